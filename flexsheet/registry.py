@@ -1,0 +1,53 @@
+"""Where the CLI finds node types, experiments, benchmarks and calibration commands.
+
+Each entry is ``"module:attribute"`` and is imported lazily, so ``flexsheet --help`` stays fast and a
+broken optional module only breaks its own subcommand. Node entries name a :class:`flexsheet.node.Node`
+subclass; experiment, bench and calibrate entries name a ``main(argv: list[str]) -> int`` function that
+parses its own arguments with argparse (its ``--help`` shows a working example).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+NODES: dict[str, str] = {
+    "camera": "nodes.camera.node:CameraNode",
+    "triangulator": "nodes.triangulator.node:TriangulatorNode",
+    "planner": "nodes.planner.node:PlannerNode",
+    "arm_bridge": "nodes.arm_bridge.node:ArmBridgeNode",
+    "arm_controller_sim": "nodes.arm_bridge.controller_sim:ArmControllerSimNode",
+    "fem": "nodes.fem.node:FemNode",
+    "renderer": "nodes.renderer.node:RendererNode",
+    "world": "nodes.world.node:WorldNode",
+    "recorder": "flexsheet.bag:RecorderNode",
+    "player": "flexsheet.bag:PlayerNode",
+    "talker": "flexsheet.demo:TalkerNode",
+    "listener": "flexsheet.demo:ListenerNode",
+}
+
+EXPERIMENTS: dict[str, str] = {
+    "triangulation": "nodes.triangulator.experiment:main",
+    "stroke": "nodes.planner.experiment:main",
+    "fem": "nodes.fem.experiment:main",
+    "correction": "nodes.renderer.experiment:main",
+}
+
+BENCHES: dict[str, str] = {
+    "transport": "flexsheet.bench_transport:main",
+    "vision": "nodes.triangulator.bench:main",
+    "planner": "nodes.planner.bench:main",
+    "arm": "nodes.arm_bridge.bench:main",
+    "fem": "nodes.fem.bench:main",
+    "render": "nodes.renderer.bench:main",
+}
+
+CALIBRATE: dict[str, str] = {
+    "stereo": "nodes.triangulator.calibrate:main",
+}
+
+
+def load(spec: str) -> Any:
+    """Import ``"module:attribute"`` and return the attribute; raises ``ImportError``/``AttributeError``."""
+    module, _, attr = spec.partition(":")
+    return getattr(importlib.import_module(module), attr)

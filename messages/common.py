@@ -1,0 +1,124 @@
+"""Common pieces of the wire contract: the header, the strict message base and typed numpy array fields.
+
+Every message is a frozen, strict pydantic v2 model (``frozen=True, extra="forbid", strict=True``) that
+carries a :class:`Header` and two class constants, ``SCHEMA`` (a stable name such as
+``"flexsheet/Fingertip"``) and ``VERSION`` (an integer bumped on any incompatible change).  numpy arrays
+are declared with :func:`ndarray` and travel as raw buffers (see :mod:`flexsheet.codec`), never as lists.
+
+Units are SI (m, rad, s, N) everywhere; frames are named in ``frame_id`` and in field docs.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, ClassVar
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, PlainSerializer, PlainValidator, WithJsonSchema, model_validator
+
+__all__ = ["Header", "Message", "ndarray", "check_finite"]
+
+#: frame name of the world frame: origin at the centre of the sheet in its home pose (the paper's
+#: imaginary screen), +x toward the user (screen normal n_o), +y to the user's left, +z up.
+DISPLAY_FRAME = "display"
+
+
+class Header(BaseModel):
+    """Header carried by every message.
+
+    Fields: ``stamp`` (float, s, the sender's clock, ``time.time()`` epoch seconds), ``frame_id`` (name of
+    the frame the message's geometry is expressed in, e.g. ``"display"``), ``seq`` (int ≥ 0, per-publisher
+    sequence number, incremented by one for each message; gaps mean drops).
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
+
+    stamp: float = Field(description="time the data was taken, s (sender's clock, epoch seconds)")
+    frame_id: str = Field(default="display", description="frame of the message's geometry")
+    seq: int = Field(default=0, ge=0, description="per-publisher sequence number")
+
+
+def _array_validator(dtype: str | None, shape: tuple[int | None, ...] | None):
+    want_dtype = np.dtype(dtype) if dtype is not None else None
+
+    def validate(value: Any) -> np.ndarray:
+        if not isinstance(value, np.ndarray):
+            raise ValueError(f"expected a numpy.ndarray, got {type(value).__name__}")
+        if want_dtype is not None and value.dtype != want_dtype:
+            raise ValueError(f"expected dtype {want_dtype}, got {value.dtype}")
+        if shape is not None:
+            if value.ndim != len(shape):
+                raise ValueError(f"expected {len(shape)}-D array of shape {_fmt(shape)}, got shape {value.shape}")
+            for want, got in zip(shape, value.shape, strict=True):
+                if want is not None and want != got:
+                    raise ValueError(f"expected shape {_fmt(shape)}, got {value.shape}")
+        return value
+
+    return validate
+
+
+def _fmt(shape: tuple[int | None, ...]) -> str:
+    return "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+
+
+def ndarray(dtype: str | None, shape: tuple[int | None, ...] | None = None, description: str = ""):
+    """Annotated type for a numpy array field with a fixed dtype and shape pattern.
+
+    Parameters
+    ----------
+    dtype : str or None
+        numpy dtype name (``"float64"``, ``"uint8"``…); ``None`` accepts any dtype.
+    shape : tuple of (int or None), optional
+        Expected shape; ``None`` entries are free dimensions. ``None`` accepts any shape.
+
+    The field validates ``isinstance(ndarray)``, dtype and shape (raising ``ValueError`` with expected vs
+    got), serialises to nested lists in JSON mode (used only by ``bag export``), and advertises a JSON
+    schema of nested arrays of numbers. On the wire it travels as a raw buffer (:mod:`flexsheet.codec`).
+    """
+    depth = len(shape) if shape is not None else 1
+    item: dict[str, Any] = {"type": "integer" if dtype and np.dtype(dtype).kind in "iub" else "number"}
+    if dtype == "bool":
+        item = {"type": "boolean"}
+    schema: dict[str, Any] = item
+    for _ in range(depth):
+        schema = {"type": "array", "items": schema}
+    schema["description"] = f"{description} [ndarray dtype={dtype or 'any'} shape={_fmt(shape) if shape else 'any'}]".strip()
+    return Annotated[
+        np.ndarray,
+        PlainValidator(_array_validator(dtype, shape)),
+        PlainSerializer(lambda a: a.tolist(), when_used="json"),
+        WithJsonSchema(schema),
+    ]
+
+
+def check_finite(name: str, value: Any) -> None:
+    """Raise ``ValueError`` naming ``name`` and ``value`` if a float or array holds NaN or inf."""
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind == "f" and not np.all(np.isfinite(value)):
+            raise ValueError(f"{name} must be finite, got {value!r}")
+    elif isinstance(value, float) and not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+
+
+class Message(BaseModel):
+    """Base of every flexsheet message: frozen, strict, no extra fields, with a :class:`Header`.
+
+    Subclasses set ``SCHEMA`` (str) and ``VERSION`` (int). A receiver that gets another schema or version on
+    a topic rejects the message with one log line and counts it in diagnostics (:mod:`flexsheet.codec`).
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True, arbitrary_types_allowed=True)
+
+    SCHEMA: ClassVar[str] = "flexsheet/Message"
+    VERSION: ClassVar[int] = 1
+
+    header: Header
+
+    @model_validator(mode="after")
+    def _all_finite(self):
+        """Reject NaN/inf in every float field and float array (error names the field and value)."""
+        for name, value in self.__dict__.items():
+            if isinstance(value, (float, np.ndarray)):
+                check_finite(name, value)
+        check_finite("header.stamp", self.header.stamp)
+        return self

@@ -1,0 +1,58 @@
+"""Surface-planner messages: the sheet target and the end-effector (edge clamp) targets."""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from .common import Message, ndarray
+
+__all__ = ["SheetTarget", "ArmTarget"]
+
+
+class SheetTarget(Message):
+    """Where the sheet must be: the tangent plane of the virtual object at the contact point.
+
+    All vectors in the display frame. ``contact_point`` (3,) m: the point of the virtual surface the finger
+    meets (paper §V-A, point A or B). ``normal`` (3,): unit outward surface normal there (the sheet's normal,
+    pointing toward the user). ``axis_u`` (3,), ``axis_v`` (3,): unit in-plane axes of the sheet (``axis_u``
+    from the right clamp to the left clamp, +y at home; ``axis_v = normal × axis_u``, +z at home; see
+    :mod:`flexsheet.scene`). ``sheet_origin`` (3,) m: where the sheet centre must be (the
+    contact point shifted along the sheet by the rolled arc, Fig. 7). ``stretch``: engineering strain of the
+    sheet between the clamps (dimensionless). ``tension``: membrane tension, N/m. ``stiffness``: normal
+    stiffness the sheet presents at the contact, N/m. ``object_stiffness``: the requested virtual-object
+    stiffness, N/m. ``touching``: the finger is in active-touch mode. ``status``: "ok", or a short reason
+    (``"unreachable"``, ``"object_stiffer_than_sheet"``, ``"hold:invalid_fingertip"``…). ``source_stamp``:
+    exposure stamp of the fingertip this target was planned from, s (latency accounting).
+    """
+
+    SCHEMA = "flexsheet/SheetTarget"
+    VERSION = 1
+
+    contact_point: ndarray("float64", (3,), "contact point, m, display frame")
+    normal: ndarray("float64", (3,), "unit sheet normal, display frame")
+    axis_u: ndarray("float64", (3,), "unit in-plane axis, right->left clamp (+y at home)")
+    axis_v: ndarray("float64", (3,), "unit in-plane axis, normal x axis_u (+z at home)")
+    sheet_origin: ndarray("float64", (3,), "sheet centre target, m, display frame")
+    stretch: float = Field(ge=0.0, description="sheet engineering strain between clamps")
+    tension: float = Field(ge=0.0, description="membrane tension, N/m")
+    stiffness: float = Field(ge=0.0, description="normal stiffness presented at the contact, N/m")
+    object_stiffness: float = Field(ge=0.0, description="requested object stiffness, N/m")
+    touching: bool = Field(default=False, description="active-touch (stroking) mode")
+    status: str = Field(default="ok", description="'ok' or the reason for a hold/clamp")
+    source_stamp: float = Field(default=0.0, description="exposure stamp of the source fingertip, s")
+
+
+class ArmTarget(Message):
+    """End-effector (sheet-clamp tool frame) target pose for one arm, in the display frame.
+
+    ``pose`` (4, 4): homogeneous transform T_display_clamp, m. ``arm``: "left" or "right".
+    ``source_stamp``: exposure stamp of the source fingertip, s. ``status`` as in :class:`SheetTarget`.
+    """
+
+    SCHEMA = "flexsheet/ArmTarget"
+    VERSION = 1
+
+    arm: str = Field(pattern="^(left|right)$", description="which arm: left or right")
+    pose: ndarray("float64", (4, 4), "T_display_clamp, m")
+    source_stamp: float = Field(default=0.0, description="exposure stamp of the source fingertip, s")
+    status: str = Field(default="ok", description="'ok' or a reason")

@@ -1,0 +1,67 @@
+"""Typed topic constants: the single list of topics the display uses, each bound to its message type.
+
+Use them when making endpoints: ``node.publisher(topics.FINGERTIP)``,
+``node.subscribe(topics.FINGERTIP, handler, qos=QoS.LATEST)``. Launch-file remaps rename topics per node.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .arm import ArmJointState
+from .common import Message
+from .diagnostics import Heartbeat
+from .fem import ObjectDeformation
+from .render import RenderedFrame
+from .surface import ArmTarget, SheetTarget
+from .vision import Fingertip, StereoCalibration, StereoFrame
+from .world import FingerTruth, SheetState
+
+
+@dataclass(frozen=True)
+class Topic:
+    """A topic name bound to its message type. ``latched`` marks topics whose last value goes to late joiners."""
+
+    name: str
+    type: type[Message]
+    latched: bool = False
+    nominal_hz: float = 0.0
+
+    def renamed(self, name: str) -> Topic:
+        """The same topic type under another name (used by launch-file remaps)."""
+        return Topic(name, self.type, self.latched, self.nominal_hz)
+
+
+STEREO = Topic("/camera/stereo", StereoFrame, nominal_hz=48.0)
+CALIBRATION = Topic("/camera/calibration", StereoCalibration, latched=True)
+FINGERTIP = Topic("/fingertip", Fingertip, nominal_hz=48.0)
+SHEET_TARGET = Topic("/sheet/target", SheetTarget, nominal_hz=48.0)
+ARM_LEFT_TARGET = Topic("/arm/left/target", ArmTarget, nominal_hz=48.0)
+ARM_RIGHT_TARGET = Topic("/arm/right/target", ArmTarget, nominal_hz=48.0)
+ARM_LEFT_STATE = Topic("/arm/left/joint_state", ArmJointState, nominal_hz=140.0)
+ARM_RIGHT_STATE = Topic("/arm/right/joint_state", ArmJointState, nominal_hz=140.0)
+DEFORMATION = Topic("/object/deformation", ObjectDeformation, nominal_hz=48.0)
+RENDERED = Topic("/render/stereo", RenderedFrame, nominal_hz=10.0)
+FINGER_TRUTH = Topic("/world/finger", FingerTruth, nominal_hz=200.0)
+SHEET_STATE = Topic("/world/sheet", SheetState, nominal_hz=100.0)
+DIAGNOSTICS = Topic("/diagnostics", Heartbeat, nominal_hz=1.0)
+
+ALL = [STEREO, CALIBRATION, FINGERTIP, SHEET_TARGET, ARM_LEFT_TARGET, ARM_RIGHT_TARGET, ARM_LEFT_STATE,
+       ARM_RIGHT_STATE, DEFORMATION, RENDERED, FINGER_TRUTH, SHEET_STATE, DIAGNOSTICS]
+BY_NAME = {t.name: t for t in ALL}
+
+
+def arm_target(arm: str) -> Topic:
+    """Arm-target topic for ``arm`` ("left" or "right"); raises ``ValueError`` otherwise."""
+    return {"left": ARM_LEFT_TARGET, "right": ARM_RIGHT_TARGET}[_arm(arm)]
+
+
+def arm_state(arm: str) -> Topic:
+    """Joint-state topic for ``arm`` ("left" or "right"); raises ``ValueError`` otherwise."""
+    return {"left": ARM_LEFT_STATE, "right": ARM_RIGHT_STATE}[_arm(arm)]
+
+
+def _arm(arm: str) -> str:
+    if arm not in ("left", "right"):
+        raise ValueError(f"arm must be 'left' or 'right', got {arm!r}")
+    return arm

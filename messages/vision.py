@@ -1,0 +1,79 @@
+"""Vision messages: stereo frames, the stereo calibration (latched) and the fingertip estimate."""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from .common import Message, ndarray
+
+__all__ = ["StereoFrame", "StereoCalibration", "Fingertip"]
+
+
+class StereoFrame(Message):
+    """A synchronised stereo pair from the camera node (mono8).
+
+    ``left``, ``right``: uint8 arrays of shape (H, W), raw (unrectified) images of the left and right
+    camera. ``exposure_stamp``: mid-exposure time, s (sender's clock); ``header.stamp`` equals it.
+    ``exposure_time``: shutter time, s. ``header.frame_id`` is the left camera's optical frame
+    (``"camera_left"``: +z forward, +x right, +y down, OpenCV convention).
+    """
+
+    SCHEMA = "flexsheet/StereoFrame"
+    VERSION = 1
+
+    left: ndarray("uint8", (None, None), "left image, mono8, (H, W)")
+    right: ndarray("uint8", (None, None), "right image, mono8, (H, W)")
+    exposure_stamp: float = Field(description="mid-exposure time, s (sender's clock)")
+    exposure_time: float = Field(ge=0.0, description="shutter open time, s")
+
+
+class StereoCalibration(Message):
+    """Stereo calibration of the camera pair, published latched (same content as ``calibrate stereo``'s YAML).
+
+    Intrinsics ``K1``, ``K2`` (3, 3) in px; distortion ``D1``, ``D2`` (5,) OpenCV (k1, k2, p1, p2, k3);
+    ``R`` (3, 3) and ``T`` (3,) in m map left-camera coordinates to right-camera coordinates
+    (x_r = R x_l + T, OpenCV ``stereoCalibrate``); rectification ``R1``, ``R2`` (3, 3), projections
+    ``P1``, ``P2`` (3, 4) px, ``Q`` (4, 4). ``T_display_camera`` (4, 4): pose of the left camera optical
+    frame in the display frame (m). ``image_size`` is (width, height) in px.
+    """
+
+    SCHEMA = "flexsheet/StereoCalibration"
+    VERSION = 1
+
+    image_size: tuple[int, int] = Field(description="(width, height), px")
+    K1: ndarray("float64", (3, 3), "left camera matrix, px")
+    D1: ndarray("float64", (None,), "left distortion (k1, k2, p1, p2, k3)")
+    K2: ndarray("float64", (3, 3), "right camera matrix, px")
+    D2: ndarray("float64", (None,), "right distortion (k1, k2, p1, p2, k3)")
+    R: ndarray("float64", (3, 3), "rotation left->right camera")
+    T: ndarray("float64", (3,), "translation left->right camera, m")
+    R1: ndarray("float64", (3, 3), "left rectification rotation")
+    R2: ndarray("float64", (3, 3), "right rectification rotation")
+    P1: ndarray("float64", (3, 4), "left rectified projection, px")
+    P2: ndarray("float64", (3, 4), "right rectified projection, px")
+    Q: ndarray("float64", (4, 4), "disparity-to-depth matrix")
+    T_display_camera: ndarray("float64", (4, 4), "pose of the left camera optical frame in the display frame, m")
+    rms_px: float = Field(default=0.0, ge=0.0, description="stereo RMS reprojection error, px")
+
+
+class Fingertip(Message):
+    """Triangulated fingertip marker position in the display frame.
+
+    ``position`` (3,) m, display frame; ``covariance`` (3, 3) m², from pixel-noise propagation.
+    ``valid`` is False when the marker is lost or gated out: then ``position`` is the zero vector and must
+    not be used (never a stale or invented position). ``predicted_position`` (3,) m is the constant-velocity
+    Kalman prediction ``prediction_horizon`` s ahead of ``header.stamp`` (horizon 0 when the predictor is
+    off; then it equals ``position``). ``exposure_stamp`` (s) is the camera exposure the estimate comes from,
+    carried for latency accounting. ``reprojection_px``: epipolar/reprojection residual, px.
+    """
+
+    SCHEMA = "flexsheet/Fingertip"
+    VERSION = 1
+
+    position: ndarray("float64", (3,), "marker position, m, display frame")
+    covariance: ndarray("float64", (3, 3), "position covariance, m^2")
+    valid: bool = Field(description="False when the marker is lost, occluded or gated out")
+    predicted_position: ndarray("float64", (3,), "predicted position at stamp + horizon, m, display frame")
+    prediction_horizon: float = Field(default=0.0, ge=0.0, description="prediction horizon, s")
+    exposure_stamp: float = Field(description="exposure time of the source frame, s")
+    reprojection_px: float = Field(default=0.0, ge=0.0, description="epipolar residual, px")

@@ -1,0 +1,51 @@
+"""World-twin messages: ground truth of the simulated finger and sheet (simulation only)."""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from .common import Message, ndarray
+
+__all__ = ["FingerTruth", "SheetState"]
+
+
+class FingerTruth(Message):
+    """True position of the simulated fingertip marker (drives the camera twin; never used by the planner).
+
+    ``position`` (3,) m and ``velocity`` (3,) m/s in the display frame. ``phase``: script phase name
+    ("approach", "stroke", "push", "stroke_push", "idle"). ``target_angle``: angle of the target mark around
+    the cylinder axis, rad (0 = facing the user). ``visible``: False when the script occludes the marker.
+    """
+
+    SCHEMA = "flexsheet/FingerTruth"
+    VERSION = 1
+
+    position: ndarray("float64", (3,), "marker position, m, display frame")
+    velocity: ndarray("float64", (3,), "marker velocity, m/s, display frame")
+    phase: str = Field(default="idle", description="script phase")
+    target_angle: float = Field(default=0.0, description="target mark angle around the cylinder axis, rad")
+    visible: bool = Field(default=True, description="marker visible to the camera")
+
+
+class SheetState(Message):
+    """Actual sheet state in the simulated world, from the arms' measured joints (FK of both clamps).
+
+    ``origin`` (3,) m: sheet centre; ``normal`` (3,), ``axis_u`` (3,): unit vectors (display frame).
+    ``corners`` (4, 3) m: sheet corners in order around the sheet. ``pushed_point`` (3,) m: the deepest
+    point of the finger's depression (equals ``origin`` projection when not pushed). ``depth`` m:
+    depression along −normal. ``stretch``: engineering strain between clamps. ``membrane`` (G, G) m:
+    out-of-plane deflection of the membrane sampled on a G×G grid over the sheet (u, v ∈ [−a, a]), positive
+    along −normal.
+    """
+
+    SCHEMA = "flexsheet/SheetState"
+    VERSION = 1
+
+    origin: ndarray("float64", (3,), "sheet centre, m, display frame")
+    normal: ndarray("float64", (3,), "unit sheet normal")
+    axis_u: ndarray("float64", (3,), "unit in-plane axis, right->left clamp (+y at home)")
+    corners: ndarray("float64", (4, 3), "sheet corners, m, display frame")
+    pushed_point: ndarray("float64", (3,), "deepest point of the depression, m")
+    depth: float = Field(ge=0.0, description="depression depth, m")
+    stretch: float = Field(ge=0.0, description="engineering strain between clamps")
+    membrane: ndarray("float64", (None, None), "deflection grid, m, along -normal")
