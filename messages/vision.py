@@ -34,13 +34,13 @@ class StereoCalibration(Message):
     ``R`` (3, 3) and ``T`` (3,) in m map left-camera coordinates to right-camera coordinates
     (x_r = R x_l + T, OpenCV ``stereoCalibrate``); rectification ``R1``, ``R2`` (3, 3), projections
     ``P1``, ``P2`` (3, 4) px, ``Q`` (4, 4). ``T_display_camera`` (4, 4): pose of the left camera optical
-    frame in the display frame (m). ``image_size`` is (width, height) in px.
+    frame in the display frame (m). ``image_size`` (2,) int64 is (width, height) in px.
     """
 
     SCHEMA = "flexsheet/StereoCalibration"
     VERSION = 1
 
-    image_size: tuple[int, int] = Field(description="(width, height), px")
+    image_size: ndarray("int64", (2,), "(width, height), px")
     K1: ndarray("float64", (3, 3), "left camera matrix, px")
     D1: ndarray("float64", (None,), "left distortion (k1, k2, p1, p2, k3)")
     K2: ndarray("float64", (3, 3), "right camera matrix, px")

@@ -1,0 +1,7 @@
+"""``python -m flexsheet`` is the ``flexsheet`` command."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())

@@ -1,0 +1,252 @@
+"""The ``flexsheet`` command: ROS 2-style subcommands (launch, run, topic, node, bag, calibrate, experiment, bench).
+
+Each subcommand's ``--help`` shows a working example. Argument parsing is argparse; subcommands that own
+an algorithm (experiments, benches, calibration) parse their own arguments (see :mod:`flexsheet.registry`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import os
+import sys
+from pathlib import Path
+
+import yaml
+
+from . import registry
+
+DEFAULT_LAUNCH = "launch/sim.yaml"
+
+
+def _launch_default() -> str:
+    return os.environ.get("FLEXSHEET_LAUNCH", DEFAULT_LAUNCH)
+
+
+def _fmt(prog_examples: str) -> dict:
+    return {"epilog": "example:\n" + prog_examples, "formatter_class": argparse.RawDescriptionHelpFormatter}
+
+
+def _parse_params(items: list[str]) -> dict:
+    params = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise SystemExit(f"flexsheet: --param expects key=value, got {item!r}")
+        params[key] = yaml.safe_load(value) if value else ""
+    return params
+
+
+def _setup_logging(name: str = "") -> None:
+    logging.basicConfig(level=os.environ.get("FLEXSHEET_LOG", "INFO"),
+                        format="%(levelname)s %(name)s: %(message)s", stream=sys.stdout)
+
+
+# ----------------------------------------------------------------------------------------------- run
+def cmd_run(args: argparse.Namespace) -> int:
+    from pydantic import ValidationError
+
+    from .launch import LaunchError, load_launch, node_config
+    from .node import NodeConfig
+
+    if args.node_type not in registry.NODES:
+        print(f"flexsheet run: unknown node type {args.node_type!r}; known: {', '.join(sorted(registry.NODES))}",
+              file=sys.stderr)
+        return 2
+    overrides = _parse_params(args.param)
+    if args.launch:
+        try:
+            lf = load_launch(args.launch)
+            config = node_config(lf, args.name or args.node_type, out=args.out, overrides=overrides)
+        except LaunchError as exc:
+            print(f"flexsheet run: {exc}", file=sys.stderr)
+            return 2
+    else:
+        config = NodeConfig(name=args.name or args.node_type, node_type=args.node_type, endpoint=args.endpoint,
+                            peers=args.peer or [], params=overrides)
+    _setup_logging()
+    cls = registry.load(registry.NODES[args.node_type])
+    try:
+        node = cls(config)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        print(f"flexsheet run {config.name}: param '{'.'.join(map(str, err['loc']))}': {err['msg']} "
+              f"(value {err.get('input')!r})", file=sys.stderr)
+        return 2
+    from .transport import TransportError
+    try:
+        asyncio.run(node.run())
+    except TransportError as exc:
+        print(f"flexsheet run {config.name}: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+# ----------------------------------------------------------------------------------------------- launch
+def cmd_launch(args: argparse.Namespace) -> int:
+    from .launch import LaunchError, Supervisor, load_launch
+
+    try:
+        lf = load_launch(args.file)
+        out = str(Path(args.out).resolve()) if args.out else None
+        if out:
+            Path(out).mkdir(parents=True, exist_ok=True)
+        sup = Supervisor(lf, host=args.host, out=out, duration=args.duration)
+    except LaunchError as exc:
+        print(f"flexsheet launch: {exc}", file=sys.stderr)
+        return 2
+    code = asyncio.run(sup.run())
+    if lf.report and out and args.host in (None, "main", next(iter(lf.hosts))):
+        report = registry.load(lf.report)
+        code = max(code, int(report(out, lf) or 0))
+    return code
+
+
+# ----------------------------------------------------------------------------------------------- table
+def _tool(name: str):
+    def call(args: argparse.Namespace) -> int:
+        from . import tools
+        return getattr(tools, name)(args)
+    return call
+
+
+def _bag(name: str):
+    def call(args: argparse.Namespace) -> int:
+        from . import bag
+        return getattr(bag, name)(args)
+    return call
+
+
+def _delegate(table: dict[str, str], kind: str):
+    def call(args: argparse.Namespace) -> int:
+        if args.name not in table:
+            print(f"flexsheet {kind}: unknown {kind} {args.name!r}; choose from: {', '.join(table)}", file=sys.stderr)
+            return 2
+        main = registry.load(table[args.name])
+        return int(main(args.rest) or 0)
+    return call
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="flexsheet",
+        description="flexsheet: encountered-type visual haptic display using a flexible sheet. "
+                    "A ROS-style node graph on ZeroMQ: launch files, nodes, topics, MCAP bags, experiments.",
+        **_fmt("  flexsheet launch launch/sim.yaml            # the whole display, simulated on localhost\n"
+               "  flexsheet topic list                        # topics of the running graph\n"
+               "  flexsheet experiment stroke --out out/stroke"))
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    s = sub.add_parser("launch", help="start the nodes of a launch file (one host or all)",
+                       description="Start every node of a launch file as its own process, with prefixed output, "
+                                   "respawn and clean Ctrl-C shutdown.",
+                       **_fmt("  flexsheet launch launch/sim.yaml --duration 60 --out out/sim\n"
+                              "  flexsheet launch launch/lab.yaml --host arm1     # on arm PC 1"))
+    s.add_argument("file", help="launch YAML file")
+    s.add_argument("--host", help="start only the nodes of this host (default: all hosts, on this machine)")
+    s.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C "
+                                                   "or the scripted run ends)")
+    s.add_argument("--out", help="output folder for bags, charts and the report (substituted for $(out))")
+    s.set_defaults(func=cmd_launch)
+
+    s = sub.add_parser("run", help="run one node alone",
+                       description="Run one node in the foreground. With --launch it takes its endpoint, "
+                                   "peers and params from the launch file; --param overrides.",
+                       **_fmt("  flexsheet run talker --param rate=5 --endpoint tcp://127.0.0.1:7201\n"
+                              "  flexsheet run listener --peer tcp://127.0.0.1:7201\n"
+                              "  flexsheet run planner --launch launch/sim.yaml --param use_prediction=false"))
+    s.add_argument("node_type", metavar="NODE", help=f"node type: {', '.join(sorted(registry.NODES))}")
+    s.add_argument("--name", help="node name (default: the type; with --launch: the node's key)")
+    s.add_argument("--launch", help="take endpoint, peers and params from this launch file")
+    s.add_argument("--param", "-p", action="append", metavar="KEY=VALUE", help="parameter (YAML value), repeatable")
+    s.add_argument("--endpoint", default="tcp://127.0.0.1:0", help="publisher endpoint to bind (without --launch)")
+    s.add_argument("--peer", action="append", metavar="ENDPOINT", help="publisher endpoint to subscribe to")
+    s.add_argument("--out", help="output folder ($(out) in params)")
+    s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("topic", help="inspect topics of the live graph (from heartbeats)",
+                       **_fmt("  flexsheet topic list\n  flexsheet topic echo /fingertip --count 3\n"
+                              "  flexsheet topic hz /camera/stereo"))
+    ts = s.add_subparsers(dest="topic_cmd", required=True, metavar="VERB")
+    for verb, helptext in (("list", "list topics with publishers, rates and types"),
+                           ("echo", "print messages of a topic"), ("hz", "measure a topic's rate")):
+        t = ts.add_parser(verb, help=helptext, **_fmt(f"  flexsheet topic {verb}" + ("" if verb == "list" else " /fingertip")))
+        if verb != "list":
+            t.add_argument("topic")
+        t.add_argument("--launch", default=_launch_default(), help="launch file of the graph (default: "
+                                                                   "$FLEXSHEET_LAUNCH or launch/sim.yaml)")
+        t.add_argument("--timeout", type=float, default=2.5, help="s to listen for heartbeats")
+        if verb == "echo":
+            t.add_argument("--count", type=int, default=0, help="stop after N messages")
+            t.add_argument("--arrays", action="store_true", help="print whole arrays (default: shape only)")
+        if verb == "hz":
+            t.add_argument("--window", type=float, default=5.0, help="s to measure")
+        t.set_defaults(func=_tool(f"topic_{verb}"))
+
+    s = sub.add_parser("node", help="inspect nodes of the live graph (from heartbeats)",
+                       **_fmt("  flexsheet node list"))
+    ns = s.add_subparsers(dest="node_cmd", required=True, metavar="VERB")
+    t = ns.add_parser("list", help="list live nodes with host, pid, state and rejections",
+                      **_fmt("  flexsheet node list --launch launch/sim.yaml"))
+    t.add_argument("--launch", default=_launch_default())
+    t.add_argument("--timeout", type=float, default=2.5)
+    t.set_defaults(func=_tool("node_list"))
+
+    s = sub.add_parser("bag", help="record, play, inspect and export MCAP bags",
+                       **_fmt("  flexsheet bag record -o run.mcap /fingertip /sheet/target\n"
+                              "  flexsheet bag info run.mcap\n  flexsheet bag play run.mcap --rate 0.5\n"
+                              "  flexsheet bag export run.mcap run_json.mcap"))
+    bs = s.add_subparsers(dest="bag_cmd", required=True, metavar="VERB")
+    t = bs.add_parser("record", help="record topics of the live graph (raw frames, lossless)",
+                      **_fmt("  flexsheet bag record -o run.mcap            # all topics"))
+    t.add_argument("topics", nargs="*", help="topics (default: all)")
+    t.add_argument("-o", "--output", default="", help="output .mcap (default: bag_<time>.mcap)")
+    t.add_argument("--launch", default=_launch_default())
+    t.add_argument("--duration", type=float, help="stop after S seconds")
+    t.set_defaults(func=_bag("cmd_record"))
+    t = bs.add_parser("play", help="republish a bag with its original timing",
+                      **_fmt("  flexsheet bag play run.mcap --rate 1 --endpoint tcp://127.0.0.1:7199"))
+    t.add_argument("file")
+    t.add_argument("--rate", type=float, default=1.0, help="playback speed factor")
+    t.add_argument("--loop", action="store_true")
+    t.add_argument("--topics", nargs="*", help="only these topics")
+    t.add_argument("--endpoint", default="tcp://127.0.0.1:7199", help="endpoint to publish on")
+    t.add_argument("--start-delay", type=float, default=0.5, help="s to let subscribers connect")
+    t.set_defaults(func=_bag("cmd_play"))
+    t = bs.add_parser("info", help="summary: topics, types, counts, duration", **_fmt("  flexsheet bag info run.mcap"))
+    t.add_argument("file")
+    t.set_defaults(func=_bag("cmd_info"))
+    t = bs.add_parser("export", help="transcode to JSON-encoded MCAP for Foxglove/Lichtblick",
+                      **_fmt("  flexsheet bag export run.mcap run_json.mcap"))
+    t.add_argument("file")
+    t.add_argument("output")
+    t.set_defaults(func=_bag("cmd_export"))
+
+    for kind, table, helptext, example in (
+            ("calibrate", registry.CALIBRATE, "calibrate devices (stereo camera)",
+             "  flexsheet calibrate stereo --left 'imgs/left*.jpg' --right 'imgs/right*.jpg' "
+             "--board chessboard:9x6 --square 0.024 -o calib.yaml"),
+            ("experiment", registry.EXPERIMENTS, "run an experiment: charts + JSON",
+             "  flexsheet experiment stroke --out out/stroke\n  flexsheet experiment fem --out out/fem --quick"),
+            ("bench", registry.BENCHES, "run a benchmark and print figures",
+             "  flexsheet bench transport --json\n  flexsheet bench planner")):
+        s = sub.add_parser(kind, help=helptext, description=f"{helptext}. NAME is one of: {', '.join(table)}. "
+                           "Arguments after NAME go to it (NAME --help shows them).", **_fmt(example))
+        s.add_argument("name", metavar="NAME", help=" | ".join(table))
+        s.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for NAME")
+        s.set_defaults(func=_delegate(table, kind))
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``flexsheet`` console script. Returns the process exit code."""
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,140 @@
+"""Wire codec: a message is a ZeroMQ multipart ``[topic, meta, *buffers]``.
+
+``meta`` is msgpack of ``{"s": SCHEMA, "v": VERSION, "d": fields}``; every numpy array inside ``fields`` is
+replaced by a msgpack ext (code 1) holding ``[buffer_index, dtype.str, shape]`` and its bytes travel as
+its own frame, so images and vertex arrays are never turned into lists and receivers wrap the received
+frame with ``np.frombuffer`` without a copy (the arrays are read-only, like the frozen messages).
+
+Errors: :class:`DecodeError` (a ``ValueError``) with a one-line reason naming the topic, and the field and
+value where one is at fault. Source: pyzmq ``examples/serialization`` (zero-copy numpy), msgpack ext types.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import msgpack
+import numpy as np
+from pydantic import BaseModel, ValidationError
+
+from messages import Message, Topic
+
+__all__ = ["DecodeError", "encode", "decode", "decode_any", "peek_schema", "MAX_ARRAY_BYTES"]
+
+EXT_NDARRAY = 1
+#: refuse arrays larger than this (bytes) on decode: a hostile size must not allocate or wrap garbage
+MAX_ARRAY_BYTES = 256 * 1024 * 1024
+_ALLOWED_KINDS = set("biuf")
+
+
+class DecodeError(ValueError):
+    """A frame set that is not a valid message for its topic (bad bytes, wrong schema/version, bad field)."""
+
+
+def _default(obj: Any) -> Any:
+    raise TypeError(f"cannot encode {type(obj).__name__}")
+
+
+def encode(topic: str, msg: Message) -> list:
+    """Encode ``msg`` for ``topic`` into multipart frames ``[topic, meta, *buffers]``.
+
+    Buffers are the arrays' own memory (C-contiguous views; a non-contiguous array is copied once).
+    Raises ``TypeError`` for a field value msgpack cannot carry.
+    """
+    buffers: list = []
+
+    def conv(value: Any) -> Any:
+        if isinstance(value, np.ndarray):
+            arr = value if value.flags.c_contiguous else np.ascontiguousarray(value)
+            buffers.append(arr)
+            return msgpack.ExtType(EXT_NDARRAY, msgpack.packb([len(buffers) + 1, arr.dtype.str, list(arr.shape)]))
+        if isinstance(value, BaseModel):
+            return {k: conv(v) for k, v in value.__dict__.items()}
+        if isinstance(value, (list, tuple)):
+            return [conv(v) for v in value]
+        return value
+
+    fields = {k: conv(v) for k, v in msg.__dict__.items()}
+    meta = msgpack.packb({"s": msg.SCHEMA, "v": msg.VERSION, "d": fields}, default=_default)
+    return [topic.encode(), meta, *buffers]
+
+
+def _unpack(frames: list, topic_name: str) -> dict:
+    if len(frames) < 2:
+        raise DecodeError(f"{topic_name}: expected at least 2 frames [topic, meta], got {len(frames)}")
+    nbuf = len(frames)
+
+    def ext_hook(code: int, data: bytes) -> Any:
+        if code != EXT_NDARRAY:
+            raise DecodeError(f"{topic_name}: unknown msgpack ext code {code}")
+        try:
+            idx, dtype_str, shape = msgpack.unpackb(data)
+            dtype = np.dtype(dtype_str)
+        except Exception as exc:  # noqa: BLE001 - any garbage in the ext payload is a decode error
+            raise DecodeError(f"{topic_name}: bad array descriptor ({exc})") from None
+        if not isinstance(idx, int) or not 2 <= idx < nbuf:
+            raise DecodeError(f"{topic_name}: array buffer index {idx!r} out of range (frames: {nbuf})")
+        if dtype.kind not in _ALLOWED_KINDS or dtype.hasobject:
+            raise DecodeError(f"{topic_name}: array dtype {dtype_str!r} not allowed")
+        if not isinstance(shape, list) or not all(isinstance(s, int) and 0 <= s for s in shape):
+            raise DecodeError(f"{topic_name}: bad array shape {shape!r}")
+        count = int(np.prod(shape, dtype=np.int64)) if shape else 1
+        buf = frames[idx]
+        buf = buf.buffer if hasattr(buf, "buffer") else buf
+        nbytes = memoryview(buf).nbytes
+        if count * dtype.itemsize != nbytes or nbytes > MAX_ARRAY_BYTES:
+            raise DecodeError(
+                f"{topic_name}: array shape {tuple(shape)} dtype {dtype} needs {count * dtype.itemsize} bytes, "
+                f"buffer has {nbytes}")
+        return np.frombuffer(buf, dtype=dtype).reshape(shape)
+
+    meta = frames[1]
+    meta = meta.bytes if hasattr(meta, "bytes") else meta
+    try:
+        obj = msgpack.unpackb(meta, ext_hook=ext_hook, raw=False, strict_map_key=True)
+    except DecodeError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - msgpack raises many types on garbage
+        raise DecodeError(f"{topic_name}: undecodable meta frame ({type(exc).__name__}: {exc})") from None
+    if not isinstance(obj, dict) or not {"s", "v", "d"} <= obj.keys() or not isinstance(obj["d"], dict):
+        raise DecodeError(f"{topic_name}: meta frame is not a flexsheet message envelope")
+    return obj
+
+
+def decode(frames: list, topic: Topic) -> Message:
+    """Decode multipart ``frames`` received on ``topic`` into a validated ``topic.type`` message.
+
+    ``frames`` may be ``bytes`` or ``zmq.Frame`` objects (zero-copy). Raises :class:`DecodeError` naming the
+    topic and the reason: undecodable bytes, wrong schema (expected vs received), wrong version, a bad array
+    descriptor, or a field that fails validation (field name and value).
+    """
+    obj = _unpack(frames, topic.name)
+    cls = topic.type
+    if obj["s"] != cls.SCHEMA:
+        raise DecodeError(f"{topic.name}: expected type {cls.SCHEMA} v{cls.VERSION}, got {obj['s']!r} v{obj['v']!r}")
+    if obj["v"] != cls.VERSION:
+        raise DecodeError(f"{topic.name}: {cls.SCHEMA} version mismatch: expected v{cls.VERSION}, got v{obj['v']!r}")
+    try:
+        return cls.model_validate(obj["d"])
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        loc = ".".join(str(p) for p in err["loc"])
+        raise DecodeError(f"{topic.name}: field {loc or '<message>'}: {err['msg']} (value {err.get('input')!r:.80})") from None
+
+
+def decode_any(frames: list) -> Message:
+    """Decode frames by the schema name they carry (used by tools that do not know the topic's type)."""
+    from messages import MESSAGE_TYPES
+
+    topic_name = bytes(frames[0]).decode(errors="replace") if frames else "?"
+    obj = _unpack(frames, topic_name)
+    cls = MESSAGE_TYPES.get(obj["s"])
+    if cls is None:
+        raise DecodeError(f"{topic_name}: unknown schema {obj['s']!r}")
+    return decode(frames, Topic(topic_name, cls))
+
+
+def peek_schema(meta: bytes) -> tuple[str, int]:
+    """Return ``(schema, version)`` of an encoded meta frame without building arrays or validating."""
+    obj = msgpack.unpackb(meta, ext_hook=lambda c, d: None, raw=False)
+    return obj["s"], obj["v"]

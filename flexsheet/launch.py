@@ -1,0 +1,316 @@
+"""Launch files: validated YAML describing hosts and nodes, and one asyncio supervisor that runs them.
+
+A launch file (``launch/*.yaml``) is the single source of truth for hosts and ports::
+
+    name: sim
+    hosts:
+      main: {address: 127.0.0.1}
+    base_port: 7100                  # nodes without a port get base_port + their index
+    nodes:
+      talker:
+        type: talker                 # a key of flexsheet.registry.NODES
+        host: main
+        params: {rate: 10.0}         # validated against the node's Params model
+        remaps: {/chatter: /chatter2}
+        respawn: {policy: on-failure, delay: 0.5, max_restarts: 5}
+        required: false              # true: when it exits by itself, the whole launch stops
+
+Every node publishes on ``tcp://<host address>:<port>`` (or an explicit ``endpoint:``) and subscribes to
+every node endpoint of the file, so the same file serves one machine (127.0.0.1) and the lab's three PCs;
+``flexsheet launch FILE --host NAME`` starts only that host's share. Strings in params may use
+``$(out)`` (the ``--out`` folder) and ``$(launch_dir)``.
+
+The supervisor starts each node as its own OS process (``python -m flexsheet run …``), prefixes every
+output line with the node name as it arrives (line-buffered, never batched), respawns by policy, and on
+Ctrl-C/SIGTERM stops all children in reverse order with escalation SIGINT → SIGTERM → SIGKILL. Children
+get ``PR_SET_PDEATHSIG`` so that not even a ``kill -9`` of the launcher leaves orphans.
+Errors: :class:`LaunchError` naming the file, the key and the wrong value.
+Source: ros2/launch ``launch_service.py`` (minus its substitution layer), supervisord's policies.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ctypes
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from . import registry
+from .node import NodeConfig
+
+__all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "load_launch", "node_config", "Supervisor"]
+
+
+class LaunchError(ValueError):
+    """A launch file that cannot be used: the message names the file, the key and the wrong value."""
+
+
+class HostSpec(BaseModel):
+    """A host of the graph: ``address`` is the IP/name its nodes bind to and others connect to."""
+
+    model_config = ConfigDict(extra="forbid")
+    address: str = "127.0.0.1"
+
+
+class RespawnSpec(BaseModel):
+    """Respawn policy: ``never``, ``on-failure`` (non-zero exit or signal) or ``always``."""
+
+    model_config = ConfigDict(extra="forbid")
+    policy: Literal["never", "on-failure", "always"] = "on-failure"
+    delay: float = Field(default=0.5, ge=0.0, description="s before a restart")
+    max_restarts: int = Field(default=10, ge=0, description="restarts allowed in the whole run")
+
+
+class NodeSpec(BaseModel):
+    """One node of a launch file (see the module docstring)."""
+
+    model_config = ConfigDict(extra="forbid")
+    type: str
+    host: str = "localhost"
+    port: int | None = Field(default=None, ge=1, le=65535)
+    endpoint: str | None = None
+    params: dict[str, Any] = Field(default_factory=dict)
+    remaps: dict[str, str] = Field(default_factory=dict)
+    respawn: RespawnSpec = Field(default_factory=RespawnSpec)
+    required: bool = False
+
+    @field_validator("type")
+    @classmethod
+    def _known_type(cls, v: str) -> str:
+        if v not in registry.NODES:
+            raise ValueError(f"unknown node type {v!r}; known: {', '.join(sorted(registry.NODES))}")
+        return v
+
+
+class LaunchFile(BaseModel):
+    """A whole launch file: hosts, nodes and graph-wide settings."""
+
+    model_config = ConfigDict(extra="forbid")
+    name: str = "graph"
+    description: str = ""
+    hosts: dict[str, HostSpec] = Field(default_factory=lambda: {"localhost": HostSpec()})
+    base_port: int = Field(default=7100, ge=1024, le=65000)
+    heartbeat_period: float = Field(default=1.0, gt=0.0)
+    shutdown_timeout: float = Field(default=3.0, gt=0.0, description="s per escalation step")
+    report: str | None = Field(default=None, description="'module:function' called after the run with --out")
+    nodes: dict[str, NodeSpec]
+
+    path: Path | None = None
+
+    def endpoint_of(self, name: str) -> str:
+        """Bound endpoint of node ``name`` (explicit ``endpoint``, else tcp://address:port)."""
+        spec = self.nodes[name]
+        if spec.endpoint:
+            return spec.endpoint
+        port = spec.port if spec.port is not None else self.base_port + list(self.nodes).index(name) + 1
+        return f"tcp://{self.hosts[spec.host].address}:{port}"
+
+    def endpoints(self) -> dict[str, str]:
+        """Node name → endpoint for every node of the file."""
+        return {n: self.endpoint_of(n) for n in self.nodes}
+
+
+def load_launch(path: str | Path) -> LaunchFile:
+    """Read and validate a launch file. Raises :class:`LaunchError` naming file, key and value."""
+    path = Path(path)
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise LaunchError(f"{path}: launch file not found") from None
+    except yaml.YAMLError as exc:
+        raise LaunchError(f"{path}: not valid YAML: {exc}") from None
+    if not isinstance(raw, dict):
+        raise LaunchError(f"{path}: top level must be a mapping with 'nodes', got {type(raw).__name__}")
+    try:
+        lf = LaunchFile.model_validate(raw)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        key = ".".join(str(p) for p in err["loc"])
+        raise LaunchError(f"{path}: key '{key}': {err['msg']} (value {err.get('input')!r:.120})") from None
+    for name, spec in lf.nodes.items():
+        if spec.host not in lf.hosts:
+            raise LaunchError(f"{path}: key 'nodes.{name}.host': unknown host {spec.host!r}; "
+                              f"hosts: {', '.join(lf.hosts)}")
+    seen: dict[str, str] = {}
+    for name, ep in lf.endpoints().items():
+        if ep in seen:
+            raise LaunchError(f"{path}: key 'nodes.{name}.port': endpoint {ep} already used by node {seen[ep]!r}")
+        seen[ep] = name
+    lf.path = path
+    return lf
+
+
+def _substitute(value: Any, subs: dict[str, str]) -> Any:
+    if isinstance(value, str):
+        for k, v in subs.items():
+            value = value.replace(f"$({k})", v)
+        return value
+    if isinstance(value, dict):
+        return {k: _substitute(v, subs) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_substitute(v, subs) for v in value]
+    return value
+
+
+def node_config(lf: LaunchFile, name: str, out: str | None = None, overrides: dict | None = None) -> NodeConfig:
+    """The :class:`NodeConfig` of node ``name`` in ``lf`` (params merged with ``overrides``)."""
+    if name not in lf.nodes:
+        raise LaunchError(f"{lf.path}: no node named {name!r}; nodes: {', '.join(lf.nodes)}")
+    spec = lf.nodes[name]
+    subs = {"out": out or os.environ.get("FLEXSHEET_OUT", "out"),
+            "launch_dir": str(lf.path.parent.resolve()) if lf.path else "."}
+    params = _substitute({**spec.params, **(overrides or {})}, subs)
+    return NodeConfig(name=name, node_type=spec.type, host=spec.host, endpoint=lf.endpoint_of(name),
+                      peers=list(lf.endpoints().values()), params=params, remaps=spec.remaps,
+                      heartbeat_period=lf.heartbeat_period)
+
+
+def _pdeathsig() -> None:  # runs in the child between fork and exec
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
+class _Child:
+    def __init__(self, name: str, spec: NodeSpec) -> None:
+        self.name, self.spec = name, spec
+        self.proc: asyncio.subprocess.Process | None = None
+        self.restarts = 0
+        self.stopping = False
+        self.exit_codes: list[int] = []
+
+
+class Supervisor:
+    """Runs the nodes of one host of a launch file as child processes (see the module docstring).
+
+    ``host`` None runs every node (all hosts on this machine). ``out`` is exported as ``FLEXSHEET_OUT`` and
+    substituted for ``$(out)``. ``duration`` s stops the run after that long (None: until Ctrl-C or a
+    required node exits). ``print_fn`` receives each prefixed output line.
+    """
+
+    def __init__(self, lf: LaunchFile, host: str | None = None, out: str | None = None,
+                 duration: float | None = None, print_fn=None, python: str = sys.executable) -> None:
+        if host is not None and host not in lf.hosts:
+            raise LaunchError(f"{lf.path}: --host {host!r} is not a host of the file; hosts: {', '.join(lf.hosts)}")
+        self.lf, self.host, self.out, self.duration = lf, host, out, duration
+        self.print = print_fn or (lambda line: print(line, flush=True))
+        self.python = python
+        self.children = [_Child(n, s) for n, s in lf.nodes.items() if host is None or s.host == host]
+        self._stop = asyncio.Event()
+        self.reason = ""
+        width = max((len(c.name) for c in self.children), default=4)
+        self._fmt = f"[{{:<{width}}}] {{}}"
+
+    def _cmd(self, child: _Child) -> list[str]:
+        cmd = [self.python, "-u", "-m", "flexsheet", "run", child.spec.type, "--launch", str(self.lf.path),
+               "--name", child.name]
+        if self.out:
+            cmd += ["--out", self.out]
+        return cmd
+
+    async def _spawn(self, child: _Child) -> None:
+        env = dict(os.environ, PYTHONUNBUFFERED="1", FLEXSHEET_LAUNCH=str(Path(self.lf.path).resolve()))
+        if self.out:
+            env["FLEXSHEET_OUT"] = self.out
+        child.proc = await asyncio.create_subprocess_exec(
+            *self._cmd(child), stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
+            stdin=asyncio.subprocess.DEVNULL, env=env, start_new_session=True, preexec_fn=_pdeathsig)
+
+    async def _pump(self, child: _Child) -> None:
+        assert child.proc is not None and child.proc.stdout is not None
+        while True:
+            line = await child.proc.stdout.readline()
+            if not line:
+                break
+            self.print(self._fmt.format(child.name, line.decode(errors="replace").rstrip()))
+
+    async def _watch(self, child: _Child) -> None:
+        while True:
+            await self._spawn(child)
+            self.print(self._fmt.format(child.name, f"started pid {child.proc.pid}"))
+            await self._pump(child)
+            code = await child.proc.wait()
+            child.exit_codes.append(code)
+            if child.stopping or self._stop.is_set():
+                return
+            self.print(self._fmt.format(child.name, f"exited with code {code}"))
+            if child.spec.required:
+                self.reason = f"required node {child.name} exited ({code})"
+                self._stop.set()
+                return
+            policy = child.spec.respawn
+            if policy.policy == "never" or (policy.policy == "on-failure" and code == 0):
+                return
+            if child.restarts >= policy.max_restarts:
+                self.print(self._fmt.format(child.name, f"not respawned: {policy.max_restarts} restarts used"))
+                return
+            child.restarts += 1
+            self.print(self._fmt.format(child.name, f"respawning in {policy.delay:.1f} s "
+                                                    f"(restart {child.restarts}/{policy.max_restarts})"))
+            await asyncio.sleep(policy.delay)
+            if self._stop.is_set():
+                return
+
+    async def _stop_child(self, child: _Child) -> None:
+        child.stopping = True
+        proc = child.proc
+        if proc is None or proc.returncode is not None:
+            return
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+            try:
+                os.killpg(proc.pid, sig)
+            except ProcessLookupError:
+                return
+            try:
+                await asyncio.wait_for(proc.wait(), timeout=self.lf.shutdown_timeout)
+                return
+            except TimeoutError:
+                self.print(self._fmt.format(child.name, f"did not stop on {sig.name}; escalating"))
+
+    async def run(self) -> int:
+        """Run until Ctrl-C, SIGTERM, ``duration`` or a required node's exit. Returns 0, or 1 if a node failed."""
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, self._on_signal, sig)
+        if not self.children:
+            self.print(f"[launch] no nodes for host {self.host!r} in {self.lf.path}")
+            return 0
+        self.print(f"[launch] {self.lf.name}: starting {len(self.children)} nodes"
+                   + (f" on host {self.host}" if self.host else ""))
+        watchers = [loop.create_task(self._watch(c)) for c in self.children]
+        t0 = time.monotonic()
+        try:
+            if self.duration is not None:
+                await asyncio.wait_for(self._stop.wait(), timeout=self.duration)
+            else:
+                await self._stop.wait()
+        except TimeoutError:
+            self.reason = f"duration {self.duration:g} s reached"
+        self.print(f"[launch] stopping after {time.monotonic() - t0:.1f} s: {self.reason or 'stop requested'}")
+        await asyncio.gather(*(self._stop_child(c) for c in reversed(self.children)))
+        for w in watchers:
+            w.cancel()
+        await asyncio.gather(*watchers, return_exceptions=True)
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+        self.print("[launch] all nodes stopped")
+        failed = [c.name for c in self.children if c.exit_codes and c.exit_codes[-1] not in (0, -2, -15)]
+        return 1 if failed and "required" in self.reason else 0
+
+    def _on_signal(self, sig: signal.Signals) -> None:
+        if self._stop.is_set():  # second Ctrl-C: stop faster
+            self.lf.shutdown_timeout = min(self.lf.shutdown_timeout, 0.5)
+        self.reason = f"{signal.Signals(sig).name} received"
+        self._stop.set()
+
+    def pids(self) -> list[int]:
+        """PIDs of the running children."""
+        return [c.proc.pid for c in self.children if c.proc is not None and c.proc.returncode is None]

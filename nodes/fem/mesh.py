@@ -1,0 +1,210 @@
+"""Tetrahedral mesh of the paper's virtual cylinder (pure: gmsh builds it in memory, meshio writes it).
+
+Geometry (display frame, m): cylinder of radius R = 0.025·√2 and length 0.12 with its axis along +y through
+O = (−R, 0, 0), so its side surface touches the imaginary screen at x = z = 0 (Furukawa et al. §V, §VI-A;
+:mod:`flexsheet.scene`). The finger pushes from +x.
+
+Support (our choice, stated in docs/fem.md): the object rests in a rigid cradle that holds its **back half**:
+every boundary node with x ≤ −R (the half of the side surface and end faces away from the user) is fixed.
+
+Refinement: an optional band of element size ``h_fine`` within ``refine_radius`` of the *working arc*, the
+circle of the side surface at y = 0 from −``arc_deg`` to +``arc_deg`` around +x (the paper strokes the
+cylinder in that plane, Fig. 7). gmsh ``Ball`` fields sampled along the arc are combined with a ``Min`` field
+(gmsh reference manual, §"Specifying mesh element sizes").
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import threading
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from flexsheet.scene import CYLINDER_CENTER, CYLINDER_LENGTH, CYLINDER_RADIUS
+
+__all__ = ["TetMesh", "MeshSpec", "cylinder_mesh", "surface_faces", "write_mesh", "arc_points"]
+
+_GMSH_LOCK = threading.Lock()   # gmsh is a process-wide singleton
+
+
+@dataclass(frozen=True)
+class MeshSpec:
+    """Mesh resolution: ``h`` global element size (m), ``h_fine`` size in the refined band (m, ≤ h),
+    ``refine_radius`` band half-width around the working arc (m; 0 = no refinement), ``arc_deg`` half-angle of
+    the working arc (deg, ≥ 0). Raises ``ValueError`` naming the field on non-positive or inconsistent values."""
+
+    h: float = 0.008
+    h_fine: float = 0.003
+    refine_radius: float = 0.012
+    arc_deg: float = 0.0
+
+    def __post_init__(self):
+        for name in ("h", "h_fine"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and 0.0005 <= v <= 0.05):
+                raise ValueError(f"{name} must be in [0.0005, 0.05] m, got {v!r}")
+        if self.h_fine > self.h:
+            raise ValueError(f"h_fine must be <= h, got h_fine={self.h_fine!r} > h={self.h!r}")
+        if not (math.isfinite(self.refine_radius) and 0.0 <= self.refine_radius <= 0.1):
+            raise ValueError(f"refine_radius must be in [0, 0.1] m, got {self.refine_radius!r}")
+        if not (math.isfinite(self.arc_deg) and 0.0 <= self.arc_deg <= 90.0):
+            raise ValueError(f"arc_deg must be in [0, 90] deg, got {self.arc_deg!r}")
+
+    def key(self) -> str:
+        """Stable text key of the spec (used in cache keys)."""
+        return f"h={self.h:.6g},hf={self.h_fine:.6g},rr={self.refine_radius:.6g},arc={self.arc_deg:.6g}"
+
+
+@dataclass
+class TetMesh:
+    """A linear tetrahedral mesh in the display frame.
+
+    ``points`` (N, 3) float64 m; ``tets`` (M, 4) int64 (positively oriented: det > 0); ``faces`` (F, 3) int64
+    boundary triangles wound counter-clockwise seen from outside; ``fixed`` (N,) bool, nodes of the support;
+    ``spec`` the :class:`MeshSpec` it came from (None for meshes built otherwise); ``radius``/``length``/
+    ``center`` the cylinder geometry (m).
+    """
+
+    points: np.ndarray
+    tets: np.ndarray
+    faces: np.ndarray
+    fixed: np.ndarray
+    spec: MeshSpec | None = None
+    radius: float = CYLINDER_RADIUS
+    length: float = CYLINDER_LENGTH
+    center: np.ndarray = field(default_factory=lambda: CYLINDER_CENTER.copy())
+
+    @property
+    def surface_nodes(self) -> np.ndarray:
+        """Sorted unique node indices on the boundary, (S,) int64."""
+        return np.unique(self.faces)
+
+    def digest(self) -> str:
+        """SHA-256 hex digest of points, tets and fixed mask (cache key part)."""
+        h = hashlib.sha256()
+        for a in (np.ascontiguousarray(self.points, np.float64), np.ascontiguousarray(self.tets, np.int64),
+                  np.ascontiguousarray(self.fixed, np.bool_)):
+            h.update(a.tobytes())
+        return h.hexdigest()
+
+
+def arc_points(radius: float, center: np.ndarray, arc_deg: float, spacing: float) -> np.ndarray:
+    """Points (K, 3) on the side surface at y = center_y along the arc φ ∈ [−arc_deg, arc_deg] around +x,
+    where a point is ``center + radius·(cos φ, 0, sin φ)``; at most ``spacing`` m apart (K ≥ 1)."""
+    half = math.radians(arc_deg)
+    n = max(1, int(math.ceil(2.0 * half * radius / max(spacing, 1e-6))) + 1) if half > 0 else 1
+    phis = np.linspace(-half, half, n) if n > 1 else np.zeros(1)
+    c = np.asarray(center, float)
+    return np.column_stack([c[0] + radius * np.cos(phis), np.full(n, c[1]), c[2] + radius * np.sin(phis)])
+
+
+def cylinder_mesh(spec: MeshSpec = MeshSpec(), radius: float = CYLINDER_RADIUS, length: float = CYLINDER_LENGTH,
+                  center: np.ndarray = CYLINDER_CENTER) -> TetMesh:
+    """Mesh the cylinder (axis +y through ``center``) with gmsh's OpenCASCADE kernel, P1 tetrahedra.
+
+    Returns a :class:`TetMesh` with the back-half support marked (boundary nodes with x ≤ center_x + 1e-9).
+    Raises ``ValueError`` on bad geometry and ``RuntimeError`` if gmsh fails. Source: gmsh Python API
+    (``occ.addCylinder``, ``Ball``/``Min`` size fields, ``generate(3)``). Deterministic for a given spec
+    (single-threaded Delaunay with fixed options).
+    """
+    if not (math.isfinite(radius) and radius > 0):
+        raise ValueError(f"radius must be > 0, got {radius!r}")
+    if not (math.isfinite(length) and length > 0):
+        raise ValueError(f"length must be > 0, got {length!r}")
+    c = np.asarray(center, float)
+    import gmsh
+
+    with _GMSH_LOCK:
+        gmsh.initialize(interruptible=False)
+        try:
+            gmsh.option.setNumber("General.Terminal", 0)
+            gmsh.option.setNumber("General.NumThreads", 1)
+            gmsh.option.setNumber("Mesh.Algorithm3D", 1)
+            gmsh.model.add("cylinder")
+            gmsh.model.occ.addCylinder(c[0], c[1] - length / 2, c[2], 0.0, length, 0.0, radius)
+            gmsh.model.occ.synchronize()
+            gmsh.option.setNumber("Mesh.MeshSizeMax", spec.h)
+            gmsh.option.setNumber("Mesh.MeshSizeMin", min(spec.h_fine, spec.h))
+            gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+            gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
+            gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+            if spec.refine_radius > 0 and spec.h_fine < spec.h:
+                fields = []
+                for p in arc_points(radius, c, spec.arc_deg, spec.refine_radius / 2):
+                    f = gmsh.model.mesh.field.add("Ball")
+                    gmsh.model.mesh.field.setNumber(f, "Radius", spec.refine_radius)
+                    gmsh.model.mesh.field.setNumber(f, "Thickness", spec.refine_radius)
+                    gmsh.model.mesh.field.setNumber(f, "VIn", spec.h_fine)
+                    gmsh.model.mesh.field.setNumber(f, "VOut", spec.h)
+                    for k, name in enumerate(("XCenter", "YCenter", "ZCenter")):
+                        gmsh.model.mesh.field.setNumber(f, name, float(p[k]))
+                    fields.append(f)
+                fmin = gmsh.model.mesh.field.add("Min")
+                gmsh.model.mesh.field.setNumbers(fmin, "FieldsList", fields)
+                gmsh.model.mesh.field.setAsBackgroundMesh(fmin)
+            gmsh.model.mesh.generate(3)
+            tags, coords, _ = gmsh.model.mesh.getNodes()
+            etypes, _, enodes = gmsh.model.mesh.getElements(3)
+        except Exception as exc:  # gmsh raises plain Exception
+            raise RuntimeError(f"gmsh failed to mesh the cylinder with {spec.key()}: {exc}") from exc
+        finally:
+            gmsh.finalize()
+    if 4 not in list(etypes):
+        raise RuntimeError(f"gmsh produced no tetrahedra for {spec.key()}")
+    conn = np.asarray(enodes[list(etypes).index(4)], dtype=np.int64).reshape(-1, 4)
+    pts_all = np.asarray(coords, float).reshape(-1, 3)
+    tag_to_row = np.full(int(np.max(tags)) + 1, -1, dtype=np.int64)
+    tag_to_row[np.asarray(tags, np.int64)] = np.arange(len(tags))
+    conn = tag_to_row[conn]
+    used, inv = np.unique(conn, return_inverse=True)
+    points = pts_all[used]
+    tets = inv.reshape(-1, 4)
+    return _finish(points, tets, radius, length, c, spec)
+
+
+def _finish(points: np.ndarray, tets: np.ndarray, radius: float, length: float, center: np.ndarray,
+            spec: MeshSpec | None) -> TetMesh:
+    tets = orient_tets(points, tets)
+    faces = surface_faces(points, tets)
+    fixed = np.zeros(len(points), bool)
+    fixed[np.unique(faces)] = points[np.unique(faces), 0] <= center[0] + 1e-9
+    return TetMesh(points, tets, faces, fixed, spec, radius, length, np.asarray(center, float).copy())
+
+
+def orient_tets(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Return ``tets`` (M, 4) with the last two vertices swapped where the signed volume is negative."""
+    tets = np.array(tets, dtype=np.int64, copy=True)
+    p = points[tets]
+    vol = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0])
+    neg = vol < 0
+    tets[neg, 2], tets[neg, 3] = tets[neg, 3].copy(), tets[neg, 2].copy()
+    return tets
+
+
+def surface_faces(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Boundary triangles (F, 3) int64 of a tet mesh, wound counter-clockwise seen from outside.
+
+    A face is on the boundary when exactly one tetrahedron has it. ``points`` (N, 3), ``tets`` (M, 4)."""
+    local = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+    opp = np.array([0, 1, 2, 3])
+    f = tets[:, local].reshape(-1, 3)
+    o = np.repeat(tets[:, opp][:, :, None], 1, axis=2).reshape(-1)
+    key = np.sort(f, axis=1)
+    _, idx, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
+    b = idx[counts == 1]
+    faces, other = f[b], o[b]
+    p0, p1, p2 = points[faces[:, 0]], points[faces[:, 1]], points[faces[:, 2]]
+    nrm = np.cross(p1 - p0, p2 - p0)
+    inward = np.einsum("ij,ij->i", nrm, points[other] - p0) > 0
+    faces[inward, 1], faces[inward, 2] = faces[inward, 2].copy(), faces[inward, 1].copy()
+    return faces
+
+
+def write_mesh(mesh: TetMesh, path: str) -> None:
+    """Write the mesh (tets + boundary triangles, point data ``fixed``) with meshio; format from the suffix."""
+    import meshio
+
+    meshio.write(path, meshio.Mesh(mesh.points, [("tetra", mesh.tets), ("triangle", mesh.faces)],
+                                   point_data={"fixed": mesh.fixed.astype(np.int32)}))
