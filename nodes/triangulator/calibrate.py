@@ -294,7 +294,7 @@ def load_yaml(path: str) -> dict:
         out[key] = d
     if "R1" not in out:
         R1, R2, P1, P2, Q, _, _ = cv2.stereoRectify(out["K1"], out["D1"], out["K2"], out["D2"], out["image_size"],
-                                                    out["R"], out["T"], alpha=0)
+                                                    out["R"], out["T"].reshape(3, 1), alpha=0)
         out.update(R1=R1, R2=R2, P1=P1, P2=P2, Q=Q)
     if "E" not in out:
         tx = np.array([[0, -out["T"][2], out["T"][1]], [out["T"][2], 0, -out["T"][0]], [-out["T"][1], out["T"][0], 0]])
