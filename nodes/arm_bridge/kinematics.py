@@ -36,7 +36,8 @@ import pinocchio as pin
 from flexsheet.scene import pose_matrix
 
 __all__ = [
-    "URDF_PATH", "JOINT_NAMES", "Q_LOWER", "Q_UPPER", "QD_MAX", "Q_HOME", "IKResult", "ArmKinematics",
+    "URDF_PATH", "JOINT_NAMES", "Q_LOWER", "Q_UPPER", "QD_MAX", "Q_HOME", "LEFT_BASE", "RIGHT_BASE",
+    "home_joints", "IKResult", "ArmKinematics",
     "rotation_angle", "check_pose",
 ]
 
@@ -47,8 +48,25 @@ _MODEL = pin.buildModelFromUrdf(str(URDF_PATH))
 Q_LOWER = np.array(_MODEL.lowerPositionLimit, dtype=float)   #: (6,) rad, URDF lower limits
 Q_UPPER = np.array(_MODEL.upperPositionLimit, dtype=float)   #: (6,) rad, URDF upper limits
 QD_MAX = np.array(_MODEL.velocityLimit, dtype=float)         #: (6,) rad/s, ASSUMED speed limits (see URDF)
-#: a well-conditioned rest posture (rad): forearm level, wrist bent 45 deg
-Q_HOME = np.array([0.0, 0.0, math.pi / 2, 0.0, math.pi / 4, 0.0])
+#: proposed base poses (x, y, z, yaw) in the display frame (m, rad). flexsheet.scene's defaults put the clamp
+#: 0.30 m from J1, inside the RV-1A's reach shell (J3 would need 156 deg > 155); these reach the home sheet
+#: and tilts of +-60 deg about the cylinder axis with stretch 0..0.1 with >= 20 deg joint margin.
+LEFT_BASE = (-0.05, 0.55, -0.40, -math.pi / 2)
+RIGHT_BASE = (-0.05, -0.55, -0.40, math.pi / 2)
+#: left arm's joints (rad) holding the home sheet (stretch 0) from LEFT_BASE; the right arm mirrors it
+Q_HOME = np.radians([8.67, 42.46, 104.28, 10.33, -57.17, 84.35])
+_MIRROR = np.array([-1.0, 1.0, 1.0, -1.0, 1.0, -1.0])
+
+
+def home_joints(side: str) -> np.ndarray:
+    """(6,) rad: joints holding the home sheet from the proposed base of ``side`` ("left"/"right").
+
+    The right arm mirrors the left across the display x–z plane: q_right = q_left · (−1, 1, 1, −1, 1, −1).
+    Raises ``ValueError`` on another side.
+    """
+    if side not in ("left", "right"):
+        raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+    return Q_HOME.copy() if side == "left" else Q_HOME * _MIRROR
 
 _FLIP_X = np.diag([1.0, -1.0, -1.0, 1.0])   # rotation by pi about x (homogeneous)
 

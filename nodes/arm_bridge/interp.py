@@ -1,0 +1,83 @@
+"""Bridge-side streaming limiter: turn a (jumpy, 48 Hz) joint goal into a 7.1 ms command stream that never
+asks for more than the position, velocity or acceleration limits (pure numpy).
+
+Per joint, each period ``T`` the command ``c`` moves with velocity ``v`` chosen as the fastest that
+(1) does not exceed ``qd_max``, (2) differs from the previous period's velocity by at most ``qdd_max·T``,
+(3) can still stop at the goal with deceleration ``qdd_max`` (discrete braking curve
+``v ≤ a·T·(√(1/4 + 2|e|/(a·T²)) − 1/2)``, the largest v = n·a·T whose stopping distance a·T²·n(n+1)/2 ≤ |e|),
+and (4) does not pass the goal in one period. The goal is first clipped into the joint range shrunk by
+``margin``. This is a per-joint time-optimal second-order rate limiter (bang-bang with braking; see
+Kröger & Wahl, "Online trajectory generation", IEEE T-RO 26(1), 2010, type-II OTG, for the general form).
+
+Guarantees (tested): ``|c_k − c_{k−1}| ≤ qd_max·T``, ``|v_k − v_{k−1}| ≤ qdd_max·T`` (except when the goal is
+reached exactly, where the residual stop is below one step of ``qdd_max·T²``), and ``c_k`` stays in the
+shrunk range when it starts there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["StreamLimiter"]
+
+
+class StreamLimiter:
+    """Rate/acceleration/position limiter of a 6-joint command stream.
+
+    Parameters
+    ----------
+    q0 : (6,) rad, the starting command (the measured joints), clipped into the range.
+    period : s, stream period T (> 0).
+    qd_max, qdd_max : (6,) rad/s and rad/s², > 0.
+    q_lower, q_upper : (6,) rad joint limits; ``margin`` rad (≥ 0) is kept from both.
+
+    Raises ``ValueError`` naming the argument on bad shapes, non-finite values or non-positive limits.
+    """
+
+    def __init__(self, q0, period: float, qd_max, qdd_max, q_lower, q_upper, margin: float = 0.0) -> None:
+        if not (period > 0.0 and np.isfinite(period)):
+            raise ValueError(f"period must be > 0 s, got {period!r}")
+        arrs = {}
+        for name, v in (("q0", q0), ("qd_max", qd_max), ("qdd_max", qdd_max), ("q_lower", q_lower),
+                        ("q_upper", q_upper)):
+            a = np.asarray(v, dtype=float)
+            if a.shape != (6,) or not np.all(np.isfinite(a)):
+                raise ValueError(f"{name} must be a finite (6,) vector, got {v!r}")
+            arrs[name] = a
+        if np.any(arrs["qd_max"] <= 0) or np.any(arrs["qdd_max"] <= 0):
+            raise ValueError("qd_max and qdd_max must be positive")
+        if not margin >= 0.0:
+            raise ValueError(f"margin must be >= 0 rad, got {margin!r}")
+        self.T = float(period)
+        self.qd_max = arrs["qd_max"]
+        self.qdd_max = arrs["qdd_max"]
+        self.lo = arrs["q_lower"] + margin
+        self.hi = arrs["q_upper"] - margin
+        if np.any(self.lo >= self.hi):
+            raise ValueError("margin leaves an empty joint range")
+        self.c = np.clip(arrs["q0"], self.lo, self.hi)
+        self.v = np.zeros(6)
+
+    def reset(self, q) -> None:
+        """Restart from joints ``q`` (6,) rad at rest (after a reconnect: q = measured). ``ValueError`` if bad."""
+        a = np.asarray(q, dtype=float)
+        if a.shape != (6,) or not np.all(np.isfinite(a)):
+            raise ValueError(f"q must be a finite (6,) vector, got {q!r}")
+        self.c = np.clip(a, self.lo, self.hi)
+        self.v = np.zeros(6)
+
+    def step(self, goal) -> np.ndarray:
+        """Advance one period toward ``goal`` (6,) rad; returns the new command (6,) rad (a copy)."""
+        g = np.clip(np.asarray(goal, dtype=float), self.lo, self.hi)
+        T, a = self.T, self.qdd_max
+        e = g - self.c
+        ae = np.abs(e)
+        v_brake = a * T * (np.sqrt(0.25 + 2.0 * ae / (a * T * T)) - 0.5)
+        v_mag = np.minimum(np.minimum(self.qd_max, v_brake), ae / T)
+        v_des = np.sign(e) * v_mag
+        v = np.clip(v_des, self.v - a * T, self.v + a * T)
+        v = np.clip(v, -self.qd_max, self.qd_max)
+        c_new = np.clip(self.c + v * T, self.lo, self.hi)
+        self.v = (c_new - self.c) / T
+        self.c = c_new
+        return c_new.copy()
