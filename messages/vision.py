@@ -14,7 +14,8 @@ class StereoFrame(Message):
 
     ``left``, ``right``: uint8 arrays of shape (H, W), raw (unrectified) images of the left and right
     camera. ``exposure_stamp``: mid-exposure time, s (sender's clock); ``header.stamp`` equals it.
-    ``exposure_time``: shutter time, s. ``header.frame_id`` is the left camera's optical frame
+    ``exposure_time``: shutter time, s. ``stereo_skew``: right minus left exposure time, s (0 for a
+    hardware-synchronised pair; a receiver rejects pairs whose |skew| exceeds its tolerance). ``header.frame_id`` is the left camera's optical frame
     (``"camera_left"``: +z forward, +x right, +y down, OpenCV convention).
     """
 
@@ -25,6 +26,7 @@ class StereoFrame(Message):
     right: ndarray("uint8", (None, None), "right image, mono8, (H, W)")
     exposure_stamp: float = Field(description="mid-exposure time, s (sender's clock)")
     exposure_time: float = Field(ge=0.0, description="shutter open time, s")
+    stereo_skew: float = Field(default=0.0, description="right minus left exposure time, s")
 
 
 class StereoCalibration(Message):
