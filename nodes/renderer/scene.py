@@ -1,0 +1,324 @@
+"""moderngl stereo renderer: draws the (deformed) object for the left and right eye into projector pixels.
+
+Pipeline per eye (all in the vertex shader ``shaders/correct.vert``, the same math as
+:mod:`nodes.renderer.correction`): vertex A → corrected A' (model ``none``/``flat``/``four_triangle``/``fine``)
+→ its screen point on the line eye–A' → the projector pixel that lights it (pinhole ``K``, pose ``R``,
+``position``, calibrated to the imaginary screen). Output: two RGB images of ``width × height`` projector
+pixels (left eye at V + IPD/2·ŷ, right at V − IPD/2·ŷ; +y is the user's left).
+
+The GL context is moderngl's standalone EGL context (headless; llvmpipe on machines without a GPU). All GL
+calls must come from the thread that created the renderer.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from flexsheet import scene
+
+from .correction import DEFAULT_MIN_COS, _triangles
+from .membrane import SheetSurface
+
+__all__ = ["Projector", "StereoRenderer", "cylinder_mesh", "vertex_normals", "eye_positions", "MODE_IDS"]
+
+SHADER_DIR = Path(__file__).with_name("shaders")
+MODE_IDS = {"none": 0, "flat": 1, "four_triangle": 2, "fine": 3}
+MAX_SHADER_MODES = 64
+
+
+@dataclass(frozen=True)
+class Projector:
+    """Pinhole projector calibrated to the imaginary screen.
+
+    ``K`` (3, 3) intrinsics, px; ``R`` (3, 3) columns = projector x (image right), y (image down), z (optical
+    axis) in the display frame; ``position`` (3,) light source P, m; ``width``, ``height`` px.
+    """
+
+    K: np.ndarray
+    R: np.ndarray
+    position: np.ndarray
+    width: int = 1024
+    height: int = 768
+
+    @classmethod
+    def default(cls, width: int = 1024, height: int = 768, pixel: float = scene.PIXEL_ON_SCREEN,
+                position=scene.PROJECTOR) -> Projector:
+        """The paper's rear projector: at P, optical axis +x (perpendicular to the screen), lens shift so that
+        the image centre lands on the screen origin, ``pixel`` m per pixel on the screen (0.7 mm, §VI)."""
+        if width < 1 or height < 1:
+            raise ValueError(f"width/height must be >= 1, got {width}x{height}")
+        if not (pixel > 0.0 and math.isfinite(pixel)):
+            raise ValueError(f"pixel must be > 0, got {pixel!r}")
+        p = np.asarray(position, dtype=float)
+        dist = -p[0]
+        if dist <= 0.0:
+            raise ValueError(f"projector position must be behind the screen (x < 0), got {p.tolist()}")
+        f = dist / pixel
+        # seen from behind, image right is -y (display), image down is -z
+        R = np.column_stack([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+        # image of the screen origin: x_c = R^T (0 - p)
+        xc = R.T @ (-p)
+        cx = (width - 1) / 2.0 - f * xc[0] / xc[2]
+        cy = (height - 1) / 2.0 - f * xc[1] / xc[2]
+        K = np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
+        return cls(K, R, p, width, height)
+
+
+def eye_positions(eye, ipd: float) -> tuple[np.ndarray, np.ndarray]:
+    """(left, right) eye positions (3,) m: V ± ipd/2 along +y (the user's left). Raises on ipd < 0."""
+    if not (math.isfinite(ipd) and ipd >= 0.0):
+        raise ValueError(f"ipd must be finite and >= 0, got {ipd!r}")
+    v = np.asarray(eye, dtype=float)
+    dy = np.array([0.0, ipd / 2.0, 0.0])
+    return v + dy, v - dy
+
+
+def cylinder_mesh(radius: float = scene.CYLINDER_RADIUS, length: float = scene.CYLINDER_LENGTH,
+                  center=scene.CYLINDER_CENTER, n_around: int = 96, n_along: int = 48):
+    """Closed cylinder with axis along +y, finely tessellated along the axis (per-vertex correction needs
+    short edges on a curved sheet). Returns (vertices (N, 3) float32 m, faces (M, 3) int32)."""
+    if n_around < 3 or n_along < 1 or radius <= 0 or length <= 0:
+        raise ValueError(f"bad cylinder: radius={radius}, length={length}, n_around={n_around}, n_along={n_along}")
+    c = np.asarray(center, dtype=float)
+    th = np.linspace(0.0, 2 * math.pi, n_around, endpoint=False)
+    ys = np.linspace(-length / 2, length / 2, n_along + 1)
+    ring = np.stack([radius * np.cos(th), np.zeros_like(th), radius * np.sin(th)], axis=1)
+    verts = [ring + [0.0, y, 0.0] for y in ys]
+    v = np.concatenate(verts) + c
+    faces = []
+    for j in range(n_along):
+        for i in range(n_around):
+            a = j * n_around + i
+            b = j * n_around + (i + 1) % n_around
+            faces += [(a, b, a + n_around), (b, b + n_around, a + n_around)]
+    base = len(v)
+    caps = np.array([c + [0.0, -length / 2, 0.0], c + [0.0, length / 2, 0.0]])
+    v = np.concatenate([v, caps])
+    for i in range(n_around):
+        faces.append((base, (i + 1) % n_around, i))
+        top = n_along * n_around
+        faces.append((base + 1, top + i, top + (i + 1) % n_around))
+    return v.astype(np.float32), np.asarray(faces, dtype=np.int32)
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals (N, 3) float32 (unit; zero where a vertex has no area)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces)
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    n = np.zeros_like(v)
+    for i in range(3):
+        np.add.at(n, f[:, i], fn)
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    return (n / np.where(ln > 0, ln, 1.0)).astype(np.float32)
+
+
+@dataclass
+class _Uniforms:
+    mode: str = "none"
+    values: dict = field(default_factory=dict)
+
+
+class StereoRenderer:
+    """Headless stereo renderer of a triangle mesh with per-vertex correction (moderngl, EGL).
+
+    ``projector``: :class:`Projector` (its width × height is the output size); ``eye`` (3,) cyclopean eye V,
+    m; ``ipd`` m; ``screen_point``/``screen_normal`` the imaginary screen; ``samples``: MSAA samples (0 =
+    off); ``ctx``: an existing moderngl context (default: a new standalone EGL context). Raises
+    ``RuntimeError`` if no EGL context can be created.
+    """
+
+    def __init__(self, projector: Projector | None = None, *, eye=scene.EYE, ipd: float = 0.064,
+                 screen_point=scene.SCREEN_POINT, screen_normal=scene.SCREEN_NORMAL, samples: int = 0,
+                 min_cos: float = DEFAULT_MIN_COS, near: float = 0.05, far: float = 3.0, ctx=None,
+                 color=(1.0, 1.0, 1.0), shading: bool = True) -> None:
+        import moderngl
+
+        self.moderngl = moderngl
+        self.projector = projector or Projector.default()
+        self.eye = np.asarray(eye, dtype=float)
+        self.ipd = float(ipd)
+        self.eyes = eye_positions(self.eye, self.ipd)
+        self.screen_point = np.asarray(screen_point, dtype=float)
+        self.screen_normal = np.asarray(screen_normal, dtype=float) / np.linalg.norm(screen_normal)
+        self.min_cos = float(min_cos)
+        if ctx is None:
+            try:
+                ctx = moderngl.create_standalone_context(backend="egl")
+            except Exception as exc:  # pragma: no cover - depends on the machine
+                raise RuntimeError(f"cannot create a headless EGL OpenGL context: {exc}") from exc
+        self.ctx = ctx
+        vs = (SHADER_DIR / "correct.vert").read_text()
+        fs = (SHADER_DIR / "shade.frag").read_text()
+        self.prog = ctx.program(vertex_shader=vs, fragment_shader=fs)
+        self.tf_prog = ctx.program(vertex_shader=vs, varyings=["v_corrected", "v_valid"])
+        W, H = self.projector.width, self.projector.height
+        self.samples = int(samples)
+        self.fbo = ctx.framebuffer(color_attachments=[ctx.texture((2 * W, H), 3)],
+                                   depth_attachment=ctx.depth_renderbuffer((2 * W, H)))
+        self.msaa = None
+        if self.samples > 0:
+            self.msaa = ctx.framebuffer(color_attachments=[ctx.renderbuffer((2 * W, H), 3, samples=self.samples)],
+                                        depth_attachment=ctx.depth_renderbuffer((2 * W, H), samples=self.samples))
+        self.color = tuple(float(c) for c in color)
+        self.shading = bool(shading)
+        self.near, self.far = float(near), float(far)
+        self.vao = None
+        self.tf_vao = None
+        self.n_vertices = 0
+        self.model = "none"
+        self._set_common()
+        self.set_model("none")
+
+    # -- state -------------------------------------------------------------------------------------------------
+    def _set(self, name: str, value, progs=None) -> None:
+        for prog in progs or (self.prog, self.tf_prog):
+            if name in prog:
+                u = prog[name]
+                if isinstance(value, np.ndarray):
+                    u.write(np.ascontiguousarray(value, dtype=np.int32 if value.dtype.kind in "ib" else np.float32)
+                            .tobytes())
+                else:
+                    u.value = value
+
+    def _set_common(self) -> None:
+        P = self.projector
+        self._set("u_proj", tuple(P.position))
+        self._set("u_ro", tuple(self.screen_point))
+        self._set("u_no", tuple(self.screen_normal))
+        self._set("u_min_cos", self.min_cos)
+        self._set("u_Kp", np.asarray(P.K, dtype=np.float32).T.copy())   # GLSL mat3 is column-major
+        self._set("u_Rp", np.asarray(P.R, dtype=np.float32).T.copy())
+        self._set("u_size", (float(P.width), float(P.height)))
+        self._set("u_near", self.near)
+        self._set("u_far", self.far)
+        self._set("u_color", self.color, (self.prog,))
+        self._set("u_shading", int(self.shading), (self.prog,))
+
+    def set_mesh(self, vertices, faces, normals=None) -> None:
+        """Upload a mesh: ``vertices`` (N, 3) m, ``faces`` (M, 3) int indices < N, ``normals`` (N, 3) or None
+        (computed). Raises ``ValueError`` for bad shapes, NaN or out-of-range indices."""
+        v = np.asarray(vertices, dtype=np.float32)
+        f = np.asarray(faces)
+        if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0 or not np.all(np.isfinite(v)):
+            raise ValueError(f"vertices must be a finite non-empty (N, 3) array, got shape {v.shape}")
+        if f.ndim != 2 or f.shape[1] != 3 or f.dtype.kind not in "iu" or (f.size and (f.min() < 0 or f.max() >= len(v))):
+            raise ValueError(f"faces must be (M, 3) int indices in [0, {len(v)}), got shape {f.shape}")
+        n = vertex_normals(v, f) if normals is None else np.asarray(normals, dtype=np.float32)
+        data = np.hstack([v, n]).astype(np.float32)
+        ctx = self.ctx
+        for obj in (self.vao, self.tf_vao):
+            if obj is not None:
+                obj.release()
+        if getattr(self, "_vbo", None) is not None:
+            self._vbo.release()
+            self._ibo.release()
+        self._vbo = ctx.buffer(data.tobytes())
+        self._ibo = ctx.buffer(f.astype(np.int32).tobytes())
+        self.vao = ctx.vertex_array(self.prog, [(self._vbo, "3f 3f", "in_pos", "in_normal")], self._ibo)
+        self.tf_vao = ctx.vertex_array(self.tf_prog, [(self._vbo, "3f 3x4", "in_pos")])
+        self.n_vertices = len(v)
+
+    def set_model(self, model: str, sheet: SheetSurface | None = None, *, fine_modes: int | None = None) -> None:
+        """Choose the correction model and the sheet it corrects for.
+
+        ``model`` ∈ {"none", "flat", "four_triangle", "fine"}; ``sheet`` the (measured) sheet (required
+        unless "none"). "fine" on a sheet without a membrane falls back to "flat" (identical result).
+        ``fine_modes`` truncates the membrane series sent to the shader (≤ 64). Raises ``ValueError``.
+        """
+        if model not in MODE_IDS:
+            raise ValueError(f"model must be one of {sorted(MODE_IDS)}, got {model!r}")
+        if model != "none" and not isinstance(sheet, SheetSurface):
+            raise ValueError(f"model {model!r} needs a SheetSurface sheet, got {sheet!r}")
+        if model == "fine" and sheet.membrane is None:
+            model = "flat"
+        mode = MODE_IDS[model]
+        if model == "flat":
+            self._set("u_rs", tuple(sheet.origin))
+            self._set("u_ns", tuple(sheet.normal))
+        elif model == "four_triangle":
+            q, cs, nrm, usable, _ = _triangles(sheet.pushed_point, sheet.corners, self.eye)
+            self._set("u_q", tuple(q))
+            self._set("u_c", cs.astype(np.float32))
+            self._set("u_tn", nrm.astype(np.float32))
+            self._set("u_usable", usable.astype(np.int32))
+        elif model == "fine":
+            m = sheet.membrane
+            k = min(len(m.coef), fine_modes or MAX_SHADER_MODES, MAX_SHADER_MODES)
+            pad = lambda a: np.pad(np.asarray(a[:k], dtype=np.float32), (0, MAX_SHADER_MODES - k))  # noqa: E731
+            self._set("u_o", tuple(sheet.origin))
+            self._set("u_n", tuple(sheet.normal))
+            self._set("u_eu", tuple(sheet.axis_u))
+            self._set("u_ev", tuple(sheet.axis_v))
+            self._set("u_a", float(m.half_span))
+            self._set("u_b", float(m.half_width))
+            self._set("u_v0", float(m.push_v))
+            self._set("u_K", int(k))
+            self._set("u_lam", pad(m.lam))
+            self._set("u_mu", pad(m.mu))
+            self._set("u_coef", pad(m.coef))
+        self._set("u_mode", mode)
+        self.model = model
+
+    # -- drawing -----------------------------------------------------------------------------------------------
+    def render_pair(self, eyes=None) -> None:
+        """Draw the left (x ∈ [0, W)) and right (x ∈ [W, 2W)) images into the framebuffer; waits for the GPU."""
+        if self.vao is None:
+            raise RuntimeError("set_mesh() first")
+        W, H = self.projector.width, self.projector.height
+        target = self.msaa or self.fbo
+        target.use()
+        self.ctx.enable(self.moderngl.DEPTH_TEST)
+        target.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
+        for i, e in enumerate(eyes if eyes is not None else self.eyes):
+            target.viewport = (i * W, 0, W, H)
+            self._set("u_eye", tuple(float(x) for x in e))
+            self.vao.render(self.moderngl.TRIANGLES)
+        if self.msaa is not None:
+            self.ctx.copy_framebuffer(self.fbo, self.msaa)
+        self.ctx.finish()
+
+    def read_pair(self, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """(left, right) uint8 RGB images (h, w, 3), top row first, downscaled by ``scale`` ∈ (0, 1] (area)."""
+        if not (0.0 < scale <= 1.0):
+            raise ValueError(f"scale must be in (0, 1], got {scale!r}")
+        W, H = self.projector.width, self.projector.height
+        img = np.frombuffer(self.fbo.read(components=3), dtype=np.uint8).reshape(H, 2 * W, 3)[::-1]
+        left, right = img[:, :W], img[:, W:]
+        if scale < 1.0:
+            import cv2
+
+            size = (max(1, round(W * scale)), max(1, round(H * scale)))
+            left = cv2.resize(left, size, interpolation=cv2.INTER_AREA)
+            right = cv2.resize(right, size, interpolation=cv2.INTER_AREA)
+        return np.ascontiguousarray(left), np.ascontiguousarray(right)
+
+    def render_single(self, eye) -> np.ndarray:
+        """Render one eye's image (H, W) float in [0, 1] (mean of RGB), for measurements."""
+        self.render_pair(eyes=[eye])
+        left, _ = self.read_pair()
+        return left.mean(axis=2) / 255.0
+
+    def transform(self, eye) -> tuple[np.ndarray, np.ndarray]:
+        """Run the vertex shader's correction on the uploaded vertices for ``eye`` (transform feedback).
+
+        Returns (corrected (N, 3) float32 m, valid (N,) bool) as the shader computed them."""
+        if self.tf_vao is None:
+            raise RuntimeError("set_mesh() first")
+        self._set("u_eye", tuple(float(x) for x in eye), (self.tf_prog,))
+        out = self.ctx.buffer(reserve=self.n_vertices * 16)
+        self.tf_vao.transform(out, mode=self.moderngl.POINTS, vertices=self.n_vertices)
+        data = np.frombuffer(out.read(), dtype=np.float32).reshape(-1, 4)
+        out.release()
+        return data[:, :3].copy(), data[:, 3] > 0.5
+
+    def release(self) -> None:
+        """Free GL objects and the context (if this renderer created it)."""
+        try:
+            self.ctx.release()
+        except Exception:  # pragma: no cover
+            pass
