@@ -314,7 +314,7 @@ def to_message(calib: dict, header, T_display_camera: np.ndarray | None = None):
     T_dc = T_display_camera if T_display_camera is not None else calib.get("T_display_camera", np.eye(4))
     f64 = lambda k: np.ascontiguousarray(np.asarray(calib[k], np.float64))  # noqa: E731
     return StereoCalibration(
-        header=header, image_size=(int(calib["image_size"][0]), int(calib["image_size"][1])),
+        header=header, image_size=np.array([int(calib["image_size"][0]), int(calib["image_size"][1])], np.int64),
         K1=f64("K1"), D1=f64("D1").ravel(), K2=f64("K2"), D2=f64("D2").ravel(), R=f64("R"), T=f64("T").ravel(),
         R1=f64("R1"), R2=f64("R2"), P1=f64("P1"), P2=f64("P2"), Q=f64("Q"),
         T_display_camera=np.ascontiguousarray(np.asarray(T_dc, np.float64)), rms_px=float(calib.get("rms_px", 0.0)))

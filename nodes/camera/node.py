@@ -1,0 +1,174 @@
+"""Camera node: publishes synchronised raw stereo pairs (mono8) on ``/camera/stereo`` and the latched stereo
+calibration on ``/camera/calibration``.
+
+Sources (param ``source``): ``sim`` — the calibrated twin (:mod:`nodes.camera.sim`) rendering the fingertip
+marker at the world node's ``/world/finger`` position (extrapolated to the exposure time with its velocity),
+or along a param trajectory when no world node has published for ``truth_timeout_s``; ``device`` —
+``cv2.VideoCapture`` (:mod:`nodes.camera.device`); ``files`` — a folder of pairs (:mod:`nodes.camera.files`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import threading
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from flexsheet.node import Node, QoS
+from messages import FingerTruth, StereoFrame, topics
+from nodes.triangulator.calibrate import load_yaml, to_message
+
+from .sim import DEFAULT_CAMERA_POSITION, DEFAULT_LOOK_AT, SimConfig, StereoRenderer, camera_model, \
+    default_trajectory, look_at
+
+__all__ = ["CameraParams", "CameraNode"]
+
+
+class CameraParams(BaseModel):
+    """Camera node parameters (SI units; see docs/vision.md)."""
+
+    model_config = ConfigDict(extra="forbid")
+    source: str = Field(default="sim", pattern="^(sim|device|files)$")
+    rate_hz: float = Field(default=48.0, gt=0.0, le=1000.0)
+    # camera model (sim) / calibration to publish (all sources)
+    model: str = Field(default="ximea", pattern="^(ximea|bumblebee2|file)$")
+    calib_file: str = ""
+    width: int = Field(default=640, gt=0)
+    height: int = Field(default=480, gt=0)
+    focal_mm: float = Field(default=3.8, gt=0.0)
+    pixel_um: float = Field(default=7.4, gt=0.0)
+    baseline: float = Field(default=0.12, gt=0.0)
+    # mounting: left camera optical centre and the point it looks at, display frame, m
+    camera_position: tuple[float, float, float] = DEFAULT_CAMERA_POSITION
+    look_at: tuple[float, float, float] = DEFAULT_LOOK_AT
+    # twin scene
+    marker_diameter: float = Field(default=0.004, ge=0.003, le=0.006)
+    noise_dn: float = Field(default=2.0, ge=0.0)
+    exposure_s: float = Field(default=0.004, ge=0.0, le=0.05)
+    blur_samples: int = Field(default=5, ge=1, le=50)
+    clutter: bool = True
+    seed: int = 0
+    truth_timeout_s: float = Field(default=0.5, gt=0.0)
+    traj_amplitude_rad: float = 1.05
+    traj_period_s: float = Field(default=10.0, gt=0.0)
+    traj_hover_m: float = 0.005
+    # device source
+    device_left: int | str = 0
+    device_right: int | str | None = None
+    # files source
+    files_left: str = ""
+    files_right: str = ""
+    files_csv: str = ""
+    loop: bool = True
+
+
+class CameraNode(Node):
+    """Publishes :class:`messages.StereoFrame` at ``rate_hz`` and latches :class:`messages.StereoCalibration`."""
+
+    Params = CameraParams
+    node_type = "camera"
+
+    async def setup(self) -> None:
+        p = self.params
+        self.T_dc = look_at(p.camera_position, p.look_at)
+        if p.model == "file":
+            calib = load_yaml(p.calib_file)
+        else:
+            calib = camera_model(p.model, width=p.width, height=p.height, focal_mm=p.focal_mm,
+                                 pixel_um=p.pixel_um, baseline=p.baseline)
+        self.calib = calib
+        self.stereo_pub = self.publisher(topics.STEREO)
+        self.calib_pub = self.publisher(topics.CALIBRATION)
+        self.calib_pub.publish(to_message(calib, self.calib_pub.header("camera_left"), self.T_dc))
+        self._truth: FingerTruth | None = None
+        self._truth_rx = -math.inf
+        self._lock = threading.Lock()
+        self._t0 = self.now()
+        self.frames = 0
+        if p.source == "sim":
+            cfg = SimConfig(marker_diameter=p.marker_diameter, noise_dn=p.noise_dn, exposure_s=p.exposure_s,
+                            blur_samples=p.blur_samples, clutter=p.clutter, seed=p.seed)
+            self.renderer = StereoRenderer(calib, self.T_dc, cfg)
+            self.subscribe(topics.FINGER_TRUTH, self.on_truth, qos=QoS.LATEST)
+            self.timer(1.0 / p.rate_hz, self.on_sim_tick)
+        elif p.source == "device":
+            from .device import DeviceSource
+
+            self.device = DeviceSource(p.device_left, p.device_right, tuple(calib["image_size"]), p.exposure_s)
+            self.timer(1.0 / p.rate_hz, self.on_device_tick)
+        else:
+            from .files import FileSource
+
+            self.files = FileSource(p.files_left, p.files_right, p.files_csv, p.rate_hz)
+            self._file_task = asyncio.get_running_loop().create_task(self._play_files())
+
+    def on_truth(self, msg: FingerTruth) -> None:
+        """Keep the newest finger truth (position/velocity in the display frame)."""
+        with self._lock:
+            self._truth = msg
+            self._truth_rx = self.now()
+
+    def _marker_state(self, t: float) -> tuple[np.ndarray, np.ndarray, bool]:
+        p = self.params
+        with self._lock:
+            truth, rx = self._truth, self._truth_rx
+        if truth is not None and t - rx <= p.truth_timeout_s:
+            dt = min(max(t - truth.header.stamp, 0.0), 0.1)
+            return truth.position + truth.velocity * dt, truth.velocity, truth.visible
+        pos, vel = default_trajectory(t - self._t0, p.traj_amplitude_rad, p.traj_period_s, p.traj_hover_m)
+        return pos, vel, True
+
+    def _publish(self, left: np.ndarray, right: np.ndarray, stamp: float, skew: float = 0.0) -> None:
+        self.stereo_pub.publish(StereoFrame(
+            header=self.stereo_pub.header("camera_left", stamp=stamp), left=left, right=right,
+            exposure_stamp=stamp, exposure_time=float(self.params.exposure_s), stereo_skew=float(skew)))
+        self.frames += 1
+
+    def _sim_frame(self) -> None:
+        t = self.now()
+        pos, vel, visible = self._marker_state(t)
+        left, right = self.renderer.render(pos, vel, visible)
+        self._publish(left, right, t)
+
+    async def on_sim_tick(self) -> None:
+        """Render and publish one twin frame (rendering runs in a worker thread, off the loop)."""
+        await asyncio.to_thread(self._sim_frame)
+
+    def _device_frame(self) -> None:
+        try:
+            left, right, stamp, skew = self.device.read()
+        except ValueError as exc:
+            self._log_limited(30, f"camera device: {exc}")
+            return
+        self._publish(left, right, stamp, skew)
+
+    async def on_device_tick(self) -> None:
+        """Grab and publish one device pair (in a worker thread)."""
+        await asyncio.to_thread(self._device_frame)
+
+    async def _play_files(self) -> None:
+        stamps = self.files.stamps()
+        while True:
+            start = self.now()
+            for i in range(len(self.files)):
+                target = start + stamps[i] - stamps[0]
+                await asyncio.sleep(max(0.0, target - self.now()))
+                try:
+                    left, right = await asyncio.to_thread(self.files.read, i)
+                except ValueError as exc:
+                    self._log_limited(30, f"camera files: {exc}")
+                    continue
+                self._publish(left, right, target)
+            if not self.params.loop:
+                return
+            gap = float(np.median(np.diff(stamps))) if len(stamps) > 1 else 1.0 / self.params.rate_hz
+            await asyncio.sleep(gap)
+
+    async def teardown(self) -> None:
+        if getattr(self, "device", None) is not None:
+            self.device.close()
+        task = getattr(self, "_file_task", None)
+        if task is not None:
+            task.cancel()
