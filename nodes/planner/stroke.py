@@ -1,0 +1,314 @@
+"""Encountered placement, active touch by rolling without slip, 2-D stroking and pushing (pure).
+
+Paper §V-A and Fig. 7, generalised:
+
+* **Away** (fingertip farther than ``touch_distance`` from the surface): the contact point A is the
+  centre-ray hit (:meth:`nodes.planner.shapes.Shape.project`; closest point for non-convex meshes) and the
+  sheet is commanded to the tangent plane at A, so the finger meets it there. The sheet's in-plane axis
+  ``axis_u`` is the reference direction (``u_ref``, +y: the clamp line at home) projected onto the
+  tangent plane. A rolled offset left from a previous touch decays with time constant ``recentre_time``.
+* **Touching** (within ``touch_distance``, released beyond ``release_distance``: hysteresis): the sheet
+  rolls on the object without slip. Each update the contact moves on the surface from B₋ to B; the sheet
+  rotates by the smallest rotation taking the old normal to the new one (rolling without spin, i.e.
+  parallel transport of ``axis_u``) and the material point under the finger advances on the sheet by the
+  geodesic step B₋→B (:meth:`Shape.geodesic_step`, exact on the cylinder's side and on spheres). So the
+  arc AB equals the sheet length A′B (Fig. 7(b)) in any direction: around the cylinder, along it, over the
+  other shapes. The sheet centre is ``origin = B − s_u·u − s_v·v`` where (s_u, s_v) are the contact's
+  coordinates on the sheet.
+* **Pushing**: a fingertip inside the object (negative distance) is projected onto the surface by the same
+  rule; the sheet keeps the tangent pose there and the finger depresses it, so stroking and pushing combine.
+* **Compliance**: the stretch comes from :func:`nodes.planner.tension.stretch_for_stiffness` for the
+  object's stiffness (FEM topic or param) at the contact's distance from the clamps.
+* **Limits and safety**: the pose passes :class:`nodes.planner.limits.RateLimiter`; clamp points are
+  checked by :class:`nodes.planner.limits.ReachModel`.
+
+Defined behaviour where methods fail (each has a test in ``tests/test_planner_stroke.py``):
+
+==============================  =========================================================================
+fingertip on the skeleton       (cylinder axis, sphere centre): the last normal is held → ``hold:singular``
+fingertip inside the object     pushing: projection as above; ``touching`` with negative ``depth``
+past end caps / box edges       centre ray wraps over rim/edge; normals continuous (sharp box: the jump
+                                is ramped by the limiter → ``rate_limited``)
+sudden jump > ``jump_distance``  treated as marker re-acquisition: touch state reset → ``reacquired``,
+                                motion ramped by the limiter
+NaN / invalid / stale input     nothing moves: the last safe plan is returned with ``hold:<reason>``
+unreachable clamp target        arms hold the last reachable pose; status ``unreachable`` (never clipped)
+contact near the sheet edge     the finger slips: offset clamped to the sheet → ``slip:sheet_edge``
+object stiffer than sheet       stretch at its limit → ``object_stiffer_than_sheet``
+==============================  =========================================================================
+
+Units m, rad, s, N/m; all vectors in the display frame; vectors are float tuples for speed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .limits import MotionLimits, RateLimiter, ReachModel
+from .shapes import Shape
+from .tension import SheetMaterial, TensionResult, _max_stretch, stretch_for_stiffness
+from .vec import Vec, axpy, cols, cross, dot, finite, min_rotation, norm, perp_unit, rodrigues, \
+    rot_from_cols, sub
+
+__all__ = ["PlannerConfig", "Plan", "SurfacePlanner"]
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Planner settings (SI). ``touch_distance``/``release_distance`` m: touch hysteresis on the signed
+    distance; ``singular_eps`` m: skeleton distance below which the centre ray is undefined;
+    ``jump_distance`` m: a larger step between samples is a re-acquired marker; ``recentre_time`` s;
+    ``u_ref`` (3,): preferred in-plane axis; ``sheet_margin`` m: the contact keeps this far from the sheet
+    edges; ``object_stiffness`` N/m: default virtual stiffness; ``max_dt`` s: longer gaps count as one
+    nominal period. Raises ``ValueError`` on bad values."""
+
+    touch_distance: float = 0.002
+    release_distance: float = 0.006
+    singular_eps: float = 1e-4
+    jump_distance: float = 0.03
+    recentre_time: float = 0.5
+    u_ref: Vec = (0.0, 1.0, 0.0)
+    sheet_margin: float = 0.03
+    object_stiffness: float = 30.0
+    max_dt: float = 0.1
+    material: SheetMaterial = field(default_factory=SheetMaterial)
+    limits: MotionLimits = field(default_factory=MotionLimits)
+    reach: ReachModel = field(default_factory=ReachModel)
+
+    def __post_init__(self) -> None:
+        for k in ("touch_distance", "release_distance", "singular_eps", "jump_distance", "recentre_time",
+                  "sheet_margin", "max_dt"):
+            v = getattr(self, k)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
+                raise ValueError(f"{k} must be finite and > 0, got {v!r}")
+        if self.release_distance < self.touch_distance:
+            raise ValueError(f"release_distance must be >= touch_distance, got {self.release_distance!r}")
+        if not (math.isfinite(self.object_stiffness) and self.object_stiffness >= 0.0):
+            raise ValueError(f"object_stiffness must be finite and >= 0, got {self.object_stiffness!r}")
+        if len(self.u_ref) != 3 or not finite(self.u_ref) or norm(self.u_ref) < 1e-9:
+            raise ValueError(f"u_ref must be a non-zero finite (3,) vector, got {self.u_ref!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class Plan:
+    """One planner output (display frame, SI).
+
+    ``contact`` (3,) m: contact point on the virtual surface (desired); ``normal``, ``axis_u``, ``axis_v``
+    (3,) unit: commanded sheet frame; ``origin`` (3,) m: commanded sheet centre; ``offset`` (s_u, s_v) m:
+    contact position on the sheet relative to its centre; ``stretch``, ``tension`` N/m, ``stiffness`` N/m,
+    ``object_stiffness`` N/m; ``depth`` m: push depth (≥ 0 when the fingertip is inside); ``touching``;
+    ``status``: "ok" or ';'-joined reasons; ``left``/``right`` (3,) m: clamp points; ``reach_margin`` m;
+    ``t`` s: time of the fingertip sample planned from.
+    """
+
+    t: float
+    contact: Vec
+    normal: Vec
+    axis_u: Vec
+    axis_v: Vec
+    origin: Vec
+    offset: tuple[float, float]
+    stretch: float
+    tension: float
+    stiffness: float
+    object_stiffness: float
+    depth: float
+    touching: bool
+    status: str
+    left: Vec
+    right: Vec
+    reach_margin: float
+
+    def rotation(self) -> np.ndarray:
+        """(3, 3) rotation with columns (normal, axis_u, axis_v)."""
+        return np.column_stack([self.normal, self.axis_u, self.axis_v])
+
+    def clamp_matrices(self) -> tuple[np.ndarray, np.ndarray]:
+        """Left and right clamp poses T_display_clamp (4, 4), same convention as :func:`flexsheet.scene.clamp_poses`."""
+        R = self.rotation()
+        out = []
+        for p in (self.left, self.right):
+            T = np.eye(4)
+            T[:3, :3] = R
+            T[:3, 3] = p
+            out.append(T)
+        return out[0], out[1]
+
+
+class SurfacePlanner:
+    """Stateful surface planner: feed fingertip samples to :meth:`update`, get :class:`Plan` s.
+
+    ``shape``: a :class:`nodes.planner.shapes.Shape`; ``config``: :class:`PlannerConfig`. The first valid
+    sample initialises the pose (no ramp). ``last`` is the last safe plan (``None`` before the first).
+    """
+
+    def __init__(self, shape: Shape, config: PlannerConfig | None = None):
+        self.shape = shape
+        self.cfg = config or PlannerConfig()
+        self.limiter = RateLimiter(self.cfg.limits)
+        self._eps_max = _max_stretch(self.cfg.material)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget all state (as at start)."""
+        self.last: Plan | None = None
+        self.t_last: float | None = None
+        self.p_last: Vec | None = None
+        self.q_last: Vec | None = None
+        self.n_last: Vec | None = None
+        self.u_last: Vec | None = None
+        self.s: tuple[float, float] = (0.0, 0.0)
+        self.touching = False
+        self.limiter.reset((0.0, 0.0, 0.0), ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), 0.0)
+        self.limiter.origin = None
+        self._tcache: tuple[float, float, TensionResult] | None = None
+        self.counts: dict[str, int] = {}
+
+    # ---------------------------------------------------------------------------------------------
+    def _hold(self, reason: str, t: float | None = None) -> Plan | None:
+        self.counts[reason] = self.counts.get(reason, 0) + 1
+        if self.last is None:
+            return None
+        L = self.last
+        return Plan(L.t if t is None else t, L.contact, L.normal, L.axis_u, L.axis_v, L.origin, L.offset,
+                    L.stretch, L.tension, L.stiffness, L.object_stiffness, L.depth, L.touching, reason,
+                    L.left, L.right, L.reach_margin)
+
+    def _tension(self, k: float, off_u: float) -> TensionResult:
+        c = self._tcache
+        if c is not None and abs(c[0] - k) <= 1e-6 * max(1.0, k) and abs(c[1] - off_u) <= 1e-4:
+            return c[2]
+        r = stretch_for_stiffness(k, self.cfg.material, off_u, self._eps_max)
+        self._tcache = (k, off_u, r)
+        return r
+
+    def update(self, t: float, p, object_stiffness: float | None = None) -> Plan | None:
+        """Plan from a fingertip sample ``p`` (3,) m at time ``t`` s; ``object_stiffness`` N/m overrides the
+        configured value (e.g. from the FEM topic). Returns the new :class:`Plan`, or a held copy of the last
+        safe plan with status ``hold:<reason>`` for invalid input (``None`` if there is none yet). Never raises
+        for bad samples: the reason is counted in ``counts``."""
+        cfg = self.cfg
+        try:
+            t = float(t)
+            p = (float(p[0]), float(p[1]), float(p[2])) if len(p) == 3 else None
+        except (TypeError, ValueError, IndexError):
+            p = None
+        if p is None or not (math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(p[2])):
+            return self._hold("hold:invalid_fingertip")
+        if not math.isfinite(t):
+            return self._hold("hold:invalid_stamp")
+        k_obj = cfg.object_stiffness if object_stiffness is None else object_stiffness
+        if not (math.isfinite(k_obj) and k_obj >= 0.0):
+            return self._hold("hold:invalid_stiffness", t)
+        status: list[str] = []
+        if self.t_last is None:
+            dt = None
+        else:
+            dt = t - self.t_last
+            if dt <= 0.0:
+                return self._hold("hold:stale_fingertip")
+            dt = min(dt, cfg.max_dt)
+
+        # re-acquisition: a jump no finger can make between two samples
+        if self.p_last is not None and norm(sub(p, self.p_last)) > cfg.jump_distance:
+            self.touching = False
+            status.append("reacquired")
+
+        proj = self.shape.project(p, self.n_last, cfg.singular_eps)
+        if proj.singular:
+            status.append("hold:singular")
+        q, n, dist = proj.point, proj.normal, proj.distance
+
+        was_touching = self.touching
+        if not self.touching and dist <= cfg.touch_distance:
+            self.touching = True
+        elif self.touching and dist > cfg.release_distance:
+            self.touching = False
+
+        su, sv = self.s
+        if self.touching and was_touching and self.n_last is not None and self.q_last is not None \
+                and self.u_last is not None:
+            # rolling without slip: parallel-transport u, advance the material point by the geodesic step
+            u0 = self.u_last
+            v0 = cross(self.n_last, u0)
+            g = self.shape.geodesic_step(self.q_last, q)
+            su += dot(g, u0)
+            sv += dot(g, v0)
+            mr = min_rotation(self.n_last, n)
+            u = rodrigues(mr[0], mr[1], u0) if mr is not None else u0
+            u = perp_unit(n, u)
+        else:
+            if dt is not None and (su != 0.0 or sv != 0.0):
+                f = math.exp(-dt / cfg.recentre_time)
+                su, sv = su * f, sv * f
+            u = perp_unit(n, cfg.u_ref if abs(dot(cfg.u_ref, n)) < 0.999 * norm(cfg.u_ref) or self.u_last is None
+                          else self.u_last)
+        v = cross(n, u)
+
+        # stiffness → stretch at the contact's distance from the clamps
+        tr = self._tension(k_obj, su)
+        if tr.saturated:
+            status.append(tr.saturated)
+
+        # the finger must stay on the sheet: otherwise it slips (offset clamped)
+        mat = cfg.material
+        hu = 0.5 * mat.size * (1.0 + tr.stretch) - cfg.sheet_margin
+        hv = 0.5 * mat.size - cfg.sheet_margin
+        if abs(su) > hu or abs(sv) > hv:
+            su, sv = max(-hu, min(hu, su)), max(-hv, min(hv, sv))
+            status.append("slip:sheet_edge")
+
+        origin = axpy(-sv, v, axpy(-su, u, q))
+        R = rot_from_cols(n, u, v)
+        prev = None
+        if dt is None or self.limiter.origin is None:
+            self.limiter.reset(origin, R, tr.stretch)
+            o, Rc, st, limited = origin, R, tr.stretch, False
+        else:
+            prev = (self.limiter.origin, self.limiter.R, self.limiter.stretch, self.limiter.vel, self.limiter.omega)
+            o, Rc, st, limited = self.limiter.step(origin, R, tr.stretch, dt)
+        if limited:
+            status.append("rate_limited")
+        nc, uc, vc = cols(Rc)
+        half = 0.5 * mat.size * (1.0 + st)
+        left = axpy(half, uc, o)
+        right = axpy(-half, uc, o)
+        ok, margin = cfg.reach.reachable(left, right)
+        if not ok:
+            status.append("unreachable")
+            if self.last is not None and prev is not None:
+                # hold the last reachable pose (at rest), keep the rolling state of the finger
+                self.limiter.origin, self.limiter.R, self.limiter.stretch = prev[0], prev[1], prev[2]
+                self.limiter.vel = (0.0, 0.0, 0.0)
+                self.limiter.omega = (0.0, 0.0, 0.0)
+                L = self.last
+                o, nc, uc, vc, st = L.origin, L.normal, L.axis_u, L.axis_v, L.stretch
+                left, right = L.left, L.right
+        plan = Plan(t, q, nc, uc, vc, o, (su, sv), st, tr.tension if st == tr.stretch else
+                    _tension_at(st, mat), tr.stiffness if st == tr.stretch else _stiff_at(st, mat, su),
+                    k_obj, max(0.0, -dist), self.touching, ";".join(status) if status else "ok", left, right,
+                    margin)
+        for s_ in status:
+            self.counts[s_] = self.counts.get(s_, 0) + 1
+        self.t_last, self.p_last, self.q_last, self.n_last, self.u_last, self.s = t, p, q, n, u, (su, sv)
+        if "unreachable" not in status or self.last is None:
+            self.last = plan
+        return plan
+
+
+def _tension_at(stretch: float, mat: SheetMaterial) -> float:
+    from .tension import tension
+
+    return tension(stretch, mat)
+
+
+def _stiff_at(stretch: float, mat: SheetMaterial, su: float) -> float:
+    from .tension import stiffness
+
+    try:
+        return stiffness(stretch, mat, su)
+    except ValueError:
+        return 0.0

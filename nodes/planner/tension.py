@@ -1,0 +1,173 @@
+"""Sheet tension for compliance: stretch → membrane tension → normal stiffness at the contact, and back (pure).
+
+Model (the cheapest that captures the paper's Fig. 1 mechanism, "bias tension varies the compliance"):
+
+* The urethane sheet (240 × 240 × 1 mm, paper §IV) is clamped along two opposite edges (the arms' clamps,
+  ``axis_u``) and free along the other two. Pulling the clamps apart by the engineering strain ε
+  (stretch λ = 1 + ε) puts it in uniaxial tension. Rubber is modelled as an incompressible neo-Hookean
+  solid (Treloar, *The Physics of Rubber Elasticity*, 3rd ed., 1975, ch. 5; shear modulus μ = E/3):
+  nominal stress P = μ (λ − λ⁻²), clamp force F = P·W₀·t₀, and tension per unit *current* width
+  T = F / (W₀ λ^{-1/2}) = μ t₀ (λ − λ⁻²) λ^{1/2}  [N/m].
+* Young's modulus: E = 2.46 MPa, assuming Shore A 50 urethane rubber (the paper gives no grade), from
+  Gent's hardness relation E[MPa] = 0.0981 (56 + 7.62336 S) / (0.137505 (254 − 2.54 S))
+  (A. N. Gent, *Trans. Inst. Rubber Ind.* 34, 46 (1958)). Shore A 30…70 spans E ≈ 1.1…5.4 MPa.
+* A fingertip pressing at distance a from one clamp and b from the other deflects a band of the sheet of
+  effective width w (default 20 mm: a fingertip pad plus spreading; identify it with one push test).
+  With no transverse tension (free edges) the band acts as a string under tension T·w, so the normal
+  stiffness at the contact is k = T·w·(1/a + 1/b)  [N/m] (small-deflection linearisation; geometric
+  stiffening at depths ≳ 5 % of a is neglected, and the sheet's bending stiffness
+  D = E t³ / 12(1 − ν²) ≈ 2.7·10⁻⁴ N·m is negligible against T·a² at ε ≥ 1 %).
+* The inverse (requested stiffness → stretch) is solved by safeguarded Newton on λ (k is monotone in λ).
+  Stretch is clamped to [``min_stretch``, ``max_stretch``] and the clamp force to ``max_force``; when the
+  object is stiffer than the sheet can present, the result says so (``saturated=True``).
+
+Units: m, N, N/m, Pa; stretch is the engineering strain between the clamps (dimensionless).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+__all__ = ["SheetMaterial", "TensionResult", "gent_modulus", "tension", "clamp_force", "stiffness",
+           "stretch_for_stiffness", "URETHANE_E"]
+
+
+def gent_modulus(shore_a: float) -> float:
+    """Young's modulus (Pa) of rubber of hardness ``shore_a`` (Shore A, 20…80), Gent (1958).
+
+    Raises ``ValueError`` outside 0 < S < 100.
+    """
+    if not 0.0 < shore_a < 100.0:
+        raise ValueError(f"shore_a must be in (0, 100), got {shore_a!r}")
+    return 1e6 * 0.0981 * (56.0 + 7.62336 * shore_a) / (0.137505 * (254.0 - 2.54 * shore_a))
+
+
+#: assumed Young's modulus of the paper's urethane rubber sheet, Pa (Shore A 50 through Gent's relation)
+URETHANE_E = gent_modulus(50.0)
+
+
+@dataclass(frozen=True)
+class SheetMaterial:
+    """The sheet and its limits. ``young`` Pa; ``thickness``, ``size`` (side, unstretched), ``contact_width`` m;
+    ``min_stretch``/``max_stretch`` engineering strain; ``max_force`` N per clamp (arm pull limit).
+
+    Defaults: paper §IV sheet; E per :data:`URETHANE_E`; max stretch 0.30 (well inside urethane's
+    elongation at break, > 300 %, and in the range where neo-Hooke fits rubber within ~10 %, Treloar 1975);
+    max force 40 N per clamp (an assumption for the RV-1A holding a static pull near its home pose — check
+    against the arm bridge's joint-torque limits). Raises ``ValueError`` on a non-positive field.
+    """
+
+    young: float = URETHANE_E
+    thickness: float = 0.001
+    size: float = 0.240
+    contact_width: float = 0.020
+    min_stretch: float = 0.01
+    max_stretch: float = 0.30
+    max_force: float = 40.0
+
+    def __post_init__(self) -> None:
+        for name in ("young", "thickness", "size", "contact_width", "max_stretch", "max_force"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {v!r}")
+        if not (0.0 <= self.min_stretch < self.max_stretch):
+            raise ValueError(f"min_stretch must be in [0, max_stretch), got {self.min_stretch!r}")
+
+    @property
+    def mu(self) -> float:
+        """Shear modulus μ = E/3 (incompressible), Pa."""
+        return self.young / 3.0
+
+
+def tension(stretch: float, mat: SheetMaterial) -> float:
+    """Membrane tension T (N/m, per unit current width) at engineering strain ``stretch`` (uniaxial neo-Hooke)."""
+    lam = 1.0 + stretch
+    return mat.mu * mat.thickness * (lam - lam ** -2) * math.sqrt(lam)
+
+
+def clamp_force(stretch: float, mat: SheetMaterial) -> float:
+    """Total pull on each clamp, N: F = μ t₀ W₀ (λ − λ⁻²)."""
+    lam = 1.0 + stretch
+    return mat.mu * mat.thickness * mat.size * (lam - lam ** -2)
+
+
+def stiffness(stretch: float, mat: SheetMaterial, offset_u: float = 0.0) -> float:
+    """Normal stiffness k (N/m) at a contact ``offset_u`` m from the sheet centre along axis_u (current length).
+
+    k = T·w·(1/a + 1/b), a, b = L/2 ∓ offset_u, L = size·(1 + stretch). Raises ``ValueError`` when the
+    contact is not strictly between the clamps.
+    """
+    half = 0.5 * mat.size * (1.0 + stretch)
+    a, b = half - offset_u, half + offset_u
+    if a <= 0.0 or b <= 0.0:
+        raise ValueError(f"offset_u must lie between the clamps (|offset_u| < {half:.4f} m), got {offset_u!r}")
+    return tension(stretch, mat) * mat.contact_width * (1.0 / a + 1.0 / b)
+
+
+@dataclass(frozen=True, slots=True)
+class TensionResult:
+    """Inverse result: ``stretch`` (clamped), ``tension`` N/m, ``stiffness`` N/m presented, ``force`` N per
+    clamp, ``saturated``: the requested stiffness was above (``"object_stiffer_than_sheet"``) or below
+    (``"object_softer_than_sheet"``) what the limits allow, else ``""``."""
+
+    stretch: float
+    tension: float
+    stiffness: float
+    force: float
+    saturated: str = ""
+
+
+def _max_stretch(mat: SheetMaterial) -> float:
+    """Largest stretch allowed by both max_stretch and max_force (force is monotone in λ)."""
+    if clamp_force(mat.max_stretch, mat) <= mat.max_force:
+        return mat.max_stretch
+    lo, hi = 0.0, mat.max_stretch
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if clamp_force(mid, mat) <= mat.max_force:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+def stretch_for_stiffness(k_target: float, mat: SheetMaterial, offset_u: float = 0.0,
+                          eps_max: float | None = None) -> TensionResult:
+    """Stretch that makes the normal stiffness at the contact equal ``k_target`` N/m (inverse of :func:`stiffness`).
+
+    Safeguarded Newton on ε ∈ [min_stretch, ε_max] (k is strictly increasing in ε for |offset_u| < L/2),
+    where ε_max is the largest stretch within ``max_stretch`` and ``max_force`` (pass ``eps_max`` to reuse a
+    precomputed value). Returns a :class:`TensionResult`; ``saturated`` reports clamping. Raises
+    ``ValueError`` if ``k_target`` is negative or not finite.
+    """
+    if not (math.isfinite(k_target) and k_target >= 0.0):
+        raise ValueError(f"k_target must be finite and >= 0, got {k_target!r}")
+    emax = _max_stretch(mat) if eps_max is None else eps_max
+    lo, hi = mat.min_stretch, emax
+
+    def k_of(e: float) -> float:
+        return stiffness(e, mat, offset_u)
+
+    klo, khi = k_of(lo), k_of(hi)
+    if k_target <= klo:
+        e, sat = lo, ("object_softer_than_sheet" if k_target < klo * (1 - 1e-9) else "")
+    elif k_target >= khi:
+        e, sat = hi, ("object_stiffer_than_sheet" if k_target > khi * (1 + 1e-9) else "")
+    else:
+        # initial guess from linear interpolation, then Newton with a bracket
+        e = lo + (hi - lo) * (k_target - klo) / (khi - klo)
+        sat = ""
+        for _ in range(30):
+            f = k_of(e) - k_target
+            if abs(f) <= 1e-10 * max(1.0, k_target):
+                break
+            if f > 0:
+                hi = e
+            else:
+                lo = e
+            h = 1e-7
+            g = (k_of(e + h) - k_of(e - h)) / (2 * h) if e - h > -1.0 else 0.0
+            en = e - f / g if g > 0 else 0.5 * (lo + hi)
+            e = en if lo < en < hi else 0.5 * (lo + hi)
+    return TensionResult(e, tension(e, mat), k_of(e), clamp_force(e, mat), sat)
