@@ -3,15 +3,18 @@ asks for more than the position, velocity or acceleration limits (pure numpy).
 
 Per joint, each period ``T`` the command ``c`` moves with velocity ``v`` chosen as the fastest that
 (1) does not exceed ``qd_max``, (2) differs from the previous period's velocity by at most ``qdd_max·T``,
-(3) can still stop at the goal with deceleration ``qdd_max`` (discrete braking curve
-``v ≤ a·T·(√(1/4 + 2|e|/(a·T²)) − 1/2)``, the largest v = n·a·T whose stopping distance a·T²·n(n+1)/2 ≤ |e|),
+(3) can still stop at the goal with deceleration ``qdd_max`` (the exact discrete braking curve, see
+``StreamLimiter._brake``),
 and (4) does not pass the goal in one period. The goal is first clipped into the joint range shrunk by
 ``margin``. This is a per-joint time-optimal second-order rate limiter (bang-bang with braking; see
 Kröger & Wahl, "Online trajectory generation", IEEE T-RO 26(1), 2010, type-II OTG, for the general form).
 
-Guarantees (tested): ``|c_k − c_{k−1}| ≤ qd_max·T``, ``|v_k − v_{k−1}| ≤ qdd_max·T`` (except when the goal is
-reached exactly, where the residual stop is below one step of ``qdd_max·T²``), and ``c_k`` stays in the
-shrunk range when it starts there.
+The velocity toward each joint limit is also capped by the braking curve of the distance to that limit,
+so the range is never left even when the goal jumps (the goal itself may be overshot when it jumps back
+toward the arm faster than the deceleration allows; the stream then returns to it).
+
+Guarantees (tested): ``|c_k − c_{k−1}| ≤ qd_max·T``, ``|v_k − v_{k−1}| ≤ qdd_max·T`` and ``c_k`` within the
+shrunk range, for any goal sequence.
 """
 
 from __future__ import annotations
@@ -66,16 +69,31 @@ class StreamLimiter:
         self.c = np.clip(a, self.lo, self.hi)
         self.v = np.zeros(6)
 
+    def _brake(self, dist: np.ndarray) -> np.ndarray:
+        """Largest speed from which steps of v, v − aT, v − 2aT, … stop within ``dist`` (exact, discrete).
+
+        With D = dist/(a·T²) and v = (m + f)·a·T (m integer, 0 ≤ f < 1) the distance covered is
+        a·T²·(m(m+1)/2 + (m+1)·f); inverting: m = ⌊(√(1+8D) − 1)/2⌋, f = (D − m(m+1)/2)/(m+1).
+        One step later the same holds with m − 1, so staying under this curve is always feasible.
+        """
+        a, T = self.qdd_max, self.T
+        D = np.maximum(dist, 0.0) / (a * T * T)
+        m = np.floor((np.sqrt(1.0 + 8.0 * D) - 1.0) * 0.5)
+        f = np.clip((D - 0.5 * m * (m + 1.0)) / (m + 1.0), 0.0, 1.0)
+        return (m + f) * a * T
+
     def step(self, goal) -> np.ndarray:
         """Advance one period toward ``goal`` (6,) rad; returns the new command (6,) rad (a copy)."""
         g = np.clip(np.asarray(goal, dtype=float), self.lo, self.hi)
         T, a = self.T, self.qdd_max
         e = g - self.c
         ae = np.abs(e)
-        v_brake = a * T * (np.sqrt(0.25 + 2.0 * ae / (a * T * T)) - 0.5)
+        v_brake = self._brake(ae)
         v_mag = np.minimum(np.minimum(self.qd_max, v_brake), ae / T)
         v_des = np.sign(e) * v_mag
         v = np.clip(v_des, self.v - a * T, self.v + a * T)
+        # never faster toward a joint limit than the deceleration can stop before it (feasible by induction)
+        v = np.clip(v, -self._brake(self.c - self.lo), self._brake(self.hi - self.c))
         v = np.clip(v, -self.qd_max, self.qd_max)
         c_new = np.clip(self.c + v * T, self.lo, self.hi)
         self.v = (c_new - self.c) / T
