@@ -19,6 +19,7 @@ import argparse
 import asyncio
 import base64
 import json
+import os
 import queue
 import threading
 import time
@@ -45,6 +46,33 @@ ENCODING = "flexsheet-msgpack"
 CHUNK_SIZE = 256 * 1024
 
 
+class _DirectFile:
+    """A file whose every ``write`` goes straight to the OS (no user-space buffer), so a completed MCAP
+    chunk is on disk even if the process is killed right after. (mcap's Writer would wrap a raw file in a
+    ``BufferedWriter``; this object is not a ``RawIOBase`` so it is used as is.)"""
+
+    def __init__(self, path: Path) -> None:
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._pos = 0
+
+    def write(self, data) -> int:
+        view = memoryview(data).cast("B")
+        while view:
+            n = os.write(self._fd, view)
+            view = view[n:]
+            self._pos += n
+        return len(data)
+
+    def tell(self) -> int:
+        return self._pos
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        os.close(self._fd)
+
+
 class BagWriter:
     """Writes raw wire frames to an MCAP file from a background thread (the caller never blocks on disk).
 
@@ -55,7 +83,7 @@ class BagWriter:
     def __init__(self, path: str | Path, chunk_size: int = CHUNK_SIZE) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh = open(self.path, "wb", buffering=0)  # noqa: SIM115 - closed in close()
+        self._fh = _DirectFile(self.path)
         self._writer = Writer(self._fh, chunk_size=chunk_size, compression=CompressionType.LZ4)
         self._writer.start(profile="flexsheet", library="flexsheet")
         self._channels: dict[str, int] = {}

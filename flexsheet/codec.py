@@ -1,7 +1,8 @@
 """Wire codec: a message is a ZeroMQ multipart ``[topic, meta, *buffers]``.
 
 ``meta`` is msgpack of ``{"s": SCHEMA, "v": VERSION, "d": fields}``; every numpy array inside ``fields`` is
-replaced by a msgpack ext (code 1) holding ``[buffer_index, dtype.str, shape]`` and its bytes travel as
+replaced by a msgpack ext (code 1) holding the buffer index (uint16), ndim (uint8), the dims (uint64
+each, little-endian) and ``dtype.str``; its bytes travel as
 its own frame, so images and vertex arrays are never turned into lists and receivers wrap the received
 frame with ``np.frombuffer`` without a copy (the arrays are read-only, like the frozen messages).
 
@@ -11,6 +12,8 @@ value where one is at fault. Source: pyzmq ``examples/serialization`` (zero-copy
 
 from __future__ import annotations
 
+import functools
+import struct
 from typing import Any
 
 import msgpack
@@ -22,6 +25,18 @@ from messages import Message, Topic
 __all__ = ["DecodeError", "encode", "decode", "decode_any", "peek_schema", "MAX_ARRAY_BYTES"]
 
 EXT_NDARRAY = 1
+_HEAD = struct.Struct("<HB")  # buffer index, ndim; then ndim × uint64 dims, then the dtype string
+_pack_head = _HEAD.pack
+
+
+def _unpack_head(data: bytes) -> tuple[int, int]:
+    return _HEAD.unpack_from(data, 0)
+
+
+@functools.lru_cache(maxsize=64)
+def _dtype(s: str) -> np.dtype:
+    return np.dtype(s)
+
 #: refuse arrays larger than this (bytes) on decode: a hostile size must not allocate or wrap garbage
 MAX_ARRAY_BYTES = 256 * 1024 * 1024
 _ALLOWED_KINDS = set("biuf")
@@ -47,7 +62,9 @@ def encode(topic: str, msg: Message) -> list:
         if isinstance(value, np.ndarray):
             arr = value if value.flags.c_contiguous else np.ascontiguousarray(value)
             buffers.append(arr)
-            return msgpack.ExtType(EXT_NDARRAY, msgpack.packb([len(buffers) + 1, arr.dtype.str, list(arr.shape)]))
+            shape = arr.shape
+            return msgpack.ExtType(EXT_NDARRAY, _pack_head(len(buffers) + 1, len(shape)) +
+                                   struct.pack(f"<{len(shape)}Q", *shape) + arr.dtype.str.encode())
         if isinstance(value, BaseModel):
             return {k: conv(v) for k, v in value.__dict__.items()}
         if isinstance(value, (list, tuple)):
@@ -68,17 +85,19 @@ def _unpack(frames: list, topic_name: str) -> dict:
         if code != EXT_NDARRAY:
             raise DecodeError(f"{topic_name}: unknown msgpack ext code {code}")
         try:
-            idx, dtype_str, shape = msgpack.unpackb(data)
-            dtype = np.dtype(dtype_str)
+            idx, ndim = _unpack_head(data)
+            shape = struct.unpack_from(f"<{ndim}Q", data, 3)
+            dtype_str = data[3 + 8 * ndim:].decode()
+            dtype = _dtype(dtype_str)
         except Exception as exc:  # noqa: BLE001 - any garbage in the ext payload is a decode error
             raise DecodeError(f"{topic_name}: bad array descriptor ({exc})") from None
-        if not isinstance(idx, int) or not 2 <= idx < nbuf:
+        if not 2 <= idx < nbuf:
             raise DecodeError(f"{topic_name}: array buffer index {idx!r} out of range (frames: {nbuf})")
         if dtype.kind not in _ALLOWED_KINDS or dtype.hasobject:
             raise DecodeError(f"{topic_name}: array dtype {dtype_str!r} not allowed")
-        if not isinstance(shape, list) or not all(isinstance(s, int) and 0 <= s for s in shape):
-            raise DecodeError(f"{topic_name}: bad array shape {shape!r}")
-        count = int(np.prod(shape, dtype=np.int64)) if shape else 1
+        count = 1
+        for s in shape:
+            count *= s
         buf = frames[idx]
         buf = buf.buffer if hasattr(buf, "buffer") else buf
         nbytes = memoryview(buf).nbytes

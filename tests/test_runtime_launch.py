@@ -1,0 +1,140 @@
+"""Launch across real processes: pub/sub, clean stop with no orphans (checked in /proc), respawn after kill -9,
+latched topics for late joiners, and clear errors for bad launch files."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from conftest import pid_alive
+from flexsheet.launch import LaunchError, load_launch
+
+
+class Launch:
+    """``flexsheet launch FILE`` in a subprocess, its output collected line by line."""
+
+    def __init__(self, path: Path, *extra: str) -> None:
+        self.proc = subprocess.Popen([sys.executable, "-m", "flexsheet", "launch", str(path), *extra],
+                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                     start_new_session=True)
+        self.lines: list[str] = []
+        self._t = threading.Thread(target=self._read, daemon=True)
+        self._t.start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self.lines.append(line.rstrip())
+
+    def wait_for(self, pattern: str, timeout: float = 20.0, count: int = 1) -> list[re.Match]:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            found = [m for line in list(self.lines) if (m := re.search(pattern, line))]
+            if len(found) >= count:
+                return found
+            time.sleep(0.05)
+        raise AssertionError(f"{pattern!r} x{count} not seen in {timeout} s; output:\n" + "\n".join(self.lines[-40:]))
+
+    def pids(self) -> dict[str, int]:
+        out = {}
+        for line in self.lines:
+            if m := re.match(r"\[(\w+)\s*\] started pid (\d+)", line):
+                out[m.group(1)] = int(m.group(2))
+        return out
+
+    def stop(self, sig=signal.SIGINT, timeout: float = 20.0) -> int:
+        self.proc.send_signal(sig)
+        code = self.proc.wait(timeout=timeout)
+        self._t.join(timeout=5)
+        return code
+
+
+def test_pubsub_across_processes_and_clean_stop_without_orphans(demo_launch):
+    lf = Launch(demo_launch())
+    try:
+        lf.wait_for(r"\[listener\s*\] heard seq=\d+ x=", count=5)
+        pids = lf.pids()
+        assert set(pids) == {"talker", "listener"}
+        assert all(pid_alive(p) for p in pids.values())
+    finally:
+        code = lf.stop()
+    assert code == 0
+    assert any("all nodes stopped" in line for line in lf.lines)
+    time.sleep(0.2)
+    assert not [p for p in pids.values() if pid_alive(p)], "orphan node processes left behind"
+    # output is prefixed with the node name, line by line
+    assert all(line.startswith("[") for line in lf.lines if line)
+
+
+def test_respawn_after_kill_9(demo_launch):
+    lf = Launch(demo_launch())
+    try:
+        lf.wait_for(r"\[talker\s*\] started pid")
+        lf.wait_for(r"heard seq=", count=3)
+        old = lf.pids()["talker"]
+        os.kill(old, signal.SIGKILL)
+        lf.wait_for(r"\[talker\s*\] respawning")
+        lf.wait_for(r"\[talker\s*\] started pid", count=2)
+        new = lf.pids()["talker"]
+        assert new != old and pid_alive(new)
+        start = next(i for i, line in enumerate(lf.lines) if "respawning" in line)
+        deadline = time.monotonic() + 15
+        while time.monotonic() < deadline:  # the new talker's messages (seq restarts at 0) reach the listener
+            if any((m := re.search(r"heard seq=(\d+) ", line)) and int(m.group(1)) < 100
+                   for line in lf.lines[start:]):
+                break
+            time.sleep(0.05)
+        else:
+            raise AssertionError("no message from the respawned talker:\n" + "\n".join(lf.lines[start:start + 30]))
+        assert any("exited with code -9" in line for line in lf.lines)
+    finally:
+        assert lf.stop() == 0
+    time.sleep(0.2)
+    assert not pid_alive(new)
+
+
+def test_host_filter_starts_only_that_hosts_share(demo_launch, tmp_path):
+    path = demo_launch()
+    text = path.read_text().replace("hosts:\n  main: {address: 127.0.0.1}",
+                                    "hosts:\n  main: {address: 127.0.0.1}\n  arm1: {address: 127.0.0.1}")
+    text = text.replace("listener: {type: listener, host: main", "listener: {type: listener, host: arm1")
+    path.write_text(text)
+    a = Launch(path, "--host", "arm1")
+    b = Launch(path, "--host", "main")
+    try:
+        a.wait_for(r"heard seq=", count=3)   # a listener on 'arm1' hears the talker on 'main'
+        assert set(a.pids()) == {"listener"} and set(b.pids()) == {"talker"}
+    finally:
+        a.stop()
+        b.stop()
+
+
+@pytest.mark.parametrize("yaml_text, needle", [
+    ("nodes:\n  t: {type: nosuch}\n", "key 'nodes.t.type': Value error, unknown node type 'nosuch'"),
+    ("nodes:\n  t: {type: talker, host: mars}\n", "key 'nodes.t.host': unknown host 'mars'"),
+    ("nodes:\n  t: {type: talker, colour: red}\n", "key 'nodes.t.colour'"),
+    ("base_port: 80\nnodes: {}\n", "key 'base_port'"),
+    ("nodes: [1, 2\n", "not valid YAML"),
+])
+def test_bad_launch_file_names_file_key_and_value(tmp_path, yaml_text, needle):
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml_text)
+    with pytest.raises(LaunchError) as err:
+        load_launch(path)
+    assert str(path) in str(err.value)
+    assert needle in str(err.value)
+
+
+def test_bad_param_fails_before_sockets_with_field_name(demo_launch):
+    path = demo_launch()
+    out = subprocess.run([sys.executable, "-m", "flexsheet", "run", "talker", "--launch", str(path), "--name",
+                          "talker", "--param", "rate=-3"], capture_output=True, text=True, timeout=30)
+    assert out.returncode == 2
+    assert "param 'rate'" in out.stderr and "-3" in out.stderr

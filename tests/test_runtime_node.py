@@ -1,0 +1,135 @@
+"""Node base: QoS semantics, rejection of bad input while serving, handlers that do not stall the loop."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from flexsheet.codec import encode
+from flexsheet.demo import ListenerNode, TalkerNode
+from flexsheet.node import Node, NodeConfig, QoS
+from flexsheet.testing import NodeHarness
+from messages import Fingertip, Header, Heartbeat
+from messages import topics as T
+
+
+def tip(seq: int, x: float = 0.0) -> Fingertip:
+    p = np.array([x, 0.0, 0.0])
+    return Fingertip(header=Header(stamp=time.time(), seq=seq), position=p, covariance=np.eye(3), valid=True,
+                     predicted_position=p, exposure_stamp=time.time())
+
+
+class Collect(Node):
+    """Test node: a slow sync handler on /fingertip (QoS from params) and a fast async one on /diagnostics."""
+
+    async def setup(self) -> None:
+        self.seen: list[int] = []
+        self.other: list[float] = []
+        self.threads: set[str] = set()
+        self.subscribe(T.FINGERTIP, self.on_tip, qos=self.qos)
+        self.subscribe(T.SHEET_STATE, self.on_other, qos=QoS.KEEP_ALL)
+
+    def on_tip(self, msg: Fingertip) -> None:
+        self.threads.add(threading.current_thread().name)
+        if msg.position[0] > 1.0:
+            raise ValueError(f"position.x out of workspace: {msg.position[0]}")
+        time.sleep(0.05)  # slow handler
+        self.seen.append(msg.header.seq)
+
+    async def on_other(self, msg) -> None:
+        self.other.append(time.monotonic())
+
+
+def make(qos: QoS):
+    cls = type(f"Collect{qos.name}", (Collect,), {"qos": qos})
+    return cls
+
+
+def test_latest_only_drops_stale_messages_and_counts_them():
+    async def scenario():
+        async with NodeHarness(make(QoS.LATEST)) as h:
+            for i in range(20):
+                h.inject(T.FINGERTIP, tip(i))
+            await h.settle(0.4)
+            seen = h.node.seen
+            sub = h.node._subs[T.FINGERTIP.name][0]
+            return seen, sub.stats.dropped
+    seen, dropped = asyncio.run(scenario())
+    assert seen[-1] == 19, "the newest message must be handled"
+    assert len(seen) <= 2 and dropped >= 18
+
+
+def test_keep_all_handles_every_message_in_order():
+    async def scenario():
+        async with NodeHarness(make(QoS.KEEP_ALL)) as h:
+            for i in range(6):
+                h.inject(T.FINGERTIP, tip(i))
+            await h.settle(0.5)
+            return h.node.seen
+    assert asyncio.run(scenario()) == list(range(6))
+
+
+def test_bad_input_rejected_node_keeps_serving():
+    async def scenario():
+        async with NodeHarness(make(QoS.KEEP_ALL)) as h:
+            h.inject_raw(T.FINGERTIP, [b"\x00garbage"])
+            h.transport.deliver(encode(T.FINGERTIP.name, Heartbeat(header=Header(stamp=1.0), node="imposter")))
+            h.inject(T.FINGERTIP, tip(1, x=5.0))   # handler raises ValueError
+            h.inject(T.FINGERTIP, tip(2))          # still served
+            await h.settle(0.3)
+            hb = h.node.heartbeat()
+            return h.node.seen, h.rejected(T.FINGERTIP), hb
+    seen, rejected, hb = asyncio.run(scenario())
+    assert seen == [2]
+    assert rejected == 3
+    assert hb.rejected_total == 3 and hb.state == "warn"
+    assert "position.x out of workspace: 5.0" in hb.last_rejection
+
+
+def test_slow_sync_handler_does_not_stall_other_topics():
+    from messages import SheetState
+
+    def sheet(i: int) -> SheetState:
+        z = np.zeros(3)
+        return SheetState(header=Header(stamp=1.0, seq=i), origin=z, normal=np.array([1.0, 0, 0]),
+                          axis_u=np.array([0, 1.0, 0]), corners=np.zeros((4, 3)), pushed_point=z, depth=0.0,
+                          stretch=0.0, membrane=np.zeros((2, 2)))
+
+    async def scenario():
+        async with NodeHarness(make(QoS.KEEP_ALL)) as h:
+            for i in range(5):
+                h.inject(T.FINGERTIP, tip(i))  # 5 × 50 ms of work in the worker thread
+            t0 = time.monotonic()
+            h.inject(T.SHEET_STATE, sheet(0))
+            for _ in range(200):
+                if h.node.other:
+                    break
+                await asyncio.sleep(0.002)
+            return h.node.other[0] - t0, h.node.threads
+    delay, threads = asyncio.run(scenario())
+    assert delay < 0.1, f"async topic waited {delay * 1e3:.0f} ms behind a slow sync handler"
+    assert all(name.startswith("sub/fingertip") for name in threads)
+
+
+def test_params_validated_before_any_socket_opens():
+    with pytest.raises(ValidationError, match="rate"):
+        TalkerNode(NodeConfig(name="t", params={"rate": -1}))
+    with pytest.raises(ValidationError, match="extra"):
+        ListenerNode(NodeConfig(name="l", params={"qos": "latest", "nope": 1}))
+
+
+def test_publisher_rejects_wrong_type():
+    async def scenario():
+        async with NodeHarness(TalkerNode, params={"rate": 1000.0, "count": 3}) as h:
+            msgs = await h.wait_for(T.FINGERTIP, n=3)
+            with pytest.raises(TypeError, match="expected Fingertip, got Heartbeat"):
+                h.node.pub.publish(Heartbeat(header=Header(stamp=1.0), node="x"))
+            return msgs
+    msgs = asyncio.run(scenario())
+    assert [m.header.seq for m in msgs[:3]] == [0, 1, 2]
+    assert msgs[2].position[0] == pytest.approx(0.002)
