@@ -10,8 +10,10 @@ Method:
 2. **Candidates**: up to ``max_candidates`` local maxima of the response, strongest first
    (``cv2.minMaxLoc`` with non-maximum suppression), at least ``min_contrast`` DN above the opened image.
 3. **Subpixel centroid**: intensity-weighted centroid of ``response − thr`` over a (2r+1)² patch around
-   each peak, with ``thr = threshold_frac · peak`` (pixels below thr carry no weight, so neighbouring
-   clutter and noise do not pull the centroid).
+   each peak, with ``thr = threshold_frac · peak``, restricted to the 8-connected blob holding the peak
+   (``cv2.connectedComponents``): pixels below thr and bright neighbours (a clutter edge next to the
+   finger) carry no weight, so they do not pull the centroid. A blob that reaches the patch border is
+   not an isolated dot (a sheet corner, a bright clutter edge) and is discarded.
 
 Search region: an ROI (``roi_half`` px around a predicted position) when one is given, else the full frame;
 :meth:`MarkerDetector.detect` falls back to the full frame in the same image when the ROI holds no
@@ -62,13 +64,13 @@ class MarkerDetector:
 
     Parameters (px unless stated): ``se_size`` odd top-hat element side (> marker diameter incl. blur
     width; default 11); ``min_contrast`` DN (default 40); ``max_candidates`` (default 3);
-    ``patch_radius`` r of the centroid patch (default 7); ``threshold_frac`` (default 0.3); ``roi_half``
+    ``patch_radius`` r of the centroid patch (default 7); ``threshold_frac`` (default 0.2); ``roi_half``
     half side of the tracking ROI (default 32); ``max_area`` px: larger blobs are not markers (default 150).
     Raises ``ValueError`` naming the parameter when out of range.
     """
 
     def __init__(self, se_size: int = 11, min_contrast: float = 40.0, max_candidates: int = 3,
-                 patch_radius: int = 7, threshold_frac: float = 0.3, roi_half: int = 32, max_area: int = 150):
+                 patch_radius: int = 7, threshold_frac: float = 0.2, roi_half: int = 32, max_area: int = 150):
         if se_size < 3 or se_size % 2 == 0:
             raise ValueError(f"se_size must be odd and >= 3, got {se_size}")
         if not (0 < min_contrast < 255):
@@ -128,11 +130,18 @@ class MarkerDetector:
             patch_full[ca - ya:cb - ya, da - xa:db - xa] = resp[ca:cb, da:db]
             wgt = patch_full - self.frac * peak
             np.maximum(wgt, 0.0, out=wgt)
+            # keep only the blob connected to the peak (not a bright neighbour such as a clutter edge)
+            _, labels = cv2.connectedComponents((wgt > 0).astype(np.uint8), connectivity=8)
+            blob = labels == labels[r, r]
+            wgt[~blob] = 0.0
+            # an isolated dot (or a blur streak shorter than the patch) does not reach the patch border;
+            # a blob that does is part of a larger bright structure (sheet corner, clutter edge): skip it
+            touches = blob[0, :].any() or blob[-1, :].any() or blob[:, 0].any() or blob[:, -1].any()
             s = wgt.sum()
             area = int(np.count_nonzero(wgt))
             # suppress this peak's neighbourhood for the next candidate
             work[max(0, py - 2 * r):py + 2 * r + 1, max(0, px - 2 * r):px + 2 * r + 1] = 0
-            if s <= 0 or area > self.max_area:
+            if s <= 0 or area > self.max_area or touches:
                 continue
             du = float((wgt * self._gx).sum() / s)
             dv = float((wgt * self._gy).sum() / s)

@@ -110,8 +110,9 @@ class StereoModel:
     # --- epipolar geometry -----------------------------------------------------------------------------
     def epipolar_residual(self, ul: np.ndarray, ur: np.ndarray) -> np.ndarray:
         """First-order geometric (Sampson) distance of ideal-pixel matches (N, 2), (N, 2) from the epipolar
-        constraint x_rᵀ F x_l = 0 (H&Z eq. 11.9). Returns (N,) px (≈ half the sum of both point offsets
-        needed to satisfy it; 0 for an exact match)."""
+        constraint x_rᵀ F x_l = 0 (H&Z eq. 11.9). Returns (N,) px: the norm of the least 4-vector correction
+        (u_l, v_l, u_r, v_r) that satisfies it, to first order (δ/√2 for a vertical offset δ on a rectified
+        rig; 0 for an exact match)."""
         ul = np.asarray(ul, np.float64).reshape(-1, 2)
         ur = np.asarray(ur, np.float64).reshape(-1, 2)
         xl = np.hstack([ul, np.ones((len(ul), 1))])
