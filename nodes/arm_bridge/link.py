@@ -189,8 +189,7 @@ class ArmStream:
         cmd = self._pending_cmd
         if cmd is None and self.cmd_written is not None and self.cmd_written & reg.CMD_RESET:
             cmd = reg.CMD_ENABLE   # drop the RESET bit so the next reset is an edge again
-        if cmd is None or cmd == self.cmd_written:
-            self._pending_cmd = None
+        if cmd is None:
             return
         self._pending_cmd = None
         rr = await self.client.write_register(reg.HR_COMMAND, cmd, device_id=self.device_id)

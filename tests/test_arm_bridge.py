@@ -1,0 +1,221 @@
+"""Bridge ↔ controller twin over real Modbus TCP sockets on 127.0.0.1 (free ports picked by the OS)."""
+
+import asyncio
+import math
+import time
+
+import numpy as np
+from pymodbus.client import AsyncModbusTcpClient
+
+from flexsheet import scene
+from flexsheet.testing import NodeHarness
+from messages import ArmTarget, Header, topics
+from nodes.arm_bridge import registers as reg
+from nodes.arm_bridge.controller import ControllerCore
+from nodes.arm_bridge.controller_sim import ControllerTwin
+from nodes.arm_bridge.kinematics import QD_MAX, home_joints
+from nodes.arm_bridge.node import ArmBridgeNode
+
+R_CYL = scene.CYLINDER_RADIUS
+SPEED_SCALE = 0.5     # bridge default
+
+
+def clamp_pose(side, theta, stretch=0.05):
+    c, s = math.cos(theta), math.sin(theta)
+    L, R = scene.clamp_poses(np.array([-R_CYL + R_CYL * c, 0.0, R_CYL * s]), np.array([c, 0.0, s]),
+                             np.array([0.0, 1.0, 0.0]), stretch)
+    return L if side == "left" else R
+
+
+def target(side, theta, stamp=1.0):
+    return ArmTarget(header=Header(stamp=time.time()), arm=side, pose=clamp_pose(side, theta), source_stamp=stamp)
+
+
+async def start_twin(side="left", port=0, q0=None):
+    core = ControllerCore(home_joints(side) if q0 is None else q0, now=time.monotonic())
+    twin = ControllerTwin(core, "127.0.0.1", port)
+    await twin.start()
+    return twin
+
+
+async def read_state(client):
+    rr = await client.read_input_registers(0, count=reg.IR_COUNT, device_id=1)
+    assert not rr.isError()
+    return reg.decode_input(rr.registers)
+
+
+def test_watchdog_fault_and_recovery_over_modbus():
+    async def scenario():
+        twin = await start_twin()
+        client = AsyncModbusTcpClient("127.0.0.1", port=twin.port, timeout=1.0, retries=0, reconnect_delay=0)
+        assert await client.connect()
+        try:
+            assert not (await client.write_register(reg.HR_COMMAND, reg.CMD_ENABLE, device_id=1)).isError()
+            for k in range(10):                      # counter running: stays enabled
+                await client.write_register(reg.HR_WATCHDOG, k + 1, device_id=1)
+                await asyncio.sleep(0.005)
+            st = await read_state(client)
+            assert st.has(reg.ST_ENABLED) and st.fault == reg.FAULT_NONE and st.has(reg.ST_WATCHDOG_OK)
+            await asyncio.sleep(0.06)                    # stall > 3 periods (21.3 ms)
+            st = await read_state(client)
+            assert st.fault == reg.FAULT_WATCHDOG and st.has(reg.ST_FAULT) and st.has(reg.ST_HOLD)
+            assert not st.has(reg.ST_ENABLED)
+            # recovery: counter again, RESET edge + ENABLE
+            await client.write_register(reg.HR_WATCHDOG, 100, device_id=1)
+            assert not (await client.write_register(reg.HR_COMMAND, reg.CMD_RESET | reg.CMD_ENABLE,
+                                                    device_id=1)).isError()
+            st = await read_state(client)
+            assert st.fault == reg.FAULT_NONE and st.has(reg.ST_ENABLED)
+            assert np.max(np.abs(st.active - st.position)) < 1e-5    # resumes where it holds
+        finally:
+            client.close()
+            await twin.stop()
+    asyncio.run(scenario())
+
+
+def test_malformed_registers_get_modbus_error_and_no_motion():
+    async def scenario():
+        twin = await start_twin()
+        client = AsyncModbusTcpClient("127.0.0.1", port=twin.port, timeout=1.0, retries=0, reconnect_delay=0)
+        assert await client.connect()
+        try:
+            await client.write_register(reg.HR_COMMAND, reg.CMD_ENABLE, device_id=1)
+            q0 = (await read_state(client)).position
+            bad = [
+                (reg.HR_COMMAND, [0x0008], reg.REJ_COMMAND_BITS, 3),
+                (reg.HR_TARGET + 3, [1, 2], reg.REJ_PARTIAL_PAIR, 3),
+                (reg.HR_TARGET, reg.encode_joints(q0 + [0, 0, 2.0, 0, 0, 0]), reg.REJ_TARGET_LIMIT, 3),
+                (reg.HR_TARGET, reg.encode_joints(q0 + [0, 0.3, 0, 0, 0, 0]), reg.REJ_TARGET_STEP, 3),
+            ]
+            for k, (address, values, code, exc_code) in enumerate(bad):
+                await client.write_register(reg.HR_WATCHDOG, k + 1, device_id=1)
+                rr = await client.write_registers(address, values, device_id=1)
+                assert rr.isError() and rr.exception_code == exc_code
+                st = await read_state(client)
+                assert st.reject == code and st.has(reg.ST_REJECTED)
+            rr = await client.write_registers(reg.HR_COUNT, [0], device_id=1)     # outside the map
+            assert rr.isError() and rr.exception_code == 2
+            await client.write_register(reg.HR_WATCHDOG, 99, device_id=1)
+            await asyncio.sleep(0.015)
+            st = await read_state(client)
+            assert np.max(np.abs(st.position - q0)) < 2e-6 and np.max(np.abs(st.velocity)) < 1e-5
+            assert twin.core.rejections == len(bad)
+        finally:
+            client.close()
+            await twin.stop()
+    asyncio.run(scenario())
+
+
+def _max_step(commanded):
+    c = np.array(commanded)
+    return np.max(np.abs(np.diff(c, axis=0)) / (SPEED_SCALE * QD_MAX * 0.0071))
+
+
+def test_bridge_tracks_and_reconnects_after_twin_restart_without_jump():
+    async def scenario():
+        twin = await start_twin("left")
+        port = twin.port
+        params = {"arm": "left", "port": port, "backoff_min": 0.02, "backoff_max": 0.1, "target_timeout": 1.0}
+        async with NodeHarness(ArmBridgeNode, params=params, name="bridge_left") as h:
+            for k in range(25):                           # slow tilt, 0 → 0.2 rad
+                h.inject(topics.ARM_LEFT_TARGET, target("left", 0.008 * k, stamp=float(k)))
+                await asyncio.sleep(0.02)
+            q_stop = twin.core.servo.q.copy()
+            await twin.stop()                             # controller goes away mid-motion
+            await asyncio.sleep(0.15)
+            assert h.node.stream.connected is False
+            twin2 = await start_twin("left", port=port, q0=twin.core.servo.q)   # arm did not move meanwhile
+            twin2.core.target_log = []
+            try:
+                for k in range(25, 60):
+                    h.inject(topics.ARM_LEFT_TARGET, target("left", min(0.2, 0.008 * k), stamp=float(k)))
+                    await asyncio.sleep(0.02)
+                await asyncio.sleep(0.5)
+                states = h.messages(topics.ARM_LEFT_STATE)
+                assert h.node.stream.reconnects >= 2
+                assert twin2.core.rejections == 0
+                log = np.array(twin2.core.target_log)
+                assert len(log) > 20
+                assert np.max(np.abs(log[0] - q_stop)) <= SPEED_SCALE * np.max(QD_MAX) * 0.0071 * 2
+                assert _max_step(log) <= 1.0 + 1e-6
+                assert _max_step([m.commanded for m in states]) <= 1.0 + 1e-6
+                last = states[-1]
+                assert last.bridge_status == "ok" and last.target_stamp == 59.0
+                want = clamp_pose("left", 0.2)
+                assert np.linalg.norm(last.pose[:3, 3] - want[:3, 3]) < 1e-4
+                assert last.write_stamp > 0 and abs(last.write_stamp - last.header.stamp) < 0.05
+            finally:
+                await twin2.stop()
+    asyncio.run(scenario())
+
+
+def test_two_bridges_run_concurrently():
+    async def scenario():
+        twins = {side: await start_twin(side) for side in ("left", "right")}
+        assert twins["left"].port != twins["right"].port
+        try:
+            async with NodeHarness(ArmBridgeNode, params={"arm": "left", "port": twins["left"].port},
+                                   name="bl") as hl, \
+                    NodeHarness(ArmBridgeNode, params={"arm": "right", "port": twins["right"].port},
+                                name="br") as hr:
+                for k in range(60):                       # ramp to -0.39 rad, then keep sending it
+                    th = -0.01 * min(k, 39)
+                    hl.inject(topics.ARM_LEFT_TARGET, target("left", th))
+                    hr.inject(topics.ARM_RIGHT_TARGET, target("right", th))
+                    await asyncio.sleep(0.02)
+                for side, h in (("left", hl), ("right", hr)):
+                    st = h.messages(topics.arm_state(side))[-1]
+                    assert st.arm == side and st.bridge_status == "ok" and st.fault == 0
+                    want = clamp_pose(side, -0.39)
+                    assert np.linalg.norm(st.pose[:3, 3] - want[:3, 3]) < 1e-4
+                    assert np.allclose(st.pose[:3, :3], want[:3, :3], atol=1e-4)
+                    assert twins[side].core.rejections == 0
+        finally:
+            for t in twins.values():
+                await t.stop()
+    asyncio.run(scenario())
+
+
+def test_bridge_holds_on_lost_or_unreachable_targets_and_follows_estop():
+    async def scenario():
+        twin = await start_twin("left")
+        params = {"arm": "left", "port": twin.port, "target_timeout": 0.1}
+        try:
+            async with NodeHarness(ArmBridgeNode, params=params, name="bh") as h:
+                for k in range(10):
+                    h.inject(topics.ARM_LEFT_TARGET, target("left", 0.01 * k))
+                    await asyncio.sleep(0.02)
+                await asyncio.sleep(0.3)                  # planner silent beyond the timeout
+                st = h.messages(topics.ARM_LEFT_STATE)[-1]
+                assert st.bridge_status == "hold:no_target"
+                q_hold = st.commanded
+                far = target("left", 0.0)
+                pose = far.pose.copy()
+                pose[:3, 3] += [0.0, -1.0, 0.0]          # 1 m beyond the arm's reach
+                n_before = len(h.messages(topics.ARM_LEFT_STATE))
+                for _ in range(5):
+                    h.inject(topics.ARM_LEFT_TARGET, ArmTarget(header=Header(stamp=time.time()), arm="left",
+                                                              pose=pose, source_stamp=5.0))
+                    await asyncio.sleep(0.02)
+                after = h.messages(topics.ARM_LEFT_STATE)[n_before:]
+                statuses = {m.bridge_status for m in after}
+                assert "hold:unreachable" in statuses or any(s.startswith("hold:limit") for s in statuses)
+                assert max(np.max(np.abs(m.commanded - q_hold)) for m in after) < 1e-9
+                # e-stop from another client: the bridge reports it and does not fight it
+                client = AsyncModbusTcpClient("127.0.0.1", port=twin.port, timeout=1.0, retries=0, reconnect_delay=0)
+                assert await client.connect()
+                await client.write_register(reg.HR_COMMAND, reg.CMD_STOP, device_id=1)
+                await asyncio.sleep(0.1)
+                st = h.messages(topics.ARM_LEFT_STATE)[-1]
+                assert st.bridge_status == "fault:estop" and st.fault == reg.FAULT_ESTOP
+                await client.write_register(reg.HR_COMMAND, reg.CMD_RESET, device_id=1)   # operator reset
+                await asyncio.sleep(0.1)
+                h.inject(topics.ARM_LEFT_TARGET, target("left", 0.05))
+                await asyncio.sleep(0.1)
+                st = h.messages(topics.ARM_LEFT_STATE)[-1]
+                assert st.bridge_status == "ok" and st.fault == 0
+                client.close()
+                assert h.rejected(topics.ARM_LEFT_TARGET) == 0
+        finally:
+            await twin.stop()
+    asyncio.run(scenario())
