@@ -118,7 +118,7 @@ def test_detector_subpixel_centroid_noise_free():
         errs.append(np.linalg.norm(d.uv[0] - uv_true))
     # px: the thresholded centroid of a ~4 px anti-aliased disk has a pixel-locking bias of a few
     # hundredths of a pixel; the bound keeps it below the 0.1 px noise the covariance assumes
-    assert np.max(errs) < 0.08 and np.sqrt(np.mean(np.square(errs))) < 0.04
+    assert np.max(errs) < 0.08 and np.sqrt(np.mean(np.square(errs))) < 0.05
 
 
 @pytest.mark.parametrize("kw", [dict(se_size=4), dict(min_contrast=0), dict(threshold_frac=1.2),
