@@ -534,9 +534,13 @@ class MeshShape(Shape):
         np = self._np
         pts, dist, tri = self._pq.on_surface(np.asarray([p], dtype=float))
         q = tuple(float(x) for x in pts[0])
-        inside = bool(self.mesh.contains(np.asarray([p], dtype=float))[0])
         d = float(dist[0])
         fn = tuple(float(x) for x in self.mesh.face_normals[int(tri[0])])
+        side = dot(sub(p, q), fn)  # type: ignore[arg-type]
+        if abs(side) > 0.999 * d and d > 1e-12:     # closest point inside a face: the face normal decides
+            inside = side < 0.0
+        else:                                       # edge/vertex: ask trimesh (ray parity)
+            inside = bool(self.mesh.contains(np.asarray([p], dtype=float))[0])
         if not inside and d > 1e-9:
             n = scale(sub(p, q), 1.0 / d)
         else:
@@ -545,6 +549,16 @@ class MeshShape(Shape):
 
     def skeleton_point(self, p: Vec) -> Vec:
         return self.centroid
+
+    def _ray_exit(self, s: Vec, w: Vec) -> tuple[Vec, Vec]:
+        """One trimesh ray cast from the (interior) centroid; the farthest hit is the exit."""
+        np = self._np
+        loc, _, tri = self.mesh.ray.intersects_location(np.asarray([s]), np.asarray([w]), multiple_hits=True)
+        if len(loc) == 0:
+            return Shape._ray_exit(self, s, w)
+        k = int(np.argmax((loc - np.asarray(s)) @ np.asarray(w)))
+        return (tuple(float(x) for x in loc[k]),  # type: ignore[return-value]
+                tuple(float(x) for x in self.mesh.face_normals[int(tri[k])]))
 
     def support(self, n: Vec, near: Vec) -> Vec:
         v = self.mesh.vertices

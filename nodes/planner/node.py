@@ -1,0 +1,145 @@
+"""Planner node: fingertip in, sheet target and the two clamp (arm) targets out. A thin shell around
+:class:`nodes.planner.stroke.SurfacePlanner`.
+
+Subscribes ``/fingertip`` (QoS LATEST; ``predicted_position`` when ``use_prediction``) and
+``/object/deformation`` (QoS LATEST; its ``stiffness`` N/m sets the sheet tension while fresh).
+Publishes ``/sheet/target``, ``/arm/left/target``, ``/arm/right/target`` with ``source_stamp`` = the
+fingertip's ``exposure_stamp``. A lost marker (``valid=False``) or an input the planner refuses republishes
+the last safe pose with status ``hold:<reason>``; an unreachable target holds the arms and says
+``unreachable``. Malformed or NaN messages are rejected by the codec and counted in diagnostics.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from flexsheet import scene
+from flexsheet.node import InputRejected, Node, QoS
+from messages import ArmTarget, Fingertip, ObjectDeformation, SheetTarget, topics
+
+from .limits import MotionLimits, ReachModel
+from .shapes import make_shape
+from .stroke import Plan, PlannerConfig, SurfacePlanner
+from .tension import URETHANE_E, SheetMaterial
+
+__all__ = ["PlannerParams", "PlannerNode"]
+
+
+class PlannerParams(BaseModel):
+    """Planner parameters (launch file / ``--param k=v``). SI units, display frame.
+
+    ``shape``: cylinder | sphere | box | plane | mesh; ``shape_params``: that shape's keys (see
+    :func:`nodes.planner.shapes.make_shape`; empty = the paper's scene). ``use_prediction``: plan on
+    ``Fingertip.predicted_position``. ``object_stiffness`` N/m: used when no fresh FEM stiffness
+    (``use_fem_stiffness``, ``fem_timeout`` s). The rest map to :class:`PlannerConfig`,
+    :class:`SheetMaterial`, :class:`MotionLimits` and :class:`ReachModel`.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    shape: str = Field(default="cylinder", pattern="^(cylinder|sphere|box|plane|mesh)$")
+    shape_params: dict = Field(default_factory=dict)
+    use_prediction: bool = False
+    object_stiffness: float = Field(default=30.0, ge=0.0)
+    use_fem_stiffness: bool = True
+    fem_timeout: float = Field(default=0.5, gt=0.0)
+    touch_distance: float = Field(default=0.002, gt=0.0)
+    release_distance: float = Field(default=0.006, gt=0.0)
+    jump_distance: float = Field(default=0.03, gt=0.0)
+    singular_eps: float = Field(default=1e-4, gt=0.0)
+    recentre_time: float = Field(default=0.5, gt=0.0)
+    sheet_margin: float = Field(default=0.03, gt=0.0)
+    u_ref: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    v_max: float = Field(default=0.30, gt=0.0)
+    a_max: float = Field(default=3.0, gt=0.0)
+    w_max: float = Field(default=3.0, gt=0.0)
+    alpha_max: float = Field(default=30.0, gt=0.0)
+    stretch_rate: float = Field(default=1.0, gt=0.0)
+    young: float = Field(default=URETHANE_E, gt=0.0)
+    thickness: float = Field(default=scene.SHEET_THICKNESS, gt=0.0)
+    sheet_size: float = Field(default=scene.SHEET_SIZE, gt=0.0)
+    contact_width: float = Field(default=0.020, gt=0.0)
+    min_stretch: float = Field(default=0.01, ge=0.0)
+    max_stretch: float = Field(default=0.30, gt=0.0)
+    max_force: float = Field(default=40.0, gt=0.0)
+    left_base: tuple[float, float, float, float] = scene.LEFT_BASE
+    right_base: tuple[float, float, float, float] = scene.RIGHT_BASE
+    shoulder_height: float = Field(default=0.30)
+    reach_min: float = Field(default=0.10, ge=0.0)
+    reach_max: float = Field(default=0.40, gt=0.0)
+
+    def planner_config(self) -> PlannerConfig:
+        """The :class:`PlannerConfig` these params describe (raises ``ValueError`` on inconsistent values)."""
+        return PlannerConfig(
+            touch_distance=self.touch_distance, release_distance=self.release_distance,
+            singular_eps=self.singular_eps, jump_distance=self.jump_distance, recentre_time=self.recentre_time,
+            u_ref=tuple(self.u_ref), sheet_margin=self.sheet_margin, object_stiffness=self.object_stiffness,
+            material=SheetMaterial(self.young, self.thickness, self.sheet_size, self.contact_width,
+                                   self.min_stretch, self.max_stretch, self.max_force),
+            limits=MotionLimits(self.v_max, self.a_max, self.w_max, self.alpha_max, self.stretch_rate),
+            reach=ReachModel(tuple(self.left_base), tuple(self.right_base), self.shoulder_height,
+                             self.reach_min, self.reach_max))
+
+
+class PlannerNode(Node):
+    """Surface-planner node (see module docstring). Params: :class:`PlannerParams`."""
+
+    Params = PlannerParams
+    node_type = "planner"
+
+    async def setup(self) -> None:
+        p: PlannerParams = self.params
+        self.planner = SurfacePlanner(make_shape(p.shape, p.shape_params), p.planner_config())
+        self._k_fem: float | None = None
+        self._k_fem_at = 0.0
+        self.pub_sheet = self.publisher(topics.SHEET_TARGET)
+        self.pub_left = self.publisher(topics.ARM_LEFT_TARGET)
+        self.pub_right = self.publisher(topics.ARM_RIGHT_TARGET)
+        self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
+        self.subscribe(topics.DEFORMATION, self.on_deformation, qos=QoS.LATEST)
+
+    def on_deformation(self, msg: ObjectDeformation) -> None:
+        """Keep the FEM's local stiffness (N/m) while the solution is valid and positive."""
+        if msg.valid and msg.stiffness > 0.0:
+            self._k_fem = float(msg.stiffness)
+            self._k_fem_at = time.monotonic()
+
+    def _stiffness(self) -> float:
+        p: PlannerParams = self.params
+        if p.use_fem_stiffness and self._k_fem is not None and time.monotonic() - self._k_fem_at <= p.fem_timeout:
+            return self._k_fem
+        return p.object_stiffness
+
+    def on_fingertip(self, msg: Fingertip) -> None:
+        """Plan and publish; a lost marker holds the last safe pose (status ``hold:marker_lost``)."""
+        if not msg.valid:
+            plan = self.planner._hold("hold:marker_lost")
+        else:
+            pos = msg.predicted_position if self.params.use_prediction else msg.position
+            plan = self.planner.update(msg.header.stamp + (msg.prediction_horizon if self.params.use_prediction else 0.0),
+                                       pos, self._stiffness())
+        if plan is None:
+            raise InputRejected(f"fingertip: no safe pose yet to hold (valid={msg.valid})")
+        self.publish_plan(plan, msg.exposure_stamp)
+        if plan.status in ("hold:invalid_fingertip", "hold:invalid_stamp", "hold:stale_fingertip",
+                           "hold:invalid_stiffness"):
+            raise InputRejected(f"fingertip: {plan.status} (position={msg.position.tolist()})")
+
+    def publish_plan(self, plan: Plan, source_stamp: float) -> None:
+        """Publish the sheet target and both clamp targets for ``plan``."""
+        st = self.pub_sheet.header("display")
+        f = np.asarray
+        self.pub_sheet.publish(SheetTarget(
+            header=st, contact_point=f(plan.contact, float), normal=f(plan.normal, float),
+            axis_u=f(plan.axis_u, float), axis_v=f(plan.axis_v, float), sheet_origin=f(plan.origin, float),
+            stretch=float(plan.stretch), tension=float(plan.tension), stiffness=float(plan.stiffness),
+            object_stiffness=float(plan.object_stiffness), touching=bool(plan.touching), status=plan.status,
+            source_stamp=float(source_stamp)))
+        Tl, Tr = plan.clamp_matrices()
+        self.pub_left.publish(ArmTarget(header=self.pub_left.header("display", st.stamp), arm="left", pose=Tl,
+                                        source_stamp=float(source_stamp), status=plan.status))
+        self.pub_right.publish(ArmTarget(header=self.pub_right.header("display", st.stamp), arm="right", pose=Tr,
+                                         source_stamp=float(source_stamp), status=plan.status))
