@@ -92,7 +92,14 @@ def cmd_launch(args: argparse.Namespace) -> int:
         out = str(Path(args.out).resolve()) if args.out else None
         if out:
             Path(out).mkdir(parents=True, exist_ok=True)
-        sup = Supervisor(lf, host=args.host, out=out, duration=args.duration)
+        overrides: dict[str, list[str]] = {}
+        for item in args.set:
+            node, dot, kv = item.partition(".")
+            if not dot or "=" not in kv or node not in lf.nodes:
+                raise LaunchError(f"{lf.path}: --set {item!r}: expected NODE.KEY=VALUE with NODE one of "
+                                  f"{', '.join(lf.nodes)}")
+            overrides.setdefault(node, []).append(kv)
+        sup = Supervisor(lf, host=args.host, out=out, duration=args.duration, overrides=overrides)
     except LaunchError as exc:
         print(f"flexsheet launch: {exc}", file=sys.stderr)
         return 2
@@ -148,6 +155,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C "
                                                    "or the scripted run ends)")
     s.add_argument("--out", help="output folder for bags, charts and the report (substituted for $(out))")
+    s.add_argument("--set", action="append", metavar="NODE.KEY=VALUE", default=[],
+                   help="override one node parameter (YAML value), repeatable: --set world.loop=true")
     s.set_defaults(func=cmd_launch)
 
     s = sub.add_parser("run", help="run one node alone",

@@ -197,12 +197,14 @@ class Supervisor:
     """
 
     def __init__(self, lf: LaunchFile, host: str | None = None, out: str | None = None,
-                 duration: float | None = None, print_fn=None, python: str = sys.executable) -> None:
+                 duration: float | None = None, print_fn=None, python: str = sys.executable,
+                 overrides: dict[str, list[str]] | None = None) -> None:
         if host is not None and host not in lf.hosts:
             raise LaunchError(f"{lf.path}: --host {host!r} is not a host of the file; hosts: {', '.join(lf.hosts)}")
         self.lf, self.host, self.out, self.duration = lf, host, out, duration
         self.print = print_fn or (lambda line: print(line, flush=True))
         self.python = python
+        self.overrides = overrides or {}
         self.children = [_Child(n, s) for n, s in lf.nodes.items() if host is None or s.host == host]
         self._stop = asyncio.Event()
         self.reason = ""
@@ -214,6 +216,8 @@ class Supervisor:
                "--name", child.name]
         if self.out:
             cmd += ["--out", self.out]
+        for kv in self.overrides.get(child.name, []):
+            cmd += ["--param", kv]
         return cmd
 
     async def _spawn(self, child: _Child) -> None:

@@ -119,8 +119,8 @@ class ZmqTransport(Transport):
         self._drain_sub()
 
     def send(self, frames: list) -> bool:
-        if self.pub is None:
-            return False
+        if self.pub is None or self.pub.closed:
+            return False  # shutting down: a late publish from a worker thread is dropped, not an error
         try:
             self.pub.send_multipart(frames, flags=zmq.NOBLOCK, copy=False)
         except zmq.Again:

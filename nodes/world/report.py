@@ -1,0 +1,209 @@
+"""Report of a full-graph run, computed from the recorded bag only (``launch/sim.yaml``'s ``report``).
+
+Reads ``OUT/*.mcap`` (the recorder's bag) and writes ``OUT/summary.json``, ``OUT/report.md`` and charts
+(``OUT/table1.png``, ``OUT/latency.png`` with JSON beside them), and prints Table I and the latency budget.
+
+Table I (paper §V-C, Fig. 9) per stroking segment, keyed by moving time in seconds like
+``flexsheet experiment stroke``: D = the measured fingertip (``/fingertip``, valid samples, while the
+target mark moves), the actual sheet = ``/world/sheet`` (FK of the arms' measured joints) interpolated at
+the fingertip's exposure time, errors by :func:`nodes.planner.metrics.table1`.
+
+Latency per hop, matched through the stamps every message carries (``exposure_stamp`` →
+``source_stamp`` → ``target_stamp``/``write_stamp``); arrival times are the recorder's receive times:
+
+* ``exposure_to_fingertip``: fingertip arrival − its exposure stamp (includes the camera twin's render);
+* ``fingertip_to_sheet_target``: sheet-target arrival − fingertip arrival (same exposure stamp);
+* ``sheet_target_to_modbus_write``: first Modbus write of the arm target − sheet-target arrival;
+* ``modbus_write_to_joint_motion``: first joint-state readback after that write − the write;
+* ``camera_frame_to_modbus_write``: first Modbus write − exposure stamp (whole software path);
+* ``fingertip_to_rendered_frame``: rendered-frame arrival − fingertip arrival (same exposure stamp).
+
+All hosts of the sim run share one clock; across PCs see docs/deploy.md on time sync.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from flexsheet.bag import read_bag
+from flexsheet.codec import DecodeError, decode_any
+from nodes.planner.metrics import summarize, table1
+from nodes.planner.shapes import paper_cylinder
+
+__all__ = ["analyse", "main"]
+
+PAPER = {"10": {"dd_mean_mm": 0.443, "dtheta_mean_deg": 0.359, "dd_std_mm": 0.0330, "dtheta_std_deg": 0.267},
+         "30": {"dd_mean_mm": 0.277, "dtheta_mean_deg": 0.225, "dd_std_mm": 0.0221, "dtheta_std_deg": 0.179}}
+
+
+def _load(bag: Path) -> dict[str, list]:
+    out: dict[str, list] = defaultdict(list)
+    for m in read_bag(bag):
+        try:
+            out[m.topic].append((m.log_time, decode_any(m.frames)))
+        except DecodeError:
+            out["<rejected>"].append((m.log_time, None))
+    return out
+
+
+def _stats(x) -> dict:
+    x = np.asarray(x, dtype=float) * 1e3
+    if x.size == 0:
+        return {"median": None, "p99": None, "n": 0}
+    return {"median": float(np.median(x)), "p99": float(np.percentile(x, 99)), "n": int(x.size)}
+
+
+def _interp_sheet(sheets: list, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    ts = np.array([s.header.stamp for _, s in sheets])
+    org = np.array([s.origin for _, s in sheets])
+    nrm = np.array([s.normal for _, s in sheets])
+    o = np.stack([np.interp(t, ts, org[:, k]) for k in range(3)], axis=1)
+    n = np.stack([np.interp(t, ts, nrm[:, k]) for k in range(3)], axis=1)
+    return o, n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def analyse(bag: Path) -> dict:
+    """Table I per segment and the latency per hop from one bag. Returns the summary dict."""
+    d = _load(bag)
+    tips = [(t, m) for t, m in d.get("/fingertip", [])]
+    truths = d.get("/world/finger", [])
+    sheets = d.get("/world/sheet", [])
+    summary: dict = {"bag": str(bag), "counts": {k: len(v) for k, v in d.items()}}
+    # ---------------------------------------------------------------- Table I
+    if truths and sheets and tips:
+        tt = np.array([m.header.stamp for _, m in truths])
+        phases = [m.phase for _, m in truths]
+        shape = paper_cylinder()
+        groups: dict[str, list] = defaultdict(list)
+        n_invalid = 0
+        for _, m in tips:
+            if not m.valid:
+                n_invalid += 1
+                continue
+            k = int(np.searchsorted(tt, m.exposure_stamp, side="right")) - 1
+            if k < 0:
+                continue
+            seg, mode, mt, phase = phases[k].split(":")
+            if phase == mode and mode in ("stroke", "stroke_push"):
+                key = mt if mode == "stroke" else f"stroke_push_{mt}"
+                groups[key].append(m)
+        s_ts = np.array([s.header.stamp for _, s in sheets])
+        for key, ms in groups.items():
+            t = np.array([m.exposure_stamp for m in ms])
+            keep = (t >= s_ts[0]) & (t <= s_ts[-1])
+            ms = [m for m, k in zip(ms, keep, strict=True) if k]
+            if len(ms) < 10:
+                continue
+            t = np.array([m.exposure_stamp for m in ms])
+            origin, normal = _interp_sheet(sheets, t)
+            err = table1(shape, np.array([m.position for m in ms]), origin, normal)
+            row = summarize(err.dd, err.dtheta)
+            if key in PAPER:
+                row["paper"] = PAPER[key]
+            summary[key] = row
+        summary["fingertip_invalid"] = n_invalid
+    # ---------------------------------------------------------------- latency
+    tip_arrival = {m.exposure_stamp: t for t, m in tips}
+    target_arrival = {}
+    for t, m in d.get("/sheet/target", []):
+        target_arrival.setdefault(m.source_stamp, t)
+    first_write: dict[float, float] = {}
+    first_readback: dict[float, float] = {}
+    for topic in ("/arm/left/joint_state", "/arm/right/joint_state"):
+        for t, m in d.get(topic, []):
+            if m.target_stamp and m.write_stamp and m.target_stamp not in first_write:
+                first_write[m.target_stamp] = m.write_stamp
+                first_readback[m.target_stamp] = m.header.stamp
+    render_arrival = {}
+    for t, m in d.get("/render/stereo", []):
+        render_arrival.setdefault(m.source_stamp, t)
+    hops = {
+        "exposure_to_fingertip": [a - e for e, a in tip_arrival.items()],
+        "fingertip_to_sheet_target": [target_arrival[e] - tip_arrival[e] for e in tip_arrival if e in target_arrival],
+        "sheet_target_to_modbus_write": [first_write[e] - target_arrival[e] for e in target_arrival if e in first_write],
+        "modbus_write_to_joint_motion": [first_readback[e] - first_write[e] for e in first_write],
+        "camera_frame_to_modbus_write": [first_write[e] - e for e in first_write],
+        "fingertip_to_rendered_frame": [render_arrival[e] - tip_arrival[e] for e in tip_arrival if e in render_arrival],
+    }
+    summary["latency_ms"] = {k: _stats(v) for k, v in hops.items()}
+    return summary
+
+
+def _charts(summary: dict, out: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    keys = [k for k in ("10", "30") if k in summary]
+    if keys:
+        fig, ax = plt.subplots(1, 2, figsize=(9, 3.5))
+        x = np.arange(len(keys))
+        for a, (q, label) in zip(ax, (("dd", "Δd (mm)"), ("dtheta", "Δθ (deg)")), strict=True):
+            unit = "mm" if q == "dd" else "deg"
+            ours = [summary[k][f"{q}_mean_{unit}"] for k in keys]
+            paper = [PAPER[k][f"{q}_mean_{unit}"] for k in keys]
+            a.bar(x - 0.2, paper, 0.4, label="paper (Table I)")
+            a.bar(x + 0.2, ours, 0.4, yerr=[summary[k][f"{q}_std_{unit}"] for k in keys], label="flexsheet (full graph)")
+            a.set_xticks(x, [f"{k} s" for k in keys])
+            a.set_ylabel(label)
+            a.set_xlabel("moving time")
+        ax[0].legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(out / "table1.png", dpi=120)
+        plt.close(fig)
+    lat = {k: v for k, v in summary["latency_ms"].items() if v["n"]}
+    if lat:
+        fig, ax = plt.subplots(figsize=(8, 3.5))
+        names = list(lat)
+        ax.barh(names, [lat[k]["median"] for k in names], label="median")
+        ax.scatter([lat[k]["p99"] for k in names], names, color="k", marker="|", s=200, label="p99")
+        ax.set_xlabel("latency (ms)")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(out / "latency.png", dpi=120)
+        plt.close(fig)
+
+
+def _format(summary: dict) -> str:
+    lines = ["Table I — position and angle errors in stroking (full process graph, from the bag)", "",
+             f"{'moving time':<16}{'Δd mean mm':>12}{'Δd std mm':>11}{'Δθ mean deg':>13}{'Δθ std deg':>12}"
+             f"{'paper Δd':>10}{'paper Δθ':>10}{'n':>7}"]
+    for key in sorted(k for k in summary if k[:1].isdigit() or k.startswith("stroke_push")):
+        r = summary[key]
+        p = r.get("paper", {})
+        lines.append(f"{key + ' s':<16}{r['dd_mean_mm']:12.3f}{r['dd_std_mm']:11.3f}{r['dtheta_mean_deg']:13.3f}"
+                     f"{r['dtheta_std_deg']:12.3f}{p.get('dd_mean_mm', float('nan')):10.3f}"
+                     f"{p.get('dtheta_mean_deg', float('nan')):10.3f}{r['n']:7d}")
+    lines += ["", "Latency budget per hop (ms)", f"{'hop':<32}{'median':>9}{'p99':>9}{'n':>7}"]
+    for k, v in summary["latency_ms"].items():
+        med = "-" if v["median"] is None else f"{v['median']:.2f}"
+        p99 = "-" if v["p99"] is None else f"{v['p99']:.2f}"
+        lines.append(f"{k:<32}{med:>9}{p99:>9}{v['n']:>7}")
+    return "\n".join(lines)
+
+
+def main(out: str, lf=None) -> int:
+    """Analyse the bag in ``out`` (called by ``flexsheet launch`` after the run). Returns 0, or 1 without data."""
+    out_dir = Path(out)
+    bags = sorted(out_dir.glob("*.mcap"), key=lambda p: p.stat().st_mtime)
+    if not bags:
+        print(f"[report] no bag in {out_dir}", flush=True)
+        return 1
+    summary = analyse(bags[-1])
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    _charts(summary, out_dir)
+    text = _format(summary)
+    (out_dir / "report.md").write_text("# flexsheet simulated run\n\n```\n" + text + "\n```\n\n"
+                                       "![Table I](table1.png)\n\n![latency](latency.png)\n")
+    print(text, flush=True)
+    print(f"[report] wrote {out_dir}/summary.json, report.md, table1.png, latency.png, {bags[-1].name}", flush=True)
+    return 0 if any(k in summary for k in ("10", "30")) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1]))
