@@ -69,6 +69,12 @@ def home_joints(side: str) -> np.ndarray:
     return Q_HOME.copy() if side == "left" else Q_HOME * _MIRROR
 
 _FLIP_X = np.diag([1.0, -1.0, -1.0, 1.0])   # rotation by pi about x (homogeneous)
+_I3 = np.eye(3)
+
+
+def _det3(R) -> float:
+    return float(R[0, 0] * (R[1, 1] * R[2, 2] - R[1, 2] * R[2, 1]) - R[0, 1] * (R[1, 0] * R[2, 2] - R[1, 2] * R[2, 0])
+                 + R[0, 2] * (R[1, 0] * R[2, 1] - R[1, 1] * R[2, 0]))
 
 
 def rotation_angle(R_a: np.ndarray, R_b: np.ndarray) -> float:
@@ -86,10 +92,10 @@ def check_pose(name: str, T: np.ndarray) -> np.ndarray:
     A = np.asarray(T, dtype=float)
     if A.shape != (4, 4) or not np.all(np.isfinite(A)):
         raise ValueError(f"{name} must be a finite (4, 4) transform, got shape {A.shape}")
-    if not np.allclose(A[3], (0.0, 0.0, 0.0, 1.0), atol=1e-9):
+    if A[3, 0] != 0.0 or A[3, 1] != 0.0 or A[3, 2] != 0.0 or A[3, 3] != 1.0:
         raise ValueError(f"{name} last row must be (0, 0, 0, 1), got {A[3]!r}")
     R = A[:3, :3]
-    if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or abs(np.linalg.det(R) - 1.0) > 1e-6:
+    if float(np.abs(R.T @ R - _I3).max()) > 1e-6 or _det3(R) < 0.0:
         raise ValueError(f"{name} rotation block is not a proper rotation: {R!r}")
     return A
 
@@ -208,23 +214,24 @@ class ArmKinematics:
         if outside.size:
             k = int(outside[0])
             return IKResult(q, False, f"limit:{JOINT_NAMES[k]}", math.inf, math.inf, 0, 0.0)
-        T_base_link = self.T_base_display @ T @ np.linalg.inv(self.T_link_tool)
+        T_base_link = self.T_base_display @ T @ self.T_link_tool.T   # T_link_tool is its own inverse here
         M_goal = pin.SE3(T_base_link[:3, :3].copy(), T_base_link[:3, 3].copy())
         model, data, fid = self.model, self.data, self.fid
         w0 = 10.0 * w_singular
         it = 0
         w = 0.0
+        J = None
         for it in range(1, max_iter + 1):  # noqa: B007
             pin.framesForwardKinematics(model, data, q)
             err = pin.log6(data.oMf[fid].actInv(M_goal)).vector
             if np.linalg.norm(err[:3]) <= tol_pos and np.linalg.norm(err[3:]) <= tol_rot:
                 break
             J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)
-            JJt = J @ J.T
-            w = math.sqrt(max(0.0, np.linalg.det(JJt)))
-            lam2 = lambda_max ** 2 * (1.0 - (w / w0) ** 2) if w < w0 else 0.0
-            if lam2 > 0.0:
-                dq = J.T @ np.linalg.solve(JJt + lam2 * np.eye(6), err)
+            if it == 1 or w < 2.0 * w0:               # re-evaluate damping only near singular poses
+                w = abs(float(np.linalg.det(J)))      # = sqrt(det(J Jᵀ)) for a square J
+            if w < w0:
+                lam2 = lambda_max ** 2 * (1.0 - (w / w0) ** 2)
+                dq = J.T @ np.linalg.solve(J @ J.T + lam2 * np.eye(6), err)
             else:
                 dq = np.linalg.solve(J, err)
             m = float(np.max(np.abs(dq)))
@@ -237,7 +244,7 @@ class ArmKinematics:
         pos_err = float(np.linalg.norm(err[:3]))
         rot_err = float(np.linalg.norm(err[3:]))
         J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)
-        w = float(abs(np.linalg.det(J)))
+        w = abs(float(np.linalg.det(J)))              # manipulability at the returned q
         converged = pos_err <= max(tol_pos, 1e-7) and rot_err <= max(tol_rot, 1e-7)
         if not converged:
             on_limit = np.flatnonzero((q <= self.q_lower + 1e-6) | (q >= self.q_upper - 1e-6))
