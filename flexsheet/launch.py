@@ -21,7 +21,8 @@ every node endpoint of the file, so the same file serves one machine (127.0.0.1)
 ``$(out)`` (the ``--out`` folder) and ``$(launch_dir)``.
 
 The supervisor starts each node as its own OS process (``python -m flexsheet run …``), prefixes every
-output line with the node name as it arrives (line-buffered, never batched), respawns by policy, and on
+output line with the node name as it arrives (line-buffered, never batched), respawns by policy, watches
+the heartbeats of every node of the file (all hosts) and reports a node or host that goes silent, and on
 Ctrl-C/SIGTERM stops all children in reverse order with escalation SIGINT → SIGTERM → SIGKILL. Children
 get ``PR_SET_PDEATHSIG`` so that not even a ``kill -9`` of the launcher leaves orphans.
 Errors: :class:`LaunchError` naming the file, the key and the wrong value.
@@ -208,6 +209,7 @@ class Supervisor:
         self.children = [_Child(n, s) for n, s in lf.nodes.items() if host is None or s.host == host]
         self._stop = asyncio.Event()
         self.reason = ""
+        self.lost_events: list[tuple[str, str]] = []
         width = max((len(c.name) for c in self.children), default=4)
         self._fmt = f"[{{:<{width}}}] {{}}"
 
@@ -290,6 +292,7 @@ class Supervisor:
         self.print(f"[launch] {self.lf.name}: starting {len(self.children)} nodes"
                    + (f" on host {self.host}" if self.host else ""))
         watchers = [loop.create_task(self._watch(c)) for c in self.children]
+        monitor = loop.create_task(self._monitor())
         t0 = time.monotonic()
         try:
             if self.duration is not None:
@@ -299,6 +302,7 @@ class Supervisor:
         except TimeoutError:
             self.reason = f"duration {self.duration:g} s reached"
         self.print(f"[launch] stopping after {time.monotonic() - t0:.1f} s: {self.reason or 'stop requested'}")
+        monitor.cancel()
         await asyncio.gather(*(self._stop_child(c) for c in reversed(self.children)))
         for w in watchers:
             w.cancel()
@@ -314,6 +318,46 @@ class Supervisor:
             self.lf.shutdown_timeout = min(self.lf.shutdown_timeout, 0.5)
         self.reason = f"{signal.Signals(sig).name} received"
         self._stop.set()
+
+    async def _monitor(self) -> None:
+        """Watch every node's heartbeat on ``/diagnostics`` (all hosts of the file) and report, once per
+        transition, a node that goes silent for ``3 × heartbeat_period`` (its host is gone, partitioned or
+        the node hangs) and when it comes back. Counts go into ``self.lost_events``."""
+        from messages import topics as T
+
+        from .codec import DecodeError, decode
+        from .transport import ZmqTransport
+
+        last: dict[str, float] = {}
+        host_of = {n: s.host for n, s in self.lf.nodes.items()}
+        lost: set[str] = set()
+
+        def on_frames(frames: list) -> None:
+            try:
+                hb = decode(frames, T.DIAGNOSTICS)
+            except DecodeError:
+                return
+            last[hb.node] = time.monotonic()
+            if hb.node in lost:
+                lost.discard(hb.node)
+                self.print(f"[launch] node {hb.node} on host {host_of.get(hb.node, '?')} is back (heartbeat)")
+
+        tr = ZmqTransport("", self.lf.endpoints().values())
+        await tr.start(on_frames)
+        tr.subscribe(T.DIAGNOSTICS.name)
+        limit = 3.0 * self.lf.heartbeat_period
+        try:
+            while True:
+                await asyncio.sleep(self.lf.heartbeat_period / 2)
+                now = time.monotonic()
+                for name, t in last.items():
+                    if name in self.lf.nodes and name not in lost and now - t > limit:
+                        lost.add(name)
+                        self.lost_events.append((name, host_of.get(name, "?")))
+                        self.print(f"[launch] node {name} on host {host_of.get(name, '?')} lost: no heartbeat "
+                                   f"for {now - t:.1f} s")
+        finally:
+            tr.close()
 
     def pids(self) -> list[int]:
         """PIDs of the running children."""
