@@ -124,7 +124,7 @@ vec3 correct(vec3 a, out bool valid) {
         float du = dot(d, u_eu), dv = dot(d, u_ev);
         float pu = dot(vo, u_eu), pv = dot(vo, u_ev);
         float h = 0.0;
-        for (int it = 0; it < 8; ++it) {
+        for (int it = 0; it < 4; ++it) {  // 4 = correction._NEWTON_ITERS
             vec3 w = membrane(pu + t * du, pv + t * dv);
             h = (-dot(vo, u_n) + t * dn) - w.x;
             float dh = dn - w.y * du - w.z * dv;
