@@ -292,6 +292,16 @@ class Cylinder(Shape):
             return add(scale(tphi, self.R * dphi), scale(self.a, h1 - h0))
         return Shape.geodesic_step(self, q0, q1)
 
+    def arc_length(self, q0: Vec, q1: Vec, steps: int = 64) -> float:
+        """Exact on the side (helix on the unrolled cylinder: hypot(R·Δφ, Δh)), else the generic sum."""
+        _, _, p0 = self._split(q0)
+        _, _, p1 = self._split(q1)
+        hl = 0.5 * self.L + 1e-9
+        if abs(p0 - self.R) < 1e-9 and abs(p1 - self.R) < 1e-9 and abs(dot(sub(q0, self.c), self.a)) <= hl \
+                and abs(dot(sub(q1, self.c), self.a)) <= hl:
+            return norm(self.geodesic_step(q0, q1))
+        return Shape.arc_length(self, q0, q1, steps)
+
     def support(self, n: Vec, near: Vec) -> Vec:
         na = dot(n, self.a)
         nr = unit(axpy(-na, self.a, n), 1e-9)

@@ -1,0 +1,100 @@
+"""Planner node through the in-process harness, the experiment CLI (quick) and the bench CLI."""
+
+import asyncio
+import json
+import time
+
+import numpy as np
+import pytest
+
+from flexsheet.testing import NodeHarness
+from messages import Fingertip, Header, ObjectDeformation, topics
+from nodes.planner.node import PlannerNode, PlannerParams
+
+
+def _ft(p, valid=True, stamp=None, pred=None):
+    s = time.time() if stamp is None else stamp
+    p = np.asarray(p, float)
+    return Fingertip(header=Header(stamp=s), position=p, covariance=np.eye(3) * 1e-8, valid=valid,
+                     predicted_position=np.asarray(pred if pred is not None else p, float),
+                     prediction_horizon=0.03 if pred is not None else 0.0, exposure_stamp=s - 0.012)
+
+
+def test_node_publishes_targets_with_source_stamp_and_holds_on_lost_marker():
+    async def scenario():
+        async with NodeHarness(PlannerNode, params={"shape": "cylinder", "object_stiffness": 20.0}) as h:
+            m = _ft([0.02, 0.0, 0.0])
+            h.inject(topics.FINGERTIP, m)
+            st = (await h.wait_for(topics.SHEET_TARGET, n=1, timeout=2.0))[0]
+            left = (await h.wait_for(topics.ARM_LEFT_TARGET, n=1, timeout=2.0))[0]
+            right = (await h.wait_for(topics.ARM_RIGHT_TARGET, n=1, timeout=2.0))[0]
+            assert st.status == "ok" and st.source_stamp == m.exposure_stamp
+            assert np.allclose(st.sheet_origin, 0.0) and np.allclose(st.normal, [1, 0, 0])
+            assert st.stiffness == pytest.approx(20.0, rel=1e-6)
+            half = 0.12 * (1 + st.stretch)
+            assert np.allclose(left.pose[:3, 3], [0, half, 0]) and np.allclose(right.pose[:3, 3], [0, -half, 0])
+            assert left.source_stamp == m.exposure_stamp and right.arm == "right"
+            h.inject(topics.FINGERTIP, _ft([0.0, 0.0, 0.0], valid=False, stamp=m.header.stamp + 0.02))
+            out = await h.wait_for(topics.SHEET_TARGET, n=2, timeout=2.0)
+            assert out[1].status == "hold:marker_lost" and np.array_equal(out[1].sheet_origin, st.sheet_origin)
+            h.inject_raw(topics.FINGERTIP, [b"garbage"])
+            await asyncio.sleep(0.1)
+            assert h.rejected(topics.FINGERTIP) == 1
+    asyncio.run(scenario())
+
+
+def test_node_uses_fem_stiffness_and_prediction():
+    async def scenario():
+        async with NodeHarness(PlannerNode, params={"use_prediction": True}) as h:
+            dm = ObjectDeformation(header=Header(stamp=time.time()), vertices=np.zeros((3, 3), np.float32),
+                                   faces=np.array([[0, 1, 2]], np.int32), contact_force=0.1, stiffness=12.0,
+                                   depth=0.001, contact_point=np.zeros(3), method="condensed")
+            h.inject(topics.DEFORMATION, dm)
+            await asyncio.sleep(0.1)
+            h.inject(topics.FINGERTIP, _ft([0.02, 0.0, 0.0], pred=[0.02, 0.01, 0.0]))
+            st = (await h.wait_for(topics.SHEET_TARGET, n=1, timeout=2.0))[0]
+            assert st.object_stiffness == 12.0 and st.stiffness == pytest.approx(12.0, rel=1e-6)
+            assert st.contact_point[1] == pytest.approx(0.01)          # planned on the predicted position
+    asyncio.run(scenario())
+
+
+def test_params_validate():
+    with pytest.raises(ValueError):
+        PlannerParams(shape="torus")
+    with pytest.raises(ValueError):
+        PlannerParams(bogus=1)
+    cfg = PlannerParams(max_stretch=0.2, reach_max=0.5).planner_config()
+    assert cfg.material.max_stretch == 0.2 and cfg.reach.reach_max == 0.5
+
+
+def test_experiment_quick_writes_summary(tmp_path, monkeypatch):
+    from nodes.planner import experiment
+
+    monkeypatch.setattr(experiment, "_plot", lambda *a, **k: None)   # chart drawing is not under test
+    assert experiment.main(["--out", str(tmp_path), "--seeds", "1", "--quick"]) == 0
+    s = json.loads((tmp_path / "summary.json").read_text())
+    for k in ("10", "30"):
+        for f in ("dd_mean_mm", "dd_std_mm", "dtheta_mean_deg", "dtheta_std_deg"):
+            assert np.isfinite(s[k][f]) and s[k][f] > 0
+    assert s["latency_budget_ms"] == pytest.approx(29.75, abs=0.01)
+    # prediction must beat no prediction at 10 s, and slower strokes must not be worse without it
+    assert s["10"]["dd_mean_mm"] < s["10_no_prediction"]["dd_mean_mm"]
+    assert s["30_no_prediction"]["dd_mean_mm"] < s["10_no_prediction"]["dd_mean_mm"]
+    chart = json.loads((tmp_path / "stroke_errors.json").read_text())
+    lat = chart["by_latency"]["no_prediction"]
+    assert lat[-1]["dd_mean_mm"] > lat[0]["dd_mean_mm"]     # more latency, more error
+
+
+def test_alpha_beta_gains_known_values():
+    from nodes.planner.experiment import alpha_beta_gains
+
+    a, b = alpha_beta_gains(1.0)
+    # Kalata (1984): λ = 1 → r = (5 − 3)/4 = 0.5, α = 0.75, β = 2·1.25 − 4·0.5 = 0.5
+    assert a == pytest.approx(0.75) and b == pytest.approx(0.5)
+
+
+def test_bench_prints_json(capsys):
+    from nodes.planner import bench
+
+    r = bench.measure("cylinder", 50)
+    assert r["update_median_us"] > 0 and r["n"] == 50
