@@ -38,9 +38,11 @@ SHEET_THICKNESS = 0.001                                 #: m
 PIXEL_ON_SCREEN = 0.0007                                #: one projector pixel on the imaginary screen, m
 
 #: default arm base poses (x, y, z, yaw) in the display frame: the arms face each other across the sheet,
-#: J1 axes 0.42 m to either side of the sheet centre, bases 0.30 m below it (so J2 is at sheet height).
-LEFT_BASE = (-0.05, 0.42, -0.30, -math.pi / 2)
-RIGHT_BASE = (-0.05, -0.42, -0.30, math.pi / 2)
+#: J1 axes 0.55 m to either side of the sheet centre, bases 0.40 m below it. Checked with the RV-1A's IK
+#: (nodes/arm_bridge/kinematics.py): the home sheet and tilts of ±60° about the cylinder axis with stretch
+#: 0…0.1 are reachable with ≥ 20° joint margin (closer bases need J3 beyond its 155° limit).
+LEFT_BASE = (-0.05, 0.55, -0.40, -math.pi / 2)
+RIGHT_BASE = (-0.05, -0.55, -0.40, math.pi / 2)
 
 
 def pose_matrix(x: float, y: float, z: float, yaw: float) -> np.ndarray:
