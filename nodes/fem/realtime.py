@@ -1,0 +1,225 @@
+"""The real-time FEM model the node runs (pure apart from its optional disk cache of precomputed matrices).
+
+:class:`RealtimeModel` = mesh + P1 model + capacitance solver (James & Pai 2001) over the candidate contact
+region, with the full sparse solve as fallback when the finger leaves that region, failure checks on a
+strain-monitor zone (surface + interior nodes near the contact region), and an optional geometrically
+nonlinear mode: a corotational table over push depth at the working-arc points, precomputed and
+interpolated at run time (the "precompute offline over the finger's state" approach of Niroomandi et al.
+2013 / Filipovič & Peterlík 2009, with corotational FEM as the offline model).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .contact import Finger, finger_at, finger_from_tip
+from .material import Material
+from .mesh import MeshSpec, TetMesh, arc_points, cylinder_mesh
+from .solver import (CapacitanceSolver, FemModel, OutsideCandidates, _grad_ops, element_checks,
+                     solve_corotational, solve_full)
+
+__all__ = ["RealtimeModel", "Update", "DEFAULT_CACHE_DIR"]
+
+DEFAULT_CACHE_DIR = os.path.join(os.path.expanduser("~"), ".cache", "flexsheet", "fem")
+_CACHE_VERSION = "1"
+
+
+@dataclass
+class Update:
+    """One model update. ``vertices`` (S, 3) float32 m display frame (deformed surface; undeformed when
+    ``valid`` is False); ``force`` N; ``stiffness`` N/m; ``depth`` m; ``contact_point`` (3,) m; ``method``;
+    ``max_strain``; ``inverted`` element count; ``status``; ``valid``."""
+
+    vertices: np.ndarray
+    force: float
+    stiffness: float
+    depth: float
+    contact_point: np.ndarray
+    method: str
+    max_strain: float
+    inverted: int
+    status: str
+    valid: bool
+
+
+class RealtimeModel:
+    """Real-time cylinder model.
+
+    Parameters: ``spec`` mesh resolution; ``material``; ``finger_radius`` m; ``max_depth`` m (deeper input is
+    rejected); ``strain_limit`` (largest principal small strain beyond which linear is declared invalid);
+    ``cache_dir`` (None: no disk cache); ``reach`` m extra margin around the working arc for candidate
+    contact points (default finger_radius + 2 mm); ``log`` optional callable(str) for progress lines.
+    Raises ``ValueError`` on bad parameters. ``precompute_s`` and ``cache_hit`` tell how start-up went.
+    """
+
+    def __init__(self, spec: MeshSpec, material: Material, finger_radius: float = 0.008, max_depth: float = 0.05,
+                 strain_limit: float = 1.0, cache_dir: str | None = DEFAULT_CACHE_DIR, reach: float | None = None,
+                 log=None):
+        if not (math.isfinite(finger_radius) and 0.001 <= finger_radius <= 0.03):
+            raise ValueError(f"finger_radius must be in [0.001, 0.03] m, got {finger_radius!r}")
+        if not (math.isfinite(max_depth) and 0.0 < max_depth <= 0.07):
+            raise ValueError(f"max_depth must be in (0, 0.07] m, got {max_depth!r}")
+        if not (math.isfinite(strain_limit) and strain_limit > 0):
+            raise ValueError(f"strain_limit must be > 0, got {strain_limit!r}")
+        log = log or (lambda s: None)
+        t0 = time.perf_counter()
+        self.spec, self.material = spec, material
+        self.finger_radius, self.max_depth, self.strain_limit = finger_radius, max_depth, strain_limit
+        self.mesh: TetMesh = cylinder_mesh(spec)
+        self.model = FemModel(self.mesh, material, order=1)
+        m = self.mesh
+        reach = finger_radius + 0.002 if reach is None else reach
+        arc = arc_points(m.radius, m.center, spec.arc_deg, 0.001)
+        dist = _dist_to_points(self.model.points, arc)
+        surf = self.model.boundary & ~self.model.fixed
+        self.candidates = surf & (dist <= reach)
+        monitor = dist <= reach + 2 * spec.h_fine
+        outputs = surf | (monitor & ~self.model.fixed)
+        self.surface_nodes = m.surface_nodes
+        self.faces = np.searchsorted(self.surface_nodes, m.faces).astype(np.int32)
+        self._rest = m.points[self.surface_nodes].astype(np.float32)
+        key = hashlib.sha256("|".join([_CACHE_VERSION, m.digest(), material.key(), f"{reach:.9g}",
+                                       f"{finger_radius:.9g}"]).encode()).hexdigest()[:24]
+        self.cache_key = key
+        self.cache_hit = False
+        path = os.path.join(cache_dir, f"capacitance_{key}.npz") if cache_dir else None
+        self.solver = None
+        if path and os.path.exists(path):
+            try:
+                self.solver = CapacitanceSolver.load(self.model, path)
+                self.cache_hit = True
+                log(f"fem: capacitance matrices loaded from cache {path}")
+            except (OSError, ValueError, KeyError) as exc:
+                log(f"fem: cache {path} unusable ({exc}); recomputing")
+        if self.solver is None:
+            log(f"fem: precomputing capacitance matrices for {int(self.candidates.sum())} candidate contact points "
+                f"on a {len(m.points)}-node mesh ...")
+            self.solver = CapacitanceSolver(self.model, self.candidates, outputs)
+            if path:
+                try:
+                    os.makedirs(cache_dir, exist_ok=True)
+                    self.solver.save(path)
+                except OSError as exc:
+                    log(f"fem: could not write cache {path}: {exc}")
+        out_idx = np.full(len(m.points), -1, np.int64)
+        out_idx[self.solver.out_pts] = np.arange(len(self.solver.out_pts))
+        self._surf_in_out = out_idx[self.surface_nodes]          # -1 for support nodes (zero displacement)
+        tet_ok = np.all(out_idx[m.tets] >= 0, axis=1) & np.all(monitor[m.tets], axis=1)
+        self._mon_tets = out_idx[m.tets[tet_ok]]
+        self._mon_Dm_inv, _ = _grad_ops(m.points[self.solver.out_pts], self._mon_tets) if tet_ok.any() else (None, None)
+        self._out_points = m.points[self.solver.out_pts]
+        self.nonlinear = None
+        self._anchor = None
+        self.precompute_s = time.perf_counter() - t0
+
+    @property
+    def n_nodes(self) -> int:
+        """Mesh node count."""
+        return len(self.mesh.points)
+
+    def build_nonlinear_table(self, depths: np.ndarray | None = None, log=None) -> None:
+        """Precompute corotational surface displacements at ``depths`` (m, ascending from 0) for pushes at
+        the working-arc points (azimuth samples every 10°). Slow (seconds per depth): call it off the
+        real-time path. Sets ``self.nonlinear``."""
+        log = log or (lambda s: None)
+        if depths is None:
+            depths = np.linspace(0.0, self.max_depth, 11)
+        depths = np.asarray(depths, float)
+        nang = max(1, int(round(2 * self.spec.arc_deg / 10.0)) + 1)
+        angles = np.radians(np.linspace(-self.spec.arc_deg, self.spec.arc_deg, nang)) if nang > 1 else np.zeros(1)
+        U = np.zeros((len(angles), len(depths), len(self.surface_nodes), 3), np.float32)
+        F = np.zeros((len(angles), len(depths)))
+        inv = np.zeros((len(angles), len(depths)), np.int64)
+        for i, ang in enumerate(angles):
+            u0 = None
+            for j, d in enumerate(depths):
+                if d <= 0:
+                    continue
+                fg = finger_at(float(ang), float(d), self.finger_radius, self.mesh.radius, self.mesh.center)
+                sol, _, _ = solve_corotational(self.model, fg, u0=u0)
+                u0 = sol.u
+                U[i, j] = sol.u[self.surface_nodes]
+                F[i, j] = sol.force
+                _, inv[i, j] = element_checks(self.mesh.points, self.mesh.tets, sol.u)
+                log(f"fem: corotational table angle {math.degrees(ang):.0f} deg depth {d * 1e3:.0f} mm "
+                    f"force {sol.force:.3f} N")
+        self.nonlinear = {"angles": angles, "depths": depths, "U": U, "F": F, "inverted": inv}
+
+    def update(self, tip: np.ndarray) -> Update:
+        """Deform the object for fingertip position ``tip`` (3,) m display frame.
+
+        Stateful: while the finger is pressed ≥ 5 mm the contact point is held (:func:`finger_from_tip`).
+        Raises ``ValueError`` (from :func:`finger_from_tip`) for NaN/inf, out-of-object or too-deep input.
+        Never returns non-finite vertices: a failed linear solve gives ``valid=False`` with the rest shape."""
+        fg = finger_from_tip(tip, self.finger_radius, self.mesh.radius, self.mesh.length, self.mesh.center,
+                             self.max_depth, anchor=self._anchor)
+        self._anchor = fg if fg.depth > 0 else None
+        return self.update_finger(fg)
+
+    def reset(self) -> None:
+        """Forget the held contact point (see ``anchor`` in :func:`finger_from_tip`)."""
+        self._anchor = None
+
+    def update_finger(self, fg: Finger) -> Update:
+        """As :meth:`update` for a prepared :class:`Finger`."""
+        method = "condensed"
+        try:
+            sol = self.solver.solve(fg)
+            u_out = sol.u
+        except OutsideCandidates:
+            sol = solve_full(self.model, fg)
+            u_out = sol.u[self.solver.out_pts]
+            method = "sparse"
+        if self._mon_Dm_inv is not None and sol.n_contact:
+            strain, inv = element_checks(self._out_points, self._mon_tets, u_out, self._mon_Dm_inv)
+        else:
+            strain, inv = 0.0, 0
+        us = np.zeros((len(self.surface_nodes), 3))
+        ok = self._surf_in_out >= 0
+        us[ok] = u_out[self._surf_in_out[ok]]
+        finite = bool(np.all(np.isfinite(us))) and math.isfinite(sol.force) and math.isfinite(sol.stiffness)
+        status, valid = "ok", True
+        force, stiff = sol.force, sol.stiffness
+        if not finite:
+            status, valid = "linear_invalid:non_finite", False
+        elif inv > 0 or strain > self.strain_limit:
+            reason = f"inverted={inv}" if inv > 0 else f"strain={strain:.2f}>{self.strain_limit:g}"
+            nl = self._nonlinear_lookup(fg)
+            if nl is not None and nl[3] == 0:
+                us, force, stiff = nl[0], nl[1], nl[2]
+                status, method = f"nonlinear ({reason} in linear)", "corotational"
+            else:
+                status, valid = f"linear_invalid:{reason}", False
+        verts = self._rest + (us.astype(np.float32) if valid else 0.0)
+        return Update(verts.astype(np.float32), float(force) if valid else 0.0, float(stiff) if valid else 0.0,
+                      fg.depth, fg.contact_point.copy(), method, float(strain), int(inv), status, valid)
+
+    def _nonlinear_lookup(self, fg: Finger):
+        t = self.nonlinear
+        if t is None:
+            return None
+        i = int(np.argmin(np.abs(t["angles"] - fg.angle)))
+        if abs(t["angles"][i] - fg.angle) * self.mesh.radius > 0.002 or abs(fg.axial) > 0.002:
+            return None
+        d = t["depths"]
+        if fg.depth > d[-1]:
+            return None
+        j = int(np.clip(np.searchsorted(d, fg.depth) - 1, 0, len(d) - 2))
+        w = (fg.depth - d[j]) / (d[j + 1] - d[j])
+        U = (1 - w) * t["U"][i, j] + w * t["U"][i, j + 1]
+        F = (1 - w) * t["F"][i, j] + w * t["F"][i, j + 1]
+        k = (t["F"][i, j + 1] - t["F"][i, j]) / (d[j + 1] - d[j])
+        return U, float(F), float(max(k, 0.0)), int(max(t["inverted"][i, j], t["inverted"][i, j + 1]))
+
+
+def _dist_to_points(x: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Distance (N,) from each row of ``x`` (N, 3) to the nearest row of ``pts`` (K, 3)."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(pts).query(x)[0]

@@ -1,0 +1,434 @@
+"""Linear (P1/P2) and corotational elasticity of the cylinder under displacement-driven fingertip contact (pure).
+
+Three solvers share one :class:`FemModel` (stiffness assembled with scikit-fem, ``linear_elasticity``):
+
+* :func:`solve_full` — the baseline: sparse direct solve (SuperLU) of the whole mesh with the support and the
+  contact points as Dirichlet DOFs, refactored every update.
+* :class:`CapacitanceSolver` — the real-time path (James & Pai, "A unified treatment of elastostatic contact
+  simulation for real time haptics", Haptics-e 2001; condensation as in Bro-Nielsen & Cotin, CGF 1996).
+  Precompute once the Green's-function columns G = K_FF⁻¹ E_C for the candidate contact DOFs C, keeping only
+  the rows the outputs need (surface + a strain-monitor zone). Per update: G_aa f = ū_a (m × m dense Cholesky,
+  m = active contact DOFs), u_out = G_out,a f, and the reaction on the finger is −Σ f.
+* :func:`solve_corotational` — geometrically nonlinear mode: corotational (stiffness-warping) FEM with lagged
+  element rotations from the polar decomposition of the deformation gradient (Müller et al., SCA 2002;
+  Müller & Gross, GI 2004; SOFA TetrahedronFEMForceField method="polar"), solved quasi-statically.
+
+Failure detection (:func:`element_checks`): inverted elements (det F ≤ 0) and the largest principal strain.
+Units SI; displacements m, forces N, stiffness N/m; display frame.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .contact import Finger, imposed_displacement
+from .material import Material
+from .mesh import TetMesh
+
+__all__ = ["FemModel", "Solution", "solve_full", "CapacitanceSolver", "solve_corotational", "element_checks",
+           "OutsideCandidates", "factor"]
+
+
+class OutsideCandidates(ValueError):
+    """The finger touches surface points outside the precomputed candidate set (use :func:`solve_full`)."""
+
+
+class _Cholesky:
+    """Sparse Cholesky of an SPD matrix via cholespy (supernodal CHOLMOD inside); ``solve(b)`` for (n,) or (n, k)."""
+
+    def __init__(self, A: sp.spmatrix):
+        import cholespy
+
+        A = sp.csr_matrix(A)
+        A.sort_indices()
+        self.n = A.shape[0]
+        self._s = cholespy.CholeskySolverD(self.n, A.indptr.astype(np.int32), A.indices.astype(np.int32),
+                                           np.ascontiguousarray(A.data, np.float64), cholespy.MatrixType.CSR)
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        b = np.ascontiguousarray(b, np.float64)
+        x = np.empty_like(b)
+        self._s.solve(b, x)
+        return x
+
+
+def factor(A: sp.spmatrix, backend: str = "auto"):
+    """Factorise a symmetric positive-definite sparse matrix; returns an object with ``.solve(b)``.
+
+    ``backend``: "cholmod" (cholespy's sparse Cholesky, 5–10× faster here), "superlu" (scipy ``splu`` with a
+    symmetric ordering) or "auto" (cholespy when importable, else SuperLU). Raises ``ValueError`` on an
+    unknown backend."""
+    if backend not in ("auto", "cholmod", "superlu"):
+        raise ValueError(f"backend must be 'auto', 'cholmod' or 'superlu', got {backend!r}")
+    if backend in ("auto", "cholmod"):
+        try:
+            return _Cholesky(A)
+        except ImportError:
+            if backend == "cholmod":
+                raise
+    return spla.splu(sp.csc_matrix(A), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
+
+
+class FemModel:
+    """Linear elasticity on a :class:`TetMesh` with P1 (``order=1``) or P2 (``order=2``) vector elements.
+
+    Attributes: ``K`` (n, n) csr stiffness (N/m); ``dofs`` (P, 3) int DOF indices of each *DOF point* (mesh
+    nodes, then edge midpoints for P2); ``points`` (P, 3) m their positions; ``boundary`` (P,) bool;
+    ``fixed`` (P,) bool support points (boundary with x ≤ x_O); ``free`` (nf,) free DOF indices.
+    Source: scikit-fem ``ElementVector(ElementTetP1/P2)``, ``linear_elasticity(λ, μ)``.
+    """
+
+    def __init__(self, mesh: TetMesh, material: Material, order: int = 1):
+        from skfem import Basis, ElementTetP1, ElementTetP2, ElementVector, MeshTet, asm
+        from skfem.models.elasticity import linear_elasticity
+
+        if order not in (1, 2):
+            raise ValueError(f"order must be 1 or 2, got {order!r}")
+        self.mesh, self.material, self.order = mesh, material, order
+        self.skmesh = MeshTet(np.ascontiguousarray(mesh.points.T), np.ascontiguousarray(mesh.tets.T))
+        elem = ElementVector(ElementTetP1() if order == 1 else ElementTetP2())
+        self.basis = Basis(self.skmesh, elem)
+        lam, mu = material.lame
+        self.K = asm(linear_elasticity(lam, mu), self.basis).tocsr()
+        nd = self.basis.nodal_dofs.T
+        if order == 1:
+            self.dofs = np.ascontiguousarray(nd)
+            self.points = self.skmesh.p.T.copy()
+        else:
+            self.dofs = np.ascontiguousarray(np.vstack([nd, self.basis.edge_dofs.T]))
+            e = self.skmesh.edges
+            self.points = np.vstack([self.skmesh.p.T, 0.5 * (self.skmesh.p[:, e[0]] + self.skmesh.p[:, e[1]]).T])
+        bd = np.zeros(self.K.shape[0], bool)
+        bd[self.basis.get_dofs().flatten()] = True
+        self.boundary = bd[self.dofs[:, 0]]
+        self.fixed = self.boundary & (self.points[:, 0] <= mesh.center[0] + 1e-9)
+        fixed_dofs = self.dofs[self.fixed].ravel()
+        mask = np.ones(self.K.shape[0], bool)
+        mask[fixed_dofs] = False
+        self.free = np.flatnonzero(mask)
+        self.fixed_dofs = np.sort(fixed_dofs)
+
+    @property
+    def n_dofs(self) -> int:
+        """Total number of DOFs."""
+        return self.K.shape[0]
+
+    def probe(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Displacement field ``u`` (n,) evaluated at points ``x`` (k, 3) m inside the mesh → (k, 3) m.
+
+        Points on the curved boundary are nudged 50 µm inward (toward the axis and the mid-plane) so the
+        faceted mesh contains them. Source: scikit-fem ``Basis.probes``."""
+        x = np.asarray(x, float).copy()
+        c = self.mesh.center
+        rad = x - c
+        rad[:, 1] = 0.0
+        rn = np.linalg.norm(rad, axis=1, keepdims=True)
+        x -= 5e-5 * rad / np.maximum(rn, 1e-12)
+        x[:, 1] -= 5e-5 * np.sign(x[:, 1] - c[1])
+        P = self.basis.probes(x.T).tocsr()
+        v = P @ u
+        k = len(x)
+        return v.reshape(3, k).T
+
+
+@dataclass
+class Solution:
+    """Result of one update.
+
+    ``u`` (P', 3) m displacements at the solver's output points (all DOF points for the full solver, the
+    output points for the capacitance solver); ``force`` N magnitude of the reaction along p̂ (≥ 0 in
+    compression); ``force_vec`` (3,) N total force the finger applies to the object; ``stiffness`` N/m,
+    dF/dd with the contact set held; ``n_contact`` number of contact points; ``method`` name."""
+
+    u: np.ndarray
+    force: float
+    force_vec: np.ndarray
+    stiffness: float
+    n_contact: int
+    method: str
+
+
+def _contact_dofs(model: FemModel, finger: Finger, candidates: np.ndarray | None = None):
+    pts_idx = np.flatnonzero(model.boundary & ~model.fixed)
+    inside, ubar = imposed_displacement(model.points[pts_idx], finger)
+    return pts_idx[inside], ubar[inside]
+
+
+def solve_full(model: FemModel, finger: Finger) -> Solution:
+    """Baseline: sparse direct solve with Dirichlet DOFs = support ∪ contact points; refactors every call.
+
+    Returns a :class:`Solution` whose ``u`` covers every DOF point (P, 3). Stiffness is dF/dd with the
+    contact set held (a second right-hand side on the same factorisation)."""
+    cpts, ubar = _contact_dofs(model, finger)
+    n = model.n_dofs
+    x = np.zeros(n)
+    dx = np.zeros(n)
+    cd = model.dofs[cpts]
+    x[cd.ravel()] = ubar.ravel()
+    dx[cd.ravel()] = np.tile(finger.direction, len(cpts))
+    D = np.union1d(model.fixed_dofs, cd.ravel())
+    mask = np.ones(n, bool)
+    mask[D] = False
+    interior = np.flatnonzero(mask)
+    K = model.K
+    if len(cpts):
+        lu = factor(K[interior][:, interior])
+        KID = K[interior][:, D]
+        sol = lu.solve(-np.column_stack([KID @ x[D], KID @ dx[D]]))
+        x[interior] = sol[:, 0]
+        dx[interior] = sol[:, 1]
+    r = K @ x
+    dr = K @ dx
+    fvec = r[cd].sum(axis=0) if len(cpts) else np.zeros(3)
+    force = float(fvec @ finger.direction)
+    stiff = float(dr[cd].sum(axis=0) @ finger.direction) if len(cpts) else 0.0
+    return Solution(x[model.dofs], max(force, 0.0), fvec, max(stiff, 0.0), len(cpts), "sparse")
+
+
+class CapacitanceSolver:
+    """Real-time linear contact by the capacitance matrix (James & Pai 2001) over precomputed Green's functions.
+
+    ``candidates`` (P,) bool: surface DOF points the finger may touch (must be free, not support);
+    ``outputs`` (P,) bool: DOF points whose displacement each update returns (e.g. free surface + monitor
+    zone). Precompute: one sparse factorisation of K_FF and |C| = 3·#candidates solves. Memory
+    8·|C|·(|C| + 3·#outputs) bytes. Raises ``ValueError`` if a candidate is a support point.
+    """
+
+    def __init__(self, model: FemModel, candidates: np.ndarray, outputs: np.ndarray, block: int = 256):
+        if np.any(candidates & model.fixed):
+            raise ValueError("candidates must not include support (fixed) points")
+        self.model = model
+        self.cand_pts = np.flatnonzero(candidates)
+        self.out_pts = np.flatnonzero(outputs)
+        pos_in_free = np.full(model.n_dofs, -1, np.int64)
+        pos_in_free[model.free] = np.arange(len(model.free))
+        cdofs = model.dofs[self.cand_pts].ravel()
+        odofs = model.dofs[self.out_pts].ravel()
+        out_fixed = pos_in_free[odofs] < 0
+        Kff = model.K[model.free][:, model.free]
+        lu = factor(Kff)
+        nc = len(cdofs)
+        ci = pos_in_free[cdofs]
+        oi = np.where(out_fixed, 0, pos_in_free[odofs])
+        self.G_cc = np.empty((nc, nc))
+        self.G_co = np.empty((nc, len(odofs)))        # row j: output response to a unit force on cdof j
+        for s in range(0, nc, block):
+            cols = np.arange(s, min(nc, s + block))
+            E = np.zeros((len(model.free), len(cols)))
+            E[ci[cols], np.arange(len(cols))] = 1.0
+            Z = lu.solve(E)
+            self.G_cc[:, cols] = Z[ci]
+            zo = Z[oi].T
+            zo[:, out_fixed] = 0.0
+            self.G_co[cols] = zo
+        self.G_cc = 0.5 * (self.G_cc + self.G_cc.T)
+        self._finish()
+
+    def _finish(self) -> None:
+        model = self.model
+        self._cand_points = model.points[self.cand_pts]
+        self._all_free_surface = np.flatnonzero(model.boundary & ~model.fixed)
+        self._noncand = np.setdiff1d(self._all_free_surface, self.cand_pts)
+
+    def save(self, path: str) -> None:
+        """Write the precomputed matrices to ``path`` (.npz, uncompressed)."""
+        tmp = path + ".tmp.npz"
+        np.savez(tmp, G_cc=self.G_cc, G_co=self.G_co, cand_pts=self.cand_pts, out_pts=self.out_pts)
+        os.replace(tmp, path)
+
+    @classmethod
+    def load(cls, model: "FemModel", path: str) -> "CapacitanceSolver":
+        """Rebuild a solver for ``model`` from :meth:`save`'s file; raises ``ValueError`` on a shape mismatch."""
+        z = np.load(path)
+        self = cls.__new__(cls)
+        self.model = model
+        self.cand_pts, self.out_pts = z["cand_pts"], z["out_pts"]
+        self.G_cc, self.G_co = z["G_cc"], z["G_co"]
+        nc = 3 * len(self.cand_pts)
+        if self.G_cc.shape != (nc, nc) or self.G_co.shape != (nc, 3 * len(self.out_pts)):
+            raise ValueError(f"cached matrices have shapes {self.G_cc.shape}, {self.G_co.shape}")
+        if len(self.cand_pts) and self.cand_pts.max() >= len(model.points):
+            raise ValueError("cached candidate indices exceed the mesh")
+        self._finish()
+        return self
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the precomputed matrices."""
+        return self.G_cc.nbytes + self.G_co.nbytes
+
+    def solve(self, finger: Finger) -> Solution:
+        """One update: returns a :class:`Solution` with ``u`` (#outputs, 3) m at the output points.
+
+        Raises :class:`OutsideCandidates` when a non-candidate surface point is inside the finger."""
+        if len(self._noncand):
+            inside_nc, _ = imposed_displacement(self.model.points[self._noncand], finger)
+            if inside_nc.any():
+                raise OutsideCandidates("finger touches surface points outside the precomputed contact region")
+        inside, ubar = imposed_displacement(self._cand_points, finger)
+        k = np.flatnonzero(inside)
+        nout = len(self.out_pts)
+        if len(k) == 0:
+            return Solution(np.zeros((nout, 3)), 0.0, np.zeros(3), 0.0, 0, "condensed")
+        a = (3 * k[:, None] + np.arange(3)[None, :]).ravel()
+        Gaa = self.G_cc[np.ix_(a, a)]
+        rhs = np.column_stack([ubar[k].ravel(), np.tile(finger.direction, len(k))])
+        f = sla.cho_solve(sla.cho_factor(Gaa, check_finite=False), rhs, check_finite=False)
+        u = (np.take(self.G_co, a, axis=0).T @ f[:, 0]).reshape(nout, 3)
+        fvec = f[:, 0].reshape(-1, 3).sum(axis=0)
+        force = float(fvec @ finger.direction)
+        stiff = float(f[:, 1].reshape(-1, 3).sum(axis=0) @ finger.direction)
+        return Solution(u, max(force, 0.0), fvec, max(stiff, 0.0), len(k), "condensed")
+
+
+def _grad_ops(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-tet inverse edge matrices Dm⁻¹ (M, 3, 3) and volumes (M,), for F = I + Du·Dm⁻¹."""
+    p = points[tets]
+    Dm = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], axis=2)
+    vol = np.linalg.det(Dm) / 6.0
+    return np.linalg.inv(Dm), vol
+
+
+def element_checks(points: np.ndarray, tets: np.ndarray, u: np.ndarray, Dm_inv: np.ndarray | None = None):
+    """Deformation checks of P1 tets: returns (max principal |strain| (small-strain ε = sym ∇u), number of
+    inverted tets (det F ≤ 0)). ``points`` (N, 3) m, ``tets`` (M, 4), ``u`` (N, 3) m node displacements."""
+    if len(tets) == 0:
+        return 0.0, 0
+    if Dm_inv is None:
+        Dm_inv, _ = _grad_ops(points, tets)
+    ue = u[tets]
+    Du = np.stack([ue[:, 1] - ue[:, 0], ue[:, 2] - ue[:, 0], ue[:, 3] - ue[:, 0]], axis=2)
+    H = Du @ Dm_inv
+    F = H + np.eye(3)
+    detF = (F[:, 0, 0] * (F[:, 1, 1] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 1])
+            - F[:, 0, 1] * (F[:, 1, 0] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 0])
+            + F[:, 0, 2] * (F[:, 1, 0] * F[:, 2, 1] - F[:, 1, 1] * F[:, 2, 0]))
+    inv = int(np.count_nonzero(detF <= 0.0))
+    return _max_abs_sym_eig(0.5 * (H + np.transpose(H, (0, 2, 1)))), inv
+
+
+def _max_abs_sym_eig(e: np.ndarray) -> float:
+    """Largest |eigenvalue| over a stack (M, 3, 3) of symmetric matrices, closed form (Smith, CACM 1961)."""
+    q = (e[:, 0, 0] + e[:, 1, 1] + e[:, 2, 2]) / 3.0
+    p1 = e[:, 0, 1] ** 2 + e[:, 0, 2] ** 2 + e[:, 1, 2] ** 2
+    d0, d1, d2 = e[:, 0, 0] - q, e[:, 1, 1] - q, e[:, 2, 2] - q
+    p = np.sqrt((d0 * d0 + d1 * d1 + d2 * d2 + 2 * p1) / 6.0)
+    ps = np.where(p > 0, p, 1.0)
+    b00, b11, b22 = d0 / ps, d1 / ps, d2 / ps
+    b01, b02, b12 = e[:, 0, 1] / ps, e[:, 0, 2] / ps, e[:, 1, 2] / ps
+    r = 0.5 * (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02))
+    phi = np.arccos(np.clip(r, -1.0, 1.0)) / 3.0
+    l1 = q + 2 * p * np.cos(phi)
+    l3 = q + 2 * p * np.cos(phi + 2 * np.pi / 3)
+    return float(max(np.max(np.abs(l1)), np.max(np.abs(l3))))
+
+
+def _element_stiffness(points, tets, material: Material):
+    """P1 element stiffness matrices (M, 12, 12), DOF order (node, component). Zienkiewicz, FEM vol. 1 §6."""
+    Dm_inv, vol = _grad_ops(points, tets)
+    # gradients of barycentric functions: rows of Dm_inv give grad of N1..N3, N0 = -sum
+    g = np.concatenate([-Dm_inv.sum(axis=1, keepdims=True), Dm_inv], axis=1)   # (M, 4, 3)
+    lam, mu = material.lame
+    M = len(tets)
+    B = np.zeros((M, 6, 12))
+    for a in range(4):
+        gx, gy, gz = g[:, a, 0], g[:, a, 1], g[:, a, 2]
+        c = 3 * a
+        B[:, 0, c], B[:, 1, c + 1], B[:, 2, c + 2] = gx, gy, gz
+        B[:, 3, c], B[:, 3, c + 1] = gy, gx
+        B[:, 4, c + 1], B[:, 4, c + 2] = gz, gy
+        B[:, 5, c], B[:, 5, c + 2] = gz, gx
+    D = np.zeros((6, 6))
+    D[:3, :3] = lam
+    D[np.arange(3), np.arange(3)] += 2 * mu
+    D[3:, 3:] = np.eye(3) * mu
+    return np.einsum("mki,kl,mlj->mij", B, D, B) * vol[:, None, None], Dm_inv
+
+
+def _polar_rotations(F: np.ndarray) -> np.ndarray:
+    U, _, Vt = np.linalg.svd(F)
+    R = U @ Vt
+    neg = np.linalg.det(R) < 0
+    if np.any(neg):
+        U[neg, :, 2] *= -1
+        R[neg] = U[neg] @ Vt[neg]
+    return R
+
+
+def solve_corotational(model: FemModel, finger: Finger, iters: int = 30, tol: float = 1e-6,
+                       u0: np.ndarray | None = None):
+    """Corotational (polar) FEM, P1 only, quasi-static, contact as :func:`solve_full`.
+
+    Internal force f_e = R_e K_e (R_eᵀ x_e − X_e) with R_e from the polar decomposition of F_e; Newton-like
+    iterations with the warped stiffness Σ R_e K_e R_eᵀ (Müller & Gross 2004) until the largest displacement
+    increment is below ``tol``·(depth + 1 mm). ``u0`` (N, 3) m optional warm start. Returns
+    (:class:`Solution` with ``u`` (N, 3), iterations used, converged flag). Raises ``ValueError`` for P2.
+    """
+    if model.order != 1:
+        raise ValueError(f"corotational solver needs order 1, got {model.order}")
+    mesh = model.mesh
+    X = model.points
+    tets = mesh.tets
+    Ke, Dm_inv = _element_stiffness(X, tets, model.material)
+    M = len(tets)
+    edofs = model.dofs[tets].reshape(M, 12)
+    rows = np.repeat(edofs, 12, axis=1).ravel()
+    cols = np.tile(edofs, (1, 12)).ravel()
+    n = model.n_dofs
+    cpts, ubar = _contact_dofs(model, finger)
+    cd = model.dofs[cpts].ravel()
+    D = np.union1d(model.fixed_dofs, cd)
+    mask = np.ones(n, bool)
+    mask[D] = False
+    interior = np.flatnonzero(mask)
+    x = np.zeros(n)
+    if u0 is not None:
+        x[model.dofs] = u0
+    x[model.fixed_dofs] = 0.0
+    x[cd] = ubar.ravel()
+    Xe = X[tets].reshape(M, 12)
+    scale = tol * (finger.depth + 1e-3)
+    converged, it = False, 0
+    for it in range(1, iters + 1):
+        ue = x[edofs].reshape(M, 4, 3)
+        Du = np.stack([ue[:, 1] - ue[:, 0], ue[:, 2] - ue[:, 0], ue[:, 3] - ue[:, 0]], axis=2)
+        F = np.eye(3) + Du @ Dm_inv
+        R = _polar_rotations(F)
+        Rb = np.zeros((M, 12, 12))
+        for a in range(4):
+            Rb[:, 3 * a:3 * a + 3, 3 * a:3 * a + 3] = R
+        RK = Rb @ Ke
+        KR = RK @ np.transpose(Rb, (0, 2, 1))
+        xe = Xe + x[edofs]
+        local = np.einsum("mji,mj->mi", Rb, xe) - Xe          # R^T x - X
+        fe = np.einsum("mij,mj->mi", RK, local)
+        fint = np.bincount(edofs.ravel(), weights=fe.ravel(), minlength=n)
+        Kt = sp.csr_matrix((KR.ravel(), (rows, cols)), shape=(n, n))
+        if len(interior) == 0:
+            converged = True
+            break
+        dx = factor(Kt[interior][:, interior]).solve(-fint[interior])
+        x[interior] += dx
+        if np.max(np.abs(dx)) < scale:
+            converged = True
+            break
+    # reaction: recompute internal force at the final state
+    ue = x[edofs].reshape(M, 4, 3)
+    Du = np.stack([ue[:, 1] - ue[:, 0], ue[:, 2] - ue[:, 0], ue[:, 3] - ue[:, 0]], axis=2)
+    R = _polar_rotations(np.eye(3) + Du @ Dm_inv)
+    Rb = np.zeros((M, 12, 12))
+    for a in range(4):
+        Rb[:, 3 * a:3 * a + 3, 3 * a:3 * a + 3] = R
+    local = np.einsum("mji,mj->mi", Rb, Xe + x[edofs]) - Xe
+    fe = np.einsum("mij,mjk,mk->mi", Rb, Ke, local)
+    fint = np.bincount(edofs.ravel(), weights=fe.ravel(), minlength=n)
+    fvec = fint[model.dofs[cpts]].sum(axis=0) if len(cpts) else np.zeros(3)
+    force = float(fvec @ finger.direction)
+    return Solution(x[model.dofs], max(force, 0.0), fvec, 0.0, len(cpts), "corotational"), it, converged
