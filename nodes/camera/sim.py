@@ -10,9 +10,9 @@ Scene per image (8-bit mono, raw = distorted, like the real camera):
   (``finger_dir``, display frame), drawn at its projected width.
 * **Marker**: a bright disk of ``marker_diameter`` (3–6 mm, default 4 mm) centred on the marker position,
   rendered with anti-aliased area coverage (so its centroid is exact to ~0.01 px without noise).
-* **Motion blur**: the finger and marker are averaged over ``blur_samples`` positions spread over the
-  exposure ``exposure_s`` along the velocity (box shutter), so the blurred centroid is the mid-exposure
-  position.
+* **Motion blur**: the finger and marker are averaged over positions spread over the exposure
+  ``exposure_s`` along the velocity (box shutter; ``blur_samples`` at least, and one per 0.5 px of streak),
+  so the blurred centroid is the mid-exposure position.
 * **Sensor noise**: additive Gaussian read noise ``noise_dn`` (DN), drawn from a pre-generated bank with a
   random crop per image (cheap enough for 48 Hz on a shared 2-core machine).
 
@@ -253,7 +253,12 @@ class StereoRenderer:
         if not (0.0 <= occlusion <= 1.0):
             raise ValueError(f"occlusion must be in [0, 1], got {occlusion!r}")
         c = self.cfg
-        n = c.blur_samples if (c.exposure_s > 0 and np.linalg.norm(v) > 0) else 1
+        n = 1
+        if c.exposure_s > 0 and np.linalg.norm(v) > 0:
+            # at least one sample per 0.5 px of streak, so the streak is continuous, not a row of dots
+            zc = max(float(self.to_camera(p)[0, 2]), 0.05)
+            streak_px = self.model.focal * float(np.linalg.norm(v)) * c.exposure_s / zc
+            n = min(max(c.blur_samples, int(np.ceil(2.0 * streak_px)) + 1), 200)
         offs = (np.linspace(-0.5, 0.5, n) if n > 1 else np.zeros(1))[:, None] * (v * c.exposure_s)[None, :]
         tips = p[None, :] + offs                                          # (n, 3) display
         bases = tips + c.finger_length * self._fdir

@@ -64,13 +64,13 @@ class MarkerDetector:
 
     Parameters (px unless stated): ``se_size`` odd top-hat element side (> marker diameter incl. blur
     width; default 11); ``min_contrast`` DN (default 40); ``max_candidates`` (default 3);
-    ``patch_radius`` r of the centroid patch (default 7); ``threshold_frac`` (default 0.2); ``roi_half``
+    ``patch_radius`` r of the centroid patch (default 10: a blur streak up to ~2r px fits); ``threshold_frac`` (default 0.2); ``roi_half``
     half side of the tracking ROI (default 32); ``max_area`` px: larger blobs are not markers (default 150).
     Raises ``ValueError`` naming the parameter when out of range.
     """
 
     def __init__(self, se_size: int = 11, min_contrast: float = 40.0, max_candidates: int = 3,
-                 patch_radius: int = 7, threshold_frac: float = 0.2, roi_half: int = 32, max_area: int = 150):
+                 patch_radius: int = 10, threshold_frac: float = 0.2, roi_half: int = 32, max_area: int = 150):
         if se_size < 3 or se_size % 2 == 0:
             raise ValueError(f"se_size must be odd and >= 3, got {se_size}")
         if not (0 < min_contrast < 255):
@@ -135,12 +135,22 @@ class MarkerDetector:
             blob = labels == labels[r, r]
             wgt[~blob] = 0.0
             # an isolated dot (or a blur streak shorter than the patch) does not reach the patch border;
-            # a blob that does is part of a larger bright structure (sheet corner, clutter edge): skip it
-            touches = blob[0, :].any() or blob[-1, :].any() or blob[:, 0].any() or blob[:, -1].any()
+            # a blob that does is part of a larger bright structure (sheet corner, clutter edge): skip it.
+            # Neither may it touch the image border (a marker cut by the frame has a biased centroid).
+            iy, ix = np.nonzero(blob)
+            gy, gx = py0 + ya + iy, px0 + xa + ix          # image coordinates of the blob pixels
+            touches = (iy.min() == 0 or iy.max() == 2 * r or ix.min() == 0 or ix.max() == 2 * r
+                       or gy.min() <= 0 or gy.max() >= h - 1 or gx.min() <= 0 or gx.max() >= w - 1)
             s = wgt.sum()
-            area = int(np.count_nonzero(wgt))
-            # suppress this peak's neighbourhood for the next candidate
-            work[max(0, py - 2 * r):py + 2 * r + 1, max(0, px - 2 * r):px + 2 * r + 1] = 0
+            area = int(iy.size)
+            # suppress this blob (dilated by 1 px) for the next candidate; a second dot nearby stays findable
+            wy, wx = iy + (ya - oy), ix + (xa - ox)            # work coordinates
+            for dy in (-1, 0, 1):
+                for dx in (-1, 0, 1):
+                    yy, xx = wy + dy, wx + dx
+                    ok = (yy >= 0) & (yy < hh) & (xx >= 0) & (xx < ww)
+                    work[yy[ok], xx[ok]] = 0
+            work[py, px] = 0
             if s <= 0 or area > self.max_area or touches:
                 continue
             du = float((wgt * self._gx).sum() / s)

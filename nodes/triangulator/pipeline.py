@@ -13,13 +13,15 @@ Per stereo pair (raw mono8 images of the calibrated size):
 3. Choice among survivors: with a live track, the one nearest the Kalman prediction; without, the
    strongest — unless a second pair nearly as strong (≥ ``ambiguity_ratio``) lies more than
    ``ambiguity_m`` away (e.g. a reflection on the epipolar line): then the frame is *ambiguous* → invalid.
-4. Covariance σ²(JᵀJ)⁻¹ (pixel noise ``sigma_px``), rotated into the display frame with
+4. Partial occlusion check: the marker blob's area (px above threshold) must agree between the views
+   within ``area_ratio_max`` (a blob cut by an occluder has a centroid shifted along the epipolar line).
+5. Covariance σ²(JᵀJ)⁻¹ (pixel noise ``sigma_px``), rotated into the display frame with
    ``T_display_camera``.
-5. Outlier gate: squared Mahalanobis distance from the constant-velocity Kalman prediction
+6. Outlier gate: squared Mahalanobis distance from the constant-velocity Kalman prediction
    (:class:`~nodes.triangulator.predict.ConstantVelocityKF`) ≤ ``gate_chi2`` (χ²₃; 16.27 = 99.9 %).
    After ``max_gate_misses`` consecutive rejections the track is reset (the next fix is accepted), so a
    wrong track cannot lock out the true marker. A track not updated for ``lost_reset_s`` is reset.
-6. Output: valid fix with position (display frame, m), covariance (m²) and the position predicted
+7. Output: valid fix with position (display frame, m), covariance (m²) and the position predicted
    ``horizon_s`` ahead — or invalid with a reason and a zero position (never stale or invented).
 """
 
@@ -50,19 +52,21 @@ class TrackerConfig:
     lost_reset_s: float = 0.25
     horizon_s: float = 0.0
     q: float = 2.0
+    v0_std: float = 1.0
     ambiguity_m: float = 0.01
     ambiguity_ratio: float = 0.8
     roi_half: int = 32
     min_contrast: float = 40.0
     se_size: int = 11
-    patch_radius: int = 7
+    patch_radius: int = 10
+    area_ratio_max: float = 1.3
     max_candidates: int = 3
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first out-of-range field."""
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
-        for name in ("sigma_px", "epipolar_tol_px", "z_min", "gate_chi2", "lost_reset_s", "q", "ambiguity_m"):
+        for name in ("sigma_px", "epipolar_tol_px", "z_min", "gate_chi2", "lost_reset_s", "q", "v0_std", "ambiguity_m"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be positive and finite, got {v!r}")
@@ -70,6 +74,8 @@ class TrackerConfig:
             raise ValueError(f"z_max must exceed z_min={self.z_min}, got {self.z_max!r}")
         if not (np.isfinite(self.horizon_s) and self.horizon_s >= 0):
             raise ValueError(f"horizon_s must be >= 0, got {self.horizon_s!r}")
+        if not (self.area_ratio_max >= 1.0):
+            raise ValueError(f"area_ratio_max must be >= 1, got {self.area_ratio_max!r}")
         if self.max_gate_misses < 1:
             raise ValueError(f"max_gate_misses must be >= 1, got {self.max_gate_misses!r}")
 
@@ -77,7 +83,7 @@ class TrackerConfig:
 @dataclass
 class TrackResult:
     """One frame's output. ``valid``; ``reason`` ("ok", "no_left", "no_right", "no_match", "depth",
-    "ambiguous", "gated"); ``position`` (3,) m display frame (zeros when invalid); ``covariance`` (3, 3) m²;
+    "ambiguous", "occluded", "gated"); ``position`` (3,) m display frame (zeros when invalid); ``covariance`` (3, 3) m²;
     ``predicted`` (3,) m display (= position when horizon 0 or invalid); ``residual_px`` epipolar residual;
     ``uv_left``/``uv_right`` (2,) raw px of the chosen marker (NaN when invalid); ``roi`` True when both
     images were found in their ROI; ``position_camera`` (3,) m left-camera frame."""
@@ -120,7 +126,7 @@ class FingertipTracker:
         self.detector = MarkerDetector(se_size=c.se_size, min_contrast=c.min_contrast,
                                        max_candidates=c.max_candidates, patch_radius=c.patch_radius,
                                        roi_half=c.roi_half)
-        self.kf = ConstantVelocityKF(q=c.q)
+        self.kf = ConstantVelocityKF(q=c.q, v0_std=c.v0_std)
         self._last_uv: tuple[np.ndarray, np.ndarray] | None = None
         self._misses = 0
 
@@ -192,6 +198,12 @@ class FingertipTracker:
         cov_d = self.R_dc @ cov_c @ self.R_dc.T
         pos = Xd[k]
         uvl, uvr = dl.uv[ia[k]], dr.uv[ib[k]]
+        al, ar = float(dl.area[ia[k]]), float(dr.area[ib[k]])
+        if max(al, ar) > c.area_ratio_max * min(al, ar):
+            # the blob is much smaller in one view: partly occluded (or merged with another blob); its
+            # centroid is biased along the epipolar line, which no epipolar check can see
+            self._last_uv = (uvl, uvr)
+            return self._invalid("occluded", roi)
         # keep the ROI on the candidate even if gated: the marker is probably there
         self._last_uv = (uvl, uvr)
         if self.kf.initialised:
