@@ -8,8 +8,14 @@ import trimesh
 
 from flexsheet import scene
 from nodes.planner.shapes import Cylinder, MeshShape, RoundedBox, Shape, make_shape, paper_cylinder
-from nodes.planner.tension import (SheetMaterial, clamp_force, gent_modulus, stiffness, stretch_for_stiffness,
-                                   tension)
+from nodes.planner.tension import (
+    SheetMaterial,
+    clamp_force,
+    gent_modulus,
+    stiffness,
+    stretch_for_stiffness,
+    tension,
+)
 from nodes.planner.vec import norm, sub
 
 R = scene.CYLINDER_RADIUS
@@ -53,7 +59,7 @@ def test_past_end_cap_is_continuous():
     c = paper_cylinder()
     pts = [(0.01, y, 0.0) for y in np.linspace(0.04, 0.09, 201)]
     prs = [c.project(p) for p in pts]
-    jumps = [norm(sub(a.point, b.point)) for a, b in zip(prs, prs[1:])]
+    jumps = [norm(sub(a.point, b.point)) for a, b in zip(prs, prs[1:], strict=False)]
     step = 0.05 / 200
     assert max(jumps) < 5 * step           # no jump of the contact across the rim
     assert prs[0].normal == (1.0, 0.0, 0.0)  # on the side: radial
@@ -80,7 +86,7 @@ def test_rounded_box_edge_normals_continuous_sharp_box_jumps():
     ys = np.linspace(0.0, 0.06, 301)
     for shape, cont in ((rb, True), (sb, False)):
         ns = [shape.project((0.02, y, 0.0)).normal for y in ys]
-        dn = max(norm(sub(a, b)) for a, b in zip(ns, ns[1:]))
+        dn = max(norm(sub(a, b)) for a, b in zip(ns, ns[1:], strict=False))
         assert (dn < 0.2) == cont, (shape.r, dn)
 
 

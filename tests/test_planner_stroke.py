@@ -101,7 +101,7 @@ def test_stroke_and_push_combined():
     pl = SurfacePlanner(c)
     angles = np.linspace(0, 0.5, 300)
     depth = 0.004 * np.sin(np.linspace(0, math.pi, 300)) + 0.0005
-    for k, (a, d) in enumerate(zip(angles, depth)):
+    for k, (a, d) in enumerate(zip(angles, depth, strict=False)):
         plan = pl.update(k * DT, c.point_at(a, 0.0, R - d))
     assert plan.touching and math.hypot(*plan.offset) == pytest.approx(R * 0.5, rel=1e-9)
 
@@ -131,8 +131,8 @@ def test_past_end_cap_rolls_over_rim_within_limits():
     pl = SurfacePlanner(c, PlannerConfig(limits=lim))
     ys = np.r_[np.linspace(0.0, 0.09, 400), np.full(200, 0.09)]
     plans = [pl.update(k * DT, (0.0005, y, 0.0)) for k, y in enumerate(ys)]
-    contacts = [norm(sub(a.contact, b.contact)) for a, b in zip(plans, plans[1:])]
-    speeds = [norm(sub(a.origin, b.origin)) / DT for a, b in zip(plans, plans[1:])]
+    contacts = [norm(sub(a.contact, b.contact)) for a, b in zip(plans, plans[1:], strict=False)]
+    speeds = [norm(sub(a.origin, b.origin)) / DT for a, b in zip(plans, plans[1:], strict=False)]
     assert max(contacts) < 0.002                 # the contact wraps over the rim continuously
     assert max(speeds) <= lim.v_max + 1e-9      # the sheet swinging about the rim is rate-limited
     assert all("hold" not in p.status for p in plans)
@@ -189,7 +189,7 @@ def test_invalid_input_holds_last_safe_pose(bad):
 
 def test_unreachable_is_reported_and_not_clipped():
     c = make_shape("plane")
-    reach = ReachModel(reach_max=0.33)
+    reach = ReachModel(reach_max=0.45)
     pl = SurfacePlanner(c, PlannerConfig(reach=reach, jump_distance=1.0))
     ok = pl.update(0.0, (0.01, 0.0, 0.0))
     assert ok.status == "ok" and ok.reach_margin > 0
@@ -241,8 +241,8 @@ def test_limit_step_braking_and_velocity_bounds():
 
 def test_rate_limiter_rotation_bounded():
     rl = RateLimiter(MotionLimits(w_max=1.0, alpha_max=100.0))
-    I = ((1.0, 0, 0), (0, 1.0, 0), (0, 0, 1.0))
-    rl.reset((0, 0, 0), I, 0.0)
+    eye = ((1.0, 0, 0), (0, 1.0, 0), (0, 0, 1.0))
+    rl.reset((0, 0, 0), eye, 0.0)
     Rz = ((0.0, -1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
     _, R1, _, lim = rl.step((0, 0, 0), Rz, 0.0, 0.1)
     ang = math.acos(max(-1, min(1, (R1[0][0] + R1[1][1] + R1[2][2] - 1) / 2)))

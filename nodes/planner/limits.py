@@ -8,8 +8,9 @@
   step, so normal stroking passes through unchanged; a jump is ramped.
 * :class:`ReachModel` — is a clamp position inside a spherical shell around each arm's shoulder (J2)?
   Bases come from :data:`flexsheet.scene.LEFT_BASE`/``RIGHT_BASE``; J2 is ``shoulder_height`` above the
-  base. Default shell 0.10…0.40 m: an RV-1A has a 250 mm upper arm and a 160 mm forearm (Mitsubishi
-  RV-1A/2AJ specifications) plus wrist and clamp; 0.40 m leaves margin for orienting the wrist. This is a
+  base (0.165 + 0.135 m in ``nodes/arm_bridge/rv1a.urdf``). Default shell 0.32…0.53 m: upper arm 0.250 m
+  + forearm 0.184 m + wrist/flange 0.102 m (same URDF) bounds the far side; the near side is where J3
+  reaches its 155° limit (the bases in :mod:`flexsheet.scene` were moved out for that reason). This is a
   workspace screen only — the arm bridge does the real IK and joint limits.
 
 Units: m, rad, s. Vectors are float tuples (see :mod:`nodes.planner.vec`).
@@ -22,8 +23,23 @@ from dataclasses import dataclass, field
 
 from flexsheet import scene
 
-from .vec import Mat, Vec, axpy, cols, cross, mat_mul_t, matvec, norm, perp_unit, rodrigues, rot_from_cols, rot_log, \
-    scale, sub, unit
+from .vec import (
+    Mat,
+    Vec,
+    axpy,
+    cols,
+    cross,
+    mat_mul_t,
+    matvec,
+    norm,
+    perp_unit,
+    rodrigues,
+    rot_from_cols,
+    rot_log,
+    scale,
+    sub,
+    unit,
+)
 
 __all__ = ["MotionLimits", "RateLimiter", "ReachModel", "limit_step"]
 
@@ -132,8 +148,8 @@ class ReachModel:
     left_base: tuple[float, float, float, float] = scene.LEFT_BASE
     right_base: tuple[float, float, float, float] = scene.RIGHT_BASE
     shoulder_height: float = 0.30
-    reach_min: float = 0.10
-    reach_max: float = 0.40
+    reach_min: float = 0.32
+    reach_max: float = 0.53
 
     def shoulder(self, arm: str) -> Vec:
         """J2 position (3,) m of ``arm`` ("left" | "right"); raises ``ValueError`` otherwise."""

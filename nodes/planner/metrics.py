@@ -69,7 +69,7 @@ def presented_contacts(shape: Shape, D, sheet_origin, sheet_normal) -> tuple[np.
     ties broken toward D (N, 3); and the gap (N,) m of D′ from the plane along the normal (> 0: floating)."""
     D = _as_points("D", D)
     N = D.shape[0]
-    O = _as_points("sheet_origin", sheet_origin, N)
+    Org = _as_points("sheet_origin", sheet_origin, N)
     Nn = _as_points("sheet_normal", sheet_normal, N)
     Dp = np.empty((N, 3))
     gap = np.empty(N)
@@ -77,7 +77,7 @@ def presented_contacts(shape: Shape, D, sheet_origin, sheet_normal) -> tuple[np.
         n = tuple(Nn[i] / np.linalg.norm(Nn[i]))
         s = shape.support(n, tuple(D[i]))
         Dp[i] = s
-        gap[i] = float(np.dot(O[i] - Dp[i], n))
+        gap[i] = float(np.dot(Org[i] - Dp[i], n))
     return Dp, gap
 
 

@@ -68,8 +68,8 @@ class PlannerParams(BaseModel):
     left_base: tuple[float, float, float, float] = scene.LEFT_BASE
     right_base: tuple[float, float, float, float] = scene.RIGHT_BASE
     shoulder_height: float = Field(default=0.30)
-    reach_min: float = Field(default=0.10, ge=0.0)
-    reach_max: float = Field(default=0.40, gt=0.0)
+    reach_min: float = Field(default=0.32, ge=0.0)
+    reach_max: float = Field(default=0.53, gt=0.0)
 
     def planner_config(self) -> PlannerConfig:
         """The :class:`PlannerConfig` these params describe (raises ``ValueError`` on inconsistent values)."""

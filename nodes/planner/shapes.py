@@ -417,40 +417,40 @@ class RoundedBox(Shape):
         d = sub(p, self.c)
         return (dot(d, self.ax[0]), dot(d, self.ax[1]), dot(d, self.ax[2]))
 
-    def _to_world(self, l: Vec) -> Vec:
+    def _to_world(self, lp: Vec) -> Vec:
         a = self.ax
-        return (self.c[0] + a[0][0] * l[0] + a[1][0] * l[1] + a[2][0] * l[2],
-                self.c[1] + a[0][1] * l[0] + a[1][1] * l[1] + a[2][1] * l[2],
-                self.c[2] + a[0][2] * l[0] + a[1][2] * l[1] + a[2][2] * l[2])
+        return (self.c[0] + a[0][0] * lp[0] + a[1][0] * lp[1] + a[2][0] * lp[2],
+                self.c[1] + a[0][1] * lp[0] + a[1][1] * lp[1] + a[2][1] * lp[2],
+                self.c[2] + a[0][2] * lp[0] + a[1][2] * lp[1] + a[2][2] * lp[2])
 
-    def _dir_world(self, l: Vec) -> Vec:
+    def _dir_world(self, lp: Vec) -> Vec:
         a = self.ax
-        return (a[0][0] * l[0] + a[1][0] * l[1] + a[2][0] * l[2], a[0][1] * l[0] + a[1][1] * l[1] + a[2][1] * l[2],
-                a[0][2] * l[0] + a[1][2] * l[1] + a[2][2] * l[2])
+        return (a[0][0] * lp[0] + a[1][0] * lp[1] + a[2][0] * lp[2], a[0][1] * lp[0] + a[1][1] * lp[1] + a[2][1] * lp[2],
+                a[0][2] * lp[0] + a[1][2] * lp[1] + a[2][2] * lp[2])
 
     def closest(self, p: Vec) -> tuple[Vec, Vec, float]:
-        l = self._to_local(p)
+        lp = self._to_local(p)
         ei = self.ei
-        ci = (max(-ei[0], min(ei[0], l[0])), max(-ei[1], min(ei[1], l[1])), max(-ei[2], min(ei[2], l[2])))
-        d = sub(l, ci)
+        ci = (max(-ei[0], min(ei[0], lp[0])), max(-ei[1], min(ei[1], lp[1])), max(-ei[2], min(ei[2], lp[2])))
+        d = sub(lp, ci)
         dl = norm(d)
         if dl > 1e-12:
             nl = scale(d, 1.0 / dl)
             return self._to_world(axpy(self.r, nl, ci)), self._dir_world(nl), dl - self.r
         # inside the inner box: nearest face of the outer box
-        best, i = min((self.e[k] - abs(l[k]), k) for k in range(3))
-        sg = 1.0 if l[i] >= 0.0 else -1.0
-        ql = list(l)
+        best, i = min((self.e[k] - abs(lp[k]), k) for k in range(3))
+        sg = 1.0 if lp[i] >= 0.0 else -1.0
+        ql = list(lp)
         ql[i] = sg * self.e[i]
         nl = [0.0, 0.0, 0.0]
         nl[i] = sg
         return self._to_world(tuple(ql)), self._dir_world(tuple(nl)), -best  # type: ignore[arg-type]
 
     def skeleton_point(self, p: Vec) -> Vec:
-        l = self._to_local(p)
+        lp = self._to_local(p)
         es = self.es
-        return self._to_world((max(-es[0], min(es[0], l[0])), max(-es[1], min(es[1], l[1])),
-                               max(-es[2], min(es[2], l[2]))))
+        return self._to_world((max(-es[0], min(es[0], lp[0])), max(-es[1], min(es[1], lp[1])),
+                               max(-es[2], min(es[2], lp[2]))))
 
     def _ray_exit(self, s: Vec, w: Vec) -> tuple[Vec, Vec]:
         """Exit through the outer slabs, then (edge/corner regions) Newton on the distance to the inner box,

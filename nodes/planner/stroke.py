@@ -50,8 +50,20 @@ import numpy as np
 from .limits import MotionLimits, RateLimiter, ReachModel
 from .shapes import Shape
 from .tension import SheetMaterial, TensionResult, _max_stretch, stretch_for_stiffness
-from .vec import Vec, axpy, cols, cross, dot, finite, min_rotation, norm, perp_unit, rodrigues, \
-    rot_from_cols, sub
+from .vec import (
+    Vec,
+    axpy,
+    cols,
+    cross,
+    dot,
+    finite,
+    min_rotation,
+    norm,
+    perp_unit,
+    rodrigues,
+    rot_from_cols,
+    sub,
+)
 
 __all__ = ["PlannerConfig", "Plan", "SurfacePlanner"]
 
