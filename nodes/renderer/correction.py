@@ -130,7 +130,7 @@ def correct_vertices(vertices, *, eye, projector, screen_point, screen_normal, s
     return (out, valid) if return_valid else out
 
 
-def _triangles(pushed_point, corners, eye):
+def _triangles(pushed_point, corners, projector):
     """Validated 4-triangle fan: returns (q (3,), corners (4,3), normals (4,3) unit, usable (4,) bool)."""
     q = _vec("pushed_point", pushed_point)
     cs = np.asarray(corners, dtype=float)
@@ -139,7 +139,7 @@ def _triangles(pushed_point, corners, eye):
     poly_n = np.cross(cs[2] - cs[0], cs[3] - cs[1])
     if np.linalg.norm(poly_n) < 1e-12:
         raise ValueError("corners are degenerate (zero area)")
-    if (eye - cs.mean(axis=0)) @ poly_n < 0.0:
+    if (projector - cs.mean(axis=0)) @ poly_n > 0.0:    # toward the user = away from the rear projector
         poly_n = -poly_n
     poly_n /= np.linalg.norm(poly_n)
     c0, c1 = cs, np.roll(cs, -1, axis=0)
@@ -199,7 +199,7 @@ def correct_vertices_pushed(vertices, *, eye, projector, screen_point, screen_no
     """
     a = _verts(vertices)
     v, p, ro, no = _check_screen(eye, projector, screen_point, screen_normal)
-    q, cs, nrm, usable, poly_n = _triangles(pushed_point, corners, v)
+    q, cs, nrm, usable, poly_n = _triangles(pushed_point, corners, p)
     if (v - cs.mean(axis=0)) @ poly_n <= 1e-6 or (v - q) @ poly_n <= 1e-6:
         raise ValueError(f"eye {v.tolist()} is on the wrong side of the sheet")
     if (p - cs.mean(axis=0)) @ poly_n >= -1e-6:

@@ -241,7 +241,7 @@ class StereoRenderer:
             self._set("u_rs", tuple(sheet.origin))
             self._set("u_ns", tuple(sheet.normal))
         elif model == "four_triangle":
-            q, cs, nrm, usable, _ = _triangles(sheet.pushed_point, sheet.corners, self.eye)
+            q, cs, nrm, usable, _ = _triangles(sheet.pushed_point, sheet.corners, self.projector.position)
             self._set("u_q", tuple(q))
             self._set("u_c", cs.astype(np.float32))
             self._set("u_tn", nrm.astype(np.float32))
@@ -310,6 +310,7 @@ class StereoRenderer:
         if self.tf_vao is None:
             raise RuntimeError("set_mesh() first")
         self._set("u_eye", tuple(float(x) for x in eye), (self.tf_prog,))
+        self.fbo.use()                    # EGL standalone contexts need a bound framebuffer for any draw
         out = self.ctx.buffer(reserve=self.n_vertices * 16)
         self.tf_vao.transform(out, mode=self.moderngl.POINTS, vertices=self.n_vertices)
         data = np.frombuffer(out.read(), dtype=np.float32).reshape(-1, 4)
