@@ -361,17 +361,19 @@ class PlayerNode(Node):
 
 
 # ------------------------------------------------------------------------------------------------ CLI
-def _peers(launch: str) -> list[str]:
-    from .launch import load_launch
+def _graph(launch: str):
+    from .launch import curve_config, load_launch
 
-    return list(load_launch(launch).endpoints().values())
+    lf = load_launch(launch)
+    return list(lf.endpoints().values()), curve_config(lf, None)
 
 
 def cmd_record(args: argparse.Namespace) -> int:
     import logging
     logging.basicConfig(level="INFO", format="%(levelname)s %(name)s: %(message)s")
     out = args.output or time.strftime("bag_%Y%m%d_%H%M%S.mcap")
-    node = RecorderNode(NodeConfig(name="bag_record", node_type="recorder", endpoint="", peers=_peers(args.launch),
+    peers, curve = _graph(args.launch)
+    node = RecorderNode(NodeConfig(name="bag_record", node_type="recorder", endpoint="", peers=peers, curve=curve,
                                    params={"output": out, "topics": args.topics}))
 
     async def main() -> None:

@@ -111,6 +111,24 @@ def cmd_launch(args: argparse.Namespace) -> int:
 
 
 # ----------------------------------------------------------------------------------------------- table
+def cmd_keys(args: argparse.Namespace) -> int:
+    import zmq.auth
+
+    out = Path(os.path.expanduser(args.output))
+    out.mkdir(parents=True, exist_ok=True)
+    os.chmod(out, 0o700)
+    lines = ["security:", "  curve: true", f"  keys_dir: {args.output}", "  public_keys:"]
+    for host in args.hosts:
+        pub_file, secret_file = zmq.auth.create_certificates(out, host)
+        os.chmod(secret_file, 0o600)
+        public, _ = zmq.auth.load_certificate(pub_file)
+        lines.append(f"    {host}: \"{public.decode()}\"")
+        print(f"wrote {pub_file} and {secret_file}", file=sys.stderr)
+    print("# paste into the launch file; copy each <host>.key_secret to that host's keys_dir only")
+    print("\n".join(lines))
+    return 0
+
+
 def _tool(name: str):
     def call(args: argparse.Namespace) -> int:
         from . import tools
@@ -173,6 +191,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--peer", action="append", metavar="ENDPOINT", help="publisher endpoint to subscribe to")
     s.add_argument("--out", help="output folder ($(out) in params)")
     s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("keys", help="generate CURVE keypairs for the hosts of a launch file",
+                       **_fmt("  flexsheet keys generate main arm1 arm2 -o ~/.flexsheet/keys"))
+    ks = s.add_subparsers(dest="keys_cmd", required=True, metavar="VERB")
+    t = ks.add_parser("generate", help="write <host>.key and <host>.key_secret; print the launch-file block",
+                      **_fmt("  flexsheet keys generate main arm1 arm2 -o ~/.flexsheet/keys"))
+    t.add_argument("hosts", nargs="+", help="host names of the launch file")
+    t.add_argument("-o", "--output", default="~/.flexsheet/keys", help="keys folder (default ~/.flexsheet/keys)")
+    t.set_defaults(func=cmd_keys)
 
     s = sub.add_parser("topic", help="inspect topics of the live graph (from heartbeats)",
                        **_fmt("  flexsheet topic list\n  flexsheet topic echo /fingertip --count 3\n"

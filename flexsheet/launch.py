@@ -45,8 +45,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from . import registry
 from .node import NodeConfig
+from .transport import CurveConfig
 
-__all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "load_launch", "node_config", "Supervisor"]
+__all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "SecuritySpec", "load_launch", "node_config",
+           "curve_config", "Supervisor"]
 
 
 class LaunchError(ValueError):
@@ -67,6 +69,25 @@ class RespawnSpec(BaseModel):
     policy: Literal["never", "on-failure", "always"] = "on-failure"
     delay: float = Field(default=0.5, ge=0.0, description="s before a restart")
     max_restarts: int = Field(default=10, ge=0, description="restarts allowed in the whole run")
+
+
+class SecuritySpec(BaseModel):
+    """ZeroMQ CURVE for the whole graph. ``public_keys``: host → Z85 public key (40 chars) — the allowed
+    keys; ``keys_dir``: where each host finds its own ``<host>.key_secret`` (from ``flexsheet keys
+    generate``; ``~`` and ``$(launch_dir)`` expand; ``$FLEXSHEET_KEYS`` overrides)."""
+
+    model_config = ConfigDict(extra="forbid")
+    curve: bool = False
+    keys_dir: str = "~/.flexsheet/keys"
+    public_keys: dict[str, str] = Field(default_factory=dict)
+
+    @field_validator("public_keys")
+    @classmethod
+    def _z85(cls, v: dict[str, str]) -> dict[str, str]:
+        for host, key in v.items():
+            if not isinstance(key, str) or len(key) != 40:
+                raise ValueError(f"public key of host {host!r} must be 40 Z85 characters, got {key!r}")
+        return v
 
 
 class NodeSpec(BaseModel):
@@ -101,6 +122,7 @@ class LaunchFile(BaseModel):
     heartbeat_period: float = Field(default=1.0, gt=0.0)
     shutdown_timeout: float = Field(default=3.0, gt=0.0, description="s per escalation step")
     report: str | None = Field(default=None, description="'module:function' called after the run with --out")
+    security: SecuritySpec = Field(default_factory=SecuritySpec)
     nodes: dict[str, NodeSpec]
 
     path: Path | None = None
@@ -144,8 +166,41 @@ def load_launch(path: str | Path) -> LaunchFile:
         if ep in seen:
             raise LaunchError(f"{path}: key 'nodes.{name}.port': endpoint {ep} already used by node {seen[ep]!r}")
         seen[ep] = name
+    if lf.security.curve:
+        missing = [h for h in lf.hosts if h not in lf.security.public_keys]
+        if missing:
+            raise LaunchError(f"{path}: key 'security.public_keys': curve is on but no public key for host(s) "
+                              f"{', '.join(missing)} (run: flexsheet keys generate {' '.join(missing)})")
     lf.path = path
     return lf
+
+
+def curve_config(lf: LaunchFile, host: str | None) -> CurveConfig | None:
+    """The :class:`CurveConfig` of ``host`` under ``lf``'s security settings (None when CURVE is off).
+
+    ``host`` None picks the first host whose secret key is present in the keys folder (tools).
+    Raises :class:`LaunchError` naming the missing secret-key file.
+    """
+    sec = lf.security
+    if not sec.curve:
+        return None
+    import zmq.auth
+
+    keys_dir = Path(os.path.expanduser(os.environ.get("FLEXSHEET_KEYS") or sec.keys_dir.replace(
+        "$(launch_dir)", str(lf.path.parent.resolve()) if lf.path else ".")))
+    hosts = [host] if host else [h for h in lf.hosts if (keys_dir / f"{h}.key_secret").exists()]
+    if not hosts:
+        raise LaunchError(f"{lf.path}: key 'security.keys_dir': no <host>.key_secret in {keys_dir}")
+    secret_file = keys_dir / f"{hosts[0]}.key_secret"
+    if not secret_file.exists():
+        raise LaunchError(f"{lf.path}: key 'security.keys_dir': no secret key for host {hosts[0]!r} at "
+                          f"{secret_file} (run: flexsheet keys generate {hosts[0]} -o {keys_dir})")
+    public, secret = zmq.auth.load_certificate(secret_file)
+    if public.decode() != sec.public_keys.get(hosts[0]):
+        raise LaunchError(f"{lf.path}: key 'security.public_keys.{hosts[0]}': does not match {secret_file}")
+    server_keys = {lf.endpoint_of(n): sec.public_keys[spec.host].encode() for n, spec in lf.nodes.items()}
+    return CurveConfig(public_key=public, secret_key=secret, server_keys=server_keys,
+                       allowed_clients=[k.encode() for k in sec.public_keys.values()])
 
 
 def _substitute(value: Any, subs: dict[str, str]) -> Any:
@@ -170,7 +225,7 @@ def node_config(lf: LaunchFile, name: str, out: str | None = None, overrides: di
     params = _substitute({**spec.params, **(overrides or {})}, subs)
     return NodeConfig(name=name, node_type=spec.type, host=spec.host, endpoint=lf.endpoint_of(name),
                       peers=list(lf.endpoints().values()), params=params, remaps=spec.remaps,
-                      heartbeat_period=lf.heartbeat_period)
+                      heartbeat_period=lf.heartbeat_period, curve=curve_config(lf, spec.host))
 
 
 def _pdeathsig() -> None:  # runs in the child between fork and exec
@@ -342,7 +397,7 @@ class Supervisor:
                 lost.discard(hb.node)
                 self.print(f"[launch] node {hb.node} on host {host_of.get(hb.node, '?')} is back (heartbeat)")
 
-        tr = ZmqTransport("", self.lf.endpoints().values())
+        tr = ZmqTransport("", self.lf.endpoints().values(), curve=curve_config(self.lf, self.host or None))
         await tr.start(on_frames)
         tr.subscribe(T.DIAGNOSTICS.name)
         limit = 3.0 * self.lf.heartbeat_period

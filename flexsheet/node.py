@@ -47,7 +47,7 @@ from messages import Header, Heartbeat, Message, Topic, TopicStats
 from messages import topics as T
 
 from .codec import DecodeError, decode, encode
-from .transport import InProcTransport, Transport, ZmqTransport
+from .transport import CurveConfig, InProcTransport, Transport, ZmqTransport
 
 __all__ = ["Node", "NodeConfig", "QoS", "InputRejected", "Publisher", "Subscription", "EmptyParams"]
 
@@ -87,6 +87,7 @@ class NodeConfig:
     params: dict[str, Any] = field(default_factory=dict)
     remaps: dict[str, str] = field(default_factory=dict)
     heartbeat_period: float = 1.0
+    curve: CurveConfig | None = None
 
 
 class _Stats:
@@ -226,7 +227,7 @@ class Node:
         self.name = config.name
         self.params = self.Params.model_validate(config.params)
         self.log = logging.getLogger(config.name)
-        self.transport = transport or ZmqTransport(config.endpoint, config.peers)
+        self.transport = transport or ZmqTransport(config.endpoint, config.peers, curve=config.curve)
         self._publishers: dict[str, Publisher] = {}
         self._subs: dict[str, list[Subscription]] = {}
         self._timers: list[asyncio.Task] = []

@@ -17,17 +17,18 @@ from messages import Heartbeat
 from messages import topics as T
 
 from .codec import DecodeError, decode, decode_any
-from .launch import LaunchError, load_launch
+from .launch import LaunchError, curve_config, load_launch
 from .transport import ZmqTransport
 
 __all__ = ["collect_heartbeats", "topic_list", "topic_echo", "topic_hz", "node_list"]
 
 
-def _peers(launch: str) -> list[str]:
-    return list(load_launch(launch).endpoints().values())
+def _peers(launch: str) -> tuple[list[str], object]:
+    lf = load_launch(launch)
+    return list(lf.endpoints().values()), curve_config(lf, None)
 
 
-async def collect_heartbeats(peers: list[str], timeout: float) -> dict[str, Heartbeat]:
+async def collect_heartbeats(peers: list[str], timeout: float, curve=None) -> dict[str, Heartbeat]:
     """Listen to ``/diagnostics`` on ``peers`` for ``timeout`` s; returns node name → latest heartbeat."""
     beats: dict[str, Heartbeat] = {}
 
@@ -38,7 +39,7 @@ async def collect_heartbeats(peers: list[str], timeout: float) -> dict[str, Hear
             return
         beats[hb.node] = hb
 
-    tr = ZmqTransport("", peers)
+    tr = ZmqTransport("", peers, curve=curve)
     await tr.start(on_frames)
     tr.subscribe(T.DIAGNOSTICS.name)
     try:
@@ -50,11 +51,11 @@ async def collect_heartbeats(peers: list[str], timeout: float) -> dict[str, Hear
 
 def _beats(args: argparse.Namespace) -> dict[str, Heartbeat] | None:
     try:
-        peers = _peers(args.launch)
+        peers, curve = _peers(args.launch)
     except LaunchError as exc:
         print(f"flexsheet: {exc}")
         return None
-    return asyncio.run(collect_heartbeats(peers, args.timeout))
+    return asyncio.run(collect_heartbeats(peers, args.timeout, curve))
 
 
 def topic_list(args: argparse.Namespace) -> int:
@@ -109,7 +110,7 @@ def _short(value) -> str:
 
 def topic_echo(args: argparse.Namespace) -> int:
     """Print messages of ``args.topic`` as they arrive (arrays shown by shape unless ``--arrays``)."""
-    peers = _peers(args.launch)
+    peers, curve = _peers(args.launch)
     done = asyncio.Event()
     n = 0
 
@@ -130,7 +131,7 @@ def topic_echo(args: argparse.Namespace) -> int:
             done.set()
 
     async def main() -> None:
-        tr = ZmqTransport("", peers)
+        tr = ZmqTransport("", peers, curve=curve)
         await tr.start(on_frames)
         tr.subscribe(args.topic)
         try:
@@ -147,7 +148,7 @@ def topic_echo(args: argparse.Namespace) -> int:
 
 def topic_hz(args: argparse.Namespace) -> int:
     """Measure the arrival rate of ``args.topic`` over ``--window`` s: mean rate, min/max/std of periods."""
-    peers = _peers(args.launch)
+    peers, curve = _peers(args.launch)
     stamps: list[float] = []
 
     def on_frames(frames: list) -> None:
@@ -155,7 +156,7 @@ def topic_hz(args: argparse.Namespace) -> int:
             stamps.append(time.monotonic())
 
     async def main() -> None:
-        tr = ZmqTransport("", peers)
+        tr = ZmqTransport("", peers, curve=curve)
         await tr.start(on_frames)
         tr.subscribe(args.topic)
         try:

@@ -19,10 +19,11 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
 
 import zmq
 
-__all__ = ["Transport", "ZmqTransport", "InProcTransport", "TransportError"]
+__all__ = ["Transport", "ZmqTransport", "InProcTransport", "TransportError", "CurveConfig"]
 
 log = logging.getLogger(__name__)
 FramesHandler = Callable[[list], None]
@@ -30,6 +31,36 @@ FramesHandler = Callable[[list], None]
 
 class TransportError(RuntimeError):
     """An endpoint could not be bound or connected (message names the endpoint and the reason)."""
+
+
+@dataclass
+class CurveConfig:
+    """ZeroMQ CURVE security for one node (RFC 26 CurveZMQ, via pyzmq's ``zmq.auth``).
+
+    ``public_key``/``secret_key``: this host's Z85 keypair (from ``flexsheet keys generate``).
+    ``server_keys``: peer endpoint → the Z85 public key its publisher must prove it owns; a peer whose
+    publisher lacks that secret key fails the handshake and none of its messages arrive.
+    ``allowed_clients``: Z85 public keys allowed to subscribe to this node's publisher (ZAP check);
+    any other subscriber is refused. Source: pyzmq ``zmq.auth`` and ``examples/security``.
+    """
+
+    public_key: bytes
+    secret_key: bytes
+    server_keys: dict[str, bytes] = field(default_factory=dict)
+    allowed_clients: list[bytes] = field(default_factory=list)
+
+
+class _AllowList:
+    def __init__(self, keys: list[bytes]) -> None:
+        self.keys = set(keys)
+        self.refused = 0
+
+    def callback(self, domain: str, key: bytes) -> bool:
+        ok = key in self.keys
+        if not ok:
+            self.refused += 1
+            log.warning("CURVE: refused a subscriber with an unlisted public key %s", key.decode(errors="replace"))
+        return ok
 
 
 class Transport:
@@ -69,8 +100,12 @@ class ZmqTransport(Transport):
         ZeroMQ high-water marks in messages (drops beyond them are counted by the node via seq gaps).
     """
 
-    def __init__(self, endpoint: str, peers: Iterable[str], *, sndhwm: int = 2000, rcvhwm: int = 20000) -> None:
+    def __init__(self, endpoint: str, peers: Iterable[str], *, sndhwm: int = 2000, rcvhwm: int = 20000,
+                 curve: CurveConfig | None = None) -> None:
         self.endpoint = endpoint
+        self.curve = curve
+        self._auth = None
+        self.allow: _AllowList | None = None
         self.peers = [p for p in dict.fromkeys(peers) if p]
         self.sndhwm, self.rcvhwm = sndhwm, rcvhwm
         self._latched: dict[bytes, list] = {}
@@ -85,9 +120,21 @@ class ZmqTransport(Transport):
         self._loop = asyncio.get_running_loop()
         self._on_frames = on_frames
         self.ctx = zmq.Context()  # one context per process, created inside the running loop
+        curve = self.curve
+        if curve is not None and self.endpoint:
+            from zmq.auth.thread import ThreadAuthenticator
+
+            self._auth = ThreadAuthenticator(self.ctx, log=log)
+            self._auth.start()
+            self.allow = _AllowList(curve.allowed_clients)
+            self._auth.configure_curve_callback("*", credentials_provider=self.allow)
         if self.endpoint:
             self.pub = self.ctx.socket(zmq.XPUB)
             self.pub.setsockopt(zmq.LINGER, 0)
+            if curve is not None:
+                self.pub.curve_secretkey = curve.secret_key
+                self.pub.curve_publickey = curve.public_key
+                self.pub.curve_server = True
             self.pub.setsockopt(zmq.SNDHWM, self.sndhwm)
             self.pub.setsockopt(zmq.XPUB_VERBOSE, 1)
             try:
@@ -103,8 +150,15 @@ class ZmqTransport(Transport):
         self.sub.setsockopt(zmq.RCVHWM, self.rcvhwm)
         self.sub.setsockopt(zmq.RECONNECT_IVL, 100)
         self.sub.setsockopt(zmq.RECONNECT_IVL_MAX, 1000)
+        if curve is not None:
+            self.sub.curve_secretkey = curve.secret_key
+            self.sub.curve_publickey = curve.public_key
         for peer in self.peers:
             try:
+                if curve is not None:
+                    if peer not in curve.server_keys:
+                        raise TransportError(f"CURVE is on but no public key is listed for peer {peer!r}")
+                    self.sub.curve_serverkey = curve.server_keys[peer]  # applies to this connect only
                 self.sub.connect(peer)
             except zmq.ZMQError as exc:
                 self.close()
@@ -187,6 +241,9 @@ class ZmqTransport(Transport):
                     except Exception:  # noqa: BLE001 - loop may be closed already
                         pass
                 sock.close(linger=0)
+        if self._auth is not None:
+            self._auth.stop()
+            self._auth = None
         if self.ctx is not None:
             self.ctx.term()
             self.ctx = None
