@@ -4,9 +4,17 @@ import numpy as np
 import pytest
 
 from flexsheet import scene
-from nodes.renderer.correction import (choose_model, correct_vertices, correct_vertices_fine,
-                                       correct_vertices_pushed, land_on_triangles, land_projector_rays,
-                                       predict_model_errors, project_vertices, _triangles)
+from nodes.renderer.correction import (
+    _triangles,
+    choose_model,
+    correct_vertices,
+    correct_vertices_fine,
+    correct_vertices_pushed,
+    land_on_triangles,
+    land_projector_rays,
+    predict_model_errors,
+    project_vertices,
+)
 from nodes.renderer.membrane import Membrane, SheetSurface
 
 COM = dict(eye=scene.EYE, projector=scene.PROJECTOR, screen_point=scene.SCREEN_POINT,
