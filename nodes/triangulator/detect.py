@@ -131,25 +131,20 @@ class MarkerDetector:
             wgt = patch_full - self.frac * peak
             np.maximum(wgt, 0.0, out=wgt)
             # keep only the blob connected to the peak (not a bright neighbour such as a clutter edge)
-            _, labels = cv2.connectedComponents((wgt > 0).astype(np.uint8), connectivity=8)
-            blob = labels == labels[r, r]
-            wgt[~blob] = 0.0
+            _, labels, stats, _ = cv2.connectedComponentsWithStats((wgt > 0).astype(np.uint8), connectivity=8)
+            lab = labels[r, r]
+            wgt[labels != lab] = 0.0
+            bx, by, bw, bh, area = (int(v) for v in stats[lab])
             # an isolated dot (or a blur streak shorter than the patch) does not reach the patch border;
             # a blob that does is part of a larger bright structure (sheet corner, clutter edge): skip it.
             # Neither may it touch the image border (a marker cut by the frame has a biased centroid).
-            iy, ix = np.nonzero(blob)
-            gy, gx = py0 + ya + iy, px0 + xa + ix          # image coordinates of the blob pixels
-            touches = (iy.min() == 0 or iy.max() == 2 * r or ix.min() == 0 or ix.max() == 2 * r
-                       or gy.min() <= 0 or gy.max() >= h - 1 or gx.min() <= 0 or gx.max() >= w - 1)
+            gy0, gx0 = py0 + ya + by, px0 + xa + bx          # image coordinates of the blob's box
+            touches = (bx == 0 or by == 0 or bx + bw == 2 * r + 1 or by + bh == 2 * r + 1
+                       or gy0 <= 0 or gx0 <= 0 or gy0 + bh >= h or gx0 + bw >= w)
             s = wgt.sum()
-            area = int(iy.size)
-            # suppress this blob (dilated by 1 px) for the next candidate; a second dot nearby stays findable
-            wy, wx = iy + (ya - oy), ix + (xa - ox)            # work coordinates
-            for dy in (-1, 0, 1):
-                for dx in (-1, 0, 1):
-                    yy, xx = wy + dy, wx + dx
-                    ok = (yy >= 0) & (yy < hh) & (xx >= 0) & (xx < ww)
-                    work[yy[ok], xx[ok]] = 0
+            # suppress this blob's box (grown by 1 px) for the next candidate; a second dot nearby stays findable
+            wy0, wx0 = ya - oy + by - 1, xa - ox + bx - 1      # work coordinates
+            work[max(0, wy0):max(0, wy0 + bh + 2), max(0, wx0):max(0, wx0 + bw + 2)] = 0
             work[py, px] = 0
             if s <= 0 or area > self.max_area or touches:
                 continue
