@@ -7,7 +7,13 @@ import pytest
 
 from flexsheet import scene
 from nodes.arm_bridge.kinematics import (
-    LEFT_BASE, Q_LOWER, Q_UPPER, RIGHT_BASE, ArmKinematics, home_joints, rotation_angle,
+    LEFT_BASE,
+    Q_LOWER,
+    Q_UPPER,
+    RIGHT_BASE,
+    ArmKinematics,
+    home_joints,
+    rotation_angle,
 )
 from nodes.arm_bridge.tracking import TargetTracker
 

@@ -30,8 +30,8 @@ from flexsheet import scene
 
 from .controller import ControllerCore
 from .interp import StreamLimiter
-from .registers import encode_joints
 from .kinematics import LEFT_BASE, Q_LOWER, Q_UPPER, QD_MAX, RIGHT_BASE, ArmKinematics, home_joints
+from .registers import encode_joints
 from .tracking import TargetTracker
 
 PERIOD = 0.0071
@@ -98,7 +98,7 @@ def track_stroke(duration: float, side: str = "left") -> dict:
     n = int(duration / PERIOD) + int(0.5 / PERIOD)
     t_cam = 1.0 / 48.0
     next_cam = 0.0
-    ts, pos_meas, pos_tgt_fn = [], [], []
+    ts, pos_meas = [], []
     theta_of = lambda t: th0 + math.radians(120.0) * 0.5 * (1 - math.cos(math.pi * min(t, duration) / duration))  # noqa: E731
     refused = 0
     for k in range(n):

@@ -96,7 +96,7 @@ class ArmStream:
                                       reconnect_delay=0, reconnect_delay_max=0)
         try:
             ok = await asyncio.wait_for(client.connect(), timeout=max(0.2, 2 * self.request_timeout))
-        except (OSError, asyncio.TimeoutError, ModbusException):
+        except (TimeoutError, OSError, ModbusException):
             ok = False
         if not ok:
             client.close()
@@ -160,7 +160,7 @@ class ArmStream:
                 log.warning("controller refused targets: %s", wr)
                 self.limiter.reset(st.position)
                 status = "hold:refused"
-        except (ModbusException, OSError, asyncio.TimeoutError, ValueError) as exc:
+        except (TimeoutError, ModbusException, OSError, ValueError) as exc:
             self._lost(type(exc).__name__)
             return self._report(t0, t_deadline, 0.0, "disconnected")
         return self._report(t0, t_deadline, write_stamp, status)
@@ -221,7 +221,7 @@ class ArmStream:
             if self.connected and self.client is not None:
                 try:
                     await self._write_command()
-                except (ModbusException, OSError, asyncio.TimeoutError) as exc:
+                except (TimeoutError, ModbusException, OSError) as exc:
                     self._lost(type(exc).__name__)
             nxt += self.period
             done += 1

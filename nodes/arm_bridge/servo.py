@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .kinematics import QD_MAX, Q_LOWER, Q_UPPER
+from .kinematics import Q_LOWER, Q_UPPER, QD_MAX
 
 __all__ = ["ServoParams", "JointServo"]
 
