@@ -102,6 +102,7 @@ class NodeSpec(BaseModel):
     remaps: dict[str, str] = Field(default_factory=dict)
     respawn: RespawnSpec = Field(default_factory=RespawnSpec)
     required: bool = False
+    nice: int = Field(default=0, ge=-20, le=19, description="process niceness (negative needs root)")
 
     @field_validator("type")
     @classmethod
@@ -228,11 +229,18 @@ def node_config(lf: LaunchFile, name: str, out: str | None = None, overrides: di
                       heartbeat_period=lf.heartbeat_period, curve=curve_config(lf, spec.host))
 
 
-def _pdeathsig() -> None:  # runs in the child between fork and exec
-    try:
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-    except OSError:
-        pass
+def _child_setup(nice: int):
+    def setup() -> None:  # runs in the child between fork and exec
+        try:
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+        except OSError:
+            pass
+        if nice:
+            try:
+                os.nice(nice)
+            except OSError:  # negative niceness without root: run at the default priority
+                pass
+    return setup
 
 
 class _Child:
@@ -283,7 +291,7 @@ class Supervisor:
             env["FLEXSHEET_OUT"] = self.out
         child.proc = await asyncio.create_subprocess_exec(
             *self._cmd(child), stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
-            stdin=asyncio.subprocess.DEVNULL, env=env, start_new_session=True, preexec_fn=_pdeathsig)
+            stdin=asyncio.subprocess.DEVNULL, env=env, start_new_session=True, preexec_fn=_child_setup(child.spec.nice))
 
     async def _pump(self, child: _Child) -> None:
         assert child.proc is not None and child.proc.stdout is not None

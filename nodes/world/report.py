@@ -6,7 +6,9 @@ Reads ``OUT/*.mcap`` (the recorder's bag) and writes ``OUT/summary.json``, ``OUT
 Table I (paper §V-C, Fig. 9) per stroking segment, keyed by moving time in seconds like
 ``flexsheet experiment stroke``: D = the measured fingertip (``/fingertip``, valid samples, while the
 target mark moves), the actual sheet = ``/world/sheet`` (FK of the arms' measured joints) interpolated at
-the fingertip's exposure time, errors by :func:`nodes.planner.metrics.table1`.
+the fingertip's exposure time, errors by :func:`nodes.planner.metrics.table1` in the cross-section of
+Fig. 9 (the sheet normal's component along the cylinder axis is removed; it is small and would otherwise
+make the support point jump along the axis).
 
 Latency per hop, matched through the stamps every message carries (``exposure_stamp`` →
 ``source_stamp`` → ``target_stamp``/``write_stamp``); arrival times are the recorder's receive times:
@@ -101,6 +103,10 @@ def analyse(bag: Path) -> dict:
                 continue
             t = np.array([m.exposure_stamp for m in ms])
             origin, normal = _interp_sheet(sheets, t)
+            # Fig. 9 is a cross-section of the cylinder: measure in the plane normal to its axis
+            axis = np.asarray(shape.axis if hasattr(shape, "axis") else (0.0, 1.0, 0.0), dtype=float)
+            normal = normal - np.outer(normal @ axis, axis)
+            normal /= np.linalg.norm(normal, axis=1, keepdims=True)
             err = table1(shape, np.array([m.position for m in ms]), origin, normal)
             row = summarize(err.dd, err.dtheta)
             if key in PAPER:
