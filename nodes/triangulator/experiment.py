@@ -262,6 +262,8 @@ def _plot_stability(st: dict, path: str) -> None:
         ax[1, 1].plot(np.array(r["distance_m"]) * 1e3, [code[e["outcome"]] for e in r[mode]], mk + "-", label=mode)
     ax[1, 1].set_yticks([0, 1, 2], ["wrong", "invalid", "correct"])
     ax[1, 1].set_xscale("log")
+    ax[1, 1].set_xticks([x * 1e3 for x in r["distance_m"]], [f"{x * 1e3:g}" for x in r["distance_m"]])
+    ax[1, 1].minorticks_off()
     ax[1, 1].set_xlabel("distance of the second bright blob, mm")
     ax[1, 1].set_title("reflection (equal-brightness second dot)")
     ax[1, 1].legend()
