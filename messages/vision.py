@@ -13,7 +13,8 @@ class StereoFrame(Message):
     """A synchronised stereo pair from the camera node (mono8).
 
     ``left``, ``right``: uint8 arrays of shape (H, W), raw (unrectified) images of the left and right
-    camera. ``exposure_stamp``: mid-exposure time, s (sender's clock); ``header.stamp`` equals it.
+    camera. ``exposure_stamp``: mid-exposure time, s (sender's clock); ``header.stamp``: the time
+    the frame was handed to the graph (after readout/transfer; for the twin, after rendering), s.
     ``exposure_time``: shutter time, s. ``stereo_skew``: right minus left exposure time, s (0 for a
     hardware-synchronised pair; a receiver rejects pairs whose |skew| exceeds its tolerance). ``header.frame_id`` is the left camera's optical frame
     (``"camera_left"``: +z forward, +x right, +y down, OpenCV convention).
@@ -66,7 +67,8 @@ class Fingertip(Message):
     not be used (never a stale or invented position). ``predicted_position`` (3,) m is the constant-velocity
     Kalman prediction ``prediction_horizon`` s ahead of ``header.stamp`` (horizon 0 when the predictor is
     off; then it equals ``position``). ``exposure_stamp`` (s) is the camera exposure the estimate comes from,
-    carried for latency accounting. ``reprojection_px``: epipolar/reprojection residual, px.
+    and ``frame_stamp`` (s) the time that frame was published by the camera node (its ``header.stamp``),
+    both carried for latency accounting. ``reprojection_px``: epipolar/reprojection residual, px.
     """
 
     SCHEMA = "flexsheet/Fingertip"
@@ -78,4 +80,5 @@ class Fingertip(Message):
     predicted_position: ndarray("float64", (3,), "predicted position at stamp + horizon, m, display frame")
     prediction_horizon: float = Field(default=0.0, ge=0.0, description="prediction horizon, s")
     exposure_stamp: float = Field(description="exposure time of the source frame, s")
+    frame_stamp: float = Field(default=0.0, description="time the source stereo frame was published, s")
     reprojection_px: float = Field(default=0.0, ge=0.0, description="epipolar residual, px")
