@@ -7,8 +7,15 @@ import cv2
 import numpy as np
 import pytest
 
-from nodes.triangulator.calibrate import (calibrate_stereo, detect_board, load_yaml, main, parse_board,
-                                          to_message, write_yaml)
+from nodes.triangulator.calibrate import (
+    calibrate_stereo,
+    detect_board,
+    load_yaml,
+    main,
+    parse_board,
+    to_message,
+    write_yaml,
+)
 
 DATA = os.path.join(os.path.dirname(__file__), "data", "stereo_xi")
 

@@ -42,7 +42,7 @@ def test_triangulator_valid_invalid_and_bad_frames():
                 stamps.append(101.0 + k / 48)
                 await h.wait_for(topics.FINGERTIP, n=k + 1, timeout=3.0)
             out = h.messages(topics.FINGERTIP)
-            for m, st in zip(out, stamps):
+            for m, st in zip(out, stamps, strict=False):
                 assert m.valid and m.exposure_stamp == st and m.header.frame_id == "display"
                 e = m.position - p
                 assert e @ np.linalg.solve(m.covariance, e) < 14.16  # within 3σ (χ²₃)

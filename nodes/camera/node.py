@@ -20,8 +20,15 @@ from flexsheet.node import Node, QoS
 from messages import FingerTruth, StereoFrame, topics
 from nodes.triangulator.calibrate import load_yaml, to_message
 
-from .sim import DEFAULT_CAMERA_POSITION, DEFAULT_LOOK_AT, SimConfig, StereoRenderer, camera_model, \
-    default_trajectory, look_at
+from .sim import (
+    DEFAULT_CAMERA_POSITION,
+    DEFAULT_LOOK_AT,
+    SimConfig,
+    StereoRenderer,
+    camera_model,
+    default_trajectory,
+    look_at,
+)
 
 __all__ = ["CameraParams", "CameraNode"]
 

@@ -25,8 +25,15 @@ import time
 import cv2
 import numpy as np
 
-from nodes.camera.sim import DEFAULT_CAMERA_POSITION, SimConfig, StereoRenderer, bumblebee2_calibration, \
-    camera_model, default_trajectory, look_at
+from nodes.camera.sim import (
+    DEFAULT_CAMERA_POSITION,
+    SimConfig,
+    StereoRenderer,
+    bumblebee2_calibration,
+    camera_model,
+    default_trajectory,
+    look_at,
+)
 
 from .calibrate import calibrate_stereo, parse_board
 from .pipeline import FingertipTracker, TrackerConfig

@@ -359,14 +359,14 @@ def main(argv: list[str] | None = None) -> int:
     report = {"output": a.output, "pairs": len(lefts), "used": len(res.used), "skipped": res.skipped_reason,
               "rms_left_px": res.rms_left_px, "rms_right_px": res.rms_right_px, "stereo_rms_px": res.rms_px,
               "baseline_m": float(np.linalg.norm(res.T)), "T_m": res.T.tolist(), "fx_left_px": float(res.K1[0, 0]),
-              "per_pair_rms_px": {n: [round(float(x), 4) for x in e] for n, e in zip(res.used, res.per_pair_rms_px)}}
+              "per_pair_rms_px": {n: [round(float(x), 4) for x in e] for n, e in zip(res.used, res.per_pair_rms_px, strict=False)}}
     if a.json:
         print(json.dumps(report, indent=1))
     else:
         print(f"stereo RMS {res.rms_px:.4f} px (left {res.rms_left_px:.4f}, right {res.rms_right_px:.4f}); "
               f"|T| = {report['baseline_m'] * 1000:.2f} mm; fx = {report['fx_left_px']:.1f} px; "
               f"{len(res.used)}/{len(lefts)} pairs used")
-        for n, e in zip(res.used, res.per_pair_rms_px):
+        for n, e in zip(res.used, res.per_pair_rms_px, strict=False):
             print(f"  {n:16s} left {e[0]:.4f} px  right {e[1]:.4f} px")
         for n, why in res.skipped_reason.items():
             print(f"  skipped {n}: {why}")

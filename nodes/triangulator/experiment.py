@@ -28,8 +28,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from nodes.camera.sim import DEFAULT_CAMERA_POSITION, SimConfig, StereoRenderer, bumblebee2_calibration, \
-    camera_model, look_at  # noqa: E402
+from nodes.camera.sim import (
+    DEFAULT_CAMERA_POSITION,
+    SimConfig,
+    StereoRenderer,
+    bumblebee2_calibration,
+    camera_model,  # noqa: E402
+    look_at,
+)
 
 from .bench import mc_rms_mm, real_stereo_rms, timing  # noqa: E402
 from .pipeline import FingertipTracker, TrackerConfig  # noqa: E402
@@ -179,7 +185,7 @@ def stability(seed: int = 0) -> dict:
     out["motion_blur"] = blur
     # end-to-end twin accuracy at 0.5 m (the twin's centroid noise is what it is; σ_px not imposed)
     errs = []
-    for k in range(60):
+    for _ in range(60):
         p = np.array([rng.uniform(0.0, 0.06), rng.uniform(-0.06, 0.06), rng.uniform(-0.05, 0.05)])
         L, R = rnd.render(p)
         r = _fresh(calib, T).process(L, R, 0.0)
@@ -250,7 +256,7 @@ def _plot_stability(st: dict, path: str) -> None:
     ax[0, 2].legend()
     o = st["occlusion"]
     ax[1, 0].plot(o["fraction"], o["error_mm"], "o-")
-    for x, r in zip(o["fraction"], o["reason"]):
+    for x, r in zip(o["fraction"], o["reason"], strict=False):
         if r != "ok":
             ax[1, 0].axvspan(x - 0.05, x + 0.05, color="0.85")
     ax[1, 0].set_xlabel("fraction of the marker hidden in the left image")
