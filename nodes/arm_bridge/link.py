@@ -40,7 +40,9 @@ log = logging.getLogger(__name__)
 @dataclass
 class CycleReport:
     """What one cycle did. Times: ``t_cycle`` monotonic s (scheduled start was ``t_deadline``),
-    ``write_stamp`` wall-clock s (``time.time()``) of the target write (0 if none). ``state``: decoded
+    ``write_stamp`` wall-clock s (``time.time()``) of this cycle's target write (0 if none); in the first
+    report after a new target it is the time of that target's first write (which may have been an
+    immediate :meth:`ArmStream.refresh` earlier in the period). ``state``: decoded
     controller state or None when disconnected. ``commanded`` (6,) rad. ``bridge_status``: see node doc."""
 
     t_cycle: float
@@ -88,6 +90,13 @@ class ArmStream:
         self._seeded = False
         self._pending_cmd: int | None = None
         self._task: asyncio.Task | None = None
+        self._io = asyncio.Lock()               # one read/step/write sequence at a time
+        self._slot: tuple[np.ndarray, np.ndarray] | None = None   # limiter (c, v) before this period's step
+        self._slot_target = 0.0                 # source stamp of the goal this period's command was made for
+        self._slot_deadline = 0.0               # monotonic end of the current period
+        self._first_write: tuple[float, float] = (0.0, 0.0)      # (source stamp, time of its first write)
+        self._first_reported = True
+        self.refreshes = 0
 
     # ------------------------------------------------------------------ connection
     async def _connect(self) -> bool:
@@ -125,7 +134,46 @@ class ArmStream:
     # ------------------------------------------------------------------ one cycle
     async def cycle(self, t_deadline: float) -> CycleReport:
         """Run one cycle (see module doc); never raises on network errors."""
+        async with self._io:
+            return await self._cycle(t_deadline)
+
+    async def refresh(self) -> bool:
+        """A new target arrived mid-period: redo this period's step toward it and write it now.
+
+        The limiter is rolled back to its state before this period's step and stepped again, so the
+        command stream still moves by one period's worth of motion (no limit is exceeded), but the target
+        reaches the controller without waiting for the next tick (the controller latches the registers at
+        its own period). Returns True if a write was made. Never raises on network errors.
+        """
+        async with self._io:
+            if (not self.connected or self.client is None or self._slot is None or self.state is None
+                    or self.tracker.source_stamp == self._slot_target or time.monotonic() >= self._slot_deadline
+                    or not self.state.has(reg.ST_ENABLED) or self.state.fault):
+                return False
+            c, v = self._slot
+            self.limiter.c, self.limiter.v = c.copy(), v.copy()
+            cmd = self.limiter.step(self.tracker.goal_for(self.clock(), self.limiter.c))
+            self._slot_target = self.tracker.source_stamp
+            try:
+                wr = await self.client.write_registers(reg.HR_WATCHDOG, [self.watchdog, *reg.encode_joints(cmd)],
+                                                       device_id=self.device_id)
+            except (TimeoutError, ModbusException, OSError, ValueError) as exc:
+                self._lost(type(exc).__name__)
+                return False
+            if wr.isError():
+                return False
+            self._note_write(self.clock())
+            self.refreshes += 1
+            return True
+
+    def _note_write(self, stamp: float) -> None:
+        if self._first_write[0] != self.tracker.source_stamp:
+            self._first_write = (self.tracker.source_stamp, stamp)
+            self._first_reported = False
+
+    async def _cycle(self, t_deadline: float) -> CycleReport:
         t0 = time.monotonic()
+        self._slot_deadline = t_deadline + self.period
         self.cycles += 1
         write_stamp = 0.0
         if not self.connected:
@@ -147,14 +195,18 @@ class ArmStream:
             self.state = st
             status = self._supervise(st)
             if st.has(reg.ST_ENABLED) and not status.startswith("fault:"):
+                self._slot = (self.limiter.c.copy(), self.limiter.v.copy())
+                self._slot_target = self.tracker.source_stamp
                 goal = self.tracker.goal_for(self.clock(), self.limiter.c)
                 cmd = self.limiter.step(goal)
             else:
+                self._slot = None
                 cmd = self.limiter.c.copy()
             self.watchdog = (self.watchdog + 1) & 0xFFFF
             wr = await self.client.write_registers(reg.HR_WATCHDOG, [self.watchdog, *reg.encode_joints(cmd)],
                                                    device_id=self.device_id)
             write_stamp = self.clock()
+            self._note_write(write_stamp)
             if wr.isError():
                 # refused by the controller (should not happen: the limiter respects its checks); re-seed
                 log.warning("controller refused targets: %s", wr)
@@ -200,6 +252,9 @@ class ArmStream:
     def _report(self, t0: float, t_deadline: float, write_stamp: float, status: str) -> CycleReport:
         if self.cycle_times is not None:
             self.cycle_times.append(t0)
+        if write_stamp and self._first_write[0] == self.tracker.source_stamp and not self._first_reported:
+            write_stamp = self._first_write[1]   # the first report of a target carries its first write
+            self._first_reported = True
         rep = CycleReport(t0, t_deadline, write_stamp, self.state, self.limiter.c.copy(), status,
                           self.tracker.source_stamp)
         if self.on_cycle is not None:

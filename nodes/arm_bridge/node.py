@@ -92,6 +92,7 @@ class ArmBridgeNode(Node):
             self._pending = msg
             return
         self.tracker.set_target(msg.pose, msg.source_stamp, self.now())
+        await self.stream.refresh()   # write it now rather than at the next tick
 
     def on_cycle(self, rep: CycleReport) -> None:
         """Publish the joint state of this cycle (runs on the loop every period)."""

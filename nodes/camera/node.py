@@ -128,8 +128,8 @@ class CameraNode(Node):
         return pos, vel, True
 
     def _publish(self, left: np.ndarray, right: np.ndarray, stamp: float, skew: float = 0.0) -> None:
-        self.stereo_pub.publish(StereoFrame(
-            header=self.stereo_pub.header("camera_left", stamp=stamp), left=left, right=right,
+        self.stereo_pub.publish(StereoFrame(   # header.stamp: handed to the graph now; exposure: mid-exposure
+            header=self.stereo_pub.header("camera_left"), left=left, right=right,
             exposure_stamp=stamp, exposure_time=float(self.params.exposure_s), stereo_skew=float(skew)))
         self.frames += 1
 

@@ -87,4 +87,5 @@ class TriangulatorNode(Node):
             header=self.pub.header("display", stamp=msg.exposure_stamp), position=res.position,
             covariance=res.covariance, valid=res.valid, predicted_position=res.predicted if res.valid else np.zeros(3),
             prediction_horizon=float(self.cfg.horizon_s), exposure_stamp=msg.exposure_stamp,
+            frame_stamp=msg.header.stamp,
             reprojection_px=float(res.residual_px)))

@@ -13,11 +13,13 @@ make the support point jump along the axis).
 Latency per hop, matched through the stamps every message carries (``exposure_stamp`` →
 ``source_stamp`` → ``target_stamp``/``write_stamp``); arrival times are the recorder's receive times:
 
-* ``exposure_to_fingertip``: fingertip arrival − its exposure stamp (includes the camera twin's render);
+* ``exposure_to_camera_frame``: the stereo frame's publish stamp − its exposure stamp (for the twin this is
+  its rendering time; for a real camera, readout and transfer);
+* ``camera_frame_to_fingertip``: fingertip arrival − the frame's publish stamp (transport + triangulation);
 * ``fingertip_to_sheet_target``: sheet-target arrival − fingertip arrival (same exposure stamp);
 * ``sheet_target_to_modbus_write``: first Modbus write of the arm target − sheet-target arrival;
 * ``modbus_write_to_joint_motion``: first joint-state readback after that write − the write;
-* ``camera_frame_to_modbus_write``: first Modbus write − exposure stamp (whole software path);
+* ``camera_frame_to_modbus_write``: first Modbus write − the frame's publish stamp (the software path);
 * ``fingertip_to_rendered_frame``: rendered-frame arrival − fingertip arrival (same exposure stamp).
 
 All hosts of the sim run share one clock; across PCs see docs/deploy.md on time sync.
@@ -115,6 +117,7 @@ def analyse(bag: Path) -> dict:
         summary["fingertip_invalid"] = n_invalid
     # ---------------------------------------------------------------- latency
     tip_arrival = {m.exposure_stamp: t for t, m in tips}
+    frame_time = {m.exposure_stamp: m.frame_stamp for _, m in tips if m.frame_stamp}
     target_arrival = {}
     for t, m in d.get("/sheet/target", []):
         target_arrival.setdefault(m.source_stamp, t)
@@ -129,11 +132,12 @@ def analyse(bag: Path) -> dict:
     for t, m in d.get("/render/stereo", []):
         render_arrival.setdefault(m.source_stamp, t)
     hops = {
-        "exposure_to_fingertip": [a - e for e, a in tip_arrival.items()],
+        "exposure_to_camera_frame": [f - e for e, f in frame_time.items()],
+        "camera_frame_to_fingertip": [tip_arrival[e] - f for e, f in frame_time.items()],
         "fingertip_to_sheet_target": [target_arrival[e] - tip_arrival[e] for e in tip_arrival if e in target_arrival],
         "sheet_target_to_modbus_write": [first_write[e] - target_arrival[e] for e in target_arrival if e in first_write],
         "modbus_write_to_joint_motion": [first_readback[e] - first_write[e] for e in first_write],
-        "camera_frame_to_modbus_write": [first_write[e] - e for e in first_write],
+        "camera_frame_to_modbus_write": [first_write[e] - frame_time[e] for e in first_write if e in frame_time],
         "fingertip_to_rendered_frame": [render_arrival[e] - tip_arrival[e] for e in tip_arrival if e in render_arrival],
     }
     summary["latency_ms"] = {k: _stats(v) for k, v in hops.items()}
