@@ -46,6 +46,22 @@ class DecodeError(ValueError):
     """A frame set that is not a valid message for its topic (bad bytes, wrong schema/version, bad field)."""
 
 
+def _line(text: str, limit: int = 300) -> str:
+    """``text`` on one line (runs of whitespace, e.g. a numpy repr's newlines, become one space), at most
+    ``limit`` characters: a hostile value must not turn one rejection into a multi-line or huge log entry."""
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _topic_name(frame: Any) -> str:
+    """Printable name of a topic frame (bytes-like only; anything else, e.g. an int, is not turned into
+    ``bytes(n)`` zeros), at most 120 characters."""
+    if isinstance(frame, (bytes, bytearray, memoryview)) or hasattr(frame, "bytes"):
+        raw = frame.bytes if hasattr(frame, "bytes") else bytes(frame[:120])
+        return _line(raw[:120].decode(errors="replace"), 120)
+    return f"<{type(frame).__name__} topic frame>"
+
+
 def _default(obj: Any) -> Any:
     raise TypeError(f"cannot encode {type(obj).__name__}")
 
@@ -90,11 +106,11 @@ def _unpack(frames: list, topic_name: str) -> dict:
             dtype_str = data[3 + 8 * ndim:].decode()
             dtype = _dtype(dtype_str)
         except Exception as exc:  # noqa: BLE001 - any garbage in the ext payload is a decode error
-            raise DecodeError(f"{topic_name}: bad array descriptor ({exc})") from None
+            raise DecodeError(_line(f"{topic_name}: bad array descriptor ({exc})")) from None
         if not 2 <= idx < nbuf:
             raise DecodeError(f"{topic_name}: array buffer index {idx!r} out of range (frames: {nbuf})")
         if dtype.kind not in _ALLOWED_KINDS or dtype.hasobject:
-            raise DecodeError(f"{topic_name}: array dtype {dtype_str!r} not allowed")
+            raise DecodeError(_line(f"{topic_name}: array dtype {dtype_str!r:.40} not allowed"))
         count = 1
         for s in shape:
             count *= s
@@ -114,7 +130,7 @@ def _unpack(frames: list, topic_name: str) -> dict:
     except DecodeError:
         raise
     except Exception as exc:  # noqa: BLE001 - msgpack raises many types on garbage
-        raise DecodeError(f"{topic_name}: undecodable meta frame ({type(exc).__name__}: {exc})") from None
+        raise DecodeError(_line(f"{topic_name}: undecodable meta frame ({type(exc).__name__}: {exc})")) from None
     if not isinstance(obj, dict) or not {"s", "v", "d"} <= obj.keys() or not isinstance(obj["d"], dict):
         raise DecodeError(f"{topic_name}: meta frame is not a flexsheet message envelope")
     return obj
@@ -129,31 +145,42 @@ def decode(frames: list, topic: Topic) -> Message:
     """
     obj = _unpack(frames, topic.name)
     cls = topic.type
-    if obj["s"] != cls.SCHEMA:
-        raise DecodeError(f"{topic.name}: expected type {cls.SCHEMA} v{cls.VERSION}, got {obj['s']!r} v{obj['v']!r}")
-    if obj["v"] != cls.VERSION:
-        raise DecodeError(f"{topic.name}: {cls.SCHEMA} version mismatch: expected v{cls.VERSION}, got v{obj['v']!r}")
+    if type(obj["s"]) is not str or obj["s"] != cls.SCHEMA:
+        raise DecodeError(_line(f"{topic.name}: expected type {cls.SCHEMA} v{cls.VERSION}, "
+                                f"got {obj['s']!r:.80} v{obj['v']!r:.40}"))
+    if type(obj["v"]) is not int or obj["v"] != cls.VERSION:
+        raise DecodeError(_line(f"{topic.name}: {cls.SCHEMA} version mismatch: expected v{cls.VERSION}, "
+                                f"got v{obj['v']!r:.40}"))
     try:
         return cls.model_validate(obj["d"])
     except ValidationError as exc:
         err = exc.errors()[0]
         loc = ".".join(str(p) for p in err["loc"])
-        raise DecodeError(f"{topic.name}: field {loc or '<message>'}: {err['msg']} (value {err.get('input')!r:.80})") from None
+        raise DecodeError(_line(f"{topic.name}: field {loc or '<message>'}: {err['msg']:.200} "
+                                f"(value {err.get('input')!r:.80})")) from None
 
 
 def decode_any(frames: list) -> Message:
     """Decode frames by the schema name they carry (used by tools that do not know the topic's type)."""
     from messages import MESSAGE_TYPES
 
-    topic_name = bytes(frames[0]).decode(errors="replace") if frames else "?"
+    topic_name = _topic_name(frames[0]) if frames else "?"
     obj = _unpack(frames, topic_name)
-    cls = MESSAGE_TYPES.get(obj["s"])
+    cls = MESSAGE_TYPES.get(obj["s"]) if type(obj["s"]) is str else None
     if cls is None:
-        raise DecodeError(f"{topic_name}: unknown schema {obj['s']!r}")
+        raise DecodeError(_line(f"{topic_name}: unknown schema {obj['s']!r:.80}"))
     return decode(frames, Topic(topic_name, cls))
 
 
 def peek_schema(meta: bytes) -> tuple[str, int]:
-    """Return ``(schema, version)`` of an encoded meta frame without building arrays or validating."""
-    obj = msgpack.unpackb(meta, ext_hook=lambda c, d: None, raw=False)
+    """Return ``(schema, version)`` of an encoded meta frame without building arrays or validating.
+
+    Raises :class:`DecodeError` if ``meta`` is not msgpack of an envelope with a str schema and an int version.
+    """
+    try:
+        obj = msgpack.unpackb(meta, ext_hook=lambda c, d: None, raw=False)
+    except Exception as exc:  # noqa: BLE001 - msgpack raises many types on garbage
+        raise DecodeError(_line(f"undecodable meta frame ({type(exc).__name__}: {exc})")) from None
+    if not isinstance(obj, dict) or type(obj.get("s")) is not str or type(obj.get("v")) is not int:
+        raise DecodeError("meta frame is not a flexsheet message envelope (str 's', int 'v')")
     return obj["s"], obj["v"]
