@@ -3,8 +3,10 @@
 Subscribes ``/object/deformation`` (rigid cylinder until the FEM publishes), both arms' joint states (the
 measured clamp poses give the actual sheet pose, :meth:`SheetSurface.from_clamps`) and ``/fingertip`` (the
 pushed point: a valid fingertip more than ``push_threshold`` behind the sheet plane and inside the sheet).
-Publishes ``/render/stereo`` (:class:`messages.RenderedFrame`, downscaled by ``publish_scale``) at
-``publish_rate``; ``source_stamp`` is the newest exposure stamp of the fingertip / deformation it drew.
+It redraws as soon as a new fingertip or deformation arrives (at most ``max_render_rate``; at least at
+``publish_rate`` when nothing arrives) and publishes ``/render/stereo`` (:class:`messages.RenderedFrame`,
+downscaled by ``publish_scale``) at ``publish_rate``, each published frame being the redraw for the newest
+input; ``source_stamp`` is the newest exposure stamp of the fingertip / deformation it drew.
 
 All GL work runs in one dedicated thread (the EGL context is bound to it). Bad input (unknown faces, a
 clamp pose that is not a rotation, a sheet pose with the eye behind it) is rejected and counted; the last good
@@ -59,6 +61,9 @@ class RendererParams(BaseModel):
     push_threshold: float = Field(0.001, ge=0.0, description="depth behind the sheet that counts as a push, m")
     sheet_half_width: float = Field(scene.SHEET_SIZE / 2, gt=0.0, description="half the free-edge length, m")
     publish_rate: float = Field(10.0, gt=0.0, le=240.0, description="RenderedFrame rate, Hz")
+    max_render_rate: float = Field(60.0, gt=0.0, le=240.0,
+                                   description="cap on redraws, Hz (a redraw follows each new fingertip or "
+                                               "deformation; the real projector window refreshes at 120 Hz)")
     publish_scale: float = Field(0.25, gt=0.0, le=1.0, description="downscale of the published images")
     samples: int = Field(0, ge=0, le=16, description="MSAA samples")
     display: Literal["headless", "window"] = "headless"
@@ -136,7 +141,35 @@ class RendererNode(Node):
         self.subscribe(topics.ARM_LEFT_STATE, self.on_arm, qos=QoS.LATEST)
         self.subscribe(topics.ARM_RIGHT_STATE, self.on_arm, qos=QoS.LATEST)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
+        self._want = asyncio.Event()
+        self._last_render = 0.0
+        self._last_publish = 0.0
+        self._render_task = loop.create_task(self._render_loop())
         self.timer(1.0 / p.publish_rate, self.on_timer)
+
+    def _request(self) -> None:
+        """Ask for a redraw (thread-safe: input handlers run in worker threads)."""
+        self._loop.call_soon_threadsafe(self._want.set)
+
+    async def _render_loop(self) -> None:
+        p: RendererParams = self.params
+        loop = asyncio.get_running_loop()
+        while True:
+            await self._want.wait()
+            self._want.clear()
+            wait = self._last_render + 1.0 / p.max_render_rate - time.monotonic()
+            if wait > 0:
+                await asyncio.sleep(wait)
+            self._last_render = time.monotonic()
+            publish = self._last_render - self._last_publish >= 1.0 / p.publish_rate
+            try:
+                msg = await loop.run_in_executor(self._gl, self._frame, publish)
+            except ValueError as exc:
+                self._reject(f"render: {exc}")
+                continue
+            if msg is not None:
+                self._last_publish = self._last_render
+                self.pub.publish(msg)
 
     def _gl_init(self) -> None:
         p: RendererParams = self.params
@@ -153,6 +186,8 @@ class RendererNode(Node):
                 self.table[m].append((float(S), pe[m]))
 
     async def teardown(self) -> None:
+        if hasattr(self, "_render_task"):
+            self._render_task.cancel()
         if hasattr(self, "_gl"):
             if hasattr(self, "renderer"):
                 await asyncio.get_running_loop().run_in_executor(self._gl, self.renderer.release)
@@ -171,6 +206,7 @@ class RendererNode(Node):
             self._mesh_normals = n
             self._mesh_dirty = True
             self._mesh_stamp = float(msg.source_stamp)
+        self._request()
 
     def on_arm(self, msg: ArmJointState) -> None:
         T = np.asarray(msg.pose, dtype=float)
@@ -192,6 +228,7 @@ class RendererNode(Node):
         with self._lock:
             self._finger = np.asarray(msg.position, dtype=float) if msg.valid else None
             self._finger_stamp = float(msg.exposure_stamp)
+        self._request()
 
     # ------------------------------------------------------------------ output
     def current_sheet(self) -> SheetSurface:
@@ -221,7 +258,8 @@ class RendererNode(Node):
         return choose_model(sheet.membrane.depth, self.table, self.params.accuracy_target,
                             models=("flat", "four_triangle", "fine"))
 
-    def _frame(self) -> RenderedFrame:
+    def _frame(self, publish: bool = True) -> RenderedFrame | None:
+        """Correct and draw the pair for the newest inputs (GL thread); read it back if ``publish``."""
         p: RendererParams = self.params
         t0 = time.perf_counter()
         with self._lock:
@@ -246,11 +284,13 @@ class RendererNode(Node):
         self.model_used = self.renderer.model
         self.renderer.render_pair()
         render_time = time.perf_counter() - t0
+        if not publish:
+            return None
         left, right = self.renderer.read_pair(p.publish_scale)
         self.frames += 1
         return RenderedFrame(header=self.pub.header("projector"), left=left, right=right, scale=p.publish_scale,
                              correction=self.model_used, render_time=render_time, source_stamp=stamp)
 
     async def on_timer(self) -> None:
-        msg = await asyncio.get_running_loop().run_in_executor(self._gl, self._frame)
-        self.pub.publish(msg)
+        if time.monotonic() - self._last_render >= 1.0 / self.params.publish_rate:
+            self._want.set()   # nothing new arrived: still redraw (and publish) at publish_rate
