@@ -34,7 +34,12 @@ _CACHE_VERSION = "1"
 class Update:
     """One model update. ``vertices`` (S, 3) float32 m display frame (deformed surface; undeformed when
     ``valid`` is False); ``force`` N; ``stiffness`` N/m; ``depth`` m; ``contact_point`` (3,) m; ``method``;
-    ``max_strain``; ``inverted`` element count; ``status``; ``valid``."""
+    ``max_strain``; ``inverted`` element count; ``status``; ``valid``.
+
+    Policy: inverted elements or strain over the limit → status ``linear_invalid:<reason>`` (or the
+    corotational table's answer, status ``nonlinear:...``); the deformation is still drawn (``valid``) unless
+    a rendered surface triangle folds over or a value is not finite — then ``valid`` is False, the vertices are
+    the rest shape and force/stiffness are 0."""
 
     vertices: np.ndarray
     force: float
@@ -51,7 +56,8 @@ class Update:
 class RealtimeModel:
     """Real-time cylinder model.
 
-    Parameters: ``spec`` mesh resolution; ``material``; ``finger_radius`` m; ``max_depth`` m (deeper input is
+    Parameters: ``spec`` mesh resolution; ``order`` element order of the capacitance model (2: P2, whose
+    edge-midpoint DOFs also take contact; outputs are the mesh's corner nodes); ``material``; ``finger_radius`` m; ``max_depth`` m (deeper input is
     rejected); ``strain_limit`` (largest principal small strain beyond which linear is declared invalid);
     ``cache_dir`` (None: no disk cache); ``reach`` m extra margin around the working arc for candidate
     contact points (default finger_radius + 2 mm); ``log`` optional callable(str) for progress lines.
@@ -60,7 +66,7 @@ class RealtimeModel:
 
     def __init__(self, spec: MeshSpec, material: Material, finger_radius: float = 0.008, max_depth: float = 0.05,
                  strain_limit: float = 1.0, cache_dir: str | None = DEFAULT_CACHE_DIR, reach: float | None = None,
-                 log=None):
+                 log=None, order: int = 2):
         if not (math.isfinite(finger_radius) and 0.001 <= finger_radius <= 0.03):
             raise ValueError(f"finger_radius must be in [0.001, 0.03] m, got {finger_radius!r}")
         if not (math.isfinite(max_depth) and 0.0 < max_depth <= 0.07):
@@ -72,7 +78,9 @@ class RealtimeModel:
         self.spec, self.material = spec, material
         self.finger_radius, self.max_depth, self.strain_limit = finger_radius, max_depth, strain_limit
         self.mesh: TetMesh = cylinder_mesh(spec)
-        self.model = FemModel(self.mesh, material, order=1)
+        self.model = FemModel(self.mesh, material, order=order)
+        self.order = order
+        self._p1 = self.model if order == 1 else None
         m = self.mesh
         reach = finger_radius + 0.002 if reach is None else reach
         arc = arc_points(m.radius, m.center, spec.arc_deg, 0.001)
@@ -80,12 +88,15 @@ class RealtimeModel:
         surf = self.model.boundary & ~self.model.fixed
         self.candidates = surf & (dist <= reach)
         monitor = dist <= reach + 2 * spec.h_fine
-        outputs = surf | (monitor & ~self.model.fixed)
+        corner = np.arange(len(self.model.points)) < len(m.points)
+        outputs = (surf | (monitor & ~self.model.fixed)) & corner
         self.surface_nodes = m.surface_nodes
         self.faces = np.searchsorted(self.surface_nodes, m.faces).astype(np.int32)
         self._rest = m.points[self.surface_nodes].astype(np.float32)
+        q = m.points[m.faces]
+        self._rest_normals = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
         key = hashlib.sha256("|".join([_CACHE_VERSION, m.digest(), material.key(), f"{reach:.9g}",
-                                       f"{finger_radius:.9g}"]).encode()).hexdigest()[:24]
+                                       f"{finger_radius:.9g}", f"P{order}"]).encode()).hexdigest()[:24]
         self.cache_key = key
         self.cache_hit = False
         path = os.path.join(cache_dir, f"capacitance_{key}.npz") if cache_dir else None
@@ -107,16 +118,23 @@ class RealtimeModel:
                     self.solver.save(path)
                 except OSError as exc:
                     log(f"fem: could not write cache {path}: {exc}")
-        out_idx = np.full(len(m.points), -1, np.int64)
+        out_idx = np.full(len(self.model.points), -1, np.int64)
         out_idx[self.solver.out_pts] = np.arange(len(self.solver.out_pts))
         self._surf_in_out = out_idx[self.surface_nodes]          # -1 for support nodes (zero displacement)
-        tet_ok = np.all(out_idx[m.tets] >= 0, axis=1) & np.all(monitor[m.tets], axis=1)
+        tet_ok = np.all(out_idx[m.tets] >= 0, axis=1) & np.all(monitor[:len(m.points)][m.tets], axis=1)
         self._mon_tets = out_idx[m.tets[tet_ok]]
         self._mon_Dm_inv, _ = _grad_ops(m.points[self.solver.out_pts], self._mon_tets) if tet_ok.any() else (None, None)
         self._out_points = m.points[self.solver.out_pts]
         self.nonlinear = None
         self._anchor = None
         self.precompute_s = time.perf_counter() - t0
+
+    @property
+    def p1_model(self) -> FemModel:
+        """P1 model on the same mesh (built on first use; the corotational table needs it)."""
+        if self._p1 is None:
+            self._p1 = FemModel(self.mesh, self.material, order=1)
+        return self._p1
 
     @property
     def n_nodes(self) -> int:
@@ -142,7 +160,7 @@ class RealtimeModel:
                 if d <= 0:
                     continue
                 fg = finger_at(float(ang), float(d), self.finger_radius, self.mesh.radius, self.mesh.center)
-                sol, _, _ = solve_corotational(self.model, fg, u0=u0)
+                sol, _, _ = solve_corotational(self.p1_model, fg, u0=u0)
                 u0 = sol.u
                 U[i, j] = sol.u[self.surface_nodes]
                 F[i, j] = sol.force
@@ -175,6 +193,7 @@ class RealtimeModel:
         except OutsideCandidates:
             sol = solve_full(self.model, fg)
             u_out = sol.u[self.solver.out_pts]
+            sol.u_full = None
             method = "sparse"
         if self._mon_Dm_inv is not None and sol.n_contact:
             strain, inv = element_checks(self._out_points, self._mon_tets, u_out, self._mon_Dm_inv)
@@ -193,12 +212,25 @@ class RealtimeModel:
             nl = self._nonlinear_lookup(fg)
             if nl is not None and nl[3] == 0:
                 us, force, stiff = nl[0], nl[1], nl[2]
-                status, method = f"nonlinear ({reason} in linear)", "corotational"
+                status, method = f"nonlinear:corotational table ({reason} in linear)", "corotational"
             else:
-                status, valid = f"linear_invalid:{reason}", False
+                status = f"linear_invalid:{reason}"
+        if valid:
+            folded = self.folded_faces(us)
+            if folded:
+                status, valid = f"linear_invalid:folded_surface={folded}" + (
+                    f";{status.split(':', 1)[1]}" if status.startswith("linear_invalid") else ""), False
         verts = self._rest + (us.astype(np.float32) if valid else 0.0)
         return Update(verts.astype(np.float32), float(force) if valid else 0.0, float(stiff) if valid else 0.0,
                       fg.depth, fg.contact_point.copy(), method, float(strain), int(inv), status, valid)
+
+    def folded_faces(self, us: np.ndarray) -> int:
+        """Number of rendered surface triangles whose normal turned by more than 90° (the drawn surface folds
+        over itself: garbage to draw). ``us`` (S, 3) m surface-vertex displacements."""
+        x = self._rest.astype(np.float64) + us
+        p = x[self.faces]
+        n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        return int(np.count_nonzero(np.einsum("ij,ij->i", n, self._rest_normals) <= 0.0))
 
     def _nonlinear_lookup(self, fg: Finger):
         t = self.nonlinear

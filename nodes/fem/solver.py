@@ -121,21 +121,36 @@ class FemModel:
         return self.K.shape[0]
 
     def probe(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """Displacement field ``u`` (n,) evaluated at points ``x`` (k, 3) m inside the mesh → (k, 3) m.
+        """Displacement field ``u`` (n,) evaluated at points ``x`` (k, 3) m → (k, 3) m.
 
-        Points on the curved boundary are nudged 50 µm inward (toward the axis and the mid-plane) so the
-        faceted mesh contains them. Source: scikit-fem ``Basis.probes``."""
-        x = np.asarray(x, float).copy()
-        c = self.mesh.center
-        rad = x - c
-        rad[:, 1] = 0.0
-        rn = np.linalg.norm(rad, axis=1, keepdims=True)
-        x -= 5e-5 * rad / np.maximum(rn, 1e-12)
-        x[:, 1] -= 5e-5 * np.sign(x[:, 1] - c[1])
-        P = self.basis.probes(x.T).tocsr()
-        v = P @ u
-        k = len(x)
-        return v.reshape(3, k).T
+        Each point is located in the tet that contains it, or — for points just outside the faceted boundary
+        (curved surface of a coarser mesh) — the nearby tet it is least outside of, and the element
+        polynomial is evaluated there (a tiny extrapolation). Follows scikit-fem ``CellBasis.probes``."""
+        from scipy.sparse import coo_matrix
+        from scipy.spatial import cKDTree
+
+        x = np.asarray(x, float)
+        p, t = self.mesh.points, self.mesh.tets
+        if not hasattr(self, "_tree"):
+            self._tree = cKDTree(p[t].mean(axis=1))
+            self._Dinv, _ = _grad_ops(p, t)
+        k = min(24, len(t))
+        _, cand = self._tree.query(x, k=k)
+        cand = np.atleast_2d(cand)
+        rel = x[:, None, :] - p[t[cand, 0]]                                   # (q, k, 3)
+        lam = np.einsum("qkij,qkj->qki", self._Dinv[cand], rel)               # barycentric 1..3
+        bary = np.concatenate([1 - lam.sum(axis=2, keepdims=True), lam], axis=2)
+        best = np.argmax(bary.min(axis=2), axis=1)
+        cells = cand[np.arange(len(x)), best]
+        xx = np.ascontiguousarray(x.T)
+        pts = self.basis.mapping.invF(xx[:, :, np.newaxis], tind=cells)
+        phis = np.array([self.basis.elem.gbasis(self.basis.mapping, pts, j, tind=cells)[0]
+                         for j in range(self.basis.Nbfun)]).flatten()
+        q = len(x)
+        rows = np.tile(np.arange(3 * q, dtype=np.int64), self.basis.Nbfun)
+        cols = self.basis.element_dofs[:, np.tile(cells, 3)].flatten()
+        P = coo_matrix((phis, (rows, cols)), shape=(3 * q, self.basis.N)).tocsr()
+        return (P @ u).reshape(3, q).T
 
 
 @dataclass
@@ -153,6 +168,7 @@ class Solution:
     stiffness: float
     n_contact: int
     method: str
+    u_full: np.ndarray | None = None     #: (n_dofs,) DOF vector (full solver only), for probing
 
 
 def _contact_dofs(model: FemModel, finger: Finger, candidates: np.ndarray | None = None):
@@ -189,7 +205,7 @@ def solve_full(model: FemModel, finger: Finger) -> Solution:
     fvec = r[cd].sum(axis=0) if len(cpts) else np.zeros(3)
     force = float(fvec @ finger.direction)
     stiff = float(dr[cd].sum(axis=0) @ finger.direction) if len(cpts) else 0.0
-    return Solution(x[model.dofs], max(force, 0.0), fvec, max(stiff, 0.0), len(cpts), "sparse")
+    return Solution(x[model.dofs], max(force, 0.0), fvec, max(stiff, 0.0), len(cpts), "sparse", x)
 
 
 class CapacitanceSolver:
