@@ -55,17 +55,51 @@ class LaunchError(ValueError):
     """A launch file that cannot be used: the message names the file, the key and the wrong value."""
 
 
+#: a launch file larger than this (bytes) is refused before it is parsed
+MAX_LAUNCH_BYTES = 1 << 20
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses a key given twice in one mapping (PyYAML keeps the last silently,
+    so a second ``nodes:`` or a repeated node name would drop nodes without a word)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                dup = key in seen
+            except TypeError:  # unhashable key: construct_mapping below reports it
+                continue
+            if dup:
+                raise yaml.constructor.ConstructorError(
+                    "while constructing a mapping", node.start_mark, f"found duplicate key {key!r:.80}",
+                    key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def _short(value: Any, limit: int = 120) -> str:
+    """Bounded one-line repr (``reprlib``): a YAML alias bomb or a deep structure must not make the error
+    message itself exponential in time and memory."""
+    import reprlib
+
+    r = reprlib.Repr()
+    r.maxlevel, r.maxlist, r.maxdict, r.maxtuple, r.maxset, r.maxstring, r.maxother = 3, 6, 6, 6, 6, limit, limit
+    return " ".join(r.repr(value).split())[:limit]
+
+
 class HostSpec(BaseModel):
     """A host of the graph: ``address`` is the IP/name its nodes bind to and others connect to."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     address: str = "127.0.0.1"
 
 
 class RespawnSpec(BaseModel):
     """Respawn policy: ``never``, ``on-failure`` (non-zero exit or signal) or ``always``."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     policy: Literal["never", "on-failure", "always"] = "on-failure"
     delay: float = Field(default=0.5, ge=0.0, description="s before a restart")
     max_restarts: int = Field(default=10, ge=0, description="restarts allowed in the whole run")
@@ -76,7 +110,7 @@ class SecuritySpec(BaseModel):
     keys; ``keys_dir``: where each host finds its own ``<host>.key_secret`` (from ``flexsheet keys
     generate``; ``~`` and ``$(launch_dir)`` expand; ``$FLEXSHEET_KEYS`` overrides)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     curve: bool = False
     keys_dir: str = "~/.flexsheet/keys"
     public_keys: dict[str, str] = Field(default_factory=dict)
@@ -93,11 +127,12 @@ class SecuritySpec(BaseModel):
 class NodeSpec(BaseModel):
     """One node of a launch file (see the module docstring)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     type: str
     host: str = "localhost"
     port: int | None = Field(default=None, ge=1, le=65535)
-    endpoint: str | None = None
+    endpoint: str | None = Field(default=None, pattern=r"^(tcp|ipc|inproc)://\S+$",
+                                 description="explicit bound endpoint, e.g. tcp://10.0.0.2:7501")
     params: dict[str, Any] = Field(default_factory=dict)
     remaps: dict[str, str] = Field(default_factory=dict)
     respawn: RespawnSpec = Field(default_factory=RespawnSpec)
@@ -115,7 +150,7 @@ class NodeSpec(BaseModel):
 class LaunchFile(BaseModel):
     """A whole launch file: hosts, nodes and graph-wide settings."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     name: str = "graph"
     description: str = ""
     hosts: dict[str, HostSpec] = Field(default_factory=lambda: {"localhost": HostSpec()})
@@ -145,11 +180,21 @@ def load_launch(path: str | Path) -> LaunchFile:
     """Read and validate a launch file. Raises :class:`LaunchError` naming file, key and value."""
     path = Path(path)
     try:
-        raw = yaml.safe_load(path.read_text())
+        with open(path, "rb") as f:
+            data = f.read(MAX_LAUNCH_BYTES + 1)
+        if len(data) > MAX_LAUNCH_BYTES:
+            raise LaunchError(f"{path}: launch file larger than {MAX_LAUNCH_BYTES} bytes")
+        raw = yaml.load(data.decode("utf-8"), Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
     except FileNotFoundError:
         raise LaunchError(f"{path}: launch file not found") from None
+    except OSError as exc:
+        raise LaunchError(f"{path}: cannot read launch file: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise LaunchError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except yaml.YAMLError as exc:
-        raise LaunchError(f"{path}: not valid YAML: {exc}") from None
+        raise LaunchError(f"{path}: not valid YAML: {' '.join(str(exc).split())[:300]}") from None
+    except RecursionError:
+        raise LaunchError(f"{path}: not valid YAML: nested too deeply") from None
     if not isinstance(raw, dict):
         raise LaunchError(f"{path}: top level must be a mapping with 'nodes', got {type(raw).__name__}")
     try:
@@ -157,13 +202,16 @@ def load_launch(path: str | Path) -> LaunchFile:
     except ValidationError as exc:
         err = exc.errors()[0]
         key = ".".join(str(p) for p in err["loc"])
-        raise LaunchError(f"{path}: key '{key}': {err['msg']} (value {err.get('input')!r:.120})") from None
+        raise LaunchError(f"{path}: key '{key}': {err['msg']:.300} (value {_short(err.get('input'))})") from None
     for name, spec in lf.nodes.items():
         if spec.host not in lf.hosts:
             raise LaunchError(f"{path}: key 'nodes.{name}.host': unknown host {spec.host!r}; "
                               f"hosts: {', '.join(lf.hosts)}")
     seen: dict[str, str] = {}
     for name, ep in lf.endpoints().items():
+        if lf.nodes[name].endpoint is None and int(ep.rsplit(":", 1)[1]) > 65535:
+            raise LaunchError(f"{path}: key 'nodes.{name}.port': base_port {lf.base_port} + node index gives port "
+                              f"{ep.rsplit(':', 1)[1]} > 65535; lower base_port or give the node a port")
         if ep in seen:
             raise LaunchError(f"{path}: key 'nodes.{name}.port': endpoint {ep} already used by node {seen[ep]!r}")
         seen[ep] = name
