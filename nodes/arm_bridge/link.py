@@ -154,6 +154,7 @@ class ArmStream:
             self.limiter.c, self.limiter.v = c.copy(), v.copy()
             cmd = self.limiter.step(self.tracker.goal_for(self.clock(), self.limiter.c))
             self._slot_target = self.tracker.source_stamp
+            stamp = self.clock()
             try:
                 wr = await self.client.write_registers(reg.HR_WATCHDOG, [self.watchdog, *reg.encode_joints(cmd)],
                                                        device_id=self.device_id)
@@ -162,7 +163,7 @@ class ArmStream:
                 return False
             if wr.isError():
                 return False
-            self._note_write(self.clock())
+            self._note_write(stamp)
             self.refreshes += 1
             return True
 
@@ -203,9 +204,9 @@ class ArmStream:
                 self._slot = None
                 cmd = self.limiter.c.copy()
             self.watchdog = (self.watchdog + 1) & 0xFFFF
+            write_stamp = self.clock()   # the request leaves now (the reply only confirms it)
             wr = await self.client.write_registers(reg.HR_WATCHDOG, [self.watchdog, *reg.encode_joints(cmd)],
                                                    device_id=self.device_id)
-            write_stamp = self.clock()
             self._note_write(write_stamp)
             if wr.isError():
                 # refused by the controller (should not happen: the limiter respects its checks); re-seed
