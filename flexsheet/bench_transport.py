@@ -25,7 +25,7 @@ import msgpack
 import numpy as np
 import zmq
 
-from messages import Fingertip, Header, StereoFrame
+from messages import Fingertip, StereoFrame
 from messages import topics as T
 
 from .node import Node, NodeConfig, QoS

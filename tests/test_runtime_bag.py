@@ -9,9 +9,9 @@ import time
 
 import jsonschema
 import numpy as np
+from conftest import free_port
 from mcap.reader import make_reader
 
-from conftest import free_port
 from flexsheet.bag import BagWriter, PlayerNode, RecorderNode, bag_info, export_bag, read_bag
 from flexsheet.codec import decode, encode
 from flexsheet.demo import TalkerNode
@@ -77,8 +77,9 @@ def _stereo(i: int) -> StereoFrame:
 
 
 def test_export_opens_with_mcap_reader_and_validates_against_stored_schema(tmp_path):
-    from flexsheet.demo import TalkerNode  # noqa: F401  (the talker's message type is Fingertip)
     from test_runtime_codec import tip
+
+    from flexsheet.demo import TalkerNode  # noqa: F401  (the talker's message type is Fingertip)
 
     src, dst = tmp_path / "raw.mcap", tmp_path / "json.mcap"
     w = BagWriter(src)

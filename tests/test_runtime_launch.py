@@ -13,8 +13,8 @@ import time
 from pathlib import Path
 
 import pytest
-
 from conftest import pid_alive
+
 from flexsheet.launch import LaunchError, load_launch
 
 

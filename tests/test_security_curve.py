@@ -10,8 +10,8 @@ import sys
 import numpy as np
 import pytest
 import zmq.auth
-
 from conftest import free_port
+
 from flexsheet.launch import LaunchError, load_launch, node_config
 from flexsheet.node import Node, NodeConfig, QoS
 from flexsheet.transport import CurveConfig

@@ -124,7 +124,7 @@ def analyse(bag: Path) -> dict:
     first_write: dict[float, float] = {}
     first_readback: dict[float, float] = {}
     for topic in ("/arm/left/joint_state", "/arm/right/joint_state"):
-        for t, m in d.get(topic, []):
+        for _, m in d.get(topic, []):
             if m.target_stamp and m.write_stamp and m.target_stamp not in first_write:
                 first_write[m.target_stamp] = m.write_stamp
                 first_readback[m.target_stamp] = m.header.stamp
