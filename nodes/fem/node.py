@@ -1,0 +1,145 @@
+"""FEM node: fingertip in, deformed virtual object out. A thin shell around :class:`nodes.fem.realtime.RealtimeModel`.
+
+Subscribes ``/fingertip`` (QoS LATEST; ``predicted_position`` when ``use_prediction``). Publishes
+``/object/deformation`` (:class:`messages.ObjectDeformation`) per fingertip: deformed surface vertices (display
+frame, float32), faces, contact force N, local stiffness dF/dd N/m, depth, method, max strain, status, valid,
+``source_stamp`` = the fingertip's ``exposure_stamp``.
+
+Start-up (``setup``): choose the mesh from the accuracy table (:mod:`nodes.fem.choose`, logged), then load the
+capacitance matrices from the disk cache or precompute them (logged with timing); optionally build the
+corotational depth table in a background thread (cached too). A lost marker publishes the rest shape with
+``valid=False, status="rejected:marker_lost"``. NaN, out-of-object or too-deep fingertips raise
+:class:`InputRejected` (one log line, counted in diagnostics; the node keeps running).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import threading
+import time
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from flexsheet.node import InputRejected, Node, QoS
+from messages import Fingertip, ObjectDeformation, topics
+
+from .choose import choose, load_table
+from .material import Material
+from .mesh import MeshSpec
+from .realtime import DEFAULT_CACHE_DIR, RealtimeModel
+
+__all__ = ["FemParams", "FemNode"]
+
+
+class FemParams(BaseModel):
+    """FEM node parameters (launch file / ``--param k=v``). SI units.
+
+    ``accuracy_target`` m (rendered-surface error target, default one projector pixel 0.7 mm);
+    ``depth_min``/``depth_max`` m push-depth range the accuracy must hold over; ``max_depth`` m deeper input is
+    rejected; ``finger_radius`` m; ``E`` Pa, ``nu``: material (soft-tissue defaults, see material.py);
+    ``strain_limit``: largest principal strain before linear is declared invalid; ``cache_dir`` ("" = no
+    disk cache); ``mesh_h``/``mesh_h_fine``/``refine_radius`` m and ``order`` override the automatic choice
+    when all of h, h_fine are > 0; ``arc_deg``: half-angle of the working arc (deg) whose neighbourhood gets
+    the precomputed contact region and refinement (0 = the front centre, the paper's push; elsewhere the full
+    sparse solve is used); ``nonlinear``: build the corotational depth table (background thread);
+    ``nonlinear_steps``: depth samples of that table; ``use_prediction``: use ``predicted_position``.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    accuracy_target: float = Field(default=0.0007, gt=0.0)
+    depth_min: float = Field(default=0.005, ge=0.0)
+    depth_max: float = Field(default=0.05, gt=0.0)
+    max_depth: float = Field(default=0.06, gt=0.0, le=0.07)
+    finger_radius: float = Field(default=0.008, ge=0.001, le=0.03)
+    E: float = Field(default=Material().E, gt=0.0)
+    nu: float = Field(default=Material().nu, ge=0.0, lt=0.5)
+    strain_limit: float = Field(default=1.0, gt=0.0)
+    cache_dir: str = DEFAULT_CACHE_DIR
+    mesh_h: float = Field(default=0.0, ge=0.0)
+    mesh_h_fine: float = Field(default=0.0, ge=0.0)
+    refine_radius: float = Field(default=0.012, ge=0.0)
+    order: int = Field(default=2, ge=1, le=2)
+    arc_deg: float = Field(default=0.0, ge=0.0, le=90.0)
+    nonlinear: bool = True
+    nonlinear_steps: int = Field(default=11, ge=2, le=101)
+    use_prediction: bool = False
+
+
+class FemNode(Node):
+    """See the module docstring."""
+
+    Params = FemParams
+
+    async def setup(self) -> None:
+        """Choose the model, load or precompute it (may take seconds: runs in a worker thread), then subscribe."""
+        p: FemParams = self.params
+        mat = Material(p.E, p.nu)
+        if p.mesh_h > 0 and p.mesh_h_fine > 0:
+            spec, order = MeshSpec(p.mesh_h, p.mesh_h_fine, p.refine_radius, p.arc_deg), p.order
+            self.log.info("fem: mesh set by params: P%d %s", order, spec.key())
+        else:
+            ch = choose(load_table(), p.accuracy_target, p.depth_min, p.depth_max, p.nu, p.finger_radius)
+            spec, order = MeshSpec(ch.spec.h, ch.spec.h_fine, ch.spec.refine_radius, p.arc_deg), ch.order
+            self.log.info("fem: model choice: %s", ch.reason)
+        cache = p.cache_dir or None
+        self.model = await asyncio.to_thread(
+            RealtimeModel, spec, mat, p.finger_radius, p.max_depth, p.strain_limit, cache, None, self.log.info, order)
+        m = self.model
+        self.log.info("fem: ready in %.2f s (%s): P%d, %d nodes, %d candidate contact points, %.1f MB",
+                      m.precompute_s, "cache hit" if m.cache_hit else "precomputed", order, m.n_nodes,
+                      int(m.candidates.sum()), m.solver.nbytes / 1e6)
+        self._lock = threading.Lock()
+        self.pub = self.publisher(topics.DEFORMATION)
+        self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
+        if p.nonlinear:
+            threading.Thread(target=self._build_nonlinear, name="fem-corotational", daemon=True).start()
+
+    def _build_nonlinear(self) -> None:
+        m = self.model
+        p: FemParams = self.params
+        depths = np.linspace(0.0, min(p.depth_max, p.max_depth), p.nonlinear_steps)
+        path = (os.path.join(p.cache_dir, f"corotational_{m.cache_key}_{p.nonlinear_steps}_{depths[-1]:.4f}.npz")
+                if p.cache_dir else None)
+        t = time.perf_counter()
+        try:
+            if path and os.path.exists(path):
+                z = np.load(path)
+                m.nonlinear = {k: z[k] for k in ("angles", "depths", "U", "F", "inverted")}
+                self.log.info("fem: corotational table loaded from cache %s", path)
+                return
+            self.log.info("fem: building corotational table (%d depths) in the background ...", len(depths))
+            m.build_nonlinear_table(depths)
+            if path:
+                os.makedirs(p.cache_dir, exist_ok=True)
+                np.savez(path + ".tmp.npz", **m.nonlinear)
+                os.replace(path + ".tmp.npz", path)
+            self.log.info("fem: corotational table ready in %.1f s", time.perf_counter() - t)
+        except Exception:  # noqa: BLE001 - background build must never take the node down
+            self.log.exception("fem: corotational table failed; linear only")
+
+    def on_fingertip(self, msg: Fingertip) -> None:
+        """Deform for one fingertip and publish; raises :class:`InputRejected` for unusable positions."""
+        m = self.model
+        if not msg.valid:
+            with self._lock:
+                m.reset()
+            self._publish(msg, m._rest, 0.0, 0.0, 0.0, np.zeros(3), "none", 0.0, "rejected:marker_lost", False)
+            return
+        tip = msg.predicted_position if self.params.use_prediction else msg.position
+        try:
+            with self._lock:
+                u = m.update(tip)
+        except ValueError as exc:
+            raise InputRejected(f"fingertip.position: {exc}") from exc
+        self._publish(msg, u.vertices, u.force, u.stiffness, u.depth, u.contact_point, u.method, u.max_strain,
+                      u.status, u.valid)
+
+    def _publish(self, msg, verts, force, stiff, depth, cp, method, strain, status, valid) -> None:
+        self.pub.publish(ObjectDeformation(
+            header=self.pub.header("display"), vertices=np.ascontiguousarray(verts, np.float32),
+            faces=self.model.faces, contact_force=float(force), stiffness=float(stiff), depth=float(depth),
+            contact_point=np.asarray(cp, np.float64), method=method, max_strain=float(strain), status=status,
+            valid=bool(valid), source_stamp=float(msg.exposure_stamp)))

@@ -1,0 +1,66 @@
+"""FEM node through the real codec: deformation out, bad fingertips rejected, node keeps running."""
+
+import asyncio
+
+import numpy as np
+
+from messages import Fingertip, Header, topics
+from nodes.fem.node import FemNode
+
+PARAMS = {"mesh_h": 0.012, "mesh_h_fine": 0.006, "refine_radius": 0.012, "order": 1, "cache_dir": "",
+          "nonlinear": False}
+
+
+def _tip(pos, valid=True, stamp=1.0):
+    p = np.asarray(pos, float)
+    return Fingertip(header=Header(stamp=stamp), position=p, covariance=np.eye(3) * 1e-8, valid=valid,
+                     predicted_position=p, exposure_stamp=stamp)
+
+
+def test_node_deforms_and_rejects_bad_input():
+    async def scenario():
+        async with __import__("flexsheet.testing", fromlist=["NodeHarness"]).NodeHarness(FemNode, params=PARAMS) as h:
+            h.inject(topics.FINGERTIP, _tip([-0.005, 0.0, 0.0], stamp=12.5))
+            out = await h.wait_for(topics.DEFORMATION, n=1, timeout=20.0)
+            d = out[-1]
+            assert d.valid and d.status == "ok"
+            assert abs(d.depth - 0.005) < 1e-9
+            assert d.contact_force > 0 and d.stiffness > 0
+            assert d.source_stamp == 12.5
+            assert d.vertices.dtype == np.float32 and d.vertices.shape[1] == 3
+            assert d.faces.max() < len(d.vertices)
+            # the vertex under the finger moved by about the depth along -x
+            i = np.argmin(np.linalg.norm(d.vertices - np.array([-0.005, 0, 0], np.float32), axis=1))
+            assert abs(d.vertices[i, 0] + 0.005) < 1e-3
+            # out of object (beyond the end face) and on the support half: rejected, node alive
+            h.inject(topics.FINGERTIP, _tip([-0.005, 0.2, 0.0]))
+            await h.settle(0.3)
+            h.inject(topics.FINGERTIP, _tip([-0.2, 0.0, 0.0]))
+            await h.settle(0.3)
+            assert h.rejected(topics.FINGERTIP) == 2
+            h.inject_raw(topics.FINGERTIP, [b"garbage"])
+            await h.settle(0.2)
+            assert h.rejected(topics.FINGERTIP) == 3
+            # NaN position (built without validation, as a faulty sender would): rejected, not published
+            nan = Fingertip.model_construct(header=Header(stamp=2.0), position=np.array([np.nan, 0.0, 0.0]),
+                                            covariance=np.eye(3), valid=True,
+                                            predicted_position=np.array([np.nan, 0.0, 0.0]), prediction_horizon=0.0,
+                                            exposure_stamp=2.0, reprojection_px=0.0)
+            try:
+                h.inject(topics.FINGERTIP, nan)
+            except ValueError:
+                pass            # the codec refuses to encode it: also fine
+            else:
+                await h.settle(0.3)
+                assert h.rejected(topics.FINGERTIP) == 4
+            assert len(h.messages(topics.DEFORMATION)) == 1
+            # lost marker: rest shape, invalid
+            h.inject(topics.FINGERTIP, _tip([0.0, 0.0, 0.0], valid=False))
+            out = await h.wait_for(topics.DEFORMATION, n=2, timeout=5.0)
+            assert not out[-1].valid and out[-1].status.startswith("rejected")
+            # still running: a good input after the bad ones is answered
+            h.inject(topics.FINGERTIP, _tip([0.01, 0.0, 0.0]))
+            out = await h.wait_for(topics.DEFORMATION, n=3, timeout=5.0)
+            assert out[-1].valid and out[-1].contact_force == 0.0 and out[-1].depth == 0.0
+
+    asyncio.run(scenario())
