@@ -33,9 +33,37 @@ def _unpack_head(data: bytes) -> tuple[int, int]:
     return _HEAD.unpack_from(data, 0)
 
 
-@functools.lru_cache(maxsize=64)
-def _dtype(s: str) -> np.dtype:
-    return np.dtype(s)
+@functools.lru_cache(maxsize=256)
+def _parse_descriptor(data: bytes) -> tuple[int, np.dtype, tuple[int, ...], int] | str:
+    """(buffer index, dtype, shape, nbytes) of an array descriptor, or the reason it is bad (cached:
+    a topic's descriptors repeat message after message)."""
+    try:
+        idx, ndim = _unpack_head(data)
+        shape = struct.unpack_from(f"<{ndim}Q", data, 3)
+        dtype_str = data[3 + 8 * ndim:].decode()
+        dtype = np.dtype(dtype_str)
+    except Exception as exc:  # noqa: BLE001 - any garbage in the ext payload is a decode error
+        return f"bad array descriptor ({type(exc).__name__}: {exc})"
+    if idx < 2:
+        return f"array buffer index {idx!r} out of range"
+    if dtype.kind not in _ALLOWED_KINDS or dtype.hasobject:
+        return f"array dtype {dtype_str!r:.40} not allowed"
+    count = 1
+    for n in shape:
+        count *= n
+    nbytes = count * dtype.itemsize
+    if nbytes > MAX_ARRAY_BYTES:
+        return f"array shape {shape} dtype {dtype} needs {nbytes} bytes, more than the {MAX_ARRAY_BYTES} allowed"
+    return idx, dtype, shape, nbytes
+
+
+def _descriptor(data: bytes, topic_name: str) -> tuple[int, np.dtype, tuple[int, ...], int]:
+    data = bytes(data)
+    # only short (well-formed-sized) descriptors go through the cache: a hostile huge one is not retained
+    parsed = _parse_descriptor(data) if len(data) <= 96 else _parse_descriptor.__wrapped__(data)
+    if isinstance(parsed, str):
+        raise DecodeError(_line(f"{topic_name}: {parsed}"))
+    return parsed
 
 #: refuse arrays larger than this (bytes) on decode: a hostile size must not allocate or wrap garbage
 MAX_ARRAY_BYTES = 256 * 1024 * 1024
@@ -100,27 +128,14 @@ def _unpack(frames: list, topic_name: str) -> dict:
     def ext_hook(code: int, data: bytes) -> Any:
         if code != EXT_NDARRAY:
             raise DecodeError(f"{topic_name}: unknown msgpack ext code {code}")
-        try:
-            idx, ndim = _unpack_head(data)
-            shape = struct.unpack_from(f"<{ndim}Q", data, 3)
-            dtype_str = data[3 + 8 * ndim:].decode()
-            dtype = _dtype(dtype_str)
-        except Exception as exc:  # noqa: BLE001 - any garbage in the ext payload is a decode error
-            raise DecodeError(_line(f"{topic_name}: bad array descriptor ({exc})")) from None
-        if not 2 <= idx < nbuf:
+        idx, dtype, shape, nbytes = _descriptor(data, topic_name)
+        if idx >= nbuf:
             raise DecodeError(f"{topic_name}: array buffer index {idx!r} out of range (frames: {nbuf})")
-        if dtype.kind not in _ALLOWED_KINDS or dtype.hasobject:
-            raise DecodeError(_line(f"{topic_name}: array dtype {dtype_str!r:.40} not allowed"))
-        count = 1
-        for s in shape:
-            count *= s
         buf = frames[idx]
         buf = buf.buffer if hasattr(buf, "buffer") else buf
-        nbytes = memoryview(buf).nbytes
-        if count * dtype.itemsize != nbytes or nbytes > MAX_ARRAY_BYTES:
-            raise DecodeError(
-                f"{topic_name}: array shape {tuple(shape)} dtype {dtype} needs {count * dtype.itemsize} bytes, "
-                f"buffer has {nbytes}")
+        have = memoryview(buf).nbytes
+        if have != nbytes:
+            raise DecodeError(f"{topic_name}: array shape {shape} dtype {dtype} needs {nbytes} bytes, buffer has {have}")
         return np.frombuffer(buf, dtype=dtype).reshape(shape)
 
     meta = frames[1]

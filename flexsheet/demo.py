@@ -20,11 +20,13 @@ __all__ = ["TalkerNode", "ListenerNode"]
 
 
 class TalkerParams(BaseModel):
-    """``rate`` Hz (> 0); ``count``: stop after this many messages (0 = forever)."""
+    """``rate`` Hz (> 0); ``count``: stop after this many messages (0 = forever); ``start_delay`` s before
+    the first message (lets subscribers connect first)."""
 
     model_config = ConfigDict(extra="forbid")
     rate: float = Field(default=10.0, gt=0.0, le=100000.0)
     count: int = Field(default=0, ge=0)
+    start_delay: float = Field(default=0.0, ge=0.0)
 
 
 class TalkerNode(Node):
@@ -36,10 +38,11 @@ class TalkerNode(Node):
     async def setup(self) -> None:
         self.pub = self.publisher(T.FINGERTIP)
         self.n = 0
+        self.t_start = time.monotonic() + self.params.start_delay
         self.timer(1.0 / self.params.rate, self.tick)
 
     def tick(self) -> None:
-        if self.params.count and self.n >= self.params.count:
+        if (self.params.count and self.n >= self.params.count) or time.monotonic() < self.t_start:
             return
         now = time.time()
         pos = np.array([0.001 * self.n, 0.0, 0.0])

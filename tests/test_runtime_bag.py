@@ -39,7 +39,7 @@ def test_record_then_play_is_byte_identical_with_original_timing(tmp_path):
     bag1, bag2 = tmp_path / "live.mcap", tmp_path / "replay.mcap"
 
     async def record_live():
-        talker = TalkerNode(NodeConfig(name="talker", endpoint=talker_ep, params={"rate": 50.0, "count": 60}))
+        talker = TalkerNode(NodeConfig(name="talker", endpoint=talker_ep, params={"rate": 50.0, "count": 60, "start_delay": 1.0}))
         rec = RecorderNode(NodeConfig(name="rec", endpoint="", peers=[talker_ep],
                                       params={"output": str(bag1), "topics": [T.FINGERTIP.name]}))
         await _run_for([rec, talker], 10.0, stop_when=lambda: hasattr(rec, "writer") and sum(rec.writer.counts.values()) >= 60)
