@@ -90,7 +90,7 @@ class FemNode(Node):
         m = self.model
         self.log.info("fem: ready in %.2f s (%s): P%d, %d nodes, %d candidate contact points, %.1f MB",
                       m.precompute_s, "cache hit" if m.cache_hit else "precomputed", order, m.n_nodes,
-                      int(m.candidates.sum()), m.solver.nbytes / 1e6)
+                      m.n_candidates, m.solver.nbytes / 1e6)
         self._lock = threading.Lock()
         self.pub = self.publisher(topics.DEFORMATION)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)

@@ -75,65 +75,83 @@ class RealtimeModel:
             raise ValueError(f"strain_limit must be > 0, got {strain_limit!r}")
         log = log or (lambda s: None)
         t0 = time.perf_counter()
-        self.spec, self.material = spec, material
+        self.spec, self.material, self.order = spec, material, order
         self.finger_radius, self.max_depth, self.strain_limit = finger_radius, max_depth, strain_limit
-        self.mesh: TetMesh = cylinder_mesh(spec)
-        self.model = FemModel(self.mesh, material, order=order)
-        self.order = order
-        self._p1 = self.model if order == 1 else None
-        m = self.mesh
         reach = finger_radius + 0.002 if reach is None else reach
-        arc = arc_points(m.radius, m.center, spec.arc_deg, 0.001)
-        dist = _dist_to_points(self.model.points, arc)
-        surf = self.model.boundary & ~self.model.fixed
-        self.candidates = surf & (dist <= reach)
-        monitor = dist <= reach + 2 * spec.h_fine
-        corner = np.arange(len(self.model.points)) < len(m.points)
-        outputs = (surf | (monitor & ~self.model.fixed)) & corner
-        self.surface_nodes = m.surface_nodes
-        self.faces = np.searchsorted(self.surface_nodes, m.faces).astype(np.int32)
-        self._rest = m.points[self.surface_nodes].astype(np.float32)
-        q = m.points[m.faces]
-        self._rest_normals = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
-        key = hashlib.sha256("|".join([_CACHE_VERSION, m.digest(), material.key(), f"{reach:.9g}",
-                                       f"{finger_radius:.9g}", f"P{order}"]).encode()).hexdigest()[:24]
+        import gmsh
+
+        key = hashlib.sha256("|".join([_CACHE_VERSION, spec.key(), str(gmsh.__version__), material.key(),
+                                       f"{reach:.9g}", f"{finger_radius:.9g}", f"P{order}"]).encode()).hexdigest()[:24]
         self.cache_key = key
         self.cache_hit = False
         path = os.path.join(cache_dir, f"capacitance_{key}.npz") if cache_dir else None
         self.solver = None
+        self._model = self._p1 = None
         if path and os.path.exists(path):
             try:
-                self.solver = CapacitanceSolver.load(self.model, path)
+                z = np.load(path)
+                self.mesh = TetMesh(z["points"], z["tets"], z["faces"], z["fixed"], spec)
+                self.solver = CapacitanceSolver.from_arrays(z)
+                monitor = z["monitor"]
                 self.cache_hit = True
                 log(f"fem: capacitance matrices loaded from cache {path}")
             except (OSError, ValueError, KeyError) as exc:
                 log(f"fem: cache {path} unusable ({exc}); recomputing")
         if self.solver is None:
-            log(f"fem: precomputing capacitance matrices for {int(self.candidates.sum())} candidate contact points "
-                f"on a {len(m.points)}-node mesh ...")
-            self.solver = CapacitanceSolver(self.model, self.candidates, outputs)
+            self.mesh = cylinder_mesh(spec)
+            m = self.mesh
+            model = self.model
+            arc = arc_points(m.radius, m.center, spec.arc_deg, 0.001)
+            dist = _dist_to_points(model.points, arc)
+            surf = model.boundary & ~model.fixed
+            candidates = surf & (dist <= reach)
+            monitor = (dist <= reach + 2 * spec.h_fine)[:len(m.points)]
+            corner = np.arange(len(model.points)) < len(m.points)
+            outputs = (surf | (np.pad(monitor, (0, len(model.points) - len(m.points))) & ~model.fixed)) & corner
+            log(f"fem: precomputing capacitance matrices for {int(candidates.sum())} candidate contact points "
+                f"on a {len(m.points)}-node P{order} mesh ...")
+            self.solver = CapacitanceSolver(model, candidates, outputs)
             if path:
                 try:
                     os.makedirs(cache_dir, exist_ok=True)
-                    self.solver.save(path)
+                    tmp = path + ".tmp.npz"
+                    np.savez(tmp, points=m.points, tets=m.tets, faces=m.faces, fixed=m.fixed, monitor=monitor,
+                             **self.solver.arrays())
+                    os.replace(tmp, path)
                 except OSError as exc:
                     log(f"fem: could not write cache {path}: {exc}")
-        out_idx = np.full(len(self.model.points), -1, np.int64)
+        m = self.mesh
+        self.n_candidates = len(self.solver.cand_pts)
+        self.surface_nodes = m.surface_nodes
+        self.faces = np.searchsorted(self.surface_nodes, m.faces).astype(np.int32)
+        self._rest = m.points[self.surface_nodes].astype(np.float32)
+        q = m.points[m.faces]
+        self._rest_normals = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
+        out_idx = np.full(len(m.points), -1, np.int64)
         out_idx[self.solver.out_pts] = np.arange(len(self.solver.out_pts))
         self._surf_in_out = out_idx[self.surface_nodes]          # -1 for support nodes (zero displacement)
-        tet_ok = np.all(out_idx[m.tets] >= 0, axis=1) & np.all(monitor[:len(m.points)][m.tets], axis=1)
+        tet_ok = np.all(out_idx[m.tets] >= 0, axis=1) & np.all(monitor[m.tets], axis=1)
         self._mon_tets = out_idx[m.tets[tet_ok]]
-        self._mon_Dm_inv, _ = _grad_ops(m.points[self.solver.out_pts], self._mon_tets) if tet_ok.any() else (None, None)
         self._out_points = m.points[self.solver.out_pts]
+        self._mon_Dm_inv = _grad_ops(self._out_points, self._mon_tets)[0] if tet_ok.any() else None
         self.nonlinear = None
         self._anchor = None
         self.precompute_s = time.perf_counter() - t0
 
     @property
+    def model(self) -> FemModel:
+        """The assembled FEM model (built on first use after a cache hit: the sparse fallback needs it)."""
+        if self._model is None:
+            self._model = FemModel(self.mesh, self.material, order=self.order)
+            if self.order == 1:
+                self._p1 = self._model
+        return self._model
+
+    @property
     def p1_model(self) -> FemModel:
         """P1 model on the same mesh (built on first use; the corotational table needs it)."""
         if self._p1 is None:
-            self._p1 = FemModel(self.mesh, self.material, order=1)
+            self._p1 = self.model if self.order == 1 else FemModel(self.mesh, self.material, order=1)
         return self._p1
 
     @property

@@ -20,7 +20,6 @@ Units SI; displacements m, forces N, stiffness N/m; display frame.
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -250,29 +249,26 @@ class CapacitanceSolver:
     def _finish(self) -> None:
         model = self.model
         self._cand_points = model.points[self.cand_pts]
-        self._all_free_surface = np.flatnonzero(model.boundary & ~model.fixed)
-        self._noncand = np.setdiff1d(self._all_free_surface, self.cand_pts)
+        free_surface = np.flatnonzero(model.boundary & ~model.fixed)
+        self._noncand_points = model.points[np.setdiff1d(free_surface, self.cand_pts)]
 
-    def save(self, path: str) -> None:
-        """Write the precomputed matrices to ``path`` (.npz, uncompressed)."""
-        tmp = path + ".tmp.npz"
-        np.savez(tmp, G_cc=self.G_cc, G_co=self.G_co, cand_pts=self.cand_pts, out_pts=self.out_pts)
-        os.replace(tmp, path)
+    def arrays(self) -> dict:
+        """The precomputed state as plain arrays (see :meth:`from_arrays`)."""
+        return {"G_cc": self.G_cc, "G_co": self.G_co, "cand_pts": self.cand_pts, "out_pts": self.out_pts,
+                "cand_points": self._cand_points, "noncand_points": self._noncand_points}
 
     @classmethod
-    def load(cls, model: "FemModel", path: str) -> "CapacitanceSolver":
-        """Rebuild a solver for ``model`` from :meth:`save`'s file; raises ``ValueError`` on a shape mismatch."""
-        z = np.load(path)
+    def from_arrays(cls, z) -> "CapacitanceSolver":
+        """Rebuild a solver from :meth:`arrays` (no model needed); raises ``ValueError`` on inconsistent shapes."""
         self = cls.__new__(cls)
-        self.model = model
-        self.cand_pts, self.out_pts = z["cand_pts"], z["out_pts"]
-        self.G_cc, self.G_co = z["G_cc"], z["G_co"]
+        self.model = None
+        self.cand_pts, self.out_pts = np.asarray(z["cand_pts"]), np.asarray(z["out_pts"])
+        self.G_cc, self.G_co = np.asarray(z["G_cc"]), np.asarray(z["G_co"])
+        self._cand_points, self._noncand_points = np.asarray(z["cand_points"]), np.asarray(z["noncand_points"])
         nc = 3 * len(self.cand_pts)
-        if self.G_cc.shape != (nc, nc) or self.G_co.shape != (nc, 3 * len(self.out_pts)):
-            raise ValueError(f"cached matrices have shapes {self.G_cc.shape}, {self.G_co.shape}")
-        if len(self.cand_pts) and self.cand_pts.max() >= len(model.points):
-            raise ValueError("cached candidate indices exceed the mesh")
-        self._finish()
+        if (self.G_cc.shape != (nc, nc) or self.G_co.shape != (nc, 3 * len(self.out_pts))
+                or self._cand_points.shape != (len(self.cand_pts), 3)):
+            raise ValueError(f"precomputed matrices have inconsistent shapes {self.G_cc.shape}, {self.G_co.shape}")
         return self
 
     @property
@@ -284,8 +280,8 @@ class CapacitanceSolver:
         """One update: returns a :class:`Solution` with ``u`` (#outputs, 3) m at the output points.
 
         Raises :class:`OutsideCandidates` when a non-candidate surface point is inside the finger."""
-        if len(self._noncand):
-            inside_nc, _ = imposed_displacement(self.model.points[self._noncand], finger)
+        if len(self._noncand_points):
+            inside_nc, _ = imposed_displacement(self._noncand_points, finger)
             if inside_nc.any():
                 raise OutsideCandidates("finger touches surface points outside the precomputed contact region")
         inside, ubar = imposed_displacement(self._cand_points, finger)
