@@ -40,6 +40,7 @@ BENCHES: dict[str, str] = {
     "arm": "nodes.arm_bridge.bench:main",
     "fem": "nodes.fem.bench:main",
     "render": "nodes.renderer.bench:main",
+    "load": "flexsheet.bench_load:main",
 }
 
 CALIBRATE: dict[str, str] = {
