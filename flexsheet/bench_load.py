@@ -36,7 +36,6 @@ import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -79,12 +78,25 @@ def _array_spec(info) -> tuple[str | None, tuple[int | None, ...] | None] | None
     return None
 
 
-def payload_fields(topic_name: str, seed: int = 0) -> dict:
+def _image(shape: tuple[int, ...], rng: np.random.Generator, random: bool) -> np.ndarray:
+    if random:
+        return rng.integers(0, 256, shape).astype(np.uint8)
+    h, w = shape[:2]
+    yy, xx = np.mgrid[0:h, 0:w]
+    img = (96 + 64 * np.sin(xx / 37.0) * np.cos(yy / 23.0)).astype(np.float32)
+    img += rng.normal(0.0, 2.0, (h, w))          # sensor-like noise of a few grey levels
+    img = np.clip(img, 0, 255).astype(np.uint8)
+    return np.repeat(img[..., None], shape[2], axis=2) if len(shape) == 3 else img
+
+
+def payload_fields(topic_name: str, seed: int = 0, random_images: bool = False) -> dict:
     """Field values (all but ``header``) of a valid, realistically sized message of ``topic_name``.
 
-    Arrays get the sizes of :data:`SHAPES` (free dimensions elsewhere: 2) and random contents (images do
-    not compress); strings matching a ``left|right`` pattern get ``"left"``. Raises ``KeyError`` for an
-    unknown topic and ``TypeError`` for a field kind it cannot fill.
+    Arrays get the sizes of :data:`SHAPES` (free dimensions elsewhere: 2). Images (uint8 arrays of ≥ 2
+    dims) are a smooth pattern with ±2 grey levels of noise, about as compressible as a camera or rendered
+    frame; ``random_images`` makes them uniform noise (incompressible: the recorder's worst case). Other
+    arrays get random values; strings matching a ``left|right`` pattern get ``"left"``. Raises ``KeyError``
+    for an unknown topic and ``TypeError`` for a field kind it cannot fill.
     """
     cls = T.BY_NAME[topic_name].type
     rng = np.random.default_rng(seed)
@@ -97,7 +109,9 @@ def payload_fields(topic_name: str, seed: int = 0) -> dict:
             dtype, shape = spec
             shape = SHAPES.get((cls.__name__, name)) or tuple(2 if s is None else s for s in (shape or (3,)))
             dt = np.dtype(dtype or "float64")
-            if dt.kind in "iu":
+            if dt == np.uint8 and len(shape) >= 2:
+                kw[name] = _image(shape, rng, random_images)
+            elif dt.kind in "iu":
                 hi = 255 if dt == np.uint8 else 500
                 kw[name] = rng.integers(0, hi, shape).astype(dt)
             else:
@@ -121,7 +135,7 @@ def payload_fields(topic_name: str, seed: int = 0) -> dict:
 
 
 # ------------------------------------------------------------------------------------------------ children
-def _make_publisher(group: str, factor: float):
+def _make_publisher(group: str, factor: float, random_images: bool = False):
     from .node import Node
 
     class LoadPublisher(Node):
@@ -131,7 +145,7 @@ def _make_publisher(group: str, factor: float):
             for name in GROUPS[group]:
                 topic = T.BY_NAME[name]
                 pub = self.publisher(topic)
-                fields = payload_fields(name)
+                fields = payload_fields(name, random_images=random_images)
                 if topic.latched or topic.nominal_hz <= 0:
                     pub.publish(topic.type(header=pub.header("display"), **fields))
                     continue
@@ -189,11 +203,12 @@ def _child(argv: list[str]) -> int:
     ap.add_argument("--peers", nargs="*", default=[])
     ap.add_argument("--factor", type=float, default=2.0)
     ap.add_argument("--out", default="")
+    ap.add_argument("--random-images", action="store_true")
     a = ap.parse_args(argv)
     from .node import NodeConfig
 
     if a.role == "pub":
-        cls = _make_publisher(a.group, a.factor)
+        cls = _make_publisher(a.group, a.factor, a.random_images)
         node = cls(NodeConfig(name=a.group, node_type="load_pub", endpoint=a.endpoint, peers=[]))
     elif a.role == "sub":
         cls = _make_subscriber(Path(a.out))
@@ -241,7 +256,7 @@ def _free_ports(n: int) -> list[int]:
 
 
 def run_load(seconds: float = 60.0, factor: float = 2.0, warmup: float = 10.0, sample: float = 0.5,
-             log=print) -> dict:
+             random_images: bool = False, log=print) -> dict:
     """Run the load (see module doc) for ``seconds`` s; returns the results dict. ``warmup`` s are left out
     of the RSS slope fit (imports, first allocations, socket buffers filling)."""
     if not seconds > warmup:
@@ -262,7 +277,8 @@ def run_load(seconds: float = 60.0, factor: float = 2.0, warmup: float = 10.0, s
         time.sleep(1.0)   # subscribers first: they connect and reconnect until the publishers bind
         for g, ep in eps.items():
             procs[g] = subprocess.Popen([*py, "--role", "pub", "--group", g, "--endpoint", ep,
-                                         "--factor", str(factor)], env=env)
+                                         "--factor", str(factor)] + (["--random-images"] if random_images else []),
+                                        env=env)
         t0 = time.monotonic()
         samples: dict[str, list[tuple[float, float]]] = {k: [] for k in procs}
         while (now := time.monotonic() - t0) < seconds:
@@ -307,6 +323,7 @@ def run_load(seconds: float = 60.0, factor: float = 2.0, warmup: float = 10.0, s
 
     shutil.rmtree(tmp, ignore_errors=True)
     return {"seconds": seconds, "factor": factor, "warmup": warmup, "cpus": os.cpu_count(),
+            "random_images": random_images,
             "p50_ms": float(np.percentile(all_lat, 50)), "p99_ms": float(np.percentile(all_lat, 99)),
             "messages": int(all_lat.size), "max_slope_mb_per_min": max(p["slope_mb_per_min"] for p in procs_res.values()),
             "subscriber_max_queue": sub["max_queue"], "recorder_dropped": dict(bag.dropped),
@@ -348,13 +365,16 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--seconds", type=float, default=60.0, help="load duration, s (default 60)")
     ap.add_argument("--factor", type=float, default=2.0, help="rate factor over nominal_hz (default 2)")
     ap.add_argument("--warmup", type=float, default=None, help="s left out of the RSS fit (default min(10, S/4))")
+    ap.add_argument("--random-images", action="store_true",
+                    help="incompressible noise images (the recorder's worst case) instead of image-like ones")
     ap.add_argument("--json", action="store_true", help="print the results as JSON")
     ap.add_argument("--out", help="write load.png and load.json here")
     a = ap.parse_args(argv)
     if not (a.seconds > 0 and a.factor > 0):
         ap.error(f"--seconds and --factor must be > 0, got {a.seconds}, {a.factor}")
     warmup = a.warmup if a.warmup is not None else min(10.0, a.seconds / 4)
-    res = run_load(a.seconds, a.factor, warmup, log=(lambda *x: None) if a.json else print)
+    res = run_load(a.seconds, a.factor, warmup, random_images=a.random_images,
+                   log=(lambda *x: None) if a.json else print)
     if a.out:
         _chart(res, Path(a.out))
     if a.json:

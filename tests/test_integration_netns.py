@@ -9,81 +9,20 @@ goes away must be seen through heartbeats and handled. Needs root and iproute2 (
 from __future__ import annotations
 
 import json
-import os
 import signal
-import subprocess
-import sys
-import threading
-import time
-from pathlib import Path
 
 import pytest
-
-ROOT = Path(__file__).resolve().parents[1]
-HOSTS = {"main": "10.77.0.1", "arm1": "10.77.0.2", "arm2": "10.77.0.3"}
-PREFIX = f"fs{os.getpid() % 10000}"
-
-
-def sh(*cmd: str) -> None:
-    subprocess.run(cmd, check=True, capture_output=True, text=True)
+from netns_util import HostLaunch, three_hosts
 
 
 @pytest.fixture
 def netns():
-    """Create namespaces <prefix>-{main,arm1,arm2} on a bridge inside a 4th 'switch' namespace."""
-    if os.geteuid() != 0:
-        pytest.fail("the three-namespace test needs root (CI runs as root)")
-    sw = f"{PREFIX}-sw"
-    names = {h: f"{PREFIX}-{h}" for h in HOSTS}
+    """Namespaces <prefix>-{main,arm1,arm2} on a bridge inside a 4th 'switch' namespace (tests/netns_util.py)."""
     try:
-        sh("ip", "netns", "add", sw)
-        sh("ip", "netns", "exec", sw, "ip", "link", "add", "br0", "type", "bridge")
-        sh("ip", "netns", "exec", sw, "ip", "link", "set", "br0", "up")
-        for i, (host, addr) in enumerate(HOSTS.items()):
-            ns = names[host]
-            sh("ip", "netns", "add", ns)
-            sh("ip", "link", "add", f"{PREFIX}v{i}", "netns", sw, "type", "veth", "peer", "name", "eth0", "netns", ns)
-            sh("ip", "netns", "exec", sw, "ip", "link", "set", f"{PREFIX}v{i}", "master", "br0", "up")
-            sh("ip", "netns", "exec", ns, "ip", "addr", "add", f"{addr}/24", "dev", "eth0")
-            sh("ip", "netns", "exec", ns, "ip", "link", "set", "eth0", "up")
-            sh("ip", "netns", "exec", ns, "ip", "link", "set", "lo", "up")
-        yield names
-    finally:
-        for ns in [*names.values(), sw]:
-            subprocess.run(["ip", "netns", "pids", ns], capture_output=True)
-            out = subprocess.run(["ip", "netns", "pids", ns], capture_output=True, text=True).stdout.split()
-            for pid in out:
-                try:
-                    os.kill(int(pid), signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-            subprocess.run(["ip", "netns", "del", ns], capture_output=True)
-
-
-class HostLaunch:
-    """``flexsheet launch launch/lab_sim.yaml --host NAME`` inside a namespace, output collected."""
-
-    def __init__(self, ns: str, host: str, *extra: str) -> None:
-        self.proc = subprocess.Popen(["ip", "netns", "exec", ns, sys.executable, "-m", "flexsheet", "launch",
-                                      "launch/lab_sim.yaml", "--host", host, *extra],
-                                     cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        self.lines: list[str] = []
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        for line in self.proc.stdout:
-            self.lines.append(line.rstrip())
-
-    def seen(self, needle: str) -> bool:
-        return any(needle in line for line in list(self.lines))
-
-    def wait(self, needle: str, timeout: float) -> None:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.seen(needle):
-                return
-            time.sleep(0.1)
-        raise AssertionError(f"{needle!r} not seen in {timeout} s:\n" + "\n".join(self.lines[-60:]))
+        with three_hosts() as names:
+            yield names
+    except RuntimeError as exc:
+        pytest.fail(str(exc))
 
 
 def test_full_loop_across_three_hosts_and_a_host_going_away(netns, tmp_path):
@@ -103,12 +42,7 @@ def test_full_loop_across_three_hosts_and_a_host_going_away(netns, tmp_path):
         assert main.proc.wait(timeout=120) == 0, "\n".join(main.lines[-60:])
     finally:
         for h in (main, arm1, arm2):
-            if h.proc.poll() is None:
-                h.proc.send_signal(signal.SIGINT)
-                try:
-                    h.proc.wait(timeout=30)
-                except subprocess.TimeoutExpired:
-                    h.proc.kill()
+            h.stop()
     summary = json.loads((tmp_path / "summary.json").read_text())
     counts = summary["counts"]
     # joint states from both arm hosts reached main's recorder; so did the world's sheet (FK of both)

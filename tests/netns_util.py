@@ -1,0 +1,123 @@
+"""The lab's three computers on one machine, for the namespace tests (test_integration_netns, test_partition).
+
+:func:`three_hosts` creates network namespaces ``<prefix>-{main,arm1,arm2}`` (addresses of
+``launch/lab_sim.yaml``) on a bridge inside a fourth ``<prefix>-sw`` namespace; host ``h``'s cable is the veth
+:func:`cable` names in the switch namespace, so a test can unplug it (:func:`set_cable`). :class:`HostLaunch`
+runs ``flexsheet launch launch/lab_sim.yaml --host NAME`` inside a namespace and collects its output.
+Needs root and iproute2 (CI runs as root).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+HOSTS = {"main": "10.77.0.1", "arm1": "10.77.0.2", "arm2": "10.77.0.3"}
+PREFIX = f"fs{os.getpid() % 10000}"
+
+
+def sh(*cmd: str) -> None:
+    """Run a command; raise ``CalledProcessError`` (with its output) if it fails."""
+    subprocess.run(cmd, check=True, capture_output=True, text=True)
+
+
+def switch() -> str:
+    """Name of the switch namespace."""
+    return f"{PREFIX}-sw"
+
+
+def cable(host: str) -> str:
+    """Name of ``host``'s veth end in the switch namespace (its cable to the switch)."""
+    return f"{PREFIX}v{list(HOSTS).index(host)}"
+
+
+def set_cable(host: str, up: bool) -> None:
+    """Plug (``up``) or unplug ``host``'s cable at the switch: ``ip link set <veth> up|down``."""
+    sh("ip", "netns", "exec", switch(), "ip", "link", "set", cable(host), "up" if up else "down")
+
+
+@contextlib.contextmanager
+def three_hosts():
+    """Create the namespaces (see module doc); yields host → namespace name; removes them (and kills what
+    runs in them) afterwards. Raises ``RuntimeError`` when not root."""
+    if os.geteuid() != 0:
+        raise RuntimeError("the three-namespace tests need root (CI runs as root)")
+    sw = switch()
+    names = {h: f"{PREFIX}-{h}" for h in HOSTS}
+    try:
+        sh("ip", "netns", "add", sw)
+        sh("ip", "netns", "exec", sw, "ip", "link", "add", "br0", "type", "bridge")
+        sh("ip", "netns", "exec", sw, "ip", "link", "set", "br0", "up")
+        for host, addr in HOSTS.items():
+            ns = names[host]
+            sh("ip", "netns", "add", ns)
+            sh("ip", "link", "add", cable(host), "netns", sw, "type", "veth", "peer", "name", "eth0", "netns", ns)
+            sh("ip", "netns", "exec", sw, "ip", "link", "set", cable(host), "master", "br0", "up")
+            sh("ip", "netns", "exec", ns, "ip", "addr", "add", f"{addr}/24", "dev", "eth0")
+            sh("ip", "netns", "exec", ns, "ip", "link", "set", "eth0", "up")
+            sh("ip", "netns", "exec", ns, "ip", "link", "set", "lo", "up")
+        yield names
+    finally:
+        for ns in [*names.values(), sw]:
+            out = subprocess.run(["ip", "netns", "pids", ns], capture_output=True, text=True).stdout.split()
+            for pid in out:
+                try:
+                    os.kill(int(pid), signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+            subprocess.run(["ip", "netns", "del", ns], capture_output=True)
+
+
+class HostLaunch:
+    """``flexsheet launch launch/lab_sim.yaml --host NAME`` inside a namespace; output lines collected with
+    their arrival times (``time.time()``)."""
+
+    def __init__(self, ns: str, host: str, *extra: str) -> None:
+        self.proc = subprocess.Popen(["ip", "netns", "exec", ns, sys.executable, "-m", "flexsheet", "launch",
+                                      "launch/lab_sim.yaml", "--host", host, *extra],
+                                     cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        self.lines: list[str] = []
+        self.times: list[float] = []
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self.times.append(time.time())
+            self.lines.append(line.rstrip())
+
+    def seen(self, needle: str, after: float = 0.0) -> bool:
+        """Whether a line containing ``needle`` arrived after time ``after``."""
+        return self.when(needle, after) is not None
+
+    def when(self, needle: str, after: float = 0.0) -> float | None:
+        """Arrival time of the first line containing ``needle`` after time ``after``, or None."""
+        for t, line in zip(list(self.times), list(self.lines), strict=False):
+            if t >= after and needle in line:
+                return t
+        return None
+
+    def wait(self, needle: str, timeout: float, after: float = 0.0) -> float:
+        """Wait for a line containing ``needle`` (after time ``after``); returns its arrival time."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            t = self.when(needle, after)
+            if t is not None:
+                return t
+            time.sleep(0.1)
+        raise AssertionError(f"{needle!r} not seen in {timeout} s:\n" + "\n".join(self.lines[-60:]))
+
+    def stop(self) -> None:
+        """SIGINT, then SIGKILL after 30 s."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
