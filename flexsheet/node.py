@@ -144,10 +144,10 @@ class Subscription:
 
     def push(self, frames: list) -> None:
         if self.qos is QoS.LATCHED:
-            meta = bytes(frames[1]) if len(frames) > 1 else b""
-            if meta == self.last_meta:  # the same latched value resent for another late joiner
+            key = b"\0".join(bytes(f) for f in frames[1:])
+            if key == self.last_meta:  # the same latched value resent for another late joiner
                 return
-            self.last_meta = meta
+            self.last_meta = key
         if len(self.queue) >= self.depth:
             self.queue.popleft()
             self.stats.dropped += 1

@@ -123,8 +123,8 @@ def encode_i32(value: float, scale: float = SCALE, name: str = "value") -> tuple
         x = float(value)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a real number, got {value!r}") from None
-    if not math.isfinite(x):
-        raise ValueError(f"{name} must be finite, got {x!r}")
+    if not math.isfinite(x) or not math.isfinite(x / scale):
+        raise ValueError(f"{name} must be finite (also after scaling by 1/{scale}), got {x!r}")
     n = round(x / scale)
     if not INT32_MIN <= n <= INT32_MAX:
         raise ValueError(f"{name}={x!r} does not fit a signed 32-bit fixed point at scale {scale}")
@@ -164,8 +164,16 @@ def encode_joints(q, scale: float = SCALE, name: str = "q") -> list[int]:
     return regs
 
 
+def _register_list(regs, what: str) -> list:
+    """``regs`` as a list if it is a list/tuple/ndarray of registers, else ``ValueError`` naming ``what``."""
+    if not isinstance(regs, (list, tuple, np.ndarray)) or (isinstance(regs, np.ndarray) and regs.ndim != 1):
+        raise ValueError(f"{what} must be a sequence of 16-bit registers, got {type(regs).__name__}")
+    return list(regs)
+
+
 def decode_joints(regs: Sequence[int], scale: float = SCALE, name: str = "q") -> np.ndarray:
     """12 registers → (6,) float64 (rad or rad/s). Raises ``ValueError`` naming the bad register or length."""
+    regs = _register_list(regs, name)
     if len(regs) != 2 * N_JOINTS:
         raise ValueError(f"{name} needs {2 * N_JOINTS} registers, got {len(regs)}")
     return np.array([decode_i32(regs[2 * k], regs[2 * k + 1], scale, f"{name}[J{k + 1}]")
@@ -206,6 +214,7 @@ class ControllerState:
 
 def decode_input(regs: Sequence[int]) -> ControllerState:
     """Decode the ``IR_COUNT`` input registers into a :class:`ControllerState`. ``ValueError`` on bad length/values."""
+    regs = _register_list(regs, "input image")
     if len(regs) != IR_COUNT:
         raise ValueError(f"input image needs {IR_COUNT} registers, got {len(regs)}")
     return ControllerState(

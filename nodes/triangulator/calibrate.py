@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+import yaml
 
 __all__ = ["BoardSpec", "parse_board", "detect_board", "StereoCalibrationResult", "calibrate_stereo",
            "write_yaml", "load_yaml", "to_message", "main"]
@@ -251,35 +252,73 @@ def write_yaml(path: str, calib: dict) -> None:
         fs.release()
 
 
-def load_yaml(path: str) -> dict:
-    """Read a calibration YAML written by :func:`write_yaml` (or any FileStorage YAML with the same keys).
+class _CvYamlLoader(yaml.SafeLoader):
+    """PyYAML loader for OpenCV FileStorage YAML: ``!!opencv-matrix`` maps become checked numpy arrays."""
 
-    Returns a dict: ``image_size`` (w, h) ints, float64 arrays K1, K2, R (3, 3), D1, D2 (5,), T (3,) m, and
-    E, F, R1, R2, P1, P2, Q, T_display_camera, per_pair_rms_px when present (missing rectification is
-    recomputed with ``cv2.stereoRectify``), plus rms floats. Raises ``ValueError`` naming the file and key
-    when the file is missing or a required key is absent or has the wrong shape.
+
+def _cv_matrix(loader: yaml.SafeLoader, node: yaml.Node) -> np.ndarray:
+    m = loader.construct_mapping(node, deep=True)
+    rows, cols, data = m.get("rows"), m.get("cols"), m.get("data")
+    if not (type(rows) is int and type(cols) is int and 0 < rows <= 64 and 0 < cols <= 64):
+        raise ValueError(f"opencv-matrix rows/cols must be ints in 1..64, got rows={rows!r:.40} cols={cols!r:.40}")
+    if m.get("dt") not in ("d", "f"):
+        raise ValueError(f"opencv-matrix dt must be 'd' or 'f', got {m.get('dt')!r:.40}")
+    if not (isinstance(data, list) and len(data) == rows * cols
+            and all(type(v) in (int, float) for v in data)):
+        raise ValueError(f"opencv-matrix data must be {rows * cols} numbers")
+    a = np.array(data, dtype=np.float64).reshape(rows, cols)
+    if not np.all(np.isfinite(a)):
+        raise ValueError("opencv-matrix data must be finite")
+    return a
+
+
+_CvYamlLoader.add_constructor("tag:yaml.org,2002:opencv-matrix", _cv_matrix)
+MAX_CALIB_BYTES = 1 << 20
+
+
+def load_yaml(path: str) -> dict:
+    """Read a calibration YAML written by :func:`write_yaml` (OpenCV FileStorage YAML with the same keys).
+
+    Parsed with PyYAML (``!!opencv-matrix`` checked: int rows/cols in 1..64, ``dt`` d|f, exactly
+    rows×cols finite numbers), never handed raw to ``cv2.FileStorage``, so a hostile file cannot reach
+    OpenCV's parser. Returns a dict: ``image_size`` (w, h) ints, float64 arrays K1, K2, R (3, 3), D1, D2
+    (5,), T (3,) m, and E, F, R1, R2, P1, P2, Q, T_display_camera, per_pair_rms_px when present (missing
+    rectification is recomputed with ``cv2.stereoRectify``), plus rms floats. Raises ``ValueError`` naming
+    the file and key when the file is missing, too large, not such a YAML, or a key is absent, malformed,
+    non-finite or of the wrong shape.
     """
     if not os.path.isfile(path):
         raise ValueError(f"calibration file not found: {path!r}")
-    fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
+    if os.path.getsize(path) > MAX_CALIB_BYTES:
+        raise ValueError(f"{path}: calibration file larger than {MAX_CALIB_BYTES} bytes")
     try:
-        out: dict = {}
-        w, h = fs.getNode("image_width").real(), fs.getNode("image_height").real()
-        if not (w > 0 and h > 0):
-            raise ValueError(f"{path}: image_width/image_height missing or not positive")
-        out["image_size"] = (int(w), int(h))
-        for key in _MATS:
-            node = fs.getNode(key)
-            if not node.empty():
-                out[key] = np.asarray(node.mat(), np.float64)
-        for key in _SCALARS:
-            node = fs.getNode(key)
-            out[key] = float(node.real()) if not node.empty() else 0.0
-        for key in ("used", "skipped"):
-            node = fs.getNode(key)
-            out[key] = node.string().split(",") if not node.empty() and node.string() else []
-    finally:
-        fs.release()
+        with open(path, "rb") as fh:
+            text = fh.read().decode("utf-8")
+        if text.startswith("%YAML"):  # OpenCV writes "%YAML:1.0" or "%YAML 1.2"; PyYAML wants neither
+            text = text.split("\n", 1)[1] if "\n" in text else ""
+        doc = yaml.load(text, Loader=_CvYamlLoader)  # noqa: S506 - a SafeLoader subclass
+    except (UnicodeDecodeError, yaml.YAMLError, ValueError, RecursionError) as exc:
+        raise ValueError(f"{path}: not a calibration YAML ({' '.join(str(exc).split())[:200]})") from None
+    if not isinstance(doc, dict):
+        raise ValueError(f"{path}: not a calibration YAML (top level is {type(doc).__name__})")
+    out: dict = {}
+    w, h = doc.get("image_width"), doc.get("image_height")
+    if not (type(w) is int and type(h) is int and 0 < w <= 100_000 and 0 < h <= 100_000):
+        raise ValueError(f"{path}: image_width/image_height must be positive ints, got {w!r:.40}, {h!r:.40}")
+    out["image_size"] = (w, h)
+    for key in _MATS:
+        if key in doc:
+            if not isinstance(doc[key], np.ndarray):
+                raise ValueError(f"{path}: {key} must be an opencv-matrix, got {type(doc[key]).__name__}")
+            out[key] = doc[key]
+    for key in _SCALARS:
+        v = doc.get(key, 0.0)
+        if type(v) not in (int, float) or not np.isfinite(v):
+            raise ValueError(f"{path}: {key} must be a finite number, got {v!r:.40}")
+        out[key] = float(v)
+    for key in ("used", "skipped"):
+        v = doc.get(key, "")
+        out[key] = v.split(",") if isinstance(v, str) and v else []
     shapes = {"K1": (3, 3), "K2": (3, 3), "R": (3, 3), "T": (3,), "D1": None, "D2": None}
     for key, shape in shapes.items():
         if key not in out:
