@@ -224,3 +224,26 @@ def test_choose_takes_cheapest_meeting_target():
     assert not choose(table, 0.0007, 0.005, 0.03, 0.3, 0.008).met      # table made for another nu
     with pytest.raises(ValueError, match="target"):
         choose(table, -1.0, 0.0, 0.03, 0.45, 0.008)
+
+
+def test_nonlinear_table_replaces_invalid_linear():
+    rm = RealtimeModel(COARSE, MAT, order=1, strain_limit=0.05, cache_dir=None)
+    rm.build_nonlinear_table(np.array([0.0, 0.004, 0.008]))
+    F = rm.nonlinear["F"][0]
+    assert F[0] == 0.0 and 0 < F[1] < F[2]
+    u = rm.update(np.array([-0.006, 0.0, 0.0]))
+    assert u.method == "corotational" and u.status.startswith("nonlinear") and u.valid
+    assert abs(u.force - 0.5 * (F[1] + F[2])) < 1e-9 * F[2]
+    assert abs(u.stiffness - (F[2] - F[1]) / 0.004) < 1e-6 * u.stiffness
+    rm.reset()
+    c, r = rm.mesh.center, rm.mesh.radius - 0.006
+    off = rm.update(c + r * np.array([np.cos(0.5), 0.0, np.sin(0.5)]))
+    assert abs(off.depth - 0.006) < 1e-12
+    assert off.method != "corotational"        # the table covers the front centre only (arc_deg = 0)
+
+
+def test_shipped_table_gives_a_choice_meeting_the_default_target():
+    from nodes.fem.choose import load_table
+
+    ch = choose(load_table(), 0.0007, 0.005, 0.03, MAT.nu, 0.008)
+    assert ch.met and ch.error <= 0.0007

@@ -35,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="", help="also write DIR/bench.json")
     args = ap.parse_args(argv)
     mat = Material()
-    ch = choose(load_table(), 0.0007, 0.005, 0.05, mat.nu, 0.008)
+    ch = choose(load_table(), 0.0007, 0.005, 0.03, mat.nu, 0.008)
     res = {"choice": ch.reason, "order": ch.order, "mesh": ch.spec.__dict__}
     with tempfile.TemporaryDirectory() as cache:
         t = time.perf_counter()

@@ -51,7 +51,7 @@ class FemParams(BaseModel):
 
     accuracy_target: float = Field(default=0.0007, gt=0.0)
     depth_min: float = Field(default=0.005, ge=0.0)
-    depth_max: float = Field(default=0.05, gt=0.0)
+    depth_max: float = Field(default=0.03, gt=0.0)
     max_depth: float = Field(default=0.06, gt=0.0, le=0.07)
     finger_radius: float = Field(default=0.008, ge=0.001, le=0.03)
     E: float = Field(default=Material().E, gt=0.0)
