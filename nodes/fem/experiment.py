@@ -109,8 +109,8 @@ def main(argv: list[str] | None = None) -> int:
         table["candidates"].append(ev)
         rm = RealtimeModel(spec, mat, FINGER_R, cache_dir=None, order=order)
         fg = finger_at(0.0, d30, FINGER_R, rm.mesh.radius, rm.mesh.center)
-        upd = _timeit(lambda: rm.update_finger(fg), 50 if args.quick else 300)
-        sparse = _timeit(lambda: solve_full(rm.model, fg), 1 if args.quick else 3)
+        upd = _timeit(lambda rm=rm, fg=fg: rm.update_finger(fg), 50 if args.quick else 300)
+        sparse = _timeit(lambda rm=rm, fg=fg: solve_full(rm.model, fg), 1 if args.quick else 3)
         k = f"{d30:.4f}"
         rows.append({"spec": spec.__dict__, "order": order, "mesh_nodes": ev["mesh_nodes"], "dofs": ev["dofs"],
                      "precompute_s": rm.precompute_s, "update_ms": upd * 1e3, "sparse_ms": sparse * 1e3,

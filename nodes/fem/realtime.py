@@ -21,8 +21,15 @@ import numpy as np
 from .contact import Finger, finger_at, finger_from_tip
 from .material import Material
 from .mesh import MeshSpec, TetMesh, arc_points, cylinder_mesh
-from .solver import (CapacitanceSolver, FemModel, OutsideCandidates, _grad_ops, element_checks,
-                     solve_corotational, solve_full)
+from .solver import (
+    CapacitanceSolver,
+    FemModel,
+    OutsideCandidates,
+    _grad_ops,
+    element_checks,
+    solve_corotational,
+    solve_full,
+)
 
 __all__ = ["RealtimeModel", "Update", "DEFAULT_CACHE_DIR"]
 

@@ -19,7 +19,6 @@ Units SI; displacements m, forces N, stiffness N/m; display frame.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -258,7 +257,7 @@ class CapacitanceSolver:
                 "cand_points": self._cand_points, "noncand_points": self._noncand_points}
 
     @classmethod
-    def from_arrays(cls, z) -> "CapacitanceSolver":
+    def from_arrays(cls, z) -> CapacitanceSolver:
         """Rebuild a solver from :meth:`arrays` (no model needed); raises ``ValueError`` on inconsistent shapes."""
         self = cls.__new__(cls)
         self.model = None
@@ -408,7 +407,7 @@ def solve_corotational(model: FemModel, finger: Finger, iters: int = 30, tol: fl
     Xe = X[tets].reshape(M, 12)
     scale = tol * (finger.depth + 1e-3)
     converged, it = False, 0
-    for it in range(1, iters + 1):
+    for it in range(1, iters + 1):  # noqa: B007 - it is returned
         ue = x[edofs].reshape(M, 4, 3)
         Du = np.stack([ue[:, 1] - ue[:, 0], ue[:, 2] - ue[:, 0], ue[:, 3] - ue[:, 0]], axis=2)
         F = np.eye(3) + Du @ Dm_inv
