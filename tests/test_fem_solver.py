@@ -247,3 +247,16 @@ def test_shipped_table_gives_a_choice_meeting_the_default_target():
 
     ch = choose(load_table(), 0.0007, 0.005, 0.03, MAT.nu, 0.008)
     assert ch.met and ch.error <= 0.0007
+
+
+def test_mesh_round_trips_through_meshio(mesh, tmp_path):
+    import meshio
+
+    from nodes.fem.mesh import write_mesh
+
+    path = str(tmp_path / "cyl.vtu")
+    write_mesh(mesh, path)
+    back = meshio.read(path)
+    assert np.allclose(back.points, mesh.points)
+    assert np.array_equal(back.cells_dict["tetra"], mesh.tets)
+    assert np.array_equal(back.point_data["fixed"].astype(bool), mesh.fixed)
