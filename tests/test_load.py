@@ -75,8 +75,8 @@ def test_a_slow_latest_subscriber_keeps_one_frame_and_flat_memory():
     assert sent > 0.6 * RATE * SECONDS and sub.handled < sent / 2.5, (sent, sub.handled)
     # … the subscription kept at most one waiting frame, dropping (and counting) the stale ones …
     assert sub.max_depth <= 1
-    # (every frame sent was either handled or dropped as stale: none is still queued anywhere)
-    assert sub.sub.stats.dropped > sent / 3 and abs(sent - sub.sub.stats.dropped - sub.handled) <= 2, (
+    # (every frame sent was handled or dropped as stale; only those in flight at the stop are neither)
+    assert sub.sub.stats.dropped > sent / 3 and 0 <= sent - sub.sub.stats.dropped - sub.handled <= 0.02 * sent + 2, (
         sent, sub.sub.stats.dropped, sub.handled)
     assert 0 <= got - sub.handled <= 1   # the last one may be decoded when the run stops
     # … so the process did not keep the ~500 MB it was sent: RSS flat after the first seconds
