@@ -76,13 +76,21 @@ class _DirectFile:
 class BagWriter:
     """Writes raw wire frames to an MCAP file from a background thread (the caller never blocks on disk).
 
-    ``write(frames, log_time_ns)`` queues one message (``frames`` = ``[topic, meta, *buffers]``);
+    If ``path`` already holds data (a respawned recorder), the bag goes to ``<stem>.1.mcap``, ``.2``…
+    instead, so nothing recorded before is lost. ``write(frames, log_time_ns)`` queues one message (``frames`` = ``[topic, meta, *buffers]``);
     ``close()`` flushes and writes the summary and the ``recorder`` metadata (message and drop counts).
     """
 
-    def __init__(self, path: str | Path, chunk_size: int = CHUNK_SIZE) -> None:
-        self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+    def __init__(self, path: str | Path, chunk_size: int = CHUNK_SIZE, max_queue_bytes: int = 256 << 20) -> None:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        n = 1
+        while path.exists() and path.stat().st_size > 0:  # a respawned recorder never overwrites its bag
+            path = Path(path.parent, f"{Path(path).name.split('.')[0]}.{n}.mcap")
+            n += 1
+        self.path = path
+        self.max_queue_bytes = max_queue_bytes
+        self._queued = 0
         self._fh = _DirectFile(self.path)
         self._writer = Writer(self._fh, chunk_size=chunk_size, compression=CompressionType.LZ4)
         self._writer.start(profile="flexsheet", library="flexsheet")
@@ -96,7 +104,14 @@ class BagWriter:
         self._thread.start()
 
     def write(self, frames: list, log_time_ns: int) -> None:
-        self._q.put((frames, log_time_ns))
+        """Queue one message; if the disk falls behind by more than ``max_queue_bytes`` it is dropped and
+        counted under ``"<recorder queue full>"`` (memory stays bounded)."""
+        size = sum(memoryview(f).nbytes for f in frames)
+        if self._queued + size > self.max_queue_bytes:
+            self.dropped["<recorder queue full>"] += 1
+            return
+        self._queued += size
+        self._q.put((frames, log_time_ns, size))
 
     def _channel(self, topic: str, meta: bytes) -> int:
         ch = self._channels.get(topic)
@@ -115,7 +130,8 @@ class BagWriter:
             item = self._q.get()
             if item is None:
                 return
-            frames, t_ns = item
+            frames, t_ns, size = item
+            self._queued -= size
             topic = bytes(frames[0]).decode(errors="replace")
             meta = bytes(frames[1])
             try:

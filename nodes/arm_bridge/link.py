@@ -244,7 +244,10 @@ class ArmStream:
             cmd = reg.CMD_ENABLE   # drop the RESET bit so the next reset is an edge again
         if cmd is None:
             return
-        self._pending_cmd = None
+        if cmd & reg.CMD_RESET and self.cmd_written is not None and self.cmd_written & reg.CMD_RESET:
+            cmd = cmd & ~reg.CMD_RESET   # RESET acts on its rising edge: clear it now, set it next cycle
+        else:
+            self._pending_cmd = None
         rr = await self.client.write_register(reg.HR_COMMAND, cmd, device_id=self.device_id)
         if rr.isError():
             raise ModbusException(f"command refused: {rr}")
