@@ -14,9 +14,9 @@ What must hold:
   counted from the gap in its stream;
 * the bag cut by ``kill -9`` of the recorder reads up to its last complete chunk.
 
-The recorder is killed first: a respawned recorder reopens the same ``output`` path, so the final bag
-holds the run after its restart (see docs/reliability.md); the cut bag is copied aside right after the
-kill (the respawn takes > 0.5 s: delay 0.2 s plus the interpreter start).
+The recorder is killed first: a respawned recorder never overwrites its bag, it continues in
+``sim.1.mcap``, so ``sim.mcap`` stays the bag cut by the kill (also copied aside right after the kill, to
+check it as it was) and ``sim.1.mcap`` holds the rest of the run (see docs/reliability.md).
 
 ``python tests/test_faults.py`` runs the scenario once and prints the numbers for docs/reliability.md.
 """
@@ -64,8 +64,10 @@ PUBLISHES = {
     "renderer": ["/render/stereo"],
     "world": ["/world/finger", "/world/sheet"],
 }
-#: the paper's two stroking speeds (Table I rows 30 s and 10 s): 46 s of script spans all the kills
-SCRIPT = "world.script=[{mode: stroke, moving_time: 30}, {mode: stroke, moving_time: 10, seed: 1}]"
+#: the paper's two stroking speeds (Table I rows 30 s and 10 s) and a third stroke: 79 s of script span
+#: all the kills even when a cold FEM start (no precompute cache on a fresh machine) takes ~10 s
+SCRIPT = ("world.script=[{mode: stroke, moving_time: 30}, {mode: stroke, moving_time: 10, seed: 1}, "
+          "{mode: stroke, moving_time: 30, seed: 2}]")
 SETTLE = 1.5              # s after a respawn (or, for WAIT_UP nodes, after "up") before the next kill
 STEP_TOLERANCE = 1.5      # the controller twin's own refusal threshold: qd_max · period · 1.5
 
@@ -153,7 +155,7 @@ def run_scenario(out: Path, cut_copy: Path) -> dict:
     launch = Launch(lf, out, "--set", SCRIPT)
     kills = []
     try:
-        launch.wait(r"\[world\s*\] .*segment 1/2", 120)
+        launch.wait(r"\[world\s*\] .*segment 1/3", 120)
         for group in KILL_GROUPS:
             victims = {}
             for name in group:   # each must be up before it is killed
@@ -249,9 +251,10 @@ def test_every_killed_node_is_respawned_and_the_run_finishes(faults):
 
 def test_the_recording_loses_only_the_dead_nodes_own_messages(faults):
     out, _, run = faults
-    info = bag_info(out / "sim.mcap")
+    info = bag_info(out / "sim.1.mcap")     # the respawned recorder's bag: the run after its restart
     assert not info.truncated
-    res = analyse_bag(out / "sim.mcap")
+    assert bag_info(out / "sim.mcap").truncated   # the first part, cut by the kill, was kept as it was
+    res = analyse_bag(out / "sim.1.mcap")
     killed = {k["node"]: k for k in run["kills"]}
     for topic, t in res["topics"].items():
         # no message lost on the wire in any publisher incarnation (the recorder's own count agrees)
@@ -280,7 +283,7 @@ def _step_limit() -> np.ndarray:
 
 def test_the_arms_hold_and_never_jump(faults):
     out, _, run = faults
-    res = analyse_bag(out / "sim.mcap")
+    res = analyse_bag(out / "sim.1.mcap")
     killed = {k["node"]: k for k in run["kills"]}
     limit = _step_limit()
     for arm in ("left", "right"):
@@ -294,8 +297,9 @@ def test_the_arms_hold_and_never_jump(faults):
         # the controller twin's death: the bridge reconnects to the new twin, which starts disabled
         k = killed[f"ctrl_{arm}"]
         after = [st for t, st in zip(stamps, status, strict=True) if k["t_kill"] < t < k["t_up"] + 5.0]
-        assert after and after[0] == "hold:disabled", (arm, after[:3])
-        assert "ok" in after, (arm, sorted(set(after)))
+        # (a state or two read just before the kill may still say "ok")
+        assert "hold:disabled" in after[:20], (arm, after[:20])
+        assert "ok" in after[after.index("hold:disabled"):], (arm, sorted(set(after)))
         # the run recovers: the arm follows targets again at the end
         assert status[-1] in ("ok", "hold:no_target"), (arm, status[-50:])
         n_reset = 0
@@ -340,7 +344,7 @@ if __name__ == "__main__":
     for k in run["kills"]:
         up = f"{k['t_up'] - k['t_kill']:.2f} s" if k["t_up"] else "never"
         print(f"  {k['node']:<12} respawn after {k['t_respawn'] - k['t_kill']:.2f} s, up after {up}")
-    res = analyse_bag(out / "sim.mcap")
+    res = analyse_bag(out / "sim.1.mcap")
     for topic, t in sorted(res["topics"].items()):
         print(f"  {topic:<24} n={t['n']:6d} restarts={len(t['restarts'])} wire_lost={t['wire_lost']} "
               f"downtime_lost={t['downtime_lost']} restart_lost={t['restart_lost']} "
