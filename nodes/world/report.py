@@ -71,13 +71,16 @@ def _interp_sheet(sheets: list, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return o, n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
-def analyse(bags: Path | list[Path]) -> dict:
+def analyse(bags: Path | list[Path], heartbeats: list | None = None) -> dict:
     """Table I per segment and the latency per hop from a bag, or the parts of one run (a respawned recorder
-    continues in ``<stem>.1.mcap``…). Returns the summary dict."""
+    continues in ``<stem>.1.mcap``…). Returns the summary dict; the recorded ``/diagnostics`` (arrival
+    time, Heartbeat) pairs are appended to ``heartbeats`` if given."""
     bags = [bags] if isinstance(bags, Path) else list(bags)
     d = _load(bags)
     for msgs in d.values():
         msgs.sort(key=lambda tm: tm[0])
+    if heartbeats is not None:
+        heartbeats.extend(d.get("/diagnostics", []))
     tips = [(t, m) for t, m in d.get("/fingertip", [])]
     truths = d.get("/world/finger", [])
     sheets = d.get("/world/sheet", [])
@@ -183,6 +186,48 @@ def _charts(summary: dict, out: Path) -> None:
         plt.close(fig)
 
 
+def graph_chart(heartbeats: list, path: Path) -> dict:
+    """Draw the live node/topic graph from recorded heartbeats (each node's last one): nodes on the left and
+    right, topics in the middle, an arrow per publisher and subscription. Writes ``path`` (PNG) and
+    returns the graph as ``{"nodes": {name: {"host", "publishes", "subscribes"}}}`` (also saved as JSON)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    last: dict = {}
+    for _, hb in heartbeats:
+        last[hb.node] = hb
+    graph = {"nodes": {n: {"host": hb.host, "type": hb.node_type,
+                           "publishes": sorted(p.topic for p in hb.publishers if p.topic != "/diagnostics"),
+                           "subscribes": sorted(sub.topic for sub in hb.subscriptions)}
+                       for n, hb in sorted(last.items())}}
+    topics = sorted({t for v in graph["nodes"].values() for t in v["publishes"] + v["subscribes"]})
+    names = list(graph["nodes"])
+    fig, ax = plt.subplots(figsize=(11, max(4.0, 0.42 * max(len(topics), len(names)))))
+    ty = {t: i for i, t in enumerate(reversed(topics))}
+    ny = {n: i * (len(topics) - 1) / max(1, len(names) - 1) for i, n in enumerate(reversed(names))}
+    for n, v in graph["nodes"].items():
+        ax.text(0.0, ny[n], f"{n}\n[{v['host']}]", ha="center", va="center", fontsize=8,
+                bbox={"boxstyle": "round", "fc": "#dbe9f6"})
+        ax.text(2.0, ny[n], n, ha="center", va="center", fontsize=8, bbox={"boxstyle": "round", "fc": "#dbe9f6"})
+        for t in v["publishes"]:
+            ax.annotate("", (0.85, ty[t]), (0.18, ny[n]), arrowprops={"arrowstyle": "->", "color": "#1f77b4", "lw": 0.7})
+        for t in v["subscribes"]:
+            ax.annotate("", (1.82, ny[n]), (1.15, ty[t]), arrowprops={"arrowstyle": "->", "color": "#ff7f0e", "lw": 0.7})
+    for t in topics:
+        ax.text(1.0, ty[t], t, ha="center", va="center", fontsize=8, bbox={"boxstyle": "square", "fc": "#fff3d6"})
+    ax.set_xlim(-0.4, 2.4)
+    ax.set_ylim(-1, len(topics))
+    ax.axis("off")
+    ax.set_title("flexsheet node/topic graph (from the recorded heartbeats): publishers → topics → subscribers",
+                 fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    path.with_suffix(".json").write_text(json.dumps(graph, indent=2))
+    return graph
+
+
 def _format(summary: dict) -> str:
     lines = ["Table I — position and angle errors in stroking (full process graph, from the bag)", "",
              f"{'moving time':<16}{'Δd mean mm':>12}{'Δd std mm':>11}{'Δθ mean deg':>13}{'Δθ std deg':>12}"
@@ -209,12 +254,15 @@ def main(out: str, lf=None) -> int:
     if not bags:
         print(f"[report] no bag in {out_dir}", flush=True)
         return 1
-    summary = analyse(bags)
+    beats: list = []
+    summary = analyse(bags, beats)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     _charts(summary, out_dir)
+    if beats:
+        graph_chart(beats, out_dir / "graph.png")
     text = _format(summary)
     (out_dir / "report.md").write_text("# flexsheet simulated run\n\n```\n" + text + "\n```\n\n"
-                                       "![Table I](table1.png)\n\n![latency](latency.png)\n")
+                                       "![Table I](table1.png)\n\n![latency](latency.png)\n\n![graph](graph.png)\n")
     print(text, flush=True)
     print(f"[report] wrote {out_dir}/summary.json, report.md, table1.png, latency.png "
           f"(from {', '.join(b.name for b in bags)})", flush=True)
