@@ -26,9 +26,9 @@ import tracemalloc
 import msgpack
 import numpy as np
 import pytest
-from pydantic import BaseModel
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from pydantic import BaseModel
 
 from flexsheet.codec import DecodeError, decode, decode_any, encode, peek_schema
 from messages import Header, Message

@@ -103,7 +103,7 @@ def test_calibration_mutated_numbers(tmp_path, data):
     line = text[:a].rsplit("\n", 1)[-1]
     if line.strip() in ("rows:", "cols:") and tok.startswith("-"):
         tok = "0"  # negative rows/cols corrupt the heap inside cv2.FileStorage: see test_calibration_heap_corruption
-    
+
     p = tmp_path / "c.yaml"
     p.write_text(text[:a] + tok + text[b:])
     kind, out = _load(p, "calibration: mutated numbers", strict=False)

@@ -19,12 +19,11 @@ import struct
 import msgpack
 import numpy as np
 import pytest
+from test_fuzz_codec import sample  # noqa: E402 - the contract-driven sample builder (tests/ is on sys.path)
 
 from flexsheet.codec import encode
 from flexsheet.testing import NodeHarness
 from messages import Fingertip, Header, topics
-
-from test_fuzz_codec import sample  # noqa: E402 - the contract-driven sample builder (tests/ is on sys.path)
 
 COUNTS: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
 N_RANDOM = 12  # random-bytes frame sets per topic (plus the fixed hostile kinds below)
@@ -151,11 +150,10 @@ def test_planner_survives_fuzz():
 
 
 def test_triangulator_survives_fuzz():
+    from messages import StereoFrame
     from nodes.camera.sim import DEFAULT_CAMERA_POSITION, SimConfig, StereoRenderer, camera_model, look_at
     from nodes.triangulator.calibrate import to_message
     from nodes.triangulator.node import TriangulatorNode
-
-    from messages import StereoFrame
 
     calib, T_dc = camera_model("ximea"), look_at(DEFAULT_CAMERA_POSITION)
 
