@@ -47,8 +47,11 @@ class LatencyModel:
     ``flexsheet bench vision`` / ``bench planner``). ``network``: one LAN hop main PC → arm PC: 1 ms.
     ``servo_period``: RV-1A external-control period 7.1 ms; a target waits for the next tick (mean half a
     period), executes one tick later (``pipeline_ticks``), and the joint servo lags it by a first-order
-    ``servo_tau`` (one period). ``camera_noise`` m rms per axis (assumed sub-pixel marker centroids;
-    a constant calibration bias cancels in Δd). ``scale`` multiplies every delay (latency sweep).
+    ``servo_tau`` (0.015 s, the controller twin's first-order lag, ``nodes/arm_bridge/controller_sim.py``).
+    ``camera_noise`` m rms per axis: 0.1 mm, measured in the full simulated graph (XIMEA-calibrated camera
+    twin at ~0.5 m, marker triangulation; per-axis rms 0.08–0.12 mm); a constant calibration bias cancels
+    in Δd. Both match the full-graph run, so the two can be compared "under the same latency budget".
+    ``scale`` multiplies every delay (latency sweep).
     """
 
     camera_period: float = 1.0 / 48.0
@@ -57,8 +60,8 @@ class LatencyModel:
     network: float = 0.001
     servo_period: float = 0.0071
     pipeline_ticks: int = 1
-    servo_tau: float = 0.0071
-    camera_noise: float = 2e-5
+    servo_tau: float = 0.015
+    camera_noise: float = 1e-4
     scale: float = 1.0
 
     def budget(self) -> dict[str, float]:
