@@ -90,10 +90,6 @@ def _topic_name(frame: Any) -> str:
     return f"<{type(frame).__name__} topic frame>"
 
 
-def _default(obj: Any) -> Any:
-    raise TypeError(f"cannot encode {type(obj).__name__}")
-
-
 def encode(topic: str, msg: Message) -> list:
     """Encode ``msg`` for ``topic`` into multipart frames ``[topic, meta, *buffers]``.
 
@@ -102,7 +98,7 @@ def encode(topic: str, msg: Message) -> list:
     """
     buffers: list = []
 
-    def conv(value: Any) -> Any:
+    def default(value: Any) -> Any:  # called by msgpack's C packer only for what it cannot pack itself
         if isinstance(value, np.ndarray):
             arr = value if value.flags.c_contiguous else np.ascontiguousarray(value)
             buffers.append(arr)
@@ -110,13 +106,10 @@ def encode(topic: str, msg: Message) -> list:
             return msgpack.ExtType(EXT_NDARRAY, _pack_head(len(buffers) + 1, len(shape)) +
                                    struct.pack(f"<{len(shape)}Q", *shape) + arr.dtype.str.encode())
         if isinstance(value, BaseModel):
-            return {k: conv(v) for k, v in value.__dict__.items()}
-        if isinstance(value, (list, tuple)):
-            return [conv(v) for v in value]
-        return value
+            return value.__dict__
+        raise TypeError(f"cannot encode {type(value).__name__}")
 
-    fields = {k: conv(v) for k, v in msg.__dict__.items()}
-    meta = msgpack.packb({"s": msg.SCHEMA, "v": msg.VERSION, "d": fields}, default=_default)
+    meta = msgpack.packb({"s": msg.SCHEMA, "v": msg.VERSION, "d": msg.__dict__}, default=default)
     return [topic.encode(), meta, *buffers]
 
 
