@@ -49,7 +49,7 @@ from messages import topics as T
 from .codec import DecodeError, decode, encode
 from .transport import CurveConfig, InProcTransport, Transport, ZmqTransport
 
-__all__ = ["Node", "NodeConfig", "QoS", "InputRejected", "Publisher", "Subscription", "EmptyParams"]
+__all__ = ["Node", "NodeConfig", "QoS", "InputRejected", "Publisher", "Subscription", "EmptyParams", "ticks"]
 
 
 class InputRejected(ValueError):
@@ -286,14 +286,7 @@ class Node:
         is_async = inspect.iscoroutinefunction(callback)
 
         async def run() -> None:
-            nxt = time.monotonic()
-            while True:
-                nxt += period
-                delay = nxt - time.monotonic()
-                if delay > 0:
-                    await asyncio.sleep(delay)
-                else:
-                    nxt = time.monotonic()  # overrun: do not burst to catch up
+            async for _ in ticks(period):
                 try:
                     if is_async:
                         await callback()
@@ -409,6 +402,20 @@ class Node:
             self.log.exception("teardown failed")
         self.transport.close()
         self.log.info("%s stopped", self.name)
+
+
+async def ticks(period: float):
+    """Async generator: yields every ``period`` s on a drift-free schedule; an overrun restarts the schedule
+    rather than bursting to catch up. Used by :meth:`Node.timer` and the device twins' loops."""
+    nxt = time.monotonic()
+    while True:
+        nxt += period
+        delay = nxt - time.monotonic()
+        if delay > 0:
+            await asyncio.sleep(delay)
+        else:
+            nxt = time.monotonic()  # overrun: do not burst to catch up
+        yield
 
 
 def hostname() -> str:

@@ -55,17 +55,17 @@ def _beats(args: argparse.Namespace) -> dict[str, Heartbeat] | None:
     except LaunchError as exc:
         print(f"flexsheet: {exc}")
         return None
-    return asyncio.run(collect_heartbeats(peers, args.timeout, curve))
+    beats = asyncio.run(collect_heartbeats(peers, args.timeout, curve))
+    if not beats:
+        print(f"no live nodes heard in {args.timeout:.1f} s (graph of {args.launch})")
+    return beats
 
 
 def topic_list(args: argparse.Namespace) -> int:
     """Print every topic published in the live graph with its type, publishers, rate and subscribers."""
     beats = _beats(args)
-    if beats is None:
-        return 2
     if not beats:
-        print(f"no live nodes heard in {args.timeout:.1f} s (graph of {args.launch})")
-        return 1
+        return 2 if beats is None else 1
     pubs: dict[str, list] = {}
     subs: dict[str, list] = {}
     for hb in beats.values():
@@ -86,11 +86,8 @@ def topic_list(args: argparse.Namespace) -> int:
 def node_list(args: argparse.Namespace) -> int:
     """Print every live node with host, pid, endpoint, state and rejection counts."""
     beats = _beats(args)
-    if beats is None:
-        return 2
     if not beats:
-        print(f"no live nodes heard in {args.timeout:.1f} s (graph of {args.launch})")
-        return 1
+        return 2 if beats is None else 1
     for name in sorted(beats):
         hb = beats[name]
         age = time.time() - hb.header.stamp

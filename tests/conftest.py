@@ -54,3 +54,16 @@ def pid_alive(pid: int) -> bool:
 
 
 os.environ.setdefault("FLEXSHEET_LOG", "INFO")
+
+
+@pytest.fixture
+def netns():
+    """Namespaces <prefix>-{main,arm1,arm2} on a bridge inside a 4th 'switch' namespace
+    (:func:`netns_util.three_hosts`); fails with the reason if they cannot be made (needs root, iproute2)."""
+    from netns_util import three_hosts
+
+    try:
+        with three_hosts() as names:
+            yield names
+    except RuntimeError as exc:
+        pytest.fail(str(exc))

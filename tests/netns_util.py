@@ -121,3 +121,4 @@ class HostLaunch:
                 self.proc.wait(timeout=30)
             except subprocess.TimeoutExpired:
                 self.proc.kill()
+

@@ -11,18 +11,7 @@ from __future__ import annotations
 import json
 import signal
 
-import pytest
-from netns_util import HostLaunch, three_hosts
-
-
-@pytest.fixture
-def netns():
-    """Namespaces <prefix>-{main,arm1,arm2} on a bridge inside a 4th 'switch' namespace (tests/netns_util.py)."""
-    try:
-        with three_hosts() as names:
-            yield names
-    except RuntimeError as exc:
-        pytest.fail(str(exc))
+from netns_util import HostLaunch
 
 
 def test_full_loop_across_three_hosts_and_a_host_going_away(netns, tmp_path):

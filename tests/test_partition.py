@@ -16,8 +16,7 @@ import json
 import time
 
 import numpy as np
-import pytest
-from netns_util import HostLaunch, set_cable, three_hosts
+from netns_util import HostLaunch, set_cable
 
 from flexsheet.bag import read_bag
 from flexsheet.codec import decode_any
@@ -25,14 +24,6 @@ from flexsheet.codec import decode_any
 CUT_S = 2.0
 STEP_TOLERANCE = 1.5      # the controller's own refusal threshold (× qd_max · period)
 
-
-@pytest.fixture
-def netns():
-    try:
-        with three_hosts() as names:
-            yield names
-    except RuntimeError as exc:
-        pytest.fail(str(exc))
 
 
 def test_a_2s_cut_to_arm1_holds_that_arm_and_it_recovers_without_a_jump(netns, tmp_path):

@@ -20,7 +20,7 @@ from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from flexsheet.node import Node
+from flexsheet.node import Node, ticks
 
 from . import registers as reg
 from .controller import ControllerCore, WriteRejected
@@ -78,15 +78,7 @@ class ControllerTwin:
         return self.port
 
     async def _run(self) -> None:
-        period = self.core.period
-        nxt = time.monotonic()
-        while True:
-            nxt += period
-            delay = nxt - time.monotonic()
-            if delay > 0:
-                await asyncio.sleep(delay)
-            else:
-                nxt = time.monotonic()
+        async for _ in ticks(self.core.period):
             self.core.advance(time.monotonic())
 
     async def stop(self) -> None:
