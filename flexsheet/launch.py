@@ -138,6 +138,9 @@ class NodeSpec(BaseModel):
     respawn: RespawnSpec = Field(default_factory=RespawnSpec)
     required: bool = False
     nice: int = Field(default=0, ge=-20, le=19, description="process niceness (negative needs root)")
+    rt_priority: int = Field(default=0, ge=0, le=90,
+                             description="SCHED_FIFO priority for a hard-periodic loop (needs root/CAP_SYS_NICE; "
+                                         "0 = normal scheduling; Linux RT throttling keeps 5 % for the rest)")
 
     @field_validator("type")
     @classmethod
@@ -277,7 +280,7 @@ def node_config(lf: LaunchFile, name: str, out: str | None = None, overrides: di
                       heartbeat_period=lf.heartbeat_period, curve=curve_config(lf, spec.host))
 
 
-def _child_setup(nice: int):
+def _child_setup(nice: int, rt_priority: int = 0):
     def setup() -> None:  # runs in the child between fork and exec
         try:
             ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
@@ -287,6 +290,11 @@ def _child_setup(nice: int):
             try:
                 os.nice(nice)
             except OSError:  # negative niceness without root: run at the default priority
+                pass
+        if rt_priority:
+            try:
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
+            except (OSError, AttributeError):  # no privilege: normal scheduling
                 pass
     return setup
 
@@ -339,7 +347,7 @@ class Supervisor:
             env["FLEXSHEET_OUT"] = self.out
         child.proc = await asyncio.create_subprocess_exec(
             *self._cmd(child), stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
-            stdin=asyncio.subprocess.DEVNULL, env=env, start_new_session=True, preexec_fn=_child_setup(child.spec.nice))
+            stdin=asyncio.subprocess.DEVNULL, env=env, start_new_session=True, preexec_fn=_child_setup(child.spec.nice, child.spec.rt_priority))
 
     async def _pump(self, child: _Child) -> None:
         assert child.proc is not None and child.proc.stdout is not None
