@@ -31,7 +31,6 @@ import argparse
 import asyncio
 import json
 import os
-import re
 import socket
 import subprocess
 import sys
@@ -42,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from messages import topics as T
+from messages.samples import sample_fields
 
 #: producing node → its topics (as in launch/sim.yaml)
 GROUPS: dict[str, list[str]] = {
@@ -63,21 +63,6 @@ SHAPES: dict[tuple[str, str], tuple[int, ...]] = {
     ("StereoCalibration", "D1"): (5,), ("StereoCalibration", "D2"): (5,),
 }
 RECORDED = [t.name for t in T.ALL if t.name != T.STEREO.name]
-_ND = re.compile(r"\[ndarray dtype=(\S+) shape=(\S+|\([^)]*\))\]")
-
-
-def _array_spec(info) -> tuple[str | None, tuple[int | None, ...] | None] | None:
-    for m in info.metadata:
-        desc = getattr(m, "json_schema", {}) or {}
-        hit = _ND.search(desc.get("description", "")) if isinstance(desc, dict) else None
-        if hit:
-            dtype = None if hit.group(1) == "any" else hit.group(1)
-            shape = None if hit.group(2) == "any" else tuple(
-                None if s.strip() == "N" else int(s) for s in hit.group(2).strip("()").split(",") if s.strip())
-            return dtype, shape
-    return None
-
-
 def _image(shape: tuple[int, ...], rng: np.random.Generator, random: bool) -> np.ndarray:
     if random:
         return rng.integers(0, 256, shape).astype(np.uint8)
@@ -99,36 +84,8 @@ def payload_fields(topic_name: str, seed: int = 0, random_images: bool = False) 
     for an unknown topic and ``TypeError`` for a field kind it cannot fill.
     """
     cls = T.BY_NAME[topic_name].type
-    rng = np.random.default_rng(seed)
-    kw: dict = {}
-    for name, info in cls.model_fields.items():
-        if name == "header":
-            continue
-        spec = _array_spec(info)
-        if spec is not None:
-            dtype, shape = spec
-            shape = SHAPES.get((cls.__name__, name)) or tuple(2 if s is None else s for s in (shape or (3,)))
-            dt = np.dtype(dtype or "float64")
-            if dt == np.uint8 and len(shape) >= 2:
-                kw[name] = _image(shape, rng, random_images)
-            elif dt.kind in "iu":
-                hi = 255 if dt == np.uint8 else 500
-                kw[name] = rng.integers(0, hi, shape).astype(dt)
-            else:
-                kw[name] = rng.uniform(0.1, 0.9, shape).astype(dt)
-        elif info.is_required():
-            ann = info.annotation
-            pattern = next((getattr(m, "pattern", None) for m in info.metadata if getattr(m, "pattern", None)), None)
-            if ann is bool:
-                kw[name] = True
-            elif ann is float:
-                kw[name] = 0.5
-            elif ann is int:
-                kw[name] = 1
-            elif ann is str:
-                kw[name] = "left" if pattern and "left" in pattern else "ok"
-            else:
-                raise TypeError(f"{cls.__name__}.{name}: no load payload for {ann}")
+    shapes = {field: shape for (owner, field), shape in SHAPES.items() if owner == cls.__name__}
+    kw = sample_fields(cls, seed, shapes=shapes, image=lambda shape, rng: _image(shape, rng, random_images))
     if cls.__name__ == "ArmTarget" or cls.__name__ == "ArmJointState":
         kw["arm"] = "right" if "right" in topic_name else "left"
     return kw

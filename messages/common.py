@@ -11,12 +11,13 @@ Units are SI (m, rad, s, N) everywhere; frames are named in ``frame_id`` and in 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Annotated, Any, ClassVar
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, PlainSerializer, PlainValidator, WithJsonSchema
 
-__all__ = ["Header", "Message", "ndarray", "check_finite"]
+__all__ = ["Header", "Message", "ndarray", "check_finite", "ArraySpec", "array_spec"]
 
 #: frame name of the world frame: origin at the centre of the sheet in its home pose (the paper's
 #: imaginary screen), +x toward the user (screen normal n_o), +y to the user's left, +z up.
@@ -61,6 +62,19 @@ def _array_validator(dtype: str | None, shape: tuple[int | None, ...] | None):
     return validate
 
 
+@dataclass(frozen=True)
+class ArraySpec:
+    """The declared dtype (None: any) and shape (None entries: free; None: any) of an :func:`ndarray` field."""
+
+    dtype: str | None
+    shape: tuple[int | None, ...] | None
+
+
+def array_spec(field_info: Any) -> ArraySpec | None:
+    """The :class:`ArraySpec` of a pydantic ``FieldInfo`` declared with :func:`ndarray`, else None."""
+    return next((m for m in field_info.metadata if isinstance(m, ArraySpec)), None)
+
+
 def _fmt(shape: tuple[int | None, ...]) -> str:
     return "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
 
@@ -92,6 +106,7 @@ def ndarray(dtype: str | None, shape: tuple[int | None, ...] | None = None, desc
         PlainValidator(_array_validator(dtype, shape)),
         PlainSerializer(lambda a: a.tolist(), when_used="json"),
         WithJsonSchema(schema),
+        ArraySpec(dtype, tuple(shape) if shape is not None else None),
     ]
 
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 import collections
 import contextlib
 import math
-import re
 import signal
 import struct
 import tracemalloc
@@ -33,6 +32,8 @@ from pydantic import BaseModel
 from flexsheet.codec import DecodeError, decode, decode_any, encode, peek_schema
 from messages import Header, Message
 from messages import topics as T
+from messages.common import array_spec
+from messages.samples import sample_fields
 
 FUZZ = settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow],
                 derandomize=False, database=None)
@@ -41,57 +42,15 @@ HANG_S = 20  # a single decode taking this long is a hang (generous: 2 busy core
 
 
 # ---------------------------------------------------------------------------------------------- samples
-_ND = re.compile(r"\[ndarray dtype=(\S+) shape=(\S+|\([^)]*\))\]")
-
-
-def _array_spec(info) -> tuple[str, tuple[int | None, ...] | None] | None:
-    for m in info.metadata:
-        desc = getattr(m, "json_schema", {}) or {}
-        hit = _ND.search(desc.get("description", "")) if isinstance(desc, dict) else None
-        if hit:
-            dtype = None if hit.group(1) == "any" else hit.group(1)
-            shape = None if hit.group(2) == "any" else tuple(
-                None if s.strip() == "N" else int(s) for s in hit.group(2).strip("()").split(",") if s.strip())
-            return dtype, shape
-    return None
-
-
 def sample(cls: type[Message], seed: int = 0) -> Message:
-    """A valid instance of ``cls`` built from its field declarations (free dims = 2; arrays filled with
-    small finite values), so the fuzz follows the message contract as it changes."""
-    rng = np.random.default_rng(seed)
-    kw: dict = {}
-    for name, info in cls.model_fields.items():
-        spec = _array_spec(info)
-        if name == "header":
-            kw[name] = Header(stamp=1000.0 + seed, frame_id="display", seq=seed)
-        elif spec is not None:
-            dtype, shape = spec
-            shape = tuple(2 if s is None else s for s in (shape or (3,)))
-            if cls.__name__ == "ObjectDeformation" and name == "faces":
-                kw[name] = np.zeros(shape, np.int32)
-            else:
-                kw[name] = (rng.uniform(0.1, 0.9, shape) * (255 if np.dtype(dtype or "f8").kind in "iu" else 1)
-                            ).astype(dtype or "float64")
-        elif info.is_required():
-            ann = info.annotation
-            pattern = next((getattr(m, "pattern", None) for m in info.metadata if getattr(m, "pattern", None)), None)
-            if ann is bool:
-                kw[name] = True
-            elif ann is float:
-                kw[name] = 0.5
-            elif ann is int:
-                kw[name] = 1
-            elif ann is str:
-                kw[name] = "left" if pattern and "left" in pattern else "ok"
-            else:  # pragma: no cover - a new field kind: extend the builder
-                raise TypeError(f"{cls.__name__}.{name}: no sample for {ann}")
-    return cls(**kw)
+    """A valid instance of ``cls`` built from its field declarations (:func:`messages.samples.sample_fields`),
+    so the fuzz follows the message contract as it changes."""
+    return cls(header=Header(stamp=1000.0 + seed, frame_id="display", seq=seed), **sample_fields(cls, seed))
 
 
 TOPICS = list(T.ALL)
 SAMPLES = {t.name: encode(t.name, sample(t.type)) for t in TOPICS}
-ARRAY_FIELDS = {t.name: [n for n, i in t.type.model_fields.items() if _array_spec(i)] for t in TOPICS}
+ARRAY_FIELDS = {t.name: [n for n, i in t.type.model_fields.items() if array_spec(i)] for t in TOPICS}
 
 
 # ---------------------------------------------------------------------------------------------- oracle
