@@ -277,11 +277,12 @@ class ArmStream:
             elif delay < -self.period:
                 nxt = time.monotonic()
             await self.cycle(nxt)
-            if self.connected and self.client is not None:
-                try:
-                    await self._write_command()
-                except (TimeoutError, ModbusException, OSError) as exc:
-                    self._lost(type(exc).__name__)
+            async with self._io:   # never two requests in flight on one client (refresh() writes too)
+                if self.connected and self.client is not None:
+                    try:
+                        await self._write_command()
+                    except (TimeoutError, ModbusException, OSError) as exc:
+                        self._lost(type(exc).__name__)
             nxt += self.period
             done += 1
 
