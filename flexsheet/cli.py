@@ -15,7 +15,7 @@ from pathlib import Path
 
 import yaml
 
-from . import registry
+from flexsheet import registry
 
 DEFAULT_LAUNCH = "launch/sim.yaml"
 
@@ -47,8 +47,8 @@ def _setup_logging(name: str = "") -> None:
 def cmd_run(args: argparse.Namespace) -> int:
     from pydantic import ValidationError
 
-    from .launch import LaunchError, load_launch, node_config
-    from .node import NodeConfig
+    from flexsheet.runtime.launch import LaunchError, load_launch, node_config
+    from flexsheet.runtime.node import NodeConfig
 
     if args.node_type not in registry.NODES:
         print(f"flexsheet run: unknown node type {args.node_type!r}; known: {', '.join(sorted(registry.NODES))}",
@@ -74,7 +74,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"flexsheet run {config.name}: param '{'.'.join(map(str, err['loc']))}': {err['msg']} "
               f"(value {err.get('input')!r})", file=sys.stderr)
         return 2
-    from .transport import TransportError
+    from flexsheet.runtime.transport import TransportError
     try:
         asyncio.run(node.run())
     except TransportError as exc:
@@ -85,7 +85,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 # ----------------------------------------------------------------------------------------------- launch
 def cmd_launch(args: argparse.Namespace) -> int:
-    from .launch import LaunchError, Supervisor, load_launch
+    from flexsheet.runtime.launch import LaunchError, Supervisor, load_launch
 
     try:
         lf = load_launch(args.file)
@@ -131,14 +131,14 @@ def cmd_keys(args: argparse.Namespace) -> int:
 
 def _tool(name: str):
     def call(args: argparse.Namespace) -> int:
-        from . import tools
+        from flexsheet.runtime import tools
         return getattr(tools, name)(args)
     return call
 
 
 def _bag(name: str):
     def call(args: argparse.Namespace) -> int:
-        from . import bag
+        from flexsheet.runtime import bag
         return getattr(bag, name)(args)
     return call
 

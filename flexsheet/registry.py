@@ -1,7 +1,7 @@
 """Where the CLI finds node types, experiments, benchmarks and calibration commands.
 
 Each entry is ``"module:attribute"`` and is imported lazily, so ``flexsheet --help`` stays fast and a
-broken optional module only breaks its own subcommand. Node entries name a :class:`flexsheet.node.Node`
+broken optional module only breaks its own subcommand. Node entries name a :class:`flexsheet.runtime.node.Node`
 subclass; experiment, bench and calibrate entries name a ``main(argv: list[str]) -> int`` function that
 parses its own arguments with argparse (its ``--help`` shows a working example).
 """
@@ -16,35 +16,35 @@ NODES: dict[str, str] = {
     "triangulator": "nodes.triangulator.node:TriangulatorNode",
     "planner": "nodes.planner.node:PlannerNode",
     "arm_bridge": "nodes.arm_bridge.node:ArmBridgeNode",
-    "arm_controller_sim": "nodes.arm_bridge.controller_sim:ArmControllerSimNode",
+    "arm_controller_sim": "nodes.arm_controller_sim.node:ArmControllerSimNode",
     "fem": "nodes.fem.node:FemNode",
     "renderer": "nodes.renderer.node:RendererNode",
     "world": "nodes.world.node:WorldNode",
-    "recorder": "flexsheet.bag:RecorderNode",
-    "player": "flexsheet.bag:PlayerNode",
-    "talker": "flexsheet.demo:TalkerNode",
-    "listener": "flexsheet.demo:ListenerNode",
+    "recorder": "flexsheet.runtime.bag:RecorderNode",
+    "player": "flexsheet.runtime.bag:PlayerNode",
+    "talker": "flexsheet.runtime.demo:TalkerNode",
+    "listener": "flexsheet.runtime.demo:ListenerNode",
 }
 
 EXPERIMENTS: dict[str, str] = {
-    "triangulation": "nodes.triangulator.experiment:main",
-    "stroke": "nodes.planner.experiment:main",
-    "fem": "nodes.fem.experiment:main",
-    "correction": "nodes.renderer.experiment:main",
+    "triangulation": "flexsheet.experiments.triangulation:main",
+    "stroke": "flexsheet.experiments.stroke:main",
+    "fem": "flexsheet.experiments.fem:main",
+    "correction": "flexsheet.experiments.correction:main",
 }
 
 BENCHES: dict[str, str] = {
-    "transport": "flexsheet.bench_transport:main",
+    "transport": "flexsheet.runtime.bench_transport:main",
     "vision": "nodes.triangulator.bench:main",
     "planner": "nodes.planner.bench:main",
-    "arm": "nodes.arm_bridge.bench:main",
+    "arm": "flexsheet.experiments.bench_arm:main",
     "fem": "nodes.fem.bench:main",
     "render": "nodes.renderer.bench:main",
-    "load": "flexsheet.bench_load:main",
+    "load": "flexsheet.runtime.bench_load:main",
 }
 
 CALIBRATE: dict[str, str] = {
-    "stereo": "nodes.triangulator.calibrate:main",
+    "stereo": "flexsheet.model.calibration:main",
 }
 
 

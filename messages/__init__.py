@@ -1,14 +1,14 @@
 """flexsheet's wire contract: one strict pydantic model per topic (see docs/messages.md)."""
 
-from .arm import ArmJointState
-from .common import DISPLAY_FRAME, Header, Message, check_finite, ndarray
-from .diagnostics import Heartbeat, TopicStats
-from .fem import ObjectDeformation
-from .render import RenderedFrame
-from .surface import ArmTarget, SheetTarget
-from .topics import Topic
-from .vision import Fingertip, StereoCalibration, StereoFrame
-from .world import FingerTruth, SheetState
+from messages.arm import ArmJointState
+from messages.common import DISPLAY_FRAME, Header, Message, check_finite, ndarray
+from messages.diagnostics import Heartbeat, TopicStats
+from messages.fem import ObjectDeformation
+from messages.render import RenderedFrame
+from messages.surface import ArmTarget, SheetTarget
+from messages.topics import Topic
+from messages.vision import Fingertip, StereoCalibration, StereoFrame
+from messages.world import FingerTruth, SheetState
 
 MESSAGE_TYPES: dict[str, type[Message]] = {
     cls.SCHEMA: cls

@@ -3,7 +3,7 @@
 Every message is a frozen, strict pydantic v2 model (``frozen=True, extra="forbid", strict=True``) that
 carries a :class:`Header` and two class constants, ``SCHEMA`` (a stable name such as
 ``"flexsheet/Fingertip"``) and ``VERSION`` (an integer bumped on any incompatible change).  numpy arrays
-are declared with :func:`ndarray` and travel as raw buffers (see :mod:`flexsheet.codec`), never as lists.
+are declared with :func:`ndarray` and travel as raw buffers (see :mod:`flexsheet.runtime.codec`), never as lists.
 
 Units are SI (m, rad, s, N) everywhere; frames are named in ``frame_id`` and in field docs.
 """
@@ -91,7 +91,7 @@ def ndarray(dtype: str | None, shape: tuple[int | None, ...] | None = None, desc
 
     The field validates ``isinstance(ndarray)``, dtype and shape (raising ``ValueError`` with expected vs
     got), serialises to nested lists in JSON mode (used only by ``bag export``), and advertises a JSON
-    schema of nested arrays of numbers. On the wire it travels as a raw buffer (:mod:`flexsheet.codec`).
+    schema of nested arrays of numbers. On the wire it travels as a raw buffer (:mod:`flexsheet.runtime.codec`).
     """
     depth = len(shape) if shape is not None else 1
     item: dict[str, Any] = {"type": "integer" if dtype and np.dtype(dtype).kind in "iub" else "number"}
@@ -126,7 +126,7 @@ class Message(BaseModel):
     or inf is rejected with an error naming the field.
 
     Subclasses set ``SCHEMA`` (str) and ``VERSION`` (int). A receiver that gets another schema or version on
-    a topic rejects the message with one log line and counts it in diagnostics (:mod:`flexsheet.codec`).
+    a topic rejects the message with one log line and counts it in diagnostics (:mod:`flexsheet.runtime.codec`).
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid", strict=True, arbitrary_types_allowed=True,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from .common import Message
+from messages.common import Message
 
 __all__ = ["TopicStats", "Heartbeat"]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from .common import Message, ndarray
+from messages.common import Message, ndarray
 
 __all__ = ["RenderedFrame"]
 

@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .common import Message, array_spec
+from messages.common import Message, array_spec
 
 __all__ = ["sample_fields"]
 

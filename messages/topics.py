@@ -8,14 +8,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .arm import ArmJointState
-from .common import Message
-from .diagnostics import Heartbeat
-from .fem import ObjectDeformation
-from .render import RenderedFrame
-from .surface import ArmTarget, SheetTarget
-from .vision import Fingertip, StereoCalibration, StereoFrame
-from .world import FingerTruth, SheetState
+from messages.arm import ArmJointState
+from messages.common import Message
+from messages.diagnostics import Heartbeat
+from messages.fem import ObjectDeformation
+from messages.render import RenderedFrame
+from messages.surface import ArmTarget, SheetTarget
+from messages.vision import Fingertip, StereoCalibration, StereoFrame
+from messages.world import FingerTruth, SheetState
 
 
 @dataclass(frozen=True)

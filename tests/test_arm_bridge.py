@@ -7,14 +7,14 @@ import time
 import numpy as np
 from pymodbus.client import AsyncModbusTcpClient
 
-from flexsheet import scene
-from flexsheet.testing import NodeHarness
+from flexsheet.model import scene
+from flexsheet.model.kinematics import QD_MAX, home_joints
+from flexsheet.runtime.testing import NodeHarness
 from messages import ArmTarget, Header, topics
-from nodes.arm_bridge import registers as reg
-from nodes.arm_bridge.controller import ControllerCore
-from nodes.arm_bridge.controller_sim import ControllerTwin
-from nodes.arm_bridge.kinematics import QD_MAX, home_joints
+from messages import registers as reg
 from nodes.arm_bridge.node import ArmBridgeNode
+from nodes.arm_controller_sim.controller import ControllerCore
+from nodes.arm_controller_sim.node import ControllerTwin
 
 R_CYL = scene.CYLINDER_RADIUS
 SPEED_SCALE = 0.5     # bridge default

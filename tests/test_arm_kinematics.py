@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from flexsheet import scene
-from nodes.arm_bridge.kinematics import (
+from flexsheet.model import scene
+from flexsheet.model.kinematics import (
     LEFT_BASE,
     Q_LOWER,
     Q_UPPER,

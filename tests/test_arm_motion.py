@@ -2,9 +2,9 @@
 
 import numpy as np
 
+from flexsheet.model.kinematics import Q_HOME, Q_LOWER, Q_UPPER, QD_MAX
 from nodes.arm_bridge.interp import StreamLimiter
-from nodes.arm_bridge.kinematics import Q_HOME, Q_LOWER, Q_UPPER, QD_MAX
-from nodes.arm_bridge.servo import JointServo, ServoParams
+from nodes.arm_controller_sim.servo import JointServo, ServoParams
 
 T = 0.0071
 

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from nodes.arm_bridge import registers as reg
-from nodes.arm_bridge.controller import ControllerCore, WriteRejected
-from nodes.arm_bridge.kinematics import Q_HOME, Q_LOWER, Q_UPPER
+from flexsheet.model.kinematics import Q_HOME, Q_LOWER, Q_UPPER
+from messages import registers as reg
+from nodes.arm_controller_sim.controller import ControllerCore, WriteRejected
 
 
 def test_word_order_is_high_word_first():

@@ -42,8 +42,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from flexsheet.bag import BagSummary, bag_info, read_bag  # noqa: E402
-from flexsheet.codec import decode_any  # noqa: E402
+from flexsheet.runtime.bag import BagSummary, bag_info, read_bag  # noqa: E402
+from flexsheet.runtime.codec import decode_any  # noqa: E402
 
 #: kill order, in groups killed together (nodes of different chains): the recorder first (see module doc),
 #: the slow-to-start FEM solver with the renderer and camera, the triangulator, the planner, then one arm's
@@ -274,7 +274,7 @@ def test_the_recording_loses_only_the_dead_nodes_own_messages(faults):
 
 
 def _step_limit() -> np.ndarray:
-    from nodes.arm_bridge.kinematics import QD_MAX
+    from flexsheet.model.kinematics import QD_MAX
     from nodes.arm_bridge.node import ArmBridgeParams
 
     p = ArmBridgeParams()

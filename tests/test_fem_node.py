@@ -19,7 +19,7 @@ def _tip(pos, valid=True, stamp=1.0):
 
 def test_node_deforms_and_rejects_bad_input():
     async def scenario():
-        async with __import__("flexsheet.testing", fromlist=["NodeHarness"]).NodeHarness(FemNode, params=PARAMS) as h:
+        async with __import__("flexsheet.runtime.testing", fromlist=["NodeHarness"]).NodeHarness(FemNode, params=PARAMS) as h:
             h.inject(topics.FINGERTIP, _tip([-0.005, 0.0, 0.0], stamp=12.5))
             out = await h.wait_for(topics.DEFORMATION, n=1, timeout=20.0)
             d = out[-1]

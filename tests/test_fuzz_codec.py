@@ -1,6 +1,6 @@
 """Hostile input against every message decoder (issue 9, item 2): property-based fuzzing with hypothesis.
 
-Targets: :func:`flexsheet.codec.decode` for every topic of ``messages.topics.ALL``, :func:`decode_any` and
+Targets: :func:`flexsheet.runtime.codec.decode` for every topic of ``messages.topics.ALL``, :func:`decode_any` and
 :func:`peek_schema`. Inputs: random bytes, truncated frames, valid envelopes with mutated fields (wrong
 types, NaN/inf, huge or negative numbers, missing/extra keys), schema and version mismatches (``True`` and
 ``1.0`` are not version 1), hostile array descriptors (huge, negative-as-uint64 and zero dims, 40-D
@@ -29,7 +29,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pydantic import BaseModel
 
-from flexsheet.codec import DecodeError, decode, decode_any, encode, peek_schema
+from flexsheet.runtime.codec import DecodeError, decode, decode_any, encode, peek_schema
 from messages import Header, Message
 from messages import topics as T
 from messages.common import array_spec

@@ -1,9 +1,9 @@
 """Hostile input for the stereo calibration loader and the Modbus register decoder (issue 9, item 2).
 
-* :func:`nodes.triangulator.calibrate.load_yaml`: random bytes, valid OpenCV YAML with mutated numbers
+* :func:`flexsheet.model.calibration.load_yaml`: random bytes, valid OpenCV YAML with mutated numbers
   (NaN/inf, huge, negative, zero), wrong shapes, missing keys. Contract (its docstring): ``ValueError``
   naming the file and key, or a calibration with finite values of the documented shapes.
-* :mod:`nodes.arm_bridge.registers`: register images of any length and content (negative, > 65535,
+* :mod:`messages.registers`: register images of any length and content (negative, > 65535,
   floats, bools, None, strings, numpy scalars) and wrong container types. Contract: ``ValueError`` naming
   the register, or a decoded state equal to what was encoded.
 
@@ -24,8 +24,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from nodes.arm_bridge import registers as reg
-from nodes.triangulator.calibrate import load_yaml, write_yaml
+from flexsheet.model.calibration import load_yaml, write_yaml
+from messages import registers as reg
 
 FUZZ = settings(max_examples=60, deadline=None, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
@@ -140,7 +140,7 @@ def test_calibration_wrong_shapes_and_missing_keys(tmp_path):
         assert str(p) in out or "not found" in out
 
 
-CALIB_BUGS = {  # nodes/triangulator/calibrate.py load_yaml: reproducers of contract violations found by fuzzing
+CALIB_BUGS = {  # flexsheet/model/calibration.py load_yaml: reproducers of contract violations found by fuzzing
     "garbage bytes -> SystemError from cv2.FileStorage": b"\x00\xff garbage",
     "empty file -> SystemError from cv2.FileStorage": b"",
     "image_width .inf -> OverflowError": ("image_width: 640", "image_width: .inf"),
@@ -249,7 +249,7 @@ def test_register_wrong_containers_rejected():
 
 HEAP_REPRO = """
 import numpy as np
-from nodes.triangulator.calibrate import load_yaml, write_yaml
+from flexsheet.model.calibration import load_yaml, write_yaml
 K = np.array([[800.0, 0, 320], [0, 800.0, 256], [0, 0, 1]])
 write_yaml("{d}/good.yaml", dict(image_size=(640, 512), K1=K, D1=np.zeros(5), K2=K, D2=np.zeros(5), R=np.eye(3),
                                  T=np.array([-0.1, 0, 0])))

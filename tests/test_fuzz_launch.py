@@ -1,4 +1,4 @@
-"""Hostile launch files (issue 9, item 2): :func:`flexsheet.launch.load_launch` must give a
+"""Hostile launch files (issue 9, item 2): :func:`flexsheet.runtime.launch.load_launch` must give a
 :class:`LaunchError` naming the file (and the key where one is at fault) or a valid graph — never another
 exception type, never a hang. Inputs: random bytes, non-UTF-8, random YAML documents, valid files with
 mutated keys (wrong types, NaN/inf, huge/negative numbers), alias bombs, over-deep nesting, duplicate keys.
@@ -17,7 +17,7 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from flexsheet.launch import LaunchError, load_launch
+from flexsheet.runtime.launch import LaunchError, load_launch
 
 ROOT = Path(__file__).resolve().parents[1]
 FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow,

@@ -1,4 +1,4 @@
-"""Hostile frames into running nodes (issue 9, item 2) through :class:`flexsheet.testing.NodeHarness`.
+"""Hostile frames into running nodes (issue 9, item 2) through :class:`flexsheet.runtime.testing.NodeHarness`.
 
 For the triangulator, planner and FEM nodes (and the renderer when its node module exists), every subscribed
 topic gets a batch of fuzzed frame sets (random bytes, truncated meta, cut array buffers, extra/dropped
@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 from test_fuzz_codec import sample  # noqa: E402 - the contract-driven sample builder (tests/ is on sys.path)
 
-from flexsheet.codec import encode
-from flexsheet.testing import NodeHarness
+from flexsheet.runtime.codec import encode
+from flexsheet.runtime.testing import NodeHarness
 from messages import Fingertip, Header, topics
 
 COUNTS: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
@@ -150,9 +150,15 @@ def test_planner_survives_fuzz():
 
 
 def test_triangulator_survives_fuzz():
+    from flexsheet.model.calibration import to_message
+    from flexsheet.model.camera_sim import (
+        DEFAULT_CAMERA_POSITION,
+        SimConfig,
+        StereoRenderer,
+        camera_model,
+        look_at,
+    )
     from messages import StereoFrame
-    from nodes.camera.sim import DEFAULT_CAMERA_POSITION, SimConfig, StereoRenderer, camera_model, look_at
-    from nodes.triangulator.calibrate import to_message
     from nodes.triangulator.node import TriangulatorNode
 
     calib, T_dc = camera_model("ximea"), look_at(DEFAULT_CAMERA_POSITION)

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flexsheet.bag import bag_info, read_bag
-from flexsheet.codec import decode_any
+from flexsheet.runtime.bag import bag_info, read_bag
+from flexsheet.runtime.codec import decode_any
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = "world.script=[{mode: stroke, moving_time: 10}, {mode: stroke_push, moving_time: 4, push_depth: 0.01}]"

@@ -12,8 +12,8 @@ import time
 import numpy as np
 import pytest
 
-from flexsheet.bench_load import payload_fields, rss_mb, slope_mb_per_min
-from flexsheet.node import Node, NodeConfig, QoS
+from flexsheet.runtime.bench_load import payload_fields, rss_mb, slope_mb_per_min
+from flexsheet.runtime.node import Node, NodeConfig, QoS
 from messages import topics as T
 
 RATE = 2 * T.STEREO.nominal_hz          # 96 Hz of 655 kB stereo frames: 63 MB/s
@@ -99,7 +99,7 @@ def test_slope_fit_and_rss_reader():
 
 
 def test_load_payloads_have_the_real_sizes():
-    from flexsheet.codec import encode
+    from flexsheet.runtime.codec import encode
     from messages import Header
 
     sizes = {}

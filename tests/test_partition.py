@@ -18,8 +18,8 @@ import time
 import numpy as np
 from netns_util import HostLaunch, set_cable
 
-from flexsheet.bag import read_bag
-from flexsheet.codec import decode_any
+from flexsheet.runtime.bag import read_bag
+from flexsheet.runtime.codec import decode_any
 
 CUT_S = 2.0
 STEP_TOLERANCE = 1.5      # the controller's own refusal threshold (× qd_max · period)
@@ -54,7 +54,7 @@ def test_a_2s_cut_to_arm1_holds_that_arm_and_it_recovers_without_a_jump(netns, t
         for h in (main, arm1, arm2):
             h.stop()
 
-    from nodes.arm_bridge.kinematics import QD_MAX
+    from flexsheet.model.kinematics import QD_MAX
     from nodes.arm_bridge.node import ArmBridgeParams
 
     p = ArmBridgeParams()

@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from flexsheet.testing import NodeHarness
+from flexsheet.runtime.testing import NodeHarness
 from messages import Fingertip, Header, ObjectDeformation, topics
 from nodes.planner.node import PlannerNode, PlannerParams
 
@@ -68,7 +68,7 @@ def test_params_validate():
 
 
 def test_experiment_quick_writes_summary(tmp_path, monkeypatch):
-    from nodes.planner import experiment
+    from flexsheet.experiments import stroke as experiment
 
     monkeypatch.setattr(experiment, "_plot", lambda *a, **k: None)   # chart drawing is not under test
     assert experiment.main(["--out", str(tmp_path), "--seeds", "1", "--quick"]) == 0
@@ -87,7 +87,7 @@ def test_experiment_quick_writes_summary(tmp_path, monkeypatch):
 
 
 def test_alpha_beta_gains_known_values():
-    from nodes.planner.experiment import alpha_beta_gains
+    from flexsheet.experiments.stroke import alpha_beta_gains
 
     a, b = alpha_beta_gains(1.0)
     # Kalata (1984): λ = 1 → r = (5 − 3)/4 = 0.5, α = 0.75, β = 2·1.25 − 4·0.5 = 0.5

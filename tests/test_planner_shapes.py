@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from flexsheet import scene
-from nodes.planner.shapes import Cylinder, MeshShape, RoundedBox, Shape, make_shape, paper_cylinder
-from nodes.planner.tension import (
+from flexsheet.model import scene
+from flexsheet.model.shapes import Cylinder, MeshShape, RoundedBox, Shape, make_shape, paper_cylinder
+from flexsheet.model.tension import (
     SheetMaterial,
     clamp_force,
     gent_modulus,
@@ -16,7 +16,7 @@ from nodes.planner.tension import (
     stretch_for_stiffness,
     tension,
 )
-from nodes.planner.vec import norm, sub
+from flexsheet.model.vec import norm, sub
 
 R = scene.CYLINDER_RADIUS
 

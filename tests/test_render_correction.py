@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from flexsheet import scene
+from flexsheet.model import scene
+from flexsheet.model.sheet import Membrane, SheetSurface
 from nodes.renderer.correction import (
     _triangles,
     choose_model,
@@ -15,7 +16,6 @@ from nodes.renderer.correction import (
     predict_model_errors,
     project_vertices,
 )
-from nodes.renderer.membrane import Membrane, SheetSurface
 
 COM = dict(eye=scene.EYE, projector=scene.PROJECTOR, screen_point=scene.SCREEN_POINT,
            screen_normal=scene.SCREEN_NORMAL)

@@ -3,11 +3,12 @@
 import numpy as np
 import pytest
 
-from flexsheet import scene
+from flexsheet.experiments.measurement import MeasurementCamera, measure_sizes
+from flexsheet.model import scene
+from flexsheet.model.projector import Projector
+from flexsheet.model.sheet import Membrane, SheetSurface
 from nodes.renderer.correction import correct_vertices, correct_vertices_fine, correct_vertices_pushed
-from nodes.renderer.measurement import MeasurementCamera, measure_sizes
-from nodes.renderer.membrane import Membrane, SheetSurface
-from nodes.renderer.scene import Projector, StereoRenderer, cylinder_mesh
+from nodes.renderer.scene import StereoRenderer, cylinder_mesh
 
 COM = dict(projector=scene.PROJECTOR, screen_point=scene.SCREEN_POINT, screen_normal=scene.SCREEN_NORMAL)
 R = scene.CYLINDER_RADIUS

@@ -12,10 +12,10 @@ import numpy as np
 from conftest import free_port
 from mcap.reader import make_reader
 
-from flexsheet.bag import BagWriter, PlayerNode, RecorderNode, bag_info, export_bag, read_bag
-from flexsheet.codec import decode, encode
-from flexsheet.demo import TalkerNode
-from flexsheet.node import Node, NodeConfig, QoS
+from flexsheet.runtime.bag import BagWriter, PlayerNode, RecorderNode, bag_info, export_bag, read_bag
+from flexsheet.runtime.codec import decode, encode
+from flexsheet.runtime.demo import TalkerNode
+from flexsheet.runtime.node import Node, NodeConfig, QoS
 from messages import Header, StereoCalibration, StereoFrame
 from messages import topics as T
 
@@ -79,7 +79,7 @@ def _stereo(i: int) -> StereoFrame:
 def test_export_opens_with_mcap_reader_and_validates_against_stored_schema(tmp_path):
     from test_runtime_codec import tip
 
-    from flexsheet.demo import TalkerNode  # noqa: F401  (the talker's message type is Fingertip)
+    from flexsheet.runtime.demo import TalkerNode  # noqa: F401  (the talker's message type is Fingertip)
 
     src, dst = tmp_path / "raw.mcap", tmp_path / "json.mcap"
     w = BagWriter(src)

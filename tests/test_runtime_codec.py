@@ -6,7 +6,7 @@ import msgpack
 import numpy as np
 import pytest
 
-from flexsheet.codec import DecodeError, decode, decode_any, encode
+from flexsheet.runtime.codec import DecodeError, decode, decode_any, encode
 from messages import Fingertip, Header, Heartbeat, StereoFrame
 from messages import topics as T
 

@@ -8,14 +8,14 @@ from pathlib import Path
 
 import pytest
 
-from flexsheet import docgen
+from flexsheet.runtime import docgen
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_messages_md_is_up_to_date():
     assert (ROOT / "docs" / "messages.md").read_text() == docgen.render(), \
-        "docs/messages.md is stale: run python -m flexsheet.docgen"
+        "docs/messages.md is stale: run python -m flexsheet.runtime.docgen"
 
 
 @pytest.mark.parametrize("cmd", [[], ["launch"], ["run"], ["topic"], ["node"], ["bag"], ["calibrate"],

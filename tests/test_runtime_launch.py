@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 from conftest import pid_alive
 
-from flexsheet.launch import LaunchError, load_launch
+from flexsheet.runtime.launch import LaunchError, load_launch
 
 
 class Launch:

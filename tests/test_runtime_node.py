@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from flexsheet.codec import encode
-from flexsheet.demo import ListenerNode, TalkerNode
-from flexsheet.node import Node, NodeConfig, QoS
-from flexsheet.testing import NodeHarness
+from flexsheet.runtime.codec import encode
+from flexsheet.runtime.demo import ListenerNode, TalkerNode
+from flexsheet.runtime.node import Node, NodeConfig, QoS
+from flexsheet.runtime.testing import NodeHarness
 from messages import Fingertip, Header, Heartbeat
 from messages import topics as T
 

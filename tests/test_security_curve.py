@@ -12,9 +12,9 @@ import pytest
 import zmq.auth
 from conftest import free_port
 
-from flexsheet.launch import LaunchError, load_launch, node_config
-from flexsheet.node import Node, NodeConfig, QoS
-from flexsheet.transport import CurveConfig
+from flexsheet.runtime.launch import LaunchError, load_launch, node_config
+from flexsheet.runtime.node import Node, NodeConfig, QoS
+from flexsheet.runtime.transport import CurveConfig
 from messages import ArmTarget
 from messages import topics as T
 

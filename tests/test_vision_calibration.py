@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from nodes.triangulator.calibrate import (
+from flexsheet.model.calibration import (
     calibrate_stereo,
     detect_board,
     load_yaml,
@@ -59,7 +59,7 @@ def test_epipolar_constraint_on_real_corners(real_result):
     _, cr = detect_board(right[0], board)
     ul = cv2.undistortPoints(cl.reshape(-1, 1, 2), real_result.K1, real_result.D1, P=real_result.K1).reshape(-1, 2)
     ur = cv2.undistortPoints(cr.reshape(-1, 1, 2), real_result.K2, real_result.D2, P=real_result.K2).reshape(-1, 2)
-    from nodes.triangulator.stereo import StereoModel
+    from flexsheet.model.stereo import StereoModel
     m = StereoModel.from_calib(real_result.as_dict())
     res = m.epipolar_residual(ul, ur)
     assert np.median(res) < 0.3

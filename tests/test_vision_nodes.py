@@ -4,12 +4,18 @@ import asyncio
 
 import numpy as np
 
-from flexsheet.codec import encode
-from flexsheet.testing import NodeHarness
+from flexsheet.model.calibration import to_message
+from flexsheet.model.camera_sim import (
+    DEFAULT_CAMERA_POSITION,
+    SimConfig,
+    StereoRenderer,
+    camera_model,
+    look_at,
+)
+from flexsheet.runtime.codec import encode
+from flexsheet.runtime.testing import NodeHarness
 from messages import FingerTruth, Header, StereoFrame, topics
 from nodes.camera.node import CameraNode
-from nodes.camera.sim import DEFAULT_CAMERA_POSITION, SimConfig, StereoRenderer, camera_model, look_at
-from nodes.triangulator.calibrate import to_message
 from nodes.triangulator.node import TriangulatorNode
 
 CALIB = camera_model("ximea")
@@ -128,7 +134,7 @@ def test_camera_node_falls_back_to_trajectory_bumblebee2():
             assert tuple(cal.image_size) == (640, 480) and abs(cal.K1[0, 0] - 513.5) < 0.1
             assert abs(np.linalg.norm(cal.T) - 0.12) < 1e-9
             f = (await h.wait_for(topics.STEREO, n=2, timeout=3.0))[-1]
-            from nodes.camera.sim import default_trajectory
+            from flexsheet.model.camera_sim import default_trajectory
             from nodes.triangulator.pipeline import FingertipTracker
             res = FingertipTracker(cal).process(f.left, f.right, f.exposure_stamp)
             truth, _ = default_trajectory(f.exposure_stamp - h.node._t0)

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from nodes.camera.sim import bumblebee2_calibration, camera_model
+from flexsheet.model.camera_sim import bumblebee2_calibration, camera_model
+from flexsheet.model.stereo import METHODS, StereoModel
 from nodes.triangulator.predict import ConstantVelocityKF
-from nodes.triangulator.stereo import METHODS, StereoModel
 
 
 @pytest.fixture(params=["ximea", "bumblebee2"])

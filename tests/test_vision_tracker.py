@@ -5,7 +5,13 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from nodes.camera.sim import DEFAULT_CAMERA_POSITION, SimConfig, StereoRenderer, camera_model, look_at
+from flexsheet.model.camera_sim import (
+    DEFAULT_CAMERA_POSITION,
+    SimConfig,
+    StereoRenderer,
+    camera_model,
+    look_at,
+)
 from nodes.triangulator.detect import MarkerDetector
 from nodes.triangulator.pipeline import FingertipTracker, TrackerConfig
 

@@ -28,9 +28,9 @@ import numpy as np
 from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
-from . import registers as reg
-from .interp import StreamLimiter
-from .tracking import TargetTracker
+from messages import registers as reg
+from nodes.arm_bridge.interp import StreamLimiter
+from nodes.arm_bridge.tracking import TargetTracker
 
 __all__ = ["CycleReport", "ArmStream"]
 

@@ -19,13 +19,12 @@ import math
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from flexsheet.node import InputRejected, Node, QoS
+from flexsheet.model.kinematics import LEFT_BASE, Q_LOWER, Q_UPPER, QD_MAX, RIGHT_BASE, ArmKinematics
+from flexsheet.runtime.node import InputRejected, Node, QoS
 from messages import ArmJointState, ArmTarget, topics
-
-from .interp import StreamLimiter
-from .kinematics import LEFT_BASE, Q_LOWER, Q_UPPER, QD_MAX, RIGHT_BASE, ArmKinematics
-from .link import ArmStream, CycleReport
-from .tracking import TargetTracker
+from nodes.arm_bridge.interp import StreamLimiter
+from nodes.arm_bridge.link import ArmStream, CycleReport
+from nodes.arm_bridge.tracking import TargetTracker
 
 __all__ = ["ArmBridgeParams", "ArmBridgeNode"]
 

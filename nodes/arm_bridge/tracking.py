@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kinematics import ArmKinematics, IKResult
+from flexsheet.model.kinematics import ArmKinematics, IKResult
 
 __all__ = ["TargetTracker"]
 

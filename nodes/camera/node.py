@@ -1,7 +1,7 @@
 """Camera node: publishes synchronised raw stereo pairs (mono8) on ``/camera/stereo`` and the latched stereo
 calibration on ``/camera/calibration``.
 
-Sources (param ``source``): ``sim`` — the calibrated twin (:mod:`nodes.camera.sim`) rendering the fingertip
+Sources (param ``source``): ``sim`` — the calibrated twin (:mod:`flexsheet.model.camera_sim`) rendering the fingertip
 marker at the world node's ``/world/finger`` position (extrapolated to the exposure time with its velocity),
 or along a param trajectory when no world node has published for ``truth_timeout_s``; ``device`` —
 ``cv2.VideoCapture`` (:mod:`nodes.camera.device`); ``files`` — a folder of pairs (:mod:`nodes.camera.files`).
@@ -16,11 +16,8 @@ import threading
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from flexsheet.node import Node, QoS
-from messages import FingerTruth, StereoFrame, topics
-from nodes.triangulator.calibrate import load_yaml, to_message
-
-from .sim import (
+from flexsheet.model.calibration import load_yaml, to_message
+from flexsheet.model.camera_sim import (
     DEFAULT_CAMERA_POSITION,
     DEFAULT_LOOK_AT,
     SimConfig,
@@ -29,6 +26,8 @@ from .sim import (
     default_trajectory,
     look_at,
 )
+from flexsheet.runtime.node import Node, QoS
+from messages import FingerTruth, StereoFrame, topics
 
 __all__ = ["CameraParams", "CameraNode"]
 
@@ -101,12 +100,12 @@ class CameraNode(Node):
             self.subscribe(topics.FINGER_TRUTH, self.on_truth, qos=QoS.LATEST)
             self.timer(1.0 / p.rate_hz, self.on_sim_tick)
         elif p.source == "device":
-            from .device import DeviceSource
+            from nodes.camera.device import DeviceSource
 
             self.device = DeviceSource(p.device_left, p.device_right, tuple(calib["image_size"]), p.exposure_s)
             self.timer(1.0 / p.rate_hz, self.on_device_tick)
         else:
-            from .files import FileSource
+            from nodes.camera.files import FileSource
 
             self.files = FileSource(p.files_left, p.files_right, p.files_csv, p.rate_hz)
             self._file_task = asyncio.get_running_loop().create_task(self._play_files())

@@ -16,11 +16,11 @@ import time
 
 import numpy as np
 
-from .choose import choose, load_table
-from .contact import finger_at
-from .material import Material
-from .realtime import RealtimeModel
-from .solver import FemModel, solve_corotational, solve_full
+from nodes.fem.choose import choose, load_table
+from nodes.fem.contact import finger_at
+from nodes.fem.material import Material
+from nodes.fem.realtime import RealtimeModel
+from nodes.fem.solver import FemModel, solve_corotational, solve_full
 
 __all__ = ["main"]
 

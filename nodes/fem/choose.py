@@ -18,10 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .contact import finger_at
-from .material import Material
-from .mesh import MeshSpec, cylinder_mesh
-from .solver import FemModel, solve_full
+from nodes.fem.contact import finger_at
+from nodes.fem.material import Material
+from nodes.fem.mesh import MeshSpec, cylinder_mesh
+from nodes.fem.solver import FemModel, solve_full
 
 __all__ = ["Choice", "evaluate_spec", "choose", "load_table", "visible_mask", "TABLE_PATH", "DEFAULT_SPEC",
            "DEFAULT_ORDER"]

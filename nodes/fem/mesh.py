@@ -2,7 +2,7 @@
 
 Geometry (display frame, m): cylinder of radius R = 0.025·√2 and length 0.12 with its axis along +y through
 O = (−R, 0, 0), so its side surface touches the imaginary screen at x = z = 0 (Furukawa et al. §V, §VI-A;
-:mod:`flexsheet.scene`). The finger pushes from +x.
+:mod:`flexsheet.model.scene`). The finger pushes from +x.
 
 Support (our choice, stated in docs/fem.md): the object rests in a rigid cradle that holds its **back half**:
 every boundary node with x ≤ −R (the half of the side surface and end faces away from the user) is fixed.
@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexsheet.scene import CYLINDER_CENTER, CYLINDER_LENGTH, CYLINDER_RADIUS
+from flexsheet.model.scene import CYLINDER_CENTER, CYLINDER_LENGTH, CYLINDER_RADIUS
 
 __all__ = ["TetMesh", "MeshSpec", "cylinder_mesh", "surface_faces", "write_mesh", "arc_points"]
 

@@ -22,13 +22,12 @@ import time
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from flexsheet.node import InputRejected, Node, QoS
+from flexsheet.runtime.node import InputRejected, Node, QoS
 from messages import Fingertip, ObjectDeformation, topics
-
-from .choose import choose, load_table
-from .material import Material
-from .mesh import MeshSpec
-from .realtime import DEFAULT_CACHE_DIR, RealtimeModel
+from nodes.fem.choose import choose, load_table
+from nodes.fem.material import Material
+from nodes.fem.mesh import MeshSpec
+from nodes.fem.realtime import DEFAULT_CACHE_DIR, RealtimeModel
 
 __all__ = ["FemParams", "FemNode"]
 

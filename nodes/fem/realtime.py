@@ -18,10 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .contact import Finger, finger_at, finger_from_tip
-from .material import Material
-from .mesh import MeshSpec, TetMesh, arc_points, cylinder_mesh
-from .solver import (
+from nodes.fem.contact import Finger, finger_at, finger_from_tip
+from nodes.fem.material import Material
+from nodes.fem.mesh import MeshSpec, TetMesh, arc_points, cylinder_mesh
+from nodes.fem.solver import (
     CapacitanceSolver,
     FemModel,
     OutsideCandidates,

@@ -26,9 +26,9 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .contact import Finger, imposed_displacement
-from .material import Material
-from .mesh import TetMesh
+from nodes.fem.contact import Finger, imposed_displacement
+from nodes.fem.material import Material
+from nodes.fem.mesh import TetMesh
 
 __all__ = ["FemModel", "Solution", "solve_full", "CapacitanceSolver", "solve_corotational", "element_checks",
            "OutsideCandidates", "factor"]

@@ -17,8 +17,8 @@ __all__ = ["measure", "main"]
 def measure(shape_kind: str = "cylinder", n: int = 2000) -> dict[str, float]:
     """Median and p95 µs of :meth:`SurfacePlanner.update` over ``n`` samples of a 48 Hz stroke on
     ``shape_kind`` (a mesh uses a trimesh icosphere), plus the median of ``Shape.project`` alone."""
-    from .shapes import MeshShape, make_shape
-    from .stroke import SurfacePlanner
+    from flexsheet.model.shapes import MeshShape, make_shape
+    from nodes.planner.stroke import SurfacePlanner
 
     if shape_kind == "mesh":
         import trimesh

@@ -7,13 +7,13 @@
   then the change of velocity is bounded by a_max·dt. Within the limits it reaches the target in one
   step, so normal stroking passes through unchanged; a jump is ramped.
 * :class:`ReachModel` — is a clamp position inside a spherical shell around each arm's shoulder (J2)?
-  Bases come from :data:`flexsheet.scene.LEFT_BASE`/``RIGHT_BASE``; J2 is ``shoulder_height`` above the
+  Bases come from :data:`flexsheet.model.scene.LEFT_BASE`/``RIGHT_BASE``; J2 is ``shoulder_height`` above the
   base (0.165 + 0.135 m in ``nodes/arm_bridge/rv1a.urdf``). Default shell 0.32…0.53 m: upper arm 0.250 m
   + forearm 0.184 m + wrist/flange 0.102 m (same URDF) bounds the far side; the near side is where J3
-  reaches its 155° limit (the bases in :mod:`flexsheet.scene` were moved out for that reason). This is a
+  reaches its 155° limit (the bases in :mod:`flexsheet.model.scene` were moved out for that reason). This is a
   workspace screen only — the arm bridge does the real IK and joint limits.
 
-Units: m, rad, s. Vectors are float tuples (see :mod:`nodes.planner.vec`).
+Units: m, rad, s. Vectors are float tuples (see :mod:`flexsheet.model.vec`).
 """
 
 from __future__ import annotations
@@ -21,9 +21,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from flexsheet import scene
-
-from .vec import (
+from flexsheet.model import scene
+from flexsheet.model.vec import (
     Mat,
     Vec,
     axpy,
@@ -141,7 +140,7 @@ class RateLimiter:
 class ReachModel:
     """Spherical-shell workspace of each arm around its shoulder (J2).
 
-    ``left_base``/``right_base``: (x, y, z, yaw) in the display frame (defaults from :mod:`flexsheet.scene`);
+    ``left_base``/``right_base``: (x, y, z, yaw) in the display frame (defaults from :mod:`flexsheet.model.scene`);
     ``shoulder_height`` m above the base; ``reach_min``/``reach_max`` m from J2 to the clamp point.
     """
 

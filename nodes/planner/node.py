@@ -16,14 +16,13 @@ import time
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from flexsheet import scene
-from flexsheet.node import InputRejected, Node, QoS
+from flexsheet.model import scene
+from flexsheet.model.shapes import make_shape
+from flexsheet.model.tension import URETHANE_E, SheetMaterial
+from flexsheet.runtime.node import InputRejected, Node, QoS
 from messages import ArmTarget, Fingertip, ObjectDeformation, SheetTarget, topics
-
-from .limits import MotionLimits, ReachModel
-from .shapes import make_shape
-from .stroke import Plan, PlannerConfig, SurfacePlanner
-from .tension import URETHANE_E, SheetMaterial
+from nodes.planner.limits import MotionLimits, ReachModel
+from nodes.planner.stroke import Plan, PlannerConfig, SurfacePlanner
 
 __all__ = ["PlannerParams", "PlannerNode"]
 
@@ -32,7 +31,7 @@ class PlannerParams(BaseModel):
     """Planner parameters (launch file / ``--param k=v``). SI units, display frame.
 
     ``shape``: cylinder | sphere | box | plane | mesh; ``shape_params``: that shape's keys (see
-    :func:`nodes.planner.shapes.make_shape`; empty = the paper's scene). ``use_prediction``: plan on
+    :func:`flexsheet.model.shapes.make_shape`; empty = the paper's scene). ``use_prediction``: plan on
     ``Fingertip.predicted_position``. ``object_stiffness`` N/m: used when no fresh FEM stiffness
     (``use_fem_stiffness``, ``fem_timeout`` s). The rest map to :class:`PlannerConfig`,
     :class:`SheetMaterial`, :class:`MotionLimits` and :class:`ReachModel`.

@@ -3,7 +3,7 @@
 Paper §V-A and Fig. 7, generalised:
 
 * **Away** (fingertip farther than ``touch_distance`` from the surface): the contact point A is the
-  centre-ray hit (:meth:`nodes.planner.shapes.Shape.project`; closest point for non-convex meshes) and the
+  centre-ray hit (:meth:`flexsheet.model.shapes.Shape.project`; closest point for non-convex meshes) and the
   sheet is commanded to the tangent plane at A, so the finger meets it there. The sheet's in-plane axis
   ``axis_u`` is the reference direction (``u_ref``, +y: the clamp line at home) projected onto the
   tangent plane. A rolled offset left from a previous touch decays with time constant ``recentre_time``.
@@ -17,7 +17,7 @@ Paper §V-A and Fig. 7, generalised:
   coordinates on the sheet.
 * **Pushing**: a fingertip inside the object (negative distance) is projected onto the surface by the same
   rule; the sheet keeps the tangent pose there and the finger depresses it, so stroking and pushing combine.
-* **Compliance**: the stretch comes from :func:`nodes.planner.tension.stretch_for_stiffness` for the
+* **Compliance**: the stretch comes from :func:`flexsheet.model.tension.stretch_for_stiffness` for the
   object's stiffness (FEM topic or param) at the contact's distance from the clamps.
 * **Limits and safety**: the pose passes :class:`nodes.planner.limits.RateLimiter`; clamp points are
   checked by :class:`nodes.planner.limits.ReachModel`.
@@ -47,10 +47,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .limits import MotionLimits, RateLimiter, ReachModel
-from .shapes import Shape
-from .tension import SheetMaterial, TensionResult, _max_stretch, stretch_for_stiffness
-from .vec import (
+from flexsheet.model.shapes import Shape
+from flexsheet.model.tension import SheetMaterial, TensionResult, _max_stretch, stretch_for_stiffness
+from flexsheet.model.vec import (
     Vec,
     axpy,
     cols,
@@ -64,6 +63,7 @@ from .vec import (
     rot_from_cols,
     sub,
 )
+from nodes.planner.limits import MotionLimits, RateLimiter, ReachModel
 
 __all__ = ["PlannerConfig", "Plan", "SurfacePlanner"]
 
@@ -139,7 +139,7 @@ class Plan:
         return np.column_stack([self.normal, self.axis_u, self.axis_v])
 
     def clamp_matrices(self) -> tuple[np.ndarray, np.ndarray]:
-        """Left and right clamp poses T_display_clamp (4, 4), same convention as :func:`flexsheet.scene.clamp_poses`."""
+        """Left and right clamp poses T_display_clamp (4, 4), same convention as :func:`flexsheet.model.scene.clamp_poses`."""
         R = self.rotation()
         out = []
         for p in (self.left, self.right):
@@ -153,7 +153,7 @@ class Plan:
 class SurfacePlanner:
     """Stateful surface planner: feed fingertip samples to :meth:`update`, get :class:`Plan` s.
 
-    ``shape``: a :class:`nodes.planner.shapes.Shape`; ``config``: :class:`PlannerConfig`. The first valid
+    ``shape``: a :class:`flexsheet.model.shapes.Shape`; ``config``: :class:`PlannerConfig`. The first valid
     sample initialises the pose (no ramp). ``last`` is the last safe plan (``None`` before the first).
     """
 
@@ -312,13 +312,13 @@ class SurfacePlanner:
 
 
 def _tension_at(stretch: float, mat: SheetMaterial) -> float:
-    from .tension import tension
+    from flexsheet.model.tension import tension
 
     return tension(stretch, mat)
 
 
 def _stiff_at(stretch: float, mat: SheetMaterial, su: float) -> float:
-    from .tension import stiffness
+    from flexsheet.model.tension import stiffness
 
     try:
         return stiffness(stretch, mat, su)

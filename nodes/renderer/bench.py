@@ -15,10 +15,10 @@ import time
 
 import numpy as np
 
-from flexsheet import scene
-
-from .membrane import Membrane, SheetSurface
-from .scene import Projector, StereoRenderer, cylinder_mesh
+from flexsheet.model import scene
+from flexsheet.model.projector import Projector
+from flexsheet.model.sheet import Membrane, SheetSurface
+from nodes.renderer.scene import StereoRenderer, cylinder_mesh
 
 __all__ = ["main", "time_models", "bench_sheets"]
 

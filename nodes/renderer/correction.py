@@ -12,7 +12,7 @@ A. Three sheet models give C:
 
 * ``flat``:           one plane (r_s, n_s), the pose from the arms (paper §III-C-2);
 * ``four_triangle``:  4 triangles (pushed point, corner i, corner i+1) (paper §III-C-3);
-* ``fine``:           the membrane shape of :mod:`nodes.renderer.membrane` (beyond the paper), C found by
+* ``fine``:           the membrane shape of :mod:`flexsheet.model.sheet` (beyond the paper), C found by
                       Newton's method on the line V–A.
 
 Stability (each case is defined and tested, tests/test_render_correction.py):
@@ -38,7 +38,7 @@ import math
 
 import numpy as np
 
-from .membrane import SheetSurface
+from flexsheet.model.sheet import SheetSurface
 
 __all__ = ["correct_vertices", "correct_vertices_pushed", "correct_vertices_fine", "screen_to_projector",
            "project_vertices", "MODELS", "DEFAULT_MIN_COS", "choose_model", "predict_model_errors",
@@ -306,7 +306,7 @@ def predict_model_errors(depth: float, *, eye, projector, screen_point, screen_n
     imaginary screen as seen from the eye, between where its shifted vertex's light lands on the fine membrane
     and where the eye expects the vertex. Used by :func:`choose_model`. Raises ``ValueError`` on bad input.
     """
-    from .membrane import Membrane
+    from flexsheet.model.sheet import Membrane
 
     if not (math.isfinite(depth) and depth >= 0.0):
         raise ValueError(f"depth must be finite and >= 0, got {depth!r}")

@@ -26,13 +26,13 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from flexsheet import scene
-from flexsheet.node import InputRejected, Node, QoS
+from flexsheet.model import scene
+from flexsheet.model.projector import Projector
+from flexsheet.model.sheet import SheetSurface
+from flexsheet.runtime.node import InputRejected, Node, QoS
 from messages import ArmJointState, Fingertip, ObjectDeformation, RenderedFrame, topics
-
-from .correction import MODELS, _check_screen, choose_model, predict_model_errors
-from .membrane import SheetSurface
-from .scene import Projector, StereoRenderer, cylinder_mesh, vertex_normals
+from nodes.renderer.correction import MODELS, _check_screen, choose_model, predict_model_errors
+from nodes.renderer.scene import StereoRenderer, cylinder_mesh, vertex_normals
 
 __all__ = ["RendererNode", "RendererParams", "check_sheet"]
 

@@ -25,7 +25,8 @@ import time
 import cv2
 import numpy as np
 
-from nodes.camera.sim import (
+from flexsheet.model.calibration import calibrate_stereo, parse_board
+from flexsheet.model.camera_sim import (
     DEFAULT_CAMERA_POSITION,
     SimConfig,
     StereoRenderer,
@@ -34,10 +35,8 @@ from nodes.camera.sim import (
     default_trajectory,
     look_at,
 )
-
-from .calibrate import calibrate_stereo, parse_board
-from .pipeline import FingertipTracker, TrackerConfig
-from .stereo import StereoModel
+from flexsheet.model.stereo import StereoModel
+from nodes.triangulator.pipeline import FingertipTracker, TrackerConfig
 
 __all__ = ["main", "timing", "mc_rms_mm", "real_stereo_rms"]
 

@@ -14,10 +14,9 @@ import threading
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from flexsheet.node import InputRejected, Node, QoS
+from flexsheet.runtime.node import InputRejected, Node, QoS
 from messages import Fingertip, StereoCalibration, StereoFrame, topics
-
-from .pipeline import FingertipTracker, TrackerConfig
+from nodes.triangulator.pipeline import FingertipTracker, TrackerConfig
 
 __all__ = ["TriangulatorParams", "TriangulatorNode"]
 

@@ -8,7 +8,7 @@ Per stereo pair (raw mono8 images of the calibrated size):
    ROI around the last marker position (full frame on loss or at start).
 2. Candidates are undistorted and every left/right pair is checked against the epipolar constraint
    (Sampson distance ≤ ``epipolar_tol_px``); surviving pairs are triangulated
-   (:class:`~nodes.triangulator.stereo.StereoModel`, method ``dlt``/``optimal``/``midpoint``) and must lie
+   (:class:`~flexsheet.model.stereo.StereoModel`, method ``dlt``/``optimal``/``midpoint``) and must lie
    in front of the camera within [``z_min``, ``z_max``] m.
 3. Choice among survivors: with a live track, the one nearest the Kalman prediction; without, the
    strongest — unless a second pair nearly as strong (≥ ``ambiguity_ratio``) lies more than
@@ -31,9 +31,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .detect import MarkerDetector, check_image
-from .predict import ConstantVelocityKF
-from .stereo import METHODS, StereoModel
+from flexsheet.model.stereo import METHODS, StereoModel
+from nodes.triangulator.detect import MarkerDetector, check_image
+from nodes.triangulator.predict import ConstantVelocityKF
 
 __all__ = ["TrackerConfig", "TrackResult", "FingertipTracker"]
 
@@ -103,7 +103,7 @@ class TrackResult:
 class FingertipTracker:
     """Stateful per-frame pipeline (module doc).
 
-    ``calib``: calibration dict (:func:`nodes.triangulator.calibrate.load_yaml`) or a
+    ``calib``: calibration dict (:func:`flexsheet.model.calibration.load_yaml`) or a
     :class:`messages.StereoCalibration`; ``config``: :class:`TrackerConfig`; ``T_display_camera`` (4, 4)
     overrides the calibration's (identity if neither has one). Raises ``ValueError`` on a bad config or
     calibration.

@@ -1,13 +1,13 @@
 """World node: the physical twin of the user's finger and the sheet (simulation only).
 
-* Finger: plays a list of :class:`nodes.world.finger.FingerScript` segments one after the other (default:
+* Finger: plays a list of :class:`flexsheet.model.finger.FingerScript` segments one after the other (default:
   the paper's stroking experiment at 10 s and 30 s moving time, then a combined stroke and push) and
   publishes the true marker position on ``/world/finger`` at ``rate_hz``; the camera twin renders it.
 * Sheet: its pose comes from the arms' *measured* joint states (``ArmJointState.pose`` is the FK of the
   clamp frames), and its depression from the finger when the finger is behind the sheet plane, through
-  the membrane model of :mod:`nodes.renderer.membrane`; published on ``/world/sheet``.
+  the membrane model of :mod:`flexsheet.model.sheet`; published on ``/world/sheet``.
 * Progress: one line every ``progress_period`` s; when the script ends the node exits, which ends a launch
-  in which it is ``required`` (then the launch's report runs, see :mod:`nodes.world.report`).
+  in which it is ``required`` (then the launch's report runs, see :mod:`flexsheet.experiments.report`).
   ``loop: true`` repeats the script until Ctrl-C (interactive mode).
 """
 
@@ -19,12 +19,11 @@ import time
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from flexsheet.node import Node, QoS
+from flexsheet.model.finger import FingerScript
+from flexsheet.model.sheet import SheetSurface
+from flexsheet.runtime.node import Node, QoS
 from messages import ArmJointState, FingerTruth, SheetState
 from messages import topics as T
-from nodes.renderer.membrane import SheetSurface
-
-from .finger import FingerScript
 
 __all__ = ["WorldNode", "WorldParams", "Segment"]
 

@@ -1,0 +1,273 @@
+"""Report of a full-graph run, computed from the recorded bag only (``launch/sim.yaml``'s ``report``).
+
+Reads ``OUT/*.mcap`` (the recorder's bag) and writes ``OUT/summary.json``, ``OUT/report.md`` and charts
+(``OUT/table1.png``, ``OUT/latency.png`` with JSON beside them), and prints Table I and the latency budget.
+
+Table I (paper §V-C, Fig. 9) per stroking segment, keyed by moving time in seconds like
+``flexsheet experiment stroke``: D = the measured fingertip (``/fingertip``, valid samples, while the
+target mark moves), the actual sheet = ``/world/sheet`` (FK of the arms' measured joints) interpolated at
+the fingertip's exposure time, errors by :func:`flexsheet.experiments.table1.table1` in the cross-section of
+Fig. 9 (the sheet normal's component along the cylinder axis is removed; it is small and would otherwise
+make the support point jump along the axis).
+
+Latency per hop, matched through the stamps every message carries (``exposure_stamp`` →
+``source_stamp`` → ``target_stamp``/``write_stamp``); arrival times are the recorder's receive times:
+
+* ``exposure_to_camera_frame``: the stereo frame's publish stamp − its exposure stamp (for the twin this is
+  its rendering time; for a real camera, readout and transfer);
+* ``camera_frame_to_fingertip``: fingertip arrival − the frame's publish stamp (transport + triangulation);
+* ``fingertip_to_sheet_target``: sheet-target arrival − fingertip arrival (same exposure stamp);
+* ``sheet_target_to_modbus_write``: first Modbus write of the arm target − sheet-target arrival;
+* ``modbus_write_to_joint_motion``: first joint-state readback after that write − the write;
+* ``camera_frame_to_modbus_write``: first Modbus write − the frame's publish stamp (the software path);
+* ``fingertip_to_rendered_frame``: rendered-frame arrival − fingertip arrival (same exposure stamp).
+
+All hosts of the sim run share one clock; across PCs see docs/deploy.md on time sync.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from flexsheet.experiments.table1 import summarize, table1
+from flexsheet.model.shapes import paper_cylinder
+from flexsheet.runtime.bag import read_bag
+from flexsheet.runtime.codec import DecodeError, decode_any
+
+__all__ = ["analyse", "main"]
+
+PAPER = {"10": {"dd_mean_mm": 0.443, "dtheta_mean_deg": 0.359, "dd_std_mm": 0.0330, "dtheta_std_deg": 0.267},
+         "30": {"dd_mean_mm": 0.277, "dtheta_mean_deg": 0.225, "dd_std_mm": 0.0221, "dtheta_std_deg": 0.179}}
+
+
+def _load(bags: list[Path]) -> dict[str, list]:
+    out: dict[str, list] = defaultdict(list)
+    for m in (m for bag in bags for m in read_bag(bag)):
+        try:
+            out[m.topic].append((m.log_time, decode_any(m.frames)))
+        except DecodeError:
+            out["<rejected>"].append((m.log_time, None))
+    return out
+
+
+def _stats(x) -> dict:
+    x = np.asarray(x, dtype=float) * 1e3
+    if x.size == 0:
+        return {"median": None, "p99": None, "n": 0}
+    return {"median": float(np.median(x)), "p99": float(np.percentile(x, 99)), "n": int(x.size)}
+
+
+def _interp_sheet(sheets: list, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    ts = np.array([s.header.stamp for _, s in sheets])
+    org = np.array([s.origin for _, s in sheets])
+    nrm = np.array([s.normal for _, s in sheets])
+    o = np.stack([np.interp(t, ts, org[:, k]) for k in range(3)], axis=1)
+    n = np.stack([np.interp(t, ts, nrm[:, k]) for k in range(3)], axis=1)
+    return o, n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def analyse(bags: Path | list[Path], heartbeats: list | None = None) -> dict:
+    """Table I per segment and the latency per hop from a bag, or the parts of one run (a respawned recorder
+    continues in ``<stem>.1.mcap``…). Returns the summary dict; the recorded ``/diagnostics`` (arrival
+    time, Heartbeat) pairs are appended to ``heartbeats`` if given."""
+    bags = [bags] if isinstance(bags, Path) else list(bags)
+    d = _load(bags)
+    for msgs in d.values():
+        msgs.sort(key=lambda tm: tm[0])
+    if heartbeats is not None:
+        heartbeats.extend(d.get("/diagnostics", []))
+    tips = [(t, m) for t, m in d.get("/fingertip", [])]
+    truths = d.get("/world/finger", [])
+    sheets = d.get("/world/sheet", [])
+    summary: dict = {"bags": [str(b) for b in bags], "counts": {k: len(v) for k, v in d.items()}}
+    # ---------------------------------------------------------------- Table I
+    if truths and sheets and tips:
+        tt = np.array([m.header.stamp for _, m in truths])
+        phases = [m.phase for _, m in truths]
+        shape = paper_cylinder()
+        groups: dict[str, list] = defaultdict(list)
+        n_invalid = 0
+        for _, m in tips:
+            if not m.valid:
+                n_invalid += 1
+                continue
+            k = int(np.searchsorted(tt, m.exposure_stamp, side="right")) - 1
+            if k < 0:
+                continue
+            seg, mode, mt, phase = phases[k].split(":")
+            if phase == mode and mode in ("stroke", "stroke_push"):
+                key = mt if mode == "stroke" else f"stroke_push_{mt}"
+                groups[key].append(m)
+        s_ts = np.array([s.header.stamp for _, s in sheets])
+        for key, ms in groups.items():
+            t = np.array([m.exposure_stamp for m in ms])
+            keep = (t >= s_ts[0]) & (t <= s_ts[-1])
+            ms = [m for m, k in zip(ms, keep, strict=True) if k]
+            if len(ms) < 10:
+                continue
+            t = np.array([m.exposure_stamp for m in ms])
+            origin, normal = _interp_sheet(sheets, t)
+            # Fig. 9 is a cross-section of the cylinder: measure in the plane normal to its axis
+            axis = np.asarray(shape.axis if hasattr(shape, "axis") else (0.0, 1.0, 0.0), dtype=float)
+            normal = normal - np.outer(normal @ axis, axis)
+            normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+            err = table1(shape, np.array([m.position for m in ms]), origin, normal)
+            row = summarize(err.dd, err.dtheta)
+            if key in PAPER:
+                row["paper"] = PAPER[key]
+            summary[key] = row
+        summary["fingertip_invalid"] = n_invalid
+    # ---------------------------------------------------------------- latency
+    tip_arrival = {m.exposure_stamp: t for t, m in tips}
+    frame_time = {m.exposure_stamp: m.frame_stamp for _, m in tips if m.frame_stamp}
+    target_arrival = {}
+    for t, m in d.get("/sheet/target", []):
+        target_arrival.setdefault(m.source_stamp, t)
+    first_write: dict[float, float] = {}
+    first_readback: dict[float, float] = {}
+    for topic in ("/arm/left/joint_state", "/arm/right/joint_state"):
+        for _, m in d.get(topic, []):
+            if m.target_stamp and m.write_stamp and m.target_stamp not in first_write:
+                first_write[m.target_stamp] = m.write_stamp
+                first_readback[m.target_stamp] = m.header.stamp
+    render_arrival = {}
+    for t, m in d.get("/render/stereo", []):
+        render_arrival.setdefault(m.source_stamp, t)
+    hops = {
+        "exposure_to_camera_frame": [f - e for e, f in frame_time.items()],
+        "camera_frame_to_fingertip": [tip_arrival[e] - f for e, f in frame_time.items()],
+        "fingertip_to_sheet_target": [target_arrival[e] - tip_arrival[e] for e in tip_arrival if e in target_arrival],
+        "sheet_target_to_modbus_write": [first_write[e] - target_arrival[e] for e in target_arrival if e in first_write],
+        "modbus_write_to_joint_motion": [first_readback[e] - first_write[e] for e in first_write],
+        "camera_frame_to_modbus_write": [first_write[e] - frame_time[e] for e in first_write if e in frame_time],
+        "fingertip_to_rendered_frame": [render_arrival[e] - tip_arrival[e] for e in tip_arrival if e in render_arrival],
+    }
+    summary["latency_ms"] = {k: _stats(v) for k, v in hops.items()}
+    return summary
+
+
+def _charts(summary: dict, out: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    keys = [k for k in ("10", "30") if k in summary]
+    if keys:
+        fig, ax = plt.subplots(1, 2, figsize=(9, 3.5))
+        x = np.arange(len(keys))
+        for a, (q, label) in zip(ax, (("dd", "Δd (mm)"), ("dtheta", "Δθ (deg)")), strict=True):
+            unit = "mm" if q == "dd" else "deg"
+            ours = [summary[k][f"{q}_mean_{unit}"] for k in keys]
+            paper = [PAPER[k][f"{q}_mean_{unit}"] for k in keys]
+            a.bar(x - 0.2, paper, 0.4, label="paper (Table I)")
+            a.bar(x + 0.2, ours, 0.4, yerr=[summary[k][f"{q}_std_{unit}"] for k in keys], label="flexsheet (full graph)")
+            a.set_xticks(x, [f"{k} s" for k in keys])
+            a.set_ylabel(label)
+            a.set_xlabel("moving time")
+        ax[0].legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(out / "table1.png", dpi=120)
+        plt.close(fig)
+    lat = {k: v for k, v in summary["latency_ms"].items() if v["n"]}
+    if lat:
+        fig, ax = plt.subplots(figsize=(8, 3.5))
+        names = list(lat)
+        ax.barh(names, [lat[k]["median"] for k in names], label="median")
+        ax.scatter([lat[k]["p99"] for k in names], names, color="k", marker="|", s=200, label="p99")
+        ax.set_xlabel("latency (ms)")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(out / "latency.png", dpi=120)
+        plt.close(fig)
+
+
+def graph_chart(heartbeats: list, path: Path) -> dict:
+    """Draw the live node/topic graph from recorded heartbeats (each node's last one): nodes on the left and
+    right, topics in the middle, an arrow per publisher and subscription. Writes ``path`` (PNG) and
+    returns the graph as ``{"nodes": {name: {"host", "publishes", "subscribes"}}}`` (also saved as JSON)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    last: dict = {}
+    for _, hb in heartbeats:
+        last[hb.node] = hb
+    graph = {"nodes": {n: {"host": hb.host, "type": hb.node_type,
+                           "publishes": sorted(p.topic for p in hb.publishers if p.topic != "/diagnostics"),
+                           "subscribes": sorted(sub.topic for sub in hb.subscriptions)}
+                       for n, hb in sorted(last.items())}}
+    topics = sorted({t for v in graph["nodes"].values() for t in v["publishes"] + v["subscribes"]})
+    names = list(graph["nodes"])
+    fig, ax = plt.subplots(figsize=(11, max(4.0, 0.42 * max(len(topics), len(names)))))
+    ty = {t: i for i, t in enumerate(reversed(topics))}
+    ny = {n: i * (len(topics) - 1) / max(1, len(names) - 1) for i, n in enumerate(reversed(names))}
+    for n, v in graph["nodes"].items():
+        ax.text(0.0, ny[n], f"{n}\n[{v['host']}]", ha="center", va="center", fontsize=8,
+                bbox={"boxstyle": "round", "fc": "#dbe9f6"})
+        ax.text(2.0, ny[n], n, ha="center", va="center", fontsize=8, bbox={"boxstyle": "round", "fc": "#dbe9f6"})
+        for t in v["publishes"]:
+            ax.annotate("", (0.85, ty[t]), (0.18, ny[n]), arrowprops={"arrowstyle": "->", "color": "#1f77b4", "lw": 0.7})
+        for t in v["subscribes"]:
+            ax.annotate("", (1.82, ny[n]), (1.15, ty[t]), arrowprops={"arrowstyle": "->", "color": "#ff7f0e", "lw": 0.7})
+    for t in topics:
+        ax.text(1.0, ty[t], t, ha="center", va="center", fontsize=8, bbox={"boxstyle": "square", "fc": "#fff3d6"})
+    ax.set_xlim(-0.4, 2.4)
+    ax.set_ylim(-1, len(topics))
+    ax.axis("off")
+    ax.set_title("flexsheet node/topic graph (from the recorded heartbeats): publishers → topics → subscribers",
+                 fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    path.with_suffix(".json").write_text(json.dumps(graph, indent=2))
+    return graph
+
+
+def _format(summary: dict) -> str:
+    lines = ["Table I — position and angle errors in stroking (full process graph, from the bag)", "",
+             f"{'moving time':<16}{'Δd mean mm':>12}{'Δd std mm':>11}{'Δθ mean deg':>13}{'Δθ std deg':>12}"
+             f"{'paper Δd':>10}{'paper Δθ':>10}{'n':>7}"]
+    for key in sorted(k for k in summary if k[:1].isdigit() or k.startswith("stroke_push")):
+        r = summary[key]
+        p = r.get("paper", {})
+        lines.append(f"{key + ' s':<16}{r['dd_mean_mm']:12.3f}{r['dd_std_mm']:11.3f}{r['dtheta_mean_deg']:13.3f}"
+                     f"{r['dtheta_std_deg']:12.3f}{p.get('dd_mean_mm', float('nan')):10.3f}"
+                     f"{p.get('dtheta_mean_deg', float('nan')):10.3f}{r['n']:7d}")
+    lines += ["", "Latency budget per hop (ms)", f"{'hop':<32}{'median':>9}{'p99':>9}{'n':>7}"]
+    for k, v in summary["latency_ms"].items():
+        med = "-" if v["median"] is None else f"{v['median']:.2f}"
+        p99 = "-" if v["p99"] is None else f"{v['p99']:.2f}"
+        lines.append(f"{k:<32}{med:>9}{p99:>9}{v['n']:>7}")
+    return "\n".join(lines)
+
+
+def main(out: str, lf=None) -> int:
+    """Analyse the bag in ``out`` (called by ``flexsheet launch`` after the run). Returns 0, or 1 without data."""
+    out_dir = Path(out)
+    bags = sorted((p for p in out_dir.glob("*.mcap") if not p.name.startswith("replay")),
+                  key=lambda p: p.stat().st_mtime)
+    if not bags:
+        print(f"[report] no bag in {out_dir}", flush=True)
+        return 1
+    beats: list = []
+    summary = analyse(bags, beats)
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    _charts(summary, out_dir)
+    if beats:
+        graph_chart(beats, out_dir / "graph.png")
+    text = _format(summary)
+    (out_dir / "report.md").write_text("# flexsheet simulated run\n\n```\n" + text + "\n```\n\n"
+                                       "![Table I](table1.png)\n\n![latency](latency.png)\n\n![graph](graph.png)\n")
+    print(text, flush=True)
+    print(f"[report] wrote {out_dir}/summary.json, report.md, table1.png, latency.png "
+          f"(from {', '.join(b.name for b in bags)})", flush=True)
+    return 0 if any(k[:1].isdigit() for k in summary) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1]))

@@ -1,0 +1,324 @@
+"""``flexsheet experiment triangulation --out DIR``: accuracy-vs-speed and stability charts (PNG + JSON).
+
+Writes to DIR:
+
+* ``accuracy_speed.png`` — (a) RMS 3-D error (mm) against time per stereo pair (µs) for each method
+  (dlt, optimal, midpoint) × pixel noise σ ∈ {0.05, 0.1, 0.2, 0.5, 1} px at 0.5 m, with the theoretical
+  stereo floor ΔZ = Z²·√2σ/(f·B) drawn per σ; (b) RMS error against depth for σ = 0.1 px with the floor.
+  Geometry-only Monte Carlo on the reference BumbleBee2 1024×768 model (f ≈ 817 px, B = 0.12 m).
+* ``stability.png`` — full pipeline on twin-rendered images (XIMEA model, default mount): (a) error map
+  over the whole left-image field of view incl. the border at 0.5 m; (b) near-degenerate rays: error
+  against the angle between the viewing direction and the baseline, and against depth up to 3 m;
+  (c) partial occlusion of the marker in one image; (d) a second bright blob (reflection) at distance d,
+  without and with a live track; (e) motion blur against finger speed (4 ms exposure).
+* ``summary.json`` — every number in the charts plus ``detect_triangulate_median_ms``,
+  ``rms_error_mm_at_0p5m_sigma0p1`` and ``stereo_rms_px`` (same definitions as ``bench vision``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from flexsheet.model.camera_sim import (
+    DEFAULT_CAMERA_POSITION,
+    SimConfig,
+    StereoRenderer,
+    bumblebee2_calibration,
+    camera_model,  # noqa: E402
+    look_at,
+)
+from flexsheet.model.stereo import METHODS, StereoModel  # noqa: E402
+from nodes.triangulator.bench import mc_rms_mm, real_stereo_rms, timing  # noqa: E402
+from nodes.triangulator.pipeline import FingertipTracker, TrackerConfig  # noqa: E402
+
+__all__ = ["main", "accuracy_speed", "stability"]
+
+SIGMAS = (0.05, 0.1, 0.2, 0.5, 1.0)
+DEPTHS = (0.3, 0.5, 0.8, 1.2, 2.0)
+
+
+def _time_per_pair_us(model: StereoModel, method: str, n: int = 400) -> float:
+    X = np.array([[0.01, -0.02, 0.5]])
+    il, ir = model.project(X, distort=False)
+    ts = []
+    for _ in range(n):
+        t0 = time.perf_counter()
+        Y = model.triangulate(il, ir, method)
+        model.covariance(Y, 0.1)
+        ts.append(time.perf_counter() - t0)
+    return float(np.median(ts) * 1e6)
+
+
+def accuracy_speed(model: StereoModel, n: int = 3000) -> dict:
+    """RMS error (mm) per method × σ × depth and time per pair (µs, triangulation + covariance)."""
+    res = {"time_us": {m: _time_per_pair_us(model, m) for m in METHODS}, "rms_mm": {},
+           "floor_mm": {}, "sigmas": list(SIGMAS), "depths": list(DEPTHS)}
+    for m in METHODS:
+        res["rms_mm"][m] = {f"{s}": [mc_rms_mm(model, z, s, m, n=n, seed=i) for i, z in enumerate(DEPTHS)]
+                            for s in SIGMAS}
+    for s in SIGMAS:
+        # floor: RMS 3-D error of the first-order covariance (≈ depth floor, plus the small lateral terms)
+        res["floor_mm"][f"{s}"] = [float(model.depth_floor(z, s) * 1e3) for z in DEPTHS]
+    return res
+
+
+def _fresh(calib, T, **kw):
+    return FingertipTracker(calib, TrackerConfig(**kw), T)
+
+
+def stability(seed: int = 0) -> dict:
+    """Full-pipeline stability cases on the XIMEA twin (module doc). Errors in mm; NaN where invalid."""
+    calib = camera_model("ximea")
+    T = look_at(DEFAULT_CAMERA_POSITION)
+    rnd = StereoRenderer(calib, T, SimConfig(seed=seed))
+    m = rnd.model
+    Tinv = np.linalg.inv(T)
+    to_disp = lambda Xc: Xc @ T[:3, :3].T + T[:3, 3]  # noqa: E731
+    out: dict = {}
+    # (a) field of view at 0.5 m incl. the border
+    w, h = m.image_size
+    us = np.linspace(-4, w + 3, 25)
+    vs = np.linspace(-4, h + 3, 20)
+    err = np.full((len(vs), len(us)), np.nan)
+    for i, v in enumerate(vs):
+        for j, u in enumerate(us):
+            ray = m.K1inv @ np.array([u, v, 1.0])
+            p = to_disp(ray * 0.5 / ray[2])
+            L, R = rnd.render(p)
+            r = _fresh(calib, T).process(L, R, 0.0)
+            if r.valid:
+                err[i, j] = np.linalg.norm(r.position - p) * 1e3
+    out["fov"] = {"u_px": us.tolist(), "v_px": vs.tolist(), "error_mm": err.tolist(),
+                  "valid_fraction": float(np.mean(np.isfinite(err))),
+                  "median_error_mm": float(np.nanmedian(err))}
+    # (b) degenerate rays, geometry only: the marker 0.5 m from the baseline midpoint at a decreasing angle
+    # to the baseline (rays become collinear with it). Noise is angular, σ = 0.1 px / f rad on each ray
+    # (image-plane pixel noise is meaningless far outside the field of view).
+    rng = np.random.default_rng(seed)
+    base_dir = m.C2 / np.linalg.norm(m.C2)           # left -> right camera centre (≈ +x)
+    mid = 0.5 * m.C2
+    angles = [90, 60, 45, 30, 20, 10, 5, 2, 1]
+    perp = np.array([0.0, 0.0, 1.0]) - base_dir[2] * base_dir
+    perp /= np.linalg.norm(perp)
+    sig_ang = 0.1 / m.focal
+    deg = {meth: [] for meth in METHODS}
+    nmc = 2000
+
+    def noisy_px(rays, K):
+        rays = rays / np.linalg.norm(rays, axis=1, keepdims=True)
+        a = np.cross(rays, [0.0, 1.0, 0.0])
+        a /= np.linalg.norm(a, axis=1, keepdims=True)
+        b = np.cross(rays, a)
+        rays = rays + sig_ang * (rng.normal(size=(len(rays), 1)) * a + rng.normal(size=(len(rays), 1)) * b)
+        x = rays @ K.T
+        return x[:, :2] / x[:, 2:]
+
+    for a in angles:
+        d = np.cos(np.radians(a)) * base_dir + np.sin(np.radians(a)) * perp
+        X = np.repeat((mid + 0.5 * d)[None], nmc, axis=0)
+        nl = noisy_px(X, m.K1)
+        nr = noisy_px(X @ m.R.T + m.T, m.K2)
+        for meth in METHODS:
+            Y = m.triangulate(nl, nr, meth)
+            deg[meth].append(float(np.sqrt(np.nanmean(np.sum((Y - X) ** 2, axis=1))) * 1e3))
+    far = [0.5, 1.0, 1.5, 2.0, 3.0]
+    far_err = {meth: [mc_rms_mm(m, z, 0.1, meth, n=2000) for z in far] for meth in METHODS}
+    out["degenerate"] = {"angle_deg": angles, "rms_mm": deg, "depth_m": far,
+                         "depth_rms_mm": far_err}
+    # marker position used for the image cases: in front of the sheet near the cylinder top
+    p0 = np.array([0.03, 0.0, 0.02])
+    # (c) partial occlusion in the left image
+    occ = [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9]
+    occ_err, occ_reason = [], []
+    for f in occ:
+        L, R = rnd.render(p0, occlusion=f)
+        r = _fresh(calib, T).process(L, R, 0.0)
+        occ_err.append(float(np.linalg.norm(r.position - p0) * 1e3) if r.valid else float("nan"))
+        occ_reason.append(r.reason)
+    out["occlusion"] = {"fraction": occ, "error_mm": occ_err, "reason": occ_reason}
+    # (d) reflection: a second dot of equal brightness at distance d (along display y), no track / track
+    dists = [0.003, 0.006, 0.01, 0.02, 0.04, 0.08]
+    refl = {"no_track": [], "track": []}
+    for d in dists:
+        for mode in refl:
+            tr = _fresh(calib, T)
+            if mode == "track":
+                for k in range(10):
+                    L, R = rnd.render(p0)
+                    tr.process(L, R, k / 48)
+            L, R = rnd.render(p0, extra_markers=[p0 + [0.0, d, 0.0]])
+            r = tr.process(L, R, 10 / 48)
+            e = np.linalg.norm(r.position - p0) * 1e3 if r.valid else float("nan")
+            refl[mode].append({"reason": r.reason, "error_mm": float(e),
+                               "outcome": "invalid" if not r.valid else ("correct" if e < 2 else "wrong")})
+    out["reflection"] = {"distance_m": dists, **refl}
+    # (e) motion blur along display y, 4 ms exposure, tracked over 12 frames
+    speeds = [0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0]
+    blur = {"speed_mps": speeds, "rms_error_mm": [], "valid_rate": [], "streak_px": []}
+    for s in speeds:
+        tr = _fresh(calib, T)
+        v = np.array([0.0, s, 0.0])
+        errs, valid, reasons = [], 0, []
+        for k in range(12):
+            p = p0 + v * (k / 48 - 6 / 48)
+            L, R = rnd.render(p, v)
+            r = tr.process(L, R, k / 48)
+            valid += r.valid
+            reasons.append(r.reason)
+            if r.valid:
+                errs.append(np.sum((r.position - p) ** 2))
+        blur.setdefault("reasons", []).append(reasons)
+        blur["rms_error_mm"].append(float(np.sqrt(np.mean(errs)) * 1e3) if errs else float("nan"))
+        blur["valid_rate"].append(valid / 12)
+        zc = (Tinv[:3, :3] @ p0 + Tinv[:3, 3])[2]
+        blur["streak_px"].append(float(m.focal * s * rnd.cfg.exposure_s / zc))
+    out["motion_blur"] = blur
+    # end-to-end twin accuracy at 0.5 m (the twin's centroid noise is what it is; σ_px not imposed)
+    errs = []
+    for _ in range(60):
+        p = np.array([rng.uniform(0.0, 0.06), rng.uniform(-0.06, 0.06), rng.uniform(-0.05, 0.05)])
+        L, R = rnd.render(p)
+        r = _fresh(calib, T).process(L, R, 0.0)
+        if r.valid:
+            errs.append(np.sum((r.position - p) ** 2))
+    out["twin_end_to_end_rms_mm"] = float(np.sqrt(np.mean(errs)) * 1e3)
+    return out
+
+
+def _plot_accuracy(acc: dict, path: str) -> None:
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4.8))
+    marks = {"dlt": "o", "optimal": "s", "midpoint": "^"}
+    zi = acc["depths"].index(0.5)
+    for meth in METHODS:
+        t = acc["time_us"][meth]
+        for s in SIGMAS:
+            ax[0].scatter(t, acc["rms_mm"][meth][f"{s}"][zi], marker=marks[meth], s=40,
+                          c=[plt.cm.viridis(SIGMAS.index(s) / (len(SIGMAS) - 1))],
+                          label=f"{meth}" if s == SIGMAS[0] else None, edgecolors="k")
+    for s in SIGMAS:
+        ax[0].axhline(acc["floor_mm"][f"{s}"][zi], color=plt.cm.viridis(SIGMAS.index(s) / (len(SIGMAS) - 1)), ls=":",
+                      lw=1)
+        ax[0].text(ax[0].get_xlim()[1] if False else 0.5, acc["floor_mm"][f"{s}"][zi], f" floor σ={s} px",
+                   fontsize=7, va="bottom", transform=ax[0].get_yaxis_transform())
+    ax[0].set_yscale("log")
+    ax[0].set_xlabel("time per stereo pair, µs (triangulation + covariance)")
+    ax[0].set_ylabel("RMS 3-D error at 0.5 m, mm")
+    ax[0].set_title("accuracy vs speed (colour: σ; dotted: floor Z²√2σ/fB)")
+    ax[0].legend()
+    for meth in METHODS:
+        ax[1].plot(acc["depths"], acc["rms_mm"][meth]["0.1"], marker=marks[meth], label=meth)
+    ax[1].plot(acc["depths"], acc["floor_mm"]["0.1"], "k:", label="depth floor")
+    ax[1].axhline(0.3, color="r", lw=0.8, ls="--", label="target 0.3 mm")
+    ax[1].set_xlabel("depth Z, m")
+    ax[1].set_ylabel("RMS 3-D error, mm (σ = 0.1 px)")
+    ax[1].set_yscale("log")
+    ax[1].set_title("BumbleBee2 1024×768 reference (f 817 px, B 0.12 m)")
+    ax[1].legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plot_stability(st: dict, path: str) -> None:
+    fig, ax = plt.subplots(2, 3, figsize=(15, 8.5))
+    f = st["fov"]
+    im = ax[0, 0].imshow(np.array(f["error_mm"], float), origin="upper", aspect="auto", cmap="magma",
+                         extent=[f["u_px"][0], f["u_px"][-1], f["v_px"][-1], f["v_px"][0]], vmin=0, vmax=1.0)
+    fig.colorbar(im, ax=ax[0, 0], label="error, mm (white = invalid)")
+    ax[0, 0].set_title(f"field of view at 0.5 m (XIMEA twin): valid {f['valid_fraction'] * 100:.0f} %")
+    ax[0, 0].set_xlabel("u, px")
+    ax[0, 0].set_ylabel("v, px")
+    d = st["degenerate"]
+    for meth in METHODS:
+        ax[0, 1].plot(d["angle_deg"], d["rms_mm"][meth], marker="o", label=meth)
+    ax[0, 1].set_yscale("log")
+    ax[0, 1].set_xscale("log")
+    ax[0, 1].set_xlabel("angle between the marker direction and the baseline, deg (0.5 m range, σ 0.1 px/f rad)")
+    ax[0, 1].set_ylabel("RMS error, mm")
+    ax[0, 1].set_title("near-degenerate rays: toward the baseline")
+    ax[0, 1].legend()
+    for meth in METHODS:
+        ax[0, 2].plot(d["depth_m"], d["depth_rms_mm"][meth], marker="o", label=meth)
+    ax[0, 2].set_xlabel("depth, m (σ 0.1 px)")
+    ax[0, 2].set_ylabel("RMS error, mm")
+    ax[0, 2].set_yscale("log")
+    ax[0, 2].set_title("near-degenerate rays: far marker")
+    ax[0, 2].legend()
+    o = st["occlusion"]
+    ax[1, 0].plot(o["fraction"], o["error_mm"], "o-")
+    for x, r in zip(o["fraction"], o["reason"], strict=False):
+        if r != "ok":
+            ax[1, 0].axvspan(x - 0.05, x + 0.05, color="0.85")
+    ax[1, 0].set_xlabel("fraction of the marker hidden in the left image")
+    ax[1, 0].set_ylabel("error, mm (grey: invalid)")
+    ax[1, 0].set_title("partial occlusion")
+    r = st["reflection"]
+    code = {"correct": 2, "invalid": 1, "wrong": 0}
+    for mode, mk in (("no_track", "o"), ("track", "s")):
+        ax[1, 1].plot(np.array(r["distance_m"]) * 1e3, [code[e["outcome"]] for e in r[mode]], mk + "-", label=mode)
+    ax[1, 1].set_yticks([0, 1, 2], ["wrong", "invalid", "correct"])
+    ax[1, 1].set_xscale("log")
+    ax[1, 1].set_xticks([x * 1e3 for x in r["distance_m"]], [f"{x * 1e3:g}" for x in r["distance_m"]])
+    ax[1, 1].minorticks_off()
+    ax[1, 1].set_xlabel("distance of the second bright blob, mm")
+    ax[1, 1].set_title("reflection (equal-brightness second dot)")
+    ax[1, 1].legend()
+    b = st["motion_blur"]
+    ax[1, 2].plot(b["speed_mps"], b["rms_error_mm"], "o-", label="RMS error, mm")
+    ax[1, 2].plot(b["speed_mps"], b["valid_rate"], "s--", label="valid rate")
+    ax2 = ax[1, 2].twiny()
+    ax2.set_xlim(ax[1, 2].get_xlim())
+    ax2.set_xticks(b["speed_mps"][::2], [f"{s:.0f}" for s in b["streak_px"][::2]])
+    ax2.set_xlabel("streak length, px")
+    ax[1, 2].set_xlabel("finger speed, m/s (4 ms exposure)")
+    ax[1, 2].set_title("motion blur")
+    ax[1, 2].legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """CLI ``flexsheet experiment triangulation --out DIR`` (argparse). Returns the exit code."""
+    p = argparse.ArgumentParser(prog="flexsheet experiment triangulation", description=__doc__.splitlines()[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter,
+                                epilog="example:\n  flexsheet experiment triangulation --out docs/figures/vision")
+    p.add_argument("--out", required=True, help="output folder (created)")
+    p.add_argument("--samples", type=int, default=3000, help="Monte Carlo samples per cell (default 3000)")
+    a = p.parse_args(argv)
+    os.makedirs(a.out, exist_ok=True)
+    ref = StereoModel.from_calib(bumblebee2_calibration(1024, 768, pixel_um=4.65))
+    acc = accuracy_speed(ref, a.samples)
+    st = stability()
+    tm = timing(200)
+    real = real_stereo_rms()
+    summary = {
+        "detect_triangulate_median_ms": tm["roi"]["median_ms"],
+        "detect_triangulate_p95_ms": tm["roi"]["p95_ms"],
+        "full_frame_median_ms": tm["full"]["median_ms"],
+        "rms_error_mm_at_0p5m_sigma0p1": acc["rms_mm"]["optimal"]["0.1"][DEPTHS.index(0.5)],
+        "floor_depth_mm_at_0p5m_sigma0p1": acc["floor_mm"]["0.1"][DEPTHS.index(0.5)],
+        "stereo_rms_px": real["stereo_rms_px"],
+        "stereo_baseline_mm": real["baseline_mm"],
+        "twin_end_to_end_rms_mm": st["twin_end_to_end_rms_mm"],
+        "accuracy_speed": acc,
+        "stability": st,
+        "cpu_count": os.cpu_count(),
+        "note": "timings on a shared 2-core machine (pessimistic); accuracy_speed on the BumbleBee2 1024x768 "
+                "reference model; stability on the XIMEA twin at the default mount",
+    }
+    _plot_accuracy(acc, os.path.join(a.out, "accuracy_speed.png"))
+    _plot_stability(st, os.path.join(a.out, "stability.png"))
+    with open(os.path.join(a.out, "summary.json"), "w") as fh:
+        json.dump(summary, fh, indent=1, default=float)
+    print(json.dumps({k: v for k, v in summary.items() if not isinstance(v, dict)}, indent=1))
+    return 0

@@ -1,0 +1,64 @@
+"""The projector model: a pinhole calibrated to the imaginary screen, and the viewer's eye positions.
+
+Pure (numpy). Frames: ``display`` (see :mod:`flexsheet.model.scene`). Source: Furukawa et al. §IV (projector
+1000 mm behind and 250 mm below the screen, 0.7 mm per pixel on the screen, §VI); pinhole model after
+Hartley & Zisserman, *Multiple View Geometry*, §6.1.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from flexsheet.model import scene
+
+__all__ = ["Projector", "eye_positions"]
+
+
+@dataclass(frozen=True)
+class Projector:
+    """Pinhole projector calibrated to the imaginary screen.
+
+    ``K`` (3, 3) intrinsics, px; ``R`` (3, 3) columns = projector x (image right), y (image down), z (optical
+    axis) in the display frame; ``position`` (3,) light source P, m; ``width``, ``height`` px.
+    """
+
+    K: np.ndarray
+    R: np.ndarray
+    position: np.ndarray
+    width: int = 1024
+    height: int = 768
+
+    @classmethod
+    def default(cls, width: int = 1024, height: int = 768, pixel: float = scene.PIXEL_ON_SCREEN,
+                position=scene.PROJECTOR) -> Projector:
+        """The paper's rear projector: at P, optical axis +x (perpendicular to the screen), lens shift so that
+        the image centre lands on the screen origin, ``pixel`` m per pixel on the screen (0.7 mm, §VI)."""
+        if width < 1 or height < 1:
+            raise ValueError(f"width/height must be >= 1, got {width}x{height}")
+        if not (pixel > 0.0 and math.isfinite(pixel)):
+            raise ValueError(f"pixel must be > 0, got {pixel!r}")
+        p = np.asarray(position, dtype=float)
+        dist = -p[0]
+        if dist <= 0.0:
+            raise ValueError(f"projector position must be behind the screen (x < 0), got {p.tolist()}")
+        f = dist / pixel
+        # seen from behind, image right is -y (display), image down is -z
+        R = np.column_stack([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+        # image of the screen origin: x_c = R^T (0 - p)
+        xc = R.T @ (-p)
+        cx = (width - 1) / 2.0 - f * xc[0] / xc[2]
+        cy = (height - 1) / 2.0 - f * xc[1] / xc[2]
+        K = np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
+        return cls(K, R, p, width, height)
+
+
+def eye_positions(eye, ipd: float) -> tuple[np.ndarray, np.ndarray]:
+    """(left, right) eye positions (3,) m: V ± ipd/2 along +y (the user's left). Raises on ipd < 0."""
+    if not (math.isfinite(ipd) and ipd >= 0.0):
+        raise ValueError(f"ipd must be finite and >= 0, got {ipd!r}")
+    v = np.asarray(eye, dtype=float)
+    dy = np.array([0.0, ipd / 2.0, 0.0])
+    return v + dy, v - dy

@@ -1,0 +1,482 @@
+"""Launch files: validated YAML describing hosts and nodes, and one asyncio supervisor that runs them.
+
+A launch file (``launch/*.yaml``) is the single source of truth for hosts and ports::
+
+    name: sim
+    hosts:
+      main: {address: 127.0.0.1}
+    base_port: 7100                  # nodes without a port get base_port + their index
+    nodes:
+      talker:
+        type: talker                 # a key of flexsheet.registry.NODES
+        host: main
+        params: {rate: 10.0}         # validated against the node's Params model
+        remaps: {/chatter: /chatter2}
+        respawn: {policy: on-failure, delay: 0.5, max_restarts: 5}
+        required: false              # true: when it exits by itself, the whole launch stops
+
+Every node publishes on ``tcp://<host address>:<port>`` (or an explicit ``endpoint:``) and subscribes to
+every node endpoint of the file, so the same file serves one machine (127.0.0.1) and the lab's three PCs;
+``flexsheet launch FILE --host NAME`` starts only that host's share. Strings in params may use
+``$(out)`` (the ``--out`` folder) and ``$(launch_dir)``.
+
+The supervisor starts each node as its own OS process (``python -m flexsheet run …``), prefixes every
+output line with the node name as it arrives (line-buffered, never batched), respawns by policy, watches
+the heartbeats of every node of the file (all hosts) and reports a node or host that goes silent, and on
+Ctrl-C/SIGTERM stops all children in reverse order with escalation SIGINT → SIGTERM → SIGKILL. Children
+get ``PR_SET_PDEATHSIG`` so that not even a ``kill -9`` of the launcher leaves orphans.
+Errors: :class:`LaunchError` naming the file, the key and the wrong value.
+Source: ros2/launch ``launch_service.py`` (minus its substitution layer), supervisord's policies.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ctypes
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from flexsheet import registry
+from flexsheet.runtime.node import NodeConfig
+from flexsheet.runtime.transport import CurveConfig
+
+__all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "SecuritySpec", "load_launch", "node_config",
+           "curve_config", "Supervisor"]
+
+
+class LaunchError(ValueError):
+    """A launch file that cannot be used: the message names the file, the key and the wrong value."""
+
+
+#: a launch file larger than this (bytes) is refused before it is parsed
+MAX_LAUNCH_BYTES = 1 << 20
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses a key given twice in one mapping (PyYAML keeps the last silently,
+    so a second ``nodes:`` or a repeated node name would drop nodes without a word)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                dup = key in seen
+            except TypeError:  # unhashable key: construct_mapping below reports it
+                continue
+            if dup:
+                raise yaml.constructor.ConstructorError(
+                    "while constructing a mapping", node.start_mark, f"found duplicate key {key!r:.80}",
+                    key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def _short(value: Any, limit: int = 120) -> str:
+    """Bounded one-line repr (``reprlib``): a YAML alias bomb or a deep structure must not make the error
+    message itself exponential in time and memory."""
+    import reprlib
+
+    r = reprlib.Repr()
+    r.maxlevel, r.maxlist, r.maxdict, r.maxtuple, r.maxset, r.maxstring, r.maxother = 3, 6, 6, 6, 6, limit, limit
+    return " ".join(r.repr(value).split())[:limit]
+
+
+class HostSpec(BaseModel):
+    """A host of the graph: ``address`` is the IP/name its nodes bind to and others connect to."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+    address: str = "127.0.0.1"
+
+
+class RespawnSpec(BaseModel):
+    """Respawn policy: ``never``, ``on-failure`` (non-zero exit or signal) or ``always``."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+    policy: Literal["never", "on-failure", "always"] = "on-failure"
+    delay: float = Field(default=0.5, ge=0.0, description="s before a restart")
+    max_restarts: int = Field(default=10, ge=0, description="restarts allowed in the whole run")
+
+
+class SecuritySpec(BaseModel):
+    """ZeroMQ CURVE for the whole graph. ``public_keys``: host → Z85 public key (40 chars) — the allowed
+    keys; ``keys_dir``: where each host finds its own ``<host>.key_secret`` (from ``flexsheet keys
+    generate``; ``~`` and ``$(launch_dir)`` expand; ``$FLEXSHEET_KEYS`` overrides)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+    curve: bool = False
+    keys_dir: str = "~/.flexsheet/keys"
+    public_keys: dict[str, str] = Field(default_factory=dict)
+
+    @field_validator("public_keys")
+    @classmethod
+    def _z85(cls, v: dict[str, str]) -> dict[str, str]:
+        for host, key in v.items():
+            if not isinstance(key, str) or len(key) != 40:
+                raise ValueError(f"public key of host {host!r} must be 40 Z85 characters, got {key!r}")
+        return v
+
+
+class NodeSpec(BaseModel):
+    """One node of a launch file (see the module docstring)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+    type: str
+    host: str = "localhost"
+    port: int | None = Field(default=None, ge=1, le=65535)
+    endpoint: str | None = Field(default=None, pattern=r"^(tcp|ipc|inproc)://\S+$",
+                                 description="explicit bound endpoint, e.g. tcp://10.0.0.2:7501")
+    params: dict[str, Any] = Field(default_factory=dict)
+    remaps: dict[str, str] = Field(default_factory=dict)
+    respawn: RespawnSpec = Field(default_factory=RespawnSpec)
+    required: bool = False
+    nice: int = Field(default=0, ge=-20, le=19, description="process niceness (negative needs root)")
+    rt_priority: int = Field(default=0, ge=0, le=90,
+                             description="SCHED_FIFO priority for a hard-periodic loop (needs root/CAP_SYS_NICE; "
+                                         "0 = normal scheduling; Linux RT throttling keeps 5 % for the rest)")
+
+    @field_validator("type")
+    @classmethod
+    def _known_type(cls, v: str) -> str:
+        if v not in registry.NODES:
+            raise ValueError(f"unknown node type {v!r}; known: {', '.join(sorted(registry.NODES))}")
+        return v
+
+
+class LaunchFile(BaseModel):
+    """A whole launch file: hosts, nodes and graph-wide settings."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+    name: str = "graph"
+    description: str = ""
+    hosts: dict[str, HostSpec] = Field(default_factory=lambda: {"localhost": HostSpec()})
+    base_port: int = Field(default=7100, ge=1024, le=65000)
+    heartbeat_period: float = Field(default=1.0, gt=0.0)
+    shutdown_timeout: float = Field(default=3.0, gt=0.0, description="s per escalation step")
+    report: str | None = Field(default=None, description="'module:function' called after the run with --out")
+    security: SecuritySpec = Field(default_factory=SecuritySpec)
+    nodes: dict[str, NodeSpec]
+
+    path: Path | None = None
+
+    def endpoint_of(self, name: str) -> str:
+        """Bound endpoint of node ``name`` (explicit ``endpoint``, else tcp://address:port)."""
+        spec = self.nodes[name]
+        if spec.endpoint:
+            return spec.endpoint
+        port = spec.port if spec.port is not None else self.base_port + list(self.nodes).index(name) + 1
+        return f"tcp://{self.hosts[spec.host].address}:{port}"
+
+    def endpoints(self) -> dict[str, str]:
+        """Node name → endpoint for every node of the file."""
+        return {n: self.endpoint_of(n) for n in self.nodes}
+
+
+def load_launch(path: str | Path) -> LaunchFile:
+    """Read and validate a launch file. Raises :class:`LaunchError` naming file, key and value."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            data = f.read(MAX_LAUNCH_BYTES + 1)
+        if len(data) > MAX_LAUNCH_BYTES:
+            raise LaunchError(f"{path}: launch file larger than {MAX_LAUNCH_BYTES} bytes")
+        raw = yaml.load(data.decode("utf-8"), Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
+    except FileNotFoundError:
+        raise LaunchError(f"{path}: launch file not found") from None
+    except OSError as exc:
+        raise LaunchError(f"{path}: cannot read launch file: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise LaunchError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except yaml.YAMLError as exc:
+        raise LaunchError(f"{path}: not valid YAML: {' '.join(str(exc).split())[:300]}") from None
+    except RecursionError:
+        raise LaunchError(f"{path}: not valid YAML: nested too deeply") from None
+    if not isinstance(raw, dict):
+        raise LaunchError(f"{path}: top level must be a mapping with 'nodes', got {type(raw).__name__}")
+    try:
+        lf = LaunchFile.model_validate(raw)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        key = ".".join(str(p) for p in err["loc"])
+        raise LaunchError(f"{path}: key '{key}': {err['msg']:.300} (value {_short(err.get('input'))})") from None
+    for name, spec in lf.nodes.items():
+        if spec.host not in lf.hosts:
+            raise LaunchError(f"{path}: key 'nodes.{name}.host': unknown host {spec.host!r}; "
+                              f"hosts: {', '.join(lf.hosts)}")
+    seen: dict[str, str] = {}
+    for name, ep in lf.endpoints().items():
+        if lf.nodes[name].endpoint is None and int(ep.rsplit(":", 1)[1]) > 65535:
+            raise LaunchError(f"{path}: key 'nodes.{name}.port': base_port {lf.base_port} + node index gives port "
+                              f"{ep.rsplit(':', 1)[1]} > 65535; lower base_port or give the node a port")
+        if ep in seen:
+            raise LaunchError(f"{path}: key 'nodes.{name}.port': endpoint {ep} already used by node {seen[ep]!r}")
+        seen[ep] = name
+    if lf.security.curve:
+        missing = [h for h in lf.hosts if h not in lf.security.public_keys]
+        if missing:
+            raise LaunchError(f"{path}: key 'security.public_keys': curve is on but no public key for host(s) "
+                              f"{', '.join(missing)} (run: flexsheet keys generate {' '.join(missing)})")
+    lf.path = path
+    return lf
+
+
+def curve_config(lf: LaunchFile, host: str | None) -> CurveConfig | None:
+    """The :class:`CurveConfig` of ``host`` under ``lf``'s security settings (None when CURVE is off).
+
+    ``host`` None picks the first host whose secret key is present in the keys folder (tools).
+    Raises :class:`LaunchError` naming the missing secret-key file.
+    """
+    sec = lf.security
+    if not sec.curve:
+        return None
+    import zmq.auth
+
+    keys_dir = Path(os.path.expanduser(os.environ.get("FLEXSHEET_KEYS") or sec.keys_dir.replace(
+        "$(launch_dir)", str(lf.path.parent.resolve()) if lf.path else ".")))
+    hosts = [host] if host else [h for h in lf.hosts if (keys_dir / f"{h}.key_secret").exists()]
+    if not hosts:
+        raise LaunchError(f"{lf.path}: key 'security.keys_dir': no <host>.key_secret in {keys_dir}")
+    secret_file = keys_dir / f"{hosts[0]}.key_secret"
+    if not secret_file.exists():
+        raise LaunchError(f"{lf.path}: key 'security.keys_dir': no secret key for host {hosts[0]!r} at "
+                          f"{secret_file} (run: flexsheet keys generate {hosts[0]} -o {keys_dir})")
+    public, secret = zmq.auth.load_certificate(secret_file)
+    if public.decode() != sec.public_keys.get(hosts[0]):
+        raise LaunchError(f"{lf.path}: key 'security.public_keys.{hosts[0]}': does not match {secret_file}")
+    server_keys = {lf.endpoint_of(n): sec.public_keys[spec.host].encode() for n, spec in lf.nodes.items()}
+    return CurveConfig(public_key=public, secret_key=secret, server_keys=server_keys,
+                       allowed_clients=[k.encode() for k in sec.public_keys.values()])
+
+
+def _substitute(value: Any, subs: dict[str, str]) -> Any:
+    if isinstance(value, str):
+        for k, v in subs.items():
+            value = value.replace(f"$({k})", v)
+        return value
+    if isinstance(value, dict):
+        return {k: _substitute(v, subs) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_substitute(v, subs) for v in value]
+    return value
+
+
+def node_config(lf: LaunchFile, name: str, out: str | None = None, overrides: dict | None = None) -> NodeConfig:
+    """The :class:`NodeConfig` of node ``name`` in ``lf`` (params merged with ``overrides``)."""
+    if name not in lf.nodes:
+        raise LaunchError(f"{lf.path}: no node named {name!r}; nodes: {', '.join(lf.nodes)}")
+    spec = lf.nodes[name]
+    subs = {"out": out or os.environ.get("FLEXSHEET_OUT", "out"),
+            "launch_dir": str(lf.path.parent.resolve()) if lf.path else "."}
+    params = _substitute({**spec.params, **(overrides or {})}, subs)
+    return NodeConfig(name=name, node_type=spec.type, host=spec.host, endpoint=lf.endpoint_of(name),
+                      peers=list(lf.endpoints().values()), params=params, remaps=spec.remaps,
+                      heartbeat_period=lf.heartbeat_period, curve=curve_config(lf, spec.host))
+
+
+def _child_setup(nice: int, rt_priority: int = 0):
+    def setup() -> None:  # runs in the child between fork and exec
+        try:
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+        except OSError:
+            pass
+        if nice:
+            try:
+                os.nice(nice)
+            except OSError:  # negative niceness without root: run at the default priority
+                pass
+        if rt_priority:
+            try:
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
+            except (OSError, AttributeError):  # no privilege: normal scheduling
+                pass
+    return setup
+
+
+class _Child:
+    def __init__(self, name: str, spec: NodeSpec) -> None:
+        self.name, self.spec = name, spec
+        self.proc: asyncio.subprocess.Process | None = None
+        self.restarts = 0
+        self.stopping = False
+        self.exit_codes: list[int] = []
+
+
+class Supervisor:
+    """Runs the nodes of one host of a launch file as child processes (see the module docstring).
+
+    ``host`` None runs every node (all hosts on this machine). ``out`` is exported as ``FLEXSHEET_OUT`` and
+    substituted for ``$(out)``. ``duration`` s stops the run after that long (None: until Ctrl-C or a
+    required node exits). ``print_fn`` receives each prefixed output line.
+    """
+
+    def __init__(self, lf: LaunchFile, host: str | None = None, out: str | None = None,
+                 duration: float | None = None, print_fn=None, python: str = sys.executable,
+                 overrides: dict[str, list[str]] | None = None) -> None:
+        if host is not None and host not in lf.hosts:
+            raise LaunchError(f"{lf.path}: --host {host!r} is not a host of the file; hosts: {', '.join(lf.hosts)}")
+        self.lf, self.host, self.out, self.duration = lf, host, out, duration
+        self.print = print_fn or (lambda line: print(line, flush=True))
+        self.python = python
+        self.overrides = overrides or {}
+        self.children = [_Child(n, s) for n, s in lf.nodes.items() if host is None or s.host == host]
+        self._stop = asyncio.Event()
+        self.reason = ""
+        self.lost_events: list[tuple[str, str]] = []
+        width = max((len(c.name) for c in self.children), default=4)
+        self._fmt = f"[{{:<{width}}}] {{}}"
+
+    def _cmd(self, child: _Child) -> list[str]:
+        cmd = [self.python, "-u", "-m", "flexsheet", "run", child.spec.type, "--launch", str(self.lf.path),
+               "--name", child.name]
+        if self.out:
+            cmd += ["--out", self.out]
+        for kv in self.overrides.get(child.name, []):
+            cmd += ["--param", kv]
+        return cmd
+
+    async def _spawn(self, child: _Child) -> None:
+        env = dict(os.environ, PYTHONUNBUFFERED="1", FLEXSHEET_LAUNCH=str(Path(self.lf.path).resolve()))
+        if self.out:
+            env["FLEXSHEET_OUT"] = self.out
+        child.proc = await asyncio.create_subprocess_exec(
+            *self._cmd(child), stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
+            stdin=asyncio.subprocess.DEVNULL, env=env, start_new_session=True, preexec_fn=_child_setup(child.spec.nice, child.spec.rt_priority))
+
+    async def _pump(self, child: _Child) -> None:
+        assert child.proc is not None and child.proc.stdout is not None
+        while True:
+            line = await child.proc.stdout.readline()
+            if not line:
+                break
+            self.print(self._fmt.format(child.name, line.decode(errors="replace").rstrip()))
+
+    async def _watch(self, child: _Child) -> None:
+        while True:
+            await self._spawn(child)
+            self.print(self._fmt.format(child.name, f"started pid {child.proc.pid}"))
+            await self._pump(child)
+            code = await child.proc.wait()
+            child.exit_codes.append(code)
+            if child.stopping or self._stop.is_set():
+                return
+            self.print(self._fmt.format(child.name, f"exited with code {code}"))
+            if child.spec.required:
+                self.reason = f"required node {child.name} exited ({code})"
+                self._stop.set()
+                return
+            policy = child.spec.respawn
+            if policy.policy == "never" or (policy.policy == "on-failure" and code == 0):
+                return
+            if child.restarts >= policy.max_restarts:
+                self.print(self._fmt.format(child.name, f"not respawned: {policy.max_restarts} restarts used"))
+                return
+            child.restarts += 1
+            self.print(self._fmt.format(child.name, f"respawning in {policy.delay:.1f} s "
+                                                    f"(restart {child.restarts}/{policy.max_restarts})"))
+            await asyncio.sleep(policy.delay)
+            if self._stop.is_set():
+                return
+
+    async def _stop_child(self, child: _Child) -> None:
+        child.stopping = True
+        proc = child.proc
+        if proc is None or proc.returncode is not None:
+            return
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+            try:
+                os.killpg(proc.pid, sig)
+            except ProcessLookupError:
+                return
+            try:
+                await asyncio.wait_for(proc.wait(), timeout=self.lf.shutdown_timeout)
+                return
+            except TimeoutError:
+                self.print(self._fmt.format(child.name, f"did not stop on {sig.name}; escalating"))
+
+    async def run(self) -> int:
+        """Run until Ctrl-C, SIGTERM, ``duration`` or a required node's exit. Returns 0, or 1 if a node failed."""
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, self._on_signal, sig)
+        if not self.children:
+            self.print(f"[launch] no nodes for host {self.host!r} in {self.lf.path}")
+            return 0
+        self.print(f"[launch] {self.lf.name}: starting {len(self.children)} nodes"
+                   + (f" on host {self.host}" if self.host else ""))
+        watchers = [loop.create_task(self._watch(c)) for c in self.children]
+        monitor = loop.create_task(self._monitor())
+        t0 = time.monotonic()
+        try:
+            if self.duration is not None:
+                await asyncio.wait_for(self._stop.wait(), timeout=self.duration)
+            else:
+                await self._stop.wait()
+        except TimeoutError:
+            self.reason = f"duration {self.duration:g} s reached"
+        self.print(f"[launch] stopping after {time.monotonic() - t0:.1f} s: {self.reason or 'stop requested'}")
+        monitor.cancel()
+        await asyncio.gather(*(self._stop_child(c) for c in reversed(self.children)))
+        for w in watchers:
+            w.cancel()
+        await asyncio.gather(*watchers, return_exceptions=True)
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+        self.print("[launch] all nodes stopped")
+        failed = [c.name for c in self.children if c.exit_codes and c.exit_codes[-1] not in (0, -2, -15)]
+        return 1 if failed and "required" in self.reason else 0
+
+    def _on_signal(self, sig: signal.Signals) -> None:
+        if self._stop.is_set():  # second Ctrl-C: stop faster
+            self.lf.shutdown_timeout = min(self.lf.shutdown_timeout, 0.5)
+        self.reason = f"{signal.Signals(sig).name} received"
+        self._stop.set()
+
+    async def _monitor(self) -> None:
+        """Watch every node's heartbeat on ``/diagnostics`` (all hosts of the file) and report, once per
+        transition, a node that goes silent for ``3 × heartbeat_period`` (its host is gone, partitioned or
+        the node hangs) and when it comes back. Counts go into ``self.lost_events``."""
+        from flexsheet.runtime.codec import DecodeError, decode
+        from flexsheet.runtime.transport import ZmqTransport
+        from messages import topics as T
+
+        last: dict[str, float] = {}
+        host_of = {n: s.host for n, s in self.lf.nodes.items()}
+        lost: set[str] = set()
+
+        def on_frames(frames: list) -> None:
+            try:
+                hb = decode(frames, T.DIAGNOSTICS)
+            except DecodeError:
+                return
+            last[hb.node] = time.monotonic()
+            if hb.node in lost:
+                lost.discard(hb.node)
+                self.print(f"[launch] node {hb.node} on host {host_of.get(hb.node, '?')} is back (heartbeat)")
+
+        tr = ZmqTransport("", self.lf.endpoints().values(), curve=curve_config(self.lf, self.host or None))
+        await tr.start(on_frames)
+        tr.subscribe(T.DIAGNOSTICS.name)
+        limit = 3.0 * self.lf.heartbeat_period
+        try:
+            while True:
+                await asyncio.sleep(self.lf.heartbeat_period / 2)
+                now = time.monotonic()
+                for name, t in last.items():
+                    if name in self.lf.nodes and name not in lost and now - t > limit:
+                        lost.add(name)
+                        self.lost_events.append((name, host_of.get(name, "?")))
+                        self.print(f"[launch] node {name} on host {host_of.get(name, '?')} lost: no heartbeat "
+                                   f"for {now - t:.1f} s")
+        finally:
+            tr.close()
+
+    def pids(self) -> list[int]:
+        """PIDs of the running children."""
+        return [c.proc.pid for c in self.children if c.proc is not None and c.proc.returncode is None]

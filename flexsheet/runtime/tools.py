@@ -1,0 +1,170 @@
+"""Introspection of the live graph: ``topic list|echo|hz`` and ``node list``.
+
+Everything comes from what is on the wire now — heartbeats on ``/diagnostics`` and the topic itself —
+never from a cache. The endpoints to listen to come from the launch file (``--launch``, default
+``$FLEXSHEET_LAUNCH`` or ``launch/sim.yaml``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import time
+
+import numpy as np
+
+from flexsheet.runtime.codec import DecodeError, decode, decode_any
+from flexsheet.runtime.launch import LaunchError, curve_config, load_launch
+from flexsheet.runtime.transport import ZmqTransport
+from messages import Heartbeat
+from messages import topics as T
+
+__all__ = ["collect_heartbeats", "topic_list", "topic_echo", "topic_hz", "node_list"]
+
+
+def _peers(launch: str) -> tuple[list[str], object]:
+    lf = load_launch(launch)
+    return list(lf.endpoints().values()), curve_config(lf, None)
+
+
+async def collect_heartbeats(peers: list[str], timeout: float, curve=None) -> dict[str, Heartbeat]:
+    """Listen to ``/diagnostics`` on ``peers`` for ``timeout`` s; returns node name → latest heartbeat."""
+    beats: dict[str, Heartbeat] = {}
+
+    def on_frames(frames: list) -> None:
+        try:
+            hb = decode(frames, T.DIAGNOSTICS)
+        except DecodeError:
+            return
+        beats[hb.node] = hb
+
+    tr = ZmqTransport("", peers, curve=curve)
+    await tr.start(on_frames)
+    tr.subscribe(T.DIAGNOSTICS.name)
+    try:
+        await asyncio.sleep(timeout)
+    finally:
+        tr.close()
+    return beats
+
+
+def _beats(args: argparse.Namespace) -> dict[str, Heartbeat] | None:
+    try:
+        peers, curve = _peers(args.launch)
+    except LaunchError as exc:
+        print(f"flexsheet: {exc}")
+        return None
+    beats = asyncio.run(collect_heartbeats(peers, args.timeout, curve))
+    if not beats:
+        print(f"no live nodes heard in {args.timeout:.1f} s (graph of {args.launch})")
+    return beats
+
+
+def topic_list(args: argparse.Namespace) -> int:
+    """Print every topic published in the live graph with its type, publishers, rate and subscribers."""
+    beats = _beats(args)
+    if not beats:
+        return 2 if beats is None else 1
+    pubs: dict[str, list] = {}
+    subs: dict[str, list] = {}
+    for hb in beats.values():
+        for s in hb.publishers:
+            pubs.setdefault(s.topic, []).append((hb.node, s))
+        for s in hb.subscriptions:
+            subs.setdefault(s.topic, []).append((hb.node, s))
+    w = max(len(t) for t in pubs | subs)
+    for topic in sorted(set(pubs) | set(subs)):
+        ps = pubs.get(topic, [])
+        typ = (ps or subs[topic])[0][1].type
+        rate = sum(s.rate_hz for _, s in ps)
+        print(f"{topic:<{w}}  {typ:<30} {rate:8.1f} Hz  pub: {','.join(n for n, _ in ps) or '-'}"
+              f"  sub: {','.join(n for n, _ in subs.get(topic, [])) or '-'}")
+    return 0
+
+
+def node_list(args: argparse.Namespace) -> int:
+    """Print every live node with host, pid, endpoint, state and rejection counts."""
+    beats = _beats(args)
+    if not beats:
+        return 2 if beats is None else 1
+    for name in sorted(beats):
+        hb = beats[name]
+        age = time.time() - hb.header.stamp
+        print(f"{name:<18} {hb.node_type:<18} host={hb.host:<8} pid={hb.pid:<7} {hb.endpoint:<24} "
+              f"state={hb.state:<5} up={hb.uptime:7.1f}s rejected={hb.rejected_total} "
+              f"(heartbeat {age * 1e3:.0f} ms ago){'  ' + hb.last_rejection if hb.last_rejection else ''}")
+    return 0
+
+
+def _short(value) -> str:
+    if isinstance(value, np.ndarray):
+        if value.size <= 16:
+            return np.array2string(value, precision=6, suppress_small=True).replace("\n", "")
+        return f"<ndarray {value.dtype} {value.shape}>"
+    return repr(value)
+
+
+def topic_echo(args: argparse.Namespace) -> int:
+    """Print messages of ``args.topic`` as they arrive (arrays shown by shape unless ``--arrays``)."""
+    peers, curve = _peers(args.launch)
+    done = asyncio.Event()
+    n = 0
+
+    def on_frames(frames: list) -> None:
+        nonlocal n
+        if bytes(frames[0]).decode(errors="replace") != args.topic:
+            return
+        try:
+            msg = decode_any(frames)
+        except DecodeError as exc:
+            print(f"--- rejected: {exc}")
+            return
+        n += 1
+        print(f"--- {args.topic} [{msg.SCHEMA} v{msg.VERSION}]")
+        for k, v in msg.__dict__.items():
+            print(f"{k}: {v!r}" if (args.arrays or not isinstance(v, np.ndarray)) else f"{k}: {_short(v)}")
+        if args.count and n >= args.count:
+            done.set()
+
+    async def main() -> None:
+        tr = ZmqTransport("", peers, curve=curve)
+        await tr.start(on_frames)
+        tr.subscribe(args.topic)
+        try:
+            await done.wait()
+        finally:
+            tr.close()
+
+    try:
+        asyncio.run(main())
+    except KeyboardInterrupt:
+        pass
+    return 0
+
+
+def topic_hz(args: argparse.Namespace) -> int:
+    """Measure the arrival rate of ``args.topic`` over ``--window`` s: mean rate, min/max/std of periods."""
+    peers, curve = _peers(args.launch)
+    stamps: list[float] = []
+
+    def on_frames(frames: list) -> None:
+        if bytes(frames[0]).decode(errors="replace") == args.topic:
+            stamps.append(time.monotonic())
+
+    async def main() -> None:
+        tr = ZmqTransport("", peers, curve=curve)
+        await tr.start(on_frames)
+        tr.subscribe(args.topic)
+        try:
+            await asyncio.sleep(args.window)
+        finally:
+            tr.close()
+
+    asyncio.run(main())
+    if len(stamps) < 2:
+        print(f"{args.topic}: {len(stamps)} messages in {args.window:.1f} s")
+        return 1
+    d = np.diff(stamps)
+    print(f"{args.topic}: average rate {1 / d.mean():.2f} Hz over {len(stamps)} msgs  "
+          f"min {d.min() * 1e3:.2f} ms max {d.max() * 1e3:.2f} ms std {d.std() * 1e3:.2f} ms")
+    return 0
