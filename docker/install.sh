@@ -12,7 +12,7 @@ if command -v apt-get >/dev/null 2>&1; then
     libegl1 libgl1 libgl1-mesa-dri libegl-mesa0 libgles2 \
     libglu1-mesa libxcursor1 libxft2 libxinerama1 libxrender1 libfontconfig1 \
     iproute2 procps \
-    xvfb xauth aravis-tools gir1.2-aravis-0.8 \
+    xvfb xauth aravis-tools aravis-tools-cli gir1.2-aravis-0.8 util-linux \
     libgirepository1.0-dev libcairo2-dev pkg-config gobject-introspection >/dev/null
 fi
 echo "[install] python packages (pyproject.toml, with the test extra)"

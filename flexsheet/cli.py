@@ -45,10 +45,13 @@ def _setup_logging(name: str = "") -> None:
 
 # ----------------------------------------------------------------------------------------------- run
 def cmd_run(args: argparse.Namespace) -> int:
+    """Run one node. Exit status: 0 after a clean stop, 1 on a transport error, 2 for an unknown node type,
+    :data:`~flexsheet.runtime.node.EXIT_CONFIG` (78) for a configuration error (a bad param, a launch-file or
+    key problem, a ``ValueError`` from the node's setup): the launcher does not respawn those."""
     from pydantic import ValidationError
 
     from flexsheet.runtime.launch import LaunchError, load_launch, node_config
-    from flexsheet.runtime.node import NodeConfig
+    from flexsheet.runtime.node import EXIT_CONFIG, ConfigError, NodeConfig
 
     if args.node_type not in registry.NODES:
         print(f"flexsheet run: unknown node type {args.node_type!r}; known: {', '.join(sorted(registry.NODES))}",
@@ -60,8 +63,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             lf = load_launch(args.launch)
             config = node_config(lf, args.name or args.node_type, out=args.out, overrides=overrides)
         except LaunchError as exc:
-            print(f"flexsheet run: {exc}", file=sys.stderr)
-            return 2
+            print(f"flexsheet run: configuration error: {exc}", file=sys.stderr)
+            return EXIT_CONFIG
     else:
         config = NodeConfig(name=args.name or args.node_type, node_type=args.node_type, endpoint=args.endpoint,
                             peers=args.peer or [], params=overrides)
@@ -70,13 +73,16 @@ def cmd_run(args: argparse.Namespace) -> int:
     try:
         node = cls(config)
     except ValidationError as exc:
-        err = exc.errors()[0]
-        print(f"flexsheet run {config.name}: param '{'.'.join(map(str, err['loc']))}': {err['msg']} "
-              f"(value {err.get('input')!r})", file=sys.stderr)
-        return 2
+        for err in exc.errors():
+            print(f"flexsheet run {config.name}: configuration error: param '{'.'.join(map(str, err['loc']))}': "
+                  f"{err['msg']} (value {err.get('input')!r:.200})", file=sys.stderr)
+        return EXIT_CONFIG
     from flexsheet.runtime.transport import TransportError
     try:
         asyncio.run(node.run())
+    except ConfigError as exc:
+        print(f"flexsheet run {config.name}: configuration error: {exc}", file=sys.stderr)
+        return EXIT_CONFIG
     except TransportError as exc:
         print(f"flexsheet run {config.name}: {exc}", file=sys.stderr)
         return 1
@@ -85,24 +91,43 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 # ----------------------------------------------------------------------------------------------- launch
 def cmd_launch(args: argparse.Namespace) -> int:
+    """Check the launch file for this host (every error one line on stderr, exit 78 when any), then, unless
+    ``--check``, run its nodes under the :class:`~flexsheet.runtime.launch.Supervisor`."""
     from flexsheet.runtime.launch import LaunchError, Supervisor, load_launch
+    from flexsheet.runtime.launch_check import check_launch
+    from flexsheet.runtime.node import EXIT_CONFIG
 
+    out = str(Path(args.out).resolve()) if args.out else None
+    overrides: dict[str, list[str]] = {}
+    parsed: dict[str, dict] = {}
+    for item in args.set:
+        node, dot, kv = item.partition(".")
+        if not dot or "=" not in kv:
+            print(f"flexsheet launch: {args.file}: --set {item!r}: expected NODE.KEY=VALUE", file=sys.stderr)
+            return EXIT_CONFIG
+        overrides.setdefault(node, []).append(kv)
+        parsed.setdefault(node, {}).update(_parse_params([kv]))
+    result = check_launch(args.file, host=args.host, out=out, overrides=parsed)
+    for line in result.warnings:
+        print(line, file=sys.stderr)
+    for line in result.errors:
+        print(line, file=sys.stderr)
+    what = f"host {args.host}" if args.host else f"all hosts ({', '.join(result.hosts)})"
+    if result.errors:
+        print(f"flexsheet launch: {len(result.errors)} error(s) in {args.file} for {what}; nothing started",
+              file=sys.stderr)
+        return EXIT_CONFIG
+    if args.check:
+        print(f"{args.file}: OK for {what}: {result.nodes} node(s); params, hosts, ports, files and keys checked")
+        return 0
     try:
         lf = load_launch(args.file)
-        out = str(Path(args.out).resolve()) if args.out else None
         if out:
             Path(out).mkdir(parents=True, exist_ok=True)
-        overrides: dict[str, list[str]] = {}
-        for item in args.set:
-            node, dot, kv = item.partition(".")
-            if not dot or "=" not in kv or node not in lf.nodes:
-                raise LaunchError(f"{lf.path}: --set {item!r}: expected NODE.KEY=VALUE with NODE one of "
-                                  f"{', '.join(lf.nodes)}")
-            overrides.setdefault(node, []).append(kv)
         sup = Supervisor(lf, host=args.host, out=out, duration=args.duration, overrides=overrides)
-    except LaunchError as exc:
+    except (LaunchError, OSError) as exc:
         print(f"flexsheet launch: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_CONFIG
     code = asyncio.run(sup.run())
     if lf.report and out and args.host in (None, "main", next(iter(lf.hosts))):
         report = registry.load(lf.report)
@@ -112,20 +137,25 @@ def cmd_launch(args: argparse.Namespace) -> int:
 
 # ----------------------------------------------------------------------------------------------- table
 def cmd_keys(args: argparse.Namespace) -> int:
-    import zmq.auth
+    from flexsheet.runtime.keys import PUBLIC_KEYS_FILE, default_keys_dir, generate
 
-    out = Path(os.path.expanduser(args.output))
-    out.mkdir(parents=True, exist_ok=True)
-    os.chmod(out, 0o700)
-    lines = ["security:", "  curve: true", f"  keys_dir: {args.output}", "  public_keys:"]
-    for host in args.hosts:
-        pub_file, secret_file = zmq.auth.create_certificates(out, host)
-        os.chmod(secret_file, 0o600)
-        public, _ = zmq.auth.load_certificate(pub_file)
-        lines.append(f"    {host}: \"{public.decode()}\"")
-        print(f"wrote {pub_file} and {secret_file}", file=sys.stderr)
-    print("# paste into the launch file; copy each <host>.key_secret to that host's keys_dir only")
-    print("\n".join(lines))
+    folder = Path(os.path.expanduser(args.output)) if args.output else default_keys_dir()
+    try:
+        status = generate(args.hosts, folder, force=args.force)
+    except (ValueError, OSError) as exc:
+        print(f"flexsheet keys: {exc}", file=sys.stderr)
+        return 2
+    for host, what in status.items():
+        print(f"{host}: {'new keypair' if what == 'new' else 'kept the existing keypair (--force to replace)'}: "
+              f"{folder / (host + '.key_secret')}")
+    print(f"public keys of all hosts: {folder / PUBLIC_KEYS_FILE}")
+    print("Each host needs its own <host>.key_secret and public_keys.yaml in its keys folder (never another "
+          "host's secret), e.g.:")
+    for host in [h for h in status if h != "main"][:3]:
+        print(f"  ssh {host} 'mkdir -p -m 700 ~/.flexsheet/keys' && scp -p {folder / (host + '.key_secret')} "
+              f"{folder / PUBLIC_KEYS_FILE} {host}:.flexsheet/keys/")
+    if folder != default_keys_dir():
+        print(f"launch files find them with: export FLEXSHEET_KEYS={folder}")
     return 0
 
 
@@ -165,8 +195,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("launch", help="start the nodes of a launch file (one host or all)",
                        description="Start every node of a launch file as its own process, with prefixed output, "
-                                   "respawn and clean Ctrl-C shutdown.",
+                                   "respawn and clean Ctrl-C shutdown. The file is checked first (params, hosts, "
+                                   "ports, files, CURVE keys); with an error nothing starts (exit 78).",
                        **_fmt("  flexsheet launch launch/sim.yaml --duration 60 --out out/sim\n"
+                              "  flexsheet launch launch/lab.yaml --check --host main   # check only, start nothing\n"
                               "  flexsheet launch launch/lab.yaml --host arm1     # on arm PC 1"))
     s.add_argument("file", help="launch YAML file")
     s.add_argument("--host", help="start only the nodes of this host (default: all hosts, on this machine)")
@@ -175,6 +207,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", help="output folder for bags, charts and the report (substituted for $(out))")
     s.add_argument("--set", action="append", metavar="NODE.KEY=VALUE", default=[],
                    help="override one node parameter (YAML value), repeatable: --set world.loop=true")
+    s.add_argument("--check", action="store_true",
+                   help="only check the file for this host (--host) and this machine: one line per error, exit 78 "
+                        "on any, 0 when it would start")
     s.set_defaults(func=cmd_launch)
 
     s = sub.add_parser("run", help="run one node alone",
@@ -193,12 +228,20 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_run)
 
     s = sub.add_parser("keys", help="generate CURVE keypairs for the hosts of a launch file",
-                       **_fmt("  flexsheet keys generate main arm1 arm2 -o ~/.flexsheet/keys"))
+                       **_fmt("  flexsheet keys generate main arm1 arm2"))
     ks = s.add_subparsers(dest="keys_cmd", required=True, metavar="VERB")
-    t = ks.add_parser("generate", help="write <host>.key and <host>.key_secret; print the launch-file block",
-                      **_fmt("  flexsheet keys generate main arm1 arm2 -o ~/.flexsheet/keys"))
+    t = ks.add_parser("generate", help="write <host>.key, <host>.key_secret and public_keys.yaml",
+                      description="Write a CURVE keypair per host and public_keys.yaml (host -> public key) into the "
+                                  "keys folder: -o, else $FLEXSHEET_KEYS, else ~/.flexsheet/keys. A launch file "
+                                  "with security: {curve: true, public_keys_file: $(keys)/public_keys.yaml} (as "
+                                  "launch/lab.yaml) then needs nothing pasted. Existing keypairs are kept.",
+                      **_fmt("  flexsheet keys generate main arm1 arm2\n"
+                             "  FLEXSHEET_KEYS=/tmp/k flexsheet keys generate main arm1 arm2 && "
+                             "FLEXSHEET_KEYS=/tmp/k flexsheet launch launch/lab.yaml --check --host main"))
     t.add_argument("hosts", nargs="+", help="host names of the launch file")
-    t.add_argument("-o", "--output", default="~/.flexsheet/keys", help="keys folder (default ~/.flexsheet/keys)")
+    t.add_argument("-o", "--output", default=None, help="keys folder (default $FLEXSHEET_KEYS or ~/.flexsheet/keys)")
+    t.add_argument("--force", action="store_true", help="replace existing keypairs (every host then needs the new "
+                                                         "public_keys.yaml and its new secret)")
     t.set_defaults(func=cmd_keys)
 
     s = sub.add_parser("topic", help="inspect topics of the live graph (from heartbeats)",

@@ -20,6 +20,7 @@ NODES: dict[str, str] = {
     "fem": "nodes.fem.node:FemNode",
     "renderer": "nodes.renderer.node:RendererNode",
     "world": "nodes.world.node:WorldNode",
+    "viz": "nodes.viz.node:VizNode",
     "recorder": "flexsheet.runtime.bag:RecorderNode",
     "player": "flexsheet.runtime.bag:PlayerNode",
     "talker": "flexsheet.runtime.demo:TalkerNode",
@@ -36,6 +37,7 @@ EXPERIMENTS: dict[str, str] = {
 BENCHES: dict[str, str] = {
     "transport": "flexsheet.runtime.bench_transport:main",
     "vision": "nodes.triangulator.bench:main",
+    "camera": "nodes.camera.bench:main",
     "planner": "nodes.planner.bench:main",
     "arm": "flexsheet.experiments.bench_arm:main",
     "fem": "nodes.fem.bench:main",

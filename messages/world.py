@@ -12,17 +12,25 @@ __all__ = ["FingerTruth", "SheetState"]
 class FingerTruth(Message):
     """True position of the simulated fingertip marker (drives the camera twin; never used by the planner).
 
-    ``position`` (3,) m and ``velocity`` (3,) m/s in the display frame. ``phase``: script phase name
-    ("approach", "stroke", "push", "stroke_push", "idle"). ``target_angle``: angle of the target mark around
-    the cylinder axis, rad (0 = facing the user). ``visible``: False when the script occludes the marker.
+    ``position`` (3,) m and ``velocity`` (3,) m/s in the display frame. The script segment being played, as
+    typed fields: ``segment`` (its index in the world's script, 0-based), ``mode`` ("stroke", "push",
+    "stroke_push"), ``moving_time`` (s, the segment's time for the mark's travel; Table I's row key) and
+    ``phase`` (where in the segment: "approach", "idle", or the mode while the mark moves).
+    ``target_angle``: angle of the target mark around the cylinder axis, rad (0 = facing the user).
+    ``visible``: False when the script occludes the marker.
     """
 
     SCHEMA = "flexsheet/FingerTruth"
-    VERSION = 1
+    VERSION = 2
 
     position: ndarray("float64", (3,), "marker position, m, display frame")
     velocity: ndarray("float64", (3,), "marker velocity, m/s, display frame")
-    phase: str = Field(default="idle", description="script phase")
+    segment: int = Field(default=0, ge=0, description="index of the script segment being played")
+    mode: str = Field(default="stroke", pattern="^(stroke|push|stroke_push)$",
+                      description="segment mode: stroke | push | stroke_push")
+    moving_time: float = Field(default=0.0, ge=0.0, description="segment moving time (mark's travel), s")
+    phase: str = Field(default="idle", pattern="^(approach|idle|stroke|push|stroke_push)$",
+                       description="script phase: approach | idle | the mode while the mark moves")
     target_angle: float = Field(default=0.0, description="target mark angle around the cylinder axis, rad")
     visible: bool = Field(default=True, description="marker visible to the camera")
 

@@ -15,6 +15,7 @@ from flexsheet.model.kinematics import (
     home_joints,
     rotation_angle,
 )
+from flexsheet.model.sheet import clamp_poses
 from nodes.arm_bridge.tracking import TargetTracker
 
 R_CYL = scene.CYLINDER_RADIUS
@@ -23,7 +24,7 @@ R_CYL = scene.CYLINDER_RADIUS
 def tilted_clamps(theta, stretch):
     """Clamp poses of the sheet tangent to the cylinder at angle theta (contact (-R+R cos, 0, R sin))."""
     c, s = math.cos(theta), math.sin(theta)
-    return scene.clamp_poses(np.array([-R_CYL + R_CYL * c, 0.0, R_CYL * s]), np.array([c, 0.0, s]),
+    return clamp_poses(np.array([-R_CYL + R_CYL * c, 0.0, R_CYL * s]), np.array([c, 0.0, s]),
                              np.array([0.0, 1.0, 0.0]), stretch)
 
 
@@ -67,7 +68,7 @@ def test_home_sheet_and_tilts_reachable_with_margin(side):
 def test_home_joints_hold_the_home_clamp_frame():
     for side, base, idx in (("left", LEFT_BASE, 0), ("right", RIGHT_BASE, 1)):
         T = ArmKinematics(side, base).fk(home_joints(side))
-        want = scene.clamp_poses(np.zeros(3), np.array([1.0, 0, 0]), np.array([0.0, 1, 0]), 0.0)[idx]
+        want = clamp_poses(np.zeros(3), np.array([1.0, 0, 0]), np.array([0.0, 1, 0]), 0.0)[idx]
         assert np.linalg.norm(T[:3, 3] - want[:3, 3]) < 1e-3
         assert np.allclose(T[:3, :3], want[:3, :3], atol=1e-3)   # columns (normal, axis_u, axis_v)
 

@@ -86,12 +86,46 @@ def test_experiment_quick_writes_summary(tmp_path, monkeypatch):
     assert lat[-1]["dd_mean_mm"] > lat[0]["dd_mean_mm"]     # more latency, more error
 
 
-def test_alpha_beta_gains_known_values():
-    from flexsheet.experiments.stroke import alpha_beta_gains
+@pytest.mark.parametrize("lam, tol", [(0.1, 0.005), (1.0, 0.01)])
+def test_experiment_kf_tuning_is_kalatas_alpha_beta_in_steady_state(lam, tol):
+    """The stroke experiment runs the triangulator's real Kalman filter with q from a tracking index λ; its
+    steady-state gains must be Kalata's closed-form α-β gains for that λ (IEEE T-AES 20(2), 1984)."""
+    from flexsheet.experiments.stroke import Predictor, q_for_tracking_index
 
-    a, b = alpha_beta_gains(1.0)
-    # Kalata (1984): λ = 1 → r = (5 − 3)/4 = 0.5, α = 0.75, β = 2·1.25 − 4·0.5 = 0.5
-    assert a == pytest.approx(0.75) and b == pytest.approx(0.5)
+    T, sig = 1.0 / 48.0, 1e-4
+    pr = Predictor(q_for_tracking_index(lam, sig, T), sig ** 2 * np.eye(3))
+    for k in range(2000):
+        pr.update(k * T, np.zeros(3))
+    before = pr.predict(T)                                   # prediction for the next sample
+    pr.update(2000 * T, before + [1e-5, 0.0, 0.0])           # a 10 µm innovation along x
+    alpha = (pr.kf.x[0] - before[0]) / 1e-5
+    beta = (pr.kf.velocity[0] - 0.0) * T / 1e-5
+    r = (4.0 + lam - np.sqrt(8.0 * lam + lam * lam)) / 4.0   # Kalata: λ = 1 → α = 0.75, β = 0.5
+    a_k = 1.0 - r * r
+    b_k = 2.0 * (2.0 - a_k) - 4.0 * np.sqrt(1.0 - a_k)
+    assert alpha == pytest.approx(a_k, abs=tol) and beta == pytest.approx(b_k, abs=tol)
+    with pytest.raises(ValueError, match="tracking_index"):
+        q_for_tracking_index(0.0, sig, T)
+
+
+def test_params_are_the_pure_configs_fields():
+    from dataclasses import fields
+
+    from flexsheet.model.tension import SheetMaterial
+    from nodes.planner.limits import MotionLimits, ReachModel
+    from nodes.planner.stroke import PlannerConfig
+
+    names = set(PlannerParams.model_fields)
+    for cls in (PlannerConfig, SheetMaterial, MotionLimits, ReachModel):
+        for f in fields(cls):
+            if f.name not in ("material", "limits", "reach"):
+                assert ("sheet_size" if f.name == "size" else f.name) in names, f.name
+    # the default params give exactly the default config; a bad value fails at validation, naming the field
+    assert PlannerParams().planner_config() == PlannerConfig()
+    with pytest.raises(ValueError, match="release_distance"):
+        PlannerParams(touch_distance=0.01, release_distance=0.005)
+    with pytest.raises(ValueError, match="v_max"):
+        PlannerParams(v_max=0.0)
 
 
 def test_bench_prints_json(capsys):

@@ -9,6 +9,7 @@ from flexsheet.experiments.table1 import stroke_errors, summarize, table1
 from flexsheet.model import scene
 from flexsheet.model.finger import FingerScript
 from flexsheet.model.shapes import make_shape, paper_cylinder
+from flexsheet.model.sheet import clamp_poses
 from flexsheet.model.vec import cross, dot, norm, sub
 from nodes.planner.limits import MotionLimits, RateLimiter, ReachModel, limit_step
 from nodes.planner.stroke import PlannerConfig, SurfacePlanner
@@ -36,9 +37,9 @@ def test_placement_is_tangent_plane_at_centre_ray_hit():
     n = plan.normal
     assert abs(dot(n, sub(A, c.c)) - R) < 1e-12              # tangent plane at A
     assert abs(dot(plan.axis_u, n)) < 1e-12 and plan.axis_u[1] > 0.99
-    # clamps match flexsheet.model.scene.clamp_poses
+    # clamps match flexsheet.model.sheet.clamp_poses
     Tl, Tr = plan.clamp_matrices()
-    El, Er = scene.clamp_poses(np.array(plan.origin), np.array(plan.normal), np.array(plan.axis_u), plan.stretch)
+    El, Er = clamp_poses(np.array(plan.origin), np.array(plan.normal), np.array(plan.axis_u), plan.stretch)
     assert np.allclose(Tl, El, atol=1e-12) and np.allclose(Tr, Er, atol=1e-12)
 
 

@@ -6,11 +6,11 @@ import pytest
 from flexsheet.model import scene
 from flexsheet.model.sheet import Membrane, SheetSurface
 from nodes.renderer.correction import (
-    _triangles,
     choose_model,
     correct_vertices,
     correct_vertices_fine,
     correct_vertices_pushed,
+    fan_triangles,
     land_on_triangles,
     land_projector_rays,
     predict_model_errors,
@@ -84,7 +84,7 @@ def test_pushed_four_triangle_light_lands_on_eye_line(depth):
     ah, ok = correct_vertices_pushed(a, pushed_point=q, corners=home.corners, return_valid=True, **COM)
     assert ok.all()
     b = project_vertices(ah, eye=scene.EYE, screen_point=[0, 0, 0], screen_normal=[1, 0, 0])
-    qq, cs, nrm, usable, _ = _triangles(q, home.corners, scene.PROJECTOR)
+    qq, cs, nrm, usable, _ = fan_triangles(q, home.corners, scene.PROJECTOR)
     c, good, on = land_on_triangles(b, scene.PROJECTOR, qq, cs, nrm, usable, 0.02)
     assert good.all() and on.all()
     assert dist_to_lines(c, scene.EYE, a).max() < 1e-9

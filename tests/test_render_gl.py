@@ -101,3 +101,45 @@ def test_measurement_camera_flat_correction_within_a_pixel():
         assert err["flat"] < 0.0007          # corrected: within one projector pixel
     finally:
         r.release()
+
+
+def test_left_image_is_drawn_for_the_users_left_eye():
+    """The user faces −x with +z up, so the left eye is at −y (right-handed frame); a small object 0.3 m behind
+    the screen must show uncrossed disparity: its left-eye image lies toward the user's left."""
+    forward, up = -np.asarray(scene.SCREEN_NORMAL, float), np.array([0.0, 0.0, 1.0])
+    users_right = np.cross(forward, up)
+    left_eye, right_eye = scene.EYE - 0.032 * users_right, scene.EYE + 0.032 * users_right
+    a = np.array([-0.3, 0.0, 0.0])
+    tri = (a + np.array([[0, -0.006, -0.006], [0, 0.006, -0.006], [0, 0.0, 0.008]])).astype(np.float32)
+    px = 0.0028
+    r = StereoRenderer(Projector.default(256, 192, pixel=px), ipd=0.064, shading=False)
+    try:
+        r.set_mesh(tri, np.array([[0, 1, 2]], np.int32))
+        r.set_model("none")
+        r.render_pair()
+        left, right = r.read_pair()
+    finally:
+        r.release()
+    col = [np.average(np.arange(256), weights=(im.mean(axis=2) > 127).sum(axis=0)) for im in (left, right)]
+    # where each eye sees the object's centroid on the screen (x = 0), and the projector column that lights it:
+    # projector image right is the projector's own right, which faces the user: the user's left
+    c = tri.mean(axis=0)
+    hit = [e + (c - e) * (e[0] / (e[0] - c[0])) for e in (left_eye, right_eye)]
+    want = float((hit[0] - hit[1]) @ -users_right) / px
+    assert want > 8.0                                       # ~9.8 px of uncrossed disparity
+    assert abs((col[0] - col[1]) - want) < 1.0
+
+
+def test_calibrated_projector_overrides_and_refuses_a_reflection():
+    d = Projector.default(320, 240)
+    K = d.K.copy()
+    K[0, 2] += 5.0
+    p = Projector.calibrated(320, 240, K=K.tolist())
+    np.testing.assert_array_equal(p.K, K)
+    np.testing.assert_array_equal(p.R, d.R)
+    np.testing.assert_array_equal(Projector.calibrated(320, 240).K, d.K)
+    flipped = d.R @ np.diag([-1.0, 1.0, 1.0])
+    with pytest.raises(ValueError, match="mirror_x"):
+        Projector.calibrated(320, 240, R=flipped)
+    with pytest.raises(ValueError, match="K must be a finite 3x3"):
+        Projector.calibrated(320, 240, K=[[1.0, 0.0], [0.0, 1.0]])

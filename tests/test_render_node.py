@@ -95,8 +95,17 @@ def test_tilted_clamps_drive_the_flat_correction():
     asyncio.run(scenario())
 
 
-def test_window_mode_names_missing_package():
+def test_window_output_params_are_validated(monkeypatch):
+    p = RendererParams(output="window", stereo="side_by_side", monitor="DP-1", fullscreen=True, mirror_x=True)
+    assert (p.output, p.stereo, p.monitor, p.mirror_x) == ("window", "side_by_side", "DP-1", True)
+    assert RendererParams().output == "offscreen" and RendererParams().stereo == "frame_sequential"
+    for bad in ({"output": "screen"}, {"stereo": "anaglyph"}, {"monitor": -1}, {"monitor": " "},
+                {"refresh_hz": 0.0}, {"display": "window"}, {"ipd": -0.01}):
+        with pytest.raises(pydantic.ValidationError, match=next(iter(bad))):
+            RendererParams(**bad)
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "glfw" else real(name, *a))
     with pytest.raises(pydantic.ValidationError, match="glfw"):
-        RendererParams(display="window")
-    with pytest.raises(pydantic.ValidationError):
-        RendererParams(ipd=-0.01)
+        RendererParams(output="window")

@@ -136,5 +136,5 @@ def test_bad_param_fails_before_sockets_with_field_name(demo_launch):
     path = demo_launch()
     out = subprocess.run([sys.executable, "-m", "flexsheet", "run", "talker", "--launch", str(path), "--name",
                           "talker", "--param", "rate=-3"], capture_output=True, text=True, timeout=30)
-    assert out.returncode == 2
-    assert "param 'rate'" in out.stderr and "-3" in out.stderr
+    assert out.returncode == 78  # EX_CONFIG: the launcher does not respawn it
+    assert "configuration error: param 'rate'" in out.stderr and "-3" in out.stderr

@@ -16,6 +16,7 @@ from flexsheet.model.calibration import (
     to_message,
     write_yaml,
 )
+from flexsheet.model.camera_sim import XIMEA_CALIB
 
 DATA = os.path.join(os.path.dirname(__file__), "data", "stereo_xi")
 
@@ -85,7 +86,7 @@ def test_yaml_round_trip_and_message(tmp_path, real_result):
 
 
 def test_shipped_ximea_calibration_matches(real_result):
-    shipped = load_yaml(os.path.join(os.path.dirname(__file__), "..", "nodes", "camera", "ximea_calib.yaml"))
+    shipped = load_yaml(XIMEA_CALIB)                     # flexsheet/model/ximea_calib.yaml
     assert np.allclose(shipped["K1"], real_result.K1, rtol=1e-6)
     assert np.allclose(shipped["T"], real_result.T, atol=1e-7)
 

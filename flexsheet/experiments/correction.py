@@ -27,8 +27,9 @@ from flexsheet.experiments.measurement import MeasurementCamera, measure_sizes
 from flexsheet.model import scene
 from flexsheet.model.sheet import Membrane, SheetSurface
 from nodes.renderer.bench import time_models
-from nodes.renderer.correction import MODELS, choose_model, predict_model_errors
+from nodes.renderer.correction import MODELS
 from nodes.renderer.scene import StereoRenderer, cylinder_mesh
+from nodes.renderer.state import ErrorTable, silhouette_probes
 
 __all__ = ["main", "inclined_sheet", "run"]
 
@@ -131,18 +132,12 @@ def run(out: Path, thetas, depths, fine_modes: int = 16, pixel: float = 0.00035,
                                                      ("fine", "fine_mm"))}
         summary["pushed_tension_ratio_sensitivity"] = {"depth_mm": Smax, "by_true_tension_ratio": sens}
 
-    # model choice from predicted errors (as the node does), per depth
-    probes = v[(v[:, 0] > -scene.CYLINDER_RADIUS)].astype(float)[::7]
-    common = dict(eye=scene.EYE, projector=scene.PROJECTOR, screen_point=scene.SCREEN_POINT,
-                  screen_normal=scene.SCREEN_NORMAL, probes=probes, sheet=home)
-    grid = np.linspace(0.0, 0.06, 13)
-    table = {m: [] for m in MODELS}
-    for S in grid:
-        pe = predict_model_errors(float(S), **common)
-        for m in MODELS:
-            table[m].append((float(S), pe[m]))
-    summary["choice"] = {f"{S:g}": choose_model(S * 1e-3, table) for S in [0.5, 1, 2, 5] + list(depths)}
-    summary["choice_table_m"] = table
+    # model choice from predicted errors (the node's table, nodes.renderer.state), per depth
+    table = ErrorTable.build(silhouette_probes(v), eye=scene.EYE, projector=scene.PROJECTOR,
+                             screen_point=scene.SCREEN_POINT, screen_normal=scene.SCREEN_NORMAL, sheet=home)
+    summary["choice"] = {f"{S:g}": table.choose(S * 1e-3, scene.PIXEL_ON_SCREEN, models=MODELS)
+                         for S in [0.5, 1, 2, 5] + list(depths)}
+    summary["choice_table_m"] = table.rows
 
     # speed: a stereo pair at 1024x768 without MSAA, shaded, as the node draws it
     rt = StereoRenderer()

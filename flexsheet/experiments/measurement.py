@@ -77,7 +77,7 @@ class MeasurementCamera:
     """Virtual camera at ``eye`` whose image plane is the imaginary screen.
 
     ``pixel`` m per camera pixel on the screen; ``extent`` (width, height) m of the photographed screen area
-    centred on ``screen_point``; the image's x axis points to the user's right (−y), its rows go down (−z),
+    centred on ``screen_point``; the image's x axis points to the user's right (+y), its rows go down (−z),
     for the default screen normal +x. ``grid_n``: samples per side of the true membrane grid.
     """
 
@@ -94,7 +94,7 @@ class MeasurementCamera:
         no = np.asarray(self.screen_normal, dtype=float)
         no = no / np.linalg.norm(no)
         up = np.array([0.0, 0.0, 1.0])
-        right = np.cross(up, no)       # −y for no = +x: the user's right
+        right = np.cross(up, no)       # +y for no = +x: the user's right (the user faces −x)
         w, h = int(round(self.extent[0] / self.pixel)), int(round(self.extent[1] / self.pixel))
         xs = (np.arange(w) - (w - 1) / 2) * self.pixel
         zs = ((h - 1) / 2 - np.arange(h)) * self.pixel

@@ -5,10 +5,11 @@ Reads ``OUT/*.mcap`` (the recorder's bag) and writes ``OUT/summary.json``, ``OUT
 
 Table I (paper §V-C, Fig. 9) per stroking segment, keyed by moving time in seconds like
 ``flexsheet experiment stroke``: D = the measured fingertip (``/fingertip``, valid samples, while the
-target mark moves), the actual sheet = ``/world/sheet`` (FK of the arms' measured joints) interpolated at
-the fingertip's exposure time, errors by :func:`flexsheet.experiments.table1.table1` in the cross-section of
-Fig. 9 (the sheet normal's component along the cylinder axis is removed; it is small and would otherwise
-make the support point jump along the axis).
+target mark moves: the ``/world/finger`` truth at the exposure time names the segment's ``mode``,
+``moving_time`` and ``phase``), the actual sheet = ``/world/sheet`` (FK of the arms' measured joints)
+interpolated at the fingertip's exposure time, the row by :func:`flexsheet.experiments.table1.table1_row`
+(the same metric as the in-process experiment, in the cross-section of Fig. 9) with the paper's numbers
+from :data:`flexsheet.experiments.table1.PAPER_TABLE1`.
 
 Latency per hop, matched through the stamps every message carries (``exposure_stamp`` →
 ``source_stamp`` → ``target_stamp``/``write_stamp``); arrival times are the recorder's receive times:
@@ -34,15 +35,15 @@ from pathlib import Path
 
 import numpy as np
 
-from flexsheet.experiments.table1 import summarize, table1
+from flexsheet.experiments.table1 import PAPER_TABLE1, table1_row
 from flexsheet.model.shapes import paper_cylinder
 from flexsheet.runtime.bag import read_bag
 from flexsheet.runtime.codec import DecodeError, decode_any
 
-__all__ = ["analyse", "main"]
+__all__ = ["analyse", "table1_rows", "latency_hops", "main"]
 
-PAPER = {"10": {"dd_mean_mm": 0.443, "dtheta_mean_deg": 0.359, "dd_std_mm": 0.0330, "dtheta_std_deg": 0.267},
-         "30": {"dd_mean_mm": 0.277, "dtheta_mean_deg": 0.225, "dd_std_mm": 0.0221, "dtheta_std_deg": 0.179}}
+#: the truth's modes whose moving phase is a Table I stroke
+STROKE_MODES = ("stroke", "stroke_push")
 
 
 def _load(bags: list[Path]) -> dict[str, list]:
@@ -73,59 +74,73 @@ def _interp_sheet(sheets: list, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def analyse(bags: Path | list[Path], heartbeats: list | None = None) -> dict:
     """Table I per segment and the latency per hop from a bag, or the parts of one run (a respawned recorder
-    continues in ``<stem>.1.mcap``…). Returns the summary dict; the recorded ``/diagnostics`` (arrival
-    time, Heartbeat) pairs are appended to ``heartbeats`` if given."""
+    continues in ``<stem>.1.mcap``…). Returns the summary dict (``bags``, ``counts`` per topic, the Table I
+    rows of :func:`table1_rows`, ``latency_ms`` of :func:`latency_hops`); the recorded ``/diagnostics``
+    (arrival time, Heartbeat) pairs are appended to ``heartbeats`` if given."""
     bags = [bags] if isinstance(bags, Path) else list(bags)
     d = _load(bags)
     for msgs in d.values():
         msgs.sort(key=lambda tm: tm[0])
     if heartbeats is not None:
         heartbeats.extend(d.get("/diagnostics", []))
-    tips = [(t, m) for t, m in d.get("/fingertip", [])]
-    truths = d.get("/world/finger", [])
-    sheets = d.get("/world/sheet", [])
     summary: dict = {"bags": [str(b) for b in bags], "counts": {k: len(v) for k, v in d.items()}}
-    # ---------------------------------------------------------------- Table I
-    if truths and sheets and tips:
-        tt = np.array([m.header.stamp for _, m in truths])
-        phases = [m.phase for _, m in truths]
-        shape = paper_cylinder()
-        groups: dict[str, list] = defaultdict(list)
-        n_invalid = 0
-        for _, m in tips:
-            if not m.valid:
-                n_invalid += 1
-                continue
-            k = int(np.searchsorted(tt, m.exposure_stamp, side="right")) - 1
-            if k < 0:
-                continue
-            seg, mode, mt, phase = phases[k].split(":")
-            if phase == mode and mode in ("stroke", "stroke_push"):
-                key = mt if mode == "stroke" else f"stroke_push_{mt}"
-                groups[key].append(m)
-        s_ts = np.array([s.header.stamp for _, s in sheets])
-        for key, ms in groups.items():
-            t = np.array([m.exposure_stamp for m in ms])
-            keep = (t >= s_ts[0]) & (t <= s_ts[-1])
-            ms = [m for m, k in zip(ms, keep, strict=True) if k]
-            if len(ms) < 10:
-                continue
-            t = np.array([m.exposure_stamp for m in ms])
-            origin, normal = _interp_sheet(sheets, t)
-            # Fig. 9 is a cross-section of the cylinder: measure in the plane normal to its axis
-            axis = np.asarray(shape.axis if hasattr(shape, "axis") else (0.0, 1.0, 0.0), dtype=float)
-            normal = normal - np.outer(normal @ axis, axis)
-            normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-            err = table1(shape, np.array([m.position for m in ms]), origin, normal)
-            row = summarize(err.dd, err.dtheta)
-            if key in PAPER:
-                row["paper"] = PAPER[key]
-            summary[key] = row
-        summary["fingertip_invalid"] = n_invalid
-    # ---------------------------------------------------------------- latency
+    summary.update(table1_rows(d))
+    summary["latency_ms"] = latency_hops(d)
+    return summary
+
+
+def _stroke_groups(tips: list, truths: list) -> tuple[dict[str, list], int]:
+    """Valid fingertips grouped by the stroking segment the truth was playing at their exposure: key = moving
+    time (``"10"``) for "stroke", ``"stroke_push_10"`` for "stroke_push"; and the number of invalid ones."""
+    tt = np.array([m.header.stamp for _, m in truths])
+    groups: dict[str, list] = defaultdict(list)
+    n_invalid = 0
+    for _, m in tips:
+        if not m.valid:
+            n_invalid += 1
+            continue
+        k = int(np.searchsorted(tt, m.exposure_stamp, side="right")) - 1
+        if k < 0:
+            continue
+        truth = truths[k][1]
+        if truth.phase == truth.mode and truth.mode in STROKE_MODES:
+            mt = f"{truth.moving_time:g}"
+            groups[mt if truth.mode == "stroke" else f"stroke_push_{mt}"].append(m)
+    return groups, n_invalid
+
+
+def table1_rows(d: dict[str, list]) -> dict:
+    """Table I rows (:func:`flexsheet.experiments.table1.table1_row`, with ``paper`` for the paper's rows) per
+    stroking segment with ≥ 10 fingertips inside the recorded sheet states, plus ``fingertip_invalid``; empty
+    without ``/fingertip``, ``/world/finger`` and ``/world/sheet``. ``d``: topic → time-sorted
+    (arrival s, message) pairs."""
+    tips, truths, sheets = d.get("/fingertip", []), d.get("/world/finger", []), d.get("/world/sheet", [])
+    if not (truths and sheets and tips):
+        return {}
+    groups, n_invalid = _stroke_groups(tips, truths)
+    shape = paper_cylinder()
+    s_ts = np.array([s.header.stamp for _, s in sheets])
+    out: dict = {}
+    for key, ms in groups.items():
+        ms = [m for m in ms if s_ts[0] <= m.exposure_stamp <= s_ts[-1]]
+        if len(ms) < 10:
+            continue
+        origin, normal = _interp_sheet(sheets, np.array([m.exposure_stamp for m in ms]))
+        row = table1_row(shape, np.array([m.position for m in ms]), origin, normal)
+        if key in PAPER_TABLE1:
+            row["paper"] = PAPER_TABLE1[key]
+        out[key] = row
+    out["fingertip_invalid"] = n_invalid
+    return out
+
+
+def latency_hops(d: dict[str, list]) -> dict[str, dict]:
+    """Latency per hop (module doc), ms: ``{hop: {"median", "p99", "n"}}``, matched through the stamps
+    every message carries. ``d``: topic → time-sorted (arrival s, message) pairs."""
+    tips = d.get("/fingertip", [])
     tip_arrival = {m.exposure_stamp: t for t, m in tips}
     frame_time = {m.exposure_stamp: m.frame_stamp for _, m in tips if m.frame_stamp}
-    target_arrival = {}
+    target_arrival: dict[float, float] = {}
     for t, m in d.get("/sheet/target", []):
         target_arrival.setdefault(m.source_stamp, t)
     first_write: dict[float, float] = {}
@@ -135,7 +150,7 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None) -> dict:
             if m.target_stamp and m.write_stamp and m.target_stamp not in first_write:
                 first_write[m.target_stamp] = m.write_stamp
                 first_readback[m.target_stamp] = m.header.stamp
-    render_arrival = {}
+    render_arrival: dict[float, float] = {}
     for t, m in d.get("/render/stereo", []):
         render_arrival.setdefault(m.source_stamp, t)
     hops = {
@@ -147,8 +162,7 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None) -> dict:
         "camera_frame_to_modbus_write": [first_write[e] - frame_time[e] for e in first_write if e in frame_time],
         "fingertip_to_rendered_frame": [render_arrival[e] - tip_arrival[e] for e in tip_arrival if e in render_arrival],
     }
-    summary["latency_ms"] = {k: _stats(v) for k, v in hops.items()}
-    return summary
+    return {k: _stats(v) for k, v in hops.items()}
 
 
 def _charts(summary: dict, out: Path) -> None:
@@ -163,7 +177,7 @@ def _charts(summary: dict, out: Path) -> None:
         for a, (q, label) in zip(ax, (("dd", "Δd (mm)"), ("dtheta", "Δθ (deg)")), strict=True):
             unit = "mm" if q == "dd" else "deg"
             ours = [summary[k][f"{q}_mean_{unit}"] for k in keys]
-            paper = [PAPER[k][f"{q}_mean_{unit}"] for k in keys]
+            paper = [PAPER_TABLE1[k][f"{q}_mean_{unit}"] for k in keys]
             a.bar(x - 0.2, paper, 0.4, label="paper (Table I)")
             a.bar(x + 0.2, ours, 0.4, yerr=[summary[k][f"{q}_std_{unit}"] for k in keys], label="flexsheet (full graph)")
             a.set_xticks(x, [f"{k} s" for k in keys])

@@ -12,6 +12,11 @@ We make the definitions exact for any shape and sheet pose:
   actual sheet normal (for the paper's cylinder this is exactly |θ − θ′| around the axis).
 * ``gap`` (extra): distance of D′ from the sheet plane along its normal (the sheet floating off, > 0, or
   cutting into, < 0, the virtual surface) — zero when the sheet is exactly tangent.
+* Fig. 9 is a cross-section of the cylinder: for a shape with an ``axis`` (the cylinder) the sheet normal's
+  component along the axis is removed before D′ and Δθ are computed (it is small, and would otherwise make
+  the support point jump along the axis). Both the in-process experiment
+  (:mod:`flexsheet.experiments.stroke`) and the report of a recorded run (:mod:`flexsheet.experiments.report`)
+  get their rows from :func:`table1_row`, and the paper's numbers from :data:`PAPER_TABLE1`.
 
 A bias common to D and the sheet (e.g. a camera calibration offset, the paper's 2.95 mm) cancels in Δd,
 which is why the paper's Δd has a small standard deviation.
@@ -26,7 +31,24 @@ import numpy as np
 
 from flexsheet.model.shapes import Shape
 
-__all__ = ["StrokeErrors", "stroke_errors", "presented_contacts", "table1", "summarize"]
+__all__ = ["StrokeErrors", "stroke_errors", "presented_contacts", "table1", "summarize", "table1_row",
+           "PAPER_TABLE1", "TARGET_FACTOR", "target", "section_normals"]
+
+#: the paper's Table I (Furukawa et al., §V-C): moving time (s, as the row key) → means and population
+#: standard deviations of Δd (mm) and Δθ (deg) over the moving phase
+PAPER_TABLE1: dict[str, dict[str, float]] = {
+    "10": {"dd_mean_mm": 0.443, "dd_std_mm": 0.0330, "dtheta_mean_deg": 0.359, "dtheta_std_deg": 0.267},
+    "30": {"dd_mean_mm": 0.277, "dd_std_mm": 0.0221, "dtheta_mean_deg": 0.225, "dtheta_std_deg": 0.179},
+}
+#: the project's target: errors this many times below the paper's (at the 10 s row)
+TARGET_FACTOR = 4.0
+
+
+def target(key: str = "10") -> dict[str, float]:
+    """Target row: the paper's Δd and Δθ means of row ``key`` divided by :data:`TARGET_FACTOR`
+    (``dd_mean_mm``, ``dtheta_mean_deg``). Raises ``KeyError`` for a row the paper does not have."""
+    p = PAPER_TABLE1[key]
+    return {"dd_mean_mm": p["dd_mean_mm"] / TARGET_FACTOR, "dtheta_mean_deg": p["dtheta_mean_deg"] / TARGET_FACTOR}
 
 
 @dataclass(frozen=True)
@@ -81,11 +103,27 @@ def presented_contacts(shape: Shape, D, sheet_origin, sheet_normal) -> tuple[np.
     return Dp, gap
 
 
+def section_normals(shape: Shape, normals) -> np.ndarray:
+    """Unit normals (N, 3) in the Fig. 9 cross-section: for a shape with an ``axis`` (the cylinder) the
+    component along the axis removed, else just normalised. Raises ``ValueError`` on bad shapes/values or a
+    normal parallel to the axis."""
+    n = _as_points("sheet_normal", normals)
+    axis = getattr(shape, "axis", None)
+    if axis is not None:
+        a = np.asarray(axis, dtype=float)
+        a = a / np.linalg.norm(a)
+        n = n - np.outer(n @ a, a)
+    nrm = np.linalg.norm(n, axis=1, keepdims=True)
+    if np.any(nrm < 1e-9):
+        raise ValueError("sheet_normal must be non-zero (and not along the shape's axis)")
+    return n / nrm
+
+
 def table1(shape: Shape, measured, sheet_origin, sheet_normal) -> StrokeErrors:
     """Fig. 9 errors from time series: ``measured`` fingertip positions (N, 3) m and the actual sheet
     ``sheet_origin`` (N, 3) m and ``sheet_normal`` (N, 3) at the same instants (e.g. from ``/fingertip``
-    and ``/world/sheet`` or the arms' FK). Returns :class:`StrokeErrors`. Raises ``ValueError`` on bad
-    shapes/values."""
+    and ``/world/sheet`` or the arms' FK). The sheet normals are taken in the cross-section
+    (:func:`section_normals`). Returns :class:`StrokeErrors`. Raises ``ValueError`` on bad shapes/values."""
     M = _as_points("measured", measured)
     N = M.shape[0]
     D = np.empty((N, 3))
@@ -95,9 +133,8 @@ def table1(shape: Shape, measured, sheet_origin, sheet_normal) -> StrokeErrors:
         pr = shape.project(tuple(M[i]), hint)
         D[i], nD[i] = pr.point, pr.normal
         hint = pr.normal
-    Dp, gap = presented_contacts(shape, D, sheet_origin, sheet_normal)
-    nS = _as_points("sheet_normal", sheet_normal, N)
-    nS = nS / np.linalg.norm(nS, axis=1, keepdims=True)
+    nS = section_normals(shape, _as_points("sheet_normal", sheet_normal, N))
+    Dp, gap = presented_contacts(shape, D, sheet_origin, nS)
     dd, dth = stroke_errors(D, Dp, nD, nS)
     return StrokeErrors(dd, dth, gap, D, Dp)
 
@@ -114,3 +151,13 @@ def summarize(dd, dtheta) -> dict[str, float]:
             "dtheta_mean_deg": float(dth.mean() * d), "dtheta_std_deg": float(dth.std() * d),
             "dd_p95_mm": float(np.percentile(dd, 95) * 1e3), "dtheta_p95_deg": float(np.percentile(dth, 95) * d),
             "n": int(dd.size)}
+
+
+def table1_row(shape: Shape, measured, sheet_origin, sheet_normal) -> dict[str, float]:
+    """One Table I row from time series (see :func:`table1`): :func:`summarize` of Δd, Δθ plus
+    ``gap_mean_mm`` (mean |gap|, mm). The one metric of the in-process experiment and of a recorded run.
+    Raises ``ValueError`` on bad shapes/values or no samples."""
+    err = table1(shape, measured, sheet_origin, sheet_normal)
+    row = summarize(err.dd, err.dtheta)
+    row["gap_mean_mm"] = float(np.mean(np.abs(err.gap)) * 1e3)
+    return row

@@ -17,7 +17,7 @@ Scene per image (8-bit mono, raw = distorted, like the real camera):
   random crop per image (cheap enough for 48 Hz on a shared 2-core machine).
 
 Camera models (:func:`camera_model`): ``"ximea"`` — the calibration that ``flexsheet calibrate stereo``
-computes from the real XIMEA pairs (``nodes/camera/ximea_calib.yaml``, 640×512, f ≈ 519 px,
+computes from the real XIMEA pairs (``flexsheet/model/ximea_calib.yaml``, 640×512, f ≈ 519 px,
 |T| ≈ 92.6 mm); ``"bumblebee2"`` — Point Grey BumbleBee2 defaults from its datasheet: 640×480,
 3.8 mm lens on 7.4 µm pixels (f ≈ 513.5 px), baseline 0.12 m, mild radial distortion; the 1024×768
 variant is ``width=1024, height=768, pixel_um=4.65`` (f ≈ 817 px). ``"file"`` — any calibration YAML.
@@ -36,6 +36,7 @@ import cv2
 import numpy as np
 
 from flexsheet.model.calibration import load_yaml
+from flexsheet.model.checks import check_pose
 
 __all__ = ["XIMEA_CALIB", "DEFAULT_CAMERA_POSITION", "DEFAULT_LOOK_AT", "bumblebee2_calibration", "camera_model",
            "look_at", "SimConfig", "StereoRenderer", "default_trajectory"]
@@ -180,9 +181,7 @@ class StereoRenderer:
 
         self.cfg = cfg or SimConfig()
         self.cfg.validate()
-        T = np.asarray(T_display_camera, float)
-        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-            raise ValueError(f"T_display_camera must be a finite (4, 4) matrix, got {T!r}")
+        T = check_pose("T_display_camera", T_display_camera, tol=1e-3)
         self.model = StereoModel.from_calib(calib)
         self.T_dc = T
         self.R_cd = T[:3, :3].T                       # display -> left camera

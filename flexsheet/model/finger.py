@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexsheet.model import scene
+from flexsheet.model.checks import check_point, check_positive, check_unit, check_vector
 
 __all__ = ["FingerScript", "MODES"]
 
@@ -45,14 +46,15 @@ def _smoothstep(x: np.ndarray) -> np.ndarray:
     return x * x * (3.0 - 2.0 * x)
 
 
-@dataclass
+@dataclass(frozen=True)
 class FingerScript:
     """The scripted finger. Fields (SI): ``mode`` ("stroke" | "push" | "stroke_push"), ``moving_time`` s,
     ``start_angle``/``end_angle`` rad, ``profile`` ("linear" | "minjerk"), ``depth`` m (stroking contact
     depth), ``push_depth`` m, ``approach_time`` s, ``approach_distance`` m, ``hold_before``/``hold_after`` s,
     ``lag`` s, ``wander_deg`` deg rms, ``wander_axial`` m rms, ``tremor_rms`` m rms per axis, ``seed``,
     cylinder ``center`` (3,), ``axis`` (3,), ``radius`` m, ``up`` (3,) (direction of positive angles at
-    90°). Raises ``ValueError`` naming a bad field."""
+    90°). Frozen: the world node's script segments are these fields. Raises ``ValueError`` naming a bad
+    field."""
 
     mode: str = "stroke"
     moving_time: float = 10.0
@@ -70,8 +72,8 @@ class FingerScript:
     wander_axial: float = 0.0005
     tremor_rms: float = 5e-5
     seed: int = 0
-    center: tuple[float, float, float] = tuple(scene.CYLINDER_CENTER)   # type: ignore[assignment]
-    axis: tuple[float, float, float] = tuple(scene.CYLINDER_AXIS)       # type: ignore[assignment]
+    center: tuple[float, float, float] = tuple(float(x) for x in scene.CYLINDER_CENTER)  # type: ignore[assignment]
+    axis: tuple[float, float, float] = tuple(float(x) for x in scene.CYLINDER_AXIS)      # type: ignore[assignment]
     radius: float = scene.CYLINDER_RADIUS
     up: tuple[float, float, float] = (0.0, 0.0, 1.0)
 
@@ -81,32 +83,37 @@ class FingerScript:
         if self.profile not in ("linear", "minjerk"):
             raise ValueError(f"profile must be 'linear' or 'minjerk', got {self.profile!r}")
         for k in ("moving_time", "radius"):
-            v = getattr(self, k)
-            if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"{k} must be finite and > 0, got {v!r}")
+            check_positive(k, getattr(self, k))
         for k in ("depth", "push_depth", "approach_time", "approach_distance", "hold_before", "hold_after", "lag",
                   "wander_deg", "wander_axial", "tremor_rms"):
-            v = getattr(self, k)
-            if not (math.isfinite(v) and v >= 0):
-                raise ValueError(f"{k} must be finite and >= 0, got {v!r}")
-        c = np.asarray(self.center, float)
-        a = np.asarray(self.axis, float)
-        up = np.asarray(self.up, float)
-        if c.shape != (3,) or a.shape != (3,) or up.shape != (3,) or not np.all(np.isfinite(np.r_[c, a, up])):
-            raise ValueError(f"center, axis and up must be finite (3,) vectors, got {self.center!r}, {self.axis!r}, {self.up!r}")
-        self._a = a / np.linalg.norm(a)
-        up = up - (up @ self._a) * self._a
-        e2 = up / np.linalg.norm(up)
-        self._e2 = e2
-        self._e1 = np.cross(e2, self._a) if np.cross(e2, self._a) @ np.array([1.0, 0, 0]) >= 0 else -np.cross(e2, self._a)
-        self._c = c
+            check_positive(k, getattr(self, k), allow_zero=True)
+        for k in ("start_angle", "end_angle"):
+            if not math.isfinite(getattr(self, k)):
+                raise ValueError(f"{k} must be finite (rad), got {getattr(self, k)!r}")
+        c = check_point("center", self.center)
+        a = check_unit("axis", self.axis)
+        up = check_vector("up", self.up)
+        up = up - (up @ a) * a
+        e2 = check_unit("up (orthogonal to axis)", up)
+        e1 = np.cross(e2, a) if np.cross(e2, a) @ np.array([1.0, 0, 0]) >= 0 else -np.cross(e2, a)
         rng = np.random.default_rng(self.seed)
         K = 6
-        self._tremor = [(rng.uniform(8.0, 12.0, K), rng.uniform(0, 2 * np.pi, K)) for _ in range(3)]
-        self._wander = [(rng.uniform(0.1, 1.0, K), rng.uniform(0, 2 * np.pi, K)) for _ in range(2)]
-        self._kamp = math.sqrt(2.0 / K)   # K sinusoids of amplitude A have rms A·sqrt(K/2)
-        self.t_move = self.approach_time + self.hold_before
-        self.duration = self.t_move + self.moving_time + self.hold_after
+        tremor = [(rng.uniform(8.0, 12.0, K), rng.uniform(0, 2 * np.pi, K)) for _ in range(3)]
+        wander = [(rng.uniform(0.1, 1.0, K), rng.uniform(0, 2 * np.pi, K)) for _ in range(2)]
+        derived = {"_a": a, "_e1": e1, "_e2": e2, "_c": c, "_tremor": tremor, "_wander": wander,
+                   "_kamp": math.sqrt(2.0 / K)}   # K sinusoids of amplitude A have rms A·sqrt(K/2)
+        for k, v in derived.items():
+            object.__setattr__(self, k, v)
+
+    @property
+    def t_move(self) -> float:
+        """Time the mark starts moving, s (approach + hold before)."""
+        return self.approach_time + self.hold_before
+
+    @property
+    def duration(self) -> float:
+        """Length of the whole script, s."""
+        return self.t_move + self.moving_time + self.hold_after
 
     # ---- script ------------------------------------------------------------------------------------
     def _s(self, t: np.ndarray) -> np.ndarray:

@@ -33,12 +33,13 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from flexsheet.model.scene import pose_matrix
+from flexsheet.model.checks import check_pose
+from flexsheet.model.scene import LEFT_BASE, RIGHT_BASE, pose_matrix
 
 __all__ = [
     "URDF_PATH", "JOINT_NAMES", "Q_LOWER", "Q_UPPER", "QD_MAX", "Q_HOME", "LEFT_BASE", "RIGHT_BASE",
     "home_joints", "IKResult", "ArmKinematics",
-    "rotation_angle", "check_pose",
+    "rotation_angle", "check_pose",   # check_pose: flexsheet.model.checks.check_pose, re-exported
 ]
 
 URDF_PATH = Path(__file__).with_name("rv1a.urdf")
@@ -48,11 +49,9 @@ _MODEL = pin.buildModelFromUrdf(str(URDF_PATH))
 Q_LOWER = np.array(_MODEL.lowerPositionLimit, dtype=float)   #: (6,) rad, URDF lower limits
 Q_UPPER = np.array(_MODEL.upperPositionLimit, dtype=float)   #: (6,) rad, URDF upper limits
 QD_MAX = np.array(_MODEL.velocityLimit, dtype=float)         #: (6,) rad/s, ASSUMED speed limits (see URDF)
-#: proposed base poses (x, y, z, yaw) in the display frame (m, rad). flexsheet.model.scene's defaults put the clamp
-#: 0.30 m from J1, inside the RV-1A's reach shell (J3 would need 156 deg > 155); these reach the home sheet
-#: and tilts of +-60 deg about the cylinder axis with stretch 0..0.1 with >= 20 deg joint margin.
-LEFT_BASE = (-0.05, 0.55, -0.40, -math.pi / 2)
-RIGHT_BASE = (-0.05, -0.55, -0.40, math.pi / 2)
+# LEFT_BASE / RIGHT_BASE: the base poses (x, y, z, yaw) in the display frame (m, rad), defined once in
+# flexsheet.model.scene and re-exported here (the arm bridge imports them from this module). They reach the
+# home sheet and tilts of +-60 deg about the cylinder axis with stretch 0..0.1 with >= 20 deg joint margin.
 #: left arm's joints (rad) holding the home sheet (stretch 0) from LEFT_BASE; the right arm mirrors it
 Q_HOME = np.radians([8.67, 42.46, 104.28, 10.33, -57.17, 84.35])
 _MIRROR = np.array([-1.0, 1.0, 1.0, -1.0, 1.0, -1.0])
@@ -69,35 +68,12 @@ def home_joints(side: str) -> np.ndarray:
     return Q_HOME.copy() if side == "left" else Q_HOME * _MIRROR
 
 _FLIP_X = np.diag([1.0, -1.0, -1.0, 1.0])   # rotation by pi about x (homogeneous)
-_I3 = np.eye(3)
-
-
-def _det3(R) -> float:
-    return float(R[0, 0] * (R[1, 1] * R[2, 2] - R[1, 2] * R[2, 1]) - R[0, 1] * (R[1, 0] * R[2, 2] - R[1, 2] * R[2, 0])
-                 + R[0, 2] * (R[1, 0] * R[2, 1] - R[1, 1] * R[2, 0]))
 
 
 def rotation_angle(R_a: np.ndarray, R_b: np.ndarray) -> float:
     """Angle (rad) of the relative rotation R_aᵀ R_b between two (3, 3) rotations."""
     c = (float(np.trace(R_a.T @ R_b)) - 1.0) * 0.5
     return math.acos(max(-1.0, min(1.0, c)))
-
-
-def check_pose(name: str, T: np.ndarray) -> np.ndarray:
-    """Validate a (4, 4) homogeneous transform; returns it as float64.
-
-    Raises ``ValueError`` naming ``name`` if the shape is wrong, values are not finite, the last row is not
-    (0, 0, 0, 1) or the rotation block is not orthonormal with det +1 (tolerance 1e-6).
-    """
-    A = np.asarray(T, dtype=float)
-    if A.shape != (4, 4) or not np.all(np.isfinite(A)):
-        raise ValueError(f"{name} must be a finite (4, 4) transform, got shape {A.shape}")
-    if A[3, 0] != 0.0 or A[3, 1] != 0.0 or A[3, 2] != 0.0 or A[3, 3] != 1.0:
-        raise ValueError(f"{name} last row must be (0, 0, 0, 1), got {A[3]!r}")
-    R = A[:3, :3]
-    if float(np.abs(R.T @ R - _I3).max()) > 1e-6 or _det3(R) < 0.0:
-        raise ValueError(f"{name} rotation block is not a proper rotation: {R!r}")
-    return A
 
 
 @dataclass(frozen=True)

@@ -54,11 +54,31 @@ class Projector:
         K = np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
         return cls(K, R, p, width, height)
 
+    @classmethod
+    def calibrated(cls, width: int = 1024, height: int = 768, pixel: float = scene.PIXEL_ON_SCREEN,
+                   position=scene.PROJECTOR, K=None, R=None) -> Projector:
+        """:meth:`default`, with the intrinsics ``K`` (3, 3) px and/or the axes ``R`` (3, 3) replaced by
+        calibrated values where given (None keeps the default). Raises ``ValueError`` naming ``K``/``R`` for a
+        wrong shape or non-finite entries, or ``R`` that is not a rotation (tolerance 1e-3)."""
+        d = cls.default(width, height, pixel, position)
+        if K is None and R is None:
+            return d
+        K = d.K if K is None else np.asarray(K, dtype=float)
+        R = d.R if R is None else np.asarray(R, dtype=float)
+        for name, a in (("K", K), ("R", R)):
+            if a.shape != (3, 3) or not np.all(np.isfinite(a)):
+                raise ValueError(f"projector {name} must be a finite 3x3 matrix, got shape {a.shape}")
+        if not np.allclose(R.T @ R, np.eye(3), atol=1e-3) or np.linalg.det(R) < 0:
+            raise ValueError(f"projector R must be a rotation (columns = projector axes; a mirrored image is the "
+                             f"renderer's mirror_x, not a reflection in R), got {R.round(4).tolist()}")
+        return cls(K, R, d.position, width, height)
+
 
 def eye_positions(eye, ipd: float) -> tuple[np.ndarray, np.ndarray]:
-    """(left, right) eye positions (3,) m: V ± ipd/2 along +y (the user's left). Raises on ipd < 0."""
+    """(left, right) eye positions (3,) m: V ∓ ipd/2 along y. The user faces −x with +z up, so in the
+    right-handed display frame the user's left is −y and the right eye sits at +y. Raises on ipd < 0."""
     if not (math.isfinite(ipd) and ipd >= 0.0):
         raise ValueError(f"ipd must be finite and >= 0, got {ipd!r}")
     v = np.asarray(eye, dtype=float)
     dy = np.array([0.0, ipd / 2.0, 0.0])
-    return v + dy, v - dy
+    return v - dy, v + dy

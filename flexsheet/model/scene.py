@@ -7,7 +7,8 @@ up has +y on the user's *right* (the user faces −x). All code uses right-hande
 coordinates; the scene is symmetric in y, so the only effect is naming: the "left" arm/clamp is the one at
 +y.
 
-Sheet frame convention (used by :class:`messages.SheetTarget`, the planner, the arm bridges and the world):
+Sheet frame convention (used by :class:`messages.SheetTarget`, the planner, the arm bridges and the world;
+the functions that map it to the clamps and back live in :mod:`flexsheet.model.sheet`):
 ``axis_u`` points from the right clamp to the left clamp (+y at home), ``axis_v = normal × axis_u``
 (+z at home) and ``normal`` points toward the user (+x at home), so (normal, axis_u, axis_v) is right-handed.
 A clamp frame (the arms' tool frame, ``T_display_clamp``) sits at the middle of its clamped edge with the
@@ -25,8 +26,8 @@ import numpy as np
 
 __all__ = [
     "EYE", "PROJECTOR", "SCREEN_POINT", "SCREEN_NORMAL", "CYLINDER_RADIUS", "CYLINDER_LENGTH",
-    "CYLINDER_CENTER", "CYLINDER_AXIS", "SHEET_SIZE", "SHEET_THICKNESS", "LEFT_BASE", "RIGHT_BASE",
-    "sheet_rotation", "clamp_poses", "pose_matrix",
+    "CYLINDER_CENTER", "CYLINDER_AXIS", "SHEET_SIZE", "SHEET_THICKNESS", "PIXEL_ON_SCREEN", "LEFT_BASE",
+    "RIGHT_BASE", "pose_matrix",
 ]
 
 EYE = np.array([0.400, 0.0, 0.0])                       #: user's eye V (cyclopean), m
@@ -41,7 +42,8 @@ SHEET_SIZE = 0.240                                      #: sheet side, m (square
 SHEET_THICKNESS = 0.001                                 #: m
 PIXEL_ON_SCREEN = 0.0007                                #: one projector pixel on the imaginary screen, m
 
-#: default arm base poses (x, y, z, yaw) in the display frame: the arms face each other across the sheet,
+#: the arm base poses (x, y, z, yaw) in the display frame, the one copy (flexsheet.model.kinematics and the
+#: planner's reach model import them): the arms face each other across the sheet,
 #: J1 axes 0.55 m to either side of the sheet centre, bases 0.40 m below it. Checked with the RV-1A's IK
 #: (flexsheet/model/kinematics.py): the home sheet and tilts of ±60° about the cylinder axis with stretch
 #: 0…0.1 are reachable with ≥ 20° joint margin (closer bases need J3 beyond its 155° limit).
@@ -58,37 +60,14 @@ def pose_matrix(x: float, y: float, z: float, yaw: float) -> np.ndarray:
     return T
 
 
-def sheet_rotation(normal: np.ndarray, axis_u: np.ndarray) -> np.ndarray:
-    """Rotation (3, 3) whose columns are (normal, axis_u, axis_v), axis_v = normal × axis_u.
+def __getattr__(name: str):
+    """``scene.clamp_poses`` / ``scene.sheet_rotation`` moved to :mod:`flexsheet.model.sheet` (the one home of
+    the sheet's geometry); re-exported lazily (sheet imports this module) for callers not yet updated."""
+    if name in _MOVED_TO_SHEET:
+        from flexsheet.model import sheet
 
-    ``normal`` and ``axis_u`` are (3,) unit vectors in the display frame, orthogonal within 1e-6.
-    Raises ``ValueError`` naming the argument if either is not finite, not unit length, or not orthogonal.
-    """
-    n = np.asarray(normal, dtype=float)
-    u = np.asarray(axis_u, dtype=float)
-    for name, v in (("normal", n), ("axis_u", u)):
-        if v.shape != (3,) or not np.all(np.isfinite(v)) or abs(np.linalg.norm(v) - 1.0) > 1e-6:
-            raise ValueError(f"{name} must be a finite unit (3,) vector, got {v!r}")
-    if abs(float(n @ u)) > 1e-6:
-        raise ValueError(f"normal and axis_u must be orthogonal, got dot={float(n @ u):.3g}")
-    return np.column_stack([n, u, np.cross(n, u)])
+        return getattr(sheet, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def clamp_poses(origin: np.ndarray, normal: np.ndarray, axis_u: np.ndarray, stretch: float,
-                size: float = SHEET_SIZE) -> tuple[np.ndarray, np.ndarray]:
-    """Left and right clamp poses T_display_clamp (4, 4) for a sheet centred at ``origin`` (3,) m.
-
-    The clamped edges sit at ``origin ± size·(1 + stretch)/2 · axis_u`` (left at +axis_u). ``stretch`` is
-    the engineering strain between the clamps (≥ 0). Raises ``ValueError`` on bad vectors or negative stretch.
-    """
-    if not (stretch >= 0.0 and math.isfinite(stretch)):
-        raise ValueError(f"stretch must be finite and >= 0, got {stretch!r}")
-    R = sheet_rotation(normal, axis_u)
-    half = 0.5 * size * (1.0 + stretch)
-    out = []
-    for sign in (+1.0, -1.0):
-        T = np.eye(4)
-        T[:3, :3] = R
-        T[:3, 3] = np.asarray(origin, dtype=float) + sign * half * R[:, 1]
-        out.append(T)
-    return out[0], out[1]
+_MOVED_TO_SHEET = ("clamp_poses", "sheet_rotation")

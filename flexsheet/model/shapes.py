@@ -25,6 +25,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from flexsheet.model.checks import check_point, check_positive, check_unit
 from flexsheet.model.vec import Vec, add, axpy, cross, dot, norm, perp_unit, scale, sub, unit
 
 __all__ = ["Projection", "Shape", "Cylinder", "Sphere", "RoundedBox", "Plane", "MeshShape", "make_shape",
@@ -47,31 +48,13 @@ class Projection:
 
 
 def _vec3(name: str, v: Any) -> Vec:
-    try:
-        t = tuple(float(x) for x in v)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a (3,) vector of floats, got {v!r}") from None
-    if len(t) != 3 or not all(math.isfinite(x) for x in t):
-        raise ValueError(f"{name} must be a finite (3,) vector, got {v!r}")
-    return t  # type: ignore[return-value]
-
-
-def _pos(name: str, x: Any, allow_zero: bool = False) -> float:
-    try:
-        x = float(x)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {x!r}") from None
-    if not math.isfinite(x) or x < 0.0 or (x == 0.0 and not allow_zero):
-        raise ValueError(f"{name} must be finite and {'>= 0' if allow_zero else '> 0'}, got {x!r}")
-    return x
+    """:func:`flexsheet.model.checks.check_point` as a float tuple (the shapes' vector type)."""
+    return tuple(check_point(name, v).tolist())  # type: ignore[return-value]
 
 
 def _unit3(name: str, v: Any) -> Vec:
-    t = _vec3(name, v)
-    u = unit(t)
-    if u is None:
-        raise ValueError(f"{name} must be a non-zero vector, got {v!r}")
-    return u
+    """:func:`flexsheet.model.checks.check_unit` (normalised, non-zero) as a float tuple."""
+    return tuple(check_unit(name, v).tolist())  # type: ignore[return-value]
 
 
 class Shape:
@@ -204,12 +187,17 @@ class Cylinder(Shape):
     def __init__(self, center: Any, axis: Any, radius: float, length: float, end_margin: float | None = None):
         self.c = _vec3("center", center)
         self.a = _unit3("axis", axis)
-        self.R = _pos("radius", radius)
-        self.L = _pos("length", length)
-        m = 0.5 * self.R if end_margin is None else _pos("end_margin", end_margin, allow_zero=True)
+        self.R = check_positive("radius", radius)
+        self.L = check_positive("length", length)
+        m = 0.5 * self.R if end_margin is None else check_positive("end_margin", end_margin, allow_zero=True)
         self.hs = max(0.0, 0.5 * self.L - min(m, 0.5 * self.L))
         self.e1 = perp_unit(self.a, (1.0, 0.0, 0.0))    # angle 0 direction (toward the user at home)
         self.e2 = cross(self.a, self.e1)
+
+    @property
+    def axis(self) -> Vec:
+        """Unit axis direction (3,) (the Fig. 9 cross-section is normal to it)."""
+        return self.a
 
     def _split(self, p: Vec) -> tuple[float, Vec, float]:
         d = sub(p, self.c)
@@ -324,7 +312,7 @@ class Sphere(Shape):
 
     def __init__(self, center: Any, radius: float):
         self.c = _vec3("center", center)
-        self.R = _pos("radius", radius)
+        self.R = check_positive("radius", radius)
 
     def closest(self, p: Vec) -> tuple[Vec, Vec, float]:
         d = sub(p, self.c)
@@ -404,13 +392,13 @@ class RoundedBox(Shape):
         e = _vec3("half_extents", half_extents)
         if min(e) <= 0.0:
             raise ValueError(f"half_extents must be > 0, got {half_extents!r}")
-        self.r = _pos("radius", radius, allow_zero=True)
+        self.r = check_positive("radius", radius, allow_zero=True)
         if self.r > min(e):
             raise ValueError(f"radius must be <= the smallest half extent {min(e)}, got {radius!r}")
         self.e = e
         self.ei = tuple(x - self.r for x in e)
         self.ax = _rpy(rpy)
-        m = 0.5 * min(self.ei) if margin is None else _pos("margin", margin, allow_zero=True)
+        m = 0.5 * min(self.ei) if margin is None else check_positive("margin", margin, allow_zero=True)
         self.es = tuple(max(0.0, x - m) for x in self.ei)
 
     def _to_local(self, p: Vec) -> Vec:
@@ -521,7 +509,7 @@ class MeshShape(Shape):
         if not mesh.is_watertight:
             raise ValueError("mesh must be watertight (closed) for a signed distance")
         m = mesh.copy()
-        m.apply_scale(_pos("scale", scale_))
+        m.apply_scale(check_positive("scale", scale_))
         m.apply_translation(np.asarray(_vec3("translation", translation)))
         self.mesh = m
         self.convex = bool(m.is_convex)
@@ -565,7 +553,7 @@ class MeshShape(Shape):
         np = self._np
         loc, _, tri = self.mesh.ray.intersects_location(np.asarray([s]), np.asarray([w]), multiple_hits=True)
         if len(loc) == 0:
-            return Shape._ray_exit(self, s, w)
+            return super()._ray_exit(s, w)
         k = int(np.argmax((loc - np.asarray(s)) @ np.asarray(w)))
         return (tuple(float(x) for x in loc[k]),  # type: ignore[return-value]
                 tuple(float(x) for x in self.mesh.face_normals[int(tri[k])]))

@@ -1,16 +1,27 @@
-"""Shape of the pushed sheet: a pre-tensioned membrane clamped on two edges, free on two, pushed by a finger.
+"""The sheet's geometry, in one place: clamp poses ↔ sheet frame, stretch, and the pushed membrane (pure).
 
-Model (stated here because the paper does not give one; §III-C only says "exact correction requires accurate
-measurement of the shape of the sheet"):
+**Sheet frame and clamps** (convention of :mod:`flexsheet.model.scene`): the sheet centre ``origin``, the
+unit ``normal`` (toward the user), ``axis_u`` (right → left clamp) and ``axis_v = normal × axis_u``. The two
+clamp frames ``T_display_clamp`` sit at the middle of the clamped edges, ``origin ± a·axis_u`` with the half
+span ``a = size·(1 + stretch)/2`` (``size`` the unstretched side between the clamps, ``stretch`` the
+engineering strain), and carry the sheet's orientation (columns of R = normal, axis_u, axis_v).
+:func:`clamp_half_span`, :func:`clamp_points` and :func:`clamp_poses` go from the sheet to the clamps (the
+planner, the arm bridge's home pose, the experiments); :func:`frame_from_clamps` and
+:meth:`SheetSurface.from_clamps` go back from measured clamps to the sheet (the world twin, the renderer),
+and :func:`stretch_of_span` recovers the stretch. Every other module calls these; none recomputes them.
+
+**Shape of the pushed sheet**: a pre-tensioned membrane clamped on two edges, free on two, pushed by a
+finger. Model (stated here because the paper does not give one; §III-C only says "exact correction
+requires accurate measurement of the shape of the sheet"):
 
 * Small-slope membrane under uniform in-plane tension: ``T_u w_uu + T_v w_vv = -p(u, v)`` for the
   out-of-plane deflection ``w`` (m, positive along ``-normal``, i.e. away from the user). Bending of the 1 mm
   rubber is neglected (membrane limit; Timoshenko & Woinowsky-Krieger, *Theory of Plates and Shells*, §1 and
   the membrane equation of Love), as is the extra tension the push itself adds (it is folded into ``T_u``,
   ``T_v``; only their ratio ``beta = T_v / T_u`` matters for the shape).
-* Boundary conditions in the sheet frame (``u`` along ``axis_u``, ``v`` along ``axis_v``, see
-  :mod:`flexsheet.model.scene`): Dirichlet ``w = 0`` on the clamped edges ``u = ±a`` (the arms' clamps), and
-  zero transverse force ``∂w/∂v = 0`` on the free edges ``v = ±b``.
+* Boundary conditions in the sheet frame (``u`` along ``axis_u``, ``v`` along ``axis_v``): Dirichlet
+  ``w = 0`` on the clamped edges ``u = ±a`` (the arms' clamps), and zero transverse force ``∂w/∂v = 0`` on
+  the free edges ``v = ±b``.
 * Load: the fingertip presses a short segment ``|u - u0| ≤ r``, ``v = v0`` (``r`` = contact radius) with
   unknown force; the force is fixed by the measured depth: ``w(u0, v0) = S``. A point load would give the
   logarithmic singularity of the 2-D Green's function; the finite contact keeps the depth finite.
@@ -29,25 +40,116 @@ uses a cheap fit of the same shape with fewer modes (see docs/renderer.md for th
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from flexsheet.model import scene
+from flexsheet.model.checks import check_point, check_pose, check_positive, check_unit
 
-__all__ = ["Membrane", "SheetSurface", "TRUE_MODES"]
+__all__ = ["Membrane", "SheetSurface", "TRUE_MODES", "sheet_rotation", "clamp_half_span", "stretch_of_span",
+           "clamp_points", "clamp_poses", "frame_from_clamps"]
 
 #: number of modes of the reference ("true") membrane shape
 TRUE_MODES = 256
+#: tolerance on a measured clamp pose's rotation block (|RᵀR − I|, last row): the renderer's acceptance
+_POSE_TOL = 1e-3
 
 
-def _check_pos(name: str, value: float) -> float:
-    value = float(value)
-    if not (math.isfinite(value) and value > 0.0):
-        raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-    return value
+# -- sheet frame <-> clamps ----------------------------------------------------------------------------
+def sheet_rotation(normal, axis_u) -> np.ndarray:
+    """Rotation (3, 3) whose columns are (normal, axis_u, axis_v), axis_v = normal × axis_u.
+
+    ``normal`` and ``axis_u`` are (3,) unit vectors in the display frame (|v| = 1 within 1e-6), orthogonal
+    within 1e-6. Raises ``ValueError`` naming the argument if either is not finite, not unit length, or the
+    two are not orthogonal.
+    """
+    n = check_unit("normal", normal, tol=1e-6)
+    u = check_unit("axis_u", axis_u, tol=1e-6)
+    if abs(float(n @ u)) > 1e-6:
+        raise ValueError(f"normal and axis_u must be orthogonal, got dot={float(n @ u):.3g}")
+    return np.column_stack([n, u, np.cross(n, u)])
 
 
+def clamp_half_span(stretch: float, size: float = scene.SHEET_SIZE) -> float:
+    """Half the clamp-to-clamp distance a = size·(1 + stretch)/2, m, for the unstretched side ``size`` (m)
+    and the engineering strain ``stretch`` (> −1). Cheap enough for the planner's per-update path.
+    Raises ``ValueError`` for a non-finite or non-positive result."""
+    a = 0.5 * size * (1.0 + stretch)
+    if not (a > 0.0 and math.isfinite(a)):
+        raise ValueError(f"stretch {stretch!r} and size {size!r} give no positive half span (need size > 0, "
+                         f"stretch > -1)")
+    return a
+
+
+def stretch_of_span(half_span: float, size: float = scene.SHEET_SIZE) -> float:
+    """Engineering strain ε = 2a/size − 1 (clipped at 0: a slack sheet has no negative stretch) from the
+    measured half span ``half_span`` a (m) and the unstretched side ``size`` (m); inverse of
+    :func:`clamp_half_span`. Raises ``ValueError`` for non-positive or non-finite inputs."""
+    a = check_positive("half_span", half_span)
+    s = check_positive("size", size)
+    return max(0.0, 2.0 * a / s - 1.0)
+
+
+def clamp_points(origin: Sequence[float], axis_u: Sequence[float], stretch: float,
+                 size: float = scene.SHEET_SIZE) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """Left and right clamp points (3,) m: ``origin ± a·axis_u`` with a = :func:`clamp_half_span`.
+
+    ``origin`` (3,) m and ``axis_u`` (3,) unit, any float sequences (plain tuples on the planner's hot path,
+    no validation beyond the half span's); returns two float tuples (left at +axis_u)."""
+    a = clamp_half_span(stretch, size)
+    o0, o1, o2 = origin
+    u0, u1, u2 = axis_u
+    return (a * u0 + o0, a * u1 + o1, a * u2 + o2), (-a * u0 + o0, -a * u1 + o1, -a * u2 + o2)
+
+
+def clamp_poses(origin, normal, axis_u, stretch: float,
+                size: float = scene.SHEET_SIZE) -> tuple[np.ndarray, np.ndarray]:
+    """Left and right clamp poses T_display_clamp (4, 4) for a sheet centred at ``origin`` (3,) m.
+
+    Rotation :func:`sheet_rotation` (normal, axis_u); positions :func:`clamp_points`, i.e. the clamped edges
+    at ``origin ± size·(1 + stretch)/2 · axis_u`` (left at +axis_u). ``stretch`` is the engineering strain
+    between the clamps (≥ 0), ``size`` the unstretched side (m). Raises ``ValueError`` on bad vectors or a
+    negative stretch.
+    """
+    if not (stretch >= 0.0 and math.isfinite(stretch)):
+        raise ValueError(f"stretch must be finite and >= 0, got {stretch!r}")
+    R = sheet_rotation(normal, axis_u)
+    o = check_point("origin", origin)
+    out = []
+    for p in clamp_points(o, R[:, 1], stretch, size):
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:3, 3] = p
+        out.append(T)
+    return out[0], out[1]
+
+
+def frame_from_clamps(T_left, T_right) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Sheet frame from the two measured clamp poses T_display_clamp (4, 4): (origin (3,) m, normal (3,),
+    axis_u (3,), half span a m). Inverse of :func:`clamp_poses`.
+
+    origin = midpoint of the clamp positions, axis_u = unit(p_left − p_right), normal = mean of the clamps'
+    first columns made orthogonal to axis_u, a = |p_left − p_right| / 2. Raises ``ValueError`` for poses
+    that are not rigid transforms (:func:`flexsheet.model.checks.check_pose`, naming ``T_left``/``T_right``),
+    clamps closer than 1 mm, or clamp normals more than 90° apart.
+    """
+    Tl = check_pose("T_left", T_left, tol=_POSE_TOL)
+    Tr = check_pose("T_right", T_right, tol=_POSE_TOL)
+    pl, pr = Tl[:3, 3], Tr[:3, 3]
+    span = float(np.linalg.norm(pl - pr))
+    if span < 1e-3:
+        raise ValueError(f"clamps must be at least 1 mm apart, got {span!r} m")
+    eu = (pl - pr) / span
+    if float(Tl[:3, 0] @ Tr[:3, 0]) <= 0.0:
+        raise ValueError("clamp normals (first pose columns) point in opposite directions")
+    n = Tl[:3, 0] + Tr[:3, 0]
+    n = check_unit("normal", n - (n @ eu) * eu)
+    return 0.5 * (pl + pr), n, eu, span / 2
+
+
+# -- pushed membrane -----------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Membrane:
     """Deflection ``w(u, v)`` (m, along ``-normal``) of the pushed sheet in its own (u, v) frame.
@@ -72,10 +174,10 @@ class Membrane:
     coef: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        a = _check_pos("half_span", self.half_span)
-        b = _check_pos("half_width", self.half_width)
-        _check_pos("tension_ratio", self.tension_ratio)
-        r = _check_pos("contact_radius", self.contact_radius)
+        a = check_positive("half_span", self.half_span)
+        b = check_positive("half_width", self.half_width)
+        check_positive("tension_ratio", self.tension_ratio)
+        r = check_positive("contact_radius", self.contact_radius)
         if not isinstance(self.modes, (int, np.integer)) or self.modes < 1:
             raise ValueError(f"modes must be an int >= 1, got {self.modes!r}")
         for name in ("push_u", "push_v", "depth"):
@@ -145,24 +247,15 @@ class Membrane:
         return self.deflection(u[:, None], v[None, :])
 
 
-def _unit(name: str, v) -> np.ndarray:
-    v = np.asarray(v, dtype=float)
-    if v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise ValueError(f"{name} must be a finite (3,) vector, got {v!r}")
-    nrm = float(np.linalg.norm(v))
-    if nrm < 1e-12:
-        raise ValueError(f"{name} must be non-zero, got {v!r}")
-    return v / nrm
-
-
 @dataclass(frozen=True)
 class SheetSurface:
     """The actual sheet: a plane pose plus an optional membrane deflection (display frame, m).
 
     ``origin`` (3,) sheet centre (midpoint of the clamps), ``normal`` (3,) toward the user, ``axis_u`` (3,)
     right → left clamp; ``half_span`` a and ``half_width`` b (m) bound the sheet (|u| ≤ a, |v| ≤ b);
-    ``membrane`` (or None for a flat sheet) gives the deflection along −normal. Raises ``ValueError`` on
-    non-finite, zero or non-orthogonal vectors (error names the field).
+    ``membrane`` (or None for a flat sheet) gives the deflection along −normal; ``size`` (m) is the
+    unstretched side between the clamps (for :attr:`stretch`). Raises ``ValueError`` on non-finite, zero or
+    non-orthogonal vectors and non-positive lengths (error names the field).
     """
 
     origin: np.ndarray
@@ -171,20 +264,25 @@ class SheetSurface:
     half_span: float = scene.SHEET_SIZE / 2
     half_width: float = scene.SHEET_SIZE / 2
     membrane: Membrane | None = None
+    size: float = scene.SHEET_SIZE
 
     def __post_init__(self) -> None:
-        o = np.asarray(self.origin, dtype=float)
-        if o.shape != (3,) or not np.all(np.isfinite(o)):
-            raise ValueError(f"origin must be a finite (3,) vector, got {o!r}")
-        n = _unit("normal", self.normal)
-        u = _unit("axis_u", self.axis_u)
+        o = check_point("origin", self.origin)
+        n = check_unit("normal", self.normal)
+        u = check_unit("axis_u", self.axis_u)
         if abs(float(n @ u)) > 1e-6:
             raise ValueError(f"normal and axis_u must be orthogonal, got dot={float(n @ u):.3g}")
-        _check_pos("half_span", self.half_span)
-        _check_pos("half_width", self.half_width)
+        check_positive("half_span", self.half_span)
+        check_positive("half_width", self.half_width)
+        check_positive("size", self.size)
         object.__setattr__(self, "origin", o)
         object.__setattr__(self, "normal", n)
         object.__setattr__(self, "axis_u", u)
+
+    @property
+    def stretch(self) -> float:
+        """Engineering strain between the clamps, :func:`stretch_of_span` (half_span, size) (≥ 0)."""
+        return stretch_of_span(self.half_span, self.size)
 
     @property
     def axis_v(self) -> np.ndarray:
@@ -214,39 +312,22 @@ class SheetSurface:
 
     @classmethod
     def from_clamps(cls, T_left: np.ndarray, T_right: np.ndarray, *, half_width: float = scene.SHEET_SIZE / 2,
-                    pushed_point: np.ndarray | None = None, membrane_kwargs: dict | None = None) -> SheetSurface:
+                    pushed_point: np.ndarray | None = None, membrane_kwargs: dict | None = None,
+                    size: float = scene.SHEET_SIZE) -> SheetSurface:
         """Sheet from the two measured clamp poses T_display_clamp (4, 4) (convention of :mod:`flexsheet.model.scene`).
 
-        origin = midpoint of the clamp positions, axis_u = unit(p_left − p_right), normal = mean of the
-        clamps' first columns made orthogonal to axis_u, a = |p_left − p_right| / 2. If ``pushed_point`` (3,)
-        lies behind the plane (depth > 0) and inside the sheet, a :class:`Membrane` with that depth is attached
-        (``membrane_kwargs`` forwarded, e.g. ``modes``). Raises ``ValueError`` for non-finite poses, clamps
-        closer than 1 mm, or normals that do not agree (clamp normals more than 90° apart).
+        The frame comes from :func:`frame_from_clamps`. If ``pushed_point`` (3,) lies behind the plane
+        (depth > 0) and inside the sheet, a :class:`Membrane` with that depth is attached (``membrane_kwargs``
+        forwarded, e.g. ``modes``). ``size`` (m): unstretched side between the clamps, for :attr:`stretch`.
+        Raises ``ValueError`` for non-rigid or non-finite poses (naming ``T_left``/``T_right``), clamps closer
+        than 1 mm, normals that do not agree (clamp normals more than 90° apart) or a bad ``pushed_point``.
         """
-        Tl = np.asarray(T_left, dtype=float)
-        Tr = np.asarray(T_right, dtype=float)
-        for name, T in (("T_left", Tl), ("T_right", Tr)):
-            if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-                raise ValueError(f"{name} must be a finite (4, 4) pose, got {T!r}")
-        pl, pr = Tl[:3, 3], Tr[:3, 3]
-        span = float(np.linalg.norm(pl - pr))
-        if span < 1e-3:
-            raise ValueError(f"clamps must be at least 1 mm apart, got {span!r} m")
-        eu = (pl - pr) / span
-        n = Tl[:3, 0] + Tr[:3, 0]
-        if float(Tl[:3, 0] @ Tr[:3, 0]) <= 0.0:
-            raise ValueError("clamp normals (first pose columns) point in opposite directions")
-        n = n - (n @ eu) * eu
-        n = _unit("normal", n)
-        origin = 0.5 * (pl + pr)
+        origin, n, eu, a = frame_from_clamps(T_left, T_right)
         mem = None
         if pushed_point is not None:
-            p = np.asarray(pushed_point, dtype=float)
-            if p.shape != (3,) or not np.all(np.isfinite(p)):
-                raise ValueError(f"pushed_point must be a finite (3,) vector, got {p!r}")
-            d = p - origin
+            d = check_point("pushed_point", pushed_point) - origin
             depth = -float(d @ n)
             pu, pv = float(d @ eu), float(d @ np.cross(n, eu))
-            if depth > 0.0 and abs(pu) < span / 2 and abs(pv) <= half_width:
-                mem = Membrane(span / 2, half_width, pu, pv, depth, **(membrane_kwargs or {}))
-        return cls(origin, n, eu, span / 2, half_width, mem)
+            if depth > 0.0 and abs(pu) < a and abs(pv) <= half_width:
+                mem = Membrane(a, half_width, pu, pv, depth, **(membrane_kwargs or {}))
+        return cls(origin, n, eu, a, half_width, mem, size)

@@ -29,8 +29,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from flexsheet.model import scene
+from flexsheet.model.checks import check_positive
+from flexsheet.model.sheet import clamp_half_span
+
 __all__ = ["SheetMaterial", "TensionResult", "gent_modulus", "tension", "clamp_force", "stiffness",
-           "stretch_for_stiffness", "URETHANE_E"]
+           "stretch_for_stiffness", "max_stretch_within_force", "URETHANE_E"]
 
 
 def gent_modulus(shore_a: float) -> float:
@@ -59,8 +63,8 @@ class SheetMaterial:
     """
 
     young: float = URETHANE_E
-    thickness: float = 0.001
-    size: float = 0.240
+    thickness: float = scene.SHEET_THICKNESS
+    size: float = scene.SHEET_SIZE
     contact_width: float = 0.020
     min_stretch: float = 0.01
     max_stretch: float = 0.30
@@ -68,9 +72,7 @@ class SheetMaterial:
 
     def __post_init__(self) -> None:
         for name in ("young", "thickness", "size", "contact_width", "max_stretch", "max_force"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
-                raise ValueError(f"{name} must be finite and > 0, got {v!r}")
+            check_positive(name, getattr(self, name))
         if not (0.0 <= self.min_stretch < self.max_stretch):
             raise ValueError(f"min_stretch must be in [0, max_stretch), got {self.min_stretch!r}")
 
@@ -95,10 +97,10 @@ def clamp_force(stretch: float, mat: SheetMaterial) -> float:
 def stiffness(stretch: float, mat: SheetMaterial, offset_u: float = 0.0) -> float:
     """Normal stiffness k (N/m) at a contact ``offset_u`` m from the sheet centre along axis_u (current length).
 
-    k = T·w·(1/a + 1/b), a, b = L/2 ∓ offset_u, L = size·(1 + stretch). Raises ``ValueError`` when the
-    contact is not strictly between the clamps.
+    k = T·w·(1/a + 1/b), a, b = L/2 ∓ offset_u, L/2 = :func:`flexsheet.model.sheet.clamp_half_span`. Raises
+    ``ValueError`` when the contact is not strictly between the clamps.
     """
-    half = 0.5 * mat.size * (1.0 + stretch)
+    half = clamp_half_span(stretch, mat.size)
     a, b = half - offset_u, half + offset_u
     if a <= 0.0 or b <= 0.0:
         raise ValueError(f"offset_u must lie between the clamps (|offset_u| < {half:.4f} m), got {offset_u!r}")
@@ -118,7 +120,7 @@ class TensionResult:
     saturated: str = ""
 
 
-def _max_stretch(mat: SheetMaterial) -> float:
+def max_stretch_within_force(mat: SheetMaterial) -> float:
     """Largest stretch allowed by both max_stretch and max_force (force is monotone in λ)."""
     if clamp_force(mat.max_stretch, mat) <= mat.max_force:
         return mat.max_stretch
@@ -143,7 +145,7 @@ def stretch_for_stiffness(k_target: float, mat: SheetMaterial, offset_u: float =
     """
     if not (math.isfinite(k_target) and k_target >= 0.0):
         raise ValueError(f"k_target must be finite and >= 0, got {k_target!r}")
-    emax = _max_stretch(mat) if eps_max is None else eps_max
+    emax = max_stretch_within_force(mat) if eps_max is None else eps_max
     lo, hi = mat.min_stretch, emax
 
     def k_of(e: float) -> float:

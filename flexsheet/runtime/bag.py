@@ -179,44 +179,49 @@ class BagSummary:
     truncated: bool = False
 
 
+def _records(fh, path: str | Path, summary: BagSummary | None) -> Iterator:
+    """The MCAP records of the open file ``fh`` up to its last readable one. A truncated or corrupt tail ends
+    the iteration (``summary.truncated`` set unless the footer was already read); a file that is not MCAP
+    from its first bytes raises ``ValueError`` naming ``path``."""
+    it = iter(StreamReader(fh).records)
+    complete = False
+    while True:
+        try:
+            rec = next(it)
+        except StopIteration:
+            return
+        except Exception as exc:  # noqa: BLE001 - truncated/corrupt tail: keep what was complete
+            if fh.tell() <= 8:
+                raise ValueError(f"{path}: not an MCAP file ({exc})") from None
+            if summary is not None and not complete:
+                summary.truncated = True
+            return
+        complete = complete or isinstance(rec, Footer)
+        yield rec
+
+
 def read_bag(path: str | Path, topics: list[str] | None = None, summary: BagSummary | None = None) -> Iterator[BagMessage]:
     """Iterate the messages of a bag in file order, even if the file was cut by a crash.
 
-    A truncated file yields every message up to its last complete chunk and sets ``summary.truncated``.
-    Raises ``ValueError`` naming the file if it is not an MCAP file at all.
+    ``topics``: only these (all if empty). A truncated file yields every message up to its last complete
+    chunk and sets ``summary.truncated``; the recorder's drop counts go to ``summary.dropped``. Raises
+    ``ValueError`` naming the file if it is not an MCAP file at all.
     """
     channels: dict[int, Channel] = {}
     schemas: dict[int, Schema] = {}
     with open(path, "rb") as fh:
-        reader = StreamReader(fh)
-        it = iter(reader.records)
-        complete = False
-        while True:
-            try:
-                rec = next(it)
-            except StopIteration:
-                break
-            except Exception as exc:  # noqa: BLE001 - truncated/corrupt tail: keep what was complete
-                if fh.tell() <= 8:
-                    raise ValueError(f"{path}: not an MCAP file ({exc})") from None
-                if summary is not None and not complete:
-                    summary.truncated = True
-                break
-            if isinstance(rec, Footer):
-                complete = True
+        for rec in _records(fh, path, summary):
+            if isinstance(rec, Message):
+                ch = channels[rec.channel_id]
+                if not topics or ch.topic in topics:
+                    schema = schemas[ch.schema_id].name if ch.schema_id in schemas else ""
+                    yield BagMessage(ch.topic, schema, rec.log_time / 1e9, [ch.topic.encode(), *msgpack.unpackb(rec.data)])
             elif isinstance(rec, Schema):
                 schemas[rec.id] = rec
             elif isinstance(rec, Channel):
                 channels[rec.id] = rec
             elif isinstance(rec, Metadata) and rec.name == "recorder" and summary is not None:
                 summary.dropped = json.loads(rec.metadata.get("dropped", "{}"))
-            elif isinstance(rec, Message):
-                ch = channels[rec.channel_id]
-                if topics and ch.topic not in topics:
-                    continue
-                parts = msgpack.unpackb(rec.data)
-                yield BagMessage(ch.topic, schemas[ch.schema_id].name if ch.schema_id in schemas else "",
-                                 rec.log_time / 1e9, [ch.topic.encode(), *parts])
 
 
 def bag_info(path: str | Path) -> BagSummary:

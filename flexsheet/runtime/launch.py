@@ -14,14 +14,22 @@ A launch file (``launch/*.yaml``) is the single source of truth for hosts and po
         remaps: {/chatter: /chatter2}
         respawn: {policy: on-failure, delay: 0.5, max_restarts: 5}
         required: false              # true: when it exits by itself, the whole launch stops
+    security:                        # ZeroMQ CURVE (docs/deploy.md); keys from `flexsheet keys generate`
+      curve: true
+      public_keys_file: $(keys)/public_keys.yaml
+    display_calib: $(launch_dir)/display.yaml   # the display registration (optional; checked by --check)
 
 Every node publishes on ``tcp://<host address>:<port>`` (or an explicit ``endpoint:``) and subscribes to
 every node endpoint of the file, so the same file serves one machine (127.0.0.1) and the lab's three PCs;
-``flexsheet launch FILE --host NAME`` starts only that host's share. Strings in params may use
-``$(out)`` (the ``--out`` folder) and ``$(launch_dir)``.
+``flexsheet launch FILE --host NAME`` starts only that host's share. Strings in params and
+``display_calib`` may use ``$(out)`` (the ``--out`` folder) and ``$(launch_dir)``; the security paths may
+use ``$(keys)`` (the keys folder: ``$FLEXSHEET_KEYS``, else ``security.keys_dir``, else ~/.flexsheet/keys)
+and ``$(launch_dir)``. :mod:`flexsheet.runtime.launch_check` checks a file against this machine
+(``flexsheet launch FILE --check``) and ``flexsheet launch`` runs that check before it starts anything.
 
 The supervisor starts each node as its own OS process (``python -m flexsheet run …``), prefixes every
-output line with the node name as it arrives (line-buffered, never batched), respawns by policy, watches
+output line with the node name as it arrives (line-buffered, never batched), respawns by policy (never a node
+that exits with :data:`~flexsheet.runtime.node.EXIT_CONFIG`, a configuration error), watches
 the heartbeats of every node of the file (all hosts) and reports a node or host that goes silent, and on
 Ctrl-C/SIGTERM stops all children in reverse order with escalation SIGINT → SIGTERM → SIGKILL. Children
 get ``PR_SET_PDEATHSIG`` so that not even a ``kill -9`` of the launcher leaves orphans.
@@ -44,15 +52,29 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from flexsheet import registry
-from flexsheet.runtime.node import NodeConfig
+from flexsheet.runtime.node import EXIT_CONFIG, NodeConfig
 from flexsheet.runtime.transport import CurveConfig
 
 __all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "SecuritySpec", "load_launch", "node_config",
-           "curve_config", "Supervisor"]
+           "curve_config", "keys_dir", "public_keys", "substitutions", "substitute", "keygen_command",
+           "display_calib_path", "DEFAULT_KEYS_DIR", "PUBLIC_KEYS_FILE", "Supervisor"]
+
+#: where ``flexsheet keys generate`` writes and CURVE looks when neither ``$FLEXSHEET_KEYS`` nor
+#: ``security.keys_dir`` says otherwise
+DEFAULT_KEYS_DIR = "~/.flexsheet/keys"
+#: the host → public key YAML that ``flexsheet keys generate`` writes into the keys folder
+PUBLIC_KEYS_FILE = "public_keys.yaml"
 
 
 class LaunchError(ValueError):
-    """A launch file that cannot be used: the message names the file, the key and the wrong value."""
+    """A launch file that cannot be used: the message names the file, the key and the wrong value.
+
+    ``lines``: every error found (one line each; the message is the first), for ``flexsheet launch --check``.
+    """
+
+    def __init__(self, message: str, lines: list[str] | None = None) -> None:
+        super().__init__(message)
+        self.lines = list(lines) if lines else [message]
 
 
 #: a launch file larger than this (bytes) is refused before it is parsed
@@ -106,14 +128,17 @@ class RespawnSpec(BaseModel):
 
 
 class SecuritySpec(BaseModel):
-    """ZeroMQ CURVE for the whole graph. ``public_keys``: host → Z85 public key (40 chars) — the allowed
-    keys; ``keys_dir``: where each host finds its own ``<host>.key_secret`` (from ``flexsheet keys
-    generate``; ``~`` and ``$(launch_dir)`` expand; ``$FLEXSHEET_KEYS`` overrides)."""
+    """ZeroMQ CURVE for the whole graph. The allowed keys are host → Z85 public key (40 chars), given inline
+    (``public_keys``) or, so that no key is pasted into a launch file, read from ``public_keys_file`` (a YAML
+    mapping written by ``flexsheet keys generate``; ``$(keys)``, ``$(launch_dir)`` and ``~`` expand); both may
+    be used if they agree. ``keys_dir``: where each host finds its own ``<host>.key_secret``
+    (``$FLEXSHEET_KEYS`` overrides it; ``~`` and ``$(launch_dir)`` expand)."""
 
     model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     curve: bool = False
-    keys_dir: str = "~/.flexsheet/keys"
+    keys_dir: str = DEFAULT_KEYS_DIR
     public_keys: dict[str, str] = Field(default_factory=dict)
+    public_keys_file: str | None = None
 
     @field_validator("public_keys")
     @classmethod
@@ -162,6 +187,8 @@ class LaunchFile(BaseModel):
     shutdown_timeout: float = Field(default=3.0, gt=0.0, description="s per escalation step")
     report: str | None = Field(default=None, description="'module:function' called after the run with --out")
     security: SecuritySpec = Field(default_factory=SecuritySpec)
+    display_calib: str | None = Field(default=None, description="display registration file (display.yaml) the "
+                                                                 "nodes take their geometry from")
     nodes: dict[str, NodeSpec]
 
     path: Path | None = None
@@ -203,81 +230,170 @@ def load_launch(path: str | Path) -> LaunchFile:
     try:
         lf = LaunchFile.model_validate(raw)
     except ValidationError as exc:
-        err = exc.errors()[0]
-        key = ".".join(str(p) for p in err["loc"])
-        raise LaunchError(f"{path}: key '{key}': {err['msg']:.300} (value {_short(err.get('input'))})") from None
+        lines = []
+        for err in exc.errors():
+            key = ".".join(str(p) for p in err["loc"])
+            lines.append(f"{path}: key '{key}': {err['msg']:.300} (value {_short(err.get('input'))})")
+        raise LaunchError(lines[0], lines) from None
+    lines = []
     for name, spec in lf.nodes.items():
         if spec.host not in lf.hosts:
-            raise LaunchError(f"{path}: key 'nodes.{name}.host': unknown host {spec.host!r}; "
-                              f"hosts: {', '.join(lf.hosts)}")
-    seen: dict[str, str] = {}
-    for name, ep in lf.endpoints().items():
-        if lf.nodes[name].endpoint is None and int(ep.rsplit(":", 1)[1]) > 65535:
-            raise LaunchError(f"{path}: key 'nodes.{name}.port': base_port {lf.base_port} + node index gives port "
-                              f"{ep.rsplit(':', 1)[1]} > 65535; lower base_port or give the node a port")
-        if ep in seen:
-            raise LaunchError(f"{path}: key 'nodes.{name}.port': endpoint {ep} already used by node {seen[ep]!r}")
-        seen[ep] = name
-    if lf.security.curve:
+            lines.append(f"{path}: key 'nodes.{name}.host': unknown host {spec.host!r}; hosts: {', '.join(lf.hosts)}")
+    if not lines:
+        seen: dict[str, str] = {}
+        for name, ep in lf.endpoints().items():
+            if lf.nodes[name].endpoint is None and int(ep.rsplit(":", 1)[1]) > 65535:
+                lines.append(f"{path}: key 'nodes.{name}.port': base_port {lf.base_port} + node index gives port "
+                             f"{ep.rsplit(':', 1)[1]} > 65535; lower base_port or give the node a port")
+            elif ep in seen:
+                lines.append(f"{path}: key 'nodes.{name}.port': endpoint {ep} already used by node {seen[ep]!r}")
+            seen[ep] = name
+    if lf.security.curve and lf.security.public_keys_file is None:  # a keys file is read when used (check)
         missing = [h for h in lf.hosts if h not in lf.security.public_keys]
         if missing:
-            raise LaunchError(f"{path}: key 'security.public_keys': curve is on but no public key for host(s) "
-                              f"{', '.join(missing)} (run: flexsheet keys generate {' '.join(missing)})")
+            lines.append(f"{path}: key 'security.public_keys': curve is on but no public key for host(s) "
+                         f"{', '.join(missing)} (run: flexsheet keys generate {' '.join(lf.hosts)}, or name "
+                         f"the file it writes: security.public_keys_file: $(keys)/{PUBLIC_KEYS_FILE})")
+    if lines:
+        raise LaunchError(lines[0], lines)
     lf.path = path
     return lf
+
+
+def keygen_command(lf: LaunchFile) -> str:
+    """The command that writes every key ``lf`` needs: ``flexsheet keys generate <its hosts>``."""
+    return "flexsheet keys generate " + " ".join(lf.hosts)
+
+
+def _launch_dir(lf: LaunchFile) -> str:
+    return str(lf.path.parent.resolve()) if lf.path else "."
+
+
+def keys_dir(lf: LaunchFile | None = None) -> Path:
+    """The keys folder: ``$FLEXSHEET_KEYS``, else ``lf.security.keys_dir`` (``$(launch_dir)``, ``~`` expanded),
+    else :data:`DEFAULT_KEYS_DIR`. The folder need not exist."""
+    raw = os.environ.get("FLEXSHEET_KEYS") or (lf.security.keys_dir if lf is not None else DEFAULT_KEYS_DIR)
+    if lf is not None:
+        raw = raw.replace("$(launch_dir)", _launch_dir(lf))
+    return Path(os.path.expanduser(raw))
+
+
+def substitutions(lf: LaunchFile, out: str | None = None) -> dict[str, str]:
+    """The ``$(name)`` substitutions of ``lf``: ``out`` (``out``, else ``$FLEXSHEET_OUT``, else ``out``),
+    ``launch_dir`` (the file's folder, absolute) and ``keys`` (:func:`keys_dir`)."""
+    return {"out": out or os.environ.get("FLEXSHEET_OUT", "out"), "launch_dir": _launch_dir(lf),
+            "keys": str(keys_dir(lf))}
+
+
+def substitute(value: Any, subs: dict[str, str]) -> Any:
+    """``value`` with every ``$(k)`` in its strings (recursively through dicts and lists) replaced by ``subs[k]``."""
+    if isinstance(value, str):
+        for k, v in subs.items():
+            value = value.replace(f"$({k})", v)
+        return value
+    if isinstance(value, dict):
+        return {k: substitute(v, subs) for k, v in value.items()}
+    if isinstance(value, list):
+        return [substitute(v, subs) for v in value]
+    return value
+
+
+def public_keys(lf: LaunchFile) -> dict[str, str]:
+    """Host → Z85 public key allowed on ``lf``'s graph: ``security.public_keys`` merged with the YAML mapping in
+    ``security.public_keys_file``. Raises :class:`LaunchError` naming the file or host (a missing file names
+    the ``flexsheet keys generate`` command that writes it)."""
+    sec = lf.security
+    keys = dict(sec.public_keys)
+    if sec.public_keys_file is None:
+        return keys
+    path = Path(os.path.expanduser(substitute(sec.public_keys_file, substitutions(lf))))
+    where = f"{lf.path}: key 'security.public_keys_file' = {str(path)!r}"
+    try:
+        with open(path, "rb") as f:
+            data = f.read(1 << 16)
+        raw = yaml.safe_load(data.decode("utf-8"))
+    except FileNotFoundError:
+        raise LaunchError(f"{where}: no such file (run: {keygen_command(lf)})") from None
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise LaunchError(f"{where}: unreadable ({' '.join(str(exc).split())[:200]})") from None
+    if not isinstance(raw, dict):
+        raise LaunchError(f"{where}: expected a mapping host: public key, got {type(raw).__name__} "
+                          f"(run: {keygen_command(lf)})")
+    for host, key in raw.items():
+        if not isinstance(host, str) or not isinstance(key, str) or len(key) != 40:
+            raise LaunchError(f"{where}: entry {_short(host)}: {_short(key)} is not host: <40 Z85 characters>")
+        if host in keys and keys[host] != key:
+            raise LaunchError(f"{where}: host {host!r} differs from security.public_keys.{host}")
+        keys[host] = key
+    return keys
 
 
 def curve_config(lf: LaunchFile, host: str | None) -> CurveConfig | None:
     """The :class:`CurveConfig` of ``host`` under ``lf``'s security settings (None when CURVE is off).
 
     ``host`` None picks the first host whose secret key is present in the keys folder (tools).
-    Raises :class:`LaunchError` naming the missing secret-key file.
+    Raises :class:`LaunchError` naming the missing key file or host and the command that writes it.
     """
     sec = lf.security
     if not sec.curve:
         return None
     import zmq.auth
 
-    keys_dir = Path(os.path.expanduser(os.environ.get("FLEXSHEET_KEYS") or sec.keys_dir.replace(
-        "$(launch_dir)", str(lf.path.parent.resolve()) if lf.path else ".")))
-    hosts = [host] if host else [h for h in lf.hosts if (keys_dir / f"{h}.key_secret").exists()]
+    kdir = keys_dir(lf)
+    keys = public_keys(lf)
+    missing = [h for h in lf.hosts if h not in keys]
+    if missing:
+        raise LaunchError(f"{lf.path}: key 'security.public_keys': curve is on but no public key for host(s) "
+                          f"{', '.join(missing)} (run: {keygen_command(lf)})")
+    hosts = [host] if host else [h for h in lf.hosts if (kdir / f"{h}.key_secret").exists()]
     if not hosts:
-        raise LaunchError(f"{lf.path}: key 'security.keys_dir': no <host>.key_secret in {keys_dir}")
-    secret_file = keys_dir / f"{hosts[0]}.key_secret"
+        raise LaunchError(f"{lf.path}: key 'security.keys_dir': no <host>.key_secret in {kdir} "
+                          f"(run: {keygen_command(lf)})")
+    secret_file = kdir / f"{hosts[0]}.key_secret"
     if not secret_file.exists():
         raise LaunchError(f"{lf.path}: key 'security.keys_dir': no secret key for host {hosts[0]!r} at "
-                          f"{secret_file} (run: flexsheet keys generate {hosts[0]} -o {keys_dir})")
-    public, secret = zmq.auth.load_certificate(secret_file)
-    if public.decode() != sec.public_keys.get(hosts[0]):
+                          f"{secret_file} (run: {keygen_command(lf)}, and copy {hosts[0]}.key_secret there)")
+    try:
+        public, secret = zmq.auth.load_certificate(secret_file)
+    except (OSError, ValueError) as exc:
+        raise LaunchError(f"{lf.path}: key 'security.keys_dir': unreadable key file {secret_file}: {exc}") from None
+    if secret is None or public.decode() != keys.get(hosts[0]):
         raise LaunchError(f"{lf.path}: key 'security.public_keys.{hosts[0]}': does not match {secret_file}")
-    server_keys = {lf.endpoint_of(n): sec.public_keys[spec.host].encode() for n, spec in lf.nodes.items()}
+    server_keys = {lf.endpoint_of(n): keys[spec.host].encode() for n, spec in lf.nodes.items()}
     return CurveConfig(public_key=public, secret_key=secret, server_keys=server_keys,
-                       allowed_clients=[k.encode() for k in sec.public_keys.values()])
+                       allowed_clients=[k.encode() for h, k in keys.items() if h in lf.hosts])
 
 
-def _substitute(value: Any, subs: dict[str, str]) -> Any:
-    if isinstance(value, str):
-        for k, v in subs.items():
-            value = value.replace(f"$({k})", v)
-        return value
-    if isinstance(value, dict):
-        return {k: _substitute(v, subs) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_substitute(v, subs) for v in value]
-    return value
+def display_calib_path(lf: LaunchFile, out: str | None = None) -> str | None:
+    """``lf.display_calib`` with substitutions and ``~`` expanded (None when the file names none)."""
+    if lf.display_calib is None:
+        return None
+    return os.path.expanduser(substitute(lf.display_calib, substitutions(lf, out)))
 
 
 def node_config(lf: LaunchFile, name: str, out: str | None = None, overrides: dict | None = None) -> NodeConfig:
-    """The :class:`NodeConfig` of node ``name`` in ``lf`` (params merged with ``overrides``)."""
+    """The :class:`NodeConfig` of node ``name`` in ``lf`` (params merged with ``overrides``, substituted).
+
+    When the file names a ``display_calib`` and the node's ``Params`` has a ``display_calib`` field that the
+    node's params leave unset, the launch file's path is filled in there; it is also in
+    ``NodeConfig.display_calib``. Raises :class:`LaunchError` (unknown node, CURVE keys).
+    """
     if name not in lf.nodes:
         raise LaunchError(f"{lf.path}: no node named {name!r}; nodes: {', '.join(lf.nodes)}")
     spec = lf.nodes[name]
-    subs = {"out": out or os.environ.get("FLEXSHEET_OUT", "out"),
-            "launch_dir": str(lf.path.parent.resolve()) if lf.path else "."}
-    params = _substitute({**spec.params, **(overrides or {})}, subs)
+    params = substitute({**spec.params, **(overrides or {})}, substitutions(lf, out))
+    display = display_calib_path(lf, out)
+    if display is not None and "display_calib" not in params:
+        try:
+            fields = registry.load(registry.NODES[spec.type]).Params.model_fields
+        except (ImportError, AttributeError):
+            fields = {}
+        if "display_calib" in fields:
+            params["display_calib"] = display
     return NodeConfig(name=name, node_type=spec.type, host=spec.host, endpoint=lf.endpoint_of(name),
                       peers=list(lf.endpoints().values()), params=params, remaps=spec.remaps,
-                      heartbeat_period=lf.heartbeat_period, curve=curve_config(lf, spec.host))
+                      heartbeat_period=lf.heartbeat_period, curve=curve_config(lf, spec.host),
+                      display_calib=display)
 
 
 def _child_setup(nice: int, rt_priority: int = 0):
@@ -329,6 +445,7 @@ class Supervisor:
         self._stop = asyncio.Event()
         self.reason = ""
         self.lost_events: list[tuple[str, str]] = []
+        self.config_errors: list[str] = []  # nodes that exited with EXIT_CONFIG (not respawned)
         width = max((len(c.name) for c in self.children), default=4)
         self._fmt = f"[{{:<{width}}}] {{}}"
 
@@ -367,6 +484,15 @@ class Supervisor:
             if child.stopping or self._stop.is_set():
                 return
             self.print(self._fmt.format(child.name, f"exited with code {code}"))
+            if code == EXIT_CONFIG:  # bad params or a missing file: a restart would fail the same way
+                self.print(self._fmt.format(child.name, "configuration error (see the line above): not respawned; "
+                                                        f"check with: flexsheet launch {self.lf.path} --check"
+                                                        + (f" --host {self.host}" if self.host else "")))
+                self.config_errors.append(child.name)
+                if child.spec.required:
+                    self.reason = f"required node {child.name} has a configuration error"
+                    self._stop.set()
+                return
             if child.spec.required:
                 self.reason = f"required node {child.name} exited ({code})"
                 self._stop.set()
@@ -430,6 +556,8 @@ class Supervisor:
             loop.remove_signal_handler(sig)
         self.print("[launch] all nodes stopped")
         failed = [c.name for c in self.children if c.exit_codes and c.exit_codes[-1] not in (0, -2, -15)]
+        if self.config_errors:
+            return EXIT_CONFIG
         return 1 if failed and "required" in self.reason else 0
 
     def _on_signal(self, sig: signal.Signals) -> None:

@@ -48,11 +48,22 @@ from flexsheet.runtime.transport import CurveConfig, InProcTransport, Transport,
 from messages import Header, Heartbeat, Message, Topic, TopicStats
 from messages import topics as T
 
-__all__ = ["Node", "NodeConfig", "QoS", "InputRejected", "Publisher", "Subscription", "EmptyParams", "ticks"]
+__all__ = ["Node", "NodeConfig", "QoS", "InputRejected", "ConfigError", "EXIT_CONFIG", "Publisher", "Subscription",
+           "EmptyParams", "ticks"]
+
+#: exit status of a node whose configuration is unusable (BSD ``sysexits.h`` EX_CONFIG): a bad param, a missing
+#: or unreadable file a param names, a ``ValueError`` from :meth:`Node.setup`. The supervisor never respawns it.
+EXIT_CONFIG = 78
 
 
 class InputRejected(ValueError):
     """Raised by a handler for input it refuses (message names the field and value). Counted, not fatal."""
+
+
+class ConfigError(ValueError):
+    """The node's configuration cannot work (message names the param and value). Raised from :meth:`Node.setup`
+    (a ``ValueError`` or ``FileNotFoundError`` there is turned into one); ``flexsheet run`` exits with
+    :data:`EXIT_CONFIG` and the launcher does not respawn the node."""
 
 
 class QoS(enum.Enum):
@@ -87,6 +98,7 @@ class NodeConfig:
     remaps: dict[str, str] = field(default_factory=dict)
     heartbeat_period: float = 1.0
     curve: CurveConfig | None = None
+    display_calib: str | None = None  # the launch file's display calibration (display.yaml), path or None
 
 
 class _Stats:
@@ -376,7 +388,12 @@ class Node:
         await self.transport.start(self._on_frames)
         self._hb_pub = self.publisher(T.DIAGNOSTICS)
         try:
-            await self.setup()
+            try:
+                await self.setup()
+            except ConfigError:
+                raise
+            except (ValueError, FileNotFoundError) as exc:  # a param or a file it names is unusable
+                raise ConfigError(f"setup: {' '.join(str(exc).split())[:400]}") from exc
             for lst in self._subs.values():
                 for sub in lst:
                     if sub.task is None:

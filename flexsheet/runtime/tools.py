@@ -106,7 +106,11 @@ def _short(value) -> str:
 
 def topic_echo(args: argparse.Namespace) -> int:
     """Print messages of ``args.topic`` as they arrive (arrays shown by shape unless ``--arrays``)."""
-    peers, curve = _peers(args.launch)
+    try:
+        peers, curve = _peers(args.launch)
+    except LaunchError as exc:
+        print(f"flexsheet: {exc}")
+        return 2
     done = asyncio.Event()
     n = 0
 
@@ -144,7 +148,11 @@ def topic_echo(args: argparse.Namespace) -> int:
 
 def topic_hz(args: argparse.Namespace) -> int:
     """Measure the arrival rate of ``args.topic`` over ``--window`` s: mean rate, min/max/std of periods."""
-    peers, curve = _peers(args.launch)
+    try:
+        peers, curve = _peers(args.launch)
+    except LaunchError as exc:
+        print(f"flexsheet: {exc}")
+        return 2
     stamps: list[float] = []
 
     def on_frames(frames: list) -> None:

@@ -69,6 +69,23 @@ class StreamLimiter:
         self.c = np.clip(a, self.lo, self.hi)
         self.v = np.zeros(6)
 
+    def snapshot(self) -> tuple[np.ndarray, np.ndarray]:
+        """The limiter's state ``(c, v)``: copies of the command (6,) rad and its velocity (6,) rad/s."""
+        return self.c.copy(), self.v.copy()
+
+    def restore(self, snap: tuple[np.ndarray, np.ndarray]) -> None:
+        """Return to a state taken by :meth:`snapshot` (e.g. to redo this period's step toward a newer goal).
+
+        Raises ``ValueError`` if ``snap`` is not two finite (6,) vectors.
+        """
+        try:
+            c, v = (np.array(x, dtype=float) for x in snap)
+        except (TypeError, ValueError):
+            raise ValueError(f"snapshot must be a (c, v) pair of (6,) vectors, got {snap!r}") from None
+        if c.shape != (6,) or v.shape != (6,) or not (np.all(np.isfinite(c)) and np.all(np.isfinite(v))):
+            raise ValueError(f"snapshot must be a (c, v) pair of finite (6,) vectors, got {snap!r}")
+        self.c, self.v = c, v
+
     def _brake(self, dist: np.ndarray) -> np.ndarray:
         """Largest speed from which steps of v, v − aT, v − 2aT, … stop within ``dist`` (exact, discrete).
 

@@ -1,18 +1,26 @@
-"""The bridge's Modbus side: a pymodbus async TCP client that streams joint targets every period.
+"""The bridge's streaming loop, independent of the controller protocol, and the small interface a protocol
+backend implements (:class:`ControllerLink`): Modbus TCP (:mod:`.modbus_link`) or MELFA real-time external
+control over UDP (:mod:`.mxt_link`).
 
-:class:`ArmStream` runs the cycle (default 7.1 ms, absolute deadlines so errors do not accumulate):
+:class:`ArmStream` runs the cycle (one per controller cycle, default 7.1 ms):
 
-1. read the input registers (state, status, fault) — decoded by :mod:`.registers`;
-2. if the controller is not enabled: re-seed the limiter at the measured joints (so the next command equals
-   where the arm is: no jump after a reconnect, a fault or an e-stop) and, unless e-stopped, write
-   COMMAND = ENABLE (with a RESET edge for a watchdog fault when ``auto_reset``);
-3. step the limiter (:mod:`.interp`) toward the tracker's goal (:mod:`.tracking`) and write the watchdog
-   counter + the six targets in one FC16 request (registers 1..13), stamping ``write_stamp``;
-4. hand a :class:`CycleReport` to the ``on_cycle`` callback (the node publishes it).
+1. if the link is down, open it (after a backoff that doubles from ``backoff_min`` to ``backoff_max``);
+2. ``link.read()``: this cycle's controller state (measured joints, the command being executed, status);
+3. ``link.supervise(state)``: may the stream advance this cycle, does the limiter restart from some joints
+   (after a (re)connect, a fault, a refused command: so the next command equals what the controller is
+   executing and nothing jumps), and a hold/fault status if any;
+4. step the limiter (:mod:`.interp`) one period toward the tracker's goal (:mod:`.tracking`), or repeat
+   the last command when the link says not to advance, and ``link.send(cmd)`` (``write_stamp``);
+5. hand a :class:`CycleReport` to ``on_cycle`` (the node publishes it); ``link.after_cycle()``.
 
-Lost connection (timeout, reset, refused): the client is closed and a new one is tried after a backoff that
-doubles from ``backoff_min`` to ``backoff_max``; meanwhile the cycle keeps its schedule and reports
-``bridge_status = "disconnected"``.
+The loop is the only writer. A new target mid-period (:meth:`ArmStream.refresh`) only marks the period
+dirty and wakes the loop; the loop then redoes this period's step toward the new goal from the limiter's
+snapshot (so one period's motion is still one period's step) and sends it, when the link allows a second
+write per period (Modbus: yes; MXT: no, exactly one packet per controller cycle).
+
+Pacing: on absolute deadlines ``period`` apart (an overrun restarts the schedule, no burst), or earlier when
+the link says the controller is ready for the next command (:meth:`ControllerLink.ready_time`: MXT sends its next
+packet when the reply to the last one arrives, so the controller's clock paces the stream).
 """
 
 from __future__ import annotations
@@ -23,27 +31,81 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
-from pymodbus.client import AsyncModbusTcpClient
-from pymodbus.exceptions import ModbusException
 
 from messages import registers as reg
 from nodes.arm_bridge.interp import StreamLimiter
 from nodes.arm_bridge.tracking import TargetTracker
 
-__all__ = ["CycleReport", "ArmStream"]
+__all__ = ["CycleReport", "Verdict", "LinkError", "ControllerLink", "ArmStream"]
 
 log = logging.getLogger(__name__)
+
+
+class LinkError(Exception):
+    """The controller link failed (timeout, reset, refused, no replies): the stream closes it and reopens it."""
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """A link's reading of one controller state.
+
+    ``advance``: the limiter may step this cycle (else the last command is repeated). ``status``: a
+    hold/fault status to report instead of the tracker's ("" = none). ``reseed``: (6,) rad joints to restart
+    the limiter (at rest) and seed the tracker from, or None.
+    """
+
+    advance: bool
+    status: str = ""
+    reseed: np.ndarray | None = None
+
+
+class ControllerLink(Protocol):
+    """What :class:`ArmStream` needs from a protocol backend. Errors are raised as :class:`LinkError`."""
+
+    name: str               #: "modbus" | "mxt"
+    connected: bool
+    rewrite_ok: bool        #: may a second command be sent within one period (a refresh)?
+    on_ready: Callable[[], None] | None   #: set by the stream: call when :meth:`ready_time` may have changed
+
+    async def open(self) -> bool:
+        """(Re)connect / open the session; True when the next :meth:`read` has a state. Never raises."""
+
+    async def read(self) -> reg.ControllerState:
+        """This cycle's controller state (SI units, see :class:`messages.registers.ControllerState`)."""
+
+    def supervise(self, state: reg.ControllerState) -> Verdict:
+        """Interpret ``state`` (see :class:`Verdict`); may queue protocol commands for :meth:`after_cycle`."""
+
+    async def send(self, cmd: np.ndarray, rewrite: bool = False) -> bool:
+        """Send joint command (6,) rad; False if the controller refused it at once (Modbus exception)."""
+
+    async def after_cycle(self) -> None:
+        """Protocol housekeeping after the cycle was reported (Modbus: the COMMAND write)."""
+
+    def ready_time(self) -> float | None:
+        """Monotonic time from which the controller takes the next command, if known before the deadline
+        (MXT: the reply to the last packet arrived); None: wait for the deadline."""
+
+    def next_deadline(self, deadline: float, t_start: float, period: float) -> float:
+        """Deadline of the next cycle given this one's ``deadline`` and actual start ``t_start``."""
+
+    async def close(self, end: bool = False) -> None:
+        """Drop the connection; ``end``: also end the controller session (MXT END) on shutdown."""
+
+    def counters(self) -> dict:
+        """Diagnostics counters (ints/floats) of the link."""
 
 
 @dataclass
 class CycleReport:
     """What one cycle did. Times: ``t_cycle`` monotonic s (scheduled start was ``t_deadline``),
-    ``write_stamp`` wall-clock s (``time.time()``) of this cycle's target write (0 if none); in the first
-    report after a new target it is the time of that target's first write (which may have been an
-    immediate :meth:`ArmStream.refresh` earlier in the period). ``state``: decoded
-    controller state or None when disconnected. ``commanded`` (6,) rad. ``bridge_status``: see node doc."""
+    ``write_stamp`` wall-clock s (``time.time()``) of this cycle's command send (0 if none); in the first
+    report after a new target it is the time of that target's first send (which may have been a rewrite
+    earlier in the period). ``state``: decoded controller state or None when disconnected. ``commanded`` (6,)
+    rad. ``bridge_status``: see the node doc."""
 
     t_cycle: float
     t_deadline: float
@@ -55,209 +117,144 @@ class CycleReport:
 
 
 class ArmStream:
-    """Streams one arm's joint targets to its controller over Modbus TCP.
+    """Streams one arm's joint commands to its controller through a :class:`ControllerLink`.
 
-    Parameters: ``tracker`` (goal source), ``limiter`` (command shaping, its period is the cycle period),
-    ``host``/``port`` of the controller, ``device_id`` (Modbus unit id), ``request_timeout`` s,
-    ``backoff_min``/``backoff_max`` s, ``auto_reset`` (reset watchdog faults automatically),
-    ``on_cycle`` callback(CycleReport), ``clock`` (wall clock for stamps, default ``time.time``).
+    Parameters: ``tracker`` (goal source), ``limiter`` (command shaping; its period is the cycle period),
+    ``link`` (the protocol backend), ``backoff_min``/``backoff_max`` s (reopen delays), ``on_cycle``
+    callback(CycleReport), ``clock`` (wall clock for stamps, default ``time.time``).
     """
 
-    def __init__(self, tracker: TargetTracker, limiter: StreamLimiter, host: str, port: int, *,
-                 device_id: int = 1, request_timeout: float = 0.1, backoff_min: float = 0.05,
-                 backoff_max: float = 2.0, auto_reset: bool = True,
+    def __init__(self, tracker: TargetTracker, limiter: StreamLimiter, link: ControllerLink, *,
+                 backoff_min: float = 0.05, backoff_max: float = 2.0,
                  on_cycle: Callable[[CycleReport], None] | None = None, clock=time.time) -> None:
         self.tracker = tracker
         self.limiter = limiter
-        self.host, self.port, self.device_id = host, int(port), int(device_id)
-        self.request_timeout = float(request_timeout)
+        self.link = link
         self.backoff_min, self.backoff_max = float(backoff_min), float(backoff_max)
-        self.auto_reset = auto_reset
         self.on_cycle = on_cycle
         self.clock = clock
         self.period = limiter.T
-        self.client: AsyncModbusTcpClient | None = None
-        self.connected = False
         self.backoff = self.backoff_min
         self.next_connect = 0.0
-        self.watchdog = 0
-        self.cmd_written: int | None = None
         self.state: reg.ControllerState | None = None
         self.reconnects = 0
         self.connect_failures = 0
         self.cycles = 0
-        self.cycle_times: list[float] | None = None   # set to [] to record (monotonic start, deadline)
-        self._seeded = False
-        self._pending_cmd: int | None = None
-        self._task: asyncio.Task | None = None
-        self._io = asyncio.Lock()               # one read/step/write sequence at a time
-        self._slot: tuple[np.ndarray, np.ndarray] | None = None   # limiter (c, v) before this period's step
-        self._slot_target = 0.0                 # source stamp of the goal this period's command was made for
-        self._slot_deadline = 0.0               # monotonic end of the current period
-        self._first_write: tuple[float, float] = (0.0, 0.0)      # (source stamp, time of its first write)
-        self._first_reported = True
         self.refreshes = 0
+        self.cycle_times: list[float] | None = None   # set to [] to record each cycle's monotonic start
+        self._task: asyncio.Task | None = None
+        self._waiter: asyncio.Future | None = None
+        self._dirty = False
+        self._snap: tuple[np.ndarray, np.ndarray] | None = None   # limiter state before this period's step
+        self._snap_target = 0.0                 # source stamp of the goal this period's command was made for
+        self._first_write: tuple[float, float] = (0.0, 0.0)      # (source stamp, time of its first send)
+        self._first_reported = True
+        link.on_ready = self._wakeup
+
+    @property
+    def connected(self) -> bool:
+        """True while the link is up."""
+        return self.link.connected
 
     # ------------------------------------------------------------------ connection
-    async def _connect(self) -> bool:
-        self._close()
-        client = AsyncModbusTcpClient(self.host, port=self.port, timeout=self.request_timeout, retries=0,
-                                      reconnect_delay=0, reconnect_delay_max=0)
-        try:
-            ok = await asyncio.wait_for(client.connect(), timeout=max(0.2, 2 * self.request_timeout))
-        except (TimeoutError, OSError, ModbusException):
-            ok = False
-        if not ok:
-            client.close()
-            return False
-        self.client = client
-        self.connected = True
-        self.cmd_written = None
-        self._seeded = False
-        return True
-
-    def _close(self) -> None:
-        if self.client is not None:
-            with contextlib.suppress(Exception):
-                self.client.close()
-        self.client = None
-        self.connected = False
-
     def _lost(self, why: str) -> None:
-        if self.connected:
-            log.warning("arm controller %s:%d lost (%s); reconnecting with backoff", self.host, self.port, why)
-        self._close()
+        if self.link.connected:
+            log.warning("arm controller (%s) lost (%s); reopening with backoff", self.link.name, why)
+        self.link.connected = False
         self.state = None
+        self._snap = None
         self.next_connect = time.monotonic() + self.backoff
         self.backoff = min(self.backoff_max, self.backoff * 2.0)
 
     # ------------------------------------------------------------------ one cycle
     async def cycle(self, t_deadline: float) -> CycleReport:
-        """Run one cycle (see module doc); never raises on network errors."""
-        async with self._io:
-            return await self._cycle(t_deadline)
+        """Run one cycle (see module doc); never raises on link errors."""
+        return await self._cycle(t_deadline)
 
     async def refresh(self) -> bool:
-        """A new target arrived mid-period: redo this period's step toward it and write it now.
-
-        The limiter is rolled back to its state before this period's step and stepped again, so the
-        command stream still moves by one period's worth of motion (no limit is exceeded), but the target
-        reaches the controller without waiting for the next tick (the controller latches the registers at
-        its own period). Returns True if a write was made. Never raises on network errors.
-        """
-        async with self._io:
-            if (not self.connected or self.client is None or self._slot is None or self.state is None
-                    or self.tracker.source_stamp == self._slot_target or time.monotonic() >= self._slot_deadline
-                    or not self.state.has(reg.ST_ENABLED) or self.state.fault):
-                return False
-            c, v = self._slot
-            self.limiter.c, self.limiter.v = c.copy(), v.copy()
-            cmd = self.limiter.step(self.tracker.goal_for(self.clock(), self.limiter.c))
-            self._slot_target = self.tracker.source_stamp
-            stamp = self.clock()
-            try:
-                wr = await self.client.write_registers(reg.HR_WATCHDOG, [self.watchdog, *reg.encode_joints(cmd)],
-                                                       device_id=self.device_id)
-            except (TimeoutError, ModbusException, OSError, ValueError) as exc:
-                self._lost(type(exc).__name__)
-                return False
-            if wr.isError():
-                return False
-            self._note_write(stamp)
-            self.refreshes += 1
-            return True
+        """A new target arrived mid-period: mark the period dirty and wake the loop, which redoes this
+        period's step toward it and sends it now (links with ``rewrite_ok`` only). True if marked."""
+        if (not self.link.rewrite_ok or self._snap is None or self.state is None
+                or self.tracker.source_stamp == self._snap_target):
+            return False
+        self._dirty = True
+        self._wakeup()
+        return True
 
     def _note_write(self, stamp: float) -> None:
         if self._first_write[0] != self.tracker.source_stamp:
             self._first_write = (self.tracker.source_stamp, stamp)
             self._first_reported = False
 
+    async def _rewrite(self) -> None:
+        """Redo this period's step toward the newest goal and send it (the refresh path of the loop)."""
+        self._dirty = False
+        if self._snap is None or not self.link.connected or self.tracker.source_stamp == self._snap_target:
+            return
+        self.limiter.restore(self._snap)
+        cmd = self.limiter.step(self.tracker.goal_for(self.clock(), self.limiter.c))
+        self._snap_target = self.tracker.source_stamp
+        stamp = self.clock()
+        try:
+            ok = await self.link.send(cmd, rewrite=True)
+        except LinkError as exc:
+            self._lost(str(exc))
+            return
+        if ok:
+            self._note_write(stamp)
+            self.refreshes += 1
+
     async def _cycle(self, t_deadline: float) -> CycleReport:
         t0 = time.monotonic()
-        self._slot_deadline = t_deadline + self.period
         self.cycles += 1
-        write_stamp = 0.0
-        if not self.connected:
+        self._dirty = False
+        link = self.link
+        if not link.connected:
             if t0 >= self.next_connect:
-                if await self._connect():
+                if await link.open():
                     self.reconnects += 1
                     self.backoff = self.backoff_min
-                    log.info("arm controller %s:%d connected", self.host, self.port)
+                    log.info("arm controller (%s) connected", link.name)
                 else:
                     self.connect_failures += 1
-                    self._lost("connect failed")
-            if not self.connected:
+                    self._lost("open failed")
+            if not link.connected:
                 return self._report(t0, t_deadline, 0.0, "disconnected")
         try:
-            rr = await self.client.read_input_registers(0, count=reg.IR_COUNT, device_id=self.device_id)
-            if rr.isError():
-                raise ModbusException(f"read refused: {rr}")
-            st = reg.decode_input(rr.registers)
+            st = await link.read()
             self.state = st
-            status = self._supervise(st)
-            if st.has(reg.ST_ENABLED) and not status.startswith("fault:"):
-                self._slot = (self.limiter.c.copy(), self.limiter.v.copy())
-                self._slot_target = self.tracker.source_stamp
-                goal = self.tracker.goal_for(self.clock(), self.limiter.c)
-                cmd = self.limiter.step(goal)
+            verdict = link.supervise(st)
+            if verdict.reseed is not None:
+                self.limiter.reset(verdict.reseed)
+                self.tracker.seed(verdict.reseed)
+            status = verdict.status or self.tracker.status(self.clock())
+            if verdict.advance:
+                self._snap = self.limiter.snapshot()
+                self._snap_target = self.tracker.source_stamp
+                cmd = self.limiter.step(self.tracker.goal_for(self.clock(), self.limiter.c))
             else:
-                self._slot = None
+                self._snap = None
                 cmd = self.limiter.c.copy()
-            self.watchdog = (self.watchdog + 1) & 0xFFFF
-            write_stamp = self.clock()   # the request leaves now (the reply only confirms it)
-            wr = await self.client.write_registers(reg.HR_WATCHDOG, [self.watchdog, *reg.encode_joints(cmd)],
-                                                   device_id=self.device_id)
+            write_stamp = self.clock()   # the command leaves now (a reply only confirms it)
+            ok = await link.send(cmd)
             self._note_write(write_stamp)
-            if wr.isError():
-                # refused by the controller (should not happen: the limiter respects its checks); re-seed
-                log.warning("controller refused targets: %s", wr)
+            if not ok:
+                # refused by the controller (should not happen: the limiter respects its checks): restart
+                # from the measured joints
+                log.warning("controller refused the command; restarting the stream from the measured joints")
                 self.limiter.reset(st.position)
+                self._snap = None
                 status = "hold:refused"
-        except (TimeoutError, ModbusException, OSError, ValueError) as exc:
-            self._lost(type(exc).__name__)
+        except LinkError as exc:
+            self._lost(str(exc))
             return self._report(t0, t_deadline, 0.0, "disconnected")
         return self._report(t0, t_deadline, write_stamp, status)
-
-    def _supervise(self, st: reg.ControllerState) -> str:
-        """Decide the bridge status from the controller state; write COMMAND when needed (queued)."""
-        if not self._seeded:
-            self.limiter.reset(st.position)
-            self.tracker.seed(st.position)
-            self._seeded = True
-        if st.fault == reg.FAULT_ESTOP or st.has(reg.ST_ESTOP):
-            self.limiter.reset(st.position)
-            return "fault:estop"
-        if st.fault == reg.FAULT_WATCHDOG:
-            self.limiter.reset(st.position)
-            if self.auto_reset:
-                self._pending_cmd = reg.CMD_RESET | reg.CMD_ENABLE
-            return "fault:watchdog"
-        if not st.has(reg.ST_ENABLED):
-            self.limiter.reset(st.position)
-            self._pending_cmd = reg.CMD_ENABLE
-            return "hold:disabled"
-        return self.tracker.status(self.clock())
-
-    async def _write_command(self) -> None:
-        cmd = self._pending_cmd
-        if cmd is None and self.cmd_written is not None and self.cmd_written & reg.CMD_RESET:
-            cmd = reg.CMD_ENABLE   # drop the RESET bit so the next reset is an edge again
-        if cmd is None:
-            return
-        if cmd & reg.CMD_RESET and self.cmd_written is not None and self.cmd_written & reg.CMD_RESET:
-            cmd = cmd & ~reg.CMD_RESET   # RESET acts on its rising edge: clear it now, set it next cycle
-        else:
-            self._pending_cmd = None
-        rr = await self.client.write_register(reg.HR_COMMAND, cmd, device_id=self.device_id)
-        if rr.isError():
-            raise ModbusException(f"command refused: {rr}")
-        self.cmd_written = cmd
 
     def _report(self, t0: float, t_deadline: float, write_stamp: float, status: str) -> CycleReport:
         if self.cycle_times is not None:
             self.cycle_times.append(t0)
         if write_stamp and self._first_write[0] == self.tracker.source_stamp and not self._first_reported:
-            write_stamp = self._first_write[1]   # the first report of a target carries its first write
+            write_stamp = self._first_write[1]   # the first report of a target carries its first send
             self._first_reported = True
         rep = CycleReport(t0, t_deadline, write_stamp, self.state, self.limiter.c.copy(), status,
                           self.tracker.source_stamp)
@@ -266,24 +263,49 @@ class ArmStream:
         return rep
 
     # ------------------------------------------------------------------ loop
+    def _wakeup(self) -> None:
+        if self._waiter is not None and not self._waiter.done():
+            self._waiter.set_result(None)
+
+    async def _wait(self, deadline: float) -> None:
+        """Sleep until ``deadline`` or until woken (a refresh, or the link's ready time changed). A plain
+        future + ``call_later`` (not ``asyncio.wait_for``, which can swallow a cancellation in a race)."""
+        delay = deadline - time.monotonic()
+        if delay <= 0:
+            return
+        loop = asyncio.get_running_loop()
+        self._waiter = loop.create_future()
+        handle = loop.call_later(delay, self._wakeup)
+        try:
+            await self._waiter
+        finally:
+            handle.cancel()
+            self._waiter = None
+
     async def run(self, n_cycles: int | None = None) -> None:
-        """Cycle every ``period`` on absolute deadlines (an overrun restarts the schedule, no burst)."""
+        """Cycle until cancelled (or ``n_cycles`` cycles): see the module doc for the pacing."""
         nxt = time.monotonic()
         done = 0
         while n_cycles is None or done < n_cycles:
-            delay = nxt - time.monotonic()
-            if delay > 0:
-                await asyncio.sleep(delay)
-            elif delay < -self.period:
-                nxt = time.monotonic()
-            await self.cycle(nxt)
-            async with self._io:   # never two requests in flight on one client (refresh() writes too)
-                if self.connected and self.client is not None:
-                    try:
-                        await self._write_command()
-                    except (TimeoutError, ModbusException, OSError) as exc:
-                        self._lost(type(exc).__name__)
-            nxt += self.period
+            ready = self.link.ready_time() if self.link.connected else None
+            due = nxt if ready is None else min(nxt, ready)
+            now = time.monotonic()
+            if now < due:
+                if self._dirty:
+                    await self._rewrite()
+                else:
+                    await self._wait(due)
+                continue
+            self._dirty = False
+            if now - due > self.period:
+                due = now   # overrun: restart the schedule rather than burst to catch up
+            await self._cycle(due)
+            if self.link.connected:
+                try:
+                    await self.link.after_cycle()
+                except LinkError as exc:
+                    self._lost(str(exc))
+            nxt = self.link.next_deadline(due, time.monotonic(), self.period)
             done += 1
 
     def start(self) -> asyncio.Task:
@@ -291,11 +313,11 @@ class ArmStream:
         self._task = asyncio.get_running_loop().create_task(self.run())
         return self._task
 
-    async def stop(self) -> None:
-        """Cancel the loop task and close the connection."""
+    async def stop(self, end: bool = True) -> None:
+        """Cancel the loop task and close the link (``end``: end the controller session, e.g. MXT END)."""
         if self._task is not None:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
             self._task = None
-        self._close()
+        await self.link.close(end=end)

@@ -1,29 +1,38 @@
-"""Node ``arm_bridge``: one per arm PC. ArmTarget (clamp pose) → IK → limited 7.1 ms Modbus TCP stream → ArmJointState.
+"""Node ``arm_bridge``: one per arm PC. ArmTarget (clamp pose) → IK → limited command stream, one command per
+controller cycle (7.1 ms) → ArmJointState.
 
-Thin shell: IK and target logic in :mod:`.tracking`/:mod:`.kinematics`, command shaping in :mod:`.interp`,
-the Modbus client loop in :mod:`.link`. Subscribes ``topics.arm_target(arm)`` (QoS.LATEST, async handler on
-the loop: IK takes tens of µs), publishes ``topics.arm_state(arm)`` every cycle with the measured joints,
-their FK clamp pose (display frame), controller status/fault, ``write_stamp`` (wall time of the Modbus write)
-and ``target_stamp`` (= the executed ``ArmTarget.source_stamp``) for latency accounting.
+Thin shell: IK and target logic in :mod:`.tracking` / :mod:`flexsheet.model.kinematics`, command shaping in
+:mod:`.interp`, the protocol-independent streaming loop in :mod:`.link`, and one backend per ``protocol``:
+``modbus`` (:mod:`.modbus_link`, Modbus TCP register map, docs/register_map.md) or ``mxt``
+(:mod:`.mxt_link`, MELFA real-time external control over UDP, docs/arm.md). Subscribes
+``topics.arm_target(arm)`` (QoS.LATEST, async handler on the loop: IK takes tens of µs), publishes
+``topics.arm_state(arm)`` every cycle with the measured joints, their FK clamp pose (display frame),
+controller status/fault, ``write_stamp`` (wall time the command left: Modbus write / MXT MOVE) and
+``target_stamp`` (= the executed ``ArmTarget.source_stamp``) for latency accounting. The heartbeat message
+carries the link counters (MXT: packets sent, replies, late, lost, repeats, refused).
 
 ``bridge_status``: "ok"; "hold:no_target" (no target yet, or none for ``target_timeout`` s: the arm stops);
 "hold:unreachable" / "hold:limit:J<k>" / "hold:singular" / "hold:jump" (last target refused by IK: the arm
 stops short at the last good goal); "hold:disabled" (controller not enabled yet); "fault:watchdog",
-"fault:estop" (controller faulted; the bridge follows the measured joints); "disconnected".
+"fault:estop" (controller faulted; the bridge follows the measured joints); "hold:refused" (the controller did
+not take a command: the stream restarts from what it executes); "disconnected".
 """
 
 from __future__ import annotations
 
 import math
+from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from flexsheet.model.kinematics import LEFT_BASE, Q_LOWER, Q_UPPER, QD_MAX, RIGHT_BASE, ArmKinematics
 from flexsheet.runtime.node import InputRejected, Node, QoS
-from messages import ArmJointState, ArmTarget, topics
+from messages import ArmJointState, ArmTarget, mxt, topics
 from nodes.arm_bridge.interp import StreamLimiter
 from nodes.arm_bridge.link import ArmStream, CycleReport
+from nodes.arm_bridge.modbus_link import ModbusLink
+from nodes.arm_bridge.mxt_link import MxtLink
 from nodes.arm_bridge.tracking import TargetTracker
 
 __all__ = ["ArmBridgeParams", "ArmBridgeNode"]
@@ -34,13 +43,17 @@ class ArmBridgeParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     arm: str = Field(default="left", pattern="^(left|right)$", description="which sheet edge: left or right")
+    protocol: Literal["modbus", "mxt"] = Field(default="modbus", description="modbus (Modbus TCP register map) "
+                                               "or mxt (MELFA real-time external control, UDP)")
     host: str = Field(default="127.0.0.1", description="controller (or twin) address")
-    port: int = Field(default=15020, ge=1, le=65535, description="controller Modbus TCP port")
+    port: int | None = Field(default=None, ge=1, le=65535, description="controller port: Modbus TCP "
+                             "(default 15020) or MXT UDP (default 10000)")
     device_id: int = Field(default=1, ge=0, le=255, description="Modbus unit id")
     base: list[float] | None = Field(default=None, min_length=4, max_length=4,
                                      description="arm base (x, y, z, yaw) in the display frame; "
                                                  "default kinematics.LEFT_BASE / RIGHT_BASE")
-    period: float = Field(default=0.0071, gt=0.0, description="stream period, s (RV-1A real-time control)")
+    period: float | None = Field(default=None, gt=0.0, description="controller cycle = stream period, s; "
+                                 "default 0.0071 (modbus) / 0.00711 (mxt: CR750-Q, CR800-Q; 0.0035 for CR800-R/D)")
     target_timeout: float = Field(default=0.25, gt=0.0, description="hold after this long without a target, s")
     speed_scale: float = Field(default=0.5, gt=0.0, le=1.0, description="commanded speed limit × URDF speed")
     accel_scale: float = Field(default=2.0, gt=0.0, description="commanded accel limit = scale × speed limit, 1/s")
@@ -50,6 +63,16 @@ class ArmBridgeParams(BaseModel):
     request_timeout: float = Field(default=0.1, gt=0.0, description="Modbus request timeout, s")
     backoff_min: float = Field(default=0.05, gt=0.0, description="first reconnect delay, s")
     backoff_max: float = Field(default=2.0, gt=0.0, description="largest reconnect delay, s")
+    mxt_open_timeout: float = Field(default=0.2, gt=0.0, description="mxt: wait for the NULL packet's reply, s")
+    mxt_lost_cycles: int = Field(default=50, ge=2, description="mxt: cycles without a reply before reopening")
+
+    @model_validator(mode="after")
+    def _protocol_defaults(self) -> ArmBridgeParams:
+        if self.port is None:
+            self.port = mxt.DEFAULT_PORT if self.protocol == "mxt" else 15020
+        if self.period is None:
+            self.period = 0.00711 if self.protocol == "mxt" else 0.0071
+        return self
 
 
 class ArmBridgeNode(Node):
@@ -70,10 +93,15 @@ class ArmBridgeNode(Node):
         qd = QD_MAX * p.speed_scale
         limiter = StreamLimiter(np.clip(np.zeros(6), Q_LOWER, Q_UPPER), p.period, qd, qd * p.accel_scale,
                                 Q_LOWER, Q_UPPER, margin)
-        self.stream = ArmStream(self.tracker, limiter, p.host, p.port, device_id=p.device_id,
-                                request_timeout=p.request_timeout, backoff_min=p.backoff_min,
-                                backoff_max=p.backoff_max, auto_reset=p.auto_reset, on_cycle=self.on_cycle,
-                                clock=self.now)
+        if p.protocol == "mxt":
+            self.link = MxtLink(p.host, p.port, period=p.period, open_timeout=p.mxt_open_timeout,
+                                lost_cycles=p.mxt_lost_cycles)
+        else:
+            self.link = ModbusLink(p.host, p.port, device_id=p.device_id, request_timeout=p.request_timeout,
+                                   auto_reset=p.auto_reset)
+        self.stream = ArmStream(self.tracker, limiter, self.link, backoff_min=p.backoff_min,
+                                backoff_max=p.backoff_max, on_cycle=self.on_cycle, clock=self.now)
+        self._diag_at = 0.0
         self._pending: ArmTarget | None = None
         self._last_status = ""
         self.pub = self.publisher(topics.arm_state(p.arm))
@@ -81,7 +109,7 @@ class ArmBridgeNode(Node):
         self.stream.start()
 
     async def teardown(self) -> None:
-        await self.stream.stop()
+        await self.stream.stop(end=True)    # MXT: END, the controller's Mxt instruction finishes
 
     async def on_target(self, msg: ArmTarget) -> None:
         """New clamp target: IK now (or once the first controller state arrived)."""
@@ -101,10 +129,13 @@ class ArmBridgeNode(Node):
                 self.tracker.set_target(msg.pose, msg.source_stamp, self.now())
             except ValueError as exc:
                 self._reject(f"ArmTarget: {exc}")
-        if rep.bridge_status != self._last_status:
-            self.log.info("%s arm: %s", self.params.arm, rep.bridge_status)
+        if rep.bridge_status != self._last_status or rep.t_cycle - self._diag_at > 1.0:
+            if rep.bridge_status != self._last_status:
+                self.log.info("%s arm: %s", self.params.arm, rep.bridge_status)
             self._last_status = rep.bridge_status
-            self.state_message = rep.bridge_status
+            self._diag_at = rep.t_cycle
+            counters = ", ".join(f"{k} {v}" for k, v in self.link.counters().items())
+            self.state_message = f"{rep.bridge_status}; {self.link.name}: {counters}"
         st = rep.state
         if st is None:
             return

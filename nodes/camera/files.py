@@ -38,7 +38,8 @@ class FileSource:
                         st.append(float(row[0]))
                     except ValueError:
                         if st:
-                            raise ValueError(f"{csv_path}: non-numeric stamp {row[0]!r} after row {len(st)}") from None
+                            raise ValueError(f"{csv_path}: non-numeric stamp {row[0]!r} after row "
+                                             f"{len(st)}") from None
             if len(st) != len(self.left):
                 raise ValueError(f"{csv_path}: {len(st)} stamps for {len(self.left)} pairs")
             self._stamps = np.asarray(st, float)

@@ -1,10 +1,18 @@
 """Camera node: publishes synchronised raw stereo pairs (mono8) on ``/camera/stereo`` and the latched stereo
 calibration on ``/camera/calibration``.
 
-Sources (param ``source``): ``sim`` — the calibrated twin (:mod:`flexsheet.model.camera_sim`) rendering the fingertip
-marker at the world node's ``/world/finger`` position (extrapolated to the exposure time with its velocity),
-or along a param trajectory when no world node has published for ``truth_timeout_s``; ``device`` —
+Sources (param ``source``): ``sim`` — the calibrated twin (:mod:`flexsheet.model.camera_sim`) rendering the
+fingertip marker at the world node's ``/world/finger`` position (extrapolated to the exposure time with its velocity),
+or along a param trajectory when no world node has published for ``truth_timeout_s``; ``genicam`` — a
+GigE Vision / USB3 Vision pair through Aravis, opened by serial, hardware/software-triggered or PTP-synced,
+stamped and paired by device timestamp (:mod:`nodes.camera.genicam`); ``device`` — UVC cameras through
 ``cv2.VideoCapture`` (:mod:`nodes.camera.device`); ``files`` — a folder of pairs (:mod:`nodes.camera.files`).
+
+``stereo_skew`` in each :class:`messages.StereoFrame` by source (docs/camera.md): ``sim`` 0 (the twin
+renders both views at one instant); ``genicam`` measured right − left device stamp (shared clock: PTP) or
+the difference of the two mapped stamps (independent clocks); ``device`` 0 by construction for one
+side-by-side device, an upper bound of |skew| for two devices; ``files`` 0 (unknown; the recording's).
+``/diagnostics`` carries one line saying which, with the measured skew and dropped frames (GenICam).
 """
 
 from __future__ import annotations
@@ -14,7 +22,7 @@ import math
 import threading
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from flexsheet.model.calibration import load_yaml, to_message
 from flexsheet.model.camera_sim import (
@@ -33,10 +41,10 @@ __all__ = ["CameraParams", "CameraNode"]
 
 
 class CameraParams(BaseModel):
-    """Camera node parameters (SI units; see docs/vision.md)."""
+    """Camera node parameters (SI units; see docs/vision.md, and docs/camera.md for the device sources)."""
 
     model_config = ConfigDict(extra="forbid")
-    source: str = Field(default="sim", pattern="^(sim|device|files)$")
+    source: str = Field(default="sim", pattern="^(sim|device|files|genicam)$")
     rate_hz: float = Field(default=48.0, gt=0.0, le=1000.0)
     # camera model (sim) / calibration to publish (all sources)
     model: str = Field(default="ximea", pattern="^(ximea|bumblebee2|file)$")
@@ -60,6 +68,24 @@ class CameraParams(BaseModel):
     traj_amplitude_rad: float = 1.05
     traj_period_s: float = Field(default=10.0, gt=0.0)
     traj_hover_m: float = 0.005
+    # genicam source (docs/camera.md): the pair by serial number (or Aravis id / IP address)
+    left_id: str = ""
+    right_id: str = ""
+    trigger: str = Field(default="software", pattern="^(hardware|master|software|free)$")
+    trigger_line: str = "Line1"
+    master_output_line: str = "Line2"
+    ptp: str = Field(default="auto", pattern="^(auto|on|off)$")
+    ptp_timeout_s: float = Field(default=10.0, ge=0.0, le=120.0)
+    device_clock: str = Field(default="auto", pattern="^(auto|shared|independent)$")
+    timestamp_at: str = Field(default="exposure_start", pattern="^(exposure_start|exposure_end)$")
+    pair_tolerance_s: float = Field(default=0.0, ge=0.0, le=0.5)
+    offset_x: int = Field(default=0, ge=0)
+    offset_y: int = Field(default=0, ge=0)
+    gain_db: float | None = None
+    packet_size: int = Field(default=0, ge=0, le=16384)
+    packet_delay_ns: int = Field(default=0, ge=0)
+    n_buffers: int = Field(default=16, ge=2, le=256)
+    discover_timeout_s: float = Field(default=10.0, ge=0.0, le=120.0)
     # device source
     device_left: int | str = 0
     device_right: int | str | None = None
@@ -69,9 +95,21 @@ class CameraParams(BaseModel):
     files_csv: str = ""
     loop: bool = True
 
+    @model_validator(mode="after")
+    def _genicam_ids(self) -> CameraParams:
+        if self.source == "genicam":
+            for key in ("left_id", "right_id"):
+                if not getattr(self, key):
+                    raise ValueError(f"{key} must name a camera (serial number) when source is genicam")
+            if self.left_id == self.right_id:
+                raise ValueError(f"left_id and right_id are both {self.left_id!r}: they must name two "
+                                 "cameras")
+        return self
+
 
 class CameraNode(Node):
-    """Publishes :class:`messages.StereoFrame` at ``rate_hz`` and latches :class:`messages.StereoCalibration`."""
+    """Publishes :class:`messages.StereoFrame` (at ``rate_hz``, or as the GenICam pair delivers) and latches
+    :class:`messages.StereoCalibration`."""
 
     Params = CameraParams
     node_type = "camera"
@@ -99,10 +137,28 @@ class CameraNode(Node):
             self.renderer = StereoRenderer(calib, self.T_dc, cfg)
             self.subscribe(topics.FINGER_TRUTH, self.on_truth, qos=QoS.LATEST)
             self.timer(1.0 / p.rate_hz, self.on_sim_tick)
+        elif p.source == "genicam":
+            from nodes.camera.genicam import GenICamConfig, GenICamStereo
+
+            w, h = (int(v) for v in calib["image_size"])
+            cfg = GenICamConfig(left_id=p.left_id, right_id=p.right_id, width=w, height=h,
+                                offset_x=p.offset_x, offset_y=p.offset_y, exposure_s=p.exposure_s,
+                                rate_hz=p.rate_hz, gain_db=p.gain_db, trigger=p.trigger,
+                                trigger_line=p.trigger_line, master_output_line=p.master_output_line,
+                                ptp=p.ptp, ptp_timeout_s=p.ptp_timeout_s, device_clock=p.device_clock,
+                                pair_tolerance_s=p.pair_tolerance_s, packet_size=p.packet_size,
+                                packet_delay_ns=p.packet_delay_ns, n_buffers=p.n_buffers,
+                                discover_timeout_s=p.discover_timeout_s)
+            self.genicam = GenICamStereo(cfg, on_pair=self._on_genicam_pair, logger=self.log)
+            try:
+                await asyncio.to_thread(self.genicam.start)
+            except RuntimeError as exc:  # Aravis missing: an installation problem, respawning cannot help
+                raise ValueError(str(exc)) from None
         elif p.source == "device":
             from nodes.camera.device import DeviceSource
 
-            self.device = DeviceSource(p.device_left, p.device_right, tuple(calib["image_size"]), p.exposure_s)
+            self.device = DeviceSource(p.device_left, p.device_right, tuple(calib["image_size"]),
+                                       p.exposure_s, fallback_period_s=1.0 / p.rate_hz)
             self.timer(1.0 / p.rate_hz, self.on_device_tick)
         else:
             from nodes.camera.files import FileSource
@@ -150,6 +206,49 @@ class CameraNode(Node):
             return
         self._publish(left, right, stamp, skew)
 
+    def _on_genicam_pair(self, pair) -> None:
+        """Publish one GenICam pair (called in a camera thread): exposure stamp = left device stamp mapped to
+        host time, moved to mid-exposure; skew = measured right − left (``pair.skew_basis``)."""
+        half = 0.5 * self.params.exposure_s
+        stamp = pair.stamp_s + (half if self.params.timestamp_at == "exposure_start" else -half)
+        self._publish(pair.left.image, pair.right.image, stamp, pair.skew_s)
+
+    def status_line(self) -> str:
+        """One line for ``/diagnostics``: what ``stereo_skew`` means for this source, with the GenICam
+        pair's measured skew, rate and dropped frames."""
+        p = self.params
+        if p.source == "genicam" and getattr(self, "genicam", None) is not None:
+            return self.genicam.summary_line()
+        if p.source == "device" and getattr(self, "device", None) is not None:
+            if self.device.skew_kind == "zero_by_construction":
+                return "device (one side-by-side UVC device): stereo_skew 0 by construction, not measured"
+            return ("device (two UVC devices, unsynchronised): exposure skew unknown; stereo_skew is an "
+                    "upper bound = |grab interval| + frame period "
+                    f"({self.device.frame_period() * 1e3:.1f} ms)")
+        if p.source == "sim":
+            return "sim: stereo_skew 0 (the twin renders both views at one instant)"
+        return "files: stereo_skew 0 (not recorded)"
+
+    def heartbeat(self):
+        """The base heartbeat with :meth:`status_line` in ``message`` (before any warning line). GenICam:
+        state ``warn`` when frames were dropped or left unpaired since the last heartbeat or no pair came for
+        1 s, ``error`` when a camera lost its control channel."""
+        hb = super().heartbeat()
+        line = self.status_line()
+        state = hb.state
+        if getattr(self, "genicam", None) is not None:
+            s = self.genicam.stats()
+            lost = sum(s.get(k, 0) for k in ("left_dropped", "right_dropped", "left_unpaired",
+                                             "right_unpaired"))
+            stale = s.get("last_pair_age_s", 0.0) > 1.0
+            if (lost > getattr(self, "_lost_seen", 0) or stale) and state == "ok":
+                state = "warn"
+            if s.get("control_lost"):
+                state = "error"
+            self._lost_seen = lost
+        return hb.model_copy(update={"message": f"{line}; {hb.message}" if hb.message else line,
+                                     "state": state})
+
     async def on_device_tick(self) -> None:
         """Grab and publish one device pair (in a worker thread)."""
         await asyncio.to_thread(self._device_frame)
@@ -175,6 +274,8 @@ class CameraNode(Node):
     async def teardown(self) -> None:
         if getattr(self, "device", None) is not None:
             self.device.close()
+        if getattr(self, "genicam", None) is not None:
+            await asyncio.to_thread(self.genicam.close)
         task = getattr(self, "_file_task", None)
         if task is not None:
             task.cancel()

@@ -24,7 +24,7 @@ import numpy as np
 
 from flexsheet.model.scene import CYLINDER_CENTER, CYLINDER_LENGTH, CYLINDER_RADIUS
 
-__all__ = ["TetMesh", "MeshSpec", "cylinder_mesh", "surface_faces", "write_mesh", "arc_points"]
+__all__ = ["TetMesh", "MeshSpec", "cylinder_mesh", "cylinder_part_mesh", "surface_faces", "write_mesh", "arc_points"]
 
 _GMSH_LOCK = threading.Lock()   # gmsh is a process-wide singleton
 
@@ -162,6 +162,82 @@ def cylinder_mesh(spec: MeshSpec = MeshSpec(), radius: float = CYLINDER_RADIUS, 
     points = pts_all[used]
     tets = inv.reshape(-1, 4)
     return _finish(points, tets, radius, length, c, spec)
+
+
+def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg: tuple[float, ...] = (0.0,),
+                       half_y: bool = True, half_z: bool = False, radius: float = CYLINDER_RADIUS,
+                       length: float = CYLINDER_LENGTH, center: np.ndarray = CYLINDER_CENTER) -> TetMesh:
+    """Mesh a symmetric part of the cylinder for the nonlinear reference (P1 tetrahedra, gmsh OpenCASCADE).
+
+    ``half_y``: keep y ≥ y_O only (the push at y = y_O is mirror-symmetric in y); ``half_z``: also keep
+    z ≥ z_O (a push at azimuth 0 is mirror-symmetric in z too). Element size ``h`` (m), ``h_fine`` (m) within
+    ``refine_radius`` (m) of the side-surface points at azimuths ``refine_deg`` (deg, around +x toward +z,
+    at y = y_O), gmsh ``Ball`` + ``Min`` fields. ``fixed`` marks nothing here: the caller knows which faces are
+    symmetry planes. Raises ``ValueError`` on bad sizes and ``RuntimeError`` if gmsh fails.
+    """
+    for name, v in (("h", h), ("h_fine", h_fine)):
+        if not (math.isfinite(v) and 0.0005 <= v <= 0.05):
+            raise ValueError(f"{name} must be in [0.0005, 0.05] m, got {v!r}")
+    if h_fine > h:
+        raise ValueError(f"h_fine must be <= h, got h_fine={h_fine!r} > h={h!r}")
+    if not (math.isfinite(refine_radius) and 0.0 <= refine_radius <= 0.1):
+        raise ValueError(f"refine_radius must be in [0, 0.1] m, got {refine_radius!r}")
+    c = np.asarray(center, float)
+    import gmsh
+
+    with _GMSH_LOCK:
+        gmsh.initialize(interruptible=False)
+        try:
+            gmsh.option.setNumber("General.Terminal", 0)
+            gmsh.option.setNumber("General.NumThreads", 1)
+            gmsh.option.setNumber("Mesh.Algorithm3D", 1)
+            gmsh.model.add("cylinder_part")
+            y0 = c[1] if half_y else c[1] - length / 2
+            cyl = gmsh.model.occ.addCylinder(c[0], y0, c[2], 0.0, c[1] + length / 2 - y0, 0.0, radius)
+            if half_z:
+                box = gmsh.model.occ.addBox(c[0] - 2 * radius, y0 - 0.01, c[2], 4 * radius, length + 0.02,
+                                            2 * radius)
+                gmsh.model.occ.intersect([(3, cyl)], [(3, box)])
+            gmsh.model.occ.synchronize()
+            gmsh.option.setNumber("Mesh.MeshSizeMax", h)
+            gmsh.option.setNumber("Mesh.MeshSizeMin", min(h_fine, h))
+            gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+            gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
+            gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+            if refine_radius > 0 and h_fine < h:
+                fields = []
+                for deg in refine_deg:
+                    f = gmsh.model.mesh.field.add("Ball")
+                    gmsh.model.mesh.field.setNumber(f, "Radius", refine_radius)
+                    gmsh.model.mesh.field.setNumber(f, "Thickness", refine_radius)
+                    gmsh.model.mesh.field.setNumber(f, "VIn", h_fine)
+                    gmsh.model.mesh.field.setNumber(f, "VOut", h)
+                    p = c + radius * np.array([math.cos(math.radians(deg)), 0.0, math.sin(math.radians(deg))])
+                    for k, name in enumerate(("XCenter", "YCenter", "ZCenter")):
+                        gmsh.model.mesh.field.setNumber(f, name, float(p[k]))
+                    fields.append(f)
+                fmin = gmsh.model.mesh.field.add("Min")
+                gmsh.model.mesh.field.setNumbers(fmin, "FieldsList", fields)
+                gmsh.model.mesh.field.setAsBackgroundMesh(fmin)
+            gmsh.model.mesh.generate(3)
+            tags, coords, _ = gmsh.model.mesh.getNodes()
+            etypes, _, enodes = gmsh.model.mesh.getElements(3)
+        except Exception as exc:  # gmsh raises plain Exception
+            raise RuntimeError(f"gmsh failed to mesh the cylinder part (h={h}, h_fine={h_fine}): {exc}") from exc
+        finally:
+            gmsh.finalize()
+    if 4 not in list(etypes):
+        raise RuntimeError("gmsh produced no tetrahedra for the cylinder part")
+    conn = np.asarray(enodes[list(etypes).index(4)], dtype=np.int64).reshape(-1, 4)
+    pts_all = np.asarray(coords, float).reshape(-1, 3)
+    tag_to_row = np.full(int(np.max(tags)) + 1, -1, dtype=np.int64)
+    tag_to_row[np.asarray(tags, np.int64)] = np.arange(len(tags))
+    conn = tag_to_row[conn]
+    used, inv = np.unique(conn, return_inverse=True)
+    points = pts_all[used]
+    tets = orient_tets(points, inv.reshape(-1, 4))
+    faces = surface_faces(points, tets)
+    return TetMesh(points, tets, faces, np.zeros(len(points), bool), None, radius, length, c.copy())
 
 
 def _finish(points: np.ndarray, tets: np.ndarray, radius: float, length: float, center: np.ndarray,

@@ -8,7 +8,7 @@
   step, so normal stroking passes through unchanged; a jump is ramped.
 * :class:`ReachModel` — is a clamp position inside a spherical shell around each arm's shoulder (J2)?
   Bases come from :data:`flexsheet.model.scene.LEFT_BASE`/``RIGHT_BASE``; J2 is ``shoulder_height`` above the
-  base (0.165 + 0.135 m in ``nodes/arm_bridge/rv1a.urdf``). Default shell 0.32…0.53 m: upper arm 0.250 m
+  base (0.165 + 0.135 m in ``flexsheet/model/rv1a.urdf``). Default shell 0.32…0.53 m: upper arm 0.250 m
   + forearm 0.184 m + wrist/flange 0.102 m (same URDF) bounds the far side; the near side is where J3
   reaches its 155° limit (the bases in :mod:`flexsheet.model.scene` were moved out for that reason). This is a
   workspace screen only — the arm bridge does the real IK and joint limits.
@@ -40,7 +40,7 @@ from flexsheet.model.vec import (
     unit,
 )
 
-__all__ = ["MotionLimits", "RateLimiter", "ReachModel", "limit_step"]
+__all__ = ["MotionLimits", "RateLimiter", "LimiterState", "ReachModel", "limit_step"]
 
 
 @dataclass(frozen=True)
@@ -86,31 +86,68 @@ def limit_step(err: Vec, vel: Vec, vmax: float, amax: float, dt: float) -> tuple
     return step, v, limited
 
 
+@dataclass(frozen=True, slots=True)
+class LimiterState:
+    """A :class:`RateLimiter`'s state: ``origin`` (3,) m or None (no pose yet), ``R`` rotation (rows) or None,
+    ``stretch``, ``vel`` (3,) m/s, ``omega`` (3,) rad/s (display frame)."""
+
+    origin: Vec | None
+    R: Mat | None
+    stretch: float
+    vel: Vec
+    omega: Vec
+
+
+_ZERO: Vec = (0.0, 0.0, 0.0)
+
+
 @dataclass
 class RateLimiter:
     """Stateful limiter of the sheet pose (origin (3,) m, rotation with columns (normal, u, v)) and stretch.
 
     ``reset(origin, R, stretch)`` sets the state with zero velocity; ``step(origin, R, stretch, dt)``
-    returns the limited (origin, R, stretch, limited). ``vel`` (m/s) and ``omega`` (rad/s, display frame)
-    hold the current rates.
+    returns the limited (origin, R, stretch, limited); ``clear()`` forgets the pose (the next ``step``
+    starts there). ``snapshot()``/``restore(state)`` save and put back the whole state (e.g. to undo a step
+    whose result was unreachable). ``vel`` (m/s) and ``omega`` (rad/s, display frame) hold the current rates;
+    callers read the state but never assign it.
     """
 
     limits: MotionLimits = field(default_factory=MotionLimits)
     origin: Vec | None = None
     R: Mat | None = None
     stretch: float = 0.0
-    vel: Vec = (0.0, 0.0, 0.0)
-    omega: Vec = (0.0, 0.0, 0.0)
+    vel: Vec = _ZERO
+    omega: Vec = _ZERO
+
+    @property
+    def initialised(self) -> bool:
+        """True once a pose is set (by :meth:`reset` or a first :meth:`step`)."""
+        return self.origin is not None and self.R is not None
 
     def reset(self, origin: Vec, R: Mat, stretch: float) -> None:
         """Set the state to this pose at rest."""
         self.origin, self.R, self.stretch = origin, R, stretch
-        self.vel = (0.0, 0.0, 0.0)
-        self.omega = (0.0, 0.0, 0.0)
+        self.vel = _ZERO
+        self.omega = _ZERO
+
+    def clear(self) -> None:
+        """Forget the pose and the rates (as constructed): the next :meth:`step` starts at its target."""
+        self.origin, self.R, self.stretch = None, None, 0.0
+        self.vel = _ZERO
+        self.omega = _ZERO
+
+    def snapshot(self) -> LimiterState:
+        """The current state (immutable)."""
+        return LimiterState(self.origin, self.R, self.stretch, self.vel, self.omega)
+
+    def restore(self, state: LimiterState, at_rest: bool = False) -> None:
+        """Put back a :meth:`snapshot`; with ``at_rest`` the rates are zeroed (the pose held, not moving)."""
+        self.origin, self.R, self.stretch = state.origin, state.R, state.stretch
+        self.vel, self.omega = (_ZERO, _ZERO) if at_rest else (state.vel, state.omega)
 
     def step(self, origin: Vec, R: Mat, stretch: float, dt: float) -> tuple[Vec, Mat, float, bool]:
         """Move toward (origin, R, stretch) within the limits over ``dt`` s (dt > 0)."""
-        if self.origin is None or self.R is None:
+        if not self.initialised:
             self.reset(origin, R, stretch)
             return origin, R, stretch, False
         L = self.limits

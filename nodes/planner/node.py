@@ -14,12 +14,12 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
-from flexsheet.model import scene
 from flexsheet.model.shapes import make_shape
-from flexsheet.model.tension import URETHANE_E, SheetMaterial
+from flexsheet.model.tension import SheetMaterial
 from flexsheet.runtime.node import InputRejected, Node, QoS
+from flexsheet.runtime.params import build, config_fields, params_model
 from messages import ArmTarget, Fingertip, ObjectDeformation, SheetTarget, topics
 from nodes.planner.limits import MotionLimits, ReachModel
 from nodes.planner.stroke import Plan, PlannerConfig, SurfacePlanner
@@ -27,60 +27,40 @@ from nodes.planner.stroke import Plan, PlannerConfig, SurfacePlanner
 __all__ = ["PlannerParams", "PlannerNode"]
 
 
-class PlannerParams(BaseModel):
+_MATERIAL = {"size": "sheet_size"}         # launch-file name of SheetMaterial.size
+
+
+def _planner_config(p) -> PlannerConfig:
+    """The :class:`PlannerConfig` params ``p`` describe (raises ``ValueError`` on inconsistent values)."""
+    return build(PlannerConfig, p, material=build(SheetMaterial, p, rename=_MATERIAL),
+                 limits=build(MotionLimits, p), reach=build(ReachModel, p))
+
+
+PlannerParams = params_model(
+    "PlannerParams",
     """Planner parameters (launch file / ``--param k=v``). SI units, display frame.
 
-    ``shape``: cylinder | sphere | box | plane | mesh; ``shape_params``: that shape's keys (see
+    Node-only: ``shape``: cylinder | sphere | box | plane | mesh; ``shape_params``: that shape's keys (see
     :func:`flexsheet.model.shapes.make_shape`; empty = the paper's scene). ``use_prediction``: plan on
-    ``Fingertip.predicted_position``. ``object_stiffness`` N/m: used when no fresh FEM stiffness
-    (``use_fem_stiffness``, ``fem_timeout`` s). The rest map to :class:`PlannerConfig`,
-    :class:`SheetMaterial`, :class:`MotionLimits` and :class:`ReachModel`.
-    """
-
-    model_config = ConfigDict(extra="forbid")
-
-    shape: str = Field(default="cylinder", pattern="^(cylinder|sphere|box|plane|mesh)$")
-    shape_params: dict = Field(default_factory=dict)
-    use_prediction: bool = False
-    object_stiffness: float = Field(default=30.0, ge=0.0)
-    use_fem_stiffness: bool = True
-    fem_timeout: float = Field(default=0.5, gt=0.0)
-    touch_distance: float = Field(default=0.002, gt=0.0)
-    release_distance: float = Field(default=0.006, gt=0.0)
-    jump_distance: float = Field(default=0.03, gt=0.0)
-    singular_eps: float = Field(default=1e-4, gt=0.0)
-    recentre_time: float = Field(default=0.5, gt=0.0)
-    sheet_margin: float = Field(default=0.03, gt=0.0)
-    u_ref: tuple[float, float, float] = (0.0, 1.0, 0.0)
-    v_max: float = Field(default=0.30, gt=0.0)
-    a_max: float = Field(default=3.0, gt=0.0)
-    w_max: float = Field(default=3.0, gt=0.0)
-    alpha_max: float = Field(default=30.0, gt=0.0)
-    stretch_rate: float = Field(default=1.0, gt=0.0)
-    young: float = Field(default=URETHANE_E, gt=0.0)
-    thickness: float = Field(default=scene.SHEET_THICKNESS, gt=0.0)
-    sheet_size: float = Field(default=scene.SHEET_SIZE, gt=0.0)
-    contact_width: float = Field(default=0.020, gt=0.0)
-    min_stretch: float = Field(default=0.01, ge=0.0)
-    max_stretch: float = Field(default=0.30, gt=0.0)
-    max_force: float = Field(default=40.0, gt=0.0)
-    left_base: tuple[float, float, float, float] = scene.LEFT_BASE
-    right_base: tuple[float, float, float, float] = scene.RIGHT_BASE
-    shoulder_height: float = Field(default=0.30)
-    reach_min: float = Field(default=0.32, ge=0.0)
-    reach_max: float = Field(default=0.53, gt=0.0)
-
-    def planner_config(self) -> PlannerConfig:
-        """The :class:`PlannerConfig` these params describe (raises ``ValueError`` on inconsistent values)."""
-        return PlannerConfig(
-            touch_distance=self.touch_distance, release_distance=self.release_distance,
-            singular_eps=self.singular_eps, jump_distance=self.jump_distance, recentre_time=self.recentre_time,
-            u_ref=tuple(self.u_ref), sheet_margin=self.sheet_margin, object_stiffness=self.object_stiffness,
-            material=SheetMaterial(self.young, self.thickness, self.sheet_size, self.contact_width,
-                                   self.min_stretch, self.max_stretch, self.max_force),
-            limits=MotionLimits(self.v_max, self.a_max, self.w_max, self.alpha_max, self.stretch_rate),
-            reach=ReachModel(tuple(self.left_base), tuple(self.right_base), self.shoulder_height,
-                             self.reach_min, self.reach_max))
+    ``Fingertip.predicted_position``; ``use_fem_stiffness``: use the FEM's stiffness while fresher than
+    ``fem_timeout`` s, else ``object_stiffness``. Every other param is a field of — defined, defaulted and
+    checked in — :class:`PlannerConfig` (``touch_distance`` … ``max_dt``), :class:`SheetMaterial`
+    (``young`` … ``max_force``; its ``size`` is ``sheet_size``), :class:`MotionLimits` and
+    :class:`ReachModel`; ``planner_config()`` builds the config.
+    """,
+    config_fields(PlannerConfig, exclude=("material", "limits", "reach")),
+    config_fields(SheetMaterial, rename=_MATERIAL),
+    config_fields(MotionLimits),
+    config_fields(ReachModel),
+    check=_planner_config,
+    methods={"planner_config": _planner_config},
+    module=__name__,
+    shape=(str, Field(default="cylinder", pattern="^(cylinder|sphere|box|plane|mesh)$")),
+    shape_params=(dict, Field(default_factory=dict)),
+    use_prediction=(bool, False),
+    use_fem_stiffness=(bool, True),
+    fem_timeout=(float, Field(default=0.5, gt=0.0)),
+)
 
 
 class PlannerNode(Node):
@@ -115,7 +95,7 @@ class PlannerNode(Node):
     def on_fingertip(self, msg: Fingertip) -> None:
         """Plan and publish; a lost marker holds the last safe pose (status ``hold:marker_lost``)."""
         if not msg.valid:
-            plan = self.planner._hold("hold:marker_lost")
+            plan = self.planner.hold("hold:marker_lost")
         else:
             pos = msg.predicted_position if self.params.use_prediction else msg.position
             plan = self.planner.update(msg.header.stamp + (msg.prediction_horizon if self.params.use_prediction else 0.0),

@@ -43,12 +43,22 @@ Units m, rad, s, N/m; all vectors in the display frame; vectors are float tuples
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 
+from flexsheet.model import scene
 from flexsheet.model.shapes import Shape
-from flexsheet.model.tension import SheetMaterial, TensionResult, _max_stretch, stretch_for_stiffness
+from flexsheet.model.sheet import clamp_half_span, clamp_points, clamp_poses
+from flexsheet.model.tension import (
+    SheetMaterial,
+    TensionResult,
+    max_stretch_within_force,
+    stiffness,
+    stretch_for_stiffness,
+    tension,
+)
 from flexsheet.model.vec import (
     Vec,
     axpy,
@@ -112,8 +122,9 @@ class Plan:
     (3,) unit: commanded sheet frame; ``origin`` (3,) m: commanded sheet centre; ``offset`` (s_u, s_v) m:
     contact position on the sheet relative to its centre; ``stretch``, ``tension`` N/m, ``stiffness`` N/m,
     ``object_stiffness`` N/m; ``depth`` m: push depth (≥ 0 when the fingertip is inside); ``touching``;
-    ``status``: "ok" or ';'-joined reasons; ``left``/``right`` (3,) m: clamp points; ``reach_margin`` m;
-    ``t`` s: time of the fingertip sample planned from.
+    ``status``: "ok" or ';'-joined reasons; ``left``/``right`` (3,) m: clamp points
+    (:func:`flexsheet.model.sheet.clamp_points`); ``reach_margin`` m; ``t`` s: time of the fingertip sample
+    planned from; ``sheet_size`` m: the unstretched sheet side between the clamps.
     """
 
     t: float
@@ -133,35 +144,40 @@ class Plan:
     left: Vec
     right: Vec
     reach_margin: float
+    sheet_size: float = scene.SHEET_SIZE
 
     def rotation(self) -> np.ndarray:
         """(3, 3) rotation with columns (normal, axis_u, axis_v)."""
         return np.column_stack([self.normal, self.axis_u, self.axis_v])
 
     def clamp_matrices(self) -> tuple[np.ndarray, np.ndarray]:
-        """Left and right clamp poses T_display_clamp (4, 4), same convention as :func:`flexsheet.model.scene.clamp_poses`."""
-        R = self.rotation()
-        out = []
-        for p in (self.left, self.right):
-            T = np.eye(4)
-            T[:3, :3] = R
-            T[:3, 3] = p
-            out.append(T)
-        return out[0], out[1]
+        """Left and right clamp poses T_display_clamp (4, 4): :func:`flexsheet.model.sheet.clamp_poses` of this
+        plan's sheet (origin, normal, axis_u, stretch, sheet_size)."""
+        return clamp_poses(self.origin, self.normal, self.axis_u, self.stretch, self.sheet_size)
+
+
+class _Sample(NamedTuple):
+    """A fingertip sample that passed the checks: time s, position (3,) m, stiffness N/m, step s (None first)."""
+
+    t: float
+    p: Vec
+    k_obj: float
+    dt: float | None
 
 
 class SurfacePlanner:
     """Stateful surface planner: feed fingertip samples to :meth:`update`, get :class:`Plan` s.
 
     ``shape``: a :class:`flexsheet.model.shapes.Shape`; ``config``: :class:`PlannerConfig`. The first valid
-    sample initialises the pose (no ramp). ``last`` is the last safe plan (``None`` before the first).
+    sample initialises the pose (no ramp). ``last`` is the last safe plan (``None`` before the first);
+    :meth:`hold` republishes it with a reason (a lost marker, a refused input). ``counts`` counts statuses.
     """
 
     def __init__(self, shape: Shape, config: PlannerConfig | None = None):
         self.shape = shape
         self.cfg = config or PlannerConfig()
         self.limiter = RateLimiter(self.cfg.limits)
-        self._eps_max = _max_stretch(self.cfg.material)
+        self._eps_max = max_stretch_within_force(self.cfg.material)
         self.reset()
 
     def reset(self) -> None:
@@ -174,20 +190,18 @@ class SurfacePlanner:
         self.u_last: Vec | None = None
         self.s: tuple[float, float] = (0.0, 0.0)
         self.touching = False
-        self.limiter.reset((0.0, 0.0, 0.0), ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), 0.0)
-        self.limiter.origin = None
+        self.limiter.clear()
         self._tcache: tuple[float, float, TensionResult] | None = None
         self.counts: dict[str, int] = {}
 
     # ---------------------------------------------------------------------------------------------
-    def _hold(self, reason: str, t: float | None = None) -> Plan | None:
+    def hold(self, reason: str, t: float | None = None) -> Plan | None:
+        """The last safe plan again with status ``reason`` (and time ``t`` s if given), counted in ``counts``;
+        ``None`` before the first plan. Used for a lost marker and for every refused input."""
         self.counts[reason] = self.counts.get(reason, 0) + 1
         if self.last is None:
             return None
-        L = self.last
-        return Plan(L.t if t is None else t, L.contact, L.normal, L.axis_u, L.axis_v, L.origin, L.offset,
-                    L.stretch, L.tension, L.stiffness, L.object_stiffness, L.depth, L.touching, reason,
-                    L.left, L.right, L.reach_margin)
+        return replace(self.last, t=self.last.t if t is None else t, status=reason)
 
     def _tension(self, k: float, off_u: float) -> TensionResult:
         c = self._tcache
@@ -201,49 +215,82 @@ class SurfacePlanner:
         """Plan from a fingertip sample ``p`` (3,) m at time ``t`` s; ``object_stiffness`` N/m overrides the
         configured value (e.g. from the FEM topic). Returns the new :class:`Plan`, or a held copy of the last
         safe plan with status ``hold:<reason>`` for invalid input (``None`` if there is none yet). Never raises
-        for bad samples: the reason is counted in ``counts``."""
+        for bad samples: the reason is counted in ``counts``.
+
+        Steps: check the sample → re-acquisition → project onto the shape (§V-A) → touch hysteresis → roll
+        or recentre (Fig. 7(b)) → stretch for the stiffness → keep the contact on the sheet → rate limits
+        and reach → the plan."""
+        s = self._sample(t, p, object_stiffness)
+        if not isinstance(s, _Sample):
+            return self.hold(*s)
         cfg = self.cfg
+        status: list[str] = []
+        # re-acquisition: a jump no finger can make between two samples
+        if self.p_last is not None and norm(sub(s.p, self.p_last)) > cfg.jump_distance:
+            self.touching = False
+            status.append("reacquired")
+        proj = self.shape.project(s.p, self.n_last, cfg.singular_eps)
+        if proj.singular:
+            status.append("hold:singular")
+        q, n, dist = proj.point, proj.normal, proj.distance
+        was_touching = self.touching
+        if not self.touching and dist <= cfg.touch_distance:
+            self.touching = True
+        elif self.touching and dist > cfg.release_distance:
+            self.touching = False
+        su, sv, u = self._roll(q, n, s.dt, was_touching)
+        v = cross(n, u)
+        # stiffness → stretch at the contact's distance from the clamps
+        tr = self._tension(s.k_obj, su)
+        if tr.saturated:
+            status.append(tr.saturated)
+        su, sv = self._keep_on_sheet(su, sv, tr.stretch, status)
+        origin = axpy(-sv, v, axpy(-su, u, q))
+        o, (nc, uc, vc), st, left, right, margin = self._limit_and_reach(origin, rot_from_cols(n, u, v),
+                                                                          tr.stretch, s.dt, status)
+        mat = cfg.material
+        plan = Plan(s.t, q, nc, uc, vc, o, (su, sv), st, tr.tension if st == tr.stretch else tension(st, mat),
+                    tr.stiffness if st == tr.stretch else _stiffness_or_zero(st, mat, su), s.k_obj,
+                    max(0.0, -dist), self.touching, ";".join(status) if status else "ok", left, right, margin,
+                    mat.size)
+        for s_ in status:
+            self.counts[s_] = self.counts.get(s_, 0) + 1
+        self.t_last, self.p_last, self.q_last, self.n_last, self.u_last, self.s = s.t, s.p, q, n, u, (su, sv)
+        if "unreachable" not in status or self.last is None:
+            self.last = plan
+        return plan
+
+    # -- the steps of update ----------------------------------------------------------------------
+    def _sample(self, t, p, object_stiffness) -> _Sample | tuple[str, float | None]:
+        """The checked sample, or (hold reason, hold time) for an input the planner refuses."""
         try:
             t = float(t)
             p = (float(p[0]), float(p[1]), float(p[2])) if len(p) == 3 else None
         except (TypeError, ValueError, IndexError):
             p = None
         if p is None or not (math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(p[2])):
-            return self._hold("hold:invalid_fingertip")
+            return "hold:invalid_fingertip", None
         if not math.isfinite(t):
-            return self._hold("hold:invalid_stamp")
-        k_obj = cfg.object_stiffness if object_stiffness is None else object_stiffness
+            return "hold:invalid_stamp", None
+        k_obj = self.cfg.object_stiffness if object_stiffness is None else object_stiffness
         if not (math.isfinite(k_obj) and k_obj >= 0.0):
-            return self._hold("hold:invalid_stiffness", t)
-        status: list[str] = []
+            return "hold:invalid_stiffness", t
         if self.t_last is None:
-            dt = None
-        else:
-            dt = t - self.t_last
-            if dt <= 0.0:
-                return self._hold("hold:stale_fingertip")
-            dt = min(dt, cfg.max_dt)
+            return _Sample(t, p, k_obj, None)
+        dt = t - self.t_last
+        if dt <= 0.0:
+            return "hold:stale_fingertip", None
+        return _Sample(t, p, k_obj, min(dt, self.cfg.max_dt))
 
-        # re-acquisition: a jump no finger can make between two samples
-        if self.p_last is not None and norm(sub(p, self.p_last)) > cfg.jump_distance:
-            self.touching = False
-            status.append("reacquired")
+    def _roll(self, q: Vec, n: Vec, dt: float | None, was_touching: bool) -> tuple[float, float, Vec]:
+        """Contact coordinates (s_u, s_v) m on the sheet and the new ``axis_u`` for contact ``q``, normal ``n``.
 
-        proj = self.shape.project(p, self.n_last, cfg.singular_eps)
-        if proj.singular:
-            status.append("hold:singular")
-        q, n, dist = proj.point, proj.normal, proj.distance
-
-        was_touching = self.touching
-        if not self.touching and dist <= cfg.touch_distance:
-            self.touching = True
-        elif self.touching and dist > cfg.release_distance:
-            self.touching = False
-
+        Touching: rolling without slip — parallel-transport u, advance the material point by the geodesic
+        step. Not touching: the offset decays with ``recentre_time`` and u is ``u_ref`` in the tangent plane."""
+        cfg = self.cfg
         su, sv = self.s
         if self.touching and was_touching and self.n_last is not None and self.q_last is not None \
                 and self.u_last is not None:
-            # rolling without slip: parallel-transport u, advance the material point by the geodesic step
             u0 = self.u_last
             v0 = cross(self.n_last, u0)
             g = self.shape.geodesic_step(self.q_last, q)
@@ -251,75 +298,51 @@ class SurfacePlanner:
             sv += dot(g, v0)
             mr = min_rotation(self.n_last, n)
             u = rodrigues(mr[0], mr[1], u0) if mr is not None else u0
-            u = perp_unit(n, u)
-        else:
-            if dt is not None and (su != 0.0 or sv != 0.0):
-                f = math.exp(-dt / cfg.recentre_time)
-                su, sv = su * f, sv * f
-            u = perp_unit(n, cfg.u_ref if abs(dot(cfg.u_ref, n)) < 0.999 * norm(cfg.u_ref) or self.u_last is None
-                          else self.u_last)
-        v = cross(n, u)
+            return su, sv, perp_unit(n, u)
+        if dt is not None and (su != 0.0 or sv != 0.0):
+            f = math.exp(-dt / cfg.recentre_time)
+            su, sv = su * f, sv * f
+        ref = cfg.u_ref if abs(dot(cfg.u_ref, n)) < 0.999 * norm(cfg.u_ref) or self.u_last is None else self.u_last
+        return su, sv, perp_unit(n, ref)
 
-        # stiffness → stretch at the contact's distance from the clamps
-        tr = self._tension(k_obj, su)
-        if tr.saturated:
-            status.append(tr.saturated)
-
-        # the finger must stay on the sheet: otherwise it slips (offset clamped)
-        mat = cfg.material
-        hu = 0.5 * mat.size * (1.0 + tr.stretch) - cfg.sheet_margin
-        hv = 0.5 * mat.size - cfg.sheet_margin
+    def _keep_on_sheet(self, su: float, sv: float, stretch: float, status: list[str]) -> tuple[float, float]:
+        """The finger must stay on the sheet (``sheet_margin`` from its edges): otherwise it slips — the
+        offset is clamped and ``slip:sheet_edge`` appended to ``status``."""
+        cfg = self.cfg
+        hu = clamp_half_span(stretch, cfg.material.size) - cfg.sheet_margin
+        hv = 0.5 * cfg.material.size - cfg.sheet_margin             # free edges: half the unstretched width
         if abs(su) > hu or abs(sv) > hv:
-            su, sv = max(-hu, min(hu, su)), max(-hv, min(hv, sv))
             status.append("slip:sheet_edge")
+            return max(-hu, min(hu, su)), max(-hv, min(hv, sv))
+        return su, sv
 
-        origin = axpy(-sv, v, axpy(-su, u, q))
-        R = rot_from_cols(n, u, v)
+    def _limit_and_reach(self, origin: Vec, R, stretch: float, dt: float | None, status: list[str]):
+        """Rate-limit the target pose, place the clamps and screen their reach. Returns (origin, (n, u, v),
+        stretch, left, right, reach margin); an unreachable step is undone and the last plan's pose held."""
         prev = None
-        if dt is None or self.limiter.origin is None:
-            self.limiter.reset(origin, R, tr.stretch)
-            o, Rc, st, limited = origin, R, tr.stretch, False
+        if dt is None or not self.limiter.initialised:
+            self.limiter.reset(origin, R, stretch)
+            o, Rc, st, limited = origin, R, stretch, False
         else:
-            prev = (self.limiter.origin, self.limiter.R, self.limiter.stretch, self.limiter.vel, self.limiter.omega)
-            o, Rc, st, limited = self.limiter.step(origin, R, tr.stretch, dt)
+            prev = self.limiter.snapshot()
+            o, Rc, st, limited = self.limiter.step(origin, R, stretch, dt)
         if limited:
             status.append("rate_limited")
-        nc, uc, vc = cols(Rc)
-        half = 0.5 * mat.size * (1.0 + st)
-        left = axpy(half, uc, o)
-        right = axpy(-half, uc, o)
-        ok, margin = cfg.reach.reachable(left, right)
+        axes = cols(Rc)
+        left, right = clamp_points(o, axes[1], st, self.cfg.material.size)
+        ok, margin = self.cfg.reach.reachable(left, right)
         if not ok:
             status.append("unreachable")
             if self.last is not None and prev is not None:
                 # hold the last reachable pose (at rest), keep the rolling state of the finger
-                self.limiter.origin, self.limiter.R, self.limiter.stretch = prev[0], prev[1], prev[2]
-                self.limiter.vel = (0.0, 0.0, 0.0)
-                self.limiter.omega = (0.0, 0.0, 0.0)
+                self.limiter.restore(prev, at_rest=True)
                 L = self.last
-                o, nc, uc, vc, st = L.origin, L.normal, L.axis_u, L.axis_v, L.stretch
-                left, right = L.left, L.right
-        plan = Plan(t, q, nc, uc, vc, o, (su, sv), st, tr.tension if st == tr.stretch else
-                    _tension_at(st, mat), tr.stiffness if st == tr.stretch else _stiff_at(st, mat, su),
-                    k_obj, max(0.0, -dist), self.touching, ";".join(status) if status else "ok", left, right,
-                    margin)
-        for s_ in status:
-            self.counts[s_] = self.counts.get(s_, 0) + 1
-        self.t_last, self.p_last, self.q_last, self.n_last, self.u_last, self.s = t, p, q, n, u, (su, sv)
-        if "unreachable" not in status or self.last is None:
-            self.last = plan
-        return plan
+                return L.origin, (L.normal, L.axis_u, L.axis_v), L.stretch, L.left, L.right, margin
+        return o, axes, st, left, right, margin
 
 
-def _tension_at(stretch: float, mat: SheetMaterial) -> float:
-    from flexsheet.model.tension import tension
-
-    return tension(stretch, mat)
-
-
-def _stiff_at(stretch: float, mat: SheetMaterial, su: float) -> float:
-    from flexsheet.model.tension import stiffness
-
+def _stiffness_or_zero(stretch: float, mat: SheetMaterial, su: float) -> float:
+    """Stiffness presented at a rate-limited stretch (N/m); 0 when the contact is not between the clamps."""
     try:
         return stiffness(stretch, mat, su)
     except ValueError:

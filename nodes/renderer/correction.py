@@ -42,7 +42,7 @@ from flexsheet.model.sheet import SheetSurface
 
 __all__ = ["correct_vertices", "correct_vertices_pushed", "correct_vertices_fine", "screen_to_projector",
            "project_vertices", "MODELS", "DEFAULT_MIN_COS", "choose_model", "predict_model_errors",
-           "land_on_triangles", "land_on_surface", "land_projector_rays"]
+           "land_on_triangles", "land_on_surface", "land_projector_rays", "check_screen", "fan_triangles"]
 
 #: correction models, cheapest first
 MODELS = ("none", "flat", "four_triangle", "fine")
@@ -75,7 +75,10 @@ def _verts(vertices) -> np.ndarray:
     return a
 
 
-def _check_screen(eye, projector, screen_point, screen_normal):
+def check_screen(eye, projector, screen_point, screen_normal):
+    """Validate the fixed geometry: eye V (3,) m in front of the imaginary screen (r_o, n_o), projector P (3,) m
+    behind it (rear projection). Returns (V, P, r_o, unit n_o) as float64 (3,) arrays. Raises ``ValueError``
+    naming the argument for a bad shape, NaN/inf, a zero normal or a point on the wrong side."""
     v = _vec("eye", eye)
     p = _vec("projector", projector)
     ro = _vec("screen_point", screen_point)
@@ -114,7 +117,7 @@ def correct_vertices(vertices, *, eye, projector, screen_point, screen_normal, s
     front of the sheet and the screen, or a projector that is not behind them.
     """
     a = _verts(vertices)
-    v, p, ro, no = _check_screen(eye, projector, screen_point, screen_normal)
+    v, p, ro, no = check_screen(eye, projector, screen_point, screen_normal)
     rs = _vec("sheet_point", sheet_point)
     ns = _unit("sheet_normal", sheet_normal)
     if (v - rs) @ ns <= 1e-6:
@@ -130,8 +133,13 @@ def correct_vertices(vertices, *, eye, projector, screen_point, screen_normal, s
     return (out, valid) if return_valid else out
 
 
-def _triangles(pushed_point, corners, projector):
-    """Validated 4-triangle fan: returns (q (3,), corners (4,3), normals (4,3) unit, usable (4,) bool)."""
+def fan_triangles(pushed_point, corners, projector):
+    """The 4-triangle fan of the pushed sheet (paper §III-C-3): triangle i = (pushed point, corner i, corner i+1).
+
+    ``pushed_point`` (3,) m, ``corners`` (4, 3) m in order around it, ``projector`` (3,) m (orients the normals
+    toward the user, away from the rear projector). Returns (q (3,), corners (4, 3), unit normals (4, 3),
+    usable (4,) bool: area above 1e-12 m², polygon normal (3,)); an unusable triangle gets the polygon normal.
+    Raises ``ValueError`` for NaN/bad shapes, zero-area corners or all four triangles degenerate."""
     q = _vec("pushed_point", pushed_point)
     cs = np.asarray(corners, dtype=float)
     if cs.shape != (4, 3) or not np.all(np.isfinite(cs)):
@@ -198,8 +206,8 @@ def correct_vertices_pushed(vertices, *, eye, projector, screen_point, screen_no
     triangles degenerate, or the eye/projector on the wrong side of the corners' plane.
     """
     a = _verts(vertices)
-    v, p, ro, no = _check_screen(eye, projector, screen_point, screen_normal)
-    q, cs, nrm, usable, poly_n = _triangles(pushed_point, corners, p)
+    v, p, ro, no = check_screen(eye, projector, screen_point, screen_normal)
+    q, cs, nrm, usable, poly_n = fan_triangles(pushed_point, corners, p)
     if (v - cs.mean(axis=0)) @ poly_n <= 1e-6 or (v - q) @ poly_n <= 1e-6:
         raise ValueError(f"eye {v.tolist()} is on the wrong side of the sheet")
     if (p - cs.mean(axis=0)) @ poly_n >= -1e-6:
@@ -253,7 +261,7 @@ def correct_vertices_fine(vertices, *, eye, projector, screen_point, screen_norm
     input or an eye/projector on the wrong side of the sheet plane.
     """
     a = _verts(vertices)
-    v, p, ro, no = _check_screen(eye, projector, screen_point, screen_normal)
+    v, p, ro, no = check_screen(eye, projector, screen_point, screen_normal)
     if not isinstance(sheet, SheetSurface):
         raise ValueError(f"sheet must be a SheetSurface, got {type(sheet).__name__}")
     if (v - sheet.origin) @ sheet.normal <= 1e-6:
@@ -310,7 +318,7 @@ def predict_model_errors(depth: float, *, eye, projector, screen_point, screen_n
 
     if not (math.isfinite(depth) and depth >= 0.0):
         raise ValueError(f"depth must be finite and >= 0, got {depth!r}")
-    v, p, ro, no = _check_screen(eye, projector, screen_point, screen_normal)
+    v, p, ro, no = check_screen(eye, projector, screen_point, screen_normal)
     probes = _verts(probes)
     mem = Membrane(sheet.half_span, sheet.half_width, 0.0, 0.0, depth, modes=16)
     true = SheetSurface(sheet.origin, sheet.normal, sheet.axis_u, sheet.half_span, sheet.half_width, mem)

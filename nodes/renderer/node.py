@@ -1,22 +1,25 @@
 """Renderer node: draws the (deformed) object for both eyes, corrected for the actual sheet (paper §III-C).
 
 Subscribes ``/object/deformation`` (rigid cylinder until the FEM publishes), both arms' joint states (the
-measured clamp poses give the actual sheet pose, :meth:`SheetSurface.from_clamps`) and ``/fingertip`` (the
-pushed point: a valid fingertip more than ``push_threshold`` behind the sheet plane and inside the sheet).
-It redraws as soon as a new fingertip or deformation arrives (at most ``max_render_rate``; at least at
-``publish_rate`` when nothing arrives) and publishes ``/render/stereo`` (:class:`messages.RenderedFrame`,
-downscaled by ``publish_scale``) at ``publish_rate``, each published frame being the redraw for the newest
-input; ``source_stamp`` is the newest exposure stamp of the fingertip / deformation it drew.
+measured clamp poses give the actual sheet pose) and ``/fingertip`` (the pushed point). It redraws as soon as a
+new fingertip or deformation arrives (at most ``max_render_rate``; at least at ``publish_rate`` when nothing
+arrives) and publishes ``/render/stereo`` (:class:`messages.RenderedFrame`, downscaled by ``publish_scale``) at
+``publish_rate``; ``source_stamp`` is the newest exposure stamp of the fingertip / deformation it drew.
 
-All GL work runs in one dedicated thread (the EGL context is bound to it). Bad input (unknown faces, a
-clamp pose that is not a rotation, a sheet pose with the eye behind it) is rejected and counted; the last good
-state keeps being drawn. ``correction="auto"`` picks the cheapest model meeting ``accuracy_target`` from a
-table of predicted errors computed at setup (:func:`correction.choose_model`).
+This file only wires topics and params. The state and the decisions (inputs → sheet, model choice, error
+table) are :mod:`nodes.renderer.state`; the drawing :mod:`nodes.renderer.scene`; the projector window
+:mod:`nodes.renderer.window`.
+
+``output: offscreen`` (default) draws with a headless EGL context in one GL thread. ``output: window`` opens
+the projector window (glfw) on a thread of its own, which presents a frame on every vsync in the ``stereo``
+format and redraws the pair there when inputs arrive; ``/diagnostics`` then reports the window's frame rate,
+frame intervals and missed vsyncs. Bad input is rejected and counted; the last good state keeps being drawn.
 """
 
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import importlib.util
 import threading
 import time
@@ -28,13 +31,12 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from flexsheet.model import scene
 from flexsheet.model.projector import Projector
-from flexsheet.model.sheet import SheetSurface
 from flexsheet.runtime.node import InputRejected, Node, QoS
-from messages import ArmJointState, Fingertip, ObjectDeformation, RenderedFrame, topics
-from nodes.renderer.correction import MODELS, _check_screen, choose_model, predict_model_errors
-from nodes.renderer.scene import StereoRenderer, cylinder_mesh, vertex_normals
+from messages import ArmJointState, Fingertip, Heartbeat, ObjectDeformation, RenderedFrame, topics
+from nodes.renderer.correction import check_screen
+from nodes.renderer.state import ErrorTable, RendererState, SheetConfig, pick_model, silhouette_probes
 
-__all__ = ["RendererNode", "RendererParams", "check_sheet"]
+__all__ = ["RendererNode", "RendererParams"]
 
 
 class RendererParams(BaseModel):
@@ -42,8 +44,8 @@ class RendererParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    width: int = Field(1024, ge=16, description="projector width, px")
-    height: int = Field(768, ge=16, description="projector height, px")
+    width: int = Field(1024, ge=16, description="projector width per eye image, px")
+    height: int = Field(768, ge=16, description="projector height per eye image, px")
     ipd: float = Field(0.064, ge=0.0, le=0.1, description="interpupillary distance, m")
     eye: list[float] = Field(default_factory=lambda: scene.EYE.tolist(), description="cyclopean eye V, m")
     screen_point: list[float] = Field(default_factory=lambda: scene.SCREEN_POINT.tolist())
@@ -55,19 +57,31 @@ class RendererParams(BaseModel):
     projector_R: list[list[float]] | None = Field(None, description="3x3, columns = projector x,y,z axes")
     correction: Literal["auto", "none", "flat", "four_triangle", "fine"] = "auto"
     accuracy_target: float = Field(scene.PIXEL_ON_SCREEN, gt=0.0, description="image error budget, m")
-    fine_modes: int = Field(16, ge=1, le=64, description="membrane modes of the fine model")
-    tension_ratio: float = Field(1.0, gt=0.0, description="membrane T_v / T_u")
-    contact_radius: float = Field(0.008, gt=0.0, description="finger contact radius, m")
-    push_threshold: float = Field(0.001, ge=0.0, description="depth behind the sheet that counts as a push, m")
-    sheet_half_width: float = Field(scene.SHEET_SIZE / 2, gt=0.0, description="half the free-edge length, m")
+    fine_modes: int = Field(SheetConfig.fine_modes, ge=1, le=64, description="membrane modes of the fine model")
+    tension_ratio: float = Field(SheetConfig.tension_ratio, gt=0.0, description="membrane T_v / T_u")
+    contact_radius: float = Field(SheetConfig.contact_radius, gt=0.0, description="finger contact radius, m")
+    push_threshold: float = Field(SheetConfig.push_threshold, ge=0.0,
+                                  description="depth behind the sheet that counts as a push, m")
+    sheet_half_width: float = Field(SheetConfig.half_width, gt=0.0, description="half the free-edge length, m")
     publish_rate: float = Field(10.0, gt=0.0, le=240.0, description="RenderedFrame rate, Hz")
     max_render_rate: float = Field(60.0, gt=0.0, le=240.0,
-                                   description="cap on redraws, Hz (a redraw follows each new fingertip or "
-                                               "deformation; the real projector window refreshes at 120 Hz)")
+                                   description="cap on redraws of the pair, Hz (a redraw follows each new "
+                                               "fingertip or deformation; the window presents every vsync)")
     publish_scale: float = Field(0.25, gt=0.0, le=1.0, description="downscale of the published images")
     samples: int = Field(0, ge=0, le=16, description="MSAA samples")
-    display: Literal["headless", "window"] = "headless"
-    stereo_mode: Literal["frame_sequential", "side_by_side"] = "frame_sequential"
+    output: Literal["offscreen", "window"] = Field(
+        "offscreen", description="offscreen: headless EGL; window: the projector window (glfw)")
+    stereo: Literal["frame_sequential", "side_by_side", "top_bottom", "mono"] = Field(
+        "frame_sequential", description="window format: eyes on alternate vsyncs (active shutter glasses), "
+                                        "the halves of one frame, or one image from the cyclopean eye")
+    monitor: int | str = Field(0, description="window: monitor index (0 = primary) or part of its name")
+    fullscreen: bool = Field(True, description="window: take the whole monitor (false: a window, debugging)")
+    mirror_x: bool = Field(False, description="window: flip each eye's image left-right")
+    refresh_hz: float | None = Field(None, gt=0.0, le=500.0,
+                                     description="window: refresh rate to ask for, Hz (None: the monitor's)")
+    quad_buffer: bool = Field(True, description="window, frame_sequential: use a quad-buffered stereo context "
+                                                "where the driver offers one")
+    swap_eyes: bool = Field(False, description="window, frame_sequential: right eye on even vsyncs")
 
     @field_validator("eye", "screen_point", "screen_normal", "projector_position")
     @classmethod
@@ -76,29 +90,20 @@ class RendererParams(BaseModel):
             raise ValueError(f"must be 3 finite numbers, got {v!r}")
         return v
 
-    @field_validator("display")
+    @field_validator("output")
     @classmethod
     def _window_lib(cls, v: str) -> str:
         if v == "window" and importlib.util.find_spec("glfw") is None:
-            raise ValueError("display='window' (fullscreen projector output) needs the 'glfw' package, which is "
-                             "not installed (pip install glfw); use display='headless'")
-        if v == "window":
-            raise ValueError("display='window' is not implemented yet; use display='headless'")
+            raise ValueError("output='window' (the projector window) needs the 'glfw' package, which is not "
+                             "installed (pip install glfw); use output='offscreen'")
         return v
 
-
-def check_sheet(sheet: SheetSurface, eye, projector, min_cos: float = 0.02) -> None:
-    """Raise ``ValueError`` if the eye is not in front of ``sheet`` or the projector not behind it."""
-    if (np.asarray(eye) - sheet.origin) @ sheet.normal <= 1e-6:
-        raise ValueError(f"eye on the wrong side of the sheet (normal {sheet.normal.round(3).tolist()})")
-    if (np.asarray(projector) - sheet.origin) @ sheet.normal >= -1e-6:
-        raise ValueError("projector is not behind the sheet")
-
-
-def _check_pose(name: str, T: np.ndarray) -> None:
-    R = T[:3, :3]
-    if not np.allclose(R.T @ R, np.eye(3), atol=1e-3) or np.linalg.det(R) < 0 or not np.allclose(T[3], [0, 0, 0, 1]):
-        raise InputRejected(f"{name}.pose is not a rigid transform: {T.round(4).tolist()}")
+    @field_validator("monitor")
+    @classmethod
+    def _monitor(cls, v: int | str) -> int | str:
+        if isinstance(v, int) and v < 0 or isinstance(v, str) and not v.strip():
+            raise ValueError(f"monitor must be an index >= 0 or part of a monitor's name, got {v!r}")
+        return v
 
 
 class RendererNode(Node):
@@ -110,46 +115,47 @@ class RendererNode(Node):
     async def setup(self) -> None:
         p: RendererParams = self.params
         self.eye = np.asarray(p.eye, dtype=float)
-        _check_screen(self.eye, p.projector_position, p.screen_point, p.screen_normal)
-        if p.projector_K is not None or p.projector_R is not None:
-            d = Projector.default(p.width, p.height, p.projector_pixel, p.projector_position)
-            K = np.asarray(p.projector_K, dtype=float) if p.projector_K is not None else d.K
-            R = np.asarray(p.projector_R, dtype=float) if p.projector_R is not None else d.R
-            if K.shape != (3, 3) or R.shape != (3, 3):
-                raise ValueError(f"projector_K and projector_R must be 3x3, got {K.shape}, {R.shape}")
-            self.projector = Projector(K, R, np.asarray(p.projector_position, dtype=float), p.width, p.height)
-        else:
-            self.projector = Projector.default(p.width, p.height, p.projector_pixel, p.projector_position)
-        self._lock = threading.Lock()
-        self._mesh = cylinder_mesh()
-        self._mesh_normals = vertex_normals(*self._mesh)
-        self._mesh_dirty = True
-        self._mesh_stamp = 0.0
-        self._home_left, self._home_right = scene.clamp_poses(np.zeros(3), scene.SCREEN_NORMAL,
-                                                              np.array([0.0, 1.0, 0.0]), 0.0)
-        self._pose = {"left": None, "right": None}
-        self._finger: np.ndarray | None = None
-        self._finger_stamp = 0.0
-        self._last_sheet = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], half_width=p.sheet_half_width)
+        check_screen(self.eye, p.projector_position, p.screen_point, p.screen_normal)
+        self.projector = Projector.calibrated(p.width, p.height, p.projector_pixel, p.projector_position,
+                                              p.projector_K, p.projector_R)
+        self.state = RendererState(self.eye, self.projector.position, SheetConfig(
+            half_width=p.sheet_half_width, push_threshold=p.push_threshold, fine_modes=p.fine_modes,
+            tension_ratio=p.tension_ratio, contact_radius=p.contact_radius))
+        loop = asyncio.get_running_loop()
+        self.table = await loop.run_in_executor(None, lambda: ErrorTable.build(
+            silhouette_probes(self.state.mesh_vertices), eye=self.eye, projector=self.projector.position,
+            screen_point=p.screen_point, screen_normal=p.screen_normal, sheet=self.state.last_good))
         self.model_used = "none"
         self.frames = 0
-        self._gl = ThreadPoolExecutor(1, thread_name_prefix="renderer-gl")
-        loop = asyncio.get_running_loop()
-        await loop.run_in_executor(self._gl, self._gl_init)
+        self.output = None
+        self.pacing = None
+        self._last_render = 0.0
+        self._last_publish = 0.0
         self.pub = self.publisher(topics.RENDERED)
+        if p.output == "window":
+            await self._open_window()
+        else:
+            self._gl = ThreadPoolExecutor(1, thread_name_prefix="renderer-gl")
+            await loop.run_in_executor(self._gl, self._gl_init)
+            self._want = asyncio.Event()
+            self._render_task = loop.create_task(self._render_loop())
         self.subscribe(topics.DEFORMATION, self.on_deformation, qos=QoS.LATEST)
         self.subscribe(topics.ARM_LEFT_STATE, self.on_arm, qos=QoS.LATEST)
         self.subscribe(topics.ARM_RIGHT_STATE, self.on_arm, qos=QoS.LATEST)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
-        self._want = asyncio.Event()
-        self._last_render = 0.0
-        self._last_publish = 0.0
-        self._render_task = loop.create_task(self._render_loop())
         self.timer(1.0 / p.publish_rate, self.on_timer)
+        self._request()
 
-    def _request(self) -> None:
-        """Ask for a redraw (thread-safe: input handlers run in worker threads)."""
-        self._loop.call_soon_threadsafe(self._want.set)
+    def _renderer_kwargs(self) -> dict:
+        p: RendererParams = self.params
+        return {"eye": self.eye, "ipd": 0.0 if p.stereo == "mono" else p.ipd, "screen_point": p.screen_point,
+                "screen_normal": p.screen_normal, "samples": p.samples}
+
+    # ------------------------------------------------------------------ offscreen output (GL thread)
+    def _gl_init(self) -> None:
+        from nodes.renderer.scene import StereoRenderer
+
+        self.renderer = StereoRenderer(self.projector, **self._renderer_kwargs())
 
     async def _render_loop(self) -> None:
         p: RendererParams = self.params
@@ -171,111 +177,125 @@ class RendererNode(Node):
                 self._last_publish = self._last_render
                 self.pub.publish(msg)
 
-    def _gl_init(self) -> None:
+    # ------------------------------------------------------------------ window output (window thread)
+    async def _open_window(self) -> None:
+        self._stop_window = threading.Event()
+        self._redraw = threading.Event()
+        ready: concurrent.futures.Future = concurrent.futures.Future()
+        self._window_thread = threading.Thread(target=self._window_main, args=(ready,), name="renderer-window",
+                                               daemon=True)
+        self._window_thread.start()
+        await asyncio.wrap_future(ready)      # a WindowError (ValueError) is a configuration error
+
+    def _window_main(self, ready: concurrent.futures.Future) -> None:
+        from nodes.renderer.window import WindowOutput
+
         p: RendererParams = self.params
-        self.renderer = StereoRenderer(self.projector, eye=self.eye, ipd=p.ipd, screen_point=p.screen_point,
-                                       screen_normal=p.screen_normal, samples=p.samples)
-        probes = self._mesh[0][self._mesh[0][:, 0] > -scene.CYLINDER_RADIUS].astype(float)[::7]
-        home = self._last_sheet
-        self.table = {m: [] for m in MODELS}
-        for S in np.linspace(0.0, 0.06, 13):
-            pe = predict_model_errors(float(S), eye=self.eye, projector=self.projector.position,
-                                      screen_point=p.screen_point, screen_normal=p.screen_normal,
-                                      probes=probes, sheet=home)
-            for m in MODELS:
-                self.table[m].append((float(S), pe[m]))
+        try:
+            out = WindowOutput(self.projector, stereo=p.stereo, monitor=p.monitor, fullscreen=p.fullscreen,
+                               mirror_x=p.mirror_x, refresh_hz=p.refresh_hz, quad_buffer=p.quad_buffer,
+                               swap_eyes=p.swap_eyes, title=f"flexsheet {self.name}", **self._renderer_kwargs())
+        except BaseException as exc:  # noqa: BLE001 - handed to setup, which reports it
+            ready.set_exception(exc)
+            return
+        self.output, self.renderer = out, out.renderer
+        if out.window.warnings:
+            self.state_message = "; ".join(out.window.warnings)
+        ready.set_result(None)
+        try:
+            self._window_loop(out)
+        except Exception:  # noqa: BLE001 - the projector image is gone: say so and stop the node (respawn)
+            self.errors_total += 1
+            self.state_message = "projector window failed"
+            self.log.exception("projector window failed; stopping the node")
+            self.shutdown()
+        finally:
+            out.close()
+
+    def _window_loop(self, out) -> None:
+        p: RendererParams = self.params
+        last_stats = 0.0
+        while not self._stop_window.is_set():
+            if not out.window.poll(keep_open=True):
+                self.log.warning("projector window close request ignored (stop the node instead)")
+            now = time.monotonic()
+            if self._redraw.is_set() and now - self._last_render >= 1.0 / p.max_render_rate:
+                self._redraw.clear()
+                self._last_render = now
+                publish = now - self._last_publish >= 1.0 / p.publish_rate
+                try:
+                    msg = self._frame(publish)
+                except ValueError as exc:
+                    self._loop.call_soon_threadsafe(self._reject, f"render: {exc}")
+                    msg = None
+                if msg is not None:
+                    self._last_publish = now
+                    self._loop.call_soon_threadsafe(self.pub.publish, msg)
+            out.show()
+            if now - last_stats >= 0.25:
+                self.pacing = out.pacer.stats()          # read by heartbeat() in the loop thread
+                last_stats = now
+
+    def heartbeat(self) -> Heartbeat:
+        """Diagnostics; with the window output the message leads with its frame rate and missed vsyncs."""
+        hb = super().heartbeat()
+        pacing = getattr(self, "pacing", None)
+        if pacing is None:
+            return hb
+        line = f"{pacing.line()} [{self.output.window.pacing}, quad buffer {self.output.window.quad_buffered}]"
+        return hb.model_copy(update={"message": f"{line}; {hb.message}" if hb.message else line})
+
+    # ------------------------------------------------------------------ shared
+    def _request(self) -> None:
+        """Ask for a redraw (thread-safe: input handlers run in worker threads)."""
+        if self.params.output == "window":
+            self._redraw.set()
+        else:
+            self._loop.call_soon_threadsafe(self._want.set)
 
     async def teardown(self) -> None:
+        loop = asyncio.get_running_loop()
         if hasattr(self, "_render_task"):
             self._render_task.cancel()
         if hasattr(self, "_gl"):
             if hasattr(self, "renderer"):
-                await asyncio.get_running_loop().run_in_executor(self._gl, self.renderer.release)
+                await loop.run_in_executor(self._gl, self.renderer.release)
             self._gl.shutdown(wait=True)
+        if hasattr(self, "_window_thread"):
+            self._stop_window.set()
+            await loop.run_in_executor(None, self._window_thread.join, 5.0)
 
     # ------------------------------------------------------------------ inputs (worker threads)
     def on_deformation(self, msg: ObjectDeformation) -> None:
-        v, f = msg.vertices, msg.faces
-        if len(v) == 0 or len(f) == 0:
-            raise InputRejected(f"deformation has {len(v)} vertices and {len(f)} faces")
-        if f.min() < 0 or f.max() >= len(v):
-            raise InputRejected(f"faces index out of range [0, {len(v)}): min {f.min()}, max {f.max()}")
-        n = vertex_normals(v, f)
-        with self._lock:
-            self._mesh = (v, f)
-            self._mesh_normals = n
-            self._mesh_dirty = True
-            self._mesh_stamp = float(msg.source_stamp)
+        try:
+            self.state.set_mesh(msg.vertices, msg.faces, msg.source_stamp)
+        except ValueError as exc:
+            raise InputRejected(str(exc)) from exc
         self._request()
 
     def on_arm(self, msg: ArmJointState) -> None:
-        T = np.asarray(msg.pose, dtype=float)
-        _check_pose(f"{msg.arm} arm", T)
-        with self._lock:
-            other = self._pose["right" if msg.arm == "left" else "left"]
-        if other is None:
-            other = self._home_right if msg.arm == "left" else self._home_left
-        Tl, Tr = (T, other) if msg.arm == "left" else (other, T)
         try:
-            sheet = SheetSurface.from_clamps(Tl, Tr, half_width=self.params.sheet_half_width)
-            check_sheet(sheet, self.eye, self.projector.position)
+            self.state.set_arm_pose(msg.arm, msg.pose)
         except ValueError as exc:
-            raise InputRejected(f"{msg.arm} arm pose gives an unusable sheet: {exc}") from exc
-        with self._lock:
-            self._pose[msg.arm] = T
+            raise InputRejected(str(exc)) from exc
 
     def on_fingertip(self, msg: Fingertip) -> None:
-        with self._lock:
-            self._finger = np.asarray(msg.position, dtype=float) if msg.valid else None
-            self._finger_stamp = float(msg.exposure_stamp)
+        self.state.set_fingertip(msg.position if msg.valid else None, msg.exposure_stamp)
         self._request()
 
-    # ------------------------------------------------------------------ output
-    def current_sheet(self) -> SheetSurface:
-        """Actual sheet from the latest clamp poses (home pose for an arm not heard from) and fingertip."""
-        p: RendererParams = self.params
-        with self._lock:
-            Tl = self._pose["left"] if self._pose["left"] is not None else self._home_left
-            Tr = self._pose["right"] if self._pose["right"] is not None else self._home_right
-            finger = self._finger
-        flat = SheetSurface.from_clamps(Tl, Tr, half_width=p.sheet_half_width)
-        if finger is None:
-            return flat
-        depth = -float((finger - flat.origin) @ flat.normal)
-        if depth <= p.push_threshold:
-            return flat
-        kw = {"modes": p.fine_modes, "tension_ratio": p.tension_ratio, "contact_radius": p.contact_radius}
-        return SheetSurface.from_clamps(Tl, Tr, half_width=p.sheet_half_width, pushed_point=finger,
-                                        membrane_kwargs=kw)
-
-    def pick_model(self, sheet: SheetSurface) -> str:
-        """The correction model for ``sheet`` (param ``correction``; "auto" chooses by ``accuracy_target``)."""
-        want = self.params.correction
-        if want != "auto":
-            return want
-        if sheet.membrane is None:
-            return "flat"
-        return choose_model(sheet.membrane.depth, self.table, self.params.accuracy_target,
-                            models=("flat", "four_triangle", "fine"))
-
+    # ------------------------------------------------------------------ drawing (GL / window thread)
     def _frame(self, publish: bool = True) -> RenderedFrame | None:
-        """Correct and draw the pair for the newest inputs (GL thread); read it back if ``publish``."""
+        """Correct and draw the pair for the newest inputs; read it back if ``publish``."""
         p: RendererParams = self.params
         t0 = time.perf_counter()
-        with self._lock:
-            mesh, normals, dirty = self._mesh, self._mesh_normals, self._mesh_dirty
-            self._mesh_dirty = False
-            stamp = max(self._finger_stamp, self._mesh_stamp)
-        if dirty:
-            self.renderer.set_mesh(mesh[0], mesh[1], normals)
-        try:
-            sheet = self.current_sheet()
-            check_sheet(sheet, self.eye, self.projector.position)
-            self._last_sheet = sheet
-        except ValueError as exc:
-            self.state_message = f"sheet unusable ({exc}); drawing the last good sheet"
-            sheet = self._last_sheet
-        model = self.pick_model(sheet)
+        mesh = self.state.take_mesh()
+        stamp = self.state.source_stamp
+        if mesh is not None:
+            self.renderer.set_mesh(*mesh)
+        sheet, warning = self.state.sheet_for_frame()
+        if warning:
+            self.state_message = warning
+        model = pick_model(p.correction, sheet, self.table, p.accuracy_target)
         try:
             self.renderer.set_model(model, sheet, fine_modes=p.fine_modes)
         except ValueError as exc:
@@ -293,4 +313,4 @@ class RendererNode(Node):
 
     async def on_timer(self) -> None:
         if time.monotonic() - self._last_render >= 1.0 / self.params.publish_rate:
-            self._want.set()   # nothing new arrived: still redraw (and publish) at publish_rate
+            self._request()   # nothing new arrived: still redraw (and publish) at publish_rate

@@ -4,10 +4,11 @@ Pipeline per eye (all in the vertex shader ``shaders/correct.vert``, the same ma
 :mod:`nodes.renderer.correction`): vertex A → corrected A' (model ``none``/``flat``/``four_triangle``/``fine``)
 → its screen point on the line eye–A' → the projector pixel that lights it (pinhole ``K``, pose ``R``,
 ``position``, calibrated to the imaginary screen). Output: two RGB images of ``width × height`` projector
-pixels (left eye at V + IPD/2·ŷ, right at V − IPD/2·ŷ; +y is the user's left).
+pixels (left eye at V − IPD/2·ŷ, right at V + IPD/2·ŷ: the user faces −x, so +y is the user's right).
 
-The GL context is moderngl's standalone EGL context (headless; llvmpipe on machines without a GPU). All GL
-calls must come from the thread that created the renderer.
+The GL context is moderngl's standalone EGL context (headless; llvmpipe on machines without a GPU), or the
+context of a projector window (:mod:`nodes.renderer.window`, ``ctx=``): the drawing is the same, only the
+output target differs. All GL calls must come from the thread that created the renderer.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import numpy as np
 from flexsheet.model import scene
 from flexsheet.model.projector import Projector, eye_positions
 from flexsheet.model.sheet import SheetSurface
-from nodes.renderer.correction import DEFAULT_MIN_COS, _triangles
+from nodes.renderer.correction import DEFAULT_MIN_COS, fan_triangles
 
 __all__ = ["Projector", "StereoRenderer", "cylinder_mesh", "vertex_normals", "eye_positions", "MODE_IDS"]
 
@@ -77,7 +78,7 @@ class _Uniforms:
 
 
 class StereoRenderer:
-    """Headless stereo renderer of a triangle mesh with per-vertex correction (moderngl, EGL).
+    """Stereo renderer of a triangle mesh with per-vertex correction (moderngl; headless EGL or a window's context).
 
     ``projector``: :class:`Projector` (its width × height is the output size); ``eye`` (3,) cyclopean eye V,
     m; ``ipd`` m; ``screen_point``/``screen_normal`` the imaginary screen; ``samples``: MSAA samples (0 =
@@ -99,6 +100,7 @@ class StereoRenderer:
         self.screen_point = np.asarray(screen_point, dtype=float)
         self.screen_normal = np.asarray(screen_normal, dtype=float) / np.linalg.norm(screen_normal)
         self.min_cos = float(min_cos)
+        self.owns_ctx = ctx is None
         if ctx is None:
             try:
                 ctx = moderngl.create_standalone_context(backend="egl")
@@ -194,7 +196,7 @@ class StereoRenderer:
             self._set("u_rs", tuple(sheet.origin))
             self._set("u_ns", tuple(sheet.normal))
         elif model == "four_triangle":
-            q, cs, nrm, usable, _ = _triangles(sheet.pushed_point, sheet.corners, self.projector.position)
+            q, cs, nrm, usable, _ = fan_triangles(sheet.pushed_point, sheet.corners, self.projector.position)
             self._set("u_q", tuple(q))
             self._set("u_c", cs.astype(np.float32))
             self._set("u_tn", nrm.astype(np.float32))
@@ -270,9 +272,22 @@ class StereoRenderer:
         out.release()
         return data[:, :3].copy(), data[:, 3] > 0.5
 
+    @property
+    def texture(self):
+        """The resolved colour texture (2W × H, RGB; left eye in x ∈ [0, W), right in [W, 2W), bottom row
+        first as GL stores it): what :meth:`read_pair` reads and what a window output presents."""
+        return self.fbo.color_attachments[0]
+
     def release(self) -> None:
-        """Free GL objects and the context (if this renderer created it)."""
-        try:
+        """Free the GL objects, and the context if this renderer created it (a window's context stays)."""
+        if self.owns_ctx:
             self.ctx.release()
-        except Exception:  # pragma: no cover
-            pass
+            return
+        objs = [self.vao, self.tf_vao, getattr(self, "_vbo", None), getattr(self, "_ibo", None), self.prog,
+                self.tf_prog, self.fbo, self.msaa]
+        for fb in (self.fbo, self.msaa):
+            if fb is not None:
+                objs += list(fb.color_attachments) + [fb.depth_attachment]
+        for obj in objs:
+            if obj is not None:
+                obj.release()

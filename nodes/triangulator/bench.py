@@ -59,7 +59,7 @@ def timing(n: int = 300, seed: int = 0, method: str = "optimal") -> dict:
         ts, valid = [], 0
         for k, (L, R) in enumerate(frames):
             if mode == "full":
-                tr._last_uv = None
+                tr.forget_roi()
             t0 = time.perf_counter()
             res = tr.process(L, R, k / 48.0)
             ts.append(time.perf_counter() - t0)

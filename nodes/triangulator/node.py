@@ -12,32 +12,27 @@ from __future__ import annotations
 import threading
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from flexsheet.runtime.node import InputRejected, Node, QoS
+from flexsheet.runtime.params import build, config_fields, params_model
 from messages import Fingertip, StereoCalibration, StereoFrame, topics
 from nodes.triangulator.pipeline import FingertipTracker, TrackerConfig
 
 __all__ = ["TriangulatorParams", "TriangulatorNode"]
 
 
-class TriangulatorParams(BaseModel):
-    """Triangulator parameters (px, m, s; see docs/vision.md and :class:`TrackerConfig`)."""
-
-    model_config = ConfigDict(extra="forbid")
-    method: str = Field(default="optimal", pattern="^(dlt|optimal|midpoint)$")
-    sigma_px: float = Field(default=0.1, gt=0.0)
-    epipolar_tol_px: float = Field(default=1.5, gt=0.0)
-    z_min: float = Field(default=0.1, gt=0.0)
-    z_max: float = Field(default=2.0, gt=0.0)
-    gate_chi2: float = Field(default=16.27, gt=0.0)
-    max_gate_misses: int = Field(default=3, ge=1)
-    lost_reset_s: float = Field(default=0.25, gt=0.0)
-    horizon_s: float = Field(default=0.0, ge=0.0, le=1.0)
-    q: float = Field(default=2.0, gt=0.0)
-    roi_half: int = Field(default=32, ge=14)
-    min_contrast: float = Field(default=40.0, gt=0.0, lt=255.0)
-    max_stereo_skew_s: float = Field(default=0.002, gt=0.0)
+TriangulatorParams = params_model(
+    "TriangulatorParams",
+    """Triangulator parameters (px, m, s; see docs/vision.md). Every param but ``max_stereo_skew_s`` is a
+    field of — defined, defaulted and checked in — :class:`nodes.triangulator.pipeline.TrackerConfig`;
+    ``max_stereo_skew_s``: largest left/right exposure difference accepted, s.""",
+    config_fields(TrackerConfig),
+    check=lambda p: build(TrackerConfig, p),
+    methods={"tracker_config": lambda self: build(TrackerConfig, self)},
+    module=__name__,
+    max_stereo_skew_s=(float, Field(default=0.002, gt=0.0)),
+)
 
 
 class TriangulatorNode(Node):
@@ -48,11 +43,7 @@ class TriangulatorNode(Node):
 
     async def setup(self) -> None:
         p = self.params
-        self.cfg = TrackerConfig(method=p.method, sigma_px=p.sigma_px, epipolar_tol_px=p.epipolar_tol_px,
-                                 z_min=p.z_min, z_max=p.z_max, gate_chi2=p.gate_chi2,
-                                 max_gate_misses=p.max_gate_misses, lost_reset_s=p.lost_reset_s,
-                                 horizon_s=p.horizon_s, q=p.q, roi_half=p.roi_half, min_contrast=p.min_contrast)
-        self.cfg.validate()
+        self.cfg: TrackerConfig = p.tracker_config()
         self.tracker: FingertipTracker | None = None
         self._lock = threading.Lock()
         self.pub = self.publisher(topics.FINGERTIP)

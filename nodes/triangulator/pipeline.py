@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from flexsheet.model.checks import check_pose
 from flexsheet.model.stereo import METHODS, StereoModel
 from nodes.triangulator.detect import MarkerDetector, check_image
 from nodes.triangulator.predict import ConstantVelocityKF
@@ -38,9 +39,10 @@ from nodes.triangulator.predict import ConstantVelocityKF
 __all__ = ["TrackerConfig", "TrackResult", "FingertipTracker"]
 
 
-@dataclass
+@dataclass(frozen=True)
 class TrackerConfig:
-    """Tracker settings (see module doc; lengths m, pixels px, times s)."""
+    """Tracker settings (see module doc; lengths m, pixels px, times s). Checked on construction
+    (:meth:`validate`); the triangulator node's params are these fields."""
 
     method: str = "optimal"
     sigma_px: float = 0.1
@@ -62,8 +64,12 @@ class TrackerConfig:
     area_ratio_max: float = 1.3
     max_candidates: int = 3
 
+    def __post_init__(self) -> None:
+        self.validate()
+
     def validate(self) -> None:
-        """Raise ``ValueError`` naming the first out-of-range field."""
+        """Raise ``ValueError`` naming the first out-of-range field (including the detector's, see
+        :class:`~nodes.triangulator.detect.MarkerDetector`)."""
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
         for name in ("sigma_px", "epipolar_tol_px", "z_min", "gate_chi2", "lost_reset_s", "q", "v0_std", "ambiguity_m"):
@@ -72,12 +78,20 @@ class TrackerConfig:
                 raise ValueError(f"{name} must be positive and finite, got {v!r}")
         if not self.z_max > self.z_min:
             raise ValueError(f"z_max must exceed z_min={self.z_min}, got {self.z_max!r}")
-        if not (np.isfinite(self.horizon_s) and self.horizon_s >= 0):
-            raise ValueError(f"horizon_s must be >= 0, got {self.horizon_s!r}")
+        if not (np.isfinite(self.horizon_s) and 0.0 <= self.horizon_s <= 1.0):
+            raise ValueError(f"horizon_s must be in [0, 1] s, got {self.horizon_s!r}")
         if not (self.area_ratio_max >= 1.0):
             raise ValueError(f"area_ratio_max must be >= 1, got {self.area_ratio_max!r}")
         if self.max_gate_misses < 1:
             raise ValueError(f"max_gate_misses must be >= 1, got {self.max_gate_misses!r}")
+        self.detector()
+
+    def detector(self) -> MarkerDetector:
+        """The :class:`~nodes.triangulator.detect.MarkerDetector` these settings describe (raises its
+        ``ValueError`` for a bad ``se_size``, ``min_contrast``, ``max_candidates``, ``patch_radius``, ``roi_half``)."""
+        return MarkerDetector(se_size=self.se_size, min_contrast=self.min_contrast,
+                              max_candidates=self.max_candidates, patch_radius=self.patch_radius,
+                              roi_half=self.roi_half)
 
 
 @dataclass
@@ -116,16 +130,12 @@ class FingertipTracker:
         if T_display_camera is None:
             T_display_camera = (calib.get("T_display_camera") if isinstance(calib, dict)
                                 else getattr(calib, "T_display_camera", None))
-        T = np.eye(4) if T_display_camera is None else np.asarray(T_display_camera, float)
-        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-            raise ValueError(f"T_display_camera must be a finite (4, 4) matrix, got {T!r}")
+        T = np.eye(4) if T_display_camera is None else check_pose("T_display_camera", T_display_camera, tol=1e-3)
         self.R_dc, self.t_dc = T[:3, :3].copy(), T[:3, 3].copy()
         w, h = self.model.image_size
         self.shape = (h, w)
         c = self.cfg
-        self.detector = MarkerDetector(se_size=c.se_size, min_contrast=c.min_contrast,
-                                       max_candidates=c.max_candidates, patch_radius=c.patch_radius,
-                                       roi_half=c.roi_half)
+        self.detector = c.detector()
         self.kf = ConstantVelocityKF(q=c.q, v0_std=c.v0_std)
         self._last_uv: tuple[np.ndarray, np.ndarray] | None = None
         self._misses = 0
@@ -135,6 +145,10 @@ class FingertipTracker:
         self.kf.reset()
         self._last_uv = None
         self._misses = 0
+
+    def forget_roi(self) -> None:
+        """Search the full images in the next frame, keeping the track (ROI off, e.g. to time the full search)."""
+        self._last_uv = None
 
     def _invalid(self, reason: str, roi: bool = False) -> TrackResult:
         return TrackResult(False, reason, roi=roi)

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from flexsheet.model.checks import check_point
+
 __all__ = ["ConstantVelocityKF"]
 
 
@@ -73,10 +75,8 @@ class ConstantVelocityKF:
     def update(self, z: np.ndarray, R: np.ndarray, t: float) -> None:
         """Predict to ``t`` (s) and fuse measurement z (3,) m with covariance R (3, 3) m² (initialises on the
         first call). Raises ``ValueError`` on non-finite input."""
-        z = np.asarray(z, float)
+        z = check_point("z", z)
         R = np.asarray(R, float)
-        if z.shape != (3,) or not np.all(np.isfinite(z)):
-            raise ValueError(f"z must be a finite (3,) position, got {z!r}")
         if R.shape != (3, 3) or not np.all(np.isfinite(R)):
             raise ValueError(f"R must be a finite (3, 3) covariance, got {R!r}")
         if self.t is None:

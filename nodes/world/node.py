@@ -19,43 +19,48 @@ import time
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from flexsheet.model import scene
+from flexsheet.model.checks import check_pose
 from flexsheet.model.finger import FingerScript
-from flexsheet.model.sheet import SheetSurface
-from flexsheet.runtime.node import Node, QoS
+from flexsheet.model.sheet import TRUE_MODES, SheetSurface
+from flexsheet.runtime.node import InputRejected, Node, QoS
+from flexsheet.runtime.params import build, config_fields, params_model
 from messages import ArmJointState, FingerTruth, SheetState
 from messages import topics as T
 
 __all__ = ["WorldNode", "WorldParams", "Segment"]
 
 
-class Segment(BaseModel):
-    """One scripted segment: ``mode`` stroke | push | stroke_push, ``moving_time`` s, ``push_depth`` m,
-    ``end_angle_deg`` (target mark travel, deg), ``tremor_rms`` m, ``seed``."""
+Segment = params_model(
+    "Segment",
+    """One scripted segment: the fields of — defined, defaulted and checked in —
+    :class:`flexsheet.model.finger.FingerScript` (SI: ``mode`` stroke | push | stroke_push, ``moving_time`` s,
+    ``push_depth`` m, ``end_angle`` rad, ``tremor_rms`` m, ``seed``, …); ``script()`` builds it.""",
+    config_fields(FingerScript),
+    check=lambda seg: build(FingerScript, seg),
+    methods={"script": lambda self: build(FingerScript, self)},
+    module=__name__,
+)
 
-    model_config = ConfigDict(extra="forbid")
-    mode: str = Field(default="stroke", pattern="^(stroke|push|stroke_push)$")
-    moving_time: float = Field(default=10.0, gt=0.0, le=600.0)
-    push_depth: float = Field(default=0.005, ge=0.0, le=0.05)
-    end_angle_deg: float = Field(default=60.0, ge=-80.0, le=80.0)
-    tremor_rms: float = Field(default=5e-5, ge=0.0, le=0.002)
-    seed: int = 0
-
-
+#: the paper's stroking experiment at 10 s and 30 s moving time, then a combined stroke and push
 DEFAULT_SCRIPT = [Segment(mode="stroke", moving_time=10.0), Segment(mode="stroke", moving_time=30.0, seed=1),
                   Segment(mode="stroke_push", moving_time=10.0, push_depth=0.010, seed=2)]
 
 
 class WorldParams(BaseModel):
     """``script``: segments played in order; ``rate_hz`` of ``/world/finger``; ``sheet_rate_hz`` of
-    ``/world/sheet``; ``membrane_grid`` G (G×G deflection samples); ``start_delay`` s before the script
-    starts (lets the graph connect and the arms reach the first pose); ``loop``: repeat until Ctrl-C;
-    ``progress_period`` s."""
+    ``/world/sheet``; ``membrane_grid`` G (G×G deflection samples); ``membrane_modes``: modes of the
+    :class:`flexsheet.model.sheet.Membrane` sampled; ``sheet_size`` m: unstretched sheet side between the
+    clamps (for the stretch); ``start_delay`` s before the script starts (lets the graph connect and the arms
+    reach the first pose); ``loop``: repeat until Ctrl-C; ``progress_period`` s."""
 
     model_config = ConfigDict(extra="forbid")
-    script: list[Segment] = Field(default_factory=lambda: list(DEFAULT_SCRIPT))
+    script: list[Segment] = Field(default_factory=lambda: list(DEFAULT_SCRIPT), min_length=1)
     rate_hz: float = Field(default=200.0, gt=0.0, le=2000.0)
     sheet_rate_hz: float = Field(default=100.0, gt=0.0, le=1000.0)
     membrane_grid: int = Field(default=16, ge=2, le=128)
+    membrane_modes: int = Field(default=64, ge=1, le=TRUE_MODES)
+    sheet_size: float = Field(default=scene.SHEET_SIZE, gt=0.0)
     start_delay: float = Field(default=3.0, ge=0.0)
     loop: bool = False
     progress_period: float = Field(default=2.0, gt=0.0)
@@ -69,9 +74,7 @@ class WorldNode(Node):
 
     async def setup(self) -> None:
         p = self.params
-        self.scripts = [FingerScript(mode=s.mode, moving_time=s.moving_time, push_depth=s.push_depth,
-                                     end_angle=math.radians(s.end_angle_deg), tremor_rms=s.tremor_rms, seed=s.seed)
-                        for s in p.script]
+        self.scripts: list[FingerScript] = [s.script() for s in p.script]
         self.total = sum(s.duration for s in self.scripts)
         self.finger_pub = self.publisher(T.FINGER_TRUTH)
         self.sheet_pub = self.publisher(T.SHEET_STATE)
@@ -87,9 +90,15 @@ class WorldNode(Node):
                       ", ".join(f"{s.mode} {s.moving_time:g} s" for s in p.script), self.total, p.start_delay)
 
     def on_arm(self, msg: ArmJointState) -> None:
-        self.poses[msg.arm] = msg.pose
+        """Keep the arm's measured clamp pose (FK of its joints); a pose that is not a rigid transform is
+        rejected (the last good one is kept)."""
+        try:
+            self.poses[msg.arm] = check_pose(f"{msg.arm} arm pose", msg.pose, tol=1e-3)
+        except ValueError as exc:
+            raise InputRejected(str(exc)) from None
 
     def _segment(self, t: float) -> tuple[int, float]:
+        """(segment index, time in it) at script time ``t`` s; (-1, overshoot) after the last segment."""
         for i, s in enumerate(self.scripts):
             if t < s.duration:
                 return i, t
@@ -108,12 +117,12 @@ class WorldNode(Node):
                 self.log.info("script finished after %.1f s", t)
                 self.shutdown()
                 return
-        script, seg = self.scripts[i], self.params.script[i]
+        script = self.scripts[i]
         pos = script.position(ts)
         self.finger = pos
         self.finger_pub.publish(FingerTruth(
-            header=self.finger_pub.header("display"), position=pos, velocity=script.velocity(ts),
-            phase=f"{i}:{seg.mode}:{seg.moving_time:g}:{script.phase(ts)}",
+            header=self.finger_pub.header("display"), position=pos, velocity=script.velocity(ts), segment=i,
+            mode=script.mode, moving_time=float(script.moving_time), phase=script.phase(ts),
             target_angle=float(script.target_angle(ts)), visible=True))
         now = time.monotonic()
         if now - self.last_progress >= self.params.progress_period and t >= 0:
@@ -121,24 +130,25 @@ class WorldNode(Node):
             done = min(1.0, (sum(s.duration for s in self.scripts[:i]) + ts) / self.total)
             bar = "#" * int(done * 30)
             self.log.info("[%-30s] %3.0f%%  segment %d/%d %s %g s: %s, mark at %.1f deg", bar, done * 100, i + 1,
-                          len(self.scripts), seg.mode, seg.moving_time, script.phase(ts),
+                          len(self.scripts), script.mode, script.moving_time, script.phase(ts),
                           math.degrees(float(script.target_angle(ts))))
 
     def tick_sheet(self) -> None:
         if "left" not in self.poses or "right" not in self.poses:
             return
-        sheet = SheetSurface.from_clamps(self.poses["left"], self.poses["right"], pushed_point=self.finger,
-                                         membrane_kwargs={"modes": 64})
-        g = self.params.membrane_grid
+        p: WorldParams = self.params
+        try:
+            sheet = SheetSurface.from_clamps(self.poses["left"], self.poses["right"], pushed_point=self.finger,
+                                             membrane_kwargs={"modes": p.membrane_modes}, size=p.sheet_size)
+        except ValueError as exc:      # e.g. the two measured clamps coincide: no sheet to publish
+            self.log.warning("no sheet state: %s", exc)
+            return
+        g = p.membrane_grid
         if sheet.membrane is not None:
-            u = np.linspace(-sheet.half_span, sheet.half_span, g)
-            v = np.linspace(-sheet.half_width, sheet.half_width, g)
-            grid = sheet.membrane.deflection(*np.meshgrid(u, v, indexing="ij"))
-            depth = float(sheet.membrane.depth)
+            grid, depth = sheet.membrane.grid(g), float(sheet.membrane.depth)
         else:
             grid, depth = np.zeros((g, g)), 0.0
-        stretch = max(0.0, 2.0 * sheet.half_span / 0.240 - 1.0)
         self.sheet_pub.publish(SheetState(
             header=self.sheet_pub.header("display"), origin=sheet.origin, normal=sheet.normal, axis_u=sheet.axis_u,
-            corners=sheet.corners, pushed_point=sheet.pushed_point, depth=depth, stretch=stretch,
+            corners=sheet.corners, pushed_point=sheet.pushed_point, depth=depth, stretch=sheet.stretch,
             membrane=np.ascontiguousarray(grid)))

@@ -1,0 +1,303 @@
+"""Camera pose: the stereo camera's pose in the display frame from a board on the sheet (pure estimator).
+
+Procedure (docs/calibration.md §2). A chessboard or ChArUco board is fixed flat on the sheet, centred on the
+sheet centre, board x along −axis_u and board y along −axis_v (:func:`board_points`). With the sheet at its
+home pose the board *is* the imaginary screen, so its corners have known display-frame coordinates: that view
+gives the camera pose. The arms then hold the sheet at further poses (:data:`VIEW_PLAN`); those views give no
+pose information (the sheet's pose there is unknown) but pin down the stereo intrinsics, which the
+``flexsheet calibrate stereo`` result leaves uncertain by 1–2 px in f and c — worth 1 mm and 0.1° of pose.
+
+Estimator (a stereo-consistent bundle adjustment, the structure of ``cv2.stereoCalibrate`` with a known
+object pose in one view):
+
+1. Corners in every image (``cv2.findChessboardCorners`` + ``cornerSubPix``, or the ChArUco detector, via
+   :func:`flexsheet.model.calibration.detect_board`). A chessboard's 180° ordering ambiguity is resolved in
+   the home view by the pose nearest the nominal mount, and in the right image of every view by the
+   epipolar constraint of the nominal stereo model.
+2. Start: ``cv2.solvePnP`` on the home view's left image (display-frame corners) and on each other view's
+   left image (board-frame corners), with the nominal intrinsics.
+3. ``scipy.optimize.least_squares`` over the 24 stereo parameters (per camera fx, fy, cx, cy, k1, k2, p1, p2,
+   k3; left→right R, T), the home pose and one board pose per other view, minimising the reprojection error
+   of all corners in both images (σ-weighted) plus a Gaussian prior on the stereo parameters: the nominal
+   calibration with its bootstrap covariance (:func:`flexsheet.model.truth.bootstrap_stereo_calibration` of
+   the stereo calibration's own pairs) — the MAP estimate. σ is re-estimated from the residuals and the fit
+   repeated once.
+
+Reported: the pose, the refined stereo model, the reprojection RMS (px), and ``residual_mm``: the RMS 3-D
+distance between the home corners triangulated with the refined model (placed by the pose) and their design
+positions — the number a lab checks. Errors: ``ValueError`` naming the view and image when the board is not
+found at home, when fewer than ``min_views`` views are usable, or when the fit's RMS exceeds ``max_rms_px``
+(a board that is not flat, or moved during capture).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.sparse import lil_matrix
+
+from flexsheet.model.calibration import BoardSpec, detect_board
+from flexsheet.model.stereo import StereoModel
+from flexsheet.model.truth import BOOTSTRAP_FILE, stereo_from_vector, stereo_vector
+
+__all__ = ["VIEW_PLAN", "board_centre", "board_points", "sheet_pose", "plan_board_views", "load_prior",
+           "CameraPoseResult", "detect_views", "estimate_camera_pose"]
+
+#: commanded sheet poses for the board views: (tilt about y °, turn about z °, origin (x, y, z) m), home
+#: first; all reachable by both RV-1As from the nominal bases and all facing the nominal camera. The order
+#: interleaves tilts, turns and depth so any prefix is well conditioned.
+VIEW_PLAN: tuple = (
+    (0, 0, (0, 0, 0)), (-35, 0, (0, 0, 0)), (0, -25, (0, 0, 0)), (0, 0, (0.08, 0, 0)), (0, 0, (-0.08, 0, 0)),
+    (0, 0, (0, 0, 0.08)), (0, 0, (0, 0, -0.08)), (-25, -20, (0, 0, 0)), (-30, 0, (0.08, 0, 0)),
+    (0, -25, (-0.08, 0, -0.06)), (-45, 0, (0, 0, 0)), (-25, -20, (0.06, 0, -0.07)),
+    (-25, -20, (-0.06, 0, 0.07)), (-40, -15, (0, 0, 0.05)), (-15, -30, (0, 0, -0.05)),
+    (-30, 0, (-0.08, 0, -0.06)), (15, -25, (0, 0, 0)), (-30, 10, (0, 0, 0)), (0, -15, (0, 0, 0)),
+    (-20, 0, (0, 0, 0)), (-35, -30, (0, 0, 0)),
+)
+
+
+def board_centre(board: BoardSpec) -> tuple[float, float]:
+    """Board-frame coordinates (m) of the board's centre (the point laid on the sheet centre)."""
+    if board.kind == "chessboard":
+        return 0.5 * (board.cols - 1) * board.square, 0.5 * (board.rows - 1) * board.square
+    return 0.5 * board.cols * board.square, 0.5 * board.rows * board.square
+
+
+def board_points(board: BoardSpec, offset: float = 0.0) -> np.ndarray:
+    """All board corners (N, 3) m in the **sheet frame** (columns: along normal, axis_u, axis_v), in the order
+    of ``board.object_points()``: corner (bx, by) sits at (offset, cx − bx, cy − by), (cx, cy) the centre.
+    At the home pose the sheet frame is the display frame. ``offset``: the printed surface's height above the
+    sheet's mid-plane (board thickness + half the sheet), m."""
+    P = board.object_points().astype(np.float64)
+    cx, cy = board_centre(board)
+    return np.column_stack([np.full(len(P), float(offset)), cx - P[:, 0], cy - P[:, 1]])
+
+
+def sheet_pose(tilt_y_deg: float, turn_z_deg: float, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Commanded sheet pose (4, 4): the home sheet turned about z by ``turn_z_deg`` then tilted about y by
+    ``tilt_y_deg`` (extrinsic axes), centred at ``origin`` (3,) m."""
+    from scipy.spatial.transform import Rotation
+
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler("zy", [turn_z_deg, tilt_y_deg], degrees=True).as_matrix()
+    T[:3, 3] = np.asarray(origin, float)
+    return T
+
+
+def plan_board_views(n_views: int) -> list[np.ndarray]:
+    """The first ``n_views`` commanded sheet poses (4, 4) of :data:`VIEW_PLAN` (home first). Raises
+    ``ValueError`` outside 1…len(VIEW_PLAN)."""
+    if not (1 <= n_views <= len(VIEW_PLAN)):
+        raise ValueError(f"n_views must be in 1..{len(VIEW_PLAN)}, got {n_views!r}")
+    return [sheet_pose(a, b, o) for a, b, o in VIEW_PLAN[:n_views]]
+
+
+def load_prior(path: str = BOOTSTRAP_FILE, scale: float = 1.0) -> np.ndarray:
+    """(24, 24) covariance of the stereo parameters (:func:`flexsheet.model.truth.stereo_vector` order) from a
+    bootstrap JSON (``{"deviations": (n, 24)}``), times ``scale``². Raises ``ValueError`` on a bad file."""
+    try:
+        with open(path) as fh:
+            D = np.asarray(json.load(fh)["deviations"], float)
+    except (OSError, KeyError, TypeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: not a stereo bootstrap file ({exc})") from None
+    if D.ndim != 2 or D.shape[1] != 24 or len(D) < 5:
+        raise ValueError(f"{path}: deviations must be (n >= 5, 24), got {D.shape}")
+    return np.cov(D.T) * scale ** 2
+
+
+@dataclass
+class CameraPoseResult:
+    """Result of :func:`estimate_camera_pose`.
+
+    ``T_display_camera`` (4, 4) left optical frame in the display frame; ``stereo``: refined stereo dict;
+    ``rms_px``: reprojection RMS over all corners and views; ``residual_mm``: RMS 3-D distance of the
+    triangulated home corners from their design positions (mm); ``flatness_mm``: RMS of their out-of-plane
+    component (mm); ``per_view_rms_px`` (n,); ``used``/``skipped`` view indices with reasons.
+    """
+
+    T_display_camera: np.ndarray
+    stereo: dict
+    rms_px: float
+    residual_mm: float
+    flatness_mm: float
+    per_view_rms_px: np.ndarray
+    n_views: int
+    used: list[int] = field(default_factory=list)
+    skipped: dict[int, str] = field(default_factory=dict)
+
+
+def _undist(model: StereoModel, uv: np.ndarray, side: str) -> np.ndarray:
+    return model.undistort(uv, side)
+
+
+def _order_right(model: StereoModel, ul: np.ndarray, ur: np.ndarray) -> np.ndarray:
+    """Pick the right detection's ordering (as is, or reversed) that best satisfies the epipolar constraint."""
+    a = _undist(model, ul, "left")
+    e0 = np.median(model.epipolar_residual(a, _undist(model, ur, "right")))
+    e1 = np.median(model.epipolar_residual(a, _undist(model, ur[::-1], "right")))
+    return ur if e0 <= e1 else ur[::-1]
+
+
+def detect_views(views: list[tuple[np.ndarray, np.ndarray]], board: BoardSpec, stereo_nominal: dict,
+                 T_dc_nominal: np.ndarray, offset: float = 0.0) -> tuple[list, dict[int, str]]:
+    """Detect the board in every stereo pair. Returns (detections, skipped): ``detections[k]`` is ``None`` or
+    ``(ids (M,), left (M, 2), right (M, 2))`` (corners seen in both images, consistently ordered),
+    ``skipped`` maps a view index to the reason. Chessboard orderings are resolved (module doc)."""
+    model = StereoModel.from_calib(stereo_nominal)
+    det = cv2.aruco.CharucoDetector(board.charuco_board()) if board.kind == "charuco" else None
+    P_home = board_points(board, offset)
+    out, skipped = [], {}
+    for k, (left, right) in enumerate(views):
+        dl, dr = detect_board(left, board, det), detect_board(right, board, det)
+        if dl is None or dr is None:
+            out.append(None)
+            skipped[k] = "board not found in the " + " and ".join(
+                s for s, d in (("left", dl), ("right", dr)) if d is None) + " image"
+            continue
+        ids_l, ul = dl[0], dl[1].astype(np.float64)
+        ids_r, ur = dr[0], dr[1].astype(np.float64)
+        if board.kind == "chessboard":
+            if k == 0:
+                ul = _home_order(ul, P_home, stereo_nominal, T_dc_nominal)
+            ur = _order_right(model, ul, ur)
+            out.append((ids_l, ul, ur))
+        else:
+            common, ia, ib = np.intersect1d(ids_l, ids_r, return_indices=True)
+            if len(common) < 6:
+                out.append(None)
+                skipped[k] = f"only {len(common)} ChArUco corners seen in both images"
+                continue
+            out.append((common, ul[ia], ur[ib]))
+    return out, skipped
+
+
+def _home_order(ul: np.ndarray, P: np.ndarray, st: dict, T_dc_nominal: np.ndarray) -> np.ndarray:
+    """Of the two chessboard orderings, the one whose PnP pose puts the camera nearest its nominal mount."""
+    best = None
+    for cand in (ul, ul[::-1]):
+        ok, rv, tv = cv2.solvePnP(P, cand, st["K1"], st["D1"], flags=cv2.SOLVEPNP_ITERATIVE)
+        if not ok:
+            continue
+        R = cv2.Rodrigues(rv)[0]
+        C = -R.T @ tv.ravel()
+        d = float(np.linalg.norm(C - T_dc_nominal[:3, 3]))
+        if best is None or d < best[0]:
+            best = (d, cand)
+    if best is None:
+        raise ValueError("solvePnP failed on the home view")
+    return best[1]
+
+
+def _pose_vec(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    return np.concatenate([cv2.Rodrigues(R)[0].ravel(), np.asarray(t, float).ravel()])
+
+
+def estimate_camera_pose(views: list[tuple[np.ndarray, np.ndarray]], board: BoardSpec, stereo_nominal: dict,
+                         T_dc_nominal: np.ndarray, *, offset: float = 0.0, prior_cov: np.ndarray | None = None,
+                         min_views: int = 3, max_rms_px: float = 0.6) -> CameraPoseResult:
+    """Estimate the stereo camera's pose in the display frame (module doc).
+
+    ``views``: stereo pairs (left, right) mono8 (H, W); ``views[0]`` at the home pose, the others at any
+    poses. ``stereo_nominal``: the stereo calibration dict to start from (``image_size``, K1, D1, K2, D2, R, T);
+    ``T_dc_nominal`` (4, 4): the design mount (resolves the chessboard's 180° ambiguity; error tolerated
+    ≲ 10 cm). ``offset`` m: see :func:`board_points`. ``prior_cov`` (24, 24): covariance of the nominal
+    stereo parameters (:func:`load_prior`); ``None`` fits them without a prior (needs many, varied views).
+    ``min_views``: usable views required (home included). Raises ``ValueError`` (see module doc).
+    """
+    if not views:
+        raise ValueError("no board views given (need the home view first)")
+    if min_views < 1:
+        raise ValueError(f"min_views must be >= 1, got {min_views!r}")
+    dets, skipped = detect_views(views, board, stereo_nominal, T_dc_nominal, offset)
+    if dets[0] is None:
+        raise ValueError(f"board not found in the home view (view 0): {skipped.get(0)}; it defines the display "
+                         f"frame — check the board is in view, lit and not occluded")
+    used = [k for k, d in enumerate(dets) if d is not None]
+    if len(used) < min_views:
+        raise ValueError(f"board found in only {len(used)} of {len(views)} views, need at least {min_views}: "
+                         f"{skipped}")
+    size = tuple(stereo_nominal["image_size"])
+    s0 = stereo_vector(stereo_nominal)
+    P_sheet = board_points(board, offset)                  # = display coordinates at home
+    obs = []
+    for k in used:
+        ids, ul, ur = dets[k]
+        obs.append((P_sheet[ids], ul, ur))
+    # starting poses: PnP with the nominal left intrinsics
+    x0 = [s0]
+    for P, ul, _ in obs:
+        ok, rv, tv = cv2.solvePnP(P, ul, stereo_nominal["K1"], stereo_nominal["D1"])
+        if not ok:
+            raise ValueError("solvePnP failed on a board view")
+        x0.append(np.concatenate([rv.ravel(), tv.ravel()]))
+    x0 = np.concatenate(x0)
+    n_res = sum(4 * len(P) for P, _, _ in obs)
+    Linv = None
+    if prior_cov is not None:
+        C = np.asarray(prior_cov, float)
+        if C.shape != (24, 24) or not np.all(np.isfinite(C)):
+            raise ValueError(f"prior_cov must be a finite (24, 24) matrix, got {C.shape}")
+        C = C + np.diag(np.maximum(np.diag(C), 1e-12) * 1e-6 + 1e-14)
+        Linv = np.linalg.inv(np.linalg.cholesky(C))
+
+    def residuals(x: np.ndarray, sigma: float) -> np.ndarray:
+        st = stereo_from_vector(x[:24], size)
+        rR = x[18:21]
+        r = []
+        for k, (P, ul, ur) in enumerate(obs):
+            rv, tv = x[24 + 6 * k:27 + 6 * k], x[27 + 6 * k:30 + 6 * k]
+            R = cv2.Rodrigues(rv)[0]
+            Xc = P @ R.T + tv
+            pl = cv2.projectPoints(Xc, np.zeros(3), np.zeros(3), st["K1"], st["D1"])[0].reshape(-1, 2)
+            pr = cv2.projectPoints(Xc, rR, st["T"], st["K2"], st["D2"])[0].reshape(-1, 2)
+            r += [((pl - ul) / sigma).ravel(), ((pr - ur) / sigma).ravel()]
+        if Linv is not None:
+            r.append(Linv @ (x[:24] - s0))
+        return np.concatenate(r)
+
+    n_par = 24 + 6 * len(obs)
+    sp = lil_matrix((n_res + (24 if Linv is not None else 0), n_par), dtype=int)
+    sp[:, :24] = 1
+    row = 0
+    for k, (P, _, _) in enumerate(obs):
+        sp[row:row + 4 * len(P), 24 + 6 * k:30 + 6 * k] = 1
+        row += 4 * len(P)
+    sigma = 0.1
+    x = x0
+    for _ in range(2):
+        sol = least_squares(residuals, x, args=(sigma,), jac_sparsity=sp, x_scale="jac", method="trf",
+                            max_nfev=200)
+        x = sol.x
+        data = sol.fun[:n_res] * sigma
+        dof = max(n_res - n_par + (24 if Linv is not None else 0), 1)
+        sigma = max(float(math.sqrt(data @ data / dof)), 0.01)
+    data = residuals(x, 1.0)[:n_res]
+    rms = float(np.sqrt(np.mean(data ** 2 * 2.0)))        # per corner (2 coordinates), px
+    per_view, row = [], 0
+    for P, _, _ in obs:
+        d = data[row:row + 4 * len(P)]
+        per_view.append(float(np.sqrt(np.mean(d ** 2) * 2.0)))
+        row += 4 * len(P)
+    if rms > max_rms_px:
+        raise ValueError(f"board fit RMS {rms:.3f} px > {max_rms_px} px (per view {np.round(per_view, 3).tolist()}): "
+                         f"is the board flat on the sheet and still during each capture?")
+    st = stereo_from_vector(x[:24], size)
+    R_cd = cv2.Rodrigues(x[24:27])[0]
+    t_cd = x[27:30]
+    T_dc = np.eye(4)
+    T_dc[:3, :3] = R_cd.T
+    T_dc[:3, 3] = -R_cd.T @ t_cd
+    # triangulated home corners vs design
+    model = StereoModel.from_calib(st)
+    P, ul, ur = obs[0]
+    Xl = model.triangulate(model.undistort(ul, "left"), model.undistort(ur, "right"), "optimal")
+    Xd = Xl @ T_dc[:3, :3].T + T_dc[:3, 3]
+    err = Xd - P
+    return CameraPoseResult(T_dc, st, rms, float(np.sqrt(np.mean(np.sum(err ** 2, 1)))) * 1e3,
+                            float(np.sqrt(np.mean(err[:, 0] ** 2))) * 1e3, np.array(per_view), len(used), used,
+                            skipped)

@@ -1,0 +1,425 @@
+"""``flexsheet launch FILE --check [--host H]``: everything a launch needs, checked before any process starts.
+
+One line per problem, each naming the file, the node, the key and the value; ``flexsheet launch`` runs the
+same check first and starts nothing when it finds an error. What is checked:
+
+- **structure**: the launch file itself (:func:`flexsheet.runtime.launch.load_launch`, every error);
+- **params**: every node's params (with ``--set`` overrides and ``$(out)``/``$(launch_dir)`` substituted)
+  against its node type's ``Params`` model (``Params.model_validate``; the node is not constructed);
+- **hosts**: ``--host`` is a host of the file; every address is an IP address (not 0.0.0.0) or a name that
+  resolves here; a ``host`` param (a device's address) is an IP address or a valid host name. Nothing is
+  bound or pinged: a host's address need not exist on the machine that checks;
+- **ports**: no two listening sockets on one machine (node endpoints, and the ports device twins listen on,
+  :data:`LISTEN_PARAMS`) share a port;
+- **files** named by the nodes of the checked host(s): inputs (:func:`is_input_file_key`) exist and, where a
+  reader is known (:data:`FILE_READERS`: stereo calibration, display calibration), parse; glob patterns match
+  a file; output folders (:data:`OUTPUT_PARAMS`) can be created;
+- **display calibration**: the file named by a top-level ``display_calib:`` exists and parses
+  (``flexsheet.model.display_calib.load_display_calib``), holds the entries the checked host's nodes take
+  their geometry from (:data:`DISPLAY_NEEDS`; a missing one names the ``flexsheet calibrate`` command), and
+  its camera entry is not older than the stereo calibration file the camera node names (stale). A nominal
+  (never measured) entry is a warning;
+- **CURVE keys** (``security.curve: true``): the keys folder exists, the public keys cover every host, and
+  each checked host's ``<host>.key_secret`` is there, matches its public key and is private (mode 0600).
+  A missing key names the command that writes it, ``flexsheet keys generate <hosts of the file>``.
+
+Warnings (printed, not failing): CURVE off on a graph whose hosts are not all loopback; a node type that
+cannot be imported on this machine for a node of another host.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import glob
+import importlib.util
+import ipaddress
+import math
+import os
+import re
+import stat
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ValidationError
+
+from flexsheet import registry
+from flexsheet.runtime.launch import (
+    LaunchError,
+    LaunchFile,
+    _short,
+    display_calib_path,
+    keygen_command,
+    keys_dir,
+    load_launch,
+    public_keys,
+    substitute,
+    substitutions,
+)
+
+__all__ = ["CheckResult", "check_launch", "check_file_param", "is_input_file_key", "LISTEN_PARAMS",
+           "OUTPUT_PARAMS", "FILE_READERS", "read_display_calib"]
+
+#: node type → (address param, port param) of a socket the node *listens* on besides its publisher
+LISTEN_PARAMS: dict[str, tuple[str, str]] = {"arm_controller_sim": ("host", "port")}
+#: (node type, param) → "file" (a file the node writes: its folder must be creatable) or "dir"
+OUTPUT_PARAMS: dict[tuple[str, str], str] = {("recorder", "output"): "file", ("fem", "cache_dir"): "dir"}
+#: params whose value is a glob pattern of input files (at least one must match)
+GLOB_PARAMS = frozenset({"files_left", "files_right"})
+_INPUT_NAMES = frozenset({"calib_file", "display_calib", "scene", "file", "files_csv"})
+_HOSTNAME = re.compile(r"^(?=.{1,253}$)([A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}"
+                       r"[A-Za-z0-9])?)*\.?$")
+_RESOLVE_TIMEOUT_S = 2.0
+#: node type → the ``display.yaml`` entries its nodes take their geometry from (``{arm}``: the node's arm param)
+DISPLAY_NEEDS: dict[str, tuple[str, ...]] = {"camera": ("camera",), "renderer": ("projector", "eye"),
+                                             "planner": ("arms.left", "arms.right"), "arm_bridge": ("arms.{arm}",)}
+#: display.yaml entry → the command that measures it (issue 14, docs/calibration.md)
+DISPLAY_COMMANDS = {"camera": "flexsheet calibrate camera-pose", "projector": "flexsheet calibrate projector",
+                    "arms": "flexsheet calibrate arms", "eye": "flexsheet calibrate eye"}
+
+
+def is_input_file_key(key: str) -> bool:
+    """True for a param that names an existing input file: ``calib_file``, ``display_calib``, ``scene``,
+    ``file``, ``files_csv`` or any ``*_file``."""
+    return key in _INPUT_NAMES or key.endswith("_file")
+
+
+def read_stereo_calib(path: str) -> None:
+    """Parse a stereo calibration YAML (:func:`flexsheet.model.calibration.load_yaml`); raises ``ValueError``."""
+    from flexsheet.model.calibration import load_yaml
+
+    load_yaml(path)
+
+
+def read_display_calib(path: str) -> None:
+    """Parse a display calibration (``flexsheet.model.display_calib.load_display_calib``); raises ``ValueError``
+    (also when that module is not available, saying so)."""
+    try:
+        from flexsheet.model.display_calib import load_display_calib
+    except ImportError as exc:
+        raise ValueError(f"cannot read it: flexsheet.model.display_calib is not available here ({exc})") from None
+    load_display_calib(path)
+
+
+#: param name → reader that raises ``ValueError``/``OSError`` for a file it cannot use
+FILE_READERS: dict[str, Callable[[str], None]] = {"calib_file": read_stereo_calib,
+                                                  "display_calib": read_display_calib}
+
+
+def check_file_param(key: str, value: str) -> str | None:
+    """The problem with input-file param ``key`` = ``value`` (a path, substitutions done), or None."""
+    if key in GLOB_PARAMS:
+        return None if glob.glob(os.path.expanduser(value)) else "no file matches this pattern"
+    path = os.path.expanduser(value)
+    if not os.path.exists(path):
+        return "no such file" + (" (the registration writes it: docs/calibration.md)" if key == "display_calib" else "")
+    if not os.path.isfile(path):
+        return "not a file"
+    if not os.access(path, os.R_OK):
+        return "not readable"
+    reader = FILE_READERS.get(key)
+    if reader is not None:
+        try:
+            reader(path)
+        except (ValueError, OSError) as exc:
+            return "unusable: " + " ".join(str(exc).split())[:300]
+    return None
+
+
+def _creatable(path: Path) -> str | None:
+    p = path
+    while not p.exists():
+        if p.parent == p:
+            return "no existing parent folder"
+        p = p.parent
+    if not p.is_dir():
+        return f"{p} is not a folder"
+    if not os.access(p, os.W_OK | os.X_OK):
+        return f"folder {p} is not writable"
+    return None
+
+
+def _resolves(name: str) -> bool:
+    import socket
+
+    pool = concurrent.futures.ThreadPoolExecutor(1)
+    try:
+        return bool(pool.submit(socket.getaddrinfo, name, None).result(timeout=_RESOLVE_TIMEOUT_S))
+    except (OSError, concurrent.futures.TimeoutError):
+        return False
+    finally:
+        pool.shutdown(wait=False)
+
+
+def _address_problem(addr: str, resolve: bool) -> str | None:
+    try:
+        ip = ipaddress.ip_address(addr)
+    except ValueError:
+        if not _HOSTNAME.match(addr):
+            return "not an IP address or a host name"
+        if resolve and not _resolves(addr):
+            return "is not an IP address and does not resolve on this machine"
+        return None
+    if ip.is_unspecified:
+        return "the unspecified address: other hosts cannot connect to it; give the host's own address"
+    if ip.is_multicast:
+        return "a multicast address"
+    return None
+
+
+@dataclass
+class CheckResult:
+    """What :func:`check_launch` found: ``errors`` and ``warnings`` (one line each), the hosts checked."""
+
+    path: Path
+    errors: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    hosts: list[str] = field(default_factory=list)
+    nodes: int = 0
+
+    @property
+    def ok(self) -> bool:
+        return not self.errors
+
+
+class _Checker:
+    def __init__(self, lf: LaunchFile, host: str | None, out: str | None, overrides: dict[str, dict]) -> None:
+        self.lf, self.host, self.out, self.overrides = lf, host, out, overrides
+        self.res = CheckResult(lf.path)
+        self.subs = substitutions(lf, out)
+        self.hosts = [host] if host else list(lf.hosts)
+        self.res.hosts = self.hosts
+
+    def err(self, where: str, value: Any, msg: str) -> None:
+        self.res.errors.append(f"{self.lf.path}: {where} = {_short(value)}: {msg}")
+
+    def warn(self, msg: str) -> None:
+        self.res.warnings.append(f"{self.lf.path}: warning: {msg}")
+
+    def run(self) -> CheckResult:
+        self.check_hosts()
+        self.check_ports()
+        self.check_security()
+        self.check_display_calib()
+        self.check_report()
+        self.check_nodes()
+        return self.res
+
+    # ---------------------------------------------------------------------------------------------- hosts
+    def check_hosts(self) -> None:
+        for name, spec in self.lf.hosts.items():
+            problem = _address_problem(spec.address, resolve=True)
+            if problem:
+                self.err(f"hosts.{name}.address", spec.address, problem)
+
+    # ---------------------------------------------------------------------------------------------- ports
+    def _machine(self, host: str) -> str:
+        """Hosts that share an address are one machine."""
+        return self.lf.hosts[host].address
+
+    def check_ports(self) -> None:
+        used: dict[tuple[str, int], str] = {}
+
+        def claim(host: str, port: int, who: str, where: str) -> None:
+            key = (self._machine(host), port)
+            if key in used:
+                self.err(where, port, f"port {port} on host {host} is already used by {used[key]}")
+            else:
+                used[key] = who
+
+        for name, spec in self.lf.nodes.items():
+            ep = self.lf.endpoint_of(name)
+            if ep.startswith("tcp://"):
+                try:
+                    port = int(ep.rsplit(":", 1)[1])
+                except ValueError:
+                    continue
+                claim(spec.host, port, f"node {name}'s publisher ({ep})", f"node {name}: port")
+        for name, spec in self.lf.nodes.items():
+            keys = LISTEN_PARAMS.get(spec.type)
+            if keys is None:
+                continue
+            port = self._params(name).get(keys[1])
+            if type(port) is int and 0 < port <= 65535:
+                claim(spec.host, port, f"node {name}'s {keys[1]} param", f"node {name}: params.{keys[1]}")
+
+    # ---------------------------------------------------------------------------------------------- keys
+    def check_security(self) -> None:
+        lf, sec = self.lf, self.lf.security
+        if not sec.curve:
+            remote = [h for h, s in lf.hosts.items() if not _loopback(s.address)]
+            if remote:
+                self.warn(f"security.curve is off: anyone who reaches {', '.join(lf.hosts[h].address for h in remote)} "
+                          f"can publish on the graph (arm targets included); see docs/deploy.md")
+            return
+        cmd = keygen_command(lf)
+        kdir = keys_dir(lf)
+        origin = "$FLEXSHEET_KEYS" if os.environ.get("FLEXSHEET_KEYS") else "security.keys_dir"
+        if not kdir.is_dir():
+            self.err(origin, str(kdir), f"no keys folder: CURVE is on and no keys were generated (run: {cmd})")
+            return
+        try:
+            keys = public_keys(lf)
+        except LaunchError as exc:
+            self.res.errors.append(str(exc))
+            return
+        missing = [h for h in lf.hosts if h not in keys]
+        if missing:
+            self.err("security.public_keys", sorted(keys), f"no public key for host(s) {', '.join(missing)} "
+                                                          f"(run: {cmd})")
+        import zmq.auth
+
+        for h in self.hosts:
+            secret = kdir / f"{h}.key_secret"
+            if not secret.is_file():
+                self.err(origin, str(kdir), f"no secret key for host {h} ({secret.name}; run: {cmd}, then copy "
+                                            f"{secret.name} and public_keys.yaml to {h}'s keys folder)")
+                continue
+            try:
+                public, secret_key = zmq.auth.load_certificate(secret)
+            except (OSError, ValueError) as exc:
+                self.err(origin, str(secret), f"unreadable secret key for host {h}: {exc}")
+                continue
+            if secret_key is None:
+                self.err(origin, str(secret), f"{secret.name} holds no secret key (run: {cmd} --force)")
+            elif h in keys and public.decode() != keys[h]:
+                self.err(f"security.public_keys.{h}", keys[h], f"does not match {secret} (keys generated "
+                                                              f"twice? copy the newest public_keys.yaml)")
+            mode = stat.S_IMODE(secret.stat().st_mode)
+            if mode & 0o077:
+                self.err(origin, str(secret), f"secret key readable by others (mode {mode:o}); run: chmod 600 {secret}")
+
+    # ---------------------------------------------------------------------------------------------- files
+    def check_display_calib(self) -> None:
+        path = display_calib_path(self.lf, self.out)
+        if path is None:
+            return
+        problem = check_file_param("display_calib", path)
+        if problem:
+            self.err("display_calib", path, problem)
+            return
+        from flexsheet.model.display_calib import load_display_calib
+
+        calib = load_display_calib(path)
+        for name, spec in self.lf.nodes.items():
+            if spec.host not in self.hosts:
+                continue
+            params = self._params(name)
+            for entry in DISPLAY_NEEDS.get(spec.type, ()):
+                entry = entry.format(arm=params.get("arm", "left"))
+                if calib.missing([entry]):
+                    self.err("display_calib", path, f"no '{entry}' entry, which node {name} needs (run: "
+                                                    f"{DISPLAY_COMMANDS[entry.split('.')[0]]}; docs/calibration.md)")
+                elif calib.stale(math.inf, [entry]):
+                    self.warn(f"display_calib: the '{entry}' entry node {name} uses is nominal, not measured (run: "
+                              f"{DISPLAY_COMMANDS[entry.split('.')[0]]})")
+            calib_file = params.get("calib_file")
+            if spec.type == "camera" and calib.camera is not None and isinstance(calib_file, str) and calib_file \
+                    and os.path.isfile(os.path.expanduser(calib_file)):
+                measured = time.time() - calib.camera.provenance.age_s()
+                changed = os.path.getmtime(os.path.expanduser(calib_file))
+                if calib.camera.provenance.source != "nominal" and measured < changed:
+                    self.err("display_calib", path, f"stale 'camera' entry: measured "
+                                                    f"{calib.camera.provenance.measured_at}, before node {name}'s "
+                                                    f"calib_file {calib_file} changed ({_iso(changed)}); run: "
+                                                    f"{DISPLAY_COMMANDS['camera']}")
+
+    def check_report(self) -> None:
+        report = self.lf.report
+        if report is None:
+            return
+        module, sep, attr = report.partition(":")
+        try:
+            found = bool(sep and attr and module and importlib.util.find_spec(module) is not None)
+        except (ImportError, ValueError):
+            found = False
+        if not found:
+            self.err("report", report, "no such 'module:function' (the report runs after the launch)")
+
+    def _params(self, name: str) -> dict:
+        spec = self.lf.nodes[name]
+        return substitute({**spec.params, **self.overrides.get(name, {})}, self.subs)
+
+    def check_nodes(self) -> None:
+        for name in self.overrides:
+            if name not in self.lf.nodes:
+                self.err("--set", name, f"no such node; nodes: {', '.join(self.lf.nodes)}")
+        for name, spec in self.lf.nodes.items():
+            here = spec.host in self.hosts
+            self.res.nodes += here
+            params = self._params(name)
+            where = f"node {name}"
+            try:
+                cls = registry.load(registry.NODES[spec.type])
+                model: type[BaseModel] = cls.Params
+            except (ImportError, AttributeError) as exc:
+                msg = f"node type {spec.type} cannot be imported here: {' '.join(str(exc).split())[:200]}"
+                if here:
+                    self.err(f"{where}: type", spec.type, msg)
+                else:
+                    self.warn(f"node {name} (host {spec.host}): {msg}; its params are not checked")
+                continue
+            display = display_calib_path(self.lf, self.out)
+            injected = display is not None and "display_calib" in model.model_fields and "display_calib" not in params
+            if injected:  # as node_config fills it in; the file itself is checked once, as display_calib
+                params["display_calib"] = display
+            try:
+                model.model_validate(params)
+            except ValidationError as exc:
+                for e in exc.errors():
+                    key = ".".join(str(p) for p in e["loc"])
+                    if not key:  # a check across params (a model validator): the message names them
+                        self.res.errors.append(f"{self.lf.path}: {where}: params: {e['msg'][:300]}")
+                    elif e["type"] == "extra_forbidden":
+                        known = ", ".join(model.model_fields)
+                        self.err(f"{where}: params.{key}", e.get("input"),
+                                 f"not a parameter of node type {spec.type} (its params: {known[:400]})")
+                    elif e["type"] == "missing":
+                        self.res.errors.append(f"{self.lf.path}: {where}: params.{key}: required, not given")
+                    else:
+                        self.err(f"{where}: params.{key}", e.get("input"), e["msg"][:300])
+            for key, value in params.items():
+                if key == "host" and isinstance(value, str):
+                    problem = _address_problem(value, resolve=False)
+                    if problem:
+                        self.err(f"{where}: params.host", value, problem)
+                if not here or not isinstance(value, str) or not value or (injected and key == "display_calib"):
+                    continue
+                kind = OUTPUT_PARAMS.get((spec.type, key))
+                if kind is not None:
+                    target = Path(os.path.expanduser(value))
+                    problem = _creatable(target if kind == "dir" else target.parent)
+                    if problem:
+                        self.err(f"{where}: params.{key}", value, f"cannot write here: {problem}")
+                elif is_input_file_key(key) or key in GLOB_PARAMS:
+                    problem = check_file_param(key, value)
+                    if problem:
+                        self.err(f"{where}: params.{key}", value, problem)
+
+
+def _iso(t: float) -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(t))
+
+
+def _loopback(address: str) -> bool:
+    try:
+        return ipaddress.ip_address(address).is_loopback
+    except ValueError:
+        return address == "localhost"
+
+
+def check_launch(path: str | Path, host: str | None = None, out: str | None = None,
+                 overrides: dict[str, dict] | None = None) -> CheckResult:
+    """Check launch file ``path`` for ``host`` (None: every host, all on this machine) with ``--out`` folder
+    ``out`` and ``overrides`` (node → {param: value}, the ``--set`` values). Returns a :class:`CheckResult`;
+    never raises for a bad file (its problems are the result's ``errors``)."""
+    try:
+        lf = load_launch(path)
+    except LaunchError as exc:
+        return CheckResult(Path(path), errors=exc.lines)
+    if host is not None and host not in lf.hosts:
+        return CheckResult(lf.path, errors=[f"{lf.path}: --host = {host!r}: not a host of the file; hosts: "
+                                            f"{', '.join(lf.hosts)}"])
+    return _Checker(lf, host, out, overrides or {}).run()

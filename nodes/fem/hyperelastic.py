@@ -1,0 +1,525 @@
+"""Geometrically nonlinear reference: compressible neo-Hookean cylinder pushed by a rigid finger (pure).
+
+Total Lagrangian, quadratic (P2) tetrahedra, Newton's method with load stepping in the push depth. This is
+the accuracy reference the real-time models are judged against (docs/fem.md, "Physically right deformation").
+
+* **Material**: compressible neo-Hookean, W = μ/2 (tr C − 3) − μ ln J + λ/2 (ln J)², first Piola–Kirchhoff
+  stress P = μ (F − F⁻ᵀ) + λ ln J F⁻ᵀ, tangent A_iJkL = μ δ_ik δ_JL + (μ − λ ln J) F⁻¹_Jk F⁻¹_Li
+  + λ F⁻¹_Ji F⁻¹_Lk (Bonet & Wood, *Nonlinear Continuum Mechanics for FEA*, 2nd ed., §6.4.3; the same energy
+  as scikit-fem's hyperelasticity examples). λ, μ from the small-strain E, ν, so it agrees with linear
+  elasticity for small strains.
+* **Discretisation**: scikit-fem ``ElementTetP2`` on straight-sided tetrahedra (shape-function gradients and
+  the 4-point quadrature, ``intorder=2``, positive weights); element matrices and residuals are vectorised
+  numpy here (the tangent split into μ(∇N·∇N)⊗I + two rank-structured terms in h = ∇N·F⁻¹).
+* **Finger**: rigid frictionless *capsule* (the fingertip sphere of radius r plus the finger's shaft behind
+  it, along −p̂), non-penetration of every surface DOF point by a nodal penalty
+  E_c = k/2 Σ min(g_i, 0)² (gap g_i = distance to the capsule's axis segment − r); k scales with E and the
+  element size so that penetration stays ~1 % of the element size (reported). A real finger, not a bonded
+  imposed displacement (the linear model's contact): material slides along it and wraps around it.
+* **Support** as the linear model's: outer boundary points with x ≤ x_O fixed. Symmetry planes y = y_O
+  (a push at y = y_O) and z = z_O (a push at azimuth 0) carry the normal displacement 0.
+* **Newton**: minimise Π = ∫W dV + E_c; each step solves K_t δ = −r (sparse Cholesky), then a backtracking line
+  search keeps det F > 0 at every quadrature point and decreases Π (Armijo). Load stepping: depth in steps
+  of ``step`` m with a linear-extrapolation predictor. Converged when ‖δ‖∞ < ``tol_u`` and the free
+  residual is below ``tol_r`` × the finger force scale.
+
+Units SI: m, N, Pa. Display frame (cylinder axis along +y through ``mesh.center``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from nodes.fem.material import Material
+from nodes.fem.mesh import TetMesh, cylinder_part_mesh
+from nodes.fem.solver import factor
+
+__all__ = ["RefSpec", "HyperelasticModel", "PathState", "Capsule", "capsule_at", "solve_path", "reference_mesh"]
+
+
+@dataclass(frozen=True)
+class RefSpec:
+    """Mesh of the reference: ``h`` global size (m), ``h_fine`` size (m) within ``refine_radius`` (m) of the
+    contact point; ``half_z`` also use the z mirror plane (azimuth-0 pushes only). Raises ``ValueError``."""
+
+    h: float = 0.010
+    h_fine: float = 0.002
+    refine_radius: float = 0.018
+    half_z: bool = False
+
+    def __post_init__(self):
+        for name in ("h", "h_fine"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and 0.0005 <= v <= 0.05):
+                raise ValueError(f"{name} must be in [0.0005, 0.05] m, got {v!r}")
+        if self.h_fine > self.h:
+            raise ValueError(f"h_fine must be <= h, got {self.h_fine!r} > {self.h!r}")
+
+    def key(self) -> str:
+        """Stable text key (cache keys)."""
+        return f"h={self.h:.6g},hf={self.h_fine:.6g},rr={self.refine_radius:.6g},hz={int(self.half_z)}"
+
+
+def reference_mesh(spec: RefSpec, angle_deg: float) -> TetMesh:
+    """Half (or quarter, ``spec.half_z``) cylinder mesh refined around the push point at ``angle_deg``."""
+    if spec.half_z and abs(angle_deg) > 1e-9:
+        raise ValueError(f"half_z needs a push at azimuth 0, got {angle_deg!r} deg")
+    return cylinder_part_mesh(spec.h, spec.h_fine, spec.refine_radius, (float(angle_deg),), half_y=True,
+                              half_z=spec.half_z)
+
+
+@dataclass(frozen=True)
+class Capsule:
+    """Rigid finger: the sphere (centre ``center`` (3,) m, radius ``radius`` m) swept back along −``direction``
+    by ``shaft`` m (the finger's body). ``direction`` (3,) unit push direction p̂ (into the object)."""
+
+    center: np.ndarray
+    direction: np.ndarray
+    radius: float
+    shaft: float = 0.1
+
+    def gap(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Signed gaps (N,) m (< 0: inside the finger) and unit outward normals (N, 3) at points ``x`` (N, 3)."""
+        rel = np.asarray(x, float) - self.center
+        s = np.clip(-(rel @ self.direction), 0.0, self.shaft)      # position along the shaft (backward)
+        q = rel + s[:, None] * self.direction                      # from the closest axis point to x
+        d = np.linalg.norm(q, axis=1)
+        n = q / np.maximum(d, 1e-12)[:, None]
+        return d - self.radius, n
+
+
+def capsule_at(angle: float, depth: float, radius: float, cyl_radius: float, cyl_center: np.ndarray,
+               axial: float = 0.0) -> Capsule:
+    """Finger pushed radially at azimuth ``angle`` (rad) to ``depth`` (m; the sphere's leading point is ``depth``
+    inside the undeformed surface, as :func:`nodes.fem.contact.finger_at`). Raises ``ValueError`` on NaN or
+    negative depth."""
+    for name, v in (("angle", angle), ("depth", depth), ("radius", radius), ("axial", axial)):
+        if not math.isfinite(v):
+            raise ValueError(f"{name} must be finite, got {v!r}")
+    if depth < 0:
+        raise ValueError(f"depth must be >= 0, got {depth!r}")
+    if radius <= 0:
+        raise ValueError(f"radius must be > 0, got {radius!r}")
+    out = np.array([math.cos(angle), 0.0, math.sin(angle)])
+    cp = np.asarray(cyl_center, float) + np.array([0.0, axial, 0.0]) + cyl_radius * out
+    return Capsule(cp - depth * out + radius * out, -out, float(radius))
+
+
+@dataclass
+class PathState:
+    """Converged state at one depth: ``depth`` m, ``u`` (P, 3) m displacement of every DOF point,
+    ``force`` N (finger force along p̂), ``force_vec`` (3,) N, ``iterations``, ``converged``, ``min_detF``
+    (smallest det F over quadrature points and element nodes), ``inverted`` (elements with det F ≤ 0 at a
+    quadrature point or node), ``max_strain`` (largest principal Green–Lagrange strain), ``penetration`` m
+    (deepest surface point inside the finger), ``n_contact``."""
+
+    depth: float
+    u: np.ndarray
+    force: float
+    force_vec: np.ndarray
+    iterations: int
+    converged: bool
+    min_detF: float
+    inverted: int
+    max_strain: float
+    penetration: float
+    n_contact: int
+    seconds: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+
+class HyperelasticModel:
+    """Neo-Hookean P2 model of a (half/quarter) cylinder mesh with the support and symmetry planes.
+
+    Attributes: ``points`` (P, 3) m DOF points (mesh nodes, then edge midpoints); ``n`` = 3P DOFs, DOF of
+    point p component c is 3p + c; ``surface`` (P,) bool points on the outer (non-symmetry) boundary;
+    ``support`` (P,) bool fixed points; ``free`` (nf,) free DOF indices. Raises ``ValueError`` on an empty mesh.
+    """
+
+    def __init__(self, mesh: TetMesh, material: Material, sym_y: bool = True, sym_z: bool = False):
+        from skfem import Basis, ElementTetP2, MeshTet
+
+        if len(mesh.tets) == 0:
+            raise ValueError("mesh has no tetrahedra")
+        self.mesh, self.material = mesh, material
+        sk = MeshTet(np.ascontiguousarray(mesh.points.T), np.ascontiguousarray(mesh.tets.T))
+        self.skmesh = sk
+        self.basis = Basis(sk, ElementTetP2(), intorder=2)
+        b = self.basis
+        self.points = np.ascontiguousarray(b.doflocs.T)
+        P = len(self.points)
+        self.n = 3 * P
+        self.edofs = np.ascontiguousarray(b.element_dofs.T)                             # (E, 10) points
+        self.grad = np.ascontiguousarray(np.stack([bf[0].grad for bf in b.basis], axis=0).transpose(2, 3, 0, 1))
+        self.w = np.ascontiguousarray(b.dx)                                               # (E, Q)
+        self.vol = float(self.w.sum())
+        # nodal gradients for det F at the 10 element nodes (inversion check)
+        self._node_grad = self._nodal_gradients()
+        c = mesh.center
+        tol = 1e-9
+        facets = sk.boundary_facets()
+        fp = sk.p[:, sk.facets[:, facets]]                                                # (3, 3, nf)
+        on_y = np.all(np.abs(fp[1] - c[1]) < tol, axis=0) if sym_y else np.zeros(len(facets), bool)
+        on_z = np.all(np.abs(fp[2] - c[2]) < tol, axis=0) if sym_z else np.zeros(len(facets), bool)
+        outer = facets[~(on_y | on_z)]
+        surf = np.zeros(P, bool)
+        surf[b.get_dofs(facets=outer).flatten()] = True
+        self.surface = surf
+        self.support = surf & (self.points[:, 0] <= c[0] + tol)
+        fixed = np.zeros((P, 3), bool)
+        fixed[self.support] = True
+        if sym_y:
+            fixed[np.abs(self.points[:, 1] - c[1]) < tol, 1] = True
+        if sym_z:
+            fixed[np.abs(self.points[:, 2] - c[2]) < tol, 2] = True
+        self.fixed_mask = fixed.ravel()
+        self.sym_y, self.sym_z = sym_y, sym_z
+        self.sym_factor = 2 ** (int(sym_y) + int(sym_z))       #: full-body force = factor × this part's
+        self.free = np.flatnonzero(~self.fixed_mask)
+        self.contact_pts = np.flatnonzero(surf & ~self.support)
+        lam, mu = material.lame
+        self.lam, self.mu = lam, mu
+        self._pattern()
+        self.eps = 5e-5           #: width (m) of the smooth onset of the contact penalty (see _pen)
+        self.h_contact = float(np.median(np.linalg.norm(
+            mesh.points[mesh.tets[:, 0]] - mesh.points[mesh.tets[:, 1]], axis=1)))
+
+    # ---- assembly ------------------------------------------------------------------------------------
+    def _nodal_gradients(self) -> np.ndarray:
+        """∇N_a at the 10 reference nodes of each element, (E, 10, 10, 3) [elem, node, basis, dim]."""
+        from skfem import ElementTetP2
+
+        el = ElementTetP2()
+        X = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1],
+                      [.5, 0, 0], [.5, .5, 0], [0, .5, 0], [0, 0, .5], [.5, 0, .5], [0, .5, .5]]).T
+        ref = np.stack([el.lbasis(X, i)[1] for i in range(10)], axis=0)                 # (10 basis, 3, 10 nodes)
+        p = self.mesh.points[self.mesh.tets]                                              # (E, 4, 3)
+        Jm = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], axis=2)  # dX/dxi (E, 3, 3)
+        Jinv = np.linalg.inv(Jm)
+        return np.einsum("akn,ekJ->enaJ", ref, Jinv)
+
+    def _pattern(self) -> None:
+        E = len(self.edofs)
+        vd = (3 * self.edofs[:, :, None] + np.arange(3)).reshape(E, 30)
+        self._vd = vd
+        rows = np.repeat(vd, 30, axis=1).ravel()
+        cols = np.tile(vd, (1, 30)).ravel()
+        key = rows * self.n + cols
+        uniq, inv = np.unique(key, return_inverse=True)
+        self._scatter = inv
+        r, c = uniq // self.n, uniq % self.n
+        self._nnz = len(uniq)
+        A = sp.csr_matrix((np.arange(self._nnz, dtype=float), (r, c)), shape=(self.n, self.n))
+        self._csr_order = A.data.astype(np.int64)        # csr position -> unique index
+        self._indptr, self._indices = A.indptr, A.indices
+        self._csr_row = np.repeat(np.arange(self.n), np.diff(A.indptr))
+        fm = self.fixed_mask
+        self._csr_fixed = fm[self._csr_row] | fm[self._indices]
+        self._csr_diag_fixed = (self._csr_row == self._indices) & fm[self._csr_row]
+
+    def deformation(self, u: np.ndarray):
+        """F (E, Q, 3, 3) at the quadrature points for DOF-point displacements ``u`` (P, 3) m."""
+        ue = u[self.edofs]                                                                # (E, 10, 3)
+        return np.eye(3) + np.einsum("eai,eqaJ->eqiJ", ue, self.grad)
+
+    def energy(self, u: np.ndarray, caps: Capsule | None, k: float) -> float:
+        """Π (J) = elastic energy + contact penalty; +inf if det F ≤ 0 at any quadrature point."""
+        F = self.deformation(u)
+        J = np.linalg.det(F)
+        if np.any(J <= 0):
+            return math.inf
+        lnJ = np.log(J)
+        I1 = np.einsum("eqij,eqij->eq", F, F)
+        W = 0.5 * self.mu * (I1 - 3) - self.mu * lnJ + 0.5 * self.lam * lnJ ** 2
+        e = float(np.sum(W * self.w))
+        if caps is not None:
+            g, _ = caps.gap(self.points[self.contact_pts] + u[self.contact_pts])
+            e += float(np.sum(_pen(g, k, self.eps)[0]))
+        return e
+
+    def residual_tangent(self, u: np.ndarray, caps: Capsule | None, k: float, need_K: bool = True,
+                         project: bool = False):
+        """Residual r (n,) N and tangent K_t (csr, n × n, N/m) of Π at ``u`` (P, 3); K_t is None when not
+        ``need_K``. ``project``: replace the material tangent A (9 × 9) at every quadrature point where it is
+        indefinite by its positive semi-definite projection (projected Newton, Teran, Sifakis, Irving & Fedkiw,
+        SCA 2005), so K_t is positive definite. Raises ``FloatingPointError`` when an element is inverted."""
+        F = self.deformation(u)
+        Finv = np.linalg.inv(F)
+        J = np.linalg.det(F)
+        if np.any(J <= 0):
+            raise FloatingPointError("inverted element (det F <= 0)")
+        lnJ = np.log(J)
+        FinvT = np.swapaxes(Finv, 2, 3)
+        P = self.mu * (F - FinvT) + (self.lam * lnJ)[..., None, None] * FinvT
+        re = np.einsum("eq,eqiJ,eqaJ->eai", self.w, P, self.grad)
+        r = np.bincount(self._vd.ravel(), weights=re.ravel(), minlength=self.n)
+        cdata = None
+        if caps is not None:
+            pts = self.contact_pts
+            g, nrm = caps.gap(self.points[pts] + u[pts])
+            act = g < self.eps
+            if np.any(act):
+                idx = pts[act]
+                _, d1, d2 = _pen(g[act], k, self.eps)
+                dofs = (3 * idx[:, None] + np.arange(3)).ravel()
+                r[dofs] += (d1[:, None] * nrm[act]).ravel()
+                cdata = (idx, nrm[act], d2)
+        if not need_K:
+            return r, None
+        E = len(self.edofs)
+        G = self.grad
+        H = np.einsum("eqaJ,eqJm->eqam", G, Finv).reshape(E, -1, 30)
+        lw = self.lam * self.w
+        c1w = (self.mu - self.lam * lnJ) * self.w
+        T3 = np.einsum("eqx,eqy->exy", H * lw[..., None], H)
+        Y = np.einsum("eqx,eqy->exy", H * c1w[..., None], H).reshape(E, 10, 3, 10, 3)
+        T1 = np.einsum("eqaJ,eqbJ->eab", G * (self.mu * self.w)[..., None, None], G)
+        Ke = T3.reshape(E, 10, 3, 10, 3) + Y.transpose(0, 1, 4, 3, 2)
+        Ke += T1[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]
+        if project:
+            Ke += self._projection(F, Finv, lnJ)
+        data = np.bincount(self._scatter, weights=Ke.ravel(), minlength=self._nnz)[self._csr_order]
+        K = sp.csr_matrix((data, self._indices, self._indptr), shape=(self.n, self.n))
+        if cdata is not None:
+            idx, nrm, d2 = cdata
+            blocks = d2[:, None, None] * nrm[:, :, None] * nrm[:, None, :]               # Gauss–Newton
+            rr = (3 * idx[:, None, None] + np.arange(3)[None, :, None]).repeat(3, axis=2)
+            cc = (3 * idx[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1)
+            K = K + sp.csr_matrix((blocks.ravel(), (rr.ravel(), cc.ravel())), shape=(self.n, self.n))
+        return r, K
+
+    def _projection(self, F: np.ndarray, Finv: np.ndarray, lnJ: np.ndarray) -> np.ndarray:
+        """Element-matrix correction Σ_q w Bᵀ(A₊ − A)B (E, 10, 3, 10, 3) where A₊ clamps A's negative
+        eigenvalues to 0 (only quadrature points with a negative eigenvalue are touched)."""
+        E, Q = lnJ.shape
+        S = np.einsum("eqJk,eqLi->eqiJkL", Finv, Finv).reshape(E, Q, 9, 9)
+        f = np.swapaxes(Finv, 2, 3).reshape(E, Q, 9)
+        A = (self.mu * np.eye(9) + (self.mu - self.lam * lnJ)[..., None, None] * S
+             + self.lam * f[..., :, None] * f[..., None, :])
+        ev, V = np.linalg.eigh(A)
+        out = np.zeros((E, 10, 3, 10, 3))
+        bad = ev[..., 0] < 0
+        if not np.any(bad):
+            return out
+        e_idx = np.flatnonzero(bad.any(axis=1))
+        evb, Vb = ev[e_idx], V[e_idx]
+        neg = np.minimum(evb, 0.0) * bad[e_idx][..., None]                      # A₊ − A = −V min(ev,0) Vᵀ
+        D = -np.einsum("eqij,eqj,eqkj->eqik", Vb, neg, Vb).reshape(len(e_idx), Q, 3, 3, 3, 3)
+        G = self.grad[e_idx]
+        DG = np.einsum("eqiJkL,eqbL->eqiJkb", D, G)
+        out[e_idx] = np.einsum("eqaJ,eqiJkb->eaibk", G * self.w[e_idx][..., None, None], DG)
+        return out
+
+    def constrained(self, K: sp.csr_matrix) -> sp.csr_matrix:
+        """K with fixed rows/columns replaced by the identity (same size; fixed DOFs then get δ = 0)."""
+        K = K.tocsr(copy=True)
+        K.sort_indices()
+        fm = self.fixed_mask
+        row = np.repeat(np.arange(self.n), np.diff(K.indptr))
+        d = K.data
+        d[fm[row] | fm[K.indices]] = 0.0
+        d[(row == K.indices) & fm[row]] = 1.0
+        return K
+
+    # ---- checks --------------------------------------------------------------------------------------
+    def checks(self, u: np.ndarray) -> tuple[float, int, float]:
+        """(min det F over quadrature points and element nodes, inverted element count, largest principal
+        Green–Lagrange strain over quadrature points) for displacements ``u`` (P, 3) m."""
+        F = self.deformation(u)
+        Jq = np.linalg.det(F)
+        ue = u[self.edofs]
+        Fn = np.eye(3) + np.einsum("eai,enaJ->eniJ", ue, self._node_grad)
+        Jn = np.linalg.det(Fn)
+        minJ = np.minimum(Jq.min(axis=1), Jn.min(axis=1))
+        C = np.einsum("eqki,eqkj->eqij", F, F)
+        Egl = 0.5 * (C - np.eye(3))
+        return float(minJ.min()), int(np.count_nonzero(minJ <= 0)), float(np.linalg.eigvalsh(Egl).max())
+
+    def probe_matrix(self, x: np.ndarray) -> sp.csr_matrix:
+        """Interpolation matrix (k, P): values of the P2 field at points ``x`` (k, 3) m. Points just outside the
+        faceted boundary use the nearest element's polynomial (a tiny extrapolation), as in
+        :meth:`nodes.fem.solver.FemModel.probe`. Points beyond the symmetry planes must be mirrored first."""
+        from scipy.spatial import cKDTree
+
+        x = np.asarray(x, float)
+        p, t = self.mesh.points, self.mesh.tets
+        if not hasattr(self, "_tree"):
+            self._tree = cKDTree(p[t].mean(axis=1))
+            Dm = np.stack([p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]], p[t[:, 3]] - p[t[:, 0]]], axis=2)
+            self._Dinv = np.linalg.inv(Dm)
+        kk = min(24, len(t))
+        _, cand = self._tree.query(x, k=kk)
+        cand = np.atleast_2d(cand)
+        rel = x[:, None, :] - p[t[cand, 0]]
+        lam = np.einsum("qkij,qkj->qki", self._Dinv[cand], rel)
+        bary = np.concatenate([1 - lam.sum(axis=2, keepdims=True), lam], axis=2)
+        best = np.argmax(bary.min(axis=2), axis=1)
+        cells = cand[np.arange(len(x)), best]
+        pts = self.basis.mapping.invF(np.ascontiguousarray(x.T)[:, :, None], tind=cells)
+        phis = np.array([self.basis.elem.gbasis(self.basis.mapping, pts, j, tind=cells)[0]
+                         for j in range(self.basis.Nbfun)]).reshape(self.basis.Nbfun, len(x))
+        rows = np.tile(np.arange(len(x)), self.basis.Nbfun)
+        cols = self.basis.element_dofs[:, cells].ravel()
+        return sp.csr_matrix((phis.ravel(), (rows, cols)), shape=(len(x), len(self.points)))
+
+    def penalty(self, mesh_h: float | None = None) -> float:
+        """Contact penalty stiffness per surface point, N/m: 50·E·h (penetration ≈ 2 % of h per unit strain)."""
+        return 50.0 * self.material.E * (mesh_h or self.h_contact)
+
+
+def _pen(g: np.ndarray, k: float, eps: float):
+    """Smoothed penalty φ(g) and its derivatives φ', φ'' for gaps ``g`` (m): k/(6ε)(ε − g)³ on [0, ε), the
+    matching quadratic k/2 g² − kε/2 g + kε²/6 below 0 (C², so Newton sees no kink), 0 above ε."""
+    g = np.asarray(g, float)
+    inside = g < 0
+    mid = (g >= 0) & (g < eps)
+    phi = np.where(inside, 0.5 * k * g * g - 0.5 * k * eps * g + k * eps * eps / 6.0,
+                   np.where(mid, k / (6 * eps) * (eps - g) ** 3, 0.0))
+    d1 = np.where(inside, k * g - 0.5 * k * eps, np.where(mid, -k / (2 * eps) * (eps - g) ** 2, 0.0))
+    d2 = np.where(inside, k, np.where(mid, k / eps * (eps - g), 0.0))
+    return phi, d1, d2
+
+
+@contextlib.contextmanager
+def _quiet_stderr():
+    """Silence CHOLMOD's C-level "not positive definite" warning (fd 2) — main thread only, since the file
+    descriptor is process-wide; elsewhere a no-op."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield
+        return
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, iters: int, tol_u: float,
+            tol_r: float, log, state: dict | None = None) -> tuple[np.ndarray, int, bool]:
+    """Minimise Π from ``u``; returns (u, iterations, converged). ``state`` (dict) carries ``project`` (use
+    the projected tangent) between calls. Raises ``FloatingPointError`` when the line search fails."""
+    state = {} if state is None else state
+    free = model.free
+    pi = model.energy(u, caps, k)
+    if not math.isfinite(pi):
+        raise FloatingPointError("start point has inverted elements")
+    project = bool(state.get("project", False))
+    for it in range(1, iters + 1):
+        r, K = model.residual_tangent(u, caps, k, project=project)
+        rf = np.zeros(model.n)
+        rf[free] = r[free]
+        try:
+            with _quiet_stderr():
+                lu = factor(model.constrained(K))
+        except ValueError:          # not positive definite: projected Newton from here on (this load path)
+            project = state["project"] = True
+            r, K = model.residual_tangent(u, caps, k, project=True)
+            lu = factor(model.constrained(K))
+        delta = -lu.solve(rf)
+        if not np.all(np.isfinite(delta)):
+            raise FloatingPointError(f"non-finite Newton step at iteration {it}")
+        d3 = delta.reshape(-1, 3)
+        slope = float(rf @ delta)
+        alpha, ok = 1.0, False
+        for _ in range(30):
+            cand = u + alpha * d3
+            pc = model.energy(cand, caps, k)
+            if math.isfinite(pc) and pc <= pi + 1e-4 * alpha * min(slope, 0.0) + 1e-12 * abs(pi):
+                ok = True
+                break
+            alpha *= 0.5
+        if not ok:
+            raise FloatingPointError(f"line search failed at iteration {it}")
+        u, pi = cand, pc
+        step = alpha * float(np.abs(delta).max())
+        rn = float(np.linalg.norm(rf))
+        if log:
+            log(f"    newton {it}: |r|={rn:.3e} N, |du|={step * 1e3:.4f} mm, alpha={alpha:.3g}")
+        if step < tol_u and rn < max(tol_r, 1e-12):
+            return u, it, True
+        if step < 0.01 * tol_u:
+            return u, it, rn < 10 * tol_r
+    return u, iters, False
+
+
+def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: float, step: float = 0.001,
+               iters: int = 40, tol_u: float = 1e-6, tol_r: float | None = None, log=None,
+               substeps_max: int = 6) -> list[PathState]:
+    """Push the capsule finger at azimuth ``angle`` (rad) through ``depths`` (m, ascending, ≥ 0), load steps of
+    at most ``step`` m; returns one :class:`PathState` per requested depth. A load step whose Newton solve fails
+    is halved (up to ``substeps_max`` times). Raises ``ValueError`` on bad depths and ``RuntimeError`` when a
+    step cannot be solved."""
+    depths = np.asarray(depths, float)
+    if depths.ndim != 1 or len(depths) == 0 or not np.all(np.isfinite(depths)) or np.any(depths < 0):
+        raise ValueError(f"depths must be a non-empty 1-D array of finite values >= 0 m, got {depths!r}")
+    if np.any(np.diff(depths) < 0):
+        raise ValueError("depths must be ascending")
+    if not (math.isfinite(step) and step > 0):
+        raise ValueError(f"step must be > 0 m, got {step!r}")
+    m = model
+    k = m.penalty()
+    tol_r = tol_r if tol_r is not None else 1e-6 * m.material.E * m.h_contact ** 2 * 10
+    u = np.zeros((len(m.points), 3))
+    u_prev, d_prev = None, 0.0
+    d_cur = 0.0
+    out = []
+    nstate: dict = {}
+    for target in depths:
+        t0 = time.perf_counter()
+        its_total = 0
+        conv_all = True
+        while d_cur < target - 1e-12:
+            h = min(step, target - d_cur)
+            for _ in range(substeps_max + 1):
+                d_new = d_cur + h
+                caps = capsule_at(angle, d_new, finger_radius, m.mesh.radius, m.mesh.center)
+                guess = u
+                if u_prev is not None and d_cur > d_prev:
+                    g2 = u + (u - u_prev) * (h / (d_cur - d_prev))
+                    if math.isfinite(m.energy(g2, None, 0.0)):
+                        guess = g2
+                try:
+                    u_new, its, conv = _newton(m, guess, caps, k, iters, tol_u, tol_r, None, nstate)
+                except FloatingPointError:
+                    u_new, its, conv = None, iters, False
+                its_total += its
+                if conv:
+                    break
+                h *= 0.5
+            else:
+                raise RuntimeError(f"Newton failed at depth {d_cur * 1e3:.2f} mm -> {(d_cur + h) * 1e3:.2f} mm "
+                                   f"(angle {math.degrees(angle):.1f} deg)")
+            conv_all &= conv
+            u_prev, d_prev = u, d_cur
+            u, d_cur = u_new, d_new
+        caps = capsule_at(angle, d_cur, finger_radius, m.mesh.radius, m.mesh.center)
+        pts = m.contact_pts
+        g, nrm = caps.gap(m.points[pts] + u[pts])
+        act = g < m.eps
+        fvec = (-_pen(g[act], k, m.eps)[1][:, None] * nrm[act]).sum(axis=0) if np.any(act) else np.zeros(3)
+        fvec = m.sym_factor * fvec * np.array([1.0, 0.0 if m.sym_y else 1.0, 0.0 if m.sym_z else 1.0])
+        minJ, ninv, emax = m.checks(u)
+        st = PathState(float(d_cur), u.copy(), float(fvec @ caps.direction), fvec, its_total, bool(conv_all),
+                       minJ, ninv, emax, float(max(0.0, -g.min())) if len(g) else 0.0, int(act.sum()),
+                       time.perf_counter() - t0)
+        out.append(st)
+        if log:
+            log(f"  depth {d_cur * 1e3:5.1f} mm: F={st.force:.4f} N, {its_total} Newton its, "
+                f"min det F={minJ:.3f}, inverted={ninv}, pen={st.penetration * 1e3:.3f} mm, "
+                f"{st.seconds:.1f} s")
+    return out

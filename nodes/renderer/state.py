@@ -1,0 +1,232 @@
+"""The renderer's state and decisions, pure (numpy; no GL, no transport): what the node draws and with which model.
+
+* :class:`RendererState` — the newest inputs (object mesh, both clamp poses, fingertip) and the sheet they
+  give (:meth:`SheetSurface.from_clamps`, paper §III-C), validated when they arrive; the last good sheet is
+  kept for frames whose inputs give an unusable sheet. Thread-safe (input handlers run in worker threads, the
+  drawing in the GL thread).
+* :class:`ErrorTable` — each correction model's predicted image error against the fine membrane model over a
+  range of push depths (:func:`nodes.renderer.correction.predict_model_errors`), computed once at setup.
+* :func:`pick_model` — the model for a sheet: the configured one, or with ``"auto"`` the cheapest whose
+  predicted error meets the accuracy target (:func:`nodes.renderer.correction.choose_model`).
+
+Units: m, display frame. Errors: ``ValueError`` naming the input and value (the node turns it into a counted
+rejection).
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from flexsheet.model import scene
+from flexsheet.model.sheet import SheetSurface
+from nodes.renderer.correction import MODELS, choose_model, predict_model_errors
+from nodes.renderer.scene import cylinder_mesh, vertex_normals
+
+__all__ = ["RendererState", "SheetConfig", "ErrorTable", "pick_model", "check_sheet", "check_pose",
+           "silhouette_probes", "AUTO_MODELS"]
+
+#: models "auto" chooses among (cheapest first); "none" is never chosen automatically
+AUTO_MODELS = ("flat", "four_triangle", "fine")
+
+
+def check_sheet(sheet: SheetSurface, eye, projector) -> None:
+    """Raise ``ValueError`` unless the eye (3,) m is in front of ``sheet`` and the projector (3,) m behind it."""
+    if (np.asarray(eye, dtype=float) - sheet.origin) @ sheet.normal <= 1e-6:
+        raise ValueError(f"eye on the wrong side of the sheet (normal {sheet.normal.round(3).tolist()})")
+    if (np.asarray(projector, dtype=float) - sheet.origin) @ sheet.normal >= -1e-6:
+        raise ValueError("projector is not behind the sheet")
+
+
+def check_pose(name: str, T) -> np.ndarray:
+    """``T`` as a (4, 4) float rigid transform; ``ValueError`` naming ``name`` if it is not one (tol. 1e-3)."""
+    T = np.asarray(T, dtype=float)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise ValueError(f"{name}.pose must be a finite 4x4 transform, got shape {T.shape}")
+    R = T[:3, :3]
+    if not np.allclose(R.T @ R, np.eye(3), atol=1e-3) or np.linalg.det(R) < 0 or not np.allclose(T[3], [0, 0, 0, 1]):
+        raise ValueError(f"{name}.pose is not a rigid transform: {T.round(4).tolist()}")
+    return T
+
+
+def silhouette_probes(vertices, step: int = 7) -> np.ndarray:
+    """Object points that decide the image error: every ``step``-th vertex on the user's side of the cylinder
+    axis (x > −R), (K, 3) float64 m."""
+    v = np.asarray(vertices, dtype=float)
+    return v[v[:, 0] > -scene.CYLINDER_RADIUS][::step]
+
+
+@dataclass(frozen=True)
+class ErrorTable:
+    """Predicted image error per model: ``rows[model]`` = [(push depth m, max error m on the screen), ...],
+    depths ascending. Build with :meth:`build`; query with :meth:`choose`."""
+
+    rows: dict
+
+    @classmethod
+    def build(cls, probes, *, eye, projector, screen_point, screen_normal, sheet: SheetSurface,
+              depths=np.linspace(0.0, 0.06, 13)) -> ErrorTable:
+        """Predict each model's error at each depth (m) for ``probes`` (N, 3) m on the unpushed ``sheet``
+        (:func:`predict_model_errors`, ~0.1 s per depth). Raises ``ValueError`` on bad geometry."""
+        rows = {m: [] for m in MODELS}
+        for S in np.asarray(depths, dtype=float):
+            pe = predict_model_errors(float(S), eye=eye, projector=projector, screen_point=screen_point,
+                                      screen_normal=screen_normal, probes=probes, sheet=sheet)
+            for m in MODELS:
+                rows[m].append((float(S), pe[m]))
+        return cls(rows)
+
+    def choose(self, depth: float, target: float, models: tuple[str, ...] = AUTO_MODELS) -> str:
+        """Cheapest of ``models`` whose predicted error at ``depth`` m is ≤ ``target`` m (else the best one)."""
+        return choose_model(depth, self.rows, target, models=models)
+
+
+def pick_model(correction: str, sheet: SheetSurface, table: ErrorTable, target: float) -> str:
+    """The correction model to draw ``sheet`` with: ``correction`` itself unless it is ``"auto"``; then
+    ``"flat"`` for an unpushed sheet, else the cheapest model meeting ``target`` m at the sheet's push depth."""
+    if correction != "auto":
+        if correction not in MODELS:
+            raise ValueError(f"correction must be 'auto' or one of {MODELS}, got {correction!r}")
+        return correction
+    if sheet.membrane is None:
+        return "flat"
+    return table.choose(sheet.membrane.depth, target)
+
+
+@dataclass(frozen=True)
+class SheetConfig:
+    """How the renderer turns clamp poses and the fingertip into the sheet it corrects for.
+
+    ``half_width`` m: half the free-edge length; ``push_threshold`` m: depth behind the flat sheet that counts
+    as a push; ``fine_modes``, ``tension_ratio`` (T_v/T_u), ``contact_radius`` m: the membrane of the pushed
+    sheet (:class:`flexsheet.model.sheet.Membrane`)."""
+
+    half_width: float = scene.SHEET_SIZE / 2
+    push_threshold: float = 0.001
+    fine_modes: int = 16
+    tension_ratio: float = 1.0
+    contact_radius: float = 0.008
+
+    def membrane_kwargs(self) -> dict:
+        """Keyword arguments for the pushed sheet's membrane."""
+        return {"modes": self.fine_modes, "tension_ratio": self.tension_ratio, "contact_radius": self.contact_radius}
+
+
+class RendererState:
+    """The renderer's newest inputs and the sheet they give (see the module docstring); thread-safe.
+
+    ``eye`` (3,) m: cyclopean eye V; ``projector`` (3,) m: light source P (the sheet must lie between them);
+    ``config``: :class:`SheetConfig`. Starts with the rigid cylinder and both clamps in the home pose.
+    """
+
+    def __init__(self, eye, projector, config: SheetConfig = SheetConfig()) -> None:
+        self.eye = np.asarray(eye, dtype=float)
+        self.projector = np.asarray(projector, dtype=float)
+        self.config = config
+        self._lock = threading.Lock()
+        v, f = cylinder_mesh()
+        self._mesh = (v, f, vertex_normals(v, f))
+        self._mesh_dirty = True
+        self._mesh_stamp = 0.0
+        self.home = dict(zip(("left", "right"), scene.clamp_poses(np.zeros(3), scene.SCREEN_NORMAL,
+                                                                  np.array([0.0, 1.0, 0.0]), 0.0), strict=True))
+        self._pose: dict[str, np.ndarray | None] = {"left": None, "right": None}
+        self._finger: np.ndarray | None = None
+        self._finger_stamp = 0.0
+        self.last_good = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], half_width=config.half_width)
+
+    # ------------------------------------------------------------------ inputs
+    @property
+    def mesh_vertices(self) -> np.ndarray:
+        """The current object mesh's vertices (N, 3) float32 m."""
+        with self._lock:
+            return self._mesh[0]
+
+    def set_mesh(self, vertices, faces, stamp: float) -> None:
+        """New object mesh: ``vertices`` (N, 3) m, ``faces`` (M, 3) int indices < N; ``stamp`` its source
+        exposure time, s. Raises ``ValueError`` for an empty mesh or face indices out of range."""
+        v, f = np.asarray(vertices), np.asarray(faces)
+        if len(v) == 0 or len(f) == 0:
+            raise ValueError(f"deformation has {len(v)} vertices and {len(f)} faces")
+        if f.min() < 0 or f.max() >= len(v):
+            raise ValueError(f"faces index out of range [0, {len(v)}): min {f.min()}, max {f.max()}")
+        n = vertex_normals(v, f)
+        with self._lock:
+            self._mesh = (v, f, n)
+            self._mesh_dirty = True
+            self._mesh_stamp = float(stamp)
+
+    def set_arm_pose(self, arm: str, T) -> None:
+        """Clamp pose ``T`` (4, 4, display frame, m) of ``arm`` ("left"/"right"). Raises ``ValueError`` if it is
+        not a rigid transform or, with the other arm's latest pose, gives a sheet with the eye behind it or the
+        projector in front of it (the pose is then not taken)."""
+        if arm not in ("left", "right"):
+            raise ValueError(f"arm must be 'left' or 'right', got {arm!r}")
+        T = check_pose(f"{arm} arm", T)
+        other_arm = "right" if arm == "left" else "left"
+        with self._lock:
+            other = self._pose[other_arm]
+        if other is None:
+            other = self.home[other_arm]
+        Tl, Tr = (T, other) if arm == "left" else (other, T)
+        try:
+            sheet = SheetSurface.from_clamps(Tl, Tr, half_width=self.config.half_width)
+            check_sheet(sheet, self.eye, self.projector)
+        except ValueError as exc:
+            raise ValueError(f"{arm} arm pose gives an unusable sheet: {exc}") from exc
+        with self._lock:
+            self._pose[arm] = T
+
+    def set_fingertip(self, position, stamp: float) -> None:
+        """Fingertip ``position`` (3,) m, or None when the tracker has no valid fix; ``stamp`` exposure time, s."""
+        with self._lock:
+            self._finger = None if position is None else np.asarray(position, dtype=float)
+            self._finger_stamp = float(stamp)
+
+    # ------------------------------------------------------------------ outputs
+    def take_mesh(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """(vertices, faces, normals) if the mesh changed since the last call, else None."""
+        with self._lock:
+            if not self._mesh_dirty:
+                return None
+            self._mesh_dirty = False
+            return self._mesh
+
+    @property
+    def fingertip_stamp(self) -> float:
+        """Exposure stamp (s) of the newest fingertip taken (0 before any)."""
+        with self._lock:
+            return self._finger_stamp
+
+    @property
+    def source_stamp(self) -> float:
+        """Newest exposure stamp (s) among the fingertip and the deformation drawn."""
+        with self._lock:
+            return max(self._finger_stamp, self._mesh_stamp)
+
+    def current_sheet(self) -> SheetSurface:
+        """The actual sheet from the latest clamp poses (home pose for an arm not heard from), pushed in by the
+        fingertip when it is more than ``push_threshold`` behind the flat sheet."""
+        c = self.config
+        with self._lock:
+            Tl = self._pose["left"] if self._pose["left"] is not None else self.home["left"]
+            Tr = self._pose["right"] if self._pose["right"] is not None else self.home["right"]
+            finger = self._finger
+        flat = SheetSurface.from_clamps(Tl, Tr, half_width=c.half_width)
+        if finger is None or -float((finger - flat.origin) @ flat.normal) <= c.push_threshold:
+            return flat
+        return SheetSurface.from_clamps(Tl, Tr, half_width=c.half_width, pushed_point=finger,
+                                        membrane_kwargs=c.membrane_kwargs())
+
+    def sheet_for_frame(self) -> tuple[SheetSurface, str]:
+        """(sheet to draw, warning): the current sheet if usable (it becomes the last good one), else the last
+        good sheet and a one-line reason."""
+        try:
+            sheet = self.current_sheet()
+            check_sheet(sheet, self.eye, self.projector)
+        except ValueError as exc:
+            return self.last_good, f"sheet unusable ({exc}); drawing the last good sheet"
+        self.last_good = sheet
+        return sheet, ""

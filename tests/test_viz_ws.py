@@ -1,0 +1,265 @@
+"""The viz node seen by an independent client of the public Foxglove WebSocket protocol (not the sdk).
+
+The client below speaks the Foxglove WebSocket protocol v1 with the ``websockets`` library. It offers both
+subprotocol names: ``foxglove.websocket.v1`` (the ws-protocol spec) and ``foxglove.sdk.v1`` — the same
+protocol under the name foxglove-sdk servers require since 2025 (they reject the old name with HTTP 400;
+Foxglove's stated position, foxglove/ros-foxglove-bridge#382, lichtblick-suite/lichtblick#819). It reads
+the JSON ``advertise`` op, sends ``subscribe``, and parses binary message-data frames (opcode 0x01, uint32
+subscription id, uint64 timestamp, payload). Protobuf payloads are decoded with the ``protobuf`` package against the
+FileDescriptorSet the server advertised. Spec: github.com/foxglove/ws-protocol/blob/main/docs/spec.md.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import json
+import struct
+import time
+
+import numpy as np
+import pytest
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+from websockets.asyncio.client import connect
+
+from conftest import free_port
+from flexsheet.model import scene
+from flexsheet.runtime.testing import NodeHarness
+from messages import topics as T
+from nodes.viz.node import VizNode
+from nodes.viz.samples import sample_state
+
+SUBPROTOCOLS = ["foxglove.websocket.v1", "foxglove.sdk.v1"]
+
+
+def proto_class(schema_b64: str, name: str):
+    """Message class for ``name`` from an advertised base64 FileDescriptorSet."""
+    fds = descriptor_pb2.FileDescriptorSet.FromString(base64.b64decode(schema_b64))
+    pool = descriptor_pool.DescriptorPool()
+    for f in fds.file:
+        pool.Add(f)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(name))
+
+
+class FoxgloveClient:
+    """Minimal client of the Foxglove WebSocket protocol v1."""
+
+    def __init__(self, ws) -> None:
+        self.ws = ws
+        self.channels: dict[str, dict] = {}
+        self.subs: dict[int, dict] = {}
+        self.server_info: dict | None = None
+
+    @classmethod
+    async def open(cls, port: int) -> FoxgloveClient:
+        ws = await connect(f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS, max_size=None)
+        assert ws.subprotocol in SUBPROTOCOLS
+        return cls(ws)
+
+    async def wait_channels(self, topics: set[str], timeout: float = 5.0) -> None:
+        deadline = time.monotonic() + timeout
+        while not topics <= set(self.channels):
+            await self._recv(deadline)
+
+    async def subscribe(self, topics: list[str]) -> None:
+        subs = []
+        for i, t in enumerate(topics, start=len(self.subs) + 1):
+            ch = self.channels[t]
+            self.subs[i] = ch
+            subs.append({"id": i, "channelId": ch["id"]})
+        await self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+
+    async def _recv(self, deadline: float):
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise TimeoutError("no message in time")
+        data = await asyncio.wait_for(self.ws.recv(), left)
+        if isinstance(data, str):
+            op = json.loads(data)
+            if op["op"] == "advertise":
+                for ch in op["channels"]:
+                    self.channels[ch["topic"]] = ch
+            elif op["op"] == "serverInfo":
+                self.server_info = op
+            return None
+        assert data[0] == 0x01, f"unexpected binary opcode {data[0]}"
+        sub_id, stamp_ns = struct.unpack_from("<IQ", data, 1)
+        return self.subs[sub_id]["topic"], stamp_ns, data[13:]
+
+    async def messages(self, want: dict[str, int], timeout: float = 10.0) -> dict[str, list[bytes]]:
+        """Collect at least ``want[topic]`` payloads per topic."""
+        got: dict[str, list[bytes]] = {t: [] for t in want}
+        deadline = time.monotonic() + timeout
+        while any(len(got[t]) < n for t, n in want.items()):
+            m = await self._recv(deadline)
+            if m is not None and m[0] in got:
+                got[m[0]].append(m[2])
+        return got
+
+    def decode(self, topic: str, payload: bytes):
+        ch = self.channels[topic]
+        if ch["encoding"] == "json":
+            return json.loads(payload)
+        assert ch["encoding"] == "protobuf" and ch["schemaEncoding"] == "protobuf"
+        return proto_class(ch["schema"], ch["schemaName"]).FromString(payload)
+
+
+def _inject_all(h: NodeHarness, state: dict) -> None:
+    for name, msg in state.items():
+        h.inject(T.BY_NAME[name], msg)
+
+
+def test_client_sees_channels_and_decodes_scene_fingertip_and_frames():
+    port = free_port()
+    state = sample_state(stamp=time.time())
+
+    async def scenario():
+        async with NodeHarness(VizNode, params={"port": port, "scene_rate": 20.0}) as h:
+            c = await FoxgloveClient.open(port)
+            await c.wait_channels({"/viz/scene", "/viz/tf", "/fingertip", "/camera/left", "/render/image"})
+            names = {t: (ch["schemaName"], ch["encoding"]) for t, ch in c.channels.items()}
+            assert names["/viz/scene"] == ("foxglove.SceneUpdate", "protobuf")
+            assert names["/viz/tf"] == ("foxglove.FrameTransforms", "protobuf")
+            assert names["/camera/left"] == names["/camera/right"] == ("foxglove.RawImage", "protobuf")
+            assert names["/render/image"] == ("foxglove.RawImage", "protobuf")
+            assert names["/fingertip"] == ("flexsheet/Fingertip", "json")
+            assert names["/viz/metrics"][1] == "json"
+            for t in ("/sheet/target", "/arm/left/joint_state", "/arm/right/joint_state", "/object/deformation",
+                      "/diagnostics"):
+                assert c.channels[t]["schemaEncoding"] == "jsonschema", t
+            assert "properties" in json.loads(c.channels["/fingertip"]["schema"])
+            _inject_all(h, state)
+            await h.settle(0.1)
+            assert h.node.streams.built == {} and h.node._subs == {}   # no viewer: no input, nothing built
+            await c.subscribe(["/camera/left"])
+            await asyncio.sleep(0.2)
+            assert set(h.node._subs) == {"/camera/stereo"}             # inputs follow what the viewer wants
+            await c.subscribe(["/viz/scene", "/viz/tf", "/fingertip", "/render/image"])
+            await asyncio.sleep(0.2)
+            assert "/camera/stereo" in h.node._subs and "/world/sheet" in h.node._subs
+            _inject_all(h, state)
+            got = await c.messages({"/viz/scene": 1, "/viz/tf": 1, "/fingertip": 1, "/camera/left": 1,
+                                    "/render/image": 1})
+            await c.ws.close()
+            return got, c, h.rejected()
+
+    got, c, rejected = asyncio.run(scenario())
+    assert rejected == 0
+    su = c.decode("/viz/scene", got["/viz/scene"][-1])
+    ents = {e.id: e for e in su.entities}
+    assert {"object", "sheet", "sheet_true", "fingertip", "contact", "projector", "eyes", "cameras", "arm_left",
+            "arm_right"} <= set(ents)
+    # the object's mesh is the deformation's vertices and faces, unchanged
+    d = state["/object/deformation"]
+    tri = ents["object"].triangles[0]
+    pts = np.array([[p.x, p.y, p.z] for p in tri.points])
+    assert pts.shape == d.vertices.shape and np.allclose(pts, d.vertices, atol=1e-7)
+    assert np.array_equal(np.asarray(tri.indices), d.faces.ravel())
+    # measured fingertip sphere where /fingertip says; the true one where /world/finger says
+    tip = state["/fingertip"].position
+    centres = [np.array([s.pose.position.x, s.pose.position.y, s.pose.position.z])
+               for s in ents["fingertip"].spheres]
+    assert min(np.linalg.norm(p - tip) for p in centres) < 1e-12
+    assert min(np.linalg.norm(p - state["/world/finger"].position) for p in centres) < 1e-12
+    # the believed sheet is dented under the finger: its deepest vertex lies behind the home plane
+    sheet_pts = np.array([[p.x, p.y, p.z] for p in ents["sheet"].triangles[0].points])
+    assert sheet_pts[:, 0].min() < -0.5 * 0.004 and abs(sheet_pts[:, 1]).max() > 0.11
+    # /fingertip JSON carries the numbers
+    j = c.decode("/fingertip", got["/fingertip"][-1])
+    assert np.allclose(j["position"], tip) and j["valid"] is True
+    # frames: chaining the left arm's URDF links from display gives the clamp holding the home sheet's left edge
+    tf = c.decode("/viz/tf", got["/viz/tf"][-1])
+    by_child = {t.child_frame_id: t for t in tf.transforms}
+    from scipy.spatial.transform import Rotation
+
+    def mat(t):
+        M = np.eye(4)
+        M[:3, :3] = Rotation.from_quat([t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w]).as_matrix()
+        M[:3, 3] = [t.translation.x, t.translation.y, t.translation.z]
+        return M
+
+    M, frame = np.eye(4), "left/clamp"
+    while frame != "display":
+        t = by_child[frame]
+        M = mat(t) @ M
+        frame = t.parent_frame_id
+    home_left, _ = scene.clamp_poses(np.zeros(3), scene.SCREEN_NORMAL, np.array([0.0, 1.0, 0.0]), 0.0)
+    assert np.linalg.norm(M[:3, 3] - home_left[:3, 3]) < 2e-3      # Q_HOME is given to 0.01 deg
+    assert {"camera_left", "camera_right", "projector", "sheet", "right/base_link"} <= set(by_child)
+    assert np.allclose(mat(by_child["projector"])[:3, 3], scene.PROJECTOR)
+    img = c.decode("/camera/left", got["/camera/left"][-1])
+    left = state["/camera/stereo"].left
+    assert (img.width, img.height, img.encoding) == (left.shape[1], left.shape[0], "mono8")
+    assert np.array_equal(np.frombuffer(img.data, np.uint8).reshape(left.shape), left)
+    rimg = c.decode("/render/image", got["/render/image"][-1])
+    assert (rimg.width, rimg.encoding) == (2 * state["/render/stereo"].left.shape[1], "rgb8")
+
+
+def test_bad_input_is_rejected_and_the_node_keeps_serving():
+    port = free_port()
+    state = sample_state(stamp=time.time())
+    d = state["/object/deformation"]
+    bad = d.model_copy(update={"faces": np.full_like(d.faces, len(d.vertices) + 5)})
+
+    async def scenario():
+        async with NodeHarness(VizNode, params={"port": port}) as h:
+            c = await FoxgloveClient.open(port)
+            await c.wait_channels({"/viz/scene"})
+            await c.subscribe(["/viz/scene"])
+            await asyncio.sleep(0.2)
+            h.inject(T.DEFORMATION, bad)
+            await h.settle(0.1)
+            _inject_all(h, {k: v for k, v in state.items() if k != "/object/deformation"})
+            got = await c.messages({"/viz/scene": 1})
+            await c.ws.close()
+            return got, c, h.rejected(T.DEFORMATION), h.node.last_rejection
+
+    got, c, rejected, why = asyncio.run(scenario())
+    assert rejected == 1 and "faces index out of range" in why
+    ents = {e.id: e for e in c.decode("/viz/scene", got["/viz/scene"][-1]).entities}
+    assert ents["object"].cylinders and not ents["object"].triangles  # still the undeformed cylinder
+
+
+def test_slow_viewer_loses_old_frames_and_never_blocks_the_node():
+    """A viewer that stops reading gets at most the server backlog plus what the sockets buffer."""
+    port = free_port()
+    state = sample_state(stamp=time.time())
+    n_sent, period = 200, 0.01
+
+    async def scenario():
+        async with NodeHarness(VizNode, params={"port": port, "camera_rate": 100.0, "poll_rate": 200.0, "input_rate": 500.0,
+                                                 "backlog": 16}) as h:
+            c = await FoxgloveClient.open(port)
+            await c.wait_channels({"/camera/left"})
+            await c.subscribe(["/camera/left"])
+            await asyncio.sleep(0.2)
+            t0 = time.monotonic()
+            for i in range(n_sent):          # the client reads nothing meanwhile
+                fr = state["/camera/stereo"]
+                h.inject(T.STEREO, fr.model_copy(update={"header": fr.header.model_copy(update={"seq": i})}))
+                await asyncio.sleep(period)
+            elapsed = time.monotonic() - t0
+            await h.settle(0.3)
+            sent = h.node.streams.built.get("/camera/left", 0)
+            received = 0
+            try:
+                while True:
+                    m = await c._recv(time.monotonic() + 0.5)
+                    received += m is not None
+            except TimeoutError:
+                pass
+            await c.ws.close()
+            return sent, received, elapsed
+
+    sent, received, elapsed = asyncio.run(scenario())
+    print(f"built {sent}, received {received}, {elapsed:.2f} s")
+    assert sent > 0.5 * n_sent, sent                       # the node kept building at the input rate
+    assert elapsed < n_sent * period * 1.5 + 1.0                  # ... and was never held up by the viewer
+    assert received < sent / 2, (received, sent)            # old frames were dropped for the slow viewer
+
+
+@pytest.mark.parametrize("params, field", [({"port": 70000}, "port"), ({"camera_scale": 0.0}, "camera_scale"),
+                                           ({"eye": [0.0, 0.0]}, "eye"), ({"left_base": [0, 0, 0]}, "left_base")])
+def test_bad_params_name_the_field(params, field):
+    with pytest.raises(ValueError, match=field):
+        VizNode.Params.model_validate(params)
