@@ -1,4 +1,4 @@
-"""``flexsheet bench arm``: IK speed, bridge cycle timing against the twin over Modbus TCP, twin tracking.
+"""``flexsheet bench arm``: IK speed, bridge cycle timing against the twin (Modbus TCP or MXT/UDP), tracking.
 
 Prints one flat JSON object (``--json``) or a table. Figures (PNG + JSON of the same numbers) go to ``--out``.
 
@@ -11,6 +11,21 @@ Prints one flat JSON object (``--json``) or a table. Figures (PNG + JSON of the 
 - ``track_*``: the twin (servo model) following a stroke in simulated time: clamp position error
   (max, rms, mm) and the lag (ms) minimising the error, for 10 s and 30 s strokes (the paper's Table I) and
   a 2 s stroke (where the speed limits start to bite).
+
+``--protocol mxt`` measures the MELFA real-time external control link instead (nothing else): the bridge's
+:class:`~nodes.arm_bridge.link.ArmStream` + :class:`~nodes.arm_bridge.mxt_link.MxtLink` streaming MOVE packets
+to the MXT twin (:class:`~nodes.arm_controller_sim.mxt_twin.MxtTwin`) in another process over UDP on
+loopback, following a ±60° stroke, for ``--cycles`` cycles at ``--period`` (7.11 ms):
+
+- ``mxt_send_period_ms``, ``mxt_jitter_p50_ms`` / ``mxt_jitter_p99_ms`` / ``mxt_jitter_max_ms``: interval
+  between consecutive MOVE packets and its deviation |Δt − period| (the bridge is paced by the replies, so
+  this includes the twin's own scheduling);
+- ``mxt_rtt_p50_ms`` / ``mxt_rtt_p99_ms``: packet → reply round trip (the reply leaves at the twin's next
+  cycle, so up to one period is by design);
+- ``mxt_lost`` (never answered), ``mxt_late`` (answered after the next packet left), ``mxt_repeats``
+  (cycles that repeated the last command for want of a reply), ``mxt_refused``, ``mxt_sent``,
+  ``mxt_replies``; twin side: ``twin_tick_jitter_p50_ms`` / ``p99``, ``twin_missed_cycles`` (control cycles
+  without a packet), ``twin_refused``.
 """
 
 from __future__ import annotations
@@ -42,7 +57,9 @@ from nodes.arm_bridge.tracking import TargetTracker
 from nodes.arm_controller_sim.controller import ControllerCore
 
 PERIOD = 0.0071
-EPILOG = "example: flexsheet bench arm --json --cycles 2000 --out docs/figures/arm"
+MXT_PERIOD = 0.00711
+EPILOG = ("examples:\n  flexsheet bench arm --json --cycles 2000 --out docs/figures/arm\n"
+          "  flexsheet bench arm --protocol mxt --json --cycles 10000 --out docs/figures/arm")
 
 
 def _clamp(side: str, theta: float, stretch: float = 0.05) -> np.ndarray:
@@ -150,6 +167,7 @@ def _twin_process(q, port_queue, stop_event) -> None:
 def bench_cycle(n_cycles: int) -> dict:
     """Stream ``n_cycles`` cycles to a twin in another process; interval statistics (ms)."""
     from nodes.arm_bridge.link import ArmStream
+    from nodes.arm_bridge.modbus_link import ModbusLink
 
     ctx = mp.get_context("spawn")
     port_q, stop = ctx.Queue(), ctx.Event()
@@ -160,7 +178,7 @@ def bench_cycle(n_cycles: int) -> dict:
         kin = ArmKinematics("left", LEFT_BASE, Q_LOWER + 0.02, Q_UPPER - 0.02)
         tr = TargetTracker(kin, target_timeout=1e9)
         lim = StreamLimiter(home_joints("left"), PERIOD, 0.5 * QD_MAX, QD_MAX, Q_LOWER, Q_UPPER, 0.02)
-        stream = ArmStream(tr, lim, "127.0.0.1", port, request_timeout=0.5)
+        stream = ArmStream(tr, lim, ModbusLink("127.0.0.1", port, request_timeout=0.5))
         stream.cycle_times = []
         deadlines: list[float] = []
         stream.on_cycle = lambda rep: deadlines.append(rep.t_deadline)
@@ -195,6 +213,115 @@ def bench_cycle(n_cycles: int) -> dict:
             "reconnects": stream.reconnects, "intervals_ms": (iv * 1e3).tolist()}
 
 
+def _mxt_twin_process(q, period, port_queue, stop_event, result_queue) -> None:
+    from nodes.arm_controller_sim.mxt_twin import MxtCore, MxtTwin
+
+    async def main():
+        core = MxtCore(np.array(q), period=period, timeout=0.0, now=time.monotonic())
+        twin = MxtTwin(core, "127.0.0.1", 0)
+        twin.tick_times = []
+        port_queue.put(await twin.start())
+        while not stop_event.is_set():
+            await asyncio.sleep(0.05)
+        await twin.stop()
+        iv = np.diff(np.array(twin.tick_times[100:]))
+        result_queue.put({"twin_tick_jitter_p50_ms": float(np.median(np.abs(iv - period)) * 1e3),
+                          "twin_tick_jitter_p99_ms": float(np.percentile(np.abs(iv - period), 99) * 1e3),
+                          "twin_missed_cycles": core.missed_cycles, "twin_refused": core.refused,
+                          "twin_moves": core.moves, "twin_replied": twin.replied})
+    asyncio.run(main())
+
+
+def bench_mxt(n_cycles: int, period: float = MXT_PERIOD) -> dict:
+    """Stream ``n_cycles`` MXT cycles to a twin in another process (see module doc); statistics in ms."""
+    from nodes.arm_bridge.link import ArmStream
+    from nodes.arm_bridge.mxt_link import MxtLink
+
+    ctx = mp.get_context("spawn")
+    port_q, stop, res_q = ctx.Queue(), ctx.Event(), ctx.Queue()
+    proc = ctx.Process(target=_mxt_twin_process, args=(home_joints("left").tolist(), period, port_q, stop, res_q),
+                       daemon=True)
+    proc.start()
+    twin_res: dict = {}
+    try:
+        port = port_q.get(timeout=60)
+        kin = ArmKinematics("left", LEFT_BASE, Q_LOWER + 0.02, Q_UPPER - 0.02)
+        tr = TargetTracker(kin, target_timeout=1e9)
+        lim = StreamLimiter(home_joints("left"), period, 0.5 * QD_MAX, QD_MAX, Q_LOWER, Q_UPPER, 0.02)
+        link = MxtLink("127.0.0.1", port, period=period, lost_cycles=10 ** 9, record=True)
+        stream = ArmStream(tr, lim, link)
+        done = [0]
+
+        def progress(rep) -> None:
+            done[0] += 1
+            if done[0] % 1000 == 0:
+                print(f"  mxt: {done[0]}/{n_cycles} cycles, lost {link.lost}, late {link.late}", file=sys.stderr)
+        stream.on_cycle = progress
+
+        async def run():
+            tr.seed(home_joints("left"))
+            k = 0
+
+            async def feeder():
+                nonlocal k
+                while True:
+                    th = math.radians(60.0) * math.sin(2 * math.pi * k / 480.0)
+                    tr.set_target(_clamp("left", th), float(k), time.time())
+                    k += 1
+                    await asyncio.sleep(1.0 / 48.0)
+            f = asyncio.get_running_loop().create_task(feeder())
+            await stream.run(n_cycles + 100)
+            f.cancel()
+            await stream.stop(end=True)
+        asyncio.run(run())
+    finally:
+        stop.set()
+        try:
+            twin_res = res_q.get(timeout=30)
+        except Exception:  # noqa: BLE001 - the twin's numbers are optional
+            twin_res = {}
+        proc.join(timeout=5)
+        if proc.is_alive():
+            proc.terminate()
+    t = np.array(link.send_times[101:])          # MOVE packets after the first 100 (warm-up)
+    iv = np.diff(t)
+    rtt = np.array(link.rtts[100:])
+    dev = np.abs(iv - period)
+    out = {"mxt_period_ms": period * 1e3, "mxt_cycles": int(len(iv)),
+           "mxt_send_period_ms": float(iv.mean() * 1e3),
+           "mxt_jitter_p50_ms": float(np.median(dev) * 1e3), "mxt_jitter_p99_ms": float(np.percentile(dev, 99) * 1e3),
+           "mxt_jitter_max_ms": float(dev.max() * 1e3),
+           "mxt_rtt_p50_ms": float(np.median(rtt) * 1e3), "mxt_rtt_p99_ms": float(np.percentile(rtt, 99) * 1e3)}
+    out.update({f"mxt_{k}": v for k, v in link.counters().items() if k in ("sent", "replies", "lost", "late",
+                                                                            "repeats", "refused", "unmatched")})
+    out.update(twin_res)
+    out["intervals_ms"] = (iv * 1e3).tolist()
+    return out
+
+
+def _mxt_figure(out: Path, res: dict, iv: list) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+    ax[0].hist(iv, bins=120, log=True)
+    ax[0].axvline(res["mxt_period_ms"], color="k", ls="--")
+    ax[0].set_xlabel("interval between MOVE packets [ms]")
+    ax[0].set_ylabel("count")
+    ax[0].set_title(f"MXT stream, jitter p50 {res['mxt_jitter_p50_ms']:.2f} / p99 {res['mxt_jitter_p99_ms']:.2f} ms")
+    ax[1].plot(np.arange(len(iv)), iv, ",")
+    ax[1].set_xlabel("cycle")
+    ax[1].set_ylabel("interval [ms]")
+    ax[1].set_title(f"{res['mxt_cycles']} cycles: lost {res['mxt_lost']}, late {res['mxt_late']}, "
+                    f"repeats {res['mxt_repeats']}")
+    fig.tight_layout()
+    fig.savefig(out / "arm_bench_mxt.png", dpi=110)
+    plt.close(fig)
+    (out / "arm_bench_mxt.json").write_text(json.dumps(res, indent=2))
+
+
 def _figures(out: Path, res: dict, iv: list, tracks: list) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -227,16 +354,29 @@ def _figures(out: Path, res: dict, iv: list, tracks: list) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """CLI entry: ``flexsheet bench arm [--json] [--cycles N] [--out DIR]``."""
+    """CLI entry: ``flexsheet bench arm [--protocol modbus|mxt] [--json] [--cycles N] [--out DIR]``."""
     ap = argparse.ArgumentParser(prog="flexsheet bench arm", description=__doc__.splitlines()[0], epilog=EPILOG,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--json", action="store_true", help="print one flat JSON object")
     ap.add_argument("--cycles", type=int, default=10000, help="bridge cycles to time (default 10000)")
-    ap.add_argument("--out", type=Path, default=None, help="write arm_bench.png/.json here")
+    ap.add_argument("--out", type=Path, default=None, help="write arm_bench.png/.json (arm_bench_mxt.*) here")
+    ap.add_argument("--protocol", choices=("modbus", "mxt"), default="modbus",
+                    help="modbus: IK, Modbus cycle timing, tracking (default); mxt: the MXT/UDP link only")
+    ap.add_argument("--period", type=float, default=MXT_PERIOD,
+                    help=f"mxt: controller cycle, s (default {MXT_PERIOD}; 0.0035 for CR800-R/D)")
     args = ap.parse_args(argv)
     if args.cycles < 10:
         ap.error(f"--cycles must be >= 10, got {args.cycles}")
+    if not 0.0005 <= args.period <= 0.1:
+        ap.error(f"--period must be in 0.0005..0.1 s, got {args.period}")
     res: dict = {}
+    if args.protocol == "mxt":
+        res = bench_mxt(args.cycles, args.period)
+        iv = res.pop("intervals_ms")
+        if args.out is not None:
+            _mxt_figure(args.out, res, iv)
+        _print(res, args.json)
+        return 0
     res.update(bench_ik())
     cyc = bench_cycle(args.cycles)
     iv = cyc.pop("intervals_ms")
@@ -248,13 +388,17 @@ def main(argv: list[str] | None = None) -> int:
             res[f"{key}_{f}"] = tk[f]
     if args.out is not None:
         _figures(args.out, res, iv, tracks)
+    _print(res, args.json)
+    return 0
+
+
+def _print(res: dict, as_json: bool) -> None:
     flat = {k: v for k, v in res.items() if not isinstance(v, dict)}
-    if args.json:
+    if as_json:
         print(json.dumps(flat))
     else:
         for k, v in flat.items():
             print(f"{k:36s} {v:.4g}" if isinstance(v, float) else f"{k:36s} {v}")
-    return 0
 
 
 if __name__ == "__main__":

@@ -36,7 +36,12 @@ def check_point(name: str, p, dim: int = 3) -> np.ndarray:
 
 def check_vector(name: str, v, dim: int = 3, nonzero: bool = False) -> np.ndarray:
     """A finite vector (``dim``,); with ``nonzero`` its norm must exceed 1e-12. Raises ``ValueError``."""
-    a = check_point(name, v, dim)
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a finite ({dim},) vector, got {v!r}") from None
+    if a.shape != (dim,) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be a finite ({dim},) vector, got {_short(v)}")
     if nonzero and float(np.linalg.norm(a)) <= 1e-12:
         raise ValueError(f"{name} must be non-zero, got {_short(v)}")
     return a

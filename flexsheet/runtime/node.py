@@ -10,10 +10,21 @@ A node is a thin shell around a pure algorithm module::
             self.timer(0.01, self.on_timer)
         def on_fingertip(self, msg): ...            # sync: runs in this subscription's worker thread
 
-Threading model: the asyncio loop owns the sockets. Each subscription has its own queue and consumer
-task; an ``async def`` handler runs on the loop, a plain ``def`` handler runs in the subscription's own
-worker thread (one thread per subscription, so messages of one topic stay in order and a slow handler
-never stalls the loop or other topics). :meth:`Publisher.publish` is thread-safe.
+Threading model: the asyncio loop owns the sockets' reads. Each subscription has its own queue and consumer:
+an ``async def`` handler runs on the loop (a consumer task), a plain ``def`` handler runs in the
+subscription's own worker thread (one thread per subscription, so messages of one topic stay in order and a
+slow handler never stalls the loop or other topics; the thread waits on its queue, so a message costs one
+thread wake-up and no loop iteration). :meth:`Publisher.publish` is thread-safe: from a worker thread it
+sends directly (the publisher socket has a lock), without waking the loop.
+
+Publishing: a message is encoded once, and only when a subscriber outside this process may want it (the
+publisher socket tracks its subscriptions, :class:`flexsheet.runtime.transport.XPub`) or the topic is latched.
+In a composable container (:mod:`flexsheet.runtime.container`) the nodes of the container get the frozen
+message object itself (its arrays as read-only views), never a copy.
+
+Time: :meth:`Node.now`, the header stamps of :meth:`Publisher.header` and :meth:`Node.timer` read the node's
+:class:`Clock` — the wall clock, or in a lockstep replay the bag's clock (:class:`SimClock`, like ROS's
+``use_sim_time``). A node that wants replayable time reads ``self.now()``, never ``time.time()``.
 
 QoS (per subscription): ``LATEST`` keeps only the newest message (depth 1: stale ones are dropped and
 counted), ``KEEP_ALL`` queues everything (bounded by ``depth``, default 1 000 000, drops counted),
@@ -30,14 +41,15 @@ import asyncio
 import collections
 import enum
 import inspect
+import itertools
 import logging
 import os
+import queue
 import signal
 import socket
 import threading
 import time
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -49,7 +61,7 @@ from messages import Header, Heartbeat, Message, Topic, TopicStats
 from messages import topics as T
 
 __all__ = ["Node", "NodeConfig", "QoS", "InputRejected", "ConfigError", "EXIT_CONFIG", "Publisher", "Subscription",
-           "EmptyParams", "ticks"]
+           "EmptyParams", "ticks", "Clock", "SimClock", "SimTimer", "WALL_CLOCK"]
 
 #: exit status of a node whose configuration is unusable (BSD ``sysexits.h`` EX_CONFIG): a bad param, a missing
 #: or unreadable file a param names, a ``ValueError`` from :meth:`Node.setup`. The supervisor never respawns it.
@@ -101,6 +113,83 @@ class NodeConfig:
     display_calib: str | None = None  # the launch file's display calibration (display.yaml), path or None
 
 
+class Clock:
+    """The time a node reads (:meth:`Node.now`, header stamps, timers): here the wall clock, ``time.time()`` s."""
+
+    simulated = False
+
+    def now(self) -> float:
+        return time.time()
+
+
+#: the wall clock every node uses unless its container replays a bag in lockstep
+WALL_CLOCK = Clock()
+
+
+class SimTimer:
+    """A :meth:`Node.timer` on a :class:`SimClock`: fired by the lockstep driver when the replayed time passes
+    ``due`` (s); ``cancel()`` stops it."""
+
+    __slots__ = ("period", "callback", "node", "due", "index", "cancelled")
+
+    def __init__(self, period: float, callback: Callable, node: Node, due: float | None, index: int) -> None:
+        self.period, self.callback, self.node, self.due, self.index = period, callback, node, due, index
+        self.cancelled = False
+
+    def cancel(self) -> None:
+        self.cancelled = True
+
+    def done(self) -> bool:
+        return self.cancelled
+
+
+class SimClock(Clock):
+    """Replayed time for a lockstep replay (ROS ``use_sim_time``): :meth:`set` by the player to each bag
+    message's log time before it is delivered; never goes backwards. Reads 0.0 until first set.
+
+    Timers created on it (:meth:`add_timer`) are fired by :mod:`flexsheet.runtime.lockstep` in due order (ties
+    in creation order), so two replays of one bag run every callback at the same replayed instants.
+    """
+
+    simulated = True
+
+    def __init__(self) -> None:
+        self._t: float | None = None
+        self.timers: list[SimTimer] = []
+        self._count = itertools.count()
+
+    @property
+    def started(self) -> bool:
+        return self._t is not None
+
+    def now(self) -> float:
+        t = self._t
+        return 0.0 if t is None else t
+
+    def set(self, t: float) -> None:
+        """Move the clock to ``t`` s (a smaller ``t`` keeps the clock where it is). The first call anchors the
+        timers created before it: their first tick is ``t + period``."""
+        t = float(t)
+        if self._t is None:
+            for tm in self.timers:
+                if tm.due is None:
+                    tm.due = t + tm.period
+            self._t = t
+        elif t > self._t:
+            self._t = t
+
+    def add_timer(self, period: float, callback: Callable, node: Node) -> SimTimer:
+        tm = SimTimer(period, callback, node, None if self._t is None else self._t + period, next(self._count))
+        self.timers.append(tm)
+        return tm
+
+    def next_due(self, t: float) -> SimTimer | None:
+        """The live timer due soonest at or before ``t`` (None if none); cancelled timers are dropped."""
+        self.timers = [tm for tm in self.timers if not tm.cancelled]
+        due = [tm for tm in self.timers if tm.due is not None and tm.due <= t]
+        return min(due, key=lambda tm: (tm.due, tm.index)) if due else None
+
+
 class _Stats:
     __slots__ = ("count", "dropped", "rejected", "last_count", "rate")
 
@@ -115,90 +204,181 @@ class Publisher:
     def __init__(self, node: Node, topic: Topic) -> None:
         self.node, self.topic = node, topic
         self.name = topic.name
-        self._seq = 0
-        self._lock = threading.Lock()
+        self.name_b = topic.name.encode()
+        self.latched = bool(topic.latched)
+        self._seq = itertools.count()  # next() is atomic under the GIL: no lock per message
         self.stats = _Stats()
 
     def header(self, frame_id: str = "display", stamp: float | None = None) -> Header:
-        """Next :class:`Header` for this publisher: ``seq`` incremented, ``stamp`` = ``time.time()`` if None."""
-        with self._lock:
-            seq = self._seq
-            self._seq += 1
-        return Header(stamp=time.time() if stamp is None else float(stamp), frame_id=frame_id, seq=seq)
+        """Next :class:`Header` for this publisher: ``seq`` incremented, ``stamp`` = :meth:`Node.now` if None."""
+        return Header(stamp=self.node._clock.now() if stamp is None else float(stamp), frame_id=frame_id,
+                      seq=next(self._seq))
 
     def publish(self, msg: Message) -> None:
-        """Encode and send ``msg``. Raises ``TypeError`` naming expected vs given type."""
+        """Deliver ``msg`` to the subscribers in this process (the object itself) and, encoded once, to those
+        outside it (only when there are any, or the topic is latched). Raises ``TypeError`` naming expected vs
+        given type."""
         if type(msg) is not self.topic.type:
             raise TypeError(f"{self.name}: expected {self.topic.type.__name__}, got {type(msg).__name__}")
-        frames = encode(self.name, msg)
         node = self.node
-        if node._loop_thread is threading.current_thread():
-            node._send(self, frames)
-        else:
-            node._loop.call_soon_threadsafe(node._send, self, frames)
+        self.stats.count += 1
+        bus = node._bus
+        frames = bus.publish(self, msg) if bus is not None else None
+        tr = node.transport
+        if self.latched or tr.wants(self.name_b):
+            if frames is None:
+                frames = encode(self.name, msg)
+            if tr.threadsafe_send or threading.get_ident() == node._loop_tid:
+                node._send(self, frames)
+            else:
+                node._loop.call_soon_threadsafe(node._send, self, frames)
+
+
+_thread_time = time.thread_time
 
 
 class Subscription:
-    """One typed subscription: its queue, QoS, handler, consumer task and statistics."""
+    """One typed subscription: its queue, QoS, handler, consumer (task or worker thread) and statistics.
+
+    Queue items are wire frames (decoded and validated by the consumer: the wire boundary) or, from a node of
+    the same container, the message object itself (already validated when it was built).
+    """
 
     def __init__(self, node: Node, topic: Topic, handler: Callable, qos: QoS, depth: int | None) -> None:
         self.node, self.topic, self.handler, self.qos = node, topic, handler, qos
+        self.name_b = topic.name.encode()
         self.depth = depth or (1 if qos in (QoS.LATEST, QoS.LATCHED) else 1_000_000)
         self.queue: collections.deque = collections.deque()
-        self.event = asyncio.Event()
         self.is_async = inspect.iscoroutinefunction(handler)
-        self.executor = None if self.is_async else ThreadPoolExecutor(1, thread_name_prefix=f"sub{topic.name}")
+        self.event = asyncio.Event() if self.is_async else None
+        self._wake: queue.SimpleQueue | None = None if self.is_async else queue.SimpleQueue()
+        self._lock = threading.Lock()
+        self._waiting = False
+        self._closed = False
         self.stats = _Stats()
+        self.cpu_s = 0.0  # CPU time of the sync handler (its worker thread), s
         self.last_seq: int | None = None
-        self.last_meta: bytes | None = None
-        self.task: asyncio.Task | None = None
+        self.last_meta: Any = None
+        self.task: asyncio.Task | threading.Thread | None = None  # the consumer, once started
 
-    def push(self, frames: list) -> None:
-        if self.qos is QoS.LATCHED:
-            key = b"\0".join(bytes(f) for f in frames[1:])
+    def start(self, loop: asyncio.AbstractEventLoop) -> None:
+        """Start the consumer: a task on ``loop`` (async handler) or the worker thread (sync handler)."""
+        if self.is_async:
+            self.task = loop.create_task(self.run())
+        else:
+            self.task = threading.Thread(target=self._work, name=f"sub{self.topic.name}@{self.node.name}",
+                                         daemon=True)
+            self.task.start()
+
+    def _fresh_latched(self, item: Any) -> bool:
+        if type(item) is list:
+            key = b"\0".join(bytes(f) for f in item[1:])
             if key == self.last_meta:  # the same latched value resent for another late joiner
-                return
+                return False
             self.last_meta = key
-        if len(self.queue) >= self.depth:
-            self.queue.popleft()
+        else:
+            if item is self.last_meta:
+                return False
+            self.last_meta = item
+        return True
+
+    def push(self, item: Any) -> None:
+        """Queue frames or a message (any thread); QoS: a full queue drops its oldest item (counted)."""
+        if self.qos is QoS.LATCHED and not self._fresh_latched(item):
+            return
+        sched = self.node._lockstep
+        if sched is not None:
+            sched.enqueue(self, item)
+            return
+        if self.is_async:
+            node = self.node
+            if threading.get_ident() != node._loop_tid:
+                node._loop.call_soon_threadsafe(self._push_async, item)
+            else:
+                self._push_async(item)
+            return
+        q = self.queue
+        with self._lock:
+            if len(q) >= self.depth:
+                q.popleft()
+                self.stats.dropped += 1
+                q.append(item)
+                return  # the dropped item's wake-up token serves this one
+            q.append(item)
+        self._wake.put(None)
+
+    def _push_async(self, item: Any) -> None:
+        q = self.queue
+        if len(q) >= self.depth:
+            q.popleft()
             self.stats.dropped += 1
-        self.queue.append(frames)
-        self.event.set()
+        q.append(item)
+        if self._waiting:
+            self.event.set()
 
     async def run(self) -> None:
-        loop = asyncio.get_running_loop()
+        """Consumer task of an async handler."""
+        q = self.queue
         while True:
-            if not self.queue:
+            if not q:
                 self.event.clear()
-                await self.event.wait()
+                self._waiting = True
+                try:
+                    await self.event.wait()
+                finally:
+                    self._waiting = False
                 continue
-            frames = self.queue.popleft()
-            if self.is_async:
-                msg = self._decode(frames)
-                if msg is not None:
-                    await self._call_async(msg)
-            else:
-                await loop.run_in_executor(self.executor, self._decode_and_call, frames)
+            msg = self._accept(q.popleft())
+            if msg is not None:
+                await self._call_async(msg)
 
-    def _decode(self, frames: list) -> Message | None:
-        try:
-            msg = decode(frames, self.topic)
-        except DecodeError as exc:
-            self.stats.rejected += 1
-            self.node._reject(str(exc))
-            return None
+    def _work(self) -> None:
+        """Worker thread of a sync handler: one wake-up token per queued item."""
+        get, q, lock = self._wake.get, self.queue, self._lock
+        while True:
+            get()
+            if self._closed:
+                return
+            with lock:
+                if not q:
+                    continue
+                item = q.popleft()
+            msg = self._accept(item)
+            if msg is not None:
+                self._call_sync(msg)
+
+    async def handle_now(self, item: Any) -> None:
+        """Handle one item to completion on the loop (lockstep replay: deterministic order, one at a time)."""
+        msg = self._accept(item)
+        if msg is None:
+            return
+        if self.is_async:
+            await self._call_async(msg)
+        else:
+            self._call_sync(msg)
+
+    def _accept(self, item: Any) -> Message | None:
+        """The message of a queue item (wire frames decoded and validated), counted; None if rejected."""
+        if type(item) is list:
+            try:
+                msg = decode(item, self.topic)
+            except DecodeError as exc:
+                self.stats.rejected += 1
+                self.node._reject(str(exc))
+                return None
+        else:
+            msg = item
         seq = msg.header.seq
-        if (self.last_seq is not None and seq > self.last_seq + 1 and self.qos is QoS.KEEP_ALL
+        last = self.last_seq
+        if (last is not None and seq > last + 1 and self.qos is QoS.KEEP_ALL
                 and self.topic.name != T.DIAGNOSTICS.name):  # every node publishes /diagnostics
-            self.stats.dropped += seq - self.last_seq - 1  # lost on the wire (HWM)
+            self.stats.dropped += seq - last - 1  # lost on the wire (HWM)
         self.last_seq = seq
         self.stats.count += 1
         return msg
 
-    def _decode_and_call(self, frames: list) -> None:
-        msg = self._decode(frames)
-        if msg is None:
-            return
+    def _call_sync(self, msg: Message) -> None:
+        t0 = _thread_time()
         try:
             self.handler(msg)
         except ValueError as exc:  # InputRejected included
@@ -206,6 +386,8 @@ class Subscription:
             self.node._reject(f"{self.topic.name}: {exc}")
         except Exception:  # noqa: BLE001 - a handler bug must not kill the node; logged with traceback
             self.node._handler_error(self.topic.name)
+        finally:
+            self.cpu_s += _thread_time() - t0
 
     async def _call_async(self, msg: Message) -> None:
         try:
@@ -217,10 +399,11 @@ class Subscription:
             self.node._handler_error(self.topic.name)
 
     def close(self) -> None:
-        if self.task is not None:
+        self._closed = True
+        if isinstance(self.task, asyncio.Task):
             self.task.cancel()
-        if self.executor is not None:
-            self.executor.shutdown(wait=False, cancel_futures=True)
+        elif self._wake is not None:
+            self._wake.put(None)
 
 
 class Node:
@@ -240,15 +423,24 @@ class Node:
         self.params = self.Params.model_validate(config.params)
         self.log = logging.getLogger(config.name)
         self.transport = transport or ZmqTransport(config.endpoint, config.peers, curve=config.curve)
+        self._bus = getattr(self.transport, "bus", None)  # the container's in-process bus, if any
+        attach = getattr(self.transport, "attach", None)
+        if attach is not None:
+            attach(self)
+        self._clock: Clock = getattr(self._bus, "clock", None) or WALL_CLOCK
+        self._lockstep = getattr(self._bus, "lockstep", None)
         self._publishers: dict[str, Publisher] = {}
         self._subs: dict[str, list[Subscription]] = {}
-        self._timers: list[asyncio.Task] = []
+        self._subs_b: dict[bytes, list[Subscription]] = {}
+        self._timers: list = []
         self._stop: asyncio.Event | None = None  # created in run(), inside the loop
         self._loop: asyncio.AbstractEventLoop | None = None
         self._loop_thread: threading.Thread | None = None
+        self._loop_tid: int | None = None
         self._started = time.monotonic()
         self.rejected_total = 0
         self.errors_total = 0
+        self.timer_cpu_s = 0.0
         self.last_rejection = ""
         self.state_message = ""
         self._last_log = 0.0
@@ -262,8 +454,14 @@ class Node:
         """Release resources on shutdown. Override if needed."""
 
     def now(self) -> float:
-        """Current time, s (``time.time()``, the clock of ``Header.stamp``)."""
-        return time.time()
+        """Current time, s: ``time.time()`` (the clock of ``Header.stamp``), or the replayed bag time in a
+        lockstep replay (:class:`SimClock`)."""
+        return self._clock.now()
+
+    @property
+    def clock(self) -> Clock:
+        """This node's :class:`Clock` (``clock.simulated`` is True in a lockstep replay)."""
+        return self._clock
 
     def topic(self, topic: Topic) -> Topic:
         """``topic`` after this node's launch-file remaps."""
@@ -286,55 +484,86 @@ class Node:
         topic = self.topic(topic)
         sub = Subscription(self, topic, handler, qos, depth)
         self._subs.setdefault(topic.name, []).append(sub)
+        self._subs_b.setdefault(sub.name_b, []).append(sub)
+        if self._bus is not None:
+            self._bus.changed()
         if self._loop is not None:
             self._start_sub(sub)
         return sub
 
-    def timer(self, period: float, callback: Callable[[], Any]) -> asyncio.Task:
-        """Call ``callback`` every ``period`` s (drift-free schedule). Sync callbacks run on the loop."""
+    def timer(self, period: float, callback: Callable[[], Any]):
+        """Call ``callback`` every ``period`` s of this node's clock (drift-free schedule). Sync callbacks run on
+        the loop. Returns the timer's task (or a :class:`SimTimer` in a lockstep replay): ``.cancel()`` stops it."""
         if not period > 0:
             raise ValueError(f"timer period must be > 0 s, got {period!r}")
+        if self._clock.simulated:
+            tm = self._clock.add_timer(period, callback, self)
+            self._timers.append(tm)
+            return tm
+        return self._wall_timer(period, callback)
+
+    def _wall_timer(self, period: float, callback: Callable[[], Any]) -> asyncio.Task:
         is_async = inspect.iscoroutinefunction(callback)
 
         async def run() -> None:
             async for _ in ticks(period):
-                try:
-                    if is_async:
-                        await callback()
-                    else:
-                        callback()
-                except ValueError as exc:
-                    self._reject(f"timer: {exc}")
-                except Exception:  # noqa: BLE001
-                    self._handler_error("timer")
+                await self._fire(callback, is_async)
 
         task = asyncio.get_running_loop().create_task(run())
         self._timers.append(task)
         return task
+
+    async def _fire(self, callback: Callable[[], Any], is_async: bool | None = None) -> None:
+        """Run one timer callback; a ``ValueError`` is a rejection, anything else a logged handler error."""
+        t0 = _thread_time()
+        try:
+            if is_async if is_async is not None else inspect.iscoroutinefunction(callback):
+                await callback()
+            else:
+                callback()
+        except ValueError as exc:
+            self._reject(f"timer: {exc}")
+        except Exception:  # noqa: BLE001
+            self._handler_error("timer")
+        finally:
+            self.timer_cpu_s += _thread_time() - t0
 
     def shutdown(self) -> None:
         """Ask the node to stop (thread-safe)."""
         if self._loop is not None and self._stop is not None:
             self._loop.call_soon_threadsafe(self._stop.set)
 
+    def cpu_seconds(self) -> float:
+        """CPU time spent in this node's sync handlers and timer callbacks so far, s (``time.thread_time``);
+        decoding, the loop and threads the node starts itself are not included."""
+        return self.timer_cpu_s + sum(s.cpu_s for lst in self._subs.values() for s in lst)
+
     # ------------------------------------------------------------------ runtime
     def _start_sub(self, sub: Subscription) -> None:
+        sub.start(self._loop)
         self.transport.subscribe(sub.topic.name)
-        sub.task = self._loop.create_task(sub.run())
 
     def _send(self, pub: Publisher, frames: list) -> None:
-        pub.stats.count += 1
-        if pub.topic.latched:
-            self.transport.set_latched(pub.name, frames)
-        if not self.transport.send(frames):
+        tr = self.transport
+        if pub.latched:
+            tr.set_latched(pub.name, frames)
+        if not tr.send_remote(frames):
             pub.stats.dropped += 1
 
     def _on_frames(self, frames: list) -> None:
-        topic = bytes(frames[0]).decode(errors="replace")
-        subs = self._subs.get(topic)
+        """Wire frames for this node (from the transport, on the loop): queue them on the topic's subscriptions."""
+        t = frames[0]
+        subs = self._subs_b.get(t if type(t) is bytes else bytes(t))
         if subs:
             for sub in subs:
                 sub.push(frames)
+
+    def _on_local(self, topic: bytes, msg: Message) -> None:
+        """A message object from a node of the same container (any thread)."""
+        subs = self._subs_b.get(topic)
+        if subs:
+            for sub in subs:
+                sub.push(msg)
 
     def _reject(self, reason: str) -> None:
         self.rejected_total += 1
@@ -356,7 +585,8 @@ class Node:
             self._suppressed += 1
 
     def heartbeat(self) -> Heartbeat:
-        """Current diagnostics as a :class:`Heartbeat` (rates over the last heartbeat period)."""
+        """Current diagnostics as a :class:`Heartbeat` (rates over the last heartbeat period; stamped with the
+        wall clock even in a lockstep replay, since heartbeats tell liveness)."""
         period = self.config.heartbeat_period
         pubs, subs = [], []
         for pub in self._publishers.values():
@@ -371,9 +601,9 @@ class Node:
                 subs.append(TopicStats(topic=sub.topic.name, type=sub.topic.type.SCHEMA, qos=sub.qos.value,
                                        rate_hz=s.rate, count=s.count, dropped=s.dropped, rejected=s.rejected))
         state = "error" if self.errors_total else ("warn" if self.rejected_total else "ok")
-        return Heartbeat(header=self._hb_pub.header("display"), node=self.name, node_type=self.config.node_type,
-                         host=self.config.host, pid=os.getpid(), endpoint=self.transport.endpoint,
-                         uptime=time.monotonic() - self._started, state=state,
+        return Heartbeat(header=self._hb_pub.header("display", time.time()), node=self.name,
+                         node_type=self.config.node_type, host=self.config.host, pid=os.getpid(),
+                         endpoint=self.transport.endpoint, uptime=time.monotonic() - self._started, state=state,
                          message=self.state_message, publishers=pubs, subscriptions=subs,
                          rejected_total=self.rejected_total, last_rejection=self.last_rejection, period=period)
 
@@ -381,6 +611,7 @@ class Node:
         """Start the transport, call :meth:`setup`, serve until SIGINT/SIGTERM or :meth:`shutdown`, tear down."""
         self._loop = asyncio.get_running_loop()
         self._loop_thread = threading.current_thread()
+        self._loop_tid = threading.get_ident()
         self._stop = asyncio.Event()
         if install_signals:
             for sig in (signal.SIGINT, signal.SIGTERM):
@@ -398,7 +629,7 @@ class Node:
                 for sub in lst:
                     if sub.task is None:
                         self._start_sub(sub)
-            self.timer(self.config.heartbeat_period, lambda: self._hb_pub.publish(self.heartbeat()))
+            self._wall_timer(self.config.heartbeat_period, lambda: self._hb_pub.publish(self.heartbeat()))
             self.log.info("%s up: endpoint %s, %d peers, publishes %s", self.name, self.transport.endpoint or "-",
                           len(getattr(self.transport, "peers", [])),
                           ", ".join(n for n in self._publishers if n != T.DIAGNOSTICS.name) or "-")

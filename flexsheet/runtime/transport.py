@@ -10,6 +10,11 @@ A transport moves encoded multipart frames (see :mod:`flexsheet.runtime.codec`) 
   is drained with non-blocking ``recv`` — no ``zmq.asyncio`` futures on the hot path (pyzmq's own
   ``zmq/asyncio.py`` allocates a future per receive, which is what doubles its latency).
 * :class:`InProcTransport` — the same interface in one process, for node tests (:mod:`flexsheet.runtime.testing`).
+* :class:`XPub` — one bound XPUB socket, shared by :class:`ZmqTransport` and the composable container
+  (:mod:`flexsheet.runtime.container`): a send is thread-safe (one lock per socket, so a node's worker thread
+  sends without waking the event loop), and the socket's subscriptions are tracked (``XPUB_VERBOSE``: every
+  subscribe, and an unsubscribe when the last subscriber of a prefix leaves or disconnects), so a publisher
+  knows whether anyone outside its process wants a topic (:meth:`XPub.wants`) and encodes only then.
 
 Errors: :class:`TransportError` when an endpoint cannot be bound (address in use, bad address).
 """
@@ -18,12 +23,13 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import threading
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 import zmq
 
-__all__ = ["Transport", "ZmqTransport", "InProcTransport", "TransportError", "CurveConfig"]
+__all__ = ["Transport", "ZmqTransport", "InProcTransport", "TransportError", "CurveConfig", "XPub"]
 
 log = logging.getLogger(__name__)
 # plain ints: pyzmq's enum flags cost a Python enum operation each (measurable per message)
@@ -67,16 +73,32 @@ class _AllowList:
 
 
 class Transport:
-    """Interface: ``start``, ``send``, ``subscribe``, ``set_latched``, ``close``. All called on the loop thread."""
+    """Interface: ``start``, ``send``, ``subscribe``, ``set_latched``, ``close`` (called on the loop thread), plus
+    ``wants`` and ``send_remote`` for the node's publish path.
+
+    ``threadsafe_send``: True when ``send``/``send_remote``/``set_latched``/``wants`` may be called from any
+    thread (else the node marshals them onto its loop). ``bus``: the in-process bus of a composable container
+    (:class:`flexsheet.runtime.container.Bus`), None for a node alone in its process.
+    """
 
     endpoint: str = ""
+    threadsafe_send: bool = False
+    bus = None
 
     async def start(self, on_frames: FramesHandler) -> None:
         raise NotImplementedError
 
     def send(self, frames: list) -> bool:
-        """Send one message; returns False if it was dropped (peer queue full)."""
+        """Send one message to every subscriber; returns False if it was dropped (peer queue full)."""
         raise NotImplementedError
+
+    def send_remote(self, frames: list) -> bool:
+        """Send one message to the subscribers outside this process (the node delivered it in-process)."""
+        return self.send(frames)
+
+    def wants(self, topic: bytes) -> bool:
+        """True if a subscriber that needs encoded frames may want ``topic`` (default: always)."""
+        return True
 
     def subscribe(self, topic: str) -> None:
         raise NotImplementedError
@@ -87,6 +109,130 @@ class Transport:
 
     def close(self) -> None:
         raise NotImplementedError
+
+
+def _allow_list(ctx: zmq.Context, curve: CurveConfig):
+    """Start a ZAP authenticator on ``ctx`` that admits ``curve.allowed_clients`` (returns it and its list)."""
+    from zmq.auth.thread import ThreadAuthenticator
+
+    auth = ThreadAuthenticator(ctx, log=log)
+    auth.start()
+    allow = _AllowList(curve.allowed_clients)
+    auth.configure_curve_callback("*", credentials_provider=allow)
+    return auth, allow
+
+
+class XPub:
+    """One bound XPUB socket: thread-safe :meth:`send`, latched values resent to late joiners, and the set of
+    topic prefixes its subscribers asked for (:meth:`wants`).
+
+    Created on the loop thread; :meth:`drain` is the loop's reader for the socket's FD. Every socket operation
+    takes ``lock`` (ZeroMQ sockets may change threads only across a full memory barrier, which the lock gives).
+    Raises :class:`TransportError` naming the endpoint when it cannot be bound.
+    """
+
+    def __init__(self, ctx: zmq.Context, endpoint: str, curve: CurveConfig | None, sndhwm: int,
+                 loop: asyncio.AbstractEventLoop) -> None:
+        self.lock = threading.Lock()
+        self.latched: dict[bytes, list] = {}
+        self.prefixes: set[bytes] = set()
+        self._wants: dict[bytes, bool] = {}
+        self._loop = loop
+        self.sock = ctx.socket(zmq.XPUB)
+        self.sock.setsockopt(zmq.LINGER, 0)
+        if curve is not None:
+            self.sock.curve_secretkey = curve.secret_key
+            self.sock.curve_publickey = curve.public_key
+            self.sock.curve_server = True
+        self.sock.setsockopt(zmq.SNDHWM, sndhwm)
+        self.sock.setsockopt(zmq.XPUB_VERBOSE, 1)
+        try:
+            self.sock.bind(endpoint)
+        except zmq.ZMQError as exc:
+            self.sock.close(linger=0)
+            raise TransportError(f"cannot bind publisher endpoint {endpoint!r}: {exc}") from None
+        self.endpoint = endpoint
+        if endpoint.endswith(":0") or endpoint.endswith(":*"):
+            self.endpoint = self.sock.getsockopt(zmq.LAST_ENDPOINT).decode()
+        self.fd = self.sock.getsockopt(zmq.FD)
+        loop.add_reader(self.fd, self.drain)
+
+    @property
+    def closed(self) -> bool:
+        return self.sock.closed
+
+    def wants(self, topic: bytes) -> bool:
+        """True if a subscriber of this socket asked for a prefix of ``topic`` (checks new subscriptions first
+        when the cached answer is no, so a subscriber that just joined is not missed)."""
+        if self._wants.get(topic):
+            return True
+        with self.lock:
+            self._drain_locked()
+            w = self._wants.get(topic)
+            if w is None:
+                w = self._wants[topic] = any(topic.startswith(p) for p in self.prefixes)
+        return w
+
+    def send(self, frames: list) -> bool:
+        """Send one multipart message without blocking (any thread); False if dropped or shut down."""
+        with self.lock:
+            sock = self.sock
+            if sock.closed:
+                return False  # shutting down: a late publish from a worker thread is dropped, not an error
+            try:
+                sock.send_multipart(frames, flags=_NOBLOCK, copy=False)
+                ok = True
+            except zmq.Again:
+                ok = False
+            except zmq.ZMQError:
+                return False
+            # any operation can change the socket's events without the FD firing again: look now
+            self._drain_locked()
+        return ok
+
+    def set_latched(self, topic: str, frames: list) -> None:
+        self.latched[topic.encode()] = frames
+
+    def drain(self) -> None:
+        """Handle pending subscription messages (the loop's reader callback; thread-safe)."""
+        with self.lock:
+            self._drain_locked()
+
+    def _drain_locked(self) -> None:
+        sock = self.sock
+        if sock.closed:
+            return
+        changed = False
+        while sock.getsockopt(_EVENTS) & _POLLIN:
+            try:
+                msg = sock.recv(_NOBLOCK)
+            except zmq.Again:
+                break
+            kind, prefix = msg[:1], msg[1:]
+            if kind == b"\x01":  # a subscription: resend latched values it matches
+                changed = changed or prefix not in self.prefixes
+                self.prefixes.add(prefix)
+                for topic, frames in self.latched.items():
+                    if topic.startswith(prefix):
+                        try:
+                            sock.send_multipart(frames, flags=_NOBLOCK, copy=False)
+                        except zmq.ZMQError:
+                            pass
+            elif kind == b"\x00":  # the last subscriber of this prefix left
+                changed = True
+                self.prefixes.discard(prefix)
+        if changed:
+            self._wants.clear()
+
+    def close(self) -> None:
+        with self.lock:
+            if self.sock.closed:
+                return
+            try:
+                self._loop.remove_reader(self.fd)
+            except Exception:  # noqa: BLE001 - loop may be closed already
+                pass
+            self.sock.close(linger=0)
 
 
 class ZmqTransport(Transport):
@@ -101,7 +247,11 @@ class ZmqTransport(Transport):
         Endpoints to connect the SUB socket to (every publisher of the graph; may include ``endpoint``).
     sndhwm, rcvhwm : int
         ZeroMQ high-water marks in messages (drops beyond them are counted by the node via seq gaps).
+
+    ``send`` is thread-safe (see :class:`XPub`); everything else runs on the loop thread.
     """
+
+    threadsafe_send = True
 
     def __init__(self, endpoint: str, peers: Iterable[str], *, sndhwm: int = 2000, rcvhwm: int = 20000,
                  curve: CurveConfig | None = None) -> None:
@@ -111,13 +261,17 @@ class ZmqTransport(Transport):
         self.allow: _AllowList | None = None
         self.peers = [p for p in dict.fromkeys(peers) if p]
         self.sndhwm, self.rcvhwm = sndhwm, rcvhwm
-        self._latched: dict[bytes, list] = {}
         self.ctx: zmq.Context | None = None
-        self.pub: zmq.Socket | None = None
+        self.xpub: XPub | None = None
         self.sub: zmq.Socket | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._on_frames: FramesHandler | None = None
         self._poll_task: asyncio.Task | None = None
+
+    @property
+    def pub(self) -> zmq.Socket | None:
+        """The bound XPUB socket (None without an endpoint)."""
+        return self.xpub.sock if self.xpub is not None else None
 
     async def start(self, on_frames: FramesHandler) -> None:
         self._loop = asyncio.get_running_loop()
@@ -125,47 +279,15 @@ class ZmqTransport(Transport):
         self.ctx = zmq.Context()  # one context per process, created inside the running loop
         curve = self.curve
         if curve is not None and self.endpoint:
-            from zmq.auth.thread import ThreadAuthenticator
-
-            self._auth = ThreadAuthenticator(self.ctx, log=log)
-            self._auth.start()
-            self.allow = _AllowList(curve.allowed_clients)
-            self._auth.configure_curve_callback("*", credentials_provider=self.allow)
+            self._auth, self.allow = _allow_list(self.ctx, curve)
         if self.endpoint:
-            self.pub = self.ctx.socket(zmq.XPUB)
-            self.pub.setsockopt(zmq.LINGER, 0)
-            if curve is not None:
-                self.pub.curve_secretkey = curve.secret_key
-                self.pub.curve_publickey = curve.public_key
-                self.pub.curve_server = True
-            self.pub.setsockopt(zmq.SNDHWM, self.sndhwm)
-            self.pub.setsockopt(zmq.XPUB_VERBOSE, 1)
             try:
-                self.pub.bind(self.endpoint)
-            except zmq.ZMQError as exc:
+                self.xpub = XPub(self.ctx, self.endpoint, curve, self.sndhwm, self._loop)
+            except TransportError:
                 self.close()
-                raise TransportError(f"cannot bind publisher endpoint {self.endpoint!r}: {exc}") from None
-            if self.endpoint.endswith(":0") or self.endpoint.endswith(":*"):
-                self.endpoint = self.pub.getsockopt(zmq.LAST_ENDPOINT).decode()
-            self._loop.add_reader(self.pub.getsockopt(zmq.FD), self._drain_pub)
-        self.sub = self.ctx.socket(zmq.SUB)
-        self.sub.setsockopt(zmq.LINGER, 0)
-        self.sub.setsockopt(zmq.RCVHWM, self.rcvhwm)
-        self.sub.setsockopt(zmq.RECONNECT_IVL, 100)
-        self.sub.setsockopt(zmq.RECONNECT_IVL_MAX, 1000)
-        if curve is not None:
-            self.sub.curve_secretkey = curve.secret_key
-            self.sub.curve_publickey = curve.public_key
-        for peer in self.peers:
-            try:
-                if curve is not None:
-                    if peer not in curve.server_keys:
-                        raise TransportError(f"CURVE is on but no public key is listed for peer {peer!r}")
-                    self.sub.curve_serverkey = curve.server_keys[peer]  # applies to this connect only
-                self.sub.connect(peer)
-            except zmq.ZMQError as exc:
-                self.close()
-                raise TransportError(f"cannot connect to peer endpoint {peer!r}: {exc}") from None
+                raise
+            self.endpoint = self.xpub.endpoint
+        self.sub = connect_sub(self.ctx, self.peers, curve, self.rcvhwm, self.close)
         self._loop.add_reader(self.sub.getsockopt(zmq.FD), self._drain_sub)
         # ZeroMQ's FD is edge-triggered: a slow safety poll catches any edge lost between drains.
         self._poll_task = self._loop.create_task(self._safety_poll())
@@ -175,21 +297,16 @@ class ZmqTransport(Transport):
         self.sub.setsockopt(zmq.SUBSCRIBE, topic.encode())
         self._drain_sub()
 
+    def wants(self, topic: bytes) -> bool:
+        return self.xpub is not None and self.xpub.wants(topic)
+
     def send(self, frames: list) -> bool:
-        if self.pub is None or self.pub.closed:
-            return False  # shutting down: a late publish from a worker thread is dropped, not an error
-        try:
-            self.pub.send_multipart(frames, flags=_NOBLOCK, copy=False)
-        except zmq.Again:
-            return False
-        finally:
-            # any operation can change the socket's events without the FD firing again
-            if self._loop is not None:
-                self._loop.call_soon(self._drain_pub)
-        return True
+        xpub = self.xpub
+        return xpub is not None and xpub.send(frames)
 
     def set_latched(self, topic: str, frames: list) -> None:
-        self._latched[topic.encode()] = frames
+        if self.xpub is not None:
+            self.xpub.set_latched(topic, frames)
 
     def add_peer(self, endpoint: str) -> None:
         """Connect the SUB socket to one more publisher endpoint (used by tools that discover late)."""
@@ -198,61 +315,84 @@ class ZmqTransport(Transport):
             self.sub.connect(endpoint)
 
     def _drain_sub(self) -> None:
-        sub = self.sub
-        if sub is None or sub.closed:
-            return
-        handler = self._on_frames
-        recv, getsockopt = sub.recv, sub.getsockopt
-        while getsockopt(_EVENTS) & _POLLIN:
-            try:
-                frames = [recv(_NOBLOCK, copy=False)]
-            except zmq.Again:
-                break
-            while getsockopt(_RCVMORE):
-                frames.append(recv(_NOBLOCK, copy=False))
-            handler(frames)
-
-    def _drain_pub(self) -> None:
-        pub = self.pub
-        if pub is None or pub.closed:
-            return
-        while pub.getsockopt(_EVENTS) & _POLLIN:
-            try:
-                msg = pub.recv(_NOBLOCK)
-            except zmq.Again:
-                break
-            if msg[:1] == b"\x01":  # a subscription: resend latched values it matches
-                prefix = msg[1:]
-                for topic, frames in self._latched.items():
-                    if topic.startswith(prefix):
-                        try:
-                            pub.send_multipart(frames, flags=zmq.NOBLOCK, copy=False)
-                        except zmq.Again:
-                            pass
+        drain_sub(self.sub, self._on_frames)
 
     async def _safety_poll(self) -> None:
         while True:
             await asyncio.sleep(0.05)
             self._drain_sub()
-            self._drain_pub()
+            if self.xpub is not None:
+                self.xpub.drain()
 
     def close(self) -> None:
         if self._poll_task is not None:
             self._poll_task.cancel()
-        for sock in (self.sub, self.pub):
-            if sock is not None and not sock.closed:
-                if self._loop is not None:
-                    try:
-                        self._loop.remove_reader(sock.getsockopt(zmq.FD))
-                    except Exception:  # noqa: BLE001 - loop may be closed already
-                        pass
-                sock.close(linger=0)
+        if self.xpub is not None:
+            self.xpub.close()
+        sub = self.sub
+        if sub is not None and not sub.closed:
+            if self._loop is not None:
+                try:
+                    self._loop.remove_reader(sub.getsockopt(zmq.FD))
+                except Exception:  # noqa: BLE001 - loop may be closed already
+                    pass
+            sub.close(linger=0)
         if self._auth is not None:
             self._auth.stop()
             self._auth = None
         if self.ctx is not None:
             self.ctx.term()
             self.ctx = None
+
+
+def connect_sub(ctx: zmq.Context, peers: list[str], curve: CurveConfig | None, rcvhwm: int,
+                on_error: Callable[[], None] | None = None) -> zmq.Socket:
+    """A SUB socket on ``ctx`` connected to every endpoint of ``peers`` (CURVE client when ``curve``).
+
+    Raises :class:`TransportError` naming the peer that cannot be connected (``on_error`` is called first).
+    """
+    sub = ctx.socket(zmq.SUB)
+    sub.setsockopt(zmq.LINGER, 0)
+    sub.setsockopt(zmq.RCVHWM, rcvhwm)
+    sub.setsockopt(zmq.RECONNECT_IVL, 100)
+    sub.setsockopt(zmq.RECONNECT_IVL_MAX, 1000)
+    if curve is not None:
+        sub.curve_secretkey = curve.secret_key
+        sub.curve_publickey = curve.public_key
+    for peer in peers:
+        try:
+            if curve is not None:
+                if peer not in curve.server_keys:
+                    raise TransportError(f"CURVE is on but no public key is listed for peer {peer!r}")
+                sub.curve_serverkey = curve.server_keys[peer]  # applies to this connect only
+            sub.connect(peer)
+        except (zmq.ZMQError, TransportError) as exc:
+            sub.close(linger=0)
+            if on_error is not None:
+                on_error()
+            if isinstance(exc, TransportError):
+                raise
+            raise TransportError(f"cannot connect to peer endpoint {peer!r}: {exc}") from None
+    return sub
+
+
+def drain_sub(sub: zmq.Socket | None, handler: FramesHandler) -> None:
+    """Receive every message ready on ``sub`` without blocking and hand each to ``handler`` as a list of frames:
+    the topic and meta frames as ``bytes`` (small: a copy is cheaper than a ``zmq.Frame``), the array buffers
+    as zero-copy ``zmq.Frame`` objects."""
+    if sub is None or sub.closed:
+        return
+    recv, getsockopt = sub.recv, sub.getsockopt
+    while getsockopt(_EVENTS) & _POLLIN:
+        try:
+            frames = [recv(_NOBLOCK)]
+        except zmq.Again:
+            break
+        if getsockopt(_RCVMORE):
+            frames.append(recv(_NOBLOCK))
+            while getsockopt(_RCVMORE):
+                frames.append(recv(_NOBLOCK, copy=False))
+        handler(frames)
 
 
 class InProcTransport(Transport):

@@ -237,6 +237,7 @@ class MxtTwin:
         self.port = port
         self.transport: asyncio.DatagramTransport | None = None
         self.replied = 0
+        self.tick_times: list[float] | None = None   # set to [] to record each wake-up (monotonic s)
         self._queue: list[tuple[mxt.Packet, object, np.ndarray]] = []
         self._task: asyncio.Task | None = None
 
@@ -268,6 +269,8 @@ class MxtTwin:
         """At ``now``: run the control cycles due (servo), then answer the requests queued before them. A
         request is answered only after at least one control cycle has executed it (a wake-up that falls
         short of the next cycle boundary answers nothing yet)."""
+        if self.tick_times is not None:
+            self.tick_times.append(now)
         if self.core.advance(now) == 0:
             return
         queue, self._queue = self._queue, []

@@ -30,6 +30,7 @@ import time
 
 import foxglove
 import numpy as np
+from foxglove.websocket import ServerListener
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from flexsheet.model import scene
@@ -90,7 +91,7 @@ class VizParams(BaseModel):
         return v
 
 
-class _Listener:
+class _Listener(ServerListener):
     """foxglove-sdk ``ServerListener``: forwards viewer subscriptions to the node's loop (SDK threads call it)."""
 
     def __init__(self, node: VizNode) -> None:

@@ -1,0 +1,81 @@
+"""The paper's stroking run (Table I, 10 s stroke) through the whole simulated graph with both arms on MELFA
+real-time external control (MXT/UDP twins) instead of Modbus: ``flexsheet launch launch/sim.yaml --set
+arm_left.protocol=mxt --set ctrl_left.protocol=mxt ...`` (issue 13: "the full stroking run must pass through
+MXT twins too"). Heavy (one sim launch, ~40 s on 2 cores)."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from flexsheet.model.kinematics import QD_MAX
+from flexsheet.runtime.bag import read_bag
+from flexsheet.runtime.codec import decode_any
+
+ROOT = Path(__file__).resolve().parents[1]
+MXT = ["arm_left.protocol=mxt", "ctrl_left.protocol=mxt", "arm_right.protocol=mxt", "ctrl_right.protocol=mxt"]
+SCRIPT = "world.script=[{mode: stroke, moving_time: 10}]"
+
+
+def _private_copy(dst: Path) -> Path:
+    """launch/sim.yaml with its ZeroMQ base port and the twins' ports moved by an offset from this process id,
+    so this run cannot collide with another sim run on the machine."""
+    offset = 100 * (1 + (os.getpid() + 150) % 300)
+    lf = yaml.safe_load((ROOT / "launch" / "sim.yaml").read_text())
+    lf["base_port"] = 20000 + offset
+    for spec in lf["nodes"].values():
+        if spec.get("type") in ("arm_controller_sim", "arm_bridge") and "port" in spec.get("params", {}):
+            spec["params"]["port"] += offset
+    dst.write_text(yaml.safe_dump(lf, sort_keys=False))
+    return dst
+
+
+def test_table1_stroke_through_mxt_twins(tmp_path):
+    launch = _private_copy(tmp_path / "sim_mxt.yaml")
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "flexsheet", "launch", str(launch), "--out", str(out), "--duration", "150",
+           "--set", SCRIPT]
+    for s in MXT:
+        cmd += ["--set", s]
+    res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stdout[-6000:] + res.stderr[-3000:]
+    summary = json.loads((out / "summary.json").read_text())
+    row = summary["10"]
+    # the arms carried the sheet: Table I (10 s) at least as good as the paper's prototype
+    assert row["n"] > 200
+    assert row["dd_mean_mm"] < 0.443 and row["dtheta_mean_deg"] < 0.359, row
+
+    states = {"left": [], "right": []}
+    beats: dict[str, str] = {}
+    for m in read_bag(out / "sim.mcap", topics=["/arm/left/joint_state", "/arm/right/joint_state", "/diagnostics"]):
+        msg = decode_any(m.frames)
+        if m.topic == "/diagnostics":
+            beats[msg.node] = msg.message
+        else:
+            states[msg.arm].append(msg)
+    step_limit = 0.5 * QD_MAX * 0.00711          # bridge speed_scale 0.5 at the MXT cycle
+    for arm in ("left", "right"):
+        st = states[arm]
+        assert len(st) > 1000, (arm, len(st))     # ~140 Hz over the run
+        ok = np.mean([m.bridge_status == "ok" for m in st])
+        assert ok > 0.5, (arm, ok)
+        cmd_q = np.array([m.commanded for m in st])
+        assert np.all(np.abs(np.diff(cmd_q, axis=0)) <= step_limit * (1 + 1e-6)), arm
+        lag = np.array([np.max(np.abs(m.position - m.commanded)) for m in st])
+        assert np.median(lag) < 0.01 and lag[-1] < 1e-3, (arm, np.median(lag), lag[-1])   # FB_JOINT follows
+        twin = _counters(beats[f"ctrl_{arm}"].split("mxt session")[1])          # the twin's last heartbeat
+        assert twin["moves"] > 1000 and twin["refused"] == 0, twin
+        link = _counters(beats[f"arm_{arm}"].split("mxt:")[1])                   # the bridge's last heartbeat
+        assert link["sent"] > 1000 and link["refused"] == 0, link
+        assert link["lost"] <= 0.01 * link["sent"], link
+
+
+def _counters(text: str) -> dict[str, int]:
+    return {k: int(v) for k, v in re.findall(r"(\w+) (\d+)", text)}
