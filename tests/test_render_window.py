@@ -131,7 +131,7 @@ def test_pacer_uses_the_media_stream_counter_and_rejects_bad_input():
     assert p.next_eye() == RIGHT
     for t, msc in ((0.0, 1000), (0.0083, 1001), (0.03, 1004)):   # the counter, not the times, decides
         p.on_swap(t, msc)
-    assert p.missed == 2 and p.resyncs == 0 and p.stats().source == "msc"
+    assert p.missed == 2 and p.resyncs == 0 and p.stats().source == "counter"
     assert p.next_eye() == ((1005 - 1000) % 2) ^ 1
     with pytest.raises(ValueError, match="backwards"):
         p.on_swap(0.01)
@@ -154,6 +154,7 @@ def test_frame_sequential_shows_left_then_right(display, offscreen, window):
     L, Rt = offscreen[0.064]
     assert diff(L, Rt) > 50                                       # the eyes differ: the test can tell them apart
     assert out.window.pacing == "timer" and not out.window.quad_buffered   # Xvfb: no vsync, no quad buffer
+    assert out.window.counter == "grid"
     seen = []
     for _ in range(4):
         eye = call(out.show)
@@ -174,6 +175,7 @@ def test_frame_sequential_stays_in_phase_after_a_dropped_vsync(display, offscree
     assert out.pacer.missed == 1 and out.pacer.resyncs == 1
     # the late frame was drawn for vsync 2 but shown at vsync 3; the next follows vsync 4's parity (left)
     assert seen == [LEFT, RIGHT, LEFT, LEFT]
+    assert out.pacer.vsync == 4 and out.pacer.stats().source == "counter"
     assert diff(shot(display, out), L) <= TOL
 
 
@@ -280,7 +282,7 @@ def test_node_window_output_publishes_and_reports_pacing(display, monkeypatch):
             assert diff(img[:, :W], m.left) <= TOL and diff(img[:, W:], m.right) <= TOL
             assert m.left.max() > 100 and m.correction == "none"
             hb = (await h.wait_for(topics.DIAGNOSTICS, n=2, timeout=10.0))[-1]
-            assert "fps" in hb.message and "missed vsyncs" in hb.message and "timer" in hb.message
+            assert "fps" in hb.message and "missed vsyncs" in hb.message and "pacing timer, counter grid" in hb.message
             fps = float(hb.message.split("window ")[1].split(" fps")[0])
             assert 10.0 < fps < 35.0                       # paced near 30 Hz even on a loaded 2-core machine
             assert h.node.pacing.frames > 10

@@ -53,7 +53,7 @@ def render() -> str:
 
 
 def main() -> int:
-    out = Path(__file__).resolve().parents[1] / "docs" / "messages.md"
+    out = Path(__file__).resolve().parents[2] / "docs" / "messages.md"
     out.write_text(render())
     print(f"wrote {out}")
     return 0

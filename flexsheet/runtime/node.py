@@ -438,6 +438,7 @@ class Node:
         self._loop_thread: threading.Thread | None = None
         self._loop_tid: int | None = None
         self._started = time.monotonic()
+        self.ready = False  # True once setup() returned and the subscriptions are served
         self.rejected_total = 0
         self.errors_total = 0
         self.timer_cpu_s = 0.0
@@ -546,7 +547,7 @@ class Node:
     def _send(self, pub: Publisher, frames: list) -> None:
         tr = self.transport
         if pub.latched:
-            tr.set_latched(pub.name, frames)
+            tr.set_latched_remote(pub.name, frames)
         if not tr.send_remote(frames):
             pub.stats.dropped += 1
 
@@ -630,6 +631,7 @@ class Node:
                     if sub.task is None:
                         self._start_sub(sub)
             self._wall_timer(self.config.heartbeat_period, lambda: self._hb_pub.publish(self.heartbeat()))
+            self.ready = True
             self.log.info("%s up: endpoint %s, %d peers, publishes %s", self.name, self.transport.endpoint or "-",
                           len(getattr(self.transport, "peers", [])),
                           ", ".join(n for n in self._publishers if n != T.DIAGNOSTICS.name) or "-")

@@ -107,6 +107,10 @@ class Transport:
         """Remember ``frames`` as the last value of latched ``topic`` (resent to new subscribers)."""
         raise NotImplementedError
 
+    def set_latched_remote(self, topic: str, frames: list) -> None:
+        """:meth:`set_latched` for the subscribers outside this process only (the node's publish path)."""
+        self.set_latched(topic, frames)
+
     def close(self) -> None:
         raise NotImplementedError
 

@@ -242,7 +242,8 @@ class RendererNode(Node):
         pacing = getattr(self, "pacing", None)
         if pacing is None:
             return hb
-        line = f"{pacing.line()} [{self.output.window.pacing}, quad buffer {self.output.window.quad_buffered}]"
+        w = self.output.window
+        line = f"{pacing.line()} [pacing {w.pacing}, counter {w.counter}, quad buffer {w.quad_buffered}]"
         return hb.model_copy(update={"message": f"{line}; {hb.message}" if hb.message else line})
 
     # ------------------------------------------------------------------ shared

@@ -33,7 +33,8 @@ class PacingStats:
     """Pacing over the last ``window`` frames: ``fps`` frames per s; ``interval_mean_ms``/``interval_p99_ms``
     between swaps; ``missed_vsyncs`` since start (refreshes that showed an old frame); ``eye_resyncs``: missed
     runs of odd length, where a per-frame eye counter would have swapped the eyes; ``frames`` since start;
-    ``period_ms`` the refresh period in use; ``source`` "msc" (media stream counter) or "time"."""
+    ``period_ms`` the refresh period in use; ``source`` "counter" (a vsync counter: the driver's media stream
+    counter, or the window's timer grid) or "time" (inferred from swap times)."""
 
     frames: int
     fps: float
@@ -95,7 +96,7 @@ class FramePacer:
             n = int(msc) - self._msc
             if n < 0:
                 raise ValueError(f"media stream counter went backwards: {self._msc} -> {msc}")
-            self._source = "msc"
+            self._source = "counter"
         else:
             n = max(1, round(dt / self.period))
         if n == 1 and abs(dt - self.period) < 0.1 * self.period:

@@ -12,7 +12,8 @@ the chosen stereo format (:func:`nodes.renderer.pacing.frame_layout`), optionall
   mode; if the mode granted differs, the frame is scaled to it and a warning says so.
 * **Vsync.** ``glfw.swap_interval(1)``; after each swap ``glFinish`` waits until the swap has happened, so the
   swap-return time is the vsync time. At open the window probes whether swaps really block; where they do not
-  (Xvfb, some drivers) it paces itself on a virtual vsync grid at ``refresh_hz`` and says so (``pacing``).
+  (Xvfb, some drivers) it paces itself on a virtual vsync grid at ``refresh_hz`` and says so (``pacing``);
+  the grid index then counts the vsyncs.
 * **Frame-sequential stereo.** With ``quad_buffer`` it asks for a quad-buffered (``glfw.STEREO``) context; if
   the driver grants one (Quadro-class GPUs with stereo enabled), both eyes go to ``GL_BACK_LEFT`` /
   ``GL_BACK_RIGHT`` every frame and the driver alternates them and drives the glasses' emitter. Otherwise the
@@ -267,10 +268,19 @@ class ProjectorWindow:
                              f"{self.refresh_hz:g} Hz")
         return "timer"
 
+    @property
+    def counter(self) -> str:
+        """What counts vsyncs: "oml" (the driver's media stream counter), "grid" (timer pacing: the index of
+        the virtual vsync the frame was shown at) or "time" (none: :class:`FramePacer` infers it from times)."""
+        if self.pacing == "timer":
+            return "grid"
+        return "oml" if self._oml.fn is not None else "time"
+
     def swap(self) -> tuple[float, int | None]:
         """Show the back buffer at the next vsync; returns (time the swap completed, s on ``time.perf_counter``;
-        media stream counter or None). With ``pacing == "timer"`` it first sleeps to the next point of a
-        virtual vsync grid (at most one frame per grid point, like a display)."""
+        vsync counter or None, see :attr:`counter`). With ``pacing == "timer"`` it first sleeps to the next
+        point of a virtual vsync grid (at most one frame per grid point, like a display), and the counter is
+        that point's index: the timer is the display's clock there, so no inference from times is needed."""
         if self.pacing == "timer":
             now = time.perf_counter()
             period = 1.0 / self.refresh_hz
@@ -281,6 +291,9 @@ class ProjectorWindow:
             wait = self._grid0 + k * period - time.perf_counter()
             if wait > 0:
                 time.sleep(wait)
+            self.glfw.swap_buffers(self.window)
+            self.ctx.finish()
+            return time.perf_counter(), k
         self.glfw.swap_buffers(self.window)
         self.ctx.finish()
         return time.perf_counter(), self._oml.msc()

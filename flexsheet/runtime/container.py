@@ -1,0 +1,565 @@
+"""Composable nodes: several nodes of one host in one process and one asyncio loop (ROS 2 component containers).
+
+A launch file puts a node in a container with ``container: NAME``; the nodes of one container and one host run
+in one process, started by the supervisor as ``flexsheet run --container NAME --launch FILE --host HOST``::
+
+    nodes:
+      camera:       {type: camera, host: main, container: vision}
+      triangulator: {type: triangulator, host: main, container: vision}
+      planner:      {type: planner, host: main, container: vision}
+
+Between the nodes of a container a message travels as the frozen message object itself, through the
+container's :class:`Bus`: no encode, no decode, no copy, no socket; its numpy arrays are handed on as
+read-only views (a receiver cannot write into the publisher's arrays; the publisher must not write into an
+array after publishing it, as with any zero-copy transport). Each node keeps its own publisher socket at its
+launch-file endpoint (:class:`flexsheet.runtime.transport.XPub`), so the rest of the graph, the recorder and
+the tools see the same endpoints, topics and heartbeats as before; a message is encoded — once — only when a
+subscriber outside the process has asked for its topic (XPUB subscription tracking) or the topic is latched.
+The container has one SUB socket, connected to every endpoint of the graph outside the container, and hands
+what arrives to its nodes' subscriptions as usual (decoded and validated there: the wire boundary).
+
+QoS (latest, keep-all, latched: a latched object is kept and handed to a late in-process joiner),
+heartbeats, diagnostics, parameters and remaps work as for a node alone. A node that raises out of its
+``run`` (its setup, its transport) is restarted inside the container by its own ``respawn`` policy, as a fresh
+instance, while the other nodes keep running with their state; a configuration error (exit status 78 alone)
+is not restarted. What a container cannot contain: a crash of the interpreter itself (a segfault or abort
+in a C extension — OpenCV, numpy, pyzmq, a GL driver — ``os._exit``, the kernel's OOM killer) ends every node
+of the process (the supervisor then restarts the whole container by the members' policy); a handler that
+blocks the loop (a sync call in an ``async def``) stalls every node of the container; nodes share the GIL, so a
+pure-Python CPU hog in one slows the others; niceness and RT priority are per process (the container takes the
+smallest ``nice`` and the largest ``rt_priority`` of its members); a node's module-level globals are shared.
+
+Errors: :class:`flexsheet.runtime.launch.LaunchError` for a container that names no node on the host.
+Source: ROS 2 ``rclcpp_components`` (component container, intra-process communication), ZeroMQ XPUB
+(``ZMQ_XPUB_VERBOSE``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import zmq
+
+from flexsheet.runtime.codec import encode
+from flexsheet.runtime.node import EXIT_CONFIG, WALL_CLOCK, Clock, ConfigError, Node, NodeConfig, SimClock
+from flexsheet.runtime.transport import (
+    CurveConfig,
+    Transport,
+    TransportError,
+    XPub,
+    _allow_list,
+    connect_sub,
+    drain_sub,
+)
+from messages import Message
+from messages.common import array_spec
+
+__all__ = ["Bus", "ContainerTransport", "Container", "Member", "container_from_launch", "run_container",
+           "freeze_arrays"]
+
+log = logging.getLogger("container")
+
+_ARRAY_FIELDS: dict[type, tuple[str, ...]] = {}
+
+
+def _array_fields(cls: type) -> tuple[str, ...]:
+    names = _ARRAY_FIELDS.get(cls)
+    if names is None:
+        names = _ARRAY_FIELDS[cls] = tuple(n for n, f in cls.model_fields.items() if array_spec(f) is not None)
+    return names
+
+
+def freeze_arrays(msg: Message) -> Message:
+    """Make every numpy array field of ``msg`` a read-only view (in place; the publisher's arrays keep their
+    own flags). Returns ``msg``. Cost: one view per writeable array field."""
+    d = msg.__dict__
+    for name in _array_fields(type(msg)):
+        a = d[name]
+        if type(a) is np.ndarray and a.flags.writeable:
+            ro = a.view()
+            ro.flags.writeable = False
+            d[name] = ro  # the model is frozen for its users; the runtime swaps in an equal read-only view
+    return msg
+
+
+class Bus:
+    """The in-process message bus of one container: routes message objects between its nodes, wire frames
+    from the rest of the graph to them, and owns the container's ZeroMQ context and SUB socket.
+
+    ``peers``: publisher endpoints outside the container; ``curve``: this host's CURVE settings (or None);
+    ``clock``: the nodes' clock (:data:`~flexsheet.runtime.node.WALL_CLOCK`, or a
+    :class:`~flexsheet.runtime.node.SimClock` for a lockstep replay, which also creates :attr:`lockstep`).
+    """
+
+    def __init__(self, name: str = "container", peers: list[str] | None = None, curve: CurveConfig | None = None,
+                 clock: Clock | None = None, rcvhwm: int = 20000) -> None:
+        self.name = name
+        self.peers = [p for p in dict.fromkeys(peers or []) if p]
+        self.curve = curve
+        self.clock = clock or WALL_CLOCK
+        self.lockstep = None
+        if self.clock.simulated:
+            from flexsheet.runtime.lockstep import Lockstep
+
+            self.lockstep = Lockstep(self)
+        self.rcvhwm = rcvhwm
+        self.nodes: list[Node] = []
+        self._prefixes: dict[Node, list[bytes]] = {}
+        self._targets: dict[bytes, tuple] = {}
+        self._latched_obj: dict[bytes, Message] = {}
+        self._latched_frames: dict[bytes, list] = {}
+        self.ctx: zmq.Context | None = None
+        self.sub: zmq.Socket | None = None
+        self._auth = None
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self._loop_tid: int | None = None
+        self._poll_task: asyncio.Task | None = None
+        self.local_messages = 0  # messages handed on in-process (objects)
+        self.ready_check: Callable[[], bool] = lambda: all(n.ready for n in self.nodes)
+
+    # ------------------------------------------------------------------ lifecycle
+    async def start(self) -> None:
+        """Create the context (with the CURVE authenticator when ``curve``) and the SUB socket."""
+        if self.ctx is not None:
+            return
+        self.loop = asyncio.get_running_loop()
+        self._loop_tid = threading.get_ident()
+        self.ctx = zmq.Context()
+        if self.curve is not None:
+            self._auth, _ = _allow_list(self.ctx, self.curve)
+        self.sub = connect_sub(self.ctx, self.peers, self.curve, self.rcvhwm)
+        self.loop.add_reader(self.sub.getsockopt(zmq.FD), self._drain_sub)
+        self._poll_task = self.loop.create_task(self._safety_poll())
+
+    def close(self) -> None:
+        if self._poll_task is not None:
+            self._poll_task.cancel()
+        if self.sub is not None and not self.sub.closed:
+            try:
+                self.loop.remove_reader(self.sub.getsockopt(zmq.FD))
+            except Exception:  # noqa: BLE001 - loop may be closed already
+                pass
+            self.sub.close(linger=0)
+        if self._auth is not None:
+            self._auth.stop()
+            self._auth = None
+        if self.ctx is not None:
+            self.ctx.term()
+            self.ctx = None
+
+    async def _safety_poll(self) -> None:
+        while True:  # ZeroMQ FDs are edge-triggered: catch an edge lost between drains
+            await asyncio.sleep(0.05)
+            self._drain_sub()
+            for node in list(self.nodes):
+                xpub = getattr(node.transport, "xpub", None)
+                if xpub is not None:
+                    xpub.drain()
+
+    def ready(self) -> bool:
+        """True when every node of the container finished its setup (the lockstep player waits for it)."""
+        return self.ready_check()
+
+    # ------------------------------------------------------------------ membership
+    def attach(self, node: Node) -> None:
+        if node not in self.nodes:
+            self.nodes.append(node)
+            self._prefixes.setdefault(node, [])
+            self.changed()
+
+    def detach(self, node: Node) -> None:
+        if node in self.nodes:
+            self.nodes.remove(node)
+        prefixes = self._prefixes.pop(node, [])
+        if self.sub is not None and not self.sub.closed:
+            for p in prefixes:
+                self.sub.setsockopt(zmq.UNSUBSCRIBE, p)
+        self.changed()
+
+    def changed(self) -> None:
+        """Forget the routing cache (a node or a subscription came or went)."""
+        self._targets = {}
+
+    def subscribe(self, node: Node, topic: str) -> None:
+        """``node`` wants ``topic`` (a prefix, as ZeroMQ's): from the wire and from the other nodes; latched
+        values already published in the container are handed to it now."""
+        prefix = topic.encode()
+        self._prefixes.setdefault(node, []).append(prefix)
+        self.changed()
+        if self.sub is not None:
+            self.sub.setsockopt(zmq.SUBSCRIBE, prefix)
+            self._drain_sub()
+        raw = _is_raw(node)
+        for name_b, msg in list(self._latched_obj.items()):
+            if name_b.startswith(prefix):
+                if raw:
+                    node._on_frames(encode(name_b.decode(), msg))
+                else:
+                    node._on_local(name_b, msg)
+        for name_b, frames in list(self._latched_frames.items()):
+            if name_b.startswith(prefix):
+                node._on_frames(frames)
+
+    def targets(self, topic: bytes) -> tuple:
+        """``(node, raw)`` of every node of the container subscribed to ``topic`` (cached)."""
+        t = self._targets.get(topic)
+        if t is None:
+            out = []
+            for node in self.nodes:
+                if any(topic.startswith(p) for p in self._prefixes.get(node, ())):
+                    raw = _is_raw(node)
+                    if raw or topic in node._subs_b:
+                        out.append((node, raw))
+            t = self._targets[topic] = tuple(out)
+        return t
+
+    # ------------------------------------------------------------------ routing
+    def publish(self, pub, msg: Message) -> list | None:
+        """Hand ``msg`` (published by ``pub``, any thread) to the container's subscribers as the object itself;
+        a node that takes raw frames (the recorder) gets it encoded. Returns those frames if it had to encode
+        (the publisher reuses them for the wire), else None."""
+        name_b = pub.name_b
+        if pub.latched:
+            self._latched_obj[name_b] = freeze_arrays(msg)
+        targets = self._targets.get(name_b)
+        if targets is None:
+            targets = self.targets(name_b)
+        if not targets:
+            return None
+        freeze_arrays(msg)
+        frames = None
+        for node, raw in targets:
+            if raw:
+                if frames is None:
+                    frames = encode(pub.name, msg)
+                self._raw(node, frames)
+            else:
+                node._on_local(name_b, msg)
+        self.local_messages += 1
+        return frames
+
+    def publish_frames(self, frames: list) -> None:
+        """Hand raw frames a node sent itself (the bag player) to the container's subscribers (decoded and
+        validated by each subscription, as frames from the wire are)."""
+        t = frames[0]
+        for node, raw in self.targets(t if type(t) is bytes else bytes(t)):
+            if raw:
+                self._raw(node, frames)
+            else:
+                node._on_frames(frames)
+
+    def latch_frames(self, topic: str, frames: list) -> None:
+        self._latched_frames[topic.encode()] = frames
+
+    def _raw(self, node: Node, frames: list) -> None:
+        if threading.get_ident() == self._loop_tid:
+            node._on_frames(frames)
+        else:  # a raw listener (the recorder) runs on the loop
+            self.loop.call_soon_threadsafe(node._on_frames, frames)
+
+    def _on_wire(self, frames: list) -> None:
+        t = frames[0]
+        for node, _ in self.targets(t if type(t) is bytes else bytes(t)):
+            node._on_frames(frames)
+
+    def _drain_sub(self) -> None:
+        drain_sub(self.sub, self._on_wire)
+
+
+def _is_raw(node: Node) -> bool:
+    """True for a node that takes raw frames itself (overrides ``Node._on_frames``, as the recorder does)."""
+    return type(node)._on_frames is not Node._on_frames
+
+
+class ContainerTransport(Transport):
+    """The transport of one node in a container: its own XPUB at its endpoint, the container's :class:`Bus`
+    for everything in-process and for the SUB side. ``send`` (raw frames, e.g. the bag player) reaches the
+    container's nodes and the wire; the node's publish path uses the bus and :meth:`send_remote`."""
+
+    threadsafe_send = True
+
+    def __init__(self, bus: Bus, endpoint: str, sndhwm: int = 2000) -> None:
+        self.bus = bus
+        self.endpoint = endpoint
+        self.sndhwm = sndhwm
+        self.xpub: XPub | None = None
+        self.node: Node | None = None
+
+    @property
+    def peers(self) -> list[str]:
+        return self.bus.peers
+
+    def attach(self, node: Node) -> None:
+        self.node = node
+
+    async def start(self, on_frames) -> None:
+        await self.bus.start()
+        self.bus.attach(self.node)
+        if self.endpoint:
+            try:
+                self.xpub = XPub(self.bus.ctx, self.endpoint, self.bus.curve, self.sndhwm, asyncio.get_running_loop())
+            except TransportError:
+                self.bus.detach(self.node)
+                raise
+            self.endpoint = self.xpub.endpoint
+
+    def subscribe(self, topic: str) -> None:
+        self.bus.subscribe(self.node, topic)
+
+    def wants(self, topic: bytes) -> bool:
+        return self.xpub is not None and self.xpub.wants(topic)
+
+    def send(self, frames: list) -> bool:
+        self.bus.publish_frames(frames)
+        return self.send_remote(frames)
+
+    def send_remote(self, frames: list) -> bool:
+        xpub = self.xpub
+        return xpub is None or xpub.send(frames)
+
+    def set_latched(self, topic: str, frames: list) -> None:
+        self.bus.latch_frames(topic, frames)
+        self.set_latched_remote(topic, frames)
+
+    def set_latched_remote(self, topic: str, frames: list) -> None:
+        if self.xpub is not None:
+            self.xpub.set_latched(topic, frames)
+
+    def close(self) -> None:
+        if self.node is not None:
+            self.bus.detach(self.node)
+        if self.xpub is not None:
+            self.xpub.close()
+
+
+@dataclass
+class Member:
+    """One node of a container: ``make(bus)`` builds a fresh instance (each start and restart); ``policy``
+    (never | on-failure | always), ``delay`` s, ``max_restarts``: its launch-file respawn policy; ``required``:
+    when it ends, the container ends."""
+
+    name: str
+    make: Callable[[Bus], Node]
+    policy: str = "on-failure"
+    delay: float = 0.5
+    max_restarts: int = 10
+    required: bool = False
+    node: Node | None = None
+    restarts: int = 0
+    codes: list[int] = field(default_factory=list)
+    finished: bool = False
+    cpu_s: float = 0.0  # handler + timer CPU of the instances that ended
+
+
+class Container:
+    """Runs the :class:`Member` nodes of one container on one loop (see the module docstring).
+
+    :meth:`run` returns the process exit status: 0 after a stop (signal, :meth:`stop`, every node ended by
+    itself), a required member's own status when it ends, :data:`~flexsheet.runtime.node.EXIT_CONFIG` when a
+    required member or every member has a configuration error.
+    """
+
+    def __init__(self, name: str, members: list[Member], bus: Bus, shutdown_timeout: float = 3.0,
+                 print_fn: Callable[[str], None] | None = None, cpu_file: str | None = None) -> None:
+        self.name, self.members, self.bus = name, members, bus
+        self.shutdown_timeout = shutdown_timeout
+        self.print = print_fn or (lambda line: print(line, flush=True))
+        self.cpu_file = cpu_file
+        self._stop = asyncio.Event()
+        self._stopping = False
+        self.reason = ""
+        self.code = 0
+        bus.ready_check = lambda: all(m.finished or (m.node is not None and m.node.ready) for m in members)
+
+    def stop(self) -> None:
+        """Ask every node to stop (thread-safe from the loop's own thread or a signal handler)."""
+        self._stop.set()
+
+    def node(self, name: str) -> Node | None:
+        """The running instance of member ``name`` (None while it is down)."""
+        return next((m.node for m in self.members if m.name == name), None)
+
+    async def _member(self, m: Member) -> int:
+        from pydantic import ValidationError
+
+        while True:
+            try:
+                node = m.make(self.bus)
+            except ValidationError as exc:
+                for err in exc.errors():
+                    self.print(f"{m.name}: configuration error: param '{'.'.join(map(str, err['loc']))}': "
+                               f"{err['msg']} (value {err.get('input')!r:.200})")
+                code = EXIT_CONFIG
+            else:
+                m.node = node
+                try:
+                    await node.run(install_signals=False)
+                    code = 0
+                except ConfigError as exc:
+                    self.print(f"{m.name}: configuration error: {exc}")
+                    code = EXIT_CONFIG
+                except TransportError as exc:
+                    self.print(f"{m.name}: {exc}")
+                    code = 1
+                except asyncio.CancelledError:
+                    raise
+                except Exception:  # noqa: BLE001 - a node's crash stays in the node
+                    log.exception("%s crashed (the other nodes of container %s keep running)", m.name, self.name)
+                    code = 1
+                finally:
+                    m.cpu_s += node.cpu_seconds()
+                    m.node = None
+            m.codes.append(code)
+            if self._stopping:
+                return code
+            self.print(f"{m.name}: ended with status {code}")
+            if code == EXIT_CONFIG:
+                self.print(f"{m.name}: configuration error: not restarted")
+                return self._end(m, code)
+            if m.required:
+                return self._end(m, code)
+            if m.policy == "never" or (m.policy == "on-failure" and code == 0):
+                return self._end(m, code)
+            if m.restarts >= m.max_restarts:
+                self.print(f"{m.name}: not restarted: {m.max_restarts} restarts used")
+                return self._end(m, code)
+            m.restarts += 1
+            self.print(f"{m.name}: restarting in {m.delay:.1f} s (restart {m.restarts}/{m.max_restarts}; the other "
+                       f"nodes of container {self.name} keep running)")
+            await asyncio.sleep(m.delay)
+            if self._stopping:
+                return code
+
+    def _end(self, m: Member, code: int) -> int:
+        m.finished = True
+        if m.required:
+            self.reason = f"required node {m.name} ended ({code})"
+            self.code = code
+            self._stop.set()
+        elif all(x.finished for x in self.members):
+            self.reason = "every node ended"
+            if all(x.codes and x.codes[-1] == EXIT_CONFIG for x in self.members):
+                self.code = EXIT_CONFIG
+            self._stop.set()
+        return code
+
+    async def run(self, install_signals: bool = True) -> int:
+        loop = asyncio.get_running_loop()
+        if install_signals:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                loop.add_signal_handler(sig, self.stop)
+        t0, c0 = time.monotonic(), time.process_time()
+        try:
+            await self.bus.start()
+        except TransportError as exc:
+            self.print(f"container {self.name}: {exc}")
+            return 1
+        self.print(f"container {self.name}: {len(self.members)} nodes in pid {os.getpid()}: "
+                   + ", ".join(m.name for m in self.members)
+                   + (" (lockstep: replayed clock)" if self.bus.lockstep is not None else ""))
+        tasks = {loop.create_task(self._member(m)): m for m in self.members}
+        await self._stop.wait()
+        self._stopping = True
+        for m in reversed(self.members):
+            if m.node is not None:
+                m.node.shutdown()
+        done, pending = await asyncio.wait(tasks, timeout=self.shutdown_timeout * 2)
+        for t in pending:
+            self.print(f"{tasks[t].name}: did not stop in {self.shutdown_timeout * 2:.1f} s; cancelled")
+            t.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        self.bus.close()
+        if install_signals:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                loop.remove_signal_handler(sig)
+        self._write_cpu(time.monotonic() - t0, time.process_time() - c0)
+        return self.code
+
+    def _write_cpu(self, wall: float, cpu: float) -> None:
+        if not self.cpu_file:
+            return
+        data = {"container": self.name, "pid": os.getpid(), "wall_s": wall, "process_cpu_s": cpu,
+                "nodes": {m.name: {"handler_cpu_s": m.cpu_s, "restarts": m.restarts} for m in self.members},
+                "note": "handler_cpu_s: CPU of each node's sync handlers and timer callbacks (thread time); "
+                        "the rest of process_cpu_s is shared: the loop, decoding, async handlers, threads"}
+        try:
+            Path(self.cpu_file).parent.mkdir(parents=True, exist_ok=True)
+            Path(self.cpu_file).write_text(json.dumps(data, indent=1))
+        except OSError as exc:
+            self.print(f"container {self.name}: cannot write {self.cpu_file}: {exc}")
+
+
+# ---------------------------------------------------------------------------------------------- from a launch file
+def container_members(lf, name: str, host: str | None) -> list[str]:
+    """Names of the nodes of ``lf`` in container ``name`` on ``host`` (all hosts if None), in file order."""
+    return [n for n, s in lf.nodes.items() if s.container == name and (host is None or s.host == host)]
+
+
+def container_from_launch(lf, name: str, host: str | None = None, out: str | None = None,
+                          overrides: dict[str, dict[str, Any]] | None = None,
+                          print_fn: Callable[[str], None] | None = None) -> Container:
+    """The :class:`Container` of nodes ``container: name`` on ``host`` of launch file ``lf``.
+
+    ``overrides``: node → {param: value}. A container whose ``player`` node has ``mode: lockstep`` runs on a
+    :class:`~flexsheet.runtime.node.SimClock` (lockstep replay). Raises ``LaunchError`` when no node of the
+    file is in that container on that host, or when its nodes span hosts and ``host`` is None.
+    """
+    from flexsheet import registry
+    from flexsheet.runtime.launch import LaunchError, curve_config, node_config
+
+    names = container_members(lf, name, host)
+    if not names:
+        where = f" on host {host!r}" if host else ""
+        known = sorted({s.container for s in lf.nodes.values() if s.container})
+        raise LaunchError(f"{lf.path}: no node has 'container: {name}'{where}; containers: {', '.join(known) or '-'}")
+    hosts = {lf.nodes[n].host for n in names}
+    if len(hosts) > 1:
+        raise LaunchError(f"{lf.path}: container {name!r} has nodes on hosts {', '.join(sorted(hosts))}: "
+                          "give --host (one process per host)")
+    host = hosts.pop()
+    overrides = overrides or {}
+    configs: dict[str, NodeConfig] = {n: node_config(lf, n, out=out, overrides=overrides.get(n)) for n in names}
+    lockstep = any(lf.nodes[n].type == "player" and configs[n].params.get("mode") == "lockstep" for n in names)
+    members_eps = {configs[n].endpoint for n in names}
+    peers = [ep for ep in lf.endpoints().values() if ep not in members_eps]
+    bus = Bus(name, peers, curve_config(lf, host), SimClock() if lockstep else None)
+    members = []
+    for n in names:
+        spec = lf.nodes[n]
+        cls = registry.load(registry.NODES[spec.type])
+
+        def make(b: Bus, cls=cls, cfg=configs[n]) -> Node:
+            return cls(cfg, transport=ContainerTransport(b, cfg.endpoint))
+
+        members.append(Member(n, make, spec.respawn.policy, spec.respawn.delay, spec.respawn.max_restarts,
+                              spec.required))
+    cpu_file = os.path.join(out, f"cpu_{name}.json") if out else None
+    return Container(name, members, bus, shutdown_timeout=lf.shutdown_timeout, print_fn=print_fn, cpu_file=cpu_file)
+
+
+def run_container(launch: str, name: str, host: str | None = None, out: str | None = None,
+                  overrides: dict[str, dict[str, Any]] | None = None) -> int:
+    """``flexsheet run --container NAME --launch FILE``: run that container in this process; returns the exit
+    status (78 for a launch-file or configuration error)."""
+    import sys
+
+    from flexsheet.runtime.launch import LaunchError, load_launch
+
+    try:
+        lf = load_launch(launch)
+        c = container_from_launch(lf, name, host, out, overrides)
+    except LaunchError as exc:
+        print(f"flexsheet run --container {name}: configuration error: {exc}", file=sys.stderr)
+        return EXIT_CONFIG
+    return asyncio.run(c.run())
