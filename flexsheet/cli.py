@@ -53,6 +53,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     from flexsheet.runtime.launch import LaunchError, load_launch, node_config
     from flexsheet.runtime.node import EXIT_CONFIG, ConfigError, NodeConfig
 
+    if args.container:
+        return _run_container(args)
+    if args.node_type is None:
+        print("flexsheet run: give a node type (or --container NAME --launch FILE)", file=sys.stderr)
+        return 2
     if args.node_type not in registry.NODES:
         print(f"flexsheet run: unknown node type {args.node_type!r}; known: {', '.join(sorted(registry.NODES))}",
               file=sys.stderr)
@@ -87,6 +92,30 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"flexsheet run {config.name}: {exc}", file=sys.stderr)
         return 1
     return 0
+
+
+def _run_container(args: argparse.Namespace) -> int:
+    """``flexsheet run --container NAME --launch FILE [--host H] [--set NODE.KEY=VALUE]``: the nodes of one
+    composable container in this process (:mod:`flexsheet.runtime.container`)."""
+    from flexsheet.runtime.container import run_container
+    from flexsheet.runtime.node import EXIT_CONFIG
+
+    if not args.launch:
+        print("flexsheet run --container: needs --launch FILE (the container's nodes come from it)", file=sys.stderr)
+        return EXIT_CONFIG
+    if args.node_type or args.param:
+        print("flexsheet run --container: give node params as --set NODE.KEY=VALUE, not a node type or --param",
+              file=sys.stderr)
+        return 2
+    overrides: dict[str, dict] = {}
+    for item in args.set or []:
+        node, dot, kv = item.partition(".")
+        if not dot or "=" not in kv:
+            print(f"flexsheet run --container: --set {item!r}: expected NODE.KEY=VALUE", file=sys.stderr)
+            return EXIT_CONFIG
+        overrides.setdefault(node, {}).update(_parse_params([kv]))
+    _setup_logging()
+    return run_container(args.launch, args.container, host=args.host, out=args.out, overrides=overrides)
 
 
 # ----------------------------------------------------------------------------------------------- launch
@@ -212,19 +241,26 @@ def build_parser() -> argparse.ArgumentParser:
                         "on any, 0 when it would start")
     s.set_defaults(func=cmd_launch)
 
-    s = sub.add_parser("run", help="run one node alone",
+    s = sub.add_parser("run", help="run one node alone (or one container of nodes)",
                        description="Run one node in the foreground. With --launch it takes its endpoint, "
-                                   "peers and params from the launch file; --param overrides.",
+                                   "peers and params from the launch file; --param overrides. With --container "
+                                   "NAME it runs every node of the launch file with 'container: NAME' (on --host) "
+                                   "in this one process (docs/realtime.md).",
                        **_fmt("  flexsheet run talker --param rate=5 --endpoint tcp://127.0.0.1:7201\n"
                               "  flexsheet run listener --peer tcp://127.0.0.1:7201\n"
-                              "  flexsheet run planner --launch launch/sim.yaml --param use_prediction=false"))
-    s.add_argument("node_type", metavar="NODE", help=f"node type: {', '.join(sorted(registry.NODES))}")
+                              "  flexsheet run planner --launch launch/sim.yaml --param use_prediction=false\n"
+                              "  flexsheet run --container vision --launch launch/sim.yaml --host main"))
+    s.add_argument("node_type", metavar="NODE", nargs="?", help=f"node type: {', '.join(sorted(registry.NODES))}")
     s.add_argument("--name", help="node name (default: the type; with --launch: the node's key)")
     s.add_argument("--launch", help="take endpoint, peers and params from this launch file")
     s.add_argument("--param", "-p", action="append", metavar="KEY=VALUE", help="parameter (YAML value), repeatable")
     s.add_argument("--endpoint", default="tcp://127.0.0.1:0", help="publisher endpoint to bind (without --launch)")
     s.add_argument("--peer", action="append", metavar="ENDPOINT", help="publisher endpoint to subscribe to")
     s.add_argument("--out", help="output folder ($(out) in params)")
+    s.add_argument("--container", metavar="NAME", help="run the nodes of this container of the --launch file")
+    s.add_argument("--host", help="with --container: the host whose share of the container to run")
+    s.add_argument("--set", action="append", metavar="NODE.KEY=VALUE", default=[],
+                   help="with --container: override one node parameter (YAML value), repeatable")
     s.set_defaults(func=cmd_run)
 
     s = sub.add_parser("keys", help="generate CURVE keypairs for the hosts of a launch file",

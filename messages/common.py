@@ -20,7 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, PlainSerializer, PlainValidat
 __all__ = ["Header", "Message", "ndarray", "check_finite", "ArraySpec", "array_spec"]
 
 #: frame name of the world frame: origin at the centre of the sheet in its home pose (the paper's
-#: imaginary screen), +x toward the user (screen normal n_o), +y to the user's left, +z up.
+#: imaginary screen), +x toward the user (screen normal n_o), +y to the user's right (the user faces −x), +z up.
 DISPLAY_FRAME = "display"
 
 

@@ -1,5 +1,9 @@
 """The arm controller's Modbus TCP register map and its encoding (pure; see docs/register_map.md).
 
+For controllers and PLC gateways that expose Modbus TCP, and the Modbus twin; a Mitsubishi MELFA controller is
+driven over real-time external control instead (:mod:`messages.mxt`). :class:`ControllerState` is also the
+protocol-neutral controller state the bridge's MXT backend fills (with synthesised STATUS bits).
+
 Style follows robot Modbus servers such as Universal Robots' map: holding registers (function codes 03, 06, 16)
 carry what the client commands, input registers (04) what the controller measures. Device id: any (the twin
 answers every id). Addresses are 0-based protocol addresses.

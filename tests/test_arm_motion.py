@@ -1,6 +1,7 @@
 """Bridge-side limiter and the twin's servo model: limits never exceeded, stated lag behaviour."""
 
 import numpy as np
+import pytest
 
 from flexsheet.model.kinematics import Q_HOME, Q_LOWER, Q_UPPER, QD_MAX
 from nodes.arm_bridge.interp import StreamLimiter
@@ -58,3 +59,25 @@ def test_servo_ramp_lag_is_tau_times_speed():
     lag = (Q_HOME + speed * t) - s.q
     # explicit-Euler first-order lag: after a step the lag is v·(tau − T) (v·tau against the previous target)
     assert np.allclose(lag, speed * (p.tau - T), rtol=0.02)
+
+
+
+def test_limiter_snapshot_restore_redoes_a_step_toward_a_newer_goal():
+    lim = StreamLimiter(Q_HOME, T, QD_MAX, 2 * QD_MAX, Q_LOWER, Q_UPPER)
+    for _ in range(10):
+        lim.step(Q_HOME + 0.5)                           # moving: v != 0
+    snap = lim.snapshot()
+    a = lim.step(Q_HOME + 0.5)
+    snap_copy = (snap[0].copy(), snap[1].copy())
+    lim.c[:] += 1.0                                      # the snapshot is a copy: later changes do not leak
+    assert np.array_equal(snap[0], snap_copy[0])
+    lim.restore(snap)
+    assert np.array_equal(lim.step(Q_HOME + 0.5), a)     # same state, same goal → the same command
+    lim.restore(snap)
+    b = lim.step(Q_HOME - 0.5)                           # redo the step toward a newer goal
+    assert np.all(np.abs(b - snap[0]) <= QD_MAX * T * (1 + 1e-9))               # still one period's step
+    assert np.all(np.abs((b - snap[0]) / T - snap[1]) <= 2 * QD_MAX * T + 1e-9)  # and one period's Δv
+    assert not np.array_equal(a, b)
+    for bad in [(np.zeros(5), np.zeros(6)), (np.full(6, np.nan), np.zeros(6)), "xy", None, (1, 2, 3)]:
+        with pytest.raises(ValueError, match="snapshot"):
+            lim.restore(bad)

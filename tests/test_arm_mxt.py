@@ -267,3 +267,20 @@ def test_twin_ends_on_end_and_answers_nothing_but_null_outside_a_session():
     assert core.receive(mxt.end_packet(2), 0.01) is not None
     assert core.session == "idle" and core.ends == 1
     assert core.receive(mxt.move_packet(Q_HOME, 3), 0.02) is None
+
+
+def test_disabled_bridge_exchanges_null_packets_and_commands_nothing():
+    with ThreadTwin() as twin:
+        async def scenario():
+            params = _bridge_params(twin.port, enabled=False)
+            async with NodeHarness(ArmBridgeNode, params=params, name="mxt_off") as h:
+                for k in range(20):
+                    h.inject(topics.ARM_LEFT_TARGET, target("left", 0.2, stamp=float(k)))
+                    await asyncio.sleep(0.02)
+                return h.messages(topics.ARM_LEFT_STATE)
+        states = asyncio.run(scenario())
+        core = twin.core
+    assert len(states) > 20 and {m.bridge_status for m in states} == {"hold:disabled"}
+    assert core.moves == 0 and core.received > 20 and core.refused == 0
+    assert np.max(np.abs(core.servo.q - home_joints("left"))) < 1e-9          # the arm never moved
+    assert np.max(np.abs(states[-1].position - home_joints("left"))) < 1e-6   # and its joints are reported

@@ -213,7 +213,7 @@ def test_renderer_survives_fuzz():
                 await asyncio.sleep(0.005)
             await h.settle(0.1)
             assert sub.stats.count == n + 1 and h.rejected(topics.FINGERTIP) == rej
-            assert h.node._finger_stamp == 400.0
+            assert h.node.state.fingertip_stamp == 400.0
             out = await h.wait_for(topics.RENDERED, n=1, timeout=10.0)
             assert out[-1].left.ndim == 3
             for t in ("/fingertip", "/object/deformation", "/arm/left/joint_state"):

@@ -13,7 +13,8 @@ object pose in one view):
 1. Corners in every image (``cv2.findChessboardCorners`` + ``cornerSubPix``, or the ChArUco detector, via
    :func:`flexsheet.model.calibration.detect_board`). A chessboard's 180° ordering ambiguity is resolved in
    the home view by the pose nearest the nominal mount, and in the right image of every view by the
-   epipolar constraint of the nominal stereo model.
+   epipolar constraint of the nominal stereo model; mirrored orderings (the detector orders corners by the
+   image, so it may hand back the board as if seen from behind) are rejected by PnP.
 2. Start: ``cv2.solvePnP`` on the home view's left image (display-frame corners) and on each other view's
    left image (board-frame corners), with the nominal intrinsics.
 3. ``scipy.optimize.least_squares`` over the 24 stereo parameters (per camera fx, fy, cx, cy, k1, k2, p1, p2,
@@ -135,12 +136,51 @@ def _undist(model: StereoModel, uv: np.ndarray, side: str) -> np.ndarray:
     return model.undistort(uv, side)
 
 
-def _order_right(model: StereoModel, ul: np.ndarray, ur: np.ndarray) -> np.ndarray:
-    """Pick the right detection's ordering (as is, or reversed) that best satisfies the epipolar constraint."""
-    a = _undist(model, ul, "left")
-    e0 = np.median(model.epipolar_residual(a, _undist(model, ur, "right")))
-    e1 = np.median(model.epipolar_residual(a, _undist(model, ur[::-1], "right")))
-    return ur if e0 <= e1 else ur[::-1]
+def _orderings(board: BoardSpec, uv: np.ndarray) -> list[np.ndarray]:
+    """The orderings a chessboard detection may come in (the detector orders by the image, not by the board):
+    as is, turned 180°, and the two mirrors (plus the transposes for a square board)."""
+    g = uv.reshape(board.rows, board.cols, 2)
+    out = [g, g[::-1, ::-1], g[::-1, :], g[:, ::-1]]
+    if board.rows == board.cols:
+        out += [np.swapaxes(a, 0, 1) for a in list(out)]
+    return [a.reshape(-1, 2).copy() for a in out]
+
+
+def _facing(P: np.ndarray, uv: np.ndarray, K: np.ndarray, D: np.ndarray):
+    """PnP pose of sheet-frame points P seen at uv; None unless the board's front (+x of the sheet frame)
+    faces the camera. Returns (camera centre in the points' frame (3,), reprojection RMS px)."""
+    ok, rv, tv = cv2.solvePnP(P, uv, K, D, flags=cv2.SOLVEPNP_SQPNP)
+    if not ok:
+        return None
+    ok, rv, tv = cv2.solvePnP(P, uv, K, D, rv, tv, useExtrinsicGuess=True)
+    R = cv2.Rodrigues(rv)[0]
+    C = -R.T @ tv.ravel()
+    if (C - P.mean(axis=0))[0] <= 0.0:          # camera behind the board's printed face
+        return None
+    err = cv2.projectPoints(P, rv, tv, K, D)[0].reshape(-1, 2) - uv
+    return C, float(np.sqrt(np.mean(np.sum(err ** 2, 1))))
+
+
+def _order_left(board: BoardSpec, ul: np.ndarray, P: np.ndarray, st: dict, C_nominal: np.ndarray | None):
+    """The left ordering whose PnP pose sees the board's front; at home (``C_nominal`` given) the one putting
+    the camera nearest its nominal position."""
+    best = None
+    for cand in _orderings(board, ul):
+        f = _facing(P, cand, st["K1"], st["D1"])
+        if f is None:
+            continue
+        key = float(np.linalg.norm(f[0] - C_nominal)) if C_nominal is not None else f[1]
+        if best is None or key < best[0]:
+            best = (key, cand)
+    return None if best is None else best[1]
+
+
+def _order_right(board: BoardSpec, model: StereoModel, ul: np.ndarray, ur: np.ndarray) -> np.ndarray:
+    """The right ordering that best satisfies the epipolar constraint with the (ordered) left corners."""
+    a = model.undistort(ul, "left")
+    errs = [(float(np.median(model.epipolar_residual(a, model.undistort(c, "right")))), i, c)
+            for i, c in enumerate(_orderings(board, ur))]
+    return min(errs, key=lambda e: (e[0], e[1]))[2]
 
 
 def detect_views(views: list[tuple[np.ndarray, np.ndarray]], board: BoardSpec, stereo_nominal: dict,
@@ -162,9 +202,12 @@ def detect_views(views: list[tuple[np.ndarray, np.ndarray]], board: BoardSpec, s
         ids_l, ul = dl[0], dl[1].astype(np.float64)
         ids_r, ur = dr[0], dr[1].astype(np.float64)
         if board.kind == "chessboard":
-            if k == 0:
-                ul = _home_order(ul, P_home, stereo_nominal, T_dc_nominal)
-            ur = _order_right(model, ul, ur)
+            ul = _order_left(board, ul, P_home, stereo_nominal, T_dc_nominal[:3, 3] if k == 0 else None)
+            if ul is None:
+                out.append(None)
+                skipped[k] = "no corner ordering shows the board's front to the left camera"
+                continue
+            ur = _order_right(board, model, ul, ur)
             out.append((ids_l, ul, ur))
         else:
             common, ia, ib = np.intersect1d(ids_l, ids_r, return_indices=True)
@@ -174,23 +217,6 @@ def detect_views(views: list[tuple[np.ndarray, np.ndarray]], board: BoardSpec, s
                 continue
             out.append((common, ul[ia], ur[ib]))
     return out, skipped
-
-
-def _home_order(ul: np.ndarray, P: np.ndarray, st: dict, T_dc_nominal: np.ndarray) -> np.ndarray:
-    """Of the two chessboard orderings, the one whose PnP pose puts the camera nearest its nominal mount."""
-    best = None
-    for cand in (ul, ul[::-1]):
-        ok, rv, tv = cv2.solvePnP(P, cand, st["K1"], st["D1"], flags=cv2.SOLVEPNP_ITERATIVE)
-        if not ok:
-            continue
-        R = cv2.Rodrigues(rv)[0]
-        C = -R.T @ tv.ravel()
-        d = float(np.linalg.norm(C - T_dc_nominal[:3, 3]))
-        if best is None or d < best[0]:
-            best = (d, cand)
-    if best is None:
-        raise ValueError("solvePnP failed on the home view")
-    return best[1]
 
 
 def _pose_vec(R: np.ndarray, t: np.ndarray) -> np.ndarray:

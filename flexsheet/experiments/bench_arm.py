@@ -22,6 +22,8 @@ loopback, following a ±60° stroke, for ``--cycles`` cycles at ``--period`` (7.
   this includes the twin's own scheduling);
 - ``mxt_rtt_p50_ms`` / ``mxt_rtt_p99_ms``: packet → reply round trip (the reply leaves at the twin's next
   cycle, so up to one period is by design);
+- ``mxt_react_p50_ms`` / ``mxt_react_p99_ms``: the bridge's own part: from the reply's arrival (the
+  controller ready for the next command) to the next MOVE leaving;
 - ``mxt_lost`` (never answered), ``mxt_late`` (answered after the next packet left), ``mxt_repeats``
   (cycles that repeated the last command for want of a reply), ``mxt_refused``, ``mxt_sent``,
   ``mxt_replies``; twin side: ``twin_tick_jitter_p50_ms`` / ``p99``, ``twin_missed_cycles`` (control cycles
@@ -58,8 +60,8 @@ from nodes.arm_controller_sim.controller import ControllerCore
 
 PERIOD = 0.0071
 MXT_PERIOD = 0.00711
-EPILOG = ("examples:\n  flexsheet bench arm --json --cycles 2000 --out docs/figures/arm\n"
-          "  flexsheet bench arm --protocol mxt --json --cycles 10000 --out docs/figures/arm")
+EPILOG = ("example: flexsheet bench arm --json --cycles 2000 --out docs/figures/arm\n"
+          "example: flexsheet bench arm --protocol mxt --json --cycles 10000 --out docs/figures/arm")
 
 
 def _clamp(side: str, theta: float, stretch: float = 0.05) -> np.ndarray:
@@ -286,12 +288,15 @@ def bench_mxt(n_cycles: int, period: float = MXT_PERIOD) -> dict:
     t = np.array(link.send_times[101:])          # MOVE packets after the first 100 (warm-up)
     iv = np.diff(t)
     rtt = np.array(link.rtts[100:])
+    react = np.array(link.reactions[101:])
+    react = react[np.isfinite(react)]
     dev = np.abs(iv - period)
     out = {"mxt_period_ms": period * 1e3, "mxt_cycles": int(len(iv)),
            "mxt_send_period_ms": float(iv.mean() * 1e3),
            "mxt_jitter_p50_ms": float(np.median(dev) * 1e3), "mxt_jitter_p99_ms": float(np.percentile(dev, 99) * 1e3),
            "mxt_jitter_max_ms": float(dev.max() * 1e3),
-           "mxt_rtt_p50_ms": float(np.median(rtt) * 1e3), "mxt_rtt_p99_ms": float(np.percentile(rtt, 99) * 1e3)}
+           "mxt_rtt_p50_ms": float(np.median(rtt) * 1e3), "mxt_rtt_p99_ms": float(np.percentile(rtt, 99) * 1e3),
+           "mxt_react_p50_ms": float(np.median(react) * 1e3), "mxt_react_p99_ms": float(np.percentile(react, 99) * 1e3)}
     out.update({f"mxt_{k}": v for k, v in link.counters().items() if k in ("sent", "replies", "lost", "late",
                                                                             "repeats", "refused", "unmatched")})
     out.update(twin_res)

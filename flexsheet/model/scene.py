@@ -1,7 +1,7 @@
 """The paper's display geometry in the ``display`` frame, shared by every node (pure, no I/O).
 
 Frame ``display``: origin at the centre of the sheet in its home pose (the paper's imaginary screen),
-+x from the sheet toward the user (screen normal n_o), +y to the user's left, +z up. Units m, rad.
++x from the sheet toward the user (screen normal n_o), +y to the user's right (the user faces −x), +z up. Units m, rad.
 Note: the design card names +y "the user's left", but a right-handed frame with +x toward the user and +z
 up has +y on the user's *right* (the user faces −x). All code uses right-handed coordinates and only the
 coordinates; the scene is symmetric in y, so the only effect is naming: the "left" arm/clamp is the one at

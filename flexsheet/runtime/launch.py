@@ -14,6 +14,7 @@ A launch file (``launch/*.yaml``) is the single source of truth for hosts and po
         remaps: {/chatter: /chatter2}
         respawn: {policy: on-failure, delay: 0.5, max_restarts: 5}
         required: false              # true: when it exits by itself, the whole launch stops
+        container: vision            # share one process (and loop) with the other nodes of this container
     security:                        # ZeroMQ CURVE (docs/deploy.md); keys from `flexsheet keys generate`
       curve: true
       public_keys_file: $(keys)/public_keys.yaml
@@ -27,12 +28,16 @@ use ``$(keys)`` (the keys folder: ``$FLEXSHEET_KEYS``, else ``security.keys_dir`
 and ``$(launch_dir)``. :mod:`flexsheet.runtime.launch_check` checks a file against this machine
 (``flexsheet launch FILE --check``) and ``flexsheet launch`` runs that check before it starts anything.
 
-The supervisor starts each node as its own OS process (``python -m flexsheet run …``), prefixes every
-output line with the node name as it arrives (line-buffered, never batched), respawns by policy (never a node
-that exits with :data:`~flexsheet.runtime.node.EXIT_CONFIG`, a configuration error), watches
+The supervisor starts each node as its own OS process (``python -m flexsheet run …``) — or, for the nodes of
+one ``container:`` on one host, one process for them all (``python -m flexsheet run --container NAME …``,
+:mod:`flexsheet.runtime.container`: messages between them are passed as objects; the container restarts a
+crashed node itself, the supervisor restarts the container process) — prefixes every
+output line with the node (or container) name as it arrives (line-buffered, never batched), respawns by policy
+(never a node that exits with :data:`~flexsheet.runtime.node.EXIT_CONFIG`, a configuration error), watches
 the heartbeats of every node of the file (all hosts) and reports a node or host that goes silent, and on
 Ctrl-C/SIGTERM stops all children in reverse order with escalation SIGINT → SIGTERM → SIGKILL. Children
-get ``PR_SET_PDEATHSIG`` so that not even a ``kill -9`` of the launcher leaves orphans.
+get ``PR_SET_PDEATHSIG`` so that not even a ``kill -9`` of the launcher leaves orphans. With ``--out`` it samples
+each child's CPU time (``/proc/<pid>/stat``) and writes ``$(out)/cpu.json`` when it stops.
 Errors: :class:`LaunchError` naming the file, the key and the wrong value.
 Source: ros2/launch ``launch_service.py`` (minus its substitution layer), supervisord's policies.
 """
@@ -41,6 +46,7 @@ from __future__ import annotations
 
 import asyncio
 import ctypes
+import json
 import os
 import signal
 import sys
@@ -166,6 +172,9 @@ class NodeSpec(BaseModel):
     rt_priority: int = Field(default=0, ge=0, le=90,
                              description="SCHED_FIFO priority for a hard-periodic loop (needs root/CAP_SYS_NICE; "
                                          "0 = normal scheduling; Linux RT throttling keeps 5 % for the rest)")
+    container: str | None = Field(default=None, pattern=r"^[A-Za-z_][A-Za-z0-9_-]{0,63}$",
+                                  description="composable container: the nodes of one container and host run in "
+                                              "one process and one event loop (flexsheet.runtime.container)")
 
     @field_validator("type")
     @classmethod
@@ -248,6 +257,10 @@ def load_launch(path: str | Path) -> LaunchFile:
             elif ep in seen:
                 lines.append(f"{path}: key 'nodes.{name}.port': endpoint {ep} already used by node {seen[ep]!r}")
             seen[ep] = name
+    for name, spec in lf.nodes.items():
+        if spec.container is not None and spec.container in lf.nodes:
+            lines.append(f"{path}: key 'nodes.{name}.container': container name {spec.container!r} is also a node "
+                         "name; give the container its own name")
     if lf.security.curve and lf.security.public_keys_file is None:  # a keys file is read when used (check)
         missing = [h for h in lf.hosts if h not in lf.security.public_keys]
         if missing:
@@ -416,12 +429,67 @@ def _child_setup(nice: int, rt_priority: int = 0):
 
 
 class _Child:
-    def __init__(self, name: str, spec: NodeSpec) -> None:
+    def __init__(self, name: str, spec: NodeSpec, members: list[str] | None = None) -> None:
         self.name, self.spec = name, spec
+        self.members = members or []  # the nodes of a container child (empty: one node)
         self.proc: asyncio.subprocess.Process | None = None
         self.restarts = 0
         self.stopping = False
         self.exit_codes: list[int] = []
+        self.cpu_s = 0.0          # CPU time of the ended incarnations, s
+        self.cpu_live = 0.0       # CPU time of the running incarnation at the last sample, s
+        self.cpu_warm: tuple[float, float] | None = None  # (monotonic time, CPU s) once warmed up
+        self.pids: list[int] = []
+        self.started_at = 0.0
+
+
+def container_spec(lf: LaunchFile, members: list[str]) -> NodeSpec:
+    """The process-level spec of a container whose nodes are ``members``: required if any member is; respawn
+    ``always`` if any member's policy is, else ``on-failure`` if any is, else ``never``, with the smallest
+    delay and the largest ``max_restarts``; the smallest ``nice`` and the largest ``rt_priority``."""
+    specs = [lf.nodes[n] for n in members]
+    policies = {s.respawn.policy for s in specs}
+    policy = "always" if "always" in policies else ("on-failure" if "on-failure" in policies else "never")
+    respawn = RespawnSpec(policy=policy, delay=min(s.respawn.delay for s in specs),
+                          max_restarts=max(s.respawn.max_restarts for s in specs))
+    return NodeSpec(type=specs[0].type, host=specs[0].host, respawn=respawn, required=any(s.required for s in specs),
+                    nice=min(s.nice for s in specs), rt_priority=max(s.rt_priority for s in specs),
+                    container=specs[0].container)
+
+
+def children_of(lf: LaunchFile, host: str | None) -> list[_Child]:
+    """One child process per node, or per container on one host (at its first member's place in the file)."""
+    out: list[_Child] = []
+    seen: set[tuple[str, str]] = set()
+    for n, s in lf.nodes.items():
+        if host is not None and s.host != host:
+            continue
+        if s.container is None:
+            out.append(_Child(n, s))
+            continue
+        key = (s.container, s.host)
+        if key in seen:
+            continue
+        seen.add(key)
+        members = [m for m, t in lf.nodes.items() if t.container == s.container and t.host == s.host]
+        hosts_of_name = {t.host for t in lf.nodes.values() if t.container == s.container}
+        label = s.container if len(hosts_of_name) == 1 else f"{s.container}@{s.host}"
+        out.append(_Child(label, container_spec(lf, members), members))
+    return out
+
+
+def _proc_cpu_s(pid: int) -> float | None:
+    """utime + stime of process ``pid`` (all its threads), s, from ``/proc/<pid>/stat``; None if gone."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            data = f.read()
+    except OSError:
+        return None
+    fields = data[data.rfind(b")") + 2:].split()
+    return (int(fields[11]) + int(fields[12])) / _CLK_TCK
+
+
+_CLK_TCK = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
 
 class Supervisor:
@@ -441,7 +509,7 @@ class Supervisor:
         self.print = print_fn or (lambda line: print(line, flush=True))
         self.python = python
         self.overrides = overrides or {}
-        self.children = [_Child(n, s) for n, s in lf.nodes.items() if host is None or s.host == host]
+        self.children = children_of(lf, host)
         self._stop = asyncio.Event()
         self.reason = ""
         self.lost_events: list[tuple[str, str]] = []
@@ -450,6 +518,15 @@ class Supervisor:
         self._fmt = f"[{{:<{width}}}] {{}}"
 
     def _cmd(self, child: _Child) -> list[str]:
+        if child.members:
+            cmd = [self.python, "-u", "-m", "flexsheet", "run", "--container", child.spec.container, "--launch",
+                   str(self.lf.path), "--host", child.spec.host]
+            if self.out:
+                cmd += ["--out", self.out]
+            for node in child.members:
+                for kv in self.overrides.get(node, []):
+                    cmd += ["--set", f"{node}.{kv}"]
+            return cmd
         cmd = [self.python, "-u", "-m", "flexsheet", "run", child.spec.type, "--launch", str(self.lf.path),
                "--name", child.name]
         if self.out:
@@ -477,10 +554,15 @@ class Supervisor:
     async def _watch(self, child: _Child) -> None:
         while True:
             await self._spawn(child)
-            self.print(self._fmt.format(child.name, f"started pid {child.proc.pid}"))
+            child.pids.append(child.proc.pid)
+            child.started_at = child.started_at or time.monotonic()
+            self.print(self._fmt.format(child.name, f"started pid {child.proc.pid}"
+                                        + (f" (container: {', '.join(child.members)})" if child.members else "")))
             await self._pump(child)
             code = await child.proc.wait()
             child.exit_codes.append(code)
+            child.cpu_s += child.cpu_live
+            child.cpu_live = 0.0
             if child.stopping or self._stop.is_set():
                 return
             self.print(self._fmt.format(child.name, f"exited with code {code}"))
@@ -534,10 +616,13 @@ class Supervisor:
         if not self.children:
             self.print(f"[launch] no nodes for host {self.host!r} in {self.lf.path}")
             return 0
-        self.print(f"[launch] {self.lf.name}: starting {len(self.children)} nodes"
+        n_nodes = sum(len(c.members) or 1 for c in self.children)
+        self.print(f"[launch] {self.lf.name}: starting {n_nodes} nodes"
+                   + (f" in {len(self.children)} processes" if n_nodes != len(self.children) else "")
                    + (f" on host {self.host}" if self.host else ""))
         watchers = [loop.create_task(self._watch(c)) for c in self.children]
         monitor = loop.create_task(self._monitor())
+        sampler = loop.create_task(self._sample_cpu())
         t0 = time.monotonic()
         try:
             if self.duration is not None:
@@ -548,6 +633,8 @@ class Supervisor:
             self.reason = f"duration {self.duration:g} s reached"
         self.print(f"[launch] stopping after {time.monotonic() - t0:.1f} s: {self.reason or 'stop requested'}")
         monitor.cancel()
+        sampler.cancel()
+        self._sample_now()
         await asyncio.gather(*(self._stop_child(c) for c in reversed(self.children)))
         for w in watchers:
             w.cancel()
@@ -555,6 +642,8 @@ class Supervisor:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
         self.print("[launch] all nodes stopped")
+        if self.out:
+            self.write_cpu(Path(self.out) / "cpu.json", time.monotonic() - t0)
         failed = [c.name for c in self.children if c.exit_codes and c.exit_codes[-1] not in (0, -2, -15)]
         if self.config_errors:
             return EXIT_CONFIG
@@ -604,6 +693,70 @@ class Supervisor:
                                    f"for {now - t:.1f} s")
         finally:
             tr.close()
+
+    #: s after the start before the steady-state CPU share is measured (imports, precompute and caches excluded)
+    cpu_warmup_s = 10.0
+
+    def _sample_now(self) -> None:
+        now = time.monotonic()
+        for c in self.children:
+            if c.proc is not None and c.proc.returncode is None:
+                v = _proc_cpu_s(c.proc.pid)
+                if v is not None:
+                    c.cpu_live = v
+            if c.cpu_warm is None and c.started_at and now - c.started_at >= self.cpu_warmup_s:
+                c.cpu_warm = (now, c.cpu_s + c.cpu_live)
+
+    async def _sample_cpu(self, period: float = 1.0) -> None:
+        """Sample every child's CPU time each ``period`` s (a child that dies loses at most one period)."""
+        while True:
+            self._sample_now()
+            await asyncio.sleep(period)
+
+    def cpu_report(self, wall_s: float) -> dict:
+        """Per node CPU use over the run: ``{"wall_s", "cores", "processes": {child: {"cpu_s", "cpu_percent",
+        "steady_cpu_percent", "pids", "nodes", "restarts"}}, "nodes": {node: {"cpu_s", "cpu_percent",
+        "process", "shared"}}}``. A node alone in its process: its process's CPU time
+        (all its threads). A node in a container: its handlers' and timers' thread CPU time as the container
+        measured it (``cpu_<container>.json``), ``shared`` naming the process whose total also holds the
+        container's loop, decoding and worker threads. ``cpu_percent``: of one core, over ``wall_s``."""
+        procs, nodes = {}, {}
+        now = time.monotonic()
+        for c in self.children:
+            cpu = c.cpu_s + c.cpu_live
+            procs[c.name] = {"cpu_s": round(cpu, 3), "cpu_percent": round(100.0 * cpu / wall_s, 2) if wall_s else 0.0,
+                             "pids": c.pids, "nodes": c.members or [c.name], "restarts": c.restarts}
+            if c.cpu_warm is not None and now - c.cpu_warm[0] > 1.0:
+                procs[c.name]["steady_cpu_percent"] = round(100.0 * (cpu - c.cpu_warm[1]) / (now - c.cpu_warm[0]), 2)
+            if not c.members:
+                nodes[c.name] = {"cpu_s": round(cpu, 3), "cpu_percent": procs[c.name]["cpu_percent"],
+                                 "process": c.name}
+                if "steady_cpu_percent" in procs[c.name]:
+                    nodes[c.name]["steady_cpu_percent"] = procs[c.name]["steady_cpu_percent"]
+                continue
+            inner: dict = {}
+            if self.out:
+                try:
+                    inner = json.loads((Path(self.out) / f"cpu_{c.spec.container}.json").read_text()).get("nodes", {})
+                except (OSError, ValueError):
+                    inner = {}
+            for n in c.members:
+                v = float(inner.get(n, {}).get("handler_cpu_s", 0.0))
+                nodes[n] = {"cpu_s": round(v, 3), "cpu_percent": round(100.0 * v / wall_s, 2) if wall_s else 0.0,
+                            "process": c.name, "shared": True}
+        return {"wall_s": round(wall_s, 3), "cores": os.cpu_count(), "processes": procs, "nodes": nodes,
+                "note": "cpu_percent: of one core over the whole run, start-up included; steady_cpu_percent: from "
+                        f"{self.cpu_warmup_s:g} s after the start to the stop; container nodes: handler+timer thread "
+                        "CPU only, the rest of their process's cpu_s is shared (loop, decoding, async handlers, "
+                        "worker threads)"}
+
+    def write_cpu(self, path: Path, wall_s: float) -> None:
+        """Write :meth:`cpu_report` as JSON to ``path`` (a failure is printed, never raised)."""
+        try:
+            path.write_text(json.dumps(self.cpu_report(wall_s), indent=1))
+            self.print(f"[launch] per-node CPU: {path}")
+        except OSError as exc:
+            self.print(f"[launch] cannot write {path}: {exc}")
 
     def pids(self) -> list[int]:
         """PIDs of the running children."""

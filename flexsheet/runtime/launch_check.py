@@ -23,8 +23,11 @@ same check first and starts nothing when it finds an error. What is checked:
   each checked host's ``<host>.key_secret`` is there, matches its public key and is private (mode 0600).
   A missing key names the command that writes it, ``flexsheet keys generate <hosts of the file>``.
 
+- **containers**: a player with ``mode: lockstep`` is in a container with other nodes.
+
 Warnings (printed, not failing): CURVE off on a graph whose hosts are not all loopback; a node type that
-cannot be imported on this machine for a node of another host.
+cannot be imported on this machine for a node of another host; the nodes of one container asking for
+different ``nice`` or ``rt_priority`` (one process has one).
 """
 
 from __future__ import annotations
@@ -205,6 +208,7 @@ class _Checker:
         self.check_display_calib()
         self.check_report()
         self.check_nodes()
+        self.check_containers()
         return self.res
 
     # ---------------------------------------------------------------------------------------------- hosts
@@ -397,6 +401,32 @@ class _Checker:
                     problem = check_file_param(key, value)
                     if problem:
                         self.err(f"{where}: params.{key}", value, problem)
+
+
+    # ---------------------------------------------------------------------------------------------- containers
+    def check_containers(self) -> None:
+        """A lockstep player must share a container with the nodes it drives; the members of one container
+        share one niceness and RT priority (warned when they ask for different ones)."""
+        groups: dict[tuple[str, str], list[str]] = {}
+        for name, spec in self.lf.nodes.items():
+            if spec.container is not None and spec.host in self.hosts:
+                groups.setdefault((spec.container, spec.host), []).append(name)
+            if spec.type == "player" and spec.host in self.hosts and self._params(name).get("mode") == "lockstep":
+                if spec.container is None:
+                    self.err(f"node {name}: params.mode", "lockstep", "a lockstep player must be in a container "
+                             "with the nodes it drives: give it and them 'container: NAME' (docs/realtime.md)")
+                elif len([n for n, s in self.lf.nodes.items() if s.container == spec.container
+                          and s.host == spec.host]) < 2:
+                    self.err(f"node {name}: container", spec.container, "a lockstep player drives only the nodes "
+                             "of its container, and this container holds no other node")
+        for (cname, host), names in groups.items():
+            specs = [self.lf.nodes[n] for n in names]
+            for key, pick in (("nice", min), ("rt_priority", max)):
+                values = {n: getattr(s, key) for n, s in zip(names, specs, strict=True)}
+                if len(set(values.values())) > 1:
+                    self.warn(f"container {cname} on host {host}: its nodes ask for different {key} "
+                              f"({', '.join(f'{n}={v}' for n, v in values.items())}); one process runs at "
+                              f"{key} {pick(values.values())}")
 
 
 def _iso(t: float) -> str:

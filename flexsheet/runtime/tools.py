@@ -19,7 +19,7 @@ from flexsheet.runtime.transport import ZmqTransport
 from messages import Heartbeat
 from messages import topics as T
 
-__all__ = ["collect_heartbeats", "topic_list", "topic_echo", "topic_hz", "node_list"]
+__all__ = ["collect_heartbeats", "topic_list", "topic_echo", "topic_hz", "node_list", "containers_of"]
 
 
 def _peers(launch: str) -> tuple[list[str], object]:
@@ -82,15 +82,27 @@ def topic_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def containers_of(launch: str) -> dict[str, str]:
+    """Node name → its ``container:`` in launch file ``launch`` (nodes alone in their process are absent)."""
+    try:
+        lf = load_launch(launch)
+    except LaunchError:
+        return {}
+    return {n: s.container for n, s in lf.nodes.items() if s.container}
+
+
 def node_list(args: argparse.Namespace) -> int:
-    """Print every live node with host, pid, endpoint, state and rejection counts."""
+    """Print every live node with host, container (``-``: its own process), pid, endpoint, state and
+    rejection counts. The nodes of one container share its pid."""
     beats = _beats(args)
     if not beats:
         return 2 if beats is None else 1
+    containers = containers_of(args.launch)
     for name in sorted(beats):
         hb = beats[name]
         age = time.time() - hb.header.stamp
-        print(f"{name:<18} {hb.node_type:<18} host={hb.host:<8} pid={hb.pid:<7} {hb.endpoint:<24} "
+        print(f"{name:<18} {hb.node_type:<18} host={hb.host:<8} container={containers.get(name, '-'):<10} "
+              f"pid={hb.pid:<7} {hb.endpoint:<24} "
               f"state={hb.state:<5} up={hb.uptime:7.1f}s rejected={hb.rejected_total} "
               f"(heartbeat {age * 1e3:.0f} ms ago){'  ' + hb.last_rejection if hb.last_rejection else ''}")
     return 0

@@ -82,6 +82,9 @@ class ControllerLink(Protocol):
     async def send(self, cmd: np.ndarray, rewrite: bool = False) -> bool:
         """Send joint command (6,) rad; False if the controller refused it at once (Modbus exception)."""
 
+    async def keepalive(self) -> None:
+        """Disabled stream: exchange state without commanding anything (MXT: a NULL packet; Modbus: nothing)."""
+
     async def after_cycle(self) -> None:
         """Protocol housekeeping after the cycle was reported (Modbus: the COMMAND write)."""
 
@@ -121,18 +124,21 @@ class ArmStream:
 
     Parameters: ``tracker`` (goal source), ``limiter`` (command shaping; its period is the cycle period),
     ``link`` (the protocol backend), ``backoff_min``/``backoff_max`` s (reopen delays), ``on_cycle``
-    callback(CycleReport), ``clock`` (wall clock for stamps, default ``time.time``).
+    callback(CycleReport), ``clock`` (wall clock for stamps, default ``time.time``). ``enabled=False``: the
+    stream reads the controller every cycle and commands nothing (``hold:disabled``; first bring-up).
     """
 
     def __init__(self, tracker: TargetTracker, limiter: StreamLimiter, link: ControllerLink, *,
                  backoff_min: float = 0.05, backoff_max: float = 2.0,
-                 on_cycle: Callable[[CycleReport], None] | None = None, clock=time.time) -> None:
+                 on_cycle: Callable[[CycleReport], None] | None = None, clock=time.time,
+                 enabled: bool = True) -> None:
         self.tracker = tracker
         self.limiter = limiter
         self.link = link
         self.backoff_min, self.backoff_max = float(backoff_min), float(backoff_max)
         self.on_cycle = on_cycle
         self.clock = clock
+        self.enabled = enabled
         self.period = limiter.T
         self.backoff = self.backoff_min
         self.next_connect = 0.0
@@ -223,6 +229,11 @@ class ArmStream:
         try:
             st = await link.read()
             self.state = st
+            if not self.enabled:
+                self.limiter.reset(st.position)
+                self.tracker.seed(st.position)
+                await link.keepalive()
+                return self._report(t0, t_deadline, 0.0, "hold:disabled")
             verdict = link.supervise(st)
             if verdict.reseed is not None:
                 self.limiter.reset(verdict.reseed)

@@ -128,6 +128,9 @@ class ModbusLink:
             return False
         return True
 
+    async def keepalive(self) -> None:
+        """Disabled: nothing is written (the read was the exchange)."""
+
     async def after_cycle(self) -> None:
         """Write COMMAND when the supervision asked for it (RESET acts on its rising edge)."""
         if self.client is None:

@@ -24,6 +24,8 @@ must be running ``Open "ENET:<this PC>" As #1 / Mxt 1,1,<filter ms>`` (docs/arm.
   lost and reopened with a NULL packet (backoff in the stream). The controller's TCount (cycles without a
   packet, unconfirmed meaning) is kept as ``controller_missed``.
 * **Shutdown** sends END (M ``on_deactivate``, R ``stop()``).
+* **Disabled** (``enabled: false``, first bring-up): NULL packets instead of MOVE, every cycle: the bridge
+  reports the measured joints and commands nothing.
 
 The controller state handed to the stream is a :class:`messages.registers.ControllerState` with the STATUS
 bits of the register map synthesised: ENABLED and WATCHDOG_OK while replies arrive, MOVING, IN_POSITION;
@@ -35,6 +37,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import time
 from collections import OrderedDict
 from collections.abc import Callable
@@ -70,7 +73,7 @@ class MxtLink:
 
     ``host``/``port``: the controller. ``period``: its control cycle, s. ``open_timeout``: s to wait for the
     NULL packet's reply. ``lost_cycles``: cycles without any reply before the link is reopened.
-    ``record``: keep per-packet send times and round trips (benchmarks).
+    ``record``: keep per-packet send times, round trips and reaction times (benchmarks).
     """
 
     name = "mxt"
@@ -117,6 +120,7 @@ class MxtLink:
         self.record = record
         self.send_times: list[float] = []
         self.rtts: list[float] = []
+        self.reactions: list[float] = []     # s from "controller ready" (reply in) to this send; nan: fallback
 
     # ------------------------------------------------------------------ socket
     def _on_datagram(self, data: bytes) -> None:
@@ -164,6 +168,9 @@ class MxtLink:
         except (OSError, ValueError) as exc:
             raise LinkError(f"send failed: {exc}") from exc
         now = time.monotonic()
+        if self.record:
+            ready = self.ready_time()
+            self.reactions.append(now - ready if ready is not None else math.nan)
         self.sent += 1
         self._t_sent = now
         self._pending[pkt.ccount] = now
@@ -293,6 +300,13 @@ class MxtLink:
             raise LinkError(str(exc)) from exc
         self._send_packet(pkt, np.asarray(cmd, dtype=float))
         return True
+
+    async def keepalive(self) -> None:
+        """Disabled: a NULL packet (exchange data only; the controller keeps its command)."""
+        if not self.connected:
+            raise LinkError("not open")
+        self.ccount = (self.ccount + 1) & 0xFFFFFFFF
+        self._send_packet(mxt.null_packet(self.ccount, RECV_TYPES), None)
 
     async def after_cycle(self) -> None:
         """Nothing: MXT has no separate command channel."""

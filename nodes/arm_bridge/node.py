@@ -13,7 +13,7 @@ carries the link counters (MXT: packets sent, replies, late, lost, repeats, refu
 
 ``bridge_status``: "ok"; "hold:no_target" (no target yet, or none for ``target_timeout`` s: the arm stops);
 "hold:unreachable" / "hold:limit:J<k>" / "hold:singular" / "hold:jump" (last target refused by IK: the arm
-stops short at the last good goal); "hold:disabled" (controller not enabled yet); "fault:watchdog",
+stops short at the last good goal); "hold:disabled" (controller not enabled yet, or ``enabled: false``); "fault:watchdog",
 "fault:estop" (controller faulted; the bridge follows the measured joints); "hold:refused" (the controller did
 not take a command: the stream restarts from what it executes); "disconnected".
 """
@@ -59,6 +59,8 @@ class ArmBridgeParams(BaseModel):
     accel_scale: float = Field(default=2.0, gt=0.0, description="commanded accel limit = scale × speed limit, 1/s")
     limit_margin: float = Field(default=0.02, ge=0.0, description="kept from each joint limit, rad")
     max_ik_jump: float = Field(default=0.5, gt=0.0, description="largest joint change one target may ask, rad")
+    enabled: bool = Field(default=True, description="false: read the controller every cycle and command "
+                          "nothing (MXT: NULL packets; Modbus: reads only) — first bring-up")
     auto_reset: bool = Field(default=True, description="reset watchdog faults automatically (never e-stops)")
     request_timeout: float = Field(default=0.1, gt=0.0, description="Modbus request timeout, s")
     backoff_min: float = Field(default=0.05, gt=0.0, description="first reconnect delay, s")
@@ -100,7 +102,8 @@ class ArmBridgeNode(Node):
             self.link = ModbusLink(p.host, p.port, device_id=p.device_id, request_timeout=p.request_timeout,
                                    auto_reset=p.auto_reset)
         self.stream = ArmStream(self.tracker, limiter, self.link, backoff_min=p.backoff_min,
-                                backoff_max=p.backoff_max, on_cycle=self.on_cycle, clock=self.now)
+                                backoff_max=p.backoff_max, on_cycle=self.on_cycle, clock=self.now,
+                                enabled=p.enabled)
         self._diag_at = 0.0
         self._pending: ArmTarget | None = None
         self._last_status = ""

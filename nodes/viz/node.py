@@ -12,8 +12,9 @@ Inputs: ``/fingertip``, ``/sheet/target``, ``/arm/left/joint_state``, ``/arm/rig
 * it subscribes to an input only once a viewer subscribes to a Foxglove channel built from it (with no
   viewer it receives nothing; the transport has no unsubscribe, so a topic stays subscribed afterwards);
 * every subscription is QoS.LATEST with an async handler that stores the message and then rests
-  ``1/input_rate`` s, so at most ``input_rate`` messages per topic per second are decoded; newer ones
-  replace each other in the depth-1 queue meanwhile (counted as ``dropped`` in the heartbeat);
+  ``1/input_rate`` s (``/camera/stereo``: ``1/camera_rate``; ``/render/stereo``: the faster of render and
+  scene rate), so at most that many messages per topic per second are decoded; newer ones replace each
+  other in the depth-1 queue meanwhile (counted as ``dropped`` in the heartbeat);
 * outputs are built only for channels a viewer subscribes to: ``/viz/scene``, ``/viz/tf``, ``/viz/metrics``
   at ``scene_rate``, the camera images at ``camera_rate``, ``/render/image`` at ``render_rate``, the JSON
   copies of the plain topics as they arrive (≤ ``input_rate``);
@@ -44,6 +45,7 @@ from flexsheet.runtime.foxglove_scene import (
     inputs_for,
 )
 from flexsheet.runtime.node import InputRejected, Node, QoS
+from messages import topics as T
 
 __all__ = ["VizNode", "VizParams"]
 
@@ -58,8 +60,10 @@ class VizParams(BaseModel):
     scene_rate: float = Field(10.0, ge=0.0, le=100.0, description="/viz/scene, /viz/tf, /viz/metrics, Hz")
     camera_rate: float = Field(5.0, ge=0.0, le=100.0, description="/camera/left, /camera/right, Hz")
     render_rate: float = Field(5.0, ge=0.0, le=100.0, description="/render/image, Hz")
-    input_rate: float = Field(20.0, gt=0.0, le=1000.0, description="most messages decoded per input topic, Hz")
-    json_rate: float = Field(20.0, ge=0.0, le=1000.0, description="cap per JSON topic, Hz")
+    input_rate: float = Field(10.0, gt=0.0, le=1000.0,
+                              description="most messages decoded per input topic, Hz (camera and rendered "
+                                          "frames: camera_rate and render_rate)")
+    json_rate: float = Field(10.0, ge=0.0, le=1000.0, description="cap per JSON topic, Hz")
     calibration_rate: float = Field(0.5, ge=0.0, le=10.0, description="camera calibrations resent, Hz")
     poll_rate: float = Field(20.0, gt=0.0, le=200.0, description="how often due outputs are checked, Hz")
     camera_scale: float = Field(1.0, gt=0.0, le=1.0, description="downscale of the camera images")
@@ -145,7 +149,10 @@ class VizNode(Node):
         return self.channels[topic].has_sinks()
 
     def _handler(self, name: str):
-        rest = 1.0 / self.params.input_rate
+        p: VizParams = self.params
+        rate = {T.STEREO.name: p.camera_rate, T.RENDERED.name: max(p.render_rate, p.scene_rate)}.get(name,
+                                                                                                   p.input_rate)
+        rest = 1.0 / (rate if rate > 0 else p.input_rate)
 
         async def on_message(msg) -> None:
             try:
