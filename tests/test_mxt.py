@@ -286,3 +286,42 @@ def test_twin_node_answers_an_independent_client_300_moves(c_client, tmp_path):
     assert np.max(np.abs(fb - q)) > 1e-4                               # measured ≠ commanded (a servo lag)
     ends = [r for r in replies if r["command"] == mxt.CMD_END]
     assert len(ends) == 1 and after_end == 0                           # END answered once, then no session
+
+
+def test_random_datagrams_are_refused_cleanly_and_never_move_the_twin():
+    """Fuzz: random bytes and random field values (valid codes, wild joints) through the codec and the twin's
+    logic: a malformed datagram is a ValueError naming the field; a decodable one never crashes the twin, and
+    the twin never executes a step beyond its limit."""
+    from flexsheet.model.kinematics import Q_HOME, QD_MAX
+    from nodes.arm_controller_sim.mxt_twin import MxtCore
+
+    rng = np.random.default_rng(13)
+    core = MxtCore(Q_HOME, period=0.00711)
+    core.receive(mxt.null_packet(0), 0.0)
+    refused, decoded = 0, 0
+    for k in range(3000):
+        if k % 3 == 0:
+            buf = rng.bytes(int(rng.choice([0, 1, 195, 196, 197, 400])))
+        else:
+            q = Q_HOME + rng.normal(0, [0.001, 0.01, 1.0][k % 3], 6)
+            if k % 7 == 0:
+                q[rng.integers(6)] = rng.choice([np.nan, np.inf, 1e30])
+            raw = bytearray(mxt.PACKET.pack(int(rng.choice([0, 1, 1, 1, 255, 7])), int(rng.choice([2, 2, 1, 3, 12])),
+                                            int(rng.integers(0, 13)), struct.pack("<8f8x", *q, 0, 0), 0, 0, 0, 0, 0,
+                                            0, k, 8, bytes(40), 0, bytes(40), 0, bytes(40)))
+            buf = bytes(raw)
+        try:
+            pkt = mxt.Packet.decode(buf)
+        except ValueError as exc:
+            assert "MXT" in str(exc)
+            refused += 1
+            continue
+        decoded += 1
+        before = core.active.copy()
+        if core.receive(pkt, 0.001 * k) is not None:
+            mxt.Packet.decode(core.reply(pkt).encode())          # every reply is a valid datagram
+        step = np.abs(core.active - before)
+        assert np.all(step <= QD_MAX * 0.00711 * 1.5 + 1e-9)
+        if core.session != "open":
+            core.receive(mxt.null_packet(0), 0.001 * k)
+    assert refused > 1000 and decoded > 800 and core.refused > 100 and core.moves > 50

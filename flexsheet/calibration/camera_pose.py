@@ -13,7 +13,7 @@ object pose in one view):
 1. Corners in every image (``cv2.findChessboardCorners`` + ``cornerSubPix``, or the ChArUco detector, via
    :func:`flexsheet.model.calibration.detect_board`). A chessboard's 180° ordering ambiguity is resolved in
    the home view by the pose nearest the nominal mount, and in the right image of every view by the
-   epipolar constraint of the nominal stereo model; mirrored orderings (the detector orders corners by the
+   prediction from the left image's pose through the nominal stereo model; mirrored orderings (the detector orders corners by the
    image, so it may hand back the board as if seen from behind) are rejected by PnP.
 2. Start: ``cv2.solvePnP`` on the home view's left image (display-frame corners) and on each other view's
    left image (board-frame corners), with the nominal intrinsics.
@@ -175,11 +175,14 @@ def _order_left(board: BoardSpec, ul: np.ndarray, P: np.ndarray, st: dict, C_nom
     return None if best is None else best[1]
 
 
-def _order_right(board: BoardSpec, model: StereoModel, ul: np.ndarray, ur: np.ndarray) -> np.ndarray:
-    """The right ordering that best satisfies the epipolar constraint with the (ordered) left corners."""
-    a = model.undistort(ul, "left")
-    errs = [(float(np.median(model.epipolar_residual(a, model.undistort(c, "right")))), i, c)
-            for i, c in enumerate(_orderings(board, ur))]
+def _order_right(board: BoardSpec, st: dict, P: np.ndarray, ul: np.ndarray, ur: np.ndarray) -> np.ndarray:
+    """The right ordering nearest the prediction from the left PnP pose through the nominal stereo model (the
+    epipolar constraint alone cannot tell a mirror along the epipolar lines)."""
+    ok, rv, tv = cv2.solvePnP(P, ul, st["K1"], st["D1"], flags=cv2.SOLVEPNP_SQPNP)
+    R = st["R"] @ cv2.Rodrigues(rv)[0]
+    t = st["R"] @ tv.ravel() + np.asarray(st["T"], float).ravel()
+    pred = cv2.projectPoints(P, cv2.Rodrigues(R)[0], t, st["K2"], st["D2"])[0].reshape(-1, 2)
+    errs = [(float(np.median(np.linalg.norm(c - pred, axis=1))), i, c) for i, c in enumerate(_orderings(board, ur))]
     return min(errs, key=lambda e: (e[0], e[1]))[2]
 
 
@@ -188,7 +191,6 @@ def detect_views(views: list[tuple[np.ndarray, np.ndarray]], board: BoardSpec, s
     """Detect the board in every stereo pair. Returns (detections, skipped): ``detections[k]`` is ``None`` or
     ``(ids (M,), left (M, 2), right (M, 2))`` (corners seen in both images, consistently ordered),
     ``skipped`` maps a view index to the reason. Chessboard orderings are resolved (module doc)."""
-    model = StereoModel.from_calib(stereo_nominal)
     det = cv2.aruco.CharucoDetector(board.charuco_board()) if board.kind == "charuco" else None
     P_home = board_points(board, offset)
     out, skipped = [], {}
@@ -207,7 +209,7 @@ def detect_views(views: list[tuple[np.ndarray, np.ndarray]], board: BoardSpec, s
                 out.append(None)
                 skipped[k] = "no corner ordering shows the board's front to the left camera"
                 continue
-            ur = _order_right(board, model, ul, ur)
+            ur = _order_right(board, stereo_nominal, P_home, ul, ur)
             out.append((ids_l, ul, ur))
         else:
             common, ia, ib = np.intersect1d(ids_l, ids_r, return_indices=True)

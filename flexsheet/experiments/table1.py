@@ -20,6 +20,12 @@ We make the definitions exact for any shape and sheet pose:
 
 A bias common to D and the sheet (e.g. a camera calibration offset, the paper's 2.95 mm) cancels in Δd,
 which is why the paper's Δd has a small standard deviation.
+
+**Δd, two conventions.** Δθ is the headline (it does not depend on a length convention). Our Δd = |DD′| is
+the chord between the two contact points on the cylinder, = 2R·sin(Δθ/2) ≈ R·Δθ (``dd_mean_mm``). Both rows
+of the paper's Table I have Δd/Δθ = 0.443 mm/0.359° = 0.277 mm/0.225° = 70.7 mm/rad = 2R, the cylinder's
+*diameter*; to compare like for like every row also carries ``dd_2r_mean_mm`` = 2R·Δθ
+(:data:`DD_CONVENTION`). For shapes without a radius only ``dd_mean_mm`` is given.
 """
 
 from __future__ import annotations
@@ -32,7 +38,7 @@ import numpy as np
 from flexsheet.model.shapes import Shape
 
 __all__ = ["StrokeErrors", "stroke_errors", "presented_contacts", "table1", "summarize", "table1_row",
-           "PAPER_TABLE1", "TARGET_FACTOR", "target", "section_normals"]
+           "PAPER_TABLE1", "TARGET_FACTOR", "target", "section_normals", "DD_CONVENTION", "paper_dd_ratio"]
 
 #: the paper's Table I (Furukawa et al., §V-C): moving time (s, as the row key) → means and population
 #: standard deviations of Δd (mm) and Δθ (deg) over the moving phase
@@ -42,6 +48,15 @@ PAPER_TABLE1: dict[str, dict[str, float]] = {
 }
 #: the project's target: errors this many times below the paper's (at the 10 s row)
 TARGET_FACTOR = 4.0
+#: one line for every report that prints Δd (module doc)
+DD_CONVENTION = ("Δθ is the headline. Δd on R: |DD′| = chord ≈ R·Δθ (ours); Δd 2R: 2R·Δθ, the paper's convention "
+                 "(its rows have Δd/Δθ = 70.7 mm/rad = the cylinder's diameter).")
+
+
+def paper_dd_ratio(key: str = "10") -> float:
+    """The paper's Δd/Δθ of row ``key``, mm/rad (70.7 for both rows: 2R, the cylinder's diameter)."""
+    p = PAPER_TABLE1[key]
+    return p["dd_mean_mm"] / math.radians(p["dtheta_mean_deg"])
 
 
 def target(key: str = "10") -> dict[str, float]:
@@ -139,25 +154,35 @@ def table1(shape: Shape, measured, sheet_origin, sheet_normal) -> StrokeErrors:
     return StrokeErrors(dd, dth, gap, D, Dp)
 
 
-def summarize(dd, dtheta) -> dict[str, float]:
+def summarize(dd, dtheta, radius: float | None = None) -> dict[str, float]:
     """Table I row: ``dd_mean_mm``, ``dd_std_mm``, ``dtheta_mean_deg``, ``dtheta_std_deg`` (population std),
-    plus ``dd_p95_mm``, ``dtheta_p95_deg`` and ``n``. Inputs (N,) m and rad; raises ``ValueError`` if empty."""
+    plus ``dd_p95_mm``, ``dtheta_p95_deg`` and ``n``; with ``radius`` R (m) also the paper's convention
+    ``dd_2r_mean_mm``, ``dd_2r_std_mm`` = 2R·Δθ (module doc). Inputs (N,) m and rad; raises ``ValueError`` if
+    empty or the radius is not positive."""
     dd = np.asarray(dd, dtype=float)
     dth = np.asarray(dtheta, dtype=float)
     if dd.size == 0 or dd.shape != dth.shape:
         raise ValueError(f"dd and dtheta must be non-empty and the same shape, got {dd.shape} and {dth.shape}")
     d = math.degrees(1.0)
-    return {"dd_mean_mm": float(dd.mean() * 1e3), "dd_std_mm": float(dd.std() * 1e3),
-            "dtheta_mean_deg": float(dth.mean() * d), "dtheta_std_deg": float(dth.std() * d),
-            "dd_p95_mm": float(np.percentile(dd, 95) * 1e3), "dtheta_p95_deg": float(np.percentile(dth, 95) * d),
-            "n": int(dd.size)}
+    row = {"dd_mean_mm": float(dd.mean() * 1e3), "dd_std_mm": float(dd.std() * 1e3),
+           "dtheta_mean_deg": float(dth.mean() * d), "dtheta_std_deg": float(dth.std() * d),
+           "dd_p95_mm": float(np.percentile(dd, 95) * 1e3), "dtheta_p95_deg": float(np.percentile(dth, 95) * d),
+           "n": int(dd.size)}
+    if radius is not None:
+        if not (math.isfinite(radius) and radius > 0.0):
+            raise ValueError(f"radius must be finite and > 0 m, got {radius!r}")
+        row["dd_2r_mean_mm"] = float(2.0 * radius * dth.mean() * 1e3)
+        row["dd_2r_std_mm"] = float(2.0 * radius * dth.std() * 1e3)
+    return row
 
 
 def table1_row(shape: Shape, measured, sheet_origin, sheet_normal) -> dict[str, float]:
-    """One Table I row from time series (see :func:`table1`): :func:`summarize` of Δd, Δθ plus
-    ``gap_mean_mm`` (mean |gap|, mm). The one metric of the in-process experiment and of a recorded run.
-    Raises ``ValueError`` on bad shapes/values or no samples."""
+    """One Table I row from time series (see :func:`table1`): :func:`summarize` of Δd, Δθ (with the paper's
+    2R convention when the shape has a radius ``R``, the cylinder) plus ``gap_mean_mm`` (mean |gap|, mm). The
+    one metric of the in-process experiment and of a recorded run. Raises ``ValueError`` on bad shapes/values
+    or no samples."""
     err = table1(shape, measured, sheet_origin, sheet_normal)
-    row = summarize(err.dd, err.dtheta)
+    radius = getattr(shape, "R", None)
+    row = summarize(err.dd, err.dtheta, float(radius) if isinstance(radius, (int, float)) else None)
     row["gap_mean_mm"] = float(np.mean(np.abs(err.gap)) * 1e3)
     return row

@@ -19,6 +19,14 @@ Output: an OpenCV FileStorage YAML with ``image_size`` (width, height), ``K1, D1
 in the display frame. :func:`load_yaml` reads it back into a dict of numpy arrays, and
 :func:`to_message` turns it into a :class:`messages.StereoCalibration`.
 
+Validation (``--validate FOLDS``, :func:`validate_stereo`): k-fold cross-validation over the pairs — each fold
+is calibrated without its pairs, then judged on them: the held-out **epipolar error** (Sampson distance of
+the held-out corners, px; scale-free: it checks the intrinsics, R and the direction of T) and the held-out
+**square spread** (the held-out corners triangulated with that fold's calibration: the spread of the
+adjacent-corner distances over the boards and against depth). The square's absolute size cannot be
+validated from the images: it scales T, and every triangulated length, by the same factor. A baseline
+"check" against a length that was itself inferred from |T| would be circular, so none is made.
+
 Board specs: ``chessboard:COLSxROWS`` (inner corners; square side from ``--square``, m) or
 ``charuco:NXxNY:SQUARE:MARKER:DICT`` (squares per side, square and marker side in m, an
 ``cv2.aruco.DICT_*`` name, e.g. ``charuco:5x7:0.04:0.03:DICT_4X4_50``).
@@ -37,7 +45,7 @@ import numpy as np
 import yaml
 
 __all__ = ["BoardSpec", "parse_board", "detect_board", "StereoCalibrationResult", "calibrate_stereo",
-           "write_yaml", "load_yaml", "to_message", "main"]
+           "validate_stereo", "write_yaml", "load_yaml", "to_message", "main"]
 
 _SUBPIX = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 40, 1e-3)
 
@@ -222,6 +230,79 @@ def calibrate_stereo(left: list[np.ndarray], right: list[np.ndarray], board: Boa
         rms_px=float(rms), per_pair_rms_px=per_view, used=used, skipped=skipped, skipped_reason=reasons)
 
 
+def validate_stereo(left: list[np.ndarray], right: list[np.ndarray], board: BoardSpec, folds: int = 0,
+                    names: list[str] | None = None) -> dict:
+    """Held-out validation of :func:`calibrate_stereo` (k-fold over the pairs; module doc).
+
+    ``folds``: number of folds (≥ 2; 0 = leave-one-out). Pairs are dealt to folds in turn (pair i → fold
+    i mod k); each fold's pairs are held out, the others calibrated, and on every held-out pair whose board is
+    found in both images: the **epipolar** residual of its corners (Sampson distance of the undistorted
+    corners under the fold's F, px) and, triangulated with the fold's calibration (optimal method), the
+    distances between adjacent corners along both board axes and the corners' mean depth.
+
+    Returns a dict: ``folds``, ``pairs`` (used), ``epipolar_rms_px`` / ``epipolar_p95_px`` (held out, all
+    corners), ``square_mean_m``, ``square_std_rel`` (std of all held-out adjacent distances / their mean),
+    ``square_pair_spread_rel`` (max − min of the per-pair means / mean), ``square_depth_slope_rel_per_m``
+    (least-squares slope of per-pair mean square size against depth, relative, 1/m) and ``per_pair``
+    (name → epipolar RMS px, mean square m, depth m). Source: cross-validation as in Hastie, Tibshirani &
+    Friedman, *The Elements of Statistical Learning*, §7.10. Raises ``ValueError`` when fewer than 4 pairs
+    show the board, folds is 1 or larger than the pairs, or a fold leaves fewer than 3 pairs to calibrate.
+    """
+    from flexsheet.model.stereo import StereoModel
+
+    if len(left) != len(right):
+        raise ValueError(f"left and right must have the same number of images, got {len(left)} and {len(right)}")
+    names = names or [f"pair{i:02d}" for i in range(len(left))]
+    det = cv2.aruco.CharucoDetector(board.charuco_board()) if board.kind == "charuco" else None
+    found = []
+    for i, (a, b) in enumerate(zip(left, right, strict=True)):
+        da, db = detect_board(a, board, det), detect_board(b, board, det)
+        if da is not None and db is not None:
+            found.append((i, da, db))
+    n = len(found)
+    if n < 4:
+        raise ValueError(f"board found in both images of only {n} pairs, need >= 4 to validate")
+    k = n if folds == 0 else int(folds)
+    if not (2 <= k <= n):
+        raise ValueError(f"folds must be 0 (leave-one-out) or in 2..{n}, got {folds!r}")
+    obj = board.object_points()
+    eps, sq_all, per = [], [], {}
+    for f in range(k):
+        held = [found[j] for j in range(n) if j % k == f]
+        keep = [found[j][0] for j in range(n) if j % k != f]
+        if len(keep) < 3:
+            raise ValueError(f"fold {f} leaves only {len(keep)} pairs to calibrate, need >= 3")
+        res = calibrate_stereo([left[i] for i in keep], [right[i] for i in keep], board)
+        m = StereoModel.from_calib(res.as_dict())
+        for i, da, db in held:
+            common, ia, ib = np.intersect1d(da[0], db[0], return_indices=True)
+            ul = m.undistort(da[1][ia], "left")
+            ur = m.undistort(db[1][ib], "right")
+            e = m.epipolar_residual(ul, ur)
+            X = m.triangulate(ul, ur, "optimal")
+            # adjacent corners along the board's x and y axes (ids whose board points are one square apart)
+            P = obj[common]
+            d = []
+            for u in range(len(P)):
+                for v in range(u + 1, len(P)):
+                    if abs(np.linalg.norm(P[u] - P[v]) - board.square) < 1e-6 * board.square + 1e-9:
+                        d.append(float(np.linalg.norm(X[u] - X[v])))
+            eps.append(e)
+            sq_all += d
+            per[names[i]] = {"epipolar_rms_px": float(np.sqrt(np.mean(e ** 2))), "square_mean_m": float(np.mean(d)),
+                             "depth_m": float(np.mean(X[:, 2]))}
+    e = np.concatenate(eps)
+    sq = np.asarray(sq_all)
+    means = np.array([p["square_mean_m"] for p in per.values()])
+    depth = np.array([p["depth_m"] for p in per.values()])
+    slope = float(np.polyfit(depth, means / sq.mean(), 1)[0]) if np.ptp(depth) > 1e-6 else 0.0
+    return {"folds": k, "pairs": n, "epipolar_rms_px": float(np.sqrt(np.mean(e ** 2))),
+            "epipolar_p95_px": float(np.percentile(e, 95)), "square_mean_m": float(sq.mean()),
+            "square_std_rel": float(sq.std() / sq.mean()),
+            "square_pair_spread_rel": float(np.ptp(means) / sq.mean()), "square_depth_slope_rel_per_m": slope,
+            "per_pair": per}
+
+
 _MATS = ("K1", "D1", "K2", "D2", "R", "T", "E", "F", "R1", "R2", "P1", "P2", "Q", "per_pair_rms_px",
          "T_display_camera")
 _SCALARS = ("rms_left_px", "rms_right_px", "rms_px")
@@ -365,7 +446,8 @@ def main(argv: list[str] | None = None) -> int:
         prog="flexsheet calibrate stereo", description="Stereo calibration from chessboard or ChArUco image pairs.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="example:\n  flexsheet calibrate stereo --left 'tests/data/stereo_xi/left*.jpg' "
-               "--right 'tests/data/stereo_xi/right*.jpg' --board chessboard:9x6 --square 0.024 -o calib.yaml")
+               "--right 'tests/data/stereo_xi/right*.jpg' --board chessboard:9x6 --square 0.024 -o calib.yaml "
+               "--validate 0")
     p.add_argument("--left", required=True, help="glob of left images (sorted by name)")
     p.add_argument("--right", required=True, help="glob of right images (sorted by name, same count)")
     p.add_argument("--board", default="chessboard:9x6",
@@ -374,6 +456,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("-o", "--output", required=True, help="output FileStorage YAML")
     p.add_argument("--camera-pose", default=None,
                    help="optional left-camera pose in the display frame as 'x,y,z,rx,ry,rz' (m, Rodrigues rad)")
+    p.add_argument("--validate", type=int, default=None, metavar="FOLDS",
+                   help="also cross-validate: held-out epipolar error and square spread over FOLDS folds "
+                        "(0 = leave-one-out)")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     a = p.parse_args(argv)
     lefts, rights = sorted(glob.glob(a.left)), sorted(glob.glob(a.right))
@@ -395,10 +480,18 @@ def main(argv: list[str] | None = None) -> int:
         T[:3, 3] = v[:3]
         d["T_display_camera"] = T
     write_yaml(a.output, d)
+    val = None
+    if a.validate is not None:
+        try:
+            val = validate_stereo(imgs_l, imgs_r, board, a.validate, names)
+        except ValueError as e:
+            p.error(str(e))
     report = {"output": a.output, "pairs": len(lefts), "used": len(res.used), "skipped": res.skipped_reason,
               "rms_left_px": res.rms_left_px, "rms_right_px": res.rms_right_px, "stereo_rms_px": res.rms_px,
               "baseline_m": float(np.linalg.norm(res.T)), "T_m": res.T.tolist(), "fx_left_px": float(res.K1[0, 0]),
               "per_pair_rms_px": {n: [round(float(x), 4) for x in e] for n, e in zip(res.used, res.per_pair_rms_px, strict=False)}}
+    if val is not None:
+        report["validation"] = val
     if a.json:
         print(json.dumps(report, indent=1))
     else:
@@ -409,6 +502,12 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {n:16s} left {e[0]:.4f} px  right {e[1]:.4f} px")
         for n, why in res.skipped_reason.items():
             print(f"  skipped {n}: {why}")
+        if val is not None:
+            print(f"held out ({val['folds']} folds, {val['pairs']} pairs): epipolar RMS {val['epipolar_rms_px']:.3f} px "
+                  f"(p95 {val['epipolar_p95_px']:.3f}); square {val['square_mean_m'] * 1e3:.2f} mm, spread "
+                  f"{val['square_std_rel'] * 100:.2f} % (per pair {val['square_pair_spread_rel'] * 100:.2f} %, "
+                  f"depth slope {val['square_depth_slope_rel_per_m'] * 100:.2f} %/m); the square's absolute "
+                  "size is the --square you gave (not checkable from images)")
         print(f"wrote {a.output}")
     return 0
 

@@ -37,7 +37,7 @@ from flexsheet.model.checks import check_pose
 from flexsheet.model.scene import LEFT_BASE, RIGHT_BASE, pose_matrix
 
 __all__ = [
-    "URDF_PATH", "JOINT_NAMES", "Q_LOWER", "Q_UPPER", "QD_MAX", "Q_HOME", "LEFT_BASE", "RIGHT_BASE",
+    "URDF_PATH", "JOINT_NAMES", "Q_LOWER", "Q_UPPER", "QD_MAX", "DATASHEET_SPEED_DEG", "Q_HOME", "LEFT_BASE", "RIGHT_BASE",
     "home_joints", "IKResult", "ArmKinematics",
     "rotation_angle", "check_pose",   # check_pose: flexsheet.model.checks.check_pose, re-exported
 ]
@@ -48,7 +48,11 @@ JOINT_NAMES = ("J1", "J2", "J3", "J4", "J5", "J6")
 _MODEL = pin.buildModelFromUrdf(str(URDF_PATH))
 Q_LOWER = np.array(_MODEL.lowerPositionLimit, dtype=float)   #: (6,) rad, URDF lower limits
 Q_UPPER = np.array(_MODEL.upperPositionLimit, dtype=float)   #: (6,) rad, URDF upper limits
-QD_MAX = np.array(_MODEL.velocityLimit, dtype=float)         #: (6,) rad/s, ASSUMED speed limits (see URDF)
+#: (6,) rad/s, the RV-1A datasheet's maximum joint speeds J1..J6 = 180, 90, 135, 180, 180, 210 deg/s (URDF
+#: ``velocity``; Mitsubishi BFP-A8050, see the URDF header). The bridge commands ``speed_scale`` × these.
+QD_MAX = np.array(_MODEL.velocityLimit, dtype=float)
+#: the datasheet values the URDF must carry, deg/s (checked by tests/test_twin_arm.py)
+DATASHEET_SPEED_DEG = (180.0, 90.0, 135.0, 180.0, 180.0, 210.0)
 # LEFT_BASE / RIGHT_BASE: the base poses (x, y, z, yaw) in the display frame (m, rad), defined once in
 # flexsheet.model.scene and re-exported here (the arm bridge imports them from this module). They reach the
 # home sheet and tilts of +-60 deg about the cylinder axis with stretch 0..0.1 with >= 20 deg joint margin.

@@ -8,9 +8,16 @@ Measures, for both stacks:
   would measure CPU wake-up, not the stack); latency is ``time.monotonic()`` at the subscriber's handler minus the stamp taken just before
   publishing (CLOCK_MONOTONIC is shared by all processes of one machine);
 * throughput of 2×640×480 uint8 stereo frames (:class:`messages.StereoFrame` vs a raw multipart of the two
-  buffers), sent as fast as the publisher can, counted at the subscriber.
+  buffers), sent as fast as the publisher can, counted at the subscriber;
+* intra-container latency (``composed_*``): the same small message between two nodes of one composable
+  container (:mod:`flexsheet.runtime.container`: one process, one loop, the message object handed on), from
+  the call to ``publish`` to an ``async def`` handler (``composed_latency_*``) and to a plain ``def`` handler in
+  its worker thread (``composed_sync_latency_*``); ``composed_build_latency_median_us`` also counts building the
+  message (pydantic validation of a Fingertip), as the cross-process figures do.
 
-The subscriber runs in a child process (``python -m flexsheet.runtime.bench_transport --sink …``) and reports JSON.
+The cross-process subscriber runs in a child process (``python -m flexsheet.runtime.bench_transport --sink …``)
+and reports JSON. Figures taken on a shared machine are pessimistic: run it at least twice and compare ranges
+(``chrt -f 10 flexsheet bench transport`` as root keeps other load from mixing in).
 """
 
 from __future__ import annotations
@@ -203,6 +210,57 @@ def _node_source(kind: str, n: int) -> dict:
     return result
 
 
+class _LocalSink(Node):
+    async def setup(self) -> None:
+        self.lat: list[tuple[float, float]] = []
+        self.t_pub: dict[int, float] = {}
+        self.subscribe(T.FINGERTIP, self.on_sync if self.sync else self.on_tip, qos=QoS.KEEP_ALL)
+
+    async def on_tip(self, msg: Fingertip) -> None:
+        now = time.monotonic()
+        self.lat.append((now - self.t_pub[msg.header.seq], now - msg.exposure_stamp))
+
+    def on_sync(self, msg: Fingertip) -> None:
+        now = time.monotonic()
+        self.lat.append((now - self.t_pub[msg.header.seq], now - msg.exposure_stamp))
+
+
+def _composed(n: int, sync: bool) -> list[tuple[float, float]]:
+    """(publish → handler, build → handler) latencies (s) of ``n`` fingertips at 1 kHz between two nodes of one
+    container (in this process)."""
+    from flexsheet.runtime.container import Bus, ContainerTransport
+
+    async def main() -> list[float]:
+        bus = Bus("bench")
+        src = _Source(NodeConfig(name="bench_source", endpoint="", heartbeat_period=10.0),
+                      transport=ContainerTransport(bus, ""))
+        sink = _LocalSink(NodeConfig(name="bench_sink", endpoint="", heartbeat_period=10.0),
+                          transport=ContainerTransport(bus, ""))
+        sink.sync = sync
+        loop = asyncio.get_running_loop()
+        tasks = [loop.create_task(x.run(install_signals=False)) for x in (sink, src)]
+        while not (src.ready and sink.ready):
+            await asyncio.sleep(0.01)
+        pos, cov = np.zeros(3), np.eye(3)
+        t0 = time.monotonic()
+        for i in range(n + 100):
+            now = time.monotonic()
+            msg = Fingertip(header=src.tip.header("display"), position=pos, covariance=cov, valid=True,
+                            predicted_position=pos, exposure_stamp=now)
+            sink.t_pub[msg.header.seq] = time.monotonic()
+            src.tip.publish(msg)
+            delay = t0 + (i + 1) / 1000.0 - time.monotonic()
+            await asyncio.sleep(max(delay, 0.0))
+        await asyncio.sleep(0.05)
+        for x in (src, sink):
+            x.shutdown()
+        await asyncio.gather(*tasks)
+        bus.close()
+        return sink.lat
+
+    return asyncio.run(main())
+
+
 def _summarise(lat_res: dict, thr_res: dict) -> dict:
     lat = np.array(lat_res["lat"][100:]) * 1e6  # drop warm-up
     span = thr_res["t_last"] - thr_res["t_first"]
@@ -212,13 +270,20 @@ def _summarise(lat_res: dict, thr_res: dict) -> dict:
 
 
 def run_bench(n_lat: int = N_LAT, n_frames: int = N_FRAMES) -> dict:
-    """Run both stacks; returns a flat dict of figures with ``ratio`` keys (runtime / raw)."""
+    """Run both stacks and the intra-container case; returns a flat dict of figures with ``ratio`` keys
+    (runtime / raw) and ``composed_latency_median_us`` (and ``_p99_us``, ``composed_sync_*``)."""
     raw = _summarise(_raw_source("lat", n_lat), _raw_source("thr", n_frames))
     ours = _summarise(_node_source("lat", n_lat), _node_source("thr", n_frames))
     out = {f"runtime_{k}": v for k, v in ours.items()} | {f"raw_{k}": v for k, v in raw.items()}
     out["ratio_latency_median"] = ours["latency_median_us"] / raw["latency_median_us"]
     out["ratio_latency_p99"] = ours["latency_p99_us"] / raw["latency_p99_us"]
     out["ratio_stereo_fps"] = ours["stereo_fps"] / raw["stereo_fps"] if raw["stereo_fps"] else 0.0
+    for key, sync in (("composed", False), ("composed_sync", True)):
+        lat = np.array(_composed(n_lat, sync)[100:]) * 1e6
+        out[f"{key}_latency_median_us"] = float(np.median(lat[:, 0]))
+        out[f"{key}_latency_p99_us"] = float(np.percentile(lat[:, 0], 99))
+        out[f"{key}_build_latency_median_us"] = float(np.median(lat[:, 1]))
+        out[f"{key}_latency_samples"] = int(len(lat))
     return out
 
 
@@ -248,6 +313,9 @@ def main(argv: list[str] | None = None) -> int:
           f"{r['ratio_latency_p99']:8.2f}")
     print(f"{'stereo 2x640x480 u8':28}{r['runtime_stereo_fps']:9.0f}f/s{r['raw_stereo_fps']:9.0f}f/s"
           f"{r['ratio_stereo_fps']:8.2f}")
+    for key, label in (("composed", "in one container, async"), ("composed_sync", "in one container, def")):
+        print(f"{label:28}{r[key + '_latency_median_us']:10.1f}us median {r[key + '_latency_p99_us']:8.1f}us p99 "
+              f"(with building the message: {r[key + '_build_latency_median_us']:.1f}us median)")
     return 0
 
 

@@ -58,7 +58,8 @@ def _parse_descriptor(data: bytes) -> tuple[int, np.dtype, tuple[int, ...], int]
 
 
 def _descriptor(data: bytes, topic_name: str) -> tuple[int, np.dtype, tuple[int, ...], int]:
-    data = bytes(data)
+    if type(data) is not bytes:
+        data = bytes(data)
     # only short (well-formed-sized) descriptors go through the cache: a hostile huge one is not retained
     parsed = _parse_descriptor(data) if len(data) <= 96 else _parse_descriptor.__wrapped__(data)
     if isinstance(parsed, str):
@@ -90,6 +91,45 @@ def _topic_name(frame: Any) -> str:
     return f"<{type(frame).__name__} topic frame>"
 
 
+_EXT_CACHE: dict[tuple, msgpack.ExtType] = {}
+_ExtType, _ndarray, _BaseModel = msgpack.ExtType, np.ndarray, BaseModel
+
+
+def _ext(index: int, arr: np.ndarray) -> msgpack.ExtType:
+    """The array descriptor ext of buffer ``index`` for ``arr`` (cached: a topic's descriptors repeat)."""
+    shape = arr.shape
+    key = (index, shape, arr.dtype.str)
+    ext = _EXT_CACHE.get(key)
+    if ext is None:
+        ext = _ExtType(EXT_NDARRAY, _pack_head(index, len(shape)) + struct.pack(f"<{len(shape)}Q", *shape)
+                       + arr.dtype.str.encode())
+        if len(_EXT_CACHE) < 4096:
+            _EXT_CACHE[key] = ext
+    return ext
+
+
+def _fields(d: dict, buffers: list) -> dict:
+    out = {}
+    for k, v in d.items():
+        t = type(v)
+        if t is _ndarray or isinstance(v, _ndarray):
+            arr = v if v.flags.c_contiguous else np.ascontiguousarray(v)
+            buffers.append(arr)
+            v = _ext(len(buffers) + 1, arr)
+        elif isinstance(v, _BaseModel):
+            v = _fields(v.__dict__, buffers)
+        elif t is list and v and isinstance(v[0], _BaseModel):
+            v = [_fields(x.__dict__, buffers) if isinstance(x, _BaseModel) else x for x in v]
+        out[k] = v
+    return out
+
+
+def _default(value: Any) -> Any:  # msgpack calls it only for what neither _fields nor msgpack handles
+    if isinstance(value, _BaseModel):
+        return value.__dict__
+    raise TypeError(f"cannot encode {type(value).__name__}")
+
+
 def encode(topic: str, msg: Message) -> list:
     """Encode ``msg`` for ``topic`` into multipart frames ``[topic, meta, *buffers]``.
 
@@ -97,19 +137,7 @@ def encode(topic: str, msg: Message) -> list:
     Raises ``TypeError`` for a field value msgpack cannot carry.
     """
     buffers: list = []
-
-    def default(value: Any) -> Any:  # called by msgpack's C packer only for what it cannot pack itself
-        if isinstance(value, np.ndarray):
-            arr = value if value.flags.c_contiguous else np.ascontiguousarray(value)
-            buffers.append(arr)
-            shape = arr.shape
-            return msgpack.ExtType(EXT_NDARRAY, _pack_head(len(buffers) + 1, len(shape)) +
-                                   struct.pack(f"<{len(shape)}Q", *shape) + arr.dtype.str.encode())
-        if isinstance(value, BaseModel):
-            return value.__dict__
-        raise TypeError(f"cannot encode {type(value).__name__}")
-
-    meta = msgpack.packb({"s": msg.SCHEMA, "v": msg.VERSION, "d": msg.__dict__}, default=default)
+    meta = msgpack.packb({"s": msg.SCHEMA, "v": msg.VERSION, "d": _fields(msg.__dict__, buffers)}, default=_default)
     return [topic.encode(), meta, *buffers]
 
 
@@ -125,14 +153,18 @@ def _unpack(frames: list, topic_name: str) -> dict:
         if idx >= nbuf:
             raise DecodeError(f"{topic_name}: array buffer index {idx!r} out of range (frames: {nbuf})")
         buf = frames[idx]
-        buf = buf.buffer if hasattr(buf, "buffer") else buf
-        have = memoryview(buf).nbytes
+        if type(buf) is bytes:
+            have = len(buf)
+        else:
+            buf = buf.buffer if hasattr(buf, "buffer") else buf
+            have = memoryview(buf).nbytes
         if have != nbytes:
             raise DecodeError(f"{topic_name}: array shape {shape} dtype {dtype} needs {nbytes} bytes, buffer has {have}")
         return np.frombuffer(buf, dtype=dtype).reshape(shape)
 
     meta = frames[1]
-    meta = meta.bytes if hasattr(meta, "bytes") else meta
+    if type(meta) is not bytes and hasattr(meta, "bytes"):
+        meta = meta.bytes
     try:
         obj = msgpack.unpackb(meta, ext_hook=ext_hook, raw=False, strict_map_key=True)
     except DecodeError:

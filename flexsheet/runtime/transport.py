@@ -35,6 +35,7 @@ log = logging.getLogger(__name__)
 # plain ints: pyzmq's enum flags cost a Python enum operation each (measurable per message)
 _EVENTS, _POLLIN, _NOBLOCK, _RCVMORE = int(zmq.EVENTS), int(zmq.POLLIN), int(zmq.NOBLOCK), int(zmq.RCVMORE)
 _SNDMORE = int(zmq.SNDMORE)
+_NOBLOCK_MORE = _NOBLOCK | _SNDMORE
 FramesHandler = Callable[[list], None]
 
 
@@ -184,15 +185,17 @@ class XPub:
             if sock.closed:
                 return False  # shutting down: a late publish from a worker thread is dropped, not an error
             try:
-                sock.send_multipart(frames, flags=_NOBLOCK, copy=False)
-                ok = True
+                send = sock.send
+                last = len(frames) - 1
+                for i, f in enumerate(frames):  # send_multipart, minus its per-frame enum arithmetic
+                    send(f, _NOBLOCK_MORE if i < last else _NOBLOCK, copy=False)
             except zmq.Again:
-                ok = False
+                return False
             except zmq.ZMQError:
                 return False
-            # any operation can change the socket's events without the FD firing again: look now
-            self._drain_locked()
-        return ok
+        # a send can swallow the FD's edge for a subscription that arrived meanwhile: the safety poll (50 ms)
+        # and wants() (which drains when its answer would be no) catch it
+        return True
 
     def set_latched(self, topic: str, frames: list) -> None:
         self.latched[topic.encode()] = frames

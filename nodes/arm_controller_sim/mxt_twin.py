@@ -45,7 +45,6 @@ import time
 
 import numpy as np
 
-from flexsheet.runtime.node import ticks
 from messages import mxt
 from nodes.arm_controller_sim.servo import JointServo, ServoParams
 
@@ -262,7 +261,12 @@ class MxtTwin:
         return self.port
 
     async def _run(self) -> None:
-        async for _ in ticks(self.core.period):
+        # wake at each control-cycle boundary of the core's clock (not a separate schedule whose phase
+        # could drift against it and wake just short of a boundary)
+        while True:
+            delay = self.core.t_sim + self.core.period - time.monotonic()
+            if delay > 0:
+                await asyncio.sleep(delay)
             self.cycle(time.monotonic())
 
     def cycle(self, now: float) -> None:

@@ -1,7 +1,7 @@
 """Camera node: publishes synchronised raw stereo pairs (mono8) on ``/camera/stereo`` and the latched stereo
 calibration on ``/camera/calibration``.
 
-Sources (param ``source``): ``sim`` — the calibrated twin (:mod:`flexsheet.model.camera_sim`) rendering the
+Sources (param ``source``): ``sim`` — the camera twin (:mod:`flexsheet.model.camera_sim`) rendering the
 fingertip marker at the world node's ``/world/finger`` position (extrapolated to the exposure time with its velocity),
 or along a param trajectory when no world node has published for ``truth_timeout_s``; ``genicam`` — a
 GigE Vision / USB3 Vision pair through Aravis, opened by serial, hardware/software-triggered or PTP-synced,
@@ -13,6 +13,18 @@ renders both views at one instant); ``genicam`` measured right − left device s
 the difference of the two mapped stamps (independent clocks); ``device`` 0 by construction for one
 side-by-side device, an upper bound of |skew| for two devices; ``files`` 0 (unknown; the recording's).
 ``/diagnostics`` carries one line saying which, with the measured skew and dropped frames (GenICam).
+
+Honest twin (issue 15). ``/camera/calibration`` carries what a lab has: the camera's pose in the display frame
+``T_display_camera`` from ``display.yaml``'s ``camera`` entry (param ``display_calib``, filled in by the launch
+file's top-level ``display_calib:``) with the stereo model that pose was fitted with (the entry's, else the
+stereo calibration file's: ``model``/``calib_file``). A missing ``display_calib`` is an error at start-up —
+except for the *ideal* twin, whose nominal registration is exact. The sim source forms its images through the
+hidden truth instead (param ``twin: {realism, truth_seed}`` → :meth:`flexsheet.model.truth.TwinTruth.draw`):
+the truth's stereo intrinsics and distortion (``model: ximea``; another model renders with its own
+calibration), the truth's mount and marker size, the realistic sensor of
+:class:`flexsheet.model.camera_sim.SimConfig` (``twin.realism: ideal`` → :meth:`SimConfig.ideal`), and drops
+a ``drop_rate`` fraction of its frames (never published, counted in ``/diagnostics``). The sensing params
+left unset (``null``) take the realism's value.
 """
 
 from __future__ import annotations
@@ -20,24 +32,32 @@ from __future__ import annotations
 import asyncio
 import math
 import threading
+from dataclasses import replace
+from typing import Literal
 
+import cv2
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from flexsheet.model.calibration import load_yaml, to_message
-from flexsheet.model.camera_sim import (
-    DEFAULT_CAMERA_POSITION,
-    DEFAULT_LOOK_AT,
-    SimConfig,
-    StereoRenderer,
-    camera_model,
-    default_trajectory,
-    look_at,
-)
+from flexsheet.model.camera_sim import SimConfig, camera_model, default_trajectory, twin_renderer
 from flexsheet.runtime.node import Node, QoS
 from messages import FingerTruth, StereoFrame, topics
 
-__all__ = ["CameraParams", "CameraNode"]
+__all__ = ["TwinSpec", "CameraParams", "CameraNode", "published_registration", "sim_config"]
+
+#: dropped-frame rate of the realistic twin (assumption: ~1 % on a loaded GigE/USB3 link; the GenICam
+#: source counts the real drops in /diagnostics)
+REALISTIC_DROP_RATE = 0.01
+
+
+class TwinSpec(BaseModel):
+    """The hidden truth a twin node builds (issue 15): ``realism`` ``realistic`` (truth drawn around nominal) or
+    ``ideal`` (nominal exactly, the twin as before), ``truth_seed`` ≥ 0 (launch files: top-level ``twin:``)."""
+
+    model_config = ConfigDict(extra="forbid")
+    realism: Literal["realistic", "ideal"] = "realistic"
+    truth_seed: int = Field(default=0, ge=0)
 
 
 class CameraParams(BaseModel):
@@ -54,12 +74,18 @@ class CameraParams(BaseModel):
     focal_mm: float = Field(default=3.8, gt=0.0)
     pixel_um: float = Field(default=7.4, gt=0.0)
     baseline: float = Field(default=0.12, gt=0.0)
-    # mounting: left camera optical centre and the point it looks at, display frame, m
-    camera_position: tuple[float, float, float] = DEFAULT_CAMERA_POSITION
-    look_at: tuple[float, float, float] = DEFAULT_LOOK_AT
-    # twin scene
-    marker_diameter: float = Field(default=0.004, ge=0.003, le=0.006)
-    noise_dn: float = Field(default=2.0, ge=0.0)
+    # the display registration (display.yaml): the published camera pose comes from its camera entry
+    display_calib: str | None = None
+    # twin: the hidden truth it renders through, and its sensing (null: the realism's value)
+    twin: TwinSpec = Field(default_factory=TwinSpec)
+    noise_dn: float | None = Field(default=None, ge=0.0)
+    shot_gain: float | None = Field(default=None, ge=0.0)
+    noise_scale: float = Field(default=1.0, ge=0.0, le=100.0)
+    blur_px: float | None = Field(default=None, ge=0.0, le=5.0)
+    self_occlusion: bool | None = None
+    background_gain: float | None = Field(default=None, gt=0.0, le=2.0)
+    finger_dir: tuple[float, float, float] | None = None
+    drop_rate: float | None = Field(default=None, ge=0.0, lt=1.0)
     exposure_s: float = Field(default=0.004, ge=0.0, le=0.05)
     blur_samples: int = Field(default=5, ge=1, le=50)
     clutter: bool = True
@@ -107,6 +133,61 @@ class CameraParams(BaseModel):
         return self
 
 
+def sim_config(p: CameraParams) -> SimConfig:
+    """The twin's :class:`SimConfig` for params ``p``: the realism's preset (:class:`SimConfig` or
+    :meth:`SimConfig.ideal`) with every sensing param that is set (not ``None``) overriding it."""
+    base = SimConfig() if p.twin.realism == "realistic" else SimConfig.ideal()
+    over = {k: getattr(p, k) for k in ("noise_dn", "shot_gain", "blur_px", "self_occlusion", "background_gain",
+                                      "finger_dir") if getattr(p, k) is not None}
+    cfg = replace(base, exposure_s=p.exposure_s, blur_samples=p.blur_samples, clutter=p.clutter, seed=p.seed,
+                  noise_scale=p.noise_scale, **over)
+    cfg.validate()
+    return cfg
+
+
+def _with_rectification(st: dict) -> dict:
+    """A stereo dict (image_size, K1, D1, K2, D2, R, T) completed with R1, R2, P1, P2, Q (``cv2.stereoRectify``,
+    alpha 0) for :func:`flexsheet.model.calibration.to_message`."""
+    out = {k: (np.asarray(v, float) if k != "image_size" else tuple(int(x) for x in v)) for k, v in st.items()}
+    if "R1" not in out:
+        R1, R2, P1, P2, Q, _, _ = cv2.stereoRectify(out["K1"], out["D1"], out["K2"], out["D2"], out["image_size"],
+                                                    out["R"], out["T"].reshape(3, 1), alpha=0)
+        out.update(R1=R1, R2=R2, P1=P1, P2=P2, Q=Q)
+    return out
+
+
+def published_registration(p: CameraParams, calib: dict) -> tuple[dict, np.ndarray, str]:
+    """What ``/camera/calibration`` carries: (stereo dict, T_display_camera (4, 4), one line saying where they
+    come from). The pose from ``display.yaml``'s camera entry (``p.display_calib``), with its stereo model when
+    it has one (the pose was fitted with it), else ``calib`` (the stereo file). Without ``display_calib``:
+    the ideal twin's nominal registration (exact there). Raises ``ValueError`` naming the fix when
+    ``display_calib`` is missing (lab sources, realistic twin), unreadable, lacks the camera entry, or its
+    image size differs from the camera's."""
+    size = tuple(int(v) for v in calib["image_size"])
+    if p.display_calib:
+        from flexsheet.model.display_calib import load_display_calib
+
+        cam = load_display_calib(p.display_calib, require=("camera",)).camera
+        stereo = cam.stereo if cam.stereo is not None else calib
+        got = tuple(int(v) for v in stereo["image_size"])
+        if got != size:
+            raise ValueError(f"{p.display_calib}: camera entry is for {got[0]}x{got[1]} images but the camera "
+                             f"delivers {size[0]}x{size[1]} (model {p.model!r}); re-run flexsheet calibrate "
+                             "camera-pose with this camera")
+        src = "display.yaml stereo" if cam.stereo is not None else "stereo file"
+        return (_with_rectification(stereo), np.asarray(cam.T_display_camera, float),
+                f"pose from {p.display_calib} ({cam.provenance.source}, {cam.provenance.measured_at}), {src}")
+    if p.source == "sim" and p.twin.realism == "ideal":
+        from flexsheet.model.display_calib import nominal_display_calib
+
+        return (_with_rectification(calib), nominal_display_calib().camera.T_display_camera.copy(),
+                "nominal registration (ideal twin: exact)")
+    raise ValueError("display_calib is not set: the camera's pose in the display frame comes from display.yaml's "
+                     "camera entry. Lab: run `flexsheet calibrate camera-pose`; twin: `flexsheet calibrate display "
+                     "--sim --truth-seed N --out DIR`; then name the file in the launch file (`display_calib: "
+                     "DIR/display.yaml`) or in this node's params (docs/calibration.md)")
+
+
 class CameraNode(Node):
     """Publishes :class:`messages.StereoFrame` (at ``rate_hz``, or as the GenICam pair delivers) and latches
     :class:`messages.StereoCalibration`."""
@@ -116,25 +197,31 @@ class CameraNode(Node):
 
     async def setup(self) -> None:
         p = self.params
-        self.T_dc = look_at(p.camera_position, p.look_at)
         if p.model == "file":
             calib = load_yaml(p.calib_file)
         else:
             calib = camera_model(p.model, width=p.width, height=p.height, focal_mm=p.focal_mm,
                                  pixel_um=p.pixel_um, baseline=p.baseline)
         self.calib = calib
+        published, self.T_dc, self.registration = published_registration(p, calib)
         self.stereo_pub = self.publisher(topics.STEREO)
         self.calib_pub = self.publisher(topics.CALIBRATION)
-        self.calib_pub.publish(to_message(calib, self.calib_pub.header("camera_left"), self.T_dc))
+        self.calib_pub.publish(to_message(published, self.calib_pub.header("camera_left"), self.T_dc))
         self._truth: FingerTruth | None = None
         self._truth_rx = -math.inf
         self._lock = threading.Lock()
         self._t0 = self.now()
         self.frames = 0
+        self.dropped = 0
         if p.source == "sim":
-            cfg = SimConfig(marker_diameter=p.marker_diameter, noise_dn=p.noise_dn, exposure_s=p.exposure_s,
-                            blur_samples=p.blur_samples, clutter=p.clutter, seed=p.seed)
-            self.renderer = StereoRenderer(calib, self.T_dc, cfg)
+            from flexsheet.model.truth import TwinTruth
+
+            truth = TwinTruth.draw(p.twin.truth_seed, p.twin.realism)
+            self._drop_rate = (REALISTIC_DROP_RATE if p.twin.realism == "realistic" else 0.0) \
+                if p.drop_rate is None else float(p.drop_rate)
+            self._drop_rng = np.random.default_rng([p.seed, p.twin.truth_seed, 31])
+            # the true cameras: the truth's (drawn around the XIMEA calibration) or, for another model, its own
+            self.renderer = twin_renderer(truth, sim_config(p), calib=None if p.model == "ximea" else calib)
             self.subscribe(topics.FINGER_TRUTH, self.on_truth, qos=QoS.LATEST)
             self.timer(1.0 / p.rate_hz, self.on_sim_tick)
         elif p.source == "genicam":
@@ -190,6 +277,9 @@ class CameraNode(Node):
 
     def _sim_frame(self) -> None:
         t = self.now()
+        if self._drop_rate > 0 and self._drop_rng.random() < self._drop_rate:
+            self.dropped += 1            # the frame is lost on the link: nothing rendered, nothing published
+            return
         pos, vel, visible = self._marker_state(t)
         left, right = self.renderer.render(pos, vel, visible)
         self._publish(left, right, t)
@@ -226,7 +316,9 @@ class CameraNode(Node):
                     "upper bound = |grab interval| + frame period "
                     f"({self.device.frame_period() * 1e3:.1f} ms)")
         if p.source == "sim":
-            return "sim: stereo_skew 0 (the twin renders both views at one instant)"
+            return (f"sim ({p.twin.realism} twin, truth seed {p.twin.truth_seed}; {self.registration}): "
+                    f"stereo_skew 0 (the twin renders both views at one instant); dropped {self.dropped} of "
+                    f"{self.frames + self.dropped} frames (drop_rate {self._drop_rate:g})")
         return "files: stereo_skew 0 (not recorded)"
 
     def heartbeat(self):

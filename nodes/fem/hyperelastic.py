@@ -144,7 +144,8 @@ class HyperelasticModel:
     ``support`` (P,) bool fixed points; ``free`` (nf,) free DOF indices. Raises ``ValueError`` on an empty mesh.
     """
 
-    def __init__(self, mesh: TetMesh, material: Material, sym_y: bool = True, sym_z: bool = False):
+    def __init__(self, mesh: TetMesh, material: Material, sym_y: bool = True, sym_z: bool = False,
+                 intorder: int = 5):
         from skfem import Basis, ElementTetP2, MeshTet
 
         if len(mesh.tets) == 0:
@@ -152,7 +153,9 @@ class HyperelasticModel:
         self.mesh, self.material = mesh, material
         sk = MeshTet(np.ascontiguousarray(mesh.points.T), np.ascontiguousarray(mesh.tets.T))
         self.skmesh = sk
-        self.basis = Basis(sk, ElementTetP2(), intorder=2)
+        if intorder not in (2, 5, 6):
+            raise ValueError(f"intorder must be 2, 5 or 6 (tetrahedral rules with positive weights), got {intorder!r}")
+        self.basis = Basis(sk, ElementTetP2(), intorder=intorder)
         b = self.basis
         self.points = np.ascontiguousarray(b.doflocs.T)
         P = len(self.points)

@@ -9,11 +9,17 @@ Method:
    difference of box filters).
 2. **Candidates**: up to ``max_candidates`` local maxima of the response, strongest first
    (``cv2.minMaxLoc`` with non-maximum suppression), at least ``min_contrast`` DN above the opened image.
-3. **Subpixel centroid**: intensity-weighted centroid of ``response − thr`` over a (2r+1)² patch around
-   each peak, with ``thr = threshold_frac · peak``, restricted to the 8-connected blob holding the peak
-   (``cv2.connectedComponents``): pixels below thr and bright neighbours (a clutter edge next to the
-   finger) carry no weight, so they do not pull the centroid. A blob that reaches the patch border is
-   not an isolated dot (a sheet corner, a bright clutter edge) and is discarded.
+3. **Subpixel centroid of the marker's coverage**: the marker is opaque, so a pixel reads
+   ``I = α·M + (1 − α)·B`` with α the fraction of it the marker covers, M the marker's level and B the
+   background behind it. B is the opened image (the top-hat's background), M the mean of the 4 brightest
+   pixels within 2 px of the peak, and α = (I − B)/(M − B). The centroid is weighted by ``α − threshold_frac``
+   over the 8-connected blob holding the peak (``cv2.connectedComponents``), so a marker seen half against
+   the dark finger and half against the bright projected image is not pulled toward the darker side (the
+   top-hat response would be: its contrast differs by 3× between the two sides). Pixels below the threshold
+   and bright neighbours (a clutter edge next to the finger) carry no weight. A blob that reaches the patch
+   border is not an isolated dot (a sheet corner, a bright clutter edge) and is discarded. The blob's
+   ``area`` is Σα, the visible silhouette in px (the pipeline compares it between the views to detect
+   partial occlusion).
 
 Search region: an ROI (``roi_half`` px around a predicted position) when one is given, else the full frame;
 :meth:`MarkerDetector.detect` falls back to the full frame in the same image when the ROI holds no
@@ -51,7 +57,7 @@ def check_image(name: str, img, shape: tuple[int, int] | None = None) -> np.ndar
 @dataclass(frozen=True)
 class Detection:
     """Candidates found in one image: ``uv`` (K, 2) raw px, ``strength`` (K,) top-hat peak, DN,
-    ``area`` (K,) px above threshold; ``roi`` True when found in the ROI (False: full-frame search)."""
+    ``area`` (K,) visible marker area Σα, px; ``roi`` True when found in the ROI (False: full-frame search)."""
 
     uv: np.ndarray
     strength: np.ndarray
@@ -93,6 +99,8 @@ class MarkerDetector:
         self.max_area = int(max_area)
         g = np.arange(-self.r, self.r + 1, dtype=np.float64)
         self._gx, self._gy = np.meshgrid(g, g)
+        self._ring = np.hypot(self._gx, self._gy) > 0.6 * self.r
+        self._k3 = np.ones((3, 3), np.uint8)
 
     def response(self, img: np.ndarray) -> np.ndarray:
         """White top-hat response of a mono8 image (H, W) → uint8 (H, W), DN."""
@@ -102,7 +110,7 @@ class MarkerDetector:
                y1: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Candidates in the window [x0, x1) × [y0, y1) of ``img`` (whole image by default).
 
-        Returns (uv (K, 2) px in full-image coordinates, strength (K,) DN, area (K,) px), strongest first,
+        Returns (uv (K, 2) px in full-image coordinates, strength (K,) DN, area (K,) Σα px), strongest first,
         K ≤ max_candidates (possibly 0).
         """
         h, w = img.shape
@@ -117,7 +125,9 @@ class MarkerDetector:
         uv, st, ar = [], [], []
         r = self.r
         hh, ww = work.shape
-        for _ in range(self.max_candidates):
+        for _ in range(4 * self.max_candidates):          # discarded blobs do not use up the candidates
+            if len(uv) >= self.max_candidates:
+                break
             _, peak, _, (px, py) = cv2.minMaxLoc(work)
             if peak < self.min_contrast:
                 break
@@ -128,13 +138,38 @@ class MarkerDetector:
             ca, cb = max(0, ya), min(resp.shape[0], yb)
             da, db = max(0, xa), min(resp.shape[1], xb)
             patch_full[ca - ya:cb - ya, da - xa:db - xa] = resp[ca:cb, da:db]
-            wgt = patch_full - self.frac * peak
-            np.maximum(wgt, 0.0, out=wgt)
-            # keep only the blob connected to the peak (not a bright neighbour such as a clutter edge)
-            _, labels, stats, _ = cv2.connectedComponentsWithStats((wgt > 0).astype(np.uint8), connectivity=8)
-            lab = labels[r, r]
+            # coverage α = (I − B)/(M − B) of the opaque marker over the local background B = open(I)
+            img_p = np.zeros_like(patch_full)
+            ia0, ib0 = py0 + ca, py0 + cb
+            ja0, jb0 = px0 + da, px0 + db
+            img_p[ca - ya:cb - ya, da - xa:db - xa] = img[ia0:ib0, ja0:jb0]
+            # the background behind the marker: inpainted from the pixels around it (Telea), so a marker
+            # straddling the dark finger and the bright sheet gets each side's level, not the opening's
+            # brighter one
+            hole = (patch_full > self.frac * peak).astype(np.uint8)
+            _, hl, _, _ = cv2.connectedComponentsWithStats(hole, connectivity=8)
+            hole = cv2.dilate((hl == hl[r, r]).astype(np.uint8), self._k3) if hl[r, r] else hole
+            bg = cv2.inpaint(np.clip(img_p, 0, 255).astype(np.uint8), hole, 3, cv2.INPAINT_TELEA).astype(np.float64)
+            bg = np.where(hole > 0, np.minimum(bg, img_p), img_p - patch_full)
+            core = img_p[r - 2:r + 3, r - 2:r + 3]
+            M = float(np.sort(core, axis=None)[-4:].mean())
+            alpha = (img_p - bg) / np.maximum(M - bg, 0.5 * self.min_contrast)
+            np.clip(alpha, 0.0, 1.5, out=alpha)
+            # blob of α above threshold_frac; if it runs into the clutter (reaches the patch border), retry
+            # above the clutter around the marker: a dark finger edge next to a bright background leaves a
+            # thin top-hat ridge (the opening cannot fit between them) that must not join the blob
+            ring_thr = min(max(self.frac, float(np.percentile(alpha[self._ring], 90)) + 0.1), 0.5)
+            for thr in (self.frac, ring_thr):
+                wgt = alpha - thr
+                np.maximum(wgt, 0.0, out=wgt)
+                # keep only the blob connected to the peak (not a bright neighbour such as a clutter edge)
+                _, labels, stats, _ = cv2.connectedComponentsWithStats((wgt > 0).astype(np.uint8), connectivity=8)
+                lab = labels[r, r]
+                bx, by, bw, bh, npix = (int(v) for v in stats[lab])
+                if lab != 0 and not (bx == 0 or by == 0 or bx + bw == 2 * r + 1 or by + bh == 2 * r + 1):
+                    break
             wgt[labels != lab] = 0.0
-            bx, by, bw, bh, area = (int(v) for v in stats[lab])
+            area = float(alpha[labels == lab].sum())
             # an isolated dot (or a blur streak shorter than the patch) does not reach the patch border;
             # a blob that does is part of a larger bright structure (sheet corner, clutter edge): skip it.
             # Neither may it touch the image border (a marker cut by the frame has a biased centroid).
@@ -146,7 +181,7 @@ class MarkerDetector:
             wy0, wx0 = ya - oy + by - 1, xa - ox + bx - 1      # work coordinates
             work[max(0, wy0):max(0, wy0 + bh + 2), max(0, wx0):max(0, wx0 + bw + 2)] = 0
             work[py, px] = 0
-            if s <= 0 or area > self.max_area or touches:
+            if s <= 0 or lab == 0 or npix > self.max_area or touches:
                 continue
             du = float((wgt * self._gx).sum() / s)
             dv = float((wgt * self._gy).sum() / s)
@@ -154,7 +189,7 @@ class MarkerDetector:
             st.append(peak)
             ar.append(area)
         return (np.asarray(uv, np.float64).reshape(-1, 2), np.asarray(st, np.float64),
-                np.asarray(ar, np.int64))
+                np.asarray(ar, np.float64))
 
     def detect(self, img: np.ndarray, center: np.ndarray | None = None) -> Detection:
         """Candidates in ``img`` (mono8 (H, W)): in the ROI around ``center`` (2,) px when given, else — or

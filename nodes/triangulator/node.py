@@ -5,6 +5,12 @@ A thin shell around :class:`nodes.triangulator.pipeline.FingertipTracker`. Every
 when the marker is lost, occluded, ambiguous or gated out. Bad frames (wrong size or dtype, unsynchronised
 pair) are rejected with a one-line reason and counted; the node keeps running. Frames that arrive before
 the calibration are rejected too.
+
+Registration (issue 15): with ``display_calib`` set (the launch file's top-level ``display_calib:`` fills it),
+the camera's pose in the display frame — and the stereo model it was fitted with, when the entry has one —
+come from that ``display.yaml``'s camera entry, overriding the ``/camera/calibration`` message's (the image
+size must agree; a pose differing from the message's by > 1 mm or 0.05° is logged). The node never reads
+the twin's truth.
 """
 
 from __future__ import annotations
@@ -32,6 +38,8 @@ TriangulatorParams = params_model(
     methods={"tracker_config": lambda self: build(TrackerConfig, self)},
     module=__name__,
     max_stereo_skew_s=(float, Field(default=0.002, gt=0.0)),
+    display_calib=(str | None, Field(default=None, description="display.yaml: the camera entry's pose (and "
+                                                               "stereo model) override the calibration message's")),
 )
 
 
@@ -46,13 +54,34 @@ class TriangulatorNode(Node):
         self.cfg: TrackerConfig = p.tracker_config()
         self.tracker: FingertipTracker | None = None
         self._lock = threading.Lock()
+        self.display = None
+        if p.display_calib:
+            from flexsheet.model.display_calib import load_display_calib
+
+            self.display = load_display_calib(p.display_calib, require=("camera",)).camera
         self.pub = self.publisher(topics.FINGERTIP)
         self.subscribe(topics.CALIBRATION, self.on_calibration, qos=QoS.LATCHED)
         self.subscribe(topics.STEREO, self.on_stereo, qos=QoS.LATEST)
 
     def on_calibration(self, msg: StereoCalibration) -> None:
-        """(Re)build the tracker from a calibration (bad calibration → rejected, old one kept)."""
-        tracker = FingertipTracker(msg, self.cfg, msg.T_display_camera)
+        """(Re)build the tracker from a calibration (bad calibration → rejected, old one kept); with
+        ``display_calib`` its camera entry's pose and stereo model replace the message's."""
+        calib, T = msg, msg.T_display_camera
+        if self.display is not None:
+            T = self.display.T_display_camera
+            st = self.display.stereo
+            if st is not None:
+                if tuple(int(v) for v in st["image_size"]) != tuple(int(v) for v in msg.image_size):
+                    raise InputRejected(f"{self.params.display_calib}: camera entry is for {st['image_size']} images, "
+                                        f"the calibration message for {tuple(msg.image_size)}")
+                calib = st
+            dt = float(np.linalg.norm(T[:3, 3] - msg.T_display_camera[:3, 3]))
+            dr = float(np.degrees(np.arccos(np.clip((np.trace(T[:3, :3].T @ msg.T_display_camera[:3, :3]) - 1) / 2,
+                                                    -1.0, 1.0))))
+            if dt > 1e-3 or dr > 0.05:
+                self.log.warning("display_calib's camera pose differs from /camera/calibration's by %.1f mm, "
+                                 "%.2f deg: using display_calib's", dt * 1e3, dr)
+        tracker = FingertipTracker(calib, self.cfg, T)
         with self._lock:
             self.tracker = tracker
         self.log.info("calibration: %dx%d, |T| = %.1f mm, f = %.1f px", msg.image_size[0], msg.image_size[1],

@@ -1,0 +1,635 @@
+"""The pushed sheet's true shape: a pre-tensioned, geometrically nonlinear membrane indented by a rounded
+fingertip, solved by finite elements (pure: numpy + scipy + scikit-fem).
+
+This is the twin's *physics* of the sheet, independent of the estimators' models: it is not the renderer's
+4-triangle or "fine" correction model, nor the sine-series :class:`flexsheet.model.sheet.Membrane`. The world
+twin publishes it (``/world/sheet``); estimators never call it.
+
+**Model** (stated here; the paper gives none). The 240 × 240 × 1 mm urethane sheet in its stretched,
+pre-tensioned state occupies the rectangle |u| ≤ a, |v| ≤ b of its own frame (``u`` along ``axis_u``, the
+clamp-to-clamp direction; ``v`` along ``axis_v``; a = the measured clamp half span, b = half the sheet width;
+the necking of the free edges is neglected). Unknowns: the in-plane displacement (u₁, u₂) and the out-of-plane
+deflection w (m, positive along −normal, away from the user).
+
+* Kinematics: Föppl–von Kármán membrane strain (moderate rotations, large deflection)
+  E_αβ = ½(u_α,β + u_β,α) + ½ w,α w,β (Timoshenko & Woinowsky-Krieger, *Theory of Plates and Shells*, §96;
+  Ventsel & Krauthammer, *Thin Plates and Shells*, §7). Bending is neglected (membrane limit:
+  D = E t³/12(1 − ν²) ≈ 2·10⁻⁴ N·m against T·a² ≈ 1.5 N·m).
+* Pre-stress: the clamps' pull N⁰ = diag(T_u, T_v), T_u = the uniaxial neo-Hookean tension of
+  :func:`flexsheet.model.tension.tension` at the true stretch (clamp strain + the truth's pre-strain) with the
+  truth's Young's modulus, and T_v = β·T_u with the truth's tension ratio β (free-edge contraction and clamp
+  misalignment, :mod:`flexsheet.model.truth`). It is balanced by dead tractions on the free edges, which
+  cancels the N⁰ : ∇u term of the energy.
+* Increment: St Venant–Kirchhoff plane stress on top of the pre-stress, N = (E t / (1 − ν²))·((1 − ν) E +
+  ν tr(E) I), ν = 0.5 (incompressible rubber), E = the small-strain Young's modulus.
+* Boundary conditions: clamped edges u = ±a fixed (u₁ = u₂ = w = 0, the rigid clamps); free edges v = ±b
+  traction-free apart from the dead pre-stress traction.
+* Load: a rigid spherical fingertip of radius ``finger_radius`` (8 mm) whose apex is at depth S behind the
+  flat sheet, at (u₀, v₀); frictionless unilateral contact w ≥ S − ρ + √(ρ² − r²) (r < ρ) by a penalty
+  ½ k ∫ ⟨φ − w⟩₊² (k = 10¹¹ N/m³; the residual penetration is reported, ≲ 1 µm).
+* Total energy Π = ∫ [½ N⁰ : (∇w ⊗ ∇w) + ½ E : 𝒞 : E + ½ k⟨φ − w⟩₊²] dA is minimised by Newton's method with
+  the consistent tangent and an Armijo backtracking line search on Π, continuing in depth (each depth
+  starts from the previous solution scaled to the new depth: w ∝ S, u ∝ S²).
+
+**Discretisation**: bilinear quadrilaterals (``skfem.ElementQuad1``) for u₁, u₂, w on a tensor-product mesh,
+``h_fine`` (4 mm) over the central |u|, |v| ≤ ``fine_extent`` and ~``h_coarse`` (8 mm) outside; 3 × 3 Gauss
+points (so the contact cap is sampled every ~1.3 mm). scikit-fem provides the mesh, the basis (shape functions,
+gradients, quadrature weights) and the global coordinates; the element matrices of the nonlinear forms are
+evaluated with numpy ``einsum`` over all elements at once (the same integrals a ``BilinearForm`` would
+evaluate, ~20× faster) and solved with SciPy's SuperLU.
+
+**Table** (:class:`IndentTable`): the world needs the shape at 100 Hz; one solve takes seconds. So the shape is
+solved once per physics on a grid of depths × contact positions (|u₀|, |v₀| ≥ 0; the other quadrants by
+symmetry), cached on disk, and interpolated (:meth:`IndentTable.shape`): between contact positions by
+blending the neighbouring solutions after a piecewise-linear remapping of each axis that moves their contact
+to the requested one while keeping the edges fixed (so the peak stays at the finger and the clamped edges
+stay at zero), and between depths by blending the two neighbouring depths' solutions, each scaled to the
+requested depth. ``tests/test_twin_sheet.py`` checks the interpolation against direct solves.
+
+Units: m, N, N/m, Pa; frames: the sheet's (u, v) as in :mod:`flexsheet.model.sheet`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from flexsheet.model import scene
+from flexsheet.model.checks import check_positive
+
+__all__ = ["FINGER_RADIUS", "SheetPhysics", "SheetFEM", "IndentSolution", "FemShape", "IndentTable",
+           "TABLE_DEPTHS", "TABLE_POSITIONS", "linear_patch_deflection", "default_cache_dir"]
+
+#: radius of the rigid spherical fingertip, m (an adult index fingertip pad, ~16 mm wide)
+FINGER_RADIUS = 0.008
+#: depths (m) of the table, after 0 (flat)
+TABLE_DEPTHS = (0.003, 0.010, 0.020, 0.035, 0.050)
+#: contact positions (m) along each of u and v of the table (≥ 0; mirrored); multiples of the default 4 mm
+#: mesh so that the fingertip apex sits on a node
+TABLE_POSITIONS = (0.0, 0.036, 0.072)
+
+
+def default_cache_dir() -> str:
+    """Folder for cached tables: ``$FLEXSHEET_CACHE/sheet_fem`` or ``~/.cache/flexsheet/sheet_fem``."""
+    root = os.environ.get("FLEXSHEET_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "flexsheet")
+    return os.path.join(root, "sheet_fem")
+
+
+@dataclass(frozen=True)
+class SheetPhysics:
+    """The sheet's physical parameters for one clamp span (SI).
+
+    ``half_span`` a (m, clamps at u = ±a), ``half_width`` b (m, free edges at v = ±b), ``thickness`` t (m),
+    ``young`` E (Pa), ``poisson`` ν, ``tension_u`` T_u (N/m, pre-tension along the clamp line),
+    ``tension_ratio`` β = T_v / T_u, ``finger_radius`` ρ (m), ``penalty`` k (N/m³). Raises ``ValueError``
+    naming the field for a non-positive or non-finite value (ν must lie in [0, 0.5]).
+    """
+
+    half_span: float
+    half_width: float = scene.SHEET_SIZE / 2
+    thickness: float = scene.SHEET_THICKNESS
+    young: float = 2.46e6
+    poisson: float = 0.5
+    tension_u: float = 93.5
+    tension_ratio: float = 1.0
+    finger_radius: float = FINGER_RADIUS
+    penalty: float = 1e11
+
+    def __post_init__(self) -> None:
+        for k in ("half_span", "half_width", "thickness", "young", "tension_u", "tension_ratio", "finger_radius",
+                  "penalty"):
+            check_positive(k, getattr(self, k))
+        if not (math.isfinite(self.poisson) and 0.0 <= self.poisson <= 0.5):
+            raise ValueError(f"poisson must be in [0, 0.5], got {self.poisson!r}")
+
+    @property
+    def tension_v(self) -> float:
+        """T_v = β·T_u, N/m."""
+        return self.tension_ratio * self.tension_u
+
+    @classmethod
+    def from_truth(cls, truth, stretch: float, size: float = scene.SHEET_SIZE, **kw) -> SheetPhysics:
+        """Physics of the twin's true sheet (``truth``: a :class:`flexsheet.model.truth.TwinTruth`) held at
+        clamp strain ``stretch`` (≥ 0) over the unstretched side ``size`` (m): a = size(1 + stretch)/2,
+        T_u = :func:`flexsheet.model.tension.tension` (stretch + truth pre-strain) with the truth's E, β = the
+        truth's tension ratio. ``kw`` overrides fields. Raises ``ValueError`` on a bad stretch."""
+        from flexsheet.model.sheet import clamp_half_span
+        from flexsheet.model.tension import SheetMaterial, tension
+
+        if not (math.isfinite(stretch) and stretch >= 0.0):
+            raise ValueError(f"stretch must be finite and >= 0, got {stretch!r}")
+        mat = SheetMaterial(young=float(truth.sheet_young), size=size)
+        args = {"half_span": clamp_half_span(stretch, size), "half_width": size / 2, "young": float(truth.sheet_young),
+                "tension_u": tension(stretch + float(truth.sheet_prestrain), mat),
+                "tension_ratio": float(truth.tension_ratio)}
+        args.update(kw)
+        return cls(**args)
+
+    def key(self) -> dict:
+        """JSON-able dict of the fields, rounded (for cache keys)."""
+        return {k: float(f"{v:.9g}") for k, v in asdict(self).items()}
+
+
+def _axis_nodes(L: float, h_fine: float, h_coarse: float, extent: float) -> np.ndarray:
+    """Sorted nodes on [−L, L]: spacing ``h_fine`` on |x| ≤ extent (a multiple of h_fine, node at 0), then
+    about ``h_coarse`` out to the edge."""
+    n_f = max(1, int(round(min(extent, L) / h_fine)))
+    ext = min(n_f * h_fine, L)
+    fine = np.linspace(-ext, ext, 2 * n_f + 1)
+    if L - ext < 0.25 * h_fine:
+        fine[0], fine[-1] = -L, L
+        return fine
+    n_c = max(1, int(math.ceil((L - ext) / h_coarse)))
+    coarse = np.linspace(ext, L, n_c + 1)[1:]
+    return np.concatenate([-coarse[::-1], fine, coarse])
+
+
+@dataclass
+class IndentSolution:
+    """One equilibrium. ``x`` (nx,), ``y`` (ny,) node coordinates along u and v (m); ``w`` (nx, ny) deflection
+    along −normal (m); ``u1``, ``u2`` (nx, ny) in-plane displacements (m); ``depth`` S (m); ``push_u``,
+    ``push_v`` (m); ``force`` contact (or pressure) force (N); ``iterations`` Newton iterations in all;
+    ``residual`` final residual norm (N); ``penetration`` largest penalty penetration (m)."""
+
+    x: np.ndarray
+    y: np.ndarray
+    w: np.ndarray
+    u1: np.ndarray
+    u2: np.ndarray
+    depth: float
+    push_u: float
+    push_v: float
+    force: float
+    iterations: int
+    residual: float
+    penetration: float
+
+    def deflection(self, u, v) -> np.ndarray:
+        """w(u, v), m (bilinear = the Q1 interpolant); arrays broadcast; points outside are clamped in."""
+        return _bilinear(self.x, self.y, self.w, u, v)
+
+
+def _bilinear(x: np.ndarray, y: np.ndarray, F: np.ndarray, u, v) -> np.ndarray:
+    """Bilinear interpolation of F (nx, ny) on the tensor grid (x, y) at (u, v) (broadcast; clamped)."""
+    u, v = np.broadcast_arrays(np.asarray(u, float), np.asarray(v, float))
+    uu = np.clip(u, x[0], x[-1])
+    vv = np.clip(v, y[0], y[-1])
+    i = np.clip(np.searchsorted(x, uu, side="right") - 1, 0, len(x) - 2)
+    j = np.clip(np.searchsorted(y, vv, side="right") - 1, 0, len(y) - 2)
+    tx = (uu - x[i]) / (x[i + 1] - x[i])
+    ty = (vv - y[j]) / (y[j + 1] - y[j])
+    return ((1 - tx) * (1 - ty) * F[i, j] + tx * (1 - ty) * F[i + 1, j] + (1 - tx) * ty * F[i, j + 1]
+            + tx * ty * F[i + 1, j + 1])
+
+
+class SheetFEM:
+    """Finite-element model of one :class:`SheetPhysics` (module doc).
+
+    ``h_fine``/``h_coarse`` (m): element sizes inside/outside ``fine_extent`` (m) of the centre.
+    Methods: :meth:`solve_indent` (rigid fingertip at a prescribed depth), :meth:`solve_pressure` (a uniform
+    pressure patch of prescribed force, for checks against the linear theory). Raises ``ValueError`` on bad
+    mesh sizes.
+    """
+
+    def __init__(self, physics: SheetPhysics, h_fine: float = 0.004, h_coarse: float = 0.008,
+                 fine_extent: float = 0.084) -> None:
+        from skfem import Basis, ElementQuad1, MeshQuad
+
+        for k, v in (("h_fine", h_fine), ("h_coarse", h_coarse), ("fine_extent", fine_extent)):
+            check_positive(k, v)
+        self.phys = physics
+        self.mesh_args = {"h_fine": float(h_fine), "h_coarse": float(h_coarse), "fine_extent": float(fine_extent)}
+        a, b = physics.half_span, physics.half_width
+        self.x = _axis_nodes(a, h_fine, h_coarse, fine_extent)
+        self.y = _axis_nodes(b, h_fine, h_coarse, fine_extent)
+        mesh = MeshQuad.init_tensor(self.x, self.y)
+        basis = Basis(mesh, ElementQuad1(), intorder=5)           # 3 x 3 Gauss points per element
+        self.n_nodes = mesh.p.shape[1]
+        self.ix = np.searchsorted(self.x, mesh.p[0] - 1e-12)
+        self.iy = np.searchsorted(self.y, mesh.p[1] - 1e-12)
+        conn = basis.element_dofs                                   # (4, nel) node indices
+        self.conn = conn.T.copy()                                   # (nel, 4)
+        # shape values N (nel, 4, nq) and gradients dNx, dNy (nel, 4, nq); weights dx (nel, nq)
+        self.N = np.stack([basis.basis[i][0].value for i in range(4)], axis=1)
+        g = [basis.basis[i][0].grad for i in range(4)]
+        self.dNx = np.stack([gi[0] for gi in g], axis=1)
+        self.dNy = np.stack([gi[1] for gi in g], axis=1)
+        self.dx = basis.dx
+        X = basis.global_coordinates().value                       # (2, nel, nq)
+        self.qx, self.qy = X[0], X[1]
+        nel = self.conn.shape[0]
+        # global dof = 3 * node + component (0: u1, 1: u2, 2: w); element dofs (nel, 12) ordered (node, comp)
+        edofs = (3 * self.conn[:, :, None] + np.arange(3)[None, None, :]).reshape(nel, 12)
+        self.edofs = edofs
+        self.ndof = 3 * self.n_nodes
+        clamped = np.flatnonzero(np.isclose(np.abs(mesh.p[0]), a, atol=1e-12))
+        fixed = np.zeros(self.ndof, bool)
+        fixed[(3 * clamped[:, None] + np.arange(3)).ravel()] = True
+        self.free = np.flatnonzero(~fixed)
+        remap = -np.ones(self.ndof, np.int64)
+        remap[self.free] = np.arange(self.free.size)
+        r = remap[edofs]
+        rows = np.broadcast_to(r[:, :, None], (nel, 12, 12)).ravel()
+        cols = np.broadcast_to(r[:, None, :], (nel, 12, 12)).ravel()
+        keep = (rows >= 0) & (cols >= 0)
+        self._keep = keep
+        nf = self.free.size
+        lin = rows[keep] * nf + cols[keep]
+        uniq, self._slot = np.unique(lin, return_inverse=True)
+        self._indptr = np.searchsorted(uniq // nf, np.arange(nf + 1))
+        self._indices = (uniq % nf).astype(np.int32)
+        self._nnz = uniq.size
+        self._rfree = r
+        nu = physics.poisson
+        A0 = physics.young * physics.thickness / (1.0 - nu * nu)
+        self.C = A0 * np.array([[1.0, nu, 0.0], [nu, 1.0, 0.0], [0.0, 0.0, 0.5 * (1.0 - nu)]])
+
+    # ------------------------------------------------------------------------------------------- kernels
+    def _fields(self, U: np.ndarray):
+        Ue = U[self.edofs].reshape(-1, 4, 3)                        # (nel, 4, 3)
+        def grad(c):
+            return (np.einsum("ea,eaq->eq", Ue[:, :, c], self.dNx), np.einsum("ea,eaq->eq", Ue[:, :, c], self.dNy))
+        u1x, u1y = grad(0)
+        u2x, u2y = grad(1)
+        g0, g1 = grad(2)
+        w = np.einsum("ea,eaq->eq", Ue[:, :, 2], self.N)
+        e = np.stack([u1x + 0.5 * g0 * g0, u2y + 0.5 * g1 * g1, u1y + u2x + g0 * g1])   # Voigt, eng. shear
+        Nst = np.einsum("ij,jeq->ieq", self.C, e)
+        return g0, g1, w, e, Nst
+
+    def _energy(self, U: np.ndarray, phi: np.ndarray, load: np.ndarray | None) -> float:
+        p = self.phys
+        g0, g1, w, e, Nst = self._fields(U)
+        dens = 0.5 * np.einsum("ieq,ieq->eq", e, Nst) + 0.5 * (p.tension_u * g0 ** 2 + p.tension_v * g1 ** 2)
+        dens = dens + 0.5 * p.penalty * np.maximum(phi - w, 0.0) ** 2
+        if load is not None:
+            dens = dens - load * w
+        return float(np.sum(dens * self.dx))
+
+    def _assemble(self, U: np.ndarray, phi: np.ndarray, load: np.ndarray | None):
+        p = self.phys
+        g0, g1, w, e, Nst = self._fields(U)
+        nel, nq = self.dx.shape
+        # B (3, nel, nq, 12): variation of the Voigt strain; G (2, ...): gradient of w
+        B = np.zeros((3, nel, nq, 4, 3))
+        dNx = self.dNx.transpose(0, 2, 1)                           # (nel, nq, 4)
+        dNy = self.dNy.transpose(0, 2, 1)
+        Nv = self.N.transpose(0, 2, 1)
+        B[0, :, :, :, 0] = dNx
+        B[0, :, :, :, 2] = g0[:, :, None] * dNx
+        B[1, :, :, :, 1] = dNy
+        B[1, :, :, :, 2] = g1[:, :, None] * dNy
+        B[2, :, :, :, 0] = dNy
+        B[2, :, :, :, 1] = dNx
+        B[2, :, :, :, 2] = g0[:, :, None] * dNy + g1[:, :, None] * dNx
+        B = B.reshape(3, nel, nq, 12)
+        gap = phi - w
+        act = p.penalty * (gap > 0.0)
+        pres = p.penalty * np.maximum(gap, 0.0)
+        T11 = p.tension_u + Nst[0]
+        T22 = p.tension_v + Nst[1]
+        T12 = Nst[2]
+        dx = self.dx
+        # residual
+        r = np.einsum("ieqk,ieq->ek", B, Nst * dx)
+        rw = (dNx * (p.tension_u * g0 * dx)[:, :, None] + dNy * (p.tension_v * g1 * dx)[:, :, None]
+              - Nv * (pres * dx)[:, :, None]).sum(axis=1)
+        if load is not None:
+            rw -= (Nv * (load * dx)[:, :, None]).sum(axis=1)
+        r = r.reshape(nel, 4, 3)
+        r[:, :, 2] += rw
+        # tangent: material Bᵀ C B + geometric (w-w block) + penalty
+        CB = np.einsum("ij,jeqk->ieqk", self.C, B) * dx[None, :, :, None]
+        K = np.einsum("ieqk,ieql->ekl", B, CB).reshape(nel, 4, 3, 4, 3)
+        Kw = (np.einsum("eqa,eqb,eq->eab", dNx, dNx, T11 * dx) + np.einsum("eqa,eqb,eq->eab", dNy, dNy, T22 * dx)
+              + np.einsum("eqa,eqb,eq->eab", dNx, dNy, T12 * dx) + np.einsum("eqa,eqb,eq->eab", dNy, dNx, T12 * dx)
+              + np.einsum("eqa,eqb,eq->eab", Nv, Nv, act * dx))
+        K[:, :, 2, :, 2] += Kw
+        R = np.zeros(self.ndof)
+        np.add.at(R, self.edofs.ravel(), r.ravel())
+        data = np.bincount(self._slot, weights=K.reshape(nel, 12, 12).ravel()[self._keep], minlength=self._nnz)
+        nf = self.free.size
+        Kf = sp.csr_matrix((data, self._indices, self._indptr), shape=(nf, nf))
+        return Kf, R[self.free], pres
+
+    def _phi(self, depth: float, u0: float, v0: float) -> np.ndarray:
+        rho = self.phys.finger_radius
+        r2 = (self.qx - u0) ** 2 + (self.qy - v0) ** 2
+        return np.where(r2 < rho * rho, depth - rho + np.sqrt(np.maximum(rho * rho - r2, 0.0)), -1.0)
+
+    def _newton(self, U: np.ndarray, phi: np.ndarray, load: np.ndarray | None, tol: float, max_iter: int):
+        it = 0
+        rn = math.inf
+        for it in range(1, max_iter + 1):  # noqa: B007
+            K, R, _ = self._assemble(U, phi, load)
+            rn = float(np.linalg.norm(R))
+            if rn <= tol:
+                return U, it - 1, rn
+            dUf = spla.spsolve(K.tocsc(), -R, permc_spec="MMD_AT_PLUS_A")
+            if not np.all(np.isfinite(dUf)):
+                raise ArithmeticError("sheet FEM: singular tangent (Newton step not finite)")
+            dU = np.zeros_like(U)
+            dU[self.free] = dUf
+            P0 = self._energy(U, phi, load)
+            slope = float(R @ dUf)
+            s = 1.0
+            while s > 1e-4 and self._energy(U + s * dU, phi, load) > P0 + 1e-4 * s * slope:
+                s *= 0.5
+            U = U + s * dU
+        K, R, _ = self._assemble(U, phi, load)
+        rn = float(np.linalg.norm(R))
+        if rn > 1e3 * tol:
+            raise ArithmeticError(f"sheet FEM: Newton did not converge in {max_iter} iterations (residual {rn:.3g} N)")
+        return U, it, rn
+
+    def _solution(self, U, depth, u0, v0, force, iters, rn, pen) -> IndentSolution:
+        shape = (len(self.x), len(self.y))
+        out = []
+        for c in range(3):
+            F = np.zeros(shape)
+            F[self.ix, self.iy] = U[c::3]
+            out.append(F)
+        return IndentSolution(self.x.copy(), self.y.copy(), out[2], out[0], out[1], float(depth), float(u0),
+                              float(v0), float(force), int(iters), float(rn), float(pen))
+
+    def _check_point(self, u0: float, v0: float) -> None:
+        a, b = self.phys.half_span, self.phys.half_width
+        if not (math.isfinite(u0) and math.isfinite(v0) and abs(u0) < a - self.phys.finger_radius
+                and abs(v0) <= b):
+            raise ValueError(f"contact (u0, v0)=({u0!r}, {v0!r}) must lie inside the sheet, |u0| < "
+                             f"{a - self.phys.finger_radius:.4f} m, |v0| <= {b:.4f} m")
+
+    def solve_indent(self, depth, u0: float = 0.0, v0: float = 0.0, *, max_step: float = 0.010,
+                     tol: float = 1e-7, max_iter: int = 40, start: IndentSolution | None = None
+                     ) -> IndentSolution | list[IndentSolution]:
+        """Equilibrium under the rigid fingertip with its apex at ``depth`` S (m, > 0; or an increasing list of
+        depths → one solution per depth, continued from each other) at contact (u0, v0) (m).
+
+        Continuation from ``start`` (or the flat sheet) in steps ≤ ``max_step`` m; Newton until the residual
+        ≤ ``tol`` N. Raises ``ValueError`` on a bad depth/contact, ``ArithmeticError`` if Newton fails.
+        """
+        depths = [float(depth)] if np.ndim(depth) == 0 else [float(d) for d in depth]
+        if not depths or any(not (math.isfinite(d) and d > 0.0) for d in depths) or np.any(np.diff(depths) <= 0):
+            raise ValueError(f"depth must be > 0 m (a list: strictly increasing), got {depth!r}")
+        self._check_point(u0, v0)
+        U = np.zeros(self.ndof)
+        S0 = 0.0
+        if start is not None:
+            for c, F in enumerate((start.u1, start.u2, start.w)):
+                U[c::3] = F[self.ix, self.iy]
+            S0 = start.depth
+        out, iters = [], 0
+        for S in depths:
+            n = max(1, int(math.ceil((S - S0) / max_step))) if S > S0 else 1
+            for s in np.linspace(S0, S, n + 1)[1:]:
+                if S0 > 0.0:
+                    k = s / S0
+                    U[2::3] *= k
+                    U[0::3] *= k * k
+                    U[1::3] *= k * k
+                phi = self._phi(s, u0, v0)
+                U, it, rn = self._newton(U, phi, None, tol, max_iter)
+                iters += it
+                S0 = s
+            _, _, pres = self._assemble(U, phi, None)
+            force = float(np.sum(pres * self.dx))
+            _, _, w, _, _ = self._fields(U)
+            pen = float(np.max(np.maximum(phi - w, 0.0)))
+            out.append(self._solution(U, S, u0, v0, force, iters, rn, pen))
+        return out[0] if np.ndim(depth) == 0 else out
+
+    def solve_pressure(self, force: float, u0: float = 0.0, v0: float = 0.0, half_side: float = 0.008, *,
+                       tol: float = 1e-9, max_iter: int = 40) -> IndentSolution:
+        """Equilibrium under a uniform pressure ``force``/(2·half_side)² (N, m) on the square |u − u0|,
+        |v − v0| ≤ half_side (no fingertip). ``depth`` of the result = w at (u0, v0). For checks against
+        :func:`linear_patch_deflection` (choose a patch on element edges). Raises ``ValueError``."""
+        check_positive("force", force)
+        check_positive("half_side", half_side)
+        self._check_point(u0, v0)
+        eps = 1e-9
+        inside = (np.abs(self.qx - u0) <= half_side + eps) & (np.abs(self.qy - v0) <= half_side + eps)
+        load = np.where(inside, force / (2.0 * half_side) ** 2, 0.0)
+        phi = np.full_like(self.qx, -1.0)
+        U, it, rn = self._newton(np.zeros(self.ndof), phi, load, tol, max_iter)
+        sol = self._solution(U, 0.0, u0, v0, float(np.sum(load * self.dx)), it, rn, 0.0)
+        sol.depth = float(sol.deflection(u0, v0))
+        return sol
+
+
+def linear_patch_deflection(physics: SheetPhysics, force: float, half_side: float, u, v, modes: int = 400
+                            ) -> np.ndarray:
+    """Small-deflection (linear) membrane under a uniform pressure patch, by double Fourier series — the
+    reference the FEM is checked against at small load (an independent closed form).
+
+    T_u w_uu + T_v w_vv = −p on |u| ≤ a, |v| ≤ b; w = 0 at u = ±a; w_v = 0 at v = ±b; p = force/(2c)² on
+    |u|, |v| ≤ c (c = ``half_side``, centred). Modes sin(kπ(u + a)/2a)·cos(mπ(v + b)/2b), k = 1…``modes``,
+    m = 0…``modes``. Returns w (m) at (u, v) (broadcast). Source: separation of variables, e.g. Timoshenko &
+    Woinowsky-Krieger §29 (Navier/Lévy series) for the membrane operator.
+    """
+    a, b, c = physics.half_span, physics.half_width, float(half_side)
+    Tu, Tv = physics.tension_u, physics.tension_v
+    p = force / (2 * c) ** 2
+    k = np.arange(1, modes + 1)
+    m = np.arange(0, modes + 1)
+    lam = k * math.pi / (2 * a)
+    nu_ = m * math.pi / (2 * b)
+    Iu = (np.cos(lam * (a - c)) - np.cos(lam * (a + c))) / lam
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Iv = np.where(m == 0, 2 * c, (np.sin(nu_ * (b + c)) - np.sin(nu_ * (b - c))) / np.where(m == 0, 1, nu_))
+    normv = np.where(m == 0, 2 * b, b)
+    W = p * Iu[:, None] * Iv[None, :] / (a * normv[None, :]) / (Tu * lam[:, None] ** 2 + Tv * nu_[None, :] ** 2)
+    u, v = np.broadcast_arrays(np.asarray(u, float), np.asarray(v, float))
+    su = np.sin(lam[None, :] * (u.ravel()[:, None] + a))
+    cv = np.cos(nu_[None, :] * (v.ravel()[:, None] + b))
+    return np.einsum("nk,km,nm->n", su, W, cv).reshape(u.shape)
+
+
+# ------------------------------------------------------------------------------------------------ table
+def _remap(q: np.ndarray, target: float, node: float, L: float) -> np.ndarray:
+    """Piecewise-linear map of [−L, L] onto itself sending ``target`` to ``node`` (edges fixed)."""
+    target = min(max(target, -L * (1 - 1e-9)), L * (1 - 1e-9))
+    lo = -L + (q + L) * (node + L) / (target + L)
+    hi = node + (q - target) * (L - node) / (L - target)
+    return np.where(q <= target, lo, hi)
+
+
+@dataclass(frozen=True)
+class FemShape:
+    """The true pushed sheet from an :class:`IndentTable` (the interface of
+    :class:`flexsheet.model.sheet.Membrane`: ``half_span``, ``half_width``, ``push_u``, ``push_v``,
+    ``depth``, ``tension_ratio``, :meth:`deflection`, :meth:`deflection_grad`, :meth:`grid`), so a
+    :class:`flexsheet.model.sheet.SheetSurface` can carry it. ``force``: interpolated contact force, N."""
+
+    table: IndentTable = field(repr=False)
+    half_span: float
+    half_width: float
+    push_u: float
+    push_v: float
+    depth: float
+    force: float = 0.0
+
+    @property
+    def tension_ratio(self) -> float:
+        """The true tension ratio β the table was solved with."""
+        return self.table.physics.tension_ratio
+
+    def deflection(self, u, v) -> np.ndarray:
+        """w(u, v), m along −normal, sheet frame (broadcast; clamped to the sheet)."""
+        return self.table.evaluate(self.depth, self.push_u, self.push_v, u, v, self.half_span)
+
+    def deflection_grad(self, u, v, h: float = 2e-4):
+        """(w, ∂w/∂u, ∂w/∂v) by central differences with step ``h`` m."""
+        u, v = np.broadcast_arrays(np.asarray(u, float), np.asarray(v, float))
+        w = self.deflection(u, v)
+        wu = (self.deflection(u + h, v) - self.deflection(u - h, v)) / (2 * h)
+        wv = (self.deflection(u, v + h) - self.deflection(u, v - h)) / (2 * h)
+        return w, wu, wv
+
+    def grid(self, n: int) -> np.ndarray:
+        """(n, n) deflection on u ∈ [−a, a] (rows) × v ∈ [−b, b] (columns), the ``SheetState.membrane`` layout."""
+        if n < 2:
+            raise ValueError(f"n must be >= 2, got {n!r}")
+        u = np.linspace(-self.half_span, self.half_span, n)
+        v = np.linspace(-self.half_width, self.half_width, n)
+        return self.deflection(u[:, None], v[None, :])
+
+
+class IndentTable:
+    """Solutions of one :class:`SheetPhysics` over ``depths`` (m, increasing, > 0) × ``positions`` (m, ≥ 0,
+    increasing, starting at 0, used for both |u₀| and |v₀|), built with :class:`SheetFEM` (``mesh`` kwargs) or
+    loaded from ``cache_dir`` (a file named by a hash of everything that defines it). ``progress``: optional
+    callable(str) for long builds. Interpolation: module doc. Raises ``ValueError`` on bad axes."""
+
+    def __init__(self, physics: SheetPhysics, depths=TABLE_DEPTHS, positions=TABLE_POSITIONS, *,
+                 mesh: dict | None = None, cache_dir: str | None = None, progress=None) -> None:
+        self.physics = physics
+        self.depths = np.asarray(depths, float)
+        self.positions = np.asarray(positions, float)
+        if (self.depths.ndim != 1 or self.depths.size < 1 or np.any(self.depths <= 0)
+                or np.any(np.diff(self.depths) <= 0)):
+            raise ValueError(f"depths must be increasing and > 0, got {depths!r}")
+        if (self.positions.ndim != 1 or self.positions.size < 1 or self.positions[0] != 0.0
+                or np.any(np.diff(self.positions) <= 0)):
+            raise ValueError(f"positions must start at 0 and increase, got {positions!r}")
+        if self.positions[-1] >= min(physics.half_span - physics.finger_radius, physics.half_width):
+            raise ValueError(f"positions must stay inside the sheet, got {positions!r}")
+        self.mesh = dict(mesh or {})
+        self.cache_dir = cache_dir
+        self.built_from_cache = False
+        self.key = self.key_of(physics, self.depths, self.positions, self.mesh)
+        path = os.path.join(cache_dir, f"indent_{self.key}.npz") if cache_dir else None
+        if path and os.path.isfile(path):
+            try:
+                z = np.load(path)
+                self.x, self.y, self.W, self.F = z["x"], z["y"], z["W"], z["F"]
+                self.built_from_cache = True
+                return
+            except (OSError, KeyError, ValueError):
+                pass
+        self._build(progress)
+        if path:
+            os.makedirs(cache_dir, exist_ok=True)
+            tmp = f"{path}.{os.getpid()}.tmp.npz"
+            np.savez_compressed(tmp, x=self.x, y=self.y, W=self.W, F=self.F)
+            os.replace(tmp, path)
+
+    @staticmethod
+    def key_of(physics: SheetPhysics, depths, positions, mesh: dict | None = None) -> str:
+        """The cache key (20 hex digits) of a table: a hash of everything that defines it."""
+        doc = {"physics": physics.key(), "depths": np.asarray(depths, float).round(9).tolist(),
+               "positions": np.asarray(positions, float).round(9).tolist(), "mesh": dict(mesh or {}), "version": 1}
+        return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:20]
+
+    @classmethod
+    def cached(cls, physics: SheetPhysics, depths=TABLE_DEPTHS, positions=TABLE_POSITIONS, *,
+               mesh: dict | None = None, cache_dir: str) -> IndentTable | None:
+        """The table if ``cache_dir`` holds it, else ``None`` (never builds)."""
+        key = cls.key_of(physics, depths, positions, mesh)
+        if not cache_dir or not os.path.isfile(os.path.join(cache_dir, f"indent_{key}.npz")):
+            return None
+        return cls(physics, depths, positions, mesh=mesh, cache_dir=cache_dir)
+
+    def _build(self, progress) -> None:
+        fem = SheetFEM(self.physics, **self.mesh)
+        P, S = self.positions, self.depths
+        self.x, self.y = fem.x, fem.y
+        self.W = np.zeros((P.size, P.size, S.size, fem.x.size, fem.y.size))
+        self.F = np.zeros((P.size, P.size, S.size))
+        n = 0
+        for i, pu in enumerate(P):
+            for j, pv in enumerate(P):
+                sols = fem.solve_indent(list(S), float(pu), float(pv))
+                for k, s in enumerate(sols):
+                    self.W[i, j, k] = s.w
+                    self.F[i, j, k] = s.force
+                n += 1
+                if progress is not None:
+                    progress(f"sheet FEM table {n}/{P.size ** 2} (contact u={pu * 1e3:.0f} mm, v={pv * 1e3:.0f} mm)")
+
+    def shape(self, depth: float, push_u: float, push_v: float, half_span: float | None = None) -> FemShape:
+        """The interpolated true shape at ``depth`` (m, ≥ 0), contact (push_u, push_v) (m); ``half_span``
+        (m): the actual clamp half span (default the table's; a different span is mapped onto the table's by
+        scaling u). Raises ``ValueError`` for a contact outside the sheet or a negative depth."""
+        a = self.physics.half_span if half_span is None else check_positive("half_span", half_span)
+        b = self.physics.half_width
+        if not (math.isfinite(depth) and depth >= 0.0):
+            raise ValueError(f"depth must be finite and >= 0, got {depth!r}")
+        if not (abs(push_u) < a and abs(push_v) <= b):
+            raise ValueError(f"pushed point ({push_u!r}, {push_v!r}) lies outside the sheet |u| < {a}, |v| <= {b}")
+        force = self._force(depth, abs(push_u) * self.physics.half_span / a, abs(push_v))
+        return FemShape(self, a, b, float(push_u), float(push_v), float(depth), force)
+
+    @staticmethod
+    def _bracket(axis: np.ndarray, q: float) -> list[tuple[int, float]]:
+        if q <= axis[0]:
+            return [(0, 1.0)]
+        if q >= axis[-1]:
+            return [(len(axis) - 1, 1.0)]
+        i = int(np.searchsorted(axis, q, side="right") - 1)
+        t = (q - axis[i]) / (axis[i + 1] - axis[i])
+        return [(i, 1.0 - t), (i + 1, t)]
+
+    def _depth_weights(self, depth: float) -> list[tuple[int, float]]:
+        """(index, weight) pairs whose fields, each scaled by depth/S_k, blend to the shape at ``depth``."""
+        S = self.depths
+        if depth <= S[0]:
+            return [(0, depth / S[0])]
+        if depth >= S[-1]:
+            return [(len(S) - 1, depth / S[-1])]
+        return [(k, wt * depth / S[k]) for k, wt in self._bracket(S, depth)]
+
+    def _force(self, depth: float, pu: float, pv: float) -> float:
+        f = 0.0
+        for i, wi in self._bracket(self.positions, pu):
+            for j, wj in self._bracket(self.positions, pv):
+                for k, wk in self._depth_weights(depth):
+                    f += wi * wj * wk * self.F[i, j, k]
+        return float(f)
+
+    def evaluate(self, depth: float, push_u: float, push_v: float, u, v, half_span: float | None = None
+                 ) -> np.ndarray:
+        """w (m) at sheet points (u, v) (broadcast) for the contact (push_u, push_v) at ``depth`` (module doc)."""
+        a_t, b = self.physics.half_span, self.physics.half_width
+        a = a_t if half_span is None else float(half_span)
+        u, v = np.broadcast_arrays(np.asarray(u, float), np.asarray(v, float))
+        if depth <= 0.0:
+            return np.zeros(u.shape)
+        s = a_t / a
+        uq = np.clip(u * s * math.copysign(1.0, push_u or 1.0), -a_t, a_t)
+        vq = np.clip(v * math.copysign(1.0, push_v or 1.0), -b, b)
+        pu, pv = abs(push_u) * s, abs(push_v)
+        out = np.zeros(u.shape)
+        for i, wi in self._bracket(self.positions, pu):
+            xu = _remap(uq, pu, self.positions[i], a_t)
+            for j, wj in self._bracket(self.positions, pv):
+                yv = _remap(vq, pv, self.positions[j], b)
+                for k, wk in self._depth_weights(depth):
+                    out += (wi * wj * wk) * _bilinear(self.x, self.y, self.W[i, j, k], xu, yv)
+        return out
