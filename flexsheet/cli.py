@@ -332,10 +332,11 @@ def build_parser() -> argparse.ArgumentParser:
     t = bs.add_parser("info", help="summary: topics, types, counts, duration", **_fmt("  flexsheet bag info run.mcap"))
     t.add_argument("file")
     t.set_defaults(func=_bag("cmd_info"))
-    t = bs.add_parser("export", help="transcode to JSON-encoded MCAP for Foxglove/Lichtblick",
-                      **_fmt("  flexsheet bag export run.mcap run_json.mcap"))
+    t = bs.add_parser("export", help="transcode to JSON-encoded MCAP for Foxglove/Lichtblick, with the 3-D scene",
+                      **_fmt("  flexsheet bag export run.mcap run_json.mcap     # open run_json.mcap in Foxglove"))
     t.add_argument("file")
     t.add_argument("output")
+    t.add_argument("--no-foxglove", action="store_true", help="JSON copies only, no /viz/* scene channels")
     t.set_defaults(func=_bag("cmd_export"))
 
     for kind, table, helptext, example in (

@@ -32,6 +32,7 @@ EXPERIMENTS: dict[str, str] = {
     "stroke": "flexsheet.experiments.stroke:main",
     "fem": "flexsheet.experiments.fem:main",
     "correction": "flexsheet.experiments.correction:main",
+    "stability": "flexsheet.experiments.stability:main",
 }
 
 BENCHES: dict[str, str] = {
@@ -43,6 +44,7 @@ BENCHES: dict[str, str] = {
     "fem": "nodes.fem.bench:main",
     "render": "nodes.renderer.bench:main",
     "load": "flexsheet.runtime.bench_load:main",
+    "viz": "nodes.viz.bench:main",
 }
 
 CALIBRATE: dict[str, str] = {

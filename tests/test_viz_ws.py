@@ -1,107 +1,25 @@
-"""The viz node seen by an independent client of the public Foxglove WebSocket protocol (not the sdk).
-
-The client below speaks the Foxglove WebSocket protocol v1 with the ``websockets`` library. It offers both
-subprotocol names: ``foxglove.websocket.v1`` (the ws-protocol spec) and ``foxglove.sdk.v1`` — the same
-protocol under the name foxglove-sdk servers require since 2025 (they reject the old name with HTTP 400;
-Foxglove's stated position, foxglove/ros-foxglove-bridge#382, lichtblick-suite/lichtblick#819). It reads
-the JSON ``advertise`` op, sends ``subscribe``, and parses binary message-data frames (opcode 0x01, uint32
-subscription id, uint64 timestamp, payload). Protobuf payloads are decoded with the ``protobuf`` package against the
-FileDescriptorSet the server advertised. Spec: github.com/foxglove/ws-protocol/blob/main/docs/spec.md.
+"""The viz node seen by an independent client of the public Foxglove WebSocket protocol, not the sdk:
+:class:`nodes.viz.wsclient.FoxgloveClient` (``websockets`` + ``protobuf``; see its docstring for the
+protocol and the subprotocol names). It checks the advertised channels and their schema names, subscribes,
+and decodes ``foxglove.SceneUpdate`` (protobuf, against the advertised FileDescriptorSet) and JSON payloads.
 """
 
 from __future__ import annotations
 
 import asyncio
-import base64
 import json
-import struct
 import time
 
 import numpy as np
 import pytest
-from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
-from websockets.asyncio.client import connect
-
 from conftest import free_port
+
 from flexsheet.model import scene
 from flexsheet.runtime.testing import NodeHarness
 from messages import topics as T
 from nodes.viz.node import VizNode
 from nodes.viz.samples import sample_state
-
-SUBPROTOCOLS = ["foxglove.websocket.v1", "foxglove.sdk.v1"]
-
-
-def proto_class(schema_b64: str, name: str):
-    """Message class for ``name`` from an advertised base64 FileDescriptorSet."""
-    fds = descriptor_pb2.FileDescriptorSet.FromString(base64.b64decode(schema_b64))
-    pool = descriptor_pool.DescriptorPool()
-    for f in fds.file:
-        pool.Add(f)
-    return message_factory.GetMessageClass(pool.FindMessageTypeByName(name))
-
-
-class FoxgloveClient:
-    """Minimal client of the Foxglove WebSocket protocol v1."""
-
-    def __init__(self, ws) -> None:
-        self.ws = ws
-        self.channels: dict[str, dict] = {}
-        self.subs: dict[int, dict] = {}
-        self.server_info: dict | None = None
-
-    @classmethod
-    async def open(cls, port: int) -> FoxgloveClient:
-        ws = await connect(f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS, max_size=None)
-        assert ws.subprotocol in SUBPROTOCOLS
-        return cls(ws)
-
-    async def wait_channels(self, topics: set[str], timeout: float = 5.0) -> None:
-        deadline = time.monotonic() + timeout
-        while not topics <= set(self.channels):
-            await self._recv(deadline)
-
-    async def subscribe(self, topics: list[str]) -> None:
-        subs = []
-        for i, t in enumerate(topics, start=len(self.subs) + 1):
-            ch = self.channels[t]
-            self.subs[i] = ch
-            subs.append({"id": i, "channelId": ch["id"]})
-        await self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
-
-    async def _recv(self, deadline: float):
-        left = deadline - time.monotonic()
-        if left <= 0:
-            raise TimeoutError("no message in time")
-        data = await asyncio.wait_for(self.ws.recv(), left)
-        if isinstance(data, str):
-            op = json.loads(data)
-            if op["op"] == "advertise":
-                for ch in op["channels"]:
-                    self.channels[ch["topic"]] = ch
-            elif op["op"] == "serverInfo":
-                self.server_info = op
-            return None
-        assert data[0] == 0x01, f"unexpected binary opcode {data[0]}"
-        sub_id, stamp_ns = struct.unpack_from("<IQ", data, 1)
-        return self.subs[sub_id]["topic"], stamp_ns, data[13:]
-
-    async def messages(self, want: dict[str, int], timeout: float = 10.0) -> dict[str, list[bytes]]:
-        """Collect at least ``want[topic]`` payloads per topic."""
-        got: dict[str, list[bytes]] = {t: [] for t in want}
-        deadline = time.monotonic() + timeout
-        while any(len(got[t]) < n for t, n in want.items()):
-            m = await self._recv(deadline)
-            if m is not None and m[0] in got:
-                got[m[0]].append(m[2])
-        return got
-
-    def decode(self, topic: str, payload: bytes):
-        ch = self.channels[topic]
-        if ch["encoding"] == "json":
-            return json.loads(payload)
-        assert ch["encoding"] == "protobuf" and ch["schemaEncoding"] == "protobuf"
-        return proto_class(ch["schema"], ch["schemaName"]).FromString(payload)
+from nodes.viz.wsclient import FoxgloveClient
 
 
 def _inject_all(h: NodeHarness, state: dict) -> None:

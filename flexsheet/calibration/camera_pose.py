@@ -10,8 +10,8 @@ pose information (the sheet's pose there is unknown) but pin down the stereo int
 Estimator (a stereo-consistent bundle adjustment, the structure of ``cv2.stereoCalibrate`` with a known
 object pose in one view):
 
-1. Corners in every image (``cv2.findChessboardCorners`` + ``cornerSubPix``, or the ChArUco detector, via
-   :func:`flexsheet.model.calibration.detect_board`). A chessboard's 180° ordering ambiguity is resolved in
+1. Corners in every image (:func:`detect_corners`: ``cv2.findChessboardCorners`` + ``cornerSubPix`` with a
+   window scaled to the squares, or the ChArUco detector). A chessboard's 180° ordering ambiguity is resolved in
    the home view by the pose nearest the nominal mount, and in the right image of every view by the
    prediction from the left image's pose through the nominal stereo model; mirrored orderings (the detector orders corners by the
    image, so it may hand back the board as if seen from behind) are rejected by PnP.
@@ -46,7 +46,7 @@ from flexsheet.model.calibration import BoardSpec, detect_board
 from flexsheet.model.stereo import StereoModel
 from flexsheet.model.truth import BOOTSTRAP_FILE, stereo_from_vector, stereo_vector
 
-__all__ = ["VIEW_PLAN", "board_centre", "board_points", "sheet_pose", "plan_board_views", "load_prior",
+__all__ = ["VIEW_PLAN", "detect_corners", "board_centre", "board_points", "sheet_pose", "plan_board_views", "load_prior",
            "CameraPoseResult", "detect_views", "estimate_camera_pose"]
 
 #: commanded sheet poses for the board views: (tilt about y °, turn about z °, origin (x, y, z) m), home
@@ -136,6 +136,31 @@ def _undist(model: StereoModel, uv: np.ndarray, side: str) -> np.ndarray:
     return model.undistort(uv, side)
 
 
+def detect_corners(image: np.ndarray, board: BoardSpec, detector=None):
+    """Board corners in one mono8 image: ``(ids (M,), corners (M, 2) px)`` or ``None`` if not found.
+
+    Chessboards: ``cv2.findChessboardCorners`` then ``cv2.cornerSubPix`` with a window of 0.4× the smallest
+    corner spacing (2…11 px; a fixed 11 px window reaches across the small, foreshortened squares of a board
+    0.5 m away and pulls corners by several px). ChArUco: :func:`flexsheet.model.calibration.detect_board`.
+    Raises ``ValueError`` if ``image`` is not a 2-D uint8 array.
+    """
+    if not isinstance(image, np.ndarray) or image.ndim != 2 or image.dtype != np.uint8:
+        raise ValueError(f"image must be a (H, W) uint8 array, got {getattr(image, 'shape', type(image))}")
+    if board.kind != "chessboard":
+        return detect_board(image, board, detector)
+    ok, c = cv2.findChessboardCorners(image, (board.cols, board.rows),
+                                      flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+    if not ok:
+        return None
+    g = c.reshape(board.rows, board.cols, 2)
+    dmin = min(float(np.linalg.norm(np.diff(g, axis=0), axis=2).min()),
+               float(np.linalg.norm(np.diff(g, axis=1), axis=2).min()))
+    win = int(np.clip(round(0.4 * dmin), 2, 11))
+    c = cv2.cornerSubPix(image, c, (win, win), (-1, -1),
+                         (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4))
+    return np.arange(len(c)), c.reshape(-1, 2)
+
+
 def _orderings(board: BoardSpec, uv: np.ndarray) -> list[np.ndarray]:
     """The orderings a chessboard detection may come in (the detector orders by the image, not by the board):
     as is, turned 180°, and the two mirrors (plus the transposes for a square board)."""
@@ -195,7 +220,7 @@ def detect_views(views: list[tuple[np.ndarray, np.ndarray]], board: BoardSpec, s
     P_home = board_points(board, offset)
     out, skipped = [], {}
     for k, (left, right) in enumerate(views):
-        dl, dr = detect_board(left, board, det), detect_board(right, board, det)
+        dl, dr = detect_corners(left, board, det), detect_corners(right, board, det)
         if dl is None or dr is None:
             out.append(None)
             skipped[k] = "board not found in the " + " and ".join(

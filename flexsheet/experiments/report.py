@@ -24,6 +24,10 @@ Latency per hop, matched through the stamps every message carries (``exposure_st
 * ``fingertip_to_rendered_frame``: rendered-frame arrival − fingertip arrival (same exposure stamp).
 
 All hosts of the sim run share one clock; across PCs see docs/deploy.md on time sync.
+
+The twin the run used (``twin.realism``, ``twin.truth_seed``: the launch file's top-level ``twin:`` section,
+else the world node's ``twin`` param, else the world's defaults) is recorded in ``summary.json`` beside the
+Table I rows (``10.dtheta_mean_deg`` …, each row with Δd in both conventions, :data:`DD_CONVENTION`).
 """
 
 from __future__ import annotations
@@ -35,12 +39,12 @@ from pathlib import Path
 
 import numpy as np
 
-from flexsheet.experiments.table1 import PAPER_TABLE1, table1_row
+from flexsheet.experiments.table1 import DD_CONVENTION, PAPER_TABLE1, table1_row, target
 from flexsheet.model.shapes import paper_cylinder
 from flexsheet.runtime.bag import read_bag
 from flexsheet.runtime.codec import DecodeError, decode_any
 
-__all__ = ["analyse", "table1_rows", "latency_hops", "main"]
+__all__ = ["analyse", "table1_rows", "latency_hops", "twin_settings", "main"]
 
 #: the truth's modes whose moving phase is a Table I stroke
 STROKE_MODES = ("stroke", "stroke_push")
@@ -165,6 +169,31 @@ def latency_hops(d: dict[str, list]) -> dict[str, dict]:
     return {k: _stats(v) for k, v in hops.items()}
 
 
+def twin_settings(lf=None) -> dict:
+    """``{"realism", "truth_seed", "source"}`` of the twin a launch ran: the launch file's top-level ``twin``
+    (a mapping or a model), else the world node's ``twin`` param, else the world's defaults (``source`` says
+    which). ``lf``: the :class:`flexsheet.runtime.launch.LaunchFile` (or ``None``)."""
+    from nodes.world.node import TwinParams
+
+    def as_dict(x) -> dict | None:
+        if x is None:
+            return None
+        if hasattr(x, "model_dump"):
+            return x.model_dump()
+        return dict(x) if isinstance(x, dict) else None
+
+    found, source = as_dict(getattr(lf, "twin", None)), "launch file twin section"
+    if found is None and lf is not None:
+        for spec in getattr(lf, "nodes", {}).values():
+            if getattr(spec, "type", None) == "world":
+                found, source = as_dict((spec.params or {}).get("twin")), "world node params"
+                break
+    if found is None:
+        found, source = {}, "world node defaults (the launch file names no twin)"
+    tp = TwinParams(**{k: v for k, v in found.items() if k in TwinParams.model_fields})
+    return {"realism": tp.realism, "truth_seed": tp.truth_seed, "source": source}
+
+
 def _charts(summary: dict, out: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -243,15 +272,20 @@ def graph_chart(heartbeats: list, path: Path) -> dict:
 
 
 def _format(summary: dict) -> str:
-    lines = ["Table I — position and angle errors in stroking (full process graph, from the bag)", "",
-             f"{'moving time':<16}{'Δd mean mm':>12}{'Δd std mm':>11}{'Δθ mean deg':>13}{'Δθ std deg':>12}"
-             f"{'paper Δd':>10}{'paper Δθ':>10}{'n':>7}"]
+    tw = summary.get("twin", {})
+    lines = ["Table I — position and angle errors in stroking (full process graph, from the bag)",
+             f"twin: {tw.get('realism', '?')}, truth seed {tw.get('truth_seed', '?')} ({tw.get('source', '?')})",
+             DD_CONVENTION, "",
+             f"{'moving time':<16}{'Δθ mean deg':>12}{'Δθ std deg':>11}{'Δd 2R mm':>10}{'Δd R mm':>9}"
+             f"{'paper Δθ':>10}{'paper Δd':>10}{'target Δθ':>10}{'n':>7}"]
     for key in sorted(k for k in summary if k[:1].isdigit() or k.startswith("stroke_push")):
         r = summary[key]
         p = r.get("paper", {})
-        lines.append(f"{key + ' s':<16}{r['dd_mean_mm']:12.3f}{r['dd_std_mm']:11.3f}{r['dtheta_mean_deg']:13.3f}"
-                     f"{r['dtheta_std_deg']:12.3f}{p.get('dd_mean_mm', float('nan')):10.3f}"
-                     f"{p.get('dtheta_mean_deg', float('nan')):10.3f}{r['n']:7d}")
+        tg = target(key)["dtheta_mean_deg"] if key in PAPER_TABLE1 else float("nan")
+        lines.append(f"{key + ' s':<16}{r['dtheta_mean_deg']:12.3f}{r['dtheta_std_deg']:11.3f}"
+                     f"{r.get('dd_2r_mean_mm', float('nan')):10.3f}{r['dd_mean_mm']:9.3f}"
+                     f"{p.get('dtheta_mean_deg', float('nan')):10.3f}{p.get('dd_mean_mm', float('nan')):10.3f}"
+                     f"{tg:10.3f}{r['n']:7d}")
     lines += ["", "Latency budget per hop (ms)", f"{'hop':<32}{'median':>9}{'p99':>9}{'n':>7}"]
     for k, v in summary["latency_ms"].items():
         med = "-" if v["median"] is None else f"{v['median']:.2f}"
@@ -270,6 +304,8 @@ def main(out: str, lf=None) -> int:
         return 1
     beats: list = []
     summary = analyse(bags, beats)
+    summary["twin"] = twin_settings(lf)
+    summary["dd_convention"] = DD_CONVENTION
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     _charts(summary, out_dir)
     if beats:

@@ -197,7 +197,7 @@ class SimConfig:
     @classmethod
     def ideal(cls, **kw) -> SimConfig:
         """The idealised twin of before issue 15: read noise 2 DN only, no optical blur, no self-occlusion."""
-        base = {"noise_dn": 2.0, "shot_gain": 0.0, "blur_px": 0.0, "self_occlusion": False, "background_gain": 1.0}
+        base = {"noise_dn": 2.0, "shot_gain": 0.0, "self_occlusion": False}
         base.update(kw)
         return cls(**base)
 

@@ -80,7 +80,8 @@ class BagWriter:
     ``close()`` flushes and writes the summary and the ``recorder`` metadata (message and drop counts).
     """
 
-    def __init__(self, path: str | Path, chunk_size: int = CHUNK_SIZE, max_queue_bytes: int = 256 << 20) -> None:
+    def __init__(self, path: str | Path, chunk_size: int = CHUNK_SIZE, max_queue_bytes: int = 256 << 20,
+                 foxglove: bool = False) -> None:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         n = 1
@@ -99,6 +100,10 @@ class BagWriter:
         self.counts: Counter = Counter()
         self.dropped: Counter = Counter()
         self._q: queue.SimpleQueue = queue.SimpleQueue()
+        self.foxglove = None
+        if foxglove:  # Foxglove channels (/viz/*, images) beside the lossless ones: the bag opens with the scene
+            from flexsheet.runtime.foxglove_bag import FoxgloveBagChannels
+            self.foxglove = FoxgloveBagChannels(self._writer)
         self._thread = threading.Thread(target=self._run, name="bag-writer", daemon=True)
         self._thread.start()
 
@@ -147,10 +152,14 @@ class BagWriter:
             data = msgpack.packb([bytes(f) for f in frames[1:]])
             self._writer.add_message(ch, log_time=t_ns, data=data, publish_time=t_ns, sequence=seq & 0xFFFFFFFF)
             self.counts[topic] += 1
+            if self.foxglove is not None:
+                self.foxglove.add_frames(frames, t_ns)
 
     def close(self) -> None:
         self._q.put(None)
         self._thread.join()
+        if self.foxglove is not None:
+            self.foxglove.close()
         self._writer.add_metadata("recorder", {"counts": json.dumps(dict(self.counts)),
                                                "dropped": json.dumps(dict(self.dropped))})
         self._writer.finish()
@@ -213,6 +222,8 @@ def read_bag(path: str | Path, topics: list[str] | None = None, summary: BagSumm
         for rec in _records(fh, path, summary):
             if isinstance(rec, Message):
                 ch = channels[rec.channel_id]
+                if ch.message_encoding != ENCODING:   # e.g. the Foxglove /viz/* channels beside ours
+                    continue
                 if not topics or ch.topic in topics:
                     schema = schemas[ch.schema_id].name if ch.schema_id in schemas else ""
                     yield BagMessage(ch.topic, schema, rec.log_time / 1e9, [ch.topic.encode(), *msgpack.unpackb(rec.data)])
@@ -245,11 +256,12 @@ def _foxglove_image_schema() -> dict:
         "format": {"type": "string"}}}
 
 
-def export_bag(src: str | Path, dst: str | Path) -> Counter:
+def export_bag(src: str | Path, dst: str | Path, foxglove: bool = True) -> Counter:
     """Transcode ``src`` to JSON-encoded MCAP ``dst`` with jsonschema channels; images → foxglove.CompressedImage.
 
     Returns per-channel message counts. Messages that fail to decode are skipped and counted under
-    ``"<rejected>"``.
+    ``"<rejected>"``. With ``foxglove`` the Foxglove scene channels (``/viz/scene``, ``/viz/tf``, images;
+    :mod:`flexsheet.runtime.foxglove_bag`) are added, so the exported bag opens in Foxglove with the 3-D scene.
     """
     import cv2
 
@@ -257,6 +269,10 @@ def export_bag(src: str | Path, dst: str | Path) -> Counter:
     with open(dst, "wb") as fh:
         w = Writer(fh)
         w.start(profile="", library="flexsheet")
+        fox = None
+        if foxglove:
+            from flexsheet.runtime.foxglove_bag import FoxgloveBagChannels
+            fox = FoxgloveBagChannels(w)
         sids: dict[str, int] = {}
         chans: dict[str, int] = {}
 
@@ -274,6 +290,8 @@ def export_bag(src: str | Path, dst: str | Path) -> Counter:
                 counts["<rejected>"] += 1
                 continue
             t = int(m.log_time * 1e9)
+            if fox is not None:
+                fox.add_message(m.topic, msg, t)
             images = {k: v for k, v in msg.__dict__.items() if isinstance(v, np.ndarray) and v.dtype == np.uint8
                       and v.ndim in (2, 3) and v.shape[0] > 8}
             stamp = msg.header.stamp
@@ -291,17 +309,23 @@ def export_bag(src: str | Path, dst: str | Path) -> Counter:
                 w.add_message(channel(m.topic, msg.SCHEMA, type(msg).model_json_schema()), log_time=t, data=data,
                               publish_time=t)
                 counts[m.topic] += 1
+        if fox is not None:
+            fox.close()
+            counts.update(fox.counts)
         w.finish()
     return counts
 
 
 # ------------------------------------------------------------------------------------------------ nodes
 class RecorderParams(BaseModel):
-    """``output``: .mcap path (``$(out)`` allowed); ``topics``: topics to record (empty: all)."""
+    """``output``: .mcap path (``$(out)`` allowed); ``topics``: topics to record (empty: all); ``foxglove``:
+    also write the Foxglove scene channels while recording (costs the recorder a decode per message; off by
+    default on a small machine — ``flexsheet bag export`` adds them afterwards)."""
 
     model_config = ConfigDict(extra="forbid")
     output: str = "bag.mcap"
     topics: list[str] = Field(default_factory=list)
+    foxglove: bool = False
 
 
 class RecorderNode(Node):
@@ -311,7 +335,7 @@ class RecorderNode(Node):
     node_type = "recorder"
 
     async def setup(self) -> None:
-        self.writer = BagWriter(self.params.output)
+        self.writer = BagWriter(self.params.output, foxglove=self.params.foxglove)
         for t in self.params.topics or [""]:
             self.transport.subscribe(t)
         self.log.info("recording %s to %s", ", ".join(self.params.topics) or "all topics", self.params.output)
@@ -434,7 +458,7 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    counts = export_bag(args.file, args.output)
+    counts = export_bag(args.file, args.output, foxglove=not args.no_foxglove)
     print(f"wrote {args.output}: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
     return 0
 

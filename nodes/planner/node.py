@@ -30,10 +30,27 @@ __all__ = ["PlannerParams", "PlannerNode"]
 _MATERIAL = {"size": "sheet_size"}         # launch-file name of SheetMaterial.size
 
 
+def _reach(p) -> ReachModel:
+    """The reach model: the bases of ``display_calib`` (the registered display, ``arms.left``/``arms.right``)
+    when the params name one, else the ``left_base``/``right_base`` params. Raises ``ValueError`` naming the
+    file and entry when it is missing, unreadable or lacks an arm."""
+    reach = build(ReachModel, p)
+    path = getattr(p, "display_calib", None)
+    if not path:
+        return reach
+    from dataclasses import replace
+
+    from flexsheet.model.display_calib import load_display_calib, xyzyaw_from_pose
+
+    dc = load_display_calib(path, require=("arms.left", "arms.right"))
+    return replace(reach, left_base=xyzyaw_from_pose(dc.arms["left"].T_display_base),
+                   right_base=xyzyaw_from_pose(dc.arms["right"].T_display_base))
+
+
 def _planner_config(p) -> PlannerConfig:
     """The :class:`PlannerConfig` params ``p`` describe (raises ``ValueError`` on inconsistent values)."""
     return build(PlannerConfig, p, material=build(SheetMaterial, p, rename=_MATERIAL),
-                 limits=build(MotionLimits, p), reach=build(ReachModel, p))
+                 limits=build(MotionLimits, p), reach=_reach(p))
 
 
 PlannerParams = params_model(
@@ -43,7 +60,10 @@ PlannerParams = params_model(
     Node-only: ``shape``: cylinder | sphere | box | plane | mesh; ``shape_params``: that shape's keys (see
     :func:`flexsheet.model.shapes.make_shape`; empty = the paper's scene). ``use_prediction``: plan on
     ``Fingertip.predicted_position``; ``use_fem_stiffness``: use the FEM's stiffness while fresher than
-    ``fem_timeout`` s, else ``object_stiffness``. Every other param is a field of — defined, defaulted and
+    ``fem_timeout`` s, else ``object_stiffness``; ``display_calib``: the display registration
+    (``display.yaml``, filled by the launcher from the launch file's ``display_calib:``) whose arm bases
+    replace ``left_base``/``right_base`` in the reach check (the planner never reads the twin's truth).
+    Every other param is a field of — defined, defaulted and
     checked in — :class:`PlannerConfig` (``touch_distance`` … ``max_dt``), :class:`SheetMaterial`
     (``young`` … ``max_force``; its ``size`` is ``sheet_size``), :class:`MotionLimits` and
     :class:`ReachModel`; ``planner_config()`` builds the config.
@@ -60,6 +80,7 @@ PlannerParams = params_model(
     use_prediction=(bool, False),
     use_fem_stiffness=(bool, True),
     fem_timeout=(float, Field(default=0.5, gt=0.0)),
+    display_calib=(str | None, Field(default=None, description="display.yaml whose arm bases the reach check uses")),
 )
 
 

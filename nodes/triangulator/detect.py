@@ -11,13 +11,15 @@ Method:
    (``cv2.minMaxLoc`` with non-maximum suppression), at least ``min_contrast`` DN above the opened image.
 3. **Subpixel centroid of the marker's coverage**: the marker is opaque, so a pixel reads
    ``I = α·M + (1 − α)·B`` with α the fraction of it the marker covers, M the marker's level and B the
-   background behind it. B is the opened image (the top-hat's background), M the mean of the 4 brightest
-   pixels within 2 px of the peak, and α = (I − B)/(M − B). The centroid is weighted by ``α − threshold_frac``
-   over the 8-connected blob holding the peak (``cv2.connectedComponents``), so a marker seen half against
-   the dark finger and half against the bright projected image is not pulled toward the darker side (the
-   top-hat response would be: its contrast differs by 3× between the two sides). Pixels below the threshold
-   and bright neighbours (a clutter edge next to the finger) carry no weight. A blob that reaches the patch
-   border is not an isolated dot (a sheet corner, a bright clutter edge) and is discarded. The blob's
+   background behind it; M is the mean of the 4 brightest pixels within 2 px of the peak and
+   α = (I − B)/(M − B). B is the opened image (the top-hat's background) outside the marker's blob and is
+   inpainted (``cv2.inpaint``, Telea) over the blob from the pixels around it, so a marker seen half against the dark finger and half
+   against the bright projected image gets each side's level (the opening would give the brighter one and
+   pull the centroid toward the finger by ~0.08 px). The centroid is weighted by α − t over the 8-connected
+   blob holding the peak (``cv2.connectedComponents``), t = max(``threshold_frac``, 90th percentile of α on
+   a ring 0.6 r–r from the peak + 0.1) ≤ 0.5: above the clutter around the marker, so a thin top-hat ridge
+   next to the finger's edge (where the opening cannot fit) does not join the blob. A blob that reaches the
+   patch border is not an isolated dot (a sheet corner, a bright clutter edge) and is discarded. The blob's
    ``area`` is Σα, the visible silhouette in px (the pipeline compares it between the views to detect
    partial occlusion).
 
@@ -155,19 +157,16 @@ class MarkerDetector:
             M = float(np.sort(core, axis=None)[-4:].mean())
             alpha = (img_p - bg) / np.maximum(M - bg, 0.5 * self.min_contrast)
             np.clip(alpha, 0.0, 1.5, out=alpha)
-            # blob of α above threshold_frac; if it runs into the clutter (reaches the patch border), retry
-            # above the clutter around the marker: a dark finger edge next to a bright background leaves a
-            # thin top-hat ridge (the opening cannot fit between them) that must not join the blob
-            ring_thr = min(max(self.frac, float(np.percentile(alpha[self._ring], 90)) + 0.1), 0.5)
-            for thr in (self.frac, ring_thr):
-                wgt = alpha - thr
-                np.maximum(wgt, 0.0, out=wgt)
-                # keep only the blob connected to the peak (not a bright neighbour such as a clutter edge)
-                _, labels, stats, _ = cv2.connectedComponentsWithStats((wgt > 0).astype(np.uint8), connectivity=8)
-                lab = labels[r, r]
-                bx, by, bw, bh, npix = (int(v) for v in stats[lab])
-                if lab != 0 and not (bx == 0 or by == 0 or bx + bw == 2 * r + 1 or by + bh == 2 * r + 1):
-                    break
+            # threshold above the clutter around the marker (at least threshold_frac): a dark finger edge next
+            # to a bright background leaves a thin top-hat ridge (the opening cannot fit between them) that,
+            # with noise, would join the blob and pull the centroid
+            thr = min(max(self.frac, float(np.percentile(alpha[self._ring], 90)) + 0.1), 0.5)
+            wgt = alpha - thr
+            np.maximum(wgt, 0.0, out=wgt)
+            # keep only the blob connected to the peak (not a bright neighbour such as a clutter edge)
+            _, labels, stats, _ = cv2.connectedComponentsWithStats((wgt > 0).astype(np.uint8), connectivity=8)
+            lab = labels[r, r]
+            bx, by, bw, bh, npix = (int(v) for v in stats[lab])
             wgt[labels != lab] = 0.0
             area = float(alpha[labels == lab].sum())
             # an isolated dot (or a blur streak shorter than the patch) does not reach the patch border;

@@ -177,14 +177,16 @@ def render(data: dict, out_png: str | Path, at: float | None = None) -> dict:
     t_scene, scene = _nearest(scenes, t_at)
     plt.style.use("dark_background")
     fig = plt.figure(figsize=(16, 9), dpi=100)
-    gs = fig.add_gridspec(3, 3, height_ratios=[1, 1, 0.85], width_ratios=[1.25, 1.25, 1], hspace=0.3, wspace=0.12)
+    gs = fig.add_gridspec(3, 3, height_ratios=[1, 1, 0.7], width_ratios=[1.25, 1.25, 1], hspace=0.32, wspace=0.1,
+                          left=0.04, right=0.98, top=0.93, bottom=0.07)
     ax3 = fig.add_subplot(gs[0:2, 0:2], projection="3d")
     drawn = _draw_scene(ax3, scene)
-    ax3.set_xlim(-0.6, 0.45)
-    ax3.set_ylim(-0.6, 0.6)
-    ax3.set_zlim(-0.5, 0.3)
-    ax3.set_box_aspect((1.05, 1.2, 0.8))
-    ax3.view_init(elev=22, azim=35)
+    ax3.set_xlim(-0.5, 0.42)
+    ax3.set_ylim(-0.55, 0.55)
+    ax3.set_zlim(-0.45, 0.25)
+    ax3.set_box_aspect((0.92, 1.1, 0.7), zoom=1.35)
+    ax3.view_init(elev=18, azim=28)
+    ax3.set_facecolor("#1b1d22")
     ax3.set_xlabel("x (m)")
     ax3.set_ylabel("y (m)")
     ax3.set_zlabel("z (m)")
@@ -193,31 +195,22 @@ def render(data: dict, out_png: str | Path, at: float | None = None) -> dict:
         _image(fig.add_subplot(gs[k, 2]) if k < 2 else fig.add_subplot(gs[2, 2]), _nearest(data.get(topic, []), t_scene),
                topic)
     numbers: dict = {"bag_start": t0, "scene_time_s": t_scene - t0, "scene_entities": drawn, "plots": {}}
-    for k, (pid, (title, series)) in enumerate(list(PLOTS.items())[:2]):
-        ax = fig.add_subplot(gs[2, k])
+    row = gs[2, 0:2].subgridspec(1, len(PLOTS), wspace=0.3)
+    for k, (pid, (title, series)) in enumerate(PLOTS.items()):
+        ax = fig.add_subplot(row[0, k])
         ax.set_title(title, fontsize=9)
         for path, label in series:
             topic, _, field = path.partition(".")
-            pts = [(t - t0, _get(m, field)) for t, m in data.get(topic, [])]
-            pts = [(t, v) for t, v in pts if isinstance(v, (int, float))]
+            pts = [(round(t - t0, 3), _get(m, field)) for t, m in data.get(topic, [])]
+            pts = [(t, round(v, 4)) for t, v in pts if isinstance(v, (int, float))]
             if pts:
-                ax.plot(*zip(*pts, strict=True), lw=0.9, label=label)
+                ax.plot(*zip(*pts, strict=True), lw=0.8, label=label)
             numbers["plots"].setdefault(pid, {})[label] = pts
-        if pid == "Plot!dtheta":  # the third plot (tension) shares this panel's row on a right axis
-            tt, tser = PLOTS["Plot!tension"]
-            ax2 = ax.twinx()
-            for path, label in tser:
-                topic, _, field = path.partition(".")
-                pts = [(t - t0, _get(m, field)) for t, m in data.get(topic, [])]
-                pts = [(t, v) for t, v in pts if isinstance(v, (int, float))]
-                if pts:
-                    ax2.plot(*zip(*pts, strict=True), lw=0.9, color="tab:orange", label=label)
-                numbers["plots"].setdefault("Plot!tension", {})[label] = pts
-            ax2.set_ylabel("tension (N/m)", color="tab:orange", fontsize=8)
-            ax.set_title("Δθ (deg, blue) and sheet tension (N/m, orange)", fontsize=9)
         ax.axvline(t_scene - t0, color="0.6", lw=0.6, ls=":")
         ax.set_xlabel("time in bag (s)", fontsize=8)
-        ax.legend(fontsize=7, loc="upper left")
+        ax.tick_params(labelsize=7)
+        if len(series) > 1:
+            ax.legend(fontsize=6, loc="upper right")
     fig.suptitle("flexsheet in the Foxglove layout's panels — drawn from the bag with matplotlib, not Foxglove",
                  fontsize=11)
     out_png = Path(out_png)

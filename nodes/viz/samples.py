@@ -29,7 +29,6 @@ from messages import (
     RenderedFrame,
     SheetState,
     SheetTarget,
-    StereoCalibration,
     StereoFrame,
 )
 from messages import topics as T
@@ -108,7 +107,7 @@ def sample_state(stamp: float = 1.0e9, push: float = 0.004, seq: int = 0) -> dic
         pushed_point=sheet.pushed_point, depth=float(sheet.membrane.depth) if sheet.membrane else 0.0,
         stretch=0.0, membrane=np.ascontiguousarray(grid))
     cal, left, right = _camera()
-    out[T.CALIBRATION.name]: StereoCalibration = to_message(cal, h("camera_left"), look_at(DEFAULT_CAMERA_POSITION))
+    out[T.CALIBRATION.name] = to_message(cal, h("camera_left"), look_at(DEFAULT_CAMERA_POSITION))
     out[T.STEREO.name] = StereoFrame(header=h("camera_left"), left=left, right=right, exposure_stamp=exposure,
                                      exposure_time=0.002)
     img = np.zeros((48, 64, 3), np.uint8)

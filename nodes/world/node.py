@@ -1,11 +1,17 @@
-"""World node: the physical twin of the user's finger and the sheet (simulation only).
+"""World node: the physical twin of the user's finger and the sheet (simulation only), built from the hidden
+truth (:class:`flexsheet.model.truth.TwinTruth`, param ``twin: {realism, truth_seed}``).
 
 * Finger: plays a list of :class:`flexsheet.model.finger.FingerScript` segments one after the other (default:
   the paper's stroking experiment at 10 s and 30 s moving time, then a combined stroke and push) and
   publishes the true marker position on ``/world/finger`` at ``rate_hz``; the camera twin renders it.
-* Sheet: its pose comes from the arms' *measured* joint states (``ArmJointState.pose`` is the FK of the
-  clamp frames), and its depression from the finger when the finger is behind the sheet plane, through
-  the membrane model of :mod:`flexsheet.model.sheet`; published on ``/world/sheet``.
+* Sheet: the true clamp poses are the *true* arms' forward kinematics of the measured joint states
+  (``ArmJointState.position``; the truth's base poses, link lengths and joint zero offsets — never the
+  bridge's model in ``ArmJointState.pose``), and the pushed sheet's shape is the nonlinear membrane FEM of
+  :mod:`flexsheet.model.sheet_fem` with the truth's Young's modulus, pre-strain and tension ratio
+  (:mod:`nodes.world.physics`); published on ``/world/sheet`` (``membrane``: the deflection on a G×G grid).
+  The FEM tables are cached on disk per truth and clamp strain; a missing one is built in a worker process
+  at low priority (``sheet_fem.wait``: hold the script until the first one is ready). Until then a pushed
+  sheet is published with its depth but a flat ``membrane`` (logged).
 * Progress: one line every ``progress_period`` s; when the script ends the node exits, which ends a launch
   in which it is ``required`` (then the launch's report runs, see :mod:`flexsheet.experiments.report`).
   ``loop: true`` repeats the script until Ctrl-C (interactive mode).
@@ -14,21 +20,59 @@
 from __future__ import annotations
 
 import math
+import multiprocessing
 import time
+from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from flexsheet.model import scene
-from flexsheet.model.checks import check_pose
 from flexsheet.model.finger import FingerScript
-from flexsheet.model.sheet import TRUE_MODES, SheetSurface
+from flexsheet.model.sheet_fem import default_cache_dir
+from flexsheet.model.truth import TwinTruth
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
 from messages import ArmJointState, FingerTruth, SheetState
 from messages import topics as T
+from nodes.world.physics import FemSettings, TruePhysics, build_table
 
-__all__ = ["WorldNode", "WorldParams", "Segment"]
+__all__ = ["WorldNode", "WorldParams", "Segment", "TwinParams", "SheetFemParams"]
+
+
+class TwinParams(BaseModel):
+    """The hidden truth every twin node draws (:meth:`flexsheet.model.truth.TwinTruth.draw`): ``realism``
+    ``realistic`` (each as-built value drawn around nominal by its documented spread) or ``ideal`` (nominal
+    exactly), ``truth_seed`` (int ≥ 0). A launch file's top-level ``twin:`` section fills it."""
+
+    model_config = ConfigDict(extra="forbid")
+    realism: Literal["realistic", "ideal"] = "realistic"
+    truth_seed: int = Field(default=0, ge=0)
+
+
+class SheetFemParams(BaseModel):
+    """The true sheet's FEM tables (:mod:`nodes.world.physics`): ``stretch_step`` clamp strain between tables;
+    ``expected_stretch`` the table built first, at start (the planner's default stiffness asks ≈ 0.04);
+    ``wait``: hold the script until that table is ready (first run of a truth seed: minutes; then cached);
+    ``h_fine``/``h_coarse`` m element sizes; ``cache_dir`` (default ``$FLEXSHEET_CACHE/sheet_fem`` or
+    ``~/.cache/flexsheet/sheet_fem``); ``worker_nice``: niceness of the worker process that builds tables."""
+
+    model_config = ConfigDict(extra="forbid")
+    stretch_step: float = Field(default=0.01, gt=0.0, le=0.1)
+    expected_stretch: float = Field(default=0.04, ge=0.0, le=0.5)
+    wait: bool = False
+    h_fine: float = Field(default=0.004, ge=0.002, le=0.03)
+    h_coarse: float = Field(default=0.008, ge=0.002, le=0.06)
+    cache_dir: str = ""
+    worker_nice: int = Field(default=15, ge=0, le=19)
+
+    def settings(self) -> FemSettings:
+        """The :class:`FemSettings` these params describe (the default mesh gives an empty ``mesh`` dict, so the
+        key matches tables built by the experiments with the defaults)."""
+        mesh = {}
+        if (self.h_fine, self.h_coarse) != (0.004, 0.008):
+            mesh = {"h_fine": self.h_fine, "h_coarse": self.h_coarse}
+        return FemSettings(stretch_step=self.stretch_step, mesh=mesh, cache_dir=self.cache_dir or default_cache_dir())
 
 
 Segment = params_model(
@@ -49,17 +93,19 @@ DEFAULT_SCRIPT = [Segment(mode="stroke", moving_time=10.0), Segment(mode="stroke
 
 class WorldParams(BaseModel):
     """``script``: segments played in order; ``rate_hz`` of ``/world/finger``; ``sheet_rate_hz`` of
-    ``/world/sheet``; ``membrane_grid`` G (G×G deflection samples); ``membrane_modes``: modes of the
-    :class:`flexsheet.model.sheet.Membrane` sampled; ``sheet_size`` m: unstretched sheet side between the
-    clamps (for the stretch); ``start_delay`` s before the script starts (lets the graph connect and the arms
-    reach the first pose); ``loop``: repeat until Ctrl-C; ``progress_period`` s."""
+    ``/world/sheet``; ``membrane_grid`` G (G×G deflection samples of the true shape); ``twin``: the hidden
+    truth (:class:`TwinParams`); ``sheet_fem``: the true sheet's FEM tables (:class:`SheetFemParams`);
+    ``sheet_size`` m: unstretched sheet side between the clamps (for the stretch); ``start_delay`` s before the
+    script starts (lets the graph connect and the arms reach the first pose); ``loop``: repeat until Ctrl-C;
+    ``progress_period`` s."""
 
     model_config = ConfigDict(extra="forbid")
     script: list[Segment] = Field(default_factory=lambda: list(DEFAULT_SCRIPT), min_length=1)
     rate_hz: float = Field(default=200.0, gt=0.0, le=2000.0)
     sheet_rate_hz: float = Field(default=100.0, gt=0.0, le=1000.0)
-    membrane_grid: int = Field(default=16, ge=2, le=128)
-    membrane_modes: int = Field(default=64, ge=1, le=TRUE_MODES)
+    membrane_grid: int = Field(default=24, ge=2, le=128)
+    twin: TwinParams = Field(default_factory=TwinParams)
+    sheet_fem: SheetFemParams = Field(default_factory=SheetFemParams)
     sheet_size: float = Field(default=scene.SHEET_SIZE, gt=0.0)
     start_delay: float = Field(default=3.0, ge=0.0)
     loop: bool = False
@@ -78,25 +124,74 @@ class WorldNode(Node):
         self.total = sum(s.duration for s in self.scripts)
         self.finger_pub = self.publisher(T.FINGER_TRUTH)
         self.sheet_pub = self.publisher(T.SHEET_STATE)
+        self.truth = TwinTruth.draw(p.twin.truth_seed, p.twin.realism)
+        self.phys = TruePhysics(self.truth, p.sheet_fem.settings(), size=p.sheet_size)
         self.poses: dict[str, np.ndarray] = {}
         self.finger = self.scripts[0].position(0.0)
+        self._worker: multiprocessing.process.BaseProcess | None = None
+        self._building: float | None = None
+        self._failed: set[float] = set()
+        self._warned_flat = False
         self.subscribe(T.ARM_LEFT_STATE, self.on_arm, qos=QoS.LATEST)
         self.subscribe(T.ARM_RIGHT_STATE, self.on_arm, qos=QoS.LATEST)
-        self.t0 = time.monotonic() + p.start_delay
+        first = self.phys.node_of(p.sheet_fem.expected_stretch)
+        if not self.phys.try_load(first):
+            self._start_build(first)
+        self.t0: float | None = None
+        self._arm_t0()
         self.last_progress = 0.0
         self.timer(1.0 / p.rate_hz, self.tick_finger)
         self.timer(1.0 / p.sheet_rate_hz, self.tick_sheet)
-        self.log.info("script: %s; %.1f s in all, starting in %.1f s",
-                      ", ".join(f"{s.mode} {s.moving_time:g} s" for s in p.script), self.total, p.start_delay)
+        self.log.info("twin: %s truth, seed %d (sheet E %.2f MPa, pre-strain %.4f, tension ratio %.3f)",
+                      p.twin.realism, p.twin.truth_seed, self.truth.sheet_young * 1e-6, self.truth.sheet_prestrain,
+                      self.truth.tension_ratio)
+        self.log.info("script: %s; %.1f s in all, starting in %.1f s%s",
+                      ", ".join(f"{s.mode} {s.moving_time:g} s" for s in p.script), self.total, p.start_delay,
+                      " (after the sheet FEM table)" if self.t0 is None else "")
+
+    async def teardown(self) -> None:
+        if self._worker is not None and self._worker.is_alive():
+            self._worker.terminate()
+            self._worker.join(timeout=1.0)
+
+    # ------------------------------------------------------------------------------------------ FEM tables
+    def _arm_t0(self) -> None:
+        """Start the script clock unless it must wait for the first FEM table."""
+        if self.t0 is None and not (self.params.sheet_fem.wait and self._building is not None):
+            self.t0 = time.monotonic() + self.params.start_delay
+
+    def _start_build(self, node: float) -> None:
+        """Build table node ``node`` in a spawned, niced worker process (never blocks the loop)."""
+        p = self.params
+        ctx = multiprocessing.get_context("spawn")
+        self._worker = ctx.Process(target=_build_worker, daemon=True, name=f"sheet-fem-{node:g}",
+                                   args=(p.twin.truth_seed, p.twin.realism, node, p.sheet_size,
+                                         self.phys.settings, p.sheet_fem.worker_nice))
+        self._worker.start()
+        self._building = node
+        self.log.info("building the true sheet's FEM table at clamp strain %.3f in a worker process (pid %s)",
+                      node, self._worker.pid)
+
+    def _poll_build(self, wanted: float | None) -> None:
+        if self._worker is not None and not self._worker.is_alive():
+            node, code = self._building, self._worker.exitcode
+            self._worker, self._building = None, None
+            if node is not None and self.phys.try_load(node):
+                self.log.info("true sheet FEM table at clamp strain %.3f ready", node)
+            else:
+                self._failed.add(node)
+                self.log.warning("true sheet FEM table at clamp strain %s failed (worker exit %s)", node, code)
+            self._arm_t0()
+        if wanted is not None and self._worker is None and wanted not in self._failed:
+            self._start_build(wanted)
 
     def on_arm(self, msg: ArmJointState) -> None:
-        """Keep the arm's measured clamp pose (FK of its joints); a pose that is not a rigid transform is
-        rejected (the last good one is kept)."""
+        """Keep the arm's *true* clamp pose: the truth's forward kinematics of the measured joints (the
+        bridge's own FK in ``msg.pose`` is not used). Joints the truth's FK refuses are rejected."""
         try:
-            self.poses[msg.arm] = check_pose(f"{msg.arm} arm pose", msg.pose, tol=1e-3)
+            self.poses[msg.arm] = self.phys.clamp_pose(msg.arm, msg.position)
         except ValueError as exc:
-            raise InputRejected(str(exc)) from None
-
+            raise InputRejected(f"{msg.arm} arm joints: {exc}") from None
     def _segment(self, t: float) -> tuple[int, float]:
         """(segment index, time in it) at script time ``t`` s; (-1, overshoot) after the last segment."""
         for i, s in enumerate(self.scripts):
@@ -106,7 +201,7 @@ class WorldNode(Node):
         return -1, t
 
     def tick_finger(self) -> None:
-        t = time.monotonic() - self.t0
+        t = -1.0 if self.t0 is None else time.monotonic() - self.t0
         if t < 0:
             i, ts = 0, 0.0
         else:
@@ -135,20 +230,40 @@ class WorldNode(Node):
 
     def tick_sheet(self) -> None:
         if "left" not in self.poses or "right" not in self.poses:
+            self._poll_build(None)
             return
         p: WorldParams = self.params
         try:
-            sheet = SheetSurface.from_clamps(self.poses["left"], self.poses["right"], pushed_point=self.finger,
-                                             membrane_kwargs={"modes": p.membrane_modes}, size=p.sheet_size)
-        except ValueError as exc:      # e.g. the two measured clamps coincide: no sheet to publish
+            sheet, stretch = self.phys.surface(self.poses["left"], self.poses["right"], self.finger)
+        except ValueError as exc:      # e.g. the two true clamps coincide: no sheet to publish
             self.log.warning("no sheet state: %s", exc)
             return
+        self._poll_build(self.phys.missing_node(stretch) if self._worker is None else None)
         g = p.membrane_grid
         if sheet.membrane is not None:
-            grid, depth = sheet.membrane.grid(g), float(sheet.membrane.depth)
+            grid, depth, pushed = sheet.membrane.grid(g), float(sheet.membrane.depth), sheet.pushed_point
         else:
-            grid, depth = np.zeros((g, g)), 0.0
+            depth = max(0.0, -float((np.asarray(self.finger) - sheet.origin) @ sheet.normal))
+            inside = abs(float((np.asarray(self.finger) - sheet.origin) @ sheet.axis_u)) < sheet.half_span
+            if depth > 0.0 and inside and not self._warned_flat:
+                self._warned_flat = True
+                self.log.warning("sheet pushed %.1f mm before its FEM table is ready: publishing the depth with a "
+                                 "flat membrane grid", depth * 1e3)
+            depth = depth if inside else 0.0
+            pushed = np.asarray(self.finger, float) if depth > 0.0 else sheet.origin
+            grid = np.zeros((g, g))
         self.sheet_pub.publish(SheetState(
             header=self.sheet_pub.header("display"), origin=sheet.origin, normal=sheet.normal, axis_u=sheet.axis_u,
-            corners=sheet.corners, pushed_point=sheet.pushed_point, depth=depth, stretch=sheet.stretch,
+            corners=sheet.corners, pushed_point=pushed, depth=depth, stretch=stretch,
             membrane=np.ascontiguousarray(grid)))
+
+
+def _build_worker(seed: int, realism: str, node: float, size: float, settings: FemSettings, nice: int) -> None:
+    """Worker-process entry: lower the priority, then build (and cache) one FEM table."""
+    import os
+
+    try:
+        os.nice(nice)
+    except OSError:
+        pass
+    build_table(seed, realism, node, size, settings)

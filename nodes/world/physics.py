@@ -22,7 +22,14 @@ import numpy as np
 
 from flexsheet.model import scene
 from flexsheet.model.sheet import SheetSurface, frame_from_clamps
-from flexsheet.model.sheet_fem import TABLE_DEPTHS, TABLE_POSITIONS, FemShape, IndentTable, SheetPhysics
+from flexsheet.model.sheet_fem import (
+    FINGER_RADIUS,
+    TABLE_DEPTHS,
+    TABLE_POSITIONS,
+    FemShape,
+    IndentTable,
+    SheetPhysics,
+)
 from flexsheet.model.truth import TwinTruth
 
 __all__ = ["FemSettings", "TruePhysics", "build_table"]
@@ -119,17 +126,9 @@ class TruePhysics:
             d = np.asarray(finger, float) - origin
             depth = -float(d @ n)
             pu, pv = float(d @ eu), float(d @ np.cross(n, eu))
-            rho = self.truth_finger_margin(a)
-            if depth > 0.0 and abs(pu) < rho and abs(pv) <= self.half_width:
+            if depth > 0.0 and abs(pu) < a - FINGER_RADIUS and abs(pv) <= self.half_width:
                 mem = self.shape(depth, pu, pv, a)
         return SheetSurface(origin, n, eu, a, self.half_width, mem, self.size), stretch
-
-    @staticmethod
-    def truth_finger_margin(half_span: float) -> float:
-        """|u| bound of a contact the FEM accepts: inside the clamps by the fingertip radius."""
-        from flexsheet.model.sheet_fem import FINGER_RADIUS
-
-        return half_span - FINGER_RADIUS
 
 
 def _cached_table(phys: SheetPhysics, s: FemSettings) -> IndentTable | None:
