@@ -318,13 +318,15 @@ nodes:
         assert "container=pair" in rows["talker"] and f"pid={pid}" in rows["talker"], res.stdout
         assert "container=pair" in rows["listener"] and f"pid={pid}" in rows["listener"], res.stdout
         assert "container=-" in rows["outside"] and f"pid={pid}" not in rows["outside"], res.stdout
+        last = max(int(m.group(1)) for m in lf.wait_for(r"\[outside\s*\] heard seq=(\d+)", count=30))
         os.kill(pid, signal.SIGKILL)                                 # what a segfault does to the whole process
         lf.wait_for(r"\[pair\s*\] respawning")
         new = int(lf.wait_for(r"\[pair\s*\] started pid (\d+)", count=2)[1].group(1))
         assert new != pid
         n = len(lf.lines)
-        deadline = time.monotonic() + 20
-        while not any(re.search(r"\[outside\s*\] heard seq=[0-4] ", ln) for ln in lf.lines[n:]):
+        deadline = time.monotonic() + 30
+        while not any((m := re.search(r"\[outside\s*\] heard seq=(\d+) ", ln)) and int(m.group(1)) < last
+                      for ln in lf.lines[n:]):                      # the new talker counts from 0 again
             assert time.monotonic() < deadline, "the restarted container's talker is not heard outside"
             time.sleep(0.05)
     finally:

@@ -3,6 +3,7 @@ the row matches the errors built into synthetic data (the sheet lagging the fing
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -75,3 +76,29 @@ def test_report_table1_from_bag_uses_typed_truth_and_the_one_metric(tmp_path):
     push = s["stroke_push_4"]                                     # the second segment, keyed by its mode
     assert push["n"] >= 10 and "paper" not in push
     assert set(s["latency_ms"]) >= {"fingertip_to_sheet_target", "camera_frame_to_modbus_write"}
+
+
+def test_report_records_the_twin_and_both_dd_conventions(tmp_path):
+    """summary.json has Table I's Δθ headline with Δd on R and in the paper's 2R convention, and the twin the run
+    used (a launch file's top-level ``twin:``, else the world node's ``twin`` param)."""
+    from types import SimpleNamespace
+
+    from flexsheet.experiments.report import main, twin_settings
+    from flexsheet.experiments.table1 import paper_dd_ratio
+    from flexsheet.runtime.launch import load_launch
+
+    _write_bag(tmp_path / "run.mcap")
+    lf_path = tmp_path / "l.yaml"
+    lf_path.write_text("name: t\nnodes:\n  world:\n    type: world\n    params: {twin: {realism: ideal, truth_seed: 2}}\n")
+    assert main(str(tmp_path), load_launch(lf_path)) == 0
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert s["twin"] == {"realism": "ideal", "truth_seed": 2, "source": "world node params"}
+    row = s["10"]
+    assert row["dtheta_mean_deg"] == pytest.approx(math.degrees(LAG), abs=1e-4)
+    assert row["dd_2r_mean_mm"] == pytest.approx(2e3 * R * LAG, abs=1e-4)           # the paper's convention
+    assert row["dd_mean_mm"] == pytest.approx(2e3 * R * math.sin(LAG / 2), abs=1e-4)  # ours: the chord on R
+    assert paper_dd_ratio("10") == pytest.approx(2e3 * R, rel=0.01)                 # why: the paper's Δd/Δθ = 2R
+    assert "2R" in s["dd_convention"] and "2R" in (tmp_path / "report.md").read_text()
+    top = SimpleNamespace(twin={"realism": "realistic", "truth_seed": 5}, nodes={})
+    assert twin_settings(top) == {"realism": "realistic", "truth_seed": 5, "source": "launch file twin section"}
+    assert twin_settings(None)["source"].startswith("world node defaults")

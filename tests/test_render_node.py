@@ -100,7 +100,8 @@ def test_window_output_params_are_validated(monkeypatch):
     assert (p.output, p.stereo, p.monitor, p.mirror_x) == ("window", "side_by_side", "DP-1", True)
     assert RendererParams().output == "offscreen" and RendererParams().stereo == "frame_sequential"
     for bad in ({"output": "screen"}, {"stereo": "anaglyph"}, {"monitor": -1}, {"monitor": " "},
-                {"refresh_hz": 0.0}, {"display": "window"}, {"ipd": -0.01}):
+                {"refresh_hz": 0.0}, {"display": "window"}, {"width": 8},
+                {"ipd": 0.064}, {"projector_K": [[1, 0, 0]]}):     # eye and projector come from display.yaml
         with pytest.raises(pydantic.ValidationError, match=next(iter(bad))):
             RendererParams(**bad)
     import importlib.util

@@ -40,7 +40,6 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
 
 from flexsheet.model.calibration import BoardSpec, detect_board
 from flexsheet.model.stereo import StereoModel
@@ -298,36 +297,55 @@ def estimate_camera_pose(views: list[tuple[np.ndarray, np.ndarray]], board: Boar
         C = C + np.diag(np.maximum(np.diag(C), 1e-12) * 1e-6 + 1e-14)
         Linv = np.linalg.inv(np.linalg.cholesky(C))
 
-    def residuals(x: np.ndarray, sigma: float) -> np.ndarray:
-        st = stereo_from_vector(x[:24], size)
-        rR = x[18:21]
-        r = []
-        for k, (P, ul, ur) in enumerate(obs):
-            rv, tv = x[24 + 6 * k:27 + 6 * k], x[27 + 6 * k:30 + 6 * k]
-            R = cv2.Rodrigues(rv)[0]
-            Xc = P @ R.T + tv
-            pl = cv2.projectPoints(Xc, np.zeros(3), np.zeros(3), st["K1"], st["D1"])[0].reshape(-1, 2)
-            pr = cv2.projectPoints(Xc, rR, st["T"], st["K2"], st["D2"])[0].reshape(-1, 2)
-            r += [((pl - ul) / sigma).ravel(), ((pr - ur) / sigma).ravel()]
-        if Linv is not None:
-            r.append(Linv @ (x[:24] - s0))
-        return np.concatenate(r)
-
     n_par = 24 + 6 * len(obs)
-    sp = lil_matrix((n_res + (24 if Linv is not None else 0), n_par), dtype=int)
-    sp[:, :24] = 1
-    row = 0
-    for k, (P, _, _) in enumerate(obs):
-        sp[row:row + 4 * len(P), 24 + 6 * k:30 + 6 * k] = 1
-        row += 4 * len(P)
+    n_pri = 24 if Linv is not None else 0
+
+    def model(x: np.ndarray, sigma: float, want_jac: bool):
+        """Residuals (n_res + n_pri,) and, if asked, their analytic Jacobian: ``cv2.projectPoints`` gives
+        d(pixel)/d(pose, f, c, distortion); ``cv2.composeRT`` chains the right camera through R, T."""
+        st = stereo_from_vector(x[:24], size)
+        rR, tT = x[18:21], x[21:24]
+        r = np.empty(n_res + n_pri)
+        J = np.zeros((n_res + n_pri, n_par)) if want_jac else None
+        row = 0
+        for k, (P, ul, ur) in enumerate(obs):
+            n = len(P)
+            cv = slice(24 + 6 * k, 30 + 6 * k)
+            rv, tv = x[24 + 6 * k:27 + 6 * k], x[27 + 6 * k:30 + 6 * k]
+            pl, jl = cv2.projectPoints(P, rv, tv, st["K1"], st["D1"])
+            r[row:row + 2 * n] = ((pl.reshape(-1, 2) - ul) / sigma).ravel()
+            if want_jac:
+                J[row:row + 2 * n, cv] = jl[:, :6] / sigma
+                J[row:row + 2 * n, 0:9] = jl[:, 6:15] / sigma
+            row += 2 * n
+            c = cv2.composeRT(rv, tv, rR, tT)
+            pr, jr = cv2.projectPoints(P, c[0], c[1], st["K2"], st["D2"])
+            r[row:row + 2 * n] = ((pr.reshape(-1, 2) - ur) / sigma).ravel()
+            if want_jac:
+                dr1, dt1, dr2, dt2, tr1, tt1, tr2, tt2 = c[2:10]
+                A, B = jr[:, 0:3], jr[:, 3:6]              # d pixel / d (r3, t3)
+                J[row:row + 2 * n, cv] = np.hstack([A @ dr1 + B @ tr1, A @ dt1 + B @ tt1]) / sigma
+                J[row:row + 2 * n, 18:21] = (A @ dr2 + B @ tr2) / sigma
+                J[row:row + 2 * n, 21:24] = (A @ dt2 + B @ tt2) / sigma
+                J[row:row + 2 * n, 9:18] = jr[:, 6:15] / sigma
+            row += 2 * n
+        if n_pri:
+            r[row:] = Linv @ (x[:24] - s0)
+            if want_jac:
+                J[row:, :24] = Linv
+        return r, J
+
+    def residuals(v: np.ndarray, sg: float) -> np.ndarray:
+        return model(v, sg, False)[0]
+
     sigma = 0.1
     x = x0
     for _ in range(2):
-        sol = least_squares(residuals, x, args=(sigma,), jac_sparsity=sp, x_scale="jac", method="trf",
-                            max_nfev=200)
+        sol = least_squares(residuals, x, jac=lambda v, sg: model(v, sg, True)[1], args=(sigma,), method="lm",
+                            x_scale="jac", max_nfev=400)
         x = sol.x
         data = sol.fun[:n_res] * sigma
-        dof = max(n_res - n_par + (24 if Linv is not None else 0), 1)
+        dof = max(n_res + n_pri - n_par, 1)
         sigma = max(float(math.sqrt(data @ data / dof)), 0.01)
     data = residuals(x, 1.0)[:n_res]
     rms = float(np.sqrt(np.mean(data ** 2 * 2.0)))        # per corner (2 coordinates), px

@@ -106,6 +106,19 @@ def board_texture(board: BoardSpec, px_per_m: float = 8000.0, margin_squares: fl
     return (img.astype(np.float32) / 255.0), px_per_m, (-m, -m)
 
 
+def _project(X: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray, D: np.ndarray):
+    """OpenCV's pinhole + 5-term distortion projection of points X (N, 3) with x_cam = R X + t, vectorised
+    (``cv2.projectPoints`` computes Jacobians too and is slow for millions of points). Returns (u, v)."""
+    Xc = X @ R.T + t
+    x, y = Xc[:, 0] / Xc[:, 2], Xc[:, 1] / Xc[:, 2]
+    k1, k2, p1, p2, k3 = (float(v) for v in np.asarray(D, float).ravel()[:5])
+    r2 = x * x + y * y
+    rad = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = x * rad + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    yd = y * rad + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    return K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]
+
+
 def _undistort_normalized(xd: np.ndarray, yd: np.ndarray, D: np.ndarray, iters: int = 40):
     """Invert OpenCV's 5-term lens model on normalised coordinates (vectorised fixed-point iteration, the
     scheme of ``cv2.undistortPoints``, run until the update is < 1e-11)."""
@@ -173,16 +186,19 @@ class CalibrationTwin:
 
     ``truth``: the hidden truth; ``noise``: :class:`NoiseModel` (default :data:`XIMEA_NOISE`);
     ``seed``: image-noise seed; ``ss``: sub-samples per pixel side for boards and markers (patterns use
-    ``max(2, ss - 1)``). Raises ``ValueError`` on ``ss < 1``.
+    ``max(2, ss - 1)``); ``frames``: frames averaged per capture (each with its own noise, as the lab's
+    capture averages them). Raises ``ValueError`` on ``ss < 1`` or ``frames < 1``.
     """
 
     ROOM_DN = 22.0          #: dark lab behind the sheet, DN
     SHEET_DN = 70.0         #: the bare translucent sheet under the room light, DN
     PATTERN_BLUR_PX = 0.6   #: projector optics + diffusion in the 1 mm sheet, σ in projector px (assumption)
 
-    def __init__(self, truth: TwinTruth, noise: NoiseModel = XIMEA_NOISE, seed: int = 0, ss: int = 3):
-        if ss < 1:
-            raise ValueError(f"ss must be >= 1, got {ss!r}")
+    def __init__(self, truth: TwinTruth, noise: NoiseModel = XIMEA_NOISE, seed: int = 0, ss: int = 3,
+                 frames: int = 1):
+        if ss < 1 or frames < 1:
+            raise ValueError(f"ss and frames must be >= 1, got {ss!r}, {frames!r}")
+        self.frames = int(frames)
         self.truth = truth
         self.noise = noise
         self.ss = int(ss)
@@ -198,15 +214,19 @@ class CalibrationTwin:
         self._ik = {}
 
     # ----------------------------------------------------------------------------------------- image model
-    def _finish(self, acc: np.ndarray, ss: int) -> np.ndarray:
+    def _finish(self, acc: np.ndarray, ss: int, frames: int | None = None) -> np.ndarray:
         """Sub-sample image (H·ss, W·ss) DN → pixel integration, optical blur, sensor noise, uint8."""
         h, w = acc.shape[0] // ss, acc.shape[1] // ss
-        img = acc.reshape(h, ss, w, ss).mean(axis=(1, 3)) if ss > 1 else acc
+        # INTER_AREA with an integer factor is the exact block mean
+        img = cv2.resize(acc, (w, h), interpolation=cv2.INTER_AREA) if ss > 1 else acc
         if self.noise.blur_px > 0:
             img = cv2.GaussianBlur(img.astype(np.float32), (0, 0), self.noise.blur_px)
         sig = np.sqrt(self.noise.read_dn ** 2 + self.noise.shot_gain * np.maximum(img, 0.0))
-        img = img + sig * self.rng.standard_normal(img.shape, dtype=np.float32)
-        return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+        n = self.frames if frames is None else int(frames)
+        acc = np.zeros(img.shape, np.float32)
+        for _ in range(n):          # each frame quantised on its own, then averaged (the lab's capture)
+            acc += np.clip(np.rint(img + sig * self.rng.standard_normal(img.shape, dtype=np.float32)), 0, 255)
+        return np.clip(np.rint(acc / n), 0, 255).astype(np.uint8)
 
     # ----------------------------------------------------------------------------------------- sheet poses
     def sheet_pose(self, T_sheet_cmd: np.ndarray, stretch: float = 0.0) -> np.ndarray:
@@ -283,7 +303,8 @@ class CalibrationTwin:
 
     # ----------------------------------------------------------------------------------------- patterns
     def pattern_frames(self, patterns: list[np.ndarray], T_sheet_cmd: np.ndarray, white_dn: float = 190.0,
-                       ambient_dn: float = 12.0, home_exact: bool = False) -> list[tuple[np.ndarray, np.ndarray]]:
+                       ambient_dn: float = 12.0, home_exact: bool = False,
+                       frames: int | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
         """Stereo pairs of each projector image in ``patterns`` (uint8 (h, w) at the projector's resolution)
         lit through the true projector onto the sheet held at the commanded pose ``T_sheet_cmd`` (4, 4).
 
@@ -291,36 +312,50 @@ class CalibrationTwin:
         or thick sheet is lower — the decode fails below ~10 DN of contrast); ``ambient_dn``: room light on
         the sheet. The translucent sheet is a Lambertian diffuser: brightness ∝ cos(incidence).
         ``home_exact``: render the home pose at the display frame instead of through the true arms.
+        ``frames``: frames averaged per pattern (default: the twin's ``frames``).
         """
         t = self.truth
         T = np.eye(4) if home_exact else self.sheet_pose(np.asarray(T_sheet_cmd, float))
         ss = max(2, self.ss - 1)
         half = 0.5 * scene.SHEET_SIZE
         Tp = t.T_display_projector
-        rvec = cv2.Rodrigues(Tp[:3, :3].T)[0]
         tvec = -Tp[:3, :3].T @ Tp[:3, 3]
         pw, ph = t.projector_size
         maps = []
         for cam in self.cams:
             u, v, ok, Xc = cam.plane_hit(T, ss)
             on = ok & (np.abs(u) <= half) & (np.abs(v) <= half)
-            Xd = (Xc.reshape(-1, 3).astype(np.float64) @ cam.T[:3, :3].T) + cam.T[:3, 3]
-            uv = cv2.projectPoints(Xd.reshape(-1, 1, 3), rvec, tvec, t.projector_K, t.projector_D)[0]
-            uv = uv.reshape(Xc.shape[0], Xc.shape[1], 2).astype(np.float32)
+            full = np.full(on.shape, np.float32(self.ROOM_DN), np.float32)
+            rows, cols = np.nonzero(on.any(axis=1))[0], np.nonzero(on.any(axis=0))[0]
+            if len(rows) == 0:
+                maps.append((None, None, None, None, full))
+                continue
+            # only the sheet's bounding box (whole pixels) is lit: compute the projector map there
+            r0, r1 = rows[0] // ss * ss, (rows[-1] // ss + 1) * ss
+            c0, c1 = cols[0] // ss * ss, (cols[-1] // ss + 1) * ss
+            box = (slice(r0, r1), slice(c0, c1))
+            onb = on[box]
+            Xd = (Xc[box].reshape(-1, 3).astype(np.float64) @ cam.T[:3, :3].T) + cam.T[:3, 3]
+            pu, pv = _project(Xd, Tp[:3, :3].T, tvec.ravel(), t.projector_K, t.projector_D)
             ray = Xd - Tp[:3, 3]
             cos_in = np.abs(ray @ T[:3, 0]) / np.linalg.norm(ray, axis=1)
-            gain = (cos_in.reshape(u.shape) * on).astype(np.float32)
-            maps.append((uv[..., 0], uv[..., 1], gain, on))
+            gain = (cos_in.reshape(onb.shape) * onb).astype(np.float32) * np.float32(white_dn)
+            base = np.where(onb, np.float32(ambient_dn), np.float32(self.ROOM_DN)).astype(np.float32)
+            maps.append((pu.reshape(onb.shape).astype(np.float32), pv.reshape(onb.shape).astype(np.float32),
+                         gain, (base, box), full))
         out = []
         for pat in patterns:
             if pat.shape != (ph, pw):
                 raise ValueError(f"pattern must be ({ph}, {pw}) (the projector's resolution), got {pat.shape}")
             p = cv2.GaussianBlur(pat.astype(np.float32) / 255.0, (0, 0), self.PATTERN_BLUR_PX)
             pair = []
-            for mx, my, gain, on in maps:
-                val = cv2.remap(p, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
-                dn = np.where(on, ambient_dn + white_dn * gain * val, self.ROOM_DN).astype(np.float32)
-                pair.append(self._finish(dn, ss))
+            for mx, my, gain, bb, full in maps:
+                img = full.copy()
+                if mx is not None:
+                    base, box = bb
+                    val = cv2.remap(p, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+                    img[box] = base + gain * val
+                pair.append(self._finish(img, ss, frames))
             out.append((pair[0], pair[1]))
         return out
 

@@ -160,7 +160,7 @@ def run(out: Path, quick: bool = False, seeds: int | None = None) -> dict:
         print(f"[stability] {msg}", flush=True)
 
     for base, px in (("realistic_camera", MARKER_PX["realistic"]), ("quiet_camera", MARKER_PX["ideal"])):
-        b: dict = {"marker_px": px}
+        b: dict = {"camera_px": px}
         for kind in ("calibration_scale", "dropout", "marker_px"):
             if kind == "marker_px" and base == "quiet_camera":
                 continue
@@ -208,7 +208,7 @@ def _plot(doc: dict, path: Path) -> None:
                 continue
             xs = [r["value"] for r in b["rows"]]
             a.plot(xs, [r["dtheta_mean_deg"] for r in b["rows"]], style,
-                   label=f"{base.replace('_', ' ')} ({doc['baselines'][base]['marker_px']:g} px)")
+                   label=f"{base.replace('_', ' ')} ({doc['baselines'][base]['camera_px']:g} px)")
             bp = b["breaks_paper_at"]
             if bp is not None:
                 a.axvline(bp, color="k", lw=0.6, ls=":")
@@ -217,8 +217,12 @@ def _plot(doc: dict, path: Path) -> None:
         a.set(xlabel=xl, ylabel="Table I mean Δθ [deg]", yscale="log")
         if kind == "marker_px":
             a.set_xscale("log")
+            xs = [r["value"] for r in doc["baselines"]["realistic_camera"][kind]["rows"]]
+            a.set_xticks(xs, [f"{x:g}" for x in xs])
+            a.minorticks_off()
         elif kind == "calibration_scale":
             a.set_xscale("symlog", linthresh=1.0)
+            a.set_xlim(left=0.0)
         a.grid(True, alpha=0.3)
         a.legend(fontsize=7)
     a = ax[1, 1]
@@ -230,7 +234,7 @@ def _plot(doc: dict, path: Path) -> None:
             a.plot(bet, [r[k] for r in rows], style, label=k.replace("_mm", "").replace("_", " "))
     a.axhline(doc["pixel_mm"], color="r", lw=0.8, ls=":", label="one projector pixel")
     a.set(xlabel="true tension ratio β (model assumes 1)", ylabel="shape error outside the finger [mm]",
-          xscale="log", yscale="log", title="pushed sheet: membrane model vs true FEM (Table I unaffected)")
+          xscale="log", yscale="log", title="pushed sheet: membrane model vs true FEM\n(Table I does not depend on β)")
     a.grid(True, alpha=0.3)
     a.legend(fontsize=7)
     fig.suptitle(f"Where the methods fail: {doc['moving_time_s']:g} s stroke, realistic twin, "

@@ -364,12 +364,11 @@ class StereoRenderer:
         ul, ur = self.model.project(Xc, distort=True)
         return ul if side == "left" else ur
 
-    def _rays(self, side: str, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
-        """Unit ray directions (M, 3), camera ``side``'s frame, of the ``marker_ss``² sub-samples of every
-        pixel in [x0, x1) × [y0, y1) (sub-sample grid row-major). The lens model is inverted exactly
+    def _rays(self, side: str, x0: int, y0: int, x1: int, y1: int, ss: int) -> np.ndarray:
+        """Unit ray directions (M, 3), camera ``side``'s frame, of the ``ss``² sub-samples of every pixel in
+        [x0, x1) × [y0, y1) (sub-sample grid row-major). The lens model is inverted exactly
         (``cv2.undistortPoints``, 40 iterations to 1e-12) at the pixel corners and interpolated bilinearly
         inside each pixel (the interpolation error of the smooth lens map over 1 px is < 1e-4 px)."""
-        ss = self.cfg.marker_ss
         K, D = (self.model.K1, self.model.D1) if side == "left" else (self.model.K2, self.model.D2)
         cx = np.arange(x0, x1 + 1, dtype=np.float64) - 0.5
         cy = np.arange(y0, y1 + 1, dtype=np.float64) - 0.5
@@ -390,22 +389,27 @@ class StereoRenderer:
                       A: np.ndarray | None, B: np.ndarray | None, rf: float) -> tuple[np.ndarray, np.ndarray]:
         """Per-pixel coverage (h, w) of the visible marker and of the finger inside ``box`` (x0, y0, x1, y1),
         averaged over the exposure samples: S (n, 3) marker centres, A, B (n, 3) capsule axes (None: no
-        finger in the ray-cast), all in camera ``side``'s frame."""
+        finger in the ray-cast), all in camera ``side``'s frame. Memory stays bounded: a box over 2.5e5
+        sub-samples gets fewer per pixel (a marker that near is many pixels wide) and the samples are
+        ray-cast in chunks."""
         x0, y0, x1, y1 = box
-        ss = self.cfg.marker_ss
-        d = self._rays(side, x0, y0, x1, y1)
-        ts = _sphere_hit(d, S, rm)                           # (n, M)
-        if A is not None:
-            tc = _capsule_hit(d, A, B, rf)
-            mk = (ts < tc).astype(np.float32)
-            fg = (np.isfinite(tc) & (tc <= ts)).astype(np.float32)
-        else:
-            mk = np.isfinite(ts).astype(np.float32)
-            fg = np.zeros_like(mk)
         h, w = y1 - y0, x1 - x0
+        ss = int(min(self.cfg.marker_ss, max(1, math.floor(math.sqrt(2.5e5 / (h * w))))))
+        d = self._rays(side, x0, y0, x1, y1, ss)
+        mk = np.zeros(len(d))
+        fg = np.zeros(len(d))
+        step = max(1, int(2e6 // len(d)))
+        for k in range(0, len(S), step):
+            ts = _sphere_hit(d, S[k:k + step], rm)           # (chunk, M)
+            if A is not None:
+                tc = _capsule_hit(d, A[k:k + step], B[k:k + step], rf)
+                mk += (ts < tc).sum(axis=0)
+                fg += (np.isfinite(tc) & (tc <= ts)).sum(axis=0)
+            else:
+                mk += np.isfinite(ts).sum(axis=0)
 
         def pool(a):
-            return a.mean(axis=0).reshape(h, ss, w, ss).mean(axis=(1, 3))
+            return (a / len(S)).reshape(h, ss, w, ss).mean(axis=(1, 3))
         return pool(mk), pool(fg)
 
     def marker_visibility(self, position: np.ndarray) -> tuple[float, float]:

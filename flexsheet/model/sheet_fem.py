@@ -217,12 +217,12 @@ class SheetFEM:
         conn = basis.element_dofs                                   # (4, nel) node indices
         self.conn = conn.T.copy()                                   # (nel, 4)
         # shape values N (nel, 4, nq) and gradients dNx, dNy (nel, 4, nq); weights dx (nel, nq)
-        self.N = np.stack([basis.basis[i][0].value for i in range(4)], axis=1)
+        self.N = np.stack([np.asarray(basis.basis[i][0]) for i in range(4)], axis=1)
         g = [basis.basis[i][0].grad for i in range(4)]
         self.dNx = np.stack([gi[0] for gi in g], axis=1)
         self.dNy = np.stack([gi[1] for gi in g], axis=1)
         self.dx = basis.dx
-        X = basis.global_coordinates().value                       # (2, nel, nq)
+        X = np.asarray(basis.global_coordinates())                 # (2, nel, nq)
         self.qx, self.qy = X[0], X[1]
         nel = self.conn.shape[0]
         # global dof = 3 * node + component (0: u1, 1: u2, 2: w); element dofs (nel, 12) ordered (node, comp)

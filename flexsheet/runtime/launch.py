@@ -63,7 +63,8 @@ from flexsheet.runtime.transport import CurveConfig
 
 __all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "SecuritySpec", "load_launch", "node_config",
            "curve_config", "keys_dir", "public_keys", "substitutions", "substitute", "keygen_command",
-           "display_calib_path", "DEFAULT_KEYS_DIR", "PUBLIC_KEYS_FILE", "Supervisor"]
+           "display_calib_path", "DEFAULT_KEYS_DIR", "PUBLIC_KEYS_FILE", "Supervisor", "container_spec",
+           "children_of"]
 
 #: where ``flexsheet keys generate`` writes and CURVE looks when neither ``$FLEXSHEET_KEYS`` nor
 #: ``security.keys_dir`` says otherwise

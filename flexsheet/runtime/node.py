@@ -237,6 +237,20 @@ class Publisher:
 _thread_time = time.thread_time
 
 
+class _Worker(threading.Thread):
+    """The worker thread of a sync handler's subscription, with the task-like ``done()`` and ``cancel()``."""
+
+    def __init__(self, sub: Subscription) -> None:
+        super().__init__(target=sub._work, name=f"sub{sub.topic.name}@{sub.node.name}", daemon=True)
+        self.sub = sub
+
+    def done(self) -> bool:
+        return not self.is_alive()
+
+    def cancel(self) -> None:
+        self.sub.close()
+
+
 class Subscription:
     """One typed subscription: its queue, QoS, handler, consumer (task or worker thread) and statistics.
 
@@ -259,15 +273,14 @@ class Subscription:
         self.cpu_s = 0.0  # CPU time of the sync handler (its worker thread), s
         self.last_seq: int | None = None
         self.last_meta: Any = None
-        self.task: asyncio.Task | threading.Thread | None = None  # the consumer, once started
+        self.task: asyncio.Task | _Worker | None = None  # the consumer, once started (both have done(), cancel())
 
     def start(self, loop: asyncio.AbstractEventLoop) -> None:
         """Start the consumer: a task on ``loop`` (async handler) or the worker thread (sync handler)."""
         if self.is_async:
             self.task = loop.create_task(self.run())
         else:
-            self.task = threading.Thread(target=self._work, name=f"sub{self.topic.name}@{self.node.name}",
-                                         daemon=True)
+            self.task = _Worker(self)
             self.task.start()
 
     def _fresh_latched(self, item: Any) -> bool:

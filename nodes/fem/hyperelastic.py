@@ -188,10 +188,19 @@ class HyperelasticModel:
         self.sym_factor = 2 ** (int(sym_y) + int(sym_z))       #: full-body force = factor × this part's
         self.free = np.flatnonzero(~self.fixed_mask)
         self.contact_pts = np.flatnonzero(surf & ~self.support)
+        # contact quadrature on the outer facets not wholly in the support (6-point rule, positive weights)
+        from skfem import FacetBasis
+
+        sup_facet = np.all(self.points[sk.facets[:, outer], 0] <= c[0] + tol, axis=0)
+        fb = FacetBasis(sk, ElementTetP2(), facets=outer[~sup_facet], intorder=4)
+        self._cf_dofs = np.ascontiguousarray(fb.element_dofs.T)                         # (Fc, 10)
+        self._cf_N = np.ascontiguousarray(np.stack([bf[0].value for bf in fb.basis], axis=2))  # (Fc, Qf, 10)
+        self._cf_X = np.ascontiguousarray(fb.global_coordinates().value.transpose(1, 2, 0))    # (Fc, Qf, 3)
+        self._cf_w = np.ascontiguousarray(fb.dx)                                         # (Fc, Qf) m²
         lam, mu = material.lame
         self.lam, self.mu = lam, mu
         self._pattern()
-        self.eps = 5e-5           #: width (m) of the smooth onset of the contact penalty (see _pen)
+        self.eps = 2e-5           #: width (m) of the smooth onset of the contact penalty (see _pen)
         self.h_contact = float(np.median(np.linalg.norm(
             mesh.points[mesh.tets[:, 0]] - mesh.points[mesh.tets[:, 1]], axis=1)))
 
@@ -244,9 +253,25 @@ class HyperelasticModel:
         W = 0.5 * self.mu * (I1 - 3) - self.mu * lnJ + 0.5 * self.lam * lnJ ** 2
         e = float(np.sum(W * self.w))
         if caps is not None:
-            g, _ = caps.gap(self.points[self.contact_pts] + u[self.contact_pts])
-            e += float(np.sum(_pen(g, k, self.eps)[0]))
+            g, _, w = self._contact_gaps(u, caps)
+            e += float(np.sum(w * _pen(g, k, self.eps)[0]))
         return e
+
+    def _contact_gaps(self, u: np.ndarray, caps: Capsule):
+        """Gaps (Fc, Qf) m, outward finger normals (Fc, Qf, 3) and area weights (Fc, Qf) m² at the contact
+        quadrature points of the deformed outer surface."""
+        x = self._cf_X + np.einsum("fqa,fai->fqi", self._cf_N, u[self._cf_dofs])
+        g, n = caps.gap(x.reshape(-1, 3))
+        return g.reshape(x.shape[:2]), n.reshape(x.shape), self._cf_w
+
+    def contact_force(self, u: np.ndarray, caps: Capsule, k: float) -> tuple[np.ndarray, float, int]:
+        """(force the finger applies to this part (3,) N, deepest penetration m, contact points in touch)."""
+        g, n, w = self._contact_gaps(u, caps)
+        act = g < self.eps
+        if not np.any(act):
+            return np.zeros(3), 0.0, 0
+        d1 = _pen(g[act], k, self.eps)[1]
+        return (-(w[act] * d1)[:, None] * n[act]).sum(axis=0), float(max(0.0, -g.min())), int(np.sum(g < 0))
 
     def residual_tangent(self, u: np.ndarray, caps: Capsule | None, k: float, need_K: bool = True,
                          project: bool = False):
@@ -266,15 +291,16 @@ class HyperelasticModel:
         r = np.bincount(self._vd.ravel(), weights=re.ravel(), minlength=self.n)
         cdata = None
         if caps is not None:
-            pts = self.contact_pts
-            g, nrm = caps.gap(self.points[pts] + u[pts])
-            act = g < self.eps
-            if np.any(act):
-                idx = pts[act]
-                _, d1, d2 = _pen(g[act], k, self.eps)
-                dofs = (3 * idx[:, None] + np.arange(3)).ravel()
-                r[dofs] += (d1[:, None] * nrm[act]).ravel()
-                cdata = (idx, nrm[act], d2)
+            g, nrm, w = self._contact_gaps(u, caps)
+            fa = np.flatnonzero(np.any(g < self.eps, axis=1))
+            if len(fa):
+                _, d1, d2 = _pen(g[fa], k, self.eps)                                        # (fa, Qf)
+                Nf = self._cf_N[fa]                                                         # (fa, Qf, 10)
+                rc = np.einsum("fq,fqa,fqi->fai", w[fa] * d1, Nf, nrm[fa])
+                vd = (3 * self._cf_dofs[fa][:, :, None] + np.arange(3)).reshape(len(fa), 30)
+                r += np.bincount(vd.ravel(), weights=rc.ravel(), minlength=self.n)
+                Kc = np.einsum("fq,fqa,fqb,fqi,fqk->faibk", w[fa] * d2, Nf, Nf, nrm[fa], nrm[fa])   # Gauss–Newton
+                cdata = (vd, Kc.reshape(len(fa), 30, 30))
         if not need_K:
             return r, None
         E = len(self.edofs)
@@ -292,11 +318,10 @@ class HyperelasticModel:
         data = np.bincount(self._scatter, weights=Ke.ravel(), minlength=self._nnz)[self._csr_order]
         K = sp.csr_matrix((data, self._indices, self._indptr), shape=(self.n, self.n))
         if cdata is not None:
-            idx, nrm, d2 = cdata
-            blocks = d2[:, None, None] * nrm[:, :, None] * nrm[:, None, :]               # Gauss–Newton
-            rr = (3 * idx[:, None, None] + np.arange(3)[None, :, None]).repeat(3, axis=2)
-            cc = (3 * idx[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1)
-            K = K + sp.csr_matrix((blocks.ravel(), (rr.ravel(), cc.ravel())), shape=(self.n, self.n))
+            vd, Kc = cdata
+            rr = np.repeat(vd, 30, axis=1).ravel()
+            cc = np.tile(vd, (1, 30)).ravel()
+            K = K + sp.csr_matrix((Kc.ravel(), (rr, cc)), shape=(self.n, self.n))
         return r, K
 
     def _projection(self, F: np.ndarray, Finv: np.ndarray, lnJ: np.ndarray) -> np.ndarray:
@@ -374,8 +399,9 @@ class HyperelasticModel:
         return sp.csr_matrix((phis.ravel(), (rows, cols)), shape=(len(x), len(self.points)))
 
     def penalty(self, mesh_h: float | None = None) -> float:
-        """Contact penalty stiffness per surface point, N/m: 50·E·h (penetration ≈ 2 % of h per unit strain)."""
-        return 50.0 * self.material.E * (mesh_h or self.h_contact)
+        """Contact penalty per unit area, N/m³: 300·E/h (a contact pressure p = E penetrates p/κ = h/300),
+        h the median edge length of the mesh."""
+        return 300.0 * self.material.E / (mesh_h or self.h_contact)
 
 
 def _pen(g: np.ndarray, k: float, eps: float):
@@ -413,7 +439,7 @@ def _quiet_stderr():
 
 
 def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, iters: int, tol_u: float,
-            tol_r: float, log, state: dict | None = None) -> tuple[np.ndarray, int, bool]:
+            tol_r: float, log, state: dict | None = None, max_step: float = 0.001) -> tuple[np.ndarray, int, bool]:
     """Minimise Π from ``u``; returns (u, iterations, converged). ``state`` (dict) carries ``project`` (use
     the projected tangent) between calls. Raises ``FloatingPointError`` when the line search fails."""
     state = {} if state is None else state
@@ -438,7 +464,9 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
             raise FloatingPointError(f"non-finite Newton step at iteration {it}")
         d3 = delta.reshape(-1, 3)
         slope = float(rf @ delta)
-        alpha, ok = 1.0, False
+        # trust region: no point moves more than max_step per iteration, so no surface point can jump
+        # across the finger between two energy evaluations (the penalty is only seen where it is sampled)
+        alpha, ok = min(1.0, max_step / max(float(np.abs(delta).max()), 1e-300)), False
         for _ in range(30):
             cand = u + alpha * d3
             pc = model.energy(cand, caps, k)
@@ -511,15 +539,11 @@ def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: fl
             u_prev, d_prev = u, d_cur
             u, d_cur = u_new, d_new
         caps = capsule_at(angle, d_cur, finger_radius, m.mesh.radius, m.mesh.center)
-        pts = m.contact_pts
-        g, nrm = caps.gap(m.points[pts] + u[pts])
-        act = g < m.eps
-        fvec = (-_pen(g[act], k, m.eps)[1][:, None] * nrm[act]).sum(axis=0) if np.any(act) else np.zeros(3)
+        fvec, pen, ncon = m.contact_force(u, caps, k)
         fvec = m.sym_factor * fvec * np.array([1.0, 0.0 if m.sym_y else 1.0, 0.0 if m.sym_z else 1.0])
         minJ, ninv, emax = m.checks(u)
         st = PathState(float(d_cur), u.copy(), float(fvec @ caps.direction), fvec, its_total, bool(conv_all),
-                       minJ, ninv, emax, float(max(0.0, -g.min())) if len(g) else 0.0, int(act.sum()),
-                       time.perf_counter() - t0)
+                       minJ, ninv, emax, pen, ncon, time.perf_counter() - t0)
         out.append(st)
         if log:
             log(f"  depth {d_cur * 1e3:5.1f} mm: F={st.force:.4f} N, {its_total} Newton its, "

@@ -153,12 +153,14 @@ def main(argv: list[str] | None = None) -> int:
         prog="flexsheet bench render", description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples: flexsheet bench render --json --repeats 30\n"
+               "          flexsheet bench render --scene launch/scenes/organ.yaml --repeats 10\n"
                "          flexsheet bench render --window --xvfb --seconds 5 --json")
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     ap.add_argument("--repeats", type=int, default=30, help="timed pairs per model (default 30)")
     ap.add_argument("--width", type=int, default=1024)
     ap.add_argument("--height", type=int, default=768)
     ap.add_argument("--model", default="four_triangle", help="model whose time is stereo_pair_ms")
+    ap.add_argument("--scene", default=None, help="scene file whose object is drawn (default: the paper's cylinder)")
     ap.add_argument("--window", action="store_true", help="measure the projector window's frame pacing instead")
     ap.add_argument("--xvfb", action="store_true", help="--window on a private Xvfb (default when DISPLAY is unset)")
     ap.add_argument("--seconds", type=float, default=5.0, help="--window: seconds per phase (default 5)")
@@ -186,8 +188,16 @@ def main(argv: list[str] | None = None) -> int:
                       f" eye resyncs {d['eye_resyncs']}, redraw {d['redraw_median_ms']:.1f} ms, present "
                       f"{d['present_median_ms']:.2f} ms")
         return 0
+    if args.scene:
+        from flexsheet.model.scenes import load_scene
+
+        try:
+            v, f = load_scene(args.scene).surface_mesh()
+        except ValueError as exc:
+            ap.error(str(exc))
+    else:
+        v, f = cylinder_mesh()
     r = StereoRenderer(Projector.default(args.width, args.height))
-    v, f = cylinder_mesh()
     r.set_mesh(v, f)
     per = time_models(r, args.repeats)
     t0 = time.perf_counter()
@@ -200,6 +210,7 @@ def main(argv: list[str] | None = None) -> int:
         "per_model": per,
         "readback_ms": readback,
         "size": [args.width, args.height],
+        "scene": args.scene or "cylinder (paper)",
         "vertices": int(len(v)),
         "triangles": int(len(f)),
         "gl_renderer": r.ctx.info.get("GL_RENDERER", "?"),

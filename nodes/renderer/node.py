@@ -1,10 +1,16 @@
 """Renderer node: draws the (deformed) object for both eyes, corrected for the actual sheet (paper §III-C).
 
-Subscribes ``/object/deformation`` (rigid cylinder until the FEM publishes), both arms' joint states (the
+Subscribes ``/object/deformation`` (the scene's rigid object until the FEM publishes), both arms' joint states (the
 measured clamp poses give the actual sheet pose) and ``/fingertip`` (the pushed point). It redraws as soon as a
 new fingertip or deformation arrives (at most ``max_render_rate``; at least at ``publish_rate`` when nothing
 arrives) and publishes ``/render/stereo`` (:class:`messages.RenderedFrame`, downscaled by ``publish_scale``) at
 ``publish_rate``; ``source_stamp`` is the newest exposure stamp of the fingertip / deformation it drew.
+
+Geometry (issues 14, 17): the object is the ``scene`` file's (:mod:`flexsheet.model.scenes`; default the
+paper's cylinder), and the projector (K_p, distortion, pose) and the eye (V, ipd) come from ``display_calib``
+(``display.yaml``, filled in by the launcher from the launch file's top-level ``display_calib:``); without
+one the node draws through the nominal geometry and says so in its log. ``width``/``height`` only choose the
+drawing resolution of that projector.
 
 This file only wires topics and params. The state and the decisions (inputs → sheet, model choice, error
 table) are :mod:`nodes.renderer.state`; the drawing :mod:`nodes.renderer.scene`; the projector window
@@ -26,15 +32,20 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Literal
 
-import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from flexsheet.model import scene
-from flexsheet.model.projector import Projector
+from flexsheet.model import scene as paper
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from messages import ArmJointState, Fingertip, Heartbeat, ObjectDeformation, RenderedFrame, topics
 from nodes.renderer.correction import check_screen
-from nodes.renderer.state import ErrorTable, RendererState, SheetConfig, pick_model, silhouette_probes
+from nodes.renderer.state import (
+    ErrorTable,
+    RendererState,
+    SheetConfig,
+    load_geometry,
+    pick_model,
+    silhouette_probes,
+)
 
 __all__ = ["RendererNode", "RendererParams"]
 
@@ -44,19 +55,15 @@ class RendererParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    width: int = Field(1024, ge=16, description="projector width per eye image, px")
-    height: int = Field(768, ge=16, description="projector height per eye image, px")
-    ipd: float = Field(0.064, ge=0.0, le=0.1, description="interpupillary distance, m")
-    eye: list[float] = Field(default_factory=lambda: scene.EYE.tolist(), description="cyclopean eye V, m")
-    screen_point: list[float] = Field(default_factory=lambda: scene.SCREEN_POINT.tolist())
-    screen_normal: list[float] = Field(default_factory=lambda: scene.SCREEN_NORMAL.tolist())
-    projector_position: list[float] = Field(default_factory=lambda: scene.PROJECTOR.tolist(),
-                                            description="projector light source P, m")
-    projector_pixel: float = Field(scene.PIXEL_ON_SCREEN, gt=0.0, description="m per px on the screen")
-    projector_K: list[list[float]] | None = Field(None, description="3x3 intrinsics, px (None: default model)")
-    projector_R: list[list[float]] | None = Field(None, description="3x3, columns = projector x,y,z axes")
+    scene: str | None = Field(None, description="scene file (launch/scenes/*.yaml) whose object is drawn until "
+                                                "the FEM publishes; None: the paper's cylinder")
+    display_calib: str | None = Field(None, description="display.yaml: the projector (K_p, D, pose) and the eye "
+                                                        "(V, ipd); None: the nominal geometry (logged)")
+    width: int | None = Field(None, ge=16, le=8192, description="image width per eye, px (None: the calibrated "
+                                                                "projector's; otherwise its K is rescaled)")
+    height: int | None = Field(None, ge=16, le=8192, description="image height per eye, px (as width)")
     correction: Literal["auto", "none", "flat", "four_triangle", "fine"] = "auto"
-    accuracy_target: float = Field(scene.PIXEL_ON_SCREEN, gt=0.0, description="image error budget, m")
+    accuracy_target: float = Field(paper.PIXEL_ON_SCREEN, gt=0.0, description="image error budget, m")
     fine_modes: int = Field(SheetConfig.fine_modes, ge=1, le=64, description="membrane modes of the fine model")
     tension_ratio: float = Field(SheetConfig.tension_ratio, gt=0.0, description="membrane T_v / T_u")
     contact_radius: float = Field(SheetConfig.contact_radius, gt=0.0, description="finger contact radius, m")
@@ -83,11 +90,13 @@ class RendererParams(BaseModel):
                                                 "where the driver offers one")
     swap_eyes: bool = Field(False, description="window, frame_sequential: right eye on even vsyncs")
 
-    @field_validator("eye", "screen_point", "screen_normal", "projector_position")
+    @field_validator("scene")
     @classmethod
-    def _vec3(cls, v: list[float]) -> list[float]:
-        if len(v) != 3 or not all(np.isfinite(v)):
-            raise ValueError(f"must be 3 finite numbers, got {v!r}")
+    def _scene_file(cls, v: str | None) -> str | None:
+        if v:                        # validated in full, so `flexsheet launch --check` names a bad key
+            from flexsheet.model.scenes import load_scene
+
+            load_scene(v)
         return v
 
     @field_validator("output")
@@ -114,17 +123,22 @@ class RendererNode(Node):
 
     async def setup(self) -> None:
         p: RendererParams = self.params
-        self.eye = np.asarray(p.eye, dtype=float)
-        check_screen(self.eye, p.projector_position, p.screen_point, p.screen_normal)
-        self.projector = Projector.calibrated(p.width, p.height, p.projector_pixel, p.projector_position,
-                                              p.projector_K, p.projector_R)
+        loop = asyncio.get_running_loop()
+        geo = await loop.run_in_executor(None, load_geometry, p.scene, p.display_calib, p.width, p.height)
+        self.geometry = geo
+        for line in geo.log:
+            loud = (geo.nominal and "NOMINAL" in line) or line.startswith("eye mode tracked")
+            (self.log.warning if loud else self.log.info)("%s", line)
+        self.eye = geo.eye
+        self.projector = geo.projector
+        check_screen(self.eye, self.projector.position, paper.SCREEN_POINT, paper.SCREEN_NORMAL)
         self.state = RendererState(self.eye, self.projector.position, SheetConfig(
             half_width=p.sheet_half_width, push_threshold=p.push_threshold, fine_modes=p.fine_modes,
-            tension_ratio=p.tension_ratio, contact_radius=p.contact_radius))
-        loop = asyncio.get_running_loop()
+            tension_ratio=p.tension_ratio, contact_radius=p.contact_radius), mesh=geo.mesh)
         self.table = await loop.run_in_executor(None, lambda: ErrorTable.build(
-            silhouette_probes(self.state.mesh_vertices), eye=self.eye, projector=self.projector.position,
-            screen_point=p.screen_point, screen_normal=p.screen_normal, sheet=self.state.last_good))
+            silhouette_probes(geo.mesh[0], center_x=float(geo.scene.center[0])), eye=self.eye,
+            projector=self.projector.position, screen_point=paper.SCREEN_POINT, screen_normal=paper.SCREEN_NORMAL,
+            sheet=self.state.last_good))
         self.model_used = "none"
         self.frames = 0
         self.output = None
@@ -148,8 +162,9 @@ class RendererNode(Node):
 
     def _renderer_kwargs(self) -> dict:
         p: RendererParams = self.params
-        return {"eye": self.eye, "ipd": 0.0 if p.stereo == "mono" else p.ipd, "screen_point": p.screen_point,
-                "screen_normal": p.screen_normal, "samples": p.samples}
+        return {"eye": self.eye, "ipd": 0.0 if p.stereo == "mono" else self.geometry.ipd,
+                "screen_point": paper.SCREEN_POINT, "screen_normal": paper.SCREEN_NORMAL, "samples": p.samples,
+                "distortion": self.geometry.distortion}
 
     # ------------------------------------------------------------------ offscreen output (GL thread)
     def _gl_init(self) -> None:

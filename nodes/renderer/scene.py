@@ -2,8 +2,9 @@
 
 Pipeline per eye (all in the vertex shader ``shaders/correct.vert``, the same math as
 :mod:`nodes.renderer.correction`): vertex A → corrected A' (model ``none``/``flat``/``four_triangle``/``fine``)
-→ its screen point on the line eye–A' → the projector pixel that lights it (pinhole ``K``, pose ``R``,
-``position``, calibrated to the imaginary screen). Output: two RGB images of ``width × height`` projector
+→ its screen point on the line eye–A' → the projector pixel that lights it: the registered projector
+(``display.yaml``: intrinsics K_p, OpenCV distortion D, axes R and centre P in the display frame; issue 14),
+so the imaginary-screen → pixel mapping is the calibration's, not a constant. Output: two RGB images of ``width × height`` projector
 pixels (left eye at V − IPD/2·ŷ, right at V + IPD/2·ŷ: the user faces −x, so +y is the user's right).
 
 The GL context is moderngl's standalone EGL context (headless; llvmpipe on machines without a GPU), or the
@@ -13,7 +14,6 @@ output target differs. All GL calls must come from the thread that created the r
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -21,10 +21,12 @@ import numpy as np
 
 from flexsheet.model import scene
 from flexsheet.model.projector import Projector, eye_positions
+from flexsheet.model.scenes import cylinder_surface
 from flexsheet.model.sheet import SheetSurface
 from nodes.renderer.correction import DEFAULT_MIN_COS, fan_triangles
 
-__all__ = ["Projector", "StereoRenderer", "cylinder_mesh", "vertex_normals", "eye_positions", "MODE_IDS"]
+__all__ = ["Projector", "StereoRenderer", "cylinder_mesh", "scaled_projector", "vertex_normals", "eye_positions",
+           "MODE_IDS"]
 
 SHADER_DIR = Path(__file__).with_name("shaders")
 MODE_IDS = {"none": 0, "flat": 1, "four_triangle": 2, "fine": 3}
@@ -33,30 +35,28 @@ MAX_SHADER_MODES = 64
 
 def cylinder_mesh(radius: float = scene.CYLINDER_RADIUS, length: float = scene.CYLINDER_LENGTH,
                   center=scene.CYLINDER_CENTER, n_around: int = 96, n_along: int = 48):
-    """Closed cylinder with axis along +y, finely tessellated along the axis (per-vertex correction needs
-    short edges on a curved sheet). Returns (vertices (N, 3) float32 m, faces (M, 3) int32)."""
-    if n_around < 3 or n_along < 1 or radius <= 0 or length <= 0:
-        raise ValueError(f"bad cylinder: radius={radius}, length={length}, n_around={n_around}, n_along={n_along}")
-    c = np.asarray(center, dtype=float)
-    th = np.linspace(0.0, 2 * math.pi, n_around, endpoint=False)
-    ys = np.linspace(-length / 2, length / 2, n_along + 1)
-    ring = np.stack([radius * np.cos(th), np.zeros_like(th), radius * np.sin(th)], axis=1)
-    verts = [ring + [0.0, y, 0.0] for y in ys]
-    v = np.concatenate(verts) + c
-    faces = []
-    for j in range(n_along):
-        for i in range(n_around):
-            a = j * n_around + i
-            b = j * n_around + (i + 1) % n_around
-            faces += [(a, b, a + n_around), (b, b + n_around, a + n_around)]
-    base = len(v)
-    caps = np.array([c + [0.0, -length / 2, 0.0], c + [0.0, length / 2, 0.0]])
-    v = np.concatenate([v, caps])
-    for i in range(n_around):
-        faces.append((base, (i + 1) % n_around, i))
-        top = n_along * n_around
-        faces.append((base + 1, top + i, top + (i + 1) % n_around))
-    return v.astype(np.float32), np.asarray(faces, dtype=np.int32)
+    """Closed cylinder with axis along +y through ``center`` (3,) m, finely tessellated along the axis
+    (per-vertex correction needs short edges on a curved sheet): :func:`flexsheet.model.scenes.cylinder_surface`
+    (the mesh of the cylinder scene). Returns (vertices (N, 3) float32 m, faces (M, 3) int32, wound
+    counter-clockwise seen from outside). Raises ``ValueError`` for a bad size or tessellation."""
+    v, f = cylinder_surface(radius, length, n_around, n_along)
+    return (v + np.asarray(center, dtype=float)).astype(np.float32), f.astype(np.int32)
+
+
+def scaled_projector(projector: Projector, width: int | None = None, height: int | None = None) -> Projector:
+    """The same projector drawn at another resolution ``width`` × ``height`` px (None keeps its own): the
+    intrinsics scale with the pixel grid (f·s, (c + ½)·s − ½), so every pixel still maps to the same ray and
+    the image covers the same field of view. Raises ``ValueError`` for a size < 1."""
+    W = projector.width if width is None else int(width)
+    H = projector.height if height is None else int(height)
+    if W < 1 or H < 1:
+        raise ValueError(f"width/height must be >= 1, got {W}x{H}")
+    if (W, H) == (projector.width, projector.height):
+        return projector
+    sx, sy = W / projector.width, H / projector.height
+    S = np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5], [0.0, 0.0, 1.0]])
+    return Projector(S @ np.asarray(projector.K, dtype=float), np.asarray(projector.R, dtype=float).copy(),
+                     np.asarray(projector.position, dtype=float).copy(), W, H)
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -80,8 +80,9 @@ class _Uniforms:
 class StereoRenderer:
     """Stereo renderer of a triangle mesh with per-vertex correction (moderngl; headless EGL or a window's context).
 
-    ``projector``: :class:`Projector` (its width × height is the output size); ``eye`` (3,) cyclopean eye V,
-    m; ``ipd`` m; ``screen_point``/``screen_normal`` the imaginary screen; ``samples``: MSAA samples (0 =
+    ``projector``: :class:`Projector` (its width × height is the output size); ``distortion``: the projector's
+    OpenCV distortion (k1, k2, p1, p2, k3) (5,) or None (pinhole), applied per vertex exactly as
+    ``cv2.projectPoints``; ``eye`` (3,) cyclopean eye V, m; ``ipd`` m; ``screen_point``/``screen_normal`` the imaginary screen; ``samples``: MSAA samples (0 =
     off); ``ctx``: an existing moderngl context (default: a new standalone EGL context). Raises
     ``RuntimeError`` if no EGL context can be created.
     """
@@ -89,11 +90,15 @@ class StereoRenderer:
     def __init__(self, projector: Projector | None = None, *, eye=scene.EYE, ipd: float = 0.064,
                  screen_point=scene.SCREEN_POINT, screen_normal=scene.SCREEN_NORMAL, samples: int = 0,
                  min_cos: float = DEFAULT_MIN_COS, near: float = 0.05, far: float = 3.0, ctx=None,
-                 color=(1.0, 1.0, 1.0), shading: bool = True) -> None:
+                 color=(1.0, 1.0, 1.0), shading: bool = True, distortion=None) -> None:
         import moderngl
 
         self.moderngl = moderngl
         self.projector = projector or Projector.default()
+        D = np.zeros(5) if distortion is None else np.asarray(distortion, dtype=float).ravel()
+        if D.shape != (5,) or not np.all(np.isfinite(D)):
+            raise ValueError(f"distortion must be 5 finite OpenCV coefficients (k1, k2, p1, p2, k3), got {distortion!r}")
+        self.distortion = D
         self.eye = np.asarray(eye, dtype=float)
         self.ipd = float(ipd)
         self.eyes = eye_positions(self.eye, self.ipd)
@@ -110,7 +115,7 @@ class StereoRenderer:
         vs = (SHADER_DIR / "correct.vert").read_text()
         fs = (SHADER_DIR / "shade.frag").read_text()
         self.prog = ctx.program(vertex_shader=vs, fragment_shader=fs)
-        self.tf_prog = ctx.program(vertex_shader=vs, varyings=["v_corrected", "v_valid"])
+        self.tf_prog = ctx.program(vertex_shader=vs, varyings=["v_corrected", "v_valid", "v_pixel"])
         W, H = self.projector.width, self.projector.height
         self.samples = int(samples)
         self.fbo = ctx.framebuffer(color_attachments=[ctx.texture((2 * W, H), 3)],
@@ -149,6 +154,8 @@ class StereoRenderer:
         self._set("u_Kp", np.asarray(P.K, dtype=np.float32).T.copy())   # GLSL mat3 is column-major
         self._set("u_Rp", np.asarray(P.R, dtype=np.float32).T.copy())
         self._set("u_size", (float(P.width), float(P.height)))
+        self._set("u_D", self.distortion.astype(np.float32))
+        self._set("u_distort", int(bool(np.any(self.distortion != 0.0))))
         self._set("u_near", self.near)
         self._set("u_far", self.far)
         self._set("u_color", self.color, (self.prog,))
@@ -264,13 +271,25 @@ class StereoRenderer:
         Returns (corrected (N, 3) float32 m, valid (N,) bool) as the shader computed them."""
         if self.tf_vao is None:
             raise RuntimeError("set_mesh() first")
+        data = self._feedback(eye)
+        return data[:, :3].copy(), data[:, 3] > 0.5
+
+    def projector_pixels(self, eye) -> np.ndarray:
+        """The projector pixel (N, 2) float32 (x right, y down; pixel centres at integers) at which the
+        shader draws each uploaded vertex for ``eye`` (transform feedback): K_p·distort(R^T (X − P)) of the
+        vertex's screen point X, as ``cv2.projectPoints`` would give it."""
+        if self.tf_vao is None:
+            raise RuntimeError("set_mesh() first")
+        return self._feedback(eye)[:, 4:6].copy()
+
+    def _feedback(self, eye) -> np.ndarray:
         self._set("u_eye", tuple(float(x) for x in eye), (self.tf_prog,))
         self.fbo.use()                    # EGL standalone contexts need a bound framebuffer for any draw
-        out = self.ctx.buffer(reserve=self.n_vertices * 16)
+        out = self.ctx.buffer(reserve=self.n_vertices * 24)
         self.tf_vao.transform(out, mode=self.moderngl.POINTS, vertices=self.n_vertices)
-        data = np.frombuffer(out.read(), dtype=np.float32).reshape(-1, 4)
+        data = np.frombuffer(out.read(), dtype=np.float32).reshape(-1, 6)
         out.release()
-        return data[:, :3].copy(), data[:, 3] > 0.5
+        return data
 
     @property
     def texture(self):

@@ -8,6 +8,9 @@
   range of push depths (:func:`nodes.renderer.correction.predict_model_errors`), computed once at setup.
 * :func:`pick_model` — the model for a sheet: the configured one, or with ``"auto"`` the cheapest whose
   predicted error meets the accuracy target (:func:`nodes.renderer.correction.choose_model`).
+* :func:`load_geometry` — what the node draws and through which projector: the scene's object
+  (:mod:`flexsheet.model.scenes`) and the registered projector and eye (``display.yaml``,
+  :mod:`flexsheet.model.display_calib`; the nominal geometry when none is named, said so in the log).
 
 Units: m, display frame. Errors: ``ValueError`` naming the input and value (the node turns it into a counted
 rejection).
@@ -16,17 +19,19 @@ rejection).
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from flexsheet.model import scene
+from flexsheet.model.projector import Projector
+from flexsheet.model.scenes import Scene, load_scene, paper_scene
 from flexsheet.model.sheet import SheetSurface
 from nodes.renderer.correction import MODELS, choose_model, predict_model_errors
-from nodes.renderer.scene import cylinder_mesh, vertex_normals
+from nodes.renderer.scene import cylinder_mesh, scaled_projector, vertex_normals
 
 __all__ = ["RendererState", "SheetConfig", "ErrorTable", "pick_model", "check_sheet", "check_pose",
-           "silhouette_probes", "AUTO_MODELS"]
+           "silhouette_probes", "AUTO_MODELS", "RenderGeometry", "load_geometry"]
 
 #: models "auto" chooses among (cheapest first); "none" is never chosen automatically
 AUTO_MODELS = ("flat", "four_triangle", "fine")
@@ -51,11 +56,15 @@ def check_pose(name: str, T) -> np.ndarray:
     return T
 
 
-def silhouette_probes(vertices, step: int = 7) -> np.ndarray:
-    """Object points that decide the image error: every ``step``-th vertex on the user's side of the cylinder
-    axis (x > −R), (K, 3) float64 m."""
+def silhouette_probes(vertices, step: int = 7, center_x: float | None = None) -> np.ndarray:
+    """Object points that decide the image error: every ``step``-th vertex on the user's side of the object's
+    centre (x > ``center_x``; default the vertices' mean x, which is the axis x = −R for the cylinder mesh),
+    (K, 3) float64 m. Raises ``ValueError`` for an empty or non-(N, 3) array."""
     v = np.asarray(vertices, dtype=float)
-    return v[v[:, 0] > -scene.CYLINDER_RADIUS][::step]
+    if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
+        raise ValueError(f"vertices must be a non-empty (N, 3) array, got shape {v.shape}")
+    cx = float(v[:, 0].mean()) if center_x is None else float(center_x)
+    return v[v[:, 0] > cx + 1e-9][::step]
 
 
 @dataclass(frozen=True)
@@ -118,15 +127,17 @@ class RendererState:
     """The renderer's newest inputs and the sheet they give (see the module docstring); thread-safe.
 
     ``eye`` (3,) m: cyclopean eye V; ``projector`` (3,) m: light source P (the sheet must lie between them);
-    ``config``: :class:`SheetConfig`. Starts with the rigid cylinder and both clamps in the home pose.
+    ``config``: :class:`SheetConfig`; ``mesh``: the rigid object's (vertices (N, 3) m, faces (M, 3)) drawn
+    until the FEM publishes (the scene's :meth:`~flexsheet.model.scenes.Scene.surface_mesh`; default the
+    paper's cylinder). Starts with both clamps in the home pose.
     """
 
-    def __init__(self, eye, projector, config: SheetConfig = SheetConfig()) -> None:
+    def __init__(self, eye, projector, config: SheetConfig = SheetConfig(), mesh=None) -> None:
         self.eye = np.asarray(eye, dtype=float)
         self.projector = np.asarray(projector, dtype=float)
         self.config = config
         self._lock = threading.Lock()
-        v, f = cylinder_mesh()
+        v, f = cylinder_mesh() if mesh is None else (np.asarray(mesh[0], np.float32), np.asarray(mesh[1], np.int32))
         self._mesh = (v, f, vertex_normals(v, f))
         self._mesh_dirty = True
         self._mesh_stamp = 0.0
@@ -230,3 +241,67 @@ class RendererState:
             return self.last_good, f"sheet unusable ({exc}); drawing the last good sheet"
         self.last_good = sheet
         return sheet, ""
+
+
+@dataclass
+class RenderGeometry:
+    """What the renderer draws and through which projector (:func:`load_geometry`).
+
+    ``scene``: the :class:`~flexsheet.model.scenes.Scene`; ``mesh``: its surface (vertices (N, 3) float32 m,
+    faces (M, 3) int32); ``projector``: the registered :class:`Projector` at the drawing resolution;
+    ``distortion`` (5,) its OpenCV distortion; ``eye`` (3,) m the cyclopean eye V; ``ipd`` m; ``nominal``:
+    True when no ``display.yaml`` was named (code constants, nothing measured); ``log``: lines for the node's
+    log (where each part came from)."""
+
+    scene: Scene
+    mesh: tuple[np.ndarray, np.ndarray]
+    projector: Projector
+    distortion: np.ndarray
+    eye: np.ndarray
+    ipd: float
+    nominal: bool
+    log: list[str] = field(default_factory=list)
+
+
+def load_geometry(scene_file: str | None = None, display_calib: str | None = None, width: int | None = None,
+                  height: int | None = None) -> RenderGeometry:
+    """The renderer's geometry: the object of ``scene_file`` (None: the paper's cylinder,
+    :func:`~flexsheet.model.scenes.paper_scene`) and the projector (K_p, D, pose, size) and eye (V, ipd) of
+    ``display_calib`` (``display.yaml``; None: :func:`~flexsheet.model.display_calib.nominal_display_calib`,
+    flagged ``nominal``). ``width``/``height`` px draw the same projector at another resolution
+    (:func:`~nodes.renderer.scene.scaled_projector`; None: the calibrated size).
+
+    The imaginary screen → projector pixel mapping is then the calibration's: K_p, D and the pose from the
+    file, nothing from constants (issue 14). An eye in ``tracked`` mode is drawn from its fixed fallback V
+    (no tracked-eye topic exists yet; the log says so). Raises ``ValueError`` naming the file and key: scene
+    invalid, display.yaml unreadable or without its ``projector`` or ``eye`` entry.
+    """
+    from flexsheet.model.display_calib import load_display_calib, nominal_display_calib
+
+    log = []
+    sc = paper_scene() if not scene_file else load_scene(scene_file)
+    log.append(f"drawing {sc.describe()}")
+    if display_calib:
+        dc = load_display_calib(display_calib, require=("projector", "eye"))
+        nominal = False
+    else:
+        dc = nominal_display_calib()
+        nominal = True
+    pe, ee = dc.projector, dc.eye
+    proj = scaled_projector(pe.projector(), width, height)
+    if nominal:
+        log.append("display_calib not set: using the NOMINAL projector and eye (code constants, nothing measured; "
+                   "name a display.yaml in the launch file's display_calib: once `flexsheet calibrate` has run)")
+    else:
+        P = pe.position
+        log.append(f"projector from {display_calib} ({pe.provenance.source}, {pe.provenance.measured_at}): "
+                   f"{pe.width}x{pe.height} px, f {pe.K[0, 0]:.1f}/{pe.K[1, 1]:.1f} px, "
+                   f"P {np.round(P * 1e3, 1).tolist()} mm; eye V {np.round(ee.V * 1e3, 1).tolist()} mm, "
+                   f"ipd {ee.ipd * 1e3:.1f} mm ({ee.provenance.source})")
+    if (proj.width, proj.height) != (pe.width, pe.height):
+        log.append(f"drawing the {pe.width}x{pe.height} projector at {proj.width}x{proj.height} px (K rescaled)")
+    if ee.mode == "tracked":
+        log.append("eye mode tracked: no tracked-eye input reaches the renderer yet; drawing for the fixed "
+                   f"fallback V {np.round(ee.V * 1e3, 1).tolist()} mm")
+    return RenderGeometry(sc, sc.surface_mesh(), proj, np.asarray(pe.D, float).ravel().copy(),
+                          np.asarray(ee.V, float).copy(), float(ee.ipd), nominal, log)

@@ -9,9 +9,9 @@ truth (:class:`flexsheet.model.truth.TwinTruth`, param ``twin: {realism, truth_s
   bridge's model in ``ArmJointState.pose``), and the pushed sheet's shape is the nonlinear membrane FEM of
   :mod:`flexsheet.model.sheet_fem` with the truth's Young's modulus, pre-strain and tension ratio
   (:mod:`nodes.world.physics`); published on ``/world/sheet`` (``membrane``: the deflection on a G×G grid).
-  The FEM tables are cached on disk per truth and clamp strain; a missing one is built in a worker process
-  at low priority (``sheet_fem.wait``: hold the script until the first one is ready). Until then a pushed
-  sheet is published with its depth but a flat ``membrane`` (logged).
+  The FEM tables are cached on disk per truth and clamp strain; a missing one is built in a niced worker
+  process when a push first needs it (``sheet_fem.wait``: build the expected one before the script starts).
+  Until it is ready a pushed sheet is published with its depth but a flat ``membrane`` (logged once).
 * Progress: one line every ``progress_period`` s; when the script ends the node exits, which ends a launch
   in which it is ``required`` (then the launch's report runs, see :mod:`flexsheet.experiments.report`).
   ``loop: true`` repeats the script until Ctrl-C (interactive mode).
@@ -52,8 +52,9 @@ class TwinParams(BaseModel):
 
 class SheetFemParams(BaseModel):
     """The true sheet's FEM tables (:mod:`nodes.world.physics`): ``stretch_step`` clamp strain between tables;
-    ``expected_stretch`` the table built first, at start (the planner's default stiffness asks ≈ 0.04);
-    ``wait``: hold the script until that table is ready (first run of a truth seed: minutes; then cached);
+    ``expected_stretch`` the table loaded (or, with ``wait``, built) at start (the planner's default stiffness
+    asks ≈ 0.04); ``wait``: build that table before the script starts (first run of a truth seed: minutes;
+    then cached) — without it a missing table is built only when a push needs it;
     ``h_fine``/``h_coarse`` m element sizes; ``cache_dir`` (default ``$FLEXSHEET_CACHE/sheet_fem`` or
     ``~/.cache/flexsheet/sheet_fem``); ``worker_nice``: niceness of the worker process that builds tables."""
 
@@ -135,7 +136,7 @@ class WorldNode(Node):
         self.subscribe(T.ARM_LEFT_STATE, self.on_arm, qos=QoS.LATEST)
         self.subscribe(T.ARM_RIGHT_STATE, self.on_arm, qos=QoS.LATEST)
         first = self.phys.node_of(p.sheet_fem.expected_stretch)
-        if not self.phys.try_load(first):
+        if not self.phys.try_load(first) and p.sheet_fem.wait:
             self._start_build(first)
         self.t0: float | None = None
         self._arm_t0()
@@ -201,6 +202,10 @@ class WorldNode(Node):
         return -1, t
 
     def tick_finger(self) -> None:
+        if self.t0 is None and time.monotonic() - self.last_progress >= self.params.progress_period:
+            self.last_progress = time.monotonic()
+            self.log.info("waiting for the true sheet's FEM table (clamp strain %s) before the script starts",
+                          self._building)
         t = -1.0 if self.t0 is None else time.monotonic() - self.t0
         if t < 0:
             i, ts = 0, 0.0
@@ -238,7 +243,8 @@ class WorldNode(Node):
         except ValueError as exc:      # e.g. the two true clamps coincide: no sheet to publish
             self.log.warning("no sheet state: %s", exc)
             return
-        self._poll_build(self.phys.missing_node(stretch) if self._worker is None else None)
+        pushed_now = -float((np.asarray(self.finger, float) - sheet.origin) @ sheet.normal) > 0.0
+        self._poll_build(self.phys.missing_node(stretch) if (pushed_now and self._worker is None) else None)
         g = p.membrane_grid
         if sheet.membrane is not None:
             grid, depth, pushed = sheet.membrane.grid(g), float(sheet.membrane.depth), sheet.pushed_point

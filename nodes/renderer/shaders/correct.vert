@@ -36,6 +36,8 @@ uniform float u_coef[64];
 uniform mat3 u_Kp;           // intrinsics, px
 uniform mat3 u_Rp;           // columns: projector x, y, z axes in the display frame
 uniform vec2 u_size;         // (W, H) px
+uniform float u_D[5];        // OpenCV distortion k1, k2, p1, p2, k3 (display.yaml projector.D)
+uniform int u_distort;       // 0: pinhole (D = 0)
 uniform float u_near;
 uniform float u_far;
 
@@ -43,6 +45,7 @@ out vec3 v_corrected;
 out float v_valid;
 out vec3 v_normal;
 out vec3 v_world;
+out vec2 v_pixel;            // projector pixel (transform feedback: tests compare it with cv2.projectPoints)
 
 // w, dw/du, dw/dv of the membrane (overflow-free Green's function)
 vec3 membrane(float u, float v) {
@@ -153,8 +156,17 @@ void main() {
     float s = dot(u_ro - u_eye, u_no) / dot(dva, u_no);
     vec3 x = u_eye + s * dva;
     vec3 pc = transpose(u_Rp) * (x - u_proj);
-    vec3 pix = u_Kp * pc;
+    vec2 xn = pc.xy / pc.z;
+    if (u_distort == 1) {    // OpenCV's model (cv::projectPoints): radial k1 k2 k3, tangential p1 p2
+        float r2 = dot(xn, xn);
+        float radial = 1.0 + r2 * (u_D[0] + r2 * (u_D[1] + r2 * u_D[4]));
+        float xy = xn.x * xn.y;
+        xn = xn * radial + vec2(2.0 * u_D[2] * xy + u_D[3] * (r2 + 2.0 * xn.x * xn.x),
+                                u_D[2] * (r2 + 2.0 * xn.y * xn.y) + 2.0 * u_D[3] * xy);
+    }
+    vec3 pix = u_Kp * vec3(xn, 1.0);
     vec2 uv = pix.xy / pix.z;
+    v_pixel = uv;
     float dist = dot(u_eye - in_pos, u_no);
     gl_Position = vec4((2.0 * uv.x + 1.0) / u_size.x - 1.0,
                        1.0 - (2.0 * uv.y + 1.0) / u_size.y,

@@ -1,0 +1,803 @@
+"""Scene files: the virtual object the display presents — its shape and pose, material, support, the finger and
+the stroke path (pure: numpy, pydantic, PyYAML, trimesh).
+
+A scene is a YAML file beside the launch files (``launch/scenes/*.yaml``; docs/scenes.md)::
+
+    name: cylinder
+    description: the paper's cylinder (§VI-A)
+    object:                       # kind: cylinder | sphere | rounded_box | mesh
+      kind: cylinder
+      radius: 0.035355339059327376
+      length: 0.12
+      pose: {position: [-0.035355339059327376, 0.0, 0.0], rpy_deg: [0, 0, 0]}
+    material: {model: neo_hookean, E: 10000.0, nu: 0.45}
+    support: {kind: back_half}    # or {kind: half_space, point: [...], normal: [...]}
+    finger: {radius: 0.008}
+    stroke: {kind: arc, start: [1, 0, 0], toward: [0, 0, 1], start_deg: 0, end_deg: 60}
+    inclusions: []                # stiffer spheres inside: [{name, center, radius, E, nu}]
+
+Frames and units: every position is in the ``display`` frame (:mod:`flexsheet.model.scene`), m; moduli Pa;
+angles in degrees where the key says ``_deg``. An object's local frame is placed by ``pose``: display point
+= R·local + position with R = Rz(yaw)·Ry(pitch)·Rx(roll) from ``rpy_deg`` (the convention of
+:class:`flexsheet.model.shapes.RoundedBox`). Local frames: cylinder axis +y, centred; sphere centred; rounded
+box centred, axis-aligned; a mesh file's own coordinates (× ``scale``, to m). The pose position is the
+object's *centre*: it must lie inside the body (the back-half support and arc strokes are defined from it).
+
+What each consumer calls:
+
+* renderer / viz: :meth:`Scene.surface_mesh` → (vertices (N, 3) float32 m, faces (M, 3) int32), closed,
+  outward-wound;
+* planner: :meth:`Scene.shape` → the :class:`flexsheet.model.shapes.Shape` (analytic where it can be);
+* FEM: :meth:`Scene.write_surface` (a surface file gmsh can mesh), :meth:`Scene.fixed_mask` (support),
+  :meth:`Scene.material_at` (E, ν per point: the inclusions), ``scene.material.model``, :meth:`Scene.key`
+  (cache key); ``scene.finger.radius``;
+* world / experiments: :meth:`Scene.stroke_at` (points and normals at fractions of the path's arc length),
+  :meth:`Scene.stroke_points` (n evenly spaced), :meth:`Scene.stroke_length`.
+
+Errors: :class:`SceneError` (a ``ValueError``) naming the file, the key and the value.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+import yaml
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PrivateAttr,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+from flexsheet.model import scene as paper
+
+__all__ = ["SceneError", "Pose", "CylinderObject", "SphereObject", "RoundedBoxObject", "MeshObject", "Material",
+           "Support", "Finger", "ArcStroke", "PolylineStroke", "Inclusion", "Scene", "load_scene", "parse_scene",
+           "paper_scene", "cylinder_surface", "rotation_rpy", "SCENES_DIR", "DEFAULT_SCENE_FILE", "MAX_SCENE_BYTES",
+           "MAX_EXTENT"]
+
+#: the shipped scenes (launch/scenes/ in the repository)
+SCENES_DIR = Path(__file__).resolve().parents[2] / "launch" / "scenes"
+#: the default scene: the paper's cylinder
+DEFAULT_SCENE_FILE = SCENES_DIR / "cylinder.yaml"
+MAX_SCENE_BYTES = 1 << 20
+MAX_MESH_BYTES = 32 << 20
+#: every surface point must lie within this distance of the display origin, m (the sheet is 240 mm square
+#: and the arms reach ±60° tilts around objects of the cylinder's size)
+MAX_EXTENT = 0.25
+
+Vec3 = tuple[float, float, float]
+_CFG = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class SceneError(ValueError):
+    """A scene file or value is invalid; the message names the file, the key and the value."""
+
+
+def rotation_rpy(rpy_deg) -> np.ndarray:
+    """R (3, 3) = Rz(yaw)·Ry(pitch)·Rx(roll) from (roll, pitch, yaw) in degrees; columns = local x, y, z axes
+    in the display frame (the convention of :class:`flexsheet.model.shapes.RoundedBox`)."""
+    r, p, y = np.radians(np.asarray(rpy_deg, dtype=float))
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    Rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    Ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+    return Rz @ Ry @ Rx
+
+
+def _nonzero(v: Vec3) -> Vec3:
+    if float(np.linalg.norm(v)) <= 1e-12:
+        raise ValueError(f"must be a non-zero vector, got {list(v)}")
+    return v
+
+
+# ----------------------------------------------------------------------------------------------- the schema
+class Pose(BaseModel):
+    """Placement of the object's local frame: ``position`` (3,) m (the object's centre, display frame) and
+    ``rpy_deg`` (roll, pitch, yaw) degrees."""
+
+    model_config = _CFG
+    position: Vec3
+    rpy_deg: Vec3 = (0.0, 0.0, 0.0)
+
+    @property
+    def R(self) -> np.ndarray:
+        """Rotation (3, 3), local → display."""
+        return rotation_rpy(self.rpy_deg)
+
+    def apply(self, local) -> np.ndarray:
+        """Display-frame points (N, 3) float64 of local points (N, 3)."""
+        return np.asarray(local, dtype=float) @ self.R.T + np.asarray(self.position, dtype=float)
+
+
+class CylinderObject(BaseModel):
+    """Capped circular cylinder: ``radius``, ``length`` m; local axis +y."""
+
+    model_config = _CFG
+    kind: Literal["cylinder"]
+    radius: float = Field(gt=0.0, le=0.2, description="m")
+    length: float = Field(gt=0.0, le=0.4, description="m")
+    pose: Pose
+
+
+class SphereObject(BaseModel):
+    """Sphere of ``radius`` m."""
+
+    model_config = _CFG
+    kind: Literal["sphere"]
+    radius: float = Field(gt=0.0, le=0.2, description="m")
+    pose: Pose
+
+
+class RoundedBoxObject(BaseModel):
+    """Box of outer ``half_extents`` (3,) m with edges rounded by ``radius`` m (0: sharp; ≤ the smallest
+    half extent)."""
+
+    model_config = _CFG
+    kind: Literal["rounded_box"]
+    half_extents: Vec3
+    radius: float = Field(0.0, ge=0.0, description="edge radius, m")
+    pose: Pose
+
+    @field_validator("half_extents")
+    @classmethod
+    def _positive(cls, v: Vec3) -> Vec3:
+        if min(v) <= 0.0 or max(v) > 0.2:
+            raise ValueError(f"must be 3 half extents in (0, 0.2] m, got {list(v)}")
+        return v
+
+    @model_validator(mode="after")
+    def _radius_fits(self) -> RoundedBoxObject:
+        if self.radius > min(self.half_extents):
+            raise ValueError(f"radius {self.radius} m is larger than the smallest half extent "
+                             f"{min(self.half_extents)} m")
+        return self
+
+
+class MeshObject(BaseModel):
+    """A closed surface mesh file (OBJ, STL, PLY, OFF… through trimesh; other formats through meshio), path
+    relative to the scene file; ``scale`` converts its units to m (0.001 for a file in mm)."""
+
+    model_config = _CFG
+    kind: Literal["mesh"]
+    file: str = Field(min_length=1)
+    scale: float = Field(1.0, gt=0.0)
+    pose: Pose = Pose(position=(0.0, 0.0, 0.0))
+
+
+ObjectSpec = Annotated[CylinderObject | SphereObject | RoundedBoxObject | MeshObject, Field(discriminator="kind")]
+
+
+class Material(BaseModel):
+    """Hyperelastic material of the object: ``model`` (``neo_hookean``, the default, or ``linear`` small-strain
+    elasticity), Young's modulus ``E`` Pa and Poisson's ratio ``nu`` (the small-strain limits of the
+    neo-Hookean law: μ = E/(2(1+ν)), λ = Eν/((1+ν)(1−2ν)))."""
+
+    model_config = _CFG
+    model: Literal["neo_hookean", "linear"] = "neo_hookean"
+    E: float = Field(10e3, gt=0.0, le=1e9, description="Pa")
+    nu: float = Field(0.45, ge=0.0, lt=0.5)
+
+
+class Support(BaseModel):
+    """How the object rests: boundary points with (p − point)·normal ≤ ``tolerance`` are fixed.
+
+    ``back_half``: ``point`` = the object's centre, ``normal`` = +x (toward the user) — the half of the surface
+    away from the user is held (the paper's cylinder lying on its back; the FEM's original rule).
+    ``half_space``: explicit ``point`` (3,) m and ``normal`` (3,) (e.g. a base face: a point on it, normal
+    pointing into the body)."""
+
+    model_config = _CFG
+    kind: Literal["back_half", "half_space"] = "back_half"
+    point: Vec3 | None = None
+    normal: Vec3 = (1.0, 0.0, 0.0)
+    tolerance: float = Field(1e-9, ge=0.0, le=0.05, description="m")
+
+    @field_validator("normal")
+    @classmethod
+    def _normal(cls, v: Vec3) -> Vec3:
+        return _nonzero(v)
+
+    @model_validator(mode="after")
+    def _point(self) -> Support:
+        if self.kind == "half_space" and self.point is None:
+            raise ValueError("kind half_space needs a point")
+        if self.kind == "back_half" and self.point is not None:
+            raise ValueError("kind back_half takes its point from the object's centre; use half_space")
+        return self
+
+
+class Finger(BaseModel):
+    """The user's fingertip as the FEM and the world see it: a sphere of ``radius`` m."""
+
+    model_config = _CFG
+    radius: float = Field(0.008, ge=0.001, le=0.03, description="m")
+
+
+class ArcStroke(BaseModel):
+    """A stroke swept by a ray from ``center`` (default: the object's centre) whose direction turns from
+    ``start`` (angle 0) toward ``toward`` (angle 90°) between ``start_deg`` and ``end_deg``; each ray's exit
+    from the body is a point of the path. The paper's stroke: start +x (facing the user), toward +z, 0–60°."""
+
+    model_config = _CFG
+    kind: Literal["arc"]
+    center: Vec3 | None = None
+    start: Vec3 = (1.0, 0.0, 0.0)
+    toward: Vec3 = (0.0, 0.0, 1.0)
+    start_deg: float = Field(0.0, ge=-360.0, le=360.0)
+    end_deg: float = Field(60.0, ge=-360.0, le=360.0)
+
+    @field_validator("start", "toward")
+    @classmethod
+    def _dir(cls, v: Vec3) -> Vec3:
+        return _nonzero(v)
+
+    @model_validator(mode="after")
+    def _frame(self) -> ArcStroke:
+        a, b = np.asarray(self.start, float), np.asarray(self.toward, float)
+        if np.linalg.norm(np.cross(a, b)) <= 1e-6 * np.linalg.norm(a) * np.linalg.norm(b):
+            raise ValueError(f"start {list(self.start)} and toward {list(self.toward)} are parallel")
+        if abs(self.end_deg - self.start_deg) < 1e-6:
+            raise ValueError(f"end_deg equals start_deg ({self.start_deg}): an empty stroke")
+        return self
+
+    def basis(self) -> tuple[np.ndarray, np.ndarray]:
+        """(e0, e1): unit directions at angles 0 and 90° (Gram–Schmidt of ``start``, ``toward``)."""
+        e0 = np.asarray(self.start, float) / np.linalg.norm(self.start)
+        t = np.asarray(self.toward, float)
+        e1 = t - (t @ e0) * e0
+        return e0, e1 / np.linalg.norm(e1)
+
+
+class PolylineStroke(BaseModel):
+    """A stroke through ``points`` (≥ 2, (3,) m each, display frame, outside the body, e.g. just in front of
+    the surface); the straight segments between them are projected onto the surface (closest point)."""
+
+    model_config = _CFG
+    kind: Literal["polyline"]
+    points: list[Vec3] = Field(min_length=2, max_length=256)
+
+    @field_validator("points")
+    @classmethod
+    def _distinct(cls, v: list[Vec3]) -> list[Vec3]:
+        p = np.asarray(v, float)
+        seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        if np.any(seg < 1e-6):
+            i = int(np.argmin(seg))
+            raise ValueError(f"points {i} and {i + 1} coincide ({list(v[i])})")
+        return v
+
+
+StrokeSpec = Annotated[ArcStroke | PolylineStroke, Field(discriminator="kind")]
+
+
+class Inclusion(BaseModel):
+    """A stiffer sphere inside the body (a "tumour" palpation should find): ``center`` (3,) m, ``radius`` m,
+    ``E`` Pa, ``nu`` (None: the body's)."""
+
+    model_config = _CFG
+    name: str = "inclusion"
+    center: Vec3
+    radius: float = Field(gt=0.0, le=0.1, description="m")
+    E: float = Field(gt=0.0, le=1e9, description="Pa")
+    nu: float | None = Field(None, ge=0.0, lt=0.5)
+
+
+# ----------------------------------------------------------------------------------------------- the scene
+class Scene(BaseModel):
+    """One scene (module doc). Build with :func:`load_scene`, :func:`parse_scene` or :func:`paper_scene`;
+    the geometry (mesh, shape, stroke) is computed on first use and cached."""
+
+    model_config = _CFG
+    name: str = Field(min_length=1, max_length=64)
+    description: str = ""
+    object: ObjectSpec
+    material: Material = Material()
+    support: Support = Support()
+    finger: Finger = Finger()
+    stroke: StrokeSpec = ArcStroke(kind="arc")
+    inclusions: list[Inclusion] = Field(default_factory=list, max_length=16)
+
+    _source: str = PrivateAttr("<scene>")
+    _base_dir: Path = PrivateAttr(Path("."))
+    _mesh: object = PrivateAttr(None)
+    _shape: object = PrivateAttr(None)
+    _table: object = PrivateAttr(None)
+    _cnormals: object = PrivateAttr(None)
+
+    # ------------------------------------------------------------------ identity
+    @property
+    def source(self) -> str:
+        """The file the scene was read from (or ``<paper>`` / ``<dict>``)."""
+        return self._source
+
+    @property
+    def center(self) -> np.ndarray:
+        """The object's centre (3,) m, display frame (the pose position)."""
+        return np.asarray(self.object.pose.position, dtype=float)
+
+    @property
+    def mesh_path(self) -> Path | None:
+        """Absolute path of a mesh object's file (None for analytic kinds)."""
+        if self.object.kind != "mesh":
+            return None
+        p = Path(os.path.expanduser(self.object.file))
+        return p if p.is_absolute() else (self._base_dir / p).resolve()
+
+    def key(self) -> str:
+        """SHA-256 hex of the scene's values and its mesh file's bytes: a cache key for precomputed FEM data."""
+        h = hashlib.sha256(self.model_dump_json().encode())
+        if self.mesh_path is not None:
+            h.update(self.mesh_path.read_bytes())
+        return h.hexdigest()
+
+    def describe(self) -> str:
+        """One line for logs: name, kind, size, material, inclusions, source file."""
+        o = self.object
+        size = {"cylinder": lambda: f"R {o.radius * 1e3:.1f} mm x {o.length * 1e3:.0f} mm",
+                "sphere": lambda: f"R {o.radius * 1e3:.1f} mm",
+                "rounded_box": lambda: "half extents " + "x".join(f"{e * 1e3:.0f}" for e in o.half_extents)
+                                       + f" mm, edge {o.radius * 1e3:.0f} mm",
+                "mesh": lambda: f"{Path(o.file).name} x{o.scale:g}"}[o.kind]()
+        m = self.material
+        inc = f", {len(self.inclusions)} inclusion(s)" if self.inclusions else ""
+        return (f"scene {self.name!r} ({self._source}): {o.kind} {size}, {m.model} E {m.E / 1e3:g} kPa "
+                f"nu {m.nu:g}{inc}")
+
+    # ------------------------------------------------------------------ geometry
+    def trimesh(self):
+        """The surface as a ``trimesh.Trimesh`` in the display frame, m (closed, outward normals; cached)."""
+        if self._mesh is None:
+            self._mesh = _build_mesh(self)
+        return self._mesh
+
+    def surface_mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """The object's closed surface for the renderer and the viewer: (vertices (N, 3) float32 m, display
+        frame; faces (M, 3) int32, counter-clockwise seen from outside). Tessellation: cylinder 96 × 48
+        (the renderer's historical mesh), sphere icosphere level 4, rounded box ≈ 3 mm faces with 6 steps
+        per rounded edge, mesh files as given."""
+        m = self.trimesh()
+        return np.asarray(m.vertices, dtype=np.float32), np.asarray(m.faces, dtype=np.int32)
+
+    def write_surface(self, path: str | os.PathLike) -> str:
+        """Write :meth:`surface_mesh` to ``path`` (format from the suffix: .stl, .obj, .ply; trimesh), for
+        gmsh (``gmsh.merge`` + ``classifySurfaces`` + ``createGeometry``). Returns the path as a string."""
+        path = str(path)
+        self.trimesh().export(path)
+        return path
+
+    def shape(self):
+        """The planner's :class:`flexsheet.model.shapes.Shape` (analytic for cylinder/sphere/rounded box,
+        :class:`~flexsheet.model.shapes.MeshShape` for a mesh; cached)."""
+        if self._shape is None:
+            from flexsheet.model import shapes
+
+            o = self.object
+            R = o.pose.R
+            if o.kind == "cylinder":
+                self._shape = shapes.Cylinder(tuple(self.center), tuple(R[:, 1]), o.radius, o.length)
+            elif o.kind == "sphere":
+                self._shape = shapes.Sphere(tuple(self.center), o.radius)
+            elif o.kind == "rounded_box":
+                self._shape = shapes.RoundedBox(tuple(self.center), o.half_extents, o.radius,
+                                                tuple(math.radians(a) for a in o.pose.rpy_deg))
+            else:
+                self._shape = shapes.MeshShape(self.trimesh())
+        return self._shape
+
+    def signed_distance(self, points) -> np.ndarray:
+        """Signed distance (N,) m of points (N, 3) m to the surface, < 0 inside (the analytic shape's, or the
+        mesh's through trimesh)."""
+        p = np.atleast_2d(np.asarray(points, dtype=float))
+        if self.object.kind == "mesh":
+            import trimesh
+
+            return -trimesh.proximity.signed_distance(self.trimesh(), p)    # trimesh: > 0 inside
+        s = self.shape()
+        return np.array([s.signed_distance(tuple(q)) for q in p])
+
+    def contains(self, points) -> np.ndarray:
+        """(N,) bool: points (N, 3) m strictly inside the body."""
+        return self.signed_distance(points) < 0.0
+
+    def surface_point(self, points) -> tuple[np.ndarray, np.ndarray]:
+        """Closest surface points (N, 3) m and outward unit normals (N, 3) of points (N, 3) m (mesh: normals
+        interpolated from the vertex normals, so they vary smoothly along a path)."""
+        p = np.atleast_2d(np.asarray(points, dtype=float))
+        if self.object.kind == "mesh":
+            return self._mesh_closest(p)
+        s = self.shape()
+        q, n = [], []
+        for x in p:
+            qi, ni, _ = s.closest(tuple(x))
+            q.append(qi)
+            n.append(ni)
+        return np.asarray(q, dtype=float), np.asarray(n, dtype=float)
+
+    def _mesh_closest(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        import trimesh
+
+        m = self.trimesh()
+        q, _, tri = trimesh.proximity.closest_point(m, p)
+        if self._cnormals is None:
+            self._cnormals = _corner_normals(m)
+        bary = trimesh.triangles.points_to_barycentric(m.triangles[tri], q)
+        n = np.einsum("ij,ijk->ik", bary, self._cnormals[tri])
+        return q, n / np.linalg.norm(n, axis=1, keepdims=True)
+
+    # ------------------------------------------------------------------ FEM helpers
+    def fixed_mask(self, points) -> np.ndarray:
+        """(N,) bool: which of the points (N, 3) m (boundary nodes) the support holds (:class:`Support`)."""
+        p = np.atleast_2d(np.asarray(points, dtype=float))
+        s = self.support
+        point = self.center if s.kind == "back_half" else np.asarray(s.point, float)
+        n = np.asarray(s.normal, float) / np.linalg.norm(s.normal)
+        return (p - point) @ n <= s.tolerance
+
+    def material_at(self, points) -> tuple[np.ndarray, np.ndarray]:
+        """(E (N,) Pa, nu (N,)) at points (N, 3) m (e.g. element centroids): the body's material, replaced by
+        an inclusion's inside it (later inclusions win where they overlap)."""
+        p = np.atleast_2d(np.asarray(points, dtype=float))
+        E = np.full(len(p), self.material.E)
+        nu = np.full(len(p), self.material.nu)
+        for inc in self.inclusions:
+            inside = np.linalg.norm(p - np.asarray(inc.center, float), axis=1) <= inc.radius
+            E[inside] = inc.E
+            nu[inside] = self.material.nu if inc.nu is None else inc.nu
+        return E, nu
+
+    # ------------------------------------------------------------------ stroke
+    def _stroke_raw(self, s: np.ndarray) -> np.ndarray:
+        """Surface points (N, 3) at the stroke's own parameter ``s`` ∈ [0, 1] (not arc length)."""
+        st = self.stroke
+        if st.kind == "arc":
+            c = self.center if st.center is None else np.asarray(st.center, float)
+            e0, e1 = st.basis()
+            ang = np.radians(st.start_deg + s * (st.end_deg - st.start_deg))
+            w = np.cos(ang)[:, None] * e0 + np.sin(ang)[:, None] * e1
+            return self._ray_exits(c, w)
+        pts = np.asarray(st.points, float)
+        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        t = np.clip(s, 0.0, 1.0) * cum[-1]
+        x = np.column_stack([np.interp(t, cum, pts[:, k]) for k in range(3)])
+        return self.surface_point(x)[0]
+
+    def _ray_exits(self, c: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """Where rays from ``c`` (inside) along unit ``w`` (N, 3) first leave the body, (N, 3) m."""
+        if self.object.kind == "mesh":
+            m = self.trimesh()
+            loc, ray, _ = m.ray.intersects_location(np.repeat(c[None], len(w), 0), w, multiple_hits=True)
+            out = np.full((len(w), 3), np.nan)
+            d = np.einsum("ij,ij->i", loc - c, w[ray])
+            for i in range(len(w)):
+                k = np.flatnonzero((ray == i) & (d > 0))
+                if len(k):
+                    out[i] = loc[k[np.argmin(d[k])]]
+            if np.isnan(out).any():
+                raise ValueError(f"a stroke ray from {c.round(4).tolist()} does not leave the mesh")
+            return out
+        shape = self.shape()
+        hi0 = float(np.max(np.linalg.norm(self.trimesh().vertices - c, axis=1))) * 1.1 + 1e-3
+        out = np.empty((len(w), 3))
+        for i, d in enumerate(w):
+            lo, hi = 0.0, hi0
+            for _ in range(48):                          # bisection on the signed distance: hi0 / 2^48 < 1e-15 m
+                mid = 0.5 * (lo + hi)
+                if shape.signed_distance(tuple(c + mid * d)) < 0.0:
+                    lo = mid
+                else:
+                    hi = mid
+            out[i] = c + 0.5 * (lo + hi) * d
+        return out
+
+    def _stroke_table(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._table is None:
+            s = np.linspace(0.0, 1.0, 513)
+            q = self._stroke_raw(s)
+            L = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))])
+            self._table = (s, L)
+        return self._table
+
+    def stroke_length(self) -> float:
+        """Length of the stroke path on the surface, m (512 chords)."""
+        return float(self._stroke_table()[1][-1])
+
+    def stroke_at(self, fraction) -> tuple[np.ndarray, np.ndarray]:
+        """Points (N, 3) m on the surface and outward unit normals (N, 3) at ``fraction`` (N,) ∈ [0, 1] of the
+        stroke's arc length (0: start, 1: end). Raises ``ValueError`` for values outside [0, 1] or NaN."""
+        f = np.atleast_1d(np.asarray(fraction, dtype=float))
+        if not np.all(np.isfinite(f)) or f.min(initial=0.0) < 0.0 or f.max(initial=0.0) > 1.0:
+            raise ValueError(f"fraction must be in [0, 1], got {np.round(f, 6).tolist()[:8]}")
+        s_tab, L = self._stroke_table()
+        s = np.interp(f * L[-1], L, s_tab)
+        return self.surface_point(self._stroke_raw(s))
+
+    def stroke_points(self, n: int = 64) -> tuple[np.ndarray, np.ndarray]:
+        """``n`` ≥ 2 points (n, 3) m evenly spaced by arc length along the stroke, on the surface, with their
+        outward unit normals (n, 3); display frame."""
+        if int(n) < 2:
+            raise ValueError(f"n must be >= 2, got {n!r}")
+        return self.stroke_at(np.linspace(0.0, 1.0, int(n)))
+
+    # ------------------------------------------------------------------ checks
+    def check_geometry(self) -> Scene:
+        """Check what the schema cannot: the mesh loads and is closed, the object lies within
+        :data:`MAX_EXTENT` of the display origin, the centre is inside the body, every inclusion lies inside
+        it, the stroke can be traced. Raises :class:`SceneError` naming the file and the key; returns self."""
+        src = self._source
+        try:
+            m = self.trimesh()
+        except (ValueError, OSError) as exc:
+            raise SceneError(f"{src}: key 'object.file': {exc}") from None
+        far = float(np.max(np.linalg.norm(m.vertices, axis=1)))
+        if far > MAX_EXTENT:
+            raise SceneError(f"{src}: key 'object.pose': position {list(self.object.pose.position)} puts the "
+                             f"object {far * 1e3:.0f} mm from the display origin; the display presents objects "
+                             f"within {MAX_EXTENT * 1e3:.0f} mm")
+        if not self.contains(self.center[None])[0]:
+            raise SceneError(f"{src}: key 'object.pose.position': the object's centre "
+                             f"{np.round(self.center, 5).tolist()} is not inside the body")
+        for i, inc in enumerate(self.inclusions):
+            d = float(self.signed_distance(np.asarray(inc.center, float)[None])[0])
+            if d > -inc.radius:
+                raise SceneError(f"{src}: key 'inclusions.{i}.center': inclusion {inc.name!r} (radius "
+                                 f"{inc.radius * 1e3:.1f} mm) is not inside the body: its centre "
+                                 f"{list(inc.center)} is {-d * 1e3:.1f} mm deep")
+        st = self.stroke
+        if st.kind == "arc" and st.center is not None and not self.contains(np.asarray(st.center, float)[None])[0]:
+            raise SceneError(f"{src}: key 'stroke.center': {list(st.center)} is not inside the body")
+        if st.kind == "polyline":
+            bad = np.flatnonzero(self.contains(np.asarray(st.points, float)))
+            if len(bad):
+                i = int(bad[0])
+                raise SceneError(f"{src}: key 'stroke.points.{i}': {list(st.points[i])} is inside the body; give "
+                                 "points in front of the surface (they are projected onto it)")
+        try:
+            self._stroke_table()
+        except ValueError as exc:
+            raise SceneError(f"{src}: key 'stroke': {exc}") from None
+        return self
+
+
+# ----------------------------------------------------------------------------------------------- meshes
+def cylinder_surface(radius: float, length: float, n_around: int = 96, n_along: int = 48):
+    """Closed cylinder in its local frame (axis +y, centred), fine along the axis (per-vertex image correction
+    needs short edges): rings of ``n_around`` vertices at ``n_along`` + 1 heights, caps as fans around their
+    centres. Returns (vertices (N, 3) float64 m, faces (M, 3) int64, outward winding)."""
+    if n_around < 3 or n_along < 1 or not radius > 0 or not length > 0:
+        raise ValueError(f"bad cylinder: radius={radius}, length={length}, n_around={n_around}, n_along={n_along}")
+    th = np.linspace(0.0, 2 * math.pi, n_around, endpoint=False)
+    ys = np.linspace(-length / 2, length / 2, n_along + 1)
+    ring = np.stack([radius * np.cos(th), np.zeros_like(th), radius * np.sin(th)], axis=1)
+    v = np.concatenate([ring + [0.0, y, 0.0] for y in ys])
+    i = np.arange(n_around)
+    j = np.arange(n_along)[:, None]
+    a = j * n_around + i
+    b = j * n_around + (i + 1) % n_around
+    side = np.stack([np.stack([a, b, a + n_around], -1), np.stack([b, b + n_around, a + n_around], -1)], 2)
+    base = len(v)
+    top = n_along * n_around
+    caps = np.stack([np.stack([np.full(n_around, base), (i + 1) % n_around, i], -1),
+                     np.stack([np.full(n_around, base + 1), top + i, top + (i + 1) % n_around], -1)], 1)
+    v = np.concatenate([v, [[0.0, -length / 2, 0.0], [0.0, length / 2, 0.0]]])
+    f = np.concatenate([side.reshape(-1, 3), caps.reshape(-1, 3)])[:, ::-1]     # counter-clockwise from outside
+    return v, np.ascontiguousarray(f, dtype=np.int64)
+
+
+def _rounded_box_surface(half_extents, radius: float, step: float = 0.003, n_round: int = 6):
+    """Rounded box in its local frame: each face of the outer box gridded (≈ ``step`` m inside, ``n_round``
+    steps of equal angle across each rounded strip), every grid point P moved to the rounded surface along
+    P − clamp(P, inner box) (exact for the Minkowski sum of the inner box and a ball of ``radius``).
+    Returns (vertices (N, 3) float64, faces (M, 3) int64)."""
+    import trimesh
+
+    e = np.asarray(half_extents, float)
+    ei = e - radius
+
+    def coords(k: int) -> np.ndarray:
+        n = max(2, int(math.ceil(2 * ei[k] / step)))
+        inner = np.linspace(-ei[k], ei[k], n + 1) if ei[k] > 0 else np.array([0.0])
+        if radius <= 0:
+            return inner
+        t = ei[k] + radius * np.tan(np.linspace(0.0, math.pi / 4, n_round + 1)[1:])
+        return np.concatenate([-t[::-1], inner, t])
+
+    cs = [coords(k) for k in range(3)]
+    verts, faces = [], []
+    for ax in range(3):
+        u, w = [k for k in range(3) if k != ax]
+        for sign in (-1.0, 1.0):
+            U, W = np.meshgrid(cs[u], cs[w], indexing="ij")
+            P = np.zeros(U.shape + (3,))
+            P[..., ax] = sign * e[ax]
+            P[..., u], P[..., w] = U, W
+            nu, nw = U.shape
+            idx = np.arange(nu * nw).reshape(nu, nw) + sum(len(x) for x in verts)
+            q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
+            tri = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
+            # outward winding: (u, w, ax) right-handed for +ax faces
+            rh = np.cross(np.eye(3)[u], np.eye(3)[w])[ax] > 0
+            if (sign > 0) != rh:
+                tri = tri[:, ::-1]
+            verts.append(P.reshape(-1, 3))
+            faces.append(tri)
+    P = np.concatenate(verts)
+    if radius > 0:
+        inner = np.clip(P, -ei, ei)
+        d = P - inner
+        P = inner + radius * d / np.linalg.norm(d, axis=1, keepdims=True)
+    m = trimesh.Trimesh(P, np.concatenate(faces), process=False)
+    m.merge_vertices(digits_vertex=10)
+    m.remove_unreferenced_vertices()
+    return np.asarray(m.vertices), np.asarray(m.faces)
+
+
+def _corner_normals(m, crease_deg: float = 30.0) -> np.ndarray:
+    """Per-face corner normals (M, 3, 3) of a trimesh: at each corner the area-weighted mean of the normals
+    of the faces around that vertex within ``crease_deg`` of this face's normal — smooth across a curved
+    surface, the face normal across a sharp edge (a box)."""
+    fn = np.asarray(m.face_normals, dtype=float)
+    area_n = fn * np.asarray(m.area_faces, dtype=float)[:, None]
+    vf = np.asarray(m.vertex_faces)                     # (N, k) incident faces, padded with -1
+    cos_c = math.cos(math.radians(crease_deg))
+    out = np.empty((len(m.faces), 3, 3))
+    for c in range(3):
+        nb = vf[m.faces[:, c]]                          # (M, k)
+        ok = nb >= 0
+        nbn = area_n[np.where(ok, nb, 0)]               # (M, k, 3)
+        keep = ok & (np.einsum("mkj,mj->mk", fn[np.where(ok, nb, 0)], fn) >= cos_c)
+        s = np.einsum("mk,mkj->mj", keep.astype(float), nbn)
+        out[:, c] = s / np.linalg.norm(s, axis=1, keepdims=True)
+    return out
+
+
+def _load_mesh_file(path: Path):
+    """A closed ``trimesh.Trimesh`` from ``path`` (trimesh, else meshio's triangle cells). ``ValueError``."""
+    import trimesh
+
+    if not path.is_file():
+        raise ValueError(f"mesh file not found: {str(path)!r}")
+    if path.stat().st_size > MAX_MESH_BYTES:
+        raise ValueError(f"mesh file {str(path)!r} is larger than {MAX_MESH_BYTES >> 20} MiB")
+    try:
+        mesh = trimesh.load(str(path), force="mesh")
+    except Exception as exc:  # noqa: BLE001 - trimesh raises assorted errors; try meshio before giving up
+        try:
+            import meshio
+
+            mm = meshio.read(str(path))
+            tri = [c.data for c in mm.cells if c.type == "triangle"]
+            if not tri:
+                raise ValueError("no triangle cells") from None
+            mesh = trimesh.Trimesh(mm.points[:, :3], np.concatenate(tri))
+        except Exception as exc2:  # noqa: BLE001
+            raise ValueError(f"cannot read mesh file {str(path)!r}: {exc}; meshio: {exc2}") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise ValueError(f"mesh file {str(path)!r} holds no triangles")
+    if not mesh.is_watertight:
+        raise ValueError(f"mesh file {str(path)!r} is not a closed (watertight) surface")
+    if mesh.volume < 0:
+        mesh.invert()
+    return mesh
+
+
+def _build_mesh(sc: Scene):
+    import trimesh
+
+    o = sc.object
+    if o.kind == "cylinder":
+        v, f = cylinder_surface(o.radius, o.length)
+    elif o.kind == "sphere":
+        ico = trimesh.creation.icosphere(subdivisions=4, radius=o.radius)
+        v, f = np.asarray(ico.vertices), np.asarray(ico.faces)
+    elif o.kind == "rounded_box":
+        v, f = _rounded_box_surface(o.half_extents, o.radius)
+    else:
+        mesh = _load_mesh_file(sc.mesh_path)
+        v, f = np.asarray(mesh.vertices) * o.scale, np.asarray(mesh.faces)
+    return trimesh.Trimesh(o.pose.apply(v), f, process=False)
+
+
+# ----------------------------------------------------------------------------------------------- loading
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses a key given twice in one mapping (PyYAML would keep the last)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                dup = key in seen
+            except TypeError:
+                continue
+            if dup:
+                raise yaml.constructor.ConstructorError("while constructing a mapping", node.start_mark,
+                                                        f"found duplicate key {key!r:.80}", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+_KINDS = {"cylinder", "sphere", "rounded_box", "mesh", "arc", "polyline"}
+
+
+def _short(v) -> str:
+    s = repr(v)
+    return s if len(s) <= 80 else s[:77] + "..."
+
+
+def parse_scene(data, source: str = "<dict>", base_dir: str | os.PathLike = ".", check: bool = True) -> Scene:
+    """A :class:`Scene` from a mapping (the YAML's content); ``source`` names it in errors; ``base_dir``
+    resolves a relative mesh ``file``; ``check`` runs :meth:`Scene.check_geometry`. Raises
+    :class:`SceneError` ``"<source>: key 'object.radius': <why> (value -0.01)"``."""
+    if not isinstance(data, dict):
+        raise SceneError(f"{source}: a scene must be a mapping with 'name' and 'object', got {type(data).__name__}")
+    try:
+        sc = Scene.model_validate(data)
+    except ValidationError as exc:
+        lines = []
+        for err in exc.errors():
+            loc = [str(p) for p in err["loc"]]
+            loc = [p for i, p in enumerate(loc) if not (i > 0 and p in _KINDS)]   # drop the union's tag
+            value = err.get("input")
+            if err["type"] == "union_tag_invalid":
+                loc.append("kind")
+                value = err["ctx"]["tag"]
+            elif err["type"] == "union_tag_not_found":
+                loc.append("kind")
+                value = None
+            msg = err["msg"].removeprefix("Value error, ")
+            lines.append(f"{source}: key '{'.'.join(loc)}': {msg:.300} (value {_short(value)})")
+        raise SceneError("\n".join(lines)) from None
+    sc._source = source
+    sc._base_dir = Path(base_dir).resolve()
+    return sc.check_geometry() if check else sc
+
+
+def load_scene(path: str | os.PathLike) -> Scene:
+    """Read and validate a scene file (module doc). Relative mesh paths are resolved against the scene file's
+    folder. Raises :class:`SceneError` naming the file, the key and the value: file missing, too large, not
+    YAML, duplicate key, unknown key, wrong type or range, mesh unreadable or not closed, object too far from
+    the display, centre or an inclusion not inside the body, stroke that cannot be traced."""
+    p = Path(os.path.expanduser(str(path)))
+    try:
+        with open(p, "rb") as fh:
+            raw = fh.read(MAX_SCENE_BYTES + 1)
+    except FileNotFoundError:
+        raise SceneError(f"{p}: scene file not found") from None
+    except OSError as exc:
+        raise SceneError(f"{p}: cannot read scene file: {exc.strerror or exc}") from None
+    if len(raw) > MAX_SCENE_BYTES:
+        raise SceneError(f"{p}: scene file larger than {MAX_SCENE_BYTES} bytes")
+    try:
+        data = yaml.load(raw.decode("utf-8"), Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"{p}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except yaml.YAMLError as exc:
+        raise SceneError(f"{p}: not valid YAML: {' '.join(str(exc).split())[:300]}") from None
+    except RecursionError:
+        raise SceneError(f"{p}: not valid YAML: nested too deeply") from None
+    return parse_scene(data, str(p), p.parent)
+
+
+def paper_scene() -> Scene:
+    """The paper's cylinder (§VI-A) from :mod:`flexsheet.model.scene`'s constants — what
+    ``launch/scenes/cylinder.yaml`` holds; the default wherever no scene is named."""
+    R = paper.CYLINDER_RADIUS
+    if not np.allclose(paper.CYLINDER_AXIS, [0.0, 1.0, 0.0]):      # pragma: no cover - a constant
+        raise ValueError("paper_scene assumes the cylinder axis +y (the local axis, no rotation)")
+    sc = Scene(name="cylinder", description="the paper's cylinder (§VI-A), stroked from 0° to 60° toward +z",
+               object=CylinderObject(kind="cylinder", radius=R, length=paper.CYLINDER_LENGTH,
+                                     pose=Pose(position=tuple(float(x) for x in paper.CYLINDER_CENTER))),
+               stroke=ArcStroke(kind="arc", start=(1.0, 0.0, 0.0), toward=(0.0, 0.0, 1.0), start_deg=0.0,
+                                end_deg=60.0))
+    sc._source = "<paper>"
+    return sc
