@@ -13,7 +13,7 @@ if command -v apt-get >/dev/null 2>&1; then
     libglu1-mesa libxcursor1 libxft2 libxinerama1 libxrender1 libfontconfig1 \
     iproute2 procps \
     xvfb xauth aravis-tools aravis-tools-cli gir1.2-aravis-0.8 util-linux \
-    libgirepository1.0-dev libcairo2-dev pkg-config gobject-introspection >/dev/null
+    libgirepository1.0-dev libcairo2-dev pkg-config gobject-introspection gcc libc6-dev >/dev/null
 fi
 echo "[install] python packages (pyproject.toml, with the test extra)"
 python3 -m pip install -q --disable-pip-version-check -e ".[test]"

@@ -10,14 +10,14 @@ __all__ = ["ArmJointState"]
 
 
 class ArmJointState(Message):
-    """Measured state of one RV-1A, read back from its controller over Modbus TCP.
+    """Measured state of one RV-1A, read back from its controller (Modbus TCP or MXT).
 
     ``position`` (6,) rad, J1..J6 measured; ``velocity`` (6,) rad/s (finite difference of measurements);
     ``commanded`` (6,) rad, the last joint target written; ``pose`` (4, 4): FK of the measured joints,
     T_display_clamp (sheet-clamp tool frame in the display frame), m. ``status``: controller status word
     bits (see docs/register_map.md); ``fault``: fault code (0 = none). ``manipulability``: Yoshikawa's
     sqrt(det(J Jᵀ)). ``target_stamp``: source stamp of the arm target being executed, s.
-    ``write_stamp``: time of the Modbus write of the current joint target, s (bridge clock).
+    ``write_stamp``: time the current joint target left the bridge (Modbus write / MXT MOVE), s (bridge clock).
     ``bridge_status``: "ok", "hold:no_target", "hold:limit", "fault:watchdog"…
     """
 
@@ -33,5 +33,5 @@ class ArmJointState(Message):
     fault: int = Field(default=0, ge=0, description="controller fault code")
     manipulability: float = Field(default=0.0, ge=0.0, description="Yoshikawa manipulability")
     target_stamp: float = Field(default=0.0, description="source stamp of the executed target, s")
-    write_stamp: float = Field(default=0.0, description="time of the last Modbus write, s")
+    write_stamp: float = Field(default=0.0, description="time the last command left the bridge (Modbus write / MXT MOVE), s")
     bridge_status: str = Field(default="ok", description="bridge state or hold reason")

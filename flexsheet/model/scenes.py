@@ -43,7 +43,7 @@ import hashlib
 import math
 import os
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import yaml
@@ -308,10 +308,10 @@ class Scene(BaseModel):
 
     _source: str = PrivateAttr("<scene>")
     _base_dir: Path = PrivateAttr(Path("."))
-    _mesh: object = PrivateAttr(None)
-    _shape: object = PrivateAttr(None)
-    _table: object = PrivateAttr(None)
-    _cnormals: object = PrivateAttr(None)
+    _mesh: Any = PrivateAttr(None)
+    _shape: Any = PrivateAttr(None)
+    _table: Any = PrivateAttr(None)
+    _cnormals: Any = PrivateAttr(None)
 
     # ------------------------------------------------------------------ identity
     @property

@@ -32,9 +32,10 @@ requires accurate measurement of the shape of the sheet"):
   ``q_k = φ_k(u0) sinc(λ_k r)`` (the exact modal projection of the segment load) and ``c`` chosen so that
   ``w(u0, v0) = S``.
 
-``modes`` sets the truncation: the series converges like ``Σ 1/k²`` beyond ``k ≈ 2a / r``; 256 modes is
-the reference ("true") shape used by the measurement camera and the world; the renderer's fine correction
-uses a cheap fit of the same shape with fewer modes (see docs/renderer.md for the error this costs).
+``modes`` sets the truncation: the series converges like ``Σ 1/k²`` beyond ``k ≈ 2a / r``; the renderer's
+fine correction uses a cheap fit of this shape with fewer modes (see docs/renderer.md for the error this
+costs). It is an *estimator's* model: the twin's true pushed sheet is the nonlinear FEM of
+:mod:`flexsheet.model.sheet_fem` (what the world publishes since the honest-twin issue).
 """
 
 from __future__ import annotations
@@ -253,7 +254,9 @@ class SheetSurface:
 
     ``origin`` (3,) sheet centre (midpoint of the clamps), ``normal`` (3,) toward the user, ``axis_u`` (3,)
     right → left clamp; ``half_span`` a and ``half_width`` b (m) bound the sheet (|u| ≤ a, |v| ≤ b);
-    ``membrane`` (or None for a flat sheet) gives the deflection along −normal; ``size`` (m) is the
+    ``membrane`` (or None for a flat sheet) gives the deflection along −normal — a :class:`Membrane` or any
+    object with its interface (``push_u``, ``push_v``, ``depth``, ``deflection``, ``deflection_grad``,
+    ``grid``), e.g. the twin's true FEM shape :class:`flexsheet.model.sheet_fem.FemShape`; ``size`` (m) is the
     unstretched side between the clamps (for :attr:`stretch`). Raises ``ValueError`` on non-finite, zero or
     non-orthogonal vectors and non-positive lengths (error names the field).
     """
@@ -263,7 +266,7 @@ class SheetSurface:
     axis_u: np.ndarray
     half_span: float = scene.SHEET_SIZE / 2
     half_width: float = scene.SHEET_SIZE / 2
-    membrane: Membrane | None = None
+    membrane: Membrane | None = None          # or a FemShape (same interface)
     size: float = scene.SHEET_SIZE
 
     def __post_init__(self) -> None:
