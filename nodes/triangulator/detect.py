@@ -13,7 +13,7 @@ Method:
    ``I = α·M + (1 − α)·B`` with α the fraction of it the marker covers, M the marker's level and B the
    background behind it; M is the mean of the 4 brightest pixels within 2 px of the peak and
    α = (I − B)/(M − B). B is the opened image (the top-hat's background) outside the marker's blob and is
-   inpainted (``cv2.inpaint``, Telea) over the blob from the pixels around it, so a marker seen half against the dark finger and half
+   filled in over the blob from the pixels around it (normalised convolution, σ 1.5 px), so a marker seen half against the dark finger and half
    against the bright projected image gets each side's level (the opening would give the brighter one and
    pull the centroid toward the finger by ~0.08 px). The centroid is weighted by α − t over the 8-connected
    blob holding the peak (``cv2.connectedComponents``), t = max(``threshold_frac``, 90th percentile of α on
@@ -103,6 +103,7 @@ class MarkerDetector:
         self._gx, self._gy = np.meshgrid(g, g)
         self._ring = np.hypot(self._gx, self._gy) > 0.6 * self.r
         self._k3 = np.ones((3, 3), np.uint8)
+        self._ring_k = int(0.9 * (int(self._ring.sum()) - 1))      # the ring's 90th percentile (order statistic)
 
     def response(self, img: np.ndarray) -> np.ndarray:
         """White top-hat response of a mono8 image (H, W) → uint8 (H, W), DN."""
@@ -145,14 +146,17 @@ class MarkerDetector:
             ia0, ib0 = py0 + ca, py0 + cb
             ja0, jb0 = px0 + da, px0 + db
             img_p[ca - ya:cb - ya, da - xa:db - xa] = img[ia0:ib0, ja0:jb0]
-            # the background behind the marker: inpainted from the pixels around it (Telea), so a marker
+            # the background behind the marker: filled in from the pixels around it (normalised convolution,
+            # Knutsson & Westin 1993: a Gaussian-weighted mean of the unmasked neighbours), so a marker
             # straddling the dark finger and the bright sheet gets each side's level, not the opening's
             # brighter one
             hole = (patch_full > self.frac * peak).astype(np.uint8)
             _, hl, _, _ = cv2.connectedComponentsWithStats(hole, connectivity=8)
             hole = cv2.dilate((hl == hl[r, r]).astype(np.uint8), self._k3) if hl[r, r] else hole
-            bg = cv2.inpaint(np.clip(img_p, 0, 255).astype(np.uint8), hole, 3, cv2.INPAINT_TELEA).astype(np.float64)
-            bg = np.where(hole > 0, np.minimum(bg, img_p), img_p - patch_full)
+            keep = 1.0 - hole
+            num = cv2.GaussianBlur(img_p * keep, (0, 0), 1.5)
+            den = cv2.GaussianBlur(keep, (0, 0), 1.5)
+            bg = np.where(hole > 0, np.minimum(num / np.maximum(den, 1e-6), img_p), img_p - patch_full)
             core = img_p[r - 2:r + 3, r - 2:r + 3]
             M = float(np.sort(core, axis=None)[-4:].mean())
             alpha = (img_p - bg) / np.maximum(M - bg, 0.5 * self.min_contrast)
@@ -160,7 +164,8 @@ class MarkerDetector:
             # threshold above the clutter around the marker (at least threshold_frac): a dark finger edge next
             # to a bright background leaves a thin top-hat ridge (the opening cannot fit between them) that,
             # with noise, would join the blob and pull the centroid
-            thr = min(max(self.frac, float(np.percentile(alpha[self._ring], 90)) + 0.1), 0.5)
+            ring = alpha[self._ring]
+            thr = min(max(self.frac, float(np.partition(ring, self._ring_k)[self._ring_k]) + 0.1), 0.5)
             wgt = alpha - thr
             np.maximum(wgt, 0.0, out=wgt)
             # keep only the blob connected to the peak (not a bright neighbour such as a clutter edge)

@@ -193,6 +193,7 @@ class WorldNode(Node):
             self.poses[msg.arm] = self.phys.clamp_pose(msg.arm, msg.position)
         except ValueError as exc:
             raise InputRejected(f"{msg.arm} arm joints: {exc}") from None
+
     def _segment(self, t: float) -> tuple[int, float]:
         """(segment index, time in it) at script time ``t`` s; (-1, overshoot) after the last segment."""
         for i, s in enumerate(self.scripts):
