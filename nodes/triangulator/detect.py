@@ -173,7 +173,9 @@ class MarkerDetector:
             lab = labels[r, r]
             bx, by, bw, bh, npix = (int(v) for v in stats[lab])
             wgt[labels != lab] = 0.0
-            area = float(alpha[labels == lab].sum())
+            # visible area: Σα over the blob's pixels of α ≥ 0.25 (independent of the clutter threshold)
+            a_blob = alpha[labels == lab]
+            area = float(np.minimum(a_blob[a_blob >= 0.25], 1.0).sum())
             # an isolated dot (or a blur streak shorter than the patch) does not reach the patch border;
             # a blob that does is part of a larger bright structure (sheet corner, clutter edge): skip it.
             # Neither may it touch the image border (a marker cut by the frame has a biased centroid).
