@@ -36,7 +36,10 @@ class FingerTruth(Message):
 
 
 class SheetState(Message):
-    """Actual sheet state in the simulated world, from the arms' measured joints (FK of both clamps).
+    """Actual (true) sheet state in the simulated world: the clamp poses come from the hidden truth's
+    kinematics (true bases, link lengths, joint zero offsets; :class:`flexsheet.model.truth.TwinTruth`) of the
+    arms' measured joints, and ``membrane`` from the independent nonlinear sheet FEM
+    (:mod:`flexsheet.model.sheet_fem`). Estimators never read it; the report and the measurement camera do.
 
     ``origin`` (3,) m: sheet centre; ``normal`` (3,), ``axis_u`` (3,): unit vectors (display frame).
     ``corners`` (4, 3) m: sheet corners in order around the sheet. ``pushed_point`` (3,) m: the deepest
