@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import logging
 import os
 import sys
@@ -122,20 +123,50 @@ def _run_container(args: argparse.Namespace) -> int:
 def cmd_launch(args: argparse.Namespace) -> int:
     """Check the launch file for this host (every error one line on stderr, exit 78 when any), then, unless
     ``--check``, run its nodes under the :class:`~flexsheet.runtime.launch.Supervisor`."""
-    from flexsheet.runtime.launch import LaunchError, Supervisor, load_launch
+    from flexsheet.runtime.launch import (
+        TOPLEVEL_ENV,
+        LaunchError,
+        Supervisor,
+        load_launch,
+        parse_toplevel_set,
+        twin_registration,
+        twin_registration_path,
+    )
     from flexsheet.runtime.launch_check import check_launch
     from flexsheet.runtime.node import EXIT_CONFIG
 
     out = str(Path(args.out).resolve()) if args.out else None
     overrides: dict[str, list[str]] = {}
     parsed: dict[str, dict] = {}
-    for item in args.set:
-        node, dot, kv = item.partition(".")
-        if not dot or "=" not in kv:
-            print(f"flexsheet launch: {args.file}: --set {item!r}: expected NODE.KEY=VALUE", file=sys.stderr)
-            return EXIT_CONFIG
-        overrides.setdefault(node, []).append(kv)
-        parsed.setdefault(node, {}).update(_parse_params([kv]))
+    try:
+        node_names = set(load_launch(args.file).nodes)
+        toplevel: dict = {}
+        for item in args.set:
+            top = parse_toplevel_set(item, node_names)
+            if top is not None:
+                key, value = top
+                toplevel[key] = {**toplevel.get(key, {}), **value} if key == "twin" else value
+                continue
+            node, dot, kv = item.partition(".")
+            if not dot or "=" not in kv:
+                raise LaunchError(f"--set {item!r}: expected NODE.KEY=VALUE, twin.KEY=VALUE or scene=FILE")
+            overrides.setdefault(node, []).append(kv)
+            parsed.setdefault(node, {}).update(_parse_params([kv]))
+        if toplevel:   # the launcher's own load_launch and every node process read these (launch.TOPLEVEL_ENV)
+            os.environ[TOPLEVEL_ENV] = json.dumps(toplevel)
+        lf = load_launch(args.file)
+        if lf.twin is not None and lf.twin.registration and lf.display_calib is None:
+            cached = twin_registration_path(lf.twin)
+            if args.check and not cached.exists():
+                print(f"flexsheet launch: {args.file}: note: the twin registration (truth seed "
+                      f"{lf.twin.truth_seed}) runs at start and writes {cached}", file=sys.stderr)
+            else:
+                toplevel["display_calib"] = twin_registration(lf.twin, print_fn=lambda m: print(m, file=sys.stderr))
+                os.environ[TOPLEVEL_ENV] = json.dumps(toplevel)
+    except LaunchError as exc:
+        for line in exc.lines or [str(exc)]:
+            print(f"flexsheet launch: {args.file}: {line}", file=sys.stderr)
+        return EXIT_CONFIG
     result = check_launch(args.file, host=args.host, out=out, overrides=parsed)
     for line in result.warnings:
         print(line, file=sys.stderr)
@@ -228,14 +259,16 @@ def build_parser() -> argparse.ArgumentParser:
                                    "ports, files, CURVE keys); with an error nothing starts (exit 78).",
                        **_fmt("  flexsheet launch launch/sim.yaml --duration 60 --out out/sim\n"
                               "  flexsheet launch launch/lab.yaml --check --host main   # check only, start nothing\n"
-                              "  flexsheet launch launch/lab.yaml --host arm1     # on arm PC 1"))
+                              "  flexsheet launch launch/lab.yaml --host arm1     # on arm PC 1\n"
+                              "  flexsheet launch launch/sim.yaml --set twin.truth_seed=2 --set scene=launch/scenes/sphere.yaml"))
     s.add_argument("file", help="launch YAML file")
     s.add_argument("--host", help="start only the nodes of this host (default: all hosts, on this machine)")
     s.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C "
                                                    "or the scripted run ends)")
     s.add_argument("--out", help="output folder for bags, charts and the report (substituted for $(out))")
     s.add_argument("--set", action="append", metavar="NODE.KEY=VALUE", default=[],
-                   help="override one node parameter (YAML value), repeatable: --set world.loop=true")
+                   help="override one node parameter (YAML value), repeatable: --set world.loop=true; or a "
+                        "graph-wide setting: --set twin.truth_seed=3, --set scene=launch/scenes/sphere.yaml")
     s.add_argument("--check", action="store_true",
                    help="only check the file for this host (--host) and this machine: one line per error, exit 78 "
                         "on any, 0 when it would start")

@@ -49,6 +49,12 @@ BENCHES: dict[str, str] = {
 
 CALIBRATE: dict[str, str] = {
     "stereo": "flexsheet.model.calibration:main",
+    "camera-pose": "flexsheet.calibration.cli:camera_pose_main",
+    "projector": "flexsheet.calibration.cli:projector_main",
+    "arms": "flexsheet.calibration.cli:arms_main",
+    "eye": "flexsheet.calibration.cli:eye_main",
+    "display": "flexsheet.calibration.cli:display_main",
+    "noise": "flexsheet.calibration.cli:noise_main",
 }
 
 

@@ -49,8 +49,8 @@ def test_sim_launch_prints_table1_and_latency_and_leaves_outputs(sim_run):
     assert row["dd_mean_mm"] < 0.443 and row["dtheta_mean_deg"] < 0.359, row
     assert "stroke_push_4" in summary                      # the combined stroke and push ran too
     lat = summary["latency_ms"]
-    for hop in ("camera_frame_to_fingertip", "fingertip_to_sheet_target", "sheet_target_to_modbus_write",
-                "camera_frame_to_modbus_write", "fingertip_to_rendered_frame"):
+    for hop in ("camera_frame_to_fingertip", "fingertip_to_sheet_target", "sheet_target_to_arm_command",
+                "camera_frame_to_arm_command", "fingertip_to_rendered_frame"):
         assert lat[hop]["n"] > 20 and lat[hop]["median"] is not None, hop
     info = bag_info(out / "sim.mcap")
     assert not info.truncated and info.counts["/object/deformation"] > 100 and info.counts["/render/stereo"] > 20

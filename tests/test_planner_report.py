@@ -75,7 +75,7 @@ def test_report_table1_from_bag_uses_typed_truth_and_the_one_metric(tmp_path):
     assert row["paper"] == PAPER_TABLE1["10"]
     push = s["stroke_push_4"]                                     # the second segment, keyed by its mode
     assert push["n"] >= 10 and "paper" not in push
-    assert set(s["latency_ms"]) >= {"fingertip_to_sheet_target", "camera_frame_to_modbus_write"}
+    assert set(s["latency_ms"]) >= {"fingertip_to_sheet_target", "camera_frame_to_arm_command"}
 
 
 def test_report_records_the_twin_and_both_dd_conventions(tmp_path):

@@ -20,7 +20,8 @@ from nodes.triangulator.node import TriangulatorNode
 
 CALIB = camera_model("ximea")
 T_DC = look_at(DEFAULT_CAMERA_POSITION)
-RENDER = StereoRenderer(CALIB, T_DC, SimConfig(seed=4))
+RENDER = StereoRenderer(CALIB, T_DC, SimConfig.ideal(seed=4))   # node mechanics: the ideal twin's sensing
+IDEAL = {"realism": "ideal", "truth_seed": 0}
 
 
 def _frame(left, right, stamp, seq=0, skew=0.0):
@@ -103,7 +104,7 @@ def test_triangulator_prediction_horizon():
 
 def test_camera_node_sim_follows_finger_truth():
     async def scenario():
-        async with NodeHarness(CameraNode, params={"rate_hz": 50.0, "seed": 1}) as h:
+        async with NodeHarness(CameraNode, params={"rate_hz": 50.0, "seed": 1, "twin": IDEAL}) as h:
             cal = (await h.wait_for(topics.CALIBRATION, n=1, timeout=3.0))[0]
             assert tuple(cal.image_size) == (640, 512) and np.allclose(cal.T_display_camera, T_DC)
             p = np.array([0.025, 0.03, -0.02])
@@ -129,7 +130,7 @@ def test_camera_node_sim_follows_finger_truth():
 
 def test_camera_node_falls_back_to_trajectory_bumblebee2():
     async def scenario():
-        async with NodeHarness(CameraNode, params={"model": "bumblebee2", "rate_hz": 50.0}) as h:
+        async with NodeHarness(CameraNode, params={"model": "bumblebee2", "rate_hz": 50.0, "twin": IDEAL}) as h:
             cal = (await h.wait_for(topics.CALIBRATION, n=1, timeout=3.0))[0]
             assert tuple(cal.image_size) == (640, 480) and abs(cal.K1[0, 0] - 513.5) < 0.1
             assert abs(np.linalg.norm(cal.T) - 0.12) < 1e-9

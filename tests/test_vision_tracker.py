@@ -47,7 +47,7 @@ def test_rendered_markers_within_3sigma(model):
 
 
 def test_roi_reacquires_after_loss():
-    calib, T, rnd = _setup()
+    calib, T, rnd = _setup(ideal=True)
     tr = FingertipTracker(calib, TrackerConfig(), T)
     p = np.array([0.03, 0.0, 0.02])
     out = []

@@ -4,8 +4,14 @@ really lands — on the actual flat, tilted or pushed sheet — and measures the
 Independent of the correction code: the true sheet is the membrane sampled on a G×G grid (the layout of
 :class:`messages.SheetState` ``membrane``), interpolated bilinearly, and each camera ray is intersected with it
 by bracketing bisection (the correction uses Newton on the analytic series). Light path, traced backwards:
-camera pixel → ray from the eye → hit X on the true sheet → projector pixel that lights X (pinhole) →
-bilinear sample of the projector image (``cv2.remap``). Rays that miss the sheet see black.
+camera pixel → ray from the eye → hit X on the true sheet → projector pixel that lights X (the TRUE
+projector: pinhole K, R, P plus its OpenCV lens distortion D, as ``cv2.projectPoints``) → bilinear sample of
+the projector image (``cv2.remap``). Rays that miss the sheet see black.
+
+In the honest twin (``flexsheet experiment correction --twin realistic``) the sheet, the projector and its
+distortion passed to :meth:`MeasurementCamera.photograph` are the hidden truth's
+(:class:`flexsheet.model.truth.TwinTruth`); the projector image was drawn by the renderer with the
+*calibrated* ones (``display.yaml``). This module never sees which is which.
 
 The camera's image plane is the imaginary screen itself (1 camera pixel = ``pixel`` m on the screen), so
 sizes are read directly in screen millimetres as in the paper ("1 pixel corresponds to 0.7 mm on the
@@ -23,7 +29,32 @@ from flexsheet.model import scene
 from flexsheet.model.projector import Projector
 from flexsheet.model.sheet import SheetSurface
 
-__all__ = ["MeasurementCamera", "measure_sizes", "trace_to_sheet"]
+__all__ = ["MeasurementCamera", "measure_sizes", "trace_to_sheet", "projector_pixels"]
+
+
+def projector_pixels(points: np.ndarray, projector: Projector, distortion=None) -> tuple[np.ndarray, np.ndarray]:
+    """Projector pixel (N, 2) (x right, y down, pixel centres at integers) that lights each display-frame point
+    (N, 3) m, and a mask (N,) of points in front of the projector. Pinhole K, R, P of ``projector`` and the
+    OpenCV distortion ``distortion`` (k1, k2, p1, p2, k3) (5,) or None, as ``cv2.projectPoints`` (Brown–Conrady
+    model; OpenCV docs, "Camera Calibration and 3D Reconstruction"). Raises ``ValueError`` for a distortion that
+    is not 5 finite numbers."""
+    pts = np.asarray(points, dtype=float)
+    xc = (pts - np.asarray(projector.position, float)) @ np.asarray(projector.R, float)
+    front = xc[:, 2] > 1e-9
+    z = np.where(front, xc[:, 2], 1.0)
+    x, y = xc[:, 0] / z, xc[:, 1] / z
+    if distortion is not None:
+        D = np.asarray(distortion, dtype=float).ravel()
+        if D.shape != (5,) or not np.all(np.isfinite(D)):
+            raise ValueError(f"distortion must be 5 finite OpenCV coefficients (k1, k2, p1, p2, k3), got {distortion!r}")
+        k1, k2, p1, p2, k3 = D
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        x, y = (x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+                y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y)
+    K = np.asarray(projector.K, float)
+    uv = np.column_stack([K[0, 0] * x + K[0, 1] * y + K[0, 2], K[1, 1] * y + K[1, 2]])
+    return uv, front
 
 
 def _bilinear(grid: np.ndarray, a: float, b: float, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -104,10 +135,13 @@ class MeasurementCamera:
         self.points = (np.asarray(self.screen_point, dtype=float) + X[..., None] * right + Z[..., None] * up
                        ).reshape(-1, 3)
 
-    def photograph(self, projector_image: np.ndarray, projector: Projector, sheet: SheetSurface) -> np.ndarray:
+    def photograph(self, projector_image: np.ndarray, projector: Projector, sheet: SheetSurface,
+                   distortion=None) -> np.ndarray:
         """What the eye sees: (h, w) float32 in [0, 1] (grey level of ``projector_image`` (H, W) or (H, W, 3)).
 
-        ``sheet``: the TRUE sheet (its membrane, if any, is sampled on the grid and traced independently)."""
+        ``projector``/``distortion``: the projector that really lights the sheet (pinhole + OpenCV D (5,), None:
+        pinhole); ``sheet``: the TRUE sheet (its membrane, if any, is sampled on the grid and traced
+        independently). Raises ``ValueError`` for a bad distortion."""
         import cv2
 
         img = np.asarray(projector_image, dtype=np.float32)
@@ -119,9 +153,8 @@ class MeasurementCamera:
         v = np.asarray(self.eye, dtype=float)
         dirs = self.points - v
         x, hit = trace_to_sheet(v, dirs, sheet, grid)
-        xc = (x - projector.position) @ projector.R
-        uv = (xc @ projector.K.T)[:, :2] / xc[:, 2:3]
-        uv[~hit | (xc[:, 2] <= 0)] = -10.0
+        uv, front = projector_pixels(x, projector, distortion)
+        uv[~hit | ~front] = -10.0
         mx = uv[:, 0].reshape(self.shape).astype(np.float32)
         my = uv[:, 1].reshape(self.shape).astype(np.float32)
         return cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)

@@ -18,9 +18,11 @@ Latency per hop, matched through the stamps every message carries (``exposure_st
   its rendering time; for a real camera, readout and transfer);
 * ``camera_frame_to_fingertip``: fingertip arrival − the frame's publish stamp (transport + triangulation);
 * ``fingertip_to_sheet_target``: sheet-target arrival − fingertip arrival (same exposure stamp);
-* ``sheet_target_to_modbus_write``: first Modbus write of the arm target − sheet-target arrival;
-* ``modbus_write_to_joint_motion``: first joint-state readback after that write − the write;
-* ``camera_frame_to_modbus_write``: first Modbus write − the frame's publish stamp (the software path);
+* ``sheet_target_to_arm_command``: the first arm command carrying the target (Modbus write or MXT MOVE, the
+  earliest of either arm) − sheet-target arrival;
+* ``arm_command_to_joint_motion``: first joint-state readback after that command − the command;
+* ``camera_frame_to_arm_command``: first arm command − the frame's publish stamp (the software path);
+* ``exposure_to_arm_command``: the same from the mid-exposure instant (+ the camera's readout/render time);
 * ``fingertip_to_rendered_frame``: rendered-frame arrival − fingertip arrival (same exposure stamp).
 
 All hosts of the sim run share one clock; across PCs see docs/deploy.md on time sync.
@@ -90,6 +92,7 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None) -> dict:
     summary: dict = {"bags": [str(b) for b in bags], "counts": {k: len(v) for k, v in d.items()}}
     summary.update(table1_rows(d))
     summary["latency_ms"] = latency_hops(d)
+    summary["faults"] = watchdog_faults(d)
     return summary
 
 
@@ -150,10 +153,14 @@ def latency_hops(d: dict[str, list]) -> dict[str, dict]:
     first_write: dict[float, float] = {}
     first_readback: dict[float, float] = {}
     for topic in ("/arm/left/joint_state", "/arm/right/joint_state"):
+        seen: set[float] = set()
         for _, m in d.get(topic, []):
-            if m.target_stamp and m.write_stamp and m.target_stamp not in first_write:
-                first_write[m.target_stamp] = m.write_stamp
-                first_readback[m.target_stamp] = m.header.stamp
+            e = m.target_stamp
+            if e and m.write_stamp and e not in seen:   # this arm's first command carrying that fingertip
+                seen.add(e)
+                if e not in first_write or m.write_stamp < first_write[e]:   # the earliest of either arm
+                    first_write[e] = m.write_stamp
+                    first_readback[e] = m.header.stamp
     render_arrival: dict[float, float] = {}
     for t, m in d.get("/render/stereo", []):
         render_arrival.setdefault(m.source_stamp, t)
@@ -161,12 +168,48 @@ def latency_hops(d: dict[str, list]) -> dict[str, dict]:
         "exposure_to_camera_frame": [f - e for e, f in frame_time.items()],
         "camera_frame_to_fingertip": [tip_arrival[e] - f for e, f in frame_time.items()],
         "fingertip_to_sheet_target": [target_arrival[e] - tip_arrival[e] for e in tip_arrival if e in target_arrival],
-        "sheet_target_to_modbus_write": [first_write[e] - target_arrival[e] for e in target_arrival if e in first_write],
-        "modbus_write_to_joint_motion": [first_readback[e] - first_write[e] for e in first_write],
-        "camera_frame_to_modbus_write": [first_write[e] - frame_time[e] for e in first_write if e in frame_time],
+        "sheet_target_to_arm_command": [first_write[e] - target_arrival[e] for e in target_arrival if e in first_write],
+        "arm_command_to_joint_motion": [first_readback[e] - first_write[e] for e in first_write],
+        "camera_frame_to_arm_command": [first_write[e] - frame_time[e] for e in first_write if e in frame_time],
+        "exposure_to_arm_command": [first_write[e] - e for e in first_write if e in frame_time],
         "fingertip_to_rendered_frame": [render_arrival[e] - tip_arrival[e] for e in tip_arrival if e in render_arrival],
     }
     return {k: _stats(v) for k, v in hops.items()}
+
+
+def watchdog_faults(d: dict[str, list]) -> dict:
+    """Watchdog trips over the run, from the controllers' status the bridges publish in ``/arm/<arm>/joint_state``:
+    a trip is a state with ``fault == FAULT_WATCHDOG`` after one without (per arm, in stamp order; each is a hold
+    and a fault on a real controller). Returns ``{"watchdog": total, "watchdog_per_arm": {arm: n}}``."""
+    from messages.registers import FAULT_WATCHDOG
+
+    per_arm = {}
+    for arm in ("left", "right"):
+        prev, n = 0, 0
+        for _, m in sorted(d.get(f"/arm/{arm}/joint_state", []), key=lambda tm: tm[1].header.stamp):
+            if m.fault == FAULT_WATCHDOG and prev != FAULT_WATCHDOG:
+                n += 1
+            prev = m.fault
+        per_arm[arm] = n
+    return {"watchdog": sum(per_arm.values()), "watchdog_per_arm": per_arm}
+
+
+def cpu_summary(out_dir: Path) -> dict | None:
+    """Per-node CPU (% of one core) from ``$(out)/cpu.json``, written by the Supervisor at stop (steady state: from
+    10 s after each process started; a node in a container counts only its handler and timer threads, the
+    container's total is under ``process_percent``). ``None`` when the file is absent or unreadable."""
+    cpu_file = out_dir / "cpu.json"
+    if not cpu_file.exists():
+        return None
+    try:
+        cpu = json.loads(cpu_file.read_text())
+        return {"wall_s": cpu["wall_s"], "cores": cpu["cores"],
+                "node_percent": {n: v.get("steady_cpu_percent", v["cpu_percent"]) for n, v in cpu["nodes"].items()},
+                "process_percent": {p: v.get("steady_cpu_percent", v["cpu_percent"])
+                                    for p, v in cpu["processes"].items()},
+                "note": cpu["note"]}
+    except (OSError, ValueError, KeyError):
+        return None
 
 
 def twin_settings(lf=None) -> dict:
@@ -305,6 +348,9 @@ def main(out: str, lf=None) -> int:
     beats: list = []
     summary = analyse(bags, beats)
     summary["twin"] = twin_settings(lf)
+    cpu = cpu_summary(out_dir)
+    if cpu is not None:
+        summary["cpu"] = cpu
     summary["dd_convention"] = DD_CONVENTION
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     _charts(summary, out_dir)

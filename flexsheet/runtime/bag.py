@@ -27,6 +27,7 @@ from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 import msgpack
 import numpy as np
@@ -354,7 +355,9 @@ class RecorderNode(Node):
 
 class PlayerParams(BaseModel):
     """``file``: bag to play; ``rate``: speed factor; ``loop``; ``topics`` (empty: all);
-    ``start_delay`` s before the first message (subscribers connect); ``exit_when_done``."""
+    ``start_delay`` s before the first message (subscribers connect); ``exit_when_done``; ``mode``:
+    ``realtime`` (the bag's timing × ``rate``) or ``lockstep`` (as fast as the nodes of the player's container
+    handle it, each message handled before the next, on the bag's clock: :mod:`flexsheet.runtime.lockstep`)."""
 
     model_config = ConfigDict(extra="forbid")
     file: str
@@ -363,6 +366,7 @@ class PlayerParams(BaseModel):
     topics: list[str] = Field(default_factory=list)
     start_delay: float = Field(default=0.5, ge=0.0)
     exit_when_done: bool = True
+    mode: Literal["realtime", "lockstep"] = "realtime"
 
 
 class PlayerNode(Node):
@@ -376,6 +380,12 @@ class PlayerNode(Node):
             raise ValueError(f"file: bag {self.params.file!r} not found")
         self.done = asyncio.Event()
         self.sent = 0
+        if self.params.mode == "lockstep":
+            from flexsheet.runtime import lockstep
+
+            lockstep.check(self)  # ConfigError (exit 78) unless the player is in a lockstep container
+            self._task = asyncio.get_running_loop().create_task(lockstep.play(self))
+            return
         asyncio.get_running_loop().create_task(self._play())
 
     async def _play(self) -> None:

@@ -63,7 +63,9 @@ from flexsheet.runtime.transport import CurveConfig
 
 __all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "SecuritySpec", "load_launch", "node_config",
            "curve_config", "keys_dir", "public_keys", "substitutions", "substitute", "keygen_command",
-           "display_calib_path", "DEFAULT_KEYS_DIR", "PUBLIC_KEYS_FILE", "Supervisor", "container_spec",
+           "display_calib_path", "TwinSpec", "TOPLEVEL_ENV", "parse_toplevel_set", "twin_registration",
+           "twin_registration_path",
+           "DEFAULT_KEYS_DIR", "PUBLIC_KEYS_FILE", "Supervisor", "container_spec",
            "children_of"]
 
 #: where ``flexsheet keys generate`` writes and CURVE looks when neither ``$FLEXSHEET_KEYS`` nor
@@ -185,6 +187,26 @@ class NodeSpec(BaseModel):
         return v
 
 
+class TwinSpec(BaseModel):
+    """The top-level ``twin:`` section: which hidden truth every twin node draws
+    (:meth:`flexsheet.model.truth.TwinTruth.draw`). ``realism``: ``realistic`` (as-built values drawn around
+    nominal by documented spreads) or ``ideal`` (nominal exactly); ``truth_seed``: int ≥ 0;
+    ``registration``: before the nodes start, run the registration procedures in the twin
+    (``flexsheet calibrate display --sim``, cached per seed) and give the estimators the ``display.yaml`` it
+    writes (when the file names no ``display_calib`` of its own)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    realism: Literal["realistic", "ideal"] = "realistic"
+    truth_seed: int = Field(default=0, ge=0)
+    registration: bool = True
+
+
+#: environment variable carrying top-level overrides (``--set twin.truth_seed=3``, ``--set scene=FILE``) from
+#: ``flexsheet launch`` to :func:`load_launch` in the launcher and in every node process it starts (JSON)
+TOPLEVEL_ENV = "FLEXSHEET_LAUNCH_SET"
+TOPLEVEL_KEYS = ("twin", "scene", "display_calib")
+
+
 class LaunchFile(BaseModel):
     """A whole launch file: hosts, nodes and graph-wide settings."""
 
@@ -199,6 +221,8 @@ class LaunchFile(BaseModel):
     security: SecuritySpec = Field(default_factory=SecuritySpec)
     display_calib: str | None = Field(default=None, description="display registration file (display.yaml) the "
                                                                  "nodes take their geometry from")
+    twin: TwinSpec | None = Field(default=None, description="the twin's hidden truth (simulated graphs only)")
+    scene: str | None = Field(default=None, description="scene file (launch/scenes/*.yaml) every node presents")
     nodes: dict[str, NodeSpec]
 
     path: Path | None = None
@@ -237,6 +261,7 @@ def load_launch(path: str | Path) -> LaunchFile:
         raise LaunchError(f"{path}: not valid YAML: nested too deeply") from None
     if not isinstance(raw, dict):
         raise LaunchError(f"{path}: top level must be a mapping with 'nodes', got {type(raw).__name__}")
+    raw = _apply_toplevel_env(raw, path)
     try:
         lf = LaunchFile.model_validate(raw)
     except ValidationError as exc:
@@ -378,6 +403,76 @@ def curve_config(lf: LaunchFile, host: str | None) -> CurveConfig | None:
                        allowed_clients=[k.encode() for h, k in keys.items() if h in lf.hosts])
 
 
+def _apply_toplevel_env(raw: dict, path: Path) -> dict:
+    """``raw`` with the top-level overrides of ``$FLEXSHEET_LAUNCH_SET`` applied (``twin`` merged key by key)."""
+    text = os.environ.get(TOPLEVEL_ENV)
+    if not text:
+        return raw
+    try:
+        over = json.loads(text)
+    except ValueError:
+        raise LaunchError(f"{path}: ${TOPLEVEL_ENV} is not JSON: {text[:200]!r}") from None
+    if not isinstance(over, dict) or set(over) - set(TOPLEVEL_KEYS):
+        raise LaunchError(f"{path}: ${TOPLEVEL_ENV} may set only {', '.join(TOPLEVEL_KEYS)}, got {text[:200]!r}")
+    raw = dict(raw)
+    for key, value in over.items():
+        if key == "twin" and isinstance(value, dict):
+            base = raw.get("twin") if isinstance(raw.get("twin"), dict) else {}
+            raw["twin"] = {**base, **value}
+        else:
+            raw[key] = value
+    return raw
+
+
+def parse_toplevel_set(item: str, node_names) -> tuple[str, Any] | None:
+    """A ``--set`` item that overrides a top-level key: ``twin.KEY=VALUE`` (when no node is named ``twin``),
+    ``scene=FILE`` or ``display_calib=FILE``. Returns ``(key, value)`` with ``twin`` values as
+    ``{KEY: VALUE}`` (YAML-parsed), or ``None`` for a node override. Raises :class:`LaunchError` on a bad item."""
+    head, dot, rest = item.partition(".")
+    if dot and head == "twin" and "twin" not in node_names:
+        key, eq, value = rest.partition("=")
+        if not eq or not key:
+            raise LaunchError(f"--set {item!r}: expected twin.KEY=VALUE")
+        return "twin", {key: yaml.safe_load(value)}
+    key, eq, value = item.partition("=")
+    if eq and "." not in key:
+        if key not in ("scene", "display_calib"):
+            raise LaunchError(f"--set {item!r}: a top-level override is one of scene=FILE, display_calib=FILE, "
+                              "twin.KEY=VALUE; a node param is NODE.KEY=VALUE")
+        return key, os.path.abspath(os.path.expanduser(value)) if value else None
+    return None
+
+
+def twin_registration_path(twin: TwinSpec, cache_root: str | None = None) -> Path:
+    """Where :func:`twin_registration` caches the ``display.yaml`` of ``twin``'s realism and seed."""
+    root = Path(cache_root or os.environ.get("FLEXSHEET_CACHE", "~/.cache/flexsheet")).expanduser()
+    return root / "display_calib" / f"{twin.realism}_seed{twin.truth_seed}" / "display.yaml"
+
+
+def twin_registration(twin: TwinSpec, print_fn=print, cache_root: str | None = None) -> str:
+    """Run the display registration in the twin for ``twin`` (``flexsheet calibrate display --sim``), cached per
+    realism and seed under ``$FLEXSHEET_CACHE`` (default ``~/.cache/flexsheet``)/``display_calib/``; returns the
+    ``display.yaml`` path. The estimators get only this file, never the truth. Raises :class:`LaunchError`
+    when the registration fails (its last output lines in the message)."""
+    import subprocess
+
+    target = twin_registration_path(twin, cache_root)
+    out_dir = target.parent
+    if target.exists():
+        print_fn(f"[launch] twin registration: cached {target}")
+        return str(target)
+    print_fn(f"[launch] twin registration ({twin.realism}, truth seed {twin.truth_seed}): running the "
+             f"calibration procedures in the twin once (flexsheet calibrate display --sim) ...")
+    cmd = [sys.executable, "-m", "flexsheet", "calibrate", "display", "--sim", "--truth-seed",
+           str(twin.truth_seed), "--realism", twin.realism, "--out", str(out_dir)]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0 or not target.exists():
+        tail = " | ".join((proc.stdout + proc.stderr).strip().splitlines()[-4:])
+        raise LaunchError(f"twin registration failed (exit {proc.returncode}): {' '.join(cmd[2:])}: {tail}")
+    print_fn(f"[launch] twin registration: wrote {target}")
+    return str(target)
+
+
 def display_calib_path(lf: LaunchFile, out: str | None = None) -> str | None:
     """``lf.display_calib`` with substitutions and ``~`` expanded (None when the file names none)."""
     if lf.display_calib is None:
@@ -388,22 +483,27 @@ def display_calib_path(lf: LaunchFile, out: str | None = None) -> str | None:
 def node_config(lf: LaunchFile, name: str, out: str | None = None, overrides: dict | None = None) -> NodeConfig:
     """The :class:`NodeConfig` of node ``name`` in ``lf`` (params merged with ``overrides``, substituted).
 
-    When the file names a ``display_calib`` and the node's ``Params`` has a ``display_calib`` field that the
-    node's params leave unset, the launch file's path is filled in there; it is also in
-    ``NodeConfig.display_calib``. Raises :class:`LaunchError` (unknown node, CURVE keys).
+    Graph-wide settings reach the nodes that take them: when the file names a ``display_calib``, a ``scene``
+    or a ``twin`` section and the node's ``Params`` has a field of that name that the node's params leave
+    unset, the launch file's value is filled in there (``twin``: ``{realism, truth_seed}``); the display
+    calibration is also in ``NodeConfig.display_calib``. Raises :class:`LaunchError` (unknown node, CURVE keys).
     """
     if name not in lf.nodes:
         raise LaunchError(f"{lf.path}: no node named {name!r}; nodes: {', '.join(lf.nodes)}")
     spec = lf.nodes[name]
     params = substitute({**spec.params, **(overrides or {})}, substitutions(lf, out))
     display = display_calib_path(lf, out)
-    if display is not None and "display_calib" not in params:
+    scene = (os.path.expanduser(substitute(lf.scene, substitutions(lf, out))) if lf.scene else None)
+    twin = ({"realism": lf.twin.realism, "truth_seed": lf.twin.truth_seed} if lf.twin is not None else None)
+    graph_wide = {"display_calib": display, "scene": scene, "twin": twin}
+    if any(v is not None and k not in params for k, v in graph_wide.items()):
         try:
             fields = registry.load(registry.NODES[spec.type]).Params.model_fields
-        except (ImportError, AttributeError):
+        except (ImportError, AttributeError, KeyError):
             fields = {}
-        if "display_calib" in fields:
-            params["display_calib"] = display
+        for key, value in graph_wide.items():
+            if value is not None and key not in params and key in fields:
+                params[key] = value
     return NodeConfig(name=name, node_type=spec.type, host=spec.host, endpoint=lf.endpoint_of(name),
                       peers=list(lf.endpoints().values()), params=params, remaps=spec.remaps,
                       heartbeat_period=lf.heartbeat_period, curve=curve_config(lf, spec.host),

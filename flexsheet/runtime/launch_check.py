@@ -206,6 +206,7 @@ class _Checker:
         self.check_ports()
         self.check_security()
         self.check_display_calib()
+        self.check_scene()
         self.check_report()
         self.check_nodes()
         self.check_containers()
@@ -296,6 +297,22 @@ class _Checker:
                 self.err(origin, str(secret), f"secret key readable by others (mode {mode:o}); run: chmod 600 {secret}")
 
     # ---------------------------------------------------------------------------------------------- files
+    def check_scene(self) -> None:
+        """The top-level ``scene:`` file exists and validates (:func:`flexsheet.model.scenes.load_scene`)."""
+        if not self.lf.scene:
+            return
+        path = os.path.expanduser(substitute(self.lf.scene, substitutions(self.lf, self.out)))
+        problem = check_file_param("scene", path)
+        if problem:
+            self.err("scene", path, problem)
+            return
+        from flexsheet.model.scenes import load_scene
+
+        try:
+            load_scene(path)
+        except ValueError as exc:
+            self.err("scene", path, str(exc))
+
     def check_display_calib(self) -> None:
         path = display_calib_path(self.lf, self.out)
         if path is None:

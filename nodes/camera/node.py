@@ -148,7 +148,10 @@ def sim_config(p: CameraParams) -> SimConfig:
 def _with_rectification(st: dict) -> dict:
     """A stereo dict (image_size, K1, D1, K2, D2, R, T) completed with R1, R2, P1, P2, Q (``cv2.stereoRectify``,
     alpha 0) for :func:`flexsheet.model.calibration.to_message`."""
-    out = {k: (np.asarray(v, float) if k != "image_size" else tuple(int(x) for x in v)) for k, v in st.items()}
+    out = {k: np.asarray(st[k], float) for k in ("K1", "D1", "K2", "D2", "R", "T", "R1", "R2", "P1", "P2", "Q")
+           if k in st}
+    out["image_size"] = tuple(int(x) for x in st["image_size"])
+    out["rms_px"] = float(st.get("rms_px", 0.0))
     if "R1" not in out:
         R1, R2, P1, P2, Q, _, _ = cv2.stereoRectify(out["K1"], out["D1"], out["K2"], out["D2"], out["image_size"],
                                                     out["R"], out["T"].reshape(3, 1), alpha=0)

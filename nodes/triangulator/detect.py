@@ -150,9 +150,9 @@ class MarkerDetector:
             # Knutsson & Westin 1993: a Gaussian-weighted mean of the unmasked neighbours), so a marker
             # straddling the dark finger and the bright sheet gets each side's level, not the opening's
             # brighter one
-            hole = (patch_full > self.frac * peak).astype(np.uint8)
+            hole = (patch_full > 0.5 * peak).astype(np.uint8)
             _, hl, _, _ = cv2.connectedComponentsWithStats(hole, connectivity=8)
-            hole = cv2.dilate((hl == hl[r, r]).astype(np.uint8), self._k3) if hl[r, r] else hole
+            hole = cv2.dilate((hl == hl[r, r]).astype(np.uint8), np.ones((3, 3), np.uint8)) if hl[r, r] else hole
             keep = 1.0 - hole
             num = cv2.GaussianBlur(img_p * keep, (0, 0), 1.5)
             den = cv2.GaussianBlur(keep, (0, 0), 1.5)
@@ -168,6 +168,7 @@ class MarkerDetector:
             thr = min(max(self.frac, float(np.partition(ring, self._ring_k)[self._ring_k]) + 0.1), 0.5)
             wgt = alpha - thr
             np.maximum(wgt, 0.0, out=wgt)
+            wgt *= hole                          # the marker is inside its (grown) top-hat blob
             # keep only the blob connected to the peak (not a bright neighbour such as a clutter edge)
             _, labels, stats, _ = cv2.connectedComponentsWithStats((wgt > 0).astype(np.uint8), connectivity=8)
             lab = labels[r, r]

@@ -1,0 +1,274 @@
+"""``flexsheet calibrate camera-pose | projector | arms | eye | display | noise`` (argparse mains).
+
+Each procedure command reads its frames from the twin (``--sim --truth-seed N``) or from a folder of captured
+lab images (``--images DIR``, layout in :mod:`flexsheet.calibration.sources`), and writes/updates its entry in
+``DIR/display.yaml`` (``--out DIR``; the other entries are kept). ``display --sim`` runs them all in lab order
+and writes ``summary.json`` with each estimate's error against the twin's hidden truth; ``--sweep`` charts the
+errors against the number of poses (Agg PNG + JSON). See docs/calibration.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import replace
+
+from flexsheet.calibration import procedures as P
+from flexsheet.model.display_calib import DisplayCalib, load_display_calib, write_display_calib
+
+__all__ = ["camera_pose_main", "projector_main", "arms_main", "eye_main", "display_main", "noise_main"]
+
+
+def _say(msg: str) -> None:
+    print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
+
+
+def _common(p: argparse.ArgumentParser, what: str) -> None:
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--sim", action="store_true", help="frames from the twin (needs --truth-seed)")
+    src.add_argument("--images", metavar="DIR", help="captured lab frames (layout: docs/calibration.md)")
+    p.add_argument("--truth-seed", type=int, default=None, help="twin truth seed (with --sim)")
+    p.add_argument("--realism", choices=("realistic", "ideal"), default="realistic", help="twin realism")
+    p.add_argument("--out", required=True, metavar="DIR", help="folder of display.yaml (entry added/replaced)")
+    p.add_argument("--quick", action="store_true", help="the test preset (fewer poses; still within target)")
+
+
+def _opts(a) -> P.Options:
+    o = P.QUICK if getattr(a, "quick", False) else P.FULL
+    kw = {}
+    for k in ("board", "square", "board_offset", "views", "board_frames", "projector_poses", "pattern_spacing",
+              "arm_configs", "prior"):
+        v = getattr(a, k, None)
+        if v is not None:
+            kw[k] = v
+    return replace(o, **kw)
+
+
+def _source(a, p: argparse.ArgumentParser, opts: P.Options):
+    from flexsheet.calibration.sources import ImageDirSource, TwinSource
+    from flexsheet.calibration.twin import CalibrationTwin
+    from flexsheet.model.truth import TwinTruth
+
+    if a.sim:
+        if a.truth_seed is None:
+            p.error("--sim needs --truth-seed N")
+        truth = TwinTruth.draw(a.truth_seed, a.realism)
+        return TwinSource(CalibrationTwin(truth, seed=a.truth_seed), opts.board_frames, opts.pattern_frames,
+                          opts.marker_frames), truth
+    return ImageDirSource(a.images), None
+
+
+def _load_out(out: str) -> DisplayCalib:
+    path = os.path.join(out, "display.yaml")
+    return load_display_calib(path) if os.path.isfile(path) else DisplayCalib(path=path)
+
+
+def _write(out: str, calib: DisplayCalib) -> str:
+    path = os.path.join(out, "display.yaml")
+    write_display_calib(path, calib)
+    return path
+
+
+def _run(p: argparse.ArgumentParser, fn):
+    try:
+        return fn()
+    except ValueError as e:
+        print(f"{p.prog}: error: {e}", file=sys.stderr)
+        return 2
+
+
+def camera_pose_main(argv: list[str] | None = None) -> int:
+    """``flexsheet calibrate camera-pose``: the stereo camera's pose from a board on the sheet."""
+    p = argparse.ArgumentParser(
+        prog="flexsheet calibrate camera-pose", formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Stereo camera pose in the display frame from a board on the sheet at home (+ tilted views).",
+        epilog="example:\n  flexsheet calibrate camera-pose --sim --truth-seed 1 --quick --out /tmp/disp\n"
+               "  flexsheet calibrate camera-pose --images lab/frames --out lab/")
+    _common(p, "camera")
+    p.add_argument("--board", default=None, help="chessboard:COLSxROWS or charuco:NXxNY:SQ:MK:DICT (default 9x8)")
+    p.add_argument("--square", type=float, default=None, help="square side, m (default 0.022)")
+    p.add_argument("--board-offset", type=float, default=None, help="printed face above the sheet mid-plane, m")
+    p.add_argument("--views", type=int, default=None, help="board views incl. home (twin; default 21, quick 12)")
+    p.add_argument("--prior", default=None, help="stereo bootstrap JSON for the prior, or 'none'")
+    a = p.parse_args(argv)
+
+    def go():
+        opts = _opts(a)
+        src, truth = _source(a, p, opts)
+        calib = _load_out(a.out)
+        entry, r = P.run_camera_pose(src, opts, progress=_say)
+        calib.camera = entry
+        path = _write(a.out, calib)
+        msg = (f"camera pose: {r.n_views} views, RMS {r.rms_px:.3f} px, home corners residual {r.residual_mm:.3f} mm "
+               f"(flatness {r.flatness_mm:.3f} mm)")
+        if truth is not None:
+            et, er = truth.camera_pose_error(entry.T_display_camera)
+            msg += f"; error vs truth {et * 1e3:.3f} mm, {math.degrees(er):.4f} deg"
+        _say(msg)
+        _say(f"wrote {path}")
+        return 0
+
+    return _run(p, go)
+
+
+def projector_main(argv: list[str] | None = None) -> int:
+    """``flexsheet calibrate projector``: K_p, distortion and pose by structured light."""
+    p = argparse.ArgumentParser(
+        prog="flexsheet calibrate projector", formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Projector intrinsics and pose from Gray-code patterns on the sheet at >= 3 poses "
+                    "(needs the camera entry in OUT/display.yaml).",
+        epilog="example:\n  flexsheet calibrate camera-pose --sim --truth-seed 1 --quick --out /tmp/disp\n"
+               "  flexsheet calibrate projector --sim --truth-seed 1 --quick --out /tmp/disp")
+    _common(p, "projector")
+    p.add_argument("--poses", dest="projector_poses", type=int, default=None, help="sheet poses (twin; default 6)")
+    p.add_argument("--spacing", dest="pattern_spacing", type=int, default=None, help="grid spacing, projector px")
+    a = p.parse_args(argv)
+
+    def go():
+        opts = _opts(a)
+        src, truth = _source(a, p, opts)
+        calib = _load_out(a.out)
+        entry, r = P.run_projector(src, opts, calib, progress=_say)
+        calib.projector = entry
+        path = _write(a.out, calib)
+        msg = f"projector: {r.n_poses} poses, {r.n_inliers}/{r.n_points} points, reprojection {r.reprojection_px:.3f} px"
+        if truth is not None:
+            et, er = truth.projector_pose_error(entry.T_display_projector)
+            msg += f"; error vs truth {et * 1e3:.2f} mm, {math.degrees(er):.3f} deg"
+        _say(msg)
+        _say(f"wrote {path}")
+        return 0
+
+    return _run(p, go)
+
+
+def arms_main(argv: list[str] | None = None) -> int:
+    """``flexsheet calibrate arms``: each arm's base pose from its clamp marker."""
+    p = argparse.ArgumentParser(
+        prog="flexsheet calibrate arms", formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Arm base poses from a clamp marker at N >= 8 joint configurations (needs the camera entry).",
+        epilog="example:\n  flexsheet calibrate arms --sim --truth-seed 1 --quick --out /tmp/disp")
+    _common(p, "arms")
+    p.add_argument("--configs", dest="arm_configs", type=int, default=None, help="configurations per arm (default 12)")
+    p.add_argument("--side", choices=("left", "right", "both"), default="both")
+    a = p.parse_args(argv)
+
+    def go():
+        opts = _opts(a)
+        src, truth = _source(a, p, opts)
+        calib = _load_out(a.out)
+        sides = ("left", "right") if a.side == "both" else (a.side,)
+        res = P.run_arms(src, opts, calib, sides, progress=_say)
+        for side, (entry, r) in res.items():
+            calib.arms[side] = entry
+            msg = f"arm {side}: {r.n_configs} configurations, residual {r.residual_mm:.3f} mm"
+            if truth is not None:
+                et, er = truth.base_error(side, entry.T_display_base)
+                msg += f"; base error vs truth {et * 1e3:.3f} mm, {math.degrees(er):.3f} deg"
+            _say(msg)
+        _say(f"wrote {_write(a.out, calib)}")
+        return 0
+
+    return _run(p, go)
+
+
+def eye_main(argv: list[str] | None = None) -> int:
+    """``flexsheet calibrate eye``: the viewer's eye entry (fixed V, or tracked glasses)."""
+    p = argparse.ArgumentParser(
+        prog="flexsheet calibrate eye", formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Write the eye entry: the paper's fixed viewpoint V, or 'tracked' glasses with a fallback V.",
+        epilog="example:\n  flexsheet calibrate eye --V 0.4,0,0 --ipd 0.064 --out /tmp/disp\n"
+               "  flexsheet calibrate eye --mode tracked --eye-offset 0,-0.03,-0.02 --out /tmp/disp")
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--mode", choices=("fixed", "tracked"), default="fixed")
+    p.add_argument("--V", default="0.4,0,0", help="cyclopean eye x,y,z in m (display frame)")
+    p.add_argument("--ipd", type=float, default=0.064, help="interpupillary distance, m")
+    p.add_argument("--eye-offset", default="0,0,0", help="tracked: cyclopean eye in the glasses frame, m")
+    a = p.parse_args(argv)
+
+    def go():
+        from flexsheet.calibration.eye import fixed_eye, tracked_eye_entry
+
+        try:
+            V = [float(v) for v in a.V.split(",")]
+            off = [float(v) for v in a.eye_offset.split(",")]
+        except ValueError:
+            raise ValueError(f"--V and --eye-offset must be x,y,z numbers, got {a.V!r}, {a.eye_offset!r}") from None
+        calib = _load_out(a.out)
+        calib.eye = fixed_eye(V, a.ipd) if a.mode == "fixed" else tracked_eye_entry(V, a.ipd, off)
+        _say(f"eye: {a.mode}, V = {calib.eye.V.tolist()} m, ipd {calib.eye.ipd} m; wrote {_write(a.out, calib)}")
+        return 0
+
+    return _run(p, go)
+
+
+def display_main(argv: list[str] | None = None) -> int:
+    """``flexsheet calibrate display``: every procedure in lab order (twin), or the error-vs-poses sweep."""
+    p = argparse.ArgumentParser(
+        prog="flexsheet calibrate display", formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Run camera-pose, projector, arms and eye in the twin against a hidden truth; write "
+                    "OUT/display.yaml and OUT/summary.json (errors vs truth; cached per seed). --sweep charts each "
+                    "estimate's error against the number of poses.",
+        epilog="example:\n  flexsheet calibrate display --sim --truth-seed 1 --quick --out /tmp/disp1\n"
+               "  flexsheet calibrate display --sweep --seeds 1,2,3 --out docs/figures/calibration")
+    p.add_argument("--sim", action="store_true", help="run in the twin (the only mode of 'display')")
+    p.add_argument("--truth-seed", type=int, default=None)
+    p.add_argument("--realism", choices=("realistic", "ideal"), default="realistic")
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--quick", action="store_true", help="the test preset (fewer poses; still within target)")
+    p.add_argument("--force", action="store_true", help="ignore the cache")
+    p.add_argument("--sweep", action="store_true", help="error vs number of poses over --seeds (PNG + JSON)")
+    p.add_argument("--seeds", default="1,2,3", help="truth seeds for --sweep")
+    a = p.parse_args(argv)
+
+    def go():
+        if a.sweep:
+            from flexsheet.calibration.sweep import run_sweep
+
+            seeds = [int(s) for s in a.seeds.split(",") if s.strip()]
+            run_sweep(seeds, a.out, quick=a.quick, realism=a.realism, progress=_say)
+            return 0
+        if not a.sim or a.truth_seed is None:
+            p.error("display needs --sim --truth-seed N (in the lab run the procedures one by one: docs/calibration.md)")
+        s = P.run_display_sim(a.truth_seed, a.out, P.QUICK if a.quick else P.FULL, a.realism, a.force, progress=_say)
+        t = s["targets"]
+        ok = (s["camera"]["translation_error_mm"] <= t["camera_mm"] and s["camera"]["rotation_error_deg"] <= t["camera_deg"]
+              and s["projector"]["translation_error_mm"] <= t["projector_mm"]
+              and s["projector"]["rotation_error_deg"] <= t["projector_deg"]
+              and s["projector"]["reprojection_px"] <= t["projector_px"]
+              and all(v["translation_error_mm"] <= t["arms_mm"] for v in s["arms"].values()))
+        _say(f"{'all within target' if ok else 'TARGET MISSED'}; wrote {a.out}/display.yaml, {a.out}/summary.json")
+        return 0
+
+    return _run(p, go)
+
+
+def noise_main(argv: list[str] | None = None) -> int:
+    """``flexsheet calibrate noise``: measure the camera noise model on real chessboard pairs."""
+    p = argparse.ArgumentParser(
+        prog="flexsheet calibrate noise", formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Measure read noise, shot-noise gain, blur and board levels on real chessboard pairs "
+                    "(9x6, the twin's image model).",
+        epilog="example:\n  flexsheet calibrate noise --images /work/shared/data/stereo_calib_xi "
+               "--out docs/figures/calibration/ximea_noise.json")
+    p.add_argument("--images", required=True, metavar="DIR", help="folder with left*.jpg / right*.jpg")
+    p.add_argument("--square", type=float, default=0.024)
+    p.add_argument("--out", required=True, metavar="FILE")
+    a = p.parse_args(argv)
+
+    def go():
+        from flexsheet.calibration.twin import measure_ximea_noise
+
+        _say(f"measuring {a.images} (render each view through its calibrated pose)…")
+        r = measure_ximea_noise(a.images, a.square)
+        os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
+        with open(a.out, "w") as fh:
+            json.dump(r, fh, indent=1)
+        _say(f"model {r['model']}; wrote {a.out}")
+        return 0
+
+    return _run(p, go)

@@ -1,0 +1,186 @@
+"""Where the procedures get their frames: the twin (:class:`TwinSource`) or the lab's captured images
+(:class:`ImageDirSource`). Both hand the same estimators the same things — stereo pairs and the commanded
+inputs (sheet poses, projector patterns, joint vectors) — so the lab and the twin run one code path.
+
+Captured-images layout (``--images DIR``; :func:`save_frames` writes it, e.g. from the twin)::
+
+    DIR/camera_pose/view00_left.png, view00_right.png, view01_...   # view00 = home pose
+    DIR/projector/pose00/img00_left.png ... img41_right.png         # the patterns of gray_code_patterns(),
+                                                                   # in order (42 for 1024x768), per pose
+    DIR/arms/left/config00_left.png ..., DIR/arms/right/...
+    DIR/manifest.json   {"arms": {"left": {"joints": [[q1..q6], ...]}, "right": {...}},   # commanded, rad
+                         "projector": {"width": 1024, "height": 768}}
+
+Images are 8-bit grayscale (PNG or any format ``cv2.imread`` reads), raw (not rectified), each ideally the mean
+of several frames (the procedures' precision assumes averaging; see docs/calibration.md).
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+import os
+
+import cv2
+import numpy as np
+
+from flexsheet.calibration.twin import CalibrationTwin
+
+__all__ = ["TwinSource", "ImageDirSource", "save_frames"]
+
+Pair = tuple[np.ndarray, np.ndarray]
+
+
+class TwinSource:
+    """Frames rendered by :class:`flexsheet.calibration.twin.CalibrationTwin` from a hidden truth.
+
+    ``board_frames``/``pattern_frames``/``marker_frames``: frames averaged per capture for each scene.
+    ``sheet_white_dn``: projector white on the sheet (lower it to play a dark sheet)."""
+
+    kind = "twin"
+
+    def __init__(self, twin: CalibrationTwin, board_frames: int = 8, pattern_frames: int = 1,
+                 marker_frames: int = 4, sheet_white_dn: float = 190.0, board_bow_mm: float = 0.0):
+        self.twin = twin
+        self.n_board_frames = board_frames
+        self.n_pattern_frames = pattern_frames
+        self.n_marker_frames = marker_frames
+        self.sheet_white_dn = sheet_white_dn
+        self.board_bow_mm = board_bow_mm
+
+    @property
+    def label(self) -> str:
+        t = self.twin.truth
+        return f"twin seed {t.seed} ({t.realism})"
+
+    def board_views(self, board, sheet_poses: list[np.ndarray], offset: float = 0.0) -> list[Pair]:
+        """One averaged stereo pair per commanded sheet pose (home first)."""
+        f = self.twin.frames
+        self.twin.frames = self.n_board_frames
+        try:
+            return self.twin.board_views(board, sheet_poses, offset, self.board_bow_mm)
+        finally:
+            self.twin.frames = f
+
+    def pattern_frames(self, patterns: list[np.ndarray], sheet_pose: np.ndarray, index: int) -> list[Pair]:
+        """Stereo pairs of every pattern with the sheet at ``sheet_pose`` (pose number ``index``)."""
+        return self.twin.pattern_frames(patterns, sheet_pose, white_dn=self.sheet_white_dn, frames=self.n_pattern_frames)
+
+    def marker_frames(self, side: str, joints: list[np.ndarray]) -> tuple[list[Pair], list[np.ndarray]]:
+        """Stereo pairs while arm ``side`` visits ``joints``; returns (frames, the joints actually commanded)."""
+        f = self.twin.frames
+        self.twin.frames = self.n_marker_frames
+        try:
+            return self.twin.marker_frames(side, joints), [np.asarray(q, float) for q in joints]
+        finally:
+            self.twin.frames = f
+
+
+def _read(path: str) -> np.ndarray:
+    img = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+    if img is None:
+        raise ValueError(f"cannot read image {path!r}")
+    return img
+
+
+def _pairs(pattern: str) -> list[Pair]:
+    lefts = sorted(glob.glob(pattern.replace("{side}", "left")))
+    out = []
+    for lf in lefts:
+        rf = lf[::-1].replace("tfel", "thgir", 1)[::-1]        # last "left" -> "right"
+        if not os.path.isfile(rf):
+            raise ValueError(f"{lf} has no right image {rf}")
+        out.append((_read(lf), _read(rf)))
+    return out
+
+
+class ImageDirSource:
+    """Frames captured in the lab, in the layout of the module doc. The commanded poses are not needed for the
+    board and pattern scenes (the estimators do not use them); the arms' commanded joints come from
+    ``manifest.json``. Raises ``ValueError`` naming the missing file or folder."""
+
+    kind = "images"
+
+    def __init__(self, root: str):
+        if not os.path.isdir(root):
+            raise ValueError(f"images folder not found: {root!r}")
+        self.root = root
+        man = os.path.join(root, "manifest.json")
+        self.manifest = {}
+        if os.path.isfile(man):
+            try:
+                with open(man) as fh:
+                    self.manifest = json.load(fh)
+            except json.JSONDecodeError as exc:
+                raise ValueError(f"{man}: not JSON ({exc})") from None
+
+    @property
+    def label(self) -> str:
+        return f"lab images {self.root}"
+
+    def board_views(self, board, sheet_poses=None, offset: float = 0.0) -> list[Pair]:
+        views = _pairs(os.path.join(self.root, "camera_pose", "view*_{side}.*"))
+        if not views:
+            raise ValueError(f"no board views in {os.path.join(self.root, 'camera_pose')} (view00_left.png, ...)")
+        return views
+
+    def n_projector_poses(self) -> int:
+        return len(glob.glob(os.path.join(self.root, "projector", "pose*")))
+
+    def pattern_frames(self, patterns, sheet_pose, index: int) -> list[Pair]:
+        d = os.path.join(self.root, "projector", f"pose{index:02d}")
+        frames = _pairs(os.path.join(d, "img*_{side}.*"))
+        if len(frames) != len(patterns):
+            raise ValueError(f"{d}: {len(frames)} image pairs, expected {len(patterns)} (one per pattern, in order)")
+        return frames
+
+    def marker_frames(self, side: str, joints=None) -> tuple[list[Pair], list[np.ndarray]]:
+        d = os.path.join(self.root, "arms", side)
+        frames = _pairs(os.path.join(d, "config*_{side}.*"))
+        try:
+            q = [np.asarray(v, float) for v in self.manifest["arms"][side]["joints"]]
+        except (KeyError, TypeError):
+            raise ValueError(f"{self.root}/manifest.json lacks arms.{side}.joints (commanded joints, rad)") from None
+        if len(q) != len(frames) or any(v.shape != (6,) for v in q):
+            raise ValueError(f"arms.{side}: {len(frames)} image pairs but {len(q)} joint vectors (each 6 numbers)")
+        return frames, q
+
+
+def save_frames(root: str, *, board_views: list[Pair] | None = None, projector: list[list[Pair]] | None = None,
+                arms: dict[str, tuple[list[Pair], list[np.ndarray]]] | None = None,
+                projector_size: tuple[int, int] | None = None) -> None:
+    """Write frames in the :class:`ImageDirSource` layout (PNG) plus ``manifest.json``."""
+    man: dict = {}
+    if board_views:
+        d = os.path.join(root, "camera_pose")
+        os.makedirs(d, exist_ok=True)
+        for k, (a, b) in enumerate(board_views):
+            cv2.imwrite(os.path.join(d, f"view{k:02d}_left.png"), a)
+            cv2.imwrite(os.path.join(d, f"view{k:02d}_right.png"), b)
+    if projector:
+        for p, frames in enumerate(projector):
+            d = os.path.join(root, "projector", f"pose{p:02d}")
+            os.makedirs(d, exist_ok=True)
+            for k, (a, b) in enumerate(frames):
+                cv2.imwrite(os.path.join(d, f"img{k:02d}_left.png"), a)
+                cv2.imwrite(os.path.join(d, f"img{k:02d}_right.png"), b)
+        if projector_size:
+            man["projector"] = {"width": int(projector_size[0]), "height": int(projector_size[1])}
+    if arms:
+        man["arms"] = {}
+        for side, (frames, q) in arms.items():
+            d = os.path.join(root, "arms", side)
+            os.makedirs(d, exist_ok=True)
+            for k, (a, b) in enumerate(frames):
+                cv2.imwrite(os.path.join(d, f"config{k:02d}_left.png"), a)
+                cv2.imwrite(os.path.join(d, f"config{k:02d}_right.png"), b)
+            man["arms"][side] = {"joints": [np.asarray(v, float).tolist() for v in q]}
+    os.makedirs(root, exist_ok=True)
+    path = os.path.join(root, "manifest.json")
+    if os.path.isfile(path):
+        with open(path) as fh:
+            old = json.load(fh)
+        old.update(man)
+        man = old
+    with open(path, "w") as fh:
+        json.dump(man, fh, indent=1)
