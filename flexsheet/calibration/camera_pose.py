@@ -20,7 +20,7 @@ object pose in one view):
 3. ``scipy.optimize.least_squares`` over the 24 stereo parameters (per camera fx, fy, cx, cy, k1, k2, p1, p2,
    k3; left→right R, T), the home pose and one board pose per other view, minimising the reprojection error
    of all corners in both images (σ-weighted) plus a Gaussian prior on the stereo parameters: the nominal
-   calibration with its bootstrap covariance (:func:`flexsheet.model.truth.bootstrap_stereo_calibration` of
+   calibration with its bootstrap covariance (``python -m flexsheet.model.truth --bootstrap`` on
    the stereo calibration's own pairs) — the MAP estimate. σ is re-estimated from the residuals and the fit
    repeated once.
 
@@ -43,7 +43,7 @@ from scipy.optimize import least_squares
 
 from flexsheet.model.calibration import BoardSpec, detect_board
 from flexsheet.model.stereo import StereoModel
-from flexsheet.model.truth import BOOTSTRAP_FILE, stereo_from_vector, stereo_vector
+from flexsheet.model.display_calib import BOOTSTRAP_FILE, stereo_from_vector, stereo_vector
 
 __all__ = ["VIEW_PLAN", "detect_corners", "board_centre", "board_points", "sheet_pose", "plan_board_views", "load_prior",
            "CameraPoseResult", "detect_views", "estimate_camera_pose"]
@@ -98,7 +98,7 @@ def plan_board_views(n_views: int) -> list[np.ndarray]:
 
 
 def load_prior(path: str = BOOTSTRAP_FILE, scale: float = 1.0) -> np.ndarray:
-    """(24, 24) covariance of the stereo parameters (:func:`flexsheet.model.truth.stereo_vector` order) from a
+    """(24, 24) covariance of the stereo parameters (:func:`flexsheet.model.display_calib.stereo_vector` order) from a
     bootstrap JSON (``{"deviations": (n, 24)}``), times ``scale``². Raises ``ValueError`` on a bad file."""
     try:
         with open(path) as fh:

@@ -29,7 +29,7 @@ from flexsheet.model import scene
 from flexsheet.model.projector import Projector
 from flexsheet.model.sheet import SheetSurface
 
-__all__ = ["MeasurementCamera", "measure_sizes", "trace_to_sheet", "projector_pixels"]
+__all__ = ["MeasurementCamera", "measure_sizes", "measure_edges", "trace_to_sheet", "projector_pixels"]
 
 
 def projector_pixels(points: np.ndarray, projector: Projector, distortion=None) -> tuple[np.ndarray, np.ndarray]:
@@ -193,3 +193,16 @@ def measure_sizes(img: np.ndarray, pixel: float, inset: float = 0.1) -> dict[str
         a, b = _profile_span(_row(img, r))
         out[name] = (b - a) * pixel
     return out
+
+
+def measure_edges(img: np.ndarray, pixel: float) -> dict[str, float]:
+    """Edges (m on the screen, from the photograph's centre; x right, z up) of the object's image: ``top`` and
+    ``bottom`` of the centre column, ``left`` and ``right`` of the row halfway between them (0.5 crossings, as
+    :func:`measure_sizes`). Raises ``ValueError`` if nothing is visible."""
+    img = np.asarray(img, dtype=float)
+    cy, cx = (img.shape[0] - 1) / 2.0, (img.shape[1] - 1) / 2.0
+    col = 0.5 * (img[:, int(np.floor(cx))] + img[:, int(np.ceil(cx))])
+    top, bot = _profile_span(col)
+    a, b = _profile_span(_row(img, 0.5 * (top + bot)))
+    return {"top": (cy - top) * pixel, "bottom": (cy - bot) * pixel, "left": (a - cx) * pixel,
+            "right": (b - cx) * pixel}

@@ -48,7 +48,8 @@ from flexsheet.model.calibration import MAX_CALIB_BYTES, _CvYamlLoader
 
 __all__ = ["FORMAT_VERSION", "ENTRIES", "NOMINAL_CLAMP_MARKER", "NOMINAL_IPD", "Provenance", "CameraEntry",
            "ProjectorEntry", "ArmEntry", "EyeEntry", "DisplayCalib", "nominal_display_calib", "load_display_calib",
-           "write_display_calib", "now_iso", "pose_from_rt", "xyzyaw_from_pose"]
+           "write_display_calib", "now_iso", "pose_from_rt", "xyzyaw_from_pose", "BOOTSTRAP_FILE", "STEREO_NAMES",
+           "stereo_vector", "stereo_from_vector"]
 
 FORMAT_VERSION = 1
 #: entry names, as :meth:`DisplayCalib.require` and the error messages spell them
@@ -58,6 +59,41 @@ ENTRIES = ("camera", "projector", "arms.left", "arms.right", "eye")
 NOMINAL_CLAMP_MARKER = (0.010, 0.0, 0.040)
 #: nominal interpupillary distance, m (adult median, Dodgson 2004: 63–64 mm)
 NOMINAL_IPD = 0.064
+
+
+#: bootstrap deviations of the shipped XIMEA stereo calibration (``python -m flexsheet.model.truth --bootstrap``):
+#: the uncertainty the stereo calibration leaves, used as the camera-pose prior and as the truth's spread
+BOOTSTRAP_FILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "ximea_calib_bootstrap.json")
+
+STEREO_NAMES = [f"{c}_{n}" for c in ("left", "right") for n in ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2",
+                                                                  "k3")] + ["rx", "ry", "rz", "tx", "ty", "tz"]
+
+
+def stereo_vector(calib: dict) -> np.ndarray:
+    """(24,) parameter vector of a stereo calibration dict: per camera (fx, fy, cx, cy, k1, k2, p1, p2, k3),
+    then the left→right rotation as a Rodrigues vector (rad) and T (m)."""
+    v = []
+    for K, D in ((calib["K1"], calib["D1"]), (calib["K2"], calib["D2"])):
+        d = np.zeros(5)
+        dd = np.asarray(D, float).ravel()[:5]
+        d[:dd.size] = dd
+        v += [K[0, 0], K[1, 1], K[0, 2], K[1, 2], *d]
+    v += list(cv2.Rodrigues(np.asarray(calib["R"], float))[0].ravel()) + list(np.asarray(calib["T"], float).ravel())
+    return np.array(v, float)
+
+
+def stereo_from_vector(v: np.ndarray, image_size) -> dict:
+    """Inverse of :func:`stereo_vector`: dict with ``image_size``, K1, D1, K2, D2, R, T (float64)."""
+    v = np.asarray(v, float)
+    out: dict = {"image_size": (int(image_size[0]), int(image_size[1]))}
+    for i, s in enumerate(("1", "2")):
+        a = v[9 * i:9 * i + 9]
+        out["K" + s] = np.array([[a[0], 0.0, a[2]], [0.0, a[1], a[3]], [0.0, 0.0, 1.0]])
+        out["D" + s] = a[4:9].copy()
+    out["R"] = cv2.Rodrigues(v[18:21].copy())[0]
+    out["T"] = v[21:24].copy()
+    return out
+
 
 
 def now_iso() -> str:

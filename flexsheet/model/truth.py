@@ -48,12 +48,18 @@ import cv2
 import numpy as np
 import pinocchio as pin
 
-from flexsheet.model.display_calib import NOMINAL_CLAMP_MARKER, nominal_display_calib, pose_from_rt
+from flexsheet.model.display_calib import (
+    BOOTSTRAP_FILE,
+    NOMINAL_CLAMP_MARKER,
+    STEREO_NAMES,
+    nominal_display_calib,
+    pose_from_rt,
+    stereo_from_vector,
+    stereo_vector,
+)
 
-__all__ = ["BOOTSTRAP_FILE", "Spreads", "TwinTruth", "TruthArm", "bootstrap_stereo_calibration",
-           "stereo_vector", "stereo_from_vector", "random_rotation"]
+__all__ = ["Spreads", "TwinTruth", "TruthArm", "bootstrap_stereo_calibration", "random_rotation"]
 
-BOOTSTRAP_FILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "ximea_calib_bootstrap.json")
 _FLIP_X = np.diag([1.0, -1.0, -1.0, 1.0])
 
 
@@ -85,37 +91,6 @@ class Spreads:
         for k, v in asdict(self).items():
             if not (math.isfinite(v) and v >= 0.0):
                 raise ValueError(f"spread {k} must be finite and >= 0, got {v!r}")
-
-
-# ------------------------------------------------------------------------------------- stereo vector helpers
-_STEREO_NAMES = [f"{c}_{n}" for c in ("left", "right") for n in ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2",
-                                                                  "k3")] + ["rx", "ry", "rz", "tx", "ty", "tz"]
-
-
-def stereo_vector(calib: dict) -> np.ndarray:
-    """(24,) parameter vector of a stereo calibration dict: per camera (fx, fy, cx, cy, k1, k2, p1, p2, k3),
-    then the left→right rotation as a Rodrigues vector (rad) and T (m)."""
-    v = []
-    for K, D in ((calib["K1"], calib["D1"]), (calib["K2"], calib["D2"])):
-        d = np.zeros(5)
-        dd = np.asarray(D, float).ravel()[:5]
-        d[:dd.size] = dd
-        v += [K[0, 0], K[1, 1], K[0, 2], K[1, 2], *d]
-    v += list(cv2.Rodrigues(np.asarray(calib["R"], float))[0].ravel()) + list(np.asarray(calib["T"], float).ravel())
-    return np.array(v, float)
-
-
-def stereo_from_vector(v: np.ndarray, image_size) -> dict:
-    """Inverse of :func:`stereo_vector`: dict with ``image_size``, K1, D1, K2, D2, R, T (float64)."""
-    v = np.asarray(v, float)
-    out: dict = {"image_size": (int(image_size[0]), int(image_size[1]))}
-    for i, s in enumerate(("1", "2")):
-        a = v[9 * i:9 * i + 9]
-        out["K" + s] = np.array([[a[0], 0.0, a[2]], [0.0, a[1], a[3]], [0.0, 0.0, 1.0]])
-        out["D" + s] = a[4:9].copy()
-    out["R"] = cv2.Rodrigues(v[18:21].copy())[0]
-    out["T"] = v[21:24].copy()
-    return out
 
 
 def random_rotation(rng: np.random.Generator, sigma_rad: float) -> np.ndarray:
@@ -162,7 +137,7 @@ def bootstrap_stereo_calibration(left: list[np.ndarray], right: list[np.ndarray]
         idx = rng.integers(0, len(data), len(data))
         if len(set(idx.tolist())) >= 6:
             devs.append(calib(idx) - full)
-    return {"names": _STEREO_NAMES, "deviations": np.round(np.array(devs), 10).tolist(), "n_pairs": len(data)}
+    return {"names": list(STEREO_NAMES), "deviations": np.round(np.array(devs), 10).tolist(), "n_pairs": len(data)}
 
 
 def _bootstrap_deviations() -> np.ndarray:

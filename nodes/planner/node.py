@@ -11,8 +11,6 @@ the last safe pose with status ``hold:<reason>``; an unreachable target holds th
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 from pydantic import Field
 
@@ -105,11 +103,11 @@ class PlannerNode(Node):
         """Keep the FEM's local stiffness (N/m) while the solution is valid and positive."""
         if msg.valid and msg.stiffness > 0.0:
             self._k_fem = float(msg.stiffness)
-            self._k_fem_at = time.monotonic()
+            self._k_fem_at = self.now()
 
     def _stiffness(self) -> float:
         p: PlannerParams = self.params
-        if p.use_fem_stiffness and self._k_fem is not None and time.monotonic() - self._k_fem_at <= p.fem_timeout:
+        if p.use_fem_stiffness and self._k_fem is not None and self.now() - self._k_fem_at <= p.fem_timeout:
             return self._k_fem
         return p.object_stiffness
 
