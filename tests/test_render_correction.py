@@ -228,3 +228,84 @@ def test_predicted_errors_grow_with_depth_and_fine_is_reference():
     assert p1["fine"] < 1e-9 and p5["fine"] < 1e-9
     assert p5["none"] > p1["none"] > 0.0
     assert p5["four_triangle"] < p5["none"]
+
+
+# ------------------------------------------------------------------ the nominal FEM sheet model (fine shader form)
+@pytest.fixture(scope="module")
+def nominal_model(tmp_path_factory):
+    from nodes.renderer.sheet_model import NominalSheetModel
+
+    # centre-contact table on a coarse mesh (~2 s); the experiment and the node use the default mesh
+    return NominalSheetModel(positions=(0.0,), mesh={"h_fine": 0.006, "h_coarse": 0.012},
+                             cache_dir=str(tmp_path_factory.mktemp("fem")))
+
+
+def test_series_shape_evaluates_the_membrane_form():
+    # SeriesShape evaluates w = sum coef sin(lam (u + a)) G(v; mu, v0), the form the GLSL fine model sends:
+    # given a Membrane's own arrays it must reproduce the Membrane (values and gradients)
+    from nodes.renderer.sheet_model import SeriesShape
+
+    m = Membrane(0.125, 0.12, 0.02, -0.03, 0.03, tension_ratio=0.8, modes=24)
+    s = SeriesShape(m.half_span, m.half_width, m.push_u, m.push_v, m.depth, m.lam, m.mu, m.coef)
+    u, v = np.meshgrid(np.linspace(-0.13, 0.13, 17), np.linspace(-0.125, 0.125, 13))
+    for a, b in zip(m.deflection_grad(u, v), s.deflection_grad(u, v), strict=True):
+        np.testing.assert_allclose(b, a, atol=1e-12)
+
+
+def test_nominal_fit_matches_the_fem_table(nominal_model):
+    a = 0.12 * 1.04
+    for S in (0.01, 0.05):
+        shp = nominal_model.shape(a, S, 0.0, 0.0)
+        assert len(shp.coef) <= 64
+        tab = nominal_model.table(0.04)
+        u, v = np.meshgrid(np.linspace(-a, a, 97), np.linspace(-0.12, 0.12, 61), indexing="ij")
+        err = np.abs(shp.deflection(u, v) - tab.evaluate(S, 0.0, 0.0, u, v, a))
+        outline = (np.abs(v) > 0.03) | (np.abs(u) > 0.05)          # where the cylinder's outline is seen
+        assert err[outline].max() < 0.01 * S, (S, err[outline].max())     # 0.1 mm at 10 mm, 0.5 mm at 50
+        assert shp.fit_rms < 0.004 * S
+        # clamped edges stay at zero, free edges have zero slope (the basis enforces both)
+        assert np.abs(shp.deflection([-a, a], [0.0, 0.05])).max() < 1e-12
+        assert np.abs(shp.deflection_grad([0.0, 0.03], [-0.12, 0.12])[2]).max() < 1e-9
+        # the old sine series (tension ratio 1) is much further off at 50 mm
+        m = Membrane(a, 0.12, 0.0, 0.0, S)
+        if S == 0.05:
+            assert np.abs(m.deflection(u, v) - tab.evaluate(S, 0.0, 0.0, u, v, a))[outline].max() > 10 * err[outline].max()
+
+
+def test_nominal_model_is_cached_and_replaces_the_membrane(nominal_model):
+    a = 0.12 * 1.04
+    sheet = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], a,
+                         membrane=Membrane(a, 0.12, 0.001, -0.002, 0.03, modes=16))
+    s2 = nominal_model.surface(sheet)
+    assert s2.membrane is not sheet.membrane and s2.membrane.depth == 0.03
+    assert (s2.membrane.push_u, s2.membrane.push_v) == (0.001, -0.002)
+    assert nominal_model.surface(sheet).membrane is s2.membrane            # LRU hit
+    flat = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], a)
+    assert nominal_model.surface(flat) is flat
+    with pytest.raises(ValueError, match="depth"):
+        nominal_model.shape(a, 0.0, 0.0, 0.0)
+
+
+def test_fine_correction_on_the_fitted_shape_lands_on_eye_line(nominal_model):
+    a = 0.12 * 1.04
+    sheet = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], a, membrane=nominal_model.shape(a, 0.05, 0.0, 0.0))
+    pts = cylinder_points()
+    ah, ok = correct_vertices_fine(pts, sheet=sheet, return_valid=True, **COM)
+    assert ok.all()
+    b = project_vertices(ah, eye=scene.EYE, screen_point=[0, 0, 0], screen_normal=[1, 0, 0])
+    c = land_projector_rays(b, scene.PROJECTOR, sheet)
+    assert dist_to_lines(c, scene.EYE, pts).max() < 1e-7
+
+
+def test_predicted_errors_against_the_nominal_model(nominal_model):
+    home = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], 0.12 * 1.04)
+
+    def ref(s, depth):
+        return nominal_model.shape(s.half_span, depth, 0.0, 0.0, s.half_width)
+
+    p_series = predict_model_errors(0.05, probes=cylinder_points(), sheet=home, **COM)
+    p_fem = predict_model_errors(0.05, probes=cylinder_points(), sheet=home, reference=ref, **COM)
+    assert p_fem["fine"] < 1e-9                        # the fine model now carries the reference shape
+    # the conical FEM dent is closer to the 4-triangle pyramid than the series membrane is
+    assert p_fem["four_triangle"] < p_series["four_triangle"]
+    assert p_fem["none"] > p_series["none"] * 0.5

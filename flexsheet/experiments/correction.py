@@ -48,7 +48,7 @@ from flexsheet.experiments.measurement import MeasurementCamera, measure_edges, 
 from flexsheet.model import scene
 from flexsheet.model.display_calib import DisplayCalib, load_display_calib, nominal_display_calib
 from flexsheet.model.projector import Projector
-from flexsheet.model.sheet import SheetSurface, clamp_poses, frame_from_clamps
+from flexsheet.model.sheet import SheetSurface, clamp_half_span, clamp_poses, frame_from_clamps
 from flexsheet.model.truth import TwinTruth
 
 __all__ = ["main", "run", "inclined_pose", "CalibratedDisplay", "DisplayEstimator", "TwinWorld", "Measurer",
@@ -166,9 +166,10 @@ class DisplayEstimator:
                                        samples=samples, shading=False)
         v, f = cylinder_mesh()
         self.renderer.set_mesh(v, f)
-        home = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        home = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], clamp_half_span(STRETCH))
         self.table = ErrorTable.build(silhouette_probes(v), eye=cal.eye, projector=cal.projector.position,
-                                      screen_point=scene.SCREEN_POINT, screen_normal=scene.SCREEN_NORMAL, sheet=home)
+                                      screen_point=scene.SCREEN_POINT, screen_normal=scene.SCREEN_NORMAL, sheet=home,
+                                      sheet_model=sheet_model)
 
     def joints(self, origin, normal, axis_u, stretch: float = STRETCH) -> dict[str, np.ndarray]:
         """The bridges' joint commands (side → (6,) rad) for the commanded sheet pose: IK of the clamp poses
@@ -194,26 +195,19 @@ class DisplayEstimator:
         """The bridges' clamp poses (FK of the measured joints at the calibrated bases), (left, right) (4, 4)."""
         return self.kin["left"].fk(q["left"]), self.kin["right"].fk(q["right"])
 
-    def sheet(self, q: dict, finger=None) -> SheetSurface:
+    def sheet(self, q: dict, finger=None, series: bool = False) -> SheetSurface:
         """The renderer's sheet (:meth:`nodes.renderer.state.RendererState.current_sheet`) from the bridges'
-        clamp poses and the tracked fingertip ``finger`` (3,) m or None; with a ``sheet_model`` and a push,
-        its membrane is that model's (``fem_nominal``)."""
+        clamp poses and the tracked fingertip ``finger`` (3,) m or None; when pushed, its membrane is the
+        ``sheet_model``'s (``fem_nominal``), or with ``series`` (or no sheet model) the config's sine series."""
         from nodes.renderer.state import RendererState
 
-        st = RendererState(self.cal.eye, self.cal.projector.position, self.config)
+        st = RendererState(self.cal.eye, self.cal.projector.position, self.config,
+                           sheet_model=None if series else self.sheet_model)
         Tl, Tr = self.clamps(q)
         st.set_arm_pose("left", Tl)
         st.set_arm_pose("right", Tr)
         st.set_fingertip(None if finger is None else np.asarray(finger, float), 0.0)
         return st.current_sheet()
-
-    def model_sheet(self, sheet: SheetSurface, model: str) -> SheetSurface:
-        """``sheet`` with the membrane ``model`` corrects with: ``fem_nominal`` → the nominal sheet model's."""
-        if model == "fem_nominal":
-            if self.sheet_model is None:
-                raise ValueError("model fem_nominal needs a sheet_model")
-            return self.sheet_model.surface(sheet)
-        return sheet
 
     def pick(self, sheet: SheetSurface) -> str:
         """The model the renderer's ``auto`` picks for ``sheet`` (:func:`nodes.renderer.state.pick_model`)."""
@@ -222,11 +216,11 @@ class DisplayEstimator:
         return pick_model("auto", sheet, self.table, self.target)
 
     def draw(self, model: str, sheet: SheetSurface) -> np.ndarray:
-        """The projector image (H, W) float in [0, 1] drawn with ``model`` (``fem_nominal``: the ``fine``
-        shader with the nominal sheet model's membrane) for the calibrated eye."""
-        gl_model = "fine" if model == "fem_nominal" else model
-        self.renderer.set_model(gl_model, None if model == "none" else self.model_sheet(sheet, model))
-        return self.renderer.render_single(self.cal.eye)
+        """The projector image (H, W) float in [0, 1] drawn with ``model`` (one of
+        :data:`nodes.renderer.correction.MODELS`; ``fine`` uses ``sheet``'s membrane) for the calibrated eye."""
+        with self.renderer.ctx:           # another renderer's (standalone) context may be current
+            self.renderer.set_model(model, None if model == "none" else sheet)
+            return self.renderer.render_single(self.cal.eye)
 
     def release(self) -> None:
         self.renderer.release()
@@ -297,7 +291,8 @@ class Measurer:
         v, f = cylinder_mesh()
         r.set_mesh(v, f)
         home = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-        self.proper_photo = self.cam.photograph(r.render_single(scene.EYE), r.projector, home)
+        with r.ctx:
+            self.proper_photo = self.cam.photograph(r.render_single(scene.EYE), r.projector, home)
         r.release()
         self.proper = self.sizes(self.proper_photo)
         self.proper_centre = self.centre(self.proper_photo)
@@ -353,7 +348,8 @@ def measure_pushed(est: DisplayEstimator, world: TwinWorld, meas: Measurer, dept
     origin, normal, axis_u = HOME_POSE
     q = est.joints(origin, normal, axis_u)
     finger = origin - depth_mm * 1e-3 * normal            # commanded, known to both sides
-    sheet = est.sheet(q, finger)
+    sheet = est.sheet(q, finger)                          # the renderer's sheet (its shape model)
+    sheets = {"fine": est.sheet(q, finger, series=True), "fem_nominal": sheet}
     true, info = world.sheet(q, finger)
     picked = est.pick(sheet)
     if picked == "fine" and est.sheet_model is not None:
@@ -361,7 +357,8 @@ def measure_pushed(est: DisplayEstimator, world: TwinWorld, meas: Measurer, dept
     row: dict = {"model": picked, "true_depth_mm": info["depth"] * 1e3,
                  "true_contact_mm": [info["push_u"] * 1e3, info["push_v"] * 1e3], **_pose_dev(info, sheet)}
     for model in dict.fromkeys((*models, picked)):
-        ph = meas.shoot(est.draw(model, sheet), world, true)
+        gl = "fine" if model == "fem_nominal" else model
+        ph = meas.shoot(est.draw(gl, sheets.get(model, sheet)), world, true)
         e = meas.errors(ph, "hw")
         lab = MODEL_LABELS[model]
         row[f"{lab}_mm"], row[f"{lab}_sizes_mm"], row[f"{lab}_position_mm"] = e["mean_mm"], e["sizes_mm"], e["position_mm"]
@@ -405,7 +402,7 @@ def run(out: Path, truth_seed: int = 0, realism: str = "realistic", *, thetas=(1
     say = progress or (lambda _m: None)
     truth = TwinTruth.draw(int(truth_seed), realism)
     cal, cal_info = display_calib_for(truth_seed, realism, display_calib, quick, progress)
-    model_obj = _sheet_model(sheet_model, progress=say)
+    model_obj = _sheet_model(sheet_model, quick=quick, progress=say)
     est = DisplayEstimator(cal, sheet_model=model_obj)
     world = TwinWorld(truth)
     meas = Measurer(pixel)
@@ -548,8 +545,9 @@ def sweep_projector(cal: CalibratedDisplay, truth: TwinTruth, meas: Measurer, sc
 
 
 # ============================================================================ sheet model choice
-def _sheet_model(name: str, progress=None):
-    """The nominal pushed-sheet model for ``fem_nominal`` (``auto``/``fem``) or None (``series``)."""
+def _sheet_model(name: str, quick: bool = False, progress=None):
+    """The nominal pushed-sheet model for ``fem_nominal`` (``auto``/``fem``) or None (``series``); ``quick``:
+    its table for centre contacts only (the experiment pushes at the centre; the node needs the full table)."""
     if name == "series":
         return None
     if name not in ("auto", "fem"):
@@ -560,7 +558,8 @@ def _sheet_model(name: str, progress=None):
         if name == "fem":
             raise
         return None
-    return NominalSheetModel.nominal(stretch=STRETCH, progress=progress)
+    kw = {"positions": (0.0,)} if quick else {}
+    return NominalSheetModel.nominal(stretch=STRETCH, progress=progress, **kw)
 
 
 def _model_info(model) -> dict:

@@ -218,16 +218,17 @@ def _log(msg: str) -> None:
 
 
 def _breaking(xs, rms, valid) -> dict:
-    """First swept value whose RMS exceeds the target or whose valid rate is under 0.9, and the last one
-    before it that passed (None when every value passed / failed)."""
-    last_ok, first_bad = None, None
-    for x, e, v in zip(xs, rms, valid, strict=True):
-        ok = (e == e) and e <= TARGET_MM and v >= 0.9
-        if ok and first_bad is None:
-            last_ok = x
-        if not ok and first_bad is None:
-            first_bad = x
-    return {"last_passing": last_ok, "first_failing": first_bad, "criterion": f"RMS > {TARGET_MM} mm or valid < 90 %"}
+    """Where a sweep breaks: the swept values that fail (RMS over the target or valid rate under 0.9), the
+    first failing value and the last passing one before it (None when every value passes / fails)."""
+    fails = [not ((e == e) and e <= TARGET_MM and v >= 0.9) for e, v in zip(rms, valid, strict=True)]
+    first = next((x for x, f in zip(xs, fails, strict=True) if f), None)
+    last_ok = None
+    for x, f in zip(xs, fails, strict=True):
+        if f:
+            break
+        last_ok = x
+    return {"failing": [x for x, f in zip(xs, fails, strict=True) if f], "first_failing": first,
+            "last_passing": last_ok, "criterion": f"RMS > {TARGET_MM} mm or valid < 90 %"}
 
 
 def honest(seeds=(0, 1, 2), quick: bool = False) -> dict:
@@ -281,19 +282,21 @@ def honest_stability(seeds=(0, 1, 2), quick: bool = False) -> dict:
     out: dict = {"seeds": list(seeds), "points": n_pts}
 
     def sweep(name, values, make):
-        rms, valid, extra = [], [], []
+        rms, valid, wrong, extra = [], [], [], []
         for x in values:
-            rs, vs, ex = [], [], []
+            rs, vs, ws, ex = [], [], [], []
             for seed in seeds:
                 r = make(x, seed)
                 rs.append(r["rms_mm"])
                 vs.append(r["valid_rate"])
+                ws.append(r.get("wrong_rate", 0.0))
                 ex.append({k: r[k] for k in r if k in ("visibility", "registration", "reasons", "failed")})
             rms.append(float(np.nanmean(rs)) if np.any(np.isfinite(rs)) else float("nan"))
             valid.append(float(np.mean(vs)))
+            wrong.append(float(np.mean(ws)))
             extra.append(ex)
-            _log(f"  {name} = {x}: RMS {rms[-1]:.3f} mm, valid {valid[-1] * 100:.0f} %")
-        return {"values": list(values), "rms_mm": rms, "valid_rate": valid, "detail": extra,
+            _log(f"  {name} = {x}: RMS {rms[-1]:.3f} mm, valid {valid[-1] * 100:.0f} %, wrong {wrong[-1] * 100:.0f} %")
+        return {"values": list(values), "rms_mm": rms, "valid_rate": valid, "wrong_rate": wrong, "detail": extra,
                 "breaking": _breaking(values, rms, valid)}
 
     def registered(seed):
@@ -375,6 +378,8 @@ def _plot_honest(h: dict, st: dict | None, path: str) -> None:
             a.axhline(TARGET_MM, color="r", ls="--", lw=1)
             b = a.twinx()
             b.plot(sw["values"], sw["valid_rate"], "s:", color="tab:green", label="valid rate")
+            b.plot(sw["values"], sw["wrong_rate"], "x:", color="tab:red", label="wrong rate (> 5 mm off)")
+            b.legend(fontsize=7, loc="upper right")
             b.set_ylim(0, 1.05)
             b.set_ylabel("valid rate")
             if x2 is not None:
@@ -384,7 +389,9 @@ def _plot_honest(h: dict, st: dict | None, path: str) -> None:
                 a.axvline(bp, color="0.5", lw=0.8)
             a.set_xlabel(xlabel)
             a.set_ylabel("RMS error, mm")
-            a.set_title(f"{title}\nbreaks at {bp}")
+            fl = sw["breaking"]["failing"]
+            a.set_title(f"{title}\nfails at {fl if len(fl) < 5 else f'{fl[0]}…{fl[-1]}'}" if fl else f"{title}\n"
+                        "no failure in the sweep")
             if logx:
                 a.set_xscale("log")
             if logy:

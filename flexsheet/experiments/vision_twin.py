@@ -124,16 +124,23 @@ def static_points(n: int, seed: int = 0) -> np.ndarray:
     return np.column_stack([rng.uniform(0.005, 0.04, n), rng.uniform(-0.05, 0.05, n), rng.uniform(-0.05, 0.05, n)])
 
 
+#: a valid fix farther than this from the truth is *wrong* (a false match), m
+WRONG_M = 0.005
+
+
 def _summ(errs: list[np.ndarray], valid: int, total: int) -> dict:
+    """Error summary: RMS, p95, max (mm), bias and noise about it (mm), valid rate (of ``total`` frames) and
+    wrong rate (valid fixes > :data:`WRONG_M` off, of ``total``)."""
     E = np.asarray(errs, float).reshape(-1, 3)
     if len(E) == 0:
         return {"rms_mm": float("nan"), "p95_mm": float("nan"), "bias_mm": [float("nan")] * 3,
-                "valid_rate": valid / max(total, 1), "n": 0}
+                "valid_rate": valid / max(total, 1), "n": 0, "wrong_rate": 0.0}
     d = np.linalg.norm(E, axis=1)
     return {"rms_mm": float(np.sqrt(np.mean(d ** 2)) * 1e3), "p95_mm": float(np.percentile(d, 95) * 1e3),
             "max_mm": float(d.max() * 1e3), "bias_mm": (E.mean(axis=0) * 1e3).round(4).tolist(),
             "noise_mm": float(np.sqrt(np.mean(np.sum((E - E.mean(axis=0)) ** 2, axis=1))) * 1e3),
-            "valid_rate": valid / max(total, 1), "n": int(len(E))}
+            "valid_rate": valid / max(total, 1), "n": int(len(E)),
+            "wrong_rate": float(np.mean(d > WRONG_M)) * valid / max(total, 1)}
 
 
 def static_error(truth: TwinTruth, calib: dict, T_display_camera: np.ndarray, cfg: SimConfig,

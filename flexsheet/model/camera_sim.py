@@ -9,7 +9,8 @@ calibration the estimators use. Scene per image (8-bit mono, raw = distorted, li
   projected image — a shaded cylinder with soft texture — warped into each camera with the exact
   plane-induced homography (computed once), on a dim, slightly textured room.
 * **Finger**: a capsule of diameter ``finger_width`` and length ``finger_length`` along ``finger_dir``
-  (display frame, from the fingertip toward the hand), at ``finger_level`` DN.
+  (display frame, from the fingertip toward the hand), at ``finger_level`` DN. Sheet, room and finger are
+  diffuse and scaled by ``background_gain`` (the exposure is set for the bright marker).
 * **Marker**: a retro-reflective sphere of ``marker_diameter`` (the truth's: 4 mm ± 3 %) at ``marker_level``
   DN, centred on the marker position. With ``self_occlusion`` it sits on the fingernail: the capsule's axis
   runs ``finger_width/2 + marker_diameter/2`` below the marker centre along the nail normal (the part of
@@ -164,15 +165,18 @@ def default_trajectory(t: float, amplitude_rad: float = 1.05, period_s: float = 
 
 @dataclass
 class SimConfig:
-    """Renderer settings (m, s, DN, px; module doc). Defaults are the **realistic** twin (measured sensor,
-    optical blur, finger self-occlusion); :meth:`ideal` gives the old idealised twin (2 DN read noise only,
-    no blur, marker always drawn on top).
+    """Renderer settings (m, s, DN, px; module doc). Defaults are the **realistic** twin (measured read and
+    shot noise, optical blur, finger self-occlusion); :meth:`ideal` gives the idealised sensing of the twin
+    before issue 15 (2 DN read noise only, marker always drawn over the finger).
 
     ``finger_dir``: vector from the fingertip toward the hand, display frame; ``marker_setback``: the
     marker centre sits this far behind the capsule's tip along the finger, m; ``marker_ss``: ray-cast
     sub-samples per pixel side; ``noise_dn``: read noise σ, DN; ``shot_gain``: DN per DN; ``noise_scale``:
     multiplies the noise σ (stability sweeps); ``blur_px``: optical PSF σ, px; ``clutter``: draw the
-    projected sheet image (else a flat grey).
+    projected sheet image (else a flat grey); ``background_gain``: brightness of the diffuse scene (sheet,
+    room, finger) relative to the retro-reflective marker — 0.5: the exposure set for a marker lit by a ring
+    light at the camera, the sheet then at ≤ ~95 DN (a design choice of the lab; the stability chart sweeps
+    it: the detector breaks between 0.5 and 1).
     """
 
     marker_diameter: float = 0.004
@@ -196,7 +200,8 @@ class SimConfig:
 
     @classmethod
     def ideal(cls, **kw) -> SimConfig:
-        """The idealised twin of before issue 15: read noise 2 DN only, no optical blur, no self-occlusion."""
+        """The idealised sensing of the twin before issue 15: read noise 2 DN only (no shot noise) and no
+        self-occlusion (the marker drawn over the finger); optics, exposure and scene as the realistic one."""
         base = {"noise_dn": 2.0, "shot_gain": 0.0, "self_occlusion": False}
         base.update(kw)
         return cls(**base)

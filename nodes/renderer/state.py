@@ -76,13 +76,19 @@ class ErrorTable:
 
     @classmethod
     def build(cls, probes, *, eye, projector, screen_point, screen_normal, sheet: SheetSurface,
-              depths=np.linspace(0.0, 0.06, 13)) -> ErrorTable:
+              depths=np.linspace(0.0, 0.06, 13), sheet_model=None) -> ErrorTable:
         """Predict each model's error at each depth (m) for ``probes`` (N, 3) m on the unpushed ``sheet``
-        (:func:`predict_model_errors`, ~0.1 s per depth). Raises ``ValueError`` on bad geometry."""
+        (:func:`predict_model_errors`, ~0.1 s per depth), against the fine membrane or, given ``sheet_model``
+        (:class:`nodes.renderer.sheet_model.NominalSheetModel`), against its shape (then also the ``fine``
+        model's shape). Raises ``ValueError`` on bad geometry."""
         rows = {m: [] for m in MODELS}
+        ref = None
+        if sheet_model is not None:
+            def ref(s, depth):
+                return sheet_model.shape(s.half_span, depth, 0.0, 0.0, s.half_width)
         for S in np.asarray(depths, dtype=float):
             pe = predict_model_errors(float(S), eye=eye, projector=projector, screen_point=screen_point,
-                                      screen_normal=screen_normal, probes=probes, sheet=sheet)
+                                      screen_normal=screen_normal, probes=probes, sheet=sheet, reference=ref)
             for m in MODELS:
                 rows[m].append((float(S), pe[m]))
         return cls(rows)
@@ -129,13 +135,17 @@ class RendererState:
     ``eye`` (3,) m: cyclopean eye V; ``projector`` (3,) m: light source P (the sheet must lie between them);
     ``config``: :class:`SheetConfig`; ``mesh``: the rigid object's (vertices (N, 3) m, faces (M, 3)) drawn
     until the FEM publishes (the scene's :meth:`~flexsheet.model.scenes.Scene.surface_mesh`; default the
-    paper's cylinder). Starts with both clamps in the home pose.
+    paper's cylinder); ``sheet_model``: the pushed sheet's shape model for the fine correction — None: the
+    sine-series :class:`~flexsheet.model.sheet.Membrane` of ``config``; a
+    :class:`nodes.renderer.sheet_model.NominalSheetModel`: the nominal FEM fitted into the shader's series.
+    Starts with both clamps in the home pose.
     """
 
-    def __init__(self, eye, projector, config: SheetConfig = SheetConfig(), mesh=None) -> None:
+    def __init__(self, eye, projector, config: SheetConfig = SheetConfig(), mesh=None, sheet_model=None) -> None:
         self.eye = np.asarray(eye, dtype=float)
         self.projector = np.asarray(projector, dtype=float)
         self.config = config
+        self.sheet_model = sheet_model
         self._lock = threading.Lock()
         v, f = cylinder_mesh() if mesh is None else (np.asarray(mesh[0], np.float32), np.asarray(mesh[1], np.int32))
         self._mesh = (v, f, vertex_normals(v, f))
@@ -219,7 +229,8 @@ class RendererState:
 
     def current_sheet(self) -> SheetSurface:
         """The actual sheet from the latest clamp poses (home pose for an arm not heard from), pushed in by the
-        fingertip when it is more than ``push_threshold`` behind the flat sheet."""
+        fingertip when it is more than ``push_threshold`` behind the flat sheet (its shape: ``sheet_model``'s, or
+        the config's membrane)."""
         c = self.config
         with self._lock:
             Tl = self._pose["left"] if self._pose["left"] is not None else self.home["left"]
@@ -228,8 +239,9 @@ class RendererState:
         flat = SheetSurface.from_clamps(Tl, Tr, half_width=c.half_width)
         if finger is None or -float((finger - flat.origin) @ flat.normal) <= c.push_threshold:
             return flat
-        return SheetSurface.from_clamps(Tl, Tr, half_width=c.half_width, pushed_point=finger,
-                                        membrane_kwargs=c.membrane_kwargs())
+        pushed = SheetSurface.from_clamps(Tl, Tr, half_width=c.half_width, pushed_point=finger,
+                                          membrane_kwargs=c.membrane_kwargs())
+        return pushed if self.sheet_model is None else self.sheet_model.surface(pushed)
 
     def sheet_for_frame(self) -> tuple[SheetSurface, str]:
         """(sheet to draw, warning): the current sheet if usable (it becomes the last good one), else the last

@@ -13,7 +13,11 @@ Per stereo pair (raw mono8 images of the calibrated size):
 3. Choice among survivors: with a live track, the one nearest the Kalman prediction; without, the
    strongest — unless a second pair nearly as strong (≥ ``ambiguity_ratio``) lies more than
    ``ambiguity_m`` away (e.g. a reflection on the epipolar line): then the frame is *ambiguous* → invalid.
-4. Partial occlusion check: the marker blob's area (px above threshold) must agree between the views
+   A pair must also have the marker's size: each view's visible area (Σα, :mod:`.detect`) within a factor
+   ``size_ratio_max`` of π(f·d/2Z)², the disk a marker of diameter ``marker_diameter`` makes at the
+   triangulated depth Z — a clutter blob that happens to lie on the epipolar line rarely does (issue 15:
+   with the marker hidden by the finger, such pairs were accepted 100 mm off).
+4. Partial occlusion check: the marker blob's area (Σα) must agree between the views
    within ``area_ratio_max`` (a blob cut by an occluder has a centroid shifted along the epipolar line).
 5. Covariance σ²(JᵀJ)⁻¹ (pixel noise ``sigma_px``), rotated into the display frame with
    ``T_display_camera``.
@@ -63,6 +67,8 @@ class TrackerConfig:
     patch_radius: int = 10
     area_ratio_max: float = 1.3
     max_candidates: int = 3
+    marker_diameter: float = 0.004
+    size_ratio_max: float = 2.5
 
     def __post_init__(self) -> None:
         self.validate()
@@ -82,6 +88,10 @@ class TrackerConfig:
             raise ValueError(f"horizon_s must be in [0, 1] s, got {self.horizon_s!r}")
         if not (self.area_ratio_max >= 1.0):
             raise ValueError(f"area_ratio_max must be >= 1, got {self.area_ratio_max!r}")
+        if not (0.001 <= self.marker_diameter <= 0.05):
+            raise ValueError(f"marker_diameter must be in [0.001, 0.05] m, got {self.marker_diameter!r}")
+        if not (self.size_ratio_max > 1.0 and np.isfinite(self.size_ratio_max)):
+            raise ValueError(f"size_ratio_max must be > 1, got {self.size_ratio_max!r}")
         if self.max_gate_misses < 1:
             raise ValueError(f"max_gate_misses must be >= 1, got {self.max_gate_misses!r}")
         self.detector()
@@ -96,7 +106,7 @@ class TrackerConfig:
 
 @dataclass
 class TrackResult:
-    """One frame's output. ``valid``; ``reason`` ("ok", "no_left", "no_right", "no_match", "depth",
+    """One frame's output. ``valid``; ``reason`` ("ok", "no_left", "no_right", "no_match", "depth", "size",
     "ambiguous", "occluded", "gated"); ``position`` (3,) m display frame (zeros when invalid); ``covariance`` (3, 3) m²;
     ``predicted`` (3,) m display (= position when horizon 0 or invalid); ``residual_px`` epipolar residual;
     ``uv_left``/``uv_right`` (2,) raw px of the chosen marker (NaN when invalid); ``roi`` True when both
@@ -194,6 +204,17 @@ class FingertipTracker:
             self._last_uv = None
             return self._invalid("depth", roi)
         ia, ib, res, X = ia[okz], ib[okz], res[okz], X[okz]
+        # the marker's size at that depth: π (f d / 2Z)² px² in each view
+        Zr = (X @ m.R.T + m.T)[:, 2]
+        exp_l = np.pi * (m.K1[0, 0] * 0.5 * c.marker_diameter / X[:, 2]) ** 2
+        exp_r = np.pi * (m.K2[0, 0] * 0.5 * c.marker_diameter / np.maximum(Zr, 1e-6)) ** 2
+        rl, rr = dl.area[ia] / exp_l, dr.area[ib] / exp_r
+        oks = ((rl <= c.size_ratio_max) & (rl >= 1.0 / c.size_ratio_max) & (rr <= c.size_ratio_max)
+               & (rr >= 1.0 / c.size_ratio_max))
+        if not oks.any():
+            self._last_uv = None
+            return self._invalid("size", roi)
+        ia, ib, res, X = ia[oks], ib[oks], res[oks], X[oks]
         Xd = X @ self.R_dc.T + self.t_dc
         strength = np.minimum(dl.strength[ia], dr.strength[ib])
         if self.kf.initialised and len(X) > 1:
