@@ -30,6 +30,7 @@ NODES: dict[str, str] = {
 EXPERIMENTS: dict[str, str] = {
     "triangulation": "flexsheet.experiments.triangulation:main",
     "stroke": "flexsheet.experiments.stroke:main",
+    "scenes": "flexsheet.experiments.scenes:main",
     "fem": "flexsheet.experiments.fem:main",
     "correction": "flexsheet.experiments.correction:main",
     "stability": "flexsheet.experiments.stability:main",

@@ -2,8 +2,9 @@
 realistic sensing (measured noise, optical blur, self-occlusion, dropped frames), and the fingertip error
 against the truth measured from the images — for three truth seeds (no tuning to one).
 
-The registration of each seed runs the camera-pose procedure on twin board views once and is cached
-(``flexsheet.experiments.vision_twin.registered_camera``; ~15 s per seed when not cached).
+The registration of each seed is the twin's own (``flexsheet.calibration.procedures.sim_display_calib``, test
+preset, cached per seed under ~/.cache/flexsheet/display — shared with the registration tests; ~20 s per seed
+when not cached).
 """
 
 import asyncio
@@ -43,7 +44,7 @@ def registered():
     out = {}
     for s in SEEDS:
         truth = TwinTruth.draw(s)
-        out[s] = (truth, vt.registered_camera(truth)[0])
+        out[s] = (truth, vt.registered_camera(truth, quick=True)[0])
     return out
 
 

@@ -22,7 +22,8 @@ def _ft(p, valid=True, stamp=None, pred=None):
 
 def test_node_publishes_targets_with_source_stamp_and_holds_on_lost_marker():
     async def scenario():
-        async with NodeHarness(PlannerNode, params={"shape": "cylinder", "object_stiffness": 20.0}) as h:
+        async with NodeHarness(PlannerNode, params={"shape": "cylinder", "object_stiffness": 20.0,
+                                                    "stiffness_from_scene": False}) as h:
             m = _ft([0.02, 0.0, 0.0])
             h.inject(topics.FINGERTIP, m)
             st = (await h.wait_for(topics.SHEET_TARGET, n=1, timeout=2.0))[0]

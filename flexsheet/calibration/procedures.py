@@ -55,7 +55,7 @@ class Options:
     projector_poses: int = 6
     pattern_spacing: int = 8
     pattern_frames: int = 1
-    arm_configs: int = 12
+    arm_configs: int = 16
     marker_frames: int = 4
     prior: str = ""
     fit_k1: bool = True
@@ -66,7 +66,7 @@ class Options:
 
 FULL = Options()
 #: the test/CI preset: fewer views, poses and configurations, still within the targets (docs/calibration.md)
-QUICK = Options(views=12, projector_poses=4, arm_configs=10)
+QUICK = Options(projector_poses=4, arm_configs=12)
 
 
 def _progress(msg: str, progress) -> None:
@@ -135,9 +135,9 @@ def run_arms(source, opts: Options, calib: DisplayCalib, sides=("left", "right")
         frames, q_used = source.marker_frames(side, qs)
         _, ul, ur = arms_mod.predict_marker(side, q_used, a.T_display_base, a.marker_offset, cam.stereo,
                                             cam.T_display_camera)
-        idx, X, skipped = arms_mod.triangulate_markers(frames, (ul, ur), cam.stereo, cam.T_display_camera)
+        idx, X, skipped, cov = arms_mod.triangulate_markers(frames, (ul, ur), cam.stereo, cam.T_display_camera)
         r = arms_mod.estimate_arm_base(side, [q_used[i] for i in idx], X, a.T_display_base, a.marker_offset,
-                                       skipped=skipped)
+                                       cov=cov, skipped=skipped)
         prov = Provenance(f"arms: clamp marker at {len(q_used)} joint configurations, triangulated; least squares "
                           f"over the URDF FK for base pose + marker offset", source=source.label,
                           n_poses=r.n_configs, residuals={"residual_mm": r.residual_mm})

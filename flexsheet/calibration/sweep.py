@@ -84,9 +84,10 @@ def _seed_sweep(seed: int, realism: str, quick: bool, progress) -> dict:
         _, ul, ur = arms_mod.predict_marker(side, qs, a0.T_display_base, a0.marker_offset, best.stereo,
                                             best.T_display_camera)
         for n in arm_n:
-            idx, X, sk = arms_mod.triangulate_markers(frames[:n], (ul[:n], ur[:n]), best.stereo, best.T_display_camera)
+            idx, X, sk, cov = arms_mod.triangulate_markers(frames[:n], (ul[:n], ur[:n]), best.stereo,
+                                                           best.T_display_camera)
             r = arms_mod.estimate_arm_base(side, [qs[i] for i in idx], X, a0.T_display_base, a0.marker_offset,
-                                           min_configs=6)
+                                           min_configs=6, cov=cov)
             t, _ = truth.base_error(side, r.T_display_base)
             out["arms"][side][n] = {"translation_error_mm": t * 1e3, "residual_mm": r.residual_mm}
     return out

@@ -38,7 +38,7 @@ import json
 import math
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -52,7 +52,7 @@ from flexsheet.model.sheet import SheetSurface, clamp_half_span, clamp_poses, fr
 from flexsheet.model.truth import TwinTruth
 
 __all__ = ["main", "run", "inclined_pose", "CalibratedDisplay", "DisplayEstimator", "TwinWorld", "Measurer",
-           "PIXEL", "STRETCH", "PAPER", "sweep_tension", "sweep_projector", "perturbed_projector"]
+           "PIXEL", "STRETCH", "PAPER", "sweep_sheet", "sweep_projector", "breaking_point", "perturbed_projector"]
 
 #: one projector pixel on the imaginary screen, m: the target (issue 15)
 PIXEL = scene.PIXEL_ON_SCREEN
@@ -437,7 +437,8 @@ def run(out: Path, truth_seed: int = 0, realism: str = "realistic", *, thetas=(1
         "pushed": s["headline"]["pushed_max_corrected_mm"] <= PIXEL * 1e3}
     if stability:
         s["stability"] = stab = {
-            "tension_ratio": sweep_tension(est, truth, meas, progress=say, quick=quick),
+            "tension_ratio": sweep_sheet(est, truth, meas, "tension_ratio", progress=say, quick=quick),
+            "prestrain": sweep_sheet(est, truth, meas, "prestrain", progress=say, quick=quick),
             "projector": sweep_projector(cal, truth, meas, sheet_model=model_obj, progress=say, quick=quick)}
         (out / "stability.json").write_text(json.dumps(stab, indent=1))
         if charts:
@@ -451,12 +452,14 @@ def run(out: Path, truth_seed: int = 0, realism: str = "realistic", *, thetas=(1
 
 
 # ============================================================================ stability sweeps
-#: tension-ratio factors (true β / the estimator's assumed β); quick: the ends
-TENSION_FACTORS = (0.5, 0.7, 0.85, 1.0, 1.2, 1.4, 2.0)
+#: true tension ratios (the estimator assumes β = 1; the truth's spread is log-normal 20 %)
+TENSION_FACTORS = (0.3, 0.5, 0.7, 0.85, 1.0, 1.2, 1.4, 2.0, 3.0)
+#: true pre-strains (the estimator assumes 0; the truth's spread is |N(0, 0.5 %)|)
+PRESTRAINS = (0.0, 0.005, 0.01, 0.02, 0.04)
 #: projector calibration error scales (× :data:`PROJECTOR_UNIT_ERROR`)
-PROJECTOR_SCALES = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
-#: one unit of projector calibration error: the registration target of issue 14 (2 mm, 0.2°) in a fixed random
-#: direction per seed, with 0.5 px of principal point and 0.1 % of focal length
+PROJECTOR_SCALES = (0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 8.0, 16.0)
+#: one unit of projector calibration error: the registration target of issue 14 (2 mm, 0.2°) in a random
+#: direction, with 0.5 px of principal point and 0.1 % of focal length
 PROJECTOR_UNIT_ERROR = {"translation_mm": 2.0, "rotation_deg": 0.2, "principal_point_px": 0.5, "focal_rel": 0.001}
 
 
@@ -471,34 +474,50 @@ def breaking_point(xs, ys, limit: float):
     return None
 
 
-def sweep_tension(est: DisplayEstimator, truth: TwinTruth, meas: Measurer, factors=TENSION_FACTORS,
-                  depth_mm: float = 50.0, quick: bool = False, progress=None) -> dict:
-    """Pushed error (``depth_mm``) of every model against the true tension ratio β = factor × the estimator's
-    assumed β (1.0): the truth's other values kept, its β replaced (one FEM table per factor)."""
-    factors = (0.7, 1.0, 1.4) if quick else factors
+def sweep_sheet(est: DisplayEstimator, truth: TwinTruth, meas: Measurer, kind: str, values=None,
+                depth_mm: float = 50.0, quick: bool = False, progress=None) -> dict:
+    """Pushed error (``depth_mm``) of every model against an error in the true sheet the estimator cannot see:
+    ``kind`` ``tension_ratio`` — the true β = value × the estimator's assumed β (1.0); ``prestrain`` — the true
+    pre-strain = value (the estimator assumes 0; the same as an error in the clamp strain it measures). The
+    truth's other values are kept (one FEM table per value). The breaking point is where the renderer's
+    picked model passes one projector pixel, going away from the assumption on each side."""
+    if kind == "tension_ratio":
+        values = values or ((0.5, 1.0, 2.0) if quick else TENSION_FACTORS)
+        assumed = 1.0
+    elif kind == "prestrain":
+        values = values or ((0.0, 0.02) if quick else PRESTRAINS)
+        assumed = 0.0
+    else:
+        raise ValueError(f"kind must be 'tension_ratio' or 'prestrain', got {kind!r}")
     models = ("none", "four_triangle", "fine") + (("fem_nominal",) if est.sheet_model is not None else ())
     rows = []
-    for f in factors:
-        tw = TwinWorld(dataclasses.replace(truth, tension_ratio=float(f)))
-        r = measure_pushed(est, tw, meas, depth_mm, models)
-        rows.append({"factor": float(f), **{MODEL_LABELS[m] + "_mm": r[MODEL_LABELS[m] + "_mm"] for m in models},
+    for x in values:
+        t = dataclasses.replace(truth, **({"tension_ratio": float(x)} if kind == "tension_ratio"
+                                          else {"sheet_prestrain": float(x)}))
+        r = measure_pushed(est, TwinWorld(t), meas, depth_mm, models)
+        rows.append({"value": float(x), **{MODEL_LABELS[m] + "_mm": r[MODEL_LABELS[m] + "_mm"] for m in models},
                      "picked": r["model"], "corrected_mm": r["corrected_mm"]})
         if progress:
-            progress(f"[correction] stability: true β = {f:g} × assumed: picked {r['model']} {r['corrected_mm']:.2f} mm")
-    out: dict = {"depth_mm": depth_mm, "assumed_ratio": 1.0, "rows": rows, "criterion_mm": PIXEL * 1e3}
+            progress(f"[correction] stability: true {kind} {x:g}: picked {r['model']} {r['corrected_mm']:.2f} mm")
+    lim = PIXEL * 1e3
+    out: dict = {"kind": kind, "depth_mm": depth_mm, "assumed": assumed, "rows": rows, "criterion_mm": lim}
     for m in ("corrected", *[MODEL_LABELS[m] for m in models]):
-        up = [(r["factor"], r[f"{m}_mm"]) for r in rows if r["factor"] >= 1.0]
-        down = [(1.0 / r["factor"], r[f"{m}_mm"]) for r in rows if r["factor"] <= 1.0]
-        hi = breaking_point(*zip(*sorted(up), strict=True), PIXEL * 1e3) if up else None
-        lo = breaking_point(*zip(*sorted(down), strict=True), PIXEL * 1e3) if down else None
-        out[f"{m}_breaks_at_factor"] = {"above": hi, "below": None if lo is None else 1.0 / lo}
+        if kind == "tension_ratio":          # distance from the assumption as a factor, both ways
+            up = sorted((r["value"], r[f"{m}_mm"]) for r in rows if r["value"] >= assumed)
+            down = sorted((1.0 / r["value"], r[f"{m}_mm"]) for r in rows if r["value"] <= assumed)
+            hi = breaking_point(*zip(*up, strict=True), lim) if up else None
+            lo = breaking_point(*zip(*down, strict=True), lim) if down else None
+            out[f"{m}_breaks_at"] = {"above": hi, "below": None if lo is None else 1.0 / lo}
+        else:
+            up = sorted((r["value"], r[f"{m}_mm"]) for r in rows)
+            out[f"{m}_breaks_at"] = {"above": breaking_point(*zip(*up, strict=True), lim)}
     return out
 
 
-def perturbed_projector(projector: Projector, scale: float, seed: int) -> Projector:
-    """``projector`` moved by ``scale`` × :data:`PROJECTOR_UNIT_ERROR` in a fixed random direction per ``seed``
-    (translation, rotation axis, principal-point direction; focal length up)."""
-    rng = np.random.default_rng([int(seed), 4242])
+def perturbed_projector(projector: Projector, scale: float, seed: int, direction: int = 0) -> Projector:
+    """``projector`` moved by ``scale`` × :data:`PROJECTOR_UNIT_ERROR` in the random direction number
+    ``direction`` of ``seed`` (translation, rotation axis, principal-point direction, sign of the focal error)."""
+    rng = np.random.default_rng([int(seed), 4242, int(direction)])
     u = PROJECTOR_UNIT_ERROR
     dt = rng.normal(size=3)
     dt *= scale * u["translation_mm"] * 1e-3 / np.linalg.norm(dt)
@@ -506,40 +525,51 @@ def perturbed_projector(projector: Projector, scale: float, seed: int) -> Projec
     ax *= scale * math.radians(u["rotation_deg"]) / np.linalg.norm(ax)
     dc = rng.normal(size=2)
     dc *= scale * u["principal_point_px"] / np.linalg.norm(dc)
+    sf = 1.0 if rng.random() < 0.5 else -1.0
     K = np.asarray(projector.K, float).copy()
-    K[0, 0] *= 1.0 + scale * u["focal_rel"]
-    K[1, 1] *= 1.0 + scale * u["focal_rel"]
+    K[0, 0] *= 1.0 + sf * scale * u["focal_rel"]
+    K[1, 1] *= 1.0 + sf * scale * u["focal_rel"]
     K[:2, 2] += dc
     R = cv2.Rodrigues(ax)[0] @ np.asarray(projector.R, float)
     return Projector(K, R, np.asarray(projector.position, float) + dt, projector.width, projector.height)
 
 
 def sweep_projector(cal: CalibratedDisplay, truth: TwinTruth, meas: Measurer, scales=PROJECTOR_SCALES,
-                    theta: float = 50.0, depth_mm: float = 50.0, sheet_model=None, quick: bool = False,
-                    progress=None) -> dict:
+                    theta: float = 50.0, depth_mm: float = 50.0, directions: int = 3, sheet_model=None,
+                    quick: bool = False, progress=None) -> dict:
     """Both figures' corrected errors when the renderer's projector is the TRUE one (incl. distortion) moved by
-    ``scale`` × :data:`PROJECTOR_UNIT_ERROR` (a sensitivity study: this estimator input is built from the truth
-    on purpose; scale 0 is a perfectly registered projector). Eye and arm bases stay the calibrated ones."""
-    scales = (0.0, 4.0, 16.0) if quick else scales
+    ``scale`` × :data:`PROJECTOR_UNIT_ERROR` in each of ``directions`` random directions (a sensitivity study:
+    this estimator input is built from the truth on purpose; scale 0 is a perfectly registered projector).
+    Eye and arm bases stay the calibrated ones. Per scale: the worst and the mean over the directions; the
+    breaking point is taken on the worst direction (an error tilting the image along the sheet's slope moves
+    the light to another depth of the inclined sheet and changes its size: the inclined figure is the fragile
+    one)."""
+    scales, directions = ((0.0, 4.0, 16.0), 1) if quick else (scales, directions)
     world = TwinWorld(truth)
     rows = []
     for k in scales:
-        p = perturbed_projector(world.projector, k, truth.seed)
-        c = dataclasses.replace(cal, projector=p, distortion=world.distortion.copy(), source=f"truth + {k:g} × unit")
-        est = DisplayEstimator(c, sheet_model=sheet_model)
-        ri = measure_inclined(est, world, meas, theta)
-        rp = measure_pushed(est, world, meas, depth_mm, ())
-        est.release()
-        rows.append({"scale": float(k), "inclined_corrected_mm": ri["corrected_mm"],
-                     "inclined_position_mm": ri["corrected_position_mm"], "pushed_corrected_mm": rp["corrected_mm"],
-                     "pushed_model": rp["model"]})
+        acc = []
+        for d in range(directions if k > 0 else 1):
+            p = perturbed_projector(world.projector, k, truth.seed, d)
+            c = dataclasses.replace(cal, projector=p, distortion=world.distortion.copy(),
+                                    source=f"truth + {k:g} × unit (direction {d})")
+            est = DisplayEstimator(c, sheet_model=sheet_model)
+            ri = measure_inclined(est, world, meas, theta)
+            rp = measure_pushed(est, world, meas, depth_mm, ())
+            est.release()
+            acc.append((ri["corrected_mm"], ri["corrected_position_mm"], rp["corrected_mm"], rp["model"]))
+        a = np.array([x[:3] for x in acc])
+        rows.append({"scale": float(k), "inclined_corrected_mm": float(a[:, 0].max()),
+                     "inclined_corrected_mean_mm": float(a[:, 0].mean()), "inclined_position_mm": float(a[:, 1].max()),
+                     "pushed_corrected_mm": float(a[:, 2].max()), "pushed_corrected_mean_mm": float(a[:, 2].mean()),
+                     "pushed_models": sorted({x[3] for x in acc}), "directions": len(acc)})
         if progress:
-            progress(f"[correction] stability: projector error × {k:g}: inclined {ri['corrected_mm']:.2f} mm, "
-                     f"pushed {rp['corrected_mm']:.2f} mm")
+            progress(f"[correction] stability: projector error × {k:g}: inclined worst {a[:, 0].max():.2f} mm, "
+                     f"pushed worst {a[:, 2].max():.2f} mm ({len(acc)} directions)")
     xs = [r["scale"] for r in rows]
     lim = PIXEL * 1e3
     return {"unit": PROJECTOR_UNIT_ERROR, "theta_deg": theta, "depth_mm": depth_mm, "rows": rows,
-            "criterion_mm": lim,
+            "criterion_mm": lim, "directions": directions,
             "inclined_breaks_at_scale": breaking_point(xs, [r["inclined_corrected_mm"] for r in rows], lim),
             "pushed_breaks_at_scale": breaking_point(xs, [r["pushed_corrected_mm"] for r in rows], lim)}
 
@@ -631,33 +661,157 @@ def _stability_chart(path: Path, stab: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
-    t = stab["tension_ratio"]
-    xs = [r["factor"] for r in t["rows"]]
-    for k in [k for k in t["rows"][0] if k.endswith("_mm")]:
-        ax[0].plot(xs, [r[k] for r in t["rows"]], "-o", label=k[:-3])
-    ax[0].axhline(0.7, color="grey", lw=0.8, ls=":", label="1 projector pixel")
-    ax[0].set_xscale("log")
-    ax[0].set_xlabel("true tension ratio / assumed (1.0)")
-    ax[0].set_ylabel(f"pushed S = {t['depth_mm']:g} mm: mean size error [mm]")
-    ax[0].set_title("wrong tension ratio", fontsize=9)
-    ax[0].legend(fontsize=7)
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
+    for a, key, xlabel in ((ax[0], "tension_ratio", "true tension ratio T_v/T_u (estimator assumes 1)"),
+                           (ax[1], "prestrain", "true pre-strain (estimator assumes 0)")):
+        t = stab[key]
+        xs = [r["value"] for r in t["rows"]]
+        for k in [k for k in t["rows"][0] if k.endswith("_mm") and k != "corrected_mm"]:
+            a.plot(xs, [r[k] for r in t["rows"]], "-o", label=k[:-3])
+        a.plot(xs, [r["corrected_mm"] for r in t["rows"]], "k-", lw=3, alpha=0.3, label="picked by the renderer")
+        a.axhline(0.7, color="grey", lw=0.8, ls=":", label="1 projector pixel")
+        b = t["corrected_breaks_at"]
+        a.set_title(f"wrong {key.replace('_', ' ')}: picked model breaks at {b}", fontsize=8)
+        if key == "tension_ratio":
+            a.set_xscale("log")
+        a.set_xlabel(xlabel, fontsize=8)
+        a.set_ylabel(f"pushed S = {t['depth_mm']:g} mm: mean size error [mm]")
+        a.set_yscale("symlog", linthresh=1.0)
+        a.legend(fontsize=7)
     p = stab["projector"]
     xs = [r["scale"] for r in p["rows"]]
-    ax[1].plot(xs, [r["inclined_corrected_mm"] for r in p["rows"]], "-o", label=f"inclined θ={p['theta_deg']:g}° size")
-    ax[1].plot(xs, [r["inclined_position_mm"] for r in p["rows"]], "--s", label="inclined: image position")
-    ax[1].plot(xs, [r["pushed_corrected_mm"] for r in p["rows"]], "-^", label=f"pushed S={p['depth_mm']:g} mm size")
-    ax[1].axhline(0.7, color="grey", lw=0.8, ls=":", label="1 projector pixel")
+    ax[2].plot(xs, [r["inclined_corrected_mm"] for r in p["rows"]], "-o", label=f"inclined θ={p['theta_deg']:g}° size")
+    ax[2].plot(xs, [r["inclined_corrected_mean_mm"] for r in p["rows"]], ":o", label="inclined, mean of directions")
+    ax[2].plot(xs, [r["inclined_position_mm"] for r in p["rows"]], "--s", label="inclined: image position")
+    ax[2].plot(xs, [r["pushed_corrected_mm"] for r in p["rows"]], "-^", label=f"pushed S={p['depth_mm']:g} mm size")
+    ax[2].axhline(0.7, color="grey", lw=0.8, ls=":", label="1 projector pixel")
     u = p["unit"]
-    ax[1].set_xlabel(f"projector error scale (1 = {u['translation_mm']:g} mm, {u['rotation_deg']:g}°, "
+    ax[2].set_xlabel(f"projector error scale (1 = {u['translation_mm']:g} mm, {u['rotation_deg']:g}°, "
                      f"{u['principal_point_px']:g} px, {u['focal_rel'] * 100:g} % f)", fontsize=8)
-    ax[1].set_ylabel("mean size error / position error [mm]")
-    ax[1].set_xscale("symlog", linthresh=0.5)
-    ax[1].set_yscale("symlog", linthresh=1.0)
-    ax[1].set_title("projector calibration error", fontsize=9)
-    ax[1].legend(fontsize=7)
+    ax[2].set_ylabel(f"size / position error [mm], worst of {p['directions']} directions")
+    ax[2].set_xscale("symlog", linthresh=0.5)
+    ax[2].set_yscale("symlog", linthresh=1.0)
+    ax[2].set_title(f"projector calibration error: breaks at ×{p['inclined_breaks_at_scale']} (inclined), "
+                    f"×{p['pushed_breaks_at_scale']} (pushed)", fontsize=8)
+    ax[2].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def model_speed(sheet_model=None, repeats: int = 10) -> dict:
+    """Median ms per 2×1024×768 stereo pair (shaded, no MSAA, as the node draws) per model on the nominal
+    projector: none, flat, four_triangle, fine (16-mode series) and, with ``sheet_model``, fine with its
+    64-term nominal FEM fit; plus the GL renderer's name."""
+    from flexsheet.model.sheet import Membrane
+    from nodes.renderer.bench import time_models
+    from nodes.renderer.scene import StereoRenderer, cylinder_mesh
+
+    a = clamp_half_span(STRETCH)
+    home = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], a)
+    tilt = SheetSurface(*inclined_pose(30))
+    series = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], a,
+                          membrane=Membrane(a, 0.12, 0.0, 0.0, 0.03, modes=16))
+    rt = StereoRenderer()
+    v, f = cylinder_mesh()
+    rt.set_mesh(v, f)
+    t = time_models(rt, repeats, sheets={"none": home, "flat": tilt, "four_triangle": series, "fine": series})
+    out = {m: d["median_ms"] for m, d in t.items()}
+    if sheet_model is not None:
+        fem = sheet_model.surface(series)
+        out["fem_nominal"] = time_models(rt, repeats, models=("fine",), sheets={"fine": fem})["fine"]["median_ms"]
+    out["gl_renderer"] = rt.ctx.info.get("GL_RENDERER", "?")
+    rt.release()
+    return out
+
+
+def aggregate(out: Path, runs: dict, speed: dict | None = None) -> dict:
+    """``out/seeds.json`` + ``out/seeds.png``: the headline numbers of each (realism, seed) run side by side."""
+    doc: dict = {"target_mm": PIXEL * 1e3, "runs": {}}
+    for key, s in runs.items():
+        doc["runs"][key] = {
+            "realism": s["twin"]["realism"], "truth_seed": s["twin"]["truth_seed"],
+            "truth_sheet": s["twin"]["truth_sheet"],
+            "registration_errors": s["estimator"].get("registration_errors"),
+            "inclined": {k: {f: r[f] for f in ("uncorrected_mm", "corrected_mm", "corrected_position_mm", "model")}
+                         for k, r in s["inclined"].items()},
+            "pushed": {k: {f: r[f] for f in r if f.endswith("_mm") and not f.endswith(("sizes_mm", "contact_mm"))}
+                       | {"model": r["model"]} for k, r in s["pushed"].items()},
+            "headline": s["headline"]}
+    if speed:
+        doc["stereo_pair_ms"] = speed
+    (out / "seeds.json").write_text(json.dumps(doc, indent=1))
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4.2))
+    for key, s in runs.items():
+        ls = "-" if s["twin"]["realism"] == "realistic" else ":"
+        th = [float(k) for k in s["inclined"]]
+        ax[0].plot(th, [r["corrected_mm"] for r in s["inclined"].values()], ls + "o", label=f"{key} corrected")
+        ds = [float(k) for k in s["pushed"]]
+        ax[1].plot(ds, [r["corrected_mm"] for r in s["pushed"].values()], ls + "o", label=f"{key} picked model")
+        if "fine_mm" in next(iter(s["pushed"].values())):
+            ax[1].plot(ds, [r["fine_mm"] for r in s["pushed"].values()], ls + "x", alpha=0.5,
+                       label=f"{key} series fine (old)")
+    for a, t in ((ax[0], "Fig. 11: inclined sheet, flat correction"), (ax[1], "Fig. 13: pushed sheet")):
+        a.axhline(0.7, color="grey", lw=0.8, ls="--", label="target: 1 projector pixel")
+        a.set_title(t + " (solid: realistic twin, dotted: ideal)", fontsize=9)
+        a.set_ylabel("mean absolute size error [mm]")
+        a.legend(fontsize=6, ncol=2)
+    ax[0].set_xlabel("θ [deg]")
+    ax[1].set_xlabel("S [mm]")
+    fig.tight_layout()
+    fig.savefig(out / "seeds.png", dpi=110)
+    plt.close(fig)
+    if speed:
+        _accuracy_vs_speed(out, runs, speed)
+    return doc
+
+
+def _accuracy_vs_speed(out: Path, runs: dict, speed: dict) -> None:
+    """``accuracy_vs_speed.{json,png}``: each model's stereo-pair time against its error at the largest θ and S
+    (mean over the realistic runs)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    real = [s for s in runs.values() if s["twin"]["realism"] == "realistic"] or list(runs.values())
+    tmax = max(real[0]["inclined"], key=float)
+    dmax = max(real[0]["pushed"], key=float)
+
+    def mean(f):
+        return float(np.mean([f(s) for s in real]))
+
+    pts = {"none": (mean(lambda s: s["inclined"][tmax]["uncorrected_mm"]), mean(lambda s: s["pushed"][dmax]["uncorrected_mm"])),
+           "flat": (mean(lambda s: s["inclined"][tmax]["corrected_mm"]), mean(lambda s: s["pushed"][dmax]["uncorrected_mm"])),
+           "four_triangle": (None, mean(lambda s: s["pushed"][dmax]["four_triangle_mm"])),
+           "fine": (None, mean(lambda s: s["pushed"][dmax]["fine_mm"]))}
+    if "fem_nominal" in speed and "fem_nominal_mm" in real[0]["pushed"][dmax]:
+        pts["fem_nominal"] = (None, mean(lambda s: s["pushed"][dmax]["fem_nominal_mm"]))
+    doc = {m: {"stereo_pair_ms": speed[m], f"inclined_{tmax}_error_mm": ei, f"pushed_{dmax}_error_mm": ep}
+           for m, (ei, ep) in pts.items()}
+    doc["gl_renderer"] = speed.get("gl_renderer", "?")
+    doc["runs"] = sorted(k for k, s in runs.items() if s in real)
+    (out / "accuracy_vs_speed.json").write_text(json.dumps(doc, indent=1))
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    for m, (ei, ep) in pts.items():
+        ax.plot(speed[m], ep, "o", ms=9, label=f"{m}: pushed S={dmax} mm")
+        if ei is not None:
+            ax.plot(speed[m], ei, "s", ms=6, mfc="none", label=f"{m}: inclined θ={tmax}°")
+    ax.axhline(0.7, color="grey", lw=0.8, ls=":", label="target: 1 pixel (0.7 mm)")
+    ax.axvline(1000 / 120, color="red", lw=0.8, ls=":", label="120 Hz budget (8.3 ms)")
+    ax.set_xlabel(f"time per stereo pair, 2×1024×768 [ms] ({doc['gl_renderer'].split('(')[0].strip()})")
+    ax.set_ylabel("mean absolute size error [mm], realistic twin")
+    ax.set_yscale("symlog", linthresh=1.0)
+    ax.set_title("Correction models: accuracy against speed", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "accuracy_vs_speed.png", dpi=110)
     plt.close(fig)
 
 
@@ -667,32 +821,66 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="flexsheet experiment correction", description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="example: flexsheet experiment correction --twin realistic --truth-seed 0 --quick --out /tmp/corr")
+        epilog="examples:\n  flexsheet experiment correction --twin realistic --truth-seed 0 --quick --out /tmp/corr\n"
+               "  flexsheet experiment correction --twin both --seeds 0 1 2 --stability --speed "
+               "--out docs/figures/renderer")
     ap.add_argument("--out", required=True, type=Path, help="output directory")
-    ap.add_argument("--twin", choices=("realistic", "ideal"), default="realistic", help="the truth's realism")
-    ap.add_argument("--truth-seed", type=int, default=0, help="hidden truth seed (>= 0)")
+    ap.add_argument("--twin", choices=("realistic", "ideal", "both"), default="realistic",
+                    help="the truth's realism (both: realistic and ideal columns)")
+    ap.add_argument("--truth-seed", type=int, default=None, help="hidden truth seed (>= 0; default 0)")
+    ap.add_argument("--seeds", type=int, nargs="+", default=None,
+                    help="several truth seeds: each run goes to OUT/<realism>-<seed>/, the table to OUT/seeds.json")
     ap.add_argument("--display-calib", default=None,
-                    help="display.yaml for the estimators (default: run the registration in the twin, cached)")
+                    help="display.yaml for the estimators (default: run the registration in the twin, cached per seed)")
     ap.add_argument("--quick", action="store_true", help="θ = 10, 50°, S = 10, 50 mm, quick registration")
     ap.add_argument("--thetas", type=float, nargs="+", default=None, help="inclinations, deg (default 10..50)")
     ap.add_argument("--depths", type=float, nargs="+", default=None, help="push depths, mm (default 10..50)")
     ap.add_argument("--pixel", type=float, default=0.35, help="measurement camera pixel on the screen, mm")
     ap.add_argument("--sheet-model", choices=("auto", "fem", "series"), default="auto",
-                    help="renderer's pushed-sheet model for the fine correction (auto: nominal FEM if available)")
-    ap.add_argument("--stability", action="store_true", help="also sweep tension-ratio and projector errors")
+                    help="renderer's pushed-sheet model for the fine correction (auto: the nominal FEM fit)")
+    ap.add_argument("--stability", action="store_true",
+                    help="also sweep tension-ratio, pre-strain and projector errors (first realistic run)")
+    ap.add_argument("--speed", action="store_true", help="time a stereo pair per model (OUT/seeds.json)")
     args = ap.parse_args(argv)
-    if args.truth_seed < 0:
-        ap.error("--truth-seed must be >= 0")
+    seeds = args.seeds if args.seeds is not None else [0 if args.truth_seed is None else args.truth_seed]
+    if args.seeds is not None and args.truth_seed is not None:
+        ap.error("give --truth-seed or --seeds, not both")
+    if any(x < 0 for x in seeds):
+        ap.error("truth seeds must be >= 0")
     thetas = args.thetas or ([10, 50] if args.quick else [10, 20, 30, 40, 50])
     depths = args.depths or ([10, 50] if args.quick else [10, 20, 30, 40, 50])
     if any(not (0.0 <= t <= 60.0) for t in thetas) or any(not (0.0 < d <= 60.0) for d in depths):
         ap.error("--thetas must lie in [0, 60] deg and --depths in (0, 60] mm")
-    s = run(args.out, args.truth_seed, args.twin, thetas=thetas, depths=depths, display_calib=args.display_calib,
-            quick=args.quick, pixel=args.pixel * 1e-3, sheet_model=args.sheet_model, stability=args.stability)
-    h = s["headline"]
-    print(f"inclined max corrected {h['inclined_max_corrected_mm']:.2f} mm, pushed max corrected "
-          f"{h['pushed_max_corrected_mm']:.2f} mm (target {PIXEL * 1e3:.1f} mm); models {s['models_picked']}")
-    print(f"wrote {args.out}/summary.json in {s['elapsed_s']:.0f} s")
+    realisms = ("realistic", "ideal") if args.twin == "both" else (args.twin,)
+    single = len(seeds) == 1 and len(realisms) == 1
+    if args.display_calib and not single:
+        ap.error("--display-calib names one display: use it with one seed and one twin")
+    t0 = time.perf_counter()
+    runs, stab_done = {}, False
+    for realism in realisms:
+        for seed in seeds:
+            out = args.out if single else args.out / f"{realism}-{seed}"
+            stab = args.stability and realism == "realistic" and not stab_done
+            head = single or (realism == realisms[0] and seed == seeds[0])
+            s = run(out, seed, realism, thetas=thetas, depths=depths, display_calib=args.display_calib,
+                    quick=args.quick, pixel=args.pixel * 1e-3, sheet_model=args.sheet_model, stability=stab,
+                    charts=head or stab)
+            stab_done |= stab
+            if head and not single:                            # the headline run, also at OUT's top
+                names = ["summary.json", "fig11_inclined.png", "fig13_pushed.png", "photos.png"]
+                for name in names + (["stability.json", "stability.png"] if stab else []):
+                    (args.out / name).write_bytes((out / name).read_bytes())
+            runs[f"{realism}-{seed}"] = s
+            h = s["headline"]
+            print(f"{realism} seed {seed}: inclined max corrected {h['inclined_max_corrected_mm']:.2f} mm, pushed max "
+                  f"corrected {h['pushed_max_corrected_mm']:.2f} mm (target {PIXEL * 1e3:.1f} mm); "
+                  f"models {s['models_picked']}")
+    if not single or args.speed:
+        speed = model_speed(_sheet_model(args.sheet_model, args.quick)) if args.speed else None
+        aggregate(args.out, runs, speed)
+        if speed:
+            print("stereo pair ms:", {k: (round(v, 2) if isinstance(v, float) else v) for k, v in speed.items()})
+    print(f"wrote {args.out} in {time.perf_counter() - t0:.0f} s")
     return 0
 
 

@@ -30,23 +30,33 @@ All hosts of the sim run share one clock; across PCs see docs/deploy.md on time 
 The twin the run used (``twin.realism``, ``twin.truth_seed``: the launch file's top-level ``twin:`` section,
 else the world node's ``twin`` param, else the world's defaults) is recorded in ``summary.json`` beside the
 Table I rows (``10.dtheta_mean_deg`` …, each row with Δd in both conventions, :data:`DD_CONVENTION`).
+
+The scene (issue 17; ``scene``: ``name``, ``file``, ``kind``, ``description``, ``source``: the launch file's
+top-level ``scene:``, else the world node's ``scene`` param, else the paper's cylinder) is the object of the
+metric: D is projected onto *its* surface and Δθ is measured in the normal section along *its* stroke
+(:func:`flexsheet.experiments.table1.scene_table1_row`; for the cylinder exactly the paper's Fig. 9 cross
+section). The paper's row is attached to a row only on the paper's cylinder. ``compliance`` summarises the
+tension the planner set at every contact (``/sheet/target``: tension N/m, presented and requested stiffness
+N/m, the share of targets whose stretch is at a limit) per stroking segment and over the whole run.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sys
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 
-from flexsheet.experiments.table1 import DD_CONVENTION, PAPER_TABLE1, table1_row, target
-from flexsheet.model.shapes import paper_cylinder
+from flexsheet.experiments.table1 import DD_CONVENTION, PAPER_TABLE1, scene_table1_row, target
+from flexsheet.model.scenes import Scene, load_scene, paper_scene
 from flexsheet.runtime.bag import read_bag
 from flexsheet.runtime.codec import DecodeError, decode_any
 
-__all__ = ["analyse", "table1_rows", "latency_hops", "twin_settings", "main"]
+__all__ = ["analyse", "table1_rows", "latency_hops", "twin_settings", "scene_settings", "compliance_summary",
+           "main"]
 
 #: the truth's modes whose moving phase is a Table I stroke
 STROKE_MODES = ("stroke", "stroke_push")
@@ -78,10 +88,11 @@ def _interp_sheet(sheets: list, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return o, n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
-def analyse(bags: Path | list[Path], heartbeats: list | None = None) -> dict:
+def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scene | None = None) -> dict:
     """Table I per segment and the latency per hop from a bag, or the parts of one run (a respawned recorder
-    continues in ``<stem>.1.mcap``…). Returns the summary dict (``bags``, ``counts`` per topic, the Table I
-    rows of :func:`table1_rows`, ``latency_ms`` of :func:`latency_hops`); the recorded ``/diagnostics``
+    continues in ``<stem>.1.mcap``…), on ``scene`` (``None``: the paper's cylinder). Returns the summary dict
+    (``bags``, ``counts`` per topic, the Table I rows of :func:`table1_rows`, ``latency_ms`` of
+    :func:`latency_hops`, ``compliance`` of :func:`compliance_summary`); the recorded ``/diagnostics``
     (arrival time, Heartbeat) pairs are appended to ``heartbeats`` if given."""
     bags = [bags] if isinstance(bags, Path) else list(bags)
     d = _load(bags)
@@ -90,7 +101,8 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None) -> dict:
     if heartbeats is not None:
         heartbeats.extend(d.get("/diagnostics", []))
     summary: dict = {"bags": [str(b) for b in bags], "counts": {k: len(v) for k, v in d.items()}}
-    summary.update(table1_rows(d))
+    summary.update(table1_rows(d, scene))
+    summary["compliance"] = compliance_summary(d)
     summary["latency_ms"] = latency_hops(d)
     summary["faults"] = watchdog_faults(d)
     return summary
@@ -116,16 +128,24 @@ def _stroke_groups(tips: list, truths: list) -> tuple[dict[str, list], int]:
     return groups, n_invalid
 
 
-def table1_rows(d: dict[str, list]) -> dict:
-    """Table I rows (:func:`flexsheet.experiments.table1.table1_row`, with ``paper`` for the paper's rows) per
-    stroking segment with ≥ 10 fingertips inside the recorded sheet states, plus ``fingertip_invalid``; empty
-    without ``/fingertip``, ``/world/finger`` and ``/world/sheet``. ``d``: topic → time-sorted
-    (arrival s, message) pairs."""
+def _is_paper(sc: Scene) -> bool:
+    o, p = sc.object, paper_scene().object
+    return o.kind == "cylinder" and bool(np.allclose([o.radius, o.length, *o.pose.position, *o.pose.rpy_deg],
+                                                     [p.radius, p.length, *p.pose.position, *p.pose.rpy_deg],
+                                                     rtol=0.0, atol=1e-9))
+
+
+def table1_rows(d: dict[str, list], scene: Scene | None = None) -> dict:
+    """Table I rows (:func:`flexsheet.experiments.table1.scene_table1_row` on ``scene``, default the paper's
+    cylinder; with ``paper`` for the paper's rows on the paper's cylinder) per stroking segment with ≥ 10
+    fingertips inside the recorded sheet states, plus ``fingertip_invalid``; empty without ``/fingertip``,
+    ``/world/finger`` and ``/world/sheet``. ``d``: topic → time-sorted (arrival s, message) pairs."""
     tips, truths, sheets = d.get("/fingertip", []), d.get("/world/finger", []), d.get("/world/sheet", [])
     if not (truths and sheets and tips):
         return {}
     groups, n_invalid = _stroke_groups(tips, truths)
-    shape = paper_cylinder()
+    scene = scene if scene is not None else paper_scene()
+    paper = _is_paper(scene)
     s_ts = np.array([s.header.stamp for _, s in sheets])
     out: dict = {}
     for key, ms in groups.items():
@@ -133,11 +153,50 @@ def table1_rows(d: dict[str, list]) -> dict:
         if len(ms) < 10:
             continue
         origin, normal = _interp_sheet(sheets, np.array([m.exposure_stamp for m in ms]))
-        row = table1_row(shape, np.array([m.position for m in ms]), origin, normal)
-        if key in PAPER_TABLE1:
+        row = scene_table1_row(scene, np.array([m.position for m in ms]), origin, normal)
+        if key in PAPER_TABLE1 and paper:
             row["paper"] = PAPER_TABLE1[key]
         out[key] = row
     out["fingertip_invalid"] = n_invalid
+    return out
+
+
+def _pct(x: np.ndarray) -> dict:
+    return {"median": float(np.median(x)), "min": float(np.min(x)), "max": float(np.max(x)),
+            "p5": float(np.percentile(x, 5)), "p95": float(np.percentile(x, 95))}
+
+
+def compliance_summary(d: dict[str, list]) -> dict:
+    """The tension the planner set at the contacts (``/sheet/target`` while ``touching``): ``all`` and per
+    stroking segment (keys as the Table I rows, by the ``/world/finger`` truth at the target's fingertip
+    exposure), each ``{"n", "tension_n_per_m", "stiffness_n_per_m", "object_stiffness_n_per_m"`` (median,
+    min, max, p5, p95) ``, "at_limit"`` (share with ``object_stiffer_than_sheet`` / ``object_softer_than_sheet``
+    in the status)``}``; empty without touching targets."""
+    tg = [m for _, m in d.get("/sheet/target", []) if m.touching and not m.status.startswith("hold")]
+    if not tg:
+        return {}
+
+    def block(ms: list) -> dict:
+        return {"n": len(ms), "tension_n_per_m": _pct(np.array([m.tension for m in ms])),
+                "stiffness_n_per_m": _pct(np.array([m.stiffness for m in ms])),
+                "object_stiffness_n_per_m": _pct(np.array([m.object_stiffness for m in ms])),
+                "at_limit": float(np.mean([("stiffer_than_sheet" in m.status) or ("softer_than_sheet" in m.status)
+                                           for m in ms]))}
+
+    out: dict = {"all": block(tg)}
+    truths = d.get("/world/finger", [])
+    if truths:
+        tt = np.array([m.header.stamp for _, m in truths])
+        groups: dict[str, list] = defaultdict(list)
+        for m in tg:
+            k = int(np.searchsorted(tt, m.source_stamp, side="right")) - 1
+            if k < 0:
+                continue
+            tr = truths[k][1]
+            if tr.phase == tr.mode and tr.mode in STROKE_MODES:
+                mt = f"{tr.moving_time:g}"
+                groups[mt if tr.mode == "stroke" else f"stroke_push_{mt}"].append(m)
+        out.update({k: block(v) for k, v in groups.items() if len(v) >= 5})
     return out
 
 
@@ -237,6 +296,32 @@ def twin_settings(lf=None) -> dict:
     return {"realism": tp.realism, "truth_seed": tp.truth_seed, "source": source}
 
 
+def scene_settings(lf=None, out: str | None = None) -> tuple[Scene, dict]:
+    """The scene a launch ran and its summary entry ``{"name", "file", "kind", "description", "source"}``: the
+    launch file's top-level ``scene`` (substituted; ``--set scene=FILE`` lands there), else the world node's
+    ``scene`` param, else the paper's cylinder (``source`` says which). An unreadable file is reported in
+    ``source`` and the paper's cylinder used (the report never fails on it)."""
+    path, source = None, "the paper's cylinder (the launch file names no scene)"
+    if lf is not None and getattr(lf, "scene", None):
+        from flexsheet.runtime.launch import substitute, substitutions
+
+        path, source = os.path.expanduser(substitute(lf.scene, substitutions(lf, out))), "launch file scene"
+    elif lf is not None:
+        for spec in getattr(lf, "nodes", {}).values():
+            if getattr(spec, "type", None) == "world" and (spec.params or {}).get("scene"):
+                path, source = str(spec.params["scene"]), "world node params"
+                break
+    sc = paper_scene()
+    if path:
+        try:
+            sc = load_scene(path)
+        except ValueError as exc:
+            source = f"{source}: unreadable ({str(exc).splitlines()[0][:200]}); the paper's cylinder used"
+            path = None
+    return sc, {"name": sc.name, "file": str(Path(path).resolve()) if path else None, "kind": sc.object.kind,
+                "description": sc.description, "source": source}
+
+
 def _charts(summary: dict, out: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -316,7 +401,9 @@ def graph_chart(heartbeats: list, path: Path) -> dict:
 
 def _format(summary: dict) -> str:
     tw = summary.get("twin", {})
+    sc = summary.get("scene", {})
     lines = ["Table I — position and angle errors in stroking (full process graph, from the bag)",
+             f"scene: {sc.get('name', 'cylinder')} ({sc.get('file') or sc.get('source', 'paper')})",
              f"twin: {tw.get('realism', '?')}, truth seed {tw.get('truth_seed', '?')} ({tw.get('source', '?')})",
              DD_CONVENTION, "",
              f"{'moving time':<16}{'Δθ mean deg':>12}{'Δθ std deg':>11}{'Δd 2R mm':>10}{'Δd R mm':>9}"
@@ -329,6 +416,14 @@ def _format(summary: dict) -> str:
                      f"{r.get('dd_2r_mean_mm', float('nan')):10.3f}{r['dd_mean_mm']:9.3f}"
                      f"{p.get('dtheta_mean_deg', float('nan')):10.3f}{p.get('dd_mean_mm', float('nan')):10.3f}"
                      f"{tg:10.3f}{r['n']:7d}")
+    comp = summary.get("compliance", {})
+    if comp:
+        lines += ["", "Sheet tension at the contacts (/sheet/target while touching), median [p5, p95]",
+                  f"{'segment':<16}{'tension N/m':>22}{'presented k N/m':>22}{'requested k N/m':>22}{'at limit':>9}"]
+        for key, b in comp.items():
+            f = "{0[median]:7.1f} [{0[p5]:5.1f},{0[p95]:6.1f}]".format
+            lines.append(f"{key:<16}{f(b['tension_n_per_m']):>22}{f(b['stiffness_n_per_m']):>22}"
+                         f"{f(b['object_stiffness_n_per_m']):>22}{b['at_limit']:9.0%}")
     lines += ["", "Latency budget per hop (ms)", f"{'hop':<32}{'median':>9}{'p99':>9}{'n':>7}"]
     for k, v in summary["latency_ms"].items():
         med = "-" if v["median"] is None else f"{v['median']:.2f}"
@@ -346,7 +441,9 @@ def main(out: str, lf=None) -> int:
         print(f"[report] no bag in {out_dir}", flush=True)
         return 1
     beats: list = []
-    summary = analyse(bags, beats)
+    scene, scene_entry = scene_settings(lf, out)
+    summary = analyse(bags, beats, scene)
+    summary["scene"] = scene_entry
     summary["twin"] = twin_settings(lf)
     cpu = cpu_summary(out_dir)
     if cpu is not None:

@@ -229,22 +229,34 @@ def _camera_cov(twin: Twin, X_display: np.ndarray, sigma_px: float) -> np.ndarra
 def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None, seed: int = 0, *,
              use_prediction: bool = True, finger_kw: dict | None = None, horizon: float | None = None,
              q: float | None = None, sigma_px_filter: float | None = None, d_source: str = "measured",
-             chain: ArmChain | None = None, stats: dict | None = None) -> dict[str, float]:
+             chain: ArmChain | None = None, stats: dict | None = None, scene=None, compliance=None,
+             planner_config: PlannerConfig | None = None, record: list | None = None) -> dict[str, float]:
     """Run one stroke on ``twin`` and return the Table I row (:func:`flexsheet.experiments.table1.table1_row`)
     over the moving phase, from the valid measurements. ``horizon`` (s, default: the latency budget plus the
     mean target hold), ``q`` (m²/s³, default: the launch file's) and ``sigma_px_filter`` (the covariance the
     triangulator assumes, default: the launch file's) set the filter. ``d_source``: D is the ``measured``
     fingertip (the paper's definition, default), the ``truth`` or the Kalman-``filtered`` position (variants
     that show what the measurement noise in D costs). ``stats``: if a dict, gets ``peak_joint_speed_ratio``
-    (largest |q̇| / datasheet speed of either servo), ``ik_refused`` and ``dropped``. Raises ``ValueError``
-    for an unknown ``d_source``."""
+    (largest |q̇| / datasheet speed of either servo), ``ik_refused`` and ``dropped``. ``scene`` (a
+    :class:`flexsheet.model.scenes.Scene`; ``None``: the paper's cylinder as before): the object, the finger's
+    path (:class:`~flexsheet.model.finger.FingerScript` on the scene) and the metric's section
+    (:func:`flexsheet.experiments.table1.scene_table1_row`). ``compliance``: the planner's stiffness model
+    (e.g. :class:`nodes.planner.compliance.SceneCompliance`; ``None``: the config's ``object_stiffness``);
+    ``planner_config``: the planner's :class:`PlannerConfig`; ``record``: if a list, gets one
+    ``(t s, true fingertip (3,) m, Plan)`` per planned sample. Raises ``ValueError`` for an unknown
+    ``d_source``."""
     if d_source not in ("measured", "truth", "filtered"):
         raise ValueError(f"d_source must be measured, truth or filtered, got {d_source!r}")
     latency = latency or LatencyModel()
     chain = chain or ArmChain()
     lk = launch_kf()
-    shape = paper_cylinder()
-    finger = FingerScript(moving_time=moving_time, seed=seed, **(finger_kw or {}))
+    if scene is None:
+        shape = paper_cylinder()
+    else:
+        from nodes.planner.scene_shape import planner_shape
+
+        shape = planner_shape(scene)
+    finger = FingerScript(moving_time=moving_time, seed=seed, scene=scene, **(finger_kw or {}))
     rng = np.random.default_rng(1000 + seed)
     Tc = latency.camera_period
     tk = np.arange(0.0, finger.duration, Tc) + rng.uniform(0, Tc)
@@ -261,7 +273,7 @@ def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None
     sig_f = lk["sigma_px"] if sigma_px_filter is None else sigma_px_filter
     Rf = _camera_cov(twin, meas, sig_f)              # the covariance the triangulator reports for its sigma_px
     kf = Predictor(lk["q"] if q is None else q)
-    planner = SurfacePlanner(shape, PlannerConfig())
+    planner = SurfacePlanner(shape, planner_config or PlannerConfig(), compliance)
     s = latency.scale
     delay_to_arm = s * (latency.exposure_to_host + latency.processing + latency.network)
     arrivals, clamps = [], []
@@ -276,6 +288,8 @@ def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None
             plan = planner.hold("hold:marker_lost", t)
         if plan is None:
             continue
+        if record is not None:
+            record.append((float(t), true_p[i], plan))
         arrivals.append(t + delay_to_arm)
         clamps.append(plan.clamp_matrices())
     arrivals = np.asarray(arrivals)
@@ -324,6 +338,8 @@ def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None
         stats.update(peak_joint_speed_ratio=vmax, ik_refused=int(sum(c[0].refused for c in chains.values())),
                      dropped=int((~valid).sum()))
     D = {"measured": meas, "truth": true_p, "filtered": filt}[d_source]
+    if scene is not None:
+        return table1_row(shape, D[idx], so, sn, scene)
     return table1_row(shape, D[idx], so, sn)
 
 

@@ -12,9 +12,13 @@ We make the definitions exact for any shape and sheet pose:
   actual sheet normal (for the paper's cylinder this is exactly |θ − θ′| around the axis).
 * ``gap`` (extra): distance of D′ from the sheet plane along its normal (the sheet floating off, > 0, or
   cutting into, < 0, the virtual surface) — zero when the sheet is exactly tangent.
-* Fig. 9 is a cross-section of the cylinder: for a shape with an ``axis`` (the cylinder) the sheet normal's
-  component along the axis is removed before D′ and Δθ are computed (it is small, and would otherwise make
-  the support point jump along the axis). Both the in-process experiment
+* Fig. 9 is a cross-section: the **normal section along the stroke**, the plane through D spanned by the
+  object's true normal n(D) and the stroke's direction t there (any scene, issue 17:
+  :func:`stroke_tangents` gives t from the scene's path). The sheet normal's component along the section's
+  binormal b = n × t is removed before D′ and Δθ are computed (it is small, and would otherwise make the
+  support point jump along b). On the paper's cylinder the stroke runs around the axis, so b is the axis and
+  this is exactly the cylinder's cross-section; without tangents a shape with an ``axis`` (the cylinder) uses
+  that cross-section directly (the same numbers, tested). Both the in-process experiment
   (:mod:`flexsheet.experiments.stroke`) and the report of a recorded run (:mod:`flexsheet.experiments.report`)
   get their rows from :func:`table1_row`, and the paper's numbers from :data:`PAPER_TABLE1`.
 
@@ -38,7 +42,8 @@ import numpy as np
 from flexsheet.model.shapes import Shape
 
 __all__ = ["StrokeErrors", "stroke_errors", "presented_contacts", "table1", "summarize", "table1_row",
-           "PAPER_TABLE1", "TARGET_FACTOR", "target", "section_normals", "DD_CONVENTION", "paper_dd_ratio"]
+           "PAPER_TABLE1", "TARGET_FACTOR", "target", "section_normals", "DD_CONVENTION", "paper_dd_ratio",
+           "stroke_tangents", "scene_table1_row"]
 
 #: the paper's Table I (Furukawa et al., §V-C): moving time (s, as the row key) → means and population
 #: standard deviations of Δd (mm) and Δθ (deg) over the moving phase
@@ -118,27 +123,55 @@ def presented_contacts(shape: Shape, D, sheet_origin, sheet_normal) -> tuple[np.
     return Dp, gap
 
 
-def section_normals(shape: Shape, normals) -> np.ndarray:
-    """Unit normals (N, 3) in the Fig. 9 cross-section: for a shape with an ``axis`` (the cylinder) the
-    component along the axis removed, else just normalised. Raises ``ValueError`` on bad shapes/values or a
-    normal parallel to the axis."""
+def section_normals(shape: Shape, normals, ref_normals=None, tangents=None) -> np.ndarray:
+    """Unit normals (N, 3) in the Fig. 9 cross-section (module doc). With ``ref_normals`` n(D) and ``tangents``
+    t (each (N, 3)): the component along the binormal b = n × t removed (the normal section along the
+    stroke). Without: for a shape with an ``axis`` (the cylinder) the component along the axis removed, else
+    just normalised. Raises ``ValueError`` on bad shapes/values, a normal along b (or the axis), or a tangent
+    along n."""
     n = _as_points("sheet_normal", normals)
-    axis = getattr(shape, "axis", None)
-    if axis is not None:
-        a = np.asarray(axis, dtype=float)
-        a = a / np.linalg.norm(a)
-        n = n - np.outer(n @ a, a)
+    if tangents is not None:
+        N = n.shape[0]
+        nr = _as_points("ref_normals", ref_normals, N)
+        t = _as_points("tangents", tangents, N)
+        t = t - np.einsum("ij,ij->i", t, nr)[:, None] * nr
+        b = np.cross(nr, t)
+        bl = np.linalg.norm(b, axis=1, keepdims=True)
+        if np.any(bl < 1e-9):
+            raise ValueError("tangents must not be along the reference normals")
+        b /= bl
+        n = n - np.einsum("ij,ij->i", n, b)[:, None] * b
+    else:
+        axis = getattr(shape, "axis", None)
+        if axis is not None:
+            a = np.asarray(axis, dtype=float)
+            a = a / np.linalg.norm(a)
+            n = n - np.outer(n @ a, a)
     nrm = np.linalg.norm(n, axis=1, keepdims=True)
     if np.any(nrm < 1e-9):
-        raise ValueError("sheet_normal must be non-zero (and not along the shape's axis)")
+        raise ValueError("sheet_normal must be non-zero (and not along the section's binormal or the shape's axis)")
     return n / nrm
 
 
-def table1(shape: Shape, measured, sheet_origin, sheet_normal) -> StrokeErrors:
+def stroke_tangents(scene, D, samples: int = 513) -> np.ndarray:
+    """Unit directions (N, 3) of ``scene``'s stroke path (:meth:`flexsheet.model.scenes.Scene.stroke_points`,
+    ``samples`` points) at the path point nearest each D (N, 3) m: the t of the normal section along the
+    stroke (module doc). Raises ``ValueError`` on bad shapes/values."""
+    D = _as_points("D", D)
+    P, _ = scene.stroke_points(int(samples))
+    T = np.gradient(P, axis=0)
+    T /= np.linalg.norm(T, axis=1, keepdims=True)
+    d2 = ((D[:, None, :] - P[None, :, :]) ** 2).sum(-1)
+    return T[np.argmin(d2, axis=1)]
+
+
+def table1(shape: Shape, measured, sheet_origin, sheet_normal, scene=None) -> StrokeErrors:
     """Fig. 9 errors from time series: ``measured`` fingertip positions (N, 3) m and the actual sheet
     ``sheet_origin`` (N, 3) m and ``sheet_normal`` (N, 3) at the same instants (e.g. from ``/fingertip``
     and ``/world/sheet`` or the arms' FK). The sheet normals are taken in the cross-section
-    (:func:`section_normals`). Returns :class:`StrokeErrors`. Raises ``ValueError`` on bad shapes/values."""
+    (:func:`section_normals`): the normal section along ``scene``'s stroke (a
+    :class:`flexsheet.model.scenes.Scene`, :func:`stroke_tangents`) when given, else the shape's axis
+    section. Returns :class:`StrokeErrors`. Raises ``ValueError`` on bad shapes/values."""
     M = _as_points("measured", measured)
     N = M.shape[0]
     D = np.empty((N, 3))
@@ -148,7 +181,8 @@ def table1(shape: Shape, measured, sheet_origin, sheet_normal) -> StrokeErrors:
         pr = shape.project(tuple(M[i]), hint)
         D[i], nD[i] = pr.point, pr.normal
         hint = pr.normal
-    nS = section_normals(shape, _as_points("sheet_normal", sheet_normal, N))
+    tang = stroke_tangents(scene, D) if scene is not None else None
+    nS = section_normals(shape, _as_points("sheet_normal", sheet_normal, N), nD if tang is not None else None, tang)
     Dp, gap = presented_contacts(shape, D, sheet_origin, nS)
     dd, dth = stroke_errors(D, Dp, nD, nS)
     return StrokeErrors(dd, dth, gap, D, Dp)
@@ -176,13 +210,22 @@ def summarize(dd, dtheta, radius: float | None = None) -> dict[str, float]:
     return row
 
 
-def table1_row(shape: Shape, measured, sheet_origin, sheet_normal) -> dict[str, float]:
-    """One Table I row from time series (see :func:`table1`): :func:`summarize` of Δd, Δθ (with the paper's
-    2R convention when the shape has a radius ``R``, the cylinder) plus ``gap_mean_mm`` (mean |gap|, mm). The
-    one metric of the in-process experiment and of a recorded run. Raises ``ValueError`` on bad shapes/values
-    or no samples."""
-    err = table1(shape, measured, sheet_origin, sheet_normal)
+def table1_row(shape: Shape, measured, sheet_origin, sheet_normal, scene=None) -> dict[str, float]:
+    """One Table I row from time series (see :func:`table1`; ``scene``: the section along its stroke):
+    :func:`summarize` of Δd, Δθ (with the paper's 2R convention when the shape has a radius ``R``: the
+    cylinder, the sphere) plus ``gap_mean_mm`` (mean |gap|, mm). The one metric of the in-process experiment
+    and of a recorded run. Raises ``ValueError`` on bad shapes/values or no samples."""
+    err = table1(shape, measured, sheet_origin, sheet_normal, scene)
     radius = getattr(shape, "R", None)
     row = summarize(err.dd, err.dtheta, float(radius) if isinstance(radius, (int, float)) else None)
     row["gap_mean_mm"] = float(np.mean(np.abs(err.gap)) * 1e3)
     return row
+
+
+def scene_table1_row(scene, measured, sheet_origin, sheet_normal) -> dict[str, float]:
+    """:func:`table1_row` on a :class:`flexsheet.model.scenes.Scene`: its shape as the planner sees it
+    (:func:`nodes.planner.scene_shape.planner_shape`: smooth normals on meshes) and the normal section along
+    its stroke. For the paper's cylinder this gives the cylinder's Fig. 9 numbers."""
+    from nodes.planner.scene_shape import planner_shape
+
+    return table1_row(planner_shape(scene), measured, sheet_origin, sheet_normal, scene)

@@ -14,8 +14,9 @@ Writes to DIR:
 * ``honest.png`` / ``honest`` in ``summary.json`` — the honest twin (issue 15; :mod:`.vision_twin`): the
   fingertip error against the hidden truth, from rendered images, for ``--seeds`` truth seeds, realistic
   and ideal twin: static (a still finger, 0.43–0.52 m from the camera) and moving along the paper's stroke
-  (10 s and 30 s), with the camera registration the twin's camera-pose procedure produced (never the
-  truth); and its stability: error against the camera noise level, the size of the truth's camera spreads
+  (10 s and 30 s), with the camera registration the twin's registration produced
+  (``flexsheet.calibration.procedures.sim_display_calib``: the display.yaml the twin's nodes load; never
+  the truth); and its stability: error against the camera noise level, the size of the truth's camera spreads
   (registered again / not registered), the finger's direction (self-occlusion of the marker) and the
   background brightness (marker contrast), each with its breaking point (first value past the 0.5 mm target
   or under 90 % valid frames).
@@ -247,7 +248,7 @@ def honest(seeds=(0, 1, 2), quick: bool = False) -> dict:
         res = {}
         for seed in seeds:
             truth = vt.TwinTruth.draw(seed, realism)
-            entry, path = vt.registered_camera(truth, log=_log)
+            entry, path = vt.registered_camera(truth, quick=quick, log=_log)
             _log(f"  {realism} seed {seed}: static...")
             r = {"registration": vt.registration_error(truth, entry), "display_calib": path,
                  "static": vt.static_error(truth, entry.stereo, entry.T_display_camera, cfg, pts, frames, seed),
@@ -301,7 +302,7 @@ def honest_stability(seeds=(0, 1, 2), quick: bool = False) -> dict:
 
     def registered(seed):
         truth = vt.TwinTruth.draw(seed, "realistic")
-        entry, _ = vt.registered_camera(truth, log=_log)
+        entry, _ = vt.registered_camera(truth, quick=quick, log=_log)
         return truth, entry
 
     def noise_case(x, seed):
@@ -370,7 +371,7 @@ def _plot_honest(h: dict, st: dict | None, path: str) -> None:
     ax[0, 0].axhline(TARGET_MM, color="r", ls="--", lw=1, label=f"target {TARGET_MM} mm")
     ax[0, 0].set_xticks(x + 0.4 - w / 2, [f"truth seed {s}" for s in seeds])
     ax[0, 0].set_ylabel("fingertip RMS error vs truth, mm")
-    ax[0, 0].set_title("honest twin: registered camera, images → detector → triangulation")
+    ax[0, 0].set_title("honest twin: registered camera, images → detector")
     ax[0, 0].legend(fontsize=7)
     if st:
         def panel(a, sw, xlabel, title, logx=False, logy=False, x2=None):
@@ -394,20 +395,23 @@ def _plot_honest(h: dict, st: dict | None, path: str) -> None:
                         "no failure in the sweep")
             if logx:
                 a.set_xscale("log")
+                a.set_xticks(sw["values"], [f"{v:g}" for v in sw["values"]])
+                a.minorticks_off()
             if logy:
                 a.set_yscale("log")
             a.legend(fontsize=7, loc="upper left")
+            return b
         panel(ax[0, 1], st["noise_scale"], "camera noise × measured σ (read 2.5 DN, shot 0.31 DN/DN)",
               "camera noise", logx=True, logy=True)
         panel(ax[0, 2], st["calibration_scale"], "truth camera spreads × (stereo bootstrap σ, mount 10 mm / 1°)",
               "calibration error (registered again)", logx=True, logy=True, x2=st["calibration_scale_unregistered"])
-        panel(ax[1, 0], st["finger_azimuth_deg"], "finger azimuth about +z, deg (elevation 40°; camera at −36°)",
-              "self-occlusion by the finger")
+        b = panel(ax[1, 0], st["finger_azimuth_deg"], "finger azimuth about +z, deg (elevation 40°; camera at −36°)",
+                  "self-occlusion by the finger", logy=True)
         vis = [float(np.mean([d.get("visibility", np.nan) for d in det])) for det in st["finger_azimuth_deg"]["detail"]]
-        ax[1, 0].plot(st["finger_azimuth_deg"]["values"], vis, "d-.", color="tab:purple", label="visible fraction")
-        ax[1, 0].legend(fontsize=7, loc="upper left")
+        b.plot(st["finger_azimuth_deg"]["values"], vis, "d-.", color="tab:purple", label="marker visible fraction")
+        b.legend(fontsize=7, loc="center right")
         panel(ax[1, 1], st["background_gain"], "background brightness × (sheet up to ~190 DN at 1)",
-              "marker contrast")
+              "marker contrast", logy=True)
     ps = h["realistic"]["per_seed"]
     txt = ["registration (camera entry) vs truth:"]
     for s in seeds:

@@ -4,10 +4,10 @@ The estimator sees what a lab has: the camera's registration (``display.yaml``'s
 the registration procedure on the twin's images) and the images. The truth
 (:class:`flexsheet.model.truth.TwinTruth`) only forms the images and scores the result.
 
-* :func:`registered_camera` — the camera entry of a truth: the realistic twin runs the camera-pose
-  procedure (:mod:`flexsheet.calibration.camera_pose` on :class:`flexsheet.calibration.twin.CalibrationTwin`
-  board views: the board on the sheet, rendered through the true cameras, true arms and measured sensor
-  noise) and caches the resulting ``display.yaml`` per truth; the ideal twin's nominal registration is exact.
+* :func:`registered_camera` — the camera entry of a truth: the realistic twin's registration
+  (:mod:`flexsheet.calibration.procedures`: the board on the sheet rendered through the true cameras, true
+  arms and the measured sensor noise, then the camera-pose fit), cached per truth; the ideal twin's nominal
+  registration is exact.
 * :func:`static_error` / :func:`moving_error` — per-frame fingertip error (display frame) of the real
   pipeline (:class:`nodes.triangulator.pipeline.FingertipTracker`) on images of the camera twin
   (:func:`flexsheet.model.camera_sim.twin_renderer`): a still finger at ~0.5 m, and the paper's stroke
@@ -34,7 +34,6 @@ from flexsheet.model.camera_sim import XIMEA_SENSOR, SimConfig, twin_renderer
 from flexsheet.model.display_calib import (
     CameraEntry,
     DisplayCalib,
-    Provenance,
     load_display_calib,
     nominal_display_calib,
     write_display_calib,
@@ -42,17 +41,14 @@ from flexsheet.model.display_calib import (
 from flexsheet.model.truth import Spreads, TwinTruth
 from nodes.triangulator.pipeline import FingertipTracker, TrackerConfig
 
-__all__ = ["REG_BOARD", "REG_VIEWS", "cache_dir", "registered_camera", "sim_config", "static_points",
+__all__ = ["cache_dir", "registered_camera", "sim_config", "static_points",
            "static_error", "moving_error", "registration_error", "scaled_truth", "measure_sensor_noise",
            "sensing_summary", "XIMEA_DIR"]
 
-#: the registration board (chessboard, inner corners, square m) laid on the sheet, and the number of views
-REG_BOARD = ("chessboard:9x6", 0.02)
-REG_VIEWS = 10
 XIMEA_DIR = "/work/shared/data/stereo_calib_xi"
 _HERE = os.path.dirname(os.path.abspath(__file__))
-_SOURCES = ("../calibration/camera_pose.py", "../calibration/twin.py", "../model/truth.py",
-            "../model/ximea_calib_bootstrap.json")
+_SOURCES = ("../calibration/camera_pose.py", "../calibration/twin.py", "../calibration/procedures.py",
+            "../calibration/sources.py", "../model/truth.py", "../model/ximea_calib_bootstrap.json")
 
 
 def cache_dir() -> str:
@@ -73,46 +69,47 @@ def _key(truth: TwinTruth, n_views: int) -> str:
     h = hashlib.sha1()
     s = truth.summary()
     h.update(json.dumps({"camera": s["camera"], "T": s["T_display_camera"], "bases": s["bases"],
-                         "links": s["link_deltas"], "zeros": s["joint_offsets"], "views": n_views,
-                         "board": REG_BOARD}, sort_keys=True).encode())
+                         "links": s["link_deltas"], "zeros": s["joint_offsets"], "views": n_views},
+                        sort_keys=True).encode())
     for rel in _SOURCES:
         with open(os.path.join(_HERE, rel), "rb") as fh:
             h.update(fh.read())
     return h.hexdigest()[:16]
 
 
-def registered_camera(truth: TwinTruth, n_views: int = REG_VIEWS, cache: str | None = None,
+def registered_camera(truth: TwinTruth, quick: bool = False, cache: str | None = None,
                       log=None) -> tuple[CameraEntry, str]:
     """The camera entry a lab would have for this truth, and the ``display.yaml`` path holding it.
 
-    Realistic truth: the camera-pose procedure on ``n_views`` twin board views (the first ``n_views`` of
-    :data:`flexsheet.calibration.camera_pose.VIEW_PLAN`), with the stereo prior of the shipped calibration's
-    bootstrap; cached under :func:`cache_dir` by a hash of the truth's camera and arm parameters and of the
-    procedure's source files. Ideal truth: the nominal registration (exact for it). Raises ``ValueError``
-    when the procedure fails (the message says why)."""
+    A realistic truth of the default spreads: the twin's whole registration for its seed
+    (:func:`flexsheet.calibration.procedures.sim_display_calib`, cached per seed — the file the twin's estimator
+    nodes load; ``quick``: its test preset). A truth drawn with other spreads (stability sweeps): the camera-pose
+    procedure alone (:func:`flexsheet.calibration.procedures.run_camera_pose`, test preset, twin board views),
+    cached under :func:`cache_dir` by a hash of the truth's camera and arms and of the procedure's sources.
+    Ideal truth: the nominal registration (exact for it). Raises ``ValueError`` when a procedure fails."""
+    from flexsheet.calibration import procedures as P
+    from flexsheet.model.truth import Spreads
+
     cache = cache or cache_dir()
     if truth.realism == "ideal":
         path = os.path.join(cache, "display_nominal.yaml")
         if not os.path.isfile(path):
             write_display_calib(path, DisplayCalib(camera=nominal_display_calib().camera))
         return load_display_calib(path, require=("camera",)).camera, path
-    path = os.path.join(cache, f"display_seed{truth.seed}_{_key(truth, n_views)}.yaml")
+    if truth.spreads == Spreads():
+        path = P.sim_display_calib(truth.seed, truth.realism, quick=quick, progress=log)
+        return load_display_calib(path, require=("camera",)).camera, path
+    path = os.path.join(cache, f"camera_seed{truth.seed}_{_key(truth, P.QUICK.views)}.yaml")
     if os.path.isfile(path):
         return load_display_calib(path, require=("camera",)).camera, path
-    from flexsheet.calibration.camera_pose import estimate_camera_pose, load_prior, plan_board_views
+    from flexsheet.calibration.sources import TwinSource
     from flexsheet.calibration.twin import CalibrationTwin
-    from flexsheet.model.calibration import parse_board
 
     if log:
-        log(f"registering the camera of truth seed {truth.seed} ({n_views} board views)...")
-    board = parse_board(*REG_BOARD)
-    nom = nominal_display_calib().camera
-    views = CalibrationTwin(truth, ss=2).board_views(board, plan_board_views(n_views))
-    r = estimate_camera_pose(views, board, nom.stereo, nom.T_display_camera, prior_cov=load_prior())
-    prov = Provenance(f"camera-pose: {REG_BOARD[0]} {REG_BOARD[1] * 1e3:.0f} mm on the sheet, {r.n_views} views",
-                      source=f"twin seed {truth.seed}", n_poses=r.n_views,
-                      residuals={"rms_px": r.rms_px, "residual_mm": r.residual_mm})
-    entry = CameraEntry(r.T_display_camera, prov, r.stereo)
+        log(f"registering the camera of a scaled truth (seed {truth.seed}, {P.QUICK.views} board views)...")
+    o = P.QUICK
+    src = TwinSource(CalibrationTwin(truth, seed=truth.seed), o.board_frames, o.pattern_frames, o.marker_frames)
+    entry, _ = P.run_camera_pose(src, o)
     write_display_calib(path, DisplayCalib(camera=entry))
     return load_display_calib(path, require=("camera",)).camera, path
 

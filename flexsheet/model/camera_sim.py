@@ -19,7 +19,8 @@ calibration the estimators use. Scene per image (8-bit mono, raw = distorted, li
   of the marker it covers from that camera — the hidden part depends on the finger's direction relative
   to each camera. Without it the marker is drawn over the finger (the old twin).
 * **Motion blur**: finger and marker are averaged over positions spread over the exposure ``exposure_s``
-  along the velocity (box shutter; ``blur_samples`` at least, and one per 0.5 px of streak).
+  along the velocity (box shutter; ``blur_samples`` at least, and one per 0.5 px of streak; a streak
+  under 0.1 px — the paper's stroke — is one position at mid-exposure).
 * **Optics**: Gaussian point-spread function ``blur_px`` (σ, px) over the drawn region.
 * **Sensor**: signal-dependent noise σ² = ``noise_dn``² + ``shot_gain``·I (DN², I the noise-free level;
   read noise plus shot noise), times ``noise_scale``, then 8-bit rounding and clipping. Standard normals
@@ -246,10 +247,16 @@ def _sheet_texture(n: int, rng: np.random.Generator) -> np.ndarray:
     return np.clip(img, 0, 255).astype(np.uint8)
 
 
+def _dot(A: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """(n, M) dot products of the rows of A (n, 3) with the rays d (M, 3), without BLAS (whose threads cost
+    more than they save on arrays this small, and contend on a shared machine)."""
+    return A[:, 0:1] * d[None, :, 0] + A[:, 1:2] * d[None, :, 1] + A[:, 2:3] * d[None, :, 2]
+
+
 def _sphere_hit(d: np.ndarray, S: np.ndarray, r: float) -> np.ndarray:
     """Ray parameter of the first hit of rays X = t·d (d (M, 3) unit, from the origin) with the sphere
     (S (n, 3), r) → (n, M), +inf where missed or behind."""
-    b = S @ d.T                                             # (n, M)
+    b = _dot(S, d)                                          # (n, M)
     c = np.einsum("ij,ij->i", S, S)[:, None] - r * r
     h = b * b - c
     with np.errstate(invalid="ignore"):
@@ -263,9 +270,9 @@ def _capsule_hit(d: np.ndarray, A: np.ndarray, B: np.ndarray, r: float) -> np.nd
     ba = B - A                                              # (n, 3)
     oa = -A
     baba = np.einsum("ij,ij->i", ba, ba)[:, None]
-    bard = ba @ d.T                                         # (n, M)
+    bard = _dot(ba, d)                                      # (n, M)
     baoa = np.einsum("ij,ij->i", ba, oa)[:, None]
-    rdoa = oa @ d.T
+    rdoa = _dot(oa, d)
     oaoa = np.einsum("ij,ij->i", oa, oa)[:, None]
     a = baba - bard * bard
     b = baba * rdoa - baoa * bard
@@ -479,10 +486,12 @@ class StereoRenderer:
             raise ValueError(f"marker_diameter must be in [0.001, 0.02] m, got {md!r}")
         n = 1
         if c.exposure_s > 0 and np.linalg.norm(v) > 0:
-            # at least one sample per 0.5 px of streak, so the streak is continuous, not a row of dots
+            # at least one sample per 0.5 px of streak, so the streak is continuous, not a row of dots; a
+            # streak under 0.1 px is rendered at its mid-exposure position (its blur is below the PSF's)
             zc = max(float(self.to_camera(p)[0, 2]), 0.05)
             streak_px = self.model.focal * float(np.linalg.norm(v)) * c.exposure_s / zc
-            n = min(max(c.blur_samples, int(np.ceil(2.0 * streak_px)) + 1), 200)
+            if streak_px >= 0.1:
+                n = min(max(c.blur_samples, int(np.ceil(2.0 * streak_px)) + 1), 200)
         offs = (np.linspace(-0.5, 0.5, n) if n > 1 else np.zeros(1))[:, None] * (v * c.exposure_s)[None, :]
         tips = p[None, :] + offs                                          # (n, 3) display, marker centres
         A0, B0 = self.finger_axis(p, md)

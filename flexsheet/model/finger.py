@@ -17,6 +17,13 @@ with the fingertip in a given moving time (10 s and 30 s in Table I). We script 
 * **Depth**: the fingertip sits ``depth`` m inside the virtual surface while stroking (light contact);
   "push" presses to ``push_depth`` and back (raised cosine) at the start angle; "stroke_push" presses
   (half sine) while stroking.
+* **Any scene** (issue 17): with ``scene`` (a :class:`flexsheet.model.scenes.Scene`) the mark moves along the
+  scene's stroke path instead (:meth:`~flexsheet.model.scenes.Scene.stroke_at`): the profile runs over the
+  path's arc-length fraction 0 → 1 and the fingertip goes to p − depth·n (p the path point, n its outward
+  normal; the approach comes in along n). The angular wander becomes an along-path wander of
+  ``radius``·``wander_deg`` (rad) and the axial wander runs along b = t × n (t the path's direction), so
+  the paper's cylinder scene gives the same finger as the cylinder parameters (tested to 1e-9 m).
+  ``start_angle``, ``end_angle``, ``center``, ``axis`` and ``up`` are not used then.
 
 Each noise is a fixed sum of sinusoids drawn from ``seed`` (numpy ``default_rng``), so :meth:`position`
 is a smooth deterministic function of time and :meth:`positions` is its vectorised form.
@@ -29,7 +36,8 @@ Timeline: [0, approach_time) "approach" from ``approach_distance`` outside the s
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -53,8 +61,9 @@ class FingerScript:
     depth), ``push_depth`` m, ``approach_time`` s, ``approach_distance`` m, ``hold_before``/``hold_after`` s,
     ``lag`` s, ``wander_deg`` deg rms, ``wander_axial`` m rms, ``tremor_rms`` m rms per axis, ``seed``,
     cylinder ``center`` (3,), ``axis`` (3,), ``radius`` m, ``up`` (3,) (direction of positive angles at
-    90°). Frozen: the world node's script segments are these fields. Raises ``ValueError`` naming a bad
-    field."""
+    90°); ``scene``: a :class:`flexsheet.model.scenes.Scene` whose stroke path the finger follows (module
+    doc; ``None``: the cylinder parameters). Frozen: the world node's script segments are these fields (but
+    ``scene``, a graph-wide setting). Raises ``ValueError`` naming a bad field."""
 
     mode: str = "stroke"
     moving_time: float = 10.0
@@ -76,6 +85,7 @@ class FingerScript:
     axis: tuple[float, float, float] = tuple(float(x) for x in scene.CYLINDER_AXIS)      # type: ignore[assignment]
     radius: float = scene.CYLINDER_RADIUS
     up: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    scene: Any = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -101,7 +111,8 @@ class FingerScript:
         tremor = [(rng.uniform(8.0, 12.0, K), rng.uniform(0, 2 * np.pi, K)) for _ in range(3)]
         wander = [(rng.uniform(0.1, 1.0, K), rng.uniform(0, 2 * np.pi, K)) for _ in range(2)]
         derived = {"_a": a, "_e1": e1, "_e2": e2, "_c": c, "_tremor": tremor, "_wander": wander,
-                   "_kamp": math.sqrt(2.0 / K)}   # K sinusoids of amplitude A have rms A·sqrt(K/2)
+                   "_kamp": math.sqrt(2.0 / K),   # K sinusoids of amplitude A have rms A·sqrt(K/2)
+                   "_path": None if self.scene is None else _path_table(self.scene)}
         for k, v in derived.items():
             object.__setattr__(self, k, v)
 
@@ -130,12 +141,23 @@ class FingerScript:
                               v * (tt - b / 2)))
         return s
 
-    def target_angle(self, t):
-        """Angle of the target mark, rad (scalar or array like t)."""
+    def target_fraction(self, t):
+        """Fraction 0 → 1 of the mark's way (of the angle range, or of a scene's path length) at t (scalar or
+        array like t); 0 throughout a push."""
         t = np.asarray(t, float)
-        if self.mode == "push":
-            return np.full_like(t, self.start_angle) if t.ndim else float(self.start_angle)
-        a = self.start_angle + (self.end_angle - self.start_angle) * self._s(t)
+        f = np.zeros_like(t) if self.mode == "push" else self._s(t)
+        return f if t.ndim else float(f)
+
+    def target_angle(self, t):
+        """Angle of the target mark, rad (scalar or array like t). With a scene: the angle on an arc stroke
+        (``start_deg`` … ``end_deg``), 0 on a polyline stroke (see :meth:`target_fraction`)."""
+        t = np.asarray(t, float)
+        f = self.target_fraction(t)
+        if self._path is not None:
+            a0, a1 = self._path["angles"]
+            a = a0 + (a1 - a0) * f
+        else:
+            a = self.start_angle + (self.end_angle - self.start_angle) * f
         return a if t.ndim else float(a)
 
     def phase(self, t: float) -> str:
@@ -163,6 +185,8 @@ class FingerScript:
         t = np.atleast_1d(np.asarray(t, float))
         if not np.all(np.isfinite(t)):
             raise ValueError("t must be finite")
+        if self._path is not None:
+            return self._scene_positions(t)
         phi = np.asarray(self.target_angle(t - self.lag), float) + np.radians(self._noise(t, self._wander[0], self.wander_deg))
         h = self._noise(t, self._wander[1], self.wander_axial)
         r = self.radius - self._depth(t)
@@ -172,6 +196,34 @@ class FingerScript:
         p = self._c[None, :] + h[:, None] * self._a[None, :] + r[:, None] * radial
         trem = np.stack([self._noise(t, c, self.tremor_rms) for c in self._tremor], axis=1)
         return p + trem
+
+    def _scene_positions(self, t: np.ndarray) -> np.ndarray:
+        """:meth:`positions` along the scene's stroke path (module doc)."""
+        tab = self._path
+        L = tab["length"]
+        arc = np.asarray(self.target_fraction(t - self.lag), float) * L \
+            + self.radius * np.radians(self._noise(t, self._wander[0], self.wander_deg))
+        q, n, tang = _path_at(tab, arc)
+        b = np.cross(tang, n)
+        b /= np.linalg.norm(b, axis=1, keepdims=True)
+        h = self._noise(t, self._wander[1], self.wander_axial)
+        off = -self._depth(t)
+        if self.approach_time > 0:
+            off = off + self.approach_distance * _smoothstep(np.clip(1.0 - t / self.approach_time, 0.0, 1.0))
+        p = q + h[:, None] * b + off[:, None] * n
+        trem = np.stack([self._noise(t, c, self.tremor_rms) for c in self._tremor], axis=1)
+        return p + trem
+
+    def surface_point(self, t) -> tuple[np.ndarray, np.ndarray]:
+        """The mark's path point (N, 3) m and outward normal (N, 3) at times t (N,) s, without the finger's lag,
+        wander, depth and tremor (a scene's path; the cylinder's circle otherwise)."""
+        t = np.atleast_1d(np.asarray(t, float))
+        if self._path is not None:
+            q, n, _ = _path_at(self._path, np.asarray(self.target_fraction(t), float) * self._path["length"])
+            return q, n
+        phi = np.asarray(self.target_angle(t), float)
+        n = np.cos(phi)[:, None] * self._e1[None, :] + np.sin(phi)[:, None] * self._e2[None, :]
+        return self._c[None, :] + self.radius * n, n
 
     def position(self, t: float) -> np.ndarray:
         """Fingertip marker position (3,) m at time t s."""
@@ -186,3 +238,58 @@ class FingerScript:
         """Angle(s) around the axis of point(s) p (3,) or (N, 3), rad, same convention as the target."""
         p = np.atleast_2d(np.asarray(p, float)) - self._c
         return np.arctan2(p @ self._e2, p @ self._e1)
+
+
+#: samples of a scene's stroke path in the finger's table (linear interpolation: < 5 nm from the path on the
+#: paper's 37 mm arc)
+PATH_SAMPLES = 1025
+
+
+def _path_table(scene) -> dict:
+    """The scene's stroke path sampled for :meth:`FingerScript.positions`: arc length s (K,) m, points (K, 3),
+    unit normals (K, 3), unit directions (K, 3), total ``length`` m, and the arc stroke's angle range, rad."""
+    try:
+        P, N = scene.stroke_at(np.linspace(0.0, 1.0, PATH_SAMPLES))
+    except (AttributeError, TypeError) as exc:
+        raise ValueError(f"scene must be a flexsheet.model.scenes.Scene, got {type(scene).__name__}: {exc}") from None
+    seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    T = np.gradient(P, s, axis=0)
+    T -= np.einsum("ij,ij->i", T, N)[:, None] * N
+    T /= np.linalg.norm(T, axis=1, keepdims=True)
+    dN = np.gradient(N, s, axis=0)
+    kappa = np.einsum("ij,ij->i", dN, T)                  # normal curvature along the path, 1/m (convex > 0)
+    st = scene.stroke
+    angles = (math.radians(st.start_deg), math.radians(st.end_deg)) if st.kind == "arc" else (0.0, 0.0)
+    return {"s": s, "P": P, "N": N, "T": T, "length": float(s[-1]), "angles": angles,
+            "kappa_ends": (float(np.median(kappa[:8])), float(np.median(kappa[-8:])))}
+
+
+def _path_at(tab: dict, arc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Point, normal and direction (each (N, 3)) at arc lengths ``arc`` (N,) m along the table; beyond the ends
+    the path goes on along the osculating circle of its end (the end's normal curvature; straight where it
+    is flat), so a wander past the start of an arc stays on the arc's circle."""
+    s, P, N, T = tab["s"], tab["P"], tab["N"], tab["T"]
+    L = s[-1]
+    a = np.clip(arc, 0.0, L)
+    q = np.column_stack([np.interp(a, s, P[:, k]) for k in range(3)])
+    n = np.column_stack([np.interp(a, s, N[:, k]) for k in range(3)])
+    d = np.column_stack([np.interp(a, s, T[:, k]) for k in range(3)])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    over = arc - a
+    for end, sel in ((0, over < 0.0), (1, over > 0.0)):
+        if not np.any(sel):
+            continue
+        k = tab["kappa_ends"][end]
+        sg = over[sel]
+        th = sg * k
+        if abs(k) > 1e-9:
+            f_t, f_n = np.sin(th) / k, (np.cos(th) - 1.0) / k
+        else:
+            f_t, f_n = sg, np.zeros_like(sg)
+        N0, T0 = n[sel], d[sel]
+        q[sel] = q[sel] + f_t[:, None] * T0 + f_n[:, None] * N0
+        n[sel] = np.cos(th)[:, None] * N0 + np.sin(th)[:, None] * T0
+        d[sel] = np.cos(th)[:, None] * T0 - np.sin(th)[:, None] * N0
+    return q, n, d

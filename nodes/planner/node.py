@@ -1,8 +1,20 @@
 """Planner node: fingertip in, sheet target and the two clamp (arm) targets out. A thin shell around
 :class:`nodes.planner.stroke.SurfacePlanner`.
 
+The object is the ``scene`` file's (:mod:`flexsheet.model.scenes`; the launcher fills ``scene`` from the
+launch file's top-level ``scene:``; none = the paper's cylinder): its shape
+(:func:`nodes.planner.scene_shape.planner_shape`) and its compliance.
+
 Subscribes ``/fingertip`` (QoS LATEST; ``predicted_position`` when ``use_prediction``) and
-``/object/deformation`` (QoS LATEST; its ``stiffness`` N/m sets the sheet tension while fresh).
+``/object/deformation`` (QoS LATEST). The sheet's tension is set so that its normal stiffness at the contact
+matches the object's local stiffness (issue 17): the FEM's dF/dd (``ObjectDeformation.stiffness``) while
+fresh and *about this scene*, else the scene's estimate at the contact (:mod:`nodes.planner.compliance`:
+Hertz contact with the scene's material, stiffer over inclusions) when ``stiffness_from_scene``, else
+``object_stiffness``; times ``stiffness_scale``; the stretch is clamped to what the arms can apply. Every
+``/sheet/target`` carries the tension, the presented and the requested stiffness; the heartbeat's message
+says which source is in use. The FEM's stiffness counts as about this scene when the message names the
+scene's key (a ``scene_key`` field, when messages get one) or — as long as the FEM solves only the paper's
+cylinder — when this scene is that cylinder.
 Publishes ``/sheet/target``, ``/arm/left/target``, ``/arm/right/target`` with ``source_stamp`` = the
 fingertip's ``exposure_stamp``. A lost marker (``valid=False``) or an input the planner refuses republishes
 the last safe pose with status ``hold:<reason>``; an unreachable target holds the arms and says
@@ -14,15 +26,47 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
+from flexsheet.model.scenes import Scene, SceneError, load_scene, paper_scene
 from flexsheet.model.shapes import make_shape
 from flexsheet.model.tension import SheetMaterial
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
 from messages import ArmTarget, Fingertip, ObjectDeformation, SheetTarget, topics
+from nodes.planner.compliance import SceneCompliance
 from nodes.planner.limits import MotionLimits, ReachModel
+from nodes.planner.scene_shape import planner_shape
 from nodes.planner.stroke import Plan, PlannerConfig, SurfacePlanner
 
-__all__ = ["PlannerParams", "PlannerNode"]
+__all__ = ["PlannerParams", "PlannerNode", "load_planner_scene", "fem_solves_scene"]
+
+
+def load_planner_scene(path: str | None) -> Scene:
+    """The scene of the ``scene`` param: :func:`flexsheet.model.scenes.load_scene` of ``path``, or the
+    paper's cylinder (:func:`~flexsheet.model.scenes.paper_scene`) for ``None``/empty. Raises ``ValueError``
+    naming the param, the file, the key and the value."""
+    if not path:
+        return paper_scene()
+    try:
+        return load_scene(path)
+    except SceneError as exc:
+        raise ValueError(f"scene: {exc}") from None
+
+
+def _is_paper_cylinder(sc: Scene) -> bool:
+    o, p = sc.object, paper_scene().object
+    return (o.kind == "cylinder" and np.allclose([o.radius, o.length], [p.radius, p.length], rtol=0, atol=1e-9)
+            and np.allclose(o.pose.position, p.pose.position, rtol=0, atol=1e-9)
+            and np.allclose(o.pose.rpy_deg, p.pose.rpy_deg, rtol=0, atol=1e-9))
+
+
+def fem_solves_scene(msg: ObjectDeformation, sc: Scene, key: str | None = None) -> bool:
+    """Whether the FEM's ``msg`` is about scene ``sc``: its ``scene_key`` (when the message has that field)
+    equals ``sc.key()`` (or ``key``, precomputed); without the field, ``sc`` must be the paper's cylinder —
+    the only object the FEM solves until it reads scenes (issue 17)."""
+    msg_key = getattr(msg, "scene_key", None)
+    if msg_key:
+        return msg_key == (key if key is not None else sc.key())
+    return _is_paper_cylinder(sc)
 
 
 _MATERIAL = {"size": "sheet_size"}         # launch-file name of SheetMaterial.size
@@ -51,14 +95,26 @@ def _planner_config(p) -> PlannerConfig:
                  limits=build(MotionLimits, p), reach=_reach(p))
 
 
+def _check(p) -> PlannerConfig:
+    """Params check: the config, and the scene file (read once more in setup)."""
+    if p.scene:
+        load_planner_scene(p.scene)
+    return _planner_config(p)
+
+
 PlannerParams = params_model(
     "PlannerParams",
     """Planner parameters (launch file / ``--param k=v``). SI units, display frame.
 
-    Node-only: ``shape``: cylinder | sphere | box | plane | mesh; ``shape_params``: that shape's keys (see
-    :func:`flexsheet.model.shapes.make_shape`; empty = the paper's scene). ``use_prediction``: plan on
-    ``Fingertip.predicted_position``; ``use_fem_stiffness``: use the FEM's stiffness while fresher than
-    ``fem_timeout`` s, else ``object_stiffness``; ``display_calib``: the display registration
+    Node-only: ``scene``: the scene file (launch/scenes/*.yaml; filled by the launcher from the launch file's
+    ``scene:``; none = the paper's cylinder) — its shape and material; ``shape``/``shape_params``: a bare
+    shape instead (cylinder | sphere | box | plane | mesh, :func:`flexsheet.model.shapes.make_shape`; used
+    only without a ``scene`` and when not the default cylinder; no material: ``object_stiffness``).
+    ``use_prediction``: plan on ``Fingertip.predicted_position``; ``use_fem_stiffness``: use the FEM's
+    stiffness while fresher than ``fem_timeout`` s and about this scene; ``stiffness_from_scene``: else the
+    scene's compliance estimate at the contact (:mod:`nodes.planner.compliance`), else ``object_stiffness``;
+    ``min_contact_depth`` m: the depth below which the estimate takes that depth (light touch);
+    ``display_calib``: the display registration
     (``display.yaml``, filled by the launcher from the launch file's ``display_calib:``) whose arm bases
     replace ``left_base``/``right_base`` in the reach check (the planner never reads the twin's truth).
     Every other param is a field of — defined, defaulted and
@@ -70,13 +126,16 @@ PlannerParams = params_model(
     config_fields(SheetMaterial, rename=_MATERIAL),
     config_fields(MotionLimits),
     config_fields(ReachModel),
-    check=_planner_config,
+    check=_check,
     methods={"planner_config": _planner_config},
     module=__name__,
+    scene=(str | None, Field(default=None, description="scene file (launch/scenes/*.yaml); none: the paper's")),
     shape=(str, Field(default="cylinder", pattern="^(cylinder|sphere|box|plane|mesh)$")),
     shape_params=(dict, Field(default_factory=dict)),
     use_prediction=(bool, False),
     use_fem_stiffness=(bool, True),
+    stiffness_from_scene=(bool, True),
+    min_contact_depth=(float, Field(default=5e-4, gt=0.0, le=0.05)),
     fem_timeout=(float, Field(default=0.5, gt=0.0)),
     display_calib=(str | None, Field(default=None, description="display.yaml whose arm bases the reach check uses")),
 )
@@ -90,9 +149,22 @@ class PlannerNode(Node):
 
     async def setup(self) -> None:
         p: PlannerParams = self.params
-        self.planner = SurfacePlanner(make_shape(p.shape, p.shape_params), p.planner_config())
+        bare = not p.scene and (p.shape != "cylinder" or p.shape_params)
+        self.scene: Scene | None = None if bare else load_planner_scene(p.scene)
+        if self.scene is None:
+            shape, compliance = make_shape(p.shape, p.shape_params), None
+            self.log.info("bare shape %s %s (no scene: object_stiffness %g N/m)", p.shape, p.shape_params,
+                          p.object_stiffness)
+        else:
+            shape = planner_shape(self.scene)
+            compliance = SceneCompliance(self.scene, shape, p.min_contact_depth) if p.stiffness_from_scene else None
+            self.log.info("%s", self.scene.describe())
+        self._scene_key = self.scene.key() if self.scene is not None else None
+        self.planner = SurfacePlanner(shape, p.planner_config(), compliance)
         self._k_fem: float | None = None
         self._k_fem_at = 0.0
+        self._fem_other_scene = 0
+        self._source = ""
         self.pub_sheet = self.publisher(topics.SHEET_TARGET)
         self.pub_left = self.publisher(topics.ARM_LEFT_TARGET)
         self.pub_right = self.publisher(topics.ARM_RIGHT_TARGET)
@@ -100,16 +172,40 @@ class PlannerNode(Node):
         self.subscribe(topics.DEFORMATION, self.on_deformation, qos=QoS.LATEST)
 
     def on_deformation(self, msg: ObjectDeformation) -> None:
-        """Keep the FEM's local stiffness (N/m) while the solution is valid and positive."""
-        if msg.valid and msg.stiffness > 0.0:
-            self._k_fem = float(msg.stiffness)
-            self._k_fem_at = self.now()
+        """Keep the FEM's local stiffness (N/m) while the solution is valid, positive and about this scene
+        (:func:`fem_solves_scene`; a bare shape takes any)."""
+        if not (msg.valid and msg.stiffness > 0.0):
+            return
+        if self.scene is not None and not fem_solves_scene(msg, self.scene, self._scene_key):
+            self._fem_other_scene += 1
+            return
+        self._k_fem = float(msg.stiffness)
+        self._k_fem_at = self.now()
 
-    def _stiffness(self) -> float:
+    def _stiffness(self) -> tuple[float | None, str]:
+        """(stiffness N/m, source): the FEM's while fresh ("fem"); ``None`` for the planner's compliance model
+        ("scene"); else ``object_stiffness`` ("param")."""
         p: PlannerParams = self.params
         if p.use_fem_stiffness and self._k_fem is not None and self.now() - self._k_fem_at <= p.fem_timeout:
-            return self._k_fem
-        return p.object_stiffness
+            return self._k_fem, "fem"
+        if self.planner.compliance is None:
+            return p.object_stiffness, "param"
+        return None, "scene"
+
+    def _note_source(self, source: str) -> None:
+        """Say in the heartbeat's message which stiffness sets the tension (on change)."""
+        text = {"fem": "the FEM's dF/dd",
+                "scene": "the scene's estimate at the contact (Hertz contact + inclusions, nodes/planner/compliance.py)",
+                "param": f"object_stiffness {self.params.object_stiffness:g} N/m"}[source]
+        if self._fem_other_scene and source != "fem":
+            text += (f"; the FEM's stiffness is not used: it solves another object than scene "
+                     f"{self.scene.name!r} ({self._fem_other_scene} messages so far)")
+        if self.params.stiffness_scale != 1.0:
+            text += f"; x {self.params.stiffness_scale:g} (stiffness_scale)"
+        if text != self._source:
+            self._source = text
+            self.state_message = f"stiffness: {text}"
+            self.log.info("sheet tension from %s", text)
 
     def on_fingertip(self, msg: Fingertip) -> None:
         """Plan and publish; a lost marker holds the last safe pose (status ``hold:marker_lost``)."""
@@ -117,8 +213,11 @@ class PlannerNode(Node):
             plan = self.planner.hold("hold:marker_lost")
         else:
             pos = msg.predicted_position if self.params.use_prediction else msg.position
+            k, source = self._stiffness()
             plan = self.planner.update(msg.header.stamp + (msg.prediction_horizon if self.params.use_prediction else 0.0),
-                                       pos, self._stiffness())
+                                       pos, k)
+            if plan is not None and not plan.status.startswith("hold"):
+                self._note_source(source)
         if plan is None:
             raise InputRejected(f"fingertip: no safe pose yet to hold (valid={msg.valid})")
         self.publish_plan(plan, msg.exposure_stamp)

@@ -18,7 +18,9 @@ Paper §V-A and Fig. 7, generalised:
 * **Pushing**: a fingertip inside the object (negative distance) is projected onto the surface by the same
   rule; the sheet keeps the tangent pose there and the finger depresses it, so stroking and pushing combine.
 * **Compliance**: the stretch comes from :func:`flexsheet.model.tension.stretch_for_stiffness` for the
-  object's stiffness (FEM topic or param) at the contact's distance from the clamps.
+  object's stiffness at the contact's distance from the clamps: the one passed in (the FEM's dF/dd), else the
+  scene's compliance model at the contact (:mod:`nodes.planner.compliance`), else the configured value;
+  times ``stiffness_scale``. The stretch is clamped to what the arms can apply (status says so).
 * **Limits and safety**: the pose passes :class:`nodes.planner.limits.RateLimiter`; clamp points are
   checked by :class:`nodes.planner.limits.ReachModel`.
 
@@ -84,8 +86,13 @@ class PlannerConfig:
     distance; ``singular_eps`` m: skeleton distance below which the centre ray is undefined;
     ``jump_distance`` m: a larger step between samples is a re-acquired marker; ``recentre_time`` s;
     ``u_ref`` (3,): preferred in-plane axis; ``sheet_margin`` m: the contact keeps this far from the sheet
-    edges; ``object_stiffness`` N/m: default virtual stiffness; ``max_dt`` s: longer gaps count as one
-    nominal period. Raises ``ValueError`` on bad values."""
+    edges; ``object_stiffness`` N/m: default virtual stiffness (used when neither a stiffness is passed nor
+    a compliance model is given); ``stiffness_scale``: haptic scale — the sheet is asked for this many times
+    the object's stiffness (1: the object's own; < 1 maps an object stiffer than the sheet into the range the
+    arms can apply, reported in every plan's ``object_stiffness``); ``stiffness_tau`` s: time constant of a
+    first-order low-pass on the compliance model's stiffness (it follows the measured push depth, which
+    carries the camera's noise; 0: none); ``max_dt`` s: longer gaps count as one nominal period. Raises
+    ``ValueError`` on bad values."""
 
     touch_distance: float = 0.002
     release_distance: float = 0.006
@@ -95,6 +102,8 @@ class PlannerConfig:
     u_ref: Vec = (0.0, 1.0, 0.0)
     sheet_margin: float = 0.03
     object_stiffness: float = 30.0
+    stiffness_scale: float = 1.0
+    stiffness_tau: float = 0.1
     max_dt: float = 0.1
     material: SheetMaterial = field(default_factory=SheetMaterial)
     limits: MotionLimits = field(default_factory=MotionLimits)
@@ -110,6 +119,10 @@ class PlannerConfig:
             raise ValueError(f"release_distance must be >= touch_distance, got {self.release_distance!r}")
         if not (math.isfinite(self.object_stiffness) and self.object_stiffness >= 0.0):
             raise ValueError(f"object_stiffness must be finite and >= 0, got {self.object_stiffness!r}")
+        if not (math.isfinite(self.stiffness_tau) and self.stiffness_tau >= 0.0):
+            raise ValueError(f"stiffness_tau must be finite and >= 0 s, got {self.stiffness_tau!r}")
+        if not (math.isfinite(self.stiffness_scale) and 0.0 < self.stiffness_scale <= 100.0):
+            raise ValueError(f"stiffness_scale must be in (0, 100], got {self.stiffness_scale!r}")
         if len(self.u_ref) != 3 or not finite(self.u_ref) or norm(self.u_ref) < 1e-9:
             raise ValueError(f"u_ref must be a non-zero finite (3,) vector, got {self.u_ref!r}")
 
@@ -124,7 +137,10 @@ class Plan:
     ``object_stiffness`` N/m; ``depth`` m: push depth (≥ 0 when the fingertip is inside); ``touching``;
     ``status``: "ok" or ';'-joined reasons; ``left``/``right`` (3,) m: clamp points
     (:func:`flexsheet.model.sheet.clamp_points`); ``reach_margin`` m; ``t`` s: time of the fingertip sample
-    planned from; ``sheet_size`` m: the unstretched sheet side between the clamps.
+    planned from; ``sheet_size`` m: the unstretched sheet side between the clamps; ``k_source``: where
+    ``object_stiffness`` came from — "given" (passed to :meth:`SurfacePlanner.update`, e.g. the FEM's dF/dd),
+    "scene" (the compliance model at the contact) or "param" (``object_stiffness`` of the config); it is
+    already multiplied by ``stiffness_scale``.
     """
 
     t: float
@@ -145,6 +161,7 @@ class Plan:
     right: Vec
     reach_margin: float
     sheet_size: float = scene.SHEET_SIZE
+    k_source: str = "param"
 
     def rotation(self) -> np.ndarray:
         """(3, 3) rotation with columns (normal, axis_u, axis_v)."""
@@ -157,25 +174,30 @@ class Plan:
 
 
 class _Sample(NamedTuple):
-    """A fingertip sample that passed the checks: time s, position (3,) m, stiffness N/m, step s (None first)."""
+    """A fingertip sample that passed the checks: time s, position (3,) m, stiffness N/m (None: from the
+    compliance model at the contact), step s (None first)."""
 
     t: float
     p: Vec
-    k_obj: float
+    k_obj: float | None
     dt: float | None
+    k_src: str = "given"
 
 
 class SurfacePlanner:
     """Stateful surface planner: feed fingertip samples to :meth:`update`, get :class:`Plan` s.
 
-    ``shape``: a :class:`flexsheet.model.shapes.Shape`; ``config``: :class:`PlannerConfig`. The first valid
-    sample initialises the pose (no ramp). ``last`` is the last safe plan (``None`` before the first);
+    ``shape``: a :class:`flexsheet.model.shapes.Shape`; ``config``: :class:`PlannerConfig`; ``compliance``:
+    optional callable (contact (3,) m, normal (3,), depth m) → the object's stiffness N/m there (e.g.
+    :class:`nodes.planner.compliance.SceneCompliance`), used when :meth:`update` gets no stiffness (else
+    ``config.object_stiffness``). The first valid sample initialises the pose (no ramp). ``last`` is the last safe plan (``None`` before the first);
     :meth:`hold` republishes it with a reason (a lost marker, a refused input). ``counts`` counts statuses.
     """
 
-    def __init__(self, shape: Shape, config: PlannerConfig | None = None):
+    def __init__(self, shape: Shape, config: PlannerConfig | None = None, compliance=None):
         self.shape = shape
         self.cfg = config or PlannerConfig()
+        self.compliance = compliance
         self.limiter = RateLimiter(self.cfg.limits)
         self._eps_max = max_stretch_within_force(self.cfg.material)
         self.reset()
@@ -192,6 +214,7 @@ class SurfacePlanner:
         self.touching = False
         self.limiter.clear()
         self._tcache: tuple[float, float, TensionResult] | None = None
+        self._k_model: float | None = None
         self.counts: dict[str, int] = {}
 
     # ---------------------------------------------------------------------------------------------
@@ -212,8 +235,9 @@ class SurfacePlanner:
         return r
 
     def update(self, t: float, p, object_stiffness: float | None = None) -> Plan | None:
-        """Plan from a fingertip sample ``p`` (3,) m at time ``t`` s; ``object_stiffness`` N/m overrides the
-        configured value (e.g. from the FEM topic). Returns the new :class:`Plan`, or a held copy of the last
+        """Plan from a fingertip sample ``p`` (3,) m at time ``t`` s; ``object_stiffness`` N/m (e.g. the FEM's
+        dF/dd) overrides the compliance model and the configured value; either is multiplied by
+        ``stiffness_scale``. Returns the new :class:`Plan`, or a held copy of the last
         safe plan with status ``hold:<reason>`` for invalid input (``None`` if there is none yet). Never raises
         for bad samples: the reason is counted in ``counts``.
 
@@ -233,6 +257,9 @@ class SurfacePlanner:
         if proj.singular:
             status.append("hold:singular")
         q, n, dist = proj.point, proj.normal, proj.distance
+        k_obj, k_source = self._object_stiffness(s, q, n, dist)
+        if k_obj is None:
+            return self.hold("hold:invalid_stiffness", s.t)
         was_touching = self.touching
         if not self.touching and dist <= cfg.touch_distance:
             self.touching = True
@@ -241,7 +268,7 @@ class SurfacePlanner:
         su, sv, u = self._roll(q, n, s.dt, was_touching)
         v = cross(n, u)
         # stiffness → stretch at the contact's distance from the clamps
-        tr = self._tension(s.k_obj, su)
+        tr = self._tension(k_obj, su)
         if tr.saturated:
             status.append(tr.saturated)
         su, sv = self._keep_on_sheet(su, sv, tr.stretch, status)
@@ -250,9 +277,9 @@ class SurfacePlanner:
                                                                           tr.stretch, s.dt, status)
         mat = cfg.material
         plan = Plan(s.t, q, nc, uc, vc, o, (su, sv), st, tr.tension if st == tr.stretch else tension(st, mat),
-                    tr.stiffness if st == tr.stretch else _stiffness_or_zero(st, mat, su), s.k_obj,
+                    tr.stiffness if st == tr.stretch else _stiffness_or_zero(st, mat, su), k_obj,
                     max(0.0, -dist), self.touching, ";".join(status) if status else "ok", left, right, margin,
-                    mat.size)
+                    mat.size, k_source)
         for s_ in status:
             self.counts[s_] = self.counts.get(s_, 0) + 1
         self.t_last, self.p_last, self.q_last, self.n_last, self.u_last, self.s = s.t, s.p, q, n, u, (su, sv)
@@ -272,15 +299,36 @@ class SurfacePlanner:
             return "hold:invalid_fingertip", None
         if not math.isfinite(t):
             return "hold:invalid_stamp", None
-        k_obj = self.cfg.object_stiffness if object_stiffness is None else object_stiffness
-        if not (math.isfinite(k_obj) and k_obj >= 0.0):
+        k_obj, src = object_stiffness, "given"
+        if k_obj is None and self.compliance is None:
+            k_obj, src = self.cfg.object_stiffness, "param"
+        if k_obj is not None and not (math.isfinite(k_obj) and k_obj >= 0.0):
             return "hold:invalid_stiffness", t
         if self.t_last is None:
-            return _Sample(t, p, k_obj, None)
+            return _Sample(t, p, k_obj, None, src)
         dt = t - self.t_last
         if dt <= 0.0:
             return "hold:stale_fingertip", None
-        return _Sample(t, p, k_obj, min(dt, self.cfg.max_dt))
+        return _Sample(t, p, k_obj, min(dt, self.cfg.max_dt), src)
+
+    def _object_stiffness(self, s: _Sample, q: Vec, n: Vec, dist: float) -> tuple[float | None, str]:
+        """(stiffness N/m × ``stiffness_scale``, source) for the sample: the one given (or the config's), else
+        the compliance model at contact ``q``, normal ``n``, depth max(0, −``dist``), low-passed with
+        ``stiffness_tau``; ``None`` when the model fails or gives a negative / non-finite value."""
+        scale_k = self.cfg.stiffness_scale
+        if s.k_obj is not None:
+            return s.k_obj * scale_k, s.k_src
+        try:
+            k = float(self.compliance(q, n, max(0.0, -dist)))
+        except (ValueError, ArithmeticError):
+            return None, "scene"
+        if not (math.isfinite(k) and k >= 0.0):
+            return None, "scene"
+        tau = self.cfg.stiffness_tau
+        if self._k_model is not None and s.dt is not None and tau > 0.0:
+            k = self._k_model + (1.0 - math.exp(-s.dt / tau)) * (k - self._k_model)
+        self._k_model = k
+        return k * scale_k, "scene"
 
     def _roll(self, q: Vec, n: Vec, dt: float | None, was_touching: bool) -> tuple[float, float, Vec]:
         """Contact coordinates (s_u, s_v) m on the sheet and the new ``axis_u`` for contact ``q``, normal ``n``.

@@ -3,7 +3,10 @@ truth (:class:`flexsheet.model.truth.TwinTruth`, param ``twin: {realism, truth_s
 
 * Finger: plays a list of :class:`flexsheet.model.finger.FingerScript` segments one after the other (default:
   the paper's stroking experiment at 10 s and 30 s moving time, then a combined stroke and push) and
-  publishes the true marker position on ``/world/finger`` at ``rate_hz``; the camera twin renders it.
+  publishes the true marker position on ``/world/finger`` at ``rate_hz``; the camera twin renders it. The
+  finger follows the stroke path of the ``scene`` (:mod:`flexsheet.model.scenes`; filled by the launcher
+  from the launch file's top-level ``scene:``; none = the paper's cylinder): p − depth·n along the path, with
+  each segment's profile over the path fraction (stroke, push at the path's start, stroke_push).
 * Sheet: the true clamp poses are the *true* arms' forward kinematics of the measured joint states
   (``ArmJointState.position``; the truth's base poses, link lengths and joint zero offsets — never the
   bridge's model in ``ArmJointState.pose``), and the pushed sheet's shape is the nonlinear membrane FEM of
@@ -25,10 +28,11 @@ import time
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from flexsheet.model import scene
 from flexsheet.model.finger import FingerScript
+from flexsheet.model.scenes import Scene, SceneError, load_scene
 from flexsheet.model.sheet_fem import default_cache_dir
 from flexsheet.model.truth import TwinTruth
 from flexsheet.runtime.node import InputRejected, Node, QoS
@@ -80,12 +84,25 @@ Segment = params_model(
     "Segment",
     """One scripted segment: the fields of — defined, defaulted and checked in —
     :class:`flexsheet.model.finger.FingerScript` (SI: ``mode`` stroke | push | stroke_push, ``moving_time`` s,
-    ``push_depth`` m, ``end_angle`` rad, ``tremor_rms`` m, ``seed``, …); ``script()`` builds it.""",
-    config_fields(FingerScript),
-    check=lambda seg: build(FingerScript, seg),
-    methods={"script": lambda self: build(FingerScript, self)},
+    ``push_depth`` m, ``end_angle`` rad, ``tremor_rms`` m, ``seed``, …) but its ``scene`` (the world's);
+    ``script(scene=None)`` builds it on that scene (a :class:`flexsheet.model.scenes.Scene`; ``None``: the
+    cylinder parameters ``center``, ``axis``, ``radius``, ``up``, ``start_angle``, ``end_angle``).""",
+    config_fields(FingerScript, exclude=("scene",)),
+    check=lambda seg: build(FingerScript, seg, scene=None),
+    methods={"script": lambda self, scene=None: build(FingerScript, self, scene=scene)},
     module=__name__,
 )
+
+
+def load_world_scene(path: str | None) -> Scene | None:
+    """The scene of the ``scene`` param (``None`` for none: the script's cylinder parameters). Raises
+    ``ValueError`` naming the param, the file, the key and the value."""
+    if not path:
+        return None
+    try:
+        return load_scene(path)
+    except SceneError as exc:
+        raise ValueError(f"scene: {exc}") from None
 
 #: the paper's stroking experiment at 10 s and 30 s moving time, then a combined stroke and push
 DEFAULT_SCRIPT = [Segment(mode="stroke", moving_time=10.0), Segment(mode="stroke", moving_time=30.0, seed=1),
@@ -98,7 +115,8 @@ class WorldParams(BaseModel):
     truth (:class:`TwinParams`); ``sheet_fem``: the true sheet's FEM tables (:class:`SheetFemParams`);
     ``sheet_size`` m: unstretched sheet side between the clamps (for the stretch); ``start_delay`` s before the
     script starts (lets the graph connect and the arms reach the first pose); ``loop``: repeat until Ctrl-C;
-    ``progress_period`` s."""
+    ``scene``: the scene file whose stroke path the finger follows (launch/scenes/*.yaml; none: the paper's
+    cylinder by the segments' own parameters); ``progress_period`` s."""
 
     model_config = ConfigDict(extra="forbid")
     script: list[Segment] = Field(default_factory=lambda: list(DEFAULT_SCRIPT), min_length=1)
@@ -111,6 +129,13 @@ class WorldParams(BaseModel):
     start_delay: float = Field(default=3.0, ge=0.0)
     loop: bool = False
     progress_period: float = Field(default=2.0, gt=0.0)
+    scene: str | None = None
+
+    @field_validator("scene")
+    @classmethod
+    def _scene_file(cls, v: str | None) -> str | None:
+        load_world_scene(v)
+        return v
 
 
 class WorldNode(Node):
@@ -121,7 +146,8 @@ class WorldNode(Node):
 
     async def setup(self) -> None:
         p = self.params
-        self.scripts: list[FingerScript] = [s.script() for s in p.script]
+        self.scene = load_world_scene(p.scene)
+        self.scripts: list[FingerScript] = [s.script(self.scene) for s in p.script]
         self.total = sum(s.duration for s in self.scripts)
         self.finger_pub = self.publisher(T.FINGER_TRUTH)
         self.sheet_pub = self.publisher(T.SHEET_STATE)
@@ -146,6 +172,8 @@ class WorldNode(Node):
         self.log.info("twin: %s truth, seed %d (sheet E %.2f MPa, pre-strain %.4f, tension ratio %.3f)",
                       p.twin.realism, p.twin.truth_seed, self.truth.sheet_young * 1e-6, self.truth.sheet_prestrain,
                       self.truth.tension_ratio)
+        self.log.info("finger on %s", self.scene.describe() + f", stroke {self.scene.stroke_length() * 1e3:.1f} mm"
+                      if self.scene is not None else "the cylinder of the script's parameters")
         self.log.info("script: %s; %.1f s in all, starting in %.1f s%s",
                       ", ".join(f"{s.mode} {s.moving_time:g} s" for s in p.script), self.total, p.start_delay,
                       " (after the sheet FEM table)" if self.t0 is None else "")
@@ -230,9 +258,9 @@ class WorldNode(Node):
             self.last_progress = now
             done = min(1.0, (sum(s.duration for s in self.scripts[:i]) + ts) / self.total)
             bar = "#" * int(done * 30)
-            self.log.info("[%-30s] %3.0f%%  segment %d/%d %s %g s: %s, mark at %.1f deg", bar, done * 100, i + 1,
-                          len(self.scripts), script.mode, script.moving_time, script.phase(ts),
-                          math.degrees(float(script.target_angle(ts))))
+            self.log.info("[%-30s] %3.0f%%  segment %d/%d %s %g s: %s, mark at %.1f deg (%.0f %% of the path)", bar,
+                          done * 100, i + 1, len(self.scripts), script.mode, script.moving_time, script.phase(ts),
+                          math.degrees(float(script.target_angle(ts))), 100.0 * float(script.target_fraction(ts)))
 
     def tick_sheet(self) -> None:
         if "left" not in self.poses or "right" not in self.poses:
