@@ -201,3 +201,18 @@ def test_shader_draws_the_fitted_fem_shape(tmp_path):
             assert np.abs(got - want).max() < 2e-6
     finally:
         r.release()
+
+
+def test_scaled_registration_error():
+    w = corr.TwinWorld(TwinTruth.draw(1, "realistic"))
+    est = corr.perturbed_projector(w.projector, 1.0, 1, 0)
+    D = w.distortion + [0.002, 0, 0, 0, 0]
+    p0, d0 = corr.scaled_error(w.projector, w.distortion, est, D, 0.0)
+    p1, d1 = corr.scaled_error(w.projector, w.distortion, est, D, 1.0)
+    assert corr.mapping_error_px(w.projector, w.distortion, p0, d0) < 1e-9
+    np.testing.assert_allclose(p1.R, est.R, atol=1e-12)
+    np.testing.assert_allclose(p1.position, est.position, atol=1e-12)
+    np.testing.assert_allclose(d1, D)
+    m1 = corr.mapping_error_px(w.projector, w.distortion, p1, d1)
+    m2 = corr.mapping_error_px(w.projector, w.distortion, *corr.scaled_error(w.projector, w.distortion, est, D, 2.0))
+    assert 1.0 < m1 < 10.0 and m2 == pytest.approx(2 * m1, rel=0.05)      # ~linear for small errors

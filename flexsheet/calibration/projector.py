@@ -75,13 +75,13 @@ def _nbits(n: int) -> int:
 
 
 def decode(images: list[np.ndarray], width: int, height: int, min_contrast: float = 15.0,
-           min_bit_contrast: float = 4.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+           min_bit_contrast: float = 5.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Decode one camera's captures of :func:`gray_code_patterns` (same order) into projector coordinates.
 
     Returns ``(col, row, valid)``: int32 (H, W) projector column/row per camera pixel (−1 where invalid) and
     the bool mask. Vectorised equivalent of ``GrayCodePattern.getProjPixel`` (checked against it in the
     tests) with a shadow mask (white − black ≥ ``min_contrast`` DN) and a per-bit reliability test
-    (|pattern − inverse| ≥ ``min_bit_contrast`` DN). Raises ``ValueError`` on a wrong image count or shape.
+    (|pattern − inverse| ≥ ``min_bit_contrast`` DN; 5 is OpenCV's ``whiteThreshold`` default). Raises ``ValueError`` on a wrong image count or shape.
     """
     nc, nr = _nbits(width), _nbits(height)
     need = 2 * (nc + nr) + 2

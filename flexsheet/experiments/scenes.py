@@ -35,7 +35,7 @@ import numpy as np
 
 from flexsheet.experiments.stroke import LatencyModel, launch_kf, make_twin, simulate
 from flexsheet.model.scenes import SCENES_DIR, load_scene
-from flexsheet.model.tension import SheetMaterial, max_stretch_within_force, stiffness
+from flexsheet.model.tension import SheetMaterial, max_stretch_within_force, stiffness, stretch_for_stiffness
 from nodes.planner.compliance import SceneCompliance
 from nodes.planner.stroke import PlannerConfig
 
@@ -133,8 +133,9 @@ def _run_series(scene, mode: str, scale: float, seed: int = 0, depth: float = 5e
     """One scripted run through the planner (realistic twin ``seed``; ``mode`` as the world's segments, finger
     ``depth`` m while stroking, ``push_depth`` m for stroke_push): per sample during the moving phase the
     contact's arc (mm), the planned depth (mm), the object's stiffness (the planner's request / ``scale``),
-    the requested and presented stiffness and the tension (N/m), the status at the limit, and the tumour's
-    ``contrast``: the estimate at the contact and depth over the same without the inclusions."""
+    the requested and presented stiffness and the tension (N/m), the status at the limit, the tumour's
+    ``contrast`` (the estimate at the contact and depth over the same without the inclusions) and the tension
+    the same request without the tumour would need at the same place on the sheet."""
     tw = make_twin("realistic", seed, None)
     rec: list = []
     kw = {"mode": mode, "depth": depth}
@@ -149,6 +150,8 @@ def _run_series(scene, mode: str, scale: float, seed: int = 0, depth: float = 5e
     q = np.array([p.contact for _, p in sel])
     C = SceneCompliance(scene)
     est = [C.estimate(p.contact, p.normal, p.depth) for _, p in sel]
+    mat = PlannerConfig().material
+    emax = max_stretch_within_force(mat)
     series = {"t_s": [t for t, _ in sel], "arc_mm": (_path_arc(scene, q) * 1e3).tolist(),
               "depth_mm": [p.depth * 1e3 for _, p in sel],
               "requested_n_per_m": [p.object_stiffness for _, p in sel],
@@ -156,7 +159,10 @@ def _run_series(scene, mode: str, scale: float, seed: int = 0, depth: float = 5e
               "presented_n_per_m": [p.stiffness for _, p in sel], "tension_n_per_m": [p.tension for _, p in sel],
               "at_limit": [("stiffer_than_sheet" in p.status) or ("softer_than_sheet" in p.status) for _, p in sel],
               "contrast": [e.k / e.k_body for e in est],
-              "stiffness_scale": scale, "mode": mode, "depth_mm": depth * 1e3,
+              "tension_without_tumour_n_per_m": [
+                  stretch_for_stiffness(p.object_stiffness * e.k_body / e.k, mat, p.offset[0], emax).tension
+                  for (_, p), e in zip(sel, est, strict=True)],
+              "stiffness_scale": scale, "finger_depth_mm": depth * 1e3,
               "push_depth_mm": push_depth * 1e3 if mode != "stroke" else None,
               "table1": {k: row[k] for k in ("dtheta_mean_deg", "dd_mean_mm", "n")}}
     return series, row
@@ -176,8 +182,9 @@ def _peak(series: dict, arc_inc: float, bin_mm: float = 4.0) -> dict:
     edges = np.arange(0.0, arc.max() + bin_mm, bin_mm)
     mid = 0.5 * (edges[1:] + edges[:-1])
     out: dict = {"tumour_arc_mm": arc_inc}
-    for key in ("object_n_per_m", "presented_n_per_m", "tension_n_per_m", "contrast"):
-        b = _binned(arc, series[key], edges)
+    tension_ratio = np.asarray(series["tension_n_per_m"]) / np.asarray(series["tension_without_tumour_n_per_m"])
+    for key in ("object_n_per_m", "presented_n_per_m", "tension_n_per_m", "contrast", "tension_over_no_tumour"):
+        b = _binned(arc, tension_ratio if key == "tension_over_no_tumour" else series[key], edges)
         i = int(np.nanargmax(b))
         far = np.abs(mid - arc_inc) > 15.0
         out[key] = {"arc_of_max_mm": float(mid[i]), "max": float(b[i]),
@@ -239,13 +246,17 @@ def _plot(org: dict, path: Path) -> None:
     a.plot(r["arc_mm"], r["presented_n_per_m"], ".", ms=3, color="C0", label="sheet stiffness presented")
     a2 = a.twinx()
     a2.plot(r["arc_mm"], r["tension_n_per_m"], ".", ms=3, color="C1", label="sheet tension (right axis)")
-    a.set(ylabel="stiffness [N/m]", title=f"organ, stroking pressed {r['depth_mm']:g} mm (palpation), 10 s, "
-          f"stiffness_scale {s:g}: planner in-process, realistic twin")
+    a2.plot(r["arc_mm"], r["tension_without_tumour_n_per_m"], ".", ms=1.5, color="C1", alpha=0.35,
+            label="tension without the tumour (same place on the sheet)")
+    a.set(ylabel="stiffness [N/m]", title=f"organ, stroking pressed {r['finger_depth_mm']:g} mm (palpation), 10 s, "
+          f"stiffness_scale {s:g}: planner in-process, realistic twin\n(the tension falls along the path as the "
+          "sheet rolls: the contact nears a clamp, where less tension gives the same stiffness)", )
+    a.title.set_fontsize(9)
     a2.set_ylabel("tension [N/m]")
     h1, l1 = a.get_legend_handles_labels()
     h2, l2 = a2.get_legend_handles_labels()
     a.legend(h1 + h2, l1 + l2, fontsize=7, loc="lower left")
-    styles = {"palpation": ("C0", f"pressed {r['depth_mm']:g} mm"), "light_stroke": ("C2", "light stroke 0.5 mm"),
+    styles = {"palpation": ("C0", f"pressed {r['finger_depth_mm']:g} mm"), "light_stroke": ("C2", "light stroke 0.5 mm"),
               "stroke_push": ("C3", "stroke and push (half sine to 10 mm)")}
     for key, (c, lbl) in styles.items():
         if key in org["runs"]:

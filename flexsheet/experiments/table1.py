@@ -159,6 +159,8 @@ def stroke_tangents(scene, D, samples: int = 513) -> np.ndarray:
     stroke (module doc). Raises ``ValueError`` on bad shapes/values."""
     D = _as_points("D", D)
     P, _ = scene.stroke_points(int(samples))
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(P, axis=0), axis=1) > 1e-9])   # no repeated points
+    P = P[keep]
     T = np.gradient(P, axis=0)
     T /= np.linalg.norm(T, axis=1, keepdims=True)
     d2 = ((D[:, None, :] - P[None, :, :]) ** 2).sum(-1)

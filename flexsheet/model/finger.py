@@ -253,7 +253,11 @@ def _path_table(scene) -> dict:
     except (AttributeError, TypeError) as exc:
         raise ValueError(f"scene must be a flexsheet.model.scenes.Scene, got {type(scene).__name__}: {exc}") from None
     seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
+    keep = np.concatenate([[True], seg > 1e-9])        # a projected polyline can repeat a surface point
+    P, N = P[keep], N[keep]
+    if len(P) < 3:
+        raise ValueError(f"scene {getattr(scene, 'name', '?')!r}: the stroke path has no length")
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1))])
     T = np.gradient(P, s, axis=0)
     T -= np.einsum("ij,ij->i", T, N)[:, None] * N
     T /= np.linalg.norm(T, axis=1, keepdims=True)
