@@ -26,6 +26,8 @@ def _measured() -> DisplayCalib:
     c.camera.provenance = Provenance("camera-pose: test", "2025-01-02T03:04:05Z", "twin seed 7", 21,
                                      {"rms_px": 0.061, "residual_mm": 0.43})
     c.projector.D = np.array([0.0123, 0.0, 0.0, 0.0, 0.0])
+    A = np.random.default_rng(0).normal(size=(30, 30))
+    c.camera.cov = A @ A.T * 1e-6
     c.arms["left"] = ArmEntry(scene.pose_matrix(-0.051, 0.552, -0.398, -1.57), np.array([0.011, -0.001, 0.041]),
                               Provenance("arms: test", n_poses=16, residuals={"residual_mm": 0.2}))
     return c
@@ -62,6 +64,7 @@ def test_round_trip_through_opencv_filestorage(tmp_path):
     np.testing.assert_allclose(d.projector.D, c.projector.D)
     assert d.camera.provenance.residuals == {"rms_px": 0.061, "residual_mm": 0.43}
     assert d.camera.provenance.n_poses == 21 and d.camera.stereo["image_size"] == (640, 512)
+    np.testing.assert_allclose(d.camera.cov, c.camera.cov, rtol=1e-14)
     assert d.projector.projector().K[0, 0] == pytest.approx(c.projector.K[0, 0])
 
 

@@ -42,8 +42,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from flexsheet.model.calibration import BoardSpec, detect_board
-from flexsheet.model.stereo import StereoModel
 from flexsheet.model.display_calib import BOOTSTRAP_FILE, stereo_from_vector, stereo_vector
+from flexsheet.model.stereo import StereoModel
 
 __all__ = ["VIEW_PLAN", "detect_corners", "board_centre", "board_points", "sheet_pose", "plan_board_views", "load_prior",
            "CameraPoseResult", "detect_views", "estimate_camera_pose"]
@@ -117,7 +117,9 @@ class CameraPoseResult:
     ``T_display_camera`` (4, 4) left optical frame in the display frame; ``stereo``: refined stereo dict;
     ``rms_px``: reprojection RMS over all corners and views; ``residual_mm``: RMS 3-D distance of the
     triangulated home corners from their design positions (mm); ``flatness_mm``: RMS of their out-of-plane
-    component (mm); ``per_view_rms_px`` (n,); ``used``/``skipped`` view indices with reasons.
+    component (mm); ``per_view_rms_px`` (n,); ``used``/``skipped`` view indices with reasons; ``cov`` (30, 30):
+    covariance of (the 24 stereo parameters, the home pose as display→left rotation vector and translation),
+    the prior the projector step refines them under; ``sigma_px``: the corner σ the fit found.
     """
 
     T_display_camera: np.ndarray
@@ -129,6 +131,8 @@ class CameraPoseResult:
     n_views: int
     used: list[int] = field(default_factory=list)
     skipped: dict[int, str] = field(default_factory=dict)
+    cov: np.ndarray | None = None
+    sigma_px: float = 0.0
 
 
 def _undist(model: StereoModel, uv: np.ndarray, side: str) -> np.ndarray:
@@ -347,6 +351,9 @@ def estimate_camera_pose(views: list[tuple[np.ndarray, np.ndarray]], board: Boar
         data = sol.fun[:n_res] * sigma
         dof = max(n_res + n_pri - n_par, 1)
         sigma = max(float(math.sqrt(data @ data / dof)), 0.01)
+    # covariance of (stereo 24, home pose 6) from the final Jacobian (residuals are σ-normalised)
+    J = model(x, sigma, True)[1]
+    cov = np.linalg.pinv(J.T @ J)[:30, :30]
     data = residuals(x, 1.0)[:n_res]
     rms = float(np.sqrt(np.mean(data ** 2 * 2.0)))        # per corner (2 coordinates), px
     per_view, row = [], 0
@@ -371,4 +378,4 @@ def estimate_camera_pose(views: list[tuple[np.ndarray, np.ndarray]], board: Boar
     err = Xd - P
     return CameraPoseResult(T_dc, st, rms, float(np.sqrt(np.mean(np.sum(err ** 2, 1)))) * 1e3,
                             float(np.sqrt(np.mean(err[:, 0] ** 2))) * 1e3, np.array(per_view), len(used), used,
-                            skipped)
+                            skipped, cov, sigma)

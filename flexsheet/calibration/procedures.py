@@ -36,7 +36,7 @@ from flexsheet.model.display_calib import (
 __all__ = ["Options", "QUICK", "FULL", "run_camera_pose", "run_projector", "run_arms", "run_eye",
            "run_display_sim", "sim_display_calib", "SUMMARY_VERSION"]
 
-SUMMARY_VERSION = 1
+SUMMARY_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -90,7 +90,7 @@ def run_camera_pose(source, opts: Options, start: DisplayCalib | None = None, pr
                       f"tilts; stereo bundle adjustment with a prior ({'none' if prior is None else 'bootstrap'})",
                       source=source.label, n_poses=r.n_views,
                       residuals={"rms_px": r.rms_px, "residual_mm": r.residual_mm, "flatness_mm": r.flatness_mm})
-    return CameraEntry(r.T_display_camera, prov, r.stereo), r
+    return CameraEntry(r.T_display_camera, prov, r.stereo, 0.5 * (r.cov + r.cov.T)), r
 
 
 def run_projector(source, opts: Options, calib: DisplayCalib, progress=None):
@@ -114,11 +114,17 @@ def run_projector(source, opts: Options, calib: DisplayCalib, progress=None):
                                              spacing=opts.pattern_spacing))
     _progress("projector: calibrating", progress)
     r = pj_mod.estimate_projector(poses, nom.K, (W, H), fit_k1=opts.fit_k1)
+    j = pj_mod.refine_joint(poses, cam.stereo, cam.T_display_camera, None, r.K, r.D, r.T_display_projector,
+                            fit_k1=opts.fit_k1)
+    r.K, r.D, r.T_display_projector = j.K, j.D, j.T_display_projector
+    r.reprojection_px, r.n_inliers = j.reprojection_px, j.n_points
     prov = Provenance(f"projector: Gray code {W}x{H} on the sheet at {n} poses, stereo-triangulated, "
-                      f"cv2.calibrateCamera (intrinsic guess, k1{'' if opts.fit_k1 else ' fixed'}) + inlier refit",
+                      f"cv2.calibrateCamera (intrinsic guess, k1{'' if opts.fit_k1 else ' fixed'}), then maximum "
+                      f"likelihood with the projector as a third camera (camera fixed)",
                       source=source.label, n_poses=n,
-                      residuals={"reprojection_px": r.reprojection_px, "points": float(r.n_inliers)})
-    return ProjectorEntry(r.K, r.D, r.T_display_projector, W, H, prov), r
+                      residuals={"reprojection_px": j.reprojection_px, "camera_px": j.sigma_px,
+                                 "points": float(j.n_points)})
+    return ProjectorEntry(j.K, j.D, j.T_display_projector, W, H, prov), r
 
 
 def run_arms(source, opts: Options, calib: DisplayCalib, sides=("left", "right"), progress=None):

@@ -35,6 +35,13 @@ def _deg(r):
     return math.degrees(r)
 
 
+def _projector(pcs, cam, K, size, fit_k1):
+    """The projector step as :func:`flexsheet.calibration.procedures.run_projector` does it."""
+    r = pj_mod.estimate_projector(pcs, K, size, fit_k1=fit_k1)
+    return pj_mod.refine_joint(pcs, cam.stereo, cam.T_display_camera, None, r.K, r.D, r.T_display_projector,
+                               fit_k1=fit_k1)
+
+
 def _seed_sweep(seed: int, realism: str, quick: bool, progress) -> dict:
     from flexsheet.calibration.twin import CalibrationTwin
     from flexsheet.model.truth import TwinTruth
@@ -67,7 +74,7 @@ def _seed_sweep(seed: int, realism: str, quick: bool, progress) -> dict:
            for T in pj_mod.plan_projector_poses(max(pj_n))]
     for n in pj_n:
         try:
-            r = pj_mod.estimate_projector(pcs[:n], nom.projector.K, (W, H), fit_k1=opts.fit_k1)
+            r = _projector(pcs[:n], best, nom.projector.K, (W, H), opts.fit_k1)
         except ValueError as e:
             out["projector"][n] = {"error": str(e)}
             continue
@@ -128,7 +135,7 @@ def _failure_modes(seed: int, realism: str, progress) -> dict:
         try:
             pcs = [pj_mod.triangulate_pose(twin.pattern_frames(pats, T, white_dn=white, frames=1), W, H,
                                            cam.stereo, cam.T_display_camera) for T in plans]
-            r = pj_mod.estimate_projector(pcs, nom.projector.K, (W, H))
+            r = _projector(pcs, cam, nom.projector.K, (W, H), True)
             t, a = truth.projector_pose_error(r.T_display_projector)
             out["dark_sheet"][white] = {"translation_error_mm": t * 1e3, "rotation_error_deg": _deg(a),
                                         "reprojection_px": r.reprojection_px,

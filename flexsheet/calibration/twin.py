@@ -469,14 +469,14 @@ def measure_ximea_noise(directory: str, square: float = 0.024, blur_grid=None) -
             byc = by.reshape(h, 3, w, 3).mean(axis=(1, 3))
             inner = (bxc > 0.05 * square) & (bxc < 7.95 * square) & (byc > 0.05 * square) & (byc < 4.95 * square)
             ys, xs = np.nonzero(inner)
-            I = im[inner].astype(float)
+            obs = im[inner].astype(float)
             xn, yn = (xs - w / 2) / w, (ys - h / 2) / h
             best = None
             for sg in blur_grid:
                 B = cv2.GaussianBlur(ideal.astype(np.float32), (0, 0), float(sg))[inner]
                 A = np.column_stack([np.ones_like(B), xn, yn, B, B * xn, B * yn])
-                coef, *_ = np.linalg.lstsq(A, I, rcond=None)
-                res = I - A @ coef
+                coef, *_ = np.linalg.lstsq(A, obs, rcond=None)
+                res = obs - A @ coef
                 rss = float(res @ res)
                 if best is None or rss < best[0]:
                     best = (rss, float(sg), coef, res, B, A)

@@ -658,17 +658,18 @@ def _charts(out: Path, s: dict, thetas, depths, photos) -> None:
     tw = f"{s['twin']['realism']} twin, truth seed {s['twin']['truth_seed']}"
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
     for size, mk in (("h", "o"), ("u", "s"), ("d", "^")):
-        ax.plot(thetas, [s["inclined"][f"{t:g}"]["uncorrected_sizes_mm"][size] for t in thetas], "--" + mk,
-                label=f"Δ{size} uncorrected")
-        ax.plot(thetas, [s["inclined"][f"{t:g}"]["corrected_sizes_mm"][size] for t in thetas], "-" + mk,
-                label=f"Δ{size} corrected (picked model)")
+        ax.plot(thetas, [max(s["inclined"][f"{t:g}"]["uncorrected_sizes_mm"][size], 0.01) for t in thetas],
+                "--" + mk, label=f"Δ{size} uncorrected")
+        ax.plot(thetas, [max(s["inclined"][f"{t:g}"]["corrected_sizes_mm"][size], 0.01) for t in thetas],
+                "-" + mk, label=f"Δ{size} corrected (picked model)")
     ax.axhline(0.7, color="grey", lw=0.8, ls=":", label="1 projector pixel (0.7 mm)")
     ax.plot([50], [27.5], "k*", ms=12, label="paper θ=50° uncorrected mean")
     ax.plot([50], [2.1], "r*", ms=12, label="paper θ=50° corrected mean")
     ax.set_xlabel("sheet inclination θ [deg]")
     ax.set_ylabel("absolute size error [mm]")
     ax.set_title(f"Fig. 11 on the {tw}", fontsize=9)
-    ax.set_yscale("symlog", linthresh=1.0)
+    ax.set_yscale("log")
+    ax.set_ylim(0.01, 50)
     ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out / "fig11_inclined.png", dpi=110)
@@ -677,9 +678,9 @@ def _charts(out: Path, s: dict, thetas, depths, photos) -> None:
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
     names = [n for n in ("uncorrected", "four_triangle", "fine", "fem_nominal") if f"{n}_mm" in s["pushed"][f"{depths[0]:g}"]]
     for name in names:
-        ax.plot(depths, [s["pushed"][f"{d:g}"][f"{name}_mm"] for d in depths], "--o" if name == "uncorrected" else "-o",
-                label=f"{name} (mean of Δh, Δw)")
-    ax.plot(depths, [s["pushed"][f"{d:g}"]["corrected_mm"] for d in depths], "k-", lw=2.5, alpha=0.35,
+        ax.plot(depths, [max(s["pushed"][f"{d:g}"][f"{name}_mm"], 0.01) for d in depths],
+                "--o" if name == "uncorrected" else "-o", label=f"{name} (mean of Δh, Δw)")
+    ax.plot(depths, [max(s["pushed"][f"{d:g}"]["corrected_mm"], 0.01) for d in depths], "k-", lw=4, alpha=0.25,
             label="picked by the renderer")
     ax.axhline(0.7, color="grey", lw=0.8, ls=":", label="1 projector pixel (0.7 mm)")
     ax.plot([50], [15.8], "k*", ms=12, label="paper S=50 uncorrected mean")
@@ -687,7 +688,8 @@ def _charts(out: Path, s: dict, thetas, depths, photos) -> None:
     ax.set_xlabel("push depth S [mm]")
     ax.set_ylabel("mean absolute size error [mm]")
     ax.set_title(f"Fig. 13 on the {tw} (true sheet: FEM)", fontsize=9)
-    ax.set_yscale("symlog", linthresh=1.0)
+    ax.set_yscale("log")
+    ax.set_ylim(0.01, 50)
     ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out / "fig13_pushed.png", dpi=110)
@@ -705,44 +707,63 @@ def _charts(out: Path, s: dict, thetas, depths, photos) -> None:
         plt.close(fig)
 
 
+def _fmt(x, unit: str = "", nd: int = 2) -> str:
+    return "not within the sweep" if x is None else f"{x:.{nd}f}{unit}"
+
+
 def _stability_chart(path: Path, stab: dict) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FixedLocator, NullLocator, ScalarFormatter
 
-    fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
+    floor = 0.01
+    fig, ax = plt.subplots(1, 3, figsize=(16, 4.6))
     for a, key, xlabel in ((ax[0], "tension_ratio", "true tension ratio T_v/T_u (estimator assumes 1)"),
                            (ax[1], "prestrain", "true pre-strain (estimator assumes 0)")):
         t = stab[key]
         xs = [r["value"] for r in t["rows"]]
         for k in [k for k in t["rows"][0] if k.endswith("_mm") and k != "corrected_mm"]:
-            a.plot(xs, [r[k] for r in t["rows"]], "-o", label=k[:-3])
-        a.plot(xs, [r["corrected_mm"] for r in t["rows"]], "k-", lw=3, alpha=0.3, label="picked by the renderer")
-        a.axhline(0.7, color="grey", lw=0.8, ls=":", label="1 projector pixel")
+            a.plot(xs, [max(r[k], floor) for r in t["rows"]], "-o", label=k[:-3])
+        a.plot(xs, [max(r["corrected_mm"], floor) for r in t["rows"]], "k-", lw=4, alpha=0.25,
+               label="picked by the renderer")
+        a.axhline(0.7, color="grey", lw=0.8, ls="--", label="1 projector pixel (0.7 mm)")
         b = t["corrected_breaks_at"]
-        a.set_title(f"wrong {key.replace('_', ' ')}: picked model breaks at {b}", fontsize=8)
         if key == "tension_ratio":
             a.set_xscale("log")
+            a.xaxis.set_major_locator(FixedLocator([x for x in xs if x in (0.3, 0.5, 0.7, 1.0, 1.4, 2.0, 3.0)] or xs))
+            a.xaxis.set_minor_locator(NullLocator())
+            a.xaxis.set_major_formatter(ScalarFormatter())
+            title = f"wrong tension ratio: picked model > 0.7 mm below β = {_fmt(b['below'])}, above β = {_fmt(b['above'])}"
+        else:
+            title = f"wrong pre-strain: picked model > 0.7 mm above {_fmt(b['above'])}"
+        a.set_title(title, fontsize=8)
         a.set_xlabel(xlabel, fontsize=8)
-        a.set_ylabel(f"pushed S = {t['depth_mm']:g} mm: mean size error [mm]")
-        a.set_yscale("symlog", linthresh=1.0)
+        a.set_ylabel(f"pushed S = {t['depth_mm']:g} mm: mean size error [mm]", fontsize=8)
+        a.set_yscale("log")
+        a.set_ylim(floor, 30)
         a.legend(fontsize=7)
     p = stab["projector"]
     for name, mk in (("calibrated", "o"), ("random", "^")):
         rows = sorted(p[name], key=lambda r: r["mapping_px"])
         xs = [max(r["mapping_px"], 1e-3) for r in rows]
-        ax[2].plot(xs, [r["inclined_corrected_mm"] for r in rows], "-" + mk,
+        ax[2].plot(xs, [max(r["inclined_corrected_mm"], floor) for r in rows], "-" + mk,
                    label=f"inclined θ={p['theta_deg']:g}°, {name} error")
-        ax[2].plot(xs, [r["pushed_corrected_mm"] for r in rows], "--" + mk, mfc="none",
+        ax[2].plot(xs, [max(r["pushed_corrected_mm"], floor) for r in rows], "--" + mk, mfc="none",
                    label=f"pushed S={p['depth_mm']:g} mm, {name} error")
-    ax[2].axhline(0.7, color="grey", lw=0.8, ls=":", label="1 projector pixel")
+    reg = [r for r in p["calibrated"] if r["scale"] == 1.0]
+    if reg:
+        ax[2].axvline(max(reg[0]["mapping_px"], 1e-3), color="green", lw=0.8, ls=":", label="as registered")
+    ax[2].axhline(0.7, color="grey", lw=0.8, ls="--", label="1 projector pixel (0.7 mm)")
     ax[2].set_xscale("log")
-    ax[2].set_xlabel("projector screen→pixel mapping error, RMS [projector px]", fontsize=8)
-    ax[2].set_ylabel("mean size error [mm]")
-    ax[2].set_yscale("symlog", linthresh=1.0)
-    ax[2].set_title(f"projector error: inclined breaks at {p['calibrated_inclined_breaks_at_px']} px (scaled "
-                    f"registration error), {p['random_inclined_breaks_at_px']} px (random)", fontsize=7)
+    ax[2].set_yscale("log")
+    ax[2].set_ylim(floor, 30)
+    ax[2].set_xlabel("projector screen→pixel mapping error, RMS [projector px] (0.001 = exact)", fontsize=8)
+    ax[2].set_ylabel("mean size error [mm]", fontsize=8)
+    ax[2].set_title(f"projector error: inclined > 0.7 mm from {_fmt(p['calibrated_inclined_breaks_at_px'], ' px')}\n"
+                    f"(registration error scaled), {_fmt(p['random_inclined_breaks_at_px'], ' px')} (random directions)",
+                    fontsize=8)
     ax[2].legend(fontsize=6)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -801,14 +822,18 @@ def aggregate(out: Path, runs: dict, speed: dict | None = None) -> dict:
     for key, s in runs.items():
         ls = "-" if s["twin"]["realism"] == "realistic" else ":"
         th = [float(k) for k in s["inclined"]]
-        ax[0].plot(th, [r["corrected_mm"] for r in s["inclined"].values()], ls + "o", label=f"{key} corrected")
+        ax[0].plot(th, [max(r["corrected_mm"], 0.01) for r in s["inclined"].values()], ls + "o",
+                   label=f"{key} corrected")
         ds = [float(k) for k in s["pushed"]]
-        ax[1].plot(ds, [r["corrected_mm"] for r in s["pushed"].values()], ls + "o", label=f"{key} picked model")
+        ax[1].plot(ds, [max(r["corrected_mm"], 0.01) for r in s["pushed"].values()], ls + "o",
+                   label=f"{key} picked model")
         if "fine_mm" in next(iter(s["pushed"].values())):
             ax[1].plot(ds, [r["fine_mm"] for r in s["pushed"].values()], ls + "x", alpha=0.5,
                        label=f"{key} series fine (old)")
     for a, t in ((ax[0], "Fig. 11: inclined sheet, flat correction"), (ax[1], "Fig. 13: pushed sheet")):
         a.axhline(0.7, color="grey", lw=0.8, ls="--", label="target: 1 projector pixel")
+        a.set_yscale("log")
+        a.set_ylim(0.01, 10)
         a.set_title(t + " (solid: realistic twin, dotted: ideal)", fontsize=9)
         a.set_ylabel("mean absolute size error [mm]")
         a.legend(fontsize=6, ncol=2)
@@ -850,14 +875,15 @@ def _accuracy_vs_speed(out: Path, runs: dict, speed: dict) -> None:
     (out / "accuracy_vs_speed.json").write_text(json.dumps(doc, indent=1))
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
     for m, (ei, ep) in pts.items():
-        ax.plot(speed[m], ep, "o", ms=9, label=f"{m}: pushed S={dmax} mm")
+        ax.plot(speed[m], max(ep, 0.01), "o", ms=9, label=f"{m}: pushed S={dmax} mm")
         if ei is not None:
-            ax.plot(speed[m], ei, "s", ms=6, mfc="none", label=f"{m}: inclined θ={tmax}°")
+            ax.plot(speed[m], max(ei, 0.01), "s", ms=6, mfc="none", label=f"{m}: inclined θ={tmax}°")
     ax.axhline(0.7, color="grey", lw=0.8, ls=":", label="target: 1 pixel (0.7 mm)")
     ax.axvline(1000 / 120, color="red", lw=0.8, ls=":", label="120 Hz budget (8.3 ms)")
     ax.set_xlabel(f"time per stereo pair, 2×1024×768 [ms] ({doc['gl_renderer'].split('(')[0].strip()})")
     ax.set_ylabel("mean absolute size error [mm], realistic twin")
-    ax.set_yscale("symlog", linthresh=1.0)
+    ax.set_yscale("log")
+    ax.set_ylim(0.01, 50)
     ax.set_title("Correction models: accuracy against speed", fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()
@@ -916,10 +942,11 @@ def main(argv: list[str] | None = None) -> int:
                     quick=args.quick, pixel=args.pixel * 1e-3, sheet_model=args.sheet_model, stability=stab,
                     charts=head or stab)
             stab_done |= stab
-            if head and not single:                            # the headline run, also at OUT's top
-                names = ["summary.json", "fig11_inclined.png", "fig13_pushed.png", "photos.png"]
+            if head and not single:                            # the headline run's charts go to OUT's top
+                (args.out / "summary.json").write_bytes((out / "summary.json").read_bytes())
+                names = ["fig11_inclined.png", "fig13_pushed.png", "photos.png"]
                 for name in names + (["stability.json", "stability.png"] if stab else []):
-                    (args.out / name).write_bytes((out / name).read_bytes())
+                    (out / name).replace(args.out / name)
             runs[f"{realism}-{seed}"] = s
             h = s["headline"]
             print(f"{realism} seed {seed}: inclined max corrected {h['inclined_max_corrected_mm']:.2f} mm, pushed max "

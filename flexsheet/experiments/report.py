@@ -411,7 +411,7 @@ def _format(summary: dict) -> str:
     for key in sorted(k for k in summary if k[:1].isdigit() or k.startswith("stroke_push")):
         r = summary[key]
         p = r.get("paper", {})
-        tg = target(key)["dtheta_mean_deg"] if key in PAPER_TABLE1 else float("nan")
+        tg = target(key)["dtheta_mean_deg"] if key in PAPER_TABLE1 and p else float("nan")
         lines.append(f"{key + ' s':<16}{r['dtheta_mean_deg']:12.3f}{r['dtheta_std_deg']:11.3f}"
                      f"{r.get('dd_2r_mean_mm', float('nan')):10.3f}{r['dd_mean_mm']:9.3f}"
                      f"{p.get('dtheta_mean_deg', float('nan')):10.3f}{p.get('dd_mean_mm', float('nan')):10.3f}"

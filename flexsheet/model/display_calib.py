@@ -12,6 +12,7 @@ Layout (OpenCV FileStorage YAML; matrices are ``!!opencv-matrix``, units m / rad
     camera:                       # the stereo camera (left optical frame: +z forward, +x right, +y down)
        T_display_camera: 4x4      # left camera pose in the display frame
        image_width, image_height, K1, D1, K2, D2, R, T   # stereo model refined by the camera-pose fit
+       cov: 30x30                 # covariance of (stereo parameters, pose) — optional
        provenance: {method, measured_at, source, n_poses, residuals: {rms_px, residual_mm, ...}}
     projector:
        K: 3x3  D: 5x1  width, height
@@ -151,11 +152,14 @@ class Provenance:
 class CameraEntry:
     """Stereo camera registration: ``T_display_camera`` (4, 4) left optical frame in the display frame, m;
     ``stereo``: the stereo model that pose was fitted with (dict with ``image_size`` (w, h), K1, D1, K2, D2, R,
-    T — the format of :func:`flexsheet.model.calibration.load_yaml`), or ``None`` to keep the stereo file's."""
+    T — the format of :func:`flexsheet.model.calibration.load_yaml`), or ``None`` to keep the stereo file's;
+    ``cov`` (30, 30) or ``None``: covariance of (:func:`stereo_vector` of ``stereo``, the pose as the
+    display→left-camera rotation vector and translation), rad/m/px units — the prior later steps refine under."""
 
     T_display_camera: np.ndarray
     provenance: Provenance
     stereo: dict | None = None
+    cov: np.ndarray | None = None
 
 
 @dataclass
@@ -324,6 +328,8 @@ def write_display_calib(path: str, calib: DisplayCalib) -> None:
                 fs.write("image_height", int(c.stereo["image_size"][1]))
                 for k in ("K1", "D1", "K2", "D2", "R", "T"):
                     _mat(fs, k, c.stereo[k])
+            if c.cov is not None:
+                _mat(fs, "cov", c.cov)
             _write_prov(fs, c.provenance)
             fs.endWriteStruct()
         if calib.projector is not None:
@@ -392,6 +398,10 @@ def _validate(c: DisplayCalib, path: str) -> None:
                     raise ValueError(f"{path}: camera.{k} must be a finite {shape} matrix")
             for k, n in (("D1", 5), ("D2", 5), ("T", 3)):
                 _vec(f"camera.{k}", s.get(k, np.nan), n, path)
+        if c.camera.cov is not None:
+            C = np.asarray(c.camera.cov, float)
+            if C.shape != (30, 30) or not np.all(np.isfinite(C)) or np.abs(C - C.T).max() > 1e-9 * max(1.0, np.abs(C).max()):
+                raise ValueError(f"{path}: camera.cov must be a finite symmetric 30x30 matrix, got {C.shape}")
     if c.projector is not None:
         p = c.projector
         _check_pose("projector.T_display_projector", p.T_display_projector, path)
@@ -483,7 +493,8 @@ def load_display_calib(path: str, require: tuple[str, ...] = ()) -> DisplayCalib
                 stereo[k] = mat(d, k, "camera.")
             for k, n in (("D1", 5), ("D2", 5), ("T", 3)):
                 stereo[k] = _vec(f"camera.{k}", mat(d, k, "camera."), n, path)
-        out.camera = CameraEntry(T, _read_prov(d, "camera.", path), stereo)
+        cov = mat(d, "cov", "camera.") if "cov" in d else None
+        out.camera = CameraEntry(T, _read_prov(d, "camera.", path), stereo, cov)
     if "projector" in doc:
         d = _get(doc, "projector", "", path, dict)
         out.projector = ProjectorEntry(

@@ -122,12 +122,12 @@ def bootstrap_stereo_calibration(left: list[np.ndarray], right: list[np.ndarray]
     size = left[0].shape[::-1]
 
     def calib(idx):
-        O = [data[i][0] for i in idx]
+        objs = [data[i][0] for i in idx]
         pl = [data[i][1] for i in idx]
         pr = [data[i][2] for i in idx]
-        _, K1, D1, _, _ = cv2.calibrateCamera(O, pl, size, None, None)
-        _, K2, D2, _, _ = cv2.calibrateCamera(O, pr, size, None, None)
-        out = cv2.stereoCalibrate(O, pl, pr, K1, D1, K2, D2, size, flags=cv2.CALIB_FIX_INTRINSIC)
+        _, K1, D1, _, _ = cv2.calibrateCamera(objs, pl, size, None, None)
+        _, K2, D2, _, _ = cv2.calibrateCamera(objs, pr, size, None, None)
+        out = cv2.stereoCalibrate(objs, pl, pr, K1, D1, K2, D2, size, flags=cv2.CALIB_FIX_INTRINSIC)
         return stereo_vector({"K1": K1, "D1": D1, "K2": K2, "D2": D2, "R": out[5], "T": out[6]})
 
     full = calib(range(len(data)))

@@ -86,14 +86,22 @@ class Capsule:
     radius: float
     shaft: float = 0.1
 
-    def gap(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Signed gaps (N,) m (< 0: inside the finger) and unit outward normals (N, 3) at points ``x`` (N, 3)."""
+    def gap(self, x: np.ndarray, curvature: bool = False):
+        """Signed gaps (N,) m (< 0: inside the finger) and unit outward normals (N, 3) at points ``x`` (N, 3);
+        with ``curvature`` also ∂n/∂x (N, 3, 3) (1/m): (I − nnᵀ)/ρ on the sphere, (I − nnᵀ − p̂p̂ᵀ)/ρ on the
+        shaft, ρ the distance from the finger's axis point."""
         rel = np.asarray(x, float) - self.center
-        s = np.clip(-(rel @ self.direction), 0.0, self.shaft)      # position along the shaft (backward)
+        s_raw = -(rel @ self.direction)
+        s = np.clip(s_raw, 0.0, self.shaft)                        # position along the shaft (backward)
         q = rel + s[:, None] * self.direction                      # from the closest axis point to x
         d = np.linalg.norm(q, axis=1)
         n = q / np.maximum(d, 1e-12)[:, None]
-        return d - self.radius, n
+        if not curvature:
+            return d - self.radius, n
+        P = np.eye(3) - n[:, :, None] * n[:, None, :]
+        shaft = (s_raw > 0) & (s_raw < self.shaft)
+        P[shaft] -= np.outer(self.direction, self.direction)
+        return d - self.radius, n, P / np.maximum(d, 1e-12)[:, None, None]
 
 
 def capsule_at(angle: float, depth: float, radius: float, cyl_radius: float, cyl_center: np.ndarray,
@@ -256,12 +264,17 @@ class HyperelasticModel:
             e += float(np.sum(w * _pen(g, k, self.eps)[0]))
         return e
 
-    def _contact_gaps(self, u: np.ndarray, caps: Capsule):
+    def _contact_gaps(self, u: np.ndarray, caps: Capsule, facets: np.ndarray | None = None):
         """Gaps (Fc, Qf) m, outward finger normals (Fc, Qf, 3) and area weights (Fc, Qf) m² at the contact
-        quadrature points of the deformed outer surface."""
-        x = self._cf_X + np.einsum("fqa,fai->fqi", self._cf_N, u[self._cf_dofs])
-        g, n = caps.gap(x.reshape(-1, 3))
-        return g.reshape(x.shape[:2]), n.reshape(x.shape), self._cf_w
+        quadrature points of the deformed outer surface (with ``facets``: those contact facets only, and
+        also ∂n/∂x (Fc, Qf, 3, 3))."""
+        if facets is None:
+            x = self._cf_X + np.einsum("fqa,fai->fqi", self._cf_N, u[self._cf_dofs])
+            g, n = caps.gap(x.reshape(-1, 3))
+            return g.reshape(x.shape[:2]), n.reshape(x.shape), self._cf_w
+        x = self._cf_X[facets] + np.einsum("fqa,fai->fqi", self._cf_N[facets], u[self._cf_dofs[facets]])
+        g, n, dn = caps.gap(x.reshape(-1, 3), curvature=True)
+        return g.reshape(x.shape[:2]), n.reshape(x.shape), self._cf_w[facets], dn.reshape(x.shape + (3,))
 
     def contact_force(self, u: np.ndarray, caps: Capsule, k: float) -> tuple[np.ndarray, float, int]:
         """(force the finger applies to this part (3,) N, deepest penetration m, contact points in touch)."""
@@ -290,15 +303,19 @@ class HyperelasticModel:
         r = np.bincount(self._vd.ravel(), weights=re.ravel(), minlength=self.n)
         cdata = None
         if caps is not None:
-            g, nrm, w = self._contact_gaps(u, caps)
-            fa = np.flatnonzero(np.any(g < self.eps, axis=1))
+            g0, _, _ = self._contact_gaps(u, caps)
+            fa = np.flatnonzero(np.any(g0 < self.eps, axis=1))
             if len(fa):
-                _, d1, d2 = _pen(g[fa], k, self.eps)                                        # (fa, Qf)
+                g, nrm, w, dn = self._contact_gaps(u, caps, fa)
+                _, d1, d2 = _pen(g, k, self.eps)                                            # (fa, Qf)
                 Nf = self._cf_N[fa]                                                         # (fa, Qf, 10)
-                rc = np.einsum("fq,fqa,fqi->fai", w[fa] * d1, Nf, nrm[fa])
+                rc = np.einsum("fq,fqa,fqi->fai", w * d1, Nf, nrm)
                 vd = (3 * self._cf_dofs[fa][:, :, None] + np.arange(3)).reshape(len(fa), 30)
                 r += np.bincount(vd.ravel(), weights=rc.ravel(), minlength=self.n)
-                Kc = np.einsum("fq,fqa,fqb,fqi,fqk->faibk", w[fa] * d2, Nf, Nf, nrm[fa], nrm[fa])   # Gauss–Newton
+                Hx = d2[..., None, None] * nrm[..., :, None] * nrm[..., None, :]
+                if not project:                 # the curvature term is negative: dropped when projecting
+                    Hx = Hx + d1[..., None, None] * dn
+                Kc = np.einsum("fq,fqa,fqb,fqik->faibk", w, Nf, Nf, Hx)
                 cdata = (vd, Kc.reshape(len(fa), 30, 30))
         if not need_K:
             return r, None

@@ -95,8 +95,9 @@ def planner_shape(scene) -> Shape:
 def principal_curvatures(shape: Shape, q: Vec, n: Vec, h: float = 0.002) -> tuple[float, float]:
     """Principal curvatures (κ1 ≥ κ2) 1/m of ``shape`` at surface point ``q`` (3,) m with outward normal ``n``
     (3,): the symmetric part of the shape operator from central differences of the normal field at
-    q ± h·e₁, q ± h·e₂ (``h`` m; e₁, e₂ a tangent basis). Convex > 0. Averages over ±h (2 mm: the finger's
-    contact scale), so a mesh's facets do not show."""
+    q ± h·e₁, q ± h·e₂ (``h`` m; e₁, e₂ a tangent basis), corrected for the offset points lying off the
+    surface (exact on spheres and cylinders). Convex > 0. Averages over ±h (2 mm: the finger's contact
+    scale), so a mesh's facets do not show."""
     nv = np.asarray(n, float)
     nv /= np.linalg.norm(nv)
     a = np.array([0.0, 1.0, 0.0]) if abs(nv[1]) < 0.9 else np.array([0.0, 0.0, 1.0])
@@ -114,4 +115,8 @@ def principal_curvatures(shape: Shape, q: Vec, n: Vec, h: float = 0.002) -> tupl
     k = np.linalg.eigvalsh(S)
     if not np.all(np.isfinite(k)):
         return 0.0, 0.0
+    # a tangent offset h off a circle of curvature κ meets its normal at atan(hκ): the difference gives
+    # κ/√(1 + h²κ²); undo that (exact on spheres and cylinders)
+    hk = np.clip(h * k, -0.99, 0.99)
+    k = k / np.sqrt(1.0 - hk * hk)
     return float(k[1]), float(k[0])
