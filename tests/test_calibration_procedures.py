@@ -139,6 +139,39 @@ def test_lab_images_path_runs_the_same_estimator(twin_and_camera, tmp_path):
         ImageDirSource(str(tmp_path / "frames")).marker_frames("left")
 
 
+def test_lab_images_path_for_the_arms(twin_and_camera, tmp_path):
+    from flexsheet.calibration.procedures import run_arms
+    from flexsheet.calibration.sources import TwinSource
+    from flexsheet.model.display_calib import CameraEntry, DisplayCalib, Provenance
+
+    truth, twin, _, r = twin_and_camera
+    calib = DisplayCalib(camera=CameraEntry(r.T_display_camera, Provenance("test"), r.stereo))
+    opts = QUICK.__class__(arm_configs=8)
+    src = TwinSource(twin, marker_frames=2)
+    nom = nominal_display_calib().arms["left"]
+    qs = arms_mod.plan_arm_configs("left", 8, nom.T_display_base, nom.marker_offset, r.stereo, r.T_display_camera)
+    frames, q = src.marker_frames("left", qs)
+    save_frames(str(tmp_path), arms={"left": (frames, q)})
+    lab = run_arms(ImageDirSource(str(tmp_path)), opts, calib, ("left",))["left"]
+    again = run_arms(_Replay(frames, q), opts, calib, ("left",))["left"]
+    # same frames, same estimator: the same base, whichever source hands them over
+    assert np.allclose(lab[0].T_display_base, again[0].T_display_base, atol=1e-12)
+    assert truth.base_error("left", lab[0].T_display_base)[0] < 2e-3
+    assert lab[0].provenance.source.startswith("lab images") and lab[1].n_configs == 8
+
+
+class _Replay:
+    """A frame source that hands back given marker frames (the twin's, captured once)."""
+
+    label = "replay"
+
+    def __init__(self, frames, q):
+        self.frames, self.q = frames, q
+
+    def marker_frames(self, side, joints):
+        return self.frames, self.q
+
+
 def test_display_cli_needs_a_seed(capsys):
     with pytest.raises(SystemExit):
         display_main(["--sim", "--out", "/tmp/never-written"])
