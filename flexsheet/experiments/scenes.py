@@ -9,7 +9,7 @@ scene and the organ's compliance along its stroke (the tumour's stiffness peak i
    solve the scene), and the metric in the normal section along the scene's stroke
    (:func:`flexsheet.experiments.table1.scene_table1_row`). Realistic twin, truth seeds 0…``seeds``−1,
    moving times 10 s and 30 s. Each row also has the tension the planner set at the contacts (median, p5,
-   p95, N/m), the requested object stiffness and the share of samples at the arms' limit.
+   p95, N/m; truth seed 0's run), the requested object stiffness and the share of samples at the arms' limit.
 2. **The organ's compliance** (``organ.yaml``, a stiff 14 mm tumour 8.6 mm under the stroke):
    a. the estimate along the path at fixed push depths 0.5, 2, 5 and 10 mm, with and without the inclusion;
    b. the scripted runs — the light stroke (0.5 mm, 10 s) and the world's stroke-and-push (10 s, pushed to
@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -46,6 +47,17 @@ DEPTHS_MM = (0.5, 2.0, 5.0, 10.0)
 #: the palpation run's push depth while stroking, m
 PALPATION_DEPTH = 0.005
 DEFAULT_OUT = Path(__file__).resolve().parents[2] / "docs" / "figures" / "scenes"
+
+
+def _rounded(x, digits: int = 5):
+    """``x`` (nested dicts/lists) with every float rounded to ``digits`` significant digits (for the JSON)."""
+    if isinstance(x, float):
+        return float(f"{x:.{digits}g}") if math.isfinite(x) else x
+    if isinstance(x, dict):
+        return {k: _rounded(v, digits) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_rounded(v, digits) for v in x]
+    return x
 
 
 def _pct(x) -> dict:
@@ -88,7 +100,8 @@ def table1_for_scene(name: str, seeds: int = 3, times=(10.0, 30.0), log=print) -
         mean["n"] = int(sum(r["n"] for r in rows))
         mean["seeds"] = len(rows)
         for k in ("tension_n_per_m", "object_stiffness_n_per_m", "stiffness_n_per_m"):
-            mean[k] = rows[0][k]
+            mean[k] = rows[0][k]                   # percentiles of truth seed 0's run
+        mean["compliance_of_truth_seed"] = 0
         mean["per_seed"] = [{"truth_seed": i, "dtheta_mean_deg": r["dtheta_mean_deg"], "dd_mean_mm": r["dd_mean_mm"],
                              "ik_refused": r["ik_refused"]} for i, r in enumerate(rows)]
         out[f"{T:g}"] = mean
@@ -283,16 +296,16 @@ def run(out: Path, seeds: int = 3, quick: bool = False, scenes=SCENE_NAMES, log=
                      "note": "planner tension from the scene's compliance estimate (no FEM); metric in the normal "
                              "section along each scene's stroke (for the cylinder: Fig. 9's cross-section)"}
     out.mkdir(parents=True, exist_ok=True)
-    (out / "table1_scenes.json").write_text(json.dumps(table, indent=2))
+    (out / "table1_scenes.json").write_text(json.dumps(_rounded(table), indent=1))
     if "organ" in scenes:
         log("[scenes] organ compliance along the stroke")
         org = organ_runs(quick)
-        (out / "compliance_organ.json").write_text(json.dumps(org, indent=1))
+        (out / "compliance_organ.json").write_text(json.dumps(_rounded(org)))
         _plot(org, out / "compliance_organ.png")
         summary["organ"] = {"peaks_along_path": org["peaks_along_path"], "inclusion": org["along_path"]["inclusions"],
                             "run_peaks": org["run_peaks"], "fitted_scale": org["fitted_scale"],
                             "sheet_range": org["sheet_range"]}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    (out / "summary.json").write_text(json.dumps(_rounded(summary), indent=1))
     return summary
 
 
