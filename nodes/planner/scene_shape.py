@@ -82,7 +82,7 @@ class SmoothMeshShape(MeshShape):
 def planner_shape(scene) -> Shape:
     """The :class:`flexsheet.model.shapes.Shape` the planner, the world and the Table I metric use for
     ``scene`` (a :class:`flexsheet.model.scenes.Scene`): ``scene.shape()`` for analytic kinds, a
-    :class:`SmoothMeshShape` for a mesh (cached on the scene object's shape, built once)."""
+    :class:`SmoothMeshShape` for a mesh (one per scene object, cached)."""
     if scene.object.kind != "mesh":
         return scene.shape()
     hit = _CACHE.get(id(scene))
