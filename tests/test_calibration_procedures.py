@@ -84,6 +84,22 @@ def test_board_not_found_is_refused(twin_and_camera):
                                 nom.camera.T_display_camera)
 
 
+def test_a_bowed_board_is_fitted_or_refused(twin_and_camera):
+    truth, twin, _, _ = twin_and_camera
+    board = QUICK.board_spec()
+    views = twin.board_views(board, cp.plan_board_views(12), bow_mm=0.6)       # sag at the sheet corners
+    nom = nominal_display_calib()
+    args = (views, board, nom.camera.stereo, nom.camera.T_display_camera)
+    r = cp.estimate_camera_pose(*args, prior_cov=cp.load_prior())
+    # reported at the board's farthest inner corner: 0.47 x the sheet-corner sag for the 9x8 board
+    assert r.bow_mm == pytest.approx(0.6 * 0.47, abs=0.08)
+    assert truth.camera_pose_error(r.T_display_camera)[0] < 0.5e-3
+    flat = cp.estimate_camera_pose(*args, prior_cov=cp.load_prior(), fit_bow=False)
+    assert truth.camera_pose_error(flat.T_display_camera)[0] > 1e-3        # why the bow is fitted
+    with pytest.raises(ValueError, match=r"board is bowed by 0\.[23]\d mm at its farthest corner"):
+        cp.estimate_camera_pose(*args, prior_cov=cp.load_prior(), max_bow_mm=0.1)
+
+
 def test_too_few_poses_are_refused(twin_and_camera):
     truth, twin, _, cam = twin_and_camera
     W, H = truth.projector_size

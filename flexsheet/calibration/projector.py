@@ -210,7 +210,8 @@ def triangulate_pose(frames: list[tuple[np.ndarray, np.ndarray]], width: int, he
     """Decode one pose's stereo captures of :func:`gray_code_patterns`, find grid correspondences in both
     cameras and triangulate them into the display frame. ``stereo``: the stereo dict the camera-pose step
     refined; ``T_display_camera`` (4, 4). Matches whose epipolar residual exceeds ``max_epipolar_px`` are
-    dropped. Raises ``ValueError`` if either camera decodes fewer than ``min_valid_pixels`` pixels."""
+    dropped. Raises ``ValueError`` if either camera decodes fewer than ``min_valid_pixels`` pixels or fewer than
+    20 grid points, or fewer than 20 points are seen by both."""
     lefts = [f[0] for f in frames]
     rights = [f[1] for f in frames]
     model = StereoModel.from_calib(stereo)
@@ -218,19 +219,21 @@ def triangulate_pose(frames: list[tuple[np.ndarray, np.ndarray]], width: int, he
     for side, imgs in (("left", lefts), ("right", rights)):
         col, row, valid = decode(imgs, width, height, min_contrast)
         nv = int(valid.sum())
-        if nv < min_valid_pixels:
-            white = imgs[-2].astype(float)
-            black = imgs[-1].astype(float)
-            raise ValueError(f"patterns did not decode in the {side} camera: {nv} valid pixels < {min_valid_pixels} "
-                             f"(white−black contrast median {np.median(white - black):.1f} DN, need ≥ "
-                             f"{min_contrast} DN): sheet too dark, projector off or out of focus, or frames "
-                             f"out of order")
-        res[side] = (*grid_correspondences(col, row, valid, spacing), nv)
+        proj, cam = grid_correspondences(col, row, valid, spacing)
+        if nv < min_valid_pixels or len(proj) < 20:
+            lit = float(np.percentile(imgs[-2].astype(float) - imgs[-1].astype(float), 95))
+            raise ValueError(f"patterns did not decode in the {side} camera: {nv} valid pixels (need "
+                             f"{min_valid_pixels}), {len(proj)} grid points (need 20); white−black contrast "
+                             f"{lit:.1f} DN on the brightest 5 % of the image (need ≥ {min_contrast} DN, and well "
+                             f"above the noise): sheet too dark, projector off or out of focus, or frames out of "
+                             f"order")
+        res[side] = (proj, cam, nv)
     (pl, cl, nl), (pr, cr, nr) = res["left"], res["right"]
     kl = {(int(u), int(v)): i for i, (u, v) in enumerate(pl)}
     pairs = [(kl[(int(u), int(v))], j) for j, (u, v) in enumerate(pr) if (int(u), int(v)) in kl]
     if len(pairs) < 20:
-        raise ValueError(f"only {len(pairs)} projector points seen by both cameras (need >= 20)")
+        raise ValueError(f"only {len(pairs)} projector points seen by both cameras (need >= 20): is the sheet in "
+                         f"view of both?")
     il, ir = np.array(pairs).T
     ul = model.undistort(cl[il], "left")
     ur = model.undistort(cr[ir], "right")

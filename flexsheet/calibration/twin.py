@@ -256,8 +256,8 @@ class CalibrationTwin:
         """Stereo pairs of ``board`` on the sheet at each commanded pose (4, 4). The first pose is the home
         pose: the board is rendered exactly at the display frame (it defines it); the others are moved by
         the true arms (:meth:`sheet_pose`). ``board_offset`` m: printed surface in front of the sheet's mid
-        plane (known to the procedure). ``bow_mm``: the board is not flat — a spherical bow of this sag (mm)
-        at its corners (failure mode; 0 = flat)."""
+        plane (known to the procedure). ``bow_mm``: the board is not flat — a paraboloid bow toward the user of
+        this sag (mm) at the sheet's corners (±120, ±120 mm); 0 = flat."""
         from flexsheet.calibration.camera_pose import board_centre
 
         key = (board, round(self.ss))
