@@ -373,9 +373,11 @@ def build_parser() -> argparse.ArgumentParser:
     t.set_defaults(func=_bag("cmd_export"))
 
     for kind, table, helptext, example in (
-            ("calibrate", registry.CALIBRATE, "calibrate devices (stereo camera)",
+            ("calibrate", registry.CALIBRATE, "calibrate devices and register the display (stereo, camera pose, "
+             "projector, arms, eye; display = all of them)",
              "  flexsheet calibrate stereo --left 'imgs/left*.jpg' --right 'imgs/right*.jpg' "
-             "--board chessboard:9x6 --square 0.024 -o calib.yaml"),
+             "--board chessboard:9x6 --square 0.024 -o calib.yaml\n"
+             "  flexsheet calibrate display --sim --truth-seed 0 --out out/calib   # all of it, in the twin"),
             ("experiment", registry.EXPERIMENTS, "run an experiment: charts + JSON",
              "  flexsheet experiment stroke --out out/stroke\n  flexsheet experiment fem --out out/fem --quick"),
             ("bench", registry.BENCHES, "run a benchmark and print figures",

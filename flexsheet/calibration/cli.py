@@ -135,7 +135,8 @@ def projector_main(argv: list[str] | None = None) -> int:
         entry, r = P.run_projector(src, opts, calib, progress=_say)
         calib.projector = entry
         path = _write(a.out, calib)
-        msg = f"projector: {r.n_poses} poses, {r.n_inliers}/{r.n_points} points, reprojection {r.reprojection_px:.3f} px"
+        msg = (f"projector: {r.n_poses} poses, {r.n_points} correspondences ({r.n_inliers} used), "
+               f"reprojection {r.reprojection_px:.3f} px")
         if truth is not None:
             et, er = truth.projector_pose_error(entry.T_display_projector)
             msg += f"; error vs truth {et * 1e3:.2f} mm, {math.degrees(er):.3f} deg"

@@ -1,8 +1,24 @@
-"""``flexsheet experiment fem --out DIR [--quick]``: accuracy against speed, Hertz check, stability curve.
+"""``flexsheet experiment fem --out DIR [--quick] [--linear-study]``: physically right deformation of the pushed
+cylinder, and the real-time model that reproduces it.
 
-Writes DIR/summary.json, DIR/accuracy_table.json (the table :mod:`nodes.fem.choose` reads), and PNG charts
-with a JSON of the same numbers beside each: accuracy_speed.png/.json, hertz.png/.json, stability.png/.json.
-The reference is P2 on the finest mesh that fits in time (``--quick``: a coarser P2 mesh and two depths).
+1. **Reference** (:mod:`nodes.fem.hyperelastic`): neo-Hookean, total Lagrangian, P2, Newton with load
+   stepping, rigid frictionless finger (sphere + shaft), pushed 0 → 50 mm at azimuth 0 on 3 meshes
+   (quarter model by symmetry). Mesh convergence: the visible-surface difference of each mesh to the finest,
+   at every depth (``convergence.json/png``); ``reference.converged`` when that difference falls with every
+   refinement and the last refinement changes the visible surface by ≤ half the target.
+2. **Candidates**, judged on the real-time model's rendered vertices outside the finger's footprint
+   (lateral distance from the push axis > finger radius + 2 mm; the footprint is hidden by the finger):
+   the linear P2 capacitance model (today's), and the nonlinear snapshots (:mod:`nodes.fem.snapshots`, built
+   on a coarser mesh than the reference at φ = 0, checked at held-out azimuths too). Accuracy against speed
+   (``accuracy_speed.png/.json``) and the failure map, where each model breaks by depth and azimuth
+   (``failure_map.png/.json``). ``nodes/fem/model_table.json`` (full mode) is what the node chooses from.
+3. ``summary.json``: ``realtime.update_ms``, ``realtime.max_visible_error_mm_0_50``, ``reference.converged``
+   with the convergence figures.
+
+``--quick``: coarse meshes, azimuth 0 only, snapshots every 5 mm checked at the depths between (≈ 1 min).
+The full mode runs the stroke arc (0–60°) and is heavy (tens of minutes on 2 cores); every solve is cached
+(:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds. ``--linear-study`` also reruns the
+linear mesh study (``accuracy_table.json``, ``hertz``, ``stability``).
 """
 
 from __future__ import annotations
@@ -12,224 +28,291 @@ import json
 import math
 import os
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from nodes.fem.choose import choose, evaluate_spec
+from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
+from nodes.fem.choose import DEFAULT_SPEC, MODEL_TABLE_PATH, visible_mask
 from nodes.fem.contact import finger_at
+from nodes.fem.hyperelastic import SOLVER_VERSION, HyperelasticModel, RefSpec, reference_mesh, solve_path
 from nodes.fem.material import Material
-from nodes.fem.mesh import MeshSpec, cylinder_mesh
+from nodes.fem.mesh import MeshSpec
 from nodes.fem.realtime import RealtimeModel
-from nodes.fem.solver import FemModel, element_checks, solve_corotational, solve_full
+from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, SnapshotGrid, load_or_build
+from nodes.fem.solver import solve_full
 
-__all__ = ["main"]
+__all__ = ["main", "Settings", "settings_for"]
 
 FINGER_R = 0.008
 TARGET = 0.0007
 
 
+@dataclass
+class Settings:
+    """What one run computes: convergence meshes (coarse → fine, azimuth 0), the snapshot grid and mesh,
+    held-out azimuths (deg) checked against their own reference solves, the linear model's mesh (its surface
+    vertices are the rendered vertices), the updates timed per configuration."""
+
+    levels: list = field(default_factory=list)
+    depth_step: float = 0.0025
+    grid: SnapshotGrid = DEFAULT_GRID
+    snap_spec: RefSpec = DEFAULT_REF_SPEC
+    holdout_deg: tuple = ()
+    linear_spec: MeshSpec = DEFAULT_SPEC
+    n_time: int = 300
+    quick: bool = False
+
+
+def settings_for(quick: bool) -> Settings:
+    """The ``--quick`` or the full settings."""
+    if quick:
+        return Settings(levels=[RefSpec(0.016, 0.008, 0.018, True), RefSpec(0.016, 0.0057, 0.018, True),
+                                RefSpec(0.016, 0.004, 0.018, True)],
+                        depth_step=0.0025,
+                        grid=SnapshotGrid((0.0,), 0.05, 0.005, 1.0, 0.001, 0.002),
+                        snap_spec=RefSpec(0.016, 0.004, 0.018, True), holdout_deg=(),
+                        linear_spec=MeshSpec(0.012, 0.004, 0.012, 0.0), n_time=100, quick=True)
+    return Settings(levels=[RefSpec(0.012, 0.0045, 0.018, True), RefSpec(0.012, 0.003, 0.018, True),
+                            RefSpec(0.010, 0.002, 0.018, True)],
+                    depth_step=0.0025, grid=DEFAULT_GRID, snap_spec=DEFAULT_REF_SPEC, holdout_deg=(5.0, 35.0, 55.0),
+                    linear_spec=MeshSpec(0.012, 0.004, 0.012, 60.0), n_time=1000)
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="flexsheet experiment fem", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
-                                epilog="example: flexsheet experiment fem --out docs/figures/fem --quick")
+                                epilog="example: flexsheet experiment fem --quick --out /tmp/fem")
     p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--quick", action="store_true", help="small reference and few meshes (< 60 s)")
+    p.add_argument("--quick", action="store_true", help="coarse meshes, azimuth 0 only (about a minute)")
     p.add_argument("--nu", type=float, default=Material().nu, help="Poisson's ratio (default %(default)s)")
     p.add_argument("--E", type=float, default=Material().E, help="Young's modulus, Pa (default %(default)s)")
+    p.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help="cache folder ('' disables; default %(default)s)")
+    p.add_argument("--linear-study", action="store_true", help="also rerun the linear mesh study (slow)")
+    p.add_argument("--write-model-table", action="store_true",
+                   help=f"write {os.path.relpath(MODEL_TABLE_PATH)} (default in full mode)")
     return p
 
 
-def _timeit(fn, n: int) -> float:
-    """Median wall time of ``n`` calls, s (median: the shared machine has load spikes)."""
-    fn()
-    ts = np.empty(n)
-    for i in range(n):
+def _log(msg: str) -> None:
+    print(msg, flush=True)
+
+
+# ---- reference solves (cached) -------------------------------------------------------------------------------
+def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, cache: ArrayCache,
+                   probes: np.ndarray) -> dict:
+    """Neo-Hookean push at ``angle_deg`` through ``depths`` on ``spec``'s mesh, sampled at ``probes`` (k, 3) m
+    (display frame, mirrored into the modelled part); cached. Returns {"u": (D, k, 3) m, "force", "inverted",
+    "inverted_qp", "min_detF", "max_strain", "penetration", "newton", "seconds", "dofs", "converged"}."""
+    key = cache_key(SOLVER_VERSION, spec.key(), angle_deg, np.round(depths, 9).tolist(), mat.key(), FINGER_R,
+                    cache_key(np.round(probes, 9).tobytes()))
+
+    def compute() -> dict:
         t = time.perf_counter()
-        fn()
-        ts[i] = time.perf_counter() - t
-    return float(np.median(ts))
+        half_z = spec.half_z and angle_deg == 0.0
+        mesh = reference_mesh(RefSpec(spec.h, spec.h_fine, spec.refine_radius, half_z), angle_deg)
+        model = HyperelasticModel(mesh, mat, sym_y=True, sym_z=half_z)
+        _log(f"reference {spec.key()} at {angle_deg:g} deg: {model.n} DOF ...")
+        states = solve_path(model, math.radians(angle_deg), depths, FINGER_R, step=0.0025,
+                            log=lambda s: _log("  " + s.strip()))
+        from nodes.fem.snapshots import _probe, _sample
+
+        P = _probe(model, probes)
+        qp = [int(np.count_nonzero(np.linalg.det(model.deformation(s.u)).min(axis=1) <= 0)) for s in states]
+        return {"u": np.stack([_sample(P, s.u, probes, model) for s in states]),
+                "force": np.array([s.force for s in states]), "inverted": np.array([s.inverted for s in states]),
+                "inverted_qp": np.array(qp), "min_detF": np.array([s.min_detF for s in states]),
+                "max_strain": np.array([s.max_strain for s in states]),
+                "penetration": np.array([s.penetration for s in states]),
+                "newton": np.array([s.iterations for s in states]), "converged": np.array([s.converged for s in states]),
+                "seconds": np.array(time.perf_counter() - t), "dofs": np.array(model.n)}
+
+    z, hit, _ = cache.get_or_compute("reference", key, compute, f"reference {spec.key()} at {angle_deg:g} deg")
+    return z
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the experiment; returns 0. See the module docstring for the outputs."""
-    args = _parser().parse_args(argv)
-    os.makedirs(args.out, exist_ok=True)
-    mat = Material(args.E, args.nu)
-    t_start = time.perf_counter()
-    if args.quick:
-        ref_spec = MeshSpec(0.012, 0.003, 0.015)
-        depths = [0.005, 0.03]
-        cands = [(MeshSpec(0.010, 0.004, 0.012), 1), (MeshSpec(0.012, 0.006, 0.012), 2),
-                 (MeshSpec(0.012, 0.004, 0.012), 2)]
-        stab_depths = [0.01, 0.03]
-        hertz_depths = [0.0005, 0.001, 0.002]
-        check_spec = None
-    else:
-        ref_spec = MeshSpec(0.010, 0.002, 0.015)
-        depths = [0.005, 0.01, 0.02, 0.03, 0.04, 0.05]
-        cands = [(MeshSpec(h, hf, rr), 1) for h, hf, rr in ((0.012, 0.004, 0.012), (0.010, 0.003, 0.012),
-                                                             (0.008, 0.003, 0.012), (0.008, 0.002, 0.015),
-                                                             (0.006, 0.002, 0.015))]
-        cands += [(MeshSpec(h, hf, rr), 2) for h, hf, rr in ((0.016, 0.006, 0.012), (0.012, 0.006, 0.012),
-                                                             (0.012, 0.005, 0.012), (0.012, 0.004, 0.012),
-                                                             (0.012, 0.003, 0.012), (0.010, 0.004, 0.012))]
-        stab_depths = [0.0025, 0.005, 0.01, 0.015, 0.02, 0.03, 0.04, 0.05]
-        hertz_depths = [0.0005, 0.00075, 0.001, 0.0015, 0.002]
-        check_spec = MeshSpec(0.008, 0.0015, 0.015)
+def _visible(points: np.ndarray, fixed: np.ndarray, angle_deg: float, depth: float, mesh) -> np.ndarray:
+    fg = finger_at(math.radians(angle_deg), depth, FINGER_R, mesh.radius, mesh.center)
+    return visible_mask(points, fg) & ~fixed
 
-    hertz_spec = MeshSpec(0.012, 0.002, 0.008)     # P2, 2 mm under the finger: contact radius ≥ 2 mm at 0.5 mm
-    depth_range = (0.005, 0.03)                     # the paper pushes to S = 30 mm (Fig. 12)
 
-    # 1. reference
-    t = time.perf_counter()
-    ref_mesh = cylinder_mesh(ref_spec)
-    ref_model = FemModel(ref_mesh, mat, order=2)
-    refs = {d: solve_full(ref_model, finger_at(0.0, d, FINGER_R, ref_mesh.radius, ref_mesh.center)) for d in depths}
-    ref_s = time.perf_counter() - t
-    print(f"reference P2 {ref_spec.key()}: {ref_model.n_dofs} DOF, {len(depths)} depths in {ref_s:.1f} s", flush=True)
-    ref_check = None
-    if check_spec is not None:   # how converged is the reference itself? (finer P2, 30 mm)
-        cm = cylinder_mesh(check_spec)
-        cmod = FemModel(cm, mat, order=2)
-        fine = {0.03: solve_full(cmod, finger_at(0.0, 0.03, FINGER_R, cm.radius, cm.center))}
-        ev = evaluate_spec(ref_spec, cmod, fine, mat, FINGER_R, order=2)
-        ref_check = {"finer_spec": check_spec.__dict__, "finer_dofs": cmod.n_dofs,
-                     "surface_error_mm_at_30mm": ev["surface_error_m"]["0.0300"] * 1e3,
-                     "surface_error_all_mm_at_30mm": ev["surface_error_all_m"]["0.0300"] * 1e3,
-                     "force_error_pct_at_30mm": ev["force_error_pct"]["0.0300"]}
-        print("reference vs finer P2:", ref_check, flush=True)
+def convergence(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel) -> tuple[dict, dict]:
+    """Mesh convergence at azimuth 0 on the rendered vertices; returns (report, finest level's path)."""
+    depths = np.round(np.arange(1, int(round(0.05 / st.depth_step)) + 1) * st.depth_step, 9)
+    verts = rm.rest_vertices.astype(float)
+    fixed = rm.mesh.fixed[rm.surface_nodes]
+    paths = [reference_path(s, 0.0, depths, mat, cache, verts) for s in st.levels]
+    fine = paths[-1]
+    rep = {"depths_m": depths.tolist(), "levels": []}
+    for s, p in zip(st.levels, paths, strict=True):
+        err = [float(np.linalg.norm(p["u"][j] - fine["u"][j], axis=1)[_visible(verts, fixed, 0.0, d, rm.mesh)].max())
+               for j, d in enumerate(depths)]
+        rep["levels"].append({"spec": s.__dict__, "h_fine_m": s.h_fine, "dofs": int(p["dofs"]),
+                              "seconds": float(p["seconds"]), "error_vs_finest_mm": [e * 1e3 for e in err],
+                              "force_N": p["force"].tolist(), "inverted_nodal": p["inverted"].tolist(),
+                              "inverted_qp": p["inverted_qp"].tolist(), "min_detF": p["min_detF"].tolist(),
+                              "max_strain": p["max_strain"].tolist(), "penetration_mm": (p["penetration"] * 1e3).tolist(),
+                              "newton_iterations": p["newton"].tolist(), "newton_converged": bool(p["converged"].all())})
+    e = np.array([lv["error_vs_finest_mm"] for lv in rep["levels"][:-1]])          # (L-1, D)
+    deep = depths >= 0.005 - 1e-12
+    monotone = bool(np.all(np.diff(e[:, deep], axis=0) < 0)) if len(e) > 1 else False
+    last = float(e[-1].max())
+    rep.update({"monotone_decrease": monotone, "last_refinement_change_mm": last,
+                "finest_inverted_nodal_at_50mm": int(fine["inverted"][-1]),
+                "finest_inverted_qp_at_50mm": int(fine["inverted_qp"][-1]),
+                "converged": monotone and last <= TARGET * 1e3 / 2 and bool(fine["converged"].all()),
+                "criterion": "visible-surface difference to the finest mesh falls with every refinement (depths "
+                             ">= 5 mm) and the last refinement changes it by <= half the 0.7 mm target"})
+    if len(e) > 1:
+        r = st.levels[-3].h_fine / st.levels[-2].h_fine if len(st.levels) >= 3 else 2.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            p_obs = np.log(e[-2] / e[-1]) / np.log(r)
+        rep["observed_order_median"] = float(np.nanmedian(p_obs[deep]))
+    _log(f"convergence: errors vs finest at 50 mm {[round(float(x[-1]), 3) for x in e]} mm, converged "
+         f"{rep['converged']}")
+    return rep, fine
 
-    # 2. candidates: accuracy and speed
-    table = {"nu": mat.nu, "finger_radius": FINGER_R, "reference": {"spec": ref_spec.__dict__, "order": 2,
-                                                                   "dofs": ref_model.n_dofs}, "candidates": []}
+
+# ---- candidates ------------------------------------------------------------------------------------------------
+def validation_set(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, fine: dict) -> list[dict]:
+    """Reference fields at the rendered vertices for the configurations the candidates are judged on: azimuth 0
+    from the finest convergence mesh (every depth), and each held-out azimuth on the snapshot mesh."""
+    depths = np.round(np.arange(1, int(round(0.05 / st.depth_step)) + 1) * st.depth_step, 9)
+    verts = rm.rest_vertices.astype(float)
+    out = [{"angle_deg": 0.0, "depth": float(d), "u": fine["u"][j], "source": "finest convergence mesh"}
+           for j, d in enumerate(depths)]
+    for a in st.holdout_deg:
+        p = reference_path(st.snap_spec, float(a), depths, mat, cache, verts)
+        out += [{"angle_deg": float(a), "depth": float(d), "u": p["u"][j], "source": "held-out azimuth"}
+                for j, d in enumerate(depths)]
+    return out
+
+
+def snapshot_table(st: Settings, mat: Material, cache: ArrayCache) -> tuple[dict, bool, float]:
+    """The snapshot table of these settings (cached): (table, cache hit, seconds to build)."""
+    _log(f"snapshots: azimuths {st.grid.angles_deg} deg, depth step {st.grid.depth_step * 1e3:g} mm, "
+         f"mesh {st.snap_spec.key()} ...")
+    table, hit, sec = load_or_build(cache, st.grid, st.snap_spec, mat, FINGER_R, build=True,
+                                    log=lambda s: _log("  " + s.strip()))
+    if hit:
+        sec = float(np.sum(table["seconds"]))
+    return table, hit, sec
+
+
+def errors(rm: RealtimeModel, cases: list[dict], kind: str) -> list[float]:
+    """Largest visible-surface error (m) of model ``kind`` ("snapshots" | "linear") per validation case."""
+    fixed = rm.mesh.fixed[rm.surface_nodes]
+    verts = rm.rest_vertices.astype(float)
+    model = rm.model if kind == "linear" else None
+    surf_pts = rm.surface_nodes
+    out = []
+    for c in cases:
+        a = math.radians(c["angle_deg"])
+        fg = finger_at(a, c["depth"], FINGER_R, rm.mesh.radius, rm.mesh.center)
+        if kind == "snapshots":
+            u = rm.snapshots.surface(a, c["depth"], 0.0)[0]
+        else:
+            u = solve_full(model, fg).u[surf_pts]
+        vis = _visible(verts, fixed, c["angle_deg"], c["depth"], rm.mesh)
+        out.append(float(np.linalg.norm(u - c["u"], axis=1)[vis].max()))
+    return out
+
+
+def update_ms(rm: RealtimeModel, angles_deg, depths, n: int) -> dict:
+    """Median and 90th-percentile wall time (ms) of ``rm.update_finger`` over ``n`` calls per configuration."""
+    ts = []
+    for a in angles_deg:
+        for d in depths:
+            fg = finger_at(math.radians(a), d, FINGER_R, rm.mesh.radius, rm.mesh.center)
+            rm.update_finger(fg)
+            for _ in range(n):
+                t = time.perf_counter()
+                rm.update_finger(fg)
+                ts.append(time.perf_counter() - t)
+    ts = np.array(ts) * 1e3
+    return {"median": float(np.median(ts)), "p90": float(np.percentile(ts, 90)), "n": int(len(ts))}
+
+
+def candidates(st: Settings, mat: Material, rm: RealtimeModel, table: dict, cases: list[dict]) -> dict:
+    """Accuracy and speed of the linear and the snapshot model on the validation cases."""
+    res = {}
+    t_angles = sorted({0.0, *st.holdout_deg})
+    t_depths = [0.01, 0.03, 0.05]
+    snap = rm.snapshots
+    rm.snapshots = None
+    _log("linear (capacitance) model: errors against the nonlinear reference ...")
+    res["linear"] = {"name": f"linear P2 {st.linear_spec.key()}", "kind": "linear",
+                     "errors_m": errors(rm, cases, "linear"),
+                     "time_ms": update_ms(rm, [a for a in t_angles if a <= st.linear_spec.arc_deg + 1e-9],
+                                          t_depths, st.n_time)}
+    rm.snapshots = snap
+    res["snapshots"] = {"name": "nonlinear snapshots", "kind": "snapshots", "errors_m": errors(rm, cases, "snapshots"),
+                        "time_ms": update_ms(rm, t_angles, t_depths, st.n_time), "table_MB": snap.nbytes / 1e6}
+    for k, v in res.items():
+        _log(f"  {k}: worst visible error {max(v['errors_m']) * 1e3:.2f} mm, update {v['time_ms']['median']:.3f} ms")
+    return res
+
+
+# ---- outputs -----------------------------------------------------------------------------------------------------
+def failure_map(cases: list[dict], cand: dict) -> dict:
+    """Per candidate: error (mm) on the (azimuth, depth) grid of the validation cases and where it breaks."""
+    angles = sorted({c["angle_deg"] for c in cases})
+    depths = sorted({c["depth"] for c in cases})
+    out = {"angles_deg": angles, "depths_mm": [d * 1e3 for d in depths], "target_mm": TARGET * 1e3, "models": {}}
+    for k, v in cand.items():
+        grid = np.full((len(angles), len(depths)), np.nan)
+        for c, e in zip(cases, v["errors_m"], strict=True):
+            grid[angles.index(c["angle_deg"]), depths.index(c["depth"])] = e * 1e3
+        breaks = {}
+        for i, a in enumerate(angles):
+            bad = [depths[j] * 1e3 for j in range(len(depths)) if grid[i, j] > TARGET * 1e3]
+            breaks[f"{a:g}"] = min(bad) if bad else None
+        out["models"][k] = {"name": v["name"], "error_mm": grid.tolist(), "breaks_at_depth_mm": breaks}
+    return out
+
+
+def model_table(cases: list[dict], cand: dict) -> dict:
+    """``nodes/fem/model_table.json``: each candidate's worst visible error per depth (over azimuths) and speed."""
+    depths = sorted({c["depth"] for c in cases})
     rows = []
-    d30 = min(depths, key=lambda d: abs(d - 0.03))
-    for spec, order in cands:
-        ev = evaluate_spec(spec, ref_model, refs, mat, FINGER_R, order=order)
-        table["candidates"].append(ev)
-        rm = RealtimeModel(spec, mat, FINGER_R, cache_dir=None, order=order)
-        fg = finger_at(0.0, d30, FINGER_R, rm.mesh.radius, rm.mesh.center)
-        upd = _timeit(lambda rm=rm, fg=fg: rm.update_finger(fg), 50 if args.quick else 300)
-        sparse = _timeit(lambda rm=rm, fg=fg: solve_full(rm.model, fg), 1 if args.quick else 3)
-        k = f"{d30:.4f}"
-        rows.append({"spec": spec.__dict__, "order": order, "mesh_nodes": ev["mesh_nodes"], "dofs": ev["dofs"],
-                     "precompute_s": rm.precompute_s, "update_ms": upd * 1e3, "sparse_ms": sparse * 1e3,
-                     "surface_error_mm_at_30mm": ev["surface_error_m"][k] * 1e3,
-                     "surface_error_all_mm_at_30mm": ev["surface_error_all_m"][k] * 1e3,
-                     "surface_rms_mm_at_30mm": ev["surface_rms_m"][k] * 1e3,
-                     "force_error_pct_at_30mm": ev["force_error_pct"][k],
-                     "max_error_mm": max(ev["surface_error_m"].values()) * 1e3})
-        print(f"  P{order} {spec.key()}: {ev['mesh_nodes']} nodes {ev['dofs']} DOF, err@30 "
-              f"{rows[-1]['surface_error_mm_at_30mm']:.2f} mm (all {rows[-1]['surface_error_all_mm_at_30mm']:.2f}, "
-              f"rms {rows[-1]['surface_rms_mm_at_30mm']:.2f}), force {rows[-1]['force_error_pct_at_30mm']:+.1f} %, "
-              f"update {upd * 1e3:.3f} ms, sparse {sparse * 1e3:.0f} ms, precompute {rm.precompute_s:.2f} s",
-              flush=True)
-    # corotational timing and self-convergence at 30 mm on the candidate meshes (quick: two of them)
-    corot = []
-    p1_specs = [s for s, o in cands if o == 1]
-    for spec in (p1_specs[:1] if args.quick else p1_specs):
-        mesh = cylinder_mesh(spec)
-        model = FemModel(mesh, mat)
-        fg = finger_at(0.0, d30, FINGER_R, mesh.radius, mesh.center)
-        t = time.perf_counter()
-        sol, it, conv = solve_corotational(model, fg)
-        corot.append({"spec": spec.__dict__, "mesh_nodes": len(mesh.points), "ms": (time.perf_counter() - t) * 1e3,
-                      "iterations": it, "converged": conv, "force_N": sol.force, "model": model, "sol": sol})
-    fine = corot[-1]
-    for c in corot:
-        surf = np.flatnonzero(c["model"].boundary & ~c["model"].fixed)
-        u_ref = _p1_probe(fine["model"], fine["sol"].u, c["model"].points[surf])
-        c["surface_error_mm_vs_finest"] = float(np.linalg.norm(c["sol"].u[surf] - u_ref, axis=1).max() * 1e3)
-        c["force_error_pct_vs_finest"] = 100.0 * (c["force_N"] - fine["force_N"]) / fine["force_N"]
-        del c["model"], c["sol"]
-    table["depths"] = depths
-    with open(os.path.join(args.out, "accuracy_table.json"), "w") as fh:
-        json.dump(table, fh, indent=1)
+    for v in cand.values():
+        by = {f"{d:.4f}": max(e for c, e in zip(cases, v["errors_m"], strict=True) if c["depth"] == d)
+              for d in depths}
+        rows.append({"kind": v["kind"], "name": v["name"], "max_error_m_by_depth": by,
+                     "update_ms": v["time_ms"]["median"]})
+    return {"target_m": TARGET, "finger_radius": FINGER_R, "angles_deg": sorted({c["angle_deg"] for c in cases}),
+            "note": "worst visible-surface error against the neo-Hookean reference over the tabulated azimuths",
+            "candidates": rows}
 
-    # 3. choice
-    ch = choose(table, TARGET, depth_range[0], depth_range[1], mat.nu, FINGER_R)
-    ch_full = choose(table, TARGET, min(depths), max(depths), mat.nu, FINGER_R)
-    print("choice over the whole tabulated range:", ch_full.reason, flush=True)
-    chosen = next(r for r in rows if r["spec"] == ch.spec.__dict__ and r["order"] == ch.order)
-    print("choice:", ch.reason, flush=True)
 
-    # 4. Hertz check (small depth, P2 on a mesh refined under the finger)
-    hz_mesh = cylinder_mesh(hertz_spec)
-    hz_model = FemModel(hz_mesh, mat, order=2)
-    hz_F = [solve_full(hz_model, finger_at(0.0, d, FINGER_R, hz_mesh.radius, hz_mesh.center)).force for d in hertz_depths]
-    if min(hz_F) <= 0:
-        raise RuntimeError(f"Hertz check: no contact at some depth {hertz_depths}: forces {hz_F}")
-    slope, _ = np.polyfit(np.log(hertz_depths), np.log(hz_F), 1)
-    # sphere (R1) on a cylinder (R2 across, flat along the axis): principal relative radii R' = R1 R2/(R1+R2),
-    # R'' = R1; equivalent radius sqrt(R' R'') (Johnson, Contact Mechanics, §4.2; ellipticity ignored)
-    R_eff = math.sqrt(FINGER_R * (FINGER_R * hz_mesh.radius / (FINGER_R + hz_mesh.radius)))
-    F_hertz = [4.0 / 3.0 * mat.E_star * math.sqrt(R_eff) * d ** 1.5 for d in hertz_depths]
-    hertz = {"depths_m": hertz_depths, "force_N": hz_F, "hertz_force_N": F_hertz, "exponent": float(slope),
-             "hertz_error_pct": float(abs(slope - 1.5) / 1.5 * 100.0),
-             "finite_size_factor": float(np.mean(np.array(hz_F) / np.array(F_hertz))),
-             "R_eff_m": R_eff, "E_star_Pa": mat.E_star, "mesh": hertz_spec.__dict__, "order": 2,
-             "mesh_nodes": len(hz_mesh.points),
-             "note": "bonded contact on a finite cylinder held on its back half; exponent is the check"}
-    print(f"hertz: exponent {slope:.3f} ({hertz['hertz_error_pct']:.1f} % from 1.5), F/F_hertz "
-          f"{hertz['finite_size_factor']:.2f}", flush=True)
-
-    # 5. stability: linear vs corotational against depth on the chosen mesh
-    mesh = cylinder_mesh(ch.spec)
-    model = FemModel(mesh, mat)
-    surf = np.flatnonzero(model.boundary & ~model.fixed)
-    stab = {"depths_m": stab_depths, "linear_force_N": [], "corot_force_N": [], "linear_max_strain": [],
-            "corot_max_strain": [], "linear_inverted": [], "corot_inverted": [], "lin_vs_corot_mm": [],
-            "corot_converged": []}
-    u0 = None
-    for d in stab_depths:
-        fg = finger_at(0.0, d, FINGER_R, mesh.radius, mesh.center)
-        lin = solve_full(model, fg)
-        co, _, conv = solve_corotational(model, fg, u0=u0)
-        u0 = co.u
-        s_l, i_l = element_checks(mesh.points, mesh.tets, lin.u)
-        s_c, i_c = element_checks(mesh.points, mesh.tets, co.u)
-        stab["linear_force_N"].append(lin.force)
-        stab["corot_force_N"].append(co.force)
-        stab["linear_max_strain"].append(s_l)
-        stab["corot_max_strain"].append(s_c)
-        stab["linear_inverted"].append(i_l)
-        stab["corot_inverted"].append(i_c)
-        stab["corot_converged"].append(bool(conv))
-        stab["lin_vs_corot_mm"].append(float(np.linalg.norm(lin.u[surf] - co.u[surf], axis=1).max() * 1e3))
-    print("stability:", {k: [round(v, 3) if isinstance(v, float) else v for v in vals] for k, vals in stab.items()},
-          flush=True)
-
-    summary = {
-        "realtime": {"method": "condensed", "order": chosen["order"], "mesh_nodes": chosen["mesh_nodes"],
-                     "dofs": chosen["dofs"], "mesh": chosen["spec"],
-                     "surface_error_all_mm_at_30mm": chosen["surface_error_all_mm_at_30mm"],
-                     "update_ms": chosen["update_ms"], "surface_error_mm_at_30mm": chosen["surface_error_mm_at_30mm"],
-                     "force_error_pct_at_30mm": chosen["force_error_pct_at_30mm"],
-                     "precompute_s": chosen["precompute_s"], "choice": ch.reason, "target_mm": TARGET * 1e3,
-                     "depth_range_m": list(depth_range), "choice_over_5_50mm": ch_full.reason},
-        "hertz_error_pct": hertz["hertz_error_pct"],
-        "hertz": hertz,
-        "reference": {"spec": ref_spec.__dict__, "order": 2, "dofs": ref_model.n_dofs, "seconds": ref_s,
-                      "vs_finer": ref_check},
-        "material": {"E": mat.E, "nu": mat.nu}, "finger_radius_m": FINGER_R, "quick": args.quick,
-        "note": "timings on a shared 2-core machine (pessimistic)",
-        "wall_s": time.perf_counter() - t_start,
+def summary(st: Settings, conv: dict, cand: dict, cases: list[dict], snap_info: dict, mat: Material,
+            wall: float) -> dict:
+    """The ``summary.json`` object (keys named in issue 17 first)."""
+    s = cand["snapshots"]
+    lin = cand["linear"]
+    worst = max(s["errors_m"])
+    wc = cases[int(np.argmax(s["errors_m"]))]
+    return {
+        "realtime": {"method": "snapshots", "update_ms": s["time_ms"]["median"], "update_ms_p90": s["time_ms"]["p90"],
+                     "max_visible_error_mm_0_50": worst * 1e3,
+                     "worst_case": {"angle_deg": wc["angle_deg"], "depth_mm": wc["depth"] * 1e3},
+                     "angles_checked_deg": sorted({c["angle_deg"] for c in cases}), "target_mm": TARGET * 1e3,
+                     "footprint": f"vertices within {FINGER_R * 1e3 + 2:.0f} mm of the push axis (hidden by the "
+                                  "finger) are left out", **snap_info},
+        "linear": {"update_ms": lin["time_ms"]["median"], "max_visible_error_mm_0_50": max(lin["errors_m"]) * 1e3},
+        "reference": {"converged": conv["converged"], "model": "compressible neo-Hookean, total Lagrangian, P2, "
+                      "Newton + load stepping, frictionless rigid finger (penalty)", **{
+                          k: conv[k] for k in ("monotone_decrease", "last_refinement_change_mm",
+                                               "finest_inverted_nodal_at_50mm", "finest_inverted_qp_at_50mm",
+                                               "criterion")},
+                      "levels": [{k: lv[k] for k in ("h_fine_m", "dofs", "seconds", "newton_converged")}
+                                 | {"error_vs_finest_mm_max": max(lv["error_vs_finest_mm"]),
+                                    "error_vs_finest_mm_at_50mm": lv["error_vs_finest_mm"][-1],
+                                    "force_N_at_50mm": lv["force_N"][-1]} for lv in conv["levels"]],
+                      "figures": "convergence.json, convergence.png"},
+        "material": {"E": mat.E, "nu": mat.nu}, "finger_radius_m": FINGER_R, "quick": st.quick,
+        "note": "timings on a shared 2-core machine (pessimistic)", "wall_s": wall,
     }
-    _write(args.out, "accuracy_speed", {"candidates": rows, "corotational": corot, "depth_m": d30})
-    _write(args.out, "hertz", hertz)
-    _write(args.out, "stability", stab)
-    with open(os.path.join(args.out, "summary.json"), "w") as fh:
-        json.dump(summary, fh, indent=1)
-    _plots(args.out, rows, corot, hertz, stab, chosen)
-    print(json.dumps(summary["realtime"], indent=1))
-    print(f"done in {summary['wall_s']:.1f} s -> {args.out}")
-    return 0
-
-
-def _p1_probe(model: FemModel, u_pts: np.ndarray, x: np.ndarray) -> np.ndarray:
-    full = np.zeros(model.n_dofs)
-    full[model.dofs] = u_pts
-    return model.probe(x, full)
 
 
 def _write(out: str, name: str, data: dict) -> None:
@@ -237,67 +320,263 @@ def _write(out: str, name: str, data: dict) -> None:
         json.dump(data, fh, indent=1)
 
 
-def _plots(out, rows, corot, hertz, stab, chosen) -> None:
+def plot_convergence(out: str, conv: dict) -> None:
+    """convergence.png: visible-surface difference to the finest mesh against depth, and against h at 3 depths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    d = np.array(conv["depths_m"]) * 1e3
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for lv in conv["levels"][:-1]:
+        a1.plot(d, lv["error_vs_finest_mm"], "o-", ms=3, label=f"h_fine {lv['h_fine_m'] * 1e3:.1f} mm ({lv['dofs']} DOF)")
+    a1.axhline(TARGET * 1e3, color="k", ls="--", lw=0.8, label="target 0.7 mm")
+    a1.set_xlabel("push depth (mm)")
+    a1.set_ylabel("max visible-surface difference to finest (mm)")
+    a1.legend(fontsize=8)
+    h = np.array([lv["h_fine_m"] for lv in conv["levels"][:-1]]) * 1e3
+    for dd in (10.0, 30.0, 50.0):
+        j = int(np.argmin(np.abs(d - dd)))
+        a2.loglog(h, [lv["error_vs_finest_mm"][j] for lv in conv["levels"][:-1]], "o-", label=f"{d[j]:.0f} mm push")
+    a2.set_xlabel("element size under the finger, h_fine (mm)")
+    a2.set_ylabel("difference to finest (mm)")
+    a2.legend(fontsize=8)
+    fig.suptitle(f"neo-Hookean reference, mesh convergence (finest h_fine = {conv['levels'][-1]['h_fine_m'] * 1e3:.1f} mm)"
+                 f": converged = {conv['converged']}", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "convergence.png"), dpi=110)
+    plt.close(fig)
+
+
+def plot_candidates(out: str, cand: dict, fmap: dict) -> None:
+    """accuracy_speed.png (worst visible error 0–50 mm against time per update) and failure_map.png."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    for k, v in cand.items():
+        ax.scatter([v["time_ms"]["median"]], [max(v["errors_m"]) * 1e3], s=60, label=v["name"])
+        ax.annotate(k, (v["time_ms"]["median"], max(v["errors_m"]) * 1e3), fontsize=8)
+    ax.axhline(TARGET * 1e3, color="k", ls="--", lw=0.8, label="target 0.7 mm (1 projector px)")
+    ax.axvline(1.0, color="grey", ls=":", lw=0.8, label="1 kHz")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("time per update (ms, median), shared 2-core CPU")
+    ax.set_ylabel("worst visible-surface error, 0–50 mm push (mm)")
+    ax.set_title("Accuracy vs speed against the neo-Hookean reference", fontsize=10)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "accuracy_speed.png"), dpi=110)
+    plt.close(fig)
+
+    models = list(fmap["models"])
+    fig, axes = plt.subplots(1, len(models), figsize=(5.2 * len(models), 3.8), squeeze=False)
+    d = np.array(fmap["depths_mm"])
+    for ax, k in zip(axes[0], models, strict=True):
+        g = np.array(fmap["models"][k]["error_mm"])
+        for i, a in enumerate(fmap["angles_deg"]):
+            ax.semilogy(d, g[i], "o-", ms=3, label=f"azimuth {a:g}°")
+        ax.axhline(TARGET * 1e3, color="k", ls="--", lw=0.8)
+        ax.fill_between(d, TARGET * 1e3, max(np.nanmax(g), 1.0) * 1.2, color="r", alpha=0.07)
+        ax.set_title(f"{fmap['models'][k]['name']}", fontsize=9)
+        ax.set_xlabel("push depth (mm)")
+        ax.set_ylabel("worst visible error (mm); red: broken")
+        ax.legend(fontsize=7)
+    fig.suptitle("Failure map: where each model leaves the 0.7 mm target", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "failure_map.png"), dpi=110)
+    plt.close(fig)
+
+
+# ---- main ---------------------------------------------------------------------------------------------------------
+def realtime_model(st: Settings, mat: Material, cache_dir: str | None) -> RealtimeModel:
+    """The node's real-time model (linear capacitance part) on the settings' mesh."""
+    rm = RealtimeModel(st.linear_spec, mat, FINGER_R, max_depth=0.06, cache_dir=cache_dir, order=2)
+    _log(f"real-time mesh P2 {st.linear_spec.key()}: {rm.n_nodes} nodes, {len(rm.surface_nodes)} rendered vertices, "
+         f"{'cache hit' if rm.cache_hit else f'precomputed in {rm.precompute_s:.1f} s'}")
+    return rm
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the experiment; returns 0. See the module docstring for the outputs."""
+    args = _parser().parse_args(argv)
+    os.makedirs(args.out, exist_ok=True)
+    mat = Material(args.E, args.nu)
+    st = settings_for(args.quick)
+    t0 = time.perf_counter()
+    cache = ArrayCache(args.cache_dir or None, _log)
+    rm = realtime_model(st, mat, args.cache_dir or None)
+    conv, fine = convergence(st, mat, cache, rm)
+    table, hit, sec = snapshot_table(st, mat, cache)
+    rm.attach_snapshots(table)
+    snap_info = {"snapshot_azimuths_deg": list(st.grid.angles_deg), "snapshot_depth_step_mm": st.grid.depth_step * 1e3,
+                 "snapshot_mesh": st.snap_spec.__dict__, "precompute_s": sec, "precompute_cache_hit": hit,
+                 "table_MB": rm.snapshots.nbytes / 1e6}
+    cases = validation_set(st, mat, cache, rm, fine)
+    cand = candidates(st, mat, rm, table, cases)
+    fmap = failure_map(cases, cand)
+    summ = summary(st, conv, cand, cases, snap_info, mat, time.perf_counter() - t0)
+    _write(args.out, "convergence", conv)
+    _write(args.out, "failure_map", fmap)
+    _write(args.out, "accuracy_speed", {k: {"name": v["name"], "update_ms": v["time_ms"],
+                                            "max_visible_error_mm_0_50": max(v["errors_m"]) * 1e3}
+                                        for k, v in cand.items()})
+    _write(args.out, "summary", summ)
+    if not st.quick or args.write_model_table:
+        with open(MODEL_TABLE_PATH, "w") as fh:
+            json.dump(model_table(cases, cand), fh, indent=1)
+    plot_convergence(args.out, conv)
+    plot_candidates(args.out, cand, fmap)
+    if args.linear_study:
+        linear_study(args.out, mat)
+    _log(json.dumps(summ["realtime"], indent=1))
+    _log(f"done in {time.perf_counter() - t0:.1f} s -> {args.out}")
+    return 0
+
+
+# ---- the linear mesh study (--linear-study): which linear mesh, Hertz check, where linear breaks ---------------------
+def linear_study(out: str, mat: Material) -> None:
+    """Linear P1/P2 meshes against a fine linear P2 solution (``accuracy_table.json``, read by
+    :func:`nodes.fem.choose.choose`), the Hertz exponent check and the linear/corotational stability curve.
+    Writes linear_accuracy_speed, hertz, stability (.json/.png) and accuracy_table.json into ``out``."""
+    from nodes.fem.choose import choose
+    from nodes.fem.mesh import cylinder_mesh
+    from nodes.fem.solver import FemModel
+
+    ref_spec = MeshSpec(0.010, 0.002, 0.015)
+    depths = [0.005, 0.01, 0.02, 0.03, 0.04, 0.05]
+    cands = [(MeshSpec(h, hf, rr), 1) for h, hf, rr in ((0.012, 0.004, 0.012), (0.010, 0.003, 0.012),
+                                                         (0.008, 0.003, 0.012), (0.008, 0.002, 0.015))]
+    cands += [(MeshSpec(h, hf, rr), 2) for h, hf, rr in ((0.016, 0.006, 0.012), (0.012, 0.006, 0.012),
+                                                         (0.012, 0.004, 0.012), (0.012, 0.003, 0.012),
+                                                         (0.010, 0.004, 0.012))]
+    ref_mesh = cylinder_mesh(ref_spec)
+    ref_model = FemModel(ref_mesh, mat, order=2)
+    refs = {d: solve_full(ref_model, finger_at(0.0, d, FINGER_R, ref_mesh.radius, ref_mesh.center)) for d in depths}
+    table, rows = _linear_candidates(cands, ref_spec, ref_model, refs, mat)
+    table["depths"] = depths
+    _write(out, "accuracy_table", table)
+    ch = choose(table, TARGET, 0.005, 0.03, mat.nu, FINGER_R)
+    _log("linear mesh choice over 5-30 mm: " + ch.reason)
+    _write(out, "linear_accuracy_speed", {"candidates": rows, "depth_m": 0.03, "choice": ch.reason})
+    hz = _hertz(mat)
+    _write(out, "hertz", hz)
+    stab = _stability(ch.spec, mat)
+    _write(out, "stability", stab)
+    _plots_linear(out, rows, hz, stab)
+
+
+def _linear_candidates(cands, ref_spec, ref_model, refs, mat):
+    from nodes.fem.choose import evaluate_spec
+
+    table = {"nu": mat.nu, "finger_radius": FINGER_R, "reference": {"spec": ref_spec.__dict__, "order": 2,
+                                                                   "dofs": ref_model.n_dofs}, "candidates": []}
+    rows = []
+    for spec, order in cands:
+        ev = evaluate_spec(spec, ref_model, refs, mat, FINGER_R, order=order)
+        table["candidates"].append(ev)
+        rm = RealtimeModel(spec, mat, FINGER_R, cache_dir=None, order=order)
+        fg = finger_at(0.0, 0.03, FINGER_R, rm.mesh.radius, rm.mesh.center)
+        t = update_ms(rm, [0.0], [0.03], 100)["median"]
+        rows.append({"spec": spec.__dict__, "order": order, "mesh_nodes": ev["mesh_nodes"], "dofs": ev["dofs"],
+                     "precompute_s": rm.precompute_s, "update_ms": t,
+                     "surface_error_mm_at_30mm": ev["surface_error_m"]["0.0300"] * 1e3,
+                     "force_error_pct_at_30mm": ev["force_error_pct"]["0.0300"],
+                     "max_error_mm": max(ev["surface_error_m"].values()) * 1e3})
+        _log(f"  linear P{order} {spec.key()}: err@30 {rows[-1]['surface_error_mm_at_30mm']:.2f} mm, "
+             f"update {t:.3f} ms ({fg.depth * 1e3:.0f} mm)")
+    return table, rows
+
+
+def _hertz(mat: Material) -> dict:
+    """Small-depth force exponent of the linear P2 model against Hertz (Johnson, Contact Mechanics §4.2)."""
+    from nodes.fem.mesh import cylinder_mesh
+    from nodes.fem.solver import FemModel
+
+    spec = MeshSpec(0.012, 0.002, 0.008)
+    depths = [0.0005, 0.00075, 0.001, 0.0015, 0.002]
+    mesh = cylinder_mesh(spec)
+    model = FemModel(mesh, mat, order=2)
+    F = [solve_full(model, finger_at(0.0, d, FINGER_R, mesh.radius, mesh.center)).force for d in depths]
+    if min(F) <= 0:
+        raise RuntimeError(f"Hertz check: no contact at some depth {depths}: forces {F}")
+    slope, _ = np.polyfit(np.log(depths), np.log(F), 1)
+    R_eff = math.sqrt(FINGER_R * (FINGER_R * mesh.radius / (FINGER_R + mesh.radius)))
+    FH = [4.0 / 3.0 * mat.E_star * math.sqrt(R_eff) * d ** 1.5 for d in depths]
+    return {"depths_m": depths, "force_N": F, "hertz_force_N": FH, "exponent": float(slope),
+            "hertz_error_pct": float(abs(slope - 1.5) / 1.5 * 100.0),
+            "finite_size_factor": float(np.mean(np.array(F) / np.array(FH))), "R_eff_m": R_eff,
+            "E_star_Pa": mat.E_star, "mesh": spec.__dict__, "order": 2, "mesh_nodes": len(mesh.points),
+            "note": "bonded contact on a finite cylinder held on its back half; exponent is the check"}
+
+
+def _stability(spec: MeshSpec, mat: Material) -> dict:
+    """Linear against corotational (P1) over depth on ``spec``: strain, inverted tets, force, difference."""
+    from nodes.fem.mesh import cylinder_mesh
+    from nodes.fem.solver import FemModel, element_checks, solve_corotational
+
+    mesh = cylinder_mesh(spec)
+    model = FemModel(mesh, mat)
+    surf = np.flatnonzero(model.boundary & ~model.fixed)
+    depths = [0.0025, 0.005, 0.01, 0.015, 0.02, 0.03, 0.04, 0.05]
+    keys = ("linear_force_N", "corot_force_N", "linear_max_strain", "corot_max_strain", "linear_inverted",
+            "corot_inverted", "lin_vs_corot_mm", "corot_converged")
+    stab = {"depths_m": depths, **{k: [] for k in keys}}
+    u0 = None
+    for d in depths:
+        fg = finger_at(0.0, d, FINGER_R, mesh.radius, mesh.center)
+        lin = solve_full(model, fg)
+        co, _, conv = solve_corotational(model, fg, u0=u0)
+        u0 = co.u
+        s_l, i_l = element_checks(mesh.points, mesh.tets, lin.u)
+        s_c, i_c = element_checks(mesh.points, mesh.tets, co.u)
+        vals = (lin.force, co.force, s_l, s_c, i_l, i_c,
+                float(np.linalg.norm(lin.u[surf] - co.u[surf], axis=1).max() * 1e3), bool(conv))
+        for k, v in zip(keys, vals, strict=True):
+            stab[k].append(v)
+    return stab
+
+
+def _plots_linear(out: str, rows: list, hz: dict, stab: dict) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    n = np.array([r["mesh_nodes"] for r in rows])
-    err = np.array([r["surface_error_mm_at_30mm"] for r in rows])
-    p2 = np.array([r["order"] == 2 for r in rows])
-    up = np.array([r["update_ms"] for r in rows])
-    sm = np.array([r["sparse_ms"] for r in rows])
-    ax.scatter(up[~p2], err[~p2], c="C0", marker="o", label="condensed P1, per update")
-    ax.scatter(up[p2], err[p2], c="C0", marker="D", label="condensed P2, per update")
-    ax.scatter(sm[~p2], err[~p2], c="C1", marker="o", label="full sparse P1, per update")
-    ax.scatter(sm[p2], err[p2], c="C1", marker="D", label="full sparse P2, per update")
-    ax.scatter([c["ms"] for c in corot], [c["surface_error_mm_vs_finest"] for c in corot], c="C2", marker="^",
-               label="corotational (vs finest corot.), per solve")
-    for r, e in zip(rows, err, strict=True):
-        ax.annotate(str(r["mesh_nodes"]), (r["update_ms"], e), fontsize=7)
-    ax.axhline(TARGET * 1e3, color="k", ls="--", lw=0.8, label="target 0.7 mm (1 projector px)")
-    ax.axvline(1.0, color="grey", ls=":", lw=0.8, label="1 kHz")
-    ax.scatter([chosen["update_ms"]], [chosen["surface_error_mm_at_30mm"]], s=150, facecolors="none",
-               edgecolors="r", label="chosen")
+    for order, mk in ((1, "o"), (2, "D")):
+        r = [x for x in rows if x["order"] == order]
+        ax.scatter([x["update_ms"] for x in r], [x["surface_error_mm_at_30mm"] for x in r], marker=mk,
+                   label=f"condensed P{order} (vs linear P2 reference)")
+    ax.axhline(TARGET * 1e3, color="k", ls="--", lw=0.8, label="target 0.7 mm")
     ax.set_xscale("log")
-    ax.set_xlabel("time per update (ms), shared 2-core CPU")
-    ax.set_ylabel("max surface error outside finger, 30 mm push (mm)")
-    ax.set_title(f"Accuracy vs speed (labels: mesh nodes; n = {n.min()}–{n.max()})")
+    ax.set_xlabel("time per update (ms)")
+    ax.set_ylabel("max surface error outside finger, 30 mm (mm)")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(os.path.join(out, "accuracy_speed.png"), dpi=120)
+    fig.savefig(os.path.join(out, "linear_accuracy_speed.png"), dpi=110)
     plt.close(fig)
-
     fig, ax = plt.subplots(figsize=(6, 4))
-    d = np.array(hertz["depths_m"]) * 1e3
-    ax.loglog(d, hertz["force_N"], "o-", label=f"FEM (exponent {hertz['exponent']:.3f})")
-    ax.loglog(d, hertz["hertz_force_N"], "k--", label="Hertz half-space, F ∝ d^1.5")
+    d = np.array(hz["depths_m"]) * 1e3
+    ax.loglog(d, hz["force_N"], "o-", label=f"FEM (exponent {hz['exponent']:.3f})")
+    ax.loglog(d, hz["hertz_force_N"], "k--", label="Hertz half-space, F ∝ d^1.5")
     ax.set_xlabel("push depth (mm)")
     ax.set_ylabel("force (N)")
-    ax.set_title(f"Hertz check: R_eff={hertz['R_eff_m'] * 1e3:.2f} mm, E*={hertz['E_star_Pa'] / 1e3:.1f} kPa, "
-                 f"F/F_H={hertz['finite_size_factor']:.2f}", fontsize=9)
     ax.legend()
     fig.tight_layout()
-    fig.savefig(os.path.join(out, "hertz.png"), dpi=120)
+    fig.savefig(os.path.join(out, "hertz.png"), dpi=110)
     plt.close(fig)
-
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4))
+    fig, ax = plt.subplots(figsize=(6, 4))
     d = np.array(stab["depths_m"]) * 1e3
-    a1.plot(d, stab["linear_force_N"], "o-", label="linear")
-    a1.plot(d, stab["corot_force_N"], "^-", label="corotational")
-    a1.set_xlabel("push depth (mm)")
-    a1.set_ylabel("force (N)")
-    a1.legend()
-    a2.plot(d, stab["lin_vs_corot_mm"], "o-", label="max |u_lin − u_corot| (mm)")
-    a2.plot(d, stab["linear_inverted"], "s-", label="inverted tets, linear")
-    a2.plot(d, stab["corot_inverted"], "^-", label="inverted tets, corotational")
-    a2.plot(d, np.array(stab["linear_max_strain"]) * 10, "x--", label="linear max strain ×10")
-    a2.set_xlabel("push depth (mm)")
-    a2.set_yscale("symlog")
-    a2.legend(fontsize=7)
-    fig.suptitle("Where linear breaks (chosen mesh)")
+    ax.plot(d, stab["lin_vs_corot_mm"], "o-", label="max |u_lin − u_corot| (mm)")
+    ax.plot(d, stab["linear_inverted"], "s-", label="inverted tets, linear")
+    ax.plot(d, stab["corot_inverted"], "^-", label="inverted tets, corotational")
+    ax.set_xlabel("push depth (mm)")
+    ax.set_yscale("symlog")
+    ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(os.path.join(out, "stability.png"), dpi=120)
+    fig.savefig(os.path.join(out, "stability.png"), dpi=110)
     plt.close(fig)

@@ -444,33 +444,28 @@ def parse_toplevel_set(item: str, node_names) -> tuple[str, Any] | None:
 
 
 def twin_registration_path(twin: TwinSpec, cache_root: str | None = None) -> Path:
-    """Where :func:`twin_registration` caches the ``display.yaml`` of ``twin``'s realism and seed."""
-    root = Path(cache_root or os.environ.get("FLEXSHEET_CACHE", "~/.cache/flexsheet")).expanduser()
-    return root / "display_calib" / f"{twin.realism}_seed{twin.truth_seed}" / "display.yaml"
+    """Where :func:`twin_registration` caches the ``display.yaml`` of ``twin``'s realism and seed (the cache of
+    :func:`flexsheet.calibration.procedures.sim_display_calib`)."""
+    root = Path(cache_root or os.environ.get("FLEXSHEET_CACHE") or "~/.cache/flexsheet").expanduser()
+    return root / "display" / f"{twin.realism}-{twin.truth_seed}" / "display.yaml"
 
 
 def twin_registration(twin: TwinSpec, print_fn=print, cache_root: str | None = None) -> str:
-    """Run the display registration in the twin for ``twin`` (``flexsheet calibrate display --sim``), cached per
-    realism and seed under ``$FLEXSHEET_CACHE`` (default ``~/.cache/flexsheet``)/``display_calib/``; returns the
-    ``display.yaml`` path. The estimators get only this file, never the truth. Raises :class:`LaunchError`
-    when the registration fails (its last output lines in the message)."""
-    import subprocess
+    """Run the display registration in the twin for ``twin`` (the procedures of ``flexsheet calibrate display
+    --sim``: camera pose, projector, arm bases, against images rendered from the hidden truth), cached per
+    realism, seed, options and procedure version; returns the ``display.yaml`` path. The estimators get only
+    this file, never the truth. Raises :class:`LaunchError` when the registration fails."""
+    from flexsheet.calibration.procedures import sim_display_calib
 
-    target = twin_registration_path(twin, cache_root)
-    out_dir = target.parent
-    if target.exists():
-        print_fn(f"[launch] twin registration: cached {target}")
-        return str(target)
-    print_fn(f"[launch] twin registration ({twin.realism}, truth seed {twin.truth_seed}): running the "
-             f"calibration procedures in the twin once (flexsheet calibrate display --sim) ...")
-    cmd = [sys.executable, "-m", "flexsheet", "calibrate", "display", "--sim", "--truth-seed",
-           str(twin.truth_seed), "--realism", twin.realism, "--out", str(out_dir)]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0 or not target.exists():
-        tail = " | ".join((proc.stdout + proc.stderr).strip().splitlines()[-4:])
-        raise LaunchError(f"twin registration failed (exit {proc.returncode}): {' '.join(cmd[2:])}: {tail}")
-    print_fn(f"[launch] twin registration: wrote {target}")
-    return str(target)
+    print_fn(f"[launch] twin registration ({twin.realism}, truth seed {twin.truth_seed}): the calibration "
+             f"procedures in the twin (cached per seed; the first run of a seed takes ~20-60 s) ...")
+    try:
+        path = sim_display_calib(twin.truth_seed, twin.realism, cache_root=cache_root,
+                                 progress=lambda m: print_fn(f"[launch] {m}"))
+    except (ValueError, RuntimeError, OSError) as exc:
+        raise LaunchError(f"twin registration (truth seed {twin.truth_seed}) failed: {exc}") from None
+    print_fn(f"[launch] twin registration: {path}")
+    return str(path)
 
 
 def display_calib_path(lf: LaunchFile, out: str | None = None) -> str | None:

@@ -24,9 +24,12 @@ from nodes.fem.mesh import MeshSpec, cylinder_mesh
 from nodes.fem.solver import FemModel, solve_full
 
 __all__ = ["Choice", "evaluate_spec", "choose", "load_table", "visible_mask", "TABLE_PATH", "DEFAULT_SPEC",
-           "DEFAULT_ORDER"]
+           "DEFAULT_ORDER", "choose_model", "load_model_table", "MODEL_TABLE_PATH", "MODEL_PREFERENCE"]
 
 TABLE_PATH = os.path.join(os.path.dirname(__file__), "accuracy_table.json")
+MODEL_TABLE_PATH = os.path.join(os.path.dirname(__file__), "model_table.json")
+#: simplest first: linear needs no nonlinear precompute; the snapshots need the (cached) neo-Hookean table
+MODEL_PREFERENCE = ("linear", "corotational", "snapshots")
 DEFAULT_SPEC = MeshSpec(0.012, 0.004, 0.012)
 DEFAULT_ORDER = 2
 
@@ -117,6 +120,41 @@ def choose(table: dict | None, target: float, depth_min: float, depth_max: float
     err, n, spec, order = min(rows, key=lambda r: r[0])
     return Choice(spec, order, err, False, f"target {target * 1e3:.2f} mm not met by any tabulated mesh; most "
                                            f"accurate P{order} {spec.key()} ({n} DOF) has {err * 1e3:.2f} mm")
+
+
+def choose_model(table: dict | None, target: float, depth_max: float, update_ms_max: float = 1.0
+                 ) -> tuple[str, str]:
+    """(model kind, reason): the first of :data:`MODEL_PREFERENCE` whose largest visible-surface error against
+    the nonlinear reference, over every tabulated contact position and depth ≤ ``depth_max`` (m), is within
+    ``target`` (m) at ≤ ``update_ms_max`` ms per update; the most accurate one when none is. ``table`` is
+    ``nodes/fem/model_table.json`` (written by ``flexsheet experiment fem``); without it: "snapshots".
+    Raises ``ValueError`` on a non-positive target or depth."""
+    if not (math.isfinite(target) and target > 0):
+        raise ValueError(f"accuracy target must be > 0 m, got {target!r}")
+    if not (math.isfinite(depth_max) and depth_max > 0):
+        raise ValueError(f"depth_max must be > 0 m, got {depth_max!r}")
+    if not table or not table.get("candidates"):
+        return "snapshots", "no model table: nonlinear snapshots by default"
+    rows = []
+    for c in table["candidates"]:
+        errs = [v for k, v in c["max_error_m_by_depth"].items() if float(k) <= depth_max + 1e-9]
+        if errs and c.get("kind") in MODEL_PREFERENCE:
+            rows.append((c["kind"], max(errs), c.get("update_ms", float("inf")), c.get("name", c["kind"])))
+    if not rows:
+        return "snapshots", "model table has no depth in range: nonlinear snapshots by default"
+    for kind in MODEL_PREFERENCE:
+        for k, err, ms, name in rows:
+            if k == kind and err <= target and ms <= update_ms_max:
+                return kind, (f"{name}: worst visible error {err * 1e3:.2f} mm <= {target * 1e3:.2f} mm over 0-"
+                              f"{depth_max * 1e3:.0f} mm, {ms:.2f} ms/update")
+    k, err, ms, name = min(rows, key=lambda r: r[1])
+    return k, (f"no model meets {target * 1e3:.2f} mm over 0-{depth_max * 1e3:.0f} mm; most accurate {name}: "
+               f"{err * 1e3:.2f} mm, {ms:.2f} ms/update")
+
+
+def load_model_table(path: str = MODEL_TABLE_PATH) -> dict | None:
+    """The model table (dict) or None if the file is missing or unreadable."""
+    return load_table(path)
 
 
 def load_table(path: str = TABLE_PATH) -> dict | None:

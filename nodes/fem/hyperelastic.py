@@ -18,8 +18,11 @@ the accuracy reference the real-time models are judged against (docs/fem.md, "Ph
   imposed displacement (the linear model's contact): material slides along it and wraps around it.
 * **Support** as the linear model's: outer boundary points with x ≤ x_O fixed. Symmetry planes y = y_O
   (a push at y = y_O) and z = z_O (a push at azimuth 0) carry the normal displacement 0.
-* **Newton**: minimise Π = ∫W dV + E_c; each step solves K_t δ = −r (sparse Cholesky), then a backtracking line
-  search keeps det F > 0 at every quadrature point and decreases Π (Armijo). Load stepping: depth in steps
+* **Newton**: minimise Π = ∫W dV + E_c; each step solves K_t δ = −r (sparse LDLᵀ, QDLDL, which also tells
+  whether K_t is positive definite; where it is not — far from equilibrium — the material tangent is projected
+  to its positive part, Teran et al. 2005), then a backtracking line search keeps det F > 0 at every quadrature
+  point and decreases Π (Armijo), with at most 1 mm of motion per iteration so no surface point can jump
+  across the finger. Load stepping: depth in steps
   of ``step`` m with a linear-extrapolation predictor. Converged when ‖δ‖∞ < ``tol_u`` and the free
   residual is below ``tol_r`` × the finger force scale.
 
@@ -28,10 +31,7 @@ Units SI: m, N, Pa. Display frame (cylinder axis along +y through ``mesh.center`
 
 from __future__ import annotations
 
-import contextlib
 import math
-import os
-import threading
 import time
 from dataclasses import dataclass, field
 
@@ -40,9 +40,10 @@ import scipy.sparse as sp
 
 from nodes.fem.material import Material
 from nodes.fem.mesh import TetMesh, cylinder_part_mesh
-from nodes.fem.solver import factor
 
-__all__ = ["RefSpec", "HyperelasticModel", "PathState", "Capsule", "capsule_at", "solve_path", "reference_mesh"]
+__all__ = ["SOLVER_VERSION", "RefSpec", "HyperelasticModel", "PathState", "Capsule", "capsule_at", "solve_path", "reference_mesh"]
+
+SOLVER_VERSION = "nh-1"     #: bump when the reference's formulation or defaults change (cache keys)
 
 
 @dataclass(frozen=True)
@@ -433,25 +434,15 @@ def _pen(g: np.ndarray, k: float, eps: float):
     return phi, d1, d2
 
 
-@contextlib.contextmanager
-def _quiet_stderr():
-    """Silence CHOLMOD's C-level "not positive definite" warning (fd 2) — main thread only, since the file
-    descriptor is process-wide; elsewhere a no-op."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    try:
-        saved = os.dup(2)
-    except OSError:
-        yield
-        return
-    try:
-        with open(os.devnull, "w") as null:
-            os.dup2(null.fileno(), 2)
-            yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
+def _ldl(K: sp.spmatrix):
+    """LDLᵀ factorisation of the symmetric ``K`` (QDLDL: Stellato et al., OSQP's sparse LDLᵀ with AMD ordering);
+    returns (solver with ``.solve(b)``, number of non-positive pivots — 0 iff K is positive definite).
+    Unlike a Cholesky that throws on an indefinite matrix, it reports the inertia, so no factorisation is
+    wasted (nor, with cholespy, leaked)."""
+    import qdldl
+
+    s = qdldl.Solver(sp.triu(K, format="csc"))
+    return s, int(np.count_nonzero(s.factors()[1] <= 0))
 
 
 def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, iters: int, tol_u: float,
@@ -467,13 +458,16 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
         r, K = model.residual_tangent(u, caps, k)
         rf = np.zeros(model.n)
         rf[free] = r[free]
-        try:
-            with _quiet_stderr():
-                lu = factor(model.constrained(K))
-        except ValueError:          # not positive definite (far from equilibrium): projected tangent, this step
+        lu, neg = _ldl(model.constrained(K))
+        if neg:                     # not positive definite (far from equilibrium): projected tangent, this step
             state["projected"] = state.get("projected", 0) + 1
-            r, K = model.residual_tangent(u, caps, k, project=True)
-            lu = factor(model.constrained(K))
+            _, K = model.residual_tangent(u, caps, k, project=True)
+            Kc = model.constrained(K)
+            lu, neg = _ldl(Kc)
+            shift = 1e-6 * float(np.abs(Kc.diagonal()).max())
+            while neg and shift < 1e3 * float(np.abs(Kc.diagonal()).max()):
+                lu, neg = _ldl(Kc + shift * sp.identity(model.n, format="csr"))
+                shift *= 10.0
         delta = -lu.solve(rf)
         if not np.all(np.isfinite(delta)):
             raise FloatingPointError(f"non-finite Newton step at iteration {it}")

@@ -6,10 +6,15 @@ frame, float32), faces, contact force N, local stiffness dF/dd N/m, depth, metho
 ``source_stamp`` = the fingertip's ``exposure_stamp``.
 
 Start-up (``setup``): choose the mesh from the accuracy table (:mod:`nodes.fem.choose`, logged), then load the
-capacitance matrices from the disk cache or precompute them (logged with timing); optionally build the
-corotational depth table in a background thread (cached too). A lost marker publishes the rest shape with
-``valid=False, status="rejected:marker_lost"``. NaN, out-of-object or too-deep fingertips raise
-:class:`InputRejected` (one log line, counted in diagnostics; the node keeps running).
+capacitance matrices from the disk cache or precompute them (logged with timing). Then the model the scene
+needs (:func:`nodes.fem.choose.choose_model`, from ``nodes/fem/model_table.json``): linear where it meets the
+accuracy target over ``depth_max``, otherwise the nonlinear snapshots (:mod:`nodes.fem.snapshots`), loaded
+from the cache; when they are not cached the node serves the linear model and either builds them in a
+background thread at low priority (``snapshot_build``) or says how to build them
+(``flexsheet experiment fem``). The diagnostics message tells which model is being served and why.
+A lost marker publishes the rest shape with ``valid=False, status="rejected:marker_lost"``. NaN,
+out-of-object or too-deep fingertips raise :class:`InputRejected` (one log line, counted in diagnostics; the
+node keeps running).
 """
 
 from __future__ import annotations
@@ -24,10 +29,11 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from messages import Fingertip, ObjectDeformation, topics
-from nodes.fem.choose import choose, load_table
+from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
+from nodes.fem.choose import choose, choose_model, load_model_table, load_table
 from nodes.fem.material import Material
 from nodes.fem.mesh import MeshSpec
-from nodes.fem.realtime import DEFAULT_CACHE_DIR, RealtimeModel
+from nodes.fem.realtime import RealtimeModel
 
 __all__ = ["FemParams", "FemNode"]
 
@@ -43,7 +49,11 @@ class FemParams(BaseModel):
     when all of h, h_fine are > 0; ``arc_deg``: half-angle of the working arc (deg) whose neighbourhood gets
     the precomputed contact region and refinement (0 = the front centre, the paper's push; elsewhere the full
     sparse solve is used); ``nonlinear``: build the corotational depth table (background thread);
-    ``nonlinear_steps``: depth samples of that table; ``use_prediction``: use ``predicted_position``.
+    ``nonlinear_steps``: depth samples of that table; ``use_prediction``: use ``predicted_position``;
+    ``model``: "auto" (the model table decides), "linear" or "snapshots"; ``snapshot_build``: build missing
+    snapshots in a background thread (heavy: tens of minutes on a 2-core machine; else run
+    ``flexsheet experiment fem``); ``snapshot_axial_max`` m: largest axial offset of the push served by the
+    snapshots (translation along the axis).
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -62,9 +72,12 @@ class FemParams(BaseModel):
     refine_radius: float = Field(default=0.012, ge=0.0)
     order: int = Field(default=2, ge=1, le=2)
     arc_deg: float = Field(default=0.0, ge=0.0, le=90.0)
-    nonlinear: bool = True
+    nonlinear: bool = False
     nonlinear_steps: int = Field(default=11, ge=2, le=101)
     use_prediction: bool = False
+    model: str = Field(default="auto", pattern="^(auto|linear|snapshots)$")
+    snapshot_build: bool = False
+    snapshot_axial_max: float = Field(default=0.01, ge=0.0, le=0.06)
 
 
 class FemNode(Node):
@@ -95,27 +108,78 @@ class FemNode(Node):
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
         if p.nonlinear:
             threading.Thread(target=self._build_nonlinear, name="fem-corotational", daemon=True).start()
+        self._setup_snapshots(mat)
+
+    def _setup_snapshots(self, mat: Material) -> None:
+        """Attach the nonlinear snapshots when the scene needs them (cache hit), else say why not."""
+        from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_or_build
+
+        p: FemParams = self.params
+        kind, why = ("linear", "model=linear") if p.model == "linear" else (
+            ("snapshots", "model=snapshots") if p.model == "snapshots" else
+            choose_model(load_model_table(), p.accuracy_target, p.depth_max))
+        self.log.info("fem: real-time model: %s (%s)", kind, why)
+        if kind != "snapshots":
+            self.state_message = f"fem: linear model ({why})"
+            return
+        cache = ArrayCache(p.cache_dir or None, self.log.info)
+        table, _, _ = load_or_build(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, p.finger_radius, build=False)
+        if table is not None:
+            self._attach(table, "loaded from cache")
+            return
+        if not p.snapshot_build:
+            self.state_message = ("fem: nonlinear snapshots not cached - serving the LINEAR model (build them with "
+                                  "`flexsheet experiment fem`, or set snapshot_build=true)")
+            self.log.warning(self.state_message)
+            return
+        self.state_message = "fem: building nonlinear snapshots in the background - serving the LINEAR model"
+        self.log.warning(self.state_message)
+        threading.Thread(target=self._build_snapshots, args=(cache, mat), name="fem-snapshots",
+                         daemon=True).start()
+
+    def _attach(self, table: dict, how: str) -> None:
+        p: FemParams = self.params
+        with self._lock:
+            self.model.attach_snapshots(table, axial_max=p.snapshot_axial_max)
+        s = self.model.snapshots
+        self.state_message = (f"fem: nonlinear snapshots {how}: |angle| <= {np.degrees(s.angle_max):.0f} deg, "
+                              f"depth <= {s.depth_max * 1e3:.0f} mm ({s.nbytes / 1e6:.0f} MB)")
+        self.log.info(self.state_message)
+
+    def _build_snapshots(self, cache: ArrayCache, mat: Material) -> None:
+        from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_or_build
+
+        try:
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)   # this thread only (Linux)
+        except (OSError, AttributeError):
+            pass
+        t = time.perf_counter()
+        try:
+            table, _, _ = load_or_build(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, self.params.finger_radius,
+                                        build=True, log=self.log.info)
+            self._attach(table, f"built in {time.perf_counter() - t:.0f} s")
+        except Exception:  # noqa: BLE001 - background build must never take the node down
+            self.state_message = "fem: building the nonlinear snapshots failed - serving the LINEAR model"
+            self.log.exception(self.state_message)
 
     def _build_nonlinear(self) -> None:
         m = self.model
         p: FemParams = self.params
         depths = np.linspace(0.0, min(p.depth_max, p.max_depth), p.nonlinear_steps)
-        path = (os.path.join(p.cache_dir, f"corotational_{m.cache_key}_{p.nonlinear_steps}_{depths[-1]:.4f}.npz")
-                if p.cache_dir else None)
+        cache = ArrayCache(p.cache_dir or None, self.log.info)
+        key = cache_key(m.cache_key, p.nonlinear_steps, f"{depths[-1]:.4f}")
         t = time.perf_counter()
-        try:
-            if path and os.path.exists(path):
-                z = np.load(path)
-                m.nonlinear = {k: z[k] for k in ("angles", "depths", "U", "F", "inverted")}
-                self.log.info("fem: corotational table loaded from cache %s", path)
-                return
+
+        def build() -> dict:
             self.log.info("fem: building corotational table (%d depths) in the background ...", len(depths))
             m.build_nonlinear_table(depths)
-            if path:
-                os.makedirs(p.cache_dir, exist_ok=True)
-                np.savez(path + ".tmp.npz", **m.nonlinear)
-                os.replace(path + ".tmp.npz", path)
-            self.log.info("fem: corotational table ready in %.1f s", time.perf_counter() - t)
+            return dict(m.nonlinear)
+
+        try:
+            z, hit, _ = cache.get_or_compute("corotational", key, build, "corotational table")
+            m.nonlinear = {k: z[k] for k in ("angles", "depths", "U", "F", "inverted")}
+            if not hit:
+                self.log.info("fem: corotational table ready in %.1f s", time.perf_counter() - t)
         except Exception:  # noqa: BLE001 - background build must never take the node down
             self.log.exception("fem: corotational table failed; linear only")
 
@@ -125,7 +189,7 @@ class FemNode(Node):
         if not msg.valid:
             with self._lock:
                 m.reset()
-            self._publish(msg, m._rest, 0.0, 0.0, 0.0, np.zeros(3), "none", 0.0, "rejected:marker_lost", False)
+            self._publish(msg, m.rest_vertices, 0.0, 0.0, 0.0, np.zeros(3), "none", 0.0, "rejected:marker_lost", False)
             return
         tip = msg.predicted_position if self.params.use_prediction else msg.position
         try:

@@ -1,23 +1,28 @@
-"""The real-time FEM model the node runs (pure apart from its optional disk cache of precomputed matrices).
+"""The real-time FEM model the node runs (pure apart from its optional disk cache of precomputed arrays).
 
-:class:`RealtimeModel` = mesh + P1 model + capacitance solver (James & Pai 2001) over the candidate contact
-region, with the full sparse solve as fallback when the finger leaves that region, failure checks on a
-strain-monitor zone (surface + interior nodes near the contact region), and an optional geometrically
-nonlinear mode: a corotational table over push depth at the working-arc points, precomputed and
-interpolated at run time (the "precompute offline over the finger's state" approach of Niroomandi et al.
-2013 / Filipovič & Peterlík 2009, with corotational FEM as the offline model).
+:class:`RealtimeModel` = mesh + linear P2 model + capacitance solver (James & Pai 2001) over the candidate
+contact region, with the full sparse solve as fallback when the finger leaves that region, failure checks on a
+strain-monitor zone (surface + interior nodes near the contact region), and the geometrically nonlinear mode:
+
+* **nonlinear snapshots** (:mod:`nodes.fem.snapshots`, Peterlík et al. 2010): neo-Hookean reference solutions
+  (:mod:`nodes.fem.hyperelastic`) precomputed over (contact azimuth, depth), rotated with the finger and
+  interpolated per update. When attached (:meth:`RealtimeModel.attach_snapshots`) and the push lies in the
+  table, this is what the node draws (``method = "snapshots"``); the linear model serves everything else.
+* the older corotational depth table (Niroomandi et al. 2013 / Filipovič & Peterlík 2009 with corotational FEM
+  offline; unvalidated, off by default).
+
+All precomputed arrays go through :class:`nodes.fem.cache.ArrayCache`.
 """
 
 from __future__ import annotations
 
-import hashlib
 import math
-import os
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
+from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
 from nodes.fem.contact import Finger, finger_at, finger_from_tip
 from nodes.fem.material import Material
 from nodes.fem.mesh import MeshSpec, TetMesh, arc_points, cylinder_mesh
@@ -33,8 +38,7 @@ from nodes.fem.solver import (
 
 __all__ = ["RealtimeModel", "Update", "DEFAULT_CACHE_DIR"]
 
-DEFAULT_CACHE_DIR = os.path.join(os.path.expanduser("~"), ".cache", "flexsheet", "fem")
-_CACHE_VERSION = "1"
+_CACHE_VERSION = "2"
 
 
 @dataclass
@@ -81,52 +85,26 @@ class RealtimeModel:
         if not (math.isfinite(strain_limit) and strain_limit > 0):
             raise ValueError(f"strain_limit must be > 0, got {strain_limit!r}")
         log = log or (lambda s: None)
+        self._log = log
         t0 = time.perf_counter()
         self.spec, self.material, self.order = spec, material, order
         self.finger_radius, self.max_depth, self.strain_limit = finger_radius, max_depth, strain_limit
         reach = finger_radius + 0.002 if reach is None else reach
         import gmsh
 
-        key = hashlib.sha256("|".join([_CACHE_VERSION, spec.key(), str(gmsh.__version__), material.key(),
-                                       f"{reach:.9g}", f"{finger_radius:.9g}", f"P{order}"]).encode()).hexdigest()[:24]
-        self.cache_key = key
-        self.cache_hit = False
-        path = os.path.join(cache_dir, f"capacitance_{key}.npz") if cache_dir else None
-        self.solver = None
+        self.cache_key = cache_key(_CACHE_VERSION, spec.key(), gmsh.__version__, material.key(), f"{reach:.9g}",
+                                   f"{finger_radius:.9g}", f"P{order}")
+        self.cache = ArrayCache(cache_dir, log)
         self._model = self._p1 = None
-        if path and os.path.exists(path):
-            try:
-                z = np.load(path)
-                self.mesh = TetMesh(z["points"], z["tets"], z["faces"], z["fixed"], spec)
-                self.solver = CapacitanceSolver.from_arrays(z)
-                monitor = z["monitor"]
-                self.cache_hit = True
-                log(f"fem: capacitance matrices loaded from cache {path}")
-            except (OSError, ValueError, KeyError) as exc:
-                log(f"fem: cache {path} unusable ({exc}); recomputing")
-        if self.solver is None:
-            self.mesh = cylinder_mesh(spec)
-            m = self.mesh
-            model = self.model
-            arc = arc_points(m.radius, m.center, spec.arc_deg, 0.001)
-            dist = _dist_to_points(model.points, arc)
-            surf = model.boundary & ~model.fixed
-            candidates = surf & (dist <= reach)
-            monitor = (dist <= reach + 2 * spec.h_fine)[:len(m.points)]
-            corner = np.arange(len(model.points)) < len(m.points)
-            outputs = (surf | (np.pad(monitor, (0, len(model.points) - len(m.points))) & ~model.fixed)) & corner
-            log(f"fem: precomputing capacitance matrices for {int(candidates.sum())} candidate contact points "
-                f"on a {len(m.points)}-node P{order} mesh ...")
-            self.solver = CapacitanceSolver(model, candidates, outputs)
-            if path:
-                try:
-                    os.makedirs(cache_dir, exist_ok=True)
-                    tmp = path + ".tmp.npz"
-                    np.savez(tmp, points=m.points, tets=m.tets, faces=m.faces, fixed=m.fixed, monitor=monitor,
-                             **self.solver.arrays())
-                    os.replace(tmp, path)
-                except OSError as exc:
-                    log(f"fem: could not write cache {path}: {exc}")
+        self._reach = reach
+        z, self.cache_hit, _ = self.cache.get_or_compute("capacitance", self.cache_key, self._precompute,
+                                                         "capacitance matrices")
+        try:
+            self.mesh = TetMesh(z["points"], z["tets"], z["faces"], z["fixed"], spec)
+            self.solver = CapacitanceSolver.from_arrays(z)
+            monitor = z["monitor"]
+        except (KeyError, ValueError) as exc:
+            raise ValueError(f"capacitance cache entry {self.cache_key} is inconsistent: {exc}") from exc
         m = self.mesh
         self.n_candidates = len(self.solver.cand_pts)
         self.surface_nodes = m.surface_nodes
@@ -142,8 +120,36 @@ class RealtimeModel:
         self._out_points = m.points[self.solver.out_pts]
         self._mon_Dm_inv = _grad_ops(self._out_points, self._mon_tets)[0] if tet_ok.any() else None
         self.nonlinear = None
+        self.snapshots = None
         self._anchor = None
         self.precompute_s = time.perf_counter() - t0
+
+    def attach_snapshots(self, table: dict, axial_max: float = 0.01) -> None:
+        """Serve pushes inside the nonlinear snapshot ``table`` (:func:`nodes.fem.snapshots.build_table`) from
+        it; raises ``ValueError`` when the table is inconsistent. Thread-safe to call while updates run (the
+        model is swapped in one assignment)."""
+        from nodes.fem.snapshots import SnapshotModel
+
+        self.snapshots = SnapshotModel(table, self._rest.astype(np.float64), axial_max=axial_max, E=self.material.E)
+
+    def _precompute(self) -> dict:
+        """Mesh, candidate/output/monitor sets and the capacitance matrices (the cache entry's arrays)."""
+        spec, order, reach = self.spec, self.order, self._reach
+        self.mesh = cylinder_mesh(spec)
+        m = self.mesh
+        model = self.model
+        arc = arc_points(m.radius, m.center, spec.arc_deg, 0.001)
+        dist = _dist_to_points(model.points, arc)
+        surf = model.boundary & ~model.fixed
+        candidates = surf & (dist <= reach)
+        monitor = (dist <= reach + 2 * spec.h_fine)[:len(m.points)]
+        corner = np.arange(len(model.points)) < len(m.points)
+        outputs = (surf | (np.pad(monitor, (0, len(model.points) - len(m.points))) & ~model.fixed)) & corner
+        self._log(f"fem: precomputing capacitance matrices for {int(candidates.sum())} candidate contact points "
+                  f"on a {len(m.points)}-node P{order} mesh ...")
+        solver = CapacitanceSolver(model, candidates, outputs)
+        return {"points": m.points, "tets": m.tets, "faces": m.faces, "fixed": m.fixed, "monitor": monitor,
+                **solver.arrays()}
 
     @property
     def model(self) -> FemModel:
@@ -160,6 +166,11 @@ class RealtimeModel:
         if self._p1 is None:
             self._p1 = self.model if self.order == 1 else FemModel(self.mesh, self.material, order=1)
         return self._p1
+
+    @property
+    def rest_vertices(self) -> np.ndarray:
+        """Undeformed rendered surface vertices (S, 3) float32 m, display frame (a copy)."""
+        return self._rest.copy()
 
     @property
     def n_nodes(self) -> int:
@@ -210,7 +221,24 @@ class RealtimeModel:
         self._anchor = None
 
     def update_finger(self, fg: Finger) -> Update:
-        """As :meth:`update` for a prepared :class:`Finger`."""
+        """As :meth:`update` for a prepared :class:`Finger`: the nonlinear snapshots when attached and the push
+        lies in their table, the linear model otherwise."""
+        snap = self.snapshots
+        if snap is not None and fg.depth > 0 and snap.covers(fg.angle, fg.depth, fg.axial):
+            return self._update_snapshots(snap, fg)
+        return self._update_linear(fg)
+
+    def _update_snapshots(self, snap, fg: Finger) -> Update:
+        us, force, stiff, strain, inv = snap.surface(fg.angle, fg.depth, fg.axial)
+        if not (np.all(np.isfinite(us)) and math.isfinite(force) and math.isfinite(stiff)):
+            return Update(self._rest.copy(), 0.0, 0.0, fg.depth, fg.contact_point.copy(), "snapshots", 0.0, 0,
+                          "nonlinear_invalid:non_finite", False)
+        status = "ok" if inv == 0 else f"nonlinear_invalid:inverted={inv}"
+        verts = (self._rest + us.astype(np.float32)).astype(np.float32)
+        return Update(verts, force, stiff, fg.depth, fg.contact_point.copy(), "snapshots", strain, inv, status,
+                      True)
+
+    def _update_linear(self, fg: Finger) -> Update:
         method = "condensed"
         try:
             sol = self.solver.solve(fg)

@@ -33,7 +33,8 @@ import numpy as np
 from nodes.fem.hyperelastic import HyperelasticModel, RefSpec, reference_mesh, solve_path
 from nodes.fem.material import Material
 
-__all__ = ["SnapshotGrid", "SnapshotModel", "build_table", "surface_coords", "TABLE_VERSION"]
+__all__ = ["SnapshotGrid", "SnapshotModel", "build_table", "surface_coords", "TABLE_VERSION", "DEFAULT_GRID",
+           "DEFAULT_REF_SPEC", "table_key", "load_or_build"]
 
 TABLE_VERSION = "snap-1"
 
@@ -98,8 +99,37 @@ class SnapshotGrid:
         return np.linspace(0.0, radius, n + 1)
 
 
-def _rot(delta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    return np.cos(delta), np.sin(delta)
+DEFAULT_GRID = SnapshotGrid()
+#: mesh of the snapshot solves: P2, 12 mm elements, 3 mm within 18 mm of the push point (docs/fem.md)
+DEFAULT_REF_SPEC = RefSpec(0.012, 0.003, 0.018, half_z=True)
+
+
+def table_key(grid: SnapshotGrid, spec: RefSpec, nu: float, finger_radius: float) -> str:
+    """Cache key of a snapshot table. The displacement field does not depend on E (the contact penalty scales
+    with E), so only ν enters; forces are scaled by E at run time."""
+    import gmsh
+
+    from nodes.fem.cache import cache_key
+    from nodes.fem.hyperelastic import SOLVER_VERSION
+
+    return cache_key(TABLE_VERSION, SOLVER_VERSION, grid.key(), spec.key(), gmsh.__version__, f"nu={nu:.9g}",
+                     f"r={finger_radius:.9g}")
+
+
+def load_or_build(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float,
+                  build: bool = True, log=None) -> tuple[dict | None, bool, float]:
+    """(table or None, cache hit, seconds): the table from ``cache`` (:class:`nodes.fem.cache.ArrayCache`), or
+    built and stored when ``build``."""
+    key = table_key(grid, spec, material.nu, finger_radius)
+    z = cache.load("snapshots", key)
+    if z is not None:
+        return z, True, 0.0
+    if not build:
+        return None, False, 0.0
+    t = time.perf_counter()
+    z = build_table(grid, spec, material, finger_radius, log=log)
+    cache.save("snapshots", key, z)
+    return z, False, time.perf_counter() - t
 
 
 def surface_coords(points: np.ndarray, radius: float, length: float, center: np.ndarray,
@@ -160,7 +190,7 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
         seconds[i] = time.perf_counter() - t0
         if progress:
             progress(i, ang, states, model)
-    return {"version": np.array(TABLE_VERSION), "angles": np.radians(np.asarray(grid.angles_deg, float)),
+    return {"version": np.array(TABLE_VERSION), "E": np.array(material.E), "angles": np.radians(np.asarray(grid.angles_deg, float)),
             "depths": depths, "theta": th, "y": ys, "rho": rh, "side": side, "cap": capf, "force": force,
             "max_strain": strain, "inverted": inverted, "min_detF": min_detf, "newton": newton,
             "seconds": seconds, "radius": np.array(R), "length": np.array(L), "center": np.asarray(c, float)}
@@ -191,11 +221,12 @@ class SnapshotModel:
     """Run-time look-up of a snapshot table (dict of arrays from :func:`build_table`, e.g. from the cache).
 
     ``axial_max`` m: largest |axial offset| served (by translation along y); ``vertices`` (S, 3) m the rendered
-    surface vertices (undeformed, display frame) whose displacements :meth:`surface` returns.
-    Raises ``ValueError`` when the table is inconsistent.
+    surface vertices (undeformed, display frame) whose displacements :meth:`surface` returns; ``E`` Pa: the
+    object's modulus (forces scale with E; displacements do not). Raises ``ValueError`` when the table is
+    inconsistent.
     """
 
-    def __init__(self, table: dict, vertices: np.ndarray, axial_max: float = 0.01):
+    def __init__(self, table: dict, vertices: np.ndarray, axial_max: float = 0.01, E: float | None = None):
         t = table
         if str(t.get("version", "")) != TABLE_VERSION:
             raise ValueError(f"snapshot table version {t.get('version')!r} != {TABLE_VERSION!r}")
@@ -207,7 +238,7 @@ class SnapshotModel:
         if self.side.shape != (na, nd, len(self.theta), len(self.ys), 3) or \
                 self.cap.shape != (na, nd, len(self.theta), len(self.rhos), 3):
             raise ValueError(f"snapshot table shapes {self.side.shape}, {self.cap.shape} do not match its axes")
-        self.force = np.asarray(t["force"], float)
+        self.force = np.asarray(t["force"], float) * ((E / float(t["E"])) if E else 1.0)
         self.max_strain = np.asarray(t["max_strain"], float)
         self.inverted = np.asarray(t["inverted"], np.int64)
         self.radius, self.length = float(t["radius"]), float(t["length"])
