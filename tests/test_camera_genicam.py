@@ -218,13 +218,24 @@ def test_camera_params_genicam_need_two_ids():
     assert CameraParams(source="genicam", left_id="a", right_id="b").trigger == "software"
 
 
-def test_genicam_camera_not_found_fails_setup_with_a_clear_error():
+def _display_yaml(folder) -> str:
+    """A display.yaml with the nominal entries (the lab's registration stands in; these tests are about the
+    GenICam path, not the geometry)."""
+    from flexsheet.model.display_calib import nominal_display_calib, write_display_calib
+
+    path = str(Path(folder) / "display.yaml")
+    write_display_calib(path, nominal_display_calib())
+    return path
+
+
+def test_genicam_camera_not_found_fails_setup_with_a_clear_error(tmp_path):
     from flexsheet.runtime.testing import NodeHarness
     from nodes.camera.node import CameraNode
 
     async def scenario():
         async with NodeHarness(CameraNode, params={"source": "genicam", "left_id": "NOSUCHCAM1",
-                                                   "right_id": "NOSUCHCAM2", "discover_timeout_s": 0.0}):
+                                                   "right_id": "NOSUCHCAM2", "discover_timeout_s": 0.0,
+                                                   "display_calib": _display_yaml(tmp_path)}):
             pass
     with pytest.raises(ValueError, match="camera 'NOSUCHCAM1' not found"):
         asyncio.run(scenario())
@@ -306,7 +317,7 @@ async def _child(out_path: str) -> None:
     cam_params_exposure = 0.004
     cam_params = {"exposure_s": cam_params_exposure, "source": "genicam", "left_id": "FSL0001",
                   "right_id": "FSR0001", "rate_hz": 25.0, "trigger": "free", "device_clock": "shared",
-                  "model": "ximea"}
+                  "model": "ximea", "display_calib": _display_yaml(Path(out_path).parent)}
     with fake_pair(("FSL0001", "FSR0001")):
         async with NodeHarness(CameraNode, cam_params, name="camera") as cam, \
                 NodeHarness(TriangulatorNode, {"max_stereo_skew_s": 0.010}, name="triangulator") as tri:

@@ -64,3 +64,48 @@ def test_node_deforms_and_rejects_bad_input():
             assert out[-1].valid and out[-1].contact_force == 0.0 and out[-1].depth == 0.0
 
     asyncio.run(scenario())
+
+
+def test_node_serves_cached_nonlinear_snapshots_and_says_so(tmp_path):
+    """A snapshot table in the cache (under the node's key) is attached at start-up: pushes inside it are
+    answered by the snapshots (method "snapshots"), the diagnostics message says so; a push outside the table's
+    azimuth range falls back to the linear model."""
+    from nodes.fem.cache import ArrayCache
+    from nodes.fem.material import Material
+    from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, table_key
+    from tests.test_fem_hyperelastic import _analytic_table
+
+    tab = _analytic_table([0.0, 10.0], [0.0, 0.01, 0.02])
+    ArrayCache(str(tmp_path)).save("snapshots", table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, Material().nu, 0.008), tab)
+    params = dict(PARAMS, cache_dir=str(tmp_path), model="snapshots")
+
+    async def scenario():
+        from flexsheet.runtime.testing import NodeHarness
+
+        async with NodeHarness(FemNode, params=params) as h:
+            assert "snapshots loaded from cache" in h.node.state_message
+            c, r = np.array([-0.025 * np.sqrt(2.0), 0.0, 0.0]), 0.025 * np.sqrt(2.0) - 0.010
+            h.inject(topics.FINGERTIP, _tip(c + r * np.array([np.cos(0.5), 0.0, np.sin(0.5)]), stamp=4.0))
+            d = (await h.wait_for(topics.DEFORMATION, n=1, timeout=20.0))[-1]
+            assert d.method != "snapshots" and abs(d.depth - 0.010) < 1e-6   # 29 deg: outside the table
+            h.inject(topics.FINGERTIP, _tip([0.0, 0.0, 0.0], valid=False))  # lift: forget the held contact
+            await h.wait_for(topics.DEFORMATION, n=2, timeout=5.0)
+            h.inject(topics.FINGERTIP, _tip([-0.010, 0.0, 0.0], stamp=3.0))
+            d = (await h.wait_for(topics.DEFORMATION, n=3, timeout=20.0))[-1]
+            assert d.method == "snapshots" and d.valid and d.status == "ok"
+            assert abs(d.contact_force - 100.0 * 0.010) < 1e-6            # the table's force, E as tabulated
+
+    asyncio.run(scenario())
+
+
+def test_node_without_cached_snapshots_serves_linear_and_says_so():
+    async def scenario():
+        from flexsheet.runtime.testing import NodeHarness
+
+        async with NodeHarness(FemNode, params=dict(PARAMS, model="snapshots")) as h:
+            assert "LINEAR" in h.node.state_message and "experiment fem" in h.node.state_message
+            h.inject(topics.FINGERTIP, _tip([-0.005, 0.0, 0.0]))
+            d = (await h.wait_for(topics.DEFORMATION, n=1, timeout=20.0))[-1]
+            assert d.method == "condensed" and d.valid
+
+    asyncio.run(scenario())

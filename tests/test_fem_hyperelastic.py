@@ -1,0 +1,211 @@
+"""Neo-Hookean reference, snapshot look-up and the FEM cache: derivatives, small-strain limit against
+scikit-fem's linear elasticity, exact symmetries of the snapshot look-up, bad input."""
+
+import math
+
+import numpy as np
+import pytest
+
+from nodes.fem import hyperelastic as H
+from nodes.fem.cache import ArrayCache, cache_key
+from nodes.fem.choose import choose_model
+from nodes.fem.material import Material
+from nodes.fem.snapshots import TABLE_VERSION, SnapshotGrid, SnapshotModel
+
+MAT = Material()
+
+
+@pytest.fixture(scope="module")
+def quarter():
+    mesh = H.reference_mesh(H.RefSpec(0.016, 0.008, 0.018, half_z=True), 0.0)
+    return H.HyperelasticModel(mesh, MAT, sym_y=True, sym_z=True, intorder=2)
+
+
+def _smooth_field(m, scale):
+    X = m.points - m.mesh.center
+    return scale * np.column_stack([X[:, 0] * X[:, 2] / 0.03, 0.5 * X[:, 1], -0.8 * X[:, 0] + 0.3 * X[:, 2]])
+
+
+def test_residual_and_tangent_are_the_derivatives_of_the_energy(quarter):
+    """Central differences of Π and r, with and without the finger in contact (exact tangent incl. the
+    contact curvature term)."""
+    m = quarter
+    rng = np.random.default_rng(0)
+    u = _smooth_field(m, 0.1) + 1e-4 * rng.standard_normal((len(m.points), 3))
+    v = rng.standard_normal(u.shape)
+    eps = 1e-7
+    for caps in (None, H.capsule_at(0.0, 0.006, 0.008, m.mesh.radius, m.mesh.center)):
+        k = m.penalty()
+        r, K = m.residual_tangent(u, caps, k)
+        rp, _ = m.residual_tangent(u + eps * v, caps, k, need_K=False)
+        rm, _ = m.residual_tangent(u - eps * v, caps, k, need_K=False)
+        fd = (rp - rm) / (2 * eps)
+        assert np.linalg.norm(fd - K @ v.ravel()) < 1e-5 * np.linalg.norm(fd)
+        de = (m.energy(u + eps * v, caps, k) - m.energy(u - eps * v, caps, k)) / (2 * eps)
+        assert abs(de - r @ v.ravel()) < 1e-5 * abs(r @ v.ravel())
+
+
+def test_small_strain_energy_equals_scikit_fem_linear_elasticity(quarter):
+    """For a tiny displacement the neo-Hookean energy is ½ uᵀ K_lin u with skfem's linear_elasticity(λ, μ)."""
+    from skfem import Basis, ElementTetP2, ElementVector, asm
+    from skfem.models.elasticity import linear_elasticity
+
+    m = quarter
+    u = _smooth_field(m, 1e-6)
+    vb = Basis(m.skmesh, ElementVector(ElementTetP2()), intorder=2)
+    K = asm(linear_elasticity(*MAT.lame), vb)
+    x = np.zeros(vb.N)
+    x[vb.nodal_dofs.T.ravel()] = u[:m.skmesh.p.shape[1]].ravel()       # skfem's vector DOFs: node-major
+    x[vb.edge_dofs.T.ravel()] = u[m.skmesh.p.shape[1]:].ravel()
+    e_lin = 0.5 * x @ (K @ x)
+    assert e_lin > 0
+    assert abs(m.energy(u, None, 0.0) - e_lin) < 1e-3 * e_lin
+
+
+def test_energy_is_infinite_for_an_inverted_element(quarter):
+    m = quarter
+    u = np.zeros((len(m.points), 3))
+    u[:, 0] = -2.5 * (m.points[:, 0] - m.mesh.center[0])        # x -> -1.5 x: det F < 0 everywhere
+    assert m.energy(u, None, 0.0) == math.inf
+    with pytest.raises(FloatingPointError, match="inverted"):
+        m.residual_tangent(u, None, 0.0)
+
+
+def test_capsule_gap_sphere_and_shaft():
+    c = H.capsule_at(0.0, 0.010, 0.008, 0.035, np.array([-0.035, 0.0, 0.0]))
+    assert np.allclose(c.direction, [-1, 0, 0]) and np.allclose(c.center, [-0.010 + 0.008, 0, 0])
+    g, n = c.gap(np.array([[-0.010, 0.0, 0.0], [-0.002, 0.0, 0.009], [0.05, 0.0, 0.0085]]))
+    assert abs(g[0]) < 1e-12 and np.allclose(n[0], [-1, 0, 0])        # leading point on the sphere
+    assert abs(g[1] - 0.001) < 1e-12 and np.allclose(n[1], [0, 0, 1])  # beside the sphere centre
+    assert abs(g[2] - 0.0005) < 1e-12                                  # beside the shaft, 50 mm back
+
+
+@pytest.mark.parametrize("bad, word", [(dict(depth=-0.001), "depth"), (dict(depth=float("nan")), "depth"),
+                                       (dict(angle=float("inf")), "angle"), (dict(radius=0.0), "radius")])
+def test_capsule_rejects_bad_input(bad, word):
+    args = dict(angle=0.0, depth=0.01, radius=0.008, cyl_radius=0.035, cyl_center=np.zeros(3)) | bad
+    with pytest.raises(ValueError, match=word):
+        H.capsule_at(**args)
+
+
+def test_solve_path_rejects_bad_depths(quarter):
+    for bad in ([-0.001], [float("nan")], [0.02, 0.01], []):
+        with pytest.raises(ValueError, match="depths"):
+            H.solve_path(quarter, 0.0, bad, 0.008)
+    with pytest.raises(ValueError, match="h_fine"):
+        H.RefSpec(0.01, 0.02)
+
+
+def test_reference_push_is_physical_at_small_depth(quarter):
+    """5 mm push: the force grows with depth, the finger is not penetrated by more than 1 % of the depth,
+    no element is inverted, the body moves along the push and is symmetric (full force = 4 × quarter)."""
+    st = H.solve_path(quarter, 0.0, [0.0025, 0.005], 0.008, step=0.0025)
+    assert all(s.converged for s in st)
+    assert 0 < st[0].force < st[1].force
+    assert st[1].inverted == 0 and st[1].min_detF > 0.5
+    assert st[1].penetration < 0.01 * 0.005
+    tip = np.argmin(np.linalg.norm(quarter.points - np.array([0.0, 0.0, 0.0]), axis=1))
+    assert abs(st[1].u[tip, 0] + 0.005) < 0.0005                      # the surface point under the finger
+    assert abs(st[1].force_vec[1]) < 1e-12 and abs(st[1].force_vec[2]) < 1e-12
+
+
+# ---- snapshot look-up: an analytic rotation-covariant table must be reproduced exactly ----------------------------
+R, L, C = 0.035, 0.12, np.array([-0.035, 0.0, 0.0])
+
+
+def _analytic_table(angles_deg, depths):
+    """A table whose field, for a push at φ, is the rigid rotation by φ of f(θ − φ, y) (exactly what the cylinder's
+    symmetry gives without the support), f linear in θ and y on the grid so bilinear look-up is exact."""
+    g = SnapshotGrid(tuple(angles_deg), depths[-1], depths[1] - depths[0], 1.0, 0.001, 0.002)
+    th, ys, rh = g.thetas(), g.ys(L / 2), g.rhos(R)
+    a = np.radians(angles_deg)
+    side = np.zeros((len(a), len(depths), len(th), len(ys), 3), np.float32)
+    cap = np.zeros((len(a), len(depths), len(th), len(rh), 3), np.float32)
+    for i, ai in enumerate(a):
+        for j, d in enumerate(depths):
+            rel = th - ai                                                # relative azimuth
+            fr = d * (1.0 + 0.3 * rel)[:, None] * (1.0 - ys / L)[None, :]  # radial component in the rotated frame
+            ft = d * 0.2 * rel[:, None] * np.ones_like(ys)[None, :]        # tangential
+            # display-frame components of (radial, tangential) at azimuth θ
+            side[i, j, :, :, 0] = fr * np.cos(th)[:, None] - ft * np.sin(th)[:, None]
+            side[i, j, :, :, 2] = fr * np.sin(th)[:, None] + ft * np.cos(th)[:, None]
+            side[i, j, :, :, 1] = d * 0.1 * ys[None, :] / L * np.ones_like(rel)[:, None]
+    return {"version": np.array(TABLE_VERSION), "E": np.array(1e4), "angles": a, "depths": np.asarray(depths),
+            "theta": th, "y": ys, "rho": rh, "side": side, "cap": cap,
+            "force": np.outer(np.ones(len(a)), 100.0 * np.asarray(depths)), "max_strain": np.zeros((len(a), len(depths))),
+            "inverted": np.zeros((len(a), len(depths)), np.int64), "radius": np.array(R), "length": np.array(L),
+            "center": C}
+
+
+def test_snapshot_lookup_rotates_with_the_finger_and_mirrors():
+    tab = _analytic_table([0.0, 10.0, 20.0], [0.0, 0.01, 0.02])
+    th = np.radians(np.array([-40.0, -5.0, 3.0, 17.0, 33.0]))
+    ys = np.array([0.0, 0.004, -0.012, 0.02, -0.03])
+    verts = np.column_stack([C[0] + R * np.cos(th), ys, C[2] + R * np.sin(th)])
+    sm = SnapshotModel(tab, verts, axial_max=0.005)
+    for phi_deg, d in ((7.3, 0.013), (-14.0, 0.02), (20.0, 0.005)):
+        phi = math.radians(phi_deg)
+        u = sm.surface(phi, d)[0]
+        s = abs(phi)
+        tt = np.where(phi < 0, -th, th)
+        rel = tt - s
+        fr = d * (1.0 + 0.3 * rel) * (1.0 - np.abs(ys) / L)
+        ft = d * 0.2 * rel
+        ex = np.column_stack([fr * np.cos(tt) - ft * np.sin(tt), d * 0.1 * ys / L, fr * np.sin(tt) + ft * np.cos(tt)])
+        if phi < 0:
+            ex[:, 2] *= -1.0
+        assert np.abs(u - ex).max() < 1e-6 * d / 0.01, (phi_deg, np.abs(u - ex).max())
+    F = sm.surface(math.radians(5.0), 0.015)[1:3]
+    assert abs(F[0] - 1.5) < 1e-9 and abs(F[1] - 100.0) < 1e-9              # force and dF/dd from the table
+
+
+def test_snapshot_lookup_rejects_outside_and_bad_input():
+    tab = _analytic_table([0.0, 10.0], [0.0, 0.01])
+    sm = SnapshotModel(tab, np.array([[0.0, 0.0, 0.0]]), axial_max=0.005)
+    for args, word in (((math.radians(11.0), 0.005), "outside"), ((0.0, 0.011), "outside"),
+                       ((0.0, -0.001), "outside"), ((float("nan"), 0.005), "finite")):
+        with pytest.raises(ValueError, match=word):
+            sm.surface(*args)
+    with pytest.raises(ValueError, match="outside"):
+        sm.surface(0.0, 0.005, 0.006)
+    bad = dict(tab, version=np.array("old"))
+    with pytest.raises(ValueError, match="version"):
+        SnapshotModel(bad, np.zeros((1, 3)))
+
+
+# ---- cache and model choice ----------------------------------------------------------------------------------------
+def test_cache_round_trip_hit_and_corrupt_entry(tmp_path):
+    logs = []
+    c = ArrayCache(str(tmp_path), logs.append, shipped_dir=None)
+    key = cache_key("x", 1.0, (2, 3))
+    assert key == cache_key("x", 1.0, (2, 3)) and key != cache_key("x", 1.0000001, (2, 3))
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return {"a": np.arange(3.0)}
+
+    z1, hit1, _ = c.get_or_compute("thing", key, compute)
+    z2, hit2, _ = c.get_or_compute("thing", key, compute)
+    assert not hit1 and hit2 and len(calls) == 1 and np.array_equal(z1["a"], z2["a"])
+    (tmp_path / f"thing_{key}.npz").write_bytes(b"not a zip")
+    z3, hit3, _ = c.get_or_compute("thing", key, compute)
+    assert not hit3 and len(calls) == 2 and any("unusable" in s for s in logs)
+    assert ArrayCache(None).save("thing", key, {"a": np.zeros(1)}) is None
+    with pytest.raises(ValueError, match="kind"):
+        c.path("../evil", key)
+
+
+def test_choose_model_prefers_linear_where_it_suffices():
+    table = {"candidates": [
+        {"kind": "linear", "name": "lin", "update_ms": 0.6,
+         "max_error_m_by_depth": {"0.0050": 0.0003, "0.0300": 0.004, "0.0500": 0.012}},
+        {"kind": "snapshots", "name": "snap", "update_ms": 0.3,
+         "max_error_m_by_depth": {"0.0050": 0.0002, "0.0300": 0.0004, "0.0500": 0.0006}}]}
+    assert choose_model(table, 0.0007, 0.005)[0] == "linear"
+    assert choose_model(table, 0.0007, 0.05)[0] == "snapshots"
+    kind, why = choose_model(table, 0.0001, 0.05)
+    assert kind == "snapshots" and "no model meets" in why
+    assert choose_model(None, 0.0007, 0.05)[0] == "snapshots"
+    with pytest.raises(ValueError, match="depth_max"):
+        choose_model(table, 0.0007, float("nan"))
