@@ -26,6 +26,7 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from flexsheet.model.display_calib import load_display_calib
 from flexsheet.model.kinematics import LEFT_BASE, Q_LOWER, Q_UPPER, QD_MAX, RIGHT_BASE, ArmKinematics
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from messages import ArmJointState, ArmTarget, mxt, topics
@@ -49,9 +50,13 @@ class ArmBridgeParams(BaseModel):
     port: int | None = Field(default=None, ge=1, le=65535, description="controller port: Modbus TCP "
                              "(default 15020) or MXT UDP (default 10000)")
     device_id: int = Field(default=1, ge=0, le=255, description="Modbus unit id")
+    display_calib: str | None = Field(default=None, description="display.yaml (the registration): this arm's "
+                                      "base pose comes from its arms.<arm> entry (flexsheet calibrate arms); "
+                                      "the launch file's display_calib fills it")
     base: list[float] | None = Field(default=None, min_length=4, max_length=4,
-                                     description="arm base (x, y, z, yaw) in the display frame; "
-                                                 "default kinematics.LEFT_BASE / RIGHT_BASE")
+                                     description="arm base (x, y, z, yaw) in the display frame, only without "
+                                                 "display_calib; default kinematics.LEFT_BASE / RIGHT_BASE "
+                                                 "(the design values)")
     period: float | None = Field(default=None, gt=0.0, description="controller cycle = stream period, s; "
                                  "default 0.0071 (modbus) / 0.00711 (mxt: CR750-Q, CR800-Q; 0.0035 for CR800-R/D)")
     target_timeout: float = Field(default=0.25, gt=0.0, description="hold after this long without a target, s")
@@ -85,9 +90,20 @@ class ArmBridgeNode(Node):
 
     async def setup(self) -> None:
         p = self.params
-        base = tuple(p.base) if p.base is not None else (LEFT_BASE if p.arm == "left" else RIGHT_BASE)
-        if not all(math.isfinite(v) for v in base):
-            raise ValueError(f"base must be finite, got {base!r}")
+        if p.display_calib:   # the registered base (a ValueError names the file and the missing entry)
+            if p.base is not None:
+                raise ValueError("base and display_calib are both set: the base comes from display.yaml's "
+                                 f"arms.{p.arm} entry; drop the base param")
+            calib = load_display_calib(p.display_calib, require=(f"arms.{p.arm}",))
+            base = calib.arms[p.arm].T_display_base
+            self.log.info("%s arm base from %s (arms.%s, %s)", p.arm, p.display_calib, p.arm,
+                          calib.arms[p.arm].provenance.source)
+        else:
+            base = tuple(p.base) if p.base is not None else (LEFT_BASE if p.arm == "left" else RIGHT_BASE)
+            if not all(math.isfinite(v) for v in base):
+                raise ValueError(f"base must be finite, got {base!r}")
+            self.log.warning("%s arm base: design values %s (no display_calib; docs/calibration.md)", p.arm,
+                             [round(float(v), 4) for v in base])
         margin = p.limit_margin
         self.kin = ArmKinematics(p.arm, base, Q_LOWER + margin, Q_UPPER - margin)
         self.fk_kin = ArmKinematics(p.arm, base)
