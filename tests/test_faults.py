@@ -82,6 +82,7 @@ def private_ports(src: Path, dst: Path, offset: int | None = None) -> Path:
     lf = yaml.safe_load(src.read_text())
     lf["base_port"] = 20000 + offset
     for spec in lf["nodes"].values():
+        spec.pop("container", None)   # kill -9 is about one node = one process: no composable containers here
         if spec.get("type") in ("arm_controller_sim", "arm_bridge") and "port" in spec.get("params", {}):
             spec["params"]["port"] = spec["params"]["port"] + offset
     dst.write_text(yaml.safe_dump(lf, sort_keys=False))

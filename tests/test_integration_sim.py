@@ -50,7 +50,7 @@ def test_sim_launch_prints_table1_and_latency_and_leaves_outputs(sim_run):
     assert summary["twin"]["realism"] == "realistic" and summary["twin"]["truth_seed"] == 0
     assert row["n"] > 200
     assert 0.0 < row["dtheta_mean_deg"] < 1.0 and 0.0 < row["dd_mean_mm"] < 1.0, row
-    assert abs(row["dd_2r_mean_mm"] - 2.0 * row["dd_mean_mm"]) < 1e-9   # the paper's 2R convention beside ours
+    assert abs(row["dd_2r_mean_mm"] - 2.0 * row["dd_mean_mm"]) < 1e-4 * row["dd_2r_mean_mm"]   # paper's 2R beside ours
     assert summary["faults"]["watchdog"] >= 0 and "camera_frame_to_arm_command" in summary["latency_ms"]
     assert "stroke_push_4" in summary                      # the combined stroke and push ran too
     lat = summary["latency_ms"]
