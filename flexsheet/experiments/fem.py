@@ -15,7 +15,8 @@ cylinder, and the real-time model that reproduces it.
 3. ``summary.json``: ``realtime.update_ms``, ``realtime.max_visible_error_mm_0_50``, ``reference.converged``
    with the convergence figures.
 
-``--quick``: coarse meshes, azimuth 0 only, snapshots every 5 mm checked at the depths between (≈ 1 min).
+``--quick``: coarse meshes, azimuth 0 only, snapshots every 5 mm checked at the depths between (≈ 9 min cold
+on the loaded 2-core machine, seconds when cached).
 The full mode runs the stroke arc (0–60°) and is heavy (tens of minutes on 2 cores); every solve is cached
 (:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds. ``--linear-study`` also reruns the
 linear mesh study (``accuracy_table.json``, ``hertz``, ``stability``).
@@ -84,7 +85,7 @@ def _parser() -> argparse.ArgumentParser:
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog="example: flexsheet experiment fem --quick --out /tmp/fem")
     p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--quick", action="store_true", help="coarse meshes, azimuth 0 only (about a minute)")
+    p.add_argument("--quick", action="store_true", help="coarse meshes, azimuth 0 only (minutes cold, seconds cached)")
     p.add_argument("--nu", type=float, default=Material().nu, help="Poisson's ratio (default %(default)s)")
     p.add_argument("--E", type=float, default=Material().E, help="Young's modulus, Pa (default %(default)s)")
     p.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help="cache folder ('' disables; default %(default)s)")

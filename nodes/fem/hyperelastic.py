@@ -498,12 +498,13 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
 
 
 def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: float, step: float = 0.001,
-               iters: int = 40, tol_u: float = 1e-6, tol_r: float | None = None, log=None,
-               substeps_max: int = 6) -> list[PathState]:
+               iters: int = 30, tol_u: float = 1e-6, tol_r: float | None = None, log=None,
+               substeps_max: int = 3) -> list[PathState]:
     """Push the capsule finger at azimuth ``angle`` (rad) through ``depths`` (m, ascending, ≥ 0), load steps of
     at most ``step`` m; returns one :class:`PathState` per requested depth. A load step whose Newton solve fails
-    is halved (up to ``substeps_max`` times). Raises ``ValueError`` on bad depths and ``RuntimeError`` when a
-    step cannot be solved."""
+    is halved (up to ``substeps_max`` times); if it still fails, its last iterate is kept and the state is
+    flagged ``converged=False`` (bounded time; the caller decides). Raises ``ValueError`` on bad depths and
+    ``RuntimeError`` when a step has no valid iterate at all."""
     depths = np.asarray(depths, float)
     if depths.ndim != 1 or len(depths) == 0 or not np.all(np.isfinite(depths)) or np.any(depths < 0):
         raise ValueError(f"depths must be a non-empty 1-D array of finite values >= 0 m, got {depths!r}")
@@ -525,6 +526,7 @@ def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: fl
         conv_all = True
         while d_cur < target - 1e-12:
             h = min(step, target - d_cur)
+            u_last = None
             for _ in range(substeps_max + 1):
                 d_new = d_cur + h
                 caps = capsule_at(angle, d_new, finger_radius, m.mesh.radius, m.mesh.center)
@@ -535,6 +537,7 @@ def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: fl
                         guess = g2
                 try:
                     u_new, its, conv = _newton(m, guess, caps, k, iters, tol_u, tol_r, None, nstate)
+                    u_last = u_new
                 except FloatingPointError:
                     u_new, its, conv = None, iters, False
                 its_total += its
@@ -542,8 +545,12 @@ def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: fl
                     break
                 h *= 0.5
             else:
-                raise RuntimeError(f"Newton failed at depth {d_cur * 1e3:.2f} mm -> {(d_cur + h) * 1e3:.2f} mm "
-                                   f"(angle {math.degrees(angle):.1f} deg)")
+                if u_last is None:
+                    raise RuntimeError(f"Newton failed at depth {d_cur * 1e3:.2f} mm -> {d_new * 1e3:.2f} mm "
+                                       f"(angle {math.degrees(angle):.1f} deg)")
+                u_new = u_last          # give up on this step: keep its last iterate, flagged not converged
+                if log:
+                    log(f"  Newton did not converge at {d_new * 1e3:.2f} mm (angle {math.degrees(angle):.1f} deg)")
             conv_all &= conv
             u_prev, d_prev = u, d_cur
             u, d_cur = u_new, d_new
