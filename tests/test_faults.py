@@ -268,8 +268,9 @@ def test_the_recording_loses_only_the_dead_nodes_own_messages(faults):
             k = killed[owner]
             assert len(t["restarts"]) == 1, (topic, t["restarts"])
             a, b = t["restarts"][0]
-            # the stream stopped at the kill and came back after the respawned node was up
-            assert a <= k["t_kill"] + 0.05 and b >= k["t_started"], (topic, a, b, k)
+            # the stream stopped at the kill and came back once the respawned node was up (t_started is when the
+            # launcher's "started pid" line was read, up to ~0.1 s after the fork on a loaded machine)
+            assert a <= k["t_kill"] + 0.05 and b >= k["t_started"] - 0.1, (topic, a, b, k)
         else:
             assert t["restarts"] == [], (topic, t["restarts"])
 
