@@ -34,6 +34,7 @@ EXPERIMENTS: dict[str, str] = {
     "fem": "flexsheet.experiments.fem:main",
     "correction": "flexsheet.experiments.correction:main",
     "stability": "flexsheet.experiments.stability:main",
+    "latency_load": "flexsheet.experiments.latency_load:main",
 }
 
 BENCHES: dict[str, str] = {
