@@ -37,8 +37,21 @@ def _private_copy(dst: Path) -> Path:
     return dst
 
 
+def _warm_start(launch: Path, tmp_path: Path) -> None:
+    """On a machine that never ran the display (a clean CI clone), the first launch precomputes the FEM's
+    capacitance matrix and the twin's registration while the stroke runs, which starves the 2-core machine; run
+    the graph once without measuring so the measured run starts as every later run does (cached)."""
+    from nodes.fem.cache import DEFAULT_CACHE_DIR
+
+    if any(Path(DEFAULT_CACHE_DIR).glob("capacitance_*.npz")):
+        return
+    subprocess.run([sys.executable, "-m", "flexsheet", "launch", str(launch), "--out", str(tmp_path / "warm"),
+                    "--duration", "60", "--set", SCRIPT], cwd=ROOT, capture_output=True, text=True, timeout=300)
+
+
 def test_table1_stroke_through_mxt_twins(tmp_path):
     launch = _private_copy(tmp_path / "sim_mxt.yaml")
+    _warm_start(launch, tmp_path)
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "flexsheet", "launch", str(launch), "--out", str(out), "--duration", "150",
            "--set", SCRIPT]
