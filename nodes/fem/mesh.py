@@ -100,6 +100,58 @@ def arc_points(radius: float, center: np.ndarray, arc_deg: float, spacing: float
     return np.column_stack([c[0] + radius * np.cos(phis), np.full(n, c[1]), c[2] + radius * np.sin(phis)])
 
 
+def _gmsh_tets(model: str, geometry, h: float, h_fine: float, refine_radius: float, centres, what: str):
+    """Run gmsh once: ``geometry(gmsh)`` adds the OpenCASCADE solid, element size ``h`` with ``h_fine`` within
+    ``refine_radius`` of each point of ``centres`` (``Ball`` fields under a ``Min``), single-threaded Delaunay.
+    Returns (points (N, 3) m, tets (M, 4) int64 into ``points``, unoriented). Raises ``RuntimeError`` naming
+    ``what`` if gmsh fails or produces no tetrahedra."""
+    import gmsh
+
+    with _GMSH_LOCK:
+        gmsh.initialize(interruptible=False)
+        try:
+            gmsh.option.setNumber("General.Terminal", 0)
+            gmsh.option.setNumber("General.NumThreads", 1)
+            gmsh.option.setNumber("Mesh.Algorithm3D", 1)
+            gmsh.model.add(model)
+            geometry(gmsh)
+            gmsh.model.occ.synchronize()
+            gmsh.option.setNumber("Mesh.MeshSizeMax", h)
+            gmsh.option.setNumber("Mesh.MeshSizeMin", min(h_fine, h))
+            gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+            gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
+            gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+            fields = []
+            for p in centres:
+                f = gmsh.model.mesh.field.add("Ball")
+                gmsh.model.mesh.field.setNumber(f, "Radius", refine_radius)
+                gmsh.model.mesh.field.setNumber(f, "Thickness", refine_radius)
+                gmsh.model.mesh.field.setNumber(f, "VIn", h_fine)
+                gmsh.model.mesh.field.setNumber(f, "VOut", h)
+                for k, name in enumerate(("XCenter", "YCenter", "ZCenter")):
+                    gmsh.model.mesh.field.setNumber(f, name, float(p[k]))
+                fields.append(f)
+            if fields:
+                fmin = gmsh.model.mesh.field.add("Min")
+                gmsh.model.mesh.field.setNumbers(fmin, "FieldsList", fields)
+                gmsh.model.mesh.field.setAsBackgroundMesh(fmin)
+            gmsh.model.mesh.generate(3)
+            tags, coords, _ = gmsh.model.mesh.getNodes()
+            etypes, _, enodes = gmsh.model.mesh.getElements(3)
+        except Exception as exc:  # gmsh raises plain Exception
+            raise RuntimeError(f"gmsh failed to mesh {what}: {exc}") from exc
+        finally:
+            gmsh.finalize()
+    if 4 not in list(etypes):
+        raise RuntimeError(f"gmsh produced no tetrahedra for {what}")
+    conn = np.asarray(enodes[list(etypes).index(4)], dtype=np.int64).reshape(-1, 4)
+    pts_all = np.asarray(coords, float).reshape(-1, 3)
+    tag_to_row = np.full(int(np.max(tags)) + 1, -1, dtype=np.int64)
+    tag_to_row[np.asarray(tags, np.int64)] = np.arange(len(tags))
+    used, inv = np.unique(tag_to_row[conn], return_inverse=True)
+    return pts_all[used], inv.reshape(-1, 4)
+
+
 def cylinder_mesh(spec: MeshSpec = MeshSpec(), radius: float = CYLINDER_RADIUS, length: float = CYLINDER_LENGTH,
                   center: np.ndarray = CYLINDER_CENTER) -> TetMesh:
     """Mesh the cylinder (axis +y through ``center``) with gmsh's OpenCASCADE kernel, P1 tetrahedra.
@@ -114,53 +166,14 @@ def cylinder_mesh(spec: MeshSpec = MeshSpec(), radius: float = CYLINDER_RADIUS, 
     if not (math.isfinite(length) and length > 0):
         raise ValueError(f"length must be > 0, got {length!r}")
     c = np.asarray(center, float)
-    import gmsh
 
-    with _GMSH_LOCK:
-        gmsh.initialize(interruptible=False)
-        try:
-            gmsh.option.setNumber("General.Terminal", 0)
-            gmsh.option.setNumber("General.NumThreads", 1)
-            gmsh.option.setNumber("Mesh.Algorithm3D", 1)
-            gmsh.model.add("cylinder")
-            gmsh.model.occ.addCylinder(c[0], c[1] - length / 2, c[2], 0.0, length, 0.0, radius)
-            gmsh.model.occ.synchronize()
-            gmsh.option.setNumber("Mesh.MeshSizeMax", spec.h)
-            gmsh.option.setNumber("Mesh.MeshSizeMin", min(spec.h_fine, spec.h))
-            gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
-            gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
-            gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
-            if spec.refine_radius > 0 and spec.h_fine < spec.h:
-                fields = []
-                for p in arc_points(radius, c, spec.arc_deg, spec.refine_radius / 2):
-                    f = gmsh.model.mesh.field.add("Ball")
-                    gmsh.model.mesh.field.setNumber(f, "Radius", spec.refine_radius)
-                    gmsh.model.mesh.field.setNumber(f, "Thickness", spec.refine_radius)
-                    gmsh.model.mesh.field.setNumber(f, "VIn", spec.h_fine)
-                    gmsh.model.mesh.field.setNumber(f, "VOut", spec.h)
-                    for k, name in enumerate(("XCenter", "YCenter", "ZCenter")):
-                        gmsh.model.mesh.field.setNumber(f, name, float(p[k]))
-                    fields.append(f)
-                fmin = gmsh.model.mesh.field.add("Min")
-                gmsh.model.mesh.field.setNumbers(fmin, "FieldsList", fields)
-                gmsh.model.mesh.field.setAsBackgroundMesh(fmin)
-            gmsh.model.mesh.generate(3)
-            tags, coords, _ = gmsh.model.mesh.getNodes()
-            etypes, _, enodes = gmsh.model.mesh.getElements(3)
-        except Exception as exc:  # gmsh raises plain Exception
-            raise RuntimeError(f"gmsh failed to mesh the cylinder with {spec.key()}: {exc}") from exc
-        finally:
-            gmsh.finalize()
-    if 4 not in list(etypes):
-        raise RuntimeError(f"gmsh produced no tetrahedra for {spec.key()}")
-    conn = np.asarray(enodes[list(etypes).index(4)], dtype=np.int64).reshape(-1, 4)
-    pts_all = np.asarray(coords, float).reshape(-1, 3)
-    tag_to_row = np.full(int(np.max(tags)) + 1, -1, dtype=np.int64)
-    tag_to_row[np.asarray(tags, np.int64)] = np.arange(len(tags))
-    conn = tag_to_row[conn]
-    used, inv = np.unique(conn, return_inverse=True)
-    points = pts_all[used]
-    tets = inv.reshape(-1, 4)
+    def geometry(gmsh) -> None:
+        gmsh.model.occ.addCylinder(c[0], c[1] - length / 2, c[2], 0.0, length, 0.0, radius)
+
+    centres = (arc_points(radius, c, spec.arc_deg, spec.refine_radius / 2)
+               if spec.refine_radius > 0 and spec.h_fine < spec.h else [])
+    points, tets = _gmsh_tets("cylinder", geometry, spec.h, spec.h_fine, spec.refine_radius, centres,
+                              f"the cylinder with {spec.key()}")
     return _finish(points, tets, radius, length, c, spec)
 
 
@@ -183,59 +196,19 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
     if not (math.isfinite(refine_radius) and 0.0 <= refine_radius <= 0.1):
         raise ValueError(f"refine_radius must be in [0, 0.1] m, got {refine_radius!r}")
     c = np.asarray(center, float)
-    import gmsh
+    y0 = c[1] if half_y else c[1] - length / 2
 
-    with _GMSH_LOCK:
-        gmsh.initialize(interruptible=False)
-        try:
-            gmsh.option.setNumber("General.Terminal", 0)
-            gmsh.option.setNumber("General.NumThreads", 1)
-            gmsh.option.setNumber("Mesh.Algorithm3D", 1)
-            gmsh.model.add("cylinder_part")
-            y0 = c[1] if half_y else c[1] - length / 2
-            cyl = gmsh.model.occ.addCylinder(c[0], y0, c[2], 0.0, c[1] + length / 2 - y0, 0.0, radius)
-            if half_z:
-                box = gmsh.model.occ.addBox(c[0] - 2 * radius, y0 - 0.01, c[2], 4 * radius, length + 0.02,
-                                            2 * radius)
-                gmsh.model.occ.intersect([(3, cyl)], [(3, box)])
-            gmsh.model.occ.synchronize()
-            gmsh.option.setNumber("Mesh.MeshSizeMax", h)
-            gmsh.option.setNumber("Mesh.MeshSizeMin", min(h_fine, h))
-            gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
-            gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
-            gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
-            if refine_radius > 0 and h_fine < h:
-                fields = []
-                for deg in refine_deg:
-                    f = gmsh.model.mesh.field.add("Ball")
-                    gmsh.model.mesh.field.setNumber(f, "Radius", refine_radius)
-                    gmsh.model.mesh.field.setNumber(f, "Thickness", refine_radius)
-                    gmsh.model.mesh.field.setNumber(f, "VIn", h_fine)
-                    gmsh.model.mesh.field.setNumber(f, "VOut", h)
-                    p = c + radius * np.array([math.cos(math.radians(deg)), 0.0, math.sin(math.radians(deg))])
-                    for k, name in enumerate(("XCenter", "YCenter", "ZCenter")):
-                        gmsh.model.mesh.field.setNumber(f, name, float(p[k]))
-                    fields.append(f)
-                fmin = gmsh.model.mesh.field.add("Min")
-                gmsh.model.mesh.field.setNumbers(fmin, "FieldsList", fields)
-                gmsh.model.mesh.field.setAsBackgroundMesh(fmin)
-            gmsh.model.mesh.generate(3)
-            tags, coords, _ = gmsh.model.mesh.getNodes()
-            etypes, _, enodes = gmsh.model.mesh.getElements(3)
-        except Exception as exc:  # gmsh raises plain Exception
-            raise RuntimeError(f"gmsh failed to mesh the cylinder part (h={h}, h_fine={h_fine}): {exc}") from exc
-        finally:
-            gmsh.finalize()
-    if 4 not in list(etypes):
-        raise RuntimeError("gmsh produced no tetrahedra for the cylinder part")
-    conn = np.asarray(enodes[list(etypes).index(4)], dtype=np.int64).reshape(-1, 4)
-    pts_all = np.asarray(coords, float).reshape(-1, 3)
-    tag_to_row = np.full(int(np.max(tags)) + 1, -1, dtype=np.int64)
-    tag_to_row[np.asarray(tags, np.int64)] = np.arange(len(tags))
-    conn = tag_to_row[conn]
-    used, inv = np.unique(conn, return_inverse=True)
-    points = pts_all[used]
-    tets = orient_tets(points, inv.reshape(-1, 4))
+    def geometry(gmsh) -> None:
+        cyl = gmsh.model.occ.addCylinder(c[0], y0, c[2], 0.0, c[1] + length / 2 - y0, 0.0, radius)
+        if half_z:
+            box = gmsh.model.occ.addBox(c[0] - 2 * radius, y0 - 0.01, c[2], 4 * radius, length + 0.02, 2 * radius)
+            gmsh.model.occ.intersect([(3, cyl)], [(3, box)])
+
+    centres = ([c + radius * np.array([math.cos(math.radians(d)), 0.0, math.sin(math.radians(d))])
+                for d in refine_deg] if refine_radius > 0 and h_fine < h else [])
+    points, tets = _gmsh_tets("cylinder_part", geometry, h, h_fine, refine_radius, centres,
+                              f"the cylinder part (h={h}, h_fine={h_fine})")
+    tets = orient_tets(points, tets)
     faces = surface_faces(points, tets)
     return TetMesh(points, tets, faces, np.zeros(len(points), bool), None, radius, length, c.copy())
 
