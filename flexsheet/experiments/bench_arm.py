@@ -185,22 +185,7 @@ def bench_cycle(n_cycles: int) -> dict:
         deadlines: list[float] = []
         stream.on_cycle = lambda rep: deadlines.append(rep.t_deadline)
 
-        async def run():
-            tr.seed(home_joints("left"))
-            k = 0
-
-            async def feeder():
-                nonlocal k
-                while True:
-                    th = math.radians(60.0) * math.sin(2 * math.pi * k / 480.0)
-                    tr.set_target(_clamp("left", th), float(k), time.time())
-                    k += 1
-                    await asyncio.sleep(1.0 / 48.0)
-            f = asyncio.get_running_loop().create_task(feeder())
-            await stream.run(n_cycles + 50)
-            f.cancel()
-            await stream.stop()
-        asyncio.run(run())
+        asyncio.run(_drive(tr, stream, n_cycles + 50))
     finally:
         stop.set()
         proc.join(timeout=5)
@@ -213,6 +198,27 @@ def bench_cycle(n_cycles: int) -> dict:
             "cycle_jitter_max_ms": float(np.max(np.abs(iv - PERIOD)) * 1e3),
             "cycle_late_p99_ms": float(np.percentile(t - d, 99) * 1e3), "cycles": int(len(t)),
             "reconnects": stream.reconnects, "intervals_ms": (iv * 1e3).tolist()}
+
+
+async def _drive(tr, stream, cycles: int) -> None:
+    """Feed the left arm's tracker a ±60° sinusoid on joint 1 at the planner's 48 Hz while ``stream`` runs
+    ``cycles`` control cycles; then stop the stream (:meth:`ArmStream.stop`, which ends the session)."""
+    tr.seed(home_joints("left"))
+    k = 0
+
+    async def feeder():
+        nonlocal k
+        while True:
+            th = math.radians(60.0) * math.sin(2 * math.pi * k / 480.0)
+            tr.set_target(_clamp("left", th), float(k), time.time())
+            k += 1
+            await asyncio.sleep(1.0 / 48.0)
+    f = asyncio.get_running_loop().create_task(feeder())
+    try:
+        await stream.run(cycles)
+    finally:
+        f.cancel()
+    await stream.stop()
 
 
 def _mxt_twin_process(q, period, port_queue, stop_event, result_queue) -> None:
@@ -260,22 +266,7 @@ def bench_mxt(n_cycles: int, period: float = MXT_PERIOD) -> dict:
                 print(f"  mxt: {done[0]}/{n_cycles} cycles, lost {link.lost}, late {link.late}", file=sys.stderr)
         stream.on_cycle = progress
 
-        async def run():
-            tr.seed(home_joints("left"))
-            k = 0
-
-            async def feeder():
-                nonlocal k
-                while True:
-                    th = math.radians(60.0) * math.sin(2 * math.pi * k / 480.0)
-                    tr.set_target(_clamp("left", th), float(k), time.time())
-                    k += 1
-                    await asyncio.sleep(1.0 / 48.0)
-            f = asyncio.get_running_loop().create_task(feeder())
-            await stream.run(n_cycles + 100)
-            f.cancel()
-            await stream.stop(end=True)
-        asyncio.run(run())
+        asyncio.run(_drive(tr, stream, n_cycles + 100))
     finally:
         stop.set()
         try:

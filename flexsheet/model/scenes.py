@@ -58,6 +58,7 @@ from pydantic import (
 )
 
 from flexsheet.model import scene as paper
+from flexsheet.model.yamlio import UniqueKeyLoader
 
 __all__ = ["SceneError", "Pose", "CylinderObject", "SphereObject", "RoundedBoxObject", "MeshObject", "Material",
            "Support", "Finger", "ArcStroke", "PolylineStroke", "Inclusion", "Scene", "load_scene", "parse_scene",
@@ -708,24 +709,6 @@ def _build_mesh(sc: Scene):
 
 
 # ----------------------------------------------------------------------------------------------- loading
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` that refuses a key given twice in one mapping (PyYAML would keep the last)."""
-
-    def construct_mapping(self, node, deep=False):
-        seen = set()
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=deep)
-            try:
-                dup = key in seen
-            except TypeError:
-                continue
-            if dup:
-                raise yaml.constructor.ConstructorError("while constructing a mapping", node.start_mark,
-                                                        f"found duplicate key {key!r:.80}", key_node.start_mark)
-            seen.add(key)
-        return super().construct_mapping(node, deep=deep)
-
-
 _KINDS = {"cylinder", "sphere", "rounded_box", "mesh", "arc", "polyline"}
 
 
@@ -778,7 +761,7 @@ def load_scene(path: str | os.PathLike) -> Scene:
     if len(raw) > MAX_SCENE_BYTES:
         raise SceneError(f"{p}: scene file larger than {MAX_SCENE_BYTES} bytes")
     try:
-        data = yaml.load(raw.decode("utf-8"), Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
+        data = yaml.load(raw.decode("utf-8"), Loader=UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
     except UnicodeDecodeError as exc:
         raise SceneError(f"{p}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except yaml.YAMLError as exc:

@@ -58,6 +58,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from flexsheet import registry
+from flexsheet.model.yamlio import UniqueKeyLoader
 from flexsheet.runtime.node import EXIT_CONFIG, NodeConfig
 from flexsheet.runtime.transport import CurveConfig
 
@@ -88,26 +89,6 @@ class LaunchError(ValueError):
 
 #: a launch file larger than this (bytes) is refused before it is parsed
 MAX_LAUNCH_BYTES = 1 << 20
-
-
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` that refuses a key given twice in one mapping (PyYAML keeps the last silently,
-    so a second ``nodes:`` or a repeated node name would drop nodes without a word)."""
-
-    def construct_mapping(self, node, deep=False):
-        seen = set()
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=deep)
-            try:
-                dup = key in seen
-            except TypeError:  # unhashable key: construct_mapping below reports it
-                continue
-            if dup:
-                raise yaml.constructor.ConstructorError(
-                    "while constructing a mapping", node.start_mark, f"found duplicate key {key!r:.80}",
-                    key_node.start_mark)
-            seen.add(key)
-        return super().construct_mapping(node, deep=deep)
 
 
 def _short(value: Any, limit: int = 120) -> str:
@@ -248,7 +229,7 @@ def load_launch(path: str | Path) -> LaunchFile:
             data = f.read(MAX_LAUNCH_BYTES + 1)
         if len(data) > MAX_LAUNCH_BYTES:
             raise LaunchError(f"{path}: launch file larger than {MAX_LAUNCH_BYTES} bytes")
-        raw = yaml.load(data.decode("utf-8"), Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
+        raw = yaml.load(data.decode("utf-8"), Loader=UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
     except FileNotFoundError:
         raise LaunchError(f"{path}: launch file not found") from None
     except OSError as exc:
