@@ -275,7 +275,7 @@ def twin_settings(lf=None) -> dict:
     """``{"realism", "truth_seed", "source"}`` of the twin a launch ran: the launch file's top-level ``twin``
     (a mapping or a model), else the world node's ``twin`` param, else the world's defaults (``source`` says
     which). ``lf``: the :class:`flexsheet.runtime.launch.LaunchFile` (or ``None``)."""
-    from nodes.world.node import TwinParams
+    from flexsheet.model.truth_choice import TruthChoice
 
     def as_dict(x) -> dict | None:
         if x is None:
@@ -292,7 +292,7 @@ def twin_settings(lf=None) -> dict:
                 break
     if found is None:
         found, source = {}, "world node defaults (the launch file names no twin)"
-    tp = TwinParams(**{k: v for k, v in found.items() if k in TwinParams.model_fields})
+    tp = TruthChoice(**{k: v for k, v in found.items() if k in TruthChoice.model_fields})
     return {"realism": tp.realism, "truth_seed": tp.truth_seed, "source": source}
 
 

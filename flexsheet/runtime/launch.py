@@ -58,6 +58,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from flexsheet import registry
+from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.model.yamlio import UniqueKeyLoader
 from flexsheet.runtime.node import EXIT_CONFIG, NodeConfig
 from flexsheet.runtime.transport import CurveConfig
@@ -168,17 +169,14 @@ class NodeSpec(BaseModel):
         return v
 
 
-class TwinSpec(BaseModel):
-    """The top-level ``twin:`` section: which hidden truth every twin node draws
-    (:meth:`flexsheet.model.truth.TwinTruth.draw`). ``realism``: ``realistic`` (as-built values drawn around
-    nominal by documented spreads) or ``ideal`` (nominal exactly); ``truth_seed``: int ≥ 0;
+class TwinSpec(TruthChoice):
+    """The top-level ``twin:`` section: which hidden truth every twin node draws (``realism``, ``truth_seed``:
+    :class:`~flexsheet.model.truth_choice.TruthChoice`, the same config the twin nodes take) and
     ``registration``: before the nodes start, run the registration procedures in the twin
     (``flexsheet calibrate display --sim``, cached per seed) and give the estimators the ``display.yaml`` it
     writes (when the file names no ``display_calib`` of its own)."""
 
     model_config = ConfigDict(extra="forbid", strict=True)
-    realism: Literal["realistic", "ideal"] = "realistic"
-    truth_seed: int = Field(default=0, ge=0)
     registration: bool = True
 
 

@@ -33,7 +33,6 @@ import asyncio
 import math
 import threading
 from dataclasses import replace
-from typing import Literal
 
 import cv2
 import numpy as np
@@ -41,23 +40,15 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from flexsheet.model.calibration import load_yaml, to_message
 from flexsheet.model.camera_sim import SimConfig, camera_model, default_trajectory, twin_renderer
+from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.runtime.node import Node, QoS
 from messages import FingerTruth, StereoFrame, topics
 
-__all__ = ["TwinSpec", "CameraParams", "CameraNode", "published_registration", "sim_config"]
+__all__ = ["CameraParams", "CameraNode", "published_registration", "sim_config"]
 
 #: dropped-frame rate of the realistic twin (assumption: ~1 % on a loaded GigE/USB3 link; the GenICam
 #: source counts the real drops in /diagnostics)
 REALISTIC_DROP_RATE = 0.01
-
-
-class TwinSpec(BaseModel):
-    """The hidden truth a twin node builds (issue 15): ``realism`` ``realistic`` (truth drawn around nominal) or
-    ``ideal`` (nominal exactly, the twin as before), ``truth_seed`` ≥ 0 (launch files: top-level ``twin:``)."""
-
-    model_config = ConfigDict(extra="forbid")
-    realism: Literal["realistic", "ideal"] = "realistic"
-    truth_seed: int = Field(default=0, ge=0)
 
 
 class CameraParams(BaseModel):
@@ -77,7 +68,7 @@ class CameraParams(BaseModel):
     # the display registration (display.yaml): the published camera pose comes from its camera entry
     display_calib: str | None = None
     # twin: the hidden truth it renders through, and its sensing (null: the realism's value)
-    twin: TwinSpec = Field(default_factory=TwinSpec)
+    twin: TruthChoice = Field(default_factory=TruthChoice)
     noise_dn: float | None = Field(default=None, ge=0.0)
     shot_gain: float | None = Field(default=None, ge=0.0)
     noise_scale: float = Field(default=1.0, ge=0.0, le=100.0)

@@ -25,7 +25,6 @@ from __future__ import annotations
 import math
 import multiprocessing
 import time
-from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
@@ -35,23 +34,14 @@ from flexsheet.model.finger import FingerScript
 from flexsheet.model.scenes import Scene, SceneError, load_scene
 from flexsheet.model.sheet_fem import default_cache_dir
 from flexsheet.model.truth import TwinTruth
+from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
 from messages import ArmJointState, FingerTruth, SheetState
 from messages import topics as T
 from nodes.world.physics import FemSettings, TruePhysics, build_table
 
-__all__ = ["WorldNode", "WorldParams", "Segment", "TwinParams", "SheetFemParams"]
-
-
-class TwinParams(BaseModel):
-    """The hidden truth every twin node draws (:meth:`flexsheet.model.truth.TwinTruth.draw`): ``realism``
-    ``realistic`` (each as-built value drawn around nominal by its documented spread) or ``ideal`` (nominal
-    exactly), ``truth_seed`` (int ≥ 0). A launch file's top-level ``twin:`` section fills it."""
-
-    model_config = ConfigDict(extra="forbid")
-    realism: Literal["realistic", "ideal"] = "realistic"
-    truth_seed: int = Field(default=0, ge=0)
+__all__ = ["WorldNode", "WorldParams", "Segment", "SheetFemParams"]
 
 
 class SheetFemParams(BaseModel):
@@ -112,7 +102,7 @@ DEFAULT_SCRIPT = [Segment(mode="stroke", moving_time=10.0), Segment(mode="stroke
 class WorldParams(BaseModel):
     """``script``: segments played in order; ``rate_hz`` of ``/world/finger``; ``sheet_rate_hz`` of
     ``/world/sheet``; ``membrane_grid`` G (G×G deflection samples of the true shape); ``twin``: the hidden
-    truth (:class:`TwinParams`); ``sheet_fem``: the true sheet's FEM tables (:class:`SheetFemParams`);
+    truth (:class:`~flexsheet.model.truth_choice.TruthChoice`); ``sheet_fem``: the true sheet's FEM tables (:class:`SheetFemParams`);
     ``sheet_size`` m: unstretched sheet side between the clamps (for the stretch); ``start_delay`` s before the
     script starts (lets the graph connect and the arms reach the first pose); ``loop``: repeat until Ctrl-C;
     ``scene``: the scene file whose stroke path the finger follows (launch/scenes/*.yaml; none: the paper's
@@ -123,7 +113,7 @@ class WorldParams(BaseModel):
     rate_hz: float = Field(default=200.0, gt=0.0, le=2000.0)
     sheet_rate_hz: float = Field(default=100.0, gt=0.0, le=1000.0)
     membrane_grid: int = Field(default=24, ge=2, le=128)
-    twin: TwinParams = Field(default_factory=TwinParams)
+    twin: TruthChoice = Field(default_factory=TruthChoice)
     sheet_fem: SheetFemParams = Field(default_factory=SheetFemParams)
     sheet_size: float = Field(default=scene.SHEET_SIZE, gt=0.0)
     start_delay: float = Field(default=3.0, ge=0.0)
