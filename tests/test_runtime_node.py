@@ -133,3 +133,38 @@ def test_publisher_rejects_wrong_type():
     msgs = asyncio.run(scenario())
     assert [m.header.seq for m in msgs[:3]] == [0, 1, 2]
     assert msgs[2].position[0] == pytest.approx(0.002)
+
+
+def test_drain_period_receives_in_batches_and_loses_nothing():
+    """``ZmqTransport(drain_period=…)`` (the Foxglove bridge's input batching): messages sent 30 ms apart over
+    120 ms reach the handler in at most two drains of the 0.2 s period, every one of them, in order."""
+    from flexsheet.runtime.transport import ZmqTransport
+    from tests.conftest import free_port
+
+    with pytest.raises(ValueError, match="drain_period"):
+        ZmqTransport("", [], drain_period=-1.0)
+
+    async def scenario():
+        ep = f"tcp://127.0.0.1:{free_port()}"
+        got: list[tuple[float, bytes]] = []
+        pub = ZmqTransport(ep, [])
+        sub = ZmqTransport("", [ep], drain_period=0.2)
+        await pub.start(lambda frames: None)
+        await sub.start(lambda frames: got.append((time.monotonic(), bytes(frames[1]))))
+        sub.subscribe("/t")
+        deadline = time.monotonic() + 5.0
+        while not pub.wants(b"/t") and time.monotonic() < deadline:      # the subscription reached the XPUB
+            await asyncio.sleep(0.01)
+        for i in range(5):
+            pub.send([b"/t", str(i).encode()])
+            await asyncio.sleep(0.03)
+        await asyncio.sleep(0.5)
+        pub.close()
+        sub.close()
+        return got
+
+    got = asyncio.run(scenario())
+    assert [m for _, m in got] == [str(i).encode() for i in range(5)]
+    t = np.array([s for s, _ in got])
+    groups = 1 + int(np.sum(np.diff(t) > 0.01))
+    assert groups <= 2, np.diff(t)

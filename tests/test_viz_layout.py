@@ -141,3 +141,60 @@ def test_bad_joint_state_is_refused_and_the_arm_kept():
         b.update("/arm/left/joint_state", bad)
     after = b.frames()
     assert len(before) == len(after) and all(np.allclose(x[2], y[2]) for x, y in zip(before, after, strict=True))
+
+
+def test_scene_bytes_decode_as_the_sdk_would_encode_them():
+    """The scene's bulk arrays are written with numpy on the protobuf wire (foxglove_scene: "protobuf wire
+    format"); decoded against the SDK's schema they must equal the same entities built with the SDK's classes."""
+    import base64
+
+    from foxglove.messages import (
+        Color,
+        LinePrimitive,
+        LinePrimitiveLineType,
+        Point3,
+        SceneEntity,
+        SceneUpdate,
+        Timestamp,
+        TriangleListPrimitive,
+    )
+
+    from nodes.viz.wsclient import proto_class
+
+    schema = base64.b64encode(SceneUpdate.get_schema().data).decode()
+    Update = proto_class(schema, "foxglove.SceneUpdate")
+    Entity = Update.DESCRIPTOR.fields_by_name["entities"].message_type._concrete_class
+    st = sample_state(stamp=1234.5)
+    b = SceneBuilder()
+    for name, msg in st.items():
+        b.update(name, msg)
+    su = Update.FromString(b.scene_bytes(1234.5))
+    ents = {e.id: e for e in su.entities}
+    assert {"object", "sheet", "sheet_true", "fingertip", "contact", "projector", "eyes", "cameras", "arm_left",
+            "arm_right"} == set(ents)
+    d = st["/object/deformation"]
+
+    def pts(a):
+        return [Point3(x=float(x), y=float(y), z=float(z)) for x, y, z in np.asarray(a, dtype=float)]
+
+    sdk = SceneEntity(timestamp=Timestamp.from_epoch_secs(1234.5), frame_id="display", id="object",
+                      triangles=[TriangleListPrimitive(points=pts(d.vertices), indices=d.faces.ravel().tolist(),
+                                                       color=Color(r=0.95, g=0.55, b=0.2, a=0.9))])
+    assert Entity.FromString(sdk.encode()) == ents["object"]
+    assert len(ents["object"].triangles[0].points) == len(d.vertices) == 1200
+    v, f = sheet_mesh(b.believed_sheet(), b.cfg.sheet_grid)
+    sheet = ents["sheet"].triangles[0]
+    assert np.allclose([(p.x, p.y, p.z) for p in sheet.points], v, rtol=0, atol=0)   # doubles, bit-exact
+    assert list(sheet.indices) == f.ravel().tolist()
+    strip = ents["sheet_true"].lines[0]
+    sdk_line = LinePrimitive(type=LinePrimitiveLineType.LineStrip, thickness=1.0, scale_invariant=True,
+                             points=[Point3(x=p.x, y=p.y, z=p.z) for p in strip.points],
+                             color=Color(r=1.0, g=1.0, b=1.0, a=0.6))
+    LineMsg = type(strip)
+    assert LineMsg.FromString(sdk_line.encode()) == strip and len(strip.points) == 16
+    # unchanged inputs: the same bytes again, rebuilt only for what changed
+    assert b.scene_bytes(1234.5) == b.scene_bytes(1234.5)
+    left, right = b._entities["arm_left"][1], b._entities["arm_right"][1]
+    b.update("/arm/left/joint_state", st["/arm/left/joint_state"].model_copy())
+    b.scene_bytes(1234.5)
+    assert b._entities["arm_left"][1] is not left and b._entities["arm_right"][1] is right

@@ -32,7 +32,7 @@ def test_client_sees_channels_and_decodes_scene_fingertip_and_frames():
     state = sample_state(stamp=time.time())
 
     async def scenario():
-        async with NodeHarness(VizNode, params={"port": port, "scene_rate": 20.0}) as h:
+        async with NodeHarness(VizNode, params={"port": port, "scene_rate": 20.0, "camera_scale": 1.0}) as h:
             c = await FoxgloveClient.open(port)
             await c.wait_channels({"/viz/scene", "/viz/tf", "/fingertip", "/camera/left", "/render/image"})
             names = {t: (ch["schemaName"], ch["encoding"]) for t, ch in c.channels.items()}
@@ -181,3 +181,44 @@ def test_slow_viewer_loses_old_frames_and_never_blocks_the_node():
 def test_bad_params_name_the_field(params, field):
     with pytest.raises(ValueError, match=field):
         VizNode.Params.model_validate(params)
+
+
+def test_inputs_are_not_decoded_while_no_viewer_watches():
+    """After the last viewer leaves, inputs stay subscribed (the transport has no unsubscribe) but nothing is
+    decoded: the newest message waits in its depth-1 queue until a viewer comes back."""
+    port = free_port()
+    tip = sample_state(stamp=time.time())["/fingertip"]
+
+    def seq(i: int):
+        return tip.model_copy(update={"header": tip.header.model_copy(update={"seq": i})})
+
+    async def scenario():
+        async with NodeHarness(VizNode, params={"port": port, "input_rate": 50.0}) as h:
+            c = await FoxgloveClient.open(port)
+            await c.wait_channels({"/fingertip"})
+            await c.subscribe(["/fingertip"])
+            await asyncio.sleep(0.2)
+            h.inject(T.FINGERTIP, seq(1))
+            await c.messages({"/fingertip": 1}, timeout=3.0)
+            await asyncio.sleep(0.3)                           # its handler is done and back to waiting
+            await c.ws.close()
+            await asyncio.sleep(1.2)                           # the server notices; the handler parks
+            assert not h.node._watched()
+            for i in range(2, 12):
+                h.inject(T.FINGERTIP, seq(i))
+                await h.settle(0.05)
+            await h.settle(1.5)
+            parked = h.node.streams.builder.get("/fingertip").header.seq
+            c = await FoxgloveClient.open(port)                # a viewer again: the newest message is decoded
+            await c.wait_channels({"/fingertip"})
+            await c.subscribe(["/fingertip"])
+            got = await c.messages({"/fingertip": 1}, timeout=4.0)
+            await c.ws.close()
+            return parked, h.node.streams.builder.get("/fingertip").header.seq, got
+
+    parked, later, got = asyncio.run(scenario())
+    # the first arrival after the viewer left is decoded (the handler looks for viewers after handling), then
+    # nothing of seq 3..11 while nobody watched
+    assert parked == 2
+    assert later == 11                       # only the newest survived the depth-1 queue
+    assert json.loads(got["/fingertip"][0])["header"]["seq"] == 11

@@ -235,9 +235,65 @@ def _grid_faces(nu: int, nv: int) -> np.ndarray:
     return f
 
 
-@cache
-def _grid_indices(n: int) -> list[int]:
-    return _grid_faces(n, n).ravel().tolist()
+# ---------------------------------------------------------------- protobuf wire format, bulk arrays
+# A Point3 per vertex built through the SDK's classes costs ~1 µs each (a deformed object: ~1 ms per scene).
+# The protobuf wire format lets a message be assembled from parts: the encoding of a message is the
+# concatenation of its fields' encodings, in any order, and a repeated field is one record per element
+# (protobuf.dev/programming-guides/encoding: "Concatenation"/"Repeated elements"). So the SDK encodes every
+# scalar part of an entity (timestamp, ids, colours, poses) and numpy writes only the bulk arrays below: the
+# repeated ``Point3 points`` (one length-delimited record of 3 doubles per point) and the packed
+# ``fixed32 indices``. tests/test_viz_layout.py decodes the result against the SDK's schema.
+_LEN = 2  # wire type of length-delimited fields (submessages, bytes, packed arrays)
+_POINT3_RECORD = np.dtype([("tag", "u1"), ("len", "u1"), ("tx", "u1"), ("x", "<f8"), ("ty", "u1"), ("y", "<f8"),
+                           ("tz", "u1"), ("z", "<f8")])  # 29 bytes, unaligned: exactly the wire bytes
+
+
+def _varint(n: int) -> bytes:
+    out = bytearray()
+    while n >= 0x80:
+        out.append((n & 0x7F) | 0x80)
+        n >>= 7
+    out.append(n)
+    return bytes(out)
+
+
+def _len_field(number: int, payload: bytes) -> bytes:
+    """One length-delimited field ``number`` (a submessage or packed array) on the wire."""
+    return _varint(number << 3 | _LEN) + _varint(len(payload)) + payload
+
+
+def _point3_field(number: int, pts: np.ndarray) -> bytes:
+    """Repeated ``foxglove.Point3`` field ``number`` holding ``pts`` (N, 3) m (float64 on the wire)."""
+    pts = np.asarray(pts, dtype=float).reshape(-1, 3)
+    if number >= 16:
+        raise ValueError(f"field number {number} needs a 2-byte tag")
+    rec = np.empty(len(pts), _POINT3_RECORD)
+    rec["tag"], rec["len"] = number << 3 | _LEN, 27
+    rec["tx"], rec["ty"], rec["tz"] = 0x09, 0x11, 0x19  # Point3 fields 1, 2, 3: double (wire type 1)
+    rec["x"], rec["y"], rec["z"] = pts[:, 0], pts[:, 1], pts[:, 2]
+    return rec.tobytes()
+
+
+def _fixed32_field(number: int, values: np.ndarray) -> bytes:
+    """Packed repeated ``fixed32`` field ``number`` (proto3 packs repeated scalars)."""
+    v = np.ascontiguousarray(values, dtype="<u4").ravel()
+    return _len_field(number, v.tobytes()) if len(v) else b""
+
+
+#: field numbers (foxglove/SceneUpdate.proto, SceneEntity.proto, TriangleListPrimitive.proto, LinePrimitive.proto)
+_SCENE_ENTITIES, _ENTITY_LINES, _ENTITY_TRIANGLES, _TRI_POINTS, _TRI_INDICES, _LINE_POINTS = 2, 11, 12, 2, 5, 5
+
+
+def _triangles_bytes(points: np.ndarray, indices: np.ndarray, color: Color) -> bytes:
+    """Encoded ``foxglove.TriangleListPrimitive`` of ``points`` (N, 3) m and ``indices`` (3M,) (or (M, 3))."""
+    return (TriangleListPrimitive(color=color).encode() + _point3_field(_TRI_POINTS, points)
+            + _fixed32_field(_TRI_INDICES, indices))
+
+
+def _line_bytes(points: np.ndarray, line_type: LinePrimitiveLineType, color: Color, thickness: float) -> bytes:
+    """Encoded ``foxglove.LinePrimitive`` through ``points`` (N, 3) m (thickness in px, scale invariant)."""
+    return (LinePrimitive(type=line_type, thickness=thickness, scale_invariant=True, color=color).encode()
+            + _point3_field(_LINE_POINTS, points))
 
 
 def json_schema(topic: str, cls: type[Message]) -> dict:
@@ -350,7 +406,7 @@ class SceneBuilder:
     """Holds the newest input of every topic and builds Foxglove messages from them.
 
     Feed it with :meth:`update` (topic name, decoded message); bad input raises ``ValueError`` naming the
-    topic and field and leaves the previous state. Build with :meth:`scene`, :meth:`transforms`,
+    topic and field and leaves the previous state. Build with :meth:`scene_bytes`, :meth:`transforms`,
     :meth:`camera_images`, :meth:`calibrations`, :meth:`render_image`, :meth:`metrics`, :meth:`json_copy`.
     Not thread-safe: call from one thread.
     """
@@ -361,9 +417,8 @@ class SceneBuilder:
         self.stamp = 0.0
         self._arms: dict[str, _Arm] | None = None
         self._links: dict[str, np.ndarray] = {}
-        self._object: SceneEntity | None = None
-        self._object_key: tuple | None = None
-        self._static: list[SceneEntity] | None = None
+        self._entities: dict[str, tuple[tuple, bytes]] = {}  # entity id -> (input objects, encoded entity)
+        self._static: list[bytes] | None = None
         self._sheet_key: tuple | None = None
         self._sheet: SheetSurface | None = None
         P = self.cfg.projector
@@ -440,30 +495,36 @@ class SceneBuilder:
             return None
 
     # ------------------------------------------------------------------ /viz/scene
-    def _entity(self, eid: str, stamp: float, **prims) -> SceneEntity:
-        return SceneEntity(timestamp=_ts(stamp), frame_id="display", id=eid, **prims)
+    def _entity(self, eid: str, stamp: float, **prims) -> bytes:
+        """Encoded ``foxglove.SceneEntity`` ``eid`` in frame ``display`` with SDK-built primitives."""
+        return SceneEntity(timestamp=_ts(stamp), frame_id="display", id=eid, **prims).encode()
 
-    def _object_entity(self, stamp: float) -> SceneEntity:
+    def _cached(self, eid: str, key: tuple, build: Callable[[], bytes]) -> bytes:
+        """Entity bytes of ``eid`` rebuilt only when one of the objects in ``key`` was replaced (compared by
+        identity: the cache holds them, so an id cannot be reused while they are compared)."""
+        hit = self._entities.get(eid)
+        if hit is not None and len(hit[0]) == len(key) and all(x is y for x, y in zip(hit[0], key, strict=True)):
+            return hit[1]
+        data = build()
+        self._entities[eid] = (key, data)
+        return data
+
+    def _object_entity(self, stamp: float) -> bytes:
         d: ObjectDeformation | None = self.get(T.DEFORMATION)
-        key = None if d is None else (d.header.seq, d.header.stamp, id(d))
-        if self._object is not None and key == self._object_key:
-            return self._object
+        return self._cached("object", (d,), lambda: self._build_object(d, stamp))
+
+    def _build_object(self, d: ObjectDeformation | None, stamp: float) -> bytes:
         if d is None:  # the FEM has not published: the undeformed paper cylinder (axis along y)
             q = _z_to(np.asarray(scene.CYLINDER_AXIS, dtype=float))
             cyl = CylinderPrimitive(pose=_pose(scene.CYLINDER_CENTER, q),
                                     size=Vector3(x=2 * scene.CYLINDER_RADIUS, y=2 * scene.CYLINDER_RADIUS,
                                                  z=scene.CYLINDER_LENGTH),
                                     bottom_scale=1.0, top_scale=1.0, color=_color("object"))
-            ent = self._entity("object", stamp, cylinders=[cyl])
-        else:
-            pts = [Point3(x=x, y=y, z=z) for x, y, z in d.vertices.tolist()]
-            tri = TriangleListPrimitive(points=pts, indices=d.faces.ravel().tolist(),
-                                        color=_color("object" if d.valid else "object_invalid"))
-            ent = self._entity("object", float(d.header.stamp), triangles=[tri])
-        self._object, self._object_key = ent, key
-        return ent
+            return self._entity("object", stamp, cylinders=[cyl])
+        tri = _triangles_bytes(d.vertices, d.faces, _color("object" if d.valid else "object_invalid"))
+        return self._entity("object", float(d.header.stamp)) + _len_field(_ENTITY_TRIANGLES, tri)
 
-    def _static_entities(self, stamp: float) -> list[SceneEntity]:
+    def _static_entities(self, stamp: float) -> list[bytes]:
         """Projector frustum and the eyes (fixed geometry): built once."""
         if self._static is None:
             P = self.cfg.projector
@@ -494,22 +555,28 @@ class SceneBuilder:
         return ArrowPrimitive(pose=_pose(p, q), shaft_length=0.8 * length, shaft_diameter=0.003,
                               head_length=0.2 * length, head_diameter=0.008, color=_color(color))
 
-    def _fingertip_entity(self, stamp: float) -> SceneEntity | None:
-        spheres, texts = [], []
+    def _fingertip_entity(self, stamp: float) -> bytes:
         tip: Fingertip | None = self.get(T.FINGERTIP)
+        truth: FingerTruth | None = self.get(T.FINGER_TRUTH)
+        return self._cached("fingertip", (tip, truth), lambda: self._build_fingertip(tip, truth, stamp))
+
+    def _build_fingertip(self, tip: Fingertip | None, truth: FingerTruth | None, stamp: float) -> bytes:
+        spheres, texts = [], []
         if tip is not None and tip.valid:
             spheres.append(self._sphere(tip.position, 0.010, "measured"))
             if tip.prediction_horizon > 0:
                 spheres.append(self._sphere(tip.predicted_position, 0.007, "predicted"))
-        truth: FingerTruth | None = self.get(T.FINGER_TRUTH)
         if truth is not None:
             spheres.append(self._sphere(truth.position, 0.005, "true"))
             texts.append(self._label(truth.position + [0, 0, 0.02], f"finger ({truth.phase})"))
         return self._entity("fingertip", stamp, spheres=spheres, texts=texts)
 
-    def _contact_entity(self, stamp: float, sheet: SheetSurface | None) -> SceneEntity:
-        spheres, arrows = [], []
+    def _contact_entity(self, stamp: float, sheet: SheetSurface | None) -> bytes:
         tgt: SheetTarget | None = self.get(T.SHEET_TARGET)
+        return self._cached("contact", (tgt, sheet), lambda: self._build_contact(tgt, sheet, stamp))
+
+    def _build_contact(self, tgt: SheetTarget | None, sheet: SheetSurface | None, stamp: float) -> bytes:
+        spheres, arrows = [], []
         if tgt is not None:
             spheres.append(self._sphere(tgt.contact_point, 0.006, "contact"))
             arrows.append(self._arrow(tgt.contact_point, tgt.normal, 0.05, "contact"))
@@ -517,37 +584,42 @@ class SceneBuilder:
             arrows.append(self._arrow(sheet.origin, sheet.normal, 0.05, "sheet_normal"))
         return self._entity("contact", stamp, spheres=spheres, arrows=arrows)
 
-    def _sheet_entities(self, stamp: float, sheet: SheetSurface | None) -> list[SceneEntity]:
+    def _sheet_entities(self, stamp: float, sheet: SheetSurface | None) -> list[bytes]:
         out = []
         if sheet is not None:
-            n = self.cfg.sheet_grid
-            v, _ = sheet_mesh(sheet, n)
-            out.append(self._entity("sheet", stamp, triangles=[TriangleListPrimitive(
-                points=[Point3(x=x, y=y, z=z) for x, y, z in v.tolist()], indices=_grid_indices(n),
-                color=_color("sheet"))]))
+            out.append(self._cached("sheet", (sheet,), lambda: self._build_sheet(sheet, stamp)))
         true: SheetState | None = self.get(T.SHEET_STATE)
         if true is not None:
-            g = true.membrane
-            a = float(np.linalg.norm(true.corners[0] - true.corners[1])) / 2
-            b = float(np.linalg.norm(true.corners[1] - true.corners[2])) / 2
-            u = np.linspace(-a, a, g.shape[0])
-            v = np.linspace(-b, b, g.shape[1])
-            ev = np.cross(true.normal, true.axis_u)
-            P = (true.origin + u[:, None, None] * true.axis_u + v[None, :, None] * ev
-                 - g[:, :, None] * true.normal)
-            # every ~8th grid line of constant u, then of constant v
-            rows = [P[i, :] for i in range(0, g.shape[0], max(1, g.shape[0] // 8))]
-            rows += [P[:, j] for j in range(0, g.shape[1], max(1, g.shape[1] // 8))]
-            strips = [LinePrimitive(type=LinePrimitiveLineType.LineStrip, thickness=1.0, scale_invariant=True,
-                                    points=[Point3(x=x, y=y, z=z) for x, y, z in r.tolist()],
-                                    color=_color("sheet_true")) for r in rows]
-            out.append(self._entity("sheet_true", float(true.header.stamp), lines=strips))
+            out.append(self._cached("sheet_true", (true,), lambda: self._build_true_sheet(true)))
         return out
 
-    def _camera_entity(self, stamp: float) -> SceneEntity | None:
+    def _build_sheet(self, sheet: SheetSurface, stamp: float) -> bytes:
+        n = self.cfg.sheet_grid
+        v, f = sheet_mesh(sheet, n)
+        return self._entity("sheet", stamp) + _len_field(_ENTITY_TRIANGLES, _triangles_bytes(v, f, _color("sheet")))
+
+    def _build_true_sheet(self, true: SheetState) -> bytes:
+        g = true.membrane
+        a = float(np.linalg.norm(true.corners[0] - true.corners[1])) / 2
+        b = float(np.linalg.norm(true.corners[1] - true.corners[2])) / 2
+        u = np.linspace(-a, a, g.shape[0])
+        v = np.linspace(-b, b, g.shape[1])
+        ev = np.cross(true.normal, true.axis_u)
+        P = (true.origin + u[:, None, None] * true.axis_u + v[None, :, None] * ev - g[:, :, None] * true.normal)
+        # every ~8th grid line of constant u, then of constant v
+        rows = [P[i, :] for i in range(0, g.shape[0], max(1, g.shape[0] // 8))]
+        rows += [P[:, j] for j in range(0, g.shape[1], max(1, g.shape[1] // 8))]
+        color = _color("sheet_true")
+        return self._entity("sheet_true", float(true.header.stamp)) + b"".join(
+            _len_field(_ENTITY_LINES, _line_bytes(r, LinePrimitiveLineType.LineStrip, color, 1.0)) for r in rows)
+
+    def _camera_entity(self, stamp: float) -> bytes | None:
         cal: StereoCalibration | None = self.get(T.CALIBRATION)
         if cal is None:
             return None
+        return self._cached("cameras", (cal,), lambda: self._build_cameras(cal, stamp))
+
+    def _build_cameras(self, cal: StereoCalibration, stamp: float) -> bytes:
         w, h = (float(x) for x in cal.image_size)
         Tl, Tr = self._camera_poses(cal)
         lines = []
@@ -564,33 +636,35 @@ class SceneBuilder:
         T_rl[:3, :3], T_rl[:3, 3] = cal.R, cal.T
         return cal.T_display_camera, cal.T_display_camera @ np.linalg.inv(T_rl)
 
-    def _arm_entities(self, stamp: float) -> list[SceneEntity]:
-        out = []
-        for side, links in self._links.items():
-            p = links[:, :3, 3]
-            cyls = []
-            for k in range(len(ARM_LINKS) - 1):
-                d = p[k + 1] - p[k]
-                L = float(np.linalg.norm(d))
-                if L < 1e-6:
-                    continue
-                dia = _LINK_DIAMETER[k]
-                cyls.append(CylinderPrimitive(pose=_pose(0.5 * (p[k] + p[k + 1]), _z_to(d / L)),
-                                              size=Vector3(x=dia, y=dia, z=L), bottom_scale=1.0, top_scale=1.0,
-                                              color=_color("arm")))
-            spheres = [self._sphere(p[k], _LINK_DIAMETER[min(k, len(_LINK_DIAMETER) - 1)] * 1.05, "arm")
-                       for k in range(1, len(ARM_LINKS) - 1)]
-            Tc = links[-1]
-            jaw = CubePrimitive(pose=_pose(Tc[:3, 3], quaternions(Tc[:3, :3])),
-                                size=Vector3(x=0.02, y=0.03, z=self.cfg.sheet_half_width * 2),
-                                color=_color("clamp"))
-            out.append(self._entity(f"arm_{side}", stamp, cylinders=cyls, spheres=spheres, cubes=[jaw],
-                                    texts=[self._label(p[0] + [0, 0, -0.03], f"{side} arm")]))
-        return out
+    def _arm_entities(self, stamp: float) -> list[bytes]:
+        return [self._cached(f"arm_{side}", (links,), lambda s=side, lk=links: self._build_arm(s, lk, stamp))
+                for side, links in self._links.items()]
 
-    def scene(self, stamp: float | None = None) -> SceneUpdate:
-        """The whole scene as one ``foxglove.SceneUpdate`` (every entity replaced; ids: object, sheet,
-        sheet_true, fingertip, contact, cameras, projector, eyes, arm_left, arm_right)."""
+    def _build_arm(self, side: str, links: np.ndarray, stamp: float) -> bytes:
+        p = links[:, :3, 3]
+        cyls = []
+        for k in range(len(ARM_LINKS) - 1):
+            d = p[k + 1] - p[k]
+            L = float(np.linalg.norm(d))
+            if L < 1e-6:
+                continue
+            dia = _LINK_DIAMETER[k]
+            cyls.append(CylinderPrimitive(pose=_pose(0.5 * (p[k] + p[k + 1]), _z_to(d / L)),
+                                          size=Vector3(x=dia, y=dia, z=L), bottom_scale=1.0, top_scale=1.0,
+                                          color=_color("arm")))
+        spheres = [self._sphere(p[k], _LINK_DIAMETER[min(k, len(_LINK_DIAMETER) - 1)] * 1.05, "arm")
+                   for k in range(1, len(ARM_LINKS) - 1)]
+        Tc = links[-1]
+        jaw = CubePrimitive(pose=_pose(Tc[:3, 3], quaternions(Tc[:3, :3])),
+                            size=Vector3(x=0.02, y=0.03, z=self.cfg.sheet_half_width * 2), color=_color("clamp"))
+        return self._entity(f"arm_{side}", stamp, cylinders=cyls, spheres=spheres, cubes=[jaw],
+                            texts=[self._label(p[0] + [0, 0, -0.03], f"{side} arm")])
+
+    def scene_bytes(self, stamp: float | None = None) -> bytes:
+        """The whole scene as one encoded ``foxglove.SceneUpdate`` (every entity replaced; ids: object, sheet,
+        sheet_true, fingertip, contact, projector, eyes, cameras, arm_left, arm_right). Entities whose inputs
+        did not change since the last call are reused as bytes; an entity's timestamp is that of the input
+        it was drawn from (``stamp``, s, default the newest input's, when it has none)."""
         stamp = self.stamp if stamp is None else stamp
         sheet = self.believed_sheet()
         ents = [self._object_entity(stamp), *self._sheet_entities(stamp, sheet), self._fingertip_entity(stamp),
@@ -598,7 +672,7 @@ class SceneBuilder:
         cam = self._camera_entity(stamp)
         if cam is not None:
             ents.append(cam)
-        return SceneUpdate(entities=ents)
+        return b"".join(_len_field(_SCENE_ENTITIES, e) for e in ents)
 
     # ------------------------------------------------------------------ /viz/tf
     def frames(self) -> list[tuple[str, str, np.ndarray]]:
@@ -798,7 +872,7 @@ class FoxgloveStreams:
             if wanted(SCENE) or wanted(TF) or wanted(METRICS):
                 if self._due(SCENE, r.scene, t):
                     if wanted(SCENE):
-                        out.append((SCENE, b.scene(t).encode(), t))
+                        out.append((SCENE, b.scene_bytes(t), t))
                     if wanted(TF):
                         out.append((TF, b.transforms(t).encode(), t))
                     if wanted(METRICS):

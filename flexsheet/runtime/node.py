@@ -429,13 +429,18 @@ class Node:
 
     Params: ClassVar[type[BaseModel]] = EmptyParams
     node_type: ClassVar[str] = ""
+    #: s; > 0: in its own process the node receives its inputs in batches every DRAIN_PERIOD s instead of on
+    #: every ready socket (:class:`~flexsheet.runtime.transport.ZmqTransport` ``drain_period``) — for nodes that
+    #: want the newest of many inputs, not each on time (the Foxglove bridge). No effect in a container.
+    DRAIN_PERIOD: ClassVar[float] = 0.0
 
     def __init__(self, config: NodeConfig, transport: Transport | None = None) -> None:
         self.config = config
         self.name = config.name
         self.params = self.Params.model_validate(config.params)
         self.log = logging.getLogger(config.name)
-        self.transport = transport or ZmqTransport(config.endpoint, config.peers, curve=config.curve)
+        self.transport = transport or ZmqTransport(config.endpoint, config.peers, curve=config.curve,
+                                                   drain_period=self.DRAIN_PERIOD)
         self._bus = getattr(self.transport, "bus", None)  # the container's in-process bus, if any
         attach = getattr(self.transport, "attach", None)
         if attach is not None:

@@ -5,8 +5,10 @@ then measures the viz process's CPU (utime + stime from ``/proc/<pid>/stat``, al
 I/O, the SDK's tokio workers) over windows of ``--window`` s: no viewer; a viewer with the shipped layout's
 channels (3-D scene, frames, metrics, images); a viewer on every channel; and no viewer again (inputs stay
 subscribed: the transport has no unsubscribe). The viewer is :class:`nodes.viz.wsclient.FoxgloveClient`.
-Writes ``OUT/viz_cpu.json`` and ``OUT/viz_cpu.png`` (fraction of one core per window). The machine's load
-shows in the numbers: run it on an otherwise idle machine for the figure that matters.
+``--runs N`` launches the sim N times; ``OUT/viz_cpu.json`` holds every run and, per window, the median and
+min/max of the CPU (% of one core); ``OUT/viz_cpu.png`` draws them, beside an earlier run's (``--baseline
+FILE``) when given. ``--param KEY=VALUE`` sets a viz parameter. The machine's load shows in the numbers (the
+load average is recorded per run): compare runs taken under similar load, or interleave them.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import asyncio
 import json
 import os
 import socket
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -102,35 +105,23 @@ async def _window(pid: int, port: int, channels, seconds: float) -> dict:
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="flexsheet bench viz", description=__doc__.splitlines()[0],
-                                 epilog="example:\n  flexsheet bench viz --out out/bench_viz --window 10",
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--launch", default=str(ROOT / "launch" / "sim.yaml"), help="launch file to run")
-    ap.add_argument("--window", type=float, default=10.0, help="seconds per measurement window")
-    ap.add_argument("--warmup", type=float, default=14.0, help="seconds before the first window")
-    ap.add_argument("--out", default="out/bench_viz", help="output folder")
-    ap.add_argument("--base-port", type=int, default=0, help="override the launch file's base_port (0: keep)")
-    args = ap.parse_args(argv)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    lf = yaml.safe_load(Path(args.launch).read_text())
+def _one_run(lf: dict, params: dict, args, out: Path, label: str) -> dict:
+    """Launch the sim once with the viz node on a free port and measure every window; returns window -> numbers."""
     port = _free_port()
-    lf["nodes"] = {k: v for k, v in lf["nodes"].items() if v.get("type") != "viz"}
     host = next(iter(lf["hosts"]))
-    lf["nodes"]["viz"] = {"type": "viz", "host": host, "nice": 10, "params": {"port": port}}
-    if args.base_port:
-        lf["base_port"] = args.base_port
+    lf = dict(lf, nodes={**{k: v for k, v in lf["nodes"].items() if v.get("type") != "viz"},
+                         "viz": {"type": "viz", "host": host, "nice": 10, "params": {**params, "port": port}}})
     with tempfile.TemporaryDirectory() as tmp:
         launch = Path(tmp) / "bench_viz.yaml"
         launch.write_text(yaml.safe_dump(lf, sort_keys=False))
         duration = args.warmup + len(WINDOWS) * (args.window + 3.0) + 5.0
-        sim = subprocess.Popen([sys.executable, "-m", "flexsheet", "launch", str(launch), "--duration", str(duration),
-                                "--out", str(out / "sim")], cwd=ROOT, stdout=open(out / "sim.log", "w"),
-                               stderr=subprocess.STDOUT)
+        with open(out / f"sim{label}.log", "w") as log:
+            sim = subprocess.Popen([sys.executable, "-m", "flexsheet", "launch", str(launch), "--duration",
+                                    str(duration), "--out", str(out / f"sim{label}")], cwd=ROOT, stdout=log,
+                                   stderr=subprocess.STDOUT)
         try:
             pid = _find_viz(launch)
-            print(f"[bench viz] viz pid {pid}, port {port}; warming up {args.warmup:.0f} s", flush=True)
+            print(f"[bench viz] run{label}: viz pid {pid}, port {port}; warming up {args.warmup:.0f} s", flush=True)
             time.sleep(args.warmup)
             res = {}
             for name, channels in WINDOWS.items():
@@ -140,24 +131,95 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             sim.terminate()
             sim.wait(timeout=60)
-    load = os.getloadavg()
-    summary = {"windows": res, "loadavg_1_5_15": load, "cpus": os.cpu_count(), "launch": args.launch}
-    (out / "viz_cpu.json").write_text(json.dumps(summary, indent=1))
+    res["loadavg_1"] = os.getloadavg()[0]
+    return res
+
+
+def stats(runs: list[dict]) -> dict:
+    """Per window: median, min and max over ``runs`` of the CPU (% of one core) and of the viewer's msg/s."""
+    out = {}
+    for name in WINDOWS:
+        cpu = [100 * r[name]["cpu_fraction_of_one_core"] for r in runs if name in r]
+        msg = [r[name]["messages_per_s"] for r in runs if name in r]
+        if cpu:
+            out[name] = {"cpu_pct_median": statistics.median(cpu), "cpu_pct_min": min(cpu), "cpu_pct_max": max(cpu),
+                         "viewer_msg_per_s_median": statistics.median(msg), "n": len(cpu)}
+    return out
+
+
+def _figure(path: Path, after: dict, before: dict | None, title: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7, 3.2))
-    names = list(res)
-    ax.barh(names, [100 * res[k]["cpu_fraction_of_one_core"] for k in names], color="tab:blue")
+    names = list(WINDOWS)
+    fig, ax = plt.subplots(figsize=(7.5, 3.4))
+    sets = [("after", after, "tab:blue")] if before is None else [("before", before, "tab:gray"),
+                                                                  ("after", after, "tab:blue")]
+    h = 0.8 / len(sets)
+    for i, (label, st, color) in enumerate(sets):
+        y = [k + (i - (len(sets) - 1) / 2) * h for k in range(len(names))]
+        med = [st[n]["cpu_pct_median"] if n in st else 0.0 for n in names]
+        err = [[m - st[n]["cpu_pct_min"] for m, n in zip(med, names, strict=True)],
+               [st[n]["cpu_pct_max"] - m for m, n in zip(med, names, strict=True)]]
+        ax.barh(y, med, height=h, xerr=err, color=color, capsize=3,
+                label=f"{label}: median, min-max of {st[names[1]]['n']} runs")
+        for yy, m, hi in zip(y, med, err[1], strict=True):
+            ax.text(m + hi + 0.15, yy, f"{m:.1f}", va="center", fontsize=7)
+    ax.set_yticks(range(len(names)), names)
     ax.axvline(5.0, color="tab:red", ls="--", lw=1, label="budget 5 %")
-    ax.set_xlabel("viz node CPU (% of one core)")
-    ax.set_title(f"viz bridge in the sim (load average {load[0]:.1f} on {os.cpu_count()} CPUs)", fontsize=9)
+    ax.set_xlabel("viz node CPU, % of one core (all its threads, /proc)")
+    ax.set_title(title, fontsize=8)
     ax.invert_yaxis()
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
-    fig.savefig(out / "viz_cpu.png", dpi=120)
+    fig.savefig(path, dpi=120)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="flexsheet bench viz", description=__doc__.splitlines()[0],
+                                 epilog="example:\n  flexsheet bench viz --out out/bench_viz --runs 3\n"
+                                        "  flexsheet bench viz --out out/bench_viz_10hz --param scene_rate=10 --param input_rate=10 "
+                                        "--baseline out/bench_viz/viz_cpu.json",
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--launch", default=str(ROOT / "launch" / "sim.yaml"), help="launch file to run")
+    ap.add_argument("--window", type=float, default=10.0, help="seconds per measurement window")
+    ap.add_argument("--warmup", type=float, default=14.0, help="seconds before the first window")
+    ap.add_argument("--runs", type=int, default=1, help="launches of the sim (median and spread over them)")
+    ap.add_argument("--out", default="out/bench_viz", help="output folder")
+    ap.add_argument("--base-port", type=int, default=0, help="override the launch file's base_port (0: keep)")
+    ap.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                    help="viz node parameter (YAML value), repeatable: --param scene_rate=10 --param camera_scale=1")
+    ap.add_argument("--baseline", help="viz_cpu.json of an earlier run of this bench, drawn beside as 'before'")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    lf = yaml.safe_load(Path(args.launch).read_text())
+    if args.base_port:
+        lf["base_port"] = args.base_port
+    params = {}
+    for item in args.param:
+        key, sep, value = item.partition("=")
+        if not sep:
+            ap.error(f"--param expects KEY=VALUE, got {item!r}")
+        params[key] = yaml.safe_load(value)
+    runs = [_one_run(lf, params, args, out, f"{i + 1}" if args.runs > 1 else "") for i in range(args.runs)]
+    summary = {"stats": stats(runs), "runs": runs, "cpus": os.cpu_count(), "launch": args.launch,
+               "viz_params": params, "command": " ".join(["flexsheet", "bench", "viz", *(argv or sys.argv[1:])])}
+    before = None
+    if args.baseline:
+        base = json.loads(Path(args.baseline).read_text())
+        before = base.get("stats") or stats(base.get("runs", [base.get("windows", {})]))
+        summary["baseline"] = {"file": args.baseline, "stats": before, "command": base.get("command"),
+                               "runs": base.get("runs", [base.get("windows", {})])}
+    (out / "viz_cpu.json").write_text(json.dumps(summary, indent=1))
+    loads = ", ".join(f"{r['loadavg_1']:.1f}" for r in runs)
+    _figure(out / "viz_cpu.png", summary["stats"], before,
+            f"viz bridge in the sim ({os.cpu_count()} CPUs; load average {loads} during the runs)")
+    for name, st in summary["stats"].items():
+        print(f"[bench viz] {name:<18} median {st['cpu_pct_median']:4.1f} % (min {st['cpu_pct_min']:.1f}, "
+              f"max {st['cpu_pct_max']:.1f}) over {st['n']} runs")
     print(f"[bench viz] wrote {out / 'viz_cpu.json'} and {out / 'viz_cpu.png'}")
     return 0
 

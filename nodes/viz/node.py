@@ -14,10 +14,16 @@ Inputs: ``/fingertip``, ``/sheet/target``, ``/arm/left/joint_state``, ``/arm/rig
 * every subscription is QoS.LATEST with an async handler that stores the message and then rests
   ``1/input_rate`` s (``/camera/stereo``: ``1/camera_rate``; ``/render/stereo``: the faster of render and
   scene rate), so at most that many messages per topic per second are decoded; newer ones replace each
-  other in the depth-1 queue meanwhile (counted as ``dropped`` in the heartbeat);
+  other in the depth-1 queue meanwhile (counted as ``dropped`` in the heartbeat); while no viewer is
+  connected the handlers decode nothing at all (they look for a viewer once a second);
+* in its own process the transport drains its inputs in batches every ``DRAIN_PERIOD`` (0.05 s;
+  :class:`~flexsheet.runtime.transport.ZmqTransport` ``drain_period``): ZeroMQ queues the ~650 input
+  messages/s of the sim and the loop wakes ~20 times a second instead of once per message (in a composable
+  container the bus delivers as usual);
 * outputs are built only for channels a viewer subscribes to: ``/viz/scene``, ``/viz/tf``, ``/viz/metrics``
-  at ``scene_rate``, the camera images at ``camera_rate``, ``/render/image`` at ``render_rate``, the JSON
-  copies of the plain topics as they arrive (≤ ``input_rate``);
+  at ``scene_rate``, the camera images at ``camera_rate`` (downscaled by ``camera_scale``), ``/render/image``
+  at ``render_rate``, the JSON copies of the plain topics as they arrive (≤ ``input_rate``); the scene is
+  assembled from cached encoded entities, each rebuilt only when its input changed (foxglove_scene);
 * a slow viewer loses the oldest queued messages (the server keeps at most ``backlog`` per client).
 
 Publishes nothing on the graph (only its heartbeat). Input the scene cannot use (faces out of range, bad
@@ -49,6 +55,8 @@ from messages import topics as T
 
 __all__ = ["VizNode", "VizParams"]
 
+_IDLE_S = 1.0  # how often a parked input handler looks for a viewer again, s
+
 
 class VizParams(BaseModel):
     """Parameters of the viz bridge (SI units, display frame)."""
@@ -57,16 +65,19 @@ class VizParams(BaseModel):
     host: str = Field("127.0.0.1", description="address the WebSocket server binds (0.0.0.0: every interface)")
     port: int = Field(8765, ge=0, le=65535, description="WebSocket port (0: any free port)")
     backlog: int = Field(64, ge=1, le=100000, description="messages queued per viewer; older ones are dropped")
-    scene_rate: float = Field(10.0, ge=0.0, le=100.0, description="/viz/scene, /viz/tf, /viz/metrics, Hz")
+    scene_rate: float = Field(5.0, ge=0.0, le=100.0,
+                              description="/viz/scene, /viz/tf, /viz/metrics, Hz (5: under 5 % of a core in the sim "
+                                          "with a viewer; 10 costs ~1.2 % more, docs/visualise.md)")
     camera_rate: float = Field(5.0, ge=0.0, le=100.0, description="/camera/left, /camera/right, Hz")
     render_rate: float = Field(5.0, ge=0.0, le=100.0, description="/render/image, Hz")
-    input_rate: float = Field(10.0, gt=0.0, le=1000.0,
+    input_rate: float = Field(5.0, gt=0.0, le=1000.0,
                               description="most messages decoded per input topic, Hz (camera and rendered "
                                           "frames: camera_rate and render_rate)")
-    json_rate: float = Field(10.0, ge=0.0, le=1000.0, description="cap per JSON topic, Hz")
+    json_rate: float = Field(5.0, ge=0.0, le=1000.0, description="cap per JSON topic, Hz (≤ input_rate)")
     calibration_rate: float = Field(0.5, ge=0.0, le=10.0, description="camera calibrations resent, Hz")
     poll_rate: float = Field(20.0, gt=0.0, le=200.0, description="how often due outputs are checked, Hz")
-    camera_scale: float = Field(1.0, gt=0.0, le=1.0, description="downscale of the camera images")
+    camera_scale: float = Field(0.5, gt=0.0, le=1.0,
+                                description="downscale of the camera images (0.5: a quarter of the pixels)")
     eye: list[float] = Field(default_factory=lambda: scene.EYE.tolist(), description="cyclopean eye V, m")
     ipd: float = Field(0.064, ge=0.0, le=0.1, description="interpupillary distance, m")
     projector_position: list[float] = Field(default_factory=lambda: scene.PROJECTOR.tolist(), description="m")
@@ -112,6 +123,7 @@ class VizNode(Node):
 
     Params = VizParams
     node_type = "viz"
+    DRAIN_PERIOD = 0.05     #: s, inputs received in ~20 batches a second (module docstring)
 
     async def setup(self) -> None:
         p: VizParams = self.params
@@ -161,7 +173,13 @@ class VizNode(Node):
                 raise InputRejected(str(exc)) from exc
             self._emit(out)
             await asyncio.sleep(rest)  # QoS latest: what arrives meanwhile replaces itself (counted dropped)
+            while not self._watched():  # no viewer now: decode nothing, the newest message waits in the queue
+                await asyncio.sleep(_IDLE_S)
         return on_message
+
+    def _watched(self) -> bool:
+        """True while a viewer subscribes to any Foxglove channel (checked once a second per input)."""
+        return any(ch.has_sinks() for ch in self.channels.values())
 
     def on_poll(self) -> None:
         self._emit(self.streams.poll(time.time(), self.wanted))
