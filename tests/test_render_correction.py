@@ -223,11 +223,17 @@ def test_choose_model_picks_cheapest_meeting_target():
 
 def test_predicted_errors_grow_with_depth_and_fine_is_reference():
     home = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0])
-    p1 = predict_model_errors(0.01, probes=cylinder_points(), sheet=home, **COM)
-    p5 = predict_model_errors(0.05, probes=cylinder_points(), sheet=home, **COM)
+
+    def ref(s, depth):                     # any membrane-like shape pushed at the centre
+        return Membrane(s.half_span, s.half_width, 0.0, 0.0, depth, modes=16)
+
+    p1 = predict_model_errors(0.01, probes=cylinder_points(), sheet=home, reference=ref, **COM)
+    p5 = predict_model_errors(0.05, probes=cylinder_points(), sheet=home, reference=ref, **COM)
     assert p1["fine"] < 1e-9 and p5["fine"] < 1e-9
     assert p5["none"] > p1["none"] > 0.0
     assert p5["four_triangle"] < p5["none"]
+    p0 = predict_model_errors(0.0, probes=cylinder_points(), sheet=home, reference=None, **COM)
+    assert max(p0.values()) < 1e-9                       # unpushed: every model is the flat correction
 
 
 # ------------------------------------------------------------------ the nominal FEM sheet model (fine shader form)
@@ -303,7 +309,8 @@ def test_predicted_errors_against_the_nominal_model(nominal_model):
     def ref(s, depth):
         return nominal_model.shape(s.half_span, depth, 0.0, 0.0, s.half_width)
 
-    p_series = predict_model_errors(0.05, probes=cylinder_points(), sheet=home, **COM)
+    p_series = predict_model_errors(0.05, probes=cylinder_points(), sheet=home, **COM,
+                                    reference=lambda s, d: Membrane(s.half_span, s.half_width, 0.0, 0.0, d, modes=16))
     p_fem = predict_model_errors(0.05, probes=cylinder_points(), sheet=home, reference=ref, **COM)
     assert p_fem["fine"] < 1e-9                        # the fine model now carries the reference shape
     # the conical FEM dent is closer to the 4-triangle pyramid than the series membrane is

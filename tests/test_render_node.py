@@ -31,22 +31,66 @@ async def next_frame(h, timeout=10.0):
     return (await h.wait_for(topics.RENDERED, n=n + 2, timeout=timeout))[-1]
 
 
+async def frame_with(h, model, timeout):
+    """Frames until one drawn with ``model`` (returned) or ``timeout`` s; the models seen before it."""
+    seen, t_end = [], time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        m = await next_frame(h, timeout=max(10.0, t_end - time.monotonic()))
+        if m.correction == model:
+            return m, seen
+        seen.append(m.correction)
+    raise AssertionError(f"no frame drawn with {model!r} in {timeout} s; saw {sorted(set(seen))}")
+
+
 def test_frames_model_choice_and_source_stamp():
+    # the planner's stretch 0.04: its pushed-sheet table is cached after the first run on a machine (built in the
+    # node's worker process otherwise, ~30 s of one core; pushes are drawn with the 4-triangle model meanwhile)
+    from flexsheet.model.sheet import clamp_poses
+
     async def scenario():
         async with NodeHarness(RendererNode, params=PARAMS) as h:
             m = await next_frame(h)
             assert m.left.shape == (48, 64, 3) and m.right.shape == (48, 64, 3)
             assert m.correction == "flat" and m.left.max() > 100          # the cylinder is drawn
+            Tl, Tr = clamp_poses(np.zeros(3), [1.0, 0, 0], [0, 1.0, 0], 0.04)
+            h.inject(topics.ARM_LEFT_STATE, arm("left", Tl))
+            h.inject(topics.ARM_RIGHT_STATE, arm("right", Tr))
             h.inject(topics.FINGERTIP, fingertip([-0.03, 0.0, 0.0], stamp=123.5))
             await h.settle(0.1)
-            m = await next_frame(h)
-            assert m.correction == "fine"                                   # 30 mm push: 4-triangle misses 0.7 mm
+            m, before = await frame_with(h, "fine", timeout=600.0)           # 30 mm push: 4-triangle misses 0.7 mm
+            assert set(before) <= {"four_triangle"}                         # never uncorrected while it waits
             assert m.source_stamp == 123.5
             h.inject(topics.FINGERTIP, fingertip([0.05, 0.0, 0.0], stamp=124.0))   # in front: not pushing
             await h.settle(0.1)
             m = await next_frame(h)
             assert m.correction == "flat"
             assert h.rejected() == 0
+    asyncio.run(scenario())
+
+
+def test_missing_sheet_table_is_built_in_a_worker_while_drawing(tmp_path):
+    """A push at a stretch whose table is not cached: drawn with the 4-triangle model (said in the diagnostics)
+    while a worker process builds it, then with the fine model. A coarse FEM mesh keeps the build to seconds."""
+    from flexsheet.model.sheet import clamp_poses
+
+    params = dict(PARAMS, sheet_cache=str(tmp_path), sheet_mesh={"h_fine": 0.012, "h_coarse": 0.024})
+
+    async def scenario():
+        async with NodeHarness(RendererNode, params=params) as h:
+            await next_frame(h)
+            Tl, Tr = clamp_poses(np.zeros(3), [1.0, 0, 0], [0, 1.0, 0], 0.04)
+            h.inject(topics.ARM_LEFT_STATE, arm("left", Tl))
+            h.inject(topics.ARM_RIGHT_STATE, arm("right", Tr))
+            h.inject(topics.FINGERTIP, fingertip([-0.04, 0.01, 0.0]))
+            await h.settle(0.1)
+            m = await next_frame(h)
+            assert m.correction == "four_triangle"
+            assert "not built yet" in h.node.state_message
+            m, before = await frame_with(h, "fine", timeout=300.0)
+            assert set(before) <= {"four_triangle"} and h.rejected() == 0
+            assert any(p.name.startswith("indent_") for p in tmp_path.iterdir())     # cached for the next start
+            await next_frame(h)
+            assert h.node.state_message == ""
     asyncio.run(scenario())
 
 

@@ -149,8 +149,9 @@ class DisplayEstimator:
     """The display's estimators for one :class:`CalibratedDisplay` (and nothing else — by construction it takes
     no truth): the bridges' kinematics at the calibrated bases, the renderer's sheet, model choice and drawing.
 
-    ``config``: the renderer's :class:`nodes.renderer.state.SheetConfig`; ``sheet_model``: optional pushed-sheet
-    model for the ``fem_nominal`` correction (:class:`nodes.renderer.sheet_model.NominalSheetModel`);
+    ``config``: the renderer's :class:`nodes.renderer.state.SheetConfig`; ``sheet_model``: the renderer's
+    pushed-sheet model (:class:`nodes.renderer.sheet_model.NominalSheetModel`; None: the node's own,
+    :func:`nodes.renderer.state.sheet_model_for` ``config``), the ``fem_nominal`` column;
     ``samples``: MSAA samples; ``target`` m: the ``auto`` model choice's accuracy target. Raises ``TypeError``
     if ``cal`` is not a :class:`CalibratedDisplay`.
     """
@@ -159,13 +160,13 @@ class DisplayEstimator:
                  target: float = PIXEL) -> None:
         from flexsheet.model.kinematics import ArmKinematics
         from nodes.renderer.scene import StereoRenderer, cylinder_mesh
-        from nodes.renderer.state import ErrorTable, SheetConfig, silhouette_probes
+        from nodes.renderer.state import ErrorTable, SheetConfig, sheet_model_for, silhouette_probes
 
         if not isinstance(cal, CalibratedDisplay):
             raise TypeError(f"DisplayEstimator takes a CalibratedDisplay, got {type(cal).__name__}")
         self.cal = cal
         self.config = config or SheetConfig()
-        self.sheet_model = sheet_model
+        self.sheet_model = sheet_model if sheet_model is not None else sheet_model_for(self.config)
         self.target = float(target)
         self.kin = {s: ArmKinematics(s, cal.bases[s]) for s in ("left", "right")}
         self.renderer = StereoRenderer(cal.projector, distortion=cal.distortion, eye=cal.eye, ipd=cal.ipd,
@@ -175,7 +176,7 @@ class DisplayEstimator:
         home = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], clamp_half_span(STRETCH))
         self.table = ErrorTable.build(silhouette_probes(v), eye=cal.eye, projector=cal.projector.position,
                                       screen_point=scene.SCREEN_POINT, screen_normal=scene.SCREEN_NORMAL, sheet=home,
-                                      sheet_model=sheet_model)
+                                      sheet_model=self.sheet_model)
 
     def joints(self, origin, normal, axis_u, stretch: float = STRETCH) -> dict[str, np.ndarray]:
         """The bridges' joint commands (side → (6,) rad) for the commanded sheet pose: IK of the clamp poses
@@ -202,14 +203,22 @@ class DisplayEstimator:
         return self.kin["left"].fk(q["left"]), self.kin["right"].fk(q["right"])
 
     def sheet(self, q: dict, finger=None, series: bool = False) -> SheetSurface:
-        """The renderer's sheet (:meth:`nodes.renderer.state.RendererState.current_sheet`) from the bridges'
-        clamp poses and the tracked fingertip ``finger`` (3,) m or None; when pushed, its membrane is the
-        ``sheet_model``'s (``fem_nominal``), or with ``series`` (or no sheet model) the config's sine series."""
+        """The renderer's sheet (:meth:`nodes.renderer.state.RendererState.current_sheet`, the node's code path)
+        from the bridges' clamp poses and the tracked fingertip ``finger`` (3,) m or None; when pushed, its
+        membrane is the ``sheet_model``'s (``fem_nominal``). ``series``: instead the renderer's OLD pushed-sheet
+        model, the 16-mode sine series (:class:`flexsheet.model.sheet.Membrane`, tension ratio 1), for the
+        comparison column ``fine`` only; the renderer no longer uses it."""
         from nodes.renderer.state import RendererState
 
-        st = RendererState(self.cal.eye, self.cal.projector.position, self.config,
-                           sheet_model=None if series else self.sheet_model)
         Tl, Tr = self.clamps(q)
+        if series:
+            flat = SheetSurface.from_clamps(Tl, Tr, half_width=self.config.half_width)
+            if finger is None or -float((np.asarray(finger, float) - flat.origin) @ flat.normal) <= \
+                    self.config.push_threshold:
+                return flat
+            return SheetSurface.from_clamps(Tl, Tr, half_width=self.config.half_width,
+                                            pushed_point=np.asarray(finger, float), membrane_kwargs={"modes": 16})
+        st = RendererState(self.cal.eye, self.cal.projector.position, self.config, sheet_model=self.sheet_model)
         st.set_arm_pose("left", Tl)
         st.set_arm_pose("right", Tr)
         st.set_fingertip(None if finger is None else np.asarray(finger, float), 0.0)
@@ -280,6 +289,122 @@ class TwinWorld:
             if depth > 0.0:
                 mem = self.table().shape(depth, pu, pv, a)
         return SheetSurface(origin, n, eu, a, b, mem), info
+
+
+# ============================================================================ the live renderer's path, ray-traced
+class LivePath:
+    """The renderer node's pushed-sheet correction measured on the true sheet without GL (``live_path`` of the
+    summary; ``tests/test_render_live_sheet.py``).
+
+    Renderer side, as ``RendererNode.setup`` builds it: the sheet model of
+    :func:`nodes.renderer.state.sheet_model_for` ``config`` (or ``sheet_model``), a
+    :class:`nodes.renderer.state.RendererState` fed both clamp poses (the home pose at ``stretch``) and the
+    fingertip, the :class:`nodes.renderer.state.ErrorTable` and ``auto`` :func:`nodes.renderer.state.pick_model`,
+    and the picked model's correction in numpy (the shader's twin, equal to 2e-6 m). Truth side: the twin's
+    FEM sheet (:meth:`TwinWorld.table`, the truth's E, pre-strain and tension ratio) at the same clamps, lit
+    along the projector's rays and traced by the measurement camera's bisection (:func:`trace_to_sheet` on a
+    241×241 grid), not the renderer's Newton solver. Eye V and projector P are the same on both sides, so the
+    error is the sheet model's alone: per probe (the object's silhouette points), the distance on the imaginary
+    screen seen from the eye between where the light for A' lands and where the eye expects A."""
+
+    def __init__(self, stretch: float = STRETCH, config=None, sheet_model=None, eye=scene.EYE,
+                 projector=scene.PROJECTOR) -> None:
+        from nodes.renderer.scene import cylinder_mesh
+        from nodes.renderer.state import (
+            ErrorTable,
+            RendererState,
+            SheetConfig,
+            sheet_model_for,
+            silhouette_probes,
+        )
+
+        self.config = config or SheetConfig()
+        self.eye, self.projector = np.asarray(eye, float), np.asarray(projector, float)
+        self.stretch = float(stretch)
+        model = sheet_model if sheet_model is not None else sheet_model_for(self.config)
+        v, f = cylinder_mesh()
+        self.probes = silhouette_probes(v)
+        self.clamps = clamp_poses(*HOME_POSE, self.stretch)
+        home = SheetSurface(*HOME_POSE, clamp_half_span(self.stretch), self.config.half_width)
+        self.table = ErrorTable.build(self.probes, eye=self.eye, projector=self.projector, screen_point=scene.SCREEN_POINT,
+                                      screen_normal=scene.SCREEN_NORMAL, sheet=home,
+                                      sheet_model=sheet_model if sheet_model is not None else sheet_model_for(self.config))
+        self.state = RendererState(self.eye, self.projector, self.config, mesh=(v, f), sheet_model=model)
+        self.state.set_arm_pose("left", self.clamps[0])
+        self.state.set_arm_pose("right", self.clamps[1])
+
+    def sheet(self, finger) -> tuple[SheetSurface, str]:
+        """(the renderer's sheet, the model ``auto`` picks) for the fingertip ``finger`` (3,) m."""
+        from nodes.renderer.state import pick_model
+
+        self.state.set_fingertip(np.asarray(finger, float), 0.0)
+        sheet, warn = self.state.sheet_for_frame()
+        if warn:
+            raise ValueError(warn)
+        return sheet, pick_model("auto", sheet, self.table, PIXEL)
+
+    def corrected(self, model: str, sheet: SheetSurface) -> np.ndarray:
+        """A' (N, 3) m of the probes for ``model`` on ``sheet``."""
+        from nodes.renderer.correction import correct_vertices, correct_vertices_fine, correct_vertices_pushed
+
+        c = dict(eye=self.eye, projector=self.projector, screen_point=scene.SCREEN_POINT,
+                 screen_normal=scene.SCREEN_NORMAL)
+        if model == "fine":
+            return correct_vertices_fine(self.probes, sheet=sheet, **c)
+        if model == "four_triangle":
+            return correct_vertices_pushed(self.probes, pushed_point=sheet.pushed_point, corners=sheet.corners, **c)
+        if model == "flat":
+            return correct_vertices(self.probes, sheet_point=sheet.origin, sheet_normal=sheet.normal, **c)
+        return self.probes.copy()
+
+    def true_sheet(self, world: TwinWorld, finger) -> SheetSurface:
+        """The twin's sheet at these clamps pushed by ``finger`` (3,) m (its FEM at the truth's material)."""
+        origin, n, eu, a = frame_from_clamps(*self.clamps)
+        d = np.asarray(finger, float) - origin
+        depth, pu, pv = -float(d @ n), float(d @ eu), float(d @ np.cross(n, eu))
+        mem = world.table().shape(depth, pu, pv, a) if depth > 0.0 else None
+        return SheetSurface(origin, n, eu, a, scene.SHEET_SIZE / 2, mem)
+
+    def landing_error(self, a_hat, true: SheetSurface) -> np.ndarray:
+        """Per probe, m: where the light for ``a_hat`` lands on ``true``, seen from the eye, against the probe."""
+        from flexsheet.experiments.measurement import trace_to_sheet
+        from nodes.renderer.correction import project_vertices
+
+        scr = dict(eye=self.eye, screen_point=scene.SCREEN_POINT, screen_normal=scene.SCREEN_NORMAL)
+        b = project_vertices(a_hat, **scr)                            # where the projector aims (its pinhole)
+        grid = true.membrane.grid(241) if true.membrane is not None else None
+        c, hit = trace_to_sheet(self.projector, b - self.projector, true, grid)
+        if not hit.all():
+            raise ValueError(f"{int((~hit).sum())} projector rays miss the true sheet")
+        return np.linalg.norm(project_vertices(c, **scr) - project_vertices(self.probes, **scr), axis=1)
+
+    def measure(self, world: TwinWorld, depth: float) -> dict:
+        """The live path at push ``depth`` m at the sheet centre: the picked model's max and mean landing error,
+        and (for comparison only) the uncorrected image's and the old series model's, mm."""
+        finger = HOME_POSE[0] - depth * HOME_POSE[1]
+        sheet, model = self.sheet(finger)
+        true = self.true_sheet(world, finger)
+        err = self.landing_error(self.corrected(model, sheet), true)
+        row = {"model": model, "max_mm": float(err.max() * 1e3), "mean_mm": float(err.mean() * 1e3),
+               "terms": int(len(sheet.membrane.coef)) if sheet.membrane is not None else 0,
+               "uncorrected_max_mm": float(self.landing_error(self.probes, true).max() * 1e3)}
+        if depth > 0.0:
+            old = SheetSurface.from_clamps(*self.clamps, half_width=self.config.half_width, pushed_point=finger,
+                                           membrane_kwargs={"modes": 16})
+            row["series_max_mm"] = float(self.landing_error(self.corrected("fine", old), true).max() * 1e3)
+        return row
+
+
+def live_path(truth: TwinTruth, depths_mm=(0, 10, 30, 50), progress=None) -> dict:
+    """:class:`LivePath` rows for ``truth`` at each depth (mm), keyed by the depth."""
+    lp, world = LivePath(), TwinWorld(truth)
+    out = {}
+    for d in depths_mm:
+        out[f"{d:g}"] = r = lp.measure(world, d * 1e-3)
+        if progress:
+            progress(f"[correction] live path {d:g} mm: {r['model']} max {r['max_mm']:.2f} mm, mean "
+                     f"{r['mean_mm']:.2f} mm (uncorrected max {r['uncorrected_max_mm']:.2f} mm)")
+    return out
 
 
 # ============================================================================ measurement
@@ -358,7 +483,7 @@ def measure_pushed(est: DisplayEstimator, world: TwinWorld, meas: Measurer, dept
     sheets = {"fine": est.sheet(q, finger, series=True), "fem_nominal": sheet}
     true, info = world.sheet(q, finger)
     picked = est.pick(sheet)
-    if picked == "fine" and est.sheet_model is not None:
+    if picked == "fine":
         picked = "fem_nominal"
     row: dict = {"model": picked, "true_depth_mm": info["depth"] * 1e3,
                  "true_contact_mm": [info["push_u"] * 1e3, info["push_v"] * 1e3], **_pose_dev(info, sheet)}
@@ -425,11 +550,14 @@ def run(out: Path, truth_seed: int = 0, realism: str = "realistic", *, thetas=(1
         say(f"[correction] seed {truth_seed} {realism}: inclined {th:g}°: uncorrected {r['uncorrected_mm']:.2f} mm, "
             f"{r['model']} {r['corrected_mm']:.2f} mm")
     s["pushed"] = {}
-    models = ("none", "four_triangle", "fine") + (("fem_nominal",) if model_obj is not None else ())
+    models = ("none", "four_triangle", "fine", "fem_nominal")
     for S in depths:
         s["pushed"][f"{S:g}"] = r = measure_pushed(est, world, meas, S, models, photos)
         say(f"[correction] seed {truth_seed} {realism}: pushed {S:g} mm: " + ", ".join(
             f"{MODEL_LABELS[m]} {r[MODEL_LABELS[m] + '_mm']:.2f}" for m in models) + f" mm; picked {r['model']}")
+    s["live_path"] = {"note": "the renderer node's code path (RendererState, ErrorTable, auto) on the true FEM "
+                              "sheet, ray-traced, same eye/projector both sides; max/mean over the silhouette, mm",
+                      "rows": live_path(truth, (0, 10, 30, 50), say)}
     s["models_picked"] = {"inclined": sorted({r["model"] for r in s["inclined"].values()}),
                           "pushed": sorted({r["model"] for r in s["pushed"].values()})}
     s["choice_table_m"] = est.table.rows
@@ -501,7 +629,7 @@ def sweep_sheet(est: DisplayEstimator, truth: TwinTruth, meas: Measurer, kind: s
         assumed = 0.0
     else:
         raise ValueError(f"kind must be 'tension_ratio' or 'prestrain', got {kind!r}")
-    models = ("none", "four_triangle", "fine") + (("fem_nominal",) if est.sheet_model is not None else ())
+    models = ("none", "four_triangle", "fine", "fem_nominal")
     rows = []
     for x in values:
         t = dataclasses.replace(truth, **({"tension_ratio": float(x)} if kind == "tension_ratio"
@@ -626,25 +754,18 @@ def sweep_projector(cal: CalibratedDisplay, truth: TwinTruth, meas: Measurer, sc
 
 # ============================================================================ sheet model choice
 def _sheet_model(name: str, quick: bool = False, progress=None):
-    """The nominal pushed-sheet model for ``fem_nominal`` (``auto``/``fem``) or None (``series``); ``quick``:
-    its table for centre contacts only (the experiment pushes at the centre; the node needs the full table)."""
-    if name == "series":
-        return None
+    """The renderer's pushed-sheet model (``auto``/``fem``: the nominal FEM fit, the node's
+    :func:`nodes.renderer.state.sheet_model_for`); ``quick``: its table for centre contacts only (the experiment
+    pushes at the centre; the node uses the full table)."""
     if name not in ("auto", "fem"):
-        raise ValueError(f"sheet model must be 'auto', 'fem' or 'series', got {name!r}")
-    try:
-        from nodes.renderer.sheet_model import NominalSheetModel
-    except ImportError:
-        if name == "fem":
-            raise
-        return None
+        raise ValueError(f"sheet model must be 'auto' or 'fem', got {name!r}")
+    from nodes.renderer.sheet_model import NominalSheetModel
+
     kw = {"positions": (0.0,)} if quick else {}
     return NominalSheetModel.nominal(stretch=STRETCH, progress=progress, **kw)
 
 
 def _model_info(model) -> dict:
-    if model is None:
-        return {"name": "series", "note": "renderer's fine model: sine-series membrane, tension ratio 1"}
     return model.describe()
 
 
@@ -912,8 +1033,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--thetas", type=float, nargs="+", default=None, help="inclinations, deg (default 10..50)")
     ap.add_argument("--depths", type=float, nargs="+", default=None, help="push depths, mm (default 10..50)")
     ap.add_argument("--pixel", type=float, default=0.35, help="measurement camera pixel on the screen, mm")
-    ap.add_argument("--sheet-model", choices=("auto", "fem", "series"), default="auto",
-                    help="renderer's pushed-sheet model for the fine correction (auto: the nominal FEM fit)")
+    ap.add_argument("--sheet-model", choices=("auto", "fem"), default="auto",
+                    help="renderer's pushed-sheet model (the nominal FEM fit; the old series model is the "
+                         "comparison column 'fine')")
     ap.add_argument("--stability", action="store_true",
                     help="also sweep tension-ratio, pre-strain and projector errors (first realistic run)")
     ap.add_argument("--speed", action="store_true", help="time a stereo pair per model (OUT/seeds.json)")

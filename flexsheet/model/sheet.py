@@ -49,7 +49,7 @@ import numpy as np
 from flexsheet.model import scene
 from flexsheet.model.checks import check_point, check_pose, check_positive, check_unit
 
-__all__ = ["Membrane", "SheetSurface", "TRUE_MODES", "sheet_rotation", "clamp_half_span", "stretch_of_span",
+__all__ = ["Membrane", "SheetSurface", "TRUE_MODES", "neumann_green", "series_deflection", "sheet_rotation", "clamp_half_span", "stretch_of_span",
            "clamp_points", "clamp_poses", "frame_from_clamps"]
 
 #: number of modes of the reference ("true") membrane shape
@@ -150,6 +150,41 @@ def frame_from_clamps(T_left, T_right) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return 0.5 * (pl + pr), n, eu, span / 2
 
 
+# -- the series form of a pushed sheet (the Membrane's, and the renderer's fitted shapes, which the fine shader draws)
+def neumann_green(v, mu, v0: float, b: float, deriv: bool = False):
+    """Neumann Green's function G(v; μ, v0) of g'' − μ²g = −δ(v − v0) on [−b, b] (zero slope at ±b), and
+    dG/dv, for v (N,) m (clamped to [−b, b]) and μ (K,) 1/m: (N, K) arrays, in the overflow-free exponential
+    form ``cosh(μ(b + v<)) cosh(μ(b − v>)) / (μ sinh 2μb)`` that float32 GLSL also evaluates."""
+    v = np.clip(np.asarray(v, float), -b, b)[:, None]
+    mu = np.asarray(mu, float)[None, :]
+    lo, hi = np.minimum(v, v0), np.maximum(v, v0)
+    ex = np.exp(-2.0 * mu * (b + lo))
+    ey = np.exp(-2.0 * mu * (b - hi))
+    e = np.exp(-mu * (hi - lo))
+    den = 2.0 * (1.0 - np.exp(-4.0 * mu * b))
+    g = e * (1.0 + ex) * (1.0 + ey) / (mu * den)
+    if not deriv:
+        return g
+    # v is the upper argument: d/dv cosh(mu(b - v)) = -mu sinh(mu(b - v))
+    dg = np.where(v >= v0, -e * (1.0 + ex) * (1.0 - ey) / den, e * (1.0 - ex) * (1.0 + ey) / den)
+    return g, dg
+
+
+def series_deflection(u, v, lam, mu, coef, a: float, b: float, v0: float):
+    """(w, ∂w/∂u, ∂w/∂v) of w = Σ_i coef_i sin(lam_i (u + a)) G(v; mu_i, v0) at (u, v) m (broadcast; clamped onto
+    |u| ≤ a, |v| ≤ b), each of the broadcast shape; ``lam``, ``mu``, ``coef`` (K,)."""
+    u, v = np.broadcast_arrays(np.asarray(u, dtype=float), np.asarray(v, dtype=float))
+    shape = u.shape
+    uu = np.clip(u.ravel(), -a, a)[:, None]
+    ph = lam * (uu + a)
+    s, c = np.sin(ph), np.cos(ph) * lam
+    g, dg = neumann_green(v.ravel(), mu, v0, b, deriv=True)
+    w = (coef * s * g).sum(axis=1)
+    wu = (coef * c * g).sum(axis=1)
+    wv = (coef * s * dg).sum(axis=1)
+    return w.reshape(shape), wu.reshape(shape), wv.reshape(shape)
+
+
 # -- pushed membrane -----------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Membrane:
@@ -202,21 +237,8 @@ class Membrane:
 
     # -- Green's function in v, overflow-free form ---------------------------------------------------------
     def _green(self, v: np.ndarray, deriv: bool = False):
-        """G_k(v, v0) (and dG/dv) for v of shape (N,), returns (N, K) arrays."""
-        b, v0, mu = self.half_width, self.push_v, self.mu[None, :]
-        v = np.clip(v, -b, b)[:, None]
-        lo = np.minimum(v, v0)
-        hi = np.maximum(v, v0)
-        ex = np.exp(-2.0 * mu * (b + lo))
-        ey = np.exp(-2.0 * mu * (b - hi))
-        e = np.exp(-mu * (hi - lo))
-        den = 2.0 * (1.0 - np.exp(-4.0 * mu * b))
-        g = e * (1.0 + ex) * (1.0 + ey) / (mu * den)
-        if not deriv:
-            return g
-        above = v >= v0  # v is the upper argument: d/dv cosh(mu(b - v)) = -mu sinh(mu(b - v))
-        dg = np.where(above, -e * (1.0 + ex) * (1.0 - ey) / den, e * (1.0 - ex) * (1.0 + ey) / den)
-        return g, dg
+        """G_k(v, v0) (and dG/dv) for v of shape (N,), returns (N, K) arrays (:func:`neumann_green`)."""
+        return neumann_green(v, self.mu, self.push_v, self.half_width, deriv)
 
     def deflection(self, u, v) -> np.ndarray:
         """w(u, v), m (positive along −normal). ``u``, ``v`` broadcastable arrays in m (sheet frame);
@@ -225,17 +247,7 @@ class Membrane:
 
     def deflection_grad(self, u, v):
         """(w, ∂w/∂u, ∂w/∂v) at (u, v) (m, m/m, m/m), same broadcast shape as the inputs; see ``deflection``."""
-        u, v = np.broadcast_arrays(np.asarray(u, dtype=float), np.asarray(v, dtype=float))
-        shape = u.shape
-        a = self.half_span
-        uu = np.clip(u.ravel(), -a, a)[:, None]
-        s = np.sin(self.lam * (uu + a))
-        c = np.cos(self.lam * (uu + a)) * self.lam
-        g, dg = self._green(v.ravel(), deriv=True)
-        w = (self.coef * s * g).sum(axis=1)
-        wu = (self.coef * c * g).sum(axis=1)
-        wv = (self.coef * s * dg).sum(axis=1)
-        return w.reshape(shape), wu.reshape(shape), wv.reshape(shape)
+        return series_deflection(u, v, self.lam, self.mu, self.coef, self.half_span, self.half_width, self.push_v)
 
     def grid(self, n: int) -> np.ndarray:
         """Deflection sampled on an n×n grid over u ∈ [−a, a] (rows) × v ∈ [−b, b] (columns), m, shape (n, n).

@@ -1,5 +1,7 @@
-"""``flexsheet bench render``: time to correct and draw one stereo pair (2 × 1024 × 768) per correction model;
-with ``--window``, the projector window's frame pacing.
+"""``flexsheet bench render``: time to correct and draw one stereo pair (2 × 1024 × 768) per correction model,
+and the per-frame cost of the pushed sheet's shape (``sheet_update``: the node's :class:`RendererState`
+turning a new fingertip into the nominal FEM fit the fine shader draws); with ``--window``, the projector
+window's frame pacing.
 
 The time covers setting the sheet uniforms (the CPU part of the correction: triangle normals, membrane
 coefficients), drawing both eyes with the per-vertex correction in the vertex shader, and ``ctx.finish()``;
@@ -27,20 +29,55 @@ import numpy as np
 
 from flexsheet.model import scene
 from flexsheet.model.projector import Projector
-from flexsheet.model.sheet import Membrane, SheetSurface
+from flexsheet.model.sheet import SheetSurface, clamp_poses
 from nodes.renderer.scene import StereoRenderer, cylinder_mesh
+from nodes.renderer.state import RendererState, SheetConfig, sheet_model_for
 
-__all__ = ["main", "time_models", "bench_sheets", "window_pacing"]
+__all__ = ["main", "time_models", "bench_sheets", "window_pacing", "sheet_update", "BENCH_STRETCH"]
+
+#: clamp stretch of the benches' pushed sheet (the planner's for the default object; a cached table node)
+BENCH_STRETCH = 0.04
 
 
-def bench_sheets(depth: float = 0.03, theta_deg: float = 30.0, fine_modes: int = 16) -> dict[str, SheetSurface]:
-    """Representative sheet per model: tilted plane for ``flat``, centre push of ``depth`` m otherwise."""
+def bench_sheets(depth: float = 0.03, theta_deg: float = 30.0, sheet_model=None) -> dict[str, SheetSurface]:
+    """Representative sheet per model: tilted plane for ``flat``, centre push of ``depth`` m otherwise, shaped
+    by the renderer's pushed-sheet model (``sheet_model``; default the node's, its table built if missing)."""
     R = scene.CYLINDER_RADIUS
     th = np.radians(theta_deg)
     tilt = SheetSurface([-R + R * np.cos(th), 0.0, -R * np.sin(th)], [np.cos(th), 0.0, -np.sin(th)], [0, 1, 0])
-    pushed = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0],
-                          membrane=Membrane(0.12, 0.12, 0.0, 0.0, depth, modes=fine_modes))
+    flat = SheetSurface.from_clamps(*clamp_poses(np.zeros(3), [1, 0, 0], [0, 1, 0], BENCH_STRETCH))
+    pushed = (sheet_model or sheet_model_for()).pushed(flat, np.array([-depth, 0.0, 0.0]))
     return {"none": tilt, "flat": tilt, "four_triangle": pushed, "fine": pushed}
+
+
+def sheet_update(frames: int = 200, sheet_model=None) -> dict[str, float]:
+    """Per-frame cost (ms) of the node's sheet for a moving finger: :meth:`RendererState.sheet_for_frame` with a
+    new fingertip every frame (depth 10→50 mm and contact sweeping ±30 mm, so every frame misses the fit's
+    cache: nominal table on the fit grid + the 64-term fit), and with the same fingertip (cache hit). Wall
+    times, plus the drawing thread's own CPU time per new fingertip (``new_finger_cpu_median_ms``: what the
+    frame costs without other processes competing for the cores)."""
+    st = RendererState(scene.EYE, scene.PROJECTOR, SheetConfig(), sheet_model=sheet_model or sheet_model_for())
+    for side, T in zip(("left", "right"), clamp_poses(np.zeros(3), [1, 0, 0], [0, 1, 0], BENCH_STRETCH), strict=True):
+        st.set_arm_pose(side, T)
+    st.set_fingertip(np.array([-0.03, 0.0, 0.0]), 0.0)
+    st.sheet_for_frame()                                         # loads the table
+    miss, hit, cpu = [], [], []
+    for k in range(frames):
+        x = k / max(frames - 1, 1)
+        st.set_fingertip(np.array([-0.01 - 0.04 * x, 0.03 * np.sin(7 * x), 0.03 * np.cos(5 * x)]), 0.0)
+        t0, c0 = time.perf_counter(), time.thread_time()
+        st.sheet_for_frame()
+        miss.append((time.perf_counter() - t0) * 1e3)
+        cpu.append((time.thread_time() - c0) * 1e3)
+        t0 = time.perf_counter()
+        st.sheet_for_frame()
+        hit.append((time.perf_counter() - t0) * 1e3)
+    miss.sort()
+    hit.sort()
+    return {"frames": frames, "new_finger_median_ms": statistics.median(miss),
+            "new_finger_p90_ms": miss[int(0.9 * (frames - 1))], "new_finger_max_ms": miss[-1],
+            "new_finger_cpu_median_ms": statistics.median(cpu),
+            "same_finger_median_ms": statistics.median(hit)}
 
 
 def time_models(renderer: StereoRenderer, repeats: int = 20, models=("none", "flat", "four_triangle", "fine"),
@@ -199,7 +236,9 @@ def main(argv: list[str] | None = None) -> int:
         v, f = cylinder_mesh()
     r = StereoRenderer(Projector.default(args.width, args.height))
     r.set_mesh(v, f)
-    per = time_models(r, args.repeats)
+    model = sheet_model_for()
+    per = time_models(r, args.repeats, sheets=bench_sheets(sheet_model=model))
+    sheet_ms = sheet_update(sheet_model=model)
     t0 = time.perf_counter()
     for _ in range(5):
         r.read_pair()
@@ -209,6 +248,7 @@ def main(argv: list[str] | None = None) -> int:
         "model": args.model,
         "per_model": per,
         "readback_ms": readback,
+        "sheet_update": sheet_ms,
         "size": [args.width, args.height],
         "scene": args.scene or "cylinder (paper)",
         "vertices": int(len(v)),
@@ -223,6 +263,9 @@ def main(argv: list[str] | None = None) -> int:
         for m, d in per.items():
             print(f"  {m:14s} stereo pair {d['median_ms']:7.2f} ms (p90 {d['p90_ms']:.2f})")
         print(f"  read-back of the pair {readback:.2f} ms; target {res['target_ms']:.2f} ms (120 Hz)")
+        print(f"  pushed-sheet shape per frame (RendererState, nominal FEM fit): new fingertip "
+              f"{sheet_ms['new_finger_median_ms']:.2f} ms median (p90 {sheet_ms['new_finger_p90_ms']:.2f}, max "
+              f"{sheet_ms['new_finger_max_ms']:.2f}; CPU {sheet_ms['new_finger_cpu_median_ms']:.2f}), same fingertip {sheet_ms['same_finger_median_ms']:.3f} ms")
     r.release()
     return 0
 

@@ -12,8 +12,8 @@ A. Three sheet models give C:
 
 * ``flat``:           one plane (r_s, n_s), the pose from the arms (paper §III-C-2);
 * ``four_triangle``:  4 triangles (pushed point, corner i, corner i+1) (paper §III-C-3);
-* ``fine``:           the membrane shape of :mod:`flexsheet.model.sheet` (beyond the paper), C found by
-                      Newton's method on the line V–A.
+* ``fine``:           the pushed sheet's shape (beyond the paper; the renderer's is the nominal FEM fit of
+                      :mod:`nodes.renderer.sheet_model`), C found by Newton's method on the line V–A.
 
 Stability (each case is defined and tested, tests/test_render_correction.py):
 
@@ -306,27 +306,22 @@ def project_vertices(vertices, *, eye, screen_point, screen_normal) -> np.ndarra
 
 
 def predict_model_errors(depth: float, *, eye, projector, screen_point, screen_normal, probes,
-                         sheet: SheetSurface, min_cos: float = DEFAULT_MIN_COS, reference=None) -> dict[str, float]:
-    """Predicted image error (m, max over ``probes``) of each model against the renderer's best sheet model.
+                         sheet: SheetSurface, reference, min_cos: float = DEFAULT_MIN_COS) -> dict[str, float]:
+    """Predicted image error (m, max over ``probes``) of each model against the renderer's pushed-sheet model.
 
     ``probes`` (N, 3) m are object points to check (e.g. the silhouette); ``sheet`` is the unpushed sheet pose
     and ``depth`` (m, ≥ 0) the push at its centre. The error of a model is the largest distance, on the
     imaginary screen as seen from the eye, between where its shifted vertex's light lands on the reference
-    shape and where the eye expects the vertex. The reference (and the ``fine`` model's shape) is the fine
-    membrane (16 modes), or ``reference(sheet, depth)`` → a membrane-like shape pushed at the centre (e.g.
-    :meth:`nodes.renderer.sheet_model.NominalSheetModel.surface`'s) when given. Used by :func:`choose_model`.
-    Raises ``ValueError`` on bad input.
+    shape and where the eye expects the vertex. The reference (and the ``fine`` model's shape) is
+    ``reference(sheet, depth)`` → a membrane-like shape pushed at the centre (the renderer's:
+    :meth:`nodes.renderer.sheet_model.NominalSheetModel.shape`); at depth 0 the flat sheet. Used by
+    :func:`choose_model`. Raises ``ValueError`` on bad input.
     """
-    from flexsheet.model.sheet import Membrane
-
     if not (math.isfinite(depth) and depth >= 0.0):
         raise ValueError(f"depth must be finite and >= 0, got {depth!r}")
     v, p, ro, no = check_screen(eye, projector, screen_point, screen_normal)
     probes = _verts(probes)
-    if reference is not None and depth > 0.0:
-        mem = reference(sheet, depth)
-    else:
-        mem = Membrane(sheet.half_span, sheet.half_width, 0.0, 0.0, depth, modes=16)
+    mem = reference(sheet, depth) if depth > 0.0 else None
     true = SheetSurface(sheet.origin, sheet.normal, sheet.axis_u, sheet.half_span, sheet.half_width, mem)
     want = project_vertices(probes, eye=v, screen_point=ro, screen_normal=no)
     common = dict(eye=v, projector=p, screen_point=ro, screen_normal=no, min_cos=min_cos)

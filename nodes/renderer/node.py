@@ -1,7 +1,13 @@
 """Renderer node: draws the (deformed) object for both eyes, corrected for the actual sheet (paper §III-C).
 
 Subscribes ``/object/deformation`` (the scene's rigid object until the FEM publishes), both arms' joint states (the
-measured clamp poses give the actual sheet pose) and ``/fingertip`` (the pushed point). It redraws as soon as a
+measured clamp poses give the actual sheet pose and its stretch), ``/fingertip`` (the pushed point and depth) and
+``/sheet/target`` (the stretch the planner sets: its pushed-sheet table is prepared before the arms get there).
+
+The pushed sheet's shape is the renderer's nominal FEM model (:mod:`nodes.renderer.sheet_model`: nominal sheet
+material, assumed tension ratio; never the twin's truth), one table per clamp-stretch node, cached on disk.
+A table that is not on disk is built in a worker process at lower priority (~30 s per node on one core);
+meanwhile a push at that stretch is drawn with the 4-triangle model and ``/diagnostics`` says so. It redraws as soon as a
 new fingertip or deformation arrives (at most ``max_render_rate``; at least at ``publish_rate`` when nothing
 arrives) and publishes ``/render/stereo`` (:class:`messages.RenderedFrame`, downscaled by ``publish_scale``) at
 ``publish_rate``; ``source_stamp`` is the newest exposure stamp of the fingertip / deformation it drew.
@@ -27,6 +33,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import importlib.util
+import multiprocessing
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -36,14 +43,24 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from flexsheet.model import scene as paper
 from flexsheet.runtime.node import InputRejected, Node, QoS
-from messages import ArmJointState, Fingertip, Heartbeat, ObjectDeformation, RenderedFrame, topics
+from messages import (
+    ArmJointState,
+    Fingertip,
+    Heartbeat,
+    ObjectDeformation,
+    RenderedFrame,
+    SheetTarget,
+    topics,
+)
 from nodes.renderer.correction import check_screen
+from nodes.renderer.sheet_model import PendingPush, build_table
 from nodes.renderer.state import (
     ErrorTable,
     RendererState,
     SheetConfig,
     load_geometry,
     pick_model,
+    sheet_model_for,
     silhouette_probes,
 )
 
@@ -64,9 +81,15 @@ class RendererParams(BaseModel):
     height: int | None = Field(None, ge=16, le=8192, description="image height per eye, px (as width)")
     correction: Literal["auto", "none", "flat", "four_triangle", "fine"] = "auto"
     accuracy_target: float = Field(paper.PIXEL_ON_SCREEN, gt=0.0, description="image error budget, m")
-    fine_modes: int = Field(SheetConfig.fine_modes, ge=1, le=64, description="membrane modes of the fine model")
-    tension_ratio: float = Field(SheetConfig.tension_ratio, gt=0.0, description="membrane T_v / T_u")
-    contact_radius: float = Field(SheetConfig.contact_radius, gt=0.0, description="finger contact radius, m")
+    fine_modes: int = Field(SheetConfig.fine_modes, ge=1, le=16,
+                            description="sine modes of the pushed-sheet fit (each with 4 terms; the shader takes 64)")
+    tension_ratio: float = Field(SheetConfig.tension_ratio, gt=0.0,
+                                 description="ASSUMED T_v / T_u of the pushed-sheet model (not measured)")
+    sheet_cache: str | None = Field(None, description="folder of the pushed-sheet FEM tables (None: "
+                                                      "$FLEXSHEET_CACHE/sheet_fem or ~/.cache/flexsheet/sheet_fem)")
+    sheet_mesh: dict[str, float] = Field(default_factory=dict,
+                                         description="FEM mesh of those tables (SheetFEM kwargs, e.g. h_fine m; "
+                                                     "{}: the default 4 mm mesh)")
     push_threshold: float = Field(SheetConfig.push_threshold, ge=0.0,
                                   description="depth behind the sheet that counts as a push, m")
     sheet_half_width: float = Field(SheetConfig.half_width, gt=0.0, description="half the free-edge length, m")
@@ -132,13 +155,24 @@ class RendererNode(Node):
         self.eye = geo.eye
         self.projector = geo.projector
         check_screen(self.eye, self.projector.position, paper.SCREEN_POINT, paper.SCREEN_NORMAL)
-        self.state = RendererState(self.eye, self.projector.position, SheetConfig(
-            half_width=p.sheet_half_width, push_threshold=p.push_threshold, fine_modes=p.fine_modes,
-            tension_ratio=p.tension_ratio, contact_radius=p.contact_radius), mesh=geo.mesh)
-        self.table = await loop.run_in_executor(None, lambda: ErrorTable.build(
-            silhouette_probes(geo.mesh[0], center_x=float(geo.scene.center[0])), eye=self.eye,
-            projector=self.projector.position, screen_point=paper.SCREEN_POINT, screen_normal=paper.SCREEN_NORMAL,
-            sheet=self.state.last_good))
+        self.sheet_config = SheetConfig(half_width=p.sheet_half_width, push_threshold=p.push_threshold,
+                                        fine_modes=p.fine_modes, tension_ratio=p.tension_ratio,
+                                        cache_dir=p.sheet_cache, mesh=dict(p.sheet_mesh))
+        self.sheet_model = sheet_model_for(self.sheet_config)
+        self.state = RendererState(self.eye, self.projector.position, self.sheet_config, mesh=geo.mesh,
+                                   sheet_model=self.sheet_model, build=False, on_missing=self._want_table)
+        self.table = None                     # the models' error table, once the first FEM table is there
+        self._tables_wanted: list[float] = []
+        self._tables_asked: set[float] = set()
+        self._tables_event = asyncio.Event()
+        self._builds: set = set()
+        self._failed: set[float] = set()
+        self._builder_task = loop.create_task(self._build_tables())
+        # tables are built when a push or the planner's stretch needs them; the error table comes from the first
+        # one there is (a cached one near the home stretch now, if any)
+        near = self.sheet_model.nearest_on_disk(self.sheet_model.node_of_span(self.state.last_good.half_span))
+        if near is not None:
+            self._want_table(near)
         self.model_used = "none"
         self.frames = 0
         self.output = None
@@ -157,6 +191,7 @@ class RendererNode(Node):
         self.subscribe(topics.ARM_LEFT_STATE, self.on_arm, qos=QoS.LATEST)
         self.subscribe(topics.ARM_RIGHT_STATE, self.on_arm, qos=QoS.LATEST)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
+        self.subscribe(topics.SHEET_TARGET, self.on_sheet_target, qos=QoS.LATEST)
         self.timer(1.0 / p.publish_rate, self.on_timer)
         self._request()
 
@@ -273,6 +308,12 @@ class RendererNode(Node):
         loop = asyncio.get_running_loop()
         if hasattr(self, "_render_task"):
             self._render_task.cancel()
+        if hasattr(self, "_builder_task"):
+            builds = list(self._builds)          # our own table builders (a partial table is never cached)
+            self._builder_task.cancel()
+            for proc in builds:
+                proc.terminate()
+                await loop.run_in_executor(None, proc.join, 5.0)
         if hasattr(self, "_gl"):
             if hasattr(self, "renderer"):
                 await loop.run_in_executor(self._gl, self.renderer.release)
@@ -280,6 +321,84 @@ class RendererNode(Node):
         if hasattr(self, "_window_thread"):
             self._stop_window.set()
             await loop.run_in_executor(None, self._window_thread.join, 5.0)
+
+    # ------------------------------------------------------------------ pushed-sheet tables
+    def _want_table(self, node: float) -> None:
+        """Ask for the pushed-sheet table of stretch ``node`` (thread-safe; from the drawing thread too). A
+        stretch outside the sheet's range (``SheetMaterial`` min/max stretch, as the planner) is not built: such
+        a push stays on the 4-triangle model."""
+        mat = self.sheet_model.material
+        if mat.min_stretch - 1e-9 <= node <= mat.max_stretch + 1e-9:
+            self._loop.call_soon_threadsafe(self._queue_table, float(node))
+
+    def _queue_table(self, node: float) -> None:
+        if node not in self._tables_asked:
+            self._tables_asked.add(node)
+            self._tables_wanted.append(node)
+            self._tables_event.set()
+
+    async def _build_tables(self) -> None:
+        """One table at a time: load it if it is on disk, else build it in a worker process (spawned, niced),
+        then (once) the models' error table at that stretch."""
+        loop = asyncio.get_running_loop()
+        ctx = multiprocessing.get_context("spawn")
+        while True:
+            await self._tables_event.wait()
+            self._tables_event.clear()
+            while self._tables_wanted:
+                node = self._tables_wanted.pop(0)
+                if not self.sheet_model.on_disk(node):
+                    self.log.info("pushed-sheet FEM table for stretch %g not cached: building it (~30 s); pushes "
+                                  "at that stretch are drawn with the 4-triangle model meanwhile", node)
+                    t0 = time.monotonic()
+                    proc = ctx.Process(target=build_table, args=(self.sheet_model.settings, node, 5),
+                                       name=f"renderer-sheet-table-{node:g}", daemon=True)
+                    proc.start()
+                    self._builds.add(proc)
+                    try:
+                        await loop.run_in_executor(None, proc.join)
+                    finally:
+                        self._builds.discard(proc)
+                    if proc.exitcode != 0 or not self.sheet_model.on_disk(node):
+                        self.errors_total += 1
+                        self._failed.add(node)
+                        self.log.error("pushed-sheet table for stretch %g failed (exit code %s; the FEM may not "
+                                       "converge at that stretch)", node, proc.exitcode)
+                        self._substitute()
+                        continue
+                    self.log.info("pushed-sheet table for stretch %g built in %.0f s", node, time.monotonic() - t0)
+                    self._substitute()
+                if self.table is None:
+                    try:
+                        self.table = await loop.run_in_executor(None, self._error_table, node)
+                        self.log.info("model error table ready (stretch %g)", node)
+                    except (ValueError, ArithmeticError, OSError) as exc:
+                        self.errors_total += 1
+                        self.log.error("model error table at stretch %g failed: %s", node, exc)
+                self._request()
+
+    def _substitute(self) -> None:
+        """Stand the nearest built table in for each stretch whose table failed (logged)."""
+        for node in sorted(self._failed):
+            sub = self.sheet_model.nearest_on_disk(node)
+            if sub is not None and self.sheet_model.substitute.get(node) != sub:
+                self.sheet_model.substitute[node] = sub
+                self.log.warning("pushes at stretch %g are drawn with the table of stretch %g", node, sub)
+                if self.table is None:
+                    self._queue_table(sub)
+
+    def _error_table(self, node: float) -> ErrorTable:
+        """The models' predicted errors on the home sheet at stretch ``node`` (its own model instance: the
+        drawing thread's is not shared)."""
+        from flexsheet.model.sheet import SheetSurface, clamp_half_span
+
+        geo = self.geometry
+        home = SheetSurface([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], clamp_half_span(node),
+                            self.sheet_config.half_width)
+        return ErrorTable.build(silhouette_probes(geo.mesh[0], center_x=float(geo.scene.center[0])), eye=self.eye,
+                                projector=self.projector.position, screen_point=paper.SCREEN_POINT,
+                                screen_normal=paper.SCREEN_NORMAL, sheet=home,
+                                sheet_model=sheet_model_for(self.sheet_config))
 
     # ------------------------------------------------------------------ inputs (worker threads)
     def on_deformation(self, msg: ObjectDeformation) -> None:
@@ -294,6 +413,10 @@ class RendererNode(Node):
             self.state.set_arm_pose(msg.arm, msg.pose)
         except ValueError as exc:
             raise InputRejected(str(exc)) from exc
+
+    def on_sheet_target(self, msg: SheetTarget) -> None:
+        """The planner's stretch: prepare its pushed-sheet table before the arms reach it."""
+        self._want_table(self.sheet_model.node_of(msg.stretch))
 
     def on_fingertip(self, msg: Fingertip) -> None:
         self.state.set_fingertip(msg.position if msg.valid else None, msg.exposure_stamp)
@@ -311,9 +434,14 @@ class RendererNode(Node):
         sheet, warning = self.state.sheet_for_frame()
         if warning:
             self.state_message = warning
+        if isinstance(sheet.membrane, PendingPush):
+            self.state_message = (f"pushed-sheet table for stretch {sheet.membrane.node:g} not built yet: "
+                                  "drawing the push with the 4-triangle model")
+        elif self.state_message.startswith("pushed-sheet table"):
+            self.state_message = ""
         model = pick_model(p.correction, sheet, self.table, p.accuracy_target)
         try:
-            self.renderer.set_model(model, sheet, fine_modes=p.fine_modes)
+            self.renderer.set_model(model, sheet)
         except ValueError as exc:
             self.state_message = f"model {model} failed ({exc}); drawing uncorrected"
             self.renderer.set_model("none")

@@ -1,10 +1,12 @@
 """The renderer's nominal pushed-sheet model: the nonlinear membrane FEM solved with the sheet's NOMINAL
 material, fitted into the "fine" shader's series form (pure: numpy; the FEM from :mod:`flexsheet.model.sheet_fem`).
 
-Why: the fine correction's sine-series membrane (:class:`flexsheet.model.sheet.Membrane`, small-slope,
-tension ratio 1) is linear; a 1 mm urethane sheet pushed 10–50 mm is not — the push stretches it, the dent
-becomes conical, and the series is 0.8 mm off at 10 mm and ~11 mm off at 50 mm where the object's outline is
-seen (measured on the twin, docs/renderer.md). This module keeps the shader and replaces the shape it is given:
+This is the renderer node's only pushed-sheet shape (``RendererState`` attaches it to every push,
+:meth:`NominalSheetModel.pushed`). Why: the old fine correction's sine-series membrane
+(:class:`flexsheet.model.sheet.Membrane`, small-slope, tension ratio 1) is linear; a 1 mm urethane sheet pushed
+10–50 mm is not — the push stretches it, the dent becomes conical, and the series is ~4 mm off at 50 mm where
+the object's outline is seen (measured on the twin, docs/renderer.md). This module keeps the shader and
+replaces the shape it is given:
 
 1. **Table** (:meth:`NominalSheetModel.table`): :class:`flexsheet.model.sheet_fem.IndentTable` of
    :class:`flexsheet.model.sheet_fem.SheetPhysics` with what the estimator knows — the clamp span measured by
@@ -21,7 +23,10 @@ seen (measured on the twin, docs/renderer.md). This module keeps the shader and 
    (decay μ = λ_k·s for s in ``mu_scales``, centred on the contact, zero slope at the free edges v = ±b).
    The result, a :class:`SeriesShape` of n_modes·len(mu_scales) ≤ 64 terms, is evaluated exactly like
    :class:`flexsheet.model.sheet.Membrane` (same λ, μ, coef arrays), so the GLSL fine model draws it
-   unchanged. Fits are cached (LRU) on the contact rounded to 0.1 mm.
+   unchanged. Fits are cached (LRU) on the contact rounded to 0.1 mm. Per new fingertip the table on the fit
+   grid (:func:`table_grid`) and the fit cost ~1–2 ms of CPU (``flexsheet bench render``).
+3. **In the node**: :meth:`NominalSheetModel.shape` with ``build=False`` never builds a missing table in the
+   drawing thread (a :class:`PendingPush` instead); :func:`build_table` builds it in a worker process.
 
 Units: m, sheet frame (u along axis_u, v along axis_v, w along −normal), as :mod:`flexsheet.model.sheet`.
 """
@@ -29,39 +34,25 @@ Units: m, sheet frame (u along axis_u, v along axis_v, w along −normal), as :m
 from __future__ import annotations
 
 import math
+import os
 from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from flexsheet.model import scene
-from flexsheet.model.sheet import SheetSurface, clamp_half_span, stretch_of_span
-from flexsheet.model.sheet_fem import TABLE_POSITIONS, IndentTable, SheetPhysics, default_cache_dir
+from flexsheet.model.sheet import SheetSurface, clamp_half_span, series_deflection, stretch_of_span
+from flexsheet.model.sheet import neumann_green as green
+from flexsheet.model.sheet_fem import TABLE_POSITIONS, IndentTable, SheetPhysics, _remap, default_cache_dir
 from flexsheet.model.tension import SheetMaterial, tension
 
-__all__ = ["SeriesShape", "NominalSheetModel", "MODEL_DEPTHS", "green"]
+__all__ = ["SeriesShape", "PendingPush", "NominalSheetModel", "MODEL_DEPTHS", "green", "fit_series", "table_grid",
+           "contact_of", "build_table"]
 
 #: depths (m) of the nominal table (the fit interpolates between them)
 MODEL_DEPTHS = (0.005, 0.010, 0.020, 0.030, 0.040, 0.050, 0.060)
 #: most terms the fine shader evaluates (``nodes.renderer.scene.MAX_SHADER_MODES``)
 MAX_TERMS = 64
-
-
-def green(v: np.ndarray, mu: np.ndarray, v0: float, b: float, deriv: bool = False):
-    """Neumann Green's function G(v; μ, v0) of g'' − μ²g = −δ(v − v0) on [−b, b] (and dG/dv), for v (N,) and μ
-    (K,): (N, K) arrays, in the overflow-free form of :class:`flexsheet.model.sheet.Membrane` and the shader."""
-    v = np.clip(np.asarray(v, float), -b, b)[:, None]
-    mu = np.asarray(mu, float)[None, :]
-    lo, hi = np.minimum(v, v0), np.maximum(v, v0)
-    ex = np.exp(-2.0 * mu * (b + lo))
-    ey = np.exp(-2.0 * mu * (b - hi))
-    e = np.exp(-mu * (hi - lo))
-    den = 2.0 * (1.0 - np.exp(-4.0 * mu * b))
-    g = e * (1.0 + ex) * (1.0 + ey) / (mu * den)
-    if not deriv:
-        return g
-    dg = np.where(v >= v0, -e * (1.0 + ex) * (1.0 - ey) / den, e * (1.0 - ex) * (1.0 + ey) / den)
-    return g, dg
 
 
 @dataclass(frozen=True)
@@ -89,18 +80,8 @@ class SeriesShape:
         return self.deflection_grad(u, v)[0]
 
     def deflection_grad(self, u, v):
-        """(w, ∂w/∂u, ∂w/∂v) at (u, v), broadcast shape of the inputs."""
-        u, v = np.broadcast_arrays(np.asarray(u, dtype=float), np.asarray(v, dtype=float))
-        shape = u.shape
-        a = self.half_span
-        uu = np.clip(u.ravel(), -a, a)[:, None]
-        ph = self.lam * (uu + a)
-        s, c = np.sin(ph), np.cos(ph) * self.lam
-        g, dg = green(v.ravel(), self.mu, self.push_v, self.half_width, deriv=True)
-        w = (self.coef * s * g).sum(axis=1)
-        wu = (self.coef * c * g).sum(axis=1)
-        wv = (self.coef * s * dg).sum(axis=1)
-        return w.reshape(shape), wu.reshape(shape), wv.reshape(shape)
+        """(w, ∂w/∂u, ∂w/∂v) at (u, v), broadcast shape of the inputs (:func:`flexsheet.model.sheet.series_deflection`)."""
+        return series_deflection(u, v, self.lam, self.mu, self.coef, self.half_span, self.half_width, self.push_v)
 
     def grid(self, n: int) -> np.ndarray:
         """(n, n) deflection on u ∈ [−a, a] (rows) × v ∈ [−b, b] (columns), the ``SheetState.membrane`` layout."""
@@ -109,6 +90,65 @@ class SeriesShape:
         u = np.linspace(-self.half_span, self.half_span, n)
         v = np.linspace(-self.half_width, self.half_width, n)
         return self.deflection(u[:, None], v[None, :])
+
+
+def _interp_1d(x: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(i (n,), t (n,)): 1-D linear interpolation on the increasing axis ``x`` at ``q`` (clamped) is
+    (1 − t)·F[i] + t·F[i + 1], the per-axis factor of :func:`flexsheet.model.sheet_fem._bilinear`."""
+    qq = np.clip(q, x[0], x[-1])
+    i = np.clip(np.searchsorted(x, qq, side="right") - 1, 0, len(x) - 2)
+    return i, (qq - x[i]) / (x[i + 1] - x[i])
+
+
+def table_grid(table: IndentTable, depth: float, push_u: float, push_v: float, u: np.ndarray, v: np.ndarray,
+               half_span: float) -> np.ndarray:
+    """:meth:`IndentTable.evaluate` on the tensor grid u (nu,) × v (nv,) m → (nu, nv) m, the same interpolation
+    (contact remapping per axis, bilinear in the FEM nodes, blend of the neighbouring depths and contacts)
+    one axis after the other, ~20× faster than point-wise (equal to 1e-12 m,
+    ``tests/test_render_live_sheet.py``). The fit's per-frame cost is this."""
+    a_t, b = table.physics.half_span, table.physics.half_width
+    u, v = np.asarray(u, float), np.asarray(v, float)
+    if depth <= 0.0:
+        return np.zeros((u.size, v.size))
+    s = a_t / float(half_span)
+    uq = np.clip(u * s * math.copysign(1.0, push_u or 1.0), -a_t, a_t)
+    vq = np.clip(v * math.copysign(1.0, push_v or 1.0), -b, b)
+    pu, pv = abs(push_u) * s, abs(push_v)
+    out = np.zeros((u.size, v.size))
+    kw = table._depth_weights(depth)
+    for i, wi in table._bracket(table.positions, pu):
+        iu, tu = _interp_1d(table.x, _remap(uq, pu, table.positions[i], a_t))
+        for j, wj in table._bracket(table.positions, pv):
+            iv, tv = _interp_1d(table.y, _remap(vq, pv, table.positions[j], b))
+            Wij = sum(wk * table.W[i, j, k] for k, wk in kw)
+            Wu = (1.0 - tu)[:, None] * Wij[iu] + tu[:, None] * Wij[iu + 1]            # along u, (nu, ny)
+            out += (wi * wj) * ((1.0 - tv)[None, :] * Wu[:, iv] + tv[None, :] * Wu[:, iv + 1])
+    return out
+
+
+def contact_of(sheet: SheetSurface, point) -> tuple[float, float, float]:
+    """(depth S, push_u, push_v) m of a fingertip ``point`` (3,) m on the flat ``sheet``: S = distance behind the
+    sheet plane along −normal, (push_u, push_v) its position in the sheet frame. Raises ``ValueError`` for a
+    non-finite point."""
+    p = np.asarray(point, dtype=float)
+    if p.shape != (3,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"fingertip must be a finite (3,) point in m, got {point!r}")
+    d = p - sheet.origin
+    return -float(d @ sheet.normal), float(d @ sheet.axis_u), float(d @ sheet.axis_v)
+
+
+@dataclass(frozen=True)
+class PendingPush:
+    """A push whose shape is not known yet (the nominal table of its stretch ``node`` is still being built):
+    only the contact and depth (m), enough for the 4-triangle model (``SheetSurface.pushed_point``). It has no
+    deflection: :func:`nodes.renderer.state.pick_model` never picks ``fine`` for it."""
+
+    half_span: float
+    half_width: float
+    push_u: float
+    push_v: float
+    depth: float
+    node: float
 
 
 def fit_series(w_grid: np.ndarray, a: float, b: float, push_u: float, push_v: float, depth: float,
@@ -130,21 +170,18 @@ def fit_series(w_grid: np.ndarray, a: float, b: float, push_u: float, push_v: fl
     k = np.arange(1, max_k + 1)
     lam_all = k * math.pi / (2.0 * a)
     Phi = np.sin(lam_all[:, None] * (u[None, :] + a))           # (max_k, nu)
-    F = (Phi * wts) @ W / a                                      # sine coefficients per v, (max_k, nv)
+    # einsum, not BLAS (@): these small products are what a frame costs, and a threaded BLAS on busy cores
+    # makes them 10-20x slower (flexsheet bench render, sheet_update)
+    F = np.einsum("ku,uv->kv", Phi * wts, W) / a                 # sine coefficients per v, (max_k, nv)
     keep = np.sort(np.argsort(-(F ** 2).sum(axis=1))[:n_modes])
-    lam, mu, coef = [], [], []
-    R = np.zeros_like(W)
-    for i in keep:
-        mus = lam_all[i] * np.asarray(mu_scales, float)
-        B = green(v, mus, push_v, b)                             # (nv, J)
-        c = np.linalg.lstsq(B, F[i], rcond=None)[0]
-        lam += [lam_all[i]] * J
-        mu += list(mus)
-        coef += list(c)
-        R += Phi[i][:, None] * (B @ c)[None, :]
+    mus = lam_all[keep][:, None] * np.asarray(mu_scales, float)[None, :]          # (n_modes, J)
+    B = green(v, mus.ravel(), push_v, b).reshape(nv, len(keep), J).transpose(1, 0, 2)   # (n_modes, nv, J)
+    c = (np.linalg.pinv(B) @ F[keep][:, :, None])[:, :, 0]                          # least squares, (n_modes, J)
+    prof = np.einsum("mvj,mj->mv", B, c)                                             # fitted profiles (n_modes, nv)
+    R = np.einsum("mu,mv->uv", Phi[keep], prof)
+    lam, mu, coef = np.repeat(lam_all[keep], J), mus.ravel(), c.ravel()
     rms = float(np.sqrt(np.mean((R - W) ** 2)))
-    return SeriesShape(float(a), float(b), float(push_u), float(push_v), float(depth), np.array(lam), np.array(mu),
-                       np.array(coef), source, rms)
+    return SeriesShape(float(a), float(b), float(push_u), float(push_v), float(depth), lam, mu, coef, source, rms)
 
 
 class NominalSheetModel:
@@ -160,6 +197,10 @@ class NominalSheetModel:
                  stretch_step: float = 0.01, depths=MODEL_DEPTHS, positions=TABLE_POSITIONS, mesh: dict | None = None,
                  cache_dir: str | None = None, n_modes: int = 16, mu_scales=(0.4, 0.7, 1.0, 1.6),
                  grid: tuple[int, int] = (193, 121), progress=None, cache_size: int = 256) -> None:
+        self.settings = {"material": material, "tension_ratio": tension_ratio, "prestrain": prestrain,
+                         "stretch_step": stretch_step, "depths": tuple(depths), "positions": tuple(positions),
+                         "mesh": dict(mesh or {}), "cache_dir": cache_dir, "n_modes": n_modes,
+                         "mu_scales": tuple(mu_scales), "grid": tuple(grid), "cache_size": cache_size}
         self.material = material or SheetMaterial()
         for k, v in (("tension_ratio", tension_ratio), ("stretch_step", stretch_step)):
             if not (math.isfinite(v) and v > 0.0):
@@ -172,9 +213,12 @@ class NominalSheetModel:
         self.depths, self.positions = tuple(depths), tuple(positions)
         self.mesh = dict(mesh or {})
         self.cache_dir = cache_dir or default_cache_dir()
+        self.settings["cache_dir"] = self.cache_dir
         self.n_modes, self.mu_scales, self.grid_n = int(n_modes), tuple(float(s) for s in mu_scales), tuple(grid)
         self.progress = progress
         self._tables: dict[float, IndentTable] = {}
+        #: stretch node → node whose table stands in for it (set where a node's FEM fails to converge)
+        self.substitute: dict[float, float] = {}
         self._fits: OrderedDict = OrderedDict()
         self._cache_size = int(cache_size)
 
@@ -201,7 +245,7 @@ class NominalSheetModel:
                             tension_u=tension(node + self.prestrain, self.material), tension_ratio=self.tension_ratio)
 
     def table(self, node: float) -> IndentTable:
-        """The nominal table at ``node`` (built once, cached on disk)."""
+        """The nominal table at ``node`` (built once, cached on disk; a build takes ~30 s on one core)."""
         if node not in self._tables:
             ph = self.physics(node)
             if ph.tension_u <= 0.0:
@@ -210,22 +254,56 @@ class NominalSheetModel:
                                              progress=self.progress)
         return self._tables[node]
 
+    def nearest_on_disk(self, node: float, nodes=None) -> float | None:
+        """The node nearest ``node`` (itself included) among ``nodes`` (default: every step up to 0.30) whose
+        table is on disk, or None."""
+        st = self.stretch_step
+        cand = nodes if nodes is not None else [round(k * st, 6) for k in range(1, int(round(0.30 / st)) + 1)]
+        have = [n for n in cand if self.on_disk(n)]
+        return min(have, key=lambda n: (abs(n - node), n)) if have else None
+
+    def on_disk(self, node: float) -> bool:
+        """Whether the table at ``node`` is loaded or cached on disk (a file check; loads nothing, builds nothing)."""
+        if node in self._tables:
+            return True
+        key = IndentTable.key_of(self.physics(node), self.depths, self.positions, self.mesh)
+        return os.path.isfile(os.path.join(self.cache_dir, f"indent_{key}.npz"))
+
+    def available(self, node: float) -> bool:
+        """Whether the table at ``node`` is loaded, or on disk (then it is loaded now, ~10 ms); never builds."""
+        if node not in self._tables:
+            tab = IndentTable.cached(self.physics(node), self.depths, self.positions, mesh=self.mesh,
+                                     cache_dir=self.cache_dir)
+            if tab is None:
+                return False
+            self._tables[node] = tab
+        return True
+
+    def node_of_span(self, half_span: float) -> float:
+        """The table node of a measured clamp half span (m)."""
+        return self.node_of(stretch_of_span(half_span, self.material.size))
+
     def shape(self, half_span: float, depth: float, push_u: float, push_v: float,
-              half_width: float = scene.SHEET_SIZE / 2) -> SeriesShape:
-        """The fitted pushed shape for the measured clamp half span (m), depth (m, > 0) and contact (m)."""
+              half_width: float = scene.SHEET_SIZE / 2, build: bool = True) -> SeriesShape | None:
+        """The fitted pushed shape for the measured clamp half span (m), depth (m, > 0) and contact (m); with
+        ``build`` False, None when the table of its node is not built yet (:meth:`available`). Per call on a
+        cache miss: the table on the fit's grid (:func:`table_grid`) and the fit (``flexsheet bench render
+        --sheet``)."""
         if not (math.isfinite(depth) and depth > 0.0):
             raise ValueError(f"depth must be finite and > 0, got {depth!r}")
-        node = self.node_of(stretch_of_span(half_span, self.material.size))
+        node = self.substitute.get(self.node_of_span(half_span), self.node_of_span(half_span))
         key = (node, round(half_span, 5), round(depth, 4), round(push_u, 4), round(push_v, 4), round(half_width, 5))
         hit = self._fits.get(key)
         if hit is not None:
             self._fits.move_to_end(key)
             return hit
+        if not build and not self.available(node):
+            return None
         tab = self.table(node)
         nu, nv = self.grid_n
         u = np.linspace(-half_span, half_span, nu)
         v = np.linspace(-half_width, half_width, nv)
-        W = tab.evaluate(depth, push_u, push_v, u[:, None], v[None, :], half_span)
+        W = table_grid(tab, depth, push_u, push_v, u, v, half_span)
         src = (f"nominal FEM (E {self.material.young / 1e6:.2f} MPa, pre-strain {self.prestrain:g}, tension ratio "
                f"{self.tension_ratio:g}, stretch node {node:g}), {self.n_modes}×{len(self.mu_scales)} terms")
         out = fit_series(W, half_span, half_width, push_u, push_v, depth, self.n_modes, self.mu_scales, source=src)
@@ -242,6 +320,20 @@ class NominalSheetModel:
             return sheet
         return replace(sheet, membrane=self.shape(sheet.half_span, m.depth, m.push_u, m.push_v, sheet.half_width))
 
+    def pushed(self, flat: SheetSurface, finger, threshold: float = 0.0, build: bool = True) -> SheetSurface:
+        """The sheet ``flat`` (from the clamps) pushed by the fingertip ``finger`` (3,) m, or ``flat`` itself when
+        the finger is no more than ``threshold`` m behind it or off the sheet. Its membrane is this model's
+        shape, or, with ``build`` False and the table of its stretch node not built yet, a :class:`PendingPush`.
+        Raises ``ValueError`` for a non-finite finger."""
+        depth, pu, pv = contact_of(flat, finger)
+        a, b = flat.half_span, flat.half_width
+        if depth <= threshold or abs(pu) >= a or abs(pv) > b:
+            return flat
+        shp = self.shape(a, depth, pu, pv, b, build=build)
+        if shp is None:
+            shp = PendingPush(a, b, pu, pv, depth, self.node_of_span(a))
+        return replace(flat, membrane=shp)
+
     def describe(self) -> dict:
         """JSON-able description (for reports)."""
         return {"name": "fem_nominal", "young_Pa": self.material.young, "prestrain": self.prestrain,
@@ -249,3 +341,16 @@ class NominalSheetModel:
                 "positions_m": list(self.positions), "mesh": self.mesh, "n_modes": self.n_modes,
                 "mu_scales": list(self.mu_scales), "terms": self.n_modes * len(self.mu_scales),
                 "note": "nominal material and assumed tension ratio; never the truth's"}
+
+
+def build_table(settings: dict, node: float, nice: int = 0) -> float:
+    """Build the table of ``NominalSheetModel(**settings)`` at ``node`` and cache it on disk; returns ``node``.
+    Module-level so that a worker process can run it (the node builds missing tables off its render loop, at
+    ``nice`` below its priority)."""
+    if nice:
+        try:
+            os.nice(nice)
+        except OSError:
+            pass
+    NominalSheetModel(**settings).table(float(node))
+    return float(node)

@@ -4,8 +4,11 @@
   give (:meth:`SheetSurface.from_clamps`, paper §III-C), validated when they arrive; the last good sheet is
   kept for frames whose inputs give an unusable sheet. Thread-safe (input handlers run in worker threads, the
   drawing in the GL thread).
-* :class:`ErrorTable` — each correction model's predicted image error against the fine membrane model over a
-  range of push depths (:func:`nodes.renderer.correction.predict_model_errors`), computed once at setup.
+* :class:`ErrorTable` — each correction model's predicted image error against the renderer's pushed-sheet model
+  (the nominal FEM, :mod:`nodes.renderer.sheet_model`) over a range of push depths
+  (:func:`nodes.renderer.correction.predict_model_errors`), computed once its first table is available.
+* :func:`sheet_model_for` — that pushed-sheet model, built from :class:`SheetConfig` the same way for the node,
+  the experiment and the tests.
 * :func:`pick_model` — the model for a sheet: the configured one, or with ``"auto"`` the cheapest whose
   predicted error meets the accuracy target (:func:`nodes.renderer.correction.choose_model`).
 * :func:`load_geometry` — what the node draws and through which projector: the scene's object
@@ -29,9 +32,10 @@ from flexsheet.model.scenes import Scene, load_scene, paper_scene
 from flexsheet.model.sheet import SheetSurface
 from nodes.renderer.correction import MODELS, choose_model, predict_model_errors
 from nodes.renderer.scene import cylinder_mesh, scaled_projector, vertex_normals
+from nodes.renderer.sheet_model import NominalSheetModel, PendingPush
 
 __all__ = ["RendererState", "SheetConfig", "ErrorTable", "pick_model", "check_sheet", "check_pose",
-           "silhouette_probes", "AUTO_MODELS", "RenderGeometry", "load_geometry"]
+           "silhouette_probes", "AUTO_MODELS", "RenderGeometry", "load_geometry", "sheet_model_for"]
 
 #: models "auto" chooses among (cheapest first); "none" is never chosen automatically
 AUTO_MODELS = ("flat", "four_triangle", "fine")
@@ -76,16 +80,16 @@ class ErrorTable:
 
     @classmethod
     def build(cls, probes, *, eye, projector, screen_point, screen_normal, sheet: SheetSurface,
-              depths=np.linspace(0.0, 0.06, 13), sheet_model=None) -> ErrorTable:
+              sheet_model: NominalSheetModel, depths=np.linspace(0.0, 0.06, 13)) -> ErrorTable:
         """Predict each model's error at each depth (m) for ``probes`` (N, 3) m on the unpushed ``sheet``
-        (:func:`predict_model_errors`, ~0.1 s per depth), against the fine membrane or, given ``sheet_model``
-        (:class:`nodes.renderer.sheet_model.NominalSheetModel`), against its shape (then also the ``fine``
-        model's shape). Raises ``ValueError`` on bad geometry."""
+        (:func:`predict_model_errors`, ~0.1 s per depth) against ``sheet_model``'s shape pushed at the centre
+        (:class:`nodes.renderer.sheet_model.NominalSheetModel`; also the ``fine`` model's shape). Builds the
+        table of ``sheet``'s stretch node if it is not cached (~30 s). Raises ``ValueError`` on bad geometry."""
         rows = {m: [] for m in MODELS}
-        ref = None
-        if sheet_model is not None:
-            def ref(s, depth):
-                return sheet_model.shape(s.half_span, depth, 0.0, 0.0, s.half_width)
+
+        def ref(s, depth):
+            return sheet_model.shape(s.half_span, depth, 0.0, 0.0, s.half_width)
+
         for S in np.asarray(depths, dtype=float):
             pe = predict_model_errors(float(S), eye=eye, projector=projector, screen_point=screen_point,
                                       screen_normal=screen_normal, probes=probes, sheet=sheet, reference=ref)
@@ -98,15 +102,21 @@ class ErrorTable:
         return choose_model(depth, self.rows, target, models=models)
 
 
-def pick_model(correction: str, sheet: SheetSurface, table: ErrorTable, target: float) -> str:
+def pick_model(correction: str, sheet: SheetSurface, table: ErrorTable | None, target: float) -> str:
     """The correction model to draw ``sheet`` with: ``correction`` itself unless it is ``"auto"``; then
-    ``"flat"`` for an unpushed sheet, else the cheapest model meeting ``target`` m at the sheet's push depth."""
+    ``"flat"`` for an unpushed sheet, else the cheapest model meeting ``target`` m at the sheet's push depth.
+    A push whose shape is not known yet (:class:`~nodes.renderer.sheet_model.PendingPush`: its stretch's
+    table is being built), or ``auto`` before the error ``table`` exists (None), is drawn with
+    ``"four_triangle"`` (``"fine"`` needs the shape)."""
+    if correction not in MODELS and correction != "auto":
+        raise ValueError(f"correction must be 'auto' or one of {MODELS}, got {correction!r}")
+    pending = isinstance(sheet.membrane, PendingPush)
     if correction != "auto":
-        if correction not in MODELS:
-            raise ValueError(f"correction must be 'auto' or one of {MODELS}, got {correction!r}")
-        return correction
+        return "four_triangle" if correction == "fine" and pending else correction
     if sheet.membrane is None:
         return "flat"
+    if pending or table is None:
+        return "four_triangle"
     return table.choose(sheet.membrane.depth, target)
 
 
@@ -115,18 +125,26 @@ class SheetConfig:
     """How the renderer turns clamp poses and the fingertip into the sheet it corrects for.
 
     ``half_width`` m: half the free-edge length; ``push_threshold`` m: depth behind the flat sheet that counts
-    as a push; ``fine_modes``, ``tension_ratio`` (T_v/T_u), ``contact_radius`` m: the membrane of the pushed
-    sheet (:class:`flexsheet.model.sheet.Membrane`)."""
+    as a push; the pushed sheet's model (:func:`sheet_model_for`): ``fine_modes`` clamped sine modes (each
+    with 4 Green's-function terms, ≤ 16: the shader takes 64 terms), ``tension_ratio`` the ASSUMED T_v/T_u,
+    ``cache_dir`` where its FEM tables are cached (None: :func:`flexsheet.model.sheet_fem.default_cache_dir`),
+    ``mesh`` the FEM mesh options (:class:`flexsheet.model.sheet_fem.SheetFEM` kwargs; {}: the default
+    4 mm mesh)."""
 
     half_width: float = scene.SHEET_SIZE / 2
     push_threshold: float = 0.001
     fine_modes: int = 16
     tension_ratio: float = 1.0
-    contact_radius: float = 0.008
+    cache_dir: str | None = None
+    mesh: dict = field(default_factory=dict)
 
-    def membrane_kwargs(self) -> dict:
-        """Keyword arguments for the pushed sheet's membrane."""
-        return {"modes": self.fine_modes, "tension_ratio": self.tension_ratio, "contact_radius": self.contact_radius}
+
+def sheet_model_for(config: SheetConfig = SheetConfig(), progress=None) -> NominalSheetModel:
+    """The renderer's pushed-sheet model for ``config``: the nominal FEM (the sheet's nominal E and size, no
+    pre-strain, the assumed tension ratio) fitted into the fine shader's series; never the truth's values.
+    Raises ``ValueError`` on a bad setting."""
+    return NominalSheetModel(tension_ratio=config.tension_ratio, n_modes=config.fine_modes,
+                             cache_dir=config.cache_dir, mesh=dict(config.mesh), progress=progress)
 
 
 class RendererState:
@@ -135,17 +153,21 @@ class RendererState:
     ``eye`` (3,) m: cyclopean eye V; ``projector`` (3,) m: light source P (the sheet must lie between them);
     ``config``: :class:`SheetConfig`; ``mesh``: the rigid object's (vertices (N, 3) m, faces (M, 3)) drawn
     until the FEM publishes (the scene's :meth:`~flexsheet.model.scenes.Scene.surface_mesh`; default the
-    paper's cylinder); ``sheet_model``: the pushed sheet's shape model for the fine correction — None: the
-    sine-series :class:`~flexsheet.model.sheet.Membrane` of ``config``; a
-    :class:`nodes.renderer.sheet_model.NominalSheetModel`: the nominal FEM fitted into the shader's series.
+    paper's cylinder); ``sheet_model``: the pushed sheet's shape (:class:`NominalSheetModel`; None:
+    :func:`sheet_model_for` ``config``); ``build``: False to never build a missing FEM table in the caller's
+    thread (the node's drawing thread) — a push at a stretch whose table is not on disk yet then gets a
+    :class:`PendingPush` and ``on_missing(node)`` is called (the node builds it in a worker process).
     Starts with both clamps in the home pose.
     """
 
-    def __init__(self, eye, projector, config: SheetConfig = SheetConfig(), mesh=None, sheet_model=None) -> None:
+    def __init__(self, eye, projector, config: SheetConfig = SheetConfig(), mesh=None,
+                 sheet_model: NominalSheetModel | None = None, *, build: bool = True, on_missing=None) -> None:
         self.eye = np.asarray(eye, dtype=float)
         self.projector = np.asarray(projector, dtype=float)
         self.config = config
-        self.sheet_model = sheet_model
+        self.sheet_model = sheet_model if sheet_model is not None else sheet_model_for(config)
+        self.build = bool(build)
+        self.on_missing = on_missing
         self._lock = threading.Lock()
         v, f = cylinder_mesh() if mesh is None else (np.asarray(mesh[0], np.float32), np.asarray(mesh[1], np.int32))
         self._mesh = (v, f, vertex_normals(v, f))
@@ -229,19 +251,21 @@ class RendererState:
 
     def current_sheet(self) -> SheetSurface:
         """The actual sheet from the latest clamp poses (home pose for an arm not heard from), pushed in by the
-        fingertip when it is more than ``push_threshold`` behind the flat sheet (its shape: ``sheet_model``'s, or
-        the config's membrane)."""
+        fingertip when it is more than ``push_threshold`` behind the flat sheet: the shape of ``sheet_model``
+        at the clamps' stretch, the fingertip's depth and contact (:meth:`NominalSheetModel.pushed`), or a
+        :class:`PendingPush` while that stretch's table is missing and ``build`` is False."""
         c = self.config
         with self._lock:
             Tl = self._pose["left"] if self._pose["left"] is not None else self.home["left"]
             Tr = self._pose["right"] if self._pose["right"] is not None else self.home["right"]
             finger = self._finger
         flat = SheetSurface.from_clamps(Tl, Tr, half_width=c.half_width)
-        if finger is None or -float((finger - flat.origin) @ flat.normal) <= c.push_threshold:
+        if finger is None:
             return flat
-        pushed = SheetSurface.from_clamps(Tl, Tr, half_width=c.half_width, pushed_point=finger,
-                                          membrane_kwargs=c.membrane_kwargs())
-        return pushed if self.sheet_model is None else self.sheet_model.surface(pushed)
+        sheet = self.sheet_model.pushed(flat, finger, c.push_threshold, build=self.build)
+        if isinstance(sheet.membrane, PendingPush) and self.on_missing is not None:
+            self.on_missing(sheet.membrane.node)
+        return sheet
 
     def sheet_for_frame(self) -> tuple[SheetSurface, str]:
         """(sheet to draw, warning): the current sheet if usable (it becomes the last good one), else the last
