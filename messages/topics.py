@@ -33,6 +33,8 @@ class Topic:
 
 
 STEREO = Topic("/camera/stereo", StereoFrame, nominal_hz=48.0)
+#: the same pairs decimated for viewers (the Foxglove bridge): every frame at most ``preview_rate`` Hz
+STEREO_PREVIEW = Topic("/camera/stereo_preview", StereoFrame, nominal_hz=5.0)
 CALIBRATION = Topic("/camera/calibration", StereoCalibration, latched=True)
 FINGERTIP = Topic("/fingertip", Fingertip, nominal_hz=48.0)
 SHEET_TARGET = Topic("/sheet/target", SheetTarget, nominal_hz=48.0)
@@ -46,7 +48,7 @@ FINGER_TRUTH = Topic("/world/finger", FingerTruth, nominal_hz=200.0)
 SHEET_STATE = Topic("/world/sheet", SheetState, nominal_hz=100.0)
 DIAGNOSTICS = Topic("/diagnostics", Heartbeat, nominal_hz=1.0)
 
-ALL = [STEREO, CALIBRATION, FINGERTIP, SHEET_TARGET, ARM_LEFT_TARGET, ARM_RIGHT_TARGET, ARM_LEFT_STATE,
+ALL = [STEREO, STEREO_PREVIEW, CALIBRATION, FINGERTIP, SHEET_TARGET, ARM_LEFT_TARGET, ARM_RIGHT_TARGET, ARM_LEFT_STATE,
        ARM_RIGHT_STATE, DEFORMATION, RENDERED, FINGER_TRUTH, SHEET_STATE, DIAGNOSTICS]
 BY_NAME = {t.name: t for t in ALL}
 

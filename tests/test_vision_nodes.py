@@ -125,6 +125,13 @@ def test_camera_node_sim_follows_finger_truth():
             n1 = len(h.messages(topics.STEREO))
             f = (await h.wait_for(topics.STEREO, n=n1 + 1, timeout=3.0))[-1]
             assert not FingertipTracker(cal).process(f.left, f.right, f.exposure_stamp).valid
+            # the viewers' preview: the same pairs, decimated to preview_rate (5 Hz) of the 50 Hz stream
+            full = {m.exposure_stamp: m for m in h.messages(topics.STEREO)}
+            prev = h.messages(topics.STEREO_PREVIEW)
+            assert len(prev) >= 2 and all(np.array_equal(m.left, full[m.exposure_stamp].left) for m in prev)
+            gaps = np.diff([m.exposure_stamp for m in prev])
+            assert np.all(gaps >= 0.2 - 0.5 / 50.0 - 1e-9), gaps              # never faster than 5 Hz
+            assert len(prev) <= len(full) / 8, (len(prev), len(full))
     asyncio.run(scenario())
 
 

@@ -23,8 +23,9 @@ from nodes.viz.wsclient import FoxgloveClient
 
 
 def _inject_all(h: NodeHarness, state: dict) -> None:
+    """Deliver the sample state; the camera pair arrives as the camera publishes it for viewers (the preview)."""
     for name, msg in state.items():
-        h.inject(T.BY_NAME[name], msg)
+        h.inject(T.STEREO_PREVIEW if name == T.STEREO.name else T.BY_NAME[name], msg)
 
 
 def test_client_sees_channels_and_decodes_scene_fingertip_and_frames():
@@ -51,10 +52,10 @@ def test_client_sees_channels_and_decodes_scene_fingertip_and_frames():
             assert h.node.streams.built == {} and h.node._subs == {}   # no viewer: no input, nothing built
             await c.subscribe(["/camera/left"])
             await asyncio.sleep(0.2)
-            assert set(h.node._subs) == {"/camera/stereo"}             # inputs follow what the viewer wants
+            assert set(h.node._subs) == {"/camera/stereo_preview"}     # inputs follow what the viewer wants
             await c.subscribe(["/viz/scene", "/viz/tf", "/fingertip", "/render/image"])
             await asyncio.sleep(0.2)
-            assert "/camera/stereo" in h.node._subs and "/world/sheet" in h.node._subs
+            assert "/camera/stereo_preview" in h.node._subs and "/world/sheet" in h.node._subs
             _inject_all(h, state)
             got = await c.messages({"/viz/scene": 1, "/viz/tf": 1, "/fingertip": 1, "/camera/left": 1,
                                     "/render/image": 1})
@@ -154,7 +155,7 @@ def test_slow_viewer_loses_old_frames_and_never_blocks_the_node():
             t0 = time.monotonic()
             for i in range(n_sent):          # the client reads nothing meanwhile
                 fr = state["/camera/stereo"]
-                h.inject(T.STEREO, fr.model_copy(update={"header": fr.header.model_copy(update={"seq": i})}))
+                h.inject(T.STEREO_PREVIEW, fr.model_copy(update={"header": fr.header.model_copy(update={"seq": i})}))
                 await asyncio.sleep(period)
             elapsed = time.monotonic() - t0
             await h.settle(0.3)

@@ -103,6 +103,8 @@ class CameraParams(BaseModel):
     packet_delay_ns: int = Field(default=0, ge=0)
     n_buffers: int = Field(default=16, ge=2, le=256)
     discover_timeout_s: float = Field(default=10.0, ge=0.0, le=120.0)
+    # viewers: the same pairs decimated on /camera/stereo_preview, Hz (0: off)
+    preview_rate: float = Field(default=5.0, ge=0.0, le=1000.0)
     # device source
     device_left: int | str = 0
     device_right: int | str | None = None
@@ -184,7 +186,9 @@ def published_registration(p: CameraParams, calib: dict) -> tuple[dict, np.ndarr
 
 class CameraNode(Node):
     """Publishes :class:`messages.StereoFrame` (at ``rate_hz``, or as the GenICam pair delivers) and latches
-    :class:`messages.StereoCalibration`."""
+    :class:`messages.StereoCalibration`. Every pair at most ``preview_rate`` Hz is also published on
+    ``/camera/stereo_preview`` (the same message; encoded only when a subscriber outside the process wants it),
+    so a viewer does not receive the 48 Hz stream it would mostly drop (docs/visualise.md)."""
 
     Params = CameraParams
     node_type = "camera"
@@ -199,6 +203,8 @@ class CameraNode(Node):
         self.calib = calib
         published, self.T_dc, self.registration = published_registration(p, calib)
         self.stereo_pub = self.publisher(topics.STEREO)
+        self.preview_pub = self.publisher(topics.STEREO_PREVIEW)
+        self._preview_next = -math.inf
         self.calib_pub = self.publisher(topics.CALIBRATION)
         self.calib_pub.publish(to_message(published, self.calib_pub.header("camera_left"), self.T_dc))
         self._truth: FingerTruth | None = None
@@ -268,6 +274,12 @@ class CameraNode(Node):
             header=self.stereo_pub.header("camera_left"), left=left, right=right,
             exposure_stamp=stamp, exposure_time=float(self.params.exposure_s), stereo_skew=float(skew)))
         self.frames += 1
+        rate = self.params.preview_rate
+        if rate > 0 and stamp >= self._preview_next:
+            self._preview_next = stamp + 1.0 / rate - 0.5 / self.params.rate_hz   # half a frame of slack
+            self.preview_pub.publish(StereoFrame(
+                header=self.preview_pub.header("camera_left"), left=left, right=right, exposure_stamp=stamp,
+                exposure_time=float(self.params.exposure_s), stereo_skew=float(skew)))
 
     def _sim_frame(self) -> None:
         t = self.now()

@@ -69,6 +69,9 @@ class VizParams(BaseModel):
                               description="/viz/scene, /viz/tf, /viz/metrics, Hz (5: under 5 % of a core in the sim "
                                           "with a viewer; 10 costs ~1.2 % more, docs/visualise.md)")
     camera_rate: float = Field(5.0, ge=0.0, le=100.0, description="/camera/left, /camera/right, Hz")
+    camera_topic: str = Field("/camera/stereo_preview", pattern="^/camera/(stereo|stereo_preview)$",
+                              description="where the camera images come from: the camera's decimated preview "
+                                          "(5 Hz) or the full 48 Hz stream (replays of bags that only have it)")
     render_rate: float = Field(5.0, ge=0.0, le=100.0, description="/render/image, Hz")
     input_rate: float = Field(5.0, gt=0.0, le=1000.0,
                               description="most messages decoded per input topic, Hz (camera and rendered "
@@ -154,7 +157,8 @@ class VizNode(Node):
         for t in inputs_for(topic):
             if t.name not in self._subscribed:
                 self._subscribed.add(t.name)
-                self.subscribe(t, self._handler(t.name), qos=QoS.LATCHED if t.latched else QoS.LATEST)
+                src = t.renamed(self.params.camera_topic) if t is T.STEREO else t   # same type, same stream key
+                self.subscribe(src, self._handler(t.name), qos=QoS.LATCHED if t.latched else QoS.LATEST)
 
     def wanted(self, topic: str) -> bool:
         """True if a viewer subscribes to Foxglove channel ``topic``."""
