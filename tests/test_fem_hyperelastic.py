@@ -234,3 +234,52 @@ def test_reference_converges_with_refinement_at_moderate_depth():
         e = [np.linalg.norm(out[i][j] - out[2][j], axis=1)[vis].max() for i in range(2)]
         assert e[1] < e[0], (d, e)
         assert e[1] < 0.0007, (d, e)            # the last refinement moves the visible surface < 1 px
+
+
+def test_per_element_material_and_support_override(quarter):
+    """Per-element E/ν and an explicit support (the hooks other scenes use) against the defaults: the same
+    values give the same residual; doubling E everywhere doubles the elastic residual (W is linear in E at
+    fixed ν); a stiffer half changes it; bad shapes and values are refused naming the field."""
+    m = quarter
+    ne = len(m.mesh.tets)
+    u = _smooth_field(m, 0.05)
+    caps = H.capsule_at(0.0, 0.004, 0.008, m.mesh.radius, m.mesh.center)
+    same = H.HyperelasticModel(m.mesh, MAT, sym_y=True, sym_z=True, intorder=2, support=m.support.copy(),
+                               E_elem=np.full(ne, MAT.E), nu_elem=np.full(ne, MAT.nu))
+    r0, K0 = m.residual_tangent(u, caps, m.penalty())
+    r1, K1 = same.residual_tangent(u, caps, same.penalty())
+    assert np.allclose(r1, r0, rtol=1e-12, atol=1e-12 * np.abs(r0).max())
+    assert abs(K1 - K0).max() <= 1e-12 * abs(K0).max()
+    stiff = H.HyperelasticModel(m.mesh, MAT, sym_y=True, sym_z=True, intorder=2, E_elem=np.full(ne, 2 * MAT.E))
+    r2, _ = stiff.residual_tangent(u, None, 0.0, need_K=False)
+    re, _ = m.residual_tangent(u, None, 0.0, need_K=False)
+    assert np.allclose(r2, 2 * re, rtol=1e-10, atol=1e-12)
+    half = np.where(m.mesh.points[m.mesh.tets].mean(axis=1)[:, 2] > m.mesh.center[2] + 0.01, 5 * MAT.E, MAT.E)
+    r3, _ = H.HyperelasticModel(m.mesh, MAT, sym_y=True, sym_z=True, intorder=2, E_elem=half).residual_tangent(
+        u, None, 0.0, need_K=False)
+    assert np.linalg.norm(r3 - re) > 0.1 * np.linalg.norm(re)
+    # support from a node mask: fix the whole back half-space x <= centre - 10 mm instead of the surface only
+    nodes = m.mesh.points[:, 0] <= m.mesh.center[0] - 0.01
+    sup = m.dof_points(nodes)
+    assert sup.shape == (len(m.points),) and np.all(m.points[sup, 0] <= m.mesh.center[0] - 0.01 + 1e-12)
+    mb = H.HyperelasticModel(m.mesh, MAT, sym_y=True, sym_z=True, intorder=2, support=sup)
+    assert np.all(mb.fixed_mask.reshape(-1, 3)[sup]) and not np.any(mb.support & ~sup)
+    with pytest.raises(ValueError, match="support"):
+        H.HyperelasticModel(m.mesh, MAT, support=np.ones(3, bool))
+    with pytest.raises(ValueError, match="E_elem"):
+        H.HyperelasticModel(m.mesh, MAT, E_elem=np.ones(ne - 1))
+    with pytest.raises(ValueError, match="nu_elem"):
+        H.HyperelasticModel(m.mesh, MAT, nu_elem=np.full(ne, 0.5))
+
+
+def test_solve_path_capsule_matches_the_cylinder_path(quarter):
+    """The callable-finger variant reproduces the azimuth form for the same finger; refuses a non-callable."""
+    m = quarter
+    a = H.solve_path(m, 0.0, [0.004], 0.008, step=0.002)
+    b = H.solve_path_capsule(m, lambda d: H.capsule_at(0.0, d, 0.008, m.mesh.radius, m.mesh.center), [0.004],
+                             step=0.002)
+    assert a[0].converged and b[0].converged and a[0].force > 0.05
+    assert b[0].force == pytest.approx(a[0].force, rel=1e-12)
+    assert np.abs(b[0].u - a[0].u).max() <= 1e-12
+    with pytest.raises(ValueError, match="capsule"):
+        H.solve_path_capsule(m, 0.0, [0.004])

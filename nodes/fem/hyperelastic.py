@@ -41,20 +41,24 @@ import scipy.sparse as sp
 from nodes.fem.material import Material
 from nodes.fem.mesh import TetMesh, cylinder_part_mesh
 
-__all__ = ["SOLVER_VERSION", "RefSpec", "HyperelasticModel", "PathState", "Capsule", "capsule_at", "solve_path", "reference_mesh"]
+__all__ = ["SOLVER_VERSION", "RefSpec", "HyperelasticModel", "PathState", "Capsule", "capsule_at", "solve_path",
+           "solve_path_capsule", "reference_mesh"]
 
-SOLVER_VERSION = "nh-1"     #: bump when the reference's formulation or defaults change (cache keys)
+SOLVER_VERSION = "nh-2"     #: bump when the reference's formulation or defaults change (cache keys)
 
 
 @dataclass(frozen=True)
 class RefSpec:
     """Mesh of the reference: ``h`` global size (m), ``h_fine`` size (m) within ``refine_radius`` (m) of the
-    contact point; ``half_z`` also use the z mirror plane (azimuth-0 pushes only). Raises ``ValueError``."""
+    contact point, or (``path_depth`` > 0, m) of the whole push path from the contact point down to that depth
+    (:func:`nodes.fem.mesh.cylinder_part_mesh`); ``half_z`` also use the z mirror plane (azimuth-0 pushes
+    only). Raises ``ValueError``."""
 
     h: float = 0.010
     h_fine: float = 0.002
     refine_radius: float = 0.018
     half_z: bool = False
+    path_depth: float = 0.0
 
     def __post_init__(self):
         for name in ("h", "h_fine"):
@@ -66,7 +70,8 @@ class RefSpec:
 
     def key(self) -> str:
         """Stable text key (cache keys)."""
-        return f"h={self.h:.6g},hf={self.h_fine:.6g},rr={self.refine_radius:.6g},hz={int(self.half_z)}"
+        k = f"h={self.h:.6g},hf={self.h_fine:.6g},rr={self.refine_radius:.6g},hz={int(self.half_z)}"
+        return k + (f",pd={self.path_depth:.6g}" if self.path_depth > 0 else "")
 
 
 def reference_mesh(spec: RefSpec, angle_deg: float) -> TetMesh:
@@ -74,7 +79,7 @@ def reference_mesh(spec: RefSpec, angle_deg: float) -> TetMesh:
     if spec.half_z and abs(angle_deg) > 1e-9:
         raise ValueError(f"half_z needs a push at azimuth 0, got {angle_deg!r} deg")
     return cylinder_part_mesh(spec.h, spec.h_fine, spec.refine_radius, (float(angle_deg),), half_y=True,
-                              half_z=spec.half_z)
+                              half_z=spec.half_z, path_depth=spec.path_depth)
 
 
 @dataclass(frozen=True)
@@ -154,7 +159,14 @@ class HyperelasticModel:
     """
 
     def __init__(self, mesh: TetMesh, material: Material, sym_y: bool = True, sym_z: bool = False,
-                 intorder: int = 5):
+                 intorder: int = 5, support: np.ndarray | None = None, E_elem: np.ndarray | None = None,
+                 nu_elem: np.ndarray | None = None):
+        """``support`` (P,) bool over the DOF points (mesh nodes first, then edge midpoints, i.e.
+        ``self.points``; build it from a node mask with :meth:`dof_points` first): fixed points, replacing the
+        default rule (outer-boundary points with x ≤ ``mesh.center`` x). ``E_elem`` (E,) Pa and ``nu_elem``
+        (E,) per-tetrahedron Young's modulus and Poisson's ratio (either may be given; the other comes from
+        ``material``): λ, μ per element (inclusions, layered bodies). Raises ``ValueError`` on a wrong shape
+        or an out-of-range value, naming the field."""
         from skfem import Basis, ElementTetP2, MeshTet
 
         if len(mesh.tets) == 0:
@@ -185,7 +197,14 @@ class HyperelasticModel:
         surf = np.zeros(P, bool)
         surf[b.get_dofs(facets=outer).flatten()] = True
         self.surface = surf
-        self.support = surf & (self.points[:, 0] <= c[0] + tol)
+        if support is None:
+            self.support = surf & (self.points[:, 0] <= c[0] + tol)
+        else:
+            support = np.asarray(support)
+            if support.shape != (P,) or support.dtype != np.bool_:
+                raise ValueError(f"support must be a ({P},) bool array over the DOF points, got "
+                                 f"{support.dtype} {support.shape}")
+            self.support = support.copy()
         fixed = np.zeros((P, 3), bool)
         fixed[self.support] = True
         if sym_y:
@@ -200,14 +219,35 @@ class HyperelasticModel:
         # contact quadrature on the outer facets not wholly in the support (6-point rule, positive weights)
         from skfem import FacetBasis
 
-        sup_facet = np.all(self.points[sk.facets[:, outer], 0] <= c[0] + tol, axis=0)
+        if support is None:
+            sup_facet = np.all(self.points[sk.facets[:, outer], 0] <= c[0] + tol, axis=0)
+        else:
+            sup_facet = np.all(self.support[sk.facets[:, outer]], axis=0)
         fb = FacetBasis(sk, ElementTetP2(), facets=outer[~sup_facet], intorder=4)
         self._cf_dofs = np.ascontiguousarray(fb.element_dofs.T)                         # (Fc, 10)
         self._cf_N = np.ascontiguousarray(np.stack([bf[0].value for bf in fb.basis], axis=2))  # (Fc, Qf, 10)
         self._cf_X = np.ascontiguousarray(fb.global_coordinates().value.transpose(1, 2, 0))    # (Fc, Qf, 3)
         self._cf_w = np.ascontiguousarray(fb.dx)                                         # (Fc, Qf) m²
         lam, mu = material.lame
-        self.lam, self.mu = lam, mu
+        self.E_ref = material.E          #: modulus (Pa) that scales the contact penalty and the tolerances
+        if E_elem is not None or nu_elem is not None:
+            ne = len(mesh.tets)
+            Ee = np.full(ne, material.E) if E_elem is None else np.asarray(E_elem, float)
+            ve = np.full(ne, material.nu) if nu_elem is None else np.asarray(nu_elem, float)
+            for name, a in (("E_elem", Ee), ("nu_elem", ve)):
+                if a.shape != (ne,):
+                    raise ValueError(f"{name} must have shape ({ne},) (one value per tetrahedron), got {a.shape}")
+            if not np.all(np.isfinite(Ee) & (Ee > 0)):
+                raise ValueError(f"E_elem must be finite and > 0 Pa, got min {float(np.min(Ee))!r}")
+            if not np.all(np.isfinite(ve) & (ve >= 0) & (ve < 0.5)):
+                raise ValueError(f"nu_elem must be in [0, 0.5), got range [{float(np.min(ve))!r}, "
+                                 f"{float(np.max(ve))!r}]")
+            lam = (Ee * ve / ((1 + ve) * (1 - 2 * ve)))[:, None]                           # (E, 1) Pa
+            mu = (Ee / (2 * (1 + ve)))[:, None]
+            self.E_ref = float(np.max(Ee))
+        self.lam, self.mu = lam, mu      #: Lamé λ, μ (Pa): floats, or (E, 1) arrays per element
+        self._lam4 = lam if np.isscalar(lam) else lam[..., None, None]       # broadcast against (E, Q, 3, 3)
+        self._mu4 = mu if np.isscalar(mu) else mu[..., None, None]
         self._pattern()
         self.eps = 2e-5           #: width (m) of the smooth onset of the contact penalty (see _pen)
         self.h_contact = float(np.sqrt(2.0 * np.percentile(self._cf_w.sum(axis=1), 10)))  #: fine facet size, m
@@ -299,7 +339,7 @@ class HyperelasticModel:
             raise FloatingPointError("inverted element (det F <= 0)")
         lnJ = np.log(J)
         FinvT = np.swapaxes(Finv, 2, 3)
-        P = self.mu * (F - FinvT) + (self.lam * lnJ)[..., None, None] * FinvT
+        P = self._mu4 * (F - FinvT) + (self.lam * lnJ)[..., None, None] * FinvT
         re = np.einsum("eq,eqiJ,eqaJ->eai", self.w, P, self.grad)
         r = np.bincount(self._vd.ravel(), weights=re.ravel(), minlength=self.n)
         cdata = None
@@ -347,8 +387,8 @@ class HyperelasticModel:
         E, Q = lnJ.shape
         S = np.einsum("eqJk,eqLi->eqiJkL", Finv, Finv).reshape(E, Q, 9, 9)
         f = np.swapaxes(Finv, 2, 3).reshape(E, Q, 9)
-        A = (self.mu * np.eye(9) + (self.mu - self.lam * lnJ)[..., None, None] * S
-             + self.lam * f[..., :, None] * f[..., None, :])
+        A = (self._mu4 * np.eye(9) + (self.mu - self.lam * lnJ)[..., None, None] * S
+             + self._lam4 * f[..., :, None] * f[..., None, :])
         ev, V = np.linalg.eigh(A)
         out = np.zeros((E, 10, 3, 10, 3))
         bad = ev[..., 0] < 0
@@ -418,7 +458,16 @@ class HyperelasticModel:
     def penalty(self, mesh_h: float | None = None) -> float:
         """Contact penalty per unit area, N/m³: 1000·E/h (a contact pressure p = E penetrates p/κ = h/1000),
         h the median size of the contact facets."""
-        return 1000.0 * self.material.E / (mesh_h or self.h_contact)
+        return 1000.0 * self.E_ref / (mesh_h or self.h_contact)
+
+    def dof_points(self, node_mask: np.ndarray) -> np.ndarray:
+        """Extend a mask over the mesh nodes (N,) bool to the DOF points (P,) bool: an edge midpoint is
+        marked when both its end nodes are (e.g. a support given on the mesh nodes)."""
+        node_mask = np.asarray(node_mask, bool)
+        n0 = self.skmesh.p.shape[1]
+        if node_mask.shape != (n0,):
+            raise ValueError(f"node_mask must have shape ({n0},), got {node_mask.shape}")
+        return np.concatenate([node_mask, np.all(node_mask[self.skmesh.edges], axis=0)])
 
 
 def _pen(g: np.ndarray, k: float, eps: float):
@@ -500,11 +549,26 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
 def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: float, step: float = 0.001,
                iters: int = 30, tol_u: float = 1e-6, tol_r: float | None = None, log=None,
                substeps_max: int = 3) -> list[PathState]:
-    """Push the capsule finger at azimuth ``angle`` (rad) through ``depths`` (m, ascending, ≥ 0), load steps of
-    at most ``step`` m; returns one :class:`PathState` per requested depth. A load step whose Newton solve fails
-    is halved (up to ``substeps_max`` times); if it still fails, its last iterate is kept and the state is
-    flagged ``converged=False`` (bounded time; the caller decides). Raises ``ValueError`` on bad depths and
-    ``RuntimeError`` when a step has no valid iterate at all."""
+    """Push the capsule finger radially into the cylinder at azimuth ``angle`` (rad, :func:`capsule_at` on
+    ``model.mesh``'s radius and centre) through ``depths`` (m, ascending, ≥ 0); see :func:`solve_path_capsule`
+    for the load stepping, the return value and the errors raised."""
+    if not math.isfinite(angle):
+        raise ValueError(f"angle must be finite, got {angle!r}")
+    m = model
+    return solve_path_capsule(model, lambda d: capsule_at(angle, d, finger_radius, m.mesh.radius, m.mesh.center),
+                              depths, step, iters, tol_u, tol_r, log, substeps_max,
+                              label=f"angle {math.degrees(angle):.1f} deg")
+
+
+def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 0.001, iters: int = 30,
+                       tol_u: float = 1e-6, tol_r: float | None = None, log=None, substeps_max: int = 3,
+                       label: str = "path") -> list[PathState]:
+    """Push a rigid finger given by ``capsule(depth) -> Capsule`` (depth m; any object, any push direction)
+    through ``depths`` (m, ascending, ≥ 0), load steps of at most ``step`` m; returns one :class:`PathState`
+    per requested depth (``force`` along the capsule's direction, full-body force with the symmetry planes).
+    A load step whose Newton solve fails is halved (up to ``substeps_max`` times); if it still fails, its last
+    iterate is kept and the state is flagged ``converged=False`` (bounded time; the caller decides). Raises
+    ``ValueError`` on bad depths and ``RuntimeError`` when a step has no valid iterate at all."""
     depths = np.asarray(depths, float)
     if depths.ndim != 1 or len(depths) == 0 or not np.all(np.isfinite(depths)) or np.any(depths < 0):
         raise ValueError(f"depths must be a non-empty 1-D array of finite values >= 0 m, got {depths!r}")
@@ -512,9 +576,11 @@ def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: fl
         raise ValueError("depths must be ascending")
     if not (math.isfinite(step) and step > 0):
         raise ValueError(f"step must be > 0 m, got {step!r}")
+    if not callable(capsule):
+        raise ValueError(f"capsule must be a callable depth -> Capsule, got {type(capsule).__name__}")
     m = model
     k = m.penalty()
-    tol_r = tol_r if tol_r is not None else 1e-6 * m.material.E * m.h_contact ** 2 * 10
+    tol_r = tol_r if tol_r is not None else 1e-6 * m.E_ref * m.h_contact ** 2 * 10
     u = np.zeros((len(m.points), 3))
     u_prev, d_prev = None, 0.0
     d_cur = 0.0
@@ -529,7 +595,7 @@ def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: fl
             u_last = None
             for _ in range(substeps_max + 1):
                 d_new = d_cur + h
-                caps = capsule_at(angle, d_new, finger_radius, m.mesh.radius, m.mesh.center)
+                caps = capsule(d_new)
                 guess = u
                 if u_prev is not None and d_cur > d_prev:
                     g2 = u + (u - u_prev) * (h / (d_cur - d_prev))
@@ -547,14 +613,14 @@ def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: fl
             else:
                 if u_last is None:
                     raise RuntimeError(f"Newton failed at depth {d_cur * 1e3:.2f} mm -> {d_new * 1e3:.2f} mm "
-                                       f"(angle {math.degrees(angle):.1f} deg)")
+                                       f"({label})")
                 u_new = u_last          # give up on this step: keep its last iterate, flagged not converged
                 if log:
-                    log(f"  Newton did not converge at {d_new * 1e3:.2f} mm (angle {math.degrees(angle):.1f} deg)")
+                    log(f"  Newton did not converge at {d_new * 1e3:.2f} mm ({label})")
             conv_all &= conv
             u_prev, d_prev = u, d_cur
             u, d_cur = u_new, d_new
-        caps = capsule_at(angle, d_cur, finger_radius, m.mesh.radius, m.mesh.center)
+        caps = capsule(d_cur)
         fvec, pen, ncon = m.contact_force(u, caps, k)
         fvec = m.sym_factor * fvec * np.array([1.0, 0.0 if m.sym_y else 1.0, 0.0 if m.sym_z else 1.0])
         minJ, ninv, emax = m.checks(u)

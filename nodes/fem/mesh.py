@@ -179,14 +179,19 @@ def cylinder_mesh(spec: MeshSpec = MeshSpec(), radius: float = CYLINDER_RADIUS, 
 
 def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg: tuple[float, ...] = (0.0,),
                        half_y: bool = True, half_z: bool = False, radius: float = CYLINDER_RADIUS,
-                       length: float = CYLINDER_LENGTH, center: np.ndarray = CYLINDER_CENTER) -> TetMesh:
+                       length: float = CYLINDER_LENGTH, center: np.ndarray = CYLINDER_CENTER,
+                       path_depth: float = 0.0) -> TetMesh:
     """Mesh a symmetric part of the cylinder for the nonlinear reference (P1 tetrahedra, gmsh OpenCASCADE).
 
     ``half_y``: keep y ≥ y_O only (the push at y = y_O is mirror-symmetric in y); ``half_z``: also keep
     z ≥ z_O (a push at azimuth 0 is mirror-symmetric in z too). Element size ``h`` (m), ``h_fine`` (m) within
     ``refine_radius`` (m) of the side-surface points at azimuths ``refine_deg`` (deg, around +x toward +z,
-    at y = y_O), gmsh ``Ball`` + ``Min`` fields. ``fixed`` marks nothing here: the caller knows which faces are
-    symmetry planes. Raises ``ValueError`` on bad sizes and ``RuntimeError`` if gmsh fails.
+    at y = y_O), gmsh ``Ball`` + ``Min`` fields; with ``path_depth`` (m) > 0 the refined region is the whole
+    *push path* instead: balls every ``refine_radius``/3 from each of those surface points down to
+    ``path_depth`` along the inward normal (the tube the fingertip travels through and the ring of material
+    that wraps it). Each ball grades from ``h_fine`` to ``h`` over a further ``refine_radius``. ``fixed`` marks
+    nothing here: the caller knows which faces are symmetry planes. Raises ``ValueError`` on bad sizes and
+    ``RuntimeError`` if gmsh fails.
     """
     for name, v in (("h", h), ("h_fine", h_fine)):
         if not (math.isfinite(v) and 0.0005 <= v <= 0.05):
@@ -204,8 +209,14 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
             box = gmsh.model.occ.addBox(c[0] - 2 * radius, y0 - 0.01, c[2], 4 * radius, length + 0.02, 2 * radius)
             gmsh.model.occ.intersect([(3, cyl)], [(3, box)])
 
-    centres = ([c + radius * np.array([math.cos(math.radians(d)), 0.0, math.sin(math.radians(d))])
-                for d in refine_deg] if refine_radius > 0 and h_fine < h else [])
+    if not (math.isfinite(path_depth) and 0.0 <= path_depth <= 2 * radius):
+        raise ValueError(f"path_depth must be in [0, {2 * radius:.4g}] m, got {path_depth!r}")
+    centres = []
+    if refine_radius > 0 and h_fine < h:
+        for d in refine_deg:
+            out = np.array([math.cos(math.radians(d)), 0.0, math.sin(math.radians(d))])
+            n = int(math.ceil(path_depth / (refine_radius / 3))) if path_depth > 0 else 0
+            centres += [c + (radius - s) * out for s in np.linspace(0.0, path_depth, n + 1)]
     points, tets = _gmsh_tets("cylinder_part", geometry, h, h_fine, refine_radius, centres,
                               f"the cylinder part (h={h}, h_fine={h_fine})")
     tets = orient_tets(points, tets)

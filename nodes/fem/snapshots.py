@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -36,7 +36,7 @@ from nodes.fem.material import Material
 __all__ = ["SnapshotGrid", "SnapshotModel", "build_table", "surface_coords", "TABLE_VERSION", "DEFAULT_GRID",
            "DEFAULT_REF_SPEC", "table_key", "load_or_build"]
 
-TABLE_VERSION = "snap-1"
+TABLE_VERSION = "snap-1"   # table layout; the solver and mesh enter the key through SOLVER_VERSION, spec
 
 
 @dataclass(frozen=True)
@@ -100,8 +100,9 @@ class SnapshotGrid:
 
 
 DEFAULT_GRID = SnapshotGrid()
-#: mesh of the snapshot solves: P2, 12 mm elements, 3 mm within 18 mm of the push point (docs/fem.md)
-DEFAULT_REF_SPEC = RefSpec(0.012, 0.003, 0.018, half_z=True)
+#: mesh of the snapshot solves = the finest mesh of the experiment's convergence study: P2, 12 mm elements,
+#: 4.5 mm within 18 mm of the fingertip's whole push path (55 mm deep) (docs/fem.md)
+DEFAULT_REF_SPEC = RefSpec(0.012, 0.0045, 0.018, half_z=True, path_depth=0.055)
 
 
 def table_key(grid: SnapshotGrid, spec: RefSpec, nu: float, finger_radius: float) -> str:
@@ -117,9 +118,9 @@ def table_key(grid: SnapshotGrid, spec: RefSpec, nu: float, finger_radius: float
 
 
 def load_or_build(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float,
-                  build: bool = True, log=None) -> tuple[dict | None, bool, float]:
+                  build: bool = True, log=None, solved=None) -> tuple[dict | None, bool, float]:
     """(table or None, cache hit, seconds): the table from ``cache`` (:class:`nodes.fem.cache.ArrayCache`), or
-    built and stored when ``build``."""
+    built and stored when ``build`` (``solved``: as :func:`build_table`)."""
     key = table_key(grid, spec, material.nu, finger_radius)
     z = cache.load("snapshots", key)
     if z is not None:
@@ -127,7 +128,7 @@ def load_or_build(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, 
     if not build:
         return None, False, 0.0
     t = time.perf_counter()
-    z = build_table(grid, spec, material, finger_radius, log=log)
+    z = build_table(grid, spec, material, finger_radius, log=log, solved=solved)
     cache.save("snapshots", key, z)
     return z, False, time.perf_counter() - t
 
@@ -145,10 +146,12 @@ def surface_coords(points: np.ndarray, radius: float, length: float, center: np.
 
 
 def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float, log=None,
-                progress=None) -> dict[str, np.ndarray]:
+                progress=None, solved=None) -> dict[str, np.ndarray]:
     """Run the nonlinear reference at every snapshot azimuth and sample the surface; returns the table arrays
     (see :class:`SnapshotModel`). Heavy (minutes per azimuth on a small machine): cache the result
-    (:class:`nodes.fem.cache.ArrayCache`). ``spec.half_z`` is used for the azimuth-0 snapshot only."""
+    (:class:`nodes.fem.cache.ArrayCache`). ``spec.half_z`` is used for the azimuth-0 snapshot only.
+    ``solved``: optional callable (azimuth deg, model, depths m) -> list of :class:`PathState` (or None to
+    solve here), e.g. the experiment's cached reference solves on the same mesh, so nothing is solved twice."""
     log = log or (lambda s: None)
     from flexsheet.model.scene import CYLINDER_CENTER, CYLINDER_LENGTH, CYLINDER_RADIUS
 
@@ -172,12 +175,14 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
                                c[2] + P2.ravel() * np.sin(T2.ravel())])
     for i, ang in enumerate(grid.angles_deg):
         t0 = time.perf_counter()
-        s = spec if ang == 0.0 else RefSpec(spec.h, spec.h_fine, spec.refine_radius, False)
+        s = spec if ang == 0.0 else replace(spec, half_z=False)
         mesh = reference_mesh(s, ang)
         model = HyperelasticModel(mesh, material, sym_y=True, sym_z=s.half_z)
         log(f"fem: snapshots at {ang:g} deg: {model.n} DOF P2 neo-Hookean, {nd - 1} depths ...")
-        states = solve_path(model, math.radians(ang), depths[1:], finger_radius, step=grid.depth_step,
-                            log=log)
+        states = solved(ang, model, depths[1:]) if solved is not None else None
+        if states is None:
+            states = solve_path(model, math.radians(ang), depths[1:], finger_radius, step=grid.depth_step,
+                                log=log)
         Ps = _probe(model, side_pts)
         Pc = _probe(model, cap_pts)
         for j, st in enumerate(states, start=1):

@@ -1,0 +1,91 @@
+"""`flexsheet experiment fem --quick` end to end, cold cache: the report keys of issue 17, and physics the
+neo-Hookean reference must show whatever the mesh (force rising with depth, the Hertz force at a shallow push,
+no element inverted at a quadrature point, the nonlinear snapshots beating linear elasticity at 0-50 mm), and
+that a second run reads everything from the cache."""
+
+import json
+import math
+import os
+import subprocess
+import sys
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _run(out, cache):
+    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--out", str(out),
+                        "--cache-dir", str(cache)], cwd=ROOT, capture_output=True, text=True, timeout=1500)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    with open(os.path.join(out, "summary.json")) as fh:
+        return json.load(fh), r.stdout
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    base = tmp_path_factory.mktemp("fem")
+    summ, log = _run(base / "out", base / "cache")
+    return base, summ, log
+
+
+def test_summary_has_the_issue_keys_with_real_numbers(quick):
+    base, s, _ = quick
+    rt = s["realtime"]
+    assert rt["method"] == "snapshots"
+    assert math.isfinite(rt["update_ms"]) and 0 < rt["update_ms"] < 50
+    e = rt["max_visible_error_mm_0_50"]
+    assert math.isfinite(e) and 0 < e < 5.0
+    assert isinstance(s["reference"]["converged"], bool)
+    for name in ("convergence", "failure_map", "accuracy_speed"):
+        assert os.path.getsize(base / "out" / f"{name}.png") > 5000
+        with open(base / "out" / f"{name}.json") as fh:
+            assert json.load(fh)
+
+
+def test_reference_physics(quick):
+    base, s, _ = quick
+    with open(base / "out" / "convergence.json") as fh:
+        conv = json.load(fh)
+    depths = conv["depths_m"]
+    assert depths[-1] == pytest.approx(0.05)
+    for lv in conv["levels"]:
+        f = lv["force_N"]
+        assert all(b > a for a, b in zip(f, f[1:], strict=False)), f          # stiffer the deeper, no snap back
+        assert max(lv["inverted_qp"]) == 0                                    # the line search keeps det F > 0
+        assert lv["newton_converged"]
+    # Hertz (Johnson, Contact Mechanics §4.2) at the shallowest push: sphere r = 8 mm on the R = 35.4 mm cylinder
+    E, nu, r, R = s["material"]["E"], s["material"]["nu"], s["finger_radius_m"], 0.025 * math.sqrt(2)
+    d = depths[0]
+    r_eff = math.sqrt(r * (r * R / (r + R)))
+    hertz = 4.0 / 3.0 * E / (1 - nu ** 2) * math.sqrt(r_eff) * d ** 1.5
+    assert conv["levels"][-1]["force_N"][0] == pytest.approx(hertz, rel=0.25)
+    # the coarser mesh differs from the finest, by less than a centimetre on the visible surface
+    err = conv["levels"][0]["error_vs_finest_mm"]
+    assert 0 < max(err) < 10
+    assert max(conv["levels"][-1]["error_vs_finest_mm"]) == 0
+    ref = s["reference"]
+    assert ref["converged"] == (ref["monotone_decrease"] and ref["last_refinement_change_mm"] <= 0.35
+                                and ref["finest_newton_converged"] and ref["finest_inverted_qp_max"] == 0)
+    if len(conv["levels"]) < 3:
+        assert not ref["converged"]
+
+
+def test_snapshots_beat_linear_elasticity_at_large_push(quick):
+    _, s, _ = quick
+    assert s["realtime"]["max_visible_error_mm_0_50"] < 0.5 * s["linear"]["max_visible_error_mm_0_50"]
+    # between snapshot depths the interpolation adds error; at the snapshot depths only surface sampling is left
+    rt = s["realtime"]
+    assert rt["max_visible_error_mm_snapshot_depths"] < rt["max_visible_error_mm_held_out_depths"]
+
+
+def test_second_run_reads_the_cache(quick):
+    base, s1, _ = quick
+    _, _, log1 = quick
+    assert "DOF, load steps" in log1                     # the cold run solved ...
+    s2, log = _run(base / "out2", base / "cache")
+    assert "DOF, load steps" not in log and "loaded from cache" in log      # ... the second did not
+    assert s2["realtime"]["precompute_cache_hit"] is True
+    assert s2["realtime"]["max_visible_error_mm_0_50"] == pytest.approx(s1["realtime"]["max_visible_error_mm_0_50"],
+                                                                        rel=1e-9)
+    assert s2["reference"]["levels"] == s1["reference"]["levels"]
