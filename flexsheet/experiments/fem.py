@@ -1,5 +1,6 @@
-"""``flexsheet experiment fem --out DIR [--quick] [--linear-study]``: physically right deformation of the pushed
-cylinder, and the real-time model that reproduces it.
+"""``flexsheet experiment fem --out DIR [--quick] [--linear-study] [--scene FILE]``: physically right deformation
+of the pushed cylinder, and the real-time model that reproduces it (``--scene`` with another object: the same
+study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 
 1. **Reference** (:mod:`nodes.fem.hyperelastic`): neo-Hookean, total Lagrangian, P2, Newton with load
    stepping (≤ 60 iterations per step), rigid frictionless finger (sphere + shaft), pushed 0 → 50 mm at
@@ -97,7 +98,9 @@ def settings_for(quick: bool) -> Settings:
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="flexsheet experiment fem", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
-                                epilog="example: flexsheet experiment fem --quick --out /tmp/fem")
+                                epilog="example: flexsheet experiment fem --quick --out /tmp/fem\n"
+                                       "         flexsheet experiment fem --quick --scene launch/scenes/sphere.yaml "
+                                       "--out /tmp/fem_sphere")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--quick", action="store_true", help="coarse meshes, azimuth 0 only (minutes cold, seconds cached)")
     p.add_argument("--nu", type=float, default=Material().nu, help="Poisson's ratio (default %(default)s)")
@@ -109,6 +112,10 @@ def _parser() -> argparse.ArgumentParser:
                         "parallel processes before the full run), then exit")
     p.add_argument("--write-model-table", action="store_true",
                    help=f"write {os.path.relpath(MODEL_TABLE_PATH)} (default in full mode)")
+    p.add_argument("--scene", default=None,
+                   help="scene file (launch/scenes/*.yaml); another object than the paper's cylinder runs "
+                        "flexsheet.experiments.fem_scene on it (same summary keys), e.g. --scene "
+                        "launch/scenes/sphere.yaml")
     return p
 
 
@@ -494,6 +501,18 @@ def main(argv: list[str] | None = None) -> int:
     """Run the experiment; returns 0. See the module docstring for the outputs."""
     args = _parser().parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
+    if args.scene:
+        from flexsheet.model.scenes import is_paper_cylinder, load_scene_or_paper
+
+        try:
+            sc = load_scene_or_paper(args.scene)
+        except ValueError as exc:
+            raise SystemExit(f"flexsheet experiment fem: {exc}") from None
+        if not is_paper_cylinder(sc):
+            from flexsheet.experiments.fem_scene import run_scene
+
+            run_scene(args.scene, args.out, args.quick, args.cache_dir or None)
+            return 0
     mat = Material(args.E, args.nu)
     st = settings_for(args.quick)
     t0 = time.perf_counter()

@@ -62,7 +62,7 @@ from flexsheet.model.yamlio import UniqueKeyLoader
 
 __all__ = ["SceneError", "Pose", "CylinderObject", "SphereObject", "RoundedBoxObject", "MeshObject", "Material",
            "Support", "Finger", "ArcStroke", "PolylineStroke", "Inclusion", "Scene", "load_scene", "parse_scene",
-           "paper_scene", "cylinder_surface", "rotation_rpy", "SCENES_DIR", "DEFAULT_SCENE_FILE", "MAX_SCENE_BYTES",
+           "paper_scene", "is_paper_cylinder", "load_scene_or_paper", "cylinder_surface", "rotation_rpy", "SCENES_DIR", "DEFAULT_SCENE_FILE", "MAX_SCENE_BYTES",
            "MAX_EXTENT"]
 
 #: the shipped scenes (launch/scenes/ in the repository)
@@ -784,3 +784,24 @@ def paper_scene() -> Scene:
                                 end_deg=60.0))
     sc._source = "<paper>"
     return sc
+
+
+def is_paper_cylinder(sc: Scene) -> bool:
+    """Whether ``sc``'s object is the paper's cylinder (same radius, length and pose to 1 nm / 1e-9 deg) — the
+    object the cylinder-specific FEM models and nonlinear snapshots were built for (material and stroke may
+    differ)."""
+    o, p = sc.object, paper_scene().object
+    return (o.kind == "cylinder" and np.allclose([o.radius, o.length], [p.radius, p.length], rtol=0, atol=1e-9)
+            and np.allclose(o.pose.position, p.pose.position, rtol=0, atol=1e-9)
+            and np.allclose(o.pose.rpy_deg, p.pose.rpy_deg, rtol=0, atol=1e-9))
+
+
+def load_scene_or_paper(path: str | os.PathLike | None) -> Scene:
+    """A node's ``scene`` param: :func:`load_scene` of ``path``, or :func:`paper_scene` for None/empty. Raises
+    ``ValueError`` ("scene: <file>: <what is wrong>") on a missing or invalid file."""
+    if not path:
+        return paper_scene()
+    try:
+        return load_scene(path)
+    except SceneError as exc:
+        raise ValueError(f"scene: {exc}") from None
