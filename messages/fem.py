@@ -19,7 +19,9 @@ class ObjectDeformation(Message):
     (3,) m: undeformed surface point under the finger. ``method``: "condensed", "corotational", "sparse"…
     ``max_strain``: largest element strain (dimensionless). ``status``: "ok", "linear_invalid:<reason>",
     "nonlinear", "rejected:<reason>". ``valid`` False means vertices are the undeformed shape and must not be
-    drawn as deformed. ``source_stamp``: exposure stamp of the source fingertip, s.
+    drawn as deformed. ``source_stamp``: exposure stamp of the source fingertip, s. ``scene_key``: the
+    :meth:`flexsheet.model.scenes.Scene.key` of the object solved (SHA-256 hex; "" = unknown, e.g. a bag
+    recorded before the FEM read scenes).
     """
 
     SCHEMA = "flexsheet/ObjectDeformation"
@@ -36,3 +38,4 @@ class ObjectDeformation(Message):
     status: str = Field(default="ok", description="'ok' or the reason linear failed / input rejected")
     valid: bool = Field(default=True, description="False: do not draw as deformed")
     source_stamp: float = Field(default=0.0, description="exposure stamp of the source fingertip, s")
+    scene_key: str = Field(default="", description="Scene.key() of the object solved; \"\" = unknown")

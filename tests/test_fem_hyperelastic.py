@@ -283,3 +283,63 @@ def test_solve_path_capsule_matches_the_cylinder_path(quarter):
     assert np.abs(b[0].u - a[0].u).max() <= 1e-12
     with pytest.raises(ValueError, match="capsule"):
         H.solve_path_capsule(m, 0.0, [0.004])
+
+
+# ---- sticking contact (the fingertip does not slip on the tissue) ------------------------------------------------
+def test_sticking_residual_and_tangent_are_the_derivatives_of_the_energy(quarter):
+    """With some contact points stuck (anchors perturbed off the finger) the residual and tangent are still the
+    exact derivatives of Π; the anchors lie on the finger's surface; points already stuck keep their anchor."""
+    from dataclasses import replace
+
+    m = quarter
+    rng = np.random.default_rng(1)
+    u = _smooth_field(m, 0.1) + 1e-4 * rng.standard_normal((len(m.points), 3))
+    caps = H.capsule_at(0.0, 0.006, 0.008, m.mesh.radius, m.mesh.center)
+    a = m.stick_anchors(u, caps)
+    stuck = np.isfinite(a[..., 0])
+    assert 5 < stuck.sum() < stuck.size
+    g, _ = caps.gap(caps.center + a[stuck])
+    assert np.abs(g).max() < 1e-12                                       # anchored on the finger's surface
+    deeper = H.capsule_at(0.0, 0.009, 0.008, m.mesh.radius, m.mesh.center)
+    a2 = m.stick_anchors(u, deeper, a)                                 # deeper: more points stick
+    assert np.isfinite(a2[..., 0]).sum() > stuck.sum() and np.array_equal(a2[stuck], a[stuck])
+    caps = replace(caps, anchors=a + np.where(stuck[..., None], 2e-4 * rng.standard_normal(a.shape), np.nan))
+    k, eps = m.penalty(), 1e-7
+    v = rng.standard_normal(u.shape)
+    r, K = m.residual_tangent(u, caps, k)
+    fd = (m.residual_tangent(u + eps * v, caps, k, need_K=False)[0]
+          - m.residual_tangent(u - eps * v, caps, k, need_K=False)[0]) / (2 * eps)
+    assert np.linalg.norm(fd - K @ v.ravel()) < 1e-5 * np.linalg.norm(fd)
+    de = (m.energy(u + eps * v, caps, k) - m.energy(u - eps * v, caps, k)) / (2 * eps)
+    assert abs(de - r @ v.ravel()) < 1e-5 * abs(r @ v.ravel())
+    # the finger's force on the body is −∂Π_contact/∂x summed: equals the contact part of the residual
+    f, _, n = m.contact_force(u, caps, k)
+    r_el = m.residual_tangent(u, None, k, need_K=False)[0]
+    assert np.allclose(f, -(r - r_el).reshape(-1, 3).sum(axis=0), rtol=1e-9, atol=1e-9)
+    assert n >= stuck.sum()
+
+
+def test_sticking_push_holds_the_surface_on_the_finger(quarter):
+    """8 mm push: the contact points stuck to the finger stay on their finger points (within the penalty's
+    elastic give) and move with the finger between 4 and 8 mm, while frictionless the same material points slide
+    over the sphere; the stuck surface needs more force (friction stiffens the contact); both converge with no
+    inverted element; an unknown law is refused."""
+    m = quarter
+    fr = H.solve_path(m, 0.0, [0.004, 0.008], 0.008, step=0.002, contact="frictionless")
+    st = H.solve_path(m, 0.0, [0.004, 0.008], 0.008, step=0.002, contact="sticking")
+    for s in fr + st:
+        assert s.converged and s.inverted == 0
+    assert "anchors" not in fr[1].extra
+    assert st[0].force < st[1].force
+    assert fr[1].force < st[1].force < 1.5 * fr[1].force
+    a = st[1].extra["anchors"]
+    stuck = np.isfinite(a[..., 0])
+    assert stuck.sum() >= 1
+    c4, c8 = (H.capsule_at(0.0, d, 0.008, m.mesh.radius, m.mesh.center).center for d in (0.004, 0.008))
+    on = np.linalg.norm(m._contact_x(st[1].u)[stuck] - c8 - a[stuck], axis=1).max()
+    assert on < 5e-5                                                    # held on its finger point
+    rel = [np.linalg.norm((m._contact_x(s[1].u)[stuck] - c8) - (m._contact_x(s[0].u)[stuck] - c4), axis=1).max()
+           for s in (fr, st)]                                           # motion relative to the finger, 4 -> 8 mm
+    assert rel[1] < 0.3 * rel[0], rel
+    with pytest.raises(ValueError, match="contact"):
+        H.solve_path(m, 0.0, [0.004], 0.008, contact="glued")

@@ -109,3 +109,53 @@ def test_node_without_cached_snapshots_serves_linear_and_says_so():
             assert d.method == "condensed" and d.valid
 
     asyncio.run(scenario())
+
+
+def test_node_solves_the_scene_it_is_given_and_names_it():
+    """``scene`` = the sphere: the node meshes and solves the sphere (not the cylinder), every message carries
+    the sphere's key; without a scene the key is the paper's cylinder's; a bad scene file is a params error."""
+    import pytest
+
+    from flexsheet.model.scenes import SCENES_DIR, load_scene, paper_scene
+    from nodes.fem.node import FemParams
+
+    sphere = load_scene(SCENES_DIR / "sphere.yaml")
+    c, R = sphere.center, sphere.object.radius
+
+    async def scenario():
+        from flexsheet.runtime.testing import NodeHarness
+
+        async with NodeHarness(FemNode, params=dict(PARAMS, scene=str(SCENES_DIR / "sphere.yaml"))) as h:
+            assert "scene 'sphere'" in h.node.state_message
+            # 6 mm into the sphere at 40 deg up its crown (a point the cylinder does not have: z = R sin 40°)
+            n = np.array([np.cos(0.7), 0.0, np.sin(0.7)])
+            h.inject(topics.FINGERTIP, _tip(c + (R - 0.006) * n, stamp=5.0))
+            d = (await h.wait_for(topics.DEFORMATION, n=1, timeout=30.0))[-1]
+            assert d.scene_key == sphere.key() and d.valid and d.contact_force > 0 and d.stiffness > 0
+            assert abs(d.depth - 0.006) < 2e-4
+            assert np.linalg.norm(d.contact_point - (c + R * n)) < 3e-4
+            # the rendered surface is the sphere's: its held back half is at rest on the sphere; the front is
+            # pushed in under the finger and bulges (ν = 0.45) by < 1 mm around it
+            r = np.linalg.norm(d.vertices - c, axis=1)
+            back = d.vertices[:, 0] < c[0] - 1e-3
+            assert back.sum() > 50 and np.abs(r[back] - R).max() < 1e-6
+            assert r.min() < R - 0.004 and r.max() < R + 0.001
+            h.inject(topics.FINGERTIP, _tip(c, valid=False))       # lift: forget the held contact point
+            await h.wait_for(topics.DEFORMATION, n=2, timeout=5.0)
+            h.inject(topics.FINGERTIP, _tip(c - 0.9 * R * np.array([1.0, 0.0, 0.0])))
+            await h.settle(0.3)
+            assert h.rejected(topics.FINGERTIP) == 1              # on the held back half: refused, node alive
+
+    asyncio.run(scenario())
+
+    async def cylinder():
+        from flexsheet.runtime.testing import NodeHarness
+
+        async with NodeHarness(FemNode, params=PARAMS) as h:
+            h.inject(topics.FINGERTIP, _tip([-0.005, 0.0, 0.0]))
+            d = (await h.wait_for(topics.DEFORMATION, n=1, timeout=20.0))[-1]
+            assert d.scene_key == paper_scene().key() and d.valid
+
+    asyncio.run(cylinder())
+    with pytest.raises(ValueError, match="scene"):
+        FemParams(scene=str(SCENES_DIR / "no_such_scene.yaml"))

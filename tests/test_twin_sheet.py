@@ -80,6 +80,15 @@ def test_table_interpolation_matches_direct_solves(tmp_path):
     assert surf.pushed_point == pytest.approx([-0.02, 0.01, 0.0])
     g = sh.grid(9)
     assert g.shape == (9, 9) and np.all(g[[0, -1], :] == 0.0) and g.max() <= 0.02 + 1e-9
+    # the tensor-grid evaluation (the renderer's fit grid) is the point-wise one, for the table's span and another
+    u, v = np.linspace(-0.15, 0.15, 41), np.linspace(-0.13, 0.13, 23)    # reaches past the edges (clamped)
+    for S, pu, pv, a in ((0.02, 0.01, 0.0, None), (0.035, -0.03, 0.05, 1.01 * ph.half_span), (0.004, 0.06, -0.1, None)):
+        g = tab.evaluate_grid(S, pu, pv, u, v, a)
+        assert g.shape == (41, 23) and g.max() > 0.5 * S
+        np.testing.assert_allclose(g, tab.evaluate(S, pu, pv, u[:, None], v[None, :], a), rtol=0, atol=1e-15)
+    assert np.array_equal(tab.evaluate_grid(0.0, 0.0, 0.0, u, v), np.zeros((41, 23)))
+    with pytest.raises(ValueError, match="1-D"):
+        tab.evaluate_grid(0.01, 0.0, 0.0, u[:, None], v)
 
 
 def test_bad_inputs_are_refused_with_the_field_named():

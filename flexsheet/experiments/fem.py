@@ -4,7 +4,8 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 
 1. **Reference** (:mod:`nodes.fem.hyperelastic`): neo-Hookean, total Lagrangian, P2, Newton with load
    stepping (≤ 60 iterations per step), rigid frictionless finger (sphere + shaft), pushed 0 → 50 mm at
-   azimuth 0 on a sequence of meshes refined along the whole push path (quarter model by symmetry). Mesh
+   azimuth 0 on a sequence of meshes refined along the whole push path (quarter model by symmetry;
+   ``--contact sticking``: a fingertip that does not slip, the contact law is a modelling choice). Mesh
    convergence: the visible-surface difference of each mesh to the finest, at every depth
    (``convergence.json/png``); ``reference.converged`` when there are ≥ 3 meshes, that difference falls with
    every refinement, the last refinement changes the visible surface by ≤ half the target, Newton converged at
@@ -42,12 +43,14 @@ from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
 from nodes.fem.choose import DEFAULT_SPEC, MODEL_TABLE_PATH, visible_mask
 from nodes.fem.contact import finger_at
 from nodes.fem.hyperelastic import (
-    SOLVER_VERSION,
+    CONTACT_LAWS,
+    DEFAULT_CONTACT,
     HyperelasticModel,
     PathState,
     RefSpec,
     reference_mesh,
     solve_path,
+    solver_tag,
 )
 from nodes.fem.material import Material
 from nodes.fem.mesh import MeshSpec
@@ -77,6 +80,7 @@ class Settings:
     linear_spec: MeshSpec = DEFAULT_SPEC
     n_time: int = 300
     quick: bool = False
+    contact: str = DEFAULT_CONTACT
 
 
 def settings_for(quick: bool) -> Settings:
@@ -111,7 +115,11 @@ def _parser() -> argparse.ArgumentParser:
                    help="only solve convergence level N (0 = coarsest; fills the cache, so levels can run in "
                         "parallel processes before the full run), then exit")
     p.add_argument("--write-model-table", action="store_true",
-                   help=f"write {os.path.relpath(MODEL_TABLE_PATH)} (default in full mode)")
+                   help=f"write {os.path.relpath(MODEL_TABLE_PATH)} (default in full mode with the default "
+                        "--contact)")
+    p.add_argument("--contact", choices=CONTACT_LAWS, default=DEFAULT_CONTACT,
+                   help="the finger's contact law in the reference: sticking (the fingertip does not slip on the "
+                        "tissue) or frictionless (default %(default)s)")
     p.add_argument("--scene", default=None,
                    help="scene file (launch/scenes/*.yaml); another object than the paper's cylinder runs "
                         "flexsheet.experiments.fem_scene on it (same summary keys), e.g. --scene "
@@ -131,24 +139,26 @@ def _ref_model(spec: RefSpec, angle_deg: float, mat: Material) -> HyperelasticMo
 
 
 def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, cache: ArrayCache,
-                   probes: np.ndarray) -> dict:
+                   probes: np.ndarray, contact: str = DEFAULT_CONTACT) -> dict:
     """Neo-Hookean push at ``angle_deg`` through ``depths`` (load steps = the depth spacing, ≤ 2.5 mm) on
     ``spec``'s mesh, sampled at ``probes`` (k, 3) m (display frame, mirrored into the modelled part); cached.
     Returns {"u": (D, k, 3) m, "u_dof": (D, P, 3) m float32 (every DOF point, for the snapshot table), "force",
     "inverted" (elements with det F ≤ 0 at a quadrature point or P2 node), "inverted_qp" (at a quadrature
     point), "inverted_nodal_visible" (nodally inverted elements whose deformed centroid lies outside the
     footprint, > finger radius + 2 mm from the push axis), "min_detF", "max_strain", "penetration", "newton",
-    "seconds", "cpu_seconds", "dofs", "converged"}."""
+    "seconds", "cpu_seconds", "dofs", "converged"}. ``contact``: the finger's contact law
+    (:data:`nodes.fem.hyperelastic.CONTACT_LAWS`)."""
     step = float(min(0.0025, np.min(np.diff(np.concatenate([[0.0], depths])))))
-    key = cache_key(SOLVER_VERSION, spec.key(), angle_deg, np.round(depths, 9).tolist(), mat.key(), FINGER_R,
+    key = cache_key(solver_tag(contact), spec.key(), angle_deg, np.round(depths, 9).tolist(), mat.key(), FINGER_R,
                     cache_key(np.round(probes, 9).tobytes()), f"step={step:.6g}", f"iters={NEWTON_ITERS}")
 
     def compute() -> dict:
         t, tc = time.perf_counter(), time.process_time()
         model = _ref_model(spec, angle_deg, mat)
-        _log(f"reference {spec.key()} at {angle_deg:g} deg: {model.n} DOF, load steps {step * 1e3:g} mm ...")
+        _log(f"reference {spec.key()} at {angle_deg:g} deg: {model.n} DOF, load steps {step * 1e3:g} mm, "
+             f"{contact} contact ...")
         states = solve_path(model, math.radians(angle_deg), depths, FINGER_R, step=step, iters=NEWTON_ITERS,
-                            log=lambda s: _log("  " + s.strip()))
+                            log=lambda s: _log("  " + s.strip()), contact=contact)
         from nodes.fem.snapshots import _probe, _sample
 
         P = _probe(model, probes)
@@ -195,8 +205,8 @@ def convergence(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMode
     fdepths = _depths(st.fine_step)
     verts = rm.rest_vertices.astype(float)
     fixed = rm.mesh.fixed[rm.surface_nodes]
-    paths = [reference_path(s, 0.0, depths, mat, cache, verts) for s in st.levels[:-1]]
-    fine = reference_path(st.levels[-1], 0.0, fdepths, mat, cache, verts)
+    paths = [reference_path(s, 0.0, depths, mat, cache, verts, st.contact) for s in st.levels[:-1]]
+    fine = reference_path(st.levels[-1], 0.0, fdepths, mat, cache, verts, st.contact)
     sub = np.array([int(np.argmin(np.abs(fdepths - d))) for d in depths])
     paths.append({k: (v[sub] if np.ndim(v) and len(v) == len(fdepths) else v) for k, v in fine.items()})
     rep = {"depths_m": depths.tolist(), "levels": []}
@@ -250,7 +260,7 @@ def validation_set(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeM
     out = [{"angle_deg": 0.0, "depth": float(d), "u": fine["u"][j], "source": "finest convergence mesh",
             "held_out": bool(np.min(np.abs(snap_d - d)) > 1e-9)} for j, d in enumerate(depths)]
     for a in st.holdout_deg:
-        p = reference_path(st.snap_spec, float(a), depths, mat, cache, verts)
+        p = reference_path(st.snap_spec, float(a), depths, mat, cache, verts, st.contact)
         out += [{"angle_deg": float(a), "depth": float(d), "u": p["u"][j], "source": "held-out azimuth",
                  "held_out": True} for j, d in enumerate(depths)]
     return out
@@ -278,7 +288,7 @@ def snapshot_table(st: Settings, mat: Material, cache: ArrayCache, fine: dict) -
         return out
 
     table, hit, sec = load_or_build(cache, st.grid, st.snap_spec, mat, FINGER_R, build=True,
-                                    log=lambda s: _log("  " + s.strip()), solved=solved)
+                                    log=lambda s: _log("  " + s.strip()), solved=solved, contact=st.contact)
     if hit:
         sec = float(np.sum(table["seconds"]))
     return table, hit, sec
@@ -395,7 +405,7 @@ def summary(st: Settings, conv: dict, cand: dict, cases: list[dict], snap_info: 
                                   "finger) are left out", **snap_info},
         "linear": {"update_ms": lin["time_ms"]["median"], "max_visible_error_mm_0_50": max(lin["errors_m"]) * 1e3},
         "reference": {"converged": conv["converged"], "model": "compressible neo-Hookean, total Lagrangian, P2, "
-                      "Newton + load stepping, frictionless rigid finger (penalty)", **{
+                      f"Newton + load stepping, rigid finger (penalty), {st.contact} contact", "contact": st.contact, **{
                           k: conv[k] for k in ("monotone_decrease", "last_refinement_change_mm",
                                                "finest_inverted_nodal_at_50mm", "finest_inverted_qp_at_50mm",
                                                "finest_inverted_nodal_visible_max", "finest_inverted_qp_max",
@@ -514,7 +524,7 @@ def main(argv: list[str] | None = None) -> int:
             run_scene(args.scene, args.out, args.quick, args.cache_dir or None)
             return 0
     mat = Material(args.E, args.nu)
-    st = settings_for(args.quick)
+    st = replace(settings_for(args.quick), contact=args.contact)
     t0 = time.perf_counter()
     cache = ArrayCache(args.cache_dir or None, _log)
     rm = realtime_model(st, mat, args.cache_dir or None)
@@ -523,7 +533,7 @@ def main(argv: list[str] | None = None) -> int:
             raise SystemExit(f"--level must be in [0, {len(st.levels) - 1}], got {args.level}")
         last = args.level == len(st.levels) - 1
         reference_path(st.levels[args.level], 0.0, _depths(st.fine_step if last else st.depth_step), mat, cache,
-                       rm.rest_vertices.astype(float))
+                       rm.rest_vertices.astype(float), st.contact)
         _log(f"level {args.level} cached in {time.perf_counter() - t0:.1f} s")
         return 0
     conv, fine = convergence(st, mat, cache, rm)
@@ -544,7 +554,7 @@ def main(argv: list[str] | None = None) -> int:
                                             "max_visible_error_mm_0_50": max(v["errors_m"]) * 1e3}
                                         for k, v in cand.items()})
     _write(args.out, "summary", summ)
-    if not st.quick or args.write_model_table:
+    if (not st.quick and st.contact == DEFAULT_CONTACT) or args.write_model_table:   # the node's table: default law
         with open(MODEL_TABLE_PATH, "w") as fh:
             json.dump(model_table(cases, cand), fh, indent=1)
     plot_convergence(args.out, conv)

@@ -49,7 +49,7 @@ import numpy as np
 from flexsheet.model import scene
 from flexsheet.model.checks import check_point, check_pose, check_positive, check_unit
 
-__all__ = ["Membrane", "SheetSurface", "TRUE_MODES", "neumann_green", "series_deflection", "sheet_rotation", "clamp_half_span", "stretch_of_span",
+__all__ = ["Membrane", "DeflectionGrid", "SheetSurface", "TRUE_MODES", "neumann_green", "series_deflection", "sheet_rotation", "clamp_half_span", "stretch_of_span",
            "clamp_points", "clamp_poses", "frame_from_clamps"]
 
 #: number of modes of the reference ("true") membrane shape
@@ -186,8 +186,25 @@ def series_deflection(u, v, lam, mu, coef, a: float, b: float, v0: float):
 
 
 # -- pushed membrane -----------------------------------------------------------------------------------
+class DeflectionGrid:
+    """Mixin of every pushed-sheet shape (:class:`Membrane`, :class:`flexsheet.model.sheet_fem.FemShape`, the
+    renderer's ``SeriesShape``): :meth:`grid` from the shape's ``half_span`` a, ``half_width`` b (m) and
+    ``deflection(u, v)``."""
+
+    def grid(self, n: int) -> np.ndarray:
+        """Deflection sampled on an n×n grid over u ∈ [−a, a] (rows) × v ∈ [−b, b] (columns), m, shape (n, n).
+
+        This is the layout of :class:`messages.SheetState` ``membrane`` (index [i, j] ↔ u_i, v_j). Raises
+        ``ValueError`` for n < 2."""
+        if n < 2:
+            raise ValueError(f"n must be >= 2, got {n!r}")
+        u = np.linspace(-self.half_span, self.half_span, n)
+        v = np.linspace(-self.half_width, self.half_width, n)
+        return self.deflection(u[:, None], v[None, :])
+
+
 @dataclass(frozen=True)
-class Membrane:
+class Membrane(DeflectionGrid):
     """Deflection ``w(u, v)`` (m, along ``-normal``) of the pushed sheet in its own (u, v) frame.
 
     Parameters (all SI): ``half_span`` a (m, clamps at u = ±a), ``half_width`` b (m, free edges at v = ±b),
@@ -249,15 +266,6 @@ class Membrane:
         """(w, ∂w/∂u, ∂w/∂v) at (u, v) (m, m/m, m/m), same broadcast shape as the inputs; see ``deflection``."""
         return series_deflection(u, v, self.lam, self.mu, self.coef, self.half_span, self.half_width, self.push_v)
 
-    def grid(self, n: int) -> np.ndarray:
-        """Deflection sampled on an n×n grid over u ∈ [−a, a] (rows) × v ∈ [−b, b] (columns), m, shape (n, n).
-
-        This is the layout of :class:`messages.SheetState` ``membrane`` (index [i, j] ↔ u_i, v_j)."""
-        if n < 2:
-            raise ValueError(f"n must be >= 2, got {n!r}")
-        u = np.linspace(-self.half_span, self.half_span, n)
-        v = np.linspace(-self.half_width, self.half_width, n)
-        return self.deflection(u[:, None], v[None, :])
 
 
 @dataclass(frozen=True)

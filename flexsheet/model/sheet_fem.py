@@ -22,14 +22,30 @@ deflection w (m, positive along −normal, away from the user).
   cancels the N⁰ : ∇u term of the energy.
 * Increment: St Venant–Kirchhoff plane stress on top of the pre-stress, N = (E t / (1 − ν²))·((1 − ν) E +
   ν tr(E) I), ν = 0.5 (incompressible rubber), E = the small-strain Young's modulus.
+* Wrinkling (tension-field theory; Pipkin 1986, "The relaxed energy density for isotropic elastic membranes",
+  IMA J. Appl. Math. 36; Steigmann 1990, Proc. R. Soc. A 429; FE use: Roddeman et al. 1987, J. Appl. Mech.
+  54). A membrane cannot carry compression: a deep push at low stretch pulls the sheet in around the finger,
+  and the hoop stress N⁰ + N there would turn compressive (down to −18 N/m against T = 24 N/m at stretch
+  0.01, 60 mm). The real 1 mm sheet wrinkles instead: its bending stiffness D ≈ 2.7·10⁻⁴ N·m carries only
+  ~D π²/ℓ² ≈ 1 N/m of compression over a wrinkle length ℓ ~ 5 cm (bendability T a²/D ≳ 10³), and without
+  relaxation the bending-free model has no minimiser there (Newton wandered in a flat valley). So the
+  energy density is Pipkin's relaxed one, in terms of the total strain E_t = E₀ + E (C:E₀ = N⁰) with
+  principal values ε₁ ≥ ε₂: taut (ε₂ + ν ε₁ > 0, both principal stresses positive): the St Venant–Kirchhoff
+  density above, unchanged; wrinkled (ε₁ > 0 ≥ ε₂ + ν ε₁): ½ E t ε₁², uniaxial tension along the first
+  principal direction; slack (ε₁ ≤ 0): 0. The density is C¹; Newton's matrix adds 10⁻⁵·C at the non-taut
+  points (tangent only: the equations solved are the relaxed ones). Where the sheet stays taut the solution
+  is the unrelaxed one: the renderer's nominal tables at stretch 0.03 and 0.04 are unchanged (< 10⁻⁶ m) at
+  every depth ≤ 40 mm and contact; they change only at 50–60 mm with an off-centre contact, most at (72, 72)
+  mm: 0.06 / 0.67 mm at 50 / 60 mm (stretch 0.03), 0.001 / 0.10 mm (0.04).
 * Boundary conditions: clamped edges u = ±a fixed (u₁ = u₂ = w = 0, the rigid clamps); free edges v = ±b
   traction-free apart from the dead pre-stress traction.
 * Load: a rigid spherical fingertip of radius ``finger_radius`` (8 mm) whose apex is at depth S behind the
   flat sheet, at (u₀, v₀); frictionless unilateral contact w ≥ S − ρ + √(ρ² − r²) (r < ρ) by a penalty
   ½ k ∫ ⟨φ − w⟩₊² (k = 10¹¹ N/m³; the residual penetration is reported, ≲ 1 µm).
-* Total energy Π = ∫ [½ N⁰ : (∇w ⊗ ∇w) + ½ E : 𝒞 : E + ½ k⟨φ − w⟩₊²] dA is minimised by Newton's method with
-  the consistent tangent and an Armijo backtracking line search on Π, continuing in depth (each depth
-  starts from the previous solution scaled to the new depth: w ∝ S, u ∝ S²).
+* Total energy Π = ∫ [½ N⁰ : (∇w ⊗ ∇w) + ½ E : 𝒞 : E + ½ k⟨φ − w⟩₊²] dA (taut; relaxed where wrinkled) is
+  minimised by Newton's method with the consistent tangent and an Armijo backtracking line search on Π,
+  continuing in depth (each depth starts from the previous solution scaled to the new depth: w ∝ S, u ∝ S²;
+  a step that fails is retried in halves).
 
 **Discretisation**: bilinear quadrilaterals (``skfem.ElementQuad1``) for u₁, u₂, w on a tensor-product mesh,
 ``h_fine`` (4 mm) over the central |u|, |v| ≤ ``fine_extent`` and ~``h_coarse`` (8 mm) outside; 3 × 3 Gauss
@@ -63,9 +79,10 @@ import scipy.sparse.linalg as spla
 
 from flexsheet.model import scene
 from flexsheet.model.checks import check_positive
+from flexsheet.model.sheet import DeflectionGrid
 
 __all__ = ["FINGER_RADIUS", "SheetPhysics", "SheetFEM", "IndentSolution", "FemShape", "IndentTable",
-           "TABLE_DEPTHS", "TABLE_POSITIONS", "linear_patch_deflection", "default_cache_dir"]
+           "TABLE_DEPTHS", "TABLE_POSITIONS", "TABLE_VERSION", "linear_patch_deflection", "default_cache_dir"]
 
 #: radius of the rigid spherical fingertip, m (an adult index fingertip pad, ~16 mm wide)
 FINGER_RADIUS = 0.008
@@ -74,6 +91,11 @@ TABLE_DEPTHS = (0.003, 0.010, 0.020, 0.035, 0.050)
 #: contact positions (m) along each of u and v of the table (≥ 0; mirrored); multiples of the default 4 mm
 #: mesh so that the fingertip apex sits on a node
 TABLE_POSITIONS = (0.0, 0.036, 0.072)
+
+
+#: formulation version in every table's cache key (:meth:`IndentTable.key_of`): 2 = with the tension-field
+#: relaxation (wrinkling); version-1 tables differ by up to 0.67 mm at 60 mm depth off-centre and are rebuilt
+TABLE_VERSION = 2
 
 
 def default_cache_dir() -> str:
@@ -250,6 +272,10 @@ class SheetFEM:
         nu = physics.poisson
         A0 = physics.young * physics.thickness / (1.0 - nu * nu)
         self.C = A0 * np.array([[1.0, nu, 0.0], [nu, 1.0, 0.0], [0.0, 0.0, 0.5 * (1.0 - nu)]])
+        self._N0 = np.array([physics.tension_u, physics.tension_v, 0.0])      # pre-stress, Voigt, N/m
+        self._E0 = np.linalg.solve(self.C, self._N0)                           # its elastic strain
+        #: tangent-only stiffness fraction added at wrinkled/slack points (Newton's matrix, not the equations)
+        self.relax_eta = 1e-5
 
     # ------------------------------------------------------------------------------------------- kernels
     def _fields(self, U: np.ndarray):
@@ -262,12 +288,49 @@ class SheetFEM:
         w = np.einsum("ea,eaq->eq", Ue[:, :, 2], self.N)
         e = np.stack([u1x + 0.5 * g0 * g0, u2y + 0.5 * g1 * g1, u1y + u2x + g0 * g1])   # Voigt, eng. shear
         Nst = np.einsum("ij,jeq->ieq", self.C, e)
-        return g0, g1, w, e, Nst
+        return g0, g1, w, e, Nst, u1x, u2y
+
+    def _relaxed(self, e: np.ndarray, Nst: np.ndarray, tangent: bool = False):
+        """Tension-field relaxation (module doc) at every quadrature point: (W_rel − W₀, S, D, taut) with W the
+        strain energy density of the total strain E₀ + e (J/m², less its flat-sheet value W₀), S = T_rel − N⁰ the
+        relaxed total membrane stress less the pre-stress (3, nel, nq) N/m (Voigt), D (3, 3, n) = Newton's
+        ∂T_rel/∂E (N/m) at the n non-taut points (only with ``tangent``, else None) and the mask of taut points
+        (nel, nq), where the relaxed quantities are the plain ones, ½ e:C:e + N⁰:e, Nst and C."""
+        p = self.phys
+        Et = e + self._E0[:, None, None]
+        m = 0.5 * (Et[0] + Et[1])
+        r = np.sqrt((0.5 * (Et[0] - Et[1])) ** 2 + (0.5 * Et[2]) ** 2)
+        e1, e2 = m + r, m - r
+        nu = p.poisson
+        taut = e2 + nu * e1 > 0.0                                   # smaller principal stress > 0
+        wrinkled = ~taut & (e1 > 0.0)
+        # taut: the pre-stressed St Venant-Kirchhoff density (the N0 : grad u part is balanced on the edges)
+        dens = 0.5 * np.einsum("ieq,ieq->eq", e, Nst) + self._N0[0] * e[0] + self._N0[1] * e[1]
+        S = Nst.copy()
+        D = None
+        if not np.all(taut):
+            Yt = self.C[0, 0] * (1.0 - nu * nu)                     # uniaxial stiffness E·t, N/m
+            W0 = 0.5 * float(self._E0 @ self._N0)
+            rr = np.where(wrinkled, r, 1.0)
+            c, sn = (Et[0] - Et[1]) / (2.0 * rr), Et[2] / (2.0 * rr)
+            a = np.stack([0.5 * (1.0 + c), 0.5 * (1.0 - c), 0.5 * sn])          # d e1 / dE (Voigt, eng. shear)
+            e1p = np.maximum(e1, 0.0)
+            Trel = np.where(wrinkled, Yt * e1p, 0.0) * a                          # uniaxial along n1, or slack
+            soft = ~taut
+            dens = np.where(soft, np.where(wrinkled, 0.5 * Yt * e1p ** 2, 0.0) - W0, dens)
+            S = np.where(soft[None], Trel - self._N0[:, None, None], S)
+            if tangent:
+                a, c, sn, k = a[:, soft], c[soft], sn[soft], np.where(wrinkled[soft], Yt, 0.0)
+                bvec = np.stack([sn, -sn, -c])
+                D = k * (np.einsum("in,jn->ijn", a, a) + (e1p[soft] / (4.0 * rr[soft])) * np.einsum("in,jn->ijn", bvec, bvec))
+                D += self.relax_eta * self.C[:, :, None]
+        return dens, S, D, taut
 
     def _energy(self, U: np.ndarray, phi: np.ndarray, load: np.ndarray | None) -> float:
         p = self.phys
-        g0, g1, w, e, Nst = self._fields(U)
-        dens = 0.5 * np.einsum("ieq,ieq->eq", e, Nst) + 0.5 * (p.tension_u * g0 ** 2 + p.tension_v * g1 ** 2)
+        g0, g1, w, e, Nst, u1x, u2y = self._fields(U)
+        dens, _, _, _ = self._relaxed(e, Nst)
+        dens = dens - p.tension_u * u1x - p.tension_v * u2y
         dens = dens + 0.5 * p.penalty * np.maximum(phi - w, 0.0) ** 2
         if load is not None:
             dens = dens - load * w
@@ -275,7 +338,8 @@ class SheetFEM:
 
     def _assemble(self, U: np.ndarray, phi: np.ndarray, load: np.ndarray | None):
         p = self.phys
-        g0, g1, w, e, Nst = self._fields(U)
+        g0, g1, w, e, Nst, _, _ = self._fields(U)
+        _, Nst, D, taut = self._relaxed(e, Nst, tangent=True)        # Nst: relaxed stress less the pre-stress
         nel, nq = self.dx.shape
         # B (3, nel, nq, 12): variation of the Voigt strain; G (2, ...): gradient of w
         B = np.zeros((3, nel, nq, 4, 3))
@@ -306,7 +370,11 @@ class SheetFEM:
         r = r.reshape(nel, 4, 3)
         r[:, :, 2] += rw
         # tangent: material Bᵀ C B + geometric (w-w block) + penalty
-        CB = np.einsum("ij,jeqk->ieqk", self.C, B) * dx[None, :, :, None]
+        CB = np.einsum("ij,jeqk->ieqk", self.C, B)
+        if D is not None:                                           # wrinkled/slack points: the relaxed tangent
+            soft = ~taut
+            CB[:, soft, :] = np.einsum("ijn,jnk->ink", D, B[:, soft, :])
+        CB *= dx[None, :, :, None]
         K = np.einsum("ieqk,ieql->ekl", B, CB).reshape(nel, 4, 3, 4, 3)
         Kw = (np.einsum("eqa,eqb,eq->eab", dNx, dNx, T11 * dx) + np.einsum("eqa,eqb,eq->eab", dNy, dNy, T22 * dx)
               + np.einsum("eqa,eqb,eq->eab", dNx, dNy, T12 * dx) + np.einsum("eqa,eqb,eq->eab", dNy, dNx, T12 * dx)
@@ -373,7 +441,8 @@ class SheetFEM:
         depths → one solution per depth, continued from each other) at contact (u0, v0) (m).
 
         Continuation from ``start`` (or the flat sheet) in steps ≤ ``max_step`` m; Newton until the residual
-        ≤ ``tol`` N. Raises ``ValueError`` on a bad depth/contact, ``ArithmeticError`` if Newton fails.
+        ≤ ``tol`` N; a step whose Newton fails is retried in two halves (down to ``max_step``/64). Raises
+        ``ValueError`` on a bad depth/contact, ``ArithmeticError`` if Newton still fails.
         """
         depths = [float(depth)] if np.ndim(depth) == 0 else [float(d) for d in depth]
         if not depths or any(not (math.isfinite(d) and d > 0.0) for d in depths) or np.any(np.diff(depths) <= 0):
@@ -388,19 +457,29 @@ class SheetFEM:
         out, iters = [], 0
         for S in depths:
             n = max(1, int(math.ceil((S - S0) / max_step))) if S > S0 else 1
-            for s in np.linspace(S0, S, n + 1)[1:]:
-                if S0 > 0.0:
+            todo = list(np.linspace(S0, S, n + 1)[1:][::-1])            # depth steps still to take (stack)
+            while todo:
+                s = todo.pop()
+                V = U.copy()
+                if S0 > 0.0:                                            # predictor: w ∝ S, in-plane u ∝ S²
                     k = s / S0
-                    U[2::3] *= k
-                    U[0::3] *= k * k
-                    U[1::3] *= k * k
+                    V[2::3] *= k
+                    V[0::3] *= k * k
+                    V[1::3] *= k * k
                 phi = self._phi(s, u0, v0)
-                U, it, rn = self._newton(U, phi, None, tol, max_iter)
+                try:
+                    V, it, rn = self._newton(V, phi, None, tol, max_iter)
+                except ArithmeticError:
+                    if s - S0 <= max_step / 64:                         # cut back six times: give up
+                        raise
+                    todo += [s, 0.5 * (S0 + s)]                         # retry in two half steps
+                    continue
+                U = V
                 iters += it
                 S0 = s
             _, _, pres = self._assemble(U, phi, None)
             force = float(np.sum(pres * self.dx))
-            _, _, w, _, _ = self._fields(U)
+            _, _, w, _, _, _, _ = self._fields(U)
             pen = float(np.max(np.maximum(phi - w, 0.0)))
             out.append(self._solution(U, S, u0, v0, force, iters, rn, pen))
         return out[0] if np.ndim(depth) == 0 else out
@@ -452,6 +531,14 @@ def linear_patch_deflection(physics: SheetPhysics, force: float, half_side: floa
 
 
 # ------------------------------------------------------------------------------------------------ table
+def _interp_1d(x: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(i (n,), t (n,)): 1-D linear interpolation on the increasing axis ``x`` at ``q`` (clamped) is
+    (1 − t)·F[i] + t·F[i + 1], the per-axis factor of :func:`_bilinear`."""
+    qq = np.clip(q, x[0], x[-1])
+    i = np.clip(np.searchsorted(x, qq, side="right") - 1, 0, len(x) - 2)
+    return i, (qq - x[i]) / (x[i + 1] - x[i])
+
+
 def _remap(q: np.ndarray, target: float, node: float, L: float) -> np.ndarray:
     """Piecewise-linear map of [−L, L] onto itself sending ``target`` to ``node`` (edges fixed)."""
     target = min(max(target, -L * (1 - 1e-9)), L * (1 - 1e-9))
@@ -461,7 +548,7 @@ def _remap(q: np.ndarray, target: float, node: float, L: float) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class FemShape:
+class FemShape(DeflectionGrid):
     """The true pushed sheet from an :class:`IndentTable` (the interface of
     :class:`flexsheet.model.sheet.Membrane`: ``half_span``, ``half_width``, ``push_u``, ``push_v``,
     ``depth``, ``tension_ratio``, :meth:`deflection`, :meth:`deflection_grad`, :meth:`grid`), so a
@@ -491,14 +578,6 @@ class FemShape:
         wu = (self.deflection(u + h, v) - self.deflection(u - h, v)) / (2 * h)
         wv = (self.deflection(u, v + h) - self.deflection(u, v - h)) / (2 * h)
         return w, wu, wv
-
-    def grid(self, n: int) -> np.ndarray:
-        """(n, n) deflection on u ∈ [−a, a] (rows) × v ∈ [−b, b] (columns), the ``SheetState.membrane`` layout."""
-        if n < 2:
-            raise ValueError(f"n must be >= 2, got {n!r}")
-        u = np.linspace(-self.half_span, self.half_span, n)
-        v = np.linspace(-self.half_width, self.half_width, n)
-        return self.deflection(u[:, None], v[None, :])
 
 
 class IndentTable:
@@ -544,7 +623,8 @@ class IndentTable:
     def key_of(physics: SheetPhysics, depths, positions, mesh: dict | None = None) -> str:
         """The cache key (20 hex digits) of a table: a hash of everything that defines it."""
         doc = {"physics": physics.key(), "depths": np.asarray(depths, float).round(9).tolist(),
-               "positions": np.asarray(positions, float).round(9).tolist(), "mesh": dict(mesh or {}), "version": 1}
+               "positions": np.asarray(positions, float).round(9).tolist(), "mesh": dict(mesh or {}),
+               "version": TABLE_VERSION}
         return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:20]
 
     @classmethod
@@ -632,4 +712,34 @@ class IndentTable:
                 yv = _remap(vq, pv, self.positions[j], b)
                 for k, wk in self._depth_weights(depth):
                     out += (wi * wj * wk) * _bilinear(self.x, self.y, self.W[i, j, k], xu, yv)
+        return out
+
+    def evaluate_grid(self, depth: float, push_u: float, push_v: float, u, v, half_span: float | None = None
+                      ) -> np.ndarray:
+        """:meth:`evaluate` on the tensor grid ``u`` (nu,) × ``v`` (nv,) (m, sheet frame: u along the clamp line,
+        v across; points off the sheet are clamped onto it) → w (nu, nv), m along −normal, for the contact
+        (``push_u``, ``push_v``) m at ``depth`` m (≤ 0: a flat sheet, zeros) and the actual clamp half span
+        ``half_span`` m (default the table's). The same interpolation (contact remapping per axis, bilinear in
+        the FEM nodes, blend of the neighbouring depths and contacts), done one axis after the other: equal to
+        :meth:`evaluate` at (u[:, None], v[None, :]) to rounding (≲ 1e-16 m) and ~20× faster on a fit grid
+        (``tests/test_render_live_sheet.py``). Raises ``ValueError`` when ``u`` or ``v`` is not 1-D."""
+        a_t, b = self.physics.half_span, self.physics.half_width
+        u, v = np.asarray(u, float), np.asarray(v, float)
+        if u.ndim != 1 or v.ndim != 1:
+            raise ValueError(f"u and v must be 1-D, got shapes u {u.shape} and v {v.shape}")
+        if depth <= 0.0:
+            return np.zeros((u.size, v.size))
+        s = a_t / (a_t if half_span is None else float(half_span))
+        uq = np.clip(u * s * math.copysign(1.0, push_u or 1.0), -a_t, a_t)
+        vq = np.clip(v * math.copysign(1.0, push_v or 1.0), -b, b)
+        pu, pv = abs(push_u) * s, abs(push_v)
+        out = np.zeros((u.size, v.size))
+        kw = self._depth_weights(depth)
+        for i, wi in self._bracket(self.positions, pu):
+            iu, tu = _interp_1d(self.x, _remap(uq, pu, self.positions[i], a_t))
+            for j, wj in self._bracket(self.positions, pv):
+                iv, tv = _interp_1d(self.y, _remap(vq, pv, self.positions[j], b))
+                Wij = sum(wk * self.W[i, j, k] for k, wk in kw)
+                Wu = (1.0 - tu)[:, None] * Wij[iu] + tu[:, None] * Wij[iu + 1]            # along u, (nu, ny)
+                out += (wi * wj) * ((1.0 - tv)[None, :] * Wu[:, iv] + tv[None, :] * Wu[:, iv + 1])
         return out

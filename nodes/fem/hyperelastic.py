@@ -16,6 +16,9 @@ the accuracy reference the real-time models are judged against (docs/fem.md, "Ph
   E_c = k/2 Σ min(g_i, 0)² (gap g_i = distance to the capsule's axis segment − r); k scales with E and the
   element size so that penetration stays ~1 % of the element size (reported). A real finger, not a bonded
   imposed displacement (the linear model's contact): material slides along it and wraps around it.
+  Optionally (``contact="sticking"``, :func:`solve_path_capsule`) a fingertip that does not slip: points that
+  touch it stick to it. It removes the frictionless snap-through under the tip but mesh-converges worse
+  (docs/fem.md), so frictionless stays the default (:data:`DEFAULT_CONTACT`).
 * **Support** as the linear model's: outer boundary points with x ≤ x_O fixed. Symmetry planes y = y_O
   (a push at y = y_O) and z = z_O (a push at azimuth 0) carry the normal displacement 0.
 * **Newton**: minimise Π = ∫W dV + E_c; each step solves K_t δ = −r (sparse LDLᵀ, QDLDL, which also tells
@@ -33,7 +36,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -41,10 +44,20 @@ import scipy.sparse as sp
 from nodes.fem.material import Material
 from nodes.fem.mesh import TetMesh, cylinder_part_mesh
 
-__all__ = ["SOLVER_VERSION", "RefSpec", "HyperelasticModel", "PathState", "Capsule", "capsule_at", "solve_path",
-           "solve_path_capsule", "reference_mesh"]
+__all__ = ["SOLVER_VERSION", "CONTACT_LAWS", "DEFAULT_CONTACT", "RefSpec", "HyperelasticModel", "PathState",
+           "Capsule", "capsule_at", "solve_path", "solve_path_capsule", "reference_mesh", "solver_tag"]
 
 SOLVER_VERSION = "nh-2"     #: bump when the reference's formulation or defaults change (cache keys)
+CONTACT_LAWS = ("frictionless", "sticking")   #: finger contact laws (see :func:`solve_path_capsule`)
+DEFAULT_CONTACT = "frictionless"            #: the contact law the experiment and the snapshots use
+
+
+def solver_tag(contact: str = DEFAULT_CONTACT) -> str:
+    """Cache-key tag of the reference solver with this contact law (``SOLVER_VERSION``, plus the law when it
+    is not frictionless, so frictionless solves cached before the option existed stay valid)."""
+    if contact not in CONTACT_LAWS:
+        raise ValueError(f"contact must be one of {CONTACT_LAWS}, got {contact!r}")
+    return SOLVER_VERSION if contact == "frictionless" else f"{SOLVER_VERSION}-{contact}"
 
 
 @dataclass(frozen=True)
@@ -85,12 +98,17 @@ def reference_mesh(spec: RefSpec, angle_deg: float) -> TetMesh:
 @dataclass(frozen=True)
 class Capsule:
     """Rigid finger: the sphere (centre ``center`` (3,) m, radius ``radius`` m) swept back along −``direction``
-    by ``shaft`` m (the finger's body). ``direction`` (3,) unit push direction p̂ (into the object)."""
+    by ``shaft`` m (the finger's body). ``direction`` (3,) unit push direction p̂ (into the object).
+    ``anchors`` (Fc, Qf, 3) m, sticking contact only: for each contact quadrature point of the
+    :class:`HyperelasticModel` it is used with, the finger point it is stuck to, relative to ``center``
+    (NaN where not stuck); stuck points are held there by the penalty k/2 |x − (center + anchor)|² instead of
+    the normal-only one (the finger only translates, so a point on it keeps its offset from ``center``)."""
 
     center: np.ndarray
     direction: np.ndarray
     radius: float
     shaft: float = 0.1
+    anchors: np.ndarray | None = None
 
     def gap(self, x: np.ndarray, curvature: bool = False):
         """Signed gaps (N,) m (< 0: inside the finger) and unit outward normals (N, 3) at points ``x`` (N, 3);
@@ -133,7 +151,8 @@ class PathState:
     ``force`` N (finger force along p̂), ``force_vec`` (3,) N, ``iterations``, ``converged``, ``min_detF``
     (smallest det F over quadrature points and element nodes), ``inverted`` (elements with det F ≤ 0 at a
     quadrature point or node), ``max_strain`` (largest principal Green–Lagrange strain), ``penetration`` m
-    (deepest surface point inside the finger), ``n_contact``."""
+    (deepest surface point inside the finger), ``n_contact``; ``extra["anchors"]`` (sticking contact) the
+    anchors (Fc, Qf, 3) m the state was solved with (:class:`Capsule`)."""
 
     depth: float
     u: np.ndarray
@@ -302,29 +321,76 @@ class HyperelasticModel:
         e = float(np.sum(W * self.w))
         if caps is not None:
             g, _, w = self._contact_gaps(u, caps)
-            e += float(np.sum(w * _pen(g, k, self.eps)[0]))
+            phi = _pen(g, k, self.eps)[0]
+            if caps.anchors is not None:
+                st = np.isfinite(caps.anchors[..., 0])
+                if np.any(st):
+                    dx = self._contact_x(u)[st] - caps.center - caps.anchors[st]
+                    phi[st] = 0.5 * k * np.einsum("ni,ni->n", dx, dx)
+            e += float(np.sum(w * phi))
         return e
+
+    def _contact_x(self, u: np.ndarray, facets: np.ndarray | None = None) -> np.ndarray:
+        """Deformed positions (Fc, Qf, 3) m of the contact quadrature points (of ``facets`` only, if given)."""
+        if facets is None:
+            return self._cf_X + np.einsum("fqa,fai->fqi", self._cf_N, u[self._cf_dofs])
+        return self._cf_X[facets] + np.einsum("fqa,fai->fqi", self._cf_N[facets], u[self._cf_dofs[facets]])
+
+    def stick_anchors(self, u: np.ndarray, caps: Capsule, anchors: np.ndarray | None = None) -> np.ndarray:
+        """Sticking contact: the anchors (Fc, Qf, 3) m (see :class:`Capsule`) after a converged state ``u``
+        (P, 3) m with the finger ``caps``: points already stuck keep theirs, every other contact quadrature
+        point inside the finger (gap < 0) is stuck to the finger point nearest to it (x − g n, on the
+        finger's surface, so the force it carries is continuous), relative to ``caps.center``."""
+        x = self._contact_x(u)
+        g, n = caps.gap(x.reshape(-1, 3))
+        g, n = g.reshape(x.shape[:2]), n.reshape(x.shape)
+        out = np.full(x.shape, np.nan) if anchors is None else np.array(anchors, float, copy=True)
+        if out.shape != x.shape:
+            raise ValueError(f"anchors must have shape {x.shape}, got {out.shape}")
+        new = (g < 0) & ~np.isfinite(out[..., 0])
+        out[new] = x[new] - g[new][:, None] * n[new] - caps.center
+        return out
+
+    def _contact_dE(self, u: np.ndarray, caps: Capsule, k: float, facets: np.ndarray, curvature: bool = True):
+        """∂φ/∂x (fa, Qf, 3) N/m² and ∂²φ/∂x² (fa, Qf, 3, 3) N/m³ of the contact energy density at the contact
+        quadrature points of ``facets``, and their area weights (fa, Qf) m² (``curvature``: include the
+        normal's derivative, a negative term, in the frictionless part)."""
+        g, nrm, w, dn = self._contact_gaps(u, caps, facets)
+        _, d1, d2 = _pen(g, k, self.eps)
+        f = d1[..., None] * nrm
+        Hx = d2[..., None, None] * nrm[..., :, None] * nrm[..., None, :]
+        if curvature:
+            Hx = Hx + d1[..., None, None] * dn
+        if caps.anchors is not None:
+            a = caps.anchors[facets]
+            st = np.isfinite(a[..., 0])
+            if np.any(st):
+                f[st] = k * (self._contact_x(u, facets)[st] - caps.center - a[st])
+                Hx[st] = k * np.eye(3)
+        return f, Hx, w
 
     def _contact_gaps(self, u: np.ndarray, caps: Capsule, facets: np.ndarray | None = None):
         """Gaps (Fc, Qf) m, outward finger normals (Fc, Qf, 3) and area weights (Fc, Qf) m² at the contact
         quadrature points of the deformed outer surface (with ``facets``: those contact facets only, and
         also ∂n/∂x (Fc, Qf, 3, 3))."""
         if facets is None:
-            x = self._cf_X + np.einsum("fqa,fai->fqi", self._cf_N, u[self._cf_dofs])
+            x = self._contact_x(u)
             g, n = caps.gap(x.reshape(-1, 3))
             return g.reshape(x.shape[:2]), n.reshape(x.shape), self._cf_w
-        x = self._cf_X[facets] + np.einsum("fqa,fai->fqi", self._cf_N[facets], u[self._cf_dofs[facets]])
+        x = self._contact_x(u, facets)
         g, n, dn = caps.gap(x.reshape(-1, 3), curvature=True)
         return g.reshape(x.shape[:2]), n.reshape(x.shape), self._cf_w[facets], dn.reshape(x.shape + (3,))
 
     def contact_force(self, u: np.ndarray, caps: Capsule, k: float) -> tuple[np.ndarray, float, int]:
-        """(force the finger applies to this part (3,) N, deepest penetration m, contact points in touch)."""
+        """(force the finger applies to this part (3,) N, deepest penetration m, contact points in touch or
+        stuck)."""
         g, n, w = self._contact_gaps(u, caps)
-        act = g < self.eps
-        if not np.any(act):
+        stuck = np.isfinite(caps.anchors[..., 0]) if caps.anchors is not None else np.zeros(g.shape, bool)
+        fa = np.flatnonzero(np.any((g < self.eps) | stuck, axis=1))
+        if not len(fa):
             return np.zeros(3), 0.0, 0
-        d1 = _pen(g[act], k, self.eps)[1]
-        return (-(w[act] * d1)[:, None] * n[act]).sum(axis=0), float(max(0.0, -g.min())), int(np.sum(g < 0))
+        f, _, wf = self._contact_dE(u, caps, k, fa, curvature=False)
+        return (-(wf[..., None] * f)).sum(axis=(0, 1)), float(max(0.0, -g.min())), int(np.sum((g < 0) | stuck))
 
     def residual_tangent(self, u: np.ndarray, caps: Capsule | None, k: float, need_K: bool = True,
                          project: bool = False):
@@ -345,17 +411,17 @@ class HyperelasticModel:
         cdata = None
         if caps is not None:
             g0, _, _ = self._contact_gaps(u, caps)
-            fa = np.flatnonzero(np.any(g0 < self.eps, axis=1))
+            act = g0 < self.eps
+            if caps.anchors is not None:
+                act |= np.isfinite(caps.anchors[..., 0])
+            fa = np.flatnonzero(np.any(act, axis=1))
             if len(fa):
-                g, nrm, w, dn = self._contact_gaps(u, caps, fa)
-                _, d1, d2 = _pen(g, k, self.eps)                                            # (fa, Qf)
+                # the curvature term is negative: dropped when projecting
+                f, Hx, w = self._contact_dE(u, caps, k, fa, curvature=not project)
                 Nf = self._cf_N[fa]                                                         # (fa, Qf, 10)
-                rc = np.einsum("fq,fqa,fqi->fai", w * d1, Nf, nrm)
+                rc = np.einsum("fq,fqa,fqi->fai", w, Nf, f)
                 vd = (3 * self._cf_dofs[fa][:, :, None] + np.arange(3)).reshape(len(fa), 30)
                 r += np.bincount(vd.ravel(), weights=rc.ravel(), minlength=self.n)
-                Hx = d2[..., None, None] * nrm[..., :, None] * nrm[..., None, :]
-                if not project:                 # the curvature term is negative: dropped when projecting
-                    Hx = Hx + d1[..., None, None] * dn
                 Kc = np.einsum("fq,fqa,fqb,fqik->faibk", w, Nf, Nf, Hx)
                 cdata = (vd, Kc.reshape(len(fa), 30, 30))
         if not need_K:
@@ -548,7 +614,7 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
 
 def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: float, step: float = 0.001,
                iters: int = 30, tol_u: float = 1e-6, tol_r: float | None = None, log=None,
-               substeps_max: int = 3) -> list[PathState]:
+               substeps_max: int = 3, contact: str = DEFAULT_CONTACT) -> list[PathState]:
     """Push the capsule finger radially into the cylinder at azimuth ``angle`` (rad, :func:`capsule_at` on
     ``model.mesh``'s radius and centre) through ``depths`` (m, ascending, ≥ 0); see :func:`solve_path_capsule`
     for the load stepping, the return value and the errors raised."""
@@ -557,18 +623,25 @@ def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: fl
     m = model
     return solve_path_capsule(model, lambda d: capsule_at(angle, d, finger_radius, m.mesh.radius, m.mesh.center),
                               depths, step, iters, tol_u, tol_r, log, substeps_max,
-                              label=f"angle {math.degrees(angle):.1f} deg")
+                              label=f"angle {math.degrees(angle):.1f} deg", contact=contact)
 
 
 def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 0.001, iters: int = 30,
                        tol_u: float = 1e-6, tol_r: float | None = None, log=None, substeps_max: int = 3,
-                       label: str = "path") -> list[PathState]:
+                       label: str = "path", contact: str = DEFAULT_CONTACT) -> list[PathState]:
     """Push a rigid finger given by ``capsule(depth) -> Capsule`` (depth m; any object, any push direction)
     through ``depths`` (m, ascending, ≥ 0), load steps of at most ``step`` m; returns one :class:`PathState`
     per requested depth (``force`` along the capsule's direction, full-body force with the symmetry planes).
     A load step whose Newton solve fails is halved (up to ``substeps_max`` times); if it still fails, its last
-    iterate is kept and the state is flagged ``converged=False`` (bounded time; the caller decides). Raises
-    ``ValueError`` on bad depths and ``RuntimeError`` when a step has no valid iterate at all."""
+    iterate is kept and the state is flagged ``converged=False`` (bounded time; the caller decides).
+
+    ``contact`` (a modelling choice, :data:`CONTACT_LAWS`): ``"frictionless"`` — non-penetration only, the
+    surface slides freely on the finger; ``"sticking"`` — a fingertip that does not slip on soft tissue
+    (infinite friction): a contact quadrature point that is inside the finger at a converged load step is stuck
+    to the finger point nearest to it (:meth:`HyperelasticModel.stick_anchors`) and from the next load step
+    on follows the finger (penalty k/2 |x − anchor|², the same k); anchors are added after every load step,
+    never released (a monotone push). Raises ``ValueError`` on bad depths or an unknown ``contact`` and
+    ``RuntimeError`` when a step has no valid iterate at all."""
     depths = np.asarray(depths, float)
     if depths.ndim != 1 or len(depths) == 0 or not np.all(np.isfinite(depths)) or np.any(depths < 0):
         raise ValueError(f"depths must be a non-empty 1-D array of finite values >= 0 m, got {depths!r}")
@@ -578,6 +651,10 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
         raise ValueError(f"step must be > 0 m, got {step!r}")
     if not callable(capsule):
         raise ValueError(f"capsule must be a callable depth -> Capsule, got {type(capsule).__name__}")
+    if contact not in CONTACT_LAWS:
+        raise ValueError(f"contact must be one of {CONTACT_LAWS}, got {contact!r}")
+    sticking = contact == "sticking"
+    anchors = None
     m = model
     k = m.penalty()
     tol_r = tol_r if tol_r is not None else 1e-6 * m.E_ref * m.h_contact ** 2 * 10
@@ -593,9 +670,13 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
         while d_cur < target - 1e-12:
             h = min(step, target - d_cur)
             u_last = None
+            if sticking:                # points touching the finger at the last converged state stick to it
+                anchors = m.stick_anchors(u, capsule(d_cur), anchors)
             for _ in range(substeps_max + 1):
                 d_new = d_cur + h
                 caps = capsule(d_new)
+                if sticking:
+                    caps = replace(caps, anchors=anchors)
                 guess = u
                 if u_prev is not None and d_cur > d_prev:
                     g2 = u + (u - u_prev) * (h / (d_cur - d_prev))
@@ -621,11 +702,15 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
             u_prev, d_prev = u, d_cur
             u, d_cur = u_new, d_new
         caps = capsule(d_cur)
+        if sticking:
+            caps = replace(caps, anchors=anchors)
         fvec, pen, ncon = m.contact_force(u, caps, k)
         fvec = m.sym_factor * fvec * np.array([1.0, 0.0 if m.sym_y else 1.0, 0.0 if m.sym_z else 1.0])
         minJ, ninv, emax = m.checks(u)
         st = PathState(float(d_cur), u.copy(), float(fvec @ caps.direction), fvec, its_total, bool(conv_all),
                        minJ, ninv, emax, pen, ncon, time.perf_counter() - t0)
+        if sticking:
+            st.extra["anchors"] = anchors.copy()
         out.append(st)
         if log:
             log(f"  depth {d_cur * 1e3:5.1f} mm: F={st.force:.4f} N, {its_total} Newton its, "

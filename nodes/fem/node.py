@@ -12,6 +12,14 @@ accuracy target over ``depth_max``, otherwise the nonlinear snapshots (:mod:`nod
 from the cache; when they are not cached the node serves the linear model and either builds them in a
 background thread at low priority (``snapshot_build``) or says how to build them
 (``flexsheet experiment fem``). The diagnostics message tells which model is being served and why.
+The object is the ``scene`` param's (:mod:`flexsheet.model.scenes`; the launcher fills it from the launch file's
+top-level ``scene:``, as for the planner and the renderer; none = the paper's cylinder). The paper's cylinder
+(no scene, or a scene that is exactly it: same size and pose, back-half support, no inclusions) keeps the
+path above; any other scene (sphere, rounded box, organ with its stiff inclusion) is meshed by gmsh and solved
+by :class:`nodes.fem.scene_model.SceneModel` (linear, per-element material, capacitance over the stroke path,
+cached), without the nonlinear snapshots (they exist for the cylinder only; the diagnostics message says so).
+Every ``ObjectDeformation`` carries ``scene_key`` = the scene's :meth:`~flexsheet.model.scenes.Scene.key` so
+that the planner uses the FEM's dF/dd only for the object it presents.
 A lost marker publishes the rest shape with ``valid=False, status="rejected:marker_lost"``. NaN,
 out-of-object or too-deep fingertips raise :class:`InputRejected` (one log line, counted in diagnostics; the
 node keeps running).
@@ -25,8 +33,9 @@ import threading
 import time
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from messages import Fingertip, ObjectDeformation, topics
 from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
@@ -35,7 +44,14 @@ from nodes.fem.material import Material
 from nodes.fem.mesh import MeshSpec
 from nodes.fem.realtime import RealtimeModel
 
-__all__ = ["FemParams", "FemNode"]
+__all__ = ["FemParams", "FemNode", "fem_models_as_cylinder"]
+
+
+def fem_models_as_cylinder(sc: Scene) -> bool:
+    """Whether the cylinder FEM path models ``sc``: the paper's cylinder
+    (:func:`flexsheet.model.scenes.is_paper_cylinder`) with the back-half support and no inclusions (its
+    material may differ: E, ν are taken from the scene)."""
+    return is_paper_cylinder(sc) and sc.support.kind == "back_half" and not sc.inclusions
 
 
 class FemParams(BaseModel):
@@ -53,7 +69,11 @@ class FemParams(BaseModel):
     ``model``: "auto" (the model table decides), "linear" or "snapshots"; ``snapshot_build``: build missing
     snapshots in a background thread (heavy: tens of minutes on a 2-core machine; else run
     ``flexsheet experiment fem``); ``snapshot_axial_max`` m: largest axial offset of the push served by the
-    snapshots (translation along the axis).
+    snapshots (translation along the axis). ``scene``: the scene file (launch/scenes/*.yaml; filled by the
+    launcher from the launch file's ``scene:``; none = the paper's cylinder); for a scene other than the
+    paper's cylinder its material, support and finger radius replace ``E``/``nu``/``finger_radius``, and
+    ``mesh_h``/``mesh_h_fine``/``refine_radius``/``order`` (when h, h_fine > 0) set its mesh (default
+    :data:`nodes.fem.scene_mesh.DEFAULT_SCENE_SPEC`, P2).
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -78,6 +98,13 @@ class FemParams(BaseModel):
     model: str = Field(default="auto", pattern="^(auto|linear|snapshots)$")
     snapshot_build: bool = False
     snapshot_axial_max: float = Field(default=0.01, ge=0.0, le=0.06)
+    scene: str | None = Field(default=None, description="scene file (launch/scenes/*.yaml); none: the paper's")
+
+    @field_validator("scene")
+    @classmethod
+    def _scene_file(cls, v: str | None) -> str | None:
+        load_scene_or_paper(v)
+        return v
 
 
 class FemNode(Node):
@@ -88,7 +115,14 @@ class FemNode(Node):
     async def setup(self) -> None:
         """Choose the model, load or precompute it (may take seconds: runs in a worker thread), then subscribe."""
         p: FemParams = self.params
-        mat = Material(p.E, p.nu)
+        self.scene = load_scene_or_paper(p.scene)
+        self.scene_key = self.scene.key()
+        self.log.info("fem: scene: %s", self.scene.describe())
+        self._lock = threading.Lock()
+        if not fem_models_as_cylinder(self.scene):
+            await self._setup_scene()
+            return
+        mat = Material(p.E, p.nu) if not p.scene else Material(self.scene.material.E, self.scene.material.nu)
         if p.mesh_h > 0 and p.mesh_h_fine > 0:
             spec, order = MeshSpec(p.mesh_h, p.mesh_h_fine, p.refine_radius, p.arc_deg), p.order
             self.log.info("fem: mesh set by params: P%d %s", order, spec.key())
@@ -103,12 +137,45 @@ class FemNode(Node):
         self.log.info("fem: ready in %.2f s (%s): P%d, %d nodes, %d candidate contact points, %.1f MB",
                       m.precompute_s, "cache hit" if m.cache_hit else "precomputed", order, m.n_nodes,
                       m.n_candidates, m.solver.nbytes / 1e6)
-        self._lock = threading.Lock()
         self.pub = self.publisher(topics.DEFORMATION)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
         if p.nonlinear:
             threading.Thread(target=self._build_nonlinear, name="fem-corotational", daemon=True).start()
         self._setup_snapshots(mat)
+
+    async def _setup_scene(self) -> None:
+        """Mesh and precompute (or load from the cache) the scene's model, then subscribe."""
+        from nodes.fem.scene_mesh import DEFAULT_SCENE_SPEC
+        from nodes.fem.scene_model import SceneModel
+
+        p: FemParams = self.params
+        sc = self.scene
+        spec, order = DEFAULT_SCENE_SPEC, 2
+        if p.mesh_h > 0 and p.mesh_h_fine > 0:
+            spec, order = MeshSpec(p.mesh_h, p.mesh_h_fine, p.refine_radius), p.order
+        self.model = await asyncio.to_thread(SceneModel, sc, spec, order, None, p.max_depth, p.strain_limit,
+                                             p.cache_dir or None, None, self.log.info)
+        m = self.model
+        self.log.info("fem: scene %r ready in %.2f s (%s): P%d %s, %d nodes, %d candidate contact points along "
+                      "the stroke, %.1f MB", sc.name, m.precompute_s, "cache hit" if m.cache_hit else "precomputed",
+                      order, spec.key(), m.n_nodes, m.n_candidates, m.solver.nbytes / 1e6)
+        self.state_message = (f"fem: scene {sc.name!r}: linear P{order} scene model with per-element material "
+                              f"({len(sc.inclusions)} inclusion(s)); nonlinear snapshots exist for the paper's "
+                              "cylinder only")
+        self.pub = self.publisher(topics.DEFORMATION)
+        self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
+        threading.Thread(target=self._warm_sparse, name="fem-sparse", daemon=True).start()
+
+    def _warm_sparse(self) -> None:
+        """Assemble the scene's full model (the sparse fallback) off the real-time path."""
+        try:
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
+        except (OSError, AttributeError):
+            pass
+        try:
+            _ = self.model.model
+        except Exception:  # noqa: BLE001 - a warm-up must never take the node down
+            self.log.exception("fem: assembling the scene's sparse fallback failed")
 
     def _setup_snapshots(self, mat: Material) -> None:
         """Attach the nonlinear snapshots when the scene needs them (cache hit), else say why not."""
@@ -205,4 +272,4 @@ class FemNode(Node):
             header=self.pub.header("display"), vertices=np.ascontiguousarray(verts, np.float32),
             faces=self.model.faces, contact_force=float(force), stiffness=float(stiff), depth=float(depth),
             contact_point=np.asarray(cp, np.float64), method=method, max_strain=float(strain), status=status,
-            valid=bool(valid), source_stamp=float(msg.exposure_stamp)))
+            valid=bool(valid), source_stamp=float(msg.exposure_stamp), scene_key=self.scene_key))

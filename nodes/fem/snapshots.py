@@ -30,7 +30,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from nodes.fem.hyperelastic import HyperelasticModel, RefSpec, reference_mesh, solve_path
+from nodes.fem.hyperelastic import (
+    DEFAULT_CONTACT,
+    HyperelasticModel,
+    RefSpec,
+    reference_mesh,
+    solve_path,
+    solver_tag,
+)
 from nodes.fem.material import Material
 
 __all__ = ["SnapshotGrid", "SnapshotModel", "build_table", "surface_coords", "TABLE_VERSION", "DEFAULT_GRID",
@@ -105,30 +112,32 @@ DEFAULT_GRID = SnapshotGrid()
 DEFAULT_REF_SPEC = RefSpec(0.012, 0.0045, 0.018, half_z=True, path_depth=0.055)
 
 
-def table_key(grid: SnapshotGrid, spec: RefSpec, nu: float, finger_radius: float) -> str:
+def table_key(grid: SnapshotGrid, spec: RefSpec, nu: float, finger_radius: float,
+              contact: str = DEFAULT_CONTACT) -> str:
     """Cache key of a snapshot table. The displacement field does not depend on E (the contact penalty scales
-    with E), so only ν enters; forces are scaled by E at run time."""
+    with E), so only ν enters; forces are scaled by E at run time. ``contact``: the finger's contact law
+    (:data:`nodes.fem.hyperelastic.CONTACT_LAWS`)."""
     import gmsh
 
     from nodes.fem.cache import cache_key
-    from nodes.fem.hyperelastic import SOLVER_VERSION
 
-    return cache_key(TABLE_VERSION, SOLVER_VERSION, grid.key(), spec.key(), gmsh.__version__, f"nu={nu:.9g}",
+    return cache_key(TABLE_VERSION, solver_tag(contact), grid.key(), spec.key(), gmsh.__version__, f"nu={nu:.9g}",
                      f"r={finger_radius:.9g}")
 
 
 def load_or_build(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float,
-                  build: bool = True, log=None, solved=None) -> tuple[dict | None, bool, float]:
+                  build: bool = True, log=None, solved=None,
+                  contact: str = DEFAULT_CONTACT) -> tuple[dict | None, bool, float]:
     """(table or None, cache hit, seconds): the table from ``cache`` (:class:`nodes.fem.cache.ArrayCache`), or
-    built and stored when ``build`` (``solved``: as :func:`build_table`)."""
-    key = table_key(grid, spec, material.nu, finger_radius)
+    built and stored when ``build`` (``solved``, ``contact``: as :func:`build_table`)."""
+    key = table_key(grid, spec, material.nu, finger_radius, contact)
     z = cache.load("snapshots", key)
     if z is not None:
         return z, True, 0.0
     if not build:
         return None, False, 0.0
     t = time.perf_counter()
-    z = build_table(grid, spec, material, finger_radius, log=log, solved=solved)
+    z = build_table(grid, spec, material, finger_radius, log=log, solved=solved, contact=contact)
     cache.save("snapshots", key, z)
     return z, False, time.perf_counter() - t
 
@@ -146,12 +155,13 @@ def surface_coords(points: np.ndarray, radius: float, length: float, center: np.
 
 
 def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float, log=None,
-                progress=None, solved=None) -> dict[str, np.ndarray]:
+                progress=None, solved=None, contact: str = DEFAULT_CONTACT) -> dict[str, np.ndarray]:
     """Run the nonlinear reference at every snapshot azimuth and sample the surface; returns the table arrays
     (see :class:`SnapshotModel`). Heavy (minutes per azimuth on a small machine): cache the result
     (:class:`nodes.fem.cache.ArrayCache`). ``spec.half_z`` is used for the azimuth-0 snapshot only.
     ``solved``: optional callable (azimuth deg, model, depths m) -> list of :class:`PathState` (or None to
-    solve here), e.g. the experiment's cached reference solves on the same mesh, so nothing is solved twice."""
+    solve here), e.g. the experiment's cached reference solves on the same mesh, so nothing is solved twice.
+    ``contact``: the finger's contact law (:func:`nodes.fem.hyperelastic.solve_path_capsule`)."""
     log = log or (lambda s: None)
     from flexsheet.model.scene import CYLINDER_CENTER, CYLINDER_LENGTH, CYLINDER_RADIUS
 
@@ -182,7 +192,7 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
         states = solved(ang, model, depths[1:]) if solved is not None else None
         if states is None:
             states = solve_path(model, math.radians(ang), depths[1:], finger_radius, step=grid.depth_step,
-                                log=log)
+                                log=log, contact=contact)
         Ps = _probe(model, side_pts)
         Pc = _probe(model, cap_pts)
         for j, st in enumerate(states, start=1):

@@ -79,11 +79,22 @@ class FemModel:
 
     Attributes: ``K`` (n, n) csr stiffness (N/m); ``dofs`` (P, 3) int DOF indices of each *DOF point* (mesh
     nodes, then edge midpoints for P2); ``points`` (P, 3) m their positions; ``boundary`` (P,) bool;
-    ``fixed`` (P,) bool support points (boundary with x ≤ x_O); ``free`` (nf,) free DOF indices.
-    Source: scikit-fem ``ElementVector(ElementTetP1/P2)``, ``linear_elasticity(λ, μ)``.
+    ``fixed`` (P,) bool support points (boundary with x ≤ x_O, or ``support``'s); ``free`` (nf,) free DOF
+    indices.
+
+    Any object (issue 17): ``support`` optional callable(points (P, 3) m) → (P,) bool that marks which
+    *boundary* DOF points are held (e.g. :meth:`flexsheet.model.scenes.Scene.fixed_mask`; default the
+    cylinder's back half, x ≤ x_O); ``E_elem``/``nu_elem`` optional per-element Young's modulus (M,) Pa and
+    Poisson's ratio (M,) (e.g. :meth:`~flexsheet.model.scenes.Scene.material_at` at the element centroids:
+    stiff inclusions), piecewise constant; ``material`` is then only the nominal one. Without them the
+    assembly is exactly the scalar-material one. Raises ``ValueError`` naming the argument on a wrong shape,
+    a non-finite or out-of-range value.
+    Source: scikit-fem ``ElementVector(ElementTetP1/P2)``, ``linear_elasticity(λ, μ)`` (per element: the same
+    weak form 2μ ε(u):ε(v) + λ div u div v with λ, μ as ``ElementTetP0`` fields).
     """
 
-    def __init__(self, mesh: TetMesh, material: Material, order: int = 1):
+    def __init__(self, mesh: TetMesh, material: Material, order: int = 1, support=None,
+                 E_elem: np.ndarray | None = None, nu_elem: np.ndarray | None = None):
         from skfem import Basis, ElementTetP1, ElementTetP2, ElementVector, MeshTet, asm
         from skfem.models.elasticity import linear_elasticity
 
@@ -93,8 +104,13 @@ class FemModel:
         self.skmesh = MeshTet(np.ascontiguousarray(mesh.points.T), np.ascontiguousarray(mesh.tets.T))
         elem = ElementVector(ElementTetP1() if order == 1 else ElementTetP2())
         self.basis = Basis(self.skmesh, elem)
-        lam, mu = material.lame
-        self.K = asm(linear_elasticity(lam, mu), self.basis).tocsr()
+        if E_elem is None and nu_elem is None:
+            lam, mu = material.lame
+            self.K = asm(linear_elasticity(lam, mu), self.basis).tocsr()
+            self.E_elem = self.nu_elem = None
+        else:
+            self.E_elem, self.nu_elem = _element_material(len(mesh.tets), material, E_elem, nu_elem)
+            self.K = _assemble_varying(self.basis, self.E_elem, self.nu_elem)
         nd = self.basis.nodal_dofs.T
         if order == 1:
             self.dofs = np.ascontiguousarray(nd)
@@ -106,7 +122,15 @@ class FemModel:
         bd = np.zeros(self.K.shape[0], bool)
         bd[self.basis.get_dofs().flatten()] = True
         self.boundary = bd[self.dofs[:, 0]]
-        self.fixed = self.boundary & (self.points[:, 0] <= mesh.center[0] + 1e-9)
+        if support is None:
+            self.fixed = self.boundary & (self.points[:, 0] <= mesh.center[0] + 1e-9)
+        else:
+            held = np.asarray(support(self.points), dtype=bool)
+            if held.shape != (len(self.points),):
+                raise ValueError(f"support must return a ({len(self.points)},) bool mask, got shape {held.shape}")
+            self.fixed = self.boundary & held
+            if not self.fixed.any():
+                raise ValueError("support holds no boundary point: the object would float (singular stiffness)")
         fixed_dofs = self.dofs[self.fixed].ravel()
         mask = np.ones(self.K.shape[0], bool)
         mask[fixed_dofs] = False
@@ -149,6 +173,40 @@ class FemModel:
         cols = self.basis.element_dofs[:, np.tile(cells, 3)].flatten()
         P = coo_matrix((phis, (rows, cols)), shape=(3 * q, self.basis.N)).tocsr()
         return (P @ u).reshape(3, q).T
+
+
+def _element_material(n_tets: int, material: Material, E_elem, nu_elem) -> tuple[np.ndarray, np.ndarray]:
+    """Per-element (E (M,) Pa, ν (M,)); a missing one is the nominal ``material``'s. ``ValueError`` naming it."""
+    out = []
+    for name, v, default in (("E_elem", E_elem, material.E), ("nu_elem", nu_elem, material.nu)):
+        a = np.full(n_tets, float(default)) if v is None else np.asarray(v, dtype=float)
+        if a.shape != (n_tets,):
+            raise ValueError(f"{name} must have shape ({n_tets},) (one value per tetrahedron), got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} must be finite, got {a[~np.isfinite(a)][:3].tolist()}")
+        out.append(a)
+    E, nu = out
+    if E.min() <= 0.0:
+        raise ValueError(f"E_elem must be > 0 Pa, got {float(E.min())!r}")
+    if nu.min() < 0.0 or nu.max() >= 0.5:
+        raise ValueError(f"nu_elem must be in [0, 0.5), got range [{float(nu.min())!r}, {float(nu.max())!r}]")
+    return E, nu
+
+
+def _assemble_varying(basis, E: np.ndarray, nu: np.ndarray) -> sp.csr_matrix:
+    """Stiffness (n, n) csr of 2μ ε(u):ε(v) + λ div u div v with λ, μ constant per element (scikit-fem)."""
+    from skfem import BilinearForm, ElementTetP0, asm
+    from skfem.helpers import ddot, div, sym_grad
+
+    lam = E * nu / ((1 + nu) * (1 - 2 * nu))
+    mu = E / (2 * (1 + nu))
+    b0 = basis.with_element(ElementTetP0())
+
+    @BilinearForm
+    def form(u, v, w):
+        return 2.0 * w.mu * ddot(sym_grad(u), sym_grad(v)) + w.lam * div(u) * div(v)
+
+    return asm(form, basis, lam=b0.interpolate(lam), mu=b0.interpolate(mu)).tocsr()
 
 
 @dataclass

@@ -351,7 +351,7 @@ class RendererNode(Node):
                     self.log.info("pushed-sheet FEM table for stretch %g not cached: building it (~30 s); pushes "
                                   "at that stretch are drawn with the 4-triangle model meanwhile", node)
                     t0 = time.monotonic()
-                    proc = ctx.Process(target=build_table, args=(self.sheet_model.settings, node, 5),
+                    proc = ctx.Process(target=build_table, args=(self.sheet_model.settings, node, 19),
                                        name=f"renderer-sheet-table-{node:g}", daemon=True)
                     proc.start()
                     self._builds.add(proc)

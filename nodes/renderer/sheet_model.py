@@ -41,9 +41,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from flexsheet.model import scene
-from flexsheet.model.sheet import SheetSurface, clamp_half_span, series_deflection, stretch_of_span
+from flexsheet.model.sheet import (
+    DeflectionGrid,
+    SheetSurface,
+    clamp_half_span,
+    series_deflection,
+    stretch_of_span,
+)
 from flexsheet.model.sheet import neumann_green as green
-from flexsheet.model.sheet_fem import TABLE_POSITIONS, IndentTable, SheetPhysics, _remap, default_cache_dir
+from flexsheet.model.sheet_fem import TABLE_POSITIONS, IndentTable, SheetPhysics, default_cache_dir
 from flexsheet.model.tension import SheetMaterial, tension
 
 __all__ = ["SeriesShape", "PendingPush", "NominalSheetModel", "MODEL_DEPTHS", "green", "fit_series", "table_grid",
@@ -56,7 +62,7 @@ MAX_TERMS = 64
 
 
 @dataclass(frozen=True)
-class SeriesShape:
+class SeriesShape(DeflectionGrid):
     """A pushed-sheet deflection in the fine shader's form, w(u, v) = Σ_i coef_i sin(lam_i (u + a)) G(v; mu_i,
     push_v) (m, along −normal), the interface of :class:`flexsheet.model.sheet.Membrane` (``half_span`` a,
     ``half_width`` b, ``push_u``, ``push_v``, ``depth`` m; ``lam``, ``mu``, ``coef`` (K,); :meth:`deflection`,
@@ -83,47 +89,14 @@ class SeriesShape:
         """(w, ∂w/∂u, ∂w/∂v) at (u, v), broadcast shape of the inputs (:func:`flexsheet.model.sheet.series_deflection`)."""
         return series_deflection(u, v, self.lam, self.mu, self.coef, self.half_span, self.half_width, self.push_v)
 
-    def grid(self, n: int) -> np.ndarray:
-        """(n, n) deflection on u ∈ [−a, a] (rows) × v ∈ [−b, b] (columns), the ``SheetState.membrane`` layout."""
-        if n < 2:
-            raise ValueError(f"n must be >= 2, got {n!r}")
-        u = np.linspace(-self.half_span, self.half_span, n)
-        v = np.linspace(-self.half_width, self.half_width, n)
-        return self.deflection(u[:, None], v[None, :])
-
-
-def _interp_1d(x: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(i (n,), t (n,)): 1-D linear interpolation on the increasing axis ``x`` at ``q`` (clamped) is
-    (1 − t)·F[i] + t·F[i + 1], the per-axis factor of :func:`flexsheet.model.sheet_fem._bilinear`."""
-    qq = np.clip(q, x[0], x[-1])
-    i = np.clip(np.searchsorted(x, qq, side="right") - 1, 0, len(x) - 2)
-    return i, (qq - x[i]) / (x[i + 1] - x[i])
-
 
 def table_grid(table: IndentTable, depth: float, push_u: float, push_v: float, u: np.ndarray, v: np.ndarray,
                half_span: float) -> np.ndarray:
-    """:meth:`IndentTable.evaluate` on the tensor grid u (nu,) × v (nv,) m → (nu, nv) m, the same interpolation
-    (contact remapping per axis, bilinear in the FEM nodes, blend of the neighbouring depths and contacts)
-    one axis after the other, ~20× faster than point-wise (equal to 1e-12 m,
-    ``tests/test_render_live_sheet.py``). The fit's per-frame cost is this."""
-    a_t, b = table.physics.half_span, table.physics.half_width
-    u, v = np.asarray(u, float), np.asarray(v, float)
-    if depth <= 0.0:
-        return np.zeros((u.size, v.size))
-    s = a_t / float(half_span)
-    uq = np.clip(u * s * math.copysign(1.0, push_u or 1.0), -a_t, a_t)
-    vq = np.clip(v * math.copysign(1.0, push_v or 1.0), -b, b)
-    pu, pv = abs(push_u) * s, abs(push_v)
-    out = np.zeros((u.size, v.size))
-    kw = table._depth_weights(depth)
-    for i, wi in table._bracket(table.positions, pu):
-        iu, tu = _interp_1d(table.x, _remap(uq, pu, table.positions[i], a_t))
-        for j, wj in table._bracket(table.positions, pv):
-            iv, tv = _interp_1d(table.y, _remap(vq, pv, table.positions[j], b))
-            Wij = sum(wk * table.W[i, j, k] for k, wk in kw)
-            Wu = (1.0 - tu)[:, None] * Wij[iu] + tu[:, None] * Wij[iu + 1]            # along u, (nu, ny)
-            out += (wi * wj) * ((1.0 - tv)[None, :] * Wu[:, iv] + tv[None, :] * Wu[:, iv + 1])
-    return out
+    """The table's shape on the tensor grid u (nu,) × v (nv,) m → (nu, nv) m for the measured clamp half span
+    ``half_span`` m: :meth:`flexsheet.model.sheet_fem.IndentTable.evaluate_grid` (equal to the point-wise
+    :meth:`~flexsheet.model.sheet_fem.IndentTable.evaluate` to rounding, ``tests/test_render_live_sheet.py``).
+    The fit's per-frame cost is this."""
+    return table.evaluate_grid(depth, push_u, push_v, u, v, half_span)
 
 
 def contact_of(sheet: SheetSurface, point) -> tuple[float, float, float]:
@@ -346,11 +319,10 @@ class NominalSheetModel:
 def build_table(settings: dict, node: float, nice: int = 0) -> float:
     """Build the table of ``NominalSheetModel(**settings)`` at ``node`` and cache it on disk; returns ``node``.
     Module-level so that a worker process can run it (the node builds missing tables off its render loop, at
-    ``nice`` below its priority)."""
+    ``nice`` below its priority, in the idle scheduling class: :func:`flexsheet.runtime.background.lower_priority`)."""
     if nice:
-        try:
-            os.nice(nice)
-        except OSError:
-            pass
+        from flexsheet.runtime.background import lower_priority
+
+        lower_priority(nice)
     NominalSheetModel(**settings).table(float(node))
     return float(node)

@@ -284,11 +284,9 @@ class WorldNode(Node):
 
 
 def _build_worker(seed: int, realism: str, node: float, size: float, settings: FemSettings, nice: int) -> None:
-    """Worker-process entry: lower the priority, then build (and cache) one FEM table."""
-    import os
+    """Worker-process entry: lower the priority (idle class, :func:`flexsheet.runtime.background.lower_priority`),
+    then build (and cache) one FEM table."""
+    from flexsheet.runtime.background import lower_priority
 
-    try:
-        os.nice(nice)
-    except OSError:
-        pass
+    lower_priority(nice)
     build_table(seed, realism, node, size, settings)

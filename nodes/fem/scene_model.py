@@ -1,0 +1,374 @@
+"""The real-time FEM model of any scene (issue 17): sphere, rounded box, organ with its stiff inclusion (pure
+apart from its optional disk cache of precomputed arrays).
+
+:class:`SceneModel` = the scene's tetrahedral mesh (:func:`nodes.fem.scene_mesh.scene_mesh`, refined along the
+stroke path) + linear elasticity with per-element material (:class:`nodes.fem.solver.FemModel` with the
+scene's support and ``E_elem``/``nu_elem``: the inclusions) + the capacitance solver (James & Pai 2001,
+:class:`nodes.fem.solver.CapacitanceSolver`) over the free surface DOF points within ``reach`` of the stroke
+path, with the full sparse solve (:func:`nodes.fem.solver.solve_full`) wherever the finger touches outside
+that region.
+
+Contact (:func:`scene_finger`): the fingertip is a rigid sphere of radius r whose leading point is ``tip``.
+The contact point is ``tip``'s projection onto the scene's surface — the tangent plane at the nearest of a
+dense set of surface samples (the scene's own surface mesh's vertices and face centroids, with
+:meth:`Scene.surface_point` normals; a KD-tree query, ~20 µs) — the push direction p̂ is the inward normal
+there and the depth d = (q − tip)·n. Surface nodes inside the sphere get the imposed displacement onto its
+leading surface (:func:`nodes.fem.contact.imposed_displacement`, bonded Dirichlet contact). While pressed
+≥ 5 mm the contact point and direction are held (a pressed finger does not slide; deep pushes stay defined).
+``Finger.angle`` and ``Finger.axial`` are 0 for scenes (they are the cylinder's coordinates).
+
+Outputs per update (:class:`nodes.fem.realtime.Update`): the deformed surface (the mesh's boundary corner
+nodes, float32 m, display frame), the contact force N and the local stiffness dF/dd N/m (the contact set
+held; what the planner sets the sheet's tension from), max strain and inverted elements in a monitor zone
+around the stroke, status/valid as the cylinder's model. A touch lighter than :data:`STIFFNESS_FLOOR`
+(0.5 mm) reports the stiffness of a press that deep at the same point (one more capacitance solve): the few
+surface nodes a grazing finger touches give a stiffness that jumps from 0 to tens of N/m with the
+fingertip's measurement noise, which would make the sheet's tension flicker (the planner's estimate uses
+the same floor, ``min_contact_depth``).
+
+The stiffness is the held-contact-set dF/dd of the imposed-overlap contact: on a sphere ≈ 1.4 × Hertz's
+tangent stiffness 2E*·a (the overlap's circle is √2·a; docs/scenes.md), and the force ≈ Hertz/√2.
+
+Frames and units: display frame, m, N, N/m, Pa. Errors: ``ValueError`` naming the argument.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
+from nodes.fem.contact import Finger
+from nodes.fem.material import Material
+from nodes.fem.mesh import MeshSpec, TetMesh
+from nodes.fem.realtime import Update
+from nodes.fem.scene_mesh import DEFAULT_SCENE_SPEC, scene_mesh
+from nodes.fem.solver import (
+    CapacitanceSolver,
+    FemModel,
+    OutsideCandidates,
+    _grad_ops,
+    element_checks,
+    solve_full,
+)
+
+__all__ = ["SceneModel", "SurfaceIndex", "scene_finger", "finger_on_scene", "one_blas_thread", "STICKY_DEPTH",
+           "STIFFNESS_FLOOR"]
+
+_CACHE_VERSION = "scene-1"
+#: a finger pressed at least this deep keeps its contact point and push direction, m
+STICKY_DEPTH = 0.005
+#: the stiffness of a lighter touch is that of a press this deep, m (the planner's ``min_contact_depth``)
+STIFFNESS_FLOOR = 0.0005
+
+
+class SurfaceIndex:
+    """Dense samples of a scene's surface for fast closest-point queries: ``points`` (K, 3) m, outward unit
+    ``normals`` (K, 3), display frame. Built from the scene's surface mesh (vertices + face centroids, the
+    normals from :meth:`Scene.surface_point`)."""
+
+    def __init__(self, scene):
+        from scipy.spatial import cKDTree
+
+        v, f = scene.surface_mesh()
+        v = np.asarray(v, float)
+        samples = np.vstack([v, v[np.asarray(f)].mean(axis=1)])
+        self.points, self.normals = scene.surface_point(samples)
+        self._tree = cKDTree(self.points)
+
+    def project(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """(contact point (3,) m, outward normal (3,), signed distance m (< 0 inside)) of point ``x`` (3,):
+        ``x`` projected onto the tangent plane at its nearest sample."""
+        _, i = self._tree.query(x)
+        n = self.normals[i]
+        s = float((x - self.points[i]) @ n)
+        return x - s * n, n, s
+
+
+def scene_finger(tip, surface: SurfaceIndex, radius: float, max_depth: float, fixed_mask=None,
+                 anchor: Finger | None = None, sticky_depth: float = STICKY_DEPTH) -> Finger:
+    """Finger geometry (:class:`nodes.fem.contact.Finger`) from the measured fingertip ``tip`` (3,) m on a
+    scene's surface (module doc). ``fixed_mask`` optional callable(points (1, 3)) → (1,) bool: a contact
+    point the support holds is refused. Raises ``ValueError`` naming ``tip`` when it is not a finite (3,)
+    vector, deeper than ``max_depth`` m, or its contact point lies on the support. A tip outside the object
+    gives depth 0 (no contact)."""
+    p = np.asarray(tip, dtype=float)
+    if p.shape != (3,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"tip must be a finite (3,) position in m, got {tip!r}")
+    if anchor is not None and anchor.depth >= sticky_depth:
+        depth = float((p - anchor.contact_point) @ anchor.direction)
+        if depth > max_depth:
+            raise ValueError(f"tip {p.tolist()} is {depth * 1e3:.1f} mm deep, beyond max_depth "
+                             f"{max_depth * 1e3:.1f} mm")
+        return Finger(p - radius * anchor.direction, anchor.direction, float(radius), max(0.0, depth),
+                      anchor.contact_point, 0.0, 0.0)
+    cp, n, s = surface.project(p)
+    depth = -s
+    if depth > max_depth:
+        raise ValueError(f"tip {p.tolist()} is {depth * 1e3:.1f} mm deep, beyond max_depth {max_depth * 1e3:.1f} mm")
+    if depth > 0 and fixed_mask is not None and bool(np.asarray(fixed_mask(cp[None]))[0]):
+        raise ValueError(f"tip {p.tolist()} presses on the object's support (held surface) at "
+                         f"{np.round(cp, 4).tolist()}")
+    return Finger(p + radius * n, -n, float(radius), max(0.0, depth), cp, 0.0, 0.0)
+
+
+def finger_on_scene(point, normal, depth: float, radius: float) -> Finger:
+    """A finger pushed ``depth`` m (≥ 0) along −``normal`` at the surface ``point`` (3,) m (outward unit
+    ``normal`` (3,)); for experiments and tests. Raises ``ValueError`` for a negative or non-finite depth or
+    radius ≤ 0."""
+    if not (math.isfinite(depth) and depth >= 0.0):
+        raise ValueError(f"depth must be >= 0 m, got {depth!r}")
+    if not (math.isfinite(radius) and radius > 0.0):
+        raise ValueError(f"radius must be > 0 m, got {radius!r}")
+    n = np.asarray(normal, float)
+    n = n / np.linalg.norm(n)
+    q = np.asarray(point, float)
+    tip = q - depth * n
+    return Finger(tip + radius * n, -n, float(radius), float(depth), q.copy(), 0.0, 0.0)
+
+
+_BLAS = None
+
+
+def one_blas_thread():
+    """Context manager: BLAS/LAPACK limited to one thread (threadpoolctl) — the update's dense Cholesky of
+    a few hundred rows. OpenBLAS's default threads spin against each other on a busy 2-core machine: a
+    189 × 189 ``cho_factor`` measured 240 ms with 2 threads and 0.09 ms with 1 (load average ~10). A no-op
+    when threadpoolctl is not installed."""
+    global _BLAS
+    if _BLAS is None:
+        try:
+            from threadpoolctl import ThreadpoolController
+
+            _BLAS = ThreadpoolController()
+        except ImportError:           # pragma: no cover - optional dependency
+            _BLAS = False
+    if _BLAS is False:
+        import contextlib
+
+        return contextlib.nullcontext()
+    return _BLAS.limit(limits=1, user_api="blas")
+
+
+def _dist_to_points(x: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
+    return cKDTree(pts).query(x)[0]
+
+
+class SceneModel:
+    """Real-time linear model of ``scene`` (a :class:`flexsheet.model.scenes.Scene`; module doc).
+
+    Parameters: ``spec`` mesh sizes (default :data:`nodes.fem.scene_mesh.DEFAULT_SCENE_SPEC`); ``order``
+    element order (2: P2, whose edge midpoints take contact too); ``finger_radius`` m (None: the scene's);
+    ``max_depth`` m (deeper input is rejected); ``strain_limit``; ``cache_dir`` (None: no disk cache);
+    ``reach`` m: candidate contact points lie within this distance of the stroke path (default finger
+    radius + 4 mm); ``log`` optional callable(str). Precompute (mesh, assembly, 3·#candidates sparse solves)
+    is cached by :class:`nodes.fem.cache.ArrayCache` under a key of ``scene.key()``, the spec, gmsh's
+    version, finger radius, reach and order. ``precompute_s``, ``cache_hit``, ``scene_key`` tell how start-up
+    went and what is solved. Raises ``ValueError`` on bad parameters.
+    """
+
+    def __init__(self, scene, spec: MeshSpec = DEFAULT_SCENE_SPEC, order: int = 2, finger_radius: float | None = None,
+                 max_depth: float = 0.06, strain_limit: float = 1.0, cache_dir: str | None = DEFAULT_CACHE_DIR,
+                 reach: float | None = None, log=None):
+        from flexsheet.model.scenes import Scene
+
+        if not isinstance(scene, Scene):
+            raise ValueError(f"scene must be a flexsheet.model.scenes.Scene, got {type(scene).__name__}")
+        finger_radius = scene.finger.radius if finger_radius is None else finger_radius
+        if not (math.isfinite(finger_radius) and 0.001 <= finger_radius <= 0.03):
+            raise ValueError(f"finger_radius must be in [0.001, 0.03] m, got {finger_radius!r}")
+        if not (math.isfinite(max_depth) and 0.0 < max_depth <= 0.07):
+            raise ValueError(f"max_depth must be in (0, 0.07] m, got {max_depth!r}")
+        if not (math.isfinite(strain_limit) and strain_limit > 0):
+            raise ValueError(f"strain_limit must be > 0, got {strain_limit!r}")
+        if order not in (1, 2):
+            raise ValueError(f"order must be 1 or 2, got {order!r}")
+        reach = finger_radius + 0.004 if reach is None else float(reach)
+        if not (math.isfinite(reach) and 0.0 < reach <= 0.05):
+            raise ValueError(f"reach must be in (0, 0.05] m, got {reach!r}")
+        import gmsh
+
+        t0 = time.perf_counter()
+        self._log = log or (lambda s: None)
+        self.scene, self.spec, self.order = scene, spec, order
+        self.scene_key = scene.key()
+        self.material = Material(scene.material.E, scene.material.nu)
+        self.finger_radius, self.max_depth, self.strain_limit, self.reach = finger_radius, max_depth, strain_limit, reach
+        self.cache_key = cache_key(_CACHE_VERSION, self.scene_key, spec.key(), gmsh.__version__, f"{reach:.9g}",
+                                   f"{finger_radius:.9g}", f"P{order}")
+        self.cache = ArrayCache(cache_dir, self._log)
+        self._model = None
+        z, self.cache_hit, _ = self.cache.get_or_compute("scenecap", self.cache_key, self._precompute,
+                                                         f"capacitance matrices of scene {scene.name!r}")
+        try:
+            self.mesh = TetMesh(z["points"], z["tets"], z["faces"], z["fixed"], spec,
+                                center=np.asarray(scene.center, float).copy())
+            self.E_elem, self.nu_elem = np.asarray(z["E"]), np.asarray(z["nu"])
+            self.solver = CapacitanceSolver.from_arrays(z)
+            monitor = z["monitor"]
+        except (KeyError, ValueError) as exc:
+            raise ValueError(f"scene capacitance cache entry {self.cache_key} is inconsistent: {exc}") from exc
+        m = self.mesh
+        self.n_candidates = len(self.solver.cand_pts)
+        self.surface_nodes = m.surface_nodes
+        self.faces = np.searchsorted(self.surface_nodes, m.faces).astype(np.int32)
+        self._rest = m.points[self.surface_nodes].astype(np.float32)
+        q = m.points[m.faces]
+        self._rest_normals = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
+        out_idx = np.full(len(m.points), -1, np.int64)
+        out_idx[self.solver.out_pts] = np.arange(len(self.solver.out_pts))
+        self._surf_in_out = out_idx[self.surface_nodes]
+        tet_ok = np.all(out_idx[m.tets] >= 0, axis=1) & np.all(monitor[m.tets], axis=1)
+        self._mon_tets = out_idx[m.tets[tet_ok]]
+        self._out_points = m.points[self.solver.out_pts]
+        self._mon_Dm_inv = _grad_ops(self._out_points, self._mon_tets)[0] if tet_ok.any() else None
+        if tet_ok.any():
+            from scipy.spatial import cKDTree
+
+            self._mon_tree = cKDTree(self._out_points[self._mon_tets].mean(axis=1))
+        self.surface = SurfaceIndex(scene)
+        self._anchor: Finger | None = None
+        self.precompute_s = time.perf_counter() - t0
+
+    # ------------------------------------------------------------------ precompute
+    def _build_model(self, mesh: TetMesh, E: np.ndarray, nu: np.ndarray) -> FemModel:
+        return FemModel(mesh, self.material, order=self.order, support=self.scene.fixed_mask, E_elem=E, nu_elem=nu)
+
+    def _precompute(self) -> dict:
+        sm = scene_mesh(self.scene, self.spec)
+        m = sm.mesh
+        self._log(f"fem: scene {self.scene.name!r}: {len(m.points)}-node mesh ({sm.how}), "
+                  f"{int(np.count_nonzero(sm.E != self.material.E))} inclusion elements")
+        model = self._build_model(m, sm.E, sm.nu)
+        n_path = max(2, int(math.ceil(self.scene.stroke_length() / 0.001)) + 1)
+        path, _ = self.scene.stroke_points(n_path)
+        dist = _dist_to_points(model.points, path)
+        surf = model.boundary & ~model.fixed
+        candidates = surf & (dist <= self.reach)
+        if not candidates.any():
+            raise ValueError(f"scene {self.scene.name!r}: no free surface node within reach {self.reach * 1e3:.1f} mm "
+                             "of the stroke path (is the stroke on the support?)")
+        monitor = (dist <= self.reach + 2 * self.spec.h_fine)[:len(m.points)]
+        corner = np.arange(len(model.points)) < len(m.points)
+        outputs = (surf | (np.pad(monitor, (0, len(model.points) - len(m.points))) & ~model.fixed)) & corner
+        self._log(f"fem: scene {self.scene.name!r}: precomputing capacitance matrices for {int(candidates.sum())} "
+                  f"candidate contact points on a {len(m.points)}-node P{self.order} mesh ...")
+        solver = CapacitanceSolver(model, candidates, outputs)
+        self._model = model
+        return {"points": m.points, "tets": m.tets, "faces": m.faces, "fixed": m.fixed, "monitor": monitor,
+                "E": sm.E, "nu": sm.nu, **solver.arrays()}
+
+    @property
+    def model(self) -> FemModel:
+        """The assembled FEM model (built on first use after a cache hit: the sparse fallback needs it)."""
+        if self._model is None:
+            self._model = self._build_model(self.mesh, self.E_elem, self.nu_elem)
+        return self._model
+
+    @property
+    def rest_vertices(self) -> np.ndarray:
+        """Undeformed rendered surface vertices (S, 3) float32 m, display frame (a copy)."""
+        return self._rest.copy()
+
+    @property
+    def n_nodes(self) -> int:
+        """Mesh node count."""
+        return len(self.mesh.points)
+
+    # ------------------------------------------------------------------ updates
+    def finger(self, tip) -> Finger:
+        """The :class:`Finger` for fingertip ``tip`` (3,) m without changing the held contact (see
+        :func:`scene_finger`). Raises ``ValueError``."""
+        return scene_finger(tip, self.surface, self.finger_radius, self.max_depth, self.scene.fixed_mask,
+                            anchor=self._anchor)
+
+    def update(self, tip) -> Update:
+        """Deform the object for fingertip ``tip`` (3,) m display frame. Stateful: a finger pressed ≥ 5 mm
+        keeps its contact point. Raises ``ValueError`` for NaN/inf, too-deep or on-the-support input.
+        Never returns non-finite vertices (``valid=False`` with the rest shape instead)."""
+        fg = self.finger(tip)
+        self._anchor = fg if fg.depth > 0 else None
+        return self.update_finger(fg)
+
+    def reset(self) -> None:
+        """Forget the held contact point."""
+        self._anchor = None
+
+    def update_finger(self, fg: Finger) -> Update:
+        """As :meth:`update` for a prepared :class:`Finger`: the capacitance solve, or the full sparse solve
+        when the finger touches surface outside the precomputed region (``method = "sparse"``); BLAS on one
+        thread (:func:`one_blas_thread`)."""
+        with one_blas_thread():
+            return self._update_finger(fg)
+
+    def _update_finger(self, fg: Finger) -> Update:
+        method = "condensed"
+        try:
+            sol = self.solver.solve(fg)
+            u_out = sol.u
+        except OutsideCandidates:
+            sol = solve_full(self.model, fg)
+            u_out = sol.u[self.solver.out_pts]
+            method = "sparse"
+        stiffness = sol.stiffness
+        if 0.0 < fg.depth < STIFFNESS_FLOOR:
+            press = finger_on_scene(fg.contact_point, -fg.direction, STIFFNESS_FLOOR, fg.radius)
+            try:
+                stiffness = self.solver.solve(press).stiffness
+            except OutsideCandidates:
+                stiffness = solve_full(self.model, press).stiffness
+        strain, inv = self._checks(fg, u_out) if sol.n_contact else (0.0, 0)
+        us = np.zeros((len(self.surface_nodes), 3))
+        ok = self._surf_in_out >= 0
+        us[ok] = u_out[self._surf_in_out[ok]]
+        finite = bool(np.all(np.isfinite(us))) and math.isfinite(sol.force) and math.isfinite(stiffness)
+        status, valid = "ok", True
+        if not finite:
+            status, valid = "linear_invalid:non_finite", False
+        elif inv > 0 or strain > self.strain_limit:
+            status = "linear_invalid:" + (f"inverted={inv}" if inv > 0 else f"strain={strain:.2f}>{self.strain_limit:g}")
+        if valid:
+            folded = self.folded_faces(us)
+            if folded:
+                status, valid = f"linear_invalid:folded_surface={folded}", False
+        verts = self._rest + (us.astype(np.float32) if valid else 0.0)
+        return Update(verts.astype(np.float32), float(sol.force) if valid else 0.0,
+                      float(stiffness) if valid else 0.0, fg.depth, fg.contact_point.copy(), method,
+                      float(strain), int(inv), status, valid)
+
+    def _checks(self, fg: Finger, u_out: np.ndarray) -> tuple[float, int]:
+        """(max principal strain, inverted elements) over the monitor tets whose centroid lies within
+        finger radius + depth + 2·h_fine of the contact point (where strain concentrates; the rest of the
+        monitor zone is not checked, to keep the update under 1 ms)."""
+        if self._mon_Dm_inv is None:
+            return 0.0, 0
+        r = self.finger_radius + fg.depth + 2 * self.spec.h_fine
+        k = np.asarray(self._mon_tree.query_ball_point(fg.contact_point, r), dtype=np.int64)
+        if len(k) == 0:
+            return 0.0, 0
+        return element_checks(self._out_points, self._mon_tets[k], u_out, self._mon_Dm_inv[k])
+
+    def surface_displacement(self, fg: Finger) -> tuple[np.ndarray, float, float]:
+        """(surface-node displacements (S, 3) m, force N, stiffness N/m) of one push, no checks (experiments)."""
+        try:
+            sol = self.solver.solve(fg)
+            u_out = sol.u
+        except OutsideCandidates:
+            sol = solve_full(self.model, fg)
+            u_out = sol.u[self.solver.out_pts]
+        us = np.zeros((len(self.surface_nodes), 3))
+        ok = self._surf_in_out >= 0
+        us[ok] = u_out[self._surf_in_out[ok]]
+        return us, float(sol.force), float(sol.stiffness)
+
+    def folded_faces(self, us: np.ndarray) -> int:
+        """Number of rendered surface triangles whose normal turned by more than 90°; ``us`` (S, 3) m."""
+        x = self._rest.astype(np.float64) + us
+        p = x[self.faces]
+        n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        return int(np.count_nonzero(np.einsum("ij,ij->i", n, self._rest_normals) <= 0.0))
+
