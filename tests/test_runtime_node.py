@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import os
 import threading
 import time
 
@@ -168,3 +169,43 @@ def test_drain_period_receives_in_batches_and_loses_nothing():
     t = np.array([s for s, _ in got])
     groups = 1 + int(np.sum(np.diff(t) > 0.01))
     assert groups <= 2, np.diff(t)
+
+
+def _background_child(q) -> None:
+    from flexsheet.runtime.background import lower_priority
+
+    q.put((lower_priority(19), os.sched_getscheduler(0), os.getpid()))
+    time.sleep(60)
+
+
+def _background_parent(q) -> None:
+    import multiprocessing as mp
+
+    p = mp.get_context("spawn").Process(target=_background_child, args=(q,))
+    p.start()
+    p.join()
+
+
+def test_background_worker_is_idle_class_and_dies_with_its_parent():
+    """flexsheet.runtime.background.lower_priority: the worker runs in SCHED_IDLE and a kill -9 of the node that
+    started it takes the worker with it (an orphan kept the node's stdout open: no respawn)."""
+    import multiprocessing as mp
+    import signal
+
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    parent = ctx.Process(target=_background_parent, args=(q,))
+    parent.start()
+    what, policy, child = q.get(timeout=60)
+    assert policy == os.SCHED_IDLE and "dies with its parent" in what, what
+    os.kill(parent.pid, signal.SIGKILL)
+    parent.join(10)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        try:
+            os.kill(child, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.05)
+    else:
+        pytest.fail(f"worker {child} outlived its killed parent")

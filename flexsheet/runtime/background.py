@@ -5,24 +5,40 @@ processes on two cores measurably slowed the loop (stroke Δθ 0.36–0.47° →
 camera frame → fingertip p99 77 → 400+ ms) while the renderer built a sheet table. :func:`lower_priority`
 puts the calling process in the ``SCHED_IDLE`` class (Linux: it runs only when a CPU would otherwise idle and
 is preempted at once) at niceness ``nice``, with one BLAS thread (OpenBLAS's spinning threads would otherwise
-compete with each other; ``threadpoolctl``)."""
+compete with each other; ``threadpoolctl``), and ties it to its parent: when the node that started it dies
+(even ``kill -9``) the worker gets SIGKILL (``PR_SET_PDEATHSIG``). Without that an orphaned worker kept the
+dead node's stdout open, so the launcher never saw the node exit and never respawned it."""
 
 from __future__ import annotations
 
+import ctypes
 import os
+import signal
 
 __all__ = ["lower_priority"]
 
 
-def lower_priority(nice: int = 19) -> str:
-    """Make the calling process a background worker (module doc); returns what took effect, e.g.
-    ``"SCHED_IDLE, nice +19, 1 BLAS thread"``. Never raises: each step that the OS refuses is skipped."""
+def lower_priority(nice: int = 19, idle: bool = True) -> str:
+    """Make the calling process a background worker (module doc); call it first thing in the worker. Returns
+    what took effect, e.g. ``"dies with its parent, SCHED_IDLE, nice +19, 1 BLAS thread"``. Never raises: a
+    step the OS refuses is skipped. Exits the process at once if its parent is already gone. ``idle`` False:
+    niceness only, no ``SCHED_IDLE`` — for work the graph needs soon (the world's true sheet: in the idle class
+    a table could take minutes beside a running graph and, killed with its node, never reach the cache)."""
     done = []
+    parent = os.getppid()
     try:
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-        done.append("SCHED_IDLE")
+        if ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL) == 0:    # PR_SET_PDEATHSIG
+            done.append("dies with its parent")
     except (AttributeError, OSError):
         pass
+    if os.getppid() != parent:           # the parent died before the tie was made
+        os._exit(1)
+    if idle:
+        try:
+            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+            done.append("SCHED_IDLE")
+        except (AttributeError, OSError):
+            pass
     if nice:
         try:
             os.nice(nice)

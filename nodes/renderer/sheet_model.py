@@ -52,6 +52,11 @@ from flexsheet.model.sheet import neumann_green as green
 from flexsheet.model.sheet_fem import TABLE_POSITIONS, IndentTable, SheetPhysics, default_cache_dir
 from flexsheet.model.tension import SheetMaterial, tension
 
+#: the nominal tables of the default settings at clamp strains 0.01–0.07 (what 40 N per clamp can hold), shipped
+#: so that no display builds them while it runs (a table build beside the running graph slowed the loop:
+#: flexsheet/runtime/background.py). Regenerate: ``python -m nodes.renderer.sheet_model --ship``.
+SHIPPED_TABLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "sheet_tables")
+
 __all__ = ["SeriesShape", "PendingPush", "NominalSheetModel", "MODEL_DEPTHS", "green", "fit_series", "table_grid",
            "contact_of", "build_table"]
 
@@ -218,14 +223,22 @@ class NominalSheetModel:
                             tension_u=tension(node + self.prestrain, self.material), tension_ratio=self.tension_ratio)
 
     def table(self, node: float) -> IndentTable:
-        """The nominal table at ``node`` (built once, cached on disk; a build takes ~30 s on one core)."""
+        """The nominal table at ``node`` (shipped, or built once and cached on disk; a build takes ~30 s on one
+        core)."""
         if node not in self._tables:
             ph = self.physics(node)
             if ph.tension_u <= 0.0:
                 raise ValueError(f"no tension at stretch {node!r}: the nominal model needs a stretched sheet")
-            self._tables[node] = IndentTable(ph, self.depths, self.positions, mesh=self.mesh, cache_dir=self.cache_dir,
-                                             progress=self.progress)
+            self._tables[node] = IndentTable(ph, self.depths, self.positions, mesh=self.mesh,
+                                             cache_dir=self._folder_of(node), progress=self.progress)
         return self._tables[node]
+
+    def _folder_of(self, node: float) -> str:
+        """Where the table at ``node`` is: the shipped folder (:data:`SHIPPED_TABLES`, the default settings'
+        tables at the stretches the arms can hold, so no display builds them at run time) or the cache."""
+        key = IndentTable.key_of(self.physics(node), self.depths, self.positions, self.mesh)
+        shipped = os.path.join(SHIPPED_TABLES, f"indent_{key}.npz")
+        return SHIPPED_TABLES if os.path.isfile(shipped) else self.cache_dir
 
     def nearest_on_disk(self, node: float, nodes=None) -> float | None:
         """The node nearest ``node`` (itself included) among ``nodes`` (default: every step up to 0.30) whose
@@ -240,13 +253,13 @@ class NominalSheetModel:
         if node in self._tables:
             return True
         key = IndentTable.key_of(self.physics(node), self.depths, self.positions, self.mesh)
-        return os.path.isfile(os.path.join(self.cache_dir, f"indent_{key}.npz"))
+        return os.path.isfile(os.path.join(self._folder_of(node), f"indent_{key}.npz"))
 
     def available(self, node: float) -> bool:
         """Whether the table at ``node`` is loaded, or on disk (then it is loaded now, ~10 ms); never builds."""
         if node not in self._tables:
             tab = IndentTable.cached(self.physics(node), self.depths, self.positions, mesh=self.mesh,
-                                     cache_dir=self.cache_dir)
+                                     cache_dir=self._folder_of(node))
             if tab is None:
                 return False
             self._tables[node] = tab
@@ -326,3 +339,32 @@ def build_table(settings: dict, node: float, nice: int = 0) -> float:
         lower_priority(nice)
     NominalSheetModel(**settings).table(float(node))
     return float(node)
+
+
+def ship_tables(nodes=(0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.07), progress=print) -> list[str]:
+    """Build (or take from the cache) the default model's tables at ``nodes`` and copy them into
+    :data:`SHIPPED_TABLES`; returns the files written. Minutes cold (~40 s of one core per table)."""
+    import shutil
+
+    m = NominalSheetModel()
+    os.makedirs(SHIPPED_TABLES, exist_ok=True)
+    out = []
+    for node in nodes:
+        progress(f"sheet table at stretch {node:g}")
+        m.table(float(node))
+        key = IndentTable.key_of(m.physics(node), m.depths, m.positions, m.mesh)
+        src = os.path.join(m._folder_of(node), f"indent_{key}.npz")
+        dst = os.path.join(SHIPPED_TABLES, os.path.basename(src))
+        if os.path.abspath(src) != os.path.abspath(dst):
+            shutil.copyfile(src, dst)
+        out.append(dst)
+    return out
+
+
+if __name__ == "__main__":      # pragma: no cover - a maintenance command
+    import sys
+
+    if sys.argv[1:] != ["--ship"]:
+        sys.exit("usage: python -m nodes.renderer.sheet_model --ship   (rebuild the shipped sheet tables)")
+    for f in ship_tables():
+        print(f)

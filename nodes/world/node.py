@@ -284,9 +284,9 @@ class WorldNode(Node):
 
 
 def _build_worker(seed: int, realism: str, node: float, size: float, settings: FemSettings, nice: int) -> None:
-    """Worker-process entry: lower the priority (idle class, :func:`flexsheet.runtime.background.lower_priority`),
-    then build (and cache) one FEM table."""
+    """Worker-process entry: lower the priority (niceness only, not the idle class: the world needs its true
+    sheet, :func:`flexsheet.runtime.background.lower_priority`), then build (and cache) one FEM table."""
     from flexsheet.runtime.background import lower_priority
 
-    lower_priority(nice)
+    lower_priority(nice, idle=False)
     build_table(seed, realism, node, size, settings)
