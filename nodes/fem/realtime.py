@@ -36,7 +36,7 @@ from nodes.fem.solver import (
     solve_full,
 )
 
-__all__ = ["RealtimeModel", "Update", "DEFAULT_CACHE_DIR"]
+__all__ = ["RealtimeModel", "Update", "DEFAULT_CACHE_DIR", "output_maps"]
 
 _CACHE_VERSION = "2"
 
@@ -105,20 +105,7 @@ class RealtimeModel:
             monitor = z["monitor"]
         except (KeyError, ValueError) as exc:
             raise ValueError(f"capacitance cache entry {self.cache_key} is inconsistent: {exc}") from exc
-        m = self.mesh
-        self.n_candidates = len(self.solver.cand_pts)
-        self.surface_nodes = m.surface_nodes
-        self.faces = np.searchsorted(self.surface_nodes, m.faces).astype(np.int32)
-        self._rest = m.points[self.surface_nodes].astype(np.float32)
-        q = m.points[m.faces]
-        self._rest_normals = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
-        out_idx = np.full(len(m.points), -1, np.int64)
-        out_idx[self.solver.out_pts] = np.arange(len(self.solver.out_pts))
-        self._surf_in_out = out_idx[self.surface_nodes]          # -1 for support nodes (zero displacement)
-        tet_ok = np.all(out_idx[m.tets] >= 0, axis=1) & np.all(monitor[m.tets], axis=1)
-        self._mon_tets = out_idx[m.tets[tet_ok]]
-        self._out_points = m.points[self.solver.out_pts]
-        self._mon_Dm_inv = _grad_ops(self._out_points, self._mon_tets)[0] if tet_ok.any() else None
+        output_maps(self, monitor)
         self.nonlinear = None
         self.snapshots = None
         self._anchor = None
@@ -308,3 +295,26 @@ def _dist_to_points(x: np.ndarray, pts: np.ndarray) -> np.ndarray:
     from scipy.spatial import cKDTree
 
     return cKDTree(pts).query(x)[0]
+
+
+def output_maps(model, monitor: np.ndarray) -> None:
+    """Set the index maps a condensed model (``model.mesh``, ``model.solver``: :class:`CapacitanceSolver`)
+    needs to publish its rendered surface and monitor its strain: ``n_candidates``, ``surface_nodes`` (S,),
+    ``faces`` (F, 3) int32 into them, ``_rest`` (S, 3) float32 m, ``_rest_normals`` (F, 3), ``_surf_in_out``
+    (S,) output row of each surface node (−1: a support node, zero displacement), ``_mon_tets`` the monitored
+    tetrahedra (all four nodes are outputs and ``monitor`` (N,) bool holds them) in output rows, ``_out_points``
+    and ``_mon_Dm_inv``. Shared by the cylinder's and any scene's model (:mod:`nodes.fem.scene_model`)."""
+    m = model.mesh
+    model.n_candidates = len(model.solver.cand_pts)
+    model.surface_nodes = m.surface_nodes
+    model.faces = np.searchsorted(model.surface_nodes, m.faces).astype(np.int32)
+    model._rest = m.points[model.surface_nodes].astype(np.float32)
+    q = m.points[m.faces]
+    model._rest_normals = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
+    out_idx = np.full(len(m.points), -1, np.int64)
+    out_idx[model.solver.out_pts] = np.arange(len(model.solver.out_pts))
+    model._surf_in_out = out_idx[model.surface_nodes]
+    tet_ok = np.all(out_idx[m.tets] >= 0, axis=1) & np.all(monitor[m.tets], axis=1)
+    model._mon_tets = out_idx[m.tets[tet_ok]]
+    model._out_points = m.points[model.solver.out_pts]
+    model._mon_Dm_inv = _grad_ops(model._out_points, model._mon_tets)[0] if tet_ok.any() else None

@@ -43,13 +43,12 @@ from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
 from nodes.fem.contact import Finger
 from nodes.fem.material import Material
 from nodes.fem.mesh import MeshSpec, TetMesh
-from nodes.fem.realtime import Update
+from nodes.fem.realtime import Update, output_maps
 from nodes.fem.scene_mesh import DEFAULT_SCENE_SPEC, scene_mesh
 from nodes.fem.solver import (
     CapacitanceSolver,
     FemModel,
     OutsideCandidates,
-    _grad_ops,
     element_checks,
     solve_full,
 )
@@ -212,21 +211,8 @@ class SceneModel:
             monitor = z["monitor"]
         except (KeyError, ValueError) as exc:
             raise ValueError(f"scene capacitance cache entry {self.cache_key} is inconsistent: {exc}") from exc
-        m = self.mesh
-        self.n_candidates = len(self.solver.cand_pts)
-        self.surface_nodes = m.surface_nodes
-        self.faces = np.searchsorted(self.surface_nodes, m.faces).astype(np.int32)
-        self._rest = m.points[self.surface_nodes].astype(np.float32)
-        q = m.points[m.faces]
-        self._rest_normals = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
-        out_idx = np.full(len(m.points), -1, np.int64)
-        out_idx[self.solver.out_pts] = np.arange(len(self.solver.out_pts))
-        self._surf_in_out = out_idx[self.surface_nodes]
-        tet_ok = np.all(out_idx[m.tets] >= 0, axis=1) & np.all(monitor[m.tets], axis=1)
-        self._mon_tets = out_idx[m.tets[tet_ok]]
-        self._out_points = m.points[self.solver.out_pts]
-        self._mon_Dm_inv = _grad_ops(self._out_points, self._mon_tets)[0] if tet_ok.any() else None
-        if tet_ok.any():
+        output_maps(self, monitor)
+        if len(self._mon_tets):
             from scipy.spatial import cKDTree
 
             self._mon_tree = cKDTree(self._out_points[self._mon_tets].mean(axis=1))
