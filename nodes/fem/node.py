@@ -28,6 +28,7 @@ node keeps running).
 from __future__ import annotations
 
 import asyncio
+import math
 import os
 import threading
 import time
@@ -268,6 +269,14 @@ class FemNode(Node):
                       u.status, u.valid)
 
     def _publish(self, msg, verts, force, stiff, depth, cp, method, strain, status, valid) -> None:
+        """Publish one deformation. The numbers are checked before a header (and its seq) is taken, so a value
+        the message refuses never leaves a gap in ``seq`` that a subscriber would count as lost on the wire;
+        round-off below zero (a dF/dd of −1e-12 N/m at first touch) is clamped to the message's bound 0."""
+        vals = {"contact_force": force, "stiffness": stiff, "depth": depth, "max_strain": strain}
+        for name, v in vals.items():
+            if not math.isfinite(v):
+                raise InputRejected(f"fem: {name} is {v!r} (not finite): nothing published")
+        force, stiff, depth, strain = (max(0.0, float(v)) for v in vals.values())
         self.pub.publish(ObjectDeformation(
             header=self.pub.header("display"), vertices=np.ascontiguousarray(verts, np.float32),
             faces=self.model.faces, contact_force=float(force), stiffness=float(stiff), depth=float(depth),
