@@ -69,6 +69,10 @@ PUBLISHES = {
 SCRIPT = ("world.script=[{mode: stroke, moving_time: 30}, {mode: stroke, moving_time: 10, seed: 1}, "
           "{mode: stroke, moving_time: 30, seed: 2}]")
 SETTLE = 1.5              # s after a respawn (or, for WAIT_UP nodes, after "up") before the next kill
+#: longer for the recorder: "up" is before its subscriptions have connected to every publisher (ZeroMQ joins
+#: late), and the next group's streams must be in its new bag before they are cut — on a cold machine one run
+#: of three had the FEM killed before the respawned recorder received /object/deformation (no restart seen)
+SETTLE_AFTER = {"recorder": 5.0}
 STEP_TOLERANCE = 1.5      # the controller twin's own refusal threshold: qd_max · period · 1.5
 
 
@@ -181,7 +185,7 @@ def run_scenario(out: Path, cut_copy: Path) -> dict:
                 k["new_pid"] = int(m.group(1))
                 if name in WAIT_UP:
                     launch.wait(rf"^\[{name}\s*\] .* up: endpoint", 60, start=k["i_started"])
-            time.sleep(SETTLE)
+            time.sleep(max(SETTLE, *(SETTLE_AFTER.get(n, 0.0) for n in group)))
         code = launch.proc.wait(timeout=150)
     finally:
         launch.stop()
