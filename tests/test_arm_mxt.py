@@ -198,8 +198,10 @@ def test_bridge_reopens_after_a_no_packet_fault():
                     await asyncio.sleep(0.02)
                 return h.messages(topics.ARM_LEFT_STATE), h.node.link.counters()
         states, link = asyncio.run(scenario())
-    assert twin.core.faults == 1 and twin.core.sessions == 2 and twin.core.unanswered >= 1
-    assert link["opens"] == 2
+    # one fault is provoked; a loaded machine can stall the bridge past the 50 ms timeout once more (seen once
+    # in a full-suite run): every fault must still be followed by a reopened session
+    assert twin.core.faults >= 1 and twin.core.sessions == twin.core.faults + 1 and twin.core.unanswered >= 1
+    assert link["opens"] == twin.core.sessions
     assert twin.core.refused == 0                             # the restart streamed from the fault pose
     assert states[-1].bridge_status == "ok"
     want = clamp_pose("left", 0.2)
