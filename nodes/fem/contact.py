@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Finger", "finger_from_tip", "finger_at", "imposed_displacement"]
+__all__ = ["Finger", "finger_from_tip", "finger_at", "held_finger", "imposed_displacement"]
 
 
 @dataclass(frozen=True)
@@ -57,6 +57,18 @@ def finger_at(angle: float, depth: float, radius: float, cyl_radius: float, cyl_
     return Finger(tip + radius * out, -out, float(radius), float(depth), cp, float(angle), float(axial))
 
 
+def held_finger(p: np.ndarray, anchor: Finger, radius: float, max_depth: float) -> Finger:
+    """The finger at tip ``p`` (3,) m while a push holds its contact: ``anchor``'s contact point, direction,
+    azimuth and axial position, depth measured along the held direction (≥ 0). Raises ``ValueError`` naming
+    the tip when it is deeper than ``max_depth`` m. Shared by the cylinder's and the scenes' contact."""
+    depth = float((p - anchor.contact_point) @ anchor.direction)
+    if depth > max_depth:
+        raise ValueError(f"tip {p.tolist()} is {depth * 1e3:.1f} mm deep, beyond max_depth "
+                         f"{max_depth * 1e3:.1f} mm")
+    return Finger(p - radius * anchor.direction, anchor.direction, float(radius), max(0.0, depth),
+                  anchor.contact_point, anchor.angle, anchor.axial)
+
+
 def finger_from_tip(tip: np.ndarray, radius: float, cyl_radius: float, cyl_length: float, cyl_center: np.ndarray,
                     max_depth: float, anchor: Finger | None = None, sticky_depth: float = 0.005) -> Finger:
     """Finger geometry from the measured fingertip position ``tip`` (3,) m, display frame.
@@ -78,12 +90,7 @@ def finger_from_tip(tip: np.ndarray, radius: float, cyl_radius: float, cyl_lengt
         raise ValueError(f"tip {p.tolist()} is beyond the cylinder's end faces (|y - y_O| = {abs(axial):.4f} m > "
                          f"{cyl_length / 2:.4f} m)")
     if anchor is not None and anchor.depth >= sticky_depth:
-        depth = float((p - anchor.contact_point) @ anchor.direction)
-        if depth > max_depth:
-            raise ValueError(f"tip {p.tolist()} is {depth * 1e3:.1f} mm deep, beyond max_depth "
-                             f"{max_depth * 1e3:.1f} mm")
-        return Finger(p - radius * anchor.direction, anchor.direction, float(radius), max(0.0, depth),
-                      anchor.contact_point, anchor.angle, anchor.axial)
+        return held_finger(p, anchor, radius, max_depth)
     radial = np.array([rel[0], 0.0, rel[2]])
     rho = float(np.linalg.norm(radial))
     if rho < 1e-9:

@@ -36,7 +36,7 @@ from nodes.fem.solver import (
     solve_full,
 )
 
-__all__ = ["RealtimeModel", "Update", "DEFAULT_CACHE_DIR", "output_maps"]
+__all__ = ["RealtimeModel", "Update", "DEFAULT_CACHE_DIR", "CondensedSurface"]
 
 _CACHE_VERSION = "2"
 
@@ -64,7 +64,72 @@ class Update:
     valid: bool
 
 
-class RealtimeModel:
+class CondensedSurface:
+    """What a condensed real-time model (``self.mesh``, ``self.solver``: :class:`CapacitanceSolver`,
+    ``self.model``) shares, the cylinder's (:class:`RealtimeModel`) and any scene's
+    (:class:`nodes.fem.scene_model.SceneModel`): the rendered-surface and strain-monitor index maps, the rest
+    surface, the condensed solve with its sparse fallback, the scatter to surface vertices, the fold check."""
+
+    def _set_output_maps(self, monitor: np.ndarray) -> None:
+        """Set ``n_candidates``, ``surface_nodes`` (S,), ``faces`` (F, 3) int32 into them, ``_rest`` (S, 3)
+        float32 m, ``_rest_normals`` (F, 3), ``_surf_in_out`` (S,) output row of each surface node (−1: a support
+        node, zero displacement), ``_mon_tets`` the monitored tetrahedra (all four nodes are outputs and
+        ``monitor`` (N,) bool holds them) in output rows, ``_out_points`` and ``_mon_Dm_inv``."""
+        m = self.mesh
+        self.n_candidates = len(self.solver.cand_pts)
+        self.surface_nodes = m.surface_nodes
+        self.faces = np.searchsorted(self.surface_nodes, m.faces).astype(np.int32)
+        self._rest = m.points[self.surface_nodes].astype(np.float32)
+        q = m.points[m.faces]
+        self._rest_normals = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
+        out_idx = np.full(len(m.points), -1, np.int64)
+        out_idx[self.solver.out_pts] = np.arange(len(self.solver.out_pts))
+        self._surf_in_out = out_idx[self.surface_nodes]
+        tet_ok = np.all(out_idx[m.tets] >= 0, axis=1) & np.all(monitor[m.tets], axis=1)
+        self._mon_tets = out_idx[m.tets[tet_ok]]
+        self._out_points = m.points[self.solver.out_pts]
+        self._mon_Dm_inv = _grad_ops(self._out_points, self._mon_tets)[0] if tet_ok.any() else None
+
+    @property
+    def rest_vertices(self) -> np.ndarray:
+        """Undeformed rendered surface vertices (S, 3) float32 m, display frame (a copy)."""
+        return self._rest.copy()
+
+    @property
+    def n_nodes(self) -> int:
+        """Mesh node count."""
+        return len(self.mesh.points)
+
+    def _solve(self, fg: Finger):
+        """(solution, displacements (O, 3) m of the output points, method): the condensed solve, or the full
+        sparse one ("sparse") when the contact leaves the precomputed candidates."""
+        try:
+            sol = self.solver.solve(fg)
+            return sol, sol.u, "condensed"
+        except OutsideCandidates:
+            sol = solve_full(self.model, fg)
+            u_out = sol.u[self.solver.out_pts]
+            sol.u_full = None
+            return sol, u_out, "sparse"
+
+    def _surface_of(self, u_out: np.ndarray) -> np.ndarray:
+        """Surface-vertex displacements (S, 3) m from output-point displacements ``u_out`` (O, 3) m (support
+        vertices 0)."""
+        us = np.zeros((len(self.surface_nodes), 3))
+        ok = self._surf_in_out >= 0
+        us[ok] = u_out[self._surf_in_out[ok]]
+        return us
+
+    def folded_faces(self, us: np.ndarray) -> int:
+        """Number of rendered surface triangles whose normal turned by more than 90° (the drawn surface folds
+        over itself: garbage to draw). ``us`` (S, 3) m surface-vertex displacements."""
+        x = self._rest.astype(np.float64) + us
+        p = x[self.faces]
+        n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        return int(np.count_nonzero(np.einsum("ij,ij->i", n, self._rest_normals) <= 0.0))
+
+
+class RealtimeModel(CondensedSurface):
     """Real-time cylinder model.
 
     Parameters: ``spec`` mesh resolution; ``order`` element order of the capacitance model (2: P2, whose
@@ -105,7 +170,7 @@ class RealtimeModel:
             monitor = z["monitor"]
         except (KeyError, ValueError) as exc:
             raise ValueError(f"capacitance cache entry {self.cache_key} is inconsistent: {exc}") from exc
-        output_maps(self, monitor)
+        self._set_output_maps(monitor)
         self.nonlinear = None
         self.snapshots = None
         self._anchor = None
@@ -153,16 +218,6 @@ class RealtimeModel:
         if self._p1 is None:
             self._p1 = self.model if self.order == 1 else FemModel(self.mesh, self.material, order=1)
         return self._p1
-
-    @property
-    def rest_vertices(self) -> np.ndarray:
-        """Undeformed rendered surface vertices (S, 3) float32 m, display frame (a copy)."""
-        return self._rest.copy()
-
-    @property
-    def n_nodes(self) -> int:
-        """Mesh node count."""
-        return len(self.mesh.points)
 
     def build_nonlinear_table(self, depths: np.ndarray | None = None, log=None) -> None:
         """Precompute corotational surface displacements at ``depths`` (m, ascending from 0) for pushes at
@@ -226,22 +281,12 @@ class RealtimeModel:
                       True)
 
     def _update_linear(self, fg: Finger) -> Update:
-        method = "condensed"
-        try:
-            sol = self.solver.solve(fg)
-            u_out = sol.u
-        except OutsideCandidates:
-            sol = solve_full(self.model, fg)
-            u_out = sol.u[self.solver.out_pts]
-            sol.u_full = None
-            method = "sparse"
+        sol, u_out, method = self._solve(fg)
         if self._mon_Dm_inv is not None and sol.n_contact:
             strain, inv = element_checks(self._out_points, self._mon_tets, u_out, self._mon_Dm_inv)
         else:
             strain, inv = 0.0, 0
-        us = np.zeros((len(self.surface_nodes), 3))
-        ok = self._surf_in_out >= 0
-        us[ok] = u_out[self._surf_in_out[ok]]
+        us = self._surface_of(u_out)
         finite = bool(np.all(np.isfinite(us))) and math.isfinite(sol.force) and math.isfinite(sol.stiffness)
         status, valid = "ok", True
         force, stiff = sol.force, sol.stiffness
@@ -263,14 +308,6 @@ class RealtimeModel:
         verts = self._rest + (us.astype(np.float32) if valid else 0.0)
         return Update(verts.astype(np.float32), float(force) if valid else 0.0, float(stiff) if valid else 0.0,
                       fg.depth, fg.contact_point.copy(), method, float(strain), int(inv), status, valid)
-
-    def folded_faces(self, us: np.ndarray) -> int:
-        """Number of rendered surface triangles whose normal turned by more than 90° (the drawn surface folds
-        over itself: garbage to draw). ``us`` (S, 3) m surface-vertex displacements."""
-        x = self._rest.astype(np.float64) + us
-        p = x[self.faces]
-        n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        return int(np.count_nonzero(np.einsum("ij,ij->i", n, self._rest_normals) <= 0.0))
 
     def _nonlinear_lookup(self, fg: Finger):
         t = self.nonlinear
@@ -295,26 +332,3 @@ def _dist_to_points(x: np.ndarray, pts: np.ndarray) -> np.ndarray:
     from scipy.spatial import cKDTree
 
     return cKDTree(pts).query(x)[0]
-
-
-def output_maps(model, monitor: np.ndarray) -> None:
-    """Set the index maps a condensed model (``model.mesh``, ``model.solver``: :class:`CapacitanceSolver`)
-    needs to publish its rendered surface and monitor its strain: ``n_candidates``, ``surface_nodes`` (S,),
-    ``faces`` (F, 3) int32 into them, ``_rest`` (S, 3) float32 m, ``_rest_normals`` (F, 3), ``_surf_in_out``
-    (S,) output row of each surface node (−1: a support node, zero displacement), ``_mon_tets`` the monitored
-    tetrahedra (all four nodes are outputs and ``monitor`` (N,) bool holds them) in output rows, ``_out_points``
-    and ``_mon_Dm_inv``. Shared by the cylinder's and any scene's model (:mod:`nodes.fem.scene_model`)."""
-    m = model.mesh
-    model.n_candidates = len(model.solver.cand_pts)
-    model.surface_nodes = m.surface_nodes
-    model.faces = np.searchsorted(model.surface_nodes, m.faces).astype(np.int32)
-    model._rest = m.points[model.surface_nodes].astype(np.float32)
-    q = m.points[m.faces]
-    model._rest_normals = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
-    out_idx = np.full(len(m.points), -1, np.int64)
-    out_idx[model.solver.out_pts] = np.arange(len(model.solver.out_pts))
-    model._surf_in_out = out_idx[model.surface_nodes]
-    tet_ok = np.all(out_idx[m.tets] >= 0, axis=1) & np.all(monitor[m.tets], axis=1)
-    model._mon_tets = out_idx[m.tets[tet_ok]]
-    model._out_points = m.points[model.solver.out_pts]
-    model._mon_Dm_inv = _grad_ops(model._out_points, model._mon_tets)[0] if tet_ok.any() else None

@@ -40,17 +40,15 @@ import time
 import numpy as np
 
 from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
-from nodes.fem.contact import Finger
+from nodes.fem.contact import Finger, held_finger
 from nodes.fem.material import Material
 from nodes.fem.mesh import MeshSpec, TetMesh
-from nodes.fem.realtime import Update, output_maps
+from nodes.fem.realtime import CondensedSurface, Update, _dist_to_points
 from nodes.fem.scene_mesh import DEFAULT_SCENE_SPEC, scene_mesh
 from nodes.fem.solver import (
     CapacitanceSolver,
     FemModel,
-    OutsideCandidates,
     element_checks,
-    solve_full,
 )
 
 __all__ = ["SceneModel", "SurfaceIndex", "scene_finger", "finger_on_scene", "one_blas_thread", "STICKY_DEPTH",
@@ -96,13 +94,8 @@ def scene_finger(tip, surface: SurfaceIndex, radius: float, max_depth: float, fi
     p = np.asarray(tip, dtype=float)
     if p.shape != (3,) or not np.all(np.isfinite(p)):
         raise ValueError(f"tip must be a finite (3,) position in m, got {tip!r}")
-    if anchor is not None and anchor.depth >= sticky_depth:
-        depth = float((p - anchor.contact_point) @ anchor.direction)
-        if depth > max_depth:
-            raise ValueError(f"tip {p.tolist()} is {depth * 1e3:.1f} mm deep, beyond max_depth "
-                             f"{max_depth * 1e3:.1f} mm")
-        return Finger(p - radius * anchor.direction, anchor.direction, float(radius), max(0.0, depth),
-                      anchor.contact_point, 0.0, 0.0)
+    if anchor is not None and anchor.depth >= sticky_depth:       # scene fingers carry azimuth/axial 0
+        return held_finger(p, anchor, radius, max_depth)
     cp, n, s = surface.project(p)
     depth = -s
     if depth > max_depth:
@@ -151,13 +144,7 @@ def one_blas_thread():
     return _BLAS.limit(limits=1, user_api="blas")
 
 
-def _dist_to_points(x: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    from scipy.spatial import cKDTree
-
-    return cKDTree(pts).query(x)[0]
-
-
-class SceneModel:
+class SceneModel(CondensedSurface):
     """Real-time linear model of ``scene`` (a :class:`flexsheet.model.scenes.Scene`; module doc).
 
     Parameters: ``spec`` mesh sizes (default :data:`nodes.fem.scene_mesh.DEFAULT_SCENE_SPEC`); ``order``
@@ -211,7 +198,7 @@ class SceneModel:
             monitor = z["monitor"]
         except (KeyError, ValueError) as exc:
             raise ValueError(f"scene capacitance cache entry {self.cache_key} is inconsistent: {exc}") from exc
-        output_maps(self, monitor)
+        self._set_output_maps(monitor)
         if len(self._mon_tets):
             from scipy.spatial import cKDTree
 
@@ -255,16 +242,6 @@ class SceneModel:
             self._model = self._build_model(self.mesh, self.E_elem, self.nu_elem)
         return self._model
 
-    @property
-    def rest_vertices(self) -> np.ndarray:
-        """Undeformed rendered surface vertices (S, 3) float32 m, display frame (a copy)."""
-        return self._rest.copy()
-
-    @property
-    def n_nodes(self) -> int:
-        """Mesh node count."""
-        return len(self.mesh.points)
-
     # ------------------------------------------------------------------ updates
     def finger(self, tip) -> Finger:
         """The :class:`Finger` for fingertip ``tip`` (3,) m without changing the held contact (see
@@ -292,25 +269,13 @@ class SceneModel:
             return self._update_finger(fg)
 
     def _update_finger(self, fg: Finger) -> Update:
-        method = "condensed"
-        try:
-            sol = self.solver.solve(fg)
-            u_out = sol.u
-        except OutsideCandidates:
-            sol = solve_full(self.model, fg)
-            u_out = sol.u[self.solver.out_pts]
-            method = "sparse"
+        sol, u_out, method = self._solve(fg)
         stiffness = sol.stiffness
         if 0.0 < fg.depth < STIFFNESS_FLOOR:
             press = finger_on_scene(fg.contact_point, -fg.direction, STIFFNESS_FLOOR, fg.radius)
-            try:
-                stiffness = self.solver.solve(press).stiffness
-            except OutsideCandidates:
-                stiffness = solve_full(self.model, press).stiffness
+            stiffness = self._solve(press)[0].stiffness
         strain, inv = self._checks(fg, u_out) if sol.n_contact else (0.0, 0)
-        us = np.zeros((len(self.surface_nodes), 3))
-        ok = self._surf_in_out >= 0
-        us[ok] = u_out[self._surf_in_out[ok]]
+        us = self._surface_of(u_out)
         finite = bool(np.all(np.isfinite(us))) and math.isfinite(sol.force) and math.isfinite(stiffness)
         status, valid = "ok", True
         if not finite:
@@ -340,21 +305,6 @@ class SceneModel:
 
     def surface_displacement(self, fg: Finger) -> tuple[np.ndarray, float, float]:
         """(surface-node displacements (S, 3) m, force N, stiffness N/m) of one push, no checks (experiments)."""
-        try:
-            sol = self.solver.solve(fg)
-            u_out = sol.u
-        except OutsideCandidates:
-            sol = solve_full(self.model, fg)
-            u_out = sol.u[self.solver.out_pts]
-        us = np.zeros((len(self.surface_nodes), 3))
-        ok = self._surf_in_out >= 0
-        us[ok] = u_out[self._surf_in_out[ok]]
-        return us, float(sol.force), float(sol.stiffness)
-
-    def folded_faces(self, us: np.ndarray) -> int:
-        """Number of rendered surface triangles whose normal turned by more than 90°; ``us`` (S, 3) m."""
-        x = self._rest.astype(np.float64) + us
-        p = x[self.faces]
-        n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        return int(np.count_nonzero(np.einsum("ij,ij->i", n, self._rest_normals) <= 0.0))
+        sol, u_out, _ = self._solve(fg)
+        return self._surface_of(u_out), float(sol.force), float(sol.stiffness)
 
