@@ -11,9 +11,17 @@ the accuracy reference the real-time models are judged against (docs/fem.md, "Ph
 * **Discretisation**: scikit-fem ``ElementTetP2`` on straight-sided tetrahedra (shape-function gradients and
   the 4-point quadrature, ``intorder=2``, positive weights); element matrices and residuals are vectorised
   numpy here (the tangent split into μ(∇N·∇N)⊗I + two rank-structured terms in h = ∇N·F⁻¹).
+* **Quadrature**: the energy is integrated with the Gauss rule (weight 1 − β) blended with the element's 10
+  P2 nodes (weight β/10 each, β = :data:`NODE_WEIGHT`; still exact for linear integrands, so the scheme stays
+  consistent and the levels still converge). The Gauss points alone cannot see a P2 element fold through its
+  corners and edge midpoints (det F is cubic over the element): under the fingertip such a fold let a column of
+  material collapse to zero thickness and the tip jump ahead at a mesh-dependent depth (the snap-through of
+  solver nh-2). With the nodes in the rule the neo-Hookean barrier (−μ ln J → ∞) keeps every node's det F > 0.
 * **Finger**: rigid frictionless *capsule* (the fingertip sphere of radius r plus the finger's shaft behind
-  it, along −p̂), non-penetration of every surface DOF point by a nodal penalty
-  E_c = k/2 Σ min(g_i, 0)² (gap g_i = distance to the capsule's axis segment − r); k scales with E and the
+  it, along −p̂), non-penetration at the contact quadrature points of the outer surface
+  (order :data:`CONTACT_INTORDER`: 25 points per facet, because the facets around the tip stretch several
+  times over and the fingertip slipped between the 6 points of the order-4 rule), penalty
+  E_c = k/2 Σ w min(g_i, 0)² (gap g_i = distance to the capsule's axis segment − r); k scales with E and the
   element size so that penetration stays ~1 % of the element size (reported). A real finger, not a bonded
   imposed displacement (the linear model's contact): material slides along it and wraps around it.
   Optionally (``contact="sticking"``, :func:`solve_path_capsule`) a fingertip that does not slip: points that
@@ -47,9 +55,11 @@ from nodes.fem.mesh import TetMesh, cylinder_part_mesh
 __all__ = ["SOLVER_VERSION", "CONTACT_LAWS", "DEFAULT_CONTACT", "RefSpec", "HyperelasticModel", "PathState",
            "Capsule", "capsule_at", "solve_path", "solve_path_capsule", "reference_mesh", "solver_tag"]
 
-SOLVER_VERSION = "nh-2"     #: bump when the reference's formulation or defaults change (cache keys)
+SOLVER_VERSION = "nh-3"     #: bump when the reference's formulation or defaults change (cache keys)
 CONTACT_LAWS = ("frictionless", "sticking")   #: finger contact laws (see :func:`solve_path_capsule`)
 DEFAULT_CONTACT = "frictionless"            #: the contact law the experiment and the snapshots use
+CONTACT_INTORDER = 10   #: facet quadrature order of the contact points (25 per facet; see the module docstring)
+NODE_WEIGHT = 0.05      #: share β of the element volume integrated at the 10 P2 nodes (see the module docstring)
 
 
 def solver_tag(contact: str = DEFAULT_CONTACT) -> str:
@@ -179,7 +189,7 @@ class HyperelasticModel:
 
     def __init__(self, mesh: TetMesh, material: Material, sym_y: bool = True, sym_z: bool = False,
                  intorder: int = 5, support: np.ndarray | None = None, E_elem: np.ndarray | None = None,
-                 nu_elem: np.ndarray | None = None):
+                 nu_elem: np.ndarray | None = None, node_weight: float = NODE_WEIGHT):
         """``support`` (P,) bool over the DOF points (mesh nodes first, then edge midpoints, i.e.
         ``self.points``; build it from a node mask with :meth:`dof_points` first): fixed points, replacing the
         default rule (outer-boundary points with x ≤ ``mesh.center`` x). ``E_elem`` (E,) Pa and ``nu_elem``
@@ -201,11 +211,22 @@ class HyperelasticModel:
         P = len(self.points)
         self.n = 3 * P
         self.edofs = np.ascontiguousarray(b.element_dofs.T)                             # (E, 10) points
-        self.grad = np.ascontiguousarray(np.stack([bf[0].grad for bf in b.basis], axis=0).transpose(2, 3, 0, 1))
-        self.w = np.ascontiguousarray(b.dx)                                               # (E, Q)
-        self.vol = float(self.w.sum())
-        # nodal gradients for det F at the 10 element nodes (inversion check)
+        gq = np.stack([bf[0].grad for bf in b.basis], axis=0).transpose(2, 3, 0, 1)       # (E, Q, 10, 3)
+        # nodal gradients for det F at the 10 element nodes (inversion check, and the nodal quadrature points)
         self._node_grad = self._nodal_gradients()
+        if not (math.isfinite(node_weight) and 0.0 <= node_weight < 1.0):
+            raise ValueError(f"node_weight must be in [0, 1), got {node_weight!r}")
+        self.node_weight = float(node_weight)
+        if node_weight > 0:         # blended rule: (1 − β) × the Gauss rule + β × the 10 nodes, equal weights
+            vol_e = b.dx.sum(axis=1, keepdims=True)
+            gq = np.concatenate([gq, self._node_grad], axis=1)
+            wq = np.concatenate([(1.0 - node_weight) * b.dx, np.repeat(node_weight * vol_e / 10.0, 10, axis=1)],
+                                axis=1)
+        else:
+            wq = b.dx
+        self.grad = np.ascontiguousarray(gq)                                              # (E, Q', 10, 3)
+        self.w = np.ascontiguousarray(wq)                                                 # (E, Q')
+        self.vol = float(self.w.sum())
         c = mesh.center
         tol = 1e-9
         facets = sk.boundary_facets()
@@ -242,7 +263,7 @@ class HyperelasticModel:
             sup_facet = np.all(self.points[sk.facets[:, outer], 0] <= c[0] + tol, axis=0)
         else:
             sup_facet = np.all(self.support[sk.facets[:, outer]], axis=0)
-        fb = FacetBasis(sk, ElementTetP2(), facets=outer[~sup_facet], intorder=4)
+        fb = FacetBasis(sk, ElementTetP2(), facets=outer[~sup_facet], intorder=CONTACT_INTORDER)
         self._cf_dofs = np.ascontiguousarray(fb.element_dofs.T)                         # (Fc, 10)
         self._cf_N = np.ascontiguousarray(np.stack([bf[0].value for bf in fb.basis], axis=2))  # (Fc, Qf, 10)
         self._cf_X = np.ascontiguousarray(fb.global_coordinates().value.transpose(1, 2, 0))    # (Fc, Qf, 3)

@@ -89,6 +89,13 @@ class CondensedSurface:
         self._mon_tets = out_idx[m.tets[tet_ok]]
         self._out_points = m.points[self.solver.out_pts]
         self._mon_Dm_inv = _grad_ops(self._out_points, self._mon_tets)[0] if tet_ok.any() else None
+        # per-update helpers: the surface gather (support rows point at an appended zero row) and the fold
+        # test as one sparse product (see folded_faces)
+        from nodes.fem.solver import fold_operator
+
+        self._surf_take = np.where(self._surf_in_out >= 0, self._surf_in_out, len(self.solver.out_pts))
+        self._fold_op, self._fold_rest = fold_operator(self._rest.astype(np.float64), self.faces,
+                                                       self._rest_normals)
 
     @property
     def rest_vertices(self) -> np.ndarray:
@@ -115,18 +122,21 @@ class CondensedSurface:
     def _surface_of(self, u_out: np.ndarray) -> np.ndarray:
         """Surface-vertex displacements (S, 3) m from output-point displacements ``u_out`` (O, 3) m (support
         vertices 0)."""
-        us = np.zeros((len(self.surface_nodes), 3))
-        ok = self._surf_in_out >= 0
-        us[ok] = u_out[self._surf_in_out[ok]]
-        return us
+        pad = np.zeros((len(u_out) + 1, 3))
+        pad[:-1] = u_out
+        return pad[self._surf_take]
 
     def folded_faces(self, us: np.ndarray) -> int:
         """Number of rendered surface triangles whose normal turned by more than 90° (the drawn surface folds
-        over itself: garbage to draw). ``us`` (S, 3) m surface-vertex displacements."""
-        x = self._rest.astype(np.float64) + us
-        p = x[self.faces]
-        n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        return int(np.count_nonzero(np.einsum("ij,ij->i", n, self._rest_normals) <= 0.0))
+        over itself: garbage to draw). ``us`` (S, 3) m surface-vertex displacements.
+
+        With x = rest + us, face edges e1 = x1 − x0, e2 = x2 − x0 and rest normal n0, the turned normal's
+        component along n0 is (e1 × e2)·n0 = e2·(n0 × e1): both factors are linear in ``us``, so one
+        precomputed sparse product gives them for every face (:func:`nodes.fem.solver.fold_operator`)."""
+        nf = len(self.faces)
+        y = self._fold_op @ np.ascontiguousarray(us, np.float64).reshape(-1) + self._fold_rest
+        dot = (y[:3 * nf] * y[3 * nf:]).reshape(3, nf).sum(axis=0)
+        return int(np.count_nonzero(dot <= 0.0))
 
 
 class RealtimeModel(CondensedSurface):

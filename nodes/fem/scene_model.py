@@ -26,6 +26,12 @@ surface nodes a grazing finger touches give a stiffness that jumps from 0 to ten
 fingertip's measurement noise, which would make the sheet's tension flicker (the planner's estimate uses
 the same floor, ``min_contact_depth``).
 
+Cost per update (issue 17: ≥ 1 kHz): the condensed solve in single precision (G_aa gathered with one flat
+index, LAPACK ``spotrf``/``spotrs``, u = G_oaᵀ f; displacements within 0.05 µm of a float64 solve), the
+strain/inversion checks as one sparse gradient product plus exact bounds that leave few tets for the
+eigenvalues (:class:`nodes.fem.solver.TetChecks`), the fold test as one sparse product
+(:func:`nodes.fem.solver.fold_operator`): ~0.3 ms on the organ, 1 BLAS thread.
+
 The stiffness is the held-contact-set dF/dd of the imposed-overlap contact: on a sphere ≈ 1.4 × Hertz's
 tangent stiffness 2E*·a (the overlap's circle is √2·a; docs/scenes.md), and the force ≈ Hertz/√2.
 
@@ -48,7 +54,7 @@ from nodes.fem.scene_mesh import DEFAULT_SCENE_SPEC, scene_mesh
 from nodes.fem.solver import (
     CapacitanceSolver,
     FemModel,
-    element_checks,
+    TetChecks,
 )
 
 __all__ = ["SceneModel", "SurfaceIndex", "scene_finger", "finger_on_scene", "one_blas_thread", "STICKY_DEPTH",
@@ -124,6 +130,26 @@ def finger_on_scene(point, normal, depth: float, radius: float) -> Finger:
 _BLAS = None
 
 
+class _OneThread:
+    """Set every BLAS library threadpoolctl found to one thread on entry and restore their counts on exit
+    (what ``ThreadpoolController.limit(limits=1, user_api="blas")`` does, without rebuilding the libraries'
+    info dicts on every call: ~2 µs instead of ~10 µs per update)."""
+
+    def __init__(self, libs):
+        self._libs = libs
+
+    def __enter__(self):
+        self._saved = [lib.get_num_threads() for lib in self._libs]
+        for lib in self._libs:
+            lib.set_num_threads(1)
+        return self
+
+    def __exit__(self, *exc):
+        for lib, n in zip(self._libs, self._saved, strict=True):
+            lib.set_num_threads(n)
+        return False
+
+
 def one_blas_thread():
     """Context manager: BLAS/LAPACK limited to one thread (threadpoolctl) — the update's dense Cholesky of
     a few hundred rows. OpenBLAS's default threads spin against each other on a busy 2-core machine: a
@@ -134,14 +160,14 @@ def one_blas_thread():
         try:
             from threadpoolctl import ThreadpoolController
 
-            _BLAS = ThreadpoolController()
+            _BLAS = _OneThread([lib for lib in ThreadpoolController().lib_controllers if lib.user_api == "blas"])
         except ImportError:           # pragma: no cover - optional dependency
             _BLAS = False
     if _BLAS is False:
         import contextlib
 
         return contextlib.nullcontext()
-    return _BLAS.limit(limits=1, user_api="blas")
+    return _OneThread(_BLAS._libs)
 
 
 class SceneModel(CondensedSurface):
@@ -194,15 +220,13 @@ class SceneModel(CondensedSurface):
             self.mesh = TetMesh(z["points"], z["tets"], z["faces"], z["fixed"], spec,
                                 center=np.asarray(scene.center, float).copy())
             self.E_elem, self.nu_elem = np.asarray(z["E"]), np.asarray(z["nu"])
-            self.solver = CapacitanceSolver.from_arrays(z)
+            # single precision per update: displacements within 0.05 µm of float64 (tests/test_fem_scene.py)
+            self.solver = CapacitanceSolver.from_arrays(z, dtype=np.float32)
             monitor = z["monitor"]
         except (KeyError, ValueError) as exc:
             raise ValueError(f"scene capacitance cache entry {self.cache_key} is inconsistent: {exc}") from exc
         self._set_output_maps(monitor)
-        if len(self._mon_tets):
-            from scipy.spatial import cKDTree
-
-            self._mon_tree = cKDTree(self._out_points[self._mon_tets].mean(axis=1))
+        self._tet_checks = TetChecks(self._out_points, self._mon_tets)
         self.surface = SurfaceIndex(scene)
         self._anchor: Finger | None = None
         self.precompute_s = time.perf_counter() - t0
@@ -294,14 +318,11 @@ class SceneModel(CondensedSurface):
     def _checks(self, fg: Finger, u_out: np.ndarray) -> tuple[float, int]:
         """(max principal strain, inverted elements) over the monitor tets whose centroid lies within
         finger radius + depth + 2·h_fine of the contact point (where strain concentrates; the rest of the
-        monitor zone is not checked, to keep the update under 1 ms)."""
-        if self._mon_Dm_inv is None:
+        monitor zone is not checked), by the precomputed :class:`nodes.fem.solver.TetChecks`."""
+        tc = self._tet_checks
+        if tc.n_tets == 0:
             return 0.0, 0
-        r = self.finger_radius + fg.depth + 2 * self.spec.h_fine
-        k = np.asarray(self._mon_tree.query_ball_point(fg.contact_point, r), dtype=np.int64)
-        if len(k) == 0:
-            return 0.0, 0
-        return element_checks(self._out_points, self._mon_tets[k], u_out, self._mon_Dm_inv[k])
+        return tc(u_out, tc.near(fg.contact_point, self.finger_radius + fg.depth + 2 * self.spec.h_fine))
 
     def surface_displacement(self, fg: Finger) -> tuple[np.ndarray, float, float]:
         """(surface-node displacements (S, 3) m, force N, stiffness N/m) of one push, no checks (experiments)."""
