@@ -93,7 +93,7 @@ def test_estimator_takes_no_truth():
     params = inspect.signature(corr.DisplayEstimator.__init__).parameters
     assert list(params) == ["self", "cal", "config", "sheet_model", "samples", "target"]
     # the nominal sheet model's physics is the nominal material whatever the truth
-    from nodes.renderer.sheet_model import NominalSheetModel
+    from flexsheet.model.sheet_model import NominalSheetModel
 
     ph = NominalSheetModel(positions=(0.0,)).physics(0.04)
     assert ph.tension_ratio == 1.0 and ph.young == pytest.approx(2.46e6, rel=0.01)
@@ -178,9 +178,9 @@ def test_cli_rejects_bad_input(tmp_path):
 def test_shader_draws_the_fitted_fem_shape(tmp_path):
     """The fine GLSL model evaluates the nominal FEM fit (64 terms, cancelling coefficients) as numpy does."""
     from flexsheet.model.sheet import SheetSurface
+    from flexsheet.model.sheet_model import NominalSheetModel
     from nodes.renderer.correction import correct_vertices_fine
     from nodes.renderer.scene import StereoRenderer, cylinder_mesh
-    from nodes.renderer.sheet_model import NominalSheetModel
 
     m = NominalSheetModel(positions=(0.0,), mesh={"h_fine": 0.006, "h_coarse": 0.012}, cache_dir=str(tmp_path))
     a = 0.12 * 1.04

@@ -89,3 +89,15 @@ def test_second_run_reads_the_cache(quick):
     assert s2["realtime"]["max_visible_error_mm_0_50"] == pytest.approx(s1["realtime"]["max_visible_error_mm_0_50"],
                                                                         rel=1e-9)
     assert s2["reference"]["levels"] == s1["reference"]["levels"]
+
+
+def test_full_settings_end_on_the_nodes_snapshot_mesh():
+    """The node's snapshot table (DEFAULT_REF_SPEC) is solved on the finest mesh of the full convergence study,
+    so the accuracy the experiment reports is the node's; the levels refine by ~1.33 each."""
+    from flexsheet.experiments.fem import settings_for
+    from nodes.fem.snapshots import DEFAULT_REF_SPEC
+
+    lv = settings_for(False).levels
+    assert len(lv) >= 3 and lv[-1] == DEFAULT_REF_SPEC
+    ratios = [a.h_fine / b.h_fine for a, b in zip(lv[:-1], lv[1:], strict=True)]
+    assert all(1.2 < r < 1.45 for r in ratios), ratios

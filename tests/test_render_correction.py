@@ -239,7 +239,7 @@ def test_predicted_errors_grow_with_depth_and_fine_is_reference():
 # ------------------------------------------------------------------ the nominal FEM sheet model (fine shader form)
 @pytest.fixture(scope="module")
 def nominal_model(tmp_path_factory):
-    from nodes.renderer.sheet_model import NominalSheetModel
+    from flexsheet.model.sheet_model import NominalSheetModel
 
     # centre-contact table on a coarse mesh (~2 s); the experiment and the node use the default mesh
     return NominalSheetModel(positions=(0.0,), mesh={"h_fine": 0.006, "h_coarse": 0.012},
@@ -249,7 +249,7 @@ def nominal_model(tmp_path_factory):
 def test_series_shape_evaluates_the_membrane_form():
     # SeriesShape evaluates w = sum coef sin(lam (u + a)) G(v; mu, v0), the form the GLSL fine model sends:
     # given a Membrane's own arrays it must reproduce the Membrane (values and gradients)
-    from nodes.renderer.sheet_model import SeriesShape
+    from flexsheet.model.sheet_model import SeriesShape
 
     m = Membrane(0.125, 0.12, 0.02, -0.03, 0.03, tension_ratio=0.8, modes=24)
     s = SeriesShape(m.half_span, m.half_width, m.push_u, m.push_v, m.depth, m.lam, m.mu, m.coef)

@@ -20,8 +20,8 @@ import pytest
 from flexsheet.experiments.correction import LivePath, TwinWorld
 from flexsheet.model import scene
 from flexsheet.model.sheet import clamp_half_span, clamp_poses
+from flexsheet.model.sheet_model import NominalSheetModel, PendingPush, table_grid
 from flexsheet.model.truth import TwinTruth
-from nodes.renderer.sheet_model import NominalSheetModel, PendingPush, table_grid
 from nodes.renderer.state import RendererState, SheetConfig, pick_model
 
 STRETCH = 0.04            # the planner's stretch for the default 30 N/m object, on a table node

@@ -150,7 +150,7 @@ class DisplayEstimator:
     no truth): the bridges' kinematics at the calibrated bases, the renderer's sheet, model choice and drawing.
 
     ``config``: the renderer's :class:`nodes.renderer.state.SheetConfig`; ``sheet_model``: the renderer's
-    pushed-sheet model (:class:`nodes.renderer.sheet_model.NominalSheetModel`; None: the node's own,
+    pushed-sheet model (:class:`flexsheet.model.sheet_model.NominalSheetModel`; None: the node's own,
     :func:`nodes.renderer.state.sheet_model_for` ``config``), the ``fem_nominal`` column;
     ``samples``: MSAA samples; ``target`` m: the ``auto`` model choice's accuracy target. Raises ``TypeError``
     if ``cal`` is not a :class:`CalibratedDisplay`.
@@ -759,7 +759,7 @@ def _sheet_model(name: str, quick: bool = False, progress=None):
     pushes at the centre; the node uses the full table)."""
     if name not in ("auto", "fem"):
         raise ValueError(f"sheet model must be 'auto' or 'fem', got {name!r}")
-    from nodes.renderer.sheet_model import NominalSheetModel
+    from flexsheet.model.sheet_model import NominalSheetModel
 
     kw = {"positions": (0.0,)} if quick else {}
     return NominalSheetModel.nominal(stretch=STRETCH, progress=progress, **kw)

@@ -61,7 +61,7 @@ from nodes.fem.solver import solve_full
 __all__ = ["main", "Settings", "settings_for"]
 
 FINGER_R = 0.008
-FULL_LEVELS = (0.006, 0.0045, 0.0034, 0.0025)   #: h_fine (m) of the full run's convergence meshes, coarse → fine
+FULL_LEVELS = (0.008, 0.006, 0.0045, 0.0034)   #: h_fine (m) of the full run's convergence meshes, coarse → fine
 TARGET = 0.0007
 NEWTON_ITERS = 60       #: per load step; a snap-through step (a crease forming beside the finger) needs ~25
 
@@ -94,7 +94,7 @@ def settings_for(quick: bool) -> Settings:
         return Settings(levels=lv, depth_step=0.005, fine_step=0.005,
                         grid=SnapshotGrid((0.0,), 0.05, 0.01, 1.0, 0.001, 0.002), snap_spec=lv[-1], holdout_deg=(),
                         linear_spec=MeshSpec(0.016, 0.006, 0.012, 0.0), n_time=50, quick=True)
-    lv = [RefSpec(0.012, hf, 0.018, True, 0.055) for hf in FULL_LEVELS]
+    lv = [replace(DEFAULT_REF_SPEC, h_fine=hf) for hf in FULL_LEVELS]     # the finest is DEFAULT_REF_SPEC
     grid = SnapshotGrid((0.0,), 0.05, 0.005, DEFAULT_GRID.dtheta_deg, DEFAULT_GRID.dy, DEFAULT_GRID.drho)
     return Settings(levels=lv, depth_step=0.0025, fine_step=0.0025, grid=grid, snap_spec=lv[-1], holdout_deg=(),
                     linear_spec=MeshSpec(0.012, 0.004, 0.012, 60.0), n_time=1000)

@@ -10,8 +10,9 @@ Outputs (Foxglove topic: schema, what):
 * ``/viz/scene`` (``foxglove.SceneUpdate``), display frame: the object's surface mesh exactly as
   ``/object/deformation`` carries it (the vertices the renderer draws; the undeformed paper cylinder until
   the FEM has published); the sheet the display believes in (clamp poses by forward kinematics of both arms'
-  measured joints, depression from a valid fingertip behind it: :meth:`SheetSurface.from_clamps`, as the
-  renderer does); in the twin the true sheet (``/world/sheet``, wireframe); the fingertip measured, predicted
+  measured joints, :meth:`SheetSurface.from_clamps`; depressed by a valid fingertip behind it with the
+  renderer's own pushed-sheet model, :func:`flexsheet.model.sheet_model.sheet_model_for` of the same
+  :class:`~flexsheet.model.sheet_model.SheetConfig`: the dent the projected image is corrected for); in the twin the true sheet (``/world/sheet``, wireframe); the fingertip measured, predicted
   and true (``/world/finger``); the contact point with the object normal (``/sheet/target``) and the sheet
   normal; camera and projector frusta; the eyes; both arms drawn from ``rv1a.urdf`` (link frames by
   Pinocchio FK, a cylinder per link, a box for each clamp jaw).
@@ -37,7 +38,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cache
 
 import numpy as np
@@ -68,7 +69,8 @@ from scipy.spatial.transform import Rotation
 
 from flexsheet.model import scene
 from flexsheet.model.projector import Projector, eye_positions
-from flexsheet.model.sheet import SheetSurface
+from flexsheet.model.sheet import DeflectionGrid, SheetSurface
+from flexsheet.model.sheet_model import NominalSheetModel, PendingPush, SheetConfig, sheet_model_for
 from messages import (
     ArmJointState,
     Fingertip,
@@ -84,8 +86,8 @@ from messages import (
 from messages import topics as T
 
 __all__ = ["SCENE", "TF", "METRICS", "CAMERA_LEFT", "CAMERA_RIGHT", "CAMERA_LEFT_INFO", "CAMERA_RIGHT_INFO",
-           "RENDER_IMAGE", "JSON_TOPICS", "INPUT_TOPICS", "inputs_for", "VizConfig", "Rates", "SceneBuilder", "FoxgloveStreams",
-           "Output", "channel_schemas", "quaternions", "frustum_points", "sheet_mesh", "json_schema"]
+           "RENDER_IMAGE", "JSON_TOPICS", "INPUT_TOPICS", "inputs_for", "VizConfig", "FourTriangleDent", "Rates", "SceneBuilder",
+           "FoxgloveStreams", "Output", "channel_schemas", "quaternions", "frustum_points", "sheet_mesh", "json_schema"]
 
 SCENE = "/viz/scene"
 TF = "/viz/tf"
@@ -348,9 +350,10 @@ class VizConfig:
 
     ``eye`` (3,) cyclopean eye V, m; ``ipd`` m; ``projector``: :class:`Projector` (default: the paper's);
     ``left_base``/``right_base``: arm bases (x, y, z, yaw) m, rad (as the arm bridges' ``base`` param);
-    ``sheet_half_width`` m; ``membrane_modes`` and ``contact_radius`` m of the believed depression;
-    ``push_threshold`` m behind the sheet that counts as a push (as the renderer); ``sheet_grid`` n (n × n
-    sheet vertices); ``frustum_depth`` m of the camera frusta; ``camera_scale`` ∈ (0, 1] image downscale.
+    ``sheet``: :class:`~flexsheet.model.sheet_model.SheetConfig` of the believed sheet — give it the
+    renderer's values (its params ``sheet_half_width``, ``push_threshold``, ``fine_modes``, ``tension_ratio``,
+    ``sheet_cache``, ``sheet_mesh``) and the bridge draws the dent the renderer corrects for;
+    ``sheet_half_width`` (read-only) is ``sheet.half_width``; ``sheet_grid`` n (n × n sheet vertices); ``frustum_depth`` m of the camera frusta; ``camera_scale`` ∈ (0, 1] image downscale.
     """
 
     eye: np.ndarray = field(default_factory=lambda: scene.EYE.copy())
@@ -358,10 +361,7 @@ class VizConfig:
     projector: Projector = field(default_factory=Projector.default)
     left_base: tuple = scene.LEFT_BASE
     right_base: tuple = scene.RIGHT_BASE
-    sheet_half_width: float = scene.SHEET_SIZE / 2
-    membrane_modes: int = 16
-    contact_radius: float = 0.008
-    push_threshold: float = 0.001
+    sheet: SheetConfig = field(default_factory=SheetConfig)
     sheet_grid: int = 20
     frustum_depth: float = 0.45
     camera_scale: float = 1.0
@@ -376,6 +376,38 @@ class VizConfig:
             raise ValueError(f"sheet_grid must be >= 2, got {self.sheet_grid!r}")
         if not (self.frustum_depth > 0):
             raise ValueError(f"frustum_depth must be > 0, got {self.frustum_depth!r}")
+        if not isinstance(self.sheet, SheetConfig):
+            raise ValueError(f"sheet must be a SheetConfig, got {type(self.sheet).__name__}")
+
+    @property
+    def sheet_half_width(self) -> float:
+        """Half the sheet's free-edge length, m (``sheet.half_width``)."""
+        return self.sheet.half_width
+
+
+@dataclass(frozen=True)
+class FourTriangleDent(DeflectionGrid):
+    """The renderer's 4-triangle pushed sheet (paper §III-C-3: triangles (pushed point, corner i, corner i+1)),
+    as a deflection for drawing: w(u, v) = depth · min((a − u)/(a − u0), (u + a)/(u0 + a), (b − v)/(b − v0),
+    (v + b)/(v0 + b)) m along −normal (the tent over the sheet's rectangle with its apex at the contact
+    (u0, v0) = (``push_u``, ``push_v``)). The bridge draws it for a :class:`PendingPush` (the nominal table of
+    that stretch is not built yet), which the renderer corrects with ``four_triangle``."""
+
+    half_span: float
+    half_width: float
+    push_u: float
+    push_v: float
+    depth: float
+
+    def deflection(self, u, v) -> np.ndarray:
+        """w(u, v), m; ``u``, ``v`` broadcastable (m, sheet frame, clamped onto the sheet)."""
+        a, b = self.half_span, self.half_width
+        u = np.clip(np.asarray(u, dtype=float), -a, a)
+        v = np.clip(np.asarray(v, dtype=float), -b, b)
+        tiny = 1e-12                        # a contact on a free edge (|v0| = b) leaves that side vertical
+        lam = np.minimum(np.minimum((a - u) / max(a - self.push_u, tiny), (u + a) / max(self.push_u + a, tiny)),
+                         np.minimum((b - v) / max(b - self.push_v, tiny), (v + b) / max(self.push_v + b, tiny)))
+        return self.depth * np.clip(lam, 0.0, 1.0)
 
 
 class _Arm:
@@ -411,7 +443,7 @@ class SceneBuilder:
     Not thread-safe: call from one thread.
     """
 
-    def __init__(self, config: VizConfig | None = None) -> None:
+    def __init__(self, config: VizConfig | None = None, sheet_model: NominalSheetModel | None = None) -> None:
         self.cfg = config or VizConfig()
         self.latest: dict[str, Message] = {}
         self.stamp = 0.0
@@ -421,6 +453,9 @@ class SceneBuilder:
         self._static: list[bytes] | None = None
         self._sheet_key: tuple | None = None
         self._sheet: SheetSurface | None = None
+        #: the renderer's pushed-sheet model for the same SheetConfig (tables loaded on first use, never built)
+        self.sheet_model: NominalSheetModel = sheet_model if sheet_model is not None else sheet_model_for(
+            self.cfg.sheet)
         P = self.cfg.projector
         T_proj = np.eye(4)
         T_proj[:3, :3], T_proj[:3, 3] = P.R, P.position
@@ -471,8 +506,12 @@ class SceneBuilder:
         return out[0], out[1]
 
     def believed_sheet(self) -> SheetSurface | None:
-        """The sheet from the measured clamps, depressed by a valid fingertip behind it (as the renderer
-        computes it), or None before any joint state / for clamps that give no sheet."""
+        """The sheet from the measured clamps, depressed by a valid fingertip more than
+        ``cfg.sheet.push_threshold`` behind it, or None before any joint state / for clamps that give no sheet.
+        The depression is the renderer's: :meth:`NominalSheetModel.pushed` of ``sheet_model``
+        (:func:`~flexsheet.model.sheet_model.sheet_model_for` ``cfg.sheet``, as ``RendererState``), with
+        ``build=False``: a stretch whose table is not on disk yet is drawn as :class:`FourTriangleDent` (what
+        the renderer draws meanwhile) until the renderer's worker has built it into the shared cache."""
         key = tuple(id(self.latest.get(t.name)) for t in (T.ARM_LEFT_STATE, T.ARM_RIGHT_STATE, T.FINGERTIP))
         if key != self._sheet_key:
             self._sheet_key, self._sheet = key, self._believed_sheet()
@@ -482,17 +521,19 @@ class SceneBuilder:
         clamps = self.clamp_poses()
         if clamps is None:
             return None
-        c = self.cfg
+        c = self.cfg.sheet
         try:
-            flat = SheetSurface.from_clamps(*clamps, half_width=c.sheet_half_width)
+            flat = SheetSurface.from_clamps(*clamps, half_width=c.half_width)
             tip = self.get(T.FINGERTIP)
-            if tip is None or not tip.valid or -float((tip.position - flat.origin) @ flat.normal) <= c.push_threshold:
+            if tip is None or not tip.valid:
                 return flat
-            return SheetSurface.from_clamps(*clamps, half_width=c.sheet_half_width, pushed_point=tip.position,
-                                            membrane_kwargs={"modes": c.membrane_modes,
-                                                             "contact_radius": c.contact_radius})
+            sheet = self.sheet_model.pushed(flat, tip.position, c.push_threshold, build=False)
         except ValueError:
             return None
+        m = sheet.membrane
+        if isinstance(m, PendingPush):
+            sheet = replace(sheet, membrane=FourTriangleDent(m.half_span, m.half_width, m.push_u, m.push_v, m.depth))
+        return sheet
 
     # ------------------------------------------------------------------ /viz/scene
     def _entity(self, eid: str, stamp: float, **prims) -> bytes:

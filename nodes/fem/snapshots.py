@@ -108,8 +108,9 @@ class SnapshotGrid:
 
 DEFAULT_GRID = SnapshotGrid()
 #: mesh of the snapshot solves = the finest mesh of the experiment's convergence study: P2, 12 mm elements,
-#: 4.5 mm within 18 mm of the fingertip's whole push path (55 mm deep) (docs/fem.md)
-DEFAULT_REF_SPEC = RefSpec(0.012, 0.0045, 0.018, half_z=True, path_depth=0.055)
+#: 3.4 mm within 18 mm of the fingertip's whole push path (55 mm deep) (docs/fem.md; ~20 min of CPU per
+#: azimuth on a 2-core machine, so the node's seven-azimuth table is a few hours of CPU)
+DEFAULT_REF_SPEC = RefSpec(0.012, 0.0034, 0.018, half_z=True, path_depth=0.055)
 
 
 def table_key(grid: SnapshotGrid, spec: RefSpec, nu: float, finger_radius: float,

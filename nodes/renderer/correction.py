@@ -13,7 +13,7 @@ A. Three sheet models give C:
 * ``flat``:           one plane (r_s, n_s), the pose from the arms (paper §III-C-2);
 * ``four_triangle``:  4 triangles (pushed point, corner i, corner i+1) (paper §III-C-3);
 * ``fine``:           the pushed sheet's shape (beyond the paper; the renderer's is the nominal FEM fit of
-                      :mod:`nodes.renderer.sheet_model`), C found by Newton's method on the line V–A.
+                      :mod:`flexsheet.model.sheet_model`), C found by Newton's method on the line V–A.
 
 Stability (each case is defined and tested, tests/test_render_correction.py):
 
@@ -314,7 +314,7 @@ def predict_model_errors(depth: float, *, eye, projector, screen_point, screen_n
     imaginary screen as seen from the eye, between where its shifted vertex's light lands on the reference
     shape and where the eye expects the vertex. The reference (and the ``fine`` model's shape) is
     ``reference(sheet, depth)`` → a membrane-like shape pushed at the centre (the renderer's:
-    :meth:`nodes.renderer.sheet_model.NominalSheetModel.shape`); at depth 0 the flat sheet. Used by
+    :meth:`flexsheet.model.sheet_model.NominalSheetModel.shape`); at depth 0 the flat sheet. Used by
     :func:`choose_model`. Raises ``ValueError`` on bad input.
     """
     if not (math.isfinite(depth) and depth >= 0.0):

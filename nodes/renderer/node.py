@@ -4,7 +4,7 @@ Subscribes ``/object/deformation`` (the scene's rigid object until the FEM publi
 measured clamp poses give the actual sheet pose and its stretch), ``/fingertip`` (the pushed point and depth) and
 ``/sheet/target`` (the stretch the planner sets: its pushed-sheet table is prepared before the arms get there).
 
-The pushed sheet's shape is the renderer's nominal FEM model (:mod:`nodes.renderer.sheet_model`: nominal sheet
+The pushed sheet's shape is the renderer's nominal FEM model (:mod:`flexsheet.model.sheet_model`: nominal sheet
 material, assumed tension ratio; never the twin's truth), one table per clamp-stretch node, cached on disk.
 A table that is not on disk is built in a worker process at lower priority (~30 s per node on one core);
 meanwhile a push at that stretch is drawn with the 4-triangle model and ``/diagnostics`` says so. It redraws as soon as a
@@ -53,11 +53,12 @@ from messages import (
     topics,
 )
 from nodes.renderer.correction import check_screen
-from nodes.renderer.sheet_model import PendingPush, build_table
 from nodes.renderer.state import (
     ErrorTable,
+    PendingPush,
     RendererState,
     SheetConfig,
+    build_table,
     load_geometry,
     pick_model,
     sheet_model_for,

@@ -5,10 +5,11 @@
   kept for frames whose inputs give an unusable sheet. Thread-safe (input handlers run in worker threads, the
   drawing in the GL thread).
 * :class:`ErrorTable` — each correction model's predicted image error against the renderer's pushed-sheet model
-  (the nominal FEM, :mod:`nodes.renderer.sheet_model`) over a range of push depths
+  (the nominal FEM, :mod:`flexsheet.model.sheet_model`) over a range of push depths
   (:func:`nodes.renderer.correction.predict_model_errors`), computed once its first table is available.
-* :func:`sheet_model_for` — that pushed-sheet model, built from :class:`SheetConfig` the same way for the node,
-  the experiment and the tests.
+* :func:`sheet_model_for`, :class:`SheetConfig` — that pushed-sheet model and its settings
+  (:mod:`flexsheet.model.sheet_model`, re-exported here), built the same way for the node, the Foxglove
+  bridge, the experiment and the tests; :func:`build_table` builds a missing table in a worker process.
 * :func:`pick_model` — the model for a sheet: the configured one, or with ``"auto"`` the cheapest whose
   predicted error meets the accuracy target (:func:`nodes.renderer.correction.choose_model`).
 * :func:`load_geometry` — what the node draws and through which projector: the scene's object
@@ -30,12 +31,12 @@ from flexsheet.model import scene
 from flexsheet.model.projector import Projector
 from flexsheet.model.scenes import Scene, load_scene, paper_scene
 from flexsheet.model.sheet import SheetSurface
+from flexsheet.model.sheet_model import NominalSheetModel, PendingPush, SheetConfig, sheet_model_for
 from nodes.renderer.correction import MODELS, choose_model, predict_model_errors
 from nodes.renderer.scene import cylinder_mesh, scaled_projector, vertex_normals
-from nodes.renderer.sheet_model import NominalSheetModel, PendingPush
 
 __all__ = ["RendererState", "SheetConfig", "ErrorTable", "pick_model", "check_sheet", "check_pose",
-           "silhouette_probes", "AUTO_MODELS", "RenderGeometry", "load_geometry", "sheet_model_for"]
+           "silhouette_probes", "AUTO_MODELS", "RenderGeometry", "load_geometry", "sheet_model_for", "build_table"]
 
 #: models "auto" chooses among (cheapest first); "none" is never chosen automatically
 AUTO_MODELS = ("flat", "four_triangle", "fine")
@@ -83,7 +84,7 @@ class ErrorTable:
               sheet_model: NominalSheetModel, depths=np.linspace(0.0, 0.06, 13)) -> ErrorTable:
         """Predict each model's error at each depth (m) for ``probes`` (N, 3) m on the unpushed ``sheet``
         (:func:`predict_model_errors`, ~0.1 s per depth) against ``sheet_model``'s shape pushed at the centre
-        (:class:`nodes.renderer.sheet_model.NominalSheetModel`; also the ``fine`` model's shape). Builds the
+        (:class:`flexsheet.model.sheet_model.NominalSheetModel`; also the ``fine`` model's shape). Builds the
         table of ``sheet``'s stretch node if it is not cached (~30 s). Raises ``ValueError`` on bad geometry."""
         rows = {m: [] for m in MODELS}
 
@@ -105,7 +106,7 @@ class ErrorTable:
 def pick_model(correction: str, sheet: SheetSurface, table: ErrorTable | None, target: float) -> str:
     """The correction model to draw ``sheet`` with: ``correction`` itself unless it is ``"auto"``; then
     ``"flat"`` for an unpushed sheet, else the cheapest model meeting ``target`` m at the sheet's push depth.
-    A push whose shape is not known yet (:class:`~nodes.renderer.sheet_model.PendingPush`: its stretch's
+    A push whose shape is not known yet (:class:`~flexsheet.model.sheet_model.PendingPush`: its stretch's
     table is being built), or ``auto`` before the error ``table`` exists (None), is drawn with
     ``"four_triangle"`` (``"fine"`` needs the shape)."""
     if correction not in MODELS and correction != "auto":
@@ -120,31 +121,16 @@ def pick_model(correction: str, sheet: SheetSurface, table: ErrorTable | None, t
     return table.choose(sheet.membrane.depth, target)
 
 
-@dataclass(frozen=True)
-class SheetConfig:
-    """How the renderer turns clamp poses and the fingertip into the sheet it corrects for.
+def build_table(settings: dict, node: float, nice: int = 0) -> float:
+    """Build the table of ``NominalSheetModel(**settings)`` at ``node`` and cache it on disk; returns ``node``.
+    Module-level so that a worker process can run it (the node builds missing tables off its render loop, at
+    ``nice`` below its priority, in the idle scheduling class: :func:`flexsheet.runtime.background.lower_priority`)."""
+    if nice:
+        from flexsheet.runtime.background import lower_priority
 
-    ``half_width`` m: half the free-edge length; ``push_threshold`` m: depth behind the flat sheet that counts
-    as a push; the pushed sheet's model (:func:`sheet_model_for`): ``fine_modes`` clamped sine modes (each
-    with 4 Green's-function terms, ≤ 16: the shader takes 64 terms), ``tension_ratio`` the ASSUMED T_v/T_u,
-    ``cache_dir`` where its FEM tables are cached (None: :func:`flexsheet.model.sheet_fem.default_cache_dir`),
-    ``mesh`` the FEM mesh options (:class:`flexsheet.model.sheet_fem.SheetFEM` kwargs; {}: the default
-    4 mm mesh)."""
-
-    half_width: float = scene.SHEET_SIZE / 2
-    push_threshold: float = 0.001
-    fine_modes: int = 16
-    tension_ratio: float = 1.0
-    cache_dir: str | None = None
-    mesh: dict = field(default_factory=dict)
-
-
-def sheet_model_for(config: SheetConfig = SheetConfig(), progress=None) -> NominalSheetModel:
-    """The renderer's pushed-sheet model for ``config``: the nominal FEM (the sheet's nominal E and size, no
-    pre-strain, the assumed tension ratio) fitted into the fine shader's series; never the truth's values.
-    Raises ``ValueError`` on a bad setting."""
-    return NominalSheetModel(tension_ratio=config.tension_ratio, n_modes=config.fine_modes,
-                             cache_dir=config.cache_dir, mesh=dict(config.mesh), progress=progress)
+        lower_priority(nice)
+    NominalSheetModel(**settings).table(float(node))
+    return float(node)
 
 
 class RendererState:

@@ -42,6 +42,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from flexsheet.model import scene
 from flexsheet.model.projector import Projector
+from flexsheet.model.sheet_model import SheetConfig
 from flexsheet.runtime.foxglove_scene import (
     FoxgloveStreams,
     Rates,
@@ -92,7 +93,15 @@ class VizParams(BaseModel):
     right_base: list[float] = Field(default_factory=lambda: list(scene.RIGHT_BASE), min_length=4, max_length=4,
                                     description="right arm base (x, y, z, yaw), m and rad")
     sheet_grid: int = Field(20, ge=2, le=200, description="sheet mesh vertices per side")
-    membrane_modes: int = Field(16, ge=1, le=256, description="modes of the drawn depression")
+    # the believed sheet: the renderer's pushed-sheet model (flexsheet.model.sheet_model.sheet_model_for); give
+    # these the renderer's values (same names as its params) and the drawn dent is the one it corrects for
+    fine_modes: int = Field(SheetConfig.fine_modes, ge=1, le=16, description="as the renderer's fine_modes")
+    tension_ratio: float = Field(SheetConfig.tension_ratio, gt=0.0, description="as the renderer's tension_ratio")
+    sheet_cache: str | None = Field(None, description="as the renderer's sheet_cache (its FEM tables are read "
+                                                      "from there, never built by the bridge)")
+    sheet_mesh: dict[str, float] = Field(default_factory=dict, description="as the renderer's sheet_mesh")
+    push_threshold: float = Field(SheetConfig.push_threshold, ge=0.0, description="as the renderer's, m")
+    sheet_half_width: float = Field(SheetConfig.half_width, gt=0.0, description="as the renderer's, m")
 
     @field_validator("eye", "projector_position")
     @classmethod
@@ -133,7 +142,10 @@ class VizNode(Node):
         cfg = VizConfig(eye=np.asarray(p.eye), ipd=p.ipd,
                         projector=Projector.default(p.width, p.height, p.projector_pixel, p.projector_position),
                         left_base=tuple(p.left_base), right_base=tuple(p.right_base), sheet_grid=p.sheet_grid,
-                        membrane_modes=p.membrane_modes, camera_scale=p.camera_scale)
+                        camera_scale=p.camera_scale,
+                        sheet=SheetConfig(half_width=p.sheet_half_width, push_threshold=p.push_threshold,
+                                          fine_modes=p.fine_modes, tension_ratio=p.tension_ratio,
+                                          cache_dir=p.sheet_cache, mesh=dict(p.sheet_mesh)))
         self.streams = FoxgloveStreams(SceneBuilder(cfg), Rates(scene=p.scene_rate, camera=p.camera_rate,
                                                                 render=p.render_rate, json=p.json_rate,
                                                                 calibration=p.calibration_rate))

@@ -1,8 +1,11 @@
-"""The renderer's nominal pushed-sheet model: the nonlinear membrane FEM solved with the sheet's NOMINAL
-material, fitted into the "fine" shader's series form (pure: numpy; the FEM from :mod:`flexsheet.model.sheet_fem`).
+"""The display's nominal pushed-sheet model: the nonlinear membrane FEM solved with the sheet's NOMINAL
+material, fitted into the renderer's "fine" shader's series form (pure: numpy; the FEM from
+:mod:`flexsheet.model.sheet_fem`).
 
-This is the renderer node's only pushed-sheet shape (``RendererState`` attaches it to every push,
-:meth:`NominalSheetModel.pushed`). Why: the old fine correction's sine-series membrane
+This is the display's only pushed-sheet shape: the renderer corrects its image for it (``RendererState``
+attaches it to every push, :meth:`NominalSheetModel.pushed`) and the Foxglove bridge draws it as the sheet the
+display believes in (:meth:`flexsheet.runtime.foxglove_scene.SceneBuilder.believed_sheet`); both build it with
+:func:`sheet_model_for` from the same :class:`SheetConfig`. Why: the old fine correction's sine-series membrane
 (:class:`flexsheet.model.sheet.Membrane`, small-slope, tension ratio 1) is linear; a 1 mm urethane sheet pushed
 10–50 mm is not — the push stretches it, the dent becomes conical, and the series is ~4 mm off at 50 mm where
 the object's outline is seen (measured on the twin, docs/renderer.md). This module keeps the shader and
@@ -25,8 +28,9 @@ replaces the shape it is given:
    :class:`flexsheet.model.sheet.Membrane` (same λ, μ, coef arrays), so the GLSL fine model draws it
    unchanged. Fits are cached (LRU) on the contact rounded to 0.1 mm. Per new fingertip the table on the fit
    grid (:func:`table_grid`) and the fit cost ~1–2 ms of CPU (``flexsheet bench render``).
-3. **In the node**: :meth:`NominalSheetModel.shape` with ``build=False`` never builds a missing table in the
-   drawing thread (a :class:`PendingPush` instead); :func:`build_table` builds it in a worker process.
+3. **In the nodes**: :meth:`NominalSheetModel.shape` with ``build=False`` never builds a missing table in the
+   caller's thread (a :class:`PendingPush` instead); the renderer node builds it in a worker process
+   (:func:`nodes.renderer.state.build_table`), the bridge draws the push as 4 triangles meanwhile.
 
 Units: m, sheet frame (u along axis_u, v along axis_v, w along −normal), as :mod:`flexsheet.model.sheet`.
 """
@@ -54,11 +58,11 @@ from flexsheet.model.tension import SheetMaterial, tension
 
 #: the nominal tables of the default settings at clamp strains 0.01–0.07 (what 40 N per clamp can hold), shipped
 #: so that no display builds them while it runs (a table build beside the running graph slowed the loop:
-#: flexsheet/runtime/background.py). Regenerate: ``python -m nodes.renderer.sheet_model --ship``.
+#: flexsheet/runtime/background.py). Regenerate: ``python -m flexsheet.model.sheet_model --ship``.
 SHIPPED_TABLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "sheet_tables")
 
 __all__ = ["SeriesShape", "PendingPush", "NominalSheetModel", "MODEL_DEPTHS", "green", "fit_series", "table_grid",
-           "contact_of", "build_table"]
+           "contact_of", "SheetConfig", "sheet_model_for", "ship_tables", "SHIPPED_TABLES"]
 
 #: depths (m) of the nominal table (the fit interpolates between them)
 MODEL_DEPTHS = (0.005, 0.010, 0.020, 0.030, 0.040, 0.050, 0.060)
@@ -329,16 +333,33 @@ class NominalSheetModel:
                 "note": "nominal material and assumed tension ratio; never the truth's"}
 
 
-def build_table(settings: dict, node: float, nice: int = 0) -> float:
-    """Build the table of ``NominalSheetModel(**settings)`` at ``node`` and cache it on disk; returns ``node``.
-    Module-level so that a worker process can run it (the node builds missing tables off its render loop, at
-    ``nice`` below its priority, in the idle scheduling class: :func:`flexsheet.runtime.background.lower_priority`)."""
-    if nice:
-        from flexsheet.runtime.background import lower_priority
+@dataclass(frozen=True)
+class SheetConfig:
+    """How the display turns clamp poses and the fingertip into the sheet it believes in (the renderer corrects
+    for it, the Foxglove bridge draws it).
 
-        lower_priority(nice)
-    NominalSheetModel(**settings).table(float(node))
-    return float(node)
+    ``half_width`` m: half the free-edge length; ``push_threshold`` m: depth behind the flat sheet that counts
+    as a push; the pushed sheet's model (:func:`sheet_model_for`): ``fine_modes`` clamped sine modes (each
+    with 4 Green's-function terms, ≤ 16: the shader takes 64 terms), ``tension_ratio`` the ASSUMED T_v/T_u,
+    ``cache_dir`` where its FEM tables are cached (None: :func:`flexsheet.model.sheet_fem.default_cache_dir`),
+    ``mesh`` the FEM mesh options (:class:`flexsheet.model.sheet_fem.SheetFEM` kwargs; {}: the default
+    4 mm mesh)."""
+
+    half_width: float = scene.SHEET_SIZE / 2
+    push_threshold: float = 0.001
+    fine_modes: int = 16
+    tension_ratio: float = 1.0
+    cache_dir: str | None = None
+    mesh: dict = field(default_factory=dict)
+
+
+def sheet_model_for(config: SheetConfig = SheetConfig(), progress=None) -> NominalSheetModel:
+    """The display's pushed-sheet model for ``config``: the nominal FEM (the sheet's nominal E and size, no
+    pre-strain, the assumed tension ratio) fitted into the fine shader's series; never the truth's values.
+    The one constructor the renderer node, the Foxglove bridge, the experiments and the tests use. Raises
+    ``ValueError`` on a bad setting."""
+    return NominalSheetModel(tension_ratio=config.tension_ratio, n_modes=config.fine_modes,
+                             cache_dir=config.cache_dir, mesh=dict(config.mesh), progress=progress)
 
 
 def ship_tables(nodes=(0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.07), progress=print) -> list[str]:
@@ -365,6 +386,6 @@ if __name__ == "__main__":      # pragma: no cover - a maintenance command
     import sys
 
     if sys.argv[1:] != ["--ship"]:
-        sys.exit("usage: python -m nodes.renderer.sheet_model --ship   (rebuild the shipped sheet tables)")
+        sys.exit("usage: python -m flexsheet.model.sheet_model --ship   (rebuild the shipped sheet tables)")
     for f in ship_tables():
         print(f)
