@@ -22,8 +22,8 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 
 ``--quick``: two coarse meshes (h_fine 12 / 9 mm), 5 mm outputs, snapshots every 10 mm: a test's run, ≈ 30 s
 of CPU cold (minutes of wall time on the loaded shared machine), seconds cached; it does not meet the targets
-and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4.5 mm, 2.5 mm outputs,
-snapshots every 5 mm) takes about an hour of CPU cold; ``--level N`` solves one mesh only (to run the levels in
+and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4.5 / 3.4 mm, :data:`FULL_LEVELS`, 2.5 mm
+outputs, snapshots every 5 mm) takes about 45 min of CPU cold (36 of them the 3.4 mm mesh); ``--level N`` solves one mesh only (to run the levels in
 parallel processes), every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds.
 ``--linear-study`` also reruns the linear mesh study (``accuracy_table.json``, ``hertz``, ``stability``).
 """
