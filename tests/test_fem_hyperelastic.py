@@ -378,3 +378,23 @@ def test_sticking_push_holds_the_surface_on_the_finger(quarter):
     assert rel[1] < 0.3 * rel[0], rel
     with pytest.raises(ValueError, match="contact"):
         H.solve_path(m, 0.0, [0.004], 0.008, contact="glued")
+
+
+def test_load_steps_after_a_halved_step_keep_the_halved_size(quarter, monkeypatch):
+    """A step that fails is halved and the steps after it stay that small (once the path got hard, Newton
+    is not sent back into the 2.5 mm steps that cost 60 iterations per try on the 3.4 mm mesh at 47.5 mm)."""
+    real = H._newton
+    tried = []
+
+    def flaky(model, u, caps, k, iters, tol_u, tol_r, log, state=None, max_step=0.001):
+        tried.append(-float(caps.center[0] + caps.radius * caps.direction[0]))   # depth of the tip (x = −d)
+        if len(tried) == 2:                                              # the second step fails once
+            return u, iters, False
+        return real(model, u, caps, k, iters, tol_u, tol_r, log, state, max_step)
+
+    monkeypatch.setattr(H, "_newton", flaky)
+    st = H.solve_path(quarter, 0.0, [0.002, 0.004, 0.006], 0.008, step=0.002)
+    assert all(s.converged for s in st)
+    # 2 mm, then 4 mm fails, 3 mm (halved), then 1 mm steps to 6 mm
+    assert np.allclose(tried, [0.002, 0.004, 0.003, 0.004, 0.005, 0.006], atol=1e-9), tried
+    assert abs(st[-1].depth - 0.006) < 1e-12
