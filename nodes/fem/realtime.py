@@ -70,6 +70,17 @@ class CondensedSurface:
     (:class:`nodes.fem.scene_model.SceneModel`): the rendered-surface and strain-monitor index maps, the rest
     surface, the condensed solve with its sparse fallback, the scatter to surface vertices, the fold check."""
 
+    @staticmethod
+    def _check_params(finger_radius: float, max_depth: float, strain_limit: float) -> None:
+        """Raise ``ValueError`` naming the field unless finger radius ∈ [1, 30] mm, max depth ∈ (0, 70] mm and
+        strain limit > 0 (both models' constructors)."""
+        if not (math.isfinite(finger_radius) and 0.001 <= finger_radius <= 0.03):
+            raise ValueError(f"finger_radius must be in [0.001, 0.03] m, got {finger_radius!r}")
+        if not (math.isfinite(max_depth) and 0.0 < max_depth <= 0.07):
+            raise ValueError(f"max_depth must be in (0, 0.07] m, got {max_depth!r}")
+        if not (math.isfinite(strain_limit) and strain_limit > 0):
+            raise ValueError(f"strain_limit must be > 0, got {strain_limit!r}")
+
     def _set_output_maps(self, monitor: np.ndarray) -> None:
         """Set ``n_candidates``, ``surface_nodes`` (S,), ``faces`` (F, 3) int32 into them, ``_rest`` (S, 3)
         float32 m, ``_rest_normals`` (F, 3), ``_surf_in_out`` (S,) output row of each surface node (−1: a support
@@ -153,12 +164,7 @@ class RealtimeModel(CondensedSurface):
     def __init__(self, spec: MeshSpec, material: Material, finger_radius: float = 0.008, max_depth: float = 0.05,
                  strain_limit: float = 1.0, cache_dir: str | None = DEFAULT_CACHE_DIR, reach: float | None = None,
                  log=None, order: int = 2):
-        if not (math.isfinite(finger_radius) and 0.001 <= finger_radius <= 0.03):
-            raise ValueError(f"finger_radius must be in [0.001, 0.03] m, got {finger_radius!r}")
-        if not (math.isfinite(max_depth) and 0.0 < max_depth <= 0.07):
-            raise ValueError(f"max_depth must be in (0, 0.07] m, got {max_depth!r}")
-        if not (math.isfinite(strain_limit) and strain_limit > 0):
-            raise ValueError(f"strain_limit must be > 0, got {strain_limit!r}")
+        self._check_params(finger_radius, max_depth, strain_limit)
         log = log or (lambda s: None)
         self._log = log
         t0 = time.perf_counter()

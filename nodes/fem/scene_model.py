@@ -191,12 +191,7 @@ class SceneModel(CondensedSurface):
         if not isinstance(scene, Scene):
             raise ValueError(f"scene must be a flexsheet.model.scenes.Scene, got {type(scene).__name__}")
         finger_radius = scene.finger.radius if finger_radius is None else finger_radius
-        if not (math.isfinite(finger_radius) and 0.001 <= finger_radius <= 0.03):
-            raise ValueError(f"finger_radius must be in [0.001, 0.03] m, got {finger_radius!r}")
-        if not (math.isfinite(max_depth) and 0.0 < max_depth <= 0.07):
-            raise ValueError(f"max_depth must be in (0, 0.07] m, got {max_depth!r}")
-        if not (math.isfinite(strain_limit) and strain_limit > 0):
-            raise ValueError(f"strain_limit must be > 0, got {strain_limit!r}")
+        self._check_params(finger_radius, max_depth, strain_limit)
         if order not in (1, 2):
             raise ValueError(f"order must be 1 or 2, got {order!r}")
         reach = finger_radius + 0.004 if reach is None else float(reach)
