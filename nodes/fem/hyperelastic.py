@@ -55,7 +55,7 @@ from nodes.fem.mesh import TetMesh, cylinder_part_mesh
 __all__ = ["SOLVER_VERSION", "CONTACT_LAWS", "DEFAULT_CONTACT", "RefSpec", "HyperelasticModel", "PathState",
            "Capsule", "capsule_at", "solve_path", "solve_path_capsule", "reference_mesh", "solver_tag"]
 
-SOLVER_VERSION = "nh-3"     #: bump when the reference's formulation or defaults change (cache keys)
+SOLVER_VERSION = "nh-4"     #: bump when the reference's formulation or defaults change (cache keys)
 CONTACT_LAWS = ("frictionless", "sticking")   #: finger contact laws (see :func:`solve_path_capsule`)
 DEFAULT_CONTACT = "frictionless"            #: the contact law the experiment and the snapshots use
 CONTACT_INTORDER = 10   #: facet quadrature order of the contact points (25 per facet; see the module docstring)
@@ -581,33 +581,99 @@ def _ldl(K: sp.spmatrix):
     return s, int(np.count_nonzero(s.factors()[1] <= 0))
 
 
+def _pcg(A: sp.csr_matrix, b: np.ndarray, precond, rtol: float, maxiter: int) -> tuple[np.ndarray | None, int]:
+    """Preconditioned conjugate gradients for A x = b (A symmetric; ``precond(r)`` applies M⁻¹). Returns
+    (x, iterations), (None, −iterations) on negative curvature (pᵀAp ≤ 0: A is not positive definite), or
+    (None, maxiter) when ‖r‖ ≤ ``rtol``·‖b‖ is not reached in ``maxiter`` iterations (Saad, *Iterative Methods for Sparse Linear
+    Systems*, 2nd ed., alg. 9.1)."""
+    x = np.zeros_like(b)
+    r = b.copy()
+    z = precond(r)
+    p = z.copy()
+    rz = float(r @ z)
+    stop = rtol * float(np.linalg.norm(b))
+    for i in range(1, maxiter + 1):
+        Ap = A @ p
+        pAp = float(p @ Ap)
+        if not pAp > 0:
+            return None, -i
+        a = rz / pAp
+        x += a * p
+        r -= a * Ap
+        if float(np.linalg.norm(r)) <= stop:
+            return x, i
+        z = precond(r)
+        rz_new = float(r @ z)
+        p = z + (rz_new / rz) * p
+        rz = rz_new
+    return None, maxiter
+
+
+#: inexact Newton (Newton–Krylov): the step solves K δ = −r by PCG to this relative residual, preconditioned by
+#: the last LDLᵀ factorisation; a fresh factorisation only when PCG fails (Knoll & Keyes, J. Comput. Phys. 193,
+#: 2004, "lagged" preconditioner). The step is then not exact, but the residual r is, so the converged state is
+#: the same within the tolerances; a PCG iteration is two triangular solves (~1/100 of a factorisation here).
+PCG_RTOL = 1e-4
+PCG_MAXITER = 60
+
+
+def _pcg_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict) -> tuple[np.ndarray | None, bool]:
+    """Newton step δ (n,) from K δ = −r by PCG preconditioned with ``state["pc"]``, or None; and whether PCG
+    met negative curvature (K is then not positive definite: no factorisation of it is tried)."""
+    x, its = _pcg(Kc, -rf, state["pc"].solve, PCG_RTOL, PCG_MAXITER)
+    if x is not None and np.all(np.isfinite(x)) and float(rf @ x) < 0:
+        state["pcg"] = state.get("pcg", 0) + 1
+        return x, False
+    return None, its < 0
+
+
 def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, iters: int, tol_u: float,
             tol_r: float, log, state: dict | None = None, max_step: float = 0.001) -> tuple[np.ndarray, int, bool]:
-    """Minimise Π from ``u``; returns (u, iterations, converged). ``state`` (dict) carries ``project`` (use
-    the projected tangent) between calls. Raises ``FloatingPointError`` when the line search fails."""
+    """Minimise Π from ``u``; returns (u, iterations, converged). ``state`` (dict) carries between calls the
+    last positive-definite factorisation (``"pc"``, the PCG preconditioner) and counters (``"projected"``:
+    steps on the projected tangent, ``"factorisations"``, ``"pcg"``: steps solved by PCG). Raises
+    ``FloatingPointError`` when the line search fails."""
     state = {} if state is None else state
     free = model.free
     pi = model.energy(u, caps, k)
     if not math.isfinite(pi):
         raise FloatingPointError("start point has inverted elements")
+    rn_prev = math.inf
     for it in range(1, iters + 1):
         r, K = model.residual_tangent(u, caps, k)
         rf = np.zeros(model.n)
         rf[free] = r[free]
-        lu, neg = _ldl(model.constrained(K))
-        if neg:                     # not positive definite (far from equilibrium): projected tangent, this step
+        Kc = model.constrained(K)
+        delta, from_pcg, indefinite = None, False, False
+        if state.get("pc") is not None:         # lagged factorisation as preconditioner (one PCG solve)
+            delta, indefinite = _pcg_step(Kc, rf, state)
+            from_pcg = delta is not None
+        if delta is None and not indefinite:
+            state["factorisations"] = state.get("factorisations", 0) + 1
+            lu, neg = _ldl(Kc)
+            if neg:
+                indefinite = True
+            else:
+                state["pc"], delta = lu, -lu.solve(rf)
+        if delta is None:           # not positive definite (far from equilibrium): projected tangent, this step
             state["projected"] = state.get("projected", 0) + 1
             _, K = model.residual_tangent(u, caps, k, project=True)
             Kc = model.constrained(K)
-            lu, neg = _ldl(Kc)
-            # rounding can leave the projected (semi-definite) tangent with a few non-positive pivots: a
-            # diagonal shift, ×100 per try (at most 3 more factorisations; each is seconds on 20k+ DOF)
-            dmax = float(np.abs(Kc.diagonal()).max())
-            shift = 1e-4 * dmax
-            while neg and shift <= 1.0 * dmax:
-                lu, neg = _ldl(Kc + shift * sp.identity(model.n, format="csr"))
-                shift *= 100.0
-        delta = -lu.solve(rf)
+            if state.get("pc") is not None:
+                delta, _ = _pcg_step(Kc, rf, state)
+                from_pcg = delta is not None
+            if delta is None:
+                state["factorisations"] = state.get("factorisations", 0) + 1
+                lu, neg = _ldl(Kc)
+                # rounding can leave the projected (semi-definite) tangent with a few non-positive pivots: a
+                # diagonal shift, ×100 per try (at most 3 more factorisations; each is seconds on 20k+ DOF)
+                dmax = float(np.abs(Kc.diagonal()).max())
+                shift = 1e-4 * dmax
+                while neg and shift <= 1.0 * dmax:
+                    lu, neg = _ldl(Kc + shift * sp.identity(model.n, format="csr"))
+                    shift *= 100.0
+                state["pc"] = lu if not neg else None
+                delta = -lu.solve(rf)
         if not np.all(np.isfinite(delta)):
             raise FloatingPointError(f"non-finite Newton step at iteration {it}")
         d3 = delta.reshape(-1, 3)
@@ -617,22 +683,30 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
         alpha, ok = min(1.0, max_step / max(float(np.abs(delta).max()), 1e-300)), False
         for _ in range(30):
             cand = u + alpha * d3
-            pc = model.energy(cand, caps, k)
-            if math.isfinite(pc) and pc <= pi + 1e-4 * alpha * min(slope, 0.0) + 1e-12 * abs(pi):
+            pi_c = model.energy(cand, caps, k)
+            if math.isfinite(pi_c) and pi_c <= pi + 1e-4 * alpha * min(slope, 0.0) + 1e-12 * abs(pi):
                 ok = True
                 break
             alpha *= 0.5
         if not ok:
+            if from_pcg:            # the inexact step was no use: factorise afresh next iteration
+                state["pc"] = None
+                continue
             raise FloatingPointError(f"line search failed at iteration {it}")
-        u, pi = cand, pc
+        u, pi = cand, pi_c
         step = alpha * float(np.abs(delta).max())
         rn = float(np.linalg.norm(rf))
         if log:
             log(f"    newton {it}: |r|={rn:.3e} N, |du|={step * 1e3:.4f} mm, alpha={alpha:.3g}")
         if step < tol_u and rn < max(tol_r, 1e-12):
             return u, it, True
-        if step < 0.01 * tol_u:
+        # stagnation: a tiny step that the line search had to cut, or a full step that no longer reduces the
+        # residual (round-off floor). A tiny *full* Newton step with a falling residual is not stagnation: the
+        # stiff contact penalty makes the step tiny long before the residual is (3.4 mm mesh at 50 mm:
+        # |du| < 1e-8 m at |r| = 1.4e-4 N, one iteration before quadratic convergence reaches the tolerance)
+        if step < 0.01 * tol_u and (alpha < 1.0 or rn > 0.5 * rn_prev):
             return u, it, rn < 10 * tol_r
+        rn_prev = rn
     return u, iters, False
 
 
