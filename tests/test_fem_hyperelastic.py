@@ -445,8 +445,23 @@ def test_lagged_preconditioner_newton_reaches_the_same_states_with_fewer_factori
     monkeypatch.setattr(H, "PCG_MAXITER", 0)
     exact = run("exact")
     assert all(s.converged for s in nk + exact)
-    for a, b in zip(nk, exact):
+    for a, b in zip(nk, exact, strict=True):
         assert np.abs(a.u - b.u).max() < 1e-9
         assert abs(a.force - b.force) < 1e-7
     assert counts["nk"].get("pcg", 0) > 0 and counts["exact"].get("pcg", 0) == 0
     assert 3 * counts["nk"]["factorisations"] <= counts["exact"]["factorisations"], counts
+
+
+def test_stiffer_penalty_penetrates_less_and_is_validated(quarter):
+    """κ = scale·E/h: at a 10 mm push a 100× softer finger penetrates ~100× deeper; bad scales are refused."""
+    soft = H.HyperelasticModel(quarter.mesh, MAT, sym_y=True, sym_z=True, intorder=2,
+                               penalty_scale=H.PENALTY_SCALE / 100)
+    assert soft.penalty() == pytest.approx(quarter.penalty() / 100)
+    a = H.solve_path(quarter, 0.0, [0.01], 0.008, step=0.005)[-1]
+    b = H.solve_path(soft, 0.0, [0.01], 0.008, step=0.005)[-1]
+    assert a.converged and b.converged
+    assert b.penetration > 20 * max(a.penetration, 1e-9) and b.penetration > 1e-5
+    assert b.force < a.force                                       # the soft finger sinks in: less push-back
+    for bad in (0.0, -1.0, float("nan"), "1e5"):
+        with pytest.raises(ValueError, match="penalty_scale"):
+            H.HyperelasticModel(quarter.mesh, MAT, penalty_scale=bad)

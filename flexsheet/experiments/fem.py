@@ -45,6 +45,7 @@ from nodes.fem.contact import finger_at
 from nodes.fem.hyperelastic import (
     CONTACT_LAWS,
     DEFAULT_CONTACT,
+    PENALTY_SCALE,
     HyperelasticModel,
     PathState,
     RefSpec,
@@ -63,6 +64,7 @@ __all__ = ["main", "Settings", "settings_for"]
 FINGER_R = 0.008
 FULL_LEVELS = (0.008, 0.006, 0.0045, 0.0034)   #: h_fine (m) of the full run's convergence meshes, coarse → fine
 TARGET = 0.0007
+PENALTY_TOL_MM = 0.1    #: the default penalty must lie this close (visible surface) to a 10× stiffer one
 NEWTON_ITERS = 60       #: per load step; a snap-through step (a crease forming beside the finger) needs ~25
 
 
@@ -82,6 +84,8 @@ class Settings:
     n_time: int = 300
     quick: bool = False
     contact: str = DEFAULT_CONTACT
+    penalty_level: int = 1
+    penalty_scales: tuple = (1e3, 1e4, PENALTY_SCALE, 10 * PENALTY_SCALE)
 
 
 def settings_for(quick: bool) -> Settings:
@@ -93,7 +97,8 @@ def settings_for(quick: bool) -> Settings:
         lv = [RefSpec(0.016, hf, 0.018, True, 0.055) for hf in (0.012, 0.009)]
         return Settings(levels=lv, depth_step=0.005, fine_step=0.005,
                         grid=SnapshotGrid((0.0,), 0.05, 0.01, 1.0, 0.001, 0.002), snap_spec=lv[-1], holdout_deg=(),
-                        linear_spec=MeshSpec(0.016, 0.006, 0.012, 0.0), n_time=50, quick=True)
+                        linear_spec=MeshSpec(0.016, 0.006, 0.012, 0.0), n_time=50, quick=True, penalty_level=0,
+                        penalty_scales=(PENALTY_SCALE, 10 * PENALTY_SCALE))
     lv = [replace(DEFAULT_REF_SPEC, h_fine=hf) for hf in FULL_LEVELS]     # the finest is DEFAULT_REF_SPEC
     grid = SnapshotGrid((0.0,), 0.05, 0.005, DEFAULT_GRID.dtheta_deg, DEFAULT_GRID.dy, DEFAULT_GRID.drho)
     return Settings(levels=lv, depth_step=0.0025, fine_step=0.0025, grid=grid, snap_spec=lv[-1], holdout_deg=(),
@@ -121,6 +126,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--contact", choices=CONTACT_LAWS, default=DEFAULT_CONTACT,
                    help="the finger's contact law in the reference: sticking (the fingertip does not slip on the "
                         "tissue) or frictionless (default %(default)s)")
+    p.add_argument("--node-table", action="store_true",
+                   help="build the FEM node's nonlinear snapshot table (azimuths 0-60 deg every 10 deg, 2.5 mm depth "
+                        "steps, on the finest convergence mesh) into the cache the node reads, then exit. Hours of "
+                        "CPU, once; azimuth 0 is shared with the full run's finest level")
     p.add_argument("--scene", default=None,
                    help="scene file (launch/scenes/*.yaml); another object than the paper's cylinder runs "
                         "flexsheet.experiments.fem_scene on it (same summary keys), e.g. --scene "
@@ -133,14 +142,15 @@ def _log(msg: str) -> None:
 
 
 # ---- reference solves (cached) -------------------------------------------------------------------------------
-def _ref_model(spec: RefSpec, angle_deg: float, mat: Material) -> HyperelasticModel:
+def _ref_model(spec: RefSpec, angle_deg: float, mat: Material, penalty_scale: float = PENALTY_SCALE
+               ) -> HyperelasticModel:
     half_z = spec.half_z and angle_deg == 0.0
     mesh = reference_mesh(replace(spec, half_z=half_z), angle_deg)
-    return HyperelasticModel(mesh, mat, sym_y=True, sym_z=half_z)
+    return HyperelasticModel(mesh, mat, sym_y=True, sym_z=half_z, penalty_scale=penalty_scale)
 
 
 def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, cache: ArrayCache,
-                   probes: np.ndarray, contact: str = DEFAULT_CONTACT) -> dict:
+                   probes: np.ndarray, contact: str = DEFAULT_CONTACT, penalty_scale: float = PENALTY_SCALE) -> dict:
     """Neo-Hookean push at ``angle_deg`` through ``depths`` (load steps = the depth spacing, ≤ 2.5 mm) on
     ``spec``'s mesh, sampled at ``probes`` (k, 3) m (display frame, mirrored into the modelled part); cached.
     Returns {"u": (D, k, 3) m, "u_dof": (D, P, 3) m float32 (every DOF point, for the snapshot table), "force",
@@ -148,16 +158,16 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
     point), "inverted_nodal_visible" (nodally inverted elements whose deformed centroid lies outside the
     footprint, > finger radius + 2 mm from the push axis), "min_detF", "max_strain", "penetration", "newton",
     "seconds", "cpu_seconds", "dofs", "converged"}. ``contact``: the finger's contact law
-    (:data:`nodes.fem.hyperelastic.CONTACT_LAWS`)."""
+    (:data:`nodes.fem.hyperelastic.CONTACT_LAWS`); ``penalty_scale``: the contact penalty κ = scale·E/h."""
     step = float(min(0.0025, np.min(np.diff(np.concatenate([[0.0], depths])))))
     key = cache_key(solver_tag(contact), spec.key(), angle_deg, np.round(depths, 9).tolist(), mat.key(), FINGER_R,
-                    cache_key(np.round(probes, 9).tobytes()), f"step={step:.6g}", f"iters={NEWTON_ITERS}")
+                    cache_key(np.round(probes, 9).tobytes()), f"step={step:.6g}", f"iters={NEWTON_ITERS}", f"pen={penalty_scale:g}")
 
     def compute() -> dict:
         t, tc = time.perf_counter(), time.process_time()
-        model = _ref_model(spec, angle_deg, mat)
+        model = _ref_model(spec, angle_deg, mat, penalty_scale)
         _log(f"reference {spec.key()} at {angle_deg:g} deg: {model.n} DOF, load steps {step * 1e3:g} mm, "
-             f"{contact} contact ...")
+             f"{contact} contact, penalty {penalty_scale:g} E/h ...")
         states = solve_path(model, math.radians(angle_deg), depths, FINGER_R, step=step, iters=NEWTON_ITERS,
                             log=lambda s: _log("  " + s.strip()), contact=contact)
         from nodes.fem.snapshots import _probe, _sample
@@ -185,7 +195,8 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
                 "seconds": np.array(time.perf_counter() - t), "cpu_seconds": np.array(time.process_time() - tc),
                 "dofs": np.array(model.n)}
 
-    z, hit, _ = cache.get_or_compute("reference", key, compute, f"reference {spec.key()} at {angle_deg:g} deg")
+    z, hit, _ = cache.get_or_compute("reference", key, compute,
+                                     f"reference {spec.key()} at {angle_deg:g} deg, penalty {penalty_scale:g} E/h")
     return z
 
 
@@ -252,6 +263,43 @@ def convergence(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMode
     _log(f"convergence: errors vs finest at 50 mm {[round(float(x[-1]), 3) for x in e]} mm, converged "
          f"{rep['converged']}")
     return rep, fine
+
+
+def penalty_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel) -> dict:
+    """Convergence in the contact penalty κ = scale·E/h on one mesh (``st.penalty_level``), azimuth 0: per
+    scale the largest visible-surface difference (mm) to the stiffest scale per depth, the deepest penetration
+    and the force at 50 mm. ``converged``: the default scale (:data:`PENALTY_SCALE`) lies within
+    ``PENALTY_TOL_MM`` of the next 10× stiffer one at every depth (the penalty error is then below the mesh's)."""
+    depths = _depths(st.depth_step)
+    verts = rm.rest_vertices.astype(float)
+    fixed = rm.mesh.fixed[rm.surface_nodes]
+    spec = st.levels[st.penalty_level]
+    scales = sorted(st.penalty_scales)
+    paths = [reference_path(spec, 0.0, depths, mat, cache, verts, st.contact, sc) for sc in scales]
+    ref = paths[-1]
+
+    def diff(p) -> list[float]:
+        return [float(np.linalg.norm(p["u"][j] - ref["u"][j], axis=1)[
+            _visible(verts + ref["u"][j], fixed, 0.0, d, rm.mesh)].max()) * 1e3 for j, d in enumerate(depths)]
+
+    rows = [{"penalty_scale": sc, "error_vs_stiffest_mm": diff(p), "penetration_mm_at_50mm": float(p["penetration"][-1]) * 1e3,
+             "penetration_mm_max": float(np.max(p["penetration"])) * 1e3, "force_N_at_50mm": float(p["force"][-1]),
+             "newton_converged": bool(p["converged"].all()), "cpu_seconds": float(p["cpu_seconds"])}
+            for sc, p in zip(scales, paths, strict=True)]
+    i = scales.index(PENALTY_SCALE)
+    nxt = 10 * PENALTY_SCALE
+    if nxt in scales:
+        j = scales.index(nxt)
+        change = float(max(np.linalg.norm(paths[i]["u"][k] - paths[j]["u"][k], axis=1)[
+            _visible(verts + paths[j]["u"][k], fixed, 0.0, d, rm.mesh)].max() for k, d in enumerate(depths))) * 1e3
+    else:
+        change = float("nan")
+    rep = {"mesh": spec.__dict__, "depths_m": depths.tolist(), "default_scale": PENALTY_SCALE, "scales": rows,
+           "default_vs_10x_stiffer_mm": change, "tolerance_mm": PENALTY_TOL_MM,
+           "converged": bool(change <= PENALTY_TOL_MM)}
+    _log(f"penalty study on h_fine {spec.h_fine * 1e3:g} mm: default vs 10x stiffer {change:.3f} mm, penetration at "
+         f"50 mm {[round(r['penetration_mm_at_50mm'], 3) for r in rows]} mm for {scales}")
+    return rep
 
 
 # ---- candidates ------------------------------------------------------------------------------------------------
@@ -419,7 +467,15 @@ def summary(st: Settings, conv: dict, cand: dict, cases: list[dict], snap_info: 
                           k: conv[k] for k in ("monotone_decrease", "last_refinement_change_mm",
                                                "finest_inverted_nodal_at_50mm", "finest_inverted_qp_at_50mm",
                                                "finest_inverted_nodal_visible_max", "finest_inverted_qp_max",
-                                               "finest_newton_converged", "converged_to_depth_mm", "criterion")},
+                                               "finest_newton_converged", "converged_to_depth_mm", "criterion",
+                                               "mesh_converged")},
+                      "penalty_study": {k: conv["penalty_study"][k] for k in (
+                          "default_scale", "default_vs_10x_stiffer_mm", "tolerance_mm", "converged")} | {
+                          "h_fine_m": conv["penalty_study"]["mesh"]["h_fine"],
+                          "scales": [{k: r[k] for k in ("penalty_scale", "penetration_mm_at_50mm", "force_N_at_50mm",
+                                                        "cpu_seconds")} | {"error_vs_stiffest_mm_max":
+                                                                           max(r["error_vs_stiffest_mm"])}
+                                     for r in conv["penalty_study"]["scales"]]},
                       "levels": [{k: lv[k] for k in ("h_fine_m", "dofs", "seconds", "cpu_seconds", "newton_converged")}
                                  | {"error_vs_finest_mm_max": max(lv["error_vs_finest_mm"]),
                                     "error_vs_finest_mm_at_50mm": lv["error_vs_finest_mm"][-1],
@@ -508,6 +564,27 @@ def plot_candidates(out: str, cand: dict, fmap: dict) -> None:
     plt.close(fig)
 
 
+def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, contact: str = DEFAULT_CONTACT) -> int:
+    """Build (or find) the FEM node's snapshot table: :data:`nodes.fem.snapshots.DEFAULT_GRID` on
+    :data:`nodes.fem.snapshots.DEFAULT_REF_SPEC`, the key the node looks up (its ``finger_radius`` default is
+    the experiment's 8 mm). Azimuth 0 is taken from the full run's finest path (solved here when not cached).
+    Returns 0."""
+    from nodes.fem.snapshots import table_key
+
+    st = replace(settings_for(False), grid=DEFAULT_GRID, snap_spec=DEFAULT_REF_SPEC, contact=contact)
+    t0 = time.perf_counter()
+    rm = realtime_model(st, mat, cache_dir)
+    _log(f"node table: azimuths {DEFAULT_GRID.angles_deg} deg on {DEFAULT_REF_SPEC.key()}; key "
+         f"{table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact)}")
+    fine = reference_path(st.levels[-1], 0.0, _depths(st.fine_step), mat, cache, rm.rest_vertices.astype(float),
+                          contact)
+    table, hit, sec = snapshot_table(st, mat, cache, fine)
+    _log(f"node table {'found in the cache' if hit else f'built in {sec:.0f} s'}: "
+         f"{sum(v.nbytes for v in table.values()) / 1e6:.0f} MB; total {time.perf_counter() - t0:.0f} s. The FEM "
+         "node loads it at start (model: auto)")
+    return 0
+
+
 # ---- main ---------------------------------------------------------------------------------------------------------
 def realtime_model(st: Settings, mat: Material, cache_dir: str | None) -> RealtimeModel:
     """The node's real-time model (linear capacitance part) on the settings' mesh."""
@@ -538,6 +615,8 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     cache = ArrayCache(args.cache_dir or None, _log)
     rm = realtime_model(st, mat, args.cache_dir or None)
+    if args.node_table:
+        return build_node_table(mat, cache, args.cache_dir or None, st.contact)
     if args.level is not None:
         if not 0 <= args.level < len(st.levels):
             raise SystemExit(f"--level must be in [0, {len(st.levels) - 1}], got {args.level}")
@@ -547,6 +626,12 @@ def main(argv: list[str] | None = None) -> int:
         _log(f"level {args.level} cached in {time.perf_counter() - t0:.1f} s")
         return 0
     conv, fine = convergence(st, mat, cache, rm)
+    pen = penalty_study(st, mat, cache, rm)
+    conv["penalty_study"] = pen
+    conv["mesh_converged"] = conv["converged"]
+    conv["converged"] = conv["converged"] and pen["converged"]
+    conv["criterion"] += (f"; and the contact penalty converged: the default {PENALTY_SCALE:g}·E/h within "
+                          f"{PENALTY_TOL_MM:g} mm of a 10x stiffer one (penalty_study)")
     table, hit, sec = snapshot_table(st, mat, cache, fine)
     if st.snap_spec == st.levels[-1]:
         sec += float(fine["seconds"])         # the solve the table was sampled from

@@ -55,7 +55,12 @@ from nodes.fem.mesh import TetMesh, cylinder_part_mesh
 __all__ = ["SOLVER_VERSION", "CONTACT_LAWS", "DEFAULT_CONTACT", "RefSpec", "HyperelasticModel", "PathState",
            "Capsule", "capsule_at", "solve_path", "solve_path_capsule", "reference_mesh", "solver_tag"]
 
-SOLVER_VERSION = "nh-4"     #: bump when the reference's formulation or defaults change (cache keys)
+SOLVER_VERSION = "nh-5"     #: bump when the reference's formulation or defaults change (cache keys)
+#: contact penalty κ = PENALTY_SCALE·E/h. Chosen by a penalty study (``flexsheet experiment fem``,
+#: ``reference.penalty_study``): on the 6 mm mesh at 50 mm the old 10³ penetrated the finger by 1.2 mm, made the
+#: force 10 % low and moved the visible surface by 2.2 mm against 10⁴; 10⁵ penetrates 0.004 mm and lies
+#: 0.03 mm from 10⁶ (docs/fem.md). Newton needs ~2.3× the CPU of 10³ for it.
+PENALTY_SCALE = 1e5
 CONTACT_LAWS = ("frictionless", "sticking")   #: finger contact laws (see :func:`solve_path_capsule`)
 DEFAULT_CONTACT = "frictionless"            #: the contact law the experiment and the snapshots use
 CONTACT_INTORDER = 10   #: facet quadrature order of the contact points (25 per facet; see the module docstring)
@@ -189,14 +194,20 @@ class HyperelasticModel:
 
     def __init__(self, mesh: TetMesh, material: Material, sym_y: bool = True, sym_z: bool = False,
                  intorder: int = 5, support: np.ndarray | None = None, E_elem: np.ndarray | None = None,
-                 nu_elem: np.ndarray | None = None, node_weight: float = NODE_WEIGHT):
+                 nu_elem: np.ndarray | None = None, node_weight: float = NODE_WEIGHT,
+                 penalty_scale: float = PENALTY_SCALE):
         """``support`` (P,) bool over the DOF points (mesh nodes first, then edge midpoints, i.e.
         ``self.points``; build it from a node mask with :meth:`dof_points` first): fixed points, replacing the
         default rule (outer-boundary points with x ≤ ``mesh.center`` x). ``E_elem`` (E,) Pa and ``nu_elem``
         (E,) per-tetrahedron Young's modulus and Poisson's ratio (either may be given; the other comes from
         ``material``): λ, μ per element (inclusions, layered bodies). Raises ``ValueError`` on a wrong shape
-        or an out-of-range value, naming the field."""
+        or an out-of-range value, naming the field. ``penalty_scale``: the contact penalty κ = scale·E/h
+        (:meth:`penalty`; > 0)."""
         from skfem import Basis, ElementTetP2, MeshTet
+
+        if not (isinstance(penalty_scale, (int, float)) and math.isfinite(penalty_scale) and penalty_scale > 0):
+            raise ValueError(f"penalty_scale must be finite and > 0, got {penalty_scale!r}")
+        self.penalty_scale = float(penalty_scale)
 
         if len(mesh.tets) == 0:
             raise ValueError("mesh has no tetrahedra")
@@ -543,9 +554,9 @@ class HyperelasticModel:
         return sp.csr_matrix((phis.ravel(), (rows, cols)), shape=(len(x), len(self.points)))
 
     def penalty(self, mesh_h: float | None = None) -> float:
-        """Contact penalty per unit area, N/m³: 1000·E/h (a contact pressure p = E penetrates p/κ = h/1000),
-        h the median size of the contact facets."""
-        return 1000.0 * self.E_ref / (mesh_h or self.h_contact)
+        """Contact penalty per unit area, N/m³: ``penalty_scale``·E/h (default :data:`PENALTY_SCALE`: a contact
+        pressure p = E penetrates p/κ = h/10⁵), h the fine contact-facet size."""
+        return self.penalty_scale * self.E_ref / (mesh_h or self.h_contact)
 
     def dof_points(self, node_mask: np.ndarray) -> np.ndarray:
         """Extend a mask over the mesh nodes (N,) bool to the DOF points (P,) bool: an edge midpoint is

@@ -11,7 +11,7 @@ needs (:func:`nodes.fem.choose.choose_model`, from ``nodes/fem/model_table.json`
 accuracy target over ``depth_max``, otherwise the nonlinear snapshots (:mod:`nodes.fem.snapshots`), loaded
 from the cache; when they are not cached the node serves the linear model and either builds them in a
 background thread at low priority (``snapshot_build``) or says how to build them
-(``flexsheet experiment fem``). The diagnostics message tells which model is being served and why.
+(``flexsheet experiment fem --node-table``). The diagnostics message tells which model is being served and why.
 The object is the ``scene`` param's (:mod:`flexsheet.model.scenes`; the launcher fills it from the launch file's
 top-level ``scene:``, as for the planner and the renderer; none = the paper's cylinder). The paper's cylinder
 (no scene, or a scene that is exactly it: same size and pose, back-half support, no inclusions) keeps the
@@ -69,7 +69,7 @@ class FemParams(BaseModel):
     ``nonlinear_steps``: depth samples of that table; ``use_prediction``: use ``predicted_position``;
     ``model``: "auto" (the model table decides), "linear" or "snapshots"; ``snapshot_build``: build missing
     snapshots in a background thread (heavy: tens of minutes on a 2-core machine; else run
-    ``flexsheet experiment fem``); ``snapshot_axial_max`` m: largest axial offset of the push served by the
+    ``flexsheet experiment fem --node-table``); ``snapshot_axial_max`` m: largest axial offset of the push served by the
     snapshots (translation along the axis). ``scene``: the scene file (launch/scenes/*.yaml; filled by the
     launcher from the launch file's ``scene:``; none = the paper's cylinder); for a scene other than the
     paper's cylinder its material, support and finger radius replace ``E``/``nu``/``finger_radius``, and
@@ -197,7 +197,7 @@ class FemNode(Node):
             return
         if not p.snapshot_build:
             self.state_message = ("fem: nonlinear snapshots not cached - serving the LINEAR model (build them with "
-                                  "`flexsheet experiment fem`, or set snapshot_build=true)")
+                                  "`flexsheet experiment fem --node-table`, or set snapshot_build=true)")
             self.log.warning(self.state_message)
             return
         self.state_message = "fem: building nonlinear snapshots in the background - serving the LINEAR model"
