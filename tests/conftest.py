@@ -67,3 +67,97 @@ def netns():
             yield names
     except RuntimeError as exc:
         pytest.fail(str(exc))
+
+
+def warm_sim_fem(launch_file: Path = ROOT / "launch" / "sim.yaml") -> bool:
+    """Precompute (or load) the FEM node's capacitance model of ``launch_file``'s ``fem`` params (the paper's
+    cylinder) in the node's default disk cache, in this process; True on a cache hit.
+
+    On a machine that never ran the display the FEM node precomputes it at start-up (~10 s alone on the 2-core
+    machine, over 60 s inside a running graph that starves it), so a launch's FEM would not be up for the first
+    part of the run. The key is the node's own (same params, same mesh choice), so the launched node hits it."""
+    import yaml
+
+    from nodes.fem.choose import choose, load_table
+    from nodes.fem.material import Material
+    from nodes.fem.mesh import MeshSpec
+    from nodes.fem.node import FemParams
+    from nodes.fem.realtime import RealtimeModel
+
+    spec = yaml.safe_load(launch_file.read_text())["nodes"]["fem"]
+    p = FemParams(**spec.get("params", {}))
+    assert p.scene is None and p.mesh_h == 0.0, "warm_sim_fem covers the paper's cylinder with the chosen mesh"
+    ch = choose(load_table(), p.accuracy_target, p.depth_min, p.depth_max, p.nu, p.finger_radius)
+    mesh = MeshSpec(ch.spec.h, ch.spec.h_fine, ch.spec.refine_radius, p.arc_deg)
+    m = RealtimeModel(mesh, Material(p.E, p.nu), p.finger_radius, p.max_depth, p.strain_limit, p.cache_dir or None,
+                      None, None, ch.order)
+    return m.cache_hit
+
+
+@pytest.fixture(scope="session")
+def sim_fem_cache() -> bool:
+    """Once per session: the FEM node's model for launch/sim.yaml (and lab_sim.yaml, same params) in the disk
+    cache before a test launches the graph (:func:`warm_sim_fem`); True when it was cached already."""
+    return warm_sim_fem()
+
+
+@pytest.fixture(scope="session")
+def lab_run(tmp_path_factory, sim_fem_cache):
+    """launch/lab_sim.yaml on three network namespaces, once per session (:func:`netns_util.run_lab`: the
+    three-host loop, a 2 s cable cut to arm1, arm2 going away); fails with the reason if the namespaces cannot
+    be made (needs root, iproute2). Returns run_lab's dict with ``out``, main's ``--out`` folder."""
+    from netns_util import run_lab
+
+    out = tmp_path_factory.mktemp("lab")
+    try:
+        r = run_lab(out)
+    except RuntimeError as exc:
+        pytest.fail(str(exc))
+    r["out"] = out
+    return r
+
+
+#: the shared sim run's script: the paper's 10 s stroke (Table I) and a 4 s stroke with a 10 mm push
+SIM_SCRIPT = "world.script=[{mode: stroke, moving_time: 10}, {mode: stroke_push, moving_time: 4, push_depth: 0.01}]"
+
+
+@pytest.fixture(scope="session")
+def sim_run(tmp_path_factory, sim_fem_cache):
+    """One launch of launch/sim.yaml (:data:`SIM_SCRIPT`, ``--set viz.port=PORT``: a free port), read by
+    tests/test_integration_sim.py (Table I, latency budget, outputs; the replay of its bag) and
+    tests/test_viz_live.py (an independent Foxglove client connected while it runs, until it has seen the FEM's
+    mesh and the finger on the object: :func:`viz_watch.watch`). One launch instead of two (~11 s).
+
+    Returns ``out`` (the launch's ``--out``), ``stdout`` (its output, stderr merged), ``code`` (exit code, or
+    "timeout" after 240 s) and ``viz`` (watch's (channels, SceneUpdate, fingertips) or the exception it raised)."""
+    import asyncio
+    import signal
+    import subprocess
+
+    from viz_watch import watch
+
+    out = tmp_path_factory.mktemp("sim")
+    log = out.parent / f"{out.name}_launch.log"
+    port = free_port()
+    with open(log, "w") as f:
+        proc = subprocess.Popen([sys.executable, "-m", "flexsheet", "launch", "launch/sim.yaml", "--out", str(out),
+                                 "--set", SIM_SCRIPT, "--set", f"viz.port={port}"],
+                                cwd=ROOT, stdout=f, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        try:
+            viz = asyncio.run(watch(port, proc))
+        except (TimeoutError, OSError) as exc:
+            viz = exc
+        try:
+            code = proc.wait(timeout=240)
+        except subprocess.TimeoutExpired:
+            code = "timeout"
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGINT)          # Ctrl-C: the launch stops its nodes
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+    return {"out": out, "stdout": log.read_text(), "code": code, "viz": viz}

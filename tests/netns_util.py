@@ -122,3 +122,72 @@ class HostLaunch:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
 
+
+
+#: one three-host run serves both namespace tests (tests/conftest.py ``lab_run``): the 6 s stroke undisturbed
+#: (its Table I row), the 10 s stroke with main's cable to arm1 pulled for CUT_S (test_partition), then arm PC 2
+#: goes away at the 5 s stroke (test_integration_netns). One launch of the three hosts instead of two (~20 s).
+LAB_SCRIPT = ("world.script=[{mode: stroke, moving_time: 6}, {mode: stroke, moving_time: 10, seed: 1}, "
+              "{mode: stroke, moving_time: 5, seed: 2}]")
+CUT_S = 2.0
+
+
+def run_lab(out: Path) -> dict:
+    """The three-host scenario of :data:`LAB_SCRIPT` with ``--out out`` on main. Returns ``main``, ``arm1``,
+    ``arm2`` (:class:`HostLaunch`, stopped), ``t_cut``/``t_back``/``t_hold`` (s, ``time.time()``), ``code``
+    (main's exit code) and per phase (``loop``, ``cut``, ``arm2_gone``) ``None`` when it went as expected or
+    the reason it did not; a failed phase does not stop the later ones (except ``loop``). Raises
+    ``RuntimeError`` when the namespaces cannot be made (not root)."""
+    r: dict = {"loop": "not run", "cut": "not run", "arm2_gone": "not run", "code": None}
+    with three_hosts() as ns:
+        arm1 = HostLaunch(ns["arm1"], "arm1")
+        arm2 = HostLaunch(ns["arm2"], "arm2")
+        main = HostLaunch(ns["main"], "main", "--out", str(out), "--set", LAB_SCRIPT)
+        r.update(main=main, arm1=arm1, arm2=arm2)
+        try:
+            try:
+                # the loop closes across hosts: the bridges on arm1/arm2 get targets from the planner on main
+                arm1.wait("left arm: ok", 90)
+                arm2.wait("right arm: ok", 90)
+                r["loop"] = None
+            except AssertionError as exc:
+                r["loop"] = str(exc)
+                return r
+            try:
+                main.wait("segment 2/3 stroke 10 s: stroke", 120)
+                time.sleep(1.0)
+                r["t_cut"] = time.time()
+                set_cable("arm1", up=False)
+                try:
+                    time.sleep(CUT_S)
+                finally:
+                    set_cable("arm1", up=True)
+                r["t_back"] = time.time()
+                # the arm held: its bridge saw no target for target_timeout and said so
+                r["t_hold"] = arm1.wait("left arm: hold:no_target", 10, after=r["t_cut"])
+                # main's launcher saw arm1's nodes go silent and come back
+                main.wait("node arm_left on host arm1 lost", 10, after=r["t_cut"])
+                main.wait("node arm_left on host arm1 is back", 15, after=r["t_back"])
+                # the bridge follows targets again
+                arm1.wait("left arm: ok", 15, after=r["t_hold"])
+                r["cut"] = None
+            except (AssertionError, subprocess.CalledProcessError) as exc:
+                r["cut"] = str(exc)
+            try:
+                # at the last stroke, arm PC 2 goes away: main's launcher sees its nodes' heartbeats stop
+                main.wait("segment 3/3 stroke 5 s", 120)
+                r["t_arm2_gone"] = time.time()
+                arm2.proc.send_signal(signal.SIGINT)
+                arm2.proc.wait(timeout=30)
+                main.wait("node arm_right on host arm2 lost", 15, after=r["t_arm2_gone"])
+                r["arm2_gone"] = None
+            except (AssertionError, subprocess.TimeoutExpired) as exc:
+                r["arm2_gone"] = str(exc)
+            try:
+                r["code"] = main.proc.wait(timeout=120)
+            except subprocess.TimeoutExpired:
+                r["code"] = "no exit in 120 s"
+        finally:
+            for h in (main, arm1, arm2):
+                h.stop()
+    return r

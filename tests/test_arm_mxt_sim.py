@@ -1,7 +1,7 @@
 """The paper's stroking run (Table I, 10 s stroke) through the whole simulated graph with both arms on MELFA
 real-time external control (MXT/UDP twins) instead of Modbus: ``flexsheet launch launch/sim.yaml --set
 arm_left.protocol=mxt --set ctrl_left.protocol=mxt ...`` (issue 13: "the full stroking run must pass through
-MXT twins too"). Heavy (one sim launch, ~40 s on 2 cores)."""
+MXT twins too"). Heavy (one sim launch, ~30 s on 2 cores)."""
 
 from __future__ import annotations
 
@@ -37,21 +37,10 @@ def _private_copy(dst: Path) -> Path:
     return dst
 
 
-def _warm_start(launch: Path, tmp_path: Path) -> None:
-    """On a machine that never ran the display (a clean CI clone), the first launch precomputes the FEM's
-    capacitance matrix and the twin's registration while the stroke runs, which starves the 2-core machine; run
-    the graph once without measuring so the measured run starts as every later run does (cached)."""
-    from nodes.fem.cache import DEFAULT_CACHE_DIR
-
-    if any(Path(DEFAULT_CACHE_DIR).glob("capacitance_*.npz")):
-        return
-    subprocess.run([sys.executable, "-m", "flexsheet", "launch", str(launch), "--out", str(tmp_path / "warm"),
-                    "--duration", "60", "--set", SCRIPT], cwd=ROOT, capture_output=True, text=True, timeout=300)
-
-
-def test_table1_stroke_through_mxt_twins(tmp_path):
+def test_table1_stroke_through_mxt_twins(tmp_path, sim_fem_cache):
+    # sim_fem_cache: the FEM's precompute is in the disk cache before the launch (tests/conftest.py), so the
+    # measured run starts as every later run does instead of starving the 2-core machine with it
     launch = _private_copy(tmp_path / "sim_mxt.yaml")
-    _warm_start(launch, tmp_path)
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "flexsheet", "launch", str(launch), "--out", str(out), "--duration", "150",
            "--set", SCRIPT]

@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,13 +24,32 @@ from flexsheet.model import scene
 from flexsheet.model.display_calib import ENTRIES, load_display_calib, nominal_display_calib
 from flexsheet.model.truth import TwinTruth
 
-SEEDS = (1, 2, 3)
+#: the truth seeds of the twin's quick registration that tests/test_camera_realism.py and
+#: tests/test_correction_twin.py load (sim_display_calib(seed, quick=True)): run here fresh, then shared
+SEEDS = (0, 1, 2)
+
+
+def _share_with_the_cache(seed: int, out: Path) -> None:
+    """Put this fresh run's files where :func:`flexsheet.calibration.procedures.sim_display_calib` caches the
+    realistic quick registration of ``seed`` (when that entry is absent), so the tests that load it do not run
+    the same procedures again: the same call (seed, realism, QUICK) whose summary key run_display_sim checks."""
+    root = os.environ.get("FLEXSHEET_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "flexsheet")
+    dst = Path(root) / "display" / f"realistic-{int(seed)}-quick"
+    if (dst / "summary.json").is_file() and (dst / "display.yaml").is_file():
+        return
+    dst.mkdir(parents=True, exist_ok=True)
+    for name in ("display.yaml", "summary.json"):       # summary last: it is what marks the entry complete
+        tmp = dst / f".{name}.{os.getpid()}"
+        shutil.copyfile(out / name, tmp)
+        os.replace(tmp, dst / name)
 
 
 @pytest.fixture(scope="module", params=SEEDS)
 def sim(request, tmp_path_factory):
     out = tmp_path_factory.mktemp(f"display{request.param}")
-    return request.param, out, run_display_sim(request.param, str(out), QUICK, progress=None)
+    s = run_display_sim(request.param, str(out), QUICK, progress=None)     # always run here, never cached
+    _share_with_the_cache(request.param, out)
+    return request.param, out, s
 
 
 def test_every_procedure_within_target(sim):

@@ -64,10 +64,12 @@ PUBLISHES = {
     "renderer": ["/render/stereo"],
     "world": ["/world/finger", "/world/sheet"],
 }
-#: the paper's two stroking speeds (Table I rows 30 s and 10 s) and a third stroke: 79 s of script span
-#: all the kills even when a cold FEM start (no precompute cache on a fresh machine) takes ~10 s
-SCRIPT = ("world.script=[{mode: stroke, moving_time: 30}, {mode: stroke, moving_time: 10, seed: 1}, "
-          "{mode: stroke, moving_time: 30, seed: 2}]")
+#: the paper's two stroking speeds (Table I rows 30 s and 10 s): ~45 s of script. All the kills are done
+#: ~27 s after the first segment starts (measured warm, loaded 2-core machine: recorder at +0 s ... last arm
+#: pair up at +27 s), i.e. still in the 30 s stroke, and the 10 s stroke after them shows the graph recovered.
+#: The FEM's precompute is cached before the launch (conftest.sim_fem_cache): a cold FEM start inside the
+#: graph took > 60 s on a fresh machine and the FEM was not up for its kill.
+SCRIPT = "world.script=[{mode: stroke, moving_time: 30}, {mode: stroke, moving_time: 10, seed: 1}]"
 SETTLE = 1.5              # s after a respawn (or, for WAIT_UP nodes, after "up") before the next kill
 #: longer for the recorder: "up" is before its subscriptions have connected to every publisher (ZeroMQ joins
 #: late), and the next group's streams must be in its new bag before they are cut — on a cold machine one run
@@ -160,7 +162,7 @@ def run_scenario(out: Path, cut_copy: Path) -> dict:
     launch = Launch(lf, out, "--set", SCRIPT)
     kills = []
     try:
-        launch.wait(r"\[world\s*\] .*segment 1/3", 120)
+        launch.wait(r"\[world\s*\] .*segment 1/2", 120)
         for group in KILL_GROUPS:
             victims = {}
             for name in group:   # each must be up before it is killed
@@ -232,7 +234,7 @@ def analyse_bag(bag: Path, summary: BagSummary | None = None) -> dict:
 
 
 @pytest.fixture(scope="module")
-def faults(tmp_path_factory):
+def faults(tmp_path_factory, sim_fem_cache):
     out = tmp_path_factory.mktemp("faults")
     cut = out.parent / f"{out.name}_cut.mcap"
     run = run_scenario(out, cut)
@@ -273,8 +275,10 @@ def test_the_recording_loses_only_the_dead_nodes_own_messages(faults):
             assert len(t["restarts"]) == 1, (topic, t["restarts"])
             a, b = t["restarts"][0]
             # the stream stopped at the kill and came back once the respawned node was up (t_started is when the
-            # launcher's "started pid" line was read, up to ~0.1 s after the fork on a loaded machine)
-            assert a <= k["t_kill"] + 0.05 and b >= k["t_started"] - 0.1, (topic, a, b, k)
+            # launcher's "started pid" line was read, up to ~0.1 s after the fork on a loaded machine; a is the
+            # recorder's receive time of the last message sent before the kill: 0.077 s after it was seen at
+            # load 9 on the 2 cores, so 0.15 s — the stream is down for seconds, several of its 20 ms periods)
+            assert a <= k["t_kill"] + 0.15 and b >= k["t_started"] - 0.1, (topic, a, b, k)
         else:
             assert t["restarts"] == [], (topic, t["restarts"])
 
@@ -344,6 +348,9 @@ if __name__ == "__main__":
     d = Path(tempfile.mkdtemp(prefix="faults_"))
     out, cut = d / "out", d / "cut.mcap"
     out.mkdir()
+    from conftest import warm_sim_fem
+
+    warm_sim_fem()
     t0 = time.time()
     run = run_scenario(out, cut)
     print(f"wall {time.time() - t0:.1f} s, launch exit {run['code']}")

@@ -260,7 +260,7 @@ def test_reference_converges_with_refinement_at_moderate_depth():
     out = []
     for hf in (0.008, 0.0057, 0.004):
         m = H.HyperelasticModel(H.reference_mesh(H.RefSpec(0.016, hf, 0.018, True), 0.0), MAT, True, True)
-        st = H.solve_path(m, 0.0, [0.01, 0.02], 0.008, step=0.0025)
+        st = H.solve_path(m, 0.0, [0.01, 0.02], 0.008, step=0.005)
         assert all(s.converged for s in st)
         out.append([_sample(_probe(m, pts), s.u, pts, m) for s in st])
     assert st[-1].inverted == 0 and st[-1].min_detF > 0

@@ -9,26 +9,16 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from flexsheet.runtime.bag import bag_info, read_bag
 from flexsheet.runtime.codec import decode_any
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPT = "world.script=[{mode: stroke, moving_time: 10}, {mode: stroke_push, moving_time: 4, push_depth: 0.01}]"
 
 
 def _launch(args: list[str], timeout: float) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "flexsheet", "launch", *args], cwd=ROOT, capture_output=True,
                           text=True, timeout=timeout)
-
-
-@pytest.fixture(scope="module")
-def sim_run(tmp_path_factory):
-    out = tmp_path_factory.mktemp("sim")
-    res = _launch(["launch/sim.yaml", "--out", str(out), "--set", SCRIPT], timeout=240)
-    assert res.returncode == 0, res.stdout[-6000:] + res.stderr[-3000:]
-    return out, res.stdout
 
 
 def _by_stamp(bag: Path, topic: str) -> dict[float, object]:
@@ -40,7 +30,10 @@ def _by_stamp(bag: Path, topic: str) -> dict[float, object]:
 
 
 def test_sim_launch_prints_table1_and_latency_and_leaves_outputs(sim_run):
-    out, stdout = sim_run
+    """The shared sim run (tests/conftest.py ``sim_run``: the 10 s stroke and a 4 s stroke with a push; a
+    Foxglove client watched it for tests/test_viz_live.py) ended normally and reported from its bag."""
+    out, stdout = sim_run["out"], sim_run["stdout"]
+    assert sim_run["code"] == 0, stdout[-8000:]
     assert "Table I" in stdout and "Latency budget per hop" in stdout
     summary = json.loads((out / "summary.json").read_text())
     row = summary["10"]
@@ -50,7 +43,11 @@ def test_sim_launch_prints_table1_and_latency_and_leaves_outputs(sim_run):
     assert summary["twin"]["realism"] == "realistic" and summary["twin"]["truth_seed"] == 0
     assert row["n"] > 200
     assert 0.0 < row["dtheta_mean_deg"] < 1.0 and 0.0 < row["dd_mean_mm"] < 1.0, row
-    assert abs(row["dd_2r_mean_mm"] - 2.0 * row["dd_mean_mm"]) < 1e-4 * row["dd_2r_mean_mm"]   # paper's 2R beside ours
+    # paper's 2R beside ours: per sample 2R·Δθ against twice the chord 2R·sin(Δθ/2), larger by Δθ²/24 relative
+    # (module doc of flexsheet/experiments/table1.py); a few degrees of Δθ in a loaded run's samples made the means
+    # differ by 2.3e-5 .. 7.1e-4 relative in three runs (2-core machine at load 5-9), so 3e-3, and never below
+    d2r = row["dd_2r_mean_mm"] - 2.0 * row["dd_mean_mm"]
+    assert -1e-9 <= d2r < 3e-3 * row["dd_2r_mean_mm"], row
     assert summary["faults"]["watchdog"] >= 0 and "camera_frame_to_arm_command" in summary["latency_ms"]
     assert "stroke_push_4" in summary                      # the combined stroke and push ran too
     lat = summary["latency_ms"]
@@ -63,7 +60,8 @@ def test_sim_launch_prints_table1_and_latency_and_leaves_outputs(sim_run):
 
 
 def test_replay_reproduces_the_live_outputs(sim_run, tmp_path):
-    out, _ = sim_run
+    out = sim_run["out"]
+    assert sim_run["code"] == 0, sim_run["stdout"][-8000:]
     res = _launch(["launch/replay.yaml", "--out", str(tmp_path), "--set", f"player.file={out / 'sim.mcap'}"],
                   timeout=180)
     assert res.returncode == 0, res.stdout[-6000:]

@@ -73,7 +73,7 @@ def test_missing_sheet_table_is_built_in_a_worker_while_drawing(tmp_path):
     while a worker process builds it, then with the fine model. A coarse FEM mesh keeps the build to seconds."""
     from flexsheet.model.sheet import clamp_poses
 
-    params = dict(PARAMS, sheet_cache=str(tmp_path), sheet_mesh={"h_fine": 0.012, "h_coarse": 0.024})
+    params = dict(PARAMS, sheet_cache=str(tmp_path), sheet_mesh={"h_fine": 0.02, "h_coarse": 0.04})
 
     async def scenario():
         async with NodeHarness(RendererNode, params=params) as h:

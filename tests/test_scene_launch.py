@@ -41,8 +41,10 @@ def test_sim_launch_on_the_sphere_scene_reports_the_scene_and_dtheta(tmp_path):
     of the stroke; Δθ 0.58° measured (0.62° with the planner's own Hertz estimate). An earlier 4.7–20.9° was a
     table-building worker beside the graph (docs/renderer.md), not the sphere."""
     key = _warm_fem("sphere")
+    # the 10 s stroke alone (the default script's first segment): the run ends with it (world exits, 13 s of
+    # script) instead of being cut by --duration inside the 30 s stroke that follows it
     res = subprocess.run([sys.executable, "-m", "flexsheet", "launch", "launch/sim.yaml", "--set",
-                          "scene=launch/scenes/sphere.yaml",
+                          "scene=launch/scenes/sphere.yaml", "--set", "world.script=[{mode: stroke, moving_time: 10}]",
                           "--duration", "25", "--out", str(tmp_path)],
                          cwd=ROOT, capture_output=True, text=True, timeout=300)
     out = res.stdout + res.stderr

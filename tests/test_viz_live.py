@@ -11,95 +11,18 @@ own code): cylinder radius R = 0.025·√2 m, length 0.120 m, axis along y throu
 
 from __future__ import annotations
 
-import asyncio
 import base64
-import math
-import os
-import signal
-import subprocess
-import sys
-import time
-from pathlib import Path
 
 import numpy as np
-from conftest import free_port
-
-from nodes.viz.wsclient import FoxgloveClient
-
-ROOT = Path(__file__).resolve().parents[1]
-R = 0.025 * math.sqrt(2.0)                  # paper's cylinder radius, m (docs/scenes.md, BRIEF conventions)
-HALF_LENGTH = 0.060                         # half its 0.120 m length, m
-AXIS_X = -R                                 # axis along y through (-R, 0, 0)
+from viz_watch import HALF_LENGTH, R, _off_surface, _radius
 
 
-def _radius(p: np.ndarray) -> np.ndarray:
-    """Distance of points (N, 3) from the cylinder axis, m."""
-    return np.hypot(p[:, 0] - AXIS_X, p[:, 2])
-
-
-async def _connect(port: int, proc: subprocess.Popen, timeout: float) -> FoxgloveClient:
-    deadline = time.monotonic() + timeout
-    while True:
-        try:
-            return await FoxgloveClient.open(port)
-        except OSError:
-            if proc.poll() is not None or time.monotonic() > deadline:
-                raise
-            await asyncio.sleep(0.5)
-
-
-def _off_surface(position) -> float:
-    """Distance of a point (3,) m from the cylinder's curved surface (radially), m."""
-    return abs(float(_radius(np.asarray(position, dtype=float)[None])[0]) - R)
-
-
-async def _watch(port: int, proc: subprocess.Popen) -> tuple[dict, object, list[dict]]:
-    """Connect, subscribe, and return (channels, a decoded SceneUpdate holding the FEM mesh, the valid /fingertip
-    messages up to the first one within 3 mm of the surface: the finger on the object)."""
-    c = await _connect(port, proc, timeout=90.0)
-    try:
-        await c.wait_channels({"/viz/scene", "/viz/tf", "/fingertip", "/camera/left"}, timeout=10.0)
-        await c.subscribe(["/viz/scene", "/viz/tf", "/fingertip"])
-        scene, tips = None, []
-        deadline = time.monotonic() + 60.0
-        while scene is None or not tips or _off_surface(tips[-1]["position"]) > 0.003:
-            m = await c.recv(deadline)   # raises TimeoutError: the sim never produced them
-            if m is None:
-                continue
-            topic, _, payload = m
-            if topic == "/viz/scene" and scene is None:
-                su = c.decode(topic, payload)
-                ents = {e.id: e for e in su.entities}
-                if "object" in ents and ents["object"].triangles:   # the FEM's mesh, not the fallback cylinder
-                    scene = su
-            elif topic == "/fingertip":
-                msg = c.decode(topic, payload)
-                if msg["valid"]:
-                    tips.append(msg)
-        return c.channels, scene, tips
-    finally:
-        await c.ws.close()
-
-
-def test_independent_client_sees_the_running_sim(tmp_path):
-    port = free_port()
-    log = tmp_path / "launch.log"
-    with open(log, "w") as f:
-        proc = subprocess.Popen([sys.executable, "-m", "flexsheet", "launch", "launch/sim.yaml", "--duration", "100",
-                                 "--out", str(tmp_path / "sim"), "--set", f"viz.port={port}"],
-                                cwd=ROOT, stdout=f, stderr=subprocess.STDOUT, start_new_session=True)
-    try:
-        channels, su, tips = asyncio.run(_watch(port, proc))
-    except (TimeoutError, OSError) as exc:
-        raise AssertionError(f"{exc!r}; launch output:\n{log.read_text()[-5000:]}") from exc
-    finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)       # Ctrl-C: the launch stops its nodes
-            try:
-                proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
+def test_independent_client_sees_the_running_sim(sim_run):
+    """The client was connected while the shared sim run (tests/conftest.py ``sim_run``: launch/sim.yaml with
+    ``--set viz.port=PORT``) ran, until it had the FEM's mesh and the finger on the object."""
+    if isinstance(sim_run["viz"], BaseException):
+        raise AssertionError(f"{sim_run['viz']!r}; launch output:\n{sim_run['stdout'][-5000:]}")
+    channels, su, tips = sim_run["viz"]
 
     # advertised channels and their schema names (Foxglove's own schemas; our topics as JSON + jsonschema)
     names = {t: (ch["schemaName"], ch["encoding"]) for t, ch in channels.items()}

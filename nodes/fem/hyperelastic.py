@@ -371,7 +371,8 @@ class HyperelasticModel:
     def stick_anchors(self, u: np.ndarray, caps: Capsule, anchors: np.ndarray | None = None) -> np.ndarray:
         """Sticking contact: the anchors (Fc, Qf, 3) m (see :class:`Capsule`) after a converged state ``u``
         (P, 3) m with the finger ``caps``: points already stuck keep theirs, every other contact quadrature
-        point inside the finger (gap < 0) is stuck to the finger point nearest to it (x − g n, on the
+        point in touch with the finger (gap < ε, the penalty's onset width: with a stiff penalty the points
+        carrying load sit at 0 ≤ g < ε, not inside) is stuck to the finger point nearest to it (x − g n, on the
         finger's surface, so the force it carries is continuous), relative to ``caps.center``."""
         x = self._contact_x(u)
         g, n = caps.gap(x.reshape(-1, 3))
@@ -379,7 +380,7 @@ class HyperelasticModel:
         out = np.full(x.shape, np.nan) if anchors is None else np.array(anchors, float, copy=True)
         if out.shape != x.shape:
             raise ValueError(f"anchors must have shape {x.shape}, got {out.shape}")
-        new = (g < 0) & ~np.isfinite(out[..., 0])
+        new = (g < self.eps) & ~np.isfinite(out[..., 0])
         out[new] = x[new] - g[new][:, None] * n[new] - caps.center
         return out
 
