@@ -84,7 +84,7 @@ def test_penalty_study_shows_the_default_penalty_converged(quick):
     d, stiff = pen["default_scale"], 10 * pen["default_scale"]
     assert set(rows) == {d, stiff}
     assert rows[d]["penetration_mm_at_50mm"] < 0.05
-    assert rows[stiff]["penetration_mm_at_50mm"] < rows[d]["penetration_mm_at_50mm"]
+    assert rows[stiff]["penetration_mm_at_50mm"] <= rows[d]["penetration_mm_at_50mm"]
     assert 0 < pen["default_vs_10x_stiffer_mm"] == pytest.approx(max(rows[d]["error_vs_stiffest_mm"]))
     assert pen["converged"] == (pen["default_vs_10x_stiffer_mm"] <= pen["tolerance_mm"] == 0.1)
     assert pen["converged"]
@@ -150,6 +150,8 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     p = FemParams()
     assert seen["path"] == (DEFAULT_REF_SPEC, 0.0, pytest.approx(0.05))
     assert seen["build"] == (DEFAULT_GRID, DEFAULT_REF_SPEC, p.nu, p.finger_radius)
+    with pytest.raises(SystemExit, match="node-table"):
+        X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--quick"])
     table, hit, _ = load_or_build(ArrayCache(str(tmp_path / "c")), DEFAULT_GRID, DEFAULT_REF_SPEC,
                                   Material(p.E, p.nu), p.finger_radius, build=False)
     assert hit and np.array_equal(table["marker"], np.arange(3.0))

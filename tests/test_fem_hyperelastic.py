@@ -333,8 +333,14 @@ def test_sticking_residual_and_tangent_are_the_derivatives_of_the_energy(quarter
     a = m.stick_anchors(u, caps)
     stuck = np.isfinite(a[..., 0])
     assert 5 < stuck.sum() < stuck.size
+    # anchored along the finger's normal where the sticking spring carries the penalty's force at that gap
+    # (continuous force when a point sticks): |x − anchor|·k = −φ'(g), so the anchor lies ε/2 … ε outside
+    x = m._contact_x(u)[stuck]
+    gx, _ = caps.gap(x)
+    d1 = H._pen(gx, m.penalty(), m.eps)[1]
+    assert np.allclose(m.penalty() * np.linalg.norm(x - caps.center - a[stuck], axis=1), -d1, rtol=1e-9, atol=1e-9)
     g, _ = caps.gap(caps.center + a[stuck])
-    assert np.abs(g).max() < 1e-12                                       # anchored on the finger's surface
+    assert np.all((g > 0.5 * m.eps - 1e-12) & (g < m.eps + 1e-12)), (g.min(), g.max())
     deeper = H.capsule_at(0.0, 0.009, 0.008, m.mesh.radius, m.mesh.center)
     a2 = m.stick_anchors(u, deeper, a)                                 # deeper: more points stick
     assert np.isfinite(a2[..., 0]).sum() > stuck.sum() and np.array_equal(a2[stuck], a[stuck])
@@ -373,7 +379,9 @@ def test_sticking_push_holds_the_surface_on_the_finger(quarter):
     c4, c8 = (H.capsule_at(0.0, d, 0.008, m.mesh.radius, m.mesh.center).center for d in (0.004, 0.008))
     on = np.linalg.norm(m._contact_x(st[1].u)[stuck] - c8 - a[stuck], axis=1).max()
     assert on < 5e-5                                                    # held on its finger point
-    rel = [np.linalg.norm((m._contact_x(s[1].u)[stuck] - c8) - (m._contact_x(s[0].u)[stuck] - c4), axis=1).max()
+    held = np.isfinite(st[0].extra["anchors"][..., 0])                # stuck already at 4 mm
+    assert held.sum() >= 1
+    rel = [np.linalg.norm((m._contact_x(s[1].u)[held] - c8) - (m._contact_x(s[0].u)[held] - c4), axis=1).max()
            for s in (fr, st)]                                           # motion relative to the finger, 4 -> 8 mm
     assert rel[1] < 0.3 * rel[0], rel
     with pytest.raises(ValueError, match="contact"):

@@ -269,7 +269,8 @@ def penalty_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMo
     """Convergence in the contact penalty κ = scale·E/h on one mesh (``st.penalty_level``), azimuth 0: per
     scale the largest visible-surface difference (mm) to the stiffest scale per depth, the deepest penetration
     and the force at 50 mm. ``converged``: the default scale (:data:`PENALTY_SCALE`) lies within
-    ``PENALTY_TOL_MM`` of the next 10× stiffer one at every depth (the penalty error is then below the mesh's)."""
+    ``PENALTY_TOL_MM`` of the next 10× stiffer one at every depth (the penalty error is then below the mesh's)
+    and Newton converged at every load step of both."""
     depths = _depths(st.depth_step)
     verts = rm.rest_vertices.astype(float)
     fixed = rm.mesh.fixed[rm.surface_nodes]
@@ -296,7 +297,8 @@ def penalty_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMo
         change = float("nan")
     rep = {"mesh": spec.__dict__, "depths_m": depths.tolist(), "default_scale": PENALTY_SCALE, "scales": rows,
            "default_vs_10x_stiffer_mm": change, "tolerance_mm": PENALTY_TOL_MM,
-           "converged": bool(change <= PENALTY_TOL_MM)}
+           "converged": bool(change <= PENALTY_TOL_MM and rows[i]["newton_converged"]
+                             and (nxt not in scales or rows[scales.index(nxt)]["newton_converged"]))}
     _log(f"penalty study on h_fine {spec.h_fine * 1e3:g} mm: default vs 10x stiffer {change:.3f} mm, penetration at "
          f"50 mm {[round(r['penetration_mm_at_50mm'], 3) for r in rows]} mm for {scales}")
     return rep
@@ -614,9 +616,12 @@ def main(argv: list[str] | None = None) -> int:
     st = replace(settings_for(args.quick), contact=args.contact)
     t0 = time.perf_counter()
     cache = ArrayCache(args.cache_dir or None, _log)
-    rm = realtime_model(st, mat, args.cache_dir or None)
     if args.node_table:
+        if args.quick or args.level is not None:
+            raise SystemExit("flexsheet experiment fem: --node-table builds the node's full table; it takes neither "
+                             "--quick nor --level")
         return build_node_table(mat, cache, args.cache_dir or None, st.contact)
+    rm = realtime_model(st, mat, args.cache_dir or None)
     if args.level is not None:
         if not 0 <= args.level < len(st.levels):
             raise SystemExit(f"--level must be in [0, {len(st.levels) - 1}], got {args.level}")

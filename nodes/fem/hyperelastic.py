@@ -21,17 +21,21 @@ the accuracy reference the real-time models are judged against (docs/fem.md, "Ph
   it, along −p̂), non-penetration at the contact quadrature points of the outer surface
   (order :data:`CONTACT_INTORDER`: 25 points per facet, because the facets around the tip stretch several
   times over and the fingertip slipped between the 6 points of the order-4 rule), penalty
-  E_c = k/2 Σ w min(g_i, 0)² (gap g_i = distance to the capsule's axis segment − r); k scales with E and the
-  element size so that penetration stays ~1 % of the element size (reported). A real finger, not a bonded
+  E_c = Σ w φ(g_i) (gap g_i = distance to the capsule's axis segment − r; φ a C² penalty that starts
+  ε = 20 µm before contact, :func:`_pen`); k = :data:`PENALTY_SCALE`·E/h, chosen by a penalty study (the
+  visible surface within 0.03 mm of a 10× stiffer finger; the loaded points stand off by < ε or penetrate
+  < 0.02 mm at 50 mm, reported). A real finger, not a bonded
   imposed displacement (the linear model's contact): material slides along it and wraps around it.
   Optionally (``contact="sticking"``, :func:`solve_path_capsule`) a fingertip that does not slip: points that
   touch it stick to it. It removes the frictionless snap-through under the tip but mesh-converges worse
   (docs/fem.md), so frictionless stays the default (:data:`DEFAULT_CONTACT`).
 * **Support** as the linear model's: outer boundary points with x ≤ x_O fixed. Symmetry planes y = y_O
   (a push at y = y_O) and z = z_O (a push at azimuth 0) carry the normal displacement 0.
-* **Newton**: minimise Π = ∫W dV + E_c; each step solves K_t δ = −r (sparse LDLᵀ, QDLDL, which also tells
-  whether K_t is positive definite; where it is not — far from equilibrium — the material tangent is projected
-  to its positive part, Teran et al. 2005), then a backtracking line search keeps det F > 0 at every quadrature
+* **Newton**: minimise Π = ∫W dV + E_c; each step solves K_t δ = −r, first by PCG preconditioned with the
+  last sparse LDLᵀ factorisation (Newton–Krylov with a lagged preconditioner, :data:`PCG_RTOL`), else by a
+  fresh LDLᵀ (QDLDL, which also tells whether K_t is positive definite; PCG's negative curvature tells it too).
+  Where K_t is not positive definite — far from equilibrium — the material tangent is projected to its
+  positive part (Teran et al. 2005). Then a backtracking line search keeps det F > 0 at every quadrature
   point and decreases Π (Armijo), with at most 1 mm of motion per iteration so no surface point can jump
   across the finger. Load stepping: depth in steps
   of ``step`` m with a linear-extrapolation predictor. Converged when ‖δ‖∞ < ``tol_u`` and the free
@@ -43,6 +47,7 @@ Units SI: m, N, Pa. Display frame (cylinder axis along +y through ``mesh.center`
 from __future__ import annotations
 
 import math
+import numbers
 import time
 from dataclasses import dataclass, field, replace
 
@@ -59,7 +64,8 @@ SOLVER_VERSION = "nh-5"     #: bump when the reference's formulation or defaults
 #: contact penalty κ = PENALTY_SCALE·E/h. Chosen by a penalty study (``flexsheet experiment fem``,
 #: ``reference.penalty_study``): on the 6 mm mesh at 50 mm the old 10³ penetrated the finger by 1.2 mm, made the
 #: force 10 % low and moved the visible surface by 2.2 mm against 10⁴; 10⁵ penetrates 0.004 mm and lies
-#: 0.03 mm from 10⁶ (docs/fem.md). Newton needs ~2.3× the CPU of 10³ for it.
+#: 0.03 mm from 10⁶ (docs/fem.md). Newton needs ~2.3× the CPU of 10³ for it. Changing it needs a
+#: SOLVER_VERSION bump (the snapshot tables' cache key carries the solver tag, not the penalty).
 PENALTY_SCALE = 1e5
 CONTACT_LAWS = ("frictionless", "sticking")   #: finger contact laws (see :func:`solve_path_capsule`)
 DEFAULT_CONTACT = "frictionless"            #: the contact law the experiment and the snapshots use
@@ -205,7 +211,8 @@ class HyperelasticModel:
         (:meth:`penalty`; > 0)."""
         from skfem import Basis, ElementTetP2, MeshTet
 
-        if not (isinstance(penalty_scale, (int, float)) and math.isfinite(penalty_scale) and penalty_scale > 0):
+        if isinstance(penalty_scale, bool) or not isinstance(penalty_scale, numbers.Real) \
+                or not (math.isfinite(penalty_scale) and penalty_scale > 0):
             raise ValueError(f"penalty_scale must be finite and > 0, got {penalty_scale!r}")
         self.penalty_scale = float(penalty_scale)
 
@@ -372,8 +379,9 @@ class HyperelasticModel:
         """Sticking contact: the anchors (Fc, Qf, 3) m (see :class:`Capsule`) after a converged state ``u``
         (P, 3) m with the finger ``caps``: points already stuck keep theirs, every other contact quadrature
         point in touch with the finger (gap < ε, the penalty's onset width: with a stiff penalty the points
-        carrying load sit at 0 ≤ g < ε, not inside) is stuck to the finger point nearest to it (x − g n, on the
-        finger's surface, so the force it carries is continuous), relative to ``caps.center``."""
+        carrying load sit at 0 ≤ g < ε, not inside) is stuck: its anchor is placed along the finger's normal
+        where the sticking spring k/2 |x − anchor|² carries the penalty's force at that gap (x − φ'(g)/k n), so
+        the force is continuous when it sticks; relative to ``caps.center``."""
         x = self._contact_x(u)
         g, n = caps.gap(x.reshape(-1, 3))
         g, n = g.reshape(x.shape[:2]), n.reshape(x.shape)
@@ -381,7 +389,8 @@ class HyperelasticModel:
         if out.shape != x.shape:
             raise ValueError(f"anchors must have shape {x.shape}, got {out.shape}")
         new = (g < self.eps) & ~np.isfinite(out[..., 0])
-        out[new] = x[new] - g[new][:, None] * n[new] - caps.center
+        d1 = _pen(g[new], self.penalty(), self.eps)[1]                  # φ'(g) ≤ 0: the push-out force
+        out[new] = x[new] - (d1 / self.penalty())[:, None] * n[new] - caps.center
         return out
 
     def _contact_dE(self, u: np.ndarray, caps: Capsule, k: float, facets: np.ndarray, curvature: bool = True):
@@ -415,15 +424,15 @@ class HyperelasticModel:
         return g.reshape(x.shape[:2]), n.reshape(x.shape), self._cf_w[facets], dn.reshape(x.shape + (3,))
 
     def contact_force(self, u: np.ndarray, caps: Capsule, k: float) -> tuple[np.ndarray, float, int]:
-        """(force the finger applies to this part (3,) N, deepest penetration m, contact points in touch or
-        stuck)."""
+        """(force the finger applies to this part (3,) N, deepest penetration m, contact points in touch (gap
+        below the penalty's onset ε) or stuck)."""
         g, n, w = self._contact_gaps(u, caps)
         stuck = np.isfinite(caps.anchors[..., 0]) if caps.anchors is not None else np.zeros(g.shape, bool)
         fa = np.flatnonzero(np.any((g < self.eps) | stuck, axis=1))
         if not len(fa):
             return np.zeros(3), 0.0, 0
         f, _, wf = self._contact_dE(u, caps, k, fa, curvature=False)
-        return (-(wf[..., None] * f)).sum(axis=(0, 1)), float(max(0.0, -g.min())), int(np.sum((g < 0) | stuck))
+        return (-(wf[..., None] * f)).sum(axis=(0, 1)), float(max(0.0, -g.min())), int(np.sum((g < self.eps) | stuck))
 
     def residual_tangent(self, u: np.ndarray, caps: Capsule | None, k: float, need_K: bool = True,
                          project: bool = False):
@@ -555,8 +564,10 @@ class HyperelasticModel:
         return sp.csr_matrix((phis.ravel(), (rows, cols)), shape=(len(x), len(self.points)))
 
     def penalty(self, mesh_h: float | None = None) -> float:
-        """Contact penalty per unit area, N/m³: ``penalty_scale``·E/h (default :data:`PENALTY_SCALE`: a contact
-        pressure p = E penetrates p/κ = h/10⁵), h the fine contact-facet size."""
+        """Contact penalty per unit area, N/m³: ``penalty_scale``·E/h (default :data:`PENALTY_SCALE`), h the fine
+        contact-facet size. With the smoothed onset (:func:`_pen`) a point carries pressure p at the stand-off
+        g = ε − √(2εp/κ) for p < κε/2 (≈ 290·E on the 3.4 mm mesh) and penetrates (p − κε/2)/κ beyond: the
+        geometric contact error is at most ε = 20 µm plus that penetration."""
         return self.penalty_scale * self.E_ref / (mesh_h or self.h_contact)
 
     def dof_points(self, node_mask: np.ndarray) -> np.ndarray:
@@ -599,6 +610,8 @@ def _pcg(A: sp.csr_matrix, b: np.ndarray, precond, rtol: float, maxiter: int) ->
     (None, maxiter) when ‖r‖ ≤ ``rtol``·‖b‖ is not reached in ``maxiter`` iterations (Saad, *Iterative Methods for Sparse Linear
     Systems*, 2nd ed., alg. 9.1)."""
     x = np.zeros_like(b)
+    if not np.any(b):
+        return x, 0
     r = b.copy()
     z = precond(r)
     p = z.copy()
@@ -632,6 +645,8 @@ PCG_MAXITER = 60
 def _pcg_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict) -> tuple[np.ndarray | None, bool]:
     """Newton step δ (n,) from K δ = −r by PCG preconditioned with ``state["pc"]``, or None; and whether PCG
     met negative curvature (K is then not positive definite: no factorisation of it is tried)."""
+    if state.get("pc_n") != Kc.shape[0]:          # a preconditioner from another model: not usable
+        return None, False
     x, its = _pcg(Kc, -rf, state["pc"].solve, PCG_RTOL, PCG_MAXITER)
     if x is not None and np.all(np.isfinite(x)) and float(rf @ x) < 0:
         state["pcg"] = state.get("pcg", 0) + 1
@@ -666,7 +681,7 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
             if neg:
                 indefinite = True
             else:
-                state["pc"], delta = lu, -lu.solve(rf)
+                state["pc"], state["pc_n"], delta = lu, model.n, -lu.solve(rf)
         if delta is None:           # not positive definite (far from equilibrium): projected tangent, this step
             state["projected"] = state.get("projected", 0) + 1
             _, K = model.residual_tangent(u, caps, k, project=True)
@@ -682,9 +697,10 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
                 dmax = float(np.abs(Kc.diagonal()).max())
                 shift = 1e-4 * dmax
                 while neg and shift <= 1.0 * dmax:
+                    state["factorisations"] += 1
                     lu, neg = _ldl(Kc + shift * sp.identity(model.n, format="csr"))
                     shift *= 100.0
-                state["pc"] = lu if not neg else None
+                state["pc"], state["pc_n"] = (lu, model.n) if not neg else (None, None)
                 delta = -lu.solve(rf)
         if not np.all(np.isfinite(delta)):
             raise FloatingPointError(f"non-finite Newton step at iteration {it}")
@@ -712,11 +728,15 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
             log(f"    newton {it}: |r|={rn:.3e} N, |du|={step * 1e3:.4f} mm, alpha={alpha:.3g}")
         if step < tol_u and rn < max(tol_r, 1e-12):
             return u, it, True
-        # stagnation: a tiny step that the line search had to cut, or a full step that no longer reduces the
-        # residual (round-off floor). A tiny *full* Newton step with a falling residual is not stagnation: the
+        # stagnation: a tiny step that the line search had to cut, or a residual (taken before this step) that
+        # the previous step did not halve (round-off floor). A tiny *full* Newton step with a falling residual is not stagnation: the
         # stiff contact penalty makes the step tiny long before the residual is (3.4 mm mesh at 50 mm:
         # |du| < 1e-8 m at |r| = 1.4e-4 N, one iteration before quadratic convergence reaches the tolerance)
         if step < 0.01 * tol_u and (alpha < 1.0 or rn > 0.5 * rn_prev):
+            if from_pcg:            # maybe only PCG's inexactness: one exact step before calling it stagnation
+                state["pc"] = None
+                rn_prev = rn
+                continue
             return u, it, rn < 10 * tol_r
         rn_prev = rn
     return u, iters, False
@@ -751,7 +771,8 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
     surface slides freely on the finger; ``"sticking"`` — a fingertip that does not slip on soft tissue
     (infinite friction): a contact quadrature point that is inside the finger at a converged load step is stuck
     to the finger point nearest to it (:meth:`HyperelasticModel.stick_anchors`) and from the next load step
-    on follows the finger (penalty k/2 |x − anchor|², the same k); anchors are added after every load step,
+    on follows the finger (penalty k/2 |x − anchor|², the same k; "inside" is gap < ε, the penalty's onset,
+    :meth:`HyperelasticModel.stick_anchors`); anchors are added after every load step,
     never released (a monotone push). Raises ``ValueError`` on bad depths or an unknown ``contact`` and
     ``RuntimeError`` when a step has no valid iterate at all."""
     depths = np.asarray(depths, float)
