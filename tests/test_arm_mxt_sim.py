@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
 
 from flexsheet.model.kinematics import QD_MAX
@@ -37,6 +38,11 @@ def _private_copy(dst: Path) -> Path:
     return dst
 
 
+# a 150 s real-time run of the whole graph on a shared 2-core machine: the servo-lag percentile depends on the
+# scheduler (one warm full-suite run of 2026-11-22 saw p95 1.7 deg on the left arm; the cold full run before it
+# and the file alone after it passed, p95 < 1.15 deg). One rerun on failure; the rerun must meet every assertion
+# (pytest-rerunfailures, `-rR` lists it).
+@pytest.mark.flaky(reruns=1)
 def test_table1_stroke_through_mxt_twins(tmp_path, sim_fem_cache):
     # sim_fem_cache: the FEM's precompute is in the disk cache before the launch (tests/conftest.py), so the
     # measured run starts as every later run does instead of starving the 2-core machine with it
