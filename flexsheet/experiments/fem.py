@@ -20,11 +20,12 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 3. ``summary.json``: ``realtime.update_ms``, ``realtime.max_visible_error_mm_0_50``, ``reference.converged``
    with the convergence figures.
 
-``--quick``: two coarse meshes (h_fine 12 / 9 mm), 5 mm outputs, snapshots every 10 mm: a test's run, ≈ 30 s
-of CPU cold (minutes of wall time on the loaded shared machine), seconds cached; it does not meet the targets
-and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4.5 / 3.4 mm, :data:`FULL_LEVELS`, 2.5 mm
-outputs, snapshots every 5 mm) takes about 45 min of CPU cold (36 of them the 3.4 mm mesh); ``--level N`` solves one mesh only (to run the levels in
-parallel processes), every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds.
+``--quick``: two coarse meshes (h_fine 12 / 9 mm), 5 mm outputs, snapshots every 10 mm, a penalty study of
+two scales: a test's run, 70 s cold on the idle 2-core machine, seconds cached; it does not meet the targets
+and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4.5 / 3.4 mm, :data:`FULL_LEVELS`,
+2.5 mm outputs, snapshots every 5 mm, penalty study) took 42 min of wall time cold on the shared 2-core machine
+(20 min of CPU the 3.4 mm mesh); ``--level N`` solves one mesh only (to run the levels in parallel processes),
+every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds.
 ``--linear-study`` also reruns the linear mesh study (``accuracy_table.json``, ``hertz``, ``stability``).
 """
 
@@ -213,6 +214,14 @@ def _visible(points: np.ndarray, fixed: np.ndarray, angle_deg: float, depth: flo
     return visible_mask(points, fg) & ~fixed
 
 
+def _visible_diffs(a: dict, b: dict, depths: np.ndarray, verts: np.ndarray, fixed: np.ndarray, mesh) -> list[float]:
+    """Largest distance (m) between two reference paths' fields ``a["u"]``, ``b["u"]`` (D, k, 3) m at the
+    rendered vertices ``verts`` (k, 3) m, per depth (D,) m, over the vertices visible on ``b``'s deformed
+    surface (:func:`_visible`, azimuth 0)."""
+    return [float(np.linalg.norm(a["u"][j] - b["u"][j], axis=1)[_visible(verts + b["u"][j], fixed, 0.0, d, mesh)].max())
+            for j, d in enumerate(depths)]
+
+
 def convergence(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel) -> tuple[dict, dict]:
     """Mesh convergence at azimuth 0 on the rendered vertices; returns (report, finest level's path, sampled
     every ``st.fine_step``)."""
@@ -226,8 +235,7 @@ def convergence(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMode
     paths.append({k: (v[sub] if np.ndim(v) and len(v) == len(fdepths) else v) for k, v in fine.items()})
     rep = {"depths_m": depths.tolist(), "levels": []}
     for s, p in zip(st.levels, paths, strict=True):
-        err = [float(np.linalg.norm(p["u"][j] - paths[-1]["u"][j], axis=1)[
-            _visible(verts + paths[-1]["u"][j], fixed, 0.0, d, rm.mesh)].max()) for j, d in enumerate(depths)]
+        err = _visible_diffs(p, paths[-1], depths, verts, fixed, rm.mesh)
         rep["levels"].append({"spec": s.__dict__, "h_fine_m": s.h_fine, "dofs": int(p["dofs"]),
                               "seconds": float(p["seconds"]), "error_vs_finest_mm": [e * 1e3 for e in err],
                               "force_N": p["force"].tolist(), "inverted_nodal": p["inverted"].tolist(),
@@ -277,13 +285,8 @@ def penalty_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMo
     spec = st.levels[st.penalty_level]
     scales = sorted(st.penalty_scales)
     paths = [reference_path(spec, 0.0, depths, mat, cache, verts, st.contact, sc) for sc in scales]
-    ref = paths[-1]
-
-    def diff(p) -> list[float]:
-        return [float(np.linalg.norm(p["u"][j] - ref["u"][j], axis=1)[
-            _visible(verts + ref["u"][j], fixed, 0.0, d, rm.mesh)].max()) * 1e3 for j, d in enumerate(depths)]
-
-    rows = [{"penalty_scale": sc, "error_vs_stiffest_mm": diff(p), "penetration_mm_at_50mm": float(p["penetration"][-1]) * 1e3,
+    rows = [{"penalty_scale": sc,
+             "error_vs_stiffest_mm": [e * 1e3 for e in _visible_diffs(p, paths[-1], depths, verts, fixed, rm.mesh)], "penetration_mm_at_50mm": float(p["penetration"][-1]) * 1e3,
              "penetration_mm_max": float(np.max(p["penetration"])) * 1e3, "force_N_at_50mm": float(p["force"][-1]),
              "newton_converged": bool(p["converged"].all()), "cpu_seconds": float(p["cpu_seconds"])}
             for sc, p in zip(scales, paths, strict=True)]
@@ -291,8 +294,7 @@ def penalty_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMo
     nxt = 10 * PENALTY_SCALE
     if nxt in scales:
         j = scales.index(nxt)
-        change = float(max(np.linalg.norm(paths[i]["u"][k] - paths[j]["u"][k], axis=1)[
-            _visible(verts + paths[j]["u"][k], fixed, 0.0, d, rm.mesh)].max() for k, d in enumerate(depths))) * 1e3
+        change = max(_visible_diffs(paths[i], paths[j], depths, verts, fixed, rm.mesh)) * 1e3
     else:
         change = float("nan")
     rep = {"mesh": spec.__dict__, "depths_m": depths.tolist(), "default_scale": PENALTY_SCALE, "scales": rows,

@@ -607,8 +607,8 @@ def _ldl(K: sp.spmatrix):
 def _pcg(A: sp.csr_matrix, b: np.ndarray, precond, rtol: float, maxiter: int) -> tuple[np.ndarray | None, int]:
     """Preconditioned conjugate gradients for A x = b (A symmetric; ``precond(r)`` applies M⁻¹). Returns
     (x, iterations), (None, −iterations) on negative curvature (pᵀAp ≤ 0: A is not positive definite), or
-    (None, maxiter) when ‖r‖ ≤ ``rtol``·‖b‖ is not reached in ``maxiter`` iterations (Saad, *Iterative Methods for Sparse Linear
-    Systems*, 2nd ed., alg. 9.1)."""
+    (None, maxiter) when ‖r‖ ≤ ``rtol``·‖b‖ is not reached in ``maxiter`` iterations (Saad, *Iterative
+    Methods for Sparse Linear Systems*, 2nd ed., alg. 9.1)."""
     x = np.zeros_like(b)
     if not np.any(b):
         return x, 0
@@ -654,6 +654,33 @@ def _pcg_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict) -> tuple[np.ndarra
     return None, its < 0
 
 
+def _tangent_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict, projected: bool) -> tuple[np.ndarray | None, bool]:
+    """(Newton step δ (n,) solving Kc δ = −rf, whether PCG gave it). PCG with the lagged factorisation
+    (:func:`_pcg_step`) first, else a fresh LDLᵀ that becomes the next preconditioner. On the true tangent
+    (``projected`` False) returns (None, False) when Kc is not positive definite (PCG met negative curvature, or
+    the LDLᵀ has non-positive pivots): the caller then takes the projected tangent. On the projected
+    (semi-definite) tangent, rounding can leave a few non-positive pivots: a diagonal shift, ×100 per try (at
+    most 3 more factorisations; each is seconds on 20k+ DOF)."""
+    if state.get("pc") is not None:         # lagged factorisation as preconditioner (one PCG solve)
+        x, indefinite = _pcg_step(Kc, rf, state)
+        if x is not None:
+            return x, True
+        if indefinite and not projected:
+            return None, False
+    state["factorisations"] = state.get("factorisations", 0) + 1
+    lu, neg = _ldl(Kc)
+    if neg and not projected:
+        return None, False
+    dmax = float(np.abs(Kc.diagonal()).max())
+    shift = 1e-4 * dmax
+    while neg and shift <= 1.0 * dmax:
+        state["factorisations"] += 1
+        lu, neg = _ldl(Kc + shift * sp.identity(Kc.shape[0], format="csr"))
+        shift *= 100.0
+    state["pc"], state["pc_n"] = (lu, Kc.shape[0]) if not neg else (None, None)
+    return -lu.solve(rf), False
+
+
 def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, iters: int, tol_u: float,
             tol_r: float, log, state: dict | None = None, max_step: float = 0.001) -> tuple[np.ndarray, int, bool]:
     """Minimise Π from ``u``; returns (u, iterations, converged). ``state`` (dict) carries between calls the
@@ -670,38 +697,11 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
         r, K = model.residual_tangent(u, caps, k)
         rf = np.zeros(model.n)
         rf[free] = r[free]
-        Kc = model.constrained(K)
-        delta, from_pcg, indefinite = None, False, False
-        if state.get("pc") is not None:         # lagged factorisation as preconditioner (one PCG solve)
-            delta, indefinite = _pcg_step(Kc, rf, state)
-            from_pcg = delta is not None
-        if delta is None and not indefinite:
-            state["factorisations"] = state.get("factorisations", 0) + 1
-            lu, neg = _ldl(Kc)
-            if neg:
-                indefinite = True
-            else:
-                state["pc"], state["pc_n"], delta = lu, model.n, -lu.solve(rf)
+        delta, from_pcg = _tangent_step(model.constrained(K), rf, state, projected=False)
         if delta is None:           # not positive definite (far from equilibrium): projected tangent, this step
             state["projected"] = state.get("projected", 0) + 1
             _, K = model.residual_tangent(u, caps, k, project=True)
-            Kc = model.constrained(K)
-            if state.get("pc") is not None:
-                delta, _ = _pcg_step(Kc, rf, state)
-                from_pcg = delta is not None
-            if delta is None:
-                state["factorisations"] = state.get("factorisations", 0) + 1
-                lu, neg = _ldl(Kc)
-                # rounding can leave the projected (semi-definite) tangent with a few non-positive pivots: a
-                # diagonal shift, ×100 per try (at most 3 more factorisations; each is seconds on 20k+ DOF)
-                dmax = float(np.abs(Kc.diagonal()).max())
-                shift = 1e-4 * dmax
-                while neg and shift <= 1.0 * dmax:
-                    state["factorisations"] += 1
-                    lu, neg = _ldl(Kc + shift * sp.identity(model.n, format="csr"))
-                    shift *= 100.0
-                state["pc"], state["pc_n"] = (lu, model.n) if not neg else (None, None)
-                delta = -lu.solve(rf)
+            delta, from_pcg = _tangent_step(model.constrained(K), rf, state, projected=True)
         if not np.all(np.isfinite(delta)):
             raise FloatingPointError(f"non-finite Newton step at iteration {it}")
         d3 = delta.reshape(-1, 3)
@@ -729,9 +729,9 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
         if step < tol_u and rn < max(tol_r, 1e-12):
             return u, it, True
         # stagnation: a tiny step that the line search had to cut, or a residual (taken before this step) that
-        # the previous step did not halve (round-off floor). A tiny *full* Newton step with a falling residual is not stagnation: the
-        # stiff contact penalty makes the step tiny long before the residual is (3.4 mm mesh at 50 mm:
-        # |du| < 1e-8 m at |r| = 1.4e-4 N, one iteration before quadratic convergence reaches the tolerance)
+        # the previous step did not halve (round-off floor). A tiny *full* Newton step with a falling residual
+        # is not stagnation: the stiff contact penalty makes the step tiny long before the residual is (3.4 mm
+        # mesh at 50 mm: |du| < 1e-8 m at |r| = 1.4e-4 N, one iteration before quadratic convergence)
         if step < 0.01 * tol_u and (alpha < 1.0 or rn > 0.5 * rn_prev):
             if from_pcg:            # maybe only PCG's inexactness: one exact step before calling it stagnation
                 state["pc"] = None
