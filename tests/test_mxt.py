@@ -78,14 +78,16 @@ static void print_reply(const MXTCMD *r) {
          (unsigned)r->TCount, j->j1, j->j2, j->j3, j->j4, j->j5, j->j6, f->j1, f->j2, f->j3, f->j4, f->j5, f->j6);
 }
 
-static int drain(int s, int timeout_ms) {   /* print every reply that arrives within timeout_ms */
-  MXTCMD r; int n = 0; struct pollfd p = {s, POLLIN, 0};
-  while (poll(&p, 1, timeout_ms) > 0) {
-    ssize_t k = recv(s, &r, sizeof r, 0);
-    if (k == (ssize_t)sizeof r) { print_reply(&r); n++; }
-    timeout_ms = 0;
+/* print replies until one with CCount == ccount arrives or timeout_ms passes; 1 if it came */
+static int wait_for(int s, uint32_t ccount, int timeout_ms) {
+  MXTCMD r; double t_end = now_s() + 1e-3 * timeout_ms; struct pollfd p = {s, POLLIN, 0};
+  for (double dt; (dt = t_end - now_s()) > 0;) {
+    if (poll(&p, 1, (int)ceil(dt * 1000.0)) > 0 && recv(s, &r, sizeof r, 0) == (ssize_t)sizeof r) {
+      print_reply(&r);
+      if (r.CCount == ccount) return 1;
+    }
   }
-  return n;
+  return 0;
 }
 
 int main(int argc, char **argv) {
@@ -135,16 +137,17 @@ int main(int argc, char **argv) {
     printf("cmd %d %.6f %.9g %.9g %.9g %.9g %.9g %.9g\n", i, now_s() - t0, q.dat.jnt.j1, q.dat.jnt.j2,
            q.dat.jnt.j3, q.dat.jnt.j4, q.dat.jnt.j5, q.dat.jnt.j6);
   }
-  drain(s, 300);
+  wait_for(s, (uint32_t)n, 5000);      /* the last MOVE's reply (earlier ones are printed on the way) */
   if (do_end) {
     memset(&q, 0, sizeof q); q.Command = MXT_CMD_END; q.CCount = (uint32_t)(n + 1);
     send(s, &q, sizeof q, 0);
-    drain(s, 200);
+    /* the END reply first (a loaded machine may take longer than any fixed drain: wait for it) */
+    wait_for(s, (uint32_t)(n + 1), 5000);
     /* after END the controller's Mxt has finished: a further MOVE gets no answer */
     memset(&q, 0, sizeof q); q.Command = MXT_CMD_MOVE; q.SendType = MXT_TYP_JOINT; q.RecvType = MXT_TYP_JOINT;
     q.dat.jnt = q0; q.CCount = (uint32_t)(n + 2);
     send(s, &q, sizeof q, 0);
-    printf("after_end_replies %d\n", drain(s, 200));
+    printf("after_end_replies %d\n", wait_for(s, (uint32_t)(n + 2), 500));
   }
   fflush(stdout);
   close(s);

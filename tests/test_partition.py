@@ -52,11 +52,21 @@ def test_a_2s_cut_to_arm1_holds_that_arm_and_it_recovers_without_a_jump(lab_run)
     status_cut = {s[3] for s in left if t_cut < s[0] < t_back}
     assert "hold:no_target" in status_cut, status_cut
     assert any(s[3] == "ok" for s in left if s[0] > t_back + 1.0)
-    steps = np.array([np.max(np.abs(b[2] - a[2]) / limit) for a, b in zip(left, left[1:], strict=False)])
+    # A controller watchdog trip (the bridge's loop late by 3 periods: a scheduling stall on this shared 2-core
+    # machine, not the cut) makes the bridge restart from the measured joints, where the tripped controller
+    # holds the arm: that reseed is not a commanded motion, so steps into or out of a trip are left out, and
+    # trips must stay rare (the loop runs SCHED_FIFO in launch/lab_sim.yaml; measured 0-1 per arm per run,
+    # 15-67 at nice -5).
+    trips = {arm: sum(a[3] != "fault:watchdog" and b[3] == "fault:watchdog" for a, b in zip(s, s[1:], strict=False))
+             for arm, s in states.items()}
+    assert max(trips.values()) <= 3, trips
+    steps = np.array([np.max(np.abs(b[2] - a[2]) / limit) for a, b in zip(left, left[1:], strict=False)
+                      if "fault:watchdog" not in (a[3], b[3])])
     assert steps.max() <= STEP_TOLERANCE + 1e-6, steps.max()
     # the other arm went on following targets through the cut
     right_cut = {s[3] for s in states["right"] if t_cut + 0.5 < s[0] < t_back}
     assert "ok" in right_cut, right_cut
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["counts"]["/arm/left/joint_state"] > 100
-    print(f"partition: hold after {t_hold - t_cut:.2f} s, largest commanded step {steps.max():.2f} × limit")
+    print(f"partition: hold after {t_hold - t_cut:.2f} s, largest commanded step {steps.max():.2f} × limit, "
+          f"watchdog trips {trips}")
