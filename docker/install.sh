@@ -2,8 +2,8 @@
 # Install everything flexsheet needs on a bare Debian 12 machine (as root) or in the Docker image.
 # .ci/run and docker/Dockerfile both call this script, so CI and the image install the same things.
 #
-# Order (to overlap the two slow halves): apt's build dependencies of the Python packages first (PyGObject and
-# pycairo have no wheels: pip compiles them, ~30 s), then pip in the background (downloads, compiles, installs:
+# Order (to overlap the two slow halves): apt's build dependencies of the Python packages first (PyGObject,
+# pycairo and scikit-sparse have no wheels: pip compiles them, ~30 s + ~18 s), then pip in the background (downloads, compiles, installs:
 # ~1 min with an empty pip cache, measured on the 2-core machine) while apt installs the runtime libraries
 # (Mesa, X, Xvfb, Aravis with its GTK viewer, iproute2), which pip does not need to install the wheels.
 set -euo pipefail
@@ -12,9 +12,11 @@ export DEBIAN_FRONTEND=noninteractive
 APT_INSTALL=(apt-get install -y -qq --no-install-recommends)
 pip_log=$(mktemp)
 if command -v apt-get >/dev/null 2>&1; then
-  echo "[install] apt packages to build PyGObject and pycairo: gcc, pkg-config, GObject introspection and cairo headers"
+  echo "[install] apt packages to build PyGObject, pycairo and scikit-sparse: gcc, pkg-config, GObject" \
+       "introspection, cairo and SuiteSparse (CHOLMOD) headers"
   apt-get update -qq
-  "${APT_INSTALL[@]}" libgirepository1.0-dev libcairo2-dev pkg-config gobject-introspection gcc libc6-dev >/dev/null
+  "${APT_INSTALL[@]}" libgirepository1.0-dev libcairo2-dev pkg-config gobject-introspection gcc libc6-dev \
+    libsuitesparse-dev >/dev/null
 fi
 echo "[install] python packages (pyproject.toml, with the test extra), in the background"
 python3 -m pip install -q --disable-pip-version-check -e ".[test]" >"$pip_log" 2>&1 &

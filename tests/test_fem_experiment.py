@@ -113,43 +113,69 @@ def test_second_run_reads_the_cache(quick):
     assert s2["reference"]["levels"] == s1["reference"]["levels"]
 
 
-def test_full_settings_end_on_the_nodes_snapshot_mesh():
-    """The node's snapshot table (DEFAULT_REF_SPEC) is solved on the finest mesh of the full convergence study,
-    so the accuracy the experiment reports is the node's; the levels refine by ~1.33 each."""
+def test_full_settings_judge_the_nodes_snapshot_mesh_against_a_finer_one():
+    """The node's snapshot table (DEFAULT_REF_SPEC) is one of the full convergence study's meshes and the
+    snapshots the experiment judges are taken on it, against a finer mesh: the accuracy reported is the
+    node's, and it includes its mesh's own error. The levels refine by ~1.33 each."""
     from flexsheet.experiments.fem import settings_for
     from nodes.fem.snapshots import DEFAULT_REF_SPEC
 
-    lv = settings_for(False).levels
-    assert len(lv) >= 3 and lv[-1] == DEFAULT_REF_SPEC
+    st = settings_for(False)
+    lv = st.levels
+    assert len(lv) >= 3 and DEFAULT_REF_SPEC in lv and st.snap_spec == DEFAULT_REF_SPEC
+    assert lv[-1].h_fine < DEFAULT_REF_SPEC.h_fine
     ratios = [a.h_fine / b.h_fine for a, b in zip(lv[:-1], lv[1:], strict=True)]
     assert all(1.2 < r < 1.45 for r in ratios), ratios
 
 
+def _fake_path_dict(n_dof: int, depths) -> dict:
+    d = len(depths)
+    return {"u_dof": np.zeros((d, n_dof, 3), np.float32), "force": np.arange(d, dtype=float),
+            "newton": np.ones(d, int), "converged": np.ones(d, bool), "min_detF": np.ones(d),
+            "inverted": np.zeros(d, int), "max_strain": np.zeros(d), "penetration": np.zeros(d)}
+
+
 def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeypatch):
     """`--node-table` builds DEFAULT_GRID on DEFAULT_REF_SPEC with the node's default finger and material, and
-    stores it under the key the FEM node loads (the solves themselves are hours: replaced by a marker table)."""
+    stores it under the key the FEM node loads; each azimuth's states come from a cached reference path on the
+    table's mesh (quarter model at 0, half model elsewhere), and `--azimuth A` solves just that path (the
+    solves themselves are hours: replaced by markers)."""
+    from dataclasses import replace
+
     from flexsheet.experiments import fem as X
     from nodes.fem.cache import ArrayCache
     from nodes.fem.material import Material
     from nodes.fem.node import FemParams
     from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_or_build
 
-    seen = {}
+    paths, seen = [], {}
 
     def fake_path(spec, angle_deg, depths, mat, cache, probes, contact="frictionless", penalty_scale=None):
-        seen["path"] = (spec, angle_deg, depths[-1])
-        return {"u_dof": None}
+        paths.append((spec, angle_deg, round(float(depths[-1]), 9), len(depths)))
+        return _fake_path_dict(4, depths)
 
-    def fake_build(grid, spec, material, finger_radius, **kw):
+    def fake_build(grid, spec, material, finger_radius, solved=None, **kw):
         seen["build"] = (grid, spec, material.nu, finger_radius)
+        seen["states"] = {a: solved(a, None, grid.depths()[1:]) for a in (0.0, 30.0)}
         return {"marker": np.arange(3.0), "seconds": np.array([1.0])}
 
     monkeypatch.setattr(X, "reference_path", fake_path)
     monkeypatch.setattr("nodes.fem.snapshots.build_table", fake_build)
     assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table"]) == 0
     p = FemParams()
-    assert seen["path"] == (DEFAULT_REF_SPEC, 0.0, pytest.approx(0.05))
     assert seen["build"] == (DEFAULT_GRID, DEFAULT_REF_SPEC, p.nu, p.finger_radius)
+    half = replace(DEFAULT_REF_SPEC, half_z=False)
+    assert paths == [(DEFAULT_REF_SPEC, 0.0, 0.05, 20), (half, 30.0, 0.05, 20)]
+    st30 = seen["states"][30.0]
+    assert [s.depth for s in st30] == pytest.approx(DEFAULT_GRID.depths()[1:]) and st30[-1].force == 19.0
+    paths.clear()
+    assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table",
+                   "--azimuth", "20"]) == 0
+    assert paths == [(half, 20.0, 0.05, 20)]
+    with pytest.raises(SystemExit, match="--azimuth must be one of"):
+        X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--azimuth", "15"])
+    with pytest.raises(SystemExit, match="--azimuth is for --node-table"):
+        X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--azimuth", "10"])
     with pytest.raises(SystemExit, match="node-table"):
         X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--quick"])
     table, hit, _ = load_or_build(ArrayCache(str(tmp_path / "c")), DEFAULT_GRID, DEFAULT_REF_SPEC,

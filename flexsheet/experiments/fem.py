@@ -12,9 +12,10 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    every load step of the finest mesh and none of its elements is inverted at a quadrature point.
 2. **Candidates**, judged on the real-time model's rendered vertices outside the finger's footprint
    (lateral distance from the push axis > finger radius + 2 mm; the footprint is hidden by the finger):
-   the linear P2 capacitance model, and the nonlinear snapshots (:mod:`nodes.fem.snapshots`), sampled from the
-   finest reference solve every other output depth and judged at every output depth, so the depths between
-   snapshots are held out. Accuracy against speed (``accuracy_speed.png/.json``) and the failure map, where
+   the linear P2 capacitance model, and the nonlinear snapshots (:mod:`nodes.fem.snapshots`), sampled every
+   5 mm from the reference solve on the node's mesh (h_fine 3.4 mm, the next-to-finest level) and judged at
+   every output depth against the finest mesh (h_fine 2.5 mm): the depths between snapshots are held out, and
+   the snapshot mesh's own error is in the figure. Accuracy against speed (``accuracy_speed.png/.json``) and the failure map, where
    each model breaks by depth (and azimuth, where more than 0 is run) (``failure_map.png/.json``).
    ``nodes/fem/model_table.json`` (full mode) is what the node chooses from.
 3. ``summary.json``: ``realtime.update_ms``, ``realtime.max_visible_error_mm_0_50``, ``reference.converged``
@@ -63,7 +64,7 @@ from nodes.fem.solver import solve_full
 __all__ = ["main", "Settings", "settings_for"]
 
 FINGER_R = 0.008
-FULL_LEVELS = (0.008, 0.006, 0.0045, 0.0034)   #: h_fine (m) of the full run's convergence meshes, coarse → fine
+FULL_LEVELS = (0.008, 0.006, 0.0045, 0.0034, 0.0025)   #: h_fine (m) of the full run's meshes, coarse → fine
 TARGET = 0.0007
 PENALTY_TOL_MM = 0.1    #: the default penalty must lie this close (visible surface) to a 10× stiffer one
 NEWTON_ITERS = 60       #: per load step; a snap-through step (a crease forming beside the finger) needs ~25
@@ -92,17 +93,19 @@ class Settings:
 def settings_for(quick: bool) -> Settings:
     """The ``--quick`` or the full settings. Every mesh is refined along the whole push path (a tube of radius
     18 mm from the contact point to 55 mm deep, graded to ``h`` over a further 18 mm), the refinement ratio
-    between levels ≈ 1.33. The snapshot table is the finest level's solution every ``2·fine_step``; the
-    finest level is also sampled at the depths in between, where the snapshots are checked (held out)."""
+    between levels ≈ 1.33. The snapshot table is the solution on ``snap_spec`` every ``grid.depth_step``
+    (full: the node's mesh, the next-to-finest level; quick: the finest); it is judged against the finest level
+    at every ``fine_step``."""
     if quick:
         lv = [RefSpec(0.016, hf, 0.018, True, 0.055) for hf in (0.012, 0.009)]
         return Settings(levels=lv, depth_step=0.005, fine_step=0.005,
                         grid=SnapshotGrid((0.0,), 0.05, 0.01, 1.0, 0.001, 0.002), snap_spec=lv[-1], holdout_deg=(),
                         linear_spec=MeshSpec(0.016, 0.006, 0.012, 0.0), n_time=50, quick=True, penalty_level=0,
                         penalty_scales=(PENALTY_SCALE, 10 * PENALTY_SCALE))
-    lv = [replace(DEFAULT_REF_SPEC, h_fine=hf) for hf in FULL_LEVELS]     # the finest is DEFAULT_REF_SPEC
+    lv = [replace(DEFAULT_REF_SPEC, h_fine=hf) for hf in FULL_LEVELS]
     grid = SnapshotGrid((0.0,), 0.05, 0.005, DEFAULT_GRID.dtheta_deg, DEFAULT_GRID.dy, DEFAULT_GRID.drho)
-    return Settings(levels=lv, depth_step=0.0025, fine_step=0.0025, grid=grid, snap_spec=lv[-1], holdout_deg=(),
+    # the snapshots on the node's mesh (DEFAULT_REF_SPEC, the next-to-finest level), judged against the finest
+    return Settings(levels=lv, depth_step=0.0025, fine_step=0.0025, grid=grid, snap_spec=DEFAULT_REF_SPEC, holdout_deg=(),
                     linear_spec=MeshSpec(0.012, 0.004, 0.012, 60.0), n_time=1000)
 
 
@@ -110,6 +113,7 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="flexsheet experiment fem", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog="example: flexsheet experiment fem --quick --out /tmp/fem\n"
+                                       "         flexsheet experiment fem --out /tmp/fem --node-table --azimuth 10\n"
                                        "         flexsheet experiment fem --quick --scene launch/scenes/sphere.yaml "
                                        "--out /tmp/fem_sphere")
     p.add_argument("--out", required=True, help="output directory")
@@ -129,8 +133,12 @@ def _parser() -> argparse.ArgumentParser:
                         "tissue) or frictionless (default %(default)s)")
     p.add_argument("--node-table", action="store_true",
                    help="build the FEM node's nonlinear snapshot table (azimuths 0-60 deg every 10 deg, 2.5 mm depth "
-                        "steps, on the finest convergence mesh) into the cache the node reads, then exit. Hours of "
-                        "CPU, once; azimuth 0 is shared with the full run's finest level")
+                        "steps, on the full run's h_fine 3.4 mm mesh) into the cache the node reads, then exit. "
+                        "~35 min of one core per azimuth (0 is shared with the full run's 3.4 mm level); every "
+                        "azimuth's solve is cached")
+    p.add_argument("--azimuth", type=float, default=None, metavar="DEG",
+                   help="with --node-table: solve only this azimuth's path into the cache and exit (run the "
+                        "azimuths in parallel processes, then --node-table alone assembles the table)")
     p.add_argument("--scene", default=None,
                    help="scene file (launch/scenes/*.yaml); another object than the paper's cylinder runs "
                         "flexsheet.experiments.fem_scene on it (same summary keys), e.g. --scene "
@@ -322,26 +330,41 @@ def validation_set(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeM
     return out
 
 
-def snapshot_table(st: Settings, mat: Material, cache: ArrayCache, fine: dict) -> tuple[dict, bool, float]:
-    """The snapshot table of these settings (cached): (table, cache hit, seconds to build). At azimuth 0 on the
-    finest convergence mesh it is sampled from that solve (``fine``, every ``fine_step``), not solved again."""
+def _path_states(src: dict, src_depths: np.ndarray, depths) -> list[PathState] | None:
+    """The states of the cached reference path ``src`` (:func:`reference_path`, solved at ``src_depths`` (D,) m)
+    at ``depths`` m, as :class:`PathState` for :func:`nodes.fem.snapshots.build_table`; None if one is missing."""
+    out = []
+    for d in depths:
+        j = int(np.argmin(np.abs(src_depths - d)))
+        if abs(src_depths[j] - d) > 1e-9:
+            return None
+        out.append(PathState(float(d), src["u_dof"][j].astype(float), float(src["force"][j]), np.zeros(3),
+                             int(src["newton"][j]), bool(src["converged"][j]), float(src["min_detF"][j]),
+                             int(src["inverted"][j]), float(src["max_strain"][j]), float(src["penetration"][j]), 0))
+    return out
+
+
+def snapshot_source(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, fine: dict):
+    """``solved`` for :func:`snapshot_table`: azimuth 0 sampled from the convergence solve on the snapshot mesh
+    when ``st.snap_spec`` is one of the levels (``fine`` when it is the finest; another level is read from the
+    cache the convergence study filled), so nothing is solved twice; None otherwise. Also returns that solve
+    (or None) for its timing."""
+    if st.snap_spec == st.levels[-1]:
+        src, sd = fine, _depths(st.fine_step)
+    elif st.snap_spec in st.levels:
+        sd = _depths(st.depth_step)
+        src = reference_path(st.snap_spec, 0.0, sd, mat, cache, rm.rest_vertices.astype(float), st.contact)
+    else:
+        return None, None
+    return (lambda ang, model, depths: _path_states(src, sd, depths) if ang == 0.0 else None), src
+
+
+def snapshot_table(st: Settings, mat: Material, cache: ArrayCache, solved) -> tuple[dict, bool, float]:
+    """The snapshot table of these settings (cached): (table, cache hit, seconds to build). ``solved``:
+    callable (azimuth deg, model, depths m) → states or None (:func:`nodes.fem.snapshots.build_table`), the
+    reference solves already made (:func:`snapshot_source`, :func:`node_table_path`)."""
     _log(f"snapshots: azimuths {st.grid.angles_deg} deg, depth step {st.grid.depth_step * 1e3:g} mm, "
          f"mesh {st.snap_spec.key()} ...")
-    fdepths = _depths(st.fine_step)
-
-    def solved(ang, model, depths):
-        if ang != 0.0 or st.snap_spec != st.levels[-1]:
-            return None
-        out = []
-        for d in depths:
-            j = int(np.argmin(np.abs(fdepths - d)))
-            if abs(fdepths[j] - d) > 1e-9:
-                return None
-            out.append(PathState(float(d), fine["u_dof"][j].astype(float), float(fine["force"][j]), np.zeros(3),
-                                 int(fine["newton"][j]), bool(fine["converged"][j]), float(fine["min_detF"][j]),
-                                 int(fine["inverted"][j]), float(fine["max_strain"][j]), float(fine["penetration"][j]),
-                                 0))
-        return out
 
     table, hit, sec = load_or_build(cache, st.grid, st.snap_spec, mat, FINGER_R, build=True,
                                     log=lambda s: _log("  " + s.strip()), solved=solved, contact=st.contact)
@@ -453,8 +476,12 @@ def summary(st: Settings, conv: dict, cand: dict, cases: list[dict], snap_info: 
         "max_visible_error_mm_snapshot_depths": max(at) * 1e3 if at else None,
         "validation": "azimuth 0 against the finest convergence mesh every "
                       f"{st.fine_step * 1e3:g} mm; the depths between snapshots are held out (interpolation "
-                      "error), at the snapshot depths only the surface-grid sampling is checked; the mesh's own "
-                      "error is the reference's convergence figure"}
+                      "error); "
+                      + ("at the snapshot depths only the surface-grid sampling is checked; the mesh's own "
+                         "error is the reference's convergence figure" if st.snap_spec == st.levels[-1] else
+                         "the snapshots come from a coarser mesh than the reference (h_fine "
+                         f"{st.snap_spec.h_fine * 1e3:g} mm against {st.levels[-1].h_fine * 1e3:g} mm), so every "
+                         "figure includes that mesh's own error")}
     return {
         "realtime": {"method": "snapshots", "update_ms": s["time_ms"]["median"], "update_ms_p90": s["time_ms"]["p90"],
                      "max_visible_error_mm_0_50": worst * 1e3,
@@ -568,21 +595,48 @@ def plot_candidates(out: str, cand: dict, fmap: dict) -> None:
     plt.close(fig)
 
 
-def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, contact: str = DEFAULT_CONTACT) -> int:
+def _node_spec(angle_deg: float) -> RefSpec:
+    """The node table's mesh at ``angle_deg``: DEFAULT_REF_SPEC (a quarter model at azimuth 0, a half model
+    elsewhere, as :func:`nodes.fem.snapshots.build_table` meshes it)."""
+    return DEFAULT_REF_SPEC if angle_deg == 0.0 else replace(DEFAULT_REF_SPEC, half_z=False)
+
+
+def node_table_path(angle_deg: float, mat: Material, cache: ArrayCache, rm: RealtimeModel,
+                    contact: str = DEFAULT_CONTACT) -> tuple[dict, np.ndarray]:
+    """One azimuth of the node's table: the reference path on its mesh (:func:`_node_spec`) through
+    DEFAULT_GRID's depths, solved or taken from the cache (azimuth 0 is the full run's 3.4 mm level); returns
+    (path, depths (D,) m). Raises ``SystemExit`` for an azimuth DEFAULT_GRID does not have."""
+    if float(angle_deg) not in DEFAULT_GRID.angles_deg:
+        raise SystemExit(f"flexsheet experiment fem: --azimuth must be one of the node table's "
+                         f"{[f'{a:g}' for a in DEFAULT_GRID.angles_deg]} deg, got {angle_deg:g}")
+    depths = _depths(DEFAULT_GRID.depth_step)
+    a = float(angle_deg)
+    return reference_path(_node_spec(a), a, depths, mat, cache, rm.rest_vertices.astype(float), contact), depths
+
+
+def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, contact: str = DEFAULT_CONTACT,
+                     azimuth: float | None = None) -> int:
     """Build (or find) the FEM node's snapshot table: :data:`nodes.fem.snapshots.DEFAULT_GRID` on
     :data:`nodes.fem.snapshots.DEFAULT_REF_SPEC`, the key the node looks up (its ``finger_radius`` default is
-    the experiment's 8 mm). Azimuth 0 is taken from the full run's finest path (solved here when not cached).
-    Returns 0."""
+    the experiment's 8 mm). Every azimuth's path is a cached :func:`node_table_path` (azimuth 0: the full run's
+    3.4 mm level), so ``azimuth`` (deg) solves just that one and returns: run the azimuths in parallel
+    processes, or over several sittings, then once without it to assemble the table. Returns 0."""
     from nodes.fem.snapshots import table_key
 
     st = replace(settings_for(False), grid=DEFAULT_GRID, snap_spec=DEFAULT_REF_SPEC, contact=contact)
     t0 = time.perf_counter()
     rm = realtime_model(st, mat, cache_dir)
+    if azimuth is not None:
+        node_table_path(azimuth, mat, cache, rm, contact)
+        _log(f"node table: azimuth {azimuth:g} deg cached in {time.perf_counter() - t0:.0f} s")
+        return 0
     _log(f"node table: azimuths {DEFAULT_GRID.angles_deg} deg on {DEFAULT_REF_SPEC.key()}; key "
          f"{table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact)}")
-    fine = reference_path(st.levels[-1], 0.0, _depths(st.fine_step), mat, cache, rm.rest_vertices.astype(float),
-                          contact)
-    table, hit, sec = snapshot_table(st, mat, cache, fine)
+
+    def solved(ang, model, depths):
+        return _path_states(*node_table_path(ang, mat, cache, rm, contact), depths)
+
+    table, hit, sec = snapshot_table(st, mat, cache, solved)
     _log(f"node table {'found in the cache' if hit else f'built in {sec:.0f} s'}: "
          f"{sum(v.nbytes for v in table.values()) / 1e6:.0f} MB; total {time.perf_counter() - t0:.0f} s. The FEM "
          "node loads it at start (model: auto)")
@@ -618,11 +672,13 @@ def main(argv: list[str] | None = None) -> int:
     st = replace(settings_for(args.quick), contact=args.contact)
     t0 = time.perf_counter()
     cache = ArrayCache(args.cache_dir or None, _log)
+    if args.azimuth is not None and not args.node_table:
+        raise SystemExit("flexsheet experiment fem: --azimuth is for --node-table")
     if args.node_table:
         if args.quick or args.level is not None:
             raise SystemExit("flexsheet experiment fem: --node-table builds the node's full table; it takes neither "
                              "--quick nor --level")
-        return build_node_table(mat, cache, args.cache_dir or None, st.contact)
+        return build_node_table(mat, cache, args.cache_dir or None, st.contact, args.azimuth)
     rm = realtime_model(st, mat, args.cache_dir or None)
     if args.level is not None:
         if not 0 <= args.level < len(st.levels):
@@ -639,9 +695,10 @@ def main(argv: list[str] | None = None) -> int:
     conv["converged"] = conv["converged"] and pen["converged"]
     conv["criterion"] += (f"; and the contact penalty converged: the default {PENALTY_SCALE:g}·E/h within "
                           f"{PENALTY_TOL_MM:g} mm of a 10x stiffer one (penalty_study)")
-    table, hit, sec = snapshot_table(st, mat, cache, fine)
-    if st.snap_spec == st.levels[-1]:
-        sec += float(fine["seconds"])         # the solve the table was sampled from
+    solved, src = snapshot_source(st, mat, cache, rm, fine)
+    table, hit, sec = snapshot_table(st, mat, cache, solved)
+    if src is not None:
+        sec += float(src["seconds"])          # the solve the table was sampled from
     rm.attach_snapshots(table)
     snap_info = {"snapshot_azimuths_deg": list(st.grid.angles_deg), "snapshot_depth_step_mm": st.grid.depth_step * 1e3,
                  "snapshot_mesh": st.snap_spec.__dict__, "precompute_s": sec, "precompute_cache_hit": hit,
