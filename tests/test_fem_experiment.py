@@ -172,6 +172,15 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table",
                    "--azimuth", "20"]) == 0
     assert paths == [(half, 20.0, 0.05, 20)]
+    # azimuth 0 of the node table is the full run's 3.4 mm convergence level: the same solve (cache key)
+    calls = []
+    monkeypatch.setattr(X, "reference_path", lambda spec, a, d, mat, cache, probes, contact="frictionless", *r:
+                        calls.append((spec, a, np.round(d, 9).tolist(), probes.tobytes(), contact)) or {})
+    level = [lv.h_fine for lv in X.settings_for(False).levels].index(DEFAULT_REF_SPEC.h_fine)
+    assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--level", str(level)]) == 0
+    assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table",
+                   "--azimuth", "-0"]) == 0
+    assert len(calls) == 2 and calls[0] == calls[1]
     with pytest.raises(SystemExit, match="--azimuth must be one of"):
         X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--azimuth", "15"])
     with pytest.raises(SystemExit, match="--azimuth is for --node-table"):

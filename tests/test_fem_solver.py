@@ -279,8 +279,9 @@ def test_cholesky_solves_spd_systems_and_refuses_an_indefinite_matrix_without_ke
     assert np.allclose(factor(lap, "cholmod").solve(b[:, 0]), x[:, 0], atol=1e-12)
     assert np.allclose(factor(lap, "superlu").solve(b[:, 0]), x[:, 0], atol=1e-10)
     bad = (lap - 0.2 * sp.identity(n)).tocsr()          # smallest eigenvalue 0.05 - 0.2 < 0
-    with pytest.raises(NotPositiveDefinite):
+    with pytest.raises(NotPositiveDefinite) as err:
         factor(bad, "cholmod")
+    assert err.value.__context__ is None and err.value.__cause__ is None     # nothing refers to the failed factor
     fac, neg = _cholesky(bad)
     assert fac is None and neg == 1
     fac, neg = _cholesky(lap)

@@ -330,9 +330,14 @@ def validation_set(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeM
     return out
 
 
-def _path_states(src: dict, src_depths: np.ndarray, depths) -> list[PathState] | None:
+def _path_states(src: dict, src_depths: np.ndarray, depths, model=None) -> list[PathState] | None:
     """The states of the cached reference path ``src`` (:func:`reference_path`, solved at ``src_depths`` (D,) m)
-    at ``depths`` m, as :class:`PathState` for :func:`nodes.fem.snapshots.build_table`; None if one is missing."""
+    at ``depths`` m, as :class:`PathState` for :func:`nodes.fem.snapshots.build_table`; None if one is missing.
+    Raises ``RuntimeError`` when ``model`` (the mesh the table samples) has another DOF count than the solve
+    (the cache key does not carry gmsh's version: a new gmsh may mesh differently)."""
+    if model is not None and int(src["dofs"]) != model.n:
+        raise RuntimeError(f"the cached reference path has {int(src['dofs'])} DOF, the snapshot mesh {model.n}: "
+                           "gmsh meshes differently now; clear the fem cache (~/.cache/flexsheet/fem) and re-solve")
     out = []
     for d in depths:
         j = int(np.argmin(np.abs(src_depths - d)))
@@ -356,7 +361,7 @@ def snapshot_source(st: Settings, mat: Material, cache: ArrayCache, rm: Realtime
         src = reference_path(st.snap_spec, 0.0, sd, mat, cache, rm.rest_vertices.astype(float), st.contact)
     else:
         return None, None
-    return (lambda ang, model, depths: _path_states(src, sd, depths) if ang == 0.0 else None), src
+    return (lambda ang, model, depths: _path_states(src, sd, depths, model) if ang == 0.0 else None), src
 
 
 def snapshot_table(st: Settings, mat: Material, cache: ArrayCache, solved) -> tuple[dict, bool, float]:
@@ -601,16 +606,21 @@ def _node_spec(angle_deg: float) -> RefSpec:
     return DEFAULT_REF_SPEC if angle_deg == 0.0 else replace(DEFAULT_REF_SPEC, half_z=False)
 
 
+def _check_azimuth(angle_deg: float) -> None:
+    """``SystemExit`` unless ``angle_deg`` is one of DEFAULT_GRID's azimuths."""
+    if float(angle_deg) not in DEFAULT_GRID.angles_deg:
+        raise SystemExit(f"flexsheet experiment fem: --azimuth must be one of the node table's "
+                         f"{[f'{a:g}' for a in DEFAULT_GRID.angles_deg]} deg, got {angle_deg:g}")
+
+
 def node_table_path(angle_deg: float, mat: Material, cache: ArrayCache, rm: RealtimeModel,
                     contact: str = DEFAULT_CONTACT) -> tuple[dict, np.ndarray]:
     """One azimuth of the node's table: the reference path on its mesh (:func:`_node_spec`) through
     DEFAULT_GRID's depths, solved or taken from the cache (azimuth 0 is the full run's 3.4 mm level); returns
     (path, depths (D,) m). Raises ``SystemExit`` for an azimuth DEFAULT_GRID does not have."""
-    if float(angle_deg) not in DEFAULT_GRID.angles_deg:
-        raise SystemExit(f"flexsheet experiment fem: --azimuth must be one of the node table's "
-                         f"{[f'{a:g}' for a in DEFAULT_GRID.angles_deg]} deg, got {angle_deg:g}")
+    _check_azimuth(angle_deg)
     depths = _depths(DEFAULT_GRID.depth_step)
-    a = float(angle_deg)
+    a = float(angle_deg) + 0.0          # -0.0 → 0.0 (one cache key)
     return reference_path(_node_spec(a), a, depths, mat, cache, rm.rest_vertices.astype(float), contact), depths
 
 
@@ -634,7 +644,10 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
          f"{table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact)}")
 
     def solved(ang, model, depths):
-        return _path_states(*node_table_path(ang, mat, cache, rm, contact), depths)
+        states = _path_states(*node_table_path(ang, mat, cache, rm, contact), depths, model)
+        if states is None:          # else build_table would solve it again, uncached
+            raise RuntimeError(f"the node table's path at {ang:g} deg lacks a depth of {DEFAULT_GRID.key()}")
+        return states
 
     table, hit, sec = snapshot_table(st, mat, cache, solved)
     _log(f"node table {'found in the cache' if hit else f'built in {sec:.0f} s'}: "
@@ -672,8 +685,10 @@ def main(argv: list[str] | None = None) -> int:
     st = replace(settings_for(args.quick), contact=args.contact)
     t0 = time.perf_counter()
     cache = ArrayCache(args.cache_dir or None, _log)
-    if args.azimuth is not None and not args.node_table:
-        raise SystemExit("flexsheet experiment fem: --azimuth is for --node-table")
+    if args.azimuth is not None:
+        if not args.node_table:
+            raise SystemExit("flexsheet experiment fem: --azimuth is for --node-table")
+        _check_azimuth(args.azimuth)
     if args.node_table:
         if args.quick or args.level is not None:
             raise SystemExit("flexsheet experiment fem: --node-table builds the node's full table; it takes neither "

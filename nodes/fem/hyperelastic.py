@@ -665,7 +665,8 @@ def _tangent_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict, projected: boo
     (``projected`` False) returns (None, False) when Kc is not positive definite (PCG met negative curvature, or
     the Cholesky meets a non-positive pivot): the caller then takes the projected tangent. On the projected
     (semi-definite) tangent, rounding can leave it not quite positive definite: a diagonal shift, ×100 per try (at
-    most 3 more factorisations; each ~1 s on 20k+ DOF)."""
+    most 3 more factorisations; each ~1 s on 20k+ DOF); ``FloatingPointError`` if it is still not positive
+    definite then (:func:`solve_path_capsule` halves the load step on it)."""
     if state.get("pc") is not None:         # lagged factorisation as preconditioner (one PCG solve)
         x, indefinite = _pcg_step(Kc, rf, state)
         if x is not None:
@@ -693,7 +694,8 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
     """Minimise Π from ``u``; returns (u, iterations, converged). ``state`` (dict) carries between calls the
     last positive-definite factorisation (``"pc"``, the PCG preconditioner) and counters (``"projected"``:
     steps on the projected tangent, ``"factorisations"``, ``"pcg"``: steps solved by PCG). Raises
-    ``FloatingPointError`` when the line search fails."""
+    ``FloatingPointError`` when the line search fails or the projected tangent stays singular
+    (:func:`_tangent_step`)."""
     state = {} if state is None else state
     free = model.free
     pi = model.energy(u, caps, k)

@@ -107,9 +107,10 @@ class SnapshotGrid:
 
 
 DEFAULT_GRID = SnapshotGrid()
-#: mesh of the snapshot solves = the finest mesh of the experiment's convergence study: P2, 12 mm elements,
-#: 3.4 mm within 18 mm of the fingertip's whole push path (55 mm deep) (docs/fem.md; ~20 min of CPU per
-#: azimuth on a 2-core machine, so the node's seven-azimuth table is a few hours of CPU)
+#: mesh of the snapshot solves = the next-to-finest mesh of the experiment's convergence study (judged against
+#: the finest, 2.5 mm): P2, 12 mm elements, 3.4 mm within 18 mm of the fingertip's whole push path (55 mm deep)
+#: (docs/fem.md; a half model of ~30 000 DOF, ~40 min of one core per azimuth other than 0:
+#: ``flexsheet experiment fem --node-table --azimuth A``)
 DEFAULT_REF_SPEC = RefSpec(0.012, 0.0034, 0.018, half_z=True, path_depth=0.055)
 
 

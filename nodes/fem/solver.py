@@ -56,12 +56,15 @@ class _Cholesky:
     def __init__(self, A: sp.spmatrix):
         from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
 
+        why = None
         try:
             # supernodal always: CHOLMOD's simplicial mode (what "auto" picks for very sparse matrices) is an
             # LDLᵀ that factorises an indefinite matrix without complaint
             self._f = cholesky(sp.csc_matrix(A), mode="supernodal")
         except CholmodNotPositiveDefiniteError as exc:
-            raise NotPositiveDefinite(str(exc)) from None
+            why = str(exc)      # raised below, outside the handler: no __context__ holding the failed factor
+        if why is not None:
+            raise NotPositiveDefinite(why)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """x with A x = b; ``b`` (n,) or (n, k)."""
