@@ -23,10 +23,12 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 
 ``--quick``: two coarse meshes (h_fine 12 / 9 mm), 5 mm outputs, snapshots every 10 mm, a penalty study of
 two scales: a test's run, 70 s cold on the idle 2-core machine, seconds cached; it does not meet the targets
-and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4.5 / 3.4 mm, :data:`FULL_LEVELS`,
-2.5 mm outputs, snapshots every 5 mm, penalty study) took 42 min of wall time cold on the shared 2-core machine
-(20 min of CPU the 3.4 mm mesh); ``--level N`` solves one mesh only (to run the levels in parallel processes),
-every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds.
+and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4.5 / 3.4 / 2.5 mm,
+:data:`FULL_LEVELS`, 2.5 mm outputs, snapshots at azimuths 0 and 20 deg every 5 mm, held out at 10 deg, penalty
+study) is ~2 h of CPU cold on the shared 2-core machine (the 2.5 mm mesh 38 min, the 3.4 mm 20 min, each
+half-model azimuth path ~40 min); ``--level N`` solves one mesh only and ``--node-table --azimuth A`` one
+azimuth (to run them in parallel processes); every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a
+second run takes seconds (27 s).
 ``--linear-study`` also reruns the linear mesh study (``accuracy_table.json``, ``hertz``, ``stability``).
 """
 
@@ -103,9 +105,12 @@ def settings_for(quick: bool) -> Settings:
                         linear_spec=MeshSpec(0.016, 0.006, 0.012, 0.0), n_time=50, quick=True, penalty_level=0,
                         penalty_scales=(PENALTY_SCALE, 10 * PENALTY_SCALE))
     lv = [replace(DEFAULT_REF_SPEC, h_fine=hf) for hf in FULL_LEVELS]
-    grid = SnapshotGrid((0.0,), 0.05, 0.005, DEFAULT_GRID.dtheta_deg, DEFAULT_GRID.dy, DEFAULT_GRID.drho)
+    # snapshots at 0 and 20 deg, held out at 10 deg: twice the node's azimuth spacing, so the error measured
+    # between them bounds the node's own azimuth interpolation (the 10 and 20 deg paths are the node table's)
+    grid = SnapshotGrid((0.0, 20.0), 0.05, 0.005, DEFAULT_GRID.dtheta_deg, DEFAULT_GRID.dy, DEFAULT_GRID.drho)
     # the snapshots on the node's mesh (DEFAULT_REF_SPEC, the next-to-finest level), judged against the finest
-    return Settings(levels=lv, depth_step=0.0025, fine_step=0.0025, grid=grid, snap_spec=DEFAULT_REF_SPEC, holdout_deg=(),
+    return Settings(levels=lv, depth_step=0.0025, fine_step=0.0025, grid=grid, snap_spec=DEFAULT_REF_SPEC,
+                    holdout_deg=(10.0,),
                     linear_spec=MeshSpec(0.012, 0.004, 0.012, 60.0), n_time=1000)
 
 
@@ -324,10 +329,16 @@ def validation_set(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeM
     out = [{"angle_deg": 0.0, "depth": float(d), "u": fine["u"][j], "source": "finest convergence mesh",
             "held_out": bool(np.min(np.abs(snap_d - d)) > 1e-9)} for j, d in enumerate(depths)]
     for a in st.holdout_deg:
-        p = reference_path(st.snap_spec, float(a), depths, mat, cache, verts, st.contact)
+        p = reference_path(_part_spec(st.snap_spec, a), float(a), depths, mat, cache, verts, st.contact)
         out += [{"angle_deg": float(a), "depth": float(d), "u": p["u"][j], "source": "held-out azimuth",
                  "held_out": True} for j, d in enumerate(depths)]
     return out
+
+
+def _part_spec(spec: RefSpec, angle_deg: float) -> RefSpec:
+    """The mesh a push at ``angle_deg`` is solved on: ``spec`` (a quarter model with ``half_z``) at azimuth 0, its
+    half model elsewhere — as :func:`nodes.fem.snapshots.build_table` meshes it, so the solves are shared."""
+    return spec if angle_deg == 0.0 else replace(spec, half_z=False)
 
 
 def _path_states(src: dict, src_depths: np.ndarray, depths, model=None) -> list[PathState] | None:
@@ -350,18 +361,28 @@ def _path_states(src: dict, src_depths: np.ndarray, depths, model=None) -> list[
 
 
 def snapshot_source(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, fine: dict):
-    """``solved`` for :func:`snapshot_table`: azimuth 0 sampled from the convergence solve on the snapshot mesh
-    when ``st.snap_spec`` is one of the levels (``fine`` when it is the finest; another level is read from the
-    cache the convergence study filled), so nothing is solved twice; None otherwise. Also returns that solve
-    (or None) for its timing."""
+    """``solved`` for :func:`snapshot_table` when ``st.snap_spec`` is one of the levels: azimuth 0 sampled from
+    the convergence solve on the snapshot mesh (``fine`` when it is the finest; another level is read from the
+    cache the convergence study filled), other azimuths from their cached :func:`reference_path` on the half
+    model (the node table's paths when ``snap_spec`` is the node's), so nothing is solved twice; (None, None)
+    otherwise. Also returns the azimuth-0 solve, for its timing."""
+    verts = rm.rest_vertices.astype(float)
     if st.snap_spec == st.levels[-1]:
         src, sd = fine, _depths(st.fine_step)
     elif st.snap_spec in st.levels:
         sd = _depths(st.depth_step)
-        src = reference_path(st.snap_spec, 0.0, sd, mat, cache, rm.rest_vertices.astype(float), st.contact)
+        src = reference_path(st.snap_spec, 0.0, sd, mat, cache, verts, st.contact)
     else:
         return None, None
-    return (lambda ang, model, depths: _path_states(src, sd, depths, model) if ang == 0.0 else None), src
+
+    def solved(ang, model, depths):
+        if ang == 0.0:
+            return _path_states(src, sd, depths, model)
+        fd = _depths(st.fine_step)          # other azimuths: the cached path the held-out check also reads
+        p = reference_path(_part_spec(st.snap_spec, ang), float(ang), fd, mat, cache, verts, st.contact)
+        return _path_states(p, fd, depths, model)
+
+    return solved, src
 
 
 def snapshot_table(st: Settings, mat: Material, cache: ArrayCache, solved) -> tuple[dict, bool, float]:
@@ -486,7 +507,14 @@ def summary(st: Settings, conv: dict, cand: dict, cases: list[dict], snap_info: 
                          "error is the reference's convergence figure" if st.snap_spec == st.levels[-1] else
                          "the snapshots come from a coarser mesh than the reference (h_fine "
                          f"{st.snap_spec.h_fine * 1e3:g} mm against {st.levels[-1].h_fine * 1e3:g} mm), so every "
-                         "figure includes that mesh's own error")}
+                         "figure includes that mesh's own error")
+                      + (f"; held-out azimuths {[f'{a:g}' for a in st.holdout_deg]} deg against their own solves "
+                         f"on the snapshot mesh (interpolation between the snapshot azimuths "
+                         f"{[f'{a:g}' for a in st.grid.angles_deg]} deg; the mesh's own error not included there)"
+                         if st.holdout_deg else ""),
+        "max_visible_error_mm_by_azimuth": {
+            f"{a:g}": max(e for c, e in zip(cases, s["errors_m"], strict=True) if c["angle_deg"] == a) * 1e3
+            for a in sorted({c["angle_deg"] for c in cases})}}
     return {
         "realtime": {"method": "snapshots", "update_ms": s["time_ms"]["median"], "update_ms_p90": s["time_ms"]["p90"],
                      "max_visible_error_mm_0_50": worst * 1e3,
@@ -600,12 +628,6 @@ def plot_candidates(out: str, cand: dict, fmap: dict) -> None:
     plt.close(fig)
 
 
-def _node_spec(angle_deg: float) -> RefSpec:
-    """The node table's mesh at ``angle_deg``: DEFAULT_REF_SPEC (a quarter model at azimuth 0, a half model
-    elsewhere, as :func:`nodes.fem.snapshots.build_table` meshes it)."""
-    return DEFAULT_REF_SPEC if angle_deg == 0.0 else replace(DEFAULT_REF_SPEC, half_z=False)
-
-
 def _check_azimuth(angle_deg: float) -> None:
     """``SystemExit`` unless ``angle_deg`` is one of DEFAULT_GRID's azimuths."""
     if float(angle_deg) not in DEFAULT_GRID.angles_deg:
@@ -615,13 +637,14 @@ def _check_azimuth(angle_deg: float) -> None:
 
 def node_table_path(angle_deg: float, mat: Material, cache: ArrayCache, rm: RealtimeModel,
                     contact: str = DEFAULT_CONTACT) -> tuple[dict, np.ndarray]:
-    """One azimuth of the node's table: the reference path on its mesh (:func:`_node_spec`) through
-    DEFAULT_GRID's depths, solved or taken from the cache (azimuth 0 is the full run's 3.4 mm level); returns
+    """One azimuth of the node's table: the reference path on its mesh (:func:`_part_spec` of DEFAULT_REF_SPEC)
+    through DEFAULT_GRID's depths, solved or taken from the cache (azimuth 0 is the full run's 3.4 mm level); returns
     (path, depths (D,) m). Raises ``SystemExit`` for an azimuth DEFAULT_GRID does not have."""
     _check_azimuth(angle_deg)
     depths = _depths(DEFAULT_GRID.depth_step)
     a = float(angle_deg) + 0.0          # -0.0 → 0.0 (one cache key)
-    return reference_path(_node_spec(a), a, depths, mat, cache, rm.rest_vertices.astype(float), contact), depths
+    return reference_path(_part_spec(DEFAULT_REF_SPEC, a), a, depths, mat, cache, rm.rest_vertices.astype(float),
+                          contact), depths
 
 
 def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, contact: str = DEFAULT_CONTACT,
