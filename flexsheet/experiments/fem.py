@@ -15,8 +15,9 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    the linear P2 capacitance model, and the nonlinear snapshots (:mod:`nodes.fem.snapshots`), sampled every
    5 mm from the reference solve on the node's mesh (h_fine 3.4 mm, the next-to-finest level) and judged at
    every output depth against the finest mesh (h_fine 2.5 mm): the depths between snapshots are held out, and
-   the snapshot mesh's own error is in the figure. Accuracy against speed (``accuracy_speed.png/.json``) and the failure map, where
-   each model breaks by depth (and azimuth, where more than 0 is run) (``failure_map.png/.json``).
+   the snapshot mesh's own error is in the figure. Accuracy against speed (``accuracy_speed.png/.json``) and
+   the failure map, where each model breaks by depth (and azimuth, where more than 0 is run)
+   (``failure_map.png/.json``).
    ``nodes/fem/model_table.json`` (full mode) is what the node chooses from.
 3. ``summary.json``: ``realtime.update_ms``, ``realtime.max_visible_error_mm_0_50``, ``reference.converged``
    with the convergence figures.
@@ -25,9 +26,9 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 two scales: a test's run, 70 s cold on the idle 2-core machine, seconds cached; it does not meet the targets
 and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4.5 / 3.4 / 2.5 mm,
 :data:`FULL_LEVELS`, 2.5 mm outputs, snapshots at azimuth 0 every 5 mm, penalty study) is ~1 h of CPU cold on
-the shared 2-core machine (the 2.5 mm mesh 38 min, the 3.4 mm 20 min; a node-table azimuth path ~40 min); ``--level N`` solves one mesh only and ``--node-table --azimuth A`` one
-azimuth (to run them in parallel processes); every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a
-second run takes seconds (27 s).
+the shared 2-core machine (the 2.5 mm mesh 38 min, the 3.4 mm 20 min; a node-table azimuth path ~40 min).
+``--level N`` solves one mesh only and ``--node-table --azimuth A`` one azimuth (to run them in parallel
+processes); every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds (27 s).
 ``--linear-study`` also reruns the linear mesh study (``accuracy_table.json``, ``hertz``, ``stability``).
 """
 
@@ -136,7 +137,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--node-table", action="store_true",
                    help="build the FEM node's nonlinear snapshot table (azimuths 0-60 deg every 10 deg, 2.5 mm depth "
                         "steps, on the full run's h_fine 3.4 mm mesh) into the cache the node reads, then exit. "
-                        "~35 min of one core per azimuth (0 is shared with the full run's 3.4 mm level); every "
+                        "~40 min of one core per azimuth (0 is shared with the full run's 3.4 mm level); every "
                         "azimuth's solve is cached")
     p.add_argument("--azimuth", type=float, default=None, metavar="DEG",
                    help="with --node-table: solve only this azimuth's path into the cache and exit (run the "
