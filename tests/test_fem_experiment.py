@@ -135,13 +135,38 @@ def _fake_path_dict(n_dof: int, depths) -> dict:
             "inverted": np.zeros(d, int), "max_strain": np.zeros(d), "penetration": np.zeros(d)}
 
 
+def test_reference_path_solves_off_axis_pushes_on_the_half_model_under_one_key():
+    """Away from azimuth 0 a quarter-model spec (``half_z``) is solved on its half model, as the snapshot table
+    meshes it: the quarter and the half spec give one cache entry (one solve), and −0° is 0°."""
+    from dataclasses import replace
+
+    from flexsheet.experiments import fem as X
+    from nodes.fem.material import Material
+    from nodes.fem.snapshots import DEFAULT_REF_SPEC
+
+    class Keys:
+        def __init__(self):
+            self.seen = []
+
+        def get_or_compute(self, kind, key, compute, what):
+            self.seen.append((key, what))
+            return {}, True, 0.0
+
+    c = Keys()
+    probes = np.zeros((2, 3))
+    d = X._depths(0.0025)
+    for spec, a in ((DEFAULT_REF_SPEC, 10.0), (replace(DEFAULT_REF_SPEC, half_z=False), 10.0),
+                    (DEFAULT_REF_SPEC, 0.0), (DEFAULT_REF_SPEC, -0.0)):
+        X.reference_path(spec, a, d, Material(), c, probes)
+    (k10q, w10), (k10h, _), (k0, w0), (k0m, _) = c.seen
+    assert k10q == k10h and "hz=0" in w10 and k0 == k0m and "hz=1" in w0 and k0 != k10q
+
+
 def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeypatch):
     """`--node-table` builds DEFAULT_GRID on DEFAULT_REF_SPEC with the node's default finger and material, and
     stores it under the key the FEM node loads; each azimuth's states come from a cached reference path on the
-    table's mesh (quarter model at 0, half model elsewhere), and `--azimuth A` solves just that path (the
-    solves themselves are hours: replaced by markers)."""
-    from dataclasses import replace
-
+    table's mesh (reference_path takes the half model away from azimuth 0), and `--azimuth A` solves just that
+    path (the solves themselves are hours: replaced by markers)."""
     from flexsheet.experiments import fem as X
     from nodes.fem.cache import ArrayCache
     from nodes.fem.material import Material
@@ -164,14 +189,13 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table"]) == 0
     p = FemParams()
     assert seen["build"] == (DEFAULT_GRID, DEFAULT_REF_SPEC, p.nu, p.finger_radius)
-    half = replace(DEFAULT_REF_SPEC, half_z=False)
-    assert paths == [(DEFAULT_REF_SPEC, 0.0, 0.05, 20), (half, 30.0, 0.05, 20)]
+    assert paths == [(DEFAULT_REF_SPEC, 0.0, 0.05, 20), (DEFAULT_REF_SPEC, 30.0, 0.05, 20)]
     st30 = seen["states"][30.0]
     assert [s.depth for s in st30] == pytest.approx(DEFAULT_GRID.depths()[1:]) and st30[-1].force == 19.0
     paths.clear()
     assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table",
                    "--azimuth", "20"]) == 0
-    assert paths == [(half, 20.0, 0.05, 20)]
+    assert paths == [(DEFAULT_REF_SPEC, 20.0, 0.05, 20)]
     # azimuth 0 of the node table is the full run's 3.4 mm convergence level: the same solve (cache key)
     calls = []
     monkeypatch.setattr(X, "reference_path", lambda spec, a, d, mat, cache, probes, contact="frictionless", *r:

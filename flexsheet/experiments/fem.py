@@ -164,13 +164,18 @@ def _ref_model(spec: RefSpec, angle_deg: float, mat: Material, penalty_scale: fl
 def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, cache: ArrayCache,
                    probes: np.ndarray, contact: str = DEFAULT_CONTACT, penalty_scale: float = PENALTY_SCALE) -> dict:
     """Neo-Hookean push at ``angle_deg`` through ``depths`` (load steps = the depth spacing, ≤ 2.5 mm) on
-    ``spec``'s mesh, sampled at ``probes`` (k, 3) m (display frame, mirrored into the modelled part); cached.
+    ``spec``'s mesh — its half model (``half_z`` off) away from azimuth 0, as
+    :func:`nodes.fem.snapshots.build_table` meshes it, so one solve serves both — sampled at ``probes`` (k, 3) m
+    (display frame, mirrored into the modelled part); cached.
     Returns {"u": (D, k, 3) m, "u_dof": (D, P, 3) m float32 (every DOF point, for the snapshot table), "force",
     "inverted" (elements with det F ≤ 0 at a quadrature point or P2 node), "inverted_qp" (at a quadrature
     point), "inverted_nodal_visible" (nodally inverted elements whose deformed centroid lies outside the
     footprint, > finger radius + 2 mm from the push axis), "min_detF", "max_strain", "penetration", "newton",
     "seconds", "cpu_seconds", "dofs", "converged"}. ``contact``: the finger's contact law
     (:data:`nodes.fem.hyperelastic.CONTACT_LAWS`); ``penalty_scale``: the contact penalty κ = scale·E/h."""
+    angle_deg = float(angle_deg) + 0.0          # -0.0 → 0.0 (one cache key)
+    if angle_deg != 0.0 and spec.half_z:
+        spec = replace(spec, half_z=False)
     step = float(min(0.0025, np.min(np.diff(np.concatenate([[0.0], depths])))))
     key = cache_key(solver_tag(contact), spec.key(), angle_deg, np.round(depths, 9).tolist(), mat.key(), FINGER_R,
                     cache_key(np.round(probes, 9).tobytes()), f"step={step:.6g}", f"iters={NEWTON_ITERS}", f"pen={penalty_scale:g}")
@@ -327,16 +332,10 @@ def validation_set(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeM
     out = [{"angle_deg": 0.0, "depth": float(d), "u": fine["u"][j], "source": "finest convergence mesh",
             "held_out": bool(np.min(np.abs(snap_d - d)) > 1e-9)} for j, d in enumerate(depths)]
     for a in st.holdout_deg:
-        p = reference_path(_part_spec(st.snap_spec, a), float(a), depths, mat, cache, verts, st.contact)
+        p = reference_path(st.snap_spec, a, depths, mat, cache, verts, st.contact)
         out += [{"angle_deg": float(a), "depth": float(d), "u": p["u"][j], "source": "held-out azimuth",
                  "held_out": True} for j, d in enumerate(depths)]
     return out
-
-
-def _part_spec(spec: RefSpec, angle_deg: float) -> RefSpec:
-    """The mesh a push at ``angle_deg`` is solved on: ``spec`` (a quarter model with ``half_z``) at azimuth 0, its
-    half model elsewhere — as :func:`nodes.fem.snapshots.build_table` meshes it, so the solves are shared."""
-    return spec if angle_deg == 0.0 else replace(spec, half_z=False)
 
 
 def _path_states(src: dict, src_depths: np.ndarray, depths, model=None) -> list[PathState] | None:
@@ -377,7 +376,7 @@ def snapshot_source(st: Settings, mat: Material, cache: ArrayCache, rm: Realtime
         if ang == 0.0:
             return _path_states(src, sd, depths, model)
         fd = _depths(st.fine_step)          # other azimuths: the cached path the held-out check also reads
-        p = reference_path(_part_spec(st.snap_spec, ang), float(ang), fd, mat, cache, verts, st.contact)
+        p = reference_path(st.snap_spec, ang, fd, mat, cache, verts, st.contact)
         return _path_states(p, fd, depths, model)
 
     return solved, src
@@ -635,13 +634,12 @@ def _check_azimuth(angle_deg: float) -> None:
 
 def node_table_path(angle_deg: float, mat: Material, cache: ArrayCache, rm: RealtimeModel,
                     contact: str = DEFAULT_CONTACT) -> tuple[dict, np.ndarray]:
-    """One azimuth of the node's table: the reference path on its mesh (:func:`_part_spec` of DEFAULT_REF_SPEC)
-    through DEFAULT_GRID's depths, solved or taken from the cache (azimuth 0 is the full run's 3.4 mm level); returns
+    """One azimuth of the node's table: the reference path on its mesh (DEFAULT_REF_SPEC) through DEFAULT_GRID's
+    depths, solved or taken from the cache (azimuth 0 is the full run's 3.4 mm level); returns
     (path, depths (D,) m). Raises ``SystemExit`` for an azimuth DEFAULT_GRID does not have."""
     _check_azimuth(angle_deg)
     depths = _depths(DEFAULT_GRID.depth_step)
-    a = float(angle_deg) + 0.0          # -0.0 → 0.0 (one cache key)
-    return reference_path(_part_spec(DEFAULT_REF_SPEC, a), a, depths, mat, cache, rm.rest_vertices.astype(float),
+    return reference_path(DEFAULT_REF_SPEC, angle_deg, depths, mat, cache, rm.rest_vertices.astype(float),
                           contact), depths
 
 

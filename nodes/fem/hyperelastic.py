@@ -595,16 +595,16 @@ def _pen(g: np.ndarray, k: float, eps: float):
 
 
 def _cholesky(K: sp.spmatrix):
-    """Sparse Cholesky of the symmetric ``K`` (:func:`nodes.fem.solver.factor`, CHOLMOD). Returns (factor with
-    ``.solve(b)``, 0) when K is positive definite, (None, 1) when it is not (CHOLMOD stops at the first
-    non-positive pivot). On a loaded 3.4 mm-mesh tangent (16 596 DOF): 0.69 s and 9.9 ms per solve, against
+    """Sparse Cholesky of the symmetric ``K`` (:func:`nodes.fem.solver.factor`, CHOLMOD): the factor (with
+    ``.solve(b)``) when K is positive definite, None when it is not (CHOLMOD stops at the first non-positive
+    pivot). On a loaded 3.4 mm-mesh tangent (16 596 DOF): 0.69 s and 9.9 ms per solve, against
     3.8 s and 22 ms for the simplicial QDLDL used before, and 4.1 s for SuperLU in symmetric mode."""
     from nodes.fem.solver import NotPositiveDefinite, factor
 
     try:
-        return factor(K, "cholmod"), 0
+        return factor(K, "cholmod")
     except NotPositiveDefinite:
-        return None, 1
+        return None
 
 
 def _pcg(A: sp.csr_matrix, b: np.ndarray, precond, rtol: float, maxiter: int) -> tuple[np.ndarray | None, int]:
@@ -674,16 +674,16 @@ def _tangent_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict, projected: boo
         if indefinite and not projected:
             return None, False
     state["factorisations"] = state.get("factorisations", 0) + 1
-    fac, neg = _cholesky(Kc)
-    if neg and not projected:
+    fac = _cholesky(Kc)
+    if fac is None and not projected:
         return None, False
     dmax = float(np.abs(Kc.diagonal()).max())
     shift = 1e-4 * dmax
-    while neg and shift <= 1.0 * dmax:
+    while fac is None and shift <= 1.0 * dmax:
         state["factorisations"] += 1
-        fac, neg = _cholesky(Kc + shift * sp.identity(Kc.shape[0], format="csr"))
+        fac = _cholesky(Kc + shift * sp.identity(Kc.shape[0], format="csr"))
         shift *= 100.0
-    state["pc"], state["pc_n"] = (fac, Kc.shape[0]) if not neg else (None, None)
+    state["pc"], state["pc_n"] = fac, Kc.shape[0]
     if fac is None:
         raise FloatingPointError("the projected tangent stays singular after diagonal shifts")
     return -fac.solve(rf), False

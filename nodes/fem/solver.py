@@ -33,8 +33,8 @@ from nodes.fem.contact import Finger, imposed_displacement
 from nodes.fem.material import Material
 from nodes.fem.mesh import TetMesh
 
-__all__ = ["FemModel", "Solution", "NotPositiveDefinite", "solve_full", "CapacitanceSolver", "solve_corotational", "element_checks",
-           "TetChecks", "fold_operator", "OutsideCandidates", "factor"]
+__all__ = ["FemModel", "Solution", "NotPositiveDefinite", "solve_full", "CapacitanceSolver", "solve_corotational",
+           "element_checks", "TetChecks", "fold_operator", "OutsideCandidates", "factor"]
 
 
 class OutsideCandidates(ValueError):
