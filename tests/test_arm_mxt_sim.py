@@ -28,7 +28,7 @@ SCRIPT = "world.script=[{mode: stroke, moving_time: 10}]"
 def _private_copy(dst: Path) -> Path:
     """launch/sim.yaml with its ZeroMQ base port and the twins' ports moved by an offset from this process id,
     so this run cannot collide with another sim run on the machine."""
-    offset = 100 * (1 + (os.getpid() + 150) % 300)
+    offset = 100 * (1 + (os.getpid() + 60) % 120)   # base_port <= 32100: below the ephemeral range
     lf = yaml.safe_load((ROOT / "launch" / "sim.yaml").read_text())
     lf["base_port"] = 20000 + offset
     for spec in lf["nodes"].values():

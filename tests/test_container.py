@@ -293,7 +293,7 @@ class Launch:
 
 
 def test_launch_file_container_is_one_process_listed_by_node_list_and_restarted_when_killed(tmp_path):
-    base = min(max(free_port() // 10 * 10, 20000), 60000)
+    base = free_port(span=20)
     path = tmp_path / "demo.yaml"
     path.write_text(f"""
 name: demo

@@ -81,10 +81,12 @@ STEP_TOLERANCE = 1.5      # the controller twin's own refusal threshold: qd_max 
 def private_ports(src: Path, dst: Path, offset: int | None = None) -> Path:
     """Write ``src`` (a launch file) to ``dst`` with its ports moved by ``offset`` (default from this
     process id), so that this run cannot collide with another sim run on the same machine (its ZeroMQ
-    ports from ``base_port`` and the controller twins' Modbus ports). Returns ``dst``."""
+    ports from ``base_port`` and the controller twins' Modbus ports). The ports stay below 32768, the
+    ephemeral range, where a restarted node's port can be taken by a reconnect's TCP self-connect
+    (``launch_check.ephemeral_port_range``). Returns ``dst``."""
     import yaml
 
-    offset = 100 * (1 + os.getpid() % 300) if offset is None else offset
+    offset = 100 * (1 + os.getpid() % 120) if offset is None else offset
     lf = yaml.safe_load(src.read_text())
     lf["base_port"] = 20000 + offset
     for spec in lf["nodes"].values():

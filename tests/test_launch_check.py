@@ -17,7 +17,7 @@ import yaml
 from conftest import ROOT, free_port
 
 from flexsheet.runtime.launch import Supervisor, load_launch
-from flexsheet.runtime.launch_check import check_launch
+from flexsheet.runtime.launch_check import check_launch, ephemeral_port_range
 from flexsheet.runtime.node import EXIT_CONFIG
 
 LAB_HOSTS = ["main", "arm1", "arm2"]
@@ -232,6 +232,25 @@ def test_curve_off_on_a_networked_graph_is_a_warning_not_an_error(tmp_path):
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     res = check_launch(path, host="main", out=str(tmp_path / "out"))
     assert res.errors == [] and len(res.warnings) == 1 and "security.curve is off" in res.warnings[0]
+
+
+def test_node_ports_in_the_ephemeral_range_are_a_warning_naming_the_range(tmp_path):
+    lo, hi = ephemeral_port_range()
+    assert 1024 <= lo < hi <= 65535
+    path = tmp_path / "chk.yaml"
+    path.write_text(yaml.safe_dump(BASE, sort_keys=False))
+    assert not any("ephemeral" in w for w in check_launch(path, out=str(tmp_path / "out")).warnings)
+    path.write_text(yaml.safe_dump(_mutate(BASE, "base_port", lo), sort_keys=False))   # talker at lo + 1, rec lo + 3
+    res = check_launch(path, out=str(tmp_path / "out"))
+    assert res.errors == []
+    eph = [w for w in res.warnings if "ephemeral" in w]
+    assert len(eph) == 1 and f"range {lo}-{hi}" in eph[0] and f"talker ({lo + 1})" in eph[0] \
+        and f"rec ({lo + 3})" in eph[0] and f"below {lo}" in eph[0], eph
+    bad = tmp_path / "range"
+    bad.write_text("not numbers\n")
+    assert ephemeral_port_range(bad) == (32768, 60999)       # unreadable: Linux's default
+    bad.write_text("20000\t40000\n")
+    assert ephemeral_port_range(bad) == (20000, 40000)
 
 
 def test_broken_param_is_refused_before_anything_starts_with_one_clear_line(demo_launch):

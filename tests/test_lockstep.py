@@ -185,7 +185,7 @@ def test_launch_file_lockstep_replay(bag, tmp_path):
 
     from conftest import free_port
 
-    base = min(max(free_port() // 10 * 10, 20000), 60000)
+    base = free_port(span=20)
     path = tmp_path / "replay.yaml"
     path.write_text(f"""
 name: replay
