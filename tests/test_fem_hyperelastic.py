@@ -2,6 +2,7 @@
 scikit-fem's linear elasticity, exact symmetries of the snapshot look-up, bad input."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -129,6 +130,35 @@ def test_solve_path_rejects_bad_depths(quarter):
             H.solve_path(quarter, 0.0, bad, 0.008)
     with pytest.raises(ValueError, match="h_fine"):
         H.RefSpec(0.01, 0.02)
+
+
+def test_skin_refinement_is_fine_in_the_surface_layer_around_the_push_only():
+    """The skin option sizes the surface layer near the push point; the rest of the mesh and the key of a
+    spec without it are unchanged (cached references keep their keys)."""
+    base = H.RefSpec(0.016, 0.008, 0.012, half_z=True)
+    skin = replace(base, skin_h=0.003, skin_radius=0.015, skin_depth=0.004)
+    assert base.key() == "h=0.016,hf=0.008,rr=0.012,hz=1" and skin.key().endswith(",sk=0.003/0.015/0.004")
+
+    def edges(spec):
+        m = H.reference_mesh(spec, 0.0)
+        e = np.concatenate([m.tets[:, [a, b]] for a, b in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))])
+        mid = m.points[e].mean(axis=1) - m.center
+        length = np.linalg.norm(m.points[e[:, 0]] - m.points[e[:, 1]], axis=1)
+        r = np.hypot(mid[:, 0], mid[:, 2])
+        lat = np.hypot(mid[:, 1], m.radius * np.arctan2(mid[:, 2], mid[:, 0]))   # along the surface from the push
+        in_skin = (r > m.radius - 0.002) & (lat < 0.010)
+        far = lat > 0.040
+        return m, length, in_skin, far
+
+    m0, l0, s0, f0 = edges(base)
+    m1, l1, s1, f1 = edges(skin)
+    assert np.median(l1[s1]) < 0.6 * np.median(l0[s0]) and np.median(l1[s1]) < 0.0045
+    assert np.median(l1[f1]) == pytest.approx(np.median(l0[f0]), rel=0.15)       # far away: unchanged
+    assert len(m1.points) > len(m0.points)
+    for kw, word in ((dict(skin_h=0.009), "skin size"), (dict(skin_h=0.003, skin_depth=0.0), "skin depth"),
+                     (dict(skin_h=0.003, skin_radius=float("nan")), "skin patch radius")):
+        with pytest.raises(ValueError, match=word):
+            H.reference_mesh(replace(base, **kw), 0.0)
 
 
 def test_reference_push_is_physical_at_small_depth(quarter):

@@ -87,13 +87,17 @@ class RefSpec:
     """Mesh of the reference: ``h`` global size (m), ``h_fine`` size (m) within ``refine_radius`` (m) of the
     contact point, or (``path_depth`` > 0, m) of the whole push path from the contact point down to that depth
     (:func:`nodes.fem.mesh.cylinder_part_mesh`); ``half_z`` also use the z mirror plane (azimuth-0 pushes
-    only). Raises ``ValueError``."""
+    only); ``skin_h`` > 0 (m): that size in the surface layer ``skin_depth`` thick within ``skin_radius`` of the
+    contact point (the material that wraps the fingertip and lines the crater). Raises ``ValueError``."""
 
     h: float = 0.010
     h_fine: float = 0.002
     refine_radius: float = 0.018
     half_z: bool = False
     path_depth: float = 0.0
+    skin_h: float = 0.0
+    skin_radius: float = 0.020
+    skin_depth: float = 0.005
 
     def __post_init__(self):
         for name in ("h", "h_fine"):
@@ -106,7 +110,8 @@ class RefSpec:
     def key(self) -> str:
         """Stable text key (cache keys)."""
         k = f"h={self.h:.6g},hf={self.h_fine:.6g},rr={self.refine_radius:.6g},hz={int(self.half_z)}"
-        return k + (f",pd={self.path_depth:.6g}" if self.path_depth > 0 else "")
+        k += f",pd={self.path_depth:.6g}" if self.path_depth > 0 else ""
+        return k + (f",sk={self.skin_h:.6g}/{self.skin_radius:.6g}/{self.skin_depth:.6g}" if self.skin_h > 0 else "")
 
 
 def reference_mesh(spec: RefSpec, angle_deg: float) -> TetMesh:
@@ -114,7 +119,8 @@ def reference_mesh(spec: RefSpec, angle_deg: float) -> TetMesh:
     if spec.half_z and abs(angle_deg) > 1e-9:
         raise ValueError(f"half_z needs a push at azimuth 0, got {angle_deg!r} deg")
     return cylinder_part_mesh(spec.h, spec.h_fine, spec.refine_radius, (float(angle_deg),), half_y=True,
-                              half_z=spec.half_z, path_depth=spec.path_depth)
+                              half_z=spec.half_z, path_depth=spec.path_depth,
+                              skin=(spec.skin_h, spec.skin_radius, spec.skin_depth) if spec.skin_h > 0 else None)
 
 
 @dataclass(frozen=True)

@@ -100,11 +100,13 @@ def arc_points(radius: float, center: np.ndarray, arc_deg: float, spacing: float
     return np.column_stack([c[0] + radius * np.cos(phis), np.full(n, c[1]), c[2] + radius * np.sin(phis)])
 
 
-def _gmsh_tets(model: str, geometry, h: float, h_fine: float, refine_radius: float, centres, what: str):
+def _gmsh_tets(model: str, geometry, h: float, h_fine: float, refine_radius: float, centres, what: str,
+               extra_balls: tuple = ()):
     """Run gmsh once: ``geometry(gmsh)`` adds the OpenCASCADE solid, element size ``h`` with ``h_fine`` within
-    ``refine_radius`` of each point of ``centres`` (``Ball`` fields under a ``Min``), single-threaded Delaunay.
-    Returns (points (N, 3) m, tets (M, 4) int64 into ``points``, unoriented). Raises ``RuntimeError`` naming
-    ``what`` if gmsh fails or produces no tetrahedra."""
+    ``refine_radius`` of each point of ``centres`` (``Ball`` fields under a ``Min``), single-threaded Delaunay;
+    ``extra_balls``: further (centres (K, 3) m, radius m, size m) groups of balls under the same ``Min``, each
+    graded to ``h`` over its radius. Returns (points (N, 3) m, tets (M, 4) int64 into ``points``, unoriented).
+    Raises ``RuntimeError`` naming ``what`` if gmsh fails or produces no tetrahedra."""
     import gmsh
 
     with _GMSH_LOCK:
@@ -122,15 +124,17 @@ def _gmsh_tets(model: str, geometry, h: float, h_fine: float, refine_radius: flo
             gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
             gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
             fields = []
-            for p in centres:
-                f = gmsh.model.mesh.field.add("Ball")
-                gmsh.model.mesh.field.setNumber(f, "Radius", refine_radius)
-                gmsh.model.mesh.field.setNumber(f, "Thickness", refine_radius)
-                gmsh.model.mesh.field.setNumber(f, "VIn", h_fine)
-                gmsh.model.mesh.field.setNumber(f, "VOut", h)
-                for k, name in enumerate(("XCenter", "YCenter", "ZCenter")):
-                    gmsh.model.mesh.field.setNumber(f, name, float(p[k]))
-                fields.append(f)
+            gmsh.option.setNumber("Mesh.MeshSizeMin", min([h_fine, h] + [b[2] for b in extra_balls]))
+            for group, radius, size in ((centres, refine_radius, h_fine), *extra_balls):
+                for p in group:
+                    f = gmsh.model.mesh.field.add("Ball")
+                    gmsh.model.mesh.field.setNumber(f, "Radius", radius)
+                    gmsh.model.mesh.field.setNumber(f, "Thickness", radius)
+                    gmsh.model.mesh.field.setNumber(f, "VIn", size)
+                    gmsh.model.mesh.field.setNumber(f, "VOut", h)
+                    for k, name in enumerate(("XCenter", "YCenter", "ZCenter")):
+                        gmsh.model.mesh.field.setNumber(f, name, float(p[k]))
+                    fields.append(f)
             if fields:
                 fmin = gmsh.model.mesh.field.add("Min")
                 gmsh.model.mesh.field.setNumbers(fmin, "FieldsList", fields)
@@ -180,7 +184,7 @@ def cylinder_mesh(spec: MeshSpec = MeshSpec(), radius: float = CYLINDER_RADIUS, 
 def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg: tuple[float, ...] = (0.0,),
                        half_y: bool = True, half_z: bool = False, radius: float = CYLINDER_RADIUS,
                        length: float = CYLINDER_LENGTH, center: np.ndarray = CYLINDER_CENTER,
-                       path_depth: float = 0.0) -> TetMesh:
+                       path_depth: float = 0.0, skin: tuple[float, float, float] | None = None) -> TetMesh:
     """Mesh a symmetric part of the cylinder for the nonlinear reference (P1 tetrahedra, gmsh OpenCASCADE).
 
     ``half_y``: keep y ≥ y_O only (the push at y = y_O is mirror-symmetric in y); ``half_z``: also keep
@@ -189,7 +193,10 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
     at y = y_O), gmsh ``Ball`` + ``Min`` fields; with ``path_depth`` (m) > 0 the refined region is the whole
     *push path* instead: balls every ``refine_radius``/3 from each of those surface points down to
     ``path_depth`` along the inward normal (the tube the fingertip travels through and the ring of material
-    that wraps it). Each ball grades from ``h_fine`` to ``h`` over a further ``refine_radius``. ``fixed`` marks
+    that wraps it). Each ball grades from ``h_fine`` to ``h`` over a further ``refine_radius``. ``skin``
+    (size, patch radius, depth) m: also size ``size`` in the skin around each push point — the surface layer
+    ``depth`` thick within ``patch radius`` (along the surface) of it, whose material wraps around the
+    fingertip and lines the crater (balls of radius ``depth`` every ``depth``/2 on the surface). ``fixed`` marks
     nothing here: the caller knows which faces are symmetry planes. Raises ``ValueError`` on bad sizes and
     ``RuntimeError`` if gmsh fails.
     """
@@ -217,8 +224,29 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
             out = np.array([math.cos(math.radians(d)), 0.0, math.sin(math.radians(d))])
             n = int(math.ceil(path_depth / (refine_radius / 3))) if path_depth > 0 else 0
             centres += [c + (radius - s) * out for s in np.linspace(0.0, path_depth, n + 1)]
+    extra = ()
+    if skin is not None:
+        size, patch, depth = (float(v) for v in skin)
+        if not (math.isfinite(size) and 0.0005 <= size <= h_fine):
+            raise ValueError(f"skin size must be in [0.0005, h_fine={h_fine}] m, got {size!r}")
+        if not (math.isfinite(patch) and 0 < patch <= radius * math.pi / 2):
+            raise ValueError(f"skin patch radius must be in (0, {radius * math.pi / 2:.4g}] m, got {patch!r}")
+        if not (math.isfinite(depth) and 0 < depth <= radius / 2):
+            raise ValueError(f"skin depth must be in (0, {radius / 2:.4g}] m, got {depth!r}")
+        step = depth / 2
+        n = int(math.ceil(patch / step))
+        pts = []
+        for d in refine_deg:
+            for i in range(-n, n + 1):          # arc length along the azimuth
+                for j in range(-n, n + 1):      # along the axis (y)
+                    if math.hypot(i, j) * step > patch:
+                        continue
+                    phi = math.radians(d) + i * step / radius
+                    pts.append(c + np.array([radius * math.cos(phi), j * step, radius * math.sin(phi)]))
+        keep = [p for p in pts if p[1] >= y0 - depth and (not half_z or p[2] >= c[2] - depth)]
+        extra = ((np.array(keep), depth, size),)
     points, tets = _gmsh_tets("cylinder_part", geometry, h, h_fine, refine_radius, centres,
-                              f"the cylinder part (h={h}, h_fine={h_fine})")
+                              f"the cylinder part (h={h}, h_fine={h_fine}, skin={skin})", extra)
     tets = orient_tets(points, tets)
     faces = surface_faces(points, tets)
     return TetMesh(points, tets, faces, np.zeros(len(points), bool), None, radius, length, c.copy())
