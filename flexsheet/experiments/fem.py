@@ -10,6 +10,9 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    (``convergence.json/png``); ``reference.converged`` when there are ≥ 3 meshes, that difference falls with
    every refinement, the last refinement changes the visible surface by ≤ half the target, Newton converged at
    every load step of the finest mesh and none of its elements is inverted at a quadrature point.
+   **Skin study** (``convergence.json`` ``skin_study``, :func:`skin_study`): the 3.4 mm mesh with only its
+   surface layer refined (2.5 and 1.8 mm), against the whole push tube refined, to tell which part of the
+   mesh the unconverged deep push depends on.
 2. **Candidates**, judged on the real-time model's rendered vertices outside the finger's footprint
    (lateral distance from the push axis > finger radius + 2 mm; the footprint is hidden by the finger):
    the linear P2 capacitance model, and the nonlinear snapshots (:mod:`nodes.fem.snapshots`), sampled every
@@ -26,7 +29,8 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 two scales: a test's run, 70 s cold on the idle 2-core machine, seconds cached; it does not meet the targets
 and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4.5 / 3.4 / 2.5 mm,
 :data:`FULL_LEVELS`, 2.5 mm outputs, snapshots at azimuth 0 every 5 mm, penalty study) is ~1 h of CPU cold on
-the shared 2-core machine (the 2.5 mm mesh 38 min, the 3.4 mm 20 min; a node-table azimuth path ~40 min).
+the shared 2-core machine (the 2.5 mm mesh 38 min, the 3.4 mm 20 min, the two skin meshes 15 and ~35 min;
+a node-table azimuth path ~40 min).
 ``--level N`` solves one mesh only and ``--node-table --azimuth A`` one azimuth (to run them in parallel
 processes); every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds (27 s).
 ``--linear-study`` also reruns the linear mesh study (``accuracy_table.json``, ``hertz``, ``stability``).
@@ -90,6 +94,7 @@ class Settings:
     contact: str = DEFAULT_CONTACT
     penalty_level: int = 1
     penalty_scales: tuple = (1e3, 1e4, PENALTY_SCALE, 10 * PENALTY_SCALE)
+    skin_sizes: tuple = (0.0025, 0.0018)
 
 
 def settings_for(quick: bool) -> Settings:
@@ -103,7 +108,7 @@ def settings_for(quick: bool) -> Settings:
         return Settings(levels=lv, depth_step=0.005, fine_step=0.005,
                         grid=SnapshotGrid((0.0,), 0.05, 0.01, 1.0, 0.001, 0.002), snap_spec=lv[-1], holdout_deg=(),
                         linear_spec=MeshSpec(0.016, 0.006, 0.012, 0.0), n_time=50, quick=True, penalty_level=0,
-                        penalty_scales=(PENALTY_SCALE, 10 * PENALTY_SCALE))
+                        penalty_scales=(PENALTY_SCALE, 10 * PENALTY_SCALE), skin_sizes=(0.006,))
     lv = [replace(DEFAULT_REF_SPEC, h_fine=hf) for hf in FULL_LEVELS]
     grid = SnapshotGrid((0.0,), 0.05, 0.005, DEFAULT_GRID.dtheta_deg, DEFAULT_GRID.dy, DEFAULT_GRID.drho)
     # the snapshots on the node's mesh (DEFAULT_REF_SPEC, the next-to-finest level), judged against the finest
@@ -323,6 +328,38 @@ def penalty_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMo
 
 
 # ---- candidates ------------------------------------------------------------------------------------------------
+def skin_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel) -> dict:
+    """Where the unconverged part of the reference lies: the next-to-finest convergence mesh (full mode: the
+    snapshot mesh) with only its surface layer refined (``skin_h`` in ``st.skin_sizes``: the material that wraps the fingertip and lines the
+    crater, :class:`nodes.fem.hyperelastic.RefSpec`), against the same mesh refined throughout its push tube (the
+    finest convergence level). Per variant the largest visible-surface difference (mm, per depth) to the
+    unrefined mesh and to the finest level, the force at 50 mm, DOF and CPU; ``tube_change_mm``: the finest
+    level against the unrefined mesh. Azimuth 0, every ``st.depth_step``."""
+    depths = _depths(st.depth_step)
+    verts = rm.rest_vertices.astype(float)
+    fixed = rm.mesh.fixed[rm.surface_nodes]
+    unrefined = st.levels[-2]
+    base = reference_path(unrefined, 0.0, depths, mat, cache, verts, st.contact)
+    fd = _depths(st.fine_step)
+    fine = reference_path(st.levels[-1], 0.0, fd, mat, cache, verts, st.contact)
+    sub = np.array([int(np.argmin(np.abs(fd - d))) for d in depths])
+    fine = {"u": fine["u"][sub], "force": fine["force"][sub]}
+    rows = []
+    for h in st.skin_sizes:
+        spec = replace(unrefined, skin_h=h)
+        p = reference_path(spec, 0.0, depths, mat, cache, verts, st.contact)
+        rows.append({"skin_h_m": h, "spec": spec.__dict__, "dofs": int(p["dofs"]), "cpu_seconds": float(p["cpu_seconds"]),
+                     "newton_converged": bool(p["converged"].all()), "force_N_at_50mm": float(p["force"][-1]),
+                     "change_vs_unrefined_mm": [e * 1e3 for e in _visible_diffs(p, base, depths, verts, fixed, rm.mesh)],
+                     "diff_vs_finest_mm": [e * 1e3 for e in _visible_diffs(p, fine, depths, verts, fixed, rm.mesh)]})
+    tube = [e * 1e3 for e in _visible_diffs(base, fine, depths, verts, fixed, rm.mesh)]
+    _log("skin study at 50 mm: skin refinement moves the visible surface by "
+         f"{[round(r['change_vs_unrefined_mm'][-1], 2) for r in rows]} mm, the tube refinement by {tube[-1]:.2f} mm")
+    return {"depths_m": depths.tolist(), "unrefined": unrefined.__dict__, "finest": st.levels[-1].__dict__,
+            "unrefined_dofs": int(base["dofs"]), "unrefined_force_N_at_50mm": float(base["force"][-1]),
+            "finest_force_N_at_50mm": float(fine["force"][-1]), "tube_change_mm": tube, "skins": rows}
+
+
 def validation_set(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, fine: dict) -> list[dict]:
     """Reference fields at the rendered vertices for the configurations the candidates are judged on: azimuth 0
     from the finest convergence mesh (every depth), and each held-out azimuth on the snapshot mesh."""
@@ -537,6 +574,12 @@ def summary(st: Settings, conv: dict, cand: dict, cases: list[dict], snap_info: 
                                                         "cpu_seconds")} | {"error_vs_stiffest_mm_max":
                                                                            max(r["error_vs_stiffest_mm"])}
                                      for r in conv["penalty_study"]["scales"]]},
+                      "skin_study": {"tube_change_mm_at_50mm": conv["skin_study"]["tube_change_mm"][-1],
+                                     "skins": [{k: r[k] for k in ("skin_h_m", "dofs", "cpu_seconds", "newton_converged",
+                                                                  "force_N_at_50mm")}
+                                               | {"change_vs_unrefined_mm_at_50mm": r["change_vs_unrefined_mm"][-1],
+                                                  "diff_vs_finest_mm_at_50mm": r["diff_vs_finest_mm"][-1]}
+                                               for r in conv["skin_study"]["skins"]]},
                       "levels": [{k: lv[k] for k in ("h_fine_m", "dofs", "seconds", "cpu_seconds", "newton_converged")}
                                  | {"error_vs_finest_mm_max": max(lv["error_vs_finest_mm"]),
                                     "error_vs_finest_mm_at_50mm": lv["error_vs_finest_mm"][-1],
@@ -729,6 +772,7 @@ def main(argv: list[str] | None = None) -> int:
     conv["converged"] = conv["converged"] and pen["converged"]
     conv["criterion"] += (f"; and the contact penalty converged: the default {PENALTY_SCALE:g}·E/h within "
                           f"{PENALTY_TOL_MM:g} mm of a 10x stiffer one (penalty_study)")
+    conv["skin_study"] = skin_study(st, mat, cache, rm)
     solved, src = snapshot_source(st, mat, cache, rm, fine)
     table, hit, sec = snapshot_table(st, mat, cache, solved)
     if src is not None:
