@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import os
-import random
-import socket
 import sys
 from pathlib import Path
 
@@ -13,30 +11,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-
-def free_port(span: int = 1) -> int:
-    """A TCP port on 127.0.0.1 that is free right now, with the ``span - 1`` ports above it, all below this
-    machine's ephemeral range: a port in that range can be taken by a ZeroMQ subscriber's reconnect (TCP
-    self-connect) while its node restarts (``launch_check.ephemeral_port_range``; CI saw it)."""
-    from flexsheet.runtime.launch_check import ephemeral_port_range
-
-    lo = min(ephemeral_port_range()[0], 32768)
-    rng = random.Random()
-    for _ in range(500):
-        port = rng.randrange(20000, lo - span)
-        socks = []
-        try:
-            for p in range(port, port + span):
-                s = socket.socket()
-                socks.append(s)
-                s.bind(("127.0.0.1", p))
-            return port
-        except OSError:
-            continue
-        finally:
-            for s in socks:
-                s.close()
-    raise RuntimeError(f"no {span} free TCP port(s) in 20000-{lo}")
+from flexsheet.runtime.ports import free_port  # noqa: E402  (tests import it from here; ports below the ephemeral range)
 
 
 @pytest.fixture

@@ -75,19 +75,19 @@ def test_reference_physics(quick):
 
 def test_skin_study_refines_the_surface_layer_only(quick):
     """The skin study's variant is the next-to-finest mesh plus a finer surface layer: more DOF than that mesh,
-    fewer than refining its whole tube would need here, Newton converged, and it moves the visible surface
-    (a real, finite change at every depth past the first) by a different amount than the tube refinement."""
+    Newton converged, a real change of the visible surface at every depth past the first, and a softer push at
+    50 mm (finer elements where the finger bends the surface stiffen it less; the full tube refinement does too)."""
     base, s, _ = quick
     with open(base / "out" / "convergence.json") as fh:
         conv = json.load(fh)
     sk = conv["skin_study"]
     assert sk["unrefined"]["h_fine"] == conv["levels"][-2]["h_fine_m"] and sk["unrefined_dofs"] == conv["levels"][-2]["dofs"]
-    assert sk["tube_change_mm"] == pytest.approx(conv["levels"][-2]["error_vs_finest_mm"], abs=1e-9)
     (row,) = sk["skins"]
-    assert row["spec"]["skin_h"] == 0.006 and row["newton_converged"] and row["dofs"] > sk["unrefined_dofs"]
+    assert row["spec"]["skin_h"] == 0.005 and row["newton_converged"] and row["dofs"] > sk["unrefined_dofs"]
     ch = np.array(row["change_vs_unrefined_mm"])
-    assert ch.shape == (len(sk["depths_m"]),) and np.all(np.isfinite(ch)) and np.all(ch[1:] > 0)
-    assert not np.allclose(ch, sk["tube_change_mm"], rtol=0.05)
+    assert ch.shape == (len(sk["depths_m"]),) and np.all(np.isfinite(ch)) and np.all(ch[1:] > 0.01)
+    f0, f_fine = sk["unrefined_force_N_at_50mm"], sk["finest_force_N_at_50mm"]
+    assert f_fine < f0 and row["force_N_at_50mm"] < f0 - 0.1, (f0, row["force_N_at_50mm"], f_fine)
     assert s["reference"]["skin_study"]["skins"][0]["change_vs_unrefined_mm_at_50mm"] == pytest.approx(ch[-1])
 
 

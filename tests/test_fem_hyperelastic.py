@@ -155,10 +155,16 @@ def test_skin_refinement_is_fine_in_the_surface_layer_around_the_push_only():
     assert np.median(l1[s1]) < 0.6 * np.median(l0[s0]) and np.median(l1[s1]) < 0.0045
     assert np.median(l1[f1]) == pytest.approx(np.median(l0[f0]), rel=0.15)       # far away: unchanged
     assert len(m1.points) > len(m0.points)
-    for kw, word in ((dict(skin_h=0.009), "skin size"), (dict(skin_h=0.003, skin_depth=0.0), "skin depth"),
-                     (dict(skin_h=0.003, skin_radius=float("nan")), "skin patch radius")):
+    for kw, word in ((dict(skin_h=0.009), r"skin_h must be 0 \(no skin\) or in \[0.0005, h_fine=0.008\] m, got 0.009"),
+                     (dict(skin_h=float("nan")), "skin_h must be"), (dict(skin_h=-0.003), "skin_h must be"),
+                     (dict(skin_h=0.003, skin_depth=0.0), "skin_depth must be > 0 m, got 0.0"),
+                     (dict(skin_h=0.003, skin_radius=float("nan")), "skin_radius must be > 0 m, got nan")):
         with pytest.raises(ValueError, match=word):
-            H.reference_mesh(replace(base, **kw), 0.0)
+            replace(base, **kw)
+    with pytest.raises(ValueError, match=r"skin_depth must be >= skin_h = 0.003 m \(one element thick\), got 0.002"):
+        replace(base, skin_h=0.003, skin_depth=0.002)
+    with pytest.raises(ValueError, match="size balls"):
+        H.reference_mesh(replace(base, skin_h=0.0005, skin_depth=0.0005, skin_radius=0.05), 0.0)
 
 
 def test_reference_push_is_physical_at_small_depth(quarter):

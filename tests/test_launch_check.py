@@ -16,9 +16,11 @@ import pytest
 import yaml
 from conftest import ROOT, free_port
 
+from flexsheet.runtime import ports
 from flexsheet.runtime.launch import Supervisor, load_launch
-from flexsheet.runtime.launch_check import check_launch, ephemeral_port_range
+from flexsheet.runtime.launch_check import check_launch
 from flexsheet.runtime.node import EXIT_CONFIG
+from flexsheet.runtime.ports import ephemeral_port_range
 
 LAB_HOSTS = ["main", "arm1", "arm2"]
 
@@ -238,19 +240,35 @@ def test_node_ports_in_the_ephemeral_range_are_a_warning_naming_the_range(tmp_pa
     lo, hi = ephemeral_port_range()
     assert 1024 <= lo < hi <= 65535
     path = tmp_path / "chk.yaml"
-    path.write_text(yaml.safe_dump(BASE, sort_keys=False))
+    below = _mutate(_mutate(BASE, "base_port", min(21000, lo - 600)), "nodes.ctrl.params.port", min(21500, lo - 100))
+    path.write_text(yaml.safe_dump(below, sort_keys=False))
     assert not any("ephemeral" in w for w in check_launch(path, out=str(tmp_path / "out")).warnings)
-    path.write_text(yaml.safe_dump(_mutate(BASE, "base_port", lo), sort_keys=False))   # talker at lo + 1, rec lo + 3
+    inside = _mutate(_mutate(BASE, "base_port", lo), "nodes.ctrl.params.port", lo + 10)   # talker lo + 1, rec lo + 3
+    path.write_text(yaml.safe_dump(inside, sort_keys=False))
     res = check_launch(path, out=str(tmp_path / "out"))
     assert res.errors == []
     eph = [w for w in res.warnings if "ephemeral" in w]
     assert len(eph) == 1 and f"range {lo}-{hi}" in eph[0] and f"talker ({lo + 1})" in eph[0] \
-        and f"rec ({lo + 3})" in eph[0] and f"below {lo}" in eph[0], eph
+        and f"below {lo}" in eph[0] and eph[0].count("(") >= 4, eph      # 3 named, "..." for the rest
+    assert "4 listening port(s)" in eph[0], eph                          # 3 publishers + the twin's Modbus port
     bad = tmp_path / "range"
     bad.write_text("not numbers\n")
     assert ephemeral_port_range(bad) == (32768, 60999)       # unreadable: Linux's default
     bad.write_text("20000\t40000\n")
     assert ephemeral_port_range(bad) == (20000, 40000)
+
+
+
+def test_free_ports_lie_below_the_ephemeral_range_and_bad_ranges_are_named(monkeypatch):
+    lo, _ = ephemeral_port_range()
+    for span in (1, 20):
+        p = ports.free_port(span=span)
+        assert ports.LOW_PORT <= p and p + span <= min(lo, 32768)
+    with pytest.raises(ValueError, match="span must be an int >= 1, got 0"):
+        ports.free_port(span=0)
+    monkeypatch.setattr(ports, "ephemeral_port_range", lambda: (20005, 60999))
+    with pytest.raises(RuntimeError, match=r"starts at 20005 \(net.ipv4.ip_local_port_range\)"):
+        ports.free_port(span=10)
 
 
 def test_broken_param_is_refused_before_anything_starts_with_one_clear_line(demo_launch):

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import asyncio
 import os
-import socket
 import time
 
 import numpy as np
@@ -14,17 +13,12 @@ import pytest
 
 from flexsheet.runtime.bench_load import payload_fields, rss_mb, slope_mb_per_min
 from flexsheet.runtime.node import Node, NodeConfig, QoS
+from flexsheet.runtime.ports import free_port
 from messages import topics as T
 
 RATE = 2 * T.STEREO.nominal_hz          # 96 Hz of 655 kB stereo frames: 63 MB/s
 SECONDS = 8.0
 HANDLER_S = 0.05                        # the subscriber needs 50 ms per frame: 5× slower than the publisher
-
-
-def _port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class StereoPublisher(Node):
@@ -54,7 +48,7 @@ class SlowLatest(Node):
 
 
 def test_a_slow_latest_subscriber_keeps_one_frame_and_flat_memory():
-    ep = f"tcp://127.0.0.1:{_port()}"
+    ep = f"tcp://127.0.0.1:{free_port()}"
     pub = StereoPublisher(NodeConfig(name="pub", endpoint=ep))
     sub = SlowLatest(NodeConfig(name="sub", endpoint="", peers=[ep]))
     rss: list[tuple[float, float]] = []

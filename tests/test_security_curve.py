@@ -37,7 +37,8 @@ def keys_env(tmp_path, monkeypatch):
 
 
 def _launch(tmp_path, security: str = "security: {curve: true, public_keys_file: $(keys)/public_keys.yaml}"):
-    p1, p2 = free_port(), free_port()
+    p1 = free_port(span=2)
+    p2 = p1 + 1
     text = f"""
 name: secure
 hosts:

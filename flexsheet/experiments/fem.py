@@ -108,7 +108,7 @@ def settings_for(quick: bool) -> Settings:
         return Settings(levels=lv, depth_step=0.005, fine_step=0.005,
                         grid=SnapshotGrid((0.0,), 0.05, 0.01, 1.0, 0.001, 0.002), snap_spec=lv[-1], holdout_deg=(),
                         linear_spec=MeshSpec(0.016, 0.006, 0.012, 0.0), n_time=50, quick=True, penalty_level=0,
-                        penalty_scales=(PENALTY_SCALE, 10 * PENALTY_SCALE), skin_sizes=(0.006,))
+                        penalty_scales=(PENALTY_SCALE, 10 * PENALTY_SCALE), skin_sizes=(0.005,))
     lv = [replace(DEFAULT_REF_SPEC, h_fine=hf) for hf in FULL_LEVELS]
     grid = SnapshotGrid((0.0,), 0.05, 0.005, DEFAULT_GRID.dtheta_deg, DEFAULT_GRID.dy, DEFAULT_GRID.drho)
     # the snapshots on the node's mesh (DEFAULT_REF_SPEC, the next-to-finest level), judged against the finest
@@ -243,6 +243,13 @@ def _visible_diffs(a: dict, b: dict, depths: np.ndarray, verts: np.ndarray, fixe
             for j, d in enumerate(depths)]
 
 
+def _at_depths(path: dict, path_depths: np.ndarray, depths: np.ndarray) -> dict:
+    """``path`` (a :func:`reference_path` result sampled at ``path_depths``, m) with its per-depth arrays taken
+    at the nearest of ``depths`` (m)."""
+    sub = np.array([int(np.argmin(np.abs(path_depths - d))) for d in depths])
+    return {k: (v[sub] if np.ndim(v) and len(v) == len(path_depths) else v) for k, v in path.items()}
+
+
 def convergence(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel) -> tuple[dict, dict]:
     """Mesh convergence at azimuth 0 on the rendered vertices; returns (report, finest level's path, sampled
     every ``st.fine_step``)."""
@@ -252,8 +259,7 @@ def convergence(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMode
     fixed = rm.mesh.fixed[rm.surface_nodes]
     paths = [reference_path(s, 0.0, depths, mat, cache, verts, st.contact) for s in st.levels[:-1]]
     fine = reference_path(st.levels[-1], 0.0, fdepths, mat, cache, verts, st.contact)
-    sub = np.array([int(np.argmin(np.abs(fdepths - d))) for d in depths])
-    paths.append({k: (v[sub] if np.ndim(v) and len(v) == len(fdepths) else v) for k, v in fine.items()})
+    paths.append(_at_depths(fine, fdepths, depths))
     rep = {"depths_m": depths.tolist(), "levels": []}
     for s, p in zip(st.levels, paths, strict=True):
         err = _visible_diffs(p, paths[-1], depths, verts, fixed, rm.mesh)
@@ -328,22 +334,20 @@ def penalty_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMo
 
 
 # ---- candidates ------------------------------------------------------------------------------------------------
-def skin_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel) -> dict:
+def skin_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, conv: dict, fine: dict) -> dict:
     """Where the unconverged part of the reference lies: the next-to-finest convergence mesh (full mode: the
-    snapshot mesh) with only its surface layer refined (``skin_h`` in ``st.skin_sizes``: the material that wraps the fingertip and lines the
-    crater, :class:`nodes.fem.hyperelastic.RefSpec`), against the same mesh refined throughout its push tube (the
-    finest convergence level). Per variant the largest visible-surface difference (mm, per depth) to the
+    snapshot mesh) with only its surface layer refined (``skin_h`` in ``st.skin_sizes``: the material that
+    wraps the fingertip and lines the crater, :class:`nodes.fem.hyperelastic.RefSpec`), against the same mesh
+    refined throughout its push tube (the finest convergence level). ``conv``: :func:`convergence`'s report;
+    ``fine``: its finest path. Per variant the largest visible-surface difference (mm, per depth) to the
     unrefined mesh and to the finest level, the force at 50 mm, DOF and CPU; ``tube_change_mm``: the finest
-    level against the unrefined mesh. Azimuth 0, every ``st.depth_step``."""
+    level against the unrefined mesh (from ``conv``). Azimuth 0, every ``st.depth_step``."""
     depths = _depths(st.depth_step)
     verts = rm.rest_vertices.astype(float)
     fixed = rm.mesh.fixed[rm.surface_nodes]
     unrefined = st.levels[-2]
     base = reference_path(unrefined, 0.0, depths, mat, cache, verts, st.contact)
-    fd = _depths(st.fine_step)
-    fine = reference_path(st.levels[-1], 0.0, fd, mat, cache, verts, st.contact)
-    sub = np.array([int(np.argmin(np.abs(fd - d))) for d in depths])
-    fine = {"u": fine["u"][sub], "force": fine["force"][sub]}
+    fine = _at_depths(fine, _depths(st.fine_step), depths)
     rows = []
     for h in st.skin_sizes:
         spec = replace(unrefined, skin_h=h)
@@ -352,7 +356,7 @@ def skin_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel
                      "newton_converged": bool(p["converged"].all()), "force_N_at_50mm": float(p["force"][-1]),
                      "change_vs_unrefined_mm": [e * 1e3 for e in _visible_diffs(p, base, depths, verts, fixed, rm.mesh)],
                      "diff_vs_finest_mm": [e * 1e3 for e in _visible_diffs(p, fine, depths, verts, fixed, rm.mesh)]})
-    tube = [e * 1e3 for e in _visible_diffs(base, fine, depths, verts, fixed, rm.mesh)]
+    tube = conv["levels"][-2]["error_vs_finest_mm"]
     _log("skin study at 50 mm: skin refinement moves the visible surface by "
          f"{[round(r['change_vs_unrefined_mm'][-1], 2) for r in rows]} mm, the tube refinement by {tube[-1]:.2f} mm")
     return {"depths_m": depths.tolist(), "unrefined": unrefined.__dict__, "finest": st.levels[-1].__dict__,
@@ -756,6 +760,8 @@ def main(argv: list[str] | None = None) -> int:
             raise SystemExit("flexsheet experiment fem: --node-table builds the node's full table; it takes neither "
                              "--quick nor --level")
         return build_node_table(mat, cache, args.cache_dir or None, st.contact, args.azimuth)
+    for h in st.skin_sizes:     # before any solve: a bad size would otherwise fail after the convergence study
+        replace(st.levels[-2], skin_h=h)
     rm = realtime_model(st, mat, args.cache_dir or None)
     if args.level is not None:
         if not 0 <= args.level < len(st.levels):
@@ -772,7 +778,7 @@ def main(argv: list[str] | None = None) -> int:
     conv["converged"] = conv["converged"] and pen["converged"]
     conv["criterion"] += (f"; and the contact penalty converged: the default {PENALTY_SCALE:g}·E/h within "
                           f"{PENALTY_TOL_MM:g} mm of a 10x stiffer one (penalty_study)")
-    conv["skin_study"] = skin_study(st, mat, cache, rm)
+    conv["skin_study"] = skin_study(st, mat, cache, rm, conv, fine)
     solved, src = snapshot_source(st, mat, cache, rm, fine)
     table, hit, sec = snapshot_table(st, mat, cache, solved)
     if src is not None:

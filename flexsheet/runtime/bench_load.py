@@ -31,7 +31,6 @@ import argparse
 import asyncio
 import json
 import os
-import socket
 import subprocess
 import sys
 import tempfile
@@ -40,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from flexsheet.runtime.ports import free_port
 from messages import topics as T
 from messages.samples import sample_fields
 
@@ -200,18 +200,6 @@ def slope_mb_per_min(t: np.ndarray, rss: np.ndarray) -> float:
     return float(np.polyfit(t, rss, 1)[0] * 60.0)
 
 
-def _free_ports(n: int) -> list[int]:
-    socks = []
-    for _ in range(n):
-        s = socket.socket()
-        s.bind(("127.0.0.1", 0))
-        socks.append(s)
-    ports = [s.getsockname()[1] for s in socks]
-    for s in socks:
-        s.close()
-    return ports
-
-
 def run_load(seconds: float = 60.0, factor: float = 2.0, warmup: float = 10.0, sample: float = 0.5,
              random_images: bool = False, log=print) -> dict:
     """Run the load (see module doc) for ``seconds`` s; returns the results dict. ``warmup`` s are left out
@@ -219,7 +207,8 @@ def run_load(seconds: float = 60.0, factor: float = 2.0, warmup: float = 10.0, s
     if not seconds > warmup:
         raise ValueError(f"seconds ({seconds}) must exceed warmup ({warmup})")
     tmp = Path(tempfile.mkdtemp(prefix="flexsheet_load_"))
-    ports = _free_ports(len(GROUPS) + 2)
+    base = free_port(span=len(GROUPS) + 2)     # below the ephemeral range: subscribers connect before binds
+    ports = list(range(base, base + len(GROUPS) + 2))
     eps = {g: f"tcp://127.0.0.1:{p}" for g, p in zip(GROUPS, ports, strict=False)}
     py = [sys.executable, "-m", "flexsheet.runtime.bench_load", "--child"]
     procs: dict[str, subprocess.Popen] = {}

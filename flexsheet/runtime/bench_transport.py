@@ -34,19 +34,13 @@ import numpy as np
 import zmq
 
 from flexsheet.runtime.node import Node, NodeConfig, QoS
+from flexsheet.runtime.ports import free_port
 from messages import Fingertip, StereoFrame
 from messages import topics as T
 
 N_LAT = 3000
 N_FRAMES = 1500
 W, H = 640, 480
-
-
-def _free_port() -> int:
-    import socket
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 # ------------------------------------------------------------------------------------------ sinks (child)
@@ -134,7 +128,7 @@ def _finish(p: subprocess.Popen) -> dict:
 
 
 def _raw_source(kind: str, n: int) -> dict:
-    port = _free_port()
+    port = free_port()
     endpoint = f"tcp://127.0.0.1:{port}"
     ctx = zmq.Context()
     pub = ctx.socket(zmq.PUB)
@@ -171,7 +165,7 @@ class _Source(Node):
 
 
 def _node_source(kind: str, n: int) -> dict:
-    port = _free_port()
+    port = free_port()
     endpoint = f"tcp://127.0.0.1:{port}"
     node = _Source(NodeConfig(name="bench_source", endpoint=endpoint, peers=[], heartbeat_period=10.0))
     left = np.random.default_rng(0).integers(0, 255, (H, W), dtype=np.uint8)

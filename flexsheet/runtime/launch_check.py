@@ -28,7 +28,7 @@ same check first and starts nothing when it finds an error. What is checked:
 Warnings (printed, not failing): CURVE off on a graph whose hosts are not all loopback; a node type that
 cannot be imported on this machine for a node of another host; the nodes of one container asking for
 different ``nice`` or ``rt_priority`` (one process has one); a node's TCP port inside this machine's
-ephemeral port range (:func:`ephemeral_port_range`): while that node restarts, a subscriber's ZeroMQ
+ephemeral port range (:func:`flexsheet.runtime.ports.ephemeral_port_range`): while that node restarts, a subscriber's ZeroMQ
 reconnect to the dead port can be given that same port as its own source port and connect to itself (a TCP
 self-connect), and the respawned node then cannot bind (seen in CI: a renderer used all its restarts on
 "Address already in use").
@@ -65,6 +65,7 @@ from flexsheet.runtime.launch import (
     substitute,
     substitutions,
 )
+from flexsheet.runtime.ports import ephemeral_port_range
 
 __all__ = ["CheckResult", "check_launch", "check_file_param", "is_input_file_key", "LISTEN_PARAMS",
            "OUTPUT_PARAMS", "FILE_READERS", "read_display_calib"]
@@ -250,11 +251,6 @@ class _Checker:
                 claim(spec.host, port, f"node {name}'s publisher ({ep})", f"node {name}: port")
                 if lo <= port <= hi:
                     ephemeral.append(f"{name} ({port})")
-        if ephemeral:
-            self.warn(f"{len(ephemeral)} node port(s) lie in this machine's ephemeral port range {lo}-{hi} "
-                      f"({', '.join(ephemeral[:3])}{', ...' if len(ephemeral) > 3 else ''}): while such a node "
-                      f"restarts, a subscriber's reconnect can take its port (TCP self-connect) and the node cannot "
-                      f"bind again; set base_port (and node ports) below {lo}")
         for name, spec in self.lf.nodes.items():
             keys = LISTEN_PARAMS.get(spec.type)
             if keys is None:
@@ -262,6 +258,13 @@ class _Checker:
             port = self._params(name).get(keys[1])
             if type(port) is int and 0 < port <= 65535:
                 claim(spec.host, port, f"node {name}'s {keys[1]} param", f"node {name}: params.{keys[1]}")
+                if lo <= port <= hi:
+                    ephemeral.append(f"{name}.{keys[1]} ({port})")
+        if ephemeral:
+            self.warn(f"{len(ephemeral)} listening port(s) lie in this machine's ephemeral port range {lo}-{hi} "
+                      f"({', '.join(ephemeral[:3])}{', ...' if len(ephemeral) > 3 else ''}): while such a node "
+                      f"restarts, a client's reconnect can take its port (TCP self-connect) and the node cannot "
+                      f"bind again; set base_port (and node ports) below {lo}")
 
     # ---------------------------------------------------------------------------------------------- keys
     def check_security(self) -> None:
@@ -457,19 +460,6 @@ class _Checker:
                     self.warn(f"container {cname} on host {host}: its nodes ask for different {key} "
                               f"({', '.join(f'{n}={v}' for n, v in values.items())}); one process runs at "
                               f"{key} {pick(values.values())}")
-
-
-EPHEMERAL_RANGE_FILE = Path("/proc/sys/net/ipv4/ip_local_port_range")
-
-
-def ephemeral_port_range(path: Path = EPHEMERAL_RANGE_FILE) -> tuple[int, int]:
-    """This machine's ephemeral (source) TCP port range, inclusive: Linux's ``net.ipv4.ip_local_port_range``,
-    or Linux's default (32768, 60999) where that file cannot be read (another OS). Source: ip-sysctl(7)."""
-    try:
-        lo, hi = (int(v) for v in path.read_text().split())
-        return lo, hi
-    except (OSError, ValueError):
-        return 32768, 60999
 
 
 def _iso(t: float) -> str:

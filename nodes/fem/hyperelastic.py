@@ -106,6 +106,14 @@ class RefSpec:
                 raise ValueError(f"{name} must be in [0.0005, 0.05] m, got {v!r}")
         if self.h_fine > self.h:
             raise ValueError(f"h_fine must be <= h, got {self.h_fine!r} > {self.h!r}")
+        if not (self.skin_h == 0.0 or (math.isfinite(self.skin_h) and 0.0005 <= self.skin_h <= self.h_fine)):
+            raise ValueError(f"skin_h must be 0 (no skin) or in [0.0005, h_fine={self.h_fine:g}] m, got {self.skin_h!r}")
+        for name in ("skin_radius", "skin_depth"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be > 0 m, got {v!r}")
+        if self.skin_h > 0 and self.skin_depth < self.skin_h:
+            raise ValueError(f"skin_depth must be >= skin_h = {self.skin_h:g} m (one element thick), got {self.skin_depth!r}")
 
     def key(self) -> str:
         """Stable text key (cache keys)."""

@@ -119,12 +119,11 @@ def _gmsh_tets(model: str, geometry, h: float, h_fine: float, refine_radius: flo
             geometry(gmsh)
             gmsh.model.occ.synchronize()
             gmsh.option.setNumber("Mesh.MeshSizeMax", h)
-            gmsh.option.setNumber("Mesh.MeshSizeMin", min(h_fine, h))
+            gmsh.option.setNumber("Mesh.MeshSizeMin", min([h_fine, h] + [b[2] for b in extra_balls]))
             gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
             gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
             gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
             fields = []
-            gmsh.option.setNumber("Mesh.MeshSizeMin", min([h_fine, h] + [b[2] for b in extra_balls]))
             for group, radius, size in ((centres, refine_radius, h_fine), *extra_balls):
                 for p in group:
                     f = gmsh.model.mesh.field.add("Ball")
@@ -231,10 +230,13 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
             raise ValueError(f"skin size must be in [0.0005, h_fine={h_fine}] m, got {size!r}")
         if not (math.isfinite(patch) and 0 < patch <= radius * math.pi / 2):
             raise ValueError(f"skin patch radius must be in (0, {radius * math.pi / 2:.4g}] m, got {patch!r}")
-        if not (math.isfinite(depth) and 0 < depth <= radius / 2):
-            raise ValueError(f"skin depth must be in (0, {radius / 2:.4g}] m, got {depth!r}")
+        if not (math.isfinite(depth) and size <= depth <= radius / 2):
+            raise ValueError(f"skin depth must be in [skin size {size:g}, {radius / 2:.4g}] m, got {depth!r}")
         step = depth / 2
         n = int(math.ceil(patch / step))
+        if len(refine_deg) * (2 * n + 1) ** 2 > 40000:      # gmsh evaluates every ball at every mesh vertex
+            raise ValueError(f"skin patch radius {patch:g} m / depth {depth:g} m needs > 40000 size balls; "
+                             "use a thicker skin or a smaller patch")
         pts = []
         for d in refine_deg:
             for i in range(-n, n + 1):          # arc length along the azimuth

@@ -17,7 +17,6 @@ import argparse
 import asyncio
 import json
 import os
-import socket
 import statistics
 import subprocess
 import sys
@@ -37,6 +36,7 @@ from flexsheet.runtime.foxglove_scene import (
     SCENE,
     TF,
 )
+from flexsheet.runtime.ports import free_port
 
 __all__ = ["main", "WINDOWS"]
 
@@ -45,12 +45,6 @@ LAYOUT_CHANNELS = [SCENE, TF, METRICS, CAMERA_LEFT, CAMERA_RIGHT, RENDER_IMAGE, 
 #: window name -> channels the viewer subscribes (None: every advertised channel; []: no viewer)
 WINDOWS = {"no viewer": [], "layout viewer": LAYOUT_CHANNELS, "all channels": None, "no viewer, after": []}
 _TICK = os.sysconf("SC_CLK_TCK")
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _cpu_s(pid: int) -> float:
@@ -107,7 +101,7 @@ async def _window(pid: int, port: int, channels, seconds: float) -> dict:
 
 def _one_run(lf: dict, params: dict, args, out: Path, label: str) -> dict:
     """Launch the sim once with the viz node on a free port and measure every window; returns window -> numbers."""
-    port = _free_port()
+    port = free_port()
     host = next(iter(lf["hosts"]))
     lf = dict(lf, nodes={**{k: v for k, v in lf["nodes"].items() if v.get("type") != "viz"},
                          "viz": {"type": "viz", "host": host, "nice": 10, "params": {**params, "port": port}}})

@@ -1,0 +1,58 @@
+"""Local TCP ports for graphs on one machine: the ephemeral range, and free ports below it.
+
+A node's port must lie outside the machine's ephemeral (source) port range: while the node is down its
+subscribers keep reconnecting to that port, and a reconnect from the same machine can be given that very port
+as its own source port and connect to itself (a TCP self-connect); the respawned node then cannot bind
+("Address already in use"). Seen in CI (a renderer used all its restarts on it) and reproduced here: 8 ZeroMQ
+subscribers reconnecting to a dead port 38810 took it within 4 s; at 25010 it stayed free (docs/deploy.md).
+"""
+
+from __future__ import annotations
+
+import random
+import socket
+from pathlib import Path
+
+__all__ = ["EPHEMERAL_RANGE_FILE", "LOW_PORT", "ephemeral_port_range", "free_port"]
+
+EPHEMERAL_RANGE_FILE = Path("/proc/sys/net/ipv4/ip_local_port_range")
+LOW_PORT = 20000        #: free ports are drawn from [LOW_PORT, start of the ephemeral range)
+
+
+def ephemeral_port_range(path: Path = EPHEMERAL_RANGE_FILE) -> tuple[int, int]:
+    """This machine's ephemeral (source) TCP port range, inclusive: Linux's ``net.ipv4.ip_local_port_range``,
+    or Linux's default (32768, 60999) where that file cannot be read (another OS). Source: ip-sysctl(7)."""
+    try:
+        lo, hi = (int(v) for v in path.read_text().split())
+        return lo, hi
+    except (OSError, ValueError):
+        return 32768, 60999
+
+
+def free_port(span: int = 1, host: str = "127.0.0.1") -> int:
+    """A TCP port on ``host`` that is free right now, with the ``span - 1`` ports above it, all in
+    [:data:`LOW_PORT`, start of :func:`ephemeral_port_range`) (see the module doc for why). Another process may
+    take it before the caller binds it. Raises ``ValueError`` on ``span`` < 1 and ``RuntimeError`` when the
+    ephemeral range leaves no room below it, or no free block is found in 500 random tries."""
+    if not (isinstance(span, int) and span >= 1):
+        raise ValueError(f"span must be an int >= 1, got {span!r}")
+    lo = min(ephemeral_port_range()[0], 32768)
+    if lo - span <= LOW_PORT:
+        raise RuntimeError(f"the ephemeral port range starts at {lo} (net.ipv4.ip_local_port_range): no room for "
+                           f"{span} port(s) in {LOW_PORT}-{lo - 1}; raise its lower bound")
+    rng = random.Random()
+    for _ in range(500):
+        port = rng.randrange(LOW_PORT, lo - span)
+        socks = []
+        try:
+            for p in range(port, port + span):
+                s = socket.socket()
+                socks.append(s)
+                s.bind((host, p))
+            return port
+        except OSError:
+            continue
+        finally:
+            for s in socks:
+                s.close()
+    raise RuntimeError(f"no {span} free TCP port(s) in a row in {LOW_PORT}-{lo - 1} on {host} after 500 tries")
