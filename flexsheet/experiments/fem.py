@@ -11,7 +11,7 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    every refinement, the last refinement changes the visible surface by ≤ half the target, Newton converged at
    every load step of the finest mesh and none of its elements is inverted at a quadrature point.
    **Skin study** (``convergence.json`` ``skin_study``, :func:`skin_study`): the 3.4 mm mesh with only its
-   surface layer refined (2.5 and 1.8 mm), against the whole push tube refined, to tell which part of the
+   surface layer refined (2.5, 1.8 and 1.3 mm), against the whole push tube refined, to tell which part of the
    mesh the unconverged deep push depends on.
 2. **Candidates**, judged on the real-time model's rendered vertices outside the finger's footprint
    (lateral distance from the push axis > finger radius + 2 mm; the footprint is hidden by the finger):
@@ -26,10 +26,11 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    with the convergence figures.
 
 ``--quick``: two coarse meshes (h_fine 12 / 9 mm), 5 mm outputs, snapshots every 10 mm, a penalty study of
-two scales: a test's run, 70 s cold on the idle 2-core machine, seconds cached; it does not meet the targets
+two scales, a skin study of one size (5 mm): a test's run, ~110 s cold on the 2-core machine with two solves
+beside it (70 s idle before the skin study), seconds cached; it does not meet the targets
 and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4.5 / 3.4 / 2.5 mm,
 :data:`FULL_LEVELS`, 2.5 mm outputs, snapshots at azimuth 0 every 5 mm, penalty study) is ~1 h of CPU cold on
-the shared 2-core machine (the 2.5 mm mesh 38 min, the 3.4 mm 20 min, the two skin meshes 15 and ~35 min;
+the shared 2-core machine (the 2.5 mm mesh 38 min, the 3.4 mm 20 min, the three skin meshes 15, ~30 and ~60 min;
 a node-table azimuth path ~40 min).
 ``--level N`` solves one mesh only and ``--node-table --azimuth A`` one azimuth (to run them in parallel
 processes); every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds (27 s).
@@ -94,7 +95,7 @@ class Settings:
     contact: str = DEFAULT_CONTACT
     penalty_level: int = 1
     penalty_scales: tuple = (1e3, 1e4, PENALTY_SCALE, 10 * PENALTY_SCALE)
-    skin_sizes: tuple = (0.0025, 0.0018)
+    skin_sizes: tuple = (0.0025, 0.0018, 0.0013)
 
 
 def settings_for(quick: bool) -> Settings:
