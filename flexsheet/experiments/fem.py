@@ -11,7 +11,7 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    every refinement, the last refinement changes the visible surface by ≤ half the target, Newton converged at
    every load step of the finest mesh and none of its elements is inverted at a quadrature point.
    **Skin study** (``convergence.json`` ``skin_study``, :func:`skin_study`): the 3.4 mm mesh with only its
-   surface layer refined (2.5, 1.8 and 1.3 mm), against the whole push tube refined, to tell which part of the
+   surface layer refined (2.5 and 1.8 mm), against the whole push tube refined, to tell which part of the
    mesh the unconverged deep push depends on.
 2. **Candidates**, judged on the real-time model's rendered vertices outside the finger's footprint
    (lateral distance from the push axis > finger radius + 2 mm; the footprint is hidden by the finger):
@@ -30,7 +30,7 @@ two scales, a skin study of one size (5 mm): a test's run, ~110 s cold on the 2-
 beside it (70 s idle before the skin study), seconds cached; it does not meet the targets
 and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4.5 / 3.4 / 2.5 mm,
 :data:`FULL_LEVELS`, 2.5 mm outputs, snapshots at azimuth 0 every 5 mm, penalty study) is ~1 h of CPU cold on
-the shared 2-core machine (the 2.5 mm mesh 38 min, the 3.4 mm 20 min, the three skin meshes 15, ~30 and ~60 min;
+the shared 2-core machine (the 2.5 mm mesh 38 min, the 3.4 mm 20 min, the two skin meshes 15 and ~30 min;
 a node-table azimuth path ~40 min).
 ``--level N`` solves one mesh only and ``--node-table --azimuth A`` one azimuth (to run them in parallel
 processes); every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds (27 s).
@@ -95,7 +95,7 @@ class Settings:
     contact: str = DEFAULT_CONTACT
     penalty_level: int = 1
     penalty_scales: tuple = (1e3, 1e4, PENALTY_SCALE, 10 * PENALTY_SCALE)
-    skin_sizes: tuple = (0.0025, 0.0018, 0.0013)
+    skin_sizes: tuple = (0.0025, 0.0018)
 
 
 def settings_for(quick: bool) -> Settings:
@@ -341,7 +341,9 @@ def skin_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel
     wraps the fingertip and lines the crater, :class:`nodes.fem.hyperelastic.RefSpec`), against the same mesh
     refined throughout its push tube (the finest convergence level). ``conv``: :func:`convergence`'s report;
     ``fine``: its finest path. Per variant the largest visible-surface difference (mm, per depth) to the
-    unrefined mesh and to the finest level, the force at 50 mm, DOF and CPU; ``tube_change_mm``: the finest
+    unrefined mesh and to the finest level (visible on the finer of the two, as in :func:`convergence`), the
+    force at 50 mm, DOF and CPU, and ``change_vs_previous_mm`` (to the previous, coarser skin; the first: to the
+    unrefined mesh); ``tube_change_mm``: the finest
     level against the unrefined mesh (from ``conv``). Azimuth 0, every ``st.depth_step``."""
     depths = _depths(st.depth_step)
     verts = rm.rest_vertices.astype(float)
@@ -349,13 +351,15 @@ def skin_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel
     unrefined = st.levels[-2]
     base = reference_path(unrefined, 0.0, depths, mat, cache, verts, st.contact)
     fine = _at_depths(fine, _depths(st.fine_step), depths)
-    rows = []
+    rows, prev = [], base
     for h in st.skin_sizes:
         spec = replace(unrefined, skin_h=h)
         p = reference_path(spec, 0.0, depths, mat, cache, verts, st.contact)
-        rows.append({"skin_h_m": h, "spec": spec.__dict__, "dofs": int(p["dofs"]), "cpu_seconds": float(p["cpu_seconds"]),
+        step = [e * 1e3 for e in _visible_diffs(prev, p, depths, verts, fixed, rm.mesh)]
+        prev = p
+        rows.append({"change_vs_previous_mm": step, "skin_h_m": h, "spec": spec.__dict__, "dofs": int(p["dofs"]), "cpu_seconds": float(p["cpu_seconds"]),
                      "newton_converged": bool(p["converged"].all()), "force_N_at_50mm": float(p["force"][-1]),
-                     "change_vs_unrefined_mm": [e * 1e3 for e in _visible_diffs(p, base, depths, verts, fixed, rm.mesh)],
+                     "change_vs_unrefined_mm": [e * 1e3 for e in _visible_diffs(base, p, depths, verts, fixed, rm.mesh)],
                      "diff_vs_finest_mm": [e * 1e3 for e in _visible_diffs(p, fine, depths, verts, fixed, rm.mesh)]})
     tube = conv["levels"][-2]["error_vs_finest_mm"]
     _log("skin study at 50 mm: skin refinement moves the visible surface by "
@@ -583,6 +587,7 @@ def summary(st: Settings, conv: dict, cand: dict, cases: list[dict], snap_info: 
                                      "skins": [{k: r[k] for k in ("skin_h_m", "dofs", "cpu_seconds", "newton_converged",
                                                                   "force_N_at_50mm")}
                                                | {"change_vs_unrefined_mm_at_50mm": r["change_vs_unrefined_mm"][-1],
+                                                  "change_vs_previous_mm_at_50mm": r["change_vs_previous_mm"][-1],
                                                   "diff_vs_finest_mm_at_50mm": r["diff_vs_finest_mm"][-1]}
                                                for r in conv["skin_study"]["skins"]]},
                       "levels": [{k: lv[k] for k in ("h_fine_m", "dofs", "seconds", "cpu_seconds", "newton_converged")}
