@@ -334,7 +334,6 @@ def penalty_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMo
     return rep
 
 
-# ---- candidates ------------------------------------------------------------------------------------------------
 def skin_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, conv: dict, fine: dict) -> dict:
     """Where the unconverged part of the reference lies: the next-to-finest convergence mesh (full mode: the
     snapshot mesh) with only its surface layer refined (``skin_h`` in ``st.skin_sizes``: the material that
@@ -343,8 +342,8 @@ def skin_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel
     ``fine``: its finest path. Per variant the largest visible-surface difference (mm, per depth) to the
     unrefined mesh and to the finest level (visible on the finer of the two, as in :func:`convergence`), the
     force at 50 mm, DOF and CPU, and ``change_vs_previous_mm`` (to the previous, coarser skin; the first: to the
-    unrefined mesh); ``tube_change_mm``: the finest
-    level against the unrefined mesh (from ``conv``). Azimuth 0, every ``st.depth_step``."""
+    unrefined mesh); ``tube_change_mm``: the finest level against the unrefined mesh (from ``conv``). Azimuth 0,
+    every ``st.depth_step``."""
     depths = _depths(st.depth_step)
     verts = rm.rest_vertices.astype(float)
     fixed = rm.mesh.fixed[rm.surface_nodes]
@@ -355,12 +354,12 @@ def skin_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel
     for h in st.skin_sizes:
         spec = replace(unrefined, skin_h=h)
         p = reference_path(spec, 0.0, depths, mat, cache, verts, st.contact)
-        step = [e * 1e3 for e in _visible_diffs(prev, p, depths, verts, fixed, rm.mesh)]
-        prev = p
-        rows.append({"change_vs_previous_mm": step, "skin_h_m": h, "spec": spec.__dict__, "dofs": int(p["dofs"]), "cpu_seconds": float(p["cpu_seconds"]),
+        rows.append({"skin_h_m": h, "spec": spec.__dict__, "dofs": int(p["dofs"]), "cpu_seconds": float(p["cpu_seconds"]),
                      "newton_converged": bool(p["converged"].all()), "force_N_at_50mm": float(p["force"][-1]),
                      "change_vs_unrefined_mm": [e * 1e3 for e in _visible_diffs(base, p, depths, verts, fixed, rm.mesh)],
+                     "change_vs_previous_mm": [e * 1e3 for e in _visible_diffs(prev, p, depths, verts, fixed, rm.mesh)],
                      "diff_vs_finest_mm": [e * 1e3 for e in _visible_diffs(p, fine, depths, verts, fixed, rm.mesh)]})
+        prev = p
     tube = conv["levels"][-2]["error_vs_finest_mm"]
     _log("skin study at 50 mm: skin refinement moves the visible surface by "
          f"{[round(r['change_vs_unrefined_mm'][-1], 2) for r in rows]} mm, the tube refinement by {tube[-1]:.2f} mm")
@@ -369,6 +368,7 @@ def skin_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel
             "finest_force_N_at_50mm": float(fine["force"][-1]), "tube_change_mm": tube, "skins": rows}
 
 
+# ---- candidates ------------------------------------------------------------------------------------------------
 def validation_set(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, fine: dict) -> list[dict]:
     """Reference fields at the rendered vertices for the configurations the candidates are judged on: azimuth 0
     from the finest convergence mesh (every depth), and each held-out azimuth on the snapshot mesh."""
