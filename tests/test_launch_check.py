@@ -266,8 +266,11 @@ def test_free_ports_lie_below_the_ephemeral_range_and_bad_ranges_are_named(monke
         assert ports.LOW_PORT <= p and p + span <= min(lo, 32768)
     with pytest.raises(ValueError, match="span must be an int >= 1, got 0"):
         ports.free_port(span=0)
-    monkeypatch.setattr(ports, "ephemeral_port_range", lambda: (20005, 60999))
-    with pytest.raises(RuntimeError, match=r"starts at 20005 \(net.ipv4.ip_local_port_range\)"):
+    monkeypatch.setattr(ports, "ephemeral_port_range", lambda: (20005, 60999))   # no room below: above the range
+    p = ports.free_port(span=10)
+    assert 61000 <= p and p + 10 <= 65536
+    monkeypatch.setattr(ports, "ephemeral_port_range", lambda: (1024, 65535))
+    with pytest.raises(RuntimeError, match=r"range 1024-65535 \(net.ipv4.ip_local_port_range\) leaves no room"):
         ports.free_port(span=10)
 
 

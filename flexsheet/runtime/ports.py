@@ -30,19 +30,25 @@ def ephemeral_port_range(path: Path = EPHEMERAL_RANGE_FILE) -> tuple[int, int]:
 
 
 def free_port(span: int = 1, host: str = "127.0.0.1") -> int:
-    """A TCP port on ``host`` that is free right now, with the ``span - 1`` ports above it, all in
-    [:data:`LOW_PORT`, start of :func:`ephemeral_port_range`) (see the module doc for why). Another process may
-    take it before the caller binds it. Raises ``ValueError`` on ``span`` < 1 and ``RuntimeError`` when the
-    ephemeral range leaves no room below it, or no free block is found in 500 random tries."""
+    """A TCP port on ``host`` that is free right now, with the ``span - 1`` ports above it, all outside
+    :func:`ephemeral_port_range` (see the module doc for why): in [:data:`LOW_PORT`, start of the range), or,
+    where the range starts too low for that, above its end. Another process may take it before the caller
+    binds it. Raises ``ValueError`` on ``span`` < 1 and ``RuntimeError`` when the range leaves no room on
+    either side, or no free block is found in 500 random tries."""
     if not (isinstance(span, int) and span >= 1):
         raise ValueError(f"span must be an int >= 1, got {span!r}")
-    lo = min(ephemeral_port_range()[0], 32768)
-    if lo - span <= LOW_PORT:
-        raise RuntimeError(f"the ephemeral port range starts at {lo} (net.ipv4.ip_local_port_range): no room for "
-                           f"{span} port(s) in {LOW_PORT}-{lo - 1}; raise its lower bound")
+    lo, hi = ephemeral_port_range()
+    lo = min(lo, 32768)
+    if lo - span > LOW_PORT:
+        first, last = LOW_PORT, lo - span              # ports first .. last - 1 start a block
+    elif 65536 - span > hi + 1:
+        first, last = hi + 1, 65536 - span
+    else:
+        raise RuntimeError(f"the ephemeral port range {lo}-{hi} (net.ipv4.ip_local_port_range) leaves no room for "
+                           f"{span} port(s) below or above it; narrow it")
     rng = random.Random()
     for _ in range(500):
-        port = rng.randrange(LOW_PORT, lo - span)
+        port = rng.randrange(first, last)
         socks = []
         try:
             for p in range(port, port + span):
@@ -55,4 +61,4 @@ def free_port(span: int = 1, host: str = "127.0.0.1") -> int:
         finally:
             for s in socks:
                 s.close()
-    raise RuntimeError(f"no {span} free TCP port(s) in a row in {LOW_PORT}-{lo - 1} on {host} after 500 tries")
+    raise RuntimeError(f"no {span} free TCP port(s) in a row in {first}-{last + span - 1} on {host} after 500 tries")
