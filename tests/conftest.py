@@ -14,6 +14,27 @@ sys.path.insert(0, str(ROOT))
 from flexsheet.runtime.ports import free_port  # noqa: E402  (tests import it from here; ports below the ephemeral range)
 
 
+def private_ports(src: Path, dst: Path, offset: int | None = None, split_containers: bool = False) -> Path:
+    """Write ``src`` (a launch file) to ``dst`` with its ports moved by ``offset`` (default from this process
+    id), so that this run cannot collide with another sim run on the same machine: its ZeroMQ ports from
+    ``base_port`` and the controller twins' and bridges' ``port`` params. The ports stay below 32768, the
+    ephemeral range, where a restarted node's port can be taken by a reconnect's TCP self-connect
+    (:mod:`flexsheet.runtime.ports`). ``split_containers``: every node its own process (no composable
+    containers). Returns ``dst``."""
+    import yaml
+
+    offset = 100 * (1 + os.getpid() % 120) if offset is None else offset
+    lf = yaml.safe_load(src.read_text())
+    lf["base_port"] = 20000 + offset
+    for spec in lf["nodes"].values():
+        if split_containers:
+            spec.pop("container", None)
+        if spec.get("type") in ("arm_controller_sim", "arm_bridge") and "port" in spec.get("params", {}):
+            spec["params"]["port"] = spec["params"]["port"] + offset
+    dst.write_text(yaml.safe_dump(lf, sort_keys=False))
+    return dst
+
+
 @pytest.fixture
 def demo_launch(tmp_path: Path):
     """Write a talker/listener(/recorder) launch file on free ports; returns a factory(extra_nodes_yaml)."""

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
+from conftest import private_ports
 
 from flexsheet.model.kinematics import QD_MAX
 from flexsheet.runtime.bag import read_bag
@@ -25,19 +25,6 @@ MXT = ["arm_left.protocol=mxt", "ctrl_left.protocol=mxt", "arm_right.protocol=mx
 SCRIPT = "world.script=[{mode: stroke, moving_time: 10}]"
 
 
-def _private_copy(dst: Path) -> Path:
-    """launch/sim.yaml with its ZeroMQ base port and the twins' ports moved by an offset from this process id,
-    so this run cannot collide with another sim run on the machine."""
-    offset = 100 * (1 + (os.getpid() + 60) % 120)   # base_port <= 32100: below the ephemeral range
-    lf = yaml.safe_load((ROOT / "launch" / "sim.yaml").read_text())
-    lf["base_port"] = 20000 + offset
-    for spec in lf["nodes"].values():
-        if spec.get("type") in ("arm_controller_sim", "arm_bridge") and "port" in spec.get("params", {}):
-            spec["params"]["port"] += offset
-    dst.write_text(yaml.safe_dump(lf, sort_keys=False))
-    return dst
-
-
 # a 150 s real-time run of the whole graph on a shared 2-core machine: the servo-lag percentile depends on the
 # scheduler (one warm full-suite run of 2026-11-22 saw p95 1.7 deg on the left arm; the cold full run before it
 # and the file alone after it passed, p95 < 1.15 deg). One rerun on failure; the rerun must meet every assertion
@@ -46,7 +33,9 @@ def _private_copy(dst: Path) -> Path:
 def test_table1_stroke_through_mxt_twins(tmp_path, sim_fem_cache):
     # sim_fem_cache: the FEM's precompute is in the disk cache before the launch (tests/conftest.py), so the
     # measured run starts as every later run does instead of starving the 2-core machine with it
-    launch = _private_copy(tmp_path / "sim_mxt.yaml")
+    # an offset other than test_faults' default, so the two never share ports within one pytest process
+    launch = private_ports(ROOT / "launch" / "sim.yaml", tmp_path / "sim_mxt.yaml",
+                           offset=100 * (1 + (os.getpid() + 60) % 120))
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "flexsheet", "launch", str(launch), "--out", str(out), "--duration", "150",
            "--set", SCRIPT]

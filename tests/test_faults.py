@@ -42,6 +42,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from conftest import private_ports  # noqa: E402
+
 from flexsheet.runtime.bag import BagSummary, bag_info, read_bag  # noqa: E402
 from flexsheet.runtime.codec import decode_any  # noqa: E402
 
@@ -76,25 +78,6 @@ SETTLE = 1.5              # s after a respawn (or, for WAIT_UP nodes, after "up"
 #: of three had the FEM killed before the respawned recorder received /object/deformation (no restart seen)
 SETTLE_AFTER = {"recorder": 5.0}
 STEP_TOLERANCE = 1.5      # the controller twin's own refusal threshold: qd_max · period · 1.5
-
-
-def private_ports(src: Path, dst: Path, offset: int | None = None) -> Path:
-    """Write ``src`` (a launch file) to ``dst`` with its ports moved by ``offset`` (default from this
-    process id), so that this run cannot collide with another sim run on the same machine (its ZeroMQ
-    ports from ``base_port`` and the controller twins' Modbus ports). The ports stay below 32768, the
-    ephemeral range, where a restarted node's port can be taken by a reconnect's TCP self-connect
-    (``launch_check.ephemeral_port_range``). Returns ``dst``."""
-    import yaml
-
-    offset = 100 * (1 + os.getpid() % 120) if offset is None else offset
-    lf = yaml.safe_load(src.read_text())
-    lf["base_port"] = 20000 + offset
-    for spec in lf["nodes"].values():
-        spec.pop("container", None)   # kill -9 is about one node = one process: no composable containers here
-        if spec.get("type") in ("arm_controller_sim", "arm_bridge") and "port" in spec.get("params", {}):
-            spec["params"]["port"] = spec["params"]["port"] + offset
-    dst.write_text(yaml.safe_dump(lf, sort_keys=False))
-    return dst
 
 
 class Launch:
@@ -160,7 +143,8 @@ def run_scenario(out: Path, cut_copy: Path) -> dict:
 
     The nodes of a group die together once all are up; the next group follows ``SETTLE`` s after the
     launcher restarted them (and, for the arm chain, after they are up again)."""
-    lf = private_ports(ROOT / "launch" / "sim.yaml", out.parent / f"{out.name}_sim.yaml")
+    # kill -9 is about one node = one process: no composable containers here
+    lf = private_ports(ROOT / "launch" / "sim.yaml", out.parent / f"{out.name}_sim.yaml", split_containers=True)
     launch = Launch(lf, out, "--set", SCRIPT)
     kills = []
     try:
