@@ -77,18 +77,22 @@ def test_replay_reproduces_the_live_outputs(sim_run, tmp_path):
         return {s for prev, s in zip(stamps, stamps[1:], strict=False) if fem[prev].depth < 0.005}
 
     unanchored = free(live_fem) & free(replay_fem)
-    exact = checked = 0
+    checked = held = 0
     for s in common:
         a, b = live_fem[s], replay_fem[s]
         same = (abs(a.contact_force - b.contact_force) <= 1e-9 * max(1.0, a.contact_force)
                 and a.vertices.shape == b.vertices.shape and np.max(np.abs(a.vertices - b.vertices)) <= 1e-9)
-        exact += same
         if a.depth < 0.005 and s in unanchored:   # no held push direction on either side: an update is a pure
             checked += 1                           # function of the fingertip, so live and replay agree exactly
             assert same, (s, a.depth, a.contact_force, b.contact_force)
-    assert checked > 50, checked
-    # deeper, the held push direction depends on which fingertips the node saw (QoS latest drops differ)
-    assert exact >= 0.85 * len(common), (exact, len(common))
+        elif np.array_equal(a.contact_point, b.contact_point):
+            # a held push: the update is a pure function of the fingertip and the held contact point (which
+            # fixes the push direction, radial on the cylinder); which fingertips each node saw before (QoS
+            # latest drops differ run to run) may pick different held points, but the same one gives the same
+            # update
+            held += 1
+            assert same, (s, a.depth, a.contact_point, a.contact_force, b.contact_force)
+    assert checked > 50 and held > 20, (checked, held, len(common))
     live_t, replay_t = _by_stamp(out / "sim.mcap", "/sheet/target"), _by_stamp(tmp_path / "replay.mcap", "/sheet/target")
     common = [s for s in replay_t if s in live_t and s > 0]
     assert len(common) > 100
