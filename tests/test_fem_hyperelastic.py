@@ -465,6 +465,64 @@ def test_pcg_solves_spd_and_reports_negative_curvature():
     assert x is None and its == 2
 
 
+class _LimitPoint:
+    """A 3-DOF stand-in for the model at a limit point: Π = (x0² − 1)² + x1²/2 + 10⁶ x2²/2 (the stiff x2 plays the
+    contact penalty, which sets max |diag K|). From x0 = 0.05 the true tangent is indefinite (∂²Π/∂x0² < 0 for
+    |x0| < 0.577); the "projected" tangent replaces that entry by 115 (the projection stiffening the soft
+    direction), so projected Newton crawls: δx0 ≈ 0.035 x0, the 3.5 % per iteration of the azimuth-10° stall."""
+
+    n = 3
+    free = np.arange(3)
+
+    def energy(self, u, caps, k):
+        x = u.ravel()
+        return (x[0] ** 2 - 1.0) ** 2 + 0.5 * x[1] ** 2 + 0.5e6 * x[2] ** 2
+
+    def residual_tangent(self, u, caps, k, need_K=True, project=False):
+        import scipy.sparse as sp
+
+        x = u.ravel()
+        h00 = 12.0 * x[0] ** 2 - 4.0
+        r = np.array([4.0 * x[0] ** 3 - 4.0 * x[0], x[1], 1e6 * x[2]])
+        return r, sp.csr_matrix(np.diag([115.0 if (project and h00 < 0) else h00, 1.0, 1e6]))
+
+    def constrained(self, K):
+        return K
+
+
+def test_newton_that_crawls_on_the_projected_tangent_switches_to_the_shifted_true_tangent(monkeypatch):
+    """Past CRAWL_ITERS crawling projected steps Newton takes the true tangent plus the smallest diagonal shift
+    that factorises (Nocedal & Wright alg. 3.3) and reaches the minimum x0 = 1 in under a quarter of the iterations of
+    projected Newton alone; the shift is the least of the tried ones that makes the tangent positive definite."""
+    u0 = np.array([[0.05, 0.3, 1e-4]])
+    st: dict = {}
+    u, its, conv = H._newton(_LimitPoint(), u0, None, 0.0, 60, 1e-10, 1e-9, None, st, max_step=10.0)
+    assert conv and abs(u[0, 0] - 1.0) < 1e-9 and abs(u[0, 1]) < 1e-9, (u, its)
+    # the first projected step has no residual before it, the second still falls (x1 and x2 were solved in one
+    # step); the CRAWL_ITERS after it crawl
+    assert st["projected"] == H.CRAWL_ITERS + 2 and st["shifted"] >= 1, st
+    # x0 ≈ 0.05·1.035⁶: −∂²Π/∂x0² ≈ 3.9 needs μ·max diag = μ·10⁶ > 3.9, so μ = 1e-5 (1e-6 gives 1.0)
+    assert st["mu"] == pytest.approx(1e-5)
+    monkeypatch.setattr(H, "CRAWL_ITERS", 10 ** 6)   # projected Newton alone
+    st2: dict = {}
+    u2, its2, conv2 = H._newton(_LimitPoint(), u0, None, 0.0, 400, 1e-10, 1e-9, None, st2, max_step=10.0)
+    assert conv2 and abs(u2[0, 0] - 1.0) < 1e-9 and "shifted" not in st2
+    assert its < 0.25 * its2, (its, its2)
+
+
+def test_shifted_step_gives_up_beyond_the_largest_shift():
+    """A tangent whose negative eigenvalue exceeds SHIFT_MAX · max |diag| is not shifted (None: the caller takes
+    the projected tangent); one within it gets a descent direction."""
+    import scipy.sparse as sp
+
+    K = sp.csr_matrix(np.diag([-5.0, 1e3]))
+    assert H._shifted_step(K, np.array([1.0, 1.0]), {}) is None
+    K = sp.csr_matrix(np.diag([-0.5, 1e4]))          # needs μ·10⁴ > 0.5: μ = 1e-4
+    st: dict = {}
+    d = H._shifted_step(K, np.array([1.0, 1.0]), st)
+    assert d is not None and float(np.array([1.0, 1.0]) @ d) < 0 and st["mu"] == pytest.approx(1e-4)
+
+
 def test_lagged_preconditioner_newton_reaches_the_same_states_with_fewer_factorisations(quarter, monkeypatch):
     """Newton–Krylov (PCG preconditioned by the last factorisation) against exact Newton (PCG disabled, one
     factorisation per iteration) on a 20 mm push: same states to 1e-9 m, forces to 1e-7 N, at least 3× fewer
