@@ -498,8 +498,8 @@ def test_newton_that_crawls_on_the_projected_tangent_switches_to_the_shifted_tru
     st: dict = {}
     u, its, conv = H._newton(_LimitPoint(), u0, None, 0.0, 60, 1e-10, 1e-9, None, st, max_step=10.0)
     assert conv and abs(u[0, 0] - 1.0) < 1e-9 and abs(u[0, 1]) < 1e-9, (u, its)
-    # the first projected step has no residual before it, the second still falls (x1 and x2 were solved in one
-    # step); the CRAWL_ITERS after it crawl
+    # the first projected step has no residual before it, the second still cuts it (the first solved x1 and x2);
+    # the CRAWL_ITERS after them crawl, and the next step is shifted
     assert st["projected"] == H.CRAWL_ITERS + 2 and st["shifted"] >= 1, st
     # x0 ≈ 0.05·1.035⁶: −∂²Π/∂x0² ≈ 3.9 needs μ·max diag = μ·10⁶ > 3.9, so μ = 1e-5 (1e-6 gives 1.0)
     assert st["mu"] == pytest.approx(1e-5)
@@ -508,6 +508,14 @@ def test_newton_that_crawls_on_the_projected_tangent_switches_to_the_shifted_tru
     u2, its2, conv2 = H._newton(_LimitPoint(), u0, None, 0.0, 400, 1e-10, 1e-9, None, st2, max_step=10.0)
     assert conv2 and abs(u2[0, 0] - 1.0) < 1e-9 and "shifted" not in st2
     assert its < 0.25 * its2, (its, its2)
+    # where no shift makes the tangent positive definite (here at the second shifted step), that step is projected
+    # and the solve stays in shifted mode: one more projected step, not a second crawl (the bug it had: 10)
+    real, calls = H._shifted_step, []
+    monkeypatch.setattr(H, "CRAWL_ITERS", 4)
+    monkeypatch.setattr(H, "_shifted_step", lambda *a: calls.append(1) or (None if len(calls) == 2 else real(*a)))
+    st3: dict = {}
+    u3, its3, conv3 = H._newton(_LimitPoint(), u0, None, 0.0, 60, 1e-10, 1e-9, None, st3, max_step=10.0)
+    assert conv3 and abs(u3[0, 0] - 1.0) < 1e-9 and st3["projected"] == H.CRAWL_ITERS + 3, st3
 
 
 def test_shifted_step_gives_up_beyond_the_largest_shift():
@@ -521,6 +529,9 @@ def test_shifted_step_gives_up_beyond_the_largest_shift():
     st: dict = {}
     d = H._shifted_step(K, np.array([1.0, 1.0]), st)
     assert d is not None and float(np.array([1.0, 1.0]) @ d) < 0 and st["mu"] == pytest.approx(1e-4)
+    K = sp.csr_matrix(np.diag([-0.5, 1e3]))          # only the largest shift, μ = SHIFT_MAX, makes it definite
+    st = {}
+    assert H._shifted_step(K, np.array([1.0, 1.0]), st) is not None and st["mu"] == pytest.approx(H.SHIFT_MAX)
 
 
 def test_lagged_preconditioner_newton_reaches_the_same_states_with_fewer_factorisations(quarter, monkeypatch):

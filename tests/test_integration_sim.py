@@ -70,13 +70,14 @@ def test_replay_reproduces_the_live_outputs(sim_run, tmp_path):
     # both FEM nodes take the newest fingertip (QoS latest): compare the fingertips both of them solved for
     common = [s for s in replay_fem if s in live_fem and s > 0]
     assert len(common) > 100, (len(common), len(replay_fem), len(live_fem))
-    def free(fem: dict) -> set[float]:
-        """Stamps whose update held no contact point: the node's previous solve was shallower than the 5 mm
-        sticky depth (nodes/fem/contact.py finger_from_tip's anchor)."""
+    def free(fem: dict, held: bool = False) -> set[float]:
+        """Stamps whose update held no contact point (``held``: held one): the node's previous solve was
+        shallower than (at least) the 5 mm sticky depth (nodes/fem/contact.py finger_from_tip's anchor)."""
         stamps = sorted(s for s in fem if s > 0)
-        return {s for prev, s in zip(stamps, stamps[1:], strict=False) if fem[prev].depth < 0.005}
+        return {s for prev, s in zip(stamps, stamps[1:], strict=False) if (fem[prev].depth >= 0.005) == held}
 
     unanchored = free(live_fem) & free(replay_fem)
+    anchored = free(live_fem, held=True) & free(replay_fem, held=True)
     checked = held = 0
     for s in common:
         a, b = live_fem[s], replay_fem[s]
@@ -85,14 +86,15 @@ def test_replay_reproduces_the_live_outputs(sim_run, tmp_path):
         if a.depth < 0.005 and s in unanchored:   # no held push direction on either side: an update is a pure
             checked += 1                           # function of the fingertip, so live and replay agree exactly
             assert same, (s, a.depth, a.contact_force, b.contact_force)
-        elif np.array_equal(a.contact_point, b.contact_point):
+        elif s in anchored and np.array_equal(a.contact_point, b.contact_point):
             # a held push: the update is a pure function of the fingertip and the held contact point (which
-            # fixes the push direction, radial on the cylinder); which fingertips each node saw before (QoS
-            # latest drops differ run to run) may pick different held points, but the same one gives the same
-            # update
+            # fixes the push direction, radial on the cylinder), so the same held point gives the same update.
+            # The held point is the first fingertip past 5 mm each node saw: QoS latest drops differ run to run,
+            # so in the stroke-and-push the two may hold different points for the whole push (one run: 5.7 mm
+            # apart at all 78 held updates; another: the same point at > 20) and no count of these is required
             held += 1
             assert same, (s, a.depth, a.contact_point, a.contact_force, b.contact_force)
-    assert checked > 50 and held > 20, (checked, held, len(common))
+    assert checked > 50, (checked, held, len(anchored), len(common))
     live_t, replay_t = _by_stamp(out / "sim.mcap", "/sheet/target"), _by_stamp(tmp_path / "replay.mcap", "/sheet/target")
     common = [s for s in replay_t if s in live_t and s > 0]
     assert len(common) > 100

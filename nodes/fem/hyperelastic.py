@@ -740,9 +740,10 @@ def _shifted_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict) -> np.ndarray 
 def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, iters: int, tol_u: float,
             tol_r: float, log, state: dict | None = None, max_step: float = 0.001) -> tuple[np.ndarray, int, bool]:
     """Minimise Π from ``u``; returns (u, iterations, converged). ``state`` (dict) carries between calls the
-    last positive-definite factorisation (``"pc"``, the PCG preconditioner) and counters (``"projected"``:
-    steps on the projected tangent, ``"shifted"``: steps on the shifted true tangent, ``"factorisations"``,
-    ``"pcg"``: steps solved by PCG). Where the true tangent is not positive definite the step is on the projected
+    last positive-definite factorisation (``"pc"``, the PCG preconditioner, and ``"pc_n"``, its size), the last
+    diagonal shift that factorised (``"mu"``, × max |diag K|), and counters (``"projected"``: steps on the
+    projected tangent, ``"shifted"``: steps on the shifted true tangent, ``"factorisations"``, ``"pcg"``: steps
+    solved by PCG). Where the true tangent is not positive definite the step is on the projected
     tangent, until Newton crawls there (:data:`CRAWL_ITERS`): then, for the rest of this call, on the true tangent
     with a diagonal shift (:func:`_shifted_step`), which crosses the limit points the projection cannot. Raises
     ``FloatingPointError`` when the line search fails or the projected tangent stays singular
@@ -753,7 +754,10 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
     if not math.isfinite(pi):
         raise FloatingPointError("start point has inverted elements")
     rn_prev = math.inf
-    crawl, shifted = 0, False       # consecutive crawling projected steps; shifted true tangent from now on
+    # crawl: consecutive projected iterations whose residual is above CRAWL_RATIO of the one before (counted as
+    # the iteration starts, so the CRAWL_ITERS-th is still projected); shifted: true tangent plus a shift from the
+    # next iteration on, for the rest of this call
+    crawl, shifted = 0, False
     for it in range(1, iters + 1):
         r, K = model.residual_tangent(u, caps, k)
         rf = np.zeros(model.n)
@@ -766,7 +770,7 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
         if delta is None:           # not positive definite (far from equilibrium): projected tangent, this step
             state["projected"] = state.get("projected", 0) + 1
             crawl = crawl + 1 if rn > CRAWL_RATIO * rn_prev else 0
-            shifted = crawl >= CRAWL_ITERS
+            shifted = shifted or crawl >= CRAWL_ITERS   # (a projected step after a failed shift stays in it)
             _, K = model.residual_tangent(u, caps, k, project=True)
             delta, from_pcg = _tangent_step(model.constrained(K), rf, state, projected=True)
         else:
