@@ -154,6 +154,7 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     :class:`flexsheet.model.scenes.SceneError`) for a bad scene file."""
     from flexsheet.model.scenes import load_scene
     from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
+    from nodes.fem.hyperelastic import SOLVER_VERSION
     from nodes.fem.scene_model import SceneModel, finger_on_scene
 
     t0 = time.perf_counter()
@@ -229,6 +230,7 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
                                 "axis)"},
         "reference": {"model": "neo-Hookean (compressible), total Lagrangian P2, Newton with load stepping, rigid "
                                "frictionless capsule finger, full body (nodes/fem/hyperelastic.py)",
+                      "solver": SOLVER_VERSION,
                       "converged": bool(all(p["reference_converged"] for p in pushes)),
                       "criterion": "two or more levels, every Newton solve converged and the last refinement "
                                    f"changes the visible surface by <= {TARGET_MM / 2} mm",
