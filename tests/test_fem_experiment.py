@@ -134,8 +134,7 @@ def test_second_run_reads_the_cache(quick):
 def test_full_settings_judge_the_nodes_snapshot_mesh_against_a_finer_one():
     """The node's snapshot table (DEFAULT_REF_SPEC) is one of the full convergence study's meshes and the
     snapshots the experiment judges are taken on it, against a finer mesh: the accuracy reported is the
-    node's, and it includes its mesh's own error. The levels refine by ~1.33 each. An azimuth between two
-    snapshot azimuths is held out."""
+    node's, and it includes its mesh's own error. The levels refine by ~1.33 each."""
     from flexsheet.experiments.fem import settings_for
     from nodes.fem.snapshots import DEFAULT_REF_SPEC
 
@@ -145,14 +144,6 @@ def test_full_settings_judge_the_nodes_snapshot_mesh_against_a_finer_one():
     assert lv[-1].h_fine < DEFAULT_REF_SPEC.h_fine
     ratios = [a.h_fine / b.h_fine for a, b in zip(lv[:-1], lv[1:], strict=True)]
     assert all(1.2 < r < 1.45 for r in ratios), ratios
-    # azimuth interpolation is judged: a held-out azimuth strictly between two snapshot azimuths, all of them the
-    # node table's, solved at its depth step (so they are its cached paths, not extra solves)
-    from nodes.fem.snapshots import DEFAULT_GRID
-
-    a = st.grid.angles_deg
-    assert st.holdout_deg and set(a) <= set(DEFAULT_GRID.angles_deg) and set(st.holdout_deg) <= set(DEFAULT_GRID.angles_deg)
-    assert all(h not in a and min(a) < h < max(a) for h in st.holdout_deg), (a, st.holdout_deg)
-    assert st.fine_step == DEFAULT_GRID.depth_step
 
 
 def _fake_path_dict(n_dof: int, depths) -> dict:
