@@ -70,14 +70,14 @@ def test_replay_reproduces_the_live_outputs(sim_run, tmp_path):
     # both FEM nodes take the newest fingertip (QoS latest): compare the fingertips both of them solved for
     common = [s for s in replay_fem if s in live_fem and s > 0]
     assert len(common) > 100, (len(common), len(replay_fem), len(live_fem))
-    def free(fem: dict, held: bool = False) -> set[float]:
-        """Stamps whose update held no contact point (``held``: held one): the node's previous solve was
-        shallower than (at least) the 5 mm sticky depth (nodes/fem/contact.py finger_from_tip's anchor)."""
+    def stamps_where(fem: dict, held: bool) -> set[float]:
+        """Stamps whose update held a contact point (``held``), or held none: the node's previous solve was at
+        least (or shallower than) the 5 mm sticky depth (nodes/fem/contact.py finger_from_tip's anchor)."""
         stamps = sorted(s for s in fem if s > 0)
         return {s for prev, s in zip(stamps, stamps[1:], strict=False) if (fem[prev].depth >= 0.005) == held}
 
-    unanchored = free(live_fem) & free(replay_fem)
-    anchored = free(live_fem, held=True) & free(replay_fem, held=True)
+    unanchored = stamps_where(live_fem, False) & stamps_where(replay_fem, False)
+    anchored = stamps_where(live_fem, True) & stamps_where(replay_fem, True)
     checked = held = 0
     for s in common:
         a, b = live_fem[s], replay_fem[s]

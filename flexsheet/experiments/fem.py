@@ -29,9 +29,9 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 two scales, a skin study of one size (5 mm): a test's run, ~110 s cold on the 2-core machine with two solves
 beside it (70 s idle before the skin study), seconds cached; it does not meet the targets
 and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4.5 / 3.4 / 2.5 mm,
-:data:`FULL_LEVELS`, 2.5 mm outputs, snapshots at azimuth 0 every 5 mm, penalty study) is ~1 h of CPU cold on
-the shared 2-core machine (the 2.5 mm mesh 38 min, the 3.4 mm 20 min, the two skin meshes 15 and ~30 min;
-a node-table azimuth path ~40 min).
+:data:`FULL_LEVELS`, 2.5 mm outputs, snapshots at azimuth 0 every 5 mm, penalty study) is ~1.4 h of CPU cold
+on the 2-core machine with another solve beside it (session 8, ``cpu_seconds`` in convergence.json: the 2.5 mm
+mesh 31 min, the 3.4 mm 9 min, the two skin meshes 12 and 23 min; a node-table azimuth path ~39 min).
 ``--level N`` solves one mesh only and ``--node-table --azimuth A`` one azimuth (to run them in parallel
 processes); every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds (27 s).
 ``--linear-study`` also reruns the linear mesh study (``accuracy_table.json``, ``hertz``, ``stability``).
