@@ -166,6 +166,9 @@ def test_reference_path_solves_off_axis_pushes_on_the_half_model_under_one_key()
         def __init__(self):
             self.seen = []
 
+        def load(self, kind, key):
+            return None
+
         def get_or_compute(self, kind, key, compute, what):
             self.seen.append((key, what))
             return {}, True, 0.0
@@ -178,6 +181,52 @@ def test_reference_path_solves_off_axis_pushes_on_the_half_model_under_one_key()
         X.reference_path(spec, a, d, Material(), c, probes)
     (k10q, w10), (k10h, _), (k0, w0), (k0m, _) = c.seen
     assert k10q == k10h and "hz=0" in w10 and k0 == k0m and "hz=1" in w0 and k0 != k10q
+
+
+def test_a_previous_version_path_is_reused_only_when_no_newton_call_ran_out(tmp_path, monkeypatch):
+    """nh-7 changed only what follows a Newton call that ran out of iterations, so a cached nh-6 path with fewer
+    than NEWTON_ITERS iterations at every depth is re-keyed and read (no solve); one with a depth at NEWTON_ITERS
+    (a call ran out there: nh-7 would continue it) is solved again."""
+    from flexsheet.experiments import fem as X
+    from nodes.fem.cache import ArrayCache
+    from nodes.fem.material import Material
+    from nodes.fem.snapshots import DEFAULT_REF_SPEC
+
+    assert X.SOLVER_VERSION == "nh-7" and X.PREVIOUS_VERSION == "nh-6"
+    d, probes = X._depths(0.0025), np.zeros((2, 3))
+
+    class Keys:
+        def load(self, kind, key):
+            return None
+
+        def get_or_compute(self, kind, key, compute, what):
+            self.key = key
+            return {}, True, 0.0
+
+    k = Keys()
+    monkeypatch.setattr(X, "SOLVER_VERSION", X.PREVIOUS_VERSION)
+    X.reference_path(DEFAULT_REF_SPEC, 0.0, d, Material(), k, probes)
+    monkeypatch.undo()
+    old_key = k.key
+
+    class Solved(Exception):
+        pass
+
+    def no_solve(*a, **kw):
+        raise Solved
+
+    monkeypatch.setattr(X, "_ref_model", no_solve)
+    for newton_max, reused in ((X.NEWTON_ITERS - 1, True), (X.NEWTON_ITERS, False)):
+        cache = ArrayCache(str(tmp_path / f"c{newton_max}"))
+        old = _fake_path_dict(4, d) | {"newton": np.full(len(d), 5)}
+        old["newton"][7] = newton_max
+        cache.save("reference", old_key, old)
+        if reused:
+            z = X.reference_path(DEFAULT_REF_SPEC, 0.0, d, Material(), cache, probes)
+            assert np.array_equal(z["force"], old["force"]) and len(os.listdir(tmp_path / f"c{newton_max}")) == 2
+        else:
+            with pytest.raises(Solved):
+                X.reference_path(DEFAULT_REF_SPEC, 0.0, d, Material(), cache, probes)
 
 
 def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeypatch):

@@ -516,6 +516,14 @@ def test_newton_that_crawls_on_the_projected_tangent_switches_to_the_shifted_tru
     st3: dict = {}
     u3, its3, conv3 = H._newton(_LimitPoint(), u0, None, 0.0, 60, 1e-10, 1e-9, None, st3, max_step=10.0)
     assert conv3 and abs(u3[0, 0] - 1.0) < 1e-9 and st3["projected"] == H.CRAWL_ITERS + 3, st3
+    # a call that continues one which ended shifted (nh-7) starts shifted: no projected step, no second crawl
+    monkeypatch.setattr(H, "_shifted_step", real)
+    st4: dict = {}
+    u4, its4, conv4 = H._newton(_LimitPoint(), u0, None, 0.0, 60, 1e-10, 1e-9, None, st4, max_step=10.0,
+                                shifted=True)
+    assert conv4 and abs(u4[0, 0] - 1.0) < 1e-9 and "projected" not in st4 and st4["ended_shifted"], st4
+    assert its4 < its, (its4, its)
+    assert st["ended_shifted"] and not st2["ended_shifted"]
 
 
 def test_shifted_step_gives_up_beyond_the_largest_shift():
@@ -544,8 +552,8 @@ def test_lagged_preconditioner_newton_reaches_the_same_states_with_fewer_factori
     def run(label):
         real = H._newton
 
-        def counting(model, u, caps, k, iters, tol_u, tol_r, log, state=None, max_step=0.001):
-            out = real(model, u, caps, k, iters, tol_u, tol_r, log, state, max_step)
+        def counting(model, u, caps, k, iters, tol_u, tol_r, log, state=None, max_step=0.001, shifted=False):
+            out = real(model, u, caps, k, iters, tol_u, tol_r, log, state, max_step, shifted)
             counts[label] = dict(state)
             return out
 
@@ -578,3 +586,52 @@ def test_stiffer_penalty_penetrates_less_and_is_validated(quarter):
     for bad in (0.0, -1.0, float("nan"), "1e5"):
         with pytest.raises(ValueError, match="penalty_scale"):
             H.HyperelasticModel(quarter.mesh, MAT, penalty_scale=bad)
+
+
+def _newton_calls(monkeypatch, budget):
+    """Patch ``H._newton`` so that call i may take only ``budget(i)`` iterations (reporting the full ``iters``
+    when it runs out, as the real one does); returns the list of calls (start u, finger centre, returned u,
+    iterations, converged, shifted)."""
+    real, calls = H._newton, []
+
+    def limited(model, u, caps, k, iters, tol_u, tol_r, log, state=None, max_step=0.001, shifted=False):
+        n = min(iters, budget(len(calls)))
+        un, its, conv = real(model, u, caps, k, n, tol_u, tol_r, log, state, max_step, shifted)
+        its = iters if (not conv and its == n) else its
+        calls.append((u.copy(), caps.center.copy(), un.copy(), its, conv, shifted))
+        return un, its, conv
+
+    monkeypatch.setattr(H, "_newton", limited)
+    return calls
+
+
+def test_a_load_step_out_of_iterations_is_continued_from_where_it_got_not_halved(quarter, monkeypatch):
+    """nh-7: a Newton call that runs out of iterations (a snap-through still descending) is continued from its
+    last iterate at the same depth; the load step is not halved and the path ends where the plain solve does."""
+    plain = H.solve_path(quarter, 0.0, [0.005, 0.01], 0.008, step=0.005, iters=30)
+    calls = _newton_calls(monkeypatch, lambda i: 2 if i == 1 else 10 ** 6)   # the second load step runs out at 2
+    cont = H.solve_path(quarter, 0.0, [0.005, 0.01], 0.008, step=0.005, iters=30)
+    assert all(s.converged for s in plain + cont)
+    assert len(calls) == 3, [(c[3], c[4]) for c in calls]         # step 1; step 2 runs out; its continuation
+    assert not calls[1][4] and calls[1][3] == 30 and calls[2][4]
+    assert np.array_equal(calls[2][0], calls[1][2])               # continued from the last iterate ...
+    assert np.array_equal(calls[2][1], calls[1][1])               # ... at the same finger position (no halving)
+    for a, b in zip(plain, cont, strict=True):
+        assert np.abs(a.u - b.u).max() < 1e-7 and abs(a.force - b.force) < 1e-5
+    assert cont[1].iterations == calls[1][3] + calls[2][3]        # both calls counted
+
+
+def test_a_load_step_that_keeps_running_out_is_halved_after_resume_max_continuations(quarter, monkeypatch):
+    """After RESUME_MAX continuations that also run out, the load step is halved as before (from the last
+    converged state, not from the stuck iterate)."""
+    plain = H.solve_path(quarter, 0.0, [0.005, 0.01], 0.008, step=0.005, iters=30)
+    calls = _newton_calls(monkeypatch, lambda i: 1 if 1 <= i <= 1 + H.RESUME_MAX else 10 ** 6)
+    st = H.solve_path(quarter, 0.0, [0.005, 0.01], 0.008, step=0.005, iters=30)
+    assert all(s.converged for s in st)
+    stuck = calls[1:2 + H.RESUME_MAX]                            # the first call and RESUME_MAX continuations
+    assert all(not c[4] for c in stuck) and all(np.array_equal(c[1], calls[1][1]) for c in stuck)
+    assert all(np.array_equal(b[0], a[2]) for a, b in zip(stuck[:-1], stuck[1:], strict=True))   # from its last iterate
+    halved = calls[2 + H.RESUME_MAX]
+    assert np.linalg.norm(halved[1] - calls[0][1]) == pytest.approx(0.0025, abs=1e-12)   # 2.5 mm past 5 mm
+    assert not np.array_equal(halved[0], stuck[-1][2])           # the halved step restarts from converged
+    assert np.abs(st[1].u - plain[1].u).max() < 1e-7 and abs(st[1].force - plain[1].force) < 1e-5

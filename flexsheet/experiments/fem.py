@@ -55,6 +55,8 @@ from nodes.fem.hyperelastic import (
     CONTACT_LAWS,
     DEFAULT_CONTACT,
     PENALTY_SCALE,
+    PREVIOUS_VERSION,
+    SOLVER_VERSION,
     HyperelasticModel,
     PathState,
     RefSpec,
@@ -183,8 +185,18 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
     if angle_deg != 0.0 and spec.half_z:
         spec = replace(spec, half_z=False)
     step = float(min(0.0025, np.min(np.diff(np.concatenate([[0.0], depths])))))
-    key = cache_key(solver_tag(contact), spec.key(), angle_deg, np.round(depths, 9).tolist(), mat.key(), FINGER_R,
-                    cache_key(np.round(probes, 9).tobytes()), f"step={step:.6g}", f"iters={NEWTON_ITERS}", f"pen={penalty_scale:g}")
+    def key_of(version: str) -> str:
+        return cache_key(solver_tag(contact, version), spec.key(), angle_deg, np.round(depths, 9).tolist(), mat.key(),
+                         FINGER_R, cache_key(np.round(probes, 9).tobytes()), f"step={step:.6g}", f"iters={NEWTON_ITERS}",
+                         f"pen={penalty_scale:g}")
+
+    key = key_of(SOLVER_VERSION)
+    if cache.load("reference", key) is None:    # a path of the version before that is this version's (see there)
+        old = cache.load("reference", key_of(PREVIOUS_VERSION))
+        if old is not None and int(np.max(old["newton"])) < NEWTON_ITERS:   # a call that ran out counts iters
+            _log(f"fem: reference {spec.key()} at {angle_deg:g} deg: the {PREVIOUS_VERSION} path (no Newton call ran "
+                 f"out of iterations) is the {SOLVER_VERSION} path; re-keyed")
+            cache.save("reference", key, old)
 
     def compute() -> dict:
         t, tc = time.perf_counter(), time.process_time()
@@ -412,11 +424,9 @@ def snapshot_source(st: Settings, mat: Material, cache: ArrayCache, rm: Realtime
     verts = rm.rest_vertices.astype(float)
     if st.snap_spec == st.levels[-1]:
         src, sd = fine, _depths(st.fine_step)
-    elif st.snap_spec in st.levels:
+    else:       # another level or a skin variant: the convergence / skin study cached it (else solved here, once)
         sd = _depths(st.depth_step)
         src = reference_path(st.snap_spec, 0.0, sd, mat, cache, verts, st.contact)
-    else:
-        return None, None
 
     def solved(ang, model, depths):
         if ang == 0.0:

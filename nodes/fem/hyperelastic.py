@@ -61,10 +61,15 @@ import scipy.sparse as sp
 from nodes.fem.material import Material
 from nodes.fem.mesh import TetMesh, cylinder_part_mesh
 
-__all__ = ["SOLVER_VERSION", "CONTACT_LAWS", "DEFAULT_CONTACT", "RefSpec", "HyperelasticModel", "PathState",
+__all__ = ["SOLVER_VERSION", "PREVIOUS_VERSION", "CONTACT_LAWS", "DEFAULT_CONTACT", "RefSpec", "HyperelasticModel", "PathState",
            "Capsule", "capsule_at", "solve_path", "solve_path_capsule", "reference_mesh", "solver_tag"]
 
-SOLVER_VERSION = "nh-6"     #: bump when the reference's formulation or defaults change (cache keys)
+SOLVER_VERSION = "nh-7"     #: bump when the reference's formulation or defaults change (cache keys)
+#: the version before, and where its results are the current one's: nh-7 differs from nh-6 only in a Newton call
+#: that ran out of iterations (continued, :data:`RESUME_MAX`), so an nh-6 path in which no call ran out (fewer
+#: than ``iters`` Newton iterations at every depth: a call that runs out counts ``iters`` by itself) is the nh-7
+#: path, bit for bit
+PREVIOUS_VERSION = "nh-6"
 #: contact penalty κ = PENALTY_SCALE·E/h. Chosen by a penalty study (``flexsheet experiment fem``,
 #: ``reference.penalty_study``): on the 6 mm mesh at 50 mm the old 10³ penetrated the finger by 1.2 mm, made the
 #: force 10 % low and moved the visible surface by 2.2 mm against 10⁴; 10⁵ penetrates 0.004 mm and lies
@@ -77,12 +82,12 @@ CONTACT_INTORDER = 10   #: facet quadrature order of the contact points (25 per 
 NODE_WEIGHT = 0.05      #: share β of the element volume integrated at the 10 P2 nodes (see the module docstring)
 
 
-def solver_tag(contact: str = DEFAULT_CONTACT) -> str:
-    """Cache-key tag of the reference solver with this contact law (``SOLVER_VERSION``, plus the law when it
+def solver_tag(contact: str = DEFAULT_CONTACT, version: str = SOLVER_VERSION) -> str:
+    """Cache-key tag of the reference solver ``version`` with this contact law (the version, plus the law when it
     is not frictionless, so frictionless solves cached before the option existed stay valid)."""
     if contact not in CONTACT_LAWS:
         raise ValueError(f"contact must be one of {CONTACT_LAWS}, got {contact!r}")
-    return SOLVER_VERSION if contact == "frictionless" else f"{SOLVER_VERSION}-{contact}"
+    return version if contact == "frictionless" else f"{version}-{contact}"
 
 
 @dataclass(frozen=True)
@@ -706,6 +711,10 @@ def _tangent_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict, projected: boo
     return -fac.solve(rf), False
 
 
+#: a load step whose Newton call ran out of iterations (not failed: still descending, e.g. through a
+#: snap-through) is continued from its last iterate up to this many more calls before the step is halved (nh-7)
+RESUME_MAX = 3
+
 #: Newton "crawls" on the projected tangent when this many consecutive projected steps each left the residual
 #: above CRAWL_RATIO of the one before (linear convergence: at a limit point the projection stiffens the soft
 #: direction, 3.5 % per iteration at the azimuth-10° stall, docs/fem.md); from then on :func:`_newton` takes the
@@ -738,14 +747,17 @@ def _shifted_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict) -> np.ndarray 
 
 
 def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, iters: int, tol_u: float,
-            tol_r: float, log, state: dict | None = None, max_step: float = 0.001) -> tuple[np.ndarray, int, bool]:
+            tol_r: float, log, state: dict | None = None, max_step: float = 0.001,
+            shifted: bool = False) -> tuple[np.ndarray, int, bool]:
     """Minimise Π from ``u``; returns (u, iterations, converged). ``state`` (dict) carries between calls the
     last positive-definite factorisation (``"pc"``, the PCG preconditioner, and ``"pc_n"``, its size), the last
     diagonal shift that factorised (``"mu"``, × max |diag K|), and counters (``"projected"``: steps on the
     projected tangent, ``"shifted"``: steps on the shifted true tangent, ``"factorisations"``, ``"pcg"``: steps
     solved by PCG). Where the true tangent is not positive definite the step is on the projected
     tangent, until Newton crawls there (:data:`CRAWL_ITERS`): then, for the rest of this call, on the true tangent
-    with a diagonal shift (:func:`_shifted_step`), which crosses the limit points the projection cannot. Raises
+    with a diagonal shift (:func:`_shifted_step`), which crosses the limit points the projection cannot
+    (``shifted=True``: from the first iteration, for a call that continues one that ended so;
+    ``state["ended_shifted"]`` says how this one ended). Raises
     ``FloatingPointError`` when the line search fails or the projected tangent stays singular
     (:func:`_tangent_step`)."""
     state = {} if state is None else state
@@ -757,7 +769,8 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
     # crawl: consecutive projected iterations whose residual is above CRAWL_RATIO of the one before (counted as
     # the iteration starts, so the CRAWL_ITERS-th is still projected); shifted: true tangent plus a shift from the
     # next iteration on, for the rest of this call
-    crawl, shifted = 0, False
+    crawl = 0
+    state["ended_shifted"] = shifted
     for it in range(1, iters + 1):
         r, K = model.residual_tangent(u, caps, k)
         rf = np.zeros(model.n)
@@ -771,6 +784,7 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
             state["projected"] = state.get("projected", 0) + 1
             crawl = crawl + 1 if rn > CRAWL_RATIO * rn_prev else 0
             shifted = shifted or crawl >= CRAWL_ITERS   # (a projected step after a failed shift stays in it)
+            state["ended_shifted"] = shifted
             _, K = model.residual_tangent(u, caps, k, project=True)
             delta, from_pcg = _tangent_step(model.constrained(K), rf, state, projected=True)
         else:
@@ -891,6 +905,15 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
                 try:
                     u_new, its, conv = _newton(m, guess, caps, k, iters, tol_u, tol_r, None, nstate)
                     u_last = u_new
+                    # out of iterations, not failed (a snap-through still under way): go on from where it got to,
+                    # in the mode it ended in, rather than restart a halved step from the last converged state
+                    for _ in range(RESUME_MAX):
+                        if conv or its < iters:
+                            break
+                        its_total += its
+                        u_new, its, conv = _newton(m, u_new, caps, k, iters, tol_u, tol_r, None, nstate,
+                                                   shifted=nstate.get("ended_shifted", False))
+                        u_last = u_new
                 except FloatingPointError:
                     u_new, its, conv = None, iters, False
                 its_total += its
