@@ -91,6 +91,23 @@ def test_skin_study_refines_the_surface_layer_only(quick):
     assert s["reference"]["skin_study"]["skins"][0]["change_vs_unrefined_mm_at_50mm"] == pytest.approx(ch[-1])
 
 
+def test_snapshot_mesh_study_tables_the_skin_meshes_and_agrees_with_the_convergence_figure(quick):
+    """The snapshot-mesh study builds an azimuth-0 table on the next-to-finest mesh and on its skin variant from
+    the cached solves. The base mesh's table error and the convergence study's error of that mesh measure the
+    same mesh against the same finest one by different routes (table sampling and depth interpolation against
+    direct probing): they agree to 0.2 mm."""
+    base, s, _ = quick
+    with open(base / "out" / "convergence.json") as fh:
+        conv = json.load(fh)
+    ms = s["realtime"]["snapshot_mesh_study"]
+    plain, skin = ms["meshes"]
+    assert plain["skin_h_m"] == 0.0 and skin["skin_h_m"] == 0.005 and skin["dofs"] > plain["dofs"]
+    assert plain["dofs"] == conv["levels"][-2]["dofs"] and skin["cpu_seconds_per_azimuth"] > 0
+    level_err = max(conv["levels"][-2]["error_vs_finest_mm"])
+    assert level_err > 0.5 and abs(plain["max_visible_error_mm"] - level_err) < 0.2, (plain, level_err)
+    assert 0 < skin["max_visible_error_mm"] < 10
+
+
 def test_penalty_study_shows_the_default_penalty_converged(quick):
     """The contact penalty is a discretisation parameter too: a 10× stiffer finger penetrates less and moves the
     visible surface by less than 0.1 mm at the default; the default penetrates the finger by < 0.05 mm at 50 mm

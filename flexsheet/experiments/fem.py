@@ -509,6 +509,40 @@ def candidates(st: Settings, mat: Material, rm: RealtimeModel, table: dict, case
     return res
 
 
+def snapshot_mesh_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, cases: list[dict]
+                        ) -> dict:
+    """Which mesh the snapshots need: an azimuth-0 table (``st.grid``'s depths) on the next-to-finest mesh (full
+    mode: the snapshot mesh) and on each of its skin-refined variants (``st.skin_sizes``; the convergence and skin
+    studies' solves, read from the cache), judged on
+    the azimuth-0 validation cases (the finest convergence mesh; depths between snapshots held out). Per mesh:
+    DOF, CPU of its azimuth-0 path and the worst visible error (mm). ``rm``'s snapshot table is left as it was."""
+    keep = rm.snapshots
+    az0 = [c for c in cases if c["angle_deg"] == 0.0]
+    grid = replace(st.grid, angles_deg=(0.0,))
+    sd = _depths(st.depth_step)
+    verts = rm.rest_vertices.astype(float)
+    rows = []
+    base = st.levels[-2]                        # the skin study's meshes (full mode: the snapshot mesh and its skins)
+    for spec in [base] + [replace(base, skin_h=h) for h in st.skin_sizes]:
+        src = reference_path(spec, 0.0, sd, mat, cache, verts, st.contact)
+        table = load_or_build(cache, grid, spec, mat, FINGER_R, build=True, contact=st.contact,
+                              solved=lambda ang, model, depths, src=src: _path_states(src, sd, depths, model))[0]
+        rm.attach_snapshots(table)
+        err = errors(rm, az0, "snapshots")
+        rows.append({"spec": spec.__dict__, "skin_h_m": spec.skin_h, "dofs": int(src["dofs"]),
+                     "cpu_seconds_per_azimuth": float(src["cpu_seconds"]),
+                     "max_visible_error_mm": max(err) * 1e3,
+                     "max_visible_error_mm_held_out_depths": max(
+                         (e for c, e in zip(az0, err, strict=True) if c["held_out"]), default=float("nan")) * 1e3})
+        _log(f"snapshot mesh {spec.key()}: {rows[-1]['dofs']} DOF, azimuth 0 worst visible error "
+             f"{rows[-1]['max_visible_error_mm']:.2f} mm")
+    rm.snapshots = keep
+    return {"azimuth_deg": 0.0, "depth_step_mm": st.grid.depth_step * 1e3, "target_mm": TARGET * 1e3,
+            "against": f"the finest convergence mesh (h_fine {st.levels[-1].h_fine * 1e3:g} mm), every "
+                       f"{st.fine_step * 1e3:g} mm",
+            "meshes": rows}
+
+
 # ---- outputs -----------------------------------------------------------------------------------------------------
 def failure_map(cases: list[dict], cand: dict) -> dict:
     """Per candidate: error (mm) on the (azimuth, depth) grid of the validation cases and where it breaks."""
@@ -806,6 +840,7 @@ def main(argv: list[str] | None = None) -> int:
                  "table_MB": rm.snapshots.nbytes / 1e6}
     cases = validation_set(st, mat, cache, rm, fine)
     cand = candidates(st, mat, rm, table, cases)
+    snap_info["snapshot_mesh_study"] = snapshot_mesh_study(st, mat, cache, rm, cases)
     fmap = failure_map(cases, cand)
     summ = summary(st, conv, cand, cases, snap_info, mat, time.perf_counter() - t0)
     _write(args.out, "convergence", conv)

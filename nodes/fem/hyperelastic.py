@@ -848,9 +848,12 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
     """Push a rigid finger given by ``capsule(depth) -> Capsule`` (depth m; any object, any push direction)
     through ``depths`` (m, ascending, ≥ 0), load steps of at most ``step`` m; returns one :class:`PathState`
     per requested depth (``force`` along the capsule's direction, full-body force with the symmetry planes).
-    A load step whose Newton solve fails is halved (up to ``substeps_max`` times) and the load steps after it
-    keep the halved size (the path got hard: on the 3.4 mm cylinder mesh a 2.5 mm step past 47.5 mm spent 60
-    iterations per try before halving); if it still fails, its last iterate is kept and the state is flagged
+    A Newton call that runs out of ``iters`` iterations (still descending: a snap-through under way) is continued
+    from its last iterate at the same depth, up to :data:`RESUME_MAX` more calls (nh-7). A load step whose Newton
+    solve fails otherwise, or still has not converged then, is halved (up to ``substeps_max`` times) and the
+    load steps after it keep the halved size (the path got hard: on the 3.4 mm cylinder mesh a 2.5 mm step past
+    47.5 mm spent 60 iterations per try before halving, nh-5); if it still fails, its last iterate is kept and
+    the state is flagged
     ``converged=False`` (bounded time; the caller decides).
 
     ``contact`` (a modelling choice, :data:`CONTACT_LAWS`): ``"frictionless"`` — non-penetration only, the
