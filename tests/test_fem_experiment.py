@@ -186,6 +186,9 @@ def test_reference_path_solves_off_axis_pushes_on_the_half_model_under_one_key()
         def load(self, kind, key):
             return None
 
+        def path(self, kind, key):
+            return None
+
         def get_or_compute(self, kind, key, compute, what):
             self.seen.append((key, what))
             return {}, True, 0.0
@@ -214,6 +217,9 @@ def test_a_previous_version_path_is_reused_only_when_no_newton_call_ran_out(tmp_
 
     class Keys:
         def load(self, kind, key):
+            return None
+
+        def path(self, kind, key):
             return None
 
         def get_or_compute(self, kind, key, compute, what):

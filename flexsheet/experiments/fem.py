@@ -191,12 +191,16 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
                          f"pen={penalty_scale:g}")
 
     key = key_of(SOLVER_VERSION)
-    if cache.load("reference", key) is None:    # a path of the version before that is this version's (see there)
+    p_new, p_old = cache.path("reference", key), cache.path("reference", key_of(PREVIOUS_VERSION))
+    if p_new is not None and not os.path.exists(p_new) and os.path.exists(p_old):
+        # the version before's path is this version's when no Newton call ran out in it (PREVIOUS_VERSION; such a
+        # call counts NEWTON_ITERS at its depth by itself)
         old = cache.load("reference", key_of(PREVIOUS_VERSION))
-        if old is not None and int(np.max(old["newton"])) < NEWTON_ITERS:   # a call that ran out counts iters
+        if old is not None and int(np.max(old["newton"])) < NEWTON_ITERS:
             _log(f"fem: reference {spec.key()} at {angle_deg:g} deg: the {PREVIOUS_VERSION} path (no Newton call ran "
                  f"out of iterations) is the {SOLVER_VERSION} path; re-keyed")
             cache.save("reference", key, old)
+            return old
 
     def compute() -> dict:
         t, tc = time.perf_counter(), time.process_time()
@@ -416,11 +420,11 @@ def _path_states(src: dict, src_depths: np.ndarray, depths, model=None) -> list[
 
 
 def snapshot_source(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, fine: dict):
-    """``solved`` for :func:`snapshot_table` when ``st.snap_spec`` is one of the levels: azimuth 0 sampled from
-    the convergence solve on the snapshot mesh (``fine`` when it is the finest; another level is read from the
-    cache the convergence study filled), other azimuths from their cached :func:`reference_path` on the half
-    model (the node table's paths when ``snap_spec`` is the node's), so nothing is solved twice; (None, None)
-    otherwise. Also returns the azimuth-0 solve, for its timing."""
+    """``solved`` for :func:`snapshot_table`: azimuth 0 sampled from the solve on the snapshot mesh (``fine``
+    when it is the finest level; otherwise its :func:`reference_path`, which the convergence or skin study
+    cached, else solved here once), other azimuths from their cached :func:`reference_path` on the half model
+    (the node table's paths when ``snap_spec`` is the node's), so nothing is solved twice. Also returns the
+    azimuth-0 solve, for its timing."""
     verts = rm.rest_vertices.astype(float)
     if st.snap_spec == st.levels[-1]:
         src, sd = fine, _depths(st.fine_step)
@@ -523,20 +527,22 @@ def snapshot_mesh_study(st: Settings, mat: Material, cache: ArrayCache, rm: Real
     verts = rm.rest_vertices.astype(float)
     rows = []
     base = st.levels[-2]                        # the skin study's meshes (full mode: the snapshot mesh and its skins)
-    for spec in [base] + [replace(base, skin_h=h) for h in st.skin_sizes]:
-        src = reference_path(spec, 0.0, sd, mat, cache, verts, st.contact)
-        table = load_or_build(cache, grid, spec, mat, FINGER_R, build=True, contact=st.contact,
-                              solved=lambda ang, model, depths, src=src: _path_states(src, sd, depths, model))[0]
-        rm.attach_snapshots(table)
-        err = errors(rm, az0, "snapshots")
-        rows.append({"spec": spec.__dict__, "skin_h_m": spec.skin_h, "dofs": int(src["dofs"]),
-                     "cpu_seconds_per_azimuth": float(src["cpu_seconds"]),
-                     "max_visible_error_mm": max(err) * 1e3,
-                     "max_visible_error_mm_held_out_depths": max(
-                         (e for c, e in zip(az0, err, strict=True) if c["held_out"]), default=float("nan")) * 1e3})
-        _log(f"snapshot mesh {spec.key()}: {rows[-1]['dofs']} DOF, azimuth 0 worst visible error "
-             f"{rows[-1]['max_visible_error_mm']:.2f} mm")
-    rm.snapshots = keep
+    try:
+        for spec in [base] + [replace(base, skin_h=h) for h in st.skin_sizes]:
+            src = reference_path(spec, 0.0, sd, mat, cache, verts, st.contact)
+            table = load_or_build(cache, grid, spec, mat, FINGER_R, build=True, contact=st.contact,
+                                  solved=lambda ang, model, depths, src=src: _path_states(src, sd, depths, model))[0]
+            rm.attach_snapshots(table)
+            err = errors(rm, az0, "snapshots")
+            rows.append({"spec": spec.__dict__, "skin_h_m": spec.skin_h, "dofs": int(src["dofs"]),
+                         "cpu_seconds_per_azimuth": float(src["cpu_seconds"]),
+                         "max_visible_error_mm": max(err) * 1e3,
+                         "max_visible_error_mm_held_out_depths": max(
+                             (e for c, e in zip(az0, err, strict=True) if c["held_out"]), default=float("nan")) * 1e3})
+            _log(f"snapshot mesh {spec.key()}: {rows[-1]['dofs']} DOF, azimuth 0 worst visible error "
+                 f"{rows[-1]['max_visible_error_mm']:.2f} mm")
+    finally:
+        rm.snapshots = keep
     return {"azimuth_deg": 0.0, "depth_step_mm": st.grid.depth_step * 1e3, "target_mm": TARGET * 1e3,
             "against": f"the finest convergence mesh (h_fine {st.levels[-1].h_fine * 1e3:g} mm), every "
                        f"{st.fine_step * 1e3:g} mm",
@@ -832,8 +838,7 @@ def main(argv: list[str] | None = None) -> int:
     conv["skin_study"] = skin_study(st, mat, cache, rm, conv, fine)
     solved, src = snapshot_source(st, mat, cache, rm, fine)
     table, hit, sec = snapshot_table(st, mat, cache, solved)
-    if src is not None:
-        sec += float(src["seconds"])          # the solve the table was sampled from
+    sec += float(src["seconds"])              # the solve the table was sampled from
     rm.attach_snapshots(table)
     snap_info = {"snapshot_azimuths_deg": list(st.grid.angles_deg), "snapshot_depth_step_mm": st.grid.depth_step * 1e3,
                  "snapshot_mesh": st.snap_spec.__dict__, "precompute_s": sec, "precompute_cache_hit": hit,

@@ -238,7 +238,7 @@ _thread_time = time.thread_time
 
 
 #: how long a stopping node waits for its sync handlers to return, s (see :meth:`Node._join_workers`)
-WORKER_JOIN_S = 5.0
+WORKER_JOIN_S = 2.0   # within the launcher's 3 s before it escalates a SIGINT (launch.py shutdown_timeout)
 
 
 class _Worker(threading.Thread):

@@ -68,7 +68,9 @@ SOLVER_VERSION = "nh-7"     #: bump when the reference's formulation or defaults
 #: the version before, and where its results are the current one's: nh-7 differs from nh-6 only in a Newton call
 #: that ran out of iterations (continued, :data:`RESUME_MAX`), so an nh-6 path in which no call ran out (fewer
 #: than ``iters`` Newton iterations at every depth: a call that runs out counts ``iters`` by itself) is the nh-7
-#: path, bit for bit
+#: path, bit for bit — if it was computed by nh-6 as committed in 27126c8. The first nh-6 commit (4899088)
+#: differed where a diagonal shift failed (it fell back to crawling); the azimuth-0 paths cached in session 8
+#: were computed by it, so for them "bit for bit" holds only if no shift failed (not recorded)
 PREVIOUS_VERSION = "nh-6"
 #: contact penalty κ = PENALTY_SCALE·E/h. Chosen by a penalty study (``flexsheet experiment fem``,
 #: ``reference.penalty_study``): on the 6 mm mesh at 50 mm the old 10³ penetrated the finger by 1.2 mm, made the
@@ -711,8 +713,9 @@ def _tangent_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict, projected: boo
     return -fac.solve(rf), False
 
 
-#: a load step whose Newton call ran out of iterations (not failed: still descending, e.g. through a
-#: snap-through) is continued from its last iterate up to this many more calls before the step is halved (nh-7)
+#: a load step whose Newton call ran out of iterations (not failed: e.g. a snap-through still under way) is
+#: continued from its last iterate up to this many more calls before the step is halved (nh-7). The price: a
+#: step that is stuck for good spends (1 + RESUME_MAX)× the iterations of nh-6 before each halving
 RESUME_MAX = 3
 
 #: Newton "crawls" on the projected tangent when this many consecutive projected steps each left the residual
@@ -848,8 +851,9 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
     """Push a rigid finger given by ``capsule(depth) -> Capsule`` (depth m; any object, any push direction)
     through ``depths`` (m, ascending, ≥ 0), load steps of at most ``step`` m; returns one :class:`PathState`
     per requested depth (``force`` along the capsule's direction, full-body force with the symmetry planes).
-    A Newton call that runs out of ``iters`` iterations (still descending: a snap-through under way) is continued
-    from its last iterate at the same depth, up to :data:`RESUME_MAX` more calls (nh-7). A load step whose Newton
+    A Newton call that runs out of ``iters`` iterations (not failed: e.g. a snap-through under way) is continued
+    from its last iterate at the same depth, up to :data:`RESUME_MAX` more calls (nh-7; a step stuck for good
+    thus costs (1 + RESUME_MAX)× the iterations before each halving). A load step whose Newton
     solve fails otherwise, or still has not converged then, is halved (up to ``substeps_max`` times) and the
     load steps after it keep the halved size (the path got hard: on the 3.4 mm cylinder mesh a 2.5 mm step past
     47.5 mm spent 60 iterations per try before halving, nh-5); if it still fails, its last iterate is kept and
@@ -908,8 +912,8 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
                 try:
                     u_new, its, conv = _newton(m, guess, caps, k, iters, tol_u, tol_r, None, nstate)
                     u_last = u_new
-                    # out of iterations, not failed (a snap-through still under way): go on from where it got to,
-                    # in the mode it ended in, rather than restart a halved step from the last converged state
+                    # out of iterations, not failed (e.g. a snap-through still under way): go on from where it got
+                    # to, in the mode it ended in, rather than restart a halved step from the last converged state
                     for _ in range(RESUME_MAX):
                         if conv or its < iters:
                             break
