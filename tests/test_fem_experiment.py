@@ -153,7 +153,7 @@ def test_full_settings_judge_the_nodes_snapshot_mesh_against_a_finer_one():
     snapshots the experiment judges are taken on it, against a finer mesh: the accuracy reported is the
     node's, and it includes its mesh's own error. The levels refine by ~1.33 each."""
     from flexsheet.experiments.fem import settings_for
-    from nodes.fem.snapshots import DEFAULT_REF_SPEC
+    from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC
 
     st = settings_for(False)
     lv = st.levels
@@ -161,6 +161,12 @@ def test_full_settings_judge_the_nodes_snapshot_mesh_against_a_finer_one():
     assert lv[-1].h_fine < DEFAULT_REF_SPEC.h_fine
     ratios = [a.h_fine / b.h_fine for a, b in zip(lv[:-1], lv[1:], strict=True)]
     assert all(1.2 < r < 1.45 for r in ratios), ratios
+    # every held-out azimuth lies strictly between two snapshot azimuths (interpolated, not a snapshot itself),
+    # and the snapshots are at most twice the node table's spacing apart
+    ga = st.grid.angles_deg
+    assert st.holdout_deg and all(a not in ga and ga[0] < a < ga[-1] for a in st.holdout_deg)
+    node_step = min(b - a for a, b in zip(DEFAULT_GRID.angles_deg[:-1], DEFAULT_GRID.angles_deg[1:], strict=True))
+    assert max(b - a for a, b in zip(ga[:-1], ga[1:], strict=True)) <= 2 * node_step
 
 
 def _fake_path_dict(n_dof: int, depths) -> dict:
