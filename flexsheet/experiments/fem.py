@@ -522,9 +522,9 @@ def snapshot_mesh_study(st: Settings, mat: Material, cache: ArrayCache, rm: Real
                         ) -> dict:
     """Which mesh the snapshots need: an azimuth-0 table (``st.grid``'s depths) on the next-to-finest mesh (full
     mode: the snapshot mesh) and on each of its skin-refined variants (``st.skin_sizes``; the convergence and skin
-    studies' solves, read from the cache), judged on
-    the azimuth-0 validation cases (the finest convergence mesh; depths between snapshots held out). Per mesh:
-    DOF, CPU of its azimuth-0 path and the worst visible error (mm). ``rm``'s snapshot table is left as it was."""
+    studies' solves, read from the cache), judged on the azimuth-0 validation cases (the finest convergence
+    mesh; depths between snapshots held out). Per mesh: DOF, CPU of its azimuth-0 path and the worst visible
+    error (mm). ``rm``'s snapshot table is left as it was."""
     keep = rm.snapshots
     az0 = [c for c in cases if c["angle_deg"] == 0.0]
     grid = replace(st.grid, angles_deg=(0.0,))

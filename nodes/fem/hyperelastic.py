@@ -853,12 +853,11 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
     per requested depth (``force`` along the capsule's direction, full-body force with the symmetry planes).
     A Newton call that runs out of ``iters`` iterations (not failed: e.g. a snap-through under way) is continued
     from its last iterate at the same depth, up to :data:`RESUME_MAX` more calls (nh-7; a step stuck for good
-    thus costs (1 + RESUME_MAX)× the iterations before each halving). A load step whose Newton
-    solve fails otherwise, or still has not converged then, is halved (up to ``substeps_max`` times) and the
+    thus costs (1 + RESUME_MAX)× the iterations before each halving). A load step whose Newton solve fails
+    otherwise, or still has not converged then, is halved (up to ``substeps_max`` times) and the
     load steps after it keep the halved size (the path got hard: on the 3.4 mm cylinder mesh a 2.5 mm step past
     47.5 mm spent 60 iterations per try before halving, nh-5); if it still fails, its last iterate is kept and
-    the state is flagged
-    ``converged=False`` (bounded time; the caller decides).
+    the state is flagged ``converged=False`` (bounded time; the caller decides).
 
     ``contact`` (a modelling choice, :data:`CONTACT_LAWS`): ``"frictionless"`` — non-penetration only, the
     surface slides freely on the finger; ``"sticking"`` — a fingertip that does not slip on soft tissue
