@@ -18,9 +18,9 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    the linear P2 capacitance model, and the nonlinear snapshots (:mod:`nodes.fem.snapshots`), sampled every
    5 mm from the reference solve on the node's mesh (h_fine 3.4 mm, the next-to-finest level) and judged at
    every output depth against the finest mesh (h_fine 2.5 mm): the depths between snapshots are held out, and
-   the snapshot mesh's own error is in the figure. Full mode: snapshots at azimuths 0 and 20 degrees, and
-   azimuth 10 held out against its own solve on the snapshot mesh (interpolation across azimuth, at twice the
-   node table's spacing). Accuracy against speed (``accuracy_speed.png/.json``) and the failure map, where
+   the snapshot mesh's own error is in the figure. Full mode: snapshots at azimuths 0, 10 and 20 degrees, and
+   azimuth 5 held out against its own solve on the snapshot mesh (interpolation across azimuth at the node
+   table's spacing). Accuracy against speed (``accuracy_speed.png/.json``) and the failure map, where
    each model breaks by depth and azimuth (``failure_map.png/.json``). **Snapshot-mesh study**
    (``realtime.snapshot_mesh_study``): the same azimuth-0 check for a table on each skin-study mesh.
    ``nodes/fem/model_table.json`` (full mode) is what the node chooses from.
@@ -31,10 +31,10 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 two scales, a skin study of one size (5 mm): a test's run, ~110 s cold on the 2-core machine with two solves
 beside it (70 s idle before the skin study), seconds cached; it does not meet the targets
 and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4.5 / 3.4 / 2.5 mm,
-:data:`FULL_LEVELS`, 2.5 mm outputs, snapshots at azimuths 0 and 20 every 5 mm, azimuth 10 held out, penalty
-study) is ~2.7 h of CPU cold on the 2-core machine with another solve beside it (sessions 8–9,
+:data:`FULL_LEVELS`, 2.5 mm outputs, snapshots at azimuths 0, 10 and 20 every 5 mm, azimuth 5 held out,
+penalty study) is ~3.4 h of CPU cold on the 2-core machine with another solve beside it (sessions 8–9,
 ``cpu_seconds`` in convergence.json: the 2.5 mm mesh 31 min, the 3.4 mm 9 min, the two skin meshes 12 and
-23 min, the azimuth-10 and azimuth-20 paths ~40 min each).
+23 min, the azimuth-5, -10 and -20 paths ~37–39 min each).
 ``--level N`` solves one mesh only and ``--node-table --azimuth A`` one azimuth (to run them in parallel
 processes); every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds (27 s).
 ``--linear-study`` also reruns the linear mesh study (``accuracy_table.json``, ``hertz``, ``stability``).
@@ -116,12 +116,12 @@ def settings_for(quick: bool) -> Settings:
                         linear_spec=MeshSpec(0.016, 0.006, 0.012, 0.0), n_time=50, quick=True, penalty_level=0,
                         penalty_scales=(PENALTY_SCALE, 10 * PENALTY_SCALE), skin_sizes=(0.005,))
     lv = [replace(DEFAULT_REF_SPEC, h_fine=hf) for hf in FULL_LEVELS]
-    grid = SnapshotGrid((0.0, 20.0), 0.05, 0.005, DEFAULT_GRID.dtheta_deg, DEFAULT_GRID.dy, DEFAULT_GRID.drho)
+    grid = SnapshotGrid((0.0, 10.0, 20.0), 0.05, 0.005, DEFAULT_GRID.dtheta_deg, DEFAULT_GRID.dy, DEFAULT_GRID.drho)
     # the snapshots on the node's mesh (DEFAULT_REF_SPEC, the next-to-finest level), judged against the finest at
-    # azimuth 0; azimuth 10 held out between snapshots 20 deg apart (twice the node table's spacing), against its
-    # own solve on that mesh (the node table's cached paths, --node-table --azimuth 10 / 20)
+    # azimuth 0; azimuth 5 held out between snapshots at the node table's 10 deg spacing, against its own solve on
+    # that mesh (10, 20: the node table's cached paths, --node-table --azimuth 10 / 20)
     return Settings(levels=lv, depth_step=0.0025, fine_step=0.0025, grid=grid, snap_spec=DEFAULT_REF_SPEC,
-                    holdout_deg=(10.0,),
+                    holdout_deg=(5.0,),
                     linear_spec=MeshSpec(0.012, 0.004, 0.012, 60.0), n_time=1000)
 
 
