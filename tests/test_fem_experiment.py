@@ -165,6 +165,8 @@ def test_full_settings_judge_the_nodes_snapshot_mesh_against_a_finer_one():
     # and the snapshots are at most twice the node table's spacing apart
     ga = st.grid.angles_deg
     assert st.holdout_deg and all(a not in ga and ga[0] < a < ga[-1] for a in st.holdout_deg)
+    # the snapshot azimuths are the node table's, solved at its depth step (its cached paths, not extra solves)
+    assert set(ga) <= set(DEFAULT_GRID.angles_deg) and st.fine_step == DEFAULT_GRID.depth_step
     node_step = min(b - a for a, b in zip(DEFAULT_GRID.angles_deg[:-1], DEFAULT_GRID.angles_deg[1:], strict=True))
     assert max(b - a for a, b in zip(ga[:-1], ga[1:], strict=True)) <= 2 * node_step
 
@@ -176,6 +178,23 @@ def _fake_path_dict(n_dof: int, depths) -> dict:
             "inverted": np.zeros(d, int), "max_strain": np.zeros(d), "penetration": np.zeros(d)}
 
 
+class _KeyRecorder:
+    """A stand-in cache for :func:`reference_path` that records (key, what) of every lookup and has nothing."""
+
+    def __init__(self):
+        self.seen = []
+
+    def load(self, kind, key):
+        return None
+
+    def path(self, kind, key):
+        return None
+
+    def get_or_compute(self, kind, key, compute, what):
+        self.seen.append((key, what))
+        return {}, True, 0.0
+
+
 def test_reference_path_solves_off_axis_pushes_on_the_half_model_under_one_key():
     """Away from azimuth 0 a quarter-model spec (``half_z``) is solved on its half model, as the snapshot table
     meshes it: the quarter and the half spec give one cache entry (one solve), and −0° is 0°."""
@@ -185,21 +204,7 @@ def test_reference_path_solves_off_axis_pushes_on_the_half_model_under_one_key()
     from nodes.fem.material import Material
     from nodes.fem.snapshots import DEFAULT_REF_SPEC
 
-    class Keys:
-        def __init__(self):
-            self.seen = []
-
-        def load(self, kind, key):
-            return None
-
-        def path(self, kind, key):
-            return None
-
-        def get_or_compute(self, kind, key, compute, what):
-            self.seen.append((key, what))
-            return {}, True, 0.0
-
-    c = Keys()
+    c = _KeyRecorder()
     probes = np.zeros((2, 3))
     d = X._depths(0.0025)
     for spec, a in ((DEFAULT_REF_SPEC, 10.0), (replace(DEFAULT_REF_SPEC, half_z=False), 10.0),
@@ -221,22 +226,11 @@ def test_a_previous_version_path_is_reused_only_when_no_newton_call_ran_out(tmp_
     assert X.SOLVER_VERSION == "nh-7" and X.PREVIOUS_VERSION == "nh-6"
     d, probes = X._depths(0.0025), np.zeros((2, 3))
 
-    class Keys:
-        def load(self, kind, key):
-            return None
-
-        def path(self, kind, key):
-            return None
-
-        def get_or_compute(self, kind, key, compute, what):
-            self.key = key
-            return {}, True, 0.0
-
-    k = Keys()
+    k = _KeyRecorder()
     monkeypatch.setattr(X, "SOLVER_VERSION", X.PREVIOUS_VERSION)
     X.reference_path(DEFAULT_REF_SPEC, 0.0, d, Material(), k, probes)
     monkeypatch.undo()
-    old_key = k.key
+    ((old_key, _),) = k.seen
 
     class Solved(Exception):
         pass

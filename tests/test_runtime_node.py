@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import asyncio
 import os
+import subprocess
+import sys
 import threading
 import time
 
@@ -239,8 +241,6 @@ def test_publisher_close_survives_subscribers_leaving_mid_message():
     with linger 0 while a subscriber disconnects part-way through a multipart message: it killed the camera
     node at a launch's shutdown in CI. The same race with linger 0 aborted 6 of 60 single-round runs here;
     :meth:`XPub.close` lingers ``CLOSE_LINGER_MS``. Three processes of eight rounds each must all end clean."""
-    import subprocess
-    import sys
 
     from conftest import free_port
 
@@ -291,12 +291,9 @@ def test_a_node_stopped_while_a_sync_handler_is_inside_opencv_exits_cleanly(run)
     thread by a forced unwind that OpenCV's noexcept GIL guard turns into std::terminate). The node now joins
     its sync workers before it returns; without that this script aborted every time (20 of 20 in a plain
     reproduction)."""
-    import subprocess
-    import sys
     tests = os.path.dirname(os.path.abspath(__file__))
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([os.path.dirname(tests), os.environ.get("PYTHONPATH", "")]))
     proc = subprocess.run([sys.executable, "-c", _CV2_HANDLER_SCRIPT.format(tests=tests)], capture_output=True,
-                          text=True, timeout=60, env=env)
+                          text=True, timeout=60, cwd=os.path.dirname(tests))
     assert "node stopped" in proc.stdout, proc.stderr[-2000:]
     assert "terminate called" not in proc.stderr, proc.stderr[-2000:]
     assert proc.returncode == 0, proc.stderr[-2000:]

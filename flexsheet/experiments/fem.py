@@ -195,12 +195,12 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
                          FINGER_R, cache_key(np.round(probes, 9).tobytes()), f"step={step:.6g}", f"iters={NEWTON_ITERS}",
                          f"pen={penalty_scale:g}")
 
-    key = key_of(SOLVER_VERSION)
-    p_new, p_old = cache.path("reference", key), cache.path("reference", key_of(PREVIOUS_VERSION))
+    key, old_key = key_of(SOLVER_VERSION), key_of(PREVIOUS_VERSION)
+    p_new, p_old = cache.path("reference", key), cache.path("reference", old_key)
     if p_new is not None and not os.path.exists(p_new) and os.path.exists(p_old):
         # the version before's path is this version's when no Newton call ran out in it (PREVIOUS_VERSION; such a
         # call counts NEWTON_ITERS at its depth by itself)
-        old = cache.load("reference", key_of(PREVIOUS_VERSION))
+        old = cache.load("reference", old_key)
         if old is not None and int(np.max(old["newton"])) < NEWTON_ITERS:
             _log(f"fem: reference {spec.key()} at {angle_deg:g} deg: the {PREVIOUS_VERSION} path (no Newton call ran "
                  f"out of iterations) is the {SOLVER_VERSION} path; re-keyed")
