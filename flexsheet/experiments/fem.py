@@ -101,6 +101,7 @@ class Settings:
     penalty_level: int = 1
     penalty_scales: tuple = (1e3, 1e4, PENALTY_SCALE, 10 * PENALTY_SCALE)
     skin_sizes: tuple = (0.0025, 0.0018)
+    half_levels: tuple = (0.006, 0.0045, 0.0034)
 
 
 def settings_for(quick: bool) -> Settings:
@@ -114,7 +115,8 @@ def settings_for(quick: bool) -> Settings:
         return Settings(levels=lv, depth_step=0.005, fine_step=0.005,
                         grid=SnapshotGrid((0.0,), 0.05, 0.01, 1.0, 0.001, 0.002), snap_spec=lv[-1], holdout_deg=(),
                         linear_spec=MeshSpec(0.016, 0.006, 0.012, 0.0), n_time=50, quick=True, penalty_level=0,
-                        penalty_scales=(PENALTY_SCALE, 10 * PENALTY_SCALE), skin_sizes=(0.005,))
+                        penalty_scales=(PENALTY_SCALE, 10 * PENALTY_SCALE), skin_sizes=(0.005,),
+                        half_levels=(0.009,))
     lv = [replace(DEFAULT_REF_SPEC, h_fine=hf) for hf in FULL_LEVELS]
     grid = SnapshotGrid((0.0, 10.0, 20.0), 0.05, 0.005, DEFAULT_GRID.dtheta_deg, DEFAULT_GRID.dy, DEFAULT_GRID.drho)
     # the snapshots on the node's mesh (DEFAULT_REF_SPEC, the next-to-finest level), judged against the finest at
@@ -387,6 +389,64 @@ def skin_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel
     return {"depths_m": depths.tolist(), "unrefined": unrefined.__dict__, "finest": st.levels[-1].__dict__,
             "unrefined_dofs": int(base["dofs"]), "unrefined_force_N_at_50mm": float(base["force"][-1]),
             "finest_force_N_at_50mm": float(fine["force"][-1]), "tube_change_mm": tube, "skins": rows}
+
+
+def mirror_asymmetry(path: dict, spec: RefSpec, depths: np.ndarray, mat: Material, rm: RealtimeModel) -> list[float]:
+    """Per depth (D,) m, the largest |u(x) − M·u(M·x)| (m) over the rendered vertices x visible on the deformed
+    surface of an azimuth-0 :func:`reference_path` ``path`` solved on ``spec``'s mesh, M the mirror in z
+    through the cylinder's axis: how far the solution is from mirror-symmetric. u(M·x) is probed from the
+    path's DOF field (``u_dof``) on the re-meshed model (gmsh is deterministic). A quarter model (``half_z``)
+    gives 0 up to float32 rounding, by construction."""
+    from nodes.fem.snapshots import _probe, _sample
+
+    verts = rm.rest_vertices.astype(float)
+    fixed = rm.mesh.fixed[rm.surface_nodes]
+    mirrored = verts.copy()
+    mirrored[:, 2] = 2 * rm.mesh.center[2] - mirrored[:, 2]
+    model = _ref_model(spec, 0.0, mat)
+    P = _probe(model, mirrored)
+    out = []
+    for j, d in enumerate(depths):
+        um = _sample(P, path["u_dof"][j].astype(float), mirrored, model)
+        um[:, 2] *= -1.0
+        vis = _visible(verts + path["u"][j], fixed, 0.0, d, rm.mesh)
+        out.append(float(np.linalg.norm(path["u"][j] - um, axis=1)[vis].max()))
+    return out
+
+
+def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, conv: dict, fine: dict) -> dict:
+    """Does the z mirror plane change the azimuth-0 answer? The convergence meshes are quarter models (u_z = 0
+    on the plane z = z_O through the push axis, so their solution is mirror-symmetric by construction); every
+    other azimuth, the held-out check and the node table's off-axis snapshots are half models, meshed without
+    that plane. Here the azimuth-0 push is solved on half models (``st.half_levels``, h_fine m, else as the
+    convergence levels) and compared, every ``st.fine_step``, with the finest quarter model (``fine``) and with
+    the quarter model of the same h_fine (from ``conv``'s levels, when there is one): per level the force (N),
+    the largest visible-surface difference (mm) and the solution's own asymmetry, the largest
+    |u(x) − M·u(M·x)| (mm) over the rendered vertices visible on it, M the mirror in z (u at M·x probed from
+    the half model's field). A mirror-symmetric continuum problem whose half-model solution is asymmetric
+    well beyond the mesh's own asymmetry would have left the symmetric branch (a bifurcation); a half model
+    that is stiffer than the quarter model of the same h_fine and converges toward it is discretization."""
+    depths = _depths(st.fine_step)
+    verts = rm.rest_vertices.astype(float)
+    fixed = rm.mesh.fixed[rm.surface_nodes]
+    quarter = {round(lv["h_fine_m"], 9): lv for lv in conv["levels"]}
+    rows = []
+    for hf in st.half_levels:
+        spec = replace(st.levels[-1], h_fine=hf, half_z=False)
+        p = reference_path(spec, 0.0, depths, mat, cache, verts, st.contact)
+        asym = [a * 1e3 for a in mirror_asymmetry(p, spec, depths, mat, rm)]
+        q = quarter.get(round(hf, 9))
+        rows.append({"h_fine_m": hf, "spec": spec.__dict__, "dofs": int(p["dofs"]), "cpu_seconds": float(p["cpu_seconds"]),
+                     "newton_converged": bool(p["converged"].all()), "newton_iterations": p["newton"].tolist(),
+                     "force_N": p["force"].tolist(), "asymmetry_mm": asym,
+                     "diff_vs_finest_quarter_mm": [e * 1e3 for e in _visible_diffs(p, fine, depths, verts, fixed, rm.mesh)],
+                     "quarter_same_h_dofs": int(q["dofs"]) if q else None,
+                     "quarter_same_h_force_N": q["force_N"] if q and len(q["force_N"]) == len(depths) else None})
+        _log(f"mirror study: half model h_fine {hf * 1e3:g} mm ({rows[-1]['dofs']} DOF) at 50 mm: "
+             f"{p['force'][-1]:.2f} N, {rows[-1]['diff_vs_finest_quarter_mm'][-1]:.2f} mm from the finest quarter "
+             f"model, asymmetry {asym[-1]:.2f} mm")
+    return {"depths_m": depths.tolist(), "finest_quarter": st.levels[-1].__dict__,
+            "finest_quarter_force_N": fine["force"].tolist(), "half_levels": rows}
 
 
 # ---- candidates ------------------------------------------------------------------------------------------------
@@ -692,6 +752,40 @@ def plot_convergence(out: str, conv: dict) -> None:
     plt.close(fig)
 
 
+def plot_mirror_study(out: str, conv: dict) -> None:
+    """mirror_study.png: finger force against depth on the quarter (dashed) and half models (solid), and each half
+    model's asymmetry and distance from the finest quarter model (the numbers: ``convergence.json``
+    ``mirror_study``)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ms = conv["mirror_study"]
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    d = np.array(conv["depths_m"]) * 1e3
+    for lv in conv["levels"]:
+        a1.plot(d[:len(lv["force_N"])], lv["force_N"], "--", lw=1, label=f"quarter, h_fine {lv['h_fine_m'] * 1e3:.1f} mm")
+    dm = np.array(ms["depths_m"]) * 1e3
+    for i, row in enumerate(ms["half_levels"]):
+        lab = f"half, h_fine {row['h_fine_m'] * 1e3:.1f} mm ({row['dofs']} DOF)"
+        a1.plot(dm, row["force_N"], "-", lw=1.8, label=lab)
+        a2.plot(dm, row["diff_vs_finest_quarter_mm"], "o-", ms=3, color=f"C{i}", label=f"{lab}: from finest quarter")
+        a2.plot(dm, row["asymmetry_mm"], "s--", ms=3, color=f"C{i}", label=f"h_fine {row['h_fine_m'] * 1e3:.1f} mm: "
+                "own asymmetry")
+    a1.set_xlabel("push depth (mm)")
+    a1.set_ylabel("finger force (N)")
+    a1.legend(fontsize=7)
+    a2.axhline(TARGET * 1e3, color="k", ls=":", lw=0.8, label="target 0.7 mm")
+    a2.set_xlabel("push depth (mm)")
+    a2.set_ylabel("max visible-surface distance (mm)")
+    a2.legend(fontsize=7)
+    fig.suptitle("azimuth-0 push: quarter models (z mirror plane) against half models (none)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "mirror_study.png"), dpi=110)
+    plt.close(fig)
+
+
 def plot_candidates(out: str, cand: dict, fmap: dict) -> None:
     """accuracy_speed.png (worst visible error 0–50 mm against time per update) and failure_map.png."""
     import matplotlib
@@ -841,6 +935,7 @@ def main(argv: list[str] | None = None) -> int:
     conv["criterion"] += (f"; and the contact penalty converged: the default {PENALTY_SCALE:g}·E/h within "
                           f"{PENALTY_TOL_MM:g} mm of a 10x stiffer one (penalty_study)")
     conv["skin_study"] = skin_study(st, mat, cache, rm, conv, fine)
+    conv["mirror_study"] = mirror_study(st, mat, cache, rm, conv, fine)
     solved, src = snapshot_source(st, mat, cache, rm, fine)
     table, hit, sec = snapshot_table(st, mat, cache, solved)
     sec += float(src["seconds"])              # the solve the table was sampled from
@@ -863,6 +958,7 @@ def main(argv: list[str] | None = None) -> int:
         with open(MODEL_TABLE_PATH, "w") as fh:
             json.dump(model_table(cases, cand), fh, indent=1)
     plot_convergence(args.out, conv)
+    plot_mirror_study(args.out, conv)
     plot_candidates(args.out, cand, fmap)
     if args.linear_study:
         linear_study(args.out, mat)
