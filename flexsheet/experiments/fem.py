@@ -12,7 +12,10 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    every load step of the finest mesh and none of its elements is inverted at a quadrature point.
    **Skin study** (``convergence.json`` ``skin_study``, :func:`skin_study`): the 3.4 mm mesh with only its
    surface layer refined (2.5 and 1.8 mm), against the whole push tube refined, to tell which part of the
-   mesh the unconverged deep push depends on.
+   mesh the unconverged deep push depends on. **Mirror study** (``convergence.json`` ``mirror_study``,
+   ``mirror_study.png``, :func:`mirror_study`): the azimuth-0 push on half models (no z mirror plane, as
+   every other azimuth is solved) at h_fine 6 / 4.5 / 3.4 mm, against the quarter models: force, distance
+   from the finest quarter model and the half model's own asymmetry.
 2. **Candidates**, judged on the real-time model's rendered vertices outside the finger's footprint
    (lateral distance from the push axis > finger radius + 2 mm; the footprint is hidden by the finger):
    the linear P2 capacitance model, and the nonlinear snapshots (:mod:`nodes.fem.snapshots`), sampled every
@@ -764,14 +767,19 @@ def plot_mirror_study(out: str, conv: dict) -> None:
     ms = conv["mirror_study"]
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
     d = np.array(conv["depths_m"]) * 1e3
+    hs = sorted({round(lv["h_fine_m"], 9) for lv in conv["levels"]} | {round(r["h_fine_m"], 9) for r in ms["half_levels"]},
+                reverse=True)
+    col = {h: f"C{k}" for k, h in enumerate(hs)}         # one colour per h_fine in both panels
     for lv in conv["levels"]:
-        a1.plot(d[:len(lv["force_N"])], lv["force_N"], "--", lw=1, label=f"quarter, h_fine {lv['h_fine_m'] * 1e3:.1f} mm")
+        a1.plot(d[:len(lv["force_N"])], lv["force_N"], "--", lw=1, color=col[round(lv["h_fine_m"], 9)],
+                label=f"quarter, h_fine {lv['h_fine_m'] * 1e3:.1f} mm")
     dm = np.array(ms["depths_m"]) * 1e3
-    for i, row in enumerate(ms["half_levels"]):
+    for row in ms["half_levels"]:
         lab = f"half, h_fine {row['h_fine_m'] * 1e3:.1f} mm ({row['dofs']} DOF)"
-        a1.plot(dm, row["force_N"], "-", lw=1.8, label=lab)
-        a2.plot(dm, row["diff_vs_finest_quarter_mm"], "o-", ms=3, color=f"C{i}", label=f"{lab}: from finest quarter")
-        a2.plot(dm, row["asymmetry_mm"], "s--", ms=3, color=f"C{i}", label=f"h_fine {row['h_fine_m'] * 1e3:.1f} mm: "
+        c = col[round(row["h_fine_m"], 9)]
+        a1.plot(dm, row["force_N"], "-", lw=1.8, color=c, label=lab)
+        a2.plot(dm, row["diff_vs_finest_quarter_mm"], "o-", ms=3, color=c, label=f"{lab}: from finest quarter")
+        a2.plot(dm, row["asymmetry_mm"], "s--", ms=3, color=c, label=f"h_fine {row['h_fine_m'] * 1e3:.1f} mm: "
                 "own asymmetry")
     a1.set_xlabel("push depth (mm)")
     a1.set_ylabel("finger force (N)")
