@@ -144,6 +144,57 @@ def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its
         max(row["asymmetry_mm"]))
 
 
+def test_mirror_stability_finds_the_lowest_eigenvalues_of_each_symmetry_block(quick):
+    """The stability check's shift-invert eigenvalues are the lowest of the symmetric and antisymmetric blocks
+    of the quarter model's tangent (dense ``eigvalsh`` on the coarse quick mesh agrees to 1e-6), the free
+    residual of each converged state is small against the finger force, and the report carries one row per
+    checked level with the antisymmetric block softer than the symmetric one somewhere along the push (the
+    mirror-symmetric state's softest direction is asymmetric: the buckling-like mode)."""
+    from dataclasses import replace
+
+    import scipy.linalg
+
+    from flexsheet.experiments import fem as X
+    from nodes.fem.cache import ArrayCache
+    from nodes.fem.hyperelastic import capsule_at
+    from nodes.fem.material import Material
+
+    base, s, _ = quick
+    with open(base / "out" / "convergence.json") as fh:
+        conv = json.load(fh)
+    stab = conv["mirror_study"]["stability"]
+    assert [r["h_fine_m"] for r in stab] == [lv["h_fine_m"] for lv in conv["levels"][-2:]]
+    for r in stab:
+        assert len(r["anti_N_per_m"]) == len(r["depths_m"]) and all(v > 0 for v in r["sym_N_per_m"])
+        assert r["stable"] == all(v > 0 for v in r["anti_N_per_m"])
+        assert min(r["anti_over_sym"]) < 1.0
+        assert max(r["residual_N"]) < 1e-3 * max(conv["levels"][-1]["force_N"])
+    st, mat = X.settings_for(True), Material()
+    spec = st.levels[0]
+    rm = X.realtime_model(st, mat, str(base / "cache"))
+    depths = X._depths(st.depth_step)
+    p = X.reference_path(spec, 0.0, depths, mat, ArrayCache(str(base / "cache")), rm.rest_vertices.astype(float),
+                         st.contact)
+    j = len(depths) // 2
+    got = X.mirror_stability({"u_dof": p["u_dof"][j:j + 1]}, spec, depths[j:j + 1], mat)
+    m = X._ref_model(spec, 0.0, mat)
+    _, K = m.residual_tangent(p["u_dof"][j].astype(float), capsule_at(0.0, float(depths[j]), X.FINGER_R, m.mesh.radius,
+                                                                      m.mesh.center), m.penalty())
+    P = len(m.points)
+    on_z = np.abs(m.points[:, 2] - m.mesh.center[2]) < 1e-9
+    sym = m.fixed_mask.reshape(P, 3)
+    anti = sym.copy()
+    anti[on_z] = [True, True, False]
+    anti[m.support] = True
+    for name, fixed in (("sym_N_per_m", sym), ("anti_N_per_m", anti)):
+        fr = np.flatnonzero(~fixed.ravel())
+        lo = scipy.linalg.eigvalsh(K[fr][:, fr].toarray(), subset_by_index=[0, 0])[0]
+        assert got[name][0] == pytest.approx(lo, rel=1e-6), name
+    assert got["anti_N_per_m"][0] == pytest.approx(stab[0]["anti_N_per_m"][j], rel=1e-9)
+    with pytest.raises(ValueError, match="quarter model"):
+        X.mirror_stability(p, replace(spec, half_z=False), depths, mat)
+
+
 def test_penalty_study_shows_the_default_penalty_converged(quick):
     """The contact penalty is a discretisation parameter too: a 10× stiffer finger penetrates less and moves the
     visible surface by less than 0.1 mm at the default; the default penetrates the finger by < 0.05 mm at 50 mm

@@ -15,7 +15,8 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    mesh the unconverged deep push depends on. **Mirror study** (``convergence.json`` ``mirror_study``,
    ``mirror_study.png``, :func:`mirror_study`): the azimuth-0 push on half models (no z mirror plane, as
    every other azimuth is solved) at h_fine 6 / 4.5 / 3.4 mm, against the quarter models: force, distance
-   from the finest quarter model and the half model's own asymmetry.
+   from the finest quarter model and the half model's own asymmetry; and whether the quarter models' symmetric
+   solution is stable against asymmetric modes (:func:`mirror_stability`, the 3.4 and 2.5 mm meshes, cached).
 2. **Candidates**, judged on the real-time model's rendered vertices outside the finger's footprint
    (lateral distance from the push axis > finger radius + 2 mm; the footprint is hidden by the finger):
    the linear P2 capacitance model, and the nonlinear snapshots (:mod:`nodes.fem.snapshots`), sampled every
@@ -417,6 +418,45 @@ def mirror_asymmetry(path: dict, spec: RefSpec, depths: np.ndarray, mat: Materia
     return out
 
 
+def mirror_stability(path: dict, spec: RefSpec, depths: np.ndarray, mat: Material, n_eig: int = 2) -> dict:
+    """Is the mirror-symmetric azimuth-0 solution of a quarter model (``spec.half_z``; its
+    :func:`reference_path` ``path`` at ``depths`` (D,) m) stable against mirror-*antisymmetric* perturbations,
+    which the quarter model cannot make? At a symmetric equilibrium on a symmetric mesh the tangent splits into
+    a symmetric block (the quarter model's own BC on the z plane, u_z = 0) and an antisymmetric one (u_x = u_y = 0,
+    u_z free on it); the lowest eigenvalue of each (N/m, unit-norm DOF vectors; scipy ``eigsh`` shift-invert)
+    at every converged state. An antisymmetric eigenvalue ≤ 0 is a symmetry-breaking bifurcation; a small
+    positive one, a state that a small asymmetry (another mesh, a push a few degrees off 0) moves far
+    (Koiter's imperfection sensitivity). Returns {"sym_N_per_m", "anti_N_per_m" (D,), "residual_N" (D,) free
+    residual norm, "dofs"}. Raises ``ValueError`` for a spec without the z mirror plane."""
+    import scipy.sparse.linalg as sla
+
+    from nodes.fem.hyperelastic import capsule_at
+
+    if not spec.half_z:
+        raise ValueError(f"mirror_stability needs a quarter model (half_z), got {spec.key()}")
+    m = _ref_model(spec, 0.0, mat)
+    c = m.mesh.center
+    P = len(m.points)
+    on_z = np.abs(m.points[:, 2] - c[2]) < 1e-9
+    sym = m.fixed_mask.reshape(P, 3)
+    anti = sym.copy()
+    anti[on_z] = [True, True, False]
+    anti[m.support] = True
+    k = m.penalty()
+    out = {"sym_N_per_m": [], "anti_N_per_m": [], "residual_N": [], "dofs": int(m.n)}
+    for j, d in enumerate(depths):
+        u = path["u_dof"][j].astype(float)
+        r, K = m.residual_tangent(u, capsule_at(0.0, float(d), FINGER_R, m.mesh.radius, c), k)
+        out["residual_N"].append(float(np.linalg.norm(r[~sym.ravel()])))
+        for name, fixed in (("sym_N_per_m", sym), ("anti_N_per_m", anti)):
+            fr = np.flatnonzero(~fixed.ravel())
+            Kf = K[fr][:, fr].tocsc()
+            ev = sla.eigsh(Kf, k=n_eig, sigma=-1e-3 * float(np.abs(Kf.diagonal()).mean()), which="LM",
+                           return_eigenvectors=False)
+            out[name].append(float(np.min(ev)))
+    return out
+
+
 def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, conv: dict, fine: dict) -> dict:
     """Does the z mirror plane change the azimuth-0 answer? The convergence meshes are quarter models (u_z = 0
     on the plane z = z_O through the push axis, so their solution is mirror-symmetric by construction); every
@@ -448,8 +488,28 @@ def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMod
         _log(f"mirror study: half model h_fine {hf * 1e3:g} mm ({rows[-1]['dofs']} DOF) at 50 mm: "
              f"{p['force'][-1]:.2f} N, {rows[-1]['diff_vs_finest_quarter_mm'][-1]:.2f} mm from the finest quarter "
              f"model, asymmetry {asym[-1]:.2f} mm")
+    stab = []
+    for spec in st.levels[-2:]:         # the node's mesh (full mode) and the finest: is the symmetric branch stable?
+        sd = depths if spec == st.levels[-1] else _depths(st.depth_step)
+        p = fine if spec == st.levels[-1] else reference_path(spec, 0.0, sd, mat, cache, verts, st.contact)
+        t = time.perf_counter()
+        z, _, _ = cache.get_or_compute("stability", cache_key("mirror_stability-1", solver_tag(st.contact), spec.key(),
+                                                               np.round(sd, 9).tolist(), mat.key(), FINGER_R),
+                                       lambda spec=spec, p=p, sd=sd: {k: np.asarray(v) for k, v in
+                                                                      mirror_stability(p, spec, sd, mat).items()},
+                                       f"mirror stability of {spec.key()}")
+        row = {"h_fine_m": spec.h_fine, "dofs": int(z["dofs"]), "depths_m": sd.tolist(),
+               "sym_N_per_m": z["sym_N_per_m"].tolist(), "anti_N_per_m": z["anti_N_per_m"].tolist(),
+               "anti_over_sym": (z["anti_N_per_m"] / z["sym_N_per_m"]).tolist(),
+               "residual_N": z["residual_N"].tolist()}
+        row["stable"] = bool(np.all(z["anti_N_per_m"] > 0))
+        stab.append(row)
+        i = int(np.argmin(row["anti_over_sym"]))
+        _log(f"mirror stability, quarter model h_fine {spec.h_fine * 1e3:g} mm: antisymmetric modes "
+             f"{'stable' if row['stable'] else 'UNSTABLE'} at every depth; softest at {sd[i] * 1e3:g} mm (lowest "
+             f"antisymmetric / symmetric eigenvalue {row['anti_over_sym'][i]:.3f}; {time.perf_counter() - t:.0f} s)")
     return {"depths_m": depths.tolist(), "finest_quarter": st.levels[-1].__dict__,
-            "finest_quarter_force_N": fine["force"].tolist(), "half_levels": rows}
+            "finest_quarter_force_N": fine["force"].tolist(), "half_levels": rows, "stability": stab}
 
 
 # ---- candidates ------------------------------------------------------------------------------------------------
@@ -756,16 +816,17 @@ def plot_convergence(out: str, conv: dict) -> None:
 
 
 def plot_mirror_study(out: str, conv: dict) -> None:
-    """mirror_study.png: finger force against depth on the quarter (dashed) and half models (solid), and each half
-    model's asymmetry and distance from the finest quarter model (the numbers: ``convergence.json``
-    ``mirror_study``)."""
+    """mirror_study.png: finger force against depth on the quarter (dashed) and half models (solid); each half
+    model's asymmetry and distance from the finest quarter model; the quarter models' lowest antisymmetric
+    over symmetric tangent eigenvalue (:func:`mirror_stability`). The numbers: ``convergence.json``
+    ``mirror_study``."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     ms = conv["mirror_study"]
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(16, 4.4))
     d = np.array(conv["depths_m"]) * 1e3
     hs = sorted({round(lv["h_fine_m"], 9) for lv in conv["levels"]} | {round(r["h_fine_m"], 9) for r in ms["half_levels"]},
                 reverse=True)
@@ -788,7 +849,15 @@ def plot_mirror_study(out: str, conv: dict) -> None:
     a2.set_xlabel("push depth (mm)")
     a2.set_ylabel("max visible-surface distance (mm)")
     a2.legend(fontsize=7)
-    fig.suptitle("azimuth-0 push: quarter models (z mirror plane) against half models (none)", fontsize=10)
+    for row in ms.get("stability", []):
+        a3.plot(np.array(row["depths_m"]) * 1e3, row["anti_over_sym"], "o-", ms=3,
+                color=col.get(round(row["h_fine_m"], 9)), label=f"quarter, h_fine {row['h_fine_m'] * 1e3:.1f} mm")
+    a3.axhline(0.0, color="k", lw=0.8)
+    a3.set_xlabel("push depth (mm)")
+    a3.set_ylabel("lowest antisymmetric / symmetric\ntangent eigenvalue (< 0: unstable)")
+    a3.legend(fontsize=7)
+    fig.suptitle("azimuth-0 push: quarter models (z mirror plane) against half models (none), and the symmetric "
+                 "solution's stability against asymmetric modes", fontsize=10)
     fig.tight_layout()
     fig.savefig(os.path.join(out, "mirror_study.png"), dpi=110)
     plt.close(fig)
