@@ -418,42 +418,71 @@ def mirror_asymmetry(path: dict, spec: RefSpec, depths: np.ndarray, mat: Materia
     return out
 
 
-def mirror_stability(path: dict, spec: RefSpec, depths: np.ndarray, mat: Material, n_eig: int = 2) -> dict:
+def mirror_blocks(m: HyperelasticModel) -> tuple[np.ndarray, np.ndarray]:
+    """The fixed DOFs (P, 3) bool of the two symmetry blocks of a quarter model ``m`` (``sym_z``): symmetric —
+    ``m``'s own BCs (support, y plane u_y = 0, z plane u_z = 0); antisymmetric in z — on the z plane u_x = u_y = 0
+    and u_z free (the y plane keeps u_y = 0 and the support stays fixed, so both are symmetric in y). Raises
+    ``ValueError`` when ``m`` has no z mirror plane."""
+    if not m.sym_z:
+        raise ValueError("mirror_blocks needs a quarter model (sym_z)")
+    P = len(m.points)
+    sym = m.fixed_mask.reshape(P, 3).copy()
+    anti = sym.copy()
+    anti[np.abs(m.points[:, 2] - m.mesh.center[2]) < 1e-9] = [True, True, False]
+    anti[m.support] = True
+    return sym, anti
+
+
+def mirror_stability(path: dict, spec: RefSpec, depths: np.ndarray, mat: Material, contact: str = DEFAULT_CONTACT,
+                     n_eig: int = 2) -> dict:
     """Is the mirror-symmetric azimuth-0 solution of a quarter model (``spec.half_z``; its
-    :func:`reference_path` ``path`` at ``depths`` (D,) m) stable against mirror-*antisymmetric* perturbations,
-    which the quarter model cannot make? At a symmetric equilibrium on a symmetric mesh the tangent splits into
-    a symmetric block (the quarter model's own BC on the z plane, u_z = 0) and an antisymmetric one (u_x = u_y = 0,
-    u_z free on it); the lowest eigenvalue of each (N/m, unit-norm DOF vectors; scipy ``eigsh`` shift-invert)
-    at every converged state. An antisymmetric eigenvalue ≤ 0 is a symmetry-breaking bifurcation; a small
-    positive one, a state that a small asymmetry (another mesh, a push a few degrees off 0) moves far
-    (Koiter's imperfection sensitivity). Returns {"sym_N_per_m", "anti_N_per_m" (D,), "residual_N" (D,) free
-    residual norm, "dofs"}. Raises ``ValueError`` for a spec without the z mirror plane."""
+    :func:`reference_path` ``path`` at ``depths`` (D,) m) stable against modes antisymmetric in z, which the
+    quarter model cannot make? At a symmetric equilibrium on a symmetric mesh the tangent splits into a
+    symmetric and an antisymmetric block (:func:`mirror_blocks`; both symmetric in y). Per converged state:
+    the lowest eigenvalue of each (N/m, unit-norm DOF vectors, so mesh-dependent; scipy ``eigsh`` shift-invert,
+    fixed start vector) and, definitively, whether the antisymmetric block is positive definite (CHOLMOD's
+    Cholesky succeeds: :func:`nodes.fem.solver.factor`). An antisymmetric block that is not positive definite is
+    a symmetry-breaking bifurcation; a small positive eigenvalue, a state a small asymmetry moves far
+    (imperfection sensitivity, Koiter). Linear stability at the sampled states only: it does not exclude an
+    asymmetric branch coexisting with the symmetric one. Returns {"sym_N_per_m", "anti_N_per_m",
+    "anti_positive_definite", "residual_N" (D,) free residual norm (u_dof is float32), "dofs", "cpu_seconds"}.
+    Raises ``ValueError`` for a spec without the z mirror plane or a contact law other than frictionless (the
+    sticking anchors are not stored with the path), ``RuntimeError`` when the re-meshed model has another DOF
+    count than the path (gmsh meshes differently)."""
     import scipy.sparse.linalg as sla
 
     from nodes.fem.hyperelastic import capsule_at
+    from nodes.fem.solver import NotPositiveDefinite, factor
 
     if not spec.half_z:
         raise ValueError(f"mirror_stability needs a quarter model (half_z), got {spec.key()}")
+    if contact != "frictionless":
+        raise ValueError(f"mirror_stability supports the frictionless contact law only, got {contact!r}")
+    tc = time.process_time()
     m = _ref_model(spec, 0.0, mat)
-    c = m.mesh.center
-    P = len(m.points)
-    on_z = np.abs(m.points[:, 2] - c[2]) < 1e-9
-    sym = m.fixed_mask.reshape(P, 3)
-    anti = sym.copy()
-    anti[on_z] = [True, True, False]
-    anti[m.support] = True
+    if "dofs" in path and int(path["dofs"]) != m.n:
+        raise RuntimeError(f"the path has {int(path['dofs'])} DOF, the re-meshed model {m.n}: gmsh meshes "
+                           "differently now; clear the fem cache and re-solve")
+    sym, anti = mirror_blocks(m)
     k = m.penalty()
-    out = {"sym_N_per_m": [], "anti_N_per_m": [], "residual_N": [], "dofs": int(m.n)}
+    out = {"sym_N_per_m": [], "anti_N_per_m": [], "anti_positive_definite": [], "residual_N": [], "dofs": int(m.n)}
     for j, d in enumerate(depths):
         u = path["u_dof"][j].astype(float)
-        r, K = m.residual_tangent(u, capsule_at(0.0, float(d), FINGER_R, m.mesh.radius, c), k)
+        r, K = m.residual_tangent(u, capsule_at(0.0, float(d), FINGER_R, m.mesh.radius, m.mesh.center), k)
         out["residual_N"].append(float(np.linalg.norm(r[~sym.ravel()])))
         for name, fixed in (("sym_N_per_m", sym), ("anti_N_per_m", anti)):
             fr = np.flatnonzero(~fixed.ravel())
             Kf = K[fr][:, fr].tocsc()
             ev = sla.eigsh(Kf, k=n_eig, sigma=-1e-3 * float(np.abs(Kf.diagonal()).mean()), which="LM",
-                           return_eigenvectors=False)
+                           v0=np.ones(len(fr)), return_eigenvectors=False)
             out[name].append(float(np.min(ev)))
+            if name == "anti_N_per_m":
+                try:
+                    factor(Kf, "cholmod")
+                    out["anti_positive_definite"].append(True)
+                except NotPositiveDefinite:
+                    out["anti_positive_definite"].append(False)
+    out["cpu_seconds"] = time.process_time() - tc
     return out
 
 
@@ -489,25 +518,29 @@ def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMod
              f"{p['force'][-1]:.2f} N, {rows[-1]['diff_vs_finest_quarter_mm'][-1]:.2f} mm from the finest quarter "
              f"model, asymmetry {asym[-1]:.2f} mm")
     stab = []
-    for spec in st.levels[-2:]:         # the node's mesh (full mode) and the finest: is the symmetric branch stable?
+    for spec in (st.levels[-2:] if st.contact == "frictionless" else []):   # sticking: anchors not stored         # the node's mesh (full mode) and the finest: is the symmetric branch stable?
         sd = depths if spec == st.levels[-1] else _depths(st.depth_step)
         p = fine if spec == st.levels[-1] else reference_path(spec, 0.0, sd, mat, cache, verts, st.contact)
         t = time.perf_counter()
-        z, _, _ = cache.get_or_compute("stability", cache_key("mirror_stability-1", solver_tag(st.contact), spec.key(),
-                                                               np.round(sd, 9).tolist(), mat.key(), FINGER_R),
+        key = cache_key("mirror_stability-2", solver_tag(st.contact), spec.key(), np.round(sd, 9).tolist(), mat.key(),
+                        FINGER_R, f"iters={NEWTON_ITERS}", f"pen={PENALTY_SCALE:g}")   # what the path's key holds
+        z, _, _ = cache.get_or_compute("stability", key,
                                        lambda spec=spec, p=p, sd=sd: {k: np.asarray(v) for k, v in
-                                                                      mirror_stability(p, spec, sd, mat).items()},
+                                                                      mirror_stability(p, spec, sd, mat, st.contact).items()},
                                        f"mirror stability of {spec.key()}")
         row = {"h_fine_m": spec.h_fine, "dofs": int(z["dofs"]), "depths_m": sd.tolist(),
                "sym_N_per_m": z["sym_N_per_m"].tolist(), "anti_N_per_m": z["anti_N_per_m"].tolist(),
                "anti_over_sym": (z["anti_N_per_m"] / z["sym_N_per_m"]).tolist(),
-               "residual_N": z["residual_N"].tolist()}
-        row["stable"] = bool(np.all(z["anti_N_per_m"] > 0))
+               "anti_positive_definite": z["anti_positive_definite"].tolist(), "residual_N": z["residual_N"].tolist(),
+               "cpu_seconds": float(z["cpu_seconds"])}
+        row["stable"] = bool(np.all(z["anti_positive_definite"]))
         stab.append(row)
         i = int(np.argmin(row["anti_over_sym"]))
-        _log(f"mirror stability, quarter model h_fine {spec.h_fine * 1e3:g} mm: antisymmetric modes "
-             f"{'stable' if row['stable'] else 'UNSTABLE'} at every depth; softest at {sd[i] * 1e3:g} mm (lowest "
-             f"antisymmetric / symmetric eigenvalue {row['anti_over_sym'][i]:.3f}; {time.perf_counter() - t:.0f} s)")
+        n_bad = len(sd) - int(np.sum(z["anti_positive_definite"]))
+        verdict = "stable at every depth" if row["stable"] else f"UNSTABLE at {n_bad} of {len(sd)} depths"
+        _log(f"mirror stability, quarter model h_fine {spec.h_fine * 1e3:g} mm: antisymmetric modes {verdict}; "
+             f"lowest antisymmetric / symmetric eigenvalue {row['anti_over_sym'][i]:.3f} at {sd[i] * 1e3:g} mm "
+             f"({time.perf_counter() - t:.0f} s)")
     return {"depths_m": depths.tolist(), "finest_quarter": st.levels[-1].__dict__,
             "finest_quarter_force_N": fine["force"].tolist(), "half_levels": rows, "stability": stab}
 
