@@ -36,9 +36,10 @@ two scales, a skin study of one size (5 mm): a test's run, ~110 s cold on the 2-
 beside it (70 s idle before the skin study), seconds cached; it does not meet the targets
 and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4.5 / 3.4 / 2.5 mm,
 :data:`FULL_LEVELS`, 2.5 mm outputs, snapshots at azimuths 0, 10 and 20 every 5 mm, azimuth 5 held out,
-penalty study) is ~3.4 h of CPU cold on the 2-core machine with another solve beside it (sessions 8–9,
-``cpu_seconds`` in convergence.json: the 2.5 mm mesh 31 min, the 3.4 mm 9 min, the two skin meshes 12 and
-23 min, the azimuth-5, -10 and -20 paths ~37–39 min each).
+penalty study, mirror study) is ~4.5 h of CPU cold on the 2-core machine with another solve beside it
+(sessions 8–10, ``cpu_seconds`` in convergence.json: the 2.5 mm mesh 31 min, the 3.4 mm 9 min, the two skin
+meshes 12 and 23 min, the azimuth-5, -10 and -20 paths ~37–39 min each, the mirror study's half models 6, 13
+and 37 min and its stability check 11 min).
 ``--level N`` solves one mesh only and ``--node-table --azimuth A`` one azimuth (to run them in parallel
 processes); every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds (27 s).
 ``--linear-study`` also reruns the linear mesh study (``accuracy_table.json``, ``hertz``, ``stability``).
@@ -497,7 +498,8 @@ def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMod
     |u(x) − M·u(M·x)| (mm) over the rendered vertices visible on it, M the mirror in z (u at M·x probed from
     the half model's field). A mirror-symmetric continuum problem whose half-model solution is asymmetric
     well beyond the mesh's own asymmetry would have left the symmetric branch (a bifurcation); a half model
-    that is stiffer than the quarter model of the same h_fine and converges toward it is discretization."""
+    that is stiffer than the quarter model of the same h_fine and converges toward it is discretization. Also
+    ``stability``: :func:`mirror_stability` of the last two quarter levels (frictionless contact only; cached)."""
     depths = _depths(st.fine_step)
     verts = rm.rest_vertices.astype(float)
     fixed = rm.mesh.fixed[rm.surface_nodes]
@@ -518,7 +520,8 @@ def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMod
              f"{p['force'][-1]:.2f} N, {rows[-1]['diff_vs_finest_quarter_mm'][-1]:.2f} mm from the finest quarter "
              f"model, asymmetry {asym[-1]:.2f} mm")
     stab = []
-    for spec in (st.levels[-2:] if st.contact == "frictionless" else []):   # sticking: anchors not stored         # the node's mesh (full mode) and the finest: is the symmetric branch stable?
+    # the next-to-finest (full mode: the node's) mesh and the finest; sticking contact: its anchors are not stored
+    for spec in (st.levels[-2:] if st.contact == "frictionless" else []):
         sd = depths if spec == st.levels[-1] else _depths(st.depth_step)
         p = fine if spec == st.levels[-1] else reference_path(spec, 0.0, sd, mat, cache, verts, st.contact)
         t = time.perf_counter()
