@@ -181,6 +181,29 @@ def _ref_model(spec: RefSpec, angle_deg: float, mat: Material, penalty_scale: fl
     return HyperelasticModel(mesh, mat, sym_y=True, sym_z=half_z, penalty_scale=penalty_scale)
 
 
+def _load_step(depths: np.ndarray) -> float:
+    """Load step (m) of a :func:`reference_path` through ``depths`` m: their spacing, at most 2.5 mm."""
+    return float(min(0.0025, np.min(np.diff(np.concatenate([[0.0], depths])))))
+
+
+def _reference_key(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, probes: np.ndarray,
+                   contact: str, penalty_scale: float, version: str = SOLVER_VERSION) -> str:
+    """Cache key of a :func:`reference_path` (``spec`` as it solves it: the half model off azimuth 0) with the
+    solver ``version``: everything the path depends on."""
+    return cache_key(solver_tag(contact, version), spec.key(), angle_deg, np.round(depths, 9).tolist(), mat.key(),
+                     FINGER_R, cache_key(np.round(probes, 9).tobytes()), f"step={_load_step(depths):.6g}",
+                     f"iters={NEWTON_ITERS}", f"pen={penalty_scale:g}")
+
+
+def _check_dofs(path: dict, model: HyperelasticModel) -> None:
+    """Raise ``RuntimeError`` when the cached reference ``path`` (with its ``dofs``) has another DOF count than
+    ``model``, the mesh re-made to read it (the cache key does not carry gmsh's version: a new gmsh may mesh
+    differently)."""
+    if "dofs" in path and int(path["dofs"]) != model.n:
+        raise RuntimeError(f"the cached reference path has {int(path['dofs'])} DOF, the re-meshed model {model.n}: "
+                           "gmsh meshes differently now; clear the fem cache (~/.cache/flexsheet/fem) and re-solve")
+
+
 def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, cache: ArrayCache,
                    probes: np.ndarray, contact: str = DEFAULT_CONTACT, penalty_scale: float = PENALTY_SCALE) -> dict:
     """Neo-Hookean push at ``angle_deg`` through ``depths`` (load steps = the depth spacing, ≤ 2.5 mm) on
@@ -196,13 +219,9 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
     angle_deg = float(angle_deg) + 0.0          # -0.0 → 0.0 (one cache key)
     if angle_deg != 0.0 and spec.half_z:
         spec = replace(spec, half_z=False)
-    step = float(min(0.0025, np.min(np.diff(np.concatenate([[0.0], depths])))))
-    def key_of(version: str) -> str:
-        return cache_key(solver_tag(contact, version), spec.key(), angle_deg, np.round(depths, 9).tolist(), mat.key(),
-                         FINGER_R, cache_key(np.round(probes, 9).tobytes()), f"step={step:.6g}", f"iters={NEWTON_ITERS}",
-                         f"pen={penalty_scale:g}")
-
-    key, old_key = key_of(SOLVER_VERSION), key_of(PREVIOUS_VERSION)
+    step = _load_step(depths)
+    key, old_key = (_reference_key(spec, angle_deg, depths, mat, probes, contact, penalty_scale, v)
+                    for v in (SOLVER_VERSION, PREVIOUS_VERSION))
     p_new, p_old = cache.path("reference", key), cache.path("reference", old_key)
     if p_new is not None and not os.path.exists(p_new) and os.path.exists(p_old):
         # the version before's path is this version's when no Newton call ran out in it (PREVIOUS_VERSION; such a
@@ -409,6 +428,7 @@ def mirror_asymmetry(path: dict, spec: RefSpec, depths: np.ndarray, mat: Materia
     mirrored = verts.copy()
     mirrored[:, 2] = 2 * rm.mesh.center[2] - mirrored[:, 2]
     model = _ref_model(spec, 0.0, mat)
+    _check_dofs(path, model)
     P = _probe(model, mirrored)
     out = []
     for j, d in enumerate(depths):
@@ -461,9 +481,7 @@ def mirror_stability(path: dict, spec: RefSpec, depths: np.ndarray, mat: Materia
         raise ValueError(f"mirror_stability supports the frictionless contact law only, got {contact!r}")
     tc = time.process_time()
     m = _ref_model(spec, 0.0, mat)
-    if "dofs" in path and int(path["dofs"]) != m.n:
-        raise RuntimeError(f"the path has {int(path['dofs'])} DOF, the re-meshed model {m.n}: gmsh meshes "
-                           "differently now; clear the fem cache and re-solve")
+    _check_dofs(path, m)
     sym, anti = mirror_blocks(m)
     k = m.penalty()
     out = {"sym_N_per_m": [], "anti_N_per_m": [], "anti_positive_definite": [], "residual_N": [], "dofs": int(m.n)}
@@ -525,8 +543,7 @@ def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMod
         sd = depths if spec == st.levels[-1] else _depths(st.depth_step)
         p = fine if spec == st.levels[-1] else reference_path(spec, 0.0, sd, mat, cache, verts, st.contact)
         t = time.perf_counter()
-        key = cache_key("mirror_stability-2", solver_tag(st.contact), spec.key(), np.round(sd, 9).tolist(), mat.key(),
-                        FINGER_R, f"iters={NEWTON_ITERS}", f"pen={PENALTY_SCALE:g}")   # what the path's key holds
+        key = cache_key("mirror_stability-2", _reference_key(spec, 0.0, sd, mat, verts, st.contact, PENALTY_SCALE))
         z, _, _ = cache.get_or_compute("stability", key,
                                        lambda spec=spec, p=p, sd=sd: {k: np.asarray(v) for k, v in
                                                                       mirror_stability(p, spec, sd, mat, st.contact).items()},
@@ -569,9 +586,8 @@ def _path_states(src: dict, src_depths: np.ndarray, depths, model=None) -> list[
     at ``depths`` m, as :class:`PathState` for :func:`nodes.fem.snapshots.build_table`; None if one is missing.
     Raises ``RuntimeError`` when ``model`` (the mesh the table samples) has another DOF count than the solve
     (the cache key does not carry gmsh's version: a new gmsh may mesh differently)."""
-    if model is not None and int(src["dofs"]) != model.n:
-        raise RuntimeError(f"the cached reference path has {int(src['dofs'])} DOF, the snapshot mesh {model.n}: "
-                           "gmsh meshes differently now; clear the fem cache (~/.cache/flexsheet/fem) and re-solve")
+    if model is not None:
+        _check_dofs(src, model)
     out = []
     for d in depths:
         j = int(np.argmin(np.abs(src_depths - d)))
