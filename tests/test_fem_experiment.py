@@ -109,9 +109,10 @@ def test_snapshot_mesh_study_tables_the_skin_meshes_and_agrees_with_the_converge
 
 
 def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its_asymmetry(quick):
-    """The mirror study's half model (no z mirror plane) at azimuth 0: about twice the quarter model's DOF, the
-    quarter model's force at the shallowest push (the two models' symmetry factors agree; 10 %), and an
-    asymmetry measure that reads 0 on the quarter model (symmetric by construction) and not on the half model."""
+    """The mirror study's half model (no z mirror plane; quick: the cut one, with nodes on that plane) at
+    azimuth 0: about twice the quarter model's DOF, the quarter model's force at the shallowest push (the two
+    models' symmetry factors agree; 10 %), and an asymmetry measure that reads 0 on the quarter model (symmetric
+    by construction) and not on the half model. ``--mirror-study`` alone writes the same study from the cache."""
     from dataclasses import replace
 
     from flexsheet.experiments import fem as X
@@ -121,10 +122,13 @@ def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its
     base, s, _ = quick
     with open(base / "out" / "convergence.json") as fh:
         conv = json.load(fh)
-    ms = conv["mirror_study"]
+    with open(base / "out" / "mirror_study.json") as fh:
+        ms = json.load(fh)
     (row,) = ms["half_levels"]
     fine = conv["levels"][-1]
     assert row["h_fine_m"] == fine["h_fine_m"] and row["spec"]["half_z"] is False and row["newton_converged"]
+    assert row["cut"] is True and row["spec"]["cut"] is True
+    assert [lv["force_N"] for lv in ms["quarter_levels"]] == [lv["force_N"] for lv in conv["levels"]]
     assert 1.4 < row["dofs"] / fine["dofs"] < 2.2, (row["dofs"], fine["dofs"])
     assert row["quarter_same_h_force_N"] == pytest.approx(fine["force_N"])
     assert row["force_N"][0] == pytest.approx(fine["force_N"][0], rel=0.10)
@@ -139,12 +143,21 @@ def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its
     cache = ArrayCache(str(base / "cache"))
     q = X.reference_path(st.levels[-1], 0.0, depths, mat, cache, rm.rest_vertices.astype(float), st.contact)
     assert max(X.mirror_asymmetry(q, st.levels[-1], depths, mat, rm)) < 1e-5
-    half = replace(st.levels[-1], half_z=False)
+    half = replace(st.levels[-1], half_z=False, cut=True)
     h = X.reference_path(half, 0.0, depths, mat, cache, rm.rest_vertices.astype(float), st.contact)
+    assert h["dofs"] == row["dofs"]
     a = 0.003
     uni = {"u_dof": np.broadcast_to([0.0, 0.0, a], h["u_dof"][:1].shape).astype(np.float32),
            "u": np.broadcast_to([0.0, 0.0, a], h["u"][:1].shape)}
     assert X.mirror_asymmetry(uni, half, depths[:1], mat, rm)[0] == pytest.approx(2 * a, rel=1e-5)
+    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--mirror-study", "--out",
+                        str(base / "mirror"), "--cache-dir", str(base / "cache")], cwd=ROOT, capture_output=True,
+                       text=True, timeout=600)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    with open(base / "mirror" / "mirror_study.json") as fh:
+        alone = json.load(fh)
+    assert alone == ms and os.path.getsize(base / "mirror" / "mirror_study.png") > 5000
+    assert not os.path.exists(base / "mirror" / "summary.json")
 
 
 def test_mirror_stability_finds_the_lowest_eigenvalues_of_each_symmetry_block(quick):
@@ -165,7 +178,8 @@ def test_mirror_stability_finds_the_lowest_eigenvalues_of_each_symmetry_block(qu
     base, s, _ = quick
     with open(base / "out" / "convergence.json") as fh:
         conv = json.load(fh)
-    stab = conv["mirror_study"]["stability"]
+    with open(base / "out" / "mirror_study.json") as fh:
+        stab = json.load(fh)["stability"]
     assert [r["h_fine_m"] for r in stab] == [lv["h_fine_m"] for lv in conv["levels"][-2:]]
     for r in stab:
         assert len(r["anti_N_per_m"]) == len(r["depths_m"]) == len(r["anti_positive_definite"])

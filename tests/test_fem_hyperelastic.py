@@ -167,6 +167,31 @@ def test_skin_refinement_is_fine_in_the_surface_layer_around_the_push_only():
         H.reference_mesh(replace(base, skin_h=0.0005, skin_depth=0.0005, skin_radius=0.05), 0.0)
 
 
+def test_cut_half_mesh_has_nodes_on_the_plane_through_the_push_axis():
+    """``cut``: the half model's mesh conforms to the plane through the cylinder's axis and the push axis at the
+    push's azimuth (a line of nodes under the fingertip, as the quarter model has on its mirror plane); without it
+    at most a stray node lies on that plane. A quarter model ignores it (same key, same mesh)."""
+    base = H.RefSpec(0.016, 0.008, 0.012)
+    cut = replace(base, cut=True)
+    assert cut.key() == base.key() + ",cut"
+    assert replace(base, half_z=True, cut=True).key() == replace(base, half_z=True).key()
+    for ang in (0.0, 20.0):
+        a = math.radians(ang)
+        normal = np.array([-math.sin(a), 0.0, math.cos(a)])
+        push = np.array([math.cos(a), 0.0, math.sin(a)])
+        for spec, want in ((base, False), (cut, True)):
+            m = H.reference_mesh(spec, ang)
+            rel = m.points - m.center
+            on = np.abs(rel @ normal) < 1e-9
+            assert (on.sum() > 20) == want and (want or on.sum() <= 2), (ang, spec.key(), on.sum())
+            if want:   # the plane's nodes reach the push point on the surface and lie on the push side and behind
+                assert np.min(np.linalg.norm(rel[on] - m.radius * push, axis=1)) < 1e-9
+                assert (rel[on] @ push).min() < -0.9 * m.radius
+                # conforming: the two volumes share their nodes, so no boundary face lies on the plane
+                assert not np.all(on[m.faces], axis=1).any()
+                assert len(np.unique(np.round(m.points, 12), axis=0)) == len(m.points)
+
+
 def test_reference_push_is_physical_at_small_depth(quarter):
     """5 mm push: the force grows with depth, the finger is not penetrated by more than 1 % of the depth,
     no element is inverted, the body moves along the push and is symmetric (full force = 4 × quarter)."""

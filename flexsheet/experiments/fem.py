@@ -12,11 +12,12 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    every load step of the finest mesh and none of its elements is inverted at a quadrature point.
    **Skin study** (``convergence.json`` ``skin_study``, :func:`skin_study`): the 3.4 mm mesh with only its
    surface layer refined (2.5 and 1.8 mm), against the whole push tube refined, to tell which part of the
-   mesh the unconverged deep push depends on. **Mirror study** (``convergence.json`` ``mirror_study``,
-   ``mirror_study.png``, :func:`mirror_study`): the azimuth-0 push on half models (no z mirror plane, as
-   every other azimuth is solved) at h_fine 6 / 4.5 / 3.4 mm, against the quarter models: force, distance
-   from the finest quarter model and the half model's own asymmetry; and whether the quarter models' symmetric
-   solution is stable against asymmetric modes (:func:`mirror_stability`, the 3.4 and 2.5 mm meshes, cached).
+   mesh the unconverged deep push depends on. **Mirror study** (``mirror_study.json/png``,
+   :func:`mirror_study`; ``--mirror-study`` runs only it): the azimuth-0 push on half models (no z mirror
+   plane, as every other azimuth is solved) at h_fine 6 / 4.5 / 3.4 mm, each without and with the cut plane
+   through the push axis, against the quarter models: force, distance from the finest quarter model and the
+   half model's own asymmetry; and whether the quarter models' symmetric solution is stable against asymmetric
+   modes (:func:`mirror_stability`, the 3.4 and 2.5 mm meshes, cached).
 2. **Candidates**, judged on the real-time model's rendered vertices outside the finger's footprint
    (lateral distance from the push axis > finger radius + 2 mm; the footprint is hidden by the finger):
    the linear P2 capacitance model, and the nonlinear snapshots (:mod:`nodes.fem.snapshots`), sampled every
@@ -107,6 +108,7 @@ class Settings:
     penalty_scales: tuple = (1e3, 1e4, PENALTY_SCALE, 10 * PENALTY_SCALE)
     skin_sizes: tuple = (0.0025, 0.0018)
     half_levels: tuple = (0.006, 0.0045, 0.0034)
+    half_cuts: tuple = (False, True)
 
 
 def settings_for(quick: bool) -> Settings:
@@ -121,7 +123,7 @@ def settings_for(quick: bool) -> Settings:
                         grid=SnapshotGrid((0.0,), 0.05, 0.01, 1.0, 0.001, 0.002), snap_spec=lv[-1], holdout_deg=(),
                         linear_spec=MeshSpec(0.016, 0.006, 0.012, 0.0), n_time=50, quick=True, penalty_level=0,
                         penalty_scales=(PENALTY_SCALE, 10 * PENALTY_SCALE), skin_sizes=(0.005,),
-                        half_levels=(0.009,))
+                        half_levels=(0.009,), half_cuts=(True,))
     lv = [replace(DEFAULT_REF_SPEC, h_fine=hf) for hf in FULL_LEVELS]
     grid = SnapshotGrid((0.0, 10.0, 20.0), 0.05, 0.005, DEFAULT_GRID.dtheta_deg, DEFAULT_GRID.dy, DEFAULT_GRID.drho)
     # the snapshots on the node's mesh (DEFAULT_REF_SPEC, the next-to-finest level), judged against the finest at
@@ -137,6 +139,7 @@ def _parser() -> argparse.ArgumentParser:
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog="example: flexsheet experiment fem --quick --out /tmp/fem\n"
                                        "         flexsheet experiment fem --out /tmp/fem --node-table --azimuth 10\n"
+                                       "         flexsheet experiment fem --quick --mirror-study --out /tmp/fem\n"
                                        "         flexsheet experiment fem --quick --scene launch/scenes/sphere.yaml "
                                        "--out /tmp/fem_sphere")
     p.add_argument("--out", required=True, help="output directory")
@@ -154,6 +157,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--contact", choices=CONTACT_LAWS, default=DEFAULT_CONTACT,
                    help="the finger's contact law in the reference: sticking (the fingertip does not slip on the "
                         "tissue) or frictionless (default %(default)s)")
+    p.add_argument("--mirror-study", action="store_true",
+                   help="run the mirror study only (the azimuth-0 push on half models with and without the cut "
+                        "plane against the quarter models, and the quarter models' stability; it needs the "
+                        "convergence meshes, cached) and write mirror_study.json/png, then exit")
     p.add_argument("--node-table", action="store_true",
                    help="build the FEM node's nonlinear snapshot table (azimuths 0-60 deg every 10 deg, 2.5 mm depth "
                         "steps, on the full run's h_fine 3.4 mm mesh) into the cache the node reads, then exit. "
@@ -510,31 +517,35 @@ def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMod
     on the plane z = z_O through the push axis, so their solution is mirror-symmetric by construction); every
     other azimuth, the held-out check and the node table's off-axis snapshots are half models, meshed without
     that plane. Here the azimuth-0 push is solved on half models (``st.half_levels``, h_fine m, else as the
-    convergence levels) and compared, every ``st.fine_step``, with the finest quarter model (``fine``) and with
+    convergence levels; each without and with the *cut*, ``st.half_cuts``: a mesh conforming to the plane through
+    the push axis, with nodes on it as the quarter model has, but no BC there: :class:`RefSpec` ``cut``) and
+    compared, every ``st.fine_step``, with the finest quarter model (``fine``) and with
     the quarter model of the same h_fine (from ``conv``'s levels, when there is one): per level the force (N),
     the largest visible-surface difference (mm) and the solution's own asymmetry, the largest
     |u(x) − M·u(M·x)| (mm) over the rendered vertices visible on it, M the mirror in z (u at M·x probed from
     the half model's field). A mirror-symmetric continuum problem whose half-model solution is asymmetric
     well beyond the mesh's own asymmetry would have left the symmetric branch (a bifurcation); a half model
-    that is stiffer than the quarter model of the same h_fine and converges toward it is discretization. Also
+    that is stiffer than the quarter model of the same h_fine and converges toward it is discretization, and one
+    that the cut brings to the quarter model's answer was stiff for want of nodes on the push axis's plane. Also
     ``stability``: :func:`mirror_stability` of the last two quarter levels (frictionless contact only; cached)."""
     depths = _depths(st.fine_step)
     verts = rm.rest_vertices.astype(float)
     fixed = rm.mesh.fixed[rm.surface_nodes]
     quarter = {round(lv["h_fine_m"], 9): lv for lv in conv["levels"]}
     rows = []
-    for hf in st.half_levels:
-        spec = replace(st.levels[-1], h_fine=hf, half_z=False)
+    for hf, cut in ((hf, cut) for hf in st.half_levels for cut in st.half_cuts):
+        spec = replace(st.levels[-1], h_fine=hf, half_z=False, cut=cut)
         p = reference_path(spec, 0.0, depths, mat, cache, verts, st.contact)
         asym = [a * 1e3 for a in mirror_asymmetry(p, spec, depths, mat, rm)]
         q = quarter.get(round(hf, 9))
-        rows.append({"h_fine_m": hf, "spec": spec.__dict__, "dofs": int(p["dofs"]), "cpu_seconds": float(p["cpu_seconds"]),
+        rows.append({"h_fine_m": hf, "cut": cut, "spec": spec.__dict__, "dofs": int(p["dofs"]),
+                     "cpu_seconds": float(p["cpu_seconds"]),
                      "newton_converged": bool(p["converged"].all()), "newton_iterations": p["newton"].tolist(),
                      "force_N": p["force"].tolist(), "asymmetry_mm": asym,
                      "diff_vs_finest_quarter_mm": [e * 1e3 for e in _visible_diffs(p, fine, depths, verts, fixed, rm.mesh)],
                      "quarter_same_h_dofs": int(q["dofs"]) if q else None,
                      "quarter_same_h_force_N": q["force_N"] if q and len(q["force_N"]) == len(depths) else None})
-        _log(f"mirror study: half model h_fine {hf * 1e3:g} mm ({rows[-1]['dofs']} DOF) at 50 mm: "
+        _log(f"mirror study: half model{' (cut)' if cut else ''} h_fine {hf * 1e3:g} mm ({rows[-1]['dofs']} DOF) at 50 mm: "
              f"{p['force'][-1]:.2f} N, {rows[-1]['diff_vs_finest_quarter_mm'][-1]:.2f} mm from the finest quarter "
              f"model, asymmetry {asym[-1]:.2f} mm")
     stab = []
@@ -562,7 +573,9 @@ def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMod
              f"lowest antisymmetric / symmetric eigenvalue {row['anti_over_sym'][i]:.3f} at {sd[i] * 1e3:g} mm "
              f"({time.perf_counter() - t:.0f} s)")
     return {"depths_m": depths.tolist(), "finest_quarter": st.levels[-1].__dict__,
-            "finest_quarter_force_N": fine["force"].tolist(), "half_levels": rows, "stability": stab}
+            "finest_quarter_force_N": fine["force"].tolist(), "quarter_depths_m": conv["depths_m"],
+            "quarter_levels": [{k: lv[k] for k in ("h_fine_m", "dofs", "force_N", "cpu_seconds")} for lv in conv["levels"]],
+            "half_levels": rows, "stability": stab}
 
 
 # ---- candidates ------------------------------------------------------------------------------------------------
@@ -867,33 +880,34 @@ def plot_convergence(out: str, conv: dict) -> None:
     plt.close(fig)
 
 
-def plot_mirror_study(out: str, conv: dict) -> None:
-    """mirror_study.png: finger force against depth on the quarter (dashed) and half models (solid); each half
-    model's asymmetry and distance from the finest quarter model; the quarter models' lowest antisymmetric
-    over symmetric tangent eigenvalue (:func:`mirror_stability`). The numbers: ``convergence.json``
-    ``mirror_study``."""
+def plot_mirror_study(out: str, ms: dict) -> None:
+    """mirror_study.png: finger force against depth on the quarter (dashed), half (solid) and cut half models
+    (dotted); each half model's asymmetry and distance from the finest quarter model; the quarter models' lowest
+    antisymmetric over symmetric tangent eigenvalue (:func:`mirror_stability`). The numbers: ``ms``
+    (:func:`mirror_study`, ``mirror_study.json``)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    ms = conv["mirror_study"]
     fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(16, 4.4))
-    d = np.array(conv["depths_m"]) * 1e3
-    hs = sorted({round(lv["h_fine_m"], 9) for lv in conv["levels"]} | {round(r["h_fine_m"], 9) for r in ms["half_levels"]},
-                reverse=True)
+    d = np.array(ms["quarter_depths_m"]) * 1e3
+    hs = sorted({round(lv["h_fine_m"], 9) for lv in ms["quarter_levels"]} |
+                {round(r["h_fine_m"], 9) for r in ms["half_levels"]}, reverse=True)
     col = {h: f"C{k}" for k, h in enumerate(hs)}         # one colour per h_fine in both panels
-    for lv in conv["levels"]:
+    for lv in ms["quarter_levels"]:
         a1.plot(d[:len(lv["force_N"])], lv["force_N"], "--", lw=1, color=col[round(lv["h_fine_m"], 9)],
                 label=f"quarter, h_fine {lv['h_fine_m'] * 1e3:.1f} mm")
     dm = np.array(ms["depths_m"]) * 1e3
     for row in ms["half_levels"]:
-        lab = f"half, h_fine {row['h_fine_m'] * 1e3:.1f} mm ({row['dofs']} DOF)"
+        kind = "cut half" if row.get("cut") else "half"
+        lab = f"{kind}, h_fine {row['h_fine_m'] * 1e3:.1f} mm ({row['dofs']} DOF)"
         c = col[round(row["h_fine_m"], 9)]
-        a1.plot(dm, row["force_N"], "-", lw=1.8, color=c, label=lab)
-        a2.plot(dm, row["diff_vs_finest_quarter_mm"], "o-", ms=3, color=c, label=f"{lab}: from finest quarter")
-        a2.plot(dm, row["asymmetry_mm"], "s--", ms=3, color=c, label=f"h_fine {row['h_fine_m'] * 1e3:.1f} mm: "
-                "own asymmetry")
+        a1.plot(dm, row["force_N"], ":" if row.get("cut") else "-", lw=1.8, color=c, label=lab)
+        a2.plot(dm, row["diff_vs_finest_quarter_mm"], "^:" if row.get("cut") else "o-", ms=3, color=c,
+                label=f"{lab}: from finest quarter")
+        a2.plot(dm, row["asymmetry_mm"], "x:" if row.get("cut") else "s--", ms=3, color=c, lw=0.8,
+                label=f"{kind}, h_fine {row['h_fine_m'] * 1e3:.1f} mm: own asymmetry")
     a1.set_xlabel("push depth (mm)")
     a1.set_ylabel("finger force (N)")
     a1.legend(fontsize=7)
@@ -908,8 +922,8 @@ def plot_mirror_study(out: str, conv: dict) -> None:
     a3.set_xlabel("push depth (mm)")
     a3.set_ylabel("lowest antisymmetric / symmetric\ntangent eigenvalue (< 0: unstable)")
     a3.legend(fontsize=7)
-    fig.suptitle("azimuth-0 push: quarter models (z mirror plane) against half models (none), and the symmetric "
-                 "solution's stability against asymmetric modes", fontsize=10)
+    fig.suptitle("azimuth-0 push: quarter models (z mirror plane) against half models (none; cut: nodes on that "
+                 "plane, no BC), and the symmetric solution's stability against asymmetric modes", fontsize=10)
     fig.tight_layout()
     fig.savefig(os.path.join(out, "mirror_study.png"), dpi=110)
     plt.close(fig)
@@ -1040,6 +1054,8 @@ def main(argv: list[str] | None = None) -> int:
         if not args.node_table:
             raise SystemExit("flexsheet experiment fem: --azimuth is for --node-table")
         _check_azimuth(args.azimuth)
+    if args.mirror_study and (args.node_table or args.level is not None):
+        raise SystemExit("flexsheet experiment fem: --mirror-study takes neither --node-table nor --level")
     if args.node_table:
         if args.quick or args.level is not None:
             raise SystemExit("flexsheet experiment fem: --node-table builds the node's full table; it takes neither "
@@ -1057,6 +1073,12 @@ def main(argv: list[str] | None = None) -> int:
         _log(f"level {args.level} cached in {time.perf_counter() - t0:.1f} s")
         return 0
     conv, fine = convergence(st, mat, cache, rm)
+    if args.mirror_study:
+        ms = mirror_study(st, mat, cache, rm, conv, fine)
+        _write(args.out, "mirror_study", ms)
+        plot_mirror_study(args.out, ms)
+        _log(f"mirror study done in {time.perf_counter() - t0:.1f} s -> {args.out}/mirror_study.json")
+        return 0
     pen = penalty_study(st, mat, cache, rm)
     conv["penalty_study"] = pen
     conv["mesh_converged"] = conv["converged"]
@@ -1064,7 +1086,7 @@ def main(argv: list[str] | None = None) -> int:
     conv["criterion"] += (f"; and the contact penalty converged: the default {PENALTY_SCALE:g}·E/h within "
                           f"{PENALTY_TOL_MM:g} mm of a 10x stiffer one (penalty_study)")
     conv["skin_study"] = skin_study(st, mat, cache, rm, conv, fine)
-    conv["mirror_study"] = mirror_study(st, mat, cache, rm, conv, fine)
+    ms = mirror_study(st, mat, cache, rm, conv, fine)
     solved, src = snapshot_source(st, mat, cache, rm, fine)
     table, hit, sec = snapshot_table(st, mat, cache, solved)
     sec += float(src["seconds"])              # the solve the table was sampled from
@@ -1078,6 +1100,7 @@ def main(argv: list[str] | None = None) -> int:
     fmap = failure_map(cases, cand)
     summ = summary(st, conv, cand, cases, snap_info, mat, time.perf_counter() - t0)
     _write(args.out, "convergence", conv)
+    _write(args.out, "mirror_study", ms)
     _write(args.out, "failure_map", fmap)
     _write(args.out, "accuracy_speed", {k: {"name": v["name"], "update_ms": v["time_ms"],
                                             "max_visible_error_mm_0_50": max(v["errors_m"]) * 1e3}
@@ -1087,7 +1110,7 @@ def main(argv: list[str] | None = None) -> int:
         with open(MODEL_TABLE_PATH, "w") as fh:
             json.dump(model_table(cases, cand), fh, indent=1)
     plot_convergence(args.out, conv)
-    plot_mirror_study(args.out, conv)
+    plot_mirror_study(args.out, ms)
     plot_candidates(args.out, cand, fmap)
     if args.linear_study:
         linear_study(args.out, mat)

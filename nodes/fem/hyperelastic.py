@@ -98,7 +98,9 @@ class RefSpec:
     contact point, or (``path_depth`` > 0, m) of the whole push path from the contact point down to that depth
     (:func:`nodes.fem.mesh.cylinder_part_mesh`); ``half_z`` also use the z mirror plane (azimuth-0 pushes
     only); ``skin_h`` > 0 (m): that size in the surface layer ``skin_depth`` thick within ``skin_radius`` of the
-    contact point (the material that wraps the fingertip and lines the crater). Raises ``ValueError``."""
+    contact point (the material that wraps the fingertip and lines the crater); ``cut``: the mesh is conforming
+    to the plane through the cylinder's axis and the push axis (nodes on it, as a quarter model has on its
+    mirror plane), for half models (a quarter model has it: ignored). Raises ``ValueError``."""
 
     h: float = 0.010
     h_fine: float = 0.002
@@ -108,6 +110,7 @@ class RefSpec:
     skin_h: float = 0.0
     skin_radius: float = 0.020
     skin_depth: float = 0.005
+    cut: bool = False
 
     def __post_init__(self):
         for name in ("h", "h_fine"):
@@ -129,7 +132,8 @@ class RefSpec:
         """Stable text key (cache keys)."""
         k = f"h={self.h:.6g},hf={self.h_fine:.6g},rr={self.refine_radius:.6g},hz={int(self.half_z)}"
         k += f",pd={self.path_depth:.6g}" if self.path_depth > 0 else ""
-        return k + (f",sk={self.skin_h:.6g}/{self.skin_radius:.6g}/{self.skin_depth:.6g}" if self.skin_h > 0 else "")
+        k += f",sk={self.skin_h:.6g}/{self.skin_radius:.6g}/{self.skin_depth:.6g}" if self.skin_h > 0 else ""
+        return k + (",cut" if self.cut and not self.half_z else "")      # a quarter model has the plane anyway
 
 
 def reference_mesh(spec: RefSpec, angle_deg: float) -> TetMesh:
@@ -138,7 +142,8 @@ def reference_mesh(spec: RefSpec, angle_deg: float) -> TetMesh:
         raise ValueError(f"half_z needs a push at azimuth 0, got {angle_deg!r} deg")
     return cylinder_part_mesh(spec.h, spec.h_fine, spec.refine_radius, (float(angle_deg),), half_y=True,
                               half_z=spec.half_z, path_depth=spec.path_depth,
-                              skin=(spec.skin_h, spec.skin_radius, spec.skin_depth) if spec.skin_h > 0 else None)
+                              skin=(spec.skin_h, spec.skin_radius, spec.skin_depth) if spec.skin_h > 0 else None,
+                              cut_deg=float(angle_deg) if spec.cut and not spec.half_z else None)
 
 
 @dataclass(frozen=True)

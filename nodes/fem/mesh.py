@@ -183,7 +183,8 @@ def cylinder_mesh(spec: MeshSpec = MeshSpec(), radius: float = CYLINDER_RADIUS, 
 def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg: tuple[float, ...] = (0.0,),
                        half_y: bool = True, half_z: bool = False, radius: float = CYLINDER_RADIUS,
                        length: float = CYLINDER_LENGTH, center: np.ndarray = CYLINDER_CENTER,
-                       path_depth: float = 0.0, skin: tuple[float, float, float] | None = None) -> TetMesh:
+                       path_depth: float = 0.0, skin: tuple[float, float, float] | None = None,
+                       cut_deg: float | None = None) -> TetMesh:
     """Mesh a symmetric part of the cylinder for the nonlinear reference (P1 tetrahedra, gmsh OpenCASCADE).
 
     ``half_y``: keep y ≥ y_O only (the push at y = y_O is mirror-symmetric in y); ``half_z``: also keep
@@ -214,6 +215,13 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
         if half_z:
             box = gmsh.model.occ.addBox(c[0] - 2 * radius, y0 - 0.01, c[2], 4 * radius, length + 0.02, 2 * radius)
             gmsh.model.occ.intersect([(3, cyl)], [(3, box)])
+        if cut_deg is not None:
+            # the plane through the cylinder's axis and the push direction at azimuth cut_deg: fragmenting the
+            # solid with it makes two volumes that gmsh meshes conformally, so the mesh has nodes on that plane
+            rect = gmsh.model.occ.addRectangle(c[0] - 2 * radius, y0 - 0.01, c[2], 4 * radius, length + 0.02)
+            gmsh.model.occ.rotate([(2, rect)], c[0], c[1], c[2], 0.0, 1.0, 0.0, -math.radians(cut_deg))
+            vols = gmsh.model.occ.getEntities(3)
+            gmsh.model.occ.fragment(vols, [(2, rect)])
 
     if not (math.isfinite(path_depth) and 0.0 <= path_depth <= 2 * radius):
         raise ValueError(f"path_depth must be in [0, {2 * radius:.4g}] m, got {path_depth!r}")
