@@ -14,8 +14,9 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    surface layer refined (2.5 and 1.8 mm), against the whole push tube refined, to tell which part of the
    mesh the unconverged deep push depends on. **Mirror study** (``mirror_study.json/png``,
    :func:`mirror_study`; ``--mirror-study`` runs only it): the azimuth-0 push on half models (no z mirror
-   plane, as every other azimuth is solved) at h_fine 6 / 4.5 / 3.4 mm, each without and with the cut plane
-   through the push axis, against the quarter models: force, distance from the finest quarter model and the
+   plane, as every other azimuth is solved) at h_fine 6 / 4.5 / 3.4 mm, each without and with the cut (the
+   plane through the push axis meshed, no BC on it: how the off-axis snapshots are meshed), against the quarter
+   models: force, distance from the finest quarter model and the
    half model's own asymmetry; and whether the quarter models' symmetric solution is stable against asymmetric
    modes (:func:`mirror_stability`, the 3.4 and 2.5 mm meshes, cached).
 2. **Candidates**, judged on the real-time model's rendered vertices outside the finger's footprint
@@ -49,6 +50,7 @@ processes); every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a se
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import os
@@ -159,8 +161,9 @@ def _parser() -> argparse.ArgumentParser:
                         "tissue) or frictionless (default %(default)s)")
     p.add_argument("--mirror-study", action="store_true",
                    help="run the mirror study only (the azimuth-0 push on half models with and without the cut "
-                        "plane against the quarter models, and the quarter models' stability; it needs the "
-                        "convergence meshes, cached) and write mirror_study.json/png, then exit")
+                        "plane against the quarter models, and the quarter models' stability; it solves what the "
+                        "cache lacks, the convergence meshes included: hours cold in full mode) and write "
+                        "mirror_study.json/png, then exit")
     p.add_argument("--node-table", action="store_true",
                    help="build the FEM node's nonlinear snapshot table (azimuths 0-60 deg every 10 deg, 2.5 mm depth "
                         "steps, on the full run's h_fine 3.4 mm mesh) into the cache the node reads, then exit. "
@@ -515,8 +518,8 @@ def mirror_stability(path: dict, spec: RefSpec, depths: np.ndarray, mat: Materia
 def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, conv: dict, fine: dict) -> dict:
     """Does the z mirror plane change the azimuth-0 answer? The convergence meshes are quarter models (u_z = 0
     on the plane z = z_O through the push axis, so their solution is mirror-symmetric by construction); every
-    other azimuth, the held-out check and the node table's off-axis snapshots are half models, meshed without
-    that plane. Here the azimuth-0 push is solved on half models (``st.half_levels``, h_fine m, else as the
+    other azimuth, the held-out check and the node table's off-axis snapshots are half models (cut: meshed
+    with nodes on the plane through their push axis, :data:`nodes.fem.snapshots.DEFAULT_REF_SPEC`). Here the azimuth-0 push is solved on half models (``st.half_levels``, h_fine m, else as the
     convergence levels; each without and with the *cut*, ``st.half_cuts``: a mesh conforming to the plane through
     the push axis, with nodes on it as the quarter model has, but no BC there: :class:`RefSpec` ``cut``) and
     compared, every ``st.fine_step``, with the finest quarter model (``fine``) and with
@@ -533,7 +536,7 @@ def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMod
     fixed = rm.mesh.fixed[rm.surface_nodes]
     quarter = {round(lv["h_fine_m"], 9): lv for lv in conv["levels"]}
     rows = []
-    for hf, cut in ((hf, cut) for hf in st.half_levels for cut in st.half_cuts):
+    for hf, cut in itertools.product(st.half_levels, st.half_cuts):
         spec = replace(st.levels[-1], h_fine=hf, half_z=False, cut=cut)
         p = reference_path(spec, 0.0, depths, mat, cache, verts, st.contact)
         asym = [a * 1e3 for a in mirror_asymmetry(p, spec, depths, mat, rm)]
@@ -899,14 +902,14 @@ def plot_mirror_study(out: str, ms: dict) -> None:
         a1.plot(d[:len(lv["force_N"])], lv["force_N"], "--", lw=1, color=col[round(lv["h_fine_m"], 9)],
                 label=f"quarter, h_fine {lv['h_fine_m'] * 1e3:.1f} mm")
     dm = np.array(ms["depths_m"]) * 1e3
+    style = {False: ("half", "-", "o-", "s--"), True: ("cut half", ":", "^:", "x:")}   # force, distance, asymmetry
     for row in ms["half_levels"]:
-        kind = "cut half" if row.get("cut") else "half"
+        kind, s_force, s_diff, s_asym = style[bool(row.get("cut"))]
         lab = f"{kind}, h_fine {row['h_fine_m'] * 1e3:.1f} mm ({row['dofs']} DOF)"
         c = col[round(row["h_fine_m"], 9)]
-        a1.plot(dm, row["force_N"], ":" if row.get("cut") else "-", lw=1.8, color=c, label=lab)
-        a2.plot(dm, row["diff_vs_finest_quarter_mm"], "^:" if row.get("cut") else "o-", ms=3, color=c,
-                label=f"{lab}: from finest quarter")
-        a2.plot(dm, row["asymmetry_mm"], "x:" if row.get("cut") else "s--", ms=3, color=c, lw=0.8,
+        a1.plot(dm, row["force_N"], s_force, lw=1.8, color=c, label=lab)
+        a2.plot(dm, row["diff_vs_finest_quarter_mm"], s_diff, ms=3, color=c, label=f"{lab}: from finest quarter")
+        a2.plot(dm, row["asymmetry_mm"], s_asym, ms=3, color=c, lw=0.8,
                 label=f"{kind}, h_fine {row['h_fine_m'] * 1e3:.1f} mm: own asymmetry")
     a1.set_xlabel("push depth (mm)")
     a1.set_ylabel("finger force (N)")
@@ -1034,6 +1037,9 @@ def main(argv: list[str] | None = None) -> int:
     """Run the experiment; returns 0. See the module docstring for the outputs."""
     args = _parser().parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
+    if args.mirror_study and (args.node_table or args.level is not None or args.linear_study or args.scene):
+        raise SystemExit("flexsheet experiment fem: --mirror-study (the paper's cylinder) takes none of "
+                         "--node-table, --level, --linear-study, --scene")
     if args.scene:
         from flexsheet.model.scenes import is_paper_cylinder, load_scene_or_paper
 
@@ -1054,8 +1060,6 @@ def main(argv: list[str] | None = None) -> int:
         if not args.node_table:
             raise SystemExit("flexsheet experiment fem: --azimuth is for --node-table")
         _check_azimuth(args.azimuth)
-    if args.mirror_study and (args.node_table or args.level is not None):
-        raise SystemExit("flexsheet experiment fem: --mirror-study takes neither --node-table nor --level")
     if args.node_table:
         if args.quick or args.level is not None:
             raise SystemExit("flexsheet experiment fem: --node-table builds the node's full table; it takes neither "

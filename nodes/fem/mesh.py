@@ -196,9 +196,11 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
     that wraps it). Each ball grades from ``h_fine`` to ``h`` over a further ``refine_radius``. ``skin``
     (size, patch radius, depth) m: also size ``size`` in the skin around each push point — the surface layer
     ``depth`` thick within ``patch radius`` (along the surface) of it, whose material wraps around the
-    fingertip and lines the crater (balls of radius ``depth`` every ``depth``/2 on the surface). ``fixed`` marks
-    nothing here: the caller knows which faces are symmetry planes. Raises ``ValueError`` on bad sizes and
-    ``RuntimeError`` if gmsh fails.
+    fingertip and lines the crater (balls of radius ``depth`` every ``depth``/2 on the surface). ``cut_deg``
+    (deg, without ``half_z``): the mesh conforms to the plane through the axis and the push direction at that
+    azimuth (the solid is fragmented by it, so the two volumes share their nodes there). ``fixed`` marks
+    nothing here: the caller knows which faces are symmetry planes. Raises ``ValueError`` on bad sizes or a
+    ``cut_deg`` that is not finite or comes with ``half_z``, and ``RuntimeError`` if gmsh fails.
     """
     for name, v in (("h", h), ("h_fine", h_fine)):
         if not (math.isfinite(v) and 0.0005 <= v <= 0.05):
@@ -223,6 +225,9 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
             vols = gmsh.model.occ.getEntities(3)
             gmsh.model.occ.fragment(vols, [(2, rect)])
 
+    if cut_deg is not None and (half_z or not math.isfinite(cut_deg)):
+        raise ValueError(f"cut_deg must be a finite azimuth (deg) on a part without the z mirror (half_z), got "
+                         f"{cut_deg!r} with half_z={half_z}")
     if not (math.isfinite(path_depth) and 0.0 <= path_depth <= 2 * radius):
         raise ValueError(f"path_depth must be in [0, {2 * radius:.4g}] m, got {path_depth!r}")
     centres = []
