@@ -109,9 +109,9 @@ def test_snapshot_mesh_study_tables_the_skin_meshes_and_agrees_with_the_converge
 
 
 def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its_asymmetry(quick):
-    """The mirror study's half model (no z mirror plane; quick: the cut one, with nodes on that plane) at
-    azimuth 0: about twice the quarter model's DOF, the quarter model's force at the shallowest push (the two
-    models' symmetry factors agree; 10 %), and an asymmetry measure that reads 0 on the quarter model (symmetric
+    """The mirror study's half model (no z mirror plane; cut: nodes on that plane, as every off-axis push is
+    meshed) at azimuth 0: about twice the quarter model's DOF, the quarter model's force at every depth (3 %:
+    the symmetry factors agree, and the cut half mesh is as stiff as the quarter one), and an asymmetry measure that reads 0 on the quarter model (symmetric
     by construction) and not on the half model. ``--mirror-study`` alone writes the same study from the cache."""
     from dataclasses import replace
 
@@ -127,11 +127,12 @@ def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its
     (row,) = ms["half_levels"]
     fine = conv["levels"][-1]
     assert row["h_fine_m"] == fine["h_fine_m"] and row["spec"]["half_z"] is False and row["newton_converged"]
-    assert row["cut"] is True and row["spec"]["cut"] is True
-    assert [lv["force_N"] for lv in ms["quarter_levels"]] == [lv["force_N"] for lv in conv["levels"]]
+    assert row["spec"]["cut"] is True
     assert 1.4 < row["dofs"] / fine["dofs"] < 2.2, (row["dofs"], fine["dofs"])
     assert row["quarter_same_h_force_N"] == pytest.approx(fine["force_N"])
-    assert row["force_N"][0] == pytest.approx(fine["force_N"][0], rel=0.10)
+    # cut, the half model has the quarter model's force at every depth (uncut, session 10's quick run: +5 % at
+    # 5 mm, +12 % at 50 mm; cut: within 1.1 %)
+    assert row["force_N"] == pytest.approx(fine["force_N"], rel=0.03)
     assert len(row["asymmetry_mm"]) == len(ms["depths_m"]) and max(row["asymmetry_mm"]) > 0.1
     assert row["diff_vs_finest_quarter_mm"][0] > 0
     assert os.path.getsize(base / "out" / "mirror_study.png") > 5000
@@ -145,7 +146,6 @@ def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its
     assert max(X.mirror_asymmetry(q, st.levels[-1], depths, mat, rm)) < 1e-5
     half = replace(st.levels[-1], half_z=False, cut=True)
     h = X.reference_path(half, 0.0, depths, mat, cache, rm.rest_vertices.astype(float), st.contact)
-    assert h["dofs"] == row["dofs"]
     a = 0.003
     uni = {"u_dof": np.broadcast_to([0.0, 0.0, a], h["u_dof"][:1].shape).astype(np.float32),
            "u": np.broadcast_to([0.0, 0.0, a], h["u"][:1].shape)}

@@ -14,9 +14,8 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    surface layer refined (2.5 and 1.8 mm), against the whole push tube refined, to tell which part of the
    mesh the unconverged deep push depends on. **Mirror study** (``mirror_study.json/png``,
    :func:`mirror_study`; ``--mirror-study`` runs only it): the azimuth-0 push on half models (no z mirror
-   plane, as every other azimuth is solved) at h_fine 6 / 4.5 / 3.4 mm, each without and with the cut (the
-   plane through the push axis meshed, no BC on it: how the off-axis snapshots are meshed), against the quarter
-   models: force, distance from the finest quarter model and the
+   plane) at h_fine 6 / 4.5 / 3.4 mm, cut as every other azimuth is (the plane through the push axis meshed,
+   no BC on it), against the quarter models: force, distance from the finest quarter model and the
    half model's own asymmetry; and whether the quarter models' symmetric solution is stable against asymmetric
    modes (:func:`mirror_stability`, the 3.4 and 2.5 mm meshes, cached).
 2. **Candidates**, judged on the real-time model's rendered vertices outside the finger's footprint
@@ -50,7 +49,6 @@ processes); every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a se
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import math
 import os
@@ -110,7 +108,6 @@ class Settings:
     penalty_scales: tuple = (1e3, 1e4, PENALTY_SCALE, 10 * PENALTY_SCALE)
     skin_sizes: tuple = (0.0025, 0.0018)
     half_levels: tuple = (0.006, 0.0045, 0.0034)
-    half_cuts: tuple = (False, True)
 
 
 def settings_for(quick: bool) -> Settings:
@@ -125,7 +122,7 @@ def settings_for(quick: bool) -> Settings:
                         grid=SnapshotGrid((0.0,), 0.05, 0.01, 1.0, 0.001, 0.002), snap_spec=lv[-1], holdout_deg=(),
                         linear_spec=MeshSpec(0.016, 0.006, 0.012, 0.0), n_time=50, quick=True, penalty_level=0,
                         penalty_scales=(PENALTY_SCALE, 10 * PENALTY_SCALE), skin_sizes=(0.005,),
-                        half_levels=(0.009,), half_cuts=(True,))
+                        half_levels=(0.009,))
     lv = [replace(DEFAULT_REF_SPEC, h_fine=hf) for hf in FULL_LEVELS]
     grid = SnapshotGrid((0.0, 10.0, 20.0), 0.05, 0.005, DEFAULT_GRID.dtheta_deg, DEFAULT_GRID.dy, DEFAULT_GRID.drho)
     # the snapshots on the node's mesh (DEFAULT_REF_SPEC, the next-to-finest level), judged against the finest at
@@ -160,8 +157,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="the finger's contact law in the reference: sticking (the fingertip does not slip on the "
                         "tissue) or frictionless (default %(default)s)")
     p.add_argument("--mirror-study", action="store_true",
-                   help="run the mirror study only (the azimuth-0 push on half models with and without the cut "
-                        "plane against the quarter models, and the quarter models' stability; it solves what the "
+                   help="run the mirror study only (the azimuth-0 push on cut half models against the quarter "
+                        "models, and the quarter models' stability; it solves what the "
                         "cache lacks, the convergence meshes included: hours cold in full mode) and write "
                         "mirror_study.json/png, then exit")
     p.add_argument("--node-table", action="store_true",
@@ -518,37 +515,37 @@ def mirror_stability(path: dict, spec: RefSpec, depths: np.ndarray, mat: Materia
 def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, conv: dict, fine: dict) -> dict:
     """Does the z mirror plane change the azimuth-0 answer? The convergence meshes are quarter models (u_z = 0
     on the plane z = z_O through the push axis, so their solution is mirror-symmetric by construction); every
-    other azimuth, the held-out check and the node table's off-axis snapshots are half models (cut: meshed
-    with nodes on the plane through their push axis, :data:`nodes.fem.snapshots.DEFAULT_REF_SPEC`). Here the azimuth-0 push is solved on half models (``st.half_levels``, h_fine m, else as the
-    convergence levels; each without and with the *cut*, ``st.half_cuts``: a mesh conforming to the plane through
-    the push axis, with nodes on it as the quarter model has, but no BC there: :class:`RefSpec` ``cut``) and
-    compared, every ``st.fine_step``, with the finest quarter model (``fine``) and with
-    the quarter model of the same h_fine (from ``conv``'s levels, when there is one): per level the force (N),
-    the largest visible-surface difference (mm) and the solution's own asymmetry, the largest
-    |u(x) − M·u(M·x)| (mm) over the rendered vertices visible on it, M the mirror in z (u at M·x probed from
-    the half model's field). A mirror-symmetric continuum problem whose half-model solution is asymmetric
-    well beyond the mesh's own asymmetry would have left the symmetric branch (a bifurcation); a half model
-    that is stiffer than the quarter model of the same h_fine and converges toward it is discretization, and one
-    that the cut brings to the quarter model's answer was stiff for want of nodes on the push axis's plane. Also
-    ``stability``: :func:`mirror_stability` of the last two quarter levels (frictionless contact only; cached)."""
+    other azimuth, the held-out check and the node table's off-axis snapshots are half models, *cut*: meshed
+    with nodes on the plane through their push axis but no BC there (:class:`RefSpec` ``cut``,
+    :data:`nodes.fem.snapshots.DEFAULT_REF_SPEC`; uncut half models were 8–12 % stiffer at 40–50 mm than the
+    quarter models of the same h_fine, session 10, docs/fem.md). Here the azimuth-0 push is solved on cut half
+    models (``st.half_levels``, h_fine m, else as the convergence levels) and compared, every ``st.fine_step``,
+    with the finest quarter model (``fine``) and with the quarter model of the same h_fine (from ``conv``'s
+    levels, when there is one): per level the force (N), the largest visible-surface difference (mm) and the
+    solution's own asymmetry, the largest |u(x) − M·u(M·x)| (mm) over the rendered vertices visible on it, M
+    the mirror in z (u at M·x probed from the half model's field). A half-model solution asymmetric well beyond
+    the mesh's own asymmetry would have left the symmetric branch (a bifurcation); one close to the quarter
+    model of the same h_fine says the off-axis snapshots' meshes are as good as the quarter models the
+    convergence study measures. Also ``stability``: :func:`mirror_stability` of the last two quarter levels
+    (frictionless contact only; cached)."""
     depths = _depths(st.fine_step)
     verts = rm.rest_vertices.astype(float)
     fixed = rm.mesh.fixed[rm.surface_nodes]
     quarter = {round(lv["h_fine_m"], 9): lv for lv in conv["levels"]}
     rows = []
-    for hf, cut in itertools.product(st.half_levels, st.half_cuts):
-        spec = replace(st.levels[-1], h_fine=hf, half_z=False, cut=cut)
+    for hf in st.half_levels:
+        spec = replace(st.levels[-1], h_fine=hf, half_z=False, cut=True)
         p = reference_path(spec, 0.0, depths, mat, cache, verts, st.contact)
         asym = [a * 1e3 for a in mirror_asymmetry(p, spec, depths, mat, rm)]
         q = quarter.get(round(hf, 9))
-        rows.append({"h_fine_m": hf, "cut": cut, "spec": spec.__dict__, "dofs": int(p["dofs"]),
+        rows.append({"h_fine_m": hf, "cut": True, "spec": spec.__dict__, "dofs": int(p["dofs"]),
                      "cpu_seconds": float(p["cpu_seconds"]),
                      "newton_converged": bool(p["converged"].all()), "newton_iterations": p["newton"].tolist(),
                      "force_N": p["force"].tolist(), "asymmetry_mm": asym,
                      "diff_vs_finest_quarter_mm": [e * 1e3 for e in _visible_diffs(p, fine, depths, verts, fixed, rm.mesh)],
                      "quarter_same_h_dofs": int(q["dofs"]) if q else None,
                      "quarter_same_h_force_N": q["force_N"] if q and len(q["force_N"]) == len(depths) else None})
-        _log(f"mirror study: half model{' (cut)' if cut else ''} h_fine {hf * 1e3:g} mm ({rows[-1]['dofs']} DOF) at 50 mm: "
+        _log(f"mirror study: half model (cut) h_fine {hf * 1e3:g} mm ({rows[-1]['dofs']} DOF) at 50 mm: "
              f"{p['force'][-1]:.2f} N, {rows[-1]['diff_vs_finest_quarter_mm'][-1]:.2f} mm from the finest quarter "
              f"model, asymmetry {asym[-1]:.2f} mm")
     stab = []
@@ -884,8 +881,8 @@ def plot_convergence(out: str, conv: dict) -> None:
 
 
 def plot_mirror_study(out: str, ms: dict) -> None:
-    """mirror_study.png: finger force against depth on the quarter (dashed), half (solid) and cut half models
-    (dotted); each half model's asymmetry and distance from the finest quarter model; the quarter models' lowest
+    """mirror_study.png: finger force against depth on the quarter (dashed) and cut half models (solid); each
+    half model's asymmetry and distance from the finest quarter model; the quarter models' lowest
     antisymmetric over symmetric tangent eigenvalue (:func:`mirror_stability`). The numbers: ``ms``
     (:func:`mirror_study`, ``mirror_study.json``)."""
     import matplotlib
@@ -902,15 +899,13 @@ def plot_mirror_study(out: str, ms: dict) -> None:
         a1.plot(d[:len(lv["force_N"])], lv["force_N"], "--", lw=1, color=col[round(lv["h_fine_m"], 9)],
                 label=f"quarter, h_fine {lv['h_fine_m'] * 1e3:.1f} mm")
     dm = np.array(ms["depths_m"]) * 1e3
-    style = {False: ("half", "-", "o-", "s--"), True: ("cut half", ":", "^:", "x:")}   # force, distance, asymmetry
     for row in ms["half_levels"]:
-        kind, s_force, s_diff, s_asym = style[bool(row.get("cut"))]
-        lab = f"{kind}, h_fine {row['h_fine_m'] * 1e3:.1f} mm ({row['dofs']} DOF)"
+        lab = f"cut half, h_fine {row['h_fine_m'] * 1e3:.1f} mm ({row['dofs']} DOF)"
         c = col[round(row["h_fine_m"], 9)]
-        a1.plot(dm, row["force_N"], s_force, lw=1.8, color=c, label=lab)
-        a2.plot(dm, row["diff_vs_finest_quarter_mm"], s_diff, ms=3, color=c, label=f"{lab}: from finest quarter")
-        a2.plot(dm, row["asymmetry_mm"], s_asym, ms=3, color=c, lw=0.8,
-                label=f"{kind}, h_fine {row['h_fine_m'] * 1e3:.1f} mm: own asymmetry")
+        a1.plot(dm, row["force_N"], "-", lw=1.8, color=c, label=lab)
+        a2.plot(dm, row["diff_vs_finest_quarter_mm"], "o-", ms=3, color=c, label=f"{lab}: from finest quarter")
+        a2.plot(dm, row["asymmetry_mm"], "s--", ms=3, color=c, label=f"h_fine {row['h_fine_m'] * 1e3:.1f} mm: "
+                "own asymmetry")
     a1.set_xlabel("push depth (mm)")
     a1.set_ylabel("finger force (N)")
     a1.legend(fontsize=7)
@@ -925,8 +920,8 @@ def plot_mirror_study(out: str, ms: dict) -> None:
     a3.set_xlabel("push depth (mm)")
     a3.set_ylabel("lowest antisymmetric / symmetric\ntangent eigenvalue (< 0: unstable)")
     a3.legend(fontsize=7)
-    fig.suptitle("azimuth-0 push: quarter models (z mirror plane) against half models (none; cut: nodes on that "
-                 "plane, no BC), and the symmetric solution's stability against asymmetric modes", fontsize=10)
+    fig.suptitle("azimuth-0 push: quarter models (z mirror plane) against cut half models (nodes on that plane, "
+                 "no BC), and the symmetric solution's stability against asymmetric modes", fontsize=10)
     fig.tight_layout()
     fig.savefig(os.path.join(out, "mirror_study.png"), dpi=110)
     plt.close(fig)
