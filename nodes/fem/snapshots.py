@@ -112,8 +112,8 @@ DEFAULT_GRID = SnapshotGrid()
 #: (docs/fem.md; a half model of ~30 000 DOF, ~40 min of one core per azimuth other than 0:
 #: ``flexsheet experiment fem --node-table --azimuth A``). Off azimuth 0 the half model is *cut*: its mesh has
 #: nodes on the plane through the push axis, as the quarter model has on its mirror plane; without them a half
-#: model is 8–12 % stiffer at 40–50 mm than the quarter model of the same h_fine, with them within 1 %
-#: (session 11, the experiment's mirror study, docs/fem.md)
+#: model is 8–12 % stiffer at 40–50 mm than the quarter model of the same h_fine (session 10), with them within
+#: 1.1 % on the 4.5 and 3.4 mm meshes (3.5 % on the 6 mm one; the experiment's mirror study, docs/fem.md)
 DEFAULT_REF_SPEC = RefSpec(0.012, 0.0034, 0.018, half_z=True, path_depth=0.055, cut=True)
 
 
