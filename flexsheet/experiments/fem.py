@@ -39,8 +39,9 @@ and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4
 :data:`FULL_LEVELS`, 2.5 mm outputs, snapshots at azimuths 0, 10 and 20 every 5 mm, azimuth 5 held out,
 penalty study, mirror study) is ~4.5 h of CPU cold on the 2-core machine with another solve beside it
 (sessions 8–10, ``cpu_seconds`` in convergence.json: the 2.5 mm mesh 31 min, the 3.4 mm 9 min, the two skin
-meshes 12 and 23 min, the azimuth-5, -10 and -20 paths ~37–39 min each, the mirror study's half models 6, 13
-and 37 min and its stability check 11 min).
+meshes 12 and 23 min, the azimuth-5, -10 and -20 paths ~37–39 min each on uncut meshes; session 11, in
+mirror_study.json: the mirror study's cut half models 10, 22 and 71 min with two or three solves on the 2 cores,
+its stability check 11 min).
 ``--level N`` solves one mesh only and ``--node-table --azimuth A`` one azimuth (to run them in parallel
 processes); every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds (27 s).
 ``--linear-study`` also reruns the linear mesh study (``accuracy_table.json``, ``hertz``, ``stability``).

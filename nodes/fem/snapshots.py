@@ -109,7 +109,7 @@ class SnapshotGrid:
 DEFAULT_GRID = SnapshotGrid()
 #: mesh of the snapshot solves = the next-to-finest mesh of the experiment's convergence study (judged against
 #: the finest, 2.5 mm): P2, 12 mm elements, 3.4 mm within 18 mm of the fingertip's whole push path (55 mm deep)
-#: (docs/fem.md; a half model of ~30 000 DOF, ~40 min of one core per azimuth other than 0:
+#: (docs/fem.md; a cut half model of ~31 000 DOF, ~40–70 min of one core per azimuth other than 0:
 #: ``flexsheet experiment fem --node-table --azimuth A``). Off azimuth 0 the half model is *cut*: its mesh has
 #: nodes on the plane through the push axis, as the quarter model has on its mirror plane; without them a half
 #: model is 8–12 % stiffer at 40–50 mm than the quarter model of the same h_fine (session 10), with them within
