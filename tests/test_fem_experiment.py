@@ -13,6 +13,9 @@ import numpy as np
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# the module's first test sets up the quick run (a subprocess of several minutes cold, timeout 1500 s in _run):
+# pytest-timeout counts fixture setup in that test's 300 s default
+pytestmark = pytest.mark.timeout(1500)
 
 
 def _run(out, cache):
