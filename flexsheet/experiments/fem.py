@@ -539,7 +539,7 @@ def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMod
         p = reference_path(spec, 0.0, depths, mat, cache, verts, st.contact)
         asym = [a * 1e3 for a in mirror_asymmetry(p, spec, depths, mat, rm)]
         q = quarter.get(round(hf, 9))
-        rows.append({"h_fine_m": hf, "cut": True, "spec": spec.__dict__, "dofs": int(p["dofs"]),
+        rows.append({"h_fine_m": hf, "spec": spec.__dict__, "dofs": int(p["dofs"]),
                      "cpu_seconds": float(p["cpu_seconds"]),
                      "newton_converged": bool(p["converged"].all()), "newton_iterations": p["newton"].tolist(),
                      "force_N": p["force"].tolist(), "asymmetry_mm": asym,
