@@ -161,13 +161,15 @@ def run_lab(out: Path) -> dict:
                 try:
                     time.sleep(CUT_S)
                 finally:
+                    # taken before the cable goes up: heartbeats queued during the cut flush at once, and main
+                    # can print "is back" before `ip link set up` has returned (CI stop 25 failed on that race)
+                    r["t_back"] = time.time()
                     set_cable("arm1", up=True)
-                r["t_back"] = time.time()
                 # the arm held: its bridge saw no target for target_timeout and said so
                 r["t_hold"] = arm1.wait("left arm: hold:no_target", 10, after=r["t_cut"])
-                # main's launcher saw arm1's nodes go silent and come back
-                main.wait("node arm_left on host arm1 lost", 10, after=r["t_cut"])
-                main.wait("node arm_left on host arm1 is back", 15, after=r["t_back"])
+                # main's launcher saw arm1's nodes go silent and come back (after it saw them go)
+                t_lost = main.wait("node arm_left on host arm1 lost", 10, after=r["t_cut"])
+                main.wait("node arm_left on host arm1 is back", 15, after=max(t_lost, r["t_back"]))
                 # the bridge follows targets again
                 arm1.wait("left arm: ok", 15, after=r["t_hold"])
                 r["cut"] = None
