@@ -262,6 +262,10 @@ def test_metrics_fig9_definitions():
     assert s["dd_mean_mm"] == pytest.approx(0.5) and s["dtheta_mean_deg"] == pytest.approx(0.5)
     with pytest.raises(ValueError, match="Dp"):
         stroke_errors(D, Dp[:1], n, n2)
+    # the median ignores a stalled stretch that lifts the mean: 9 samples of 0.5 mm and one of 20 mm
+    s = summarize(np.r_[np.full(9, 0.0005), 0.02], np.r_[np.full(9, a / 2), 10 * a])
+    assert s["dd_median_mm"] == pytest.approx(0.5) and s["dd_mean_mm"] == pytest.approx(2.45)
+    assert s["dtheta_median_deg"] == pytest.approx(0.5) and s["dtheta_mean_deg"] == pytest.approx(1.45)
 
 
 def test_table1_from_sheet_poses_on_cylinder():

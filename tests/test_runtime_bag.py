@@ -65,7 +65,11 @@ def test_record_then_play_is_byte_identical_with_original_timing(tmp_path):
     rel_live = np.array([m.log_time for m in live]) - live[0].log_time
     rel_play = np.array([m.log_time for m in played]) - played[0].log_time
     err = np.abs(rel_play - rel_live)
-    assert np.median(err) < 0.002 and np.percentile(err, 90) < 0.002, f"timing error ms: {err * 1e3}"
+    # both sides are a recorder's receive times, so the error holds two recorders' scheduling jitter: median
+    # 0.5 ms, but a 90th percentile of 2.2 ms and single 11 ms outliers on the loaded 2-core machine (session 12).
+    # A player that ignored the timing would be off by up to the bag's 1.18 s span, one at half speed by 590 ms.
+    assert np.median(err) < 0.002 and np.percentile(err, 90) < 0.005, f"timing error ms: {err * 1e3}"
+    assert abs(rel_play[-1] - rel_live[-1]) < 0.02, (rel_play[-1], rel_live[-1])
     info = bag_info(bag1)
     assert info.counts[T.FINGERTIP.name] == 60 and info.dropped == {} and not info.truncated
 

@@ -192,7 +192,8 @@ def table1(shape: Shape, measured, sheet_origin, sheet_normal, scene=None) -> St
 
 def summarize(dd, dtheta, radius: float | None = None) -> dict[str, float]:
     """Table I row: ``dd_mean_mm``, ``dd_std_mm``, ``dtheta_mean_deg``, ``dtheta_std_deg`` (population std),
-    plus ``dd_p95_mm``, ``dtheta_p95_deg`` and ``n``; with ``radius`` R (m) also the paper's convention
+    plus ``dd_p95_mm``, ``dtheta_p95_deg``, the medians ``dd_median_mm``, ``dtheta_median_deg`` (robust to a
+    stalled stretch of a run on a loaded machine, which the mean is not) and ``n``; with ``radius`` R (m) also the paper's convention
     ``dd_2r_mean_mm``, ``dd_2r_std_mm`` = 2R·Δθ (module doc). Inputs (N,) m and rad; raises ``ValueError`` if
     empty or the radius is not positive."""
     dd = np.asarray(dd, dtype=float)
@@ -203,6 +204,7 @@ def summarize(dd, dtheta, radius: float | None = None) -> dict[str, float]:
     row = {"dd_mean_mm": float(dd.mean() * 1e3), "dd_std_mm": float(dd.std() * 1e3),
            "dtheta_mean_deg": float(dth.mean() * d), "dtheta_std_deg": float(dth.std() * d),
            "dd_p95_mm": float(np.percentile(dd, 95) * 1e3), "dtheta_p95_deg": float(np.percentile(dth, 95) * d),
+           "dd_median_mm": float(np.median(dd) * 1e3), "dtheta_median_deg": float(np.median(dth) * d),
            "n": int(dd.size)}
     if radius is not None:
         if not (math.isfinite(radius) and radius > 0.0):
