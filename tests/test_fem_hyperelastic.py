@@ -46,6 +46,45 @@ def test_residual_and_tangent_are_the_derivatives_of_the_energy(quarter):
         assert abs(de - r @ v.ravel()) < 1e-5 * abs(r @ v.ravel())
 
 
+def test_projected_tangent_is_the_clamped_material_tangent_element_by_element(quarter):
+    """``_projection`` (batched matmuls) against a loop over one element's quadrature points built another way:
+    the material tangent A = ∂P/∂F by central differences of P(F), clamped to its non-negative eigenvalues,
+    and Σ_q w Bᵀ(A₊ − A)B with B the explicit 9 × 30 gradient matrix. The field compresses the part enough
+    that A is indefinite somewhere; 3 × 3 inverse and determinant against numpy's."""
+    m = quarter
+    u = _smooth_field(m, 0.4)
+    F = m.deformation(u)
+    Finv, J = H.inv_det3(F)
+    np.testing.assert_allclose(J, np.linalg.det(F), rtol=1e-12)
+    np.testing.assert_allclose(Finv, np.linalg.inv(F), rtol=1e-10, atol=1e-12)
+    corr = m._projection(F, Finv, np.log(J))
+    touched = np.flatnonzero(np.abs(corr).reshape(len(corr), -1).max(axis=1) > 0)
+    assert len(touched) > 0, "the test field must make the tangent indefinite somewhere"
+    mu, lam = m.mu, m.lam
+
+    def piola(Fq):
+        Fi = np.linalg.inv(Fq).T
+        return mu * (Fq - Fi) + lam * math.log(np.linalg.det(Fq)) * Fi
+
+    for e in touched[:3]:
+        K = np.zeros((30, 30))
+        for q in range(F.shape[1]):
+            A = np.zeros((9, 9))
+            for c in range(9):
+                dF = np.zeros(9)
+                dF[c] = 1e-6
+                A[:, c] = (piola(F[e, q] + dF.reshape(3, 3)) - piola(F[e, q] - dF.reshape(3, 3))).ravel() / 2e-6
+            A = 0.5 * (A + A.T)
+            ev, V = np.linalg.eigh(A)
+            D = V @ np.diag(np.maximum(ev, 0.0) - ev) @ V.T
+            B = np.zeros((9, 30))
+            for a in range(10):
+                for i in range(3):
+                    B[3 * i:3 * i + 3, 3 * a + i] = m.grad[e, q, a]
+            K += m.w[e, q] * B.T @ D @ B
+        np.testing.assert_allclose(corr[e].reshape(30, 30), K, rtol=1e-5, atol=1e-6 * np.abs(K).max())
+
+
 def _gauss_only(m):
     """The same mesh with the plain Gauss rule (no nodal quadrature points)."""
     return H.HyperelasticModel(m.mesh, MAT, sym_y=True, sym_z=True, intorder=2, node_weight=0.0)

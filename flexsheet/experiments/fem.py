@@ -257,8 +257,7 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
         for s in states:
             qp.append(int(np.count_nonzero(np.linalg.det(model.deformation(s.u)).min(axis=1) <= 0)))
             ue = s.u[model.edofs]
-            Fn = np.eye(3) + np.einsum("eai,enaJ->eniJ", ue, model._node_grad)
-            bad = np.flatnonzero(np.linalg.det(Fn).min(axis=1) <= 0)
+            bad = np.flatnonzero(np.linalg.det(model.nodal_deformation(s.u)).min(axis=1) <= 0)
             xc = (model.points[model.edofs[bad]] + ue[bad]).mean(axis=1) - model.mesh.center
             lat = np.linalg.norm(xc - np.outer(xc @ axis, axis), axis=1)
             vis.append(int(np.count_nonzero(lat > FINGER_R + 0.002)))

@@ -376,16 +376,20 @@ class HyperelasticModel:
     def deformation(self, u: np.ndarray):
         """F (E, Q, 3, 3) at the quadrature points for DOF-point displacements ``u`` (P, 3) m."""
         ue = u[self.edofs]                                                                # (E, 10, 3)
-        return np.eye(3) + np.einsum("eai,eqaJ->eqiJ", ue, self.grad)
+        return np.eye(3) + np.swapaxes(ue, 1, 2)[:, None] @ self.grad
+
+    def nodal_deformation(self, u: np.ndarray) -> np.ndarray:
+        """F (E, 10, 3, 3) at the 10 P2 nodes of each element for displacements ``u`` (P, 3) m."""
+        return np.eye(3) + np.swapaxes(u[self.edofs], 1, 2)[:, None] @ self._node_grad
 
     def energy(self, u: np.ndarray, caps: Capsule | None, k: float) -> float:
         """Π (J) = elastic energy + contact penalty; +inf if det F ≤ 0 at any quadrature point."""
         F = self.deformation(u)
-        J = np.linalg.det(F)
+        J = inv_det3(F)[1]
         if np.any(J <= 0):
             return math.inf
         lnJ = np.log(J)
-        I1 = np.einsum("eqij,eqij->eq", F, F)
+        I1 = (F * F).sum(axis=(2, 3))
         W = 0.5 * self.mu * (I1 - 3) - self.mu * lnJ + 0.5 * self.lam * lnJ ** 2
         e = float(np.sum(W * self.w))
         if caps is not None:
@@ -402,8 +406,8 @@ class HyperelasticModel:
     def _contact_x(self, u: np.ndarray, facets: np.ndarray | None = None) -> np.ndarray:
         """Deformed positions (Fc, Qf, 3) m of the contact quadrature points (of ``facets`` only, if given)."""
         if facets is None:
-            return self._cf_X + np.einsum("fqa,fai->fqi", self._cf_N, u[self._cf_dofs])
-        return self._cf_X[facets] + np.einsum("fqa,fai->fqi", self._cf_N[facets], u[self._cf_dofs[facets]])
+            return self._cf_X + self._cf_N @ u[self._cf_dofs]
+        return self._cf_X[facets] + self._cf_N[facets] @ u[self._cf_dofs[facets]]
 
     def stick_anchors(self, u: np.ndarray, caps: Capsule, anchors: np.ndarray | None = None) -> np.ndarray:
         """Sticking contact: the anchors (Fc, Qf, 3) m (see :class:`Capsule`) after a converged state ``u``
@@ -471,14 +475,16 @@ class HyperelasticModel:
         indefinite by its positive semi-definite projection (projected Newton, Teran, Sifakis, Irving & Fedkiw,
         SCA 2005), so K_t is positive definite. Raises ``FloatingPointError`` when an element is inverted."""
         F = self.deformation(u)
-        Finv = np.linalg.inv(F)
-        J = np.linalg.det(F)
+        Finv, J = inv_det3(F)
         if np.any(J <= 0):
             raise FloatingPointError("inverted element (det F <= 0)")
         lnJ = np.log(J)
         FinvT = np.swapaxes(Finv, 2, 3)
         P = self._mu4 * (F - FinvT) + (self.lam * lnJ)[..., None, None] * FinvT
-        re = np.einsum("eq,eqiJ,eqaJ->eai", self.w, P, self.grad)
+        E, Q = lnJ.shape
+        G = self.grad
+        Gf = G.transpose(0, 2, 1, 3).reshape(E, 10, 3 * Q)                                 # [e, a, (q, J)]
+        re = Gf @ (P * self.w[..., None, None]).transpose(0, 1, 3, 2).reshape(E, 3 * Q, 3)   # Σ_qJ w ∇N_a,J P_iJ
         r = np.bincount(self._vd.ravel(), weights=re.ravel(), minlength=self.n)
         cdata = None
         if caps is not None:
@@ -491,21 +497,22 @@ class HyperelasticModel:
                 # the curvature term is negative: dropped when projecting
                 f, Hx, w = self._contact_dE(u, caps, k, fa, curvature=not project)
                 Nf = self._cf_N[fa]                                                         # (fa, Qf, 10)
-                rc = np.einsum("fq,fqa,fqi->fai", w, Nf, f)
+                Nw = Nf * w[..., None]                                                      # (fa, Qf, 10)
+                rc = _gram(Nw, f)                                                           # (fa, 10, 3)
                 vd = (3 * self._cf_dofs[fa][:, :, None] + np.arange(3)).reshape(len(fa), 30)
                 r += np.bincount(vd.ravel(), weights=rc.ravel(), minlength=self.n)
-                Kc = np.einsum("fq,fqa,fqb,fqik->faibk", w, Nf, Nf, Hx)
-                cdata = (vd, Kc.reshape(len(fa), 30, 30))
+                NN = (Nw[..., :, None] * Nf[..., None, :]).reshape(len(fa), -1, 100)       # [f, q, (a, b)]
+                Kc = _gram(NN, Hx.reshape(len(fa), -1, 9)).reshape(len(fa), 10, 10, 3, 3)   # [f, a, b, i, k]
+                cdata = (vd, Kc.transpose(0, 1, 3, 2, 4).reshape(len(fa), 30, 30))
         if not need_K:
             return r, None
-        E = len(self.edofs)
-        G = self.grad
-        H = np.einsum("eqaJ,eqJm->eqam", G, Finv).reshape(E, -1, 30)
+        H = (G @ Finv).reshape(E, Q, 30)                                                  # ∇N_a,J F⁻¹_Jm
         lw = self.lam * self.w
         c1w = (self.mu - self.lam * lnJ) * self.w
-        T3 = np.einsum("eqx,eqy->exy", H * lw[..., None], H)
-        Y = np.einsum("eqx,eqy->exy", H * c1w[..., None], H).reshape(E, 10, 3, 10, 3)
-        T1 = np.einsum("eqaJ,eqbJ->eab", G * (self.mu * self.w)[..., None, None], G)
+        T3 = _gram(H * lw[..., None], H)
+        Y = _gram(H * c1w[..., None], H).reshape(E, 10, 3, 10, 3)
+        T1 = (G * (self.mu * self.w)[..., None, None]).transpose(0, 2, 1, 3).reshape(E, 10, 3 * Q) @ \
+            np.swapaxes(Gf, 1, 2)
         Ke = T3.reshape(E, 10, 3, 10, 3) + Y.transpose(0, 1, 4, 3, 2)
         Ke += T1[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]
         if project:
@@ -535,10 +542,13 @@ class HyperelasticModel:
         e_idx = np.flatnonzero(bad.any(axis=1))
         evb, Vb = ev[e_idx], V[e_idx]
         neg = np.minimum(evb, 0.0) * bad[e_idx][..., None]                      # A₊ − A = −V min(ev,0) Vᵀ
-        D = -np.einsum("eqij,eqj,eqkj->eqik", Vb, neg, Vb).reshape(len(e_idx), Q, 3, 3, 3, 3)
-        G = self.grad[e_idx]
-        DG = np.einsum("eqiJkL,eqbL->eqiJkb", D, G)
-        out[e_idx] = np.einsum("eqaJ,eqiJkb->eaibk", G * self.w[e_idx][..., None, None], DG)
+        ne = len(e_idx)
+        D = -(Vb * neg[..., None, :]) @ np.swapaxes(Vb, -1, -2)                 # [e, q, (i, J), (k, L)]
+        G = self.grad[e_idx]                                                    # [e, q, b, L]
+        DG = (D.reshape(ne, Q, 27, 3) @ np.swapaxes(G, -1, -2)).reshape(ne, Q, 3, 3, 3, 10)    # [e, q, i, J, k, b]
+        Gw = (G * self.w[e_idx][..., None, None]).transpose(0, 2, 1, 3).reshape(ne, 10, 3 * Q)  # [e, a, (q, J)]
+        K = Gw @ DG.transpose(0, 1, 3, 2, 4, 5).reshape(ne, 3 * Q, 90)                         # [e, a, (i, k, b)]
+        out[e_idx] = K.reshape(ne, 10, 3, 3, 10).transpose(0, 1, 2, 4, 3)
         return out
 
     def constrained(self, K: sp.csr_matrix) -> sp.csr_matrix:
@@ -557,12 +567,10 @@ class HyperelasticModel:
         """(min det F over quadrature points and element nodes, inverted element count, largest principal
         Green–Lagrange strain over quadrature points) for displacements ``u`` (P, 3) m."""
         F = self.deformation(u)
-        Jq = np.linalg.det(F)
-        ue = u[self.edofs]
-        Fn = np.eye(3) + np.einsum("eai,enaJ->eniJ", ue, self._node_grad)
-        Jn = np.linalg.det(Fn)
+        Jq = inv_det3(F)[1]
+        Jn = inv_det3(self.nodal_deformation(u))[1]
         minJ = np.minimum(Jq.min(axis=1), Jn.min(axis=1))
-        C = np.einsum("eqki,eqkj->eqij", F, F)
+        C = _gram(F, F)
         Egl = 0.5 * (C - np.eye(3))
         return float(minJ.min()), int(np.count_nonzero(minJ <= 0)), float(np.linalg.eigvalsh(Egl).max())
 
@@ -608,6 +616,28 @@ class HyperelasticModel:
         if node_mask.shape != (n0,):
             raise ValueError(f"node_mask must have shape ({n0},), got {node_mask.shape}")
         return np.concatenate([node_mask, np.all(node_mask[self.skmesh.edges], axis=0)])
+
+
+def inv_det3(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse (..., 3, 3) and determinant (...) of a stack of 3 × 3 matrices ``F`` (..., 3, 3), by cofactors
+    (Cramer's rule): a few times faster than ``np.linalg.inv``/``det``, which call LAPACK per matrix. The
+    inverse of a singular matrix has inf/nan entries (no error); callers check the determinant."""
+    a, b, c = F[..., 0, 0], F[..., 0, 1], F[..., 0, 2]
+    d, e, f = F[..., 1, 0], F[..., 1, 1], F[..., 1, 2]
+    g, h, i = F[..., 2, 0], F[..., 2, 1], F[..., 2, 2]
+    c00, c01, c02 = e * i - f * h, f * g - d * i, d * h - e * g
+    det = a * c00 + b * c01 + c * c02
+    adj = np.stack([np.stack([c00, c * h - b * i, b * f - c * e], axis=-1),
+                    np.stack([c01, a * i - c * g, c * d - a * f], axis=-1),
+                    np.stack([c02, b * g - a * h, a * e - b * d], axis=-1)], axis=-2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return adj / det[..., None, None], det
+
+
+def _gram(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Σ_k A[..., k, x] B[..., k, y]: (..., X, Y) from (..., K, X) and (..., K, Y), as a batched BLAS matmul
+    (np.einsum without ``optimize`` loops in C and is ~10× slower on these element batches)."""
+    return np.swapaxes(A, -1, -2) @ B
 
 
 def _pen(g: np.ndarray, k: float, eps: float):
