@@ -20,7 +20,8 @@ pytestmark = pytest.mark.timeout(1500)
 
 def _run(out, cache):
     r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--out", str(out),
-                        "--cache-dir", str(cache)], cwd=ROOT, capture_output=True, text=True, timeout=1500)
+                        "--cache-dir", str(cache), "--jobs", "2"], cwd=ROOT, capture_output=True, text=True,
+                       timeout=1500)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     with open(os.path.join(out, "summary.json")) as fh:
         return json.load(fh), r.stdout
@@ -248,6 +249,11 @@ def test_second_run_reads_the_cache(quick):
     base, s1, _ = quick
     _, _, log1 = quick
     assert "DOF, load steps" in log1                     # the cold run solved ...
+    # ... every reference push in its two prefetch workers (planned_solves lists all the run reads): the run
+    # itself started none
+    solves = [ln for ln in log1.splitlines() if "DOF, load steps" in ln]
+    assert "prefetch: " in log1 and all(ln.startswith("[solver ") for ln in solves), solves
+    assert {ln.split("]")[0] for ln in solves} == {"[solver 1", "[solver 2"}
     s2, log = _run(base / "out2", base / "cache")
     assert "DOF, load steps" not in log and "loaded from cache" in log      # ... the second did not
     assert s2["realtime"]["precompute_cache_hit"] is True
@@ -384,7 +390,7 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
 
     monkeypatch.setattr(X, "reference_path", fake_path)
     monkeypatch.setattr("nodes.fem.snapshots.build_table", fake_build)
-    assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table"]) == 0
+    assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--jobs", "1"]) == 0
     p = FemParams()
     assert seen["build"] == (DEFAULT_GRID, DEFAULT_REF_SPEC, p.nu, p.finger_radius)
     assert paths == [(DEFAULT_REF_SPEC, 0.0, 0.05, 20), (DEFAULT_REF_SPEC, 30.0, 0.05, 20)]

@@ -170,6 +170,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--azimuth", type=float, default=None, metavar="DEG",
                    help="with --node-table: solve only this azimuth's path into the cache and exit (run the "
                         "azimuths in parallel processes, then --node-table alone assembles the table)")
+    p.add_argument("--jobs", type=int, default=default_jobs(), metavar="N",
+                   help="solve the independent reference pushes the cache lacks in N worker processes first "
+                        "(default %(default)s: the cores here; 1 solves them one by one in this process)")
     p.add_argument("--scene", default=None,
                    help="scene file (launch/scenes/*.yaml); another object than the paper's cylinder runs "
                         "flexsheet.experiments.fem_scene on it (same summary keys), e.g. --scene "
@@ -177,8 +180,11 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+_LOG_PREFIX = ""         #: set in prefetch workers ("[solver 1] "), so their lines can be told apart
+
+
 def _log(msg: str) -> None:
-    print(msg, flush=True)
+    print(_LOG_PREFIX + msg, flush=True)
 
 
 # ---- reference solves (cached) -------------------------------------------------------------------------------
@@ -212,6 +218,13 @@ def _check_dofs(path: dict, model: HyperelasticModel) -> None:
                            "gmsh meshes differently now; clear the fem cache (~/.cache/flexsheet/fem) and re-solve")
 
 
+def _as_solved(spec: RefSpec, angle_deg: float) -> tuple[RefSpec, float]:
+    """(spec, azimuth) as :func:`reference_path` solves and keys them: -0.0 → 0.0, and the half model
+    (``half_z`` off) away from azimuth 0."""
+    angle_deg = float(angle_deg) + 0.0
+    return (replace(spec, half_z=False) if angle_deg != 0.0 and spec.half_z else spec), angle_deg
+
+
 def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, cache: ArrayCache,
                    probes: np.ndarray, contact: str = DEFAULT_CONTACT, penalty_scale: float = PENALTY_SCALE) -> dict:
     """Neo-Hookean push at ``angle_deg`` through ``depths`` (load steps = the depth spacing, ≤ 2.5 mm) on
@@ -224,9 +237,7 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
     footprint, > finger radius + 2 mm from the push axis), "min_detF", "max_strain", "penetration", "newton",
     "seconds", "cpu_seconds", "dofs", "converged"}. ``contact``: the finger's contact law
     (:data:`nodes.fem.hyperelastic.CONTACT_LAWS`); ``penalty_scale``: the contact penalty κ = scale·E/h."""
-    angle_deg = float(angle_deg) + 0.0          # -0.0 → 0.0 (one cache key)
-    if angle_deg != 0.0 and spec.half_z:
-        spec = replace(spec, half_z=False)
+    spec, angle_deg = _as_solved(spec, angle_deg)
     step = _load_step(depths)
     key, old_key = (_reference_key(spec, angle_deg, depths, mat, probes, contact, penalty_scale, v)
                     for v in (SOLVER_VERSION, PREVIOUS_VERSION))
@@ -988,12 +999,13 @@ def node_table_path(angle_deg: float, mat: Material, cache: ArrayCache, rm: Real
 
 
 def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, contact: str = DEFAULT_CONTACT,
-                     azimuth: float | None = None) -> int:
+                     azimuth: float | None = None, jobs: int = 1) -> int:
     """Build (or find) the FEM node's snapshot table: :data:`nodes.fem.snapshots.DEFAULT_GRID` on
     :data:`nodes.fem.snapshots.DEFAULT_REF_SPEC`, the key the node looks up (its ``finger_radius`` default is
     the experiment's 8 mm). Every azimuth's path is a cached :func:`node_table_path` (azimuth 0: the full run's
     3.4 mm level), so ``azimuth`` (deg) solves just that one and returns: run the azimuths in parallel
-    processes, or over several sittings, then once without it to assemble the table. Returns 0."""
+    processes, or over several sittings, then once without it to assemble the table; without it the azimuths
+    the cache lacks are solved in ``jobs`` worker processes first (:func:`prefetch`). Returns 0."""
     from nodes.fem.snapshots import table_key
 
     st = replace(settings_for(False), grid=DEFAULT_GRID, snap_spec=DEFAULT_REF_SPEC, contact=contact)
@@ -1005,6 +1017,8 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
         return 0
     _log(f"node table: azimuths {DEFAULT_GRID.angles_deg} deg on {DEFAULT_REF_SPEC.key()}; key "
          f"{table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact)}")
+    prefetch([Solve(DEFAULT_REF_SPEC, a, DEFAULT_GRID.depth_step) for a in DEFAULT_GRID.angles_deg], jobs, mat, cache,
+             rm.rest_vertices.astype(float), contact)
 
     def solved(ang, model, depths):
         states = _path_states(*node_table_path(ang, mat, cache, rm, contact), depths, model)
@@ -1017,6 +1031,113 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
          f"{sum(v.nbytes for v in table.values()) / 1e6:.0f} MB; total {time.perf_counter() - t0:.0f} s. The FEM "
          "node loads it at start (model: auto)")
     return 0
+
+
+# ---- parallel solves --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Solve:
+    """One :func:`reference_path` a run reads: mesh, azimuth (deg), output depth spacing (m; depths
+    ``_depths(step)``) and contact penalty scale."""
+
+    spec: RefSpec
+    angle_deg: float
+    step: float
+    penalty_scale: float = PENALTY_SCALE
+
+    def cost(self) -> float:
+        """Relative CPU estimate for ordering (largest first): ∝ h_fine⁻³ (× (h_fine/skin)² with a skin), × 2 for
+        a half model, × the load steps."""
+        c = self.spec.h_fine ** -3 * (self.spec.h_fine / self.spec.skin_h) ** 2 if self.spec.skin_h else \
+            self.spec.h_fine ** -3
+        half = self.angle_deg != 0.0 or not self.spec.half_z
+        return c * (2.0 if half else 1.0) / _load_step(_depths(self.step))
+
+
+def planned_solves(st: Settings, mirror_only: bool = False) -> list[Solve]:
+    """Every reference path :func:`main`'s run reads (``mirror_only``: the ``--mirror-study`` run's), once each
+    (as :func:`reference_path` keys them), most expensive first. Kept beside the functions that read them:
+    :func:`convergence`, :func:`mirror_study` (its stability check reads the last two levels),
+    :func:`penalty_study`, :func:`skin_study`, :func:`validation_set`, :func:`snapshot_source` and
+    :func:`snapshot_mesh_study` (the skin study's meshes); a path may be listed twice. A run after
+    :func:`prefetch` of this list solves nothing itself (tests/test_fem_experiment.py checks the quick run's
+    log)."""
+    lv = st.levels
+    jobs = [Solve(s, 0.0, st.depth_step) for s in lv[:-1]] + [Solve(lv[-1], 0.0, st.fine_step)]
+    jobs += [Solve(replace(lv[-1], h_fine=hf, half_z=False, cut=True), 0.0, st.fine_step) for hf in st.half_levels]
+    if not mirror_only:
+        jobs += [Solve(lv[st.penalty_level], 0.0, st.depth_step, sc) for sc in st.penalty_scales]
+        jobs += [Solve(replace(lv[-2], skin_h=h), 0.0, st.depth_step) for h in st.skin_sizes]
+        jobs += [Solve(st.snap_spec, a, st.fine_step) for a in st.holdout_deg]
+        jobs += [Solve(st.snap_spec, a, st.fine_step) for a in st.grid.angles_deg if a != 0.0]
+        if st.snap_spec != lv[-1]:
+            jobs.append(Solve(st.snap_spec, 0.0, st.depth_step))
+    return sorted(jobs, key=lambda j: -j.cost())      # repeats are dropped by prefetch (by cache key)
+
+
+def _solver_init(prefix_base: str, counter) -> None:
+    """Prefetch worker start: one BLAS/OpenMP thread (the workers share the cores), a log prefix."""
+    global _LOG_PREFIX
+    from threadpoolctl import threadpool_limits
+
+    with counter.get_lock():
+        counter.value += 1
+        _LOG_PREFIX = f"[{prefix_base} {counter.value}] "
+    globals()["_THREADS"] = threadpool_limits(1)
+
+
+def _solve_one(job: Solve, mat: Material, cache_dir: str, probes: np.ndarray, contact: str) -> float:
+    t = time.perf_counter()
+    reference_path(job.spec, job.angle_deg, _depths(job.step), mat, ArrayCache(cache_dir, _log), probes, contact,
+                   job.penalty_scale)
+    return time.perf_counter() - t
+
+
+def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache, probes: np.ndarray,
+             contact: str) -> None:
+    """Solve the ``jobs`` the cache lacks in ``n_workers`` processes (spawned, one BLAS thread each, their log
+    lines prefixed "[solver N]"), into ``cache``; the run then reads them from it. Nothing to do with one worker,
+    a disabled cache or nothing missing. A failed solve is logged and left to the run, which solves it again
+    and raises with the cause."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    if n_workers < 2 or not cache.cache_dir:
+        return
+    todo, seen = [], set()
+    for j in jobs:
+        spec, ang = _as_solved(j.spec, j.angle_deg)
+        keys = [_reference_key(spec, ang, _depths(j.step), mat, probes, contact, j.penalty_scale, v)
+                for v in (SOLVER_VERSION, PREVIOUS_VERSION)]
+        if keys[0] not in seen and not any(os.path.exists(cache.path("reference", k)) for k in keys):
+            todo.append(j)
+        seen.add(keys[0])
+    if len(todo) < 2:
+        return
+    n = min(n_workers, len(todo))
+    _log(f"prefetch: {len(todo)} reference solves the cache lacks, in {n} worker processes (--jobs)")
+    ctx = multiprocessing.get_context("spawn")
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(n, mp_context=ctx, initializer=_solver_init,
+                             initargs=("solver", ctx.Value("i", 0))) as pool:
+        futs = {pool.submit(_solve_one, j, mat, cache.cache_dir, probes, contact): j for j in todo}
+        try:
+            for f in as_completed(futs):
+                j = futs[f]
+                try:
+                    _log(f"prefetch: {j.spec.key()} at {j.angle_deg:g} deg, penalty {j.penalty_scale:g} E/h done in "
+                         f"{f.result():.0f} s")
+                except Exception as exc:            # noqa: BLE001 - the run solves it again and raises
+                    _log(f"prefetch: {j.spec.key()} at {j.angle_deg:g} deg failed ({type(exc).__name__}: {exc}); "
+                         "the run solves it itself")
+        except KeyboardInterrupt:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+    _log(f"prefetch: done in {time.perf_counter() - t0:.0f} s")
+
+
+def default_jobs() -> int:
+    """Worker processes for :func:`prefetch`: the cores this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 # ---- main ---------------------------------------------------------------------------------------------------------
@@ -1047,6 +1168,8 @@ def main(argv: list[str] | None = None) -> int:
 
             run_scene(args.scene, args.out, args.quick, args.cache_dir or None)
             return 0
+    if args.jobs < 1:
+        raise SystemExit(f"flexsheet experiment fem: --jobs must be >= 1, got {args.jobs}")
     mat = Material(args.E, args.nu)
     st = replace(settings_for(args.quick), contact=args.contact)
     t0 = time.perf_counter()
@@ -1059,7 +1182,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.quick or args.level is not None:
             raise SystemExit("flexsheet experiment fem: --node-table builds the node's full table; it takes neither "
                              "--quick nor --level")
-        return build_node_table(mat, cache, args.cache_dir or None, st.contact, args.azimuth)
+        return build_node_table(mat, cache, args.cache_dir or None, st.contact, args.azimuth, args.jobs)
     for h in st.skin_sizes:     # before any solve: a bad size would otherwise fail after the convergence study
         replace(st.levels[-2], skin_h=h)
     rm = realtime_model(st, mat, args.cache_dir or None)
@@ -1071,6 +1194,8 @@ def main(argv: list[str] | None = None) -> int:
                        rm.rest_vertices.astype(float), st.contact)
         _log(f"level {args.level} cached in {time.perf_counter() - t0:.1f} s")
         return 0
+    prefetch(planned_solves(st, mirror_only=args.mirror_study), args.jobs, mat, cache, rm.rest_vertices.astype(float),
+             st.contact)
     conv, fine = convergence(st, mat, cache, rm)
     if args.mirror_study:
         ms = mirror_study(st, mat, cache, rm, conv, fine)
