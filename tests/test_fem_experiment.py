@@ -285,6 +285,30 @@ def test_full_settings_judge_the_nodes_snapshot_mesh_against_a_finer_one():
     assert max(b - a for a, b in zip(ga[:-1], ga[1:], strict=True)) <= 2 * node_step
 
 
+def test_planned_solves_list_each_push_the_run_reads_once_by_cache_key():
+    """The full run reads 16 distinct reference pushes: five convergence levels, three cut half models, three
+    more penalties (the default is level 1's), two skins, azimuth 5 held out and the snapshots' 10 and 20; the
+    quick run 5; ``--mirror-study`` the levels and the half models (its stability check reads two levels)."""
+    from flexsheet.experiments import fem as X
+    from nodes.fem.material import Material
+
+    probes = np.zeros((1, 3))
+
+    def keys(st, mirror_only=False):
+        out = []
+        for j in X.planned_solves(st, mirror_only):
+            spec, ang = X._as_solved(j.spec, j.angle_deg)
+            out.append(X._reference_keys(spec, ang, X._depths(j.step), Material(), probes, "frictionless",
+                                         j.penalty_scale)[0])
+        return out
+
+    full, quick = X.settings_for(False), X.settings_for(True)
+    assert len(set(keys(full))) == 16 and len(set(keys(quick))) == 5
+    assert len(set(keys(full, True))) == 8 and set(keys(full, True)) <= set(keys(full))
+    costs = [j.cost() for j in X.planned_solves(full)]
+    assert costs == sorted(costs, reverse=True)
+
+
 def _fake_path_dict(n_dof: int, depths) -> dict:
     d = len(depths)
     return {"u_dof": np.zeros((d, n_dof, 3), np.float32), "force": np.arange(d, dtype=float),

@@ -1,4 +1,4 @@
-"""``flexsheet experiment fem --out DIR [--quick] [--linear-study] [--scene FILE]``: physically right deformation
+"""``flexsheet experiment fem --out DIR [--quick] [--jobs N] [--linear-study] [--scene FILE]``: physically right deformation
 of the pushed cylinder, and the real-time model that reproduces it (``--scene`` with another object: the same
 study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 
@@ -42,8 +42,11 @@ penalty study, mirror study) is ~4.5 h of CPU cold on the 2-core machine with an
 meshes 12 and 23 min, the azimuth-5, -10 and -20 paths ~37–39 min each on uncut meshes; session 11, in
 mirror_study.json: the mirror study's cut half models 10, 22 and 71 min with two or three solves on the 2 cores,
 its stability check 11 min).
-``--level N`` solves one mesh only and ``--node-table --azimuth A`` one azimuth (to run them in parallel
-processes); every solve is cached (:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds (27 s).
+Those CPU figures are from the einsum assembly, about twice the present one's (session 12, docs/fem.md).
+``--jobs N`` (default: the cores) solves the pushes the run reads in N worker processes first
+(:func:`planned_solves`, :func:`prefetch`); ``--level N`` solves one mesh only and ``--node-table --azimuth A``
+one azimuth (for a run over several sittings or machines); every solve is cached
+(:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds (27 s).
 ``--linear-study`` also reruns the linear mesh study (``accuracy_table.json``, ``hertz``, ``stability``).
 """
 
@@ -209,6 +212,14 @@ def _reference_key(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
                      f"iters={NEWTON_ITERS}", f"pen={penalty_scale:g}")
 
 
+def _reference_keys(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, probes: np.ndarray,
+                    contact: str, penalty_scale: float) -> tuple[str, str]:
+    """(this solver version's, the previous version's) :func:`_reference_key` (``spec``, ``angle_deg`` as
+    :func:`_as_solved` gives them)."""
+    return tuple(_reference_key(spec, angle_deg, depths, mat, probes, contact, penalty_scale, v)
+                 for v in (SOLVER_VERSION, PREVIOUS_VERSION))
+
+
 def _check_dofs(path: dict, model: HyperelasticModel) -> None:
     """Raise ``RuntimeError`` when the cached reference ``path`` (with its ``dofs``) has another DOF count than
     ``model``, the mesh re-made to read it (the cache key does not carry gmsh's version: a new gmsh may mesh
@@ -239,8 +250,7 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
     (:data:`nodes.fem.hyperelastic.CONTACT_LAWS`); ``penalty_scale``: the contact penalty κ = scale·E/h."""
     spec, angle_deg = _as_solved(spec, angle_deg)
     step = _load_step(depths)
-    key, old_key = (_reference_key(spec, angle_deg, depths, mat, probes, contact, penalty_scale, v)
-                    for v in (SOLVER_VERSION, PREVIOUS_VERSION))
+    key, old_key = _reference_keys(spec, angle_deg, depths, mat, probes, contact, penalty_scale)
     p_new, p_old = cache.path("reference", key), cache.path("reference", old_key)
     if p_new is not None and not os.path.exists(p_new) and os.path.exists(p_old):
         # the version before's path is this version's when no Newton call ran out in it (PREVIOUS_VERSION; such a
@@ -1055,8 +1065,8 @@ class Solve:
 
 def planned_solves(st: Settings, mirror_only: bool = False) -> list[Solve]:
     """Every reference path :func:`main`'s run reads (``mirror_only``: the ``--mirror-study`` run's), once each
-    (as :func:`reference_path` keys them), most expensive first. Kept beside the functions that read them:
-    :func:`convergence`, :func:`mirror_study` (its stability check reads the last two levels),
+    (as :func:`reference_path` keys them), most expensive first. Keep it in step with the functions that read
+    them: :func:`convergence`, :func:`mirror_study` (its stability check reads the last two levels),
     :func:`penalty_study`, :func:`skin_study`, :func:`validation_set`, :func:`snapshot_source` and
     :func:`snapshot_mesh_study` (the skin study's meshes); a path may be listed twice. A run after
     :func:`prefetch` of this list solves nothing itself (tests/test_fem_experiment.py checks the quick run's
@@ -1074,40 +1084,54 @@ def planned_solves(st: Settings, mirror_only: bool = False) -> list[Solve]:
     return sorted(jobs, key=lambda j: -j.cost())      # repeats are dropped by prefetch (by cache key)
 
 
-def _solver_init(prefix_base: str, counter) -> None:
-    """Prefetch worker start: one BLAS/OpenMP thread (the workers share the cores), a log prefix."""
+def _solver_init(counter) -> None:
+    """Prefetch worker start: a log prefix "[solver N] "; SIGINT ignored (the parent terminates the pool on
+    Ctrl-C); one BLAS and OpenMP thread, CHOLMOD's libraries loaded first so the limit reaches them; tied to
+    the parent, dies with it (:func:`flexsheet.runtime.background.lower_priority`, niceness unchanged)."""
     global _LOG_PREFIX
-    from threadpoolctl import threadpool_limits
+    import signal
 
+    from flexsheet.runtime.background import lower_priority
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[var] = "1"
+    try:
+        import sksparse.cholmod  # noqa: F401 - loads the BLAS/OpenMP CHOLMOD uses before the thread limit
+    except ImportError:
+        pass
+    lower_priority(0, idle=False)
     with counter.get_lock():
         counter.value += 1
-        _LOG_PREFIX = f"[{prefix_base} {counter.value}] "
-    globals()["_THREADS"] = threadpool_limits(1)
+        _LOG_PREFIX = f"[solver {counter.value}] "
 
 
-def _solve_one(job: Solve, mat: Material, cache_dir: str, probes: np.ndarray, contact: str) -> float:
+def _solve_one(args: tuple) -> tuple[int, float, str | None]:
+    """Worker: one :func:`reference_path` into the cache; (job index, seconds, None or the error)."""
+    i, job, mat, cache_dir, probes, contact = args
     t = time.perf_counter()
-    reference_path(job.spec, job.angle_deg, _depths(job.step), mat, ArrayCache(cache_dir, _log), probes, contact,
-                   job.penalty_scale)
-    return time.perf_counter() - t
+    try:
+        reference_path(job.spec, job.angle_deg, _depths(job.step), mat, ArrayCache(cache_dir, _log), probes,
+                       contact, job.penalty_scale)
+    except Exception as exc:                    # noqa: BLE001 - reported; the run solves it again and raises
+        return i, time.perf_counter() - t, f"{type(exc).__name__}: {exc}"
+    return i, time.perf_counter() - t, None
 
 
 def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache, probes: np.ndarray,
              contact: str) -> None:
     """Solve the ``jobs`` the cache lacks in ``n_workers`` processes (spawned, one BLAS thread each, their log
-    lines prefixed "[solver N]"), into ``cache``; the run then reads them from it. Nothing to do with one worker,
-    a disabled cache or nothing missing. A failed solve is logged and left to the run, which solves it again
-    and raises with the cause."""
+    lines prefixed "[solver N]"), into ``cache``; the run then reads them from it. Does nothing with one
+    worker, a disabled cache or fewer than two solves missing. A failed solve is logged and left to the run,
+    which solves it again and raises with the cause. Ctrl-C terminates the workers at once."""
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
 
     if n_workers < 2 or not cache.cache_dir:
         return
     todo, seen = [], set()
     for j in jobs:
         spec, ang = _as_solved(j.spec, j.angle_deg)
-        keys = [_reference_key(spec, ang, _depths(j.step), mat, probes, contact, j.penalty_scale, v)
-                for v in (SOLVER_VERSION, PREVIOUS_VERSION)]
+        keys = _reference_keys(spec, ang, _depths(j.step), mat, probes, contact, j.penalty_scale)
         if keys[0] not in seen and not any(os.path.exists(cache.path("reference", k)) for k in keys):
             todo.append(j)
         seen.add(keys[0])
@@ -1117,21 +1141,18 @@ def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache
     _log(f"prefetch: {len(todo)} reference solves the cache lacks, in {n} worker processes (--jobs)")
     ctx = multiprocessing.get_context("spawn")
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(n, mp_context=ctx, initializer=_solver_init,
-                             initargs=("solver", ctx.Value("i", 0))) as pool:
-        futs = {pool.submit(_solve_one, j, mat, cache.cache_dir, probes, contact): j for j in todo}
-        try:
-            for f in as_completed(futs):
-                j = futs[f]
-                try:
-                    _log(f"prefetch: {j.spec.key()} at {j.angle_deg:g} deg, penalty {j.penalty_scale:g} E/h done in "
-                         f"{f.result():.0f} s")
-                except Exception as exc:            # noqa: BLE001 - the run solves it again and raises
-                    _log(f"prefetch: {j.spec.key()} at {j.angle_deg:g} deg failed ({type(exc).__name__}: {exc}); "
-                         "the run solves it itself")
-        except KeyboardInterrupt:
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
+    pool = ctx.Pool(n, initializer=_solver_init, initargs=(ctx.Value("i", 0),))
+    try:
+        work = [(i, j, mat, cache.cache_dir, probes, contact) for i, j in enumerate(todo)]
+        for i, sec, err in pool.imap_unordered(_solve_one, work):
+            j = todo[i]
+            what = f"{j.spec.key()} at {j.angle_deg:g} deg, penalty {j.penalty_scale:g} E/h"
+            _log(f"prefetch: {what} done in {sec:.0f} s" if err is None else
+                 f"prefetch: {what} failed ({err}); the run solves it itself")
+        pool.close()
+    finally:
+        pool.terminate()            # at once on Ctrl-C or an error; after close() the workers have exited
+        pool.join()
     _log(f"prefetch: done in {time.perf_counter() - t0:.0f} s")
 
 
