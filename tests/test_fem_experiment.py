@@ -8,6 +8,7 @@ import math
 import os
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -414,6 +415,9 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
 
     monkeypatch.setattr(X, "reference_path", fake_path)
     monkeypatch.setattr("nodes.fem.snapshots.build_table", fake_build)
+    # the rendered vertices the paths are sampled at (the full settings' linear model: a 17 s precompute)
+    verts = np.random.default_rng(0).uniform(-0.03, 0.03, (7, 3)).astype(np.float32)
+    monkeypatch.setattr(X, "realtime_model", lambda st, mat, cache_dir: SimpleNamespace(rest_vertices=verts))
     assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--jobs", "1"]) == 0
     p = FemParams()
     assert seen["build"] == (DEFAULT_GRID, DEFAULT_REF_SPEC, p.nu, p.finger_radius)
@@ -432,7 +436,7 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--level", str(level)]) == 0
     assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table",
                    "--azimuth", "-0"]) == 0
-    assert len(calls) == 2 and calls[0] == calls[1]
+    assert len(calls) == 2 and calls[0] == calls[1] and calls[0][3] == verts.astype(float).tobytes()
     with pytest.raises(SystemExit, match="--azimuth must be one of"):
         X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--azimuth", "15"])
     with pytest.raises(SystemExit, match="--azimuth is for --node-table"):
