@@ -246,7 +246,8 @@ def load_launch(path: str | Path) -> LaunchFile:
     except ValidationError as exc:
         lines = []
         for err in exc.errors():
-            key = ".".join(str(p) for p in err["loc"])
+            # one line per error: a key with control characters (a YAML key "\n") is shown escaped
+            key = ".".join(str(p) for p in err["loc"]).encode("unicode_escape").decode("ascii")
             lines.append(f"{path}: key '{key}': {err['msg']:.300} (value {_short(err.get('input'))})")
         raise LaunchError(lines[0], lines) from None
     lines = []
