@@ -298,9 +298,8 @@ def test_planned_solves_list_each_push_the_run_reads_once_by_cache_key():
     def keys(st, mirror_only=False):
         out = []
         for j in X.planned_solves(st, mirror_only):
-            spec, ang = X._as_solved(j.spec, j.angle_deg)
-            out.append(X._reference_keys(spec, ang, X._depths(j.step), Material(), probes, "frictionless",
-                                         j.penalty_scale)[0])
+            out.append(X._reference_keys(j.spec, j.angle_deg, X._depths(j.step), Material(), probes,
+                                         "frictionless", j.penalty_scale)[0])
         return out
 
     full, quick = X.settings_for(False), X.settings_for(True)

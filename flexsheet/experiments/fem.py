@@ -214,8 +214,9 @@ def _reference_key(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
 
 def _reference_keys(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, probes: np.ndarray,
                     contact: str, penalty_scale: float) -> tuple[str, str]:
-    """(this solver version's, the previous version's) :func:`_reference_key` (``spec``, ``angle_deg`` as
-    :func:`_as_solved` gives them)."""
+    """(this solver version's, the previous version's) :func:`_reference_key` of the path :func:`reference_path`
+    solves for ``spec`` at ``angle_deg`` (:func:`_as_solved` applied)."""
+    spec, angle_deg = _as_solved(spec, angle_deg)
     return tuple(_reference_key(spec, angle_deg, depths, mat, probes, contact, penalty_scale, v)
                  for v in (SOLVER_VERSION, PREVIOUS_VERSION))
 
@@ -1130,8 +1131,7 @@ def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache
         return
     todo, seen = [], set()
     for j in jobs:
-        spec, ang = _as_solved(j.spec, j.angle_deg)
-        keys = _reference_keys(spec, ang, _depths(j.step), mat, probes, contact, j.penalty_scale)
+        keys = _reference_keys(j.spec, j.angle_deg, _depths(j.step), mat, probes, contact, j.penalty_scale)
         if keys[0] not in seen and not any(os.path.exists(cache.path("reference", k)) for k in keys):
             todo.append(j)
         seen.add(keys[0])
