@@ -234,3 +234,91 @@ def test_bridge_holds_on_lost_or_unreachable_targets_and_follows_estop():
         finally:
             await twin.stop()
     asyncio.run(scenario())
+
+
+class _CancelSwallowingLink:
+    """A controller link whose first read after a cancellation returns the state instead of raising
+    ``CancelledError``: what Python 3.11's ``asyncio.wait_for`` inside pymodbus does when the reply and the
+    cancellation arrive together (CPython gh-86296)."""
+
+    name = "fake"
+    rewrite_ok = False
+
+    def __init__(self):
+        self.connected, self.on_ready, self.swallowed, self.closed = False, None, 0, False
+        self.state = reg.ControllerState(reg.ST_ENABLED, 0, 0, 0, home_joints("left"), np.zeros(6), 0,
+                                         home_joints("left"))
+
+    async def open(self):
+        self.connected = True
+        return True
+
+    async def read(self):
+        try:
+            await asyncio.sleep(0.02)             # longer than the period: the loop is nearly always here
+        except asyncio.CancelledError:
+            if self.swallowed == 0:          # the race: the reply wins, the cancellation is lost
+                self.swallowed += 1
+                return self.state
+            raise
+        return self.state
+
+    def supervise(self, st):
+        from nodes.arm_bridge.link import Verdict
+        return Verdict(False, "hold:disabled", st.position)
+
+    async def send(self, cmd, rewrite=False):
+        return True
+
+    async def keepalive(self):
+        pass
+
+    async def after_cycle(self):
+        pass
+
+    def ready_time(self):
+        return None
+
+    def next_deadline(self, deadline, t_start, period):
+        return deadline + period
+
+    async def close(self, end=False):
+        self.closed = True
+
+    def counters(self):
+        return {}
+
+
+def test_stream_stop_ends_the_loop_when_a_cancellation_is_swallowed():
+    """A lost cancellation (a reply and the cancel arriving together in pymodbus's ``wait_for``) must not keep
+    the stream running: ``stop`` returns (bounded here by 2 s; it used to wait forever, and the node harness
+    timed out after 5 s) and closes the link."""
+    from flexsheet.model.kinematics import LEFT_BASE, Q_LOWER, Q_UPPER, ArmKinematics
+    from nodes.arm_bridge.interp import StreamLimiter
+    from nodes.arm_bridge.link import ArmStream
+    from nodes.arm_bridge.tracking import TargetTracker
+
+    async def scenario():
+        link = _CancelSwallowingLink()
+        kin = ArmKinematics("left", LEFT_BASE, Q_LOWER + 0.02, Q_UPPER - 0.02)
+        lim = StreamLimiter(home_joints("left"), 0.0071, 0.5 * QD_MAX, QD_MAX, Q_LOWER, Q_UPPER, 0.02)
+        stream = ArmStream(TargetTracker(kin, target_timeout=1.0), lim, link)
+        task = stream.start()
+        while stream.cycles < 5:
+            await asyncio.sleep(0.005)
+        # cancel while the loop is inside read(): the first cancellation is swallowed there
+        while link.swallowed == 0:
+            stopping = asyncio.ensure_future(stream.stop(end=True))
+            await asyncio.wait({stopping}, timeout=2.0)      # (asyncio.wait cancels nothing on timeout)
+            if not stopping.done():
+                task.cancel()                                 # clean up the runaway loop, then fail
+                await asyncio.wait({stopping}, timeout=2.0)
+                raise AssertionError("ArmStream.stop did not return within 2 s (the loop ran on)")
+            assert task.done() and link.closed
+            if link.swallowed == 0:          # the cancel landed in the inter-cycle wait: run again
+                link.closed = False
+                task = stream.start()
+                await asyncio.sleep(0.003)
+        return link.swallowed
+
+    assert asyncio.run(scenario()) == 1

@@ -26,7 +26,6 @@ packet when the reply to the last one arrives, so the controller's clock paces t
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import time
 from collections.abc import Callable
@@ -149,6 +148,7 @@ class ArmStream:
         self.refreshes = 0
         self.cycle_times: list[float] | None = None   # set to [] to record each cycle's monotonic start
         self._task: asyncio.Task | None = None
+        self._stopping = False                  # set by stop(): the loop ends at its next turn
         self._waiter: asyncio.Future | None = None
         self._dirty = False
         self._snap: tuple[np.ndarray, np.ndarray] | None = None   # limiter state before this period's step
@@ -297,7 +297,7 @@ class ArmStream:
         """Cycle until cancelled (or ``n_cycles`` cycles): see the module doc for the pacing."""
         nxt = time.monotonic()
         done = 0
-        while n_cycles is None or done < n_cycles:
+        while (n_cycles is None or done < n_cycles) and not self._stopping:
             ready = self.link.ready_time() if self.link.connected else None
             due = nxt if ready is None else min(nxt, ready)
             now = time.monotonic()
@@ -325,10 +325,20 @@ class ArmStream:
         return self._task
 
     async def stop(self, end: bool = True) -> None:
-        """Cancel the loop task and close the link (``end``: end the controller session, e.g. MXT END)."""
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
-            self._task = None
+        """End the loop task and close the link (``end``: end the controller session, e.g. MXT END).
+
+        The task is cancelled, and cancelled again every 50 ms until it has ended, and the loop also checks a
+        stop flag: a single cancellation can be lost. Python 3.11's ``asyncio.wait_for`` (used inside pymodbus
+        for every request) returns the reply instead of raising ``CancelledError`` when the reply and the
+        cancellation arrive together (CPython gh-86296), and the loop then ran on, so stop never returned."""
+        task, self._task = self._task, None
+        if task is not None:
+            self._stopping = True
+            self._wakeup()
+            while not task.done():
+                task.cancel()
+                await asyncio.wait({task}, timeout=0.05)
+            if not task.cancelled() and task.exception() is not None:
+                log.warning("arm stream loop ended with %r", task.exception())
+            self._stopping = False
         await self.link.close(end=end)
