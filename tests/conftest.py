@@ -175,3 +175,42 @@ def sim_run(tmp_path_factory, sim_fem_cache):
                 os.killpg(proc.pid, signal.SIGKILL)
                 proc.wait()
     return {"out": out, "stdout": log.read_text(), "code": code, "viz": viz}
+
+
+#: Test modules of pure computation (no node, process, socket, window or clock bound): ``tests/run.sh`` runs
+#: them on two pytest-xdist workers first (``-m cpu``), then everything else alone (``-m "not cpu"``), because a
+#: test that judges a live loop against the clock needs the whole machine (a solve beside the suite made the
+#: fault-injection run miss its respawn deadlines, session 13). A module belongs here only if nothing in it
+#: starts a node, a subprocess, a socket or a window, or bounds a time.
+CPU_MODULES = frozenset({
+    "test_arm_kinematics", "test_arm_motion", "test_arm_registers", "test_calibration_display_yaml",
+    "test_calibration_procedures", "test_calibration_twin", "test_correction_twin", "test_fem_experiment",
+    "test_fem_hyperelastic", "test_fem_scene", "test_fem_solver", "test_fuzz_codec", "test_fuzz_launch",
+    "test_planner_report", "test_planner_shapes", "test_planner_sheet", "test_planner_stroke",
+    "test_render_correction", "test_render_gl", "test_render_live_sheet", "test_runtime_codec", "test_scenes",
+    "test_sheet_fem_lowstretch", "test_twin_arm", "test_twin_sheet", "test_twin_stability",
+    "test_vision_calibration", "test_vision_stereo", "test_vision_tracker", "test_viz_bag", "test_viz_layout",
+    "test_viz_scene_sheet",
+})
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "cpu: pure computation, safe to run beside another test (tests/run.sh)")
+    missing = sorted(m for m in CPU_MODULES if not (ROOT / "tests" / f"{m}.py").exists())
+    if missing:
+        raise pytest.UsageError(f"tests/conftest.py CPU_MODULES names modules that do not exist: {missing}")
+
+
+#: modules that must run on one xdist worker, after the first: test_calibration_procedures registers the twin's
+#: three seeds and shares them with the cache that test_correction_twin loads (on two workers it would redo them)
+SAME_WORKER = {"test_correction_twin": "test_calibration_procedures"}
+
+
+@pytest.hookimpl(tryfirst=True)       # before pytest-xdist's own hook reads the xdist_group marks
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        stem = item.path.stem
+        if stem in CPU_MODULES:
+            item.add_marker(pytest.mark.cpu)
+            # tests/run.sh distributes by group (--dist loadgroup): a module per worker, module fixtures once
+            item.add_marker(pytest.mark.xdist_group(SAME_WORKER.get(stem, stem)))

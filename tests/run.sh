@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# The whole test suite, as the README and CI run it, in two phases on the 2-core machine:
+#   1. the pure-computation modules (marker `cpu`, tests/conftest.py CPU_MODULES) on two pytest-xdist workers,
+#      a module per worker (tests/conftest.py: groups), one BLAS/OpenMP thread each;
+#   2. everything else (nodes, launches, sockets, windows, deadlines) one by one, with the machine to itself:
+#      those tests judge a live loop against the clock.
+# Arguments go to both phases (e.g. tests/run.sh -x, tests/run.sh -p no:cacheprovider).
+# Plain `python3 -m pytest -q` runs the same tests in one process, one by one (slower).
+set -u
+cd "$(dirname "$0")/.."
+echo "[tests] phase 1/2: pure computation (-m cpu) on 2 workers"
+OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 python3 -m pytest -q -n 2 --dist loadgroup -m cpu "$@"
+a=$?
+echo "[tests] phase 2/2: nodes, launches and timing (-m 'not cpu'), one by one"
+python3 -m pytest -q -m "not cpu" "$@"
+b=$?
+# 5 = no tests collected in that phase (e.g. a selection inside the other phase's modules)
+if [ $a -eq 5 ] && [ $b -ne 5 ]; then a=0; fi
+if [ $b -eq 5 ] && [ $a -ne 5 ]; then b=0; fi
+echo "[tests] phase 1 exit $a, phase 2 exit $b"
+[ $a -ne 0 ] && exit $a
+exit $b
