@@ -8,6 +8,7 @@ import math
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -289,22 +290,32 @@ def test_full_settings_judge_the_nodes_snapshot_mesh_against_a_finer_one():
 def test_planned_solves_list_each_push_the_run_reads_once_by_cache_key():
     """The full run reads 16 distinct reference pushes: five convergence levels, three cut half models, three
     more penalties (the default is level 1's), two skins, azimuth 5 held out and the snapshots' 10 and 20; the
-    quick run 5; ``--mirror-study`` the levels and the half models (its stability check reads two levels)."""
+    quick run 5; ``--mirror-study`` the levels and the half models (its stability check reads two levels);
+    ``--holdout-study`` the finest level, the snapshot mesh's azimuth-0 level and its cut paths at 5 and 10 only
+    (the table's blend at 5 reads 0 and 10, not 20)."""
     from flexsheet.experiments import fem as X
     from nodes.fem.material import Material
 
     probes = np.zeros((1, 3))
 
-    def keys(st, mirror_only=False):
+    def keys(st, study="full"):
         out = []
-        for j in X.planned_solves(st, mirror_only):
+        for j in X.planned_solves(st, study):
             out.append(X._reference_keys(j.spec, j.angle_deg, X._depths(j.step), Material(), probes,
                                          "frictionless", j.penalty_scale)[0])
         return out
 
     full, quick = X.settings_for(False), X.settings_for(True)
     assert len(set(keys(full))) == 16 and len(set(keys(quick))) == 5
-    assert len(set(keys(full, True))) == 8 and set(keys(full, True)) <= set(keys(full))
+    assert len(set(keys(full, "mirror"))) == 8 and set(keys(full, "mirror")) <= set(keys(full))
+    hold = X.planned_solves(full, "holdout")
+    assert len(set(keys(full, "holdout"))) == 4 and set(keys(full, "holdout")) <= set(keys(full))
+    assert sorted(j.angle_deg for j in hold) == [0.0, 0.0, 5.0, 10.0]
+    assert X.holdout_grid(full).grid.angles_deg == (0.0, 10.0)
+    with pytest.raises(ValueError, match="held-out azimuth 25 deg is outside"):
+        X.holdout_grid(replace(full, holdout_deg=(25.0,)))
+    with pytest.raises(ValueError, match="study must be"):
+        X.planned_solves(full, "mirror_only")
     costs = [j.cost() for j in X.planned_solves(full)]
     assert costs == sorted(costs, reverse=True)
 

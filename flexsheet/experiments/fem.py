@@ -143,6 +143,7 @@ def _parser() -> argparse.ArgumentParser:
                                 epilog="example: flexsheet experiment fem --quick --out /tmp/fem\n"
                                        "         flexsheet experiment fem --out /tmp/fem --node-table --azimuth 10\n"
                                        "         flexsheet experiment fem --quick --mirror-study --out /tmp/fem\n"
+                                       "         flexsheet experiment fem --holdout-study --out /tmp/fem\n"
                                        "         flexsheet experiment fem --quick --scene launch/scenes/sphere.yaml "
                                        "--out /tmp/fem_sphere")
     p.add_argument("--out", required=True, help="output directory")
@@ -165,6 +166,11 @@ def _parser() -> argparse.ArgumentParser:
                         "models, and the quarter models' stability; it solves what the "
                         "cache lacks, the convergence meshes included: hours cold in full mode) and write "
                         "mirror_study.json/png, then exit")
+    p.add_argument("--holdout-study", action="store_true",
+                   help="run the held-out azimuth check only (full mode: a snapshot table on azimuths 0 and 10 "
+                        "judged at 5 deg against its own solve on the cut half model, and at 0 against the finest "
+                        "mesh; it solves what the cache lacks, ~1-2 h of two cores cold) and write "
+                        "holdout_study.json/png, then exit")
     p.add_argument("--node-table", action="store_true",
                    help="build the FEM node's nonlinear snapshot table (azimuths 0-60 deg every 10 deg, 2.5 mm depth "
                         "steps, on the full run's h_fine 3.4 mm mesh) into the cache the node reads, then exit. "
@@ -764,6 +770,80 @@ def snapshot_mesh_study(st: Settings, mat: Material, cache: ArrayCache, rm: Real
             "meshes": rows}
 
 
+def holdout_grid(st: Settings) -> Settings:
+    """``st`` with its snapshot azimuths cut to the grid azimuths around each held-out one (full mode: 0 and 10
+    for 5), the ones the table's blend at a held-out azimuth reads. ``ValueError`` when a held-out azimuth is
+    not inside the grid."""
+    g = sorted(st.grid.angles_deg)
+    keep = set()
+    for a in st.holdout_deg:
+        lo, hi = [x for x in g if x <= a], [x for x in g if x >= a]
+        if not lo or not hi:
+            raise ValueError(f"held-out azimuth {a:g} deg is outside the snapshot grid {g} deg")
+        keep |= {lo[-1], hi[0]}
+    return replace(st, grid=replace(st.grid, angles_deg=tuple(sorted(keep))))
+
+
+def holdout_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, fine: dict) -> dict:
+    """The nonlinear snapshots between azimuths, alone (``--holdout-study``): a table on the grid azimuths
+    around each held-out azimuth (:func:`holdout_grid`; the snapshot mesh's cut half model away from 0, every
+    ``grid.depth_step``), judged at the held-out azimuth against its own solve on that mesh, and at azimuth 0
+    against the finest mesh, at every ``fine_step`` 0–50 mm, on the visible surface (:func:`errors`). The same
+    check as the full run's failure map at the held-out azimuth, without the studies that need the other
+    solves. Returns per azimuth: depths (mm), worst visible error (mm) per depth, its maximum and the first
+    depth over the 0.7 mm target; ``rm``'s snapshot table is left as it was."""
+    hs = holdout_grid(st)
+    keep = rm.snapshots
+    try:
+        solved, _ = snapshot_source(hs, mat, cache, rm, fine)
+        table, hit, sec = snapshot_table(hs, mat, cache, solved)
+        rm.attach_snapshots(table)
+        cases = validation_set(hs, mat, cache, rm, fine)
+        err = errors(rm, cases, "snapshots")
+    finally:
+        rm.snapshots = keep
+    rows = []
+    for a in sorted({c["angle_deg"] for c in cases}):
+        pairs = [(c["depth"] * 1e3, e * 1e3) for c, e in zip(cases, err, strict=True) if c["angle_deg"] == a]
+        bad = [d for d, e in pairs if e > TARGET * 1e3]
+        rows.append({"azimuth_deg": a, "held_out": a in hs.holdout_deg,
+                     "against": "its own solve on the snapshot mesh (cut half model)" if a in hs.holdout_deg
+                     else f"the finest convergence mesh (h_fine {st.levels[-1].h_fine * 1e3:g} mm)",
+                     "depths_mm": [d for d, _ in pairs], "error_mm": [e for _, e in pairs],
+                     "max_error_mm": max(e for _, e in pairs), "breaks_at_depth_mm": min(bad) if bad else None})
+        _log(f"holdout study: azimuth {a:g} deg: worst visible error {rows[-1]['max_error_mm']:.2f} mm"
+             + (f", over the target from {min(bad):g} mm" if bad else ", within the target"))
+    return {"snapshot_azimuths_deg": list(hs.grid.angles_deg), "held_out_deg": list(hs.holdout_deg),
+            "snapshot_depth_step_mm": hs.grid.depth_step * 1e3, "snapshot_mesh": hs.snap_spec.__dict__,
+            "table_build_s": sec, "table_cache_hit": hit, "target_mm": TARGET * 1e3,
+            "footprint": "left out: lateral distance from the push axis <= finger radius + 2 mm, hidden by the finger",
+            "azimuths": rows}
+
+
+def plot_holdout_study(out: str, hs: dict) -> None:
+    """holdout_study.png: worst visible error against depth per azimuth (:func:`holdout_study`, the numbers in
+    ``holdout_study.json``)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for r in hs["azimuths"]:
+        ax.semilogy(r["depths_mm"], r["error_mm"], "o-" if r["held_out"] else "s--", ms=3,
+                    label=f"azimuth {r['azimuth_deg']:g}° ({'held out' if r['held_out'] else 'on the grid'}), "
+                          f"against {r['against']}")
+    ax.axhline(hs["target_mm"], color="k", ls="--", lw=0.8, label="target 0.7 mm (1 projector px)")
+    ax.set_xlabel("push depth (mm)")
+    ax.set_ylabel("worst visible-surface error (mm)")
+    ax.set_title(f"Nonlinear snapshots at azimuths {hs['snapshot_azimuths_deg']} deg, every "
+                 f"{hs['snapshot_depth_step_mm']:g} mm", fontsize=10)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "holdout_study.png"), dpi=110)
+    plt.close(fig)
+
+
 # ---- outputs -----------------------------------------------------------------------------------------------------
 def failure_map(cases: list[dict], cand: dict) -> dict:
     """Per candidate: error (mm) on the (azimuth, depth) grid of the validation cases and where it breaks."""
@@ -1064,18 +1144,28 @@ class Solve:
         return c * (2.0 if half else 1.0) / _load_step(_depths(self.step))
 
 
-def planned_solves(st: Settings, mirror_only: bool = False) -> list[Solve]:
-    """Every reference path :func:`main`'s run reads (``mirror_only``: the ``--mirror-study`` run's), once each
-    (as :func:`reference_path` keys them), most expensive first. Keep it in step with the functions that read
-    them: :func:`convergence`, :func:`mirror_study` (its stability check reads the last two levels),
-    :func:`penalty_study`, :func:`skin_study`, :func:`validation_set`, :func:`snapshot_source` and
-    :func:`snapshot_mesh_study` (the skin study's meshes); a path may be listed twice. A run after
-    :func:`prefetch` of this list solves nothing itself (tests/test_fem_experiment.py checks the quick run's
-    log)."""
+def planned_solves(st: Settings, study: str = "full") -> list[Solve]:
+    """Every reference path :func:`main`'s run reads (``study``: "full", or the "mirror" / "holdout" study
+    alone, ``--mirror-study`` / ``--holdout-study``), once each (as :func:`reference_path` keys them), most
+    expensive first. Keep it in step with the functions that read them: :func:`convergence`,
+    :func:`mirror_study` (its stability check reads the last two levels), :func:`penalty_study`,
+    :func:`skin_study`, :func:`validation_set`, :func:`snapshot_source`, :func:`snapshot_mesh_study` (the skin
+    study's meshes) and :func:`holdout_study`; a path may be listed twice. A run after :func:`prefetch` of this
+    list solves nothing itself (tests/test_fem_experiment.py checks the quick run's log). ``ValueError`` on
+    another ``study``."""
+    if study not in ("full", "mirror", "holdout"):
+        raise ValueError(f"study must be 'full', 'mirror' or 'holdout', got {study!r}")
     lv = st.levels
+    if study == "holdout":
+        hs = holdout_grid(st)
+        jobs = [Solve(lv[-1], 0.0, st.fine_step)]
+        jobs += [Solve(hs.snap_spec, a, st.fine_step) for a in (*hs.holdout_deg, *hs.grid.angles_deg) if a != 0.0]
+        if hs.snap_spec != lv[-1]:
+            jobs.append(Solve(hs.snap_spec, 0.0, st.depth_step))
+        return sorted(jobs, key=lambda j: -j.cost())
     jobs = [Solve(s, 0.0, st.depth_step) for s in lv[:-1]] + [Solve(lv[-1], 0.0, st.fine_step)]
     jobs += [Solve(replace(lv[-1], h_fine=hf, half_z=False, cut=True), 0.0, st.fine_step) for hf in st.half_levels]
-    if not mirror_only:
+    if study == "full":
         jobs += [Solve(lv[st.penalty_level], 0.0, st.depth_step, sc) for sc in st.penalty_scales]
         jobs += [Solve(replace(lv[-2], skin_h=h), 0.0, st.depth_step) for h in st.skin_sizes]
         jobs += [Solve(st.snap_spec, a, st.fine_step) for a in st.holdout_deg]
@@ -1174,9 +1264,14 @@ def main(argv: list[str] | None = None) -> int:
     """Run the experiment; returns 0. See the module docstring for the outputs."""
     args = _parser().parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
-    if args.mirror_study and (args.node_table or args.level is not None or args.linear_study or args.scene):
-        raise SystemExit("flexsheet experiment fem: --mirror-study (the paper's cylinder) takes none of "
-                         "--node-table, --level, --linear-study, --scene")
+    for flag, on in (("--mirror-study", args.mirror_study), ("--holdout-study", args.holdout_study)):
+        if on and (args.node_table or args.level is not None or args.linear_study or args.scene
+                   or (args.mirror_study and args.holdout_study)):
+            raise SystemExit(f"flexsheet experiment fem: {flag} (the paper's cylinder) takes none of "
+                             "--node-table, --level, --linear-study, --scene, and runs alone")
+    if args.holdout_study and args.quick:
+        raise SystemExit("flexsheet experiment fem: --holdout-study is a full-mode study (the quick settings hold "
+                         "no azimuth out); leave out --quick")
     if args.scene:
         from flexsheet.model.scenes import is_paper_cylinder, load_scene_or_paper
 
@@ -1215,8 +1310,16 @@ def main(argv: list[str] | None = None) -> int:
                        rm.rest_vertices.astype(float), st.contact)
         _log(f"level {args.level} cached in {time.perf_counter() - t0:.1f} s")
         return 0
-    prefetch(planned_solves(st, mirror_only=args.mirror_study), args.jobs, mat, cache, rm.rest_vertices.astype(float),
-             st.contact)
+    study = "mirror" if args.mirror_study else "holdout" if args.holdout_study else "full"
+    prefetch(planned_solves(st, study), args.jobs, mat, cache, rm.rest_vertices.astype(float), st.contact)
+    if args.holdout_study:
+        fine = reference_path(st.levels[-1], 0.0, _depths(st.fine_step), mat, cache, rm.rest_vertices.astype(float),
+                              st.contact)
+        hs = holdout_study(st, mat, cache, rm, fine)
+        _write(args.out, "holdout_study", hs)
+        plot_holdout_study(args.out, hs)
+        _log(f"holdout study done in {time.perf_counter() - t0:.1f} s -> {args.out}/holdout_study.json")
+        return 0
     conv, fine = convergence(st, mat, cache, rm)
     if args.mirror_study:
         ms = mirror_study(st, mat, cache, rm, conv, fine)
