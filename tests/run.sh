@@ -4,13 +4,26 @@
 #      a module per worker (tests/conftest.py: groups), one BLAS/OpenMP thread each;
 #   2. everything else (nodes, launches, sockets, windows, deadlines) one by one, with the machine to itself:
 #      those tests judge a live loop against the clock.
-# Arguments go to both phases (e.g. tests/run.sh -x, tests/run.sh -p no:cacheprovider).
-# Plain `python3 -m pytest -q` runs the same tests in one process, one by one (slower).
+# Arguments go to both phases (e.g. tests/run.sh -x, tests/run.sh -p no:cacheprovider, tests/run.sh -k bridge);
+# not -m, which replaces the phase's own marker selection. With -x a failure in phase 1 skips phase 2; an
+# interrupt (Ctrl-C), an internal or a usage error in phase 1 ends the run. Plain `python3 -m pytest -q` runs
+# the same tests in one process, one by one (slower).
 set -u
 cd "$(dirname "$0")/.."
+for arg in "$@"; do
+  case "$arg" in
+    -m|-m*) echo "tests/run.sh: -m selects each phase's tests here; run python3 -m pytest $* instead" >&2; exit 4;;
+  esac
+done
 echo "[tests] phase 1/2: pure computation (-m cpu) on 2 workers"
 OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 python3 -m pytest -q -n 2 --dist loadgroup -m cpu "$@"
 a=$?
+case $a in 2|3|4) echo "[tests] phase 1 ended with exit $a (interrupted or an error): phase 2 not run" >&2; exit $a;; esac
+if [ $a -eq 1 ]; then
+  for arg in "$@"; do
+    case "$arg" in -x|--exitfirst) echo "[tests] phase 1 failed and -x: phase 2 not run" >&2; exit 1;; esac
+  done
+fi
 echo "[tests] phase 2/2: nodes, launches and timing (-m 'not cpu'), one by one"
 python3 -m pytest -q -m "not cpu" "$@"
 b=$?

@@ -314,6 +314,9 @@ def test_planned_solves_list_each_push_the_run_reads_once_by_cache_key():
     assert X.holdout_grid(full).grid.angles_deg == (0.0, 10.0)
     with pytest.raises(ValueError, match="held-out azimuth 25 deg is outside"):
         X.holdout_grid(replace(full, holdout_deg=(25.0,)))
+    assert X.holdout_grid(replace(full, holdout_deg=(15.0,))).grid.angles_deg == (0.0, 10.0, 20.0)
+    with pytest.raises(ValueError, match="hold no azimuth out"):
+        X.holdout_grid(quick)
     with pytest.raises(ValueError, match="study must be"):
         X.planned_solves(full, "mirror_only")
     costs = [j.cost() for j in X.planned_solves(full)]

@@ -1,4 +1,5 @@
-"""``flexsheet experiment fem --out DIR [--quick] [--jobs N] [--linear-study] [--scene FILE]``: physically right deformation
+"""``flexsheet experiment fem --out DIR [--quick] [--jobs N] [--linear-study] [--mirror-study | --holdout-study]
+[--scene FILE]``: physically right deformation
 of the pushed cylinder, and the real-time model that reproduces it (``--scene`` with another object: the same
 study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 
@@ -25,7 +26,8 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    every output depth against the finest mesh (h_fine 2.5 mm): the depths between snapshots are held out, and
    the snapshot mesh's own error is in the figure. Full mode: snapshots at azimuths 0, 10 and 20 degrees, and
    azimuth 5 held out against its own solve on the snapshot mesh (interpolation across azimuth at the node
-   table's spacing). Accuracy against speed (``accuracy_speed.png/.json``) and the failure map, where
+   table's spacing; ``--holdout-study`` runs only that check, on a table at 0 and 10 degrees:
+   ``holdout_study.json/png``, :func:`holdout_study`). Accuracy against speed (``accuracy_speed.png/.json``) and the failure map, where
    each model breaks by depth and azimuth (``failure_map.png/.json``). **Snapshot-mesh study**
    (``realtime.snapshot_mesh_study``): the same azimuth-0 check for a table on each skin-study mesh.
    ``nodes/fem/model_table.json`` (full mode) is what the node chooses from.
@@ -771,11 +773,13 @@ def snapshot_mesh_study(st: Settings, mat: Material, cache: ArrayCache, rm: Real
 
 
 def holdout_grid(st: Settings) -> Settings:
-    """``st`` with its snapshot azimuths cut to the grid azimuths around each held-out one (full mode: 0 and 10
-    for 5), the ones the table's blend at a held-out azimuth reads. ``ValueError`` when a held-out azimuth is
-    not inside the grid."""
+    """``st`` with its snapshot azimuths cut to the grid's first azimuth (0, judged too) and the two around each
+    held-out one (full mode: 0 and 10 for 5), the ones the table's blend reads. ``ValueError`` when there is no
+    held-out azimuth or one is not inside the grid."""
+    if not st.holdout_deg:
+        raise ValueError("these settings hold no azimuth out (the quick settings): nothing to study")
     g = sorted(st.grid.angles_deg)
-    keep = set()
+    keep = {g[0]}
     for a in st.holdout_deg:
         lo, hi = [x for x in g if x <= a], [x for x in g if x >= a]
         if not lo or not hi:

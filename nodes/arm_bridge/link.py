@@ -321,24 +321,31 @@ class ArmStream:
 
     def start(self) -> asyncio.Task:
         """Run :meth:`run` forever as a task on the current loop."""
+        self._stopping = False
         self._task = asyncio.get_running_loop().create_task(self.run())
         return self._task
 
     async def stop(self, end: bool = True) -> None:
-        """End the loop task and close the link (``end``: end the controller session, e.g. MXT END).
+        """End the loop task and close the link (``end``: end the controller session, e.g. MXT END). An error
+        the loop ended with is logged, not raised (stop is teardown); the link is closed even when stop itself
+        is cancelled.
 
         The task is cancelled, and cancelled again every 50 ms until it has ended, and the loop also checks a
         stop flag: a single cancellation can be lost. Python 3.11's ``asyncio.wait_for`` (used inside pymodbus
         for every request) returns the reply instead of raising ``CancelledError`` when the reply and the
         cancellation arrive together (CPython gh-86296), and the loop then ran on, so stop never returned."""
         task, self._task = self._task, None
-        if task is not None:
-            self._stopping = True
-            self._wakeup()
-            while not task.done():
-                task.cancel()
-                await asyncio.wait({task}, timeout=0.05)
-            if not task.cancelled() and task.exception() is not None:
-                log.warning("arm stream loop ended with %r", task.exception())
-            self._stopping = False
-        await self.link.close(end=end)
+        try:
+            if task is not None:
+                self._stopping = True
+                self._wakeup()
+                while not task.done():
+                    task.cancel()
+                    await asyncio.wait({task}, timeout=0.05)
+                self._stopping = False      # the loop has ended: a later run() or start() runs
+                if not task.cancelled() and task.exception() is not None:
+                    log.warning("arm stream loop ended with %r", task.exception())
+        finally:
+            if task is not None and not task.done():
+                task.cancel()               # stop() itself was cancelled: leave no loop running
+            await self.link.close(end=end)
