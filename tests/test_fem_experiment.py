@@ -369,7 +369,7 @@ def test_reference_path_solves_off_axis_pushes_on_the_half_model_under_one_key()
 def test_a_previous_version_path_is_reused_only_when_no_newton_call_ran_out(tmp_path, monkeypatch):
     """nh-7 changed only what follows a Newton call that ran out of iterations, so a cached nh-6 path with fewer
     than NEWTON_ITERS iterations at every depth is re-keyed and read (no solve); one with a depth at NEWTON_ITERS
-    (a call ran out there: nh-7 would continue it) is solved again."""
+    (a call ran out there: nh-7 would continue it) is solved again; prefetch's plan (missing_solves) agrees."""
     from flexsheet.experiments import fem as X
     from nodes.fem.cache import ArrayCache
     from nodes.fem.material import Material
@@ -396,6 +396,9 @@ def test_a_previous_version_path_is_reused_only_when_no_newton_call_ran_out(tmp_
         old = _fake_path_dict(4, d) | {"newton": np.full(len(d), 5)}
         old["newton"][7] = newton_max
         cache.save("reference", old_key, old)
+        # prefetch plans the same: a path it counts as present is one reference_path reads
+        job = X.Solve(DEFAULT_REF_SPEC, 0.0, 0.0025)
+        assert X.missing_solves([job, job], Material(), cache, probes, X.DEFAULT_CONTACT) == ([] if reused else [job])
         if reused:
             z = X.reference_path(DEFAULT_REF_SPEC, 0.0, d, Material(), cache, probes)
             assert np.array_equal(z["force"], old["force"]) and len(os.listdir(tmp_path / f"c{newton_max}")) == 2

@@ -245,6 +245,17 @@ def _as_solved(spec: RefSpec, angle_deg: float) -> tuple[RefSpec, float]:
     return (replace(spec, half_z=False) if angle_deg != 0.0 and spec.half_z else spec), angle_deg
 
 
+def _previous_version_path(cache: ArrayCache, old_key: str) -> dict | None:
+    """The cached path under the previous solver version's key when it is this version's too: no Newton call
+    ran out of iterations in it (PREVIOUS_VERSION; such a call counts NEWTON_ITERS at its depth by itself);
+    else None."""
+    p_old = cache.path("reference", old_key)
+    if p_old is None or not os.path.exists(p_old):
+        return None
+    old = cache.load("reference", old_key)
+    return old if old is not None and int(np.max(old["newton"])) < NEWTON_ITERS else None
+
+
 def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, cache: ArrayCache,
                    probes: np.ndarray, contact: str = DEFAULT_CONTACT, penalty_scale: float = PENALTY_SCALE) -> dict:
     """Neo-Hookean push at ``angle_deg`` through ``depths`` (load steps = the depth spacing, ≤ 2.5 mm) on
@@ -260,12 +271,10 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
     spec, angle_deg = _as_solved(spec, angle_deg)
     step = _load_step(depths)
     key, old_key = _reference_keys(spec, angle_deg, depths, mat, probes, contact, penalty_scale)
-    p_new, p_old = cache.path("reference", key), cache.path("reference", old_key)
-    if p_new is not None and not os.path.exists(p_new) and os.path.exists(p_old):
-        # the version before's path is this version's when no Newton call ran out in it (PREVIOUS_VERSION; such a
-        # call counts NEWTON_ITERS at its depth by itself)
-        old = cache.load("reference", old_key)
-        if old is not None and int(np.max(old["newton"])) < NEWTON_ITERS:
+    p_new = cache.path("reference", key)
+    if p_new is not None and not os.path.exists(p_new):
+        old = _previous_version_path(cache, old_key)
+        if old is not None:
             _log(f"fem: reference {spec.key()} at {angle_deg:g} deg: the {PREVIOUS_VERSION} path (no Newton call ran "
                  f"out of iterations) is the {SOLVER_VERSION} path; re-keyed")
             cache.save("reference", key, old)
@@ -1213,6 +1222,20 @@ def _solve_one(args: tuple) -> tuple[int, float, str | None]:
     return i, time.perf_counter() - t, None
 
 
+def missing_solves(jobs: list[Solve], mat: Material, cache: ArrayCache, probes: np.ndarray, contact: str
+                   ) -> list[Solve]:
+    """The ``jobs`` :func:`reference_path` would solve, not read, from ``cache`` (a previous version's path
+    counts only when that version's path is this one's, :func:`_previous_version_path`), each key once."""
+    todo, seen = [], set()
+    for j in jobs:
+        keys = _reference_keys(j.spec, j.angle_deg, _depths(j.step), mat, probes, contact, j.penalty_scale)
+        if keys[0] not in seen and not os.path.exists(cache.path("reference", keys[0])) \
+                and _previous_version_path(cache, keys[1]) is None:
+            todo.append(j)
+        seen.add(keys[0])
+    return todo
+
+
 def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache, probes: np.ndarray,
              contact: str) -> None:
     """Solve the ``jobs`` the cache lacks in ``n_workers`` processes (spawned, one BLAS thread each, their log
@@ -1223,12 +1246,7 @@ def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache
 
     if n_workers < 2 or not cache.cache_dir:
         return
-    todo, seen = [], set()
-    for j in jobs:
-        keys = _reference_keys(j.spec, j.angle_deg, _depths(j.step), mat, probes, contact, j.penalty_scale)
-        if keys[0] not in seen and not any(os.path.exists(cache.path("reference", k)) for k in keys):
-            todo.append(j)
-        seen.add(keys[0])
+    todo = missing_solves(jobs, mat, cache, probes, contact)
     if len(todo) < 2:
         return
     n = min(n_workers, len(todo))
