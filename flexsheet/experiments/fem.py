@@ -851,7 +851,7 @@ def plot_holdout_study(out: str, hs: dict) -> None:
     ax.set_ylabel("worst visible-surface error (mm)")
     ax.set_title(f"Nonlinear snapshots at azimuths {hs['snapshot_azimuths_deg']} deg, every "
                  f"{hs['snapshot_depth_step_mm']:g} mm", fontsize=10)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     fig.savefig(os.path.join(out, "holdout_study.png"), dpi=110)
     plt.close(fig)
