@@ -829,7 +829,8 @@ def holdout_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMo
     return {"snapshot_azimuths_deg": list(hs.grid.angles_deg), "held_out_deg": list(hs.holdout_deg),
             "snapshot_depth_step_mm": hs.grid.depth_step * 1e3, "snapshot_mesh": hs.snap_spec.__dict__,
             "table_build_s": sec, "table_cache_hit": hit, "target_mm": TARGET * 1e3,
-            "footprint": "left out: lateral distance from the push axis <= finger radius + 2 mm, hidden by the finger",
+            "footprint": f"left out: vertices whose deformed position (the reference's) lies within "
+                         f"{(FINGER_R + 0.002) * 1e3:g} mm of the push axis (finger radius + 2 mm), hidden by the finger",
             "azimuths": rows}
 
 
