@@ -1170,22 +1170,23 @@ def planned_solves(st: Settings, study: str = "full") -> list[Solve]:
     if study not in ("full", "mirror", "holdout"):
         raise ValueError(f"study must be 'full', 'mirror' or 'holdout', got {study!r}")
     lv = st.levels
+
+    def snapshot_jobs(s: Settings) -> list[Solve]:      # validation_set's held-out paths, snapshot_source's
+        jobs = [Solve(s.snap_spec, a, s.fine_step) for a in s.holdout_deg]
+        jobs += [Solve(s.snap_spec, a, s.fine_step) for a in s.grid.angles_deg if a != 0.0]
+        if s.snap_spec != lv[-1]:
+            jobs.append(Solve(s.snap_spec, 0.0, s.depth_step))
+        return jobs
+
     if study == "holdout":
-        hs = holdout_grid(st)
-        jobs = [Solve(lv[-1], 0.0, st.fine_step)]
-        jobs += [Solve(hs.snap_spec, a, st.fine_step) for a in (*hs.holdout_deg, *hs.grid.angles_deg) if a != 0.0]
-        if hs.snap_spec != lv[-1]:
-            jobs.append(Solve(hs.snap_spec, 0.0, st.depth_step))
+        jobs = [Solve(lv[-1], 0.0, st.fine_step)] + snapshot_jobs(holdout_grid(st))
         return sorted(jobs, key=lambda j: -j.cost())
     jobs = [Solve(s, 0.0, st.depth_step) for s in lv[:-1]] + [Solve(lv[-1], 0.0, st.fine_step)]
     jobs += [Solve(replace(lv[-1], h_fine=hf, half_z=False, cut=True), 0.0, st.fine_step) for hf in st.half_levels]
     if study == "full":
         jobs += [Solve(lv[st.penalty_level], 0.0, st.depth_step, sc) for sc in st.penalty_scales]
         jobs += [Solve(replace(lv[-2], skin_h=h), 0.0, st.depth_step) for h in st.skin_sizes]
-        jobs += [Solve(st.snap_spec, a, st.fine_step) for a in st.holdout_deg]
-        jobs += [Solve(st.snap_spec, a, st.fine_step) for a in st.grid.angles_deg if a != 0.0]
-        if st.snap_spec != lv[-1]:
-            jobs.append(Solve(st.snap_spec, 0.0, st.depth_step))
+        jobs += snapshot_jobs(st)
     return sorted(jobs, key=lambda j: -j.cost())      # repeats are dropped by prefetch (by cache key)
 
 
@@ -1325,19 +1326,19 @@ def main(argv: list[str] | None = None) -> int:
     for h in st.skin_sizes:     # before any solve: a bad size would otherwise fail after the convergence study
         replace(st.levels[-2], skin_h=h)
     rm = realtime_model(st, mat, args.cache_dir or None)
+    probes = rm.rest_vertices.astype(float)       # the rendered vertices every reference path is sampled at
     if args.level is not None:
         if not 0 <= args.level < len(st.levels):
             raise SystemExit(f"--level must be in [0, {len(st.levels) - 1}], got {args.level}")
         last = args.level == len(st.levels) - 1
         reference_path(st.levels[args.level], 0.0, _depths(st.fine_step if last else st.depth_step), mat, cache,
-                       rm.rest_vertices.astype(float), st.contact)
+                       probes, st.contact)
         _log(f"level {args.level} cached in {time.perf_counter() - t0:.1f} s")
         return 0
     study = "mirror" if args.mirror_study else "holdout" if args.holdout_study else "full"
-    prefetch(planned_solves(st, study), args.jobs, mat, cache, rm.rest_vertices.astype(float), st.contact)
+    prefetch(planned_solves(st, study), args.jobs, mat, cache, probes, st.contact)
     if args.holdout_study:
-        fine = reference_path(st.levels[-1], 0.0, _depths(st.fine_step), mat, cache, rm.rest_vertices.astype(float),
-                              st.contact)
+        fine = reference_path(st.levels[-1], 0.0, _depths(st.fine_step), mat, cache, probes, st.contact)
         hs = holdout_study(st, mat, cache, rm, fine)
         _write(args.out, "holdout_study", hs)
         plot_holdout_study(args.out, hs)
