@@ -256,8 +256,12 @@ def test_second_run_reads_the_cache(quick):
     solves = [ln for ln in log1.splitlines() if "DOF, load steps" in ln]
     assert "prefetch: " in log1 and all(ln.startswith("[solver ") for ln in solves), solves
     assert {ln.split("]")[0] for ln in solves} == {"[solver 1", "[solver 2"}
+    # the snapshot table's push got its unloading sweep (stable_path) in a worker too
+    sweeps = [ln for ln in log1.splitlines() if "unloading from" in ln]
+    assert len(sweeps) == 1 and sweeps[0].startswith("[solver "), sweeps
     s2, log = _run(base / "out2", base / "cache")
     assert "DOF, load steps" not in log and "loaded from cache" in log      # ... the second did not
+    assert "unloading from" not in log
     assert s2["realtime"]["precompute_cache_hit"] is True
     assert s2["realtime"]["max_visible_error_mm_0_50"] == pytest.approx(s1["realtime"]["max_visible_error_mm_0_50"],
                                                                         rel=1e-9)
@@ -311,6 +315,11 @@ def test_planned_solves_list_each_push_the_run_reads_once_by_cache_key():
     hold = X.planned_solves(full, "holdout")
     assert len(set(keys(full, "holdout"))) == 4 and set(keys(full, "holdout")) <= set(keys(full))
     assert sorted(j.angle_deg for j in hold) == [0.0, 0.0, 5.0, 10.0]
+    # the table's pushes and the held-out ones are read as their stable branch (stable_path), the levels not
+    assert sorted((j.angle_deg, j.stable, j.spec == full.snap_spec) for j in hold) == \
+        [(0.0, False, False), (0.0, True, True), (5.0, True, True), (10.0, True, True)]
+    assert {j.spec for j in X.planned_solves(full) if j.stable} == {full.snap_spec}
+    assert [j.stable for j in X.planned_solves(quick)].count(True) == 1
     assert X.holdout_grid(full).grid.angles_deg == (0.0, 10.0)
     with pytest.raises(ValueError, match="held-out azimuth 25 deg is outside"):
         X.holdout_grid(replace(full, holdout_deg=(25.0,)))

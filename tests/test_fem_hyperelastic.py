@@ -732,3 +732,45 @@ def test_a_load_step_that_keeps_running_out_is_halved_after_resume_max_continuat
     assert not np.array_equal(halved[0], stuck[-1][2])           # the halved step restarts from converged
     assert np.abs(st[1].u - plain[1].u).max() < 1e-7 and abs(st[1].force - plain[1].force) < 1e-5
 
+
+
+def _caps(m, angle=0.0):
+    return lambda d: H.capsule_at(angle, d, 0.008, m.mesh.radius, m.mesh.center)
+
+
+@pytest.fixture(scope="module")
+def loading(quarter):
+    return H.solve_path(quarter, 0.0, [0.004, 0.008, 0.012], 0.008, step=0.004)
+
+
+def test_unload_sweep_finds_the_loading_path_where_there_is_one_branch(quarter, loading):
+    """A push without hysteresis: unloading from the deepest state lands on the loading state at every depth
+    (the sweep runs to the shallowest), and the stable branch is the loading path."""
+    st = loading
+    sw = H.unload_sweep(quarter, _caps(quarter), st, step=0.002)
+    assert [s.depth for s in sw] == pytest.approx([0.004, 0.008, 0.012]) and all(s.converged for s in sw)
+    for a, b in zip(sw[:2], st[:2], strict=True):
+        assert np.abs(a.u - b.u).max() <= H.BRANCH_MEET_TOL
+        assert abs(a.extra["energy"] - a.extra["energy_loading"]) <= 1e-6 * abs(a.extra["energy"])
+    chosen, branch = H.stable_states(quarter, _caps(quarter), st, step=0.002)
+    assert branch.tolist() == [0, 0, 0] and all(c is s for c, s in zip(chosen, st, strict=True))
+
+
+def test_stable_states_replaces_a_higher_energy_state_by_the_unloaded_equilibrium(quarter, loading):
+    """A loading state that is not the lowest-energy equilibrium at its depth (here the 8 mm state pushed off
+    its equilibrium, as a metastable branch would be) is replaced by the state unloading reaches there, which
+    is the equilibrium: within 20 µm of the true loading state, at a lower Π. The others stay."""
+    st = loading
+    bad = list(st)
+    X = quarter.points - quarter.mesh.center
+    bump = 0.0005 * np.exp(-((X[:, 1] ** 2 + X[:, 2] ** 2) / 0.01 ** 2))[:, None] * np.array([0.0, 0.0, 1.0])
+    bad[1] = replace(st[1], u=st[1].u + bump * (X[:, 2:3] > 0))
+    chosen, branch = H.stable_states(quarter, _caps(quarter), bad, step=0.002)
+    assert branch.tolist() == [0, 1, 0]
+    assert chosen[1].extra["energy"] < chosen[1].extra["energy_loading"]
+    assert np.abs(chosen[1].u - st[1].u).max() < 2e-5
+    assert chosen[0] is bad[0] and chosen[2] is bad[2]
+    with pytest.raises(ValueError, match="ascending"):
+        H.unload_sweep(quarter, _caps(quarter), st[::-1])
+    with pytest.raises(ValueError, match="non-empty"):
+        H.unload_sweep(quarter, _caps(quarter), [])

@@ -27,7 +27,10 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    the snapshot mesh's own error is in the figure. Full mode: snapshots at azimuths 0, 10 and 20 degrees, and
    azimuth 5 held out against its own solve on the snapshot mesh (interpolation across azimuth at the node
    table's spacing; ``--holdout-study`` runs only that check, on a table at 0 and 10 degrees:
-   ``holdout_study.json/png``, :func:`holdout_study`). Accuracy against speed (``accuracy_speed.png/.json``) and the failure map, where
+   ``holdout_study.json/png``, :func:`holdout_study`). The table's pushes and the held-out ones are read as
+   their **stable branch** (:func:`stable_path`): a push off azimuth 0 can be bistable (a fold beside the
+   finger that the loading path carries past the depth where a lower-energy state exists, then snaps); the
+   finger is withdrawn from 50 mm to the start, and each depth keeps the state of lower total potential. Accuracy against speed (``accuracy_speed.png/.json``) and the failure map, where
    each model breaks by depth and azimuth (``failure_map.png/.json``). **Snapshot-mesh study**
    (``realtime.snapshot_mesh_study``): the same azimuth-0 check for a table on each skin-study mesh.
    ``nodes/fem/model_table.json`` (full mode) is what the node chooses from.
@@ -75,9 +78,11 @@ from nodes.fem.hyperelastic import (
     HyperelasticModel,
     PathState,
     RefSpec,
+    capsule_at,
     reference_mesh,
     solve_path,
     solver_tag,
+    stable_states,
 )
 from nodes.fem.material import Material
 from nodes.fem.mesh import MeshSpec
@@ -256,6 +261,32 @@ def _previous_version_path(cache: ArrayCache, old_key: str) -> dict | None:
     return old if old is not None and int(np.max(old["newton"])) < NEWTON_ITERS else None
 
 
+def _path_record(model: HyperelasticModel, states: list[PathState], probes: np.ndarray, angle_deg: float) -> dict:
+    """The per-depth arrays :func:`reference_path` caches for ``states`` on ``model`` (see there), ``probes``
+    (k, 3) m the rendered vertices."""
+    from nodes.fem.snapshots import _probe, _sample
+
+    P = _probe(model, probes)
+    qp, vis = [], []
+    a = math.radians(angle_deg)
+    axis = np.array([math.cos(a), 0.0, math.sin(a)])
+    for s in states:
+        qp.append(int(np.count_nonzero(np.linalg.det(model.deformation(s.u)).min(axis=1) <= 0)))
+        ue = s.u[model.edofs]
+        bad = np.flatnonzero(np.linalg.det(model.nodal_deformation(s.u)).min(axis=1) <= 0)
+        xc = (model.points[model.edofs[bad]] + ue[bad]).mean(axis=1) - model.mesh.center
+        lat = np.linalg.norm(xc - np.outer(xc @ axis, axis), axis=1)
+        vis.append(int(np.count_nonzero(lat > FINGER_R + 0.002)))
+    return {"u": np.stack([_sample(P, s.u, probes, model) for s in states]),
+            "u_dof": np.stack([s.u for s in states]).astype(np.float32),
+            "force": np.array([s.force for s in states]), "inverted": np.array([s.inverted for s in states]),
+            "inverted_qp": np.array(qp), "inverted_nodal_visible": np.array(vis),
+            "min_detF": np.array([s.min_detF for s in states]),
+            "max_strain": np.array([s.max_strain for s in states]),
+            "penetration": np.array([s.penetration for s in states]),
+            "newton": np.array([s.iterations for s in states]), "converged": np.array([s.converged for s in states])}
+
+
 def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, cache: ArrayCache,
                    probes: np.ndarray, contact: str = DEFAULT_CONTACT, penalty_scale: float = PENALTY_SCALE) -> dict:
     """Neo-Hookean push at ``angle_deg`` through ``depths`` (load steps = the depth spacing, ≤ 2.5 mm) on
@@ -287,32 +318,65 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
              f"{contact} contact, penalty {penalty_scale:g} E/h ...")
         states = solve_path(model, math.radians(angle_deg), depths, FINGER_R, step=step, iters=NEWTON_ITERS,
                             log=lambda s: _log("  " + s.strip()), contact=contact)
-        from nodes.fem.snapshots import _probe, _sample
-
-        P = _probe(model, probes)
-        qp, vis = [], []
-        a = math.radians(angle_deg)
-        axis = np.array([math.cos(a), 0.0, math.sin(a)])
-        for s in states:
-            qp.append(int(np.count_nonzero(np.linalg.det(model.deformation(s.u)).min(axis=1) <= 0)))
-            ue = s.u[model.edofs]
-            bad = np.flatnonzero(np.linalg.det(model.nodal_deformation(s.u)).min(axis=1) <= 0)
-            xc = (model.points[model.edofs[bad]] + ue[bad]).mean(axis=1) - model.mesh.center
-            lat = np.linalg.norm(xc - np.outer(xc @ axis, axis), axis=1)
-            vis.append(int(np.count_nonzero(lat > FINGER_R + 0.002)))
-        return {"u": np.stack([_sample(P, s.u, probes, model) for s in states]),
-                "u_dof": np.stack([s.u for s in states]).astype(np.float32),
-                "force": np.array([s.force for s in states]), "inverted": np.array([s.inverted for s in states]),
-                "inverted_qp": np.array(qp), "inverted_nodal_visible": np.array(vis),
-                "min_detF": np.array([s.min_detF for s in states]),
-                "max_strain": np.array([s.max_strain for s in states]),
-                "penetration": np.array([s.penetration for s in states]),
-                "newton": np.array([s.iterations for s in states]), "converged": np.array([s.converged for s in states]),
+        return {**_path_record(model, states, probes, angle_deg),
                 "seconds": np.array(time.perf_counter() - t), "cpu_seconds": np.array(time.process_time() - tc),
                 "dofs": np.array(model.n)}
 
     z, hit, _ = cache.get_or_compute("reference", key, compute,
                                      f"reference {spec.key()} at {angle_deg:g} deg, penalty {penalty_scale:g} E/h")
+    return z
+
+
+UNLOAD_VERSION = "unload-2"     #: bump when :func:`nodes.fem.hyperelastic.stable_states` changes (cache keys)
+
+
+def _stable_key(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, probes: np.ndarray,
+                contact: str, penalty_scale: float) -> str:
+    """Cache key of a :func:`stable_path`: its loading path's key and the unloading sweep's version."""
+    spec, angle_deg = _as_solved(spec, angle_deg)
+    return cache_key(UNLOAD_VERSION, _reference_key(spec, angle_deg, depths, mat, probes, contact, penalty_scale))
+
+
+def stable_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, cache: ArrayCache,
+                probes: np.ndarray, contact: str = DEFAULT_CONTACT, penalty_scale: float = PENALTY_SCALE) -> dict:
+    """:func:`reference_path` with the stable branch where the push is bistable: the loading path, then the
+    finger withdrawn from its deepest state back to the shallowest (:func:`nodes.fem.hyperelastic.stable_states`,
+    the path's load steps), and at each depth the state of lower total potential Π. The
+    snapshot tables and the held-out pushes they are judged on read these, so both sides make the same choice.
+    Cached (kind "stable"); frictionless contact only (else the loading path itself). Returns
+    :func:`reference_path`'s dict plus "branch" (D,) int (1: the unloaded state), "energy_loading",
+    "energy_unloading" (D,) J (NaN where the sweep did not reach), "unload_seconds"."""
+    p = reference_path(spec, angle_deg, depths, mat, cache, probes, contact, penalty_scale)
+    if contact != "frictionless":
+        return p
+    spec, angle_deg = _as_solved(spec, angle_deg)
+    key = _stable_key(spec, angle_deg, depths, mat, probes, contact, penalty_scale)
+
+    def compute() -> dict:
+        t = time.perf_counter()
+        model = _ref_model(spec, angle_deg, mat, penalty_scale)
+        _check_dofs(p, model)
+        states = _path_states(p, depths, depths)
+        a = math.radians(angle_deg)
+        caps = lambda d: capsule_at(a, d, FINGER_R, model.mesh.radius, model.mesh.center)  # noqa: E731
+        _log(f"stable branch {spec.key()} at {angle_deg:g} deg: unloading from {depths[-1] * 1e3:g} mm ...")
+        chosen, branch = stable_states(model, caps, states, step=_load_step(depths), iters=NEWTON_ITERS,
+                                       log=lambda s: _log("  " + s.strip()))
+        rec = _path_record(model, chosen, probes, angle_deg)
+        out = dict(p)
+        for k_, v in rec.items():           # the loading rows as cached (sampled from float64, not float32)
+            out[k_] = np.where(branch.reshape((-1,) + (1,) * (v.ndim - 1)) == 1, v, p[k_]).astype(v.dtype)
+        e_ld = np.array([c.extra.get("energy_loading", np.nan) for c in chosen])
+        e_un = np.array([c.extra.get("energy", np.nan) for c in chosen])
+        n_un = int(branch.sum())
+        _log(f"stable branch {spec.key()} at {angle_deg:g} deg: the unloaded state taken at {n_un} depth(s)"
+             + (f" ({', '.join(f'{d * 1e3:g}' for d in depths[branch == 1])} mm)" if n_un else "")
+             + f", {time.perf_counter() - t:.0f} s")
+        out.update(branch=branch, energy_loading=e_ld, energy_unloading=e_un,
+                   unload_seconds=np.array(time.perf_counter() - t))
+        return out
+
+    z, _, _ = cache.get_or_compute("stable", key, compute, f"stable branch {spec.key()} at {angle_deg:g} deg")
     return z
 
 
@@ -627,7 +691,7 @@ def validation_set(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeM
     out = [{"angle_deg": 0.0, "depth": float(d), "u": fine["u"][j], "source": "finest convergence mesh",
             "held_out": bool(np.min(np.abs(snap_d - d)) > 1e-9)} for j, d in enumerate(depths)]
     for a in st.holdout_deg:
-        p = reference_path(st.snap_spec, a, depths, mat, cache, verts, st.contact)
+        p = stable_path(st.snap_spec, a, depths, mat, cache, verts, st.contact)
         out += [{"angle_deg": float(a), "depth": float(d), "u": p["u"][j], "source": "held-out azimuth",
                  "held_out": True} for j, d in enumerate(depths)]
     return out
@@ -658,17 +722,16 @@ def snapshot_source(st: Settings, mat: Material, cache: ArrayCache, rm: Realtime
     (the node table's paths when ``snap_spec`` is the node's), so nothing is solved twice. Also returns the
     azimuth-0 solve, for its timing."""
     verts = rm.rest_vertices.astype(float)
-    if st.snap_spec == st.levels[-1]:
-        src, sd = fine, _depths(st.fine_step)
-    else:       # another level or a skin variant: the convergence / skin study cached it (else solved here, once)
-        sd = _depths(st.depth_step)
-        src = reference_path(st.snap_spec, 0.0, sd, mat, cache, verts, st.contact)
+    # the finest level (quick) or another level or a skin variant, which the convergence / skin study cached
+    # (else solved here, once); the stable branch of it (stable_path), as every azimuth's
+    sd = _depths(st.fine_step if st.snap_spec == st.levels[-1] else st.depth_step)
+    src = stable_path(st.snap_spec, 0.0, sd, mat, cache, verts, st.contact)
 
     def solved(ang, model, depths):
         if ang == 0.0:
             return _path_states(src, sd, depths, model)
         fd = _depths(st.fine_step)          # other azimuths: the cached path the held-out check also reads
-        p = reference_path(st.snap_spec, ang, fd, mat, cache, verts, st.contact)
+        p = stable_path(st.snap_spec, ang, fd, mat, cache, verts, st.contact)
         return _path_states(p, fd, depths, model)
 
     return solved, src
@@ -1099,8 +1162,8 @@ def node_table_path(angle_deg: float, mat: Material, cache: ArrayCache, rm: Real
     (path, depths (D,) m). Raises ``SystemExit`` for an azimuth DEFAULT_GRID does not have."""
     _check_azimuth(angle_deg)
     depths = _depths(DEFAULT_GRID.depth_step)
-    return reference_path(DEFAULT_REF_SPEC, angle_deg, depths, mat, cache, rm.rest_vertices.astype(float),
-                          contact), depths
+    return stable_path(DEFAULT_REF_SPEC, angle_deg, depths, mat, cache, rm.rest_vertices.astype(float),
+                       contact), depths
 
 
 def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, contact: str = DEFAULT_CONTACT,
@@ -1122,7 +1185,8 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
         return 0
     _log(f"node table: azimuths {DEFAULT_GRID.angles_deg} deg on {DEFAULT_REF_SPEC.key()}; key "
          f"{table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact)}")
-    prefetch([Solve(DEFAULT_REF_SPEC, a, DEFAULT_GRID.depth_step) for a in DEFAULT_GRID.angles_deg], jobs, mat, cache,
+    prefetch([Solve(DEFAULT_REF_SPEC, a, DEFAULT_GRID.depth_step, stable=True) for a in DEFAULT_GRID.angles_deg], jobs,
+             mat, cache,
              rm.rest_vertices.astype(float), contact)
 
     def solved(ang, model, depths):
@@ -1142,12 +1206,14 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
 @dataclass(frozen=True)
 class Solve:
     """One :func:`reference_path` a run reads: mesh, azimuth (deg), output depth spacing (m; depths
-    ``_depths(step)``) and contact penalty scale."""
+    ``_depths(step)``) and contact penalty scale; ``stable``: its :func:`stable_path` (the snapshot tables and
+    the held-out pushes)."""
 
     spec: RefSpec
     angle_deg: float
     step: float
     penalty_scale: float = PENALTY_SCALE
+    stable: bool = False
 
     def cost(self) -> float:
         """Relative CPU estimate for ordering (largest first): ∝ h_fine⁻³ (× (h_fine/skin)² with a skin), × 2 for
@@ -1172,10 +1238,9 @@ def planned_solves(st: Settings, study: str = "full") -> list[Solve]:
     lv = st.levels
 
     def snapshot_jobs(s: Settings) -> list[Solve]:      # validation_set's held-out paths, snapshot_source's
-        jobs = [Solve(s.snap_spec, a, s.fine_step) for a in s.holdout_deg]
-        jobs += [Solve(s.snap_spec, a, s.fine_step) for a in s.grid.angles_deg if a != 0.0]
-        if s.snap_spec != lv[-1]:
-            jobs.append(Solve(s.snap_spec, 0.0, s.depth_step))
+        jobs = [Solve(s.snap_spec, a, s.fine_step, stable=True) for a in s.holdout_deg]
+        jobs += [Solve(s.snap_spec, a, s.fine_step, stable=True) for a in s.grid.angles_deg if a != 0.0]
+        jobs.append(Solve(s.snap_spec, 0.0, s.fine_step if s.snap_spec == lv[-1] else s.depth_step, stable=True))
         return jobs
 
     if study == "holdout":
@@ -1213,11 +1278,12 @@ def _solver_init(counter) -> None:
 
 
 def _solve_one(args: tuple) -> tuple[int, float, str | None]:
-    """Worker: one :func:`reference_path` into the cache; (job index, seconds, None or the error)."""
+    """Worker: one :func:`reference_path` (or :func:`stable_path`) into the cache; (job index, seconds, None or
+    the error)."""
     i, job, mat, cache_dir, probes, contact = args
     t = time.perf_counter()
     try:
-        reference_path(job.spec, job.angle_deg, _depths(job.step), mat, ArrayCache(cache_dir, _log), probes,
+        (stable_path if job.stable else reference_path)(job.spec, job.angle_deg, _depths(job.step), mat, ArrayCache(cache_dir, _log), probes,
                        contact, job.penalty_scale)
     except Exception as exc:                    # noqa: BLE001 - reported; the run solves it again and raises
         return i, time.perf_counter() - t, f"{type(exc).__name__}: {exc}"
@@ -1226,16 +1292,19 @@ def _solve_one(args: tuple) -> tuple[int, float, str | None]:
 
 def missing_solves(jobs: list[Solve], mat: Material, cache: ArrayCache, probes: np.ndarray, contact: str
                    ) -> list[Solve]:
-    """The ``jobs`` :func:`reference_path` would solve, not read, from ``cache`` (a previous version's path
-    counts only when that version's path is this one's, :func:`_previous_version_path`), each key once."""
-    todo, seen = [], set()
+    """The ``jobs`` :func:`reference_path` (or, ``stable``, :func:`stable_path`) would solve, not read, from
+    ``cache`` (a previous version's path counts only when that version's path is this one's,
+    :func:`_previous_version_path`), each loading path once (its ``stable`` job where there is one)."""
+    todo: dict[str, Solve] = {}             # by the loading path's key: one worker per path, its sweep included
     for j in jobs:
         keys = _reference_keys(j.spec, j.angle_deg, _depths(j.step), mat, probes, contact, j.penalty_scale)
-        if keys[0] not in seen and not os.path.exists(cache.path("reference", keys[0])) \
-                and _previous_version_path(cache, keys[1]) is None:
-            todo.append(j)
-        seen.add(keys[0])
-    return todo
+        missing = not os.path.exists(cache.path("reference", keys[0])) and _previous_version_path(cache, keys[1]) is None
+        if j.stable and contact == "frictionless":     # its unloading sweep too (stable_path)
+            sk = _stable_key(j.spec, j.angle_deg, _depths(j.step), mat, probes, contact, j.penalty_scale)
+            missing = missing or not os.path.exists(cache.path("stable", sk))
+        if missing and (keys[0] not in todo or j.stable):
+            todo[keys[0]] = j
+    return list(todo.values())
 
 
 def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache, probes: np.ndarray,

@@ -61,7 +61,7 @@ import scipy.sparse as sp
 from nodes.fem.material import Material
 from nodes.fem.mesh import TetMesh, cylinder_part_mesh
 
-__all__ = ["SOLVER_VERSION", "PREVIOUS_VERSION", "CONTACT_LAWS", "DEFAULT_CONTACT", "RefSpec", "HyperelasticModel", "PathState",
+__all__ = ["unload_sweep", "stable_states", "BRANCH_MEET_TOL", "SOLVER_VERSION", "PREVIOUS_VERSION", "CONTACT_LAWS", "DEFAULT_CONTACT", "RefSpec", "HyperelasticModel", "PathState",
            "Capsule", "capsule_at", "solve_path", "solve_path_capsule", "reference_mesh", "solver_tag"]
 
 SOLVER_VERSION = "nh-7"     #: bump when the reference's formulation or defaults change (cache keys)
@@ -866,6 +866,29 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
     return u, iters, False
 
 
+def _newton_resumed(m: HyperelasticModel, guess: np.ndarray, caps: Capsule, k: float, iters: int, tol_u: float,
+                    tol_r: float, nstate: dict) -> tuple[np.ndarray | None, int, bool, np.ndarray | None]:
+    """One load step's Newton solve from ``guess``; a call that runs out of ``iters`` iterations, not failed
+    (e.g. a snap-through still under way), is continued from where it got to, in the mode it ended in, up to
+    :data:`RESUME_MAX` more calls, rather than restarting a halved step from the last converged state (nh-7).
+    Returns (u or None when the line search failed, iterations over all calls, converged, last iterate or
+    None)."""
+    its_total, u_last = 0, None
+    try:
+        u_new, its, conv = _newton(m, guess, caps, k, iters, tol_u, tol_r, None, nstate)
+        u_last = u_new
+        for _ in range(RESUME_MAX):
+            if conv or its < iters:
+                break
+            its_total += its
+            u_new, its, conv = _newton(m, u_new, caps, k, iters, tol_u, tol_r, None, nstate,
+                                       shifted=nstate.get("ended_shifted", False))
+            u_last = u_new
+    except FloatingPointError:
+        u_new, its, conv = None, iters, False
+    return u_new, its_total + its, conv, u_last
+
+
 def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: float, step: float = 0.001,
                iters: int = 30, tol_u: float = 1e-6, tol_r: float | None = None, log=None,
                substeps_max: int = 3, contact: str = DEFAULT_CONTACT) -> list[PathState]:
@@ -943,20 +966,8 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
                     g2 = u + (u - u_prev) * (h / (d_cur - d_prev))
                     if math.isfinite(m.energy(g2, None, 0.0)):
                         guess = g2
-                try:
-                    u_new, its, conv = _newton(m, guess, caps, k, iters, tol_u, tol_r, None, nstate)
-                    u_last = u_new
-                    # out of iterations, not failed (e.g. a snap-through still under way): go on from where it got
-                    # to, in the mode it ended in, rather than restart a halved step from the last converged state
-                    for _ in range(RESUME_MAX):
-                        if conv or its < iters:
-                            break
-                        its_total += its
-                        u_new, its, conv = _newton(m, u_new, caps, k, iters, tol_u, tol_r, None, nstate,
-                                                   shifted=nstate.get("ended_shifted", False))
-                        u_last = u_new
-                except FloatingPointError:
-                    u_new, its, conv = None, iters, False
+                u_new, its, conv, u_try = _newton_resumed(m, guess, caps, k, iters, tol_u, tol_r, nstate)
+                u_last = u_try if u_try is not None else u_last
                 its_total += its
                 if conv:
                     break
@@ -975,16 +986,111 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
         caps = capsule(d_cur)
         if sticking:
             caps = replace(caps, anchors=anchors)
-        fvec, pen, ncon = m.contact_force(u, caps, k)
-        fvec = m.sym_factor * fvec * np.array([1.0, 0.0 if m.sym_y else 1.0, 0.0 if m.sym_z else 1.0])
-        minJ, ninv, emax = m.checks(u)
-        st = PathState(float(d_cur), u.copy(), float(fvec @ caps.direction), fvec, its_total, bool(conv_all),
-                       minJ, ninv, emax, pen, ncon, time.perf_counter() - t0)
+        st = _path_state(m, u, caps, k, d_cur, its_total, conv_all, t0)
         if sticking:
             st.extra["anchors"] = anchors.copy()
         out.append(st)
         if log:
             log(f"  depth {d_cur * 1e3:5.1f} mm: F={st.force:.4f} N, {its_total} Newton its, "
-                f"min det F={minJ:.3f}, inverted={ninv}, pen={st.penetration * 1e3:.3f} mm, "
+                f"min det F={st.min_detF:.3f}, inverted={st.inverted}, pen={st.penetration * 1e3:.3f} mm, "
                 f"{st.seconds:.1f} s")
+    return out
+
+
+def _path_state(m: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, depth: float, iterations: int,
+                converged: bool, t0: float) -> PathState:
+    """The :class:`PathState` of displacement ``u`` (P, 3) m under ``caps`` at ``depth`` m: the finger force
+    (full body, the symmetry planes' mirror images added), the element checks; ``t0`` its start (perf_counter)."""
+    fvec, pen, ncon = m.contact_force(u, caps, k)
+    fvec = m.sym_factor * fvec * np.array([1.0, 0.0 if m.sym_y else 1.0, 0.0 if m.sym_z else 1.0])
+    minJ, ninv, emax = m.checks(u)
+    return PathState(float(depth), u.copy(), float(fvec @ caps.direction), fvec, int(iterations), bool(converged),
+                     minJ, ninv, emax, pen, ncon, time.perf_counter() - t0)
+
+
+def stable_states(model: HyperelasticModel, capsule, states: list[PathState], step: float = 0.0025,
+                  iters: int = 30, log=None) -> tuple[list[PathState], np.ndarray]:
+    """Per depth the lower-energy of the loading state (``states``, :func:`solve_path_capsule`) and the
+    unloaded one (:func:`unload_sweep`): where a push is bistable, the stable branch rather than the metastable
+    one the loading path may stay on (both are equilibria under the same finger; the lower total potential Π
+    is the one a perturbation cannot leave). The unloaded state is taken only when it converged and lies
+    farther than :data:`BRANCH_MEET_TOL` from the loading one (else they are one state). Returns (states, branch
+    (D,) int: 1 where the unloaded state was taken); each taken state's ``extra`` carries both energies.
+    Frictionless contact only. Costs one Newton solve per depth (about a third of the loading path's CPU on
+    the 3.4 mm half model)."""
+    sw = unload_sweep(model, capsule, states, step=step, iters=iters, log=log)
+    out, branch = [], np.zeros(len(states), np.int64)
+    for j, (ld, un) in enumerate(zip(states, sw, strict=True)):
+        take = (un is not None and un.converged and un.extra["energy"] < un.extra["energy_loading"]
+                and float(np.abs(un.u - ld.u).max()) > BRANCH_MEET_TOL)
+        out.append(un if take else ld)
+        branch[j] = int(take)
+    return out, branch
+
+
+#: two states of one push lie on the same branch when no DOF point is farther apart than this (m): 20× the
+#: Newton tolerance on the step, far below the 0.7 mm target (:func:`stable_states`)
+BRANCH_MEET_TOL = 2e-5
+
+
+def unload_sweep(model: HyperelasticModel, capsule, states: list[PathState], step: float = 0.0025,
+                 iters: int = 30, tol_u: float = 1e-6, tol_r: float | None = None, log=None,
+                 substeps_max: int = 3) -> list[PathState]:
+    """The equilibria of a frictionless push found by *unloading*: from the deepest of ``states`` (a loading
+    path, :func:`solve_path_capsule`, ascending depths) the finger is withdrawn through the same depths, load
+    steps of at most ``step`` m, each Newton solve started from the last unloaded state (halved on failure as in
+    :func:`solve_path_capsule`). A push into a soft body can be bistable: the loading path stays on a
+    metastable branch (a fold beside the finger not yet snapped) that unloading, starting past the snap, does
+    not visit. Returns one :class:`PathState` per depth of ``states`` (ascending), with
+    ``extra["energy"]`` (J, Π of the unloaded state) and ``extra["energy_loading"]`` (Π of the loading state
+    there); the deepest state is the loading one itself. The sweep runs to the shallowest depth: the two
+    branches coincide past the snap (at 10° on the 3.4 mm mesh from 45 mm) and part only below it, so meeting
+    the loading path says nothing about the depths still to come. Frictionless contact only (a sticking
+    finger's anchors depend on the loading history). Raises ``ValueError`` on an empty or unsorted ``states``,
+    ``RuntimeError`` when a step has no valid iterate at all."""
+    if not states:
+        raise ValueError("states must be a non-empty loading path")
+    d = np.array([s.depth for s in states])
+    if np.any(np.diff(d) <= 0):
+        raise ValueError(f"states must have ascending depths, got {d.tolist()}")
+    m = model
+    k = m.penalty()
+    tol_r = tol_r if tol_r is not None else 1e-6 * m.E_ref * m.h_contact ** 2 * 10
+    out: list[PathState | None] = [None] * len(states)
+    top = states[-1]
+    out[-1] = replace(top, extra={**top.extra, "energy": m.energy(top.u, capsule(top.depth), k),
+                                  "energy_loading": m.energy(top.u, capsule(top.depth), k)})
+    u, d_cur = top.u.copy(), top.depth
+    nstate: dict = {}
+    for j in range(len(states) - 2, -1, -1):
+        t0 = time.perf_counter()
+        target, its_total, conv_all = states[j].depth, 0, True
+        h_max = step
+        while d_cur > target + 1e-12:
+            h = min(h_max, d_cur - target)
+            u_last = None
+            for _ in range(substeps_max + 1):
+                d_new = d_cur - h
+                u_new, its, conv, u_try = _newton_resumed(m, u, capsule(d_new), k, iters, tol_u, tol_r, nstate)
+                u_last = u_try if u_try is not None else u_last
+                its_total += its
+                if conv:
+                    break
+                h *= 0.5
+                h_max = min(h_max, h)
+            else:
+                if u_last is None:
+                    raise RuntimeError(f"Newton failed unloading from {d_cur * 1e3:.2f} mm to {d_new * 1e3:.2f} mm")
+                u_new = u_last
+            conv_all &= conv
+            u, d_cur = u_new, d_new
+        caps = capsule(target)
+        st = _path_state(m, u, caps, k, target, its_total, conv_all, t0)
+        e_un, e_ld = m.energy(u, caps, k), m.energy(states[j].u, caps, k)
+        st.extra.update(energy=e_un, energy_loading=e_ld)
+        out[j] = st
+        if log:
+            gap = float(np.abs(u - states[j].u).max())
+            log(f"  unloading {target * 1e3:5.2f} mm: {its_total} Newton its, Π {e_un:.6g} J against the loading "
+                f"path's {e_ld:.6g} J, {gap * 1e3:.3f} mm apart, {st.seconds:.1f} s")
     return out

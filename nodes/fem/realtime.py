@@ -30,7 +30,7 @@ from nodes.fem.solver import (
     CapacitanceSolver,
     FemModel,
     OutsideCandidates,
-    _grad_ops,
+    TetChecks,
     element_checks,
     solve_corotational,
     solve_full,
@@ -85,7 +85,8 @@ class CondensedSurface:
         """Set ``n_candidates``, ``surface_nodes`` (S,), ``faces`` (F, 3) int32 into them, ``_rest`` (S, 3)
         float32 m, ``_rest_normals`` (F, 3), ``_surf_in_out`` (S,) output row of each surface node (−1: a support
         node, zero displacement), ``_mon_tets`` the monitored tetrahedra (all four nodes are outputs and
-        ``monitor`` (N,) bool holds them) in output rows, ``_out_points`` and ``_mon_Dm_inv``."""
+        ``monitor`` (N,) bool holds them) in output rows, ``_out_points`` and ``_tet_checks`` (their precomputed
+        :class:`nodes.fem.solver.TetChecks`)."""
         m = self.mesh
         self.n_candidates = len(self.solver.cand_pts)
         self.surface_nodes = m.surface_nodes
@@ -99,7 +100,7 @@ class CondensedSurface:
         tet_ok = np.all(out_idx[m.tets] >= 0, axis=1) & np.all(monitor[m.tets], axis=1)
         self._mon_tets = out_idx[m.tets[tet_ok]]
         self._out_points = m.points[self.solver.out_pts]
-        self._mon_Dm_inv = _grad_ops(self._out_points, self._mon_tets)[0] if tet_ok.any() else None
+        self._tet_checks = TetChecks(self._out_points, self._mon_tets)
         # per-update helpers: the surface gather (support rows point at an appended zero row) and the fold
         # test as one sparse product (see folded_faces)
         from nodes.fem.solver import fold_operator
@@ -298,10 +299,7 @@ class RealtimeModel(CondensedSurface):
 
     def _update_linear(self, fg: Finger) -> Update:
         sol, u_out, method = self._solve(fg)
-        if self._mon_Dm_inv is not None and sol.n_contact:
-            strain, inv = element_checks(self._out_points, self._mon_tets, u_out, self._mon_Dm_inv)
-        else:
-            strain, inv = 0.0, 0
+        strain, inv = self._tet_checks(u_out) if sol.n_contact else (0.0, 0)
         us = self._surface_of(u_out)
         finite = bool(np.all(np.isfinite(us))) and math.isfinite(sol.force) and math.isfinite(sol.stiffness)
         status, valid = "ok", True

@@ -51,11 +51,7 @@ from nodes.fem.material import Material
 from nodes.fem.mesh import MeshSpec, TetMesh
 from nodes.fem.realtime import CondensedSurface, Update, _dist_to_points
 from nodes.fem.scene_mesh import DEFAULT_SCENE_SPEC, scene_mesh
-from nodes.fem.solver import (
-    CapacitanceSolver,
-    FemModel,
-    TetChecks,
-)
+from nodes.fem.solver import CapacitanceSolver, FemModel
 
 __all__ = ["SceneModel", "SurfaceIndex", "scene_finger", "finger_on_scene", "one_blas_thread", "STICKY_DEPTH",
            "STIFFNESS_FLOOR"]
@@ -221,7 +217,6 @@ class SceneModel(CondensedSurface):
         except (KeyError, ValueError) as exc:
             raise ValueError(f"scene capacitance cache entry {self.cache_key} is inconsistent: {exc}") from exc
         self._set_output_maps(monitor)
-        self._tet_checks = TetChecks(self._out_points, self._mon_tets)
         self.surface = SurfaceIndex(scene)
         self._anchor: Finger | None = None
         self.precompute_s = time.perf_counter() - t0

@@ -34,16 +34,20 @@ from nodes.fem.hyperelastic import (
     DEFAULT_CONTACT,
     HyperelasticModel,
     RefSpec,
+    capsule_at,
     reference_mesh,
     solve_path,
     solver_tag,
+    stable_states,
 )
 from nodes.fem.material import Material
 
 __all__ = ["SnapshotGrid", "SnapshotModel", "build_table", "surface_coords", "TABLE_VERSION", "DEFAULT_GRID",
            "DEFAULT_REF_SPEC", "table_key", "load_or_build"]
 
-TABLE_VERSION = "snap-1"   # table layout; the solver and mesh enter the key through SOLVER_VERSION, spec
+#: table layout and content; the solver and mesh enter the key through SOLVER_VERSION, spec. snap-2: every
+#: azimuth's states are the stable branch (:func:`nodes.fem.hyperelastic.stable_states`), not the loading path
+TABLE_VERSION = "snap-2"
 
 
 @dataclass(frozen=True)
@@ -167,7 +171,8 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
     (see :class:`SnapshotModel`). Heavy (minutes per azimuth on a small machine): cache the result
     (:class:`nodes.fem.cache.ArrayCache`). ``spec.half_z`` is used for the azimuth-0 snapshot only.
     ``solved``: optional callable (azimuth deg, model, depths m) -> list of :class:`PathState` (or None to
-    solve here), e.g. the experiment's cached reference solves on the same mesh, so nothing is solved twice.
+    solve here: the loading path and, frictionless, its stable branch, :func:`nodes.fem.hyperelastic.stable_states`),
+    e.g. the experiment's cached stable paths on the same mesh, so nothing is solved twice.
     ``contact``: the finger's contact law (:func:`nodes.fem.hyperelastic.solve_path_capsule`)."""
     log = log or (lambda s: None)
     from flexsheet.model.scene import CYLINDER_CENTER, CYLINDER_LENGTH, CYLINDER_RADIUS
@@ -200,6 +205,11 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
         if states is None:
             states = solve_path(model, math.radians(ang), depths[1:], finger_radius, step=grid.depth_step,
                                 log=log, contact=contact)
+            if contact == "frictionless":       # the stable branch where the push is bistable
+                a = math.radians(ang)
+                states, _ = stable_states(model, lambda d, a=a, m=mesh: capsule_at(a, d, finger_radius, m.radius,
+                                                                                  m.center),
+                                          states, step=grid.depth_step, log=log)
         Ps = _probe(model, side_pts)
         Pc = _probe(model, cap_pts)
         for j, st in enumerate(states, start=1):
