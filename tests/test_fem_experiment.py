@@ -256,9 +256,10 @@ def test_second_run_reads_the_cache(quick):
     solves = [ln for ln in log1.splitlines() if "DOF, load steps" in ln]
     assert "prefetch: " in log1 and all(ln.startswith("[solver ") for ln in solves), solves
     assert {ln.split("]")[0] for ln in solves} == {"[solver 1", "[solver 2"}
-    # the snapshot table's push got its unloading sweep (stable_path) in a worker too
+    # the pushes the tables read (the snapshots' and the snapshot-mesh study's three) got their unloading sweep
+    # (stable_path) in a worker too
     sweeps = [ln for ln in log1.splitlines() if "unloading from" in ln]
-    assert len(sweeps) == 1 and sweeps[0].startswith("[solver "), sweeps
+    assert len(sweeps) == 3 and all(ln.startswith("[solver ") for ln in sweeps), sweeps
     s2, log = _run(base / "out2", base / "cache")
     assert "DOF, load steps" not in log and "loaded from cache" in log      # ... the second did not
     assert "unloading from" not in log
@@ -318,8 +319,9 @@ def test_planned_solves_list_each_push_the_run_reads_once_by_cache_key():
     # the table's pushes and the held-out ones are read as their stable branch (stable_path), the levels not
     assert sorted((j.angle_deg, j.stable, j.spec == full.snap_spec) for j in hold) == \
         [(0.0, False, False), (0.0, True, True), (5.0, True, True), (10.0, True, True)]
-    assert {j.spec for j in X.planned_solves(full) if j.stable} == {full.snap_spec}
-    assert [j.stable for j in X.planned_solves(quick)].count(True) == 1
+    assert {j.spec for j in X.planned_solves(full) if j.stable} == \
+        {full.snap_spec} | {replace(full.levels[-2], skin_h=h) for h in full.skin_sizes}
+    assert [j.stable for j in X.planned_solves(quick)].count(True) == 3
     assert X.holdout_grid(full).grid.angles_deg == (0.0, 10.0)
     with pytest.raises(ValueError, match="held-out azimuth 25 deg is outside"):
         X.holdout_grid(replace(full, holdout_deg=(25.0,)))
@@ -471,3 +473,56 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     table, hit, _ = load_or_build(ArrayCache(str(tmp_path / "c")), DEFAULT_GRID, DEFAULT_REF_SPEC,
                                   Material(p.E, p.nu), p.finger_radius, build=False)
     assert hit and np.array_equal(table["marker"], np.arange(3.0))
+
+
+def test_stable_path_takes_the_unloaded_rows_only_and_keeps_the_dtypes(tmp_path, monkeypatch):
+    """stable_path: rows where stable_states took the unloaded state come from its record, the others are the
+    loading path's as cached, every array keeps its dtype; the energies and branch flags are stored; a second
+    call reads the "stable" cache entry without touching the loading path."""
+    from flexsheet.experiments import fem as X
+    from nodes.fem.cache import ArrayCache
+    from nodes.fem.hyperelastic import RefSpec
+    from nodes.fem.material import Material
+
+    depths = np.array([0.01, 0.02, 0.03])
+    n_dof, k = 4, 2
+    base = {**_fake_path_dict(n_dof, depths), "u": np.zeros((3, k, 3)), "inverted_qp": np.zeros(3, int),
+            "inverted_nodal_visible": np.zeros(3, int), "seconds": np.array(1.0), "cpu_seconds": np.array(1.0)}
+    calls = []
+
+    def fake_reference_path(*a, **kw):
+        calls.append(a[1])
+        return base
+
+    class FakeModel:
+        mesh = type("M", (), {"radius": 0.035, "center": np.zeros(3)})()
+
+    def fake_stable_states(model, caps, states, step, iters, log):
+        moved = [replace(s, u=s.u + 1.0, force=10.0 + j) for j, s in enumerate(states)]
+        return ([states[0], moved[1], states[2]], np.array([0, 1, 0]),
+                np.array([[3.0, 3.0], [2.0, 1.5], [1.0, 1.0]]))
+
+    def fake_record(model, states, probes, angle_deg):
+        n = len(states)
+        return {"u": np.full((n, k, 3), 7.0), "u_dof": np.stack([s.u for s in states]).astype(np.float64),
+                "force": np.array([s.force for s in states]), "inverted": np.full(n, 5),
+                "inverted_qp": np.full(n, 6), "inverted_nodal_visible": np.full(n, 2), "min_detF": np.full(n, 0.5),
+                "max_strain": np.full(n, 0.25), "penetration": np.full(n, 1e-5), "newton": np.full(n, 9),
+                "converged": np.array([True] * n)}
+
+    monkeypatch.setattr(X, "reference_path", fake_reference_path)
+    monkeypatch.setattr(X, "_ref_model", lambda *a, **kw: FakeModel())
+    monkeypatch.setattr(X, "stable_states", fake_stable_states)
+    monkeypatch.setattr(X, "_path_record", fake_record)
+    cache = ArrayCache(str(tmp_path), None, shipped_dir=None)
+    spec, probes = RefSpec(0.016, 0.012), np.zeros((k, 3))
+    z = X.stable_path(spec, 10.0, depths, Material(), cache, probes)
+    assert z["branch"].tolist() == [0, 1, 0] and z["energy_unloading"].tolist() == [3.0, 1.5, 1.0]
+    assert z["force"].tolist() == [0.0, 11.0, 2.0]                  # the loading path's 0 and 2, the record's 11
+    assert z["u"][1].max() == 7.0 and z["u"][[0, 2]].max() == 0.0
+    assert z["u_dof"].dtype == np.float32 and np.all(z["u_dof"][1] == 1.0) and np.all(z["u_dof"][0] == 0.0)
+    assert z["newton"].tolist() == [1, 9, 1] and z["inverted_qp"].tolist() == [0, 6, 0]
+    assert z["converged"].dtype == bool
+    assert calls == [10.0]
+    z2 = X.stable_path(spec, 10.0, depths, Material(), cache, probes)   # the cached entry, no loading path read
+    assert calls == [10.0] and z2["force"].tolist() == [0.0, 11.0, 2.0]

@@ -752,8 +752,9 @@ def test_unload_sweep_finds_the_loading_path_where_there_is_one_branch(quarter, 
     for a, b in zip(sw[:2], st[:2], strict=True):
         assert np.abs(a.u - b.u).max() <= H.BRANCH_MEET_TOL
         assert abs(a.extra["energy"] - a.extra["energy_loading"]) <= 1e-6 * abs(a.extra["energy"])
-    chosen, branch = H.stable_states(quarter, _caps(quarter), st, step=0.002)
-    assert branch.tolist() == [0, 0, 0] and all(c is s for c, s in zip(chosen, st, strict=True))
+    chosen, branch, energies = H.stable_states(quarter, _caps(quarter), st, step=0.002)
+    assert branch.tolist() == [0, 0, 0] and energies.shape == (3, 2)
+    assert np.allclose(energies[:, 0], energies[:, 1], rtol=1e-6) and all(c is s for c, s in zip(chosen, st, strict=True))
 
 
 def test_stable_states_replaces_a_higher_energy_state_by_the_unloaded_equilibrium(quarter, loading):
@@ -765,12 +766,15 @@ def test_stable_states_replaces_a_higher_energy_state_by_the_unloaded_equilibriu
     X = quarter.points - quarter.mesh.center
     bump = 0.0005 * np.exp(-((X[:, 1] ** 2 + X[:, 2] ** 2) / 0.01 ** 2))[:, None] * np.array([0.0, 0.0, 1.0])
     bad[1] = replace(st[1], u=st[1].u + bump * (X[:, 2:3] > 0))
-    chosen, branch = H.stable_states(quarter, _caps(quarter), bad, step=0.002)
+    chosen, branch, energies = H.stable_states(quarter, _caps(quarter), bad, step=0.002)
     assert branch.tolist() == [0, 1, 0]
-    assert chosen[1].extra["energy"] < chosen[1].extra["energy_loading"]
+    assert energies[1, 1] < energies[1, 0] and chosen[1].extra["energy"] == energies[1, 1]
     assert np.abs(chosen[1].u - st[1].u).max() < 2e-5
     assert chosen[0] is bad[0] and chosen[2] is bad[2]
     with pytest.raises(ValueError, match="ascending"):
         H.unload_sweep(quarter, _caps(quarter), st[::-1])
     with pytest.raises(ValueError, match="non-empty"):
         H.unload_sweep(quarter, _caps(quarter), [])
+    stuck = [replace(x, extra={"anchors": np.zeros((1, 1, 3))}) for x in st]
+    with pytest.raises(ValueError, match="frictionless"):
+        H.unload_sweep(quarter, _caps(quarter), stuck)

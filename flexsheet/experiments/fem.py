@@ -75,6 +75,7 @@ from nodes.fem.hyperelastic import (
     PENALTY_SCALE,
     PREVIOUS_VERSION,
     SOLVER_VERSION,
+    UNLOAD_VERSION,
     HyperelasticModel,
     PathState,
     RefSpec,
@@ -327,9 +328,6 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
     return z
 
 
-UNLOAD_VERSION = "unload-2"     #: bump when :func:`nodes.fem.hyperelastic.stable_states` changes (cache keys)
-
-
 def _stable_key(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, probes: np.ndarray,
                 contact: str, penalty_scale: float) -> str:
     """Cache key of a :func:`stable_path`: its loading path's key and the unloading sweep's version."""
@@ -343,16 +341,16 @@ def stable_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Materi
     finger withdrawn from its deepest state back to the shallowest (:func:`nodes.fem.hyperelastic.stable_states`,
     the path's load steps), and at each depth the state of lower total potential Π. The
     snapshot tables and the held-out pushes they are judged on read these, so both sides make the same choice.
-    Cached (kind "stable"); frictionless contact only (else the loading path itself). Returns
-    :func:`reference_path`'s dict plus "branch" (D,) int (1: the unloaded state), "energy_loading",
-    "energy_unloading" (D,) J (NaN where the sweep did not reach), "unload_seconds"."""
-    p = reference_path(spec, angle_deg, depths, mat, cache, probes, contact, penalty_scale)
+    Cached (kind "stable", read before the loading path is); frictionless contact only (else the loading path
+    itself). Returns :func:`reference_path`'s dict plus "branch" (D,) int (1: the unloaded state),
+    "energy_loading", "energy_unloading" (D,) J (Π of each branch's state), "unload_seconds"."""
     if contact != "frictionless":
-        return p
+        return reference_path(spec, angle_deg, depths, mat, cache, probes, contact, penalty_scale)
     spec, angle_deg = _as_solved(spec, angle_deg)
     key = _stable_key(spec, angle_deg, depths, mat, probes, contact, penalty_scale)
 
     def compute() -> dict:
+        p = reference_path(spec, angle_deg, depths, mat, cache, probes, contact, penalty_scale)
         t = time.perf_counter()
         model = _ref_model(spec, angle_deg, mat, penalty_scale)
         _check_dofs(p, model)
@@ -360,24 +358,32 @@ def stable_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Materi
         a = math.radians(angle_deg)
         caps = lambda d: capsule_at(a, d, FINGER_R, model.mesh.radius, model.mesh.center)  # noqa: E731
         _log(f"stable branch {spec.key()} at {angle_deg:g} deg: unloading from {depths[-1] * 1e3:g} mm ...")
-        chosen, branch = stable_states(model, caps, states, step=_load_step(depths), iters=NEWTON_ITERS,
-                                       log=lambda s: _log("  " + s.strip()))
-        rec = _path_record(model, chosen, probes, angle_deg)
-        out = dict(p)
-        for k_, v in rec.items():           # the loading rows as cached (sampled from float64, not float32)
-            out[k_] = np.where(branch.reshape((-1,) + (1,) * (v.ndim - 1)) == 1, v, p[k_]).astype(v.dtype)
-        e_ld = np.array([c.extra.get("energy_loading", np.nan) for c in chosen])
-        e_un = np.array([c.extra.get("energy", np.nan) for c in chosen])
-        n_un = int(branch.sum())
-        _log(f"stable branch {spec.key()} at {angle_deg:g} deg: the unloaded state taken at {n_un} depth(s)"
-             + (f" ({', '.join(f'{d * 1e3:g}' for d in depths[branch == 1])} mm)" if n_un else "")
-             + f", {time.perf_counter() - t:.0f} s")
-        out.update(branch=branch, energy_loading=e_ld, energy_unloading=e_un,
-                   unload_seconds=np.array(time.perf_counter() - t))
-        return out
+        chosen, branch, energies = stable_states(model, caps, states, step=_load_step(depths), iters=NEWTON_ITERS,
+                                                 log=lambda s: _log("  " + s.strip()))
+        return {**_merge_rows(p, branch, lambda rows: _path_record(model, [chosen[j] for j in rows], probes,
+                                                                    angle_deg)),
+                "branch": branch, "energy_loading": energies[:, 0], "energy_unloading": energies[:, 1],
+                "unload_seconds": np.array(time.perf_counter() - t)}
 
     z, _, _ = cache.get_or_compute("stable", key, compute, f"stable branch {spec.key()} at {angle_deg:g} deg")
+    n_un = int(np.sum(z["branch"]))
+    _log(f"stable branch {spec.key()} at {angle_deg:g} deg: the unloaded state at {n_un} of {len(depths)} depths"
+         + (f" ({', '.join(f'{d * 1e3:g}' for d in depths[np.asarray(z['branch']) == 1])} mm)" if n_un else ""))
     return z
+
+
+def _merge_rows(p: dict, branch: np.ndarray, record) -> dict:
+    """``p`` (a :func:`reference_path` dict, per-depth arrays of length D) with the rows where ``branch`` (D,)
+    is 1 replaced by ``record(rows)`` (a :func:`_path_record` of those rows' states), each array's dtype kept."""
+    rows = np.flatnonzero(branch)
+    out = dict(p)
+    if len(rows) == 0:
+        return out
+    for k_, v in record(rows).items():
+        arr = np.array(p[k_], copy=True)
+        arr[rows] = v.astype(arr.dtype)
+        out[k_] = arr
+    return out
 
 
 def _depths(step: float) -> np.ndarray:
@@ -824,7 +830,7 @@ def snapshot_mesh_study(st: Settings, mat: Material, cache: ArrayCache, rm: Real
     base = st.levels[-2]                        # the skin study's meshes (full mode: the snapshot mesh and its skins)
     try:
         for spec in [base] + [replace(base, skin_h=h) for h in st.skin_sizes]:
-            src = reference_path(spec, 0.0, sd, mat, cache, verts, st.contact)
+            src = stable_path(spec, 0.0, sd, mat, cache, verts, st.contact)       # as every table reads
             table = load_or_build(cache, grid, spec, mat, FINGER_R, build=True, contact=st.contact,
                                   solved=lambda ang, model, depths, src=src: _path_states(src, sd, depths, model))[0]
             rm.attach_snapshots(table)
@@ -1250,7 +1256,10 @@ def planned_solves(st: Settings, study: str = "full") -> list[Solve]:
     jobs += [Solve(replace(lv[-1], h_fine=hf, half_z=False, cut=True), 0.0, st.fine_step) for hf in st.half_levels]
     if study == "full":
         jobs += [Solve(lv[st.penalty_level], 0.0, st.depth_step, sc) for sc in st.penalty_scales]
-        jobs += [Solve(replace(lv[-2], skin_h=h), 0.0, st.depth_step) for h in st.skin_sizes]
+        # the skin study's paths, read as their stable branch by snapshot_mesh_study's tables (its base mesh:
+        # the snapshot mesh in full mode, a job of its own in quick mode)
+        jobs += [Solve(replace(lv[-2], skin_h=h), 0.0, st.depth_step, stable=True) for h in st.skin_sizes]
+        jobs.append(Solve(lv[-2], 0.0, st.depth_step, stable=True))
         jobs += snapshot_jobs(st)
     return sorted(jobs, key=lambda j: -j.cost())      # repeats are dropped by prefetch (by cache key)
 

@@ -61,7 +61,7 @@ import scipy.sparse as sp
 from nodes.fem.material import Material
 from nodes.fem.mesh import TetMesh, cylinder_part_mesh
 
-__all__ = ["unload_sweep", "stable_states", "BRANCH_MEET_TOL", "SOLVER_VERSION", "PREVIOUS_VERSION", "CONTACT_LAWS", "DEFAULT_CONTACT", "RefSpec", "HyperelasticModel", "PathState",
+__all__ = ["unload_sweep", "stable_states", "BRANCH_MEET_TOL", "UNLOAD_VERSION", "SOLVER_VERSION", "PREVIOUS_VERSION", "CONTACT_LAWS", "DEFAULT_CONTACT", "RefSpec", "HyperelasticModel", "PathState",
            "Capsule", "capsule_at", "solve_path", "solve_path_capsule", "reference_mesh", "solver_tag"]
 
 SOLVER_VERSION = "nh-7"     #: bump when the reference's formulation or defaults change (cache keys)
@@ -1009,25 +1009,31 @@ def _path_state(m: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, de
 
 
 def stable_states(model: HyperelasticModel, capsule, states: list[PathState], step: float = 0.0025,
-                  iters: int = 30, log=None) -> tuple[list[PathState], np.ndarray]:
+                  iters: int = 30, log=None) -> tuple[list[PathState], np.ndarray, np.ndarray]:
     """Per depth the lower-energy of the loading state (``states``, :func:`solve_path_capsule`) and the
     unloaded one (:func:`unload_sweep`): where a push is bistable, the stable branch rather than the metastable
     one the loading path may stay on (both are equilibria under the same finger; the lower total potential Π
     is the one a perturbation cannot leave). The unloaded state is taken only when it converged and lies
     farther than :data:`BRANCH_MEET_TOL` from the loading one (else they are one state). Returns (states, branch
-    (D,) int: 1 where the unloaded state was taken); each taken state's ``extra`` carries both energies.
-    Frictionless contact only. Costs one Newton solve per depth (about a third of the loading path's CPU on
-    the 3.4 mm half model)."""
+    (D,) int: 1 where the unloaded state was taken, energies (D, 2) J: Π of the loading and of the unloaded
+    state at each depth). Frictionless contact only. Costs a Newton solve per load step (on the 3.4 mm half
+    model at 5° and 10°, 41 min of one core each with another solve beside it, about as long as the loading path:
+    the unloading steps start from the previous state with no predictor and need up to ~35 iterations at
+    5–20 mm)."""
     sw = unload_sweep(model, capsule, states, step=step, iters=iters, log=log)
     out, branch = [], np.zeros(len(states), np.int64)
+    energies = np.array([[un.extra["energy_loading"], un.extra["energy"]] for un in sw])
     for j, (ld, un) in enumerate(zip(states, sw, strict=True)):
-        take = (un is not None and un.converged and un.extra["energy"] < un.extra["energy_loading"]
+        take = (un.converged and un.extra["energy"] < un.extra["energy_loading"]
                 and float(np.abs(un.u - ld.u).max()) > BRANCH_MEET_TOL)
         out.append(un if take else ld)
         branch[j] = int(take)
-    return out, branch
+    return out, branch, energies
 
 
+#: version of :func:`stable_states`' definition (cache keys of the stable paths and the snapshot tables built
+#: from them); bump when it changes
+UNLOAD_VERSION = "unload-2"
 #: two states of one push lie on the same branch when no DOF point is farther apart than this (m): 20× the
 #: Newton tolerance on the step, far below the 0.7 mm target (:func:`stable_states`)
 BRANCH_MEET_TOL = 2e-5
@@ -1043,13 +1049,16 @@ def unload_sweep(model: HyperelasticModel, capsule, states: list[PathState], ste
     metastable branch (a fold beside the finger not yet snapped) that unloading, starting past the snap, does
     not visit. Returns one :class:`PathState` per depth of ``states`` (ascending), with
     ``extra["energy"]`` (J, Π of the unloaded state) and ``extra["energy_loading"]`` (Π of the loading state
-    there); the deepest state is the loading one itself. The sweep runs to the shallowest depth: the two
+    there); the deepest state is the loading one itself (taken as stable: the push is assumed past its snaps
+    there; the 50 mm states of 5°–20° on the 3.4 mm mesh are). The sweep runs to the shallowest depth: the two
     branches coincide past the snap (at 10° on the 3.4 mm mesh from 45 mm) and part only below it, so meeting
     the loading path says nothing about the depths still to come. Frictionless contact only (a sticking
     finger's anchors depend on the loading history). Raises ``ValueError`` on an empty or unsorted ``states``,
     ``RuntimeError`` when a step has no valid iterate at all."""
     if not states:
         raise ValueError("states must be a non-empty loading path")
+    if any("anchors" in s.extra for s in states):
+        raise ValueError("unload_sweep needs a frictionless push: these states carry a sticking finger's anchors")
     d = np.array([s.depth for s in states])
     if np.any(np.diff(d) <= 0):
         raise ValueError(f"states must have ascending depths, got {d.tolist()}")
@@ -1058,8 +1067,8 @@ def unload_sweep(model: HyperelasticModel, capsule, states: list[PathState], ste
     tol_r = tol_r if tol_r is not None else 1e-6 * m.E_ref * m.h_contact ** 2 * 10
     out: list[PathState | None] = [None] * len(states)
     top = states[-1]
-    out[-1] = replace(top, extra={**top.extra, "energy": m.energy(top.u, capsule(top.depth), k),
-                                  "energy_loading": m.energy(top.u, capsule(top.depth), k)})
+    e_top = m.energy(top.u, capsule(top.depth), k)
+    out[-1] = replace(top, extra={**top.extra, "energy": e_top, "energy_loading": e_top})
     u, d_cur = top.u.copy(), top.depth
     nstate: dict = {}
     for j in range(len(states) - 2, -1, -1):

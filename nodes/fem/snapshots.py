@@ -32,6 +32,7 @@ import numpy as np
 
 from nodes.fem.hyperelastic import (
     DEFAULT_CONTACT,
+    UNLOAD_VERSION,
     HyperelasticModel,
     RefSpec,
     capsule_at,
@@ -132,7 +133,8 @@ def table_key(grid: SnapshotGrid, spec: RefSpec, nu: float, finger_radius: float
 
     # spec.key() of a quarter spec leaves out ``cut`` (its azimuth-0 mesh does not depend on it); the off-axis
     # entries' meshes do
-    return cache_key(TABLE_VERSION, solver_tag(contact), grid.key(), spec.key(), f"cut={int(spec.cut)}",
+    return cache_key(TABLE_VERSION, solver_tag(contact), *([UNLOAD_VERSION] if contact == "frictionless" else []),
+                     grid.key(), spec.key(), f"cut={int(spec.cut)}",
                      gmsh.__version__, f"nu={nu:.9g}", f"r={finger_radius:.9g}")
 
 
@@ -207,7 +209,7 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
                                 log=log, contact=contact)
             if contact == "frictionless":       # the stable branch where the push is bistable
                 a = math.radians(ang)
-                states, _ = stable_states(model, lambda d, a=a, m=mesh: capsule_at(a, d, finger_radius, m.radius,
+                states, _, _ = stable_states(model, lambda d, a=a, m=mesh: capsule_at(a, d, finger_radius, m.radius,
                                                                                   m.center),
                                           states, step=grid.depth_step, log=log)
         Ps = _probe(model, side_pts)
