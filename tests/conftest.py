@@ -208,6 +208,12 @@ def pytest_configure(config):
 SAME_WORKER = {"test_correction_twin": "test_calibration_procedures"}
 
 
+#: the longest groups of phase 1 (~270 s: the quick FEM run's fixture; ~200 s: the twin's registrations and
+#: correction), collected first so each starts at once on a worker of its own and the short modules fill in
+#: around them (longest first; alphabetically the FEM experiment started after ~10 modules)
+LONGEST_FIRST = ("test_fem_experiment", "test_calibration_procedures")
+
+
 @pytest.hookimpl(tryfirst=True)       # before pytest-xdist's own hook reads the xdist_group marks
 def pytest_collection_modifyitems(config, items):
     for item in items:
@@ -216,3 +222,5 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.cpu)
             # tests/run.sh distributes by group (--dist loadgroup): a module per worker, module fixtures once
             item.add_marker(pytest.mark.xdist_group(SAME_WORKER.get(stem, stem)))
+    rank = {g: i for i, g in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda it: rank.get(SAME_WORKER.get(it.path.stem, it.path.stem), len(rank)))   # stable

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The whole test suite, as the README and CI run it, in two phases on the 2-core machine:
 #   1. the pure-computation modules (marker `cpu`, tests/conftest.py CPU_MODULES) on two pytest-xdist workers,
-#      a module per worker (tests/conftest.py: groups), one BLAS/OpenMP thread each;
+#      a module per worker (tests/conftest.py: groups; the longest groups first, LONGEST_FIRST, so not
+#      xdist's reorder by test count), one BLAS/OpenMP thread each;
 #   2. everything else (nodes, launches, sockets, windows, deadlines) one by one, with the machine to itself:
 #      those tests judge a live loop against the clock.
 # Arguments go to both phases (e.g. tests/run.sh -x, tests/run.sh -p no:cacheprovider, tests/run.sh -k bridge);
@@ -16,7 +17,7 @@ for arg in "$@"; do
   esac
 done
 echo "[tests] phase 1/2: pure computation (-m cpu) on 2 workers"
-OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 python3 -m pytest -q -n 2 --dist loadgroup -m cpu "$@"
+OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 python3 -m pytest -q -n 2 --dist loadgroup --no-loadscope-reorder -m cpu "$@"
 a=$?
 case $a in 2|3|4) echo "[tests] phase 1 ended with exit $a (interrupted or an error): phase 2 not run" >&2; exit $a;; esac
 if [ $a -eq 1 ]; then
