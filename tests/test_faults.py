@@ -302,8 +302,14 @@ def test_the_arms_hold_and_never_jump(faults):
         for prev, cur in zip(states, states[1:], strict=False):
             step = np.abs(cur[2] - prev[2])
             if cur[1] == prev[1] + 1 and cur[0] - prev[0] < 0.5:
-                # consecutive cycles: no commanded step beyond the controller's own step check
-                assert np.all(step <= STEP_TOLERANCE * limit + 1e-9), (arm, cur[0], step / limit)
+                # consecutive cycles: no commanded step beyond the controller's own step check; except into a
+                # cycle where the controller faulted (e.g. its watchdog, after a late cycle under load): the
+                # bridge then reseeds its command to the measured joints (nodes/arm_bridge/link.py,
+                # Verdict.reseed), which lag the last command by the servo's tracking error, not a motion (seen
+                # once: 0.039 rad on J6 at a fault:watchdog cycle, 3.0x the step limit); the step out of the
+                # fault is checked
+                if not cur[4].startswith("fault:"):
+                    assert np.all(step <= STEP_TOLERANCE * limit + 1e-9), (arm, cur[0], step / limit)
             elif cur[1] <= prev[1]:
                 # the bridge restarted: while it was dead the controller's watchdog held the arm, so the
                 # arm is no farther from the last command than the new bridge's cycles so far allow
