@@ -1191,9 +1191,8 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
         return 0
     _log(f"node table: azimuths {DEFAULT_GRID.angles_deg} deg on {DEFAULT_REF_SPEC.key()}; key "
          f"{table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact)}")
-    prefetch([Solve(DEFAULT_REF_SPEC, a, DEFAULT_GRID.depth_step, stable=True) for a in DEFAULT_GRID.angles_deg], jobs,
-             mat, cache,
-             rm.rest_vertices.astype(float), contact)
+    prefetch([Solve(DEFAULT_REF_SPEC, a, DEFAULT_GRID.depth_step, stable=True) for a in DEFAULT_GRID.angles_deg],
+             jobs, mat, cache, rm.rest_vertices.astype(float), contact)
 
     def solved(ang, model, depths):
         states = _path_states(*node_table_path(ang, mat, cache, rm, contact), depths, model)
@@ -1292,8 +1291,9 @@ def _solve_one(args: tuple) -> tuple[int, float, str | None]:
     i, job, mat, cache_dir, probes, contact = args
     t = time.perf_counter()
     try:
-        (stable_path if job.stable else reference_path)(job.spec, job.angle_deg, _depths(job.step), mat, ArrayCache(cache_dir, _log), probes,
-                       contact, job.penalty_scale)
+        solve = stable_path if job.stable else reference_path
+        solve(job.spec, job.angle_deg, _depths(job.step), mat, ArrayCache(cache_dir, _log), probes, contact,
+              job.penalty_scale)
     except Exception as exc:                    # noqa: BLE001 - reported; the run solves it again and raises
         return i, time.perf_counter() - t, f"{type(exc).__name__}: {exc}"
     return i, time.perf_counter() - t, None

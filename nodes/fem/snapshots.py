@@ -209,9 +209,11 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
                                 log=log, contact=contact)
             if contact == "frictionless":       # the stable branch where the push is bistable
                 a = math.radians(ang)
-                states, _, _ = stable_states(model, lambda d, a=a, m=mesh: capsule_at(a, d, finger_radius, m.radius,
-                                                                                  m.center),
-                                          states, step=grid.depth_step, log=log)
+
+                def caps(d, a=a, m=mesh):
+                    return capsule_at(a, d, finger_radius, m.radius, m.center)
+
+                states, _, _ = stable_states(model, caps, states, step=grid.depth_step, log=log)
         Ps = _probe(model, side_pts)
         Pc = _probe(model, cap_pts)
         for j, st in enumerate(states, start=1):
