@@ -305,15 +305,6 @@ class SceneModel(CondensedSurface):
                       float(stiffness) if valid else 0.0, fg.depth, fg.contact_point.copy(), method,
                       float(strain), int(inv), status, valid)
 
-    def _checks(self, fg: Finger, u_out: np.ndarray) -> tuple[float, int]:
-        """(max principal strain, inverted elements) over the monitor tets whose centroid lies within
-        finger radius + depth + 2·h_fine of the contact point (where strain concentrates; the rest of the
-        monitor zone is not checked), by the precomputed :class:`nodes.fem.solver.TetChecks`."""
-        tc = self._tet_checks
-        if tc.n_tets == 0:
-            return 0.0, 0
-        return tc(u_out, tc.near(fg.contact_point, self.finger_radius + fg.depth + 2 * self.spec.h_fine))
-
     def surface_displacement(self, fg: Finger) -> tuple[np.ndarray, float, float]:
         """(surface-node displacements (S, 3) m, force N, stiffness N/m) of one push, no checks (experiments)."""
         sol, u_out, _ = self._solve(fg)
