@@ -38,8 +38,10 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    with the convergence figures.
 
 ``--quick``: two coarse meshes (h_fine 12 / 9 mm), 5 mm outputs, snapshots every 10 mm, a penalty study of
-two scales, a skin study of one size (5 mm): a test's run, ~110 s cold on the 2-core machine with two solves
-beside it (70 s idle before the skin study), seconds cached; it does not meet the targets
+two scales, a skin study of one size (5 mm), a mirror study of one cut half model (h_fine 12 mm, against the
+quarter model of the same h_fine): a test's run, 133 s cold on the 2-core machine with ``--jobs 2`` and nothing
+beside it (session 15, the stable sweeps included; 148 s with the half model at 9 mm), seconds cached; it does
+not meet the targets
 and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4.5 / 3.4 / 2.5 mm,
 :data:`FULL_LEVELS`, 2.5 mm outputs, snapshots at azimuths 0, 10 and 20 every 5 mm, azimuth 5 held out,
 penalty study, mirror study) is ~4.5 h of CPU cold on the 2-core machine with another solve beside it
@@ -134,7 +136,7 @@ def settings_for(quick: bool) -> Settings:
                         grid=SnapshotGrid((0.0,), 0.05, 0.01, 1.0, 0.001, 0.002), snap_spec=lv[-1], holdout_deg=(),
                         linear_spec=MeshSpec(0.016, 0.006, 0.012, 0.0), n_time=50, quick=True, penalty_level=0,
                         penalty_scales=(PENALTY_SCALE, 10 * PENALTY_SCALE), skin_sizes=(0.005,),
-                        half_levels=(0.009,))
+                        half_levels=(0.012,))
     lv = [replace(DEFAULT_REF_SPEC, h_fine=hf) for hf in FULL_LEVELS]
     grid = SnapshotGrid((0.0, 10.0, 20.0), 0.05, 0.005, DEFAULT_GRID.dtheta_deg, DEFAULT_GRID.dy, DEFAULT_GRID.drho)
     # the snapshots on the node's mesh (DEFAULT_REF_SPEC, the next-to-finest level), judged against the finest at
