@@ -1,8 +1,8 @@
 """The real-time FEM model the node runs (pure apart from its optional disk cache of precomputed arrays).
 
 :class:`RealtimeModel` = mesh + linear P2 model + capacitance solver (James & Pai 2001) over the candidate
-contact region, with the full sparse solve as fallback when the finger leaves that region, failure checks on a
-strain-monitor zone (surface + interior nodes near the contact region), and the geometrically nonlinear mode:
+contact region, with the full sparse solve as fallback when the finger leaves that region, failure checks on the
+strain-monitor zone (surface + interior nodes near the contact region) where it lies near the finger, and the geometrically nonlinear mode:
 
 * **nonlinear snapshots** (:mod:`nodes.fem.snapshots`, Peterlík et al. 2010): neo-Hookean reference solutions
   (:mod:`nodes.fem.hyperelastic`) precomputed over (contact azimuth, depth), rotated with the finger and
@@ -68,7 +68,7 @@ class CondensedSurface:
     """What a condensed real-time model (``self.mesh``, ``self.solver``: :class:`CapacitanceSolver`,
     ``self.model``) shares, the cylinder's (:class:`RealtimeModel`) and any scene's
     (:class:`nodes.fem.scene_model.SceneModel`): the rendered-surface and strain-monitor index maps, the rest
-    surface, the condensed solve (single precision: :meth:`CapacitanceSolver.from_arrays`) with its sparse
+    surface, the condensed solve (both subclasses load it in single precision: :meth:`CapacitanceSolver.from_arrays`) with its sparse
     fallback, the strain and inversion check near the finger, the scatter to surface vertices, the fold check."""
 
     @staticmethod
@@ -136,12 +136,15 @@ class CondensedSurface:
         """(max principal strain, inverted elements) over the monitor tets whose centroid lies within
         finger radius + depth + 2·h_fine of the contact point (where strain concentrates; the rest of the
         monitor zone is not checked: over the cylinder's ±60° arc, 0–50 mm and three axial offsets this gave the
-        same strain and inverted count as checking every monitor tet, 2026-11-23), by the precomputed
+        same strain and inverted count as checking every monitor tet, 2026-11-23, for fingers not held), by the precomputed
         :class:`nodes.fem.solver.TetChecks`. ``u_out`` (O, 3) m output-point displacements."""
         tc = self._tet_checks
         if tc.n_tets == 0:
             return 0.0, 0
-        return tc(u_out, tc.near(fg.contact_point, self.finger_radius + fg.depth + 2 * self.spec.h_fine))
+        # centred under the sphere as it is now (for a held finger, whose contact point stays at the anchor while
+        # the sphere slides, the anchor would go stale); for a finger not held this is its contact point
+        at = np.asarray(fg.center, float) + np.asarray(fg.direction, float) * (fg.radius - fg.depth)
+        return tc(u_out, tc.near(at, self.finger_radius + fg.depth + 2 * self.spec.h_fine))
 
     def _surface_of(self, u_out: np.ndarray) -> np.ndarray:
         """Surface-vertex displacements (S, 3) m from output-point displacements ``u_out`` (O, 3) m (support
