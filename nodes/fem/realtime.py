@@ -2,7 +2,8 @@
 
 :class:`RealtimeModel` = mesh + linear P2 model + capacitance solver (James & Pai 2001) over the candidate
 contact region, with the full sparse solve as fallback when the finger leaves that region, failure checks on the
-strain-monitor zone (surface + interior nodes near the contact region) where it lies near the finger, and the geometrically nonlinear mode:
+part of the strain-monitor zone (surface + interior nodes near the contact region) near the finger, and the
+geometrically nonlinear mode:
 
 * **nonlinear snapshots** (:mod:`nodes.fem.snapshots`, Peterlík et al. 2010): neo-Hookean reference solutions
   (:mod:`nodes.fem.hyperelastic`) precomputed over (contact azimuth, depth), rotated with the finger and
@@ -68,8 +69,9 @@ class CondensedSurface:
     """What a condensed real-time model (``self.mesh``, ``self.solver``: :class:`CapacitanceSolver`,
     ``self.model``) shares, the cylinder's (:class:`RealtimeModel`) and any scene's
     (:class:`nodes.fem.scene_model.SceneModel`): the rendered-surface and strain-monitor index maps, the rest
-    surface, the condensed solve (both subclasses load it in single precision: :meth:`CapacitanceSolver.from_arrays`) with its sparse
-    fallback, the strain and inversion check near the finger, the scatter to surface vertices, the fold check."""
+    surface, the condensed solve (both subclasses load it in single precision:
+    :meth:`CapacitanceSolver.from_arrays`) with its sparse fallback, the strain and inversion check near the
+    finger, the scatter to surface vertices, the fold check."""
 
     @staticmethod
     def _check_params(finger_radius: float, max_depth: float, strain_limit: float) -> None:
@@ -134,10 +136,11 @@ class CondensedSurface:
 
     def _checks(self, fg: Finger, u_out: np.ndarray) -> tuple[float, int]:
         """(max principal strain, inverted elements) over the monitor tets whose centroid lies within
-        finger radius + depth + 2·h_fine of the contact point (where strain concentrates; the rest of the
-        monitor zone is not checked: over the cylinder's ±60° arc, 0–50 mm and three axial offsets this gave the
-        same strain and inverted count as checking every monitor tet, 2026-11-23, for fingers not held), by the precomputed
-        :class:`nodes.fem.solver.TetChecks`. ``u_out`` (O, 3) m output-point displacements."""
+        finger radius + depth + 2·h_fine of the undeformed surface point under the sphere (where strain
+        concentrates; the rest of the monitor zone is not checked: over the cylinder's ±60° arc, 0–50 mm and
+        three axial offsets this gave the same strain and inverted count as checking every monitor tet,
+        2026-11-23, for fingers not held), by the precomputed :class:`nodes.fem.solver.TetChecks`. ``u_out``
+        (O, 3) m output-point displacements."""
         tc = self._tet_checks
         if tc.n_tets == 0:
             return 0.0, 0
