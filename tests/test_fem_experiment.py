@@ -269,6 +269,36 @@ def test_second_run_reads_the_cache(quick):
     assert s2["reference"]["levels"] == s1["reference"]["levels"]
 
 
+def test_fold_study_reads_the_levels_from_the_cache_and_finds_no_fold_on_the_coarse_meshes(quick):
+    """--fold-study checks the reference's own surface for folds (it has no self-contact): on the quick run's
+    cached levels it solves nothing, and the coarse meshes' visible surface stays smooth (w ≈ ½, nothing inside
+    the body) to 50 mm, while the material over the fingertip (footprint included) is kinked at the apex (w > ½)
+    and stretched several times over; its differences to the finest level are the convergence study's."""
+    base, _, _ = quick
+    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--fold-study", "--out",
+                        str(base / "fold"), "--cache-dir", str(base / "cache"), "--jobs", "1"], cwd=ROOT,
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert "DOF, load steps" not in r.stdout and "fold study done" in r.stdout
+    with open(base / "fold" / "fold_study.json") as fh:
+        fs = json.load(fh)
+    assert os.path.getsize(base / "fold" / "fold_study.png") > 5000
+    assert fs["depths_mm"] == pytest.approx([5.0 * k for k in range(1, 11)])
+    assert [lv["h_fine_mm"] for lv in fs["levels"]] == pytest.approx([12.0, 9.0])
+    for lv in fs["levels"]:
+        assert max(lv["n_penetrating"]) == 0 and max(lv["max_penetration_mm"]) == 0.0
+        assert 0.49 < max(lv["max_winding"]) < 0.6
+        fp = lv["with_footprint"]
+        assert max(fp["n_penetrating"]) == 0 and fp["max_winding"][-1] > max(lv["max_winding"])
+        assert fp["max_stretch"][-1] > 2.0 and lv["min_stretch"][-1] < lv["min_stretch"][0] < 1.0
+        assert lv["max_principal_strain"][-1] > lv["max_principal_strain"][0] > 0
+    assert fs["fold_free_to_mm"] == 50.0 and fs["first_penetration_mm_by_h_fine_mm"] == {"12.0": None, "9.0": None}
+    with open(base / "out" / "convergence.json") as fh:
+        conv = json.load(fh)
+    assert fs["levels"][0]["difference_to_finest_mm"] == pytest.approx(conv["levels"][0]["error_vs_finest_mm"],
+                                                                       rel=1e-9)
+
+
 def test_full_settings_judge_the_nodes_snapshot_mesh_against_a_finer_one():
     """The node's snapshot table (DEFAULT_REF_SPEC) is one of the full convergence study's meshes and the
     snapshots the experiment judges are taken on it, against a finer mesh: the accuracy reported is the
@@ -328,6 +358,8 @@ def test_planned_solves_list_each_push_the_run_reads_once_by_cache_key():
     assert X.holdout_grid(replace(full, holdout_deg=(15.0,))).grid.angles_deg == (0.0, 10.0, 20.0)
     with pytest.raises(ValueError, match="hold no azimuth out"):
         X.holdout_grid(quick)
+    assert len(set(keys(full, "fold"))) == 3 and set(keys(full, "fold")) <= set(keys(full))
+    assert len(set(keys(quick, "fold"))) == 2 and set(keys(quick, "fold")) <= set(keys(quick))
     with pytest.raises(ValueError, match="study must be"):
         X.planned_solves(full, "mirror_only")
     costs = [j.cost() for j in X.planned_solves(full)]

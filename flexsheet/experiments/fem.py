@@ -71,6 +71,7 @@ import numpy as np
 from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
 from nodes.fem.choose import DEFAULT_SPEC, MODEL_TABLE_PATH, visible_mask
 from nodes.fem.contact import finger_at
+from nodes.fem.fold import CREASE_STRETCH, fold_report, outer_surface
 from nodes.fem.hyperelastic import (
     CONTACT_LAWS,
     DEFAULT_CONTACT,
@@ -154,6 +155,7 @@ def _parser() -> argparse.ArgumentParser:
                                        "         flexsheet experiment fem --out /tmp/fem --node-table --azimuth 10\n"
                                        "         flexsheet experiment fem --quick --mirror-study --out /tmp/fem\n"
                                        "         flexsheet experiment fem --holdout-study --out /tmp/fem\n"
+                                       "         flexsheet experiment fem --quick --fold-study --out /tmp/fem\n"
                                        "         flexsheet experiment fem --quick --scene launch/scenes/sphere.yaml "
                                        "--out /tmp/fem_sphere")
     p.add_argument("--out", required=True, help="output directory")
@@ -181,6 +183,11 @@ def _parser() -> argparse.ArgumentParser:
                         "judged at 5 deg against its own solve on the cut half model, and at 0 against the finest "
                         "mesh; it solves what the cache lacks, ~1-2 h of two cores cold) and write "
                         "holdout_study.json/png, then exit")
+    p.add_argument("--fold-study", action="store_true",
+                   help="run the fold study only: does the reference's surface fold through itself (it has no "
+                        "self-contact), and is that where it does not converge? The last three convergence "
+                        "levels at azimuth 0 (full: h_fine 4.5 / 3.4 / 2.5 mm, ~1 h of two cores cold; quick: "
+                        "its two); writes fold_study.json/png, then exits")
     p.add_argument("--node-table", action="store_true",
                    help="build the FEM node's nonlinear snapshot table (azimuths 0-60 deg every 10 deg, 2.5 mm depth "
                         "steps, on the full run's h_fine 3.4 mm mesh) into the cache the node reads, then exit. "
@@ -414,6 +421,160 @@ def _at_depths(path: dict, path_depths: np.ndarray, depths: np.ndarray) -> dict:
     at the nearest of ``depths`` (m)."""
     sub = np.array([int(np.argmin(np.abs(path_depths - d))) for d in depths])
     return {k: (v[sub] if np.ndim(v) and len(v) == len(path_depths) else v) for k, v in path.items()}
+
+
+FOLD_REGION = 0.03      #: m: surface points within this rest distance of the push axis are checked for folds
+FOLD_VERSION = "fold-2"
+
+
+def fold_path(spec: RefSpec, angle_deg: float, path: dict, depths: np.ndarray, mat: Material,
+              cache: ArrayCache) -> dict:
+    """Self-contact and crease check (:func:`nodes.fem.fold.fold_report`) of every state of a
+    :func:`reference_path` ``path`` (its ``u_dof``, at ``depths`` m) on ``spec``'s mesh at ``angle_deg``: the
+    reference has no self-contact, so where its surface passes through itself it is not a physical solution.
+    Cached (kind "fold", keyed by the states themselves). Returns (D,) arrays: "max_winding" (0.5 on a smooth
+    surface, α/2π at the bottom of a fold of interior angle α, > 1 where the surface lies inside the body),
+    "n_penetrating" (surface points with w > 1), "max_penetration" m, "min_stretch" (smallest in-plane stretch
+    of the surface triangles off the footprint), "n_creased" (triangles below
+    :data:`nodes.fem.fold.CREASE_STRETCH`), "worst_lateral" / "worst_drop" m (the largest-w point's rest
+    distance from the push axis and its motion along the push); the same with the footprint included ("all_…":
+    the material over the fingertip); "max_strain" the largest principal Green–Lagrange strain of any element
+    and "max_strain_lateral_m" that element's rest distance from the push axis; "seconds". Raises ``RuntimeError`` when the
+    re-made mesh has another DOF count than the path (:func:`_check_dofs`)."""
+    spec, angle_deg = _as_solved(spec, angle_deg)
+    ud = np.asarray(path["u_dof"])
+    key = cache_key(FOLD_VERSION, spec.key(), angle_deg, np.round(depths, 9).tolist(), FOLD_REGION,
+                    cache_key(np.ascontiguousarray(ud).tobytes()))
+
+    def compute() -> dict:
+        t = time.perf_counter()
+        model = _ref_model(spec, angle_deg, mat)
+        _check_dofs(path, model)
+        surf = outer_surface(model)
+        rows = []
+        for j, d in enumerate(depths):
+            caps = capsule_at(math.radians(angle_deg), float(d), FINGER_R, model.mesh.radius, model.mesh.center)
+            u = ud[j].reshape(-1, 3).astype(float)
+            r = fold_report(model, surf, u, caps, FOLD_REGION)
+            a = fold_report(model, surf, u, caps, FOLD_REGION, margin=-np.inf)     # the footprint too
+            F = model.deformation(u)
+            ev = np.linalg.eigvalsh(0.5 * (np.einsum("eqki,eqkj->eqij", F, F) - np.eye(3)))[..., -1].max(axis=1)
+            e = int(np.argmax(ev))
+            rel = model.points[model.edofs[e]].mean(axis=0) - caps.center
+            r.update(all_max_winding=a["max_winding"], all_n_penetrating=a["n_penetrating"],
+                     all_max_stretch=a["max_stretch"], all_max_stretch_lateral_m=a["max_stretch_lateral_m"],
+                     max_strain=float(ev[e]),
+                     max_strain_lateral_m=float(np.linalg.norm(rel - (rel @ caps.direction) * caps.direction)))
+            rows.append(r)
+        out = {k: np.array([r[k] if r[k] is not None else np.nan for r in rows], float)
+               for k in ("max_winding", "n_penetrating", "max_penetration_m", "min_stretch", "n_creased_tris",
+                         "worst_lateral_m", "worst_drop_m", "all_max_winding", "all_n_penetrating",
+                         "all_max_stretch", "all_max_stretch_lateral_m", "max_strain", "max_strain_lateral_m")}
+        out["seconds"] = np.array(time.perf_counter() - t)
+        return out
+
+    z, _, _ = cache.get_or_compute("fold", key, compute, f"fold check {spec.key()} at {angle_deg:g} deg")
+    return z
+
+
+def _fold_rep(f: dict) -> dict:
+    """The JSON form of a :func:`fold_path` result (mm where a length)."""
+    return {"max_winding": f["max_winding"].tolist(), "n_penetrating": f["n_penetrating"].astype(int).tolist(),
+            "max_penetration_mm": (f["max_penetration_m"] * 1e3).tolist(), "min_stretch": f["min_stretch"].tolist(),
+            "n_creased_tris": f["n_creased_tris"].astype(int).tolist(),
+            "worst_lateral_mm": (f["worst_lateral_m"] * 1e3).tolist(),
+            "worst_drop_mm": (f["worst_drop_m"] * 1e3).tolist(),
+            "with_footprint": {"max_winding": f["all_max_winding"].tolist(),
+                               "n_penetrating": f["all_n_penetrating"].astype(int).tolist(),
+                               "max_stretch": f["all_max_stretch"].tolist(),
+                               "max_stretch_rest_lateral_mm": (f["all_max_stretch_lateral_m"] * 1e3).tolist()},
+            "max_principal_strain": f["max_strain"].tolist(),
+            "max_strain_rest_lateral_mm": (f["max_strain_lateral_m"] * 1e3).tolist(), "seconds": float(f["seconds"])}
+
+
+def _where_worst(a: dict, b: dict, j: int, depth: float, verts: np.ndarray, fixed: np.ndarray, mesh) -> dict:
+    """Where the largest visible difference between paths ``a`` and ``b`` (D, k, 3) m at row ``j`` sits: its
+    rendered vertex's rest distance from the push axis (azimuth 0) and its motion along the push on ``b`` (mm)."""
+    vis = _visible(verts + b["u"][j], fixed, 0.0, depth, mesh)
+    dist = np.linalg.norm(a["u"][j] - b["u"][j], axis=1)
+    i = int(np.flatnonzero(vis)[np.argmax(dist[vis])])
+    rel = verts[i] - mesh.center
+    return {"lateral_mm": float(math.hypot(rel[1], rel[2]) * 1e3), "drop_mm": float(-b["u"][j][i][0] * 1e3),
+            "difference_mm": float(dist[i] * 1e3)}
+
+
+def fold_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel) -> dict:
+    """Does the reference fold its own surface, and is that where it does not converge? The last three
+    convergence levels (quick: its two) pushed at azimuth 0 (their loading paths, as :func:`convergence` reads
+    them): per level and depth the :func:`fold_path` figures, the visible-surface difference to the finest level
+    and where the largest one sits (rest distance from the push axis, drop along the push). "fold_free_to_mm":
+    on the finest level, the deepest depth to which no surface point lies inside the body (the reference is a
+    solution of the modelled problem there; past it the model lacks the self-contact the folding surface
+    needs)."""
+    depths = _depths(st.depth_step)
+    verts = rm.rest_vertices.astype(float)
+    fixed = rm.mesh.fixed[rm.surface_nodes]
+    lv = st.levels[-3:]
+    fdepths = _depths(st.fine_step)
+    fine = _at_depths(reference_path(lv[-1], 0.0, fdepths, mat, cache, verts, st.contact), fdepths, depths)
+    rows = []
+    for i, s in enumerate(lv):
+        p = fine if i == len(lv) - 1 else reference_path(s, 0.0, depths, mat, cache, verts, st.contact)
+        f = fold_path(s, 0.0, p, depths, mat, cache)
+        row = {"h_fine_mm": s.h_fine * 1e3, "dofs": int(p["dofs"]), **_fold_rep(f), "force_N": p["force"].tolist()}
+        if i < len(lv) - 1:
+            row["difference_to_finest_mm"] = [e * 1e3 for e in _visible_diffs(p, fine, depths, verts, fixed, rm.mesh)]
+            row["worst_difference_at"] = [_where_worst(p, fine, j, d, verts, fixed, rm.mesh)
+                                          for j, d in enumerate(depths)]
+        rows.append(row)
+    pen = np.asarray(rows[-1]["n_penetrating"]) > 0
+    free = float(depths[np.argmax(pen) - 1] * 1e3) if pen.any() and pen.argmax() > 0 else \
+        (0.0 if pen.any() else float(depths[-1] * 1e3))
+    first = {r["h_fine_mm"]: (float(depths[np.argmax(np.asarray(r["n_penetrating"]) > 0)] * 1e3)
+                              if np.any(np.asarray(r["n_penetrating"]) > 0) else None) for r in rows}
+    return {"depths_mm": (depths * 1e3).tolist(), "region_mm": FOLD_REGION * 1e3, "levels": rows,
+            "fold_free_to_mm": free, "first_penetration_mm_by_h_fine_mm": first,
+            "crease_stretch": CREASE_STRETCH,
+            "what": "self-contact and crease check of the reference at azimuth 0 (nodes/fem/fold.py): the "
+                    "generalised winding number w of the closed outer surface at its own points within "
+                    f"{FOLD_REGION * 1e3:g} mm (rest) of the push axis, off the finger's footprint: 0.5 on a "
+                    "smooth surface, alpha/2pi at the bottom of a fold of interior angle alpha, > 1 where the "
+                    "point lies inside the body (the surface has passed through itself: the model has no "
+                    "self-contact); max_penetration_mm how deep; min_stretch the smallest in-plane stretch of "
+                    "the surface triangles off the footprint (a neo-Hookean surface creases below ~0.65)"}
+
+
+def plot_fold_study(out: str, fs: dict) -> None:
+    """fold_study.png: per level, the largest winding number and the deepest self-penetration against depth,
+    beside the visible-surface difference to the finest level (:func:`fold_study`, the numbers in
+    ``fold_study.json``)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    d = fs["depths_mm"]
+    fig, ax = plt.subplots(1, 3, figsize=(13, 4.2))
+    for r in fs["levels"]:
+        lab = f"h_fine {r['h_fine_mm']:g} mm ({r['dofs']} DOF)"
+        ax[0].plot(d, r["max_winding"], "o-", ms=3, label=lab)
+        ax[1].plot(d, r["max_penetration_mm"], "o-", ms=3, label=lab)
+        if "difference_to_finest_mm" in r:
+            ax[2].plot(d, r["difference_to_finest_mm"], "o-", ms=3, label=f"{lab} vs finest")
+    ax[0].axhline(0.5, color="k", lw=0.6, ls=":")
+    ax[0].axhline(1.0, color="r", lw=0.8, ls="--", label="w = 1: surface inside the body")
+    ax[0].set_ylabel("largest winding number w off the footprint")
+    ax[1].set_ylabel("deepest self-penetration (mm)")
+    ax[2].axhline(0.35, color="k", lw=0.8, ls="--", label="half the 0.7 mm target")
+    ax[2].set_ylabel("visible-surface difference to the finest (mm)")
+    for a in ax:
+        a.set_xlabel("push depth (mm)")
+        a.legend(fontsize=7)
+    fig.suptitle(f"Reference at azimuth 0: folds of its own surface (no self-contact); fold-free to "
+                 f"{fs['fold_free_to_mm']:g} mm on the finest mesh", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "fold_study.png"), dpi=110)
+    plt.close(fig)
 
 
 def convergence(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel) -> tuple[dict, dict]:
@@ -1232,17 +1393,20 @@ class Solve:
 
 
 def planned_solves(st: Settings, study: str = "full") -> list[Solve]:
-    """Every reference path :func:`main`'s run reads (``study``: "full", or the "mirror" / "holdout" study
-    alone, ``--mirror-study`` / ``--holdout-study``), once each (as :func:`reference_path` keys them), most
+    """Every reference path :func:`main`'s run reads (``study``: "full", or the "mirror" / "holdout" / "fold"
+    study alone, ``--mirror-study`` / ``--holdout-study`` / ``--fold-study``), once each (as :func:`reference_path` keys them), most
     expensive first. Keep it in step with the functions that read them: :func:`convergence`,
     :func:`mirror_study` (its stability check reads the last two levels), :func:`penalty_study`,
     :func:`skin_study`, :func:`validation_set`, :func:`snapshot_source`, :func:`snapshot_mesh_study` (the skin
     study's meshes) and :func:`holdout_study`; a path may be listed twice. A run after :func:`prefetch` of this
     list solves nothing itself (tests/test_fem_experiment.py checks the quick run's log). ``ValueError`` on
     another ``study``."""
-    if study not in ("full", "mirror", "holdout"):
-        raise ValueError(f"study must be 'full', 'mirror' or 'holdout', got {study!r}")
+    if study not in ("full", "mirror", "holdout", "fold"):
+        raise ValueError(f"study must be 'full', 'mirror', 'holdout' or 'fold', got {study!r}")
     lv = st.levels
+    if study == "fold":                                  # fold_study: the last three levels
+        jobs = [Solve(s, 0.0, st.depth_step) for s in lv[-3:-1]] + [Solve(lv[-1], 0.0, st.fine_step)]
+        return sorted(jobs, key=lambda j: -j.cost())
 
     def snapshot_jobs(s: Settings) -> list[Solve]:      # validation_set's held-out paths, snapshot_source's
         jobs = [Solve(s.snap_spec, a, s.fine_step, stable=True) for a in s.holdout_deg]
@@ -1368,9 +1532,11 @@ def main(argv: list[str] | None = None) -> int:
     """Run the experiment; returns 0. See the module docstring for the outputs."""
     args = _parser().parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
-    for flag, on in (("--mirror-study", args.mirror_study), ("--holdout-study", args.holdout_study)):
+    studies = ("--mirror-study", args.mirror_study), ("--holdout-study", args.holdout_study), \
+        ("--fold-study", args.fold_study)
+    for flag, on in studies:
         if on and (args.node_table or args.level is not None or args.linear_study or args.scene
-                   or (args.mirror_study and args.holdout_study)):
+                   or sum(o for _, o in studies) > 1):
             raise SystemExit(f"flexsheet experiment fem: {flag} (the paper's cylinder) takes none of "
                              "--node-table, --level, --linear-study, --scene, and runs alone")
     if args.holdout_study and args.quick:
@@ -1415,7 +1581,8 @@ def main(argv: list[str] | None = None) -> int:
                        probes, st.contact)
         _log(f"level {args.level} cached in {time.perf_counter() - t0:.1f} s")
         return 0
-    study = "mirror" if args.mirror_study else "holdout" if args.holdout_study else "full"
+    study = "mirror" if args.mirror_study else "holdout" if args.holdout_study else \
+        "fold" if args.fold_study else "full"
     prefetch(planned_solves(st, study), args.jobs, mat, cache, probes, st.contact)
     if args.holdout_study:
         fine = reference_path(st.levels[-1], 0.0, _depths(st.fine_step), mat, cache, probes, st.contact)
@@ -1423,6 +1590,12 @@ def main(argv: list[str] | None = None) -> int:
         _write(args.out, "holdout_study", hs)
         plot_holdout_study(args.out, hs)
         _log(f"holdout study done in {time.perf_counter() - t0:.1f} s -> {args.out}/holdout_study.json")
+        return 0
+    if args.fold_study:
+        fs = fold_study(st, mat, cache, rm)
+        _write(args.out, "fold_study", fs)
+        plot_fold_study(args.out, fs)
+        _log(f"fold study done in {time.perf_counter() - t0:.1f} s -> {args.out}/fold_study.json")
         return 0
     conv, fine = convergence(st, mat, cache, rm)
     if args.mirror_study:
