@@ -181,6 +181,32 @@ def test_solve_path_rejects_bad_depths(quarter):
         H.RefSpec(0.01, 0.02)
 
 
+def test_tip_refinement_is_fine_at_the_push_point_only():
+    """The tip option sizes the material at the push point itself (what ends up stretched over the fingertip);
+    a spec without it keeps its key."""
+    base = H.RefSpec(0.016, 0.008, 0.012, half_z=True)
+    tip = replace(base, tip_h=0.002, tip_radius=0.005)
+    assert tip.key() == base.key() + ",tip=0.002/0.005"
+
+    def edges(spec):
+        m = H.reference_mesh(spec, 0.0)
+        e = np.concatenate([m.tets[:, [a, b]] for a, b in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))])
+        apex = m.center + np.array([m.radius, 0.0, 0.0])
+        dist = np.linalg.norm(m.points[e].mean(axis=1) - apex, axis=1)
+        return m, np.linalg.norm(m.points[e[:, 0]] - m.points[e[:, 1]], axis=1), dist
+
+    m0, l0, d0 = edges(base)
+    m1, l1, d1 = edges(tip)
+    assert np.median(l1[d1 < 0.004]) < 0.5 * np.median(l0[d0 < 0.004]) and np.median(l1[d1 < 0.004]) < 0.003
+    assert np.median(l1[d1 > 0.030]) == pytest.approx(np.median(l0[d0 > 0.030]), rel=0.15)   # far away: unchanged
+    assert len(m1.points) > len(m0.points)
+    for kw, word in ((dict(tip_h=0.009), r"tip_h must be 0 \(no tip refinement\) or in \[0.0005, h_fine=0.008\] m"),
+                     (dict(tip_h=float("nan")), "tip_h must be"), (dict(tip_h=0.002, tip_radius=0.001),
+                                                                    "tip_radius must be >= tip_h")):
+        with pytest.raises(ValueError, match=word):
+            replace(base, **kw)
+
+
 def test_skin_refinement_is_fine_in_the_surface_layer_around_the_push_only():
     """The skin option sizes the surface layer near the push point; the rest of the mesh and the key of a
     spec without it are unchanged (cached references keep their keys)."""

@@ -1,5 +1,5 @@
-"""``flexsheet experiment fem --out DIR [--quick] [--jobs N] [--linear-study] [--mirror-study | --holdout-study]
-[--scene FILE]``: physically right deformation
+"""``flexsheet experiment fem --out DIR [--quick] [--jobs N] [--linear-study]
+[--mirror-study | --holdout-study | --fold-study] [--scene FILE]``: physically right deformation
 of the pushed cylinder, and the real-time model that reproduces it (``--scene`` with another object: the same
 study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 
@@ -18,7 +18,10 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    plane) at h_fine 6 / 4.5 / 3.4 mm, cut as every other azimuth is (the plane through the push axis meshed,
    no BC on it), against the quarter models: force, distance from the finest quarter model and the
    half model's own asymmetry; and whether the quarter models' symmetric solution is stable against asymmetric
-   modes (:func:`mirror_stability`, the 3.4 and 2.5 mm meshes, cached).
+   modes (:func:`mirror_stability`, the 3.4 and 2.5 mm meshes, cached). **Fold study** (``fold_study.json/png``,
+   :func:`fold_study`; ``--fold-study`` runs only it): the reference has no self-contact, so the last three
+   levels' states are checked for a surface that passes through itself or creases (:mod:`nodes.fem.fold`),
+   and for where the largest strain and the levels' largest differences sit.
 2. **Candidates**, judged on the real-time model's rendered vertices outside the finger's footprint
    (lateral distance from the push axis > finger radius + 2 mm; the footprint is hidden by the finger):
    the linear P2 capacitance model, and the nonlinear snapshots (:mod:`nodes.fem.snapshots`), sampled every
@@ -545,8 +548,8 @@ def fold_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel
 
 
 def plot_fold_study(out: str, fs: dict) -> None:
-    """fold_study.png: per level, the largest winding number and the deepest self-penetration against depth,
-    beside the visible-surface difference to the finest level (:func:`fold_study`, the numbers in
+    """fold_study.png: per level, the largest winding number (off the footprint, and with it) and the smallest
+    surface stretch against depth, beside the visible-surface difference to the finest level (:func:`fold_study`, the numbers in
     ``fold_study.json``)."""
     import matplotlib
 
@@ -555,23 +558,29 @@ def plot_fold_study(out: str, fs: dict) -> None:
 
     d = fs["depths_mm"]
     fig, ax = plt.subplots(1, 3, figsize=(13, 4.2))
-    for r in fs["levels"]:
+    for k, r in enumerate(fs["levels"]):
         lab = f"h_fine {r['h_fine_mm']:g} mm ({r['dofs']} DOF)"
-        ax[0].plot(d, r["max_winding"], "o-", ms=3, label=lab)
-        ax[1].plot(d, r["max_penetration_mm"], "o-", ms=3, label=lab)
+        col = f"C{k}"
+        ax[0].plot(d, r["max_winding"], "o-", color=col, ms=3, label=f"{lab}, off the footprint")
+        ax[0].plot(d, r["with_footprint"]["max_winding"], "s--", color=col, ms=3, lw=0.8,
+                   label=f"{lab}, footprint too (fingertip)")
+        ax[1].plot(d, r["min_stretch"], "o-", color=col, ms=3, label=lab)
         if "difference_to_finest_mm" in r:
-            ax[2].plot(d, r["difference_to_finest_mm"], "o-", ms=3, label=f"{lab} vs finest")
+            ax[2].plot(d, r["difference_to_finest_mm"], "o-", color=col, ms=3, label=f"{lab} vs finest")
     ax[0].axhline(0.5, color="k", lw=0.6, ls=":")
     ax[0].axhline(1.0, color="r", lw=0.8, ls="--", label="w = 1: surface inside the body")
-    ax[0].set_ylabel("largest winding number w off the footprint")
-    ax[1].set_ylabel("deepest self-penetration (mm)")
+    ax[0].set_ylabel("largest winding number w of the surface")
+    ax[1].axhline(fs["crease_stretch"], color="r", lw=0.8, ls="--", label="neo-Hookean crease onset")
+    ax[1].set_ylabel("smallest in-plane surface stretch off the footprint")
     ax[2].axhline(0.35, color="k", lw=0.8, ls="--", label="half the 0.7 mm target")
     ax[2].set_ylabel("visible-surface difference to the finest (mm)")
     for a in ax:
         a.set_xlabel("push depth (mm)")
-        a.legend(fontsize=7)
+        a.legend(fontsize=6)
+    pen = max(max(r["max_penetration_mm"]) for r in fs["levels"])
     fig.suptitle(f"Reference at azimuth 0: folds of its own surface (no self-contact); fold-free to "
-                 f"{fs['fold_free_to_mm']:g} mm on the finest mesh", fontsize=10)
+                 f"{fs['fold_free_to_mm']:g} mm on the finest mesh; deepest self-penetration {pen:.2f} mm",
+                 fontsize=10)
     fig.tight_layout()
     fig.savefig(os.path.join(out, "fold_study.png"), dpi=110)
     plt.close(fig)

@@ -98,7 +98,9 @@ class RefSpec:
     contact point, or (``path_depth`` > 0, m) of the whole push path from the contact point down to that depth
     (:func:`nodes.fem.mesh.cylinder_part_mesh`); ``half_z`` also use the z mirror plane (azimuth-0 pushes
     only); ``skin_h`` > 0 (m): that size in the surface layer ``skin_depth`` thick within ``skin_radius`` of the
-    contact point (the material that wraps the fingertip and lines the crater); ``cut``: the mesh is conforming
+    contact point (the material that wraps the fingertip and lines the crater); ``tip_h`` > 0 (m): that size
+    within ``tip_radius`` (m) of the contact point itself, graded to ``h`` over a further ``tip_radius`` (the
+    material that ends up over the fingertip, stretched several times over: docs/fem.md, fold study); ``cut``: the mesh is conforming
     to the plane through the cylinder's axis and the push axis (nodes on it, as a quarter model has on its
     mirror plane), for half models (a quarter model has it: ignored). Raises ``ValueError``."""
 
@@ -111,6 +113,8 @@ class RefSpec:
     skin_radius: float = 0.020
     skin_depth: float = 0.005
     cut: bool = False
+    tip_h: float = 0.0
+    tip_radius: float = 0.005
 
     def __post_init__(self):
         for name in ("h", "h_fine"):
@@ -125,6 +129,11 @@ class RefSpec:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be > 0 m, got {v!r}")
+        if not (self.tip_h == 0.0 or (math.isfinite(self.tip_h) and 0.0005 <= self.tip_h <= self.h_fine)):
+            raise ValueError(f"tip_h must be 0 (no tip refinement) or in [0.0005, h_fine={self.h_fine:g}] m, got "
+                             f"{self.tip_h!r}")
+        if not (math.isfinite(self.tip_radius) and self.tip_radius >= max(self.tip_h, 1e-4)):
+            raise ValueError(f"tip_radius must be >= tip_h (one element), got {self.tip_radius!r}")
         if self.skin_h > 0 and self.skin_depth < self.skin_h:
             raise ValueError(f"skin_depth must be >= skin_h = {self.skin_h:g} m (one element thick), got {self.skin_depth!r}")
 
@@ -133,6 +142,7 @@ class RefSpec:
         k = f"h={self.h:.6g},hf={self.h_fine:.6g},rr={self.refine_radius:.6g},hz={int(self.half_z)}"
         k += f",pd={self.path_depth:.6g}" if self.path_depth > 0 else ""
         k += f",sk={self.skin_h:.6g}/{self.skin_radius:.6g}/{self.skin_depth:.6g}" if self.skin_h > 0 else ""
+        k += f",tip={self.tip_h:.6g}/{self.tip_radius:.6g}" if self.tip_h > 0 else ""
         return k + (",cut" if self.cut and not self.half_z else "")      # a quarter model has the plane anyway
 
 
@@ -143,6 +153,7 @@ def reference_mesh(spec: RefSpec, angle_deg: float) -> TetMesh:
     return cylinder_part_mesh(spec.h, spec.h_fine, spec.refine_radius, (float(angle_deg),), half_y=True,
                               half_z=spec.half_z, path_depth=spec.path_depth,
                               skin=(spec.skin_h, spec.skin_radius, spec.skin_depth) if spec.skin_h > 0 else None,
+                              tip=(spec.tip_h, spec.tip_radius) if spec.tip_h > 0 else None,
                               cut_deg=float(angle_deg) if spec.cut and not spec.half_z else None)
 
 

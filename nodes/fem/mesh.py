@@ -184,7 +184,7 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
                        half_y: bool = True, half_z: bool = False, radius: float = CYLINDER_RADIUS,
                        length: float = CYLINDER_LENGTH, center: np.ndarray = CYLINDER_CENTER,
                        path_depth: float = 0.0, skin: tuple[float, float, float] | None = None,
-                       cut_deg: float | None = None) -> TetMesh:
+                       cut_deg: float | None = None, tip: tuple[float, float] | None = None) -> TetMesh:
     """Mesh a symmetric part of the cylinder for the nonlinear reference (P1 tetrahedra, gmsh OpenCASCADE).
 
     ``half_y``: keep y ≥ y_O only (the push at y = y_O is mirror-symmetric in y); ``half_z``: also keep
@@ -196,7 +196,9 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
     that wraps it). Each ball grades from ``h_fine`` to ``h`` over a further ``refine_radius``. ``skin``
     (size, patch radius, depth) m: also size ``size`` in the skin around each push point — the surface layer
     ``depth`` thick within ``patch radius`` (along the surface) of it, whose material wraps around the
-    fingertip and lines the crater (balls of radius ``depth`` every ``depth``/2 on the surface). ``cut_deg``
+    fingertip and lines the crater (balls of radius ``depth`` every ``depth``/2 on the surface). ``tip``
+    (size, radius) m: also size ``size`` within ``radius`` of each push point itself, graded to ``h`` over a
+    further ``radius`` (the material that ends up over the fingertip). ``cut_deg``
     (deg, without ``half_z``): the mesh conforms to the plane through the axis and the push direction at that
     azimuth (the solid is fragmented by it, so the two volumes share their nodes there). ``fixed`` marks
     nothing here: the caller knows which faces are symmetry planes. Raises ``ValueError`` on bad sizes or a
@@ -260,8 +262,17 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
                     pts.append(c + np.array([radius * math.cos(phi), j * step, radius * math.sin(phi)]))
         keep = [p for p in pts if p[1] >= y0 - depth and (not half_z or p[2] >= c[2] - depth)]
         extra = ((np.array(keep), depth, size),)
+    if tip is not None:
+        size, rad = (float(v) for v in tip)
+        if not (math.isfinite(size) and 0.0005 <= size <= h_fine):
+            raise ValueError(f"tip size must be in [0.0005, h_fine={h_fine}] m, got {size!r}")
+        if not (math.isfinite(rad) and size <= rad <= radius / 2):
+            raise ValueError(f"tip radius must be in [tip size {size:g}, {radius / 2:.4g}] m, got {rad!r}")
+        apex = [c + radius * np.array([math.cos(math.radians(d)), 0.0, math.sin(math.radians(d))])
+                for d in refine_deg]
+        extra = extra + ((np.array(apex), rad, size),)
     points, tets = _gmsh_tets("cylinder_part", geometry, h, h_fine, refine_radius, centres,
-                              f"the cylinder part (h={h}, h_fine={h_fine}, skin={skin})", extra)
+                              f"the cylinder part (h={h}, h_fine={h_fine}, skin={skin}, tip={tip})", extra)
     tets = orient_tets(points, tets)
     faces = surface_faces(points, tets)
     return TetMesh(points, tets, faces, np.zeros(len(points), bool), None, radius, length, c.copy())
