@@ -270,8 +270,8 @@ def test_second_run_reads_the_cache(quick):
 
 
 def test_fold_study_reads_the_levels_from_the_cache_and_finds_no_fold_on_the_coarse_meshes(quick):
-    """--fold-study checks the reference's own surface for folds (it has no self-contact): on the quick run's
-    cached levels it solves nothing, and the coarse meshes' visible surface stays smooth (w ≈ ½, nothing inside
+    """--fold-study checks the reference's own surface for folds (it has no self-contact): it reads the quick
+    run's cached levels (solving only its tip-refined sequence), and the coarse meshes' visible surface stays smooth (w ≈ ½, nothing inside
     the body) to 50 mm, while the material over the fingertip (footprint included) is kinked at the apex (w > ½)
     and stretched several times over; its differences to the finest level are the convergence study's."""
     base, _, _ = quick
@@ -279,7 +279,9 @@ def test_fold_study_reads_the_levels_from_the_cache_and_finds_no_fold_on_the_coa
                         str(base / "fold"), "--cache-dir", str(base / "cache"), "--jobs", "1"], cwd=ROOT,
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
-    assert "DOF, load steps" not in r.stdout and "fold study done" in r.stdout
+    solved = [ln for ln in r.stdout.splitlines() if "DOF, load steps" in ln]
+    assert len(solved) == 2 and all(",tip=" in ln for ln in solved), solved     # the tip sequence only
+    assert "fold study done" in r.stdout
     with open(base / "fold" / "fold_study.json") as fh:
         fs = json.load(fh)
     assert os.path.getsize(base / "fold" / "fold_study.png") > 5000
@@ -293,6 +295,21 @@ def test_fold_study_reads_the_levels_from_the_cache_and_finds_no_fold_on_the_coa
         assert fp["max_stretch"][-1] > 2.0 and lv["min_stretch"][-1] < lv["min_stretch"][0] < 1.0
         assert lv["max_principal_strain"][-1] > lv["max_principal_strain"][0] > 0
     assert fs["fold_free_to_mm"] == 50.0 and fs["first_penetration_mm_by_h_fine_mm"] == {"12.0": None, "9.0": None}
+    tip = fs["tip_sequence"]
+    assert [(t["h_fine_mm"], t["tip_h_mm"]) for t in tip["levels"]] == pytest.approx([(12.0, 5.0), (9.0, 4.0)])
+    assert tip["converged"] is False and "tip_check" not in tip              # two levels cannot converge
+    assert max(tip["levels"][-1]["difference_to_finest_mm"]) == 0.0
+    assert tip["last_refinement_change_mm"] == pytest.approx(max(tip["levels"][0]["difference_to_finest_mm"]))
+    for t, lv in zip(tip["levels"], fs["levels"], strict=True):        # the tip adds elements at the push point
+        assert t["dofs"] > lv["dofs"] and t["newton_converged"]
+    # the finer apex stretches more: the strain at 50 mm on the tip level exceeds the plain level's
+    assert tip["levels"][-1]["max_principal_strain"][-1] > fs["levels"][-1]["max_principal_strain"][-1]
+    # azimuth-0 snapshot tables on the next-to-finest plain and tip levels, judged against the finest tip level:
+    # the tip-refined table is the closer one at the deep end
+    plain, tipped = tip["snapshots"]["tables"]
+    assert plain["tip_h_mm"] == 0.0 and tipped["tip_h_mm"] == pytest.approx(5.0) and len(tipped["error_mm"]) == 10
+    assert tipped["max_visible_error_mm"] < plain["max_visible_error_mm"]
+    assert max(tipped["error_mm"][-3:]) < min(plain["error_mm"][-3:])
     with open(base / "out" / "convergence.json") as fh:
         conv = json.load(fh)
     assert fs["levels"][0]["difference_to_finest_mm"] == pytest.approx(conv["levels"][0]["error_vs_finest_mm"],
@@ -358,8 +375,9 @@ def test_planned_solves_list_each_push_the_run_reads_once_by_cache_key():
     assert X.holdout_grid(replace(full, holdout_deg=(15.0,))).grid.angles_deg == (0.0, 10.0, 20.0)
     with pytest.raises(ValueError, match="hold no azimuth out"):
         X.holdout_grid(quick)
-    assert len(set(keys(full, "fold"))) == 3 and set(keys(full, "fold")) <= set(keys(full))
-    assert len(set(keys(quick, "fold"))) == 2 and set(keys(quick, "fold")) <= set(keys(quick))
+    # the fold study: the last three levels (the full run's), the tip-refined sequence and its tip check
+    assert len(set(keys(full, "fold"))) == 7 and len(set(keys(full, "fold")) & set(keys(full))) == 3
+    assert len(set(keys(quick, "fold"))) == 4 and len(set(keys(quick, "fold")) & set(keys(quick))) == 2
     with pytest.raises(ValueError, match="study must be"):
         X.planned_solves(full, "mirror_only")
     costs = [j.cost() for j in X.planned_solves(full)]

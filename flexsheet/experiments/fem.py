@@ -103,6 +103,11 @@ FINGER_R = 0.008
 FULL_LEVELS = (0.008, 0.006, 0.0045, 0.0034, 0.0025)   #: h_fine (m) of the full run's meshes, coarse → fine
 TARGET = 0.0007
 PENALTY_TOL_MM = 0.1    #: the default penalty must lie this close (visible surface) to a 10× stiffer one
+#: the fold study's tip-refined sequence (h_fine, tip_h) m: the push tube and, within TIP_RADIUS of the push point,
+#: the material that ends up stretched over the fingertip, refined together (docs/fem.md, fold study)
+TIP_LEVELS = ((0.0045, 0.0016), (0.0034, 0.0012), (0.0025, 0.0009))
+TIP_RADIUS = 0.005
+TIP_CHECK = 0.0008      #: a finer tip alone on the middle tip level's tube (does the apex still move the surface?)
 NEWTON_ITERS = 60       #: per load step; a snap-through step (a crease forming beside the finger) needs ~25
 
 
@@ -126,6 +131,8 @@ class Settings:
     penalty_scales: tuple = (1e3, 1e4, PENALTY_SCALE, 10 * PENALTY_SCALE)
     skin_sizes: tuple = (0.0025, 0.0018)
     half_levels: tuple = (0.006, 0.0045, 0.0034)
+    tip_levels: tuple = TIP_LEVELS
+    tip_check: float = TIP_CHECK
 
 
 def settings_for(quick: bool) -> Settings:
@@ -140,7 +147,7 @@ def settings_for(quick: bool) -> Settings:
                         grid=SnapshotGrid((0.0,), 0.05, 0.01, 1.0, 0.001, 0.002), snap_spec=lv[-1], holdout_deg=(),
                         linear_spec=MeshSpec(0.016, 0.006, 0.012, 0.0), n_time=50, quick=True, penalty_level=0,
                         penalty_scales=(PENALTY_SCALE, 10 * PENALTY_SCALE), skin_sizes=(0.005,),
-                        half_levels=(0.012,))
+                        half_levels=(0.012,), tip_levels=((0.012, 0.005), (0.009, 0.004)), tip_check=0.0)
     lv = [replace(DEFAULT_REF_SPEC, h_fine=hf) for hf in FULL_LEVELS]
     grid = SnapshotGrid((0.0, 10.0, 20.0), 0.05, 0.005, DEFAULT_GRID.dtheta_deg, DEFAULT_GRID.dy, DEFAULT_GRID.drho)
     # the snapshots on the node's mesh (DEFAULT_REF_SPEC, the next-to-finest level), judged against the finest at
@@ -530,13 +537,14 @@ def fold_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel
             row["worst_difference_at"] = [_where_worst(p, fine, j, d, verts, fixed, rm.mesh)
                                           for j, d in enumerate(depths)]
         rows.append(row)
+    tip = tip_sequence(st, mat, cache, rm, fine)
     pen = np.asarray(rows[-1]["n_penetrating"]) > 0
     free = float(depths[np.argmax(pen) - 1] * 1e3) if pen.any() and pen.argmax() > 0 else \
         (0.0 if pen.any() else float(depths[-1] * 1e3))
     first = {r["h_fine_mm"]: (float(depths[np.argmax(np.asarray(r["n_penetrating"]) > 0)] * 1e3)
                               if np.any(np.asarray(r["n_penetrating"]) > 0) else None) for r in rows}
     return {"depths_mm": (depths * 1e3).tolist(), "region_mm": FOLD_REGION * 1e3, "levels": rows,
-            "fold_free_to_mm": free, "first_penetration_mm_by_h_fine_mm": first,
+            "tip_sequence": tip, "fold_free_to_mm": free, "first_penetration_mm_by_h_fine_mm": first,
             "crease_stretch": CREASE_STRETCH,
             "what": "self-contact and crease check of the reference at azimuth 0 (nodes/fem/fold.py): the "
                     "generalised winding number w of the closed outer surface at its own points within "
@@ -545,6 +553,99 @@ def fold_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel
                     "point lies inside the body (the surface has passed through itself: the model has no "
                     "self-contact); max_penetration_mm how deep; min_stretch the smallest in-plane stretch of "
                     "the surface triangles off the footprint (a neo-Hookean surface creases below ~0.65)"}
+
+
+def tip_specs(st: Settings) -> tuple[list[RefSpec], RefSpec | None]:
+    """(the tip-refined sequence, coarse → fine: ``st.tip_levels`` (h_fine, tip_h) on the finest level's spec
+    with ``tip_radius`` :data:`TIP_RADIUS`; the tip check: the middle level with the finer tip ``st.tip_check``,
+    or None when it is 0)."""
+    seq = [replace(st.levels[-1], h_fine=hf, tip_h=th, tip_radius=TIP_RADIUS) for hf, th in st.tip_levels]
+    chk = replace(seq[len(seq) // 2], tip_h=st.tip_check) if st.tip_check > 0 and len(seq) > 1 else None
+    return seq, chk
+
+
+def tip_sequence(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, tube_fine: dict) -> dict:
+    """The push at azimuth 0 on meshes that refine the push tube *and* the material at the push point (within
+    :data:`TIP_RADIUS`; the material stretched over the fingertip, where the plain levels are unresolved) together
+    (``st.tip_levels``). Per level: DOF, CPU, force, the largest strain and stretch, the visible-surface
+    difference to the finest tip level and to the finest plain level (``tube_fine``); the sequence's verdict by
+    :func:`convergence`'s criterion ("converged": ≥ 3 levels, monotone at every depth ≥ 5 mm, last change ≤ half
+    the target, Newton converged at every step of the finest, nothing inverted at a quadrature point); the tip
+    check: the middle level with a finer tip alone, its difference to that level (does the apex still move the
+    visible surface?)."""
+    depths = _depths(st.depth_step)
+    verts = rm.rest_vertices.astype(float)
+    fixed = rm.mesh.fixed[rm.surface_nodes]
+    seq, chk = tip_specs(st)
+    paths = [reference_path(s, 0.0, depths, mat, cache, verts, st.contact) for s in seq]
+    rows = []
+    for s, p in zip(seq, paths, strict=True):
+        f = fold_path(s, 0.0, p, depths, mat, cache)
+        rows.append({"h_fine_mm": s.h_fine * 1e3, "tip_h_mm": s.tip_h * 1e3, "tip_radius_mm": s.tip_radius * 1e3,
+                     "dofs": int(p["dofs"]), "cpu_seconds": float(p["cpu_seconds"]), "force_N": p["force"].tolist(),
+                     "newton_converged": bool(p["converged"].all()), "inverted_qp_max": int(p["inverted_qp"].max()),
+                     "max_principal_strain": p["max_strain"].tolist(),
+                     "max_surface_stretch": f["all_max_stretch"].tolist(),
+                     "max_winding_with_footprint": f["all_max_winding"].tolist(),
+                     "n_penetrating": f["all_n_penetrating"].astype(int).tolist(),
+                     "difference_to_finest_mm": [e * 1e3 for e in _visible_diffs(p, paths[-1], depths, verts, fixed,
+                                                                                  rm.mesh)],
+                     "difference_to_finest_plain_level_mm": [e * 1e3 for e in _visible_diffs(
+                         p, tube_fine, depths, verts, fixed, rm.mesh)]})
+    e = np.array([r["difference_to_finest_mm"] for r in rows[:-1]])
+    monotone, last, to_depth = _sequence_verdict(e, depths) if len(e) else (False, float("nan"), 0.0)
+    fine = rows[-1]
+    out = {"levels": rows, "monotone_decrease": monotone, "last_refinement_change_mm": last,
+           "converged_to_depth_mm": to_depth,
+           "converged": len(rows) >= 3 and monotone and last <= TARGET * 1e3 / 2 and fine["newton_converged"]
+           and fine["inverted_qp_max"] == 0,
+           "criterion": "convergence.json's: at least 3 meshes, the visible-surface difference to the finest falls "
+                        "with every refinement (depths >= 5 mm), the last refinement changes it by <= half the "
+                        "0.7 mm target, Newton converged at every load step of the finest mesh, no element of it "
+                        "inverted at a quadrature point"}
+    if chk is not None:
+        pc = reference_path(chk, 0.0, depths, mat, cache, verts, st.contact)
+        mid = paths[len(seq) // 2]
+        out["tip_check"] = {"h_fine_mm": chk.h_fine * 1e3, "tip_h_mm": chk.tip_h * 1e3, "dofs": int(pc["dofs"]),
+                            "cpu_seconds": float(pc["cpu_seconds"]), "max_principal_strain": pc["max_strain"].tolist(),
+                            "difference_to_its_level_mm": [e * 1e3 for e in _visible_diffs(pc, mid, depths, verts,
+                                                                                           fixed, rm.mesh)],
+                            "difference_to_finest_mm": [e * 1e3 for e in _visible_diffs(pc, paths[-1], depths, verts,
+                                                                                       fixed, rm.mesh)]}
+    out["snapshots"] = _tip_snapshots(st, mat, cache, rm, seq, paths[-1])
+    _log(f"tip sequence: last refinement {last:.3f} mm, monotone {monotone}, converged {out['converged']}")
+    return out
+
+
+def _tip_snapshots(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, seq: list[RefSpec],
+                   finest: dict) -> dict:
+    """Azimuth-0 snapshot tables (``st.grid``'s depth step, from the stable branch as every table) on the
+    next-to-finest tip level and on the next-to-finest plain level (full mode: the node's mesh), each judged
+    against the finest tip level ``finest`` at every output depth (the depths between snapshots held out): the
+    worst visible error (mm) and the depth from which it exceeds the target. ``rm``'s table is left as it was."""
+    depths = _depths(st.depth_step)
+    verts = rm.rest_vertices.astype(float)
+    snap_d = st.grid.depths()
+    cases = [{"angle_deg": 0.0, "depth": float(d), "u": finest["u"][j],
+              "held_out": bool(np.min(np.abs(snap_d - d)) > 1e-9)} for j, d in enumerate(depths)]
+    grid = replace(st.grid, angles_deg=(0.0,))
+    keep, rows = rm.snapshots, []
+    try:
+        for spec in (st.levels[-2], seq[-2]):
+            src = stable_path(spec, 0.0, depths, mat, cache, verts, st.contact)
+            table = load_or_build(cache, grid, spec, mat, FINGER_R, build=True, contact=st.contact,
+                                  solved=lambda ang, model, ds, src=src: _path_states(src, depths, ds, model))[0]
+            rm.attach_snapshots(table)
+            err = np.array(errors(rm, cases, "snapshots")) * 1e3
+            over = np.flatnonzero(err > TARGET * 1e3)
+            rows.append({"spec": spec.key(), "h_fine_mm": spec.h_fine * 1e3, "tip_h_mm": spec.tip_h * 1e3,
+                         "dofs": int(src["dofs"]), "error_mm": err.tolist(), "max_visible_error_mm": float(err.max()),
+                         "over_target_from_mm": float(depths[over[0]] * 1e3) if len(over) else None})
+            _log(f"tip snapshots {spec.key()}: azimuth 0 worst {err.max():.2f} mm against the finest tip level")
+    finally:
+        rm.snapshots = keep
+    return {"azimuth_deg": 0.0, "snapshot_depth_step_mm": st.grid.depth_step * 1e3, "target_mm": TARGET * 1e3,
+            "against": "the finest tip level, every output depth", "tables": rows}
 
 
 def plot_fold_study(out: str, fs: dict) -> None:
@@ -557,7 +658,8 @@ def plot_fold_study(out: str, fs: dict) -> None:
     import matplotlib.pyplot as plt
 
     d = fs["depths_mm"]
-    fig, ax = plt.subplots(1, 3, figsize=(13, 4.2))
+    fig, axs = plt.subplots(2, 2, figsize=(12, 8.5))
+    ax = axs.ravel()
     for k, r in enumerate(fs["levels"]):
         lab = f"h_fine {r['h_fine_mm']:g} mm ({r['dofs']} DOF)"
         col = f"C{k}"
@@ -574,6 +676,21 @@ def plot_fold_study(out: str, fs: dict) -> None:
     ax[1].set_ylabel("smallest in-plane surface stretch off the footprint")
     ax[2].axhline(0.35, color="k", lw=0.8, ls="--", label="half the 0.7 mm target")
     ax[2].set_ylabel("visible-surface difference to the finest (mm)")
+    tip = fs["tip_sequence"]
+    for k, r in enumerate(tip["levels"][:-1]):
+        ax[3].plot(d, r["difference_to_finest_mm"], "o-", color=f"C{k + 3}", ms=3,
+                   label=f"tube {r['h_fine_mm']:g} mm + tip {r['tip_h_mm']:g} mm ({r['dofs']} DOF) vs finest")
+    fin = tip["levels"][-1]
+    ax[3].plot(d, fin["difference_to_finest_plain_level_mm"], "s--", color="k", ms=3, lw=0.8,
+               label=f"finest (tube {fin['h_fine_mm']:g} + tip {fin['tip_h_mm']:g} mm) vs the finest plain level")
+    if "tip_check" in tip:
+        tc = tip["tip_check"]
+        ax[3].plot(d, tc["difference_to_its_level_mm"], "^-", color="C7", ms=3,
+                   label=f"tip {tc['tip_h_mm']:g} mm vs its level (tube {tc['h_fine_mm']:g} mm)")
+    ax[3].axhline(0.35, color="k", lw=0.8, ls="--", label="half the 0.7 mm target")
+    ax[3].set_ylabel("visible-surface difference (mm)")
+    ax[3].set_title(f"tip-refined sequence: last refinement {tip['last_refinement_change_mm']:.2f} mm, "
+                    f"converged {tip['converged']}", fontsize=9)
     for a in ax:
         a.set_xlabel("push depth (mm)")
         a.legend(fontsize=6)
@@ -584,6 +701,19 @@ def plot_fold_study(out: str, fs: dict) -> None:
     fig.tight_layout()
     fig.savefig(os.path.join(out, "fold_study.png"), dpi=110)
     plt.close(fig)
+
+
+def _sequence_verdict(e: np.ndarray, depths: np.ndarray) -> tuple[bool, float, float]:
+    """Mesh-sequence verdict from ``e`` (L-1, D) mm, each coarser level's visible-surface difference to the
+    finest at ``depths`` (D,) m: (the difference falls with every refinement at every depth ≥ 5 mm, the last
+    refinement's largest change in mm, the deepest depth in mm to which both hold with the last change ≤ half
+    the target; 0 with fewer than 3 levels)."""
+    deep = depths >= 0.005 - 1e-12
+    monotone = bool(np.all(np.diff(e[:, deep], axis=0) < 0)) if len(e) > 1 else False
+    last = float(e[-1].max())
+    ok = (e[-1] <= TARGET * 1e3 / 2) & (~deep | np.all(np.diff(e, axis=0) < 0, axis=0) if len(e) > 1 else False)
+    n_ok = int(np.argmin(ok)) if not np.all(ok) else len(ok)
+    return monotone, last, (float(depths[n_ok - 1] * 1e3) if n_ok and len(e) > 1 else 0.0)
 
 
 def convergence(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel) -> tuple[dict, dict]:
@@ -609,12 +739,8 @@ def convergence(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMode
                               "cpu_seconds": float(p["cpu_seconds"])})
     e = np.array([lv["error_vs_finest_mm"] for lv in rep["levels"][:-1]])          # (L-1, D)
     deep = depths >= 0.005 - 1e-12
-    monotone = bool(np.all(np.diff(e[:, deep], axis=0) < 0)) if len(e) > 1 else False
-    last = float(e[-1].max())
+    monotone, last, rep["converged_to_depth_mm"] = _sequence_verdict(e, depths)
     no_qp = int(fine["inverted_qp"].max()) == 0
-    ok = (e[-1] <= TARGET * 1e3 / 2) & (~deep | np.all(np.diff(e, axis=0) < 0, axis=0) if len(e) > 1 else False)
-    n_ok = int(np.argmin(ok)) if not np.all(ok) else len(ok)
-    rep["converged_to_depth_mm"] = float(depths[n_ok - 1] * 1e3) if n_ok and len(e) > 1 else 0.0
     rep.update({"monotone_decrease": monotone, "last_refinement_change_mm": last,
                 "finest_inverted_nodal_at_50mm": int(fine["inverted"][-1]),
                 "finest_inverted_nodal_visible_max": int(fine["inverted_nodal_visible"].max()),
@@ -1413,8 +1539,11 @@ def planned_solves(st: Settings, study: str = "full") -> list[Solve]:
     if study not in ("full", "mirror", "holdout", "fold"):
         raise ValueError(f"study must be 'full', 'mirror', 'holdout' or 'fold', got {study!r}")
     lv = st.levels
-    if study == "fold":                                  # fold_study: the last three levels
+    if study == "fold":                  # fold_study: the last three levels, the tip sequence and its check
+        seq, chk = tip_specs(st)
         jobs = [Solve(s, 0.0, st.depth_step) for s in lv[-3:-1]] + [Solve(lv[-1], 0.0, st.fine_step)]
+        jobs += [Solve(s, 0.0, st.depth_step) for s in seq + ([chk] if chk is not None else [])]
+        jobs += [Solve(s, 0.0, st.depth_step, stable=True) for s in (lv[-2], seq[-2])]     # _tip_snapshots
         return sorted(jobs, key=lambda j: -j.cost())
 
     def snapshot_jobs(s: Settings) -> list[Solve]:      # validation_set's held-out paths, snapshot_source's
