@@ -21,7 +21,9 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    modes (:func:`mirror_stability`, the 3.4 and 2.5 mm meshes, cached). **Fold study** (``fold_study.json/png``,
    :func:`fold_study`; ``--fold-study`` runs only it): the reference has no self-contact, so the last three
    levels' states are checked for a surface that passes through itself or creases (:mod:`nodes.fem.fold`),
-   and for where the largest strain and the levels' largest differences sit.
+   and for where the largest strain and the levels' largest differences sit; then a sequence that refines the
+   push point with the tube (:data:`TIP_LEVELS`, :func:`tip_sequence`: its verdict, a finer tip alone, and
+   azimuth-0 snapshot tables on the plain and the tip meshes against its finest level).
 2. **Candidates**, judged on the real-time model's rendered vertices outside the finger's footprint
    (lateral distance from the push axis > finger radius + 2 mm; the footprint is hidden by the finger):
    the linear P2 capacitance model, and the nonlinear snapshots (:mod:`nodes.fem.snapshots`), sampled every
@@ -196,8 +198,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--fold-study", action="store_true",
                    help="run the fold study only: does the reference's surface fold through itself (it has no "
                         "self-contact), and is that where it does not converge? The last three convergence "
-                        "levels at azimuth 0 (full: h_fine 4.5 / 3.4 / 2.5 mm, ~1 h of two cores cold; quick: "
-                        "its two); writes fold_study.json/png, then exits")
+                        "levels at azimuth 0 (quick: its two), a tip-refined sequence (the push point refined "
+                        "with the tube), a finer tip alone, and azimuth-0 snapshot tables on the plain and tip "
+                        "meshes (full: ~1.5 h of two cores cold here, 43 s cached); writes fold_study.json/png, "
+                        "then exits")
     p.add_argument("--node-table", action="store_true",
                    help="build the FEM node's nonlinear snapshot table (azimuths 0-60 deg every 10 deg, 2.5 mm depth "
                         "steps, on the full run's h_fine 3.4 mm mesh) into the cache the node reads, then exit. "
