@@ -47,7 +47,7 @@ def test_winding_number_is_one_inside_zero_outside_and_half_on_the_quarter_cylin
     assert np.median(w) == pytest.approx(0.5, abs=0.03)
 
 
-def test_the_undeformed_and_a_shallow_push_fold_nothing(quarter):
+def test_the_undeformed_quarter_model_folds_nothing(quarter):
     m, s = quarter
     caps = capsule_at(0.0, 0.01, 0.008, m.mesh.radius, m.mesh.center)
     rep = fold_report(m, s, np.zeros_like(m.points), caps, region=0.03)
@@ -117,3 +117,34 @@ def test_outer_surface_refuses_a_p1_model(quarter):
                           points=np.ascontiguousarray(m.skmesh.p.T))
     with pytest.raises(ValueError, match="edge midpoint"):
         outer_surface(bad)
+
+
+def test_a_quarter_model_moved_through_its_mirror_plane_penetrates_its_mirror_image(quarter):
+    """Shift the quarter model 5 mm across its z mirror plane: its surface near the plane now lies inside its own
+    mirror image (the closed surface is the part and its mirrors), and the depth is measured, not left at 0."""
+    m, s = quarter
+    caps = capsule_at(0.0, 0.01, 0.008, m.mesh.radius, m.mesh.center)
+    u = np.zeros_like(m.points)
+    u[:, 2] = -0.005
+    rep = fold_report(m, s, u, caps, region=0.05)
+    assert rep["n_penetrating"] > 0 and rep["max_winding"] > 1.0
+    assert 0.001 < rep["max_penetration_m"] < 0.05
+
+
+def test_the_tip_sequence_verdict_needs_three_levels_a_falling_difference_and_a_quiet_tip_check():
+    from flexsheet.experiments.fem import _tip_verdict
+
+    depths = np.array([0.0025, 0.005, 0.0075])
+    good = np.array([[0.2, 0.6, 0.9], [0.1, 0.2, 0.3]])          # mm: coarse, middle vs the finest
+    v = _tip_verdict(good, depths, True, 0, None)
+    assert v["converged"] and v["monotone_decrease"] and v["last_refinement_change_mm"] == pytest.approx(0.3)
+    assert v["converged_to_depth_mm"] == pytest.approx(7.5)
+    assert _tip_verdict(good, depths, True, 0, 0.30)["converged"]
+    assert not _tip_verdict(good, depths, True, 0, 0.80)["converged"]          # a finer tip still moves it
+    assert "tip_check" in _tip_verdict(good, depths, True, 0, 0.80)["criterion"]
+    assert not _tip_verdict(good[1:], depths, True, 0, None)["converged"]     # two levels
+    assert not _tip_verdict(good, depths, False, 0, None)["converged"]        # Newton failed on the finest
+    assert not _tip_verdict(good, depths, True, 3, None)["converged"]         # inverted elements
+    worse = np.array([[0.2, 0.6, 0.9], [0.1, 0.7, 0.3]])        # not falling at 5 mm, and over 0.35 mm there
+    w = _tip_verdict(worse, depths, True, 0, None)
+    assert not w["converged"] and not w["monotone_decrease"] and w["converged_to_depth_mm"] == pytest.approx(2.5)

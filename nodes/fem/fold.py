@@ -109,7 +109,9 @@ def winding_numbers(q: np.ndarray, verts: np.ndarray, tris: np.ndarray, chunk: i
     """Generalised winding number (Q,) of the closed triangle surface (``verts`` (V, 3) m, ``tris`` (T, 3) int,
     outward) at points ``q`` (Q, 3) m: Σ_t Ω_t(q) / 4π, Ω_t the signed solid angle of triangle t
     (Van Oosterom & Strackee 1983). 1 inside, 0 outside, ½ on a smooth part of the surface (a triangle with q
-    as a vertex, within :data:`VERTEX_TOL`, contributes 0). ``chunk`` bounds the point × triangle pairs held at once."""
+    as a vertex, within :data:`VERTEX_TOL`, contributes 0; a point inside another triangle's edge or face lies on
+    the jump of that triangle's solid angle and reads either side). ``chunk`` bounds the point × triangle pairs
+    held at once (~180 bytes each: the default holds ~0.7 GB)."""
     q = np.asarray(q, float)
     A, B, C = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
     out = np.empty(len(q))
@@ -130,7 +132,7 @@ def winding_numbers(q: np.ndarray, verts: np.ndarray, tris: np.ndarray, chunk: i
 def surface_stretch(surf: Surface, x0: np.ndarray, x: np.ndarray) -> np.ndarray:
     """(T, 2) principal in-plane stretches (smallest first) of the part's surface triangles between rest
     ``x0`` (P, 3) m and deformed ``x`` (P, 3) m DOF positions: the singular values of the map between the
-    triangles' edge vectors."""
+    triangles' edge vectors. Raises ``numpy.linalg.LinAlgError`` on a degenerate rest triangle."""
     t = surf.tris
     E0 = np.stack([x0[t[:, 1]] - x0[t[:, 0]], x0[t[:, 2]] - x0[t[:, 0]]], axis=2)   # (T, 3, 2)
     E1 = np.stack([x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 0]]], axis=2)
@@ -152,7 +154,10 @@ def fold_report(model, surf: Surface, u: np.ndarray, capsule, region: float, mar
     triangle that is not within 3 rest edge lengths of it (m; 0 if none), "worst_rest_m" (3,) rest position
     of the largest-w point, "worst_lateral_m" / "worst_drop_m": its rest distance from the push axis and how
     far it moved along the push (m), "min_stretch": smallest in-plane stretch of the surface triangles off the
-    footprint (the crease criterion: < :data:`CREASE_STRETCH`), "n_creased_tris": how many are below it}."""
+    footprint (the crease criterion: < :data:`CREASE_STRETCH`), "n_creased_tris": how many are below it,
+    "max_stretch" the largest in-plane stretch there and "max_stretch_lateral_m" its triangle's rest distance from
+    the push axis}. w is sampled at the surface's own points (DOF points): a facet that crosses another between
+    them is not seen. "max_winding" is NaN when no point is checked; ``margin`` = -inf checks the footprint too."""
     X0 = model.points
     x = X0 + u
     verts, tris = surf.closed(x)
@@ -164,7 +169,7 @@ def fold_report(model, surf: Surface, u: np.ndarray, capsule, region: float, mar
     sel = (lat0 < region) & (lat > capsule.radius + margin) & ~model.support[surf.points]
     pts = surf.points[sel]
     w = winding_numbers(x[pts], verts, tris) if len(pts) else np.zeros(0)
-    out = {"max_winding": float(w.max(initial=0.5)), "n_penetrating": int(np.count_nonzero(w > 1.0)),
+    out = {"max_winding": float(w.max()) if len(w) else float("nan"), "n_penetrating": int(np.count_nonzero(w > 1.0)),
            "max_penetration_m": 0.0, "worst_rest_m": None, "worst_lateral_m": None, "worst_drop_m": None}
     if len(pts):
         k = int(np.argmax(w))
@@ -175,13 +180,15 @@ def fold_report(model, surf: Surface, u: np.ndarray, capsule, region: float, mar
     if len(pen):
         from trimesh.triangles import closest_point
 
-        t_rest = np.concatenate([X0] * len(surf.mirrors))[tris].mean(axis=1)
+        t_rest = surf.closed(X0)[0][tris].mean(axis=1)        # rest centroids, mirror images mirrored too
         edge = np.median(np.linalg.norm(X0[surf.tris[:, 1]] - X0[surf.tris[:, 0]], axis=1))
         tree = cKDTree(verts[tris].mean(axis=1))
         depth = []
         for p in pen:
             _, cand = tree.query(x[p], k=min(256, len(tris)))
             cand = cand[np.linalg.norm(t_rest[cand] - X0[p], axis=1) > 3 * edge]
+            if not len(cand):       # every near triangle is its own neighbourhood: take them all
+                cand = np.flatnonzero(np.linalg.norm(t_rest - X0[p], axis=1) > 3 * edge)
             if len(cand):
                 cp = closest_point(verts[tris[cand]], np.repeat(x[p][None], len(cand), axis=0))
                 depth.append(float(np.min(np.linalg.norm(cp - x[p], axis=1))))
