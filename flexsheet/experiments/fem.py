@@ -76,7 +76,7 @@ import numpy as np
 from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
 from nodes.fem.choose import DEFAULT_SPEC, MODEL_TABLE_PATH, visible_mask
 from nodes.fem.contact import finger_at
-from nodes.fem.fold import CREASE_STRETCH, VERTEX_TOL, fold_report, outer_surface
+from nodes.fem.fold import CREASE_STRETCH, VERTEX_TOL, fold_report, lateral_distance, outer_surface
 from nodes.fem.hyperelastic import (
     CONTACT_LAWS,
     DEFAULT_CONTACT,
@@ -475,11 +475,11 @@ def fold_path(spec: RefSpec, angle_deg: float, path: dict, depths: np.ndarray, m
             F = model.deformation(u)
             ev = np.linalg.eigvalsh(0.5 * (np.einsum("eqki,eqkj->eqij", F, F) - np.eye(3)))[..., -1].max(axis=1)
             e = int(np.argmax(ev))
-            rel = model.points[model.edofs[e]].mean(axis=0) - caps.center
             r.update(all_max_winding=a["max_winding"], all_n_penetrating=a["n_penetrating"],
                      all_max_stretch=a["max_stretch"], all_max_stretch_lateral_m=a["max_stretch_lateral_m"],
                      max_strain=float(ev[e]),
-                     max_strain_lateral_m=float(np.linalg.norm(rel - (rel @ caps.direction) * caps.direction)))
+                     max_strain_lateral_m=float(lateral_distance(model.points[model.edofs[e]].mean(axis=0)[None],
+                                                                  caps)[0]))
             rows.append(r)
         out = {k: np.array([r[k] if r[k] is not None else np.nan for r in rows], float)
                for k in ("max_winding", "n_penetrating", "max_penetration_m", "min_stretch", "n_creased_tris",
@@ -651,26 +651,18 @@ def _tip_snapshots(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeM
     against the finest tip level ``finest`` at every output depth (the depths between snapshots held out): the
     worst visible error (mm) and the depth from which it exceeds the target. ``rm``'s table is left as it was."""
     depths = _depths(st.depth_step)
-    verts = rm.rest_vertices.astype(float)
     snap_d = st.grid.depths()
     cases = [{"angle_deg": 0.0, "depth": float(d), "u": finest["u"][j],
               "held_out": bool(np.min(np.abs(snap_d - d)) > 1e-9)} for j, d in enumerate(depths)]
-    grid = replace(st.grid, angles_deg=(0.0,))
-    keep, rows = rm.snapshots, []
-    try:
-        for spec in (st.levels[-2], seq[-2]):
-            src = stable_path(spec, 0.0, depths, mat, cache, verts, st.contact)
-            table = load_or_build(cache, grid, spec, mat, FINGER_R, build=True, contact=st.contact,
-                                  solved=lambda ang, model, ds, src=src: _path_states(src, depths, ds, model))[0]
-            rm.attach_snapshots(table)
-            err = np.array(errors(rm, cases, "snapshots")) * 1e3
-            over = np.flatnonzero(err > TARGET * 1e3)
-            rows.append({"spec": spec.key(), "h_fine_mm": spec.h_fine * 1e3, "tip_h_mm": spec.tip_h * 1e3,
-                         "dofs": int(src["dofs"]), "error_mm": err.tolist(), "max_visible_error_mm": float(err.max()),
-                         "over_target_from_mm": float(depths[over[0]] * 1e3) if len(over) else None})
-            _log(f"tip snapshots {spec.key()}: azimuth 0 worst {err.max():.2f} mm against the finest tip level")
-    finally:
-        rm.snapshots = keep
+    rows = []
+    for spec in (st.levels[-2], seq[-2]):
+        src, err = _azimuth0_table_errors(st, mat, cache, rm, spec, cases)
+        err = np.array(err) * 1e3
+        over = np.flatnonzero(err > TARGET * 1e3)
+        rows.append({"spec": spec.key(), "h_fine_mm": spec.h_fine * 1e3, "tip_h_mm": spec.tip_h * 1e3,
+                     "dofs": int(src["dofs"]), "error_mm": err.tolist(), "max_visible_error_mm": float(err.max()),
+                     "over_target_from_mm": float(depths[over[0]] * 1e3) if len(over) else None})
+        _log(f"tip snapshots {spec.key()}: azimuth 0 worst {err.max():.2f} mm against the finest tip level")
     return {"azimuth_deg": 0.0, "snapshot_depth_step_mm": st.grid.depth_step * 1e3, "target_mm": TARGET * 1e3,
             "against": "the finest tip level, every output depth", "tables": rows}
 
@@ -1139,6 +1131,24 @@ def candidates(st: Settings, mat: Material, rm: RealtimeModel, table: dict, case
     return res
 
 
+def _azimuth0_table_errors(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, spec: RefSpec,
+                           cases: list[dict]) -> tuple[dict, list[float]]:
+    """(the stable branch of ``spec``'s azimuth-0 push at ``_depths(st.depth_step)``, :func:`errors` in m of an
+    azimuth-0 snapshot table on ``st.grid``'s depths built from it, on ``cases``): how :func:`snapshot_mesh_study`
+    and :func:`_tip_snapshots` judge a candidate snapshot mesh. ``rm``'s table is left as it was."""
+    sd = _depths(st.depth_step)
+    src = stable_path(spec, 0.0, sd, mat, cache, rm.rest_vertices.astype(float), st.contact)   # as every table
+    table = load_or_build(cache, replace(st.grid, angles_deg=(0.0,)), spec, mat, FINGER_R, build=True,
+                          contact=st.contact,
+                          solved=lambda ang, model, depths: _path_states(src, sd, depths, model))[0]
+    keep = rm.snapshots
+    try:
+        rm.attach_snapshots(table)
+        return src, errors(rm, cases, "snapshots")
+    finally:
+        rm.snapshots = keep
+
+
 def snapshot_mesh_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, cases: list[dict]
                         ) -> dict:
     """Which mesh the snapshots need: an azimuth-0 table (``st.grid``'s depths) on the next-to-finest mesh (full
@@ -1146,29 +1156,18 @@ def snapshot_mesh_study(st: Settings, mat: Material, cache: ArrayCache, rm: Real
     studies' solves, read from the cache), judged on the azimuth-0 validation cases (the finest convergence
     mesh; depths between snapshots held out). Per mesh: DOF, CPU of its azimuth-0 path and the worst visible
     error (mm). ``rm``'s snapshot table is left as it was."""
-    keep = rm.snapshots
     az0 = [c for c in cases if c["angle_deg"] == 0.0]
-    grid = replace(st.grid, angles_deg=(0.0,))
-    sd = _depths(st.depth_step)
-    verts = rm.rest_vertices.astype(float)
     rows = []
     base = st.levels[-2]                        # the skin study's meshes (full mode: the snapshot mesh and its skins)
-    try:
-        for spec in [base] + [replace(base, skin_h=h) for h in st.skin_sizes]:
-            src = stable_path(spec, 0.0, sd, mat, cache, verts, st.contact)       # as every table reads
-            table = load_or_build(cache, grid, spec, mat, FINGER_R, build=True, contact=st.contact,
-                                  solved=lambda ang, model, depths, src=src: _path_states(src, sd, depths, model))[0]
-            rm.attach_snapshots(table)
-            err = errors(rm, az0, "snapshots")
-            rows.append({"spec": spec.__dict__, "skin_h_m": spec.skin_h, "dofs": int(src["dofs"]),
-                         "cpu_seconds_per_azimuth": float(src["cpu_seconds"]),
-                         "max_visible_error_mm": max(err) * 1e3,
-                         "max_visible_error_mm_held_out_depths": max(
-                             (e for c, e in zip(az0, err, strict=True) if c["held_out"]), default=float("nan")) * 1e3})
-            _log(f"snapshot mesh {spec.key()}: {rows[-1]['dofs']} DOF, azimuth 0 worst visible error "
-                 f"{rows[-1]['max_visible_error_mm']:.2f} mm")
-    finally:
-        rm.snapshots = keep
+    for spec in [base] + [replace(base, skin_h=h) for h in st.skin_sizes]:
+        src, err = _azimuth0_table_errors(st, mat, cache, rm, spec, az0)
+        rows.append({"spec": spec.__dict__, "skin_h_m": spec.skin_h, "dofs": int(src["dofs"]),
+                     "cpu_seconds_per_azimuth": float(src["cpu_seconds"]),
+                     "max_visible_error_mm": max(err) * 1e3,
+                     "max_visible_error_mm_held_out_depths": max(
+                         (e for c, e in zip(az0, err, strict=True) if c["held_out"]), default=float("nan")) * 1e3})
+        _log(f"snapshot mesh {spec.key()}: {rows[-1]['dofs']} DOF, azimuth 0 worst visible error "
+             f"{rows[-1]['max_visible_error_mm']:.2f} mm")
     return {"azimuth_deg": 0.0, "depth_step_mm": st.grid.depth_step * 1e3, "target_mm": TARGET * 1e3,
             "against": f"the finest convergence mesh (h_fine {st.levels[-1].h_fine * 1e3:g} mm), every "
                        f"{st.fine_step * 1e3:g} mm",

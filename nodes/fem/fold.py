@@ -33,7 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["Surface", "outer_surface", "winding_numbers", "fold_report", "surface_stretch", "CREASE_STRETCH"]
+__all__ = ["Surface", "outer_surface", "winding_numbers", "fold_report", "surface_stretch", "lateral_distance",
+           "CREASE_STRETCH"]
 
 VERTEX_TOL = 1e-9       #: m: a point this close to a triangle's vertex is that vertex (its solid angle is 0)
 CREASE_STRETCH = 0.65   #: compressive stretch at which a neo-Hookean surface creases (Hohlfeld & Mahadevan 2011)
@@ -142,6 +143,14 @@ def surface_stretch(surf: Surface, x0: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.linalg.svd(M, compute_uv=False)[:, ::-1]
 
 
+def lateral_distance(x: np.ndarray, capsule) -> np.ndarray:
+    """(N,) m distance of points ``x`` (N, 3) m from the finger's push axis (the line through ``capsule.center``
+    along ``capsule.direction``)."""
+    rel = np.asarray(x, float) - capsule.center
+    d = capsule.direction
+    return np.linalg.norm(rel - np.outer(rel @ d, d), axis=1)
+
+
 def fold_report(model, surf: Surface, u: np.ndarray, capsule, region: float, margin: float = 0.002) -> dict:
     """Fold and self-contact check of one state: ``u`` (P, 3) m displacements of ``model``'s DOF points,
     ``capsule`` the finger (:class:`~nodes.fem.hyperelastic.Capsule`), ``region`` m: only surface points within
@@ -162,10 +171,8 @@ def fold_report(model, surf: Surface, u: np.ndarray, capsule, region: float, mar
     x = X0 + u
     verts, tris = surf.closed(x)
     d = capsule.direction
-    rel0 = X0[surf.points] - capsule.center
-    lat0 = np.linalg.norm(rel0 - np.outer(rel0 @ d, d), axis=1)
-    rel = x[surf.points] - capsule.center
-    lat = np.linalg.norm(rel - np.outer(rel @ d, d), axis=1)
+    lat0 = lateral_distance(X0[surf.points], capsule)
+    lat = lateral_distance(x[surf.points], capsule)
     sel = (lat0 < region) & (lat > capsule.radius + margin) & ~model.support[surf.points]
     pts = surf.points[sel]
     w = winding_numbers(x[pts], verts, tris) if len(pts) else np.zeros(0)
@@ -194,10 +201,8 @@ def fold_report(model, surf: Surface, u: np.ndarray, capsule, region: float, mar
                 depth.append(float(np.min(np.linalg.norm(cp - x[p], axis=1))))
         out["max_penetration_m"] = max(depth, default=0.0)
     st = surface_stretch(surf, X0, x)
-    tc = x[surf.tris].mean(axis=1) - capsule.center
-    tlat = np.linalg.norm(tc - np.outer(tc @ d, d), axis=1)
-    t0 = X0[surf.tris].mean(axis=1) - capsule.center
-    tlat0 = np.linalg.norm(t0 - np.outer(t0 @ d, d), axis=1)
+    tlat = lateral_distance(x[surf.tris].mean(axis=1), capsule)
+    tlat0 = lateral_distance(X0[surf.tris].mean(axis=1), capsule)
     off = (tlat > capsule.radius + margin) & (tlat0 < region) & ~np.all(model.support[surf.tris], axis=1)
     out["min_stretch"] = float(st[off, 0].min(initial=1.0))
     out["n_creased_tris"] = int(np.count_nonzero(st[off, 0] < CREASE_STRETCH))
