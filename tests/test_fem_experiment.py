@@ -316,6 +316,46 @@ def test_fold_study_reads_the_levels_from_the_cache_and_finds_no_fold_on_the_coa
                                                                        rel=1e-9)
 
 
+def test_material_study_gent_stiffens_the_deep_push_only_and_is_judged_against_its_own_finest_level(quick):
+    """--material-study: the quick run's neo-Hookean levels come from its cache, only the Gent solid's (Jm 97.2,
+    natural rubber) two levels and its table's stable branch are solved. Physics whatever the mesh: Gent is the
+    neo-Hookean solid at small strain (the two finest solutions within 0.05 mm at 5 mm) and stiffer where the
+    chains stretch (more force, less strain at 50 mm on every level, the distance between the materials growing
+    with depth), its strain stays below its own limiting extensibility; the snapshots are judged against the
+    finer level, never the one they were sampled from."""
+    base, _, _ = quick
+    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--material-study",
+                        "--out", str(base / "material"), "--cache-dir", str(base / "cache"), "--jobs", "1"], cwd=ROOT,
+                       capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    solved = [ln for ln in r.stdout.splitlines() if "DOF, load steps" in ln]
+    assert len(solved) == 2, solved                                      # the Gent levels only
+    assert r.stdout.count("unloading from 50 mm") == 1                   # and the Gent table's stable branch
+    with open(base / "material" / "material_study.json") as fh:
+        ms = json.load(fh)
+    assert os.path.getsize(base / "material" / "material_study.png") > 5000
+    nh, gent = ms["materials"]
+    assert nh["name"] == "neo-Hookean" and nh["Jm"] is None and gent["Jm"] == pytest.approx(97.2)
+    for a, b in zip(nh["convergence"]["levels"], gent["convergence"]["levels"], strict=True):
+        assert a["dofs"] == b["dofs"] and b["newton_converged"] and max(b["inverted_qp"]) == 0
+        assert b["force_N"][-1] > 1.02 * a["force_N"][-1]                 # stiffer at 50 mm
+        assert b["force_N"][0] == pytest.approx(a["force_N"][0], rel=0.02)  # the same solid at 5 mm
+        assert b["max_strain"][-1] < a["max_strain"][-1]
+        assert max(b["max_strain"]) < (97.2 + 2.0) / 2.0                 # I1 - 3 < Jm bounds every stretch
+    d = ms["difference_between_materials_mm"]
+    assert len(d) == 10 and d[0] < 0.05 and d[-1] > 0.3 and d[-1] > 5 * d[1]
+    for row, conv in ((nh, nh["convergence"]), (gent, gent["convergence"])):
+        sn = row["snapshots_azimuth0"]
+        assert sn["mesh"]["h_fine"] == pytest.approx(0.012) and len(sn["error_mm"]) == 10
+        assert min(sn["error_mm"]) > 0                                  # judged against the 9 mm level, not itself
+        assert sn["max_visible_error_mm"] == pytest.approx(max(sn["error_mm"]))
+        assert conv["converged"] is False                                 # two levels cannot converge
+    with open(base / "out" / "convergence.json") as fh:
+        conv = json.load(fh)
+    assert nh["convergence"]["levels"][0]["error_vs_finest_mm"] == pytest.approx(
+        conv["levels"][0]["error_vs_finest_mm"], rel=1e-9)
+
+
 def test_full_settings_judge_the_nodes_snapshot_mesh_against_a_finer_one():
     """The node's snapshot table (DEFAULT_REF_SPEC) is one of the full convergence study's meshes and the
     snapshots the experiment judges are taken on it, against a finer mesh: the accuracy reported is the
@@ -378,6 +418,10 @@ def test_planned_solves_list_each_push_the_run_reads_once_by_cache_key():
     # the fold study: the last three levels (the full run's), the tip-refined sequence and its tip check
     assert len(set(keys(full, "fold"))) == 7 and len(set(keys(full, "fold")) & set(keys(full))) == 3
     assert len(set(keys(quick, "fold"))) == 4 and len(set(keys(quick, "fold")) & set(keys(quick))) == 2
+    # the material study (per material): the five levels, and the snapshot mesh's stable branch (its table)
+    mat = X.planned_solves(full, "material")
+    assert len(set(keys(full, "material"))) == 5 and set(keys(full, "material")) <= set(keys(full))
+    assert [j.spec for j in mat if j.stable] == [full.snap_spec] == [full.levels[-2]]
     with pytest.raises(ValueError, match="study must be"):
         X.planned_solves(full, "mirror_only")
     costs = [j.cost() for j in X.planned_solves(full)]

@@ -46,25 +46,29 @@ def test_residual_and_tangent_are_the_derivatives_of_the_energy(quarter):
         assert abs(de - r @ v.ravel()) < 1e-5 * abs(r @ v.ravel())
 
 
-def test_projected_tangent_is_the_clamped_material_tangent_element_by_element(quarter):
+@pytest.mark.parametrize("Jm", [math.inf, 2.0])
+def test_projected_tangent_is_the_clamped_material_tangent_element_by_element(quarter, Jm):
     """``_projection`` (batched matmuls) against a loop over one element's quadrature points built another way:
     the material tangent A = ∂P/∂F by central differences of P(F), clamped to its non-negative eigenvalues,
     and Σ_q w Bᵀ(A₊ − A)B with B the explicit 9 × 30 gradient matrix. The field compresses the part enough
-    that A is indefinite somewhere; 3 × 3 inverse and determinant against numpy's."""
-    m = quarter
+    that A is indefinite somewhere; 3 × 3 inverse and determinant against numpy's. Neo-Hookean and a strongly
+    stiffening Gent solid (Jm 2: the field reaches I1 − 3 ≈ 1.5, so Gent's factor g reaches ~4)."""
+    m = quarter if Jm == math.inf else H.HyperelasticModel(quarter.mesh, Material(Jm=Jm), sym_y=True, sym_z=True,
+                                                           intorder=2)
     u = _smooth_field(m, 0.2)                 # indefinite at some points of 244 of the 311 elements
     F = m.deformation(u)
     Finv, J = H.inv_det3(F)
     np.testing.assert_allclose(J, np.linalg.det(F), rtol=1e-12)
     np.testing.assert_allclose(Finv, np.linalg.inv(F), rtol=1e-10, atol=1e-12)
-    corr = m._projection(F, Finv, np.log(J))
+    corr = m._projection(F, Finv, np.log(J), m._gent_factor(F))
     touched = np.flatnonzero(np.abs(corr).reshape(len(corr), -1).max(axis=1) > 0)
     assert len(touched) > 0, "the test field must make the tangent indefinite somewhere"
     mu, lam = m.mu, m.lam
 
     def piola(Fq):
         Fi = np.linalg.inv(Fq).T
-        return mu * (Fq - Fi) + lam * math.log(np.linalg.det(Fq)) * Fi
+        g = 1.0 if Jm == math.inf else 1.0 / (1.0 - (np.sum(Fq * Fq) - 3.0) / Jm)     # Gent: ∂W/∂I1 = μg/2
+        return mu * (g * Fq - Fi) + lam * math.log(np.linalg.det(Fq)) * Fi
 
     def tangent(Fq):                      # A = ∂P/∂F (9 × 9, row-major (i, J)) by central differences
         A = np.zeros((9, 9))
@@ -154,6 +158,57 @@ def test_energy_is_infinite_for_an_inverted_element(quarter):
     assert m.energy(u, None, 0.0) == math.inf
     with pytest.raises(FloatingPointError, match="inverted"):
         m.residual_tangent(u, None, 0.0)
+
+
+def test_gent_residual_and_tangent_are_the_derivatives_of_its_energy(quarter):
+    """A Gent solid (Jm 2, stiffening strongly within the test field's I1 − 3 ≈ 1.5): central differences of Π
+    and r, with and without the finger, as for neo-Hookean."""
+    m = H.HyperelasticModel(quarter.mesh, Material(Jm=2.0), sym_y=True, sym_z=True, intorder=2)
+    rng = np.random.default_rng(1)
+    u = _smooth_field(m, 0.2) + 1e-4 * rng.standard_normal((len(m.points), 3))
+    F = m.deformation(u)
+    assert ((F * F).sum(axis=(2, 3)) - 3).max() > 1.0          # g = 1/(1 − (I1 − 3)/Jm) > 2 somewhere
+    v = rng.standard_normal(u.shape)
+    eps = 1e-7
+    for caps in (None, H.capsule_at(0.0, 0.006, 0.008, m.mesh.radius, m.mesh.center)):
+        k = m.penalty()
+        r, K = m.residual_tangent(u, caps, k)
+        rp, _ = m.residual_tangent(u + eps * v, caps, k, need_K=False)
+        rm, _ = m.residual_tangent(u - eps * v, caps, k, need_K=False)
+        fd = (rp - rm) / (2 * eps)
+        assert np.linalg.norm(fd - K @ v.ravel()) < 1e-5 * np.linalg.norm(fd)
+        de = (m.energy(u + eps * v, caps, k) - m.energy(u - eps * v, caps, k)) / (2 * eps)
+        assert abs(de - r @ v.ravel()) < 1e-5 * abs(r @ v.ravel())
+
+
+def test_gent_energy_of_a_homogeneous_stretch_its_limit_and_its_neo_hookean_limit(quarter):
+    """A homogeneous stretch F = diag(a, b, c): Π = V·W(F) with W = −μJm/2 ln(1 − (I1 − 3)/Jm) − μ ln J +
+    λ/2 ln²J written out by hand (Gent 1996 with the compressible neo-Hookean's volumetric part); +inf and a
+    ``FloatingPointError`` past the limiting extensibility; Jm → ∞ gives the neo-Hookean energy."""
+    X = quarter.points - quarter.mesh.center
+    a, b, c = 1.6, 0.85, 0.9
+    u = X * (np.array([a, b, c]) - 1.0)
+    I1, lnJ = a * a + b * b + c * c, math.log(a * b * c)
+    lam, mu = MAT.lame
+    for Jm in (4.0, 30.0):
+        m = H.HyperelasticModel(quarter.mesh, Material(Jm=Jm), sym_y=True, sym_z=True, intorder=2)
+        W = -0.5 * mu * Jm * math.log(1 - (I1 - 3) / Jm) - mu * lnJ + 0.5 * lam * lnJ ** 2
+        assert m.energy(u, None, 0.0) == pytest.approx(m.vol * W, rel=1e-9)
+    W_nh = 0.5 * mu * (I1 - 3) - mu * lnJ + 0.5 * lam * lnJ ** 2
+    assert quarter.energy(u, None, 0.0) == pytest.approx(quarter.vol * W_nh, rel=1e-9)
+    near_nh = H.HyperelasticModel(quarter.mesh, Material(Jm=1e9), sym_y=True, sym_z=True, intorder=2)
+    assert near_nh.energy(u, None, 0.0) == pytest.approx(quarter.energy(u, None, 0.0), rel=1e-8)
+    tight = H.HyperelasticModel(quarter.mesh, Material(Jm=I1 - 3.0 - 1e-3), sym_y=True, sym_z=True, intorder=2)
+    assert tight.energy(u, None, 0.0) == math.inf
+    with pytest.raises(FloatingPointError, match="limiting extensibility"):
+        tight.residual_tangent(u, None, 0.0)
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, math.nan, True])
+def test_material_rejects_a_bad_gent_limit(bad):
+    with pytest.raises(ValueError, match="Jm"):
+        Material(Jm=bad)
+    assert Material().key() == "E=10000,nu=0.45" and Material(Jm=97.2).key() == "E=10000,nu=0.45,Jm=97.2"
 
 
 def test_capsule_gap_sphere_and_shaft():

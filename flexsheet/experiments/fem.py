@@ -1,5 +1,5 @@
 """``flexsheet experiment fem --out DIR [--quick] [--jobs N] [--linear-study]
-[--mirror-study | --holdout-study | --fold-study] [--scene FILE]``: physically right deformation
+[--Jm JM] [--mirror-study | --holdout-study | --fold-study | --material-study] [--scene FILE]``: physically right deformation
 of the pushed cylinder, and the real-time model that reproduces it (``--scene`` with another object: the same
 study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 
@@ -23,7 +23,11 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    levels' states are checked for a surface that passes through itself or creases (:mod:`nodes.fem.fold`),
    and for where the largest strain and the levels' largest differences sit; then a sequence that refines the
    push point with the tube (:data:`TIP_LEVELS`, :func:`tip_sequence`: its verdict, a finer tip alone, and
-   azimuth-0 snapshot tables on the plain and the tip meshes against its finest level).
+   azimuth-0 snapshot tables on the plain and the tip meshes against its finest level). **Material study**
+   (``material_study.json/png``, :func:`material_study`; ``--material-study`` runs only it): the same azimuth-0
+   convergence and an azimuth-0 snapshot table on the next-to-finest level, for the neo-Hookean reference and
+   for a strain-stiffening Gent solid (``--Jm``, default :data:`nodes.fem.material.GENT_JM_RUBBER`), and how far
+   the two materials' finest solutions lie apart. ``--Jm`` alone makes every other study use the Gent solid.
 2. **Candidates**, judged on the real-time model's rendered vertices outside the finger's footprint
    (lateral distance from the push axis > finger radius + 2 mm; the footprint is hidden by the finger):
    the linear P2 capacitance model, and the nonlinear snapshots (:mod:`nodes.fem.snapshots`), sampled every
@@ -93,7 +97,7 @@ from nodes.fem.hyperelastic import (
     solver_tag,
     stable_states,
 )
-from nodes.fem.material import Material
+from nodes.fem.material import GENT_JM_RUBBER, Material
 from nodes.fem.mesh import MeshSpec
 from nodes.fem.realtime import RealtimeModel
 from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, SnapshotGrid, load_or_build
@@ -168,12 +172,17 @@ def _parser() -> argparse.ArgumentParser:
                                        "         flexsheet experiment fem --quick --mirror-study --out /tmp/fem\n"
                                        "         flexsheet experiment fem --holdout-study --out /tmp/fem\n"
                                        "         flexsheet experiment fem --quick --fold-study --out /tmp/fem\n"
+                                       "         flexsheet experiment fem --quick --material-study --out /tmp/fem\n"
                                        "         flexsheet experiment fem --quick --scene launch/scenes/sphere.yaml "
                                        "--out /tmp/fem_sphere")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--quick", action="store_true", help="coarse meshes, azimuth 0 only (minutes cold, seconds cached)")
     p.add_argument("--nu", type=float, default=Material().nu, help="Poisson's ratio (default %(default)s)")
     p.add_argument("--E", type=float, default=Material().E, help="Young's modulus, Pa (default %(default)s)")
+    p.add_argument("--Jm", type=float, default=math.inf, metavar="JM",
+                   help="the reference's material: a Gent solid with this limiting extensibility (I1 - 3 <= JM; "
+                        f"{GENT_JM_RUBBER:g} is Gent's natural-rubber fit) instead of neo-Hookean (default: inf, "
+                        "neo-Hookean). Cached apart; see --material-study")
     p.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help="cache folder ('' disables; default %(default)s)")
     p.add_argument("--linear-study", action="store_true", help="also rerun the linear mesh study (slow)")
     p.add_argument("--level", type=int, default=None,
@@ -202,6 +211,11 @@ def _parser() -> argparse.ArgumentParser:
                         "with the tube), a finer tip alone, and azimuth-0 snapshot tables on the plain and tip "
                         "meshes (full: ~1.5 h of two cores cold here, under a minute cached); writes fold_study.json/png, "
                         "then exits")
+    p.add_argument("--material-study", action="store_true",
+                   help="run the material study only: the azimuth-0 mesh convergence and an azimuth-0 snapshot "
+                        "table for the neo-Hookean reference and for a Gent solid (--Jm, default "
+                        f"{GENT_JM_RUBBER:g}); full: ~1 h of two cores cold here, seconds cached; writes "
+                        "material_study.json/png, then exits")
     p.add_argument("--node-table", action="store_true",
                    help="build the FEM node's nonlinear snapshot table (azimuths 0-60 deg every 10 deg, 2.5 mm depth "
                         "steps, on the full run's h_fine 3.4 mm mesh) into the cache the node reads, then exit. "
@@ -1174,6 +1188,82 @@ def snapshot_mesh_study(st: Settings, mat: Material, cache: ArrayCache, rm: Real
             "meshes": rows}
 
 
+def material_study(st: Settings, mats: tuple[Material, ...], cache: ArrayCache, rm: RealtimeModel) -> dict:
+    """Does the reference converge with a strain-stiffening material? For each of ``mats`` (neo-Hookean and a
+    Gent solid, :class:`nodes.fem.material.Material` ``Jm``; same E, ν, finger, penalty, meshes): the azimuth-0
+    mesh convergence of :func:`convergence` (its verdict, every level's visible-surface difference to the
+    finest, force, largest Green–Lagrange strain), and an azimuth-0 snapshot table (``st.grid``'s depths) taken
+    from the stable branch of the next-to-finest level (full mode: the node's 3.4 mm mesh) judged at every
+    ``st.fine_step`` against that material's finest level — never against the solve it was sampled from; and
+    the visible-surface distance between the materials' finest solutions (how far the choice of material
+    moves what the display shows). Returns {"depths_mm", "target_mm", "materials": [{"name", "Jm",
+    "convergence", "snapshots_azimuth0"}], "difference_between_materials_mm", "what"}; lengths in mm."""
+    depths = _depths(st.depth_step)
+    fdepths = _depths(st.fine_step)
+    verts = rm.rest_vertices.astype(float)
+    fixed = rm.mesh.fixed[rm.surface_nodes]
+    snap_d = st.grid.depths()
+    rows, fines = [], []
+    for mat in mats:
+        conv, fine = convergence(st, mat, cache, rm)
+        cases = [{"angle_deg": 0.0, "depth": float(d), "u": fine["u"][j],
+                  "held_out": bool(np.min(np.abs(snap_d - d)) > 1e-9)} for j, d in enumerate(fdepths)]
+        src, err = _azimuth0_table_errors(st, mat, cache, rm, st.levels[-2], cases)
+        name = f"Gent, Jm {mat.Jm:g}" if mat.gent else "neo-Hookean"
+        rows.append({"name": name, "Jm": mat.Jm if mat.gent else None, "convergence": conv,
+                     "snapshots_azimuth0": {
+                         "mesh": st.levels[-2].__dict__, "dofs": int(src["dofs"]),
+                         "error_mm": [e * 1e3 for e in err], "depths_mm": (fdepths * 1e3).tolist(),
+                         "max_visible_error_mm": max(err) * 1e3,
+                         "max_visible_error_mm_held_out_depths": max(
+                             (e for c, e in zip(cases, err, strict=True) if c["held_out"]), default=math.nan) * 1e3}})
+        _log(f"material study, {name}: converged {conv['converged']}, last refinement "
+             f"{conv['last_refinement_change_mm']:.3f} mm, azimuth-0 snapshots worst {max(err) * 1e3:.2f} mm")
+        fines.append(_at_depths(fine, fdepths, depths))
+    diff = [e * 1e3 for e in _visible_diffs(fines[0], fines[-1], depths, verts, fixed, rm.mesh)] \
+        if len(fines) > 1 else []
+    return {"depths_mm": (depths * 1e3).tolist(), "target_mm": TARGET * 1e3, "materials": rows,
+            "difference_between_materials_mm": diff,
+            "what": "azimuth-0 mesh convergence of the reference (convergence()) for each material, an azimuth-0 "
+                    "snapshot table on the next-to-finest level judged against that material's finest level, "
+                    "and the visible-surface distance between the first and the last material's finest "
+                    "solutions (visible on the last's surface)"}
+
+
+def plot_material_study(out: str, ms: dict) -> None:
+    """material_study.png: per material, each level's visible-surface difference to its finest level (left) and
+    the azimuth-0 snapshot table's error (right), against depth."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for i, row in enumerate(ms["materials"]):
+        conv = row["convergence"]
+        d = np.array(conv["depths_m"]) * 1e3
+        ls = "-" if i == len(ms["materials"]) - 1 else "--"
+        for lv in conv["levels"][-3:-1]:
+            a1.plot(d, lv["error_vs_finest_mm"], ls, marker="o", ms=2.5,
+                    label=f"{row['name']}: h_fine {lv['h_fine_m'] * 1e3:.1f} mm")
+        sn = row["snapshots_azimuth0"]
+        a2.plot(sn["depths_mm"], sn["error_mm"], ls, marker="o", ms=2.5,
+                label=f"{row['name']} (worst {sn['max_visible_error_mm']:.2f} mm)")
+    for ax, yl in ((a1, "difference to the finest level (mm)"), (a2, "azimuth-0 snapshot error (mm)")):
+        ax.axhline(ms["target_mm"], color="k", ls=":", lw=0.8, label=f"target {ms['target_mm']:g} mm")
+        ax.set_xlabel("push depth (mm)")
+        ax.set_ylabel(yl)
+        ax.legend(fontsize=7)
+    a1.axhline(ms["target_mm"] / 2, color="grey", ls=":", lw=0.8)
+    a1.set_title("mesh convergence (last refinement within the grey line: half the target)", fontsize=9)
+    a2.set_title("snapshots on the next-to-finest mesh against the finest", fontsize=9)
+    fig.suptitle("reference material: " + " vs ".join(
+        f"{r['name']} (converged = {r['convergence']['converged']})" for r in ms["materials"]), fontsize=10)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "material_study.png"), dpi=110)
+    plt.close(fig)
+
+
 def holdout_grid(st: Settings) -> Settings:
     """``st`` with its snapshot azimuths cut to the grid's first azimuth (0, judged too) and the two around each
     held-out one (full mode: 0 and 10 for 5), the ones the table's blend reads. ``ValueError`` when there is no
@@ -1555,17 +1645,22 @@ class Solve:
 
 
 def planned_solves(st: Settings, study: str = "full") -> list[Solve]:
-    """Every reference path :func:`main`'s run reads (``study``: "full", or the "mirror" / "holdout" / "fold"
-    study alone, ``--mirror-study`` / ``--holdout-study`` / ``--fold-study``), once each (as :func:`reference_path` keys them), most
+    """Every reference path :func:`main`'s run reads (``study``: "full", or the "mirror" / "holdout" / "fold" /
+    "material" study alone, ``--mirror-study`` / ``--holdout-study`` / ``--fold-study`` / ``--material-study``,
+    the last per material), once each (as :func:`reference_path` keys them), most
     expensive first. Keep it in step with the functions that read them: :func:`convergence`,
     :func:`mirror_study` (its stability check reads the last two levels), :func:`penalty_study`,
     :func:`skin_study`, :func:`validation_set`, :func:`snapshot_source`, :func:`snapshot_mesh_study` (the skin
     study's meshes) and :func:`holdout_study`; a path may be listed twice. A run after :func:`prefetch` of this
     list solves nothing itself (tests/test_fem_experiment.py checks the quick run's log). ``ValueError`` on
     another ``study``."""
-    if study not in ("full", "mirror", "holdout", "fold"):
-        raise ValueError(f"study must be 'full', 'mirror', 'holdout' or 'fold', got {study!r}")
+    if study not in ("full", "mirror", "holdout", "fold", "material"):
+        raise ValueError(f"study must be 'full', 'mirror', 'holdout', 'fold' or 'material', got {study!r}")
     lv = st.levels
+    if study == "material":              # material_study, per material: the levels and the table's stable branch
+        jobs = [Solve(s, 0.0, st.depth_step) for s in lv[:-1]] + [Solve(lv[-1], 0.0, st.fine_step)]
+        jobs.append(Solve(lv[-2], 0.0, st.depth_step, stable=True))
+        return sorted(jobs, key=lambda j: -j.cost())
     if study == "fold":                  # fold_study: the last three levels, the tip sequence and its check
         seq, chk = tip_specs(st)
         jobs = [Solve(s, 0.0, st.depth_step) for s in lv[-3:-1]] + [Solve(lv[-1], 0.0, st.fine_step)]
@@ -1698,7 +1793,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
     studies = ("--mirror-study", args.mirror_study), ("--holdout-study", args.holdout_study), \
-        ("--fold-study", args.fold_study)
+        ("--fold-study", args.fold_study), ("--material-study", args.material_study)
     for flag, on in studies:
         if on and (args.node_table or args.level is not None or args.linear_study or args.scene
                    or sum(o for _, o in studies) > 1):
@@ -1721,7 +1816,10 @@ def main(argv: list[str] | None = None) -> int:
             return 0
     if args.jobs < 1:
         raise SystemExit(f"flexsheet experiment fem: --jobs must be >= 1, got {args.jobs}")
-    mat = Material(args.E, args.nu)
+    try:
+        mat = Material(args.E, args.nu, args.Jm)
+    except ValueError as exc:
+        raise SystemExit(f"flexsheet experiment fem: {exc}") from None
     st = replace(settings_for(args.quick), contact=args.contact)
     t0 = time.perf_counter()
     cache = ArrayCache(args.cache_dir or None, _log)
@@ -1745,6 +1843,15 @@ def main(argv: list[str] | None = None) -> int:
         reference_path(st.levels[args.level], 0.0, _depths(st.fine_step if last else st.depth_step), mat, cache,
                        probes, st.contact)
         _log(f"level {args.level} cached in {time.perf_counter() - t0:.1f} s")
+        return 0
+    if args.material_study:
+        mats = (Material(mat.E, mat.nu), Material(mat.E, mat.nu, mat.Jm if mat.gent else GENT_JM_RUBBER))
+        for m in mats:
+            prefetch(planned_solves(st, "material"), args.jobs, m, cache, probes, st.contact)
+        ms = material_study(st, mats, cache, rm)
+        _write(args.out, "material_study", ms)
+        plot_material_study(args.out, ms)
+        _log(f"material study done in {time.perf_counter() - t0:.1f} s -> {args.out}/material_study.json")
         return 0
     study = "mirror" if args.mirror_study else "holdout" if args.holdout_study else \
         "fold" if args.fold_study else "full"

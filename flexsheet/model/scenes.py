@@ -178,14 +178,25 @@ ObjectSpec = Annotated[CylinderObject | SphereObject | RoundedBoxObject | MeshOb
 
 
 class Material(BaseModel):
-    """Hyperelastic material of the object: ``model`` (``neo_hookean``, the default, or ``linear`` small-strain
-    elasticity), Young's modulus ``E`` Pa and Poisson's ratio ``nu`` (the small-strain limits of the
-    neo-Hookean law: μ = E/(2(1+ν)), λ = Eν/((1+ν)(1−2ν)))."""
+    """Hyperelastic material of the object: ``model`` (``neo_hookean``, the default; ``gent``, a strain-stiffening
+    solid with limiting extensibility ``Jm`` = the largest I₁ − 3, Gent 1996, which needs ``Jm``; or ``linear``
+    small-strain elasticity), Young's modulus ``E`` Pa and Poisson's ratio ``nu`` (the small-strain limits of
+    either law: μ = E/(2(1+ν)), λ = Eν/((1+ν)(1−2ν))). Raises ``ValueError`` (pydantic) for ``gent`` without
+    ``Jm`` or ``Jm`` with another model."""
 
     model_config = _CFG
-    model: Literal["neo_hookean", "linear"] = "neo_hookean"
+    model: Literal["neo_hookean", "gent", "linear"] = "neo_hookean"
     E: float = Field(10e3, gt=0.0, le=1e9, description="Pa")
     nu: float = Field(0.45, ge=0.0, lt=0.5)
+    Jm: float | None = Field(None, gt=0.0, le=1e6, description="Gent limiting I1 - 3 (dimensionless)")
+
+    @model_validator(mode="after")
+    def _jm(self) -> Material:
+        if self.model == "gent" and self.Jm is None:
+            raise ValueError("model gent needs Jm (its limiting I1 - 3, e.g. 97.2 for natural rubber)")
+        if self.model != "gent" and self.Jm is not None:
+            raise ValueError(f"Jm is a Gent parameter; model {self.model!r} takes none")
+        return self
 
 
 class Support(BaseModel):

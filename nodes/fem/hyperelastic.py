@@ -8,6 +8,12 @@ the accuracy reference the real-time models are judged against (docs/fem.md, "Ph
   + λ F⁻¹_Ji F⁻¹_Lk (Bonet & Wood, *Nonlinear Continuum Mechanics for FEA*, 2nd ed., §6.4.3; the same energy
   as scikit-fem's hyperelasticity examples). λ, μ from the small-strain E, ν, so it agrees with linear
   elasticity for small strains.
+  Or (``material.Jm`` finite) a **Gent** solid: μ/2 (tr C − 3) becomes −μJm/2 ln(1 − (tr C − 3)/Jm) (Gent,
+  Rubber Chem. Technol. 69, 1996; limiting chain extensibility, neo-Hookean as Jm → ∞), so P's first term is
+  μ g F with g = 1/(1 − (I₁ − 3)/Jm) and the tangent gains μ(g − 1) δ_ik δ_JL + (2μg²/Jm) F_iJ F_kL; the
+  energy is +inf at I₁ − 3 ≥ Jm (the line search's barrier, as det F ≤ 0). A neo-Hookean solid never
+  stiffens, and under the frictionless finger its apex thins without a mesh-converged limit past ~35–40 mm
+  (docs/fem.md, fold and material studies).
 * **Discretisation**: scikit-fem ``ElementTetP2`` on straight-sided tetrahedra (shape-function gradients and
   the 4-point quadrature, ``intorder=2``, positive weights); element matrices and residuals are vectorised
   numpy here (the tangent split into μ(∇N·∇N)⊗I + two rank-structured terms in h = ∇N·F⁻¹).
@@ -232,7 +238,7 @@ class PathState:
 
 
 class HyperelasticModel:
-    """Neo-Hookean P2 model of a (half/quarter) cylinder mesh with the support and symmetry planes.
+    """Neo-Hookean (or Gent, ``material.Jm`` finite) P2 model of a (half/quarter) cylinder mesh with the support and symmetry planes.
 
     Attributes: ``points`` (P, 3) m DOF points (mesh nodes, then edge midpoints); ``n`` = 3P DOFs, DOF of
     point p component c is 3p + c; ``surface`` (P,) bool points on the outer (non-symmetry) boundary;
@@ -345,6 +351,7 @@ class HyperelasticModel:
             mu = (Ee / (2 * (1 + ve)))[:, None]
             self.E_ref = float(np.max(Ee))
         self.lam, self.mu = lam, mu      #: Lamé λ, μ (Pa): floats, or (E, 1) arrays per element
+        self.Jm = float(material.Jm) if material.gent else None     #: Gent limiting I1 − 3, None: neo-Hookean
         self._lam4 = lam if np.isscalar(lam) else lam[..., None, None]       # broadcast against (E, Q, 3, 3)
         self._mu4 = mu if np.isscalar(mu) else mu[..., None, None]
         self._pattern()
@@ -352,6 +359,17 @@ class HyperelasticModel:
         self.h_contact = float(np.sqrt(2.0 * np.percentile(self._cf_w.sum(axis=1), 10)))  #: fine facet size, m
 
     # ---- assembly ------------------------------------------------------------------------------------
+    def _gent_factor(self, F: np.ndarray) -> np.ndarray | None:
+        """Gent's stress factor g = 1/(1 − (I₁ − 3)/Jm) (E, Q) at deformation gradients ``F`` (E, Q, 3, 3), so that
+        P's isochoric-free part is μ g F; None for neo-Hookean (g ≡ 1). Raises ``FloatingPointError`` at or
+        beyond the limiting extensibility (the energy is +inf there; Newton's line search never goes there)."""
+        if self.Jm is None:
+            return None
+        x = ((F * F).sum(axis=(2, 3)) - 3.0) / self.Jm
+        if np.any(x >= 1.0):
+            raise FloatingPointError("Gent limiting extensibility reached (I1 - 3 >= Jm)")
+        return 1.0 / (1.0 - x)
+
     def _nodal_gradients(self) -> np.ndarray:
         """∇N_a at the 10 reference nodes of each element, (E, 10, 10, 3) [elem, node, basis, dim]."""
         from skfem import ElementTetP2
@@ -401,7 +419,13 @@ class HyperelasticModel:
             return math.inf
         lnJ = np.log(J)
         I1 = (F * F).sum(axis=(2, 3))
-        W = 0.5 * self.mu * (I1 - 3) - self.mu * lnJ + 0.5 * self.lam * lnJ ** 2
+        if self.Jm is None:
+            W = 0.5 * self.mu * (I1 - 3) - self.mu * lnJ + 0.5 * self.lam * lnJ ** 2
+        else:                   # Gent: −μJm/2 ln(1 − (I1 − 3)/Jm), +inf at and beyond the limiting extensibility
+            x = (I1 - 3) / self.Jm
+            if np.any(x >= 1.0):
+                return math.inf
+            W = -0.5 * self.mu * self.Jm * np.log1p(-x) - self.mu * lnJ + 0.5 * self.lam * lnJ ** 2
         e = float(np.sum(W * self.w))
         if caps is not None:
             g, _, w = self._contact_gaps(u, caps)
@@ -491,7 +515,11 @@ class HyperelasticModel:
             raise FloatingPointError("inverted element (det F <= 0)")
         lnJ = np.log(J)
         FinvT = np.swapaxes(Finv, 2, 3)
-        P = self._mu4 * (F - FinvT) + (self.lam * lnJ)[..., None, None] * FinvT
+        gent = self._gent_factor(F)             # None (neo-Hookean) or g = 1/(1 − (I1 − 3)/Jm) (E, Q)
+        if gent is None:
+            P = self._mu4 * (F - FinvT) + (self.lam * lnJ)[..., None, None] * FinvT
+        else:
+            P = self._mu4 * (gent[..., None, None] * F - FinvT) + (self.lam * lnJ)[..., None, None] * FinvT
         E, Q = lnJ.shape
         G = self.grad
         Gf = G.transpose(0, 2, 1, 3).reshape(E, 10, 3 * Q)                                 # [e, a, (q, J)]
@@ -522,12 +550,16 @@ class HyperelasticModel:
         c1w = (self.mu - self.lam * lnJ) * self.w
         T3 = _gram(H * lw[..., None], H)
         Y = _gram(H * c1w[..., None], H).reshape(E, 10, 3, 10, 3)
-        T1 = (G * (self.mu * self.w)[..., None, None]).transpose(0, 2, 1, 3).reshape(E, 10, 3 * Q) @ \
-            np.swapaxes(Gf, 1, 2)
+        muw = self.mu * self.w if gent is None else self.mu * gent * self.w
+        T1 = (G * muw[..., None, None]).transpose(0, 2, 1, 3).reshape(E, 10, 3 * Q) @ np.swapaxes(Gf, 1, 2)
         Ke = T3.reshape(E, 10, 3, 10, 3) + Y.transpose(0, 1, 4, 3, 2)
         Ke += T1[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]
+        if gent is not None:    # Gent's stiffening: (2μg²/Jm) F_iJ F_kL, i.e. Σ_q w c (∇N_a·F_i)(∇N_b·F_k)
+            M = (G @ np.swapaxes(F, 2, 3)).reshape(E, Q, 30)                              # ∇N_a,J F_iJ
+            cw = (2.0 / self.Jm) * self.mu * gent ** 2 * self.w
+            Ke += _gram(M * cw[..., None], M).reshape(E, 10, 3, 10, 3)
         if project:
-            Ke += self._projection(F, Finv, lnJ)
+            Ke += self._projection(F, Finv, lnJ, gent)
         data = np.bincount(self._scatter, weights=Ke.ravel(), minlength=self._nnz)[self._csr_order]
         K = sp.csr_matrix((data, self._indices, self._indptr), shape=(self.n, self.n))
         if cdata is not None:
@@ -537,14 +569,20 @@ class HyperelasticModel:
             K = K + sp.csr_matrix((Kc.ravel(), (rr, cc)), shape=(self.n, self.n))
         return r, K
 
-    def _projection(self, F: np.ndarray, Finv: np.ndarray, lnJ: np.ndarray) -> np.ndarray:
+    def _projection(self, F: np.ndarray, Finv: np.ndarray, lnJ: np.ndarray, gent: np.ndarray | None = None
+                    ) -> np.ndarray:
         """Element-matrix correction Σ_q w Bᵀ(A₊ − A)B (E, 10, 3, 10, 3) where A₊ clamps A's negative
-        eigenvalues to 0 (only quadrature points with a negative eigenvalue are touched)."""
+        eigenvalues to 0 (only quadrature points with a negative eigenvalue are touched). ``gent`` (E, Q): the
+        Gent factor g of :meth:`_gent_factor` (None: neo-Hookean)."""
         E, Q = lnJ.shape
         S = np.einsum("eqJk,eqLi->eqiJkL", Finv, Finv).reshape(E, Q, 9, 9)
         f = np.swapaxes(Finv, 2, 3).reshape(E, Q, 9)
         A = (self._mu4 * np.eye(9) + (self.mu - self.lam * lnJ)[..., None, None] * S
              + self._lam4 * f[..., :, None] * f[..., None, :])
+        if gent is not None:    # μ(g − 1) I + (2μg²/Jm) F ⊗ F on top of the neo-Hookean tangent
+            fF = F.reshape(E, Q, 9)
+            A = A + (self._mu4 * (gent - 1.0)[..., None, None]) * np.eye(9) \
+                + ((2.0 / self.Jm) * self.mu * gent ** 2)[..., None, None] * fF[..., :, None] * fF[..., None, :]
         ev, V = np.linalg.eigh(A)
         out = np.zeros((E, 10, 3, 10, 3))
         bad = ev[..., 0] < 0

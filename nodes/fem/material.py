@@ -1,4 +1,5 @@
-"""Linear-elastic material of the virtual object (pure).
+"""Material of the virtual object (pure): small-strain E, ν, and for the hyperelastic reference the limiting
+chain extensibility ``Jm`` of a Gent solid (∞, the default: neo-Hookean).
 
 Defaults: E = 10 kPa, ν = 0.45, a soft-tissue value. Sources: soft-tissue phantoms span agar 5–81 kPa,
 gelatine 17–85 kPa, silicone (Ecoflex 00-30) 5–112 kPa; breast fat and glandular tissue measure 3–20 kPa
@@ -13,23 +14,40 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-__all__ = ["Material", "SOFT_TISSUE"]
+__all__ = ["Material", "SOFT_TISSUE", "GENT_JM_RUBBER"]
+
+#: Gent's limiting chain extensibility for natural rubber, fitted to Treloar's data (Gent, Rubber Chem. Technol.
+#: 69, 1996; the value used by Horgan & Saccomandi, Math. Mech. Solids 7, 2002 — recalled, not re-fitted here):
+#: the *weakest* strain-stiffening of the published fits (soft tissues fit far smaller Jm, i.e. stiffen sooner),
+#: so the Gent solid closest to neo-Hookean that still has a limiting stretch (equibiaxial λ ≤ 7.1, uniaxial ≤ 9.9)
+GENT_JM_RUBBER = 97.2
 
 
 @dataclass(frozen=True)
 class Material:
-    """Isotropic linear elasticity: Young's modulus ``E`` (Pa, > 0) and Poisson's ratio ``nu`` (0 ≤ ν < 0.5).
+    """Isotropic material: Young's modulus ``E`` (Pa, > 0) and Poisson's ratio ``nu`` (0 ≤ ν < 0.5) — all the
+    linear models read — and ``Jm`` (> 0, dimensionless; ``math.inf``: none), the Gent limiting value of
+    I₁ − 3 that only the hyperelastic reference reads (:mod:`nodes.fem.hyperelastic`: W's isochoric-free part
+    −μJm/2 ln(1 − (I₁ − 3)/Jm), Gent 1996; Jm → ∞ is neo-Hookean μ/2 (I₁ − 3)).
 
-    Raises ``ValueError`` naming the field when out of range or not finite."""
+    Raises ``ValueError`` naming the field when out of range or not finite (``Jm`` may be ``inf``)."""
 
     E: float = 10e3
     nu: float = 0.45
+    Jm: float = math.inf
 
     def __post_init__(self):
         if not (math.isfinite(self.E) and self.E > 0):
             raise ValueError(f"E must be a finite modulus > 0 Pa, got {self.E!r}")
         if not (math.isfinite(self.nu) and 0.0 <= self.nu < 0.5):
             raise ValueError(f"nu must be in [0, 0.5), got {self.nu!r}")
+        if isinstance(self.Jm, bool) or not (self.Jm == math.inf or (math.isfinite(self.Jm) and self.Jm > 0)):
+            raise ValueError(f"Jm must be > 0 (Gent limiting I1 - 3) or inf (neo-Hookean), got {self.Jm!r}")
+
+    @property
+    def gent(self) -> bool:
+        """True when the hyperelastic reference is a Gent solid (finite ``Jm``), False for neo-Hookean."""
+        return math.isfinite(self.Jm)
 
     @property
     def lame(self) -> tuple[float, float]:
@@ -44,8 +62,8 @@ class Material:
         return self.E / (1 - self.nu ** 2)
 
     def key(self) -> str:
-        """Stable text key (cache keys)."""
-        return f"E={self.E:.9g},nu={self.nu:.9g}"
+        """Stable text key (cache keys; a neo-Hookean material keeps the key it had before ``Jm`` existed)."""
+        return f"E={self.E:.9g},nu={self.nu:.9g}" + (f",Jm={self.Jm:.9g}" if self.gent else "")
 
 
 SOFT_TISSUE = Material()
