@@ -420,8 +420,11 @@ def test_planned_solves_list_each_push_the_run_reads_once_by_cache_key():
     assert len(set(keys(quick, "fold"))) == 4 and len(set(keys(quick, "fold")) & set(keys(quick))) == 2
     # the material study (per material): the five levels, and the snapshot mesh's stable branch (its table)
     mat = X.planned_solves(full, "material")
-    assert len(set(keys(full, "material"))) == 5 and set(keys(full, "material")) <= set(keys(full))
+    assert len(set(keys(full, "material"))) == 6 and len(set(keys(full, "material")) & set(keys(full))) == 5
     assert [j.spec for j in mat if j.stable] == [full.snap_spec] == [full.levels[-2]]
+    # its tip check is the fold study's (3.4 mm tube + 0.8 mm tip): one solve, shared
+    assert set(keys(full, "material")) - set(keys(full)) <= set(keys(full, "fold"))
+    assert len(set(keys(quick, "material"))) == 2                       # quick: no tip check
     with pytest.raises(ValueError, match="study must be"):
         X.planned_solves(full, "mirror_only")
     costs = [j.cost() for j in X.planned_solves(full)]
