@@ -349,6 +349,9 @@ def test_material_study_gent_stiffens_the_deep_push_only_and_is_judged_against_i
         assert sn["mesh"]["h_fine"] == pytest.approx(0.012) and len(sn["error_mm"]) == 10
         assert min(sn["error_mm"]) > 0                                  # judged against the 9 mm level, not itself
         assert sn["max_visible_error_mm"] == pytest.approx(max(sn["error_mm"]))
+        # at 50 mm, a snapshot depth, the table is its own material's 12 mm solve: its error is that level's
+        # distance to the 9 mm level (a table of the other material would be ~0.8 mm off it)
+        assert sn["error_mm"][-1] == pytest.approx(conv["levels"][0]["error_vs_finest_mm"][-1], abs=0.15)
         assert conv["converged"] is False                                 # two levels cannot converge
     with open(base / "out" / "convergence.json") as fh:
         conv = json.load(fh)

@@ -1461,7 +1461,9 @@ def summary(st: Settings, conv: dict, cand: dict, cases: list[dict], snap_info: 
                                     "inverted_nodal_at_50mm": lv["inverted_nodal"][-1],
                                     "inverted_qp_max": max(lv["inverted_qp"])} for lv in conv["levels"]],
                       "figures": "convergence.json, convergence.png"},
-        "material": {"E": mat.E, "nu": mat.nu}, "finger_radius_m": FINGER_R, "quick": st.quick,
+        "material": {"E": mat.E, "nu": mat.nu, "model": "gent" if mat.gent else "neo_hookean",
+                     **({"Jm": mat.Jm} if mat.gent else {})},
+        "finger_radius_m": FINGER_R, "quick": st.quick,
         "note": "timings on a shared 2-core machine (pessimistic)", "wall_s": wall,
     }
 
@@ -1625,7 +1627,7 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
         _log(f"node table: azimuth {azimuth:g} deg cached in {time.perf_counter() - t0:.0f} s")
         return 0
     _log(f"node table: azimuths {DEFAULT_GRID.angles_deg} deg on {DEFAULT_REF_SPEC.key()}; key "
-         f"{table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact)}")
+         f"{table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact, mat.Jm)}")
     prefetch([Solve(DEFAULT_REF_SPEC, a, DEFAULT_GRID.depth_step, stable=True) for a in DEFAULT_GRID.angles_deg],
              jobs, mat, cache, rm.rest_vertices.astype(float), contact)
 

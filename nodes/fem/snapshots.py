@@ -123,9 +123,10 @@ DEFAULT_REF_SPEC = RefSpec(0.012, 0.0034, 0.018, half_z=True, path_depth=0.055, 
 
 
 def table_key(grid: SnapshotGrid, spec: RefSpec, nu: float, finger_radius: float,
-              contact: str = DEFAULT_CONTACT) -> str:
+              contact: str = DEFAULT_CONTACT, Jm: float = math.inf) -> str:
     """Cache key of a snapshot table. The displacement field does not depend on E (the contact penalty scales
-    with E), so only ν enters; forces are scaled by E at run time. ``contact``: the finger's contact law
+    with E), so only ν enters, and a Gent solid's ``Jm`` (finite; a neo-Hookean key is the one it was before
+    ``Jm`` existed); forces are scaled by E at run time. ``contact``: the finger's contact law
     (:data:`nodes.fem.hyperelastic.CONTACT_LAWS`)."""
     import gmsh
 
@@ -135,7 +136,8 @@ def table_key(grid: SnapshotGrid, spec: RefSpec, nu: float, finger_radius: float
     # entries' meshes do
     return cache_key(TABLE_VERSION, solver_tag(contact), *([UNLOAD_VERSION] if contact == "frictionless" else []),
                      grid.key(), spec.key(), f"cut={int(spec.cut)}",
-                     gmsh.__version__, f"nu={nu:.9g}", f"r={finger_radius:.9g}")
+                     gmsh.__version__, f"nu={nu:.9g}", f"r={finger_radius:.9g}",
+                     *([f"Jm={Jm:.9g}"] if math.isfinite(Jm) else []))
 
 
 def load_or_build(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float,
@@ -143,7 +145,7 @@ def load_or_build(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, 
                   contact: str = DEFAULT_CONTACT) -> tuple[dict | None, bool, float]:
     """(table or None, cache hit, seconds): the table from ``cache`` (:class:`nodes.fem.cache.ArrayCache`), or
     built and stored when ``build`` (``solved``, ``contact``: as :func:`build_table`)."""
-    key = table_key(grid, spec, material.nu, finger_radius, contact)
+    key = table_key(grid, spec, material.nu, finger_radius, contact, material.Jm)
     z = cache.load("snapshots", key)
     if z is not None:
         return z, True, 0.0
