@@ -1196,9 +1196,9 @@ def material_study(st: Settings, mats: tuple[Material, ...], cache: ArrayCache, 
     from the stable branch of the next-to-finest level (full mode: the node's 3.4 mm mesh) judged at every
     ``st.fine_step`` against that material's finest level — never against the solve it was sampled from; and
     the visible-surface distance between the materials' finest solutions (how far the choice of material
-    moves what the display shows). Full mode also a tip check per material (:func:`material_tip_check`): the
-    next-to-finest level with the push point alone refined further, its visible-surface distance to that
-    level and to the finest (neo-Hookean: the apex the fold study found unresolved). Returns {"depths_mm",
+    moves what the display shows). Full mode also a tip check per material (the fold study's, :func:`tip_specs`:
+    the next-to-finest level's tube with the push point alone refined further), its visible-surface distance to
+    that level and to the finest (neo-Hookean: the apex the fold study found unresolved). Returns {"depths_mm",
     "target_mm", "materials": [{"name", "Jm", "convergence", "snapshots_azimuth0", "tip_check" (full mode)}],
     "difference_between_materials_mm", "what"}; lengths in mm."""
     depths = _depths(st.depth_step)
@@ -1206,23 +1206,23 @@ def material_study(st: Settings, mats: tuple[Material, ...], cache: ArrayCache, 
     verts = rm.rest_vertices.astype(float)
     fixed = rm.mesh.fixed[rm.surface_nodes]
     snap_d = st.grid.depths()
+    chk = tip_specs(st)[1]
     rows, fines = [], []
     for mat in mats:
         conv, fine = convergence(st, mat, cache, rm)
+        fines.append(_at_depths(fine, fdepths, depths))
         cases = [{"angle_deg": 0.0, "depth": float(d), "u": fine["u"][j],
                   "held_out": bool(np.min(np.abs(snap_d - d)) > 1e-9)} for j, d in enumerate(fdepths)]
         src, err = _azimuth0_table_errors(st, mat, cache, rm, st.levels[-2], cases)
         name = f"Gent, Jm {mat.Jm:g}" if mat.gent else "neo-Hookean"
         tip = {}
-        if st.tip_check > 0:            # does refining the apex alone still move the visible surface?
-            chk = material_tip_check(st)
+        if chk is not None:             # does refining the apex alone still move the visible surface?
             tp = reference_path(chk, 0.0, depths, mat, cache, verts, st.contact)
             plain = reference_path(st.levels[-2], 0.0, depths, mat, cache, verts, st.contact)
-            fine_d = _at_depths(fine, fdepths, depths)
             tip = {"tip_check": {
                 "spec": chk.__dict__, "dofs": int(tp["dofs"]), "newton_converged": bool(tp["converged"].all()),
                 "difference_to_plain_level_mm": [e * 1e3 for e in _visible_diffs(tp, plain, depths, verts, fixed, rm.mesh)],
-                "difference_to_finest_mm": [e * 1e3 for e in _visible_diffs(tp, fine_d, depths, verts, fixed, rm.mesh)],
+                "difference_to_finest_mm": [e * 1e3 for e in _visible_diffs(tp, fines[-1], depths, verts, fixed, rm.mesh)],
                 "max_strain": tp["max_strain"].tolist(), "force_N": tp["force"].tolist(),
                 "cpu_seconds": float(tp["cpu_seconds"])}}
         rows.append({"name": name, "Jm": mat.Jm if mat.gent else None, "convergence": conv, **tip,
@@ -1234,7 +1234,6 @@ def material_study(st: Settings, mats: tuple[Material, ...], cache: ArrayCache, 
                              (e for c, e in zip(cases, err, strict=True) if c["held_out"]), default=math.nan) * 1e3}})
         _log(f"material study, {name}: converged {conv['converged']}, last refinement "
              f"{conv['last_refinement_change_mm']:.3f} mm, azimuth-0 snapshots worst {max(err) * 1e3:.2f} mm")
-        fines.append(_at_depths(fine, fdepths, depths))
     diff = [e * 1e3 for e in _visible_diffs(fines[0], fines[-1], depths, verts, fixed, rm.mesh)] \
         if len(fines) > 1 else []
     return {"depths_mm": (depths * 1e3).tolist(), "target_mm": TARGET * 1e3, "materials": rows,
@@ -1243,12 +1242,6 @@ def material_study(st: Settings, mats: tuple[Material, ...], cache: ArrayCache, 
                     "snapshot table on the next-to-finest level judged against that material's finest level, "
                     "and the visible-surface distance between the first and the last material's finest "
                     "solutions (visible on the last's surface)"}
-
-
-def material_tip_check(st: Settings) -> RefSpec:
-    """The material study's tip check: the next-to-finest level with only the push point refined further (to
-    ``st.tip_check`` within :data:`TIP_RADIUS`; full mode: the fold study's tip check, 3.4 mm + 0.8 mm)."""
-    return replace(st.levels[-2], tip_h=st.tip_check, tip_radius=TIP_RADIUS)
 
 
 def plot_material_study(out: str, ms: dict) -> None:
@@ -1683,7 +1676,8 @@ def planned_solves(st: Settings, study: str = "full") -> list[Solve]:
     if study == "material":              # material_study, per material: the levels and the table's stable branch
         jobs = [Solve(s, 0.0, st.depth_step) for s in lv[:-1]] + [Solve(lv[-1], 0.0, st.fine_step)]
         jobs.append(Solve(lv[-2], 0.0, st.depth_step, stable=True))
-        jobs += [Solve(material_tip_check(st), 0.0, st.depth_step)] if st.tip_check > 0 else []
+        chk = tip_specs(st)[1]
+        jobs += [Solve(chk, 0.0, st.depth_step)] if chk is not None else []
         return sorted(jobs, key=lambda j: -j.cost())
     if study == "fold":                  # fold_study: the last three levels, the tip sequence and its check
         seq, chk = tip_specs(st)

@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
@@ -89,7 +88,7 @@ def _reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, probes
     def compute() -> dict:
         t = time.perf_counter()
         sm = scene_mesh(sc, MeshSpec(st["h"], h_fine, st["refine_radius"]), refine_at=refine_at)
-        mat = Material(sc.material.E, sc.material.nu, sc.material.Jm if sc.material.model == "gent" else math.inf)
+        mat = Material.of_scene(sc.material)
         m0 = HyperelasticModel(sm.mesh, mat, sym_y=False, sym_z=False, E_elem=sm.E, nu_elem=sm.nu)
         model = HyperelasticModel(sm.mesh, mat, sym_y=False, sym_z=False, support=m0.dof_points(sm.mesh.fixed),
                                   E_elem=sm.E, nu_elem=sm.nu)

@@ -44,6 +44,13 @@ class Material:
         if isinstance(self.Jm, bool) or not (self.Jm == math.inf or (math.isfinite(self.Jm) and self.Jm > 0)):
             raise ValueError(f"Jm must be > 0 (Gent limiting I1 - 3) or inf (neo-Hookean), got {self.Jm!r}")
 
+    @classmethod
+    def of_scene(cls, m) -> Material:
+        """The material of a scene file's ``material`` (:class:`flexsheet.model.scenes.Material`: ``model``,
+        ``E``, ``nu``, ``Jm``): its ``Jm`` for ``model: gent``, else neo-Hookean (∞; the linear models read E, ν
+        only). Raises ``ValueError`` as the constructor."""
+        return cls(m.E, m.nu, m.Jm if m.model == "gent" else math.inf)
+
     @property
     def gent(self) -> bool:
         """True when the hyperelastic reference is a Gent solid (finite ``Jm``), False for neo-Hookean."""

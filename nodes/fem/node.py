@@ -123,9 +123,7 @@ class FemNode(Node):
         if not fem_models_as_cylinder(self.scene):
             await self._setup_scene()
             return
-        sm = self.scene.material if p.scene else None
-        mat = Material(p.E, p.nu) if sm is None else \
-            Material(sm.E, sm.nu, sm.Jm if sm.model == "gent" else math.inf)
+        mat = Material.of_scene(self.scene.material) if p.scene else Material(p.E, p.nu)
         if p.mesh_h > 0 and p.mesh_h_fine > 0:
             spec, order = MeshSpec(p.mesh_h, p.mesh_h_fine, p.refine_radius, p.arc_deg), p.order
             self.log.info("fem: mesh set by params: P%d %s", order, spec.key())
