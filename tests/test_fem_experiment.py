@@ -21,7 +21,7 @@ pytestmark = pytest.mark.timeout(1500)
 
 
 def _run(out, cache):
-    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--out", str(out),
+    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--Jm", "inf", "--out", str(out),
                         "--cache-dir", str(cache), "--jobs", "2"], cwd=ROOT, capture_output=True, text=True,
                        timeout=1500)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
@@ -156,7 +156,7 @@ def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its
     uni = {"u_dof": np.broadcast_to([0.0, 0.0, a], h["u_dof"][:1].shape).astype(np.float32),
            "u": np.broadcast_to([0.0, 0.0, a], h["u"][:1].shape)}
     assert X.mirror_asymmetry(uni, half, depths[:1], mat, rm)[0] == pytest.approx(2 * a, rel=1e-5)
-    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--mirror-study", "--out",
+    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--Jm", "inf", "--mirror-study", "--out",
                         str(base / "mirror"), "--cache-dir", str(base / "cache")], cwd=ROOT, capture_output=True,
                        text=True, timeout=600)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
@@ -275,7 +275,7 @@ def test_fold_study_reads_the_levels_from_the_cache_and_finds_no_fold_on_the_coa
     the body) to 50 mm, while the material over the fingertip (footprint included) is kinked at the apex (w > ½)
     and stretched several times over; its differences to the finest level are the convergence study's."""
     base, _, _ = quick
-    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--fold-study", "--out",
+    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--Jm", "inf", "--fold-study", "--out",
                         str(base / "fold"), "--cache-dir", str(base / "cache"), "--jobs", "1"], cwd=ROOT,
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
@@ -324,7 +324,7 @@ def test_material_study_gent_stiffens_the_deep_push_only_and_is_judged_against_i
     with depth), its strain stays below its own limiting extensibility; the snapshots are judged against the
     finer level, never the one they were sampled from."""
     base, _, _ = quick
-    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--material-study",
+    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--Jm", "inf", "--material-study",
                         "--out", str(base / "material"), "--cache-dir", str(base / "cache"), "--jobs", "1"], cwd=ROOT,
                        capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
@@ -525,7 +525,7 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     solves just that path (the solves themselves are hours: replaced by markers)."""
     from flexsheet.experiments import fem as X
     from nodes.fem.cache import ArrayCache
-    from nodes.fem.material import Material
+    from nodes.fem.material import GENT_JM_RUBBER, Material
     from nodes.fem.node import FemParams
     from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_or_build
 
@@ -547,10 +547,21 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     # the rendered vertices the paths are sampled at (the full settings' linear model: a 17 s precompute)
     verts = np.random.default_rng(0).uniform(-0.03, 0.03, (7, 3)).astype(np.float32)
     monkeypatch.setattr(X, "realtime_model", lambda st, mat, cache_dir: SimpleNamespace(rest_vertices=verts))
+    # the report reads a real table's fields (tests/test_fem_hyperelastic.py checks the shipped one): a marker here
+    reported = {}
+    monkeypatch.setattr(X, "node_table_report", lambda table, paths, mat, key: reported.update(
+        angles=sorted(paths), Jm=mat.Jm, key=key) or {"key": key})
+    monkeypatch.setattr(X, "plot_node_table", lambda out, rep: None)
+    monkeypatch.setattr(X, "_table_update_ms", lambda table, verts, mat: {"median_ms": -1.0})
     assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--jobs", "1"]) == 0
+    assert reported["angles"] == list(DEFAULT_GRID.angles_deg) and reported["Jm"] == GENT_JM_RUBBER
+    with open(tmp_path / "o" / "node_table.json") as fh:
+        assert json.load(fh) == {"key": reported["key"], "update": {"median_ms": -1.0}, "held_out": []}
     p = FemParams()
     assert seen["build"] == (DEFAULT_GRID, DEFAULT_REF_SPEC, p.nu, p.finger_radius)
-    assert paths == [(DEFAULT_REF_SPEC, 0.0, 0.05, 20), (DEFAULT_REF_SPEC, 30.0, 0.05, 20)]
+    # the table reads 0 and 30 (fake_build), then the report every azimuth's path (cached)
+    assert paths == [(DEFAULT_REF_SPEC, 0.0, 0.05, 20), (DEFAULT_REF_SPEC, 30.0, 0.05, 20)] + [
+        (DEFAULT_REF_SPEC, a, 0.05, 20) for a in DEFAULT_GRID.angles_deg]
     st30 = seen["states"][30.0]
     assert [s.depth for s in st30] == pytest.approx(DEFAULT_GRID.depths()[1:]) and st30[-1].force == 19.0
     paths.clear()
@@ -572,8 +583,9 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
         X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--azimuth", "10"])
     with pytest.raises(SystemExit, match="node-table"):
         X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--quick"])
+    # the default material is the default scene's (Gent, Jm 97.2): the key the bare FEM node looks up too
     table, hit, _ = load_or_build(ArrayCache(str(tmp_path / "c")), DEFAULT_GRID, DEFAULT_REF_SPEC,
-                                  Material(p.E, p.nu), p.finger_radius, build=False)
+                                  Material(p.E, p.nu, GENT_JM_RUBBER), p.finger_radius, build=False)
     assert hit and np.array_equal(table["marker"], np.arange(3.0))
 
 

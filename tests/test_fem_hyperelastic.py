@@ -405,6 +405,64 @@ def test_snapshot_lookup_rejects_outside_and_bad_input():
         SnapshotModel(bad, np.zeros((1, 3)))
 
 
+def test_packed_table_rounds_within_float16_and_looks_up_as_the_original(tmp_path):
+    """pack_table: float16 surface fields, off by at most 2^-16 m (|u| < 64 mm), read back through the shipped
+    directory (compressed) into a SnapshotModel that answers within that of the float32 table; a value no
+    displacement has is refused."""
+    from nodes.fem.snapshots import pack_table
+
+    tab = _analytic_table([0.0, 10.0], [0.0, 0.015, 0.03])            # |u| up to 44 mm
+    assert 0.032 < np.abs(tab["side"]).max() < 0.064
+    packed, err = pack_table(tab)
+    assert packed["side"].dtype == np.float16 and packed["force"] is tab["force"]
+    assert 0.0 < err <= 2.0 ** -16 and err == np.abs(packed["side"].astype(np.float32) - tab["side"]).max()
+    c = ArrayCache(None, shipped_dir=str(tmp_path / "data"))
+    path = c.ship("snapshots", "k" * 24, packed)
+    assert path.startswith(str(tmp_path / "data")) and c.load("snapshots", "k" * 24)["side"].dtype == np.float16
+    th = np.radians(np.array([-20.0, 0.0, 15.0]))
+    verts = np.column_stack([C[0] + R * np.cos(th), [0.0, 0.01, -0.02], C[2] + R * np.sin(th)])
+    a = SnapshotModel(tab, verts).surface(math.radians(6.0), 0.02)[0]
+    b = SnapshotModel(c.load("snapshots", "k" * 24), verts).surface(math.radians(6.0), 0.02)[0]
+    assert np.abs(a - b).max() <= 2.0 ** -16 and np.abs(a).max() > 0.01
+    with pytest.raises(ValueError, match="float16"):
+        pack_table(dict(tab, cap=np.full_like(tab["cap"], 1e6)))
+    with pytest.raises(ValueError, match="shipped directory"):
+        ArrayCache(str(tmp_path), shipped_dir=None).ship("snapshots", "k" * 24, packed)
+
+
+def test_shipped_node_table_is_the_default_scenes_and_stiffens_from_hertz():
+    """The FEM node's snapshot table for the default scene (the paper's cylinder, Gent Jm 97.2) ships in
+    nodes/fem/data under the key the node looks up (gmsh's version is in the key: a machine with another gmsh
+    would fall back to the linear model). Its forces, checked against a closed form and not against the
+    reference they came from: at a 2.5 mm push Hertz's sphere (8 mm) on the cylinder (R 35.4 mm), F = 4/3 E*
+    √R_e d^1.5 with R_e = √(R′R″), R′ = (1/r + 1/R)⁻¹, R″ = r (Johnson, Contact Mechanics, §4.2), within 15 %
+    at every azimuth (a finite body held on its back half is a little stiffer than a half-space); the force
+    rises with every depth and stiffens (dF/dd over the last 2.5 mm step more than twice the first step's; Hertz's
+    d^1.5 alone gives √13 ≈ 3.6 between those steps' midpoints)."""
+    from flexsheet.model.scenes import SCENES_DIR, load_scene
+    from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, table_key
+
+    sc = load_scene(SCENES_DIR / "cylinder.yaml")
+    mat = Material.of_scene(sc.material)
+    assert mat.gent and mat.Jm == 97.2
+    key = table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, sc.finger.radius, Jm=mat.Jm)
+    tab = ArrayCache(None).load("snapshots", key)
+    assert tab is not None, f"no shipped snapshot table under the node's key {key} in nodes/fem/data"
+    assert np.allclose(np.degrees(tab["angles"]), DEFAULT_GRID.angles_deg)
+    assert np.allclose(tab["depths"], DEFAULT_GRID.depths()) and tab["side"].dtype == np.float16
+    r = sc.finger.radius
+    R_e = math.sqrt(1.0 / (1.0 / r + 1.0 / R) * r)
+    d = tab["depths"]
+    hertz = 4.0 / 3.0 * mat.E_star * math.sqrt(R_e) * d[1] ** 1.5
+    sm = SnapshotModel(tab, np.zeros((1, 3)), E=mat.E)
+    for i, phi in enumerate(DEFAULT_GRID.angles_deg):
+        f = sm.force[i]
+        assert 1.0 <= f[1] / hertz < 1.15, (phi, f[1], hertz)
+        assert f[0] == 0.0 and np.all(np.diff(f) > 0), (phi, f)
+        k_first, k_last = (f[1] - f[0]) / (d[1] - d[0]), (f[-1] - f[-2]) / (d[-1] - d[-2])
+        assert k_last > 2 * k_first, (phi, k_first, k_last)
+
+
 # ---- cache and model choice ----------------------------------------------------------------------------------------
 def test_cache_round_trip_hit_and_corrupt_entry(tmp_path):
     logs = []

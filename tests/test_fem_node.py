@@ -71,12 +71,14 @@ def test_node_serves_cached_nonlinear_snapshots_and_says_so(tmp_path):
     answered by the snapshots (method "snapshots"), the diagnostics message says so; a push outside the table's
     azimuth range falls back to the linear model."""
     from nodes.fem.cache import ArrayCache
-    from nodes.fem.material import Material
+    from nodes.fem.material import GENT_JM_RUBBER, Material
     from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, table_key
     from tests.test_fem_hyperelastic import _analytic_table
 
     tab = _analytic_table([0.0, 10.0], [0.0, 0.01, 0.02])
-    ArrayCache(str(tmp_path)).save("snapshots", table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, Material().nu, 0.008), tab)
+    # the bare node's law is the paper scene's (Gent); a table under that key in cache_dir wins over the shipped one
+    key = table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, Material().nu, 0.008, Jm=GENT_JM_RUBBER)
+    ArrayCache(str(tmp_path)).save("snapshots", key, tab)
     params = dict(PARAMS, cache_dir=str(tmp_path), model="snapshots")
 
     async def scenario():
@@ -98,11 +100,21 @@ def test_node_serves_cached_nonlinear_snapshots_and_says_so(tmp_path):
     asyncio.run(scenario())
 
 
-def test_node_without_cached_snapshots_serves_linear_and_says_so():
+def test_node_without_cached_snapshots_serves_linear_and_says_so(tmp_path):
+    """The cylinder made neo-Hookean again (cylinder.yaml's comment): no table is shipped or cached for that law,
+    so the node serves the linear model and says how to build the table."""
+    from flexsheet.model.scenes import SCENES_DIR
+
+    text = (SCENES_DIR / "cylinder.yaml").read_text()
+    assert "{model: gent, E: 10000.0, nu: 0.45, Jm: 97.2}" in text
+    scene = tmp_path / "cylinder_neo_hookean.yaml"
+    scene.write_text(text.replace("{model: gent, E: 10000.0, nu: 0.45, Jm: 97.2}",
+                                  "{model: neo_hookean, E: 10000.0, nu: 0.45}"))
+
     async def scenario():
         from flexsheet.runtime.testing import NodeHarness
 
-        async with NodeHarness(FemNode, params=dict(PARAMS, model="snapshots")) as h:
+        async with NodeHarness(FemNode, params=dict(PARAMS, model="snapshots", scene=str(scene))) as h:
             assert "LINEAR" in h.node.state_message and "experiment fem" in h.node.state_message
             h.inject(topics.FINGERTIP, _tip([-0.005, 0.0, 0.0]))
             d = (await h.wait_for(topics.DEFORMATION, n=1, timeout=20.0))[-1]
@@ -159,3 +171,34 @@ def test_node_solves_the_scene_it_is_given_and_names_it():
     asyncio.run(cylinder())
     with pytest.raises(ValueError, match="scene"):
         FemParams(scene=str(SCENES_DIR / "no_such_scene.yaml"))
+
+
+def test_node_on_the_default_scene_serves_the_shipped_nonlinear_snapshots():
+    """launch/scenes/cylinder.yaml on a machine that never solved anything (no disk cache): the node attaches the
+    Gent snapshot table shipped in nodes/fem/data and answers a push on the stroke (30 deg, 20 mm) with it: the
+    table's force there, and the rendered surface moved about the push depth under the fingertip, nowhere more."""
+    from flexsheet.model.scenes import SCENES_DIR
+    from nodes.fem.snapshots import DEFAULT_GRID
+
+    params = dict(PARAMS, scene=str(SCENES_DIR / "cylinder.yaml"), cache_dir="", arc_deg=60.0)
+
+    async def scenario():
+        from flexsheet.runtime.testing import NodeHarness
+
+        async with NodeHarness(FemNode, params=params) as h:
+            assert "snapshots loaded" in h.node.state_message, h.node.state_message
+            snap = h.node.model.snapshots
+            assert np.degrees(snap.angle_max) == 60.0 and snap.depth_max == 0.05
+            c, R = np.array([-0.025 * np.sqrt(2.0), 0.0, 0.0]), 0.025 * np.sqrt(2.0)
+            n = np.array([np.cos(np.pi / 6), 0.0, np.sin(np.pi / 6)])
+            h.inject(topics.FINGERTIP, _tip(c + (R - 0.020) * n, stamp=2.0))      # the fingertip, 20 mm in
+            d = (await h.wait_for(topics.DEFORMATION, n=1, timeout=20.0))[-1]
+            assert d.method == "snapshots" and d.valid and abs(d.depth - 0.020) < 1e-6
+            ia = list(DEFAULT_GRID.angles_deg).index(30.0)
+            jd = int(np.argmin(np.abs(DEFAULT_GRID.depths() - 0.020)))
+            assert abs(d.contact_force - snap.force[ia, jd]) < 1e-6 and 2.0 < d.contact_force < 5.0
+            # the material under the fingertip went in with it; nothing else moved farther
+            u = np.linalg.norm(np.asarray(d.vertices, float) - h.node.model._rest.astype(float), axis=1)
+            assert 0.8 * 0.020 < u.max() < 1.3 * 0.020, u.max()
+
+    asyncio.run(scenario())

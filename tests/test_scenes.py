@@ -28,7 +28,10 @@ def scenes():
 @pytest.mark.parametrize("name", NAMES)
 def test_shipped_scene_loads_and_its_surface_is_closed(scenes, name):
     sc = scenes[name]
-    assert sc.name == name and sc.material.model == "neo_hookean" and 0.0 <= sc.material.nu < 0.5
+    # the paper's cylinder is a Gent solid (its neo-Hookean deep push has no mesh-converged solution), the others
+    # neo-Hookean until their nonlinear models are built on Gent too
+    law = ("gent", 97.2) if name == "cylinder" else ("neo_hookean", None)
+    assert sc.name == name and (sc.material.model, sc.material.Jm) == law and 0.0 <= sc.material.nu < 0.5
     v, f = sc.surface_mesh()
     assert v.dtype == np.float32 and f.dtype == np.int32 and v.shape[1] == 3 and f.shape[1] == 3
     m = trimesh.Trimesh(v.astype(float), f, process=True)

@@ -3,7 +3,9 @@
 of the pushed cylinder, and the real-time model that reproduces it (``--scene`` with another object: the same
 study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 
-1. **Reference** (:mod:`nodes.fem.hyperelastic`): neo-Hookean, total Lagrangian, P2, Newton with load
+1. **Reference** (:mod:`nodes.fem.hyperelastic`): the default scene's hyperelastic solid (a Gent solid, Jm 97.2,
+   since session 18: ``--Jm``; ``--Jm inf`` is the neo-Hookean solid of the committed full, quick, fold and
+   held-out figures), total Lagrangian, P2, Newton with load
    stepping (≤ 60 iterations per step), rigid frictionless finger (sphere + shaft), pushed 0 → 50 mm at
    azimuth 0 on a sequence of meshes refined along the whole push path (quarter model by symmetry;
    ``--contact sticking``: a fingertip that does not slip, the contact law is a modelling choice). Mesh
@@ -77,6 +79,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from flexsheet.model.scenes import paper_scene
 from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
 from nodes.fem.choose import DEFAULT_SPEC, MODEL_TABLE_PATH, visible_mask
 from nodes.fem.contact import finger_at
@@ -179,10 +182,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="coarse meshes, azimuth 0 only (minutes cold, seconds cached)")
     p.add_argument("--nu", type=float, default=Material().nu, help="Poisson's ratio (default %(default)s)")
     p.add_argument("--E", type=float, default=Material().E, help="Young's modulus, Pa (default %(default)s)")
-    p.add_argument("--Jm", type=float, default=math.inf, metavar="JM",
+    p.add_argument("--Jm", type=float, default=DEFAULT_JM, metavar="JM",
                    help="the reference's material: a Gent solid with this limiting extensibility (I1 - 3 <= JM; "
-                        f"{GENT_JM_RUBBER:g} is Gent's natural-rubber fit) instead of neo-Hookean (default: inf, "
-                        "neo-Hookean). Cached apart; see --material-study")
+                        f"{GENT_JM_RUBBER:g} is Gent's natural-rubber fit), or inf: neo-Hookean (default "
+                        "%(default)s: the default scene's, launch/scenes/cylinder.yaml; the committed figures in "
+                        "docs/figures/fem/full, quick, fold and holdout are neo-Hookean runs, --Jm inf). Cached "
+                        "apart; see --material-study")
     p.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help="cache folder ('' disables; default %(default)s)")
     p.add_argument("--linear-study", action="store_true", help="also rerun the linear mesh study (slow)")
     p.add_argument("--level", type=int, default=None,
@@ -221,6 +226,13 @@ def _parser() -> argparse.ArgumentParser:
                         "steps, on the full run's h_fine 3.4 mm mesh) into the cache the node reads, then exit. "
                         "~40 min of one core per azimuth (0 is shared with the full run's 3.4 mm level); every "
                         "azimuth's solve is cached")
+    p.add_argument("--ship", action="store_true",
+                   help="with --node-table: also write the table, packed (float16 surface fields, compressed), into "
+                        "nodes/fem/data/, which the node reads on a machine that never solved it (commit it)")
+    p.add_argument("--holdout-azimuth", type=float, action="append", default=[], metavar="DEG",
+                   help="with --node-table: judge the table at this azimuth (between its own) against that push's "
+                        "own solve on the table's mesh (solved unless cached, ~30 min of one core); into "
+                        "node_table.json. Repeatable")
     p.add_argument("--azimuth", type=float, default=None, metavar="DEG",
                    help="with --node-table: solve only this azimuth's path into the cache and exit (run the "
                         "azimuths in parallel processes, then --node-table alone assembles the table)")
@@ -242,6 +254,16 @@ def _log(msg: str) -> None:
 
 
 # ---- reference solves (cached) -------------------------------------------------------------------------------
+#: the reference's default limiting extensibility: the default scene's material (the paper's cylinder, a Gent solid
+#: since session 18; ``--Jm inf`` is the neo-Hookean solid every study before it ran)
+DEFAULT_JM = Material.of_scene(paper_scene().material).Jm
+
+
+def _law(mat: Material) -> str:
+    """The reference's hyperelastic law in words: "neo-Hookean" or "Gent (Jm …)"."""
+    return f"Gent (Jm {mat.Jm:g})" if mat.gent else "neo-Hookean"
+
+
 def _ref_model(spec: RefSpec, angle_deg: float, mat: Material, penalty_scale: float = PENALTY_SCALE
                ) -> HyperelasticModel:
     half_z = spec.half_z and angle_deg == 0.0
@@ -1425,7 +1447,7 @@ def summary(st: Settings, conv: dict, cand: dict, cases: list[dict], snap_info: 
                      "max_visible_error_mm_0_50_rest_footprint": max(s["errors_rest_footprint_m"]) * 1e3,
                      **snap_info},
         "linear": {"update_ms": lin["time_ms"]["median"], "max_visible_error_mm_0_50": max(lin["errors_m"]) * 1e3},
-        "reference": {"converged": conv["converged"], "model": "compressible neo-Hookean, total Lagrangian, P2, "
+        "reference": {"converged": conv["converged"], "model": f"compressible {_law(mat)}, total Lagrangian, P2, "
                       f"Newton + load stepping, rigid finger (penalty), {st.contact} contact", "contact": st.contact,
                       "solver": solver_tag(st.contact), **{
                           k: conv[k] for k in ("monotone_decrease", "last_refinement_change_mm",
@@ -1602,14 +1624,138 @@ def node_table_path(angle_deg: float, mat: Material, cache: ArrayCache, rm: Real
                        contact), depths
 
 
+def node_table_report(table: dict, paths: dict[float, dict], mat: Material, key: str) -> dict:
+    """What ``node_table.json`` records of the FEM node's table (:func:`build_node_table`): per azimuth the
+    reference path's DOF, CPU and Newton iterations (loading + unloading sweep), the depths where the stable
+    branch took the unloaded state, and the finger force (N), largest Green–Lagrange strain and inverted
+    elements at every depth; plus a check against the finger's geometry, not against the reference the table
+    came from: the table's displacement of the surface point under the fingertip along the inward normal, minus
+    the push depth (mm; the rigid apex's penetration plus the surface grid's sampling), largest per azimuth.
+    ``paths``: azimuth (deg) → its :func:`stable_path` dict. Units in keys."""
+    from nodes.fem.snapshots import SnapshotModel
+
+    R, c = float(table["radius"]), np.asarray(table["center"], float)
+    phis = np.asarray(table["angles"], float)
+    depths = np.asarray(table["depths"], float)
+    pts = np.column_stack([c[0] + R * np.cos(phis), np.full(len(phis), c[1]), c[2] + R * np.sin(phis)])
+    sm = SnapshotModel(table, pts, E=mat.E)
+    rows = []
+    for i, phi in enumerate(phis):
+        n_in = -np.array([math.cos(phi), 0.0, math.sin(phi)])
+        apex = [float(sm.surface(float(phi), float(d))[0][i] @ n_in - d) * 1e3 for d in depths[1:]]
+        p = paths[round(math.degrees(phi), 6)]
+        br = np.asarray(p.get("branch", np.zeros(len(depths) - 1)))
+        rows.append({"azimuth_deg": round(math.degrees(phi), 6), "dofs": int(p["dofs"]),
+                     "cpu_seconds_loading": float(p["cpu_seconds"]),
+                     "unload_seconds": float(p["unload_seconds"]) if "unload_seconds" in p else None,
+                     "newton_iterations": int(np.sum(p["newton"])), "converged": bool(np.all(p["converged"])),
+                     "unloaded_state_at_mm": [round(float(d) * 1e3, 3) for d in depths[1:][br == 1]],
+                     "force_N": sm.force[i].tolist(), "max_strain": np.asarray(table["max_strain"])[i].tolist(),
+                     "inverted": np.asarray(table["inverted"])[i].tolist(),
+                     "apex_depth_error_mm": apex, "apex_depth_error_max_mm": max(abs(a) for a in apex)})
+    return {"key": key, "material": {"E": mat.E, "nu": mat.nu, "Jm": mat.Jm if mat.gent else None,
+                                     "law": _law(mat)},
+            "mesh": DEFAULT_REF_SPEC.__dict__, "grid": DEFAULT_GRID.key(), "depths_mm": (depths * 1e3).tolist(),
+            "table_MB_float32": float(sum(np.asarray(table[k]).size * 4 for k in ("side", "cap")) / 1e6),
+            "apex_check": "the table's displacement of the surface point under the fingertip along the inward "
+                          "normal minus the push depth: the finger's geometry, not the reference it came from",
+            "azimuths": rows}
+
+
+def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: RealtimeModel, azimuth_deg: float,
+                       contact: str = DEFAULT_CONTACT) -> dict:
+    """The node's table at an azimuth it does not hold, against that push's own stable path on the table's mesh
+    (:func:`stable_path` on DEFAULT_REF_SPEC, solved here unless cached: ~30 min of one core): the
+    interpolation across azimuth alone, every table depth, largest distance (mm) over the visible rendered
+    vertices (not held, outside the finger's footprint on the reference's deformed surface, :func:`_visible`).
+    Raises ``ValueError`` for an azimuth the table holds or outside it."""
+    from nodes.fem.snapshots import SnapshotModel
+
+    held = np.degrees(np.asarray(table["angles"], float))
+    if np.any(np.abs(held - azimuth_deg) < 1e-9) or not held[0] < azimuth_deg < held[-1]:
+        raise ValueError(f"held-out azimuth must lie strictly between the table's, off them "
+                         f"({held.round(6).tolist()} deg), got {azimuth_deg!r}")
+    depths = np.asarray(table["depths"], float)
+    verts = rm.rest_vertices.astype(float)
+    p = stable_path(DEFAULT_REF_SPEC, azimuth_deg, depths[1:], mat, cache, verts, contact)
+    sm = SnapshotModel(table, verts, E=mat.E)
+    fixed = rm.mesh.fixed[rm.surface_nodes]
+    err = []
+    for j, d in enumerate(depths[1:]):
+        u = sm.surface(math.radians(azimuth_deg), float(d))[0]
+        vis = _visible(verts + p["u"][j], fixed, azimuth_deg, float(d), rm.mesh)
+        err.append(float(np.linalg.norm(u - p["u"][j], axis=1)[vis].max()) * 1e3)
+    bad = [float(d) * 1e3 for d, e in zip(depths[1:], err, strict=True) if e > TARGET * 1e3]
+    return {"azimuth_deg": float(azimuth_deg), "against": "its own stable path on the table's mesh (cut half model)",
+            "depths_mm": (depths[1:] * 1e3).tolist(), "error_mm": err, "max_error_mm": max(err),
+            "over_target_from_mm": min(bad) if bad else None, "dofs": int(p["dofs"]),
+            "cpu_seconds_loading": float(p["cpu_seconds"])}
+
+
+def _table_update_ms(table: dict, verts: np.ndarray, mat: Material, n: int = 50) -> dict:
+    """CPU time (``time.thread_time``) of one snapshot look-up for the rendered vertices ``verts`` (k, 3) m — what
+    the node does per update on the cylinder (:meth:`nodes.fem.snapshots.SnapshotModel.surface`) — at pushes
+    between the table's azimuths and depths (5°, 25°, 55° × 5, 20, 45 mm), ``n`` calls each: median and 90th
+    percentile, ms."""
+    from nodes.fem.snapshots import SnapshotModel
+
+    sm = SnapshotModel(table, verts, E=mat.E)
+    ts = []
+    for a in (5.0, 25.0, 55.0):
+        for d in (0.005, 0.020, 0.045):
+            for _ in range(n):
+                t = time.thread_time()
+                sm.surface(math.radians(a), d)
+                ts.append(time.thread_time() - t)
+    return {"median_ms": float(np.median(ts) * 1e3), "p90_ms": float(np.percentile(ts, 90) * 1e3),
+            "vertices": int(len(verts)), "calls": len(ts),
+            "what": "SnapshotModel.surface CPU time (thread_time) per call, the node's per-update look-up"}
+
+
+def plot_node_table(out: str, rep: dict) -> None:
+    """node_table.png: finger force against depth per azimuth, and the apex check (:func:`node_table_report`)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+    d = rep["depths_mm"]
+    for r in rep["azimuths"]:
+        a.plot(d, r["force_N"], ".-", ms=3, label=f"{r['azimuth_deg']:g}°")
+        b.plot(d[1:], r["apex_depth_error_mm"], ".-", ms=3, label=f"{r['azimuth_deg']:g}°")
+    a.set_xlabel("push depth (mm)")
+    a.set_ylabel("finger force (N)")
+    a.set_title(f"node table, {rep['material']['law']}, E {rep['material']['E'] / 1e3:g} kPa", fontsize=10)
+    a.legend(fontsize=7, title="azimuth")
+    for h in rep.get("held_out", []):
+        b.plot(h["depths_mm"], h["error_mm"], "k.-", ms=4, lw=1.5,
+               label=f"held out {h['azimuth_deg']:g}°: visible-surface error")
+    if rep.get("held_out"):
+        b.axhline(TARGET * 1e3, color="k", ls="--", lw=0.8, label="target 0.7 mm")
+    b.set_xlabel("push depth (mm)")
+    b.set_ylabel("mm")
+    b.set_title("apex displacement − depth per azimuth; held-out error", fontsize=10)
+    b.legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "node_table.png"), dpi=110)
+    plt.close(fig)
+
+
 def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, contact: str = DEFAULT_CONTACT,
-                     azimuth: float | None = None, jobs: int = 1) -> int:
+                     azimuth: float | None = None, jobs: int = 1, ship: bool = False, out: str | None = None,
+                     holdout: tuple[float, ...] = ()) -> int:
     """Build (or find) the FEM node's snapshot table: :data:`nodes.fem.snapshots.DEFAULT_GRID` on
     :data:`nodes.fem.snapshots.DEFAULT_REF_SPEC`, the key the node looks up (its ``finger_radius`` default is
     the experiment's 8 mm). Every azimuth's path is a cached :func:`node_table_path` (azimuth 0: the full run's
     3.4 mm level), so ``azimuth`` (deg) solves just that one and returns: run the azimuths in parallel
     processes, or over several sittings, then once without it to assemble the table; without it the azimuths
-    the cache lacks are solved in ``jobs`` worker processes first (:func:`prefetch`). Returns 0."""
+    the cache lacks are solved in ``jobs`` worker processes first (:func:`prefetch`). ``ship``: also write the
+    table, packed (:func:`nodes.fem.snapshots.pack_table`: float16 surface fields, compressed), into the
+    repository's ``nodes/fem/data/`` (:meth:`nodes.fem.cache.ArrayCache.ship`), where the node finds it on a
+    machine that never solved it. ``out``: write ``node_table.json/png`` there (:func:`node_table_report`), with
+    the table judged at each ``holdout`` azimuth (deg, between the table's) against its own solve
+    (:func:`node_table_holdout`; solved unless cached). Returns 0."""
     from nodes.fem.snapshots import table_key
 
     st = replace(settings_for(False), grid=DEFAULT_GRID, snap_spec=DEFAULT_REF_SPEC, contact=contact)
@@ -1634,6 +1780,29 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
     _log(f"node table {'found in the cache' if hit else f'built in {sec:.0f} s'}: "
          f"{sum(v.nbytes for v in table.values()) / 1e6:.0f} MB; total {time.perf_counter() - t0:.0f} s. The FEM "
          "node loads it at start (model: auto)")
+    if ship:
+        from nodes.fem.snapshots import pack_table
+
+        packed, err = pack_table(table)
+        p = cache.ship("snapshots", table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact, mat.Jm),
+                       packed)
+        _log(f"node table shipped: {p} ({os.path.getsize(p) / 1e6:.1f} MB, float16 surface fields: rounding "
+             f"<= {err * 1e3:.4f} mm); commit it")
+    if out:
+        key = table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact, mat.Jm)
+        rep = node_table_report(table, {a: node_table_path(a, mat, cache, rm, contact)[0]
+                                        for a in DEFAULT_GRID.angles_deg}, mat, key)
+        if ship:
+            rep["shipped"] = {"path": os.path.relpath(p, os.getcwd()), "MB": os.path.getsize(p) / 1e6,
+                              "float16_rounding_mm": err * 1e3}
+        rep["update"] = _table_update_ms(table, rm.rest_vertices.astype(float), mat)
+        rep["held_out"] = [node_table_holdout(table, mat, cache, rm, a, contact) for a in holdout]
+        for h in rep["held_out"]:
+            _log(f"node table held out at {h['azimuth_deg']:g} deg: worst visible error {h['max_error_mm']:.2f} mm"
+                 + (f", over the target from {h['over_target_from_mm']:g} mm" if h["over_target_from_mm"] else ""))
+        _write(out, "node_table", rep)
+        plot_node_table(out, rep)
+        _log(f"node table report -> {out}/node_table.json")
     return 0
 
 
@@ -1841,6 +2010,11 @@ def main(argv: list[str] | None = None) -> int:
     st = replace(settings_for(args.quick), contact=args.contact)
     t0 = time.perf_counter()
     cache = ArrayCache(args.cache_dir or None, _log)
+    if args.holdout_azimuth and (not args.node_table or args.azimuth is not None):
+        raise SystemExit("flexsheet experiment fem: --holdout-azimuth is for --node-table without --azimuth")
+    if args.ship and (not args.node_table or args.azimuth is not None):
+        raise SystemExit("flexsheet experiment fem: --ship is for --node-table without --azimuth (it ships the "
+                         "assembled table)")
     if args.azimuth is not None:
         if not args.node_table:
             raise SystemExit("flexsheet experiment fem: --azimuth is for --node-table")
@@ -1849,7 +2023,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.quick or args.level is not None:
             raise SystemExit("flexsheet experiment fem: --node-table builds the node's full table; it takes neither "
                              "--quick nor --level")
-        return build_node_table(mat, cache, args.cache_dir or None, st.contact, args.azimuth, args.jobs)
+        return build_node_table(mat, cache, args.cache_dir or None, st.contact, args.azimuth, args.jobs, args.ship,
+                                args.out, tuple(args.holdout_azimuth))
     for h in st.skin_sizes:     # before any solve: a bad size would otherwise fail after the convergence study
         replace(st.levels[-2], skin_h=h)
     rm = realtime_model(st, mat, args.cache_dir or None)

@@ -177,6 +177,15 @@ class MeshObject(BaseModel):
 ObjectSpec = Annotated[CylinderObject | SphereObject | RoundedBoxObject | MeshObject, Field(discriminator="kind")]
 
 
+#: Gent's limiting chain extensibility (the largest I₁ − 3) for natural rubber, fitted to Treloar's data (Gent, Rubber
+#: Chem. Technol. 69, 1996; the value used by Horgan & Saccomandi, Math. Mech. Solids 7, 2002 — recalled, not
+#: re-fitted here): the *weakest* strain-stiffening of the published fits (soft tissues fit far smaller Jm, i.e.
+#: stiffen sooner), so the Gent solid closest to neo-Hookean that still has a limiting stretch (equibiaxial
+#: λ ≤ 7.1, uniaxial ≤ 9.9). The paper's cylinder (:func:`paper_scene`, ``cylinder.yaml``) is this solid: a
+#: neo-Hookean body under the paper's 50 mm push has no mesh-converged solution at the fingertip (docs/fem.md)
+GENT_JM_RUBBER = 97.2
+
+
 class Material(BaseModel):
     """Hyperelastic material of the object: ``model`` (``neo_hookean``, the default; ``gent``, a strain-stiffening
     solid with limiting extensibility ``Jm`` = the largest I₁ − 3, Gent 1996, which needs ``Jm``; or ``linear``
@@ -784,13 +793,16 @@ def load_scene(path: str | os.PathLike) -> Scene:
 
 def paper_scene() -> Scene:
     """The paper's cylinder (§VI-A) from :mod:`flexsheet.model.scene`'s constants — what
-    ``launch/scenes/cylinder.yaml`` holds; the default wherever no scene is named."""
+    ``launch/scenes/cylinder.yaml`` holds; the default wherever no scene is named. Its material is a Gent solid
+    (E 10 kPa, ν 0.45, Jm :data:`GENT_JM_RUBBER`): the neo-Hookean body the paper's 50 mm push was first
+    modelled with has no mesh-converged solution there (docs/fem.md, session 17's material study)."""
     R = paper.CYLINDER_RADIUS
     if not np.allclose(paper.CYLINDER_AXIS, [0.0, 1.0, 0.0]):      # pragma: no cover - a constant
         raise ValueError("paper_scene assumes the cylinder axis +y (the local axis, no rotation)")
     sc = Scene(name="cylinder", description="the paper's cylinder (§VI-A), stroked from 0° to 60° toward +z",
                object=CylinderObject(kind="cylinder", radius=R, length=paper.CYLINDER_LENGTH,
                                      pose=Pose(position=tuple(float(x) for x in paper.CYLINDER_CENTER))),
+               material=Material(model="gent", E=10e3, nu=0.45, Jm=GENT_JM_RUBBER),
                stroke=ArcStroke(kind="arc", start=(1.0, 0.0, 0.0), toward=(0.0, 0.0, 1.0), start_deg=0.0,
                                 end_deg=60.0))
     sc._source = "<paper>"

@@ -85,6 +85,24 @@ class ArrayCache:
                 pass
             return None
 
+    def ship(self, kind: str, key: str, arrays: dict[str, np.ndarray]) -> str:
+        """Write an entry into ``shipped_dir`` (the repository's read-only store, ``nodes/fem/data/``), zlib
+        compressed (``numpy.savez_compressed``), atomically; returns its path. For entries a fresh machine should
+        not have to compute (the FEM node's snapshot table: hours of CPU). Raises ``ValueError`` when there is no
+        shipped directory, ``OSError`` when it cannot be written."""
+        if not self.shipped_dir:
+            raise ValueError("this cache has no shipped directory to write into")
+        os.makedirs(self.shipped_dir, exist_ok=True)
+        p = os.path.join(self.shipped_dir, self._name(kind, key))
+        tmp = f"{p}.{os.getpid()}.tmp.npz"
+        try:
+            np.savez_compressed(tmp, **arrays)
+            os.replace(tmp, p)
+        finally:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+        return p
+
     def get_or_compute(self, kind: str, key: str, compute: Callable[[], dict[str, np.ndarray]],
                        what: str = "") -> tuple[dict[str, np.ndarray], bool, float]:
         """(arrays, hit, seconds): load the entry or run ``compute()`` and store its result."""

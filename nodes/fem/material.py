@@ -14,13 +14,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from flexsheet.model.scenes import GENT_JM_RUBBER
+
 __all__ = ["Material", "SOFT_TISSUE", "GENT_JM_RUBBER"]
 
-#: Gent's limiting chain extensibility for natural rubber, fitted to Treloar's data (Gent, Rubber Chem. Technol.
-#: 69, 1996; the value used by Horgan & Saccomandi, Math. Mech. Solids 7, 2002 — recalled, not re-fitted here):
-#: the *weakest* strain-stiffening of the published fits (soft tissues fit far smaller Jm, i.e. stiffen sooner),
-#: so the Gent solid closest to neo-Hookean that still has a limiting stretch (equibiaxial λ ≤ 7.1, uniaxial ≤ 9.9)
-GENT_JM_RUBBER = 97.2
+# GENT_JM_RUBBER: Gent's natural-rubber limiting I1 - 3 (97.2), defined beside the scene format that names it
+# (flexsheet.model.scenes), re-exported here for the FEM
 
 
 @dataclass(frozen=True)

@@ -60,7 +60,8 @@ class FemParams(BaseModel):
 
     ``accuracy_target`` m (rendered-surface error target, default one projector pixel 0.7 mm);
     ``depth_min``/``depth_max`` m push-depth range the accuracy must hold over; ``max_depth`` m deeper input is
-    rejected; ``finger_radius`` m; ``E`` Pa, ``nu``: material (soft-tissue defaults, see material.py);
+    rejected; ``finger_radius`` m; ``E`` Pa, ``nu``: material (soft-tissue defaults, see material.py; without a scene file the
+    hyperelastic law is the paper scene's, a Gent solid with Jm 97.2, whose snapshot table ships in ``nodes/fem/data``);
     ``strain_limit``: largest principal strain before linear is declared invalid; ``cache_dir`` ("" = no
     disk cache); ``mesh_h``/``mesh_h_fine``/``refine_radius`` m and ``order`` override the automatic choice
     when all of h, h_fine are > 0; ``arc_deg``: half-angle of the working arc (deg) whose neighbourhood gets
@@ -123,7 +124,9 @@ class FemNode(Node):
         if not fem_models_as_cylinder(self.scene):
             await self._setup_scene()
             return
-        mat = Material.of_scene(self.scene.material) if p.scene else Material(p.E, p.nu)
+        # a scene file's material; no scene: E, ν from the params with the paper scene's law (Gent, its Jm)
+        mat = Material.of_scene(self.scene.material) if p.scene else \
+            Material(p.E, p.nu, Material.of_scene(self.scene.material).Jm)
         if p.mesh_h > 0 and p.mesh_h_fine > 0:
             spec, order = MeshSpec(p.mesh_h, p.mesh_h_fine, p.refine_radius, p.arc_deg), p.order
             self.log.info("fem: mesh set by params: P%d %s", order, spec.key())

@@ -192,7 +192,9 @@ class RealtimeModel(CondensedSurface):
         reach = finger_radius + 0.002 if reach is None else reach
         import gmsh
 
-        self.cache_key = cache_key(_CACHE_VERSION, spec.key(), gmsh.__version__, material.key(), f"{reach:.9g}",
+        # the linear (capacitance) model reads E and ν only: a Gent solid shares the neo-Hookean key
+        small_strain = Material(material.E, material.nu)
+        self.cache_key = cache_key(_CACHE_VERSION, spec.key(), gmsh.__version__, small_strain.key(), f"{reach:.9g}",
                                    f"{finger_radius:.9g}", f"P{order}")
         self.cache = ArrayCache(cache_dir, log)
         self._model = self._p1 = None
