@@ -2,6 +2,7 @@
 scikit-fem's linear elasticity, exact symmetries of the snapshot look-up, bad input."""
 
 import math
+import os
 from dataclasses import replace
 
 import numpy as np
@@ -419,6 +420,8 @@ def test_packed_table_rounds_within_float16_and_looks_up_as_the_original(tmp_pat
     c = ArrayCache(None, shipped_dir=str(tmp_path / "data"))
     path = c.ship("snapshots", "k" * 24, packed)
     assert path.startswith(str(tmp_path / "data")) and c.load("snapshots", "k" * 24)["side"].dtype == np.float16
+    mtime = os.stat(path).st_mtime_ns
+    assert c.ship("snapshots", "k" * 24, packed) == path and os.stat(path).st_mtime_ns == mtime   # same: kept
     th = np.radians(np.array([-20.0, 0.0, 15.0]))
     verts = np.column_stack([C[0] + R * np.cos(th), [0.0, 0.01, -0.02], C[2] + R * np.sin(th)])
     a = SnapshotModel(tab, verts).surface(math.radians(6.0), 0.02)[0]

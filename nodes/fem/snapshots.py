@@ -167,9 +167,9 @@ def pack_table(table: dict) -> tuple[dict, float]:
     err = 0.0
     for k in ("side", "cap"):
         a = np.asarray(table[k], np.float32)
-        h = a.astype(np.float16)
-        if not np.all(np.isfinite(h)):
+        if not np.all(np.abs(a) < np.finfo(np.float16).max):
             raise ValueError(f"snapshot table field {k!r} does not fit float16 (largest |u| {np.abs(a).max():g} m)")
+        h = a.astype(np.float16)
         err = max(err, float(np.abs(h.astype(np.float32) - a).max(initial=0.0)))
         out[k] = h
     return out, err
