@@ -530,6 +530,8 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_or_build
 
     paths, seen = [], {}
+    # the repository's shipped table has this very key: keep it out, the build below must run
+    monkeypatch.setattr("nodes.fem.cache.SHIPPED_DIR", str(tmp_path / "no_shipped"))
 
     def fake_path(spec, angle_deg, depths, mat, cache, probes, contact="frictionless", penalty_scale=None):
         paths.append((spec, angle_deg, round(float(depths[-1]), 9), len(depths)))
@@ -640,3 +642,67 @@ def test_stable_path_takes_the_unloaded_rows_only_and_keeps_the_dtypes(tmp_path,
     assert calls == [10.0]
     z2 = X.stable_path(spec, 10.0, depths, Material(), cache, probes)   # the cached entry, no loading path read
     assert calls == [10.0] and z2["force"].tolist() == [0.0, 11.0, 2.0]
+
+
+def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatch):
+    """node_table.json's parts on a table whose field is known in closed form (the rigid rotation of one field
+    with the finger, test_fem_hyperelastic._analytic_table): the apex check reads the surface point under the
+    fingertip (the field moves it d outward there, so −2d against the push), the held-out azimuth is answered
+    by the table's rotate-and-blend (< 5 µm) and a 1 mm flaw in the held-out solve at a visible vertex
+    reads 1 mm; the update timing and the chart are written; bad held-out azimuths are refused. (The table's 1° θ
+    grid interpolates display-frame components of a rotating field: a few µm, not exact.)"""
+    from flexsheet.experiments import fem as X
+    from nodes.fem.material import GENT_JM_RUBBER, Material
+    from tests.test_fem_hyperelastic import C, L, R, _analytic_table
+
+    depths = [0.0, 0.01, 0.02]
+    tab = _analytic_table([0.0, 10.0], depths)
+    mat = Material(1e4, 0.45, GENT_JM_RUBBER)
+
+    def path(extra=0):
+        return {"dofs": np.array(100 + extra), "cpu_seconds": np.array(1.0), "newton": np.array([3, 4]),
+                "converged": np.array([True, True]), "branch": np.array([0, 1]), "unload_seconds": np.array(2.0)}
+
+    rep = X.node_table_report(tab, {0.0: path(), 10.0: path(1)}, mat, "k")
+    assert [r["azimuth_deg"] for r in rep["azimuths"]] == [0.0, 10.0] and rep["material"]["Jm"] == GENT_JM_RUBBER
+    for r in rep["azimuths"]:
+        assert r["apex_depth_error_mm"] == pytest.approx([-20.0, -40.0], abs=1e-3)
+        assert r["unloaded_state_at_mm"] == [20.0] and r["force_N"] == pytest.approx([0.0, 1.0, 2.0])
+    # held out at 5 deg: the rendered vertices on the side, away from the held back half and the fingertip
+    th, ys = np.meshgrid(np.radians(np.arange(-60.0, 61.0, 7.5)), np.array([-0.04, -0.02, 0.0, 0.02, 0.04]))
+    th, ys = th.ravel(), ys.ravel()
+    verts = np.column_stack([C[0] + R * np.cos(th), ys, C[2] + R * np.sin(th)])
+    mesh = SimpleNamespace(radius=R, center=C, fixed=np.zeros(len(verts), bool))
+    rm = SimpleNamespace(rest_vertices=verts.astype(np.float32), mesh=mesh, surface_nodes=np.arange(len(verts)))
+    phi = math.radians(5.0)
+
+    def exact(d):                       # the analytic field of a push at 5 deg (the table's own formula)
+        rel = th - phi
+        fr, ft = d * (1.0 + 0.3 * rel) * (1.0 - np.abs(ys) / L), d * 0.2 * rel
+        return np.column_stack([fr * np.cos(th) - ft * np.sin(th), d * 0.1 * ys / L, fr * np.sin(th) + ft * np.cos(th)])
+
+    held = {"u": np.stack([exact(d) for d in depths[1:]]), "dofs": np.array(7), "cpu_seconds": np.array(3.0)}
+    monkeypatch.setattr(X, "stable_path", lambda *a, **kw: held)
+    h = X.node_table_holdout(tab, mat, None, rm, 5.0)
+    assert h["depths_mm"] == pytest.approx([10.0, 20.0]) and h["max_error_mm"] < 5e-3    # 1° grid: µm
+    far = int(np.argmax(np.abs(th - phi)))                 # a vertex far from the fingertip: visible
+    held["u"] = held["u"].copy()
+    held["u"][1, far] += [0.0, 0.001, 0.0]
+    h = X.node_table_holdout(tab, mat, None, rm, 5.0)
+    assert h["error_mm"][1] == pytest.approx(1.0, abs=1e-3) and h["over_target_from_mm"] == pytest.approx(20.0)
+    for bad in (0.0, 10.0, 12.0, -3.0):
+        with pytest.raises(ValueError, match="held-out azimuth"):
+            X.node_table_holdout(tab, mat, None, rm, bad)
+    rep["update"] = X._table_update_ms(tab, verts, mat, n=3)
+    assert rep["update"]["calls"] == 9 and 0.0 < rep["update"]["median_ms"] <= rep["update"]["p90_ms"]
+    rep["held_out"] = [h]
+    X.plot_node_table(str(tmp_path), rep)
+    assert os.path.getsize(tmp_path / "node_table.png") > 5000
+    for args, word in ((["--node-table", "--holdout-azimuth", "10"], "strictly between"),
+                       (["--node-table", "--holdout-azimuth", "75"], "strictly between"),
+                       (["--holdout-azimuth", "5"], "is for --node-table"),
+                       (["--node-table", "--ship", "--azimuth", "10"], "--ship is for"),
+                       (["--ship"], "--ship is for"),
+                       (["--node-table", "--ship", "--contact", "sticking"], "frictionless")):
+        with pytest.raises(SystemExit, match=word):
+            X.main(["--out", str(tmp_path / "o"), "--cache-dir", ""] + args)

@@ -3,6 +3,7 @@
 import asyncio
 
 import numpy as np
+import pytest
 
 from messages import Fingertip, Header, topics
 from nodes.fem.node import FemNode
@@ -115,7 +116,7 @@ def test_node_without_cached_snapshots_serves_linear_and_says_so(tmp_path):
         from flexsheet.runtime.testing import NodeHarness
 
         async with NodeHarness(FemNode, params=dict(PARAMS, model="snapshots", scene=str(scene))) as h:
-            assert "LINEAR" in h.node.state_message and "experiment fem" in h.node.state_message
+            assert "LINEAR" in h.node.state_message and "experiment fem --node-table --nu 0.45 --Jm inf" in h.node.state_message
             h.inject(topics.FINGERTIP, _tip([-0.005, 0.0, 0.0]))
             d = (await h.wait_for(topics.DEFORMATION, n=1, timeout=20.0))[-1]
             assert d.method == "condensed" and d.valid
@@ -188,7 +189,7 @@ def test_node_on_the_default_scene_serves_the_shipped_nonlinear_snapshots():
         async with NodeHarness(FemNode, params=params) as h:
             assert "snapshots loaded" in h.node.state_message, h.node.state_message
             snap = h.node.model.snapshots
-            assert np.degrees(snap.angle_max) == 60.0 and snap.depth_max == 0.05
+            assert np.degrees(snap.angle_max) == pytest.approx(60.0) and snap.depth_max == pytest.approx(0.05)
             c, R = np.array([-0.025 * np.sqrt(2.0), 0.0, 0.0]), 0.025 * np.sqrt(2.0)
             n = np.array([np.cos(np.pi / 6), 0.0, np.sin(np.pi / 6)])
             h.inject(topics.FINGERTIP, _tip(c + (R - 0.020) * n, stamp=2.0))      # the fingertip, 20 mm in
@@ -196,7 +197,9 @@ def test_node_on_the_default_scene_serves_the_shipped_nonlinear_snapshots():
             assert d.method == "snapshots" and d.valid and abs(d.depth - 0.020) < 1e-6
             ia = list(DEFAULT_GRID.angles_deg).index(30.0)
             jd = int(np.argmin(np.abs(DEFAULT_GRID.depths() - 0.020)))
-            assert abs(d.contact_force - snap.force[ia, jd]) < 1e-6 and 2.0 < d.contact_force < 5.0
+            hertz = 4.0 / 3.0 * 1e4 / (1 - 0.45 ** 2) * np.sqrt(np.sqrt(0.008 / (1 + 0.008 / R) * 0.008)) * 0.020 ** 1.5
+            assert abs(d.contact_force - snap.force[ia, jd]) < 1e-6      # the table's force, E as tabulated
+            assert 0.5 * hertz < d.contact_force < 1.5 * hertz, (d.contact_force, hertz)   # Hertz's order (Johnson §4.2)
             # the material under the fingertip went in with it; nothing else moved farther
             u = np.linalg.norm(np.asarray(d.vertices, float) - h.node.model._rest.astype(float), axis=1)
             assert 0.8 * 0.020 < u.max() < 1.3 * 0.020, u.max()

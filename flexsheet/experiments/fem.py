@@ -29,7 +29,8 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    (``material_study.json/png``, :func:`material_study`; ``--material-study`` runs only it): the same azimuth-0
    convergence and an azimuth-0 snapshot table on the next-to-finest level, for the neo-Hookean reference and
    for a strain-stiffening Gent solid (``--Jm``, default :data:`nodes.fem.material.GENT_JM_RUBBER`), and how far
-   the two materials' finest solutions lie apart. ``--Jm`` alone makes every other study use the Gent solid.
+   the two materials' finest solutions lie apart. ``--Jm`` sets the material of every other study (default: the
+   default scene's Gent solid; ``--Jm inf``: neo-Hookean).
 2. **Candidates**, judged on the real-time model's rendered vertices outside the finger's footprint
    (lateral distance from the push axis > finger radius + 2 mm; the footprint is hidden by the finger):
    the linear P2 capacitance model, and the nonlinear snapshots (:mod:`nodes.fem.snapshots`), sampled every
@@ -180,14 +181,16 @@ def _parser() -> argparse.ArgumentParser:
                                        "--out /tmp/fem_sphere")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--quick", action="store_true", help="coarse meshes, azimuth 0 only (minutes cold, seconds cached)")
-    p.add_argument("--nu", type=float, default=Material().nu, help="Poisson's ratio (default %(default)s)")
-    p.add_argument("--E", type=float, default=Material().E, help="Young's modulus, Pa (default %(default)s)")
-    p.add_argument("--Jm", type=float, default=DEFAULT_JM, metavar="JM",
+    p.add_argument("--nu", type=float, default=None,
+                   help=f"Poisson's ratio (default: the scene's, {Material().nu:g} for the default scene)")
+    p.add_argument("--E", type=float, default=None,
+                   help=f"Young's modulus, Pa (default: the scene's, {Material().E:g} for the default scene)")
+    p.add_argument("--Jm", type=float, default=None, metavar="JM",
                    help="the reference's material: a Gent solid with this limiting extensibility (I1 - 3 <= JM; "
-                        f"{GENT_JM_RUBBER:g} is Gent's natural-rubber fit), or inf: neo-Hookean (default "
-                        "%(default)s: the default scene's, launch/scenes/cylinder.yaml; the committed figures in "
-                        "docs/figures/fem/full, quick, fold and holdout are neo-Hookean runs, --Jm inf). Cached "
-                        "apart; see --material-study")
+                        f"{GENT_JM_RUBBER:g} is Gent's natural-rubber fit), or inf: neo-Hookean (default: the "
+                        f"scene's, {DEFAULT_JM:g} for the default scene, launch/scenes/cylinder.yaml; the committed "
+                        "figures in docs/figures/fem/full, quick, fold and holdout are neo-Hookean runs, --Jm "
+                        "inf). Cached apart; see --material-study")
     p.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help="cache folder ('' disables; default %(default)s)")
     p.add_argument("--linear-study", action="store_true", help="also rerun the linear mesh study (slow)")
     p.add_argument("--level", type=int, default=None,
@@ -195,7 +198,7 @@ def _parser() -> argparse.ArgumentParser:
                         "parallel processes before the full run), then exit")
     p.add_argument("--write-model-table", action="store_true",
                    help=f"write {os.path.relpath(MODEL_TABLE_PATH)} (default in full mode with the default "
-                        "--contact)")
+                        "--contact and the default scene's material)")
     p.add_argument("--contact", choices=CONTACT_LAWS, default=DEFAULT_CONTACT,
                    help="the finger's contact law in the reference: sticking (the fingertip does not slip on the "
                         "tissue) or frictionless (default %(default)s)")
@@ -349,7 +352,7 @@ def _path_record(model: HyperelasticModel, states: list[PathState], probes: np.n
 
 def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, cache: ArrayCache,
                    probes: np.ndarray, contact: str = DEFAULT_CONTACT, penalty_scale: float = PENALTY_SCALE) -> dict:
-    """Neo-Hookean push at ``angle_deg`` through ``depths`` (load steps = the depth spacing, ≤ 2.5 mm) on
+    """Hyperelastic (``mat``: neo-Hookean or Gent) push at ``angle_deg`` through ``depths`` (load steps = the depth spacing, ≤ 2.5 mm) on
     ``spec``'s mesh — its half model (``half_z`` off) away from azimuth 0, as
     :func:`nodes.fem.snapshots.build_table` meshes it, so one solve serves both — sampled at ``probes`` (k, 3) m
     (display frame, mirrored into the modelled part); cached.
@@ -1395,7 +1398,7 @@ def failure_map(cases: list[dict], cand: dict) -> dict:
     return out
 
 
-def model_table(cases: list[dict], cand: dict) -> dict:
+def model_table(cases: list[dict], cand: dict, law: str = "neo-Hookean") -> dict:
     """``nodes/fem/model_table.json``: each candidate's worst visible error per depth (over azimuths) and speed."""
     depths = sorted({c["depth"] for c in cases})
     rows = []
@@ -1405,7 +1408,7 @@ def model_table(cases: list[dict], cand: dict) -> dict:
         rows.append({"kind": v["kind"], "name": v["name"], "max_error_m_by_depth": by,
                      "update_ms": v["time_ms"]["median"]})
     return {"target_m": TARGET, "finger_radius": FINGER_R, "angles_deg": sorted({c["angle_deg"] for c in cases}),
-            "note": "worst visible-surface error against the neo-Hookean reference over the tabulated azimuths",
+            "note": f"worst visible-surface error against the {law} reference over the tabulated azimuths",
             "candidates": rows}
 
 
@@ -1488,7 +1491,7 @@ def _write(out: str, name: str, data: dict) -> None:
         json.dump(data, fh, indent=1)
 
 
-def plot_convergence(out: str, conv: dict) -> None:
+def plot_convergence(out: str, conv: dict, law: str = "neo-Hookean") -> None:
     """convergence.png: visible-surface difference to the finest mesh against depth, and against h at 3 depths."""
     import matplotlib
 
@@ -1510,7 +1513,7 @@ def plot_convergence(out: str, conv: dict) -> None:
     a2.set_xlabel("element size under the finger, h_fine (mm)")
     a2.set_ylabel("difference to finest (mm)")
     a2.legend(fontsize=8)
-    fig.suptitle(f"neo-Hookean reference, mesh convergence (finest h_fine = {conv['levels'][-1]['h_fine_m'] * 1e3:.1f} mm)"
+    fig.suptitle(f"{law} reference, mesh convergence (finest h_fine = {conv['levels'][-1]['h_fine_m'] * 1e3:.1f} mm)"
                  f": converged = {conv['converged']}", fontsize=10)
     fig.tight_layout()
     fig.savefig(os.path.join(out, "convergence.png"), dpi=110)
@@ -1564,7 +1567,7 @@ def plot_mirror_study(out: str, ms: dict) -> None:
     plt.close(fig)
 
 
-def plot_candidates(out: str, cand: dict, fmap: dict) -> None:
+def plot_candidates(out: str, cand: dict, fmap: dict, law: str = "neo-Hookean") -> None:
     """accuracy_speed.png (worst visible error 0–50 mm against time per update) and failure_map.png."""
     import matplotlib
 
@@ -1581,7 +1584,7 @@ def plot_candidates(out: str, cand: dict, fmap: dict) -> None:
     ax.set_yscale("log")
     ax.set_xlabel("time per update (ms, median), shared 2-core CPU")
     ax.set_ylabel("worst visible-surface error, 0–50 mm push (mm)")
-    ax.set_title("Accuracy vs speed against the neo-Hookean reference", fontsize=10)
+    ax.set_title(f"Accuracy vs speed against the {law} reference", fontsize=10)
     ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(os.path.join(out, "accuracy_speed.png"), dpi=110)
@@ -1626,7 +1629,8 @@ def node_table_path(angle_deg: float, mat: Material, cache: ArrayCache, rm: Real
 
 def node_table_report(table: dict, paths: dict[float, dict], mat: Material, key: str) -> dict:
     """What ``node_table.json`` records of the FEM node's table (:func:`build_node_table`): per azimuth the
-    reference path's DOF, CPU and Newton iterations (loading + unloading sweep), the depths where the stable
+    reference path's DOF, the loading path's CPU and the unloading sweep's wall time, the Newton iterations of the
+    states kept (one branch per depth), the depths where the stable
     branch took the unloaded state, and the finger force (N), largest Green–Lagrange strain and inverted
     elements at every depth; plus a check against the finger's geometry, not against the reference the table
     came from: the table's displacement of the surface point under the fingertip along the inward normal, minus
@@ -1695,14 +1699,16 @@ def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: Realti
 def _table_update_ms(table: dict, verts: np.ndarray, mat: Material, n: int = 50) -> dict:
     """CPU time (``time.thread_time``) of one snapshot look-up for the rendered vertices ``verts`` (k, 3) m — what
     the node does per update on the cylinder (:meth:`nodes.fem.snapshots.SnapshotModel.surface`) — at pushes
-    between the table's azimuths and depths (5°, 25°, 55° × 5, 20, 45 mm), ``n`` calls each: median and 90th
-    percentile, ms."""
+    between the table's azimuths (the first, middle and last midpoints: 5°, 35°, 55° for the node's) and at 0.1,
+    0.4, 0.9 of its deepest push (5, 20, 45 mm), ``n`` calls each: median and 90th percentile, ms."""
     from nodes.fem.snapshots import SnapshotModel
 
     sm = SnapshotModel(table, verts, E=mat.E)
+    mids = np.degrees(np.asarray(table["angles"], float))
+    mids = (mids[:-1] + mids[1:]) / 2 if len(mids) > 1 else mids
     ts = []
-    for a in (5.0, 25.0, 55.0):
-        for d in (0.005, 0.020, 0.045):
+    for a in sorted({float(mids[0]), float(mids[len(mids) // 2]), float(mids[-1])}):
+        for d in (0.1 * sm.depth_max, 0.4 * sm.depth_max, 0.9 * sm.depth_max):
             for _ in range(n):
                 t = time.thread_time()
                 sm.surface(math.radians(a), d)
@@ -1780,6 +1786,11 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
     _log(f"node table {'found in the cache' if hit else f'built in {sec:.0f} s'}: "
          f"{sum(v.nbytes for v in table.values()) / 1e6:.0f} MB; total {time.perf_counter() - t0:.0f} s. The FEM "
          "node loads it at start (model: auto)")
+    paths = {a: node_table_path(a, mat, cache, rm, contact)[0] for a in DEFAULT_GRID.angles_deg}
+    unconverged = [a for a, q in paths.items() if not np.all(q["converged"])]
+    if ship and unconverged:
+        raise SystemExit(f"flexsheet experiment fem: not shipping the node table: Newton did not converge at every "
+                         f"load step at azimuth(s) {unconverged} deg")
     if ship:
         from nodes.fem.snapshots import pack_table
 
@@ -1790,8 +1801,7 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
              f"<= {err * 1e3:.4f} mm); commit it")
     if out:
         key = table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact, mat.Jm)
-        rep = node_table_report(table, {a: node_table_path(a, mat, cache, rm, contact)[0]
-                                        for a in DEFAULT_GRID.angles_deg}, mat, key)
+        rep = node_table_report(table, paths, mat, key)
         if ship:
             rep["shipped"] = {"path": os.path.relpath(p, os.getcwd()), "MB": os.path.getsize(p) / 1e6,
                               "float16_rounding_mm": err * 1e3}
@@ -1989,6 +1999,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.holdout_study and args.quick:
         raise SystemExit("flexsheet experiment fem: --holdout-study is a full-mode study (the quick settings hold "
                          "no azimuth out); leave out --quick")
+    scene_mat = paper_scene().material          # the default scene's; a paper-cylinder --scene file's below
     if args.scene:
         from flexsheet.model.scenes import is_paper_cylinder, load_scene_or_paper
 
@@ -2001,12 +2012,24 @@ def main(argv: list[str] | None = None) -> int:
 
             run_scene(args.scene, args.out, args.quick, args.cache_dir or None)
             return 0
+        scene_mat = sc.material
     if args.jobs < 1:
         raise SystemExit(f"flexsheet experiment fem: --jobs must be >= 1, got {args.jobs}")
     try:
-        mat = Material(args.E, args.nu, args.Jm)
+        sm = Material.of_scene(scene_mat)        # --E / --nu / --Jm given replace the scene's
+        mat = Material(sm.E if args.E is None else args.E, sm.nu if args.nu is None else args.nu,
+                       sm.Jm if args.Jm is None else args.Jm)
     except ValueError as exc:
         raise SystemExit(f"flexsheet experiment fem: {exc}") from None
+    if args.holdout_azimuth:
+        inner = DEFAULT_GRID.angles_deg
+        for a in args.holdout_azimuth:
+            if not (math.isfinite(a) and inner[0] < a < inner[-1]) or a in inner:
+                raise SystemExit(f"flexsheet experiment fem: --holdout-azimuth must lie strictly between the node "
+                                 f"table's azimuths {[f'{x:g}' for x in inner]} deg and off them, got {a:g}")
+    if args.ship and args.contact != DEFAULT_CONTACT:
+        raise SystemExit(f"flexsheet experiment fem: --ship ships the table the node looks up ({DEFAULT_CONTACT} "
+                         f"contact); got --contact {args.contact}")
     st = replace(settings_for(args.quick), contact=args.contact)
     t0 = time.perf_counter()
     cache = ArrayCache(args.cache_dir or None, _log)
@@ -2096,12 +2119,14 @@ def main(argv: list[str] | None = None) -> int:
                                             "max_visible_error_mm_0_50": max(v["errors_m"]) * 1e3}
                                         for k, v in cand.items()})
     _write(args.out, "summary", summ)
-    if (not st.quick and st.contact == DEFAULT_CONTACT) or args.write_model_table:   # the node's table: default law
+    # the node's model table: a full run of the default scene's material and contact law (or asked for)
+    if (not st.quick and st.contact == DEFAULT_CONTACT and mat == Material.of_scene(paper_scene().material)) \
+            or args.write_model_table:
         with open(MODEL_TABLE_PATH, "w") as fh:
-            json.dump(model_table(cases, cand), fh, indent=1)
-    plot_convergence(args.out, conv)
+            json.dump(model_table(cases, cand, _law(mat)), fh, indent=1)
+    plot_convergence(args.out, conv, _law(mat))
     plot_mirror_study(args.out, ms)
-    plot_candidates(args.out, cand, fmap)
+    plot_candidates(args.out, cand, fmap, _law(mat))
     if args.linear_study:
         linear_study(args.out, mat)
     _log(json.dumps(summ["realtime"], indent=1))

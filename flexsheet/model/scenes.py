@@ -10,7 +10,7 @@ A scene is a YAML file beside the launch files (``launch/scenes/*.yaml``; docs/s
       radius: 0.035355339059327376
       length: 0.12
       pose: {position: [-0.035355339059327376, 0.0, 0.0], rpy_deg: [0, 0, 0]}
-    material: {model: neo_hookean, E: 10000.0, nu: 0.45}
+    material: {model: gent, E: 10000.0, nu: 0.45, Jm: 97.2}   # or {model: neo_hookean, E: ..., nu: ...}
     support: {kind: back_half}    # or {kind: half_space, point: [...], normal: [...]}
     finger: {radius: 0.008}
     stroke: {kind: arc, start: [1, 0, 0], toward: [0, 0, 1], start_deg: 0, end_deg: 60}

@@ -31,13 +31,15 @@ def cache_key(*parts) -> str:
 
 
 class ArrayCache:
-    """Named array sets on disk. ``cache_dir`` None or "" disables writing (and reading from it);
+    """Named array sets on disk. ``cache_dir`` None or "" disables writing (and reading from it); ``shipped_dir``
+    the read-only store searched after it (default :data:`SHIPPED_DIR`; None: none);
     ``log`` optional callable(str) for one-line reports. ``kind`` must be a simple word (letters, digits, _)."""
 
     def __init__(self, cache_dir: str | None, log: Callable[[str], None] | None = None,
-                 shipped_dir: str | None = SHIPPED_DIR):
+                 shipped_dir: str | None = ""):
         self.cache_dir = cache_dir or None
-        self.shipped_dir = shipped_dir
+        # "" (the default): the module's SHIPPED_DIR as it is now (tests point it elsewhere); None: none
+        self.shipped_dir = SHIPPED_DIR if shipped_dir == "" else shipped_dir
         self.log = log or (lambda s: None)
 
     @staticmethod

@@ -28,7 +28,7 @@ __all__ = ["Choice", "evaluate_spec", "choose", "load_table", "visible_mask", "T
 
 TABLE_PATH = os.path.join(os.path.dirname(__file__), "accuracy_table.json")
 MODEL_TABLE_PATH = os.path.join(os.path.dirname(__file__), "model_table.json")
-#: simplest first: linear needs no nonlinear precompute; the snapshots need the (cached) neo-Hookean table
+#: simplest first: linear needs no nonlinear precompute; the snapshots need the (cached or shipped) hyperelastic table
 MODEL_PREFERENCE = ("linear", "corotational", "snapshots")
 DEFAULT_SPEC = MeshSpec(0.012, 0.004, 0.012)
 DEFAULT_ORDER = 2

@@ -200,7 +200,8 @@ class FemNode(Node):
             return
         if not p.snapshot_build:
             self.state_message = ("fem: nonlinear snapshots not cached - serving the LINEAR model (build them with "
-                                  "`flexsheet experiment fem --node-table`, or set snapshot_build=true)")
+                                  f"`flexsheet experiment fem --node-table --nu {mat.nu:g} --Jm {mat.Jm:g}`, or set "
+                                  "snapshot_build=true)")
             self.log.warning(self.state_message)
             return
         self.state_message = "fem: building nonlinear snapshots in the background - serving the LINEAR model"

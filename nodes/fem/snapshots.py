@@ -6,7 +6,7 @@ finger's state space offline and interpolate them at haptic rate. Here the state
 point, push depth d, axial offset a) and the stored quantity is the displacement of the *surface*, the only
 thing the renderer draws.
 
-* **Offline** (:func:`build_table`): for each snapshot azimuth φ_i the neo-Hookean reference
+* **Offline** (:func:`build_table`): for each snapshot azimuth φ_i the hyperelastic reference (the material's law: neo-Hookean, or Gent — the paper's cylinder since session 18)
   (:mod:`nodes.fem.hyperelastic`) is pushed 0 → d_max with load stepping, and every converged depth d_j is
   sampled on a fixed surface grid: the side surface on (θ, y) and the end cap on (θ, ρ), display-frame
   components. Also stored per (φ_i, d_j): finger force, largest strain, inverted elements, min det F.
@@ -222,7 +222,8 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
         s = spec if ang == 0.0 else replace(spec, half_z=False)
         mesh = reference_mesh(s, ang)
         model = HyperelasticModel(mesh, material, sym_y=True, sym_z=s.half_z)
-        log(f"fem: snapshots at {ang:g} deg: {model.n} DOF P2 neo-Hookean, {nd - 1} depths ...")
+        law = f"Gent Jm {material.Jm:g}" if material.gent else "neo-Hookean"
+        log(f"fem: snapshots at {ang:g} deg: {model.n} DOF P2 {law}, {nd - 1} depths ...")
         states = solved(ang, model, depths[1:]) if solved is not None else None
         if states is None:
             states = solve_path(model, math.radians(ang), depths[1:], finger_radius, step=grid.depth_step,
