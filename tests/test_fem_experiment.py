@@ -561,11 +561,13 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
         assert json.load(fh) == {"key": reported["key"], "update": {"median_ms": -1.0}, "held_out": []}
     p = FemParams()
     assert seen["build"] == (DEFAULT_GRID, DEFAULT_REF_SPEC, p.nu, p.finger_radius)
-    # the table reads 0 and 30 (fake_build), then the report every azimuth's path (cached)
-    assert paths == [(DEFAULT_REF_SPEC, 0.0, 0.05, 20), (DEFAULT_REF_SPEC, 30.0, 0.05, 20)] + [
-        (DEFAULT_REF_SPEC, a, 0.05, 20) for a in DEFAULT_GRID.angles_deg]
+    assert paths == [(DEFAULT_REF_SPEC, 0.0, 0.05, 20), (DEFAULT_REF_SPEC, 30.0, 0.05, 20)]   # fake_build's reads
     st30 = seen["states"][30.0]
     assert [s.depth for s in st30] == pytest.approx(DEFAULT_GRID.depths()[1:]) and st30[-1].force == 19.0
+    paths.clear()
+    seen.clear()
+    assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table"]) == 0
+    assert paths == [] and seen == {}           # the table is found: nothing solved or built again
     paths.clear()
     assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table",
                    "--azimuth", "20"]) == 0
@@ -668,6 +670,10 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
     for r in rep["azimuths"]:
         assert r["apex_depth_error_mm"] == pytest.approx([-20.0, -40.0], abs=1e-3)
         assert r["unloaded_state_at_mm"] == [20.0] and r["force_N"] == pytest.approx([0.0, 1.0, 2.0])
+    assert [r["dofs"] for r in rep["azimuths"]] == [100, 101]
+    # a path this machine's cache lacks (the table shipped, its solves not): its facts are left out, not invented
+    r10 = X.node_table_report(tab, {0.0: path(), 10.0: None}, mat, "k")["azimuths"][1]
+    assert r10["path"] == "not in this machine's cache" and "dofs" not in r10 and r10["force_N"][2] == 2.0
     # held out at 5 deg: the rendered vertices on the side, away from the held back half and the fingertip
     th, ys = np.meshgrid(np.radians(np.arange(-60.0, 61.0, 7.5)), np.array([-0.04, -0.02, 0.0, 0.02, 0.04]))
     th, ys = th.ravel(), ys.ravel()

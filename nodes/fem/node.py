@@ -60,8 +60,9 @@ class FemParams(BaseModel):
 
     ``accuracy_target`` m (rendered-surface error target, default one projector pixel 0.7 mm);
     ``depth_min``/``depth_max`` m push-depth range the accuracy must hold over; ``max_depth`` m deeper input is
-    rejected; ``finger_radius`` m; ``E`` Pa, ``nu``: material (soft-tissue defaults, see material.py; without a scene file the
-    hyperelastic law is the paper scene's, a Gent solid with Jm 97.2, whose snapshot table ships in ``nodes/fem/data``);
+    rejected; ``finger_radius`` m; ``E`` Pa, ``nu``: material (soft-tissue defaults, see material.py; without a
+    scene file the hyperelastic law is the paper scene's, a Gent solid with Jm 97.2, whose snapshot table ships
+    in ``nodes/fem/data``);
     ``strain_limit``: largest principal strain before linear is declared invalid; ``cache_dir`` ("" = no
     disk cache); ``mesh_h``/``mesh_h_fine``/``refine_radius`` m and ``order`` override the automatic choice
     when all of h, h_fine are > 0; ``arc_deg``: half-angle of the working arc (deg) whose neighbourhood gets

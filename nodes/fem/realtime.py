@@ -5,8 +5,8 @@ contact region, with the full sparse solve as fallback when the finger leaves th
 part of the strain-monitor zone (surface + interior nodes near the contact region) near the finger, and the
 geometrically nonlinear mode:
 
-* **nonlinear snapshots** (:mod:`nodes.fem.snapshots`, Peterlík et al. 2010): hyperelastic (neo-Hookean or Gent) reference solutions
-  (:mod:`nodes.fem.hyperelastic`) precomputed over (contact azimuth, depth), rotated with the finger and
+* **nonlinear snapshots** (:mod:`nodes.fem.snapshots`, Peterlík et al. 2010): hyperelastic (neo-Hookean or
+  Gent) reference solutions (:mod:`nodes.fem.hyperelastic`) precomputed over (contact azimuth, depth), rotated with the finger and
   interpolated per update. When attached (:meth:`RealtimeModel.attach_snapshots`) and the push lies in the
   table, this is what the node draws (``method = "snapshots"``); the linear model serves everything else.
 * the older corotational depth table (Niroomandi et al. 2013 / Filipovič & Peterlík 2009 with corotational FEM
