@@ -679,7 +679,8 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
     th, ys = th.ravel(), ys.ravel()
     verts = np.column_stack([C[0] + R * np.cos(th), ys, C[2] + R * np.sin(th)])
     mesh = SimpleNamespace(radius=R, center=C, fixed=np.zeros(len(verts), bool))
-    rm = SimpleNamespace(rest_vertices=verts.astype(np.float32), mesh=mesh, surface_nodes=np.arange(len(verts)))
+    rm = SimpleNamespace(rest_vertices=verts.astype(np.float32), mesh=mesh, surface_nodes=np.arange(len(verts)),
+                         snapshots=None)
     phi = math.radians(5.0)
 
     def exact(d):                       # the analytic field of a push at 5 deg (the table's own formula)

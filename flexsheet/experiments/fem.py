@@ -188,7 +188,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--Jm", type=float, default=None, metavar="JM",
                    help="the reference's material: a Gent solid with this limiting extensibility (I1 - 3 <= JM; "
                         f"{GENT_JM_RUBBER:g} is Gent's natural-rubber fit), or inf: neo-Hookean (default: the "
-                        f"scene's, {DEFAULT_JM:g} for the default scene, launch/scenes/cylinder.yaml; the committed "
+                        f"scene's, {DEFAULT_MATERIAL.Jm:g} for the default scene, launch/scenes/cylinder.yaml; the committed "
                         "figures in docs/figures/fem/full, quick, fold and holdout are neo-Hookean runs, --Jm "
                         "inf). Cached apart; see --material-study")
     p.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help="cache folder ('' disables; default %(default)s)")
@@ -257,9 +257,9 @@ def _log(msg: str) -> None:
 
 
 # ---- reference solves (cached) -------------------------------------------------------------------------------
-#: the reference's default limiting extensibility: the default scene's material (the paper's cylinder, a Gent solid
-#: since session 18; ``--Jm inf`` is the neo-Hookean solid every study before it ran)
-DEFAULT_JM = Material.of_scene(paper_scene().material).Jm
+#: the reference's default material: the default scene's (the paper's cylinder, a Gent solid since session 18;
+#: ``--Jm inf`` is the neo-Hookean solid every study before it ran)
+DEFAULT_MATERIAL = Material.of_scene(paper_scene().material)
 
 
 def _law(mat: Material) -> str:
@@ -1683,13 +1683,13 @@ def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: Realti
     depths = np.asarray(table["depths"], float)
     verts = rm.rest_vertices.astype(float)
     p = stable_path(DEFAULT_REF_SPEC, azimuth_deg, depths[1:], mat, cache, verts, contact)
-    sm = SnapshotModel(table, verts, E=mat.E)
-    fixed = rm.mesh.fixed[rm.surface_nodes]
-    err = []
-    for j, d in enumerate(depths[1:]):
-        u = sm.surface(math.radians(azimuth_deg), float(d))[0]
-        vis = _visible(verts + p["u"][j], fixed, azimuth_deg, float(d), rm.mesh)
-        err.append(float(np.linalg.norm(u - p["u"][j], axis=1)[vis].max()) * 1e3)
+    cases = [{"angle_deg": float(azimuth_deg), "depth": float(d), "u": p["u"][j]} for j, d in enumerate(depths[1:])]
+    keep = rm.snapshots
+    try:                                    # the check every snapshot table gets (errors), on this table
+        rm.snapshots = SnapshotModel(table, verts, E=mat.E)
+        err = [e * 1e3 for e in errors(rm, cases, "snapshots")]
+    finally:
+        rm.snapshots = keep
     bad = [float(d) * 1e3 for d, e in zip(depths[1:], err, strict=True) if e > TARGET * 1e3]
     return {"azimuth_deg": float(azimuth_deg), "against": "its own stable path on the table's mesh (cut half model)",
             "depths_mm": (depths[1:] * 1e3).tolist(), "error_mm": err, "max_error_mm": max(err),
@@ -1785,11 +1785,12 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
     _log(f"node table: azimuths {DEFAULT_GRID.angles_deg} deg on {DEFAULT_REF_SPEC.key()}; key {key}")
     table, hit, _ = load_or_build(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, FINGER_R, build=False,
                                   contact=contact)
+    verts = rm.rest_vertices.astype(float)
     if hit:     # in the cache or shipped: its paths are not solved again (a held-out check needs only its own)
         _log("node table found (this machine's cache or nodes/fem/data): not solving its paths again")
     else:
         prefetch([Solve(DEFAULT_REF_SPEC, a, DEFAULT_GRID.depth_step, stable=True) for a in DEFAULT_GRID.angles_deg],
-                 jobs, mat, cache, rm.rest_vertices.astype(float), contact)
+                 jobs, mat, cache, verts, contact)
 
         def solved(ang, model, depths):
             states = _path_states(*node_table_path(ang, mat, cache, rm, contact), depths, model)
@@ -1801,7 +1802,6 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
         _log(f"node table built in {sec:.0f} s: {sum(v.nbytes for v in table.values()) / 1e6:.0f} MB; total "
              f"{time.perf_counter() - t0:.0f} s. The FEM node loads it at start (model: auto)")
     depths = _depths(DEFAULT_GRID.depth_step)
-    verts = rm.rest_vertices.astype(float)
     paths = {a: _cached_path(DEFAULT_REF_SPEC, a, depths, mat, cache, verts, contact) for a in DEFAULT_GRID.angles_deg}
     missing = [a for a, q in paths.items() if q is None]
     unconverged = [a for a, q in paths.items() if q is not None and not np.all(q["converged"])]
@@ -1822,7 +1822,7 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
         if ship:
             rep["shipped"] = {"path": os.path.relpath(p, os.getcwd()), "MB": os.path.getsize(p) / 1e6,
                               "float16_rounding_mm": err * 1e3}
-        rep["update"] = _table_update_ms(table, rm.rest_vertices.astype(float), mat)
+        rep["update"] = _table_update_ms(table, verts, mat)
         rep["held_out"] = [node_table_holdout(table, mat, cache, rm, a, contact) for a in holdout]
         for h in rep["held_out"]:
             _log(f"node table held out at {h['azimuth_deg']:g} deg: worst visible error {h['max_error_mm']:.2f} mm"
@@ -2016,7 +2016,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.holdout_study and args.quick:
         raise SystemExit("flexsheet experiment fem: --holdout-study is a full-mode study (the quick settings hold "
                          "no azimuth out); leave out --quick")
-    scene_mat = paper_scene().material          # the default scene's; a paper-cylinder --scene file's below
+    sm = DEFAULT_MATERIAL                        # the default scene's; a paper-cylinder --scene file's below
     if args.scene:
         from flexsheet.model.scenes import is_paper_cylinder, load_scene_or_paper
 
@@ -2029,13 +2029,12 @@ def main(argv: list[str] | None = None) -> int:
 
             run_scene(args.scene, args.out, args.quick, args.cache_dir or None)
             return 0
-        scene_mat = sc.material
+        sm = Material.of_scene(sc.material)
     if args.jobs < 1:
         raise SystemExit(f"flexsheet experiment fem: --jobs must be >= 1, got {args.jobs}")
     try:
-        sm = Material.of_scene(scene_mat)        # --E / --nu / --Jm given replace the scene's
-        mat = Material(sm.E if args.E is None else args.E, sm.nu if args.nu is None else args.nu,
-                       sm.Jm if args.Jm is None else args.Jm)
+        mat = Material(sm.E if args.E is None else args.E, sm.nu if args.nu is None else args.nu,  # given: replace
+                       sm.Jm if args.Jm is None else args.Jm)                                     # the scene's
     except ValueError as exc:
         raise SystemExit(f"flexsheet experiment fem: {exc}") from None
     if args.holdout_azimuth:
@@ -2137,7 +2136,7 @@ def main(argv: list[str] | None = None) -> int:
                                         for k, v in cand.items()})
     _write(args.out, "summary", summ)
     # the node's model table: a full run of the default scene's material and contact law (or asked for)
-    if (not st.quick and st.contact == DEFAULT_CONTACT and mat == Material.of_scene(paper_scene().material)) \
+    if (not st.quick and st.contact == DEFAULT_CONTACT and mat == DEFAULT_MATERIAL) \
             or args.write_model_table:
         with open(MODEL_TABLE_PATH, "w") as fh:
             json.dump(model_table(cases, cand, _law(mat)), fh, indent=1)

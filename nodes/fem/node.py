@@ -126,8 +126,8 @@ class FemNode(Node):
             await self._setup_scene()
             return
         # a scene file's material; no scene: E, ν from the params with the paper scene's law (Gent, its Jm)
-        mat = Material.of_scene(self.scene.material) if p.scene else \
-            Material(p.E, p.nu, Material.of_scene(self.scene.material).Jm)
+        mat = Material.of_scene(self.scene.material)
+        mat = mat if p.scene else Material(p.E, p.nu, mat.Jm)
         if p.mesh_h > 0 and p.mesh_h_fine > 0:
             spec, order = MeshSpec(p.mesh_h, p.mesh_h_fine, p.refine_radius, p.arc_deg), p.order
             self.log.info("fem: mesh set by params: P%d %s", order, spec.key())
