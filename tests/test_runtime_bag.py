@@ -64,10 +64,13 @@ def test_record_then_play_is_byte_identical_with_original_timing(tmp_path):
         assert a.frames == b.frames  # byte-identical payloads (header stamps included)
     rel_live = np.array([m.log_time for m in live]) - live[0].log_time
     rel_play = np.array([m.log_time for m in played]) - played[0].log_time
-    err = np.abs(rel_play - rel_live)
+    # a latency common to every message (a recorder's first receive, the player's timer wake-up) is not timing:
+    # the spacing is judged, after taking out the median offset between the two recordings
+    off = rel_play - rel_live
+    err = np.abs(off - np.median(off))
     # both sides are a recorder's receive times, so the error holds two recorders' scheduling jitter: median
     # 0.5 ms, but a 90th percentile of 2.2 ms and single 11 ms outliers on the loaded 2-core machine (session 12).
-    # A player that ignored the timing would be off by up to the bag's 1.18 s span, one at half speed by 590 ms.
+    # A player that ignored the timing would be off by up to the bag's 1.18 s span, one at half speed by up to 295 ms after the median offset is taken out.
     assert np.median(err) < 0.002 and np.percentile(err, 90) < 0.005, f"timing error ms: {err * 1e3}"
     assert abs(rel_play[-1] - rel_live[-1]) < 0.02, (rel_play[-1], rel_live[-1])
     info = bag_info(bag1)

@@ -369,6 +369,9 @@ class PlayerParams(BaseModel):
     mode: Literal["realtime", "lockstep"] = "realtime"
 
 
+_PLAY_LEAD_S = 0.005  # s; see PlayerNode._play
+
+
 class PlayerNode(Node):
     """Republishes a bag's raw frames with the original relative timing, from this node's endpoint."""
 
@@ -392,11 +395,11 @@ class PlayerNode(Node):
         await asyncio.sleep(self.params.start_delay)
         latched = {t.name for t in __import__("messages.topics", fromlist=["ALL"]).ALL if t.latched}
         while True:
-            t0_bag = None
-            t0 = time.monotonic()
+            t0_bag = t0 = None
             for m in read_bag(self.params.file, self.params.topics or None):
-                if t0_bag is None:
-                    t0_bag = m.log_time
+                if t0_bag is None:  # anchor once the bag is open, a little ahead: the first message then waits
+                    t0_bag = m.log_time  # through the same timer as the rest and shares their wake-up latency
+                    t0 = time.monotonic() + _PLAY_LEAD_S
                 due = t0 + (m.log_time - t0_bag) / self.params.rate
                 delay = due - time.monotonic()
                 if delay > 0:
