@@ -4,7 +4,7 @@ of the pushed cylinder, and the real-time model that reproduces it (``--scene`` 
 study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 
 1. **Reference** (:mod:`nodes.fem.hyperelastic`): the default scene's hyperelastic solid (a Gent solid, Jm 97.2,
-   since session 18: ``--Jm``; ``--Jm inf`` is the neo-Hookean solid of the committed full, quick, fold and
+   since session 18: ``--Jm``; ``--Jm inf`` is the neo-Hookean solid of the committed full, quick_neohookean, fold and
    held-out figures), total Lagrangian, P2, Newton with load
    stepping (≤ 60 iterations per step), rigid frictionless finger (sphere + shaft), pushed 0 → 50 mm at
    azimuth 0 on a sequence of meshes refined along the whole push path (quarter model by symmetry;
@@ -189,7 +189,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="the reference's material: a Gent solid with this limiting extensibility (I1 - 3 <= JM; "
                         f"{GENT_JM_RUBBER:g} is Gent's natural-rubber fit), or inf: neo-Hookean (default: the "
                         f"scene's, {DEFAULT_MATERIAL.Jm:g} for the default scene, launch/scenes/cylinder.yaml; the committed "
-                        "figures in docs/figures/fem/full, quick, fold and holdout are neo-Hookean runs, --Jm "
+                        "figures in docs/figures/fem/full, quick_neohookean, fold and holdout are neo-Hookean runs, --Jm "
                         "inf). Cached apart; see --material-study")
     p.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help="cache folder ('' disables; default %(default)s)")
     p.add_argument("--linear-study", action="store_true", help="also rerun the linear mesh study (slow)")
