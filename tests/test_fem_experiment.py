@@ -558,7 +558,8 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--jobs", "1"]) == 0
     assert reported["angles"] == list(DEFAULT_GRID.angles_deg) and reported["Jm"] == GENT_JM_RUBBER
     with open(tmp_path / "o" / "node_table.json") as fh:
-        assert json.load(fh) == {"key": reported["key"], "update": {"median_ms": -1.0}, "held_out": []}
+        assert json.load(fh) == {"key": reported["key"], "update": {"median_ms": -1.0}, "held_out": [],
+                                 "between_depths": []}
     p = FemParams()
     assert seen["build"] == (DEFAULT_GRID, DEFAULT_REF_SPEC, p.nu, p.finger_radius)
     assert paths == [(DEFAULT_REF_SPEC, 0.0, 0.05, 20), (DEFAULT_REF_SPEC, 30.0, 0.05, 20)]   # fake_build's reads
@@ -700,6 +701,30 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
     for bad in (0.0, 10.0, 12.0, -3.0):
         with pytest.raises(ValueError, match="held-out azimuth"):
             X.node_table_holdout(tab, mat, None, rm, bad)
+    # between the table's depths at one of its azimuths: the analytic field is linear in depth, so the table's
+    # depth blend is exact at the midpoints too; a 1 mm flaw at a midpoint reads there, and only there
+    fine = [0.005, 0.01, 0.015, 0.02]
+
+    def exact0(d):
+        fr, ft = d * (1.0 + 0.3 * th) * (1.0 - np.abs(ys) / L), d * 0.2 * th
+        return np.column_stack([fr * np.cos(th) - ft * np.sin(th), d * 0.1 * ys / L, fr * np.sin(th) + ft * np.cos(th)])
+
+    seen = []
+    on0 = {"u": np.stack([exact0(d) for d in fine]), "dofs": np.array(9), "cpu_seconds": np.array(4.0),
+           "branch": np.array([0, 0, 1, 1])}
+    monkeypatch.setattr(X, "stable_path", lambda spec, a, d, *r, **kw: seen.append(np.round(d, 9).tolist()) or on0)
+    b = X.node_table_between_depths(tab, mat, None, rm, 0.0)
+    assert seen == [fine] and b["depths_mm"] == pytest.approx([5.0, 10.0, 15.0, 20.0]) and b["max_error_mm"] < 5e-3
+    assert b["unloaded_state_at_mm"] == pytest.approx([15.0, 20.0]) and b["over_target_from_mm"] is None
+    far0 = int(np.argmax(np.abs(th)))
+    on0["u"] = on0["u"].copy()
+    on0["u"][2, far0] += [0.0, 0.0, 0.001]
+    b = X.node_table_between_depths(tab, mat, None, rm, 0.0)
+    assert b["max_error_mm_between_depths"] == pytest.approx(1.0, abs=1e-3) and b["max_error_mm_at_table_depths"] < 5e-3
+    assert b["over_target_from_mm"] == pytest.approx(15.0)
+    with pytest.raises(ValueError, match="one of the table's"):
+        X.node_table_between_depths(tab, mat, None, rm, 5.0)
+    rep["between_depths"] = [b]
     rep["update"] = X._table_update_ms(tab, verts, mat, n=3)
     assert rep["update"]["calls"] == 9 and 0.0 < rep["update"]["median_ms"] <= rep["update"]["p90_ms"]
     rep["held_out"] = [h]
@@ -710,6 +735,8 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
                        (["--holdout-azimuth", "5"], "is for --node-table"),
                        (["--node-table", "--ship", "--azimuth", "10"], "--ship is for"),
                        (["--ship"], "--ship is for"),
-                       (["--node-table", "--ship", "--contact", "sticking"], "frictionless")):
+                       (["--node-table", "--ship", "--contact", "sticking"], "frictionless"),
+                       (["--node-table", "--between-depths", "5"], "one of the node table's"),
+                       (["--between-depths", "0"], "is for --node-table")):
         with pytest.raises(SystemExit, match=word):
             X.main(["--out", str(tmp_path / "o"), "--cache-dir", ""] + args)

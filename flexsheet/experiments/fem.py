@@ -236,6 +236,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="with --node-table: judge the table at this azimuth (between its own) against that push's "
                         "own solve on the table's mesh (solved unless cached, ~30 min of one core); into "
                         "node_table.json. Repeatable")
+    p.add_argument("--between-depths", type=float, action="append", default=[], metavar="DEG",
+                   help="with --node-table: judge the table between its depths at this azimuth (one of its own) "
+                        "against that push solved at half the table's load step (~20 min of one core at 0, cached); "
+                        "into node_table.json. Repeatable")
     p.add_argument("--azimuth", type=float, default=None, metavar="DEG",
                    help="with --node-table: solve only this azimuth's path into the cache and exit (run the "
                         "azimuths in parallel processes, then --node-table alone assembles the table)")
@@ -1697,6 +1701,46 @@ def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: Realti
             "cpu_seconds_loading": float(p["cpu_seconds"])}
 
 
+def node_table_between_depths(table: dict, mat: Material, cache: ArrayCache, rm: RealtimeModel,
+                              azimuth_deg: float, contact: str = DEFAULT_CONTACT) -> dict:
+    """The node's table between its depths, at one of its azimuths: against that push's own stable path on the
+    table's mesh solved at **half** the table's load step (:func:`stable_path` on DEFAULT_REF_SPEC through
+    depths every step/2 to the table's deepest; solved unless cached: ~20 min of one core at azimuth 0, the
+    quarter model). Judged as :func:`node_table_holdout` judges (:func:`errors`: largest distance, mm, over the
+    visible rendered vertices) at every depth of that path: the midpoints are the interpolation in depth, and
+    with a bistable push they show what blending two branches' states costs; at the table's own depths the
+    two sides differ only by float16 rounding and by a branch that the finer load step may leave elsewhere.
+    Returns per-depth errors, the largest at the midpoints and at the table's depths, and the depths where each
+    side holds the unloaded (stable-branch) state. Raises ``ValueError`` for an azimuth the table does not hold."""
+    from nodes.fem.snapshots import SnapshotModel
+
+    held = np.degrees(np.asarray(table["angles"], float))
+    if not np.any(np.abs(held - azimuth_deg) < 1e-9):
+        raise ValueError(f"azimuth must be one of the table's ({held.round(6).tolist()} deg), got {azimuth_deg!r}")
+    depths = np.asarray(table["depths"], float)
+    step = float(depths[1] - depths[0])
+    fine = np.round(np.arange(1, int(round(depths[-1] / (step / 2))) + 1) * (step / 2), 9)
+    verts = rm.rest_vertices.astype(float)
+    p = stable_path(DEFAULT_REF_SPEC, azimuth_deg, fine, mat, cache, verts, contact)
+    cases = [{"angle_deg": float(azimuth_deg), "depth": float(d), "u": p["u"][j]} for j, d in enumerate(fine)]
+    keep = rm.snapshots
+    try:
+        rm.snapshots = SnapshotModel(table, verts, E=mat.E)
+        err = np.array([e * 1e3 for e in errors(rm, cases, "snapshots")])
+    finally:
+        rm.snapshots = keep
+    mid = np.abs(np.round(fine / step) * step - fine) > 1e-9
+    bad = fine[err > TARGET * 1e3]
+    return {"azimuth_deg": float(azimuth_deg),
+            "against": f"its own stable path on the table's mesh, load step {step / 2 * 1e3:g} mm",
+            "depths_mm": (fine * 1e3).tolist(), "error_mm": err.tolist(), "max_error_mm": float(err.max()),
+            "max_error_mm_between_depths": float(err[mid].max()),
+            "max_error_mm_at_table_depths": float(err[~mid].max()),
+            "over_target_from_mm": float(bad.min() * 1e3) if len(bad) else None,
+            "unloaded_state_at_mm": (fine[np.asarray(p["branch"]) == 1] * 1e3).tolist() if "branch" in p else None,
+            "dofs": int(p["dofs"]), "cpu_seconds_loading": float(p["cpu_seconds"])}
+
+
 def _table_update_ms(table: dict, verts: np.ndarray, mat: Material, n: int = 50) -> dict:
     """CPU time (``time.thread_time``) of one snapshot look-up for the rendered vertices ``verts`` (k, 3) m — what
     the node does per update on the cylinder (:meth:`nodes.fem.snapshots.SnapshotModel.surface`) — at pushes
@@ -1720,7 +1764,8 @@ def _table_update_ms(table: dict, verts: np.ndarray, mat: Material, n: int = 50)
 
 
 def plot_node_table(out: str, rep: dict) -> None:
-    """node_table.png: finger force against depth per azimuth, and the apex check (:func:`node_table_report`)."""
+    """node_table.png: finger force against depth per azimuth, and the apex check (:func:`node_table_report`), with
+    the held-out azimuths' and the between-depths checks' errors."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -1738,7 +1783,10 @@ def plot_node_table(out: str, rep: dict) -> None:
     for h in rep.get("held_out", []):
         b.plot(h["depths_mm"], h["error_mm"], "k.-", ms=4, lw=1.5,
                label=f"held out {h['azimuth_deg']:g}°: visible-surface error")
-    if rep.get("held_out"):
+    for h in rep.get("between_depths", []):
+        b.plot(h["depths_mm"], h["error_mm"], "rx-", ms=4, lw=1,
+               label=f"{h['azimuth_deg']:g}°, every {h['depths_mm'][0]:g} mm: visible-surface error")
+    if rep.get("held_out") or rep.get("between_depths"):
         b.axhline(TARGET * 1e3, color="k", ls="--", lw=0.8, label="target 0.7 mm")
     b.set_xlabel("push depth (mm)")
     b.set_ylabel("mm")
@@ -1760,7 +1808,7 @@ def _cached_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mater
 
 def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, contact: str = DEFAULT_CONTACT,
                      azimuth: float | None = None, jobs: int = 1, ship: bool = False, out: str | None = None,
-                     holdout: tuple[float, ...] = ()) -> int:
+                     holdout: tuple[float, ...] = (), between: tuple[float, ...] = ()) -> int:
     """Build (or find) the FEM node's snapshot table: :data:`nodes.fem.snapshots.DEFAULT_GRID` on
     :data:`nodes.fem.snapshots.DEFAULT_REF_SPEC`, the key the node looks up (its ``finger_radius`` default is
     the experiment's 8 mm). Every azimuth's path is a cached :func:`node_table_path` (azimuth 0: the full run's
@@ -1771,7 +1819,8 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
     repository's ``nodes/fem/data/`` (:meth:`nodes.fem.cache.ArrayCache.ship`), where the node finds it on a
     machine that never solved it. ``out``: write ``node_table.json/png`` there (:func:`node_table_report`), with
     the table judged at each ``holdout`` azimuth (deg, between the table's) against its own solve
-    (:func:`node_table_holdout`; solved unless cached). Returns 0."""
+    (:func:`node_table_holdout`; solved unless cached) and between its depths at each ``between`` azimuth (deg,
+    one of the table's; :func:`node_table_between_depths`). Returns 0."""
     from nodes.fem.snapshots import table_key
 
     st = replace(settings_for(False), grid=DEFAULT_GRID, snap_spec=DEFAULT_REF_SPEC, contact=contact)
@@ -1824,6 +1873,10 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
                               "float16_rounding_mm": err * 1e3}
         rep["update"] = _table_update_ms(table, verts, mat)
         rep["held_out"] = [node_table_holdout(table, mat, cache, rm, a, contact) for a in holdout]
+        rep["between_depths"] = [node_table_between_depths(table, mat, cache, rm, a, contact) for a in between]
+        for h in rep["between_depths"]:
+            _log(f"node table between its depths at {h['azimuth_deg']:g} deg: worst visible error "
+                 f"{h['max_error_mm_between_depths']:.2f} mm (at its own depths {h['max_error_mm_at_table_depths']:.2f})")
         for h in rep["held_out"]:
             _log(f"node table held out at {h['azimuth_deg']:g} deg: worst visible error {h['max_error_mm']:.2f} mm"
                  + (f", over the target from {h['over_target_from_mm']:g} mm" if h["over_target_from_mm"] else ""))
@@ -2043,6 +2096,12 @@ def main(argv: list[str] | None = None) -> int:
             if not (math.isfinite(a) and inner[0] < a < inner[-1]) or a in inner:
                 raise SystemExit(f"flexsheet experiment fem: --holdout-azimuth must lie strictly between the node "
                                  f"table's azimuths {[f'{x:g}' for x in inner]} deg and off them, got {a:g}")
+    for a in args.between_depths:
+        if a not in DEFAULT_GRID.angles_deg:
+            raise SystemExit(f"flexsheet experiment fem: --between-depths must be one of the node table's azimuths "
+                             f"{[f'{x:g}' for x in DEFAULT_GRID.angles_deg]} deg, got {a:g}")
+    if args.between_depths and (not args.node_table or args.azimuth is not None):
+        raise SystemExit("flexsheet experiment fem: --between-depths is for --node-table without --azimuth")
     if args.ship and args.contact != DEFAULT_CONTACT:
         raise SystemExit(f"flexsheet experiment fem: --ship ships the table the node looks up ({DEFAULT_CONTACT} "
                          f"contact); got --contact {args.contact}")
@@ -2063,7 +2122,7 @@ def main(argv: list[str] | None = None) -> int:
             raise SystemExit("flexsheet experiment fem: --node-table builds the node's full table; it takes neither "
                              "--quick nor --level")
         return build_node_table(mat, cache, args.cache_dir or None, st.contact, args.azimuth, args.jobs, args.ship,
-                                args.out, tuple(args.holdout_azimuth))
+                                args.out, tuple(args.holdout_azimuth), tuple(args.between_depths))
     for h in st.skin_sizes:     # before any solve: a bad size would otherwise fail after the convergence study
         replace(st.levels[-2], skin_h=h)
     rm = realtime_model(st, mat, args.cache_dir or None)
