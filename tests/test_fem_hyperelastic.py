@@ -487,6 +487,16 @@ def test_cache_round_trip_hit_and_corrupt_entry(tmp_path):
     assert ArrayCache(None).save("thing", key, {"a": np.zeros(1)}) is None
     with pytest.raises(ValueError, match="kind"):
         c.path("../evil", key)
+    # an entry found only in the shipped store says so (the FEM node's diagnostics); the user's cache wins
+    store, logs2 = tmp_path / "store", []
+    both = ArrayCache(str(tmp_path / "user"), logs2.append, shipped_dir=str(store))
+    both_key = cache_key("shipped")
+    both.ship("thing", both_key, {"a": np.arange(2.0)})
+    z4, hit4, _ = both.get_or_compute("thing", both_key, compute)
+    assert hit4 and both.shipped() and np.array_equal(z4["a"], [0.0, 1.0]) and "shipped store" in logs2[-1]
+    both.save("thing", both_key, {"a": np.arange(4.0)})
+    z5, hit5, _ = both.get_or_compute("thing", both_key, compute)
+    assert hit5 and not both.shipped() and len(z5["a"]) == 4 and logs2[-1].endswith(f"from cache (thing_{both_key})")
 
 
 def test_choose_model_prefers_linear_where_it_suffices():

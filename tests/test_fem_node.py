@@ -187,7 +187,7 @@ def test_node_on_the_default_scene_serves_the_shipped_nonlinear_snapshots():
         from flexsheet.runtime.testing import NodeHarness
 
         async with NodeHarness(FemNode, params=params) as h:
-            assert "snapshots loaded" in h.node.state_message, h.node.state_message
+            assert "snapshots loaded from the shipped store" in h.node.state_message, h.node.state_message
             snap = h.node.model.snapshots
             assert np.degrees(snap.angle_max) == pytest.approx(60.0) and snap.depth_max == pytest.approx(0.05)
             c, R = np.array([-0.025 * np.sqrt(2.0), 0.0, 0.0]), 0.025 * np.sqrt(2.0)

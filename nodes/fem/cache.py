@@ -41,6 +41,8 @@ class ArrayCache:
         # "" (the default): the module's SHIPPED_DIR as it is now (tests point it elsewhere); None: none
         self.shipped_dir = SHIPPED_DIR if shipped_dir == "" else shipped_dir
         self.log = log or (lambda s: None)
+        #: the file the last successful :meth:`load` read (in ``cache_dir`` or ``shipped_dir``), else None
+        self.source: str | None = None
 
     @staticmethod
     def _name(kind: str, key: str) -> str:
@@ -63,10 +65,18 @@ class ArrayCache:
                 continue
             try:
                 with np.load(p, allow_pickle=False) as z:
-                    return {k: z[k] for k in z.files}
+                    out = {k: z[k] for k in z.files}
+                self.source = p
+                return out
             except (OSError, ValueError, KeyError) as exc:
                 self.log(f"fem: cache {p} unusable ({exc}); recomputing")
         return None
+
+    def shipped(self) -> bool:
+        """Whether the last successful :meth:`load` read the read-only shipped store (``nodes/fem/data/``) rather
+        than this machine's cache."""
+        return bool(self.source and self.shipped_dir
+                    and os.path.dirname(os.path.abspath(self.source)) == os.path.abspath(self.shipped_dir))
 
     def save(self, kind: str, key: str, arrays: dict[str, np.ndarray]) -> str | None:
         """Store ``arrays`` atomically; returns the path, or None when disabled or the write failed (logged)."""
@@ -120,7 +130,8 @@ class ArrayCache:
         t = time.perf_counter()
         z = self.load(kind, key)
         if z is not None:
-            self.log(f"fem: {what or kind} loaded from cache ({kind}_{key})")
+            where = f"the shipped store {self.shipped_dir}" if self.shipped() else "cache"
+            self.log(f"fem: {what or kind} loaded from {where} ({kind}_{key})")
             return z, True, time.perf_counter() - t
         z = compute()
         self.save(kind, key, z)

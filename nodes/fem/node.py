@@ -197,7 +197,8 @@ class FemNode(Node):
         cache = ArrayCache(p.cache_dir or None, self.log.info)
         table, _, _ = load_or_build(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, p.finger_radius, build=False)
         if table is not None:
-            self._attach(table, "loaded from cache")
+            self._attach(table, "loaded from the shipped store (nodes/fem/data)" if cache.shipped() else
+                         "loaded from cache")
             return
         if not p.snapshot_build:
             self.state_message = ("fem: nonlinear snapshots not cached - serving the LINEAR model (build them with "
