@@ -205,3 +205,45 @@ def test_node_on_the_default_scene_serves_the_shipped_nonlinear_snapshots():
             assert 0.8 * 0.020 < u.max() < 1.3 * 0.020, u.max()
 
     asyncio.run(scenario())
+
+
+def test_node_on_the_sphere_serves_its_nonlinear_table_when_cached(tmp_path):
+    """A sphere table under the key the node looks up (here the closed-form dent of
+    tests/test_fem_sphere_table.py, 0-60° every 10°, 0-10 mm): the node on sphere.yaml attaches it, says so, and
+    answers a push at 35° up the crown with it — the force is the table's bilinear value at the measured depth,
+    the vertex under the finger moved by about the depth; a push beyond the table's 60° is the linear model's."""
+    from flexsheet.model.scenes import SCENES_DIR, load_scene
+    from nodes.fem.cache import ArrayCache
+    from nodes.fem.sphere_snapshots import SphereGrid, sphere_frame, sphere_table_key
+    from tests.test_fem_sphere_table import _table
+
+    sc = load_scene(SCENES_DIR / "sphere.yaml")
+    fr = sphere_frame(sc)
+    ArrayCache(str(tmp_path)).save("spheresnap", sphere_table_key(sc), _table(fr, SphereGrid(depth_max=0.01,
+                                                                                               depth_step=0.005)))
+    params = dict(PARAMS, scene=str(SCENES_DIR / "sphere.yaml"), cache_dir=str(tmp_path))
+
+    async def scenario():
+        from flexsheet.runtime.testing import NodeHarness
+
+        async with NodeHarness(FemNode, params=params) as h:
+            assert "nonlinear sphere snapshots loaded from cache" in h.node.state_message, h.node.state_message
+            n = fr.direction(np.radians(35.0))
+            h.inject(topics.FINGERTIP, _tip(fr.center + (fr.radius - 0.006) * n, stamp=5.0))
+            d = (await h.wait_for(topics.DEFORMATION, n=1, timeout=30.0))[-1]
+            assert d.valid and abs(d.depth - 0.006) < 3e-4
+            # the table's force at the radial push through the fingertip (35°, 6 mm; table E = the scene's E)
+            alpha, wd = np.radians(35.0), (0.006 - 0.005) / 0.005
+            force = (1 + alpha) * ((1 - wd) * 0.005 ** 1.5 + wd * 0.01 ** 1.5)
+            assert d.contact_force == pytest.approx(force, rel=1e-6)
+            i = int(np.argmin(np.linalg.norm(d.vertices - (fr.center + fr.radius * n), axis=1)))
+            assert abs(np.linalg.norm(d.vertices[i] - fr.center) - (fr.radius - d.depth)) < 1.5e-3
+            h.inject(topics.FINGERTIP, _tip(fr.center, valid=False))             # lift
+            await h.wait_for(topics.DEFORMATION, n=2, timeout=5.0)
+            n70 = fr.direction(np.radians(70.0))
+            h.inject(topics.FINGERTIP, _tip(fr.center + (fr.radius - 0.006) * n70, stamp=6.0))
+            d70 = (await h.wait_for(topics.DEFORMATION, n=3, timeout=30.0))[-1]
+            assert d70.valid and d70.contact_force > 0 and d70.contact_force != pytest.approx(
+                (1 + np.radians(60.0)) * 0.006 ** 1.5, rel=0.2)
+
+    asyncio.run(scenario())

@@ -240,6 +240,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="with --node-table: judge the table between its depths at this azimuth (one of its own) "
                         "against that push solved at half the table's load step (~20 min of one core at 0, cached); "
                         "into node_table.json. Repeatable")
+    p.add_argument("--mesh-check", action="store_true",
+                   help="with --scene SPHERE --node-table: also solve the 0-degree push on a finer mesh (h_fine "
+                        "3.4 mm, ~40 min of one core) and judge the table against it")
     p.add_argument("--azimuth", type=float, default=None, metavar="DEG",
                    help="with --node-table: solve only this azimuth's path into the cache and exit (run the "
                         "azimuths in parallel processes, then --node-table alone assembles the table)")
@@ -2077,6 +2080,11 @@ def main(argv: list[str] | None = None) -> int:
             sc = load_scene_or_paper(args.scene)
         except ValueError as exc:
             raise SystemExit(f"flexsheet experiment fem: {exc}") from None
+        if not is_paper_cylinder(sc) and args.node_table:
+            from flexsheet.experiments.sphere_table import build_sphere_table
+
+            return build_sphere_table(args.scene, args.out, args.cache_dir or None, args.azimuth,
+                                      tuple(args.holdout_azimuth), args.jobs, args.mesh_check)
         if not is_paper_cylinder(sc):
             from flexsheet.experiments.fem_scene import run_scene
 

@@ -219,7 +219,21 @@ class SceneModel(CondensedSurface):
         self._set_output_maps(monitor)
         self.surface = SurfaceIndex(scene)
         self._anchor: Finger | None = None
+        self.snapshots = None
         self.precompute_s = time.perf_counter() - t0
+
+    def attach_sphere_snapshots(self, table: dict) -> None:
+        """Serve pushes inside a sphere scene's nonlinear table (:mod:`nodes.fem.sphere_snapshots`) from it, the
+        linear model elsewhere. Raises ``ValueError`` when the table is inconsistent or was built for another
+        sphere (centre or radius). Thread-safe to call while updates run (one assignment)."""
+        from nodes.fem.sphere_snapshots import SphereSnapshotModel, sphere_frame
+
+        fr = sphere_frame(self.scene)
+        sm = SphereSnapshotModel(table, self._rest.astype(np.float64), E=self.material.E)
+        if np.linalg.norm(sm.frame.center - fr.center) > 1e-9 or abs(sm.frame.radius - fr.radius) > 1e-9:
+            raise ValueError(f"sphere table is for centre {sm.frame.center.tolist()} radius {sm.frame.radius:g} m, "
+                             f"the scene's sphere is at {fr.center.tolist()} radius {fr.radius:g} m")
+        self.snapshots = sm
 
     # ------------------------------------------------------------------ precompute
     def _build_model(self, mesh: TetMesh, E: np.ndarray, nu: np.ndarray) -> FemModel:
@@ -283,6 +297,11 @@ class SceneModel(CondensedSurface):
             return self._update_finger(fg)
 
     def _update_finger(self, fg: Finger) -> Update:
+        snap = self.snapshots
+        if snap is not None and fg.depth > 0:
+            n, d = snap.radial_push(fg.contact_point + fg.depth * fg.direction)
+            if snap.covers(n, d):
+                return self._update_snapshots(snap, fg, n, d)
         sol, u_out, method = self._solve(fg)
         stiffness = sol.stiffness
         if 0.0 < fg.depth < STIFFNESS_FLOOR:
@@ -304,6 +323,18 @@ class SceneModel(CondensedSurface):
         return Update(verts.astype(np.float32), float(sol.force) if valid else 0.0,
                       float(stiffness) if valid else 0.0, fg.depth, fg.contact_point.copy(), method,
                       float(strain), int(inv), status, valid)
+
+    def _update_snapshots(self, snap, fg: Finger, normal: np.ndarray, depth: float) -> Update:
+        """The sphere table's answer (method "snapshots") for the radial push (``normal``, ``depth``) through the
+        finger's leading point: its surface, force and dF/dd; the strain and inverted elements are the
+        reference's at the bracketing snapshots."""
+        us, force, stiff, strain, inv = snap.surface(normal, depth)
+        if not (np.all(np.isfinite(us)) and math.isfinite(force) and math.isfinite(stiff)):
+            return Update(self._rest.copy(), 0.0, 0.0, fg.depth, fg.contact_point.copy(), "snapshots", 0.0, 0,
+                          "nonlinear_invalid:non_finite", False)
+        status = "ok" if inv == 0 else f"nonlinear_invalid:inverted={inv}"
+        return Update((self._rest + us.astype(np.float32)).astype(np.float32), force, stiff, fg.depth,
+                      fg.contact_point.copy(), "snapshots", strain, inv, status, True)
 
     def surface_displacement(self, fg: Finger) -> tuple[np.ndarray, float, float]:
         """(surface-node displacements (S, 3) m, force N, stiffness N/m) of one push, no checks (experiments)."""

@@ -1,0 +1,279 @@
+"""The sphere scene's nonlinear table (issue 17): ``flexsheet experiment fem --scene launch/scenes/sphere.yaml
+--node-table [--azimuth A] [--holdout-azimuth A ...] [--jobs N] --out DIR`` (wired by
+:mod:`flexsheet.experiments.fem`; for the sphere "azimuth" is the polar angle α of the push from the support
+axis, along the stroke).
+
+1. Every snapshot angle of :data:`nodes.fem.sphere_snapshots.DEFAULT_SPHERE_GRID` is solved
+   (:func:`nodes.fem.sphere_snapshots.solve_alpha`: the scene's hyperelastic body, full body, mesh refined along
+   that push path, 0 → 50 mm, stable branch), each cached apart (``--azimuth A`` solves one and exits; ``--jobs``
+   solves the missing ones in worker processes); the table is assembled and stored under the key the FEM node
+   looks up (:func:`nodes.fem.sphere_snapshots.sphere_table_key`).
+2. ``DIR/sphere_table.json`` + ``.png``: per angle the DOF, CPU, Newton convergence, the depths where the stable
+   branch took the unloaded state, the force against depth, and Hertz's force at the first depth (Johnson
+   §4.2, the rigid sphere of the finger's radius on the sphere: a closed form, not the reference); the look-up
+   time; and each **held-out** angle (``--holdout-azimuth``, between the table's): its own solve on its own mesh
+   against the table (interpolation across α) and against the linear real-time model the node served before
+   (:class:`nodes.fem.scene_model.SceneModel`), as the largest distance over the visible rendered vertices (not
+   held, outside the finger's footprint: deformed position > finger radius + 2 mm from the push axis).
+
+What is not measured here: the table mesh's own error against a finer mesh (``mesh_check`` in the JSON is
+null unless ``--mesh-check`` solved the 0° push on h_fine 3.4 mm). Units in keys (mm, ms, N), else SI.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+__all__ = ["build_sphere_table", "alpha_path"]
+
+TARGET_MM = 0.7
+MESH_CHECK_SPEC = (0.012, 0.0034, 0.015, 0.055)   #: the finer mesh of ``--mesh-check`` (h, h_fine, rr, path) m
+
+
+def _log(msg: str) -> None:
+    print(f"[sphere_table] {msg}", file=sys.stderr, flush=True)
+
+
+def _alpha_key(sc, a: float, grid, spec, probes: np.ndarray) -> str:
+    import gmsh
+
+    from nodes.fem.cache import cache_key
+    from nodes.fem.hyperelastic import SOLVER_VERSION, UNLOAD_VERSION
+    from nodes.fem.sphere_snapshots import SPHERE_TABLE_VERSION
+
+    return cache_key("sphere-alpha-1", SPHERE_TABLE_VERSION, sc.key(), grid.key(), *(f"{x:.9g}" for x in spec),
+                     f"{a:.9g}", gmsh.__version__, SOLVER_VERSION, UNLOAD_VERSION,
+                     cache_key(np.round(probes, 9).tobytes()))
+
+
+def alpha_path(sc, a: float, grid, spec, probes: np.ndarray, cache) -> dict:
+    """:func:`nodes.fem.sphere_snapshots.solve_alpha` at ``a`` deg, cached (kind "spherealpha")."""
+    from nodes.fem.sphere_snapshots import solve_alpha
+
+    z, _, _ = cache.get_or_compute("spherealpha", _alpha_key(sc, a, grid, spec, probes),
+                                   lambda: solve_alpha(sc, a, grid, spec, probes, _log),
+                                   f"sphere push at {a:g} deg on h_fine {spec[1] * 1e3:g} mm")
+    return z
+
+
+def _job(args) -> tuple[float, float, str | None]:
+    """Worker: one angle into the cache (one BLAS thread)."""
+    scene_file, a, cache_dir, spec = args
+    t = time.perf_counter()
+    try:
+        from flexsheet.model.scenes import load_scene
+        from nodes.fem.cache import ArrayCache
+        from nodes.fem.scene_model import SceneModel
+        from nodes.fem.sphere_snapshots import DEFAULT_SPHERE_GRID
+
+        sc = load_scene(scene_file)
+        probes = SceneModel(sc, cache_dir=cache_dir).rest_vertices.astype(float)
+        alpha_path(sc, a, DEFAULT_SPHERE_GRID, spec, probes, ArrayCache(cache_dir, _log))
+        return a, time.perf_counter() - t, None
+    except Exception as exc:  # noqa: BLE001 - reported; the run solves it itself and raises
+        return a, time.perf_counter() - t, f"{type(exc).__name__}: {exc}"
+
+
+def _hertz_force(E: float, nu: float, r_finger: float, R: float, d: float) -> float:
+    """Hertz's force (N) of a rigid sphere (radius ``r_finger``) pressed ``d`` m into an elastic sphere (radius
+    ``R``): F = 4/3 E* √R* d^{3/2}, 1/R* = 1/r + 1/R, E* = E/(1 − ν²) (Johnson, Contact Mechanics, §4.2)."""
+    Rs = 1.0 / (1.0 / r_finger + 1.0 / R)
+    return 4.0 / 3.0 * E / (1.0 - nu ** 2) * math.sqrt(Rs) * d ** 1.5
+
+
+def _visible_errors(model_u, ref_u, verts, held, q, n, depths, r) -> list[float]:
+    from nodes.fem.choose import visible_mask
+    from nodes.fem.scene_model import finger_on_scene
+
+    out = []
+    for j, d in enumerate(depths):
+        vis = visible_mask(verts + ref_u[j], finger_on_scene(q, n, float(d), r)) & ~held
+        out.append(float(np.linalg.norm(model_u[j] - ref_u[j], axis=1)[vis].max()) * 1e3)
+    return out
+
+
+def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, alpha: float | None = None,
+                       holdout: tuple[float, ...] = (), jobs: int = 1, mesh_check: bool = False) -> int:
+    """Build (or find) the sphere scene's table and report it (module doc). Returns 0; ``SystemExit`` with the
+    reason for a scene the table does not apply to or a bad angle."""
+    import multiprocessing
+
+    from flexsheet.model.scenes import load_scene
+    from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
+    from nodes.fem.material import Material
+    from nodes.fem.scene_model import SceneModel, finger_on_scene
+    from nodes.fem.sphere_snapshots import (
+        DEFAULT_SPHERE_GRID,
+        DEFAULT_SPHERE_SPEC,
+        SphereSnapshotModel,
+        assemble_table,
+        sphere_frame,
+        sphere_table_key,
+    )
+
+    t0 = time.perf_counter()
+    sc = load_scene(scene_file)
+    try:
+        fr = sphere_frame(sc)
+    except ValueError as exc:
+        raise SystemExit(f"flexsheet experiment fem: --node-table with --scene builds the sphere's table only "
+                         f"(its symmetry: {exc})") from None
+    grid, spec = DEFAULT_SPHERE_GRID, DEFAULT_SPHERE_SPEC
+    al = grid.alphas_deg
+    for a in holdout:
+        if not (math.isfinite(a) and al[0] < a < al[-1]) or a in al:
+            raise SystemExit(f"flexsheet experiment fem: --holdout-azimuth must lie strictly between the sphere "
+                             f"table's angles {[f'{x:g}' for x in al]} deg and off them, got {a:g}")
+    if alpha is not None and not (math.isfinite(alpha) and 0 <= alpha < 90):
+        raise SystemExit(f"flexsheet experiment fem: --azimuth (the sphere's polar angle) must be in [0, 90) deg, "
+                         f"got {alpha:g}")
+    cache_dir = cache_dir or DEFAULT_CACHE_DIR
+    cache = ArrayCache(cache_dir, _log)
+    rt = SceneModel(sc, cache_dir=cache_dir, log=_log)
+    probes = rt.rest_vertices.astype(float)
+    if alpha is not None:
+        alpha_path(sc, alpha, grid, spec, probes, cache)
+        _log(f"sphere push at {alpha:g} deg cached in {time.perf_counter() - t0:.0f} s")
+        return 0
+    key = sphere_table_key(sc, grid, spec)
+    table = cache.load("spheresnap", key)
+    want = [(0.0, MESH_CHECK_SPEC)] if mesh_check else []      # the longest first: the workers end together
+    want += [(a, spec) for a in (list(al) if table is None else [])] + [(a, spec) for a in holdout]
+    todo = [(a, s) for a, s in want if not os.path.exists(cache.path("spherealpha", _alpha_key(sc, a, grid, s, probes))
+                                                          or "")]
+    if jobs > 1 and len(todo) > 1:
+        _log(f"{len(todo)} sphere pushes the cache lacks, in {min(jobs, len(todo))} worker processes")
+        os.environ["OPENBLAS_NUM_THREADS"] = os.environ["OMP_NUM_THREADS"] = "1"   # read by the spawned workers
+        ctx = multiprocessing.get_context("spawn")
+        with ctx.Pool(min(jobs, len(todo))) as pool:
+            for a, sec, err in pool.imap_unordered(_job, [(scene_file, a, cache_dir, s) for a, s in todo]):
+                _log(f"sphere push at {a:g} deg: " + (f"done in {sec:.0f} s" if err is None else f"failed ({err})"))
+    mat = Material.of_scene(sc.material)
+    if table is None:
+        paths = [alpha_path(sc, a, grid, spec, probes, cache) for a in al]
+        table = assemble_table(fr, grid, paths, mat.E)
+        cache.save("spheresnap", key, table)
+        _log(f"sphere table assembled: {table['field'].nbytes / 1e6:.0f} MB float32, key {key}")
+    else:
+        paths = [cache.load("spherealpha", _alpha_key(sc, a, grid, spec, probes)) for a in al]
+    if not out:
+        return 0
+    sm = SphereSnapshotModel(table, probes, E=mat.E)
+    depths = grid.depths()
+    r = sc.finger.radius
+    rows = []
+    for a, p in zip(al, paths, strict=True):
+        row = {"alpha_deg": a, "force_N": np.asarray(table["force"][al.index(a)]).tolist()}
+        if p is not None:
+            br = np.asarray(p["branch"])
+            row.update(dofs=int(p["dofs"]), cpu_seconds_loading=float(p["cpu_seconds"]),
+                       unload_seconds=float(p["unload_seconds"]), converged=bool(np.all(p["converged"])),
+                       newton_iterations=int(np.sum(p["newton"])), max_inverted=int(np.max(p["inverted"])),
+                       unloaded_state_at_mm=(depths[br == 1] * 1e3).tolist())
+        else:
+            row["path"] = "not in this machine's cache"
+        h = _hertz_force(mat.E, mat.nu, r, fr.radius, depths[1])
+        row["force_over_hertz_at_first_depth"] = float(table["force"][al.index(a)][1] / h)
+        rows.append(row)
+    held = rt.mesh.fixed[rt.surface_nodes]
+    held_out = []
+    for a in holdout:
+        p = alpha_path(sc, a, grid, spec, probes, cache)
+        n = fr.direction(math.radians(a))
+        q = fr.center + fr.radius * n
+        snap = np.stack([sm.surface(n, float(d))[0] if d > 0 else np.zeros_like(probes) for d in depths])
+        lin = np.stack([rt.surface_displacement(finger_on_scene(q, n, float(d), r))[0] if d > 0 else
+                        np.zeros_like(probes) for d in depths])
+        ref = np.asarray(p["u_probes"], float)
+        e_s = _visible_errors(snap[1:], ref[1:], probes, held, q, n, depths[1:], r)
+        e_l = _visible_errors(lin[1:], ref[1:], probes, held, q, n, depths[1:], r)
+        bad = [float(d) * 1e3 for d, e in zip(depths[1:], e_s, strict=True) if e > TARGET_MM]
+        held_out.append({"alpha_deg": a, "against": "its own push on its own mesh (same sizes), stable branch",
+                         "depths_mm": (depths[1:] * 1e3).tolist(), "snapshots_error_mm": e_s,
+                         "linear_error_mm": e_l, "max_snapshots_error_mm": max(e_s), "max_linear_error_mm": max(e_l),
+                         "over_target_from_mm": min(bad) if bad else None, "dofs": int(p["dofs"]),
+                         "converged": bool(np.all(p["converged"]))})
+        _log(f"held out {a:g} deg: snapshots {max(e_s):.2f} mm, linear {max(e_l):.2f} mm worst")
+    ts = []
+    for a in (5.0, 35.0, 55.0):
+        n = fr.direction(math.radians(a))
+        for d in (0.005, 0.02, 0.045):
+            for _ in range(30):
+                t = time.thread_time()
+                sm.surface(n, d)
+                ts.append(time.thread_time() - t)
+    rep = {"scene": {"name": sc.name, "file": os.path.relpath(str(sc.source), os.getcwd()) if sc.source else None,
+                     "key": sc.key()},
+           "material": {"law": sc.material.model, "E": mat.E, "nu": mat.nu, "Jm": mat.Jm if mat.gent else None},
+           "key": key, "grid": {"alphas_deg": list(al), "depth_step_mm": grid.depth_step * 1e3,
+                                "depth_max_mm": grid.depth_max * 1e3, "dtheta_deg": grid.dtheta_deg,
+                                "dphi_deg": grid.dphi_deg},
+           "mesh": {"h_m": spec[0], "h_fine_m": spec[1], "refine_radius_m": spec[2], "path_depth_m": spec[3]},
+           "table_MB_float32": table["field"].nbytes / 1e6, "depths_mm": (depths * 1e3).tolist(), "alphas": rows,
+           "update": {"median_ms": float(np.median(ts) * 1e3), "p90_ms": float(np.percentile(ts, 90) * 1e3),
+                      "vertices": int(len(probes)), "calls": len(ts),
+                      "what": "SphereSnapshotModel.surface CPU time (thread_time) per call"},
+           "held_out": held_out, "mesh_check": None, "target_mm": TARGET_MM,
+           "footprint": "vertices whose deformed (reference) position lies within finger radius + 2 mm of the push "
+                        "axis are hidden by the finger and left out, as for the cylinder",
+           "wall_s": time.perf_counter() - t0}
+    if mesh_check:
+        rep["mesh_check"] = _mesh_check(sc, fr, sm, rt, probes, held, grid, cache)
+    os.makedirs(out, exist_ok=True)
+    import json
+
+    with open(os.path.join(out, "sphere_table.json"), "w") as fh:
+        json.dump(rep, fh, indent=1)
+    _plot(out, rep)
+    _log(f"sphere table report -> {out}/sphere_table.json ({time.perf_counter() - t0:.0f} s)")
+    return 0
+
+
+def _mesh_check(sc, fr, sm, rt, probes, held, grid, cache) -> dict:
+    """The 0° push on the finer :data:`MESH_CHECK_SPEC` mesh against the table at 0° (the table mesh's own
+    error, the interpolation in depth included at no extra depth)."""
+    p = alpha_path(sc, 0.0, grid, MESH_CHECK_SPEC, probes, cache)
+    n = fr.direction(0.0)
+    q = fr.center + fr.radius * n
+    depths = grid.depths()[1:]
+    snap = np.stack([sm.surface(n, float(d))[0] for d in depths])
+    e = _visible_errors(snap, np.asarray(p["u_probes"], float)[1:], probes, held, q, n, depths, sc.finger.radius)
+    return {"alpha_deg": 0.0, "finer_h_fine_m": MESH_CHECK_SPEC[1], "dofs": int(p["dofs"]),
+            "converged": bool(np.all(p["converged"])), "depths_mm": (depths * 1e3).tolist(), "error_mm": e,
+            "max_error_mm": max(e)}
+
+
+def _plot(out: str, rep: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+    d = rep["depths_mm"]
+    for r in rep["alphas"]:
+        a.plot(d, r["force_N"], ".-", ms=3, label=f"{r['alpha_deg']:g}°")
+    a.set_xlabel("push depth (mm)")
+    a.set_ylabel("finger force (N)")
+    a.set_title(f"sphere table, {rep['material']['law']}, E {rep['material']['E'] / 1e3:g} kPa", fontsize=10)
+    a.legend(fontsize=7, title="α")
+    for h in rep["held_out"]:
+        b.plot(h["depths_mm"], h["snapshots_error_mm"], "k.-", ms=4, label=f"snapshots, held out {h['alpha_deg']:g}°")
+        b.plot(h["depths_mm"], h["linear_error_mm"], "r.--", ms=3, label=f"linear, {h['alpha_deg']:g}°")
+    if rep.get("mesh_check"):
+        m = rep["mesh_check"]
+        b.plot(m["depths_mm"], m["error_mm"], "b^-", ms=3, label=f"table at 0° vs h_fine {m['finer_h_fine_m'] * 1e3:g} mm")
+    b.axhline(TARGET_MM, color="k", ls=":", lw=0.8, label="target 0.7 mm")
+    b.set_xlabel("push depth (mm)")
+    b.set_ylabel("visible-surface error (mm)")
+    b.set_yscale("log")
+    b.set_title("against the nonlinear reference", fontsize=10)
+    b.legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "sphere_table.png"), dpi=110)
+    plt.close(fig)
