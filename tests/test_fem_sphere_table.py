@@ -2,6 +2,7 @@
 look-up on a field known in closed form, and the symmetry it rests on checked in the FEM itself."""
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -139,3 +140,63 @@ def test_the_support_axis_symmetry_holds_in_the_fem():
     assert f == pytest.approx(st.force, rel=0.02)      # measured 0.1 % apart
     unturned = sm.surface(fr.direction(math.radians(20)), 0.006)[0]
     assert np.abs(unturned - direct)[far].max() > 3 * err
+
+
+def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkeypatch):
+    """`flexsheet experiment fem --scene sphere.yaml --node-table --holdout-azimuth 5 --ship` with the solves
+    replaced by the closed-form dent (they are ~10 min each): the table is assembled under the node's key, the
+    held-out angle is answered by the table within the grid's interpolation while the linear model it replaces
+    is millimetres off that field, the report and chart are written, the packed table lands in the shipped
+    store within float16 rounding; an unconverged push is not shipped; bad arguments are refused."""
+    import json
+
+    from flexsheet.experiments import fem as X
+    from flexsheet.experiments import sphere_table as T
+    from nodes.fem import sphere_snapshots as S
+    from nodes.fem.cache import ArrayCache
+
+    sc = load_scene(SPHERE)
+    fr = sphere_frame(sc)
+    grid = SphereGrid(depth_max=0.01, depth_step=0.005)
+    monkeypatch.setattr(S, "DEFAULT_SPHERE_GRID", grid)
+    monkeypatch.setattr("nodes.fem.cache.SHIPPED_DIR", str(tmp_path / "shipped"))
+    pts = grid_points(fr, grid)
+    nt, nph = len(grid.thetas()), len(grid.phis())
+    calls, converged = [], {"ok": True}
+
+    def fake_alpha_path(sc_, a, grid_, spec, probes, cache):
+        calls.append(a)
+        n = fr.direction(math.radians(a))
+        ds = grid_.depths()
+        return {"field": np.stack([_dent(pts, fr.center, n, d).reshape(nt, nph, 3) for d in ds]).astype(np.float32),
+                "u_probes": np.stack([_dent(probes, fr.center, n, d) for d in ds]),
+                "force": ds ** 1.5 * 100.0, "max_strain": ds, "inverted": np.zeros(len(ds), np.int64),
+                "converged": np.array([True] * (len(ds) - 1) + [converged["ok"]]), "newton": np.full(len(ds), 5),
+                "branch": np.zeros(len(ds), np.int64), "dofs": np.array(123), "cpu_seconds": np.array(1.0),
+                "unload_seconds": np.array(2.0)}
+
+    monkeypatch.setattr(T, "alpha_path", fake_alpha_path)
+    cache_dir = str(tmp_path / "cache")
+    out = tmp_path / "o"
+    assert X.main(["--out", str(out), "--cache-dir", cache_dir, "--scene", str(SPHERE), "--node-table",
+                   "--holdout-azimuth", "5", "--ship", "--jobs", "1"]) == 0
+    rep = json.loads((out / "sphere_table.json").read_text())
+    assert [r["alpha_deg"] for r in rep["alphas"]] == list(grid.alphas_deg) and rep["material"]["law"] == "gent"
+    h = rep["held_out"][0]
+    assert h["alpha_deg"] == 5.0 and h["depths_mm"] == pytest.approx([5.0, 10.0])
+    assert h["max_snapshots_error_mm"] < 0.05 and h["max_linear_error_mm"] > 0.5
+    assert rep["shipped"]["float16_rounding_mm"] <= 2 ** -16 * 1e3 and os.path.getsize(out / "sphere_table.png") > 5e3
+    key = S.sphere_table_key(sc, grid)
+    assert rep["key"] == key and ArrayCache(cache_dir).load("spheresnap", key) is not None
+    store = ArrayCache(None, shipped_dir=str(tmp_path / "shipped")).load("spheresnap", key)
+    assert store["field"].dtype == np.float16 and store["field"].shape == (7, 3, nt, nph, 3)
+    converged["ok"] = False                       # a push that did not converge at its deepest step
+    with pytest.raises(SystemExit, match="not shipping"):
+        X.main(["--out", str(out), "--cache-dir", str(tmp_path / "cache2"), "--scene", str(SPHERE), "--node-table",
+                "--ship", "--jobs", "1"])
+    for args, word in ((["--mesh-check"], "--mesh-check is for"),
+                       (["--scene", str(SCENES_DIR / "organ.yaml"), "--node-table"], "object.kind"),
+                       (["--scene", str(SPHERE), "--node-table", "--holdout-azimuth", "60"], "strictly between"),
+                       (["--scene", str(SPHERE), "--between-depths", "0"], "cylinder")):
+        with pytest.raises(SystemExit, match=word):
+            X.main(["--out", str(out), "--cache-dir", ""] + args)

@@ -2072,6 +2072,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.holdout_study and args.quick:
         raise SystemExit("flexsheet experiment fem: --holdout-study is a full-mode study (the quick settings hold "
                          "no azimuth out); leave out --quick")
+    if args.mesh_check and not (args.scene and args.node_table):
+        raise SystemExit("flexsheet experiment fem: --mesh-check is for --scene SPHERE.yaml --node-table")
     sm = DEFAULT_MATERIAL                        # the default scene's; a paper-cylinder --scene file's below
     if args.scene:
         from flexsheet.model.scenes import is_paper_cylinder, load_scene_or_paper
@@ -2080,11 +2082,13 @@ def main(argv: list[str] | None = None) -> int:
             sc = load_scene_or_paper(args.scene)
         except ValueError as exc:
             raise SystemExit(f"flexsheet experiment fem: {exc}") from None
+        if not is_paper_cylinder(sc) and args.between_depths:
+            raise SystemExit("flexsheet experiment fem: --between-depths is for the paper's cylinder's table")
         if not is_paper_cylinder(sc) and args.node_table:
             from flexsheet.experiments.sphere_table import build_sphere_table
 
             return build_sphere_table(args.scene, args.out, args.cache_dir or None, args.azimuth,
-                                      tuple(args.holdout_azimuth), args.jobs, args.mesh_check)
+                                      tuple(args.holdout_azimuth), args.jobs, args.mesh_check, args.ship)
         if not is_paper_cylinder(sc):
             from flexsheet.experiments.fem_scene import run_scene
 

@@ -98,9 +98,12 @@ def _visible_errors(model_u, ref_u, verts, held, q, n, depths, r) -> list[float]
 
 
 def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, alpha: float | None = None,
-                       holdout: tuple[float, ...] = (), jobs: int = 1, mesh_check: bool = False) -> int:
-    """Build (or find) the sphere scene's table and report it (module doc). Returns 0; ``SystemExit`` with the
-    reason for a scene the table does not apply to or a bad angle."""
+                       holdout: tuple[float, ...] = (), jobs: int = 1, mesh_check: bool = False,
+                       ship: bool = False) -> int:
+    """Build (or find) the sphere scene's table and report it (module doc); ``ship``: also write it, packed
+    (the surface field as float16, compressed), into the repository's ``nodes/fem/data/``, where the FEM node
+    finds it on a machine that never solved it. Returns 0; ``SystemExit`` with the reason for a scene the table
+    does not apply to, a bad angle, or a table that may not be shipped (an angle unconverged or not cached)."""
     import multiprocessing
 
     from flexsheet.model.scenes import load_scene
@@ -161,6 +164,19 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
         _log(f"sphere table assembled: {table['field'].nbytes / 1e6:.0f} MB float32, key {key}")
     else:
         paths = [cache.load("spherealpha", _alpha_key(sc, a, grid, spec, probes)) for a in al]
+    shipped = None
+    if ship:
+        bad = [a for a, p in zip(al, paths, strict=True) if p is None or not np.all(p["converged"])]
+        if bad:
+            raise SystemExit(f"flexsheet experiment fem: not shipping the sphere table: Newton did not converge at "
+                             f"every depth, or the push is not in this machine's cache, at {bad} deg")
+        f32 = np.asarray(table["field"], np.float32)
+        f16 = f32.astype(np.float16)
+        sp = cache.ship("spheresnap", key, {**table, "field": f16})
+        shipped = {"path": os.path.relpath(sp, os.getcwd()), "MB": os.path.getsize(sp) / 1e6,
+                   "float16_rounding_mm": float(np.abs(f16.astype(np.float32) - f32).max()) * 1e3}
+        _log(f"sphere table shipped: {sp} ({shipped['MB']:.1f} MB, float16 rounding <= "
+             f"{shipped['float16_rounding_mm']:.4f} mm); commit it")
     if not out:
         return 0
     sm = SphereSnapshotModel(table, probes, E=mat.E)
@@ -218,7 +234,7 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
            "update": {"median_ms": float(np.median(ts) * 1e3), "p90_ms": float(np.percentile(ts, 90) * 1e3),
                       "vertices": int(len(probes)), "calls": len(ts),
                       "what": "SphereSnapshotModel.surface CPU time (thread_time) per call"},
-           "held_out": held_out, "mesh_check": None, "target_mm": TARGET_MM,
+           "held_out": held_out, "mesh_check": None, "target_mm": TARGET_MM, "shipped": shipped,
            "footprint": "vertices whose deformed (reference) position lies within finger radius + 2 mm of the push "
                         "axis are hidden by the finger and left out, as for the cylinder",
            "wall_s": time.perf_counter() - t0}
