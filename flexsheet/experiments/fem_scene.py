@@ -8,7 +8,7 @@ per-element material, capacitance over the stroke path — what the FEM node ser
    fold check) at pushes along the stroke, median and 90th percentile, ms.
 2. **Accuracy against the nonlinear reference**: at push points on the stroke (``quick``: its middle; else
    its start, middle, end), a rigid capsule finger (the fingertip sphere and the finger behind it) pushed
-   along the inward surface normal to 5…50 mm into the compressible neo-Hookean body (total Lagrangian P2,
+   along the inward surface normal to 5…50 mm into the scene's compressible hyperelastic body (neo-Hookean or Gent; total Lagrangian P2,
    Newton with load stepping: :mod:`nodes.fem.hyperelastic`, full body, the scene's support and per-element
    material: the inclusions), on gmsh meshes of the scene refined around the push point
    (:func:`nodes.fem.scene_mesh.scene_mesh` with ``refine_at``). The error is the largest distance between
@@ -160,6 +160,7 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     t0 = time.perf_counter()
     st = QUICK if quick else FULL
     sc = load_scene(scene_path)
+    law = f"Gent (Jm {sc.material.Jm:g})" if sc.material.model == "gent" else "neo-Hookean"
     cache_dir = cache_dir or DEFAULT_CACHE_DIR
     cache = ArrayCache(cache_dir, _log)
     os.makedirs(out_dir, exist_ok=True)
@@ -220,16 +221,17 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
                      "error_mm_by_depth": err_by_depth,
                      "depths_m": depths.tolist(), "target_mm": TARGET_MM, "meets_target": err_rt_all <= TARGET_MM,
                      "depth_note": None if reaches_50 else (
-                         f"quick stops at {depths[-1] * 1e3:g} mm: the one-level neo-Hookean reference on an 8 mm "
-                         "mesh needs minutes per 2.5 mm step beyond 30 mm (inverted elements; Newton sub-steps) "
-                         "on the loaded 2-core machine; max_visible_error_mm_0_50 needs the full run"),
+                         f"quick stops at {depths[-1] * 1e3:g} mm (its settings: one {law} level on an 8 mm mesh; "
+                         "the neo-Hookean one needed minutes per 2.5 mm step beyond 30 mm); "
+                         "max_visible_error_mm_0_50 needs the full run"),
                      "mesh": {"spec": rt.spec.key(), "nodes": rt.n_nodes, "candidates": rt.n_candidates,
                               "precompute_MB": rt.solver.nbytes / 1e6},
                      "visible": "rendered surface vertices not held by the support and outside the finger's "
                                 "footprint (deformed reference position more than finger radius + 2 mm from the push "
                                 "axis)"},
-        "reference": {"model": "neo-Hookean (compressible), total Lagrangian P2, Newton with load stepping, rigid "
+        "reference": {"model": f"{law} (compressible), total Lagrangian P2, Newton with load stepping, rigid "
                                "frictionless capsule finger, full body (nodes/fem/hyperelastic.py)",
+                      "law": sc.material.model, "Jm": sc.material.Jm,
                       "solver": SOLVER_VERSION,
                       "converged": bool(all(p["reference_converged"] for p in pushes)),
                       "criterion": "two or more levels, every Newton solve converged and the last refinement "
@@ -262,15 +264,16 @@ def _plot(out_dir: str, s: dict) -> None:
     import matplotlib.pyplot as plt
 
     name = s["scene"]["name"]
+    law = s["reference"]["model"].split(" (compressible)")[0]
     ref_ms = [1e3 * lv["seconds"] / max(1, len(s["realtime"]["depths_m"]))
               for p in s["pushes"] for lv in p["reference_levels"][-1:]]
     pts = [{"model": "real-time linear P2 (capacitance)", "update_ms": s["realtime"]["update_ms"],
             "max_visible_error_mm": max(s["realtime"]["error_mm_by_depth"])},
            {"model": "linear P2, reference mesh (sparse)", "update_ms": s["linear_fine"]["solve_ms"],
             "max_visible_error_mm": s["linear_fine"]["max_visible_error_mm"]},
-           {"model": "neo-Hookean reference (per depth): its last refinement's change" if
+           {"model": f"{law} reference (per depth): its last refinement's change" if
             s["reference"]["last_refinement_change_mm"] is not None else
-            "neo-Hookean reference (per depth): 0 by definition, one level, convergence not shown",
+            f"{law} reference (per depth): 0 by definition, one level, convergence not shown",
             "update_ms": float(np.median(ref_ms)),
             "max_visible_error_mm": s["reference"]["last_refinement_change_mm"] or 0.0}]
     data = {"scene": name, "points": pts, "target_mm": TARGET_MM, "depths_m": s["realtime"]["depths_m"],
@@ -294,7 +297,7 @@ def _plot(out_dir: str, s: dict) -> None:
     a2.plot(d, data["linear_fine_error_mm_by_depth"], "s-", label="linear P2 on the reference mesh")
     a2.axhline(TARGET_MM, color="k", ls="--", lw=0.8)
     a2.set_xlabel("push depth, mm")
-    a2.set_ylabel("error against neo-Hookean reference, mm")
+    a2.set_ylabel("error against the nonlinear reference, mm")
     a2.set_title(f"{name}: where linear breaks (by depth)")
     a2.legend(fontsize=7)
     fig.tight_layout()
@@ -371,7 +374,7 @@ def main(argv: list[str] | None = None) -> int:
     """CLI (see the module doc)."""
     ap = argparse.ArgumentParser(
         prog="python -m flexsheet.experiments.fem_scene",
-        description="FEM accuracy (against the neo-Hookean reference) and speed on one scene.",
+        description="FEM accuracy (against the nonlinear reference) and speed on one scene.",
         epilog="example: python -m flexsheet.experiments.fem_scene --scene launch/scenes/sphere.yaml --quick "
                "--out out/fem_sphere")
     ap.add_argument("--scene", required=True, help="scene file (launch/scenes/*.yaml)")
