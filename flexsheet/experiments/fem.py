@@ -1783,8 +1783,8 @@ def plot_node_table(out: str, rep: dict) -> None:
     a.set_ylabel("finger force (N)")
     a.set_title(f"node table, {rep['material']['law']}, E {rep['material']['E'] / 1e3:g} kPa", fontsize=10)
     a.legend(fontsize=7, title="azimuth")
-    for h in rep.get("held_out", []):
-        b.plot(h["depths_mm"], h["error_mm"], "k.-", ms=4, lw=1.5,
+    for i, h in enumerate(rep.get("held_out", [])):
+        b.plot(h["depths_mm"], h["error_mm"], ".-", color=("k", "0.45", "0.7")[i % 3], ms=4, lw=1.5,
                label=f"held out {h['azimuth_deg']:g}°: visible-surface error")
     for h in rep.get("between_depths", []):
         b.plot(h["depths_mm"], h["error_mm"], "rx-", ms=4, lw=1,
