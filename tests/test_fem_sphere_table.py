@@ -185,11 +185,13 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
     h = rep["held_out"][0]
     assert h["alpha_deg"] == 5.0 and h["depths_mm"] == pytest.approx([5.0, 10.0])
     assert h["max_snapshots_error_mm"] < 0.05 and h["max_linear_error_mm"] > 0.5
-    assert rep["shipped"]["float16_rounding_mm"] <= 2 ** -16 * 1e3 and os.path.getsize(out / "sphere_table.png") > 5e3
+    # packed (2° cells, float16) against the full table: the closed-form dent is smooth, so a few µm per mm of depth
+    assert 0.0 < rep["shipped"]["packing_error_mm"] < 0.05 and os.path.getsize(out / "sphere_table.png") > 5e3
     key = S.sphere_table_key(sc, grid)
     assert rep["key"] == key and ArrayCache(cache_dir).load("spheresnap", key) is not None
     store = ArrayCache(None, shipped_dir=str(tmp_path / "shipped")).load("spheresnap", key)
-    assert store["field"].dtype == np.float16 and store["field"].shape == (7, 3, nt, nph, 3)
+    assert store["field"].dtype == np.float16 and store["field"].shape == (7, 3, nt // 2 + 1, nph // 2 + 1, 3)
+    assert np.array_equal(store["theta"], grid.thetas()[::2]) and store["theta"][-1] == grid.thetas()[-1]
     converged["ok"] = False                       # a push that did not converge at its deepest step
     with pytest.raises(SystemExit, match="not shipping"):
         X.main(["--out", str(out), "--cache-dir", str(tmp_path / "cache2"), "--scene", str(SPHERE), "--node-table",
