@@ -233,6 +233,7 @@ class SceneModel(CondensedSurface):
         if np.linalg.norm(sm.frame.center - fr.center) > 1e-9 or abs(sm.frame.radius - fr.radius) > 1e-9:
             raise ValueError(f"sphere table is for centre {sm.frame.center.tolist()} radius {sm.frame.radius:g} m, "
                              f"the scene's sphere is at {fr.center.tolist()} radius {fr.radius:g} m")
+        self._held = np.asarray(self.mesh.fixed[self.surface_nodes], bool)   # the support: exactly at rest
         self.snapshots = sm
 
     # ------------------------------------------------------------------ precompute
@@ -329,6 +330,7 @@ class SceneModel(CondensedSurface):
         finger's leading point: its surface, force and dF/dd; the strain and inverted elements are the
         reference's at the bracketing snapshots."""
         us, force, stiff, strain, inv = snap.surface(normal, depth)
+        us[self._held] = 0.0        # the look-up rotates the field; the held back half stays where it is
         if not (np.all(np.isfinite(us)) and math.isfinite(force) and math.isfinite(stiff)):
             return Update(self._rest.copy(), 0.0, 0.0, fg.depth, fg.contact_point.copy(), "snapshots", 0.0, 0,
                           "nonlinear_invalid:non_finite", False)
