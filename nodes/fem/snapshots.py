@@ -403,7 +403,13 @@ class SnapshotModel:
         return u, float(max(F, 0.0)), float(max(k, 0.0)), float(strain), inv
 
     def _bilinear(self, tab: np.ndarray, ia: int, wa: float, jd: int, wd: float) -> float:
-        ib = min(ia + 1, tab.shape[0] - 1)
-        jb = min(jd + 1, tab.shape[1] - 1)
-        return float((1 - wa) * ((1 - wd) * tab[ia, jd] + wd * tab[ia, jb])
-                     + wa * ((1 - wd) * tab[ib, jd] + wd * tab[ib, jb]))
+        return bilinear(tab, ia, wa, jd, wd)
+
+
+def bilinear(tab: np.ndarray, ia: int, wa: float, jd: int, wd: float) -> float:
+    """``tab`` (A, D) blended between rows ia, ia+1 by ``wa`` and columns jd, jd+1 by ``wd`` (clamped at the
+    last row/column): the snapshot tables' per-push scalars (force, strain) at a push between samples."""
+    ib = min(ia + 1, tab.shape[0] - 1)
+    jb = min(jd + 1, tab.shape[1] - 1)
+    return float((1 - wa) * ((1 - wd) * tab[ia, jd] + wd * tab[ia, jb])
+                 + wa * ((1 - wd) * tab[ib, jd] + wd * tab[ib, jb]))

@@ -35,6 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nodes.fem.snapshots import bilinear
+
 __all__ = ["SphereGrid", "SphereFrame", "sphere_frame", "solve_alpha", "assemble_table", "SphereSnapshotModel",
            "SPHERE_TABLE_VERSION", "DEFAULT_SPHERE_GRID", "DEFAULT_SPHERE_SPEC", "grid_points", "sphere_table_key"]
 
@@ -323,18 +325,14 @@ class SphereSnapshotModel:
             u[:, 1] += w * (cp * ub - sp * U[:, 2])                              # then by ψ about e_a
             u[:, 2] += w * (sp * ub + cp * U[:, 2])
         u = u @ ax
-        f = self._bilinear(self.force, ia, wa, jd, wd)
+        f = bilinear(self.force, ia, wa, jd, wd)
         j1 = min(jd + 1, len(self.depths) - 1)
-        stiff = (self._bilinear(self.force, ia, wa, j1, 0.0) - self._bilinear(self.force, ia, wa, jd, 0.0)) / \
+        stiff = (bilinear(self.force, ia, wa, j1, 0.0) - bilinear(self.force, ia, wa, jd, 0.0)) / \
             max(self.depths[j1] - self.depths[jd], 1e-12)
-        strain = self._bilinear(self.max_strain, ia, wa, jd, wd)
+        strain = bilinear(self.max_strain, ia, wa, jd, wd)
         inv = int(max(self.inverted[ia, jd], self.inverted[min(ia + 1, len(self.alphas) - 1), j1]))
         return u, float(f), float(stiff), float(strain), inv
 
-    def _bilinear(self, tab: np.ndarray, ia: int, wa: float, jd: int, wd: float) -> float:
-        ib, jb = min(ia + 1, tab.shape[0] - 1), min(jd + 1, tab.shape[1] - 1)
-        return float((1 - wa) * ((1 - wd) * tab[ia, jd] + wd * tab[ia, jb])
-                     + wa * ((1 - wd) * tab[ib, jd] + wd * tab[ib, jb]))
 
 
 def sphere_table_key(scene, grid: SphereGrid = DEFAULT_SPHERE_GRID, spec=DEFAULT_SPHERE_SPEC) -> str:
