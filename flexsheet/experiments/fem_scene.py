@@ -1,8 +1,11 @@
 """The FEM's accuracy and speed on any scene (issue 17): ``flexsheet experiment fem --scene
 launch/scenes/NAME.yaml`` (wired by :mod:`flexsheet.experiments.fem`) calls :func:`run_scene`.
 
-What it measures, for the scene's real-time model (:class:`nodes.fem.scene_model.SceneModel`: linear P2,
-per-element material, capacitance over the stroke path — what the FEM node serves for this scene):
+What it measures, for the scene's real-time model — what the FEM node serves for this scene: the nonlinear
+snapshot table where the scene has one (the sphere, :mod:`nodes.fem.sphere_snapshots`, attached as the node
+attaches it, the linear model outside it), else :class:`nodes.fem.scene_model.SceneModel` (linear P2,
+per-element material, capacitance over the stroke path); with a table, the linear model is measured beside it
+(``realtime.linear``):
 
 1. **Update time**: wall time of one ``update_finger`` (contact, capacitance solve, strain/inversion checks,
    fold check) at pushes along the stroke, median and 90th percentile, ms.
@@ -147,6 +150,25 @@ def _update_ms(rt, sc, depths, n_calls: int) -> dict:
             "sparse_share": float(np.mean([m == "sparse" for m in methods]))}
 
 
+def _attach_table(sc, rt, cache) -> str | None:
+    """Attach the scene's nonlinear table to the real-time model ``rt`` as the FEM node does
+    (:meth:`nodes.fem.node.FemNode._setup_sphere_snapshots`): a sphere scene whose table this machine's cache or
+    the shipped store holds. Returns where it came from ("cache" / "shipped store"), or None (no table applies
+    or none is stored: the node serves the linear model, and so is measured)."""
+    from nodes.fem.sphere_snapshots import sphere_frame, sphere_table_key
+
+    try:
+        sphere_frame(sc)
+    except ValueError:
+        return None
+    table = cache.load("spheresnap", sphere_table_key(sc))
+    if table is None:
+        _log("no sphere table in the cache or the shipped store: the node serves linear, measured as such")
+        return None
+    rt.attach_sphere_snapshots(table)
+    return "shipped store (nodes/fem/data)" if cache.shipped() else "cache"
+
+
 def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | None = None) -> dict:
     """Measure the real-time model of the scene file ``scene_path`` against the nonlinear reference (module
     doc); write ``out_dir``/summary.json and the accuracy-against-speed chart; return the summary dict.
@@ -167,8 +189,12 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     _log(f"scene {sc.name!r} ({sc.source}), {'quick' if quick else 'full'} settings")
     rt = SceneModel(sc, cache_dir=cache_dir, log=_log)
     timing = _update_ms(rt, sc, (0.005, 0.02, 0.05), st["n_time"])
-    _log(f"real-time update: CPU median {timing['median']:.3f} ms, p90 {timing['p90']:.3f} ms (wall median "
+    _log(f"real-time update (linear): CPU median {timing['median']:.3f} ms, p90 {timing['p90']:.3f} ms (wall median "
          f"{timing['wall_median']:.3f} ms)")
+    snap = _attach_table(sc, rt, cache)
+    if snap is not None:
+        timing_sn = _update_ms(rt, sc, (0.005, 0.02, 0.05), st["n_time"])
+        _log(f"the node's nonlinear table (from the {snap}): update CPU median {timing_sn['median']:.3f} ms")
     verts = rt.rest_vertices.astype(float)
     held = rt.mesh.fixed[rt.surface_nodes]
     depths = np.asarray(st["depths"], float)
@@ -183,6 +209,10 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
                for j, d in enumerate(depths)]
         rt_u = [rt.surface_displacement(finger_on_scene(q, n, float(d), sc.finger.radius)) for d in depths]
         err_rt = [float(np.linalg.norm(u[0] - fine["u"][j], axis=1)[vis[j]].max()) for j, u in enumerate(rt_u)]
+        if snap is not None:        # what the node serves: the table inside it (radial push), linear elsewhere
+            sn_up = [rt.update_finger(finger_on_scene(q, n, float(d), sc.finger.radius)) for d in depths]
+            err_sn = [float(np.linalg.norm(up.vertices - verts - fine["u"][j], axis=1)[vis[j]].max())
+                      for j, up in enumerate(sn_up)]
         lin_u, lin_ms = _linear_fine(sc, fine, q, n, depths, verts)
         err_lin = [float(np.linalg.norm(lin_u[j] - fine["u"][j], axis=1)[vis[j]].max()) for j in range(len(depths))]
         levels = []
@@ -193,23 +223,37 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
                            "inverted": r["inverted"].tolist(), "change_to_finest_mm": [e * 1e3 for e in ch]})
         last = max(levels[-2]["change_to_finest_mm"]) if len(levels) > 1 else None
         pushes.append({"fraction": f, "point_m": q.tolist(), "normal": n.tolist(), "depths_m": depths.tolist(),
-                       "realtime_error_mm": [e * 1e3 for e in err_rt],
+                       "linear_error_mm": [e * 1e3 for e in err_rt],
+                       "realtime_error_mm": [e * 1e3 for e in (err_sn if snap is not None else err_rt)],
+                       "realtime_methods": sorted({up.method for up in sn_up}) if snap is not None else ["linear"],
                        "realtime_force_N": [u[1] for u in rt_u], "realtime_stiffness_N_per_m": [u[2] for u in rt_u],
                        "linear_fine_error_mm": [e * 1e3 for e in err_lin], "linear_fine_solve_ms": lin_ms,
                        "reference_levels": levels, "last_refinement_change_mm": last,
                        "reference_converged": bool(len(levels) > 1 and all(lv["newton_converged"] for lv in levels)
                                                    and last is not None and last <= TARGET_MM / 2)})
-        _log(f"push at {f:g} of the stroke: real-time error {max(err_rt) * 1e3:.2f} mm, linear on the reference "
+        _log(f"push at {f:g} of the stroke: real-time error {max(pushes[-1]['realtime_error_mm']):.2f} mm "
+             f"(linear {max(err_rt) * 1e3:.2f} mm), linear on the reference "
              f"mesh {max(err_lin) * 1e3:.2f} mm, last refinement {last} mm")
     err_rt_all = max(max(p["realtime_error_mm"]) for p in pushes)
     reaches_50 = bool(depths[-1] >= 0.05 - 1e-9)
     err_by_depth = np.max([p["realtime_error_mm"] for p in pushes], axis=0).tolist()
     fine_lv = pushes[0]["reference_levels"][-1]
+    lin_all = max(max(p["linear_error_mm"]) for p in pushes)
+    linear = {"method": f"linear P{rt.order} capacitance over the stroke path (nodes/fem/scene_model.py)",
+              "update_ms": timing["median"], "update_ms_p90": timing["p90"],
+              "max_visible_error_mm": lin_all,
+              "error_mm_by_depth": np.max([p["linear_error_mm"] for p in pushes], axis=0).tolist()}
+    if snap is not None:
+        method = (f"the sphere's nonlinear snapshot table (nodes/fem/sphere_snapshots.py, from the {snap}) for "
+                  "pushes inside it, the linear model elsewhere: what the FEM node serves on this scene")
+        timing = timing_sn
+    else:
+        method = linear["method"] + ": what the FEM node serves on this scene"
     summary = {
         "scene": {"name": sc.name, "file": str(sc.source), "kind": sc.object.kind, "key": sc.key(),
                   "description": sc.description},
         "settings": {"quick": quick, **{k: list(v) if isinstance(v, tuple) else v for k, v in st.items()}},
-        "realtime": {"method": f"linear P{rt.order} capacitance over the stroke path (nodes/fem/scene_model.py)",
+        "realtime": {"method": method, "linear": linear,
                      "update_ms": timing["median"], "update_ms_p90": timing["p90"], "n_timed": timing["n"],
                      "update_wall_ms": timing["wall_median"], "update_wall_ms_p90": timing["wall_p90"],
                      "update_timing": "update_ms: the updating thread's CPU time (time.thread_time) per "
@@ -267,8 +311,14 @@ def _plot(out_dir: str, s: dict) -> None:
     law = s["reference"]["model"].split(" (compressible)")[0]
     ref_ms = [1e3 * lv["seconds"] / max(1, len(s["realtime"]["depths_m"]))
               for p in s["pushes"] for lv in p["reference_levels"][-1:]]
-    pts = [{"model": "real-time linear P2 (capacitance)", "update_ms": s["realtime"]["update_ms"],
-            "max_visible_error_mm": max(s["realtime"]["error_mm_by_depth"])},
+    lin = s["realtime"].get("linear") or {"update_ms": s["realtime"]["update_ms"],
+                                          "max_visible_error_mm": max(s["realtime"]["error_mm_by_depth"]),
+                                          "error_mm_by_depth": s["realtime"]["error_mm_by_depth"]}
+    served_table = "snapshot" in s["realtime"]["method"]
+    pts = ([{"model": "real-time nonlinear snapshot table (served)", "update_ms": s["realtime"]["update_ms"],
+             "max_visible_error_mm": max(s["realtime"]["error_mm_by_depth"])}] if served_table else []) + [
+           {"model": "real-time linear P2 (capacitance)", "update_ms": lin["update_ms"],
+            "max_visible_error_mm": lin["max_visible_error_mm"]},
            {"model": "linear P2, reference mesh (sparse)", "update_ms": s["linear_fine"]["solve_ms"],
             "max_visible_error_mm": s["linear_fine"]["max_visible_error_mm"]},
            {"model": f"{law} reference (per depth): its last refinement's change" if
@@ -278,12 +328,13 @@ def _plot(out_dir: str, s: dict) -> None:
             "max_visible_error_mm": s["reference"]["last_refinement_change_mm"] or 0.0}]
     data = {"scene": name, "points": pts, "target_mm": TARGET_MM, "depths_m": s["realtime"]["depths_m"],
             "realtime_error_mm_by_depth": s["realtime"]["error_mm_by_depth"],
+            "linear_error_mm_by_depth": lin["error_mm_by_depth"],
             "linear_fine_error_mm_by_depth": np.max([p["linear_fine_error_mm"] for p in s["pushes"]], axis=0).tolist(),
             "note": "the reference's 'error' is its last mesh refinement's change (convergence), not an error"}
     with open(os.path.join(out_dir, f"accuracy_speed_{name}.json"), "w") as fh:
         json.dump(data, fh, indent=1)
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
-    for p, mk in zip(pts, ("o", "s", "^"), strict=True):
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 5.6))
+    for p, mk in zip(pts, ("D", "o", "s", "^")[-len(pts):], strict=True):
         a1.scatter(p["update_ms"], p["max_visible_error_mm"], marker=mk, s=60, label=p["model"])
     a1.axhline(TARGET_MM, color="k", ls="--", lw=0.8, label="0.7 mm (one projector pixel)")
     a1.axvline(1.0, color="gray", ls=":", lw=0.8, label="1 ms (1 kHz)")
@@ -291,9 +342,11 @@ def _plot(out_dir: str, s: dict) -> None:
     a1.set_xlabel("time per update, ms (log)")
     a1.set_ylabel(f"largest visible-surface error 0-{s['realtime']['depths_m'][-1] * 1e3:g} mm, mm")
     a1.set_title(f"{name}: accuracy against speed")
-    a1.legend(fontsize=7)
+    a1.legend(fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -0.16))       # below: the points stay visible
     d = np.asarray(data["depths_m"]) * 1e3
-    a2.plot(d, data["realtime_error_mm_by_depth"], "o-", label="real-time linear P2")
+    if served_table:
+        a2.plot(d, data["realtime_error_mm_by_depth"], "D-", label="real-time nonlinear table (served)")
+    a2.plot(d, data["linear_error_mm_by_depth"], "o-", label="real-time linear P2")
     a2.plot(d, data["linear_fine_error_mm_by_depth"], "s-", label="linear P2 on the reference mesh")
     a2.axhline(TARGET_MM, color="k", ls="--", lw=0.8)
     a2.set_xlabel("push depth, mm")
