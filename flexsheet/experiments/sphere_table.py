@@ -16,8 +16,10 @@ axis, along the stroke).
    (:class:`nodes.fem.scene_model.SceneModel`), as the largest distance over the visible rendered vertices (not
    held, outside the finger's footprint: deformed position > finger radius + 2 mm from the push axis).
 
-What is not measured here: the table mesh's own error against a finer mesh (``mesh_check`` in the JSON is
-null unless ``--mesh-check`` solved the 0° push on h_fine 3.4 mm). Units in keys (mm, ms, N), else SI.
+3. ``--mesh-check``: at each held-out angle (else 0°) the same push on the table mesh's **twin** (same sizes,
+   laid out anew), on a **finer** mesh (h_fine 3.4 mm) and on its twin (:func:`mesh_study_specs`): the mesh's
+   noise at each level, the table's mesh against the finer one, and the table against the finer one
+   (``mesh_check``, a list per angle; null without the flag). Units in keys (mm, ms, N), else SI.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ __all__ = ["build_sphere_table", "alpha_path"]
 
 TARGET_MM = 0.7
 MESH_CHECK_SPEC = (0.012, 0.0034, 0.015, 0.055)   #: the finer mesh of ``--mesh-check`` (h, h_fine, rr, path) m
+TWIN_DR = 0.0001                                    #: a twin mesh's wider refinement tube, m (:func:`mesh_study_specs`)
 
 
 def _log(msg: str) -> None:
@@ -145,7 +148,9 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
         return 0
     key = sphere_table_key(sc, grid, spec)
     table = cache.load("spheresnap", key)
-    want = [(0.0, MESH_CHECK_SPEC)] if mesh_check else []      # the longest first: the workers end together
+    check_angles = tuple(holdout) or (0.0,)
+    want = [(a, s) for a in check_angles for s in mesh_study_specs(spec).values()] if mesh_check else []
+    want.sort(key=lambda x: x[1][1])                          # the finest (longest) first: the workers end together
     want += [(a, spec) for a in (list(al) if table is None else [])] + [(a, spec) for a in holdout]
     todo = [(a, s) for a, s in want if not os.path.exists(cache.path("spherealpha", _alpha_key(sc, a, grid, s, probes))
                                                           or "")]
@@ -240,7 +245,7 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
                         "axis are hidden by the finger and left out, as for the cylinder",
            "wall_s": time.perf_counter() - t0}
     if mesh_check:
-        rep["mesh_check"] = _mesh_check(sc, fr, sm, rt, probes, held, grid, cache)
+        rep["mesh_check"] = _mesh_check(sc, fr, sm, probes, held, grid, spec, check_angles, cache)
     os.makedirs(out, exist_ok=True)
     import json
 
@@ -287,18 +292,59 @@ def _packing_error(table, packed, paths, fr, rt, probes, r) -> float:
     return worst
 
 
-def _mesh_check(sc, fr, sm, rt, probes, held, grid, cache) -> dict:
-    """The 0° push on the finer :data:`MESH_CHECK_SPEC` mesh against the table at 0° (the table mesh's own
-    error, the interpolation in depth included at no extra depth)."""
-    p = alpha_path(sc, 0.0, grid, MESH_CHECK_SPEC, probes, cache)
-    n = fr.direction(0.0)
-    q = fr.center + fr.radius * n
+def mesh_study_specs(spec) -> dict:
+    """The meshes of ``--mesh-check`` beside the table's ``spec`` (h, h_fine, refine radius, path depth) m:
+    its **twin** (the same sizes, the refinement tube 0.1 mm wider, so gmsh lays the elements out anew: the
+    difference between the two is the mesh's noise, what no interpolation can beat), the **finer** mesh
+    (:data:`MESH_CHECK_SPEC`, h_fine 3.4 mm) and the finer mesh's twin."""
+    def twin(x):
+        return (x[0], x[1], x[2] + TWIN_DR, x[3])
+
+    return {"table_twin": twin(spec), "finer": MESH_CHECK_SPEC, "finer_twin": twin(MESH_CHECK_SPEC)}
+
+
+def _mesh_check(sc, fr, sm, probes, held, grid, spec, angles, cache) -> list[dict]:
+    """For each angle (the held-out ones, else 0°): the push on the table's mesh (its own solve), on that
+    mesh's twin, on the finer mesh and on its twin (:func:`mesh_study_specs`), compared on the visible rendered
+    vertices (the finer mesh's deformed positions decide what the finger hides) at every depth: each level's
+    noise (mesh against twin), the table's mesh against the finer, and the table (interpolated) against the
+    finer mesh. A table cannot be judged more finely than its reference's noise."""
+    from nodes.fem.choose import visible_mask
+    from nodes.fem.scene_model import finger_on_scene
+
     depths = grid.depths()[1:]
-    snap = np.stack([sm.surface(n, float(d))[0] for d in depths])
-    e = _visible_errors(snap, np.asarray(p["u_probes"], float)[1:], probes, held, q, n, depths, sc.finger.radius)
-    return {"alpha_deg": 0.0, "finer_h_fine_m": MESH_CHECK_SPEC[1], "dofs": int(p["dofs"]),
-            "converged": bool(np.all(p["converged"])), "depths_mm": (depths * 1e3).tolist(), "error_mm": e,
-            "max_error_mm": max(e)}
+    r = sc.finger.radius
+    out = []
+    for a in angles:
+        n = fr.direction(math.radians(a))
+        q = fr.center + fr.radius * n
+        sols = {"table_mesh": alpha_path(sc, a, grid, spec, probes, cache)}
+        sols.update({k: alpha_path(sc, a, grid, s, probes, cache) for k, s in mesh_study_specs(spec).items()})
+        u = {k: np.asarray(v["u_probes"], float)[1:] for k, v in sols.items()}
+        snap = np.stack([sm.surface(n, float(d))[0] for d in depths])
+        vis = [visible_mask(probes + u["finer"][j], finger_on_scene(q, n, float(d), r)) & ~held
+               for j, d in enumerate(depths)]
+
+        def diff(x, y, u=u, vis=vis):
+            return [float(np.linalg.norm(x[j] - y[j], axis=1)[vis[j]].max()) * 1e3 for j in range(len(depths))]
+
+        row = {"alpha_deg": a, "depths_mm": (depths * 1e3).tolist(),
+               "meshes": {k: {"spec_m": list(s), "dofs": int(sols[k]["dofs"]),
+                              "converged": bool(np.all(sols[k]["converged"])),
+                              "force_N_at_max_depth": float(sols[k]["force"][-1])}
+                          for k, s in {"table_mesh": spec, **mesh_study_specs(spec)}.items()},
+               "noise_table_mesh_mm": diff(u["table_mesh"], u["table_twin"]),
+               "noise_finer_mm": diff(u["finer"], u["finer_twin"]),
+               "table_mesh_vs_finer_mm": diff(u["table_mesh"], u["finer"]),
+               "snapshots_vs_finer_mm": diff(snap, u["finer"]),
+               "what": "largest distance over the visible rendered vertices, mm: noise = the same push on two "
+                       "meshes of the same sizes; table_mesh_vs_finer = the table's mesh sizes against h_fine "
+                       f"{MESH_CHECK_SPEC[1] * 1e3:g} mm; snapshots_vs_finer = the table's look-up against it"}
+        row["snapshots_vs_finer_max_mm"] = max(row["snapshots_vs_finer_mm"])
+        out.append(row)
+        _log(f"mesh study at {a:g} deg: noise {max(row['noise_table_mesh_mm']):.2f} mm (table's sizes), "
+             f"{max(row['noise_finer_mm']):.2f} mm (finer); table vs finer {row['snapshots_vs_finer_max_mm']:.2f} mm")
+    return out
 
 
 def _plot(out: str, rep: dict) -> None:
@@ -318,9 +364,13 @@ def _plot(out: str, rep: dict) -> None:
     for h in rep["held_out"]:
         b.plot(h["depths_mm"], h["snapshots_error_mm"], "k.-", ms=4, label=f"snapshots, held out {h['alpha_deg']:g}°")
         b.plot(h["depths_mm"], h["linear_error_mm"], "r.--", ms=3, label=f"linear, {h['alpha_deg']:g}°")
-    if rep.get("mesh_check"):
-        m = rep["mesh_check"]
-        b.plot(m["depths_mm"], m["error_mm"], "b^-", ms=3, label=f"table at 0° vs h_fine {m['finer_h_fine_m'] * 1e3:g} mm")
+    for m in rep.get("mesh_check") or []:
+        fine = m["meshes"]["finer"]["spec_m"][1] * 1e3
+        b.plot(m["depths_mm"], m["noise_table_mesh_mm"], "c^-", ms=3,
+               label=f"{m['alpha_deg']:g}°: table's mesh vs its twin (noise)")
+        b.plot(m["depths_mm"], m["noise_finer_mm"], "bv-", ms=3, label=f"{m['alpha_deg']:g}°: h_fine {fine:g} mm vs twin")
+        b.plot(m["depths_mm"], m["snapshots_vs_finer_mm"], "ms-", ms=3,
+               label=f"{m['alpha_deg']:g}°: table vs h_fine {fine:g} mm")
     b.axhline(TARGET_MM, color="k", ls=":", lw=0.8, label="target 0.7 mm")
     b.set_xlabel("push depth (mm)")
     b.set_ylabel("visible-surface error (mm)")
