@@ -168,8 +168,8 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
         calls.append((a, spec))
         n = fr.direction(math.radians(a))
         ds = grid_.depths()
-        # a mesh's error: +x, 0.01 x depth x h_fine / 4.5 mm, the opposite sign on a twin (refinement tube wider)
-        sign = 1.0 if spec[2] == S.DEFAULT_SPHERE_SPEC[2] else -1.0
+        # a mesh's error: +x, 0.01 x depth x h_fine / 4.5 mm, the opposite sign on a twin
+        sign = -1.0 if round(spec[2] * 1e4) % 10 == 1 else 1.0         # a twin's tube is 0.1 mm wider
         off = np.array([sign * 0.01 * spec[1] / 0.0045, 0.0, 0.0])
         return {"field": np.stack([(_dent(pts, fr.center, n, d) + d * off).reshape(nt, nph, 3)
                                    for d in ds]).astype(np.float32),
@@ -200,20 +200,22 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
     with pytest.raises(SystemExit, match="not shipping"):
         X.main(["--out", str(out), "--cache-dir", str(tmp_path / "cache2"), "--scene", str(SPHERE), "--node-table",
                 "--ship", "--jobs", "1"])
-    # --mesh-check at the held-out angle: the twin and the finer meshes solved, each level's noise and the
-    # table against the finer mesh read back (at 10 mm: 2 x 0.1 mm, 2 x 0.0756 mm, 0.1 - 0.0756 mm)
+    # --mesh-check at the held-out angle: every study mesh and its twin solved, each mesh's noise and the table
+    # against each read back (at 10 mm: 2 x 0.1 mm on the table's h_fine 4.5 mm, 2 x 0.1 x 6/4.5 mm on 6 mm)
     converged["ok"] = True
     calls.clear()
+    monkeypatch.setattr(T, "MESH_STUDY_SPECS", ((0.012, 0.006, 0.030, 0.055),))
     assert X.main(["--out", str(out), "--cache-dir", cache_dir, "--scene", str(SPHERE), "--node-table",
                    "--holdout-azimuth", "5", "--mesh-check", "--jobs", "1"]) == 0
-    assert {c for c in calls if c[0] == 5.0} == {(5.0, s) for s in
-                                                [S.DEFAULT_SPHERE_SPEC, *T.mesh_study_specs(S.DEFAULT_SPHERE_SPEC).values()]}
+    specs = T.mesh_study_specs(S.DEFAULT_SPHERE_SPEC)
+    assert len(specs) == 4 and {c for c in calls if c[0] == 5.0} == {(5.0, x) for x in specs.values()}
     m = json.loads((out / "sphere_table.json").read_text())["mesh_check"][0]
-    assert m["alpha_deg"] == 5.0 and m["meshes"]["finer"]["spec_m"][1] == pytest.approx(0.0034)
-    assert m["noise_table_mesh_mm"][-1] == pytest.approx(0.2, rel=1e-6)
-    assert m["noise_finer_mm"][-1] == pytest.approx(0.2 * 3.4 / 4.5, rel=1e-6)
-    assert m["table_mesh_vs_finer_mm"][-1] == pytest.approx(0.1 * (1 - 3.4 / 4.5), rel=1e-6)
-    assert abs(m["snapshots_vs_finer_mm"][-1] - 0.1 * (1 - 3.4 / 4.5)) < 0.05      # plus the α interpolation
+    tab, lv = m["levels"]
+    assert m["alpha_deg"] == 5.0 and tab["name"] == "table" and lv["spec_m"][1] == pytest.approx(0.006)
+    assert tab["noise_mm"][-1] == pytest.approx(0.2, rel=1e-6) and tab["vs_table_mesh_mm"][-1] == 0.0
+    assert lv["noise_mm"][-1] == pytest.approx(0.2 * 6 / 4.5, rel=1e-6)
+    assert lv["vs_table_mesh_mm"][-1] == pytest.approx(0.1 * (6 / 4.5 - 1), rel=1e-6)
+    assert abs(lv["snapshots_vs_this_mm"][-1] - 0.1 * (6 / 4.5 - 1)) < 0.05      # plus the α interpolation
     for args, word in ((["--mesh-check"], "--mesh-check is for"),
                        (["--scene", str(SCENES_DIR / "organ.yaml"), "--node-table"], "object.kind"),
                        (["--scene", str(SPHERE), "--node-table", "--holdout-azimuth", "60"], "strictly between"),

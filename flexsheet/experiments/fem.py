@@ -242,9 +242,9 @@ def _parser() -> argparse.ArgumentParser:
                         "into node_table.json. Repeatable")
     p.add_argument("--mesh-check", action="store_true",
                    help="with --scene SPHERE --node-table: at each --holdout-azimuth (else 0 degrees) also solve "
-                        "the push on a twin of the table's mesh (same sizes, laid out anew), on a finer mesh (h_fine "
-                        "3.4 mm) and on its twin (~20 min + 2 x ~1 h of one core): each mesh's noise, and the "
-                        "table against the finer mesh")
+                        "the push on a twin of the table's mesh (same sizes, laid out anew) and on the study's wider-tube "
+                        "mesh and its twin (~20 min of one core each): each mesh's noise, and the table against "
+                        "each")
     p.add_argument("--azimuth", type=float, default=None, metavar="DEG",
                    help="with --node-table: solve only this azimuth's path into the cache and exit (run the "
                         "azimuths in parallel processes, then --node-table alone assembles the table)")

@@ -17,9 +17,9 @@ axis, along the stroke).
    held, outside the finger's footprint: deformed position > finger radius + 2 mm from the push axis).
 
 3. ``--mesh-check``: at each held-out angle (else 0°) the same push on the table mesh's **twin** (same sizes,
-   laid out anew), on a **finer** mesh (h_fine 3.4 mm) and on its twin (:func:`mesh_study_specs`): the mesh's
-   noise at each level, the table's mesh against the finer one, and the table against the finer one
-   (``mesh_check``, a list per angle; null without the flag). Units in keys (mm, ms, N), else SI.
+   laid out anew) and on each of :data:`MESH_STUDY_SPECS` and its twin (:func:`mesh_study_specs`): each mesh's
+   noise, each against the table's mesh, and the table against each (``mesh_check``, a list per angle; null
+   without the flag). Units in keys (mm, ms, N), else SI.
 """
 
 from __future__ import annotations
@@ -34,7 +34,10 @@ import numpy as np
 __all__ = ["build_sphere_table", "alpha_path"]
 
 TARGET_MM = 0.7
-MESH_CHECK_SPEC = (0.012, 0.0034, 0.015, 0.055)   #: the finer mesh of ``--mesh-check`` (h, h_fine, rr, path) m
+#: the meshes ``--mesh-check`` sets beside the table's (h, h_fine, refine radius, path depth) m (session 20: the
+#: 4.5 mm table mesh's noise sits on the crater's rim, material that rested 15–28 mm from the push axis, outside
+#: its 15 mm tube; so the levels widen the tube)
+MESH_STUDY_SPECS = ((0.012, 0.006, 0.030, 0.055),)
 TWIN_DR = 0.0001                                    #: a twin mesh's wider refinement tube, m (:func:`mesh_study_specs`)
 
 
@@ -150,6 +153,7 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
     table = cache.load("spheresnap", key)
     check_angles = tuple(holdout) or (0.0,)
     want = [(a, s) for a in check_angles for s in mesh_study_specs(spec).values()] if mesh_check else []
+    want = list(dict.fromkeys(want))
     want.sort(key=lambda x: x[1][1])                          # the finest (longest) first: the workers end together
     want += [(a, spec) for a in (list(al) if table is None else [])] + [(a, spec) for a in holdout]
     todo = [(a, s) for a, s in want if not os.path.exists(cache.path("spherealpha", _alpha_key(sc, a, grid, s, probes))
@@ -293,57 +297,61 @@ def _packing_error(table, packed, paths, fr, rt, probes, r) -> float:
 
 
 def mesh_study_specs(spec) -> dict:
-    """The meshes of ``--mesh-check`` beside the table's ``spec`` (h, h_fine, refine radius, path depth) m:
-    its **twin** (the same sizes, the refinement tube 0.1 mm wider, so gmsh lays the elements out anew: the
-    difference between the two is the mesh's noise, what no interpolation can beat), the **finer** mesh
-    (:data:`MESH_CHECK_SPEC`, h_fine 3.4 mm) and the finer mesh's twin."""
+    """The meshes of ``--mesh-check``, name → (h, h_fine, refine radius, path depth) m: the table's ``spec``
+    and each of :data:`MESH_STUDY_SPECS` (``level1`` …), each with its **twin** (``…_twin``: the same sizes,
+    the refinement tube :data:`TWIN_DR` wider, so gmsh lays the elements out anew; the difference between a
+    mesh and its twin is that mesh's noise, which no interpolation between pushes can beat)."""
     def twin(x):
         return (x[0], x[1], x[2] + TWIN_DR, x[3])
 
-    return {"table_twin": twin(spec), "finer": MESH_CHECK_SPEC, "finer_twin": twin(MESH_CHECK_SPEC)}
+    out = {}
+    for name, x in (("table", tuple(spec)), *((f"level{i + 1}", tuple(m)) for i, m in enumerate(MESH_STUDY_SPECS))):
+        out[name], out[name + "_twin"] = x, twin(x)
+    return out
 
 
 def _mesh_check(sc, fr, sm, probes, held, grid, spec, angles, cache) -> list[dict]:
-    """For each angle (the held-out ones, else 0°): the push on the table's mesh (its own solve), on that
-    mesh's twin, on the finer mesh and on its twin (:func:`mesh_study_specs`), compared on the visible rendered
-    vertices (the finer mesh's deformed positions decide what the finger hides) at every depth: each level's
-    noise (mesh against twin), the table's mesh against the finer, and the table (interpolated) against the
-    finer mesh. A table cannot be judged more finely than its reference's noise."""
+    """For each angle (the held-out ones, else 0°) and each mesh of :func:`mesh_study_specs` (the table's, its
+    twin, the study's levels and their twins): the push solved on it, compared on the visible rendered vertices
+    (the table mesh's deformed positions decide what the finger hides) at every depth: each mesh's noise
+    (against its twin), each level against the table's mesh, and the table (interpolated in α) against each."""
     from nodes.fem.choose import visible_mask
     from nodes.fem.scene_model import finger_on_scene
 
     depths = grid.depths()[1:]
     r = sc.finger.radius
+    specs = mesh_study_specs(spec)
     out = []
     for a in angles:
         n = fr.direction(math.radians(a))
         q = fr.center + fr.radius * n
-        sols = {"table_mesh": alpha_path(sc, a, grid, spec, probes, cache)}
-        sols.update({k: alpha_path(sc, a, grid, s, probes, cache) for k, s in mesh_study_specs(spec).items()})
+        sols = {k: alpha_path(sc, a, grid, x, probes, cache) for k, x in specs.items()}
         u = {k: np.asarray(v["u_probes"], float)[1:] for k, v in sols.items()}
         snap = np.stack([sm.surface(n, float(d))[0] for d in depths])
-        vis = [visible_mask(probes + u["finer"][j], finger_on_scene(q, n, float(d), r)) & ~held
+        vis = [visible_mask(probes + u["table"][j], finger_on_scene(q, n, float(d), r)) & ~held
                for j, d in enumerate(depths)]
 
-        def diff(x, y, u=u, vis=vis):
+        def diff(x, y, vis=vis):
             return [float(np.linalg.norm(x[j] - y[j], axis=1)[vis[j]].max()) * 1e3 for j in range(len(depths))]
 
-        row = {"alpha_deg": a, "depths_mm": (depths * 1e3).tolist(),
-               "meshes": {k: {"spec_m": list(s), "dofs": int(sols[k]["dofs"]),
-                              "converged": bool(np.all(sols[k]["converged"])),
-                              "force_N_at_max_depth": float(sols[k]["force"][-1])}
-                          for k, s in {"table_mesh": spec, **mesh_study_specs(spec)}.items()},
-               "noise_table_mesh_mm": diff(u["table_mesh"], u["table_twin"]),
-               "noise_finer_mm": diff(u["finer"], u["finer_twin"]),
-               "table_mesh_vs_finer_mm": diff(u["table_mesh"], u["finer"]),
-               "snapshots_vs_finer_mm": diff(snap, u["finer"]),
-               "what": "largest distance over the visible rendered vertices, mm: noise = the same push on two "
-                       "meshes of the same sizes; table_mesh_vs_finer = the table's mesh sizes against h_fine "
-                       f"{MESH_CHECK_SPEC[1] * 1e3:g} mm; snapshots_vs_finer = the table's look-up against it"}
-        row["snapshots_vs_finer_max_mm"] = max(row["snapshots_vs_finer_mm"])
-        out.append(row)
-        _log(f"mesh study at {a:g} deg: noise {max(row['noise_table_mesh_mm']):.2f} mm (table's sizes), "
-             f"{max(row['noise_finer_mm']):.2f} mm (finer); table vs finer {row['snapshots_vs_finer_max_mm']:.2f} mm")
+        levels = []
+        for k, x in specs.items():
+            if k.endswith("_twin"):
+                continue
+            lv = {"name": k, "spec_m": list(x), "dofs": int(sols[k]["dofs"]), "dofs_twin": int(sols[k + "_twin"]["dofs"]),
+                  "converged": bool(np.all(sols[k]["converged"]) and np.all(sols[k + "_twin"]["converged"])),
+                  "cpu_seconds": float(sols[k]["cpu_seconds"]) + float(sols[k]["unload_seconds"]),
+                  "force_N_at_max_depth": float(sols[k]["force"][-1]),
+                  "noise_mm": diff(u[k], u[k + "_twin"]), "snapshots_vs_this_mm": diff(snap, u[k])}
+            lv["vs_table_mesh_mm"] = diff(u[k], u["table"])
+            lv["max_noise_mm"] = max(lv["noise_mm"])
+            levels.append(lv)
+            _log(f"mesh study at {a:g} deg, {k} (h_fine {x[1] * 1e3:g} mm, tube {x[2] * 1e3:g} mm, {lv['dofs']} DOF): "
+                 f"noise {lv['max_noise_mm']:.2f} mm, table against it {max(lv['snapshots_vs_this_mm']):.2f} mm")
+        out.append({"alpha_deg": a, "depths_mm": (depths * 1e3).tolist(), "levels": levels,
+                    "what": "largest distance over the visible rendered vertices, mm: noise = the same push on the "
+                            "mesh and on its twin (same sizes, laid out anew); vs_table_mesh = this mesh against the "
+                            "table's; snapshots_vs_this = the table's look-up (interpolated in α) against this mesh"})
     return out
 
 
@@ -365,12 +373,9 @@ def _plot(out: str, rep: dict) -> None:
         b.plot(h["depths_mm"], h["snapshots_error_mm"], "k.-", ms=4, label=f"snapshots, held out {h['alpha_deg']:g}°")
         b.plot(h["depths_mm"], h["linear_error_mm"], "r.--", ms=3, label=f"linear, {h['alpha_deg']:g}°")
     for m in rep.get("mesh_check") or []:
-        fine = m["meshes"]["finer"]["spec_m"][1] * 1e3
-        b.plot(m["depths_mm"], m["noise_table_mesh_mm"], "c^-", ms=3,
-               label=f"{m['alpha_deg']:g}°: table's mesh vs its twin (noise)")
-        b.plot(m["depths_mm"], m["noise_finer_mm"], "bv-", ms=3, label=f"{m['alpha_deg']:g}°: h_fine {fine:g} mm vs twin")
-        b.plot(m["depths_mm"], m["snapshots_vs_finer_mm"], "ms-", ms=3,
-               label=f"{m['alpha_deg']:g}°: table vs h_fine {fine:g} mm")
+        for lv, mk in zip(m["levels"], "^vs<>", strict=False):
+            b.plot(m["depths_mm"], lv["noise_mm"], mk + "-", ms=3,
+                   label=f"{m['alpha_deg']:g}°: noise, h_fine {lv['spec_m'][1] * 1e3:g} / tube {lv['spec_m'][2] * 1e3:g} mm")
     b.axhline(TARGET_MM, color="k", ls=":", lw=0.8, label="target 0.7 mm")
     b.set_xlabel("push depth (mm)")
     b.set_ylabel("visible-surface error (mm)")
