@@ -698,6 +698,17 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
     held["u"][1, far] += [0.0, 0.001, 0.0]
     h = X.node_table_holdout(tab, mat, None, rm, 5.0)
     assert h["error_mm"][1] == pytest.approx(1.0, abs=1e-3) and h["over_target_from_mm"] == pytest.approx(20.0)
+    # the twin (--mesh-check): the same push on the table mesh's twin (here 0.5 mm off at 10 mm, the same at 20 mm),
+    # its difference read as the mesh's noise
+    twin_u = held["u"].copy()
+    twin_u[0, far] += [0.0, 0.0, 0.0005]
+    specs = []
+    monkeypatch.setattr(X, "stable_path", lambda spec, *a, **kw: specs.append(spec) or (
+        held if spec == X.DEFAULT_REF_SPEC else {**held, "u": twin_u, "converged": np.array([True, True])}))
+    h = X.node_table_holdout(tab, mat, None, rm, 5.0, twin=True)
+    assert specs == [X.DEFAULT_REF_SPEC, X.twin_spec(X.DEFAULT_REF_SPEC)]
+    assert specs[1].refine_radius == pytest.approx(X.DEFAULT_REF_SPEC.refine_radius + 1e-4)
+    assert h["twin"]["noise_mm"] == pytest.approx([0.5, 0.0], abs=1e-6) and h["error_mm"][1] == pytest.approx(1.0, abs=1e-3)
     for bad in (0.0, 10.0, 12.0, -3.0):
         with pytest.raises(ValueError, match="held-out azimuth"):
             X.node_table_holdout(tab, mat, None, rm, bad)
@@ -737,6 +748,7 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
                        (["--ship"], "--ship is for"),
                        (["--node-table", "--ship", "--contact", "sticking"], "frictionless"),
                        (["--node-table", "--between-depths", "5"], "one of the node table's"),
-                       (["--between-depths", "0"], "is for --node-table")):
+                       (["--between-depths", "0"], "is for --node-table"),
+                       (["--node-table", "--mesh-check"], "--mesh-check is for")):
         with pytest.raises(SystemExit, match=word):
             X.main(["--out", str(tmp_path / "o"), "--cache-dir", ""] + args)

@@ -241,10 +241,11 @@ def _parser() -> argparse.ArgumentParser:
                         "against that push solved at half the table's load step (~20 min of one core at 0, cached); "
                         "into node_table.json. Repeatable")
     p.add_argument("--mesh-check", action="store_true",
-                   help="with --scene SPHERE --node-table: at each --holdout-azimuth (else 0 degrees) also solve "
-                        "the push on a twin of the table's mesh (same sizes, laid out anew) and on the study's wider-tube "
-                        "mesh and its twin (~20 min of one core each): each mesh's noise, and the table against "
-                        "each")
+                   help="the table mesh's noise: with --node-table --holdout-azimuth (the cylinder) each held-out "
+                        "push also on a twin of the table's mesh (same sizes, laid out anew; ~30 min of one core "
+                        "each); with --scene SPHERE --node-table at each --holdout-azimuth (else 0 degrees) the push "
+                        "on the twin and on the study's wider-tube mesh and its twin (~20 min each): each mesh's "
+                        "noise, and the table against each")
     p.add_argument("--azimuth", type=float, default=None, metavar="DEG",
                    help="with --node-table: solve only this azimuth's path into the cache and exit (run the "
                         "azimuths in parallel processes, then --node-table alone assembles the table)")
@@ -1676,13 +1677,25 @@ def node_table_report(table: dict, paths: dict[float, dict], mat: Material, key:
             "azimuths": rows}
 
 
+TWIN_DR = 0.0001    #: m: a twin mesh's wider refinement tube (:func:`twin_spec`)
+
+
+def twin_spec(spec: RefSpec) -> RefSpec:
+    """The **twin** of a reference mesh: the same sizes, the refinement tube :data:`TWIN_DR` wider, so gmsh
+    lays the elements out anew. The same push on a mesh and on its twin differs by that mesh's noise, which no
+    interpolation between pushes solved on such meshes can beat."""
+    return replace(spec, refine_radius=spec.refine_radius + TWIN_DR)
+
+
 def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: RealtimeModel, azimuth_deg: float,
-                       contact: str = DEFAULT_CONTACT) -> dict:
+                       contact: str = DEFAULT_CONTACT, twin: bool = False) -> dict:
     """The node's table at an azimuth it does not hold, against that push's own stable path on the table's mesh
     (:func:`stable_path` on DEFAULT_REF_SPEC, solved here unless cached: ~30 min of one core): the
     interpolation across azimuth alone, every table depth, largest distance (mm) over the visible rendered
     vertices (not held, outside the finger's footprint on the reference's deformed surface, :func:`_visible`).
-    Raises ``ValueError`` for an azimuth the table holds or outside it."""
+    ``twin``: also the same push on the mesh's twin (:func:`twin_spec`; another ~30 min), and that mesh's noise
+    (``noise_mm``, the same distance between the two) beside the error. Raises ``ValueError`` for an azimuth
+    the table holds or outside it."""
     from nodes.fem.snapshots import SnapshotModel
 
     held = np.degrees(np.asarray(table["angles"], float))
@@ -1700,10 +1713,21 @@ def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: Realti
     finally:
         rm.snapshots = keep
     bad = [float(d) * 1e3 for d, e in zip(depths[1:], err, strict=True) if e > TARGET * 1e3]
-    return {"azimuth_deg": float(azimuth_deg), "against": "its own stable path on the table's mesh (cut half model)",
-            "depths_mm": (depths[1:] * 1e3).tolist(), "error_mm": err, "max_error_mm": max(err),
-            "over_target_from_mm": min(bad) if bad else None, "dofs": int(p["dofs"]),
-            "cpu_seconds_loading": float(p["cpu_seconds"])}
+    row = {"azimuth_deg": float(azimuth_deg), "against": "its own stable path on the table's mesh (cut half model)",
+           "depths_mm": (depths[1:] * 1e3).tolist(), "error_mm": err, "max_error_mm": max(err),
+           "over_target_from_mm": min(bad) if bad else None, "dofs": int(p["dofs"]),
+           "cpu_seconds_loading": float(p["cpu_seconds"])}
+    if twin:
+        q = stable_path(twin_spec(DEFAULT_REF_SPEC), azimuth_deg, depths[1:], mat, cache, verts, contact)
+        fixed = rm.mesh.fixed[rm.surface_nodes]
+        noise = [float(np.linalg.norm(q["u"][j] - c["u"], axis=1)[
+            _visible(verts + c["u"], fixed, c["angle_deg"], c["depth"], rm.mesh)].max()) * 1e3
+            for j, c in enumerate(cases)]
+        row["twin"] = {"spec": twin_spec(DEFAULT_REF_SPEC).__dict__, "dofs": int(q["dofs"]),
+                       "converged": bool(np.all(q["converged"])), "noise_mm": noise, "max_noise_mm": max(noise),
+                       "what": "the same push on the twin mesh (same sizes, the tube 0.1 mm wider, laid out anew) "
+                               "against the table mesh's solve, the same vertices: the mesh's noise"}
+    return row
 
 
 def node_table_between_depths(table: dict, mat: Material, cache: ArrayCache, rm: RealtimeModel,
@@ -1788,6 +1812,9 @@ def plot_node_table(out: str, rep: dict) -> None:
     for i, h in enumerate(rep.get("held_out", [])):
         b.plot(h["depths_mm"], h["error_mm"], ".-", color=("k", "0.45", "0.7")[i % 3], ms=4, lw=1.5,
                label=f"held out {h['azimuth_deg']:g}°: visible-surface error")
+        if h.get("twin"):
+            b.plot(h["depths_mm"], h["twin"]["noise_mm"], "v:", color=("k", "0.45", "0.7")[i % 3], ms=3, lw=1.2,
+                   label=f"{h['azimuth_deg']:g}°: the mesh's noise (twin mesh)")
     for h in rep.get("between_depths", []):
         b.plot(h["depths_mm"], h["error_mm"], "rx-", ms=4, lw=1,
                label=f"{h['azimuth_deg']:g}°, every {h['depths_mm'][0]:g} mm: visible-surface error")
@@ -1813,7 +1840,7 @@ def _cached_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mater
 
 def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, contact: str = DEFAULT_CONTACT,
                      azimuth: float | None = None, jobs: int = 1, ship: bool = False, out: str | None = None,
-                     holdout: tuple[float, ...] = (), between: tuple[float, ...] = ()) -> int:
+                     holdout: tuple[float, ...] = (), between: tuple[float, ...] = (), twin: bool = False) -> int:
     """Build (or find) the FEM node's snapshot table: :data:`nodes.fem.snapshots.DEFAULT_GRID` on
     :data:`nodes.fem.snapshots.DEFAULT_REF_SPEC`, the key the node looks up (its ``finger_radius`` default is
     the experiment's 8 mm). Every azimuth's path is a cached :func:`node_table_path` (azimuth 0: the full run's
@@ -1825,7 +1852,8 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
     machine that never solved it. ``out``: write ``node_table.json/png`` there (:func:`node_table_report`), with
     the table judged at each ``holdout`` azimuth (deg, between the table's) against its own solve
     (:func:`node_table_holdout`; solved unless cached) and between its depths at each ``between`` azimuth (deg,
-    one of the table's; :func:`node_table_between_depths`). Returns 0."""
+    one of the table's; :func:`node_table_between_depths`); ``twin`` (``--mesh-check``): each held-out push also
+    on the mesh's twin, its noise beside the error. Returns 0."""
     from nodes.fem.snapshots import table_key
 
     st = replace(settings_for(False), grid=DEFAULT_GRID, snap_spec=DEFAULT_REF_SPEC, contact=contact)
@@ -1871,13 +1899,17 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
                        packed)
         _log(f"node table shipped: {p} ({os.path.getsize(p) / 1e6:.1f} MB, float16 surface fields: rounding "
              f"<= {err * 1e3:.4f} mm); commit it")
+    if out and holdout:     # the held-out pushes (and their twins) the cache lacks, in worker processes
+        specs = [DEFAULT_REF_SPEC] + ([twin_spec(DEFAULT_REF_SPEC)] if twin else [])
+        prefetch([Solve(sp, a, DEFAULT_GRID.depth_step, stable=True) for a in holdout for sp in specs], jobs, mat,
+                 cache, verts, contact)
     if out:
         rep = node_table_report(table, paths, mat, key)
         if ship:
             rep["shipped"] = {"path": os.path.relpath(p, os.getcwd()), "MB": os.path.getsize(p) / 1e6,
                               "float16_rounding_mm": err * 1e3}
         rep["update"] = _table_update_ms(table, verts, mat)
-        rep["held_out"] = [node_table_holdout(table, mat, cache, rm, a, contact) for a in holdout]
+        rep["held_out"] = [node_table_holdout(table, mat, cache, rm, a, contact, twin) for a in holdout]
         rep["between_depths"] = [node_table_between_depths(table, mat, cache, rm, a, contact) for a in between]
         for h in rep["between_depths"]:
             _log(f"node table between its depths at {h['azimuth_deg']:g} deg: worst visible error "
@@ -2074,8 +2106,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.holdout_study and args.quick:
         raise SystemExit("flexsheet experiment fem: --holdout-study is a full-mode study (the quick settings hold "
                          "no azimuth out); leave out --quick")
-    if args.mesh_check and not (args.scene and args.node_table):
-        raise SystemExit("flexsheet experiment fem: --mesh-check is for --scene SPHERE.yaml --node-table")
+    if args.mesh_check and not (args.node_table and (args.scene or args.holdout_azimuth)):
+        raise SystemExit("flexsheet experiment fem: --mesh-check is for --node-table with --holdout-azimuth (the "
+                         "cylinder) or --scene SPHERE.yaml --node-table")
     sm = DEFAULT_MATERIAL                        # the default scene's; a paper-cylinder --scene file's below
     if args.scene:
         from flexsheet.model.scenes import is_paper_cylinder, load_scene_or_paper
@@ -2136,7 +2169,7 @@ def main(argv: list[str] | None = None) -> int:
             raise SystemExit("flexsheet experiment fem: --node-table builds the node's full table; it takes neither "
                              "--quick nor --level")
         return build_node_table(mat, cache, args.cache_dir or None, st.contact, args.azimuth, args.jobs, args.ship,
-                                args.out, tuple(args.holdout_azimuth), tuple(args.between_depths))
+                                args.out, tuple(args.holdout_azimuth), tuple(args.between_depths), args.mesh_check)
     for h in st.skin_sizes:     # before any solve: a bad size would otherwise fail after the convergence study
         replace(st.levels[-2], skin_h=h)
     rm = realtime_model(st, mat, args.cache_dir or None)
