@@ -471,12 +471,13 @@ def _visible(points: np.ndarray, fixed: np.ndarray, angle_deg: float, depth: flo
     return visible_mask(points, fg) & ~fixed
 
 
-def _visible_diffs(a: dict, b: dict, depths: np.ndarray, verts: np.ndarray, fixed: np.ndarray, mesh) -> list[float]:
+def _visible_diffs(a: dict, b: dict, depths: np.ndarray, verts: np.ndarray, fixed: np.ndarray, mesh,
+                   angle_deg: float = 0.0) -> list[float]:
     """Largest distance (m) between two reference paths' fields ``a["u"]``, ``b["u"]`` (D, k, 3) m at the
     rendered vertices ``verts`` (k, 3) m, per depth (D,) m, over the vertices visible on ``b``'s deformed
-    surface (:func:`_visible`, azimuth 0)."""
-    return [float(np.linalg.norm(a["u"][j] - b["u"][j], axis=1)[_visible(verts + b["u"][j], fixed, 0.0, d, mesh)].max())
-            for j, d in enumerate(depths)]
+    surface (:func:`_visible`, the push at azimuth ``angle_deg``)."""
+    return [float(np.linalg.norm(a["u"][j] - b["u"][j], axis=1)[
+        _visible(verts + b["u"][j], fixed, angle_deg, d, mesh)].max()) for j, d in enumerate(depths)]
 
 
 def _at_depths(path: dict, path_depths: np.ndarray, depths: np.ndarray) -> dict:
@@ -1719,10 +1720,8 @@ def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: Realti
            "cpu_seconds_loading": float(p["cpu_seconds"])}
     if twin:
         q = stable_path(twin_spec(DEFAULT_REF_SPEC), azimuth_deg, depths[1:], mat, cache, verts, contact)
-        fixed = rm.mesh.fixed[rm.surface_nodes]
-        noise = [float(np.linalg.norm(q["u"][j] - c["u"], axis=1)[
-            _visible(verts + c["u"], fixed, c["angle_deg"], c["depth"], rm.mesh)].max()) * 1e3
-            for j, c in enumerate(cases)]
+        noise = [e * 1e3 for e in _visible_diffs(q, p, depths[1:], verts, rm.mesh.fixed[rm.surface_nodes], rm.mesh,
+                                                 azimuth_deg)]
         row["twin"] = {"spec": twin_spec(DEFAULT_REF_SPEC).__dict__, "dofs": int(q["dofs"]),
                        "converged": bool(np.all(q["converged"])), "noise_mm": noise, "max_noise_mm": max(noise),
                        "what": "the same push on the twin mesh (same sizes, the tube 0.1 mm wider, laid out anew) "
