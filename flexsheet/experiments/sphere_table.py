@@ -38,7 +38,6 @@ TARGET_MM = 0.7
 #: 4.5 mm table mesh's noise sits on the crater's rim, material that rested 15–28 mm from the push axis, outside
 #: its 15 mm tube; so the levels widen the tube)
 MESH_STUDY_SPECS = ((0.012, 0.006, 0.030, 0.055),)
-TWIN_DR = 0.0001                                    #: a twin mesh's wider refinement tube, m (:func:`mesh_study_specs`)
 
 
 def _log(msg: str) -> None:
@@ -153,9 +152,9 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
     table = cache.load("spheresnap", key)
     check_angles = tuple(holdout) or (0.0,)
     want = [(a, s) for a in check_angles for s in mesh_study_specs(spec).values()] if mesh_check else []
-    want = list(dict.fromkeys(want))
     want.sort(key=lambda x: x[1][1])                          # the finest (longest) first: the workers end together
     want += [(a, spec) for a in (list(al) if table is None else [])] + [(a, spec) for a in holdout]
+    want = list(dict.fromkeys(want))      # a held-out push is also the mesh study's table-mesh push: solve it once
     todo = [(a, s) for a, s in want if not os.path.exists(cache.path("spherealpha", _alpha_key(sc, a, grid, s, probes))
                                                           or "")]
     if jobs > 1 and len(todo) > 1:
@@ -174,30 +173,28 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
     else:
         paths = [cache.load("spherealpha", _alpha_key(sc, a, grid, spec, probes)) for a in al]
     shipped = None
+    packed = sp = None
     if ship:
         bad = [a for a, p in zip(al, paths, strict=True) if p is None or not np.all(p["converged"])]
         if bad:
             raise SystemExit(f"flexsheet experiment fem: not shipping the sphere table: Newton did not converge at "
                              f"every depth, or the push is not in this machine's cache, at {bad} deg")
         packed = pack_sphere_table(table)
-        err = _packing_error(table, packed, paths, fr, rt, probes, sc.finger.radius)
         sp = cache.ship("spheresnap", key, packed)
+    elif out and all(p is not None for p in paths):   # already shipped: report what the node reads from the store
+        store = ArrayCache(None)                      # the shipped store alone
+        packed = store.load("spheresnap", key)
+        sp = store.source
+    if packed is not None:
+        err = _packing_error(table, packed, paths, fr, rt, probes, sc.finger.radius)
         shipped = {"path": os.path.relpath(sp, os.getcwd()), "MB": os.path.getsize(sp) / 1e6,
                    "packing": "surface field as float16 on every second grid line (2° cells)",
                    "packing_error_mm": err}
-        _log(f"sphere table shipped: {sp} ({shipped['MB']:.1f} MB; packed against the full table: <= {err:.3f} mm "
-             "on the visible surface); commit it")
-    elif out and all(p is not None for p in paths):   # already shipped: report what the node reads from the store
-        from nodes.fem import cache as _cache
-
-        sp = os.path.join(_cache.SHIPPED_DIR, f"spheresnap_{key}.npz")
-        if os.path.exists(sp):
-            with np.load(sp, allow_pickle=False) as z:
-                packed = {k: z[k] for k in z.files}
-            err = _packing_error(table, packed, paths, fr, rt, probes, sc.finger.radius)
-            shipped = {"path": os.path.relpath(sp, os.getcwd()), "MB": os.path.getsize(sp) / 1e6,
-                       "packing": "surface field as float16 on every second grid line (2° cells)",
-                       "packing_error_mm": err, "note": "shipped before this run; its packing error measured again"}
+        if ship:
+            _log(f"sphere table shipped: {sp} ({shipped['MB']:.1f} MB; packed against the full table: <= {err:.3f} "
+                 "mm on the visible surface); commit it")
+        else:
+            shipped["note"] = "shipped before this run; its packing error measured again"
     if not out:
         return 0
     sm = SphereSnapshotModel(table, probes, E=mat.E)
@@ -310,8 +307,11 @@ def _packing_error(table, packed, paths, fr, rt, probes, r) -> float:
 def mesh_study_specs(spec) -> dict:
     """The meshes of ``--mesh-check``, name → (h, h_fine, refine radius, path depth) m: the table's ``spec``
     and each of :data:`MESH_STUDY_SPECS` (``level1`` …), each with its **twin** (``…_twin``: the same sizes,
-    the refinement tube :data:`TWIN_DR` wider, so gmsh lays the elements out anew; the difference between a
-    mesh and its twin is that mesh's noise, which no interpolation between pushes can beat)."""
+    the refinement tube ``TWIN_DR`` wider, as the cylinder's twins (:func:`flexsheet.experiments.fem.twin_spec`),
+    so gmsh lays the elements out anew; the difference between a mesh and its twin is that mesh's noise, which
+    no interpolation between pushes can beat)."""
+    from flexsheet.experiments.fem import TWIN_DR
+
     def twin(x):
         return (x[0], x[1], x[2] + TWIN_DR, x[3])
 
