@@ -311,10 +311,8 @@ def _plot(out_dir: str, s: dict) -> None:
     law = s["reference"]["model"].split(" (compressible)")[0]
     ref_ms = [1e3 * lv["seconds"] / max(1, len(s["realtime"]["depths_m"]))
               for p in s["pushes"] for lv in p["reference_levels"][-1:]]
-    lin = s["realtime"].get("linear") or {"update_ms": s["realtime"]["update_ms"],
-                                          "max_visible_error_mm": max(s["realtime"]["error_mm_by_depth"]),
-                                          "error_mm_by_depth": s["realtime"]["error_mm_by_depth"]}
-    served_table = "snapshot" in s["realtime"]["method"]
+    lin = s["realtime"]["linear"]
+    served_table = any("snapshots" in p["realtime_methods"] for p in s["pushes"])
     pts = ([{"model": "real-time nonlinear snapshot table (served)", "update_ms": s["realtime"]["update_ms"],
              "max_visible_error_mm": max(s["realtime"]["error_mm_by_depth"])}] if served_table else []) + [
            {"model": "real-time linear P2 (capacitance)", "update_ms": lin["update_ms"],
