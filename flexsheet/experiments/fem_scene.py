@@ -226,7 +226,10 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
                        "linear_error_mm": [e * 1e3 for e in err_rt],
                        "realtime_error_mm": [e * 1e3 for e in (err_sn if snap is not None else err_rt)],
                        "realtime_methods": sorted({up.method for up in sn_up}) if snap is not None else ["linear"],
-                       "realtime_force_N": [u[1] for u in rt_u], "realtime_stiffness_N_per_m": [u[2] for u in rt_u],
+                       "realtime_force_N": [up.force for up in sn_up] if snap is not None else [u[1] for u in rt_u],
+                       "realtime_stiffness_N_per_m": [up.stiffness for up in sn_up] if snap is not None else
+                       [u[2] for u in rt_u],
+                       "linear_force_N": [u[1] for u in rt_u], "linear_stiffness_N_per_m": [u[2] for u in rt_u],
                        "linear_fine_error_mm": [e * 1e3 for e in err_lin], "linear_fine_solve_ms": lin_ms,
                        "reference_levels": levels, "last_refinement_change_mm": last,
                        "reference_converged": bool(len(levels) > 1 and all(lv["newton_converged"] for lv in levels)
