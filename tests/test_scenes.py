@@ -16,6 +16,8 @@ from flexsheet.model import scene as paper
 from flexsheet.model import shapes
 from flexsheet.model.scenes import SCENES_DIR, SceneError, load_scene, paper_scene, parse_scene
 
+ROOT = Path(__file__).resolve().parents[1]
+
 NAMES = ("cylinder", "sphere", "rounded_box", "organ")
 
 
@@ -181,6 +183,7 @@ def _base() -> dict:
     (lambda d: d["material"].update(model="neo_hookean"), "material", "takes none"),
     (lambda d: d["material"].update(model="gent", Jm=-3.0), "material.Jm", "-3.0"),
     (lambda d: d["finger"].update(radius=0.5), "finger.radius", "0.5"),
+    (lambda d: d["finger"].update(contact="slippery"), "finger.contact", "'slippery'"),
     (lambda d: d["stroke"].update(toward=[2.0, 0.0, 0.0]), "stroke", "[2.0, 0.0, 0.0]"),
     (lambda d: d["object"]["pose"].update(position=[-0.03, 0.0]), "object.pose.position", "[-0.03, 0.0]"),
     (lambda d: d["object"]["pose"].update(position=[-0.5, 0.0, 0.0]), "object.pose", "[-0.5, 0.0, 0.0]"),
@@ -255,3 +258,23 @@ def test_planner_tension_follows_the_organ_tumour():
         assert abs(pk[key]["arc_of_max_mm"] - arc_inc) < 6.0, (key, pk)
         assert pk[key]["max_over_far_median"] > 1.05, (key, pk)
     assert np.mean(series["at_limit"]) < 0.05                          # inside the arms' range
+
+
+def test_the_shipped_sphere_table_is_found_under_the_scene_key_and_a_sticking_finger_changes_the_key(tmp_path):
+    # the default (frictionless) contact law is left out of Scene.key(): the shipped sphere table, keyed by the
+    # key of sphere.yaml from before the field existed, is still the one the FEM node finds
+    from nodes.fem.sphere_snapshots import sphere_frame, sphere_table_key
+
+    sphere = load_scene(SCENES_DIR / "sphere.yaml")
+    assert sphere.finger.contact == "frictionless"
+    shipped = {p.name for p in (ROOT / "nodes" / "fem" / "data").glob("spheresnap_*.npz")}
+    assert f"spheresnap_{sphere_table_key(sphere)}.npz" in shipped, shipped
+    d = _base()
+    d["finger"]["contact"] = "sticking"
+    sticky = load_scene(_write(tmp_path, d))
+    assert sticky.finger.contact == "sticking" and sticky.key() != sphere.key()
+    d["finger"]["contact"] = "frictionless"     # written out explicitly: the same scene, the same key
+    assert load_scene(_write(tmp_path, d, "explicit.yaml")).key() == sphere.key()
+    # the sphere table's pushes are unloaded to their stable branch, which a sticking finger's anchors forbid
+    with pytest.raises(ValueError, match="finger.contact must be 'frictionless'.*'sticking'"):
+        sphere_frame(sticky)

@@ -70,7 +70,7 @@ def _log(msg: str) -> None:
 
 
 def _reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, probes: np.ndarray, cache) -> dict:
-    """Neo-Hookean push at surface point ``q`` along −``n`` through ``st['depths']`` on a mesh refined to
+    """The scene's hyperelastic push (its material, its finger's contact law) at surface point ``q`` along −``n`` through ``st['depths']`` on a mesh refined to
     ``h_fine`` around ``q``; displacements sampled at ``probes`` (k, 3) m; cached."""
     from nodes.fem.cache import cache_key
     from nodes.fem.hyperelastic import SOLVER_VERSION, Capsule, HyperelasticModel, solve_path_capsule
@@ -98,7 +98,8 @@ def _reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, probes
         r = sc.finger.radius
         _log(f"reference h_fine {h_fine * 1e3:g} mm at {np.round(q * 1e3, 1).tolist()} mm: {model.n} DOF ...")
         states = solve_path_capsule(model, lambda d: Capsule(q - d * n + r * n, -n, r), depths, step=st["step"],
-                                    log=lambda s: _log("  " + s.strip()), label=f"scene {sc.name}")
+                                    log=lambda s: _log("  " + s.strip()), label=f"scene {sc.name}",
+                                    contact=sc.finger.contact)
         P = model.probe_matrix(probes)
         return {"u": np.stack([np.asarray(P @ s.u) for s in states]), "force": np.array([s.force for s in states]),
                 "converged": np.array([s.converged for s in states]), "inverted": np.array([s.inverted for s in states]),
@@ -277,7 +278,8 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
                                 "footprint (deformed reference position more than finger radius + 2 mm from the push "
                                 "axis)"},
         "reference": {"model": f"{law} (compressible), total Lagrangian P2, Newton with load stepping, rigid "
-                               "frictionless capsule finger, full body (nodes/fem/hyperelastic.py)",
+                               f"{sc.finger.contact} capsule finger, full body (nodes/fem/hyperelastic.py)",
+                      "contact": sc.finger.contact,
                       "law": sc.material.model, "Jm": sc.material.Jm,
                       "solver": SOLVER_VERSION,
                       "converged": bool(all(p["reference_converged"] for p in pushes)),

@@ -237,10 +237,16 @@ class Support(BaseModel):
 
 
 class Finger(BaseModel):
-    """The user's fingertip as the FEM and the world see it: a sphere of ``radius`` m."""
+    """The user's fingertip as the FEM and the world see it: a sphere of ``radius`` m, and how the object's
+    surface meets it in the nonlinear reference (``contact``, :data:`nodes.fem.hyperelastic.CONTACT_LAWS`):
+    ``frictionless`` (the default: the surface slides freely over the fingertip) or ``sticking`` (a fingertip
+    that does not slip on the skin: a surface point that touched it moves with it). A modelling choice per
+    object: the rounded box's push beside its edge has a sliding mode under a frictionless fingertip that no
+    Newton solve on its quick mesh got past 25 mm (session 21), and skin does not slide on silicone."""
 
     model_config = _CFG
     radius: float = Field(0.008, ge=0.001, le=0.03, description="m")
+    contact: Literal["frictionless", "sticking"] = Field("frictionless", description="reference contact law")
 
 
 class ArcStroke(BaseModel):
@@ -355,7 +361,10 @@ class Scene(BaseModel):
 
     def key(self) -> str:
         """SHA-256 hex of the scene's values and its mesh file's bytes: a cache key for precomputed FEM data."""
-        h = hashlib.sha256(self.model_dump_json().encode())
+        # the default contact law is left out, so every key made before the field existed still holds (the
+        # shipped tables' keys; tests/test_scenes.py)
+        h = hashlib.sha256(self.model_dump_json(
+            exclude={"finger": {"contact"}} if self.finger.contact == "frictionless" else None).encode())
         if self.mesh_path is not None:
             h.update(self.mesh_path.read_bytes())
         return h.hexdigest()
