@@ -25,9 +25,12 @@ MXT = ["arm_left.protocol=mxt", "ctrl_left.protocol=mxt", "arm_right.protocol=mx
 SCRIPT = "world.script=[{mode: stroke, moving_time: 10}]"
 
 
-# a 150 s real-time run of the whole graph on a shared 2-core machine: the servo-lag percentile depends on the
-# scheduler (one warm full-suite run of 2026-11-22 saw p95 1.7 deg on the left arm; the cold full run before it
-# and the file alone after it passed, p95 < 1.15 deg). One rerun on failure; the rerun must meet every assertion
+# a 150 s real-time run of the whole graph on a shared 2-core machine. The servo is judged against the command
+# the controller reports executing in the same reply (ArmJointState.executing, the MXT JOINT slot), not against
+# the bridge's newest send: that one also carries the host link's delay, and when the twin's process is
+# descheduled for tens of ms while the arm moves (up to half the datasheet speeds) it reads as servo lag (CI of 2026-11-24, both
+# attempts: p95 1.8 deg against the command sent; two busy loops beside the run here: max 5.7 deg). The link is
+# judged by its own counters (lost, refused). One rerun on failure; the rerun must meet every assertion
 # (pytest-rerunfailures, `-rR` lists it).
 @pytest.mark.flaky(reruns=1)
 def test_table1_stroke_through_mxt_twins(tmp_path, sim_fem_cache):
@@ -67,10 +70,15 @@ def test_table1_stroke_through_mxt_twins(tmp_path, sim_fem_cache):
         assert ok > 0.5, (arm, ok)
         cmd_q = np.array([m.commanded for m in st])
         assert np.all(np.abs(np.diff(cmd_q, axis=0)) <= step_limit * (1 + 1e-6)), arm
-        lag = np.array([np.max(np.abs(m.position - m.commanded)) for m in st])
-        # FB_JOINT follows the command: median within 0.6 deg, 95 % of the cycles within 1.2 deg (the datasheet
-        # joint speeds and the 15 ms servo lag; the last sample is not used: the bag may close mid-move)
+        # FB_JOINT follows the command it executes: median within 0.6 deg, 95 % of the cycles within 1.2 deg (the
+        # datasheet joint speeds and the 15 ms servo lag)
+        lag = np.array([np.max(np.abs(m.position - m.executing)) for m in st])
         assert np.median(lag) < 0.01 and np.percentile(lag, 95) < 0.02, (arm, np.median(lag), np.percentile(lag, 95))
+        # and what it executes is what the bridge sent, a cycle or so behind: the median gap is a small part of one
+        # speed-limited step (0.05-0.06 of it measured alone and beside 2-4 busy processes); an `executing` that
+        # were not the controller's echo of these commands (zeros, another arm's) would be many steps off
+        behind = np.array([np.max(np.abs(m.executing - m.commanded) / step_limit) for m in st])
+        assert np.median(behind) < 0.5, (arm, np.median(behind))
         twin = _counters(beats[f"ctrl_{arm}"].split("mxt session")[1])          # the twin's last heartbeat
         assert twin["moves"] > 1000 and twin["refused"] == 0, twin
         link = _counters(beats[f"arm_{arm}"].split("mxt:")[1])                   # the bridge's last heartbeat

@@ -20,7 +20,7 @@ from nodes.world.node import Segment, WorldNode, WorldParams
 
 
 def _arm(arm: str, q: np.ndarray, pose: np.ndarray, stamp: float) -> ArmJointState:
-    return ArmJointState(header=Header(stamp=stamp), arm=arm, position=q, velocity=np.zeros(6), commanded=q,
+    return ArmJointState(header=Header(stamp=stamp), arm=arm, position=q, velocity=np.zeros(6), commanded=q, executing=q,
                          pose=pose, status=0)
 
 

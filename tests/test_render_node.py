@@ -22,7 +22,7 @@ def fingertip(pos, stamp=100.0, valid=True):
 
 def arm(name, T):
     z = np.zeros(6)
-    return ArmJointState(header=Header(stamp=time.time()), arm=name, position=z, velocity=z, commanded=z,
+    return ArmJointState(header=Header(stamp=time.time()), arm=name, position=z, velocity=z, commanded=z, executing=z,
                          pose=np.asarray(T, dtype=float), status=0)
 
 

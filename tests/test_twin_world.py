@@ -57,7 +57,7 @@ def test_true_clamps_differ_from_the_bridge_model_under_realistic_truth_and_equa
 
 
 def _state(arm: str, q: np.ndarray, pose: np.ndarray, stamp: float) -> ArmJointState:
-    return ArmJointState(header=Header(stamp=stamp), arm=arm, position=q, velocity=np.zeros(6), commanded=q,
+    return ArmJointState(header=Header(stamp=stamp), arm=arm, position=q, velocity=np.zeros(6), commanded=q, executing=q,
                          pose=pose, status=0)
 
 

@@ -37,7 +37,7 @@ def _arm_states(stretch: float) -> dict[str, ArmJointState]:
         res = kin.ik(targets[side], home_joints(side))
         assert res.ok, (side, res.status)
         out[side] = ArmJointState(header=Header(stamp=10.0, frame_id="display", seq=0), arm=side, position=res.q,
-                                  velocity=np.zeros(6), commanded=res.q, pose=kin.fk(res.q), status=1,
+                                  velocity=np.zeros(6), commanded=res.q, executing=res.q, pose=kin.fk(res.q), status=1,
                                   target_stamp=9.99, write_stamp=9.999)
     return out
 

@@ -161,6 +161,6 @@ class ArmBridgeNode(Node):
         q = st.position
         self.pub.publish(ArmJointState(
             header=self.pub.header("display"), arm=self.params.arm, position=q, velocity=st.velocity,
-            commanded=rep.commanded, pose=self.fk_kin.fk(q), status=st.status, fault=st.fault,
+            commanded=rep.commanded, executing=st.active, pose=self.fk_kin.fk(q), status=st.status, fault=st.fault,
             manipulability=self.fk_kin.manipulability(q), target_stamp=rep.target_stamp,
             write_stamp=rep.write_stamp, bridge_status=rep.bridge_status))

@@ -82,7 +82,7 @@ def sample_state(stamp: float = 1.0e9, push: float = 0.004, seq: int = 0) -> dic
         q = home_joints(side)
         poses[side] = kin.fk(q)
         topic = T.arm_state(side).name
-        out[topic] = ArmJointState(header=h(), arm=side, position=q, velocity=np.zeros(6), commanded=q,
+        out[topic] = ArmJointState(header=h(), arm=side, position=q, velocity=np.zeros(6), commanded=q, executing=q,
                                    pose=poses[side], status=1, target_stamp=exposure, write_stamp=stamp - 0.002)
     tip = np.array([-push, 0.01, 0.0])
     out[T.FINGERTIP.name] = Fingertip(header=h(), position=tip, covariance=np.eye(3) * 1e-8, valid=True,
