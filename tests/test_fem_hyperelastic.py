@@ -433,6 +433,70 @@ def test_packed_table_rounds_within_float16_and_looks_up_as_the_original(tmp_pat
         ArrayCache(str(tmp_path), shipped_dir=None).ship("snapshots", "k" * 24, packed)
 
 
+def _linear_states(model, ang, depths, log=None):
+    """PathStates whose displacement is a linear field of the rest position scaled by depth and azimuth: P2 holds it
+    exactly, so the table samples it exactly wherever it is sampled (u = 20·d·(1 + φ)·A·(x − c), A fixed)."""
+    A = np.array([[0.3, 0.0, 0.1], [0.0, -0.2, 0.0], [0.1, 0.0, 0.4]])
+    X = model.points - model.mesh.center
+    out = []
+    for d in depths:
+        u = 20.0 * d * (1.0 + math.radians(ang)) * X @ A.T
+        out.append(H.PathState(depth=float(d), u=u, force=100.0 * d * (1.0 + ang), force_vec=np.zeros(3),
+                               iterations=3, converged=True, min_detF=1.0, inverted=0, max_strain=0.01 * d,
+                               penetration=0.0, n_contact=0))
+    if log is not None:
+        log.append(ang)
+    return out
+
+
+def test_a_table_is_extended_azimuth_by_azimuth_from_a_shipped_one(tmp_path):
+    """build_table(reuse=...): a table on fewer azimuths (here packed to float16 and found through the cache as a
+    shipped one would be) gives its azimuths as they are stored, and only the new azimuth is solved; the extended
+    table equals the one built whole within float16's rounding (exactly at the solved azimuth); a table sampled
+    otherwise is refused, and reusable_table finds only a proper subset of the grid's azimuths."""
+    from nodes.fem.snapshots import build_table, load_or_build, pack_table, reusable_table
+
+    spec = H.RefSpec(0.016, 0.012, 0.012, half_z=True, path_depth=0.012, cut=True)
+    grid = SnapshotGrid(angles_deg=(0.0, 10.0, 20.0), depth_max=0.005, depth_step=0.0025, dtheta_deg=5.0,
+                        dy=0.005, drho=0.005)
+    asked: list[float] = []
+    whole = build_table(grid, spec, MAT, 0.008, solved=lambda a, m, d: _linear_states(m, a, d, asked))
+    assert asked == [0.0, 10.0, 20.0] and np.abs(whole["side"]).max() > 1e-3 and not whole["reused"].any()
+    base_grid = replace(grid, angles_deg=(0.0, 20.0))
+    base = {k: (v[[0, 2]] if isinstance(v, np.ndarray) and v.ndim and len(v) == 3 and k not in
+                ("theta", "y", "rho", "center", "depths") else v) for k, v in whole.items()}
+    base = pack_table(base)[0]
+    cache = ArrayCache(str(tmp_path / "cache"), shipped_dir=str(tmp_path / "data"))
+    cache.ship("snapshots", _table_key(base_grid, spec), base)
+    found = reusable_table(cache, grid, spec, MAT, 0.008, previous=((0.0, 10.0, 20.0), (0.0, 30.0), (0.0, 20.0)))
+    assert found is not None and np.allclose(np.degrees(found["angles"]), [0.0, 20.0])
+    assert reusable_table(cache, grid, spec, MAT, 0.008, previous=((0.0, 30.0),)) is None
+    asked.clear()
+    ext = build_table(grid, spec, MAT, 0.008, solved=lambda a, m, d: _linear_states(m, a, d, asked), reuse=found)
+    assert asked == [10.0] and ext["reused"].tolist() == [True, False, True]
+    assert np.array_equal(ext["side"][1], whole["side"][1]) and np.array_equal(ext["cap"][1], whole["cap"][1])
+    for f in ("side", "cap"):
+        diff = np.abs(ext[f] - whole[f]).max()
+        assert 0.0 < diff <= 2.0 ** -16, (f, diff)                   # float16 at 0 and 20 deg only
+    assert np.array_equal(ext["force"], whole["force"]) and np.array_equal(ext["newton"], whole["newton"])
+    # through load_or_build: stored under the three-azimuth key, then found there without solving
+    z, hit, _ = load_or_build(cache, grid, spec, MAT, 0.008, solved=lambda a, m, d: _linear_states(m, a, d),
+                              reuse=found)
+    assert not hit and load_or_build(cache, grid, spec, MAT, 0.008, build=False)[1]
+    other = replace(grid, dtheta_deg=2.5)
+    with pytest.raises(ValueError, match="theta"):
+        build_table(other, spec, MAT, 0.008, solved=lambda a, m, d: _linear_states(m, a, d), reuse=found)
+    with pytest.raises(ValueError, match="E "):
+        build_table(grid, spec, Material(2e4, MAT.nu), 0.008, solved=lambda a, m, d: _linear_states(m, a, d),
+                    reuse=found)
+
+
+def _table_key(grid, spec):
+    from nodes.fem.snapshots import table_key
+
+    return table_key(grid, spec, MAT.nu, 0.008, Jm=MAT.Jm)
+
+
 def test_shipped_node_table_is_the_default_scenes_and_stiffens_from_hertz():
     """The FEM node's snapshot table for the default scene (the paper's cylinder, Gent Jm 97.2) ships in
     nodes/fem/data under the key the node looks up (gmsh's version is in the key: a machine with another gmsh

@@ -104,7 +104,7 @@ from nodes.fem.hyperelastic import (
 from nodes.fem.material import GENT_JM_RUBBER, Material
 from nodes.fem.mesh import MeshSpec
 from nodes.fem.realtime import RealtimeModel
-from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, SnapshotGrid, load_or_build
+from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, SnapshotGrid, load_or_build, reusable_table
 from nodes.fem.solver import solve_full
 
 __all__ = ["main", "Settings", "settings_for"]
@@ -1110,15 +1110,18 @@ def snapshot_source(st: Settings, mat: Material, cache: ArrayCache, rm: Realtime
     return solved, src
 
 
-def snapshot_table(st: Settings, mat: Material, cache: ArrayCache, solved) -> tuple[dict, bool, float]:
+def snapshot_table(st: Settings, mat: Material, cache: ArrayCache, solved,
+                   reuse: dict | None = None) -> tuple[dict, bool, float]:
     """The snapshot table of these settings (cached): (table, cache hit, seconds to build). ``solved``:
     callable (azimuth deg, model, depths m) → states or None (:func:`nodes.fem.snapshots.build_table`), the
-    reference solves already made (:func:`snapshot_source`, :func:`node_table_path`)."""
+    reference solves already made (:func:`snapshot_source`, :func:`node_table_path`); ``reuse``: a table whose
+    azimuths are copied, not solved (:func:`nodes.fem.snapshots.build_table`)."""
     _log(f"snapshots: azimuths {st.grid.angles_deg} deg, depth step {st.grid.depth_step * 1e3:g} mm, "
          f"mesh {st.snap_spec.key()} ...")
 
     table, hit, sec = load_or_build(cache, st.grid, st.snap_spec, mat, FINGER_R, build=True,
-                                    log=lambda s: _log("  " + s.strip()), solved=solved, contact=st.contact)
+                                    log=lambda s: _log("  " + s.strip()), solved=solved, contact=st.contact,
+                                    reuse=reuse)
     if hit:
         sec = float(np.sum(table["seconds"]))
     return table, hit, sec
@@ -1660,7 +1663,9 @@ def node_table_report(table: dict, paths: dict[float, dict], mat: Material, key:
         n_in = -np.array([math.cos(phi), 0.0, math.sin(phi)])
         apex = [float(sm.surface(float(phi), float(d))[0][i] @ n_in - d) * 1e3 for d in depths[1:]]
         p = paths.get(round(math.degrees(phi), 6))
-        facts = {"path": "not in this machine's cache"} if p is None else {
+        gone = "taken from the table this one extends (that table's report has its path's facts)" \
+            if "reused" in table and bool(np.asarray(table["reused"])[i]) else "not in this machine's cache"
+        facts = {"path": gone} if p is None else {
             "dofs": int(p["dofs"]), "cpu_seconds_loading": float(p["cpu_seconds"]),
             "unload_seconds": float(p["unload_seconds"]) if "unload_seconds" in p else None,
             "newton_iterations": int(np.sum(p["newton"])), "converged": bool(np.all(p["converged"])),
@@ -1848,7 +1853,8 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
     the cache lacks are solved in ``jobs`` worker processes first (:func:`prefetch`). ``ship``: also write the
     table, packed (:func:`nodes.fem.snapshots.pack_table`: float16 surface fields, compressed), into the
     repository's ``nodes/fem/data/`` (:meth:`nodes.fem.cache.ArrayCache.ship`), where the node finds it on a
-    machine that never solved it. ``out``: write ``node_table.json/png`` there (:func:`node_table_report`), with
+    machine that never solved it. A table on fewer azimuths in the cache or the shipped store
+    (:func:`nodes.fem.snapshots.reusable_table`) is extended: only the azimuths it lacks are solved. ``out``: write ``node_table.json/png`` there (:func:`node_table_report`), with
     the table judged at each ``holdout`` azimuth (deg, between the table's) against its own solve
     (:func:`node_table_holdout`; solved unless cached) and between its depths at each ``between`` azimuth (deg,
     one of the table's; :func:`node_table_between_depths`); ``twin`` (``--mesh-check``): each held-out push also
@@ -1870,8 +1876,13 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
     if hit:     # in the cache or shipped: its paths are not solved again (a held-out check needs only its own)
         _log("node table found (this machine's cache or nodes/fem/data): not solving its paths again")
     else:
-        prefetch([Solve(DEFAULT_REF_SPEC, a, DEFAULT_GRID.depth_step, stable=True) for a in DEFAULT_GRID.angles_deg],
-                 jobs, mat, cache, verts, contact)
+        base = reusable_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, FINGER_R, contact)
+        have = set() if base is None else {round(float(a), 6) for a in np.degrees(base["angles"])}
+        if base is not None:
+            _log(f"node table: extending the table on azimuths {sorted(have)} deg (this machine's cache or "
+                 f"nodes/fem/data): only {[a for a in DEFAULT_GRID.angles_deg if a not in have]} deg are solved")
+        prefetch([Solve(DEFAULT_REF_SPEC, a, DEFAULT_GRID.depth_step, stable=True) for a in DEFAULT_GRID.angles_deg
+                  if a not in have], jobs, mat, cache, verts, contact)
 
         def solved(ang, model, depths):
             states = _path_states(*node_table_path(ang, mat, cache, rm, contact), depths, model)
@@ -1879,12 +1890,15 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
                 raise RuntimeError(f"the node table's path at {ang:g} deg lacks a depth of {DEFAULT_GRID.key()}")
             return states
 
-        table, _, sec = snapshot_table(st, mat, cache, solved)
+        table, _, sec = snapshot_table(st, mat, cache, solved, reuse=base)
         _log(f"node table built in {sec:.0f} s: {sum(v.nbytes for v in table.values()) / 1e6:.0f} MB; total "
              f"{time.perf_counter() - t0:.0f} s. The FEM node loads it at start (model: auto)")
     depths = _depths(DEFAULT_GRID.depth_step)
     paths = {a: _cached_path(DEFAULT_REF_SPEC, a, depths, mat, cache, verts, contact) for a in DEFAULT_GRID.angles_deg}
-    missing = [a for a, q in paths.items() if q is None]
+    # an azimuth copied from an extended table was checked when that table shipped (or was built from this cache)
+    flags = np.asarray(table["reused"], bool) if "reused" in table else np.zeros(len(DEFAULT_GRID.angles_deg), bool)
+    reused = {a for a, r in zip(DEFAULT_GRID.angles_deg, flags, strict=True) if r}
+    missing = [a for a, q in paths.items() if q is None and a not in reused]
     unconverged = [a for a, q in paths.items() if q is not None and not np.all(q["converged"])]
     if ship and (missing or unconverged):
         raise SystemExit(f"flexsheet experiment fem: not shipping the node table: Newton did not converge at every "

@@ -58,7 +58,10 @@ class SnapshotGrid:
     spacing along y near the push plane (coarser by 2× beyond 20 mm and 40 mm), ``drho`` m radial spacing on
     the cap. Raises ``ValueError`` on bad values."""
 
-    angles_deg: tuple[float, ...] = (0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0)
+    #: every 10°, and 5° and 55° besides (sessions 21-22): past ~35 mm the push at 5° is not a blend of the 0° and
+    #: 10° pushes turned to it (held out, 2.33 mm off at 47.5 mm; no blend weight gets within 0.85 mm at 40-50 mm),
+    #: nor 55° of 50° and 60° (1.44 mm at 35 mm); docs/fem.md
+    angles_deg: tuple[float, ...] = (0.0, 5.0, 10.0, 20.0, 30.0, 40.0, 50.0, 55.0, 60.0)
     depth_max: float = 0.05
     depth_step: float = 0.0025
     dtheta_deg: float = 0.5
@@ -112,6 +115,9 @@ class SnapshotGrid:
 
 
 DEFAULT_GRID = SnapshotGrid()
+#: the node table's azimuths before session 22 added 5° and 55° (shipped in sessions 18-21): the table on them
+#: is extended azimuth by azimuth (:func:`reusable_table`), not solved again
+PREVIOUS_ANGLES_DEG = (0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0)
 #: mesh of the snapshot solves = the next-to-finest mesh of the experiment's convergence study (judged against
 #: the finest, 2.5 mm): P2, 12 mm elements, 3.4 mm within 18 mm of the fingertip's whole push path (55 mm deep)
 #: (docs/fem.md; a cut half model of ~31 000 DOF, ~40–70 min of one core per azimuth other than 0:
@@ -142,9 +148,9 @@ def table_key(grid: SnapshotGrid, spec: RefSpec, nu: float, finger_radius: float
 
 def load_or_build(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float,
                   build: bool = True, log=None, solved=None,
-                  contact: str = DEFAULT_CONTACT) -> tuple[dict | None, bool, float]:
+                  contact: str = DEFAULT_CONTACT, reuse: dict | None = None) -> tuple[dict | None, bool, float]:
     """(table or None, cache hit, seconds): the table from ``cache`` (:class:`nodes.fem.cache.ArrayCache`), or
-    built and stored when ``build`` (``solved``, ``contact``: as :func:`build_table`)."""
+    built and stored when ``build`` (``solved``, ``contact``, ``reuse``: as :func:`build_table`)."""
     key = table_key(grid, spec, material.nu, finger_radius, contact, material.Jm)
     z = cache.load("snapshots", key)
     if z is not None:
@@ -152,9 +158,26 @@ def load_or_build(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, 
     if not build:
         return None, False, 0.0
     t = time.perf_counter()
-    z = build_table(grid, spec, material, finger_radius, log=log, solved=solved, contact=contact)
+    z = build_table(grid, spec, material, finger_radius, log=log, solved=solved, contact=contact, reuse=reuse)
     cache.save("snapshots", key, z)
     return z, False, time.perf_counter() - t
+
+
+def reusable_table(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float,
+                   contact: str = DEFAULT_CONTACT,
+                   previous: tuple[tuple[float, ...], ...] = (PREVIOUS_ANGLES_DEG,)) -> dict | None:
+    """A cached or shipped table that :func:`build_table` can extend to ``grid`` (its ``reuse``): the table of the
+    same mesh spec, material, finger radius (m) and contact law on ``grid``'s samples but an earlier azimuth set,
+    each of ``previous`` tried in turn (only sets that are a proper subset of ``grid``'s azimuths); None when none
+    is there. Its cache key (:func:`table_key`) is what vouches for the spec, material and contact."""
+    for angles in previous:
+        if set(angles) >= set(grid.angles_deg) or not set(angles) <= set(grid.angles_deg):
+            continue
+        z, hit, _ = load_or_build(cache, replace(grid, angles_deg=tuple(angles)), spec, material, finger_radius,
+                                  build=False, contact=contact)
+        if hit:
+            return z
+    return None
 
 
 def pack_table(table: dict) -> tuple[dict, float]:
@@ -188,14 +211,21 @@ def surface_coords(points: np.ndarray, radius: float, length: float, center: np.
 
 
 def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float, log=None,
-                progress=None, solved=None, contact: str = DEFAULT_CONTACT) -> dict[str, np.ndarray]:
+                progress=None, solved=None, contact: str = DEFAULT_CONTACT,
+                reuse: dict | None = None) -> dict[str, np.ndarray]:
     """Run the nonlinear reference at every snapshot azimuth and sample the surface; returns the table arrays
     (see :class:`SnapshotModel`). Heavy (minutes per azimuth on a small machine): cache the result
     (:class:`nodes.fem.cache.ArrayCache`). ``spec.half_z`` is used for the azimuth-0 snapshot only.
     ``solved``: optional callable (azimuth deg, model, depths m) -> list of :class:`PathState` (or None to
     solve here: the loading path and, frictionless, its stable branch, :func:`nodes.fem.hyperelastic.stable_states`),
     e.g. the experiment's cached stable paths on the same mesh, so nothing is solved twice.
-    ``contact``: the finger's contact law (:func:`nodes.fem.hyperelastic.solve_path_capsule`)."""
+    ``contact``: the finger's contact law (:func:`nodes.fem.hyperelastic.solve_path_capsule`).
+    ``reuse``: optional table of the **same** mesh spec, material, finger and contact law holding some of
+    ``grid``'s azimuths (e.g. the shipped table before azimuths were added, :func:`reusable_table`): those
+    azimuths are copied from it, not solved (its surface fields as stored: float16 in a shipped table, ≤ 0.015
+    mm). The caller vouches for the spec, material, finger and contact (its cache key); its samples (depths, θ,
+    y, ρ, E, version) are checked here: ``ValueError`` when they differ. The result's ``reused`` (A,) bool marks
+    the copied azimuths."""
     log = log or (lambda s: None)
     from flexsheet.model.scene import CYLINDER_CENTER, CYLINDER_LENGTH, CYLINDER_RADIUS
 
@@ -217,7 +247,17 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
     T2, P2 = np.meshgrid(th[free], rh, indexing="ij")
     cap_pts = np.column_stack([c[0] + P2.ravel() * np.cos(T2.ravel()), np.full(T2.size, c[1] + L / 2),
                                c[2] + P2.ravel() * np.sin(T2.ravel())])
+    reused = np.zeros(na, bool)
+    src = _reuse_index(reuse, grid, depths, th, ys, rh, material) if reuse is not None else {}
     for i, ang in enumerate(grid.angles_deg):
+        if ang in src:
+            k = src[ang]
+            side[i], capf[i] = np.asarray(reuse["side"][k], np.float32), np.asarray(reuse["cap"][k], np.float32)
+            force[i], strain[i], inverted[i] = reuse["force"][k], reuse["max_strain"][k], reuse["inverted"][k]
+            min_detf[i], newton[i], seconds[i] = reuse["min_detF"][k], reuse["newton"][k], reuse["seconds"][k]
+            reused[i] = True
+            log(f"fem: snapshots at {ang:g} deg taken from the table being extended (not solved again)")
+            continue
         t0 = time.perf_counter()
         s = spec if ang == 0.0 else replace(spec, half_z=False)
         mesh = reference_mesh(s, ang)
@@ -250,7 +290,29 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
     return {"version": np.array(TABLE_VERSION), "E": np.array(material.E), "angles": np.radians(np.asarray(grid.angles_deg, float)),
             "depths": depths, "theta": th, "y": ys, "rho": rh, "side": side, "cap": capf, "force": force,
             "max_strain": strain, "inverted": inverted, "min_detF": min_detf, "newton": newton,
-            "seconds": seconds, "radius": np.array(R), "length": np.array(L), "center": np.asarray(c, float)}
+            "seconds": seconds, "radius": np.array(R), "length": np.array(L), "center": np.asarray(c, float),
+            "reused": reused}
+
+
+def _reuse_index(reuse: dict, grid: SnapshotGrid, depths, th, ys, rh, material: Material) -> dict[float, int]:
+    """{azimuth deg of ``grid`` → its index in ``reuse``} for the azimuths ``reuse`` holds; ``ValueError`` when
+    ``reuse`` is sampled otherwise (version, E, depths, θ, y, ρ) than :func:`build_table` would sample."""
+    if str(reuse.get("version", "")) != TABLE_VERSION:
+        raise ValueError(f"reuse: snapshot table version {reuse.get('version')!r} != {TABLE_VERSION!r}")
+    if float(reuse["E"]) != material.E:
+        raise ValueError(f"reuse: table E {float(reuse['E'])!r} Pa != material E {material.E!r} Pa")
+    for name, mine in (("depths", depths), ("theta", th), ("y", ys), ("rho", rh)):
+        theirs = np.asarray(reuse[name], float)
+        if theirs.shape != mine.shape or not np.allclose(theirs, mine, rtol=0.0, atol=1e-12):
+            raise ValueError(f"reuse: the table's {name} samples differ from this grid's ({theirs.shape} vs "
+                             f"{mine.shape})")
+    have = np.degrees(np.asarray(reuse["angles"], float))
+    out = {}
+    for ang in grid.angles_deg:
+        k = np.flatnonzero(np.abs(have - ang) < 1e-9)
+        if k.size:
+            out[ang] = int(k[0])
+    return out
 
 
 def _probe(model: HyperelasticModel, x: np.ndarray):
