@@ -225,10 +225,11 @@ def _parser() -> argparse.ArgumentParser:
                         f"{GENT_JM_RUBBER:g}); full: ~1 h of two cores cold here, seconds cached; writes "
                         "material_study.json/png, then exits")
     p.add_argument("--node-table", action="store_true",
-                   help="build the FEM node's nonlinear snapshot table (azimuths 0-60 deg every 10 deg, 2.5 mm depth "
-                        "steps, on the full run's h_fine 3.4 mm mesh) into the cache the node reads, then exit. "
-                        "~40 min of one core per azimuth (0 is shared with the full run's 3.4 mm level); every "
-                        "azimuth's solve is cached")
+                   help="build the FEM node's nonlinear snapshot table (azimuths 0, 5, 10-50 every 10, 55 and 60 deg, "
+                        "2.5 mm depth steps, on the full run's h_fine 3.4 mm mesh) into the cache the node reads, "
+                        "then exit. ~40 min of one core per azimuth (0 is shared with the full run's 3.4 mm level); "
+                        "every azimuth's solve is cached, and a cached or shipped table on fewer azimuths is "
+                        "extended (only the azimuths it lacks are solved)")
     p.add_argument("--ship", action="store_true",
                    help="with --node-table: also write the table, packed (float16 surface fields, compressed), into "
                         "nodes/fem/data/, which the node reads on a machine that never solved it (commit it)")
