@@ -454,7 +454,7 @@ def test_a_table_is_extended_azimuth_by_azimuth_from_a_shipped_one(tmp_path):
     shipped one would be) gives its azimuths as they are stored, and only the new azimuth is solved; the extended
     table equals the one built whole within float16's rounding (exactly at the solved azimuth); a table sampled
     otherwise is refused, and reusable_table finds only a proper subset of the grid's azimuths."""
-    from nodes.fem.snapshots import build_table, load_or_build, pack_table, reusable_table
+    from nodes.fem.snapshots import build_table, load_or_build, pack_table, reusable_table, reused_azimuths
 
     spec = H.RefSpec(0.016, 0.012, 0.012, half_z=True, path_depth=0.012, cut=True)
     grid = SnapshotGrid(angles_deg=(0.0, 10.0, 20.0), depth_max=0.005, depth_step=0.0025, dtheta_deg=5.0,
@@ -474,6 +474,7 @@ def test_a_table_is_extended_azimuth_by_azimuth_from_a_shipped_one(tmp_path):
     asked.clear()
     ext = build_table(grid, spec, MAT, 0.008, solved=lambda a, m, d: _linear_states(m, a, d, asked), reuse=found)
     assert asked == [10.0] and ext["reused"].tolist() == [True, False, True]
+    assert reused_azimuths(ext) == {0.0, 20.0} and reused_azimuths(whole) == set() and reused_azimuths(base) == set()
     assert np.array_equal(ext["side"][1], whole["side"][1]) and np.array_equal(ext["cap"][1], whole["cap"][1])
     for f in ("side", "cap"):
         diff = np.abs(ext[f] - whole[f]).max()

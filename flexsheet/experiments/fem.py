@@ -104,7 +104,14 @@ from nodes.fem.hyperelastic import (
 from nodes.fem.material import GENT_JM_RUBBER, Material
 from nodes.fem.mesh import MeshSpec
 from nodes.fem.realtime import RealtimeModel
-from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, SnapshotGrid, load_or_build, reusable_table
+from nodes.fem.snapshots import (
+    DEFAULT_GRID,
+    DEFAULT_REF_SPEC,
+    SnapshotGrid,
+    load_or_build,
+    reusable_table,
+    reused_azimuths,
+)
 from nodes.fem.solver import solve_full
 
 __all__ = ["main", "Settings", "settings_for"]
@@ -1659,13 +1666,14 @@ def node_table_report(table: dict, paths: dict[float, dict], mat: Material, key:
     depths = np.asarray(table["depths"], float)
     pts = np.column_stack([c[0] + R * np.cos(phis), np.full(len(phis), c[1]), c[2] + R * np.sin(phis)])
     sm = SnapshotModel(table, pts, E=mat.E)
+    reused = reused_azimuths(table)
     rows = []
     for i, phi in enumerate(phis):
         n_in = -np.array([math.cos(phi), 0.0, math.sin(phi)])
         apex = [float(sm.surface(float(phi), float(d))[0][i] @ n_in - d) * 1e3 for d in depths[1:]]
         p = paths.get(round(math.degrees(phi), 6))
         gone = "taken from the table this one extends (that table's report has its path's facts)" \
-            if "reused" in table and bool(np.asarray(table["reused"])[i]) else "not in this machine's cache"
+            if round(math.degrees(phi), 6) in reused else "not in this machine's cache"
         facts = {"path": gone} if p is None else {
             "dofs": int(p["dofs"]), "cpu_seconds_loading": float(p["cpu_seconds"]),
             "unload_seconds": float(p["unload_seconds"]) if "unload_seconds" in p else None,
@@ -1855,7 +1863,8 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
     table, packed (:func:`nodes.fem.snapshots.pack_table`: float16 surface fields, compressed), into the
     repository's ``nodes/fem/data/`` (:meth:`nodes.fem.cache.ArrayCache.ship`), where the node finds it on a
     machine that never solved it. A table on fewer azimuths in the cache or the shipped store
-    (:func:`nodes.fem.snapshots.reusable_table`) is extended: only the azimuths it lacks are solved. ``out``: write ``node_table.json/png`` there (:func:`node_table_report`), with
+    (:func:`nodes.fem.snapshots.reusable_table`) is extended: only the azimuths it lacks are solved. ``out``:
+    write ``node_table.json/png`` there (:func:`node_table_report`), with
     the table judged at each ``holdout`` azimuth (deg, between the table's) against its own solve
     (:func:`node_table_holdout`; solved unless cached) and between its depths at each ``between`` azimuth (deg,
     one of the table's; :func:`node_table_between_depths`); ``twin`` (``--mesh-check``): each held-out push also
@@ -1897,9 +1906,8 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
     depths = _depths(DEFAULT_GRID.depth_step)
     paths = {a: _cached_path(DEFAULT_REF_SPEC, a, depths, mat, cache, verts, contact) for a in DEFAULT_GRID.angles_deg}
     # an azimuth copied from an extended table was checked when that table shipped (or was built from this cache)
-    flags = np.asarray(table["reused"], bool) if "reused" in table else np.zeros(len(DEFAULT_GRID.angles_deg), bool)
-    reused = {a for a, r in zip(DEFAULT_GRID.angles_deg, flags, strict=True) if r}
-    missing = [a for a, q in paths.items() if q is None and a not in reused]
+    reused = reused_azimuths(table)
+    missing = [a for a, q in paths.items() if q is None and round(a, 6) not in reused]
     unconverged = [a for a, q in paths.items() if q is not None and not np.all(q["converged"])]
     if ship and (missing or unconverged):
         raise SystemExit(f"flexsheet experiment fem: not shipping the node table: Newton did not converge at every "

@@ -58,9 +58,9 @@ class SnapshotGrid:
     spacing along y near the push plane (coarser by 2× beyond 20 mm and 40 mm), ``drho`` m radial spacing on
     the cap. Raises ``ValueError`` on bad values."""
 
-    #: every 10°, and 5° and 55° besides (sessions 21-22): past ~35 mm the push at 5° is not a blend of the 0° and
-    #: 10° pushes turned to it (held out, 2.33 mm off at 47.5 mm; no blend weight gets within 0.85 mm at 40-50 mm),
-    #: nor 55° of 50° and 60° (1.44 mm at 35 mm); docs/fem.md
+    #: every 10°, and 5° and 55° besides (sessions 21-22): held out of the 10° table, the push at 5° was 2.33 mm
+    #: off at 47.5 mm and at 55° 1.44 mm at 35 mm (docs/figures/fem/node_table_seven); held out of this one, 15° is
+    #: within 0.66 mm and 7.5° still 1.96 mm off at 50 mm (docs/figures/fem/node_table, docs/fem.md)
     angles_deg: tuple[float, ...] = (0.0, 5.0, 10.0, 20.0, 30.0, 40.0, 50.0, 55.0, 60.0)
     depth_max: float = 0.05
     depth_step: float = 0.0025
@@ -171,7 +171,7 @@ def reusable_table(cache, grid: SnapshotGrid, spec: RefSpec, material: Material,
     each of ``previous`` tried in turn (only sets that are a proper subset of ``grid``'s azimuths); None when none
     is there. Its cache key (:func:`table_key`) is what vouches for the spec, material and contact."""
     for angles in previous:
-        if set(angles) >= set(grid.angles_deg) or not set(angles) <= set(grid.angles_deg):
+        if not set(angles) < set(grid.angles_deg):
             continue
         z, hit, _ = load_or_build(cache, replace(grid, angles_deg=tuple(angles)), spec, material, finger_radius,
                                   build=False, contact=contact)
@@ -292,6 +292,15 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
             "max_strain": strain, "inverted": inverted, "min_detF": min_detf, "newton": newton,
             "seconds": seconds, "radius": np.array(R), "length": np.array(L), "center": np.asarray(c, float),
             "reused": reused}
+
+
+def reused_azimuths(table: dict) -> set[float]:
+    """The azimuths (deg, rounded to 10⁻⁶) that :func:`build_table` copied from the table it extended (its
+    ``reused`` flags); empty for a table built whole or before the flags existed."""
+    if "reused" not in table:
+        return set()
+    return {round(math.degrees(float(a)), 6) for a, r in
+            zip(np.asarray(table["angles"]), np.asarray(table["reused"], bool), strict=True) if r}
 
 
 def _reuse_index(reuse: dict, grid: SnapshotGrid, depths, th, ys, rh, material: Material) -> dict[float, int]:
