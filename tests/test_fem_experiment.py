@@ -744,11 +744,11 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
     for args, word in ((["--node-table", "--holdout-azimuth", "10"], "strictly between"),
                        (["--node-table", "--holdout-azimuth", "5"], "strictly between"),      # a table azimuth
                        (["--node-table", "--holdout-azimuth", "75"], "strictly between"),
-                       (["--holdout-azimuth", "7.5"], "is for --node-table"),
+                       (["--holdout-azimuth", "8.75"], "is for --node-table"),
                        (["--node-table", "--ship", "--azimuth", "10"], "--ship is for"),
                        (["--ship"], "--ship is for"),
                        (["--node-table", "--ship", "--contact", "sticking"], "frictionless"),
-                       (["--node-table", "--between-depths", "7.5"], "one of the node table's"),
+                       (["--node-table", "--between-depths", "8.75"], "one of the node table's"),
                        (["--between-depths", "0"], "is for --node-table"),
                        (["--node-table", "--mesh-check"], "--mesh-check is for")):
         with pytest.raises(SystemExit, match=word):

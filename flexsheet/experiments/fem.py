@@ -232,7 +232,7 @@ def _parser() -> argparse.ArgumentParser:
                         f"{GENT_JM_RUBBER:g}); full: ~1 h of two cores cold here, seconds cached; writes "
                         "material_study.json/png, then exits")
     p.add_argument("--node-table", action="store_true",
-                   help="build the FEM node's nonlinear snapshot table (azimuths 0, 5, 10-50 every 10, 55 and 60 deg, "
+                   help="build the FEM node's nonlinear snapshot table (azimuths 0, 5, 7.5, 10-50 every 10, 55 and 60 deg, "
                         "2.5 mm depth steps, on the full run's h_fine 3.4 mm mesh) into the cache the node reads, "
                         "then exit. ~40 min of one core per azimuth (0 is shared with the full run's 3.4 mm level); "
                         "every azimuth's solve is cached, and a cached or shipped table on fewer azimuths is "
