@@ -709,6 +709,13 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
     assert specs == [X.DEFAULT_REF_SPEC, X.twin_spec(X.DEFAULT_REF_SPEC)]
     assert specs[1].refine_radius == pytest.approx(X.DEFAULT_REF_SPEC.refine_radius + 1e-4)
     assert h["twin"]["noise_mm"] == pytest.approx([0.5, 0.0], abs=1e-6) and h["error_mm"][1] == pytest.approx(1.0, abs=1e-3)
+    # two tables judged side by side at the same pushes: the held-out one's error as node_table_holdout gives it,
+    # and a table azimuth named as held, not judged
+    rows = X.node_table_compare({"a": tab, "b": tab}, [5.0, 10.0], mat, None, rm)
+    assert [r["azimuth_deg"] for r in rows] == [5.0, 10.0] and rows[0]["depths_mm"] == pytest.approx([10.0, 20.0])
+    assert rows[0]["a"] == rows[0]["b"] and rows[0]["a"]["error_mm"][1] == pytest.approx(1.0, abs=1e-3)
+    assert rows[0]["a"]["over_target_from_mm"] == pytest.approx(20.0) and rows[1] == {
+        "azimuth_deg": 10.0, "a": "holds this azimuth", "b": "holds this azimuth"}
     for bad in (0.0, 10.0, 12.0, -3.0):
         with pytest.raises(ValueError, match="held-out azimuth"):
             X.node_table_holdout(tab, mat, None, rm, bad)

@@ -1743,6 +1743,27 @@ def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: Realti
     return row
 
 
+def node_table_compare(tables: dict[str, dict], azimuths, mat: Material, cache: ArrayCache, rm: RealtimeModel,
+                       contact: str = DEFAULT_CONTACT) -> list[dict]:
+    """Several tables (name → table, e.g. the node's before and after azimuths were added) judged at the same
+    held-out ``azimuths`` (deg) as :func:`node_table_holdout` judges each (its push solved unless cached). One row
+    per azimuth: {"azimuth_deg", "depths_mm", and per name {"error_mm" (rounded to µm), "max_error_mm",
+    "over_target_from_mm"} or "holds this azimuth" where that table holds it}."""
+    rows = []
+    for az in (float(a) for a in azimuths):
+        row: dict = {"azimuth_deg": az}
+        for name, tab in tables.items():
+            if np.any(np.abs(np.degrees(np.asarray(tab["angles"], float)) - az) < 1e-9):
+                row[name] = "holds this azimuth"
+                continue
+            r = node_table_holdout(tab, mat, cache, rm, az, contact)
+            row[name] = {"error_mm": [round(e, 3) for e in r["error_mm"]], "max_error_mm": round(r["max_error_mm"], 3),
+                         "over_target_from_mm": r["over_target_from_mm"]}
+            row["depths_mm"] = r["depths_mm"]
+        rows.append(row)
+    return rows
+
+
 def node_table_between_depths(table: dict, mat: Material, cache: ArrayCache, rm: RealtimeModel,
                               azimuth_deg: float, contact: str = DEFAULT_CONTACT) -> dict:
     """The node's table between its depths, at one of its azimuths: against that push's own stable path on the

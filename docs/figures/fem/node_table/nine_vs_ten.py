@@ -2,7 +2,6 @@
 the nine-azimuth table (session 22) and the ten-azimuth one (session 23) judged at the same held-out azimuths
 against the cached stable paths, as node_table_holdout judges. Writes nine_vs_ten.json in the working folder."""
 import json, sys
-import numpy as np
 sys.path.insert(0, ".")
 from dataclasses import replace
 from flexsheet.experiments import fem as F
@@ -17,19 +16,8 @@ tabs = {n: cache.load("snapshots", table_key(g, DEFAULT_REF_SPEC, mat.nu, F.FING
         for n, g in (("nine", replace(DEFAULT_GRID, angles_deg=PREVIOUS_ANGLES_DEG)), ("ten", DEFAULT_GRID))}
 out = {"what": "largest visible-surface error (mm) of each table at a held-out azimuth against that push's own "
                "stable path on the table's mesh (node_table_holdout); one-off script, session 23",
-       "rows": []}
-for az in [float(a) for a in sys.argv[1:]]:
-    row = {"azimuth_deg": az}
-    for name, tab in tabs.items():
-        held = np.degrees(tab["angles"])
-        if np.any(np.abs(held - az) < 1e-9):
-            row[name] = "holds this azimuth"
-            continue
-        r = F.node_table_holdout(tab, mat, cache, rm, az)
-        row[name] = {"error_mm": [round(e, 3) for e in r["error_mm"]], "max_error_mm": round(r["max_error_mm"], 3),
-                     "over_target_from_mm": r["over_target_from_mm"]}
-        row["depths_mm"] = r["depths_mm"]
-    out["rows"].append(row)
-    print(az, {k: (v["max_error_mm"], v["over_target_from_mm"]) if isinstance(v, dict) else v
-               for k, v in row.items() if k in tabs}, flush=True)
+       "rows": F.node_table_compare(tabs, sys.argv[1:], mat, cache, rm)}
+for row in out["rows"]:
+    print(row["azimuth_deg"], {k: (v["max_error_mm"], v["over_target_from_mm"]) if isinstance(v, dict) else v
+                               for k, v in row.items() if k not in ("azimuth_deg", "depths_mm")}, flush=True)
 json.dump(out, open("nine_vs_ten.json", "w"), indent=1)

@@ -18,19 +18,8 @@ nine = cache.load("snapshots", table_key(replace(DEFAULT_GRID, angles_deg=PREVIO
                                          mat.nu, F.FINGER_R, Jm=mat.Jm))
 out = {"what": "largest visible-surface error (mm) of each table at a held-out azimuth against that push's own "
                "stable path on the table's mesh (node_table_holdout); one-off script, session 22",
-       "rows": []}
-for az in [float(a) for a in sys.argv[2:]]:
-    row = {"azimuth_deg": az}
-    for name, tab in (("seven", seven), ("nine", nine)):
-        held = np.degrees(tab["angles"])
-        if np.any(np.abs(held - az) < 1e-9):
-            row[name] = "holds this azimuth"
-            continue
-        r = F.node_table_holdout(tab, mat, cache, rm, az)
-        row[name] = {"error_mm": [round(e, 3) for e in r["error_mm"]], "max_error_mm": round(r["max_error_mm"], 3),
-                     "over_target_from_mm": r["over_target_from_mm"]}
-        row["depths_mm"] = r["depths_mm"]
-    out["rows"].append(row)
-    print(az, {k: (v["max_error_mm"], v["over_target_from_mm"]) if isinstance(v, dict) else v
-               for k, v in row.items() if k in ("seven", "nine")}, flush=True)
+       "rows": F.node_table_compare({"seven": seven, "nine": nine}, sys.argv[2:], mat, cache, rm)}
+for row in out["rows"]:
+    print(row["azimuth_deg"], {k: (v["max_error_mm"], v["over_target_from_mm"]) if isinstance(v, dict) else v
+                               for k, v in row.items() if k not in ("azimuth_deg", "depths_mm")}, flush=True)
 json.dump(out, open("seven_vs_nine.json", "w"), indent=1)
