@@ -187,7 +187,7 @@ def sim_run(tmp_path_factory, sim_fem_cache):
 CPU_MODULES = frozenset({
     "test_arm_kinematics", "test_arm_motion", "test_arm_registers", "test_calibration_display_yaml",
     "test_calibration_procedures", "test_calibration_twin", "test_correction_twin", "test_fem_experiment",
-    "test_fem_fold", "test_fem_hyperelastic", "test_fem_scene", "test_fem_sphere_table", "test_fem_solver", "test_fuzz_codec", "test_fuzz_launch",
+    "test_fem_fold", "test_fem_hyperelastic", "test_fem_path_table", "test_fem_scene", "test_fem_sphere_table", "test_fem_solver", "test_fuzz_codec", "test_fuzz_launch",
     "test_planner_report", "test_planner_shapes", "test_planner_sheet", "test_planner_stroke",
     "test_render_correction", "test_render_gl", "test_render_live_sheet", "test_runtime_codec", "test_scenes",
     "test_sheet_fem_lowstretch", "test_twin_arm", "test_twin_sheet", "test_twin_stability",

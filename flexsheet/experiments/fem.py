@@ -185,7 +185,9 @@ def _parser() -> argparse.ArgumentParser:
                                        "         flexsheet experiment fem --quick --fold-study --out /tmp/fem\n"
                                        "         flexsheet experiment fem --quick --material-study --out /tmp/fem\n"
                                        "         flexsheet experiment fem --quick --scene launch/scenes/sphere.yaml "
-                                       "--out /tmp/fem_sphere")
+                                       "--out /tmp/fem_sphere\n"
+                                       "         flexsheet experiment fem --scene launch/scenes/rounded_box.yaml "
+                                       "--node-table --jobs 2 --out /tmp/rb_table")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--quick", action="store_true", help="coarse meshes, azimuth 0 only (minutes cold, seconds cached)")
     p.add_argument("--nu", type=float, default=None,
@@ -260,6 +262,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, default=default_jobs(), metavar="N",
                    help="solve the independent reference pushes the cache lacks in N worker processes first "
                         "(default %(default)s: the cores here; 1 solves them one by one in this process)")
+    p.add_argument("--stations", type=int, default=7, metavar="K",
+                   help="with --scene (not the cylinder or the sphere) --node-table: the path table's stations, K "
+                        "evenly spaced fractions of the stroke, ends included (default %(default)s; each a 0-50 mm "
+                        "push, ~1-3 min of one core on the rounded box); see flexsheet.experiments.path_table")
+    p.add_argument("--holdout-fraction", type=float, action="append", default=[], metavar="F",
+                   help="with --scene (not the cylinder or the sphere) --node-table: judge the path table at this "
+                        "fraction of the stroke (between stations) against that push's own solve (default: the "
+                        "midpoints of every second interval). Repeatable")
     p.add_argument("--scene", default=None,
                    help="scene file (launch/scenes/*.yaml); another object than the paper's cylinder runs "
                         "flexsheet.experiments.fem_scene on it (same summary keys), e.g. --scene "
@@ -2163,6 +2173,18 @@ def main(argv: list[str] | None = None) -> int:
         if not is_paper_cylinder(sc) and args.between_depths:
             raise SystemExit("flexsheet experiment fem: --between-depths is for the paper's cylinder's table")
         if not is_paper_cylinder(sc) and args.node_table:
+            from nodes.fem.sphere_snapshots import sphere_frame
+
+            try:
+                sphere_frame(sc)
+            except ValueError:          # no symmetry to carry one push onto another: the path table
+                from flexsheet.experiments.path_table import build_path_table
+
+                if args.azimuth is not None or args.holdout_azimuth:
+                    raise SystemExit("flexsheet experiment fem: --azimuth / --holdout-azimuth are the cylinder's and "
+                                     "the sphere's; a path table takes --stations and --holdout-fraction") from None
+                return build_path_table(args.scene, args.out, args.cache_dir or None, args.stations,
+                                        tuple(args.holdout_fraction) or None, args.jobs, args.mesh_check, args.ship)
             from flexsheet.experiments.sphere_table import build_sphere_table
 
             return build_sphere_table(args.scene, args.out, args.cache_dir or None, args.azimuth,

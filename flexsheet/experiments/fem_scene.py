@@ -54,6 +54,7 @@ import time
 import numpy as np
 
 from nodes.fem.choose import visible_mask
+from nodes.fem.path_snapshots import GRID
 
 __all__ = ["run_scene", "main", "TARGET_MM", "QUICK", "FULL"]
 
@@ -61,17 +62,26 @@ TARGET_MM = 0.7                      #: one projector pixel on the screen, mm
 #: settings: push fractions along the stroke, recorded depths (m), load step (m), reference levels' h_fine (m)
 QUICK = {"fractions": (0.5,), "depths": tuple(np.round(np.arange(1, 7) * 0.005, 4)), "step": 0.0025,
          "levels": (0.008,), "h": 0.012, "refine_radius": 0.015, "path_depth": 0.0, "n_time": 100}
-FULL = {"fractions": (0.0, 0.5, 1.0), "depths": tuple(np.round(np.arange(1, 11) * 0.005, 4)), "step": 0.0025,
-        "levels": (0.006, 0.004, 0.003), "h": 0.012, "refine_radius": 0.015, "path_depth": 0.05, "n_time": 300}
+#: the full run: its first level is the path table's stations' mesh (:data:`nodes.fem.path_snapshots.GRID`), with
+#: the same outputs, so the pushes at the stroke's start, middle and end are shared with a 7-station table
+FULL = {"fractions": (0.0, 0.5, 1.0),
+        "depths": tuple(np.round(np.arange(1, int(round(GRID["depth_max"] / GRID["step"])) + 1) * GRID["step"], 9)),
+        "step": GRID["step"], "levels": (GRID["h_fine"], 0.004, 0.003), "h": GRID["h"],
+        "refine_radius": GRID["refine_radius"], "path_depth": GRID["path_depth"], "n_time": 300}
 
 
 def _log(msg: str) -> None:
     print(f"[fem_scene] {msg}", file=sys.stderr, flush=True)
 
 
-def _reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, probes: np.ndarray, cache) -> dict:
-    """The scene's hyperelastic push (its material, its finger's contact law) at surface point ``q`` along −``n`` through ``st['depths']`` on a mesh refined to
-    ``h_fine`` around ``q``; displacements sampled at ``probes`` (k, 3) m; cached."""
+def scene_reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, probes: np.ndarray, cache) -> dict:
+    """The scene's hyperelastic push (its material, its finger's contact law) at surface point ``q`` (3,) m along
+    −``n`` (outward unit normal (3,)) through ``st['depths']`` (D,) m (load steps ``st['step']``) on a mesh of size
+    ``st['h']`` refined to ``h_fine`` m within ``st['refine_radius']`` of ``q`` (``st['path_depth']`` > 0: of the
+    whole push path down to that depth); cached (kind "scenereference"). Returns arrays: ``u`` (D, k, 3) m the
+    displacements at ``probes`` (k, 3) m, ``force`` (D,) N, ``converged``, ``inverted``, ``max_strain`` (D,)
+    (largest principal Green–Lagrange strain), ``seconds``, ``dofs``, and the mesh (``points``, ``tets``,
+    ``fixed``, ``E``, ``nu``)."""
     from nodes.fem.cache import cache_key
     from nodes.fem.hyperelastic import SOLVER_VERSION, Capsule, HyperelasticModel, solve_path_capsule
     from nodes.fem.material import Material
@@ -80,7 +90,7 @@ def _reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, probes
 
     depths = np.asarray(st["depths"], float)
     path = float(st.get("path_depth", 0.0))
-    key = cache_key("scene-ref-1", SOLVER_VERSION, sc.key(), h_fine, st["h"], st["refine_radius"], st["step"],
+    key = cache_key("scene-ref-2", SOLVER_VERSION, sc.key(), h_fine, st["h"], st["refine_radius"], st["step"],
                     np.round(q, 9).tolist(), np.round(n, 9).tolist(), np.round(depths, 9).tolist(),
                     cache_key(np.round(probes, 9).tobytes()), *([f"path={path:.6g}"] if path > 0 else []))
     # refine around the push point, or (path_depth > 0) along the whole push path: balls every
@@ -103,7 +113,7 @@ def _reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, probes
         P = model.probe_matrix(probes)
         return {"u": np.stack([np.asarray(P @ s.u) for s in states]), "force": np.array([s.force for s in states]),
                 "converged": np.array([s.converged for s in states]), "inverted": np.array([s.inverted for s in states]),
-                "seconds": np.array(time.perf_counter() - t), "dofs": np.array(model.n),
+                "max_strain": np.array([s.max_strain for s in states]), "seconds": np.array(time.perf_counter() - t), "dofs": np.array(model.n),
                 "points": sm.mesh.points, "tets": sm.mesh.tets, "fixed": sm.mesh.fixed, "E": sm.E, "nu": sm.nu}
 
     z, _, _ = cache.get_or_compute("scenereference", key, compute, f"scene reference h_fine {h_fine * 1e3:g} mm")
@@ -153,21 +163,15 @@ def _update_ms(rt, sc, depths, n_calls: int) -> dict:
 
 def _attach_table(sc, rt, cache) -> str | None:
     """Attach the scene's nonlinear table to the real-time model ``rt`` as the FEM node does
-    (:meth:`nodes.fem.node.FemNode._setup_sphere_snapshots`): a sphere scene whose table this machine's cache or
-    the shipped store holds. Returns where it came from ("cache" / "shipped store"), or None (no table applies
-    or none is stored: the node serves the linear model, and so is measured)."""
-    from nodes.fem.sphere_snapshots import sphere_frame, sphere_table_key
+    (:func:`nodes.fem.scene_model.attach_scene_table`: a sphere's table, any other scene's path table). Returns
+    where it came from ("cache" / "shipped store ..."), or None (none stored: the node serves the linear model,
+    and so is measured)."""
+    from nodes.fem.scene_model import attach_scene_table
 
-    try:
-        sphere_frame(sc)
-    except ValueError:
-        return None
-    table = cache.load("spheresnap", sphere_table_key(sc))
-    if table is None:
-        _log("no sphere table in the cache or the shipped store: the node serves linear, measured as such")
-        return None
-    rt.attach_sphere_snapshots(table)
-    return "shipped store (nodes/fem/data)" if cache.shipped() else "cache"
+    kind, where = attach_scene_table(rt, cache)
+    if where is None:
+        _log(f"no {kind} table in the cache or the shipped store: the node serves linear, measured as such")
+    return where
 
 
 def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | None = None) -> dict:
@@ -203,7 +207,7 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     for f in st["fractions"]:
         q, n = sc.stroke_at([f])
         q, n = q[0], n[0]
-        refs = [_reference(sc, q, n, h, st, verts, cache) for h in st["levels"]]
+        refs = [scene_reference(sc, q, n, h, st, verts, cache) for h in st["levels"]]
         fine = refs[-1]
         # hidden: deformed (reference) position within finger radius + 2 mm of the push axis (as the cylinder's)
         vis = [visible_mask(verts + fine["u"][j], finger_on_scene(q, n, float(d), sc.finger.radius)) & ~held
@@ -248,8 +252,10 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
               "max_visible_error_mm": lin_all,
               "error_mm_by_depth": np.max([p["linear_error_mm"] for p in pushes], axis=0).tolist()}
     if snap is not None:
-        method = (f"the sphere's nonlinear snapshot table (nodes/fem/sphere_snapshots.py, from the {snap}) for "
-                  "pushes inside it, the linear model elsewhere: what the FEM node serves on this scene")
+        which = ("the sphere's nonlinear snapshot table (nodes/fem/sphere_snapshots.py" if rt.path_table is None else
+                 "the scene's nonlinear path table (nodes/fem/path_snapshots.py: linear + correction")
+        method = (f"{which}, from the {snap}) for pushes inside it, the linear model elsewhere: what the FEM node "
+                  "serves on this scene")
         timing = timing_sn
     else:
         method = linear["method"] + ": what the FEM node serves on this scene"
@@ -317,7 +323,7 @@ def _plot(out_dir: str, s: dict) -> None:
     ref_ms = [1e3 * lv["seconds"] / max(1, len(s["realtime"]["depths_m"]))
               for p in s["pushes"] for lv in p["reference_levels"][-1:]]
     lin = s["realtime"]["linear"]
-    served_table = any("snapshots" in p["realtime_methods"] for p in s["pushes"])
+    served_table = any(m in ("snapshots", "path_snapshots") for p in s["pushes"] for m in p["realtime_methods"])
     pts = ([{"model": "real-time nonlinear snapshot table (served)", "update_ms": s["realtime"]["update_ms"],
              "max_visible_error_mm": max(s["realtime"]["error_mm_by_depth"])}] if served_table else []) + [
            {"model": "real-time linear P2 (capacitance)", "update_ms": lin["update_ms"],

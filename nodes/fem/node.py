@@ -166,40 +166,41 @@ class FemNode(Node):
                       order, spec.key(), m.n_nodes, m.n_candidates, m.solver.nbytes / 1e6)
         self.state_message = (f"fem: scene {sc.name!r}: linear P{order} scene model with per-element material "
                               f"({len(sc.inclusions)} inclusion(s)); nonlinear snapshots exist for the paper's "
-                              "cylinder and the sphere only")
-        self._setup_sphere_snapshots(sc)
+                              "cylinder, the sphere and along a scene's stroke (path tables) only")
+        self._setup_snapshots(sc)
         self.pub = self.publisher(topics.DEFORMATION)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
         threading.Thread(target=self._warm_sparse, name="fem-sparse", daemon=True).start()
 
-    def _setup_sphere_snapshots(self, sc: Scene) -> None:
-        """A sphere scene (:func:`nodes.fem.sphere_snapshots.sphere_frame` applies): attach its nonlinear table
-        when this machine's cache or the shipped store has it, else serve linear and name the command."""
-        from nodes.fem.sphere_snapshots import sphere_frame, sphere_table_key
+    def _setup_snapshots(self, sc: Scene) -> None:
+        """Attach the scene's nonlinear table (:func:`nodes.fem.scene_model.attach_scene_table`: a sphere's
+        sphere table, any other scene's path table along its stroke) when this machine's cache or the shipped
+        store has it, else serve linear and name the command that builds it."""
+        from nodes.fem.scene_model import attach_scene_table
 
-        try:
-            sphere_frame(sc)
-        except ValueError:
-            return
         cache = ArrayCache(self.params.cache_dir or None, self.log.info)
-        table = cache.load("spheresnap", sphere_table_key(sc))
-        if table is None:
-            self.state_message = (f"fem: scene {sc.name!r}: nonlinear sphere snapshots not cached - serving the "
-                                  "LINEAR model (build them with `flexsheet experiment fem --scene "
-                                  f"{sc.source or 'SCENE.yaml'} --node-table --out DIR`)")
-            self.log.warning(self.state_message)
-            return
         try:
-            self.model.attach_sphere_snapshots(table)
+            kind, where = attach_scene_table(self.model, cache)
         except ValueError as exc:
-            self.state_message = f"fem: scene {sc.name!r}: sphere snapshots unusable ({exc}) - serving LINEAR"
+            self.state_message = f"fem: scene {sc.name!r}: nonlinear table unusable ({exc}) - serving LINEAR"
             self.log.error(self.state_message)
             return
-        sm = self.model.snapshots
-        where = "the shipped store (nodes/fem/data)" if cache.shipped() else "cache"
-        self.state_message = (f"fem: scene {sc.name!r}: nonlinear sphere snapshots loaded from {where}: polar angle "
-                              f"<= {np.degrees(sm.alphas[-1]):.0f} deg, depth <= {sm.depth_max * 1e3:.0f} mm; "
-                              "linear elsewhere")
+        if where is None:
+            self.state_message = (f"fem: scene {sc.name!r}: no nonlinear {kind} table cached - serving the LINEAR "
+                                  f"model (build it with `flexsheet experiment fem --scene {sc.source or 'SCENE.yaml'} "
+                                  "--node-table --out DIR`)")
+            self.log.warning(self.state_message)
+            return
+        if kind == "sphere":
+            sm = self.model.snapshots
+            self.state_message = (f"fem: scene {sc.name!r}: nonlinear sphere snapshots loaded from {where}: "
+                                  f"polar angle <= {np.degrees(sm.alphas[-1]):.0f} deg, depth <= "
+                                  f"{sm.depth_max * 1e3:.0f} mm; linear elsewhere")
+        else:
+            pt = self.model.path_table
+            self.state_message = (f"fem: scene {sc.name!r}: nonlinear path table loaded from {where}: "
+                                  f"{len(pt.fractions)} stations along the stroke, depth <= {pt.depth_max * 1e3:.0f} "
+                                  f"mm, within {pt.reach * 1e3:.0f} mm of the stroke; linear elsewhere")
         self.log.info(self.state_message)
 
     def _warm_sparse(self) -> None:

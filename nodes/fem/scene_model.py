@@ -54,7 +54,7 @@ from nodes.fem.scene_mesh import DEFAULT_SCENE_SPEC, scene_mesh
 from nodes.fem.solver import CapacitanceSolver, FemModel
 
 __all__ = ["SceneModel", "SurfaceIndex", "scene_finger", "finger_on_scene", "one_blas_thread", "STICKY_DEPTH",
-           "STIFFNESS_FLOOR"]
+           "STIFFNESS_FLOOR", "attach_scene_table"]
 
 _CACHE_VERSION = "scene-1"
 #: a finger pressed at least this deep keeps its contact point and push direction, m
@@ -220,6 +220,8 @@ class SceneModel(CondensedSurface):
         self.surface = SurfaceIndex(scene)
         self._anchor: Finger | None = None
         self.snapshots = None
+        #: the nonlinear path table (:meth:`attach_path_table`), or None
+        self.path_table = None
         self.precompute_s = time.perf_counter() - t0
 
     def attach_sphere_snapshots(self, table: dict) -> None:
@@ -235,6 +237,20 @@ class SceneModel(CondensedSurface):
                              f"the scene's sphere is at {fr.center.tolist()} radius {fr.radius:g} m")
         self._held = np.asarray(self.mesh.fixed[self.surface_nodes], bool)   # the support: exactly at rest
         self.snapshots = sm
+
+    def attach_path_table(self, table: dict) -> None:
+        """Serve pushes along the stroke from a path table (:mod:`nodes.fem.path_snapshots`: the linear solve plus
+        the nonlinear correction blended along the stroke and in depth), the linear model elsewhere. Raises
+        ``ValueError`` when the table is inconsistent or was built on another real-time mesh. Thread-safe to call
+        while updates run (one assignment)."""
+        from nodes.fem.path_snapshots import PathSnapshotModel
+
+        n_path = max(2, int(math.ceil(self.scene.stroke_length() / 0.0002)) + 1)    # 0.2 mm apart
+        pf = np.linspace(0.0, 1.0, n_path)
+        path, _ = self.scene.stroke_at(pf)
+        pt = PathSnapshotModel(table, self._rest.astype(np.float64), path, pf)
+        self._held = np.asarray(self.mesh.fixed[self.surface_nodes], bool)
+        self.path_table = pt
 
     # ------------------------------------------------------------------ precompute
     def _build_model(self, mesh: TetMesh, E: np.ndarray, nu: np.ndarray) -> FemModel:
@@ -303,6 +319,11 @@ class SceneModel(CondensedSurface):
             n, d = snap.radial_push(fg.contact_point + fg.depth * fg.direction)
             if snap.covers(n, d):
                 return self._update_snapshots(snap, fg, n, d)
+        pt = self.path_table
+        if pt is not None and fg.depth > 0:
+            f, lateral = pt.locate(fg.contact_point)
+            if pt.covers(f, lateral, fg.depth):
+                return self._update_path(pt, fg, f)
         sol, u_out, method = self._solve(fg)
         stiffness = sol.stiffness
         if 0.0 < fg.depth < STIFFNESS_FLOOR:
@@ -338,8 +359,56 @@ class SceneModel(CondensedSurface):
         return Update((self._rest + us.astype(np.float32)).astype(np.float32), force, stiff, fg.depth,
                       fg.contact_point.copy(), "snapshots", strain, inv, status, True)
 
+    def _update_path(self, pt, fg: Finger, fraction: float) -> Update:
+        """The path table's answer (method "path_snapshots"): the linear solve of this push plus the table's
+        correction at (``fraction``, depth); force and dF/dd the linear model's times the table's ratios; the
+        strain and inverted elements are the reference's at the bracketing samples; the served surface must not
+        fold (else ``valid`` False and the rest shape, as the linear model)."""
+        sol, u_out, _ = self._solve(fg)
+        stiffness = sol.stiffness
+        if fg.depth < STIFFNESS_FLOOR:
+            press = finger_on_scene(fg.contact_point, -fg.direction, STIFFNESS_FLOOR, fg.radius)
+            stiffness = self._solve(press)[0].stiffness
+        corr, rf, rk, strain, inv = pt.lookup(fraction, fg.depth)
+        us = self._surface_of(u_out) + corr
+        us[self._held] = 0.0
+        force, stiffness = float(sol.force) * rf, float(stiffness) * rk
+        status, valid = ("ok" if inv == 0 else f"nonlinear_invalid:inverted={inv}"), True
+        if not (np.all(np.isfinite(us)) and math.isfinite(force) and math.isfinite(stiffness)):
+            status, valid = "nonlinear_invalid:non_finite", False
+        else:
+            folded = self.folded_faces(us)
+            if folded:
+                status, valid = f"nonlinear_invalid:folded_surface={folded}", False
+        verts = self._rest + (us.astype(np.float32) if valid else 0.0)
+        return Update(verts.astype(np.float32), force if valid else 0.0, stiffness if valid else 0.0, fg.depth,
+                      fg.contact_point.copy(), "path_snapshots", strain, inv, status, valid)
+
     def surface_displacement(self, fg: Finger) -> tuple[np.ndarray, float, float]:
         """(surface-node displacements (S, 3) m, force N, stiffness N/m) of one push, no checks (experiments)."""
         sol, u_out, _ = self._solve(fg)
         return self._surface_of(u_out), float(sol.force), float(sol.stiffness)
 
+
+
+def attach_scene_table(model: SceneModel, cache: ArrayCache) -> tuple[str | None, str | None]:
+    """Attach the scene's nonlinear table to ``model`` as the FEM node serves it: a sphere scene's sphere table
+    (:mod:`nodes.fem.sphere_snapshots`), any other scene's path table (:mod:`nodes.fem.path_snapshots`), from
+    ``cache`` (this machine's cache, then the shipped store ``nodes/fem/data``). Returns (kind "sphere" or "path",
+    where: "cache" or "shipped store (nodes/fem/data)"), or (kind, None) when none is stored (the model stays
+    linear). Raises ``ValueError`` when a stored table is unusable (inconsistent, another mesh)."""
+    from nodes.fem.path_snapshots import path_table_key
+    from nodes.fem.sphere_snapshots import sphere_frame, sphere_table_key
+
+    try:
+        sphere_frame(model.scene)
+        kind, table = "sphere", cache.load("spheresnap", sphere_table_key(model.scene))
+    except ValueError:
+        kind, table = "path", cache.load("pathsnap", path_table_key(model.scene_key, model.cache_key))
+    if table is None:
+        return kind, None
+    if kind == "sphere":
+        model.attach_sphere_snapshots(table)
+    else:
+        model.attach_path_table(table)
+    return kind, ("shipped store (nodes/fem/data)" if cache.shipped() else "cache")

@@ -1,0 +1,355 @@
+"""A scene's nonlinear path table (issue 17): ``flexsheet experiment fem --scene launch/scenes/NAME.yaml
+--node-table [--stations K] [--holdout-fraction F ...] [--jobs N] [--ship] --out DIR`` for any scene but the
+paper's cylinder and the sphere (wired by :mod:`flexsheet.experiments.fem`; the runtime is
+:mod:`nodes.fem.path_snapshots`).
+
+1. **Stations**: K fractions of the stroke's arc length, evenly spaced, start and end included
+   (``--stations``, default :data:`DEFAULT_STATIONS`). At each, the scene's hyperelastic reference
+   (:func:`flexsheet.experiments.fem_scene.scene_reference`: the scene's law and finger contact, full body, its
+   support and inclusions) is pushed along the inward normal 0 → :data:`GRID` ``depth_max`` in 2.5 mm steps on
+   a mesh refined along the whole push path (``h_fine`` 6 mm within 15 mm of it: the scene FULL run's first
+   level), sampled on the real-time model's rendered vertices; each push is cached on its own, ``--jobs``
+   solves the missing ones in worker processes.
+2. **The table**: per station and depth the reference minus the real-time linear model's solve of the same
+   push, and the force and dF/dd ratios (module doc of :mod:`nodes.fem.path_snapshots`); stored under the key
+   the FEM node looks up (:func:`table_key`); ``--ship`` also writes it into ``nodes/fem/data/``.
+3. **Held out** (``--holdout-fraction``, default the midpoints of every second interval): a push between
+   stations solved on its own mesh (refined along *its* path), against what the node serves there (the linear
+   solve + the blended correction) and against the linear model alone: the largest distance over the visible
+   rendered vertices (not held, outside the finger's footprint: deformed position > finger radius + 2 mm from
+   the push axis) at every depth. This judges the interpolation along the stroke and in depth (and the two
+   meshes' difference); it is not a judgement of the reference against physics, which is one mesh level here
+   (``--mesh-check``: the same push at the middle station on a mesh refined to 4 mm, the next level, gives its
+   change). Look-up time: the updating thread's CPU per update with the table attached.
+
+Outputs: ``DIR/path_table.json`` + ``path_table.png``: stations (DOF, CPU, Newton, force), held-out errors
+(mm) per depth, the look-up time (ms), the shipped file. Units in keys (mm, ms, N), else SI.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+__all__ = ["build_path_table", "table_key", "DEFAULT_STATIONS", "assemble_path_table"]
+
+from nodes.fem.path_snapshots import GRID, REACH
+
+TARGET_MM = 0.7
+DEFAULT_STATIONS = 7
+#: ``--mesh-check``'s finer level (h_fine, m): the scene FULL run's second level
+CHECK_H_FINE = 0.004
+
+
+def _log(msg: str) -> None:
+    print(f"[path_table] {msg}", file=sys.stderr, flush=True)
+
+
+def _st() -> dict:
+    """The stations' settings for :func:`flexsheet.experiments.fem_scene.scene_reference`: the scene full run's
+    (:data:`flexsheet.experiments.fem_scene.FULL`, whose first level is :data:`GRID`'s), so its pushes are shared."""
+    from flexsheet.experiments.fem_scene import FULL
+
+    return {k: FULL[k] for k in ("depths", "step", "h", "refine_radius", "path_depth")}
+
+
+def table_key(sc, rt) -> str:
+    """The key the FEM node looks a scene's path table up by (:func:`nodes.fem.path_snapshots.path_table_key`)
+    for the scene ``sc`` and the real-time model ``rt`` it corrects."""
+    from nodes.fem.path_snapshots import path_table_key
+
+    return path_table_key(sc.key(), rt.cache_key)
+
+
+def _push(sc, f: float, h_fine: float, probes, cache) -> dict:
+    from flexsheet.experiments.fem_scene import scene_reference
+
+    q, n = sc.stroke_at([f])
+    return scene_reference(sc, q[0], n[0], h_fine, _st(), probes, cache)
+
+
+def _job(args) -> tuple[float, float, str | None]:
+    """Worker: one push into the cache (fraction, h_fine); returns (fraction, seconds, error or None)."""
+    scene_file, f, h_fine, cache_dir = args
+    t = time.perf_counter()
+    try:
+        from flexsheet.model.scenes import load_scene
+        from nodes.fem.cache import ArrayCache
+        from nodes.fem.scene_model import SceneModel
+
+        sc = load_scene(scene_file)
+        rt = SceneModel(sc, cache_dir=cache_dir)
+        _push(sc, f, h_fine, rt.rest_vertices.astype(float), ArrayCache(cache_dir, _log))
+        return f, time.perf_counter() - t, None
+    except Exception as exc:  # noqa: BLE001 - reported by the parent, which solves it again in-process
+        return f, time.perf_counter() - t, f"{type(exc).__name__}: {exc}"
+
+
+def _prefetch(scene_file, jobs_list, cache_dir, n_jobs: int) -> None:
+    if n_jobs <= 1 or len(jobs_list) <= 1:
+        return
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    _log(f"solving {len(jobs_list)} pushes in {n_jobs} worker processes ...")
+    with ProcessPoolExecutor(n_jobs, mp_context=mp.get_context("spawn")) as ex:
+        for f, sec, err in ex.map(_job, [(scene_file, f, h, cache_dir) for f, h in jobs_list]):
+            _log(f"  push at fraction {f:.4g}: {'failed: ' + err if err else 'done'} ({sec:.0f} s wall)")
+
+
+def _linear(rt, sc, q, n, depths) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The real-time linear model's surface displacement (D, S, 3), force (D,), stiffness (D,) at the push."""
+    from nodes.fem.scene_model import finger_on_scene
+
+    out = [rt.surface_displacement(finger_on_scene(q, n, float(d), sc.finger.radius)) for d in depths]
+    return (np.stack([o[0] for o in out]), np.array([o[1] for o in out]), np.array([o[2] for o in out]))
+
+
+def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
+    """num/den over (D,) with d = 0 (index 0) taking the first depth's ratio."""
+    r = np.ones_like(num, dtype=float)
+    ok = np.abs(den) > 1e-12
+    r[ok] = num[ok] / den[ok]
+    r[0] = r[1]
+    return r
+
+
+def assemble_path_table(sc, rt, fractions, refs: list[dict]) -> dict:
+    """The path table (:data:`nodes.fem.path_snapshots.TABLE_FIELDS`) from the stations' reference pushes
+    ``refs`` (one :func:`flexsheet.experiments.fem_scene.scene_reference` result per fraction, sampled on
+    ``rt``'s rendered vertices at :data:`GRID`'s depths) and the real-time model ``rt``'s linear solves. The
+    table reaches the deepest depth to which every station's Newton solve converged at every load step (so a
+    scene whose reference stalls gets a shallower table, the linear model beyond it). Raises ``ValueError`` when
+    no station converged at the first depth."""
+    from nodes.fem.path_snapshots import stiffness_from_force
+
+    depths = np.concatenate([[0.0], np.asarray(_st()["depths"])])
+    ok = np.all([np.asarray(r["converged"], bool) for r in refs], axis=0)      # (D-1,) every station converged
+    n_ok = int(np.argmin(ok)) if not ok.all() else len(ok)
+    if n_ok < 1:
+        raise ValueError("path table: Newton did not converge at the first depth of every station")
+    depths = depths[:n_ok + 1]                  # the table stops before the first depth a station failed at
+    refs = [{k: (np.asarray(v)[:n_ok] if k in ("u", "force", "converged", "inverted", "max_strain") else v)
+             for k, v in r.items()} for r in refs]
+    K, S = len(fractions), len(rt.rest_vertices)
+    corr = np.zeros((K, len(depths), S, 3), np.float32)
+    fr, kr = np.ones((K, len(depths))), np.ones((K, len(depths)))
+    inv, strain = np.zeros((K, len(depths))), np.zeros((K, len(depths)))
+    pts, nrm = sc.stroke_at(np.asarray(fractions, float))
+    for i, (q, n, ref) in enumerate(zip(pts, nrm, refs, strict=True)):
+        u_lin, f_lin, k_lin = _linear(rt, sc, q, n, depths[1:])
+        corr[i, 1:] = (np.asarray(ref["u"]) - u_lin).astype(np.float32)
+        f_ref = np.concatenate([[0.0], np.asarray(ref["force"], float)])
+        k_ref = stiffness_from_force(f_ref, depths)
+        fr[i] = _ratio(f_ref, np.concatenate([[0.0], f_lin]))
+        kr[i] = _ratio(k_ref, np.concatenate([[k_lin[0]], k_lin]))
+        inv[i, 1:] = np.asarray(ref["inverted"], float)
+        strain[i, 1:] = np.asarray(ref["max_strain"], float)
+    corr[:, :, np.asarray(rt.mesh.fixed[rt.surface_nodes], bool)] = 0.0
+    return {"fractions": np.asarray(fractions, float), "depths": depths, "points": pts, "normals": nrm,
+            "rest_vertices": rt.rest_vertices.astype(np.float64), "correction": corr, "force_ratio": fr,
+            "stiffness_ratio": kr, "inverted": inv, "max_strain": strain, "reach": np.array(REACH)}
+
+
+def _visible_errors(u_model: np.ndarray, u_ref: np.ndarray, verts, held, sc, q, n, depths) -> list[float]:
+    """Largest visible distance (mm) per depth between ``u_model`` and ``u_ref`` (D, S, 3) m."""
+    from nodes.fem.choose import visible_mask
+    from nodes.fem.scene_model import finger_on_scene
+
+    out = []
+    for j, d in enumerate(depths):
+        vis = visible_mask(verts + u_ref[j], finger_on_scene(q, n, float(d), sc.finger.radius)) & ~held
+        out.append(float(np.linalg.norm(u_model[j] - u_ref[j], axis=1)[vis].max()) * 1e3)
+    return out
+
+
+def _lookup_ms(rt, sc, fractions, n_calls: int = 200) -> dict:
+    from nodes.fem.scene_model import finger_on_scene
+
+    pts, nrm = sc.stroke_at(np.linspace(fractions[0], fractions[-1], 5))
+    cpu, methods = [], set()
+    for q, n in zip(pts, nrm, strict=True):
+        for d in (0.005, 0.02, 0.045):
+            fg = finger_on_scene(q, n, d, rt.finger_radius)
+            methods.add(rt.update_finger(fg).method)
+            for _ in range(n_calls):
+                c = time.thread_time()
+                rt.update_finger(fg)
+                cpu.append(time.thread_time() - c)
+    cpu = np.array(cpu) * 1e3
+    return {"median": float(np.median(cpu)), "p90": float(np.percentile(cpu, 90)), "n": int(len(cpu)),
+            "methods": sorted(methods)}
+
+
+def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, stations: int = DEFAULT_STATIONS,
+                     holdout: tuple[float, ...] | None = None, jobs: int = 1, mesh_check: bool = False,
+                     ship: bool = False) -> int:
+    """Build (or find in the cache) the scene's path table and report it (module doc). ``holdout`` None: the
+    midpoints of every second interval. Returns 0; raises ``SystemExit`` naming the argument for fewer than 2
+    stations, a held-out fraction outside (0, 1) or on a station, or an unconverged station with ``ship``."""
+    from flexsheet.model.scenes import load_scene
+    from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
+    from nodes.fem.scene_model import SceneModel, finger_on_scene
+
+    if int(stations) < 2:
+        raise SystemExit(f"flexsheet experiment fem: --stations must be >= 2, got {stations}")
+    fractions = np.linspace(0.0, 1.0, int(stations))
+    if holdout is None or len(holdout) == 0:
+        holdout = tuple(float((fractions[i] + fractions[i + 1]) / 2) for i in range(0, len(fractions) - 1, 2))
+    for h in holdout:
+        if not (0.0 < h < 1.0) or np.min(np.abs(fractions - h)) < 1e-6:
+            raise SystemExit(f"flexsheet experiment fem: --holdout-fraction {h} must lie in (0, 1) between the "
+                             f"stations {np.round(fractions, 4).tolist()}")
+    t0 = time.perf_counter()
+    cache_dir = cache_dir or DEFAULT_CACHE_DIR
+    cache = ArrayCache(cache_dir, _log)
+    sc = load_scene(scene_file)
+    rt = SceneModel(sc, cache_dir=cache_dir, log=_log)
+    verts = rt.rest_vertices.astype(float)
+    held = np.asarray(rt.mesh.fixed[rt.surface_nodes], bool)
+    todo = [(float(f), GRID["h_fine"]) for f in fractions] + [(float(h), GRID["h_fine"]) for h in holdout]
+    if mesh_check:
+        todo.append((float(fractions[len(fractions) // 2]), CHECK_H_FINE))
+    _prefetch(scene_file, todo, cache_dir, jobs)
+    refs = [_push(sc, float(f), GRID["h_fine"], verts, cache) for f in fractions]
+    table = assemble_path_table(sc, rt, fractions, refs)
+    key = table_key(sc, rt)
+    cache.save("pathsnap", key, table)
+    shipped = None
+    if ship:
+        bad = [float(f) for f, r in zip(fractions, refs, strict=True) if not np.all(r["converged"])]
+        if bad:
+            raise SystemExit(f"flexsheet experiment fem: not shipping the path table: Newton did not converge at "
+                             f"every depth of the stations at fractions {bad}")
+        sp = cache.ship("pathsnap", key, table)
+        shipped = {"path": os.path.relpath(sp, os.getcwd()), "MB": os.path.getsize(sp) / 1e6}
+        _log(f"path table shipped: {sp} ({shipped['MB']:.2f} MB)")
+    lin_ms = _lookup_ms(rt, sc, fractions)
+    rt.attach_path_table(table)
+    look = _lookup_ms(rt, sc, fractions)
+    _log(f"look-up with the table: CPU median {look['median']:.3f} ms (linear alone {lin_ms['median']:.3f} ms)")
+    depths = np.asarray(table["depths"][1:])            # the table's reach (every station converged to it)
+    nd = len(depths)
+    held_out = []
+    for h in holdout:
+        ref = _push(sc, float(h), GRID["h_fine"], verts, cache)
+        q, n = sc.stroke_at([h])
+        q, n = q[0], n[0]
+        ups = [rt.update_finger(finger_on_scene(q, n, float(d), sc.finger.radius)) for d in depths]
+        u_tab = np.stack([up.vertices.astype(float) - verts for up in ups])
+        u_lin = _linear(rt, sc, q, n, depths)[0]
+        u_ref = np.asarray(ref["u"])[:nd]
+        e_tab = _visible_errors(u_tab, u_ref, verts, held, sc, q, n, depths)
+        e_lin = _visible_errors(u_lin, u_ref, verts, held, sc, q, n, depths)
+        over = [float(d * 1e3) for d, e in zip(depths, e_tab, strict=True) if e > TARGET_MM]
+        held_out.append({"fraction": float(h), "point_m": q.tolist(), "dofs": int(ref["dofs"]),
+                         "newton_converged": bool(np.all(np.asarray(ref["converged"])[:nd])),
+                         "methods": sorted({up.method for up in ups}),
+                         "table_error_mm": e_tab, "linear_error_mm": e_lin,
+                         "table_max_mm": max(e_tab), "linear_max_mm": max(e_lin),
+                         "force_N": np.asarray(ref["force"])[:nd].tolist(),
+                         "served_force_N": [up.force for up in ups],
+                         "depths_over_target_mm": over})
+        _log(f"held out at {h:.4g}: table {max(e_tab):.2f} mm (over the target at {over} mm), linear "
+             f"{max(e_lin):.2f} mm")
+    check = None
+    if mesh_check:
+        f = float(fractions[len(fractions) // 2])
+        fine = _push(sc, f, CHECK_H_FINE, verts, cache)
+        q, n = sc.stroke_at([f])
+        ch = _visible_errors(np.asarray(refs[len(fractions) // 2]["u"])[:nd], np.asarray(fine["u"])[:nd], verts,
+                             held, sc, q[0], n[0], depths)
+        check = {"fraction": f, "h_fine_m": CHECK_H_FINE, "dofs": int(fine["dofs"]),
+                 "cpu_seconds": float(fine["seconds"]), "newton_converged": bool(np.all(fine["converged"])),
+                 "change_mm": ch, "max_change_mm": max(ch)}
+        _log(f"mesh check at {f:.4g}: h_fine {CHECK_H_FINE * 1e3:g} mm moves the visible surface by "
+             f"{max(ch):.2f} mm at most")
+    rep = {"scene": {"name": sc.name, "file": str(sc.source), "key": sc.key(), "contact": sc.finger.contact,
+                     "law": sc.material.model},
+           "what": "the scene's nonlinear path table (nodes/fem/path_snapshots.py): the real-time linear solve "
+                   "plus the reference-minus-linear correction blended along the stroke and in depth; held-out "
+                   "pushes between stations on their own meshes, visible rendered vertices (not held, outside the "
+                   "finger's footprint + 2 mm)",
+           "grid": GRID, "reach_m": REACH, "stroke_length_m": sc.stroke_length(),
+           "stations": [{"fraction": float(f), "point_m": p.tolist(), "dofs": int(r["dofs"]),
+                         "seconds": float(r["seconds"]), "newton_converged": bool(np.all(r["converged"])),
+                         "inverted_max": int(np.max(r["inverted"])), "max_strain": float(np.max(r["max_strain"])),
+                         "force_N": np.asarray(r["force"]).tolist()}
+                        for f, p, r in zip(fractions, table["points"], refs, strict=True)],
+           "depths_m": depths.tolist(), "table_depth_max_m": float(depths[-1]), "held_out": held_out,
+           "max_held_out_error_mm": max((h["table_max_mm"] for h in held_out), default=None),
+           "max_held_out_linear_error_mm": max((h["linear_max_mm"] for h in held_out), default=None),
+           "lookup_ms": look["median"], "lookup_ms_p90": look["p90"], "lookup_methods": look["methods"],
+           "linear_update_ms": lin_ms["median"],
+           "lookup_timing": "the updating thread's CPU (time.thread_time) per update_finger at 5 points x "
+                            "5/20/45 mm along the table's stretch of the stroke",
+           "mesh_check": check, "target_mm": TARGET_MM, "shipped": shipped, "key": key,
+           "seconds": time.perf_counter() - t0}
+    if out:
+        os.makedirs(out, exist_ok=True)
+        with open(os.path.join(out, "path_table.json"), "w") as fh:
+            json.dump(rep, fh, indent=1)
+        _plot(out, rep)
+        _log(f"report: {os.path.join(out, 'path_table.json')}")
+    return 0
+
+
+def _plot(out: str, rep: dict) -> None:
+    """``path_table.png``: held-out visible error against depth, table and linear, per held-out fraction."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    d = np.asarray(rep["depths_m"]) * 1e3
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))
+    for i, h in enumerate(rep["held_out"]):
+        c = f"C{i}"
+        ax[0].plot(d, h["table_error_mm"], "-o", ms=3, color=c, label=f"table, held out at {h['fraction']:.3f}")
+        ax[0].plot(d, h["linear_error_mm"], "--", color=c, alpha=0.6, label=f"linear, {h['fraction']:.3f}")
+    ax[0].axhline(rep["target_mm"], color="k", lw=0.8, ls=":", label="target 0.7 mm")
+    ax[0].set_xlabel("push depth (mm)")
+    ax[0].set_ylabel("largest visible error (mm)")
+    ax[0].set_title(f"{rep['scene']['name']}: held-out pushes between stations")
+    ax[0].legend(fontsize=7)
+    for s in rep["stations"]:
+        ax[1].plot(d, s["force_N"], label=f"station {s['fraction']:.3f}")
+    for h in rep["held_out"]:
+        ax[1].plot(d, h["force_N"], "k:", lw=1)
+        ax[1].plot(d, h["served_force_N"], "r--", lw=1)
+    ax[1].set_xlabel("push depth (mm)")
+    ax[1].set_ylabel("finger force (N)")
+    ax[1].set_title("reference force (held out: dotted; served: red dashed)")
+    ax[1].legend(fontsize=7)
+    fig.suptitle(f"look-up {rep['lookup_ms']:.2f} ms (CPU median); linear alone {rep['linear_update_ms']:.2f} ms",
+                 fontsize=9)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "path_table.png"), dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:  # pragma: no cover - thin CLI for a by-hand run
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 epilog="example: python -m flexsheet.experiments.path_table --scene "
+                                        "launch/scenes/rounded_box.yaml --jobs 2 --out out/rb_table")
+    ap.add_argument("--scene", required=True)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--stations", type=int, default=DEFAULT_STATIONS)
+    ap.add_argument("--holdout-fraction", type=float, action="append", default=[])
+    ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--mesh-check", action="store_true")
+    ap.add_argument("--ship", action="store_true")
+    ap.add_argument("--cache-dir", default=None)
+    a = ap.parse_args(argv)
+    return build_path_table(a.scene, a.out, a.cache_dir, a.stations, tuple(a.holdout_fraction), a.jobs,
+                            a.mesh_check, a.ship)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,186 @@
+"""Nonlinear snapshots along a scene's stroke path (issue 17): the real-time model for scenes with no symmetry
+that carries one push onto another (the rounded box, the organ), after Peterlík et al. 2010's precomputed
+snapshots, here stored as a **correction to the linear model**.
+
+The cylinder's and the sphere's tables (:mod:`nodes.fem.snapshots`, :mod:`nodes.fem.sphere_snapshots`) move a
+snapshot from one push to the next by the object's symmetry. A general body has none, so what this table stores
+is the part of the deformation the linear model gets wrong:
+
+* **Offline** (:mod:`flexsheet.experiments.path_table`): at K **stations** along the stroke (fractions
+  f_0 < … < f_K-1 of its arc length; the stroke's start and end included) the scene's hyperelastic body is
+  pushed along the inward surface normal 0 → ``depths[-1]`` (the nonlinear reference,
+  :func:`flexsheet.experiments.fem_scene.scene_reference`), and at every depth d_j the same push is solved by the
+  real-time linear model (:class:`nodes.fem.scene_model.SceneModel`, its own mesh). The table holds, on the
+  real-time model's rendered surface vertices (S, 3):
+
+  - ``correction`` (K, D, S, 3) m: reference displacement − linear displacement;
+  - ``force_ratio`` / ``stiffness_ratio`` (K, D): the reference's force F and dF/dd (central differences in d)
+    over the linear model's at the same push (at d = 0 the first depth's ratio);
+  - ``inverted`` (K, D) and ``max_strain`` (K, D): the reference's inverted elements and largest principal
+    Green–Lagrange strain.
+* **Run time** (:meth:`PathSnapshotModel.lookup`): the finger's contact point is located on the stroke (the
+  nearest of a dense set of path samples: fraction f and lateral distance ℓ); inside the table (f within the
+  stations, ℓ ≤ ``reach``, 0 < d ≤ ``depths[-1]``) the served surface is **the linear model's solve for this
+  very push plus the correction blended bilinearly in (f, d)** from the four neighbouring samples, and the force
+  and stiffness are the linear model's times the blended ratios. At a station the served push is the
+  reference's (up to float32); between stations the linear part is exact for the push and only the correction
+  is interpolated. The linear model keeps its spatial detail (an inclusion's stiffness peak between stations),
+  the table adds the large-deformation part. Outside the table the node serves linear.
+
+Frames and units: display frame, m, N, N/m. Errors: ``ValueError`` naming the field.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["PATH_TABLE_VERSION", "GRID", "REACH", "PathSnapshotModel", "path_table_key", "check_path_table", "stiffness_from_force",
+           "TABLE_FIELDS"]
+
+PATH_TABLE_VERSION = "path-snap-1"
+#: the arrays a path table holds (module doc)
+TABLE_FIELDS = ("fractions", "depths", "points", "normals", "rest_vertices", "correction", "force_ratio",
+                "stiffness_ratio", "inverted", "max_strain", "reach")
+
+
+#: the stations' reference: load step and deepest depth (m), mesh sizes (m): h, h_fine along the push path
+#: (radius refine_radius, down to path_depth), as the scene FULL run's first level
+#: (:mod:`flexsheet.experiments.path_table` solves them)
+GRID = {"step": 0.0025, "depth_max": 0.05, "h": 0.012, "h_fine": 0.006, "refine_radius": 0.015,
+        "path_depth": 0.05}
+#: how far off the stroke (m) a contact point may lie and still be served from the table
+REACH = 0.004
+
+
+def path_table_key(scene_key: str, realtime_key: str) -> str:
+    """The cache/shipped-store key (kind "pathsnap") of a scene's path table: the scene (``Scene.key()``), the
+    real-time model it corrects (:attr:`nodes.fem.scene_model.SceneModel.cache_key`: mesh, gmsh version, reach,
+    finger), the reference solver's version, :data:`GRID` and :data:`REACH` (the stations are in the table)."""
+    import json
+
+    from nodes.fem.cache import cache_key
+    from nodes.fem.hyperelastic import SOLVER_VERSION
+
+    return cache_key(PATH_TABLE_VERSION, scene_key, realtime_key, SOLVER_VERSION, json.dumps(GRID, sort_keys=True),
+                     f"reach={REACH:.9g}")
+
+
+def stiffness_from_force(force: np.ndarray, depths: np.ndarray) -> np.ndarray:
+    """dF/dd (…, D) N/m of ``force`` (…, D) N sampled at ``depths`` (D,) m ascending: second-order central
+    differences inside, one-sided at the ends (``numpy.gradient``). Raises ``ValueError`` for fewer than 2
+    depths or non-ascending depths."""
+    d = np.asarray(depths, float)
+    if d.ndim != 1 or len(d) < 2 or np.any(np.diff(d) <= 0):
+        raise ValueError(f"depths must be >= 2 ascending values in m, got {np.round(d, 6).tolist()[:8]}")
+    return np.gradient(np.asarray(force, float), d, axis=-1, edge_order=2 if len(d) > 2 else 1)
+
+
+def check_path_table(t: dict) -> None:
+    """Raise ``ValueError`` naming the field when the table ``t`` (module doc) is missing an array, has
+    inconsistent shapes, non-ascending fractions/depths, depths not starting at 0, or non-finite values."""
+    for k in TABLE_FIELDS:
+        if k not in t:
+            raise ValueError(f"path table: field {k!r} missing")
+    fr, d = np.asarray(t["fractions"], float), np.asarray(t["depths"], float)
+    if fr.ndim != 1 or len(fr) < 2 or np.any(np.diff(fr) <= 0) or fr[0] < 0 or fr[-1] > 1:
+        raise ValueError(f"path table: fractions must be >= 2 ascending values in [0, 1], got {fr.tolist()[:8]}")
+    if d.ndim != 1 or len(d) < 2 or abs(d[0]) > 1e-12 or np.any(np.diff(d) <= 0):
+        raise ValueError(f"path table: depths must ascend from 0 m, got {np.round(d, 6).tolist()[:8]}")
+    K, D = len(fr), len(d)
+    c = np.asarray(t["correction"])
+    S = np.asarray(t["rest_vertices"]).shape[0]
+    shapes = {"points": (K, 3), "normals": (K, 3), "rest_vertices": (S, 3), "correction": (K, D, S, 3),
+              "force_ratio": (K, D), "stiffness_ratio": (K, D), "inverted": (K, D), "max_strain": (K, D)}
+    for k, sh in shapes.items():
+        a = np.asarray(t[k])
+        if a.shape != sh:
+            raise ValueError(f"path table: {k} has shape {a.shape}, expected {sh}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"path table: {k} holds non-finite values")
+    if not np.all(np.isfinite(c)):
+        raise ValueError("path table: correction holds non-finite values")
+    r = float(np.asarray(t["reach"]))
+    if not (math.isfinite(r) and 0 < r <= 0.05):
+        raise ValueError(f"path table: reach must be in (0, 0.05] m, got {r!r}")
+
+
+class PathSnapshotModel:
+    """Look-ups into a path table (module doc).
+
+    ``table``: the arrays of :data:`TABLE_FIELDS` (checked by :func:`check_path_table`); ``rest_vertices``
+    (S, 3) m the real-time model's rendered vertices, which must be the table's (within 1 µm: the table
+    corrects that very mesh); ``path`` (M, 3) m dense samples of the stroke on the surface at ``path_fractions``
+    (M,) ascending (``Scene.stroke_points``). Raises ``ValueError`` when the table is inconsistent, was built on
+    another mesh, or the path samples are bad."""
+
+    def __init__(self, table: dict, rest_vertices: np.ndarray, path: np.ndarray, path_fractions: np.ndarray):
+        check_path_table(table)
+        rv = np.asarray(rest_vertices, float)
+        tv = np.asarray(table["rest_vertices"], float)
+        if rv.shape != tv.shape or float(np.abs(rv - tv).max(initial=0.0)) > 1e-6:
+            raise ValueError(f"path table: built on another real-time mesh ({tv.shape[0]} rendered vertices) than "
+                             f"this model's ({rv.shape[0]}), or they moved by more than 1 um")
+        p, pf = np.asarray(path, float), np.asarray(path_fractions, float)
+        if p.ndim != 2 or p.shape[1] != 3 or len(p) < 2 or pf.shape != (len(p),) or np.any(np.diff(pf) <= 0):
+            raise ValueError(f"path must be (M >= 2, 3) with ascending fractions (M,), got {p.shape} / {pf.shape}")
+        self.fractions = np.asarray(table["fractions"], float)
+        self.depths = np.asarray(table["depths"], float)
+        self.depth_max = float(self.depths[-1])
+        self.reach = float(np.asarray(table["reach"]))
+        self.correction = np.ascontiguousarray(table["correction"], dtype=np.float32)
+        self.force_ratio = np.asarray(table["force_ratio"], float)
+        self.stiffness_ratio = np.asarray(table["stiffness_ratio"], float)
+        self.inverted = np.asarray(table["inverted"], float)
+        self.max_strain = np.asarray(table["max_strain"], float)
+        self._path, self._path_f = p, pf
+
+    def locate(self, point) -> tuple[float, float]:
+        """(fraction along the stroke, lateral distance m) of a contact point (3,) m: its projection onto the
+        path polyline's segments beside the nearest sample (continuous in the point)."""
+        x = np.asarray(point, float)
+        d2 = ((self._path - x) ** 2).sum(axis=1)
+        i = int(np.argmin(d2))
+        best_f, best = float(self._path_f[i]), float(d2[i])
+        for a in (i - 1, i):
+            if a < 0 or a + 1 >= len(self._path):
+                continue
+            seg = self._path[a + 1] - self._path[a]
+            t = float(np.clip((x - self._path[a]) @ seg / max(float(seg @ seg), 1e-30), 0.0, 1.0))
+            e = x - (self._path[a] + t * seg)
+            if float(e @ e) < best:
+                best = float(e @ e)
+                best_f = float(self._path_f[a] + t * (self._path_f[a + 1] - self._path_f[a]))
+        return best_f, math.sqrt(best)
+
+    def covers(self, fraction: float, lateral: float, depth: float) -> bool:
+        """Whether a push at ``fraction`` of the stroke, ``lateral`` m off it, ``depth`` m deep lies inside the
+        table (between its first and last station, within ``reach``, 0 < depth ≤ the table's deepest)."""
+        return bool(self.fractions[0] - 1e-9 <= fraction <= self.fractions[-1] + 1e-9 and lateral <= self.reach
+                    and 0.0 < depth <= self.depth_max + 1e-9)
+
+    def _cell(self, x: float, grid: np.ndarray) -> tuple[int, float]:
+        i = int(np.clip(np.searchsorted(grid, x, side="right") - 1, 0, len(grid) - 2))
+        w = float(np.clip((x - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0))
+        return i, w
+
+    def lookup(self, fraction: float, depth: float) -> tuple[np.ndarray, float, float, float, int]:
+        """(correction (S, 3) float32 m, force ratio, stiffness ratio, the reference's largest strain, its
+        inverted element count) at (``fraction``, ``depth`` m), bilinear between the four samples around it
+        (clamped to the table). Raises ``ValueError`` for a non-finite argument."""
+        if not (math.isfinite(fraction) and math.isfinite(depth)):
+            raise ValueError(f"fraction and depth must be finite, got {fraction!r}, {depth!r}")
+        i, a = self._cell(fraction, self.fractions)
+        j, b = self._cell(depth, self.depths)
+        c = self.correction
+        u = ((1 - a) * (1 - b)) * c[i, j] + ((1 - a) * b) * c[i, j + 1] + (a * (1 - b)) * c[i + 1, j] \
+            + (a * b) * c[i + 1, j + 1]
+
+        def bl(t):
+            return float((1 - a) * ((1 - b) * t[i, j] + b * t[i, j + 1]) + a * ((1 - b) * t[i + 1, j] + b * t[i + 1, j + 1]))
+
+        inv = int(round(max(self.inverted[i, j], self.inverted[i, j + 1], self.inverted[i + 1, j],
+                            self.inverted[i + 1, j + 1]))) if (a > 0 or b > 0) else int(self.inverted[i, j])
+        return (u.astype(np.float32, copy=False), bl(self.force_ratio), bl(self.stiffness_ratio),
+                bl(self.max_strain), inv)
