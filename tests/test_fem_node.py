@@ -247,3 +247,46 @@ def test_node_on_the_sphere_serves_its_nonlinear_table_when_cached(tmp_path):
                 (1 + np.radians(60.0)) * 0.006 ** 1.5, rel=0.2)
 
     asyncio.run(scenario())
+
+
+def test_node_on_a_scene_without_symmetry_serves_its_path_table_when_cached(tmp_path):
+    """A path table (nodes/fem/path_snapshots.py, here a closed-form one) under the key the node looks up for a
+    scene no sphere table applies to (the sphere with a sticking finger and a 4° stroke): the node attaches it,
+    says so, and its answer on the stroke is the model's table answer (linear solve + correction, force scaled by
+    the table's ratio), not the linear one."""
+    import yaml
+
+    from nodes.fem.cache import ArrayCache
+    from nodes.fem.mesh import MeshSpec
+    from nodes.fem.path_snapshots import path_table_key
+    from nodes.fem.scene_model import SceneModel
+    from tests.test_fem_path_table import _scene, _table
+
+    sc = _scene()
+    path = tmp_path / "sticky_sphere.yaml"
+    path.write_text(yaml.safe_dump(sc.model_dump(mode="json")))
+    m = SceneModel(sc, MeshSpec(0.012, 0.006, 0.012), order=1, cache_dir=str(tmp_path))
+    ArrayCache(str(tmp_path)).save("pathsnap", path_table_key(m.scene_key, m.cache_key), _table(m))
+    q, n = sc.stroke_at([0.6])
+    tip = q[0] - 0.003 * n[0]
+    linear = m.update(tip)
+    m.reset()
+    m.attach_path_table(_table(m))
+    served = m.update(tip)
+    assert served.method == "path_snapshots" and linear.method == "condensed"
+    assert served.force > 1.1 * linear.force
+    params = dict(PARAMS, scene=str(path), cache_dir=str(tmp_path))
+
+    async def scenario():
+        from flexsheet.runtime.testing import NodeHarness
+
+        async with NodeHarness(FemNode, params=params) as h:
+            assert "nonlinear path table loaded from cache: 3 stations" in h.node.state_message, \
+                h.node.state_message
+            h.inject(topics.FINGERTIP, _tip(tip, stamp=5.0))
+            d = (await h.wait_for(topics.DEFORMATION, n=1, timeout=30.0))[-1]
+            assert d.valid and abs(d.depth - served.depth) < 1e-9
+            assert d.contact_force == pytest.approx(served.force, rel=1e-9)
+            assert np.abs(np.asarray(d.vertices) - served.vertices).max() < 1e-7
+
+    asyncio.run(scenario())

@@ -176,9 +176,18 @@ def test_assembly_turns_a_station_push_into_its_reference(model):
         u_lin, f_lin, _ = P._linear(m, m.scene, q, n, depths)
         extra = (2e-4 * (i + 1)) * np.ones_like(u_lin) * (depths[:, None, None] / depths[-1])
         refs.append({"u": u_lin + extra, "force": f_lin * 1.3 + 0.2 * depths, "inverted": np.zeros(len(depths)),
-                     "max_strain": np.full(len(depths), 0.1)})
+                     "max_strain": np.full(len(depths), 0.1), "converged": np.ones(len(depths), bool)})
     t = P.assemble_path_table(m.scene, m, fr, refs)
     check_path_table(t)
+    assert t["depths"][-1] == pytest.approx(depths[-1]) and len(t["depths"]) == len(depths) + 1
+    # a station whose Newton solve failed at the 6th depth: the table stops at the 5th, for every station
+    stalled = [dict(r) for r in refs]
+    stalled[0]["converged"] = np.arange(len(depths)) < 5
+    short = P.assemble_path_table(m.scene, m, fr, stalled)
+    assert short["depths"][-1] == pytest.approx(depths[4]) and short["correction"].shape[1] == 6
+    stalled[1]["converged"] = np.zeros(len(depths), bool)
+    with pytest.raises(ValueError, match="did not converge at the first depth"):
+        P.assemble_path_table(m.scene, m, fr, stalled)
     m.attach_path_table(t)
     try:
         j = 1

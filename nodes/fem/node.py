@@ -167,12 +167,12 @@ class FemNode(Node):
         self.state_message = (f"fem: scene {sc.name!r}: linear P{order} scene model with per-element material "
                               f"({len(sc.inclusions)} inclusion(s)); nonlinear snapshots exist for the paper's "
                               "cylinder, the sphere and along a scene's stroke (path tables) only")
-        self._setup_snapshots(sc)
+        self._setup_scene_table(sc)
         self.pub = self.publisher(topics.DEFORMATION)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
         threading.Thread(target=self._warm_sparse, name="fem-sparse", daemon=True).start()
 
-    def _setup_snapshots(self, sc: Scene) -> None:
+    def _setup_scene_table(self, sc: Scene) -> None:
         """Attach the scene's nonlinear table (:func:`nodes.fem.scene_model.attach_scene_table`: a sphere's
         sphere table, any other scene's path table along its stroke) when this machine's cache or the shipped
         store has it, else serve linear and name the command that builds it."""

@@ -362,8 +362,10 @@ class SceneModel(CondensedSurface):
     def _update_path(self, pt, fg: Finger, fraction: float) -> Update:
         """The path table's answer (method "path_snapshots"): the linear solve of this push plus the table's
         correction at (``fraction``, depth); force and dF/dd the linear model's times the table's ratios; the
-        strain and inverted elements are the reference's at the bracketing samples; the served surface must not
-        fold (else ``valid`` False and the rest shape, as the linear model)."""
+        strain and inverted elements are the reference's at the bracketing samples. No fold test (as the
+        sphere's table): the reference's own surface, sampled on the rendered triangles, folds around the
+        fingertip (rounded box, 50 mm: up to 102 of them at a station, all under or beside the finger), and the
+        test exists to catch the *linear* model's overlapping surface; non-finite values give ``valid`` False."""
         sol, u_out, _ = self._solve(fg)
         stiffness = sol.stiffness
         if fg.depth < STIFFNESS_FLOOR:
@@ -376,10 +378,6 @@ class SceneModel(CondensedSurface):
         status, valid = ("ok" if inv == 0 else f"nonlinear_invalid:inverted={inv}"), True
         if not (np.all(np.isfinite(us)) and math.isfinite(force) and math.isfinite(stiffness)):
             status, valid = "nonlinear_invalid:non_finite", False
-        else:
-            folded = self.folded_faces(us)
-            if folded:
-                status, valid = f"nonlinear_invalid:folded_surface={folded}", False
         verts = self._rest + (us.astype(np.float32) if valid else 0.0)
         return Update(verts.astype(np.float32), force if valid else 0.0, stiffness if valid else 0.0, fg.depth,
                       fg.contact_point.copy(), "path_snapshots", strain, inv, status, valid)
