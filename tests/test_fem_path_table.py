@@ -215,3 +215,27 @@ def test_the_cli_refuses_what_a_path_table_does_not_take(tmp_path):
         main(["--scene", box, "--node-table", "--holdout-fraction", "0.5", "--out", out])
     with pytest.raises(SystemExit, match=r"--holdout-fraction 1.2 must lie"):
         main(["--scene", box, "--node-table", "--stations", "4", "--holdout-fraction", "1.2", "--out", out])
+
+
+def test_the_shipped_rounded_box_table_is_found_under_its_key_and_fits_a_fresh_mesh():
+    """The FEM node on rounded_box.yaml finds the shipped path table (nodes/fem/data) under its key, and the
+    table's rendered vertices are exactly the boundary corner nodes of the scene's mesh meshed anew here (gmsh is
+    deterministic for one version: a table on another mesh would be refused at attach time)."""
+    from nodes.fem.scene_mesh import DEFAULT_SCENE_SPEC, scene_mesh
+    from nodes.fem.scene_model import scene_cache_key
+
+    sc = load_scene(SCENES_DIR / "rounded_box.yaml")
+    r = sc.finger.radius
+    key = path_table_key(sc.key(), scene_cache_key(sc, DEFAULT_SCENE_SPEC, 2, r, r + 0.004))
+    t = ArrayCache(None).load("pathsnap", key)
+    assert t is not None, f"no shipped pathsnap_{key}.npz"
+    check_path_table(t)
+    assert len(t["fractions"]) == 13 and t["depths"][-1] == pytest.approx(0.05)
+    m = scene_mesh(sc, DEFAULT_SCENE_SPEC).mesh
+    corners = m.points[np.unique(np.asarray(m.faces)[:, :3])]
+    rv = np.asarray(t["rest_vertices"])
+    assert rv.shape == corners.shape
+    assert np.abs(np.sort(rv, axis=0) - np.sort(corners, axis=0)).max() < 1e-8      # float32 rest vertices
+    # the correction is what the table is for: centimetres deep in, nothing at the surface's rest
+    c = np.linalg.norm(np.asarray(t["correction"]), axis=-1).max(axis=-1)        # (K, D)
+    assert np.all(c[:, 0] == 0) and c[:, -1].min() > 0.005

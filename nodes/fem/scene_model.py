@@ -54,13 +54,23 @@ from nodes.fem.scene_mesh import DEFAULT_SCENE_SPEC, scene_mesh
 from nodes.fem.solver import CapacitanceSolver, FemModel
 
 __all__ = ["SceneModel", "SurfaceIndex", "scene_finger", "finger_on_scene", "one_blas_thread", "STICKY_DEPTH",
-           "STIFFNESS_FLOOR", "attach_scene_table"]
+           "STIFFNESS_FLOOR", "attach_scene_table", "scene_cache_key"]
 
 _CACHE_VERSION = "scene-1"
 #: a finger pressed at least this deep keeps its contact point and push direction, m
 STICKY_DEPTH = 0.005
 #: the stiffness of a lighter touch is that of a press this deep, m (the planner's ``min_contact_depth``)
 STIFFNESS_FLOOR = 0.0005
+
+
+def scene_cache_key(scene, spec: MeshSpec, order: int, finger_radius: float, reach: float) -> str:
+    """The key of a scene's real-time model (:class:`SceneModel`'s precompute, and the key a path table is
+    stored under with it): the scene (``Scene.key()``), mesh spec, gmsh's version, reach (m), finger radius
+    (m), element order."""
+    import gmsh
+
+    return cache_key(_CACHE_VERSION, scene.key(), spec.key(), gmsh.__version__, f"{reach:.9g}",
+                     f"{finger_radius:.9g}", f"P{order}")
 
 
 class SurfaceIndex:
@@ -193,7 +203,6 @@ class SceneModel(CondensedSurface):
         reach = finger_radius + 0.004 if reach is None else float(reach)
         if not (math.isfinite(reach) and 0.0 < reach <= 0.05):
             raise ValueError(f"reach must be in (0, 0.05] m, got {reach!r}")
-        import gmsh
 
         t0 = time.perf_counter()
         self._log = log or (lambda s: None)
@@ -201,8 +210,7 @@ class SceneModel(CondensedSurface):
         self.scene_key = scene.key()
         self.material = Material(scene.material.E, scene.material.nu)
         self.finger_radius, self.max_depth, self.strain_limit, self.reach = finger_radius, max_depth, strain_limit, reach
-        self.cache_key = cache_key(_CACHE_VERSION, self.scene_key, spec.key(), gmsh.__version__, f"{reach:.9g}",
-                                   f"{finger_radius:.9g}", f"P{order}")
+        self.cache_key = scene_cache_key(scene, spec, order, finger_radius, reach)
         self.cache = ArrayCache(cache_dir, self._log)
         self._model = None
         z, self.cache_hit, _ = self.cache.get_or_compute("scenecap", self.cache_key, self._precompute,
