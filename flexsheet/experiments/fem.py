@@ -262,10 +262,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, default=default_jobs(), metavar="N",
                    help="solve the independent reference pushes the cache lacks in N worker processes first "
                         "(default %(default)s: the cores here; 1 solves them one by one in this process)")
-    p.add_argument("--stations", type=int, default=7, metavar="K",
+    p.add_argument("--stations", type=int, default=13, metavar="K",
                    help="with --scene (not the cylinder or the sphere) --node-table: the path table's stations, K "
-                        "evenly spaced fractions of the stroke, ends included (default %(default)s; each a 0-50 mm "
-                        "push, ~1-3 min of one core on the rounded box); see flexsheet.experiments.path_table")
+                        "evenly spaced fractions of the stroke, ends included (default %(default)s, the shipped "
+                        "rounded box table's; each a 0-50 mm push, 4-9 min wall two at a time on the rounded box); "
+                        "see flexsheet.experiments.path_table")
     p.add_argument("--holdout-fraction", type=float, action="append", default=[], metavar="F",
                    help="with --scene (not the cylinder or the sphere) --node-table: judge the path table at this "
                         "fraction of the stroke (between stations) against that push's own solve (default: the "
