@@ -217,7 +217,9 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
     assert lv["vs_table_mesh_mm"][-1] == pytest.approx(0.1 * (6 / 4.5 - 1), rel=1e-6)
     assert abs(lv["snapshots_vs_this_mm"][-1] - 0.1 * (6 / 4.5 - 1)) < 0.05      # plus the α interpolation
     for args, word in ((["--mesh-check"], "--mesh-check is for"),
-                       (["--scene", str(SCENES_DIR / "organ.yaml"), "--node-table"], "object.kind"),
+                       # the organ has no sphere symmetry: its --node-table is a path table (test_fem_path_table)
+                       (["--scene", str(SCENES_DIR / "organ.yaml"), "--node-table", "--azimuth", "10"],
+                        "path table takes --stations"),
                        (["--scene", str(SPHERE), "--node-table", "--holdout-azimuth", "60"], "strictly between"),
                        (["--scene", str(SPHERE), "--between-depths", "0"], "cylinder")):
         with pytest.raises(SystemExit, match=word):
