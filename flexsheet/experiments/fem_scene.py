@@ -56,14 +56,15 @@ import numpy as np
 from nodes.fem.choose import visible_mask
 from nodes.fem.path_snapshots import GRID
 
-__all__ = ["run_scene", "main", "TARGET_MM", "QUICK", "FULL"]
+__all__ = ["run_scene", "main", "visible_errors", "TARGET_MM", "QUICK", "FULL"]
 
 TARGET_MM = 0.7                      #: one projector pixel on the screen, mm
 #: settings: push fractions along the stroke, recorded depths (m), load step (m), reference levels' h_fine (m)
 QUICK = {"fractions": (0.5,), "depths": tuple(np.round(np.arange(1, 7) * 0.005, 4)), "step": 0.0025,
          "levels": (0.008,), "h": 0.012, "refine_radius": 0.015, "path_depth": 0.0, "n_time": 100}
 #: the full run: its first level is the path table's stations' mesh (:data:`nodes.fem.path_snapshots.GRID`), with
-#: the same outputs, so the pushes at the stroke's start, middle and end are shared with a 7-station table
+#: the same outputs, so its pushes at the stroke's start, middle and end are those of a path table whose stations
+#: include them (any odd count: the default 13, or 7)
 FULL = {"fractions": (0.0, 0.5, 1.0),
         "depths": tuple(np.round(np.arange(1, int(round(GRID["depth_max"] / GRID["step"])) + 1) * GRID["step"], 9)),
         "step": GRID["step"], "levels": (GRID["h_fine"], 0.004, 0.003), "h": GRID["h"],
@@ -141,6 +142,20 @@ def _linear_fine(sc, ref: dict, q, n, depths, probes) -> tuple[np.ndarray, float
     return np.stack(us), float(np.median(ts) * 1e3)
 
 
+def visible_errors(model_u, ref_u, verts, held, q, n, depths, r) -> list[float]:
+    """Largest distance (mm) per depth between ``model_u`` and ``ref_u`` (D, S, 3) m over the visible rendered
+    vertices ``verts`` (S, 3) m: not ``held`` (S,) bool and outside the footprint of a finger of radius ``r`` m
+    pushed ``depths[j]`` m at surface point ``q`` along −``n`` (:func:`nodes.fem.choose.visible_mask` on the
+    reference's deformed positions)."""
+    from nodes.fem.scene_model import finger_on_scene
+
+    out = []
+    for j, d in enumerate(depths):
+        vis = visible_mask(verts + ref_u[j], finger_on_scene(q, n, float(d), r)) & ~held
+        out.append(float(np.linalg.norm(model_u[j] - ref_u[j], axis=1)[vis].max()) * 1e3)
+    return out
+
+
 def _update_ms(rt, sc, depths, n_calls: int) -> dict:
     from nodes.fem.scene_model import finger_on_scene
 
@@ -158,7 +173,7 @@ def _update_ms(rt, sc, depths, n_calls: int) -> dict:
     ts, cpu = np.array(ts) * 1e3, np.array(cpu) * 1e3
     return {"median": float(np.median(cpu)), "p90": float(np.percentile(cpu, 90)),
             "wall_median": float(np.median(ts)), "wall_p90": float(np.percentile(ts, 90)), "n": int(len(ts)),
-            "sparse_share": float(np.mean([m == "sparse" for m in methods]))}
+            "sparse_share": float(np.mean([m == "sparse" for m in methods])), "methods": sorted(set(methods))}
 
 
 def _attach_table(sc, rt, cache) -> str | None:

@@ -37,12 +37,15 @@ import numpy as np
 
 __all__ = ["build_path_table", "table_key", "DEFAULT_STATIONS", "assemble_path_table"]
 
+from flexsheet.experiments.fem_scene import _update_ms, visible_errors
 from nodes.fem.path_snapshots import GRID, REACH
 
 TARGET_MM = 0.7
 DEFAULT_STATIONS = 13          #: the shipped rounded box table's (session 24: 7 missed by 4.7 mm over the edge)
 #: ``--mesh-check``'s finer level (h_fine, m): the scene FULL run's second level
 CHECK_H_FINE = 0.004
+#: the depths (m) the look-up is timed at, 5 stroke points each
+LOOKUP_DEPTHS = (0.005, 0.02, 0.045)
 
 
 def _log(msg: str) -> None:
@@ -155,36 +158,6 @@ def assemble_path_table(sc, rt, fractions, refs: list[dict]) -> dict:
             "stiffness_ratio": kr, "inverted": inv, "max_strain": strain, "reach": np.array(REACH)}
 
 
-def _visible_errors(u_model: np.ndarray, u_ref: np.ndarray, verts, held, sc, q, n, depths) -> list[float]:
-    """Largest visible distance (mm) per depth between ``u_model`` and ``u_ref`` (D, S, 3) m."""
-    from nodes.fem.choose import visible_mask
-    from nodes.fem.scene_model import finger_on_scene
-
-    out = []
-    for j, d in enumerate(depths):
-        vis = visible_mask(verts + u_ref[j], finger_on_scene(q, n, float(d), sc.finger.radius)) & ~held
-        out.append(float(np.linalg.norm(u_model[j] - u_ref[j], axis=1)[vis].max()) * 1e3)
-    return out
-
-
-def _lookup_ms(rt, sc, fractions, n_calls: int = 200) -> dict:
-    from nodes.fem.scene_model import finger_on_scene
-
-    pts, nrm = sc.stroke_at(np.linspace(fractions[0], fractions[-1], 5))
-    cpu, methods = [], set()
-    for q, n in zip(pts, nrm, strict=True):
-        for d in (0.005, 0.02, 0.045):
-            fg = finger_on_scene(q, n, d, rt.finger_radius)
-            methods.add(rt.update_finger(fg).method)
-            for _ in range(n_calls):
-                c = time.thread_time()
-                rt.update_finger(fg)
-                cpu.append(time.thread_time() - c)
-    cpu = np.array(cpu) * 1e3
-    return {"median": float(np.median(cpu)), "p90": float(np.percentile(cpu, 90)), "n": int(len(cpu)),
-            "methods": sorted(methods)}
-
-
 def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, stations: int = DEFAULT_STATIONS,
                      holdout: tuple[float, ...] | None = None, jobs: int = 1, mesh_check: bool = False,
                      ship: bool = False) -> int:
@@ -228,9 +201,9 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
         sp = cache.ship("pathsnap", key, table)
         shipped = {"path": os.path.relpath(sp, os.getcwd()), "MB": os.path.getsize(sp) / 1e6}
         _log(f"path table shipped: {sp} ({shipped['MB']:.2f} MB)")
-    lin_ms = _lookup_ms(rt, sc, fractions)
+    lin_ms = _update_ms(rt, sc, LOOKUP_DEPTHS, 200)
     rt.attach_path_table(table)
-    look = _lookup_ms(rt, sc, fractions)
+    look = _update_ms(rt, sc, LOOKUP_DEPTHS, 200)
     _log(f"look-up with the table: CPU median {look['median']:.3f} ms (linear alone {lin_ms['median']:.3f} ms)")
     depths = np.asarray(table["depths"][1:])            # the table's reach (every station converged to it)
     nd = len(depths)
@@ -243,8 +216,8 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
         u_tab = np.stack([up.vertices.astype(float) - verts for up in ups])
         u_lin = _linear(rt, sc, q, n, depths)[0]
         u_ref = np.asarray(ref["u"])[:nd]
-        e_tab = _visible_errors(u_tab, u_ref, verts, held, sc, q, n, depths)
-        e_lin = _visible_errors(u_lin, u_ref, verts, held, sc, q, n, depths)
+        e_tab = visible_errors(u_tab, u_ref, verts, held, q, n, depths, sc.finger.radius)
+        e_lin = visible_errors(u_lin, u_ref, verts, held, q, n, depths, sc.finger.radius)
         over = [float(d * 1e3) for d, e in zip(depths, e_tab, strict=True) if e > TARGET_MM]
         held_out.append({"fraction": float(h), "point_m": q.tolist(), "dofs": int(ref["dofs"]),
                          "newton_converged": bool(np.all(np.asarray(ref["converged"])[:nd])),
@@ -261,8 +234,8 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
         f = float(fractions[len(fractions) // 2])
         fine = _push(sc, f, CHECK_H_FINE, verts, cache)
         q, n = sc.stroke_at([f])
-        ch = _visible_errors(np.asarray(refs[len(fractions) // 2]["u"])[:nd], np.asarray(fine["u"])[:nd], verts,
-                             held, sc, q[0], n[0], depths)
+        ch = visible_errors(np.asarray(refs[len(fractions) // 2]["u"])[:nd], np.asarray(fine["u"])[:nd], verts,
+                            held, q[0], n[0], depths, sc.finger.radius)
         check = {"fraction": f, "h_fine_m": CHECK_H_FINE, "dofs": int(fine["dofs"]),
                  "cpu_seconds": float(fine["seconds"]), "newton_converged": bool(np.all(fine["converged"])),
                  "change_mm": ch, "max_change_mm": max(ch)}
@@ -286,7 +259,7 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
            "lookup_ms": look["median"], "lookup_ms_p90": look["p90"], "lookup_methods": look["methods"],
            "linear_update_ms": lin_ms["median"],
            "lookup_timing": "the updating thread's CPU (time.thread_time) per update_finger at 5 points x "
-                            "5/20/45 mm along the table's stretch of the stroke",
+                            "5/20/45 mm along the stroke (flexsheet.experiments.fem_scene._update_ms)",
            "mesh_check": check, "target_mm": TARGET_MM, "shipped": shipped, "key": key,
            "seconds": time.perf_counter() - t0}
     if out:

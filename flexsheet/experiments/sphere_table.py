@@ -31,6 +31,8 @@ import time
 
 import numpy as np
 
+from flexsheet.experiments.fem_scene import visible_errors
+
 __all__ = ["build_sphere_table", "alpha_path"]
 
 TARGET_MM = 0.7
@@ -89,17 +91,6 @@ def _hertz_force(E: float, nu: float, r_finger: float, R: float, d: float) -> fl
     ``R``): F = 4/3 E* √R* d^{3/2}, 1/R* = 1/r + 1/R, E* = E/(1 − ν²) (Johnson, Contact Mechanics, §4.2)."""
     Rs = 1.0 / (1.0 / r_finger + 1.0 / R)
     return 4.0 / 3.0 * E / (1.0 - nu ** 2) * math.sqrt(Rs) * d ** 1.5
-
-
-def _visible_errors(model_u, ref_u, verts, held, q, n, depths, r) -> list[float]:
-    from nodes.fem.choose import visible_mask
-    from nodes.fem.scene_model import finger_on_scene
-
-    out = []
-    for j, d in enumerate(depths):
-        vis = visible_mask(verts + ref_u[j], finger_on_scene(q, n, float(d), r)) & ~held
-        out.append(float(np.linalg.norm(model_u[j] - ref_u[j], axis=1)[vis].max()) * 1e3)
-    return out
 
 
 def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, alpha: float | None = None,
@@ -224,8 +215,8 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
         lin = np.stack([rt.surface_displacement(finger_on_scene(q, n, float(d), r))[0] if d > 0 else
                         np.zeros_like(probes) for d in depths])
         ref = np.asarray(p["u_probes"], float)
-        e_s = _visible_errors(snap[1:], ref[1:], probes, held, q, n, depths[1:], r)
-        e_l = _visible_errors(lin[1:], ref[1:], probes, held, q, n, depths[1:], r)
+        e_s = visible_errors(snap[1:], ref[1:], probes, held, q, n, depths[1:], r)
+        e_l = visible_errors(lin[1:], ref[1:], probes, held, q, n, depths[1:], r)
         bad = [float(d) * 1e3 for d, e in zip(depths[1:], e_s, strict=True) if e > TARGET_MM]
         held_out.append({"alpha_deg": a, "against": "its own push on its own mesh (same sizes), stable branch",
                          "depths_mm": (depths[1:] * 1e3).tolist(), "snapshots_error_mm": e_s,

@@ -18,8 +18,8 @@ is the part of the deformation the linear model gets wrong:
     over the linear model's at the same push (at d = 0 the first depth's ratio);
   - ``inverted`` (K, D) and ``max_strain`` (K, D): the reference's inverted elements and largest principal
     Green–Lagrange strain.
-* **Run time** (:meth:`PathSnapshotModel.lookup`): the finger's contact point is located on the stroke (the
-  nearest of a dense set of path samples: fraction f and lateral distance ℓ); inside the table (f within the
+* **Run time** (:meth:`PathSnapshotModel.lookup`): the finger's contact point is located on the stroke (projected
+  onto the segments of a dense path polyline beside its nearest sample: fraction f and lateral distance ℓ); inside the table (f within the
   stations, ℓ ≤ ``reach``, 0 < d ≤ ``depths[-1]``) the served surface is **the linear model's solve for this
   very push plus the correction blended bilinearly in (f, d)** from the four neighbouring samples, and the force
   and stiffness are the linear model's times the blended ratios. At a station the served push is the
@@ -89,7 +89,6 @@ def check_path_table(t: dict) -> None:
     if d.ndim != 1 or len(d) < 2 or abs(d[0]) > 1e-12 or np.any(np.diff(d) <= 0):
         raise ValueError(f"path table: depths must ascend from 0 m, got {np.round(d, 6).tolist()[:8]}")
     K, D = len(fr), len(d)
-    c = np.asarray(t["correction"])
     S = np.asarray(t["rest_vertices"]).shape[0]
     shapes = {"points": (K, 3), "normals": (K, 3), "rest_vertices": (S, 3), "correction": (K, D, S, 3),
               "force_ratio": (K, D), "stiffness_ratio": (K, D), "inverted": (K, D), "max_strain": (K, D)}
@@ -99,8 +98,6 @@ def check_path_table(t: dict) -> None:
             raise ValueError(f"path table: {k} has shape {a.shape}, expected {sh}")
         if not np.all(np.isfinite(a)):
             raise ValueError(f"path table: {k} holds non-finite values")
-    if not np.all(np.isfinite(c)):
-        raise ValueError("path table: correction holds non-finite values")
     r = float(np.asarray(t["reach"]))
     if not (math.isfinite(r) and 0 < r <= 0.05):
         raise ValueError(f"path table: reach must be in (0, 0.05] m, got {r!r}")

@@ -333,10 +333,7 @@ class SceneModel(CondensedSurface):
             if pt.covers(f, lateral, fg.depth):
                 return self._update_path(pt, fg, f)
         sol, u_out, method = self._solve(fg)
-        stiffness = sol.stiffness
-        if 0.0 < fg.depth < STIFFNESS_FLOOR:
-            press = finger_on_scene(fg.contact_point, -fg.direction, STIFFNESS_FLOOR, fg.radius)
-            stiffness = self._solve(press)[0].stiffness
+        stiffness = self._floored_stiffness(fg, sol)
         strain, inv = self._checks(fg, u_out) if sol.n_contact else (0.0, 0)
         us = self._surface_of(u_out)
         finite = bool(np.all(np.isfinite(us))) and math.isfinite(sol.force) and math.isfinite(stiffness)
@@ -367,6 +364,14 @@ class SceneModel(CondensedSurface):
         return Update((self._rest + us.astype(np.float32)).astype(np.float32), force, stiff, fg.depth,
                       fg.contact_point.copy(), "snapshots", strain, inv, status, True)
 
+    def _floored_stiffness(self, fg: Finger, sol) -> float:
+        """The linear solve ``sol``'s dF/dd, or for a touch lighter than :data:`STIFFNESS_FLOOR` that of a press
+        that deep at the same point (one more capacitance solve; module doc)."""
+        if 0.0 < fg.depth < STIFFNESS_FLOOR:
+            press = finger_on_scene(fg.contact_point, -fg.direction, STIFFNESS_FLOOR, fg.radius)
+            return self._solve(press)[0].stiffness
+        return sol.stiffness
+
     def _update_path(self, pt, fg: Finger, fraction: float) -> Update:
         """The path table's answer (method "path_snapshots"): the linear solve of this push plus the table's
         correction at (``fraction``, depth); force and dF/dd the linear model's times the table's ratios; the
@@ -375,10 +380,7 @@ class SceneModel(CondensedSurface):
         fingertip (rounded box, 50 mm: up to 102 of them at a station, all under or beside the finger), and the
         test exists to catch the *linear* model's overlapping surface; non-finite values give ``valid`` False."""
         sol, u_out, _ = self._solve(fg)
-        stiffness = sol.stiffness
-        if fg.depth < STIFFNESS_FLOOR:
-            press = finger_on_scene(fg.contact_point, -fg.direction, STIFFNESS_FLOOR, fg.radius)
-            stiffness = self._solve(press)[0].stiffness
+        stiffness = self._floored_stiffness(fg, sol)
         corr, rf, rk, strain, inv = pt.lookup(fraction, fg.depth)
         us = self._surface_of(u_out) + corr
         us[self._held] = 0.0

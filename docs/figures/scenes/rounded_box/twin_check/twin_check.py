@@ -27,6 +27,7 @@ def solve(args):
 
 def main() -> int:
     from flexsheet.experiments import path_table as P
+    from flexsheet.experiments.fem_scene import visible_errors
     from flexsheet.model.scenes import load_scene
     from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
     from nodes.fem.scene_model import SceneModel
@@ -49,8 +50,8 @@ def main() -> int:
         a = P._push(sc, f, P.GRID["h_fine"], verts, cache)
         b = P._push(sc, f, TWIN_H, verts, cache)
         q, n = sc.stroke_at([f])
-        e = P._visible_errors(np.asarray(b["u"])[:len(depths)], np.asarray(a["u"])[:len(depths)], verts, held, sc,
-                              q[0], n[0], depths)
+        e = visible_errors(np.asarray(b["u"])[:len(depths)], np.asarray(a["u"])[:len(depths)], verts, held,
+                           q[0], n[0], depths, sc.finger.radius)
         rows.append({"fraction": f, "twin_h_fine_m": TWIN_H, "twin_dofs": int(b["dofs"]),
                      "twin_newton_converged": bool(np.all(b["converged"])), "mesh_noise_mm": e,
                      "max_mesh_noise_mm": max(e), "table_error_mm": h["table_error_mm"],
