@@ -102,3 +102,16 @@ def test_report_records_the_twin_and_both_dd_conventions(tmp_path):
     top = SimpleNamespace(twin={"realism": "realistic", "truth_seed": 5}, nodes={})
     assert twin_settings(top) == {"realism": "realistic", "truth_seed": 5, "source": "launch file twin section"}
     assert twin_settings(None)["source"].startswith("world node defaults")
+
+
+def test_report_text_leaves_dd_2r_blank_on_a_shape_with_no_radius():
+    """The rounded box and the organ have no radius R, so their rows carry no Δd 2R: the text table prints "-"
+    there (it printed "nan", which reads as a failed measurement), and the number where there is one."""
+    from flexsheet.experiments.report import _format
+
+    row = {"dtheta_mean_deg": 0.5, "dtheta_std_deg": 0.25, "dd_mean_mm": 1.25, "n": 120}
+    text = _format({"10": row, "30": {**row, "dd_2r_mean_mm": 0.875}, "latency_ms": {}})
+    line10 = next(li for li in text.splitlines() if li.startswith("10 s"))
+    line30 = next(li for li in text.splitlines() if li.startswith("30 s"))
+    assert line10.split()[2:6] == ["0.500", "0.250", "-", "1.250"], line10
+    assert line30.split()[2:6] == ["0.500", "0.250", "0.875", "1.250"], line30

@@ -189,8 +189,9 @@ def _background_parent(q) -> None:
 
 
 def test_background_worker_is_idle_class_and_dies_with_its_parent():
-    """flexsheet.runtime.background.lower_priority: the worker runs in SCHED_IDLE and a kill -9 of the node that
-    started it takes the worker with it (an orphan kept the node's stdout open: no respawn)."""
+    """flexsheet.runtime.background.lower_priority: the worker runs in SCHED_IDLE, outlives a SIGINT (the
+    launcher's, sent to the node's process group: its owner ends it, without a traceback) and a kill -9 of the
+    node that started it takes the worker with it (an orphan kept the node's stdout open: no respawn)."""
     import multiprocessing as mp
     import signal
 
@@ -199,7 +200,10 @@ def test_background_worker_is_idle_class_and_dies_with_its_parent():
     parent = ctx.Process(target=_background_parent, args=(q,))
     parent.start()
     what, policy, child = q.get(timeout=60)
-    assert policy == os.SCHED_IDLE and "dies with its parent" in what, what
+    assert policy == os.SCHED_IDLE and "dies with its parent" in what and "SIGINT ignored" in what, what
+    os.kill(child, signal.SIGINT)
+    time.sleep(0.5)
+    os.kill(child, 0)                 # still there: ProcessLookupError would fail the test
     os.kill(parent.pid, signal.SIGKILL)
     parent.join(10)
     deadline = time.monotonic() + 10

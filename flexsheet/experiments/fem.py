@@ -2052,11 +2052,8 @@ def _solver_init(counter) -> None:
     Ctrl-C); one BLAS and OpenMP thread, CHOLMOD's libraries loaded first so the limit reaches them; tied to
     the parent, dies with it (:func:`flexsheet.runtime.background.lower_priority`, niceness unchanged)."""
     global _LOG_PREFIX
-    import signal
-
     from flexsheet.runtime.background import lower_priority
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = "1"
     try:

@@ -399,6 +399,12 @@ def graph_chart(heartbeats: list, path: Path) -> dict:
     return graph
 
 
+def _cell(v: float | None, width: int) -> str:
+    """A table cell: ``v`` to 3 decimals, or "-" where the row has no such value (Δd 2R on a shape with no
+    radius: the rounded box, the organ)."""
+    return f"{'-':>{width}}" if v is None else f"{v:{width}.3f}"
+
+
 def _format(summary: dict) -> str:
     tw = summary.get("twin", {})
     sc = summary.get("scene", {})
@@ -413,7 +419,7 @@ def _format(summary: dict) -> str:
         p = r.get("paper", {})
         tg = target(key)["dtheta_mean_deg"] if key in PAPER_TABLE1 and p else float("nan")
         lines.append(f"{key + ' s':<16}{r['dtheta_mean_deg']:12.3f}{r['dtheta_std_deg']:11.3f}"
-                     f"{r.get('dd_2r_mean_mm', float('nan')):10.3f}{r['dd_mean_mm']:9.3f}"
+                     f"{_cell(r.get('dd_2r_mean_mm'), 10)}{r['dd_mean_mm']:9.3f}"
                      f"{p.get('dtheta_mean_deg', float('nan')):10.3f}{p.get('dd_mean_mm', float('nan')):10.3f}"
                      f"{tg:10.3f}{r['n']:7d}")
     comp = summary.get("compliance", {})

@@ -7,7 +7,10 @@ puts the calling process in the ``SCHED_IDLE`` class (Linux: it runs only when a
 is preempted at once) at niceness ``nice``, with one BLAS thread (OpenBLAS's spinning threads would otherwise
 compete with each other; ``threadpoolctl``), and ties it to its parent: when the node that started it dies
 (even ``kill -9``) the worker gets SIGKILL (``PR_SET_PDEATHSIG``). Without that an orphaned worker kept the
-dead node's stdout open, so the launcher never saw the node exit and never respawned it."""
+dead node's stdout open, so the launcher never saw the node exit and never respawned it. The worker ignores
+SIGINT: its owner ends it (the node's teardown terminates it; the experiment's pool on Ctrl-C), or it dies with
+its owner. The launcher stops a node with SIGINT to its whole process group, and a worker that took it printed a
+``KeyboardInterrupt`` traceback at every shutdown during a table build."""
 
 from __future__ import annotations
 
@@ -20,11 +23,16 @@ __all__ = ["lower_priority"]
 
 def lower_priority(nice: int = 19, idle: bool = True) -> str:
     """Make the calling process a background worker (module doc); call it first thing in the worker. Returns
-    what took effect, e.g. ``"dies with its parent, SCHED_IDLE, nice +19, 1 BLAS thread"``. Never raises: a
+    what took effect, e.g. ``"SIGINT ignored, dies with its parent, SCHED_IDLE, nice +19, 1 BLAS thread"``. Never raises: a
     step the OS refuses is skipped. Exits the process at once if its parent is already gone. ``idle`` False:
     niceness only, no ``SCHED_IDLE`` — for work the graph needs soon (the world's true sheet: in the idle class
     a table could take minutes beside a running graph and, killed with its node, never reach the cache)."""
     done = []
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        done.append("SIGINT ignored")
+    except ValueError:             # not the main thread: the caller is not a worker process of its own
+        pass
     parent = os.getppid()
     try:
         if ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL) == 0:    # PR_SET_PDEATHSIG
