@@ -8,6 +8,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -215,6 +216,51 @@ def test_background_worker_is_idle_class_and_dies_with_its_parent():
         time.sleep(0.05)
     else:
         pytest.fail(f"worker {child} outlived its killed parent")
+
+
+def _pool_worker(path: str) -> str:
+    """A long solve's stand-in: say who we are and how we were started, then wait."""
+    import signal
+
+    Path(path, str(os.getpid())).write_text(
+        f"{signal.getsignal(signal.SIGINT) == signal.SIG_IGN} {os.environ.get('OPENBLAS_NUM_THREADS')}")
+    time.sleep(120)
+    return path
+
+
+def _pool_parent(path: str) -> None:
+    from flexsheet.experiments.fem import run_workers
+
+    for _ in run_workers(_pool_worker, [path, path], 2):
+        pass
+
+
+def test_experiment_workers_are_tied_to_their_parent(tmp_path):
+    """flexsheet.experiments.fem.run_workers, the pool of the reference, sphere-table and path-table solves: its
+    workers ignore SIGINT, run one BLAS thread, and die when the experiment is killed (kill -9): the path table's
+    own pool once left two workers solving for minutes after its parent was gone."""
+    import multiprocessing as mp
+    import signal
+
+    parent = mp.get_context("spawn").Process(target=_pool_parent, args=(str(tmp_path),))
+    parent.start()
+    deadline = time.monotonic() + 60
+    while len(list(tmp_path.iterdir())) < 2 and time.monotonic() < deadline:
+        time.sleep(0.1)
+    workers = {int(p.name): p.read_text() for p in tmp_path.iterdir()}
+    assert len(workers) == 2 and set(workers.values()) == {"True 1"}, workers
+    os.kill(parent.pid, signal.SIGKILL)
+    parent.join(10)
+    deadline = time.monotonic() + 10
+    alive = set(workers)
+    while alive and time.monotonic() < deadline:
+        for pid in list(alive):
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                alive.discard(pid)
+        time.sleep(0.05)
+    assert not alive, f"workers {alive} outlived their killed parent"
 
 
 _CLOSE_RACE = r"""

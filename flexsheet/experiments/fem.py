@@ -2103,7 +2103,6 @@ def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache
     lines prefixed "[solver N]"), into ``cache``; the run then reads them from it. Does nothing with one
     worker, a disabled cache or fewer than two solves missing. A failed solve is logged and left to the run,
     which solves it again and raises with the cause. Ctrl-C terminates the workers at once."""
-    import multiprocessing
 
     if n_workers < 2 or not cache.cache_dir:
         return
@@ -2112,21 +2111,33 @@ def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache
         return
     n = min(n_workers, len(todo))
     _log(f"prefetch: {len(todo)} reference solves the cache lacks, in {n} worker processes (--jobs)")
-    ctx = multiprocessing.get_context("spawn")
     t0 = time.perf_counter()
+    work = [(i, j, mat, cache.cache_dir, probes, contact) for i, j in enumerate(todo)]
+    for i, sec, err in run_workers(_solve_one, work, n):
+        j = todo[i]
+        what = f"{j.spec.key()} at {j.angle_deg:g} deg, penalty {j.penalty_scale:g} E/h"
+        _log(f"prefetch: {what} done in {sec:.0f} s" if err is None else
+             f"prefetch: {what} failed ({err}); the run solves it itself")
+    _log(f"prefetch: done in {time.perf_counter() - t0:.0f} s")
+
+
+def run_workers(fn, work: list, n: int):
+    """Yield ``fn(w)`` for every ``w`` of ``work``, in the order they finish, computed in ``n`` spawned worker
+    processes started by :func:`_solver_init` (one BLAS thread, SIGINT ignored, tied to this process: killed with
+    it, even by ``kill -9``). Ctrl-C, an error or leaving the loop early terminates the workers at once. The
+    one pool of every long solve here (:func:`prefetch`, the sphere and path tables): a pool without the tie
+    left its workers solving for minutes after its parent was killed (session 25). ``fn`` must be importable
+    (module level) and catch its own errors."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("spawn")
     pool = ctx.Pool(n, initializer=_solver_init, initargs=(ctx.Value("i", 0),))
     try:
-        work = [(i, j, mat, cache.cache_dir, probes, contact) for i, j in enumerate(todo)]
-        for i, sec, err in pool.imap_unordered(_solve_one, work):
-            j = todo[i]
-            what = f"{j.spec.key()} at {j.angle_deg:g} deg, penalty {j.penalty_scale:g} E/h"
-            _log(f"prefetch: {what} done in {sec:.0f} s" if err is None else
-                 f"prefetch: {what} failed ({err}); the run solves it itself")
+        yield from pool.imap_unordered(fn, work)
         pool.close()
     finally:
         pool.terminate()            # at once on Ctrl-C or an error; after close() the workers have exited
         pool.join()
-    _log(f"prefetch: done in {time.perf_counter() - t0:.0f} s")
 
 
 def default_jobs() -> int:

@@ -95,13 +95,11 @@ def _job(args) -> tuple[float, float, str | None]:
 def _prefetch(scene_file, jobs_list, cache_dir, n_jobs: int) -> None:
     if n_jobs <= 1 or len(jobs_list) <= 1:
         return
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
+    from flexsheet.experiments.fem import run_workers
 
     _log(f"solving {len(jobs_list)} pushes in {n_jobs} worker processes ...")
-    with ProcessPoolExecutor(n_jobs, mp_context=mp.get_context("spawn")) as ex:
-        for f, sec, err in ex.map(_job, [(scene_file, f, h, cache_dir) for f, h in jobs_list]):
-            _log(f"  push at fraction {f:.4g}: {'failed: ' + err if err else 'done'} ({sec:.0f} s wall)")
+    for f, sec, err in run_workers(_job, [(scene_file, f, h, cache_dir) for f, h in jobs_list], n_jobs):
+        _log(f"  push at fraction {f:.4g}: {'failed: ' + err if err else 'done'} ({sec:.0f} s wall)")
 
 
 def _linear(rt, sc, q, n, depths) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

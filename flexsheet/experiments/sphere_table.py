@@ -100,7 +100,6 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
     (the surface field as float16, compressed), into the repository's ``nodes/fem/data/``, where the FEM node
     finds it on a machine that never solved it. Returns 0; ``SystemExit`` with the reason for a scene the table
     does not apply to, a bad angle, or a table that may not be shipped (an angle unconverged or not cached)."""
-    import multiprocessing
 
     from flexsheet.model.scenes import load_scene
     from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
@@ -150,11 +149,10 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
                                                           or "")]
     if jobs > 1 and len(todo) > 1:
         _log(f"{len(todo)} sphere pushes the cache lacks, in {min(jobs, len(todo))} worker processes")
-        os.environ["OPENBLAS_NUM_THREADS"] = os.environ["OMP_NUM_THREADS"] = "1"   # read by the spawned workers
-        ctx = multiprocessing.get_context("spawn")
-        with ctx.Pool(min(jobs, len(todo))) as pool:
-            for a, sec, err in pool.imap_unordered(_job, [(scene_file, a, cache_dir, s) for a, s in todo]):
-                _log(f"sphere push at {a:g} deg: " + (f"done in {sec:.0f} s" if err is None else f"failed ({err})"))
+        from flexsheet.experiments.fem import run_workers
+
+        for a, sec, err in run_workers(_job, [(scene_file, a, cache_dir, s) for a, s in todo], min(jobs, len(todo))):
+            _log(f"sphere push at {a:g} deg: " + (f"done in {sec:.0f} s" if err is None else f"failed ({err})"))
     mat = Material.of_scene(sc.material)
     if table is None:
         paths = [alpha_path(sc, a, grid, spec, probes, cache) for a in al]
