@@ -217,20 +217,22 @@ def test_the_cli_refuses_what_a_path_table_does_not_take(tmp_path):
         main(["--scene", box, "--node-table", "--stations", "4", "--holdout-fraction", "1.2", "--out", out])
 
 
-def test_the_shipped_rounded_box_table_is_found_under_its_key_and_fits_a_fresh_mesh():
-    """The FEM node on rounded_box.yaml finds the shipped path table (nodes/fem/data) under its key, and the
-    table's rendered vertices are exactly the boundary corner nodes of the scene's mesh meshed anew here (gmsh is
-    deterministic for one version: a table on another mesh would be refused at attach time)."""
+@pytest.mark.parametrize("name, stations", [("rounded_box", 13), ("organ", 7)])
+def test_the_shipped_path_tables_are_found_under_their_keys_and_fit_a_fresh_mesh(name, stations):
+    """The FEM node on rounded_box.yaml (session 24) and organ.yaml (session 25) finds the shipped path table
+    (nodes/fem/data) under its key, and the table's rendered vertices are exactly the boundary corner nodes of the
+    scene's mesh meshed anew here (gmsh is deterministic for one version: a table on another mesh would be
+    refused at attach time)."""
     from nodes.fem.scene_mesh import DEFAULT_SCENE_SPEC, scene_mesh
     from nodes.fem.scene_model import scene_cache_key
 
-    sc = load_scene(SCENES_DIR / "rounded_box.yaml")
+    sc = load_scene(SCENES_DIR / f"{name}.yaml")
     r = sc.finger.radius
     key = path_table_key(sc.key(), scene_cache_key(sc, DEFAULT_SCENE_SPEC, 2, r, r + 0.004))
     t = ArrayCache(None).load("pathsnap", key)
     assert t is not None, f"no shipped pathsnap_{key}.npz"
     check_path_table(t)
-    assert len(t["fractions"]) == 13 and t["depths"][-1] == pytest.approx(0.05)
+    assert len(t["fractions"]) == stations and t["depths"][-1] == pytest.approx(0.05)
     m = scene_mesh(sc, DEFAULT_SCENE_SPEC).mesh
     corners = m.points[np.unique(np.asarray(m.faces)[:, :3])]
     rv = np.asarray(t["rest_vertices"])

@@ -218,6 +218,34 @@ def test_background_worker_is_idle_class_and_dies_with_its_parent():
         pytest.fail(f"worker {child} outlived its killed parent")
 
 
+def _sigint_at_start(q) -> None:
+    import signal
+
+    q.put(signal.getsignal(signal.SIGINT) == signal.SIG_IGN)      # before anything of ours has run
+
+
+def test_a_node_worker_ignores_sigint_from_its_first_instruction():
+    """flexsheet.runtime.background.start_worker: the child starts with SIGINT ignored (the launcher's SIGINT to
+    the node's group hit a table builder still importing numpy and printed a traceback), and the caller's own
+    handler is back afterwards; a plain start gives the child Python's KeyboardInterrupt handler."""
+    import multiprocessing as mp
+    import signal
+
+    from flexsheet.runtime.background import start_worker
+
+    ctx = mp.get_context("spawn")
+    got = {}
+    before = signal.getsignal(signal.SIGINT)
+    for how in ("start_worker", "plain"):
+        q = ctx.Queue()
+        p = ctx.Process(target=_sigint_at_start, args=(q,))
+        start_worker(p) if how == "start_worker" else p.start()
+        got[how] = q.get(timeout=60)
+        p.join(10)
+    assert got == {"start_worker": True, "plain": False}, got
+    assert signal.getsignal(signal.SIGINT) is before
+
+
 def _pool_worker(path: str) -> str:
     """A long solve's stand-in: say who we are and how we were started, then wait."""
     import signal

@@ -17,8 +17,9 @@ from __future__ import annotations
 import ctypes
 import os
 import signal
+import threading
 
-__all__ = ["lower_priority"]
+__all__ = ["lower_priority", "start_worker"]
 
 
 def lower_priority(nice: int = 19, idle: bool = True) -> str:
@@ -61,3 +62,20 @@ def lower_priority(nice: int = 19, idle: bool = True) -> str:
     except ImportError:        # pragma: no cover - a dependency
         pass
     return ", ".join(done) or "unchanged"
+
+
+def start_worker(proc) -> None:
+    """``proc.start()`` (a :class:`multiprocessing.Process`) with SIGINT ignored in the child from its first
+    instruction: an ignored disposition survives the spawn's fork + exec, and Python keeps it. The worker then
+    ignores the launcher's SIGINT to the node's process group even while it still imports, before its
+    :func:`lower_priority` (a stop 1 s after a build started printed a ``KeyboardInterrupt`` traceback from the
+    worker's numpy import, session 25). The caller's own handler is restored at once. Off the main thread (where
+    Python may not touch signal handlers) it is a plain ``proc.start()``."""
+    if threading.current_thread() is not threading.main_thread():
+        proc.start()
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        proc.start()
+    finally:
+        signal.signal(signal.SIGINT, old)

@@ -42,6 +42,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from flexsheet.model import scene as paper
+from flexsheet.runtime.background import start_worker
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from messages import (
     ArmJointState,
@@ -354,7 +355,7 @@ class RendererNode(Node):
                     t0 = time.monotonic()
                     proc = ctx.Process(target=build_table, args=(self.sheet_model.settings, node, 19),
                                        name=f"renderer-sheet-table-{node:g}", daemon=True)
-                    proc.start()
+                    start_worker(proc)             # SIGINT ignored from its first instruction
                     self._builds.add(proc)
                     try:
                         await loop.run_in_executor(None, proc.join)

@@ -35,6 +35,7 @@ from flexsheet.model.scenes import Scene, SceneError, load_scene
 from flexsheet.model.sheet_fem import default_cache_dir
 from flexsheet.model.truth import TwinTruth
 from flexsheet.model.truth_choice import TruthChoice
+from flexsheet.runtime.background import start_worker
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
 from messages import ArmJointState, FingerTruth, SheetState
@@ -186,7 +187,7 @@ class WorldNode(Node):
         self._worker = ctx.Process(target=_build_worker, daemon=True, name=f"sheet-fem-{node:g}",
                                    args=(p.twin.truth_seed, p.twin.realism, node, p.sheet_size,
                                          self.phys.settings, p.sheet_fem.worker_nice))
-        self._worker.start()
+        start_worker(self._worker)             # SIGINT ignored from its first instruction
         self._building = node
         self.log.info("building the true sheet's FEM table at clamp strain %.3f in a worker process (pid %s)",
                       node, self._worker.pid)
