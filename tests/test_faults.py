@@ -42,7 +42,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from conftest import private_ports  # noqa: E402
+from conftest import MIN_TIPS_HZ, private_ports  # noqa: E402
 
 from flexsheet.runtime.bag import BagSummary, bag_info, read_bag  # noqa: E402
 from flexsheet.runtime.codec import decode_any  # noqa: E402
@@ -245,7 +245,7 @@ def test_every_killed_node_is_respawned_and_the_run_finishes(faults):
     summary = json.loads((out / "summary.json").read_text())
     # Table I of both strokes was computed from the bag of the faulted run (its accuracy is not the point
     # here: a restarted controller twin re-creates its arm at the initial joints)
-    assert summary["30"]["n"] > 100 and summary["10"]["n"] > 100
+    assert summary["30"]["n"] > MIN_TIPS_HZ * 30 and summary["10"]["n"] > MIN_TIPS_HZ * 10
 
 
 def test_the_recording_loses_only_the_dead_nodes_own_messages(faults):
