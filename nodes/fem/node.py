@@ -167,7 +167,9 @@ class FemNode(Node):
         self.state_message = (f"fem: scene {sc.name!r}: linear P{order} scene model with per-element material "
                               f"({len(sc.inclusions)} inclusion(s)); nonlinear snapshots exist for the paper's "
                               "cylinder, the sphere and along a scene's stroke (path tables) only")
-        self._setup_scene_table(sc)
+        # off the event loop: attaching a path table precomputes its contact-following moves (2-5 s, more on a
+        # loaded machine; nodes/fem/path_snapshots.py), during which heartbeats must go on
+        await asyncio.to_thread(self._setup_scene_table, sc)
         self.pub = self.publisher(topics.DEFORMATION)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
         threading.Thread(target=self._warm_sparse, name="fem-sparse", daemon=True).start()

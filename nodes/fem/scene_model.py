@@ -256,7 +256,7 @@ class SceneModel(CondensedSurface):
         n_path = max(2, int(math.ceil(self.scene.stroke_length() / 0.0002)) + 1)    # 0.2 mm apart
         pf = np.linspace(0.0, 1.0, n_path)
         path, _ = self.scene.stroke_at(pf)
-        pt = PathSnapshotModel(table, self._rest.astype(np.float64), path, pf)
+        pt = PathSnapshotModel(table, self._rest.astype(np.float64), self.faces, path, pf)
         self._held = np.asarray(self.mesh.fixed[self.surface_nodes], bool)
         self.path_table = pt
 
