@@ -155,7 +155,7 @@ class PathSnapshotModel:
         if fc.ndim != 2 or fc.shape[1] != 3 or len(fc) == 0 or fc.min() < 0 or fc.max() >= len(rv):
             raise ValueError(f"faces must be (F >= 1, 3) indices into the {len(rv)} rendered vertices, got shape "
                              f"{fc.shape}")
-        self._sub, self._move_idx, self._move_w = self._contact_moves(rv, fc.astype(np.int64))
+        self._sub, self._moves = self._contact_moves(rv, fc.astype(np.int64))
 
     def path_point(self, fraction) -> np.ndarray:
         """The path polyline's point(s) (…, 3) m at ``fraction`` (…,) of the stroke (linear between samples)."""
@@ -163,12 +163,14 @@ class PathSnapshotModel:
         return np.stack([np.interp(f, self._path_f, self._path[:, k]) for k in range(3)], axis=-1)
 
     def _contact_moves(self, rv: np.ndarray, faces: np.ndarray):
-        """Per interval i between stations: its sub-fractions (n_i + 1,), and for each sub-fraction g and each of
-        the interval's two stations s the rest-surface point nearest v − (P(g) − P(f_s)) for every vertex v, as
-        the indices (n_i + 1, 2, S, 3) int32 of its triangle's vertices and barycentric weights (…, 3) float32
-        (module doc)."""
+        """Per interval i between stations: its sub-fractions (n_i + 1,), and per sub-fraction g one sparse
+        matrix (S, 2S) float32 (CSR, 6 entries a row) that maps the two stations' stacked corrections (2S, 3) to
+        their moved sum: row v holds the barycentric weights of the rest-surface point nearest v − (P(g) −
+        P(f_s)) on its triangle's vertices, station s's columns offset by s·S (module doc)."""
+        import scipy.sparse as sparse
         import trimesh
 
+        S = len(rv)
         seg = np.linalg.norm(np.diff(self._path, axis=0), axis=1)
         arc = np.concatenate([[0.0], np.cumsum(seg)])          # path length at each path sample
         mesh = trimesh.Trimesh(rv, faces, process=False)
@@ -185,14 +187,16 @@ class PathSnapshotModel:
         bc = trimesh.triangles.points_to_barycentric(mesh.triangles[tri], cp)
         bc = np.clip(np.nan_to_num(bc, nan=1.0 / 3.0), 0.0, 1.0)
         bc /= bc.sum(axis=1, keepdims=True)
-        idx_all, w_all, k = faces[tri].astype(np.int32), bc.astype(np.float32), 0
-        idx, w = [], []
+        cols_all, w_all, k, mats = faces[tri], bc.astype(np.float32), 0, []
+        indptr = np.arange(0, 6 * S + 1, 6)
         for y in ys:
-            n = y.shape[0] * y.shape[1] * y.shape[2]
-            idx.append(idx_all[k:k + n].reshape(y.shape))
-            w.append(w_all[k:k + n].reshape(y.shape))
-            k += n
-        return subs, idx, w
+            n_sub = y.shape[0]
+            cols = cols_all[k:k + n_sub * 2 * S].reshape(n_sub, 2, S, 3) + (np.arange(2) * S)[None, :, None, None]
+            w = w_all[k:k + n_sub * 2 * S].reshape(n_sub, 2, S, 3)
+            k += n_sub * 2 * S
+            mats.append([sparse.csr_matrix((w[g].transpose(1, 0, 2).reshape(-1), cols[g].transpose(1, 0, 2).reshape(-1),
+                                            indptr), shape=(S, 2 * S)) for g in range(n_sub)])
+        return subs, mats
 
     def locate(self, point) -> tuple[float, float]:
         """(fraction along the stroke, lateral distance m) of a contact point (3,) m: its projection onto the
@@ -219,9 +223,9 @@ class PathSnapshotModel:
                     and 0.0 < depth <= self.depth_max + 1e-9)
 
     def _cell(self, x: float, grid: np.ndarray) -> tuple[int, float]:
-        i = int(np.clip(np.searchsorted(grid, x, side="right") - 1, 0, len(grid) - 2))
-        w = float(np.clip((x - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0))
-        return i, w
+        i = min(max(int(np.searchsorted(grid, x, side="right")) - 1, 0), len(grid) - 2)
+        w = (x - float(grid[i])) / float(grid[i + 1] - grid[i])
+        return i, min(max(w, 0.0), 1.0)
 
     def lookup(self, fraction: float, depth: float) -> tuple[np.ndarray, float, float, float, int]:
         """(correction (S, 3) float32 m, force ratio, stiffness ratio, the reference's largest strain, its
@@ -235,14 +239,10 @@ class PathSnapshotModel:
         j, b = self._cell(depth, self.depths)
         c = self.correction
         k, w = self._cell(fraction, self._sub[i])
-        ix, wt = self._move_idx[i], self._move_w[i]
-
-        def moved(field: np.ndarray, s: int) -> np.ndarray:
-            return np.float32(1 - w) * (wt[k, s][..., None] * field[ix[k, s]]).sum(axis=1) \
-                + np.float32(w) * (wt[k + 1, s][..., None] * field[ix[k + 1, s]]).sum(axis=1)
-
-        u = np.float32(1 - a) * moved(np.float32(1 - b) * c[i, j] + np.float32(b) * c[i, j + 1], 0) \
-            + np.float32(a) * moved(np.float32(1 - b) * c[i + 1, j] + np.float32(b) * c[i + 1, j + 1], 1)
+        both = np.concatenate([np.float32((1 - a) * (1 - b)) * c[i, j] + np.float32((1 - a) * b) * c[i, j + 1],
+                               np.float32(a * (1 - b)) * c[i + 1, j] + np.float32(a * b) * c[i + 1, j + 1]])
+        mv = self._moves[i]
+        u = mv[k] @ both if w == 0.0 else np.float32(1 - w) * (mv[k] @ both) + np.float32(w) * (mv[k + 1] @ both)
 
         def bl(t):
             return float((1 - a) * ((1 - b) * t[i, j] + b * t[i, j + 1]) + a * ((1 - b) * t[i + 1, j] + b * t[i + 1, j + 1]))

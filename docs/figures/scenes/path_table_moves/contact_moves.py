@@ -7,7 +7,8 @@ stations' corrections blended on fixed vertices, what it served in sessions 24â€
 The held-out pushes are those of each scene's path_table.json (solved on their own meshes, as
 flexsheet.experiments.path_table solves them, cached under ~/.cache/flexsheet/fem: the rounded box's three take
 ~25 min wall on two cores when the cache is empty). Visible rendered vertices only (not held, outside the
-finger's footprint), as everywhere. Writes contact_moves.json and contact_moves.png beside this file."""
+finger's footprint), as everywhere. Also the look-up's CPU time per update with the moved table and the linear
+model's, as path_table.json times them. Writes contact_moves.json and contact_moves.png beside this file."""
 
 import argparse
 import json
@@ -18,7 +19,7 @@ sys.path.insert(0, ".")
 import numpy as np  # noqa: E402
 
 from flexsheet.experiments import path_table as P  # noqa: E402
-from flexsheet.experiments.fem_scene import visible_errors  # noqa: E402
+from flexsheet.experiments.fem_scene import _update_ms, visible_errors  # noqa: E402
 from flexsheet.model.scenes import SCENES_DIR, load_scene  # noqa: E402
 from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache  # noqa: E402
 from nodes.fem.scene_model import SceneModel, attach_scene_table, finger_on_scene  # noqa: E402
@@ -78,6 +79,16 @@ def scene(name: str, jobs: int) -> dict:
               f"{row['moved_within_target_to_mm']:g} mm), fixed {row['fixed_max_mm']:.2f} (to "
               f"{row['fixed_within_target_to_mm']:g}), linear {row['linear_max_mm']:.2f}", file=sys.stderr)
         out["held_out"].append(row)
+    look = _update_ms(rt, sc, P.LOOKUP_DEPTHS, 200)            # as path_table.json's lookup_ms
+    rt.path_table = None
+    lin = _update_ms(rt, sc, P.LOOKUP_DEPTHS, 200)
+    out.update({"lookup_ms": look["median"], "lookup_ms_p90": look["p90"], "lookup_methods": look["methods"],
+                "linear_update_ms": lin["median"],
+                "lookup_timing": "the updating thread's CPU per update_finger at 5 points x 5/20/45 mm along the "
+                                 "stroke (flexsheet.experiments.fem_scene._update_ms), the moved table and then "
+                                 "the linear model alone"})
+    print(f"[{name}] look-up {look['median']:.3f} ms (p90 {look['p90']:.3f}), linear {lin['median']:.3f} ms",
+          file=sys.stderr)
     return out
 
 
