@@ -33,9 +33,11 @@ is the part of the deformation the linear model gets wrong:
   correction at the rest-surface point nearest to v − (P(f) − P(f_s)) (P: the path polyline; barycentric on the
   rendered triangles), then the two moved corrections are blended with weights 1 − a, a. The moves are
   precomputed when the table is attached (``trimesh.proximity.closest_point``), at sub-fractions no more than
-  :data:`SHIFT_STEP` of path apart, and blended linearly between sub-fractions at run time (gathers only: no
-  search per update). At a station the move is the identity. Held out on the organ (session 26,
-  ``docs/figures/scenes/organ/path_table``): 0.70 → 0.16 mm at 5 mm, 1.40 → 0.33 mm at 10 mm at the tumour.
+  :data:`SHIFT_STEP` of path apart, as one sparse (S, 2S) matrix each, and blended linearly between
+  sub-fractions at run time (one or two sparse products: no search per update). At a station the move is the
+  identity. Held out on the organ (session 26, ``docs/figures/scenes/organ/path_table``): 0.70 → 0.16 mm at
+  5 mm, 1.40 → 0.33 mm at 10 mm at the tumour; on the rounded box worse at one of three held-out points from
+  15 mm on (the correction there is tied to the rounded edge, not the contact; docs/scenes.md).
   The move follows the contact *along* the path only (not its lateral offset ≤ ``reach``) and does not turn
   the correction's vectors with the normal (2–3.5° between the organ's stations; turning them changed the
   held-out errors by < 0.25 mm, one-off, not kept).
@@ -128,7 +130,7 @@ class PathSnapshotModel:
     ``path`` (M, 3) m dense samples of the stroke on the surface at ``path_fractions`` (M,) ascending
     (``Scene.stroke_at``). Raises ``ValueError`` when the table is inconsistent, was built on another mesh, or
     the path samples or faces are bad. Attaching costs one ``closest_point`` query per vertex, sub-fraction and
-    station (module doc): 2.2 s for the organ (385 vertices, 144 moves), 5 s for the rounded box here."""
+    station (module doc): about 1 s for either shipped table here."""
 
     def __init__(self, table: dict, rest_vertices: np.ndarray, faces: np.ndarray, path: np.ndarray,
                  path_fractions: np.ndarray):

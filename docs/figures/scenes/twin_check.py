@@ -1,28 +1,20 @@
-"""One-off (session 24): how much of the rounded box's held-out path-table error is the reference mesh's own
-noise? The two worst held-out pushes (over 1 mm) of ``docs/figures/scenes/rounded_box/path_table`` solved again on a twin of its mesh
-(h_fine 5.9 mm instead of 6 mm: the same sizes, laid out anew) and compared with itself over the visible
-rendered vertices, depth by depth, beside the table's error there. Writes twin_check.json beside this file.
+"""One-off (session 24 for the rounded box, session 26 for the organ): how much of a scene's held-out path-table
+error is the reference mesh's own noise? The held-out pushes worse than 1 mm of
+``docs/figures/scenes/NAME/path_table/path_table.json`` solved again on a twin of their mesh (h_fine 5.9 mm
+instead of 6 mm: the same sizes, laid out anew) and compared with themselves over the visible rendered vertices,
+depth by depth, beside the table's error there. Writes ``docs/figures/scenes/NAME/twin_check/twin_check.json``.
 
-Run from the repository root: ``python3 docs/figures/scenes/rounded_box/twin_check/twin_check.py`` (~7 min of
-two cores cold; seconds cached)."""
+Run from the repository root: ``python3 docs/figures/scenes/twin_check.py rounded_box`` (~7 min of two cores
+cold; seconds cached), ``… organ`` (~25 min)."""
 
 import json
 import os
 import sys
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-SCENE = "launch/scenes/rounded_box.yaml"
+sys.path.insert(0, ".")
 TWIN_H = 0.0059
-
-
-def solve(args):
-    from flexsheet.experiments.path_table import _job
-    from nodes.fem.cache import DEFAULT_CACHE_DIR
-
-    return _job((SCENE, args[0], args[1], DEFAULT_CACHE_DIR))
 
 
 def main() -> int:
@@ -32,13 +24,14 @@ def main() -> int:
     from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
     from nodes.fem.scene_model import SceneModel
 
-    rep = json.load(open(os.path.join(HERE, "..", "path_table", "path_table.json")))
-    rep["held_out"] = [h for h in rep["held_out"] if h["table_max_mm"] > 1.0]      # the two worst: 0.042, 0.792
+    name = sys.argv[1] if len(sys.argv) > 1 else "rounded_box"
+    here = os.path.join("docs", "figures", "scenes", name)
+    scene = os.path.join("launch", "scenes", f"{name}.yaml")
+    rep = json.load(open(os.path.join(here, "path_table", "path_table.json")))
+    rep["held_out"] = [h for h in rep["held_out"] if h["table_max_mm"] > 1.0]   # rounded box: 0.042, 0.792
     fr = [h["fraction"] for h in rep["held_out"]]
-    with ProcessPoolExecutor(2) as ex:
-        for r in ex.map(solve, [(f, TWIN_H) for f in fr]):
-            print(r, file=sys.stderr)
-    sc = load_scene(SCENE)
+    P._prefetch(scene, [(f, TWIN_H) for f in fr], DEFAULT_CACHE_DIR, 2)      # worker pool tied to this process
+    sc = load_scene(scene)
     rt = SceneModel(sc)
     cache = ArrayCache(DEFAULT_CACHE_DIR)
     verts = rt.rest_vertices.astype(float)
@@ -60,7 +53,8 @@ def main() -> int:
     out = {"what": "each held-out push of path_table.json on a twin of its mesh (h_fine 5.9 mm against 6 mm), its "
                    "largest visible difference per depth (mm): the reference mesh's own noise, beside the table's "
                    "held-out error", "depths_m": depths.tolist(), "held_out": rows}
-    with open(os.path.join(HERE, "twin_check.json"), "w") as fh:
+    os.makedirs(os.path.join(here, "twin_check"), exist_ok=True)
+    with open(os.path.join(here, "twin_check", "twin_check.json"), "w") as fh:
         json.dump(out, fh, indent=1)
     return 0
 
