@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import pid_alive
+from conftest import free_port, pid_alive
 
 from flexsheet.runtime.launch import LaunchError, load_launch
 
@@ -98,6 +98,39 @@ def test_respawn_after_kill_9(demo_launch):
         assert lf.stop() == 0
     time.sleep(0.2)
     assert not pid_alive(new)
+
+
+def test_a_killed_node_is_respawned_at_once_though_its_worker_holds_its_output(tmp_path):
+    """A node killed -9 while a child it started (not tied to it, as a table builder still importing) holds its
+    output pipe: the launcher reports the exit and respawns within seconds, and the child, in the node's process
+    group, goes with it (session 26: the renderer's sheet-table worker stalled the faults scenario's respawn
+    past 30 s). Before the fix the exit was seen only when the child's 60 s sleep ended."""
+    base = free_port(span=10)
+    path = tmp_path / "worker.yaml"
+    path.write_text(f"""
+name: worker
+hosts:
+  main: {{address: 127.0.0.1}}
+base_port: {base}
+shutdown_timeout: 2.0
+nodes:
+  talker: {{type: talker, host: main, params: {{rate: 20, worker_s: 60}}, respawn: {{policy: on-failure, delay: 0.2}}}}
+""")
+    lf = Launch(path)
+    try:
+        (m,) = lf.wait_for(r"\[talker\s*\] talker: worker pid (\d+)")
+        worker = int(m.group(1))
+        old = lf.pids()["talker"]
+        assert pid_alive(worker)
+        t0 = time.monotonic()
+        os.kill(old, signal.SIGKILL)
+        lf.wait_for(r"\[talker\s*\] exited with code -9", timeout=10.0)
+        lf.wait_for(r"\[talker\s*\] started pid", count=2, timeout=10.0)
+        assert time.monotonic() - t0 < 10.0
+        time.sleep(0.2)
+        assert not pid_alive(worker), "the dead node's worker outlived it"
+    finally:
+        assert lf.stop() == 0
 
 
 def test_host_filter_starts_only_that_hosts_share(demo_launch, tmp_path):

@@ -218,6 +218,43 @@ def test_background_worker_is_idle_class_and_dies_with_its_parent():
         pytest.fail(f"worker {child} outlived its killed parent")
 
 
+def _late_child(q) -> None:
+    q.put(os.getpid())
+    time.sleep(1.5)                  # still "importing" when its parent dies
+    from flexsheet.runtime.background import lower_priority
+
+    lower_priority()
+    q.put("went on")                 # an orphan that did not notice: it would build a whole table
+
+
+def _dying_parent(q) -> None:
+    import multiprocessing as mp
+
+    mp.get_context("spawn").Process(target=_late_child, args=(q,)).start()
+    time.sleep(0.5)
+    os._exit(0)                      # gone before the child's lower_priority (kill -9 in the faults scenario)
+
+
+def test_a_worker_whose_parent_died_before_it_tied_itself_exits_at_once():
+    """lower_priority compares the parent multiprocessing recorded at the start with getppid(): a worker whose
+    node died while it still imported (before PR_SET_PDEATHSIG) has been reparented and exits in lower_priority
+    instead of running on as an orphan (session 26; getppid() read inside lower_priority saw init and went on)."""
+    import multiprocessing as mp
+    import queue
+
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    parent = ctx.Process(target=_dying_parent, args=(q,))
+    parent.start()
+    child = q.get(timeout=60)
+    parent.join(10)
+    with pytest.raises(queue.Empty):
+        q.get(timeout=8.0)               # the child sleeps 1.5 s, then must exit in lower_priority
+    from conftest import pid_alive
+
+    assert not pid_alive(child), f"worker {child} is still running without its parent"
+
+
 def _sigint_at_start(q) -> None:
     import signal
 

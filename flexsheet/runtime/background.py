@@ -15,6 +15,7 @@ its owner. The launcher stops a node with SIGINT to its whole process group, and
 from __future__ import annotations
 
 import ctypes
+import multiprocessing
 import os
 import signal
 import threading
@@ -25,7 +26,8 @@ __all__ = ["lower_priority", "start_worker"]
 def lower_priority(nice: int = 19, idle: bool = True) -> str:
     """Make the calling process a background worker (module doc); call it first thing in the worker. Returns
     what took effect, e.g. ``"SIGINT ignored, dies with its parent, SCHED_IDLE, nice +19, 1 BLAS thread"``. Never raises: a
-    step the OS refuses is skipped. Exits the process at once if its parent is already gone. ``idle`` False:
+    step the OS refuses is skipped. Exits the process at once if its parent is already gone (the parent
+    :func:`multiprocessing.parent_process` names, so also one killed while this worker still imported). ``idle`` False:
     niceness only, no ``SCHED_IDLE`` — for work the graph needs soon (the world's true sheet: in the idle class
     a table could take minutes beside a running graph and, killed with its node, never reach the cache)."""
     done = []
@@ -34,7 +36,10 @@ def lower_priority(nice: int = 19, idle: bool = True) -> str:
         done.append("SIGINT ignored")
     except ValueError:             # not the main thread: the caller is not a worker process of its own
         pass
-    parent = os.getppid()
+    # the parent as multiprocessing recorded it when it started this worker: a parent killed while the worker
+    # still imported (before the tie below) has already been replaced by init or a subreaper in getppid()
+    mp_parent = multiprocessing.parent_process()
+    parent = mp_parent.pid if mp_parent is not None and mp_parent.pid else os.getppid()
     try:
         if ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL) == 0:    # PR_SET_PDEATHSIG
             done.append("dies with its parent")

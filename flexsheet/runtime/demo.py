@@ -20,12 +20,15 @@ __all__ = ["TalkerNode", "ListenerNode"]
 
 class TalkerParams(BaseModel):
     """``rate`` Hz (> 0); ``count``: stop after this many messages (0 = forever); ``start_delay`` s before
-    the first message (lets subscribers connect first)."""
+    the first message (lets subscribers connect first); ``worker_s``: > 0 starts a child process at setup that
+    sleeps this long holding the node's output, not tied to its parent (as a node's table builder is while it
+    still imports; the launcher must not wait for it when the node dies: tests/test_runtime_launch.py)."""
 
     model_config = ConfigDict(extra="forbid")
     rate: float = Field(default=10.0, gt=0.0, le=100000.0)
     count: int = Field(default=0, ge=0)
     start_delay: float = Field(default=0.0, ge=0.0)
+    worker_s: float = Field(default=0.0, ge=0.0, le=3600.0)
 
 
 class TalkerNode(Node):
@@ -39,6 +42,12 @@ class TalkerNode(Node):
         self.n = 0
         self.t_start = time.monotonic() + self.params.start_delay
         self.timer(1.0 / self.params.rate, self.tick)
+        if self.params.worker_s > 0:
+            import subprocess
+            import sys
+
+            w = subprocess.Popen([sys.executable, "-c", f"import time; time.sleep({self.params.worker_s!r})"])
+            print(f"talker: worker pid {w.pid}", flush=True)
 
     def tick(self) -> None:
         if (self.params.count and self.n >= self.params.count) or time.monotonic() < self.t_start:

@@ -627,6 +627,30 @@ class Supervisor:
                 break
             self.print(self._fmt.format(child.name, line.decode(errors="replace").rstrip()))
 
+    async def _exit_code(self, child: _Child, pump: asyncio.Task) -> int:
+        """The node's exit code as soon as its process exits, its output read to the end. Whatever is left in
+        its process group then (a worker it started that had not yet tied itself to its parent,
+        :mod:`flexsheet.runtime.background`) is killed: it would hold the node's output pipe open, and asyncio's
+        ``wait()`` waits for that pipe too, so the launcher would report neither the exit nor respawn the node
+        until the worker ended (the renderer's sheet table, ~30 s or more: a kill -9 during its worker's imports
+        stalled the respawn, session 26). Output still held open 2 s after that is no longer read."""
+        proc = child.proc
+        while proc.returncode is None and not pump.done():
+            await asyncio.sleep(0.05)
+        if proc.returncode is None:          # the output closed first, as a node ends: the process is exiting
+            return await proc.wait()
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass                             # the group is empty: nothing outlived the node
+        try:
+            await asyncio.wait_for(asyncio.shield(pump), timeout=2.0)
+        except TimeoutError:
+            pump.cancel()
+            self.print(self._fmt.format(child.name, "output still held open by another process 2 s after "
+                                                    "exit: no longer read"))
+        return proc.returncode
+
     async def _watch(self, child: _Child) -> None:
         while True:
             await self._spawn(child)
@@ -634,8 +658,7 @@ class Supervisor:
             child.started_at = child.started_at or time.monotonic()
             self.print(self._fmt.format(child.name, f"started pid {child.proc.pid}"
                                         + (f" (container: {', '.join(child.members)})" if child.members else "")))
-            await self._pump(child)
-            code = await child.proc.wait()
+            code = await self._exit_code(child, asyncio.create_task(self._pump(child)))
             child.exit_codes.append(code)
             child.cpu_s += child.cpu_live
             child.cpu_live = 0.0
