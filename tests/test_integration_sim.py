@@ -48,11 +48,13 @@ def test_sim_launch_prints_table1_and_latency_and_leaves_outputs(sim_run):
     assert row["n"] > MIN_TIPS_HZ * 10                    # the 10 s stroke (conftest: not a speed test)
     assert 0.0 < row["dtheta_median_deg"] < 1.5 and 0.0 < row["dd_median_mm"] < 1.0, row
     assert row["dtheta_mean_deg"] < 2.0 and row["dd_mean_mm"] < 1.5, row
-    # paper's 2R beside ours: per sample 2R·Δθ against twice the chord 2R·sin(Δθ/2), larger by Δθ²/24 relative
-    # (module doc of flexsheet/experiments/table1.py); a few degrees of Δθ in a loaded run's samples made the means
-    # differ by 2.3e-5 .. 7.1e-4 relative in three runs (2-core machine at load 5-9), so 3e-3, and never below
+    # paper's 2R beside ours: per sample 2R·Δθ against twice the chord 2R·sin(Δθ/2), never smaller, larger by at
+    # most 2R·Δθ³/24 (module doc of flexsheet/experiments/table1.py). Over the samples that is at most
+    # π·E[Δθ²] / (24·E[Δθ]) of the mean (Δθ ≤ π), from the row's own mean and std: a loaded run's few samples
+    # of tens of degrees made it 8.7e-3 (session 26; 2.3e-5 .. 7.1e-4 in three earlier runs, under a fixed 3e-3)
     d2r = row["dd_2r_mean_mm"] - 2.0 * row["dd_mean_mm"]
-    assert -1e-9 <= d2r < 3e-3 * row["dd_2r_mean_mm"], row
+    m, sd = np.radians(row["dtheta_mean_deg"]), np.radians(row["dtheta_std_deg"])
+    assert -1e-9 <= d2r <= 1.1 * np.pi * (sd ** 2 + m ** 2) / (24.0 * m) * row["dd_2r_mean_mm"], row
     assert summary["faults"]["watchdog"] >= 0 and "camera_frame_to_arm_command" in summary["latency_ms"]
     assert "stroke_push_4" in summary                      # the combined stroke and push ran too
     lat = summary["latency_ms"]

@@ -627,6 +627,14 @@ class Supervisor:
                 break
             self.print(self._fmt.format(child.name, line.decode(errors="replace").rstrip()))
 
+    @staticmethod
+    def _kill_group(pgid: int) -> None:
+        """SIGKILL to what is left of an exited node's process group (its session: ``start_new_session``)."""
+        try:
+            os.killpg(pgid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass                             # the group is empty: nothing outlived the node
+
     async def _exit_code(self, child: _Child, pump: asyncio.Task) -> int:
         """The node's exit code as soon as its process exits, its output read to the end. Whatever is left in
         its process group then (a worker it started that had not yet tied itself to its parent,
@@ -635,14 +643,33 @@ class Supervisor:
         until the worker ended (the renderer's sheet table, ~30 s or more: a kill -9 during its worker's imports
         stalled the respawn, session 26). Output still held open 2 s after that is no longer read."""
         proc = child.proc
-        while proc.returncode is None and not pump.done():
-            await asyncio.sleep(0.05)
-        if proc.returncode is None:          # the output closed first, as a node ends: the process is exiting
-            return await proc.wait()
+        loop = asyncio.get_running_loop()
+        exited = loop.create_future()
         try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass                             # the group is empty: nothing outlived the node
+            pidfd = os.pidfd_open(proc.pid)              # readable once the process has exited (Linux >= 5.3)
+        except (AttributeError, OSError):
+            pidfd = None                                 # already reaped, or no pidfd: the pipe's end decides
+        if pidfd is not None:
+            loop.add_reader(pidfd, lambda: exited.done() or exited.set_result(None))
+        try:
+            await asyncio.wait({exited, pump}, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            if pidfd is not None:
+                loop.remove_reader(pidfd)
+                os.close(pidfd)
+            exited.cancel()
+        if pump.done():                      # the output closed first, as a node ends: the process is exiting
+            code = await proc.wait()
+            self._kill_group(proc.pid)
+            return code
+        for _ in range(200):                 # asyncio's child watcher reaps it a moment later
+            if proc.returncode is not None:
+                break
+            await asyncio.sleep(0.005)
+        if proc.returncode is not None:
+            self._kill_group(proc.pid)
+        if proc.returncode is None:          # not reaped within 1 s: wait for it (and its pipe) as before
+            return await proc.wait()
         try:
             await asyncio.wait_for(asyncio.shield(pump), timeout=2.0)
         except TimeoutError:
