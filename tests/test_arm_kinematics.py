@@ -120,6 +120,25 @@ def test_branch_jump_refused():
     assert not res.ok and res.status == "jump"
 
 
+def test_a_target_after_a_pause_may_ask_what_the_arm_could_move_meanwhile():
+    """TargetTracker: within a flowing stream (targets 30 ms apart) a 0.9 rad change is a branch jump, refused
+    with the goal kept; the same target after the stream paused 2 s (a planner respawning while the finger moved
+    on) is taken: 0.5 rad + 2 s at the fastest joint's speed."""
+    kin = ArmKinematics("left", LEFT_BASE)
+    q = home_joints("left")
+    q_far = q + np.array([0.9, 0.0, 0.0, 0.0, 0.0, 0.0])
+    tr = TargetTracker(kin, target_timeout=0.25, max_jump=0.5)
+    tr.seed(q)
+    assert tr.set_target(kin.fk(q), 1.0, now=0.0).ok
+    res = tr.set_target(kin.fk(q_far), 2.0, now=0.03)
+    assert not res.ok and res.status == "jump" and np.allclose(tr.goal, q, atol=1e-6)
+    assert tr.status(0.04) == "hold:jump"
+    res = tr.set_target(kin.fk(q_far), 3.0, now=0.06)        # still flowing: still refused
+    assert not res.ok and res.status == "jump"
+    res = tr.set_target(kin.fk(q_far), 4.0, now=2.06)        # after a 2 s pause
+    assert res.ok and np.abs(tr.goal - q_far).max() < 1e-6 and tr.status(2.07) == "ok"
+
+
 @pytest.mark.parametrize("bad", [np.full((4, 4), np.nan), np.eye(3), np.diag([2.0, 1.0, 1.0, 1.0])])
 def test_malformed_pose_raises_value_error(bad):
     kin = ArmKinematics("left", LEFT_BASE)

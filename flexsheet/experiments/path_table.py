@@ -242,7 +242,8 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
     rep = {"scene": {"name": sc.name, "file": str(sc.source), "key": sc.key(), "contact": sc.finger.contact,
                      "law": sc.material.model},
            "what": "the scene's nonlinear path table (nodes/fem/path_snapshots.py): the real-time linear solve "
-                   "plus the reference-minus-linear correction blended along the stroke and in depth; held-out "
+                   "plus the reference-minus-linear correction, each station's moved with the contact and blended "
+                   "along the stroke and in depth; held-out "
                    "pushes between stations on their own meshes, visible rendered vertices (not held, outside the "
                    "finger's footprint + 2 mm)",
            "grid": GRID, "reach_m": REACH, "stroke_length_m": sc.stroke_length(),

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexsheet.model.kinematics import ArmKinematics, IKResult
+from flexsheet.model.kinematics import QD_MAX, ArmKinematics, IKResult
 
 __all__ = ["TargetTracker"]
 
@@ -21,6 +21,12 @@ class TargetTracker:
 
     ``kin``: the arm's :class:`ArmKinematics`. ``target_timeout``: s without a target before holding.
     ``max_jump``: rad, largest joint change one new target may ask of IK (larger = a branch jump, refused).
+    After a pause of the target stream longer than ``target_timeout`` (the arm held) the first target may ask
+    ``max_jump`` plus what the fastest joint could have moved in the pause (``QD_MAX``'s largest, rad/s, times
+    the pause): the finger went on meanwhile, and a respawned planner's first target is where it is now (a
+    planner dead 5.6 s left the left arm in ``hold:jump`` for 11 s in the faults scenario, session 26). The
+    streaming limiter still moves the arm there at the speed limit. A branch flip inside a flowing stream is
+    refused as before.
     After :meth:`seed` (or the first target) ``goal`` is a (6,) rad joint vector.
     """
 
@@ -47,13 +53,16 @@ class TargetTracker:
     def set_target(self, T_display_clamp, source_stamp: float, now: float, q_measured=None) -> IKResult:
         """Solve IK for a new target pose (4, 4) at time ``now`` (s); returns the :class:`IKResult`.
 
-        Seed: the current goal, else ``q_measured``. If the result is not ok, the goal is unchanged and
-        ``ik_status`` holds the reason. Raises ``ValueError`` for a malformed pose (before anything changes).
+        Seed: the current goal, else ``q_measured``; the jump limit as the class doc says. If the result is not
+        ok, the goal is unchanged and ``ik_status`` holds the reason. Raises ``ValueError`` for a malformed pose (before anything changes).
         """
         seed = self.goal if self.goal is not None else q_measured
         if seed is None:
             raise ValueError("no seed: call seed(q_measured) or pass q_measured before the first target")
-        res = self.kin.ik(T_display_clamp, seed, max_jump=self.max_jump)
+        max_jump = self.max_jump
+        if self.last_target_at is not None and now - self.last_target_at > self.target_timeout:
+            max_jump += float(np.max(QD_MAX)) * (now - self.last_target_at)     # resumed after a pause
+        res = self.kin.ik(T_display_clamp, seed, max_jump=max_jump)
         self.last_ik = res
         self.last_target_at = now
         if res.ok:
