@@ -80,3 +80,18 @@ def test_nan_and_wrong_shape_name_the_field():
 def test_decode_any_uses_carried_schema():
     out = decode_any(encode("/anything", tip()))
     assert isinstance(out, Fingertip) and out.header.seq == 7
+
+
+def test_a_descriptor_with_many_huge_dims_gives_one_bounded_line():
+    """The fuzz test's falsifying example (session 26): a 37-dim descriptor with 2^31 / 2^63 sizes made the
+    reason 401 characters; the shape is now cut after 8 dims (here in the too-many-bytes reason, which writes
+    the shape the same way as the buffer-size one)."""
+    import struct
+
+    from flexsheet.runtime.codec import _parse_descriptor
+
+    dims = [1] * 23 + [2 ** 31] * 4 + [2 ** 63] * 10
+    data = struct.pack("<HB", 2, len(dims)) + struct.pack(f"<{len(dims)}Q", *dims) + b"<f8"
+    why = _parse_descriptor(data)
+    assert isinstance(why, str) and "\n" not in why and len(why) <= 200, why
+    assert "... 37 dims" in why and "needs" in why

@@ -53,8 +53,17 @@ def _parse_descriptor(data: bytes) -> tuple[int, np.dtype, tuple[int, ...], int]
         count *= n
     nbytes = count * dtype.itemsize
     if nbytes > MAX_ARRAY_BYTES:
-        return f"array shape {shape} dtype {dtype} needs {nbytes} bytes, more than the {MAX_ARRAY_BYTES} allowed"
+        return (f"array shape {_shape_text(shape)} dtype {dtype} needs {nbytes} bytes, more than the "
+                f"{MAX_ARRAY_BYTES} allowed")
     return idx, dtype, shape, nbytes
+
+
+def _shape_text(shape: tuple[int, ...]) -> str:
+    """A decoded array shape for an error message, at most 8 dimensions written (a hostile descriptor may give
+    hundreds of huge ones: the reason must stay one bounded line)."""
+    if len(shape) <= 8:
+        return str(tuple(shape))
+    return f"({', '.join(str(n) for n in shape[:8])}, ... {len(shape)} dims)"
 
 
 def _descriptor(data: bytes, topic_name: str) -> tuple[int, np.dtype, tuple[int, ...], int]:
@@ -159,7 +168,8 @@ def _unpack(frames: list, topic_name: str) -> dict:
             buf = buf.buffer if hasattr(buf, "buffer") else buf
             have = memoryview(buf).nbytes
         if have != nbytes:
-            raise DecodeError(f"{topic_name}: array shape {shape} dtype {dtype} needs {nbytes} bytes, buffer has {have}")
+            raise DecodeError(f"{topic_name}: array shape {_shape_text(shape)} dtype {dtype} needs {nbytes} bytes, "
+                              f"buffer has {have}")
         return np.frombuffer(buf, dtype=dtype).reshape(shape)
 
     meta = frames[1]
