@@ -53,7 +53,7 @@ def _parse_descriptor(data: bytes) -> tuple[int, np.dtype, tuple[int, ...], int]
         count *= n
     nbytes = count * dtype.itemsize
     if nbytes > MAX_ARRAY_BYTES:
-        return (f"array shape {_shape_text(shape)} dtype {dtype} needs {nbytes} bytes, more than the "
+        return (f"array shape {_shape_text(shape)} dtype {dtype} needs {_count_text(nbytes)} bytes, more than the "
                 f"{MAX_ARRAY_BYTES} allowed")
     return idx, dtype, shape, nbytes
 
@@ -64,6 +64,13 @@ def _shape_text(shape: tuple[int, ...]) -> str:
     if len(shape) <= 8:
         return str(tuple(shape))
     return f"({', '.join(str(n) for n in shape[:8])}, ... {len(shape)} dims)"
+
+
+def _count_text(n: int) -> str:
+    """A byte count for an error message: exact up to 20 digits, else its power of ten (dims up to 2^64 each
+    multiply to hundreds of digits)."""
+    t = str(n)
+    return t if len(t) <= 20 else f"~10^{len(t) - 1}"
 
 
 def _descriptor(data: bytes, topic_name: str) -> tuple[int, np.dtype, tuple[int, ...], int]:
