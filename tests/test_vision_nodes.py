@@ -135,6 +135,32 @@ def test_camera_node_sim_follows_finger_truth():
     asyncio.run(scenario())
 
 
+def test_camera_node_holds_a_stale_finger_truth_and_never_returns_to_the_param_path():
+    """A world node that stalls (no /world/finger for 1 s, as the loaded 2-core machine once did for 0.7 s)
+    leaves the marker where its last truth put it, extrapolated at most 0.1 s with the truth's velocity. Until
+    session 27 the twin fell back to the param stroke after 0.5 s: a second finger ~20 mm away."""
+    async def scenario():
+        async with NodeHarness(CameraNode, params={"rate_hz": 50.0, "seed": 2, "twin": IDEAL}) as h:
+            cal = (await h.wait_for(topics.CALIBRATION, n=1, timeout=3.0))[0]
+            p, v = np.array([-0.010, 0.0, 0.024]), np.array([-0.02, 0.0, 0.03])
+            h.inject(topics.FINGER_TRUTH, FingerTruth(header=Header(stamp=h.node.now()), position=p, velocity=v))
+            await h.settle(1.0)
+            n0 = len(h.messages(topics.STEREO))
+            f = (await h.wait_for(topics.STEREO, n=n0 + 2, timeout=3.0))[-1]
+            from flexsheet.model.camera_sim import default_trajectory
+            from nodes.triangulator.pipeline import FingertipTracker
+            res = FingertipTracker(cal).process(f.left, f.right, f.exposure_stamp)
+            held = p + 0.1 * v                                       # the extrapolation stops at 0.1 s
+            assert res.valid and np.linalg.norm(res.position - held) < 2e-3, (res.position, held)
+            param, _ = default_trajectory(f.exposure_stamp - h.node._t0)
+            assert np.linalg.norm(res.position - param) > 5e-3       # not the param path's finger
+            line = h.node.status_line()
+            assert "finger: /world/finger, last" in line and "s ago" in line, line
+            age = float(line.split("finger: /world/finger, last ")[1].split(" s ago")[0])
+            assert age >= 1.0, line
+    asyncio.run(scenario())
+
+
 def test_camera_node_falls_back_to_trajectory_bumblebee2():
     async def scenario():
         async with NodeHarness(CameraNode, params={"model": "bumblebee2", "rate_hz": 50.0, "twin": IDEAL}) as h:

@@ -2,8 +2,9 @@
 calibration on ``/camera/calibration``.
 
 Sources (param ``source``): ``sim`` — the camera twin (:mod:`flexsheet.model.camera_sim`) rendering the
-fingertip marker at the world node's ``/world/finger`` position (extrapolated to the exposure time with its velocity),
-or along a param trajectory when no world node has published for ``truth_timeout_s``; ``genicam`` — a
+fingertip marker at the world node's ``/world/finger`` position (extrapolated to the exposure time with its velocity,
+at most 0.1 s), or along a param trajectory until a world node first publishes — never after: a world node that
+stalls or is respawned leaves the finger where it last was (a real finger does not jump to another path); ``genicam`` — a
 GigE Vision / USB3 Vision pair through Aravis, opened by serial, hardware/software-triggered or PTP-synced,
 stamped and paired by device timestamp (:mod:`nodes.camera.genicam`); ``device`` — UVC cameras through
 ``cv2.VideoCapture`` (:mod:`nodes.camera.device`); ``files`` — a folder of pairs (:mod:`nodes.camera.files`).
@@ -81,7 +82,6 @@ class CameraParams(BaseModel):
     blur_samples: int = Field(default=5, ge=1, le=50)
     clutter: bool = True
     seed: int = 0
-    truth_timeout_s: float = Field(default=0.5, gt=0.0)
     traj_amplitude_rad: float = 1.05
     traj_period_s: float = Field(default=10.0, gt=0.0)
     traj_hover_m: float = 0.005
@@ -262,8 +262,8 @@ class CameraNode(Node):
     def _marker_state(self, t: float) -> tuple[np.ndarray, np.ndarray, bool]:
         p = self.params
         with self._lock:
-            truth, rx = self._truth, self._truth_rx
-        if truth is not None and t - rx <= p.truth_timeout_s:
+            truth = self._truth
+        if truth is not None:       # held however old: falling back to the param path showed a second finger
             dt = min(max(t - truth.header.stamp, 0.0), 0.1)
             return truth.position + truth.velocity * dt, truth.velocity, truth.visible
         pos, vel = default_trajectory(t - self._t0, p.traj_amplitude_rad, p.traj_period_s, p.traj_hover_m)
@@ -324,8 +324,15 @@ class CameraNode(Node):
         if p.source == "sim":
             return (f"sim ({p.twin.realism} twin, truth seed {p.twin.truth_seed}; {self.registration}): "
                     f"stereo_skew 0 (the twin renders both views at one instant); dropped {self.dropped} of "
-                    f"{self.frames + self.dropped} frames (drop_rate {self._drop_rate:g})")
+                    f"{self.frames + self.dropped} frames (drop_rate {self._drop_rate:g}); {self._truth_line()}")
         return "files: stereo_skew 0 (not recorded)"
+
+    def _truth_line(self) -> str:
+        with self._lock:
+            rx = self._truth_rx
+        if not math.isfinite(rx):
+            return "finger: param trajectory (no /world/finger yet)"
+        return f"finger: /world/finger, last {self.now() - rx:.2f} s ago"
 
     def heartbeat(self):
         """The base heartbeat with :meth:`status_line` in ``message`` (before any warning line). GenICam:
