@@ -22,13 +22,16 @@ class TalkerParams(BaseModel):
     """``rate`` Hz (> 0); ``count``: stop after this many messages (0 = forever); ``start_delay`` s before
     the first message (lets subscribers connect first); ``worker_s``: > 0 starts a child process at setup that
     sleeps this long holding the node's output, not tied to its parent (as a node's table builder is while it
-    still imports; the launcher must not wait for it when the node dies: tests/test_runtime_launch.py)."""
+    still imports; the launcher must not wait for it when the node dies: tests/test_runtime_launch.py);
+    ``exit_lines``: lines printed at teardown (a node with much to say as it stops: the launcher must still
+    record that exit, tests/test_runtime_launch.py)."""
 
     model_config = ConfigDict(extra="forbid")
     rate: float = Field(default=10.0, gt=0.0, le=100000.0)
     count: int = Field(default=0, ge=0)
     start_delay: float = Field(default=0.0, ge=0.0)
     worker_s: float = Field(default=0.0, ge=0.0, le=3600.0)
+    exit_lines: int = Field(default=0, ge=0, le=1_000_000)
 
 
 class TalkerNode(Node):
@@ -48,6 +51,13 @@ class TalkerNode(Node):
 
             w = subprocess.Popen([sys.executable, "-c", f"import time; time.sleep({self.params.worker_s!r})"])
             print(f"talker: worker pid {w.pid}", flush=True)
+
+    async def teardown(self) -> None:
+        if self.params.exit_lines:
+            import sys
+
+            sys.stdout.write("".join(f"talker: last words {i}\n" for i in range(self.params.exit_lines)))
+            sys.stdout.flush()
 
     def tick(self) -> None:
         if (self.params.count and self.n >= self.params.count) or time.monotonic() < self.t_start:

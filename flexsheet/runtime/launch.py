@@ -762,15 +762,25 @@ class Supervisor:
         sampler.cancel()
         self._sample_now()
         await asyncio.gather(*(self._stop_child(c) for c in reversed(self.children)))
+        await asyncio.wait(watchers, timeout=3.0)   # each records its node's exit (≤ 1 s reap + 2 s of output)
         for w in watchers:
             w.cancel()
         await asyncio.gather(*watchers, return_exceptions=True)
+        for c in self.children:     # a watcher cancelled while it still read the stopped node's last output
+            rc = c.proc.returncode if c.proc is not None else None    # never recorded that incarnation's exit:
+            if rc is not None and len(c.exit_codes) < len(c.pids):    # a respawned node kept its kill's -9
+                c.exit_codes.append(rc)                               # and the run "failed" (session 27)
+                c.cpu_s += c.cpu_live
+                c.cpu_live = 0.0
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
         self.print("[launch] all nodes stopped")
         if self.out:
             self.write_cpu(Path(self.out) / "cpu.json", time.monotonic() - t0)
         failed = [c.name for c in self.children if c.exit_codes and c.exit_codes[-1] not in (0, -2, -15)]
+        if failed:                           # name them: a run's exit 1 must say whose exit it is
+            self.print("[launch] ended with a failure exit: " + ", ".join(
+                f"{c.name} ({c.exit_codes[-1]})" for c in self.children if c.name in failed))
         if self.config_errors:
             return EXIT_CONFIG
         return 1 if failed and "required" in self.reason else 0
