@@ -150,7 +150,7 @@ def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its
     cache = ArrayCache(str(base / "cache"))
     q = X.reference_path(st.levels[-1], 0.0, depths, mat, cache, rm.rest_vertices.astype(float), st.contact)
     assert max(X.mirror_asymmetry(q, st.levels[-1], depths, mat, rm)) < 1e-5
-    half = replace(st.levels[-1], half_z=False, cut=True)
+    half = replace(st.levels[0], half_z=False, cut=True)   # the study's own half model, cached by the run
     h = X.reference_path(half, 0.0, depths, mat, cache, rm.rest_vertices.astype(float), st.contact)
     a = 0.003
     uni = {"u_dof": np.broadcast_to([0.0, 0.0, a], h["u_dof"][:1].shape).astype(np.float32),
@@ -276,7 +276,7 @@ def test_fold_study_reads_the_levels_from_the_cache_and_finds_no_fold_on_the_coa
     and stretched several times over; its differences to the finest level are the convergence study's."""
     base, _, _ = quick
     r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--Jm", "inf", "--fold-study", "--out",
-                        str(base / "fold"), "--cache-dir", str(base / "cache"), "--jobs", "1"], cwd=ROOT,
+                        str(base / "fold"), "--cache-dir", str(base / "cache"), "--jobs", "2"], cwd=ROOT,
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     solved = [ln for ln in r.stdout.splitlines() if "DOF, load steps" in ln]
@@ -325,7 +325,7 @@ def test_material_study_gent_stiffens_the_deep_push_only_and_is_judged_against_i
     finer level, never the one they were sampled from."""
     base, _, _ = quick
     r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--Jm", "inf", "--material-study",
-                        "--out", str(base / "material"), "--cache-dir", str(base / "cache"), "--jobs", "1"], cwd=ROOT,
+                        "--out", str(base / "material"), "--cache-dir", str(base / "cache"), "--jobs", "2"], cwd=ROOT,
                        capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     solved = [ln for ln in r.stdout.splitlines() if "DOF, load steps" in ln]
