@@ -165,6 +165,34 @@ nodes:
     assert code == 0
 
 
+def test_a_real_time_nodes_children_start_in_the_normal_class(tmp_path):
+    """A node with ``rt_priority`` runs SCHED_FIFO; a process it starts (here the talker's ``worker_s`` child, as the
+    world node's sheet-table builder) begins in the normal class (SCHED_RESET_ON_FORK), not at the node's
+    real-time priority, where a CPU-bound build would starve every normal node. Needs root (CI is root)."""
+    if os.geteuid() != 0:
+        pytest.skip("SCHED_FIFO needs root (CAP_SYS_NICE)")
+    base = free_port(span=10)
+    path = tmp_path / "rt.yaml"
+    path.write_text(f"""
+name: rt
+hosts:
+  main: {{address: 127.0.0.1}}
+base_port: {base}
+shutdown_timeout: 2.0
+nodes:
+  talker: {{type: talker, host: main, rt_priority: 5, params: {{rate: 20, worker_s: 30}}}}
+""")
+    lf = Launch(path)
+    try:
+        (m,) = lf.wait_for(r"\[talker\s*\] talker: worker pid (\d+)")
+        node, worker = lf.pids()["talker"], int(m.group(1))
+        assert os.sched_getscheduler(worker) == os.SCHED_OTHER          # without the reset: SCHED_FIFO, 5
+        assert os.sched_getscheduler(node) == os.SCHED_FIFO | os.SCHED_RESET_ON_FORK
+        assert os.sched_getparam(node).sched_priority == 5
+    finally:
+        assert lf.stop() == 0
+
+
 def test_host_filter_starts_only_that_hosts_share(demo_launch, tmp_path):
     path = demo_launch()
     text = path.read_text().replace("hosts:\n  main: {address: 127.0.0.1}",

@@ -156,7 +156,8 @@ class NodeSpec(BaseModel):
     nice: int = Field(default=0, ge=-20, le=19, description="process niceness (negative needs root)")
     rt_priority: int = Field(default=0, ge=0, le=90,
                              description="SCHED_FIFO priority for a hard-periodic loop (needs root/CAP_SYS_NICE; "
-                                         "0 = normal scheduling; Linux RT throttling keeps 5 % for the rest)")
+                                         "0 = normal scheduling; Linux RT throttling keeps 5 % for the rest; "
+                                         "processes the node starts run in the normal class: reset on fork)")
     container: str | None = Field(default=None, pattern=r"^[A-Za-z_][A-Za-z0-9_-]{0,63}$",
                                   description="composable container: the nodes of one container and host run in "
                                               "one process and one event loop (flexsheet.runtime.container)")
@@ -498,7 +499,10 @@ def _child_setup(nice: int, rt_priority: int = 0):
                 pass
         if rt_priority:
             try:
-                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
+                # reset on fork: a process the node starts (a table builder, a subprocess) begins in the normal
+                # class, not at the node's real-time priority, where its imports alone would starve the graph
+                os.sched_setscheduler(0, os.SCHED_FIFO | getattr(os, "SCHED_RESET_ON_FORK", 0),
+                                      os.sched_param(rt_priority))
             except (OSError, AttributeError):  # no privilege: normal scheduling
                 pass
     return setup
