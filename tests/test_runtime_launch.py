@@ -100,22 +100,29 @@ def test_respawn_after_kill_9(demo_launch):
     assert not pid_alive(new)
 
 
+def _talker_file(tmp_path, name: str, talker: str, shutdown_timeout: float = 2.0):
+    """A launch file of one talker node (``talker``: the node's YAML flow mapping after ``type, host``) on free
+    ports, in ``tmp_path``."""
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(f"""
+name: {name}
+hosts:
+  main: {{address: 127.0.0.1}}
+base_port: {free_port(span=10)}
+shutdown_timeout: {shutdown_timeout}
+nodes:
+  talker: {{type: talker, host: main, {talker}}}
+""")
+    return path
+
+
 def test_a_killed_node_is_respawned_at_once_though_its_worker_holds_its_output(tmp_path):
     """A node killed -9 while a child it started (not tied to it, as a table builder still importing) holds its
     output pipe: the launcher reports the exit and respawns within seconds, and the child, in the node's process
     group, goes with it (session 26: the renderer's sheet-table worker stalled the faults scenario's respawn
     past 30 s). Before the fix the exit was seen only when the child's 60 s sleep ended."""
-    base = free_port(span=10)
-    path = tmp_path / "worker.yaml"
-    path.write_text(f"""
-name: worker
-hosts:
-  main: {{address: 127.0.0.1}}
-base_port: {base}
-shutdown_timeout: 2.0
-nodes:
-  talker: {{type: talker, host: main, params: {{rate: 20, worker_s: 60}}, respawn: {{policy: on-failure, delay: 0.2}}}}
-""")
+    path = _talker_file(tmp_path, "worker",
+                        "params: {rate: 20, worker_s: 60}, respawn: {policy: on-failure, delay: 0.2}")
     lf = Launch(path)
     try:
         (m,) = lf.wait_for(r"\[talker\s*\] talker: worker pid (\d+)")
@@ -141,17 +148,9 @@ def test_a_respawned_node_that_stops_cleanly_is_not_a_failure_though_it_says_muc
     its watcher polled for the reaped exit code in 5 ms sleeps while the stop, woken by the exit callback,
     cancelled it). The race itself did not reproduce with this node on an idle machine; the test holds the
     clean stop of a respawned node that has much to say."""
-    base = free_port(span=10)
-    path = tmp_path / "loud.yaml"
-    path.write_text(f"""
-name: loud
-hosts:
-  main: {{address: 127.0.0.1}}
-base_port: {base}
-shutdown_timeout: 5.0
-nodes:
-  talker: {{type: talker, host: main, params: {{rate: 20, exit_lines: 200000}}, respawn: {{policy: on-failure, delay: 0.2}}}}
-""")
+    path = _talker_file(tmp_path, "loud",
+                        "params: {rate: 20, exit_lines: 200000}, respawn: {policy: on-failure, delay: 0.2}",
+                        shutdown_timeout=5.0)
     lf = Launch(path)
     try:
         lf.wait_for(r"\[talker\s*\] .*talker up: endpoint")
@@ -171,17 +170,7 @@ def test_a_real_time_nodes_children_start_in_the_normal_class(tmp_path):
     real-time priority, where a CPU-bound build would starve every normal node. Needs root (CI is root)."""
     if os.geteuid() != 0:
         pytest.skip("SCHED_FIFO needs root (CAP_SYS_NICE)")
-    base = free_port(span=10)
-    path = tmp_path / "rt.yaml"
-    path.write_text(f"""
-name: rt
-hosts:
-  main: {{address: 127.0.0.1}}
-base_port: {base}
-shutdown_timeout: 2.0
-nodes:
-  talker: {{type: talker, host: main, rt_priority: 5, params: {{rate: 20, worker_s: 30}}}}
-""")
+    path = _talker_file(tmp_path, "rt", "rt_priority: 5, params: {rate: 20, worker_s: 30}")
     lf = Launch(path)
     try:
         (m,) = lf.wait_for(r"\[talker\s*\] talker: worker pid (\d+)")

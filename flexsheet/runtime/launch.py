@@ -670,10 +670,9 @@ class Supervisor:
             if proc.returncode is not None:
                 break
             await asyncio.sleep(0.005)
-        if proc.returncode is not None:
-            self._kill_group(proc.pid)
         if proc.returncode is None:          # not reaped within 1 s: wait for it (and its pipe) as before
             return await proc.wait()
+        self._kill_group(proc.pid)
         try:
             await asyncio.wait_for(asyncio.shield(pump), timeout=2.0)
         except TimeoutError:
@@ -681,6 +680,13 @@ class Supervisor:
             self.print(self._fmt.format(child.name, "output still held open by another process 2 s after "
                                                     "exit: no longer read"))
         return proc.returncode
+
+    @staticmethod
+    def _record_exit(child: _Child, code: int) -> None:
+        """One incarnation's end: its exit code, and its CPU time added to the node's ended incarnations."""
+        child.exit_codes.append(code)
+        child.cpu_s += child.cpu_live
+        child.cpu_live = 0.0
 
     async def _watch(self, child: _Child) -> None:
         while True:
@@ -690,9 +696,7 @@ class Supervisor:
             self.print(self._fmt.format(child.name, f"started pid {child.proc.pid}"
                                         + (f" (container: {', '.join(child.members)})" if child.members else "")))
             code = await self._exit_code(child, asyncio.create_task(self._pump(child)))
-            child.exit_codes.append(code)
-            child.cpu_s += child.cpu_live
-            child.cpu_live = 0.0
+            self._record_exit(child, code)
             if child.stopping or self._stop.is_set():
                 return
             self.print(self._fmt.format(child.name, f"exited with code {code}"))
@@ -773,9 +777,7 @@ class Supervisor:
         for c in self.children:     # a watcher cancelled while it still read the stopped node's last output
             rc = c.proc.returncode if c.proc is not None else None    # never recorded that incarnation's exit:
             if rc is not None and len(c.exit_codes) < len(c.pids):    # a respawned node kept its kill's -9
-                c.exit_codes.append(rc)                               # and the run "failed" (session 27)
-                c.cpu_s += c.cpu_live
-                c.cpu_live = 0.0
+                self._record_exit(c, rc)                              # and the run "failed" (session 27)
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
         self.print("[launch] all nodes stopped")
