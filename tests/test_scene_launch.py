@@ -5,7 +5,8 @@ the organ (its messages carry the organ's scene key) and its stiffness peak over
 sheet's tension along the stroke.
 
 The FEM's precompute for a scene is warmed in the test process first (the same disk cache the FEM node reads,
-~1 min on a cold 2-core machine), so the 25 s run is served by the FEM from its start."""
+~1 min on a cold 2-core machine); the world starts the stroke only after the FEM node (and the rest of the graph)
+is up (`world.start_after` in launch/sim.yaml), so the stroke is served by the FEM from its start."""
 
 from __future__ import annotations
 
@@ -116,6 +117,10 @@ def test_sim_launch_on_the_organ_shows_the_fem_stiffness_peak_over_the_inclusion
         assert o.sum() >= 10 and a.sum() >= 10, (o.sum(), a.sum())
         return float(np.median(v[o])), float(np.median(v[a]))
 
+    # the FEM was up before the stroke began (world.start_after): its first deformation precedes the stroke
+    stroke = [m.header.stamp for m in _bag(tmp_path / "sim.mcap", "/world/finger") if m.phase == "stroke"]
+    first = min(m.header.stamp for m in _bag(tmp_path / "sim.mcap", "/object/deformation"))
+    assert first < stroke[0], (first - stroke[0], out[-3000:])
     de = [m for m in _bag(tmp_path / "sim.mcap", "/object/deformation") if m.valid and m.depth > 0.002]
     assert len(de) > 50 and {m.scene_key for m in de} == {key}     # the FEM solved this organ
     k_over, k_away = over_away([m.contact_point[1] for m in de], [m.stiffness for m in de])

@@ -119,3 +119,57 @@ def test_world_params_take_the_twin_and_refuse_bad_values():
         WorldParams(twin={"truth_seed": -1})
     with pytest.raises(ValueError, match="stretch_step"):
         WorldParams(sheet_fem={"stretch_step": 0.0})
+
+
+def _heartbeat(node: str, stamp: float):
+    from messages import Heartbeat
+
+    return Heartbeat(header=Header(stamp=stamp), node=node, node_type=node)
+
+
+def test_world_script_waits_for_the_heartbeats_of_start_after_then_starts(tmp_path, monkeypatch):
+    """The finger holds its first pose (approach start, 30 mm off the surface) until every node named in
+    ``start_after`` has sent a heartbeat; a heartbeat of another node does not count; then the script runs."""
+    monkeypatch.setenv("FLEXSHEET_CACHE", str(tmp_path))
+
+    async def scenario():
+        params = {"start_delay": 0.0, "start_after": ["fem", "renderer"], "rate_hz": 50.0, "sheet_rate_hz": 10.0,
+                  "script": [{"mode": "stroke", "moving_time": 2.0, "approach_time": 0.2, "hold_before": 0.0}],
+                  "sheet_fem": {**COARSE, "expected_stretch": 0.04}}
+        async with NodeHarness(WorldNode, params=params) as h:
+            await asyncio.sleep(0.8)
+            h.inject(T.DIAGNOSTICS, _heartbeat("planner", h.node.now()))     # not one of start_after
+            h.inject(T.DIAGNOSTICS, _heartbeat("fem", h.node.now()))
+            await asyncio.sleep(0.8)
+            held = h.messages(T.FINGER_TRUTH)
+            assert len(held) > 40 and h.node.t0 is None and h.node.waiting_for == {"renderer"}
+            p0 = np.array([m.position for m in held])
+            assert np.abs(p0 - p0[0]).max() < 1e-12 and {m.phase for m in held} == {"approach"}
+            h.inject(T.DIAGNOSTICS, _heartbeat("renderer", h.node.now()))
+            await asyncio.sleep(0.8)
+            moved = h.messages(T.FINGER_TRUTH)[len(held):]
+            assert h.node.t0 is not None and "stroke" in {m.phase for m in moved}
+            p1 = np.array([m.position for m in moved])
+            assert np.linalg.norm(p1 - p0[0], axis=1).max() > 0.02      # left the held pose (30 mm approach)
+    asyncio.run(scenario())
+
+
+def test_world_script_starts_after_start_timeout_without_the_heartbeats(tmp_path, monkeypatch, caplog):
+    """A node of ``start_after`` that never comes up (a typo, a dead host) delays the script by
+    ``start_timeout`` s, with a warning naming it — never forever."""
+    monkeypatch.setenv("FLEXSHEET_CACHE", str(tmp_path))
+
+    async def scenario():
+        params = {"start_delay": 0.0, "start_after": ["fme"], "start_timeout": 0.5, "rate_hz": 50.0,
+                  "sheet_rate_hz": 10.0, "script": [{"mode": "stroke", "moving_time": 2.0, "approach_time": 0.2, "hold_before": 0.0}],
+                  "sheet_fem": {**COARSE, "expected_stretch": 0.04}}
+        async with NodeHarness(WorldNode, params=params) as h:
+            await asyncio.sleep(0.3)
+            assert h.node.t0 is None
+            await asyncio.sleep(1.2)
+            assert h.node.t0 is not None and "stroke" in {m.phase for m in h.messages(T.FINGER_TRUTH)}
+    with caplog.at_level("WARNING"):
+        asyncio.run(scenario())
+    assert any("without a heartbeat from fme" in r.getMessage() for r in caplog.records), caplog.text
+    with pytest.raises(ValueError, match="start_timeout"):
+        WorldParams(start_timeout=0.0)

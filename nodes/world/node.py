@@ -15,6 +15,11 @@ truth (:class:`flexsheet.model.truth.TwinTruth`, param ``twin: {realism, truth_s
   The FEM tables are cached on disk per truth and clamp strain; a missing one is built in a niced worker
   process when a push first needs it (``sheet_fem.wait``: build the expected one before the script starts).
   Until it is ready a pushed sheet is published with its depth but a flat ``membrane`` (logged once).
+* Start: the script clock starts ``start_delay`` s after every node named in ``start_after`` has sent a
+  heartbeat on ``/diagnostics`` (a node's heartbeats begin when its setup is done: an FEM node loading and
+  attaching a scene's path table took 13 s of a loaded 2-core start, and a stroke that began before it was
+  half unserved), or after ``start_timeout`` s of waiting (logged as a warning naming the nodes missing), as
+  an experimenter begins when the display is up.
 * Progress: one line every ``progress_period`` s; when the script ends the node exits, which ends a launch
   in which it is ``required`` (then the launch's report runs, see :mod:`flexsheet.experiments.report`).
   ``loop: true`` repeats the script until Ctrl-C (interactive mode).
@@ -38,7 +43,7 @@ from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.runtime.background import start_worker
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
-from messages import ArmJointState, FingerTruth, SheetState
+from messages import ArmJointState, FingerTruth, Heartbeat, SheetState
 from messages import topics as T
 from nodes.world.physics import FemSettings, TruePhysics, build_table
 
@@ -105,7 +110,9 @@ class WorldParams(BaseModel):
     ``/world/sheet``; ``membrane_grid`` G (G×G deflection samples of the true shape); ``twin``: the hidden
     truth (:class:`~flexsheet.model.truth_choice.TruthChoice`); ``sheet_fem``: the true sheet's FEM tables (:class:`SheetFemParams`);
     ``sheet_size`` m: unstretched sheet side between the clamps (for the stretch); ``start_delay`` s before the
-    script starts (lets the graph connect and the arms reach the first pose); ``loop``: repeat until Ctrl-C;
+    script starts (lets the graph connect and the arms reach the first pose), counted from the heartbeat of the
+    last node named in ``start_after`` (node names of the launch file; empty: from the world's own start) or
+    from ``start_timeout`` s of waiting for them; ``loop``: repeat until Ctrl-C;
     ``scene``: the scene file whose stroke path the finger follows (launch/scenes/*.yaml; none: the paper's
     cylinder by the segments' own parameters); ``progress_period`` s."""
 
@@ -118,6 +125,8 @@ class WorldParams(BaseModel):
     sheet_fem: SheetFemParams = Field(default_factory=SheetFemParams)
     sheet_size: float = Field(default=scene.SHEET_SIZE, gt=0.0)
     start_delay: float = Field(default=3.0, ge=0.0)
+    start_after: list[str] = Field(default_factory=list)
+    start_timeout: float = Field(default=60.0, gt=0.0)
     loop: bool = False
     progress_period: float = Field(default=2.0, gt=0.0)
     scene: str | None = None
@@ -152,6 +161,10 @@ class WorldNode(Node):
         self._warned_flat = False
         self.subscribe(T.ARM_LEFT_STATE, self.on_arm, qos=QoS.LATEST)
         self.subscribe(T.ARM_RIGHT_STATE, self.on_arm, qos=QoS.LATEST)
+        self.waiting_for: set[str] = set(p.start_after)
+        self.t_setup = time.monotonic()
+        if self.waiting_for:
+            self.subscribe(T.DIAGNOSTICS, self.on_heartbeat, qos=QoS.KEEP_ALL)
         first = self.phys.node_of(p.sheet_fem.expected_stretch)
         if not self.phys.try_load(first) and p.sheet_fem.wait:
             self._start_build(first)
@@ -167,7 +180,8 @@ class WorldNode(Node):
                       if self.scene is not None else "the cylinder of the script's parameters")
         self.log.info("script: %s; %.1f s in all, starting in %.1f s%s",
                       ", ".join(f"{s.mode} {s.moving_time:g} s" for s in p.script), self.total, p.start_delay,
-                      " (after the sheet FEM table)" if self.t0 is None else "")
+                      "" if self.t0 is not None else
+                      f" (after {self._waiting_text()})")
 
     async def teardown(self) -> None:
         if self._worker is not None and self._worker.is_alive():
@@ -176,9 +190,29 @@ class WorldNode(Node):
 
     # ------------------------------------------------------------------------------------------ FEM tables
     def _arm_t0(self) -> None:
-        """Start the script clock unless it must wait for the first FEM table."""
-        if self.t0 is None and not (self.params.sheet_fem.wait and self._building is not None):
+        """Start the script clock unless it must wait for the first FEM table or a node of ``start_after``."""
+        if self.waiting_for and time.monotonic() - self.t_setup > self.params.start_timeout:
+            self.log.warning("starting the script without a heartbeat from %s after %g s (start_timeout)",
+                             ", ".join(sorted(self.waiting_for)), self.params.start_timeout)
+            self.waiting_for = set()
+        if self.t0 is None and not self.waiting_for and not (self.params.sheet_fem.wait and self._building is not None):
             self.t0 = time.monotonic() + self.params.start_delay
+
+    def _waiting_text(self) -> str:
+        """What the script clock waits for, for the log."""
+        parts = [f"the true sheet's FEM table (clamp strain {self._building})"] if (
+            self.params.sheet_fem.wait and self._building is not None) else []
+        if self.waiting_for:
+            parts.append("a heartbeat from " + ", ".join(sorted(self.waiting_for)))
+        return " and ".join(parts)
+
+    def on_heartbeat(self, msg: Heartbeat) -> None:
+        """A node of ``start_after`` is up (its heartbeats begin after its setup): stop waiting for it."""
+        if msg.node in self.waiting_for:
+            self.waiting_for.discard(msg.node)
+            self.log.info("%s is up (%.1f s after the world)%s", msg.node, time.monotonic() - self.t_setup,
+                          "" if self.waiting_for else f"; the script starts in {self.params.start_delay:.1f} s")
+            self._arm_t0()
 
     def _start_build(self, node: float) -> None:
         """Build table node ``node`` in a spawned, niced worker process (never blocks the loop)."""
@@ -222,10 +256,12 @@ class WorldNode(Node):
         return -1, t
 
     def tick_finger(self) -> None:
+        if self.t0 is None:
+            self._arm_t0()
         if self.t0 is None and time.monotonic() - self.last_progress >= self.params.progress_period:
             self.last_progress = time.monotonic()
-            self.log.info("waiting for the true sheet's FEM table (clamp strain %s) before the script starts",
-                          self._building)
+            self.log.info("waiting for %s before the script starts (%.0f s)", self._waiting_text(),
+                          time.monotonic() - self.t_setup)
         t = -1.0 if self.t0 is None else time.monotonic() - self.t0
         if t < 0:
             i, ts = 0, 0.0
