@@ -44,8 +44,8 @@ ARM_LEFT_STATE = Topic("/arm/left/joint_state", ArmJointState, nominal_hz=140.0)
 ARM_RIGHT_STATE = Topic("/arm/right/joint_state", ArmJointState, nominal_hz=140.0)
 DEFORMATION = Topic("/object/deformation", ObjectDeformation, nominal_hz=48.0)
 RENDERED = Topic("/render/stereo", RenderedFrame, nominal_hz=10.0)
-FINGER_TRUTH = Topic("/world/finger", FingerTruth, nominal_hz=200.0)
-SHEET_STATE = Topic("/world/sheet", SheetState, nominal_hz=100.0)
+FINGER_TRUTH = Topic("/world/finger", FingerTruth, nominal_hz=100.0)
+SHEET_STATE = Topic("/world/sheet", SheetState, nominal_hz=50.0)
 DIAGNOSTICS = Topic("/diagnostics", Heartbeat, nominal_hz=1.0)
 
 ALL = [STEREO, STEREO_PREVIEW, CALIBRATION, FINGERTIP, SHEET_TARGET, ARM_LEFT_TARGET, ARM_RIGHT_TARGET, ARM_LEFT_STATE,

@@ -334,3 +334,13 @@ def test_experiment_quick_writes_summary(tmp_path, monkeypatch):
     chart = json.loads((tmp_path / "stroke_errors.json").read_text())
     lat = chart["by_latency"]["no_prediction"]
     assert lat[-1]["dtheta_mean_deg"] > lat[0]["dtheta_mean_deg"]     # more latency, more error
+
+
+@pytest.mark.parametrize("t", [0.5, 3.7, 6.05])
+def test_finger_script_state_is_position_and_velocity_in_one_call(t):
+    """The world's per-tick (position, velocity): the same numbers as the two separate calls, and the velocity
+    is the stroke's (≈ R·dφ/dt on the linear profile plus the tremor's), not zero."""
+    fs = FingerScript(mode="stroke", moving_time=5.0, seed=3)
+    p, v = fs.state(t)
+    assert p == pytest.approx(fs.position(t), abs=1e-15) and v == pytest.approx(fs.velocity(t), rel=1e-9, abs=1e-12)
+    assert np.linalg.norm(v) > 1e-4

@@ -74,9 +74,12 @@ def test_world_node_publishes_the_sheet_of_the_true_kinematics(realism, tmp_path
                   "sheet_rate_hz": 50.0, "twin": {"realism": realism, "truth_seed": 1},
                   "sheet_fem": {**COARSE, "expected_stretch": 0.04}}
         async with NodeHarness(WorldNode, params=params) as h:
-            h.inject(T.ARM_LEFT_STATE, _state("left", q["left"], fk["left"], h.node.now()))
-            h.inject(T.ARM_RIGHT_STATE, _state("right", q["right"], fk["right"], h.node.now()))
+            t_meas = h.node.now() - 0.300           # joints measured 0.3 s before the world got them
+            h.inject(T.ARM_LEFT_STATE, _state("left", q["left"], fk["left"], t_meas))
+            h.inject(T.ARM_RIGHT_STATE, _state("right", q["right"], fk["right"], t_meas + 0.004))
             sheet = (await h.wait_for(T.SHEET_STATE, n=1, timeout=5.0))[-1]
+            # stamped when that pose was true (the joints' mean stamp), not when the world published it
+            assert sheet.header.stamp == pytest.approx(t_meas + 0.002, abs=1e-6)
             assert sheet.origin == pytest.approx(o_t, abs=1e-12) and sheet.normal == pytest.approx(n_t, abs=1e-12)
             assert sheet.stretch == pytest.approx(max(0.0, 2 * a_t / 0.24 - 1), abs=1e-12)
             if realism == "ideal":

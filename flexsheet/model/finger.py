@@ -234,6 +234,11 @@ class FingerScript:
         p = self.positions(np.array([t - h, t + h]))
         return (p[1] - p[0]) / (2 * h)
 
+    def state(self, t: float, h: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
+        """(:meth:`position`, :meth:`velocity`) at t s from one evaluation of three samples: (3,) m, (3,) m/s."""
+        p = self.positions(np.array([t - h, t, t + h]))
+        return p[1], (p[2] - p[0]) / (2 * h)
+
     def angle_of(self, p) -> np.ndarray:
         """Angle(s) around the axis of point(s) p (3,) or (N, 3), rad, same convention as the target."""
         p = np.atleast_2d(np.asarray(p, float)) - self._c

@@ -3,7 +3,10 @@ truth (:class:`flexsheet.model.truth.TwinTruth`, param ``twin: {realism, truth_s
 
 * Finger: plays a list of :class:`flexsheet.model.finger.FingerScript` segments one after the other (default:
   the paper's stroking experiment at 10 s and 30 s moving time, then a combined stroke and push) and
-  publishes the true marker position on ``/world/finger`` at ``rate_hz``; the camera twin renders it. The
+  publishes the true marker position on ``/world/finger`` at ``rate_hz`` (100 Hz; the camera twin renders it
+  with the truth's velocity between samples). 200 Hz (and a 100 Hz sheet) asked ~0.4 of a core of a 2-core
+  machine the whole graph shares: the world ran at 27 Hz in a loaded shared sim run (21 Hz in CI) with gaps
+  of 0.3–0.8 s, in which the camera twin's finger froze (its extrapolation is capped at 0.1 s). The
   finger follows the stroke path of the ``scene`` (:mod:`flexsheet.model.scenes`; filled by the launcher
   from the launch file's top-level ``scene:``; none = the paper's cylinder): p − depth·n along the path, with
   each segment's profile over the path fraction (stroke, push at the path's start, stroke_push).
@@ -11,7 +14,10 @@ truth (:class:`flexsheet.model.truth.TwinTruth`, param ``twin: {realism, truth_s
   (``ArmJointState.position``; the truth's base poses, link lengths and joint zero offsets — never the
   bridge's model in ``ArmJointState.pose``), and the pushed sheet's shape is the nonlinear membrane FEM of
   :mod:`flexsheet.model.sheet_fem` with the truth's Young's modulus, pre-strain and tension ratio
-  (:mod:`nodes.world.physics`); published on ``/world/sheet`` (``membrane``: the deflection on a G×G grid).
+  (:mod:`nodes.world.physics`); published on ``/world/sheet`` (``membrane``: the deflection on a G×G grid),
+  stamped with the time its pose was true — the mean stamp of the two joint states it comes from — so a world
+  tick that runs late does not show as the display's lag in Table I (the finger's shape of a push is the
+  finger's at publication).
   The FEM tables are cached on disk per truth and clamp strain; a missing one is built in a niced worker
   process when a push first needs it (``sheet_fem.wait``: build the expected one before the script starts).
   Until it is ready a pushed sheet is published with its depth but a flat ``membrane`` (logged once).
@@ -118,8 +124,8 @@ class WorldParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     script: list[Segment] = Field(default_factory=lambda: list(DEFAULT_SCRIPT), min_length=1)
-    rate_hz: float = Field(default=200.0, gt=0.0, le=2000.0)
-    sheet_rate_hz: float = Field(default=100.0, gt=0.0, le=1000.0)
+    rate_hz: float = Field(default=100.0, gt=0.0, le=2000.0)
+    sheet_rate_hz: float = Field(default=50.0, gt=0.0, le=1000.0)
     membrane_grid: int = Field(default=24, ge=2, le=128)
     twin: TruthChoice = Field(default_factory=TruthChoice)
     sheet_fem: SheetFemParams = Field(default_factory=SheetFemParams)
@@ -154,6 +160,7 @@ class WorldNode(Node):
         self.truth = TwinTruth.draw(p.twin.truth_seed, p.twin.realism)
         self.phys = TruePhysics(self.truth, p.sheet_fem.settings(), size=p.sheet_size)
         self.poses: dict[str, np.ndarray] = {}
+        self.pose_stamps: dict[str, float] = {}
         self.finger = self.scripts[0].position(0.0)
         self._worker: multiprocessing.process.BaseProcess | None = None
         self._building: float | None = None
@@ -244,6 +251,7 @@ class WorldNode(Node):
         bridge's own FK in ``msg.pose`` is not used). Joints the truth's FK refuses are rejected."""
         try:
             self.poses[msg.arm] = self.phys.clamp_pose(msg.arm, msg.position)
+            self.pose_stamps[msg.arm] = float(msg.header.stamp)
         except ValueError as exc:
             raise InputRejected(f"{msg.arm} arm joints: {exc}") from None
 
@@ -274,10 +282,10 @@ class WorldNode(Node):
                 self.shutdown()
                 return
         script = self.scripts[i]
-        pos = script.position(ts)
+        pos, vel = script.state(ts)
         self.finger = pos
         self.finger_pub.publish(FingerTruth(
-            header=self.finger_pub.header("display"), position=pos, velocity=script.velocity(ts), segment=i,
+            header=self.finger_pub.header("display"), position=pos, velocity=vel, segment=i,
             mode=script.mode, moving_time=float(script.moving_time), phase=script.phase(ts),
             target_angle=float(script.target_angle(ts)), visible=True))
         now = time.monotonic()
@@ -314,8 +322,12 @@ class WorldNode(Node):
             depth = depth if inside else 0.0
             pushed = np.asarray(self.finger, float) if depth > 0.0 else sheet.origin
             grid = np.zeros((g, g))
+        # stamped when its pose was true: the mean of the two joint measurements' stamps (they are one
+        # controller cycle apart at most), not the publication's — a world tick late under load (a median
+        # 50 ms, seconds in a stall) would read as the display's lag in Table I
+        stamp = 0.5 * (self.pose_stamps["left"] + self.pose_stamps["right"])
         self.sheet_pub.publish(SheetState(
-            header=self.sheet_pub.header("display"), origin=sheet.origin, normal=sheet.normal, axis_u=sheet.axis_u,
+            header=self.sheet_pub.header("display", stamp=stamp), origin=sheet.origin, normal=sheet.normal, axis_u=sheet.axis_u,
             corners=sheet.corners, pushed_point=pushed, depth=depth, stretch=stretch,
             membrane=np.ascontiguousarray(grid)))
 
