@@ -122,6 +122,7 @@ def _mutate(doc: dict, dotted: str, value) -> dict:
     ("nodes.talker.params.rate", -3, r"node talker: params\.rate = -3: Input should be greater than 0"),
     ("nodes.talker.params.colour", "red", r"node talker: params\.colour = 'red': not a parameter of node type "
                                           r"talker \(its params: rate, count, start_delay, worker_s, exit_lines\)"),
+    ("nodes.talker.params", {"co\nlour": 1}, r"node talker: params\.co\\nlour = 1: not a parameter of node type talker"),
     ("nodes.ctrl.params.port", 21003, r"node ctrl: params\.port = 21003: port 21003 on host arm1 is already used by "
                                       r"node rec's publisher"),
     ("hosts.arm1.address", "not_a host!", r"hosts\.arm1\.address = 'not_a host!': not an IP address or a host name"),

@@ -215,6 +215,8 @@ class _Checker:
         self.check_report()
         self.check_nodes()
         self.check_containers()
+        self.res.errors = [_one_line(x) for x in self.res.errors]
+        self.res.warnings = [_one_line(x) for x in self.res.warnings]
         return self.res
 
     # ---------------------------------------------------------------------------------------------- hosts
@@ -471,6 +473,12 @@ def _loopback(address: str) -> bool:
         return ipaddress.ip_address(address).is_loopback
     except ValueError:
         return address == "localhost"
+
+
+def _one_line(text: str) -> str:
+    """``text`` with every non-printable character escaped as Python writes it (a param key or value may hold a
+    newline: ``params: {"\\n": null}``, found by tests/test_fuzz_launch.py), so one problem is one line."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def check_launch(path: str | Path, host: str | None = None, out: str | None = None,
