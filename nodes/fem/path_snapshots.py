@@ -164,11 +164,18 @@ class PathSnapshotModel:
         f = np.asarray(fraction, float)
         return np.stack([np.interp(f, self._path_f, self._path[:, k]) for k in range(3)], axis=-1)
 
+    def _move_targets(self, rv: np.ndarray, g: np.ndarray, f0: float, f1: float) -> np.ndarray:
+        """(n+1, 2, S, 3) m: for each sub-fraction in ``g`` and each of the interval's two stations f0, f1, the
+        point whose nearest rest-surface point gives vertex v its moved correction: v − (P(g) − P(f_s)), the
+        contact's travel along the path (module doc)."""
+        pg, ps = self.path_point(g), self.path_point(np.array([f0, f1]))
+        return rv[None, None] - (pg[:, None, None] - ps[None, :, None])
+
     def _contact_moves(self, rv: np.ndarray, faces: np.ndarray):
         """Per interval i between stations: its sub-fractions (n_i + 1,), and per sub-fraction g one sparse
         matrix (S, 2S) float32 (CSR, 6 entries a row) that maps the two stations' stacked corrections (2S, 3) to
-        their moved sum: row v holds the barycentric weights of the rest-surface point nearest v − (P(g) −
-        P(f_s)) on its triangle's vertices, station s's columns offset by s·S (module doc)."""
+        their moved sum: row v holds the barycentric weights of the rest-surface point nearest its
+        :meth:`_move_targets` point on its triangle's vertices, station s's columns offset by s·S (module doc)."""
         import scipy.sparse as sparse
         import trimesh
 
@@ -182,8 +189,7 @@ class PathSnapshotModel:
             length = float(np.interp(f1, self._path_f, arc) - np.interp(f0, self._path_f, arc))
             g = np.linspace(f0, f1, max(1, int(math.ceil(length / SHIFT_STEP - 1e-9))) + 1)
             subs.append(g)
-            pg, ps = self.path_point(g), self.path_point(np.array([f0, f1]))
-            ys.append(rv[None, None] - (pg[:, None, None] - ps[None, :, None]))     # (n+1, 2, S, 3)
+            ys.append(self._move_targets(rv, g, f0, f1))
         flat = np.concatenate([y.reshape(-1, 3) for y in ys])
         cp, _, tri = trimesh.proximity.closest_point(mesh, flat)
         bc = trimesh.triangles.points_to_barycentric(mesh.triangles[tri], cp)

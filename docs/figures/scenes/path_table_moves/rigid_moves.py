@@ -21,8 +21,6 @@ import sys
 
 sys.path.insert(0, ".")
 import numpy as np  # noqa: E402
-import scipy.sparse as sparse  # noqa: E402
-import trimesh  # noqa: E402
 
 from flexsheet.experiments import path_table as P  # noqa: E402
 from flexsheet.experiments.fem_scene import visible_errors  # noqa: E402
@@ -42,38 +40,14 @@ class FrameMoves(ps.PathSnapshotModel):
         self._frame, self.rotate_vectors = frame, rotate_vectors
         super().__init__(*a, **k)
 
-    def _contact_moves(self, rv, faces):
-        S = len(rv)
-        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(self._path, axis=0), axis=1))])
-        mesh = trimesh.Trimesh(rv, faces, process=False)
-        subs, ys = [], []
-        for i in range(len(self.fractions) - 1):
-            f0, f1 = self.fractions[i], self.fractions[i + 1]
-            length = float(np.interp(f1, self._path_f, arc) - np.interp(f0, self._path_f, arc))
-            g = np.linspace(f0, f1, max(1, int(math.ceil(length / ps.SHIFT_STEP - 1e-9))) + 1)
-            subs.append(g)
-            pg, pst = self.path_point(g), self.path_point(np.array([f0, f1]))
-            y = np.empty((len(g), 2, S, 3))
-            for a, ga in enumerate(g):
-                fg = self._frame(ga)
-                for s, fs in enumerate((f0, f1)):
-                    y[a, s] = pst[s] + (rv - pg[a]) @ (self._frame(fs) @ fg.T).T
-            ys.append(y)
-        cp, _, tri = trimesh.proximity.closest_point(mesh, np.concatenate([y.reshape(-1, 3) for y in ys]))
-        bc = trimesh.triangles.points_to_barycentric(mesh.triangles[tri], cp)
-        bc = np.clip(np.nan_to_num(bc, nan=1.0 / 3.0), 0.0, 1.0)
-        bc /= bc.sum(axis=1, keepdims=True)
-        cols_all, w_all, k, mats = faces[tri], bc.astype(np.float32), 0, []
-        indptr = np.arange(0, 6 * S + 1, 6)
-        for y in ys:
-            n_sub = y.shape[0]
-            cols = cols_all[k:k + n_sub * 2 * S].reshape(n_sub, 2, S, 3) + (np.arange(2) * S)[None, :, None, None]
-            w = w_all[k:k + n_sub * 2 * S].reshape(n_sub, 2, S, 3)
-            k += n_sub * 2 * S
-            mats.append([sparse.csr_matrix((w[q].transpose(1, 0, 2).reshape(-1),
-                                            cols[q].transpose(1, 0, 2).reshape(-1), indptr), shape=(S, 2 * S))
-                         for q in range(n_sub)])
-        return subs, mats
+    def _move_targets(self, rv, g, f0, f1):
+        pg, pst = self.path_point(g), self.path_point(np.array([f0, f1]))
+        y = np.empty((len(g), 2, len(rv), 3))
+        for a, ga in enumerate(g):
+            fg = self._frame(ga)
+            for s, fs in enumerate((f0, f1)):
+                y[a, s] = pst[s] + (rv - pg[a]) @ (self._frame(fs) @ fg.T).T
+        return y
 
     def lookup(self, fraction, depth):
         if not self.rotate_vectors:
