@@ -216,7 +216,7 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
         timing_sn = _update_ms(rt, sc, (0.005, 0.02, 0.05), st["n_time"])
         _log(f"the node's nonlinear table (from the {snap}): update CPU median {timing_sn['median']:.3f} ms")
     verts = rt.rest_vertices.astype(float)
-    held = rt.mesh.fixed[rt.surface_nodes]
+    held = rt.held
     depths = np.asarray(st["depths"], float)
     pushes = []
     for f in st["fractions"]:

@@ -150,7 +150,7 @@ def assemble_path_table(sc, rt, fractions, refs: list[dict]) -> dict:
         kr[i] = _ratio(k_ref, np.concatenate([[k_lin[0]], k_lin]))
         inv[i, 1:] = np.asarray(ref["inverted"], float)
         strain[i, 1:] = np.asarray(ref["max_strain"], float)
-    corr[:, :, np.asarray(rt.mesh.fixed[rt.surface_nodes], bool)] = 0.0
+    corr[:, :, rt.held] = 0.0
     return {"fractions": np.asarray(fractions, float), "depths": depths, "points": pts, "normals": nrm,
             "rest_vertices": rt.rest_vertices.astype(np.float64), "correction": corr, "force_ratio": fr,
             "stiffness_ratio": kr, "inverted": inv, "max_strain": strain, "reach": np.array(REACH)}
@@ -181,7 +181,7 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
     sc = load_scene(scene_file)
     rt = SceneModel(sc, cache_dir=cache_dir, log=_log)
     verts = rt.rest_vertices.astype(float)
-    held = np.asarray(rt.mesh.fixed[rt.surface_nodes], bool)
+    held = rt.held
     todo = [(float(f), GRID["h_fine"]) for f in fractions] + [(float(h), GRID["h_fine"]) for h in holdout]
     if mesh_check:
         todo.append((float(fractions[len(fractions) // 2]), CHECK_H_FINE))

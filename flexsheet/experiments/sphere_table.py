@@ -203,7 +203,7 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
         h = _hertz_force(mat.E, mat.nu, r, fr.radius, depths[1])
         row["force_over_hertz_at_first_depth"] = float(table["force"][al.index(a)][1] / h)
         rows.append(row)
-    held = rt.mesh.fixed[rt.surface_nodes]
+    held = rt.held
     held_out = []
     for a in holdout:
         p = alpha_path(sc, a, grid, spec, probes, cache)
@@ -280,7 +280,7 @@ def _packing_error(table, packed, paths, fr, rt, probes, r) -> float:
     from nodes.fem.sphere_snapshots import SphereSnapshotModel
 
     full, small = SphereSnapshotModel(table, probes), SphereSnapshotModel(packed, probes)
-    held = rt.mesh.fixed[rt.surface_nodes]
+    held = rt.held
     worst = 0.0
     for i, a in enumerate(np.degrees(np.asarray(table["alphas"], float))):
         n = fr.direction(math.radians(a))

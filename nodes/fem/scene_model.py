@@ -225,6 +225,8 @@ class SceneModel(CondensedSurface):
         except (KeyError, ValueError) as exc:
             raise ValueError(f"scene capacitance cache entry {self.cache_key} is inconsistent: {exc}") from exc
         self._set_output_maps(monitor)
+        #: (S,) bool: the rendered vertices the scene's support holds (exactly at rest in every served push)
+        self.held = np.asarray(self.mesh.fixed[self.surface_nodes], bool)
         self.surface = SurfaceIndex(scene)
         self._anchor: Finger | None = None
         self.snapshots = None
@@ -243,7 +245,6 @@ class SceneModel(CondensedSurface):
         if np.linalg.norm(sm.frame.center - fr.center) > 1e-9 or abs(sm.frame.radius - fr.radius) > 1e-9:
             raise ValueError(f"sphere table is for centre {sm.frame.center.tolist()} radius {sm.frame.radius:g} m, "
                              f"the scene's sphere is at {fr.center.tolist()} radius {fr.radius:g} m")
-        self._held = np.asarray(self.mesh.fixed[self.surface_nodes], bool)   # the support: exactly at rest
         self.snapshots = sm
 
     def attach_path_table(self, table: dict) -> None:
@@ -258,7 +259,6 @@ class SceneModel(CondensedSurface):
         pf = np.linspace(0.0, 1.0, n_path)
         path, _ = self.scene.stroke_at(pf)
         pt = PathSnapshotModel(table, self._rest.astype(np.float64), self.faces, path, pf)
-        self._held = np.asarray(self.mesh.fixed[self.surface_nodes], bool)
         self.path_table = pt
 
     # ------------------------------------------------------------------ precompute
@@ -357,7 +357,7 @@ class SceneModel(CondensedSurface):
         finger's leading point: its surface, force and dF/dd; the strain and inverted elements are the
         reference's at the bracketing snapshots."""
         us, force, stiff, strain, inv = snap.surface(normal, depth)
-        us[self._held] = 0.0        # the look-up rotates the field; the held back half stays where it is
+        us[self.held] = 0.0        # the look-up rotates the field; the held back half stays where it is
         if not (np.all(np.isfinite(us)) and math.isfinite(force) and math.isfinite(stiff)):
             return Update(self._rest.copy(), 0.0, 0.0, fg.depth, fg.contact_point.copy(), "snapshots", 0.0, 0,
                           "nonlinear_invalid:non_finite", False)
@@ -384,7 +384,7 @@ class SceneModel(CondensedSurface):
         stiffness = self._floored_stiffness(fg, sol)
         corr, rf, rk, strain, inv = pt.lookup(fraction, fg.depth)
         us = self._surface_of(u_out) + corr
-        us[self._held] = 0.0
+        us[self.held] = 0.0
         force, stiffness = float(sol.force) * rf, float(stiffness) * rk
         status, valid = ("ok" if inv == 0 else f"nonlinear_invalid:inverted={inv}"), True
         if not (np.all(np.isfinite(us)) and math.isfinite(force) and math.isfinite(stiffness)):

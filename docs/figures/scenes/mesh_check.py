@@ -41,7 +41,7 @@ def main() -> int:
     rt = SceneModel(sc)
     cache = ArrayCache(DEFAULT_CACHE_DIR)
     verts = rt.rest_vertices.astype(float)
-    held = np.asarray(rt.mesh.fixed[rt.surface_nodes], bool)
+    held = rt.held
     depths = np.asarray(rep["depths_m"])
     nd = len(depths)
     a = P._push(sc, f, P.GRID["h_fine"], verts, cache)

@@ -35,7 +35,7 @@ def main() -> int:
     rt = SceneModel(sc)
     cache = ArrayCache(DEFAULT_CACHE_DIR)
     verts = rt.rest_vertices.astype(float)
-    held = np.asarray(rt.mesh.fixed[rt.surface_nodes], bool)
+    held = rt.held
     depths = np.asarray(rep["depths_m"])
     rows = []
     for h in rep["held_out"]:

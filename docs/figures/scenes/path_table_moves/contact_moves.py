@@ -49,7 +49,7 @@ def scene(name: str, jobs: int) -> dict:
         raise SystemExit(f"{name}: no path table found ({kind}, {where})")
     pt = rt.path_table
     verts = rt.rest_vertices.astype(float)
-    held = np.asarray(rt.mesh.fixed[rt.surface_nodes], bool)
+    held = rt.held
     P._prefetch(str(sc.source), [(h, P.GRID["h_fine"]) for h in holdout], DEFAULT_CACHE_DIR, jobs)
     depths = pt.depths[1:]
     C = pt.correction.astype(float)

@@ -72,7 +72,7 @@ def main() -> int:
     _, where = attach_scene_table(rt, cache)
     base = rt.path_table
     verts = rt.rest_vertices.astype(float)
-    held = np.asarray(rt.mesh.fixed[rt.surface_nodes], bool)
+    held = rt.held
     pf = np.linspace(0.0, 1.0, max(2, int(math.ceil(sc.stroke_length() / 0.0002)) + 1))   # as attach_path_table
     path, pn = sc.stroke_at(pf)
 

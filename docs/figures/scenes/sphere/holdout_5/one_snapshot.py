@@ -42,7 +42,7 @@ def main() -> int:
     n = fr.direction(math.radians(ALPHA))
     q = fr.center + fr.radius * n
     depths = grid.depths()[1:]
-    held = rt.mesh.fixed[rt.surface_nodes]
+    held = rt.held
     ref = np.asarray(p["u_probes"], float)[1:]
     k = len(np.asarray(table["alphas"]))
 
