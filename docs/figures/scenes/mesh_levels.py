@@ -2,7 +2,8 @@
 cost on this machine? The middle station of ``docs/figures/scenes/NAME/path_table/path_table.json`` pushed at
 four mesh levels (h_fine 6, 5, 4, 3 mm along the push path; 6 mm is the shipped table's, 4 mm session 29's
 ``mesh_check.py``, 5 and 3 mm new), compared over the visible rendered vertices (not held, outside the finger's
-footprint) with the finest, depth by depth.
+footprint) with the finest, depth by depth, and split three ways (the funnel the finger makes, < 20 mm from the
+push axis; a band one coarse element wide beside the support; the rest).
 
 From those numbers, an **estimate**, not a measurement: at each depth the differences to the finest level are
 fitted by D(h) = C (h^p − h_min^p) (the leading error term e(h) = C h^p, assumed in its asymptotic range and of
@@ -51,6 +52,28 @@ def fit_fixed(h_mm: np.ndarray, d_mm: np.ndarray, p: float) -> float:
     """Least-squares C of d = C (h^p − h_min^p) for a given order ``p`` (same arrays as :func:`fit_order`)."""
     g = h_mm[:-1] ** p - h_mm[-1] ** p
     return float(g @ d_mm[:-1] / (g @ g))
+
+
+def _zones(u_ref, verts, held, q, n, depths, r) -> dict:
+    """Per depth, the visible rendered vertices (as :func:`flexsheet.experiments.fem_scene.visible_errors`) split
+    three ways: ``funnel`` (deformed position < 20 mm from the push axis), ``support_band`` (the rest whose rest
+    position lies < 12 mm — one coarse element — from a held rendered vertex) and ``rest``. Dict of lists of
+    (S,) bool masks."""
+    from scipy.spatial import cKDTree
+
+    from nodes.fem.choose import visible_mask
+    from nodes.fem.scene_model import finger_on_scene
+
+    dsup = cKDTree(verts[held]).query(verts)[0]
+    out = {"funnel": [], "support_band": [], "rest": []}
+    for j, d in enumerate(depths):
+        vis = visible_mask(verts + u_ref[j], finger_on_scene(q, n, float(d), r)) & ~held
+        x = verts + u_ref[j] - q
+        rax = np.linalg.norm(x - (x @ n)[:, None] * n, axis=1)
+        out["funnel"].append(vis & (rax < 0.02))
+        out["support_band"].append(vis & (rax >= 0.02) & (dsup < 0.012))
+        out["rest"].append(vis & (rax >= 0.02) & (dsup >= 0.012))
+    return out
 
 
 def _gent_copy(scene_file: str, jm: float) -> str:
@@ -109,6 +132,9 @@ def main() -> int:
     u = [np.asarray(z["u"])[:nd] for z in pushes]
     diff = np.array([visible_errors(ui, u[-1], verts, rt.held, q[0], n[0], depths, sc.finger.radius)
                      for ui in u])                                   # (L, D) mm, last row 0
+    zones = _zones(u[-1], verts, rt.held, q[0], n[0], depths, sc.finger.radius)
+    by_zone = [{k: [float(np.linalg.norm(ui[j] - u[-1][j], axis=1)[m].max() * 1e3) for j, m in enumerate(ms)]
+                for k, ms in zones.items()} for ui in u]
     h_mm = np.asarray(levels) * 1e3
     per_depth = []
     for j, d in enumerate(depths):
@@ -145,7 +171,7 @@ def main() -> int:
            "levels": [{"h_fine_m": h, "dofs": int(z["dofs"]), "cpu_seconds": float(z["seconds"]),
                        "newton_converged": bool(np.all(np.asarray(z["converged"])[:nd])),
                        "force_N": np.asarray(z["force"])[:nd].tolist(),
-                       "diff_to_finest_mm": diff[i].tolist()} for i, (h, z) in enumerate(zip(levels, pushes, strict=True))],
+                       "diff_to_finest_mm": diff[i].tolist(), "diff_to_finest_by_zone_mm": by_zone[i]} for i, (h, z) in enumerate(zip(levels, pushes, strict=True))],
            "per_depth": per_depth,
            "cost_fit": {"dofs_vs_h_fine_mm": {"exponent": float(kd), "prefactor": math.exp(ld)},
                         "cpu_seconds_vs_dofs": {"exponent": float(kc), "prefactor": math.exp(lc)}},
