@@ -34,28 +34,27 @@ sys.path.insert(0, ".")
 DEFAULT_LEVELS = (0.006, 0.005, 0.004, 0.003)     #: h_fine, m, coarse to fine
 
 
+def fit_fixed(h_mm: np.ndarray, d_mm: np.ndarray, p: float) -> float:
+    """Least-squares C of d = C (h^p − h_min^p) for a given order ``p`` over the levels coarser than the finest:
+    ``h_mm`` (L,) coarse to fine; ``d_mm`` (L,) differences to the finest (last 0)."""
+    g = h_mm[:-1] ** p - h_mm[-1] ** p
+    return float(g @ d_mm[:-1] / (g @ g))
+
+
 def fit_order(h_mm: np.ndarray, d_mm: np.ndarray) -> tuple[float, float, float]:
-    """Least-squares fit of d = C (h^p − h_min^p) over the levels coarser than the finest: returns (C, p,
-    rms residual mm). ``h_mm`` (L,) ascending fineness last; ``d_mm`` (L,) differences to the finest (last 0)."""
+    """Least-squares fit of d = C (h^p − h_min^p) over p in [0.25, 4] (:func:`fit_fixed` at each p): returns
+    (C, p, rms residual mm) of the best p. Arrays as :func:`fit_fixed`."""
     best = (math.nan, math.nan, math.inf)
-    hmin = h_mm[-1]
     for p in np.linspace(0.25, 4.0, 376):
-        g = h_mm[:-1] ** p - hmin ** p
-        c = float(g @ d_mm[:-1] / (g @ g))
-        r = float(np.sqrt(np.mean((c * g - d_mm[:-1]) ** 2)))
+        c = fit_fixed(h_mm, d_mm, p)
+        r = float(np.sqrt(np.mean((c * (h_mm[:-1] ** p - h_mm[-1] ** p) - d_mm[:-1]) ** 2)))
         if r < best[2]:
             best = (c, float(p), r)
     return best
 
 
-def fit_fixed(h_mm: np.ndarray, d_mm: np.ndarray, p: float) -> float:
-    """Least-squares C of d = C (h^p − h_min^p) for a given order ``p`` (same arrays as :func:`fit_order`)."""
-    g = h_mm[:-1] ** p - h_mm[-1] ** p
-    return float(g @ d_mm[:-1] / (g @ g))
-
-
 def _zones(u_ref, verts, held, q, n, depths, r) -> dict:
-    """Per depth, the visible rendered vertices (as :func:`flexsheet.experiments.fem_scene.visible_errors`) split
+    """Per depth, the visible rendered vertices (those :func:`flexsheet.experiments.fem_scene.visible_errors` judges) split
     three ways: ``funnel`` (deformed position < 20 mm from the push axis), ``support_band`` (the rest whose rest
     position lies < 12 mm — one coarse element — from a held rendered vertex) and ``rest``. Dict of lists of
     (S,) bool masks."""
@@ -97,7 +96,6 @@ def _gent_copy(scene_file: str, jm: float) -> str:
 
 def main() -> int:
     from flexsheet.experiments import path_table as P
-    from flexsheet.experiments.fem_scene import visible_errors
     from flexsheet.model.scenes import load_scene
     from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
     from nodes.fem.scene_model import SceneModel
@@ -130,11 +128,12 @@ def main() -> int:
     q, n = sc.stroke_at([f])
     pushes = [P._push(sc, f, h, verts, cache) for h in levels]
     u = [np.asarray(z["u"])[:nd] for z in pushes]
-    diff = np.array([visible_errors(ui, u[-1], verts, rt.held, q[0], n[0], depths, sc.finger.radius)
-                     for ui in u])                                   # (L, D) mm, last row 0
     zones = _zones(u[-1], verts, rt.held, q[0], n[0], depths, sc.finger.radius)
-    by_zone = [{k: [float(np.linalg.norm(ui[j] - u[-1][j], axis=1)[m].max() * 1e3) for j, m in enumerate(ms)]
-                for k, ms in zones.items()} for ui in u]
+    by_zone = [{k: [float(np.linalg.norm(ui[j] - u[-1][j], axis=1)[m].max(initial=0.0) * 1e3)
+                    for j, m in enumerate(ms)] for k, ms in zones.items()} for ui in u]
+    # the zones split the visible vertices, so the largest visible difference is the largest of the zones'
+    # (what flexsheet.experiments.fem_scene.visible_errors gives): (L, D) mm, last row 0
+    diff = np.array([np.max([z[k] for k in zones], axis=0) for z in by_zone])
     h_mm = np.asarray(levels) * 1e3
     per_depth = []
     for j, d in enumerate(depths):
@@ -148,14 +147,17 @@ def main() -> int:
     cpu = np.array([float(z["seconds"]) for z in pushes])
     kd, ld = np.polyfit(np.log(h_mm), np.log(dofs), 1)               # dofs = exp(ld) h^kd
     kc, lc = np.polyfit(np.log(dofs), np.log(cpu), 1)                # cpu = exp(lc) dofs^kc
-    deep = per_depth[-1]
-    h_star = deep["h_fine_for_target_mm"]
-    dof_star = math.exp(ld) * h_star ** kd if math.isfinite(h_star) else math.inf
-    cpu_star = math.exp(lc) * dof_star ** kc if math.isfinite(dof_star) else math.inf
+
     def at(h_star_mm: float) -> tuple[float, float]:
+        """(DOF, CPU seconds per push) the fits give at h_fine ``h_star_mm``; inf past any mesh."""
+        if not math.isfinite(h_star_mm):
+            return math.inf, math.inf
         dof = math.exp(ld) * h_star_mm ** kd
         return dof, math.exp(lc) * dof ** kc
 
+    deep = per_depth[-1]
+    h_star = deep["h_fine_for_target_mm"]
+    dof_star, cpu_star = at(h_star)
     bracket = []
     for p in (1.0, 2.0):
         c = fit_fixed(h_mm, diff[:, -1], p)
@@ -163,7 +165,7 @@ def main() -> int:
         dof, sec = at(hs)
         bracket.append({"p": p, "C": c, "finest_error_estimate_mm": c * h_mm[-1] ** p, "h_fine_for_target_mm": hs,
                         "dofs": dof, "cpu_seconds_per_push": sec})
-    out = {"what": "the middle station's push at four reference mesh levels, the largest visible-surface "
+    out = {"what": "the middle station's push at several reference mesh levels (``levels``), the largest visible-surface "
                    "difference (mm) of each to the finest per depth, and an asymptotic estimate of the finest "
                    "level's own error and of the mesh (and its CPU cost) the 0.7 mm target would need; the "
                    "estimate assumes e(h) = C h^p on the worst vertex (see the script's docstring)",
