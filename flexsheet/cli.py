@@ -123,14 +123,13 @@ def _run_container(args: argparse.Namespace) -> int:
 def cmd_launch(args: argparse.Namespace) -> int:
     """Check the launch file for this host (every error one line on stderr, exit 78 when any), then, unless
     ``--check``, run its nodes under the :class:`~flexsheet.runtime.launch.Supervisor`."""
+    from flexsheet.runtime.extensions import extensions
     from flexsheet.runtime.launch import (
         TOPLEVEL_ENV,
         LaunchError,
         Supervisor,
         load_launch,
         parse_toplevel_set,
-        twin_registration,
-        twin_registration_path,
     )
     from flexsheet.runtime.launch_check import check_launch
     from flexsheet.runtime.node import EXIT_CONFIG
@@ -145,23 +144,25 @@ def cmd_launch(args: argparse.Namespace) -> int:
             top = parse_toplevel_set(item, node_names)
             if top is not None:
                 key, value = top
-                toplevel[key] = {**toplevel.get(key, {}), **value} if key == "twin" else value
+                toplevel[key] = {**toplevel.get(key, {}), **value} if isinstance(value, dict) else value
                 continue
             node, dot, kv = item.partition(".")
             if not dot or "=" not in kv:
-                raise LaunchError(f"--set {item!r}: expected NODE.KEY=VALUE, twin.KEY=VALUE or scene=FILE")
+                raise LaunchError(f"--set {item!r}: expected NODE.KEY=VALUE, or a top-level section's "
+                                  "KEY=VALUE or KEY.SUB=VALUE (e.g. scene=FILE, twin.truth_seed=3)")
             overrides.setdefault(node, []).append(kv)
             parsed.setdefault(node, {}).update(_parse_params([kv]))
         if toplevel:   # the launcher's own load_launch and every node process read these (launch.TOPLEVEL_ENV)
             os.environ[TOPLEVEL_ENV] = json.dumps(toplevel)
         lf = load_launch(args.file)
-        if lf.twin is not None and lf.twin.registration and lf.display_calib is None:
-            cached = twin_registration_path(lf.twin)
-            if args.check and not cached.exists():
-                print(f"flexsheet launch: {args.file}: note: the twin registration (truth seed "
-                      f"{lf.twin.truth_seed}) runs at start and writes {cached}", file=sys.stderr)
-            else:
-                toplevel["display_calib"] = twin_registration(lf.twin, print_fn=lambda m: print(m, file=sys.stderr))
+        for ext in extensions():   # e.g. the display's twin registration (flexsheet.display.launch)
+            if ext.before_launch is None:
+                continue
+            extra = ext.before_launch(lf, lambda m: print(f"flexsheet launch: {args.file}: {m}"
+                                                          if m.startswith("note:") else m, file=sys.stderr),
+                                      args.check)
+            if extra:
+                toplevel.update(extra)
                 os.environ[TOPLEVEL_ENV] = json.dumps(toplevel)
     except LaunchError as exc:
         for line in exc.lines or [str(exc)]:

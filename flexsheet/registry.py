@@ -38,19 +38,19 @@ EXPERIMENTS: dict[str, str] = {
 }
 
 BENCHES: dict[str, str] = {
-    "transport": "flexsheet.runtime.bench_transport:main",
-    "vision": "nodes.triangulator.bench:main",
+    "transport": "flexsheet.benches.transport:main",
+    "vision": "flexsheet.benches.vision:main",
     "camera": "nodes.camera.bench:main",
-    "planner": "nodes.planner.bench:main",
-    "arm": "flexsheet.experiments.bench_arm:main",
-    "fem": "nodes.fem.bench:main",
+    "planner": "flexsheet.benches.planner:main",
+    "arm": "nodes.arm_bridge.bench:main",
+    "fem": "flexsheet.benches.fem:main",
     "render": "nodes.renderer.bench:main",
-    "load": "flexsheet.runtime.bench_load:main",
+    "load": "flexsheet.benches.load:main",
     "viz": "nodes.viz.bench:main",
 }
 
 CALIBRATE: dict[str, str] = {
-    "stereo": "flexsheet.model.calibration:main",
+    "stereo": "flexsheet.vision.stereo_calibration:main",
     "camera-pose": "flexsheet.calibration.cli:camera_pose_main",
     "projector": "flexsheet.calibration.cli:projector_main",
     "arms": "flexsheet.calibration.cli:arms_main",

@@ -1,7 +1,7 @@
 """MELFA real-time external control ("MXT") packet codec: the 196-byte UDP datagram, both directions (pure).
 
 Wire contract shared by the arm bridge (``nodes/arm_bridge/mxt_link.py``, the client) and the controller twin
-(``nodes/arm_controller_sim/mxt_twin.py``, the server). Protocol facts and their sources:
+(``flexsheet/twin/mxt_server.py``, the server). Protocol facts and their sources:
 ``design/mxt_protocol.md``; the public struct is ``MXTCMD`` in tork-a/melfa_robot
 ``melfa_driver/include/melfa_driver/strdef.h`` (TORK, Apache-2.0) and ``MXTCMD`` in Mitsubishi-Electric-Asia/
 melfa_ros2_driver ``melfa_driver/include/melfa_driver/rt_exc_def.hpp``. Both rely on natural alignment (no

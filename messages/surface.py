@@ -16,7 +16,7 @@ class SheetTarget(Message):
     meets (paper §V-A, point A or B). ``normal`` (3,): unit outward surface normal there (the sheet's normal,
     pointing toward the user). ``axis_u`` (3,), ``axis_v`` (3,): unit in-plane axes of the sheet (``axis_u``
     from the right clamp to the left clamp, +y at home; ``axis_v = normal × axis_u``, +z at home; see
-    :mod:`flexsheet.model.scene`). ``sheet_origin`` (3,) m: where the sheet centre must be (the
+    :mod:`flexsheet.model.geometry`). ``sheet_origin`` (3,) m: where the sheet centre must be (the
     contact point shifted along the sheet by the rolled arc, Fig. 7). ``stretch``: engineering strain of the
     sheet between the clamps (dimensionless). ``tension``: membrane tension, N/m. ``stiffness``: normal
     stiffness the sheet presents at the contact, N/m. ``object_stiffness``: the requested virtual-object

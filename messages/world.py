@@ -37,7 +37,7 @@ class FingerTruth(Message):
 
 class SheetState(Message):
     """Actual (true) sheet state in the simulated world: the clamp poses come from the hidden truth's
-    kinematics (true bases, link lengths, joint zero offsets; :class:`flexsheet.model.truth.TwinTruth`) of the
+    kinematics (true bases, link lengths, joint zero offsets; :class:`flexsheet.twin.truth.TwinTruth`) of the
     arms' measured joints, and ``membrane`` from the independent nonlinear sheet FEM
     (:mod:`flexsheet.model.sheet_fem`). Estimators never read it; the report and the measurement camera do.
 

@@ -10,6 +10,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))          # the shared helpers (netns_util, viz_watch) for every folder
 
 from flexsheet.runtime.ports import free_port  # noqa: E402  (tests import it from here; ports below the ephemeral range)
 
@@ -99,11 +100,11 @@ def warm_sim_fem(launch_file: Path = ROOT / "launch" / "sim.yaml") -> bool:
     part of the run. The key is the node's own (same params, same mesh choice), so the launched node hits it."""
     import yaml
 
-    from nodes.fem.choose import choose, load_table
-    from nodes.fem.material import Material
-    from nodes.fem.mesh import MeshSpec
+    from flexsheet.fem.choose import choose, load_table
+    from flexsheet.fem.material import Material
+    from flexsheet.fem.mesh import MeshSpec
+    from flexsheet.fem.realtime import RealtimeModel
     from nodes.fem.node import FemParams
-    from nodes.fem.realtime import RealtimeModel
 
     spec = yaml.safe_load(launch_file.read_text())["nodes"]["fem"]
     p = FemParams(**spec.get("params", {}))
@@ -145,8 +146,8 @@ SIM_SCRIPT = "world.script=[{mode: stroke, moving_time: 10}, {mode: stroke_push,
 @pytest.fixture(scope="session")
 def sim_run(tmp_path_factory, sim_fem_cache):
     """One launch of launch/sim.yaml (:data:`SIM_SCRIPT`, ``--set viz.port=PORT``: a free port), read by
-    tests/test_integration_sim.py (Table I, latency budget, outputs; the replay of its bag) and
-    tests/test_viz_live.py (an independent Foxglove client connected while it runs, until it has seen the FEM's
+    tests/system/test_integration_sim.py (Table I, latency budget, outputs; the replay of its bag) and
+    tests/system/test_viz_live.py (an independent Foxglove client connected while it runs, until it has seen the FEM's
     mesh and the finger on the object: :func:`viz_watch.watch`). One launch instead of two (~11 s).
 
     Returns ``out`` (the launch's ``--out``), ``stdout`` (its output, stderr merged), ``code`` (exit code, or
@@ -184,30 +185,21 @@ def sim_run(tmp_path_factory, sim_fem_cache):
     return {"out": out, "stdout": log.read_text(), "code": code, "viz": viz}
 
 
-#: Test modules of pure computation (no node, process, socket, window or clock bound): ``tests/run.sh`` runs
-#: them on two pytest-xdist workers first (``-m cpu``), then everything else alone (``-m "not cpu"``), because a
-#: test that judges a live loop against the clock needs the whole machine (a solve beside the suite made the
-#: fault-injection run miss its respawn deadlines, session 13). A module belongs here only if nothing in it
-#: starts a node, a socket or a window, or bounds a time tightly. Allowed: a subprocess of pure computation
-#: (test_fem_experiment runs ``flexsheet experiment fem --quick`` with its two solver processes, timeouts of 10
-#: and 25 min, and checks ``update_ms < 50`` where the target is 1) and the fuzz modules' 20 s hang guards.
-CPU_MODULES = frozenset({
-    "test_arm_kinematics", "test_arm_motion", "test_arm_registers", "test_calibration_display_yaml",
-    "test_calibration_procedures", "test_calibration_twin", "test_correction_twin", "test_fem_experiment",
-    "test_fem_fold", "test_fem_hyperelastic", "test_fem_path_table", "test_fem_scene", "test_fem_sphere_table", "test_fem_solver", "test_fuzz_codec", "test_fuzz_launch",
-    "test_planner_report", "test_planner_shapes", "test_planner_sheet", "test_planner_stroke",
-    "test_render_correction", "test_render_gl", "test_render_live_sheet", "test_runtime_codec", "test_scenes",
-    "test_sheet_fem_lowstretch", "test_twin_arm", "test_twin_sheet", "test_twin_stability",
-    "test_vision_calibration", "test_vision_stereo", "test_vision_tracker", "test_viz_bag", "test_viz_layout",
-    "test_viz_scene_sheet",
-})
+#: The folder decides the CI phase (tests/run.sh): ``tests/unit/<package>/`` (and tests/test_layout.py) hold pure
+#: computation — no node, process, socket, window or tight time bound — run first on two pytest-xdist workers
+#: (marker ``cpu``); ``tests/nodes/`` (the node harness) and ``tests/system/`` (launched graphs) run after, one by
+#: one, with the machine to themselves, because a test that judges a live loop against the clock needs it.
+SERIAL_FOLDERS = ("nodes", "system")
+
+
+def is_cpu_test(path: Path) -> bool:
+    """True for a test module of phase 1: under tests/ but not under tests/nodes/ or tests/system/."""
+    rel = Path(path).resolve().relative_to(ROOT / "tests")
+    return rel.parts[0] not in SERIAL_FOLDERS
 
 
 def pytest_configure(config):
     config.addinivalue_line("markers", "cpu: pure computation, safe to run beside another test (tests/run.sh)")
-    missing = sorted(m for m in CPU_MODULES if not (ROOT / "tests" / f"{m}.py").exists())
-    if missing:
-        raise pytest.UsageError(f"tests/conftest.py CPU_MODULES names modules that do not exist: {missing}")
 
 
 #: modules that must run on one xdist worker, after the first: test_calibration_procedures registers the twin's
@@ -225,7 +217,7 @@ LONGEST_FIRST = ("test_fem_experiment", "test_calibration_procedures")
 def pytest_collection_modifyitems(config, items):
     for item in items:
         stem = item.path.stem
-        if stem in CPU_MODULES:
+        if is_cpu_test(item.path):
             item.add_marker(pytest.mark.cpu)
             # tests/run.sh distributes by group (--dist loadgroup): a module per worker, module fixtures once
             item.add_marker(pytest.mark.xdist_group(SAME_WORKER.get(stem, stem)))

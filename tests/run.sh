@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The whole test suite, as the README and CI run it, in two phases on the 2-core machine:
-#   1. the pure-computation modules (marker `cpu`, tests/conftest.py CPU_MODULES) on two pytest-xdist workers,
+#   1. the pure-computation modules (tests/unit/ and tests/test_layout.py: marker `cpu`, set by folder in tests/conftest.py) on two pytest-xdist workers,
 #      a module per worker (tests/conftest.py: groups; the longest groups first, LONGEST_FIRST, so not
 #      xdist's reorder by test count), one BLAS/OpenMP thread each;
 #   2. everything else (nodes, launches, sockets, windows, deadlines) one by one, with the machine to itself:

@@ -1,18 +1,27 @@
-"""The code layout's rules (issue 12), checked with ``ast`` so a violation names the file, line and import.
+"""The code layout's rules (issue 39), checked with ``ast`` so a violation names the file, line and import.
 
+- ``flexsheet/`` is the library: nothing in it imports ``nodes`` (the adapters);
+- ``flexsheet/runtime/`` is generic: it imports nothing from ``model``, ``calibration``, ``experiments``,
+  ``display``, ``twin`` or any algorithm package, and one file of it (``transport.py``) imports zmq;
+- ``flexsheet/model/`` is pure: no transport (zmq, asyncio, msgpack, pymodbus), nothing above it;
 - a node (``nodes/X/``) imports only ``flexsheet.*``, ``messages`` and ``nodes.X`` itself;
-- ``flexsheet.model`` is pure: no transport (zmq, asyncio, msgpack, pymodbus) and nothing from the runtime,
-  the experiments or the nodes;
-- no import cycle between the top-level parts (runtime, model, experiments, messages, nodes).
+- no import cycle between folders (the packages of ``flexsheet/``, ``messages``, each node);
+- no ``.py`` under ``docs/``; ``README.md`` ≤ 150 lines, none over 300 characters; each ``docs/`` page ≤ 300
+  lines (``docs/messages.md`` is generated from the message models and exempt); no work-log words outside
+  ``CHANGELOG.md``.
 """
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 TRANSPORT = {"zmq", "asyncio", "msgpack", "pymodbus"}
+#: the library's packages that the generic runtime must not import
+ABOVE_RUNTIME = ("model", "calibration", "experiments", "display", "twin", "fem", "vision", "planning", "arm",
+                 "rendering", "viz", "benches")
 
 
 def _imports(path: Path) -> list[tuple[int, str]]:
@@ -23,17 +32,50 @@ def _imports(path: Path) -> list[tuple[int, str]]:
         elif isinstance(n, ast.ImportFrom):
             if n.level:
                 raise AssertionError(f"{path.relative_to(ROOT)}:{n.lineno}: relative import; use absolute imports")
-            out.append((n.lineno, n.module or ""))
+            out += [(n.lineno, n.module or "")]
+            # ``from flexsheet import registry`` names the module flexsheet.registry
+            out += [(n.lineno, f"{n.module}.{a.name}") for a in n.names if n.module in ("flexsheet", "nodes")]
     return out
 
 
-def _part(module: str) -> str | None:
+def _folder(module: str) -> str | None:
+    """The folder a module belongs to: ``flexsheet.<package>`` (a top-level module of ``flexsheet/`` such as
+    ``flexsheet.cli`` is its own), ``messages`` or ``nodes.<name>``; None for a third-party module and for the
+    bare package names."""
     parts = module.split(".")
-    if parts[0] == "flexsheet" and len(parts) > 1 and parts[1] in ("runtime", "model", "experiments"):
-        return "flexsheet." + parts[1]
-    if parts[0] in ("messages", "nodes"):
-        return parts[0]
+    if parts[0] == "flexsheet":
+        return "flexsheet." + parts[1] if len(parts) > 1 else None
+    if parts[0] == "messages":
+        return "messages"
+    if parts[0] == "nodes" and len(parts) > 1:
+        return "nodes." + parts[1]
     return None
+
+
+def _module(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _library_imports(sub: str = "") -> list[tuple[Path, int, str]]:
+    return [(p, line, mod) for p in sorted((ROOT / "flexsheet" / sub).rglob("*.py")) for line, mod in _imports(p)]
+
+
+def test_the_library_imports_no_node():
+    bad = [f"{p.relative_to(ROOT)}:{line}: imports {mod}" for p, line, mod in _library_imports()
+           if mod == "nodes" or mod.startswith("nodes.")]
+    assert bad == [], "flexsheet/ must not import the adapters in nodes/:\n" + "\n".join(bad)
+
+
+def test_the_runtime_is_generic():
+    bad = [f"{p.relative_to(ROOT)}:{line}: imports {mod}" for p, line, mod in _library_imports("runtime")
+           if mod.split(".")[0] == "flexsheet" and len(mod.split(".")) > 1 and mod.split(".")[1] in ABOVE_RUNTIME]
+    assert bad == [], "flexsheet/runtime/ must know nothing of the display:\n" + "\n".join(bad)
+
+
+def test_one_runtime_file_talks_to_zmq():
+    users = sorted({p.name for p, _, mod in _library_imports("runtime") if mod.split(".")[0] == "zmq"})
+    assert users == ["transport.py"], f"runtime files importing zmq: {users}"
 
 
 def test_nodes_import_only_flexsheet_messages_and_themselves():
@@ -48,29 +90,27 @@ def test_nodes_import_only_flexsheet_messages_and_themselves():
 
 
 def test_model_is_pure():
-    bad = []
-    for path in sorted((ROOT / "flexsheet" / "model").rglob("*.py")):
-        for line, mod in _imports(path):
-            top = mod.split(".")[0]
-            if top in TRANSPORT or _part(mod) in ("flexsheet.runtime", "flexsheet.experiments", "nodes"):
-                bad.append(f"{path.relative_to(ROOT)}:{line}: imports {mod}")
+    bad = [f"{p.relative_to(ROOT)}:{line}: imports {mod}" for p, line, mod in _library_imports("model")
+           if mod.split(".")[0] in TRANSPORT or (mod.startswith("flexsheet.") and _folder(mod) not in
+                                                  ("flexsheet.model", "flexsheet.yamlio", "flexsheet.manifest"))]
     assert bad == [], "flexsheet.model must stay pure:\n" + "\n".join(bad)
 
 
-def test_no_cycle_between_parts():
+def _edges() -> tuple[dict[str, set[str]], dict[tuple[str, str], str]]:
     edges: dict[str, set[str]] = {}
     where: dict[tuple[str, str], str] = {}
     for base in ("flexsheet", "messages", "nodes"):
         for path in sorted((ROOT / base).rglob("*.py")):
-            src = _part(".".join(path.relative_to(ROOT).with_suffix("").parts))
-            if src is None:
-                continue
+            src = _folder(_module(path))
             for line, mod in _imports(path):
-                dst = _part(mod)
-                if dst and dst != src:
+                dst = _folder(mod)
+                if dst and src and dst != src:
                     edges.setdefault(src, set()).add(dst)
                     where.setdefault((src, dst), f"{path.relative_to(ROOT)}:{line} ({mod})")
+    return edges, where
 
+
+def _cycles(edges: dict[str, set[str]], where: dict[tuple[str, str], str]) -> list[str]:
     def reach(a: str, seen: set[str]) -> set[str]:
         for b in edges.get(a, ()):
             if b not in seen:
@@ -78,13 +118,51 @@ def test_no_cycle_between_parts():
                 reach(b, seen)
         return seen
 
-    cycles = [f"{a} -> {b} [{where[(a, b)]}] and back" for a in edges for b in edges[a] if a in reach(b, set())]
-    assert cycles == [], "import cycles between parts:\n" + "\n".join(cycles)
+    return sorted(f"{a} -> {b} [{where[(a, b)]}] and back" for a in edges for b in edges[a] if a in reach(b, set()))
 
 
-def test_checker_catches_a_cross_node_import(tmp_path):
-    """The rule above is not vacuous: a planted cross-node import is reported with its line."""
+#: the one cycle left (issue 39, open): the twin draws its truth around the nominal display.yaml
+#: (calibration.display_calib), and the registration's simulated runs (calibration cli/procedures/sweep/twin)
+#: draw that truth. A ratchet: a new cycle fails, and so does this one once it is broken (then empty the set).
+KNOWN_CYCLES = {("flexsheet.calibration", "flexsheet.twin"), ("flexsheet.twin", "flexsheet.calibration")}
+
+
+def test_no_import_cycle_between_folders():
+    edges, where = _edges()
+    assert "flexsheet.runtime" in edges and "flexsheet.fem" in edges, "the import graph was not read"
+    cycles = _cycles(edges, where)
+    found = {tuple(c.split(" ")[0:3:2]) for c in cycles}
+    assert found == KNOWN_CYCLES, "import cycles between folders:\n" + "\n".join(cycles)
+
+
+def test_the_cycle_finder_finds_a_planted_cycle():
+    edges = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    where = {(x, y): "" for x in edges for y in edges[x]}
+    assert [c.split(" ")[0] for c in _cycles(edges, where)] == ["a", "b", "c"]
+
+
+def test_checker_reads_imports_with_lines(tmp_path):
+    """The rules above are not vacuous: a planted import is reported with its line and module."""
     f = tmp_path / "x.py"
-    f.write_text("import os\nfrom nodes.planner.stroke import SurfacePlanner\n")
-    assert [m for _, m in _imports(f)] == ["os", "nodes.planner.stroke"]
-    assert _imports(f)[1][0] == 2
+    f.write_text("import os\nfrom nodes.camera.node import CameraNode\nfrom flexsheet import registry\n")
+    assert _imports(f) == [(1, "os"), (2, "nodes.camera.node"), (3, "flexsheet"), (3, "flexsheet.registry")]
+    assert _folder("nodes.camera.node") == "nodes.camera" and _folder("flexsheet.fem.solver") == "flexsheet.fem"
+    assert _folder("flexsheet.registry") == "flexsheet.registry" and _folder("numpy") is None
+    assert _folder("flexsheet") is None
+
+
+def test_no_python_under_docs():
+    assert sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").rglob("*.py")) == []
+
+
+def test_readme_and_docs_are_short_pages_of_current_state():
+    readme = (ROOT / "README.md").read_text().splitlines()
+    assert len(readme) <= 150, f"README.md has {len(readme)} lines (at most 150)"
+    long = [i + 1 for i, line in enumerate(readme) if len(line) > 300]
+    assert long == [], f"README.md lines over 300 characters: {long}"
+    pages = {p.name: len(p.read_text().splitlines()) for p in (ROOT / "docs").glob("*.md") if p.name != "messages.md"}
+    assert {k: v for k, v in pages.items() if v > 300} == {}, "docs pages over 300 lines"
+    log = re.compile(r"\bsessions? [0-9]+|this session|last session", re.I)
+    hist = [f"{p.relative_to(ROOT)}:{i + 1}" for p in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+            for i, line in enumerate(p.read_text().splitlines()) if log.search(line)]
+    assert hist == [], "development history outside CHANGELOG.md:\n" + "\n".join(hist[:20])

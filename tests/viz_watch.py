@@ -1,4 +1,4 @@
-"""An independent Foxglove client's view of the running simulated display (tests/test_viz_live.py): connect to
+"""An independent Foxglove client's view of the running simulated display (tests/system/test_viz_live.py): connect to
 the viz bridge of a launch, subscribe, and collect what it shows. Used by the shared sim run (tests/conftest.py
 ``sim_run``), which connects it while the graph runs."""
 
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nodes.viz.wsclient import FoxgloveClient
+from flexsheet.viz.wsclient import FoxgloveClient
 
 ROOT = Path(__file__).resolve().parents[1]
 R = 0.025 * math.sqrt(2.0)                  # paper's cylinder radius, m (docs/scenes.md, BRIEF conventions)

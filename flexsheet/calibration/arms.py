@@ -11,8 +11,8 @@ and takes the background-subtracted, intensity-weighted centroid; it is undistor
 Fit (:func:`estimate_arm_base`): ``scipy.optimize.least_squares`` over the base pose (6: a rotation vector and
 a translation correcting the nominal base) and the marker offset in the clamp frame (3), minimising the 3-D
 distance between the triangulated markers and the URDF forward kinematics
-(:class:`flexsheet.model.kinematics.ArmKinematics`) of the commanded joints, each marker weighted by its
-triangulation covariance (:meth:`flexsheet.model.stereo.StereoModel.covariance`: depth is ~10× less certain
+(:class:`flexsheet.arm.kinematics.ArmKinematics`) of the commanded joints, each marker weighted by its
+triangulation covariance (:meth:`flexsheet.vision.stereo.StereoModel.covariance`: depth is ~10× less certain
 than lateral position; in the twin this cut the worst base error over 12 seeds from 1.0 to 0.8 mm). An
 optional prior on the base's roll and pitch (``level_sigma_deg``, a spirit level's reading) is available; it
 did not help measurably and is off by default — the hand–eye / robot–world
@@ -31,8 +31,8 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from flexsheet.model.kinematics import Q_LOWER, Q_UPPER, ArmKinematics, home_joints
-from flexsheet.model.stereo import StereoModel
+from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, ArmKinematics, home_joints
+from flexsheet.vision.stereo import StereoModel
 
 __all__ = ["JOINT_SPAN_DEG", "plan_arm_configs", "predict_marker", "detect_marker", "triangulate_markers",
            "ArmResult", "estimate_arm_base"]
@@ -140,7 +140,7 @@ def triangulate_markers(frames: list[tuple[np.ndarray, np.ndarray]], predicted: 
     """Detect and triangulate the marker in each stereo pair. ``predicted``: (left (N, 2), right (N, 2)) raw
     pixels from :func:`predict_marker`. Returns (indices of the usable frames, X (M, 3) display m, skipped
     index → reason, covariances (M, 3, 3) m² in the display frame for a centroid σ of ``sigma_px``, from
-    :meth:`flexsheet.model.stereo.StereoModel.covariance` — depth is ~10× worse than lateral and grows as Z²)."""
+    :meth:`flexsheet.vision.stereo.StereoModel.covariance` — depth is ~10× worse than lateral and grows as Z²)."""
     model = StereoModel.from_calib(stereo)
     idx, pts, covs, skipped = [], [], [], {}
     Rdc = T_display_camera[:3, :3]

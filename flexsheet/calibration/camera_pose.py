@@ -20,7 +20,7 @@ object pose in one view):
 3. ``scipy.optimize.least_squares`` over the 24 stereo parameters (per camera fx, fy, cx, cy, k1, k2, p1, p2,
    k3; left→right R, T), the home pose and one board pose per other view, minimising the reprojection error
    of all corners in both images (σ-weighted) plus a Gaussian prior on the stereo parameters: the nominal
-   calibration with its bootstrap covariance (``python -m flexsheet.model.truth --bootstrap`` on
+   calibration with its bootstrap covariance (``python -m flexsheet.twin.truth --bootstrap`` on
    the stereo calibration's own pairs) — the MAP estimate — and the board's bow (one paraboloid sag, the
    same in all views: a 0.25 mm bow left out costs 0.8 mm of pose with an unchanged RMS). Analytic Jacobian
    (``projectPoints``, ``composeRT``). σ is re-estimated from the residuals and the fit repeated once; the
@@ -43,9 +43,9 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from flexsheet.model.calibration import BoardSpec, detect_board
-from flexsheet.model.display_calib import BOOTSTRAP_FILE, stereo_from_vector, stereo_vector
-from flexsheet.model.stereo import StereoModel
+from flexsheet.calibration.display_calib import BOOTSTRAP_FILE, stereo_from_vector, stereo_vector
+from flexsheet.vision.stereo import StereoModel
+from flexsheet.vision.stereo_calibration import BoardSpec, detect_board
 
 __all__ = ["VIEW_PLAN", "detect_corners", "board_centre", "board_points", "sheet_pose", "plan_board_views", "load_prior",
            "CameraPoseResult", "detect_views", "estimate_camera_pose"]
@@ -100,7 +100,7 @@ def plan_board_views(n_views: int) -> list[np.ndarray]:
 
 
 def load_prior(path: str = BOOTSTRAP_FILE, scale: float = 1.0) -> np.ndarray:
-    """(24, 24) covariance of the stereo parameters (:func:`flexsheet.model.display_calib.stereo_vector` order) from a
+    """(24, 24) covariance of the stereo parameters (:func:`flexsheet.calibration.display_calib.stereo_vector` order) from a
     bootstrap JSON (``{"deviations": (n, 24)}``), times ``scale``². Raises ``ValueError`` on a bad file."""
     try:
         with open(path) as fh:
@@ -148,7 +148,7 @@ def detect_corners(image: np.ndarray, board: BoardSpec, detector=None):
 
     Chessboards: ``cv2.findChessboardCorners`` then ``cv2.cornerSubPix`` with a window of 0.4× the smallest
     corner spacing (2…11 px; a fixed 11 px window reaches across the small, foreshortened squares of a board
-    0.5 m away and pulls corners by several px). ChArUco: :func:`flexsheet.model.calibration.detect_board`.
+    0.5 m away and pulls corners by several px). ChArUco: :func:`flexsheet.vision.stereo_calibration.detect_board`.
     Raises ``ValueError`` if ``image`` is not a 2-D uint8 array.
     """
     if not isinstance(image, np.ndarray) or image.ndim != 2 or image.dtype != np.uint8:

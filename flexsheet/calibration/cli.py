@@ -18,7 +18,7 @@ import time
 from dataclasses import replace
 
 from flexsheet.calibration import procedures as P
-from flexsheet.model.display_calib import DisplayCalib, load_display_calib, write_display_calib
+from flexsheet.calibration.display_calib import DisplayCalib, load_display_calib, write_display_calib
 
 __all__ = ["camera_pose_main", "projector_main", "arms_main", "eye_main", "display_main", "noise_main"]
 
@@ -51,7 +51,7 @@ def _opts(a) -> P.Options:
 def _source(a, p: argparse.ArgumentParser, opts: P.Options):
     from flexsheet.calibration.sources import ImageDirSource, TwinSource
     from flexsheet.calibration.twin import CalibrationTwin
-    from flexsheet.model.truth import TwinTruth
+    from flexsheet.twin.truth import TwinTruth
 
     if a.sim:
         if a.truth_seed is None:

@@ -8,7 +8,7 @@
   the viewer in the reference position), and the eyes at ± IPD/2 along the glasses' x axis (from the right
   lens to the left lens): :func:`tracked_eyes`. The correction then follows the viewer's head.
 
-Frames: ``display`` (:mod:`flexsheet.model.scene`); the glasses frame: x from the right to the left lens,
+Frames: ``display`` (:mod:`flexsheet.model.geometry`); the glasses frame: x from the right to the left lens,
 y up, z = x × y (toward the sheet when worn). Units m.
 """
 
@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexsheet.model import scene
-from flexsheet.model.display_calib import NOMINAL_IPD, EyeEntry, Provenance
+from flexsheet.calibration.display_calib import NOMINAL_IPD, EyeEntry, Provenance
+from flexsheet.model import geometry
 
 __all__ = ["fixed_eye", "glasses_pose", "glasses_eye_offset", "tracked_eyes", "tracked_eye_entry"]
 
@@ -35,7 +35,7 @@ def _ipd(ipd: float) -> float:
     return float(ipd)
 
 
-def fixed_eye(V=scene.EYE, ipd: float = NOMINAL_IPD, method: str = "fixed viewpoint (paper §IV)",
+def fixed_eye(V=geometry.EYE, ipd: float = NOMINAL_IPD, method: str = "fixed viewpoint (paper §IV)",
               source: str = "lab") -> EyeEntry:
     """``display.yaml`` eye entry for the fixed viewpoint ``V`` (3,) m with interpupillary distance ``ipd`` m.
     Raises ``ValueError`` on a bad V or ipd, or a V not in front of the sheet (x ≤ 0)."""
@@ -70,7 +70,7 @@ def glasses_pose(markers_display, model_points) -> np.ndarray:
     return T
 
 
-def glasses_eye_offset(T_display_glasses: np.ndarray, V_reference=scene.EYE) -> np.ndarray:
+def glasses_eye_offset(T_display_glasses: np.ndarray, V_reference=geometry.EYE) -> np.ndarray:
     """The cyclopean eye in the glasses frame (3,) m, from one capture with the viewer's eye at the reference
     ``V_reference`` (3,) m (e.g. the chin rest that defines the paper's V)."""
     T = np.asarray(T_display_glasses, float)
@@ -80,7 +80,7 @@ def glasses_eye_offset(T_display_glasses: np.ndarray, V_reference=scene.EYE) -> 
 def tracked_eyes(T_display_glasses: np.ndarray, eye_offset, ipd: float = NOMINAL_IPD):
     """(left, right, V) eye positions (3,) m in the display frame for glasses at ``T_display_glasses`` (4, 4):
     V = T · eye_offset, left/right = V ± ipd/2 · (glasses x axis). Raises ``ValueError`` on bad inputs."""
-    from flexsheet.model.kinematics import check_pose
+    from flexsheet.model.checks import check_pose
 
     T = check_pose("T_display_glasses", T_display_glasses)
     V = T[:3, :3] @ _vec3("eye_offset", eye_offset) + T[:3, 3]

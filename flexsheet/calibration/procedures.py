@@ -3,7 +3,7 @@
 
 Lab order (docs/calibration.md): stereo calibration (``flexsheet calibrate stereo``, not here) →
 :func:`run_camera_pose` → :func:`run_projector` → :func:`run_arms` → :func:`run_eye`. Each step starts from the
-nominal values (:func:`flexsheet.model.display_calib.nominal_display_calib`) and from the entries measured
+nominal values (:func:`flexsheet.calibration.display_calib.nominal_display_calib`) and from the entries measured
 before it — never from the truth. :func:`run_display_sim` runs all of them in the twin, scores each estimate
 against the truth (only here, after estimation) and caches the result per seed.
 """
@@ -21,9 +21,7 @@ import numpy as np
 from flexsheet.calibration import arms as arms_mod
 from flexsheet.calibration import camera_pose as cp_mod
 from flexsheet.calibration import projector as pj_mod
-from flexsheet.calibration.eye import fixed_eye
-from flexsheet.model.calibration import BoardSpec, parse_board
-from flexsheet.model.display_calib import (
+from flexsheet.calibration.display_calib import (
     ArmEntry,
     CameraEntry,
     DisplayCalib,
@@ -32,6 +30,8 @@ from flexsheet.model.display_calib import (
     nominal_display_calib,
     write_display_calib,
 )
+from flexsheet.calibration.eye import fixed_eye
+from flexsheet.vision.stereo_calibration import BoardSpec, parse_board
 
 __all__ = ["Options", "QUICK", "FULL", "run_camera_pose", "run_projector", "run_arms", "run_eye",
            "run_display_sim", "sim_display_calib", "SUMMARY_VERSION"]
@@ -41,7 +41,7 @@ SUMMARY_VERSION = 2
 
 @dataclass(frozen=True)
 class Options:
-    """Procedure settings. ``board``: board spec (:func:`flexsheet.model.calibration.parse_board`),
+    """Procedure settings. ``board``: board spec (:func:`flexsheet.vision.stereo_calibration.parse_board`),
     ``square`` m, ``board_offset`` m; ``views``: board views (home + tilts); ``board_frames``: frames averaged
     per view; ``projector_poses``; ``pattern_spacing`` projector px; ``pattern_frames``; ``arm_configs`` per arm;
     ``marker_frames``; ``prior``: stereo bootstrap JSON for the camera-pose prior ("" = shipped XIMEA one,
@@ -169,7 +169,7 @@ def run_display_sim(seed: int, out_dir: str, opts: Options = FULL, realism: str 
     options and version is returned unless ``force``. Returns the summary dict."""
     from flexsheet.calibration.sources import TwinSource
     from flexsheet.calibration.twin import CalibrationTwin
-    from flexsheet.model.truth import TwinTruth
+    from flexsheet.twin.truth import TwinTruth
 
     os.makedirs(out_dir, exist_ok=True)
     spath = os.path.join(out_dir, "summary.json")

@@ -16,7 +16,7 @@ calibrated stereo camera instead of a checkerboard: the sheet needs no markings 
    that decoded within the grid cell are fitted with a local affine map camera → projector (Moreno &
    Taubin's local homography, which averages the codes' quantisation); inverting it gives the sub-pixel
    camera position of the projector point.
-4. Points found in both cameras are triangulated (Hartley–Sturm, :class:`flexsheet.model.stereo.StereoModel`)
+4. Points found in both cameras are triangulated (Hartley–Sturm, :class:`flexsheet.vision.stereo.StereoModel`)
    with the camera-pose step's stereo model and placed in the display frame by its ``T_display_camera``.
 5. All poses' 3-D ↔ projector-pixel pairs form one non-planar rig: ``cv2.calibrateCamera`` with
    ``CALIB_USE_INTRINSIC_GUESS`` from the nominal projector (fixed aspect ratio, no tangential terms, k1 only),
@@ -38,7 +38,7 @@ import cv2
 import numpy as np
 
 from flexsheet.calibration.camera_pose import sheet_pose
-from flexsheet.model.stereo import StereoModel
+from flexsheet.vision.stereo import StereoModel
 
 __all__ = ["POSE_PLAN", "plan_projector_poses", "gray_code_patterns", "decode", "grid_correspondences",
            "PoseCorrespondences", "ProjectorResult", "triangulate_pose", "estimate_projector", "JointResult",
@@ -321,7 +321,7 @@ class JointResult:
 
 
 def _cam_vector(stereo: dict, T_dc: np.ndarray) -> np.ndarray:
-    from flexsheet.model.display_calib import stereo_vector
+    from flexsheet.calibration.display_calib import stereo_vector
 
     R_cd = T_dc[:3, :3].T
     return np.concatenate([stereo_vector(stereo), cv2.Rodrigues(R_cd)[0].ravel(), -R_cd @ T_dc[:3, 3]])
@@ -348,7 +348,7 @@ def refine_joint(poses: list[PoseCorrespondences], stereo: dict, T_display_camer
     """
     from scipy.optimize import least_squares
 
-    from flexsheet.model.display_calib import stereo_from_vector
+    from flexsheet.calibration.display_calib import stereo_from_vector
 
     if any(p.left_px is None for p in poses):
         raise ValueError("poses lack their raw camera pixels (made by an old triangulate_pose?)")

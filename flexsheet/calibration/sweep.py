@@ -19,8 +19,8 @@ import numpy as np
 from flexsheet.calibration import arms as arms_mod
 from flexsheet.calibration import camera_pose as cp_mod
 from flexsheet.calibration import projector as pj_mod
+from flexsheet.calibration.display_calib import nominal_display_calib
 from flexsheet.calibration.procedures import FULL, QUICK
-from flexsheet.model.display_calib import nominal_display_calib
 
 __all__ = ["CAMERA_N", "PROJECTOR_N", "ARMS_N", "run_sweep"]
 
@@ -46,7 +46,7 @@ def _projector(pcs, cam, K, size, fit_k1):
 
 def _seed_sweep(seed: int, realism: str, quick: bool, progress) -> dict:
     from flexsheet.calibration.twin import CalibrationTwin
-    from flexsheet.model.truth import TwinTruth
+    from flexsheet.twin.truth import TwinTruth
 
     opts = QUICK if quick else FULL
     cam_n = [n for n in CAMERA_N if n <= (12 if quick else 21)]
@@ -107,7 +107,7 @@ def _failure_modes(seed: int, realism: str, progress) -> dict:
     board (sag at the sheet corners → camera error with the bow fitted and with a flat board assumed), on one
     seed."""
     from flexsheet.calibration.twin import CalibrationTwin
-    from flexsheet.model.truth import TwinTruth
+    from flexsheet.twin.truth import TwinTruth
 
     truth = TwinTruth.draw(seed, realism)
     twin = CalibrationTwin(truth, seed=seed + 1000)

@@ -1,5 +1,5 @@
 """The calibration twin: what the real stereo camera would see while the lab runs the registration procedures,
-rendered from the hidden truth (:class:`flexsheet.model.truth.TwinTruth`) only.
+rendered from the hidden truth (:class:`flexsheet.twin.truth.TwinTruth`) only.
 
 Scenes (each returns raw, distorted mono8 stereo pairs, like the real camera):
 
@@ -33,9 +33,9 @@ from dataclasses import asdict, dataclass
 import cv2
 import numpy as np
 
-from flexsheet.model import scene
-from flexsheet.model.calibration import BoardSpec
-from flexsheet.model.truth import TwinTruth
+from flexsheet.model import geometry
+from flexsheet.twin.truth import TwinTruth
+from flexsheet.vision.stereo_calibration import BoardSpec
 
 __all__ = ["NoiseModel", "XIMEA_NOISE", "CalibrationTwin", "measure_ximea_noise", "board_texture",
            "sheet_pose_from_clamps"]
@@ -232,9 +232,9 @@ class CalibrationTwin:
     def sheet_pose(self, T_sheet_cmd: np.ndarray, stretch: float = 0.0) -> np.ndarray:
         """Where the true arms put the sheet when the lab commands ``T_sheet_cmd`` (4, 4): the clamp poses are
         solved with the *nominal* kinematics (what the bridges would do), then the *true* arms move there."""
-        from flexsheet.model.kinematics import LEFT_BASE, RIGHT_BASE, ArmKinematics, home_joints
+        from flexsheet.arm.kinematics import LEFT_BASE, RIGHT_BASE, ArmKinematics, home_joints
 
-        Tl, Tr = scene.clamp_poses(T_sheet_cmd[:3, 3], T_sheet_cmd[:3, 0], T_sheet_cmd[:3, 1], stretch)
+        Tl, Tr = geometry.clamp_poses(T_sheet_cmd[:3, 3], T_sheet_cmd[:3, 0], T_sheet_cmd[:3, 1], stretch)
         qs = {}
         for side, T, base in (("left", Tl, LEFT_BASE), ("right", Tr, RIGHT_BASE)):
             kin = self._ik.setdefault(side, ArmKinematics(side, base))
@@ -265,7 +265,7 @@ class CalibrationTwin:
             self._tex[key] = board_texture(board)
         tex, ppm, (x0, y0) = self._tex[key]
         cx, cy = board_centre(board)
-        half = 0.5 * scene.SHEET_SIZE
+        half = 0.5 * geometry.SHEET_SIZE
         out = []
         for k, T_cmd in enumerate(sheet_poses):
             T = np.eye(4) if k == 0 else self.sheet_pose(np.asarray(T_cmd, float))
@@ -317,7 +317,7 @@ class CalibrationTwin:
         t = self.truth
         T = np.eye(4) if home_exact else self.sheet_pose(np.asarray(T_sheet_cmd, float))
         ss = max(2, self.ss - 1)
-        half = 0.5 * scene.SHEET_SIZE
+        half = 0.5 * geometry.SHEET_SIZE
         Tp = t.T_display_projector
         tvec = -Tp[:3, :3].T @ Tp[:3, 3]
         pw, ph = t.projector_size
@@ -365,7 +365,7 @@ class CalibrationTwin:
         """Stereo pairs of the clamp markers while arm ``side`` goes through the commanded joints in
         ``joint_list`` (each (6,) rad) and the other arm rests at ``other_q`` (default: its home joints).
         Both arms' markers are in view (the detector must pick the right one)."""
-        from flexsheet.model.kinematics import home_joints
+        from flexsheet.arm.kinematics import home_joints
 
         other = "right" if side == "left" else "left"
         oq = home_joints(other) if other_q is None else np.asarray(other_q, float)
@@ -429,7 +429,7 @@ def measure_ximea_noise(directory: str, square: float = 0.024, blur_grid=None) -
     ``black_dn``, ``white_dn``, ``corner_rms_px`` (per-view reprojection RMS of the calibration: corner jitter
     plus model error). Raises ``ValueError`` if no image shows the board.
     """
-    from flexsheet.model.calibration import parse_board
+    from flexsheet.vision.stereo_calibration import parse_board
 
     board = parse_board("chessboard:9x6", square)
     blur_grid = np.arange(0.3, 1.55, 0.06) if blur_grid is None else np.asarray(blur_grid)

@@ -6,10 +6,10 @@ light lands on the **true** sheet, lit by the **true** projector (issue 15):
 * *Estimator side* (:class:`DisplayEstimator`, built from :class:`CalibratedDisplay` — ``display.yaml`` of the
   registration procedures run in the twin, :func:`flexsheet.calibration.procedures.sim_display_calib`): the
   bridges' IK/FK at the calibrated arm bases (nominal URDF), the renderer's sheet
-  (:class:`nodes.renderer.state.RendererState` from those clamp poses and the tracked fingertip), its model
-  choice (:class:`nodes.renderer.state.ErrorTable`, ``auto``) and its drawing through the calibrated projector
-  (K_p, distortion, pose) for the calibrated eye (:class:`nodes.renderer.scene.StereoRenderer`).
-* *Twin side* (:class:`TwinWorld`, built from :class:`flexsheet.model.truth.TwinTruth`): the true clamp poses
+  (:class:`flexsheet.rendering.state.RendererState` from those clamp poses and the tracked fingertip), its model
+  choice (:class:`flexsheet.rendering.state.ErrorTable`, ``auto``) and its drawing through the calibrated projector
+  (K_p, distortion, pose) for the calibrated eye (:class:`flexsheet.rendering.stereo_renderer.StereoRenderer`).
+* *Twin side* (:class:`TwinWorld`, built from :class:`flexsheet.twin.truth.TwinTruth`): the true clamp poses
   (true forward kinematics of the commanded joints: true bases, link lengths, joint zeros), the true pushed
   shape (the nonlinear membrane FEM of :mod:`flexsheet.model.sheet_fem` with the truth's E, pre-strain and
   tension ratio), the true projector (K, distortion, pose). Only the measurement uses it.
@@ -44,24 +44,24 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from flexsheet.calibration.display_calib import DisplayCalib, load_display_calib, nominal_display_calib
 from flexsheet.experiments.measurement import (
     MeasurementCamera,
     measure_edges,
     measure_sizes,
     projector_pixels,
 )
-from flexsheet.model import scene
-from flexsheet.model.display_calib import DisplayCalib, load_display_calib, nominal_display_calib
+from flexsheet.model import geometry
 from flexsheet.model.projector import Projector
 from flexsheet.model.sheet import SheetSurface, clamp_half_span, clamp_poses, frame_from_clamps
-from flexsheet.model.truth import TwinTruth
+from flexsheet.twin.truth import TwinTruth
 
 __all__ = ["main", "run", "inclined_pose", "CalibratedDisplay", "DisplayEstimator", "TwinWorld", "Measurer",
            "PIXEL", "STRETCH", "PAPER", "sweep_sheet", "sweep_projector", "breaking_point",
            "scaled_error", "mapping_error_px", "perturbed_projector"]
 
 #: one projector pixel on the imaginary screen, m: the target (issue 15)
-PIXEL = scene.PIXEL_ON_SCREEN
+PIXEL = geometry.PIXEL_ON_SCREEN
 #: clamp strain of both experiments: the planner's stretch for the default 30 N/m object
 #: (``stretch_for_stiffness`` → 0.0388), rounded to the world's FEM table node (``FemSettings.stretch_step``)
 STRETCH = 0.04
@@ -90,7 +90,7 @@ ASSUMPTIONS = [
     "Sizes on the imaginary screen seen from the eye: h at the centre column, u/d 10 % of h inside the "
     "top/bottom edges, w at the middle row; 0.5-crossings of the anti-aliased photograph. corrected_mm = mean "
     "absolute size error of the model the renderer picks; position_mm = shift of the image's centre.",
-    "The measurement camera sits at the paper's fixed viewpoint V (scene.EYE); the renderer draws for the "
+    "The measurement camera sits at the paper's fixed viewpoint V (geometry.EYE); the renderer draws for the "
     "eye of display.yaml.",
     "The drawn object is the rigid cylinder (the paper draws the FEM-deformed one; its outline barely moves).",
 ]
@@ -104,7 +104,7 @@ def inclined_pose(theta_deg: float, direction: str = "down") -> tuple[np.ndarray
     tilted ``direction`` ("down" or "up"). Raises ``ValueError`` for another direction or a non-finite θ."""
     if direction not in ("down", "up") or not math.isfinite(theta_deg):
         raise ValueError(f"need direction 'down'/'up' and a finite theta, got {direction!r}, {theta_deg!r}")
-    R = scene.CYLINDER_RADIUS
+    R = geometry.CYLINDER_RADIUS
     sg = -1.0 if direction == "down" else 1.0
     th = math.radians(theta_deg)
     return (np.array([-R + R * math.cos(th), 0.0, sg * R * math.sin(th)]),
@@ -149,18 +149,18 @@ class DisplayEstimator:
     """The display's estimators for one :class:`CalibratedDisplay` (and nothing else — by construction it takes
     no truth): the bridges' kinematics at the calibrated bases, the renderer's sheet, model choice and drawing.
 
-    ``config``: the renderer's :class:`nodes.renderer.state.SheetConfig`; ``sheet_model``: the renderer's
+    ``config``: the renderer's :class:`flexsheet.rendering.state.SheetConfig`; ``sheet_model``: the renderer's
     pushed-sheet model (:class:`flexsheet.model.sheet_model.NominalSheetModel`; None: the node's own,
-    :func:`nodes.renderer.state.sheet_model_for` ``config``), the ``fem_nominal`` column;
+    :func:`flexsheet.rendering.state.sheet_model_for` ``config``), the ``fem_nominal`` column;
     ``samples``: MSAA samples; ``target`` m: the ``auto`` model choice's accuracy target. Raises ``TypeError``
     if ``cal`` is not a :class:`CalibratedDisplay`.
     """
 
     def __init__(self, cal: CalibratedDisplay, config=None, *, sheet_model=None, samples: int = 4,
                  target: float = PIXEL) -> None:
-        from flexsheet.model.kinematics import ArmKinematics
-        from nodes.renderer.scene import StereoRenderer, cylinder_mesh
-        from nodes.renderer.state import ErrorTable, SheetConfig, sheet_model_for, silhouette_probes
+        from flexsheet.arm.kinematics import ArmKinematics
+        from flexsheet.rendering.state import ErrorTable, SheetConfig, sheet_model_for, silhouette_probes
+        from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_mesh
 
         if not isinstance(cal, CalibratedDisplay):
             raise TypeError(f"DisplayEstimator takes a CalibratedDisplay, got {type(cal).__name__}")
@@ -175,14 +175,14 @@ class DisplayEstimator:
         self.renderer.set_mesh(v, f)
         home = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], clamp_half_span(STRETCH))
         self.table = ErrorTable.build(silhouette_probes(v), eye=cal.eye, projector=cal.projector.position,
-                                      screen_point=scene.SCREEN_POINT, screen_normal=scene.SCREEN_NORMAL, sheet=home,
+                                      screen_point=geometry.SCREEN_POINT, screen_normal=geometry.SCREEN_NORMAL, sheet=home,
                                       sheet_model=self.sheet_model)
 
     def joints(self, origin, normal, axis_u, stretch: float = STRETCH) -> dict[str, np.ndarray]:
         """The bridges' joint commands (side → (6,) rad) for the commanded sheet pose: IK of the clamp poses
         (:func:`flexsheet.model.sheet.clamp_poses`) at the calibrated bases. Raises ``ValueError`` if an arm
         cannot reach it."""
-        from flexsheet.model.kinematics import home_joints
+        from flexsheet.arm.kinematics import home_joints
 
         Tl, Tr = clamp_poses(origin, normal, axis_u, stretch)
         out = {}
@@ -203,12 +203,12 @@ class DisplayEstimator:
         return self.kin["left"].fk(q["left"]), self.kin["right"].fk(q["right"])
 
     def sheet(self, q: dict, finger=None, series: bool = False) -> SheetSurface:
-        """The renderer's sheet (:meth:`nodes.renderer.state.RendererState.current_sheet`, the node's code path)
+        """The renderer's sheet (:meth:`flexsheet.rendering.state.RendererState.current_sheet`, the node's code path)
         from the bridges' clamp poses and the tracked fingertip ``finger`` (3,) m or None; when pushed, its
         membrane is the ``sheet_model``'s (``fem_nominal``). ``series``: instead the renderer's OLD pushed-sheet
         model, the 16-mode sine series (:class:`flexsheet.model.sheet.Membrane`, tension ratio 1), for the
         comparison column ``fine`` only; the renderer no longer uses it."""
-        from nodes.renderer.state import RendererState
+        from flexsheet.rendering.state import RendererState
 
         Tl, Tr = self.clamps(q)
         if series:
@@ -225,14 +225,14 @@ class DisplayEstimator:
         return st.current_sheet()
 
     def pick(self, sheet: SheetSurface) -> str:
-        """The model the renderer's ``auto`` picks for ``sheet`` (:func:`nodes.renderer.state.pick_model`)."""
-        from nodes.renderer.state import pick_model
+        """The model the renderer's ``auto`` picks for ``sheet`` (:func:`flexsheet.rendering.state.pick_model`)."""
+        from flexsheet.rendering.state import pick_model
 
         return pick_model("auto", sheet, self.table, self.target)
 
     def draw(self, model: str, sheet: SheetSurface) -> np.ndarray:
         """The projector image (H, W) float in [0, 1] drawn with ``model`` (one of
-        :data:`nodes.renderer.correction.MODELS`; ``fine`` uses ``sheet``'s membrane) for the calibrated eye."""
+        :data:`flexsheet.rendering.correction.MODELS`; ``fine`` uses ``sheet``'s membrane) for the calibrated eye."""
         with self.renderer.ctx:           # another renderer's (standalone) context may be current
             self.renderer.set_model(model, None if model == "none" else sheet)
             return self.renderer.render_single(self.cal.eye)
@@ -278,7 +278,7 @@ class TwinWorld:
         """The true sheet held by the true clamps, pushed by the finger at ``finger`` (3,) m when it is behind
         the true sheet plane; returns (surface, info: true depth and contact, m)."""
         origin, n, eu, a = frame_from_clamps(*self.clamps(q))
-        b = scene.SHEET_SIZE / 2
+        b = geometry.SHEET_SIZE / 2
         info = {"origin": origin, "normal": n}
         mem = None
         if finger is not None:
@@ -294,12 +294,12 @@ class TwinWorld:
 # ============================================================================ the live renderer's path, ray-traced
 class LivePath:
     """The renderer node's pushed-sheet correction measured on the true sheet without GL (``live_path`` of the
-    summary; ``tests/test_render_live_sheet.py``).
+    summary; ``tests/unit/rendering/test_render_live_sheet.py``).
 
     Renderer side, as ``RendererNode.setup`` builds it: the sheet model of
-    :func:`nodes.renderer.state.sheet_model_for` ``config`` (or ``sheet_model``), a
-    :class:`nodes.renderer.state.RendererState` fed both clamp poses (the home pose at ``stretch``) and the
-    fingertip, the :class:`nodes.renderer.state.ErrorTable` and ``auto`` :func:`nodes.renderer.state.pick_model`,
+    :func:`flexsheet.rendering.state.sheet_model_for` ``config`` (or ``sheet_model``), a
+    :class:`flexsheet.rendering.state.RendererState` fed both clamp poses (the home pose at ``stretch``) and the
+    fingertip, the :class:`flexsheet.rendering.state.ErrorTable` and ``auto`` :func:`flexsheet.rendering.state.pick_model`,
     and the picked model's correction in numpy (the shader's twin, equal to 2e-6 m). Truth side: the twin's
     FEM sheet (:meth:`TwinWorld.table`, the truth's E, pre-strain and tension ratio) at the same clamps, lit
     along the projector's rays and traced by the measurement camera's bisection (:func:`trace_to_sheet` on a
@@ -307,16 +307,16 @@ class LivePath:
     error is the sheet model's alone: per probe (the object's silhouette points), the distance on the imaginary
     screen seen from the eye between where the light for A' lands and where the eye expects A."""
 
-    def __init__(self, stretch: float = STRETCH, config=None, sheet_model=None, eye=scene.EYE,
-                 projector=scene.PROJECTOR) -> None:
-        from nodes.renderer.scene import cylinder_mesh
-        from nodes.renderer.state import (
+    def __init__(self, stretch: float = STRETCH, config=None, sheet_model=None, eye=geometry.EYE,
+                 projector=geometry.PROJECTOR) -> None:
+        from flexsheet.rendering.state import (
             ErrorTable,
             RendererState,
             SheetConfig,
             sheet_model_for,
             silhouette_probes,
         )
+        from flexsheet.rendering.stereo_renderer import cylinder_mesh
 
         self.config = config or SheetConfig()
         self.eye, self.projector = np.asarray(eye, float), np.asarray(projector, float)
@@ -326,8 +326,8 @@ class LivePath:
         self.probes = silhouette_probes(v)
         self.clamps = clamp_poses(*HOME_POSE, self.stretch)
         home = SheetSurface(*HOME_POSE, clamp_half_span(self.stretch), self.config.half_width)
-        self.table = ErrorTable.build(self.probes, eye=self.eye, projector=self.projector, screen_point=scene.SCREEN_POINT,
-                                      screen_normal=scene.SCREEN_NORMAL, sheet=home,
+        self.table = ErrorTable.build(self.probes, eye=self.eye, projector=self.projector, screen_point=geometry.SCREEN_POINT,
+                                      screen_normal=geometry.SCREEN_NORMAL, sheet=home,
                                       sheet_model=sheet_model if sheet_model is not None else sheet_model_for(self.config))
         self.state = RendererState(self.eye, self.projector, self.config, mesh=(v, f), sheet_model=model)
         self.state.set_arm_pose("left", self.clamps[0])
@@ -335,7 +335,7 @@ class LivePath:
 
     def sheet(self, finger) -> tuple[SheetSurface, str]:
         """(the renderer's sheet, the model ``auto`` picks) for the fingertip ``finger`` (3,) m."""
-        from nodes.renderer.state import pick_model
+        from flexsheet.rendering.state import pick_model
 
         self.state.set_fingertip(np.asarray(finger, float), 0.0)
         sheet, warn = self.state.sheet_for_frame()
@@ -345,10 +345,14 @@ class LivePath:
 
     def corrected(self, model: str, sheet: SheetSurface) -> np.ndarray:
         """A' (N, 3) m of the probes for ``model`` on ``sheet``."""
-        from nodes.renderer.correction import correct_vertices, correct_vertices_fine, correct_vertices_pushed
+        from flexsheet.rendering.correction import (
+            correct_vertices,
+            correct_vertices_fine,
+            correct_vertices_pushed,
+        )
 
-        c = dict(eye=self.eye, projector=self.projector, screen_point=scene.SCREEN_POINT,
-                 screen_normal=scene.SCREEN_NORMAL)
+        c = dict(eye=self.eye, projector=self.projector, screen_point=geometry.SCREEN_POINT,
+                 screen_normal=geometry.SCREEN_NORMAL)
         if model == "fine":
             return correct_vertices_fine(self.probes, sheet=sheet, **c)
         if model == "four_triangle":
@@ -363,14 +367,14 @@ class LivePath:
         d = np.asarray(finger, float) - origin
         depth, pu, pv = -float(d @ n), float(d @ eu), float(d @ np.cross(n, eu))
         mem = world.table().shape(depth, pu, pv, a) if depth > 0.0 else None
-        return SheetSurface(origin, n, eu, a, scene.SHEET_SIZE / 2, mem)
+        return SheetSurface(origin, n, eu, a, geometry.SHEET_SIZE / 2, mem)
 
     def landing_error(self, a_hat, true: SheetSurface) -> np.ndarray:
         """Per probe, m: where the light for ``a_hat`` lands on ``true``, seen from the eye, against the probe."""
         from flexsheet.experiments.measurement import trace_to_sheet
-        from nodes.renderer.correction import project_vertices
+        from flexsheet.rendering.correction import project_vertices
 
-        scr = dict(eye=self.eye, screen_point=scene.SCREEN_POINT, screen_normal=scene.SCREEN_NORMAL)
+        scr = dict(eye=self.eye, screen_point=geometry.SCREEN_POINT, screen_normal=geometry.SCREEN_NORMAL)
         b = project_vertices(a_hat, **scr)                            # where the projector aims (its pinhole)
         grid = true.membrane.grid(241) if true.membrane is not None else None
         c, hit = trace_to_sheet(self.projector, b - self.projector, true, grid)
@@ -415,7 +419,7 @@ class Measurer:
     it up to pixel sampling). ``pixel`` m per camera pixel on the screen."""
 
     def __init__(self, pixel: float = 0.00035) -> None:
-        from nodes.renderer.scene import StereoRenderer, cylinder_mesh
+        from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_mesh
 
         self.cam = MeasurementCamera(pixel=pixel, extent=(0.26, 0.22))
         r = StereoRenderer(samples=4, shading=False)
@@ -423,7 +427,7 @@ class Measurer:
         r.set_mesh(v, f)
         home = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
         with r.ctx:
-            self.proper_photo = self.cam.photograph(r.render_single(scene.EYE), r.projector, home)
+            self.proper_photo = self.cam.photograph(r.render_single(geometry.EYE), r.projector, home)
         r.release()
         self.proper = self.sizes(self.proper_photo)
         self.proper_centre = self.centre(self.proper_photo)
@@ -755,7 +759,7 @@ def sweep_projector(cal: CalibratedDisplay, truth: TwinTruth, meas: Measurer, sc
 # ============================================================================ sheet model choice
 def _sheet_model(name: str, quick: bool = False, progress=None):
     """The renderer's pushed-sheet model (``auto``/``fem``: the nominal FEM fit, the node's
-    :func:`nodes.renderer.state.sheet_model_for`); ``quick``: its table for centre contacts only (the experiment
+    :func:`flexsheet.rendering.state.sheet_model_for`); ``quick``: its table for centre contacts only (the experiment
     pushes at the centre; the node uses the full table)."""
     if name not in ("auto", "fem"):
         raise ValueError(f"sheet model must be 'auto' or 'fem', got {name!r}")
@@ -895,9 +899,9 @@ def model_speed(sheet_model=None, repeats: int = 10) -> dict:
     """Median ms per 2×1024×768 stereo pair (shaded, no MSAA, as the node draws) per model on the nominal
     projector: none, flat, four_triangle, fine (16-mode series) and, with ``sheet_model``, fine with its
     64-term nominal FEM fit; plus the GL renderer's name."""
+    from flexsheet.benches.render import time_models
     from flexsheet.model.sheet import Membrane
-    from nodes.renderer.bench import time_models
-    from nodes.renderer.scene import StereoRenderer, cylinder_mesh
+    from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_mesh
 
     a = clamp_half_span(STRETCH)
     home = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], a)

@@ -3,7 +3,7 @@
 of the pushed cylinder, and the real-time model that reproduces it (``--scene`` with another object: the same
 study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 
-1. **Reference** (:mod:`nodes.fem.hyperelastic`): the default scene's hyperelastic solid (a Gent solid, Jm 97.2,
+1. **Reference** (:mod:`flexsheet.fem.hyperelastic`): the default scene's hyperelastic solid (a Gent solid, Jm 97.2,
    since session 18: ``--Jm``; ``--Jm inf`` is the neo-Hookean solid of the committed full, quick_neohookean, fold and
    held-out figures), total Lagrangian, P2, Newton with load
    stepping (≤ 60 iterations per step), rigid frictionless finger (sphere + shaft), pushed 0 → 50 mm at
@@ -22,18 +22,18 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    half model's own asymmetry; and whether the quarter models' symmetric solution is stable against asymmetric
    modes (:func:`mirror_stability`, the 3.4 and 2.5 mm meshes, cached). **Fold study** (``fold_study.json/png``,
    :func:`fold_study`; ``--fold-study`` runs only it): the reference has no self-contact, so the last three
-   levels' states are checked for a surface that passes through itself or creases (:mod:`nodes.fem.fold`),
+   levels' states are checked for a surface that passes through itself or creases (:mod:`flexsheet.fem.fold`),
    and for where the largest strain and the levels' largest differences sit; then a sequence that refines the
    push point with the tube (:data:`TIP_LEVELS`, :func:`tip_sequence`: its verdict, a finer tip alone, and
    azimuth-0 snapshot tables on the plain and the tip meshes against its finest level). **Material study**
    (``material_study.json/png``, :func:`material_study`; ``--material-study`` runs only it): the same azimuth-0
    convergence and an azimuth-0 snapshot table on the next-to-finest level, for the neo-Hookean reference and
-   for a strain-stiffening Gent solid (``--Jm``, default :data:`nodes.fem.material.GENT_JM_RUBBER`), and how far
+   for a strain-stiffening Gent solid (``--Jm``, default :data:`flexsheet.fem.material.GENT_JM_RUBBER`), and how far
    the two materials' finest solutions lie apart. ``--Jm`` sets the material of every other study (default: the
    default scene's Gent solid; ``--Jm inf``: neo-Hookean).
 2. **Candidates**, judged on the real-time model's rendered vertices outside the finger's footprint
    (lateral distance from the push axis > finger radius + 2 mm; the footprint is hidden by the finger):
-   the linear P2 capacitance model, and the nonlinear snapshots (:mod:`nodes.fem.snapshots`), sampled every
+   the linear P2 capacitance model, and the nonlinear snapshots (:mod:`flexsheet.fem.snapshots`), sampled every
    5 mm from the reference solve on the node's mesh (h_fine 3.4 mm, the next-to-finest level) and judged at
    every output depth against the finest mesh (h_fine 2.5 mm): the depths between snapshots are held out, and
    the snapshot mesh's own error is in the figure. Full mode: snapshots at azimuths 0, 10 and 20 degrees, and
@@ -45,7 +45,7 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    finger is withdrawn from 50 mm to the start, and each depth keeps the state of lower total potential. Accuracy against speed (``accuracy_speed.png/.json``) and the failure map, where
    each model breaks by depth and azimuth (``failure_map.png/.json``). **Snapshot-mesh study**
    (``realtime.snapshot_mesh_study``): the same azimuth-0 check for a table on each skin-study mesh.
-   ``nodes/fem/model_table.json`` (full mode) is what the node chooses from.
+   ``flexsheet/fem/model_table.json`` (full mode) is what the node chooses from.
 3. ``summary.json``: ``realtime.update_ms``, ``realtime.max_visible_error_mm_0_50``, ``reference.converged``
    with the convergence figures.
 
@@ -65,7 +65,7 @@ Those CPU figures are from the einsum assembly, about twice the present one's (s
 ``--jobs N`` (default: the cores) solves the pushes the run reads in N worker processes first
 (:func:`planned_solves`, :func:`prefetch`); ``--level N`` solves one mesh only and ``--node-table --azimuth A``
 one azimuth (for a run over several sittings or machines); every solve is cached
-(:class:`nodes.fem.cache.ArrayCache`), so a second run takes seconds (27 s).
+(:class:`flexsheet.fem.cache.ArrayCache`), so a second run takes seconds (27 s).
 ``--linear-study`` also reruns the linear mesh study (``accuracy_table.json``, ``hertz``, ``stability``).
 """
 
@@ -80,12 +80,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from flexsheet.model.scenes import paper_scene
-from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
-from nodes.fem.choose import DEFAULT_SPEC, MODEL_TABLE_PATH, visible_mask
-from nodes.fem.contact import finger_at
-from nodes.fem.fold import CREASE_STRETCH, VERTEX_TOL, fold_report, lateral_distance, outer_surface
-from nodes.fem.hyperelastic import (
+from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
+from flexsheet.fem.choose import DEFAULT_SPEC, MODEL_TABLE_PATH, visible_mask
+from flexsheet.fem.contact import finger_at
+from flexsheet.fem.fold import CREASE_STRETCH, VERTEX_TOL, fold_report, lateral_distance, outer_surface
+from flexsheet.fem.hyperelastic import (
     CONTACT_LAWS,
     DEFAULT_CONTACT,
     PENALTY_SCALE,
@@ -101,10 +100,10 @@ from nodes.fem.hyperelastic import (
     solver_tag,
     stable_states,
 )
-from nodes.fem.material import GENT_JM_RUBBER, Material
-from nodes.fem.mesh import MeshSpec
-from nodes.fem.realtime import RealtimeModel
-from nodes.fem.snapshots import (
+from flexsheet.fem.material import GENT_JM_RUBBER, Material
+from flexsheet.fem.mesh import MeshSpec
+from flexsheet.fem.realtime import RealtimeModel
+from flexsheet.fem.snapshots import (
     DEFAULT_GRID,
     DEFAULT_REF_SPEC,
     SnapshotGrid,
@@ -112,7 +111,8 @@ from nodes.fem.snapshots import (
     reusable_table,
     reused_azimuths,
 )
-from nodes.fem.solver import solve_full
+from flexsheet.fem.solver import solve_full
+from flexsheet.model.scenes import paper_scene
 
 __all__ = ["main", "Settings", "settings_for"]
 
@@ -241,7 +241,7 @@ def _parser() -> argparse.ArgumentParser:
                         "extended (only the azimuths it lacks are solved)")
     p.add_argument("--ship", action="store_true",
                    help="with --node-table: also write the table, packed (float16 surface fields, compressed), into "
-                        "nodes/fem/data/, which the node reads on a machine that never solved it (commit it)")
+                        "flexsheet/fem/data/, which the node reads on a machine that never solved it (commit it)")
     p.add_argument("--holdout-azimuth", type=float, action="append", default=[], metavar="DEG",
                    help="with --node-table: judge the table at this azimuth (between its own) against that push's "
                         "own solve on the table's mesh (solved unless cached, ~30 min of one core); into "
@@ -356,7 +356,7 @@ def _previous_version_path(cache: ArrayCache, old_key: str) -> dict | None:
 def _path_record(model: HyperelasticModel, states: list[PathState], probes: np.ndarray, angle_deg: float) -> dict:
     """The per-depth arrays :func:`reference_path` caches for ``states`` on ``model`` (see there), ``probes``
     (k, 3) m the rendered vertices."""
-    from nodes.fem.snapshots import _probe, _sample
+    from flexsheet.fem.snapshots import _probe, _sample
 
     P = _probe(model, probes)
     qp, vis = [], []
@@ -383,14 +383,14 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
                    probes: np.ndarray, contact: str = DEFAULT_CONTACT, penalty_scale: float = PENALTY_SCALE) -> dict:
     """Hyperelastic (``mat``: neo-Hookean or Gent) push at ``angle_deg`` through ``depths`` (load steps = the depth spacing, ≤ 2.5 mm) on
     ``spec``'s mesh — its half model (``half_z`` off) away from azimuth 0, as
-    :func:`nodes.fem.snapshots.build_table` meshes it, so one solve serves both — sampled at ``probes`` (k, 3) m
+    :func:`flexsheet.fem.snapshots.build_table` meshes it, so one solve serves both — sampled at ``probes`` (k, 3) m
     (display frame, mirrored into the modelled part); cached.
     Returns {"u": (D, k, 3) m, "u_dof": (D, P, 3) m float32 (every DOF point, for the snapshot table), "force",
     "inverted" (elements with det F ≤ 0 at a quadrature point or P2 node), "inverted_qp" (at a quadrature
     point), "inverted_nodal_visible" (nodally inverted elements whose deformed centroid lies outside the
     footprint, > finger radius + 2 mm from the push axis), "min_detF", "max_strain", "penetration", "newton",
     "seconds", "cpu_seconds", "dofs", "converged"}. ``contact``: the finger's contact law
-    (:data:`nodes.fem.hyperelastic.CONTACT_LAWS`); ``penalty_scale``: the contact penalty κ = scale·E/h."""
+    (:data:`flexsheet.fem.hyperelastic.CONTACT_LAWS`); ``penalty_scale``: the contact penalty κ = scale·E/h."""
     spec, angle_deg = _as_solved(spec, angle_deg)
     step = _load_step(depths)
     key, old_key = _reference_keys(spec, angle_deg, depths, mat, probes, contact, penalty_scale)
@@ -429,7 +429,7 @@ def _stable_key(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Materi
 def stable_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, cache: ArrayCache,
                 probes: np.ndarray, contact: str = DEFAULT_CONTACT, penalty_scale: float = PENALTY_SCALE) -> dict:
     """:func:`reference_path` with the stable branch where the push is bistable: the loading path, then the
-    finger withdrawn from its deepest state back to the shallowest (:func:`nodes.fem.hyperelastic.stable_states`,
+    finger withdrawn from its deepest state back to the shallowest (:func:`flexsheet.fem.hyperelastic.stable_states`,
     the path's load steps), and at each depth the state of lower total potential Π. The
     snapshot tables and the held-out pushes they are judged on read these, so both sides make the same choice.
     Cached (kind "stable", read before the loading path is); frictionless contact only (else the loading path
@@ -507,19 +507,19 @@ def _at_depths(path: dict, path_depths: np.ndarray, depths: np.ndarray) -> dict:
 
 
 FOLD_REGION = 0.03      #: m: surface points within this rest distance of the push axis are checked for folds
-FOLD_VERSION = "fold-3"  #: bump when nodes/fem/fold.py's checks change (fold_path's cache key)
+FOLD_VERSION = "fold-3"  #: bump when flexsheet/fem/fold.py's checks change (fold_path's cache key)
 
 
 def fold_path(spec: RefSpec, angle_deg: float, path: dict, depths: np.ndarray, mat: Material,
               cache: ArrayCache) -> dict:
-    """Self-contact and crease check (:func:`nodes.fem.fold.fold_report`) of every state of a
+    """Self-contact and crease check (:func:`flexsheet.fem.fold.fold_report`) of every state of a
     :func:`reference_path` ``path`` (its ``u_dof``, at ``depths`` m) on ``spec``'s mesh at ``angle_deg``: the
     reference has no self-contact, so where its surface passes through itself it is not a physical solution.
     Cached (kind "fold", keyed by the states themselves). Returns (D,) arrays: "max_winding" (0.5 on a smooth
     surface, α/2π at the bottom of a fold of interior angle α, > 1 where the surface lies inside the body),
     "n_penetrating" (surface points with w > 1), "max_penetration" m, "min_stretch" (smallest in-plane stretch
     of the surface triangles off the footprint), "n_creased" (triangles below
-    :data:`nodes.fem.fold.CREASE_STRETCH`), "worst_lateral" / "worst_drop" m (the largest-w point's rest
+    :data:`flexsheet.fem.fold.CREASE_STRETCH`), "worst_lateral" / "worst_drop" m (the largest-w point's rest
     distance from the push axis and its motion along the push); the same with the footprint included ("all_…":
     the material over the fingertip); "max_strain" the largest principal Green–Lagrange strain of any element
     and "max_strain_lateral_m" that element's rest distance from the push axis; "seconds". Raises ``RuntimeError`` when the
@@ -624,7 +624,7 @@ def fold_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel
     return {"depths_mm": (depths * 1e3).tolist(), "region_mm": FOLD_REGION * 1e3, "levels": rows,
             "tip_sequence": tip, "fold_free_to_mm": free, "first_penetration_mm_by_h_fine_mm": first,
             "crease_stretch": CREASE_STRETCH,
-            "what": "self-contact and crease check of the reference at azimuth 0 (nodes/fem/fold.py): the "
+            "what": "self-contact and crease check of the reference at azimuth 0 (flexsheet/fem/fold.py): the "
                     "generalised winding number w of the closed outer surface at its own points within "
                     f"{FOLD_REGION * 1e3:g} mm (rest) of the push axis, off the finger's footprint: 0.5 on a "
                     "smooth surface, alpha/2pi at the bottom of a fold of interior angle alpha, > 1 where the "
@@ -886,7 +886,7 @@ def penalty_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMo
 def skin_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, conv: dict, fine: dict) -> dict:
     """Where the unconverged part of the reference lies: the next-to-finest convergence mesh (full mode: the
     snapshot mesh) with only its surface layer refined (``skin_h`` in ``st.skin_sizes``: the material that
-    wraps the fingertip and lines the crater, :class:`nodes.fem.hyperelastic.RefSpec`), against the same mesh
+    wraps the fingertip and lines the crater, :class:`flexsheet.fem.hyperelastic.RefSpec`), against the same mesh
     refined throughout its push tube (the finest convergence level). ``conv``: :func:`convergence`'s report;
     ``fine``: its finest path. Per variant the largest visible-surface difference (mm, per depth) to the
     unrefined mesh and to the finest level (visible on the finer of the two, as in :func:`convergence`), the
@@ -923,7 +923,7 @@ def mirror_asymmetry(path: dict, spec: RefSpec, depths: np.ndarray, mat: Materia
     through the cylinder's axis: how far the solution is from mirror-symmetric. u(M·x) is probed from the
     path's DOF field (``u_dof``) on the re-meshed model (gmsh is deterministic). A quarter model (``half_z``)
     gives 0 up to float32 rounding, by construction."""
-    from nodes.fem.snapshots import _probe, _sample
+    from flexsheet.fem.snapshots import _probe, _sample
 
     verts = rm.rest_vertices.astype(float)
     fixed = rm.mesh.fixed[rm.surface_nodes]
@@ -964,7 +964,7 @@ def mirror_stability(path: dict, spec: RefSpec, depths: np.ndarray, mat: Materia
     symmetric and an antisymmetric block (:func:`mirror_blocks`; both symmetric in y). Per converged state:
     the lowest eigenvalue of each (N/m, unit-norm DOF vectors, so mesh-dependent; scipy ``eigsh`` shift-invert,
     fixed start vector) and, definitively, whether the antisymmetric block is positive definite (CHOLMOD's
-    Cholesky succeeds: :func:`nodes.fem.solver.factor`). An antisymmetric block that is not positive definite is
+    Cholesky succeeds: :func:`flexsheet.fem.solver.factor`). An antisymmetric block that is not positive definite is
     a symmetry-breaking bifurcation; a small positive eigenvalue, a state a small asymmetry moves far
     (imperfection sensitivity, Koiter). Linear stability at the sampled states only: it does not exclude an
     asymmetric branch coexisting with the symmetric one. Returns {"sym_N_per_m", "anti_N_per_m",
@@ -974,8 +974,8 @@ def mirror_stability(path: dict, spec: RefSpec, depths: np.ndarray, mat: Materia
     count than the path (gmsh meshes differently)."""
     import scipy.sparse.linalg as sla
 
-    from nodes.fem.hyperelastic import capsule_at
-    from nodes.fem.solver import NotPositiveDefinite, factor
+    from flexsheet.fem.hyperelastic import capsule_at
+    from flexsheet.fem.solver import NotPositiveDefinite, factor
 
     if not spec.half_z:
         raise ValueError(f"mirror_stability needs a quarter model (half_z), got {spec.key()}")
@@ -1012,7 +1012,7 @@ def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMod
     on the plane z = z_O through the push axis, so their solution is mirror-symmetric by construction); every
     other azimuth, the held-out check and the node table's off-axis snapshots are half models, *cut*: meshed
     with nodes on the plane through their push axis but no BC there (:class:`RefSpec` ``cut``,
-    :data:`nodes.fem.snapshots.DEFAULT_REF_SPEC`; uncut half models were 8–12 % stiffer at 40–50 mm than the
+    :data:`flexsheet.fem.snapshots.DEFAULT_REF_SPEC`; uncut half models were 8–12 % stiffer at 40–50 mm than the
     quarter models of the same h_fine, session 10, docs/fem.md). Here the azimuth-0 push is solved on cut half
     models (``st.half_levels``, h_fine m, else as the convergence levels) and compared, every ``st.fine_step``,
     with the finest quarter model (``fine``) and with the quarter model of the same h_fine (from ``conv``'s
@@ -1091,7 +1091,7 @@ def validation_set(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeM
 
 def _path_states(src: dict, src_depths: np.ndarray, depths, model=None) -> list[PathState] | None:
     """The states of the cached reference path ``src`` (:func:`reference_path`, solved at ``src_depths`` (D,) m)
-    at ``depths`` m, as :class:`PathState` for :func:`nodes.fem.snapshots.build_table`; None if one is missing.
+    at ``depths`` m, as :class:`PathState` for :func:`flexsheet.fem.snapshots.build_table`; None if one is missing.
     Raises ``RuntimeError`` when ``model`` (the mesh the table samples) has another DOF count than the solve
     (the cache key does not carry gmsh's version: a new gmsh may mesh differently)."""
     if model is not None:
@@ -1132,9 +1132,9 @@ def snapshot_source(st: Settings, mat: Material, cache: ArrayCache, rm: Realtime
 def snapshot_table(st: Settings, mat: Material, cache: ArrayCache, solved,
                    reuse: dict | None = None) -> tuple[dict, bool, float]:
     """The snapshot table of these settings (cached): (table, cache hit, seconds to build). ``solved``:
-    callable (azimuth deg, model, depths m) → states or None (:func:`nodes.fem.snapshots.build_table`), the
+    callable (azimuth deg, model, depths m) → states or None (:func:`flexsheet.fem.snapshots.build_table`), the
     reference solves already made (:func:`snapshot_source`, :func:`node_table_path`); ``reuse``: a table whose
-    azimuths are copied, not solved (:func:`nodes.fem.snapshots.build_table`)."""
+    azimuths are copied, not solved (:func:`flexsheet.fem.snapshots.build_table`)."""
     _log(f"snapshots: azimuths {st.grid.angles_deg} deg, depth step {st.grid.depth_step * 1e3:g} mm, "
          f"mesh {st.snap_spec.key()} ...")
 
@@ -1248,7 +1248,7 @@ def snapshot_mesh_study(st: Settings, mat: Material, cache: ArrayCache, rm: Real
 
 def material_study(st: Settings, mats: tuple[Material, ...], cache: ArrayCache, rm: RealtimeModel) -> dict:
     """Does the reference converge with a strain-stiffening material? For each of ``mats`` (neo-Hookean and a
-    Gent solid, :class:`nodes.fem.material.Material` ``Jm``; same E, ν, finger, penalty, meshes): the azimuth-0
+    Gent solid, :class:`flexsheet.fem.material.Material` ``Jm``; same E, ν, finger, penalty, meshes): the azimuth-0
     mesh convergence of :func:`convergence` (its verdict, every level's visible-surface difference to the
     finest, force, largest Green–Lagrange strain), and an azimuth-0 snapshot table (``st.grid``'s depths) taken
     from the stable branch of the next-to-finest level (full mode: the node's 3.4 mm mesh) judged at every
@@ -1432,7 +1432,7 @@ def failure_map(cases: list[dict], cand: dict) -> dict:
 
 
 def model_table(cases: list[dict], cand: dict, law: str = "neo-Hookean") -> dict:
-    """``nodes/fem/model_table.json``: each candidate's worst visible error per depth (over azimuths) and speed."""
+    """``flexsheet/fem/model_table.json``: each candidate's worst visible error per depth (over azimuths) and speed."""
     depths = sorted({c["depth"] for c in cases})
     rows = []
     for v in cand.values():
@@ -1670,7 +1670,7 @@ def node_table_report(table: dict, paths: dict[float, dict], mat: Material, key:
     the push depth (mm; the rigid apex's penetration plus the surface grid's sampling), largest per azimuth.
     ``paths``: azimuth (deg) → its :func:`stable_path` dict, or None when not cached (its facts are then left
     out). Units in keys."""
-    from nodes.fem.snapshots import SnapshotModel
+    from flexsheet.fem.snapshots import SnapshotModel
 
     R, c = float(table["radius"]), np.asarray(table["center"], float)
     phis = np.asarray(table["angles"], float)
@@ -1722,7 +1722,7 @@ def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: Realti
     ``twin``: also the same push on the mesh's twin (:func:`twin_spec`; another ~30 min), and that mesh's noise
     (``noise_mm``, the same distance between the two) beside the error. Raises ``ValueError`` for an azimuth
     the table holds or outside it."""
-    from nodes.fem.snapshots import SnapshotModel
+    from flexsheet.fem.snapshots import SnapshotModel
 
     held = np.degrees(np.asarray(table["angles"], float))
     if np.any(np.abs(held - azimuth_deg) < 1e-9) or not held[0] < azimuth_deg < held[-1]:
@@ -1786,7 +1786,7 @@ def node_table_between_depths(table: dict, mat: Material, cache: ArrayCache, rm:
     two sides differ only by float16 rounding and by a branch that the finer load step may leave elsewhere.
     Returns per-depth errors, the largest at the midpoints and at the table's depths, and the depths where each
     side holds the unloaded (stable-branch) state. Raises ``ValueError`` for an azimuth the table does not hold."""
-    from nodes.fem.snapshots import SnapshotModel
+    from flexsheet.fem.snapshots import SnapshotModel
 
     held = np.degrees(np.asarray(table["angles"], float))
     if not np.any(np.abs(held - azimuth_deg) < 1e-9):
@@ -1817,10 +1817,10 @@ def node_table_between_depths(table: dict, mat: Material, cache: ArrayCache, rm:
 
 def _table_update_ms(table: dict, verts: np.ndarray, mat: Material, n: int = 50) -> dict:
     """CPU time (``time.thread_time``) of one snapshot look-up for the rendered vertices ``verts`` (k, 3) m — what
-    the node does per update on the cylinder (:meth:`nodes.fem.snapshots.SnapshotModel.surface`) — at pushes
+    the node does per update on the cylinder (:meth:`flexsheet.fem.snapshots.SnapshotModel.surface`) — at pushes
     between the table's azimuths (the first, middle and last midpoints: 5°, 35°, 55° for the node's) and at 0.1,
     0.4, 0.9 of its deepest push (5, 20, 45 mm), ``n`` calls each: median and 90th percentile, ms."""
-    from nodes.fem.snapshots import SnapshotModel
+    from flexsheet.fem.snapshots import SnapshotModel
 
     sm = SnapshotModel(table, verts, E=mat.E)
     mids = np.degrees(np.asarray(table["angles"], float))
@@ -1886,22 +1886,22 @@ def _cached_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mater
 def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, contact: str = DEFAULT_CONTACT,
                      azimuth: float | None = None, jobs: int = 1, ship: bool = False, out: str | None = None,
                      holdout: tuple[float, ...] = (), between: tuple[float, ...] = (), twin: bool = False) -> int:
-    """Build (or find) the FEM node's snapshot table: :data:`nodes.fem.snapshots.DEFAULT_GRID` on
-    :data:`nodes.fem.snapshots.DEFAULT_REF_SPEC`, the key the node looks up (its ``finger_radius`` default is
+    """Build (or find) the FEM node's snapshot table: :data:`flexsheet.fem.snapshots.DEFAULT_GRID` on
+    :data:`flexsheet.fem.snapshots.DEFAULT_REF_SPEC`, the key the node looks up (its ``finger_radius`` default is
     the experiment's 8 mm). Every azimuth's path is a cached :func:`node_table_path` (azimuth 0: the full run's
     3.4 mm level), so ``azimuth`` (deg) solves just that one and returns: run the azimuths in parallel
     processes, or over several sittings, then once without it to assemble the table; without it the azimuths
     the cache lacks are solved in ``jobs`` worker processes first (:func:`prefetch`). ``ship``: also write the
-    table, packed (:func:`nodes.fem.snapshots.pack_table`: float16 surface fields, compressed), into the
-    repository's ``nodes/fem/data/`` (:meth:`nodes.fem.cache.ArrayCache.ship`), where the node finds it on a
+    table, packed (:func:`flexsheet.fem.snapshots.pack_table`: float16 surface fields, compressed), into the
+    repository's ``flexsheet/fem/data/`` (:meth:`flexsheet.fem.cache.ArrayCache.ship`), where the node finds it on a
     machine that never solved it. A table on fewer azimuths in the cache or the shipped store
-    (:func:`nodes.fem.snapshots.reusable_table`) is extended: only the azimuths it lacks are solved. ``out``:
+    (:func:`flexsheet.fem.snapshots.reusable_table`) is extended: only the azimuths it lacks are solved. ``out``:
     write ``node_table.json/png`` there (:func:`node_table_report`), with
     the table judged at each ``holdout`` azimuth (deg, between the table's) against its own solve
     (:func:`node_table_holdout`; solved unless cached) and between its depths at each ``between`` azimuth (deg,
     one of the table's; :func:`node_table_between_depths`); ``twin`` (``--mesh-check``): each held-out push also
     on the mesh's twin, its noise beside the error. Returns 0."""
-    from nodes.fem.snapshots import table_key
+    from flexsheet.fem.snapshots import table_key
 
     st = replace(settings_for(False), grid=DEFAULT_GRID, snap_spec=DEFAULT_REF_SPEC, contact=contact)
     t0 = time.perf_counter()
@@ -1916,13 +1916,13 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
                                   contact=contact)
     verts = rm.rest_vertices.astype(float)
     if hit:     # in the cache or shipped: its paths are not solved again (a held-out check needs only its own)
-        _log("node table found (this machine's cache or nodes/fem/data): not solving its paths again")
+        _log("node table found (this machine's cache or flexsheet/fem/data): not solving its paths again")
     else:
         base = reusable_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, FINGER_R, contact)
         have = set() if base is None else {round(float(a), 6) for a in np.degrees(base["angles"])}
         if base is not None:
             _log(f"node table: extending the table on azimuths {sorted(have)} deg (this machine's cache or "
-                 f"nodes/fem/data): only {[a for a in DEFAULT_GRID.angles_deg if a not in have]} deg are solved")
+                 f"flexsheet/fem/data): only {[a for a in DEFAULT_GRID.angles_deg if a not in have]} deg are solved")
         prefetch([Solve(DEFAULT_REF_SPEC, a, DEFAULT_GRID.depth_step, stable=True) for a in DEFAULT_GRID.angles_deg
                   if a not in have], jobs, mat, cache, verts, contact)
 
@@ -1946,7 +1946,7 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
                          f"load step at azimuth(s) {unconverged} deg, paths not in this machine's cache (so not "
                          f"checked) at {missing} deg")
     if ship:
-        from nodes.fem.snapshots import pack_table
+        from flexsheet.fem.snapshots import pack_table
 
         packed, err = pack_table(table)
         p = cache.ship("snapshots", table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact, mat.Jm),
@@ -2008,7 +2008,7 @@ def planned_solves(st: Settings, study: str = "full") -> list[Solve]:
     :func:`mirror_study` (its stability check reads the last two levels), :func:`penalty_study`,
     :func:`skin_study`, :func:`validation_set`, :func:`snapshot_source`, :func:`snapshot_mesh_study` (the skin
     study's meshes) and :func:`holdout_study`; a path may be listed twice. A run after :func:`prefetch` of this
-    list solves nothing itself (tests/test_fem_experiment.py checks the quick run's log). ``ValueError`` on
+    list solves nothing itself (tests/unit/fem/test_fem_experiment.py checks the quick run's log). ``ValueError`` on
     another ``study``."""
     if study not in ("full", "mirror", "holdout", "fold", "material"):
         raise ValueError(f"study must be 'full', 'mirror', 'holdout', 'fold' or 'material', got {study!r}")
@@ -2182,7 +2182,7 @@ def main(argv: list[str] | None = None) -> int:
         if not is_paper_cylinder(sc) and args.between_depths:
             raise SystemExit("flexsheet experiment fem: --between-depths is for the paper's cylinder's table")
         if not is_paper_cylinder(sc) and args.node_table:
-            from nodes.fem.sphere_snapshots import sphere_frame
+            from flexsheet.fem.sphere_snapshots import sphere_frame
 
             try:
                 sphere_frame(sc)
@@ -2333,11 +2333,11 @@ def main(argv: list[str] | None = None) -> int:
 # ---- the linear mesh study (--linear-study): which linear mesh, Hertz check, where linear breaks ---------------------
 def linear_study(out: str, mat: Material) -> None:
     """Linear P1/P2 meshes against a fine linear P2 solution (``accuracy_table.json``, read by
-    :func:`nodes.fem.choose.choose`), the Hertz exponent check and the linear/corotational stability curve.
+    :func:`flexsheet.fem.choose.choose`), the Hertz exponent check and the linear/corotational stability curve.
     Writes linear_accuracy_speed, hertz, stability (.json/.png) and accuracy_table.json into ``out``."""
-    from nodes.fem.choose import choose
-    from nodes.fem.mesh import cylinder_mesh
-    from nodes.fem.solver import FemModel
+    from flexsheet.fem.choose import choose
+    from flexsheet.fem.mesh import cylinder_mesh
+    from flexsheet.fem.solver import FemModel
 
     ref_spec = MeshSpec(0.010, 0.002, 0.015)
     depths = [0.005, 0.01, 0.02, 0.03, 0.04, 0.05]
@@ -2363,7 +2363,7 @@ def linear_study(out: str, mat: Material) -> None:
 
 
 def _linear_candidates(cands, ref_spec, ref_model, refs, mat):
-    from nodes.fem.choose import evaluate_spec
+    from flexsheet.fem.choose import evaluate_spec
 
     table = {"nu": mat.nu, "finger_radius": FINGER_R, "reference": {"spec": ref_spec.__dict__, "order": 2,
                                                                    "dofs": ref_model.n_dofs}, "candidates": []}
@@ -2386,8 +2386,8 @@ def _linear_candidates(cands, ref_spec, ref_model, refs, mat):
 
 def _hertz(mat: Material) -> dict:
     """Small-depth force exponent of the linear P2 model against Hertz (Johnson, Contact Mechanics §4.2)."""
-    from nodes.fem.mesh import cylinder_mesh
-    from nodes.fem.solver import FemModel
+    from flexsheet.fem.mesh import cylinder_mesh
+    from flexsheet.fem.solver import FemModel
 
     spec = MeshSpec(0.012, 0.002, 0.008)
     depths = [0.0005, 0.00075, 0.001, 0.0015, 0.002]
@@ -2408,8 +2408,8 @@ def _hertz(mat: Material) -> dict:
 
 def _stability(spec: MeshSpec, mat: Material) -> dict:
     """Linear against corotational (P1) over depth on ``spec``: strain, inverted tets, force, difference."""
-    from nodes.fem.mesh import cylinder_mesh
-    from nodes.fem.solver import FemModel, element_checks, solve_corotational
+    from flexsheet.fem.mesh import cylinder_mesh
+    from flexsheet.fem.solver import FemModel, element_checks, solve_corotational
 
     mesh = cylinder_mesh(spec)
     model = FemModel(mesh, mat)

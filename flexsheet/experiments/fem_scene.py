@@ -2,8 +2,8 @@
 launch/scenes/NAME.yaml`` (wired by :mod:`flexsheet.experiments.fem`) calls :func:`run_scene`.
 
 What it measures, for the scene's real-time model — what the FEM node serves for this scene: the nonlinear
-snapshot table where the scene has one (the sphere, :mod:`nodes.fem.sphere_snapshots`, attached as the node
-attaches it, the linear model outside it), else :class:`nodes.fem.scene_model.SceneModel` (linear P2,
+snapshot table where the scene has one (the sphere, :mod:`flexsheet.fem.sphere_snapshots`, attached as the node
+attaches it, the linear model outside it), else :class:`flexsheet.fem.scene_model.SceneModel` (linear P2,
 per-element material, capacitance over the stroke path); with a table, the linear model is measured beside it
 (``realtime.linear``):
 
@@ -12,9 +12,9 @@ per-element material, capacitance over the stroke path); with a table, the linea
 2. **Accuracy against the nonlinear reference**: at push points on the stroke (``quick``: its middle; else
    its start, middle, end), a rigid capsule finger (the fingertip sphere and the finger behind it) pushed
    along the inward surface normal to 5…50 mm into the scene's compressible hyperelastic body (neo-Hookean or Gent; total Lagrangian P2,
-   Newton with load stepping: :mod:`nodes.fem.hyperelastic`, full body, the scene's support and per-element
+   Newton with load stepping: :mod:`flexsheet.fem.hyperelastic`, full body, the scene's support and per-element
    material: the inclusions), on gmsh meshes of the scene refined around the push point
-   (:func:`nodes.fem.scene_mesh.scene_mesh` with ``refine_at``). The error is the largest distance between
+   (:func:`flexsheet.fem.scene_mesh.scene_mesh` with ``refine_at``). The error is the largest distance between
    the real-time and the reference displacement over the *visible* rendered surface vertices: not held by
    the support, and outside the finger's footprint (the vertex's deformed position in the reference lies more
    than finger radius + 2 mm from the push axis; the finger hides the footprint and the wall dragged onto its
@@ -31,7 +31,7 @@ Outputs in ``out_dir``: ``summary.json`` (``scene``, ``realtime.update_ms``, ``r
 ``realtime.max_visible_error_mm_0_50``, ``realtime.error_mm_by_depth``, ``reference.model``,
 ``reference.converged``, ``reference.levels``, ``linear_fine``), ``accuracy_speed_<name>.png`` + ``.json``
 (the same numbers). ``quick`` pushes to 30 mm only (``max_visible_error_mm_0_30``; ``…_0_50`` is null).
-Reference solves are cached (:class:`nodes.fem.cache.ArrayCache`, key includes
+Reference solves are cached (:class:`flexsheet.fem.cache.ArrayCache`, key includes
 ``scene.key()``). Units in files: mm and ms where the key says so, else SI.
 
 Run by hand (charts for docs/figures/scenes/)::
@@ -53,8 +53,8 @@ import time
 
 import numpy as np
 
-from nodes.fem.choose import visible_mask
-from nodes.fem.path_snapshots import GRID
+from flexsheet.fem.choose import visible_mask
+from flexsheet.fem.path_snapshots import GRID
 
 __all__ = ["run_scene", "main", "visible_errors", "TARGET_MM", "QUICK", "FULL"]
 
@@ -62,7 +62,7 @@ TARGET_MM = 0.7                      #: one projector pixel on the screen, mm
 #: settings: push fractions along the stroke, recorded depths (m), load step (m), reference levels' h_fine (m)
 QUICK = {"fractions": (0.5,), "depths": tuple(np.round(np.arange(1, 7) * 0.005, 4)), "step": 0.0025,
          "levels": (0.008,), "h": 0.012, "refine_radius": 0.015, "path_depth": 0.0, "n_time": 100}
-#: the full run: its first level is the path table's stations' mesh (:data:`nodes.fem.path_snapshots.GRID`), with
+#: the full run: its first level is the path table's stations' mesh (:data:`flexsheet.fem.path_snapshots.GRID`), with
 #: the same outputs, so its pushes at the stroke's start, middle and end are those of a path table whose stations
 #: include them (any odd count: the default 13, or 7)
 FULL = {"fractions": (0.0, 0.5, 1.0),
@@ -83,11 +83,11 @@ def scene_reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, p
     displacements at ``probes`` (k, 3) m, ``force`` (D,) N, ``converged``, ``inverted``, ``max_strain`` (D,)
     (largest principal Green–Lagrange strain), ``seconds``, ``dofs``, and the mesh (``points``, ``tets``,
     ``fixed``, ``E``, ``nu``)."""
-    from nodes.fem.cache import cache_key
-    from nodes.fem.hyperelastic import SOLVER_VERSION, Capsule, HyperelasticModel, solve_path_capsule
-    from nodes.fem.material import Material
-    from nodes.fem.mesh import MeshSpec
-    from nodes.fem.scene_mesh import scene_mesh
+    from flexsheet.fem.cache import cache_key
+    from flexsheet.fem.hyperelastic import SOLVER_VERSION, Capsule, HyperelasticModel, solve_path_capsule
+    from flexsheet.fem.material import Material
+    from flexsheet.fem.mesh import MeshSpec
+    from flexsheet.fem.scene_mesh import scene_mesh
 
     depths = np.asarray(st["depths"], float)
     path = float(st.get("path_depth", 0.0))
@@ -124,10 +124,10 @@ def scene_reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, p
 def _linear_fine(sc, ref: dict, q, n, depths, probes) -> tuple[np.ndarray, float]:
     """Linear P2 on the reference's mesh (full sparse solve): displacements (D, k, 3) at ``probes`` and the
     median solve time, ms."""
-    from nodes.fem.material import Material
-    from nodes.fem.mesh import TetMesh, surface_faces
-    from nodes.fem.scene_model import finger_on_scene
-    from nodes.fem.solver import FemModel, solve_full
+    from flexsheet.fem.material import Material
+    from flexsheet.fem.mesh import TetMesh, surface_faces
+    from flexsheet.fem.scene_model import finger_on_scene
+    from flexsheet.fem.solver import FemModel, solve_full
 
     mesh = TetMesh(ref["points"], ref["tets"], surface_faces(ref["points"], ref["tets"]), ref["fixed"],
                    center=sc.center.copy())
@@ -145,9 +145,9 @@ def _linear_fine(sc, ref: dict, q, n, depths, probes) -> tuple[np.ndarray, float
 def visible_errors(model_u, ref_u, verts, held, q, n, depths, r) -> list[float]:
     """Largest distance (mm) per depth between ``model_u`` and ``ref_u`` (D, S, 3) m over the visible rendered
     vertices ``verts`` (S, 3) m: not ``held`` (S,) bool and outside the footprint of a finger of radius ``r`` m
-    pushed ``depths[j]`` m at surface point ``q`` along −``n`` (:func:`nodes.fem.choose.visible_mask` on the
+    pushed ``depths[j]`` m at surface point ``q`` along −``n`` (:func:`flexsheet.fem.choose.visible_mask` on the
     reference's deformed positions)."""
-    from nodes.fem.scene_model import finger_on_scene
+    from flexsheet.fem.scene_model import finger_on_scene
 
     out = []
     for j, d in enumerate(depths):
@@ -157,7 +157,7 @@ def visible_errors(model_u, ref_u, verts, held, q, n, depths, r) -> list[float]:
 
 
 def _update_ms(rt, sc, depths, n_calls: int) -> dict:
-    from nodes.fem.scene_model import finger_on_scene
+    from flexsheet.fem.scene_model import finger_on_scene
 
     pts, nrm = sc.stroke_points(5)
     ts, cpu, methods = [], [], []
@@ -178,10 +178,10 @@ def _update_ms(rt, sc, depths, n_calls: int) -> dict:
 
 def _attach_table(sc, rt, cache) -> str | None:
     """Attach the scene's nonlinear table to the real-time model ``rt`` as the FEM node does
-    (:func:`nodes.fem.scene_model.attach_scene_table`: a sphere's table, any other scene's path table). Returns
+    (:func:`flexsheet.fem.scene_model.attach_scene_table`: a sphere's table, any other scene's path table). Returns
     where it came from ("cache" / "shipped store ..."), or None (none stored: the node serves the linear model,
     and so is measured)."""
-    from nodes.fem.scene_model import attach_scene_table
+    from flexsheet.fem.scene_model import attach_scene_table
 
     kind, where = attach_scene_table(rt, cache)
     if where is None:
@@ -194,10 +194,10 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     doc); write ``out_dir``/summary.json and the accuracy-against-speed chart; return the summary dict.
     ``cache_dir``: the FEM cache (None: the default, ~/.cache/flexsheet/fem). Raises ``ValueError`` (via
     :class:`flexsheet.model.scenes.SceneError`) for a bad scene file."""
+    from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
+    from flexsheet.fem.hyperelastic import SOLVER_VERSION
+    from flexsheet.fem.scene_model import SceneModel, finger_on_scene
     from flexsheet.model.scenes import load_scene
-    from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
-    from nodes.fem.hyperelastic import SOLVER_VERSION
-    from nodes.fem.scene_model import SceneModel, finger_on_scene
 
     t0 = time.perf_counter()
     st = QUICK if quick else FULL
@@ -262,13 +262,13 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     err_by_depth = np.max([p["realtime_error_mm"] for p in pushes], axis=0).tolist()
     fine_lv = pushes[0]["reference_levels"][-1]
     lin_all = max(max(p["linear_error_mm"]) for p in pushes)
-    linear = {"method": f"linear P{rt.order} capacitance over the stroke path (nodes/fem/scene_model.py)",
+    linear = {"method": f"linear P{rt.order} capacitance over the stroke path (flexsheet/fem/scene_model.py)",
               "update_ms": timing["median"], "update_ms_p90": timing["p90"],
               "max_visible_error_mm": lin_all,
               "error_mm_by_depth": np.max([p["linear_error_mm"] for p in pushes], axis=0).tolist()}
     if snap is not None:
-        which = ("the sphere's nonlinear snapshot table (nodes/fem/sphere_snapshots.py" if rt.path_table is None else
-                 "the scene's nonlinear path table (nodes/fem/path_snapshots.py: linear + correction")
+        which = ("the sphere's nonlinear snapshot table (flexsheet/fem/sphere_snapshots.py" if rt.path_table is None else
+                 "the scene's nonlinear path table (flexsheet/fem/path_snapshots.py: linear + correction")
         method = (f"{which}, from the {snap}) for pushes inside it, the linear model elsewhere: what the FEM node "
                   "serves on this scene")
         timing = timing_sn
@@ -299,7 +299,7 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
                                 "footprint (deformed reference position more than finger radius + 2 mm from the push "
                                 "axis)"},
         "reference": {"model": f"{law} (compressible), total Lagrangian P2, Newton with load stepping, rigid "
-                               f"{sc.finger.contact} capsule finger, full body (nodes/fem/hyperelastic.py)",
+                               f"{sc.finger.contact} capsule finger, full body (flexsheet/fem/hyperelastic.py)",
                       "contact": sc.finger.contact,
                       "law": sc.material.model, "Jm": sc.material.Jm,
                       "solver": SOLVER_VERSION,

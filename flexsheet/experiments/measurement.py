@@ -10,7 +10,7 @@ the projector image (``cv2.remap``). Rays that miss the sheet see black.
 
 In the honest twin (``flexsheet experiment correction --twin realistic``) the sheet, the projector and its
 distortion passed to :meth:`MeasurementCamera.photograph` are the hidden truth's
-(:class:`flexsheet.model.truth.TwinTruth`); the projector image was drawn by the renderer with the
+(:class:`flexsheet.twin.truth.TwinTruth`); the projector image was drawn by the renderer with the
 *calibrated* ones (``display.yaml``). This module never sees which is which.
 
 The camera's image plane is the imaginary screen itself (1 camera pixel = ``pixel`` m on the screen), so
@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexsheet.model import scene
+from flexsheet.model import geometry
 from flexsheet.model.projector import Projector
 from flexsheet.model.sheet import SheetSurface
 
@@ -112,11 +112,11 @@ class MeasurementCamera:
     for the default screen normal +x. ``grid_n``: samples per side of the true membrane grid.
     """
 
-    eye: np.ndarray = field(default_factory=lambda: scene.EYE.copy())
+    eye: np.ndarray = field(default_factory=lambda: geometry.EYE.copy())
     pixel: float = 0.00035
     extent: tuple[float, float] = (0.24, 0.18)
-    screen_point: np.ndarray = field(default_factory=lambda: scene.SCREEN_POINT.copy())
-    screen_normal: np.ndarray = field(default_factory=lambda: scene.SCREEN_NORMAL.copy())
+    screen_point: np.ndarray = field(default_factory=lambda: geometry.SCREEN_POINT.copy())
+    screen_normal: np.ndarray = field(default_factory=lambda: geometry.SCREEN_NORMAL.copy())
     grid_n: int = 241
 
     def __post_init__(self) -> None:

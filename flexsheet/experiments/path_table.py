@@ -1,7 +1,7 @@
 """A scene's nonlinear path table (issue 17): ``flexsheet experiment fem --scene launch/scenes/NAME.yaml
 --node-table [--stations K] [--holdout-fraction F ...] [--jobs N] [--ship] --out DIR`` for any scene but the
 paper's cylinder and the sphere (wired by :mod:`flexsheet.experiments.fem`; the runtime is
-:mod:`nodes.fem.path_snapshots`).
+:mod:`flexsheet.fem.path_snapshots`).
 
 1. **Stations**: K fractions of the stroke's arc length, evenly spaced, start and end included
    (``--stations``, default :data:`DEFAULT_STATIONS`, 13). At each, the scene's hyperelastic reference
@@ -11,8 +11,8 @@ paper's cylinder and the sphere (wired by :mod:`flexsheet.experiments.fem`; the 
    level), sampled on the real-time model's rendered vertices; each push is cached on its own, ``--jobs``
    solves the missing ones in worker processes.
 2. **The table**: per station and depth the reference minus the real-time linear model's solve of the same
-   push, and the force and dF/dd ratios (module doc of :mod:`nodes.fem.path_snapshots`); stored under the key
-   the FEM node looks up (:func:`table_key`); ``--ship`` also writes it into ``nodes/fem/data/``.
+   push, and the force and dF/dd ratios (module doc of :mod:`flexsheet.fem.path_snapshots`); stored under the key
+   the FEM node looks up (:func:`table_key`); ``--ship`` also writes it into ``flexsheet/fem/data/``.
 3. **Held out** (``--holdout-fraction``, default the midpoints of every second interval): a push between
    stations solved on its own mesh (refined along *its* path), against what the node serves there (the linear
    solve + the blended correction) and against the linear model alone: the largest distance over the visible
@@ -38,7 +38,7 @@ import numpy as np
 __all__ = ["build_path_table", "table_key", "DEFAULT_STATIONS", "assemble_path_table"]
 
 from flexsheet.experiments.fem_scene import _update_ms, visible_errors
-from nodes.fem.path_snapshots import GRID, REACH
+from flexsheet.fem.path_snapshots import GRID, REACH
 
 TARGET_MM = 0.7
 DEFAULT_STATIONS = 13          #: the shipped rounded box table's (session 24: 7 missed by 4.7 mm over the edge)
@@ -61,9 +61,9 @@ def _st() -> dict:
 
 
 def table_key(sc, rt) -> str:
-    """The key the FEM node looks a scene's path table up by (:func:`nodes.fem.path_snapshots.path_table_key`)
+    """The key the FEM node looks a scene's path table up by (:func:`flexsheet.fem.path_snapshots.path_table_key`)
     for the scene ``sc`` and the real-time model ``rt`` it corrects."""
-    from nodes.fem.path_snapshots import path_table_key
+    from flexsheet.fem.path_snapshots import path_table_key
 
     return path_table_key(sc.key(), rt.cache_key)
 
@@ -80,9 +80,9 @@ def _job(args) -> tuple[float, float, str | None]:
     scene_file, f, h_fine, cache_dir = args
     t = time.perf_counter()
     try:
+        from flexsheet.fem.cache import ArrayCache
+        from flexsheet.fem.scene_model import SceneModel
         from flexsheet.model.scenes import load_scene
-        from nodes.fem.cache import ArrayCache
-        from nodes.fem.scene_model import SceneModel
 
         sc = load_scene(scene_file)
         rt = SceneModel(sc, cache_dir=cache_dir)
@@ -104,7 +104,7 @@ def _prefetch(scene_file, jobs_list, cache_dir, n_jobs: int) -> None:
 
 def _linear(rt, sc, q, n, depths) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The real-time linear model's surface displacement (D, S, 3), force (D,), stiffness (D,) at the push."""
-    from nodes.fem.scene_model import finger_on_scene
+    from flexsheet.fem.scene_model import finger_on_scene
 
     out = [rt.surface_displacement(finger_on_scene(q, n, float(d), sc.finger.radius)) for d in depths]
     return (np.stack([o[0] for o in out]), np.array([o[1] for o in out]), np.array([o[2] for o in out]))
@@ -120,13 +120,13 @@ def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
 
 
 def assemble_path_table(sc, rt, fractions, refs: list[dict]) -> dict:
-    """The path table (:data:`nodes.fem.path_snapshots.TABLE_FIELDS`) from the stations' reference pushes
+    """The path table (:data:`flexsheet.fem.path_snapshots.TABLE_FIELDS`) from the stations' reference pushes
     ``refs`` (one :func:`flexsheet.experiments.fem_scene.scene_reference` result per fraction, sampled on
     ``rt``'s rendered vertices at :data:`GRID`'s depths) and the real-time model ``rt``'s linear solves. The
     table reaches the deepest depth to which every station's Newton solve converged at every load step (so a
     scene whose reference stalls gets a shallower table, the linear model beyond it). Raises ``ValueError`` when
     no station converged at the first depth."""
-    from nodes.fem.path_snapshots import stiffness_from_force
+    from flexsheet.fem.path_snapshots import stiffness_from_force
 
     depths = np.concatenate([[0.0], np.asarray(_st()["depths"])])
     ok = np.all([np.asarray(r["converged"], bool) for r in refs], axis=0)      # (D-1,) every station converged
@@ -162,9 +162,9 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
     """Build (or find in the cache) the scene's path table and report it (module doc). ``holdout`` None: the
     midpoints of every second interval. Returns 0; raises ``SystemExit`` naming the argument for fewer than 2
     stations, a held-out fraction outside (0, 1) or on a station, or an unconverged station with ``ship``."""
+    from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
+    from flexsheet.fem.scene_model import SceneModel, finger_on_scene
     from flexsheet.model.scenes import load_scene
-    from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
-    from nodes.fem.scene_model import SceneModel, finger_on_scene
 
     if int(stations) < 2:
         raise SystemExit(f"flexsheet experiment fem: --stations must be >= 2, got {stations}")
@@ -241,7 +241,7 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
              f"{max(ch):.2f} mm at most")
     rep = {"scene": {"name": sc.name, "file": str(sc.source), "key": sc.key(), "contact": sc.finger.contact,
                      "law": sc.material.model},
-           "what": "the scene's nonlinear path table (nodes/fem/path_snapshots.py): the real-time linear solve "
+           "what": "the scene's nonlinear path table (flexsheet/fem/path_snapshots.py): the real-time linear solve "
                    "plus the reference-minus-linear correction, each station's moved with the contact and blended "
                    "along the stroke and in depth; held-out "
                    "pushes between stations on their own meshes, visible rendered vertices (not held, outside the "

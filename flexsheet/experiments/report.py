@@ -275,7 +275,7 @@ def twin_settings(lf=None) -> dict:
     """``{"realism", "truth_seed", "source"}`` of the twin a launch ran: the launch file's top-level ``twin``
     (a mapping or a model), else the world node's ``twin`` param, else the world's defaults (``source`` says
     which). ``lf``: the :class:`flexsheet.runtime.launch.LaunchFile` (or ``None``)."""
-    from flexsheet.model.truth_choice import TruthChoice
+    from flexsheet.twin.truth_choice import TruthChoice
 
     def as_dict(x) -> dict | None:
         if x is None:

@@ -5,7 +5,7 @@ scene and the organ's compliance along its stroke (the tumour's stiffness peak i
    of :func:`flexsheet.experiments.stroke.simulate` (honest twin, camera noise, Kalman prediction, latency,
    the arms' IK / command stream / servo / true kinematics) with the scripted finger on the scene's stroke
    path, the planner on the scene's shape with the tension from the scene's compliance estimate
-   (:class:`nodes.planner.compliance.SceneCompliance`, what the planner node does while the FEM does not
+   (:class:`flexsheet.planning.compliance.SceneCompliance`, what the planner node does while the FEM does not
    solve the scene), and the metric in the normal section along the scene's stroke
    (:func:`flexsheet.experiments.table1.scene_table1_row`). Realistic twin, truth seeds 0…``seeds``−1,
    moving times 10 s and 30 s. Each row also has the tension the planner set at the contacts (median, p5,
@@ -37,8 +37,8 @@ import numpy as np
 from flexsheet.experiments.stroke import LatencyModel, launch_kf, make_twin, simulate
 from flexsheet.model.scenes import SCENES_DIR, load_scene
 from flexsheet.model.tension import SheetMaterial, max_stretch_within_force, stiffness, stretch_for_stiffness
-from nodes.planner.compliance import SceneCompliance
-from nodes.planner.stroke import PlannerConfig
+from flexsheet.planning.compliance import SceneCompliance
+from flexsheet.planning.surface_planner import PlannerConfig
 
 __all__ = ["SCENE_NAMES", "table1_for_scene", "stiffness_along_path", "organ_runs", "run", "main"]
 
@@ -46,7 +46,7 @@ SCENE_NAMES = ("cylinder", "sphere", "rounded_box", "organ")
 DEPTHS_MM = (0.5, 2.0, 5.0, 10.0)
 #: the palpation run's push depth while stroking, m
 PALPATION_DEPTH = 0.005
-DEFAULT_OUT = Path(__file__).resolve().parents[2] / "docs" / "figures" / "scenes"
+DEFAULT_OUT = Path("out") / "scenes"
 
 
 def _rounded(x, digits: int = 5):

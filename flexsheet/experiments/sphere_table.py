@@ -3,17 +3,17 @@
 :mod:`flexsheet.experiments.fem`; for the sphere "azimuth" is the polar angle α of the push from the support
 axis, along the stroke).
 
-1. Every snapshot angle of :data:`nodes.fem.sphere_snapshots.DEFAULT_SPHERE_GRID` is solved
-   (:func:`nodes.fem.sphere_snapshots.solve_alpha`: the scene's hyperelastic body, full body, mesh refined along
+1. Every snapshot angle of :data:`flexsheet.fem.sphere_snapshots.DEFAULT_SPHERE_GRID` is solved
+   (:func:`flexsheet.fem.sphere_snapshots.solve_alpha`: the scene's hyperelastic body, full body, mesh refined along
    that push path, 0 → 50 mm, stable branch), each cached apart (``--azimuth A`` solves one and exits; ``--jobs``
    solves the missing ones in worker processes); the table is assembled and stored under the key the FEM node
-   looks up (:func:`nodes.fem.sphere_snapshots.sphere_table_key`).
+   looks up (:func:`flexsheet.fem.sphere_snapshots.sphere_table_key`).
 2. ``DIR/sphere_table.json`` + ``.png``: per angle the DOF, CPU, Newton convergence, the depths where the stable
    branch took the unloaded state, the force against depth, and Hertz's force at the first depth (Johnson
    §4.2, the rigid sphere of the finger's radius on the sphere: a closed form, not the reference); the look-up
    time; and each **held-out** angle (``--holdout-azimuth``, between the table's): its own solve on its own mesh
    against the table (interpolation across α) and against the linear real-time model the node served before
-   (:class:`nodes.fem.scene_model.SceneModel`), as the largest distance over the visible rendered vertices (not
+   (:class:`flexsheet.fem.scene_model.SceneModel`), as the largest distance over the visible rendered vertices (not
    held, outside the finger's footprint: deformed position > finger radius + 2 mm from the push axis).
 
 3. ``--mesh-check``: at each held-out angle (else 0°) the same push on the table mesh's **twin** (same sizes,
@@ -49,9 +49,9 @@ def _log(msg: str) -> None:
 def _alpha_key(sc, a: float, grid, spec, probes: np.ndarray) -> str:
     import gmsh
 
-    from nodes.fem.cache import cache_key
-    from nodes.fem.hyperelastic import SOLVER_VERSION, UNLOAD_VERSION
-    from nodes.fem.sphere_snapshots import SPHERE_TABLE_VERSION
+    from flexsheet.fem.cache import cache_key
+    from flexsheet.fem.hyperelastic import SOLVER_VERSION, UNLOAD_VERSION
+    from flexsheet.fem.sphere_snapshots import SPHERE_TABLE_VERSION
 
     return cache_key("sphere-alpha-1", SPHERE_TABLE_VERSION, sc.key(), grid.key(), *(f"{x:.9g}" for x in spec),
                      f"{a:.9g}", gmsh.__version__, SOLVER_VERSION, UNLOAD_VERSION,
@@ -59,8 +59,8 @@ def _alpha_key(sc, a: float, grid, spec, probes: np.ndarray) -> str:
 
 
 def alpha_path(sc, a: float, grid, spec, probes: np.ndarray, cache) -> dict:
-    """:func:`nodes.fem.sphere_snapshots.solve_alpha` at ``a`` deg, cached (kind "spherealpha")."""
-    from nodes.fem.sphere_snapshots import solve_alpha
+    """:func:`flexsheet.fem.sphere_snapshots.solve_alpha` at ``a`` deg, cached (kind "spherealpha")."""
+    from flexsheet.fem.sphere_snapshots import solve_alpha
 
     z, _, _ = cache.get_or_compute("spherealpha", _alpha_key(sc, a, grid, spec, probes),
                                    lambda: solve_alpha(sc, a, grid, spec, probes, _log),
@@ -73,10 +73,10 @@ def _job(args) -> tuple[float, float, str | None]:
     scene_file, a, cache_dir, spec = args
     t = time.perf_counter()
     try:
+        from flexsheet.fem.cache import ArrayCache
+        from flexsheet.fem.scene_model import SceneModel
+        from flexsheet.fem.sphere_snapshots import DEFAULT_SPHERE_GRID
         from flexsheet.model.scenes import load_scene
-        from nodes.fem.cache import ArrayCache
-        from nodes.fem.scene_model import SceneModel
-        from nodes.fem.sphere_snapshots import DEFAULT_SPHERE_GRID
 
         sc = load_scene(scene_file)
         probes = SceneModel(sc, cache_dir=cache_dir).rest_vertices.astype(float)
@@ -97,15 +97,14 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
                        holdout: tuple[float, ...] = (), jobs: int = 1, mesh_check: bool = False,
                        ship: bool = False) -> int:
     """Build (or find) the sphere scene's table and report it (module doc); ``ship``: also write it, packed
-    (the surface field as float16, compressed), into the repository's ``nodes/fem/data/``, where the FEM node
+    (the surface field as float16, compressed), into the repository's ``flexsheet/fem/data/``, where the FEM node
     finds it on a machine that never solved it. Returns 0; ``SystemExit`` with the reason for a scene the table
     does not apply to, a bad angle, or a table that may not be shipped (an angle unconverged or not cached)."""
 
-    from flexsheet.model.scenes import load_scene
-    from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
-    from nodes.fem.material import Material
-    from nodes.fem.scene_model import SceneModel, finger_on_scene
-    from nodes.fem.sphere_snapshots import (
+    from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
+    from flexsheet.fem.material import Material
+    from flexsheet.fem.scene_model import SceneModel, finger_on_scene
+    from flexsheet.fem.sphere_snapshots import (
         DEFAULT_SPHERE_GRID,
         DEFAULT_SPHERE_SPEC,
         SphereSnapshotModel,
@@ -113,6 +112,7 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
         sphere_frame,
         sphere_table_key,
     )
+    from flexsheet.model.scenes import load_scene
 
     t0 = time.perf_counter()
     sc = load_scene(scene_file)
@@ -259,7 +259,7 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
 
 def pack_sphere_table(table: dict) -> dict:
     """The table made small enough to ship: the surface field on every second θ and φ line (2° cells for the
-    default 1° grid) as float16 (:class:`nodes.fem.sphere_snapshots.SphereSnapshotModel` reads the axes it
+    default 1° grid) as float16 (:class:`flexsheet.fem.sphere_snapshots.SphereSnapshotModel` reads the axes it
     carries and widens to float32): an eighth of the bytes. ``ValueError`` when the grid's line counts are even
     (the last line would be lost) or a value does not fit float16."""
     f = np.asarray(table["field"], np.float32)
@@ -275,9 +275,9 @@ def pack_sphere_table(table: dict) -> dict:
 def _packing_error(table, packed, paths, fr, rt, probes, r) -> float:
     """Largest distance (mm) between the packed and the full table's surfaces over the visible rendered
     vertices, at every snapshot angle and depth (the footprint taken on the reference's deformed surface)."""
-    from nodes.fem.choose import visible_mask
-    from nodes.fem.scene_model import finger_on_scene
-    from nodes.fem.sphere_snapshots import SphereSnapshotModel
+    from flexsheet.fem.choose import visible_mask
+    from flexsheet.fem.scene_model import finger_on_scene
+    from flexsheet.fem.sphere_snapshots import SphereSnapshotModel
 
     full, small = SphereSnapshotModel(table, probes), SphereSnapshotModel(packed, probes)
     held = rt.held
@@ -315,8 +315,8 @@ def _mesh_check(sc, fr, sm, probes, held, grid, spec, angles, cache) -> list[dic
     twin, the study's levels and their twins): the push solved on it, compared on the visible rendered vertices
     (the table mesh's deformed positions decide what the finger hides) at every depth: each mesh's noise
     (against its twin), each level against the table's mesh, and the table (interpolated in α) against each."""
-    from nodes.fem.choose import visible_mask
-    from nodes.fem.scene_model import finger_on_scene
+    from flexsheet.fem.choose import visible_mask
+    from flexsheet.fem.scene_model import finger_on_scene
 
     depths = grid.depths()[1:]
     r = sc.finger.radius

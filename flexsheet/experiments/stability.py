@@ -37,16 +37,16 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from flexsheet.calibration.display_calib import pose_from_rt
 from flexsheet.experiments.stroke import MARKER_PX, make_twin, simulate
 from flexsheet.experiments.table1 import PAPER_TABLE1, target
-from flexsheet.model import scene
-from flexsheet.model.display_calib import pose_from_rt
+from flexsheet.model import geometry
 
 __all__ = ["breaking_point", "perturb_bases", "sweep_table1", "sweep_tension", "run", "main"]
 
-DEFAULT_OUT = Path(__file__).resolve().parents[2] / "docs" / "figures" / "stability"
+DEFAULT_OUT = Path("out") / "stability"
 #: one projector pixel on the screen, m: the correction's error budget
-PIXEL = scene.PIXEL_ON_SCREEN
+PIXEL = geometry.PIXEL_ON_SCREEN
 
 SWEEPS = {
     "calibration_scale": [0.0, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0],
@@ -117,7 +117,7 @@ def sweep_tension(values, stretch: float = 0.04, depths=(0.010, 0.030), mesh: di
     radius), plus the same for the membrane model told the true β (``*_true_beta``: the model's own floor)."""
     from flexsheet.model.sheet import Membrane
     from flexsheet.model.sheet_fem import FINGER_RADIUS, SheetFEM, SheetPhysics
-    from flexsheet.model.truth import TwinTruth
+    from flexsheet.twin.truth import TwinTruth
 
     truth = TwinTruth.draw(0, "ideal")
     rows = []

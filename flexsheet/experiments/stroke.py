@@ -1,30 +1,30 @@
 """``flexsheet experiment stroke``: the paper's Table I in-process, on the honest twin, with a latency model of
 the real loop and the arms' own chain (IK, command stream, servo, true kinematics).
 
-The scripted finger (:class:`flexsheet.model.finger.FingerScript`) follows the target mark from 0° to 60°
+The scripted finger (:class:`flexsheet.twin.finger.FingerScript`) follows the target mark from 0° to 60°
 around the paper's cylinder. A camera samples it at 48 Hz (BumbleBee2) with the triangulation noise of the
-stereo geometry (:meth:`flexsheet.model.stereo.StereoModel.covariance` of the *true* camera at the fingertip
+stereo geometry (:meth:`flexsheet.vision.stereo.StereoModel.covariance` of the *true* camera at the fingertip
 for a marker-centre noise ``marker_px`` per image coordinate) and drops frames at rate ``dropout``; the
-triangulator's own constant-velocity Kalman filter (:class:`nodes.triangulator.predict.ConstantVelocityKF`,
+triangulator's own constant-velocity Kalman filter (:class:`flexsheet.vision.predict.ConstantVelocityKF`,
 fed the covariance the triangulator computes for its ``sigma_px``) predicts the fingertip ``horizon`` s ahead;
-the :class:`nodes.planner.stroke.SurfacePlanner` plans (a lost frame holds the last plan, as the planner node
+the :class:`flexsheet.planning.surface_planner.SurfacePlanner` plans (a lost frame holds the last plan, as the planner node
 does). The plan reaches the arm PCs after processing + network delay; each bridge solves IK with the
 *estimator's* model — the nominal RV-1A URDF at the calibrated base pose (``display.yaml``), or the nominal
 base when no calibration is given — streams it through the bridge's limiter
-(:class:`nodes.arm_bridge.interp.StreamLimiter`: ``speed_scale`` × the RV-1A datasheet joint speeds), the
-controller twin executes it one 7.1 ms tick later through its servo (:class:`nodes.arm_controller_sim.servo.
+(:class:`flexsheet.arm.limiter.StreamLimiter`: ``speed_scale`` × the RV-1A datasheet joint speeds), the
+controller twin executes it one 7.1 ms tick later through its servo (:class:`flexsheet.twin.servo.
 JointServo`: first-order lag ``tau`` with the datasheet speed and acceleration limits), and the *true* sheet
-is where the truth's kinematics (:meth:`flexsheet.model.truth.TwinTruth.clamp_pose`: true bases, link
+is where the truth's kinematics (:meth:`flexsheet.twin.truth.TwinTruth.clamp_pose`: true bases, link
 lengths, joint zero offsets) put the clamps at each exposure. The Table I row (Fig. 9,
 :func:`flexsheet.experiments.table1.table1_row`, the same metric as the report of a recorded run) is
 computed over the moving phase from the valid measurements.
 
-Twins (:mod:`flexsheet.model.truth`): ``realistic`` (default; truth drawn per seed, ``marker_px`` = 0.1 px)
+Twins (:mod:`flexsheet.twin.truth`): ``realistic`` (default; truth drawn per seed, ``marker_px`` = 0.1 px)
 and ``ideal`` (nominal truth, ``marker_px`` = 0.025 px: the camera twin before the honest-twin issue), three
 truth seeds each; the finger and noise seeds follow the truth seed.
 
 Filter settings: the triangulator's ``q``, ``horizon_s`` and ``sigma_px`` and the planner's ``use_prediction``
-are read from ``launch/sim.yaml`` (the defaults of :class:`nodes.triangulator.pipeline.TrackerConfig` where
+are read from ``launch/sim.yaml`` (the defaults of :class:`flexsheet.vision.tracker.TrackerConfig` where
 the file sets none), so the in-process rows and the full graph use one filter.
 
 Outputs in ``--out DIR``: ``summary.json`` (Table I rows keyed by moving time "10", "30" — the realistic
@@ -48,20 +48,20 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints
+from flexsheet.arm.limiter import StreamLimiter
+from flexsheet.arm.tracking import TargetTracker
 from flexsheet.experiments.table1 import DD_CONVENTION, PAPER_TABLE1, TARGET_FACTOR, table1_row, target
-from flexsheet.model import scene
-from flexsheet.model.finger import FingerScript
-from flexsheet.model.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints
+from flexsheet.model import geometry
 from flexsheet.model.shapes import paper_cylinder
 from flexsheet.model.sheet import frame_from_clamps
-from flexsheet.model.stereo import StereoModel
-from flexsheet.model.truth import TwinTruth
-from nodes.arm_bridge.interp import StreamLimiter
-from nodes.arm_bridge.tracking import TargetTracker
-from nodes.arm_controller_sim.servo import JointServo, ServoParams
-from nodes.planner.stroke import PlannerConfig, SurfacePlanner
-from nodes.triangulator.pipeline import TrackerConfig
-from nodes.triangulator.predict import ConstantVelocityKF
+from flexsheet.planning.surface_planner import Hold, PlannerConfig, SurfacePlanner
+from flexsheet.twin.finger import FingerScript
+from flexsheet.twin.servo import JointServo, ServoParams
+from flexsheet.twin.truth import TwinTruth
+from flexsheet.vision.predict import ConstantVelocityKF
+from flexsheet.vision.stereo import StereoModel
+from flexsheet.vision.tracker import TrackerConfig
 
 __all__ = ["LatencyModel", "ArmChain", "Twin", "Predictor", "q_for_tracking_index", "launch_kf", "make_twin",
            "simulate", "run", "main", "MARKER_PX"]
@@ -151,9 +151,9 @@ def make_twin(realism: str, seed: int, display_calib: str | None = None, marker_
               dropout: float = 0.0) -> Twin:
     """The twin of ``realism`` and truth ``seed``. Estimator bases: the ``arms`` entries of ``display_calib``
     (a path; ``{seed}`` is replaced by the seed) when given and present, else the nominal bases
-    (:func:`flexsheet.model.display_calib.nominal_display_calib`). ``marker_px`` defaults to
+    (:func:`flexsheet.calibration.display_calib.nominal_display_calib`). ``marker_px`` defaults to
     :data:`MARKER_PX` of the realism. Raises ``ValueError`` for a file that is given but unreadable."""
-    from flexsheet.model.display_calib import load_display_calib, nominal_display_calib
+    from flexsheet.calibration.display_calib import load_display_calib, nominal_display_calib
 
     truth = TwinTruth.draw(int(seed), realism)
     if display_calib:
@@ -182,7 +182,7 @@ def q_for_tracking_index(tracking_index: float, sigma_m: float, period: float) -
 class Predictor:
     """The triangulator's fingertip prediction, in-process: :class:`ConstantVelocityKF` updated with each
     measurement z (3,) m and its covariance R (3, 3) m², predicting ``position_at(t + h)`` as
-    :class:`nodes.triangulator.pipeline.FingertipTracker` does. ``q`` m²/s³; ``v0_std`` m/s (default: the
+    :class:`flexsheet.vision.tracker.FingertipTracker` does. ``q`` m²/s³; ``v0_std`` m/s (default: the
     tracker's)."""
 
     def __init__(self, q: float, v0_std: float = TrackerConfig.v0_std):
@@ -239,9 +239,9 @@ def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None
     that show what the measurement noise in D costs). ``stats``: if a dict, gets ``peak_joint_speed_ratio``
     (largest |q̇| / datasheet speed of either servo), ``ik_refused`` and ``dropped``. ``scene`` (a
     :class:`flexsheet.model.scenes.Scene`; ``None``: the paper's cylinder as before): the object, the finger's
-    path (:class:`~flexsheet.model.finger.FingerScript` on the scene) and the metric's section
+    path (:class:`~flexsheet.twin.finger.FingerScript` on the scene) and the metric's section
     (:func:`flexsheet.experiments.table1.scene_table1_row`). ``compliance``: the planner's stiffness model
-    (e.g. :class:`nodes.planner.compliance.SceneCompliance`; ``None``: the config's ``object_stiffness``);
+    (e.g. :class:`flexsheet.planning.compliance.SceneCompliance`; ``None``: the config's ``object_stiffness``);
     ``planner_config``: the planner's :class:`PlannerConfig`; ``record``: if a list, gets one
     ``(t s, true fingertip (3,) m, Plan)`` per planned sample. Raises ``ValueError`` for an unknown
     ``d_source``."""
@@ -253,7 +253,7 @@ def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None
     if scene is None:
         shape = paper_cylinder()
     else:
-        from nodes.planner.scene_shape import planner_shape
+        from flexsheet.planning.shape import planner_shape
 
         shape = planner_shape(scene)
     finger = FingerScript(moving_time=moving_time, seed=seed, scene=scene, **(finger_kw or {}))
@@ -285,7 +285,7 @@ def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None
             p = kf.predict(h) if use_prediction else meas[i]
             plan = planner.update(t, p)
         else:
-            plan = planner.hold("hold:marker_lost", t)
+            plan = planner.hold(Hold.MARKER_LOST, t)
         if plan is None:
             continue
         if record is not None:
@@ -438,7 +438,7 @@ def _tangential_noise(twin: Twin, marker_px: float) -> float:
     t = np.linspace(f.t_move, f.t_move + f.moving_time, 50)
     X = f.positions(t)
     C = _camera_cov(twin, X, marker_px)
-    r = X - scene.CYLINDER_CENTER
+    r = X - geometry.CYLINDER_CENTER
     r[:, 1] = 0.0
     r /= np.linalg.norm(r, axis=1, keepdims=True)
     tang = np.cross(np.array([0.0, 1.0, 0.0]), r)

@@ -228,8 +228,8 @@ def table1_row(shape: Shape, measured, sheet_origin, sheet_normal, scene=None) -
 
 def scene_table1_row(scene, measured, sheet_origin, sheet_normal) -> dict[str, float]:
     """:func:`table1_row` on a :class:`flexsheet.model.scenes.Scene`: its shape as the planner sees it
-    (:func:`nodes.planner.scene_shape.planner_shape`: smooth normals on meshes) and the normal section along
+    (:func:`flexsheet.planning.shape.planner_shape`: smooth normals on meshes) and the normal section along
     its stroke. For the paper's cylinder this gives the cylinder's Fig. 9 numbers."""
-    from nodes.planner.scene_shape import planner_shape
+    from flexsheet.planning.shape import planner_shape
 
     return table1_row(planner_shape(scene), measured, sheet_origin, sheet_normal, scene)

@@ -26,7 +26,7 @@ Writes to DIR:
 * ``summary.json`` — every number in the charts plus ``detect_triangulate_median_ms``,
   ``rms_error_mm_at_0p5m_sigma0p1`` and ``stereo_rms_px`` (same definitions as ``bench vision``), and
   ``stereo_validation``: the held-out epipolar error and square spread of the real calibration
-  (:func:`flexsheet.model.calibration.validate_stereo`, leave-one-out).
+  (:func:`flexsheet.vision.stereo_calibration.validate_stereo`, leave-one-out).
 
 ``--quick``: one seed, fewer points and sweep values, short stroke windows (for a smoke run).
 """
@@ -44,8 +44,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from flexsheet.benches.vision import mc_rms_mm, real_stereo_rms, timing  # noqa: E402
 from flexsheet.experiments import vision_twin as vt  # noqa: E402
-from flexsheet.model.camera_sim import (  # noqa: E402
+from flexsheet.twin.camera import (  # noqa: E402
     DEFAULT_CAMERA_POSITION,
     SimConfig,
     StereoRenderer,
@@ -53,9 +54,8 @@ from flexsheet.model.camera_sim import (  # noqa: E402
     camera_model,
     look_at,
 )
-from flexsheet.model.stereo import METHODS, StereoModel  # noqa: E402
-from nodes.triangulator.bench import mc_rms_mm, real_stereo_rms, timing  # noqa: E402
-from nodes.triangulator.pipeline import FingertipTracker, TrackerConfig  # noqa: E402
+from flexsheet.vision.stereo import METHODS, StereoModel  # noqa: E402
+from flexsheet.vision.tracker import FingertipTracker, TrackerConfig  # noqa: E402
 
 __all__ = ["main", "accuracy_speed", "stability", "honest", "honest_stability", "TARGET_MM"]
 
@@ -238,7 +238,7 @@ def honest(seeds=(0, 1, 2), quick: bool = False) -> dict:
     quick: 12 × 2), moving error along the 10 s and 30 s strokes (quick: 3 s of the 10 s stroke) with the
     twin's drop rate (realistic 1 %), and — diagnostic only — the static error with a perfect registration
     (the truth's own camera), which separates image error from registration error."""
-    from nodes.camera.node import REALISTIC_DROP_RATE
+    from flexsheet.twin.camera import REALISTIC_DROP_RATE
 
     n_pts, frames = (12, 2) if quick else (40, 3)
     pts = vt.static_points(n_pts)
@@ -557,8 +557,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.quick:
         seeds = seeds[:1]
     os.makedirs(a.out, exist_ok=True)
-    from flexsheet.model.calibration import parse_board, validate_stereo
-    from nodes.triangulator.bench import DATA
+    from flexsheet.benches.vision import DATA
+    from flexsheet.vision.stereo_calibration import parse_board, validate_stereo
 
     _log("accuracy vs speed (geometry Monte Carlo)...")
     ref = StereoModel.from_calib(bumblebee2_calibration(1024, 768, pixel_um=4.65))

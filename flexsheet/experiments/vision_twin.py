@@ -2,16 +2,16 @@
 
 The estimator sees what a lab has: the camera's registration (``display.yaml``'s camera entry, produced by
 the registration procedure on the twin's images) and the images. The truth
-(:class:`flexsheet.model.truth.TwinTruth`) only forms the images and scores the result.
+(:class:`flexsheet.twin.truth.TwinTruth`) only forms the images and scores the result.
 
 * :func:`registered_camera` — the camera entry of a truth: the realistic twin's registration
   (:mod:`flexsheet.calibration.procedures`: the board on the sheet rendered through the true cameras, true
   arms and the measured sensor noise, then the camera-pose fit), cached per truth; the ideal twin's nominal
   registration is exact.
 * :func:`static_error` / :func:`moving_error` — per-frame fingertip error (display frame) of the real
-  pipeline (:class:`nodes.triangulator.pipeline.FingertipTracker`) on images of the camera twin
-  (:func:`flexsheet.model.camera_sim.twin_renderer`): a still finger at ~0.5 m, and the paper's stroke
-  (:class:`flexsheet.model.finger.FingerScript`, 60° of the cylinder in 10 s or 30 s) with dropped frames.
+  pipeline (:class:`flexsheet.vision.tracker.FingertipTracker`) on images of the camera twin
+  (:func:`flexsheet.twin.camera.twin_renderer`): a still finger at ~0.5 m, and the paper's stroke
+  (:class:`flexsheet.twin.finger.FingerScript`, 60° of the cylinder in 10 s or 30 s) with dropped frames.
 * :func:`measure_sensor_noise` — the read/shot noise of the real XIMEA images by a second, independent method
   (flat-patch second differences), and the corner jitter that noise causes on the real images.
 
@@ -30,16 +30,16 @@ from dataclasses import asdict, replace
 import cv2
 import numpy as np
 
-from flexsheet.model.camera_sim import XIMEA_SENSOR, SimConfig, twin_renderer
-from flexsheet.model.display_calib import (
+from flexsheet.calibration.display_calib import (
     CameraEntry,
     DisplayCalib,
     load_display_calib,
     nominal_display_calib,
     write_display_calib,
 )
-from flexsheet.model.truth import Spreads, TwinTruth
-from nodes.triangulator.pipeline import FingertipTracker, TrackerConfig
+from flexsheet.twin.camera import XIMEA_SENSOR, SimConfig, twin_renderer
+from flexsheet.twin.truth import Spreads, TwinTruth
+from flexsheet.vision.tracker import FingertipTracker, TrackerConfig
 
 __all__ = ["cache_dir", "registered_camera", "sim_config", "static_points",
            "static_error", "moving_error", "registration_error", "scaled_truth", "measure_sensor_noise",
@@ -48,7 +48,7 @@ __all__ = ["cache_dir", "registered_camera", "sim_config", "static_points",
 XIMEA_DIR = "/work/shared/data/stereo_calib_xi"
 _HERE = os.path.dirname(os.path.abspath(__file__))
 _SOURCES = ("../calibration/camera_pose.py", "../calibration/twin.py", "../calibration/procedures.py",
-            "../calibration/sources.py", "../model/truth.py", "../model/ximea_calib_bootstrap.json")
+            "../calibration/sources.py", "../twin/truth.py", "../vision/ximea_calib_bootstrap.json")
 
 
 def cache_dir() -> str:
@@ -88,7 +88,7 @@ def registered_camera(truth: TwinTruth, quick: bool = False, cache: str | None =
     cached under :func:`cache_dir` by a hash of the truth's camera and arms and of the procedure's sources.
     Ideal truth: the nominal registration (exact for it). Raises ``ValueError`` when a procedure fails."""
     from flexsheet.calibration import procedures as P
-    from flexsheet.model.truth import Spreads
+    from flexsheet.twin.truth import Spreads
 
     cache = cache or cache_dir()
     if truth.realism == "ideal":
@@ -168,12 +168,12 @@ def static_error(truth: TwinTruth, calib: dict, T_display_camera: np.ndarray, cf
 def moving_error(truth: TwinTruth, calib: dict, T_display_camera: np.ndarray, cfg: SimConfig,
                  moving_time: float = 10.0, drop_rate: float = 0.0, window_s: float | None = None,
                  sim_seed: int = 0, rate_hz: float = 48.0) -> dict:
-    """Per-frame error along the paper's stroke (:class:`flexsheet.model.finger.FingerScript`: 0→60° of the
+    """Per-frame error along the paper's stroke (:class:`flexsheet.twin.finger.FingerScript`: 0→60° of the
     cylinder in ``moving_time`` s, with its lag, wander and tremor), one tracker over the whole run, frames at
     ``rate_hz`` each dropped with probability ``drop_rate``; the camera twin renders each frame's motion blur
     from the script's velocity. ``window_s``: only that long a stretch from the middle of the stroke
     (quick runs). Returns the error summary plus ``speed_mps`` (mean, max) and ``dropped``."""
-    from flexsheet.model.finger import FingerScript
+    from flexsheet.twin.finger import FingerScript
 
     fs = FingerScript(moving_time=moving_time, seed=sim_seed)
     t0, t1 = fs.t_move, fs.t_move + moving_time

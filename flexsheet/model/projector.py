@@ -1,6 +1,6 @@
 """The projector model: a pinhole calibrated to the imaginary screen, and the viewer's eye positions.
 
-Pure (numpy). Frames: ``display`` (see :mod:`flexsheet.model.scene`). Source: Furukawa et al. §IV (projector
+Pure (numpy). Frames: ``display`` (see :mod:`flexsheet.model.geometry`). Source: Furukawa et al. §IV (projector
 1000 mm behind and 250 mm below the screen, 0.7 mm per pixel on the screen, §VI); pinhole model after
 Hartley & Zisserman, *Multiple View Geometry*, §6.1.
 """
@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexsheet.model import scene
+from flexsheet.model import geometry
 
 __all__ = ["Projector", "eye_positions"]
 
@@ -32,8 +32,8 @@ class Projector:
     height: int = 768
 
     @classmethod
-    def default(cls, width: int = 1024, height: int = 768, pixel: float = scene.PIXEL_ON_SCREEN,
-                position=scene.PROJECTOR) -> Projector:
+    def default(cls, width: int = 1024, height: int = 768, pixel: float = geometry.PIXEL_ON_SCREEN,
+                position=geometry.PROJECTOR) -> Projector:
         """The paper's rear projector: at P, optical axis +x (perpendicular to the screen), lens shift so that
         the image centre lands on the screen origin, ``pixel`` m per pixel on the screen (0.7 mm, §VI)."""
         if width < 1 or height < 1:
@@ -55,8 +55,8 @@ class Projector:
         return cls(K, R, p, width, height)
 
     @classmethod
-    def calibrated(cls, width: int = 1024, height: int = 768, pixel: float = scene.PIXEL_ON_SCREEN,
-                   position=scene.PROJECTOR, K=None, R=None) -> Projector:
+    def calibrated(cls, width: int = 1024, height: int = 768, pixel: float = geometry.PIXEL_ON_SCREEN,
+                   position=geometry.PROJECTOR, K=None, R=None) -> Projector:
         """:meth:`default`, with the intrinsics ``K`` (3, 3) px and/or the axes ``R`` (3, 3) replaced by
         calibrated values where given (None keeps the default). Raises ``ValueError`` naming ``K``/``R`` for a
         wrong shape or non-finite entries, or ``R`` that is not a rotation (tolerance 1e-3)."""

@@ -16,7 +16,7 @@ A scene is a YAML file beside the launch files (``launch/scenes/*.yaml``; docs/s
     stroke: {kind: arc, start: [1, 0, 0], toward: [0, 0, 1], start_deg: 0, end_deg: 60}
     inclusions: []                # stiffer spheres inside: [{name, center, radius, E, nu}]
 
-Frames and units: every position is in the ``display`` frame (:mod:`flexsheet.model.scene`), m; moduli Pa;
+Frames and units: every position is in the ``display`` frame (:mod:`flexsheet.model.geometry`), m; moduli Pa;
 angles in degrees where the key says ``_deg``. An object's local frame is placed by ``pose``: display point
 = R·local + position with R = Rz(yaw)·Ry(pitch)·Rx(roll) from ``rpy_deg`` (the convention of
 :class:`flexsheet.model.shapes.RoundedBox`). Local frames: cylinder axis +y, centred; sphere centred; rounded
@@ -57,10 +57,10 @@ from pydantic import (
     model_validator,
 )
 
-from flexsheet.model import scene as paper
-from flexsheet.model.yamlio import UniqueKeyLoader
+from flexsheet.model import geometry as paper
+from flexsheet.yamlio import UniqueKeyLoader
 
-__all__ = ["SceneError", "Pose", "CylinderObject", "SphereObject", "RoundedBoxObject", "MeshObject", "Material",
+__all__ = ["SceneError", "Pose", "CylinderObject", "SphereObject", "RoundedBoxObject", "MeshObject", "MaterialSpec",
            "Support", "Finger", "ArcStroke", "PolylineStroke", "Inclusion", "Scene", "load_scene", "parse_scene",
            "paper_scene", "is_paper_cylinder", "load_scene_or_paper", "cylinder_surface", "rotation_rpy", "SCENES_DIR", "DEFAULT_SCENE_FILE", "MAX_SCENE_BYTES",
            "MAX_EXTENT"]
@@ -186,7 +186,7 @@ ObjectSpec = Annotated[CylinderObject | SphereObject | RoundedBoxObject | MeshOb
 GENT_JM_RUBBER = 97.2
 
 
-class Material(BaseModel):
+class MaterialSpec(BaseModel):
     """Hyperelastic material of the object: ``model`` (``neo_hookean``, the default; ``gent``, a strain-stiffening
     solid with limiting extensibility ``Jm`` = the largest I₁ − 3, Gent 1996, which needs ``Jm``; or ``linear``
     small-strain elasticity), Young's modulus ``E`` Pa and Poisson's ratio ``nu`` (the small-strain limits of
@@ -200,7 +200,7 @@ class Material(BaseModel):
     Jm: float | None = Field(None, gt=0.0, le=1e6, description="Gent limiting I1 - 3 (dimensionless)")
 
     @model_validator(mode="after")
-    def _jm(self) -> Material:
+    def _jm(self) -> MaterialSpec:
         if self.model == "gent" and self.Jm is None:
             raise ValueError("model gent needs Jm (its limiting I1 - 3, e.g. 97.2 for natural rubber)")
         if self.model != "gent" and self.Jm is not None:
@@ -238,7 +238,7 @@ class Support(BaseModel):
 
 class Finger(BaseModel):
     """The user's fingertip as the FEM and the world see it: a sphere of ``radius`` m, and how the object's
-    surface meets it in the nonlinear reference (``contact``, :data:`nodes.fem.hyperelastic.CONTACT_LAWS`):
+    surface meets it in the nonlinear reference (``contact``, :data:`flexsheet.fem.hyperelastic.CONTACT_LAWS`):
     ``frictionless`` (the default: the surface slides freely over the fingertip) or ``sticking`` (a fingertip
     that does not slip on the skin: a surface point that touched it moves with it). A modelling choice per
     object: the rounded box's push beside its edge has a sliding mode under a frictionless fingertip that no
@@ -327,7 +327,7 @@ class Scene(BaseModel):
     name: str = Field(min_length=1, max_length=64)
     description: str = ""
     object: ObjectSpec
-    material: Material = Material()
+    material: MaterialSpec = MaterialSpec()
     support: Support = Support()
     finger: Finger = Finger()
     stroke: StrokeSpec = ArcStroke(kind="arc")
@@ -362,7 +362,7 @@ class Scene(BaseModel):
     def key(self) -> str:
         """SHA-256 hex of the scene's values and its mesh file's bytes: a cache key for precomputed FEM data."""
         # the default contact law is left out, so every key made before the field existed still holds (the
-        # shipped tables' keys; tests/test_scenes.py)
+        # shipped tables' keys; tests/unit/model/test_scenes.py)
         h = hashlib.sha256(self.model_dump_json(
             exclude={"finger": {"contact"}} if self.finger.contact == "frictionless" else None).encode())
         if self.mesh_path is not None:
@@ -801,7 +801,7 @@ def load_scene(path: str | os.PathLike) -> Scene:
 
 
 def paper_scene() -> Scene:
-    """The paper's cylinder (§VI-A) from :mod:`flexsheet.model.scene`'s constants — what
+    """The paper's cylinder (§VI-A) from :mod:`flexsheet.model.geometry`'s constants — what
     ``launch/scenes/cylinder.yaml`` holds; the default wherever no scene is named. Its material is a Gent solid
     (E 10 kPa, ν 0.45, Jm :data:`GENT_JM_RUBBER`): the neo-Hookean body the paper's 50 mm push was first
     modelled with has no mesh-converged solution there (docs/fem.md, session 17's material study)."""
@@ -811,7 +811,7 @@ def paper_scene() -> Scene:
     sc = Scene(name="cylinder", description="the paper's cylinder (§VI-A), stroked from 0° to 60° toward +z",
                object=CylinderObject(kind="cylinder", radius=R, length=paper.CYLINDER_LENGTH,
                                      pose=Pose(position=tuple(float(x) for x in paper.CYLINDER_CENTER))),
-               material=Material(model="gent", E=10e3, nu=0.45, Jm=GENT_JM_RUBBER),
+               material=MaterialSpec(model="gent", E=10e3, nu=0.45, Jm=GENT_JM_RUBBER),
                stroke=ArcStroke(kind="arc", start=(1.0, 0.0, 0.0), toward=(0.0, 0.0, 1.0), start_deg=0.0,
                                 end_deg=60.0))
     sc._source = "<paper>"

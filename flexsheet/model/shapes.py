@@ -565,10 +565,10 @@ class MeshShape(Shape):
 
 def paper_cylinder() -> Cylinder:
     """The paper's cylinder (§VI-A) in the display frame: Ø 50√2 mm × 120 mm, axis +y through (−R, 0, 0)."""
-    from flexsheet.model import scene
+    from flexsheet.model import geometry
 
-    return Cylinder(tuple(scene.CYLINDER_CENTER), tuple(scene.CYLINDER_AXIS), scene.CYLINDER_RADIUS,
-                    scene.CYLINDER_LENGTH)
+    return Cylinder(tuple(geometry.CYLINDER_CENTER), tuple(geometry.CYLINDER_AXIS), geometry.CYLINDER_RADIUS,
+                    geometry.CYLINDER_LENGTH)
 
 
 def make_shape(kind: str, spec: dict[str, Any] | None = None) -> Shape:
@@ -580,14 +580,14 @@ def make_shape(kind: str, spec: dict[str, Any] | None = None) -> Shape:
     plane: point, normal (default: the home sheet plane x = 0); mesh: path, translation, scale.
     Raises ``ValueError`` naming an unknown kind or key, or a bad value.
     """
-    from flexsheet.model import scene
+    from flexsheet.model import geometry
 
     spec = dict(spec or {})
-    R = scene.CYLINDER_RADIUS
+    R = geometry.CYLINDER_RADIUS
     try:
         if kind == "cylinder":
-            d = {"center": tuple(scene.CYLINDER_CENTER), "axis": tuple(scene.CYLINDER_AXIS), "radius": R,
-                 "length": scene.CYLINDER_LENGTH, "end_margin": None}
+            d = {"center": tuple(geometry.CYLINDER_CENTER), "axis": tuple(geometry.CYLINDER_AXIS), "radius": R,
+                 "length": geometry.CYLINDER_LENGTH, "end_margin": None}
             d.update(spec)
             return Cylinder(**d)
         if kind == "sphere":

@@ -1,6 +1,6 @@
 """The sheet's geometry, in one place: clamp poses ↔ sheet frame, stretch, and the pushed membrane (pure).
 
-**Sheet frame and clamps** (convention of :mod:`flexsheet.model.scene`): the sheet centre ``origin``, the
+**Sheet frame and clamps** (convention of :mod:`flexsheet.model.geometry`): the sheet centre ``origin``, the
 unit ``normal`` (toward the user), ``axis_u`` (right → left clamp) and ``axis_v = normal × axis_u``. The two
 clamp frames ``T_display_clamp`` sit at the middle of the clamped edges, ``origin ± a·axis_u`` with the half
 span ``a = size·(1 + stretch)/2`` (``size`` the unstretched side between the clamps, ``stretch`` the
@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexsheet.model import scene
+from flexsheet.model import geometry
 from flexsheet.model.checks import check_point, check_pose, check_positive, check_unit
 
 __all__ = ["Membrane", "DeflectionGrid", "SheetSurface", "TRUE_MODES", "neumann_green", "series_deflection", "sheet_rotation", "clamp_half_span", "stretch_of_span",
@@ -73,7 +73,7 @@ def sheet_rotation(normal, axis_u) -> np.ndarray:
     return np.column_stack([n, u, np.cross(n, u)])
 
 
-def clamp_half_span(stretch: float, size: float = scene.SHEET_SIZE) -> float:
+def clamp_half_span(stretch: float, size: float = geometry.SHEET_SIZE) -> float:
     """Half the clamp-to-clamp distance a = size·(1 + stretch)/2, m, for the unstretched side ``size`` (m)
     and the engineering strain ``stretch`` (> −1). Cheap enough for the planner's per-update path.
     Raises ``ValueError`` for a non-finite or non-positive result."""
@@ -84,7 +84,7 @@ def clamp_half_span(stretch: float, size: float = scene.SHEET_SIZE) -> float:
     return a
 
 
-def stretch_of_span(half_span: float, size: float = scene.SHEET_SIZE) -> float:
+def stretch_of_span(half_span: float, size: float = geometry.SHEET_SIZE) -> float:
     """Engineering strain ε = 2a/size − 1 (clipped at 0: a slack sheet has no negative stretch) from the
     measured half span ``half_span`` a (m) and the unstretched side ``size`` (m); inverse of
     :func:`clamp_half_span`. Raises ``ValueError`` for non-positive or non-finite inputs."""
@@ -94,7 +94,7 @@ def stretch_of_span(half_span: float, size: float = scene.SHEET_SIZE) -> float:
 
 
 def clamp_points(origin: Sequence[float], axis_u: Sequence[float], stretch: float,
-                 size: float = scene.SHEET_SIZE) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+                 size: float = geometry.SHEET_SIZE) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
     """Left and right clamp points (3,) m: ``origin ± a·axis_u`` with a = :func:`clamp_half_span`.
 
     ``origin`` (3,) m and ``axis_u`` (3,) unit, any float sequences (plain tuples on the planner's hot path,
@@ -106,7 +106,7 @@ def clamp_points(origin: Sequence[float], axis_u: Sequence[float], stretch: floa
 
 
 def clamp_poses(origin, normal, axis_u, stretch: float,
-                size: float = scene.SHEET_SIZE) -> tuple[np.ndarray, np.ndarray]:
+                size: float = geometry.SHEET_SIZE) -> tuple[np.ndarray, np.ndarray]:
     """Left and right clamp poses T_display_clamp (4, 4) for a sheet centred at ``origin`` (3,) m.
 
     Rotation :func:`sheet_rotation` (normal, axis_u); positions :func:`clamp_points`, i.e. the clamped edges
@@ -284,10 +284,10 @@ class SheetSurface:
     origin: np.ndarray
     normal: np.ndarray
     axis_u: np.ndarray
-    half_span: float = scene.SHEET_SIZE / 2
-    half_width: float = scene.SHEET_SIZE / 2
+    half_span: float = geometry.SHEET_SIZE / 2
+    half_width: float = geometry.SHEET_SIZE / 2
     membrane: Membrane | None = None          # or a FemShape (same interface)
-    size: float = scene.SHEET_SIZE
+    size: float = geometry.SHEET_SIZE
 
     def __post_init__(self) -> None:
         o = check_point("origin", self.origin)
@@ -334,10 +334,10 @@ class SheetSurface:
         return (self.origin + u[..., None] * self.axis_u + v[..., None] * self.axis_v - w[..., None] * self.normal)
 
     @classmethod
-    def from_clamps(cls, T_left: np.ndarray, T_right: np.ndarray, *, half_width: float = scene.SHEET_SIZE / 2,
+    def from_clamps(cls, T_left: np.ndarray, T_right: np.ndarray, *, half_width: float = geometry.SHEET_SIZE / 2,
                     pushed_point: np.ndarray | None = None, membrane_kwargs: dict | None = None,
-                    size: float = scene.SHEET_SIZE) -> SheetSurface:
-        """Sheet from the two measured clamp poses T_display_clamp (4, 4) (convention of :mod:`flexsheet.model.scene`).
+                    size: float = geometry.SHEET_SIZE) -> SheetSurface:
+        """Sheet from the two measured clamp poses T_display_clamp (4, 4) (convention of :mod:`flexsheet.model.geometry`).
 
         The frame comes from :func:`frame_from_clamps`. If ``pushed_point`` (3,) lies behind the plane
         (depth > 0) and inside the sheet, a :class:`Membrane` with that depth is attached (``membrane_kwargs``

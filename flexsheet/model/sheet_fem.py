@@ -18,7 +18,7 @@ deflection w (m, positive along −normal, away from the user).
 * Pre-stress: the clamps' pull N⁰ = diag(T_u, T_v), T_u = the uniaxial neo-Hookean tension of
   :func:`flexsheet.model.tension.tension` at the true stretch (clamp strain + the truth's pre-strain) with the
   truth's Young's modulus, and T_v = β·T_u with the truth's tension ratio β (free-edge contraction and clamp
-  misalignment, :mod:`flexsheet.model.truth`). It is balanced by dead tractions on the free edges, which
+  misalignment, :mod:`flexsheet.twin.truth`). It is balanced by dead tractions on the free edges, which
   cancels the N⁰ : ∇u term of the energy.
 * Increment: St Venant–Kirchhoff plane stress on top of the pre-stress, N = (E t / (1 − ν²))·((1 − ν) E +
   ν tr(E) I), ν = 0.5 (incompressible rubber), E = the small-strain Young's modulus.
@@ -60,7 +60,7 @@ symmetry), cached on disk, and interpolated (:meth:`IndentTable.shape`): between
 blending the neighbouring solutions after a piecewise-linear remapping of each axis that moves their contact
 to the requested one while keeping the edges fixed (so the peak stays at the finger and the clamped edges
 stay at zero), and between depths by blending the two neighbouring depths' solutions, each scaled to the
-requested depth. ``tests/test_twin_sheet.py`` checks the interpolation against direct solves.
+requested depth. ``tests/unit/twin/test_twin_sheet.py`` checks the interpolation against direct solves.
 
 Units: m, N, N/m, Pa; frames: the sheet's (u, v) as in :mod:`flexsheet.model.sheet`.
 """
@@ -77,7 +77,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from flexsheet.model import scene
+from flexsheet.model import geometry
 from flexsheet.model.checks import check_positive
 from flexsheet.model.sheet import DeflectionGrid
 
@@ -115,8 +115,8 @@ class SheetPhysics:
     """
 
     half_span: float
-    half_width: float = scene.SHEET_SIZE / 2
-    thickness: float = scene.SHEET_THICKNESS
+    half_width: float = geometry.SHEET_SIZE / 2
+    thickness: float = geometry.SHEET_THICKNESS
     young: float = 2.46e6
     poisson: float = 0.5
     tension_u: float = 93.5
@@ -137,8 +137,8 @@ class SheetPhysics:
         return self.tension_ratio * self.tension_u
 
     @classmethod
-    def from_truth(cls, truth, stretch: float, size: float = scene.SHEET_SIZE, **kw) -> SheetPhysics:
-        """Physics of the twin's true sheet (``truth``: a :class:`flexsheet.model.truth.TwinTruth`) held at
+    def from_truth(cls, truth, stretch: float, size: float = geometry.SHEET_SIZE, **kw) -> SheetPhysics:
+        """Physics of the twin's true sheet (``truth``: a :class:`flexsheet.twin.truth.TwinTruth`) held at
         clamp strain ``stretch`` (≥ 0) over the unstretched side ``size`` (m): a = size(1 + stretch)/2,
         T_u = :func:`flexsheet.model.tension.tension` (stretch + truth pre-strain) with the truth's E, β = the
         truth's tension ratio. ``kw`` overrides fields. Raises ``ValueError`` on a bad stretch."""
@@ -722,7 +722,7 @@ class IndentTable:
         ``half_span`` m (default the table's). The same interpolation (contact remapping per axis, bilinear in
         the FEM nodes, blend of the neighbouring depths and contacts), done one axis after the other: equal to
         :meth:`evaluate` at (u[:, None], v[None, :]) to rounding (≲ 1e-16 m) and ~20× faster on a fit grid
-        (``tests/test_render_live_sheet.py``). Raises ``ValueError`` when ``u`` or ``v`` is not 1-D."""
+        (``tests/unit/rendering/test_render_live_sheet.py``). Raises ``ValueError`` when ``u`` or ``v`` is not 1-D."""
         a_t, b = self.physics.half_span, self.physics.half_width
         u, v = np.asarray(u, float), np.asarray(v, float)
         if u.ndim != 1 or v.ndim != 1:

@@ -4,7 +4,7 @@ material, fitted into the renderer's "fine" shader's series form (pure: numpy; t
 
 This is the display's only pushed-sheet shape: the renderer corrects its image for it (``RendererState``
 attaches it to every push, :meth:`NominalSheetModel.pushed`) and the Foxglove bridge draws it as the sheet the
-display believes in (:meth:`flexsheet.runtime.foxglove_scene.SceneBuilder.believed_sheet`); both build it with
+display believes in (:meth:`flexsheet.viz.foxglove.SceneBuilder.believed_sheet`); both build it with
 :func:`sheet_model_for` from the same :class:`SheetConfig`. Why: the old fine correction's sine-series membrane
 (:class:`flexsheet.model.sheet.Membrane`, small-slope, tension ratio 1) is linear; a 1 mm urethane sheet pushed
 10–50 mm is not — the push stretches it, the dent becomes conical, and the series is ~4 mm off at 50 mm where
@@ -16,7 +16,7 @@ replaces the shape it is given:
    the arms (rounded to a ``stretch_step`` node), the sheet's NOMINAL Young's modulus and size
    (:class:`flexsheet.model.tension.SheetMaterial`), no pre-strain, and an ASSUMED tension ratio (default 1).
    Never the twin's truth: the truth's E (±15 %), pre-strain (|N(0, 0.5 %)|) and tension ratio (±20 %) differ
-   from these (:mod:`flexsheet.model.truth`); under ``realism: ideal`` they coincide and the model is in-model
+   from these (:mod:`flexsheet.twin.truth`); under ``realism: ideal`` they coincide and the model is in-model
    (an inverse crime, stated wherever that column is reported). Solved once per stretch node (~3 s per
    contact position on one core) and cached on disk.
 2. **Fit** (:meth:`NominalSheetModel.shape`): the table's shape at the measured depth and contact, sampled on
@@ -30,7 +30,7 @@ replaces the shape it is given:
    grid (:func:`table_grid`) and the fit cost ~1–2 ms of CPU (``flexsheet bench render``).
 3. **In the nodes**: :meth:`NominalSheetModel.shape` with ``build=False`` never builds a missing table in the
    caller's thread (a :class:`PendingPush` instead); the renderer node builds it in a worker process
-   (:func:`nodes.renderer.state.build_table`), the bridge draws the push as 4 triangles meanwhile.
+   (:func:`flexsheet.rendering.state.build_table`), the bridge draws the push as 4 triangles meanwhile.
 
 Units: m, sheet frame (u along axis_u, v along axis_v, w along −normal), as :mod:`flexsheet.model.sheet`.
 """
@@ -44,7 +44,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from flexsheet.model import scene
+from flexsheet.manifest import record
+from flexsheet.model import geometry
 from flexsheet.model.sheet import (
     DeflectionGrid,
     SheetSurface,
@@ -66,7 +67,7 @@ __all__ = ["SeriesShape", "PendingPush", "NominalSheetModel", "MODEL_DEPTHS", "g
 
 #: depths (m) of the nominal table (the fit interpolates between them)
 MODEL_DEPTHS = (0.005, 0.010, 0.020, 0.030, 0.040, 0.050, 0.060)
-#: most terms the fine shader evaluates (``nodes.renderer.scene.MAX_SHADER_MODES``)
+#: most terms the fine shader evaluates (``flexsheet.rendering.stereo_renderer.MAX_SHADER_MODES``)
 MAX_TERMS = 64
 
 
@@ -76,7 +77,7 @@ class SeriesShape(DeflectionGrid):
     push_v) (m, along −normal), the interface of :class:`flexsheet.model.sheet.Membrane` (``half_span`` a,
     ``half_width`` b, ``push_u``, ``push_v``, ``depth`` m; ``lam``, ``mu``, ``coef`` (K,); :meth:`deflection`,
     :meth:`deflection_grad`, :meth:`grid`), so a :class:`SheetSurface` can carry it and
-    :meth:`nodes.renderer.scene.StereoRenderer.set_model` sends it to the shader. ``source``: one line saying
+    :meth:`flexsheet.rendering.stereo_renderer.StereoRenderer.set_model` sends it to the shader. ``source``: one line saying
     what it was fitted to; ``fit_rms`` m: rms residual of the fit on its grid."""
 
     half_span: float
@@ -103,7 +104,7 @@ def table_grid(table: IndentTable, depth: float, push_u: float, push_v: float, u
                half_span: float) -> np.ndarray:
     """The table's shape on the tensor grid u (nu,) × v (nv,) m → (nu, nv) m for the measured clamp half span
     ``half_span`` m: :meth:`flexsheet.model.sheet_fem.IndentTable.evaluate_grid` (equal to the point-wise
-    :meth:`~flexsheet.model.sheet_fem.IndentTable.evaluate` to rounding, ``tests/test_render_live_sheet.py``).
+    :meth:`~flexsheet.model.sheet_fem.IndentTable.evaluate` to rounding, ``tests/unit/rendering/test_render_live_sheet.py``).
     The fit's per-frame cost is this."""
     return table.evaluate_grid(depth, push_u, push_v, u, v, half_span)
 
@@ -123,7 +124,7 @@ def contact_of(sheet: SheetSurface, point) -> tuple[float, float, float]:
 class PendingPush:
     """A push whose shape is not known yet (the nominal table of its stretch ``node`` is still being built):
     only the contact and depth (m), enough for the 4-triangle model (``SheetSurface.pushed_point``). It has no
-    deflection: :func:`nodes.renderer.state.pick_model` never picks ``fine`` for it."""
+    deflection: :func:`flexsheet.rendering.state.pick_model` never picks ``fine`` for it."""
 
     half_span: float
     half_width: float
@@ -274,7 +275,7 @@ class NominalSheetModel:
         return self.node_of(stretch_of_span(half_span, self.material.size))
 
     def shape(self, half_span: float, depth: float, push_u: float, push_v: float,
-              half_width: float = scene.SHEET_SIZE / 2, build: bool = True) -> SeriesShape | None:
+              half_width: float = geometry.SHEET_SIZE / 2, build: bool = True) -> SeriesShape | None:
         """The fitted pushed shape for the measured clamp half span (m), depth (m, > 0) and contact (m); with
         ``build`` False, None when the table of its node is not built yet (:meth:`available`). Per call on a
         cache miss: the table on the fit's grid (:func:`table_grid`) and the fit (``flexsheet bench render
@@ -345,7 +346,7 @@ class SheetConfig:
     ``mesh`` the FEM mesh options (:class:`flexsheet.model.sheet_fem.SheetFEM` kwargs; {}: the default
     4 mm mesh)."""
 
-    half_width: float = scene.SHEET_SIZE / 2
+    half_width: float = geometry.SHEET_SIZE / 2
     push_threshold: float = 0.001
     fine_modes: int = 16
     tension_ratio: float = 1.0
@@ -378,6 +379,7 @@ def ship_tables(nodes=(0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.07), progress=print
         dst = os.path.join(SHIPPED_TABLES, os.path.basename(src))
         if os.path.abspath(src) != os.path.abspath(dst):
             shutil.copyfile(src, dst)
+        record(dst, "python -m flexsheet.model.sheet_model --ship")
         out.append(dst)
     return out
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from flexsheet.model import scene
+from flexsheet.model import geometry
 from flexsheet.model.checks import check_positive
 from flexsheet.model.sheet import clamp_half_span
 
@@ -63,8 +63,8 @@ class SheetMaterial:
     """
 
     young: float = URETHANE_E
-    thickness: float = scene.SHEET_THICKNESS
-    size: float = scene.SHEET_SIZE
+    thickness: float = geometry.SHEET_THICKNESS
+    size: float = geometry.SHEET_SIZE
     contact_width: float = 0.020
     min_stretch: float = 0.01
     max_stretch: float = 0.30

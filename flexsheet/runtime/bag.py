@@ -37,6 +37,7 @@ from mcap.writer import CompressionType, Writer
 from pydantic import BaseModel, ConfigDict, Field
 
 from flexsheet.runtime.codec import DecodeError, decode_any, peek_schema
+from flexsheet.runtime.extensions import bag_channels
 from flexsheet.runtime.node import Node, NodeConfig
 from messages import MESSAGE_TYPES
 
@@ -103,8 +104,7 @@ class BagWriter:
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self.foxglove = None
         if foxglove:  # Foxglove channels (/viz/*, images) beside the lossless ones: the bag opens with the scene
-            from flexsheet.runtime.foxglove_bag import FoxgloveBagChannels
-            self.foxglove = FoxgloveBagChannels(self._writer)
+            self.foxglove = bag_channels("foxglove")(self._writer)
         self._thread = threading.Thread(target=self._run, name="bag-writer", daemon=True)
         self._thread.start()
 
@@ -262,7 +262,7 @@ def export_bag(src: str | Path, dst: str | Path, foxglove: bool = True) -> Count
 
     Returns per-channel message counts. Messages that fail to decode are skipped and counted under
     ``"<rejected>"``. With ``foxglove`` the Foxglove scene channels (``/viz/scene``, ``/viz/tf``, images;
-    :mod:`flexsheet.runtime.foxglove_bag`) are added, so the exported bag opens in Foxglove with the 3-D scene.
+    :mod:`flexsheet.viz.foxglove_bag`) are added, so the exported bag opens in Foxglove with the 3-D scene.
     """
     import cv2
 
@@ -272,8 +272,7 @@ def export_bag(src: str | Path, dst: str | Path, foxglove: bool = True) -> Count
         w.start(profile="", library="flexsheet")
         fox = None
         if foxglove:
-            from flexsheet.runtime.foxglove_bag import FoxgloveBagChannels
-            fox = FoxgloveBagChannels(w)
+            fox = bag_channels("foxglove")(w)
         sids: dict[str, int] = {}
         chans: dict[str, int] = {}
 

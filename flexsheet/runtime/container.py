@@ -49,19 +49,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import zmq
 
 from flexsheet.runtime.codec import encode
 from flexsheet.runtime.node import EXIT_CONFIG, WALL_CLOCK, Clock, ConfigError, Node, NodeConfig, SimClock
-from flexsheet.runtime.transport import (
-    CurveConfig,
-    Transport,
-    TransportError,
-    XPub,
-    _allow_list,
-    connect_sub,
-    drain_sub,
-)
+from flexsheet.runtime.transport import BusSocket, CurveConfig, Transport, TransportError, XPub
 from messages import Message
 from messages.common import array_spec
 
@@ -119,9 +110,7 @@ class Bus:
         self._targets: dict[bytes, tuple] = {}
         self._latched_obj: dict[bytes, Message] = {}
         self._latched_frames: dict[bytes, list] = {}
-        self.ctx: zmq.Context | None = None
-        self.sub: zmq.Socket | None = None
-        self._auth = None
+        self.sub: BusSocket | None = None
         self.loop: asyncio.AbstractEventLoop | None = None
         self._loop_tid: int | None = None
         self._poll_task: asyncio.Task | None = None
@@ -131,32 +120,25 @@ class Bus:
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> None:
         """Create the context (with the CURVE authenticator when ``curve``) and the SUB socket."""
-        if self.ctx is not None:
+        if self.sub is not None:
             return
         self.loop = asyncio.get_running_loop()
         self._loop_tid = threading.get_ident()
-        self.ctx = zmq.Context()
-        if self.curve is not None:
-            self._auth, _ = _allow_list(self.ctx, self.curve)
-        self.sub = connect_sub(self.ctx, self.peers, self.curve, self.rcvhwm)
-        self.loop.add_reader(self.sub.getsockopt(zmq.FD), self._drain_sub)
+        self.sub = BusSocket(self.peers, self.curve, self.rcvhwm)
+        self.loop.add_reader(self.sub.fileno(), self._drain_sub)
         self._poll_task = self.loop.create_task(self._safety_poll())
 
     def close(self) -> None:
         if self._poll_task is not None:
             self._poll_task.cancel()
-        if self.sub is not None and not self.sub.closed:
-            try:
-                self.loop.remove_reader(self.sub.getsockopt(zmq.FD))
-            except Exception:  # noqa: BLE001 - loop may be closed already
-                pass
-            self.sub.close(linger=0)
-        if self._auth is not None:
-            self._auth.stop()
-            self._auth = None
-        if self.ctx is not None:
-            self.ctx.term()
-            self.ctx = None
+        if self.sub is not None:
+            if not self.sub.closed:
+                try:
+                    self.loop.remove_reader(self.sub.fileno())
+                except Exception:  # noqa: BLE001 - loop may be closed already
+                    pass
+            self.sub.close()
+            self.sub = None
 
     async def _safety_poll(self) -> None:
         while True:  # ZeroMQ FDs are edge-triggered: catch an edge lost between drains
@@ -184,7 +166,7 @@ class Bus:
         prefixes = self._prefixes.pop(node, [])
         if self.sub is not None and not self.sub.closed:
             for p in prefixes:
-                self.sub.setsockopt(zmq.UNSUBSCRIBE, p)
+                self.sub.unsubscribe(p)
         self.changed()
 
     def changed(self) -> None:
@@ -198,7 +180,7 @@ class Bus:
         self._prefixes.setdefault(node, []).append(prefix)
         self.changed()
         if self.sub is not None:
-            self.sub.setsockopt(zmq.SUBSCRIBE, prefix)
+            self.sub.subscribe(prefix)
             self._drain_sub()
         raw = _is_raw(node)
         for name_b, msg in list(self._latched_obj.items()):
@@ -274,7 +256,8 @@ class Bus:
             node._on_frames(frames)
 
     def _drain_sub(self) -> None:
-        drain_sub(self.sub, self._on_wire)
+        if self.sub is not None:
+            self.sub.drain(self._on_wire)
 
 
 def _is_raw(node: Node) -> bool:
@@ -308,7 +291,7 @@ class ContainerTransport(Transport):
         self.bus.attach(self.node)
         if self.endpoint:
             try:
-                self.xpub = XPub(self.bus.ctx, self.endpoint, self.bus.curve, self.sndhwm, asyncio.get_running_loop())
+                self.xpub = XPub(self.bus.sub.ctx, self.endpoint, self.bus.curve, self.sndhwm, asyncio.get_running_loop())
             except TransportError:
                 self.bus.detach(self.node)
                 raise

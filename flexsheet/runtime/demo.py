@@ -22,9 +22,9 @@ class TalkerParams(BaseModel):
     """``rate`` Hz (> 0); ``count``: stop after this many messages (0 = forever); ``start_delay`` s before
     the first message (lets subscribers connect first); ``worker_s``: > 0 starts a child process at setup that
     sleeps this long holding the node's output, not tied to its parent (as a node's table builder is while it
-    still imports; the launcher must not wait for it when the node dies: tests/test_runtime_launch.py);
+    still imports; the launcher must not wait for it when the node dies: tests/system/test_runtime_launch.py);
     ``exit_lines``: lines printed at teardown (a node with much to say as it stops: the launcher must still
-    record that exit, tests/test_runtime_launch.py)."""
+    record that exit, tests/system/test_runtime_launch.py)."""
 
     model_config = ConfigDict(extra="forbid")
     rate: float = Field(default=10.0, gt=0.0, le=100000.0)

@@ -29,7 +29,7 @@ def render() -> str:
              "Every message is a frozen, strict pydantic v2 model with a `header` (`stamp` s on the sender's clock, "
              "`frame_id`, `seq`) and carries its schema name and version on the wire. Arrays travel as raw "
              "buffers (see `flexsheet/runtime/codec.py`). Units are SI; frame `display` is defined in "
-             "`flexsheet/model/scene.py`. Float fields and float arrays must be finite.", "",
+             "`flexsheet/model/geometry.py`. Float fields and float arrays must be finite.", "",
              "| topic | type | latched | nominal rate |", "|---|---|---|---|"]
     for t in T.ALL:
         lines.append(f"| `{t.name}` | {t.type.SCHEMA} v{t.type.VERSION} | {'yes' if t.latched else ''} | "

@@ -51,7 +51,7 @@ def generate(hosts: list[str], folder: Path, force: bool = False) -> dict[str, s
     Returns host → ``"new"`` or ``"kept"``. Raises ``ValueError`` for a host name that is not a plain name
     (letters, digits, ``_.-``) or an unreadable existing key file.
     """
-    import zmq.auth
+    from flexsheet.runtime.transport import create_curve_keypair, load_curve_keys
 
     for host in hosts:
         if not _HOST.match(host):
@@ -66,13 +66,13 @@ def generate(hosts: list[str], folder: Path, force: bool = False) -> dict[str, s
             continue
         for f in (secret_file, folder / f"{host}.key"):
             f.unlink(missing_ok=True)
-        _, secret_file = zmq.auth.create_certificates(folder, host)
+        _, secret_file = create_curve_keypair(folder, host)
         os.chmod(secret_file, 0o600)
         status[host] = "new"
     keys = read_public_keys(folder / PUBLIC_KEYS_FILE)
     for host in status:
         try:
-            public, _ = zmq.auth.load_certificate(folder / f"{host}.key_secret")
+            public, _ = load_curve_keys(folder / f"{host}.key_secret")
         except (OSError, ValueError) as exc:
             raise ValueError(f"{folder / f'{host}.key_secret'}: unreadable ({exc}); use --force to replace it") \
                 from None

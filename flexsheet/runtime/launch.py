@@ -18,12 +18,11 @@ A launch file (``launch/*.yaml``) is the single source of truth for hosts and po
     security:                        # ZeroMQ CURVE (docs/deploy.md); keys from `flexsheet keys generate`
       curve: true
       public_keys_file: $(keys)/public_keys.yaml
-    display_calib: $(launch_dir)/display.yaml   # the display registration (optional; checked by --check)
+    # plus the top-level sections of the installed launch extensions (flexsheet.runtime.extensions)
 
 Every node publishes on ``tcp://<host address>:<port>`` (or an explicit ``endpoint:``) and subscribes to
 every node endpoint of the file, so the same file serves one machine (127.0.0.1) and the lab's three PCs;
-``flexsheet launch FILE --host NAME`` starts only that host's share. Strings in params and
-``display_calib`` may use ``$(out)`` (the ``--out`` folder) and ``$(launch_dir)``; the security paths may
+``flexsheet launch FILE --host NAME`` starts only that host's share. Strings in params may use ``$(out)`` (the ``--out`` folder) and ``$(launch_dir)``; the security paths may
 use ``$(keys)`` (the keys folder: ``$FLEXSHEET_KEYS``, else ``security.keys_dir``, else ~/.flexsheet/keys)
 and ``$(launch_dir)``. :mod:`flexsheet.runtime.launch_check` checks a file against this machine
 (``flexsheet launch FILE --check``) and ``flexsheet launch`` runs that check before it starts anything.
@@ -55,18 +54,17 @@ from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, field_validator
 
 from flexsheet import registry
-from flexsheet.model.truth_choice import TruthChoice
-from flexsheet.model.yamlio import UniqueKeyLoader
+from flexsheet.runtime.extensions import sections as launch_sections
 from flexsheet.runtime.node import EXIT_CONFIG, NodeConfig
 from flexsheet.runtime.transport import CurveConfig
+from flexsheet.yamlio import UniqueKeyLoader
 
 __all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "SecuritySpec", "load_launch", "node_config",
            "curve_config", "keys_dir", "public_keys", "substitutions", "substitute", "keygen_command",
-           "display_calib_path", "TwinSpec", "TOPLEVEL_ENV", "parse_toplevel_set", "twin_registration",
-           "twin_registration_path",
+           "TOPLEVEL_ENV", "parse_toplevel_set",
            "DEFAULT_KEYS_DIR", "PUBLIC_KEYS_FILE", "Supervisor", "container_spec",
            "children_of"]
 
@@ -170,21 +168,9 @@ class NodeSpec(BaseModel):
         return v
 
 
-class TwinSpec(TruthChoice):
-    """The top-level ``twin:`` section: which hidden truth every twin node draws (``realism``, ``truth_seed``:
-    :class:`~flexsheet.model.truth_choice.TruthChoice`, the same config the twin nodes take) and
-    ``registration``: before the nodes start, run the registration procedures in the twin
-    (``flexsheet calibrate display --sim``, cached per seed) and give the estimators the ``display.yaml`` it
-    writes (when the file names no ``display_calib`` of its own)."""
-
-    model_config = ConfigDict(extra="forbid", strict=True)
-    registration: bool = True
-
-
 #: environment variable carrying top-level overrides (``--set twin.truth_seed=3``, ``--set scene=FILE``) from
 #: ``flexsheet launch`` to :func:`load_launch` in the launcher and in every node process it starts (JSON)
 TOPLEVEL_ENV = "FLEXSHEET_LAUNCH_SET"
-TOPLEVEL_KEYS = ("twin", "scene", "display_calib")
 
 
 class LaunchFile(BaseModel):
@@ -199,13 +185,15 @@ class LaunchFile(BaseModel):
     shutdown_timeout: float = Field(default=3.0, gt=0.0, description="s per escalation step")
     report: str | None = Field(default=None, description="'module:function' called after the run with --out")
     security: SecuritySpec = Field(default_factory=SecuritySpec)
-    display_calib: str | None = Field(default=None, description="display registration file (display.yaml) the "
-                                                                 "nodes take their geometry from")
-    twin: TwinSpec | None = Field(default=None, description="the twin's hidden truth (simulated graphs only)")
-    scene: str | None = Field(default=None, description="scene file (launch/scenes/*.yaml) every node presents")
+    sections: dict[str, Any] = Field(default_factory=dict, description="the top-level sections launch "
+                                     "extensions add (flexsheet.runtime.extensions), validated by them")
     nodes: dict[str, NodeSpec]
 
     path: Path | None = None
+
+    def section(self, key: str) -> Any:
+        """The value of top-level section ``key`` (None when the file has none)."""
+        return self.sections.get(key)
 
     def endpoint_of(self, name: str) -> str:
         """Bound endpoint of node ``name`` (explicit ``endpoint``, else tcp://address:port)."""
@@ -218,6 +206,16 @@ class LaunchFile(BaseModel):
     def endpoints(self) -> dict[str, str]:
         """Node name → endpoint for every node of the file."""
         return {n: self.endpoint_of(n) for n in self.nodes}
+
+
+def _error_lines(path: Path, exc: ValidationError, prefix: str = "") -> list[str]:
+    """One line per validation error, naming the file, the key path and the value."""
+    lines = []
+    for err in exc.errors():
+        # a key with control characters (a YAML key "\n") is shown escaped
+        key = ".".join([prefix] * bool(prefix) + [str(p) for p in err["loc"]]).encode("unicode_escape").decode("ascii")
+        lines.append(f"{path}: key '{key}': {err['msg']:.300} (value {_short(err.get('input'))})")
+    return lines
 
 
 def load_launch(path: str | Path) -> LaunchFile:
@@ -242,16 +240,22 @@ def load_launch(path: str | Path) -> LaunchFile:
     if not isinstance(raw, dict):
         raise LaunchError(f"{path}: top level must be a mapping with 'nodes', got {type(raw).__name__}")
     raw = _apply_toplevel_env(raw, path)
+    known = launch_sections()
+    found = {k: raw.pop(k) for k in list(raw) if k in known and k != "sections"}
+    lines = []
     try:
         lf = LaunchFile.model_validate(raw)
     except ValidationError as exc:
-        lines = []
-        for err in exc.errors():
-            # one line per error: a key with control characters (a YAML key "\n") is shown escaped
-            key = ".".join(str(p) for p in err["loc"]).encode("unicode_escape").decode("ascii")
-            lines.append(f"{path}: key '{key}': {err['msg']:.300} (value {_short(err.get('input'))})")
+        lines += _error_lines(path, exc)
+    checked = {}
+    for key, value in found.items():
+        try:
+            checked[key] = TypeAdapter(known[key].type).validate_python(value, strict=True)
+        except ValidationError as exc:
+            lines += _error_lines(path, exc, key)
+    if lines:
         raise LaunchError(lines[0], lines) from None
-    lines = []
+    lf.sections = checked
     for name, spec in lf.nodes.items():
         if spec.host not in lf.hosts:
             lines.append(f"{path}: key 'nodes.{name}.host': unknown host {spec.host!r}; hosts: {', '.join(lf.hosts)}")
@@ -357,7 +361,7 @@ def curve_config(lf: LaunchFile, host: str | None) -> CurveConfig | None:
     sec = lf.security
     if not sec.curve:
         return None
-    import zmq.auth
+    from flexsheet.runtime.transport import load_curve_keys
 
     kdir = keys_dir(lf)
     keys = public_keys(lf)
@@ -374,7 +378,7 @@ def curve_config(lf: LaunchFile, host: str | None) -> CurveConfig | None:
         raise LaunchError(f"{lf.path}: key 'security.keys_dir': no secret key for host {hosts[0]!r} at "
                           f"{secret_file} (run: {keygen_command(lf)}, and copy {hosts[0]}.key_secret there)")
     try:
-        public, secret = zmq.auth.load_certificate(secret_file)
+        public, secret = load_curve_keys(secret_file)
     except (OSError, ValueError) as exc:
         raise LaunchError(f"{lf.path}: key 'security.keys_dir': unreadable key file {secret_file}: {exc}") from None
     if secret is None or public.decode() != keys.get(hosts[0]):
@@ -393,85 +397,53 @@ def _apply_toplevel_env(raw: dict, path: Path) -> dict:
         over = json.loads(text)
     except ValueError:
         raise LaunchError(f"{path}: ${TOPLEVEL_ENV} is not JSON: {text[:200]!r}") from None
-    if not isinstance(over, dict) or set(over) - set(TOPLEVEL_KEYS):
-        raise LaunchError(f"{path}: ${TOPLEVEL_ENV} may set only {', '.join(TOPLEVEL_KEYS)}, got {text[:200]!r}")
+    keys = launch_sections()
+    if not isinstance(over, dict) or set(over) - set(keys):
+        raise LaunchError(f"{path}: ${TOPLEVEL_ENV} may set only {', '.join(keys)}, got {text[:200]!r}")
     raw = dict(raw)
     for key, value in over.items():
-        if key == "twin" and isinstance(value, dict):
-            base = raw.get("twin") if isinstance(raw.get("twin"), dict) else {}
-            raw["twin"] = {**base, **value}
+        if keys[key].parse_set is None and isinstance(value, dict):   # a mapping section: merged key by key
+            base = raw.get(key) if isinstance(raw.get(key), dict) else {}
+            raw[key] = {**base, **value}
         else:
             raw[key] = value
     return raw
 
 
 def parse_toplevel_set(item: str, node_names) -> tuple[str, Any] | None:
-    """A ``--set`` item that overrides a top-level key: ``twin.KEY=VALUE`` (when no node is named ``twin``),
-    ``scene=FILE`` or ``display_calib=FILE``. Returns ``(key, value)`` with ``twin`` values as
-    ``{KEY: VALUE}`` (YAML-parsed), or ``None`` for a node override. Raises :class:`LaunchError` on a bad item."""
+    """A ``--set`` item that overrides a top-level section of a launch extension: ``KEY=VALUE`` or, for a
+    mapping section, ``KEY.SUB=VALUE`` (when no node is named KEY). Returns ``(key, value)`` (a mapping
+    section's value as ``{SUB: VALUE}``, YAML-parsed), or ``None`` for a node override. Raises
+    :class:`LaunchError` on a bad item."""
+    known = launch_sections()
     head, dot, rest = item.partition(".")
-    if dot and head == "twin" and "twin" not in node_names:
+    if dot and head in known and known[head].parse_set is None and head not in node_names:
         key, eq, value = rest.partition("=")
         if not eq or not key:
-            raise LaunchError(f"--set {item!r}: expected twin.KEY=VALUE")
-        return "twin", {key: yaml.safe_load(value)}
+            raise LaunchError(f"--set {item!r}: expected {head}.KEY=VALUE")
+        return head, {key: yaml.safe_load(value)}
     key, eq, value = item.partition("=")
     if eq and "." not in key:
-        if key not in ("scene", "display_calib"):
-            raise LaunchError(f"--set {item!r}: a top-level override is one of scene=FILE, display_calib=FILE, "
-                              "twin.KEY=VALUE; a node param is NODE.KEY=VALUE")
-        return key, os.path.abspath(os.path.expanduser(value)) if value else None
+        if key not in known or known[key].parse_set is None:
+            forms = [f"{k}=VALUE" if s.parse_set else f"{k}.KEY=VALUE" for k, s in known.items()]
+            raise LaunchError(f"--set {item!r}: a top-level override is one of {', '.join(forms)}; a node param "
+                              "is NODE.KEY=VALUE")
+        return key, known[key].parse_set(value)
     return None
-
-
-def twin_registration_path(twin: TwinSpec, cache_root: str | None = None) -> Path:
-    """Where :func:`twin_registration` caches the ``display.yaml`` of ``twin``'s realism and seed (the cache of
-    :func:`flexsheet.calibration.procedures.sim_display_calib`)."""
-    root = Path(cache_root or os.environ.get("FLEXSHEET_CACHE") or "~/.cache/flexsheet").expanduser()
-    return root / "display" / f"{twin.realism}-{twin.truth_seed}" / "display.yaml"
-
-
-def twin_registration(twin: TwinSpec, print_fn=print, cache_root: str | None = None) -> str:
-    """Run the display registration in the twin for ``twin`` (the procedures of ``flexsheet calibrate display
-    --sim``: camera pose, projector, arm bases, against images rendered from the hidden truth), cached per
-    realism, seed, options and procedure version; returns the ``display.yaml`` path. The estimators get only
-    this file, never the truth. Raises :class:`LaunchError` when the registration fails."""
-    from flexsheet.calibration.procedures import sim_display_calib
-
-    print_fn(f"[launch] twin registration ({twin.realism}, truth seed {twin.truth_seed}): the calibration "
-             f"procedures in the twin (cached per seed; the first run of a seed takes ~20-60 s) ...")
-    try:
-        path = sim_display_calib(twin.truth_seed, twin.realism, cache_root=cache_root,
-                                 progress=lambda m: print_fn(f"[launch] {m}"))
-    except (ValueError, RuntimeError, OSError) as exc:
-        raise LaunchError(f"twin registration (truth seed {twin.truth_seed}) failed: {exc}") from None
-    print_fn(f"[launch] twin registration: {path}")
-    return str(path)
-
-
-def display_calib_path(lf: LaunchFile, out: str | None = None) -> str | None:
-    """``lf.display_calib`` with substitutions and ``~`` expanded (None when the file names none)."""
-    if lf.display_calib is None:
-        return None
-    return os.path.expanduser(substitute(lf.display_calib, substitutions(lf, out)))
 
 
 def node_config(lf: LaunchFile, name: str, out: str | None = None, overrides: dict | None = None) -> NodeConfig:
     """The :class:`NodeConfig` of node ``name`` in ``lf`` (params merged with ``overrides``, substituted).
 
-    Graph-wide settings reach the nodes that take them: when the file names a ``display_calib``, a ``scene``
-    or a ``twin`` section and the node's ``Params`` has a field of that name that the node's params leave
-    unset, the launch file's value is filled in there (``twin``: ``{realism, truth_seed}``); the display
-    calibration is also in ``NodeConfig.display_calib``. Raises :class:`LaunchError` (unknown node, CURVE keys).
+    Graph-wide settings reach the nodes that take them: for each top-level section of a launch extension
+    (:mod:`flexsheet.runtime.extensions`) whose node value is not None, a node whose ``Params`` has a field of
+    that name that its params leave unset gets the value there. Raises :class:`LaunchError` (unknown node, CURVE keys).
     """
     if name not in lf.nodes:
         raise LaunchError(f"{lf.path}: no node named {name!r}; nodes: {', '.join(lf.nodes)}")
     spec = lf.nodes[name]
     params = substitute({**spec.params, **(overrides or {})}, substitutions(lf, out))
-    display = display_calib_path(lf, out)
-    scene = (os.path.expanduser(substitute(lf.scene, substitutions(lf, out))) if lf.scene else None)
-    twin = ({"realism": lf.twin.realism, "truth_seed": lf.twin.truth_seed} if lf.twin is not None else None)
-    graph_wide = {"display_calib": display, "scene": scene, "twin": twin}
+    graph_wide = {key: sec.node_value(lf.section(key), lf, out) for key, sec in launch_sections().items()}
     if any(v is not None and k not in params for k, v in graph_wide.items()):
         try:
             fields = registry.load(registry.NODES[spec.type]).Params.model_fields
@@ -482,8 +454,7 @@ def node_config(lf: LaunchFile, name: str, out: str | None = None, overrides: di
                 params[key] = value
     return NodeConfig(name=name, node_type=spec.type, host=spec.host, endpoint=lf.endpoint_of(name),
                       peers=list(lf.endpoints().values()), params=params, remaps=spec.remaps,
-                      heartbeat_period=lf.heartbeat_period, curve=curve_config(lf, spec.host),
-                      display_calib=display)
+                      heartbeat_period=lf.heartbeat_period, curve=curve_config(lf, spec.host))
 
 
 def _child_setup(nice: int, rt_priority: int = 0):

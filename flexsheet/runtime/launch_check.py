@@ -9,16 +9,13 @@ same check first and starts nothing when it finds an error. What is checked:
 - **hosts**: ``--host`` is a host of the file; every address is an IP address (not 0.0.0.0) or a name that
   resolves here; a ``host`` param (a device's address) is an IP address or a valid host name. Nothing is
   bound or pinged: a host's address need not exist on the machine that checks;
-- **ports**: no two listening sockets on one machine (node endpoints, and the ports device twins listen on,
-  :data:`LISTEN_PARAMS`) share a port;
+- **ports**: no two listening sockets on one machine (node endpoints, and the ports the launch extensions'
+  device twins listen on) share a port;
 - **files** named by the nodes of the checked host(s): inputs (:func:`is_input_file_key`) exist and, where a
-  reader is known (:data:`FILE_READERS`: stereo calibration, display calibration), parse; glob patterns match
-  a file; output folders (:data:`OUTPUT_PARAMS`) can be created;
-- **display calibration**: the file named by a top-level ``display_calib:`` exists and parses
-  (``flexsheet.model.display_calib.load_display_calib``), holds the entries the checked host's nodes take
-  their geometry from (:data:`DISPLAY_NEEDS`; a missing one names the ``flexsheet calibrate`` command), and
-  its camera entry is not older than the stereo calibration file the camera node names (stale). A nominal
-  (never measured) entry is a warning;
+  launch extension knows a reader, parse; glob patterns match a file; output folders (:data:`OUTPUT_PARAMS`
+  and the extensions') can be created;
+- **extensions**: each launch extension's own rules (:mod:`flexsheet.runtime.extensions`; the display's:
+  :mod:`flexsheet.display.launch`);
 - **CURVE keys** (``security.curve: true``): the keys folder exists, the public keys cover every host, and
   each checked host's ``<host>.key_secret`` is there, matches its public key and is private (mode 0600).
   A missing key names the command that writes it, ``flexsheet keys generate <hosts of the file>``.
@@ -40,7 +37,6 @@ import concurrent.futures
 import glob
 import importlib.util
 import ipaddress
-import math
 import os
 import re
 import stat
@@ -53,11 +49,12 @@ from typing import Any
 from pydantic import BaseModel, ValidationError
 
 from flexsheet import registry
+from flexsheet.runtime.extensions import extensions
+from flexsheet.runtime.extensions import sections as launch_sections
 from flexsheet.runtime.launch import (
     LaunchError,
     LaunchFile,
     _short,
-    display_calib_path,
     keygen_command,
     keys_dir,
     load_launch,
@@ -67,53 +64,34 @@ from flexsheet.runtime.launch import (
 )
 from flexsheet.runtime.ports import ephemeral_port_range
 
-__all__ = ["CheckResult", "check_launch", "check_file_param", "is_input_file_key", "LISTEN_PARAMS",
-           "OUTPUT_PARAMS", "FILE_READERS", "read_display_calib"]
+__all__ = ["CheckResult", "check_launch", "check_file_param", "is_input_file_key", "OUTPUT_PARAMS"]
 
 #: node type → (address param, port param) of a socket the node *listens* on besides its publisher
-LISTEN_PARAMS: dict[str, tuple[str, str]] = {"arm_controller_sim": ("host", "port")}
 #: (node type, param) → "file" (a file the node writes: its folder must be creatable) or "dir"
-OUTPUT_PARAMS: dict[tuple[str, str], str] = {("recorder", "output"): "file", ("fem", "cache_dir"): "dir"}
+OUTPUT_PARAMS: dict[tuple[str, str], str] = {("recorder", "output"): "file"}
 #: params whose value is a glob pattern of input files (at least one must match)
 GLOB_PARAMS = frozenset({"files_left", "files_right"})
 _INPUT_NAMES = frozenset({"calib_file", "display_calib", "scene", "file", "files_csv"})
 _HOSTNAME = re.compile(r"^(?=.{1,253}$)([A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}"
                        r"[A-Za-z0-9])?)*\.?$")
 _RESOLVE_TIMEOUT_S = 2.0
-#: node type → the ``display.yaml`` entries its nodes take their geometry from (``{arm}``: the node's arm param)
-DISPLAY_NEEDS: dict[str, tuple[str, ...]] = {"camera": ("camera",), "renderer": ("projector", "eye"),
-                                             "planner": ("arms.left", "arms.right"), "arm_bridge": ("arms.{arm}",)}
-#: display.yaml entry → the command that measures it (issue 14, docs/calibration.md)
-DISPLAY_COMMANDS = {"camera": "flexsheet calibrate camera-pose", "projector": "flexsheet calibrate projector",
-                    "arms": "flexsheet calibrate arms", "eye": "flexsheet calibrate eye"}
-
-
 def is_input_file_key(key: str) -> bool:
     """True for a param that names an existing input file: ``calib_file``, ``display_calib``, ``scene``,
     ``file``, ``files_csv`` or any ``*_file``."""
     return key in _INPUT_NAMES or key.endswith("_file")
 
 
-def read_stereo_calib(path: str) -> None:
-    """Parse a stereo calibration YAML (:func:`flexsheet.model.calibration.load_yaml`); raises ``ValueError``."""
-    from flexsheet.model.calibration import load_yaml
-
-    load_yaml(path)
+def _file_readers() -> dict[str, Callable[[str], None]]:
+    """Param name → reader that raises ``ValueError``/``OSError`` for a file it cannot use (launch extensions)."""
+    return {k: r for ext in extensions() for k, r in ext.file_readers.items()}
 
 
-def read_display_calib(path: str) -> None:
-    """Parse a display calibration (``flexsheet.model.display_calib.load_display_calib``); raises ``ValueError``
-    (also when that module is not available, saying so)."""
-    try:
-        from flexsheet.model.display_calib import load_display_calib
-    except ImportError as exc:
-        raise ValueError(f"cannot read it: flexsheet.model.display_calib is not available here ({exc})") from None
-    load_display_calib(path)
+def _output_params() -> dict[tuple[str, str], str]:
+    return {**OUTPUT_PARAMS, **{k: v for ext in extensions() for k, v in ext.output_params.items()}}
 
 
-#: param name → reader that raises ``ValueError``/``OSError`` for a file it cannot use
-FILE_READERS: dict[str, Callable[[str], None]] = {"calib_file": read_stereo_calib,
-                                                  "display_calib": read_display_calib}
+def _listen_params() -> dict[str, tuple[str, str]]:
+    return {k: v for ext in extensions() for k, v in ext.listen_params.items()}
 
 
 def check_file_param(key: str, value: str) -> str | None:
@@ -122,12 +100,12 @@ def check_file_param(key: str, value: str) -> str | None:
         return None if glob.glob(os.path.expanduser(value)) else "no file matches this pattern"
     path = os.path.expanduser(value)
     if not os.path.exists(path):
-        return "no such file" + (" (the registration writes it: docs/calibration.md)" if key == "display_calib" else "")
+        return "no such file"
     if not os.path.isfile(path):
         return "not a file"
     if not os.access(path, os.R_OK):
         return "not readable"
-    reader = FILE_READERS.get(key)
+    reader = _file_readers().get(key)
     if reader is not None:
         try:
             reader(path)
@@ -210,8 +188,9 @@ class _Checker:
         self.check_hosts()
         self.check_ports()
         self.check_security()
-        self.check_display_calib()
-        self.check_scene()
+        for ext in extensions():
+            if ext.check is not None:
+                ext.check(self)
         self.check_report()
         self.check_nodes()
         self.check_containers()
@@ -254,10 +233,10 @@ class _Checker:
                 if lo <= port <= hi:
                     ephemeral.append(f"{name} ({port})")
         for name, spec in self.lf.nodes.items():
-            keys = LISTEN_PARAMS.get(spec.type)
+            keys = _listen_params().get(spec.type)
             if keys is None:
                 continue
-            port = self._params(name).get(keys[1])
+            port = self.params(name).get(keys[1])
             if type(port) is int and 0 < port <= 65535:
                 claim(spec.host, port, f"node {name}'s {keys[1]} param", f"node {name}: params.{keys[1]}")
                 if lo <= port <= hi:
@@ -292,7 +271,7 @@ class _Checker:
         if missing:
             self.err("security.public_keys", sorted(keys), f"no public key for host(s) {', '.join(missing)} "
                                                           f"(run: {cmd})")
-        import zmq.auth
+        from flexsheet.runtime.transport import load_curve_keys
 
         for h in self.hosts:
             secret = kdir / f"{h}.key_secret"
@@ -301,7 +280,7 @@ class _Checker:
                                             f"{secret.name} and public_keys.yaml to {h}'s keys folder)")
                 continue
             try:
-                public, secret_key = zmq.auth.load_certificate(secret)
+                public, secret_key = load_curve_keys(secret)
             except (OSError, ValueError) as exc:
                 self.err(origin, str(secret), f"unreadable secret key for host {h}: {exc}")
                 continue
@@ -315,55 +294,9 @@ class _Checker:
                 self.err(origin, str(secret), f"secret key readable by others (mode {mode:o}); run: chmod 600 {secret}")
 
     # ---------------------------------------------------------------------------------------------- files
-    def check_scene(self) -> None:
-        """The top-level ``scene:`` file exists and validates (:func:`flexsheet.model.scenes.load_scene`)."""
-        if not self.lf.scene:
-            return
-        path = os.path.expanduser(substitute(self.lf.scene, substitutions(self.lf, self.out)))
-        problem = check_file_param("scene", path)
-        if problem:
-            self.err("scene", path, problem)
-            return
-        from flexsheet.model.scenes import load_scene
-
-        try:
-            load_scene(path)
-        except ValueError as exc:
-            self.err("scene", path, str(exc))
-
-    def check_display_calib(self) -> None:
-        path = display_calib_path(self.lf, self.out)
-        if path is None:
-            return
-        problem = check_file_param("display_calib", path)
-        if problem:
-            self.err("display_calib", path, problem)
-            return
-        from flexsheet.model.display_calib import load_display_calib
-
-        calib = load_display_calib(path)
-        for name, spec in self.lf.nodes.items():
-            if spec.host not in self.hosts:
-                continue
-            params = self._params(name)
-            for entry in DISPLAY_NEEDS.get(spec.type, ()):
-                entry = entry.format(arm=params.get("arm", "left"))
-                if calib.missing([entry]):
-                    self.err("display_calib", path, f"no '{entry}' entry, which node {name} needs (run: "
-                                                    f"{DISPLAY_COMMANDS[entry.split('.')[0]]}; docs/calibration.md)")
-                elif calib.stale(math.inf, [entry]):
-                    self.warn(f"display_calib: the '{entry}' entry node {name} uses is nominal, not measured (run: "
-                              f"{DISPLAY_COMMANDS[entry.split('.')[0]]})")
-            calib_file = params.get("calib_file")
-            if spec.type == "camera" and calib.camera is not None and isinstance(calib_file, str) and calib_file \
-                    and os.path.isfile(os.path.expanduser(calib_file)):
-                measured = time.time() - calib.camera.provenance.age_s()
-                changed = os.path.getmtime(os.path.expanduser(calib_file))
-                if calib.camera.provenance.source != "nominal" and measured < changed:
-                    self.err("display_calib", path, f"stale 'camera' entry: measured "
-                                                    f"{calib.camera.provenance.measured_at}, before node {name}'s "
-                                                    f"calib_file {calib_file} changed ({_iso(changed)}); run: "
-                                                    f"{DISPLAY_COMMANDS['camera']}")
+    def file_problem(self, key: str, value: str) -> str | None:
+        """The problem with input file ``value`` of param ``key`` (:func:`check_file_param`), or None."""
+        return check_file_param(key, value)
 
     def check_report(self) -> None:
         report = self.lf.report
@@ -377,7 +310,8 @@ class _Checker:
         if not found:
             self.err("report", report, "no such 'module:function' (the report runs after the launch)")
 
-    def _params(self, name: str) -> dict:
+    def params(self, name: str) -> dict:
+        """Node ``name``'s params with the ``--set`` overrides and substitutions applied."""
         spec = self.lf.nodes[name]
         return substitute({**spec.params, **self.overrides.get(name, {})}, self.subs)
 
@@ -388,7 +322,7 @@ class _Checker:
         for name, spec in self.lf.nodes.items():
             here = spec.host in self.hosts
             self.res.nodes += here
-            params = self._params(name)
+            params = self.params(name)
             where = f"node {name}"
             try:
                 cls = registry.load(registry.NODES[spec.type])
@@ -400,10 +334,12 @@ class _Checker:
                 else:
                     self.warn(f"node {name} (host {spec.host}): {msg}; its params are not checked")
                 continue
-            display = display_calib_path(self.lf, self.out)
-            injected = display is not None and "display_calib" in model.model_fields and "display_calib" not in params
-            if injected:  # as node_config fills it in; the file itself is checked once, as display_calib
-                params["display_calib"] = display
+            injected = set()   # graph-wide values, as node_config fills them in; each file is checked once
+            for key, sec in launch_sections().items():
+                value = sec.node_value(self.lf.section(key), self.lf, self.out)
+                if value is not None and key in model.model_fields and key not in params:
+                    params[key] = value
+                    injected.add(key)
             try:
                 model.model_validate(params)
             except ValidationError as exc:
@@ -424,9 +360,9 @@ class _Checker:
                     problem = _address_problem(value, resolve=False)
                     if problem:
                         self.err(f"{where}: params.host", value, problem)
-                if not here or not isinstance(value, str) or not value or (injected and key == "display_calib"):
+                if not here or not isinstance(value, str) or not value or key in injected:
                     continue
-                kind = OUTPUT_PARAMS.get((spec.type, key))
+                kind = _output_params().get((spec.type, key))
                 if kind is not None:
                     target = Path(os.path.expanduser(value))
                     problem = _creatable(target if kind == "dir" else target.parent)
@@ -446,7 +382,7 @@ class _Checker:
         for name, spec in self.lf.nodes.items():
             if spec.container is not None and spec.host in self.hosts:
                 groups.setdefault((spec.container, spec.host), []).append(name)
-            if spec.type == "player" and spec.host in self.hosts and self._params(name).get("mode") == "lockstep":
+            if spec.type == "player" and spec.host in self.hosts and self.params(name).get("mode") == "lockstep":
                 if spec.container is None:
                     self.err(f"node {name}: params.mode", "lockstep", "a lockstep player must be in a container "
                              "with the nodes it drives: give it and them 'container: NAME' (docs/realtime.md)")
@@ -477,7 +413,7 @@ def _loopback(address: str) -> bool:
 
 def _one_line(text: str) -> str:
     """``text`` with every non-printable character escaped as Python writes it (a param key or value may hold a
-    newline: ``params: {"\\n": null}``, found by tests/test_fuzz_launch.py), so one problem is one line."""
+    newline: ``params: {"\\n": null}``, found by tests/unit/runtime/test_fuzz_launch.py), so one problem is one line."""
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 

@@ -110,7 +110,6 @@ class NodeConfig:
     remaps: dict[str, str] = field(default_factory=dict)
     heartbeat_period: float = 1.0
     curve: CurveConfig | None = None
-    display_calib: str | None = None  # the launch file's display calibration (display.yaml), path or None
 
 
 class Clock:

@@ -1,8 +1,8 @@
 """A node's ``Params`` from the pure module's config dataclass: one definition of each setting.
 
 The algorithms keep their settings in frozen dataclasses beside the code that uses them (e.g.
-:class:`nodes.planner.stroke.PlannerConfig`, :class:`nodes.triangulator.pipeline.TrackerConfig`,
-:class:`flexsheet.model.finger.FingerScript`), with the defaults and the range checks (``__post_init__``).
+:class:`flexsheet.planning.surface_planner.PlannerConfig`, :class:`flexsheet.vision.tracker.TrackerConfig`,
+:class:`flexsheet.twin.finger.FingerScript`), with the defaults and the range checks (``__post_init__``).
 A node's launch-file parameters are a flat pydantic model (``extra="forbid"``, so a typo is an error). This
 module builds those pydantic fields *from* the dataclass — same names, types and defaults — so nothing is
 copied, and builds the dataclass back from a validated params object. Range checks stay in the dataclass:

@@ -26,10 +26,12 @@ import logging
 import threading
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import zmq
 
-__all__ = ["Transport", "ZmqTransport", "InProcTransport", "TransportError", "CurveConfig", "XPub"]
+__all__ = ["Transport", "ZmqTransport", "InProcTransport", "TransportError", "CurveConfig", "XPub", "BusSocket",
+           "create_curve_keypair", "load_curve_keys"]
 
 log = logging.getLogger(__name__)
 # plain ints: pyzmq's enum flags cost a Python enum operation each (measurable per message)
@@ -460,3 +462,59 @@ class InProcTransport(Transport):
 
     def close(self) -> None:
         self._on_frames = None
+
+
+class BusSocket:
+    """A composable container's one SUB socket, with the ZeroMQ context (and CURVE authenticator) its nodes'
+    :class:`XPub` sockets share (:class:`flexsheet.runtime.container.Bus`).
+
+    ``peers``: endpoints to connect to; ``curve``: CURVE keys or None; ``rcvhwm``: receive high-water mark."""
+
+    def __init__(self, peers: list[str], curve: CurveConfig | None, rcvhwm: int) -> None:
+        self.ctx = zmq.Context()
+        self._auth = _allow_list(self.ctx, curve)[0] if curve is not None else None
+        self.sock = connect_sub(self.ctx, peers, curve, rcvhwm)
+
+    @property
+    def closed(self) -> bool:
+        return self.sock.closed
+
+    def fileno(self) -> int:
+        """The socket's (edge-triggered) file descriptor, for ``loop.add_reader``."""
+        return self.sock.getsockopt(zmq.FD)
+
+    def subscribe(self, prefix: bytes) -> None:
+        self.sock.setsockopt(zmq.SUBSCRIBE, prefix)
+
+    def unsubscribe(self, prefix: bytes) -> None:
+        self.sock.setsockopt(zmq.UNSUBSCRIBE, prefix)
+
+    def drain(self, handler: FramesHandler) -> None:
+        """Hand every waiting multipart message to ``handler`` (:func:`drain_sub`)."""
+        drain_sub(self.sock, handler)
+
+    def close(self) -> None:
+        """Close the socket, stop the authenticator and end the context (idempotent)."""
+        if not self.sock.closed:
+            self.sock.close(linger=0)
+        if self._auth is not None:
+            self._auth.stop()
+            self._auth = None
+        if not self.ctx.closed:
+            self.ctx.term()
+
+
+def create_curve_keypair(folder: str | Path, name: str) -> tuple[Path, Path]:
+    """Write ``folder/name.key`` (public) and ``folder/name.key_secret`` (both); returns their paths."""
+    import zmq.auth
+
+    public, secret = zmq.auth.create_certificates(str(folder), name)
+    return Path(public), Path(secret)
+
+
+def load_curve_keys(path: str | Path) -> tuple[bytes, bytes | None]:
+    """``(public, secret)`` Z85 keys of a certificate file (``secret`` is None for a public-only file).
+    Raises ``OSError``/``ValueError`` for a missing or malformed file."""
+    import zmq.auth
+
+    return zmq.auth.load_certificate(str(path))

@@ -24,8 +24,8 @@ import numpy as np
 from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
+from flexsheet.arm.stream import LinkError, Verdict
 from messages import registers as reg
-from nodes.arm_bridge.link import LinkError, Verdict
 
 __all__ = ["ModbusLink"]
 
@@ -33,7 +33,7 @@ _NET_ERRORS = (TimeoutError, ModbusException, OSError, ValueError)
 
 
 class ModbusLink:
-    """:class:`~nodes.arm_bridge.link.ControllerLink` over Modbus TCP.
+    """:class:`~flexsheet.arm.stream.ControllerLink` over Modbus TCP.
 
     ``host``/``port`` of the controller, ``device_id`` (Modbus unit id), ``request_timeout`` s,
     ``auto_reset`` (reset watchdog faults automatically; never e-stops).

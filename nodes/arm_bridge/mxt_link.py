@@ -44,9 +44,9 @@ from collections.abc import Callable
 
 import numpy as np
 
+from flexsheet.arm.stream import LinkError, Verdict
 from messages import mxt
 from messages import registers as reg
-from nodes.arm_bridge.link import LinkError, Verdict
 
 __all__ = ["MxtLink"]
 
@@ -69,7 +69,7 @@ class _Protocol(asyncio.DatagramProtocol):
 
 
 class MxtLink:
-    """:class:`~nodes.arm_bridge.link.ControllerLink` over MXT/UDP (see module doc).
+    """:class:`~flexsheet.arm.stream.ControllerLink` over MXT/UDP (see module doc).
 
     ``host``/``port``: the controller. ``period``: its control cycle, s. ``open_timeout``: s to wait for the
     NULL packet's reply. ``lost_cycles``: cycles without any reply before the link is reopened.

@@ -1,7 +1,7 @@
 """Node ``arm_bridge``: one per arm PC. ArmTarget (clamp pose) → IK → limited command stream, one command per
 controller cycle (7.1 ms) → ArmJointState.
 
-Thin shell: IK and target logic in :mod:`.tracking` / :mod:`flexsheet.model.kinematics`, command shaping in
+Thin shell: IK and target logic in :mod:`.tracking` / :mod:`flexsheet.arm.kinematics`, command shaping in
 :mod:`.interp`, the protocol-independent streaming loop in :mod:`.link`, and one backend per ``protocol``:
 ``modbus`` (:mod:`.modbus_link`, Modbus TCP register map, docs/register_map.md) or ``mxt``
 (:mod:`.mxt_link`, MELFA real-time external control over UDP, docs/arm.md). Subscribes
@@ -26,15 +26,15 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from flexsheet.model.display_calib import load_display_calib
-from flexsheet.model.kinematics import LEFT_BASE, Q_LOWER, Q_UPPER, QD_MAX, RIGHT_BASE, ArmKinematics
+from flexsheet.arm.kinematics import LEFT_BASE, Q_LOWER, Q_UPPER, QD_MAX, RIGHT_BASE, ArmKinematics
+from flexsheet.arm.limiter import StreamLimiter
+from flexsheet.arm.stream import ArmStream, CycleReport
+from flexsheet.arm.tracking import TargetTracker
+from flexsheet.calibration.display_calib import load_display_calib
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from messages import ArmJointState, ArmTarget, mxt, topics
-from nodes.arm_bridge.interp import StreamLimiter
-from nodes.arm_bridge.link import ArmStream, CycleReport
 from nodes.arm_bridge.modbus_link import ModbusLink
 from nodes.arm_bridge.mxt_link import MxtLink
-from nodes.arm_bridge.tracking import TargetTracker
 
 __all__ = ["ArmBridgeParams", "ArmBridgeNode"]
 

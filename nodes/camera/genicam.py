@@ -4,7 +4,7 @@
 configures Mono8, the region, exposure and frame rate, chooses the synchronisation the cameras offer
 (:func:`plan_sync`: hardware trigger, master/slave trigger line, software trigger or free run; PTP when
 offered), streams with one polling thread per camera and pairs frames by *device* timestamp
-(:class:`nodes.camera.stereo_sync.StereoPairer`), measuring the left/right exposure skew and counting
+(:class:`flexsheet.vision.stereo_sync.StereoPairer`), measuring the left/right exposure skew and counting
 dropped frames (incomplete buffers by status, frame id gaps, Aravis stream counters).
 
 Pure parts (no Aravis): :func:`resolve_device`, :func:`plan_sync`, :class:`SyncPlan`. Aravis is imported
@@ -13,7 +13,7 @@ lazily (:func:`aravis`), so importing this module never needs it. Setup guide: `
 Time stamps: ``buffer.get_timestamp()`` is the device's stamp in ns (Aravis converts GigE ticks with the
 camera's ``GevTimestampTickFrequency``; a camera that reports no tick frequency gets the *host arrival
 time* instead — :meth:`GenICamStereo.start` logs that case). It is mapped to host time (``time.time()``)
-with the offset :class:`~nodes.camera.stereo_sync.ClockMap` measures: by latching the device clock
+with the offset :class:`~flexsheet.vision.stereo_sync.ClockMap` measures: by latching the device clock
 (``TimestampLatch``/``GevTimestampControlLatch``, re-latched every ``relatch_s``) where the camera offers
 it, else from the minimum of arrival − device stamp (late by the minimum delivery delay; documented in
 :class:`ClockMap`).
@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from nodes.camera.stereo_sync import CamFrame, StereoPair, StereoPairer
+from flexsheet.vision.stereo_sync import CamFrame, StereoPair, StereoPairer
 
 __all__ = ["aravis", "DeviceInfo", "list_devices", "resolve_device", "SyncPlan", "plan_sync",
            "probe_features", "GenICamConfig", "GenICamStereo"]

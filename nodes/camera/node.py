@@ -1,7 +1,7 @@
 """Camera node: publishes synchronised raw stereo pairs (mono8) on ``/camera/stereo`` and the latched stereo
 calibration on ``/camera/calibration``.
 
-Sources (param ``source``): ``sim`` — the camera twin (:mod:`flexsheet.model.camera_sim`) rendering the
+Sources (param ``source``): ``sim`` — the camera twin (:mod:`flexsheet.twin.camera`) rendering the
 fingertip marker at the world node's ``/world/finger`` position (extrapolated to the exposure time with its velocity,
 at most 0.1 s), or along a param trajectory until a world node first publishes — never after: a world node that
 stalls or is respawned leaves the finger where it last was (a real finger does not jump to another path); ``genicam`` — a
@@ -20,10 +20,10 @@ Honest twin (issue 15). ``/camera/calibration`` carries what a lab has: the came
 file's top-level ``display_calib:``) with the stereo model that pose was fitted with (the entry's, else the
 stereo calibration file's: ``model``/``calib_file``). A missing ``display_calib`` is an error at start-up —
 except for the *ideal* twin, whose nominal registration is exact. The sim source forms its images through the
-hidden truth instead (param ``twin: {realism, truth_seed}`` → :meth:`flexsheet.model.truth.TwinTruth.draw`):
+hidden truth instead (param ``twin: {realism, truth_seed}`` → :meth:`flexsheet.twin.truth.TwinTruth.draw`):
 the truth's stereo intrinsics and distortion (``model: ximea``; another model renders with its own
 calibration), the truth's mount and marker size, the realistic sensor of
-:class:`flexsheet.model.camera_sim.SimConfig` (``twin.realism: ideal`` → :meth:`SimConfig.ideal`), and drops
+:class:`flexsheet.twin.camera.SimConfig` (``twin.realism: ideal`` → :meth:`SimConfig.ideal`), and drops
 a ``drop_rate`` fraction of its frames (never published, counted in ``/diagnostics``). The sensing params
 left unset (``null``) take the realism's value.
 """
@@ -39,17 +39,20 @@ import cv2
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from flexsheet.model.calibration import load_yaml, to_message
-from flexsheet.model.camera_sim import SimConfig, camera_model, default_trajectory, twin_renderer
-from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.runtime.node import Node, QoS
+from flexsheet.twin.camera import (
+    REALISTIC_DROP_RATE,
+    SimConfig,
+    camera_model,
+    default_trajectory,
+    twin_renderer,
+)
+from flexsheet.twin.truth_choice import TruthChoice
+from flexsheet.vision.stereo_calibration import load_yaml, to_message
 from messages import FingerTruth, StereoFrame, topics
 
 __all__ = ["CameraParams", "CameraNode", "published_registration", "sim_config"]
 
-#: dropped-frame rate of the realistic twin (assumption: ~1 % on a loaded GigE/USB3 link; the GenICam
-#: source counts the real drops in /diagnostics)
-REALISTIC_DROP_RATE = 0.01
 
 
 class CameraParams(BaseModel):
@@ -140,7 +143,7 @@ def sim_config(p: CameraParams) -> SimConfig:
 
 def _with_rectification(st: dict) -> dict:
     """A stereo dict (image_size, K1, D1, K2, D2, R, T) completed with R1, R2, P1, P2, Q (``cv2.stereoRectify``,
-    alpha 0) for :func:`flexsheet.model.calibration.to_message`."""
+    alpha 0) for :func:`flexsheet.vision.stereo_calibration.to_message`."""
     out = {k: np.asarray(st[k], float) for k in ("K1", "D1", "K2", "D2", "R", "T", "R1", "R2", "P1", "P2", "Q")
            if k in st}
     out["image_size"] = tuple(int(x) for x in st["image_size"])
@@ -161,7 +164,7 @@ def published_registration(p: CameraParams, calib: dict) -> tuple[dict, np.ndarr
     image size differs from the camera's."""
     size = tuple(int(v) for v in calib["image_size"])
     if p.display_calib:
-        from flexsheet.model.display_calib import load_display_calib
+        from flexsheet.calibration.display_calib import load_display_calib
 
         cam = load_display_calib(p.display_calib, require=("camera",)).camera
         stereo = cam.stereo if cam.stereo is not None else calib
@@ -174,7 +177,7 @@ def published_registration(p: CameraParams, calib: dict) -> tuple[dict, np.ndarr
         return (_with_rectification(stereo), np.asarray(cam.T_display_camera, float),
                 f"pose from {p.display_calib} ({cam.provenance.source}, {cam.provenance.measured_at}), {src}")
     if p.source == "sim" and p.twin.realism == "ideal":
-        from flexsheet.model.display_calib import nominal_display_calib
+        from flexsheet.calibration.display_calib import nominal_display_calib
 
         return (_with_rectification(calib), nominal_display_calib().camera.T_display_camera.copy(),
                 "nominal registration (ideal twin: exact)")
@@ -214,7 +217,7 @@ class CameraNode(Node):
         self.frames = 0
         self.dropped = 0
         if p.source == "sim":
-            from flexsheet.model.truth import TwinTruth
+            from flexsheet.twin.truth import TwinTruth
 
             truth = TwinTruth.draw(p.twin.truth_seed, p.twin.realism)
             self._drop_rate = (REALISTIC_DROP_RATE if p.twin.realism == "realistic" else 0.0) \

@@ -1,14 +1,14 @@
-"""FEM node: fingertip in, deformed virtual object out. A thin shell around :class:`nodes.fem.realtime.RealtimeModel`.
+"""FEM node: fingertip in, deformed virtual object out. A thin shell around :class:`flexsheet.fem.realtime.RealtimeModel`.
 
 Subscribes ``/fingertip`` (QoS LATEST; ``predicted_position`` when ``use_prediction``). Publishes
 ``/object/deformation`` (:class:`messages.ObjectDeformation`) per fingertip: deformed surface vertices (display
 frame, float32), faces, contact force N, local stiffness dF/dd N/m, depth, method, max strain, status, valid,
 ``source_stamp`` = the fingertip's ``exposure_stamp``.
 
-Start-up (``setup``): choose the mesh from the accuracy table (:mod:`nodes.fem.choose`, logged), then load the
+Start-up (``setup``): choose the mesh from the accuracy table (:mod:`flexsheet.fem.choose`, logged), then load the
 capacitance matrices from the disk cache or precompute them (logged with timing). Then the model the scene
-needs (:func:`nodes.fem.choose.choose_model`, from ``nodes/fem/model_table.json``): linear where it meets the
-accuracy target over ``depth_max``, otherwise the nonlinear snapshots (:mod:`nodes.fem.snapshots`), loaded
+needs (:func:`flexsheet.fem.choose.choose_model`, from ``flexsheet/fem/model_table.json``): linear where it meets the
+accuracy target over ``depth_max``, otherwise the nonlinear snapshots (:mod:`flexsheet.fem.snapshots`), loaded
 from the cache; when they are not cached the node serves the linear model and either builds them in a
 background thread at low priority (``snapshot_build``) or says how to build them
 (``flexsheet experiment fem --node-table``). The diagnostics message tells which model is being served and why.
@@ -16,7 +16,7 @@ The object is the ``scene`` param's (:mod:`flexsheet.model.scenes`; the launcher
 top-level ``scene:``, as for the planner and the renderer; none = the paper's cylinder). The paper's cylinder
 (no scene, or a scene that is exactly it: same size and pose, back-half support, no inclusions) keeps the
 path above; any other scene (sphere, rounded box, organ with its stiff inclusion) is meshed by gmsh and solved
-by :class:`nodes.fem.scene_model.SceneModel` (linear, per-element material, capacitance over the stroke path,
+by :class:`flexsheet.fem.scene_model.SceneModel` (linear, per-element material, capacitance over the stroke path,
 cached), without the nonlinear snapshots (they exist for the cylinder only; the diagnostics message says so).
 Every ``ObjectDeformation`` carries ``scene_key`` = the scene's :meth:`~flexsheet.model.scenes.Scene.key` so
 that the planner uses the FEM's dF/dd only for the object it presents.
@@ -36,14 +36,14 @@ import time
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
+from flexsheet.fem.choose import choose, choose_model, load_model_table, load_table
+from flexsheet.fem.material import Material
+from flexsheet.fem.mesh import MeshSpec
+from flexsheet.fem.realtime import RealtimeModel
 from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from messages import Fingertip, ObjectDeformation, topics
-from nodes.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
-from nodes.fem.choose import choose, choose_model, load_model_table, load_table
-from nodes.fem.material import Material
-from nodes.fem.mesh import MeshSpec
-from nodes.fem.realtime import RealtimeModel
 
 __all__ = ["FemParams", "FemNode", "fem_models_as_cylinder"]
 
@@ -62,7 +62,7 @@ class FemParams(BaseModel):
     ``depth_min``/``depth_max`` m push-depth range the accuracy must hold over; ``max_depth`` m deeper input is
     rejected; ``finger_radius`` m; ``E`` Pa, ``nu``: material (soft-tissue defaults, see material.py; without a
     scene file the hyperelastic law is the paper scene's, a Gent solid with Jm 97.2, whose snapshot table ships
-    in ``nodes/fem/data``);
+    in ``flexsheet/fem/data``);
     ``strain_limit``: largest principal strain before linear is declared invalid; ``cache_dir`` ("" = no
     disk cache); ``mesh_h``/``mesh_h_fine``/``refine_radius`` m and ``order`` override the automatic choice
     when all of h, h_fine are > 0; ``arc_deg``: half-angle of the working arc (deg) whose neighbourhood gets
@@ -76,7 +76,7 @@ class FemParams(BaseModel):
     launcher from the launch file's ``scene:``; none = the paper's cylinder); for a scene other than the
     paper's cylinder its material, support and finger radius replace ``E``/``nu``/``finger_radius``, and
     ``mesh_h``/``mesh_h_fine``/``refine_radius``/``order`` (when h, h_fine > 0) set its mesh (default
-    :data:`nodes.fem.scene_mesh.DEFAULT_SCENE_SPEC`, P2).
+    :data:`flexsheet.fem.scene_mesh.DEFAULT_SCENE_SPEC`, P2).
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -150,8 +150,8 @@ class FemNode(Node):
 
     async def _setup_scene(self) -> None:
         """Mesh and precompute (or load from the cache) the scene's model, then subscribe."""
-        from nodes.fem.scene_mesh import DEFAULT_SCENE_SPEC
-        from nodes.fem.scene_model import SceneModel
+        from flexsheet.fem.scene_mesh import DEFAULT_SCENE_SPEC
+        from flexsheet.fem.scene_model import SceneModel
 
         p: FemParams = self.params
         sc = self.scene
@@ -168,17 +168,17 @@ class FemNode(Node):
                               f"({len(sc.inclusions)} inclusion(s)); nonlinear snapshots exist for the paper's "
                               "cylinder, the sphere and along a scene's stroke (path tables) only")
         # off the event loop: attaching a path table precomputes its contact-following moves (2-5 s, more on a
-        # loaded machine; nodes/fem/path_snapshots.py), during which heartbeats must go on
+        # loaded machine; flexsheet/fem/path_snapshots.py), during which heartbeats must go on
         await asyncio.to_thread(self._setup_scene_table, sc)
         self.pub = self.publisher(topics.DEFORMATION)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
         threading.Thread(target=self._warm_sparse, name="fem-sparse", daemon=True).start()
 
     def _setup_scene_table(self, sc: Scene) -> None:
-        """Attach the scene's nonlinear table (:func:`nodes.fem.scene_model.attach_scene_table`: a sphere's
+        """Attach the scene's nonlinear table (:func:`flexsheet.fem.scene_model.attach_scene_table`: a sphere's
         sphere table, any other scene's path table along its stroke) when this machine's cache or the shipped
         store has it, else serve linear and name the command that builds it."""
-        from nodes.fem.scene_model import attach_scene_table
+        from flexsheet.fem.scene_model import attach_scene_table
 
         cache = ArrayCache(self.params.cache_dir or None, self.log.info)
         try:
@@ -218,7 +218,7 @@ class FemNode(Node):
 
     def _setup_snapshots(self, mat: Material) -> None:
         """Attach the nonlinear snapshots when the scene needs them (cache hit), else say why not."""
-        from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_or_build
+        from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_or_build
 
         p: FemParams = self.params
         kind, why = ("linear", "model=linear") if p.model == "linear" else (
@@ -231,7 +231,7 @@ class FemNode(Node):
         cache = ArrayCache(p.cache_dir or None, self.log.info)
         table, _, _ = load_or_build(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, p.finger_radius, build=False)
         if table is not None:
-            self._attach(table, "loaded from the shipped store (nodes/fem/data)" if cache.shipped() else
+            self._attach(table, "loaded from the shipped store (flexsheet/fem/data)" if cache.shipped() else
                          "loaded from cache")
             return
         if not p.snapshot_build:
@@ -255,7 +255,7 @@ class FemNode(Node):
         self.log.info(self.state_message)
 
     def _build_snapshots(self, cache: ArrayCache, mat: Material) -> None:
-        from nodes.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_or_build
+        from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_or_build
 
         try:
             os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)   # this thread only (Linux)

@@ -1,14 +1,14 @@
 """Planner node: fingertip in, sheet target and the two clamp (arm) targets out. A thin shell around
-:class:`nodes.planner.stroke.SurfacePlanner`.
+:class:`flexsheet.planning.surface_planner.SurfacePlanner`.
 
 The object is the ``scene`` file's (:mod:`flexsheet.model.scenes`; the launcher fills ``scene`` from the
 launch file's top-level ``scene:``; none = the paper's cylinder): its shape
-(:func:`nodes.planner.scene_shape.planner_shape`) and its compliance.
+(:func:`flexsheet.planning.shape.planner_shape`) and its compliance.
 
 Subscribes ``/fingertip`` (QoS LATEST; ``predicted_position`` when ``use_prediction``) and
 ``/object/deformation`` (QoS LATEST). The sheet's tension is set so that its normal stiffness at the contact
 matches the object's local stiffness (issue 17): the FEM's dF/dd (``ObjectDeformation.stiffness``) while
-fresh and *about this scene*, else the scene's estimate at the contact (:mod:`nodes.planner.compliance`:
+fresh and *about this scene*, else the scene's estimate at the contact (:mod:`flexsheet.planning.compliance`:
 Hertz contact with the scene's material, stiffer over inclusions) when ``stiffness_from_scene``, else
 ``object_stiffness``; times ``stiffness_scale``; the stretch is clamped to what the arms can apply. Every
 ``/sheet/target`` carries the tension, the presented and the requested stiffness; the heartbeat's message
@@ -32,13 +32,13 @@ from pydantic import Field
 from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
 from flexsheet.model.shapes import make_shape
 from flexsheet.model.tension import SheetMaterial
+from flexsheet.planning.compliance import SceneCompliance
+from flexsheet.planning.limits import MotionLimits, ReachModel
+from flexsheet.planning.shape import planner_shape
+from flexsheet.planning.surface_planner import INPUT_REJECTIONS, Hold, Plan, PlannerConfig, SurfacePlanner
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
 from messages import ArmTarget, Fingertip, ObjectDeformation, SheetTarget, topics
-from nodes.planner.compliance import SceneCompliance
-from nodes.planner.limits import MotionLimits, ReachModel
-from nodes.planner.scene_shape import planner_shape
-from nodes.planner.stroke import Plan, PlannerConfig, SurfacePlanner
 
 __all__ = ["PlannerParams", "PlannerNode", "fem_solves_scene"]
 
@@ -66,7 +66,7 @@ def _reach(p) -> ReachModel:
         return reach
     from dataclasses import replace
 
-    from flexsheet.model.display_calib import load_display_calib, xyzyaw_from_pose
+    from flexsheet.calibration.display_calib import load_display_calib, xyzyaw_from_pose
 
     dc = load_display_calib(path, require=("arms.left", "arms.right"))
     return replace(reach, left_base=xyzyaw_from_pose(dc.arms["left"].T_display_base),
@@ -99,8 +99,8 @@ PlannerParams = params_model(
     of its messages of the last ``fem_window`` s (default 0: the latest only; on the sphere, whose FEM dF/dd
     jumps with the few surface nodes a light touch moves, a 0.3 s median took the stroke's Δθ from 20.9° to
     4.7° in one run and 18.8° in another, while on the cylinder it lags the tension: 0.60–0.64° against
-    0.40–0.51° with the latest value, two runs each of tests/test_integration_sim.py's script); ``stiffness_from_scene``: else the
-    scene's compliance estimate at the contact (:mod:`nodes.planner.compliance`), else ``object_stiffness``;
+    0.40–0.51° with the latest value, two runs each of tests/system/test_integration_sim.py's script); ``stiffness_from_scene``: else the
+    scene's compliance estimate at the contact (:mod:`flexsheet.planning.compliance`), else ``object_stiffness``;
     ``min_contact_depth`` m: the depth below which the estimate takes that depth (light touch);
     ``display_calib``: the display registration
     (``display.yaml``, filled by the launcher from the launch file's ``display_calib:``) whose arm bases
@@ -189,7 +189,7 @@ class PlannerNode(Node):
     def _note_source(self, source: str) -> None:
         """Say in the heartbeat's message which stiffness sets the tension (on change)."""
         text = {"fem": "the FEM's dF/dd",
-                "scene": "the scene's estimate at the contact (Hertz contact + inclusions, nodes/planner/compliance.py)",
+                "scene": "the scene's estimate at the contact (Hertz contact + inclusions, flexsheet/planning/compliance.py)",
                 "param": f"object_stiffness {self.params.object_stiffness:g} N/m"}[source]
         if self._fem_other_scene and source != "fem":
             text += (f"; the FEM's stiffness is not used: it solves another object than scene "
@@ -204,7 +204,7 @@ class PlannerNode(Node):
     def on_fingertip(self, msg: Fingertip) -> None:
         """Plan and publish; a lost marker holds the last safe pose (status ``hold:marker_lost``)."""
         if not msg.valid:
-            plan = self.planner.hold("hold:marker_lost")
+            plan = self.planner.hold(Hold.MARKER_LOST)
         else:
             pos = msg.predicted_position if self.params.use_prediction else msg.position
             k, source = self._stiffness()
@@ -215,8 +215,7 @@ class PlannerNode(Node):
         if plan is None:
             raise InputRejected(f"fingertip: no safe pose yet to hold (valid={msg.valid})")
         self.publish_plan(plan, msg.exposure_stamp)
-        if plan.status in ("hold:invalid_fingertip", "hold:invalid_stamp", "hold:stale_fingertip",
-                           "hold:invalid_stiffness"):
+        if plan.status in INPUT_REJECTIONS:
             raise InputRejected(f"fingertip: {plan.status} (position={msg.position.tolist()})")
 
     def publish_plan(self, plan: Plan, source_stamp: float) -> None:

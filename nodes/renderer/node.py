@@ -19,7 +19,7 @@ one the node draws through the nominal geometry and says so in its log. ``width`
 drawing resolution of that projector.
 
 This file only wires topics and params. The state and the decisions (inputs → sheet, model choice, error
-table) are :mod:`nodes.renderer.state`; the drawing :mod:`nodes.renderer.scene`; the projector window
+table) are :mod:`flexsheet.rendering.state`; the drawing :mod:`flexsheet.rendering.stereo_renderer`; the projector window
 :mod:`nodes.renderer.window`.
 
 ``output: offscreen`` (default) draws with a headless EGL context in one GL thread. ``output: window`` opens
@@ -41,7 +41,19 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from flexsheet.model import scene as paper
+from flexsheet.model import geometry as paper
+from flexsheet.rendering.correction import check_screen
+from flexsheet.rendering.state import (
+    ErrorTable,
+    PendingPush,
+    RendererState,
+    SheetConfig,
+    build_table,
+    load_geometry,
+    pick_model,
+    sheet_model_for,
+    silhouette_probes,
+)
 from flexsheet.runtime.background import start_worker
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from messages import (
@@ -52,18 +64,6 @@ from messages import (
     RenderedFrame,
     SheetTarget,
     topics,
-)
-from nodes.renderer.correction import check_screen
-from nodes.renderer.state import (
-    ErrorTable,
-    PendingPush,
-    RendererState,
-    SheetConfig,
-    build_table,
-    load_geometry,
-    pick_model,
-    sheet_model_for,
-    silhouette_probes,
 )
 
 __all__ = ["RendererNode", "RendererParams"]
@@ -205,7 +205,7 @@ class RendererNode(Node):
 
     # ------------------------------------------------------------------ offscreen output (GL thread)
     def _gl_init(self) -> None:
-        from nodes.renderer.scene import StereoRenderer
+        from flexsheet.rendering.stereo_renderer import StereoRenderer
 
         self.renderer = StereoRenderer(self.projector, **self._renderer_kwargs())
 

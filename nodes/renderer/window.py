@@ -1,10 +1,10 @@
 """Projector output: a real window (glfw) showing the stereo pair that :class:`StereoRenderer` draws.
 
 The drawing is the offscreen renderer's, unchanged: :class:`WindowOutput` creates the
-:class:`~nodes.renderer.scene.StereoRenderer` on the window's OpenGL context (``moderngl.create_context()``
+:class:`~flexsheet.rendering.stereo_renderer.StereoRenderer` on the window's OpenGL context (``moderngl.create_context()``
 after ``glfw.make_context_current``), the renderer draws both eyes into its framebuffer texture exactly as
 headless, and :class:`Presenter` copies the eye images into the window's back buffer at 1:1 (texelFetch), in
-the chosen stereo format (:func:`nodes.renderer.pacing.frame_layout`), optionally mirrored left-right.
+the chosen stereo format (:func:`flexsheet.rendering.pacing.frame_layout`), optionally mirrored left-right.
 
 * **Monitor, mode.** ``monitor`` is an index into ``glfw.get_monitors()`` (0 = primary) or a substring of a
   monitor's name (on X11 the RandR output, e.g. ``"DP-1"``). Fullscreen asks for a video mode of the frame's
@@ -34,19 +34,19 @@ import ctypes.util
 import logging
 import math
 import time
-from pathlib import Path
 
 import numpy as np
 
 from flexsheet.model.projector import Projector
-from nodes.renderer.pacing import LEFT, RIGHT, STEREO_MODES, FramePacer, frame_layout
-from nodes.renderer.scene import StereoRenderer
+from flexsheet.rendering.pacing import LEFT, RIGHT, STEREO_MODES, FramePacer, frame_layout
+from flexsheet.rendering.stereo_renderer import StereoRenderer
 
 __all__ = ["ProjectorWindow", "Presenter", "WindowOutput", "find_monitor", "monitor_names", "WindowError"]
 
 log = logging.getLogger(__name__)
 
-SHADER_DIR = Path(__file__).with_name("shaders")
+from flexsheet.rendering.stereo_renderer import SHADER_DIR  # noqa: E402
+
 GL_BACK = 0x0405
 GL_BACK_LEFT = 0x0402
 GL_BACK_RIGHT = 0x0403

@@ -1,6 +1,6 @@
 """Triangulator node: ``/camera/stereo`` (+ latched ``/camera/calibration``) → ``/fingertip`` (display frame).
 
-A thin shell around :class:`nodes.triangulator.pipeline.FingertipTracker`. Every frame gives one
+A thin shell around :class:`flexsheet.vision.tracker.FingertipTracker`. Every frame gives one
 :class:`messages.Fingertip`: valid with position, covariance and prediction, or invalid (zero position)
 when the marker is lost, occluded, ambiguous or gated out. Bad frames (wrong size or dtype, unsynchronised
 pair) are rejected with a one-line reason and counted; the node keeps running. Frames that arrive before
@@ -22,8 +22,8 @@ from pydantic import Field
 
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
+from flexsheet.vision.tracker import FingertipTracker, TrackerConfig
 from messages import Fingertip, StereoCalibration, StereoFrame, topics
-from nodes.triangulator.pipeline import FingertipTracker, TrackerConfig
 
 __all__ = ["TriangulatorParams", "TriangulatorNode"]
 
@@ -31,7 +31,7 @@ __all__ = ["TriangulatorParams", "TriangulatorNode"]
 TriangulatorParams = params_model(
     "TriangulatorParams",
     """Triangulator parameters (px, m, s; see docs/vision.md). Every param but ``max_stereo_skew_s`` is a
-    field of — defined, defaulted and checked in — :class:`nodes.triangulator.pipeline.TrackerConfig`;
+    field of — defined, defaulted and checked in — :class:`flexsheet.vision.tracker.TrackerConfig`;
     ``max_stereo_skew_s``: largest left/right exposure difference accepted, s.""",
     config_fields(TrackerConfig),
     check=lambda p: build(TrackerConfig, p),
@@ -56,7 +56,7 @@ class TriangulatorNode(Node):
         self._lock = threading.Lock()
         self.display = None
         if p.display_calib:
-            from flexsheet.model.display_calib import load_display_calib
+            from flexsheet.calibration.display_calib import load_display_calib
 
             self.display = load_display_calib(p.display_calib, require=("camera",)).camera
         self.pub = self.publisher(topics.FINGERTIP)

@@ -4,7 +4,7 @@ Starts ``launch/sim.yaml`` (or ``--launch``) with a viz node added on a free por
 then measures the viz process's CPU (utime + stime from ``/proc/<pid>/stat``, all its threads: Python, ZeroMQ
 I/O, the SDK's tokio workers) over windows of ``--window`` s: no viewer; a viewer with the shipped layout's
 channels (3-D scene, frames, metrics, images); a viewer on every channel; and no viewer again (inputs stay
-subscribed: the transport has no unsubscribe). The viewer is :class:`nodes.viz.wsclient.FoxgloveClient`.
+subscribed: the transport has no unsubscribe). The viewer is :class:`flexsheet.viz.wsclient.FoxgloveClient`.
 ``--runs N`` launches the sim N times; ``OUT/viz_cpu.json`` holds every run and, per window, the median and
 min/max of the CPU (% of one core); ``OUT/viz_cpu.png`` draws them, beside an earlier run's (``--baseline
 FILE``) when given. ``--param KEY=VALUE`` sets a viz parameter. The machine's load shows in the numbers (the
@@ -26,7 +26,8 @@ from pathlib import Path
 
 import yaml
 
-from flexsheet.runtime.foxglove_scene import (
+from flexsheet.runtime.ports import free_port
+from flexsheet.viz.foxglove import (
     CAMERA_LEFT,
     CAMERA_LEFT_INFO,
     CAMERA_RIGHT,
@@ -36,7 +37,6 @@ from flexsheet.runtime.foxglove_scene import (
     SCENE,
     TF,
 )
-from flexsheet.runtime.ports import free_port
 
 __all__ = ["main", "WINDOWS"]
 
@@ -70,7 +70,7 @@ def _find_viz(launch: Path, timeout: float = 60.0) -> int:
 
 
 async def _window(pid: int, port: int, channels, seconds: float) -> dict:
-    from nodes.viz.wsclient import FoxgloveClient
+    from flexsheet.viz.wsclient import FoxgloveClient
 
     c = None
     if channels != []:

@@ -1,6 +1,6 @@
 """Node ``viz``: the Foxglove WebSocket bridge. Serves the display's state in Foxglove's own schemas.
 
-Thin shell around :mod:`flexsheet.runtime.foxglove_scene` (what is drawn, how it is encoded, at what rate) and
+Thin shell around :mod:`flexsheet.viz.foxglove` (what is drawn, how it is encoded, at what rate) and
 the ``foxglove-sdk`` WebSocket server (default port 8765; the SDK speaks the Foxglove WebSocket protocol v1
 under the subprotocol name ``foxglove.sdk.v1``). Open ``ws://HOST:8765`` in Foxglove or Lichtblick and import
 ``docs/foxglove_layout.json`` (see docs/visualise.md).
@@ -40,10 +40,11 @@ import numpy as np
 from foxglove.websocket import ServerListener
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from flexsheet.model import scene
+from flexsheet.model import geometry
 from flexsheet.model.projector import Projector
 from flexsheet.model.sheet_model import SheetConfig
-from flexsheet.runtime.foxglove_scene import (
+from flexsheet.runtime.node import InputRejected, Node, QoS
+from flexsheet.viz.foxglove import (
     FoxgloveStreams,
     Rates,
     SceneBuilder,
@@ -51,7 +52,6 @@ from flexsheet.runtime.foxglove_scene import (
     channel_schemas,
     inputs_for,
 )
-from flexsheet.runtime.node import InputRejected, Node, QoS
 from messages import topics as T
 
 __all__ = ["VizNode", "VizParams"]
@@ -82,15 +82,15 @@ class VizParams(BaseModel):
     poll_rate: float = Field(20.0, gt=0.0, le=200.0, description="how often due outputs are checked, Hz")
     camera_scale: float = Field(0.5, gt=0.0, le=1.0,
                                 description="downscale of the camera images (0.5: a quarter of the pixels)")
-    eye: list[float] = Field(default_factory=lambda: scene.EYE.tolist(), description="cyclopean eye V, m")
+    eye: list[float] = Field(default_factory=lambda: geometry.EYE.tolist(), description="cyclopean eye V, m")
     ipd: float = Field(0.064, ge=0.0, le=0.1, description="interpupillary distance, m")
-    projector_position: list[float] = Field(default_factory=lambda: scene.PROJECTOR.tolist(), description="m")
-    projector_pixel: float = Field(scene.PIXEL_ON_SCREEN, gt=0.0, description="m per px on the screen")
+    projector_position: list[float] = Field(default_factory=lambda: geometry.PROJECTOR.tolist(), description="m")
+    projector_pixel: float = Field(geometry.PIXEL_ON_SCREEN, gt=0.0, description="m per px on the screen")
     width: int = Field(1024, ge=16, description="projector width, px")
     height: int = Field(768, ge=16, description="projector height, px")
-    left_base: list[float] = Field(default_factory=lambda: list(scene.LEFT_BASE), min_length=4, max_length=4,
+    left_base: list[float] = Field(default_factory=lambda: list(geometry.LEFT_BASE), min_length=4, max_length=4,
                                    description="left arm base (x, y, z, yaw), m and rad (as arm_bridge 'base')")
-    right_base: list[float] = Field(default_factory=lambda: list(scene.RIGHT_BASE), min_length=4, max_length=4,
+    right_base: list[float] = Field(default_factory=lambda: list(geometry.RIGHT_BASE), min_length=4, max_length=4,
                                     description="right arm base (x, y, z, yaw), m and rad")
     sheet_grid: int = Field(20, ge=2, le=200, description="sheet mesh vertices per side")
     # the believed sheet: the renderer's pushed-sheet model (flexsheet.model.sheet_model.sheet_model_for); give

@@ -1,7 +1,7 @@
 """World node: the physical twin of the user's finger and the sheet (simulation only), built from the hidden
-truth (:class:`flexsheet.model.truth.TwinTruth`, param ``twin: {realism, truth_seed}``).
+truth (:class:`flexsheet.twin.truth.TwinTruth`, param ``twin: {realism, truth_seed}``).
 
-* Finger: plays a list of :class:`flexsheet.model.finger.FingerScript` segments one after the other (default:
+* Finger: plays a list of :class:`flexsheet.twin.finger.FingerScript` segments one after the other (default:
   the paper's stroking experiment at 10 s and 30 s moving time, then a combined stroke and push) and
   publishes the true marker position on ``/world/finger`` at ``rate_hz`` (100 Hz; the camera twin renders it
   with the truth's velocity between samples). 200 Hz (and a 100 Hz sheet) asked ~0.4 of a core of a 2-core
@@ -14,7 +14,7 @@ truth (:class:`flexsheet.model.truth.TwinTruth`, param ``twin: {realism, truth_s
   (``ArmJointState.position``; the truth's base poses, link lengths and joint zero offsets — never the
   bridge's model in ``ArmJointState.pose``), and the pushed sheet's shape is the nonlinear membrane FEM of
   :mod:`flexsheet.model.sheet_fem` with the truth's Young's modulus, pre-strain and tension ratio
-  (:mod:`nodes.world.physics`); published on ``/world/sheet`` (``membrane``: the deflection on a G×G grid),
+  (:mod:`flexsheet.twin.world`); published on ``/world/sheet`` (``membrane``: the deflection on a G×G grid),
   stamped with the time its pose was true — the mean stamp of the two joint states it comes from — so a world
   tick that runs late does not show as the display's lag in Table I (the finger's shape of a push is the
   finger's at publication).
@@ -40,24 +40,24 @@ import time
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from flexsheet.model import scene
-from flexsheet.model.finger import FingerScript
+from flexsheet.model import geometry
 from flexsheet.model.scenes import Scene, SceneError, load_scene
 from flexsheet.model.sheet_fem import default_cache_dir
-from flexsheet.model.truth import TwinTruth
-from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.runtime.background import start_worker
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
+from flexsheet.twin.finger import FingerScript
+from flexsheet.twin.truth import TwinTruth
+from flexsheet.twin.truth_choice import TruthChoice
+from flexsheet.twin.world import FemSettings, TruePhysics, build_table
 from messages import ArmJointState, FingerTruth, Heartbeat, SheetState
 from messages import topics as T
-from nodes.world.physics import FemSettings, TruePhysics, build_table
 
 __all__ = ["WorldNode", "WorldParams", "Segment", "SheetFemParams"]
 
 
 class SheetFemParams(BaseModel):
-    """The true sheet's FEM tables (:mod:`nodes.world.physics`): ``stretch_step`` clamp strain between tables;
+    """The true sheet's FEM tables (:mod:`flexsheet.twin.world`): ``stretch_step`` clamp strain between tables;
     ``expected_stretch`` the table loaded (or, with ``wait``, built) at start (the planner's default stiffness
     asks ≈ 0.04); ``wait``: build that table before the script starts (first run of a truth seed: minutes;
     then cached) — without it a missing table is built only when a push needs it;
@@ -85,7 +85,7 @@ class SheetFemParams(BaseModel):
 Segment = params_model(
     "Segment",
     """One scripted segment: the fields of — defined, defaulted and checked in —
-    :class:`flexsheet.model.finger.FingerScript` (SI: ``mode`` stroke | push | stroke_push, ``moving_time`` s,
+    :class:`flexsheet.twin.finger.FingerScript` (SI: ``mode`` stroke | push | stroke_push, ``moving_time`` s,
     ``push_depth`` m, ``end_angle`` rad, ``tremor_rms`` m, ``seed``, …) but its ``scene`` (the world's);
     ``script(scene=None)`` builds it on that scene (a :class:`flexsheet.model.scenes.Scene`; ``None``: the
     cylinder parameters ``center``, ``axis``, ``radius``, ``up``, ``start_angle``, ``end_angle``).""",
@@ -114,7 +114,7 @@ DEFAULT_SCRIPT = [Segment(mode="stroke", moving_time=10.0), Segment(mode="stroke
 class WorldParams(BaseModel):
     """``script``: segments played in order; ``rate_hz`` of ``/world/finger``; ``sheet_rate_hz`` of
     ``/world/sheet``; ``membrane_grid`` G (G×G deflection samples of the true shape); ``twin``: the hidden
-    truth (:class:`~flexsheet.model.truth_choice.TruthChoice`); ``sheet_fem``: the true sheet's FEM tables (:class:`SheetFemParams`);
+    truth (:class:`~flexsheet.twin.truth_choice.TruthChoice`); ``sheet_fem``: the true sheet's FEM tables (:class:`SheetFemParams`);
     ``sheet_size`` m: unstretched sheet side between the clamps (for the stretch); ``start_delay`` s before the
     script starts (lets the graph connect and the arms reach the first pose), counted from the heartbeat of the
     last node named in ``start_after`` (node names of the launch file; empty: from the world's own start) or
@@ -129,7 +129,7 @@ class WorldParams(BaseModel):
     membrane_grid: int = Field(default=24, ge=2, le=128)
     twin: TruthChoice = Field(default_factory=TruthChoice)
     sheet_fem: SheetFemParams = Field(default_factory=SheetFemParams)
-    sheet_size: float = Field(default=scene.SHEET_SIZE, gt=0.0)
+    sheet_size: float = Field(default=geometry.SHEET_SIZE, gt=0.0)
     start_delay: float = Field(default=3.0, ge=0.0)
     start_after: list[str] = Field(default_factory=list)
     start_timeout: float = Field(default=60.0, gt=0.0)

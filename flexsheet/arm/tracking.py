@@ -1,0 +1,88 @@
+"""The bridge's target logic, independent of the network (pure; time is passed in).
+
+:class:`TargetTracker` turns clamp-pose targets (``ArmTarget.pose``, display frame) into a joint goal with IK
+seeded from the previous goal, refuses what IK reports as unreachable, beyond limits, singular or a
+branch jump (the goal stays at the last good solution: the arm stops short, the status says why), and holds
+when targets stop arriving for longer than ``target_timeout``. The streaming limiter (:mod:`.interp`) then
+moves the commanded joints toward the goal within the joint limits.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, IKResult
+
+__all__ = ["TargetTracker"]
+
+
+class TargetTracker:
+    """Joint goal for one arm from its stream of clamp-pose targets.
+
+    ``kin``: the arm's :class:`ArmKinematics`. ``target_timeout``: s without a target before holding.
+    ``max_jump``: rad, largest joint change one new target may ask of IK (larger = a branch jump, refused).
+    After a pause of the target stream longer than ``target_timeout`` (the arm held) the first target may ask
+    ``max_jump`` plus what the fastest joint could have moved in the pause (``QD_MAX``'s largest, rad/s, times
+    the pause): the finger went on meanwhile, and a respawned planner's first target is where it is now (a
+    planner dead 5.6 s left the left arm in ``hold:jump`` for 11 s in the faults scenario, session 26). The
+    streaming limiter still moves the arm there at the speed limit. A branch flip inside a flowing stream is
+    refused as before.
+    After :meth:`seed` (or the first target) ``goal`` is a (6,) rad joint vector.
+    """
+
+    def __init__(self, kin: ArmKinematics, target_timeout: float = 0.25, max_jump: float = 0.5) -> None:
+        if not target_timeout > 0.0:
+            raise ValueError(f"target_timeout must be > 0 s, got {target_timeout!r}")
+        if not max_jump > 0.0:
+            raise ValueError(f"max_jump must be > 0 rad, got {max_jump!r}")
+        self.kin = kin
+        self.target_timeout = float(target_timeout)
+        self.max_jump = float(max_jump)
+        self.goal: np.ndarray | None = None
+        self.source_stamp = 0.0
+        self.last_target_at: float | None = None
+        self.ik_status = "no_target"
+        self.last_ik: IKResult | None = None
+        self.refused = 0
+
+    def seed(self, q) -> None:
+        """Start IK from joints ``q`` (6,) rad (the measured joints) if no goal exists yet."""
+        if self.goal is None:
+            self.goal = self.kin.check_q(q).copy()
+
+    def set_target(self, T_display_clamp, source_stamp: float, now: float, q_measured=None) -> IKResult:
+        """Solve IK for a new target pose (4, 4) at time ``now`` (s); returns the :class:`IKResult`.
+
+        Seed: the current goal, else ``q_measured``; the jump limit as the class doc says. If the result is not
+        ok, the goal is unchanged and ``ik_status`` holds the reason. Raises ``ValueError`` for a malformed pose (before anything changes).
+        """
+        seed = self.goal if self.goal is not None else q_measured
+        if seed is None:
+            raise ValueError("no seed: call seed(q_measured) or pass q_measured before the first target")
+        max_jump = self.max_jump
+        if self.last_target_at is not None and now - self.last_target_at > self.target_timeout:
+            max_jump += float(np.max(QD_MAX)) * (now - self.last_target_at)     # resumed after a pause
+        res = self.kin.ik(T_display_clamp, seed, max_jump=max_jump)
+        self.last_ik = res
+        self.last_target_at = now
+        if res.ok:
+            self.goal = res.q
+            self.source_stamp = float(source_stamp)
+            self.ik_status = "ok"
+        else:
+            self.ik_status = res.status
+            self.refused += 1
+        return res
+
+    def status(self, now: float) -> str:
+        """"ok", "hold:no_target" (none yet or timed out) or "hold:<ik status>" (last target refused)."""
+        if self.last_target_at is None or now - self.last_target_at > self.target_timeout:
+            return "hold:no_target"
+        return "ok" if self.ik_status == "ok" else f"hold:{self.ik_status}"
+
+    def goal_for(self, now: float, q_command: np.ndarray) -> np.ndarray:
+        """Joint goal to stream toward at ``now``: the IK goal while targets are fresh, else ``q_command``
+        (hold where the command is: the limiter brakes to a stop)."""
+        if self.goal is None or self.status(now) == "hold:no_target":
+            return q_command
+        return self.goal

@@ -1,0 +1,196 @@
+"""The display's launch extension (:mod:`flexsheet.runtime.extensions`): the top-level ``twin:``, ``scene:``
+and ``display_calib:`` sections of a launch file, the twin's registration before a simulated launch, and the
+``--check`` rules for them.
+
+- ``display_calib: FILE`` — the display registration (``display.yaml``) the nodes take their geometry from;
+  may use ``$(out)`` and ``$(launch_dir)``; handed to every node with a ``display_calib`` param.
+- ``scene: FILE`` — the scene file (``launch/scenes/*.yaml``) every node with a ``scene`` param presents.
+- ``twin: {realism, truth_seed, registration}`` — the hidden truth every twin node draws; with
+  ``registration: true`` (default) and no ``display_calib``, ``flexsheet launch`` first runs the registration
+  in the twin (cached per seed) and hands its ``display.yaml`` to the estimators.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from pathlib import Path
+
+from pydantic import ConfigDict
+
+from flexsheet.runtime.extensions import LaunchExtension, LaunchSection
+from flexsheet.runtime.launch import LaunchError, LaunchFile, substitute, substitutions
+from flexsheet.twin.truth_choice import TruthChoice
+
+__all__ = ["TwinSpec", "EXTENSION", "display_calib_path", "twin_registration", "twin_registration_path",
+           "read_display_calib", "DISPLAY_NEEDS", "DISPLAY_COMMANDS"]
+
+#: node type → the ``display.yaml`` entries its nodes take their geometry from (``{arm}``: the node's arm param)
+DISPLAY_NEEDS: dict[str, tuple[str, ...]] = {"camera": ("camera",), "renderer": ("projector", "eye"),
+                                             "planner": ("arms.left", "arms.right"), "arm_bridge": ("arms.{arm}",)}
+#: display.yaml entry → the command that measures it (docs/calibration.md)
+DISPLAY_COMMANDS = {"camera": "flexsheet calibrate camera-pose", "projector": "flexsheet calibrate projector",
+                    "arms": "flexsheet calibrate arms", "eye": "flexsheet calibrate eye"}
+
+
+class TwinSpec(TruthChoice):
+    """The top-level ``twin:`` section: which hidden truth every twin node draws (``realism``, ``truth_seed``:
+    :class:`~flexsheet.twin.truth_choice.TruthChoice`, the same config the twin nodes take) and
+    ``registration``: before the nodes start, run the registration procedures in the twin
+    (``flexsheet calibrate display --sim``, cached per seed) and give the estimators the ``display.yaml`` it
+    writes (when the file names no ``display_calib`` of its own)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    registration: bool = True
+
+
+def _path(value: str | None, lf: LaunchFile, out: str | None) -> str | None:
+    return None if not value else os.path.expanduser(substitute(value, substitutions(lf, out)))
+
+
+def display_calib_path(lf: LaunchFile, out: str | None = None) -> str | None:
+    """The launch file's ``display_calib`` with substitutions and ``~`` expanded (None when it names none)."""
+    return _path(lf.section("display_calib"), lf, out)
+
+
+def _set_path(text: str) -> str | None:
+    return os.path.abspath(os.path.expanduser(text)) if text else None
+
+
+def twin_registration_path(twin: TwinSpec, cache_root: str | None = None) -> Path:
+    """Where :func:`twin_registration` caches the ``display.yaml`` of ``twin``'s realism and seed (the cache of
+    :func:`flexsheet.calibration.procedures.sim_display_calib`)."""
+    root = Path(cache_root or os.environ.get("FLEXSHEET_CACHE") or "~/.cache/flexsheet").expanduser()
+    return root / "display" / f"{twin.realism}-{twin.truth_seed}" / "display.yaml"
+
+
+def twin_registration(twin: TwinSpec, print_fn=print, cache_root: str | None = None) -> str:
+    """Run the display registration in the twin for ``twin`` (the procedures of ``flexsheet calibrate display
+    --sim``: camera pose, projector, arm bases, against images rendered from the hidden truth), cached per
+    realism, seed, options and procedure version; returns the ``display.yaml`` path. The estimators get only
+    this file, never the truth. Raises :class:`LaunchError` when the registration fails."""
+    from flexsheet.calibration.procedures import sim_display_calib
+
+    print_fn(f"[launch] twin registration ({twin.realism}, truth seed {twin.truth_seed}): the calibration "
+             f"procedures in the twin (cached per seed; the first run of a seed takes ~20-60 s) ...")
+    try:
+        path = sim_display_calib(twin.truth_seed, twin.realism, cache_root=cache_root,
+                                 progress=lambda m: print_fn(f"[launch] {m}"))
+    except (ValueError, RuntimeError, OSError) as exc:
+        raise LaunchError(f"twin registration (truth seed {twin.truth_seed}) failed: {exc}") from None
+    print_fn(f"[launch] twin registration: {path}")
+    return str(path)
+
+
+def _before_launch(lf: LaunchFile, print_fn, check_only: bool) -> dict:
+    """The twin's registration, when the file asks for it and names no ``display_calib``: returns
+    ``{"display_calib": path}`` (nothing with ``check_only`` when the cache is cold: a note instead)."""
+    twin = lf.section("twin")
+    if twin is None or not twin.registration or lf.section("display_calib") is not None:
+        return {}
+    cached = twin_registration_path(twin)
+    if check_only and not cached.exists():
+        print_fn(f"note: the twin registration (truth seed {twin.truth_seed}) runs at start and writes {cached}")
+        return {}
+    return {"display_calib": twin_registration(twin, print_fn=print_fn)}
+
+
+def read_display_calib(path: str) -> None:
+    """Parse a display calibration (:func:`flexsheet.calibration.display_calib.load_display_calib`); raises
+    ``ValueError``."""
+    from flexsheet.calibration.display_calib import load_display_calib
+
+    load_display_calib(path)
+
+
+def read_stereo_calib(path: str) -> None:
+    """Parse a stereo calibration YAML (:func:`flexsheet.vision.stereo_calibration.load_yaml`); raises
+    ``ValueError``."""
+    from flexsheet.vision.stereo_calibration import load_yaml
+
+    load_yaml(path)
+
+
+def _check_scene(c) -> None:
+    """The top-level ``scene:`` file exists and validates (:func:`flexsheet.model.scenes.load_scene`)."""
+    path = _path(c.lf.section("scene"), c.lf, c.out)
+    if path is None:
+        return
+    problem = c.file_problem("scene", path)
+    if problem:
+        c.err("scene", path, problem)
+        return
+    from flexsheet.model.scenes import load_scene
+
+    try:
+        load_scene(path)
+    except ValueError as exc:
+        c.err("scene", path, str(exc))
+
+
+def _check_display_calib(c) -> None:
+    """The ``display_calib`` file parses, holds every entry the checked host's nodes need (nominal ones are
+    warned about) and its camera entry is newer than the camera's ``calib_file``."""
+    path = display_calib_path(c.lf, c.out)
+    if path is None:
+        return
+    problem = c.file_problem("display_calib", path)
+    if problem:
+        c.err("display_calib", path, problem + (" (the registration writes it: docs/calibration.md)"
+                                                if problem == "no such file" else ""))
+        return
+    from flexsheet.calibration.display_calib import load_display_calib
+
+    calib = load_display_calib(path)
+    for name, spec in c.lf.nodes.items():
+        if spec.host not in c.hosts:
+            continue
+        params = c.params(name)
+        for entry in DISPLAY_NEEDS.get(spec.type, ()):
+            entry = entry.format(arm=params.get("arm", "left"))
+            command = DISPLAY_COMMANDS[entry.split(".")[0]]
+            if calib.missing([entry]):
+                c.err("display_calib", path, f"no '{entry}' entry, which node {name} needs (run: {command}; "
+                                             "docs/calibration.md)")
+            elif calib.stale(math.inf, [entry]):
+                c.warn(f"display_calib: the '{entry}' entry node {name} uses is nominal, not measured (run: "
+                       f"{command})")
+        calib_file = params.get("calib_file")
+        if spec.type == "camera" and calib.camera is not None and isinstance(calib_file, str) and calib_file \
+                and os.path.isfile(os.path.expanduser(calib_file)):
+            measured = time.time() - calib.camera.provenance.age_s()
+            changed = os.path.getmtime(os.path.expanduser(calib_file))
+            if calib.camera.provenance.source != "nominal" and measured < changed:
+                c.err("display_calib", path, f"stale 'camera' entry: measured {calib.camera.provenance.measured_at},"
+                                             f" before node {name}'s calib_file {calib_file} changed "
+                                             f"({time.strftime('%Y-%m-%dT%H:%M:%S', time.localtime(changed))}); "
+                                             f"run: {DISPLAY_COMMANDS['camera']}")
+
+
+def _check(c) -> None:
+    _check_display_calib(c)
+    _check_scene(c)
+
+
+def _twin_value(twin: TwinSpec | None, lf: LaunchFile, out: str | None) -> dict | None:
+    return None if twin is None else {"realism": twin.realism, "truth_seed": twin.truth_seed}
+
+
+#: the display's launch extension, named in pyproject.toml's ``flexsheet.launch_extensions`` entry points
+EXTENSION = LaunchExtension(
+    name="display",
+    sections=(
+        LaunchSection("display_calib", str | None, lambda v, lf, out: _path(v, lf, out), _set_path,
+                      "display registration file (display.yaml) the nodes take their geometry from"),
+        LaunchSection("scene", str | None, lambda v, lf, out: _path(v, lf, out), _set_path,
+                      "scene file (launch/scenes/*.yaml) every node presents"),
+        LaunchSection("twin", TwinSpec | None, _twin_value, None,
+                      "the twin's hidden truth (simulated graphs only)"),
+    ),
+    before_launch=_before_launch,
+    check=_check,
+    file_readers={"calib_file": read_stereo_calib, "display_calib": read_display_calib},
+    output_params={("fem", "cache_dir"): "dir"},
+    listen_params={"arm_controller_sim": ("host", "port")},
+)

@@ -1,0 +1,143 @@
+"""One disk cache for every precomputed FEM array set (capacitance matrices, corotational table, nonlinear
+snapshots, reference solutions). Pure: numpy ``.npz`` files, no pickles.
+
+A cache entry is ``<cache_dir>/<kind>_<key>.npz`` where ``key`` is the first 24 hex digits of the SHA-256 of
+the *parts* that determine its content (mesh spec, gmsh version, material, finger radius, solver parameters,
+a version string). Writes are atomic (temporary file + ``os.replace``), so a crash or a concurrent writer never
+leaves a half-written entry; an unreadable entry is reported and recomputed.
+
+Also searched, read-only, after ``cache_dir``: ``flexsheet/fem/data/`` (entries shipped with the repository).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from flexsheet.manifest import record
+
+__all__ = ["DEFAULT_CACHE_DIR", "SHIPPED_DIR", "cache_key", "ArrayCache"]
+
+DEFAULT_CACHE_DIR = os.path.join(os.path.expanduser("~"), ".cache", "flexsheet", "fem")
+SHIPPED_DIR = os.path.join(os.path.dirname(__file__), "data")
+
+
+def cache_key(*parts) -> str:
+    """24-hex-digit SHA-256 key of ``parts`` (their ``str()`` joined by "|"; floats as ``repr``)."""
+    text = "|".join(repr(p) if isinstance(p, float) else str(p) for p in parts)
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+class ArrayCache:
+    """Named array sets on disk. ``cache_dir`` None or "" disables writing (and reading from it); ``shipped_dir``
+    the read-only store searched after it (default :data:`SHIPPED_DIR`; None: none);
+    ``log`` optional callable(str) for one-line reports. ``kind`` must be a simple word (letters, digits, _)."""
+
+    def __init__(self, cache_dir: str | None, log: Callable[[str], None] | None = None,
+                 shipped_dir: str | None = ""):
+        self.cache_dir = cache_dir or None
+        # "" (the default): the module's SHIPPED_DIR as it is now (tests point it elsewhere); None: none
+        self.shipped_dir = SHIPPED_DIR if shipped_dir == "" else shipped_dir
+        self.log = log or (lambda s: None)
+        #: the file the last successful :meth:`load` read (in ``cache_dir`` or ``shipped_dir``), else None
+        self.source: str | None = None
+
+    @staticmethod
+    def _name(kind: str, key: str) -> str:
+        if not kind.replace("_", "").isalnum():
+            raise ValueError(f"cache kind must be letters, digits and '_', got {kind!r}")
+        return f"{kind}_{key}.npz"
+
+    def path(self, kind: str, key: str) -> str | None:
+        """Where the entry is written (None when the cache is disabled)."""
+        return os.path.join(self.cache_dir, self._name(kind, key)) if self.cache_dir else None
+
+    def load(self, kind: str, key: str) -> dict[str, np.ndarray] | None:
+        """The stored arrays, or None when absent or unreadable (reported through ``log``)."""
+        name = self._name(kind, key)
+        for d in (self.cache_dir, self.shipped_dir):
+            if not d:
+                continue
+            p = os.path.join(d, name)
+            if not os.path.exists(p):
+                continue
+            try:
+                with np.load(p, allow_pickle=False) as z:
+                    out = {k: z[k] for k in z.files}
+                self.source = p
+                return out
+            except (OSError, ValueError, KeyError) as exc:
+                self.log(f"fem: cache {p} unusable ({exc}); recomputing")
+        return None
+
+    def shipped(self) -> bool:
+        """Whether the last successful :meth:`load` read the read-only shipped store (``flexsheet/fem/data/``) rather
+        than this machine's cache."""
+        return bool(self.source and self.shipped_dir
+                    and os.path.dirname(os.path.abspath(self.source)) == os.path.abspath(self.shipped_dir))
+
+    def save(self, kind: str, key: str, arrays: dict[str, np.ndarray]) -> str | None:
+        """Store ``arrays`` atomically; returns the path, or None when disabled or the write failed (logged)."""
+        p = self.path(kind, key)
+        if p is None:
+            return None
+        tmp = f"{p}.{os.getpid()}.tmp.npz"
+        try:
+            os.makedirs(self.cache_dir, exist_ok=True)
+            np.savez(tmp, **arrays)
+            os.replace(tmp, p)
+            return p
+        except OSError as exc:
+            self.log(f"fem: could not write cache {p}: {exc}")
+            try:
+                os.remove(tmp)
+            except OSError:
+                pass
+            return None
+
+    def ship(self, kind: str, key: str, arrays: dict[str, np.ndarray]) -> str:
+        """Write an entry into ``shipped_dir`` (the repository's read-only store, ``flexsheet/fem/data/``), zlib
+        compressed (``numpy.savez_compressed``), atomically; returns its path. For entries a fresh machine should
+        not have to compute (the FEM node's snapshot table: hours of CPU), entered in the folder's manifest
+        (:func:`flexsheet.manifest.record`, which deletes an older table of the same kind). Raises ``ValueError`` when there is no
+        shipped directory, ``OSError`` when it cannot be written."""
+        if not self.shipped_dir:
+            raise ValueError("this cache has no shipped directory to write into")
+        os.makedirs(self.shipped_dir, exist_ok=True)
+        p = os.path.join(self.shipped_dir, self._name(kind, key))
+        if os.path.exists(p):           # the same arrays again: keep the file (a zip's bytes carry its write time)
+            try:
+                with np.load(p, allow_pickle=False) as z:
+                    if set(z.files) == set(arrays) and all(
+                            np.asarray(arrays[k]).dtype == z[k].dtype and np.array_equal(arrays[k], z[k])
+                            for k in z.files):
+                        return p
+            except (OSError, ValueError):
+                pass
+        tmp = f"{p}.{os.getpid()}.tmp.npz"
+        try:
+            np.savez_compressed(tmp, **arrays)
+            os.replace(tmp, p)
+        finally:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+        # one table per kind, except the path tables (one per scene): the old version is deleted, not kept
+        record(p, replaces=None if kind == "pathsnap" else f"{kind}_")
+        return p
+
+    def get_or_compute(self, kind: str, key: str, compute: Callable[[], dict[str, np.ndarray]],
+                       what: str = "") -> tuple[dict[str, np.ndarray], bool, float]:
+        """(arrays, hit, seconds): load the entry or run ``compute()`` and store its result."""
+        t = time.perf_counter()
+        z = self.load(kind, key)
+        if z is not None:
+            where = f"the shipped store {self.shipped_dir}" if self.shipped() else "cache"
+            self.log(f"fem: {what or kind} loaded from {where} ({kind}_{key})")
+            return z, True, time.perf_counter() - t
+        z = compute()
+        self.save(kind, key, z)
+        return z, False, time.perf_counter() - t

@@ -1,0 +1,489 @@
+"""Precomputed nonlinear snapshots interpolated over contact position and depth: the real-time nonlinear model.
+
+Peterlík, Sedef, Basdogan & Matyska, "Real-time visio-haptic interaction with static soft tissue models having
+geometric and material nonlinearity", Computers & Graphics 34(1), 2010: precompute nonlinear solutions over the
+finger's state space offline and interpolate them at haptic rate. Here the state is (azimuth φ of the contact
+point, push depth d, axial offset a) and the stored quantity is the displacement of the *surface*, the only
+thing the renderer draws.
+
+* **Offline** (:func:`build_table`): for each snapshot azimuth φ_i the hyperelastic reference (the material's law: neo-Hookean, or Gent — the paper's cylinder since session 18)
+  (:mod:`flexsheet.fem.hyperelastic`) is pushed 0 → d_max with load stepping, and every converged depth d_j is
+  sampled on a fixed surface grid: the side surface on (θ, y) and the end cap on (θ, ρ), display-frame
+  components. Also stored per (φ_i, d_j): finger force, largest strain, inverted elements, min det F.
+* **Run time** (:meth:`SnapshotModel.surface`): the cylinder is rotationally symmetric about its axis except
+  for the support, so each snapshot is *rotated with the finger*: for a push at φ between φ_i and φ_i+1 the
+  field of snapshot i is rotated by δ_i = φ − φ_i about the axis (u(θ) ≈ R(δ_i)·U_i(θ − δ_i)) and the two are
+  blended linearly in φ, and linearly in depth between d_j and d_j+1. Rotating first removes the
+  "ghosting" a plain blend of two fields centred 10° apart would give; what is left to interpolate is the slow
+  change of the support's influence with φ. Negative φ use the z-mirror image, axial offsets a translation
+  along y (both exact symmetries of the geometry, except the end caps for a translation: stated, bounded by
+  ``axial_max``). Cost: 16 bilinear look-ups per rendered vertex, no solve.
+
+Memory: float32, (#φ × #d × #θ × (#y + #ρ) × 3) × 4 bytes (≈ 30 MB for the default table).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from flexsheet.fem.hyperelastic import (
+    DEFAULT_CONTACT,
+    UNLOAD_VERSION,
+    HyperelasticModel,
+    RefSpec,
+    capsule_at,
+    reference_mesh,
+    solve_path,
+    solver_tag,
+    stable_states,
+)
+from flexsheet.fem.material import Material
+
+__all__ = ["SnapshotGrid", "SnapshotModel", "build_table", "surface_coords", "TABLE_VERSION", "DEFAULT_GRID",
+           "DEFAULT_REF_SPEC", "table_key", "load_or_build", "pack_table"]
+
+#: table layout and content; the solver and mesh enter the key through SOLVER_VERSION, spec. snap-2: every
+#: azimuth's states are the stable branch (:func:`flexsheet.fem.hyperelastic.stable_states`), not the loading path
+TABLE_VERSION = "snap-2"
+
+
+@dataclass(frozen=True)
+class SnapshotGrid:
+    """Sampling of the snapshot table: ``angles_deg`` snapshot azimuths (≥ 0, ascending), ``depth_max`` m,
+    ``depth_step`` m (load step and depth sample), ``dtheta_deg`` θ spacing of the surface grid, ``dy`` m
+    spacing along y near the push plane (coarser by 2× beyond 20 mm and 40 mm), ``drho`` m radial spacing on
+    the cap. Raises ``ValueError`` on bad values."""
+
+    #: every 10°, and 5°, 7.5° and 55° besides (sessions 21-23): held out of the 10° table, the push at 5° was
+    #: 2.33 mm off at 47.5 mm and at 55° 1.44 mm at 35 mm (docs/figures/fem/node_table_seven); held out of the
+    #: nine-azimuth table, 15° was within 0.66 mm and 7.5° 1.96 mm off at 50 mm (docs/figures/fem/node_table_nine),
+    #: so 7.5° was added (its held-out solve); held out of this one, 6.25° misses at 40 mm only (0.96 mm) and 8.75°
+    #: from 30 mm (2.77 mm): the frictionless finger's slide changes steeply between 5° and 10° on this mesh
+    #: (docs/figures/fem/node_table, docs/fem.md)
+    angles_deg: tuple[float, ...] = (0.0, 5.0, 7.5, 10.0, 20.0, 30.0, 40.0, 50.0, 55.0, 60.0)
+    depth_max: float = 0.05
+    depth_step: float = 0.0025
+    dtheta_deg: float = 0.5
+    dy: float = 0.0005
+    drho: float = 0.001
+
+    def __post_init__(self):
+        a = np.asarray(self.angles_deg, float)
+        if a.ndim != 1 or len(a) == 0 or np.any(~np.isfinite(a)) or np.any(np.diff(a) <= 0) or a[0] < 0 \
+                or a[-1] > 80:
+            raise ValueError(f"angles_deg must be ascending, finite, in [0, 80], got {self.angles_deg!r}")
+        if not (math.isfinite(self.depth_max) and 0 < self.depth_max <= 0.07):
+            raise ValueError(f"depth_max must be in (0, 0.07] m, got {self.depth_max!r}")
+        if not (math.isfinite(self.depth_step) and 0 < self.depth_step <= self.depth_max):
+            raise ValueError(f"depth_step must be in (0, depth_max] m, got {self.depth_step!r}")
+        for name in ("dtheta_deg", "dy", "drho"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be > 0, got {v!r}")
+
+    def key(self) -> str:
+        """Stable text key (cache keys)."""
+        return (f"a={','.join(f'{x:g}' for x in self.angles_deg)},dmax={self.depth_max:g},ds={self.depth_step:g},"
+                f"dt={self.dtheta_deg:g},dy={self.dy:g},dr={self.drho:g}")
+
+    def depths(self) -> np.ndarray:
+        """Depth samples (m), 0 … depth_max."""
+        n = int(round(self.depth_max / self.depth_step))
+        return np.linspace(0.0, n * self.depth_step, n + 1)
+
+    def thetas(self) -> np.ndarray:
+        """θ samples (rad) over the free half [−90°, 90°] plus a margin of one snapshot spacing."""
+        a = np.asarray(self.angles_deg, float)
+        margin = float(np.max(np.diff(a))) if len(a) > 1 else 10.0
+        lim = 90.0 + margin
+        n = int(math.ceil(2 * lim / self.dtheta_deg))
+        return np.radians(np.linspace(-lim, lim, n + 1))
+
+    def ys(self, half_length: float) -> np.ndarray:
+        """y samples (m, relative to the cylinder centre), 0 … L/2, fine near the push plane."""
+        a = np.arange(0.0, min(0.02, half_length), self.dy)
+        b = np.arange(a[-1] + 2 * self.dy, min(0.04, half_length), 2 * self.dy) if half_length > 0.02 else []
+        last = b[-1] if len(b) else a[-1]
+        c = np.arange(last + 4 * self.dy, half_length, 4 * self.dy) if half_length > 0.04 else []
+        return np.unique(np.concatenate([a, b, c, [half_length]]))
+
+    def rhos(self, radius: float) -> np.ndarray:
+        """Cap radius samples (m), 0 … R."""
+        n = int(math.ceil(radius / self.drho))
+        return np.linspace(0.0, radius, n + 1)
+
+
+DEFAULT_GRID = SnapshotGrid()
+#: the node table's azimuths before session 23 added 7.5° (shipped in session 22): the table on them is extended
+#: azimuth by azimuth (:func:`reusable_table`), not solved again
+PREVIOUS_ANGLES_DEG = (0.0, 5.0, 10.0, 20.0, 30.0, 40.0, 50.0, 55.0, 60.0)
+#: mesh of the snapshot solves = the next-to-finest mesh of the experiment's convergence study (judged against
+#: the finest, 2.5 mm): P2, 12 mm elements, 3.4 mm within 18 mm of the fingertip's whole push path (55 mm deep)
+#: (docs/fem.md; a cut half model of ~31 000 DOF, ~40–70 min of one core per azimuth other than 0:
+#: ``flexsheet experiment fem --node-table --azimuth A``). Off azimuth 0 the half model is *cut*: its mesh has
+#: nodes on the plane through the push axis, as the quarter model has on its mirror plane; without them a half
+#: model is 8–12 % stiffer at 40–50 mm than the quarter model of the same h_fine (session 10), with them within
+#: 1.1 % on the 4.5 and 3.4 mm meshes (3.5 % on the 6 mm one; the experiment's mirror study, docs/fem.md)
+DEFAULT_REF_SPEC = RefSpec(0.012, 0.0034, 0.018, half_z=True, path_depth=0.055, cut=True)
+
+
+def table_key(grid: SnapshotGrid, spec: RefSpec, nu: float, finger_radius: float,
+              contact: str = DEFAULT_CONTACT, Jm: float = math.inf) -> str:
+    """Cache key of a snapshot table. The displacement field does not depend on E (the contact penalty scales
+    with E), so only ν enters, and a Gent solid's ``Jm`` (finite; a neo-Hookean key is the one it was before
+    ``Jm`` existed); forces are scaled by E at run time. ``contact``: the finger's contact law
+    (:data:`flexsheet.fem.hyperelastic.CONTACT_LAWS`)."""
+    import gmsh
+
+    from flexsheet.fem.cache import cache_key
+
+    # spec.key() of a quarter spec leaves out ``cut`` (its azimuth-0 mesh does not depend on it); the off-axis
+    # entries' meshes do
+    return cache_key(TABLE_VERSION, solver_tag(contact), *([UNLOAD_VERSION] if contact == "frictionless" else []),
+                     grid.key(), spec.key(), f"cut={int(spec.cut)}",
+                     gmsh.__version__, f"nu={nu:.9g}", f"r={finger_radius:.9g}",
+                     *([f"Jm={Jm:.9g}"] if math.isfinite(Jm) else []))
+
+
+def load_or_build(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float,
+                  build: bool = True, log=None, solved=None,
+                  contact: str = DEFAULT_CONTACT, reuse: dict | None = None) -> tuple[dict | None, bool, float]:
+    """(table or None, cache hit, seconds): the table from ``cache`` (:class:`flexsheet.fem.cache.ArrayCache`), or
+    built and stored when ``build`` (``solved``, ``contact``, ``reuse``: as :func:`build_table`)."""
+    key = table_key(grid, spec, material.nu, finger_radius, contact, material.Jm)
+    z = cache.load("snapshots", key)
+    if z is not None:
+        return z, True, 0.0
+    if not build:
+        return None, False, 0.0
+    t = time.perf_counter()
+    z = build_table(grid, spec, material, finger_radius, log=log, solved=solved, contact=contact, reuse=reuse)
+    cache.save("snapshots", key, z)
+    return z, False, time.perf_counter() - t
+
+
+def reusable_table(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float,
+                   contact: str = DEFAULT_CONTACT,
+                   previous: tuple[tuple[float, ...], ...] = (PREVIOUS_ANGLES_DEG,)) -> dict | None:
+    """A cached or shipped table that :func:`build_table` can extend to ``grid`` (its ``reuse``): the table of the
+    same mesh spec, material, finger radius (m) and contact law on ``grid``'s samples but an earlier azimuth set,
+    each of ``previous`` tried in turn (only sets that are a proper subset of ``grid``'s azimuths); None when none
+    is there. Its cache key (:func:`table_key`) is what vouches for the spec, material and contact."""
+    for angles in previous:
+        if not set(angles) < set(grid.angles_deg):
+            continue
+        z, hit, _ = load_or_build(cache, replace(grid, angles_deg=tuple(angles)), spec, material, finger_radius,
+                                  build=False, contact=contact)
+        if hit:
+            return z
+    return None
+
+
+def pack_table(table: dict) -> tuple[dict, float]:
+    """A table (:func:`build_table`) made small enough to ship in the repository: the surface fields ``side`` and
+    ``cap`` as float16 (half the bytes; :class:`SnapshotModel` reads them back as float32), everything else as
+    it is. Returns (packed table, largest rounding error in m): float16 keeps 11 significant bits, so a
+    displacement of up to 64 mm is off by at most 2⁻¹⁶ m ≈ 0.015 mm, 2 % of the 0.7 mm target. Raises
+    ``ValueError`` when a surface value does not fit float16's range (|u| ≥ 65504 m: not a displacement)."""
+    out = dict(table)
+    err = 0.0
+    for k in ("side", "cap"):
+        a = np.asarray(table[k], np.float32)
+        if not np.all(np.abs(a) < np.finfo(np.float16).max):
+            raise ValueError(f"snapshot table field {k!r} does not fit float16 (largest |u| {np.abs(a).max():g} m)")
+        h = a.astype(np.float16)
+        err = max(err, float(np.abs(h.astype(np.float32) - a).max(initial=0.0)))
+        out[k] = h
+    return out, err
+
+
+def surface_coords(points: np.ndarray, radius: float, length: float, center: np.ndarray,
+                   tol: float = 1e-6) -> dict[str, np.ndarray]:
+    """Surface coordinates of ``points`` (S, 3) m on the cylinder: ``theta`` (S,) rad azimuth around +x toward
+    +z, ``y`` (S,) m axial offset from the centre, ``rho`` (S,) m distance from the axis, ``cap`` (S,) bool
+    (on an end face, |y| = L/2, and inside the rim: ρ < R − tol)."""
+    rel = np.asarray(points, float) - np.asarray(center, float)
+    theta = np.arctan2(rel[:, 2], rel[:, 0])
+    rho = np.hypot(rel[:, 0], rel[:, 2])
+    cap = (np.abs(np.abs(rel[:, 1]) - length / 2) < tol) & (rho < radius - tol)
+    return {"theta": theta, "y": rel[:, 1], "rho": rho, "cap": cap}
+
+
+def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float, log=None,
+                progress=None, solved=None, contact: str = DEFAULT_CONTACT,
+                reuse: dict | None = None) -> dict[str, np.ndarray]:
+    """Run the nonlinear reference at every snapshot azimuth and sample the surface; returns the table arrays
+    (see :class:`SnapshotModel`). Heavy (minutes per azimuth on a small machine): cache the result
+    (:class:`flexsheet.fem.cache.ArrayCache`). ``spec.half_z`` is used for the azimuth-0 snapshot only.
+    ``solved``: optional callable (azimuth deg, model, depths m) -> list of :class:`PathState` (or None to
+    solve here: the loading path and, frictionless, its stable branch, :func:`flexsheet.fem.hyperelastic.stable_states`),
+    e.g. the experiment's cached stable paths on the same mesh, so nothing is solved twice.
+    ``contact``: the finger's contact law (:func:`flexsheet.fem.hyperelastic.solve_path_capsule`).
+    ``reuse``: optional table of the **same** mesh spec, material, finger and contact law holding some of
+    ``grid``'s azimuths (e.g. the shipped table before azimuths were added, :func:`reusable_table`): those
+    azimuths are copied from it, not solved (its surface fields as stored: float16 in a shipped table, ≤ 0.015
+    mm). The caller vouches for the spec, material, finger and contact (its cache key); its samples (depths, θ,
+    y, ρ, E, version) are checked here: ``ValueError`` when they differ. The result's ``reused`` (A,) bool marks
+    the copied azimuths."""
+    log = log or (lambda s: None)
+    from flexsheet.model.geometry import CYLINDER_CENTER, CYLINDER_LENGTH, CYLINDER_RADIUS
+
+    R, L, c = CYLINDER_RADIUS, CYLINDER_LENGTH, CYLINDER_CENTER
+    depths = grid.depths()
+    th, ys, rh = grid.thetas(), grid.ys(L / 2), grid.rhos(R)
+    na, nd = len(grid.angles_deg), len(depths)
+    side = np.zeros((na, nd, len(th), len(ys), 3), np.float32)
+    capf = np.zeros((na, nd, len(th), len(rh), 3), np.float32)
+    force = np.zeros((na, nd))
+    strain = np.zeros((na, nd))
+    inverted = np.zeros((na, nd), np.int64)
+    min_detf = np.ones((na, nd))
+    newton = np.zeros((na, nd), np.int64)
+    seconds = np.zeros(na)
+    free = np.abs(th) < math.pi / 2
+    T, Y = np.meshgrid(th[free], ys, indexing="ij")
+    side_pts = np.column_stack([c[0] + R * np.cos(T.ravel()), c[1] + Y.ravel(), c[2] + R * np.sin(T.ravel())])
+    T2, P2 = np.meshgrid(th[free], rh, indexing="ij")
+    cap_pts = np.column_stack([c[0] + P2.ravel() * np.cos(T2.ravel()), np.full(T2.size, c[1] + L / 2),
+                               c[2] + P2.ravel() * np.sin(T2.ravel())])
+    reused = np.zeros(na, bool)
+    src = _reuse_index(reuse, grid, depths, th, ys, rh, material) if reuse is not None else {}
+    for i, ang in enumerate(grid.angles_deg):
+        if ang in src:
+            k = src[ang]
+            side[i], capf[i] = np.asarray(reuse["side"][k], np.float32), np.asarray(reuse["cap"][k], np.float32)
+            force[i], strain[i], inverted[i] = reuse["force"][k], reuse["max_strain"][k], reuse["inverted"][k]
+            min_detf[i], newton[i], seconds[i] = reuse["min_detF"][k], reuse["newton"][k], reuse["seconds"][k]
+            reused[i] = True
+            log(f"fem: snapshots at {ang:g} deg taken from the table being extended (not solved again)")
+            continue
+        t0 = time.perf_counter()
+        s = spec if ang == 0.0 else replace(spec, half_z=False)
+        mesh = reference_mesh(s, ang)
+        model = HyperelasticModel(mesh, material, sym_y=True, sym_z=s.half_z)
+        law = f"Gent Jm {material.Jm:g}" if material.gent else "neo-Hookean"
+        log(f"fem: snapshots at {ang:g} deg: {model.n} DOF P2 {law}, {nd - 1} depths ...")
+        states = solved(ang, model, depths[1:]) if solved is not None else None
+        if states is None:
+            states = solve_path(model, math.radians(ang), depths[1:], finger_radius, step=grid.depth_step,
+                                log=log, contact=contact)
+            if contact == "frictionless":       # the stable branch where the push is bistable
+                a = math.radians(ang)
+
+                def caps(d, a=a, m=mesh):
+                    return capsule_at(a, d, finger_radius, m.radius, m.center)
+
+                states, _, _ = stable_states(model, caps, states, step=grid.depth_step, log=log)
+        Ps = _probe(model, side_pts)
+        Pc = _probe(model, cap_pts)
+        for j, st in enumerate(states, start=1):
+            us = _sample(Ps, st.u, side_pts, model)
+            uc = _sample(Pc, st.u, cap_pts, model)
+            side[i, j][free] = us.reshape(int(free.sum()), len(ys), 3)
+            capf[i, j][free] = uc.reshape(int(free.sum()), len(rh), 3)
+            force[i, j], strain[i, j], inverted[i, j] = st.force, st.max_strain, st.inverted
+            min_detf[i, j], newton[i, j] = st.min_detF, st.iterations
+        seconds[i] = time.perf_counter() - t0
+        if progress:
+            progress(i, ang, states, model)
+    return {"version": np.array(TABLE_VERSION), "E": np.array(material.E), "angles": np.radians(np.asarray(grid.angles_deg, float)),
+            "depths": depths, "theta": th, "y": ys, "rho": rh, "side": side, "cap": capf, "force": force,
+            "max_strain": strain, "inverted": inverted, "min_detF": min_detf, "newton": newton,
+            "seconds": seconds, "radius": np.array(R), "length": np.array(L), "center": np.asarray(c, float),
+            "reused": reused}
+
+
+def reused_azimuths(table: dict) -> set[float]:
+    """The azimuths (deg, rounded to 10⁻⁶) that :func:`build_table` copied from the table it extended (its
+    ``reused`` flags); empty for a table built whole or before the flags existed."""
+    if "reused" not in table:
+        return set()
+    return {round(math.degrees(float(a)), 6) for a, r in
+            zip(np.asarray(table["angles"]), np.asarray(table["reused"], bool), strict=True) if r}
+
+
+def _reuse_index(reuse: dict, grid: SnapshotGrid, depths, th, ys, rh, material: Material) -> dict[float, int]:
+    """{azimuth deg of ``grid`` → its index in ``reuse``} for the azimuths ``reuse`` holds; ``ValueError`` when
+    ``reuse`` is sampled otherwise (version, E, depths, θ, y, ρ) than :func:`build_table` would sample."""
+    if str(reuse.get("version", "")) != TABLE_VERSION:
+        raise ValueError(f"reuse: snapshot table version {reuse.get('version')!r} != {TABLE_VERSION!r}")
+    if float(reuse["E"]) != material.E:
+        raise ValueError(f"reuse: table E {float(reuse['E'])!r} Pa != material E {material.E!r} Pa")
+    for name, mine in (("depths", depths), ("theta", th), ("y", ys), ("rho", rh)):
+        theirs = np.asarray(reuse[name], float)
+        if theirs.shape != mine.shape or not np.allclose(theirs, mine, rtol=0.0, atol=1e-12):
+            raise ValueError(f"reuse: the table's {name} samples differ from this grid's ({theirs.shape} vs "
+                             f"{mine.shape})")
+    have = np.degrees(np.asarray(reuse["angles"], float))
+    out = {}
+    for ang in grid.angles_deg:
+        k = np.flatnonzero(np.abs(have - ang) < 1e-9)
+        if k.size:
+            out[ang] = int(k[0])
+    return out
+
+
+def _probe(model: HyperelasticModel, x: np.ndarray):
+    """Probe matrix for points ``x`` folded into the modelled part (y ≥ y_O; z ≥ z_O for a quarter model)."""
+    c = model.mesh.center
+    xf = x.copy()
+    xf[:, 1] = c[1] + np.abs(xf[:, 1] - c[1])
+    if model.sym_z:
+        xf[:, 2] = c[2] + np.abs(xf[:, 2] - c[2])
+    return model.probe_matrix(xf)
+
+
+def _sample(P, u: np.ndarray, x: np.ndarray, model: HyperelasticModel) -> np.ndarray:
+    """Displacements (k, 3) at points ``x`` from DOF-point displacements ``u`` via the probe matrix ``P``,
+    unfolding the mirror images (component signs)."""
+    v = np.asarray(P @ u)
+    c = model.mesh.center
+    v[:, 1] *= np.where(x[:, 1] < c[1], -1.0, 1.0)
+    if model.sym_z:
+        v[:, 2] *= np.where(x[:, 2] < c[2], -1.0, 1.0)
+    return v
+
+
+class SnapshotModel:
+    """Run-time look-up of a snapshot table (dict of arrays from :func:`build_table`, e.g. from the cache).
+
+    ``axial_max`` m: largest |axial offset| served (by translation along y); ``vertices`` (S, 3) m the rendered
+    surface vertices (undeformed, display frame) whose displacements :meth:`surface` returns; ``E`` Pa: the
+    object's modulus (forces scale with E; displacements do not). Raises ``ValueError`` when the table is
+    inconsistent.
+    """
+
+    def __init__(self, table: dict, vertices: np.ndarray, axial_max: float = 0.01, E: float | None = None):
+        t = table
+        if str(t.get("version", "")) != TABLE_VERSION:
+            raise ValueError(f"snapshot table version {t.get('version')!r} != {TABLE_VERSION!r}")
+        self.angles = np.asarray(t["angles"], float)
+        self.depths = np.asarray(t["depths"], float)
+        self.theta, self.ys, self.rhos = (np.asarray(t[k], float) for k in ("theta", "y", "rho"))
+        self.side, self.cap = np.asarray(t["side"], np.float32), np.asarray(t["cap"], np.float32)
+        na, nd = len(self.angles), len(self.depths)
+        if self.side.shape != (na, nd, len(self.theta), len(self.ys), 3) or \
+                self.cap.shape != (na, nd, len(self.theta), len(self.rhos), 3):
+            raise ValueError(f"snapshot table shapes {self.side.shape}, {self.cap.shape} do not match its axes")
+        self.force = np.asarray(t["force"], float) * ((E / float(t["E"])) if E else 1.0)
+        self.max_strain = np.asarray(t["max_strain"], float)
+        self.inverted = np.asarray(t["inverted"], np.int64)
+        self.radius, self.length = float(t["radius"]), float(t["length"])
+        self.center = np.asarray(t["center"], float)
+        self.axial_max = float(axial_max)
+        sc = surface_coords(vertices, self.radius, self.length, self.center)
+        self._th, self._y, self._rho, self._cap = sc["theta"], sc["y"], sc["rho"], sc["cap"]
+        self._ysign = np.where(sc["y"] >= 0, 1.0, -1.0)
+        self.n_vertices = len(vertices)
+        # flattened fields for fast gathers: (na, nd, nθ·nY, 3)
+        self._side_f = self.side.reshape(na, nd, -1, 3)
+        self._cap_f = self.cap.reshape(na, nd, -1, 3)
+        self.nbytes = self.side.nbytes + self.cap.nbytes
+
+    @property
+    def depth_max(self) -> float:
+        """Deepest tabulated push, m."""
+        return float(self.depths[-1])
+
+    @property
+    def angle_max(self) -> float:
+        """Largest tabulated |azimuth|, rad."""
+        return float(self.angles[-1])
+
+    def covers(self, angle: float, depth: float, axial: float) -> bool:
+        """True when (angle rad, depth m, axial m) lies inside the table (|angle| ≤ angle_max, 0 ≤ depth ≤
+        depth_max, |axial| ≤ axial_max)."""
+        return (abs(angle) <= self.angle_max + 1e-9 and 0.0 <= depth <= self.depth_max + 1e-12
+                and abs(axial) <= self.axial_max)
+
+    def _bracket(self, x: float, grid: np.ndarray) -> tuple[int, float]:
+        if len(grid) == 1:
+            return 0, 0.0
+        j = int(np.clip(np.searchsorted(grid, x) - 1, 0, len(grid) - 2))
+        w = float(np.clip((x - grid[j]) / (grid[j + 1] - grid[j]), 0.0, 1.0))
+        return j, w
+
+    def _lookup(self, field: np.ndarray, th: np.ndarray, s: np.ndarray, s_grid: np.ndarray) -> np.ndarray:
+        """Bilinear look-up of ``field`` (nθ·nS, 3) at (θ, s) (k,) each → (k, 3); zero outside the θ range."""
+        tg = self.theta
+        it = np.clip(np.searchsorted(tg, th) - 1, 0, len(tg) - 2)
+        wt = np.clip((th - tg[it]) / (tg[it + 1] - tg[it]), 0.0, 1.0)
+        js = np.clip(np.searchsorted(s_grid, s) - 1, 0, len(s_grid) - 2)
+        ws = np.clip((s - s_grid[js]) / (s_grid[js + 1] - s_grid[js]), 0.0, 1.0)
+        ns = len(s_grid)
+        i00 = it * ns + js
+        out = ((1 - wt) * (1 - ws))[:, None] * field[i00] + ((1 - wt) * ws)[:, None] * field[i00 + 1] \
+            + (wt * (1 - ws))[:, None] * field[i00 + ns] + (wt * ws)[:, None] * field[i00 + ns + 1]
+        out[(th < tg[0]) | (th > tg[-1])] = 0.0
+        return out
+
+    def surface(self, angle: float, depth: float, axial: float = 0.0):
+        """Surface displacements (S, 3) m of the rendered vertices for a push at azimuth ``angle`` (rad),
+        ``depth`` (m), axial offset ``axial`` (m); plus (force N, stiffness dF/dd N/m, max strain, inverted).
+        Raises ``ValueError`` when (angle, depth, axial) is outside the table (see :meth:`covers`)."""
+        if not all(math.isfinite(v) for v in (angle, depth, axial)):
+            raise ValueError(f"angle, depth, axial must be finite, got {angle!r}, {depth!r}, {axial!r}")
+        if not self.covers(angle, depth, axial):
+            raise ValueError(f"push (angle {math.degrees(angle):.1f} deg, depth {depth * 1e3:.1f} mm, axial "
+                             f"{axial * 1e3:.1f} mm) is outside the snapshot table (|angle| <= "
+                             f"{math.degrees(self.angle_max):.1f} deg, depth <= {self.depth_max * 1e3:.1f} mm, "
+                             f"|axial| <= {self.axial_max * 1e3:.1f} mm)")
+        mirror = angle < 0
+        phi = abs(angle)
+        th = -self._th if mirror else self._th
+        yr = self._y - axial
+        ya = np.abs(yr)
+        ysg = np.where(yr >= 0, 1.0, -1.0)
+        ia, wa = self._bracket(phi, self.angles)
+        jd, wd = self._bracket(depth, self.depths)
+        side, cap = self._cap, None
+        side = ~self._cap
+        cap = self._cap
+        u = np.zeros((self.n_vertices, 3))
+        for i, wi in ((ia, 1.0 - wa), (ia + 1, wa)):
+            if wi == 0.0 or i >= len(self.angles):
+                continue
+            delta = phi - self.angles[i]
+            tl = th - delta
+            ui = np.zeros((self.n_vertices, 3))
+            for j, wj in ((jd, 1.0 - wd), (jd + 1, wd)):
+                if wj == 0.0 or j >= len(self.depths):
+                    continue
+                if side.any():
+                    ui[side] += wj * self._lookup(self._side_f[i, j], tl[side], ya[side], self.ys)
+                if cap.any():
+                    ui[cap] += wj * self._lookup(self._cap_f[i, j], tl[cap], self._rho[cap], self.rhos)
+            cd, sd = math.cos(delta), math.sin(delta)
+            ux, uz = ui[:, 0].copy(), ui[:, 2].copy()
+            ui[:, 0] = cd * ux - sd * uz
+            ui[:, 2] = sd * ux + cd * uz
+            u += wi * ui
+        u[:, 1] *= ysg
+        if mirror:
+            u[:, 2] *= -1.0
+        # mirror images of the caps: the table holds the +y cap; a vertex on the −y cap uses it mirrored
+        F = self._bilinear(self.force, ia, wa, jd, wd)
+        j0 = min(jd, len(self.depths) - 2)
+        dF0 = (self.force[ia, j0 + 1] - self.force[ia, j0]) / (self.depths[j0 + 1] - self.depths[j0])
+        ib = min(ia + 1, len(self.angles) - 1)
+        dF1 = (self.force[ib, j0 + 1] - self.force[ib, j0]) / (self.depths[j0 + 1] - self.depths[j0])
+        k = (1 - wa) * dF0 + wa * dF1
+        strain = self._bilinear(self.max_strain, ia, wa, jd, wd)
+        inv = int(self.inverted[ia:ia + 2, jd:jd + 2].max())
+        return u, float(max(F, 0.0)), float(max(k, 0.0)), float(strain), inv
+
+    def _bilinear(self, tab: np.ndarray, ia: int, wa: float, jd: int, wd: float) -> float:
+        return bilinear(tab, ia, wa, jd, wd)
+
+
+def bilinear(tab: np.ndarray, ia: int, wa: float, jd: int, wd: float) -> float:
+    """``tab`` (A, D) blended between rows ia, ia+1 by ``wa`` and columns jd, jd+1 by ``wd`` (clamped at the
+    last row/column): the snapshot tables' per-push scalars (force, strain) at a push between samples."""
+    ib = min(ia + 1, tab.shape[0] - 1)
+    jb = min(jd + 1, tab.shape[1] - 1)
+    return float((1 - wa) * ((1 - wd) * tab[ia, jd] + wd * tab[ia, jb])
+                 + wa * ((1 - wd) * tab[ib, jd] + wd * tab[ib, jb]))

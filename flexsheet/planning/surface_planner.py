@@ -1,0 +1,414 @@
+"""Encountered placement, active touch by rolling without slip, 2-D stroking and pushing (pure).
+
+Paper §V-A and Fig. 7, generalised:
+
+* **Away** (fingertip farther than ``touch_distance`` from the surface): the contact point A is the
+  centre-ray hit (:meth:`flexsheet.model.shapes.Shape.project`; closest point for non-convex meshes) and the
+  sheet is commanded to the tangent plane at A, so the finger meets it there. The sheet's in-plane axis
+  ``axis_u`` is the reference direction (``u_ref``, +y: the clamp line at home) projected onto the
+  tangent plane. A rolled offset left from a previous touch decays with time constant ``recentre_time``.
+* **Touching** (within ``touch_distance``, released beyond ``release_distance``: hysteresis): the sheet
+  rolls on the object without slip. Each update the contact moves on the surface from B₋ to B; the sheet
+  rotates by the smallest rotation taking the old normal to the new one (rolling without spin, i.e.
+  parallel transport of ``axis_u``) and the material point under the finger advances on the sheet by the
+  geodesic step B₋→B (:meth:`Shape.geodesic_step`, exact on the cylinder's side and on spheres). So the
+  arc AB equals the sheet length A′B (Fig. 7(b)) in any direction: around the cylinder, along it, over the
+  other shapes. The sheet centre is ``origin = B − s_u·u − s_v·v`` where (s_u, s_v) are the contact's
+  coordinates on the sheet.
+* **Pushing**: a fingertip inside the object (negative distance) is projected onto the surface by the same
+  rule; the sheet keeps the tangent pose there and the finger depresses it, so stroking and pushing combine.
+* **Compliance**: the stretch comes from :func:`flexsheet.model.tension.stretch_for_stiffness` for the
+  object's stiffness at the contact's distance from the clamps: the one passed in (the FEM's dF/dd), else the
+  scene's compliance model at the contact (:mod:`flexsheet.planning.compliance`), else the configured value;
+  times ``stiffness_scale``. The stretch is clamped to what the arms can apply (status says so).
+* **Limits and safety**: the pose passes :class:`flexsheet.planning.limits.RateLimiter`; clamp points are
+  checked by :class:`flexsheet.planning.limits.ReachModel`.
+
+Defined behaviour where methods fail (each has a test in ``tests/unit/planning/test_planner_stroke.py``):
+
+==============================  =========================================================================
+fingertip on the skeleton       (cylinder axis, sphere centre): the last normal is held → ``hold:singular``
+fingertip inside the object     pushing: projection as above; ``touching`` with negative ``depth``
+past end caps / box edges       centre ray wraps over rim/edge; normals continuous (sharp box: the jump
+                                is ramped by the limiter → ``rate_limited``)
+sudden jump > ``jump_distance``  treated as marker re-acquisition: touch state reset → ``reacquired``,
+                                motion ramped by the limiter
+NaN / invalid / stale input     nothing moves: the last safe plan is returned with ``hold:<reason>``
+unreachable clamp target        arms hold the last reachable pose; status ``unreachable`` (never clipped)
+contact near the sheet edge     the finger slips: offset clamped to the sheet → ``slip:sheet_edge``
+object stiffer than sheet       stretch at its limit → ``object_stiffer_than_sheet``
+==============================  =========================================================================
+
+Units m, rad, s, N/m; all vectors in the display frame; vectors are float tuples for speed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from enum import StrEnum
+from typing import NamedTuple
+
+import numpy as np
+
+from flexsheet.model import geometry
+from flexsheet.model.shapes import Shape
+from flexsheet.model.sheet import clamp_half_span, clamp_points, clamp_poses
+from flexsheet.model.tension import (
+    SheetMaterial,
+    TensionResult,
+    max_stretch_within_force,
+    stiffness,
+    stretch_for_stiffness,
+    tension,
+)
+from flexsheet.model.vec import (
+    Vec,
+    axpy,
+    cols,
+    cross,
+    dot,
+    finite,
+    min_rotation,
+    norm,
+    perp_unit,
+    rodrigues,
+    rot_from_cols,
+    sub,
+)
+from flexsheet.planning.limits import MotionLimits, RateLimiter, ReachModel
+
+__all__ = ["Hold", "INPUT_REJECTIONS", "PlannerConfig", "Plan", "SurfacePlanner"]
+
+
+class Hold(StrEnum):
+    """Why the planner holds its last safe plan (a :class:`Plan` ``status``; compares equal to its string)."""
+
+    MARKER_LOST = "hold:marker_lost"
+    INVALID_FINGERTIP = "hold:invalid_fingertip"
+    INVALID_STAMP = "hold:invalid_stamp"
+    INVALID_STIFFNESS = "hold:invalid_stiffness"
+    STALE_FINGERTIP = "hold:stale_fingertip"
+    SINGULAR = "hold:singular"
+
+
+#: the holds caused by a refused input (the node reports them as rejected input)
+INPUT_REJECTIONS = frozenset({Hold.INVALID_FINGERTIP, Hold.INVALID_STAMP, Hold.STALE_FINGERTIP,
+                              Hold.INVALID_STIFFNESS})
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Planner settings (SI). ``touch_distance``/``release_distance`` m: touch hysteresis on the signed
+    distance; ``singular_eps`` m: skeleton distance below which the centre ray is undefined;
+    ``jump_distance`` m: a larger step between samples is a re-acquired marker; ``recentre_time`` s;
+    ``u_ref`` (3,): preferred in-plane axis; ``sheet_margin`` m: the contact keeps this far from the sheet
+    edges; ``object_stiffness`` N/m: default virtual stiffness (used when neither a stiffness is passed nor
+    a compliance model is given); ``stiffness_scale``: haptic scale — the sheet is asked for this many times
+    the object's stiffness (1: the object's own; < 1 maps an object stiffer than the sheet into the range the
+    arms can apply, reported in every plan's ``object_stiffness``); ``stiffness_tau`` s: time constant of a
+    first-order low-pass on the compliance model's stiffness (it follows the measured push depth, which
+    carries the camera's noise; 0: none); ``max_dt`` s: longer gaps count as one nominal period. Raises
+    ``ValueError`` on bad values."""
+
+    touch_distance: float = 0.002
+    release_distance: float = 0.006
+    singular_eps: float = 1e-4
+    jump_distance: float = 0.03
+    recentre_time: float = 0.5
+    u_ref: Vec = (0.0, 1.0, 0.0)
+    sheet_margin: float = 0.03
+    object_stiffness: float = 30.0
+    stiffness_scale: float = 1.0
+    stiffness_tau: float = 0.1
+    max_dt: float = 0.1
+    material: SheetMaterial = field(default_factory=SheetMaterial)
+    limits: MotionLimits = field(default_factory=MotionLimits)
+    reach: ReachModel = field(default_factory=ReachModel)
+
+    def __post_init__(self) -> None:
+        for k in ("touch_distance", "release_distance", "singular_eps", "jump_distance", "recentre_time",
+                  "sheet_margin", "max_dt"):
+            v = getattr(self, k)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
+                raise ValueError(f"{k} must be finite and > 0, got {v!r}")
+        if self.release_distance < self.touch_distance:
+            raise ValueError(f"release_distance must be >= touch_distance, got {self.release_distance!r}")
+        if not (math.isfinite(self.object_stiffness) and self.object_stiffness >= 0.0):
+            raise ValueError(f"object_stiffness must be finite and >= 0, got {self.object_stiffness!r}")
+        if not (math.isfinite(self.stiffness_tau) and self.stiffness_tau >= 0.0):
+            raise ValueError(f"stiffness_tau must be finite and >= 0 s, got {self.stiffness_tau!r}")
+        if not (math.isfinite(self.stiffness_scale) and 0.0 < self.stiffness_scale <= 100.0):
+            raise ValueError(f"stiffness_scale must be in (0, 100], got {self.stiffness_scale!r}")
+        if len(self.u_ref) != 3 or not finite(self.u_ref) or norm(self.u_ref) < 1e-9:
+            raise ValueError(f"u_ref must be a non-zero finite (3,) vector, got {self.u_ref!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class Plan:
+    """One planner output (display frame, SI).
+
+    ``contact`` (3,) m: contact point on the virtual surface (desired); ``normal``, ``axis_u``, ``axis_v``
+    (3,) unit: commanded sheet frame; ``origin`` (3,) m: commanded sheet centre; ``offset`` (s_u, s_v) m:
+    contact position on the sheet relative to its centre; ``stretch``, ``tension`` N/m, ``stiffness`` N/m,
+    ``object_stiffness`` N/m; ``depth`` m: push depth (≥ 0 when the fingertip is inside); ``touching``;
+    ``status``: "ok" or ';'-joined reasons; ``left``/``right`` (3,) m: clamp points
+    (:func:`flexsheet.model.sheet.clamp_points`); ``reach_margin`` m; ``t`` s: time of the fingertip sample
+    planned from; ``sheet_size`` m: the unstretched sheet side between the clamps; ``k_source``: where
+    ``object_stiffness`` came from — "given" (passed to :meth:`SurfacePlanner.update`, e.g. the FEM's dF/dd),
+    "scene" (the compliance model at the contact) or "param" (``object_stiffness`` of the config); it is
+    already multiplied by ``stiffness_scale``.
+    """
+
+    t: float
+    contact: Vec
+    normal: Vec
+    axis_u: Vec
+    axis_v: Vec
+    origin: Vec
+    offset: tuple[float, float]
+    stretch: float
+    tension: float
+    stiffness: float
+    object_stiffness: float
+    depth: float
+    touching: bool
+    status: str
+    left: Vec
+    right: Vec
+    reach_margin: float
+    sheet_size: float = geometry.SHEET_SIZE
+    k_source: str = "param"
+
+    def rotation(self) -> np.ndarray:
+        """(3, 3) rotation with columns (normal, axis_u, axis_v)."""
+        return np.column_stack([self.normal, self.axis_u, self.axis_v])
+
+    def clamp_matrices(self) -> tuple[np.ndarray, np.ndarray]:
+        """Left and right clamp poses T_display_clamp (4, 4): :func:`flexsheet.model.sheet.clamp_poses` of this
+        plan's sheet (origin, normal, axis_u, stretch, sheet_size)."""
+        return clamp_poses(self.origin, self.normal, self.axis_u, self.stretch, self.sheet_size)
+
+
+class _Sample(NamedTuple):
+    """A fingertip sample that passed the checks: time s, position (3,) m, stiffness N/m (None: from the
+    compliance model at the contact), step s (None first)."""
+
+    t: float
+    p: Vec
+    k_obj: float | None
+    dt: float | None
+    k_src: str = "given"
+
+
+class SurfacePlanner:
+    """Stateful surface planner: feed fingertip samples to :meth:`update`, get :class:`Plan` s.
+
+    ``shape``: a :class:`flexsheet.model.shapes.Shape`; ``config``: :class:`PlannerConfig`; ``compliance``:
+    optional callable (contact (3,) m, normal (3,), depth m) → the object's stiffness N/m there (e.g.
+    :class:`flexsheet.planning.compliance.SceneCompliance`), used when :meth:`update` gets no stiffness (else
+    ``config.object_stiffness``). The first valid sample initialises the pose (no ramp). ``last`` is the last safe plan (``None`` before the first);
+    :meth:`hold` republishes it with a reason (a lost marker, a refused input). ``counts`` counts statuses.
+    """
+
+    def __init__(self, shape: Shape, config: PlannerConfig | None = None, compliance=None):
+        self.shape = shape
+        self.cfg = config or PlannerConfig()
+        self.compliance = compliance
+        self.limiter = RateLimiter(self.cfg.limits)
+        self._eps_max = max_stretch_within_force(self.cfg.material)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget all state (as at start)."""
+        self.last: Plan | None = None
+        self.t_last: float | None = None
+        self.p_last: Vec | None = None
+        self.q_last: Vec | None = None
+        self.n_last: Vec | None = None
+        self.u_last: Vec | None = None
+        self.s: tuple[float, float] = (0.0, 0.0)
+        self.touching = False
+        self.limiter.clear()
+        self._tcache: tuple[float, float, TensionResult] | None = None
+        self._k_model: float | None = None
+        self.counts: dict[str, int] = {}
+
+    # ---------------------------------------------------------------------------------------------
+    def hold(self, reason: str, t: float | None = None) -> Plan | None:
+        """The last safe plan again with status ``reason`` (and time ``t`` s if given), counted in ``counts``;
+        ``None`` before the first plan. Used for a lost marker and for every refused input."""
+        self.counts[reason] = self.counts.get(reason, 0) + 1
+        if self.last is None:
+            return None
+        return replace(self.last, t=self.last.t if t is None else t, status=reason)
+
+    def _tension(self, k: float, off_u: float) -> TensionResult:
+        c = self._tcache
+        if c is not None and abs(c[0] - k) <= 1e-6 * max(1.0, k) and abs(c[1] - off_u) <= 1e-4:
+            return c[2]
+        r = stretch_for_stiffness(k, self.cfg.material, off_u, self._eps_max)
+        self._tcache = (k, off_u, r)
+        return r
+
+    def update(self, t: float, p, object_stiffness: float | None = None) -> Plan | None:
+        """Plan from a fingertip sample ``p`` (3,) m at time ``t`` s; ``object_stiffness`` N/m (e.g. the FEM's
+        dF/dd) overrides the compliance model and the configured value; either is multiplied by
+        ``stiffness_scale``. Returns the new :class:`Plan`, or a held copy of the last
+        safe plan with status ``hold:<reason>`` for invalid input (``None`` if there is none yet). Never raises
+        for bad samples: the reason is counted in ``counts``.
+
+        Steps: check the sample → re-acquisition → project onto the shape (§V-A) → touch hysteresis → roll
+        or recentre (Fig. 7(b)) → stretch for the stiffness → keep the contact on the sheet → rate limits
+        and reach → the plan."""
+        s = self._sample(t, p, object_stiffness)
+        if not isinstance(s, _Sample):
+            return self.hold(*s)
+        cfg = self.cfg
+        status: list[str] = []
+        # re-acquisition: a jump no finger can make between two samples
+        if self.p_last is not None and norm(sub(s.p, self.p_last)) > cfg.jump_distance:
+            self.touching = False
+            status.append("reacquired")
+        proj = self.shape.project(s.p, self.n_last, cfg.singular_eps)
+        if proj.singular:
+            status.append(Hold.SINGULAR)
+        q, n, dist = proj.point, proj.normal, proj.distance
+        k_obj, k_source = self._object_stiffness(s, q, n, dist)
+        if k_obj is None:
+            return self.hold(Hold.INVALID_STIFFNESS, s.t)
+        was_touching = self.touching
+        if not self.touching and dist <= cfg.touch_distance:
+            self.touching = True
+        elif self.touching and dist > cfg.release_distance:
+            self.touching = False
+        su, sv, u = self._roll(q, n, s.dt, was_touching)
+        v = cross(n, u)
+        # stiffness → stretch at the contact's distance from the clamps
+        tr = self._tension(k_obj, su)
+        if tr.saturated:
+            status.append(tr.saturated)
+        su, sv = self._keep_on_sheet(su, sv, tr.stretch, status)
+        origin = axpy(-sv, v, axpy(-su, u, q))
+        o, (nc, uc, vc), st, left, right, margin = self._limit_and_reach(origin, rot_from_cols(n, u, v),
+                                                                          tr.stretch, s.dt, status)
+        mat = cfg.material
+        plan = Plan(s.t, q, nc, uc, vc, o, (su, sv), st, tr.tension if st == tr.stretch else tension(st, mat),
+                    tr.stiffness if st == tr.stretch else _stiffness_or_zero(st, mat, su), k_obj,
+                    max(0.0, -dist), self.touching, ";".join(status) if status else "ok", left, right, margin,
+                    mat.size, k_source)
+        for s_ in status:
+            self.counts[s_] = self.counts.get(s_, 0) + 1
+        self.t_last, self.p_last, self.q_last, self.n_last, self.u_last, self.s = s.t, s.p, q, n, u, (su, sv)
+        if "unreachable" not in status or self.last is None:
+            self.last = plan
+        return plan
+
+    # -- the steps of update ----------------------------------------------------------------------
+    def _sample(self, t, p, object_stiffness) -> _Sample | tuple[str, float | None]:
+        """The checked sample, or (hold reason, hold time) for an input the planner refuses."""
+        try:
+            t = float(t)
+            p = (float(p[0]), float(p[1]), float(p[2])) if len(p) == 3 else None
+        except (TypeError, ValueError, IndexError):
+            p = None
+        if p is None or not (math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(p[2])):
+            return Hold.INVALID_FINGERTIP, None
+        if not math.isfinite(t):
+            return Hold.INVALID_STAMP, None
+        k_obj, src = object_stiffness, "given"
+        if k_obj is None and self.compliance is None:
+            k_obj, src = self.cfg.object_stiffness, "param"
+        if k_obj is not None and not (math.isfinite(k_obj) and k_obj >= 0.0):
+            return Hold.INVALID_STIFFNESS, t
+        if self.t_last is None:
+            return _Sample(t, p, k_obj, None, src)
+        dt = t - self.t_last
+        if dt <= 0.0:
+            return Hold.STALE_FINGERTIP, None
+        return _Sample(t, p, k_obj, min(dt, self.cfg.max_dt), src)
+
+    def _object_stiffness(self, s: _Sample, q: Vec, n: Vec, dist: float) -> tuple[float | None, str]:
+        """(stiffness N/m × ``stiffness_scale``, source) for the sample: the one given (or the config's), else
+        the compliance model at contact ``q``, normal ``n``, depth max(0, −``dist``), low-passed with
+        ``stiffness_tau``; ``None`` when the model fails or gives a negative / non-finite value."""
+        scale_k = self.cfg.stiffness_scale
+        if s.k_obj is not None:
+            return s.k_obj * scale_k, s.k_src
+        try:
+            k = float(self.compliance(q, n, max(0.0, -dist)))
+        except (ValueError, ArithmeticError):
+            return None, "scene"
+        if not (math.isfinite(k) and k >= 0.0):
+            return None, "scene"
+        tau = self.cfg.stiffness_tau
+        if self._k_model is not None and s.dt is not None and tau > 0.0:
+            k = self._k_model + (1.0 - math.exp(-s.dt / tau)) * (k - self._k_model)
+        self._k_model = k
+        return k * scale_k, "scene"
+
+    def _roll(self, q: Vec, n: Vec, dt: float | None, was_touching: bool) -> tuple[float, float, Vec]:
+        """Contact coordinates (s_u, s_v) m on the sheet and the new ``axis_u`` for contact ``q``, normal ``n``.
+
+        Touching: rolling without slip — parallel-transport u, advance the material point by the geodesic
+        step. Not touching: the offset decays with ``recentre_time`` and u is ``u_ref`` in the tangent plane."""
+        cfg = self.cfg
+        su, sv = self.s
+        if self.touching and was_touching and self.n_last is not None and self.q_last is not None \
+                and self.u_last is not None:
+            u0 = self.u_last
+            v0 = cross(self.n_last, u0)
+            g = self.shape.geodesic_step(self.q_last, q)
+            su += dot(g, u0)
+            sv += dot(g, v0)
+            mr = min_rotation(self.n_last, n)
+            u = rodrigues(mr[0], mr[1], u0) if mr is not None else u0
+            return su, sv, perp_unit(n, u)
+        if dt is not None and (su != 0.0 or sv != 0.0):
+            f = math.exp(-dt / cfg.recentre_time)
+            su, sv = su * f, sv * f
+        ref = cfg.u_ref if abs(dot(cfg.u_ref, n)) < 0.999 * norm(cfg.u_ref) or self.u_last is None else self.u_last
+        return su, sv, perp_unit(n, ref)
+
+    def _keep_on_sheet(self, su: float, sv: float, stretch: float, status: list[str]) -> tuple[float, float]:
+        """The finger must stay on the sheet (``sheet_margin`` from its edges): otherwise it slips — the
+        offset is clamped and ``slip:sheet_edge`` appended to ``status``."""
+        cfg = self.cfg
+        hu = clamp_half_span(stretch, cfg.material.size) - cfg.sheet_margin
+        hv = 0.5 * cfg.material.size - cfg.sheet_margin             # free edges: half the unstretched width
+        if abs(su) > hu or abs(sv) > hv:
+            status.append("slip:sheet_edge")
+            return max(-hu, min(hu, su)), max(-hv, min(hv, sv))
+        return su, sv
+
+    def _limit_and_reach(self, origin: Vec, R, stretch: float, dt: float | None, status: list[str]):
+        """Rate-limit the target pose, place the clamps and screen their reach. Returns (origin, (n, u, v),
+        stretch, left, right, reach margin); an unreachable step is undone and the last plan's pose held."""
+        prev = None
+        if dt is None or not self.limiter.initialised:
+            self.limiter.reset(origin, R, stretch)
+            o, Rc, st, limited = origin, R, stretch, False
+        else:
+            prev = self.limiter.snapshot()
+            o, Rc, st, limited = self.limiter.step(origin, R, stretch, dt)
+        if limited:
+            status.append("rate_limited")
+        axes = cols(Rc)
+        left, right = clamp_points(o, axes[1], st, self.cfg.material.size)
+        ok, margin = self.cfg.reach.reachable(left, right)
+        if not ok:
+            status.append("unreachable")
+            if self.last is not None and prev is not None:
+                # hold the last reachable pose (at rest), keep the rolling state of the finger
+                self.limiter.restore(prev, at_rest=True)
+                L = self.last
+                return L.origin, (L.normal, L.axis_u, L.axis_v), L.stretch, L.left, L.right, margin
+        return o, axes, st, left, right, margin
+
+
+def _stiffness_or_zero(stretch: float, mat: SheetMaterial, su: float) -> float:
+    """Stiffness presented at a rate-limited stretch (N/m); 0 when the contact is not between the clamps."""
+    try:
+        return stiffness(stretch, mat, su)
+    except ValueError:
+        return 0.0

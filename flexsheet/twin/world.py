@@ -1,0 +1,136 @@
+"""The world twin's physics of the display, from the hidden truth only (pure; no transport).
+
+* **Clamps**: the true clamp pose of each arm is the *true* forward kinematics of its measured joints —
+  the truth's base pose, link lengths and joint zero offsets (:meth:`flexsheet.twin.truth.TwinTruth.clamp_pose`)
+  — not the bridge's model (nominal URDF at the calibrated base), whose FK the bridge publishes in
+  ``ArmJointState.pose``. Under the ideal truth the two agree exactly.
+* **Sheet**: the pushed sheet's shape is the nonlinear membrane FEM of :mod:`flexsheet.model.sheet_fem` with
+  the truth's Young's modulus, pre-strain and tension ratio, held at the measured clamp span. Its tables are
+  solved per clamp-strain node (``stretch_step`` apart, the nearest available node is used, the actual span
+  mapped onto it) and cached on disk; :meth:`TruePhysics.missing_node` names the node still to be built, which
+  the node builds in a worker process (:func:`build_table`) so that the world's timers never wait on it.
+
+Units: m, rad; frames: display (clamps), the sheet's own (u, v) for the deflection.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from flexsheet.model import geometry
+from flexsheet.model.sheet import SheetSurface, frame_from_clamps
+from flexsheet.model.sheet_fem import (
+    FINGER_RADIUS,
+    TABLE_DEPTHS,
+    TABLE_POSITIONS,
+    FemShape,
+    IndentTable,
+    SheetPhysics,
+)
+from flexsheet.twin.truth import TwinTruth
+
+__all__ = ["FemSettings", "TruePhysics", "build_table"]
+
+
+@dataclass(frozen=True)
+class FemSettings:
+    """How the true sheet's FEM tables are made: ``stretch_step`` (clamp-strain spacing of the tables),
+    ``depths`` and ``positions`` (m, :class:`flexsheet.model.sheet_fem.IndentTable`), ``mesh`` (kwargs of
+    :class:`flexsheet.model.sheet_fem.SheetFEM`), ``cache_dir`` (folder of the cached tables)."""
+
+    stretch_step: float = 0.01
+    depths: tuple[float, ...] = TABLE_DEPTHS
+    positions: tuple[float, ...] = TABLE_POSITIONS
+    mesh: dict = field(default_factory=dict)
+    cache_dir: str = ""
+
+
+def build_table(truth_seed: int, realism: str, stretch: float, size: float, settings: FemSettings) -> str:
+    """Build (or find) the cached FEM table of the truth (``truth_seed``, ``realism``) at clamp strain
+    ``stretch`` over the unstretched side ``size`` m; returns its cache key. Runs in a worker process: it
+    redraws the truth from the seed (nothing but the seed crosses the process boundary)."""
+    truth = TwinTruth.draw(int(truth_seed), realism)
+    phys = SheetPhysics.from_truth(truth, stretch, size)
+    tab = IndentTable(phys, settings.depths, settings.positions, mesh=settings.mesh, cache_dir=settings.cache_dir)
+    return tab.key
+
+
+class TruePhysics:
+    """True clamps and true sheet of one :class:`TwinTruth` (module doc).
+
+    ``size`` m: the unstretched sheet side between the clamps; ``half_width`` m: half the sheet's width.
+    """
+
+    def __init__(self, truth: TwinTruth, settings: FemSettings | None = None, size: float = geometry.SHEET_SIZE,
+                 half_width: float = geometry.SHEET_SIZE / 2) -> None:
+        self.truth = truth
+        self.settings = settings or FemSettings()
+        if not (self.settings.stretch_step > 0.0 and math.isfinite(self.settings.stretch_step)):
+            raise ValueError(f"stretch_step must be > 0, got {self.settings.stretch_step!r}")
+        self.size = float(size)
+        self.half_width = float(half_width)
+        self.tables: dict[float, IndentTable] = {}
+
+    # ------------------------------------------------------------------------------------------- clamps
+    def clamp_pose(self, side: str, q) -> np.ndarray:
+        """True T_display_clamp (4, 4) of arm ``side`` at the measured joints ``q`` (6,) rad."""
+        return self.truth.clamp_pose(side, q)
+
+    # -------------------------------------------------------------------------------------------- sheet
+    def node_of(self, stretch: float) -> float:
+        """The table node (clamp strain) nearest ``stretch``, rounded to the step, ≥ 0."""
+        st = self.settings.stretch_step
+        return round(max(0.0, round(stretch / st) * st), 6)
+
+    def physics(self, node: float) -> SheetPhysics:
+        """The true sheet physics at table node ``node`` (clamp strain)."""
+        return SheetPhysics.from_truth(self.truth, node, self.size, half_width=self.half_width)
+
+    def try_load(self, node: float) -> bool:
+        """Load node ``node``'s table if it is cached (never builds); returns whether it is available."""
+        if node in self.tables:
+            return True
+        s = self.settings
+        tab = _cached_table(self.physics(node), s)
+        if tab is not None:
+            self.tables[node] = tab
+        return tab is not None
+
+    def missing_node(self, stretch: float) -> float | None:
+        """The node ``stretch`` wants when its table is neither loaded nor cached, else ``None``."""
+        node = self.node_of(stretch)
+        return None if self.try_load(node) else node
+
+    def shape(self, depth: float, push_u: float, push_v: float, half_span: float) -> FemShape | None:
+        """The true pushed shape from the nearest loaded table node to the measured span ``half_span`` (m),
+        or ``None`` while no table is loaded. Raises ``ValueError`` for a contact outside the sheet."""
+        if not self.tables:
+            return None
+        stretch = 2.0 * half_span / self.size - 1.0
+        node = min(self.tables, key=lambda n: abs(n - stretch))
+        return self.tables[node].shape(depth, push_u, push_v, half_span)
+
+    def surface(self, T_left: np.ndarray, T_right: np.ndarray, finger: np.ndarray | None
+                ) -> tuple[SheetSurface, float]:
+        """The true sheet held by the true clamp poses (4, 4), pushed by the fingertip ``finger`` (3,) m when
+        it is behind the sheet plane and inside it. Returns (surface, clamp strain). The surface's
+        ``membrane`` is a :class:`FemShape` (or ``None``: flat, or no table yet). Raises ``ValueError`` for
+        clamps that hold no sheet (see :func:`flexsheet.model.sheet.frame_from_clamps`)."""
+        origin, n, eu, a = frame_from_clamps(T_left, T_right)
+        stretch = max(0.0, 2.0 * a / self.size - 1.0)
+        mem = None
+        if finger is not None:
+            d = np.asarray(finger, float) - origin
+            depth = -float(d @ n)
+            pu, pv = float(d @ eu), float(d @ np.cross(n, eu))
+            if depth > 0.0 and abs(pu) < a - FINGER_RADIUS and abs(pv) <= self.half_width:
+                mem = self.shape(depth, pu, pv, a)
+        return SheetSurface(origin, n, eu, a, self.half_width, mem, self.size), stretch
+
+
+def _cached_table(phys: SheetPhysics, s: FemSettings) -> IndentTable | None:
+    """The cached table of ``phys`` or ``None`` (nothing is built)."""
+    return IndentTable.cached(phys, s.depths, s.positions, mesh=s.mesh, cache_dir=s.cache_dir)

@@ -1,0 +1,159 @@
+"""Planner node through the in-process harness, the experiment CLI (quick) and the bench CLI."""
+
+import asyncio
+import time
+
+import numpy as np
+import pytest
+
+from flexsheet.runtime.testing import NodeHarness
+from messages import Fingertip, Header, ObjectDeformation, topics
+from nodes.planner.node import PlannerNode, PlannerParams
+
+
+def _ft(p, valid=True, stamp=None, pred=None):
+    s = time.time() if stamp is None else stamp
+    p = np.asarray(p, float)
+    return Fingertip(header=Header(stamp=s), position=p, covariance=np.eye(3) * 1e-8, valid=valid,
+                     predicted_position=np.asarray(pred if pred is not None else p, float),
+                     prediction_horizon=0.03 if pred is not None else 0.0, exposure_stamp=s - 0.012)
+
+
+def test_node_publishes_targets_with_source_stamp_and_holds_on_lost_marker():
+    async def scenario():
+        async with NodeHarness(PlannerNode, params={"shape": "cylinder", "object_stiffness": 20.0,
+                                                    "stiffness_from_scene": False}) as h:
+            m = _ft([0.02, 0.0, 0.0])
+            h.inject(topics.FINGERTIP, m)
+            st = (await h.wait_for(topics.SHEET_TARGET, n=1, timeout=2.0))[0]
+            left = (await h.wait_for(topics.ARM_LEFT_TARGET, n=1, timeout=2.0))[0]
+            right = (await h.wait_for(topics.ARM_RIGHT_TARGET, n=1, timeout=2.0))[0]
+            assert st.status == "ok" and st.source_stamp == m.exposure_stamp
+            assert np.allclose(st.sheet_origin, 0.0) and np.allclose(st.normal, [1, 0, 0])
+            assert st.stiffness == pytest.approx(20.0, rel=1e-6)
+            half = 0.12 * (1 + st.stretch)
+            assert np.allclose(left.pose[:3, 3], [0, half, 0]) and np.allclose(right.pose[:3, 3], [0, -half, 0])
+            assert left.source_stamp == m.exposure_stamp and right.arm == "right"
+            h.inject(topics.FINGERTIP, _ft([0.0, 0.0, 0.0], valid=False, stamp=m.header.stamp + 0.02))
+            out = await h.wait_for(topics.SHEET_TARGET, n=2, timeout=2.0)
+            assert out[1].status == "hold:marker_lost" and np.array_equal(out[1].sheet_origin, st.sheet_origin)
+            h.inject_raw(topics.FINGERTIP, [b"garbage"])
+            await asyncio.sleep(0.1)
+            assert h.rejected(topics.FINGERTIP) == 1
+    asyncio.run(scenario())
+
+
+def test_node_uses_fem_stiffness_and_prediction():
+    async def scenario():
+        async with NodeHarness(PlannerNode, params={"use_prediction": True}) as h:
+            dm = ObjectDeformation(header=Header(stamp=time.time()), vertices=np.zeros((3, 3), np.float32),
+                                   faces=np.array([[0, 1, 2]], np.int32), contact_force=0.1, stiffness=12.0,
+                                   depth=0.001, contact_point=np.zeros(3), method="condensed")
+            h.inject(topics.DEFORMATION, dm)
+            await asyncio.sleep(0.1)
+            h.inject(topics.FINGERTIP, _ft([0.02, 0.0, 0.0], pred=[0.02, 0.01, 0.0]))
+            st = (await h.wait_for(topics.SHEET_TARGET, n=1, timeout=2.0))[0]
+            assert st.object_stiffness == 12.0 and st.stiffness == pytest.approx(12.0, rel=1e-6)
+            assert st.contact_point[1] == pytest.approx(0.01)          # planned on the predicted position
+    asyncio.run(scenario())
+
+
+def test_params_validate():
+    with pytest.raises(ValueError):
+        PlannerParams(shape="torus")
+    with pytest.raises(ValueError):
+        PlannerParams(bogus=1)
+    cfg = PlannerParams(max_stretch=0.2, reach_max=0.5).planner_config()
+    assert cfg.material.max_stretch == 0.2 and cfg.reach.reach_max == 0.5
+
+
+@pytest.mark.parametrize("lam, tol", [(0.1, 0.005), (1.0, 0.01)])
+def test_experiment_kf_tuning_is_kalatas_alpha_beta_in_steady_state(lam, tol):
+    """The stroke experiment runs the triangulator's real Kalman filter with q from a tracking index λ; its
+    steady-state gains must be Kalata's closed-form α-β gains for that λ (IEEE T-AES 20(2), 1984)."""
+    from flexsheet.experiments.stroke import Predictor, q_for_tracking_index
+
+    T, sig = 1.0 / 48.0, 1e-4
+    pr = Predictor(q_for_tracking_index(lam, sig, T))
+    R = sig ** 2 * np.eye(3)
+    for k in range(2000):
+        pr.update(k * T, np.zeros(3), R)
+    before = pr.predict(T)                                   # prediction for the next sample
+    pr.update(2000 * T, before + [1e-5, 0.0, 0.0], R)        # a 10 µm innovation along x
+    alpha = (pr.kf.x[0] - before[0]) / 1e-5
+    beta = (pr.kf.velocity[0] - 0.0) * T / 1e-5
+    r = (4.0 + lam - np.sqrt(8.0 * lam + lam * lam)) / 4.0   # Kalata: λ = 1 → α = 0.75, β = 0.5
+    a_k = 1.0 - r * r
+    b_k = 2.0 * (2.0 - a_k) - 4.0 * np.sqrt(1.0 - a_k)
+    assert alpha == pytest.approx(a_k, abs=tol) and beta == pytest.approx(b_k, abs=tol)
+    with pytest.raises(ValueError, match="tracking_index"):
+        q_for_tracking_index(0.0, sig, T)
+
+
+def test_params_are_the_pure_configs_fields():
+    from dataclasses import fields
+
+    from flexsheet.model.tension import SheetMaterial
+    from flexsheet.planning.limits import MotionLimits, ReachModel
+    from flexsheet.planning.surface_planner import PlannerConfig
+
+    names = set(PlannerParams.model_fields)
+    for cls in (PlannerConfig, SheetMaterial, MotionLimits, ReachModel):
+        for f in fields(cls):
+            if f.name not in ("material", "limits", "reach"):
+                assert ("sheet_size" if f.name == "size" else f.name) in names, f.name
+    # the default params give exactly the default config; a bad value fails at validation, naming the field
+    assert PlannerParams().planner_config() == PlannerConfig()
+    with pytest.raises(ValueError, match="release_distance"):
+        PlannerParams(touch_distance=0.01, release_distance=0.005)
+    with pytest.raises(ValueError, match="v_max"):
+        PlannerParams(v_max=0.0)
+
+
+def test_bench_prints_json(capsys):
+    from flexsheet.benches import planner as bench
+
+    r = bench.measure("cylinder", 50)
+    assert r["update_median_us"] > 0 and r["n"] == 50
+
+
+def test_reach_takes_the_arm_bases_from_display_calib(tmp_path):
+    """The planner (an estimator) takes the arm bases of the registered display, never the twin's truth."""
+    from flexsheet.calibration.display_calib import nominal_display_calib, write_display_calib
+    from flexsheet.model.geometry import LEFT_BASE
+
+    dc = nominal_display_calib()
+    dc.arms["left"].T_display_base[:3, 3] += (0.004, -0.002, 0.001)
+    path = tmp_path / "display.yaml"
+    write_display_calib(str(path), dc)
+    reach = PlannerParams(display_calib=str(path)).planner_config().reach
+    assert reach.left_base[:3] == pytest.approx((LEFT_BASE[0] + 0.004, LEFT_BASE[1] - 0.002, LEFT_BASE[2] + 0.001))
+    assert reach.left_base[3] == pytest.approx(LEFT_BASE[3])
+    assert PlannerParams().planner_config().reach.left_base == LEFT_BASE     # no file: the design bases
+    with pytest.raises(ValueError, match="not found"):
+        PlannerParams(display_calib=str(tmp_path / "missing.yaml"))
+    del dc.arms["right"]
+    write_display_calib(str(path), dc)
+    with pytest.raises(ValueError, match="arms.right"):
+        PlannerParams(display_calib=str(path))
+
+
+def test_fem_stiffness_counts_only_for_the_scene_the_fem_solved():
+    """``fem_solves_scene``: the FEM's dF/dd is used for the scene whose key its message names; an empty key
+    (a message from before the FEM read scenes) only on the paper's cylinder."""
+    from flexsheet.model.scenes import SCENES_DIR, load_scene, paper_scene
+    from nodes.planner.node import fem_solves_scene
+
+    organ, sphere = load_scene(SCENES_DIR / "organ.yaml"), load_scene(SCENES_DIR / "sphere.yaml")
+
+    def msg(key: str) -> ObjectDeformation:
+        return ObjectDeformation(header=Header(stamp=1.0), vertices=np.zeros((3, 3), np.float32),
+                                 faces=np.array([[0, 1, 2]], np.int32), contact_force=0.1, stiffness=120.0,
+                                 depth=0.003, contact_point=np.zeros(3), method="condensed", scene_key=key)
+
+    assert fem_solves_scene(msg(organ.key()), organ)
+    assert not fem_solves_scene(msg(organ.key()), sphere)
+    assert not fem_solves_scene(msg(sphere.key()), organ, organ.key())
+    assert not fem_solves_scene(msg(""), organ)                  # unknown: not this organ
+    assert fem_solves_scene(msg(""), paper_scene())              # unknown: the old FEM's cylinder
+    assert fem_solves_scene(msg(paper_scene().key()), paper_scene())

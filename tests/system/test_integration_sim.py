@@ -1,0 +1,111 @@
+"""The whole display, simulated on localhost through real processes (launch/sim.yaml), then a replay of its
+bag into the planner and the FEM solver (launch/replay.yaml) whose outputs must match the live run."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+from conftest import MIN_TIPS_HZ
+
+from flexsheet.runtime.bag import bag_info, read_bag
+from flexsheet.runtime.codec import decode_any
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _launch(args: list[str], timeout: float) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "flexsheet", "launch", *args], cwd=ROOT, capture_output=True,
+                          text=True, timeout=timeout)
+
+
+def _by_stamp(bag: Path, topic: str) -> dict[float, object]:
+    out = {}
+    for m in read_bag(bag, topics=[topic]):
+        msg = decode_any(m.frames)
+        out.setdefault(msg.source_stamp, msg)
+    return out
+
+
+def test_sim_launch_prints_table1_and_latency_and_leaves_outputs(sim_run):
+    """The shared sim run (tests/conftest.py ``sim_run``: the 10 s stroke and a 4 s stroke with a push; a
+    Foxglove client watched it for tests/system/test_viz_live.py) ended normally and reported from its bag."""
+    out, stdout = sim_run["out"], sim_run["stdout"]
+    assert sim_run["code"] == 0, stdout[-8000:]
+    assert "Table I" in stdout and "Latency budget per hop" in stdout
+    summary = json.loads((out / "summary.json").read_text())
+    row = summary["10"]
+    # the honest (realistic) twin, judged against its hidden truth: the sheet follows the finger's tangent
+    # plane (the paper's 0.359 deg is NOT beaten here: the realistic camera's 0.26 mm fingertip noise sets a
+    # 0.27 deg floor, docs/planner.md; Table I's figures are the experiment's, docs/planner.md); the run records
+    # which truth it was. Bounds for the loaded 2-core machine, where the lag (6 deg/s of stroke) grows with
+    # contention: mean 1.03 deg (dd 0.64 mm) in session 12's clean cold suite, median 1.25 deg (dd 0.77 mm)
+    # with a solve in the idle class beside it; a loop that does not track is tens of degrees off.
+    assert summary["twin"]["realism"] == "realistic" and summary["twin"]["truth_seed"] == 0
+    assert row["n"] > MIN_TIPS_HZ * 10                    # the 10 s stroke (conftest: not a speed test)
+    assert 0.0 < row["dtheta_median_deg"] < 1.5 and 0.0 < row["dd_median_mm"] < 1.0, row
+    assert row["dtheta_mean_deg"] < 2.0 and row["dd_mean_mm"] < 1.5, row
+    # paper's 2R beside ours: per sample 2R·Δθ against twice the chord 2R·sin(Δθ/2), never smaller, larger by at
+    # most 2R·Δθ³/24 (module doc of flexsheet/experiments/table1.py). Over the samples that is at most
+    # π·E[Δθ²] / (24·E[Δθ]) of the mean (Δθ ≤ π), from the row's own mean and std: a loaded run's few samples
+    # of tens of degrees made it 8.7e-3 (session 26; 2.3e-5 .. 7.1e-4 in three earlier runs, under a fixed 3e-3)
+    d2r = row["dd_2r_mean_mm"] - 2.0 * row["dd_mean_mm"]
+    m, sd = np.radians(row["dtheta_mean_deg"]), np.radians(row["dtheta_std_deg"])
+    assert -1e-9 <= d2r <= 1.1 * np.pi * (sd ** 2 + m ** 2) / (24.0 * m) * row["dd_2r_mean_mm"], row
+    assert summary["faults"]["watchdog"] >= 0 and "camera_frame_to_arm_command" in summary["latency_ms"]
+    assert "stroke_push_4" in summary                      # the combined stroke and push ran too
+    lat = summary["latency_ms"]
+    for hop in ("camera_frame_to_fingertip", "fingertip_to_sheet_target", "sheet_target_to_arm_command",
+                "camera_frame_to_arm_command", "fingertip_to_rendered_frame"):
+        assert lat[hop]["n"] > 20 and lat[hop]["median"] is not None, hop
+    info = bag_info(out / "sim.mcap")
+    assert not info.truncated and info.counts["/object/deformation"] > 100 and info.counts["/render/stereo"] > 20
+    assert (out / "table1.png").stat().st_size > 1000 and (out / "report.md").exists()
+
+
+def test_replay_reproduces_the_live_outputs(sim_run, tmp_path):
+    out = sim_run["out"]
+    assert sim_run["code"] == 0, sim_run["stdout"][-8000:]
+    res = _launch(["launch/replay.yaml", "--out", str(tmp_path), "--set", f"player.file={out / 'sim.mcap'}"],
+                  timeout=180)
+    assert res.returncode == 0, res.stdout[-6000:]
+    live_fem, replay_fem = _by_stamp(out / "sim.mcap", "/object/deformation"), \
+        _by_stamp(tmp_path / "replay.mcap", "/object/deformation")
+    # both FEM nodes take the newest fingertip (QoS latest): compare the fingertips both of them solved for
+    common = [s for s in replay_fem if s in live_fem and s > 0]
+    assert len(common) > 100, (len(common), len(replay_fem), len(live_fem))
+    def stamps_where(fem: dict, held: bool) -> set[float]:
+        """Stamps whose update held a contact point (``held``), or held none: the node's previous solve was at
+        least (or shallower than) the 5 mm sticky depth (flexsheet/fem/contact.py finger_from_tip's anchor)."""
+        stamps = sorted(s for s in fem if s > 0)
+        return {s for prev, s in zip(stamps, stamps[1:], strict=False) if (fem[prev].depth >= 0.005) == held}
+
+    unanchored = stamps_where(live_fem, False) & stamps_where(replay_fem, False)
+    anchored = stamps_where(live_fem, True) & stamps_where(replay_fem, True)
+    checked = held = 0
+    for s in common:
+        a, b = live_fem[s], replay_fem[s]
+        same = (abs(a.contact_force - b.contact_force) <= 1e-9 * max(1.0, a.contact_force)
+                and a.vertices.shape == b.vertices.shape and np.max(np.abs(a.vertices - b.vertices)) <= 1e-9)
+        if a.depth < 0.005 and s in unanchored:   # no held push direction on either side: an update is a pure
+            checked += 1                           # function of the fingertip, so live and replay agree exactly
+            assert same, (s, a.depth, a.contact_force, b.contact_force)
+        elif s in anchored and np.array_equal(a.contact_point, b.contact_point):
+            # a held push: the update is a pure function of the fingertip and the held contact point (which
+            # fixes the push direction, radial on the cylinder), so the same held point gives the same update.
+            # The held point is the first fingertip past 5 mm each node saw: QoS latest drops differ run to run,
+            # so in the stroke-and-push the two may hold different points for the whole push (one run: 5.7 mm
+            # apart at all 78 held updates; another: the same point at > 20) and no count of these is required
+            held += 1
+            assert same, (s, a.depth, a.contact_point, a.contact_force, b.contact_force)
+    assert checked > 50, (checked, held, len(anchored), len(common))
+    live_t, replay_t = _by_stamp(out / "sim.mcap", "/sheet/target"), _by_stamp(tmp_path / "replay.mcap", "/sheet/target")
+    common = [s for s in replay_t if s in live_t and s > 0]
+    assert len(common) > 100
+    dp = np.array([np.linalg.norm(live_t[s].contact_point - replay_t[s].contact_point) for s in common])
+    dn = np.degrees([np.arccos(np.clip(live_t[s].normal @ replay_t[s].normal, -1, 1)) for s in common])
+    # the planner's rate limiter integrates over arrival times, which jitter: compare within tolerances
+    assert np.median(dp) < 1e-4 and np.median(dn) < 0.05, (np.median(dp), np.median(dn))

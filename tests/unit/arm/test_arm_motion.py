@@ -1,0 +1,83 @@
+"""Bridge-side limiter and the twin's servo model: limits never exceeded, stated lag behaviour."""
+
+import numpy as np
+import pytest
+
+from flexsheet.arm.kinematics import Q_HOME, Q_LOWER, Q_UPPER, QD_MAX
+from flexsheet.arm.limiter import StreamLimiter
+from flexsheet.twin.servo import JointServo, ServoParams
+
+T = 0.0071
+
+
+def test_limiter_never_commands_beyond_position_speed_accel():
+    qd, qdd, margin = 0.5 * QD_MAX, 1.0 * QD_MAX, 0.02
+    lim = StreamLimiter(Q_HOME, T, qd, qdd, Q_LOWER, Q_UPPER, margin)
+    rng = np.random.default_rng(11)
+    c_prev, v_prev = lim.c.copy(), np.zeros(6)
+    goal = Q_HOME.copy()
+    for k in range(6000):
+        if k % 40 == 0:   # jumpy goals, including far outside the joint range
+            goal = rng.uniform(Q_LOWER - 1.0, Q_UPPER + 1.0)
+        c = lim.step(goal)
+        v = (c - c_prev) / T
+        assert np.all(np.abs(v) <= qd * (1 + 1e-9))
+        assert np.all(np.abs(v - v_prev) <= qdd * T + 1e-9)
+        assert np.all(c >= Q_LOWER + margin - 1e-12) and np.all(c <= Q_UPPER - margin + 1e-12)
+        c_prev, v_prev = c, v
+
+
+def test_limiter_reaches_a_held_goal_exactly_and_stops():
+    lim = StreamLimiter(Q_HOME, T, QD_MAX, 2 * QD_MAX, Q_LOWER, Q_UPPER)
+    goal = Q_HOME + np.array([0.3, -0.2, 0.1, 0.5, -0.4, 1.0])
+    for _ in range(400):
+        c = lim.step(goal)
+    assert np.allclose(c, goal, atol=1e-12) and np.allclose(lim.v, 0.0)
+
+
+def test_servo_respects_rate_accel_and_converges():
+    p = ServoParams()
+    s = JointServo(Q_HOME, p)
+    goal = Q_HOME + np.array([0.5, 0.3, -0.3, 1.0, 0.5, -2.0])
+    v_prev = np.zeros(6)
+    for _ in range(700):
+        s.step(goal, T)
+        assert np.all(np.abs(s.v) <= p.qd_max * (1 + 1e-12))
+        assert np.all(np.abs(s.v - v_prev) <= p.qdd_max * T + 1e-9)
+        v_prev = s.v.copy()
+    assert np.max(np.abs(s.q - goal)) < 1e-4
+
+
+def test_servo_ramp_lag_is_tau_times_speed():
+    p = ServoParams(tau=0.02)
+    s = JointServo(Q_HOME, p)
+    speed = 0.2    # rad/s, well below the limits
+    t = 0.0
+    for _ in range(300):
+        t += T
+        s.step(Q_HOME + speed * t, T)
+    lag = (Q_HOME + speed * t) - s.q
+    # explicit-Euler first-order lag: after a step the lag is v·(tau − T) (v·tau against the previous target)
+    assert np.allclose(lag, speed * (p.tau - T), rtol=0.02)
+
+
+
+def test_limiter_snapshot_restore_redoes_a_step_toward_a_newer_goal():
+    lim = StreamLimiter(Q_HOME, T, QD_MAX, 2 * QD_MAX, Q_LOWER, Q_UPPER)
+    for _ in range(10):
+        lim.step(Q_HOME + 0.5)                           # moving: v != 0
+    snap = lim.snapshot()
+    a = lim.step(Q_HOME + 0.5)
+    snap_copy = (snap[0].copy(), snap[1].copy())
+    lim.c[:] += 1.0                                      # the snapshot is a copy: later changes do not leak
+    assert np.array_equal(snap[0], snap_copy[0])
+    lim.restore(snap)
+    assert np.array_equal(lim.step(Q_HOME + 0.5), a)     # same state, same goal → the same command
+    lim.restore(snap)
+    b = lim.step(Q_HOME - 0.5)                           # redo the step toward a newer goal
+    assert np.all(np.abs(b - snap[0]) <= QD_MAX * T * (1 + 1e-9))               # still one period's step
+    assert np.all(np.abs((b - snap[0]) / T - snap[1]) <= 2 * QD_MAX * T + 1e-9)  # and one period's Δv
+    assert not np.array_equal(a, b)
+    for bad in [(np.zeros(5), np.zeros(6)), (np.full(6, np.nan), np.zeros(6)), "xy", None, (1, 2, 3)]:
+        with pytest.raises(ValueError, match="snapshot"):
+            lim.restore(bad)

@@ -1,0 +1,346 @@
+"""Planner: encountered placement, rolling without slip, pushing, limits, and the stability cases (issue 4)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from flexsheet.experiments.table1 import stroke_errors, summarize, table1
+from flexsheet.model import geometry
+from flexsheet.model.shapes import make_shape, paper_cylinder
+from flexsheet.model.sheet import clamp_poses
+from flexsheet.model.vec import cross, dot, norm, sub
+from flexsheet.planning.limits import MotionLimits, RateLimiter, ReachModel, limit_step
+from flexsheet.planning.surface_planner import PlannerConfig, SurfacePlanner
+from flexsheet.twin.finger import FingerScript
+
+R = geometry.CYLINDER_RADIUS
+DT = 1.0 / 48.0
+
+
+def _stroke(planner, shape, angles, h=None, depth=0.0005, t0=0.0):
+    plans = []
+    for k, a in enumerate(angles):
+        p = shape.point_at(a, 0.0 if h is None else h[k], R - depth)
+        plans.append(planner.update(t0 + k * DT, p))
+    return plans
+
+
+def test_placement_is_tangent_plane_at_centre_ray_hit():
+    c = paper_cylinder()
+    pl = SurfacePlanner(c)
+    p = (-R + 0.08 * math.cos(0.4), 0.0, -0.08 * math.sin(0.4))   # away from the object
+    plan = pl.update(0.0, p)
+    A = c.point_at(0.4)
+    assert not plan.touching and plan.status == "ok"
+    assert norm(sub(plan.contact, A)) < 1e-12 and norm(sub(plan.origin, A)) < 1e-12
+    n = plan.normal
+    assert abs(dot(n, sub(A, c.c)) - R) < 1e-12              # tangent plane at A
+    assert abs(dot(plan.axis_u, n)) < 1e-12 and plan.axis_u[1] > 0.99
+    # clamps match flexsheet.model.sheet.clamp_poses
+    Tl, Tr = plan.clamp_matrices()
+    El, Er = clamp_poses(np.array(plan.origin), np.array(plan.normal), np.array(plan.axis_u), plan.stretch)
+    assert np.allclose(Tl, El, atol=1e-12) and np.allclose(Tr, Er, atol=1e-12)
+
+
+def test_rolling_without_slip_arc_equals_sheet_length():
+    c = paper_cylinder()
+    pl = SurfacePlanner(c)
+    angles = np.radians(np.linspace(0, 60, 481))
+    plans = _stroke(pl, c, -angles)          # point_at positive angles go down (a × e1 = −z)
+    last = plans[-1]
+    arc = R * math.radians(60)
+    assert last.touching and last.status == "ok"
+    assert math.hypot(*last.offset) == pytest.approx(arc, rel=1e-9)
+    # A' (the sheet's material point that first touched A) is at distance arc from B along the sheet
+    Ap = sub(last.origin, (0.0, 0.0, 0.0))
+    B = last.contact
+    assert norm(sub(B, Ap)) == pytest.approx(arc, rel=1e-9)
+    assert abs(dot(sub(B, Ap), last.normal)) < 1e-12          # A'B lies in the sheet plane
+    assert dot(last.normal, sub(B, c.c)) == pytest.approx(R)  # tangent at B
+
+
+def test_two_d_stroking_around_and_along_is_path_independent_on_cylinder():
+    c = paper_cylinder()
+    n = 200
+    a1 = np.r_[np.linspace(0, 0.5, n), np.full(n, 0.5)]
+    h1 = np.r_[np.zeros(n), np.linspace(0, 0.03, n)]
+    a2 = np.r_[np.zeros(n), np.linspace(0, 0.5, n)]
+    h2 = np.r_[np.linspace(0, 0.03, n), np.full(n, 0.03)]
+    p1 = _stroke(SurfacePlanner(c), c, a1, h1)[-1]
+    p2 = _stroke(SurfacePlanner(c), c, a2, h2)[-1]
+    assert norm(sub(p1.origin, p2.origin)) < 1e-9            # cylinder is developable: no holonomy
+    assert p1.offset == pytest.approx(p2.offset, abs=1e-9)
+    assert abs(p1.offset[0]) == pytest.approx(0.03, abs=1e-9)
+
+
+def test_stroking_on_sphere_keeps_tangent_and_rolls_geodesic():
+    s = make_shape("sphere", {"center": (-0.04, 0.0, 0.0), "radius": 0.04})
+    pl = SurfacePlanner(s)
+    for k, a in enumerate(np.linspace(0, 0.6, 300)):
+        p = (-0.04 + 0.0395 * math.cos(a), 0.0395 * math.sin(a), 0.0)
+        plan = pl.update(k * DT, p)
+    assert plan.touching
+    assert math.hypot(*plan.offset) == pytest.approx(0.04 * 0.6, rel=1e-6)
+    assert dot(plan.normal, sub(plan.contact, s.c)) == pytest.approx(0.04)
+
+
+def test_pushing_keeps_tangent_pose_and_reports_depth():
+    c = paper_cylinder()
+    pl = SurfacePlanner(c)
+    pl.update(0.0, c.point_at(0.3, 0.0, R + 0.0005))
+    base = pl.update(DT, c.point_at(0.3, 0.0, R - 0.0005))
+    for k, d in enumerate(np.linspace(0.0005, 0.01, 40)):
+        plan = pl.update((k + 2) * DT, c.point_at(0.3, 0.0, R - d))
+    assert plan.touching and plan.depth == pytest.approx(0.01)
+    assert norm(sub(plan.contact, c.point_at(0.3))) < 1e-12
+    assert norm(sub(plan.origin, base.origin)) < 1e-12 and norm(sub(plan.normal, base.normal)) < 1e-12
+
+
+def test_stroke_and_push_combined():
+    c = paper_cylinder()
+    pl = SurfacePlanner(c)
+    angles = np.linspace(0, 0.5, 300)
+    depth = 0.004 * np.sin(np.linspace(0, math.pi, 300)) + 0.0005
+    for k, (a, d) in enumerate(zip(angles, depth, strict=False)):
+        plan = pl.update(k * DT, c.point_at(a, 0.0, R - d))
+    assert plan.touching and math.hypot(*plan.offset) == pytest.approx(R * 0.5, rel=1e-9)
+
+
+def test_axis_singularity_holds_last_normal():
+    c = paper_cylinder()
+    pl = SurfacePlanner(c)
+    pl.update(0.0, c.point_at(0.2, 0.0, R - 0.001))
+    n0 = pl.last.normal
+    plan = pl.update(DT, (-R, 0.0, 0.0))       # finger pushed onto the axis
+    assert "hold:singular" in plan.status
+    assert norm(sub(plan.normal, n0)) < 1e-9 or "rate_limited" in plan.status
+    assert all(math.isfinite(x) for x in plan.origin + plan.normal)
+
+
+def test_inside_object_projects_and_touches():
+    c = paper_cylinder()
+    pl = SurfacePlanner(c)
+    plan = pl.update(0.0, (-R + 0.5 * R * math.cos(0.2), 0.0, -0.5 * R * math.sin(0.2)))
+    assert plan.touching and plan.depth == pytest.approx(0.5 * R)
+    assert norm(sub(plan.contact, c.point_at(0.2))) < 1e-12
+
+
+def test_past_end_cap_rolls_over_rim_within_limits():
+    c = paper_cylinder()
+    lim = MotionLimits()
+    pl = SurfacePlanner(c, PlannerConfig(limits=lim))
+    ys = np.r_[np.linspace(0.0, 0.09, 400), np.full(200, 0.09)]
+    plans = [pl.update(k * DT, (0.0005, y, 0.0)) for k, y in enumerate(ys)]
+    contacts = [norm(sub(a.contact, b.contact)) for a, b in zip(plans, plans[1:], strict=False)]
+    speeds = [norm(sub(a.origin, b.origin)) / DT for a, b in zip(plans, plans[1:], strict=False)]
+    assert max(contacts) < 0.002                 # the contact wraps over the rim continuously
+    assert max(speeds) <= lim.v_max + 1e-9      # the sheet swinging about the rim is rate-limited
+    assert all("hold" not in p.status for p in plans)
+    # with the default arm bases the sheet cannot face the end cap: reported, arms held inside reach
+    assert "unreachable" in plans[-1].status and ReachModel().reachable(plans[-1].left, plans[-1].right)[0]
+    # with a larger workspace it settles tangent to the cap
+    pl = SurfacePlanner(c, PlannerConfig(reach=ReachModel(reach_max=0.8, reach_min=0.0)))
+    plans = [pl.update(k * DT, (0.0005, y, 0.0)) for k, y in enumerate(ys)]
+    assert plans[-1].normal[1] > 0.99 and plans[-1].status == "ok"
+
+
+def test_box_edge_sharp_is_rate_limited_rounded_is_not():
+    for radius, expect_limited in ((0.0, True), (0.01, False)):
+        b = make_shape("box", {"center": (-0.03, 0, 0), "half_extents": (0.03, 0.03, 0.03), "radius": radius})
+        pl = SurfacePlanner(b)
+        statuses = []
+        for k, z in enumerate(np.linspace(0.0, 0.06, 600)):
+            statuses.append(pl.update(k * DT, (0.01, 0.0, z)).status)
+        assert any("rate_limited" in s for s in statuses) == expect_limited, radius
+
+
+def test_sudden_jump_is_reacquired_and_ramped():
+    c = paper_cylinder()
+    lim = MotionLimits()
+    pl = SurfacePlanner(c, PlannerConfig(limits=lim))
+    for k in range(10):
+        pl.update(k * DT, c.point_at(0.0, 0.0, R - 0.0005))
+    o_prev = pl.last.origin
+    plan = pl.update(10 * DT, c.point_at(-1.0, 0.03, R + 0.01))     # marker re-acquired far away
+    assert "reacquired" in plan.status and "rate_limited" in plan.status
+    assert norm(sub(plan.origin, o_prev)) <= lim.a_max * DT * DT + 1e-12
+    speeds = []
+    for k in range(11, 200):
+        p = pl.update(k * DT, c.point_at(-1.0, 0.03, R + 0.01))
+        speeds.append(norm(sub(p.origin, o_prev)) / DT)
+        o_prev = p.origin
+    assert max(speeds) <= lim.v_max + 1e-9
+    assert norm(sub(p.contact, c.point_at(-1.0, 0.03))) < 1e-9 and p.status == "ok"
+
+
+@pytest.mark.parametrize("bad", [(float("nan"), 0.0, 0.0), (0.0, float("inf"), 0.0), (1.0, 2.0), "xyz", None])
+def test_invalid_input_holds_last_safe_pose(bad):
+    c = paper_cylinder()
+    pl = SurfacePlanner(c)
+    assert pl.update(0.0, bad) is None                      # nothing to hold yet, no exception
+    good = pl.update(0.0, (0.01, 0.0, 0.0))
+    plan = pl.update(DT, bad)
+    assert plan.status == "hold:invalid_fingertip"
+    assert plan.origin == good.origin and plan.left == good.left and plan.normal == good.normal
+    assert pl.counts["hold:invalid_fingertip"] == 2
+    stale = pl.update(0.0, (0.01, 0.0, 0.0))
+    assert stale.status == "hold:stale_fingertip"
+
+
+def test_unreachable_is_reported_and_not_clipped():
+    c = make_shape("plane")
+    reach = ReachModel(reach_max=0.45)
+    pl = SurfacePlanner(c, PlannerConfig(reach=reach, jump_distance=1.0))
+    ok = pl.update(0.0, (0.01, 0.0, 0.0))
+    assert ok.status == "ok" and ok.reach_margin > 0
+    o = ok.origin
+    for k in range(1, 300):                                   # finger walks up, sheet follows until the limit
+        plan = pl.update(k * DT, (0.01, 0.0, 0.0005 * k))
+        if "unreachable" in plan.status:
+            break
+        o = plan.origin
+    assert "unreachable" in plan.status and plan.reach_margin < 0
+    assert plan.origin == o                                   # held the last reachable pose, exactly
+    assert reach.reachable(plan.left, plan.right)[0]
+    assert plan.contact[2] == pytest.approx(0.0005 * k)      # the requested contact is still reported
+
+
+def test_object_stiffer_than_sheet_is_reported():
+    pl = SurfacePlanner(paper_cylinder())
+    plan = pl.update(0.0, (0.01, 0.0, 0.0), object_stiffness=5000.0)
+    assert "object_stiffer_than_sheet" in plan.status
+    assert plan.stiffness < 5000.0 and plan.stretch <= pl.cfg.material.max_stretch
+    for k in range(1, 40):                       # stretch is rate-limited back down
+        plan = pl.update(k * DT, (0.01, 0.0, 0.0), object_stiffness=20.0)
+    assert plan.status == "ok"
+    assert plan.stiffness == pytest.approx(20.0, rel=1e-6)
+
+
+def test_sheet_edge_slip_is_reported():
+    c = make_shape("plane")
+    pl = SurfacePlanner(c)
+    for k, y in enumerate(np.linspace(0.0, 0.2, 400)):
+        plan = pl.update(k * DT, (-0.0005, y, 0.0))
+    assert "slip:sheet_edge" in plan.status
+    assert abs(plan.offset[0]) <= 0.5 * 0.24 * (1 + plan.stretch) - pl.cfg.sheet_margin + 1e-12
+
+
+def test_limit_step_braking_and_velocity_bounds():
+    v = (0.0, 0.0, 0.0)
+    pos = 0.0
+    for _ in range(2000):
+        st, v, _ = limit_step((1.0 - pos, 0.0, 0.0), v, 0.3, 3.0, 0.005)
+        assert norm(v) <= 0.3 + 1e-12
+        pos += st[0]
+    assert pos == pytest.approx(1.0, abs=1e-6)
+    st, v2, lim = limit_step((0.001, 0.0, 0.0), (0.0, 0.0, 0.0), 0.3, 3.0, 0.02)
+    assert not lim and st[0] == pytest.approx(0.001)        # within the limits: lands in one step
+    st, v2, lim = limit_step((0.01, 0.0, 0.0), (0.0, 0.0, 0.0), 0.3, 3.0, 0.02)
+    assert lim and v2[0] == pytest.approx(3.0 * 0.02)       # acceleration-bounded
+
+
+def test_rate_limiter_rotation_bounded():
+    rl = RateLimiter(MotionLimits(w_max=1.0, alpha_max=100.0))
+    eye = ((1.0, 0, 0), (0, 1.0, 0), (0, 0, 1.0))
+    rl.reset((0, 0, 0), eye, 0.0)
+    Rz = ((0.0, -1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+    _, R1, _, lim = rl.step((0, 0, 0), Rz, 0.0, 0.1)
+    ang = math.acos(max(-1, min(1, (R1[0][0] + R1[1][1] + R1[2][2] - 1) / 2)))
+    assert lim and ang <= 1.0 * 0.1 + 1e-9
+
+
+def test_metrics_fig9_definitions():
+    D = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    Dp = np.array([[0.0, 0.0, 0.001], [0.0, 0.0, 0.0]])
+    n = np.array([[1.0, 0, 0], [1.0, 0, 0]])
+    a = math.radians(1.0)
+    n2 = np.array([[1.0, 0, 0], [math.cos(a), 0, math.sin(a)]])
+    dd, dth = stroke_errors(D, Dp, n, n2)
+    assert dd == pytest.approx([0.001, 0.0]) and dth == pytest.approx([0.0, a])
+    s = summarize(dd, dth)
+    assert s["dd_mean_mm"] == pytest.approx(0.5) and s["dtheta_mean_deg"] == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="Dp"):
+        stroke_errors(D, Dp[:1], n, n2)
+    # the median ignores a stalled stretch that lifts the mean: 9 samples of 0.5 mm and one of 20 mm
+    s = summarize(np.r_[np.full(9, 0.0005), 0.02], np.r_[np.full(9, a / 2), 10 * a])
+    assert s["dd_median_mm"] == pytest.approx(0.5) and s["dd_mean_mm"] == pytest.approx(2.45)
+    assert s["dtheta_median_deg"] == pytest.approx(0.5) and s["dtheta_mean_deg"] == pytest.approx(1.45)
+
+
+def test_table1_from_sheet_poses_on_cylinder():
+    c = paper_cylinder()
+    ang = np.radians([0.0, 10.0, 30.0])
+    lag = math.radians(0.5)
+    meas = np.array([c.point_at(a, 0.0, R + 0.002) for a in ang])
+    sheet_n = np.array([[math.cos(a - lag), 0.0, -math.sin(a - lag)] for a in ang])
+    sheet_o = np.array([c.point_at(a - lag) for a in ang])
+    err = table1(c, meas, sheet_o, sheet_n)
+    assert err.dtheta == pytest.approx([lag] * 3, abs=1e-12)
+    assert err.dd == pytest.approx([2 * R * math.sin(lag / 2)] * 3, abs=1e-12)
+    assert np.abs(err.gap).max() < 1e-12
+
+
+def test_finger_script_follows_mark_and_is_deterministic():
+    f = FingerScript(moving_time=10.0, tremor_rms=0.0, wander_deg=0.0, wander_axial=0.0, lag=0.0, depth=0.0)
+    t = np.array([0.0, f.t_move, f.t_move + 5.0, f.t_move + 10.0])
+    P = f.positions(t)
+    assert np.degrees(f.angle_of(P[1:])) == pytest.approx([0.0, 30.0, 60.0], abs=1e-9)
+    assert np.linalg.norm(P[1:] - geometry.CYLINDER_CENTER, axis=1) == pytest.approx([R] * 3)
+    assert P[0][0] == pytest.approx(0.03)                    # approach starts 30 mm in front
+    assert P[3][2] > 0                                         # positive angles go up (+z)
+    g1, g2 = FingerScript(seed=4), FingerScript(seed=4)
+    tt = np.linspace(0, 13, 500)
+    assert np.array_equal(g1.positions(tt), g2.positions(tt))
+    trem = FingerScript(seed=1, wander_deg=0, wander_axial=0).positions(tt) - \
+        FingerScript(seed=1, wander_deg=0, wander_axial=0, tremor_rms=0).positions(tt)
+    assert np.sqrt(np.mean(trem ** 2, axis=0)) == pytest.approx([5e-5] * 3, rel=0.35)
+    assert f.phase(0.5) == "approach" and f.phase(f.t_move + 1) == "stroke" and f.phase(100) == "idle"
+    with pytest.raises(ValueError, match="mode"):
+        FingerScript(mode="dance")
+
+
+def test_cross_product_convention_axis_v():
+    plan = SurfacePlanner(paper_cylinder()).update(0.0, (0.01, 0.0, 0.0))
+    assert plan.axis_v == pytest.approx(cross(plan.normal, plan.axis_u)) and plan.axis_v[2] == pytest.approx(1.0)
+
+
+def test_experiment_quick_writes_summary(tmp_path, monkeypatch):
+    """The stroke experiment's quick run (pure computation, no node: phase 1 of tests/run.sh)."""
+    import json
+
+    from flexsheet.experiments import stroke as experiment
+
+    monkeypatch.setattr(experiment, "_plot", lambda *a, **k: None)   # chart drawing is not under test
+    assert experiment.main(["--out", str(tmp_path), "--seeds", "1", "--quick"]) == 0
+    s = json.loads((tmp_path / "summary.json").read_text())
+    R = experiment.paper_cylinder().R
+    for rows in (s, s["ideal"]):
+        for k in ("10", "30"):
+            for f in ("dd_mean_mm", "dd_std_mm", "dtheta_mean_deg", "dtheta_std_deg", "dd_2r_mean_mm"):
+                assert np.isfinite(rows[k][f]) and rows[k][f] > 0
+            # both Δd conventions: the chord ≈ R·Δθ and the paper's 2R·Δθ
+            assert rows[k]["dd_2r_mean_mm"] == pytest.approx(2e3 * R * np.radians(rows[k]["dtheta_mean_deg"]))
+            assert rows[k]["dd_mean_mm"] == pytest.approx(rows[k]["dd_2r_mean_mm"] / 2, rel=1e-3)
+    assert s["twin"]["realism"] == "realistic" and s["twin"]["estimator_bases"].startswith("nominal")
+    # the launch file's filter: q and horizon of launch/sim.yaml's triangulator
+    assert s["filter"]["file"] == "sim.yaml" and s["filter"]["horizon_s"] > 0
+    # 8 + 3 + 1 ms to the arm PC, 3.55 ms tick wait, 7.1 ms pipeline tick, 15 ms servo lag
+    assert s["latency_budget_ms"] == pytest.approx(8 + 3 + 1 + 3.55 + 7.1 + 15, abs=0.01)
+    # the realistic twin (truth, camera noise) is worse than the ideal one; prediction pays at 10 s
+    assert s["10"]["dtheta_mean_deg"] > s["ideal"]["10"]["dtheta_mean_deg"]
+    assert s["10"]["dtheta_mean_deg"] < s["10_no_prediction"]["dtheta_mean_deg"]
+    assert s["noise_floor"]["dtheta_floor_deg"] < s["10"]["dtheta_mean_deg"]
+    chart = json.loads((tmp_path / "stroke_errors.json").read_text())
+    lat = chart["by_latency"]["no_prediction"]
+    assert lat[-1]["dtheta_mean_deg"] > lat[0]["dtheta_mean_deg"]     # more latency, more error
+
+
+@pytest.mark.parametrize("t", [0.5, 3.7, 6.05])
+def test_finger_script_state_is_position_and_velocity_in_one_call(t):
+    """The world's per-tick (position, velocity): the same numbers as the two separate calls, and the velocity
+    is the stroke's (≈ R·dφ/dt on the linear profile plus the tremor's), not zero."""
+    fs = FingerScript(mode="stroke", moving_time=5.0, seed=3)
+    p, v = fs.state(t)
+    assert p == pytest.approx(fs.position(t), abs=1e-15) and v == pytest.approx(fs.velocity(t), rel=1e-9, abs=1e-12)
+    assert np.linalg.norm(v) > 1e-4
