@@ -11,6 +11,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))          # the shared helpers (netns_util, viz_watch) for every folder
+for _folder in sorted((ROOT / "tests").glob("**/")):   # a test module may import another's helpers by name
+    if _folder.name not in ("data", "__pycache__") and "data" not in _folder.relative_to(ROOT / "tests").parts:
+        sys.path.append(str(_folder))
 
 from flexsheet.runtime.ports import free_port  # noqa: E402  (tests import it from here; ports below the ephemeral range)
 

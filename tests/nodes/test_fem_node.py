@@ -74,7 +74,7 @@ def test_node_serves_cached_nonlinear_snapshots_and_says_so(tmp_path):
     from flexsheet.fem.cache import ArrayCache
     from flexsheet.fem.material import GENT_JM_RUBBER, Material
     from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, table_key
-    from tests.test_fem_hyperelastic import _analytic_table
+    from test_fem_hyperelastic import _analytic_table
 
     tab = _analytic_table([0.0, 10.0], [0.0, 0.01, 0.02])
     # the bare node's law is the paper scene's (Gent); a table under that key in cache_dir wins over the shipped one
@@ -215,7 +215,7 @@ def test_node_on_the_sphere_serves_its_nonlinear_table_when_cached(tmp_path):
     from flexsheet.fem.cache import ArrayCache
     from flexsheet.fem.sphere_snapshots import SphereGrid, sphere_frame, sphere_table_key
     from flexsheet.model.scenes import SCENES_DIR, load_scene
-    from tests.test_fem_sphere_table import _table
+    from test_fem_sphere_table import _table
 
     sc = load_scene(SCENES_DIR / "sphere.yaml")
     fr = sphere_frame(sc)
@@ -260,7 +260,7 @@ def test_node_on_a_scene_without_symmetry_serves_its_path_table_when_cached(tmp_
     from flexsheet.fem.mesh import MeshSpec
     from flexsheet.fem.path_snapshots import path_table_key
     from flexsheet.fem.scene_model import SceneModel
-    from tests.test_fem_path_table import _scene, _table
+    from test_fem_path_table import _scene, _table
 
     sc = _scene()
     path = tmp_path / "sticky_sphere.yaml"

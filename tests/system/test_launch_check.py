@@ -158,7 +158,7 @@ def test_base_file_passes_and_files_are_checked_only_on_their_host(tmp_path):
     (tmp_path / "calib.yaml").write_text("not: a calibration\n")  # present but unusable: the reader says why
     bad = check_launch(path, host="main").errors
     assert len(bad) == 1 and "unusable" in bad[0] and "calib_file" in bad[0], bad
-    (tmp_path / "calib.yaml").write_text((ROOT / "flexsheet" / "model" / "ximea_calib.yaml").read_text())
+    (tmp_path / "calib.yaml").write_text((ROOT / "flexsheet" / "vision" / "ximea_calib.yaml").read_text())
     assert check_launch(path, host="main").errors == []
     # an override is checked like the file's own value
     res = check_launch(path, host="main", overrides={"talker": {"rate": 0}, "ghost": {"x": 1}})
@@ -184,7 +184,7 @@ def test_display_calib_missing_or_stale_entries_are_named_per_host(tmp_path):
     import dataclasses
 
     stereo = tmp_path / "stereo.yaml"
-    stereo.write_text((ROOT / "flexsheet" / "model" / "ximea_calib.yaml").read_text())
+    stereo.write_text((ROOT / "flexsheet" / "vision" / "ximea_calib.yaml").read_text())
     doc = _mutate(BASE, "display_calib", "$(launch_dir)/display.yaml")
     doc["nodes"].update({"cam": {"type": "camera", "host": "main",
                                  "params": {"model": "file", "calib_file": "$(launch_dir)/stereo.yaml"}},

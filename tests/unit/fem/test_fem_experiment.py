@@ -657,7 +657,7 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
     grid interpolates display-frame components of a rotating field: a few µm, not exact.)"""
     from flexsheet.experiments import fem as X
     from flexsheet.fem.material import GENT_JM_RUBBER, Material
-    from tests.test_fem_hyperelastic import C, L, R, _analytic_table
+    from test_fem_hyperelastic import C, L, R, _analytic_table
 
     depths = [0.0, 0.01, 0.02]
     tab = _analytic_table([0.0, 10.0], depths)
