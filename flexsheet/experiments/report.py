@@ -284,7 +284,8 @@ def twin_settings(lf=None) -> dict:
             return x.model_dump()
         return dict(x) if isinstance(x, dict) else None
 
-    found, source = as_dict(getattr(lf, "twin", None)), "launch file twin section"
+    twin = lf.section("twin") if lf is not None and hasattr(lf, "section") else None
+    found, source = as_dict(twin), "launch file twin section"
     if found is None and lf is not None:
         for spec in getattr(lf, "nodes", {}).values():
             if getattr(spec, "type", None) == "world":
@@ -302,10 +303,11 @@ def scene_settings(lf=None, out: str | None = None) -> tuple[Scene, dict]:
     ``scene`` param, else the paper's cylinder (``source`` says which). An unreadable file is reported in
     ``source`` and the paper's cylinder used (the report never fails on it)."""
     path, source = None, "the paper's cylinder (the launch file names no scene)"
-    if lf is not None and getattr(lf, "scene", None):
+    scene = lf.section("scene") if lf is not None and hasattr(lf, "section") else None
+    if scene:
         from flexsheet.runtime.launch import substitute, substitutions
 
-        path, source = os.path.expanduser(substitute(lf.scene, substitutions(lf, out))), "launch file scene"
+        path, source = os.path.expanduser(substitute(scene, substitutions(lf, out))), "launch file scene"
     elif lf is not None:
         for spec in getattr(lf, "nodes", {}).values():
             if getattr(spec, "type", None) == "world" and (spec.params or {}).get("scene"):

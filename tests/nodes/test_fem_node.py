@@ -71,10 +71,11 @@ def test_node_serves_cached_nonlinear_snapshots_and_says_so(tmp_path):
     """A snapshot table in the cache (under the node's key) is attached at start-up: pushes inside it are
     answered by the snapshots (method "snapshots"), the diagnostics message says so; a push outside the table's
     azimuth range falls back to the linear model."""
+    from test_fem_hyperelastic import _analytic_table
+
     from flexsheet.fem.cache import ArrayCache
     from flexsheet.fem.material import GENT_JM_RUBBER, Material
     from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, table_key
-    from test_fem_hyperelastic import _analytic_table
 
     tab = _analytic_table([0.0, 10.0], [0.0, 0.01, 0.02])
     # the bare node's law is the paper scene's (Gent); a table under that key in cache_dir wins over the shipped one
@@ -212,10 +213,11 @@ def test_node_on_the_sphere_serves_its_nonlinear_table_when_cached(tmp_path):
     tests/unit/fem/test_fem_sphere_table.py, 0-60° every 10°, 0-10 mm): the node on sphere.yaml attaches it, says so, and
     answers a push at 35° up the crown with it — the force is the table's bilinear value at the measured depth,
     the vertex under the finger moved by about the depth; a push beyond the table's 60° is the linear model's."""
+    from test_fem_sphere_table import _table
+
     from flexsheet.fem.cache import ArrayCache
     from flexsheet.fem.sphere_snapshots import SphereGrid, sphere_frame, sphere_table_key
     from flexsheet.model.scenes import SCENES_DIR, load_scene
-    from test_fem_sphere_table import _table
 
     sc = load_scene(SCENES_DIR / "sphere.yaml")
     fr = sphere_frame(sc)
@@ -255,12 +257,12 @@ def test_node_on_a_scene_without_symmetry_serves_its_path_table_when_cached(tmp_
     says so, and its answer on the stroke is the model's table answer (linear solve + correction, force scaled by
     the table's ratio), not the linear one."""
     import yaml
+    from test_fem_path_table import _scene, _table
 
     from flexsheet.fem.cache import ArrayCache
     from flexsheet.fem.mesh import MeshSpec
     from flexsheet.fem.path_snapshots import path_table_key
     from flexsheet.fem.scene_model import SceneModel
-    from test_fem_path_table import _scene, _table
 
     sc = _scene()
     path = tmp_path / "sticky_sphere.yaml"

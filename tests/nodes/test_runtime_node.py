@@ -406,9 +406,9 @@ def test_a_node_stopped_while_a_sync_handler_is_inside_opencv_exits_cleanly(run)
     thread by a forced unwind that OpenCV's noexcept GIL guard turns into std::terminate). The node now joins
     its sync workers before it returns; without that this script aborted every time (20 of 20 in a plain
     reproduction)."""
-    tests = str(Path(__file__).resolve().parents[1])
-    proc = subprocess.run([sys.executable, "-c", _CV2_HANDLER_SCRIPT.format(tests=tests)], capture_output=True,
-                          text=True, timeout=60, cwd=os.path.dirname(tests))
+    here = Path(__file__).resolve()
+    proc = subprocess.run([sys.executable, "-c", _CV2_HANDLER_SCRIPT.format(tests=str(here.parent))],
+                          capture_output=True, text=True, timeout=60, cwd=here.parents[2])
     assert "node stopped" in proc.stdout, proc.stderr[-2000:]
     assert "terminate called" not in proc.stderr, proc.stderr[-2000:]
     assert proc.returncode == 0, proc.stderr[-2000:]

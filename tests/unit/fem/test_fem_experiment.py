@@ -4,12 +4,12 @@ no element inverted at a quadrature point, the nonlinear snapshots beating linea
 that a second run reads everything from the cache."""
 
 import json
-from pathlib import Path
 import math
 import os
 import subprocess
 import sys
 from dataclasses import replace
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -655,9 +655,10 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
     by the table's rotate-and-blend (< 5 µm) and a 1 mm flaw in the held-out solve at a visible vertex
     reads 1 mm; the update timing and the chart are written; bad held-out azimuths are refused. (The table's 1° θ
     grid interpolates display-frame components of a rotating field: a few µm, not exact.)"""
+    from test_fem_hyperelastic import C, L, R, _analytic_table
+
     from flexsheet.experiments import fem as X
     from flexsheet.fem.material import GENT_JM_RUBBER, Material
-    from test_fem_hyperelastic import C, L, R, _analytic_table
 
     depths = [0.0, 0.01, 0.02]
     tab = _analytic_table([0.0, 10.0], depths)

@@ -81,7 +81,6 @@ def test_report_table1_from_bag_uses_typed_truth_and_the_one_metric(tmp_path):
 def test_report_records_the_twin_and_both_dd_conventions(tmp_path):
     """summary.json has Table I's Δθ headline with Δd on R and in the paper's 2R convention, and the twin the run
     used (a launch file's top-level ``twin:``, else the world node's ``twin`` param)."""
-    from types import SimpleNamespace
 
     from flexsheet.experiments.report import main, twin_settings
     from flexsheet.experiments.table1 import paper_dd_ratio
@@ -99,8 +98,11 @@ def test_report_records_the_twin_and_both_dd_conventions(tmp_path):
     assert row["dd_mean_mm"] == pytest.approx(2e3 * R * math.sin(LAG / 2), abs=1e-4)  # ours: the chord on R
     assert paper_dd_ratio("10") == pytest.approx(2e3 * R, rel=0.01)                 # why: the paper's Δd/Δθ = 2R
     assert "2R" in s["dd_convention"] and "2R" in (tmp_path / "report.md").read_text()
-    top = SimpleNamespace(twin={"realism": "realistic", "truth_seed": 5}, nodes={})
-    assert twin_settings(top) == {"realism": "realistic", "truth_seed": 5, "source": "launch file twin section"}
+    top_path = tmp_path / "top.yaml"
+    top_path.write_text("name: t\ntwin: {realism: realistic, truth_seed: 5, registration: false}\n"
+                        "nodes:\n  world:\n    type: world\n    params: {twin: {realism: ideal, truth_seed: 2}}\n")
+    assert twin_settings(load_launch(top_path)) == {"realism": "realistic", "truth_seed": 5,
+                                                    "source": "launch file twin section"}
     assert twin_settings(None)["source"].startswith("world node defaults")
 
 

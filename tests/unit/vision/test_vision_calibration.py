@@ -1,8 +1,8 @@
 """Stereo calibration on the real XIMEA pairs (tests/data/stereo_xi), the YAML format and board specs."""
 
 import glob
-from pathlib import Path
 import os
+from pathlib import Path
 
 import cv2
 import numpy as np
