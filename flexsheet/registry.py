@@ -51,12 +51,12 @@ BENCHES: dict[str, str] = {
 
 CALIBRATE: dict[str, str] = {
     "stereo": "flexsheet.vision.stereo_calibration:main",
-    "camera-pose": "flexsheet.calibration.cli:camera_pose_main",
-    "projector": "flexsheet.calibration.cli:projector_main",
-    "arms": "flexsheet.calibration.cli:arms_main",
-    "eye": "flexsheet.calibration.cli:eye_main",
-    "display": "flexsheet.calibration.cli:display_main",
-    "noise": "flexsheet.calibration.cli:noise_main",
+    "camera-pose": "flexsheet.display.calibrate:camera_pose_main",
+    "projector": "flexsheet.display.calibrate:projector_main",
+    "arms": "flexsheet.display.calibrate:arms_main",
+    "eye": "flexsheet.display.calibrate:eye_main",
+    "display": "flexsheet.display.calibrate:display_main",
+    "noise": "flexsheet.display.calibrate:noise_main",
 }
 
 

@@ -267,7 +267,7 @@ class DisplayCalib:
 def nominal_display_calib() -> DisplayCalib:
     """The display as the code's constants describe it (nothing measured; every provenance ``source: nominal``).
 
-    Camera: the shipped XIMEA stereo calibration mounted at :func:`flexsheet.twin.camera.look_at`
+    Camera: the shipped XIMEA stereo calibration mounted at :func:`flexsheet.vision.camera_model.look_at`
     (``DEFAULT_CAMERA_POSITION``); projector: :meth:`flexsheet.model.projector.Projector.default`; arms:
     :data:`flexsheet.arm.kinematics.LEFT_BASE`/``RIGHT_BASE`` with :data:`NOMINAL_CLAMP_MARKER`; eye: the
     paper's fixed V (:data:`flexsheet.model.geometry.EYE`). Estimators start from these; the twin's truth is drawn
@@ -275,7 +275,7 @@ def nominal_display_calib() -> DisplayCalib:
     """
     from flexsheet.arm.kinematics import LEFT_BASE, RIGHT_BASE
     from flexsheet.model.projector import Projector
-    from flexsheet.twin.camera import DEFAULT_CAMERA_POSITION, camera_model, look_at
+    from flexsheet.vision.camera_model import DEFAULT_CAMERA_POSITION, camera_model, look_at
 
     nominal = Provenance("nominal (code constants)", source="nominal")
     cal = camera_model("ximea")

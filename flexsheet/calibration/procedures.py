@@ -4,19 +4,13 @@
 Lab order (docs/calibration.md): stereo calibration (``flexsheet calibrate stereo``, not here) →
 :func:`run_camera_pose` → :func:`run_projector` → :func:`run_arms` → :func:`run_eye`. Each step starts from the
 nominal values (:func:`flexsheet.calibration.display_calib.nominal_display_calib`) and from the entries measured
-before it — never from the truth. :func:`run_display_sim` runs all of them in the twin, scores each estimate
-against the truth (only here, after estimation) and caches the result per seed.
+before it — never from the truth. :func:`flexsheet.twin.registration.run_display_sim` runs all of them in the
+twin and scores each estimate against the truth.
 """
 
 from __future__ import annotations
 
-import json
-import math
-import os
-import time
-from dataclasses import asdict, dataclass
-
-import numpy as np
+from dataclasses import dataclass
 
 from flexsheet.calibration import arms as arms_mod
 from flexsheet.calibration import camera_pose as cp_mod
@@ -28,15 +22,12 @@ from flexsheet.calibration.display_calib import (
     ProjectorEntry,
     Provenance,
     nominal_display_calib,
-    write_display_calib,
 )
 from flexsheet.calibration.eye import fixed_eye
 from flexsheet.vision.stereo_calibration import BoardSpec, parse_board
 
 __all__ = ["Options", "QUICK", "FULL", "run_camera_pose", "run_projector", "run_arms", "run_eye",
-           "run_display_sim", "sim_display_calib", "SUMMARY_VERSION"]
-
-SUMMARY_VERSION = 2
+           ]
 
 
 @dataclass(frozen=True)
@@ -155,82 +146,3 @@ def run_eye(V=None, ipd: float | None = None, source: str = "lab"):
     """The fixed-eye entry (paper's V unless given)."""
     nom = nominal_display_calib().eye
     return fixed_eye(nom.V if V is None else V, nom.ipd if ipd is None else ipd, source=source)
-
-
-def _err(t, r):
-    return {"translation_error_mm": t * 1e3, "rotation_error_deg": math.degrees(r)}
-
-
-def run_display_sim(seed: int, out_dir: str, opts: Options = FULL, realism: str = "realistic",
-                    force: bool = False, progress=print) -> dict:
-    """Run every procedure in the twin of truth ``seed``; write ``out_dir/display.yaml`` and
-    ``out_dir/summary.json`` (errors against the truth under ``camera``, ``projector``, ``arms.left``,
-    ``arms.right``; residuals; options; timings). Cached: an existing summary with the same seed, realism,
-    options and version is returned unless ``force``. Returns the summary dict."""
-    from flexsheet.calibration.sources import TwinSource
-    from flexsheet.calibration.twin import CalibrationTwin
-    from flexsheet.twin.truth import TwinTruth
-
-    os.makedirs(out_dir, exist_ok=True)
-    spath = os.path.join(out_dir, "summary.json")
-    ypath = os.path.join(out_dir, "display.yaml")
-    key = {"seed": int(seed), "realism": realism, "options": asdict(opts), "version": SUMMARY_VERSION}
-    if not force and os.path.isfile(spath) and os.path.isfile(ypath):
-        with open(spath) as fh:
-            old = json.load(fh)
-        if all(old.get(k) == v for k, v in key.items()):
-            _progress(f"display: seed {seed}: cached ({spath})", progress)
-            return old
-    t_all = time.perf_counter()
-    truth = TwinTruth.draw(int(seed), realism)
-    src = TwinSource(CalibrationTwin(truth, seed=int(seed)), opts.board_frames, opts.pattern_frames,
-                     opts.marker_frames)
-    timings = {}
-    t0 = time.perf_counter()
-    cam, rc = run_camera_pose(src, opts, progress=progress)
-    timings["camera_s"] = time.perf_counter() - t0
-    calib = DisplayCalib(camera=cam)
-    t0 = time.perf_counter()
-    proj, rp = run_projector(src, opts, calib, progress=progress)
-    timings["projector_s"] = time.perf_counter() - t0
-    calib.projector = proj
-    t0 = time.perf_counter()
-    arms = run_arms(src, opts, calib, progress=progress)
-    timings["arms_s"] = time.perf_counter() - t0
-    calib.arms = {s: e for s, (e, _) in arms.items()}
-    calib.eye = run_eye(source=src.label)
-    write_display_calib(ypath, calib)
-    # scoring against the truth: only now, after every estimate is fixed
-    summary = dict(key)
-    summary["camera"] = {**_err(*truth.camera_pose_error(cam.T_display_camera)), "rms_px": rc.rms_px,
-                         "residual_mm": rc.residual_mm, "views": rc.n_views}
-    summary["projector"] = {**_err(*truth.projector_pose_error(proj.T_display_projector)),
-                            "reprojection_px": rp.reprojection_px, "poses": rp.n_poses, "points": rp.n_inliers,
-                            "focal_error_px": float(proj.K[0, 0] - truth.projector_K[0, 0]),
-                            "principal_point_error_px": (proj.K[:2, 2] - truth.projector_K[:2, 2]).tolist()}
-    summary["arms"] = {s: {**_err(*truth.base_error(s, e.T_display_base)), "residual_mm": r.residual_mm,
-                           "configs": r.n_configs,
-                           "marker_offset_error_mm": float(np.linalg.norm(e.marker_offset - truth.clamp_marker[s]) * 1e3)}
-                       for s, (e, r) in arms.items()}
-    summary["targets"] = {"camera_mm": 0.5, "camera_deg": 0.1, "projector_mm": 2.0, "projector_deg": 0.2,
-                          "projector_px": 0.5, "arms_mm": 1.0}
-    summary["timings"] = {**timings, "total_s": time.perf_counter() - t_all}
-    with open(spath, "w") as fh:
-        json.dump(summary, fh, indent=1)
-    c, p = summary["camera"], summary["projector"]
-    _progress(f"display: seed {seed}: camera {c['translation_error_mm']:.3f} mm {c['rotation_error_deg']:.4f}°, "
-              f"projector {p['translation_error_mm']:.2f} mm {p['rotation_error_deg']:.3f}° "
-              f"{p['reprojection_px']:.3f} px, arms " + ", ".join(
-                  f"{s} {summary['arms'][s]['translation_error_mm']:.3f} mm" for s in summary["arms"]), progress)
-    return summary
-
-
-def sim_display_calib(seed: int, realism: str = "realistic", cache_root: str | None = None,
-                      quick: bool = False, progress=None) -> str:
-    """Path of the twin's ``display.yaml`` for truth ``seed``, running the procedures once per seed and caching
-    them under ``cache_root`` (default ``$FLEXSHEET_CACHE`` or ``~/.cache/flexsheet``)/display/<realism>-<seed>.
-    This is what the twin's estimator nodes should load at start-up (issue 15)."""
-    root = cache_root or os.environ.get("FLEXSHEET_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "flexsheet")
-    out = os.path.join(root, "display", f"{realism}-{int(seed)}{'-quick' if quick else ''}")
-    run_display_sim(seed, out, QUICK if quick else FULL, realism, progress=progress)
-    return os.path.join(out, "display.yaml")

@@ -1,5 +1,5 @@
-"""Where the procedures get their frames: the twin (:class:`TwinSource`) or the lab's captured images
-(:class:`ImageDirSource`). Both hand the same estimators the same things — stereo pairs and the commanded
+"""Where the procedures get their frames in the lab: captured images (:class:`ImageDirSource`; the twin's
+source is :class:`flexsheet.twin.registration.TwinSource`). Both hand the same estimators the same things — stereo pairs and the commanded
 inputs (sheet poses, projector patterns, joint vectors) — so the lab and the twin run one code path.
 
 Captured-images layout (``--images DIR``; :func:`save_frames` writes it, e.g. from the twin)::
@@ -24,56 +24,9 @@ import os
 import cv2
 import numpy as np
 
-from flexsheet.calibration.twin import CalibrationTwin
-
-__all__ = ["TwinSource", "ImageDirSource", "save_frames"]
+__all__ = ["ImageDirSource", "save_frames"]
 
 Pair = tuple[np.ndarray, np.ndarray]
-
-
-class TwinSource:
-    """Frames rendered by :class:`flexsheet.calibration.twin.CalibrationTwin` from a hidden truth.
-
-    ``board_frames``/``pattern_frames``/``marker_frames``: frames averaged per capture for each scene.
-    ``sheet_white_dn``: projector white on the sheet (lower it to play a dark sheet)."""
-
-    kind = "twin"
-
-    def __init__(self, twin: CalibrationTwin, board_frames: int = 8, pattern_frames: int = 1,
-                 marker_frames: int = 4, sheet_white_dn: float = 190.0, board_bow_mm: float = 0.0):
-        self.twin = twin
-        self.n_board_frames = board_frames
-        self.n_pattern_frames = pattern_frames
-        self.n_marker_frames = marker_frames
-        self.sheet_white_dn = sheet_white_dn
-        self.board_bow_mm = board_bow_mm
-
-    @property
-    def label(self) -> str:
-        t = self.twin.truth
-        return f"twin seed {t.seed} ({t.realism})"
-
-    def board_views(self, board, sheet_poses: list[np.ndarray], offset: float = 0.0) -> list[Pair]:
-        """One averaged stereo pair per commanded sheet pose (home first)."""
-        f = self.twin.frames
-        self.twin.frames = self.n_board_frames
-        try:
-            return self.twin.board_views(board, sheet_poses, offset, self.board_bow_mm)
-        finally:
-            self.twin.frames = f
-
-    def pattern_frames(self, patterns: list[np.ndarray], sheet_pose: np.ndarray, index: int) -> list[Pair]:
-        """Stereo pairs of every pattern with the sheet at ``sheet_pose`` (pose number ``index``)."""
-        return self.twin.pattern_frames(patterns, sheet_pose, white_dn=self.sheet_white_dn, frames=self.n_pattern_frames)
-
-    def marker_frames(self, side: str, joints: list[np.ndarray]) -> tuple[list[Pair], list[np.ndarray]]:
-        """Stereo pairs while arm ``side`` visits ``joints``; returns (frames, the joints actually commanded)."""
-        f = self.twin.frames
-        self.twin.frames = self.n_marker_frames
-        try:
-            return self.twin.marker_frames(side, joints), [np.asarray(q, float) for q in joints]
-        finally:
-            self.twin.frames = f
 
 
 def _read(path: str) -> np.ndarray:

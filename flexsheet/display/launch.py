@@ -60,7 +60,7 @@ def _set_path(text: str) -> str | None:
 
 def twin_registration_path(twin: TwinSpec, cache_root: str | None = None) -> Path:
     """Where :func:`twin_registration` caches the ``display.yaml`` of ``twin``'s realism and seed (the cache of
-    :func:`flexsheet.calibration.procedures.sim_display_calib`)."""
+    :func:`flexsheet.twin.registration.sim_display_calib`)."""
     root = Path(cache_root or os.environ.get("FLEXSHEET_CACHE") or "~/.cache/flexsheet").expanduser()
     return root / "display" / f"{twin.realism}-{twin.truth_seed}" / "display.yaml"
 
@@ -70,7 +70,7 @@ def twin_registration(twin: TwinSpec, print_fn=print, cache_root: str | None = N
     --sim``: camera pose, projector, arm bases, against images rendered from the hidden truth), cached per
     realism, seed, options and procedure version; returns the ``display.yaml`` path. The estimators get only
     this file, never the truth. Raises :class:`LaunchError` when the registration fails."""
-    from flexsheet.calibration.procedures import sim_display_calib
+    from flexsheet.twin.registration import sim_display_calib
 
     print_fn(f"[launch] twin registration ({twin.realism}, truth seed {twin.truth_seed}): the calibration "
              f"procedures in the twin (cached per seed; the first run of a seed takes ~20-60 s) ...")

@@ -4,7 +4,7 @@ The renderer corrects with **calibrated values only** and the twin's measurement
 light lands on the **true** sheet, lit by the **true** projector (issue 15):
 
 * *Estimator side* (:class:`DisplayEstimator`, built from :class:`CalibratedDisplay` — ``display.yaml`` of the
-  registration procedures run in the twin, :func:`flexsheet.calibration.procedures.sim_display_calib`): the
+  registration procedures run in the twin, :func:`flexsheet.twin.registration.sim_display_calib`): the
   bridges' IK/FK at the calibrated arm bases (nominal URDF), the renderer's sheet
   (:class:`flexsheet.rendering.state.RendererState` from those clamp poses and the tracked fingertip), its model
   choice (:class:`flexsheet.rendering.state.ErrorTable`, ``auto``) and its drawing through the calibrated projector
@@ -508,11 +508,11 @@ def measure_pushed(est: DisplayEstimator, world: TwinWorld, meas: Measurer, dept
 def display_calib_for(seed: int, realism: str, path: str | None = None, quick: bool = False,
                       progress=None) -> tuple[CalibratedDisplay, dict]:
     """The estimator's display for truth ``seed``: ``path`` (a display.yaml) if given, else the registration
-    procedures run in the twin (:func:`flexsheet.calibration.procedures.sim_display_calib`, cached per seed;
+    procedures run in the twin (:func:`flexsheet.twin.registration.sim_display_calib`, cached per seed;
     ``quick``: its quick preset). Returns (display, info with the path and, when known, the registration's own
     errors against the truth from its summary.json)."""
     if path is None:
-        from flexsheet.calibration.procedures import sim_display_calib
+        from flexsheet.twin.registration import sim_display_calib
 
         path = sim_display_calib(int(seed), realism, quick=quick, progress=progress)
     cal = CalibratedDisplay.from_display_calib(load_display_calib(path), path)

@@ -82,12 +82,13 @@ def registered_camera(truth: TwinTruth, quick: bool = False, cache: str | None =
     """The camera entry a lab would have for this truth, and the ``display.yaml`` path holding it.
 
     A realistic truth of the default spreads: the twin's whole registration for its seed
-    (:func:`flexsheet.calibration.procedures.sim_display_calib`, cached per seed — the file the twin's estimator
+    (:func:`flexsheet.twin.registration.sim_display_calib`, cached per seed — the file the twin's estimator
     nodes load; ``quick``: its test preset). A truth drawn with other spreads (stability sweeps): the camera-pose
     procedure alone (:func:`flexsheet.calibration.procedures.run_camera_pose`, test preset, twin board views),
     cached under :func:`cache_dir` by a hash of the truth's camera and arms and of the procedure's sources.
     Ideal truth: the nominal registration (exact for it). Raises ``ValueError`` when a procedure fails."""
     from flexsheet.calibration import procedures as P
+    from flexsheet.twin.registration import sim_display_calib
     from flexsheet.twin.truth import Spreads
 
     cache = cache or cache_dir()
@@ -97,13 +98,13 @@ def registered_camera(truth: TwinTruth, quick: bool = False, cache: str | None =
             write_display_calib(path, DisplayCalib(camera=nominal_display_calib().camera))
         return load_display_calib(path, require=("camera",)).camera, path
     if truth.spreads == Spreads():
-        path = P.sim_display_calib(truth.seed, truth.realism, quick=quick, progress=log)
+        path = sim_display_calib(truth.seed, truth.realism, quick=quick, progress=log)
         return load_display_calib(path, require=("camera",)).camera, path
     path = os.path.join(cache, f"camera_seed{truth.seed}_{_key(truth, P.QUICK.views)}.yaml")
     if os.path.isfile(path):
         return load_display_calib(path, require=("camera",)).camera, path
-    from flexsheet.calibration.sources import TwinSource
-    from flexsheet.calibration.twin import CalibrationTwin
+    from flexsheet.twin.registration import TwinSource
+    from flexsheet.twin.registration_camera import CalibrationTwin
 
     if log:
         log(f"registering the camera of a scaled truth (seed {truth.seed}, {P.QUICK.views} board views)...")
@@ -224,7 +225,7 @@ def scaled_truth(seed: int, scale: float) -> TwinTruth:
 def measure_sensor_noise(directory: str = XIMEA_DIR, block: int = 8, max_grad: float = 1.5,
                          jitter_repeats: int = 4, seed: int = 0) -> dict:
     """Read and shot noise of the real XIMEA images, and the corner jitter they cause (independent of the
-    registration's board-fit method, ``flexsheet.calibration.twin.measure_ximea_noise``).
+    registration's board-fit method, ``flexsheet.twin.registration_camera.measure_ximea_noise``).
 
     Noise: every ``block``×``block`` patch of every image whose smoothed gradient stays below ``max_grad``
     DN/px (a flat board square or background) gives its mean level I and a robust σ from second differences

@@ -2,7 +2,7 @@
 realistic sensing (measured noise, optical blur, self-occlusion, dropped frames), and the fingertip error
 against the truth measured from the images — for three truth seeds (no tuning to one).
 
-The registration of each seed is the twin's own (``flexsheet.calibration.procedures.sim_display_calib``, test
+The registration of each seed is the twin's own (``flexsheet.twin.registration.sim_display_calib``, test
 preset, cached per seed under ~/.cache/flexsheet/display — shared with the registration tests; ~20 s per seed
 when not cached).
 """

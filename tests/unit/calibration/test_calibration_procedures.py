@@ -15,13 +15,14 @@ import pytest
 from flexsheet.calibration import arms as arms_mod
 from flexsheet.calibration import camera_pose as cp
 from flexsheet.calibration import projector as pj
-from flexsheet.calibration.cli import camera_pose_main, display_main, eye_main
 from flexsheet.calibration.display_calib import ENTRIES, load_display_calib, nominal_display_calib
 from flexsheet.calibration.eye import glasses_eye_offset, glasses_pose, tracked_eyes
-from flexsheet.calibration.procedures import QUICK, run_display_sim
+from flexsheet.calibration.procedures import QUICK
 from flexsheet.calibration.sources import ImageDirSource, save_frames
-from flexsheet.calibration.twin import CalibrationTwin
+from flexsheet.display.calibrate import camera_pose_main, display_main, eye_main
 from flexsheet.model import geometry
+from flexsheet.twin.registration import run_display_sim
+from flexsheet.twin.registration_camera import CalibrationTwin
 from flexsheet.twin.truth import TwinTruth
 
 #: the truth seeds of the twin's quick registration that tests/nodes/test_camera_realism.py and
@@ -30,7 +31,7 @@ SEEDS = (0, 1, 2)
 
 
 def _share_with_the_cache(seed: int, out: Path) -> None:
-    """Put this fresh run's files where :func:`flexsheet.calibration.procedures.sim_display_calib` caches the
+    """Put this fresh run's files where :func:`flexsheet.twin.registration.sim_display_calib` caches the
     realistic quick registration of ``seed`` (when that entry is absent), so the tests that load it do not run
     the same procedures again: the same call (seed, realism, QUICK) whose summary key run_display_sim checks."""
     root = os.environ.get("FLEXSHEET_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "flexsheet")
@@ -180,7 +181,7 @@ def test_lab_images_path_runs_the_same_estimator(twin_and_camera, tmp_path):
 def test_lab_images_path_for_the_arms(twin_and_camera, tmp_path):
     from flexsheet.calibration.display_calib import CameraEntry, DisplayCalib, Provenance
     from flexsheet.calibration.procedures import run_arms
-    from flexsheet.calibration.sources import TwinSource
+    from flexsheet.twin.registration import TwinSource
 
     truth, twin, _, r = twin_and_camera
     calib = DisplayCalib(camera=CameraEntry(r.T_display_camera, Provenance("test"), r.stereo))

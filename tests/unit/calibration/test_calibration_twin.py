@@ -1,5 +1,5 @@
 """The hidden truth (flexsheet.twin.truth) and the calibration twin's image formation
-(flexsheet.calibration.twin): determinism, documented spreads, exact rays, the decoder against OpenCV's,
+(flexsheet.twin.registration_camera): determinism, documented spreads, exact rays, the decoder against OpenCV's,
 and image noise at the level measured on the real XIMEA images."""
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import pytest
 from flexsheet.arm.kinematics import ArmKinematics, home_joints
 from flexsheet.calibration import projector as pj
 from flexsheet.calibration.display_calib import nominal_display_calib
-from flexsheet.calibration.twin import XIMEA_NOISE, CalibrationTwin, _Cam, measure_ximea_noise
+from flexsheet.twin.registration_camera import XIMEA_NOISE, CalibrationTwin, _Cam, measure_ximea_noise
 from flexsheet.twin.truth import Spreads, TwinTruth
 
 ROOT = Path(__file__).resolve().parents[3]

@@ -1,7 +1,7 @@
 """Figs 11 and 13 on the honest twin (issue 15): the correction with calibrated values only, measured on the truth.
 
 Three truth seeds, ``--quick``. The registration (``display.yaml``) comes from the twin's procedures
-(:func:`flexsheet.calibration.procedures.sim_display_calib`, cached per seed) and the true pushed sheet from the
+(:func:`flexsheet.twin.registration.sim_display_calib`, cached per seed) and the true pushed sheet from the
 nonlinear FEM (cached tables), so the first run on a clean machine takes ~2 min, later runs ~1 min.
 """
 

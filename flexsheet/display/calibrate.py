@@ -49,8 +49,9 @@ def _opts(a) -> P.Options:
 
 
 def _source(a, p: argparse.ArgumentParser, opts: P.Options):
-    from flexsheet.calibration.sources import ImageDirSource, TwinSource
-    from flexsheet.calibration.twin import CalibrationTwin
+    from flexsheet.calibration.sources import ImageDirSource
+    from flexsheet.twin.registration import TwinSource
+    from flexsheet.twin.registration_camera import CalibrationTwin
     from flexsheet.twin.truth import TwinTruth
 
     if a.sim:
@@ -228,14 +229,16 @@ def display_main(argv: list[str] | None = None) -> int:
 
     def go():
         if a.sweep:
-            from flexsheet.calibration.sweep import run_sweep
+            from flexsheet.experiments.registration_sweep import run_sweep
 
             seeds = [int(s) for s in a.seeds.split(",") if s.strip()]
             run_sweep(seeds, a.out, quick=a.quick, realism=a.realism, progress=_say)
             return 0
         if not a.sim or a.truth_seed is None:
             p.error("display needs --sim --truth-seed N (in the lab run the procedures one by one: docs/calibration.md)")
-        s = P.run_display_sim(a.truth_seed, a.out, P.QUICK if a.quick else P.FULL, a.realism, a.force, progress=_say)
+        from flexsheet.twin.registration import run_display_sim
+
+        s = run_display_sim(a.truth_seed, a.out, P.QUICK if a.quick else P.FULL, a.realism, a.force, progress=_say)
         t = s["targets"]
         ok = (s["camera"]["translation_error_mm"] <= t["camera_mm"] and s["camera"]["rotation_error_deg"] <= t["camera_deg"]
               and s["projector"]["translation_error_mm"] <= t["projector_mm"]
@@ -262,7 +265,7 @@ def noise_main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
 
     def go():
-        from flexsheet.calibration.twin import measure_ximea_noise
+        from flexsheet.twin.registration_camera import measure_ximea_noise
 
         _say(f"measuring {a.images} (render each view through its calibrated pose)…")
         r = measure_ximea_noise(a.images, a.square)

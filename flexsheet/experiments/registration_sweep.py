@@ -45,7 +45,7 @@ def _projector(pcs, cam, K, size, fit_k1):
 
 
 def _seed_sweep(seed: int, realism: str, quick: bool, progress) -> dict:
-    from flexsheet.calibration.twin import CalibrationTwin
+    from flexsheet.twin.registration_camera import CalibrationTwin
     from flexsheet.twin.truth import TwinTruth
 
     opts = QUICK if quick else FULL
@@ -106,7 +106,7 @@ def _failure_modes(seed: int, realism: str, progress) -> dict:
     """A dark sheet (projector white on the sheet → decoded pixels, projector error or the refusal) and a bowed
     board (sag at the sheet corners → camera error with the bow fitted and with a flat board assumed), on one
     seed."""
-    from flexsheet.calibration.twin import CalibrationTwin
+    from flexsheet.twin.registration_camera import CalibrationTwin
     from flexsheet.twin.truth import TwinTruth
 
     truth = TwinTruth.draw(seed, realism)

@@ -1,0 +1,155 @@
+"""The display's registration run in the twin: every procedure of :mod:`flexsheet.calibration.procedures` on
+frames rendered from a hidden truth (:class:`TwinSource`), each estimate scored against that truth only after
+it is fixed, cached per seed (:func:`sim_display_calib`: the ``display.yaml`` the twin's estimator nodes load).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import asdict
+
+import numpy as np
+
+from flexsheet.calibration.display_calib import DisplayCalib, write_display_calib
+from flexsheet.calibration.procedures import (
+    FULL,
+    QUICK,
+    Options,
+    _progress,
+    run_arms,
+    run_camera_pose,
+    run_eye,
+    run_projector,
+)
+from flexsheet.twin.registration_camera import CalibrationTwin
+from flexsheet.twin.truth import TwinTruth
+
+__all__ = ["TwinSource", "run_display_sim", "sim_display_calib", "SUMMARY_VERSION"]
+
+SUMMARY_VERSION = 2
+
+Pair = tuple[np.ndarray, np.ndarray]
+
+
+class TwinSource:
+    """Frames rendered by :class:`flexsheet.twin.registration_camera.CalibrationTwin` from a hidden truth.
+
+    ``board_frames``/``pattern_frames``/``marker_frames``: frames averaged per capture for each scene.
+    ``sheet_white_dn``: projector white on the sheet (lower it to play a dark sheet)."""
+
+    kind = "twin"
+
+    def __init__(self, twin: CalibrationTwin, board_frames: int = 8, pattern_frames: int = 1,
+                 marker_frames: int = 4, sheet_white_dn: float = 190.0, board_bow_mm: float = 0.0):
+        self.twin = twin
+        self.n_board_frames = board_frames
+        self.n_pattern_frames = pattern_frames
+        self.n_marker_frames = marker_frames
+        self.sheet_white_dn = sheet_white_dn
+        self.board_bow_mm = board_bow_mm
+
+    @property
+    def label(self) -> str:
+        t = self.twin.truth
+        return f"twin seed {t.seed} ({t.realism})"
+
+    def board_views(self, board, sheet_poses: list[np.ndarray], offset: float = 0.0) -> list[Pair]:
+        """One averaged stereo pair per commanded sheet pose (home first)."""
+        f = self.twin.frames
+        self.twin.frames = self.n_board_frames
+        try:
+            return self.twin.board_views(board, sheet_poses, offset, self.board_bow_mm)
+        finally:
+            self.twin.frames = f
+
+    def pattern_frames(self, patterns: list[np.ndarray], sheet_pose: np.ndarray, index: int) -> list[Pair]:
+        """Stereo pairs of every pattern with the sheet at ``sheet_pose`` (pose number ``index``)."""
+        return self.twin.pattern_frames(patterns, sheet_pose, white_dn=self.sheet_white_dn, frames=self.n_pattern_frames)
+
+    def marker_frames(self, side: str, joints: list[np.ndarray]) -> tuple[list[Pair], list[np.ndarray]]:
+        """Stereo pairs while arm ``side`` visits ``joints``; returns (frames, the joints actually commanded)."""
+        f = self.twin.frames
+        self.twin.frames = self.n_marker_frames
+        try:
+            return self.twin.marker_frames(side, joints), [np.asarray(q, float) for q in joints]
+        finally:
+            self.twin.frames = f
+
+
+
+def _err(t, r):
+    return {"translation_error_mm": t * 1e3, "rotation_error_deg": math.degrees(r)}
+
+
+def run_display_sim(seed: int, out_dir: str, opts: Options = FULL, realism: str = "realistic",
+                    force: bool = False, progress=print) -> dict:
+    """Run every procedure in the twin of truth ``seed``; write ``out_dir/display.yaml`` and
+    ``out_dir/summary.json`` (errors against the truth under ``camera``, ``projector``, ``arms.left``,
+    ``arms.right``; residuals; options; timings). Cached: an existing summary with the same seed, realism,
+    options and version is returned unless ``force``. Returns the summary dict."""
+    os.makedirs(out_dir, exist_ok=True)
+    spath = os.path.join(out_dir, "summary.json")
+    ypath = os.path.join(out_dir, "display.yaml")
+    key = {"seed": int(seed), "realism": realism, "options": asdict(opts), "version": SUMMARY_VERSION}
+    if not force and os.path.isfile(spath) and os.path.isfile(ypath):
+        with open(spath) as fh:
+            old = json.load(fh)
+        if all(old.get(k) == v for k, v in key.items()):
+            _progress(f"display: seed {seed}: cached ({spath})", progress)
+            return old
+    t_all = time.perf_counter()
+    truth = TwinTruth.draw(int(seed), realism)
+    src = TwinSource(CalibrationTwin(truth, seed=int(seed)), opts.board_frames, opts.pattern_frames,
+                     opts.marker_frames)
+    timings = {}
+    t0 = time.perf_counter()
+    cam, rc = run_camera_pose(src, opts, progress=progress)
+    timings["camera_s"] = time.perf_counter() - t0
+    calib = DisplayCalib(camera=cam)
+    t0 = time.perf_counter()
+    proj, rp = run_projector(src, opts, calib, progress=progress)
+    timings["projector_s"] = time.perf_counter() - t0
+    calib.projector = proj
+    t0 = time.perf_counter()
+    arms = run_arms(src, opts, calib, progress=progress)
+    timings["arms_s"] = time.perf_counter() - t0
+    calib.arms = {s: e for s, (e, _) in arms.items()}
+    calib.eye = run_eye(source=src.label)
+    write_display_calib(ypath, calib)
+    # scoring against the truth: only now, after every estimate is fixed
+    summary = dict(key)
+    summary["camera"] = {**_err(*truth.camera_pose_error(cam.T_display_camera)), "rms_px": rc.rms_px,
+                         "residual_mm": rc.residual_mm, "views": rc.n_views}
+    summary["projector"] = {**_err(*truth.projector_pose_error(proj.T_display_projector)),
+                            "reprojection_px": rp.reprojection_px, "poses": rp.n_poses, "points": rp.n_inliers,
+                            "focal_error_px": float(proj.K[0, 0] - truth.projector_K[0, 0]),
+                            "principal_point_error_px": (proj.K[:2, 2] - truth.projector_K[:2, 2]).tolist()}
+    summary["arms"] = {s: {**_err(*truth.base_error(s, e.T_display_base)), "residual_mm": r.residual_mm,
+                           "configs": r.n_configs,
+                           "marker_offset_error_mm": float(np.linalg.norm(e.marker_offset - truth.clamp_marker[s]) * 1e3)}
+                       for s, (e, r) in arms.items()}
+    summary["targets"] = {"camera_mm": 0.5, "camera_deg": 0.1, "projector_mm": 2.0, "projector_deg": 0.2,
+                          "projector_px": 0.5, "arms_mm": 1.0}
+    summary["timings"] = {**timings, "total_s": time.perf_counter() - t_all}
+    with open(spath, "w") as fh:
+        json.dump(summary, fh, indent=1)
+    c, p = summary["camera"], summary["projector"]
+    _progress(f"display: seed {seed}: camera {c['translation_error_mm']:.3f} mm {c['rotation_error_deg']:.4f}°, "
+              f"projector {p['translation_error_mm']:.2f} mm {p['rotation_error_deg']:.3f}° "
+              f"{p['reprojection_px']:.3f} px, arms " + ", ".join(
+                  f"{s} {summary['arms'][s]['translation_error_mm']:.3f} mm" for s in summary["arms"]), progress)
+    return summary
+
+
+def sim_display_calib(seed: int, realism: str = "realistic", cache_root: str | None = None,
+                      quick: bool = False, progress=None) -> str:
+    """Path of the twin's ``display.yaml`` for truth ``seed``, running the procedures once per seed and caching
+    them under ``cache_root`` (default ``$FLEXSHEET_CACHE`` or ``~/.cache/flexsheet``)/display/<realism>-<seed>.
+    This is what the twin's estimator nodes should load at start-up (issue 15)."""
+    root = cache_root or os.environ.get("FLEXSHEET_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "flexsheet")
+    out = os.path.join(root, "display", f"{realism}-{int(seed)}{'-quick' if quick else ''}")
+    run_display_sim(seed, out, QUICK if quick else FULL, realism, progress=progress)
+    return os.path.join(out, "display.yaml")
