@@ -62,7 +62,7 @@ from flexsheet.model.tension import SheetMaterial, tension
 #: flexsheet/runtime/background.py). Regenerate: ``python -m flexsheet.model.sheet_model --ship``.
 SHIPPED_TABLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "sheet_tables")
 
-__all__ = ["SeriesShape", "PendingPush", "NominalSheetModel", "MODEL_DEPTHS", "green", "fit_series", "table_grid",
+__all__ = ["SeriesShape", "PendingPush", "FourTriangleDent", "believed_sheet", "drawable", "NominalSheetModel", "MODEL_DEPTHS", "green", "fit_series", "table_grid",
            "contact_of", "SheetConfig", "sheet_model_for", "ship_tables", "SHIPPED_TABLES"]
 
 #: depths (m) of the nominal table (the fit interpolates between them)
@@ -132,6 +132,54 @@ class PendingPush:
     push_v: float
     depth: float
     node: float
+
+
+@dataclass(frozen=True)
+class FourTriangleDent(DeflectionGrid):
+    """The renderer's 4-triangle pushed sheet (paper §III-C-3: triangles (pushed point, corner i, corner i+1)),
+    as a deflection for drawing: w(u, v) = depth · min((a − u)/(a − u0), (u + a)/(u0 + a), (b − v)/(b − v0),
+    (v + b)/(v0 + b)) m along −normal (the tent over the sheet's rectangle with its apex at the contact
+    (u0, v0) = (``push_u``, ``push_v``)). The viz draws it for a :class:`PendingPush` (the nominal table of
+    that stretch is not built yet), which the renderer corrects with ``four_triangle``."""
+
+    half_span: float
+    half_width: float
+    push_u: float
+    push_v: float
+    depth: float
+
+    def deflection(self, u, v) -> np.ndarray:
+        """w(u, v), m; ``u``, ``v`` broadcastable (m, sheet frame, clamped onto the sheet)."""
+        a, b = self.half_span, self.half_width
+        u = np.clip(np.asarray(u, dtype=float), -a, a)
+        v = np.clip(np.asarray(v, dtype=float), -b, b)
+        tiny = 1e-12                        # a contact on a free edge (|v0| = b) leaves that side vertical
+        lam = np.minimum(np.minimum((a - u) / max(a - self.push_u, tiny), (u + a) / max(self.push_u + a, tiny)),
+                         np.minimum((b - v) / max(b - self.push_v, tiny), (v + b) / max(self.push_v + b, tiny)))
+        return self.depth * np.clip(lam, 0.0, 1.0)
+
+
+
+def believed_sheet(T_left: np.ndarray, T_right: np.ndarray, fingertip, model: NominalSheetModel,
+                   config: SheetConfig, build: bool = True) -> SheetSurface:
+    """The sheet the display believes, shared by the renderer and the viz: flat between the measured clamps
+    ``T_left``/``T_right`` (T_display_clamp (4, 4), m) and, when ``fingertip`` (3,) m (None: no valid fix) is
+    more than ``config.push_threshold`` behind it, pushed in by ``model`` (:meth:`NominalSheetModel.pushed`;
+    a :class:`PendingPush` while that stretch's table is missing and ``build`` is False). Raises
+    ``ValueError`` for clamps that give no sheet."""
+    flat = SheetSurface.from_clamps(T_left, T_right, half_width=config.half_width)
+    if fingertip is None:
+        return flat
+    return model.pushed(flat, fingertip, config.push_threshold, build=build)
+
+
+def drawable(sheet: SheetSurface) -> SheetSurface:
+    """``sheet`` with a :class:`PendingPush` replaced by its :class:`FourTriangleDent` (what the renderer
+    corrects with meanwhile), so that it can be drawn; any other sheet unchanged."""
+    m = sheet.membrane
+    if isinstance(m, PendingPush):
+        return replace(sheet, membrane=FourTriangleDent(m.half_span, m.half_width, m.push_u, m.push_v, m.depth))
+    return sheet
 
 
 def fit_series(w_grid: np.ndarray, a: float, b: float, push_u: float, push_v: float, depth: float,

@@ -32,7 +32,13 @@ from flexsheet.model.checks import check_pose
 from flexsheet.model.projector import Projector
 from flexsheet.model.scenes import Scene, load_scene, paper_scene
 from flexsheet.model.sheet import SheetSurface
-from flexsheet.model.sheet_model import NominalSheetModel, PendingPush, SheetConfig, sheet_model_for
+from flexsheet.model.sheet_model import (
+    NominalSheetModel,
+    PendingPush,
+    SheetConfig,
+    believed_sheet,
+    sheet_model_for,
+)
 from flexsheet.rendering.correction import MODELS, choose_model, predict_model_errors
 from flexsheet.rendering.stereo_renderer import cylinder_mesh, scaled_projector, vertex_normals
 
@@ -235,10 +241,7 @@ class RendererState:
             Tl = self._pose["left"] if self._pose["left"] is not None else self.home["left"]
             Tr = self._pose["right"] if self._pose["right"] is not None else self.home["right"]
             finger = self._finger
-        flat = SheetSurface.from_clamps(Tl, Tr, half_width=c.half_width)
-        if finger is None:
-            return flat
-        sheet = self.sheet_model.pushed(flat, finger, c.push_threshold, build=self.build)
+        sheet = believed_sheet(Tl, Tr, finger, self.sheet_model, c, build=self.build)
         if isinstance(sheet.membrane, PendingPush) and self.on_missing is not None:
             self.on_missing(sheet.membrane.node)
         return sheet

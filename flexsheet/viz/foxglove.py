@@ -38,7 +38,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import cache
 
 import numpy as np
@@ -69,8 +69,14 @@ from scipy.spatial.transform import Rotation
 
 from flexsheet.model import geometry
 from flexsheet.model.projector import Projector, eye_positions
-from flexsheet.model.sheet import DeflectionGrid, SheetSurface
-from flexsheet.model.sheet_model import NominalSheetModel, PendingPush, SheetConfig, sheet_model_for
+from flexsheet.model.sheet import SheetSurface
+from flexsheet.model.sheet_model import (
+    NominalSheetModel,
+    SheetConfig,
+    believed_sheet,
+    drawable,
+    sheet_model_for,
+)
 from messages import (
     ArmJointState,
     Fingertip,
@@ -86,7 +92,7 @@ from messages import (
 from messages import topics as T
 
 __all__ = ["SCENE", "TF", "METRICS", "CAMERA_LEFT", "CAMERA_RIGHT", "CAMERA_LEFT_INFO", "CAMERA_RIGHT_INFO",
-           "RENDER_IMAGE", "JSON_TOPICS", "INPUT_TOPICS", "inputs_for", "VizConfig", "FourTriangleDent", "Rates", "SceneBuilder",
+           "RENDER_IMAGE", "JSON_TOPICS", "INPUT_TOPICS", "inputs_for", "VizConfig", "Rates", "SceneBuilder",
            "FoxgloveStreams", "Output", "channel_schemas", "quaternions", "frustum_points", "sheet_mesh", "json_schema"]
 
 SCENE = "/viz/scene"
@@ -385,31 +391,6 @@ class VizConfig:
         return self.sheet.half_width
 
 
-@dataclass(frozen=True)
-class FourTriangleDent(DeflectionGrid):
-    """The renderer's 4-triangle pushed sheet (paper §III-C-3: triangles (pushed point, corner i, corner i+1)),
-    as a deflection for drawing: w(u, v) = depth · min((a − u)/(a − u0), (u + a)/(u0 + a), (b − v)/(b − v0),
-    (v + b)/(v0 + b)) m along −normal (the tent over the sheet's rectangle with its apex at the contact
-    (u0, v0) = (``push_u``, ``push_v``)). The bridge draws it for a :class:`PendingPush` (the nominal table of
-    that stretch is not built yet), which the renderer corrects with ``four_triangle``."""
-
-    half_span: float
-    half_width: float
-    push_u: float
-    push_v: float
-    depth: float
-
-    def deflection(self, u, v) -> np.ndarray:
-        """w(u, v), m; ``u``, ``v`` broadcastable (m, sheet frame, clamped onto the sheet)."""
-        a, b = self.half_span, self.half_width
-        u = np.clip(np.asarray(u, dtype=float), -a, a)
-        v = np.clip(np.asarray(v, dtype=float), -b, b)
-        tiny = 1e-12                        # a contact on a free edge (|v0| = b) leaves that side vertical
-        lam = np.minimum(np.minimum((a - u) / max(a - self.push_u, tiny), (u + a) / max(self.push_u + a, tiny)),
-                         np.minimum((b - v) / max(b - self.push_v, tiny), (v + b) / max(self.push_v + b, tiny)))
-        return self.depth * np.clip(lam, 0.0, 1.0)
-
-
 class _Arm:
     """One RV-1A: Pinocchio FK of every URDF link in the display frame."""
 
@@ -521,19 +502,13 @@ class SceneBuilder:
         clamps = self.clamp_poses()
         if clamps is None:
             return None
-        c = self.cfg.sheet
+        tip = self.get(T.FINGERTIP)
         try:
-            flat = SheetSurface.from_clamps(*clamps, half_width=c.half_width)
-            tip = self.get(T.FINGERTIP)
-            if tip is None or not tip.valid:
-                return flat
-            sheet = self.sheet_model.pushed(flat, tip.position, c.push_threshold, build=False)
+            sheet = believed_sheet(*clamps, tip.position if tip is not None and tip.valid else None,
+                                   self.sheet_model, self.cfg.sheet, build=False)
         except ValueError:
             return None
-        m = sheet.membrane
-        if isinstance(m, PendingPush):
-            sheet = replace(sheet, membrane=FourTriangleDent(m.half_span, m.half_width, m.push_u, m.push_v, m.depth))
-        return sheet
+        return drawable(sheet)
 
     # ------------------------------------------------------------------ /viz/scene
     def _entity(self, eid: str, stamp: float, **prims) -> bytes:

@@ -19,9 +19,9 @@ from foxglove.messages import SceneUpdate
 from flexsheet.arm.kinematics import LEFT_BASE, RIGHT_BASE, ArmKinematics, home_joints
 from flexsheet.model import geometry
 from flexsheet.model.sheet import SheetSurface, clamp_poses
-from flexsheet.model.sheet_model import SeriesShape, SheetConfig
+from flexsheet.model.sheet_model import FourTriangleDent, SeriesShape, SheetConfig
 from flexsheet.rendering.state import RendererState
-from flexsheet.viz.foxglove import FourTriangleDent, SceneBuilder, VizConfig
+from flexsheet.viz.foxglove import SceneBuilder, VizConfig
 from messages import ArmJointState, Fingertip, Header
 
 TOL = 5e-5          # 0.05 mm
