@@ -17,10 +17,11 @@ import yaml
 from conftest import ROOT, free_port
 
 from flexsheet.runtime import ports
-from flexsheet.runtime.launch import Supervisor, load_launch
+from flexsheet.runtime.launch import load_launch
 from flexsheet.runtime.launch_check import check_launch
 from flexsheet.runtime.node import EXIT_CONFIG
 from flexsheet.runtime.ports import ephemeral_port_range
+from flexsheet.runtime.supervisor import Supervisor
 
 LAB_HOSTS = ["main", "arm1", "arm2"]
 
