@@ -35,7 +35,7 @@ from typing import Protocol
 import numpy as np
 
 from flexsheet.arm.limiter import StreamLimiter
-from flexsheet.arm.tracking import TargetTracker
+from flexsheet.arm.tracking import BridgeStatus, TargetTracker
 from messages import registers as reg
 
 __all__ = ["CycleReport", "Verdict", "LinkError", "ControllerLink", "ArmStream"]
@@ -233,7 +233,7 @@ class ArmStream:
                 self.limiter.reset(st.position)
                 self.tracker.seed(st.position)
                 await link.keepalive()
-                return self._report(t0, t_deadline, 0.0, "hold:disabled")
+                return self._report(t0, t_deadline, 0.0, BridgeStatus.DISABLED)
             verdict = link.supervise(st)
             if verdict.reseed is not None:
                 self.limiter.reset(verdict.reseed)
@@ -255,7 +255,7 @@ class ArmStream:
                 log.warning("controller refused the command; restarting the stream from the measured joints")
                 self.limiter.reset(st.position)
                 self._snap = None
-                status = "hold:refused"
+                status = BridgeStatus.REFUSED
         except LinkError as exc:
             self._lost(str(exc))
             return self._report(t0, t_deadline, 0.0, "disconnected")

@@ -3,17 +3,29 @@
 :class:`TargetTracker` turns clamp-pose targets (``ArmTarget.pose``, display frame) into a joint goal with IK
 seeded from the previous goal, refuses what IK reports as unreachable, beyond limits, singular or a
 branch jump (the goal stays at the last good solution: the arm stops short, the status says why), and holds
-when targets stop arriving for longer than ``target_timeout``. The streaming limiter (:mod:`.interp`) then
-moves the commanded joints toward the goal within the joint limits.
+when targets stop arriving for longer than ``target_timeout``. The streaming limiter then
+moves the commanded joints toward the goal within the joint limits (:mod:`flexsheet.arm.limiter`).
 """
 
 from __future__ import annotations
+
+from enum import StrEnum
 
 import numpy as np
 
 from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, IKResult
 
-__all__ = ["TargetTracker"]
+__all__ = ["TargetTracker", "BridgeStatus"]
+
+
+class BridgeStatus(StrEnum):
+    """The bridge's fixed statuses (``ArmState.bridge_status``; compares equal to its string). A refused IK
+    target is ``"hold:" + IKResult.status`` (``hold:unreachable``, ``hold:limit:J<k>``, ...)."""
+
+    OK = "ok"
+    NO_TARGET = "hold:no_target"
+    DISABLED = "hold:disabled"
+    REFUSED = "hold:refused"
 
 
 class TargetTracker:
@@ -77,12 +89,12 @@ class TargetTracker:
     def status(self, now: float) -> str:
         """"ok", "hold:no_target" (none yet or timed out) or "hold:<ik status>" (last target refused)."""
         if self.last_target_at is None or now - self.last_target_at > self.target_timeout:
-            return "hold:no_target"
-        return "ok" if self.ik_status == "ok" else f"hold:{self.ik_status}"
+            return BridgeStatus.NO_TARGET
+        return BridgeStatus.OK if self.ik_status == "ok" else f"hold:{self.ik_status}"
 
     def goal_for(self, now: float, q_command: np.ndarray) -> np.ndarray:
         """Joint goal to stream toward at ``now``: the IK goal while targets are fresh, else ``q_command``
         (hold where the command is: the limiter brakes to a stop)."""
-        if self.goal is None or self.status(now) == "hold:no_target":
+        if self.goal is None or self.status(now) == BridgeStatus.NO_TARGET:
             return q_command
         return self.goal

@@ -25,6 +25,7 @@ from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
 from flexsheet.arm.stream import LinkError, Verdict
+from flexsheet.arm.tracking import BridgeStatus
 from messages import registers as reg
 
 __all__ = ["ModbusLink"]
@@ -108,7 +109,7 @@ class ModbusLink:
             return Verdict(False, "fault:watchdog", st.position)
         if not st.has(reg.ST_ENABLED):
             self._pending_cmd = reg.CMD_ENABLE
-            return Verdict(False, "hold:disabled", st.position)
+            return Verdict(False, BridgeStatus.DISABLED, st.position)
         return Verdict(True, "", reseed)
 
     async def send(self, cmd: np.ndarray, rewrite: bool = False) -> bool:

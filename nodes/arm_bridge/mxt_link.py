@@ -45,6 +45,7 @@ from collections.abc import Callable
 import numpy as np
 
 from flexsheet.arm.stream import LinkError, Verdict
+from flexsheet.arm.tracking import BridgeStatus
 from messages import mxt
 from messages import registers as reg
 
@@ -284,7 +285,7 @@ class MxtLink:
                 self.refused += 1
                 log.warning("MXT controller did not take command %d (executing %s); restarting there", c,
                             np.round(joint, 5))
-                return Verdict(True, "hold:refused", joint.copy())
+                return Verdict(True, BridgeStatus.REFUSED, joint.copy())
         return Verdict(True)
 
     async def send(self, cmd: np.ndarray, rewrite: bool = False) -> bool:
