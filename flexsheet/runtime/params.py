@@ -46,7 +46,7 @@ def config_fields(cls: type, *, exclude: Iterable[str] = (), rename: Mapping[str
     for name in excl | set(rename):
         if name not in fields:
             raise KeyError(f"{cls.__name__} has no field {name!r}")
-    hints = typing.get_type_hints(cls)
+    hints = typing.get_type_hints(cls, include_extras=True)   # Annotated[..., Field(gt=0)] constraints kept
     out: dict[str, tuple[Any, Any]] = {}
     for name, f in fields.items():
         if name in excl:
