@@ -294,14 +294,14 @@ def _pool_worker(path: str) -> str:
 
 
 def _pool_parent(path: str) -> None:
-    from flexsheet.experiments.fem import run_workers
+    from flexsheet.fem.workers import run_workers
 
     for _ in run_workers(_pool_worker, [path, path], 2):
         pass
 
 
 def test_experiment_workers_are_tied_to_their_parent(tmp_path):
-    """flexsheet.experiments.fem.run_workers, the pool of the reference, sphere-table and path-table solves: its
+    """flexsheet.fem.workers.run_workers, the pool of the reference, sphere-table and path-table solves: its
     workers ignore SIGINT, run one BLAS thread, and die when the experiment is killed (kill -9): the path table's
     own pool once left two workers solving for minutes after its parent was gone."""
     import multiprocessing as mp

@@ -483,6 +483,7 @@ def test_a_previous_version_path_is_reused_only_when_no_newton_call_ran_out(tmp_
     than NEWTON_ITERS iterations at every depth is re-keyed and read (no solve); one with a depth at NEWTON_ITERS
     (a call ran out there: nh-7 would continue it) is solved again; prefetch's plan (missing_solves) agrees."""
     from flexsheet.experiments import fem as X
+    from flexsheet.fem import reference_paths as R
     from flexsheet.fem.cache import ArrayCache
     from flexsheet.fem.material import Material
     from flexsheet.fem.snapshots import DEFAULT_REF_SPEC
@@ -491,7 +492,7 @@ def test_a_previous_version_path_is_reused_only_when_no_newton_call_ran_out(tmp_
     d, probes = X._depths(0.0025), np.zeros((2, 3))
 
     k = _KeyRecorder()
-    monkeypatch.setattr(X, "SOLVER_VERSION", X.PREVIOUS_VERSION)
+    monkeypatch.setattr(R, "SOLVER_VERSION", X.PREVIOUS_VERSION)
     X.reference_path(DEFAULT_REF_SPEC, 0.0, d, Material(), k, probes)
     monkeypatch.undo()
     ((old_key, _),) = k.seen
@@ -502,7 +503,7 @@ def test_a_previous_version_path_is_reused_only_when_no_newton_call_ran_out(tmp_
     def no_solve(*a, **kw):
         raise Solved
 
-    monkeypatch.setattr(X, "_ref_model", no_solve)
+    monkeypatch.setattr(R, "_ref_model", no_solve)
     for newton_max, reused in ((X.NEWTON_ITERS - 1, True), (X.NEWTON_ITERS, False)):
         cache = ArrayCache(str(tmp_path / f"c{newton_max}"))
         old = _fake_path_dict(4, d) | {"newton": np.full(len(d), 5)}
@@ -525,6 +526,10 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     table's mesh (its loading path: reference_path takes the half model away from azimuth 0), and `--azimuth A`
     solves just that path (the solves themselves are hours: replaced by markers)."""
     from flexsheet.experiments import fem as X
+    from flexsheet.experiments.fem import cli as CLI
+    from flexsheet.experiments.fem import runs as RUNS
+    from flexsheet.fem import node_table as NT
+    from flexsheet.fem import reference_paths as R
     from flexsheet.fem.cache import ArrayCache
     from flexsheet.fem.material import GENT_JM_RUBBER, Material
     from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_or_build
@@ -543,19 +548,21 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
         seen["states"] = {a: solved(a, None, grid.depths()[1:]) for a in (0.0, 30.0)}
         return {"marker": np.arange(3.0), "seconds": np.array([1.0])}
 
-    monkeypatch.setattr(X, "reference_path", fake_path)
+    monkeypatch.setattr(R, "reference_path", fake_path)
     # stable_path's unloading sweep (test_stable_path_takes_the_unloaded_rows_only...) left out: its loading read
-    monkeypatch.setattr(X, "stable_path", lambda *a, **kw: X.reference_path(*a, **kw))
+    monkeypatch.setattr(NT, "stable_path", lambda *a, **kw: R.reference_path(*a, **kw))
     monkeypatch.setattr("flexsheet.fem.snapshots.build_table", fake_build)
     # the rendered vertices the paths are sampled at (the full settings' linear model: a 17 s precompute)
     verts = np.random.default_rng(0).uniform(-0.03, 0.03, (7, 3)).astype(np.float32)
-    monkeypatch.setattr(X, "realtime_model", lambda st, mat, cache_dir: SimpleNamespace(rest_vertices=verts))
+    for where in (NT, RUNS):            # the node table's build and the --level run
+        monkeypatch.setattr(where, "realtime_model",
+                            lambda st, mat, cache_dir: SimpleNamespace(rest_vertices=verts))
     # the report reads a real table's fields (tests/unit/fem/test_fem_hyperelastic.py checks the shipped one): a marker here
     reported = {}
-    monkeypatch.setattr(X, "node_table_report", lambda table, paths, mat, key: reported.update(
+    monkeypatch.setattr(NT, "node_table_report", lambda table, paths, mat, key: reported.update(
         angles=sorted(paths), Jm=mat.Jm, key=key) or {"key": key})
-    monkeypatch.setattr(X, "plot_node_table", lambda out, rep: None)
-    monkeypatch.setattr(X, "_table_update_ms", lambda table, verts, mat: {"median_ms": -1.0})
+    monkeypatch.setattr(CLI, "plot_node_table", lambda out, rep: None)
+    monkeypatch.setattr(NT, "_table_update_ms", lambda table, verts, mat: {"median_ms": -1.0})
     assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--jobs", "1"]) == 0
     assert reported["angles"] == list(DEFAULT_GRID.angles_deg) and reported["Jm"] == GENT_JM_RUBBER
     with open(tmp_path / "o" / "node_table.json") as fh:
@@ -576,8 +583,9 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     assert paths == [(DEFAULT_REF_SPEC, 20.0, 0.05, 20)]
     # azimuth 0 of the node table is the full run's 3.4 mm convergence level: the same solve (cache key)
     calls = []
-    monkeypatch.setattr(X, "reference_path", lambda spec, a, d, mat, cache, probes, contact="frictionless", *r:
-                        calls.append((spec, a, np.round(d, 9).tolist(), probes.tobytes(), contact)) or {})
+    for where in (R, RUNS):             # the node table's stable_path reads R's, the --level run its own
+        monkeypatch.setattr(where, "reference_path", lambda spec, a, d, mat, cache, probes, contact="frictionless",
+                            *r: calls.append((spec, a, np.round(d, 9).tolist(), probes.tobytes(), contact)) or {})
     level = [lv.h_fine for lv in X.settings_for(False).levels].index(DEFAULT_REF_SPEC.h_fine)
     assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--level", str(level)]) == 0
     assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table",
@@ -599,7 +607,7 @@ def test_stable_path_takes_the_unloaded_rows_only_and_keeps_the_dtypes(tmp_path,
     """stable_path: rows where stable_states took the unloaded state come from its record, the others are the
     loading path's as cached, every array keeps its dtype; the energies and branch flags are stored; a second
     call reads the "stable" cache entry without touching the loading path."""
-    from flexsheet.experiments import fem as X
+    from flexsheet.fem import reference_paths as X
     from flexsheet.fem.cache import ArrayCache
     from flexsheet.fem.hyperelastic import RefSpec
     from flexsheet.fem.material import Material
@@ -658,6 +666,7 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
     from test_fem_hyperelastic import C, L, R, _analytic_table
 
     from flexsheet.experiments import fem as X
+    from flexsheet.fem import node_table as NT
     from flexsheet.fem.material import GENT_JM_RUBBER, Material
 
     depths = [0.0, 0.01, 0.02]
@@ -692,7 +701,7 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
         return np.column_stack([fr * np.cos(th) - ft * np.sin(th), d * 0.1 * ys / L, fr * np.sin(th) + ft * np.cos(th)])
 
     held = {"u": np.stack([exact(d) for d in depths[1:]]), "dofs": np.array(7), "cpu_seconds": np.array(3.0)}
-    monkeypatch.setattr(X, "stable_path", lambda *a, **kw: held)
+    monkeypatch.setattr(NT, "stable_path", lambda *a, **kw: held)
     h = X.node_table_holdout(tab, mat, None, rm, 5.0)
     assert h["depths_mm"] == pytest.approx([10.0, 20.0]) and h["max_error_mm"] < 5e-3    # 1° grid: µm
     far = int(np.argmax(np.abs(th - phi)))                 # a vertex far from the fingertip: visible
@@ -705,7 +714,7 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
     twin_u = held["u"].copy()
     twin_u[0, far] += [0.0, 0.0, 0.0005]
     specs = []
-    monkeypatch.setattr(X, "stable_path", lambda spec, *a, **kw: specs.append(spec) or (
+    monkeypatch.setattr(NT, "stable_path", lambda spec, *a, **kw: specs.append(spec) or (
         held if spec == X.DEFAULT_REF_SPEC else {**held, "u": twin_u, "converged": np.array([True, True])}))
     h = X.node_table_holdout(tab, mat, None, rm, 5.0, twin=True)
     assert specs == [X.DEFAULT_REF_SPEC, X.twin_spec(X.DEFAULT_REF_SPEC)]
@@ -732,7 +741,7 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
     seen = []
     on0 = {"u": np.stack([exact0(d) for d in fine]), "dofs": np.array(9), "cpu_seconds": np.array(4.0),
            "branch": np.array([0, 0, 1, 1])}
-    monkeypatch.setattr(X, "stable_path", lambda spec, a, d, *r, **kw: seen.append(np.round(d, 9).tolist()) or on0)
+    monkeypatch.setattr(NT, "stable_path", lambda spec, a, d, *r, **kw: seen.append(np.round(d, 9).tolist()) or on0)
     b = X.node_table_between_depths(tab, mat, None, rm, 0.0)
     assert seen == [fine] and b["depths_mm"] == pytest.approx([5.0, 10.0, 15.0, 20.0]) and b["max_error_mm"] < 5e-3
     assert b["unloaded_state_at_mm"] == pytest.approx([15.0, 20.0]) and b["over_target_from_mm"] is None
