@@ -122,17 +122,17 @@ def _run_container(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------------------------------- launch
 def cmd_launch(args: argparse.Namespace) -> int:
     """Check the launch file for this host (every error one line on stderr, exit 78 when any), then, unless
-    ``--check``, run its nodes under the :class:`~flexsheet.runtime.launch.Supervisor`."""
+    ``--check``, run its nodes under the :class:`~flexsheet.runtime.supervisor.Supervisor`."""
     from flexsheet.runtime.extensions import extensions
     from flexsheet.runtime.launch import (
         TOPLEVEL_ENV,
         LaunchError,
-        Supervisor,
         load_launch,
         parse_toplevel_set,
     )
     from flexsheet.runtime.launch_check import check_launch
     from flexsheet.runtime.node import EXIT_CONFIG
+    from flexsheet.runtime.supervisor import Supervisor
 
     out = str(Path(args.out).resolve()) if args.out else None
     overrides: dict[str, list[str]] = {}
@@ -244,16 +244,7 @@ def _delegate(table: dict[str, str], kind: str):
     return call
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="flexsheet",
-        description="flexsheet: encountered-type visual haptic display using a flexible sheet. "
-                    "A ROS-style node graph on ZeroMQ: launch files, nodes, topics, MCAP bags, experiments.",
-        **_fmt("  flexsheet launch launch/sim.yaml            # the whole display, simulated on localhost\n"
-               "  flexsheet topic list                        # topics of the running graph\n"
-               "  flexsheet experiment stroke --out out/stroke"))
-    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
-
+def _add_launch_parser(sub) -> None:
     s = sub.add_parser("launch", help="start the nodes of a launch file (one host or all)",
                        description="Start every node of a launch file as its own process, with prefixed output, "
                                    "respawn and clean Ctrl-C shutdown. The file is checked first (params, hosts, "
@@ -275,6 +266,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "on any, 0 when it would start")
     s.set_defaults(func=cmd_launch)
 
+
+def _add_run_parser(sub) -> None:
     s = sub.add_parser("run", help="run one node alone (or one container of nodes)",
                        description="Run one node in the foreground. With --launch it takes its endpoint, "
                                    "peers and params from the launch file; --param overrides. With --container "
@@ -297,6 +290,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --container: override one node parameter (YAML value), repeatable")
     s.set_defaults(func=cmd_run)
 
+
+def _add_keys_parser(sub) -> None:
     s = sub.add_parser("keys", help="generate CURVE keypairs for the hosts of a launch file",
                        **_fmt("  flexsheet keys generate main arm1 arm2"))
     ks = s.add_subparsers(dest="keys_cmd", required=True, metavar="VERB")
@@ -314,6 +309,8 @@ def build_parser() -> argparse.ArgumentParser:
                                                          "public_keys.yaml and its new secret)")
     t.set_defaults(func=cmd_keys)
 
+
+def _add_topic_parser(sub) -> None:
     s = sub.add_parser("topic", help="inspect topics of the live graph (from heartbeats)",
                        **_fmt("  flexsheet topic list\n  flexsheet topic echo /fingertip --count 3\n"
                               "  flexsheet topic hz /camera/stereo"))
@@ -333,6 +330,8 @@ def build_parser() -> argparse.ArgumentParser:
             t.add_argument("--window", type=float, default=5.0, help="s to measure")
         t.set_defaults(func=_tool(f"topic_{verb}"))
 
+
+def _add_node_parser(sub) -> None:
     s = sub.add_parser("node", help="inspect nodes of the live graph (from heartbeats)",
                        **_fmt("  flexsheet node list"))
     ns = s.add_subparsers(dest="node_cmd", required=True, metavar="VERB")
@@ -342,6 +341,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--timeout", type=float, default=2.5)
     t.set_defaults(func=_tool("node_list"))
 
+
+def _add_bag_parser(sub) -> None:
     s = sub.add_parser("bag", help="record, play, inspect and export MCAP bags",
                        **_fmt("  flexsheet bag record -o run.mcap /fingertip /sheet/target\n"
                               "  flexsheet bag info run.mcap\n  flexsheet bag play run.mcap --rate 0.5\n"
@@ -373,6 +374,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--no-foxglove", action="store_true", help="JSON copies only, no /viz/* scene channels")
     t.set_defaults(func=_bag("cmd_export"))
 
+
+def _add_delegate_parsers(sub) -> None:
     for kind, table, helptext, example in (
             ("calibrate", registry.CALIBRATE, "calibrate devices and register the display (stereo, camera pose, "
              "projector, arms, eye; display = all of them)",
@@ -388,6 +391,20 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("name", metavar="NAME", help=" | ".join(table))
         s.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for NAME")
         s.set_defaults(func=_delegate(table, kind))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="flexsheet",
+        description="flexsheet: encountered-type visual haptic display using a flexible sheet. "
+                    "A ROS-style node graph on ZeroMQ: launch files, nodes, topics, MCAP bags, experiments.",
+        **_fmt("  flexsheet launch launch/sim.yaml            # the whole display, simulated on localhost\n"
+               "  flexsheet topic list                        # topics of the running graph\n"
+               "  flexsheet experiment stroke --out out/stroke"))
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for add in (_add_launch_parser, _add_run_parser, _add_keys_parser, _add_topic_parser,
+                _add_node_parser, _add_bag_parser, _add_delegate_parsers):
+        add(sub)
     return p
 
 

@@ -257,6 +257,156 @@ def _pose_vec(R: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.concatenate([cv2.Rodrigues(R)[0].ravel(), np.asarray(t, float).ravel()])
 
 
+def _usable_views(views, board: BoardSpec, stereo_nominal: dict, T_dc_nominal: np.ndarray, offset: float,
+                  min_views: int) -> tuple[list, dict[int, str], list[int]]:
+    """The board detected in every view (:func:`detect_views`): (detections, skipped, used view indices).
+    Raises ``ValueError`` (module doc) without the home view or with fewer than ``min_views`` usable views."""
+    if not views:
+        raise ValueError("no board views given (need the home view first)")
+    if min_views < 1:
+        raise ValueError(f"min_views must be >= 1, got {min_views!r}")
+    dets, skipped = detect_views(views, board, stereo_nominal, T_dc_nominal, offset)
+    if dets[0] is None:
+        raise ValueError(f"board not found in the home view (view 0): {skipped.get(0)}; it defines the display "
+                         f"frame — check the board is in view, lit and not occluded")
+    used = [k for k, d in enumerate(dets) if d is not None]
+    if len(used) < min_views:
+        raise ValueError(f"board found in only {len(used)} of {len(views)} views, need at least {min_views}: "
+                         f"{skipped}")
+    return dets, skipped, used
+
+
+def _start_vector(obs: list, s0: np.ndarray, stereo_nominal: dict, fit_bow: bool) -> np.ndarray:
+    """x0: the nominal stereo parameters, each view's PnP pose with the nominal left intrinsics, no bow."""
+    x0 = [s0]
+    for P, ul, _ in obs:
+        ok, rv, tv = cv2.solvePnP(P, ul, stereo_nominal["K1"], stereo_nominal["D1"])
+        if not ok:
+            raise ValueError("solvePnP failed on a board view")
+        x0.append(np.concatenate([rv.ravel(), tv.ravel()]))
+    if fit_bow:
+        x0.append(np.zeros(1))
+    return np.concatenate(x0)
+
+
+def _prior_sqrt_inv(prior_cov: np.ndarray | None) -> np.ndarray | None:
+    """L⁻¹ of the prior's (regularised) Cholesky factor, or None without a prior. ``ValueError`` on a bad one."""
+    if prior_cov is None:
+        return None
+    C = np.asarray(prior_cov, float)
+    if C.shape != (24, 24) or not np.all(np.isfinite(C)):
+        raise ValueError(f"prior_cov must be a finite (24, 24) matrix, got {C.shape}")
+    C = C + np.diag(np.maximum(np.diag(C), 1e-12) * 1e-6 + 1e-14)
+    return np.linalg.inv(np.linalg.cholesky(C))
+
+
+_EX = np.array([1.0, 0.0, 0.0])
+
+
+class _BoardFit:
+    """The stereo bundle adjustment's residuals and analytic Jacobian (module doc, step 3): parameters x = the 24
+    stereo parameters, one pose (rotation vector, translation) per used view, and (``fit_bow``) the bow."""
+
+    def __init__(self, obs: list, P_sheet: np.ndarray, size: tuple, s0: np.ndarray, Linv: np.ndarray | None,
+                 fit_bow: bool):
+        self.obs, self.size, self.s0, self.Linv, self.fit_bow = obs, size, s0, Linv, fit_bow
+        self.n_res = sum(4 * len(P) for P, _, _ in obs)
+        self.n_par = 24 + 6 * len(obs) + (1 if fit_bow else 0)
+        self.n_pri = 24 if Linv is not None else 0
+        r2 = [P[:, 1] ** 2 + P[:, 2] ** 2 for P, _, _ in obs]
+        r2max = max(float(np.max(P_sheet[:, 1] ** 2 + P_sheet[:, 2] ** 2)), 1e-12)
+        self.quad = [q / r2max for q in r2]                # 0 at the centre, 1 at the farthest corner
+
+    def model(self, x: np.ndarray, sigma: float, want_jac: bool):
+        """Residuals (n_res + n_pri,) and, if asked, their analytic Jacobian: ``cv2.projectPoints`` gives
+        d(pixel)/d(pose, f, c, distortion); ``cv2.composeRT`` chains the right camera through R, T."""
+        st = stereo_from_vector(x[:24], self.size)
+        r = np.empty(self.n_res + self.n_pri)
+        J = np.zeros((self.n_res + self.n_pri, self.n_par)) if want_jac else None
+        row = 0
+        bow = x[-1] if self.fit_bow else 0.0
+        for k, (P0, ul, ur) in enumerate(self.obs):
+            P = P0 + (bow * self.quad[k])[:, None] * _EX          # the bowed board
+            row = self._left(x, st, k, P, ul, sigma, r, J, row)
+            row = self._right(x, st, k, P, ur, sigma, r, J, row)
+        if self.n_pri:
+            r[row:] = self.Linv @ (x[:24] - self.s0)
+            if want_jac:
+                J[row:, :24] = self.Linv
+        return r, J
+
+    def _left(self, x, st, k, P, ul, sigma, r, J, row) -> int:
+        n = len(P)
+        cv = slice(24 + 6 * k, 30 + 6 * k)
+        rv, tv = x[24 + 6 * k:27 + 6 * k], x[27 + 6 * k:30 + 6 * k]
+        pl, jl = cv2.projectPoints(P, rv, tv, st["K1"], st["D1"])
+        r[row:row + 2 * n] = ((pl.reshape(-1, 2) - ul) / sigma).ravel()
+        if J is not None:
+            J[row:row + 2 * n, cv] = jl[:, :6] / sigma
+            J[row:row + 2 * n, 0:9] = jl[:, 6:15] / sigma
+            if self.fit_bow:                               # d pixel / d X_cam = d pixel / d t
+                dX = cv2.Rodrigues(rv.copy())[0] @ _EX
+                J[row:row + 2 * n, -1] = (jl[:, 3:6] @ dX) * np.repeat(self.quad[k], 2) / sigma
+        return row + 2 * n
+
+    def _right(self, x, st, k, P, ur, sigma, r, J, row) -> int:
+        n = len(P)
+        cv = slice(24 + 6 * k, 30 + 6 * k)
+        rv, tv = x[24 + 6 * k:27 + 6 * k], x[27 + 6 * k:30 + 6 * k]
+        c = cv2.composeRT(rv, tv, x[18:21], x[21:24])
+        pr, jr = cv2.projectPoints(P, c[0], c[1], st["K2"], st["D2"])
+        r[row:row + 2 * n] = ((pr.reshape(-1, 2) - ur) / sigma).ravel()
+        if J is not None:
+            dr1, dt1, dr2, dt2, tr1, tt1, tr2, tt2 = c[2:10]
+            A, B = jr[:, 0:3], jr[:, 3:6]                  # d pixel / d (r3, t3)
+            J[row:row + 2 * n, cv] = np.hstack([A @ dr1 + B @ tr1, A @ dt1 + B @ tt1]) / sigma
+            J[row:row + 2 * n, 18:21] = (A @ dr2 + B @ tr2) / sigma
+            J[row:row + 2 * n, 21:24] = (A @ dt2 + B @ tt2) / sigma
+            J[row:row + 2 * n, 9:18] = jr[:, 6:15] / sigma
+            if self.fit_bow:
+                dX = cv2.Rodrigues(c[0])[0] @ _EX
+                J[row:row + 2 * n, -1] = (B @ dX) * np.repeat(self.quad[k], 2) / sigma
+        return row + 2 * n
+
+    def residuals(self, v: np.ndarray, sg: float) -> np.ndarray:
+        return self.model(v, sg, False)[0]
+
+    def solve(self, x0: np.ndarray) -> tuple[np.ndarray, float]:
+        """Levenberg–Marquardt from ``x0``, σ re-estimated from the residuals and the fit repeated once: (x, σ)."""
+        sigma = 0.1
+        x = x0
+        for _ in range(2):
+            sol = least_squares(self.residuals, x, jac=lambda v, sg: self.model(v, sg, True)[1], args=(sigma,),
+                                method="lm", x_scale="jac", max_nfev=400)
+            x = sol.x
+            data = sol.fun[:self.n_res] * sigma
+            dof = max(self.n_res + self.n_pri - self.n_par, 1)
+            sigma = max(float(math.sqrt(data @ data / dof)), 0.01)
+        return x, sigma
+
+    def rms(self, x: np.ndarray) -> tuple[float, list[float]]:
+        """Reprojection RMS per corner (px), over all views and per view."""
+        data = self.residuals(x, 1.0)[:self.n_res]
+        rms = float(np.sqrt(np.mean(data ** 2 * 2.0)))    # per corner (2 coordinates), px
+        per_view, row = [], 0
+        for P, _, _ in self.obs:
+            d = data[row:row + 4 * len(P)]
+            per_view.append(float(np.sqrt(np.mean(d ** 2) * 2.0)))
+            row += 4 * len(P)
+        return rms, per_view
+
+
+def _home_residual(fit: _BoardFit, st: dict, T_dc: np.ndarray, bow: float) -> np.ndarray:
+    """The home corners triangulated with the refined model, placed by the pose, minus their (bowed) design
+    positions (N, 3) m."""
+    P, ul, ur = fit.obs[0]
+    P = P + (bow * fit.quad[0])[:, None] * _EX
+    model = StereoModel.from_calib(st)
+    Xl = model.triangulate(model.undistort(ul, "left"), model.undistort(ur, "right"), "optimal")
+    Xd = Xl @ T_dc[:3, :3].T + T_dc[:3, 3]
+    return Xd - P
+
+
 def estimate_camera_pose(views: list[tuple[np.ndarray, np.ndarray]], board: BoardSpec, stereo_nominal: dict,
                          T_dc_nominal: np.ndarray, *, offset: float = 0.0, prior_cov: np.ndarray | None = None,
                          min_views: int = 3, max_rms_px: float = 0.6, fit_bow: bool = True,
@@ -273,18 +423,7 @@ def estimate_camera_pose(views: list[tuple[np.ndarray, np.ndarray]], board: Boar
     0.9 mm of camera pose (the views fit a flat board just as well with other intrinsics); a fitted bow above
     ``max_bow_mm`` is refused. Raises ``ValueError`` (see module doc).
     """
-    if not views:
-        raise ValueError("no board views given (need the home view first)")
-    if min_views < 1:
-        raise ValueError(f"min_views must be >= 1, got {min_views!r}")
-    dets, skipped = detect_views(views, board, stereo_nominal, T_dc_nominal, offset)
-    if dets[0] is None:
-        raise ValueError(f"board not found in the home view (view 0): {skipped.get(0)}; it defines the display "
-                         f"frame — check the board is in view, lit and not occluded")
-    used = [k for k, d in enumerate(dets) if d is not None]
-    if len(used) < min_views:
-        raise ValueError(f"board found in only {len(used)} of {len(views)} views, need at least {min_views}: "
-                         f"{skipped}")
+    dets, skipped, used = _usable_views(views, board, stereo_nominal, T_dc_nominal, offset, min_views)
     size = tuple(stereo_nominal["image_size"])
     s0 = stereo_vector(stereo_nominal)
     P_sheet = board_points(board, offset)                  # = display coordinates at home
@@ -292,97 +431,13 @@ def estimate_camera_pose(views: list[tuple[np.ndarray, np.ndarray]], board: Boar
     for k in used:
         ids, ul, ur = dets[k]
         obs.append((P_sheet[ids], ul, ur))
-    # starting poses: PnP with the nominal left intrinsics
-    x0 = [s0]
-    for P, ul, _ in obs:
-        ok, rv, tv = cv2.solvePnP(P, ul, stereo_nominal["K1"], stereo_nominal["D1"])
-        if not ok:
-            raise ValueError("solvePnP failed on a board view")
-        x0.append(np.concatenate([rv.ravel(), tv.ravel()]))
-    if fit_bow:
-        x0.append(np.zeros(1))
-    x0 = np.concatenate(x0)
-    n_res = sum(4 * len(P) for P, _, _ in obs)
-    Linv = None
-    if prior_cov is not None:
-        C = np.asarray(prior_cov, float)
-        if C.shape != (24, 24) or not np.all(np.isfinite(C)):
-            raise ValueError(f"prior_cov must be a finite (24, 24) matrix, got {C.shape}")
-        C = C + np.diag(np.maximum(np.diag(C), 1e-12) * 1e-6 + 1e-14)
-        Linv = np.linalg.inv(np.linalg.cholesky(C))
-
-    n_par = 24 + 6 * len(obs) + (1 if fit_bow else 0)
-    n_pri = 24 if Linv is not None else 0
-    r2 = [P[:, 1] ** 2 + P[:, 2] ** 2 for P, _, _ in obs]
-    r2max = max(float(np.max(P_sheet[:, 1] ** 2 + P_sheet[:, 2] ** 2)), 1e-12)
-    quad = [q / r2max for q in r2]                         # 0 at the centre, 1 at the farthest corner
-    ex = np.array([1.0, 0.0, 0.0])
-
-    def model(x: np.ndarray, sigma: float, want_jac: bool):
-        """Residuals (n_res + n_pri,) and, if asked, their analytic Jacobian: ``cv2.projectPoints`` gives
-        d(pixel)/d(pose, f, c, distortion); ``cv2.composeRT`` chains the right camera through R, T."""
-        st = stereo_from_vector(x[:24], size)
-        rR, tT = x[18:21], x[21:24]
-        r = np.empty(n_res + n_pri)
-        J = np.zeros((n_res + n_pri, n_par)) if want_jac else None
-        row = 0
-        bow = x[-1] if fit_bow else 0.0
-        for k, (P0, ul, ur) in enumerate(obs):
-            n = len(P0)
-            P = P0 + (bow * quad[k])[:, None] * ex          # the bowed board
-            cv = slice(24 + 6 * k, 30 + 6 * k)
-            rv, tv = x[24 + 6 * k:27 + 6 * k], x[27 + 6 * k:30 + 6 * k]
-            pl, jl = cv2.projectPoints(P, rv, tv, st["K1"], st["D1"])
-            r[row:row + 2 * n] = ((pl.reshape(-1, 2) - ul) / sigma).ravel()
-            if want_jac:
-                J[row:row + 2 * n, cv] = jl[:, :6] / sigma
-                J[row:row + 2 * n, 0:9] = jl[:, 6:15] / sigma
-                if fit_bow:                                # d pixel / d X_cam = d pixel / d t
-                    dX = cv2.Rodrigues(rv.copy())[0] @ ex
-                    J[row:row + 2 * n, -1] = (jl[:, 3:6] @ dX) * np.repeat(quad[k], 2) / sigma
-            row += 2 * n
-            c = cv2.composeRT(rv, tv, rR, tT)
-            pr, jr = cv2.projectPoints(P, c[0], c[1], st["K2"], st["D2"])
-            r[row:row + 2 * n] = ((pr.reshape(-1, 2) - ur) / sigma).ravel()
-            if want_jac:
-                dr1, dt1, dr2, dt2, tr1, tt1, tr2, tt2 = c[2:10]
-                A, B = jr[:, 0:3], jr[:, 3:6]              # d pixel / d (r3, t3)
-                J[row:row + 2 * n, cv] = np.hstack([A @ dr1 + B @ tr1, A @ dt1 + B @ tt1]) / sigma
-                J[row:row + 2 * n, 18:21] = (A @ dr2 + B @ tr2) / sigma
-                J[row:row + 2 * n, 21:24] = (A @ dt2 + B @ tt2) / sigma
-                J[row:row + 2 * n, 9:18] = jr[:, 6:15] / sigma
-                if fit_bow:
-                    dX = cv2.Rodrigues(c[0])[0] @ ex
-                    J[row:row + 2 * n, -1] = (B @ dX) * np.repeat(quad[k], 2) / sigma
-            row += 2 * n
-        if n_pri:
-            r[row:] = Linv @ (x[:24] - s0)
-            if want_jac:
-                J[row:, :24] = Linv
-        return r, J
-
-    def residuals(v: np.ndarray, sg: float) -> np.ndarray:
-        return model(v, sg, False)[0]
-
-    sigma = 0.1
-    x = x0
-    for _ in range(2):
-        sol = least_squares(residuals, x, jac=lambda v, sg: model(v, sg, True)[1], args=(sigma,), method="lm",
-                            x_scale="jac", max_nfev=400)
-        x = sol.x
-        data = sol.fun[:n_res] * sigma
-        dof = max(n_res + n_pri - n_par, 1)
-        sigma = max(float(math.sqrt(data @ data / dof)), 0.01)
+    x0 = _start_vector(obs, s0, stereo_nominal, fit_bow)  # starting poses: PnP with the nominal left intrinsics
+    fit = _BoardFit(obs, P_sheet, size, s0, _prior_sqrt_inv(prior_cov), fit_bow)
+    x, sigma = fit.solve(x0)
     # covariance of (stereo 24, home pose 6) from the final Jacobian (residuals are σ-normalised)
-    J = model(x, sigma, True)[1]
+    J = fit.model(x, sigma, True)[1]
     cov = np.linalg.pinv(J.T @ J)[:30, :30]
-    data = residuals(x, 1.0)[:n_res]
-    rms = float(np.sqrt(np.mean(data ** 2 * 2.0)))        # per corner (2 coordinates), px
-    per_view, row = [], 0
-    for P, _, _ in obs:
-        d = data[row:row + 4 * len(P)]
-        per_view.append(float(np.sqrt(np.mean(d ** 2) * 2.0)))
-        row += 4 * len(P)
+    rms, per_view = fit.rms(x)
     if rms > max_rms_px:
         raise ValueError(f"board fit RMS {rms:.3f} px > {max_rms_px} px (per view {np.round(per_view, 3).tolist()}): "
                          f"is the board flat on the sheet and still during each capture?")
@@ -392,17 +447,11 @@ def estimate_camera_pose(views: list[tuple[np.ndarray, np.ndarray]], board: Boar
     T_dc = np.eye(4)
     T_dc[:3, :3] = R_cd.T
     T_dc[:3, 3] = -R_cd.T @ t_cd
-    # triangulated home corners vs design
-    model = StereoModel.from_calib(st)
     bow = float(x[-1]) if fit_bow else 0.0
     if abs(bow) * 1e3 > max_bow_mm:
         raise ValueError(f"the board is bowed by {bow * 1e3:.2f} mm at its farthest corner (> {max_bow_mm} mm): fix it flat "
                          f"on a rigid plate (docs/calibration.md)")
-    P, ul, ur = obs[0]
-    P = P + (bow * quad[0])[:, None] * ex
-    Xl = model.triangulate(model.undistort(ul, "left"), model.undistort(ur, "right"), "optimal")
-    Xd = Xl @ T_dc[:3, :3].T + T_dc[:3, 3]
-    err = Xd - P
+    err = _home_residual(fit, st, T_dc, bow)               # triangulated home corners vs design
     return CameraPoseResult(T_dc, st, rms, float(np.sqrt(np.mean(np.sum(err ** 2, 1)))) * 1e3,
                             float(np.sqrt(np.mean(err[:, 0] ** 2))) * 1e3, np.array(per_view), len(used), used,
                             skipped, cov, sigma, bow * 1e3)

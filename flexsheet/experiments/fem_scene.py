@@ -189,14 +189,120 @@ def _attach_table(sc, rt, cache) -> str | None:
     return where
 
 
+def _scene_push(sc, rt, snap, st: dict, verts, held, cache, f: float, depths) -> dict:
+    """One push point (fraction ``f`` of the stroke): the reference's levels, the real-time model (what the node
+    serves, and the linear model) and linear on the finest reference mesh against the finest level."""
+    from flexsheet.fem.scene_model import finger_on_scene
+
+    q, n = sc.stroke_at([f])
+    q, n = q[0], n[0]
+    refs = [scene_reference(sc, q, n, h, st, verts, cache) for h in st["levels"]]
+    fine = refs[-1]
+    # hidden: deformed (reference) position within finger radius + 2 mm of the push axis (as the cylinder's)
+    vis = [visible_mask(verts + fine["u"][j], finger_on_scene(q, n, float(d), sc.finger.radius)) & ~held
+           for j, d in enumerate(depths)]
+    rt_u = [rt.surface_displacement(finger_on_scene(q, n, float(d), sc.finger.radius)) for d in depths]
+    err_rt = [float(np.linalg.norm(u[0] - fine["u"][j], axis=1)[vis[j]].max()) for j, u in enumerate(rt_u)]
+    if snap is not None:        # what the node serves: the table inside it (radial push), linear elsewhere
+        sn_up = [rt.update_finger(finger_on_scene(q, n, float(d), sc.finger.radius)) for d in depths]
+        err_sn = [float(np.linalg.norm(up.vertices - verts - fine["u"][j], axis=1)[vis[j]].max())
+                  for j, up in enumerate(sn_up)]
+    lin_u, lin_ms = _linear_fine(sc, fine, q, n, depths, verts)
+    err_lin = [float(np.linalg.norm(lin_u[j] - fine["u"][j], axis=1)[vis[j]].max()) for j in range(len(depths))]
+    levels = []
+    for h, r in zip(st["levels"], refs, strict=True):
+        ch = [float(np.linalg.norm(r["u"][j] - fine["u"][j], axis=1)[vis[j]].max()) for j in range(len(depths))]
+        levels.append({"h_fine_m": h, "dofs": int(r["dofs"]), "seconds": float(r["seconds"]),
+                       "newton_converged": bool(np.all(r["converged"])), "force_N": r["force"].tolist(),
+                       "inverted": r["inverted"].tolist(), "change_to_finest_mm": [e * 1e3 for e in ch]})
+    last = max(levels[-2]["change_to_finest_mm"]) if len(levels) > 1 else None
+    push = {"fraction": f, "point_m": q.tolist(), "normal": n.tolist(), "depths_m": depths.tolist(),
+            "linear_error_mm": [e * 1e3 for e in err_rt],
+            "realtime_error_mm": [e * 1e3 for e in (err_sn if snap is not None else err_rt)],
+            "realtime_methods": sorted({up.method for up in sn_up}) if snap is not None else ["linear"],
+            "realtime_force_N": [up.force for up in sn_up] if snap is not None else [u[1] for u in rt_u],
+            "realtime_stiffness_N_per_m": [up.stiffness for up in sn_up] if snap is not None else
+            [u[2] for u in rt_u],
+            "linear_force_N": [u[1] for u in rt_u], "linear_stiffness_N_per_m": [u[2] for u in rt_u],
+            "linear_fine_error_mm": [e * 1e3 for e in err_lin], "linear_fine_solve_ms": lin_ms,
+            "reference_levels": levels, "last_refinement_change_mm": last,
+            "reference_converged": bool(len(levels) > 1 and all(lv["newton_converged"] for lv in levels)
+                                        and last is not None and last <= TARGET_MM / 2)}
+    _log(f"push at {f:g} of the stroke: real-time error {max(push['realtime_error_mm']):.2f} mm "
+         f"(linear {max(err_rt) * 1e3:.2f} mm), linear on the reference "
+         f"mesh {max(err_lin) * 1e3:.2f} mm, last refinement {last} mm")
+    return push
+
+
+def _realtime_summary(rt, snap, timing: dict, timing_sn: dict | None, pushes: list[dict], depths, law: str) -> dict:
+    """The summary's ``realtime``: what the node serves (the table, else the linear model) and the linear model."""
+    err_rt_all = max(max(p["realtime_error_mm"]) for p in pushes)
+    reaches_50 = bool(depths[-1] >= 0.05 - 1e-9)
+    err_by_depth = np.max([p["realtime_error_mm"] for p in pushes], axis=0).tolist()
+    lin_all = max(max(p["linear_error_mm"]) for p in pushes)
+    linear = {"method": f"linear P{rt.order} capacitance over the stroke path (flexsheet/fem/scene_model.py)",
+              "update_ms": timing["median"], "update_ms_p90": timing["p90"],
+              "max_visible_error_mm": lin_all,
+              "error_mm_by_depth": np.max([p["linear_error_mm"] for p in pushes], axis=0).tolist()}
+    if snap is not None:
+        which = ("the sphere's nonlinear snapshot table (flexsheet/fem/sphere_snapshots.py" if rt.path_table is None else
+                 "the scene's nonlinear path table (flexsheet/fem/path_snapshots.py: linear + correction")
+        method = (f"{which}, from the {snap}) for pushes inside it, the linear model elsewhere: what the FEM node "
+                  "serves on this scene")
+        timing = timing_sn
+    else:
+        method = linear["method"] + ": what the FEM node serves on this scene"
+    return {"method": method, "linear": linear,
+            "update_ms": timing["median"], "update_ms_p90": timing["p90"], "n_timed": timing["n"],
+            "update_wall_ms": timing["wall_median"], "update_wall_ms_p90": timing["wall_p90"],
+            "update_timing": "update_ms: the updating thread's CPU time (time.thread_time) per "
+                             "update_finger, pushes at 5 stroke points x 5/20/50 mm; the wall time "
+                             "beside it includes preemption on a shared machine",
+            "sparse_fallback_share": timing["sparse_share"],
+            "max_visible_error_mm_0_50": err_rt_all if reaches_50 else None,
+            f"max_visible_error_mm_0_{round(depths[-1] * 1e3)}": err_rt_all,
+            "error_mm_by_depth": err_by_depth,
+            "depths_m": depths.tolist(), "target_mm": TARGET_MM, "meets_target": err_rt_all <= TARGET_MM,
+            "depth_note": None if reaches_50 else (
+                f"quick stops at {depths[-1] * 1e3:g} mm (its settings: one {law} level on an 8 mm mesh; "
+                "the neo-Hookean one needed minutes per 2.5 mm step beyond 30 mm); "
+                "max_visible_error_mm_0_50 needs the full run"),
+            "mesh": {"spec": rt.spec.key(), "nodes": rt.n_nodes, "candidates": rt.n_candidates,
+                     "precompute_MB": rt.solver.nbytes / 1e6},
+            "visible": "rendered surface vertices not held by the support and outside the finger's "
+                       "footprint (deformed reference position more than finger radius + 2 mm from the push "
+                       "axis)"}
+
+
+def _reference_summary(sc, st: dict, pushes: list[dict], law: str) -> dict:
+    """The summary's ``reference``: the nonlinear reference's model, convergence and finest level."""
+    from flexsheet.fem.hyperelastic import SOLVER_VERSION
+
+    fine_lv = pushes[0]["reference_levels"][-1]
+    return {"model": f"{law} (compressible), total Lagrangian P2, Newton with load stepping, rigid "
+                     f"{sc.finger.contact} capsule finger, full body (flexsheet/fem/hyperelastic.py)",
+            "contact": sc.finger.contact,
+            "law": sc.material.model, "Jm": sc.material.Jm,
+            "solver": SOLVER_VERSION,
+            "converged": bool(all(p["reference_converged"] for p in pushes)),
+            "criterion": "two or more levels, every Newton solve converged and the last refinement "
+                         f"changes the visible surface by <= {TARGET_MM / 2} mm",
+            "levels_solved": len(st["levels"]),
+            "newton_converged": bool(all(lv["newton_converged"] for p in pushes
+                                         for lv in p["reference_levels"])),
+            "inverted_elements_by_depth": pushes[0]["reference_levels"][-1]["inverted"],
+            "last_refinement_change_mm": max(p["last_refinement_change_mm"] for p in pushes)
+            if len(st["levels"]) > 1 else None,
+            "finest_h_fine_m": fine_lv["h_fine_m"], "finest_dofs": fine_lv["dofs"]}
+
+
 def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | None = None) -> dict:
     """Measure the real-time model of the scene file ``scene_path`` against the nonlinear reference (module
     doc); write ``out_dir``/summary.json and the accuracy-against-speed chart; return the summary dict.
     ``cache_dir``: the FEM cache (None: the default, ~/.cache/flexsheet/fem). Raises ``ValueError`` (via
     :class:`flexsheet.model.scenes.SceneError`) for a bad scene file."""
     from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
-    from flexsheet.fem.hyperelastic import SOLVER_VERSION
-    from flexsheet.fem.scene_model import SceneModel, finger_on_scene
+    from flexsheet.fem.scene_model import SceneModel
     from flexsheet.model.scenes import load_scene
 
     t0 = time.perf_counter()
@@ -212,107 +318,20 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     _log(f"real-time update (linear): CPU median {timing['median']:.3f} ms, p90 {timing['p90']:.3f} ms (wall median "
          f"{timing['wall_median']:.3f} ms)")
     snap = _attach_table(sc, rt, cache)
+    timing_sn = None
     if snap is not None:
         timing_sn = _update_ms(rt, sc, (0.005, 0.02, 0.05), st["n_time"])
         _log(f"the node's nonlinear table (from the {snap}): update CPU median {timing_sn['median']:.3f} ms")
     verts = rt.rest_vertices.astype(float)
     held = rt.held
     depths = np.asarray(st["depths"], float)
-    pushes = []
-    for f in st["fractions"]:
-        q, n = sc.stroke_at([f])
-        q, n = q[0], n[0]
-        refs = [scene_reference(sc, q, n, h, st, verts, cache) for h in st["levels"]]
-        fine = refs[-1]
-        # hidden: deformed (reference) position within finger radius + 2 mm of the push axis (as the cylinder's)
-        vis = [visible_mask(verts + fine["u"][j], finger_on_scene(q, n, float(d), sc.finger.radius)) & ~held
-               for j, d in enumerate(depths)]
-        rt_u = [rt.surface_displacement(finger_on_scene(q, n, float(d), sc.finger.radius)) for d in depths]
-        err_rt = [float(np.linalg.norm(u[0] - fine["u"][j], axis=1)[vis[j]].max()) for j, u in enumerate(rt_u)]
-        if snap is not None:        # what the node serves: the table inside it (radial push), linear elsewhere
-            sn_up = [rt.update_finger(finger_on_scene(q, n, float(d), sc.finger.radius)) for d in depths]
-            err_sn = [float(np.linalg.norm(up.vertices - verts - fine["u"][j], axis=1)[vis[j]].max())
-                      for j, up in enumerate(sn_up)]
-        lin_u, lin_ms = _linear_fine(sc, fine, q, n, depths, verts)
-        err_lin = [float(np.linalg.norm(lin_u[j] - fine["u"][j], axis=1)[vis[j]].max()) for j in range(len(depths))]
-        levels = []
-        for h, r in zip(st["levels"], refs, strict=True):
-            ch = [float(np.linalg.norm(r["u"][j] - fine["u"][j], axis=1)[vis[j]].max()) for j in range(len(depths))]
-            levels.append({"h_fine_m": h, "dofs": int(r["dofs"]), "seconds": float(r["seconds"]),
-                           "newton_converged": bool(np.all(r["converged"])), "force_N": r["force"].tolist(),
-                           "inverted": r["inverted"].tolist(), "change_to_finest_mm": [e * 1e3 for e in ch]})
-        last = max(levels[-2]["change_to_finest_mm"]) if len(levels) > 1 else None
-        pushes.append({"fraction": f, "point_m": q.tolist(), "normal": n.tolist(), "depths_m": depths.tolist(),
-                       "linear_error_mm": [e * 1e3 for e in err_rt],
-                       "realtime_error_mm": [e * 1e3 for e in (err_sn if snap is not None else err_rt)],
-                       "realtime_methods": sorted({up.method for up in sn_up}) if snap is not None else ["linear"],
-                       "realtime_force_N": [up.force for up in sn_up] if snap is not None else [u[1] for u in rt_u],
-                       "realtime_stiffness_N_per_m": [up.stiffness for up in sn_up] if snap is not None else
-                       [u[2] for u in rt_u],
-                       "linear_force_N": [u[1] for u in rt_u], "linear_stiffness_N_per_m": [u[2] for u in rt_u],
-                       "linear_fine_error_mm": [e * 1e3 for e in err_lin], "linear_fine_solve_ms": lin_ms,
-                       "reference_levels": levels, "last_refinement_change_mm": last,
-                       "reference_converged": bool(len(levels) > 1 and all(lv["newton_converged"] for lv in levels)
-                                                   and last is not None and last <= TARGET_MM / 2)})
-        _log(f"push at {f:g} of the stroke: real-time error {max(pushes[-1]['realtime_error_mm']):.2f} mm "
-             f"(linear {max(err_rt) * 1e3:.2f} mm), linear on the reference "
-             f"mesh {max(err_lin) * 1e3:.2f} mm, last refinement {last} mm")
-    err_rt_all = max(max(p["realtime_error_mm"]) for p in pushes)
-    reaches_50 = bool(depths[-1] >= 0.05 - 1e-9)
-    err_by_depth = np.max([p["realtime_error_mm"] for p in pushes], axis=0).tolist()
-    fine_lv = pushes[0]["reference_levels"][-1]
-    lin_all = max(max(p["linear_error_mm"]) for p in pushes)
-    linear = {"method": f"linear P{rt.order} capacitance over the stroke path (flexsheet/fem/scene_model.py)",
-              "update_ms": timing["median"], "update_ms_p90": timing["p90"],
-              "max_visible_error_mm": lin_all,
-              "error_mm_by_depth": np.max([p["linear_error_mm"] for p in pushes], axis=0).tolist()}
-    if snap is not None:
-        which = ("the sphere's nonlinear snapshot table (flexsheet/fem/sphere_snapshots.py" if rt.path_table is None else
-                 "the scene's nonlinear path table (flexsheet/fem/path_snapshots.py: linear + correction")
-        method = (f"{which}, from the {snap}) for pushes inside it, the linear model elsewhere: what the FEM node "
-                  "serves on this scene")
-        timing = timing_sn
-    else:
-        method = linear["method"] + ": what the FEM node serves on this scene"
+    pushes = [_scene_push(sc, rt, snap, st, verts, held, cache, f, depths) for f in st["fractions"]]
     summary = {
         "scene": {"name": sc.name, "file": str(sc.source), "kind": sc.object.kind, "key": sc.key(),
                   "description": sc.description},
         "settings": {"quick": quick, **{k: list(v) if isinstance(v, tuple) else v for k, v in st.items()}},
-        "realtime": {"method": method, "linear": linear,
-                     "update_ms": timing["median"], "update_ms_p90": timing["p90"], "n_timed": timing["n"],
-                     "update_wall_ms": timing["wall_median"], "update_wall_ms_p90": timing["wall_p90"],
-                     "update_timing": "update_ms: the updating thread's CPU time (time.thread_time) per "
-                                      "update_finger, pushes at 5 stroke points x 5/20/50 mm; the wall time "
-                                      "beside it includes preemption on a shared machine",
-                     "sparse_fallback_share": timing["sparse_share"],
-                     "max_visible_error_mm_0_50": err_rt_all if reaches_50 else None,
-                     f"max_visible_error_mm_0_{round(depths[-1] * 1e3)}": err_rt_all,
-                     "error_mm_by_depth": err_by_depth,
-                     "depths_m": depths.tolist(), "target_mm": TARGET_MM, "meets_target": err_rt_all <= TARGET_MM,
-                     "depth_note": None if reaches_50 else (
-                         f"quick stops at {depths[-1] * 1e3:g} mm (its settings: one {law} level on an 8 mm mesh; "
-                         "the neo-Hookean one needed minutes per 2.5 mm step beyond 30 mm); "
-                         "max_visible_error_mm_0_50 needs the full run"),
-                     "mesh": {"spec": rt.spec.key(), "nodes": rt.n_nodes, "candidates": rt.n_candidates,
-                              "precompute_MB": rt.solver.nbytes / 1e6},
-                     "visible": "rendered surface vertices not held by the support and outside the finger's "
-                                "footprint (deformed reference position more than finger radius + 2 mm from the push "
-                                "axis)"},
-        "reference": {"model": f"{law} (compressible), total Lagrangian P2, Newton with load stepping, rigid "
-                               f"{sc.finger.contact} capsule finger, full body (flexsheet/fem/hyperelastic.py)",
-                      "contact": sc.finger.contact,
-                      "law": sc.material.model, "Jm": sc.material.Jm,
-                      "solver": SOLVER_VERSION,
-                      "converged": bool(all(p["reference_converged"] for p in pushes)),
-                      "criterion": "two or more levels, every Newton solve converged and the last refinement "
-                                   f"changes the visible surface by <= {TARGET_MM / 2} mm",
-                      "levels_solved": len(st["levels"]),
-                      "newton_converged": bool(all(lv["newton_converged"] for p in pushes
-                                                   for lv in p["reference_levels"])),
-                      "inverted_elements_by_depth": pushes[0]["reference_levels"][-1]["inverted"],
-                      "last_refinement_change_mm": max(p["last_refinement_change_mm"] for p in pushes)
-                      if len(st["levels"]) > 1 else None,
-                      "finest_h_fine_m": fine_lv["h_fine_m"], "finest_dofs": fine_lv["dofs"]},
+        "realtime": _realtime_summary(rt, snap, timing, timing_sn, pushes, depths, law),
+        "reference": _reference_summary(sc, st, pushes, law),
         "linear_fine": {"model": "linear P2 on the finest reference mesh, full sparse solve",
                         "max_visible_error_mm": max(max(p["linear_fine_error_mm"]) for p in pushes),
                         "solve_ms": float(np.median([p["linear_fine_solve_ms"] for p in pushes]))},

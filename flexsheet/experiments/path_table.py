@@ -95,7 +95,7 @@ def _job(args) -> tuple[float, float, str | None]:
 def _prefetch(scene_file, jobs_list, cache_dir, n_jobs: int) -> None:
     if n_jobs <= 1 or len(jobs_list) <= 1:
         return
-    from flexsheet.experiments.fem import run_workers
+    from flexsheet.fem.workers import run_workers
 
     _log(f"solving {len(jobs_list)} pushes in {n_jobs} worker processes ...")
     for f, sec, err in run_workers(_job, [(scene_file, f, h, cache_dir) for f, h in jobs_list], n_jobs):
@@ -156,16 +156,9 @@ def assemble_path_table(sc, rt, fractions, refs: list[dict]) -> dict:
             "stiffness_ratio": kr, "inverted": inv, "max_strain": strain, "reach": np.array(REACH)}
 
 
-def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, stations: int = DEFAULT_STATIONS,
-                     holdout: tuple[float, ...] | None = None, jobs: int = 1, mesh_check: bool = False,
-                     ship: bool = False) -> int:
-    """Build (or find in the cache) the scene's path table and report it (module doc). ``holdout`` None: the
-    midpoints of every second interval. Returns 0; raises ``SystemExit`` naming the argument for fewer than 2
-    stations, a held-out fraction outside (0, 1) or on a station, or an unconverged station with ``ship``."""
-    from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
-    from flexsheet.fem.scene_model import SceneModel, finger_on_scene
-    from flexsheet.model.scenes import load_scene
-
+def _path_fractions(stations, holdout) -> tuple[np.ndarray, tuple[float, ...]]:
+    """The stations' fractions and the held-out ones (``holdout`` None or empty: the midpoints of every second
+    interval), after the arguments are checked (``SystemExit`` naming the argument)."""
     if int(stations) < 2:
         raise SystemExit(f"flexsheet experiment fem: --stations must be >= 2, got {stations}")
     fractions = np.linspace(0.0, 1.0, int(stations))
@@ -175,35 +168,25 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
         if not (0.0 < h < 1.0) or np.min(np.abs(fractions - h)) < 1e-6:
             raise SystemExit(f"flexsheet experiment fem: --holdout-fraction {h} must lie in (0, 1) between the "
                              f"stations {np.round(fractions, 4).tolist()}")
-    t0 = time.perf_counter()
-    cache_dir = cache_dir or DEFAULT_CACHE_DIR
-    cache = ArrayCache(cache_dir, _log)
-    sc = load_scene(scene_file)
-    rt = SceneModel(sc, cache_dir=cache_dir, log=_log)
-    verts = rt.rest_vertices.astype(float)
-    held = rt.held
-    todo = [(float(f), GRID["h_fine"]) for f in fractions] + [(float(h), GRID["h_fine"]) for h in holdout]
-    if mesh_check:
-        todo.append((float(fractions[len(fractions) // 2]), CHECK_H_FINE))
-    _prefetch(scene_file, todo, cache_dir, jobs)
-    refs = [_push(sc, float(f), GRID["h_fine"], verts, cache) for f in fractions]
-    table = assemble_path_table(sc, rt, fractions, refs)
-    key = table_key(sc, rt)
-    cache.save("pathsnap", key, table)
-    shipped = None
-    if ship:
-        bad = [float(f) for f, r in zip(fractions, refs, strict=True) if not np.all(r["converged"])]
-        if bad:
-            raise SystemExit(f"flexsheet experiment fem: not shipping the path table: Newton did not converge at "
-                             f"every depth of the stations at fractions {bad}")
-        sp = cache.ship("pathsnap", key, table)
-        shipped = {"path": os.path.relpath(sp, os.getcwd()), "MB": os.path.getsize(sp) / 1e6}
-        _log(f"path table shipped: {sp} ({shipped['MB']:.2f} MB)")
-    lin_ms = _update_ms(rt, sc, LOOKUP_DEPTHS, 200)
-    rt.attach_path_table(table)
-    look = _update_ms(rt, sc, LOOKUP_DEPTHS, 200)
-    _log(f"look-up with the table: CPU median {look['median']:.3f} ms (linear alone {lin_ms['median']:.3f} ms)")
-    depths = np.asarray(table["depths"][1:])            # the table's reach (every station converged to it)
+    return fractions, holdout
+
+
+def _ship_path_table(cache, key: str, table: dict, fractions, refs) -> dict:
+    """The table written into the shipped store (``SystemExit`` when a station did not converge): its path, MB."""
+    bad = [float(f) for f, r in zip(fractions, refs, strict=True) if not np.all(r["converged"])]
+    if bad:
+        raise SystemExit(f"flexsheet experiment fem: not shipping the path table: Newton did not converge at "
+                         f"every depth of the stations at fractions {bad}")
+    sp = cache.ship("pathsnap", key, table)
+    shipped = {"path": os.path.relpath(sp, os.getcwd()), "MB": os.path.getsize(sp) / 1e6}
+    _log(f"path table shipped: {sp} ({shipped['MB']:.2f} MB)")
+    return shipped
+
+
+def _held_out_pushes(sc, rt, verts, held, cache, holdout, depths) -> list[dict]:
+    """Per held-out fraction: its own push against what the node serves (table attached) and the linear model."""
+    from flexsheet.fem.scene_model import finger_on_scene
+
     nd = len(depths)
     held_out = []
     for h in holdout:
@@ -227,40 +210,86 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
                          "depths_over_target_mm": over})
         _log(f"held out at {h:.4g}: table {max(e_tab):.2f} mm (over the target at {over} mm), linear "
              f"{max(e_lin):.2f} mm")
-    check = None
+    return held_out
+
+
+def _path_mesh_check(sc, held, verts, cache, fractions, refs, depths) -> dict:
+    """``--mesh-check``: the middle station's push on the finer mesh against the table's, on the visible surface."""
+    nd = len(depths)
+    f = float(fractions[len(fractions) // 2])
+    fine = _push(sc, f, CHECK_H_FINE, verts, cache)
+    q, n = sc.stroke_at([f])
+    ch = visible_errors(np.asarray(refs[len(fractions) // 2]["u"])[:nd], np.asarray(fine["u"])[:nd], verts,
+                        held, q[0], n[0], depths, sc.finger.radius)
+    check = {"fraction": f, "h_fine_m": CHECK_H_FINE, "dofs": int(fine["dofs"]),
+             "cpu_seconds": float(fine["seconds"]), "newton_converged": bool(np.all(fine["converged"])),
+             "change_mm": ch, "max_change_mm": max(ch)}
+    _log(f"mesh check at {f:.4g}: h_fine {CHECK_H_FINE * 1e3:g} mm moves the visible surface by "
+         f"{max(ch):.2f} mm at most")
+    return check
+
+
+def _path_report(sc, fractions, table, refs, depths, held_out, look, lin_ms, check, shipped, key, t0) -> dict:
+    """The report's JSON (``path_table.json``)."""
+    return {"scene": {"name": sc.name, "file": str(sc.source), "key": sc.key(), "contact": sc.finger.contact,
+                      "law": sc.material.model},
+            "what": "the scene's nonlinear path table (flexsheet/fem/path_snapshots.py): the real-time linear solve "
+                    "plus the reference-minus-linear correction, each station's moved with the contact and blended "
+                    "along the stroke and in depth; held-out "
+                    "pushes between stations on their own meshes, visible rendered vertices (not held, outside the "
+                    "finger's footprint + 2 mm)",
+            "grid": GRID, "reach_m": REACH, "stroke_length_m": sc.stroke_length(),
+            "stations": [{"fraction": float(f), "point_m": p.tolist(), "dofs": int(r["dofs"]),
+                          "seconds": float(r["seconds"]), "newton_converged": bool(np.all(r["converged"])),
+                          "inverted_max": int(np.max(r["inverted"])), "max_strain": float(np.max(r["max_strain"])),
+                          "force_N": np.asarray(r["force"]).tolist()}
+                         for f, p, r in zip(fractions, table["points"], refs, strict=True)],
+            "depths_m": depths.tolist(), "table_depth_max_m": float(depths[-1]), "held_out": held_out,
+            "max_held_out_error_mm": max((h["table_max_mm"] for h in held_out), default=None),
+            "max_held_out_linear_error_mm": max((h["linear_max_mm"] for h in held_out), default=None),
+            "lookup_ms": look["median"], "lookup_ms_p90": look["p90"], "lookup_methods": look["methods"],
+            "linear_update_ms": lin_ms["median"],
+            "lookup_timing": "the updating thread's CPU (time.thread_time) per update_finger at 5 points x "
+                             "5/20/45 mm along the stroke (flexsheet.experiments.fem_scene._update_ms)",
+            "mesh_check": check, "target_mm": TARGET_MM, "shipped": shipped, "key": key,
+            "seconds": time.perf_counter() - t0}
+
+
+def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, stations: int = DEFAULT_STATIONS,
+                     holdout: tuple[float, ...] | None = None, jobs: int = 1, mesh_check: bool = False,
+                     ship: bool = False) -> int:
+    """Build (or find in the cache) the scene's path table and report it (module doc). ``holdout`` None: the
+    midpoints of every second interval. Returns 0; raises ``SystemExit`` naming the argument for fewer than 2
+    stations, a held-out fraction outside (0, 1) or on a station, or an unconverged station with ``ship``."""
+    from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
+    from flexsheet.fem.scene_model import SceneModel
+    from flexsheet.model.scenes import load_scene
+
+    fractions, holdout = _path_fractions(stations, holdout)
+    t0 = time.perf_counter()
+    cache_dir = cache_dir or DEFAULT_CACHE_DIR
+    cache = ArrayCache(cache_dir, _log)
+    sc = load_scene(scene_file)
+    rt = SceneModel(sc, cache_dir=cache_dir, log=_log)
+    verts = rt.rest_vertices.astype(float)
+    held = rt.held
+    todo = [(float(f), GRID["h_fine"]) for f in fractions] + [(float(h), GRID["h_fine"]) for h in holdout]
     if mesh_check:
-        f = float(fractions[len(fractions) // 2])
-        fine = _push(sc, f, CHECK_H_FINE, verts, cache)
-        q, n = sc.stroke_at([f])
-        ch = visible_errors(np.asarray(refs[len(fractions) // 2]["u"])[:nd], np.asarray(fine["u"])[:nd], verts,
-                            held, q[0], n[0], depths, sc.finger.radius)
-        check = {"fraction": f, "h_fine_m": CHECK_H_FINE, "dofs": int(fine["dofs"]),
-                 "cpu_seconds": float(fine["seconds"]), "newton_converged": bool(np.all(fine["converged"])),
-                 "change_mm": ch, "max_change_mm": max(ch)}
-        _log(f"mesh check at {f:.4g}: h_fine {CHECK_H_FINE * 1e3:g} mm moves the visible surface by "
-             f"{max(ch):.2f} mm at most")
-    rep = {"scene": {"name": sc.name, "file": str(sc.source), "key": sc.key(), "contact": sc.finger.contact,
-                     "law": sc.material.model},
-           "what": "the scene's nonlinear path table (flexsheet/fem/path_snapshots.py): the real-time linear solve "
-                   "plus the reference-minus-linear correction, each station's moved with the contact and blended "
-                   "along the stroke and in depth; held-out "
-                   "pushes between stations on their own meshes, visible rendered vertices (not held, outside the "
-                   "finger's footprint + 2 mm)",
-           "grid": GRID, "reach_m": REACH, "stroke_length_m": sc.stroke_length(),
-           "stations": [{"fraction": float(f), "point_m": p.tolist(), "dofs": int(r["dofs"]),
-                         "seconds": float(r["seconds"]), "newton_converged": bool(np.all(r["converged"])),
-                         "inverted_max": int(np.max(r["inverted"])), "max_strain": float(np.max(r["max_strain"])),
-                         "force_N": np.asarray(r["force"]).tolist()}
-                        for f, p, r in zip(fractions, table["points"], refs, strict=True)],
-           "depths_m": depths.tolist(), "table_depth_max_m": float(depths[-1]), "held_out": held_out,
-           "max_held_out_error_mm": max((h["table_max_mm"] for h in held_out), default=None),
-           "max_held_out_linear_error_mm": max((h["linear_max_mm"] for h in held_out), default=None),
-           "lookup_ms": look["median"], "lookup_ms_p90": look["p90"], "lookup_methods": look["methods"],
-           "linear_update_ms": lin_ms["median"],
-           "lookup_timing": "the updating thread's CPU (time.thread_time) per update_finger at 5 points x "
-                            "5/20/45 mm along the stroke (flexsheet.experiments.fem_scene._update_ms)",
-           "mesh_check": check, "target_mm": TARGET_MM, "shipped": shipped, "key": key,
-           "seconds": time.perf_counter() - t0}
+        todo.append((float(fractions[len(fractions) // 2]), CHECK_H_FINE))
+    _prefetch(scene_file, todo, cache_dir, jobs)
+    refs = [_push(sc, float(f), GRID["h_fine"], verts, cache) for f in fractions]
+    table = assemble_path_table(sc, rt, fractions, refs)
+    key = table_key(sc, rt)
+    cache.save("pathsnap", key, table)
+    shipped = _ship_path_table(cache, key, table, fractions, refs) if ship else None
+    lin_ms = _update_ms(rt, sc, LOOKUP_DEPTHS, 200)
+    rt.attach_path_table(table)
+    look = _update_ms(rt, sc, LOOKUP_DEPTHS, 200)
+    _log(f"look-up with the table: CPU median {look['median']:.3f} ms (linear alone {lin_ms['median']:.3f} ms)")
+    depths = np.asarray(table["depths"][1:])            # the table's reach (every station converged to it)
+    held_out = _held_out_pushes(sc, rt, verts, held, cache, holdout, depths)
+    check = _path_mesh_check(sc, held, verts, cache, fractions, refs, depths) if mesh_check else None
+    rep = _path_report(sc, fractions, table, refs, depths, held_out, look, lin_ms, check, shipped, key, t0)
     if out:
         os.makedirs(out, exist_ok=True)
         with open(os.path.join(out, "path_table.json"), "w") as fh:

@@ -93,36 +93,15 @@ def _hertz_force(E: float, nu: float, r_finger: float, R: float, d: float) -> fl
     return 4.0 / 3.0 * E / (1.0 - nu ** 2) * math.sqrt(Rs) * d ** 1.5
 
 
-def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, alpha: float | None = None,
-                       holdout: tuple[float, ...] = (), jobs: int = 1, mesh_check: bool = False,
-                       ship: bool = False) -> int:
-    """Build (or find) the sphere scene's table and report it (module doc); ``ship``: also write it, packed
-    (the surface field as float16, compressed), into the repository's ``flexsheet/fem/data/``, where the FEM node
-    finds it on a machine that never solved it. Returns 0; ``SystemExit`` with the reason for a scene the table
-    does not apply to, a bad angle, or a table that may not be shipped (an angle unconverged or not cached)."""
+def _check_sphere_args(sc, al, alpha: float | None, holdout: tuple[float, ...]):
+    """The scene's sphere frame, after the arguments are checked (``SystemExit`` with the reason)."""
+    from flexsheet.fem.sphere_snapshots import sphere_frame
 
-    from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
-    from flexsheet.fem.material import Material
-    from flexsheet.fem.scene_model import SceneModel, finger_on_scene
-    from flexsheet.fem.sphere_snapshots import (
-        DEFAULT_SPHERE_GRID,
-        DEFAULT_SPHERE_SPEC,
-        SphereSnapshotModel,
-        assemble_table,
-        sphere_frame,
-        sphere_table_key,
-    )
-    from flexsheet.model.scenes import load_scene
-
-    t0 = time.perf_counter()
-    sc = load_scene(scene_file)
     try:
         fr = sphere_frame(sc)
     except ValueError as exc:
         raise SystemExit(f"flexsheet experiment fem: --node-table with --scene builds the sphere's table only "
                          f"(its symmetry: {exc})") from None
-    grid, spec = DEFAULT_SPHERE_GRID, DEFAULT_SPHERE_SPEC
-    al = grid.alphas_deg
     for a in holdout:
         if not (math.isfinite(a) and al[0] < a < al[-1]) or a in al:
             raise SystemExit(f"flexsheet experiment fem: --holdout-azimuth must lie strictly between the sphere "
@@ -130,17 +109,13 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
     if alpha is not None and not (math.isfinite(alpha) and 0 <= alpha < 90):
         raise SystemExit(f"flexsheet experiment fem: --azimuth (the sphere's polar angle) must be in [0, 90) deg, "
                          f"got {alpha:g}")
-    cache_dir = cache_dir or DEFAULT_CACHE_DIR
-    cache = ArrayCache(cache_dir, _log)
-    rt = SceneModel(sc, cache_dir=cache_dir, log=_log)
-    probes = rt.rest_vertices.astype(float)
-    if alpha is not None:
-        alpha_path(sc, alpha, grid, spec, probes, cache)
-        _log(f"sphere push at {alpha:g} deg cached in {time.perf_counter() - t0:.0f} s")
-        return 0
-    key = sphere_table_key(sc, grid, spec)
-    table = cache.load("spheresnap", key)
-    check_angles = tuple(holdout) or (0.0,)
+    return fr
+
+
+def _solve_missing(scene_file, sc, grid, spec, probes, cache, cache_dir, table, holdout, check_angles,
+                   mesh_check: bool, jobs: int) -> None:
+    """The pushes this run needs and the cache lacks, solved in ``jobs`` worker processes (with ``jobs`` > 1)."""
+    al = grid.alphas_deg
     want = [(a, s) for a in check_angles for s in mesh_study_specs(spec).values()] if mesh_check else []
     want.sort(key=lambda x: x[1][1])                          # the finest (longest) first: the workers end together
     want += [(a, spec) for a in (list(al) if table is None else [])] + [(a, spec) for a in holdout]
@@ -149,18 +124,33 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
                                                           or "")]
     if jobs > 1 and len(todo) > 1:
         _log(f"{len(todo)} sphere pushes the cache lacks, in {min(jobs, len(todo))} worker processes")
-        from flexsheet.experiments.fem import run_workers
+        from flexsheet.fem.workers import run_workers
 
         for a, sec, err in run_workers(_job, [(scene_file, a, cache_dir, s) for a, s in todo], min(jobs, len(todo))):
             _log(f"sphere push at {a:g} deg: " + (f"done in {sec:.0f} s" if err is None else f"failed ({err})"))
-    mat = Material.of_scene(sc.material)
+
+
+def _table_and_paths(sc, fr, grid, spec, probes, cache, key, table, E: float):
+    """The table (assembled from the pushes and cached when ``table`` is None) and the snapshot angles' pushes
+    (None where the cache lacks one)."""
+    from flexsheet.fem.sphere_snapshots import assemble_table
+
+    al = grid.alphas_deg
     if table is None:
         paths = [alpha_path(sc, a, grid, spec, probes, cache) for a in al]
-        table = assemble_table(fr, grid, paths, mat.E)
+        table = assemble_table(fr, grid, paths, E)
         cache.save("spheresnap", key, table)
         _log(f"sphere table assembled: {table['field'].nbytes / 1e6:.0f} MB float32, key {key}")
     else:
         paths = [cache.load("spherealpha", _alpha_key(sc, a, grid, spec, probes)) for a in al]
+    return table, paths
+
+
+def _shipped_report(table, paths, al, key, cache, fr, rt, probes, r: float, out, ship: bool) -> dict | None:
+    """With ``ship``: the packed table written into the shipped store (``SystemExit`` when a push is unconverged
+    or not cached); else the one already shipped, when reporting. Its path, size and packing error, or None."""
+    from flexsheet.fem.cache import ArrayCache
+
     shipped = None
     packed = sp = None
     if ship:
@@ -175,7 +165,7 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
         packed = store.load("spheresnap", key)
         sp = store.source
     if packed is not None:
-        err = _packing_error(table, packed, paths, fr, rt, probes, sc.finger.radius)
+        err = _packing_error(table, packed, paths, fr, rt, probes, r)
         shipped = {"path": os.path.relpath(sp, os.getcwd()), "MB": os.path.getsize(sp) / 1e6,
                    "packing": "surface field as float16 on every second grid line (2° cells)",
                    "packing_error_mm": err}
@@ -184,11 +174,11 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
                  "mm on the visible surface); commit it")
         else:
             shipped["note"] = "shipped before this run; its packing error measured again"
-    if not out:
-        return 0
-    sm = SphereSnapshotModel(table, probes, E=mat.E)
-    depths = grid.depths()
-    r = sc.finger.radius
+    return shipped
+
+
+def _alpha_rows(table, paths, al, depths, mat, r: float, fr) -> list[dict]:
+    """Per snapshot angle: its force against depth, its solve's figures and its force over Hertz's."""
     rows = []
     for a, p in zip(al, paths, strict=True):
         row = {"alpha_deg": a, "force_N": np.asarray(table["force"][al.index(a)]).tolist()}
@@ -203,6 +193,13 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
         h = _hertz_force(mat.E, mat.nu, r, fr.radius, depths[1])
         row["force_over_hertz_at_first_depth"] = float(table["force"][al.index(a)][1] / h)
         rows.append(row)
+    return rows
+
+
+def _held_out_rows(sc, fr, sm, rt, probes, grid, spec, cache, holdout, depths, r: float) -> list[dict]:
+    """Per held-out angle: its own push against the table and against the linear model, on the visible surface."""
+    from flexsheet.fem.scene_model import finger_on_scene
+
     held = rt.held
     held_out = []
     for a in holdout:
@@ -222,6 +219,11 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
                          "over_target_from_mm": min(bad) if bad else None, "dofs": int(p["dofs"]),
                          "converged": bool(np.all(p["converged"]))})
         _log(f"held out {a:g} deg: snapshots {max(e_s):.2f} mm, linear {max(e_l):.2f} mm worst")
+    return held_out
+
+
+def _lookup_times(fr, sm) -> list[float]:
+    """CPU seconds (thread time) of the table's look-up, 30 calls at each of 3 angles x 3 depths."""
     ts = []
     for a in (5.0, 35.0, 55.0):
         n = fr.direction(math.radians(a))
@@ -230,23 +232,80 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
                 t = time.thread_time()
                 sm.surface(n, d)
                 ts.append(time.thread_time() - t)
-    rep = {"scene": {"name": sc.name, "file": os.path.relpath(str(sc.source), os.getcwd()) if sc.source else None,
-                     "key": sc.key()},
-           "material": {"law": sc.material.model, "E": mat.E, "nu": mat.nu, "Jm": mat.Jm if mat.gent else None},
-           "key": key, "grid": {"alphas_deg": list(al), "depth_step_mm": grid.depth_step * 1e3,
-                                "depth_max_mm": grid.depth_max * 1e3, "dtheta_deg": grid.dtheta_deg,
-                                "dphi_deg": grid.dphi_deg},
-           "mesh": {"h_m": spec[0], "h_fine_m": spec[1], "refine_radius_m": spec[2], "path_depth_m": spec[3]},
-           "table_MB_float32": table["field"].nbytes / 1e6, "depths_mm": (depths * 1e3).tolist(), "alphas": rows,
-           "update": {"median_ms": float(np.median(ts) * 1e3), "p90_ms": float(np.percentile(ts, 90) * 1e3),
-                      "vertices": int(len(probes)), "calls": len(ts),
-                      "what": "SphereSnapshotModel.surface CPU time (thread_time) per call"},
-           "held_out": held_out, "mesh_check": None, "target_mm": TARGET_MM, "shipped": shipped,
-           "footprint": "vertices whose deformed (reference) position lies within finger radius + 2 mm of the push "
-                        "axis are hidden by the finger and left out, as for the cylinder",
-           "wall_s": time.perf_counter() - t0}
+    return ts
+
+
+def _sphere_report(sc, mat, key, grid, spec, table, depths, rows, ts, probes, held_out, shipped, t0) -> dict:
+    """The report's JSON (``mesh_check`` still null)."""
+    al = grid.alphas_deg
+    return {"scene": {"name": sc.name, "file": os.path.relpath(str(sc.source), os.getcwd()) if sc.source else None,
+                      "key": sc.key()},
+            "material": {"law": sc.material.model, "E": mat.E, "nu": mat.nu, "Jm": mat.Jm if mat.gent else None},
+            "key": key, "grid": {"alphas_deg": list(al), "depth_step_mm": grid.depth_step * 1e3,
+                                 "depth_max_mm": grid.depth_max * 1e3, "dtheta_deg": grid.dtheta_deg,
+                                 "dphi_deg": grid.dphi_deg},
+            "mesh": {"h_m": spec[0], "h_fine_m": spec[1], "refine_radius_m": spec[2], "path_depth_m": spec[3]},
+            "table_MB_float32": table["field"].nbytes / 1e6, "depths_mm": (depths * 1e3).tolist(), "alphas": rows,
+            "update": {"median_ms": float(np.median(ts) * 1e3), "p90_ms": float(np.percentile(ts, 90) * 1e3),
+                       "vertices": int(len(probes)), "calls": len(ts),
+                       "what": "SphereSnapshotModel.surface CPU time (thread_time) per call"},
+            "held_out": held_out, "mesh_check": None, "target_mm": TARGET_MM, "shipped": shipped,
+            "footprint": "vertices whose deformed (reference) position lies within finger radius + 2 mm of the push "
+                         "axis are hidden by the finger and left out, as for the cylinder",
+            "wall_s": time.perf_counter() - t0}
+
+
+def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, alpha: float | None = None,
+                       holdout: tuple[float, ...] = (), jobs: int = 1, mesh_check: bool = False,
+                       ship: bool = False) -> int:
+    """Build (or find) the sphere scene's table and report it (module doc); ``ship``: also write it, packed
+    (the surface field as float16, compressed), into the repository's ``flexsheet/fem/data/``, where the FEM node
+    finds it on a machine that never solved it. Returns 0; ``SystemExit`` with the reason for a scene the table
+    does not apply to, a bad angle, or a table that may not be shipped (an angle unconverged or not cached)."""
+
+    from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
+    from flexsheet.fem.material import Material
+    from flexsheet.fem.scene_model import SceneModel
+    from flexsheet.fem.sphere_snapshots import (
+        DEFAULT_SPHERE_GRID,
+        DEFAULT_SPHERE_SPEC,
+        SphereSnapshotModel,
+        sphere_table_key,
+    )
+    from flexsheet.model.scenes import load_scene
+
+    t0 = time.perf_counter()
+    sc = load_scene(scene_file)
+    grid, spec = DEFAULT_SPHERE_GRID, DEFAULT_SPHERE_SPEC
+    al = grid.alphas_deg
+    fr = _check_sphere_args(sc, al, alpha, holdout)
+    cache_dir = cache_dir or DEFAULT_CACHE_DIR
+    cache = ArrayCache(cache_dir, _log)
+    rt = SceneModel(sc, cache_dir=cache_dir, log=_log)
+    probes = rt.rest_vertices.astype(float)
+    if alpha is not None:
+        alpha_path(sc, alpha, grid, spec, probes, cache)
+        _log(f"sphere push at {alpha:g} deg cached in {time.perf_counter() - t0:.0f} s")
+        return 0
+    key = sphere_table_key(sc, grid, spec)
+    table = cache.load("spheresnap", key)
+    check_angles = tuple(holdout) or (0.0,)
+    _solve_missing(scene_file, sc, grid, spec, probes, cache, cache_dir, table, holdout, check_angles, mesh_check,
+                   jobs)
+    mat = Material.of_scene(sc.material)
+    table, paths = _table_and_paths(sc, fr, grid, spec, probes, cache, key, table, mat.E)
+    shipped = _shipped_report(table, paths, al, key, cache, fr, rt, probes, sc.finger.radius, out, ship)
+    if not out:
+        return 0
+    sm = SphereSnapshotModel(table, probes, E=mat.E)
+    depths = grid.depths()
+    r = sc.finger.radius
+    rows = _alpha_rows(table, paths, al, depths, mat, r, fr)
+    held_out = _held_out_rows(sc, fr, sm, rt, probes, grid, spec, cache, holdout, depths, r)
+    ts = _lookup_times(fr, sm)
+    rep = _sphere_report(sc, mat, key, grid, spec, table, depths, rows, ts, probes, held_out, shipped, t0)
     if mesh_check:
-        rep["mesh_check"] = _mesh_check(sc, fr, sm, probes, held, grid, spec, check_angles, cache)
+        rep["mesh_check"] = _mesh_check(sc, fr, sm, probes, rt.held, grid, spec, check_angles, cache)
     os.makedirs(out, exist_ok=True)
     import json
 
@@ -296,10 +355,10 @@ def _packing_error(table, packed, paths, fr, rt, probes, r) -> float:
 def mesh_study_specs(spec) -> dict:
     """The meshes of ``--mesh-check``, name → (h, h_fine, refine radius, path depth) m: the table's ``spec``
     and each of :data:`MESH_STUDY_SPECS` (``level1`` …), each with its **twin** (``…_twin``: the same sizes,
-    the refinement tube ``TWIN_DR`` wider, as the cylinder's twins (:func:`flexsheet.experiments.fem.twin_spec`),
+    the refinement tube ``TWIN_DR`` wider, as the cylinder's twins (:func:`flexsheet.fem.node_table.twin_spec`),
     so gmsh lays the elements out anew; the difference between a mesh and its twin is that mesh's noise, which
     no interpolation between pushes can beat)."""
-    from flexsheet.experiments.fem import TWIN_DR
+    from flexsheet.fem.node_table import TWIN_DR
 
     def twin(x):
         return (x[0], x[1], x[2] + TWIN_DR, x[3])

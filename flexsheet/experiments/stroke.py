@@ -226,6 +226,95 @@ def _camera_cov(twin: Twin, X_display: np.ndarray, sigma_px: float) -> np.ndarra
     return np.einsum("ij,njk,lk->nil", R, C, R)
 
 
+def _measure(twin: Twin, finger, rng, Tc: float):
+    """The camera's exposures: times tk (s), the true fingertip, its measurement (the triangulation's noise for
+    the twin's marker σ) and which measurements are valid (the twin's dropout; the first always)."""
+    tk = np.arange(0.0, finger.duration, Tc) + rng.uniform(0, Tc)
+    true_p = finger.positions(tk)
+    if twin.marker_px > 0.0:
+        C = _camera_cov(twin, true_p, twin.marker_px)
+        meas = true_p + np.einsum("nij,nj->ni", np.linalg.cholesky(C), rng.normal(size=true_p.shape))
+    else:
+        meas = true_p.copy()
+    valid = rng.uniform(size=len(tk)) >= twin.dropout
+    valid[0] = True
+    return tk, true_p, meas, valid
+
+
+def _plan_stroke(tk, true_p, meas, valid, Rf, kf: Predictor, planner, h: float, use_prediction: bool,
+                 delay_to_arm: float, record: list | None):
+    """The planner over the exposures (the Kalman prediction ``h`` s ahead, or the measurement): the plans'
+    arrival times at the arms, their clamp matrices, and the filtered positions."""
+    arrivals, clamps = [], []
+    filt = meas.copy()
+    for i, t in enumerate(tk):
+        if valid[i]:
+            kf.update(t, meas[i], Rf[i])
+            filt[i] = kf.predict(0.0)
+            p = kf.predict(h) if use_prediction else meas[i]
+            plan = planner.update(t, p)
+        else:
+            plan = planner.hold(Hold.MARKER_LOST, t)
+        if plan is None:
+            continue
+        if record is not None:
+            record.append((float(t), true_p[i], plan))
+        arrivals.append(t + delay_to_arm)
+        clamps.append(plan.clamp_matrices())
+    return np.asarray(arrivals), clamps, filt
+
+
+def _arm_chains(twin: Twin, chain: ArmChain, latency: LatencyModel, first_clamps, Ts: float) -> dict:
+    """Per side (target tracker on the estimator's kinematics, stream limiter, servo), at rest on the first plan."""
+    chains = {}
+    qd = QD_MAX * chain.speed_scale
+    sp = ServoParams(tau=latency.servo_tau, qd_max=QD_MAX * chain.ctrl_speed_scale,
+                     qdd_max=QD_MAX * chain.ctrl_speed_scale * chain.ctrl_accel_factor)
+    for k, side in enumerate(("left", "right")):
+        m = chain.limit_margin
+        kin = ArmKinematics(side, twin.bases[side], Q_LOWER + m, Q_UPPER - m)
+        tracker = TargetTracker(kin, chain.target_timeout, chain.max_ik_jump)
+        tracker.seed(home_joints(side))
+        res = tracker.set_target(first_clamps[k], 0.0, 0.0)       # start at rest on the first plan
+        q0 = res.q if res.ok else home_joints(side)
+        lim = StreamLimiter(q0, Ts, qd, qd * chain.accel_scale, Q_LOWER, Q_UPPER, m)
+        chains[side] = (tracker, lim, JointServo(q0, sp))
+    return chains
+
+
+def _drive_arms(chains: dict, ticks, eff, clamps, Ts: float) -> tuple[dict, float]:
+    """The servos over the controller ticks (IK of the newest arrived plan): joints per tick and side, and the
+    largest |q̇| / datasheet speed."""
+    Q = {side: np.empty((len(ticks), 6)) for side in chains}
+    vmax = 0.0
+    last = -1
+    for j, tj in enumerate(ticks):
+        if eff[j] > last:                       # new target(s) since the last tick: IK of the newest
+            last = eff[j]
+            for k, side in enumerate(("left", "right")):
+                chains[side][0].set_target(clamps[last][k], 0.0, tj)
+        for side, (tracker, lim, servo) in chains.items():
+            Q[side][j] = servo.q
+            goal = tracker.goal_for(tj, lim.c) if last >= 0 else lim.c
+            servo.step(lim.step(goal), Ts)
+            vmax = max(vmax, float(np.max(np.abs(servo.v) / QD_MAX)))
+    return Q, vmax
+
+
+def _true_sheet(twin: Twin, tk, idx, ticks, Q: dict, Ts: float) -> tuple[np.ndarray, np.ndarray]:
+    """The true sheet (origin, normal) at the exposures ``tk[idx]``: joints interpolated between ticks, the
+    truth's forward kinematics."""
+    so = np.empty((idx.size, 3))
+    sn = np.empty((idx.size, 3))
+    for n, i in enumerate(idx):
+        j = int(np.clip(np.searchsorted(ticks, tk[i], side="right") - 1, 0, len(ticks) - 2))
+        w = (tk[i] - ticks[j]) / Ts
+        Tl = twin.truth.clamp_pose("left", (1 - w) * Q["left"][j] + w * Q["left"][j + 1])
+        Tr = twin.truth.clamp_pose("right", (1 - w) * Q["right"][j] + w * Q["right"][j + 1])
+        so[n], sn[n], _, _ = frame_from_clamps(Tl, Tr)
+    return so, sn
+
+
 def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None, seed: int = 0, *,
              use_prediction: bool = True, finger_kw: dict | None = None, horizon: float | None = None,
              q: float | None = None, sigma_px_filter: float | None = None, d_source: str = "measured",
@@ -258,16 +347,7 @@ def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None
         shape = planner_shape(scene)
     finger = FingerScript(moving_time=moving_time, seed=seed, scene=scene, **(finger_kw or {}))
     rng = np.random.default_rng(1000 + seed)
-    Tc = latency.camera_period
-    tk = np.arange(0.0, finger.duration, Tc) + rng.uniform(0, Tc)
-    true_p = finger.positions(tk)
-    if twin.marker_px > 0.0:
-        C = _camera_cov(twin, true_p, twin.marker_px)
-        meas = true_p + np.einsum("nij,nj->ni", np.linalg.cholesky(C), rng.normal(size=true_p.shape))
-    else:
-        meas = true_p.copy()
-    valid = rng.uniform(size=len(tk)) >= twin.dropout
-    valid[0] = True
+    tk, true_p, meas, valid = _measure(twin, finger, rng, latency.camera_period)
     bud = latency.budget()
     h = (bud["total"] + bud["target_hold_mean"]) if horizon is None else horizon
     sig_f = lk["sigma_px"] if sigma_px_filter is None else sigma_px_filter
@@ -276,64 +356,18 @@ def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None
     planner = SurfacePlanner(shape, planner_config or PlannerConfig(), compliance)
     s = latency.scale
     delay_to_arm = s * (latency.exposure_to_host + latency.processing + latency.network)
-    arrivals, clamps = [], []
-    filt = meas.copy()
-    for i, t in enumerate(tk):
-        if valid[i]:
-            kf.update(t, meas[i], Rf[i])
-            filt[i] = kf.predict(0.0)
-            p = kf.predict(h) if use_prediction else meas[i]
-            plan = planner.update(t, p)
-        else:
-            plan = planner.hold(Hold.MARKER_LOST, t)
-        if plan is None:
-            continue
-        if record is not None:
-            record.append((float(t), true_p[i], plan))
-        arrivals.append(t + delay_to_arm)
-        clamps.append(plan.clamp_matrices())
-    arrivals = np.asarray(arrivals)
+    arrivals, clamps, filt = _plan_stroke(tk, true_p, meas, valid, Rf, kf, planner, h, use_prediction, delay_to_arm,
+                                          record)
     # arms: IK at arrival (estimator model), limiter + servo per controller tick, true FK
     Ts = latency.servo_period
     ticks = np.arange(rng.uniform(0, Ts), finger.duration + Ts, Ts)
     eff = np.searchsorted(arrivals, ticks - latency.pipeline_ticks * Ts, side="right") - 1
-    chains = {}
-    qd = QD_MAX * chain.speed_scale
-    sp = ServoParams(tau=latency.servo_tau, qd_max=QD_MAX * chain.ctrl_speed_scale,
-                     qdd_max=QD_MAX * chain.ctrl_speed_scale * chain.ctrl_accel_factor)
-    for k, side in enumerate(("left", "right")):
-        m = chain.limit_margin
-        kin = ArmKinematics(side, twin.bases[side], Q_LOWER + m, Q_UPPER - m)
-        tracker = TargetTracker(kin, chain.target_timeout, chain.max_ik_jump)
-        tracker.seed(home_joints(side))
-        res = tracker.set_target(clamps[0][k], 0.0, 0.0)          # start at rest on the first plan
-        q0 = res.q if res.ok else home_joints(side)
-        lim = StreamLimiter(q0, Ts, qd, qd * chain.accel_scale, Q_LOWER, Q_UPPER, m)
-        chains[side] = (tracker, lim, JointServo(q0, sp))
-    Q = {side: np.empty((len(ticks), 6)) for side in chains}
-    vmax = 0.0
-    last = -1
-    for j, tj in enumerate(ticks):
-        if eff[j] > last:                       # new target(s) since the last tick: IK of the newest
-            last = eff[j]
-            for k, side in enumerate(("left", "right")):
-                chains[side][0].set_target(clamps[last][k], 0.0, tj)
-        for side, (tracker, lim, servo) in chains.items():
-            Q[side][j] = servo.q
-            goal = tracker.goal_for(tj, lim.c) if last >= 0 else lim.c
-            servo.step(lim.step(goal), Ts)
-            vmax = max(vmax, float(np.max(np.abs(servo.v) / QD_MAX)))
+    chains = _arm_chains(twin, chain, latency, clamps[0], Ts)
+    Q, vmax = _drive_arms(chains, ticks, eff, clamps, Ts)
     # true sheet at each exposure: joints interpolated between ticks, the truth's forward kinematics
     moving = (tk >= finger.t_move) & (tk < finger.t_move + moving_time) & valid
     idx = np.flatnonzero(moving)
-    so = np.empty((idx.size, 3))
-    sn = np.empty((idx.size, 3))
-    for n, i in enumerate(idx):
-        j = int(np.clip(np.searchsorted(ticks, tk[i], side="right") - 1, 0, len(ticks) - 2))
-        w = (tk[i] - ticks[j]) / Ts
-        Tl = twin.truth.clamp_pose("left", (1 - w) * Q["left"][j] + w * Q["left"][j + 1])
-        Tr = twin.truth.clamp_pose("right", (1 - w) * Q["right"][j] + w * Q["right"][j + 1])
-        so[n], sn[n], _, _ = frame_from_clamps(Tl, Tr)
+    so, sn = _true_sheet(twin, tk, idx, ticks, Q, Ts)
     if stats is not None:
         stats.update(peak_joint_speed_ratio=vmax, ik_refused=int(sum(c[0].refused for c in chains.values())),
                      dropped=int((~valid).sum()))

@@ -94,16 +94,9 @@ def _fresh(calib, T, **kw):
     return FingertipTracker(calib, TrackerConfig(**kw), T)
 
 
-def stability(seed: int = 0) -> dict:
-    """Full-pipeline stability cases on the XIMEA twin (module doc). Errors in mm; NaN where invalid."""
-    calib = camera_model("ximea")
-    T = look_at(DEFAULT_CAMERA_POSITION)
-    rnd = StereoRenderer(calib, T, SimConfig(seed=seed))
+def _stability_fov(calib, T, rnd, to_disp) -> dict:
+    """(a) Field of view at 0.5 m incl. the border: error (mm) on a 25 × 20 pixel grid."""
     m = rnd.model
-    Tinv = np.linalg.inv(T)
-    to_disp = lambda Xc: Xc @ T[:3, :3].T + T[:3, 3]  # noqa: E731
-    out: dict = {}
-    # (a) field of view at 0.5 m incl. the border
     w, h = m.image_size
     us = np.linspace(-4, w + 3, 25)
     vs = np.linspace(-4, h + 3, 20)
@@ -116,13 +109,15 @@ def stability(seed: int = 0) -> dict:
             r = _fresh(calib, T).process(L, R, 0.0)
             if r.valid:
                 err[i, j] = np.linalg.norm(r.position - p) * 1e3
-    out["fov"] = {"u_px": us.tolist(), "v_px": vs.tolist(), "error_mm": err.tolist(),
-                  "valid_fraction": float(np.mean(np.isfinite(err))),
-                  "median_error_mm": float(np.nanmedian(err))}
-    # (b) degenerate rays, geometry only: the marker 0.5 m from the baseline midpoint at a decreasing angle
-    # to the baseline (rays become collinear with it). Noise is angular, σ = 0.1 px / f rad on each ray
-    # (image-plane pixel noise is meaningless far outside the field of view).
-    rng = np.random.default_rng(seed)
+    return {"u_px": us.tolist(), "v_px": vs.tolist(), "error_mm": err.tolist(),
+            "valid_fraction": float(np.mean(np.isfinite(err))),
+            "median_error_mm": float(np.nanmedian(err))}
+
+
+def _stability_degenerate(m: StereoModel, rng) -> dict:
+    """(b) Degenerate rays, geometry only: the marker 0.5 m from the baseline midpoint at a decreasing angle
+    to the baseline (rays become collinear with it). Noise is angular, σ = 0.1 px / f rad on each ray
+    (image-plane pixel noise is meaningless far outside the field of view); and the RMS against depth."""
     base_dir = m.C2 / np.linalg.norm(m.C2)           # left -> right camera centre (≈ +x)
     mid = 0.5 * m.C2
     angles = [90, 60, 45, 30, 20, 10, 5, 2, 1]
@@ -151,11 +146,11 @@ def stability(seed: int = 0) -> dict:
             deg[meth].append(float(np.sqrt(np.nanmean(np.sum((Y - X) ** 2, axis=1))) * 1e3))
     far = [0.5, 1.0, 1.5, 2.0, 3.0]
     far_err = {meth: [mc_rms_mm(m, z, 0.1, meth, n=2000) for z in far] for meth in METHODS}
-    out["degenerate"] = {"angle_deg": angles, "rms_mm": deg, "depth_m": far,
-                         "depth_rms_mm": far_err}
-    # marker position used for the image cases: in front of the sheet near the cylinder top
-    p0 = np.array([0.03, 0.0, 0.02])
-    # (c) partial occlusion in the left image
+    return {"angle_deg": angles, "rms_mm": deg, "depth_m": far, "depth_rms_mm": far_err}
+
+
+def _stability_occlusion(calib, T, rnd, p0) -> dict:
+    """(c) Partial occlusion of the marker in the left image."""
     occ = [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9]
     occ_err, occ_reason = [], []
     for f in occ:
@@ -163,8 +158,11 @@ def stability(seed: int = 0) -> dict:
         r = _fresh(calib, T).process(L, R, 0.0)
         occ_err.append(float(np.linalg.norm(r.position - p0) * 1e3) if r.valid else float("nan"))
         occ_reason.append(r.reason)
-    out["occlusion"] = {"fraction": occ, "error_mm": occ_err, "reason": occ_reason}
-    # (d) reflection: a second dot of equal brightness at distance d (along display y), no track / track
+    return {"fraction": occ, "error_mm": occ_err, "reason": occ_reason}
+
+
+def _stability_reflection(calib, T, rnd, p0) -> dict:
+    """(d) Reflection: a second dot of equal brightness at distance d (along display y), no track / track."""
     dists = [0.003, 0.006, 0.01, 0.02, 0.04, 0.08]
     refl = {"no_track": [], "track": []}
     for d in dists:
@@ -179,8 +177,13 @@ def stability(seed: int = 0) -> dict:
             e = np.linalg.norm(r.position - p0) * 1e3 if r.valid else float("nan")
             refl[mode].append({"reason": r.reason, "error_mm": float(e),
                                "outcome": "invalid" if not r.valid else ("correct" if e < 2 else "wrong")})
-    out["reflection"] = {"distance_m": dists, **refl}
-    # (e) motion blur along display y, 4 ms exposure, tracked over 12 frames
+    return {"distance_m": dists, **refl}
+
+
+def _stability_motion_blur(calib, T, rnd, p0) -> dict:
+    """(e) Motion blur along display y, 4 ms exposure, tracked over 12 frames."""
+    m = rnd.model
+    Tinv = np.linalg.inv(T)
     speeds = [0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0]
     blur = {"speed_mps": speeds, "rms_error_mm": [], "valid_rate": [], "streak_px": []}
     for s in speeds:
@@ -200,8 +203,11 @@ def stability(seed: int = 0) -> dict:
         blur["valid_rate"].append(valid / 12)
         zc = (Tinv[:3, :3] @ p0 + Tinv[:3, 3])[2]
         blur["streak_px"].append(float(m.focal * s * rnd.cfg.exposure_s / zc))
-    out["motion_blur"] = blur
-    # end-to-end twin accuracy at 0.5 m (the twin's centroid noise is what it is; σ_px not imposed)
+    return blur
+
+
+def _stability_end_to_end(calib, T, rnd, rng) -> float:
+    """End-to-end twin accuracy at 0.5 m (the twin's centroid noise is what it is; σ_px not imposed): RMS mm."""
     errs = []
     for _ in range(60):
         p = np.array([rng.uniform(0.0, 0.06), rng.uniform(-0.06, 0.06), rng.uniform(-0.05, 0.05)])
@@ -209,7 +215,25 @@ def stability(seed: int = 0) -> dict:
         r = _fresh(calib, T).process(L, R, 0.0)
         if r.valid:
             errs.append(np.sum((r.position - p) ** 2))
-    out["twin_end_to_end_rms_mm"] = float(np.sqrt(np.mean(errs)) * 1e3)
+    return float(np.sqrt(np.mean(errs)) * 1e3)
+
+
+def stability(seed: int = 0) -> dict:
+    """Full-pipeline stability cases on the XIMEA twin (module doc). Errors in mm; NaN where invalid."""
+    calib = camera_model("ximea")
+    T = look_at(DEFAULT_CAMERA_POSITION)
+    rnd = StereoRenderer(calib, T, SimConfig(seed=seed))
+    to_disp = lambda Xc: Xc @ T[:3, :3].T + T[:3, 3]  # noqa: E731
+    out: dict = {}
+    out["fov"] = _stability_fov(calib, T, rnd, to_disp)
+    rng = np.random.default_rng(seed)
+    out["degenerate"] = _stability_degenerate(rnd.model, rng)
+    # marker position used for the image cases: in front of the sheet near the cylinder top
+    p0 = np.array([0.03, 0.0, 0.02])
+    out["occlusion"] = _stability_occlusion(calib, T, rnd, p0)
+    out["reflection"] = _stability_reflection(calib, T, rnd, p0)
+    out["motion_blur"] = _stability_motion_blur(calib, T, rnd, p0)
+    out["twin_end_to_end_rms_mm"] = _stability_end_to_end(calib, T, rnd, rng)
     return out
 
 
@@ -272,6 +296,73 @@ def honest(seeds=(0, 1, 2), quick: bool = False) -> dict:
     return out
 
 
+def _sweep(name, values, make, seeds) -> dict:
+    """One stability sweep: ``make(x, seed)`` per value and seed; mean over the seeds of RMS, valid and wrong
+    rates, the per-seed details, and where the sweep breaks."""
+    rms, valid, wrong, extra = [], [], [], []
+    for x in values:
+        rs, vs, ws, ex = [], [], [], []
+        for seed in seeds:
+            r = make(x, seed)
+            rs.append(r["rms_mm"])
+            vs.append(r["valid_rate"])
+            ws.append(r.get("wrong_rate", 0.0))
+            ex.append({k: r[k] for k in r if k in ("visibility", "registration", "reasons", "failed")})
+        rms.append(float(np.nanmean(rs)) if np.any(np.isfinite(rs)) else float("nan"))
+        valid.append(float(np.mean(vs)))
+        wrong.append(float(np.mean(ws)))
+        extra.append(ex)
+        _log(f"  {name} = {x}: RMS {rms[-1]:.3f} mm, valid {valid[-1] * 100:.0f} %, wrong {wrong[-1] * 100:.0f} %")
+    return {"values": list(values), "rms_mm": rms, "valid_rate": valid, "wrong_rate": wrong, "detail": extra,
+            "breaking": _breaking(values, rms, valid)}
+
+
+def _registered(seed, quick: bool):
+    truth = vt.TwinTruth.draw(seed, "realistic")
+    entry, _ = vt.registered_camera(truth, quick=quick, log=_log)
+    return truth, entry
+
+
+def _noise_case(x, seed, pts, quick: bool) -> dict:
+    truth, e = _registered(seed, quick)
+    return vt.static_error(truth, e.stereo, e.T_display_camera, vt.sim_config("realistic", noise_scale=x), pts, 2,
+                           seed)
+
+
+def _calib_case(x, seed, pts, register: bool = True) -> dict:
+    truth = vt.scaled_truth(seed, x)
+    if register:
+        try:
+            e, _ = vt.registered_camera(truth, log=_log)
+        except ValueError as exc:
+            return {"rms_mm": float("nan"), "valid_rate": 0.0, "failed": str(exc)[:200]}
+        st, T = e.stereo, e.T_display_camera
+        reg = vt.registration_error(truth, e)
+    else:
+        nom = vt.nominal_display_calib().camera
+        st, T, reg = nom.stereo, nom.T_display_camera, None
+    r = vt.static_error(truth, st, T, vt.sim_config("realistic"), pts, 2, seed)
+    r["registration"] = reg
+    return r
+
+
+def _finger_case(az, seed, pts, quick: bool) -> dict:
+    truth, e = _registered(seed, quick)
+    el = np.radians(40.0)
+    d = (float(np.cos(el) * np.cos(np.radians(az))), float(np.cos(el) * np.sin(np.radians(az))), float(np.sin(el)))
+    cfg = vt.sim_config("realistic", finger_dir=d)
+    r = vt.static_error(truth, e.stereo, e.T_display_camera, cfg, pts, 2, seed)
+    rnd = vt.twin_renderer(truth, cfg)
+    r["visibility"] = float(np.mean([min(rnd.marker_visibility(p)) for p in pts]))
+    return r
+
+
+def _bg_case(g, seed, pts, quick: bool) -> dict:
+    truth, e = _registered(seed, quick)
+    return vt.static_error(truth, e.stereo, e.T_display_camera, vt.sim_config("realistic", background_gain=g),
+                           pts, 2, seed)
+
+
 def honest_stability(seeds=(0, 1, 2), quick: bool = False) -> dict:
     """Error against the size of what breaks it (realistic twin, registered camera, static points):
     camera noise (``noise_scale`` × the measured σ), the truth's camera spreads (× scale; the registration is
@@ -281,79 +372,21 @@ def honest_stability(seeds=(0, 1, 2), quick: bool = False) -> dict:
     n_pts = 8 if quick else 20
     pts = vt.static_points(n_pts, seed=5)
     out: dict = {"seeds": list(seeds), "points": n_pts}
-
-    def sweep(name, values, make):
-        rms, valid, wrong, extra = [], [], [], []
-        for x in values:
-            rs, vs, ws, ex = [], [], [], []
-            for seed in seeds:
-                r = make(x, seed)
-                rs.append(r["rms_mm"])
-                vs.append(r["valid_rate"])
-                ws.append(r.get("wrong_rate", 0.0))
-                ex.append({k: r[k] for k in r if k in ("visibility", "registration", "reasons", "failed")})
-            rms.append(float(np.nanmean(rs)) if np.any(np.isfinite(rs)) else float("nan"))
-            valid.append(float(np.mean(vs)))
-            wrong.append(float(np.mean(ws)))
-            extra.append(ex)
-            _log(f"  {name} = {x}: RMS {rms[-1]:.3f} mm, valid {valid[-1] * 100:.0f} %, wrong {wrong[-1] * 100:.0f} %")
-        return {"values": list(values), "rms_mm": rms, "valid_rate": valid, "wrong_rate": wrong, "detail": extra,
-                "breaking": _breaking(values, rms, valid)}
-
-    def registered(seed):
-        truth = vt.TwinTruth.draw(seed, "realistic")
-        entry, _ = vt.registered_camera(truth, quick=quick, log=_log)
-        return truth, entry
-
-    def noise_case(x, seed):
-        truth, e = registered(seed)
-        return vt.static_error(truth, e.stereo, e.T_display_camera, vt.sim_config("realistic", noise_scale=x), pts, 2,
-                               seed)
     noise = (1.0, 4.0, 16.0) if quick else (0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
     _log("stability: camera noise")
-    out["noise_scale"] = sweep("noise_scale", noise, noise_case)
-
-    def calib_case(x, seed, register=True):
-        truth = vt.scaled_truth(seed, x)
-        if register:
-            try:
-                e, _ = vt.registered_camera(truth, log=_log)
-            except ValueError as exc:
-                return {"rms_mm": float("nan"), "valid_rate": 0.0, "failed": str(exc)[:200]}
-            st, T = e.stereo, e.T_display_camera
-            reg = vt.registration_error(truth, e)
-        else:
-            nom = vt.nominal_display_calib().camera
-            st, T, reg = nom.stereo, nom.T_display_camera, None
-        r = vt.static_error(truth, st, T, vt.sim_config("realistic"), pts, 2, seed)
-        r["registration"] = reg
-        return r
+    out["noise_scale"] = _sweep("noise_scale", noise, lambda x, s: _noise_case(x, s, pts, quick), seeds)
     scales = (0.5, 2.0, 8.0) if quick else (0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
     _log("stability: calibration error (truth spreads scaled, registered again)")
-    out["calibration_scale"] = sweep("spread_scale", scales, calib_case)
+    out["calibration_scale"] = _sweep("spread_scale", scales, lambda x, s: _calib_case(x, s, pts), seeds)
     _log("stability: calibration error, not registered (nominal calibration)")
-    out["calibration_scale_unregistered"] = sweep("spread_scale", scales, lambda x, s: calib_case(x, s, False))
-
-    def finger_case(az, seed):
-        truth, e = registered(seed)
-        el = np.radians(40.0)
-        d = (float(np.cos(el) * np.cos(np.radians(az))), float(np.cos(el) * np.sin(np.radians(az))), float(np.sin(el)))
-        cfg = vt.sim_config("realistic", finger_dir=d)
-        r = vt.static_error(truth, e.stereo, e.T_display_camera, cfg, pts, 2, seed)
-        rnd = vt.twin_renderer(truth, cfg)
-        r["visibility"] = float(np.mean([min(rnd.marker_visibility(p)) for p in pts]))
-        return r
+    out["calibration_scale_unregistered"] = _sweep("spread_scale", scales, lambda x, s: _calib_case(x, s, pts, False),
+                                                   seeds)
     azs = (-60.0, 0.0, 40.0) if quick else (-90.0, -60.0, -30.0, -15.0, 0.0, 15.0, 30.0, 40.0, 60.0, 90.0)
     _log("stability: finger direction (self-occlusion)")
-    out["finger_azimuth_deg"] = sweep("finger_azimuth_deg", azs, finger_case)
-
-    def bg_case(g, seed):
-        truth, e = registered(seed)
-        return vt.static_error(truth, e.stereo, e.T_display_camera, vt.sim_config("realistic", background_gain=g),
-                               pts, 2, seed)
+    out["finger_azimuth_deg"] = _sweep("finger_azimuth_deg", azs, lambda x, s: _finger_case(x, s, pts, quick), seeds)
     gains = (0.5, 1.0) if quick else (0.25, 0.5, 0.75, 1.0, 1.25)
     _log("stability: background brightness (marker contrast)")
-    out["background_gain"] = sweep("background_gain", gains, bg_case)
+    out["background_gain"] = _sweep("background_gain", gains, lambda x, s: _bg_case(x, s, pts, quick), seeds)
     return out
 
 

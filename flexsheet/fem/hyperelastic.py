@@ -256,7 +256,7 @@ class HyperelasticModel:
         ``material``): λ, μ per element (inclusions, layered bodies). Raises ``ValueError`` on a wrong shape
         or an out-of-range value, naming the field. ``penalty_scale``: the contact penalty κ = scale·E/h
         (:meth:`penalty`; > 0)."""
-        from skfem import Basis, ElementTetP2, MeshTet
+        from skfem import MeshTet
 
         if isinstance(penalty_scale, bool) or not isinstance(penalty_scale, numbers.Real) \
                 or not (math.isfinite(penalty_scale) and penalty_scale > 0):
@@ -268,13 +268,24 @@ class HyperelasticModel:
         self.mesh, self.material = mesh, material
         sk = MeshTet(np.ascontiguousarray(mesh.points.T), np.ascontiguousarray(mesh.tets.T))
         self.skmesh = sk
+        self._init_quadrature(intorder, node_weight)
+        outer = self._init_boundary(sym_y, sym_z, support)
+        self._init_contact_quadrature(outer, support is None)
+        self._init_material(material, E_elem, nu_elem)
+        self._pattern()
+        self.eps = 2e-5           #: width (m) of the smooth onset of the contact penalty (see _pen)
+        self.h_contact = float(np.sqrt(2.0 * np.percentile(self._cf_w.sum(axis=1), 10)))  #: fine facet size, m
+
+    def _init_quadrature(self, intorder: int, node_weight: float) -> None:
+        """The P2 basis, the DOF points and the volume quadrature (the Gauss rule blended with the 10 nodes)."""
+        from skfem import Basis, ElementTetP2
+
         if intorder not in (2, 5, 6):
             raise ValueError(f"intorder must be 2, 5 or 6 (tetrahedral rules with positive weights), got {intorder!r}")
-        self.basis = Basis(sk, ElementTetP2(), intorder=intorder)
+        self.basis = Basis(self.skmesh, ElementTetP2(), intorder=intorder)
         b = self.basis
         self.points = np.ascontiguousarray(b.doflocs.T)
-        P = len(self.points)
-        self.n = 3 * P
+        self.n = 3 * len(self.points)
         self.edofs = np.ascontiguousarray(b.element_dofs.T)                             # (E, 10) points
         gq = np.stack([bf[0].grad for bf in b.basis], axis=0).transpose(2, 3, 0, 1)       # (E, Q, 10, 3)
         # nodal gradients for det F at the 10 element nodes (inversion check, and the nodal quadrature points)
@@ -292,7 +303,12 @@ class HyperelasticModel:
         self.grad = np.ascontiguousarray(gq)                                              # (E, Q', 10, 3)
         self.w = np.ascontiguousarray(wq)                                                 # (E, Q')
         self.vol = float(self.w.sum())
-        c = mesh.center
+
+    def _init_boundary(self, sym_y: bool, sym_z: bool, support: np.ndarray | None) -> np.ndarray:
+        """The outer surface, the support and the fixed DOFs (support and symmetry planes); returns the outer
+        (non-symmetry) boundary facets."""
+        sk, b, c = self.skmesh, self.basis, self.mesh.center
+        P = len(self.points)
         tol = 1e-9
         facets = sk.boundary_facets()
         fp = sk.p[:, sk.facets[:, facets]]                                                # (3, 3, nf)
@@ -321,10 +337,14 @@ class HyperelasticModel:
         self.sym_factor = 2 ** (int(sym_y) + int(sym_z))       #: full-body force = factor × this part's
         self.free = np.flatnonzero(~self.fixed_mask)
         self.contact_pts = np.flatnonzero(surf & ~self.support)
-        # contact quadrature on the outer facets not wholly in the support (6-point rule, positive weights)
-        from skfem import FacetBasis
+        return outer
 
-        if support is None:
+    def _init_contact_quadrature(self, outer: np.ndarray, default_support: bool) -> None:
+        """Contact quadrature on the outer facets not wholly in the support (6-point rule, positive weights)."""
+        from skfem import ElementTetP2, FacetBasis
+
+        sk, c, tol = self.skmesh, self.mesh.center, 1e-9
+        if default_support:
             sup_facet = np.all(self.points[sk.facets[:, outer], 0] <= c[0] + tol, axis=0)
         else:
             sup_facet = np.all(self.support[sk.facets[:, outer]], axis=0)
@@ -333,10 +353,13 @@ class HyperelasticModel:
         self._cf_N = np.ascontiguousarray(np.stack([bf[0].value for bf in fb.basis], axis=2))  # (Fc, Qf, 10)
         self._cf_X = np.ascontiguousarray(fb.global_coordinates().value.transpose(1, 2, 0))    # (Fc, Qf, 3)
         self._cf_w = np.ascontiguousarray(fb.dx)                                         # (Fc, Qf) m²
+
+    def _init_material(self, material: Material, E_elem: np.ndarray | None, nu_elem: np.ndarray | None) -> None:
+        """Lamé λ, μ (the material's, or per element from ``E_elem``/``nu_elem``), the reference modulus, Gent's Jm."""
         lam, mu = material.lame
         self.E_ref = material.E          #: modulus (Pa) that scales the contact penalty and the tolerances
         if E_elem is not None or nu_elem is not None:
-            ne = len(mesh.tets)
+            ne = len(self.mesh.tets)
             Ee = np.full(ne, material.E) if E_elem is None else np.asarray(E_elem, float)
             ve = np.full(ne, material.nu) if nu_elem is None else np.asarray(nu_elem, float)
             for name, a in (("E_elem", Ee), ("nu_elem", ve)):
@@ -354,9 +377,6 @@ class HyperelasticModel:
         self.Jm = float(material.Jm) if material.gent else None     #: Gent limiting I1 − 3, None: neo-Hookean
         self._lam4 = lam if np.isscalar(lam) else lam[..., None, None]       # broadcast against (E, Q, 3, 3)
         self._mu4 = mu if np.isscalar(mu) else mu[..., None, None]
-        self._pattern()
-        self.eps = 2e-5           #: width (m) of the smooth onset of the contact penalty (see _pen)
-        self.h_contact = float(np.sqrt(2.0 * np.percentile(self._cf_w.sum(axis=1), 10)))  #: fine facet size, m
 
     # ---- assembly ------------------------------------------------------------------------------------
     def _gent_factor(self, F: np.ndarray) -> np.ndarray | None:
@@ -952,6 +972,91 @@ def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: fl
                               label=f"angle {math.degrees(angle):.1f} deg", contact=contact)
 
 
+def _check_path_args(depths, step: float, capsule, contact: str) -> np.ndarray:
+    """``depths`` as an array, after :func:`solve_path_capsule`'s arguments are checked (``ValueError``)."""
+    depths = np.asarray(depths, float)
+    if depths.ndim != 1 or len(depths) == 0 or not np.all(np.isfinite(depths)) or np.any(depths < 0):
+        raise ValueError(f"depths must be a non-empty 1-D array of finite values >= 0 m, got {depths!r}")
+    if np.any(np.diff(depths) < 0):
+        raise ValueError("depths must be ascending")
+    if not (math.isfinite(step) and step > 0):
+        raise ValueError(f"step must be > 0 m, got {step!r}")
+    if not callable(capsule):
+        raise ValueError(f"capsule must be a callable depth -> Capsule, got {type(capsule).__name__}")
+    if contact not in CONTACT_LAWS:
+        raise ValueError(f"contact must be one of {CONTACT_LAWS}, got {contact!r}")
+    return depths
+
+
+class _PathPush:
+    """:func:`solve_path_capsule`'s walk along the push: the iterate ``u`` at depth ``d_cur``, the previous one
+    (``u_prev`` at ``d_prev``, for the extrapolated guess), the sticking anchors, Newton's resume state and the
+    current load step size."""
+
+    def __init__(self, m: HyperelasticModel, capsule, sticking: bool, step: float, iters: int, tol_u: float,
+                 tol_r: float | None, substeps_max: int, label: str, log):
+        self.m, self.capsule, self.sticking = m, capsule, sticking
+        self.iters, self.tol_u, self.substeps_max, self.label, self.log = iters, tol_u, substeps_max, label, log
+        self.anchors = None
+        self.k = m.penalty()
+        self.tol_r = tol_r if tol_r is not None else 1e-6 * m.E_ref * m.h_contact ** 2 * 10
+        self.u = np.zeros((len(m.points), 3))
+        self.u_prev, self.d_prev = None, 0.0
+        self.d_cur = 0.0
+        self.nstate: dict = {}
+        self.step_now = step
+
+    def caps(self, d: float):
+        """The finger at depth ``d`` (with the anchors, sticking)."""
+        caps = self.capsule(d)
+        if self.sticking:
+            caps = replace(caps, anchors=self.anchors)
+        return caps
+
+    def load_step(self, target: float):
+        """One load step toward ``target`` m, halved on a failed Newton solve (module doc of
+        :func:`solve_path_capsule`): returns (Newton iterations, converged)."""
+        m = self.m
+        h = min(self.step_now, target - self.d_cur)
+        u_last = None
+        its_total = 0
+        if self.sticking:                # points touching the finger at the last converged state stick to it
+            self.anchors = m.stick_anchors(self.u, self.capsule(self.d_cur), self.anchors)
+        for _ in range(self.substeps_max + 1):
+            d_new = self.d_cur + h
+            caps = self.caps(d_new)
+            guess = self.u
+            if self.u_prev is not None and self.d_cur > self.d_prev:
+                g2 = self.u + (self.u - self.u_prev) * (h / (self.d_cur - self.d_prev))
+                if math.isfinite(m.energy(g2, None, 0.0)):
+                    guess = g2
+            u_new, its, conv, u_try = _newton_resumed(m, guess, caps, self.k, self.iters, self.tol_u, self.tol_r,
+                                                      self.nstate)
+            u_last = u_try if u_try is not None else u_last
+            its_total += its
+            if conv:
+                break
+            h *= 0.5
+            self.step_now = min(self.step_now, h)
+        else:
+            if u_last is None:
+                raise RuntimeError(f"Newton failed at depth {self.d_cur * 1e3:.2f} mm -> {d_new * 1e3:.2f} mm "
+                                   f"({self.label})")
+            u_new = u_last          # give up on this step: keep its last iterate, flagged not converged
+            if self.log:
+                self.log(f"  Newton did not converge at {d_new * 1e3:.2f} mm ({self.label})")
+        self.u_prev, self.d_prev = self.u, self.d_cur
+        self.u, self.d_cur = u_new, d_new
+        return its_total, conv
+
+    def state(self, its_total: int, conv_all, t0: float) -> PathState:
+        """The :class:`PathState` at the current depth."""
+        st = _path_state(self.m, self.u, self.caps(self.d_cur), self.k, self.d_cur, its_total, conv_all, t0)
+        if self.sticking:
+            st.extra["anchors"] = self.anchors.copy()
+        return st
+
+
 def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 0.001, iters: int = 30,
                        tol_u: float = 1e-6, tol_r: float | None = None, log=None, substeps_max: int = 3,
                        label: str = "path", contact: str = DEFAULT_CONTACT) -> list[PathState]:
@@ -974,73 +1079,21 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
     :meth:`HyperelasticModel.stick_anchors`); anchors are added after every load step,
     never released (a monotone push). Raises ``ValueError`` on bad depths or an unknown ``contact`` and
     ``RuntimeError`` when a step has no valid iterate at all."""
-    depths = np.asarray(depths, float)
-    if depths.ndim != 1 or len(depths) == 0 or not np.all(np.isfinite(depths)) or np.any(depths < 0):
-        raise ValueError(f"depths must be a non-empty 1-D array of finite values >= 0 m, got {depths!r}")
-    if np.any(np.diff(depths) < 0):
-        raise ValueError("depths must be ascending")
-    if not (math.isfinite(step) and step > 0):
-        raise ValueError(f"step must be > 0 m, got {step!r}")
-    if not callable(capsule):
-        raise ValueError(f"capsule must be a callable depth -> Capsule, got {type(capsule).__name__}")
-    if contact not in CONTACT_LAWS:
-        raise ValueError(f"contact must be one of {CONTACT_LAWS}, got {contact!r}")
-    sticking = contact == "sticking"
-    anchors = None
-    m = model
-    k = m.penalty()
-    tol_r = tol_r if tol_r is not None else 1e-6 * m.E_ref * m.h_contact ** 2 * 10
-    u = np.zeros((len(m.points), 3))
-    u_prev, d_prev = None, 0.0
-    d_cur = 0.0
+    depths = _check_path_args(depths, step, capsule, contact)
+    walk = _PathPush(model, capsule, contact == "sticking", step, iters, tol_u, tol_r, substeps_max, label, log)
     out = []
-    nstate: dict = {}
-    step_now = step
     for target in depths:
         t0 = time.perf_counter()
         its_total = 0
         conv_all = True
-        while d_cur < target - 1e-12:
-            h = min(step_now, target - d_cur)
-            u_last = None
-            if sticking:                # points touching the finger at the last converged state stick to it
-                anchors = m.stick_anchors(u, capsule(d_cur), anchors)
-            for _ in range(substeps_max + 1):
-                d_new = d_cur + h
-                caps = capsule(d_new)
-                if sticking:
-                    caps = replace(caps, anchors=anchors)
-                guess = u
-                if u_prev is not None and d_cur > d_prev:
-                    g2 = u + (u - u_prev) * (h / (d_cur - d_prev))
-                    if math.isfinite(m.energy(g2, None, 0.0)):
-                        guess = g2
-                u_new, its, conv, u_try = _newton_resumed(m, guess, caps, k, iters, tol_u, tol_r, nstate)
-                u_last = u_try if u_try is not None else u_last
-                its_total += its
-                if conv:
-                    break
-                h *= 0.5
-                step_now = min(step_now, h)
-            else:
-                if u_last is None:
-                    raise RuntimeError(f"Newton failed at depth {d_cur * 1e3:.2f} mm -> {d_new * 1e3:.2f} mm "
-                                       f"({label})")
-                u_new = u_last          # give up on this step: keep its last iterate, flagged not converged
-                if log:
-                    log(f"  Newton did not converge at {d_new * 1e3:.2f} mm ({label})")
+        while walk.d_cur < target - 1e-12:
+            its, conv = walk.load_step(target)
+            its_total += its
             conv_all &= conv
-            u_prev, d_prev = u, d_cur
-            u, d_cur = u_new, d_new
-        caps = capsule(d_cur)
-        if sticking:
-            caps = replace(caps, anchors=anchors)
-        st = _path_state(m, u, caps, k, d_cur, its_total, conv_all, t0)
-        if sticking:
-            st.extra["anchors"] = anchors.copy()
+        st = walk.state(its_total, conv_all, t0)
         out.append(st)
         if log:
-            log(f"  depth {d_cur * 1e3:5.1f} mm: F={st.force:.4f} N, {its_total} Newton its, "
+            log(f"  depth {walk.d_cur * 1e3:5.1f} mm: F={st.force:.4f} N, {its_total} Newton its, "
                 f"min det F={st.min_detF:.3f}, inverted={st.inverted}, pen={st.penetration * 1e3:.3f} mm, "
                 f"{st.seconds:.1f} s")
     return out

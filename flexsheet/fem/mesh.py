@@ -180,6 +180,64 @@ def cylinder_mesh(spec: MeshSpec = MeshSpec(), radius: float = CYLINDER_RADIUS, 
     return _finish(points, tets, radius, length, c, spec)
 
 
+def _part_geometry(c: np.ndarray, y0: float, radius: float, length: float, half_z: bool, cut_deg: float | None):
+    """:func:`cylinder_part_mesh`'s gmsh geometry: the cylinder from ``y0``, cut to z ≥ z_O (``half_z``),
+    fragmented by the plane at azimuth ``cut_deg``."""
+
+    def geometry(gmsh) -> None:
+        cyl = gmsh.model.occ.addCylinder(c[0], y0, c[2], 0.0, c[1] + length / 2 - y0, 0.0, radius)
+        if half_z:
+            box = gmsh.model.occ.addBox(c[0] - 2 * radius, y0 - 0.01, c[2], 4 * radius, length + 0.02, 2 * radius)
+            gmsh.model.occ.intersect([(3, cyl)], [(3, box)])
+        if cut_deg is not None:
+            # the plane through the cylinder's axis and the push direction at azimuth cut_deg: fragmenting the
+            # solid with it makes two volumes that gmsh meshes conformally, so the mesh has nodes on that plane
+            rect = gmsh.model.occ.addRectangle(c[0] - 2 * radius, y0 - 0.01, c[2], 4 * radius, length + 0.02)
+            gmsh.model.occ.rotate([(2, rect)], c[0], c[1], c[2], 0.0, 1.0, 0.0, -math.radians(cut_deg))
+            vols = gmsh.model.occ.getEntities(3)
+            gmsh.model.occ.fragment(vols, [(2, rect)])
+
+    return geometry
+
+
+def _skin_balls(skin, h_fine: float, refine_deg, radius: float, c: np.ndarray, y0: float, half_z: bool) -> tuple:
+    """The skin's size balls (centres, radius, size) of :func:`cylinder_part_mesh` (``ValueError`` on bad sizes)."""
+    size, patch, depth = (float(v) for v in skin)
+    if not (math.isfinite(size) and 0.0005 <= size <= h_fine):
+        raise ValueError(f"skin size must be in [0.0005, h_fine={h_fine}] m, got {size!r}")
+    if not (math.isfinite(patch) and 0 < patch <= radius * math.pi / 2):
+        raise ValueError(f"skin patch radius must be in (0, {radius * math.pi / 2:.4g}] m, got {patch!r}")
+    if not (math.isfinite(depth) and size <= depth <= radius / 2):
+        raise ValueError(f"skin depth must be in [skin size {size:g}, {radius / 2:.4g}] m, got {depth!r}")
+    step = depth / 2
+    n = int(math.ceil(patch / step))
+    if len(refine_deg) * (2 * n + 1) ** 2 > 40000:      # gmsh evaluates every ball at every mesh vertex
+        raise ValueError(f"skin patch radius {patch:g} m / depth {depth:g} m needs > 40000 size balls; "
+                         "use a thicker skin or a smaller patch")
+    pts = []
+    for d in refine_deg:
+        for i in range(-n, n + 1):          # arc length along the azimuth
+            for j in range(-n, n + 1):      # along the axis (y)
+                if math.hypot(i, j) * step > patch:
+                    continue
+                phi = math.radians(d) + i * step / radius
+                pts.append(c + np.array([radius * math.cos(phi), j * step, radius * math.sin(phi)]))
+    keep = [p for p in pts if p[1] >= y0 - depth and (not half_z or p[2] >= c[2] - depth)]
+    return (np.array(keep), depth, size)
+
+
+def _tip_balls(tip, h_fine: float, refine_deg, radius: float, c: np.ndarray) -> tuple:
+    """The tip's size balls (centres, radius, size) of :func:`cylinder_part_mesh` (``ValueError`` on bad sizes)."""
+    size, rad = (float(v) for v in tip)
+    if not (math.isfinite(size) and 0.0005 <= size <= h_fine):
+        raise ValueError(f"tip size must be in [0.0005, h_fine={h_fine}] m, got {size!r}")
+    if not (math.isfinite(rad) and size <= rad <= radius / 2):
+        raise ValueError(f"tip radius must be in [tip size {size:g}, {radius / 2:.4g}] m, got {rad!r}")
+    apex = [c + radius * np.array([math.cos(math.radians(d)), 0.0, math.sin(math.radians(d))])
+            for d in refine_deg]
+    return (np.array(apex), rad, size)
+
+
 def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg: tuple[float, ...] = (0.0,),
                        half_y: bool = True, half_z: bool = False, radius: float = CYLINDER_RADIUS,
                        length: float = CYLINDER_LENGTH, center: np.ndarray = CYLINDER_CENTER,
@@ -213,20 +271,7 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
         raise ValueError(f"refine_radius must be in [0, 0.1] m, got {refine_radius!r}")
     c = np.asarray(center, float)
     y0 = c[1] if half_y else c[1] - length / 2
-
-    def geometry(gmsh) -> None:
-        cyl = gmsh.model.occ.addCylinder(c[0], y0, c[2], 0.0, c[1] + length / 2 - y0, 0.0, radius)
-        if half_z:
-            box = gmsh.model.occ.addBox(c[0] - 2 * radius, y0 - 0.01, c[2], 4 * radius, length + 0.02, 2 * radius)
-            gmsh.model.occ.intersect([(3, cyl)], [(3, box)])
-        if cut_deg is not None:
-            # the plane through the cylinder's axis and the push direction at azimuth cut_deg: fragmenting the
-            # solid with it makes two volumes that gmsh meshes conformally, so the mesh has nodes on that plane
-            rect = gmsh.model.occ.addRectangle(c[0] - 2 * radius, y0 - 0.01, c[2], 4 * radius, length + 0.02)
-            gmsh.model.occ.rotate([(2, rect)], c[0], c[1], c[2], 0.0, 1.0, 0.0, -math.radians(cut_deg))
-            vols = gmsh.model.occ.getEntities(3)
-            gmsh.model.occ.fragment(vols, [(2, rect)])
-
+    geometry = _part_geometry(c, y0, radius, length, half_z, cut_deg)
     if cut_deg is not None and (half_z or not math.isfinite(cut_deg)):
         raise ValueError(f"cut_deg must be a finite azimuth (deg) on a part without the z mirror (half_z), got "
                          f"{cut_deg!r} with half_z={half_z}")
@@ -240,37 +285,9 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
             centres += [c + (radius - s) * out for s in np.linspace(0.0, path_depth, n + 1)]
     extra = ()
     if skin is not None:
-        size, patch, depth = (float(v) for v in skin)
-        if not (math.isfinite(size) and 0.0005 <= size <= h_fine):
-            raise ValueError(f"skin size must be in [0.0005, h_fine={h_fine}] m, got {size!r}")
-        if not (math.isfinite(patch) and 0 < patch <= radius * math.pi / 2):
-            raise ValueError(f"skin patch radius must be in (0, {radius * math.pi / 2:.4g}] m, got {patch!r}")
-        if not (math.isfinite(depth) and size <= depth <= radius / 2):
-            raise ValueError(f"skin depth must be in [skin size {size:g}, {radius / 2:.4g}] m, got {depth!r}")
-        step = depth / 2
-        n = int(math.ceil(patch / step))
-        if len(refine_deg) * (2 * n + 1) ** 2 > 40000:      # gmsh evaluates every ball at every mesh vertex
-            raise ValueError(f"skin patch radius {patch:g} m / depth {depth:g} m needs > 40000 size balls; "
-                             "use a thicker skin or a smaller patch")
-        pts = []
-        for d in refine_deg:
-            for i in range(-n, n + 1):          # arc length along the azimuth
-                for j in range(-n, n + 1):      # along the axis (y)
-                    if math.hypot(i, j) * step > patch:
-                        continue
-                    phi = math.radians(d) + i * step / radius
-                    pts.append(c + np.array([radius * math.cos(phi), j * step, radius * math.sin(phi)]))
-        keep = [p for p in pts if p[1] >= y0 - depth and (not half_z or p[2] >= c[2] - depth)]
-        extra = ((np.array(keep), depth, size),)
+        extra = (_skin_balls(skin, h_fine, refine_deg, radius, c, y0, half_z),)
     if tip is not None:
-        size, rad = (float(v) for v in tip)
-        if not (math.isfinite(size) and 0.0005 <= size <= h_fine):
-            raise ValueError(f"tip size must be in [0.0005, h_fine={h_fine}] m, got {size!r}")
-        if not (math.isfinite(rad) and size <= rad <= radius / 2):
-            raise ValueError(f"tip radius must be in [tip size {size:g}, {radius / 2:.4g}] m, got {rad!r}")
-        apex = [c + radius * np.array([math.cos(math.radians(d)), 0.0, math.sin(math.radians(d))])
-                for d in refine_deg]
-        extra = extra + ((np.array(apex), rad, size),)
+        extra = extra + (_tip_balls(tip, h_fine, refine_deg, radius, c),)
     points, tets = _gmsh_tets("cylinder_part", geometry, h, h_fine, refine_radius, centres,
                               f"the cylinder part (h={h}, h_fine={h_fine}, skin={skin}, tip={tip})", extra)
     tets = orient_tets(points, tets)

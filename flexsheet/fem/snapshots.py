@@ -213,6 +213,62 @@ def surface_coords(points: np.ndarray, radius: float, length: float, center: np.
     return {"theta": theta, "y": rel[:, 1], "rho": rho, "cap": cap}
 
 
+def _surface_samples(th: np.ndarray, ys: np.ndarray, rh: np.ndarray, R: float, L: float, c: np.ndarray):
+    """The table's sample points on the pushed half (|θ| < 90°): ``free`` (T,) bool, the side points
+    (free θ × y) and the end-cap points (free θ × ρ), (N, 3) m."""
+    free = np.abs(th) < math.pi / 2
+    T, Y = np.meshgrid(th[free], ys, indexing="ij")
+    side_pts = np.column_stack([c[0] + R * np.cos(T.ravel()), c[1] + Y.ravel(), c[2] + R * np.sin(T.ravel())])
+    T2, P2 = np.meshgrid(th[free], rh, indexing="ij")
+    cap_pts = np.column_stack([c[0] + P2.ravel() * np.cos(T2.ravel()), np.full(T2.size, c[1] + L / 2),
+                               c[2] + P2.ravel() * np.sin(T2.ravel())])
+    return free, side_pts, cap_pts
+
+
+def _solve_azimuth(ang: float, spec: RefSpec, material: Material, finger_radius: float, grid: SnapshotGrid,
+                   depths: np.ndarray, solved, contact: str, log):
+    """The reference model at azimuth ``ang`` deg and its states at ``depths[1:]`` (``solved``'s, else solved
+    here: the loading path and, frictionless, its stable branch)."""
+    s = spec if ang == 0.0 else replace(spec, half_z=False)
+    mesh = reference_mesh(s, ang)
+    model = HyperelasticModel(mesh, material, sym_y=True, sym_z=s.half_z)
+    law = f"Gent Jm {material.Jm:g}" if material.gent else "neo-Hookean"
+    log(f"fem: snapshots at {ang:g} deg: {model.n} DOF P2 {law}, {len(depths) - 1} depths ...")
+    states = solved(ang, model, depths[1:]) if solved is not None else None
+    if states is None:
+        states = solve_path(model, math.radians(ang), depths[1:], finger_radius, step=grid.depth_step,
+                            log=log, contact=contact)
+        if contact == "frictionless":       # the stable branch where the push is bistable
+            a = math.radians(ang)
+
+            def caps(d, a=a, m=mesh):
+                return capsule_at(a, d, finger_radius, m.radius, m.center)
+
+            states, _, _ = stable_states(model, caps, states, step=grid.depth_step, log=log)
+    return model, states
+
+
+def _store_states(t: dict, i: int, model, states, free, side_pts, cap_pts, ny: int, nr: int) -> None:
+    """Azimuth ``i``'s states sampled into the table's arrays ``t`` (depth index 1 on)."""
+    Ps = _probe(model, side_pts)
+    Pc = _probe(model, cap_pts)
+    for j, st in enumerate(states, start=1):
+        us = _sample(Ps, st.u, side_pts, model)
+        uc = _sample(Pc, st.u, cap_pts, model)
+        t["side"][i, j][free] = us.reshape(int(free.sum()), ny, 3)
+        t["cap"][i, j][free] = uc.reshape(int(free.sum()), nr, 3)
+        t["force"][i, j], t["max_strain"][i, j], t["inverted"][i, j] = st.force, st.max_strain, st.inverted
+        t["min_detF"][i, j], t["newton"][i, j] = st.min_detF, st.iterations
+
+
+def _copy_reused(t: dict, i: int, reuse: dict, k: int) -> None:
+    """Azimuth ``i`` of the table's arrays ``t`` copied from azimuth ``k`` of the table ``reuse``."""
+    t["side"][i], t["cap"][i] = np.asarray(reuse["side"][k], np.float32), np.asarray(reuse["cap"][k], np.float32)
+    t["force"][i], t["max_strain"][i], t["inverted"][i] = reuse["force"][k], reuse["max_strain"][k], reuse["inverted"][k]
+    t["min_detF"][i], t["newton"][i], t["seconds"][i] = reuse["min_detF"][k], reuse["newton"][k], reuse["seconds"][k]
+    t["reused"][i] = True
+
+
 def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float, log=None,
                 progress=None, solved=None, contact: str = DEFAULT_CONTACT,
                 reuse: dict | None = None) -> dict[str, np.ndarray]:
@@ -236,65 +292,28 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
     depths = grid.depths()
     th, ys, rh = grid.thetas(), grid.ys(L / 2), grid.rhos(R)
     na, nd = len(grid.angles_deg), len(depths)
-    side = np.zeros((na, nd, len(th), len(ys), 3), np.float32)
-    capf = np.zeros((na, nd, len(th), len(rh), 3), np.float32)
-    force = np.zeros((na, nd))
-    strain = np.zeros((na, nd))
-    inverted = np.zeros((na, nd), np.int64)
-    min_detf = np.ones((na, nd))
-    newton = np.zeros((na, nd), np.int64)
-    seconds = np.zeros(na)
-    free = np.abs(th) < math.pi / 2
-    T, Y = np.meshgrid(th[free], ys, indexing="ij")
-    side_pts = np.column_stack([c[0] + R * np.cos(T.ravel()), c[1] + Y.ravel(), c[2] + R * np.sin(T.ravel())])
-    T2, P2 = np.meshgrid(th[free], rh, indexing="ij")
-    cap_pts = np.column_stack([c[0] + P2.ravel() * np.cos(T2.ravel()), np.full(T2.size, c[1] + L / 2),
-                               c[2] + P2.ravel() * np.sin(T2.ravel())])
-    reused = np.zeros(na, bool)
+    t = {"side": np.zeros((na, nd, len(th), len(ys), 3), np.float32),
+         "cap": np.zeros((na, nd, len(th), len(rh), 3), np.float32), "force": np.zeros((na, nd)),
+         "max_strain": np.zeros((na, nd)), "inverted": np.zeros((na, nd), np.int64), "min_detF": np.ones((na, nd)),
+         "newton": np.zeros((na, nd), np.int64), "seconds": np.zeros(na), "reused": np.zeros(na, bool)}
+    free, side_pts, cap_pts = _surface_samples(th, ys, rh, R, L, c)
     src = _reuse_index(reuse, grid, depths, th, ys, rh, material) if reuse is not None else {}
     for i, ang in enumerate(grid.angles_deg):
         if ang in src:
-            k = src[ang]
-            side[i], capf[i] = np.asarray(reuse["side"][k], np.float32), np.asarray(reuse["cap"][k], np.float32)
-            force[i], strain[i], inverted[i] = reuse["force"][k], reuse["max_strain"][k], reuse["inverted"][k]
-            min_detf[i], newton[i], seconds[i] = reuse["min_detF"][k], reuse["newton"][k], reuse["seconds"][k]
-            reused[i] = True
+            _copy_reused(t, i, reuse, src[ang])
             log(f"fem: snapshots at {ang:g} deg taken from the table being extended (not solved again)")
             continue
         t0 = time.perf_counter()
-        s = spec if ang == 0.0 else replace(spec, half_z=False)
-        mesh = reference_mesh(s, ang)
-        model = HyperelasticModel(mesh, material, sym_y=True, sym_z=s.half_z)
-        law = f"Gent Jm {material.Jm:g}" if material.gent else "neo-Hookean"
-        log(f"fem: snapshots at {ang:g} deg: {model.n} DOF P2 {law}, {nd - 1} depths ...")
-        states = solved(ang, model, depths[1:]) if solved is not None else None
-        if states is None:
-            states = solve_path(model, math.radians(ang), depths[1:], finger_radius, step=grid.depth_step,
-                                log=log, contact=contact)
-            if contact == "frictionless":       # the stable branch where the push is bistable
-                a = math.radians(ang)
-
-                def caps(d, a=a, m=mesh):
-                    return capsule_at(a, d, finger_radius, m.radius, m.center)
-
-                states, _, _ = stable_states(model, caps, states, step=grid.depth_step, log=log)
-        Ps = _probe(model, side_pts)
-        Pc = _probe(model, cap_pts)
-        for j, st in enumerate(states, start=1):
-            us = _sample(Ps, st.u, side_pts, model)
-            uc = _sample(Pc, st.u, cap_pts, model)
-            side[i, j][free] = us.reshape(int(free.sum()), len(ys), 3)
-            capf[i, j][free] = uc.reshape(int(free.sum()), len(rh), 3)
-            force[i, j], strain[i, j], inverted[i, j] = st.force, st.max_strain, st.inverted
-            min_detf[i, j], newton[i, j] = st.min_detF, st.iterations
-        seconds[i] = time.perf_counter() - t0
+        model, states = _solve_azimuth(ang, spec, material, finger_radius, grid, depths, solved, contact, log)
+        _store_states(t, i, model, states, free, side_pts, cap_pts, len(ys), len(rh))
+        t["seconds"][i] = time.perf_counter() - t0
         if progress:
             progress(i, ang, states, model)
     return {"version": np.array(TABLE_VERSION), "E": np.array(material.E), "angles": np.radians(np.asarray(grid.angles_deg, float)),
-            "depths": depths, "theta": th, "y": ys, "rho": rh, "side": side, "cap": capf, "force": force,
-            "max_strain": strain, "inverted": inverted, "min_detF": min_detf, "newton": newton,
-            "seconds": seconds, "radius": np.array(R), "length": np.array(L), "center": np.asarray(c, float),
-            "reused": reused}
+            "depths": depths, "theta": th, "y": ys, "rho": rh, "side": t["side"], "cap": t["cap"], "force": t["force"],
+            "max_strain": t["max_strain"], "inverted": t["inverted"], "min_detF": t["min_detF"], "newton": t["newton"],
+            "seconds": t["seconds"], "radius": np.array(R), "length": np.array(L), "center": np.asarray(c, float),
+            "reused": t["reused"]}
 
 
 def reused_azimuths(table: dict) -> set[float]:

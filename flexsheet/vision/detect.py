@@ -132,7 +132,6 @@ class MarkerDetector:
         work = resp[oy:oy + (y1 - y0), ox:ox + (x1 - x0)].copy()
         uv, st, ar = [], [], []
         r = self.r
-        hh, ww = work.shape
         for _ in range(4 * self.max_candidates):          # discarded blobs do not use up the candidates
             if len(uv) >= self.max_candidates:
                 break
@@ -140,32 +139,8 @@ class MarkerDetector:
             if peak < self.min_contrast:
                 break
             # patch in resp coordinates (resp is padded by m around work)
-            cx, cy = px + ox, py + oy
-            ya, yb, xa, xb = cy - r, cy + r + 1, cx - r, cx + r + 1
-            patch_full = np.zeros((2 * r + 1, 2 * r + 1), np.float64)
-            ca, cb = max(0, ya), min(resp.shape[0], yb)
-            da, db = max(0, xa), min(resp.shape[1], xb)
-            patch_full[ca - ya:cb - ya, da - xa:db - xa] = resp[ca:cb, da:db]
-            # coverage α = (I − B)/(M − B) of the opaque marker over the background B behind it
-            img_p = np.zeros_like(patch_full)
-            ia0, ib0 = py0 + ca, py0 + cb
-            ja0, jb0 = px0 + da, px0 + db
-            img_p[ca - ya:cb - ya, da - xa:db - xa] = img[ia0:ib0, ja0:jb0]
-            # the background behind the marker's mask: filled in from the pixels around it (normalised
-            # convolution, Knutsson & Westin 1993: a Gaussian-weighted mean of the unmasked neighbours), so a
-            # marker straddling the dark finger and the bright sheet gets each side's level, not the opening's
-            # brighter one; outside the mask B is the opening
-            hole = (patch_full > self.HOLE_FRAC * peak).astype(np.uint8)
-            _, hl, _, _ = cv2.connectedComponentsWithStats(hole, connectivity=8)
-            hole = cv2.dilate((hl == hl[r, r]).astype(np.uint8), self._k3) if hl[r, r] else hole
-            keep = 1.0 - hole
-            num = cv2.GaussianBlur(img_p * keep, (0, 0), 1.5)
-            den = cv2.GaussianBlur(keep, (0, 0), 1.5)
-            bg = np.where(hole > 0, np.minimum(num / np.maximum(den, 1e-6), img_p), img_p - patch_full)
-            core = img_p[r - 2:r + 3, r - 2:r + 3]
-            M = float(np.sort(core, axis=None)[-4:].mean())
-            alpha = (img_p - bg) / np.maximum(M - bg, 0.5 * self.min_contrast)
-            np.clip(alpha, 0.0, 1.5, out=alpha)
+            ya, xa = py + oy - r, px + ox - r
+            alpha, hole = self._coverage(img, resp, ya, xa, px0, py0, peak)
             # threshold above the clutter around the marker (at least threshold_frac): a dark finger edge next
             # to a bright background leaves a thin top-hat ridge (the opening cannot fit between them) that,
             # with noise, would join the blob and pull the centroid
@@ -202,6 +177,38 @@ class MarkerDetector:
             ar.append(area)
         return (np.asarray(uv, np.float64).reshape(-1, 2), np.asarray(st, np.float64),
                 np.asarray(ar, np.float64))
+
+    def _coverage(self, img: np.ndarray, resp: np.ndarray, ya: int, xa: int, px0: int, py0: int,
+                  peak: float) -> tuple[np.ndarray, np.ndarray]:
+        """The marker's coverage α (2r+1, 2r+1) in the patch whose corner is (``ya``, ``xa``) in ``resp``
+        coordinates (``resp`` starts at (``py0``, ``px0``) in ``img``), and its grown top-hat blob (uint8 mask)."""
+        r = self.r
+        yb, xb = ya + 2 * r + 1, xa + 2 * r + 1
+        patch_full = np.zeros((2 * r + 1, 2 * r + 1), np.float64)
+        ca, cb = max(0, ya), min(resp.shape[0], yb)
+        da, db = max(0, xa), min(resp.shape[1], xb)
+        patch_full[ca - ya:cb - ya, da - xa:db - xa] = resp[ca:cb, da:db]
+        # coverage α = (I − B)/(M − B) of the opaque marker over the background B behind it
+        img_p = np.zeros_like(patch_full)
+        ia0, ib0 = py0 + ca, py0 + cb
+        ja0, jb0 = px0 + da, px0 + db
+        img_p[ca - ya:cb - ya, da - xa:db - xa] = img[ia0:ib0, ja0:jb0]
+        # the background behind the marker's mask: filled in from the pixels around it (normalised
+        # convolution, Knutsson & Westin 1993: a Gaussian-weighted mean of the unmasked neighbours), so a
+        # marker straddling the dark finger and the bright sheet gets each side's level, not the opening's
+        # brighter one; outside the mask B is the opening
+        hole = (patch_full > self.HOLE_FRAC * peak).astype(np.uint8)
+        _, hl, _, _ = cv2.connectedComponentsWithStats(hole, connectivity=8)
+        hole = cv2.dilate((hl == hl[r, r]).astype(np.uint8), self._k3) if hl[r, r] else hole
+        keep = 1.0 - hole
+        num = cv2.GaussianBlur(img_p * keep, (0, 0), 1.5)
+        den = cv2.GaussianBlur(keep, (0, 0), 1.5)
+        bg = np.where(hole > 0, np.minimum(num / np.maximum(den, 1e-6), img_p), img_p - patch_full)
+        core = img_p[r - 2:r + 3, r - 2:r + 3]
+        M = float(np.sort(core, axis=None)[-4:].mean())
+        alpha = (img_p - bg) / np.maximum(M - bg, 0.5 * self.min_contrast)
+        np.clip(alpha, 0.0, 1.5, out=alpha)
+        return alpha, hole
 
     def detect(self, img: np.ndarray, center: np.ndarray | None = None) -> Detection:
         """Candidates in ``img`` (mono8 (H, W)): in the ROI around ``center`` (2,) px when given, else — or

@@ -186,35 +186,11 @@ class FingertipTracker:
         if len(dr.uv) == 0:
             self._last_uv = None
             return self._invalid("no_right", roi)
-        m = self.model
-        il = m.undistort(dl.uv, "left")
-        ir = m.undistort(dr.uv, "right")
-        nl, nr = len(il), len(ir)
-        ia, ib = np.meshgrid(np.arange(nl), np.arange(nr), indexing="ij")
-        ia, ib = ia.ravel(), ib.ravel()
-        res = m.epipolar_residual(il[ia], ir[ib])
-        ok = res <= c.epipolar_tol_px
-        if not ok.any():
+        pairs = self._pairs(dl, dr)
+        if isinstance(pairs, str):
             self._last_uv = None
-            return self._invalid("no_match", roi)
-        ia, ib, res = ia[ok], ib[ok], res[ok]
-        X = m.triangulate(il[ia], ir[ib], c.method)
-        okz = np.all(np.isfinite(X), axis=1) & (X[:, 2] >= c.z_min) & (X[:, 2] <= c.z_max)
-        if not okz.any():
-            self._last_uv = None
-            return self._invalid("depth", roi)
-        ia, ib, res, X = ia[okz], ib[okz], res[okz], X[okz]
-        # the marker's size at that depth: π (f d / 2Z)² px² in each view
-        Zr = (X @ m.R.T + m.T)[:, 2]
-        exp_l = np.pi * (m.K1[0, 0] * 0.5 * c.marker_diameter / X[:, 2]) ** 2
-        exp_r = np.pi * (m.K2[0, 0] * 0.5 * c.marker_diameter / np.maximum(Zr, 1e-6)) ** 2
-        rl, rr = dl.area[ia] / exp_l, dr.area[ib] / exp_r
-        oks = ((rl <= c.size_ratio_max) & (rl >= 1.0 / c.size_ratio_max) & (rr <= c.size_ratio_max)
-               & (rr >= 1.0 / c.size_ratio_max))
-        if not oks.any():
-            self._last_uv = None
-            return self._invalid("size", roi)
-        ia, ib, res, X = ia[oks], ib[oks], res[oks], X[oks]
+            return self._invalid(pairs, roi)
+        ia, ib, res, X = pairs
         Xd = X @ self.R_dc.T + self.t_dc
         strength = np.minimum(dl.strength[ia], dr.strength[ib])
         if self.kf.initialised and len(X) > 1:
@@ -229,11 +205,47 @@ class FingertipTracker:
                         and np.linalg.norm(Xd[k2] - Xd[k]) > c.ambiguity_m):
                     self._last_uv = None
                     return self._invalid("ambiguous", roi)
-        cov_c = m.covariance(X[k:k + 1], c.sigma_px)[0]
+        return self._track(X, Xd, k, dl.uv[ia[k]], dr.uv[ib[k]], float(dl.area[ia[k]]), float(dr.area[ib[k]]),
+                           float(res[k]), stamp, roi)
+
+    def _pairs(self, dl, dr):
+        """The left × right detection pairs that pass the epipolar, depth and size checks: (left index, right
+        index, epipolar residual px, left-camera point (N, 3) m), or the reason none does."""
+        c, m = self.cfg, self.model
+        il = m.undistort(dl.uv, "left")
+        ir = m.undistort(dr.uv, "right")
+        nl, nr = len(il), len(ir)
+        ia, ib = np.meshgrid(np.arange(nl), np.arange(nr), indexing="ij")
+        ia, ib = ia.ravel(), ib.ravel()
+        res = m.epipolar_residual(il[ia], ir[ib])
+        ok = res <= c.epipolar_tol_px
+        if not ok.any():
+            return "no_match"
+        ia, ib, res = ia[ok], ib[ok], res[ok]
+        X = m.triangulate(il[ia], ir[ib], c.method)
+        okz = np.all(np.isfinite(X), axis=1) & (X[:, 2] >= c.z_min) & (X[:, 2] <= c.z_max)
+        if not okz.any():
+            return "depth"
+        ia, ib, res, X = ia[okz], ib[okz], res[okz], X[okz]
+        # the marker's size at that depth: π (f d / 2Z)² px² in each view
+        Zr = (X @ m.R.T + m.T)[:, 2]
+        exp_l = np.pi * (m.K1[0, 0] * 0.5 * c.marker_diameter / X[:, 2]) ** 2
+        exp_r = np.pi * (m.K2[0, 0] * 0.5 * c.marker_diameter / np.maximum(Zr, 1e-6)) ** 2
+        rl, rr = dl.area[ia] / exp_l, dr.area[ib] / exp_r
+        oks = ((rl <= c.size_ratio_max) & (rl >= 1.0 / c.size_ratio_max) & (rr <= c.size_ratio_max)
+               & (rr >= 1.0 / c.size_ratio_max))
+        if not oks.any():
+            return "size"
+        return ia[oks], ib[oks], res[oks], X[oks]
+
+    def _track(self, X, Xd, k: int, uvl, uvr, al: float, ar: float, residual: float, stamp: float,
+               roi: bool) -> TrackResult:
+        """The chosen candidate ``k``: refused as occluded (blob areas ``al``/``ar`` px² too unequal) or gated
+        (Mahalanobis), else fused into the track; the ROI follows it either way."""
+        c = self.cfg
+        cov_c = self.model.covariance(X[k:k + 1], c.sigma_px)[0]
         cov_d = self.R_dc @ cov_c @ self.R_dc.T
         pos = Xd[k]
-        uvl, uvr = dl.uv[ia[k]], dr.uv[ib[k]]
-        al, ar = float(dl.area[ia[k]]), float(dr.area[ib[k]])
         if max(al, ar) > c.area_ratio_max * min(al, ar):
             # the blob is much smaller in one view: partly occluded (or merged with another blob); its
             # centroid is biased along the epipolar line, which no epipolar check can see
@@ -252,5 +264,4 @@ class FingertipTracker:
         self._misses = 0
         self.kf.update(pos, cov_d, stamp)
         pred = self.kf.position_at(stamp + c.horizon_s) if c.horizon_s > 0 else pos.copy()
-        return TrackResult(True, "ok", pos.copy(), cov_d, pred, float(res[k]), uvl.copy(), uvr.copy(), roi,
-                           X[k].copy())
+        return TrackResult(True, "ok", pos.copy(), cov_d, pred, residual, uvl.copy(), uvr.copy(), roi, X[k].copy())

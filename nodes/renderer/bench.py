@@ -119,8 +119,7 @@ def _window_main(args) -> dict:
     return run(os.environ["DISPLAY"])
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``flexsheet bench render``; returns the exit code."""
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="flexsheet bench render", description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -141,25 +140,47 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--refresh-hz", type=float, default=120.0, help="--window: refresh to ask for (default 120)")
     ap.add_argument("--redraw-hz", type=float, default=30.0,
                     help="--window: pair redraws per s in the second phase (default 30, as sim.yaml)")
+    return ap
+
+
+def _window_report(ap: argparse.ArgumentParser, args) -> int:
+    """``--window``: measure the window's frame pacing and print it."""
+    if args.seconds <= 0 or args.refresh_hz <= 0 or args.redraw_hz <= 0:
+        ap.error("--seconds, --refresh-hz and --redraw-hz must be > 0")
+    res = _window_main(args)
+    if args.json:
+        print(json.dumps(res))
+    else:
+        print(f"window {res['frame_size'][0]}x{res['frame_size'][1]} {res['stereo']} on {res['display']}, "
+              f"{res['gl_renderer']}, asked {res['refresh_hz']:g} Hz, pacing {res['pacing']}")
+        for ph in ("present_only", "with_redraws"):
+            d = res[ph]
+            print(f"  {ph:13s} {d['fps']:6.1f} fps, interval mean {d['interval_mean_ms']:.2f} ms p99 "
+                  f"{d['interval_p99_ms']:.2f} ms, missed vsyncs {d['missed_vsyncs']} of {d['frames']} frames,"
+                  f" eye resyncs {d['eye_resyncs']}, redraw {d['redraw_median_ms']:.1f} ms, present "
+                  f"{d['present_median_ms']:.2f} ms")
+    return 0
+
+
+def _print_render(res: dict, args, per: dict, readback: float, sheet_ms: dict, n_vertices: int) -> None:
+    """The figures of the correction models and the sheet update, as text."""
+    print(f"renderer {res['gl_renderer']}, {args.width}x{args.height} per eye, {n_vertices} vertices")
+    for m, d in per.items():
+        print(f"  {m:14s} stereo pair {d['median_ms']:7.2f} ms (p90 {d['p90_ms']:.2f})")
+    print(f"  read-back of the pair {readback:.2f} ms; target {res['target_ms']:.2f} ms (120 Hz)")
+    print(f"  pushed-sheet shape per frame (RendererState, nominal FEM fit): new fingertip "
+          f"{sheet_ms['new_finger_median_ms']:.2f} ms median (p90 {sheet_ms['new_finger_p90_ms']:.2f}, max "
+          f"{sheet_ms['new_finger_max_ms']:.2f}; CPU {sheet_ms['new_finger_cpu_median_ms']:.2f}), same fingertip {sheet_ms['same_finger_median_ms']:.3f} ms")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``flexsheet bench render``; returns the exit code."""
+    ap = _parser()
     args = ap.parse_args(argv)
     if args.repeats < 1:
         ap.error("--repeats must be >= 1")
     if args.window:
-        if args.seconds <= 0 or args.refresh_hz <= 0 or args.redraw_hz <= 0:
-            ap.error("--seconds, --refresh-hz and --redraw-hz must be > 0")
-        res = _window_main(args)
-        if args.json:
-            print(json.dumps(res))
-        else:
-            print(f"window {res['frame_size'][0]}x{res['frame_size'][1]} {res['stereo']} on {res['display']}, "
-                  f"{res['gl_renderer']}, asked {res['refresh_hz']:g} Hz, pacing {res['pacing']}")
-            for ph in ("present_only", "with_redraws"):
-                d = res[ph]
-                print(f"  {ph:13s} {d['fps']:6.1f} fps, interval mean {d['interval_mean_ms']:.2f} ms p99 "
-                      f"{d['interval_p99_ms']:.2f} ms, missed vsyncs {d['missed_vsyncs']} of {d['frames']} frames,"
-                      f" eye resyncs {d['eye_resyncs']}, redraw {d['redraw_median_ms']:.1f} ms, present "
-                      f"{d['present_median_ms']:.2f} ms")
-        return 0
+        return _window_report(ap, args)
     if args.scene:
         from flexsheet.model.scenes import load_scene
 
@@ -194,13 +215,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         print(json.dumps(res))
     else:
-        print(f"renderer {res['gl_renderer']}, {args.width}x{args.height} per eye, {len(v)} vertices")
-        for m, d in per.items():
-            print(f"  {m:14s} stereo pair {d['median_ms']:7.2f} ms (p90 {d['p90_ms']:.2f})")
-        print(f"  read-back of the pair {readback:.2f} ms; target {res['target_ms']:.2f} ms (120 Hz)")
-        print(f"  pushed-sheet shape per frame (RendererState, nominal FEM fit): new fingertip "
-              f"{sheet_ms['new_finger_median_ms']:.2f} ms median (p90 {sheet_ms['new_finger_p90_ms']:.2f}, max "
-              f"{sheet_ms['new_finger_max_ms']:.2f}; CPU {sheet_ms['new_finger_cpu_median_ms']:.2f}), same fingertip {sheet_ms['same_finger_median_ms']:.3f} ms")
+        _print_render(res, args, per, readback, sheet_ms, len(v))
     r.release()
     return 0
 
