@@ -15,7 +15,7 @@ Writes to DIR:
   fingertip error against the hidden truth, from rendered images, for ``--seeds`` truth seeds, realistic
   and ideal twin: static (a still finger, 0.43–0.52 m from the camera) and moving along the paper's stroke
   (10 s and 30 s), with the camera registration the twin's registration produced
-  (``flexsheet.calibration.procedures.sim_display_calib``: the display.yaml the twin's nodes load; never
+  (``flexsheet.twin.registration.sim_display_calib``: the display.yaml the twin's nodes load; never
   the truth); and its stability: error against the camera noise level, the size of the truth's camera spreads
   (registered again / not registered), the finger's direction (self-occlusion of the marker) and the
   background brightness (marker contrast), each with its breaking point (first value past the 0.5 mm target

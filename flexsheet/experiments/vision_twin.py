@@ -47,7 +47,7 @@ __all__ = ["cache_dir", "registered_camera", "sim_config", "static_points",
 
 XIMEA_DIR = "/work/shared/data/stereo_calib_xi"
 _HERE = os.path.dirname(os.path.abspath(__file__))
-_SOURCES = ("../calibration/camera_pose.py", "../calibration/twin.py", "../calibration/procedures.py",
+_SOURCES = ("../calibration/camera_pose.py", "../twin/registration_camera.py", "../calibration/procedures.py",
             "../calibration/sources.py", "../twin/truth.py", "../vision/ximea_calib_bootstrap.json")
 
 
