@@ -24,6 +24,7 @@ from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
+from pydantic.fields import FieldInfo
 
 __all__ = ["config_fields", "params_model", "build"]
 
@@ -35,7 +36,9 @@ def config_fields(cls: type, *, exclude: Iterable[str] = (), rename: Mapping[str
     Types come from the dataclass annotations (resolved with :func:`typing.get_type_hints`), defaults (or
     default factories) from its fields. ``exclude``: field names left out (e.g. nested configs flattened by
     the caller); ``rename``: field name → param name (e.g. ``{"size": "sheet_size"}``); ``descriptions``:
-    field name → text for the schema. A field without a default becomes a required param. Raises
+    field name → text for the schema (else the ``description`` of a ``Field`` in the field's ``Annotated``
+    type, else ``Class.field``). Constraints in the annotation (``Annotated[float, Field(gt=0.0)]``) are kept.
+    A field without a default becomes a required param. Raises
     ``TypeError`` if ``cls`` is not a dataclass, ``KeyError`` for an excluded/renamed name it does not have.
     """
     if not dataclasses.is_dataclass(cls):
@@ -51,7 +54,7 @@ def config_fields(cls: type, *, exclude: Iterable[str] = (), rename: Mapping[str
     for name, f in fields.items():
         if name in excl:
             continue
-        desc = (descriptions or {}).get(name) or f"{cls.__name__}.{name}"
+        desc = (descriptions or {}).get(name) or _annotated_description(hints[name]) or f"{cls.__name__}.{name}"
         if f.default is not dataclasses.MISSING:
             info = Field(default=f.default, description=desc)
         elif f.default_factory is not dataclasses.MISSING:
@@ -60,6 +63,14 @@ def config_fields(cls: type, *, exclude: Iterable[str] = (), rename: Mapping[str
             info = Field(description=desc)
         out[rename.get(name, name)] = (hints[name], info)
     return out
+
+
+def _annotated_description(hint: Any) -> str | None:
+    """The ``description`` of the last ``Field(...)`` in an ``Annotated`` type that has one, else None."""
+    if typing.get_origin(hint) is not typing.Annotated:
+        return None
+    descs = [m.description for m in hint.__metadata__ if isinstance(m, FieldInfo) and m.description]
+    return descs[-1] if descs else None
 
 
 def build(cls: type, params: BaseModel, *, rename: Mapping[str, str] | None = None, **override: Any):
@@ -73,14 +84,18 @@ def build(cls: type, params: BaseModel, *, rename: Mapping[str, str] | None = No
 
 def params_model(name: str, doc: str, *parts: Mapping[str, tuple[Any, Any]],
                  check: Callable[[Any], Any] | None = None, methods: Mapping[str, Callable] | None = None,
-                 module: str | None = None, **extra: tuple[Any, Any]) -> type[BaseModel]:
+                 validators: Mapping[str, Any] | None = None, module: str | None = None,
+                 **extra: tuple[Any, Any]) -> type[BaseModel]:
     """A flat pydantic params model (``extra="forbid"``) named ``name`` with docstring ``doc`` from field
     definition dicts ``parts`` (see :func:`config_fields`) and node-only fields ``extra`` (``(type, Field)``).
 
     ``check(params)``, if given, runs after field validation (build the config there, so its range checks
     reject bad values early; its ``ValueError`` becomes a pydantic ``ValidationError``). ``methods``: extra
-    methods of the model (e.g. ``planner_config``); ``module``: the ``__module__`` to report (the caller's).
-    Raises ``ValueError`` when two parts define the same param name.
+    methods of the model (e.g. ``planner_config``); ``validators``: name → pydantic validator
+    (``field_validator("scene")(fn)``, ``model_validator(mode="after")(fn)``, as written in a class body: a
+    field's own check keeps its error at that field, an ``after`` validator may fill defaults that depend on
+    other fields); ``module``: the ``__module__`` to report (the caller's). Raises ``ValueError`` when two
+    parts define the same param name or a validator's name is taken.
     """
     defs: dict[str, tuple[Any, Any]] = {}
     for part in (*parts, extra):
@@ -88,8 +103,10 @@ def params_model(name: str, doc: str, *parts: Mapping[str, tuple[Any, Any]],
             if k in defs:
                 raise ValueError(f"{name}: param {k!r} defined twice")
             defs[k] = v
-    validators = {}
+    validators = dict(validators or {})
     if check is not None:
+        if "check_config" in validators:
+            raise ValueError(f"{name}: validator name 'check_config' is taken by check=")
         def _check(self):
             check(self)
             return self

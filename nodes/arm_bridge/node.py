@@ -24,62 +24,58 @@ import math
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
+from flexsheet.arm.bridge_config import DEFAULT_PERIOD, DEFAULT_PORT, BridgeConfig
 from flexsheet.arm.kinematics import LEFT_BASE, Q_LOWER, Q_UPPER, QD_MAX, RIGHT_BASE, ArmKinematics
 from flexsheet.arm.limiter import StreamLimiter
 from flexsheet.arm.stream import ArmStream, CycleReport
 from flexsheet.arm.tracking import TargetTracker
 from flexsheet.calibration.display_calib import load_display_calib
 from flexsheet.runtime.node import InputRejected, Node, QoS
-from messages import ArmJointState, ArmTarget, mxt, topics
+from flexsheet.runtime.params import config_fields, params_model
+from messages import ArmJointState, ArmTarget, topics
 from nodes.arm_bridge.modbus_link import ModbusLink
 from nodes.arm_bridge.mxt_link import MxtLink
 
 __all__ = ["ArmBridgeParams", "ArmBridgeNode"]
 
 
-class ArmBridgeParams(BaseModel):
-    """Parameters of one arm bridge (SI units: m, rad, s)."""
+def _protocol_defaults(self):
+    if self.port is None:
+        self.port = DEFAULT_PORT[self.protocol]
+    if self.period is None:
+        self.period = DEFAULT_PERIOD[self.protocol]
+    return self
 
-    model_config = ConfigDict(extra="forbid")
-    arm: str = Field(default="left", pattern="^(left|right)$", description="which sheet edge: left or right")
-    protocol: Literal["modbus", "mxt"] = Field(default="modbus", description="modbus (Modbus TCP register map) "
-                                               "or mxt (MELFA real-time external control, UDP)")
-    host: str = Field(default="127.0.0.1", description="controller (or twin) address")
-    port: int | None = Field(default=None, ge=1, le=65535, description="controller port: Modbus TCP "
-                             "(default 15020) or MXT UDP (default 10000)")
-    device_id: int = Field(default=1, ge=0, le=255, description="Modbus unit id")
-    display_calib: str | None = Field(default=None, description="display.yaml (the registration): this arm's "
-                                      "base pose comes from its arms.<arm> entry (flexsheet calibrate arms); "
-                                      "the launch file's display_calib fills it")
-    base: list[float] | None = Field(default=None, min_length=4, max_length=4,
-                                     description="arm base (x, y, z, yaw) in the display frame, only without "
-                                                 "display_calib; default kinematics.LEFT_BASE / RIGHT_BASE "
-                                                 "(the design values)")
-    period: float | None = Field(default=None, gt=0.0, description="controller cycle = stream period, s; "
-                                 "default 0.0071 (modbus) / 0.00711 (mxt: CR750-Q, CR800-Q; 0.0035 for CR800-R/D)")
-    target_timeout: float = Field(default=0.25, gt=0.0, description="hold after this long without a target, s")
-    speed_scale: float = Field(default=0.5, gt=0.0, le=1.0, description="commanded speed limit × URDF speed")
-    accel_scale: float = Field(default=2.0, gt=0.0, description="commanded accel limit = scale × speed limit, 1/s")
-    limit_margin: float = Field(default=0.02, ge=0.0, description="kept from each joint limit, rad")
-    max_ik_jump: float = Field(default=0.5, gt=0.0, description="largest joint change one target may ask, rad")
-    enabled: bool = Field(default=True, description="false: read the controller every cycle and command "
-                          "nothing (MXT: NULL packets; Modbus: reads only) — first bring-up")
-    auto_reset: bool = Field(default=True, description="reset watchdog faults automatically (never e-stops)")
-    request_timeout: float = Field(default=0.1, gt=0.0, description="Modbus request timeout, s")
-    backoff_min: float = Field(default=0.05, gt=0.0, description="first reconnect delay, s")
-    backoff_max: float = Field(default=2.0, gt=0.0, description="largest reconnect delay, s")
-    mxt_open_timeout: float = Field(default=0.2, gt=0.0, description="mxt: wait for the NULL packet's reply, s")
-    mxt_lost_cycles: int = Field(default=50, ge=2, description="mxt: cycles without a reply before reopening")
 
-    @model_validator(mode="after")
-    def _protocol_defaults(self) -> ArmBridgeParams:
-        if self.port is None:
-            self.port = mxt.DEFAULT_PORT if self.protocol == "mxt" else 15020
-        if self.period is None:
-            self.period = 0.00711 if self.protocol == "mxt" else 0.0071
-        return self
+#: which arm and controller, and the registration file: the node's own
+_DEVICE = {
+    "arm": (str, Field(default="left", pattern="^(left|right)$", description="which sheet edge: left or right")),
+    "protocol": (Literal["modbus", "mxt"], Field(default="modbus", description="modbus (Modbus TCP register map) "
+                                                 "or mxt (MELFA real-time external control, UDP)")),
+    "host": (str, Field(default="127.0.0.1", description="controller (or twin) address")),
+    "port": (int | None, Field(default=None, ge=1, le=65535, description="controller port: Modbus TCP "
+                               "(default 15020) or MXT UDP (default 10000)")),
+    "device_id": (int, Field(default=1, ge=0, le=255, description="Modbus unit id")),
+    "display_calib": (str | None, Field(default=None, description="display.yaml (the registration): this arm's "
+                                        "base pose comes from its arms.<arm> entry (flexsheet calibrate arms); "
+                                        "the launch file's display_calib fills it")),
+}
+
+ArmBridgeParams = params_model(
+    "ArmBridgeParams",
+    """Parameters of one arm bridge (SI units: m, rad, s).
+
+    ``arm``, ``protocol``, ``host``, ``port``, ``device_id`` and ``display_calib`` are the node's own (``port``
+    defaults by protocol); every other param is a field of — defined, defaulted and range-checked in —
+    :class:`flexsheet.arm.bridge_config.BridgeConfig` (``period`` defaults by protocol).
+    """,
+    _DEVICE,
+    config_fields(BridgeConfig),
+    validators={"_protocol_defaults": model_validator(mode="after")(_protocol_defaults)},
+    module=__name__,
+)
 
 
 class ArmBridgeNode(Node):

@@ -17,49 +17,44 @@ import time
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
-from flexsheet.arm.kinematics import Q_HOME
+from flexsheet.arm.bridge_config import DEFAULT_PERIOD, DEFAULT_PORT
 from flexsheet.runtime.node import Node
+from flexsheet.runtime.params import config_fields, params_model
 from flexsheet.twin.controller import ControllerCore
+from flexsheet.twin.controller_config import ControllerTwinConfig
 from flexsheet.twin.modbus_server import ControllerTwin
 from flexsheet.twin.mxt_server import MxtCore, MxtTwin
 from flexsheet.twin.servo import ServoParams
-from messages import mxt
 
 __all__ = ["ArmControllerSimParams", "ArmControllerSimNode"]
 
 
-class ArmControllerSimParams(BaseModel):
-    """Parameters of the controller twin node (SI units). ``port`` and ``period`` default by protocol."""
+def _protocol_defaults(self):
+    if self.port is None:
+        self.port = DEFAULT_PORT[self.protocol]
+    if self.period is None:
+        self.period = DEFAULT_PERIOD[self.protocol]
+    return self
 
-    model_config = ConfigDict(extra="forbid")
-    protocol: Literal["modbus", "mxt"] = Field(default="modbus", description="modbus (TCP register map) or "
-                                               "mxt (MELFA real-time external control, UDP)")
-    host: str = Field(default="127.0.0.1", description="listen address")
-    port: int | None = Field(default=None, ge=0, le=65535, description="TCP (modbus) or UDP (mxt) port; "
-                             "0 = any free port; default 15020 (modbus) / 10000 (mxt)")
-    period: float | None = Field(default=None, gt=0.0, description="control cycle, s; default 0.0071 "
-                                 "(modbus) / 0.00711 (mxt, CR750-Q/CR800-Q; 0.0035 for CR800-R/D)")
-    initial_joints: list[float] = Field(default_factory=lambda: Q_HOME.tolist(), min_length=6, max_length=6,
-                                        description="joints at start, rad")
-    tau: float = Field(default=0.015, gt=0.0, description="servo first-order lag time constant, s")
-    speed_scale: float = Field(default=1.0, gt=0.0, le=1.0, description="joint speed limits × URDF limits")
-    accel_factor: float = Field(default=4.0, gt=0.0, description="acceleration limits = factor × speed limits, 1/s")
-    step_tolerance: float = Field(default=1.5, ge=1.0, description="largest accepted command step per cycle, "
-                                  "× speed limit × period")
-    watchdog_periods: int = Field(default=3, ge=1, description="modbus: periods the watchdog counter may stall")
-    timeout_s: float = Field(default=0.5, description="mxt: no-packet timeout, s (<= 0: never, MXTTOUT = -1)")
-    on_timeout: Literal["hold", "fault"] = Field(default="hold", description="mxt: after the timeout keep "
-                                                 "servoing to the last command (hold) or stop and end the session")
 
-    @model_validator(mode="after")
-    def _protocol_defaults(self) -> ArmControllerSimParams:
-        if self.port is None:
-            self.port = mxt.DEFAULT_PORT if self.protocol == "mxt" else 15020
-        if self.period is None:
-            self.period = 0.00711 if self.protocol == "mxt" else 0.0071
-        return self
+ArmControllerSimParams = params_model(
+    "ArmControllerSimParams",
+    """Parameters of the controller twin node (SI units). ``port`` and ``period`` default by protocol.
+
+    ``protocol``, ``host`` and ``port`` are the node's own; every other param is a field of — defined,
+    defaulted and range-checked in — :class:`flexsheet.twin.controller_config.ControllerTwinConfig`.
+    """,
+    {"protocol": (Literal["modbus", "mxt"], Field(default="modbus", description="modbus (TCP register map) or "
+                                                  "mxt (MELFA real-time external control, UDP)")),
+     "host": (str, Field(default="127.0.0.1", description="listen address")),
+     "port": (int | None, Field(default=None, ge=0, le=65535, description="TCP (modbus) or UDP (mxt) port; "
+                                "0 = any free port; default 15020 (modbus) / 10000 (mxt)"))},
+    config_fields(ControllerTwinConfig),
+    validators={"_protocol_defaults": model_validator(mode="after")(_protocol_defaults)},
+    module=__name__,
+)
 
 
 class ArmControllerSimNode(Node):

@@ -34,12 +34,14 @@ import asyncio
 import math
 import threading
 from dataclasses import replace
+from itertools import pairwise
 
 import cv2
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
 from flexsheet.runtime.node import Node, QoS
+from flexsheet.runtime.params import config_fields, params_model
 from flexsheet.twin.camera import (
     REALISTIC_DROP_RATE,
     SimConfig,
@@ -48,6 +50,7 @@ from flexsheet.twin.camera import (
     twin_renderer,
 )
 from flexsheet.twin.truth_choice import TruthChoice
+from flexsheet.vision.camera_config import CameraConfig
 from flexsheet.vision.stereo_calibration import load_yaml, to_message
 from messages import FingerTruth, StereoFrame, topics
 
@@ -55,78 +58,76 @@ __all__ = ["CameraParams", "CameraNode", "published_registration", "sim_config"]
 
 
 
-class CameraParams(BaseModel):
-    """Camera node parameters (SI units; see docs/vision.md, and docs/camera.md for the device sources)."""
+def _genicam_ids(self):
+    if self.source == "genicam":
+        for key in ("left_id", "right_id"):
+            if not getattr(self, key):
+                raise ValueError(f"{key} must name a camera (serial number) when source is genicam")
+        if self.left_id == self.right_id:
+            raise ValueError(f"left_id and right_id are both {self.left_id!r}: they must name two "
+                             "cameras")
+    return self
 
-    model_config = ConfigDict(extra="forbid")
-    source: str = Field(default="sim", pattern="^(sim|device|files|genicam)$")
-    rate_hz: float = Field(default=48.0, gt=0.0, le=1000.0)
-    # camera model (sim) / calibration to publish (all sources)
-    model: str = Field(default="ximea", pattern="^(ximea|bumblebee2|file)$")
-    calib_file: str = ""
-    width: int = Field(default=640, gt=0)
-    height: int = Field(default=480, gt=0)
-    focal_mm: float = Field(default=3.8, gt=0.0)
-    pixel_um: float = Field(default=7.4, gt=0.0)
-    baseline: float = Field(default=0.12, gt=0.0)
-    # the display registration (display.yaml): the published camera pose comes from its camera entry
-    display_calib: str | None = None
-    # twin: the hidden truth it renders through, and its sensing (null: the realism's value)
-    twin: TruthChoice = Field(default_factory=TruthChoice)
-    noise_dn: float | None = Field(default=None, ge=0.0)
-    shot_gain: float | None = Field(default=None, ge=0.0)
-    noise_scale: float = Field(default=1.0, ge=0.0, le=100.0)
-    blur_px: float | None = Field(default=None, ge=0.0, le=5.0)
-    self_occlusion: bool | None = None
-    background_gain: float | None = Field(default=None, gt=0.0, le=2.0)
-    finger_dir: tuple[float, float, float] | None = None
-    drop_rate: float | None = Field(default=None, ge=0.0, lt=1.0)
-    exposure_s: float = Field(default=0.004, ge=0.0, le=0.05)
-    blur_samples: int = Field(default=5, ge=1, le=50)
-    clutter: bool = True
-    seed: int = 0
-    traj_amplitude_rad: float = 1.05
-    traj_period_s: float = Field(default=10.0, gt=0.0)
-    traj_hover_m: float = 0.005
-    # genicam source (docs/camera.md): the pair by serial number (or Aravis id / IP address)
-    left_id: str = ""
-    right_id: str = ""
-    trigger: str = Field(default="software", pattern="^(hardware|master|software|free)$")
-    trigger_line: str = "Line1"
-    master_output_line: str = "Line2"
-    ptp: str = Field(default="auto", pattern="^(auto|on|off)$")
-    ptp_timeout_s: float = Field(default=10.0, ge=0.0, le=120.0)
-    device_clock: str = Field(default="auto", pattern="^(auto|shared|independent)$")
-    timestamp_at: str = Field(default="exposure_start", pattern="^(exposure_start|exposure_end)$")
-    pair_tolerance_s: float = Field(default=0.0, ge=0.0, le=0.5)
-    offset_x: int = Field(default=0, ge=0)
-    offset_y: int = Field(default=0, ge=0)
-    gain_db: float | None = None
-    packet_size: int = Field(default=0, ge=0, le=16384)
-    packet_delay_ns: int = Field(default=0, ge=0)
-    n_buffers: int = Field(default=16, ge=2, le=256)
-    discover_timeout_s: float = Field(default=10.0, ge=0.0, le=120.0)
-    # viewers: the same pairs decimated on /camera/stereo_preview, Hz (0: off)
-    preview_rate: float = Field(default=5.0, ge=0.0, le=1000.0)
-    # device source
-    device_left: int | str = 0
-    device_right: int | str | None = None
-    # files source
-    files_left: str = ""
-    files_right: str = ""
-    files_csv: str = ""
-    loop: bool = True
 
-    @model_validator(mode="after")
-    def _genicam_ids(self) -> CameraParams:
-        if self.source == "genicam":
-            for key in ("left_id", "right_id"):
-                if not getattr(self, key):
-                    raise ValueError(f"{key} must name a camera (serial number) when source is genicam")
-            if self.left_id == self.right_id:
-                raise ValueError(f"left_id and right_id are both {self.left_id!r}: they must name two "
-                                 "cameras")
-        return self
+def _split(fields: dict, *at: str) -> list[dict]:
+    """``fields`` (ordered) cut before each name of ``at``: consecutive dicts that together hold them all."""
+    keys = list(fields)
+    cuts = [0, *(keys.index(name) for name in at), len(keys)]
+    return [{k: fields[k] for k in keys[a:b]} for a, b in pairwise(cuts)]
+
+
+_MODEL, _SENSING, _PREVIEW = _split(config_fields(CameraConfig), "noise_dn", "preview_rate")
+
+#: the display registration (display.yaml): the published camera pose comes from its camera entry; twin: the
+#: hidden truth it renders through
+_REGISTRATION = {
+    "display_calib": (str | None, Field(default=None)),
+    "twin": (TruthChoice, Field(default_factory=TruthChoice)),
+}
+
+#: genicam source (docs/camera.md): the pair by serial number (or Aravis id / IP address)
+_GENICAM = {
+    "left_id": (str, Field(default="")),
+    "right_id": (str, Field(default="")),
+    "trigger": (str, Field(default="software", pattern="^(hardware|master|software|free)$")),
+    "trigger_line": (str, Field(default="Line1")),
+    "master_output_line": (str, Field(default="Line2")),
+    "ptp": (str, Field(default="auto", pattern="^(auto|on|off)$")),
+    "ptp_timeout_s": (float, Field(default=10.0, ge=0.0, le=120.0)),
+    "device_clock": (str, Field(default="auto", pattern="^(auto|shared|independent)$")),
+    "timestamp_at": (str, Field(default="exposure_start", pattern="^(exposure_start|exposure_end)$")),
+    "pair_tolerance_s": (float, Field(default=0.0, ge=0.0, le=0.5)),
+    "offset_x": (int, Field(default=0, ge=0)),
+    "offset_y": (int, Field(default=0, ge=0)),
+    "gain_db": (float | None, Field(default=None)),
+    "packet_size": (int, Field(default=0, ge=0, le=16384)),
+    "packet_delay_ns": (int, Field(default=0, ge=0)),
+    "n_buffers": (int, Field(default=16, ge=2, le=256)),
+    "discover_timeout_s": (float, Field(default=10.0, ge=0.0, le=120.0)),
+}
+
+#: device source (V4L2 index or path) and files source
+_DEVICE_FILES = {
+    "device_left": (int | str, Field(default=0)),
+    "device_right": (int | str | None, Field(default=None)),
+    "files_left": (str, Field(default="")),
+    "files_right": (str, Field(default="")),
+    "files_csv": (str, Field(default="")),
+    "loop": (bool, Field(default=True)),
+}
+
+CameraParams = params_model(
+    "CameraParams",
+    """Camera node parameters (SI units; see docs/vision.md, and docs/camera.md for the device sources).
+
+    ``display_calib``, ``twin`` and the devices' settings (``left_id`` … ``discover_timeout_s``,
+    ``device_left`` … ``loop``) are the node's own; every other param is a field of — defined, defaulted and
+    range-checked in — :class:`flexsheet.vision.camera_config.CameraConfig`.
+    """,
+    _MODEL, _REGISTRATION, _SENSING, _GENICAM, _PREVIEW, _DEVICE_FILES,
+    validators={"_genicam_ids": model_validator(mode="after")(_genicam_ids)},
+    module=__name__,
+)
 
 
 def sim_config(p: CameraParams) -> SimConfig:

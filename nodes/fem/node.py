@@ -34,15 +34,17 @@ import threading
 import time
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import Field, field_validator
 
-from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
+from flexsheet.fem.cache import ArrayCache, cache_key
 from flexsheet.fem.choose import choose, choose_model, load_model_table, load_table
+from flexsheet.fem.config import FemConfig
 from flexsheet.fem.material import Material
 from flexsheet.fem.mesh import MeshSpec
 from flexsheet.fem.realtime import RealtimeModel
 from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
 from flexsheet.runtime.node import InputRejected, Node, QoS
+from flexsheet.runtime.params import build, config_fields, params_model
 from messages import Fingertip, ObjectDeformation, topics
 
 __all__ = ["FemParams", "FemNode", "fem_models_as_cylinder"]
@@ -55,7 +57,13 @@ def fem_models_as_cylinder(sc: Scene) -> bool:
     return is_paper_cylinder(sc) and sc.support.kind == "back_half" and not sc.inclusions
 
 
-class FemParams(BaseModel):
+def _scene_file(cls, v: str | None) -> str | None:
+    load_scene_or_paper(v)
+    return v
+
+
+FemParams = params_model(
+    "FemParams",
     """FEM node parameters (launch file / ``--param k=v``). SI units.
 
     ``accuracy_target`` m (rendered-surface error target, default one projector pixel 0.7 mm);
@@ -76,38 +84,15 @@ class FemParams(BaseModel):
     launcher from the launch file's ``scene:``; none = the paper's cylinder); for a scene other than the
     paper's cylinder its material, support and finger radius replace ``E``/``nu``/``finger_radius``, and
     ``mesh_h``/``mesh_h_fine``/``refine_radius``/``order`` (when h, h_fine > 0) set its mesh (default
-    :data:`flexsheet.fem.scene_mesh.DEFAULT_SCENE_SPEC`, P2).
-    """
-
-    model_config = ConfigDict(extra="forbid")
-
-    accuracy_target: float = Field(default=0.0007, gt=0.0)
-    depth_min: float = Field(default=0.005, ge=0.0)
-    depth_max: float = Field(default=0.03, gt=0.0)
-    max_depth: float = Field(default=0.06, gt=0.0, le=0.07)
-    finger_radius: float = Field(default=0.008, ge=0.001, le=0.03)
-    E: float = Field(default=Material().E, gt=0.0)
-    nu: float = Field(default=Material().nu, ge=0.0, lt=0.5)
-    strain_limit: float = Field(default=1.0, gt=0.0)
-    cache_dir: str = DEFAULT_CACHE_DIR
-    mesh_h: float = Field(default=0.0, ge=0.0)
-    mesh_h_fine: float = Field(default=0.0, ge=0.0)
-    refine_radius: float = Field(default=0.012, ge=0.0)
-    order: int = Field(default=2, ge=1, le=2)
-    arc_deg: float = Field(default=0.0, ge=0.0, le=90.0)
-    nonlinear: bool = False
-    nonlinear_steps: int = Field(default=11, ge=2, le=101)
-    use_prediction: bool = False
-    model: str = Field(default="auto", pattern="^(auto|linear|snapshots)$")
-    snapshot_build: bool = False
-    snapshot_axial_max: float = Field(default=0.01, ge=0.0, le=0.06)
-    scene: str | None = Field(default=None, description="scene file (launch/scenes/*.yaml); none: the paper's")
-
-    @field_validator("scene")
-    @classmethod
-    def _scene_file(cls, v: str | None) -> str | None:
-        load_scene_or_paper(v)
-        return v
+    :data:`flexsheet.fem.scene_mesh.DEFAULT_SCENE_SPEC`, P2). Every param but ``scene`` is a field of —
+    defined, defaulted and range-checked in — :class:`flexsheet.fem.config.FemConfig`; ``fem_config()`` builds it.
+    """,
+    config_fields(FemConfig),
+    validators={"_scene_file": field_validator("scene")(_scene_file)},
+    methods={"fem_config": lambda self: build(FemConfig, self)},
+    module=__name__,
+    scene=(str | None, Field(default=None, description="scene file (launch/scenes/*.yaml); none: the paper's")),
+)
 
 
 class FemNode(Node):

@@ -39,9 +39,10 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import Field, field_validator
 
 from flexsheet.model import geometry as paper
+from flexsheet.rendering.config import RendererConfig
 from flexsheet.rendering.correction import check_screen
 from flexsheet.rendering.state import (
     ErrorTable,
@@ -56,6 +57,7 @@ from flexsheet.rendering.state import (
 )
 from flexsheet.runtime.background import start_worker
 from flexsheet.runtime.node import InputRejected, Node, QoS
+from flexsheet.runtime.params import build, config_fields, params_model
 from messages import (
     ArmJointState,
     Fingertip,
@@ -69,75 +71,69 @@ from messages import (
 __all__ = ["RendererNode", "RendererParams"]
 
 
-class RendererParams(BaseModel):
-    """Renderer parameters (SI units, display frame)."""
+def _scene_file(cls, v: str | None) -> str | None:
+    if v:                        # validated in full, so `flexsheet launch --check` names a bad key
+        from flexsheet.model.scenes import load_scene
 
-    model_config = ConfigDict(extra="forbid")
+        load_scene(v)
+    return v
 
-    scene: str | None = Field(None, description="scene file (launch/scenes/*.yaml) whose object is drawn until "
-                                                "the FEM publishes; None: the paper's cylinder")
-    display_calib: str | None = Field(None, description="display.yaml: the projector (K_p, D, pose) and the eye "
-                                                        "(V, ipd); None: the nominal geometry (logged)")
-    width: int | None = Field(None, ge=16, le=8192, description="image width per eye, px (None: the calibrated "
-                                                                "projector's; otherwise its K is rescaled)")
-    height: int | None = Field(None, ge=16, le=8192, description="image height per eye, px (as width)")
-    correction: Literal["auto", "none", "flat", "four_triangle", "fine"] = "auto"
-    accuracy_target: float = Field(paper.PIXEL_ON_SCREEN, gt=0.0, description="image error budget, m")
-    fine_modes: int = Field(SheetConfig.fine_modes, ge=1, le=16,
-                            description="sine modes of the pushed-sheet fit (each with 4 terms; the shader takes 64)")
-    tension_ratio: float = Field(SheetConfig.tension_ratio, gt=0.0,
-                                 description="ASSUMED T_v / T_u of the pushed-sheet model (not measured)")
-    sheet_cache: str | None = Field(None, description="folder of the pushed-sheet FEM tables (None: "
-                                                      "$FLEXSHEET_CACHE/sheet_fem or ~/.cache/flexsheet/sheet_fem)")
-    sheet_mesh: dict[str, float] = Field(default_factory=dict,
-                                         description="FEM mesh of those tables (SheetFEM kwargs, e.g. h_fine m; "
-                                                     "{}: the default 4 mm mesh)")
-    push_threshold: float = Field(SheetConfig.push_threshold, ge=0.0,
-                                  description="depth behind the sheet that counts as a push, m")
-    sheet_half_width: float = Field(SheetConfig.half_width, gt=0.0, description="half the free-edge length, m")
-    publish_rate: float = Field(10.0, gt=0.0, le=240.0, description="RenderedFrame rate, Hz")
-    max_render_rate: float = Field(60.0, gt=0.0, le=240.0,
-                                   description="cap on redraws of the pair, Hz (a redraw follows each new "
-                                               "fingertip or deformation; the window presents every vsync)")
-    publish_scale: float = Field(0.25, gt=0.0, le=1.0, description="downscale of the published images")
-    samples: int = Field(0, ge=0, le=16, description="MSAA samples")
-    output: Literal["offscreen", "window"] = Field(
-        "offscreen", description="offscreen: headless EGL; window: the projector window (glfw)")
-    stereo: Literal["frame_sequential", "side_by_side", "top_bottom", "mono"] = Field(
+
+def _window_lib(cls, v: str) -> str:
+    if v == "window" and importlib.util.find_spec("glfw") is None:
+        raise ValueError("output='window' (the projector window) needs the 'glfw' package, which is not "
+                         "installed (pip install glfw); use output='offscreen'")
+    return v
+
+
+def _monitor(cls, v: int | str) -> int | str:
+    if isinstance(v, int) and v < 0 or isinstance(v, str) and not v.strip():
+        raise ValueError(f"monitor must be an index >= 0 or part of a monitor's name, got {v!r}")
+    return v
+
+
+#: the files the node reads (filled by the launcher from the launch file's top-level sections)
+_FILES = {
+    "scene": (str | None, Field(None, description="scene file (launch/scenes/*.yaml) whose object is drawn until "
+                                                  "the FEM publishes; None: the paper's cylinder")),
+    "display_calib": (str | None, Field(None, description="display.yaml: the projector (K_p, D, pose) and the eye "
+                                                          "(V, ipd); None: the nominal geometry (logged)")),
+}
+
+#: the projector window (``output: window``): device settings, the node's own
+_WINDOW = {
+    "output": (Literal["offscreen", "window"], Field(
+        "offscreen", description="offscreen: headless EGL; window: the projector window (glfw)")),
+    "stereo": (Literal["frame_sequential", "side_by_side", "top_bottom", "mono"], Field(
         "frame_sequential", description="window format: eyes on alternate vsyncs (active shutter glasses), "
-                                        "the halves of one frame, or one image from the cyclopean eye")
-    monitor: int | str = Field(0, description="window: monitor index (0 = primary) or part of its name")
-    fullscreen: bool = Field(True, description="window: take the whole monitor (false: a window, debugging)")
-    mirror_x: bool = Field(False, description="window: flip each eye's image left-right")
-    refresh_hz: float | None = Field(None, gt=0.0, le=500.0,
-                                     description="window: refresh rate to ask for, Hz (None: the monitor's)")
-    quad_buffer: bool = Field(True, description="window, frame_sequential: use a quad-buffered stereo context "
-                                                "where the driver offers one")
-    swap_eyes: bool = Field(False, description="window, frame_sequential: right eye on even vsyncs")
+                                        "the halves of one frame, or one image from the cyclopean eye")),
+    "monitor": (int | str, Field(0, description="window: monitor index (0 = primary) or part of its name")),
+    "fullscreen": (bool, Field(True, description="window: take the whole monitor (false: a window, debugging)")),
+    "mirror_x": (bool, Field(False, description="window: flip each eye's image left-right")),
+    "refresh_hz": (float | None, Field(None, gt=0.0, le=500.0,
+                                       description="window: refresh rate to ask for, Hz (None: the monitor's)")),
+    "quad_buffer": (bool, Field(True, description="window, frame_sequential: use a quad-buffered stereo context "
+                                                  "where the driver offers one")),
+    "swap_eyes": (bool, Field(False, description="window, frame_sequential: right eye on even vsyncs")),
+}
 
-    @field_validator("scene")
-    @classmethod
-    def _scene_file(cls, v: str | None) -> str | None:
-        if v:                        # validated in full, so `flexsheet launch --check` names a bad key
-            from flexsheet.model.scenes import load_scene
+RendererParams = params_model(
+    "RendererParams",
+    """Renderer parameters (SI units, display frame).
 
-            load_scene(v)
-        return v
-
-    @field_validator("output")
-    @classmethod
-    def _window_lib(cls, v: str) -> str:
-        if v == "window" and importlib.util.find_spec("glfw") is None:
-            raise ValueError("output='window' (the projector window) needs the 'glfw' package, which is not "
-                             "installed (pip install glfw); use output='offscreen'")
-        return v
-
-    @field_validator("monitor")
-    @classmethod
-    def _monitor(cls, v: int | str) -> int | str:
-        if isinstance(v, int) and v < 0 or isinstance(v, str) and not v.strip():
-            raise ValueError(f"monitor must be an index >= 0 or part of a monitor's name, got {v!r}")
-        return v
+    The files (``scene``, ``display_calib``) and the projector window (``output`` … ``swap_eyes``) are the
+    node's own; every other param is a field of — defined, defaulted and range-checked in —
+    :class:`flexsheet.rendering.config.RendererConfig`; ``renderer_config()`` builds it.
+    """,
+    _FILES,
+    config_fields(RendererConfig),
+    _WINDOW,
+    validators={"_scene_file": field_validator("scene")(_scene_file),
+                "_window_lib": field_validator("output")(_window_lib),
+                "_monitor": field_validator("monitor")(_monitor)},
+    methods={"renderer_config": lambda self: build(RendererConfig, self)},
+    module=__name__,
+)
 
 
 class RendererNode(Node):

@@ -33,17 +33,20 @@ joints) is rejected and counted.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import time
 
 import foxglove
 import numpy as np
 from foxglove.websocket import ServerListener
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import Field, field_validator
 
-from flexsheet.model import geometry
 from flexsheet.model.projector import Projector
 from flexsheet.model.sheet_model import SheetConfig
+from flexsheet.rendering.config import SHEET_PARAMS, RendererConfig
 from flexsheet.runtime.node import InputRejected, Node, QoS
+from flexsheet.runtime.params import config_fields, params_model
+from flexsheet.viz.config import VizNodeConfig
 from flexsheet.viz.foxglove import (
     FoxgloveStreams,
     Rates,
@@ -59,63 +62,51 @@ __all__ = ["VizNode", "VizParams"]
 _IDLE_S = 1.0  # how often a parked input handler looks for a viewer again, s
 
 
-class VizParams(BaseModel):
-    """Parameters of the viz bridge (SI units, display frame)."""
+def _vec3(cls, v: list[float]) -> list[float]:
+    if len(v) != 3 or not all(np.isfinite(v)):
+        raise ValueError(f"must be 3 finite numbers, got {v!r}")
+    return v
 
-    model_config = ConfigDict(extra="forbid")
-    host: str = Field("127.0.0.1", description="address the WebSocket server binds (0.0.0.0: every interface)")
-    port: int = Field(8765, ge=0, le=65535, description="WebSocket port (0: any free port)")
-    backlog: int = Field(64, ge=1, le=100000, description="messages queued per viewer; older ones are dropped")
-    scene_rate: float = Field(5.0, ge=0.0, le=100.0,
-                              description="/viz/scene, /viz/tf, /viz/metrics, Hz (5: under 5 % of a core in the sim "
-                                          "with a viewer; 10 costs ~1.2 % more, docs/visualise.md)")
-    camera_rate: float = Field(5.0, ge=0.0, le=100.0, description="/camera/left, /camera/right, Hz")
-    camera_topic: str = Field("/camera/stereo_preview", pattern="^/camera/(stereo|stereo_preview)$",
-                              description="where the camera images come from: the camera's decimated preview "
-                                          "(5 Hz) or the full 48 Hz stream (replays of bags that only have it)")
-    render_rate: float = Field(5.0, ge=0.0, le=100.0, description="/render/image, Hz")
-    input_rate: float = Field(5.0, gt=0.0, le=1000.0,
-                              description="most messages decoded per input topic, Hz (camera and rendered "
-                                          "frames: camera_rate and render_rate)")
-    json_rate: float = Field(5.0, ge=0.0, le=1000.0, description="cap per JSON topic, Hz (≤ input_rate)")
-    calibration_rate: float = Field(0.5, ge=0.0, le=10.0, description="camera calibrations resent, Hz")
-    poll_rate: float = Field(20.0, gt=0.0, le=200.0, description="how often due outputs are checked, Hz")
-    camera_scale: float = Field(0.5, gt=0.0, le=1.0,
-                                description="downscale of the camera images (0.5: a quarter of the pixels)")
-    eye: list[float] = Field(default_factory=lambda: geometry.EYE.tolist(), description="cyclopean eye V, m")
-    ipd: float = Field(0.064, ge=0.0, le=0.1, description="interpupillary distance, m")
-    projector_position: list[float] = Field(default_factory=lambda: geometry.PROJECTOR.tolist(), description="m")
-    projector_pixel: float = Field(geometry.PIXEL_ON_SCREEN, gt=0.0, description="m per px on the screen")
-    width: int = Field(1024, ge=16, description="projector width, px")
-    height: int = Field(768, ge=16, description="projector height, px")
-    left_base: list[float] = Field(default_factory=lambda: list(geometry.LEFT_BASE), min_length=4, max_length=4,
-                                   description="left arm base (x, y, z, yaw), m and rad (as arm_bridge 'base')")
-    right_base: list[float] = Field(default_factory=lambda: list(geometry.RIGHT_BASE), min_length=4, max_length=4,
-                                    description="right arm base (x, y, z, yaw), m and rad")
-    sheet_grid: int = Field(20, ge=2, le=200, description="sheet mesh vertices per side")
-    # the believed sheet: the renderer's pushed-sheet model (flexsheet.model.sheet_model.sheet_model_for); give
-    # these the renderer's values (same names as its params) and the drawn dent is the one it corrects for
-    fine_modes: int = Field(SheetConfig.fine_modes, ge=1, le=16, description="as the renderer's fine_modes")
-    tension_ratio: float = Field(SheetConfig.tension_ratio, gt=0.0, description="as the renderer's tension_ratio")
-    sheet_cache: str | None = Field(None, description="as the renderer's sheet_cache (its FEM tables are read "
-                                                      "from there, never built by the bridge)")
-    sheet_mesh: dict[str, float] = Field(default_factory=dict, description="as the renderer's sheet_mesh")
-    push_threshold: float = Field(SheetConfig.push_threshold, ge=0.0, description="as the renderer's, m")
-    sheet_half_width: float = Field(SheetConfig.half_width, gt=0.0, description="as the renderer's, m")
 
-    @field_validator("eye", "projector_position")
-    @classmethod
-    def _vec3(cls, v: list[float]) -> list[float]:
-        if len(v) != 3 or not all(np.isfinite(v)):
-            raise ValueError(f"must be 3 finite numbers, got {v!r}")
-        return v
+def _finite(cls, v: list[float]) -> list[float]:
+    if not all(np.isfinite(v)):
+        raise ValueError(f"must be finite, got {v!r}")
+    return v
 
-    @field_validator("left_base", "right_base")
-    @classmethod
-    def _finite(cls, v: list[float]) -> list[float]:
-        if not all(np.isfinite(v)):
-            raise ValueError(f"must be finite, got {v!r}")
-        return v
+
+#: the WebSocket server: device settings, the node's own
+_SERVER = {
+    "host": (str, Field("127.0.0.1", description="address the WebSocket server binds (0.0.0.0: every interface)")),
+    "port": (int, Field(8765, ge=0, le=65535, description="WebSocket port (0: any free port)")),
+    "backlog": (int, Field(64, ge=1, le=100000, description="messages queued per viewer; older ones are dropped")),
+}
+
+#: the believed sheet: the renderer's pushed-sheet model (flexsheet.model.sheet_model.sheet_model_for); these are
+#: the renderer's params (same names, defaults and ranges): give them its values and the drawn dent is the one it
+#: corrects for
+_SHEET = config_fields(
+    RendererConfig, exclude=[f.name for f in dataclasses.fields(RendererConfig) if f.name not in SHEET_PARAMS],
+    descriptions={"fine_modes": "as the renderer's fine_modes", "tension_ratio": "as the renderer's tension_ratio",
+                  "sheet_cache": "as the renderer's sheet_cache (its FEM tables are read from there, never built "
+                                 "by the bridge)",
+                  "sheet_mesh": "as the renderer's sheet_mesh", "push_threshold": "as the renderer's, m",
+                  "sheet_half_width": "as the renderer's, m"})
+
+VizParams = params_model(
+    "VizParams",
+    """Parameters of the viz bridge (SI units, display frame).
+
+    The server's ``host``, ``port``, ``backlog`` are the node's own; the believed sheet's (``fine_modes`` …
+    ``sheet_half_width``) are the renderer's (:class:`flexsheet.rendering.config.RendererConfig`); every other
+    param is a field of — defined, defaulted and range-checked in — :class:`flexsheet.viz.config.VizNodeConfig`.
+    """,
+    _SERVER,
+    config_fields(VizNodeConfig),
+    _SHEET,
+    validators={"_vec3": field_validator("eye", "projector_position")(_vec3),
+                "_finite": field_validator("left_base", "right_base")(_finite)},
+    module=__name__,
+)
 
 
 class _Listener(ServerListener):

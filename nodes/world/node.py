@@ -33,53 +33,43 @@ truth (:class:`flexsheet.twin.truth.TwinTruth`, param ``twin: {realism, truth_se
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import multiprocessing
 import time
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import Field, field_validator
 
-from flexsheet.model import geometry
 from flexsheet.model.scenes import Scene, SceneError, load_scene
-from flexsheet.model.sheet_fem import default_cache_dir
 from flexsheet.runtime.background import start_worker
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.twin.finger import FingerScript
 from flexsheet.twin.truth import TwinTruth
-from flexsheet.twin.truth_choice import TruthChoice
 from flexsheet.twin.world import FemSettings, TruePhysics, build_table
+from flexsheet.twin.world_config import SheetFemConfig, WorldConfig
 from messages import ArmJointState, FingerTruth, Heartbeat, SheetState
 from messages import topics as T
 
 __all__ = ["WorldNode", "WorldParams", "Segment", "SheetFemParams"]
 
 
-class SheetFemParams(BaseModel):
+SheetFemParams = params_model(
+    "SheetFemParams",
     """The true sheet's FEM tables (:mod:`flexsheet.twin.world`): ``stretch_step`` clamp strain between tables;
     ``expected_stretch`` the table loaded (or, with ``wait``, built) at start (the planner's default stiffness
     asks ≈ 0.04); ``wait``: build that table before the script starts (first run of a truth seed: minutes;
     then cached) — without it a missing table is built only when a push needs it;
     ``h_fine``/``h_coarse`` m element sizes; ``cache_dir`` (default ``$FLEXSHEET_CACHE/sheet_fem`` or
-    ``~/.cache/flexsheet/sheet_fem``); ``worker_nice``: niceness of the worker process that builds tables."""
-
-    model_config = ConfigDict(extra="forbid")
-    stretch_step: float = Field(default=0.01, gt=0.0, le=0.1)
-    expected_stretch: float = Field(default=0.04, ge=0.0, le=0.5)
-    wait: bool = False
-    h_fine: float = Field(default=0.004, ge=0.002, le=0.03)
-    h_coarse: float = Field(default=0.008, ge=0.002, le=0.06)
-    cache_dir: str = ""
-    worker_nice: int = Field(default=15, ge=0, le=19)
-
-    def settings(self) -> FemSettings:
-        """The :class:`FemSettings` these params describe (the default mesh gives an empty ``mesh`` dict, so the
-        key matches tables built by the experiments with the defaults)."""
-        mesh = {}
-        if (self.h_fine, self.h_coarse) != (0.004, 0.008):
-            mesh = {"h_fine": self.h_fine, "h_coarse": self.h_coarse}
-        return FemSettings(stretch_step=self.stretch_step, mesh=mesh, cache_dir=self.cache_dir or default_cache_dir())
+    ``~/.cache/flexsheet/sheet_fem``); ``worker_nice``: niceness of the worker process that builds tables.
+    Each is a field of — defined, defaulted and range-checked in —
+    :class:`flexsheet.twin.world_config.SheetFemConfig`; ``settings()`` gives the
+    :class:`~flexsheet.twin.world.FemSettings`.""",
+    config_fields(SheetFemConfig),
+    methods={"settings": lambda self: build(SheetFemConfig, self).settings()},
+    module=__name__,
+)
 
 
 Segment = params_model(
@@ -111,7 +101,17 @@ DEFAULT_SCRIPT = [Segment(mode="stroke", moving_time=10.0), Segment(mode="stroke
                   Segment(mode="stroke_push", moving_time=10.0, push_depth=0.010, seed=2)]
 
 
-class WorldParams(BaseModel):
+def _scene_file(cls, v: str | None) -> str | None:
+    load_world_scene(v)
+    return v
+
+
+#: the params of :class:`WorldConfig` that come before ``sheet_fem`` in ``WorldParams`` (the others after it)
+_BEFORE_SHEET_FEM = ("rate_hz", "sheet_rate_hz", "membrane_grid", "twin")
+_AFTER_SHEET_FEM = tuple(f.name for f in dataclasses.fields(WorldConfig) if f.name not in _BEFORE_SHEET_FEM)
+
+WorldParams = params_model(
+    "WorldParams",
     """``script``: segments played in order; ``rate_hz`` of ``/world/finger``; ``sheet_rate_hz`` of
     ``/world/sheet``; ``membrane_grid`` G (G×G deflection samples of the true shape); ``twin``: the hidden
     truth (:class:`~flexsheet.twin.truth_choice.TruthChoice`); ``sheet_fem``: the true sheet's FEM tables (:class:`SheetFemParams`);
@@ -120,28 +120,17 @@ class WorldParams(BaseModel):
     last node named in ``start_after`` (node names of the launch file; empty: from the world's own start) or
     from ``start_timeout`` s of waiting for them; ``loop``: repeat until Ctrl-C;
     ``scene``: the scene file whose stroke path the finger follows (launch/scenes/*.yaml; none: the paper's
-    cylinder by the segments' own parameters); ``progress_period`` s."""
-
-    model_config = ConfigDict(extra="forbid")
-    script: list[Segment] = Field(default_factory=lambda: list(DEFAULT_SCRIPT), min_length=1)
-    rate_hz: float = Field(default=100.0, gt=0.0, le=2000.0)
-    sheet_rate_hz: float = Field(default=50.0, gt=0.0, le=1000.0)
-    membrane_grid: int = Field(default=24, ge=2, le=128)
-    twin: TruthChoice = Field(default_factory=TruthChoice)
-    sheet_fem: SheetFemParams = Field(default_factory=SheetFemParams)
-    sheet_size: float = Field(default=geometry.SHEET_SIZE, gt=0.0)
-    start_delay: float = Field(default=3.0, ge=0.0)
-    start_after: list[str] = Field(default_factory=list)
-    start_timeout: float = Field(default=60.0, gt=0.0)
-    loop: bool = False
-    progress_period: float = Field(default=2.0, gt=0.0)
-    scene: str | None = None
-
-    @field_validator("scene")
-    @classmethod
-    def _scene_file(cls, v: str | None) -> str | None:
-        load_world_scene(v)
-        return v
+    cylinder by the segments' own parameters); ``progress_period`` s.
+    ``script``, ``sheet_fem`` and ``scene`` are the node's own; every other param is a field of — defined,
+    defaulted and range-checked in — :class:`flexsheet.twin.world_config.WorldConfig`.""",
+    {"script": (list[Segment], Field(default_factory=lambda: list(DEFAULT_SCRIPT), min_length=1))},
+    config_fields(WorldConfig, exclude=_AFTER_SHEET_FEM),
+    {"sheet_fem": (SheetFemParams, Field(default_factory=SheetFemParams))},
+    config_fields(WorldConfig, exclude=_BEFORE_SHEET_FEM),
+    validators={"_scene_file": field_validator("scene")(_scene_file)},
+    module=__name__,
+    scene=(str | None, Field(default=None)),
+)
 
 
 class WorldNode(Node):

@@ -1,0 +1,70 @@
+"""The world twin's settings: one definition of each — name, type, default and range — that ``nodes/world``'s
+``WorldParams`` and ``SheetFemParams`` are built from (:func:`flexsheet.runtime.params.config_fields`).
+Pure and light (no transport, no FEM import until :meth:`SheetFemConfig.settings`); the ranges are pydantic
+``Field`` constraints in the annotations, checked when the params are. The finger's script (segments of
+:class:`flexsheet.twin.finger.FingerScript`) and the ``scene`` file are the node's own params."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Annotated
+
+from pydantic import Field
+
+from flexsheet.model import geometry
+from flexsheet.twin.truth_choice import TruthChoice
+
+if TYPE_CHECKING:
+    from flexsheet.twin.world import FemSettings
+
+__all__ = ["SheetFemConfig", "WorldConfig"]
+
+#: the mesh of the tables the experiments build with the defaults (h_fine, h_coarse), m
+_DEFAULT_MESH = (0.004, 0.008)
+
+
+@dataclass(frozen=True)
+class SheetFemConfig:
+    """The true sheet's FEM tables (:mod:`flexsheet.twin.world`): ``stretch_step`` clamp strain between tables;
+    ``expected_stretch`` the table loaded (or, with ``wait``, built) at start; ``wait``: build that table
+    before the script starts; ``h_fine``/``h_coarse`` m element sizes; ``cache_dir`` ("": the default);
+    ``worker_nice``: niceness of the worker process that builds tables."""
+
+    stretch_step: Annotated[float, Field(gt=0.0, le=0.1)] = 0.01
+    expected_stretch: Annotated[float, Field(ge=0.0, le=0.5)] = 0.04
+    wait: bool = False
+    h_fine: Annotated[float, Field(ge=0.002, le=0.03)] = _DEFAULT_MESH[0]
+    h_coarse: Annotated[float, Field(ge=0.002, le=0.06)] = _DEFAULT_MESH[1]
+    cache_dir: str = ""
+    worker_nice: Annotated[int, Field(ge=0, le=19)] = 15
+
+    def settings(self) -> FemSettings:
+        """The :class:`~flexsheet.twin.world.FemSettings` these settings describe (the default mesh gives an
+        empty ``mesh`` dict, so the key matches tables built by the experiments with the defaults; no
+        ``cache_dir``: :func:`flexsheet.model.sheet_fem.default_cache_dir`)."""
+        from flexsheet.model.sheet_fem import default_cache_dir
+        from flexsheet.twin.world import FemSettings
+
+        mesh = {}
+        if (self.h_fine, self.h_coarse) != _DEFAULT_MESH:
+            mesh = {"h_fine": self.h_fine, "h_coarse": self.h_coarse}
+        return FemSettings(stretch_step=self.stretch_step, mesh=mesh, cache_dir=self.cache_dir or default_cache_dir())
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """The world twin's rates, truth and start (SI units): ``rate_hz`` of the finger, ``sheet_rate_hz`` of the
+    sheet, ``membrane_grid`` G (G×G deflection samples), ``twin`` the hidden truth, ``sheet_size`` m,
+    ``start_delay`` s after the nodes of ``start_after`` (or ``start_timeout`` s), ``loop``,
+    ``progress_period`` s."""
+
+    rate_hz: Annotated[float, Field(gt=0.0, le=2000.0)] = 100.0
+    sheet_rate_hz: Annotated[float, Field(gt=0.0, le=1000.0)] = 50.0
+    membrane_grid: Annotated[int, Field(ge=2, le=128)] = 24
+    twin: TruthChoice = field(default_factory=TruthChoice)
+    sheet_size: Annotated[float, Field(gt=0.0)] = geometry.SHEET_SIZE
+    start_delay: Annotated[float, Field(ge=0.0)] = 3.0
+    start_after: list[str] = field(default_factory=list)
+    start_timeout: Annotated[float, Field(gt=0.0)] = 60.0
+    loop: bool = False
+    progress_period: Annotated[float, Field(gt=0.0)] = 2.0
