@@ -325,10 +325,9 @@ class LivePath:
         v, f = cylinder_mesh()
         self.probes = silhouette_probes(v)
         self.clamps = clamp_poses(*HOME_POSE, self.stretch)
-        home = SheetSurface(*HOME_POSE, clamp_half_span(self.stretch), self.config.half_width)
-        self.table = ErrorTable.build(self.probes, eye=self.eye, projector=self.projector, screen_point=geometry.SCREEN_POINT,
-                                      screen_normal=geometry.SCREEN_NORMAL, sheet=home,
-                                      sheet_model=sheet_model if sheet_model is not None else sheet_model_for(self.config))
+        self.table = ErrorTable.at_home(self.probes, eye=self.eye, projector=self.projector,
+                                        stretch_node=self.stretch, config=self.config,
+                                        sheet_model=sheet_model if sheet_model is not None else sheet_model_for(self.config))
         self.state = RendererState(self.eye, self.projector, self.config, mesh=(v, f), sheet_model=model)
         self.state.set_arm_pose("left", self.clamps[0])
         self.state.set_arm_pose("right", self.clamps[1])

@@ -94,6 +94,19 @@ class ErrorTable:
                 rows[m].append((float(S), pe[m]))
         return cls(rows)
 
+    @classmethod
+    def at_home(cls, probes, *, eye, projector, stretch_node: float, config: SheetConfig,
+                sheet_model: NominalSheetModel) -> ErrorTable:
+        """:meth:`build` on the home (unpushed, untilted) sheet at clamp stretch ``stretch_node`` with
+        ``config``'s half width, on the paper's imaginary screen: the table the renderer node picks its models
+        from (and the correction experiment's live path)."""
+        from flexsheet.model.sheet import clamp_half_span
+
+        home = SheetSurface(np.zeros(3), geometry.SCREEN_NORMAL, [0.0, 1.0, 0.0], clamp_half_span(stretch_node),
+                            config.half_width)
+        return cls.build(probes, eye=eye, projector=projector, screen_point=geometry.SCREEN_POINT,
+                         screen_normal=geometry.SCREEN_NORMAL, sheet=home, sheet_model=sheet_model)
+
     def choose(self, depth: float, target: float, models: tuple[str, ...] = AUTO_MODELS) -> str:
         """Cheapest of ``models`` whose predicted error at ``depth`` m is ≤ ``target`` m (else the best one)."""
         return choose_model(depth, self.rows, target, models=models)

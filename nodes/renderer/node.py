@@ -388,15 +388,10 @@ class RendererNode(Node):
     def _error_table(self, node: float) -> ErrorTable:
         """The models' predicted errors on the home sheet at stretch ``node`` (its own model instance: the
         drawing thread's is not shared)."""
-        from flexsheet.model.sheet import SheetSurface, clamp_half_span
-
         geo = self.geometry
-        home = SheetSurface([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], clamp_half_span(node),
-                            self.sheet_config.half_width)
-        return ErrorTable.build(silhouette_probes(geo.mesh[0], center_x=float(geo.scene.center[0])), eye=self.eye,
-                                projector=self.projector.position, screen_point=paper.SCREEN_POINT,
-                                screen_normal=paper.SCREEN_NORMAL, sheet=home,
-                                sheet_model=sheet_model_for(self.sheet_config))
+        return ErrorTable.at_home(silhouette_probes(geo.mesh[0], center_x=float(geo.scene.center[0])), eye=self.eye,
+                                  projector=self.projector.position, stretch_node=node, config=self.sheet_config,
+                                  sheet_model=sheet_model_for(self.sheet_config))
 
     # ------------------------------------------------------------------ inputs (worker threads)
     def on_deformation(self, msg: ObjectDeformation) -> None:
