@@ -19,7 +19,7 @@ from flexsheet.runtime.ports import free_port  # noqa: E402  (tests import it fr
 
 #: the fewest valid fingertips (or planner targets while touching, or world finger samples) per second of a
 #: launched stroke: 5 Hz, a sixth of the camera's 30 fps. Not a speed test (flexsheet bench is): enough samples
-#: for a mean Δθ and for binning along the stroke. A quiet 2-core machine gives 25-30 Hz; session 25's CI gave
+#: for a mean Δθ and for binning along the stroke. A quiet 2-core machine gives 25-30 Hz; a loaded CI run gave
 #: 19 Hz on the shared sim run's 10 s stroke (193) and 21 Hz of /world/finger (207, from a 200 Hz timer) on
 #: the sphere's, with the suite's other phase-2 work beside it.
 MIN_TIPS_HZ = 5.0

@@ -36,7 +36,7 @@ class TargetTracker:
     After a pause of the target stream longer than ``target_timeout`` (the arm held) the first target may ask
     ``max_jump`` plus what the fastest joint could have moved in the pause (``QD_MAX``'s largest, rad/s, times
     the pause): the finger went on meanwhile, and a respawned planner's first target is where it is now (a
-    planner dead 5.6 s left the left arm in ``hold:jump`` for 11 s in the faults scenario, session 26). The
+    planner dead 5.6 s left the left arm in ``hold:jump`` for 11 s in the faults scenario). The
     streaming limiter still moves the arm there at the speed limit. A branch flip inside a flowing stream is
     refused as before.
     After :meth:`seed` (or the first target) ``goal`` is a (6,) rad joint vector.

@@ -41,7 +41,7 @@ from flexsheet.experiments.fem_scene import _update_ms, visible_errors
 from flexsheet.fem.path_snapshots import GRID, REACH
 
 TARGET_MM = 0.7
-DEFAULT_STATIONS = 13          #: the shipped rounded box table's (session 24: 7 missed by 4.7 mm over the edge)
+DEFAULT_STATIONS = 13          #: the shipped rounded box table's (7 missed by 4.7 mm over the edge)
 #: ``--mesh-check``'s finer level (h_fine, m): the scene FULL run's second level
 CHECK_H_FINE = 0.004
 #: the depths (m) the look-up is timed at, 5 stroke points each

@@ -36,7 +36,7 @@ from flexsheet.experiments.fem_scene import visible_errors
 __all__ = ["build_sphere_table", "alpha_path"]
 
 TARGET_MM = 0.7
-#: the meshes ``--mesh-check`` sets beside the table's (h, h_fine, refine radius, path depth) m (session 20: the
+#: the meshes ``--mesh-check`` sets beside the table's (h, h_fine, refine radius, path depth) m (the
 #: 4.5 mm table mesh's noise sits on the crater's rim, material that rested 15–28 mm from the push axis, outside
 #: its 15 mm tube; so the levels widen the tube)
 MESH_STUDY_SPECS = ((0.012, 0.006, 0.030, 0.055),)

@@ -75,7 +75,7 @@ SOLVER_VERSION = "nh-7"     #: bump when the reference's formulation or defaults
 #: that ran out of iterations (continued, :data:`RESUME_MAX`), so an nh-6 path in which no call ran out (fewer
 #: than ``iters`` Newton iterations at every depth: a call that runs out counts ``iters`` by itself) is the nh-7
 #: path, bit for bit — if it was computed by nh-6 as committed in 27126c8. The first nh-6 commit (4899088)
-#: differed where a diagonal shift failed (it fell back to crawling); the azimuth-0 paths cached in session 8
+#: differed where a diagonal shift failed (it fell back to crawling); the earliest cached azimuth-0 paths
 #: were computed by it, so for them "bit for bit" holds only if no shift failed (not recorded)
 PREVIOUS_VERSION = "nh-6"
 #: contact penalty κ = PENALTY_SCALE·E/h. Chosen by a penalty study (``flexsheet experiment fem``,

@@ -27,7 +27,7 @@ is the part of the deformation the linear model gets wrong:
   is interpolated. The linear model keeps its spatial detail (an inclusion's stiffness peak between stations),
   the table adds the large-deformation part. Outside the table the node serves linear.
 * **The correction follows the contact.** A station's correction is a bump centred on *its* contact point.
-  Blending two of them at fixed vertices (session 24–25) put two half bumps 5 mm either side of a push midway
+  Blending two of them at fixed vertices put two half bumps 5 mm either side of a push midway
   between the organ's stations, worse than the linear model alone at 5–7.5 mm deep. So each station's
   correction is first **moved along the surface with the contact**: at fraction f, vertex v takes station s's
   correction at the rest-surface point nearest to v − (P(f) − P(f_s)) (P: the path polyline; barycentric on the
@@ -35,7 +35,7 @@ is the part of the deformation the linear model gets wrong:
   precomputed when the table is attached (``trimesh.proximity.closest_point``), at sub-fractions no more than
   :data:`SHIFT_STEP` of path apart, as one sparse (S, 2S) matrix each, and blended linearly between
   sub-fractions at run time (one or two sparse products: no search per update). At a station the move is the
-  identity. Held out on the organ (session 26, ``docs/figures/scenes/organ/path_table``): 0.70 → 0.16 mm at
+  identity. Held out on the organ (``docs/figures/scenes/organ/path_table``): 0.70 → 0.16 mm at
   5 mm, 1.40 → 0.33 mm at 10 mm at the tumour; on the rounded box worse at one of three held-out points from
   15 mm on (the correction there is tied to the rounded edge, not the contact; docs/scenes.md).
   The move follows the contact *along* the path only (not its lateral offset ≤ ``reach``) and does not turn

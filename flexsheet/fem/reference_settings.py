@@ -73,8 +73,8 @@ def settings_for(quick: bool) -> Settings:
                     linear_spec=MeshSpec(0.012, 0.004, 0.012, 60.0), n_time=1000)
 
 
-#: the reference's default material: the default scene's (the paper's cylinder, a Gent solid since session 18;
-#: ``--Jm inf`` is the neo-Hookean solid every study before it ran)
+#: the reference's default material: the default scene's (the paper's cylinder, a Gent solid;
+#: ``--Jm inf`` is the neo-Hookean solid the earlier studies ran)
 DEFAULT_MATERIAL = Material.of_scene(paper_scene().material)
 
 

@@ -6,7 +6,7 @@ finger's state space offline and interpolate them at haptic rate. Here the state
 point, push depth d, axial offset a) and the stored quantity is the displacement of the *surface*, the only
 thing the renderer draws.
 
-* **Offline** (:func:`build_table`): for each snapshot azimuth φ_i the hyperelastic reference (the material's law: neo-Hookean, or Gent — the paper's cylinder since session 18)
+* **Offline** (:func:`build_table`): for each snapshot azimuth φ_i the hyperelastic reference (the material's law: neo-Hookean, or Gent — the paper's cylinder's)
   (:mod:`flexsheet.fem.hyperelastic`) is pushed 0 → d_max with load stepping, and every converged depth d_j is
   sampled on a fixed surface grid: the side surface on (θ, y) and the end cap on (θ, ρ), display-frame
   components. Also stored per (φ_i, d_j): finger force, largest strain, inverted elements, min det F.
@@ -58,7 +58,7 @@ class SnapshotGrid:
     spacing along y near the push plane (coarser by 2× beyond 20 mm and 40 mm), ``drho`` m radial spacing on
     the cap. Raises ``ValueError`` on bad values."""
 
-    #: every 10°, and 5°, 7.5° and 55° besides (sessions 21-23): held out of the 10° table, the push at 5° was
+    #: every 10°, and 5°, 7.5° and 55° besides: held out of the 10° table, the push at 5° was
     #: 2.33 mm off at 47.5 mm and at 55° 1.44 mm at 35 mm (docs/figures/fem/node_table_seven); held out of the
     #: nine-azimuth table, 15° was within 0.66 mm and 7.5° 1.96 mm off at 50 mm (docs/figures/fem/node_table_nine),
     #: so 7.5° was added (its held-out solve); held out of this one, 6.25° misses at 40 mm only (0.96 mm) and 8.75°
@@ -118,7 +118,7 @@ class SnapshotGrid:
 
 
 DEFAULT_GRID = SnapshotGrid()
-#: the node table's azimuths before session 23 added 7.5° (shipped in session 22): the table on them is extended
+#: the node table's azimuths without 7.5°: the table on them is extended
 #: azimuth by azimuth (:func:`reusable_table`), not solved again
 PREVIOUS_ANGLES_DEG = (0.0, 5.0, 10.0, 20.0, 30.0, 40.0, 50.0, 55.0, 60.0)
 #: mesh of the snapshot solves = the next-to-finest mesh of the experiment's convergence study (judged against
@@ -126,7 +126,7 @@ PREVIOUS_ANGLES_DEG = (0.0, 5.0, 10.0, 20.0, 30.0, 40.0, 50.0, 55.0, 60.0)
 #: (docs/fem.md; a cut half model of ~31 000 DOF, ~40–70 min of one core per azimuth other than 0:
 #: ``flexsheet experiment fem --node-table --azimuth A``). Off azimuth 0 the half model is *cut*: its mesh has
 #: nodes on the plane through the push axis, as the quarter model has on its mirror plane; without them a half
-#: model is 8–12 % stiffer at 40–50 mm than the quarter model of the same h_fine (session 10), with them within
+#: model is 8–12 % stiffer at 40–50 mm than the quarter model of the same h_fine, with them within
 #: 1.1 % on the 4.5 and 3.4 mm meshes (3.5 % on the 6 mm one; the experiment's mirror study, docs/fem.md)
 DEFAULT_REF_SPEC = RefSpec(0.012, 0.0034, 0.018, half_z=True, path_depth=0.055, cut=True)
 

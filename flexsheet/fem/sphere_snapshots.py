@@ -9,7 +9,7 @@ stroke's ``toward`` direction made normal to e_a — rotated about e_a by ψ: **
 describes every push exactly.** The stroke of ``sphere.yaml`` is that plane's arc from α = 0 to 60°.
 
 * **Offline** (:func:`solve_alpha`): for each snapshot angle α_i (:class:`SphereGrid`, default 0–60° every 10°)
-  the scene's hyperelastic body (the scene's law; Gent since session 19) on a gmsh mesh refined along that push
+  the scene's hyperelastic body (the scene's law, Gent) on a gmsh mesh refined along that push
   path (:func:`flexsheet.fem.scene_mesh.scene_mesh` with ``refine_at``, full body, the scene's support) is pushed by
   the rigid frictionless capsule finger 0 → 50 mm (:func:`flexsheet.fem.hyperelastic.solve_path_capsule`), the
   stable branch kept where the push is bistable (:func:`flexsheet.fem.hyperelastic.stable_states`), and every depth
@@ -95,7 +95,7 @@ class SphereGrid:
 
 DEFAULT_SPHERE_GRID = SphereGrid()
 #: the table's mesh: (h, h_fine, refine_radius, path_depth) m — h_fine 4.5 mm along the push path (the cylinder's
-#: next-to-finest level but one; session 19's budget), the tube to 55 mm deep as the cylinder's reference
+#: next-to-finest level but one, for the build's time), the tube to 55 mm deep as the cylinder's reference
 DEFAULT_SPHERE_SPEC = (0.012, 0.0045, 0.015, 0.055)
 
 

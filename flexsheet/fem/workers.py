@@ -130,7 +130,7 @@ def run_workers(fn, work: list, n: int):
     thread, SIGINT ignored, tied to this process: killed with it, even by ``kill -9``). Ctrl-C, an error or
     leaving the loop early terminates the workers at once (a running solve is not waited for). The one pool of
     every long solve here (:func:`prefetch`, the sphere and path tables): a pool without the tie left its
-    workers solving for minutes after its parent was killed (session 25). ``fn`` must be importable (module
+    workers solving for minutes after its parent was killed. ``fn`` must be importable (module
     level) and catch its own errors."""
     import multiprocessing
 

@@ -242,7 +242,7 @@ class Finger(BaseModel):
     ``frictionless`` (the default: the surface slides freely over the fingertip) or ``sticking`` (a fingertip
     that does not slip on the skin: a surface point that touched it moves with it). A modelling choice per
     object: the rounded box's push beside its edge has a sliding mode under a frictionless fingertip that no
-    Newton solve on its quick mesh got past 25 mm (session 21), and skin does not slide on silicone."""
+    Newton solve on its quick mesh got past 25 mm, and skin does not slide on silicone."""
 
     model_config = _CFG
     radius: float = Field(0.008, ge=0.001, le=0.03, description="m")
@@ -804,7 +804,7 @@ def paper_scene() -> Scene:
     """The paper's cylinder (§VI-A) from :mod:`flexsheet.model.geometry`'s constants — what
     ``launch/scenes/cylinder.yaml`` holds; the default wherever no scene is named. Its material is a Gent solid
     (E 10 kPa, ν 0.45, Jm :data:`GENT_JM_RUBBER`): the neo-Hookean body the paper's 50 mm push was first
-    modelled with has no mesh-converged solution there (docs/fem.md, session 17's material study)."""
+    modelled with has no mesh-converged solution there (docs/fem.md, the material study)."""
     R = paper.CYLINDER_RADIUS
     if not np.allclose(paper.CYLINDER_AXIS, [0.0, 1.0, 0.0]):      # pragma: no cover - a constant
         raise ValueError("paper_scene assumes the cylinder axis +y (the local axis, no rotation)")

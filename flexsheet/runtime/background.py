@@ -74,7 +74,7 @@ def start_worker(proc) -> None:
     instruction: an ignored disposition survives the spawn's fork + exec, and Python keeps it. The worker then
     ignores the launcher's SIGINT to the node's process group even while it still imports, before its
     :func:`lower_priority` (a stop 1 s after a build started printed a ``KeyboardInterrupt`` traceback from the
-    worker's numpy import, session 25). The caller's own handler is restored at once. Off the main thread (where
+    worker's numpy import). The caller's own handler is restored at once. Off the main thread (where
     Python may not touch signal handlers) it is a plain ``proc.start()``."""
     if threading.current_thread() is not threading.main_thread():
         proc.start()

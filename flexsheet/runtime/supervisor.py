@@ -179,7 +179,7 @@ class Supervisor:
         :mod:`flexsheet.runtime.background`) is killed: it would hold the node's output pipe open, and asyncio's
         ``wait()`` waits for that pipe too, so the launcher would report neither the exit nor respawn the node
         until the worker ended (the renderer's sheet table, ~30 s or more: a kill -9 during its worker's imports
-        stalled the respawn, session 26). Output still held open 2 s after that is no longer read."""
+        stalled the respawn). Output still held open 2 s after that is no longer read."""
         proc = child.proc
         loop = asyncio.get_running_loop()
         exited = loop.create_future()
@@ -311,7 +311,7 @@ class Supervisor:
         for c in self.children:     # a watcher cancelled while it still read the stopped node's last output
             rc = c.proc.returncode if c.proc is not None else None    # never recorded that incarnation's exit:
             if rc is not None and len(c.exit_codes) < len(c.pids):    # a respawned node kept its kill's -9
-                self._record_exit(c, rc)                              # and the run "failed" (session 27)
+                self._record_exit(c, rc)                              # and the run "failed"
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
         self.print("[launch] all nodes stopped")

@@ -91,7 +91,7 @@ class MxtCore:
         self.last_packet_at: float | None = None
         self.timed_out = False
         self._got_packet = False
-        self.missed_cycles = 0                   # TCount: cycles without a packet in this session
+        self.missed_cycles = 0                   # TCount: cycles without a packet in the current session
         self.received = 0
         self.unanswered = 0                      # packets outside a session (no reply)
         self.malformed = 0

@@ -69,7 +69,7 @@ def test_record_then_play_is_byte_identical_with_original_timing(tmp_path):
     off = rel_play - rel_live
     err = np.abs(off - np.median(off))
     # both sides are a recorder's receive times, so the error holds two recorders' scheduling jitter: median
-    # 0.5 ms, but a 90th percentile of 2.2 ms and single 11 ms outliers on the loaded 2-core machine (session 12).
+    # 0.5 ms, but a 90th percentile of 2.2 ms and single 11 ms outliers on the loaded 2-core machine.
     # A player that ignored the timing would be off by up to the bag's 1.18 s span, one at half speed by up to 295 ms after the median offset is taken out.
     assert np.median(err) < 0.002 and np.percentile(err, 90) < 0.005, f"timing error ms: {err * 1e3}"
     assert abs(rel_play[-1] - rel_live[-1]) < 0.02, (rel_play[-1], rel_live[-1])

@@ -238,7 +238,7 @@ def _dying_parent(q) -> None:
 def test_a_worker_whose_parent_died_before_it_tied_itself_exits_at_once():
     """lower_priority compares the parent multiprocessing recorded at the start with getppid(): a worker whose
     node died while it still imported (before PR_SET_PDEATHSIG) has been reparented and exits in lower_priority
-    instead of running on as an orphan (session 26; getppid() read inside lower_priority saw init and went on)."""
+    instead of running on as an orphan (getppid() alone, read inside lower_priority, sees init and goes on)."""
     import multiprocessing as mp
     import queue
 

@@ -137,8 +137,8 @@ def test_camera_node_sim_follows_finger_truth():
 
 def test_camera_node_holds_a_stale_finger_truth_and_never_returns_to_the_param_path():
     """A world node that stalls (no /world/finger for 1 s, as the loaded 2-core machine once did for 0.7 s)
-    leaves the marker where its last truth put it, extrapolated at most 0.1 s with the truth's velocity. Until
-    session 27 the twin fell back to the param stroke after 0.5 s: a second finger ~20 mm away."""
+    leaves the marker where its last truth put it, extrapolated at most 0.1 s with the truth's velocity. It
+    never falls back to the param stroke: that would be a second finger ~20 mm away."""
     async def scenario():
         async with NodeHarness(CameraNode, params={"rate_hz": 50.0, "seed": 2, "twin": IDEAL}) as h:
             cal = (await h.wait_for(topics.CALIBRATION, n=1, timeout=3.0))[0]

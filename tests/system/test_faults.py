@@ -68,10 +68,10 @@ PUBLISHES = {
     "world": ["/world/finger", "/world/sheet"],
 }
 #: a 45 s stroke the kills start in, then the paper's two stroking speeds (Table I rows 30 s and 10 s): ~95 s
-#: of script. All the kills were done ~27 s after the first segment started (session 12, warm, loaded 2-core
-#: machine: recorder at +0 s ... last arm pair up at +27 s) but took > 46 s on the same machine in session 25
-#: (a Python loop 1.5-2x slower that day), when a script of the two paper strokes alone ended before the last
-#: arm pair's kill; with a 20 s first stroke (~69 s of script) a session-27 suite still saw the script end before
+#: of script. All the kills were done ~27 s after the first segment started (warm, loaded 2-core
+#: machine: recorder at +0 s ... last arm pair up at +27 s) but took > 46 s on the same machine on a slower day
+#: (a Python loop 1.5-2x slower), when a script of the two paper strokes alone ended before the last
+#: arm pair's kill; with a 20 s first stroke (~69 s of script) a loaded suite still saw the script end before
 #: the last controller twin's respawn. The kills now have the 45 s and the 30 s strokes (~80 s), and the 10 s
 #: stroke after them shows the graph recovered. The FEM's precompute is cached before the launch (conftest.sim_fem_cache): a cold
 #: FEM start inside the graph took > 60 s on a fresh machine and the FEM was not up for its kill.

@@ -56,7 +56,7 @@ def test_a_2s_cut_to_arm1_holds_that_arm_and_it_recovers_without_a_jump(lab_run)
     # machine, not the cut) makes the bridge restart from the measured joints, where the tripped controller
     # holds the arm: that reseed is not a commanded motion, so steps into or out of a trip are left out, and
     # trips must stay rare (the loop runs SCHED_FIFO in launch/lab_sim.yaml; measured 0-1 per arm per run, 3 with
-    # two FEM solves running beside the suite, 15-67 at nice -5; session 12: 11 and 4 in a clean cold suite,
+    # two FEM solves running beside the suite, 15-67 at nice -5; 11 and 4 in a clean cold suite,
     # 32-54 with two idle-class FEM solves beside it). A bridge that trips on every late loop would count hundreds.
     trips = {arm: sum(a[3] != "fault:watchdog" and b[3] == "fault:watchdog" for a, b in zip(s, s[1:], strict=False))
              for arm, s in states.items()}

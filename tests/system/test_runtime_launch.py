@@ -119,7 +119,7 @@ nodes:
 def test_a_killed_node_is_respawned_at_once_though_its_worker_holds_its_output(tmp_path):
     """A node killed -9 while a child it started (not tied to it, as a table builder still importing) holds its
     output pipe: the launcher reports the exit and respawns within seconds, and the child, in the node's process
-    group, goes with it (session 26: the renderer's sheet-table worker stalled the faults scenario's respawn
+    group, goes with it (the renderer's sheet-table worker stalled the faults scenario's respawn
     past 30 s). Before the fix the exit was seen only when the child's 60 s sleep ended."""
     path = _talker_file(tmp_path, "worker",
                         "params: {rate: 20, worker_s: 60}, respawn: {policy: on-failure, delay: 0.2}")
@@ -144,7 +144,7 @@ def test_a_respawned_node_that_stops_cleanly_is_not_a_failure_though_it_says_muc
     """A node killed -9 and respawned, then stopped with the launch (SIGINT), exits 0; the launcher records
     that last exit even when the node's final output is still being read as the stop completes (its watcher
     is cancelled then). Before the fix the kill's -9 stayed the node's last exit code and ``flexsheet launch``
-    exited 1 after a clean run (the faults scenario's renderer, 2 of 3 runs on a loaded machine, session 27:
+    exited 1 after a clean run (the faults scenario's renderer, 2 of 3 runs on a loaded machine:
     its watcher polled for the reaped exit code in 5 ms sleeps while the stop, woken by the exit callback,
     cancelled it). The race itself did not reproduce with this node on an idle machine; the test holds the
     clean stop of a respawned node that has much to say."""

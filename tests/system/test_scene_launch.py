@@ -48,7 +48,7 @@ def test_sim_launch_on_the_sphere_scene_reports_the_scene_and_dtheta(tmp_path):
     key = _warm_fem("sphere")
     # the 10 s stroke alone (the default script's first segment): the run ends with it (world exits, 13 s of
     # script) instead of being cut by --duration inside the 30 s stroke that follows it. --duration is only a
-    # cap: at 25 s a slow start (the world's script began ~17 s in, session 25) cut the stroke at 20 %
+    # cap: at 25 s a slow start (the world's script began ~17 s in) cut the stroke at 20 %
     res = subprocess.run([sys.executable, "-m", "flexsheet", "launch", "launch/sim.yaml", "--set",
                           "scene=launch/scenes/sphere.yaml", "--set", "world.script=[{mode: stroke, moving_time: 10}]",
                           "--duration", "60", "--out", str(tmp_path)],
@@ -81,8 +81,8 @@ def test_sim_launch_on_the_sphere_scene_reports_the_scene_and_dtheta(tmp_path):
     assert np.abs(np.linalg.norm(cp - c, axis=1) - R).max() < 2e-4
 
 
-# the tension's peak rides on the arms' lag behind the stiffness: +18 % and +7.5 % in session 10's runs, but
-# +2 % and -0.5 % in two of session 12's three cold suites (the FEM's own peak held, +8 % or more, every time).
+# the tension's peak rides on the arms' lag behind the stiffness: +18 % and +7.5 % in some runs, but
+# +2 % and -0.5 % in two of three cold suites (the FEM's own peak held, +8 % or more, every time).
 # One rerun on failure (pytest-rerunfailures); the weak tension peak is flagged in the issue 17 note.
 @pytest.mark.flaky(reruns=1)
 def test_sim_launch_on_the_organ_shows_the_fem_stiffness_peak_over_the_inclusion_in_the_tension(tmp_path):

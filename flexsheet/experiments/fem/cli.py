@@ -4,7 +4,7 @@ of the pushed cylinder, and the real-time model that reproduces it (``--scene`` 
 study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 
 1. **Reference** (:mod:`flexsheet.fem.hyperelastic`): the default scene's hyperelastic solid (a Gent solid, Jm 97.2,
-   since session 18: ``--Jm``; ``--Jm inf`` is the neo-Hookean solid of the committed full, quick_neohookean, fold and
+   ``--Jm``; ``--Jm inf`` is the neo-Hookean solid of the committed full, quick_neohookean, fold and
    held-out figures), total Lagrangian, P2, Newton with load
    stepping (≤ 60 iterations per step), rigid frictionless finger (sphere + shaft), pushed 0 → 50 mm at
    azimuth 0 on a sequence of meshes refined along the whole push path (quarter model by symmetry;
@@ -52,16 +52,16 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 ``--quick``: two coarse meshes (h_fine 12 / 9 mm), 5 mm outputs, snapshots every 10 mm, a penalty study of
 two scales, a skin study of one size (5 mm), a mirror study of one cut half model (h_fine 12 mm, against the
 quarter model of the same h_fine): a test's run, 133 s cold on the 2-core machine with ``--jobs 2`` and nothing
-beside it (session 15, the stable sweeps included; 148 s with the half model at 9 mm), seconds cached; it does
+beside it (the stable sweeps included; 148 s with the half model at 9 mm), seconds cached; it does
 not meet the targets
 and cannot be "converged" (fewer than 3 meshes). The full mode (h_fine 8 / 6 / 4.5 / 3.4 / 2.5 mm,
 :data:`FULL_LEVELS`, 2.5 mm outputs, snapshots at azimuths 0, 10 and 20 every 5 mm, azimuth 5 held out,
 penalty study, mirror study) is ~4.5 h of CPU cold on the 2-core machine with another solve beside it
-(sessions 8–10, ``cpu_seconds`` in convergence.json: the 2.5 mm mesh 31 min, the 3.4 mm 9 min, the two skin
-meshes 12 and 23 min, the azimuth-5, -10 and -20 paths ~37–39 min each on uncut meshes; session 11, in
+(``cpu_seconds`` in convergence.json: the 2.5 mm mesh 31 min, the 3.4 mm 9 min, the two skin
+meshes 12 and 23 min, the azimuth-5, -10 and -20 paths ~37–39 min each on uncut meshes; in
 mirror_study.json: the mirror study's cut half models 10, 22 and 71 min with two or three solves on the 2 cores,
 its stability check 11 min).
-Those CPU figures are from the einsum assembly, about twice the present one's (session 12, docs/fem.md).
+Those CPU figures are from the einsum assembly, about twice the present one's (docs/fem.md).
 ``--jobs N`` (default: the cores) solves the pushes the run reads in N worker processes first
 (:func:`planned_solves`, :func:`prefetch`); ``--level N`` solves one mesh only and ``--node-table --azimuth A``
 one azimuth (for a run over several sittings or machines); every solve is cached

@@ -137,8 +137,8 @@ def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its
     assert row["spec"]["cut"] is True
     assert 1.4 < row["dofs"] / same["dofs"] < 2.2, (row["dofs"], same["dofs"])
     assert row["quarter_same_h_force_N"] == pytest.approx(same["force_N"])
-    # cut, the half model has the quarter model's force at every depth (uncut, session 10's quick run: +5 % at
-    # 5 mm, +12 % at 50 mm; cut at 9 mm: within 1.1 %; at 12 mm, session 15: within 0.6 %)
+    # cut, the half model has the quarter model's force at every depth (uncut, a quick run: +5 % at
+    # 5 mm, +12 % at 50 mm; cut at 9 mm: within 1.1 %; at 12 mm: within 0.6 %)
     assert row["force_N"] == pytest.approx(same["force_N"], rel=0.03)
     assert len(row["asymmetry_mm"]) == len(ms["depths_m"]) and max(row["asymmetry_mm"]) > 0.1
     assert row["diff_vs_finest_quarter_mm"][0] > 0

@@ -249,7 +249,7 @@ def test_the_cli_refuses_what_a_path_table_does_not_take(tmp_path):
 
 @pytest.mark.parametrize("name, stations", [("rounded_box", 13), ("organ", 7)])
 def test_the_shipped_path_tables_are_found_under_their_keys_and_fit_a_fresh_mesh(name, stations):
-    """The FEM node on rounded_box.yaml (session 24) and organ.yaml (session 25) finds the shipped path table
+    """The FEM node on rounded_box.yaml and organ.yaml finds the shipped path table
     (flexsheet/fem/data) under its key, and the table's rendered vertices are exactly the boundary corner nodes of the
     scene's mesh meshed anew here (gmsh is deterministic for one version: a table on another mesh would be
     refused at attach time)."""
@@ -304,7 +304,7 @@ def _flat_bump_table():
 
 def test_a_station_correction_moves_with_the_contact_along_the_stroke():
     """Between stations the served correction is the bump where the finger is (within the 1 mm grid's linear
-    interpolation: measured 0.1 % on a sub-fraction, 1.5 % between them), where the fixed-vertex blend that served it until session 25
+    interpolation: measured 0.1 % on a sub-fraction, 1.5 % between them), where a fixed-vertex blend
     gives two half bumps (79 % of the height off at the finger); at a station it is the station's, exactly; along
     the stroke it changes smoothly (no jump at the sub-fractions or the stations)."""
     table, v, faces, path, pf, bump, A = _flat_bump_table()

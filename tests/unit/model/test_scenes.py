@@ -31,7 +31,7 @@ def scenes():
 def test_shipped_scene_loads_and_its_surface_is_closed(scenes, name):
     sc = scenes[name]
     # the paper's cylinder is a Gent solid (its neo-Hookean deep push has no mesh-converged solution), and the
-    # sphere with it (session 19: its nonlinear table); the others neo-Hookean until theirs are built on Gent too
+    # sphere with it (its nonlinear table is Gent); the others neo-Hookean until theirs are built on Gent too
     law = ("gent", 97.2) if name in ("cylinder", "sphere") else ("neo_hookean", None)
     assert sc.name == name and (sc.material.model, sc.material.Jm) == law and 0.0 <= sc.material.nu < 0.5
     v, f = sc.surface_mesh()

@@ -106,7 +106,7 @@ hostile = st.one_of(yaml_leaf, st.sampled_from([math.nan, math.inf, -math.inf, -
 
 @FUZZ
 @given(path=st.sampled_from(PATHS), value=hostile)
-@example(path=("hosts",), value={"\n": None})      # found by hypothesis in session 12: a key with a newline
+@example(path=("hosts",), value={"\n": None})      # found by hypothesis: a key with a newline
 def test_mutated_valid_file(tmp_path, path, value):
     import copy
 

@@ -83,7 +83,7 @@ def test_decode_any_uses_carried_schema():
 
 
 def test_a_descriptor_with_many_huge_dims_gives_one_bounded_line():
-    """The fuzz test's falsifying example (session 26): a 37-dim descriptor with 2^31 / 2^63 sizes made the
+    """The fuzz test's falsifying example: a 37-dim descriptor with 2^31 / 2^63 sizes made the
     reason 401 characters; the shape is now cut after 8 dims (here in the too-many-bytes reason, which writes
     the shape the same way as the buffer-size one)."""
     import struct

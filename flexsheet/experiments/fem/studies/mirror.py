@@ -120,7 +120,7 @@ def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMod
     other azimuth, the held-out check and the node table's off-axis snapshots are half models, *cut*: meshed
     with nodes on the plane through their push axis but no BC there (:class:`RefSpec` ``cut``,
     :data:`flexsheet.fem.snapshots.DEFAULT_REF_SPEC`; uncut half models were 8–12 % stiffer at 40–50 mm than the
-    quarter models of the same h_fine, session 10, docs/fem.md). Here the azimuth-0 push is solved on cut half
+    quarter models of the same h_fine, docs/fem.md). Here the azimuth-0 push is solved on cut half
     models (``st.half_levels``, h_fine m, else as the convergence levels) and compared, every ``st.fine_step``,
     with the finest quarter model (``fine``) and with the quarter model of the same h_fine (from ``conv``'s
     levels, when there is one): per level the force (N), the largest visible-surface difference (mm) and the
