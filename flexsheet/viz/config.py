@@ -2,7 +2,7 @@
 range — that ``nodes/viz``'s ``VizParams`` is built from (:func:`flexsheet.runtime.params.config_fields`).
 Pure and light (no transport, no foxglove import); the ranges are pydantic ``Field`` constraints in the
 annotations, checked when the params are. The geometry here is flat (lists of numbers, as a launch file
-writes them); :class:`flexsheet.viz.foxglove.VizConfig` is what the scene builder takes. The believed sheet's
+writes them); :class:`flexsheet.viz.scene_builder.VizConfig` is what the scene builder takes. The believed sheet's
 settings are the renderer's (:data:`flexsheet.rendering.config.SHEET_PARAMS`); the WebSocket server's
 address is the node's own."""
 

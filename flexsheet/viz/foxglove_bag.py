@@ -26,15 +26,9 @@ from pathlib import Path
 from mcap.writer import Writer
 
 from flexsheet.runtime.codec import DecodeError, decode_any
-from flexsheet.viz.foxglove import (
-    JSON_TOPICS,
-    FoxgloveStreams,
-    Output,
-    Rates,
-    SceneBuilder,
-    VizConfig,
-    channel_schemas,
-)
+from flexsheet.viz.foxglove import JSON_TOPICS, channel_schemas
+from flexsheet.viz.scene_builder import SceneBuilder, VizConfig
+from flexsheet.viz.streams import FoxgloveStreams, Output, Rates
 from messages import Message
 
 __all__ = ["FoxgloveBagChannels", "add_foxglove"]

@@ -20,13 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flexsheet.viz.foxglove import (
-    CAMERA_LEFT,
-    CAMERA_RIGHT,
-    METRICS,
-    RENDER_IMAGE,
-    SCENE,
-)
+from flexsheet.viz.foxglove import CAMERA_LEFT, CAMERA_RIGHT, METRICS, RENDER_IMAGE, SCENE
 from flexsheet.viz.layout import PLOTS
 
 __all__ = ["read_foxglove", "render", "main"]

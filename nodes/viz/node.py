@@ -47,14 +47,9 @@ from flexsheet.rendering.config import SHEET_PARAMS, RendererConfig
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import config_fields, params_model
 from flexsheet.viz.config import VizNodeConfig
-from flexsheet.viz.foxglove import (
-    FoxgloveStreams,
-    Rates,
-    SceneBuilder,
-    VizConfig,
-    channel_schemas,
-    inputs_for,
-)
+from flexsheet.viz.foxglove import channel_schemas, inputs_for
+from flexsheet.viz.scene_builder import SceneBuilder, VizConfig
+from flexsheet.viz.streams import FoxgloveStreams, Rates
 from messages import topics as T
 
 __all__ = ["VizNode", "VizParams"]

@@ -16,9 +16,9 @@ from mcap.writer import Writer
 
 from flexsheet.runtime.bag import ENCODING, BagWriter, read_bag
 from flexsheet.runtime.codec import encode
-from flexsheet.viz.foxglove import Rates
 from flexsheet.viz.foxglove_bag import FoxgloveBagChannels, add_foxglove
 from flexsheet.viz.samples import sample_state
+from flexsheet.viz.streams import Rates
 
 T0 = 1.7e9
 DURATION, RATE = 3.0, 50.0   # a 3 s synthetic run, every input at 50 Hz

@@ -14,18 +14,13 @@ from flexsheet.model import geometry
 from flexsheet.model.projector import Projector
 from flexsheet.model.sheet import SheetSurface
 from flexsheet.runtime.codec import encode
-from flexsheet.viz.foxglove import (
-    SceneBuilder,
-    channel_schemas,
-    frustum_points,
-    inputs_for,
-    quaternions,
-    sheet_mesh,
-)
+from flexsheet.viz.foxglove import channel_schemas, inputs_for
 from flexsheet.viz.foxglove_bag import FoxgloveBagChannels
 from flexsheet.viz.layout import layout
 from flexsheet.viz.preview import read_foxglove, render
+from flexsheet.viz.primitives import frustum_points, quaternions, sheet_mesh
 from flexsheet.viz.samples import sample_state
+from flexsheet.viz.scene_builder import SceneBuilder
 
 ROOT = Path(__file__).resolve().parents[3]
 

@@ -21,7 +21,7 @@ from flexsheet.model import geometry
 from flexsheet.model.sheet import SheetSurface, clamp_poses
 from flexsheet.model.sheet_model import FourTriangleDent, SeriesShape, SheetConfig
 from flexsheet.rendering.state import RendererState
-from flexsheet.viz.foxglove import SceneBuilder, VizConfig
+from flexsheet.viz.scene_builder import SceneBuilder, VizConfig
 from messages import ArmJointState, Fingertip, Header
 
 TOL = 5e-5          # 0.05 mm
