@@ -4,7 +4,7 @@ material, fitted into the renderer's "fine" shader's series form (pure: numpy; t
 
 This is the display's only pushed-sheet shape: the renderer corrects its image for it (``RendererState``
 attaches it to every push, :meth:`NominalSheetModel.pushed`) and the Foxglove bridge draws it as the sheet the
-display believes in (:meth:`flexsheet.viz.foxglove.SceneBuilder.believed_sheet`); both build it with
+display believes in (:meth:`flexsheet.viz.scene_builder.SceneBuilder.believed_sheet`); both build it with
 :func:`sheet_model_for` from the same :class:`SheetConfig`. Why: the old fine correction's sine-series membrane
 (:class:`flexsheet.model.sheet.Membrane`, small-slope, tension ratio 1) is linear; a 1 mm urethane sheet pushed
 10–50 mm is not — the push stretches it, the dent becomes conical, and the series is ~4 mm off at 50 mm where
