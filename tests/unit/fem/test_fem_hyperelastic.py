@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from flexsheet.fem import hyperelastic as H
+from flexsheet.fem import newton as N
 from flexsheet.fem.cache import ArrayCache, cache_key
 from flexsheet.fem.choose import choose_model
 from flexsheet.fem.material import Material
@@ -740,7 +741,7 @@ def test_load_steps_after_a_halved_step_keep_the_halved_size(quarter, monkeypatc
             return u, 3, False
         return real(model, u, caps, k, iters, tol_u, tol_r, log, state, max_step, shifted)
 
-    monkeypatch.setattr(H, "_newton", flaky)
+    monkeypatch.setattr(N, "_newton", flaky)
     st = H.solve_path(quarter, 0.0, [0.002, 0.004, 0.006], 0.008, step=0.002)
     assert all(s.converged for s in st)
     # 2 mm, then 4 mm fails, 3 mm (halved), then 1 mm steps to 6 mm
@@ -807,7 +808,7 @@ def test_newton_that_crawls_on_the_projected_tangent_switches_to_the_shifted_tru
     assert st["projected"] == H.CRAWL_ITERS + 2 and st["shifted"] >= 1, st
     # x0 ≈ 0.05·1.035⁶: −∂²Π/∂x0² ≈ 3.9 needs μ·max diag = μ·10⁶ > 3.9, so μ = 1e-5 (1e-6 gives 1.0)
     assert st["mu"] == pytest.approx(1e-5)
-    monkeypatch.setattr(H, "CRAWL_ITERS", 10 ** 6)   # projected Newton alone
+    monkeypatch.setattr(N, "CRAWL_ITERS", 10 ** 6)   # projected Newton alone
     st2: dict = {}
     u2, its2, conv2 = H._newton(_LimitPoint(), u0, None, 0.0, 400, 1e-10, 1e-9, None, st2, max_step=10.0)
     assert conv2 and abs(u2[0, 0] - 1.0) < 1e-9 and "shifted" not in st2
@@ -815,13 +816,13 @@ def test_newton_that_crawls_on_the_projected_tangent_switches_to_the_shifted_tru
     # where no shift makes the tangent positive definite (here at the second shifted step), that step is projected
     # and the solve stays in shifted mode: one more projected step, not a second crawl (the bug it had: 10)
     real, calls = H._shifted_step, []
-    monkeypatch.setattr(H, "CRAWL_ITERS", 4)
-    monkeypatch.setattr(H, "_shifted_step", lambda *a: calls.append(1) or (None if len(calls) == 2 else real(*a)))
+    monkeypatch.setattr(N, "CRAWL_ITERS", 4)
+    monkeypatch.setattr(N, "_shifted_step", lambda *a: calls.append(1) or (None if len(calls) == 2 else real(*a)))
     st3: dict = {}
     u3, its3, conv3 = H._newton(_LimitPoint(), u0, None, 0.0, 60, 1e-10, 1e-9, None, st3, max_step=10.0)
     assert conv3 and abs(u3[0, 0] - 1.0) < 1e-9 and st3["projected"] == H.CRAWL_ITERS + 3, st3
     # a call that continues one which ended shifted (nh-7) starts shifted: no projected step, no second crawl
-    monkeypatch.setattr(H, "_shifted_step", real)
+    monkeypatch.setattr(N, "_shifted_step", real)
     st4: dict = {}
     u4, its4, conv4 = H._newton(_LimitPoint(), u0, None, 0.0, 60, 1e-10, 1e-9, None, st4, max_step=10.0,
                                 shifted=True)
@@ -861,13 +862,13 @@ def test_lagged_preconditioner_newton_reaches_the_same_states_with_fewer_factori
             counts[label] = dict(state)
             return out
 
-        monkeypatch.setattr(H, "_newton", counting)
+        monkeypatch.setattr(N, "_newton", counting)
         st = H.solve_path(quarter, 0.0, depths, 0.008, step=0.005)
-        monkeypatch.setattr(H, "_newton", real)
+        monkeypatch.setattr(N, "_newton", real)
         return st
 
     nk = run("nk")
-    monkeypatch.setattr(H, "PCG_MAXITER", 0)
+    monkeypatch.setattr(N, "PCG_MAXITER", 0)
     exact = run("exact")
     assert all(s.converged for s in nk + exact)
     for a, b in zip(nk, exact, strict=True):
@@ -893,7 +894,7 @@ def test_stiffer_penalty_penetrates_less_and_is_validated(quarter):
 
 
 def _newton_calls(monkeypatch, budget):
-    """Patch ``H._newton`` so that call i may take only ``budget(i)`` iterations (reporting the full ``iters``
+    """Patch ``N._newton`` so that call i may take only ``budget(i)`` iterations (reporting the full ``iters``
     when it runs out, as the real one does; a call that stagnates exactly at its budget reads as run out too);
     returns the list of calls (start u, finger centre, returned u, iterations, converged, shifted)."""
     real, calls = H._newton, []
@@ -905,7 +906,7 @@ def _newton_calls(monkeypatch, budget):
         calls.append((u.copy(), caps.center.copy(), un.copy(), its, conv, shifted))
         return un, its, conv
 
-    monkeypatch.setattr(H, "_newton", limited)
+    monkeypatch.setattr(N, "_newton", limited)
     return calls
 
 
