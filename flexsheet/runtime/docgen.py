@@ -1,7 +1,7 @@
 """Generate ``docs/messages.md`` from the message models (``python -m flexsheet.runtime.docgen``).
 
-The table of each message lists every field with its type and description (units and frames are in the
-descriptions and the class docstring). A test checks that the committed file is up to date.
+The table of each message lists every field but the common ``header`` with its type and description (units and
+frames are in the descriptions and the class docstring). A test checks that the committed file is up to date.
 """
 
 from __future__ import annotations
@@ -40,9 +40,11 @@ def render() -> str:
             continue
         seen.add(cls)
         schema = getattr(cls, "SCHEMA", cls.__name__)
-        lines += ["", f"## {cls.__name__} (`{schema}`)", "", inspect.cleandoc(cls.__doc__ or ""), "",
+        lines += ["", f"## {cls.__name__} (`{schema}`)", inspect.cleandoc(cls.__doc__ or ""), "",
                   "| field | type | description |", "|---|---|---|"]
         for name, f in cls.model_fields.items():
+            if name == "header":     # every message's, described above
+                continue
             desc = (f.description or "").replace("|", "\\|")
             if not desc:
                 for m in f.metadata:
