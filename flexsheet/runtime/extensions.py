@@ -71,8 +71,9 @@ def extensions() -> tuple[LaunchExtension, ...]:
     return tuple(found)
 
 
+@functools.cache
 def sections() -> dict[str, LaunchSection]:
-    """Key → :class:`LaunchSection` over every extension."""
+    """Key → :class:`LaunchSection` over every extension (one dict, shared: do not mutate)."""
     return {s.key: s for ext in extensions() for s in ext.sections}
 
 

@@ -34,6 +34,7 @@ self-connect), and the respawned node then cannot bind (seen in CI: a renderer u
 from __future__ import annotations
 
 import concurrent.futures
+import functools
 import glob
 import importlib.util
 import ipaddress
@@ -81,15 +82,18 @@ def is_input_file_key(key: str) -> bool:
     return key in _INPUT_NAMES or key.endswith("_file")
 
 
+@functools.cache
 def _file_readers() -> dict[str, Callable[[str], None]]:
     """Param name → reader that raises ``ValueError``/``OSError`` for a file it cannot use (launch extensions)."""
     return {k: r for ext in extensions() for k, r in ext.file_readers.items()}
 
 
+@functools.cache
 def _output_params() -> dict[tuple[str, str], str]:
     return {**OUTPUT_PARAMS, **{k: v for ext in extensions() for k, v in ext.output_params.items()}}
 
 
+@functools.cache
 def _listen_params() -> dict[str, tuple[str, str]]:
     return {k: v for ext in extensions() for k, v in ext.listen_params.items()}
 
@@ -177,6 +181,9 @@ class _Checker:
         self.subs = substitutions(lf, out)
         self.hosts = [host] if host else list(lf.hosts)
         self.res.hosts = self.hosts
+        #: the launch extensions' values for the nodes that take them (not None), as node_config hands them on
+        self.graph_wide = {k: v for k, sec in launch_sections().items()
+                           if (v := sec.node_value(lf.section(k), lf, out)) is not None}
 
     def err(self, where: str, value: Any, msg: str) -> None:
         self.res.errors.append(f"{self.lf.path}: {where} = {_short(value)}: {msg}")
@@ -334,12 +341,9 @@ class _Checker:
                 else:
                     self.warn(f"node {name} (host {spec.host}): {msg}; its params are not checked")
                 continue
-            injected = set()   # graph-wide values, as node_config fills them in; each file is checked once
-            for key, sec in launch_sections().items():
-                value = sec.node_value(self.lf.section(key), self.lf, self.out)
-                if value is not None and key in model.model_fields and key not in params:
-                    params[key] = value
-                    injected.add(key)
+            # graph-wide values, as node_config fills them in; each file is checked once, by its extension
+            injected = {k for k in self.graph_wide if k in model.model_fields and k not in params}
+            params.update({k: self.graph_wide[k] for k in injected})
             try:
                 model.model_validate(params)
             except ValidationError as exc:

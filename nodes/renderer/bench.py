@@ -25,7 +25,7 @@ import sys
 import threading
 import time
 
-from flexsheet.benches.render import BENCH_STRETCH, bench_sheets, sheet_update, time_models  # noqa: F401
+from flexsheet.benches.render import bench_sheets, sheet_update, time_models
 from flexsheet.model.projector import Projector
 from flexsheet.rendering.state import sheet_model_for
 from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_mesh
