@@ -116,7 +116,8 @@ def _run_container(args: argparse.Namespace) -> int:
             return EXIT_CONFIG
         overrides.setdefault(node, {}).update(_parse_params([kv]))
     _setup_logging()
-    return run_container(args.launch, args.container, host=args.host, out=args.out, overrides=overrides)
+    return run_container(args.launch, args.container, host=args.host, out=args.out, overrides=overrides,
+                         sim_until=args.sim_duration)
 
 
 # ----------------------------------------------------------------------------------------------- launch
@@ -255,8 +256,9 @@ def _add_launch_parser(sub) -> None:
                               "  flexsheet launch launch/sim.yaml --set twin.truth_seed=2 --set scene=launch/scenes/sphere.yaml"))
     s.add_argument("file", help="launch YAML file")
     s.add_argument("--host", help="start only the nodes of this host (default: all hosts, on this machine)")
-    s.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C "
-                                                   "or the scripted run ends)")
+    s.add_argument("--duration", type=float, help="stop after this many seconds — simulated seconds in a "
+                                                   "'clock: sim' file (default: until Ctrl-C or the scripted "
+                                                   "run ends)")
     s.add_argument("--out", help="output folder for bags, charts and the report (substituted for $(out))")
     s.add_argument("--set", action="append", metavar="NODE.KEY=VALUE", default=[],
                    help="override one node parameter (YAML value), repeatable: --set world.loop=true; or a "
@@ -288,6 +290,8 @@ def _add_run_parser(sub) -> None:
     s.add_argument("--host", help="with --container: the host whose share of the container to run")
     s.add_argument("--set", action="append", metavar="NODE.KEY=VALUE", default=[],
                    help="with --container: override one node parameter (YAML value), repeatable")
+    s.add_argument("--sim-duration", type=float, metavar="S", help="with --container of a 'clock: sim' file: stop "
+                   "after S simulated seconds (flexsheet launch --duration passes it)")
     s.set_defaults(func=cmd_run)
 
 

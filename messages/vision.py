@@ -67,8 +67,8 @@ class Fingertip(Message):
     not be used (never a stale or invented position). ``predicted_position`` (3,) m is the constant-velocity
     Kalman prediction ``prediction_horizon`` s ahead of ``header.stamp`` (horizon 0 when the predictor is
     off; then it equals ``position``). ``exposure_stamp`` (s) is the camera exposure the estimate comes from,
-    and ``frame_stamp`` (s) the time that frame was published by the camera node (its ``header.stamp``),
-    both carried for latency accounting. ``reprojection_px``: epipolar/reprojection residual, px.
+    ``frame_stamp`` (s) the time that frame was published by the camera node (its ``header.stamp``) and
+    ``sent_stamp`` (s) the time this estimate was published, all carried for latency accounting. ``reprojection_px``: epipolar/reprojection residual, px.
     """
 
     SCHEMA = "flexsheet/Fingertip"
@@ -81,4 +81,5 @@ class Fingertip(Message):
     prediction_horizon: float = Field(default=0.0, ge=0.0, description="prediction horizon, s")
     exposure_stamp: float = Field(description="exposure time of the source frame, s")
     frame_stamp: float = Field(default=0.0, description="time the source stereo frame was published, s")
+    sent_stamp: float = Field(default=0.0, description="time this estimate was published, s")
     reprojection_px: float = Field(default=0.0, ge=0.0, description="epipolar residual, px")

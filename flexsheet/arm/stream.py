@@ -123,20 +123,23 @@ class ArmStream:
 
     Parameters: ``tracker`` (goal source), ``limiter`` (command shaping; its period is the cycle period),
     ``link`` (the protocol backend), ``backoff_min``/``backoff_max`` s (reopen delays), ``on_cycle``
-    callback(CycleReport), ``clock`` (wall clock for stamps, default ``time.time``). ``enabled=False``: the
+    callback(CycleReport), ``clock`` (wall clock for stamps, default ``time.time``), ``monotonic`` (interval
+    clock of the reconnect backoff and the cycle times, default ``time.monotonic``; a simulated clock's time
+    when :meth:`cycle` is driven by its timers instead of :meth:`run`). ``enabled=False``: the
     stream reads the controller every cycle and commands nothing (``hold:disabled``; first bring-up).
     """
 
     def __init__(self, tracker: TargetTracker, limiter: StreamLimiter, link: ControllerLink, *,
                  backoff_min: float = 0.05, backoff_max: float = 2.0,
                  on_cycle: Callable[[CycleReport], None] | None = None, clock=time.time,
-                 enabled: bool = True) -> None:
+                 enabled: bool = True, monotonic: Callable[[], float] = time.monotonic) -> None:
         self.tracker = tracker
         self.limiter = limiter
         self.link = link
         self.backoff_min, self.backoff_max = float(backoff_min), float(backoff_max)
         self.on_cycle = on_cycle
         self.clock = clock
+        self.monotonic = monotonic
         self.enabled = enabled
         self.period = limiter.T
         self.backoff = self.backoff_min
@@ -169,7 +172,7 @@ class ArmStream:
         self.link.connected = False
         self.state = None
         self._snap = None
-        self.next_connect = time.monotonic() + self.backoff
+        self.next_connect = self.monotonic() + self.backoff
         self.backoff = min(self.backoff_max, self.backoff * 2.0)
 
     # ------------------------------------------------------------------ one cycle
@@ -210,8 +213,17 @@ class ArmStream:
             self._note_write(stamp)
             self.refreshes += 1
 
+    async def rewrite_now(self) -> bool:
+        """For a driver without :meth:`run` (a simulated clock): after :meth:`refresh` marked the period dirty,
+        redo this period's step toward the new goal and send it now. True if it was sent."""
+        if not self._dirty:
+            return False
+        n = self.refreshes
+        await self._rewrite()
+        return self.refreshes > n
+
     async def _cycle(self, t_deadline: float) -> CycleReport:
-        t0 = time.monotonic()
+        t0 = self.monotonic()
         self.cycles += 1
         self._dirty = False
         link = self.link

@@ -354,8 +354,11 @@ class Container:
     """
 
     def __init__(self, name: str, members: list[Member], bus: Bus, shutdown_timeout: float = 3.0,
-                 print_fn: Callable[[str], None] | None = None, cpu_file: str | None = None) -> None:
+                 print_fn: Callable[[str], None] | None = None, cpu_file: str | None = None,
+                 sim_until: float | None = None, sim_file: str | None = None) -> None:
         self.name, self.members, self.bus = name, members, bus
+        self.sim_until = sim_until   # live simulated clock: stop after this many simulated seconds
+        self.sim_file = sim_file     # live simulated clock: where the run's clock figures go (JSON)
         self.shutdown_timeout = shutdown_timeout
         self.print = print_fn or (lambda line: print(line, flush=True))
         self.cpu_file = cpu_file
@@ -450,10 +453,15 @@ class Container:
             return 1
         self.print(f"container {self.name}: {len(self.members)} nodes in pid {os.getpid()}: "
                    + ", ".join(m.name for m in self.members)
-                   + (" (lockstep: replayed clock)" if self.bus.lockstep is not None else ""))
+                   + ((" (simulated clock)" if self.bus.clock.live else " (lockstep: replayed clock)")
+                      if self.bus.lockstep is not None else ""))
         tasks = {loop.create_task(self._member(m)): m for m in self.members}
+        driver = loop.create_task(self._drive()) if getattr(self.bus.clock, "live", False) else None
         await self._stop.wait()
         self._stopping = True
+        if driver is not None:
+            driver.cancel()
+            await asyncio.gather(driver, return_exceptions=True)
         for m in reversed(self.members):
             if m.node is not None:
                 m.node.shutdown()
@@ -468,6 +476,57 @@ class Container:
                 loop.remove_signal_handler(sig)
         self._write_cpu(time.monotonic() - t0, time.process_time() - c0)
         return self.code
+
+    async def _drive(self) -> None:
+        """Drive the live simulated clock (:func:`flexsheet.runtime.lockstep.run_live`) until ``sim_until``
+        simulated seconds (then stop the container) or the stop; write the clock figures."""
+        from flexsheet.runtime.lockstep import SIM_EPOCH, run_live
+
+        t0 = time.monotonic()
+        ready_s = None
+
+        def stopped() -> bool:
+            return self._stopping
+
+        async def wait_ready() -> None:
+            nonlocal ready_s
+            while not self.bus.ready() and not self._stopping:
+                await asyncio.sleep(0.01)
+            ready_s = time.monotonic() - t0
+            self.print(f"container {self.name}: every node active after {ready_s:.1f} s; simulated time starts at "
+                       f"{SIM_EPOCH:g} s" + (f" and runs {self.sim_until:g} s" if self.sim_until else ""))
+
+        stats = None
+        try:
+            await wait_ready()
+            stats = await run_live(self.bus, self.sim_until, stopped)
+            if self.sim_until is not None and not self._stopping:
+                self.reason = f"simulated duration {self.sim_until:g} s reached"
+                self.print(f"container {self.name}: {self.reason} in {stats.wall_s:.1f} s of wall time "
+                           f"(real-time factor {stats.speed:.2f})")
+                self._stop.set()
+        finally:
+            self._write_sim(stats, ready_s)
+
+    def _write_sim(self, stats, ready_s: float | None) -> None:
+        if not self.sim_file:
+            return
+        ls = self.bus.lockstep
+        host_cpu = {m.name: m.cpu_s + (m.node.cpu_seconds() if m.node is not None else 0.0) for m in self.members}
+        data = {"clock": "sim", "ready_wall_s": ready_s,
+                "sim_s": stats.bag_s if stats else 0.0, "wall_s": stats.wall_s if stats else 0.0,
+                "realtime_factor": stats.speed if stats else 0.0,
+                "handled": stats.handled if stats else 0, "timer_ticks": stats.timers if stats else 0,
+                "superseded_latest": ls.dropped,
+                "charged_compute_s": dict(sorted(ls.charged.items())),
+                "host_handler_cpu_s": host_cpu,
+                "note": "charged_compute_s: simulated time charged to each node (declared sim_cost: the lab's "
+                        "timings); host_handler_cpu_s: what its handlers took on this host (thread CPU time)"}
+        try:
+            Path(self.sim_file).parent.mkdir(parents=True, exist_ok=True)
+            Path(self.sim_file).write_text(json.dumps(data, indent=1))
+        except OSError as exc:
+            self.print(f"container {self.name}: cannot write {self.sim_file}: {exc}")
 
     def _write_cpu(self, wall: float, cpu: float) -> None:
         if not self.cpu_file:
@@ -491,7 +550,8 @@ def container_members(lf, name: str, host: str | None) -> list[str]:
 
 def container_from_launch(lf, name: str, host: str | None = None, out: str | None = None,
                           overrides: dict[str, dict[str, Any]] | None = None,
-                          print_fn: Callable[[str], None] | None = None) -> Container:
+                          print_fn: Callable[[str], None] | None = None,
+                          sim_until: float | None = None) -> Container:
     """The :class:`Container` of nodes ``container: name`` on ``host`` of launch file ``lf``.
 
     ``overrides``: node → {param: value}. A container whose ``player`` node has ``mode: lockstep`` runs on a
@@ -516,7 +576,13 @@ def container_from_launch(lf, name: str, host: str | None = None, out: str | Non
     lockstep = any(lf.nodes[n].type == "player" and configs[n].params.get("mode") == "lockstep" for n in names)
     members_eps = {configs[n].endpoint for n in names}
     peers = [ep for ep in lf.endpoints().values() if ep not in members_eps]
-    bus = Bus(name, peers, curve_config(lf, host), SimClock() if lockstep else None)
+    live = getattr(lf, "clock", "wall") == "sim"
+    clock = SimClock(live=live) if (lockstep or live) else None
+    if live:   # simulated time stands at its epoch while the nodes set up, then runs (run_live)
+        from flexsheet.runtime.lockstep import SIM_EPOCH
+
+        clock.set(SIM_EPOCH)
+    bus = Bus(name, peers, curve_config(lf, host), clock)
     members = []
     for n in names:
         spec = lf.nodes[n]
@@ -528,11 +594,13 @@ def container_from_launch(lf, name: str, host: str | None = None, out: str | Non
         members.append(Member(n, make, spec.respawn.policy, spec.respawn.delay, spec.respawn.max_restarts,
                               spec.required))
     cpu_file = os.path.join(out, f"cpu_{name}.json") if out else None
-    return Container(name, members, bus, shutdown_timeout=lf.shutdown_timeout, print_fn=print_fn, cpu_file=cpu_file)
+    sim_file = os.path.join(out, "sim_clock.json") if (out and live) else None
+    return Container(name, members, bus, shutdown_timeout=lf.shutdown_timeout, print_fn=print_fn, cpu_file=cpu_file,
+                     sim_until=sim_until if live else None, sim_file=sim_file)
 
 
 def run_container(launch: str, name: str, host: str | None = None, out: str | None = None,
-                  overrides: dict[str, dict[str, Any]] | None = None) -> int:
+                  overrides: dict[str, dict[str, Any]] | None = None, sim_until: float | None = None) -> int:
     """``flexsheet run --container NAME --launch FILE``: run that container in this process; returns the exit
     status (78 for a launch-file or configuration error)."""
     import sys
@@ -541,7 +609,7 @@ def run_container(launch: str, name: str, host: str | None = None, out: str | No
 
     try:
         lf = load_launch(launch)
-        c = container_from_launch(lf, name, host, out, overrides)
+        c = container_from_launch(lf, name, host, out, overrides, sim_until=sim_until)
     except LaunchError as exc:
         print(f"flexsheet run --container {name}: configuration error: {exc}", file=sys.stderr)
         return EXIT_CONFIG

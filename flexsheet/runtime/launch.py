@@ -3,6 +3,7 @@
 A launch file (``launch/*.yaml``) is the single source of truth for hosts and ports::
 
     name: sim
+    clock: sim                       # sim: one process on simulated time (flexsheet.runtime.lockstep); wall
     hosts:
       main: {address: 127.0.0.1}
     base_port: 7100                  # nodes without a port get base_port + their index
@@ -37,6 +38,9 @@ the heartbeats of every node of the file (all hosts) and reports a node or host 
 Ctrl-C/SIGTERM stops all children in reverse order with escalation SIGINT → SIGTERM → SIGKILL. Children
 get ``PR_SET_PDEATHSIG`` so that not even a ``kill -9`` of the launcher leaves orphans. With ``--out`` it samples
 each child's CPU time (``/proc/<pid>/stat``) and writes ``$(out)/cpu.json`` when it stops.
+``clock: sim`` (default ``wall``) runs the whole graph on simulated time: every node in one container,
+:data:`SIM_CONTAINER`, driven by :func:`flexsheet.runtime.lockstep.run_live` (the file's nodes must share one
+host; a node's own ``container:`` is then ignored); ``--duration`` counts simulated seconds.
 Errors: :class:`LaunchError` naming the file, the key and the wrong value.
 Source: ros2/launch ``launch_service.py`` (minus its substitution layer), supervisord's policies.
 """
@@ -59,12 +63,14 @@ from flexsheet.yamlio import UniqueKeyLoader
 
 __all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "SecuritySpec", "load_launch", "node_config",
            "curve_config", "keys_dir", "public_keys", "substitutions", "substitute", "keygen_command",
-           "TOPLEVEL_ENV", "parse_toplevel_set",
+           "TOPLEVEL_ENV", "parse_toplevel_set", "SIM_CONTAINER",
            "DEFAULT_KEYS_DIR", "PUBLIC_KEYS_FILE"]
 
 #: where ``flexsheet keys generate`` writes and CURVE looks when neither ``$FLEXSHEET_KEYS`` nor
 #: ``security.keys_dir`` says otherwise
 DEFAULT_KEYS_DIR = "~/.flexsheet/keys"
+#: the container that holds every node of a ``clock: sim`` launch file
+SIM_CONTAINER = "sim_clock"
 #: the host → public key YAML that ``flexsheet keys generate`` writes into the keys folder
 PUBLIC_KEYS_FILE = "public_keys.yaml"
 
@@ -173,6 +179,8 @@ class LaunchFile(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     name: str = "graph"
     description: str = ""
+    clock: Literal["sim", "wall"] = Field(default="wall", description="sim: the whole graph in one process on "
+                                          "simulated time (deterministic); wall: the host's clock")
     hosts: dict[str, HostSpec] = Field(default_factory=lambda: {"localhost": HostSpec()})
     base_port: int = Field(default=7100, ge=1024, le=65000)
     heartbeat_period: float = Field(default=1.0, gt=0.0)
@@ -266,6 +274,13 @@ def load_launch(path: str | Path) -> LaunchFile:
         if spec.container is not None and spec.container in lf.nodes:
             lines.append(f"{path}: key 'nodes.{name}.container': container name {spec.container!r} is also a node "
                          "name; give the container its own name")
+    if lf.clock == "sim":
+        hosts = sorted({s.host for s in lf.nodes.values()})
+        if len(hosts) > 1:
+            lines.append(f"{path}: key 'clock': sim runs the graph in one process, but its nodes are on hosts "
+                         f"{', '.join(hosts)}; put them on one host or use clock: wall")
+        for spec in lf.nodes.values():
+            spec.container = SIM_CONTAINER
     if lf.security.curve and lf.security.public_keys_file is None:  # a keys file is read when used (check)
         missing = [h for h in lf.hosts if h not in lf.security.public_keys]
         if missing:

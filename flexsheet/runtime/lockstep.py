@@ -1,5 +1,14 @@
-"""Deterministic, fast replay: a bag played into a container in lockstep, on the bag's clock.
+"""Simulated time for a container: a bag replayed in lockstep, or a live simulated graph (``clock: sim``).
 
+Live simulated graph. A launch file with ``clock: sim`` runs every node in one container on a
+:class:`~flexsheet.runtime.node.SimClock` driven by :func:`run_live` (Gazebo's lockstep, ROS 2's
+``use_sim_time``, a discrete-event simulation): time starts once every node is set up and then jumps from
+event to event — a timer, a delivery — only when everything due has been handled. Each subscription and timer
+declares the simulated time one call takes (``sim_cost``: the lab PC's compute, a device's latency); the node
+is busy meanwhile and its output leaves, stamped, at the end. Nothing depends on the host's speed: two runs
+with one seed publish byte-identical messages, stamps included; the host only sets the real-time factor.
+
+Lockstep replay.
 ``flexsheet launch launch/replay.yaml --set player.mode=lockstep`` plays the bag into the nodes of the
 player's container as fast as they can handle it: each message is delivered, handled by every subscription
 it reaches, and the messages those handlers publish are delivered and handled in turn (breadth first, in a
@@ -27,16 +36,24 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import heapq
+import itertools
+import math
+import threading
 import time
 from typing import TYPE_CHECKING, Any
 
-from flexsheet.runtime.node import ConfigError
+from flexsheet.runtime.node import ConfigError, QoS
 
 if TYPE_CHECKING:
     from flexsheet.runtime.container import Bus
     from flexsheet.runtime.node import Node, Subscription
 
-__all__ = ["Lockstep", "check", "play", "LockstepStats"]
+__all__ = ["Lockstep", "check", "play", "run_live", "LockstepStats", "SIM_EPOCH", "WALL_TOPICS"]
+
+#: simulated time at which a live simulated graph starts, s (a fixed, clearly simulated instant: runs of one
+#: seed carry identical stamps, and no stamp is 0, which some fields use for "none")
+SIM_EPOCH = 1000.0
 
 
 class LockstepStats:
@@ -57,45 +74,177 @@ class LockstepStats:
 
 
 class Lockstep:
-    """The lockstep scheduler of a container's :class:`~flexsheet.runtime.container.Bus`: subscriptions queue
-    their input here (:meth:`enqueue`, any thread) instead of on their consumers, and :meth:`drain` handles it
-    one item at a time on the loop."""
+    """The discrete-event scheduler of a container's :class:`~flexsheet.runtime.container.Bus` on a
+    :class:`~flexsheet.runtime.node.SimClock`: subscriptions queue their input here (:meth:`enqueue`) instead
+    of on their consumers; :meth:`drain` handles what is due, one item at a time on the loop, and
+    :meth:`advance` moves the clock to a later instant, firing timers and deliveries in due order.
+
+    Live simulated clock (``clock.live``): a handler (or timer) with ``sim_cost`` c started at t makes its node
+    busy until t + c; what it publishes is delivered at t + c and stamped t + c (``Clock.stamp``); an item
+    due while its node is busy waits until the node is free (QoS ``latest``: only the newest waiting item is
+    handled, the older are dropped and counted). In a lockstep replay every cost is 0: breadth first, in
+    publication order, as before. Wall-clock topics (``/diagnostics``) are handled when they arrive, without
+    charge or wait (their content is wall time: they tell liveness, not simulated state).
+    """
 
     def __init__(self, bus: Bus) -> None:
         self.bus = bus
         self.clock = bus.clock
-        self.agenda: collections.deque = collections.deque()
+        self.live = bool(getattr(bus.clock, "live", False))
+        self.heap: list = []            # (due s, order, sub, item)
+        self._order = itertools.count()
+        self._lock = threading.Lock()
+        self.busy: dict = {}            # node -> simulated time it is free again, s
         self.stats = LockstepStats()
+        self.charged: dict[str, float] = collections.defaultdict(float)   # node name -> charged compute, s
+        self.dropped = 0                # latest-QoS items superseded while their node was busy
+
+    @property
+    def agenda(self) -> list:
+        """The queued items (tests: empty after a drain)."""
+        return [(sub, item) for _, _, sub, item in self.heap]
 
     def enqueue(self, sub: Subscription, item: Any) -> None:
-        self.agenda.append((sub, item))  # deque.append is atomic: safe from any thread
+        """Queue ``item`` for ``sub`` (any thread): due when the running handler's output leaves."""
+        if sub.topic.name in WALL_TOPICS:
+            due = self.clock.now()
+        else:
+            due = self.clock.stamp()
+        with self._lock:
+            key = (due, next(self._order))
+            sub.newest = key
+            heapq.heappush(self.heap, (key[0], key[1], sub, item))
+
+    def next_due(self) -> float | None:
+        """Due time of the earliest queued item or timer, s (None: nothing scheduled)."""
+        t = self.heap[0][0] if self.heap else None
+        tm = self.clock.next_due(math.inf)
+        if tm is not None and (t is None or tm.due < t):
+            t = tm.due
+        return t
+
+    async def _charged(self, node: Node, cost: float, call) -> None:
+        """Run ``call`` (an awaitable) as ``node``'s work of ``cost`` s: busy, output stamped at the end."""
+        clock = self.clock
+        if not self.live:
+            await call
+            return
+        end = clock.now() + cost
+        if cost > 0.0:
+            self.busy[node] = end
+            self.charged[node.name] += cost
+        clock.emit = end
+        try:
+            await call
+        finally:
+            clock.emit = None
+
+    def charge(self, node: Node, seconds: float) -> None:
+        """The running call of ``node`` takes ``seconds`` more of simulated time (live clock only; outside a
+        scheduled call nothing happens)."""
+        clock = self.clock
+        if not self.live or clock.emit is None or not seconds > 0.0:
+            return
+        clock.emit += seconds
+        self.busy[node] = clock.emit
+        self.charged[node.name] += seconds
 
     async def drain(self) -> None:
-        """Handle every queued item, and what their handlers publish, until nothing is left."""
-        agenda = self.agenda
-        while agenda:
-            sub, item = agenda.popleft()
+        """Handle every queued item due now (and what their handlers publish that is due now)."""
+        heap, clock = self.heap, self.clock
+        while heap and heap[0][0] <= clock.now():
+            with self._lock:
+                due, order, sub, item = heapq.heappop(heap)
             if sub._closed:
                 continue
-            await sub.handle_now(item)
+            node = sub.node
+            if sub.topic.name not in WALL_TOPICS:
+                free = self.busy.get(node, -math.inf)
+                if free > clock.now():          # the node is still working: the item waits for it
+                    with self._lock:
+                        heapq.heappush(heap, (free, order, sub, item))
+                    continue
+                if self.live and sub.qos is not QoS.KEEP_ALL and sub.newest is not None and sub.newest[1] != order \
+                        and sub.newest[0] <= clock.now():
+                    self.dropped += 1           # a newer item for this latest-QoS subscription is due
+                    sub.stats.dropped += 1
+                    continue
+                await self._charged(node, sub.sim_cost, sub.handle_now(item))
+            else:
+                await sub.handle_now(item)
             self.stats.handled += 1
 
     async def advance(self, t: float) -> None:
-        """Fire, in due order, every timer due at or before ``t`` s (the clock reads each one's due time while
-        it runs, and what it publishes is handled), then set the clock to ``t``."""
+        """Move the clock to ``t`` s, in due order: fire every timer due at or before ``t`` (the clock reads
+        its due time while it runs; a timer whose node is busy fires when it is free) and deliver every queued
+        item due by then, handling what they publish; then set the clock to ``t``."""
         clock = self.clock
         if not clock.started:
             clock.set(t)
         while True:
+            await self.drain()
             tm = clock.next_due(t)
-            if tm is None:
+            item_due = self.heap[0][0] if self.heap else math.inf
+            if tm is None and item_due > t:
                 break
+            if tm is None or item_due < tm.due:
+                clock.set(item_due)
+                continue
+            free = self.busy.get(tm.node, -math.inf)
+            if free > tm.due:                    # its node is busy: the tick waits for it
+                tm.due = free
+                continue
             clock.set(tm.due)
             tm.due += tm.period
-            await tm.node._fire(tm.callback)
+            if tm.due <= clock.now():           # overran: restart the schedule rather than burst
+                tm.due = clock.now() + tm.period
+            await self._charged(tm.node, tm.sim_cost, tm.node._fire(tm.callback))
             self.stats.timers += 1
-            await self.drain()
         clock.set(t)
+
+
+#: topics whose content is wall time (liveness), handled on arrival without charge on a simulated clock
+WALL_TOPICS = frozenset({"/diagnostics"})
+
+
+async def run_live(bus: Bus, until: float | None, stopped, epoch: float = SIM_EPOCH) -> LockstepStats:
+    """Drive a live simulated graph (launch files' ``clock: sim``) until ``until`` s of simulated time after
+    ``epoch`` (None: until ``stopped()`` is true, e.g. a required node ended).
+
+    Simulated time starts at ``epoch`` once every node of the container finished its setup (as ROS 2
+    lifecycle nodes become *active*), and then advances only when everything due has been handled:
+    from one event (a timer, a delivery) to the next. The loop yields to asyncio between events, so signals,
+    heartbeats and subscribers outside the process are served. Returns the statistics (``bag_s``: simulated
+    seconds, ``wall_s``, ``speed`` = the real-time factor)."""
+    ls = bus.lockstep
+    while not bus.ready():
+        if stopped():
+            return ls.stats
+        await asyncio.sleep(0.01)
+    if not ls.clock.started:
+        ls.clock.set(epoch)
+    epoch = ls.clock.now()
+    t0 = time.monotonic()
+    end = math.inf if until is None else epoch + until
+    st = ls.stats
+    n = 0
+    while not stopped():
+        nxt = ls.next_due()
+        if nxt is None:
+            await asyncio.sleep(0.001)
+            continue
+        if nxt > end:
+            await ls.advance(end)
+            break
+        await ls.advance(nxt)
+        n += 1
+        if n % 8 == 0:
+            await asyncio.sleep(0)   # serve the loop: signals, heartbeats, sockets
+        st.bag_s = ls.clock.now() - epoch
+        st.wall_s = time.monotonic() - t0
+    st.bag_s = ls.clock.now() - epoch
+    st.wall_s = time.monotonic() - t0
+    return st
 
 
 def check(player: Node) -> Lockstep:

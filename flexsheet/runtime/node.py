@@ -120,6 +120,11 @@ class Clock:
     def now(self) -> float:
         return time.time()
 
+    def stamp(self) -> float:
+        """The default ``Header.stamp`` of what is published now: :meth:`now` here; on a live simulated clock the
+        time the running handler's output leaves (its start plus its charged compute)."""
+        return time.time()
+
 
 #: the wall clock every node uses unless its container replays a bag in lockstep
 WALL_CLOCK = Clock()
@@ -129,11 +134,13 @@ class SimTimer:
     """A :meth:`Node.timer` on a :class:`SimClock`: fired by the lockstep driver when the replayed time passes
     ``due`` (s); ``cancel()`` stops it."""
 
-    __slots__ = ("period", "callback", "node", "due", "index", "cancelled")
+    __slots__ = ("period", "callback", "node", "due", "index", "cancelled", "sim_cost")
 
-    def __init__(self, period: float, callback: Callable, node: Node, due: float | None, index: int) -> None:
+    def __init__(self, period: float, callback: Callable, node: Node, due: float | None, index: int,
+                 sim_cost: float = 0.0) -> None:
         self.period, self.callback, self.node, self.due, self.index = period, callback, node, due, index
         self.cancelled = False
+        self.sim_cost = float(sim_cost)
 
     def cancel(self) -> None:
         self.cancelled = True
@@ -143,19 +150,27 @@ class SimTimer:
 
 
 class SimClock(Clock):
-    """Replayed time for a lockstep replay (ROS ``use_sim_time``): :meth:`set` by the player to each bag
-    message's log time before it is delivered; never goes backwards. Reads 0.0 until first set.
+    """Simulated time (ROS ``use_sim_time``), driven by :mod:`flexsheet.runtime.lockstep`: in a lockstep
+    replay :meth:`set` to each bag message's log time before it is delivered; in a live simulated graph
+    (``live=True``, launch files' ``clock: sim``) advanced from event to event by the scheduler, which charges
+    each handler its declared compute (``sim_cost``). Never goes backwards. Reads 0.0 until first set.
 
-    Timers created on it (:meth:`add_timer`) are fired by :mod:`flexsheet.runtime.lockstep` in due order (ties
-    in creation order), so two replays of one bag run every callback at the same replayed instants.
+    Timers created on it (:meth:`add_timer`) fire in due order (ties in creation order), so two runs with the
+    same input run every callback at the same simulated instants.
     """
 
     simulated = True
 
-    def __init__(self) -> None:
+    def __init__(self, live: bool = False) -> None:
         self._t: float | None = None
+        self.live = bool(live)
+        self.emit: float | None = None   # output time of the running handler (live: start + sim_cost)
         self.timers: list[SimTimer] = []
         self._count = itertools.count()
+
+    def stamp(self) -> float:
+        e = self.emit
+        return self.now() if e is None else e
 
     @property
     def started(self) -> bool:
@@ -177,8 +192,9 @@ class SimClock(Clock):
         elif t > self._t:
             self._t = t
 
-    def add_timer(self, period: float, callback: Callable, node: Node) -> SimTimer:
-        tm = SimTimer(period, callback, node, None if self._t is None else self._t + period, next(self._count))
+    def add_timer(self, period: float, callback: Callable, node: Node, sim_cost: float = 0.0) -> SimTimer:
+        tm = SimTimer(period, callback, node, None if self._t is None else self._t + period, next(self._count),
+                      sim_cost)
         self.timers.append(tm)
         return tm
 
@@ -209,8 +225,9 @@ class Publisher:
         self.stats = _Stats()
 
     def header(self, frame_id: str = "display", stamp: float | None = None) -> Header:
-        """Next :class:`Header` for this publisher: ``seq`` incremented, ``stamp`` = :meth:`Node.now` if None."""
-        return Header(stamp=self.node._clock.now() if stamp is None else float(stamp), frame_id=frame_id,
+        """Next :class:`Header` for this publisher: ``seq`` incremented, ``stamp`` = the clock's
+        :meth:`Clock.stamp` if None (the wall clock's now; on a live simulated clock, when the output leaves)."""
+        return Header(stamp=self.node._clock.stamp() if stamp is None else float(stamp), frame_id=frame_id,
                       seq=next(self._seq))
 
     def publish(self, msg: Message) -> None:
@@ -261,8 +278,11 @@ class Subscription:
     the same container, the message object itself (already validated when it was built).
     """
 
-    def __init__(self, node: Node, topic: Topic, handler: Callable, qos: QoS, depth: int | None) -> None:
+    def __init__(self, node: Node, topic: Topic, handler: Callable, qos: QoS, depth: int | None,
+                 sim_cost: float = 0.0) -> None:
         self.node, self.topic, self.handler, self.qos = node, topic, handler, qos
+        self.sim_cost = float(sim_cost)  # s charged per message on a live simulated clock
+        self.newest: tuple | None = None  # live simulated clock: (due, order) of the newest queued item
         self.name_b = topic.name.encode()
         self.depth = depth or (1 if qos in (QoS.LATEST, QoS.LATCHED) else 1_000_000)
         self.queue: collections.deque = collections.deque()
@@ -476,9 +496,20 @@ class Node:
         """Release resources on shutdown. Override if needed."""
 
     def now(self) -> float:
-        """Current time, s: ``time.time()`` (the clock of ``Header.stamp``), or the replayed bag time in a
-        lockstep replay (:class:`SimClock`)."""
+        """Current time, s: ``time.time()`` (the clock of ``Header.stamp``), or simulated time (:class:`SimClock`:
+        a lockstep replay's bag time, or a live simulated graph's; there the start of the running handler)."""
         return self._clock.now()
+
+    def charge(self, seconds: float) -> None:
+        """On a live simulated clock: the running handler takes ``seconds`` more of simulated time than its
+        declared ``sim_cost`` (work it does only sometimes, e.g. a redraw); its output leaves that much later.
+        No effect on the wall clock or in a lockstep replay."""
+        if self._lockstep is not None:
+            self._lockstep.charge(self, seconds)
+
+    def monotonic(self) -> float:
+        """Time for intervals, s: ``time.monotonic()``, or :meth:`now` on a simulated clock."""
+        return self._clock.now() if self._clock.simulated else time.monotonic()
 
     @property
     def clock(self) -> Clock:
@@ -501,10 +532,12 @@ class Node:
         return pub
 
     def subscribe(self, topic: Topic, handler: Callable[[Any], Any], qos: QoS = QoS.LATEST,
-                  depth: int | None = None) -> Subscription:
-        """Subscribe ``handler`` to ``topic`` with ``qos``; ``depth`` overrides the queue bound."""
+                  depth: int | None = None, sim_cost: float = 0.0) -> Subscription:
+        """Subscribe ``handler`` to ``topic`` with ``qos``; ``depth`` overrides the queue bound. ``sim_cost`` s:
+        the simulated time one call takes on a live simulated clock (its compute on the lab's PC and the hops
+        before it; the node is busy meanwhile and its output leaves at the end); ignored on the wall clock."""
         topic = self.topic(topic)
-        sub = Subscription(self, topic, handler, qos, depth)
+        sub = Subscription(self, topic, handler, qos, depth, sim_cost)
         self._subs.setdefault(topic.name, []).append(sub)
         self._subs_b.setdefault(sub.name_b, []).append(sub)
         if self._bus is not None:
@@ -513,13 +546,14 @@ class Node:
             self._start_sub(sub)
         return sub
 
-    def timer(self, period: float, callback: Callable[[], Any]):
+    def timer(self, period: float, callback: Callable[[], Any], sim_cost: float = 0.0):
         """Call ``callback`` every ``period`` s of this node's clock (drift-free schedule). Sync callbacks run on
-        the loop. Returns the timer's task (or a :class:`SimTimer` in a lockstep replay): ``.cancel()`` stops it."""
+        the loop. Returns the timer's task (or a :class:`SimTimer` on a simulated clock): ``.cancel()`` stops it.
+        ``sim_cost`` s: as for :meth:`subscribe`."""
         if not period > 0:
             raise ValueError(f"timer period must be > 0 s, got {period!r}")
         if self._clock.simulated:
-            tm = self._clock.add_timer(period, callback, self)
+            tm = self._clock.add_timer(period, callback, self, sim_cost)
             self._timers.append(tm)
             return tm
         return self._wall_timer(period, callback)

@@ -60,8 +60,12 @@ class _Child:
 def container_spec(lf: LaunchFile, members: list[str]) -> NodeSpec:
     """The process-level spec of a container whose nodes are ``members``: required if any member is; respawn
     ``always`` if any member's policy is, else ``on-failure`` if any is, else ``never``, with the smallest
-    delay and the largest ``max_restarts``; the smallest ``nice`` and the largest ``rt_priority``."""
+    delay and the largest ``max_restarts``; the smallest ``nice`` and the largest ``rt_priority``. The container
+    of a ``clock: sim`` file is required and runs at normal priority (simulated time needs no real-time class)."""
     specs = [lf.nodes[n] for n in members]
+    if getattr(lf, "clock", "wall") == "sim":
+        return NodeSpec(type=specs[0].type, host=specs[0].host, respawn=RespawnSpec(policy="never"), required=True,
+                        container=specs[0].container)
     policies = {s.respawn.policy for s in specs}
     policy = "always" if "always" in policies else ("on-failure" if "on-failure" in policies else "never")
     respawn = RespawnSpec(policy=policy, delay=min(s.respawn.delay for s in specs),
@@ -120,6 +124,7 @@ class Supervisor:
         if host is not None and host not in lf.hosts:
             raise LaunchError(f"{lf.path}: --host {host!r} is not a host of the file; hosts: {', '.join(lf.hosts)}")
         self.lf, self.host, self.out, self.duration = lf, host, out, duration
+        self.sim = getattr(lf, "clock", "wall") == "sim"   # the container counts simulated seconds itself
         self.print = print_fn or (lambda line: print(line, flush=True))
         self.python = python
         self.overrides = overrides or {}
@@ -137,6 +142,8 @@ class Supervisor:
                    str(self.lf.path), "--host", child.spec.host]
             if self.out:
                 cmd += ["--out", self.out]
+            if self.sim and self.duration is not None:
+                cmd += ["--sim-duration", repr(float(self.duration))]
             for node in child.members:
                 for kv in self.overrides.get(node, []):
                     cmd += ["--set", f"{node}.{kv}"]
@@ -293,7 +300,7 @@ class Supervisor:
         sampler = loop.create_task(self._sample_cpu())
         t0 = time.monotonic()
         try:
-            if self.duration is not None:
+            if self.duration is not None and not self.sim:
                 await asyncio.wait_for(self._stop.wait(), timeout=self.duration)
             else:
                 await self._stop.wait()

@@ -22,6 +22,7 @@ from pydantic import Field, model_validator
 from flexsheet.arm.bridge_config import DEFAULT_PERIOD, DEFAULT_PORT
 from flexsheet.runtime.node import Node
 from flexsheet.runtime.params import config_fields, params_model
+from flexsheet.twin import loopback
 from flexsheet.twin.controller import ControllerCore
 from flexsheet.twin.controller_config import ControllerTwinConfig
 from flexsheet.twin.modbus_server import ControllerTwin
@@ -68,6 +69,8 @@ class ArmControllerSimNode(Node):
         p = self.params
         sp = ServoParams()
         servo = ServoParams(tau=p.tau, qd_max=sp.qd_max * p.speed_scale, qdd_max=sp.qd_max * p.speed_scale * p.accel_factor)
+        if p.protocol == "mxt" and self.clock.simulated:
+            raise ValueError("protocol mxt needs the wall clock (launch file clock: wall)")
         if p.protocol == "mxt":
             self.core = MxtCore(np.array(p.initial_joints), period=p.period, servo=servo, timeout=p.timeout_s,
                                 on_timeout=p.on_timeout, step_tolerance=p.step_tolerance, now=time.monotonic())
@@ -78,7 +81,15 @@ class ArmControllerSimNode(Node):
         else:
             self.core = ControllerCore(np.array(p.initial_joints), period=p.period, servo=servo,
                                        watchdog_periods=p.watchdog_periods, step_tolerance=p.step_tolerance,
-                                       now=time.monotonic())
+                                       now=self.monotonic())
+            if self.clock.simulated:   # no socket: the bridge of this process calls the core at simulated instants
+                loopback.register(p.host, p.port, self.core, self.now)
+                self.timer(p.period, lambda: self.core.advance(self.now()))
+                self.twin = None
+                self.state_message = f"in-process at {p.host}:{p.port} (simulated clock)"
+                self.log.info("arm controller twin (modbus) in-process at %s:%d (simulated clock, period %.5f s)",
+                              p.host, p.port, p.period)
+                return
             self.twin = ControllerTwin(self.core, p.host, p.port)
             port = await self.twin.start()
             self.state_message = f"listening on {p.host}:{port}"
@@ -89,4 +100,7 @@ class ArmControllerSimNode(Node):
         self.state_message = f"udp {self.params.host}:{self.twin.port}; {self.core.summary()}"
 
     async def teardown(self) -> None:
-        await self.twin.stop()
+        if getattr(self, "twin", None) is not None:
+            await self.twin.stop()
+        elif getattr(self, "core", None) is not None:
+            loopback.unregister(self.params.host, self.params.port)

@@ -41,6 +41,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from flexsheet.runtime.node import Node, QoS
+from flexsheet.twin.timing import LAB
 from flexsheet.runtime.params import config_fields, params_model
 from flexsheet.twin.camera import (
     REALISTIC_DROP_RATE,
@@ -227,7 +228,9 @@ class CameraNode(Node):
             # the true cameras: the truth's (drawn around the XIMEA calibration) or, for another model, its own
             self.renderer = twin_renderer(truth, sim_config(p), calib=None if p.model == "ximea" else calib)
             self.subscribe(topics.FINGER_TRUTH, self.on_truth, qos=QoS.LATEST)
-            self.timer(1.0 / p.rate_hz, self.on_sim_tick)
+            # simulated clock: the pair leaves readout + transfer after mid-exposure (flexsheet/twin/timing.py)
+            w, h = (int(v) for v in calib["image_size"])
+            self.timer(1.0 / p.rate_hz, self.on_sim_tick, sim_cost=LAB.camera_latency(p.exposure_s, w, h))
         elif p.source == "genicam":
             from nodes.camera.genicam import GenICamConfig, GenICamStereo
 
@@ -295,8 +298,12 @@ class CameraNode(Node):
         self._publish(left, right, t)
 
     async def on_sim_tick(self) -> None:
-        """Render and publish one twin frame (rendering runs in a worker thread, off the loop)."""
-        await asyncio.to_thread(self._sim_frame)
+        """Render and publish one twin frame (rendering runs in a worker thread, off the loop; on a simulated
+        clock on the loop: the frame is due at its instant)."""
+        if self.clock.simulated:
+            self._sim_frame()
+        else:
+            await asyncio.to_thread(self._sim_frame)
 
     def _device_frame(self) -> None:
         try:

@@ -45,6 +45,7 @@ from flexsheet.fem.realtime import RealtimeModel
 from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
+from flexsheet.twin.timing import LAB
 from messages import Fingertip, ObjectDeformation, topics
 
 __all__ = ["FemParams", "FemNode", "fem_models_as_cylinder"]
@@ -128,10 +129,18 @@ class FemNode(Node):
                       m.precompute_s, "cache hit" if m.cache_hit else "precomputed", order, m.n_nodes,
                       m.n_candidates, m.solver.nbytes / 1e6)
         self.pub = self.publisher(topics.DEFORMATION)
-        self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
+        self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST, sim_cost=LAB.compute("fem"))
         if p.nonlinear:
-            threading.Thread(target=self._build_nonlinear, name="fem-corotational", daemon=True).start()
-        self._setup_snapshots(mat)
+            await self._background(self._build_nonlinear, "fem-corotational")
+        await self._setup_snapshots(mat)
+
+    async def _background(self, target, name: str, *args) -> None:
+        """Run ``target(*args)`` in a daemon thread; on a simulated clock to completion before the node is
+        active (what it attaches must not arrive at a host-dependent moment of simulated time)."""
+        if self.clock.simulated:
+            await asyncio.to_thread(target, *args)
+        else:
+            threading.Thread(target=target, args=args, name=name, daemon=True).start()
 
     async def _setup_scene(self) -> None:
         """Mesh and precompute (or load from the cache) the scene's model, then subscribe."""
@@ -156,8 +165,8 @@ class FemNode(Node):
         # loaded machine; flexsheet/fem/path_snapshots.py), during which heartbeats must go on
         await asyncio.to_thread(self._setup_scene_table, sc)
         self.pub = self.publisher(topics.DEFORMATION)
-        self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
-        threading.Thread(target=self._warm_sparse, name="fem-sparse", daemon=True).start()
+        self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST, sim_cost=LAB.compute("fem"))
+        await self._background(self._warm_sparse, "fem-sparse")
 
     def _setup_scene_table(self, sc: Scene) -> None:
         """Attach the scene's nonlinear table (:func:`flexsheet.fem.scene_model.attach_scene_table`: a sphere's
@@ -201,7 +210,7 @@ class FemNode(Node):
         except Exception:  # noqa: BLE001 - a warm-up must never take the node down
             self.log.exception("fem: assembling the scene's sparse fallback failed")
 
-    def _setup_snapshots(self, mat: Material) -> None:
+    async def _setup_snapshots(self, mat: Material) -> None:
         """Attach the nonlinear snapshots when the scene needs them (cache hit), else say why not."""
         from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_or_build
 
@@ -227,8 +236,7 @@ class FemNode(Node):
             return
         self.state_message = "fem: building nonlinear snapshots in the background - serving the LINEAR model"
         self.log.warning(self.state_message)
-        threading.Thread(target=self._build_snapshots, args=(cache, mat), name="fem-snapshots",
-                         daemon=True).start()
+        await self._background(self._build_snapshots, "fem-snapshots", cache, mat)
 
     def _attach(self, table: dict, how: str) -> None:
         p: FemParams = self.params

@@ -58,6 +58,7 @@ from flexsheet.rendering.state import (
 from flexsheet.runtime.background import start_worker
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
+from flexsheet.twin.timing import LAB
 from messages import (
     ArmJointState,
     Fingertip,
@@ -165,7 +166,12 @@ class RendererNode(Node):
         self._tables_event = asyncio.Event()
         self._builds: set = set()
         self._failed: set[float] = set()
-        self._builder_task = loop.create_task(self._build_tables())
+        self.sim = self.clock.simulated
+        if self.sim and p.output == "window":
+            raise ValueError("output: window needs the wall clock (launch file clock: wall): a projector window "
+                             "shows frames on real vsyncs")
+        if not self.sim:   # on a simulated clock tables are made when wanted, while simulated time waits
+            self._builder_task = loop.create_task(self._build_tables())
         # tables are built when a push or the planner's stretch needs them; the error table comes from the first
         # one there is (a cached one near the home stretch now, if any)
         near = self.sheet_model.nearest_on_disk(self.sheet_model.node_of_span(self.state.last_good.half_span))
@@ -178,8 +184,12 @@ class RendererNode(Node):
         self._last_render = 0.0
         self._last_publish = 0.0
         self.pub = self.publisher(topics.RENDERED)
+        self._dirty = False
         if p.output == "window":
             await self._open_window()
+        elif self.sim:     # one thread: the loop's; each redraw is charged the lab's render time
+            self._gl_init()
+            self.timer(1.0 / p.max_render_rate, self._sim_tick)
         else:
             self._gl = ThreadPoolExecutor(1, thread_name_prefix="renderer-gl")
             await loop.run_in_executor(self._gl, self._gl_init)
@@ -297,10 +307,65 @@ class RendererNode(Node):
     # ------------------------------------------------------------------ shared
     def _request(self) -> None:
         """Ask for a redraw (thread-safe: input handlers run in worker threads)."""
+        if self.sim:
+            self._dirty = True
+            self._sim_render()
+            return
         if self.params.output == "window":
             self._redraw.set()
         else:
             self._loop.call_soon_threadsafe(self._want.set)
+
+    # ------------------------------------------------------------------ simulated clock (one thread)
+    def _sim_render(self) -> None:
+        """Redraw now if one is wanted and ``max_render_rate`` allows (else the next tick does), charging the
+        lab's render time; publish at ``publish_rate``."""
+        p: RendererParams = self.params
+        now = self.now()
+        if not self._dirty or now - self._last_render < 1.0 / p.max_render_rate - 1e-9:
+            return
+        self._dirty = False
+        self._last_render = now
+        publish = now - self._last_publish >= 1.0 / p.publish_rate - 1e-9
+        self.charge(LAB.compute("renderer"))
+        try:
+            msg = self._frame(publish)
+        except ValueError as exc:
+            self._reject(f"render: {exc}")
+            return
+        if msg is not None:
+            self._last_publish = now
+            self.pub.publish(msg)
+
+    def _sim_tick(self) -> None:
+        self._sim_render()
+
+    def _sim_table(self, node: float) -> None:
+        """Load or build (in a spawned worker process, waited for) the pushed-sheet table of stretch ``node``,
+        then the error table once: on a simulated clock, before simulated time goes on."""
+        if node in self._tables_asked:
+            return
+        self._tables_asked.add(node)
+        if not self.sheet_model.on_disk(node):
+            self.log.info("pushed-sheet FEM table for stretch %g not cached: building it (~30 s) while simulated "
+                          "time waits", node)
+            proc = multiprocessing.get_context("spawn").Process(
+                target=build_table, args=(self.sheet_model.settings, node, 19), name=f"renderer-sheet-table-{node:g}",
+                daemon=True)
+            start_worker(proc)
+            proc.join()
+            if proc.exitcode != 0 or not self.sheet_model.on_disk(node):
+                self.errors_total += 1
+                self._failed.add(node)
+                self.log.error("pushed-sheet table for stretch %g failed (exit code %s)", node, proc.exitcode)
+                self._substitute()
+                return
+        if self.table is None:
+            try:
+                self.table = self._error_table(node)
+            except (ValueError, ArithmeticError, OSError) as exc:
+                self.errors_total += 1
+                self.log.error("model error table at stretch %g failed: %s", node, exc)
 
     async def teardown(self) -> None:
         loop = asyncio.get_running_loop()
@@ -312,6 +377,8 @@ class RendererNode(Node):
             for proc in builds:
                 proc.terminate()
                 await loop.run_in_executor(None, proc.join, 5.0)
+        if getattr(self, "sim", False) and hasattr(self, "renderer"):
+            self.renderer.release()
         if hasattr(self, "_gl"):
             if hasattr(self, "renderer"):
                 await loop.run_in_executor(self._gl, self.renderer.release)
@@ -327,9 +394,15 @@ class RendererNode(Node):
         a push stays on the 4-triangle model."""
         mat = self.sheet_model.material
         if mat.min_stretch - 1e-9 <= node <= mat.max_stretch + 1e-9:
-            self._loop.call_soon_threadsafe(self._queue_table, float(node))
+            if getattr(self, "sim", False):
+                self._sim_table(float(node))
+            else:
+                self._loop.call_soon_threadsafe(self._queue_table, float(node))
 
     def _queue_table(self, node: float) -> None:
+        if self.sim:
+            self._sim_table(node)
+            return
         if node not in self._tables_asked:
             self._tables_asked.add(node)
             self._tables_wanted.append(node)
@@ -440,7 +513,8 @@ class RendererNode(Node):
             self.renderer.set_model("none")
         self.model_used = self.renderer.model
         self.renderer.render_pair()
-        render_time = time.perf_counter() - t0
+        # the host's drawing time; on a simulated clock the lab's declared one (the message must not depend on the host)
+        render_time = LAB.compute("renderer") if self.sim else time.perf_counter() - t0
         if not publish:
             return None
         left, right = self.renderer.read_pair(p.publish_scale)
@@ -449,5 +523,5 @@ class RendererNode(Node):
                              correction=self.model_used, render_time=render_time, source_stamp=stamp)
 
     async def on_timer(self) -> None:
-        if time.monotonic() - self._last_render >= 1.0 / self.params.publish_rate:
+        if self.monotonic() - self._last_render >= 1.0 / self.params.publish_rate:
             self._request()   # nothing new arrived: still redraw (and publish) at publish_rate

@@ -22,6 +22,7 @@ from pydantic import Field
 
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
+from flexsheet.twin.timing import LAB
 from flexsheet.vision.tracker import FingertipTracker, TrackerConfig
 from messages import Fingertip, StereoCalibration, StereoFrame, topics
 
@@ -61,7 +62,7 @@ class TriangulatorNode(Node):
             self.display = load_display_calib(p.display_calib, require=("camera",)).camera
         self.pub = self.publisher(topics.FINGERTIP)
         self.subscribe(topics.CALIBRATION, self.on_calibration, qos=QoS.LATCHED)
-        self.subscribe(topics.STEREO, self.on_stereo, qos=QoS.LATEST)
+        self.subscribe(topics.STEREO, self.on_stereo, qos=QoS.LATEST, sim_cost=LAB.compute("triangulator"))
 
     def on_calibration(self, msg: StereoCalibration) -> None:
         """(Re)build the tracker from a calibration (bad calibration → rejected, old one kept); with
@@ -106,5 +107,5 @@ class TriangulatorNode(Node):
             header=self.pub.header("display", stamp=msg.exposure_stamp), position=res.position,
             covariance=res.covariance, valid=res.valid, predicted_position=res.predicted if res.valid else np.zeros(3),
             prediction_horizon=float(self.cfg.horizon_s), exposure_stamp=msg.exposure_stamp,
-            frame_stamp=msg.header.stamp,
+            frame_stamp=msg.header.stamp, sent_stamp=self.clock.stamp(),
             reprojection_px=float(res.residual_px)))

@@ -36,7 +36,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import multiprocessing
-import time
 
 import numpy as np
 from pydantic import Field, field_validator
@@ -157,8 +156,9 @@ class WorldNode(Node):
         self._warned_flat = False
         self.subscribe(T.ARM_LEFT_STATE, self.on_arm, qos=QoS.LATEST)
         self.subscribe(T.ARM_RIGHT_STATE, self.on_arm, qos=QoS.LATEST)
-        self.waiting_for: set[str] = set(p.start_after)
-        self.t_setup = time.monotonic()
+        # on a simulated clock the graph's time starts only once every node is active: nothing to wait for
+        self.waiting_for: set[str] = set() if self.clock.simulated else set(p.start_after)
+        self.t_setup = self.monotonic()
         if self.waiting_for:
             self.subscribe(T.DIAGNOSTICS, self.on_heartbeat, qos=QoS.KEEP_ALL)
         first = self.phys.node_of(p.sheet_fem.expected_stretch)
@@ -187,12 +187,12 @@ class WorldNode(Node):
     # ------------------------------------------------------------------------------------------ FEM tables
     def _arm_t0(self) -> None:
         """Start the script clock unless it must wait for the first FEM table or a node of ``start_after``."""
-        if self.waiting_for and time.monotonic() - self.t_setup > self.params.start_timeout:
+        if self.waiting_for and self.monotonic() - self.t_setup > self.params.start_timeout:
             self.log.warning("starting the script without a heartbeat from %s after %g s (start_timeout)",
                              ", ".join(sorted(self.waiting_for)), self.params.start_timeout)
             self.waiting_for = set()
         if self.t0 is None and not self.waiting_for and not (self.params.sheet_fem.wait and self._building is not None):
-            self.t0 = time.monotonic() + self.params.start_delay
+            self.t0 = self.monotonic() + self.params.start_delay
 
     def _waiting_text(self) -> str:
         """What the script clock waits for, for the log."""
@@ -206,13 +206,21 @@ class WorldNode(Node):
         """A node of ``start_after`` is up (its heartbeats begin after its setup): stop waiting for it."""
         if msg.node in self.waiting_for:
             self.waiting_for.discard(msg.node)
-            self.log.info("%s is up (%.1f s after the world)%s", msg.node, time.monotonic() - self.t_setup,
+            self.log.info("%s is up (%.1f s after the world)%s", msg.node, self.monotonic() - self.t_setup,
                           "" if self.waiting_for else f"; the script starts in {self.params.start_delay:.1f} s")
             self._arm_t0()
 
     def _start_build(self, node: float) -> None:
-        """Build table node ``node`` in a spawned, niced worker process (never blocks the loop)."""
+        """Build table node ``node`` in a spawned, niced worker process (never blocks the loop; on a simulated
+        clock waited for: the true sheet is ready at the same simulated instant on every host)."""
         p = self.params
+        if self.clock.simulated:
+            self.log.info("building the true sheet's FEM table at clamp strain %.3f while simulated time waits", node)
+            build_table(p.twin.truth_seed, p.twin.realism, node, p.sheet_size, self.phys.settings)
+            if not self.phys.try_load(node):
+                self._failed.add(node)
+                self.log.warning("true sheet FEM table at clamp strain %s failed", node)
+            return
         ctx = multiprocessing.get_context("spawn")
         self._worker = ctx.Process(target=_build_worker, daemon=True, name=f"sheet-fem-{node:g}",
                                    args=(p.twin.truth_seed, p.twin.realism, node, p.sheet_size,
@@ -255,11 +263,11 @@ class WorldNode(Node):
     def tick_finger(self) -> None:
         if self.t0 is None:
             self._arm_t0()
-        if self.t0 is None and time.monotonic() - self.last_progress >= self.params.progress_period:
-            self.last_progress = time.monotonic()
+        if self.t0 is None and self.monotonic() - self.last_progress >= self.params.progress_period:
+            self.last_progress = self.monotonic()
             self.log.info("waiting for %s before the script starts (%.0f s)", self._waiting_text(),
-                          time.monotonic() - self.t_setup)
-        t = -1.0 if self.t0 is None else time.monotonic() - self.t0
+                          self.monotonic() - self.t_setup)
+        t = -1.0 if self.t0 is None else self.monotonic() - self.t0
         if t < 0:
             i, ts = 0, 0.0
         else:
@@ -277,7 +285,7 @@ class WorldNode(Node):
             header=self.finger_pub.header("display"), position=pos, velocity=vel, segment=i,
             mode=script.mode, moving_time=float(script.moving_time), phase=script.phase(ts),
             target_angle=float(script.target_angle(ts)), visible=True))
-        now = time.monotonic()
+        now = self.monotonic()
         if now - self.last_progress >= self.params.progress_period and t >= 0:
             self.last_progress = now
             done = min(1.0, (sum(s.duration for s in self.scripts[:i]) + ts) / self.total)
