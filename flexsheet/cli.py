@@ -347,20 +347,23 @@ def _add_node_parser(sub) -> None:
 
 
 def _add_bag_parser(sub) -> None:
-    s = sub.add_parser("bag", help="record, play, inspect and export MCAP bags",
+    s = sub.add_parser("bag", help="record, play, inspect, export and recover MCAP bags",
                        **_fmt("  flexsheet bag record -o run.mcap /fingertip /sheet/target\n"
                               "  flexsheet bag info run.mcap\n  flexsheet bag play run.mcap --rate 0.5\n"
-                              "  flexsheet bag export run.mcap run_json.mcap"))
+                              "  flexsheet bag export run.mcap run_json.mcap\n"
+                              "  flexsheet bag recover cut.mcap fixed.mcap"))
     bs = s.add_subparsers(dest="bag_cmd", required=True, metavar="VERB")
     t = bs.add_parser("record", help="record topics of the live graph (raw frames, lossless)",
-                      **_fmt("  flexsheet bag record -o run.mcap            # all topics"))
+                      **_fmt("  flexsheet bag record -o run.mcap --duration 10     # all topics, 10 s\n"
+                             "exit status 1 if the bag could not be written completely"))
     t.add_argument("topics", nargs="*", help="topics (default: all)")
     t.add_argument("-o", "--output", default="", help="output .mcap (default: bag_<time>.mcap)")
     t.add_argument("--launch", default=_launch_default())
     t.add_argument("--duration", type=float, help="stop after S seconds")
     t.set_defaults(func=_bag("cmd_record"))
     t = bs.add_parser("play", help="republish a bag with its original timing",
-                      **_fmt("  flexsheet bag play run.mcap --rate 1 --endpoint tcp://127.0.0.1:7199"))
+                      **_fmt("  flexsheet bag play run.mcap --rate 1 --endpoint tcp://127.0.0.1:7199\n"
+                             "exit status 2 (one line on stderr) if the file is missing or not MCAP"))
     t.add_argument("file")
     t.add_argument("--rate", type=float, default=1.0, help="playback speed factor")
     t.add_argument("--loop", action="store_true")
@@ -368,15 +371,25 @@ def _add_bag_parser(sub) -> None:
     t.add_argument("--endpoint", default="tcp://127.0.0.1:7199", help="endpoint to publish on")
     t.add_argument("--start-delay", type=float, default=0.5, help="s to let subscribers connect")
     t.set_defaults(func=_bag("cmd_play"))
-    t = bs.add_parser("info", help="summary: topics, types, counts, duration", **_fmt("  flexsheet bag info run.mcap"))
+    t = bs.add_parser("info", help="summary of any MCAP: topics, types, counts, duration, what is lost",
+                      **_fmt("  flexsheet bag info run.mcap\n"
+                             "exit status 1 if the bag is damaged (a 'damaged:' line) or cut short ('cut:'), "
+                             "2 if it is not MCAP"))
     t.add_argument("file")
     t.set_defaults(func=_bag("cmd_info"))
     t = bs.add_parser("export", help="transcode to JSON-encoded MCAP for Foxglove/Lichtblick, with the 3-D scene",
-                      **_fmt("  flexsheet bag export run.mcap run_json.mcap     # open run_json.mcap in Foxglove"))
+                      **_fmt("  flexsheet bag export run.mcap run_json.mcap     # open run_json.mcap in Foxglove\n"
+                             "progress on stderr every 2 s; exit status 1 if the source was damaged or cut"))
     t.add_argument("file")
     t.add_argument("output")
     t.add_argument("--no-foxglove", action="store_true", help="JSON copies only, no /viz/* scene channels")
     t.set_defaults(func=_bag("cmd_export"))
+    t = bs.add_parser("recover", help="rewrite a cut (kill -9) or damaged bag as a complete MCAP",
+                      **_fmt("  flexsheet bag recover out/sim/sim.mcap out/sim/sim_recovered.mcap\n"
+                             "prints the messages kept per topic and what was lost"))
+    t.add_argument("file")
+    t.add_argument("output")
+    t.set_defaults(func=_bag("cmd_recover"))
 
 
 def _add_delegate_parsers(sub) -> None:

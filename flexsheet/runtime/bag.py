@@ -1,14 +1,20 @@
-"""Bags in MCAP (the ``mcap`` package): record, play, info, export.
+"""Bags in MCAP (the ``mcap`` package): record, play, info, export, recover.
 
-* Record stores each message's raw wire frames (``meta`` + array buffers, msgpack-framed as one record, no
-  re-encoding: lossless) on a channel per topic, with message encoding ``flexsheet-msgpack`` and the
-  message's pydantic JSON schema (encoding ``jsonschema``). Chunks are small (256 KiB, LZ4) and written
-  unbuffered, so a bag cut by a crash or ``kill -9`` stays readable up to its last complete chunk.
-  Messages lost on the wire (publisher sequence gaps) are counted and stored as MCAP metadata.
+* Record (:mod:`~flexsheet.runtime.bag_write`) stores each message's raw wire frames (``meta`` + array
+  buffers, msgpack-framed as one record, no re-encoding: lossless) on a channel per topic, with message
+  encoding ``flexsheet-msgpack`` and the message's pydantic JSON schema (encoding ``jsonschema``). It trusts
+  nothing: a message that is not a flexsheet envelope is stored as it came (``flexsheet-raw``), and what is lost
+  (publisher sequence gaps, a full queue, write errors) is counted in the bag's metadata and the recorder's
+  heartbeat. Chunks are small (256 KiB, LZ4, written at least once a second) and unbuffered, so a bag cut by a
+  crash or ``kill -9`` stays readable up to its last complete chunk; a respawned recorder writes the time it
+  was down as ``/recorder/gap`` records.
+* Read (:mod:`~flexsheet.runtime.bag_read`) checks every chunk's CRC; a damaged chunk is skipped and reported
+  with what it held, the rest of the file is read. ``bag info`` reads any MCAP.
 * Play republishes the same frames with the original relative timing (``--rate`` scales it), from a node
   endpoint, so that subscribers cannot tell a replay from a live run.
-* Export transcodes to JSON-encoded MCAP with jsonschema (Foxglove/Lichtblick open it); image fields become
-  ``foxglove.CompressedImage`` (PNG) channels ``<topic>/<field>``.
+* Export (:mod:`~flexsheet.runtime.bag_export`) transcodes to JSON-encoded MCAP with jsonschema
+  (Foxglove/Lichtblick open it); image fields become ``foxglove.CompressedImage`` (PNG) channels.
+* Recover (:mod:`~flexsheet.runtime.bag_recover`) rewrites a cut or damaged bag as a complete MCAP.
 
 Source: MCAP specification (mcap.dev/spec), Foxglove schemas (foxglove.CompressedImage).
 """
@@ -17,303 +23,44 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import base64
-import json
-import os
-import queue
-import threading
+import sys
 import time
-from collections import Counter
-from collections.abc import Iterator
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-import msgpack
-import numpy as np
-from mcap.records import Channel, Footer, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
-from mcap.writer import CompressionType, Writer
 from pydantic import BaseModel, ConfigDict, Field
 
-from flexsheet.runtime.codec import DecodeError, decode_any, peek_schema
-from flexsheet.runtime.extensions import bag_channels
+from flexsheet.runtime.bag_export import export_bag
+from flexsheet.runtime.bag_read import (
+    ENCODING,
+    GAP_TOPIC,
+    MAGIC,
+    RAW_ENCODING,
+    BagMessage,
+    BagSummary,
+    Damage,
+    bag_info,
+    clock_text,
+    read_bag,
+)
+from flexsheet.runtime.bag_recover import recover_bag
+from flexsheet.runtime.bag_write import CHUNK_SIZE, MAX_SEQ_JUMP, BagWriter
 from flexsheet.runtime.node import Node, NodeConfig
-from messages import MESSAGE_TYPES
+from messages import Heartbeat, TopicStats
 
-__all__ = ["BagWriter", "read_bag", "BagMessage", "bag_info", "export_bag", "RecorderNode", "PlayerNode"]
-
-ENCODING = "flexsheet-msgpack"
-CHUNK_SIZE = 256 * 1024
-
-
-class _DirectFile:
-    """A file whose every ``write`` goes straight to the OS (no user-space buffer), so a completed MCAP
-    chunk is on disk even if the process is killed right after. (mcap's Writer would wrap a raw file in a
-    ``BufferedWriter``; this object is not a ``RawIOBase`` so it is used as is.)"""
-
-    def __init__(self, path: Path) -> None:
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        self._pos = 0
-
-    def write(self, data) -> int:
-        view = memoryview(data).cast("B")
-        while view:
-            n = os.write(self._fd, view)
-            view = view[n:]
-            self._pos += n
-        return len(data)
-
-    def tell(self) -> int:
-        return self._pos
-
-    def flush(self) -> None:
-        pass
-
-    def close(self) -> None:
-        os.close(self._fd)
+__all__ = ["BagWriter", "read_bag", "BagMessage", "BagSummary", "Damage", "bag_info", "export_bag", "recover_bag",
+           "RecorderNode", "PlayerNode", "ENCODING", "RAW_ENCODING", "GAP_TOPIC", "CHUNK_SIZE", "MAX_SEQ_JUMP",
+           "check_mcap"]
 
 
-class BagWriter:
-    """Writes raw wire frames to an MCAP file from a background thread (the caller never blocks on disk).
-
-    If ``path`` already holds data (a respawned recorder), the bag goes to ``<stem>.1.mcap``, ``.2``…
-    instead, so nothing recorded before is lost. ``write(frames, log_time_ns)`` queues one message (``frames`` = ``[topic, meta, *buffers]``);
-    ``close()`` flushes and writes the summary and the ``recorder`` metadata (message and drop counts).
-    """
-
-    def __init__(self, path: str | Path, chunk_size: int = CHUNK_SIZE, max_queue_bytes: int = 256 << 20,
-                 foxglove: bool = False) -> None:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        n = 1
-        while path.exists() and path.stat().st_size > 0:  # a respawned recorder never overwrites its bag
-            path = Path(path.parent, f"{Path(path).name.split('.')[0]}.{n}.mcap")
-            n += 1
-        self.path = path
-        self.max_queue_bytes = max_queue_bytes
-        self._queued = 0
-        self._fh = _DirectFile(self.path)
-        self._writer = Writer(self._fh, chunk_size=chunk_size, compression=CompressionType.LZ4)
-        self._writer.start(profile="flexsheet", library="flexsheet")
-        self._channels: dict[str, int] = {}
-        self._schemas: dict[str, int] = {}
-        self._seq: dict[str, int] = {}
-        self.counts: Counter = Counter()
-        self.dropped: Counter = Counter()
-        self._q: queue.SimpleQueue = queue.SimpleQueue()
-        self.foxglove = None
-        if foxglove:  # Foxglove channels (/viz/*, images) beside the lossless ones: the bag opens with the scene
-            self.foxglove = bag_channels("foxglove")(self._writer)
-        self._thread = threading.Thread(target=self._run, name="bag-writer", daemon=True)
-        self._thread.start()
-
-    def write(self, frames: list, log_time_ns: int) -> None:
-        """Queue one message; if the disk falls behind by more than ``max_queue_bytes`` it is dropped and
-        counted under ``"<recorder queue full>"`` (memory stays bounded)."""
-        size = sum(memoryview(f).nbytes for f in frames)
-        if self._queued + size > self.max_queue_bytes:
-            self.dropped["<recorder queue full>"] += 1
-            return
-        self._queued += size
-        self._q.put((frames, log_time_ns, size))
-
-    def _channel(self, topic: str, meta: bytes) -> int:
-        ch = self._channels.get(topic)
-        if ch is None:
-            schema_name, _version = peek_schema(meta)
-            sid = self._schemas.get(schema_name)
-            if sid is None:
-                cls = MESSAGE_TYPES.get(schema_name)
-                data = json.dumps(cls.model_json_schema() if cls else {}).encode()
-                sid = self._schemas[schema_name] = self._writer.register_schema(schema_name, "jsonschema", data)
-            ch = self._channels[topic] = self._writer.register_channel(topic, ENCODING, sid)
-        return ch
-
-    def _run(self) -> None:
-        while True:
-            item = self._q.get()
-            if item is None:
-                return
-            frames, t_ns, size = item
-            self._queued -= size
-            topic = bytes(frames[0]).decode(errors="replace")
-            meta = bytes(frames[1])
-            try:
-                ch = self._channel(topic, meta)
-                seq = msgpack.unpackb(meta, ext_hook=lambda c, d: None)["d"]["header"]["seq"]
-            except Exception:  # noqa: BLE001 - a garbage message is counted, never crashes the recorder
-                self.dropped["<undecodable>"] += 1
-                continue
-            if topic != "/diagnostics":
-                last = self._seq.get(topic)
-                if last is not None and seq > last + 1:
-                    self.dropped[topic] += seq - last - 1
-                self._seq[topic] = seq
-            data = msgpack.packb([bytes(f) for f in frames[1:]])
-            self._writer.add_message(ch, log_time=t_ns, data=data, publish_time=t_ns, sequence=seq & 0xFFFFFFFF)
-            self.counts[topic] += 1
-            if self.foxglove is not None:
-                self.foxglove.add_frames(frames, t_ns)
-
-    def close(self) -> None:
-        self._q.put(None)
-        self._thread.join()
-        if self.foxglove is not None:
-            self.foxglove.close()
-        self._writer.add_metadata("recorder", {"counts": json.dumps(dict(self.counts)),
-                                               "dropped": json.dumps(dict(self.dropped))})
-        self._writer.finish()
-        self._fh.close()
-
-
-@dataclass
-class BagMessage:
-    """One recorded message: ``topic``, ``schema`` name, ``log_time`` (s), raw ``frames`` [topic, meta, *buffers]."""
-
-    topic: str
-    schema: str
-    log_time: float
-    frames: list[bytes]
-
-
-@dataclass
-class BagSummary:
-    """Summary of a bag: per-topic counts and schemas, time span (s), drops, whether it was cut short."""
-
-    counts: Counter = field(default_factory=Counter)
-    schemas: dict[str, str] = field(default_factory=dict)
-    start: float = 0.0
-    end: float = 0.0
-    dropped: dict[str, int] = field(default_factory=dict)
-    truncated: bool = False
-
-
-def _records(fh, path: str | Path, summary: BagSummary | None) -> Iterator:
-    """The MCAP records of the open file ``fh`` up to its last readable one. A truncated or corrupt tail ends
-    the iteration (``summary.truncated`` set unless the footer was already read); a file that is not MCAP
-    from its first bytes raises ``ValueError`` naming ``path``."""
-    it = iter(StreamReader(fh).records)
-    complete = False
-    while True:
-        try:
-            rec = next(it)
-        except StopIteration:
-            return
-        except Exception as exc:  # noqa: BLE001 - truncated/corrupt tail: keep what was complete
-            if fh.tell() <= 8:
-                raise ValueError(f"{path}: not an MCAP file ({exc})") from None
-            if summary is not None and not complete:
-                summary.truncated = True
-            return
-        complete = complete or isinstance(rec, Footer)
-        yield rec
-
-
-def read_bag(path: str | Path, topics: list[str] | None = None, summary: BagSummary | None = None) -> Iterator[BagMessage]:
-    """Iterate the messages of a bag in file order, even if the file was cut by a crash.
-
-    ``topics``: only these (all if empty). A truncated file yields every message up to its last complete
-    chunk and sets ``summary.truncated``; the recorder's drop counts go to ``summary.dropped``. Raises
-    ``ValueError`` naming the file if it is not an MCAP file at all.
-    """
-    channels: dict[int, Channel] = {}
-    schemas: dict[int, Schema] = {}
-    with open(path, "rb") as fh:
-        for rec in _records(fh, path, summary):
-            if isinstance(rec, Message):
-                ch = channels[rec.channel_id]
-                if ch.message_encoding != ENCODING:   # e.g. the Foxglove /viz/* channels beside ours
-                    continue
-                if not topics or ch.topic in topics:
-                    schema = schemas[ch.schema_id].name if ch.schema_id in schemas else ""
-                    yield BagMessage(ch.topic, schema, rec.log_time / 1e9, [ch.topic.encode(), *msgpack.unpackb(rec.data)])
-            elif isinstance(rec, Schema):
-                schemas[rec.id] = rec
-            elif isinstance(rec, Channel):
-                channels[rec.id] = rec
-            elif isinstance(rec, Metadata) and rec.name == "recorder" and summary is not None:
-                summary.dropped = json.loads(rec.metadata.get("dropped", "{}"))
-
-
-def bag_info(path: str | Path) -> BagSummary:
-    """Counts, schemas, time span and drops of a bag (reads the whole file; tolerant of truncation)."""
-    s = BagSummary()
-    first = True
-    for m in read_bag(path, summary=s):
-        s.counts[m.topic] += 1
-        s.schemas[m.topic] = m.schema
-        if first:
-            s.start, first = m.log_time, False
-        s.end = max(s.end, m.log_time)
-    return s
-
-
-def _foxglove_image_schema() -> dict:
-    return {"title": "foxglove.CompressedImage", "type": "object", "properties": {
-        "timestamp": {"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}},
-        "frame_id": {"type": "string"},
-        "data": {"type": "string", "contentEncoding": "base64"},
-        "format": {"type": "string"}}}
-
-
-def export_bag(src: str | Path, dst: str | Path, foxglove: bool = True) -> Counter:
-    """Transcode ``src`` to JSON-encoded MCAP ``dst`` with jsonschema channels; images → foxglove.CompressedImage.
-
-    Returns per-channel message counts. Messages that fail to decode are skipped and counted under
-    ``"<rejected>"``. With ``foxglove`` the Foxglove scene channels (``/viz/scene``, ``/viz/tf``, images;
-    :mod:`flexsheet.viz.foxglove_bag`) are added, so the exported bag opens in Foxglove with the 3-D scene.
-    """
-    import cv2
-
-    counts: Counter = Counter()
-    with open(dst, "wb") as fh:
-        w = Writer(fh)
-        w.start(profile="", library="flexsheet")
-        fox = None
-        if foxglove:
-            fox = bag_channels("foxglove")(w)
-        sids: dict[str, int] = {}
-        chans: dict[str, int] = {}
-
-        def channel(topic: str, schema_name: str, schema: dict) -> int:
-            if topic not in chans:
-                if schema_name not in sids:
-                    sids[schema_name] = w.register_schema(schema_name, "jsonschema", json.dumps(schema).encode())
-                chans[topic] = w.register_channel(topic, "json", sids[schema_name])
-            return chans[topic]
-
-        for m in read_bag(src):
-            try:
-                msg = decode_any(m.frames)
-            except DecodeError:
-                counts["<rejected>"] += 1
-                continue
-            t = int(m.log_time * 1e9)
-            if fox is not None:
-                fox.add_message(m.topic, msg, t)
-            images = {k: v for k, v in msg.__dict__.items() if isinstance(v, np.ndarray) and v.dtype == np.uint8
-                      and v.ndim in (2, 3) and v.shape[0] > 8}
-            stamp = msg.header.stamp
-            for fname, img in images.items():
-                ok, png = cv2.imencode(".png", img if img.ndim == 2 else img[:, :, ::-1])
-                payload = {"timestamp": {"sec": int(stamp), "nsec": int((stamp % 1) * 1e9)},
-                           "frame_id": msg.header.frame_id, "data": base64.b64encode(png.tobytes()).decode(),
-                           "format": "png"}
-                topic = f"{m.topic}/{fname}"
-                w.add_message(channel(topic, "foxglove.CompressedImage", _foxglove_image_schema()), log_time=t,
-                              data=json.dumps(payload).encode(), publish_time=t)
-                counts[topic] += 1
-            if not images:
-                data = msg.model_dump_json().encode()
-                w.add_message(channel(m.topic, msg.SCHEMA, type(msg).model_json_schema()), log_time=t, data=data,
-                              publish_time=t)
-                counts[m.topic] += 1
-        if fox is not None:
-            fox.close()
-            counts.update(fox.counts)
-        w.finish()
-    return counts
+def check_mcap(path: str | Path) -> None:
+    """Raise ``FileNotFoundError`` or ``ValueError`` (one line naming ``path``) unless it is an MCAP file."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    with open(p, "rb") as fh:
+        if fh.read(len(MAGIC)) != MAGIC:
+            raise ValueError(f"{path}: not an MCAP file (no MCAP magic at its start)")
 
 
 # ------------------------------------------------------------------------------------------------ nodes
@@ -329,27 +76,58 @@ class RecorderParams(BaseModel):
 
 
 class RecorderNode(Node):
-    """Records raw frames of the live graph into an MCAP bag (QoS keep-all; nothing is decoded)."""
+    """Records raw frames of the live graph into an MCAP bag (QoS keep-all; nothing is decoded). Its heartbeat
+    has one subscription entry per recorded topic (``count`` stored, ``dropped`` lost to sequence gaps,
+    ``rejected`` stored raw as malformed) and says ``warn`` with the counts once anything was lost or
+    malformed, ``error`` after a write error."""
 
     Params = RecorderParams
     node_type = "recorder"
 
     async def setup(self) -> None:
         self.writer = BagWriter(self.params.output, foxglove=self.params.foxglove)
+        self._last_counts: dict[str, int] = {}
         for t in self.params.topics or [""]:
             self.transport.subscribe(t)
-        self.log.info("recording %s to %s", ", ".join(self.params.topics) or "all topics", self.params.output)
+        self.log.info("recording %s to %s", ", ".join(self.params.topics) or "all topics", self.writer.path)
 
     def _on_frames(self, frames: list) -> None:  # raw frames straight from the transport
-        if self.params.topics and bytes(frames[0]).decode(errors="replace") not in self.params.topics:
-            return
+        try:
+            if self.params.topics and bytes(frames[0]).decode(errors="replace") not in self.params.topics:
+                return
+        except (IndexError, TypeError):
+            pass   # no topic frame: stored (or counted) by the writer all the same
         self.writer.write(frames, time.time_ns())
+
+    def heartbeat(self) -> Heartbeat:
+        hb = super().heartbeat()
+        w = getattr(self, "writer", None)
+        if w is None:
+            return hb
+        period = self.config.heartbeat_period
+        subs = list(hb.subscriptions)
+        for topic in sorted(set(w.counts) | set(w.malformed) | {t for t in w.dropped if not t.startswith("<")}):
+            n = w.counts[topic] + w.malformed[topic]
+            rate = (n - self._last_counts.get(topic, 0)) / period
+            self._last_counts[topic] = n
+            subs.append(TopicStats(topic=topic, type="", qos="keep_all", rate_hz=rate, count=n,
+                                   dropped=w.dropped[topic], rejected=w.malformed[topic]))
+        malformed, lost = sum(w.malformed.values()), w.lost
+        update: dict = {"subscriptions": subs}
+        if w.error or not w._thread.is_alive():
+            update.update(state="error", message=f"bag write error: {w.error or 'writer thread stopped'}")
+        elif malformed or lost:
+            parts = ", ".join(f"{k} {v}" for k, v in sorted(w.dropped.items()))
+            update.update(state="error" if hb.state == "error" else "warn",
+                          message=f"bag {w.path.name}: {sum(w.counts.values())} stored, {malformed} malformed "
+                                  f"(stored raw), {lost} lost" + (f" ({parts})" if parts else ""))
+        return hb.model_copy(update=update)
 
     async def teardown(self) -> None:
         self.writer.close()
-        total = sum(self.writer.counts.values())
-        self.log.info("bag %s: %d messages on %d topics, %d dropped", self.params.output, total,
-                      len(self.writer.counts), sum(self.writer.dropped.values()))
+        self.log.info("bag %s: %d messages on %d topics, %d malformed (stored raw), %d lost%s", self.writer.path,
+                      sum(self.writer.counts.values()), len(self.writer.counts), sum(self.writer.malformed.values()),
+                      self.writer.lost, f"; write error: {self.writer.error}" if self.writer.error else "")
 
 
 class PlayerParams(BaseModel):
@@ -378,8 +156,10 @@ class PlayerNode(Node):
     node_type = "player"
 
     async def setup(self) -> None:
-        if not Path(self.params.file).exists():
-            raise ValueError(f"file: bag {self.params.file!r} not found")
+        try:
+            check_mcap(self.params.file)
+        except FileNotFoundError:
+            raise ValueError(f"file: bag {self.params.file!r} not found") from None
         self.done = asyncio.Event()
         self.sent = 0
         if self.params.mode == "lockstep":
@@ -388,14 +168,25 @@ class PlayerNode(Node):
             lockstep.check(self)  # ConfigError (exit 78) unless the player is in a lockstep container
             self._task = asyncio.get_running_loop().create_task(lockstep.play(self))
             return
-        asyncio.get_running_loop().create_task(self._play())
+        asyncio.get_running_loop().create_task(self._play_safely())
+
+    async def _play_safely(self) -> None:
+        try:
+            await self._play()
+        except (ValueError, OSError) as exc:  # the file became unreadable: say so in one line and stop
+            self.log.error("cannot play %s: %s", self.params.file, exc)
+            self.errors_total += 1
+            self.done.set()
+            if self.params.exit_when_done:
+                self.shutdown()
 
     async def _play(self) -> None:
         await asyncio.sleep(self.params.start_delay)
         latched = {t.name for t in __import__("messages.topics", fromlist=["ALL"]).ALL if t.latched}
+        summary = BagSummary()
         while True:
             t0_bag = t0 = None
-            for m in read_bag(self.params.file, self.params.topics or None):
+            for m in read_bag(self.params.file, self.params.topics or None, summary=summary):
                 if t0_bag is None:  # anchor once the bag is open, a little ahead: the first message then waits
                     t0_bag = m.log_time  # through the same timer as the rest and shares their wake-up latency
                     t0 = time.monotonic() + _PLAY_LEAD_S
@@ -407,9 +198,13 @@ class PlayerNode(Node):
                     self.transport.set_latched(m.topic, m.frames)
                 self.transport.send(m.frames)
                 self.sent += 1
-            if not self.params.loop:
+            if not self.params.loop or t0_bag is None:
                 break
         self.log.info("played %d messages from %s", self.sent, self.params.file)
+        if summary.damaged or summary.truncated:
+            self.log.warning("%s: %d damaged parts skipped (%d messages lost)%s; see flexsheet bag info",
+                             self.params.file, len(summary.damaged), summary.lost,
+                             ", cut short" if summary.truncated else "")
         self.done.set()
         if self.params.exit_when_done:
             await asyncio.sleep(0.2)
@@ -422,6 +217,11 @@ def _graph(launch: str):
 
     lf = load_launch(launch)
     return list(lf.endpoints().values()), curve_config(lf, None)
+
+
+def _fail(verb: str, exc: Exception) -> int:
+    print(f"flexsheet bag {verb}: {exc}", file=sys.stderr)
+    return 2
 
 
 def cmd_record(args: argparse.Namespace) -> int:
@@ -438,39 +238,104 @@ def cmd_record(args: argparse.Namespace) -> int:
         await node.run()
 
     asyncio.run(main())
-    print(f"wrote {out}: {sum(node.writer.counts.values())} messages, {sum(node.writer.dropped.values())} dropped")
-    return 0
+    w = node.writer
+    print(f"wrote {w.path}: {sum(w.counts.values())} messages, {sum(w.malformed.values())} malformed (stored raw), "
+          f"{w.lost} lost")
+    return 1 if w.error else 0
 
 
 def cmd_play(args: argparse.Namespace) -> int:
     import logging
+    try:
+        check_mcap(args.file)
+    except (OSError, ValueError) as exc:
+        return _fail("play", exc)
     logging.basicConfig(level="INFO", format="%(levelname)s %(name)s: %(message)s")
     node = PlayerNode(NodeConfig(name="bag_play", node_type="player", endpoint=args.endpoint, peers=[],
                                  params={"file": args.file, "rate": args.rate, "loop": args.loop,
                                          "topics": args.topics or [], "start_delay": args.start_delay}))
     asyncio.run(node.run())
-    return 0
+    return 1 if node.errors_total else 0
+
+
+def _when(t: float) -> str:
+    return time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(t))
+
+
+def print_damage(s: BagSummary, out=sys.stdout) -> None:
+    """The ``damaged:``, ``cut:`` and ``gaps:`` lines of ``bag info`` / ``bag recover``."""
+    if s.damaged:
+        print(f"damaged:   {len(s.damaged)} unreadable part(s) skipped, {s.lost} messages lost "
+              f"({sum(d.length for d in s.damaged)} bytes)", file=out)
+        for d in s.damaged[:20]:
+            print(f"  {d.describe()}", file=out)
+        if len(s.damaged) > 20:
+            print(f"  … and {len(s.damaged) - 20} more", file=out)
+    if s.truncated:
+        span = f", a partial chunk of {clock_text(s.cut_span[0])}–{clock_text(s.cut_span[1])}" if s.cut_span else ""
+        print(f"cut:       TRUNCATED: the file ends before its footer; {s.cut_bytes} bytes at the end unreadable"
+              f"{span} (flexsheet bag recover writes a complete copy)", file=out)
+    for g in s.gaps:
+        if g.get("topic") == "":
+            lost = g.get("lost_s")
+            print(f"gap:       recorder restarted after {g.get('previous')}: "
+                  f"{f'{lost:.2f} s' if lost is not None else 'unknown time'} without recording", file=out)
 
 
 def cmd_info(args: argparse.Namespace) -> int:
     try:
         s = bag_info(args.file)
-    except (ValueError, FileNotFoundError) as exc:
-        print(f"flexsheet bag info: {exc}")
-        return 2
+    except (ValueError, OSError) as exc:
+        return _fail("info", exc)
     size = Path(args.file).stat().st_size
-    print(f"file:      {args.file} ({size / 1e6:.2f} MB){'  [TRUNCATED: read up to last complete chunk]' if s.truncated else ''}")
-    print(f"duration:  {s.end - s.start:.3f} s  (start {time.strftime('%Y-%m-%d %H:%M:%S', time.localtime(s.start))})")
-    print(f"messages:  {sum(s.counts.values())}   dropped on the wire: {sum(s.dropped.values()) if s.dropped else 0}")
+    print(f"file:      {args.file} ({size / 1e6:.2f} MB)")
+    print(f"duration:  {s.end - s.start:.3f} s  (start {_when(s.start)}, end {_when(s.end)})" if s.end
+          else "duration:  - (no messages)")
+    lost_wire = sum(v for k, v in s.dropped.items() if not k.startswith("<"))
+    other = {k: v for k, v in s.dropped.items() if k.startswith("<") and v}
+    print(f"messages:  {sum(s.counts.values())}   dropped on the wire: {lost_wire}"
+          + "".join(f"   {k.strip('<>')}: {v}" for k, v in sorted(other.items()))
+          + (f"   malformed (stored raw): {sum(s.malformed.values())}" if s.malformed else ""))
+    print_damage(s)
     w = max((len(t) for t in s.counts), default=5)
     for topic, n in sorted(s.counts.items()):
         rate = n / (s.end - s.start) if s.end > s.start else 0.0
-        print(f"  {topic:<{w}}  {n:7d} msgs  {rate:8.1f} Hz  {s.schemas[topic]}")
-    return 0
+        kind = s.schemas.get(topic) or s.encodings.get(topic, "")
+        enc = "" if s.encodings.get(topic) == ENCODING else f"  [{s.encodings.get(topic)}]"
+        print(f"  {topic:<{w}}  {n:7d} msgs  {rate:8.1f} Hz  {kind}{enc}")
+    for topic, n in sorted(s.malformed.items()):
+        print(f"  {topic:<{w}}  {n:7d} msgs  malformed, stored raw")
+    return 1 if s.damaged or s.truncated else 0
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    counts = export_bag(args.file, args.output, foxglove=not args.no_foxglove)
-    print(f"wrote {args.output}: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
-    return 0
+    s = BagSummary()
+    t0 = time.monotonic()
 
+    def progress(share: float, n: int) -> None:
+        print(f"export: {share * 100:5.1f} %  {n} messages  {time.monotonic() - t0:.1f} s", file=sys.stderr,
+              flush=True)
+
+    try:
+        check_mcap(args.file)
+        counts = export_bag(args.file, args.output, foxglove=not args.no_foxglove, summary=s, progress=progress)
+    except (ValueError, OSError) as exc:
+        return _fail("export", exc)
+    print(f"wrote {args.output}: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+    print_damage(s)
+    return 1 if s.damaged or s.truncated else 0
+
+
+def cmd_recover(args: argparse.Namespace) -> int:
+    s = BagSummary()
+    try:
+        kept = recover_bag(args.file, args.output, summary=s)
+    except (ValueError, OSError) as exc:
+        return _fail("recover", exc)
+    print(f"wrote {args.output}: {sum(kept.values())} messages kept on {len(kept)} topics")
+    for topic, n in sorted(kept.items()):
+        print(f"  kept {topic}: {n}")
+    print_damage(s)
+    if not s.damaged and not s.truncated:
+        print("lost:      nothing (the input was complete and undamaged)")
+    return 0

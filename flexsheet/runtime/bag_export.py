@@ -1,0 +1,181 @@
+"""``bag export``: a flexsheet bag transcoded to JSON-encoded MCAP that Foxglove and Lichtblick open.
+
+Each lossless message becomes JSON on a channel of the same topic with the message's jsonschema; image fields
+(uint8 arrays of 2 or 3 dimensions) become ``foxglove.CompressedImage`` (PNG) channels ``<topic>/<field>``.
+The recorder's gap records are copied. With ``foxglove`` the scene channels of :mod:`flexsheet.viz.foxglove_bag`
+are added (through the ``flexsheet.bag_channels`` entry point), built lazily as while recording (only when an
+output is due). The source is read with every chunk's CRC checked (:mod:`flexsheet.runtime.bag_read`).
+
+Decoding and JSON encoding (most of the time) run in ``workers`` forked processes, batch by batch, in order;
+this process reads, writes and builds the scene. ``progress`` is called about every 2 s with the share read.
+Source: Foxglove schemas (foxglove.CompressedImage).
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import time
+from collections import Counter, deque
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import msgpack
+import numpy as np
+from mcap.writer import CompressionType, Writer
+
+from flexsheet.runtime.bag_read import ENCODING, GAP_SCHEMA, GAP_TOPIC, BagSummary, McapScan
+from flexsheet.runtime.codec import DecodeError, decode_any
+from flexsheet.runtime.extensions import bag_channels
+
+__all__ = ["export_bag"]
+
+_IMAGE = "foxglove.CompressedImage"
+_IMAGE_SCHEMA = {"title": _IMAGE, "type": "object", "properties": {
+    "timestamp": {"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}},
+    "frame_id": {"type": "string"},
+    "data": {"type": "string", "contentEncoding": "base64"},
+    "format": {"type": "string"}}}
+_BATCH_BYTES = 4 << 20
+_BATCH_MESSAGES = 500
+
+
+def _transcode(batch: list[tuple[str, int, bytes]]) -> list[tuple]:
+    """JSON outputs ``(topic, schema name, log time ns, data)`` of a batch of lossless messages, in order;
+    ``("<rejected>", "", t, b"")`` for one that does not decode."""
+    import cv2
+
+    out = []
+    for topic, t, data in batch:
+        try:
+            msg = decode_any([topic.encode(), *msgpack.unpackb(data)])
+        except (DecodeError, ValueError, TypeError):
+            out.append(("<rejected>", "", t, b""))
+            continue
+        images = {k: v for k, v in msg.__dict__.items() if isinstance(v, np.ndarray) and v.dtype == np.uint8
+                  and v.ndim in (2, 3) and v.shape[0] > 8}
+        stamp = msg.header.stamp
+        for fname, img in images.items():
+            _ok, png = cv2.imencode(".png", img if img.ndim == 2 else img[:, :, ::-1])
+            payload = {"timestamp": {"sec": int(stamp), "nsec": int((stamp % 1) * 1e9)},
+                       "frame_id": msg.header.frame_id, "data": base64.b64encode(png.tobytes()).decode(),
+                       "format": "png"}
+            out.append((f"{topic}/{fname}", _IMAGE, t, json.dumps(payload).encode()))
+        if not images:
+            out.append((topic, msg.SCHEMA, t, msg.model_dump_json().encode()))
+    return out
+
+
+def _schema(name: str) -> dict:
+    from messages import MESSAGE_TYPES
+
+    if name == _IMAGE:
+        return _IMAGE_SCHEMA
+    if name == "flexsheet.RecorderGap":
+        return GAP_SCHEMA
+    cls = MESSAGE_TYPES.get(name)
+    return cls.model_json_schema() if cls else {}
+
+
+def export_bag(src: str | Path, dst: str | Path, foxglove: bool = True, summary: BagSummary | None = None,
+               progress: Callable[[float, int], None] | None = None, workers: int | None = None) -> Counter:
+    """Transcode ``src`` to JSON-encoded MCAP ``dst`` (module docstring). Returns per-channel message counts;
+    messages that fail to decode are skipped and counted under ``"<rejected>"``. Damage and truncation of
+    ``src`` go to ``summary``. ``progress(share_read, messages)`` is called about every 2 s. ``workers``:
+    processes that transcode (default: one per core, at most 4; 0: all in this process)."""
+    counts: Counter = Counter()
+    scan = McapScan(src, summary)
+    workers = min(4, os.cpu_count() or 1) if workers is None else workers
+    n_read = [0]
+    t_next = [time.monotonic() + 2.0]
+    gap_records: list[tuple[int, bytes]] = []
+
+    def batches() -> Iterator[list[tuple[str, int, bytes]]]:
+        batch, size = [], 0
+        for kind, rec in scan.records():
+            if kind != "message":
+                continue
+            n_read[0] += 1
+            if progress is not None and time.monotonic() >= t_next[0]:
+                progress(scan.pos / max(scan.size, 1), n_read[0])
+                t_next[0] = time.monotonic() + 2.0
+            ch = scan.channels.get(rec[0])
+            if ch is None:
+                continue
+            if ch.topic == GAP_TOPIC:
+                gap_records.append((rec[2], rec[4]))
+            elif ch.message_encoding == ENCODING:
+                batch.append((ch.topic, rec[2], rec[4]))
+                size += len(rec[4])
+                if size > _BATCH_BYTES or len(batch) >= _BATCH_MESSAGES:
+                    yield batch
+                    batch, size = [], 0
+        if batch:
+            yield batch
+
+    with open(dst, "wb") as fh:
+        w = Writer(fh, compression=CompressionType.LZ4)
+        w.start(profile="", library="flexsheet")
+        sids: dict[str, int] = {}
+        chans: dict[str, int] = {}
+
+        def write(topic: str, schema_name: str, t: int, data: bytes) -> None:
+            ch = chans.get(topic)
+            if ch is None:
+                if schema_name not in sids:  # the schema is built once per type, not per message
+                    sids[schema_name] = w.register_schema(schema_name, "jsonschema",
+                                                          json.dumps(_schema(schema_name)).encode())
+                ch = chans[topic] = w.register_channel(topic, "json", sids[schema_name])
+            w.add_message(ch, log_time=t, data=data, publish_time=t)
+            counts[topic] += 1
+
+        pool = _pool(workers)  # forked before the scene builder loads anything
+        fox = bag_channels("foxglove")(w) if foxglove else None
+        try:
+            pending: deque = deque()
+
+            def drain(limit: int) -> None:
+                while len(pending) > limit:
+                    batch, result = pending.popleft()
+                    for topic, schema_name, t, data in (result.result() if pool else result):
+                        if topic == "<rejected>":
+                            counts[topic] += 1
+                        else:
+                            write(topic, schema_name, t, data)
+                    if fox is not None:
+                        for topic, t, data in batch:
+                            fox.add_frames([topic.encode(), *msgpack.unpackb(data)], t)
+
+            for batch in batches():
+                pending.append((batch, pool.submit(_transcode, batch) if pool else _transcode(batch)))
+                drain(2 * max(workers, 1))
+            drain(0)
+        finally:
+            if pool is not None:
+                pool.shutdown(cancel_futures=True)
+        for t, data in gap_records:
+            write(GAP_TOPIC, "flexsheet.RecorderGap", t, data)
+        if fox is not None:
+            fox.close()
+            counts.update(fox.counts)
+        w.finish()
+    if progress is not None:
+        progress(1.0, n_read[0])
+    return counts
+
+
+def _pool(workers: int):
+    if workers < 1:
+        return None
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    try:
+        ctx = multiprocessing.get_context("fork")
+    except ValueError:  # no fork on this platform: transcode here
+        return None
+    pool = ProcessPoolExecutor(workers, mp_context=ctx)
+    for f in [pool.submit(os.getpid) for _ in range(workers)]:
+        f.result()
+    return pool
