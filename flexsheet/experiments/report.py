@@ -11,19 +11,20 @@ interpolated at the fingertip's exposure time, the row by :func:`flexsheet.exper
 (the same metric as the in-process experiment, in the cross-section of Fig. 9) with the paper's numbers
 from :data:`flexsheet.experiments.table1.PAPER_TABLE1`.
 
-Latency per hop, matched through the stamps every message carries (``exposure_stamp`` →
-``source_stamp`` → ``target_stamp``/``write_stamp``); arrival times are the recorder's receive times:
+Latency, one chain per fingertip sample, from the stamps the nodes set (never the recorder's receive
+times), so the hops add up to the chain (``latency_ms.chain``; every value median, p99 and n, ms):
 
-* ``exposure_to_camera_frame``: the stereo frame's publish stamp − its exposure stamp (for the twin this is
-  its rendering time; for a real camera, readout and transfer);
-* ``camera_frame_to_fingertip``: fingertip arrival − the frame's publish stamp (transport + triangulation);
-* ``fingertip_to_sheet_target``: sheet-target arrival − fingertip arrival (same exposure stamp);
-* ``sheet_target_to_arm_command``: the first arm command carrying the target (Modbus write or MXT MOVE, the
-  earliest of either arm) − sheet-target arrival;
-* ``arm_command_to_joint_motion``: first joint-state readback after that command − the command;
-* ``camera_frame_to_arm_command``: first arm command − the frame's publish stamp (the software path);
-* ``exposure_to_arm_command``: the same from the mid-exposure instant (+ the camera's readout/render time);
-* ``fingertip_to_rendered_frame``: rendered-frame arrival − fingertip arrival (same exposure stamp).
+* arm chain: ``exposure_to_camera_frame`` (the frame's ``header.stamp`` − mid-exposure: readout and
+  transfer), ``camera_frame_to_fingertip`` (the fingertip's ``sent_stamp`` − the frame's stamp),
+  ``fingertip_to_sheet_target``, ``sheet_target_to_arm_command`` (the first command carrying the sample,
+  ``write_stamp``, the earliest of either arm), ``arm_command_to_sheet_at_pose`` (the first readback whose FK
+  clamp pose is within :data:`POSE_TOL_M` and :data:`POSE_TOL_RAD` of that sample's arm target, the later
+  of the two arms; a sample neither arm reached before the next target took over is not counted:
+  ``sheet_at_pose_reached`` gives the share); ends: ``exposure_to_arm_command``,
+  ``exposure_to_sheet_at_pose``;
+* render chain: ``fingertip_to_deformation``, ``deformation_to_rendered_frame``, ``rendered_to_projected``
+  (the first projector vsync after the frame plus the projector's input latency,
+  :meth:`flexsheet.twin.timing.LabTiming.projected_at`); end: ``exposure_to_projected``.
 
 All hosts of the sim run share one clock; across PCs see docs/deploy.md on time sync.
 
@@ -200,40 +201,73 @@ def compliance_summary(d: dict[str, list]) -> dict:
     return out
 
 
+#: a clamp at its commanded pose: position and rotation tolerance (m, rad)
+POSE_TOL_M, POSE_TOL_RAD = 1e-4, np.radians(0.05)
+
+
+def _at_pose(T: np.ndarray, G: np.ndarray) -> bool:
+    if np.linalg.norm(T[:3, 3] - G[:3, 3]) > POSE_TOL_M:
+        return False
+    c = (np.trace(T[:3, :3].T @ G[:3, :3]) - 1.0) / 2.0
+    return float(np.arccos(np.clip(c, -1.0, 1.0))) <= POSE_TOL_RAD
+
+
+def _pose_times(d: dict[str, list]) -> dict[float, float]:
+    """Source stamp → the time both clamps were first at that sample's arm targets (module doc)."""
+    out: dict[float, float] = {}
+    per_arm = []
+    for arm in ("left", "right"):
+        goals = {m.source_stamp: m.pose for _, m in d.get(f"/arm/{arm}/target", [])}
+        reached: dict[float, float] = {}
+        for _, m in sorted(d.get(f"/arm/{arm}/joint_state", []), key=lambda tm: tm[1].header.stamp):
+            e = m.target_stamp
+            if e and e not in reached and e in goals and _at_pose(m.pose, goals[e]):
+                reached[e] = m.header.stamp
+        per_arm.append(reached)
+    for e in set(per_arm[0]) & set(per_arm[1]):
+        out[e] = max(per_arm[0][e], per_arm[1][e])
+    return out
+
+
 def latency_hops(d: dict[str, list]) -> dict[str, dict]:
-    """Latency per hop (module doc), ms: ``{hop: {"median", "p99", "n"}}``, matched through the stamps
-    every message carries. ``d``: topic → time-sorted (arrival s, message) pairs."""
-    tips = d.get("/fingertip", [])
-    tip_arrival = {m.exposure_stamp: t for t, m in tips}
-    frame_time = {m.exposure_stamp: m.frame_stamp for _, m in tips if m.frame_stamp}
-    target_arrival: dict[float, float] = {}
-    for t, m in d.get("/sheet/target", []):
-        target_arrival.setdefault(m.source_stamp, t)
+    """Latency chains (module doc), ms: ``{"chain": {hop: {"median", "p99", "n"}}, "sheet_at_pose_reached":
+    share}``, matched through the stamps every message carries. ``d``: topic → (arrival s, message) pairs."""
+    from flexsheet.twin.timing import LAB
+
+    tips = {m.exposure_stamp: m for _, m in d.get("/fingertip", []) if m.sent_stamp and m.frame_stamp}
+    target = {}
+    for _, m in d.get("/sheet/target", []):
+        target.setdefault(m.source_stamp, m.header.stamp)
     first_write: dict[float, float] = {}
-    first_readback: dict[float, float] = {}
     for topic in ("/arm/left/joint_state", "/arm/right/joint_state"):
-        seen: set[float] = set()
         for _, m in d.get(topic, []):
             e = m.target_stamp
-            if e and m.write_stamp and e not in seen:   # this arm's first command carrying that fingertip
-                seen.add(e)
-                if e not in first_write or m.write_stamp < first_write[e]:   # the earliest of either arm
-                    first_write[e] = m.write_stamp
-                    first_readback[e] = m.header.stamp
-    render_arrival: dict[float, float] = {}
-    for t, m in d.get("/render/stereo", []):
-        render_arrival.setdefault(m.source_stamp, t)
+            if e and m.write_stamp and (e not in first_write or m.write_stamp < first_write[e]):
+                first_write[e] = m.write_stamp
+    at_pose = _pose_times(d)
+    deform = {}
+    for _, m in d.get("/object/deformation", []):
+        deform.setdefault(m.source_stamp, m.header.stamp)
+    render = {}
+    for _, m in d.get("/render/stereo", []):
+        render.setdefault(m.source_stamp, m.header.stamp)
+    arm = [e for e in tips if e in target and e in first_write]
+    rend = [e for e in tips if e in deform and e in render]
     hops = {
-        "exposure_to_camera_frame": [f - e for e, f in frame_time.items()],
-        "camera_frame_to_fingertip": [tip_arrival[e] - f for e, f in frame_time.items()],
-        "fingertip_to_sheet_target": [target_arrival[e] - tip_arrival[e] for e in tip_arrival if e in target_arrival],
-        "sheet_target_to_arm_command": [first_write[e] - target_arrival[e] for e in target_arrival if e in first_write],
-        "arm_command_to_joint_motion": [first_readback[e] - first_write[e] for e in first_write],
-        "camera_frame_to_arm_command": [first_write[e] - frame_time[e] for e in first_write if e in frame_time],
-        "exposure_to_arm_command": [first_write[e] - e for e in first_write if e in frame_time],
-        "fingertip_to_rendered_frame": [render_arrival[e] - tip_arrival[e] for e in tip_arrival if e in render_arrival],
+        "exposure_to_camera_frame": [tips[e].frame_stamp - e for e in tips],
+        "camera_frame_to_fingertip": [tips[e].sent_stamp - tips[e].frame_stamp for e in tips],
+        "fingertip_to_sheet_target": [target[e] - tips[e].sent_stamp for e in tips if e in target],
+        "sheet_target_to_arm_command": [first_write[e] - target[e] for e in arm],
+        "arm_command_to_sheet_at_pose": [at_pose[e] - first_write[e] for e in arm if e in at_pose],
+        "exposure_to_arm_command": [first_write[e] - e for e in arm],
+        "exposure_to_sheet_at_pose": [at_pose[e] - e for e in arm if e in at_pose],
+        "fingertip_to_deformation": [deform[e] - tips[e].sent_stamp for e in tips if e in deform],
+        "deformation_to_rendered_frame": [render[e] - deform[e] for e in rend],
+        "rendered_to_projected": [LAB.projected_at(render[e]) - render[e] for e in rend],
+        "exposure_to_projected": [LAB.projected_at(render[e]) - e for e in rend],
     }
-    return {k: _stats(v) for k, v in hops.items()}
+    reached = sum(e in at_pose for e in arm) / len(arm) if arm else None
+    return {"chain": {k: _stats(v) for k, v in hops.items()}, "sheet_at_pose_reached": reached}
 
 
 def watchdog_faults(d: dict[str, list]) -> dict:
@@ -346,13 +380,14 @@ def _charts(summary: dict, out: Path) -> None:
         fig.tight_layout()
         fig.savefig(out / "table1.png", dpi=120)
         plt.close(fig)
-    lat = {k: v for k, v in summary["latency_ms"].items() if v["n"]}
+    lat = {k: v for k, v in summary["latency_ms"].get("chain", {}).items() if v["n"]}
     if lat:
         fig, ax = plt.subplots(figsize=(8, 3.5))
         names = list(lat)
         ax.barh(names, [lat[k]["median"] for k in names], label="median")
         ax.scatter([lat[k]["p99"] for k in names], names, color="k", marker="|", s=200, label="p99")
-        ax.set_xlabel("latency (ms)")
+        ax.set_xlabel("latency (ms), from the nodes' own stamps")
+        ax.set_title("latency per hop and end to end (median, p99)")
         ax.legend(fontsize=8)
         fig.tight_layout()
         fig.savefig(out / "latency.png", dpi=120)
@@ -432,8 +467,9 @@ def _format(summary: dict) -> str:
             f = "{0[median]:7.1f} [{0[p5]:5.1f},{0[p95]:6.1f}]".format
             lines.append(f"{key:<16}{f(b['tension_n_per_m']):>22}{f(b['stiffness_n_per_m']):>22}"
                          f"{f(b['object_stiffness_n_per_m']):>22}{b['at_limit']:9.0%}")
-    lines += ["", "Latency budget per hop (ms)", f"{'hop':<32}{'median':>9}{'p99':>9}{'n':>7}"]
-    for k, v in summary["latency_ms"].items():
+    lines += ["", "Latency per hop and end to end, from the nodes' stamps (ms)",
+              f"{'hop':<32}{'median':>9}{'p99':>9}{'n':>7}"]
+    for k, v in summary["latency_ms"].get("chain", {}).items():
         med = "-" if v["median"] is None else f"{v['median']:.2f}"
         p99 = "-" if v["p99"] is None else f"{v['p99']:.2f}"
         lines.append(f"{k:<32}{med:>9}{p99:>9}{v['n']:>7}")
@@ -453,6 +489,16 @@ def main(out: str, lf=None) -> int:
     summary = analyse(bags, beats, scene)
     summary["scene"] = scene_entry
     summary["twin"] = twin_settings(lf)
+    clock = out_dir / "sim_clock.json"
+    if clock.exists():   # a clock: sim run (flexsheet.runtime.container writes it)
+        sim = json.loads(clock.read_text())
+        summary["clock"] = "sim"
+        summary["realtime_factor"] = sim.get("realtime_factor")
+        summary["readiness"] = {f"{k}_active_s": v for k, v in sim.get("active_wall_s", {}).items()}
+        summary["sim_clock"] = sim
+    else:
+        summary["clock"] = "wall"
+    summary["seed"] = summary["twin"].get("truth_seed")
     cpu = cpu_summary(out_dir)
     if cpu is not None:
         summary["cpu"] = cpu

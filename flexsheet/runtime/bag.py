@@ -97,7 +97,9 @@ class RecorderNode(Node):
                 return
         except (IndexError, TypeError):
             pass   # no topic frame: stored (or counted) by the writer all the same
-        self.writer.write(frames, time.time_ns())
+        # log time: the wall clock, or on a simulated clock when the message left its node (deterministic)
+        clock = self.clock
+        self.writer.write(frames, round(clock.stamp() * 1e9) if clock.simulated else time.time_ns())
 
     def heartbeat(self) -> Heartbeat:
         hb = super().heartbeat()

@@ -359,6 +359,7 @@ class Container:
         self.name, self.members, self.bus = name, members, bus
         self.sim_until = sim_until   # live simulated clock: stop after this many simulated seconds
         self.sim_file = sim_file     # live simulated clock: where the run's clock figures go (JSON)
+        self.active_s: dict[str, float] = {}   # live simulated clock: wall s from start until each node was active
         self.shutdown_timeout = shutdown_timeout
         self.print = print_fn or (lambda line: print(line, flush=True))
         self.cpu_file = cpu_file
@@ -491,15 +492,20 @@ class Container:
         async def wait_ready() -> None:
             nonlocal ready_s
             while not self.bus.ready() and not self._stopping:
+                for m in self.members:
+                    if m.name not in self.active_s and m.node is not None and m.node.ready:
+                        self.active_s[m.name] = time.monotonic() - t0
                 await asyncio.sleep(0.01)
+            for m in self.members:
+                self.active_s.setdefault(m.name, time.monotonic() - t0)
             ready_s = time.monotonic() - t0
             self.print(f"container {self.name}: every node active after {ready_s:.1f} s; simulated time starts at "
                        f"{SIM_EPOCH:g} s" + (f" and runs {self.sim_until:g} s" if self.sim_until else ""))
 
-        stats = None
+        stats = self.bus.lockstep.stats   # kept up to date while it runs: valid however the run ends
         try:
             await wait_ready()
-            stats = await run_live(self.bus, self.sim_until, stopped)
+            await run_live(self.bus, self.sim_until, stopped)
             if self.sim_until is not None and not self._stopping:
                 self.reason = f"simulated duration {self.sim_until:g} s reached"
                 self.print(f"container {self.name}: {self.reason} in {stats.wall_s:.1f} s of wall time "
@@ -513,7 +519,7 @@ class Container:
             return
         ls = self.bus.lockstep
         host_cpu = {m.name: m.cpu_s + (m.node.cpu_seconds() if m.node is not None else 0.0) for m in self.members}
-        data = {"clock": "sim", "ready_wall_s": ready_s,
+        data = {"clock": "sim", "ready_wall_s": ready_s, "active_wall_s": dict(self.active_s),
                 "sim_s": stats.bag_s if stats else 0.0, "wall_s": stats.wall_s if stats else 0.0,
                 "realtime_factor": stats.speed if stats else 0.0,
                 "handled": stats.handled if stats else 0, "timer_ticks": stats.timers if stats else 0,

@@ -41,7 +41,6 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from flexsheet.runtime.node import Node, QoS
-from flexsheet.twin.timing import LAB
 from flexsheet.runtime.params import config_fields, params_model
 from flexsheet.twin.camera import (
     REALISTIC_DROP_RATE,
@@ -50,6 +49,7 @@ from flexsheet.twin.camera import (
     default_trajectory,
     twin_renderer,
 )
+from flexsheet.twin.timing import LAB
 from flexsheet.twin.truth_choice import TruthChoice
 from flexsheet.vision.camera_config import CameraConfig
 from flexsheet.vision.stereo_calibration import load_yaml, to_message

@@ -319,7 +319,8 @@ class RendererNode(Node):
     # ------------------------------------------------------------------ simulated clock (one thread)
     def _sim_render(self) -> None:
         """Redraw now if one is wanted and ``max_render_rate`` allows (else the next tick does), charging the
-        lab's render time; publish at ``publish_rate``."""
+        lab's render time; publish at ``publish_rate``. Only the published pairs are drawn on the host: nobody
+        sees the others in a simulation, and a pair is drawn from the newest inputs whatever came before."""
         p: RendererParams = self.params
         now = self.now()
         if not self._dirty or now - self._last_render < 1.0 / p.max_render_rate - 1e-9:
@@ -328,6 +329,8 @@ class RendererNode(Node):
         self._last_render = now
         publish = now - self._last_publish >= 1.0 / p.publish_rate - 1e-9
         self.charge(LAB.compute("renderer"))
+        if not publish:
+            return
         try:
             msg = self._frame(publish)
         except ValueError as exc:

@@ -1,4 +1,4 @@
-"""The whole display, simulated on localhost through real processes (launch/sim.yaml), then a replay of its
+"""The whole display, simulated on one machine on the simulated clock (launch/sim.yaml), then a replay of its
 bag into the planner and the FEM solver (launch/replay.yaml) whose outputs must match the live run."""
 
 from __future__ import annotations
@@ -35,32 +35,30 @@ def test_sim_launch_prints_table1_and_latency_and_leaves_outputs(sim_run):
     Foxglove client watched it for tests/system/test_viz_live.py) ended normally and reported from its bag."""
     out, stdout = sim_run["out"], sim_run["stdout"]
     assert sim_run["code"] == 0, stdout[-8000:]
-    assert "Table I" in stdout and "Latency budget per hop" in stdout
+    assert "Table I" in stdout and "Latency per hop and end to end" in stdout
     summary = json.loads((out / "summary.json").read_text())
+    assert summary["clock"] == "sim" and summary["realtime_factor"] > 0
     row = summary["10"]
-    # the honest (realistic) twin, judged against its hidden truth: the sheet follows the finger's tangent
-    # plane (the paper's 0.359 deg is NOT beaten here: the realistic camera's 0.26 mm fingertip noise sets a
-    # 0.27 deg floor, docs/planner.md; Table I's figures are the experiment's, docs/planner.md); the run records
-    # which truth it was. Bounds for the loaded 2-core machine, where the lag (6 deg/s of stroke) grows with
-    # contention: mean 1.03 deg (dd 0.64 mm) in a clean cold suite, median 1.25 deg (dd 0.77 mm)
-    # with a solve in the idle class beside it; a loop that does not track is tens of degrees off.
+    # the honest (realistic) twin on the simulated clock (deterministic for the seed): the sheet follows the
+    # finger's tangent plane; a loop that does not track is tens of degrees off
     assert summary["twin"]["realism"] == "realistic" and summary["twin"]["truth_seed"] == 0
-    assert row["n"] > MIN_TIPS_HZ * 10                    # the 10 s stroke (conftest: not a speed test)
-    assert 0.0 < row["dtheta_median_deg"] < 1.5 and 0.0 < row["dd_median_mm"] < 1.0, row
-    assert row["dtheta_mean_deg"] < 2.0 and row["dd_mean_mm"] < 1.5, row
+    assert row["n"] > MIN_TIPS_HZ * 10                    # the 10 s stroke
+    assert 0.0 < row["dtheta_median_deg"] < 0.6 and 0.0 < row["dd_median_mm"] < 0.4, row
+    assert row["dtheta_mean_deg"] < 0.6 and row["dd_mean_mm"] < 0.4, row
     # paper's 2R beside ours: per sample 2R·Δθ against twice the chord 2R·sin(Δθ/2), never smaller, larger by at
-    # most 2R·Δθ³/24 (module doc of flexsheet/experiments/table1.py). Over the samples that is at most
-    # π·E[Δθ²] / (24·E[Δθ]) of the mean (Δθ ≤ π), from the row's own mean and std: a loaded run's few samples
-    # of tens of degrees made it 8.7e-3 (2.3e-5 .. 7.1e-4 in three other runs: a fixed 3e-3 is too tight)
+    # most 2R·Δθ³/24 (module doc of flexsheet/experiments/table1.py); over the samples at most
+    # π·E[Δθ²] / (24·E[Δθ]) of the mean (Δθ ≤ π), from the row's own mean and std
     d2r = row["dd_2r_mean_mm"] - 2.0 * row["dd_mean_mm"]
     m, sd = np.radians(row["dtheta_mean_deg"]), np.radians(row["dtheta_std_deg"])
     assert -1e-9 <= d2r <= 1.1 * np.pi * (sd ** 2 + m ** 2) / (24.0 * m) * row["dd_2r_mean_mm"], row
-    assert summary["faults"]["watchdog"] >= 0 and "camera_frame_to_arm_command" in summary["latency_ms"]
+    assert summary["faults"]["watchdog"] >= 0
     assert "stroke_push_4" in summary                      # the combined stroke and push ran too
-    lat = summary["latency_ms"]
+    chain = summary["latency_ms"]["chain"]
     for hop in ("camera_frame_to_fingertip", "fingertip_to_sheet_target", "sheet_target_to_arm_command",
-                "camera_frame_to_arm_command", "fingertip_to_rendered_frame"):
-        assert lat[hop]["n"] > 20 and lat[hop]["median"] is not None, hop
+                "exposure_to_arm_command", "fingertip_to_deformation", "exposure_to_projected"):
+        assert chain[hop]["n"] > 20 and chain[hop]["median"] is not None, hop
+    # the modelled lab latency (flexsheet/twin/timing.py), issue targets: 15 ms and 25 ms medians
+    assert chain["exposure_to_arm_command"]["median"] <= 15.0 and chain["exposure_to_projected"]["median"] <= 25.0
     info = bag_info(out / "sim.mcap")
     assert not info.truncated and info.counts["/object/deformation"] > 100 and info.counts["/render/stereo"] > 20
     assert (out / "table1.png").stat().st_size > 1000 and (out / "report.md").exists()
