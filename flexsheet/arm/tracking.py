@@ -15,7 +15,16 @@ import numpy as np
 
 from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, IKResult
 
-__all__ = ["TargetTracker", "BridgeStatus"]
+__all__ = ["TargetTracker", "TargetRefused", "BridgeStatus"]
+
+
+class TargetRefused(ValueError):
+    """A target IK refused (``set_target(..., strict=True)``); ``result`` is the :class:`IKResult`. A
+    ``ValueError``, so a node handler that lets it out counts the message as rejected input."""
+
+    def __init__(self, result: IKResult) -> None:
+        super().__init__(f"ArmTarget refused by IK: {result.status}")
+        self.result = result
 
 
 class BridgeStatus(StrEnum):
@@ -62,11 +71,14 @@ class TargetTracker:
         if self.goal is None:
             self.goal = self.kin.check_q(q).copy()
 
-    def set_target(self, T_display_clamp, source_stamp: float, now: float, q_measured=None) -> IKResult:
+    def set_target(self, T_display_clamp, source_stamp: float, now: float, q_measured=None, *,
+                   strict: bool = False) -> IKResult:
         """Solve IK for a new target pose (4, 4) at time ``now`` (s); returns the :class:`IKResult`.
 
         Seed: the current goal, else ``q_measured``; the jump limit as the class doc says. If the result is not
-        ok, the goal is unchanged and ``ik_status`` holds the reason. Raises ``ValueError`` for a malformed pose (before anything changes).
+        ok, the goal is unchanged, ``ik_status`` holds the reason, ``refused`` counts it and, with ``strict``,
+        :class:`TargetRefused` is raised (after that bookkeeping: the hold status still shows). Raises
+        ``ValueError`` for a malformed pose (before anything changes).
         """
         seed = self.goal if self.goal is not None else q_measured
         if seed is None:
@@ -84,6 +96,8 @@ class TargetTracker:
         else:
             self.ik_status = res.status
             self.refused += 1
+            if strict:
+                raise TargetRefused(res)
         return res
 
     def status(self, now: float) -> str:

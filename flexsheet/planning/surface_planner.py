@@ -34,6 +34,12 @@ past end caps / box edges       centre ray wraps over rim/edge; normals continuo
 sudden jump > ``jump_distance``  treated as marker re-acquisition: touch state reset → ``reacquired``,
                                 motion ramped by the limiter
 NaN / invalid / stale input     nothing moves: the last safe plan is returned with ``hold:<reason>``
+stamp from the future           (``update(..., now=)``) a sample stamped more than
+                                ``future_stamp_tolerance`` ahead of ``now`` → ``hold:future_stamp``, state
+                                untouched, so it cannot make later samples look stale
+clock stepped backwards         (``now`` behind the newest accepted stamp) an older sample is not stale:
+                                the time base restarts at it with the last step as ``dt`` (counted
+                                ``clock_rebase``); never a freeze
 unreachable clamp target        arms hold the last reachable pose; status ``unreachable`` (never clipped)
 contact near the sheet edge     the finger slips: offset clamped to the sheet → ``slip:sheet_edge``
 object stiffer than sheet       stretch at its limit → ``object_stiffer_than_sheet``
@@ -89,12 +95,13 @@ class Hold(StrEnum):
     INVALID_STAMP = "hold:invalid_stamp"
     INVALID_STIFFNESS = "hold:invalid_stiffness"
     STALE_FINGERTIP = "hold:stale_fingertip"
+    FUTURE_STAMP = "hold:future_stamp"
     SINGULAR = "hold:singular"
 
 
 #: the holds caused by a refused input (the node reports them as rejected input)
 INPUT_REJECTIONS = frozenset({Hold.INVALID_FINGERTIP, Hold.INVALID_STAMP, Hold.STALE_FINGERTIP,
-                              Hold.INVALID_STIFFNESS})
+                              Hold.FUTURE_STAMP, Hold.INVALID_STIFFNESS})
 
 
 @dataclass(frozen=True)
@@ -108,8 +115,10 @@ class PlannerConfig:
     the object's stiffness (1: the object's own; < 1 maps an object stiffer than the sheet into the range the
     arms can apply, reported in every plan's ``object_stiffness``); ``stiffness_tau`` s: time constant of a
     first-order low-pass on the compliance model's stiffness (it follows the measured push depth, which
-    carries the camera's noise; 0: none); ``max_dt`` s: longer gaps count as one nominal period. Raises
-    ``ValueError`` on bad values."""
+    carries the camera's noise; 0: none); ``max_dt`` s: longer gaps count as one nominal period;
+    ``future_stamp_tolerance`` s: how far ahead of the caller's clock (``update``'s ``now``) a sample's stamp
+    may be (clock offsets between hosts, a prediction horizon) before it is refused. Raises ``ValueError`` on
+    bad values."""
 
     touch_distance: float = 0.002
     release_distance: float = 0.006
@@ -122,6 +131,7 @@ class PlannerConfig:
     stiffness_scale: float = 1.0
     stiffness_tau: float = 0.1
     max_dt: float = 0.1
+    future_stamp_tolerance: float = 0.5
     material: SheetMaterial = field(default_factory=SheetMaterial)
     limits: MotionLimits = field(default_factory=MotionLimits)
     reach: ReachModel = field(default_factory=ReachModel)
@@ -138,6 +148,8 @@ class PlannerConfig:
             raise ValueError(f"object_stiffness must be finite and >= 0, got {self.object_stiffness!r}")
         if not (math.isfinite(self.stiffness_tau) and self.stiffness_tau >= 0.0):
             raise ValueError(f"stiffness_tau must be finite and >= 0 s, got {self.stiffness_tau!r}")
+        if not (math.isfinite(self.future_stamp_tolerance) and 0.0 < self.future_stamp_tolerance <= 60.0):
+            raise ValueError(f"future_stamp_tolerance must be in (0, 60] s, got {self.future_stamp_tolerance!r}")
         if not (math.isfinite(self.stiffness_scale) and 0.0 < self.stiffness_scale <= 100.0):
             raise ValueError(f"stiffness_scale must be in (0, 100], got {self.stiffness_scale!r}")
         if len(self.u_ref) != 3 or not finite(self.u_ref) or norm(self.u_ref) < 1e-9:
@@ -223,6 +235,7 @@ class SurfacePlanner:
         """Forget all state (as at start)."""
         self.last: Plan | None = None
         self.t_last: float | None = None
+        self.dt_last: float | None = None
         self.p_last: Vec | None = None
         self.q_last: Vec | None = None
         self.n_last: Vec | None = None
@@ -251,17 +264,19 @@ class SurfacePlanner:
         self._tcache = (k, off_u, r)
         return r
 
-    def update(self, t: float, p, object_stiffness: float | None = None) -> Plan | None:
+    def update(self, t: float, p, object_stiffness: float | None = None, now: float | None = None) -> Plan | None:
         """Plan from a fingertip sample ``p`` (3,) m at time ``t`` s; ``object_stiffness`` N/m (e.g. the FEM's
         dF/dd) overrides the compliance model and the configured value; either is multiplied by
-        ``stiffness_scale``. Returns the new :class:`Plan`, or a held copy of the last
+        ``stiffness_scale``. ``now`` s: the caller's clock (the node's ``now()``, same time base as ``t``), which
+        judges stamps from the future and backward clock steps (see the module table); None: ``t`` alone.
+        Returns the new :class:`Plan`, or a held copy of the last
         safe plan with status ``hold:<reason>`` for invalid input (``None`` if there is none yet). Never raises
         for bad samples: the reason is counted in ``counts``.
 
         Steps: check the sample → re-acquisition → project onto the shape (§V-A) → touch hysteresis → roll
         or recentre (Fig. 7(b)) → stretch for the stiffness → keep the contact on the sheet → rate limits
         and reach → the plan."""
-        s = self._sample(t, p, object_stiffness)
+        s = self._sample(t, p, object_stiffness, now)
         if not isinstance(s, _Sample):
             return self.hold(*s)
         cfg = self.cfg
@@ -300,12 +315,14 @@ class SurfacePlanner:
         for s_ in status:
             self.counts[s_] = self.counts.get(s_, 0) + 1
         self.t_last, self.p_last, self.q_last, self.n_last, self.u_last, self.s = s.t, s.p, q, n, u, (su, sv)
+        if s.dt is not None:
+            self.dt_last = s.dt
         if "unreachable" not in status or self.last is None:
             self.last = plan
         return plan
 
     # -- the steps of update ----------------------------------------------------------------------
-    def _sample(self, t, p, object_stiffness) -> _Sample | tuple[str, float | None]:
+    def _sample(self, t, p, object_stiffness, now=None) -> _Sample | tuple[str, float | None]:
         """The checked sample, or (hold reason, hold time) for an input the planner refuses."""
         try:
             t = float(t)
@@ -316,6 +333,8 @@ class SurfacePlanner:
             return Hold.INVALID_FINGERTIP, None
         if not math.isfinite(t):
             return Hold.INVALID_STAMP, None
+        if now is not None and math.isfinite(now) and t > now + self.cfg.future_stamp_tolerance:
+            return Hold.FUTURE_STAMP, None
         k_obj, src = object_stiffness, "given"
         if k_obj is None and self.compliance is None:
             k_obj, src = self.cfg.object_stiffness, "param"
@@ -325,7 +344,12 @@ class SurfacePlanner:
             return _Sample(t, p, k_obj, None, src)
         dt = t - self.t_last
         if dt <= 0.0:
-            return Hold.STALE_FINGERTIP, None
+            if now is None or not self.t_last > now:
+                return Hold.STALE_FINGERTIP, None
+            # the newest accepted stamp is ahead of the clock: the clock stepped back (or that stamp ran ahead
+            # within the tolerance). It must not gate later samples: restart the time base here.
+            self.counts["clock_rebase"] = self.counts.get("clock_rebase", 0) + 1
+            dt = self.dt_last if self.dt_last is not None else self.cfg.max_dt
         return _Sample(t, p, k_obj, min(dt, self.cfg.max_dt), src)
 
     def _object_stiffness(self, s: _Sample, q: Vec, n: Vec, dist: float) -> tuple[float | None, str]:

@@ -2,14 +2,21 @@
 
 :class:`ControllerCore` owns the register image of docs/register_map.md, validates every write (a refused write
 changes nothing and records a reject code), runs the joint servo (:mod:`.servo`) in fixed periods, and
-implements the watchdog (counter unchanged for more than ``watchdog_periods`` periods while enabled → hold and
-``FAULT_WATCHDOG``), the e-stop (COMMAND.STOP → hold and ``FAULT_ESTOP``, latched) and the fault reset
-(a 0→1 edge of COMMAND.RESET with STOP clear). Holding means the active target is frozen at the joints measured
-when the hold began; the servo brakes to it under its acceleration limit.
+implements the watchdog, the e-stop and the resets. Holding means the executed command is frozen at the joints
+measured when the hold began; the servo brakes to it under its acceleration limit.
 
-Write checks (mirroring a real-time external-control controller, which refuses a too-large step rather than
-executing it): targets inside the joint limits, and while enabled each joint's step from the active target
-≤ ``qd_max · period · step_tolerance``.
+* **One command per cycle.** An accepted target write is latched, not executed: at the next cycle boundary
+  the newest target latched in that period becomes the executed command (ACTIVE); targets it replaced are
+  dropped and counted (``superseded``). The command executed in cycle k+1 therefore differs from the one of
+  cycle k by at most one checked step, however many writes arrive in between.
+* **Write checks** (as a real-time external-control controller, which refuses a too-large step rather than
+  executing it): targets inside the joint limits, and while enabled each joint's step from the command
+  executed in the previous cycle (ACTIVE, not the last accepted write) ≤ ``qd_max · period · step_tolerance``.
+* **Watchdog**: counter unchanged for more than ``watchdog_periods`` periods while enabled → hold and
+  ``FAULT_WATCHDOG``, latched until a 0→1 edge of COMMAND.RESET (writing targets or the counter again does not
+  clear it).
+* **E-stop**: COMMAND.STOP → hold and ``FAULT_ESTOP``, latched until :meth:`ControllerCore.local_reset` (the
+  operator at the controller); a RESET over the network never clears it.
 """
 
 from __future__ import annotations
@@ -60,7 +67,8 @@ class ControllerCore:
         self.servo = JointServo(q0, servo)
         self.holding = [0] * reg.HR_COUNT
         self.holding[reg.HR_TARGET:reg.HR_TARGET + 12] = reg.encode_joints(self.servo.q)
-        self.active = self.servo.q.copy()
+        self.active = self.servo.q.copy()       # the command executed in the current cycle (ACTIVE)
+        self.pending: np.ndarray | None = None  # the newest accepted target, executed at the next cycle
         self.enabled = False
         self.fault = reg.FAULT_NONE
         self.reject = reg.REJ_NONE
@@ -71,7 +79,12 @@ class ControllerCore:
         self.wd_changed_at = float(now)
         self.rejections = 0
         self.writes = 0
+        self.superseded = 0                     # accepted targets replaced in the same period (never executed)
+        self.executed = 0                       # cycles that took a new target
+        self.network_resets_refused = 0         # RESET edges over the network while e-stopped
+        self.local_resets = 0
         self.target_log: list[np.ndarray] | None = None   # set to [] to record accepted targets (tests)
+        self.command_log: list[np.ndarray] | None = None  # set to [] to record the executed command per cycle
 
     # ------------------------------------------------------------------ writes
     def write_holding(self, address: int, values: Sequence[int], now: float) -> None:
@@ -106,7 +119,7 @@ class ControllerCore:
                 self._reject(reg.REJ_TARGET_LIMIT, f"TARGET J{k + 1}={target[k]:.6f} rad outside "
                                                    f"[{p.q_lower[k]:.6f}, {p.q_upper[k]:.6f}]")
             if self.enabled:
-                step = np.abs(target - self.active)
+                step = np.abs(target - self.active)     # from the command executed in the previous cycle
                 cap = p.qd_max * self.period * self.step_tolerance
                 over = np.flatnonzero(step > cap)
                 if over.size:
@@ -124,7 +137,9 @@ class ControllerCore:
         if address <= reg.HR_COMMAND < end:
             self._command(old_cmd, new[reg.HR_COMMAND], now)
         if target is not None and self.enabled:
-            self.active = target
+            if self.pending is not None:
+                self.superseded += 1
+            self.pending = target
             if self.target_log is not None:
                 self.target_log.append(target.copy())
 
@@ -140,13 +155,17 @@ class ControllerCore:
             self.fault = reg.FAULT_ESTOP
             return
         if (cmd & reg.CMD_RESET) and not (old & reg.CMD_RESET):
-            self.fault = reg.FAULT_NONE
-            self.reject = reg.REJ_NONE
-            self.wd_changed_at = now
+            if self.fault == reg.FAULT_ESTOP:
+                self.network_resets_refused += 1     # only the local reset clears an e-stop
+            else:
+                self.fault = reg.FAULT_NONE
+                self.reject = reg.REJ_NONE
+                self.wd_changed_at = now
         if cmd & reg.CMD_ENABLE and self.fault == reg.FAULT_NONE:
             if not self.enabled:
                 self.enabled = True
                 self.active = self.servo.q.copy()
+                self.pending = None
                 self.wd_changed_at = now
         elif self.enabled:
             self._hold()
@@ -154,19 +173,40 @@ class ControllerCore:
     def _hold(self) -> None:
         self.enabled = False
         self.active = self.servo.q.copy()
+        self.pending = None
+
+    def local_reset(self, now: float) -> bool:
+        """The operator's reset at the controller (not reachable over Modbus): clear a latched e-stop or
+        watchdog fault and the COMMAND register (STOP bit included). The arm stays held until a client writes
+        ENABLE. Returns True if a fault was cleared."""
+        had = self.fault != reg.FAULT_NONE
+        self.advance(now)
+        self.fault = reg.FAULT_NONE
+        self.reject = reg.REJ_NONE
+        self.holding[reg.HR_COMMAND] = 0
+        self._hold()
+        self.wd_changed_at = now
+        self.local_resets += 1
+        return had
 
     # ------------------------------------------------------------------ time
     def advance(self, now: float, max_steps: int = 20) -> int:
         """Run servo periods up to time ``now`` (s, same clock as the writes); returns the periods run.
 
         At most ``max_steps`` periods are run per call (a stalled caller does not replay a long gap: the
-        simulated time jumps to ``now``). The watchdog is checked each period.
+        simulated time jumps to ``now``). The watchdog is checked each period; the first period run takes the
+        latched target, if any.
         """
         n = 0
         while self.t_sim + self.period <= now and n < max_steps:
             self.t_sim += self.period
             self._watchdog(self.t_sim)
+            if self.pending is not None:        # this cycle executes the newest target of the last period
+                self.active, self.pending = self.pending, None
+                self.executed += 1
             self.servo.step(self.active, self.period)
+            if self.command_log is not None:
+                self.command_log.append(self.active.copy())
             self.cycle = (self.cycle + 1) & 0xFFFFFFFF
             n += 1
         if self.t_sim + self.period <= now:
@@ -179,6 +219,12 @@ class ControllerCore:
             self.fault = reg.FAULT_WATCHDOG
 
     # ------------------------------------------------------------------ reads
+    def summary(self) -> str:
+        """One diagnostics line: state and counters."""
+        return (f"modbus {'enabled' if self.enabled else 'held'}, fault {self.fault}: writes {self.writes}, "
+                f"rejected {self.rejections}, superseded {self.superseded}, executed {self.executed}, "
+                f"network resets refused (e-stop) {self.network_resets_refused}, local resets {self.local_resets}")
+
     def status_word(self, now: float) -> int:
         """STATUS register value at time ``now``."""
         s = 0

@@ -6,9 +6,11 @@ watchdog counter + the six joint targets (registers 1..13, applied atomically), 
 it, an FC06 COMMAND write after the cycle:
 
 * not enabled → restart the stream at the measured joints (no jump after a reconnect, a fault or an
-  e-stop) and, unless e-stopped, write COMMAND = ENABLE (with a RESET edge for a watchdog fault when
-  ``auto_reset``);
-* e-stop → report ``fault:estop`` and leave it to the operator.
+  e-stop) and, unless faulted, write COMMAND = ENABLE;
+* watchdog fault → report ``fault:watchdog``; with ``auto_reset`` write RESET | ENABLE (a RESET edge: the
+  controller latches the fault until one comes, sending targets and counter again does not clear it);
+* e-stop → report ``fault:estop`` and leave it to the operator: only the controller's local reset clears
+  it (a RESET over Modbus does not), after which the controller is not enabled and the bridge enables it.
 
 A refresh may write the targets a second time within one period (the controller latches the registers at its
 own period), with the same watchdog value.

@@ -4,9 +4,11 @@ Protocol facts and sources: ``design/mxt_protocol.md``; packet codec: :mod:`mess
 must be running ``Open "ENET:<this PC>" As #1 / Mxt 1,1,<filter ms>`` (docs/arm.md).
 
 * **Open.** One UDP socket (ephemeral local port, connected to the controller's ``host:port``, default
-  10000). The first packet is NULL with CCount 0, asking for JOINT (slot 0) and FB_JOINT (slot 1). Its reply
-  gives the command the controller is executing; the stream restarts the limiter there, so the first MOVE is
-  one limited step from it (TORK ``write_first``/``read``).
+  10000), kept across reopens: the controller's session belongs to this address and port. The first packet
+  is NULL with CCount 0, asking for JOINT (slot 0) and FB_JOINT (slot 1); a reopen sends NULL with the next
+  CCount (the controller drops a CCount that does not increase within its session). Its reply gives the
+  command the controller is executing; the stream restarts the limiter there, so the first MOVE is one
+  limited step from it (TORK ``write_first``/``read``).
 * **Stream.** Each cycle one MOVE (SendType JOINT, rad, j7/j8 = 0) with CCount + 1 per packet (M, R). The
   next MOVE leaves as soon as the reply to the last one arrives (the controller replies in its next cycle,
   so its clock paces the bridge, as in TORK's read-then-write loop), but not sooner than half a cycle after
@@ -192,13 +194,15 @@ class MxtLink:
 
     # ------------------------------------------------------------------ ControllerLink
     async def open(self) -> bool:
-        """Send NULL (CCount 0) and wait ``open_timeout`` for its reply. Never raises."""
+        """Send NULL (CCount 0, or the next one on a reopen) and wait ``open_timeout`` for its reply. Never
+        raises."""
         try:
             await self._ensure_socket()
         except OSError as exc:
             log.debug("MXT socket: %s", exc)
             return False
-        self.ccount = 0
+        if self.sent:   # a reopen: CCount goes on increasing (the session may still be ours)
+            self.ccount = (self.ccount + 1) & 0xFFFFFFFF
         self._pending.clear()
         self._sent_cmd.clear()
         self._replies.clear()
@@ -206,7 +210,7 @@ class MxtLink:
         self._last_fb = None
         self._missing = 0
         try:
-            self._send_packet(mxt.null_packet(0, RECV_TYPES), None)
+            self._send_packet(mxt.null_packet(self.ccount, RECV_TYPES), None)
         except LinkError:
             return False
         t_end = time.monotonic() + self.open_timeout

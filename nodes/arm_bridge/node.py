@@ -124,7 +124,9 @@ class ArmBridgeNode(Node):
         self.stream.start()
 
     async def teardown(self) -> None:
-        await self.stream.stop(end=True)    # MXT: END, the controller's Mxt instruction finishes
+        stream = getattr(self, "stream", None)   # None when setup failed before the stream existed
+        if stream is not None:
+            await stream.stop(end=True)    # MXT: END, the controller's Mxt instruction finishes
 
     async def on_target(self, msg: ArmTarget) -> None:
         """New clamp target: IK now (or once the first controller state arrived)."""

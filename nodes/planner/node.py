@@ -20,6 +20,11 @@ Publishes ``/sheet/target``, ``/arm/left/target``, ``/arm/right/target`` with ``
 fingertip's ``exposure_stamp``. A lost marker (``valid=False``) or an input the planner refuses republishes
 the last safe pose with status ``hold:<reason>``; an unreachable target holds the arms and says
 ``unreachable``. Malformed or NaN messages are rejected by the codec and counted in diagnostics.
+Time: a fingertip stamped more than ``future_stamp_tolerance`` s ahead of the node's clock (``self.now()``) is
+rejected and counted alone (``hold:future_stamp``); it never becomes the newest stamp, so the next good
+fingertips are served. Staleness (a stamp not newer than the last accepted one) counts only while the node's
+clock is not behind that last stamp, so a backward clock step restarts the time base instead of freezing the
+planner (:meth:`~flexsheet.planning.surface_planner.SurfacePlanner.update`).
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ from flexsheet.planning.shape import planner_shape
 from flexsheet.planning.surface_planner import INPUT_REJECTIONS, Hold, Plan, PlannerConfig, SurfacePlanner
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
+from flexsheet.twin.timing import LAB
 from messages import ArmTarget, Fingertip, ObjectDeformation, SheetTarget, topics
 
 __all__ = ["PlannerParams", "PlannerNode", "fem_solves_scene"]
@@ -158,7 +164,7 @@ class PlannerNode(Node):
         self.pub_sheet = self.publisher(topics.SHEET_TARGET)
         self.pub_left = self.publisher(topics.ARM_LEFT_TARGET)
         self.pub_right = self.publisher(topics.ARM_RIGHT_TARGET)
-        self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
+        self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST, sim_cost=LAB.compute("planner"))
         self.subscribe(topics.DEFORMATION, self.on_deformation, qos=QoS.LATEST)
 
     def on_deformation(self, msg: ObjectDeformation) -> None:
@@ -209,14 +215,15 @@ class PlannerNode(Node):
             pos = msg.predicted_position if self.params.use_prediction else msg.position
             k, source = self._stiffness()
             plan = self.planner.update(msg.header.stamp + (msg.prediction_horizon if self.params.use_prediction else 0.0),
-                                       pos, k)
+                                       pos, k, now=self.now())
             if plan is not None and not plan.status.startswith("hold"):
                 self._note_source(source)
         if plan is None:
             raise InputRejected(f"fingertip: no safe pose yet to hold (valid={msg.valid})")
         self.publish_plan(plan, msg.exposure_stamp)
         if plan.status in INPUT_REJECTIONS:
-            raise InputRejected(f"fingertip: {plan.status} (position={msg.position.tolist()})")
+            raise InputRejected(f"fingertip: {plan.status} (stamp={msg.header.stamp!r}, "
+                                f"position={msg.position.tolist()})")
 
     def publish_plan(self, plan: Plan, source_stamp: float) -> None:
         """Publish the sheet target and both clamp targets for ``plan``."""

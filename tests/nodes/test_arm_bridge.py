@@ -223,7 +223,12 @@ def test_bridge_holds_on_lost_or_unreachable_targets_and_follows_estop():
                 await asyncio.sleep(0.1)
                 st = h.messages(topics.ARM_LEFT_STATE)[-1]
                 assert st.bridge_status == "fault:estop" and st.fault == reg.FAULT_ESTOP
-                await client.write_register(reg.HR_COMMAND, reg.CMD_RESET, device_id=1)   # operator reset
+                rr = await client.write_register(reg.HR_COMMAND, reg.CMD_RESET | reg.CMD_ENABLE, device_id=1)
+                assert not rr.isError()                   # accepted, but a network RESET never clears an e-stop
+                await asyncio.sleep(0.1)
+                st = h.messages(topics.ARM_LEFT_STATE)[-1]
+                assert st.bridge_status == "fault:estop" and st.fault == reg.FAULT_ESTOP
+                assert twin.local_reset()                 # the operator's reset at the controller
                 await asyncio.sleep(0.1)
                 h.inject(topics.ARM_LEFT_TARGET, target("left", 0.05))
                 await asyncio.sleep(0.1)

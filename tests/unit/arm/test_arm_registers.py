@@ -108,7 +108,7 @@ def test_watchdog_fault_after_three_periods_and_reset():
     assert np.allclose(core.active, core.servo.q)                  # resumes from where it holds
 
 
-def test_estop_latches_until_reset_with_stop_cleared():
+def test_estop_latches_until_the_local_reset():
     core = _enabled_core()
     core.write_holding(reg.HR_COMMAND, [reg.CMD_STOP | reg.CMD_ENABLE], 0.0)
     assert not core.enabled and core.fault == reg.FAULT_ESTOP
@@ -117,4 +117,10 @@ def test_estop_latches_until_reset_with_stop_cleared():
     core.write_holding(reg.HR_COMMAND, [reg.CMD_ENABLE], 0.0)
     assert core.fault == reg.FAULT_ESTOP and not core.enabled        # no reset edge yet
     core.write_holding(reg.HR_COMMAND, [reg.CMD_RESET | reg.CMD_ENABLE], 0.0)
-    assert core.fault == reg.FAULT_NONE and core.enabled
+    assert core.fault == reg.FAULT_ESTOP and not core.enabled        # a network RESET never clears an e-stop
+    assert core.network_resets_refused == 1                          # (STOP|RESET is a stop)
+    assert core.local_reset(0.0)                                     # the operator's reset at the controller
+    assert core.fault == reg.FAULT_NONE and not core.enabled         # held until a client enables
+    assert not core.status_word(0.0) & reg.ST_ESTOP
+    core.write_holding(reg.HR_COMMAND, [reg.CMD_ENABLE], 0.0)
+    assert core.enabled
