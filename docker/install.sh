@@ -39,3 +39,7 @@ fi
 cat "$pip_log"
 rm -f "$pip_log"
 python3 -c "import flexsheet, messages, nodes; print('[install] flexsheet', flexsheet.__version__, 'ready')"
+# the FEM node's models for the shipped launch files and scenes, precomputed once here (not at every start on a
+# fresh HOME: ~12 s for the cylinder); searched read-only by every FEM cache (flexsheet/fem/cache.py)
+echo "[install] precomputing the FEM node's models (python3 -m nodes.fem.warm)"
+python3 -m nodes.fem.warm

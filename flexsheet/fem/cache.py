@@ -6,7 +6,10 @@ the *parts* that determine its content (mesh spec, gmsh version, material, finge
 a version string). Writes are atomic (temporary file + ``os.replace``), so a crash or a concurrent writer never
 leaves a half-written entry; an unreadable entry is reported and recomputed.
 
-Also searched, read-only, after ``cache_dir``: ``flexsheet/fem/data/`` (entries shipped with the repository).
+Also searched, read-only, after ``cache_dir``: ``flexsheet/fem/data/`` (entries shipped with the repository),
+then ``flexsheet/fem/data/installed/`` (:data:`INSTALL_DIR`: what the installer precomputed for the shipped
+launch files and scenes, ``python3 -m nodes.fem.warm``; not in git), so a fresh ``HOME`` starts without
+precomputing.
 """
 
 from __future__ import annotations
@@ -20,10 +23,11 @@ import numpy as np
 
 from flexsheet.manifest import record
 
-__all__ = ["DEFAULT_CACHE_DIR", "SHIPPED_DIR", "cache_key", "ArrayCache"]
+__all__ = ["DEFAULT_CACHE_DIR", "SHIPPED_DIR", "INSTALL_DIR", "cache_key", "ArrayCache"]
 
 DEFAULT_CACHE_DIR = os.path.join(os.path.expanduser("~"), ".cache", "flexsheet", "fem")
 SHIPPED_DIR = os.path.join(os.path.dirname(__file__), "data")
+INSTALL_DIR = os.path.join(SHIPPED_DIR, "installed")
 
 
 def cache_key(*parts) -> str:
@@ -42,6 +46,7 @@ class ArrayCache:
         self.cache_dir = cache_dir or None
         # "" (the default): the module's SHIPPED_DIR as it is now (tests point it elsewhere); None: none
         self.shipped_dir = SHIPPED_DIR if shipped_dir == "" else shipped_dir
+        self.install_dir = INSTALL_DIR if shipped_dir == "" else None   # the installer's precomputed entries
         self.log = log or (lambda s: None)
         #: the file the last successful :meth:`load` read (in ``cache_dir`` or ``shipped_dir``), else None
         self.source: str | None = None
@@ -59,7 +64,7 @@ class ArrayCache:
     def load(self, kind: str, key: str) -> dict[str, np.ndarray] | None:
         """The stored arrays, or None when absent or unreadable (reported through ``log``)."""
         name = self._name(kind, key)
-        for d in (self.cache_dir, self.shipped_dir):
+        for d in (self.cache_dir, self.shipped_dir, self.install_dir):
             if not d:
                 continue
             p = os.path.join(d, name)
