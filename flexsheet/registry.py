@@ -47,6 +47,7 @@ BENCHES: dict[str, str] = {
     "render": "nodes.renderer.bench:main",
     "load": "flexsheet.benches.load:main",
     "viz": "nodes.viz.bench:main",
+    "graph": "nodes.graph_bench:main",
 }
 
 CALIBRATE: dict[str, str] = {

@@ -39,17 +39,19 @@ class ModbusLink:
     """:class:`~flexsheet.arm.stream.ControllerLink` over Modbus TCP.
 
     ``host``/``port`` of the controller, ``device_id`` (Modbus unit id), ``request_timeout`` s,
-    ``auto_reset`` (reset watchdog faults automatically; never e-stops).
+    ``auto_reset`` (reset watchdog faults automatically; never e-stops); ``client_factory``: pymodbus's
+    ``AsyncModbusTcpClient``, or :class:`flexsheet.twin.loopback.LoopbackModbusClient` on a simulated clock.
     """
 
     name = "modbus"
     rewrite_ok = True
 
     def __init__(self, host: str, port: int, *, device_id: int = 1, request_timeout: float = 0.1,
-                 auto_reset: bool = True) -> None:
+                 auto_reset: bool = True, client_factory=AsyncModbusTcpClient) -> None:
         self.host, self.port, self.device_id = host, int(port), int(device_id)
         self.request_timeout = float(request_timeout)
         self.auto_reset = auto_reset
+        self.client_factory = client_factory   # a simulated clock's in-process twin: flexsheet.twin.loopback
         self.client: AsyncModbusTcpClient | None = None
         self.connected = False
         self.on_ready: Callable[[], None] | None = None
@@ -63,8 +65,8 @@ class ModbusLink:
     async def open(self) -> bool:
         """Connect the client (a fresh one each time); False if the controller cannot be reached."""
         self._close()
-        client = AsyncModbusTcpClient(self.host, port=self.port, timeout=self.request_timeout, retries=0,
-                                      reconnect_delay=0, reconnect_delay_max=0)
+        client = self.client_factory(self.host, port=self.port, timeout=self.request_timeout, retries=0,
+                                     reconnect_delay=0, reconnect_delay_max=0)
         try:
             ok = await asyncio.wait_for(client.connect(), timeout=max(0.2, 2 * self.request_timeout))
         except (TimeoutError, OSError, ModbusException):

@@ -29,11 +29,12 @@ from pydantic import Field, model_validator
 from flexsheet.arm.bridge_config import DEFAULT_PERIOD, DEFAULT_PORT, BridgeConfig
 from flexsheet.arm.kinematics import LEFT_BASE, Q_LOWER, Q_UPPER, QD_MAX, RIGHT_BASE, ArmKinematics
 from flexsheet.arm.limiter import StreamLimiter
-from flexsheet.arm.stream import ArmStream, CycleReport
+from flexsheet.arm.stream import ArmStream, CycleReport, LinkError
 from flexsheet.arm.tracking import TargetTracker
 from flexsheet.calibration.display_calib import load_display_calib
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import config_fields, params_model
+from flexsheet.twin.timing import LAB
 from messages import ArmJointState, ArmTarget, topics
 from nodes.arm_bridge.modbus_link import ModbusLink
 from nodes.arm_bridge.mxt_link import MxtLink
@@ -107,21 +108,47 @@ class ArmBridgeNode(Node):
         qd = QD_MAX * p.speed_scale
         limiter = StreamLimiter(np.clip(np.zeros(6), Q_LOWER, Q_UPPER), p.period, qd, qd * p.accel_scale,
                                 Q_LOWER, Q_UPPER, margin)
+        sim = self.clock.simulated
+        if sim and p.protocol == "mxt":
+            raise ValueError("protocol mxt needs the wall clock (launch file clock: wall): its UDP session is "
+                             "paced by the controller's own 7.1 ms clock")
         if p.protocol == "mxt":
             self.link = MxtLink(p.host, p.port, period=p.period, open_timeout=p.mxt_open_timeout,
                                 lost_cycles=p.mxt_lost_cycles)
         else:
+            extra = {}
+            if sim:   # the controller twin of this process, reached at a simulated instant
+                from flexsheet.twin.loopback import LoopbackModbusClient
+
+                extra["client_factory"] = LoopbackModbusClient
             self.link = ModbusLink(p.host, p.port, device_id=p.device_id, request_timeout=p.request_timeout,
-                                   auto_reset=p.auto_reset)
+                                   auto_reset=p.auto_reset, **extra)
         self.stream = ArmStream(self.tracker, limiter, self.link, backoff_min=p.backoff_min,
-                                backoff_max=p.backoff_max, on_cycle=self.on_cycle, clock=self.now,
-                                enabled=p.enabled)
+                                backoff_max=p.backoff_max, on_cycle=self.on_cycle, clock=self.clock.stamp,
+                                enabled=p.enabled, monotonic=self.monotonic)
         self._diag_at = 0.0
         self._pending: ArmTarget | None = None
         self._last_status = ""
         self.pub = self.publisher(topics.arm_state(p.arm))
-        self.subscribe(topics.arm_target(p.arm), self.on_target, qos=QoS.LATEST)
-        self.stream.start()
+        # simulated clock: the target crosses the lab network to the arm PC, then IK (flexsheet/twin/timing.py)
+        # every target is handled and a refused one counted (QoS latest would drop them before decoding)
+        self.subscribe(topics.arm_target(p.arm), self.on_target, qos=QoS.KEEP_ALL, depth=256,
+                       sim_cost=LAB.network_s + LAB.compute("arm_bridge"))
+        if sim:
+            self.timer(p.period, self._sim_cycle)
+        else:
+            self.stream.start()
+
+    async def _sim_cycle(self) -> None:
+        """One controller cycle driven by the simulated clock's timer (the stream's own loop paces the wall
+        clock)."""
+        stream = self.stream
+        await stream.cycle(self.now())
+        if stream.link.connected:
+            try:
+                await stream.link.after_cycle()
+            except LinkError as exc:
+                stream._lost(str(exc))
 
     async def teardown(self) -> None:
         stream = getattr(self, "stream", None)   # None when setup failed before the stream existed
@@ -135,15 +162,16 @@ class ArmBridgeNode(Node):
         if self.tracker.goal is None:
             self._pending = msg
             return
-        self.tracker.set_target(msg.pose, msg.source_stamp, self.now())
-        await self.stream.refresh()   # write it now rather than at the next tick
+        self.tracker.set_target(msg.pose, msg.source_stamp, self.now(), strict=True)
+        if await self.stream.refresh() and self.clock.simulated:   # write it now rather than at the next tick
+            await self.stream.rewrite_now()
 
     def on_cycle(self, rep: CycleReport) -> None:
         """Publish the joint state of this cycle (runs on the loop every period)."""
         if self._pending is not None and self.tracker.goal is not None:
             msg, self._pending = self._pending, None
             try:
-                self.tracker.set_target(msg.pose, msg.source_stamp, self.now())
+                self.tracker.set_target(msg.pose, msg.source_stamp, self.now(), strict=True)
             except ValueError as exc:
                 self._reject(f"ArmTarget: {exc}")
         if rep.bridge_status != self._last_status or rep.t_cycle - self._diag_at > 1.0:

@@ -13,6 +13,7 @@ servo every period even with no client, so the watchdog trips when the client go
 
 from __future__ import annotations
 
+import os
 import time
 from typing import Literal
 
@@ -73,7 +74,8 @@ class ArmControllerSimNode(Node):
             raise ValueError("protocol mxt needs the wall clock (launch file clock: wall)")
         if p.protocol == "mxt":
             self.core = MxtCore(np.array(p.initial_joints), period=p.period, servo=servo, timeout=p.timeout_s,
-                                on_timeout=p.on_timeout, step_tolerance=p.step_tolerance, now=time.monotonic())
+                                on_timeout=p.on_timeout, step_tolerance=p.step_tolerance, now=time.monotonic(),
+                                owner_timeout=p.owner_timeout_s)
             self.twin = MxtTwin(self.core, p.host, p.port)
             port = await self.twin.start()
             self.state_message = f"mxt listening on udp {p.host}:{port}"
@@ -84,20 +86,42 @@ class ArmControllerSimNode(Node):
                                        now=self.monotonic())
             if self.clock.simulated:   # no socket: the bridge of this process calls the core at simulated instants
                 loopback.register(p.host, p.port, self.core, self.now)
-                self.timer(p.period, lambda: self.core.advance(self.now()))
+                self._reset_mtime = self._reset_file_mtime()
+                self.timer(p.period, self._sim_tick)
+                self.timer(1.0, self._diagnose)
                 self.twin = None
                 self.state_message = f"in-process at {p.host}:{p.port} (simulated clock)"
                 self.log.info("arm controller twin (modbus) in-process at %s:%d (simulated clock, period %.5f s)",
                               p.host, p.port, p.period)
                 return
-            self.twin = ControllerTwin(self.core, p.host, p.port)
+            self.twin = ControllerTwin(self.core, p.host, p.port, reset_file=p.estop_reset_path)
             port = await self.twin.start()
             self.state_message = f"listening on {p.host}:{port}"
+            self.timer(1.0, self._diagnose)
         self.log.info("arm controller twin (%s) listening on %s:%d (period %.5f s)", p.protocol, p.host, port,
                       p.period)
 
+    def _reset_file_mtime(self) -> int | None:
+        path = self.params.estop_reset_path
+        try:
+            return os.stat(path).st_mtime_ns if path else None
+        except OSError:
+            return None
+
+    def _sim_tick(self) -> None:
+        """Simulated clock: one servo period; a change of ``estop_reset_path``'s mtime is the local reset."""
+        now = self.now()
+        self.core.advance(now)
+        m = self._reset_file_mtime()
+        if m is not None and m != self._reset_mtime:
+            self._reset_mtime = m
+            if self.core.local_reset(now):
+                self.log.warning("local reset (%s): controller fault cleared", self.params.estop_reset_path)
+
     def _diagnose(self) -> None:
-        self.state_message = f"udp {self.params.host}:{self.twin.port}; {self.core.summary()}"
+        where = (f"udp {self.params.host}:{self.twin.port}" if self.params.protocol == "mxt" else
+                 f"{self.params.host}:{self.params.port}" + (" (in-process)" if self.twin is None else ""))
+        self.state_message = f"{where}; {self.core.summary()}"
 
     async def teardown(self) -> None:
         if getattr(self, "twin", None) is not None:

@@ -353,8 +353,6 @@ def test_the_tracker_refuses_every_bad_target_as_a_value_error():
     assert np.allclose(tr.goal, home_joints("left"))     # the goal never moved
 
 
-@pytest.mark.xfail(strict=True, reason="needs nodes/arm_bridge/node.py (not edited here): on_target must call "
-                   "set_target(..., strict=True) and subscribe the target with QoS.KEEP_ALL (issue 44)")
 def test_the_bridge_counts_80_of_80_bad_targets():
     async def scenario():
         twin = await start_twin("left")

@@ -1,5 +1,5 @@
 """The paper's stroking run (Table I, 10 s stroke) through the whole simulated graph with both arms on MELFA
-real-time external control (MXT/UDP twins) instead of Modbus: ``flexsheet launch launch/sim.yaml --set
+real-time external control (MXT/UDP twins) instead of Modbus: ``flexsheet launch launch/sim_composed.yaml --set
 arm_left.protocol=mxt --set ctrl_left.protocol=mxt ...`` (issue 13: "the full stroking run must pass through
 MXT twins too"). Heavy (one sim launch, ~30 s on 2 cores)."""
 
@@ -37,7 +37,7 @@ def test_table1_stroke_through_mxt_twins(tmp_path, sim_fem_cache):
     # sim_fem_cache: the FEM's precompute is in the disk cache before the launch (tests/conftest.py), so the
     # measured run starts as every later run does instead of starving the 2-core machine with it
     # an offset other than test_faults' default, so the two never share ports within one pytest process
-    launch = private_ports(ROOT / "launch" / "sim.yaml", tmp_path / "sim_mxt.yaml",
+    launch = private_ports(ROOT / "launch" / "sim_composed.yaml", tmp_path / "sim_mxt.yaml",
                            offset=100 * (1 + (os.getpid() + 60) % 120))
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "flexsheet", "launch", str(launch), "--out", str(out), "--duration", "150",

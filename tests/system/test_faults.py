@@ -1,5 +1,5 @@
 """Faults in the full simulated graph (issue 9, item 3): ``kill -9`` of every node but the world, one after
-another, while the paper's stroke runs (``launch/sim.yaml`` through ``flexsheet launch``).
+another, while the paper's stroke runs (``launch/sim_composed.yaml``, the wall-clock graph of processes, through ``flexsheet launch``).
 
 What must hold:
 
@@ -83,7 +83,7 @@ SETTLE = 1.5              # s after a respawn (or, for WAIT_UP nodes, after "up"
 #: of three had the FEM killed before the respawned recorder received /object/deformation (no restart seen)
 SETTLE_AFTER = {"recorder": 5.0}
 #: the launcher's wait before each respawn, per node (s), from the launch file the scenario runs
-RESPAWN_DELAY = {name: spec.respawn.delay for name, spec in load_launch(ROOT / "launch" / "sim.yaml").nodes.items()}
+RESPAWN_DELAY = {name: spec.respawn.delay for name, spec in load_launch(ROOT / "launch" / "sim_composed.yaml").nodes.items()}
 STEP_TOLERANCE = 1.5      # the controller twin's own refusal threshold: qd_max · period · 1.5
 
 
@@ -151,7 +151,7 @@ def run_scenario(out: Path, cut_copy: Path) -> dict:
     The nodes of a group die together once all are up; the next group follows ``SETTLE`` s after the
     launcher restarted them (and, for the arm chain, after they are up again)."""
     # kill -9 is about one node = one process: no composable containers here
-    lf = private_ports(ROOT / "launch" / "sim.yaml", out.parent / f"{out.name}_sim.yaml", split_containers=True)
+    lf = private_ports(ROOT / "launch" / "sim_composed.yaml", out.parent / f"{out.name}_sim.yaml", split_containers=True)
     launch = Launch(lf, out, "--set", SCRIPT)
     kills = []
     try:

@@ -1,0 +1,202 @@
+"""``flexsheet bench graph [--seconds S] [--json]``: the display's own path on the wall clock, without the twin.
+
+The nodes of the display (triangulator, planner, both arm bridges with their Modbus controller twins, FEM,
+renderer offscreen on this machine's GL) run in one container on the wall clock, fed by a player that
+publishes pre-rendered stereo pairs of the ideal camera twin at 48 Hz along the paper's stroke: no world
+node, no camera rendering, no recorder beside them. From the stamps the nodes set:
+
+* ``camera_frame_to_arm_command`` — the frame's ``header.stamp`` (when it was handed to the graph) to the
+  first arm command carrying its fingertip (``ArmJointState.write_stamp``, the earlier arm);
+* ``fingertip_to_rendered_frame`` — the fingertip's ``sent_stamp`` to the rendered pair that drew it
+  (``RenderedFrame.header.stamp``; the renderer redraws and publishes every new input here, at most 120 Hz).
+
+Each with ``median_ms``, ``p99_ms``, ``n``, the target and the verdict. These are the lab's real-time figures
+(docs/realtime.md); the simulated clock charges the declared ones (flexsheet/twin/timing.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from flexsheet.runtime.container import Bus, Container, ContainerTransport, Member
+from flexsheet.runtime.node import Node, NodeConfig, QoS
+from flexsheet.vision.stereo_calibration import to_message
+from messages import StereoFrame
+from messages import topics as T
+
+ROOT = Path(__file__).resolve().parents[1]
+RATE_HZ = 48.0
+TARGETS = {"camera_frame_to_arm_command": {"median_ms": 2.0, "p99_ms": 5.0},
+           "fingertip_to_rendered_frame": {"median_ms": 15.0}}
+
+
+def _frames(n: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], object, np.ndarray]:
+    """``n`` stereo pairs of the ideal twin along the paper's 10 s stroke, its calibration and camera pose."""
+    from flexsheet.twin.camera import camera_model
+    from flexsheet.twin.truth import TwinTruth
+    from nodes.camera.node import CameraParams, published_registration, sim_config, twin_renderer
+    from nodes.world.node import DEFAULT_SCRIPT
+
+    p = CameraParams(source="sim", model="ximea", twin={"realism": "ideal", "truth_seed": 0})
+    calib = camera_model("ximea")
+    published, T_dc, _ = published_registration(p, calib)
+    renderer = twin_renderer(TwinTruth.draw(0, "ideal"), sim_config(p))
+    script = DEFAULT_SCRIPT[0].script(None)
+    frames = []
+    for t in np.linspace(0.0, script.duration, n, endpoint=False):
+        pos, vel = script.state(float(t))
+        frames.append(renderer.render(pos, vel, True))
+    return frames, published, T_dc
+
+
+class _Player(Node):
+    """Publishes the latched calibration and the pre-rendered pairs at 48 Hz (stamped now)."""
+
+    frames: list = []
+    calib: object = None
+    T_dc: np.ndarray | None = None
+
+    async def setup(self) -> None:
+        cal = self.publisher(T.CALIBRATION)
+        cal.publish(to_message(self.calib, cal.header("camera_left"), self.T_dc))
+        self.pub = self.publisher(T.STEREO)
+        self.i = 0
+        self.timer(1.0 / RATE_HZ, self.tick)
+
+    def tick(self) -> None:
+        left, right = self.frames[self.i % len(self.frames)]
+        self.i += 1
+        hdr = self.pub.header("camera_left")
+        self.pub.publish(StereoFrame(header=hdr, left=left, right=right, exposure_stamp=hdr.stamp,
+                                     exposure_time=0.004, stereo_skew=0.0))
+
+
+class _Sink(Node):
+    """Keeps what the measured outputs carry."""
+
+    async def setup(self) -> None:
+        self.tips: dict[float, tuple[float, float]] = {}
+        self.writes: dict[float, float] = {}
+        self.renders: dict[float, float] = {}
+        self.subscribe(T.FINGERTIP, self.on_tip, qos=QoS.KEEP_ALL)
+        self.subscribe(T.ARM_LEFT_STATE, self.on_arm, qos=QoS.KEEP_ALL)
+        self.subscribe(T.ARM_RIGHT_STATE, self.on_arm, qos=QoS.KEEP_ALL)
+        self.subscribe(T.RENDERED, self.on_render, qos=QoS.KEEP_ALL)
+
+    def on_tip(self, m) -> None:
+        if m.valid:
+            self.tips[m.exposure_stamp] = (m.frame_stamp, m.sent_stamp)
+
+    def on_arm(self, m) -> None:
+        e = m.target_stamp
+        if e and m.write_stamp and (e not in self.writes or m.write_stamp < self.writes[e]):
+            self.writes[e] = m.write_stamp
+
+    def on_render(self, m) -> None:
+        self.renders.setdefault(m.source_stamp, m.header.stamp)
+
+
+def _stats(x: list[float], target: dict) -> dict:
+    a = np.asarray(x, float) * 1e3
+    out = {"median_ms": float(np.median(a)) if a.size else None, "p99_ms": float(np.percentile(a, 99)) if a.size
+           else None, "n": int(a.size), "target": target}
+    out["verdict"] = "met" if a.size and all(out[k] is not None and out[k] <= v for k, v in target.items()) else \
+        "MISSED"
+    return out
+
+
+async def _run(seconds: float, warmup: float, names: tuple[str, ...]) -> dict:
+    from flexsheet import registry
+
+    lf = yaml.safe_load((ROOT / "launch" / "sim.yaml").read_text())["nodes"]
+    params = {n: dict(lf[n].get("params", {})) for n in lf}
+    params["renderer"].update(publish_rate=120.0, max_render_rate=120.0)
+    params["ctrl_left"]["port"], params["ctrl_right"]["port"] = 15121, 15122
+    params["arm_left"]["port"], params["arm_right"]["port"] = 15121, 15122
+    bus = Bus("bench", clock=None)
+    made: dict[str, Node] = {}
+
+    def member(name: str, cls, p: dict) -> Member:
+        cfg = NodeConfig(name=name, node_type=getattr(cls, "node_type", ""), endpoint="", params=p,
+                         heartbeat_period=1.0)
+
+        def make(b: Bus) -> Node:
+            made[name] = cls(cfg, transport=ContainerTransport(b, ""))
+            return made[name]
+        return Member(name, make)
+
+    members = [member("player", _Player, {})]
+    for name in names:
+        members.append(member(name, registry.load(registry.NODES[lf[name]["type"]]), params[name]))
+    members.append(member("sink", _Sink, {}))
+    c = Container("bench", members, bus, print_fn=lambda line: None)
+    task = asyncio.get_running_loop().create_task(c.run(install_signals=False))
+    t0 = time.monotonic()
+    while not bus.ready():
+        if task.done() or time.monotonic() - t0 > 300:
+            raise RuntimeError("the display's nodes did not come up (see the log)")
+        await asyncio.sleep(0.05)
+    await asyncio.sleep(warmup)
+    sink = made["sink"]
+    sink.tips.clear()
+    sink.writes.clear()
+    sink.renders.clear()
+    await asyncio.sleep(seconds)
+    tips, writes, renders = dict(sink.tips), dict(sink.writes), dict(sink.renders)
+    c.stop()
+    await task
+    return {"arm": [writes[e] - f for e, (f, _) in tips.items() if e in writes],
+            "render": [renders[e] - s for e, (_, s) in tips.items() if e in renders], "fingertips": len(tips)}
+
+
+#: the two paths, each measured in its own run (in the lab the FEM and the renderer have their own processes
+#: and cores beside the main PC's camera -> planner container; here one process would share one GIL)
+ARM_PATH = ("triangulator", "planner", "ctrl_left", "ctrl_right", "arm_left", "arm_right")
+RENDER_PATH = ("triangulator", "fem", "renderer")
+
+
+def measure(seconds: float, warmup: float) -> dict:
+    """Both paths (module doc), each in its own run of ``warmup`` + ``seconds`` wall seconds."""
+    arm = asyncio.run(_run(seconds, warmup, ARM_PATH))
+    ren = asyncio.run(_run(seconds, warmup, RENDER_PATH))
+    return {"camera_frame_to_arm_command": _stats(arm["arm"], TARGETS["camera_frame_to_arm_command"]),
+            "fingertip_to_rendered_frame": _stats(ren["render"], TARGETS["fingertip_to_rendered_frame"]),
+            "fingertips": {"arm_run": arm["fingertips"], "render_run": ren["fingertips"]}, "seconds": seconds,
+            "clock": "wall",
+            "note": "the display's nodes in one container on this host's wall clock, fed pre-rendered pairs at "
+                    "48 Hz (no world, camera twin or recorder load); the arm path (triangulator, planner, both "
+                    "bridges with their Modbus twins) and the render path (triangulator, FEM, renderer on this "
+                    "machine's GL) in separate runs"}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="flexsheet bench graph", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter,
+                                 epilog="example: flexsheet bench graph --seconds 10 --json > graph_bench.json")
+    ap.add_argument("--seconds", type=float, default=10.0, help="measured wall seconds (default 10)")
+    ap.add_argument("--warmup", type=float, default=3.0, help="seconds after every node is up, not measured")
+    ap.add_argument("--frames", type=int, default=144, help="pre-rendered pairs played in a loop (default 144)")
+    ap.add_argument("--json", action="store_true", help="print the figures as JSON")
+    args = ap.parse_args(argv)
+    print(f"[bench graph] rendering {args.frames} stereo pairs of the ideal twin ...", flush=True)
+    _Player.frames, _Player.calib, _Player.T_dc = _frames(args.frames)
+    print(f"[bench graph] running the arm path, then the render path, {args.warmup:g} + {args.seconds:g} s each ...",
+          flush=True)
+    logging.getLogger().setLevel(logging.WARNING)
+    out = measure(args.seconds, args.warmup)
+    if args.json:
+        print(json.dumps(out, indent=1))
+    else:
+        for k in ("camera_frame_to_arm_command", "fingertip_to_rendered_frame"):
+            v = out[k]
+            print(f"{k:32s} median {v['median_ms']} ms  p99 {v['p99_ms']} ms  n {v['n']}  target {v['target']}: "
+                  f"{v['verdict']}")
+    return 0
