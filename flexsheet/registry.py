@@ -35,6 +35,7 @@ EXPERIMENTS: dict[str, str] = {
     "correction": "flexsheet.experiments.correction:main",
     "stability": "flexsheet.experiments.stability:main",
     "latency_load": "flexsheet.experiments.latency_load:main",
+    "determinism": "flexsheet.experiments.determinism:main",
 }
 
 BENCHES: dict[str, str] = {
@@ -47,7 +48,7 @@ BENCHES: dict[str, str] = {
     "render": "nodes.renderer.bench:main",
     "load": "flexsheet.benches.load:main",
     "viz": "nodes.viz.bench:main",
-    "graph": "nodes.graph_bench:main",
+    "graph": "nodes.camera.graph_bench:main",
 }
 
 CALIBRATE: dict[str, str] = {

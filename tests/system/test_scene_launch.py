@@ -4,9 +4,8 @@ has the stroke's Table I (Δθ) row measured on the sphere; the organ with its s
 the organ (its messages carry the organ's scene key) and its stiffness peak over the inclusion reaches the
 sheet's tension along the stroke.
 
-The FEM's precompute for a scene is warmed in the test process first (the same disk cache the FEM node reads,
-~1 min on a cold 2-core machine); the world starts the stroke only after the FEM node (and the rest of the graph)
-is up (`world.start_after` in launch/sim.yaml), so the stroke is served by the FEM from its start."""
+The graph runs on the simulated clock (launch/sim.yaml ``clock: sim``): simulated time starts once every node,
+the FEM included, is active, so the stroke is served by the FEM from its start whatever the host's load."""
 
 from __future__ import annotations
 

@@ -1,5 +1,8 @@
 """``flexsheet bench graph [--seconds S] [--json]``: the display's own path on the wall clock, without the twin.
 
+Here because the pairs come from the camera node's own twin renderer and registration; the other nodes are
+loaded by their registry names (:mod:`flexsheet.registry`), as the launcher does.
+
 The nodes of the display (triangulator, planner, both arm bridges with their Modbus controller twins, FEM,
 renderer offscreen on this machine's GL) run in one container on the wall clock, fed by a player that
 publishes pre-rendered stereo pairs of the ideal camera twin at 48 Hz along the paper's stroke: no world
@@ -32,7 +35,7 @@ from flexsheet.vision.stereo_calibration import to_message
 from messages import StereoFrame
 from messages import topics as T
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 RATE_HZ = 48.0
 TARGETS = {"camera_frame_to_arm_command": {"median_ms": 2.0, "p99_ms": 5.0},
            "fingertip_to_rendered_frame": {"median_ms": 15.0}}
@@ -41,15 +44,15 @@ TARGETS = {"camera_frame_to_arm_command": {"median_ms": 2.0, "p99_ms": 5.0},
 def _frames(n: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], object, np.ndarray]:
     """``n`` stereo pairs of the ideal twin along the paper's 10 s stroke, its calibration and camera pose."""
     from flexsheet.twin.camera import camera_model
+    from flexsheet.twin.finger import FingerScript
     from flexsheet.twin.truth import TwinTruth
     from nodes.camera.node import CameraParams, published_registration, sim_config, twin_renderer
-    from nodes.world.node import DEFAULT_SCRIPT
 
     p = CameraParams(source="sim", model="ximea", twin={"realism": "ideal", "truth_seed": 0})
     calib = camera_model("ximea")
     published, T_dc, _ = published_registration(p, calib)
     renderer = twin_renderer(TwinTruth.draw(0, "ideal"), sim_config(p))
-    script = DEFAULT_SCRIPT[0].script(None)
+    script = FingerScript(mode="stroke", moving_time=10.0)   # the paper's 10 s stroke (the world's default)
     frames = []
     for t in np.linspace(0.0, script.duration, n, endpoint=False):
         pos, vel = script.state(float(t))
