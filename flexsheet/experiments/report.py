@@ -305,6 +305,39 @@ def cpu_summary(out_dir: Path) -> dict | None:
         return None
 
 
+#: hop of the chain → (the node whose work it is, the topic it publishes: one output per call)
+HOP_NODES = {"camera_frame_to_fingertip": ("triangulator", "/fingertip"),
+             "fingertip_to_sheet_target": ("planner", "/sheet/target"),
+             "fingertip_to_deformation": ("fem", "/object/deformation")}
+
+
+def compute_vs_waiting(summary: dict, out_dir: Path) -> dict:
+    """Wall clock: each hop's median split into its node's own compute per call (the node's CPU seconds over
+    the run, ``cpu.json`` / ``cpu_<container>.json``, divided by its outputs) and the rest (waiting: queues,
+    wake-ups, the other processes). A node in a container counts its handler threads only; a node alone its
+    whole process (decoding and loop included: an upper bound). ms; empty where a figure is missing."""
+    cpu: dict[str, float] = {}
+    try:
+        for f in out_dir.glob("cpu_*.json"):
+            for n, v in json.loads(f.read_text()).get("nodes", {}).items():
+                cpu[n] = float(v.get("handler_cpu_s", 0.0))
+        for n, v in json.loads((out_dir / "cpu.json").read_text()).get("nodes", {}).items():
+            cpu.setdefault(n, float(v.get("cpu_s", 0.0)))
+    except (OSError, ValueError):
+        return {}
+    out = {}
+    for hop, (node, topic) in HOP_NODES.items():
+        n = summary["counts"].get(topic, 0)
+        med = summary["latency_ms"]["chain"].get(hop, {}).get("median")
+        if node in cpu and n and med is not None:
+            c = 1e3 * cpu[node] / n
+            out[hop] = {"node": node, "compute_ms": c, "waiting_ms": med - c, "median_ms": med}
+    if out:
+        out["note"] = ("compute_ms: the node's mean CPU per output (all its handlers); waiting_ms: the hop's median "
+                       "minus it (negative where the node's other handlers make the mean exceed the median)")
+    return out
+
+
 def twin_settings(lf=None) -> dict:
     """``{"realism", "truth_seed", "source"}`` of the twin a launch ran: the launch file's top-level ``twin``
     (a mapping or a model), else the world node's ``twin`` param, else the world's defaults (``source`` says
@@ -499,6 +532,8 @@ def main(out: str, lf=None) -> int:
     else:
         summary["clock"] = "wall"
     summary["seed"] = summary["twin"].get("truth_seed")
+    if summary["clock"] == "wall":
+        summary["latency_ms"]["compute_vs_waiting"] = compute_vs_waiting(summary, out_dir)
     cpu = cpu_summary(out_dir)
     if cpu is not None:
         summary["cpu"] = cpu
