@@ -13,7 +13,8 @@ same check first and starts nothing when it finds an error. What is checked:
   device twins listen on) share a port;
 - **files** named by the nodes of the checked host(s): inputs (:func:`is_input_file_key`) exist and, where a
   launch extension knows a reader, parse; glob patterns match a file; output folders (:data:`OUTPUT_PARAMS`
-  and the extensions') can be created;
+  and the extensions') can be created and lie in a data folder: not under ``/proc``, ``/sys`` or ``/dev``, not
+  on a kernel pseudo filesystem (:data:`PSEUDO_FS`), and an output file that exists is a regular file;
 - **extensions**: each launch extension's own rules (:mod:`flexsheet.runtime.extensions`; the display's:
   :mod:`flexsheet.display.launch`);
 - **CURVE keys** (``security.curve: true``): the keys folder exists, the public keys cover every host, and
@@ -65,7 +66,7 @@ from flexsheet.runtime.launch import (
 )
 from flexsheet.runtime.ports import ephemeral_port_range
 
-__all__ = ["CheckResult", "check_launch", "check_file_param", "is_input_file_key", "OUTPUT_PARAMS"]
+__all__ = ["CheckResult", "check_launch", "check_file_param", "is_input_file_key", "output_problem", "OUTPUT_PARAMS"]
 
 #: node type → (address param, port param) of a socket the node *listens* on besides its publisher
 #: (node type, param) → "file" (a file the node writes: its folder must be creatable) or "dir"
@@ -76,6 +77,14 @@ _INPUT_NAMES = frozenset({"calib_file", "display_calib", "scene", "file", "files
 _HOSTNAME = re.compile(r"^(?=.{1,253}$)([A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}"
                        r"[A-Za-z0-9])?)*\.?$")
 _RESOLVE_TIMEOUT_S = 2.0
+#: folders whose files are the kernel's or devices, never data: an output there is refused
+SYSTEM_DIRS = ("/proc", "/sys", "/dev")
+#: kernel pseudo filesystems (``/proc/self/mounts`` types): an output there is refused wherever it is mounted
+PSEUDO_FS = frozenset({"proc", "sysfs", "devtmpfs", "devpts", "cgroup", "cgroup2", "debugfs", "tracefs", "securityfs",
+                       "configfs", "fusectl", "bpf", "pstore", "mqueue", "hugetlbfs", "efivarfs", "binfmt_misc",
+                       "autofs", "selinuxfs", "rpc_pipefs", "nsfs"})
+
+
 def is_input_file_key(key: str) -> bool:
     """True for a param that names an existing input file: ``calib_file``, ``display_calib``, ``scene``,
     ``file``, ``files_csv`` or any ``*_file``."""
@@ -115,6 +124,49 @@ def check_file_param(key: str, value: str) -> str | None:
             reader(path)
         except (ValueError, OSError) as exc:
             return "unusable: " + " ".join(str(exc).split())[:300]
+    return None
+
+
+def _mount_type(path: Path) -> str:
+    """The filesystem type of the mount that holds ``path`` (an existing path), from ``/proc/self/mounts``
+    ("" when unknown)."""
+    best, kind = "", ""
+    try:
+        lines = Path("/proc/self/mounts").read_text().splitlines()
+    except OSError:
+        return ""
+    target = str(path)
+    for line in lines:
+        f = line.split()
+        if len(f) < 3:
+            continue
+        mnt = f[1].replace("\\040", " ")
+        if (target == mnt or target.startswith(mnt.rstrip("/") + "/")) and len(mnt) > len(best):
+            best, kind = mnt, f[2]
+    return kind
+
+
+def output_problem(value: str, kind: str) -> str | None:
+    """The problem with output param value ``value`` (``kind``: "file", whose folder must be creatable, or
+    "dir"), or None: it must lie in a writable data folder (not under :data:`SYSTEM_DIRS`, not on a
+    :data:`PSEUDO_FS` filesystem), and an existing output file must be a regular file."""
+    target = Path(os.path.realpath(os.path.expanduser(value)))
+    for d in SYSTEM_DIRS:
+        if target == Path(d) or str(target).startswith(d + "/"):
+            return f"{target} is under {d}, not a data folder (the kernel's or devices' files); write to a folder " \
+                   f"on a disk, e.g. $(out)"
+    if kind == "file" and target.exists() and not target.is_file():
+        return f"{target} exists and is not a regular file"
+    folder = target if kind == "dir" else target.parent
+    problem = _creatable(folder)
+    if problem:
+        return problem
+    p = folder
+    while not p.exists():
+        p = p.parent
+    fs = _mount_type(p)
+    if fs in PSEUDO_FS:
+        return f"{p} is on a {fs} filesystem, not a data folder; write to a folder on a disk, e.g. $(out)"
     return None
 
 
@@ -368,8 +420,7 @@ class _Checker:
                     continue
                 kind = _output_params().get((spec.type, key))
                 if kind is not None:
-                    target = Path(os.path.expanduser(value))
-                    problem = _creatable(target if kind == "dir" else target.parent)
+                    problem = output_problem(value, kind)
                     if problem:
                         self.err(f"{where}: params.{key}", value, f"cannot write here: {problem}")
                 elif is_input_file_key(key) or key in GLOB_PARAMS:

@@ -27,7 +27,7 @@ Time: :meth:`Node.now`, the header stamps of :meth:`Publisher.header` and :meth:
 ``use_sim_time``). A node that wants replayable time reads ``self.now()``, never ``time.time()``.
 
 QoS (per subscription): ``LATEST`` keeps only the newest message (depth 1: stale ones are dropped and
-counted), ``KEEP_ALL`` queues everything (bounded by ``depth``, default 1 000 000, drops counted),
+counted), ``KEEP_ALL`` queues everything (bounded by ``depth``, default :data:`KEEP_ALL_DEPTH`, drops counted),
 ``LATCHED`` is ``LATEST`` plus the publisher's last value delivered on joining.
 
 Bad input never crashes a node: an undecodable or wrong-type message, or a handler raising
@@ -62,6 +62,13 @@ from messages import topics as T
 
 __all__ = ["Node", "NodeConfig", "QoS", "InputRejected", "ConfigError", "EXIT_CONFIG", "Publisher", "Subscription",
            "EmptyParams", "ticks", "Clock", "SimClock", "SimTimer", "WALL_CLOCK"]
+
+#: default queue bound of a ``KEEP_ALL`` subscription, messages: more than twice the deepest backlog measured (433
+#: messages: the 2x load bench's every-topic subscriber on 2 cores, docs/reliability.md), 3.5 s of the fastest
+#: topic at twice its rate (joint states, 280 Hz), ~70 s of a 14-node graph's /diagnostics. It was 1 000 000 (no bound in
+#: practice: the world's /diagnostics queue could grow without end). A KEEP_ALL subscriber of images passes a
+#: smaller ``depth`` (1000 stereo frames are 655 MB)
+KEEP_ALL_DEPTH = 1000
 
 #: exit status of a node whose configuration is unusable (BSD ``sysexits.h`` EX_CONFIG): a bad param, a missing
 #: or unreadable file a param names, a ``ValueError`` from :meth:`Node.setup`. The supervisor never respawns it.
@@ -284,7 +291,7 @@ class Subscription:
         self.sim_cost = float(sim_cost)  # s charged per message on a live simulated clock
         self.newest: tuple | None = None  # live simulated clock: (due, order) of the newest queued item
         self.name_b = topic.name.encode()
-        self.depth = depth or (1 if qos in (QoS.LATEST, QoS.LATCHED) else 1_000_000)
+        self.depth = depth or (1 if qos in (QoS.LATEST, QoS.LATCHED) else KEEP_ALL_DEPTH)
         self.queue: collections.deque = collections.deque()
         self.is_async = inspect.iscoroutinefunction(handler)
         self.event = asyncio.Event() if self.is_async else None
@@ -657,10 +664,16 @@ class Node:
                 subs.append(TopicStats(topic=sub.topic.name, type=sub.topic.type.SCHEMA, qos=sub.qos.value,
                                        rate_hz=s.rate, count=s.count, dropped=s.dropped, rejected=s.rejected))
         state = "error" if self.errors_total else ("warn" if self.rejected_total else "ok")
+        message = self.state_message
+        report = getattr(self.transport, "link_report", None)  # peers without a link for a while (LinkWatch)
+        links = report() if report is not None else ""
+        if links:
+            state = "warn" if state == "ok" else state
+            message = f"{message}; {links}" if message else links
         return Heartbeat(header=self._hb_pub.header("display", time.time()), node=self.name,
                          node_type=self.config.node_type, host=self.config.host, pid=os.getpid(),
                          endpoint=self.transport.endpoint, uptime=time.monotonic() - self._started, state=state,
-                         message=self.state_message, publishers=pubs, subscriptions=subs,
+                         message=message, publishers=pubs, subscriptions=subs,
                          rejected_total=self.rejected_total, last_rejection=self.last_rejection, period=period)
 
     async def run(self, install_signals: bool = True) -> None:

@@ -16,6 +16,18 @@ A transport moves encoded multipart frames (see :mod:`flexsheet.runtime.codec`) 
   subscribe, and an unsubscribe when the last subscriber of a prefix leaves or disconnects), so a publisher
   knows whether anyone outside its process wants a topic (:meth:`XPub.wants`) and encodes only then.
 
+Links heal (:class:`LinkWatch`): libzmq gives up on a connection for good after a protocol or handshake error
+(``session_base_t::engine_error``: a ``protocol_error`` terminates the session, no reconnect), so one listener
+that speaks the wrong protocol on a dead node's port (not ZMTP, or plain ZMTP against CURVE) cut that node off
+until its subscribers restarted. Every SUB socket's monitor is watched; an endpoint whose session ended without
+a reconnect is connected again, with back-off, and refusals are logged at most once per
+:data:`LinkWatch.LOG_EVERY_S` per endpoint, with a count.
+
+Memory (:class:`XPub`): a publisher's queue per subscriber is bounded by bytes as well as by count: the send
+high-water mark is lowered to ``budget_bytes`` / (largest message sent), so a subscriber that stops reading
+costs at most about :data:`PUB_QUEUE_BYTES` of the publisher's memory; a message that a full subscriber queue
+could not take is counted (``send`` returns False; the node counts it in its publisher's ``dropped``).
+
 Errors: :class:`TransportError` when an endpoint cannot be bound (address in use, bad address).
 """
 
@@ -23,7 +35,9 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import struct
 import threading
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,7 +45,7 @@ from pathlib import Path
 import zmq
 
 __all__ = ["Transport", "ZmqTransport", "InProcTransport", "TransportError", "CurveConfig", "XPub", "BusSocket",
-           "create_curve_keypair", "load_curve_keys"]
+           "LinkWatch", "PUB_QUEUE_BYTES", "create_curve_keypair", "load_curve_keys"]
 
 log = logging.getLogger(__name__)
 # plain ints: pyzmq's enum flags cost a Python enum operation each (measurable per message)
@@ -39,6 +53,13 @@ _EVENTS, _POLLIN, _NOBLOCK, _RCVMORE = int(zmq.EVENTS), int(zmq.POLLIN), int(zmq
 _SNDMORE = int(zmq.SNDMORE)
 _NOBLOCK_MORE = _NOBLOCK | _SNDMORE
 FramesHandler = Callable[[list], None]
+_monotonic = time.monotonic
+
+#: bytes a publisher socket may queue for one subscriber that does not read (see :class:`XPub`): 32 MiB is
+#: ~50 stereo frames (655 kB, ~1 s at 48 Hz) or ~7 rendered frames (4.7 MB); small messages keep SNDHWM
+PUB_QUEUE_BYTES = 32 << 20
+#: the send high-water mark never goes below this many messages, however big the messages
+MIN_SNDHWM = 4
 
 
 class TransportError(RuntimeError):
@@ -63,15 +84,29 @@ class CurveConfig:
 
 
 class _AllowList:
+    """The ZAP check of a CURVE publisher: admits the listed client keys; refusals are counted (``refused``) and
+    logged at most once per :data:`LOG_EVERY_S` s with the count since the last line (a handshake flood wrote
+    one warning per refusal: 1 106 lines, and the logging slowed the node)."""
+
+    LOG_EVERY_S = 5.0
+
     def __init__(self, keys: list[bytes]) -> None:
         self.keys = set(keys)
         self.refused = 0
+        self._logged_at = -1e9
+        self._unlogged = 0
 
     def callback(self, domain: str, key: bytes) -> bool:
         ok = key in self.keys
         if not ok:
             self.refused += 1
-            log.warning("CURVE: refused a subscriber with an unlisted public key %s", key.decode(errors="replace"))
+            self._unlogged += 1
+            now = _monotonic()
+            if now - self._logged_at >= self.LOG_EVERY_S:
+                log.warning("CURVE: refused %d subscriber handshake(s) with an unlisted public key since the last "
+                            "line (last key %s; %d in all)", self._unlogged, key.decode(errors="replace"),
+                            self.refused)
+                self._logged_at, self._unlogged = now, 0
         return ok
 
 
@@ -114,6 +149,14 @@ class Transport:
         """:meth:`set_latched` for the subscribers outside this process only (the node's publish path)."""
         self.set_latched(topic, frames)
 
+    def link_report(self) -> str:
+        """One line naming the peer endpoints this node has heard nothing from for a while (no link; see
+        :meth:`LinkWatch.report`), or "" (also for a transport without links, or a container's node: its
+        container's SUB socket is asked)."""
+        sock = getattr(self.bus, "sub", None)
+        watch = getattr(sock, "watch", None)
+        return watch.report() if watch is not None else ""
+
     def close(self) -> None:
         raise NotImplementedError
 
@@ -140,23 +183,35 @@ class XPub:
     Created on the loop thread; :meth:`drain` is the loop's reader for the socket's FD. Every socket operation
     takes ``lock`` (ZeroMQ sockets may change threads only across a full memory barrier, which the lock gives).
     Raises :class:`TransportError` naming the endpoint when it cannot be bound.
+
+    Bounded by bytes: ``sndhwm`` (messages) is the most each subscriber's queue holds; once a message bigger than
+    ``budget_bytes / sndhwm`` is sent, the high-water mark (of every subscriber's queue, libzmq applies it to the
+    existing ones) drops to ``budget_bytes // largest message`` (at least :data:`MIN_SNDHWM`), so the queue of a
+    subscriber that stops reading holds about ``budget_bytes``. Counted drops: the socket runs with
+    ``XPUB_NODROP``, so a send that a full queue cannot take fails instead of vanishing; it is then sent again
+    lossy (the subscribers with room still get it) and :meth:`send` returns False. ``dropped`` counts them.
     """
 
     def __init__(self, ctx: zmq.Context, endpoint: str, curve: CurveConfig | None, sndhwm: int,
-                 loop: asyncio.AbstractEventLoop) -> None:
+                 loop: asyncio.AbstractEventLoop, budget_bytes: int = PUB_QUEUE_BYTES) -> None:
         self.lock = threading.Lock()
         self.latched: dict[bytes, list] = {}
         self.prefixes: set[bytes] = set()
         self._wants: dict[bytes, bool] = {}
         self._loop = loop
+        self.budget_bytes = int(budget_bytes)
+        self.sndhwm = self.max_sndhwm = max(1, int(sndhwm))
+        self.largest = self.budget_bytes // self.sndhwm  # a bigger message lowers the high-water mark
+        self.dropped = 0
         self.sock = ctx.socket(zmq.XPUB)
         self.sock.setsockopt(zmq.LINGER, 0)
         if curve is not None:
             self.sock.curve_secretkey = curve.secret_key
             self.sock.curve_publickey = curve.public_key
             self.sock.curve_server = True
-        self.sock.setsockopt(zmq.SNDHWM, sndhwm)
+        self.sock.setsockopt(zmq.SNDHWM, self.sndhwm)
         self.sock.setsockopt(zmq.XPUB_VERBOSE, 1)
+        self.sock.setsockopt(zmq.XPUB_NODROP, 1)
         try:
             self.sock.bind(endpoint)
         except zmq.ZMQError as exc:
@@ -185,23 +240,54 @@ class XPub:
         return w
 
     def send(self, frames: list) -> bool:
-        """Send one multipart message without blocking (any thread); False if dropped or shut down."""
+        """Send one multipart message without blocking (any thread); False if a subscriber's full queue dropped
+        it (the others got it; counted in ``dropped``) or the socket is shut down."""
+        if len(frames) == 2:  # [topic, meta]: no array buffers (the topic's few bytes are left out)
+            m = frames[1]
+            size = len(m) if type(m) is bytes else _nbytes(m)
+        else:
+            size = 0
+            for f in frames:
+                size += len(f) if type(f) is bytes else _nbytes(f)
         with self.lock:
             sock = self.sock
             if sock.closed:
                 return False  # shutting down: a late publish from a worker thread is dropped, not an error
+            if size > self.largest:
+                self._fit_hwm(size)
             try:
                 send = sock.send
                 last = len(frames) - 1
                 for i, f in enumerate(frames):  # send_multipart, minus its per-frame enum arithmetic
                     send(f, _NOBLOCK_MORE if i < last else _NOBLOCK, copy=False)
-            except zmq.Again:
+            except zmq.Again:  # XPUB_NODROP: a matching subscriber's queue is full
+                self.dropped += 1
+                self._send_lossy(frames)
                 return False
             except zmq.ZMQError:
                 return False
         # a send can swallow the FD's edge for a subscription that arrived meanwhile: the safety poll (50 ms)
         # and wants() (which drains when its answer would be no) catch it
         return True
+
+    def _fit_hwm(self, size: int) -> None:
+        """Lower the send high-water mark so that ``size``-byte messages fit ``budget_bytes`` (lock held)."""
+        self.largest = size
+        hwm = max(MIN_SNDHWM, min(self.max_sndhwm, self.budget_bytes // size))
+        if hwm < self.sndhwm:
+            self.sock.setsockopt(zmq.SNDHWM, hwm)
+            self.sndhwm = hwm
+
+    def _send_lossy(self, frames: list) -> None:
+        """Send to the subscribers whose queue has room, the full ones skipped (lock held)."""
+        sock = self.sock
+        sock.setsockopt(zmq.XPUB_NODROP, 0)
+        try:
+            _send_frames(sock, frames)
+        except zmq.ZMQError:
+            pass
+        finally:
+            sock.setsockopt(zmq.XPUB_NODROP, 1)
 
     def set_latched(self, topic: str, frames: list) -> None:
         self.latched[topic.encode()] = frames
@@ -228,7 +314,9 @@ class XPub:
                 for topic, frames in self.latched.items():
                     if topic.startswith(prefix):
                         try:
-                            sock.send_multipart(frames, flags=_NOBLOCK, copy=False)
+                            _send_frames(sock, frames)
+                        except zmq.Again:  # an old subscriber's queue is full: the new one still gets it
+                            self._send_lossy(frames)
                         except zmq.ZMQError:
                             pass
             elif kind == b"\x00":  # the last subscriber of this prefix left
@@ -251,6 +339,20 @@ class XPub:
             # Reproduced with 4 subscribers closing as the XPUB closes after 0.6 MB frames: 6 aborts in 60
             # runs at linger 0, none in 210 at 100 ms. ctx.term() then waits at most CLOSE_LINGER_MS.
             self.sock.close(linger=CLOSE_LINGER_MS)
+
+
+def _send_frames(sock: zmq.Socket, frames: list) -> None:
+    """Send one multipart message without blocking (``send_multipart`` minus its per-frame enum arithmetic)."""
+    send = sock.send
+    last = len(frames) - 1
+    for i, f in enumerate(frames):
+        send(f, _NOBLOCK_MORE if i < last else _NOBLOCK, copy=False)
+
+
+def _nbytes(frame) -> int:
+    """Size of one frame that is not ``bytes`` (an array, a memoryview, a ``zmq.Frame``), bytes."""
+    n = getattr(frame, "nbytes", None)
+    return n if n is not None else len(frame)
 
 
 class ZmqTransport(Transport):
@@ -291,6 +393,7 @@ class ZmqTransport(Transport):
         self.ctx: zmq.Context | None = None
         self.xpub: XPub | None = None
         self.sub: zmq.Socket | None = None
+        self.watch: LinkWatch | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._on_frames: FramesHandler | None = None
         self._poll_task: asyncio.Task | None = None
@@ -315,6 +418,7 @@ class ZmqTransport(Transport):
                 raise
             self.endpoint = self.xpub.endpoint
         self.sub = connect_sub(self.ctx, self.peers, curve, self.rcvhwm, self.close)
+        self.watch = LinkWatch(self.sub, self.peers, curve)
         if self.drain_period <= 0.0:
             self._loop.add_reader(self.sub.getsockopt(zmq.FD), self._drain_sub)
         # ZeroMQ's FD is edge-triggered: a slow safety poll catches any edge lost between drains (with a
@@ -342,6 +446,11 @@ class ZmqTransport(Transport):
         if endpoint and endpoint not in self.peers and self.sub is not None:
             self.peers.append(endpoint)
             self.sub.connect(endpoint)
+            if self.watch is not None:
+                self.watch.add(endpoint)
+
+    def link_report(self) -> str:
+        return self.watch.report() if self.watch is not None else ""
 
     def _drain_sub(self) -> None:
         drain_sub(self.sub, self._on_frames)
@@ -352,12 +461,16 @@ class ZmqTransport(Transport):
             self._drain_sub()
             if self.xpub is not None:
                 self.xpub.drain()
+            if self.watch is not None:
+                self.watch.poll()
 
     def close(self) -> None:
         if self._poll_task is not None:
             self._poll_task.cancel()
         if self.xpub is not None:
             self.xpub.close()
+        if self.watch is not None:
+            self.watch.close()
         sub = self.sub
         if sub is not None and not sub.closed:
             if self._loop is not None:
@@ -403,6 +516,201 @@ def connect_sub(ctx: zmq.Context, peers: list[str], curve: CurveConfig | None, r
                 raise
             raise TransportError(f"cannot connect to peer endpoint {peer!r}: {exc}") from None
     return sub
+
+
+# monitor events as plain ints (pyzmq's enums cost an enum operation each)
+_EV_CONNECTED, _EV_DELAYED = int(zmq.EVENT_CONNECTED), int(zmq.EVENT_CONNECT_DELAYED)
+_EV_RETRIED, _EV_DISCONNECTED = int(zmq.EVENT_CONNECT_RETRIED), int(zmq.EVENT_DISCONNECTED)
+_EV_OK, _EV_FAIL_NO_DETAIL = int(zmq.EVENT_HANDSHAKE_SUCCEEDED), int(zmq.EVENT_HANDSHAKE_FAILED_NO_DETAIL)
+_EV_FAIL_PROTOCOL, _EV_FAIL_AUTH = int(zmq.EVENT_HANDSHAKE_FAILED_PROTOCOL), int(zmq.EVENT_HANDSHAKE_FAILED_AUTH)
+_LINK_EVENTS = (_EV_CONNECTED | _EV_DELAYED | _EV_RETRIED | _EV_DISCONNECTED | _EV_OK | _EV_FAIL_PROTOCOL
+                | _EV_FAIL_AUTH | _EV_FAIL_NO_DETAIL)
+_PROTOCOL_ERRORS = {int(getattr(zmq, n)): n[len("PROTOCOL_ERROR_"):].lower().replace("_", " ")
+                    for n in dir(zmq) if n.startswith("PROTOCOL_ERROR_")}
+
+
+class _Link:
+    """What :class:`LinkWatch` knows of one peer endpoint."""
+
+    __slots__ = ("endpoint", "up", "since", "check_at", "retry_at", "backoff", "failures", "failed_down",
+                 "unlogged", "logged_at", "reason", "reconnects")
+
+    def __init__(self, endpoint: str, now: float) -> None:
+        self.endpoint = endpoint
+        self.up = False
+        self.since = now                      # when it last went up or down (down from the start)
+        self.check_at: float | None = None    # the session must show a sign of life by then, or it is gone
+        self.retry_at: float | None = None    # gone: connect again then
+        self.backoff = LinkWatch.BACKOFF_MIN_S
+        self.failures = 0                     # failed handshakes, in all
+        self.failed_down = 0                  # ... since the link was last up
+        self.unlogged = 0                     # ... since the last log line
+        self.logged_at = -1e9
+        self.reason = ""                      # the last failure
+        self.reconnects = 0                   # connections made again by the watch
+
+
+class LinkWatch:
+    """Keeps every peer endpoint of one SUB socket connected, whatever a listener on that port did.
+
+    libzmq reconnects a connection lost to a network error, but a protocol error (the peer is not ZMTP, speaks
+    another security mechanism, sends a malformed greeting or command) ends the connection's session for good:
+    libzmq never connects to that endpoint again. Read from the socket's monitor: a session that disconnects
+    and shows no reconnect (``EVENT_CONNECT_RETRIED``, which libzmq emits right after the disconnect when it
+    retries) within :data:`GRACE_S`, or that failed its handshake (``HANDSHAKE_FAILED_PROTOCOL``/``_AUTH``), is
+    gone: the endpoint is disconnected and connected again after a back-off (:data:`BACKOFF_MIN_S` doubling to
+    :data:`BACKOFF_MAX_S`; reset by a handshake that succeeds). So within about ``BACKOFF_MAX_S`` + libzmq's
+    ``RECONNECT_IVL_MAX`` (1 s) after a squatter leaves and the real publisher is back, messages flow again.
+
+    :meth:`poll` runs on the socket's thread (the transports' safety poll, every 50 ms). A connection given up
+    is logged at most once per :data:`LOG_EVERY_S` per endpoint, with the count of failed handshakes;
+    :meth:`report` names the endpoints without a link for more than :data:`SILENT_S` (the node's heartbeat
+    says it).
+    """
+
+    GRACE_S = 0.5
+    BACKOFF_MIN_S = 0.1
+    BACKOFF_MAX_S = 1.0
+    LOG_EVERY_S = 5.0
+    SILENT_S = 5.0
+    POLL_S = 0.05
+
+    def __init__(self, sock: zmq.Socket, peers: Iterable[str], curve: CurveConfig | None = None) -> None:
+        self.sock = sock
+        self.curve = curve
+        self.mon: zmq.Socket | None = sock.get_monitor_socket(_LINK_EVENTS)
+        now = _monotonic()
+        self.links: dict[str, _Link] = {ep: _Link(ep, now) for ep in peers}
+        self._busy: set[_Link] = set()  # links with a pending check or retry
+        self.next_poll = now
+
+    def add(self, endpoint: str) -> None:
+        """Watch one more endpoint (connected by the caller)."""
+        if endpoint not in self.links:
+            self.links[endpoint] = _Link(endpoint, _monotonic())
+
+    def poll(self, now: float | None = None) -> None:
+        """Read the monitor's events and connect again to every endpoint whose session is gone."""
+        mon = self.mon
+        if mon is None or mon.closed or self.sock.closed:
+            return
+        now = _monotonic() if now is None else now
+        self.next_poll = now + self.POLL_S
+        while mon.getsockopt(_EVENTS) & _POLLIN:
+            try:
+                head = mon.recv(_NOBLOCK)
+                endpoint = mon.recv(_NOBLOCK).decode(errors="replace") if mon.getsockopt(_RCVMORE) else ""
+            except zmq.Again:
+                break
+            link = self.links.get(endpoint)
+            if link is not None and len(head) >= 6:
+                self._event(link, *struct.unpack_from("<HI", head), now)
+        for link in list(self._busy):
+            self._step(link, now)
+
+    def _event(self, link: _Link, event: int, value: int, now: float) -> None:
+        if event == _EV_RETRIED or event == _EV_DELAYED or event == _EV_CONNECTED:
+            link.check_at = None                       # libzmq is (re)connecting: alive
+        elif event == _EV_OK:
+            if link.failed_down:
+                log.info("link to %s up again (%d failed handshake(s) while it was down)", link.endpoint,
+                         link.failed_down)
+            link.up, link.since = True, now
+            link.check_at = link.retry_at = None
+            link.backoff = self.BACKOFF_MIN_S
+            link.failed_down = 0
+        elif event == _EV_DISCONNECTED:
+            if link.up:
+                link.up, link.since = False, now
+            if link.check_at is None and link.retry_at is None:
+                link.check_at = now + self.GRACE_S     # gone unless libzmq retries
+                self._busy.add(link)
+        elif event == _EV_FAIL_PROTOCOL or event == _EV_FAIL_AUTH or event == _EV_FAIL_NO_DETAIL:
+            if event == _EV_FAIL_PROTOCOL:
+                link.reason = "handshake refused: " + _PROTOCOL_ERRORS.get(value, f"protocol error {value:#x}")
+            elif event == _EV_FAIL_AUTH:
+                link.reason = f"handshake refused by the publisher (ZAP status {value})"
+            elif not (link.failed_down and link.reason.startswith("handshake refused")):  # a refusal says more
+                link.reason = f"handshake failed: {_strerror(value)}"
+            link.failures += 1
+            link.failed_down += 1
+            link.unlogged += 1
+            if event != _EV_FAIL_NO_DETAIL and link.retry_at is None:
+                link.check_at = now                    # libzmq ends the connection: no retry will come
+                self._busy.add(link)
+
+    def _step(self, link: _Link, now: float) -> None:
+        if link.check_at is not None and now >= link.check_at:
+            link.check_at = None
+            link.retry_at = now + link.backoff
+            self._log(link, now)
+        if link.retry_at is not None and now >= link.retry_at:
+            link.retry_at = None
+            link.backoff = min(self.BACKOFF_MAX_S, link.backoff * 2.0)
+            self._reconnect(link)
+        if link.check_at is None and link.retry_at is None:
+            self._busy.discard(link)
+
+    def _reconnect(self, link: _Link) -> None:
+        sock, ep = self.sock, link.endpoint
+        try:
+            sock.disconnect(ep)
+        except zmq.ZMQError:
+            pass  # libzmq may have dropped the endpoint already
+        try:
+            if self.curve is not None:
+                sock.curve_serverkey = self.curve.server_keys[ep]
+            sock.connect(ep)
+        except (zmq.ZMQError, KeyError) as exc:
+            link.retry_at = _monotonic() + link.backoff
+            log.warning("link to %s: cannot connect again: %s", ep, exc)
+            return
+        link.reconnects += 1
+
+    def _log(self, link: _Link, now: float) -> None:
+        """One line per :data:`LOG_EVERY_S` per endpoint: the connection was given up, why, how often."""
+        if now - link.logged_at < self.LOG_EVERY_S:
+            return
+        n, link.unlogged, link.logged_at = link.unlogged, 0, now
+        log.warning("link to %s: %s; libzmq gave up on it, connecting again in %.1f s (back-off up to %.0f s; "
+                    "%d failed handshake(s) since the last line, %d in all)", link.endpoint,
+                    link.reason or "ended without a reconnect", link.retry_at - now, self.BACKOFF_MAX_S, n,
+                    link.failures)
+
+    def report(self, now: float | None = None) -> str:
+        """``"no link to EP for N s (reason)"`` for each endpoint (at most 3 named) down for more than
+        :data:`SILENT_S`, joined by "; ", or ""."""
+        now = _monotonic() if now is None else now
+        silent = [x for x in self.links.values() if not x.up and now - x.since > self.SILENT_S]
+        if not silent:
+            return ""
+        parts = [f"no link to {x.endpoint} for {now - x.since:.0f} s"
+                 + (f" ({x.failed_down} failed handshake(s), last: {x.reason})" if x.failed_down else "")
+                 for x in silent[:3]]
+        if len(silent) > 3:
+            parts.append(f"and {len(silent) - 3} more endpoint(s)")
+        return "; ".join(parts)
+
+    def close(self) -> None:
+        """Stop the monitor and close its socket (before the SUB socket and the context)."""
+        mon, self.mon = self.mon, None
+        if mon is None:
+            return
+        try:
+            if not self.sock.closed:
+                self.sock.disable_monitor()
+        except zmq.ZMQError:
+            pass
+        mon.close(linger=0)
+
+
+def _strerror(code: int) -> str:
+    import os
+
+    try:
+        return os.strerror(code)
+    except ValueError:
+        return f"errno {code}"
 
 
 def drain_sub(sub: zmq.Socket | None, handler: FramesHandler) -> None:
@@ -474,6 +782,7 @@ class BusSocket:
         self.ctx = zmq.Context()
         self._auth = _allow_list(self.ctx, curve)[0] if curve is not None else None
         self.sock = connect_sub(self.ctx, peers, curve, rcvhwm)
+        self.watch = LinkWatch(self.sock, [p for p in dict.fromkeys(peers) if p], curve)
 
     @property
     def closed(self) -> bool:
@@ -490,11 +799,17 @@ class BusSocket:
         self.sock.setsockopt(zmq.UNSUBSCRIBE, prefix)
 
     def drain(self, handler: FramesHandler) -> None:
-        """Hand every waiting multipart message to ``handler`` (:func:`drain_sub`)."""
+        """Hand every waiting multipart message to ``handler`` (:func:`drain_sub`); every
+        :data:`LinkWatch.POLL_S` also keep the links (:meth:`LinkWatch.poll`; the container's safety poll calls
+        this every 50 ms)."""
         drain_sub(self.sock, handler)
+        watch = self.watch
+        if _monotonic() >= watch.next_poll:
+            watch.poll()
 
     def close(self) -> None:
         """Close the socket, stop the authenticator and end the context (idempotent)."""
+        self.watch.close()
         if not self.sock.closed:
             self.sock.close(linger=0)
         if self._auth is not None:
