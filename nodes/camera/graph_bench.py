@@ -89,7 +89,10 @@ class _Sink(Node):
         self.tips: dict[float, tuple[float, float]] = {}
         self.writes: dict[float, float] = {}
         self.renders: dict[float, float] = {}
+        self.targets: dict[float, float] = {}
         self.subscribe(T.FINGERTIP, self.on_tip, qos=QoS.KEEP_ALL)
+        self.subscribe(T.SHEET_TARGET, lambda m: self.targets.setdefault(m.source_stamp, m.header.stamp),
+                       qos=QoS.KEEP_ALL)
         self.subscribe(T.ARM_LEFT_STATE, self.on_arm, qos=QoS.KEEP_ALL)
         self.subscribe(T.ARM_RIGHT_STATE, self.on_arm, qos=QoS.KEEP_ALL)
         self.subscribe(T.RENDERED, self.on_render, qos=QoS.KEEP_ALL)
@@ -152,11 +155,16 @@ async def _run(seconds: float, warmup: float, names: tuple[str, ...]) -> dict:
     sink.tips.clear()
     sink.writes.clear()
     sink.renders.clear()
+    sink.targets.clear()
     await asyncio.sleep(seconds)
-    tips, writes, renders = dict(sink.tips), dict(sink.writes), dict(sink.renders)
+    tips, writes, renders, targets = dict(sink.tips), dict(sink.writes), dict(sink.renders), dict(sink.targets)
     c.stop()
     await task
-    return {"arm": [writes[e] - f for e, (f, _) in tips.items() if e in writes],
+    hops = {"frame_to_fingertip": [s - f for f, s in tips.values()],
+            "fingertip_to_sheet_target": [targets[e] - s for e, (_, s) in tips.items() if e in targets],
+            "sheet_target_to_arm_command": [writes[e] - targets[e] for e in targets if e in writes]}
+    return {"hops": {k: float(np.median(v)) * 1e3 if v else None for k, v in hops.items()},
+            "arm": [writes[e] - f for e, (f, _) in tips.items() if e in writes],
             "render": [renders[e] - s for e, (_, s) in tips.items() if e in renders], "fingertips": len(tips)}
 
 
@@ -172,6 +180,7 @@ def measure(seconds: float, warmup: float) -> dict:
     ren = asyncio.run(_run(seconds, warmup, RENDER_PATH))
     return {"camera_frame_to_arm_command": _stats(arm["arm"], TARGETS["camera_frame_to_arm_command"]),
             "fingertip_to_rendered_frame": _stats(ren["render"], TARGETS["fingertip_to_rendered_frame"]),
+            "arm_path_hops_median_ms": arm["hops"],
             "fingertips": {"arm_run": arm["fingertips"], "render_run": ren["fingertips"]}, "seconds": seconds,
             "clock": "wall",
             "note": "the display's nodes in one container on this host's wall clock, fed pre-rendered pairs at "
