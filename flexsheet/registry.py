@@ -36,6 +36,7 @@ EXPERIMENTS: dict[str, str] = {
     "stability": "flexsheet.experiments.stability:main",
     "latency_load": "flexsheet.experiments.latency_load:main",
     "determinism": "flexsheet.experiments.determinism:main",
+    "faults": "flexsheet.experiments.faults:main",
 }
 
 BENCHES: dict[str, str] = {

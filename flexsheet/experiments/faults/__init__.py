@@ -1,0 +1,6 @@
+"""``flexsheet experiment faults --out DIR [--quick]``: each hostile input and fault of issue 44 against the
+runtime, the links and the twins, counted (:mod:`.experiment`)."""
+
+from flexsheet.experiments.faults.experiment import main
+
+__all__ = ["main"]
