@@ -16,6 +16,7 @@ Units: m, rad; frames: display (clamps), the sheet's own (u, v) for the deflecti
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -131,6 +132,54 @@ class TruePhysics:
         return SheetSurface(origin, n, eu, a, self.half_width, mem, self.size), stretch
 
 
+#: the true sheet's tables shipped for the default twin (realistic, truth seed 0) at the clamp strains a
+#: default run reaches, so a fresh machine's simulated run does not wait for them (≈ 30–80 s each); searched
+#: after the cache. Regenerate: ``python -m flexsheet.twin.world --ship``.
+SHIPPED_TRUTH_TABLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "sheet_tables")
+#: (realism, truth seed, clamp strains) shipped
+SHIPPED_TRUTHS = (("realistic", 0, tuple(round(0.01 * k, 6) for k in range(1, 9))),)
+
+
 def _cached_table(phys: SheetPhysics, s: FemSettings) -> IndentTable | None:
-    """The cached table of ``phys`` or ``None`` (nothing is built)."""
-    return IndentTable.cached(phys, s.depths, s.positions, mesh=s.mesh, cache_dir=s.cache_dir)
+    """The cached (or shipped) table of ``phys`` or ``None`` (nothing is built)."""
+    for folder in (s.cache_dir, SHIPPED_TRUTH_TABLES):
+        tab = IndentTable.cached(phys, s.depths, s.positions, mesh=s.mesh, cache_dir=folder)
+        if tab is not None:
+            return tab
+    return None
+
+
+def ship(size: float = geometry.SHEET_SIZE) -> list[str]:
+    """Build (or take from the cache) the tables of :data:`SHIPPED_TRUTHS` and copy them into
+    :data:`SHIPPED_TRUTH_TABLES`, entered in its manifest. Returns the paths."""
+    import shutil
+
+    from flexsheet.manifest import record
+    from flexsheet.twin.world_config import SheetFemConfig
+
+    os.makedirs(SHIPPED_TRUTH_TABLES, exist_ok=True)
+    out = []
+    for realism, seed, nodes in SHIPPED_TRUTHS:
+        phys = TruePhysics(TwinTruth.draw(seed, realism), SheetFemConfig().settings(), size=size)
+        for node in nodes:
+            build_table(seed, realism, node, size, phys.settings)
+            key = IndentTable.key_of(phys.physics(node), phys.settings.depths, phys.settings.positions,
+                                     phys.settings.mesh)
+            src = os.path.join(phys.settings.cache_dir, f"indent_{key}.npz")
+            dst = os.path.join(SHIPPED_TRUTH_TABLES, os.path.basename(src))
+            if os.path.abspath(src) != os.path.abspath(dst):
+                shutil.copyfile(src, dst)
+            record(dst, "python -m flexsheet.twin.world --ship")
+            out.append(dst)
+    return out
+
+
+if __name__ == "__main__":
+    import sys
+
+    if sys.argv[1:] == ["--ship"]:
+        for path in ship():
+            print(path)
+    else:
+        print("usage: python -m flexsheet.twin.world --ship", file=sys.stderr)
+        sys.exit(2)
