@@ -159,6 +159,65 @@ def table1_rows(d: dict[str, list], scene: Scene | None = None) -> dict:
             row["paper"] = PAPER_TABLE1[key]
         out[key] = row
     out["fingertip_invalid"] = n_invalid
+    out["table1"] = felt_and_paper(d, groups, scene, s_ts)
+    return out
+
+
+def _interp_points(samples: list, t: np.ndarray, attr: str = "position") -> np.ndarray:
+    ts = np.array([m.header.stamp for _, m in samples])
+    v = np.array([getattr(m, attr) for _, m in samples], float)
+    return np.stack([np.interp(t, ts, v[:, k]) for k in range(v.shape[1])], axis=1)
+
+
+def _believed_sheet(d: dict[str, list], t: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The sheet the display believes at times ``t``: its kinematics on the joint readback (the bridges'
+    ``ArmJointState.pose``), both clamps interpolated, :func:`flexsheet.model.sheet.frame_from_clamps`."""
+    from flexsheet.model.sheet import frame_from_clamps
+
+    left, right = d.get("/arm/left/joint_state", []), d.get("/arm/right/joint_state", [])
+    if len(left) < 2 or len(right) < 2:
+        return None
+    poses = []
+    for arm in (left, right):
+        ts = np.array([m.header.stamp for _, m in arm])
+        idx = np.clip(np.searchsorted(ts, t), 0, len(ts) - 1)   # the readback at or just after each instant
+        poses.append([arm[i][1].pose for i in idx])
+    o, n = np.empty((len(t), 3)), np.empty((len(t), 3))
+    for i, (tl, tr) in enumerate(zip(*poses, strict=True)):
+        o[i], n[i], _, _ = frame_from_clamps(tl, tr)
+    return o, n
+
+
+def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_ts: np.ndarray) -> dict:
+    """Table I two ways per stroking segment (issue 41):
+
+    * ``felt``: the true fingertip (``/world/finger``, interpolated at each exposure) against the true sheet
+      (``/world/sheet``): the row of :func:`flexsheet.experiments.table1.scene_table1_row` plus
+      ``angle3d_mean_deg`` (the full 3-D angle between the object's normal at the true contact and the
+      sheet's normal);
+    * ``paper``: the paper's own measurement: the measured fingertip against the sheet the display believes
+      (its kinematics on the joint readback).
+    """
+    from flexsheet.planning.shape import planner_shape
+
+    truths, sheets = d.get("/world/finger", []), d.get("/world/sheet", [])
+    shape = planner_shape(scene)
+    out: dict = {"felt": {}, "paper": {}}
+    for key, ms in groups.items():
+        ms = [m for m in ms if s_ts[0] <= m.exposure_stamp <= s_ts[-1]]
+        if len(ms) < 10:
+            continue
+        t = np.array([m.exposure_stamp for m in ms])
+        true_tip = _interp_points(truths, t)
+        origin, normal = _interp_sheet(sheets, t)
+        row = scene_table1_row(scene, true_tip, origin, normal)
+        nd = np.array([shape.project(tuple(p)).normal for p in true_tip])
+        cos = np.clip(np.abs(np.sum(nd * normal, axis=1)), 0.0, 1.0)
+        row["angle3d_mean_deg"] = float(np.degrees(np.arccos(cos)).mean())
+        out["felt"][key] = row
+        believed = _believed_sheet(d, t)
+        if believed is not None:
+            out["paper"][key] = scene_table1_row(scene, np.array([m.position for m in ms]), *believed)
     return out
 
 
@@ -492,6 +551,14 @@ def _format(summary: dict) -> str:
                      f"{_cell(r.get('dd_2r_mean_mm'), 10)}{r['dd_mean_mm']:9.3f}"
                      f"{p.get('dtheta_mean_deg', float('nan')):10.3f}{p.get('dd_mean_mm', float('nan')):10.3f}"
                      f"{tg:10.3f}{r['n']:7d}")
+    t1 = summary.get("table1", {})
+    if t1.get("felt"):
+        lines += ["", "Table I, felt (true finger vs true sheet) and paper (measured finger vs believed sheet), deg/mm",
+                  f"{'segment':<16}{'felt Δθ':>9}{'felt 3-D':>10}{'felt gap':>10}{'paper Δθ':>10}"]
+        for key, r in t1["felt"].items():
+            pr = t1.get("paper", {}).get(key, {})
+            lines.append(f"{key:<16}{r['dtheta_mean_deg']:9.3f}{r['angle3d_mean_deg']:10.3f}{r['gap_mean_mm']:10.3f}"
+                         f"{pr.get('dtheta_mean_deg', float('nan')):10.3f}")
     comp = summary.get("compliance", {})
     if comp:
         lines += ["", "Sheet tension at the contacts (/sheet/target while touching), median [p5, p95]",
