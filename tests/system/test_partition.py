@@ -1,5 +1,6 @@
 """Partition (issue 9, item 4): in the three-host setup (tests/netns_util.py), main's cable to arm PC 1 is
-pulled for 2 s mid-stroke (``ip link set <veth> down`` at the switch, then ``up``).
+pulled for 2 s mid-stroke (``ip link set <veth> down`` at the switch, then ``up``). On the wall clock: three
+hosts (network namespaces) are three processes and a real network, which one simulated clock cannot span.
 
 Expected: the left arm's bridge on arm1 gets no target for ``target_timeout`` (0.25 s) and holds
 (``bridge_status = hold:no_target``, logged as ``left arm: hold:no_target``); main's launcher reports the
