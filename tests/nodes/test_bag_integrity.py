@@ -16,6 +16,7 @@ from conftest import ROOT, free_port
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
+from flexsheet.experiments.faults.bags import T0, fingertip, with_seq
 from flexsheet.runtime.bag import (
     GAP_TOPIC,
     BagSummary,
@@ -28,23 +29,10 @@ from flexsheet.runtime.bag import (
 )
 from flexsheet.runtime.codec import decode, encode
 from flexsheet.runtime.node import Node, NodeConfig
-from messages import Fingertip, Header, StereoFrame
+from messages import Header, StereoFrame
 from messages import topics as T
 
-T0 = 1_700_000_000_000_000_000   # ns, a plausible wall clock
-
-
-def tip(seq: int) -> Fingertip:
-    p = np.array([0.01, -0.02, 0.03])
-    return Fingertip(header=Header(stamp=T0 / 1e9 + seq / 40, seq=seq), position=p, covariance=np.eye(3) * 1e-8,
-                     valid=True, predicted_position=p, exposure_stamp=T0 / 1e9 + seq / 40)
-
-
-def with_seq(frames: list, seq) -> list:
-    """The frames of a real message whose header.seq is replaced by ``seq`` (any msgpack value)."""
-    meta = msgpack.unpackb(frames[1], raw=False, ext_hook=msgpack.ExtType)
-    meta["d"]["header"]["seq"] = seq
-    return [frames[0], msgpack.packb(meta), *frames[2:]]
+tip = fingertip
 
 
 def hostile_inputs() -> list[tuple[list, str]]:

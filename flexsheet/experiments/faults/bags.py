@@ -17,18 +17,20 @@ from flexsheet.runtime.codec import encode
 from messages import Fingertip, Header, StereoFrame
 from messages import topics as T
 
-__all__ = ["recorder_malformed", "bag_flip", "bag_cut_recover"]
+__all__ = ["recorder_malformed", "bag_flip", "bag_cut_recover", "fingertip", "with_seq", "T0"]
 
 T0 = 1_700_000_000_000_000_000   # ns
 
 
-def _tip(seq: int) -> Fingertip:
+def fingertip(seq: int) -> Fingertip:
+    """A valid fingertip with ``header.seq`` = ``seq``, stamped 1/40 s apart from :data:`T0`."""
     p = np.array([0.01, -0.02, 0.03])
     return Fingertip(header=Header(stamp=T0 / 1e9 + seq / 40, seq=seq), position=p, covariance=np.eye(3) * 1e-8,
                      valid=True, predicted_position=p, exposure_stamp=T0 / 1e9 + seq / 40)
 
 
-def _with_seq(frames: list, seq) -> list:
+def with_seq(frames: list, seq) -> list:
+    """The frames of a real message whose ``header.seq`` is replaced by ``seq`` (any msgpack value)."""
     meta = msgpack.unpackb(frames[1], raw=False, ext_hook=msgpack.ExtType)
     meta["d"]["header"]["seq"] = seq
     return [frames[0], msgpack.packb(meta), *frames[2:]]
@@ -37,14 +39,14 @@ def _with_seq(frames: list, seq) -> list:
 def recorder_malformed(tmp: Path, n: int = 200) -> dict:
     """``n`` good fingertips with a hostile frame after every 20th (1-frame, undecodable, not an envelope,
     empty, seq "x" / 1.5 / None / 2⁶⁴−1): every frame must be in the bag (``lost`` 0)."""
-    good = encode(T.FINGERTIP.name, _tip(0))
+    good = encode(T.FINGERTIP.name, fingertip(0))
     hostile = [[b"/fingertip"], [b"/fingertip", b"\xc1\xc1 not msgpack"], [b"/fingertip", msgpack.packb([1, 2])],
-               [], _with_seq(good, "x"), _with_seq(good, 1.5), _with_seq(good, None), _with_seq(good, 2**64 - 1)]
+               [], with_seq(good, "x"), with_seq(good, 1.5), with_seq(good, None), with_seq(good, 2**64 - 1)]
     path = tmp / "hostile.mcap"
     w = BagWriter(path, chunk_size=4096)
     fed = 0
     for i in range(n):
-        w.write(encode(T.FINGERTIP.name, _tip(i)), T0 + i * 25_000_000)
+        w.write(encode(T.FINGERTIP.name, fingertip(i)), T0 + i * 25_000_000)
         fed += 1
         if i % 20 == 10:
             w.write(hostile[(i // 20) % len(hostile)], T0 + i * 25_000_000 + 1)
