@@ -2,7 +2,7 @@
 simulated time for each device and each handler of the display (``Node.subscribe(..., sim_cost=)``).
 
 The display's own compute is declared per handler as the CPU time it takes on this project's reference host
-(``flexsheet bench graph``, median) times :attr:`LabTiming.compute_scale` for the lab's PC. Declared, not
+(its mean per output in a full simulated run) times :attr:`LabTiming.compute_scale` for the lab's PC. Declared, not
 measured during the run: a run's result must not depend on how busy the host is. The run reports beside it
 what each node's handlers really took on the host (``sim_clock.json``: ``host_handler_cpu_s``).
 
@@ -43,12 +43,14 @@ class LabTiming:
     projector_input_latency_s: float = 1.0 / 120.0
     #: the lab PC's speed relative to the reference host on which ``compute_s`` was measured (1.0: alike)
     compute_scale: float = 1.0
-    #: CPU time per call on the reference host, s (``flexsheet bench graph``, median; see docs/realtime.md)
+    #: CPU time per call on the reference host, s: the mean handler CPU per output of each node in a full
+    #: ``launch/sim.yaml`` run on this project's 2-core machine (``sim_clock.json`` ``host_handler_cpu_s`` over
+    #: the output count, all the node's handlers included; docs/realtime.md)
     compute_s: dict[str, float] = field(default_factory=lambda: {
-        "triangulator": 0.0011,   # detect + undistort + triangulate + Kalman, one 640x512 pair
-        "planner": 0.00025,       # contact point, tangent plane, IK-free sheet target, two arm targets
-        "fem": 0.00040,           # one realtime FEM update (bench fem: 5-30 mm pushes)
-        "renderer": 0.0040,       # one corrected stereo pair on a desktop GPU (A: llvmpipe here is slower)
+        "triangulator": 0.00176,  # detect + undistort + triangulate + Kalman, one 640x512 pair
+        "planner": 0.00061,       # contact point, tangent plane, sheet target, two arm targets (+ FEM stiffness)
+        "fem": 0.00144,           # one realtime FEM update (nonlinear snapshots)
+        "renderer": 0.0040,       # one corrected stereo pair on a desktop GPU (A: llvmpipe here takes ~13.6 ms)
         "arm_bridge": 0.00005,    # IK of one clamp target
     })
 
