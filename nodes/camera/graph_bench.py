@@ -23,6 +23,7 @@ import argparse
 import asyncio
 import json
 import logging
+import sys
 import time
 from pathlib import Path
 
@@ -198,10 +199,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=144, help="pre-rendered pairs played in a loop (default 144)")
     ap.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = ap.parse_args(argv)
-    print(f"[bench graph] rendering {args.frames} stereo pairs of the ideal twin ...", flush=True)
+    print(f"[bench graph] rendering {args.frames} stereo pairs of the ideal twin ...", file=sys.stderr, flush=True)
     _Player.frames, _Player.calib, _Player.T_dc = _frames(args.frames)
     print(f"[bench graph] running the arm path, then the render path, {args.warmup:g} + {args.seconds:g} s each ...",
-          flush=True)
+          file=sys.stderr, flush=True)
     logging.getLogger().setLevel(logging.WARNING)
     out = measure(args.seconds, args.warmup)
     if args.json:
