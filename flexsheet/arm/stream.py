@@ -222,6 +222,17 @@ class ArmStream:
         await self._rewrite()
         return self.refreshes > n
 
+    async def step(self, t_deadline: float) -> CycleReport:
+        """One cycle and the link's housekeeping after it (:meth:`run`'s body; a simulated clock's timer calls
+        it directly). Never raises on link errors."""
+        rep = await self._cycle(t_deadline)
+        if self.link.connected:
+            try:
+                await self.link.after_cycle()
+            except LinkError as exc:
+                self._lost(str(exc))
+        return rep
+
     async def _cycle(self, t_deadline: float) -> CycleReport:
         t0 = self.monotonic()
         self.cycles += 1
@@ -322,12 +333,7 @@ class ArmStream:
             self._dirty = False
             if now - due > self.period:
                 due = now   # overrun: restart the schedule rather than burst to catch up
-            await self._cycle(due)
-            if self.link.connected:
-                try:
-                    await self.link.after_cycle()
-                except LinkError as exc:
-                    self._lost(str(exc))
+            await self.step(due)
             nxt = self.link.next_deadline(due, time.monotonic(), self.period)
             done += 1
 

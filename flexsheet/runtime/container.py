@@ -512,17 +512,17 @@ class Container:
                            f"(real-time factor {stats.speed:.2f})")
                 self._stop.set()
         finally:
-            self._write_sim(stats, ready_s)
+            self._write_sim(ready_s)
 
-    def _write_sim(self, stats, ready_s: float | None) -> None:
+    def _write_sim(self, ready_s: float | None) -> None:
         if not self.sim_file:
             return
         ls = self.bus.lockstep
+        stats = ls.stats
         host_cpu = {m.name: m.cpu_s + (m.node.cpu_seconds() if m.node is not None else 0.0) for m in self.members}
         data = {"clock": "sim", "ready_wall_s": ready_s, "active_wall_s": dict(self.active_s),
-                "sim_s": stats.bag_s if stats else 0.0, "wall_s": stats.wall_s if stats else 0.0,
-                "realtime_factor": stats.speed if stats else 0.0,
-                "handled": stats.handled if stats else 0, "timer_ticks": stats.timers if stats else 0,
+                "sim_s": stats.bag_s, "wall_s": stats.wall_s, "realtime_factor": stats.speed,
+                "handled": stats.handled, "timer_ticks": stats.timers,
                 "superseded_latest": ls.dropped,
                 "charged_compute_s": dict(sorted(ls.charged.items())),
                 "host_handler_cpu_s": host_cpu,

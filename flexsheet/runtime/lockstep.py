@@ -207,22 +207,17 @@ class Lockstep:
 WALL_TOPICS = frozenset({"/diagnostics"})
 
 
-async def run_live(bus: Bus, until: float | None, stopped, epoch: float = SIM_EPOCH) -> LockstepStats:
-    """Drive a live simulated graph (launch files' ``clock: sim``) until ``until`` s of simulated time after
-    ``epoch`` (None: until ``stopped()`` is true, e.g. a required node ended).
-
-    Simulated time starts at ``epoch`` once every node of the container finished its setup (as ROS 2
-    lifecycle nodes become *active*), and then advances only when everything due has been handled:
-    from one event (a timer, a delivery) to the next. The loop yields to asyncio between events, so signals,
-    heartbeats and subscribers outside the process are served. Returns the statistics (``bag_s``: simulated
-    seconds, ``wall_s``, ``speed`` = the real-time factor)."""
+async def run_live(bus: Bus, until: float | None, stopped) -> LockstepStats:
+    """Drive a live simulated graph (launch files' ``clock: sim``) for ``until`` s of simulated time from where
+    its clock stands (:data:`SIM_EPOCH` if unset; None: until ``stopped()`` is true, e.g. a required node
+    ended). The caller starts it once every node of the container is active (as ROS 2 lifecycle nodes);
+    time then advances only when everything due has been handled: from one event (a timer, a delivery) to the
+    next. The loop yields to asyncio between events, so signals, heartbeats and subscribers outside the process
+    are served. Returns the statistics, kept up to date while it runs (``bag_s``: simulated seconds,
+    ``wall_s``, ``speed`` = the real-time factor)."""
     ls = bus.lockstep
-    while not bus.ready():
-        if stopped():
-            return ls.stats
-        await asyncio.sleep(0.01)
     if not ls.clock.started:
-        ls.clock.set(epoch)
+        ls.clock.set(SIM_EPOCH)
     epoch = ls.clock.now()
     t0 = time.monotonic()
     end = math.inf if until is None else epoch + until

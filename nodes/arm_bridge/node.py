@@ -29,7 +29,7 @@ from pydantic import Field, model_validator
 from flexsheet.arm.bridge_config import DEFAULT_PERIOD, DEFAULT_PORT, BridgeConfig
 from flexsheet.arm.kinematics import LEFT_BASE, Q_LOWER, Q_UPPER, QD_MAX, RIGHT_BASE, ArmKinematics
 from flexsheet.arm.limiter import StreamLimiter
-from flexsheet.arm.stream import ArmStream, CycleReport, LinkError
+from flexsheet.arm.stream import ArmStream, CycleReport
 from flexsheet.arm.tracking import TargetTracker
 from flexsheet.calibration.display_calib import load_display_calib
 from flexsheet.runtime.node import InputRejected, Node, QoS
@@ -134,21 +134,13 @@ class ArmBridgeNode(Node):
         # every target is handled and a refused one counted (QoS latest would drop them before decoding)
         self.subscribe(topics.arm_target(p.arm), self.on_target, qos=QoS.KEEP_ALL, depth=256,
                        sim_cost=LAB.network_s + LAB.compute("arm_bridge"))
-        if sim:
+        if sim:   # the simulated clock's timer paces the cycles (the stream's own loop paces the wall clock)
             self.timer(p.period, self._sim_cycle)
         else:
             self.stream.start()
 
     async def _sim_cycle(self) -> None:
-        """One controller cycle driven by the simulated clock's timer (the stream's own loop paces the wall
-        clock)."""
-        stream = self.stream
-        await stream.cycle(self.now())
-        if stream.link.connected:
-            try:
-                await stream.link.after_cycle()
-            except LinkError as exc:
-                stream._lost(str(exc))
+        await self.stream.step(self.now())
 
     async def teardown(self) -> None:
         stream = getattr(self, "stream", None)   # None when setup failed before the stream existed

@@ -189,7 +189,7 @@ class RendererNode(Node):
             await self._open_window()
         elif self.sim:     # one thread: the loop's; each redraw is charged the lab's render time
             self._gl_init()
-            self.timer(1.0 / p.max_render_rate, self._sim_tick)
+            self.timer(1.0 / p.max_render_rate, self._sim_render)
         else:
             self._gl = ThreadPoolExecutor(1, thread_name_prefix="renderer-gl")
             await loop.run_in_executor(self._gl, self._gl_init)
@@ -339,9 +339,6 @@ class RendererNode(Node):
         if msg is not None:
             self._last_publish = now
             self.pub.publish(msg)
-
-    def _sim_tick(self) -> None:
-        self._sim_render()
 
     def _sim_table(self, node: float) -> None:
         """Load or build (in a spawned worker process, waited for) the pushed-sheet table of stretch ``node``,
