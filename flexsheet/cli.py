@@ -200,21 +200,34 @@ def cmd_launch(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------------------------------- table
 def cmd_keys(args: argparse.Namespace) -> int:
     from flexsheet.runtime.keys import PUBLIC_KEYS_FILE, default_keys_dir, generate
+    from flexsheet.runtime.launch import LaunchError, identities, load_launch
 
     folder = Path(os.path.expanduser(args.output)) if args.output else default_keys_dir()
     try:
-        status = generate(args.hosts, folder, force=args.force)
+        lf = load_launch(args.launch)
+    except LaunchError as exc:
+        print(f"flexsheet keys: {exc}", file=sys.stderr)
+        return 2
+    known = identities(lf)
+    unknown = [n for n in args.names if n not in known]
+    if unknown:
+        print(f"flexsheet keys: {unknown[0]!r} is no host or node of {args.launch} (hosts: {', '.join(lf.hosts)}; "
+              f"nodes: {', '.join(lf.nodes)})", file=sys.stderr)
+        return 2
+    try:
+        status = generate(args.names or known, folder, force=args.force)
     except (ValueError, OSError) as exc:
         print(f"flexsheet keys: {exc}", file=sys.stderr)
         return 2
-    for host, what in status.items():
-        print(f"{host}: {'new keypair' if what == 'new' else 'kept the existing keypair (--force to replace)'}: "
-              f"{folder / (host + '.key_secret')}")
-    print(f"public keys of all hosts: {folder / PUBLIC_KEYS_FILE}")
-    print("Each host needs its own <host>.key_secret and public_keys.yaml in its keys folder (never another "
-          "host's secret), e.g.:")
-    for host in [h for h in status if h != "main"][:3]:
-        print(f"  ssh {host} 'mkdir -p -m 700 ~/.flexsheet/keys' && scp -p {folder / (host + '.key_secret')} "
+    for name, what in status.items():
+        print(f"{name}: {'new keypair' if what == 'new' else 'kept the existing keypair (--force to replace)'}: "
+              f"{folder / (name + '.key_secret')}")
+    print(f"public keys of all hosts and nodes: {folder / PUBLIC_KEYS_FILE}")
+    print("Each host needs public_keys.yaml and the secret keys of itself and its nodes in its keys folder "
+          "(never another host's), e.g.:")
+    for host in list(lf.hosts)[1:4]:
+        files = " ".join(str(folder / (n + ".key_secret")) for n in identities(lf, host))
+        print(f"  ssh {host} 'mkdir -p -m 700 ~/.flexsheet/keys' && scp -p {files} "
               f"{folder / PUBLIC_KEYS_FILE} {host}:.flexsheet/keys/")
     if folder != default_keys_dir():
         print(f"launch files find them with: export FLEXSHEET_KEYS={folder}")
@@ -296,21 +309,27 @@ def _add_run_parser(sub) -> None:
 
 
 def _add_keys_parser(sub) -> None:
-    s = sub.add_parser("keys", help="generate CURVE keypairs for the hosts of a launch file",
-                       **_fmt("  flexsheet keys generate main arm1 arm2"))
+    s = sub.add_parser("keys", help="generate CURVE keypairs for the hosts and nodes of a launch file",
+                       **_fmt("  flexsheet keys generate --launch launch/lab.yaml"))
     ks = s.add_subparsers(dest="keys_cmd", required=True, metavar="VERB")
-    t = ks.add_parser("generate", help="write <host>.key, <host>.key_secret and public_keys.yaml",
-                      description="Write a CURVE keypair per host and public_keys.yaml (host -> public key) into the "
-                                  "keys folder: -o, else $FLEXSHEET_KEYS, else ~/.flexsheet/keys. A launch file "
-                                  "with security: {curve: true, public_keys_file: $(keys)/public_keys.yaml} (as "
-                                  "launch/lab.yaml) then needs nothing pasted. Existing keypairs are kept.",
-                      **_fmt("  flexsheet keys generate main arm1 arm2\n"
-                             "  FLEXSHEET_KEYS=/tmp/k flexsheet keys generate main arm1 arm2 && "
-                             "FLEXSHEET_KEYS=/tmp/k flexsheet launch launch/lab.yaml --check --host main"))
-    t.add_argument("hosts", nargs="+", help="host names of the launch file")
+    t = ks.add_parser("generate", help="write <name>.key, <name>.key_secret and public_keys.yaml",
+                      description="Write a CURVE keypair per node and per host of a launch file, and "
+                                  "public_keys.yaml (name -> public key), into the keys folder: -o, else "
+                                  "$FLEXSHEET_KEYS, else ~/.flexsheet/keys. A launch file with security: {curve: true, "
+                                  "public_keys_file: $(keys)/public_keys.yaml} (as launch/lab.yaml) then needs "
+                                  "nothing pasted. Each node proves itself with its own key; security.publishers "
+                                  "says which node may publish a guarded topic (the arm targets: the planner). "
+                                  "Existing keypairs are kept.",
+                      **_fmt("  flexsheet keys generate --launch launch/lab.yaml\n"
+                             "  flexsheet keys generate --launch launch/lab.yaml arm_left --force   # rotate one key\n"
+                             "  FLEXSHEET_KEYS=/tmp/k flexsheet keys generate --launch launch/lab.yaml && "
+                             "FLEXSHEET_KEYS=/tmp/k flexsheet launch launch/lab.yaml --check --host arm1"))
+    t.add_argument("names", nargs="*", metavar="NAME", help="only these hosts or nodes of the launch file "
+                                                            "(default: all)")
+    t.add_argument("--launch", required=True, metavar="FILE", help="the launch file whose hosts and nodes get keys")
     t.add_argument("-o", "--output", default=None, help="keys folder (default $FLEXSHEET_KEYS or ~/.flexsheet/keys)")
     t.add_argument("--force", action="store_true", help="replace existing keypairs (every host then needs the new "
-                                                         "public_keys.yaml and its new secret)")
+                                                         "public_keys.yaml, and the owner its new secret)")
     t.set_defaults(func=cmd_keys)
 
 

@@ -125,7 +125,8 @@ class Bus:
         self.loop = asyncio.get_running_loop()
         self._loop_tid = threading.get_ident()
         self.sub = BusSocket(self.peers, self.curve, self.rcvhwm)
-        self.loop.add_reader(self.sub.fileno(), self._drain_sub)
+        for fd in self.sub.fds():
+            self.loop.add_reader(fd, self._drain_sub)
         self._poll_task = self.loop.create_task(self._safety_poll())
 
     def close(self) -> None:
@@ -133,10 +134,11 @@ class Bus:
             self._poll_task.cancel()
         if self.sub is not None:
             if not self.sub.closed:
-                try:
-                    self.loop.remove_reader(self.sub.fileno())
-                except Exception:  # noqa: BLE001 - loop may be closed already
-                    pass
+                for fd in self.sub.fds():
+                    try:
+                        self.loop.remove_reader(fd)
+                    except Exception:  # noqa: BLE001 - loop may be closed already
+                        pass
             self.sub.close()
             self.sub = None
 
@@ -291,7 +293,8 @@ class ContainerTransport(Transport):
         self.bus.attach(self.node)
         if self.endpoint:
             try:
-                self.xpub = XPub(self.bus.sub.ctx, self.endpoint, self.bus.curve, self.sndhwm, asyncio.get_running_loop())
+                curve = self.node.config.curve or self.bus.curve  # the node's own key (the bus: the host's)
+                self.xpub = XPub(self.bus.sub.ctx, self.endpoint, curve, self.sndhwm, asyncio.get_running_loop())
             except TransportError:
                 self.bus.detach(self.node)
                 raise

@@ -1,16 +1,17 @@
-"""CURVE keys for a launch graph: ``flexsheet keys generate main arm1 arm2``.
+"""CURVE keys for a launch graph: ``flexsheet keys generate --launch launch/lab.yaml``.
 
 Writes, into the keys folder (``-o``, else ``$FLEXSHEET_KEYS``, else ``~/.flexsheet/keys``; mode 0700):
 
-- ``<host>.key`` (public) and ``<host>.key_secret`` (mode 0600) for each host, ZeroMQ's certificate format
-  (``zmq.auth.create_certificates``);
-- ``public_keys.yaml``: host → Z85 public key for every host of the folder, the file a launch file names
+- ``<name>.key`` (public) and ``<name>.key_secret`` (mode 0600) for each identity of the launch file: every
+  node (its publisher and subscribers prove it) and every host (the tools run there), ZeroMQ's certificate
+  format (``zmq.auth.create_certificates``);
+- ``public_keys.yaml``: name → Z85 public key for every identity of the folder, the file a launch file names
   with ``security: {curve: true, public_keys_file: $(keys)/public_keys.yaml}`` (as ``launch/lab.yaml``
   does), so no key is pasted into a launch file.
 
-A host whose secret key already exists keeps it (a second run must not lock out a deployed arm PC);
-``--force`` makes new ones. Each host needs only its own ``<host>.key_secret`` and ``public_keys.yaml``.
-Errors: ``ValueError`` naming the host or file.
+An identity whose secret key already exists keeps it (a second run must not lock out a deployed arm PC);
+``--force`` makes new ones. Each host needs only its own and its nodes' ``<name>.key_secret`` and
+``public_keys.yaml``. Errors: ``ValueError`` naming the identity or file.
 """
 
 from __future__ import annotations
@@ -46,16 +47,17 @@ def read_public_keys(path: Path) -> dict[str, str]:
 
 
 def generate(hosts: list[str], folder: Path, force: bool = False) -> dict[str, str]:
-    """Make (or keep) the keypair of each host in ``folder`` and rewrite ``folder/public_keys.yaml``.
+    """Make (or keep) the keypair of each identity (node or host name) in ``folder`` and rewrite
+    ``folder/public_keys.yaml``.
 
-    Returns host → ``"new"`` or ``"kept"``. Raises ``ValueError`` for a host name that is not a plain name
+    Returns name → ``"new"`` or ``"kept"``. Raises ``ValueError`` for a name that is not a plain name
     (letters, digits, ``_.-``) or an unreadable existing key file.
     """
     from flexsheet.runtime.transport import create_curve_keypair, load_curve_keys
 
     for host in hosts:
         if not _HOST.match(host):
-            raise ValueError(f"host name {host!r}: use letters, digits, '_', '.', '-' (a host of the launch file)")
+            raise ValueError(f"name {host!r}: use letters, digits, '_', '.', '-' (a host or node of the launch file)")
     folder.mkdir(parents=True, exist_ok=True)
     os.chmod(folder, 0o700)
     status: dict[str, str] = {}
@@ -77,7 +79,7 @@ def generate(hosts: list[str], folder: Path, force: bool = False) -> dict[str, s
             raise ValueError(f"{folder / f'{host}.key_secret'}: unreadable ({exc}); use --force to replace it") \
                 from None
         keys[host] = public.decode()
-    text = ("# CURVE public keys of the launch graph's hosts, written by `flexsheet keys generate`.\n"
+    text = ("# CURVE public keys of the launch graph's hosts and nodes, written by `flexsheet keys generate`.\n"
             "# Launch files name it: security: {curve: true, public_keys_file: $(keys)/public_keys.yaml}\n"
             + yaml.safe_dump(keys, sort_keys=False))
     tmp = folder / (PUBLIC_KEYS_FILE + ".tmp")

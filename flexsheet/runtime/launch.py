@@ -62,7 +62,7 @@ from flexsheet.runtime.transport import CurveConfig
 from flexsheet.yamlio import UniqueKeyLoader
 
 __all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "SecuritySpec", "load_launch", "node_config",
-           "curve_config", "keys_dir", "public_keys", "substitutions", "substitute", "keygen_command",
+           "curve_config", "identities", "keys_dir", "public_keys", "substitutions", "substitute", "keygen_command",
            "TOPLEVEL_ENV", "parse_toplevel_set", "SIM_CONTAINER",
            "DEFAULT_KEYS_DIR", "PUBLIC_KEYS_FILE"]
 
@@ -117,17 +117,23 @@ class RespawnSpec(BaseModel):
 
 
 class SecuritySpec(BaseModel):
-    """ZeroMQ CURVE for the whole graph. The allowed keys are host → Z85 public key (40 chars), given inline
+    """ZeroMQ CURVE for the whole graph. Every node has its own keypair (its publisher proves it, its
+    subscribers present it) and every host one more, for the tools run there (``topic echo``, the launcher's
+    heartbeat watch). The allowed keys are identity (node or host name) → Z85 public key (40 chars), given inline
     (``public_keys``) or, so that no key is pasted into a launch file, read from ``public_keys_file`` (a YAML
-    mapping written by ``flexsheet keys generate``; ``$(keys)``, ``$(launch_dir)`` and ``~`` expand); both may
-    be used if they agree. ``keys_dir``: where each host finds its own ``<host>.key_secret``
-    (``$FLEXSHEET_KEYS`` overrides it; ``~`` and ``$(launch_dir)`` expand)."""
+    mapping written by ``flexsheet keys generate --launch FILE``; ``$(keys)``, ``$(launch_dir)`` and ``~``
+    expand); both may be used if they agree. ``keys_dir``: where each host finds ``<name>.key_secret`` of itself
+    and of its nodes (``$FLEXSHEET_KEYS`` overrides it; ``~`` and ``$(launch_dir)`` expand).
+    ``publishers``: guarded topic → the nodes allowed to publish it (SROS2-style per-node policy): a subscriber
+    takes that topic only from those nodes' endpoints, proven by their keys (:class:`~flexsheet.runtime.transport.SubLinks`);
+    any other topic comes from any node of the graph."""
 
     model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     curve: bool = False
     keys_dir: str = DEFAULT_KEYS_DIR
     public_keys: dict[str, str] = Field(default_factory=dict)
     public_keys_file: str | None = None
+    publishers: dict[str, list[str]] = Field(default_factory=dict)
 
     @field_validator("public_keys")
     @classmethod
@@ -281,11 +287,24 @@ def load_launch(path: str | Path) -> LaunchFile:
                          f"{', '.join(hosts)}; put them on one host or use clock: wall")
         for spec in lf.nodes.values():
             spec.container = SIM_CONTAINER
+    clash = sorted(set(lf.hosts) & set(lf.nodes))
+    if lf.security.curve and clash:
+        lines.append(f"{path}: key 'nodes.{clash[0]}': a node named like a host; under CURVE each has its own key "
+                     f"of that name: rename the node")
+    for topic, names in lf.security.publishers.items():
+        unknown = [n for n in names if n not in lf.nodes]
+        if not topic.startswith("/") or unknown or not names:
+            lines.append(f"{path}: key 'security.publishers.{topic}': {names!r}: a topic (/name) and the nodes "
+                         f"of this file allowed to publish it" + (f"; no node named {unknown[0]!r}" if unknown else ""))
+        elif not lf.security.curve:
+            lines.append(f"{path}: key 'security.publishers': needs curve: true (the nodes prove who they are by "
+                         f"their keys)")
+            break
     if lf.security.curve and lf.security.public_keys_file is None:  # a keys file is read when used (check)
-        missing = [h for h in lf.hosts if h not in lf.security.public_keys]
+        missing = [h for h in identities(lf) if h not in lf.security.public_keys]
         if missing:
-            lines.append(f"{path}: key 'security.public_keys': curve is on but no public key for host(s) "
-                         f"{', '.join(missing)} (run: flexsheet keys generate {' '.join(lf.hosts)}, or name "
+            lines.append(f"{path}: key 'security.public_keys': curve is on but no public key for "
+                         f"{', '.join(missing)} (run: flexsheet keys generate --launch {path}, or name "
                          f"the file it writes: security.public_keys_file: $(keys)/{PUBLIC_KEYS_FILE})")
     if lines:
         raise LaunchError(lines[0], lines)
@@ -294,8 +313,14 @@ def load_launch(path: str | Path) -> LaunchFile:
 
 
 def keygen_command(lf: LaunchFile) -> str:
-    """The command that writes every key ``lf`` needs: ``flexsheet keys generate <its hosts>``."""
-    return "flexsheet keys generate " + " ".join(lf.hosts)
+    """The command that writes every key ``lf`` needs: ``flexsheet keys generate --launch <its file>``."""
+    return f"flexsheet keys generate --launch {lf.path or '<launch file>'}"
+
+
+def identities(lf: LaunchFile, host: str | None = None) -> list[str]:
+    """The CURVE identities of ``lf`` (of ``host`` only, when given): each host (its tools), then each node."""
+    hosts = [h for h in lf.hosts if host is None or h == host]
+    return hosts + [n for n, spec in lf.nodes.items() if host is None or spec.host == host]
 
 
 def _launch_dir(lf: LaunchFile) -> str:
@@ -332,8 +357,9 @@ def substitute(value: Any, subs: dict[str, str]) -> Any:
 
 
 def public_keys(lf: LaunchFile) -> dict[str, str]:
-    """Host → Z85 public key allowed on ``lf``'s graph: ``security.public_keys`` merged with the YAML mapping in
-    ``security.public_keys_file``. Raises :class:`LaunchError` naming the file or host (a missing file names
+    """Identity (host or node name) → Z85 public key allowed on ``lf``'s graph: ``security.public_keys`` merged
+    with the YAML mapping in ``security.public_keys_file``. Raises :class:`LaunchError` naming the file or the
+    identity (a missing file names
     the ``flexsheet keys generate`` command that writes it)."""
     sec = lf.security
     keys = dict(sec.public_keys)
@@ -354,18 +380,21 @@ def public_keys(lf: LaunchFile) -> dict[str, str]:
                           f"(run: {keygen_command(lf)})")
     for host, key in raw.items():
         if not isinstance(host, str) or not isinstance(key, str) or len(key) != 40:
-            raise LaunchError(f"{where}: entry {_short(host)}: {_short(key)} is not host: <40 Z85 characters>")
+            raise LaunchError(f"{where}: entry {_short(host)}: {_short(key)} is not name: <40 Z85 characters>")
         if host in keys and keys[host] != key:
             raise LaunchError(f"{where}: host {host!r} differs from security.public_keys.{host}")
         keys[host] = key
     return keys
 
 
-def curve_config(lf: LaunchFile, host: str | None) -> CurveConfig | None:
-    """The :class:`CurveConfig` of ``host`` under ``lf``'s security settings (None when CURVE is off).
+def curve_config(lf: LaunchFile, host: str | None, node: str | None = None) -> CurveConfig | None:
+    """The :class:`CurveConfig` of ``node`` (its own keypair), else of ``host``'s tools, under ``lf``'s security
+    settings (None when CURVE is off).
 
-    ``host`` None picks the first host whose secret key is present in the keys folder (tools).
-    Raises :class:`LaunchError` naming the missing key file or host and the command that writes it.
+    ``host`` None picks the first host whose secret key is present in the keys folder (tools). Publishers are
+    pinned to their nodes' keys; subscribers admitted are every identity of the file; guarded topics come from
+    ``security.publishers``. Raises :class:`LaunchError` naming the missing key file or identity and the
+    command that writes it.
     """
     sec = lf.security
     if not sec.curve:
@@ -374,27 +403,32 @@ def curve_config(lf: LaunchFile, host: str | None) -> CurveConfig | None:
 
     kdir = keys_dir(lf)
     keys = public_keys(lf)
-    missing = [h for h in lf.hosts if h not in keys]
+    missing = [h for h in identities(lf) if h not in keys]
     if missing:
-        raise LaunchError(f"{lf.path}: key 'security.public_keys': curve is on but no public key for host(s) "
+        raise LaunchError(f"{lf.path}: key 'security.public_keys': curve is on but no public key for "
                           f"{', '.join(missing)} (run: {keygen_command(lf)})")
-    hosts = [host] if host else [h for h in lf.hosts if (kdir / f"{h}.key_secret").exists()]
-    if not hosts:
+    if node is not None:
+        names = [node]
+    else:
+        names = [host] if host else [h for h in lf.hosts if (kdir / f"{h}.key_secret").exists()]
+    if not names:
         raise LaunchError(f"{lf.path}: key 'security.keys_dir': no <host>.key_secret in {kdir} "
                           f"(run: {keygen_command(lf)})")
-    secret_file = kdir / f"{hosts[0]}.key_secret"
+    who = names[0]
+    secret_file = kdir / f"{who}.key_secret"
     if not secret_file.exists():
-        raise LaunchError(f"{lf.path}: key 'security.keys_dir': no secret key for host {hosts[0]!r} at "
-                          f"{secret_file} (run: {keygen_command(lf)}, and copy {hosts[0]}.key_secret there)")
+        raise LaunchError(f"{lf.path}: key 'security.keys_dir': no secret key for {who!r} at "
+                          f"{secret_file} (run: {keygen_command(lf)}, and copy {who}.key_secret there)")
     try:
         public, secret = load_curve_keys(secret_file)
     except (OSError, ValueError) as exc:
         raise LaunchError(f"{lf.path}: key 'security.keys_dir': unreadable key file {secret_file}: {exc}") from None
-    if secret is None or public.decode() != keys.get(hosts[0]):
-        raise LaunchError(f"{lf.path}: key 'security.public_keys.{hosts[0]}': does not match {secret_file}")
-    server_keys = {lf.endpoint_of(n): keys[spec.host].encode() for n, spec in lf.nodes.items()}
+    if secret is None or public.decode() != keys.get(who):
+        raise LaunchError(f"{lf.path}: key 'security.public_keys.{who}': does not match {secret_file}")
+    server_keys = {lf.endpoint_of(n): keys[n].encode() for n in lf.nodes}
+    guards = {t: [lf.endpoint_of(n) for n in names] for t, names in sec.publishers.items()}
     return CurveConfig(public_key=public, secret_key=secret, server_keys=server_keys,
-                       allowed_clients=[k.encode() for h, k in keys.items() if h in lf.hosts])
+                       allowed_clients=[keys[k].encode() for k in identities(lf)], topic_publishers=guards)
 
 
 def _apply_toplevel_env(raw: dict, path: Path) -> dict:
@@ -463,4 +497,4 @@ def node_config(lf: LaunchFile, name: str, out: str | None = None, overrides: di
                 params[key] = value
     return NodeConfig(name=name, node_type=spec.type, host=spec.host, endpoint=lf.endpoint_of(name),
                       peers=list(lf.endpoints().values()), params=params, remaps=spec.remaps,
-                      heartbeat_period=lf.heartbeat_period, curve=curve_config(lf, spec.host))
+                      heartbeat_period=lf.heartbeat_period, curve=curve_config(lf, spec.host, name))

@@ -17,9 +17,10 @@ same check first and starts nothing when it finds an error. What is checked:
   on a kernel pseudo filesystem (:data:`PSEUDO_FS`), and an output file that exists is a regular file;
 - **extensions**: each launch extension's own rules (:mod:`flexsheet.runtime.extensions`; the display's:
   :mod:`flexsheet.display.launch`);
-- **CURVE keys** (``security.curve: true``): the keys folder exists, the public keys cover every host, and
-  each checked host's ``<host>.key_secret`` is there, matches its public key and is private (mode 0600).
-  A missing key names the command that writes it, ``flexsheet keys generate <hosts of the file>``.
+- **CURVE keys** (``security.curve: true``): the keys folder exists, the public keys cover every host and
+  node, and on each checked host ``<name>.key_secret`` of the host and of each of its nodes is there, matches
+  its public key and is private (mode 0600). A missing key names the command that writes it,
+  ``flexsheet keys generate --launch FILE``.
 
 - **containers**: a player with ``mode: lockstep`` is in a container with other nodes.
 
@@ -57,6 +58,7 @@ from flexsheet.runtime.launch import (
     LaunchError,
     LaunchFile,
     _short,
+    identities,
     keygen_command,
     keys_dir,
     load_launch,
@@ -326,31 +328,33 @@ class _Checker:
         except LaunchError as exc:
             self.res.errors.append(str(exc))
             return
-        missing = [h for h in lf.hosts if h not in keys]
+        missing = [h for h in identities(lf) if h not in keys]
         if missing:
-            self.err("security.public_keys", sorted(keys), f"no public key for host(s) {', '.join(missing)} "
+            self.err("security.public_keys", sorted(keys), f"no public key for {', '.join(missing)} "
                                                           f"(run: {cmd})")
         from flexsheet.runtime.transport import load_curve_keys
 
         for h in self.hosts:
-            secret = kdir / f"{h}.key_secret"
-            if not secret.is_file():
-                self.err(origin, str(kdir), f"no secret key for host {h} ({secret.name}; run: {cmd}, then copy "
-                                            f"{secret.name} and public_keys.yaml to {h}'s keys folder)")
-                continue
-            try:
-                public, secret_key = load_curve_keys(secret)
-            except (OSError, ValueError) as exc:
-                self.err(origin, str(secret), f"unreadable secret key for host {h}: {exc}")
-                continue
-            if secret_key is None:
-                self.err(origin, str(secret), f"{secret.name} holds no secret key (run: {cmd} --force)")
-            elif h in keys and public.decode() != keys[h]:
-                self.err(f"security.public_keys.{h}", keys[h], f"does not match {secret} (keys generated "
-                                                              f"twice? copy the newest public_keys.yaml)")
-            mode = stat.S_IMODE(secret.stat().st_mode)
-            if mode & 0o077:
-                self.err(origin, str(secret), f"secret key readable by others (mode {mode:o}); run: chmod 600 {secret}")
+            for who in identities(lf, h):
+                secret = kdir / f"{who}.key_secret"
+                if not secret.is_file():
+                    self.err(origin, str(kdir), f"no secret key for {who} on host {h} ({secret.name}; run: {cmd}, "
+                                                f"then copy {secret.name} and public_keys.yaml to {h}'s keys folder)")
+                    continue
+                try:
+                    public, secret_key = load_curve_keys(secret)
+                except (OSError, ValueError) as exc:
+                    self.err(origin, str(secret), f"unreadable secret key of {who}: {exc}")
+                    continue
+                if secret_key is None:
+                    self.err(origin, str(secret), f"{secret.name} holds no secret key (run: {cmd} --force {who})")
+                elif who in keys and public.decode() != keys[who]:
+                    self.err(f"security.public_keys.{who}", keys[who], f"does not match {secret} (keys generated "
+                                                                      f"twice? copy the newest public_keys.yaml)")
+                mode = stat.S_IMODE(secret.stat().st_mode)
+                if mode & 0o077:
+                    self.err(origin, str(secret), f"secret key readable by others (mode {mode:o}); run: chmod 600 "
+                                                  f"{secret}")
 
     # ---------------------------------------------------------------------------------------------- files
     def file_problem(self, key: str, value: str) -> str | None:

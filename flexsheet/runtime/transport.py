@@ -3,8 +3,9 @@
 A transport moves encoded multipart frames (see :mod:`flexsheet.runtime.codec`) between nodes:
 
 * :class:`ZmqTransport` — brokerless. Each node binds **one** XPUB socket at its endpoint (from the launch
-  file) and connects **one** SUB socket to every peer endpoint of the graph; SUB subscribes by topic name,
-  so filtering happens at the publisher. XPUB sees each new subscription, which is how latched topics
+  file) and connects **one** SUB socket to every peer endpoint of the graph (plus one per set of publishers
+  a guarded topic is restricted to, :class:`SubLinks`); SUB subscribes by topic name, so filtering happens
+  at the publisher. XPUB sees each new subscription, which is how latched topics
   resend their last value to late joiners without any ``sleep()``.
   Readiness comes from the sockets' file descriptors through ``loop.add_reader`` and every ready message
   is drained with non-blocking ``recv`` — no ``zmq.asyncio`` futures on the hot path (pyzmq's own
@@ -44,7 +45,7 @@ from pathlib import Path
 
 import zmq
 
-__all__ = ["Transport", "ZmqTransport", "InProcTransport", "TransportError", "CurveConfig", "XPub", "BusSocket",
+__all__ = ["Transport", "ZmqTransport", "InProcTransport", "TransportError", "CurveConfig", "XPub", "BusSocket", "SubLinks",
            "LinkWatch", "PUB_QUEUE_BYTES", "create_curve_keypair", "load_curve_keys"]
 
 log = logging.getLogger(__name__)
@@ -74,13 +75,18 @@ class CurveConfig:
     ``server_keys``: peer endpoint → the Z85 public key its publisher must prove it owns; a peer whose
     publisher lacks that secret key fails the handshake and none of its messages arrive.
     ``allowed_clients``: Z85 public keys allowed to subscribe to this node's publisher (ZAP check);
-    any other subscriber is refused. Source: pyzmq ``zmq.auth`` and ``examples/security``.
+    any other subscriber is refused.
+    ``topic_publishers``: guarded topic → the endpoints allowed to publish it (the launch file's
+    ``security.publishers``, per node as SROS2 grants per participant): a guarded topic is received only on a
+    SUB socket connected to those endpoints alone, each pinned to its node's key (:class:`SubLinks`).
+    Source: pyzmq ``zmq.auth`` and ``examples/security``; SROS2 access control (``sros2/policy``).
     """
 
     public_key: bytes
     secret_key: bytes
     server_keys: dict[str, bytes] = field(default_factory=dict)
     allowed_clients: list[bytes] = field(default_factory=list)
+    topic_publishers: dict[str, list[str]] = field(default_factory=dict)
 
 
 class _AllowList:
@@ -154,8 +160,7 @@ class Transport:
         :meth:`LinkWatch.report`), or "" (also for a transport without links, or a container's node: its
         container's SUB socket is asked)."""
         sock = getattr(self.bus, "sub", None)
-        watch = getattr(sock, "watch", None)
-        return watch.report() if watch is not None else ""
+        return sock.report() if sock is not None else ""
 
     def close(self) -> None:
         raise NotImplementedError
@@ -392,8 +397,7 @@ class ZmqTransport(Transport):
         self.sndhwm, self.rcvhwm = sndhwm, rcvhwm
         self.ctx: zmq.Context | None = None
         self.xpub: XPub | None = None
-        self.sub: zmq.Socket | None = None
-        self.watch: LinkWatch | None = None
+        self.links: SubLinks | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._on_frames: FramesHandler | None = None
         self._poll_task: asyncio.Task | None = None
@@ -417,17 +421,27 @@ class ZmqTransport(Transport):
                 self.close()
                 raise
             self.endpoint = self.xpub.endpoint
-        self.sub = connect_sub(self.ctx, self.peers, curve, self.rcvhwm, self.close)
-        self.watch = LinkWatch(self.sub, self.peers, curve)
+        self.links = SubLinks(self.ctx, self.peers, curve, self.rcvhwm, self.close)
         if self.drain_period <= 0.0:
-            self._loop.add_reader(self.sub.getsockopt(zmq.FD), self._drain_sub)
+            for fd in self.links.fds():
+                self._loop.add_reader(fd, self._drain_sub)
         # ZeroMQ's FD is edge-triggered: a slow safety poll catches any edge lost between drains (with a
         # ``drain_period`` it is the only drain).
         self._poll_task = self._loop.create_task(self._safety_poll())
 
+    @property
+    def sub(self) -> zmq.Socket | None:
+        """The SUB socket connected to every peer (None before :meth:`start`)."""
+        return self.links.sock if self.links is not None else None
+
+    @property
+    def watch(self) -> LinkWatch | None:
+        """The :class:`LinkWatch` of :attr:`sub` (None before :meth:`start`)."""
+        return self.links.watch if self.links is not None else None
+
     def subscribe(self, topic: str) -> None:
-        assert self.sub is not None, "start() first"
-        self.sub.setsockopt(zmq.SUBSCRIBE, topic.encode())
+        assert self.links is not None, "start() first"
+        self.links.subscribe(topic.encode())
         self._drain_sub()
 
     def wants(self, topic: bytes) -> bool:
@@ -443,17 +457,16 @@ class ZmqTransport(Transport):
 
     def add_peer(self, endpoint: str) -> None:
         """Connect the SUB socket to one more publisher endpoint (used by tools that discover late)."""
-        if endpoint and endpoint not in self.peers and self.sub is not None:
+        if endpoint and endpoint not in self.peers and self.links is not None:
             self.peers.append(endpoint)
-            self.sub.connect(endpoint)
-            if self.watch is not None:
-                self.watch.add(endpoint)
+            self.links.add_peer(endpoint)
 
     def link_report(self) -> str:
-        return self.watch.report() if self.watch is not None else ""
+        return self.links.report() if self.links is not None else ""
 
     def _drain_sub(self) -> None:
-        drain_sub(self.sub, self._on_frames)
+        if self.links is not None:
+            self.links.drain(self._on_frames)
 
     async def _safety_poll(self) -> None:
         while True:
@@ -461,24 +474,23 @@ class ZmqTransport(Transport):
             self._drain_sub()
             if self.xpub is not None:
                 self.xpub.drain()
-            if self.watch is not None:
-                self.watch.poll()
+            if self.links is not None:
+                self.links.poll()
 
     def close(self) -> None:
         if self._poll_task is not None:
             self._poll_task.cancel()
         if self.xpub is not None:
             self.xpub.close()
-        if self.watch is not None:
-            self.watch.close()
-        sub = self.sub
-        if sub is not None and not sub.closed:
+        links, self.links = self.links, None
+        if links is not None:
             if self._loop is not None:
-                try:
-                    self._loop.remove_reader(sub.getsockopt(zmq.FD))
-                except Exception:  # noqa: BLE001 - loop may be closed already
-                    pass
-            sub.close(linger=0)
+                for fd in links.fds():
+                    try:
+                        self._loop.remove_reader(fd)
+                    except Exception:  # noqa: BLE001 - loop may be closed already
+                        pass
+            links.close()
         if self._auth is not None:
             self._auth.stop()
             self._auth = None
@@ -732,6 +744,114 @@ def drain_sub(sub: zmq.Socket | None, handler: FramesHandler) -> None:
         handler(frames)
 
 
+class SubLinks:
+    """The SUB side of one process: a SUB socket connected to every peer (with its :class:`LinkWatch`), plus,
+    under CURVE with guarded topics (``curve.topic_publishers``), one SUB socket per set of allowed publishers,
+    connected to those endpoints alone.
+
+    A guarded topic is subscribed on its publishers' socket only, so another node's publisher (ZMTP filters at
+    the publisher) never sends it and the SUB's own filter drops it should it come; a message of a guarded topic
+    that arrives on the socket of every peer under a wider prefix subscription ("") is dropped too (it may be
+    the allowed publisher's copy, which arrives on its own socket, or another node's: the socket cannot tell,
+    so nothing is counted). Every socket's
+    links heal (:class:`LinkWatch`). ``on_error`` is called before a :class:`TransportError` (bad peer) is
+    raised. Runs on the loop thread.
+    """
+
+    def __init__(self, ctx: zmq.Context, peers: Iterable[str], curve: CurveConfig | None, rcvhwm: int,
+                 on_error: Callable[[], None] | None = None) -> None:
+        self.peers = [p for p in dict.fromkeys(peers) if p]
+        self.curve = curve
+        self.sock = connect_sub(ctx, self.peers, curve, rcvhwm, on_error)
+        self.watch = LinkWatch(self.sock, self.peers, curve)
+        self.guards: dict[bytes, tuple[str, ...]] = {}
+        self.guarded: dict[tuple[str, ...], tuple[zmq.Socket, LinkWatch]] = {}
+        self._general = self._filtered = None
+        for topic, eps in (curve.topic_publishers if curve is not None else {}).items():
+            allowed = tuple(sorted(ep for ep in dict.fromkeys(eps) if ep in self.peers))
+            self.guards[topic.encode()] = allowed
+            if allowed and allowed not in self.guarded:
+                try:
+                    sock = connect_sub(ctx, list(allowed), curve, rcvhwm, on_error)
+                except TransportError:
+                    self.close()
+                    raise
+                self.guarded[allowed] = (sock, LinkWatch(sock, allowed, curve))
+
+    def fds(self) -> list[int]:
+        """The (edge-triggered) file descriptors of every SUB socket, for ``loop.add_reader``."""
+        return [s.getsockopt(zmq.FD) for s in self._socks() if not s.closed]
+
+    def _socks(self) -> list[zmq.Socket]:
+        return [self.sock] + [s for s, _ in self.guarded.values()]
+
+    def subscribe(self, prefix: bytes) -> None:
+        """Subscribe ``prefix``: a guarded topic on its publishers' socket alone; any other prefix on the socket
+        of every peer, plus each guarded topic it covers on that topic's publishers' socket."""
+        self._subscription(prefix, zmq.SUBSCRIBE)
+
+    def unsubscribe(self, prefix: bytes) -> None:
+        """Undo one :meth:`subscribe` of ``prefix``."""
+        self._subscription(prefix, zmq.UNSUBSCRIBE)
+
+    def _subscription(self, prefix: bytes, option: int) -> None:
+        covered = [t for t in self.guards if t.startswith(prefix)]
+        if prefix not in self.guards:
+            self.sock.setsockopt(option, prefix)
+        for topic in covered:
+            allowed = self.guards[topic]
+            if allowed:
+                self.guarded[allowed][0].setsockopt(option, topic)
+
+    def add_peer(self, endpoint: str) -> None:
+        """Connect the socket of every peer to one more endpoint (a tool that discovers late)."""
+        if endpoint not in self.peers:
+            self.peers.append(endpoint)
+            self.sock.connect(endpoint)
+            self.watch.add(endpoint)
+
+    def drain(self, handler: FramesHandler) -> None:
+        """Hand every waiting message of every socket to ``handler`` (:func:`drain_sub`), less the guarded
+        topics that came from a publisher not allowed them."""
+        if not self.guards:
+            drain_sub(self.sock, handler)
+            return
+        if self._general is not handler:
+            guards = self.guards
+
+            def filtered(frames: list) -> None:
+                t = frames[0]
+                if (t if type(t) is bytes else bytes(t)) not in guards:
+                    handler(frames)
+
+            self._general, self._filtered = handler, filtered
+        drain_sub(self.sock, self._filtered)
+        for sock, _ in self.guarded.values():
+            drain_sub(sock, handler)
+
+    def poll(self, now: float | None = None) -> None:
+        """Keep every socket's links (:meth:`LinkWatch.poll`)."""
+        self.watch.poll(now)
+        for _, watch in self.guarded.values():
+            watch.poll(now)
+
+    @property
+    def next_poll(self) -> float:
+        return self.watch.next_poll
+
+    def report(self) -> str:
+        """The reports of every socket's links (:meth:`LinkWatch.report`), joined by "; "."""
+        parts = [self.watch.report()] + [w.report() for _, w in self.guarded.values()]
+        return "; ".join(dict.fromkeys(p for p in parts if p))
+
+    def close(self) -> None:
+        """Stop the monitors and close every socket (before the context ends; idempotent)."""
+        for sock, watch in [(self.sock, self.watch)] + list(self.guarded.values()):
+            watch.close()
+            if not sock.closed:
+                sock.close(linger=0)
+
+
 class InProcTransport(Transport):
     """In-process transport: ``send`` records frames and loops them back; ``deliver`` injects frames.
 
@@ -773,45 +893,46 @@ class InProcTransport(Transport):
 
 
 class BusSocket:
-    """A composable container's one SUB socket, with the ZeroMQ context (and CURVE authenticator) its nodes'
-    :class:`XPub` sockets share (:class:`flexsheet.runtime.container.Bus`).
+    """A composable container's SUB side (:class:`SubLinks`), with the ZeroMQ context (and CURVE authenticator)
+    its nodes' :class:`XPub` sockets share (:class:`flexsheet.runtime.container.Bus`).
 
     ``peers``: endpoints to connect to; ``curve``: CURVE keys or None; ``rcvhwm``: receive high-water mark."""
 
     def __init__(self, peers: list[str], curve: CurveConfig | None, rcvhwm: int) -> None:
         self.ctx = zmq.Context()
         self._auth = _allow_list(self.ctx, curve)[0] if curve is not None else None
-        self.sock = connect_sub(self.ctx, peers, curve, rcvhwm)
-        self.watch = LinkWatch(self.sock, [p for p in dict.fromkeys(peers) if p], curve)
+        self.links = SubLinks(self.ctx, peers, curve, rcvhwm)
+        self.sock, self.watch = self.links.sock, self.links.watch
 
     @property
     def closed(self) -> bool:
         return self.sock.closed
 
-    def fileno(self) -> int:
-        """The socket's (edge-triggered) file descriptor, for ``loop.add_reader``."""
-        return self.sock.getsockopt(zmq.FD)
+    def fds(self) -> list[int]:
+        """The sockets' (edge-triggered) file descriptors, for ``loop.add_reader``."""
+        return self.links.fds()
 
     def subscribe(self, prefix: bytes) -> None:
-        self.sock.setsockopt(zmq.SUBSCRIBE, prefix)
+        self.links.subscribe(prefix)
 
     def unsubscribe(self, prefix: bytes) -> None:
-        self.sock.setsockopt(zmq.UNSUBSCRIBE, prefix)
+        self.links.unsubscribe(prefix)
+
+    def report(self) -> str:
+        return self.links.report()
 
     def drain(self, handler: FramesHandler) -> None:
-        """Hand every waiting multipart message to ``handler`` (:func:`drain_sub`); every
-        :data:`LinkWatch.POLL_S` also keep the links (:meth:`LinkWatch.poll`; the container's safety poll calls
+        """Hand every waiting multipart message to ``handler`` (:meth:`SubLinks.drain`); every
+        :data:`LinkWatch.POLL_S` also keep the links (:meth:`SubLinks.poll`; the container's safety poll calls
         this every 50 ms)."""
-        drain_sub(self.sock, handler)
-        watch = self.watch
-        if _monotonic() >= watch.next_poll:
-            watch.poll()
+        links = self.links
+        links.drain(handler)
+        if _monotonic() >= links.next_poll:
+            links.poll()
 
     def close(self) -> None:
-        """Close the socket, stop the authenticator and end the context (idempotent)."""
-        self.watch.close()
-        if not self.sock.closed:
-            self.sock.close(linger=0)
+        """Close the sockets, stop the authenticator and end the context (idempotent)."""
+        self.links.close()
         if self._auth is not None:
             self._auth.stop()
             self._auth = None

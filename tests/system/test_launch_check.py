@@ -23,7 +23,7 @@ from flexsheet.runtime.node import EXIT_CONFIG
 from flexsheet.runtime.ports import ephemeral_port_range
 from flexsheet.runtime.supervisor import Supervisor
 
-LAB_HOSTS = ["main", "arm1", "arm2"]
+LAB_KEYGEN = ["keys", "generate", "--launch", "launch/lab.yaml"]
 
 
 def flexsheet(*args: str, env: dict | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
@@ -33,10 +33,10 @@ def flexsheet(*args: str, env: dict | None = None, timeout: float = 120) -> subp
 
 @pytest.fixture
 def keys(tmp_path, monkeypatch) -> Path:
-    """``$FLEXSHEET_KEYS`` = a fresh folder, filled by ``flexsheet keys generate main arm1 arm2``."""
+    """``$FLEXSHEET_KEYS`` = a fresh folder, filled by ``flexsheet keys generate --launch launch/lab.yaml``."""
     folder = tmp_path / "keys"
     monkeypatch.setenv("FLEXSHEET_KEYS", str(folder))
-    r = flexsheet("keys", "generate", *LAB_HOSTS)
+    r = flexsheet(*LAB_KEYGEN)
     assert r.returncode == 0, r.stderr
     return folder
 
@@ -77,13 +77,14 @@ def test_lab_is_secure_by_default_and_check_without_keys_names_the_command(tmp_p
     assert r.returncode == EXIT_CONFIG
     key_lines = [line for line in r.stderr.splitlines() if "FLEXSHEET_KEYS" in line]
     assert len(key_lines) == 1, r.stderr
-    assert "flexsheet keys generate main arm1 arm2" in key_lines[0] and str(tmp_path / "nokeys") in key_lines[0]
-    # one host's secret missing (the arm PC got only public_keys.yaml): names that host and the command
-    flexsheet("keys", "generate", *LAB_HOSTS, env={"FLEXSHEET_KEYS": str(tmp_path / "k")})
-    (tmp_path / "k" / "arm2.key_secret").unlink()
+    assert "flexsheet keys generate --launch launch/lab.yaml" in key_lines[0]
+    assert str(tmp_path / "nokeys") in key_lines[0]
+    # one node's secret missing (the arm PC got only public_keys.yaml and its host key): names it and the command
+    flexsheet(*LAB_KEYGEN, env={"FLEXSHEET_KEYS": str(tmp_path / "k")})
+    (tmp_path / "k" / "arm_right.key_secret").unlink()
     res = _check_env(ROOT / "launch" / "lab.yaml", "arm2", tmp_path / "k")
-    secret = [e for e in res.errors if "secret key for host arm2" in e]
-    assert len(secret) == 1 and "flexsheet keys generate main arm1 arm2" in secret[0], res.errors
+    secret = [e for e in res.errors if "secret key for arm_right on host arm2" in e]
+    assert len(secret) == 1 and "flexsheet keys generate --launch" in secret[0], res.errors
     assert not [e for e in _check_env(ROOT / "launch" / "lab.yaml", "arm1", tmp_path / "k").errors
                 if "secret" in e or "FLEXSHEET_KEYS" in e or "security" in e]
 
@@ -217,17 +218,19 @@ def test_curve_problems_name_the_key_file(tmp_path, monkeypatch):
     doc = _mutate(BASE, "security", {"curve": True, "public_keys_file": "$(keys)/public_keys.yaml"})
     path = tmp_path / "chk.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
-    assert flexsheet("keys", "generate", "main", "arm1").returncode == 0
+    assert flexsheet("keys", "generate", "--launch", str(path)).returncode == 0
     assert check_launch(path, out=str(tmp_path / "out")).errors == []
     os.chmod(tmp_path / "k" / "arm1.key_secret", 0o644)
     errs = check_launch(path, host="arm1").errors
     assert len(errs) == 1 and "readable by others (mode 644)" in errs[0] and "chmod 600" in errs[0], errs
     os.chmod(tmp_path / "k" / "arm1.key_secret", 0o600)
     other = tmp_path / "other"                                       # keys from another run: mismatch
-    assert flexsheet("keys", "generate", "main", "arm1", "-o", str(other)).returncode == 0
+    assert flexsheet("keys", "generate", "--launch", str(path), "-o", str(other)).returncode == 0
     os.replace(other / "public_keys.yaml", tmp_path / "k" / "public_keys.yaml")
     errs = check_launch(path, host="main").errors
-    assert len(errs) == 1 and "security.public_keys.main" in errs[0] and "does not match" in errs[0], errs
+    from flexsheet.runtime.launch import identities
+    assert len(errs) == len(identities(load_launch(path), "main")) >= 2, errs   # main and each of its nodes
+    assert all("does not match" in e for e in errs) and "security.public_keys.main" in errs[0], errs
 
 
 def test_curve_off_on_a_networked_graph_is_a_warning_not_an_error(tmp_path):
@@ -334,7 +337,7 @@ def _doc_commands() -> list[str]:
 
 def test_deploy_doc_commands_pass_the_check(keys, tmp_path, monkeypatch):
     """Every ``flexsheet launch``/``flexsheet run --launch`` command of docs/deploy.md parses with the real CLI
-    and passes the check, once ``flexsheet keys generate main arm1 arm2`` has run (the doc's step 3). The lab's
+    and passes the check, once ``flexsheet keys generate --launch launch/lab.yaml`` has run (the doc's step 3). The lab's
     own stereo calibration (step 5) stands in as a copy of the shipped one."""
     import shlex
 
@@ -345,7 +348,7 @@ def test_deploy_doc_commands_pass_the_check(keys, tmp_path, monkeypatch):
     (tmp_path / ".flexsheet" / "stereo.yaml").write_text((ROOT / "flexsheet/vision/ximea_calib.yaml").read_text())
     cmds = _doc_commands()
     assert sum(c.startswith("flexsheet launch launch/lab.yaml") for c in cmds) >= 9, cmds
-    assert "flexsheet keys generate main arm1 arm2" in (ROOT / "docs" / "deploy.md").read_text()
+    assert "flexsheet keys generate --launch launch/lab.yaml" in (ROOT / "docs" / "deploy.md").read_text()
     for cmd in cmds:
         args = build_parser().parse_args([os.path.expandvars(a) for a in shlex.split(cmd)[1:]])
         if args.command == "launch":

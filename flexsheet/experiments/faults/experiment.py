@@ -10,7 +10,8 @@ Runs, in this process (nothing else needs to be running):
 * time (:mod:`.planner`): one fingertip stamped 1e12 s into the planner node;
 * links (:mod:`.links`): a squatted port (garbage; plain ZMTP against CURVE), then the real publisher back
   (time to the first message, target 2 s); a subscriber that never reads stereo frames (the publisher's RSS
-  growth, target ≤ 100 MB; skipped with ``--quick``).
+  growth, target ≤ 100 MB; skipped with ``--quick``); arm targets sent with a stolen host key and with another
+  node's own key (authorization per node: 0 accepted, the planner's all arrive).
 
 Writes ``DIR/faults.json`` (every count, the targets and the verdicts) and ``DIR/faults.png``.
 """
@@ -51,6 +52,9 @@ def run(quick: bool = False, log=print) -> dict:
         log(f"[faults] squat {variant} ...")
         r = asyncio.run(links.squat_then_restart(variant))
         out[f"squat_{variant}"] = {k: r[k] for k in ("received", "recovery_s", "reconnects", "failures")}
+    log("[faults] stolen keys: arm targets from the main host's key and from the triangulator's ...")
+    with tempfile.TemporaryDirectory() as tmp:
+        out["stolen_keys"] = links.stolen_keys(Path(tmp))
     if not quick:
         log("[faults] never-reading subscriber of stereo frames (8 s) ...")
         r = links.memory_run()
@@ -78,6 +82,9 @@ def verdicts(r: dict) -> dict:
     for variant in ("garbage", "plain_zmtp_vs_curve"):
         s = r[f"squat_{variant}"]["recovery_s"]
         out[f"squat_{variant}_heals_in_2s"] = v(s is not None and s <= TARGETS["squat_recovery_s"])
+    k = r["stolen_keys"]
+    out["targets_only_from_the_planner"] = v(k["planner"]["received"] > 0 and k["host_key_at_planner_port"]
+                                             ["received"] == 0 and k["other_node_key"]["received"] == 0)
     if "never_reading_subscriber" in r:
         out["memory_bounded"] = v(r["never_reading_subscriber"]["growth_mb"] <= TARGETS["memory_growth_mb"])
     return out

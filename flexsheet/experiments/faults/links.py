@@ -1,6 +1,7 @@
 """Attacks on the links (:mod:`flexsheet.runtime.transport`): a node's port squatted while it is down by a
 listener that speaks the wrong protocol (garbage after a ZMTP signature; plain ZMTP against CURVE), then
-released; a subscriber that never reads 655 kB stereo frames. Used by ``flexsheet experiment faults`` and
+released; a subscriber that never reads 655 kB stereo frames; arm targets sent with a stolen host key and with
+another node's own key (authorization per node). Used by ``flexsheet experiment faults`` and
 tests/system/test_links_heal.py."""
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from messages import ArmTarget
 from messages import topics as T
 
 __all__ = ["GARBAGE", "DEADLINE_S", "Sink", "Source", "GarbageSquatter", "PlainZmtpSquatter", "squat_then_restart",
-           "memory_run"]
+           "memory_run", "stolen_keys"]
 
 ROOT = Path(__file__).resolve().parents[3]
 #: a ZMTP signature byte, then a greeting no ZMTP peer sends: libzmq ends the session (no retry)
@@ -140,6 +141,59 @@ async def squat_then_restart(variant: str, heal: bool = True, deadline: float = 
                 n.shutdown()
         await asyncio.gather(*tasks)
 
+
+STOLEN_KEYS_LAUNCH = """
+name: per_node_keys
+hosts:
+  main: {{address: 127.0.0.1}}
+  arm1: {{address: 127.0.0.1}}
+nodes:
+  planner: {{type: planner, host: main, port: {p}}}
+  arm_left: {{type: arm_bridge, host: arm1, port: {p1}}}
+  triangulator: {{type: triangulator, host: main, port: {p2}}}
+security: {{curve: true, public_keys_file: $(keys)/public_keys.yaml, publishers: {{/arm/left/target: [planner]}}}}
+"""
+
+
+def stolen_keys(folder: Path, seconds: float = 1.0) -> dict:
+    """Arm targets to a bridge's subscription under CURVE with per-node keys and ``security.publishers``
+    (``/arm/left/target: [planner]``), from: the planner (the control), a process holding the main host's key at
+    the planner's endpoint, and the triangulator with its own key from its own endpoint. Keys are generated into
+    ``folder``. Returns the targets received from each (the thief's handshake fails; the triangulator's publisher
+    is never asked for the topic) and the bridge's link report."""
+    from flexsheet.runtime.keys import generate
+    from flexsheet.runtime.launch import curve_config, identities, load_launch, node_config
+
+    p = free_port(span=3)
+    path = folder / "per_node_keys.yaml"
+    path.write_text(STOLEN_KEYS_LAUNCH.format(p=p, p1=p + 1, p2=p + 2))
+    old = os.environ.get("FLEXSHEET_KEYS")
+    os.environ["FLEXSHEET_KEYS"] = str(folder / "keys")
+    try:
+        lf = load_launch(path)
+        generate(identities(lf), folder / "keys")
+        bridge = node_config(lf, "arm_left")
+        bridge.name = "sink"
+        planner, tri = node_config(lf, "planner"), node_config(lf, "triangulator")
+        stolen = NodeConfig(name="thief", endpoint=planner.endpoint, peers=[], curve=curve_config(lf, "main"))
+    finally:
+        if old is None:
+            os.environ.pop("FLEXSHEET_KEYS", None)
+        else:
+            os.environ["FLEXSHEET_KEYS"] = old
+
+    async def exchange(source_cfg: NodeConfig) -> dict:
+        sink, source = Sink(bridge), Source(source_cfg)
+        tasks = [asyncio.get_running_loop().create_task(n.run(install_signals=False)) for n in (sink, source)]
+        await asyncio.sleep(seconds)
+        out = {"sent": source.pub.stats.count, "received": len(sink.got)}
+        for n in (sink, source):
+            n.shutdown()
+        await asyncio.gather(*tasks)
+        return out
+
+    return {name: asyncio.run(exchange(cfg))
+            for name, cfg in (("planner", planner), ("host_key_at_planner_port", stolen), ("other_node_key", tri))}
 
 
 PUBLISHER = r"""
