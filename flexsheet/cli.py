@@ -89,9 +89,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"flexsheet run {config.name}: configuration error: {exc}", file=sys.stderr)
         return EXIT_CONFIG
-    except TransportError as exc:
-        print(f"flexsheet run {config.name}: {exc}", file=sys.stderr)
-        return 1
+    except TransportError as exc:   # an endpoint that cannot be bound or connected: not fixed by a restart
+        print(f"flexsheet run {config.name}: configuration error: {exc}", file=sys.stderr)
+        return EXIT_CONFIG
     return 0
 
 

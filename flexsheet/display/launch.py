@@ -134,6 +134,12 @@ def _check_display_calib(c) -> None:
     warned about) and its camera entry is newer than the camera's ``calib_file``."""
     path = display_calib_path(c.lf, c.out)
     if path is None:
+        twin = c.lf.section("twin")
+        users = [n for n, spec in c.lf.nodes.items() if spec.host in c.hosts and spec.type in DISPLAY_NEEDS]
+        if users and (twin is None or not twin.registration):
+            c.warn(f"no display_calib: node(s) {', '.join(users)} run on the nominal geometry (camera pose, "
+                   f"projector, eye, arm bases), not this display's; register it (flexsheet calibrate display, "
+                   f"docs/calibration.md) and name its display.yaml in the launch file: display_calib: FILE")
         return
     problem = c.file_problem("display_calib", path)
     if problem:

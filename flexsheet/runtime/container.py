@@ -399,9 +399,9 @@ class Container:
                 except ConfigError as exc:
                     self.print(f"{m.name}: configuration error: {exc}")
                     code = EXIT_CONFIG
-                except TransportError as exc:
-                    self.print(f"{m.name}: {exc}")
-                    code = 1
+                except TransportError as exc:   # cannot bind or connect: a restart fails the same way
+                    self.print(f"{m.name}: configuration error: {exc}")
+                    code = EXIT_CONFIG
                 except asyncio.CancelledError:
                     raise
                 except Exception:  # noqa: BLE001 - a node's crash stays in the node
@@ -453,8 +453,8 @@ class Container:
         try:
             await self.bus.start()
         except TransportError as exc:
-            self.print(f"container {self.name}: {exc}")
-            return 1
+            self.print(f"container {self.name}: configuration error: {exc}")
+            return EXIT_CONFIG
         self.print(f"container {self.name}: {len(self.members)} nodes in pid {os.getpid()}: "
                    + ", ".join(m.name for m in self.members)
                    + ((" (simulated clock)" if self.bus.clock.live else " (lockstep: replayed clock)")
@@ -479,6 +479,10 @@ class Container:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.remove_signal_handler(sig)
         self._write_cpu(time.monotonic() - t0, time.process_time() - c0)
+        failed = [m.name for m in self.members if any(c != 0 for c in m.codes)]
+        if self.code == 0 and failed:   # a node that failed and was restarted here: the launch must know
+            self.print(f"container {self.name}: node(s) failed during the run: {', '.join(failed)}")
+            return 1
         return self.code
 
     async def _drive(self) -> None:

@@ -7,8 +7,9 @@ same check first and starts nothing when it finds an error. What is checked:
 - **params**: every node's params (with ``--set`` overrides and ``$(out)``/``$(launch_dir)`` substituted)
   against its node type's ``Params`` model (``Params.model_validate``; the node is not constructed);
 - **hosts**: ``--host`` is a host of the file; every address is an IP address (not 0.0.0.0) or a name that
-  resolves here; a ``host`` param (a device's address) is an IP address or a valid host name. Nothing is
-  bound or pinged: a host's address need not exist on the machine that checks;
+  resolves here; the address of each checked host (``--host``, else every host) is one of this machine's (a
+  socket binds to it, port 0: its nodes could not bind their endpoints otherwise); a ``host`` param (a
+  device's address) is an IP address or a valid host name. Nothing is pinged;
 - **ports**: no two listening sockets on one machine (node endpoints, and the ports the launch extensions'
   device twins listen on) share a port;
 - **files** named by the nodes of the checked host(s): inputs (:func:`is_input_file_key`) exist and, where a
@@ -213,6 +214,25 @@ def _address_problem(addr: str, resolve: bool) -> str | None:
     return None
 
 
+def _not_local(addr: str) -> str | None:
+    """Why no socket binds to ``addr`` on this machine (port 0), or None when one does."""
+    import socket
+
+    try:
+        infos = socket.getaddrinfo(addr, 0, type=socket.SOCK_STREAM)
+    except OSError as exc:
+        return str(exc)
+    reason = "no address"
+    for family, kind, proto, _, sockaddr in infos:
+        with socket.socket(family, kind, proto) as s:
+            try:
+                s.bind(sockaddr)
+                return None
+            except OSError as exc:
+                reason = exc.strerror or str(exc)
+    return reason
+
+
 @dataclass
 class CheckResult:
     """What :func:`check_launch` found: ``errors`` and ``warnings`` (one line each), the hosts checked."""
@@ -265,6 +285,13 @@ class _Checker:
             problem = _address_problem(spec.address, resolve=True)
             if problem:
                 self.err(f"hosts.{name}.address", spec.address, problem)
+            elif name in self.hosts and any(s.host == name for s in self.lf.nodes.values()):
+                reason = _not_local(spec.address)
+                if reason:
+                    self.err(f"hosts.{name}.address", spec.address,
+                             f"not an address of this machine ({reason}): host {name}'s nodes cannot bind their "
+                             f"endpoints here; run this on {name} itself (--host {name}), or give {name} this "
+                             f"machine's address")
 
     # ---------------------------------------------------------------------------------------------- ports
     def _machine(self, host: str) -> str:

@@ -17,6 +17,10 @@ from pathlib import Path
 from flexsheet.runtime.launch import LaunchError, LaunchFile, NodeSpec, RespawnSpec, curve_config
 from flexsheet.runtime.node import EXIT_CONFIG
 
+#: exit codes of a node or container stopped by the launcher that are not failures (0, SIGINT's 130 and the
+#: signals themselves)
+STOP_EXITS = frozenset({0, 130, -2, -15})
+
 __all__ = ["Supervisor", "container_spec", "children_of"]
 
 
@@ -50,6 +54,7 @@ class _Child:
         self.restarts = 0
         self.stopping = False
         self.exit_codes: list[int] = []
+        self.failures: list[int] = []  # exit codes of incarnations that failed (not by the launcher's stop)
         self.cpu_s = 0.0          # CPU time of the ended incarnations, s
         self.cpu_live = 0.0       # CPU time of the running incarnation at the last sample, s
         self.cpu_warm: tuple[float, float] | None = None  # (monotonic time, CPU s) once warmed up
@@ -239,8 +244,12 @@ class Supervisor:
             code = await self._exit_code(child, asyncio.create_task(self._pump(child)))
             self._record_exit(child, code)
             if child.stopping or self._stop.is_set():
+                if code not in STOP_EXITS:   # e.g. a container whose node failed and was restarted, or -9
+                    child.failures.append(code)
                 return
             self.print(self._fmt.format(child.name, f"exited with code {code}"))
+            if code != 0:
+                child.failures.append(code)
             if code == EXIT_CONFIG:  # bad params or a missing file: a restart would fail the same way
                 self.print(self._fmt.format(child.name, "configuration error (see the line above): not respawned; "
                                                         f"check with: flexsheet launch {self.lf.path} --check"
@@ -284,7 +293,9 @@ class Supervisor:
                 self.print(self._fmt.format(child.name, f"did not stop on {sig.name}; escalating"))
 
     async def run(self) -> int:
-        """Run until Ctrl-C, SIGTERM, ``duration`` or a required node's exit. Returns 0, or 1 if a node failed."""
+        """Run until Ctrl-C, SIGTERM, ``duration`` or a required node's exit. Returns 0; :data:`EXIT_CONFIG` if a
+        node had a configuration error (a bind failure included); else 1 if any node exited non-zero by itself
+        during the run (respawned or not). Exits caused by the launcher's own stop are never failures."""
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, self._on_signal, sig)
@@ -324,13 +335,13 @@ class Supervisor:
         self.print("[launch] all nodes stopped")
         if self.out:
             self.write_cpu(Path(self.out) / "cpu.json", time.monotonic() - t0)
-        failed = [c.name for c in self.children if c.exit_codes and c.exit_codes[-1] not in (0, -2, -15)]
-        if failed:                           # name them: a run's exit 1 must say whose exit it is
-            self.print("[launch] ended with a failure exit: " + ", ".join(
-                f"{c.name} ({c.exit_codes[-1]})" for c in self.children if c.name in failed))
+        failed = [c for c in self.children if c.failures]
+        if failed:   # name them: a run's exit 1 must say whose exit it is (exits the launcher caused are not)
+            self.print("[launch] node(s) failed during the run: " + ", ".join(
+                f"{c.name} (exit {', '.join(map(str, c.failures))})" for c in failed))
         if self.config_errors:
             return EXIT_CONFIG
-        return 1 if failed and "required" in self.reason else 0
+        return 1 if failed else 0
 
     def _on_signal(self, sig: signal.Signals) -> None:
         if self._stop.is_set():  # second Ctrl-C: stop faster

@@ -236,8 +236,12 @@ def faults(tmp_path_factory, sim_fem_cache):
 
 def test_every_killed_node_is_respawned_and_the_run_finishes(faults):
     out, _, run = faults
-    why = [ln for ln in run["lines"] if re.search(r"exited with code|failure exit|Traceback|Error|escalating", ln)]
-    assert run["code"] == 0, "\n".join(why[-40:] + ["..."] + run["lines"][-60:])
+    why = [ln for ln in run["lines"] if re.search(r"exited with code|failed during|Traceback|Error|escalating", ln)]
+    # a launch in which nodes failed exits 1, naming them: the kills, and nothing else
+    failed = [ln for ln in run["lines"] if "failed during the run" in ln]
+    assert run["code"] == 1 and len(failed) == 1, "\n".join(why[-40:] + ["..."] + run["lines"][-60:])
+    assert sorted(part.split(" (")[0] for part in failed[0].split(": ", 1)[1].split("), ")) == sorted(KILL_ORDER), \
+        failed
     assert [k["node"] for k in run["kills"]] == KILL_ORDER
     for k in run["kills"]:
         assert k["new_pid"] != k["old_pid"]

@@ -55,6 +55,22 @@ def _tiny_bag(path: Path) -> Path:
     return path
 
 
+def _here(errors: list[str], path: Path) -> list[str]:
+    """``errors`` less the one "not an address of this machine" line of each host of ``path`` whose address this
+    machine lacks (the lab's 10.77.0.x); asserts that each such host got that line."""
+    from flexsheet.runtime.launch_check import _not_local
+
+    lf = load_launch(path)
+    absent = {h: s.address for h, s in lf.hosts.items() if _not_local(s.address)}
+    out = []
+    for e in errors:
+        host = next((h for h, a in absent.items() if f"hosts.{h}.address = '{a}': not an address of this machine"
+                     in e), None)
+        if host is None:
+            out.append(e)
+    return out
+
+
 def _shipped() -> list[tuple[str, str]]:
     return [(f.name, h) for f in sorted((ROOT / "launch").glob("*.yaml")) for h in load_launch(f).hosts]
 
@@ -65,7 +81,7 @@ def test_every_shipped_launch_file_passes_for_every_host(keys, tmp_path, name, h
     if name == "replay.yaml":  # replays a bag the user names (docs/replay.md)
         overrides = {"player": {"file": str(_tiny_bag(tmp_path / "sim.mcap"))}}
     res = check_launch(ROOT / "launch" / name, host=host, out=str(tmp_path / "out"), overrides=overrides)
-    assert res.errors == [], "\n".join(res.errors)
+    assert _here(res.errors, ROOT / "launch" / name) == [], "\n".join(res.errors)
     assert res.nodes == sum(s.host == host for s in load_launch(ROOT / "launch" / name).nodes.values())
 
 
@@ -87,6 +103,28 @@ def test_lab_is_secure_by_default_and_check_without_keys_names_the_command(tmp_p
     assert len(secret) == 1 and "flexsheet keys generate --launch" in secret[0], res.errors
     assert not [e for e in _check_env(ROOT / "launch" / "lab.yaml", "arm1", tmp_path / "k").errors
                 if "secret" in e or "FLEXSHEET_KEYS" in e or "security" in e]
+
+
+def test_a_host_whose_address_this_machine_lacks_fails_the_check_and_names_it(keys, tmp_path):
+    """The lab's main PC address (10.77.0.1) is not on this machine: --check --host main exits 78 naming it
+    (it printed OK, then the launch failed 63 times to bind); the same file with main on 127.0.0.1 passes."""
+    r = flexsheet("launch", "launch/lab.yaml", "--check", "--host", "main")
+    assert r.returncode == EXIT_CONFIG, r.stdout + r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if "hosts.main.address = '10.77.0.1': not an address of this machine"
+             in ln]
+    assert len(lines) == 1, r.stderr
+    doc = yaml.safe_load((ROOT / "launch" / "lab.yaml").read_text())
+    doc["hosts"]["main"]["address"] = "127.0.0.1"
+    doc["nodes"]["viz"]["params"]["host"] = "127.0.0.1"
+    path = ROOT / "launch" / f".lab_here_{os.getpid()}.yaml"   # beside lab.yaml: its $(launch_dir) paths hold
+    try:
+        path.write_text(yaml.safe_dump(doc, sort_keys=False))
+        flexsheet("keys", "generate", "--launch", str(path))
+        res = check_launch(path, host="main", out=str(tmp_path / "out"))
+    finally:
+        path.unlink(missing_ok=True)
+    assert not [e for e in res.errors if "address" in e], res.errors
+    assert any("no display_calib: node(s) camera, planner, renderer" in w for w in res.warnings), res.warnings
 
 
 def _check_env(path, host, keys_dir):
@@ -361,4 +399,4 @@ def test_deploy_doc_commands_pass_the_check(keys, tmp_path, monkeypatch):
             lf = load_launch(ROOT / args.launch)
             res = check_launch(lf.path, host=lf.nodes[args.name].host,
                                overrides={args.name: _parse_params(args.param or [])})
-        assert res.errors == [], f"{cmd}:\n" + "\n".join(res.errors)
+        assert _here(res.errors, res.path) == [], f"{cmd}:\n" + "\n".join(res.errors)
