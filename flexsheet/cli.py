@@ -291,7 +291,7 @@ def _add_run_parser(sub) -> None:
                        **_fmt("  flexsheet run talker --param rate=5 --endpoint tcp://127.0.0.1:7201\n"
                               "  flexsheet run listener --peer tcp://127.0.0.1:7201\n"
                               "  flexsheet run planner --launch launch/sim.yaml --param use_prediction=false\n"
-                              "  flexsheet run --container vision --launch launch/sim.yaml --host main"))
+                              "  flexsheet run --container main_pc --launch launch/sim_composed.yaml --host main"))
     s.add_argument("node_type", metavar="NODE", nargs="?", help=f"node type: {', '.join(sorted(registry.NODES))}")
     s.add_argument("--name", help="node name (default: the type; with --launch: the node's key)")
     s.add_argument("--launch", help="take endpoint, peers and params from this launch file")
@@ -345,7 +345,10 @@ def _add_topic_parser(sub) -> None:
             t.add_argument("topic")
         t.add_argument("--launch", default=_launch_default(), help="launch file of the graph (default: "
                                                                    "$FLEXSHEET_LAUNCH or launch/sim.yaml)")
-        t.add_argument("--timeout", type=float, default=2.5, help="s to listen for heartbeats")
+        if verb != "hz":
+            t.add_argument("--timeout", type=float, default=2.5,
+                           help="s to listen for heartbeats" if verb == "list" else
+                           "s to wait for the first message (none: it is not published; exit 1)")
         if verb == "echo":
             t.add_argument("--count", type=int, default=0, help="stop after N messages")
             t.add_argument("--arrays", action="store_true", help="print whole arrays (default: shape only)")

@@ -155,7 +155,8 @@ def arms_main(argv: list[str] | None = None) -> int:
         description="Arm base poses from a clamp marker at N >= 8 joint configurations (needs the camera entry).",
         epilog="example:\n  flexsheet calibrate arms --sim --truth-seed 1 --quick --out /tmp/disp")
     _common(p, "arms")
-    p.add_argument("--configs", dest="arm_configs", type=int, default=None, help="configurations per arm (default 12)")
+    p.add_argument("--configs", dest="arm_configs", type=int, default=None, help=f"configurations per arm (default {P.FULL.arm_configs}; "
+                                                             f"--quick {P.QUICK.arm_configs})")
     p.add_argument("--side", choices=("left", "right", "both"), default="both")
     a = p.parse_args(argv)
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import sys
 import time
 
 import numpy as np
@@ -117,7 +118,8 @@ def _short(value) -> str:
 
 
 def topic_echo(args: argparse.Namespace) -> int:
-    """Print messages of ``args.topic`` as they arrive (arrays shown by shape unless ``--arrays``)."""
+    """Print messages of ``args.topic`` as they arrive (arrays shown by shape unless ``--arrays``): exactly
+    ``--count`` of them when given; when none arrives within ``--timeout`` s, say so and return 1."""
     try:
         peers, curve = _peers(args.launch)
     except LaunchError as exc:
@@ -128,8 +130,8 @@ def topic_echo(args: argparse.Namespace) -> int:
 
     def on_frames(frames: list) -> None:
         nonlocal n
-        if bytes(frames[0]).decode(errors="replace") != args.topic:
-            return
+        if done.is_set() or bytes(frames[0]).decode(errors="replace") != args.topic:
+            return          # one drain may hold more than --count messages
         try:
             msg = decode_any(frames)
         except DecodeError as exc:
@@ -142,20 +144,27 @@ def topic_echo(args: argparse.Namespace) -> int:
         if args.count and n >= args.count:
             done.set()
 
-    async def main() -> None:
+    async def main() -> int:
         tr = ZmqTransport("", peers, curve=curve)
         await tr.start(on_frames)
         tr.subscribe(args.topic)
         try:
-            await done.wait()
+            try:
+                await asyncio.wait_for(asyncio.shield(done.wait()), timeout=args.timeout)
+            except TimeoutError:
+                if n == 0:
+                    print(f"no message on {args.topic} in {args.timeout:g} s: nothing in the graph of {args.launch} "
+                          f"publishes it now (flexsheet topic list shows what is published)", file=sys.stderr)
+                    return 1
+                await done.wait()
         finally:
             tr.close()
+        return 0
 
     try:
-        asyncio.run(main())
+        return asyncio.run(main())
     except KeyboardInterrupt:
-        pass
-    return 0
+        return 0
 
 
 def topic_hz(args: argparse.Namespace) -> int:
