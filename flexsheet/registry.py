@@ -29,7 +29,8 @@ NODES: dict[str, str] = {
 
 EXPERIMENTS: dict[str, str] = {
     "triangulation": "flexsheet.experiments.triangulation:main",
-    "stroke": "flexsheet.experiments.stroke:main",
+    "stroke": "flexsheet.experiments.graph_stroke:main",
+    "stroke_model": "flexsheet.experiments.stroke:main",
     "scenes": "flexsheet.experiments.scenes:main",
     "fem": "flexsheet.experiments.fem:main",
     "correction": "flexsheet.experiments.correction:main",

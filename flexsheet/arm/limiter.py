@@ -13,8 +13,13 @@ The velocity toward each joint limit is also capped by the braking curve of the 
 so the range is never left even when the goal jumps (the goal itself may be overshot when it jumps back
 toward the arm faster than the deceleration allows; the stream then returns to it).
 
+Velocity feed-forward: a moving goal (``goal_velocity`` w, rad/s) is tracked by moving with w plus the
+braking-limited speed toward it, ``v = w + sign(e)·min(v_brake(|e|), |e|/T)``: once caught up, the command
+moves with the goal one period ahead of it instead of braking to a stop at each new goal (a streamed
+trajectory through the targets). With w = 0 this is the rate limiter above.
+
 Guarantees (tested): ``|c_k − c_{k−1}| ≤ qd_max·T``, ``|v_k − v_{k−1}| ≤ qdd_max·T`` and ``c_k`` within the
-shrunk range, for any goal sequence.
+shrunk range, for any goal and goal-velocity sequence.
 """
 
 from __future__ import annotations
@@ -99,15 +104,17 @@ class StreamLimiter:
         f = np.clip((D - 0.5 * m * (m + 1.0)) / (m + 1.0), 0.0, 1.0)
         return (m + f) * a * T
 
-    def step(self, goal) -> np.ndarray:
-        """Advance one period toward ``goal`` (6,) rad; returns the new command (6,) rad (a copy)."""
+    def step(self, goal, goal_velocity=None) -> np.ndarray:
+        """Advance one period toward ``goal`` (6,) rad moving at ``goal_velocity`` (6,) rad/s (None: at rest);
+        returns the new command (6,) rad (a copy). A non-finite goal velocity is taken as 0."""
         g = np.clip(np.asarray(goal, dtype=float), self.lo, self.hi)
         T, a = self.T, self.qdd_max
+        w = np.zeros(6) if goal_velocity is None else np.asarray(goal_velocity, dtype=float)
+        w = np.clip(np.where(np.isfinite(w), w, 0.0), -self.qd_max, self.qd_max)
         e = g - self.c
         ae = np.abs(e)
-        v_brake = self._brake(ae)
-        v_mag = np.minimum(np.minimum(self.qd_max, v_brake), ae / T)
-        v_des = np.sign(e) * v_mag
+        v_mag = np.minimum(self._brake(ae), ae / T)
+        v_des = np.clip(w + np.sign(e) * v_mag, -self.qd_max, self.qd_max)
         v = np.clip(v_des, self.v - a * T, self.v + a * T)
         # never faster toward a joint limit than the deceleration can stop before it (feasible by induction)
         v = np.clip(v, -self._brake(self.c - self.lo), self._brake(self.hi - self.c))

@@ -201,7 +201,7 @@ class ArmStream:
         if self._snap is None or not self.link.connected or self.tracker.source_stamp == self._snap_target:
             return
         self.limiter.restore(self._snap)
-        cmd = self.limiter.step(self.tracker.goal_for(self.clock(), self.limiter.c))
+        cmd = self.limiter.step(*self.tracker.reference(self.clock(), self.limiter.c))
         self._snap_target = self.tracker.source_stamp
         stamp = self.clock()
         try:
@@ -265,7 +265,7 @@ class ArmStream:
             if verdict.advance:
                 self._snap = self.limiter.snapshot()
                 self._snap_target = self.tracker.source_stamp
-                cmd = self.limiter.step(self.tracker.goal_for(self.clock(), self.limiter.c))
+                cmd = self.limiter.step(*self.tracker.reference(self.clock(), self.limiter.c))
             else:
                 self._snap = None
                 cmd = self.limiter.c.copy()

@@ -3,8 +3,10 @@
 :class:`TargetTracker` turns clamp-pose targets (``ArmTarget.pose``, display frame) into a joint goal with IK
 seeded from the previous goal, refuses what IK reports as unreachable, beyond limits, singular or a
 branch jump (the goal stays at the last good solution: the arm stops short, the status says why), and holds
-when targets stop arriving for longer than ``target_timeout``. The streaming limiter then
-moves the commanded joints toward the goal within the joint limits (:mod:`flexsheet.arm.limiter`).
+when targets stop arriving for longer than ``target_timeout``. Between targets the goal moves on at the
+velocity of the last few goals (a least-squares line through the last :data:`VELOCITY_GOALS` goals over their
+source stamps; at most :data:`EXTRAPOLATE_MAX_S` past the newest), and the streaming limiter follows it with
+that velocity as feed-forward (:mod:`flexsheet.arm.limiter`), within the joint limits.
 """
 
 from __future__ import annotations
@@ -15,7 +17,12 @@ import numpy as np
 
 from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, IKResult
 
-__all__ = ["TargetTracker", "TargetRefused", "BridgeStatus"]
+__all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S"]
+
+#: goals the velocity is fitted over (8 at the camera's 48 Hz: the last 146 ms)
+VELOCITY_GOALS = 8
+#: the goal moves on at its velocity for at most this long after the newest target (then it waits there)
+EXTRAPOLATE_MAX_S = 0.05
 
 
 class TargetRefused(ValueError):
@@ -65,6 +72,8 @@ class TargetTracker:
         self.ik_status = "no_target"
         self.last_ik: IKResult | None = None
         self.refused = 0
+        self._history: list[tuple[float, np.ndarray]] = []   # (source stamp, goal) of the last accepted goals
+        self.velocity = np.zeros(6)
 
     def seed(self, q) -> None:
         """Start IK from joints ``q`` (6,) rad (the measured joints) if no goal exists yet."""
@@ -86,6 +95,7 @@ class TargetTracker:
         max_jump = self.max_jump
         if self.last_target_at is not None and now - self.last_target_at > self.target_timeout:
             max_jump += float(np.max(QD_MAX)) * (now - self.last_target_at)     # resumed after a pause
+        resumed = self.last_target_at is not None and now - self.last_target_at > self.target_timeout
         res = self.kin.ik(T_display_clamp, seed, max_jump=max_jump)
         self.last_ik = res
         self.last_target_at = now
@@ -93,6 +103,7 @@ class TargetTracker:
             self.goal = res.q
             self.source_stamp = float(source_stamp)
             self.ik_status = "ok"
+            self._fit_velocity(resumed)
         else:
             self.ik_status = res.status
             self.refused += 1
@@ -100,15 +111,39 @@ class TargetTracker:
                 raise TargetRefused(res)
         return res
 
+    def _fit_velocity(self, restart: bool) -> None:
+        """The goal's velocity (6,) rad/s: slope of the least-squares line through the last goals over their
+        source stamps (0 with fewer than 2, after a pause, or for stamps that do not increase)."""
+        h = self._history
+        if restart or (h and self.source_stamp <= h[-1][0]):
+            h.clear()
+        h.append((self.source_stamp, self.goal.copy()))
+        del h[:-VELOCITY_GOALS]
+        if len(h) < 2:
+            self.velocity = np.zeros(6)
+            return
+        t = np.array([x[0] for x in h])
+        t = t - t.mean()
+        q = np.array([x[1] for x in h])
+        self.velocity = (t @ (q - q.mean(axis=0))) / float(t @ t)
+
     def status(self, now: float) -> str:
         """"ok", "hold:no_target" (none yet or timed out) or "hold:<ik status>" (last target refused)."""
         if self.last_target_at is None or now - self.last_target_at > self.target_timeout:
             return BridgeStatus.NO_TARGET
         return BridgeStatus.OK if self.ik_status == "ok" else f"hold:{self.ik_status}"
 
-    def goal_for(self, now: float, q_command: np.ndarray) -> np.ndarray:
-        """Joint goal to stream toward at ``now``: the IK goal while targets are fresh, else ``q_command``
-        (hold where the command is: the limiter brakes to a stop)."""
+    def reference(self, now: float, q_command: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Joint goal (6,) rad and its velocity (6,) rad/s to stream toward at ``now`` (s): while targets are
+        fresh, the IK goal moved on at :attr:`velocity` for the time since it arrived (at most
+        :data:`EXTRAPOLATE_MAX_S`); else ``q_command`` at rest (hold where the command is: the limiter brakes
+        to a stop)."""
         if self.goal is None or self.status(now) == BridgeStatus.NO_TARGET:
-            return q_command
-        return self.goal
+            return q_command, np.zeros(6)
+        ahead = min(max(now - self.last_target_at, 0.0), EXTRAPOLATE_MAX_S)
+        w = self.velocity if ahead < EXTRAPOLATE_MAX_S else np.zeros(6)
+        return self.goal + self.velocity * ahead, w
+
+    def goal_for(self, now: float, q_command: np.ndarray) -> np.ndarray:
+        """The goal of :meth:`reference` alone (6,) rad."""
+        return self.reference(now, q_command)[0]

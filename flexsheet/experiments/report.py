@@ -51,7 +51,15 @@ from pathlib import Path
 
 import numpy as np
 
-from flexsheet.experiments.table1 import DD_CONVENTION, PAPER_TABLE1, scene_table1_row, target
+from flexsheet.experiments.table1 import (
+    DD_CONVENTION,
+    FELT_TARGET_FACTOR,
+    PAPER_TABLE1,
+    TARGET_FACTOR,
+    scene_table1_row,
+    table1,
+    target,
+)
 from flexsheet.model.scenes import Scene, load_scene, paper_scene
 from flexsheet.runtime.bag import read_bag
 from flexsheet.runtime.codec import DecodeError, decode_any
@@ -89,12 +97,14 @@ def _interp_sheet(sheets: list, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return o, n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
-def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scene | None = None) -> dict:
+def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scene | None = None,
+            series: dict | None = None) -> dict:
     """Table I per segment and the latency per hop from a bag, or the parts of one run (a respawned recorder
     continues in ``<stem>.1.mcap``…), on ``scene`` (``None``: the paper's cylinder). Returns the summary dict
     (``bags``, ``counts`` per topic, the Table I rows of :func:`table1_rows`, ``latency_ms`` of
     :func:`latency_hops`, ``compliance`` of :func:`compliance_summary`); the recorded ``/diagnostics``
-    (arrival time, Heartbeat) pairs are appended to ``heartbeats`` if given."""
+    (arrival time, Heartbeat) pairs are appended to ``heartbeats`` if given, the per-sample Table I series to
+    ``series`` (:func:`felt_and_paper`)."""
     bags = [bags] if isinstance(bags, Path) else list(bags)
     d = _load(bags)
     for msgs in d.values():
@@ -102,7 +112,7 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scen
     if heartbeats is not None:
         heartbeats.extend(d.get("/diagnostics", []))
     summary: dict = {"bags": [str(b) for b in bags], "counts": {k: len(v) for k, v in d.items()}}
-    summary.update(table1_rows(d, scene))
+    summary.update(table1_rows(d, scene, series))
     summary["compliance"] = compliance_summary(d)
     summary["latency_ms"] = latency_hops(d)
     summary["faults"] = watchdog_faults(d)
@@ -136,11 +146,13 @@ def _is_paper(sc: Scene) -> bool:
                                                      rtol=0.0, atol=1e-9))
 
 
-def table1_rows(d: dict[str, list], scene: Scene | None = None) -> dict:
+def table1_rows(d: dict[str, list], scene: Scene | None = None, series: dict | None = None) -> dict:
     """Table I rows (:func:`flexsheet.experiments.table1.scene_table1_row` on ``scene``, default the paper's
     cylinder; with ``paper`` for the paper's rows on the paper's cylinder) per stroking segment with ≥ 10
-    fingertips inside the recorded sheet states, plus ``fingertip_invalid``; empty without ``/fingertip``,
-    ``/world/finger`` and ``/world/sheet``. ``d``: topic → time-sorted (arrival s, message) pairs."""
+    fingertips inside the recorded sheet states, plus ``fingertip_invalid``, ``table1`` (felt and paper,
+    :func:`felt_and_paper`, whose per-sample series go to ``series`` if given) and ``delay``
+    (:func:`sheet_delay`); empty without ``/fingertip``, ``/world/finger`` and ``/world/sheet``. ``d``: topic →
+    time-sorted (arrival s, message) pairs."""
     tips, truths, sheets = d.get("/fingertip", []), d.get("/world/finger", []), d.get("/world/sheet", [])
     if not (truths and sheets and tips):
         return {}
@@ -159,7 +171,8 @@ def table1_rows(d: dict[str, list], scene: Scene | None = None) -> dict:
             row["paper"] = PAPER_TABLE1[key]
         out[key] = row
     out["fingertip_invalid"] = n_invalid
-    out["table1"] = felt_and_paper(d, groups, scene, s_ts)
+    out["table1"] = felt_and_paper(d, groups, scene, s_ts, series)
+    out["delay"] = sheet_delay(d, groups, scene)
     return out
 
 
@@ -188,7 +201,8 @@ def _believed_sheet(d: dict[str, list], t: np.ndarray) -> tuple[np.ndarray, np.n
     return o, n
 
 
-def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_ts: np.ndarray) -> dict:
+def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_ts: np.ndarray,
+                   series: dict | None = None) -> dict:
     """Table I two ways per stroking segment (issue 41):
 
     * ``felt``: the true fingertip (``/world/finger``, interpolated at each exposure) against the true sheet
@@ -197,6 +211,11 @@ def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_
       sheet's normal);
     * ``paper``: the paper's own measurement: the measured fingertip against the sheet the display believes
       (its kinematics on the joint readback).
+
+    Plus ``targets`` (Δθ mean, deg: the paper's ÷ :data:`~flexsheet.experiments.table1.FELT_TARGET_FACTOR`
+    felt, ÷ :data:`~flexsheet.experiments.table1.TARGET_FACTOR` paper) and ``verdicts`` (met/MISSED) for the
+    paper's rows. ``series``, if given, receives per segment the exposure times (s from the segment's first)
+    and the per-sample Δθ (deg) of both, for the chart.
     """
     from flexsheet.planning.shape import planner_shape
 
@@ -218,7 +237,58 @@ def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_
         believed = _believed_sheet(d, t)
         if believed is not None:
             out["paper"][key] = scene_table1_row(scene, np.array([m.position for m in ms]), *believed)
+        if series is not None:
+            entry = {"t_s": (t - t[0]).tolist(),
+                     "felt_deg": np.degrees(table1(shape, true_tip, origin, normal, scene).dtheta).tolist()}
+            if believed is not None:
+                entry["paper_deg"] = np.degrees(table1(shape, np.array([m.position for m in ms]), *believed,
+                                                       scene).dtheta).tolist()
+            series[key] = entry
+    out["targets"] = {kind: {k: target(k, f)["dtheta_mean_deg"] for k in PAPER_TABLE1}
+                      for kind, f in (("felt", FELT_TARGET_FACTOR), ("paper", TARGET_FACTOR))}
+    out["verdicts"] = {f"{kind}.{k}": ("met" if out[kind][k]["dtheta_mean_deg"] <= out["targets"][kind][k]
+                                       else "MISSED")
+                       for kind in ("felt", "paper") for k in PAPER_TABLE1 if k in out[kind]}
     return out
+
+
+#: lags tried by :func:`sheet_delay`, s
+DELAY_LAGS = np.arange(-0.030, 0.150001, 0.001)
+
+
+def sheet_delay(d: dict[str, list], groups: dict[str, list], scene: Scene) -> dict:
+    """How late the true sheet is, measured: the lag L (s) that best aligns the true sheet's normal at t with
+    the object's normal at the true fingertip at t − L (least mean angle, over :data:`DELAY_LAGS`, on the
+    fastest stroke, the 10 s one, where a lag costs the most angle; else the longest segment). The prediction already leads by its horizon h (``Fingertip.prediction_horizon``),
+    so the delay from an exposure to the sheet at its pose is h + L: the value the horizon should have.
+    Returns ``{"segment", "horizon_ms", "residual_lag_ms", "exposure_to_sheet_ms", "angle_at_best_deg"}``,
+    or {} without the topics."""
+    from flexsheet.planning.shape import planner_shape
+
+    truths, sheets = d.get("/world/finger", []), d.get("/world/sheet", [])
+    if not groups or len(truths) < 10 or len(sheets) < 10:
+        return {}
+    key = "10" if len(groups.get("10", ())) >= 10 else max(groups, key=lambda k: len(groups[k]))
+    t = np.array([m.exposure_stamp for m in groups[key]])
+    s_ts = np.array([m.header.stamp for _, m in sheets])
+    t = t[(t >= s_ts[0]) & (t <= s_ts[-1])]
+    if len(t) < 10:
+        return {}
+    shape = planner_shape(scene)
+    f_ts = np.array([m.header.stamp for _, m in truths])
+    sel = (f_ts >= t[0] - DELAY_LAGS[-1] - 0.05) & (f_ts <= t[-1] - DELAY_LAGS[0] + 0.05)
+    fn = np.array([shape.project(tuple(m.position)).normal for (_, m), ok in zip(truths, sel, strict=True) if ok])
+    fts = f_ts[sel]
+    _, n_s = _interp_sheet(sheets, t)
+    best = (np.inf, 0.0)
+    for lag in DELAY_LAGS:
+        nf = np.stack([np.interp(t - lag, fts, fn[:, k]) for k in range(3)], axis=1)
+        nf /= np.linalg.norm(nf, axis=1, keepdims=True)
+        a = float(np.degrees(np.arccos(np.clip(np.abs(np.sum(nf * n_s, axis=1)), 0.0, 1.0))).mean())
+        best = min(best, (a, float(lag)))
+    h = float(groups[key][0].prediction_horizon)
+    return {"segment": key, "horizon_ms": h * 1e3, "residual_lag_ms": best[1] * 1e3,
+            "exposure_to_sheet_ms": (h + best[1]) * 1e3, "angle_at_best_deg": best[0]}
 
 
 def _pct(x: np.ndarray) -> dict:
@@ -486,6 +556,60 @@ def _charts(summary: dict, out: Path) -> None:
         plt.close(fig)
 
 
+def felt_chart(summary: dict, series: dict, path: Path) -> dict:
+    """The felt error against its target: Δθ per exposure over each stroking segment (felt: true finger vs
+    true sheet; paper: measured finger vs believed sheet) with the target lines, and the segment means side by
+    side. Writes ``path`` (PNG) and the same numbers as JSON beside it; returns that dict."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t1 = summary.get("table1", {})
+    keys = [k for k in ("10", "30", "stroke_push_10") if k in series and k in t1.get("felt", {})]
+    data = {"title": "Table I felt (true finger vs true sheet) and paper (measured finger vs believed sheet)",
+            "unit": "deg", "targets": t1.get("targets", {}), "verdicts": t1.get("verdicts", {}),
+            "delay": summary.get("delay", {}),
+            "means": {k: {"felt": t1["felt"][k]["dtheta_mean_deg"],
+                          "paper": t1.get("paper", {}).get(k, {}).get("dtheta_mean_deg")} for k in keys},
+            "series": {k: series[k] for k in keys}}
+    if not keys:
+        return data
+    fig, axes = plt.subplots(1, len(keys) + 1, figsize=(4.2 * (len(keys) + 1), 3.6))
+    tg = t1.get("targets", {})
+    for ax, k in zip(axes, keys, strict=False):
+        sr = series[k]
+        ax.plot(sr["t_s"], sr["felt_deg"], lw=0.6, label="felt")
+        if "paper_deg" in sr:
+            ax.plot(sr["t_s"], sr["paper_deg"], lw=0.5, alpha=0.6, label="paper")
+        row = k if k in PAPER_TABLE1 else k.rsplit("_", 1)[-1]
+        for kind, style in (("felt", "--"), ("paper", ":")):
+            if row in tg.get(kind, {}):
+                ax.axhline(tg[kind][row], color="k", ls=style, lw=0.8, label=f"{kind} target (mean)")
+        ax.set_title(f"{k} s: felt mean {data['means'][k]['felt']:.3f}°", fontsize=9)
+        ax.set_xlabel("time in segment (s)")
+        ax.set_ylabel("Δθ (deg)")
+        ax.legend(fontsize=7)
+    ax = axes[-1]
+    x = np.arange(len(keys))
+    ax.bar(x - 0.2, [data["means"][k]["felt"] for k in keys], 0.4, label="felt")
+    ax.bar(x + 0.2, [data["means"][k]["paper"] or 0.0 for k in keys], 0.4, label="paper")
+    for i, k in enumerate(keys):
+        for kind, dx, m in (("felt", -0.2, "v"), ("paper", 0.2, "^")):
+            if k in tg.get(kind, {}):
+                ax.scatter([i + dx], [tg[kind][k]], color="k", marker=m, zorder=3)
+    ax.set_xticks(x, [f"{k} s" for k in keys], fontsize=7)
+    ax.set_ylabel("Δθ mean (deg); markers: targets")
+    verdict = ", ".join(f"{k} {v}" for k, v in data["verdicts"].items())
+    ax.set_title("felt vs paper\n" + verdict, fontsize=7)
+    ax.legend(fontsize=7)
+    fig.suptitle(data["title"], fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    path.with_suffix(".json").write_text(json.dumps(data))
+    return data
+
+
 def graph_chart(heartbeats: list, path: Path) -> dict:
     """Draw the live node/topic graph from recorded heartbeats (each node's last one): nodes on the left and
     right, topics in the middle, an arrow per publisher and subscription. Writes ``path`` (PNG) and
@@ -559,6 +683,14 @@ def _format(summary: dict) -> str:
             pr = t1.get("paper", {}).get(key, {})
             lines.append(f"{key:<16}{r['dtheta_mean_deg']:9.3f}{r['angle3d_mean_deg']:10.3f}{r['gap_mean_mm']:10.3f}"
                          f"{pr.get('dtheta_mean_deg', float('nan')):10.3f}")
+        for k, v in t1.get("verdicts", {}).items():
+            kind, row = k.split(".")
+            lines.append(f"  {k}: Δθ mean {t1[kind][row]['dtheta_mean_deg']:.3f} deg, target "
+                         f"{t1['targets'][kind][row]:.3f}: {v}")
+    dl = summary.get("delay", {})
+    if dl:
+        lines += ["", f"Delay exposure -> sheet at its pose: {dl['exposure_to_sheet_ms']:.1f} ms (prediction horizon "
+                      f"{dl['horizon_ms']:.1f} ms + residual lag {dl['residual_lag_ms']:.1f} ms, segment {dl['segment']})"]
     comp = summary.get("compliance", {})
     if comp:
         lines += ["", "Sheet tension at the contacts (/sheet/target while touching), median [p5, p95]",
@@ -585,8 +717,9 @@ def main(out: str, lf=None) -> int:
         print(f"[report] no bag in {out_dir}", flush=True)
         return 1
     beats: list = []
+    series: dict = {}
     scene, scene_entry = scene_settings(lf, out)
-    summary = analyse(bags, beats, scene)
+    summary = analyse(bags, beats, scene, series)
     summary["scene"] = scene_entry
     summary["twin"] = twin_settings(lf)
     clock = out_dir / "sim_clock.json"
@@ -607,13 +740,15 @@ def main(out: str, lf=None) -> int:
     summary["dd_convention"] = DD_CONVENTION
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     _charts(summary, out_dir)
+    felt_chart(summary, series, out_dir / "felt.png")
     if beats:
         graph_chart(beats, out_dir / "graph.png")
     text = _format(summary)
     (out_dir / "report.md").write_text("# flexsheet simulated run\n\n```\n" + text + "\n```\n\n"
-                                       "![Table I](table1.png)\n\n![latency](latency.png)\n\n![graph](graph.png)\n")
+                                       "![Table I](table1.png)\n\n![felt](felt.png)\n\n![latency](latency.png)\n\n"
+                                       "![graph](graph.png)\n")
     print(text, flush=True)
-    print(f"[report] wrote {out_dir}/summary.json, report.md, table1.png, latency.png "
+    print(f"[report] wrote {out_dir}/summary.json, report.md, table1.png, felt.png, latency.png "
           f"(from {', '.join(b.name for b in bags)})", flush=True)
     return 0 if any(k[:1].isdigit() for k in summary) else 1
 

@@ -1,4 +1,4 @@
-"""``flexsheet experiment stroke``: the paper's Table I in-process, on the honest twin, with a latency model of
+"""``flexsheet experiment stroke_model``: the paper's Table I in-process, on the honest twin, with a latency model of
 the real loop and the arms' own chain (IK, command stream, servo, true kinematics).
 
 The scripted finger (:class:`flexsheet.twin.finger.FingerScript`) follows the target mark from 0° to 60°
@@ -23,7 +23,7 @@ Twins (:mod:`flexsheet.twin.truth`): ``realistic`` (default; truth drawn per see
 and ``ideal`` (nominal truth, ``marker_px`` = 0.025 px: the camera twin before the honest-twin issue), three
 truth seeds each; the finger and noise seeds follow the truth seed.
 
-Filter settings: the triangulator's ``q``, ``horizon_s`` and ``sigma_px`` and the planner's ``use_prediction``
+Filter settings: the triangulator's ``tracking_index``, ``horizon_s`` and ``sigma_px`` and the planner's ``use_prediction``
 are read from ``launch/sim.yaml`` (the defaults of :class:`flexsheet.vision.tracker.TrackerConfig` where
 the file sets none), so the in-process rows and the full graph use one filter.
 
@@ -200,18 +200,20 @@ class Predictor:
 
 
 def launch_kf(path: Path = SIM_LAUNCH) -> dict:
-    """The triangulator's ``q``, ``horizon_s``, ``sigma_px`` and the planner's ``use_prediction`` in launch
-    file ``path`` (the nodes' defaults for keys it does not set; all defaults when the file or node is
-    missing), plus ``file`` (the file name, or ``None``)."""
+    """The triangulator's ``tracking_index``, ``horizon_s``, ``sigma_px`` and the planner's ``use_prediction``
+    in launch file ``path`` (the nodes' defaults for keys it does not set; all defaults when the file or node
+    is missing), plus ``file`` (the file name, or ``None``)."""
     d = TrackerConfig()
-    out = {"q": d.q, "horizon_s": d.horizon_s, "sigma_px": d.sigma_px, "use_prediction": False, "file": None}
+    out = {"tracking_index": d.tracking_index, "horizon_s": d.horizon_s, "sigma_px": d.sigma_px,
+           "use_prediction": False, "file": None}
     try:
         nodes = yaml.safe_load(path.read_text())["nodes"]
     except (OSError, KeyError, TypeError, yaml.YAMLError):
         return out
     tri = ((nodes.get("triangulator") or {}).get("params") or {})
     pl = ((nodes.get("planner") or {}).get("params") or {})
-    out.update(q=float(tri.get("q", d.q)), horizon_s=float(tri.get("horizon_s", d.horizon_s)),
+    out.update(tracking_index=float(tri.get("tracking_index", d.tracking_index)),
+               horizon_s=float(tri.get("horizon_s", d.horizon_s)),
                sigma_px=float(tri.get("sigma_px", d.sigma_px)), use_prediction=bool(pl.get("use_prediction", False)),
                file=path.name)
     return out
@@ -295,8 +297,8 @@ def _drive_arms(chains: dict, ticks, eff, clamps, Ts: float) -> tuple[dict, floa
                 chains[side][0].set_target(clamps[last][k], 0.0, tj)
         for side, (tracker, lim, servo) in chains.items():
             Q[side][j] = servo.q
-            goal = tracker.goal_for(tj, lim.c) if last >= 0 else lim.c
-            servo.step(lim.step(goal), Ts)
+            ref = tracker.reference(tj, lim.c) if last >= 0 else (lim.c, None)
+            servo.step(lim.step(*ref), Ts)
             vmax = max(vmax, float(np.max(np.abs(servo.v) / QD_MAX)))
     return Q, vmax
 
@@ -352,7 +354,9 @@ def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None
     h = (bud["total"] + bud["target_hold_mean"]) if horizon is None else horizon
     sig_f = lk["sigma_px"] if sigma_px_filter is None else sigma_px_filter
     Rf = _camera_cov(twin, meas, sig_f)              # the covariance the triangulator reports for its sigma_px
-    kf = Predictor(lk["q"] if q is None else q)
+    if q is None:
+        q = q_for_tracking_index(lk["tracking_index"], _tangential_noise(twin, twin.marker_px), latency.camera_period)
+    kf = Predictor(q)
     planner = SurfacePlanner(shape, planner_config or PlannerConfig(), compliance)
     s = latency.scale
     delay_to_arm = s * (latency.exposure_to_host + latency.processing + latency.network)
@@ -524,11 +528,11 @@ def _plot(chart: dict, summary: dict, path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """CLI entry: ``flexsheet experiment stroke --out DIR [--seeds N] [--quick] [--display-calib PATH]``."""
+    """CLI entry: ``flexsheet experiment stroke_model --out DIR [--seeds N] [--quick] [--display-calib PATH]``."""
     ap = argparse.ArgumentParser(
-        prog="flexsheet experiment stroke", description=__doc__.split("\n")[0],
-        epilog="example: flexsheet experiment stroke --out docs/figures/planner\n"
-               "         flexsheet experiment stroke --out /tmp/s --display-calib 'out/cal{seed}/display.yaml'",
+        prog="flexsheet experiment stroke_model", description=__doc__.split("\n")[0],
+        epilog="example: flexsheet experiment stroke_model --out docs/figures/planner\n"
+               "         flexsheet experiment stroke_model --out /tmp/s --display-calib 'out/cal{seed}/display.yaml'",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True, type=Path, help="output folder for summary.json and the chart")
     ap.add_argument("--seeds", type=int, default=3, help="truth seeds per twin (default 3)")
@@ -547,7 +551,8 @@ def main(argv: list[str] | None = None) -> int:
                   f"(paper {p['dtheta_mean_deg']}, target {target(k)['dtheta_mean_deg']:.4f}); dd 2R "
                   f"{r['dd_2r_mean_mm']:.4f} mm (paper {p['dd_mean_mm']}), dd R {r['dd_mean_mm']:.4f} mm; "
                   f"seeds {[round(x['dtheta_mean_deg'], 4) for x in r['per_seed']]}")
-    print(f"estimator bases: {s['twin']['estimator_bases']}; filter {s['filter']['file']}: q {s['filter']['q']}, "
+    print(f"estimator bases: {s['twin']['estimator_bases']}; filter {s['filter']['file']}: tracking index "
+          f"{s['filter']['tracking_index']}, "
           f"horizon {s['filter']['horizon_s']} s; floor {s['noise_floor']['dtheta_floor_deg']:.4f} deg")
     return 0
 

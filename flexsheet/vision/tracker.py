@@ -19,10 +19,14 @@ Per stereo pair (raw mono8 images of the calibrated size):
    with the marker hidden by the finger, such pairs were accepted 100 mm off).
 4. Partial occlusion check: the marker blob's area (Σα) must agree between the views
    within ``area_ratio_max`` (a blob cut by an occluder has a centroid shifted along the epipolar line).
-5. Covariance σ²(JᵀJ)⁻¹ (pixel noise ``sigma_px``), rotated into the display frame with
-   ``T_display_camera``.
+5. Covariance σ²(JᵀJ)⁻¹, rotated into the display frame with ``T_display_camera``. The pixel noise σ is
+   measured from the data (:class:`PixelNoise`: the RMS epipolar residual of the accepted matches; ``sigma_px``
+   is only its prior until enough frames have been seen).
 6. Outlier gate: squared Mahalanobis distance from the constant-velocity Kalman prediction
-   (:class:`~flexsheet.vision.predict.ConstantVelocityKF`) ≤ ``gate_chi2`` (χ²₃; 16.27 = 99.9 %).
+   (:class:`~flexsheet.vision.predict.ConstantVelocityKF`) ≤ ``gate_chi2`` (χ²₃; 16.27 = 99.9 %). The
+   filter's process noise is set by its tracking index λ = σ_w·T²/σ_v (Kalata 1984; Bar-Shalom et al. §6.5):
+   q = λ²·σ_v²/T³ with σ_v² the mean variance of the measured position (from step 5) and T the measured
+   frame interval, so the filter smooths the same whatever the camera's noise or rate.
    After ``max_gate_misses`` consecutive rejections the track is reset (the next fix is accepted), so a
    wrong track cannot lock out the true marker. A track not updated for ``lost_reset_s`` is reset.
 7. Output: valid fix with position (display frame, m), covariance (m²) and the position predicted
@@ -40,7 +44,38 @@ from flexsheet.vision.detect import MarkerDetector, check_image
 from flexsheet.vision.predict import ConstantVelocityKF
 from flexsheet.vision.stereo import METHODS, StereoModel
 
-__all__ = ["TrackerConfig", "TrackResult", "FingertipTracker"]
+__all__ = ["TrackerConfig", "TrackResult", "FingertipTracker", "PixelNoise"]
+
+
+class PixelNoise:
+    """Running estimate of the image pipeline's pixel noise σ (px) from the epipolar (Sampson) residuals r of
+    accepted matches. For i.i.d. N(0, σ²) noise on the four image coordinates r = σ·|N(0, 1)| to first order
+    (the residual is the noise's component along the constraint's unit gradient; Hartley & Zisserman §11.4.3),
+    so E[r²] = σ². The prior ``prior_px`` counts as ``PRIOR_WEIGHT`` residuals; after ``window`` residuals the
+    estimate is an exponential average over about that many. Raises ``ValueError`` for a non-positive prior."""
+
+    PRIOR_WEIGHT = 10
+
+    def __init__(self, prior_px: float, window: int = 500) -> None:
+        if not (prior_px > 0 and np.isfinite(prior_px)):
+            raise ValueError(f"prior_px must be positive and finite, got {prior_px!r}")
+        self.var = float(prior_px) ** 2
+        self.n = 0
+        self.window = int(window)
+
+    def add(self, residual_px: float) -> None:
+        """Fuse one residual (px; a non-finite one is ignored)."""
+        r2 = float(residual_px) ** 2
+        if not np.isfinite(r2):
+            return
+        self.n += 1
+        w = 1.0 / min(self.n + self.PRIOR_WEIGHT, self.window)
+        self.var += w * (r2 - self.var)
+
+    @property
+    def sigma(self) -> float:
+        """The current estimate, px (> 0)."""
+        return max(float(np.sqrt(self.var)), 1e-4)
 
 
 @dataclass(frozen=True)
@@ -57,7 +92,7 @@ class TrackerConfig:
     max_gate_misses: int = 3
     lost_reset_s: float = 0.25
     horizon_s: float = 0.0
-    q: float = 2.0
+    tracking_index: float = 0.1
     v0_std: float = 1.0
     ambiguity_m: float = 0.01
     ambiguity_ratio: float = 0.8
@@ -78,7 +113,8 @@ class TrackerConfig:
         :class:`~flexsheet.vision.detect.MarkerDetector`)."""
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
-        for name in ("sigma_px", "epipolar_tol_px", "z_min", "gate_chi2", "lost_reset_s", "q", "v0_std", "ambiguity_m"):
+        for name in ("sigma_px", "epipolar_tol_px", "z_min", "gate_chi2", "lost_reset_s", "tracking_index", "v0_std",
+                     "ambiguity_m"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be positive and finite, got {v!r}")
@@ -146,7 +182,9 @@ class FingertipTracker:
         self.shape = (h, w)
         c = self.cfg
         self.detector = c.detector()
-        self.kf = ConstantVelocityKF(q=c.q, v0_std=c.v0_std)
+        self.kf = ConstantVelocityKF(q=1.0, v0_std=c.v0_std)   # q: set per update from the tracking index
+        self.noise = PixelNoise(c.sigma_px)
+        self.frame_dt: float | None = None      # measured frame interval, s (exponential average)
         self._last_uv: tuple[np.ndarray, np.ndarray] | None = None
         self._misses = 0
 
@@ -243,7 +281,7 @@ class FingertipTracker:
         """The chosen candidate ``k``: refused as occluded (blob areas ``al``/``ar`` px² too unequal) or gated
         (Mahalanobis), else fused into the track; the ROI follows it either way."""
         c = self.cfg
-        cov_c = self.model.covariance(X[k:k + 1], c.sigma_px)[0]
+        cov_c = self.model.covariance(X[k:k + 1], self.noise.sigma)[0]
         cov_d = self.R_dc @ cov_c @ self.R_dc.T
         pos = Xd[k]
         if max(al, ar) > c.area_ratio_max * min(al, ar):
@@ -262,6 +300,12 @@ class FingertipTracker:
                     self._misses = 0
                 return self._invalid("gated", roi)
         self._misses = 0
+        self.noise.add(residual)
+        if self.kf.initialised and 1e-3 < stamp - self.kf.t < 0.2:
+            dt = stamp - self.kf.t
+            self.frame_dt = dt if self.frame_dt is None else self.frame_dt + 0.05 * (dt - self.frame_dt)
+        if self.frame_dt is not None:   # q from the tracking index (module doc, step 6)
+            self.kf.q = c.tracking_index ** 2 * float(np.trace(cov_d)) / 3.0 / self.frame_dt ** 3
         self.kf.update(pos, cov_d, stamp)
         pred = self.kf.position_at(stamp + c.horizon_s) if c.horizon_s > 0 else pos.copy()
         return TrackResult(True, "ok", pos.copy(), cov_d, pred, residual, uvl.copy(), uvr.copy(), roi, X[k].copy())

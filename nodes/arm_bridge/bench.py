@@ -133,7 +133,7 @@ def track_stroke(duration: float, side: str = "left") -> dict:
             r = tr.set_target(_clamp(side, theta_of(t)), t, t)
             refused += not r.ok
             next_cam += t_cam
-        cmd = lim.step(tr.goal_for(t, lim.c))
+        cmd = lim.step(*tr.reference(t, lim.c))
         core.write_holding(1, [(k + 1) & 0xFFFF, *encode_joints(cmd)], t)
         core.advance(t + PERIOD)
         ts.append(t + PERIOD)

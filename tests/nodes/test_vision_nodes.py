@@ -84,7 +84,7 @@ def test_triangulator_valid_invalid_and_bad_frames():
 
 def test_triangulator_prediction_horizon():
     async def scenario():
-        async with NodeHarness(TriangulatorNode, params={"horizon_s": 0.05, "q": 0.5}) as h:
+        async with NodeHarness(TriangulatorNode, params={"horizon_s": 0.05}) as h:
             h.inject(topics.CALIBRATION, _calib_msg())
             await h.settle(0.1)
             v = np.array([0.0, 0.2, 0.0])

@@ -10,16 +10,18 @@ from flexsheet.twin.servo import JointServo, ServoParams
 T = 0.0071
 
 
-def test_limiter_never_commands_beyond_position_speed_accel():
+@pytest.mark.parametrize("feed_forward", [False, True])
+def test_limiter_never_commands_beyond_position_speed_accel(feed_forward):
     qd, qdd, margin = 0.5 * QD_MAX, 1.0 * QD_MAX, 0.02
     lim = StreamLimiter(Q_HOME, T, qd, qdd, Q_LOWER, Q_UPPER, margin)
     rng = np.random.default_rng(11)
     c_prev, v_prev = lim.c.copy(), np.zeros(6)
-    goal = Q_HOME.copy()
+    goal, w = Q_HOME.copy(), None
     for k in range(6000):
-        if k % 40 == 0:   # jumpy goals, including far outside the joint range
+        if k % 40 == 0:   # jumpy goals, including far outside the joint range, and wild goal velocities
             goal = rng.uniform(Q_LOWER - 1.0, Q_UPPER + 1.0)
-        c = lim.step(goal)
+            w = rng.uniform(-3.0, 3.0, 6) * QD_MAX if feed_forward else None
+        c = lim.step(goal, w)
         v = (c - c_prev) / T
         assert np.all(np.abs(v) <= qd * (1 + 1e-9))
         assert np.all(np.abs(v - v_prev) <= qdd * T + 1e-9)
@@ -33,6 +35,25 @@ def test_limiter_reaches_a_held_goal_exactly_and_stops():
     for _ in range(400):
         c = lim.step(goal)
     assert np.allclose(c, goal, atol=1e-12) and np.allclose(lim.v, 0.0)
+
+
+def test_feed_forward_streams_through_48_hz_goals_where_the_rate_limiter_brakes_at_each():
+    """A finger-like ramp of 0.1 rad/s sampled as goals at 48 Hz (every 3 periods): fed the goal moved on at its
+    velocity (what TargetTracker.reference gives) the command runs one period ahead of the ramp; fed the
+    held goal, the limiter brakes toward each and trails it by more than a target period."""
+    w = np.full(6, 0.1)
+    err = {}
+    for ff in (False, True):
+        lim = StreamLimiter(Q_HOME, T, QD_MAX, 4 * QD_MAX, Q_LOWER, Q_UPPER)
+        e = []
+        for k in range(600):
+            k0 = k - k % 3                                  # the newest goal's period
+            held = Q_HOME + w * k0 * T
+            c = lim.step(held + w * (k - k0) * T, w) if ff else lim.step(held)
+            e.append(Q_HOME + w * k * T - c)                # the ramp now minus the command
+        err[ff] = np.abs(np.array(e[300:])).mean(axis=0)
+    assert np.allclose(err[True], w * T, rtol=1e-6), err[True]
+    assert np.all(err[False] > 1.5 * w * T), err[False]
 
 
 def test_servo_respects_rate_accel_and_converges():

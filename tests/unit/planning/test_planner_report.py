@@ -83,6 +83,30 @@ def test_report_table1_from_bag_uses_typed_truth_and_the_one_metric(tmp_path):
     assert felt["dtheta_mean_deg"] == pytest.approx(math.degrees(LAG), abs=1e-3) and felt["n"] == n_stroke
     assert felt["angle3d_mean_deg"] == pytest.approx(math.degrees(LAG), abs=1e-3)
     assert s["table1"]["paper"] == {}
+    assert s["table1"]["verdicts"] == {"felt.10": "MISSED"}                 # 0.5° against 0.359 / 2
+    assert s["table1"]["targets"]["felt"]["10"] == pytest.approx(PAPER_TABLE1["10"]["dtheta_mean_deg"] / 2)
+    # the sheet trails the finger by LAG at OMEGA: LAG / OMEGA = 83.3 ms, found by the lag fit (1 ms grid)
+    assert s["delay"]["segment"] == "10" and s["delay"]["horizon_ms"] == 0.0
+    assert s["delay"]["exposure_to_sheet_ms"] == pytest.approx(1e3 * LAG / OMEGA, abs=1.0)
+    assert s["delay"]["angle_at_best_deg"] < 0.03                         # against 0.5 deg unaligned
+
+
+def test_graph_stroke_judges_every_row_by_its_worst_seed():
+    """flexsheet experiment stroke's aggregate: a row is met only when every seed meets it; a seed missing a row
+    leaves that row unmeasured (MISSED)."""
+    from flexsheet.experiments.graph_stroke import aggregate
+
+    def run(felt10, felt30, paper10):
+        return {"table1": {"felt": {"10": {"dtheta_mean_deg": felt10, "n": 400}, "30": {"dtheta_mean_deg": felt30}},
+                           "paper": {"10": {"dtheta_mean_deg": paper10}}},
+                "delay": {"exposure_to_sheet_ms": 24.0}}
+
+    a = aggregate({0: run(0.10, 0.10, 0.05), 1: run(0.17, 0.12, 0.08), 2: run(0.15, 0.05, 0.02)})
+    assert a["table1"]["felt"]["10"]["dtheta_mean_deg"] == 0.17 and a["table1"]["felt"]["30"]["dtheta_mean_deg"] == 0.12
+    assert a["verdicts"]["felt.10"] == "met"                       # 0.17 <= 0.1795
+    assert a["verdicts"]["felt.30"] == "MISSED"                    # seed 1: 0.12 > 0.1125
+    assert a["verdicts"]["paper.10"] == "met" and a["verdicts"]["paper.30"].startswith("MISSED (not measured")
+    assert a["table1"]["felt"]["10"]["per_seed"][1]["n"] == 400 and set(a["delay"]) == {0, 1, 2}
 
 
 def test_latency_chain_comes_from_the_nodes_stamps_and_adds_up():

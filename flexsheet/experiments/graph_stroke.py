@@ -1,0 +1,156 @@
+"""``flexsheet experiment stroke --out DIR [--seeds 0 1 2]``: Table I felt and paper, from the display's own graph.
+
+For each truth seed the whole graph of ``launch/sim.yaml`` runs on the simulated clock in one process
+(``flexsheet launch launch/sim.yaml --duration D --set twin.truth_seed=N``: the same node classes, params and
+messages as the lab; the twin's cameras, finger, arms and sheet; the geometry from the twin's registration,
+not the truth), and its run report (:mod:`flexsheet.experiments.report`) measures from the bag:
+
+* ``felt``: the true fingertip against the true sheet (what the user feels; the headline);
+* ``paper``: the measured fingertip against the sheet the display believes (the paper's Table I);
+* ``delay``: exposure → sheet at its pose, the value the prediction horizon should have.
+
+On the simulated clock one run per seed is exact (two runs write the same bytes: ``flexsheet experiment
+determinism``). Writes ``DIR/seed<N>/`` (each run's bag, summary and charts), ``DIR/summary.json`` (per seed
+and the worst seed per row, the targets and the verdicts: a target is met only when every seed meets it) and
+``DIR/stroke.png`` with the same numbers in ``DIR/stroke.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from flexsheet.experiments.table1 import FELT_TARGET_FACTOR, PAPER_TABLE1, TARGET_FACTOR, target
+
+__all__ = ["run_seed", "aggregate", "chart", "main", "ROWS"]
+
+ROOT = Path(__file__).resolve().parents[2]
+#: the rows judged: the paper's two moving times
+ROWS = tuple(PAPER_TABLE1)
+
+
+def run_seed(seed: int, out: Path, duration: float, launch: Path, extra: list[str] | None = None,
+             log=print) -> dict:
+    """Run the graph of ``launch`` for ``duration`` simulated s on truth seed ``seed`` into ``out``; returns
+    its ``summary.json``. Raises ``RuntimeError`` naming the seed and the log when the run writes none."""
+    out.mkdir(parents=True, exist_ok=True)
+    cmd = [sys.executable, "-m", "flexsheet", "launch", str(launch), "--duration", f"{duration:g}", "--out",
+           str(out), "--set", f"twin.truth_seed={seed}", *(extra or [])]
+    t0 = time.monotonic()
+    with open(out / "launch.log", "w") as fh:
+        subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=ROOT, check=False)
+    path = out / "summary.json"
+    if not path.exists():
+        raise RuntimeError(f"seed {seed}: the run wrote no summary.json (see {out / 'launch.log'})")
+    log(f"[stroke] seed {seed}: {duration:g} simulated s in {time.monotonic() - t0:.0f} s")
+    return json.loads(path.read_text())
+
+
+def aggregate(summaries: dict[int, dict]) -> dict:
+    """Per seed and worst seed of each Table I row (felt: Δθ mean, 3-D angle, gap, Δd; paper: Δθ mean, Δd), the
+    delays, the targets and the verdicts (met only when the worst seed meets). ``summaries``: seed → a run
+    report's summary."""
+    out: dict = {"seeds": sorted(summaries), "table1": {"felt": {}, "paper": {}}, "delay": {},
+                 "targets": {"felt": {k: target(k, FELT_TARGET_FACTOR)["dtheta_mean_deg"] for k in ROWS},
+                             "paper": {k: target(k, TARGET_FACTOR)["dtheta_mean_deg"] for k in ROWS}},
+                 "paper_table1": PAPER_TABLE1}
+    fields = {"felt": ("dtheta_mean_deg", "angle3d_mean_deg", "gap_mean_mm", "dd_mean_mm", "dd_2r_mean_mm", "n"),
+              "paper": ("dtheta_mean_deg", "dd_mean_mm", "dd_2r_mean_mm", "n")}
+    for kind, keys in fields.items():
+        for row in sorted({r for s in summaries.values() for r in s.get("table1", {}).get(kind, {})}):
+            per = {seed: {k: s["table1"][kind][row].get(k) for k in keys}
+                   for seed, s in summaries.items() if row in s.get("table1", {}).get(kind, {})}
+            worst = max(v["dtheta_mean_deg"] for v in per.values())
+            out["table1"][kind][row] = {"per_seed": per, "dtheta_mean_deg": worst,
+                                        "dtheta_mean_deg_all": [per[s]["dtheta_mean_deg"] for s in sorted(per)]}
+    for seed, s in summaries.items():
+        if s.get("delay"):
+            out["delay"][seed] = s["delay"]
+    out["verdicts"] = {}
+    for kind in ("felt", "paper"):
+        for row in ROWS:
+            r = out["table1"][kind].get(row)
+            if r is not None and len(r["per_seed"]) == len(summaries):
+                ok = r["dtheta_mean_deg"] <= out["targets"][kind][row]
+                out["verdicts"][f"{kind}.{row}"] = "met" if ok else "MISSED"
+            else:
+                out["verdicts"][f"{kind}.{row}"] = "MISSED (not measured on every seed)"
+    return out
+
+
+def chart(summary: dict, path: Path) -> None:
+    """Felt and paper Δθ mean per row and seed against the targets (``path``, PNG; the numbers are
+    ``summary``, written beside it as JSON by :func:`main`)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    seeds = summary["seeds"]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    for ax, kind in zip(axes, ("felt", "paper"), strict=True):
+        rows = [r for r in ROWS if r in summary["table1"][kind]]
+        x = np.arange(len(rows))
+        w = 0.8 / max(1, len(seeds))
+        for i, seed in enumerate(seeds):
+            vals = [summary["table1"][kind][r]["per_seed"].get(seed, {}).get("dtheta_mean_deg", np.nan)
+                    for r in rows]
+            ax.bar(x - 0.4 + w * (i + 0.5), vals, w, label=f"truth seed {seed}")
+        for i, r in enumerate(rows):
+            ax.hlines(summary["targets"][kind][r], i - 0.45, i + 0.45, color="k", ls="--", lw=1.0)
+            ax.hlines(PAPER_TABLE1[r]["dtheta_mean_deg"], i - 0.45, i + 0.45, color="tab:red", ls=":", lw=1.0)
+        ax.set_xticks(x, [f"{r} s stroke" for r in rows])
+        ax.set_ylabel("Δθ mean (deg)")
+        verdict = ", ".join(f"{r} s {summary['verdicts'][f'{kind}.{r}']}" for r in rows)
+        ax.set_title(f"{kind}: dashed target, dotted the paper\n{verdict}", fontsize=8)
+        ax.legend(fontsize=7)
+    fig.suptitle("Table I from the full graph on the simulated clock: felt (true finger vs true sheet) and paper "
+                 "(measured finger vs believed sheet)", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="flexsheet experiment stroke", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter,
+                                 epilog="example: flexsheet experiment stroke --out docs/figures/stroke\n"
+                                        "         flexsheet experiment stroke --out /tmp/s --seeds 0 --set "
+                                        "triangulator.tracking_index=0.3")
+    ap.add_argument("--out", required=True, help="output folder (seed<N>/, summary.json, stroke.png, stroke.json)")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="truth seeds (default 0 1 2)")
+    ap.add_argument("--duration", type=float, default=60.0,
+                    help="simulated s per run (default 60: the world's 10 s stroke, 30 s stroke and 10 s push)")
+    ap.add_argument("--launch", default=str(ROOT / "launch" / "sim.yaml"), help="launch file (clock: sim)")
+    ap.add_argument("--set", action="append", default=[], metavar="NODE.KEY=VALUE",
+                    help="a param override passed to each run (flexsheet launch --set)")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    extra = [a for kv in args.set for a in ("--set", kv)]
+    summaries = {}
+    for seed in args.seeds:
+        print(f"[stroke] seed {seed}: running the graph ({args.duration:g} simulated s) ...", flush=True)
+        summaries[seed] = run_seed(seed, out / f"seed{seed}", args.duration, Path(args.launch), extra,
+                                   log=lambda line: print(line, flush=True))
+    summary = aggregate(summaries)
+    summary["overrides"] = args.set
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    (out / "stroke.json").write_text(json.dumps(summary, indent=1))
+    chart(summary, out / "stroke.png")
+    for kind in ("felt", "paper"):
+        for row in ROWS:
+            r = summary["table1"][kind].get(row)
+            if r:
+                print(f"[stroke] {kind} {row} s: Δθ mean per seed {[round(v, 3) for v in r['dtheta_mean_deg_all']]} "
+                      f"deg, worst {r['dtheta_mean_deg']:.3f}, target {summary['targets'][kind][row]:.3f}: "
+                      f"{summary['verdicts'][f'{kind}.{row}']}", flush=True)
+    print(f"[stroke] wrote {out}/summary.json, stroke.png, stroke.json", flush=True)
+    return 0 if all(v == "met" for v in summary["verdicts"].values()) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
