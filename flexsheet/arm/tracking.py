@@ -19,8 +19,8 @@ from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, IKResult
 
 __all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S"]
 
-#: goals the velocity is fitted over (8 at the camera's 48 Hz: the last 146 ms)
-VELOCITY_GOALS = 8
+#: goals the velocity is fitted over (16 at the camera's 48 Hz: the last 313 ms)
+VELOCITY_GOALS = 16
 #: the goal moves on at its velocity for at most this long after the newest target (then it waits there)
 EXTRAPOLATE_MAX_S = 0.05
 

@@ -212,7 +212,8 @@ def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_
     * ``paper``: the paper's own measurement: the measured fingertip against the sheet the display believes
       (its kinematics on the joint readback).
 
-    Plus ``targets`` (Δθ mean, deg: the paper's ÷ :data:`~flexsheet.experiments.table1.FELT_TARGET_FACTOR`
+    Plus ``decomposition`` per segment (:func:`_decomposition`: tremor, camera, prediction, kinematics),
+    ``targets`` (Δθ mean, deg: the paper's ÷ :data:`~flexsheet.experiments.table1.FELT_TARGET_FACTOR`
     felt, ÷ :data:`~flexsheet.experiments.table1.TARGET_FACTOR` paper) and ``verdicts`` (met/MISSED) for the
     paper's rows. ``series``, if given, receives per segment the exposure times (s from the segment's first)
     and the per-sample Δθ (deg) of both, for the chart.
@@ -244,11 +245,49 @@ def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_
                 entry["paper_deg"] = np.degrees(table1(shape, np.array([m.position for m in ms]), *believed,
                                                        scene).dtheta).tolist()
             series[key] = entry
+        out.setdefault("decomposition", {})[key] = _decomposition(d, ms, shape, true_tip, normal, believed)
     out["targets"] = {kind: {k: target(k, f)["dtheta_mean_deg"] for k in PAPER_TABLE1}
                       for kind, f in (("felt", FELT_TARGET_FACTOR), ("paper", TARGET_FACTOR))}
     out["verdicts"] = {f"{kind}.{k}": ("met" if out[kind][k]["dtheta_mean_deg"] <= out["targets"][kind][k]
                                        else "MISSED")
                        for kind in ("felt", "paper") for k in PAPER_TABLE1 if k in out[kind]}
+    return out
+
+
+#: the finger's slow motion is its 0.21 s moving average (21 samples at the world's 100 Hz): the rest is tremor
+TREMOR_WINDOW = 21
+
+
+def _decomposition(d: dict[str, list], ms: list, shape, true_tip: np.ndarray, sheet_normal: np.ndarray,
+                   believed) -> dict:
+    """What the felt error is made of, each as a mean angle (deg) between object normals or sheet normals:
+    ``tremor`` (the true finger against its own slow motion, :data:`TREMOR_WINDOW`), ``camera`` (the measured
+    fingertip against the true one), ``prediction`` (the predicted fingertip against the true one at the
+    horizon), ``kinematics`` (the sheet the display believes against the true sheet) and ``slow_finger``
+    (the felt error against the finger's slow motion: what is left without the tremor)."""
+    truths = d["/world/finger"]
+    ts = np.array([m.header.stamp for _, m in truths])
+    pos = np.array([m.position for _, m in truths], float)
+    ker = np.ones(TREMOR_WINDOW) / TREMOR_WINDOW
+    slow = np.stack([np.convolve(pos[:, k], ker, mode="same") for k in range(3)], axis=1)
+    t = np.array([m.exposure_stamp for m in ms])
+    slow_t = np.stack([np.interp(t, ts, slow[:, k]) for k in range(3)], axis=1)
+    h = float(ms[0].prediction_horizon)
+
+    def normals(points: np.ndarray) -> np.ndarray:
+        return np.array([shape.project(tuple(p)).normal for p in points])
+
+    def angle(a: np.ndarray, b: np.ndarray) -> float:
+        return float(np.degrees(np.arccos(np.clip(np.abs(np.sum(a * b, axis=1)), 0.0, 1.0))).mean())
+
+    n_true = normals(true_tip)
+    out = {"tremor": angle(n_true, normals(slow_t)),
+           "camera": angle(n_true, normals(np.array([m.position for m in ms]))),
+           "prediction": angle(normals(_interp_points(truths, t + h)),
+                               normals(np.array([m.predicted_position for m in ms]))),
+           "slow_finger": angle(normals(slow_t), sheet_normal)}
+    if believed is not None:
+        out["kinematics"] = angle(believed[1], sheet_normal)
     return out
 
 
@@ -683,6 +722,8 @@ def _format(summary: dict) -> str:
             pr = t1.get("paper", {}).get(key, {})
             lines.append(f"{key:<16}{r['dtheta_mean_deg']:9.3f}{r['angle3d_mean_deg']:10.3f}{r['gap_mean_mm']:10.3f}"
                          f"{pr.get('dtheta_mean_deg', float('nan')):10.3f}")
+        for key, dc in t1.get("decomposition", {}).items():
+            lines.append(f"  {key}: made of (mean angle, deg) " + ", ".join(f"{k} {v:.3f}" for k, v in dc.items()))
         for k, v in t1.get("verdicts", {}).items():
             kind, row = k.split(".")
             lines.append(f"  {k}: Δθ mean {t1[kind][row]['dtheta_mean_deg']:.3f} deg, target "

@@ -91,8 +91,8 @@ class TrackerConfig:
     gate_chi2: float = 16.27
     max_gate_misses: int = 3
     lost_reset_s: float = 0.25
-    horizon_s: float = 0.0
-    tracking_index: float = 0.1
+    horizon_s: float = 0.027          # the display's measured exposure -> sheet delay (docs/planner.md)
+    tracking_index: float = 0.05
     v0_std: float = 1.0
     ambiguity_m: float = 0.01
     ambiguity_ratio: float = 0.8

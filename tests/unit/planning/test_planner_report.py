@@ -84,6 +84,8 @@ def test_report_table1_from_bag_uses_typed_truth_and_the_one_metric(tmp_path):
     assert felt["angle3d_mean_deg"] == pytest.approx(math.degrees(LAG), abs=1e-3)
     assert s["table1"]["paper"] == {}
     assert s["table1"]["verdicts"] == {"felt.10": "MISSED"}                 # 0.5° against 0.359 / 2
+    dc = s["table1"]["decomposition"]["10"]          # no tremor, camera error only along the normal: the lag is all
+    assert dc["tremor"] < 0.01 and dc["camera"] < 0.01 and dc["slow_finger"] == pytest.approx(math.degrees(LAG), abs=0.01)
     assert s["table1"]["targets"]["felt"]["10"] == pytest.approx(PAPER_TABLE1["10"]["dtheta_mean_deg"] / 2)
     # the sheet trails the finger by LAG at OMEGA: LAG / OMEGA = 83.3 ms, found by the lag fit (1 ms grid)
     assert s["delay"]["segment"] == "10" and s["delay"]["horizon_ms"] == 0.0
