@@ -6,8 +6,9 @@ The recorder's gap records are copied. With ``foxglove`` the scene channels of :
 are added (through the ``flexsheet.bag_channels`` entry point), built lazily as while recording (only when an
 output is due). The source is read with every chunk's CRC checked (:mod:`flexsheet.runtime.bag_read`).
 
-Decoding and JSON encoding (most of the time) run in ``workers`` forked processes, batch by batch, in order;
-this process reads, writes and builds the scene. ``progress`` is called about every 2 s with the share read.
+Decoding and JSON encoding run in ``workers`` forked processes, batch by batch, in order, and the scene
+channels in one more (its writer calls are recorded there and replayed here, :class:`_Recorder`); this
+process reads and writes. ``progress`` is called about every 2 s with the share read.
 Source: Foxglove schemas (foxglove.CompressedImage).
 """
 
@@ -65,6 +66,66 @@ def _transcode(batch: list[tuple[str, int, bytes]]) -> list[tuple]:
         if not images:
             out.append((topic, msg.SCHEMA, t, msg.model_dump_json().encode()))
     return out
+
+
+class _Recorder:
+    """The calls a bag-channels object makes on its MCAP writer, recorded in the scene worker and replayed on the
+    real writer by :func:`_replay` (ids are the worker's own, mapped there)."""
+
+    def __init__(self) -> None:
+        self.ops: list[tuple] = []
+        self._n = 0
+
+    def register_schema(self, name: str, encoding: str, data: bytes) -> int:
+        self._n += 1
+        self.ops.append(("s", self._n, name, encoding, data))
+        return self._n
+
+    def register_channel(self, topic: str, message_encoding: str, schema_id: int, metadata=None) -> int:
+        self._n += 1
+        self.ops.append(("c", self._n, topic, message_encoding, schema_id))
+        return self._n
+
+    def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int = 0) -> None:
+        self.ops.append(("m", channel_id, log_time, data, publish_time, sequence))
+
+    def take(self) -> list[tuple]:
+        ops, self.ops = self.ops, []
+        return ops
+
+
+_SCENE: tuple | None = None   # the scene worker's (bag-channels object, recorder)
+
+
+def _scene_start() -> None:
+    global _SCENE
+    rec = _Recorder()
+    _SCENE = (bag_channels("foxglove")(rec), rec)
+
+
+def _scene_batch(batch: list[tuple[str, int, bytes]]) -> list[tuple]:
+    fox, rec = _SCENE
+    for topic, t, data in batch:
+        fox.add_frames([topic.encode(), *msgpack.unpackb(data)], t)
+    return rec.take()
+
+
+def _scene_close() -> tuple[list[tuple], dict]:
+    fox, rec = _SCENE
+    fox.close()
+    return rec.take(), dict(fox.counts)
+
+
+def _replay(w: Writer, ops: list[tuple], ids: dict) -> None:
+    """Apply recorded writer calls ``ops`` to ``w``; ``ids`` maps the worker's schema/channel ids to ``w``'s."""
+    for op in ops:
+        if op[0] == "m":
+            _, ch, log_time, data, publish_time, seq = op
+            w.add_message(ids[ch], log_time=log_time, data=data, publish_time=publish_time, sequence=seq)
+        elif op[0] == "c":
+            ids[op[1]] = w.register_channel(op[2], op[3], ids[op[4]])
+        else:
+            ids[op[1]] = w.register_schema(op[2], op[3], op[4])
 
 
 def _schema(name: str) -> dict:
@@ -131,29 +192,39 @@ def export_bag(src: str | Path, dst: str | Path, foxglove: bool = True, summary:
             counts[topic] += 1
 
         pool = _pool(workers)  # forked before the scene builder loads anything
-        fox = bag_channels("foxglove")(w) if foxglove else None
+        scene = _pool(1, _scene_start) if (foxglove and pool is not None) else None
+        fox = bag_channels("foxglove")(w) if (foxglove and scene is None) else None
+        ids: dict = {}
         try:
             pending: deque = deque()
 
             def drain(limit: int) -> None:
                 while len(pending) > limit:
-                    batch, result = pending.popleft()
+                    batch, result, scene_ops = pending.popleft()
                     for topic, schema_name, t, data in (result.result() if pool else result):
                         if topic == "<rejected>":
                             counts[topic] += 1
                         else:
                             write(topic, schema_name, t, data)
-                    if fox is not None:
+                    if scene_ops is not None:
+                        _replay(w, scene_ops.result(), ids)
+                    elif fox is not None:
                         for topic, t, data in batch:
                             fox.add_frames([topic.encode(), *msgpack.unpackb(data)], t)
 
             for batch in batches():
-                pending.append((batch, pool.submit(_transcode, batch) if pool else _transcode(batch)))
+                pending.append((batch, pool.submit(_transcode, batch) if pool else _transcode(batch),
+                                scene.submit(_scene_batch, batch) if scene else None))
                 drain(2 * max(workers, 1))
             drain(0)
+            if scene is not None:
+                ops, scene_counts = scene.submit(_scene_close).result()
+                _replay(w, ops, ids)
+                counts.update(scene_counts)
         finally:
-            if pool is not None:
-                pool.shutdown(cancel_futures=True)
+            for p in (pool, scene):
+                if p is not None:
+                    p.shutdown(cancel_futures=True)
         for t, data in gap_records:
             write(GAP_TOPIC, "flexsheet.RecorderGap", t, data)
         if fox is not None:
@@ -165,7 +236,7 @@ def export_bag(src: str | Path, dst: str | Path, foxglove: bool = True, summary:
     return counts
 
 
-def _pool(workers: int):
+def _pool(workers: int, initializer=None):
     if workers < 1:
         return None
     import multiprocessing
@@ -175,7 +246,7 @@ def _pool(workers: int):
         ctx = multiprocessing.get_context("fork")
     except ValueError:  # no fork on this platform: transcode here
         return None
-    pool = ProcessPoolExecutor(workers, mp_context=ctx)
+    pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=initializer)
     for f in [pool.submit(os.getpid) for _ in range(workers)]:
         f.result()
     return pool

@@ -23,8 +23,10 @@ Per stereo pair (raw mono8 images of the calibrated size):
    measured from the data (:class:`PixelNoise`: the RMS epipolar residual of the accepted matches; ``sigma_px``
    is only its prior until enough frames have been seen).
 6. Outlier gate: squared Mahalanobis distance from the constant-velocity Kalman prediction
-   (:class:`~flexsheet.vision.predict.ConstantVelocityKF`) ≤ ``gate_chi2`` (χ²₃; 16.27 = 99.9 %). The
-   filter's process noise is set by its tracking index λ = σ_w·T²/σ_v (Kalata 1984; Bar-Shalom et al. §6.5):
+   (:class:`~flexsheet.vision.predict.ConstantVelocityKF`) ≤ ``gate_chi2`` (χ²₃; 16.27 = 99.9 %), scaled
+   by the measured mean normalised innovation² of the accepted fixes over 3 when it exceeds 3 (covariance
+   matching, Mehra 1972: a smooth filter does not model the finger's tremor and turns, and its raw gate
+   rejected 16 % of the true marker's fixes). The filter's process noise is set by its tracking index λ = σ_w·T²/σ_v (Kalata 1984; Bar-Shalom et al. §6.5):
    q = λ²·σ_v²/T³ with σ_v² the mean variance of the measured position (from step 5) and T the measured
    frame interval, so the filter smooths the same whatever the camera's noise or rate.
    After ``max_gate_misses`` consecutive rejections the track is reset (the next fix is accepted), so a
@@ -91,7 +93,7 @@ class TrackerConfig:
     gate_chi2: float = 16.27
     max_gate_misses: int = 3
     lost_reset_s: float = 0.25
-    horizon_s: float = 0.027          # the display's measured exposure -> sheet delay (docs/planner.md)
+    horizon_s: float = 0.025          # the display's measured exposure -> sheet delay (docs/planner.md)
     tracking_index: float = 0.05
     v0_std: float = 1.0
     ambiguity_m: float = 0.01
@@ -185,6 +187,7 @@ class FingertipTracker:
         self.kf = ConstantVelocityKF(q=1.0, v0_std=c.v0_std)   # q: set per update from the tracking index
         self.noise = PixelNoise(c.sigma_px)
         self.frame_dt: float | None = None      # measured frame interval, s (exponential average)
+        self.nis = 3.0                          # mean normalised innovation² of accepted fixes (3 if consistent)
         self._last_uv: tuple[np.ndarray, np.ndarray] | None = None
         self._misses = 0
 
@@ -293,12 +296,14 @@ class FingertipTracker:
         self._last_uv = (uvl, uvr)
         if self.kf.initialised:
             d2 = self.kf.mahalanobis2(pos, cov_d, stamp)
-            if d2 > c.gate_chi2:
+            if d2 > c.gate_chi2 * max(1.0, self.nis / 3.0):
                 self._misses += 1
                 if self._misses >= c.max_gate_misses:
                     self.kf.reset()
                     self._misses = 0
                 return self._invalid("gated", roi)
+        if self.kf.initialised:
+            self.nis += 0.02 * (d2 - self.nis)
         self._misses = 0
         self.noise.add(residual)
         if self.kf.initialised and 1e-3 < stamp - self.kf.t < 0.2:

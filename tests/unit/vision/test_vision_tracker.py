@@ -90,6 +90,30 @@ def test_gate_rejects_jump_then_resets():
     assert reasons[:3] == ["gated"] * 3 and reasons[3] == "ok"     # gate, then track reset and accept
 
 
+def test_a_finger_that_turns_and_trembles_is_tracked_and_a_jump_still_gated():
+    """A 5 mm stroke back and forth at 0.5 Hz with a 0.1 mm, 10 Hz tremor: the smooth filter (tracking index
+    0.05) does not model it; with the gate scaled by the measured innovations ≥ 98 % of the fixes are kept,
+    held at the raw χ² gate (the innovation mean pinned at 3) a third are rejected; a 3 cm jump is still
+    gated."""
+    calib, T, rnd = _setup()
+    kept = {}
+    for scaled in (True, False):
+        tr = FingertipTracker(calib, TrackerConfig(tracking_index=0.05), T)
+        kept[scaled] = 0
+        for k in range(240):
+            t = k / 48
+            p = np.array([0.03, 0.005 * np.sin(np.pi * t), 0.0]) + 1e-4 * np.sin(2 * np.pi * 10 * t)
+            L, R = rnd.render(p)
+            if not scaled:
+                tr.nis = 3.0
+            kept[scaled] += tr.process(L, R, t).reason == "ok"
+        if scaled:
+            assert tr.nis > 3.0                                 # the innovations really exceed the model's
+            L, R = rnd.render(np.array([0.03, 0.02, 0.0]))
+            assert tr.process(L, R, 240 / 48).reason == "gated"
+    assert kept[True] >= 236 and kept[False] <= 200, kept
+
+
 def test_reflection_ambiguous_without_track_resolved_with_track():
     calib, T, rnd = _setup()
     p = np.array([0.03, -0.02, 0.0])
