@@ -354,8 +354,8 @@ def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None
     h = (bud["total"] + bud["target_hold_mean"]) if horizon is None else horizon
     sig_f = lk["sigma_px"] if sigma_px_filter is None else sigma_px_filter
     Rf = _camera_cov(twin, meas, sig_f)              # the covariance the triangulator reports for its sigma_px
-    if q is None:
-        q = q_for_tracking_index(lk["tracking_index"], _tangential_noise(twin, twin.marker_px), latency.camera_period)
+    if q is None:   # the tracker's rule (q from its tracking index) on the noise the filter assumes
+        q = q_for_tracking_index(lk["tracking_index"], _tangential_noise(twin, sig_f), latency.camera_period)
     kf = Predictor(q)
     planner = SurfacePlanner(shape, planner_config or PlannerConfig(), compliance)
     s = latency.scale
