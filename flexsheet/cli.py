@@ -335,20 +335,24 @@ def _add_keys_parser(sub) -> None:
 
 def _add_topic_parser(sub) -> None:
     s = sub.add_parser("topic", help="inspect topics of the live graph (from heartbeats)",
-                       **_fmt("  flexsheet topic list\n  flexsheet topic echo /fingertip --count 3\n"
-                              "  flexsheet topic hz /camera/stereo"))
+                       **_fmt("  flexsheet topic list\n  flexsheet topic info /fingertip\n"
+                              "  flexsheet topic echo /fingertip --count 3\n  flexsheet topic hz /camera/stereo"))
     ts = s.add_subparsers(dest="topic_cmd", required=True, metavar="VERB")
     for verb, helptext in (("list", "list topics with publishers, rates and types"),
+                           ("info", "one topic: type, rate, publishers and subscribers with QoS and drops"),
                            ("echo", "print messages of a topic"), ("hz", "measure a topic's rate")):
-        t = ts.add_parser(verb, help=helptext, **_fmt(f"  flexsheet topic {verb}" + ("" if verb == "list" else " /fingertip")))
+        t = ts.add_parser(verb, help=helptext, **_fmt(f"  flexsheet topic {verb}" + ("" if verb == "list" else " /fingertip")
+                                                      + (" --json" if verb in ("list", "info") else "")))
         if verb != "list":
             t.add_argument("topic")
         t.add_argument("--launch", default=_launch_default(), help="launch file of the graph (default: "
                                                                    "$FLEXSHEET_LAUNCH or launch/sim.yaml)")
         if verb != "hz":
             t.add_argument("--timeout", type=float, default=2.5,
-                           help="s to listen for heartbeats" if verb == "list" else
-                           "s to wait for the first message (none: it is not published; exit 1)")
+                           help="s to wait for the first message (none: it is not published; exit 1)"
+                           if verb == "echo" else "s to listen for heartbeats")
+        if verb in ("list", "info"):
+            t.add_argument("--json", action="store_true", help="one JSON document on stdout")
         if verb == "echo":
             t.add_argument("--count", type=int, default=0, help="stop after N messages")
             t.add_argument("--arrays", action="store_true", help="print whole arrays (default: shape only)")
@@ -359,13 +363,21 @@ def _add_topic_parser(sub) -> None:
 
 def _add_node_parser(sub) -> None:
     s = sub.add_parser("node", help="inspect nodes of the live graph (from heartbeats)",
-                       **_fmt("  flexsheet node list"))
+                       **_fmt("  flexsheet node list\n  flexsheet node info planner"))
     ns = s.add_subparsers(dest="node_cmd", required=True, metavar="VERB")
     t = ns.add_parser("list", help="list live nodes with host, pid, state and rejections",
-                      **_fmt("  flexsheet node list --launch launch/sim.yaml"))
-    t.add_argument("--launch", default=_launch_default())
-    t.add_argument("--timeout", type=float, default=2.5)
+                      **_fmt("  flexsheet node list --launch launch/sim.yaml --json"))
+    t.add_argument("--launch", default=_launch_default(), help="launch file of the graph")
+    t.add_argument("--timeout", type=float, default=2.5, help="s to listen for heartbeats")
+    t.add_argument("--json", action="store_true", help="one JSON document on stdout")
     t.set_defaults(func=_tool("node_list"))
+    t = ns.add_parser("info", help="one node: host, pid, state, its topics with rates, QoS and drops",
+                      **_fmt("  flexsheet node info planner --launch launch/sim.yaml"))
+    t.add_argument("name", help="node name (as in the launch file)")
+    t.add_argument("--launch", default=_launch_default(), help="launch file of the graph")
+    t.add_argument("--timeout", type=float, default=2.5, help="s to listen for heartbeats")
+    t.add_argument("--json", action="store_true", help="one JSON document on stdout")
+    t.set_defaults(func=_tool("node_info"))
 
 
 def _add_bag_parser(sub) -> None:

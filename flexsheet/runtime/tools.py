@@ -1,4 +1,5 @@
-"""Introspection of the live graph: ``topic list|echo|hz`` and ``node list``.
+"""Introspection of the live graph: ``topic list|info|echo|hz`` and ``node list|info`` (``--json`` on the
+list and info verbs: one JSON document on stdout).
 
 Everything comes from what is on the wire now — heartbeats on ``/diagnostics`` and the topic itself —
 never from a cache. The endpoints to listen to come from the launch file (``--launch``, default
@@ -9,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import sys
 import time
 
@@ -20,7 +22,8 @@ from flexsheet.runtime.transport import ZmqTransport
 from messages import Heartbeat
 from messages import topics as T
 
-__all__ = ["collect_heartbeats", "topic_list", "topic_echo", "topic_hz", "node_list", "containers_of"]
+__all__ = ["collect_heartbeats", "topic_list", "topic_info", "topic_echo", "topic_hz", "node_list", "node_info",
+           "containers_of", "graph_topics"]
 
 
 def _peers(launch: str) -> tuple[list[str], object]:
@@ -61,25 +64,63 @@ def _beats(args: argparse.Namespace) -> dict[str, Heartbeat] | None:
     return beats
 
 
+def graph_topics(beats: dict[str, Heartbeat]) -> dict[str, dict]:
+    """Topic → ``{"type", "rate_hz", "publishers": [...], "subscribers": [...]}`` from heartbeats; each publisher
+    ``{"node", "host", "endpoint", "rate_hz", "count", "dropped"}``, each subscriber ``{"node", "host", "qos",
+    "rate_hz", "count", "dropped", "rejected"}`` (rates Hz over the nodes' last heartbeat period)."""
+    out: dict[str, dict] = {}
+    for hb in beats.values():
+        for st in hb.publishers:
+            t = out.setdefault(st.topic, {"type": st.type, "rate_hz": 0.0, "publishers": [], "subscribers": []})
+            t["publishers"].append({"node": hb.node, "host": hb.host, "endpoint": hb.endpoint, "rate_hz": st.rate_hz,
+                                    "count": st.count, "dropped": st.dropped})
+            t["rate_hz"] += st.rate_hz
+        for st in hb.subscriptions:
+            t = out.setdefault(st.topic, {"type": st.type, "rate_hz": 0.0, "publishers": [], "subscribers": []})
+            t["subscribers"].append({"node": hb.node, "host": hb.host, "qos": st.qos, "rate_hz": st.rate_hz,
+                                     "count": st.count, "dropped": st.dropped, "rejected": st.rejected})
+    return dict(sorted(out.items()))
+
+
 def topic_list(args: argparse.Namespace) -> int:
     """Print every topic published in the live graph with its type, publishers, rate and subscribers."""
     beats = _beats(args)
     if not beats:
         return 2 if beats is None else 1
-    pubs: dict[str, list] = {}
-    subs: dict[str, list] = {}
-    for hb in beats.values():
-        for s in hb.publishers:
-            pubs.setdefault(s.topic, []).append((hb.node, s))
-        for s in hb.subscriptions:
-            subs.setdefault(s.topic, []).append((hb.node, s))
-    w = max(len(t) for t in pubs | subs)
-    for topic in sorted(set(pubs) | set(subs)):
-        ps = pubs.get(topic, [])
-        typ = (ps or subs[topic])[0][1].type
-        rate = sum(s.rate_hz for _, s in ps)
-        print(f"{topic:<{w}}  {typ:<30} {rate:8.1f} Hz  pub: {','.join(n for n, _ in ps) or '-'}"
-              f"  sub: {','.join(n for n, _ in subs.get(topic, [])) or '-'}")
+    topics = graph_topics(beats)
+    if getattr(args, "json", False):
+        print(json.dumps(topics, indent=1))
+        return 0
+    w = max(len(t) for t in topics)
+    for topic, t in topics.items():
+        print(f"{topic:<{w}}  {t['type']:<30} {t['rate_hz']:8.1f} Hz  "
+              f"pub: {','.join(p['node'] for p in t['publishers']) or '-'}  "
+              f"sub: {','.join(p['node'] for p in t['subscribers']) or '-'}")
+    return 0
+
+
+def topic_info(args: argparse.Namespace) -> int:
+    """Print one topic's type, rate, publishers and subscribers (with QoS and drop counts); 1 when no live
+    node publishes or subscribes it."""
+    beats = _beats(args)
+    if not beats:
+        return 2 if beats is None else 1
+    t = graph_topics(beats).get(args.topic)
+    if t is None:
+        print(f"{args.topic}: no live node publishes or subscribes it (flexsheet topic list shows those that do)",
+              file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps({"topic": args.topic, **t}, indent=1))
+        return 0
+    print(f"topic: {args.topic}\ntype: {t['type']}\nrate: {t['rate_hz']:.1f} Hz\npublishers: {len(t['publishers'])}")
+    for p in t["publishers"]:
+        print(f"  {p['node']} [{p['host']}] {p['endpoint']}  {p['rate_hz']:.1f} Hz, {p['count']} sent, "
+              f"{p['dropped']} dropped")
+    print(f"subscribers: {len(t['subscribers'])}")
+    for p in t["subscribers"]:
+        print(f"  {p['node']} [{p['host']}] qos {p['qos']}  {p['rate_hz']:.1f} Hz, {p['count']} received, "
+              f"{p['dropped']} dropped, {p['rejected']} rejected")
     return 0
 
 
@@ -92,6 +133,18 @@ def containers_of(launch: str) -> dict[str, str]:
     return {n: s.container for n, s in lf.nodes.items() if s.container}
 
 
+def _node_entry(hb: Heartbeat, container: str | None) -> dict:
+    return {"node": hb.node, "type": hb.node_type, "host": hb.host, "container": container, "pid": hb.pid,
+            "endpoint": hb.endpoint, "state": hb.state, "message": hb.message, "uptime_s": hb.uptime,
+            "heartbeat_age_s": time.time() - hb.header.stamp, "rejected_total": hb.rejected_total,
+            "last_rejection": hb.last_rejection,
+            "publishers": [{"topic": st.topic, "type": st.type, "rate_hz": st.rate_hz, "count": st.count,
+                            "dropped": st.dropped} for st in hb.publishers],
+            "subscriptions": [{"topic": st.topic, "type": st.type, "qos": st.qos, "rate_hz": st.rate_hz,
+                               "count": st.count, "dropped": st.dropped, "rejected": st.rejected}
+                              for st in hb.subscriptions]}
+
+
 def node_list(args: argparse.Namespace) -> int:
     """Print every live node with host, container (``-``: its own process), pid, endpoint, state and
     rejection counts. The nodes of one container share its pid."""
@@ -99,6 +152,9 @@ def node_list(args: argparse.Namespace) -> int:
     if not beats:
         return 2 if beats is None else 1
     containers = containers_of(args.launch)
+    if getattr(args, "json", False):
+        print(json.dumps([_node_entry(beats[n], containers.get(n)) for n in sorted(beats)], indent=1))
+        return 0
     for name in sorted(beats):
         hb = beats[name]
         age = time.time() - hb.header.stamp
@@ -106,6 +162,34 @@ def node_list(args: argparse.Namespace) -> int:
               f"pid={hb.pid:<7} {hb.endpoint:<24} "
               f"state={hb.state:<5} up={hb.uptime:7.1f}s rejected={hb.rejected_total} "
               f"(heartbeat {age * 1e3:.0f} ms ago){'  ' + hb.last_rejection if hb.last_rejection else ''}")
+    return 0
+
+
+def node_info(args: argparse.Namespace) -> int:
+    """Print one live node: host, container, pid, state, its publishers and subscriptions with rates, QoS and
+    drop/rejection counts; 1 when no such node is heard."""
+    beats = _beats(args)
+    if not beats:
+        return 2 if beats is None else 1
+    hb = beats.get(args.name)
+    if hb is None:
+        print(f"node {args.name!r} not heard in {args.timeout:g} s; live nodes: {', '.join(sorted(beats))}",
+              file=sys.stderr)
+        return 1
+    e = _node_entry(hb, containers_of(args.launch).get(args.name))
+    if args.json:
+        print(json.dumps(e, indent=1))
+        return 0
+    print(f"node: {e['node']} ({e['type']}) host {e['host']} container {e['container'] or '-'} pid {e['pid']}\n"
+          f"endpoint: {e['endpoint'] or '-'}\nstate: {e['state']}{' (' + e['message'] + ')' if e['message'] else ''}"
+          f", up {e['uptime_s']:.1f} s, {e['rejected_total']} rejected")
+    print("publishers:")
+    for p in e["publishers"]:
+        print(f"  {p['topic']} [{p['type']}] {p['rate_hz']:.1f} Hz, {p['count']} sent, {p['dropped']} dropped")
+    print("subscriptions:")
+    for p in e["subscriptions"]:
+        print(f"  {p['topic']} [{p['type']}] qos {p['qos']} {p['rate_hz']:.1f} Hz, {p['count']} received, "
+              f"{p['dropped']} dropped, {p['rejected']} rejected")
     return 0
 
 

@@ -30,3 +30,33 @@ def test_echo_prints_exactly_count_and_an_absent_topic_says_so(demo_launch):
         assert r.stdout == "" and took < 30.0, (r.stdout, took)
     finally:
         lf.stop()
+
+
+def test_topic_and_node_info_from_the_live_graph_as_json(demo_launch):
+    """``topic info`` and ``node info`` (and ``--json`` on them and on the lists) report the talker's /fingertip
+    with its rate and the listener's QoS from the heartbeats; an unknown topic or node is said, exit 1."""
+    import json
+
+    path = demo_launch(rate=50.0)
+    lf = Launch(path)
+    try:
+        lf.wait_for(r"heard seq=", count=3)
+        time.sleep(1.5)                                            # a full heartbeat period of rates
+        r = _flexsheet("topic", "info", "/fingertip", "--json", "--launch", str(path))
+        assert r.returncode == 0, r.stderr
+        t = json.loads(r.stdout)
+        assert t["type"] == "flexsheet/Fingertip" and [p["node"] for p in t["publishers"]] == ["talker"]
+        assert 40.0 <= t["publishers"][0]["rate_hz"] <= 60.0 and t["publishers"][0]["count"] > 20, t
+        assert [(s["node"], s["qos"]) for s in t["subscribers"]] == [("listener", "keep_all")], t
+        n = json.loads(_flexsheet("node", "info", "talker", "--json", "--launch", str(path)).stdout)
+        assert n["node"] == "talker" and n["state"] == "ok" and n["pid"] > 0
+        assert any(p["topic"] == "/fingertip" and p["count"] > 20 for p in n["publishers"]), n
+        names = [e["node"] for e in json.loads(_flexsheet("node", "list", "--json", "--launch", str(path)).stdout)]
+        assert names == ["listener", "talker"]
+        assert "/fingertip" in json.loads(_flexsheet("topic", "list", "--json", "--launch", str(path)).stdout)
+        r = _flexsheet("node", "info", "nobody", "--launch", str(path))
+        assert r.returncode == 1 and "node 'nobody' not heard" in r.stderr and "talker" in r.stderr
+        r = _flexsheet("topic", "info", "/nobody", "--launch", str(path))
+        assert r.returncode == 1 and "/nobody: no live node" in r.stderr
+    finally:
+        lf.stop()
