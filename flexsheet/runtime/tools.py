@@ -26,14 +26,17 @@ __all__ = ["collect_heartbeats", "topic_list", "topic_info", "topic_echo", "topi
            "containers_of", "graph_topics"]
 
 
-def _peers(launch: str) -> tuple[list[str], object]:
+def _peers(launch: str) -> tuple[list[str], object, set[str]]:
     lf = load_launch(launch)
-    return list(lf.endpoints().values()), curve_config(lf, None)
+    return list(lf.endpoints().values()), curve_config(lf, None), set(lf.nodes)
 
 
-async def collect_heartbeats(peers: list[str], timeout: float, curve=None) -> dict[str, Heartbeat]:
-    """Listen to ``/diagnostics`` on ``peers`` for ``timeout`` s; returns node name → latest heartbeat."""
+async def collect_heartbeats(peers: list[str], timeout: float, curve=None,
+                             expect: set[str] | None = None) -> dict[str, Heartbeat]:
+    """Listen to ``/diagnostics`` on ``peers`` for at most ``timeout`` s, or until every node of ``expect`` (the
+    launch file's) has been heard; returns node name → latest heartbeat."""
     beats: dict[str, Heartbeat] = {}
+    done = asyncio.Event()
 
     def on_frames(frames: list) -> None:
         try:
@@ -41,12 +44,16 @@ async def collect_heartbeats(peers: list[str], timeout: float, curve=None) -> di
         except DecodeError:
             return
         beats[hb.node] = hb
+        if expect and expect <= beats.keys():
+            done.set()
 
     tr = ZmqTransport("", peers, curve=curve)
     await tr.start(on_frames)
     tr.subscribe(T.DIAGNOSTICS.name)
     try:
-        await asyncio.sleep(timeout)
+        await asyncio.wait_for(done.wait(), timeout=timeout)
+    except TimeoutError:
+        pass
     finally:
         tr.close()
     return beats
@@ -54,11 +61,11 @@ async def collect_heartbeats(peers: list[str], timeout: float, curve=None) -> di
 
 def _beats(args: argparse.Namespace) -> dict[str, Heartbeat] | None:
     try:
-        peers, curve = _peers(args.launch)
+        peers, curve, names = _peers(args.launch)
     except LaunchError as exc:
         print(f"flexsheet: {exc}")
         return None
-    beats = asyncio.run(collect_heartbeats(peers, args.timeout, curve))
+    beats = asyncio.run(collect_heartbeats(peers, args.timeout, curve, names))
     if not beats:
         print(f"no live nodes heard in {args.timeout:.1f} s (graph of {args.launch})")
     return beats
@@ -205,7 +212,7 @@ def topic_echo(args: argparse.Namespace) -> int:
     """Print messages of ``args.topic`` as they arrive (arrays shown by shape unless ``--arrays``): exactly
     ``--count`` of them when given; when none arrives within ``--timeout`` s, say so and return 1."""
     try:
-        peers, curve = _peers(args.launch)
+        peers, curve, _ = _peers(args.launch)
     except LaunchError as exc:
         print(f"flexsheet: {exc}")
         return 2
@@ -254,7 +261,7 @@ def topic_echo(args: argparse.Namespace) -> int:
 def topic_hz(args: argparse.Namespace) -> int:
     """Measure the arrival rate of ``args.topic`` over ``--window`` s: mean rate, min/max/std of periods."""
     try:
-        peers, curve = _peers(args.launch)
+        peers, curve, _ = _peers(args.launch)
     except LaunchError as exc:
         print(f"flexsheet: {exc}")
         return 2

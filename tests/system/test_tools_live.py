@@ -51,8 +51,10 @@ def test_topic_and_node_info_from_the_live_graph_as_json(demo_launch):
         n = json.loads(_flexsheet("node", "info", "talker", "--json", "--launch", str(path)).stdout)
         assert n["node"] == "talker" and n["state"] == "ok" and n["pid"] > 0
         assert any(p["topic"] == "/fingertip" and p["count"] > 20 for p in n["publishers"]), n
-        names = [e["node"] for e in json.loads(_flexsheet("node", "list", "--json", "--launch", str(path)).stdout)]
-        assert names == ["listener", "talker"]
+        t0 = time.monotonic()      # every node of the file heard: the call ends then, not at its --timeout
+        names = [e["node"] for e in json.loads(_flexsheet("node", "list", "--json", "--timeout", "20", "--launch",
+                                                          str(path)).stdout)]
+        assert names == ["listener", "talker"] and time.monotonic() - t0 < 10.0
         assert "/fingertip" in json.loads(_flexsheet("topic", "list", "--json", "--launch", str(path)).stdout)
         r = _flexsheet("node", "info", "nobody", "--launch", str(path))
         assert r.returncode == 1 and "node 'nobody' not heard" in r.stderr and "talker" in r.stderr
