@@ -93,9 +93,9 @@ class TargetTracker:
         if seed is None:
             raise ValueError("no seed: call seed(q_measured) or pass q_measured before the first target")
         max_jump = self.max_jump
-        if self.last_target_at is not None and now - self.last_target_at > self.target_timeout:
-            max_jump += float(np.max(QD_MAX)) * (now - self.last_target_at)     # resumed after a pause
         resumed = self.last_target_at is not None and now - self.last_target_at > self.target_timeout
+        if resumed:
+            max_jump += float(np.max(QD_MAX)) * (now - self.last_target_at)     # resumed after a pause
         res = self.kin.ik(T_display_clamp, seed, max_jump=max_jump)
         self.last_ik = res
         self.last_target_at = now

@@ -56,6 +56,7 @@ from flexsheet.experiments.table1 import (
     FELT_TARGET_FACTOR,
     PAPER_TABLE1,
     TARGET_FACTOR,
+    errors_row,
     scene_table1_row,
     table1,
     target,
@@ -230,22 +231,21 @@ def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_
         t = np.array([m.exposure_stamp for m in ms])
         true_tip = _interp_points(truths, t)
         origin, normal = _interp_sheet(sheets, t)
-        row = scene_table1_row(scene, true_tip, origin, normal)
-        nd = np.array([shape.project(tuple(p)).normal for p in true_tip])
-        cos = np.clip(np.abs(np.sum(nd * normal, axis=1)), 0.0, 1.0)
-        row["angle3d_mean_deg"] = float(np.degrees(np.arccos(cos)).mean())
+        felt = table1(shape, true_tip, origin, normal, scene)
+        row = errors_row(shape, felt)
+        n_true = _normals(shape, true_tip)
+        row["angle3d_mean_deg"] = float(_angles_deg(n_true, normal).mean())
         out["felt"][key] = row
         believed = _believed_sheet(d, t)
+        paper = None
         if believed is not None:
-            out["paper"][key] = scene_table1_row(scene, np.array([m.position for m in ms]), *believed)
+            paper = table1(shape, np.array([m.position for m in ms]), *believed, scene)
+            out["paper"][key] = errors_row(shape, paper)
         if series is not None:
-            entry = {"t_s": (t - t[0]).tolist(),
-                     "felt_deg": np.degrees(table1(shape, true_tip, origin, normal, scene).dtheta).tolist()}
-            if believed is not None:
-                entry["paper_deg"] = np.degrees(table1(shape, np.array([m.position for m in ms]), *believed,
-                                                       scene).dtheta).tolist()
-            series[key] = entry
-        out.setdefault("decomposition", {})[key] = _decomposition(d, ms, shape, true_tip, normal, believed)
+            series[key] = {"t_s": (t - t[0]).tolist(), "felt_deg": np.degrees(felt.dtheta).tolist()}
+            if paper is not None:
+                series[key]["paper_deg"] = np.degrees(paper.dtheta).tolist()
+        out.setdefault("decomposition", {})[key] = _decomposition(d, ms, shape, n_true, normal, believed)
     out["targets"] = {kind: {k: target(k, f)["dtheta_mean_deg"] for k in PAPER_TABLE1}
                       for kind, f in (("felt", FELT_TARGET_FACTOR), ("paper", TARGET_FACTOR))}
     out["verdicts"] = {f"{kind}.{k}": ("met" if out[kind][k]["dtheta_mean_deg"] <= out["targets"][kind][k]
@@ -258,34 +258,41 @@ def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_
 TREMOR_WINDOW = 21
 
 
-def _decomposition(d: dict[str, list], ms: list, shape, true_tip: np.ndarray, sheet_normal: np.ndarray,
+def _normals(shape, points: np.ndarray) -> np.ndarray:
+    """The object's unit normals (N, 3) at the points of ``shape`` nearest ``points`` (N, 3) m."""
+    return np.array([shape.project(tuple(p)).normal for p in points])
+
+
+def _angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angles (N,) deg between the unit directions (N, 3) ``a`` and ``b`` (sign-blind, as normals of a plane)."""
+    return np.degrees(np.arccos(np.clip(np.abs(np.sum(a * b, axis=1)), 0.0, 1.0)))
+
+
+def _decomposition(d: dict[str, list], ms: list, shape, n_true: np.ndarray, sheet_normal: np.ndarray,
                    believed) -> dict:
     """What the felt error is made of, each as a mean angle (deg) between object normals or sheet normals:
     ``tremor`` (the true finger against its own slow motion, :data:`TREMOR_WINDOW`), ``camera`` (the measured
     fingertip against the true one), ``prediction`` (the predicted fingertip against the true one at the
     horizon), ``kinematics`` (the sheet the display believes against the true sheet) and ``slow_finger``
-    (the felt error against the finger's slow motion: what is left without the tremor)."""
+    (the felt error against the finger's slow motion: what is left without the tremor). ``n_true``: the
+    object's normals (N, 3) at the true fingertip of each of ``ms``."""
     truths = d["/world/finger"]
     ts = np.array([m.header.stamp for _, m in truths])
     pos = np.array([m.position for _, m in truths], float)
     ker = np.ones(TREMOR_WINDOW) / TREMOR_WINDOW
     slow = np.stack([np.convolve(pos[:, k], ker, mode="same") for k in range(3)], axis=1)
     t = np.array([m.exposure_stamp for m in ms])
-    slow_t = np.stack([np.interp(t, ts, slow[:, k]) for k in range(3)], axis=1)
+    n_slow = _normals(shape, np.stack([np.interp(t, ts, slow[:, k]) for k in range(3)], axis=1))
     h = float(ms[0].prediction_horizon)
 
-    def normals(points: np.ndarray) -> np.ndarray:
-        return np.array([shape.project(tuple(p)).normal for p in points])
-
     def angle(a: np.ndarray, b: np.ndarray) -> float:
-        return float(np.degrees(np.arccos(np.clip(np.abs(np.sum(a * b, axis=1)), 0.0, 1.0))).mean())
+        return float(_angles_deg(a, b).mean())
 
-    n_true = normals(true_tip)
-    out = {"tremor": angle(n_true, normals(slow_t)),
-           "camera": angle(n_true, normals(np.array([m.position for m in ms]))),
-           "prediction": angle(normals(_interp_points(truths, t + h)),
-                               normals(np.array([m.predicted_position for m in ms]))),
-           "slow_finger": angle(normals(slow_t), sheet_normal)}
+    out = {"tremor": angle(n_true, n_slow),
+           "camera": angle(n_true, _normals(shape, np.array([m.position for m in ms]))),
+           "prediction": angle(_normals(shape, _interp_points(truths, t + h)),
+                               _normals(shape, np.array([m.predicted_position for m in ms]))),
+           "slow_finger": angle(n_slow, sheet_normal)}
     if believed is not None:
         out["kinematics"] = angle(believed[1], sheet_normal)
     return out
@@ -316,14 +323,14 @@ def sheet_delay(d: dict[str, list], groups: dict[str, list], scene: Scene) -> di
     shape = planner_shape(scene)
     f_ts = np.array([m.header.stamp for _, m in truths])
     sel = (f_ts >= t[0] - DELAY_LAGS[-1] - 0.05) & (f_ts <= t[-1] - DELAY_LAGS[0] + 0.05)
-    fn = np.array([shape.project(tuple(m.position)).normal for (_, m), ok in zip(truths, sel, strict=True) if ok])
+    fn = _normals(shape, np.array([m.position for (_, m), ok in zip(truths, sel, strict=True) if ok]))
     fts = f_ts[sel]
     _, n_s = _interp_sheet(sheets, t)
     best = (np.inf, 0.0)
     for lag in DELAY_LAGS:
         nf = np.stack([np.interp(t - lag, fts, fn[:, k]) for k in range(3)], axis=1)
         nf /= np.linalg.norm(nf, axis=1, keepdims=True)
-        a = float(np.degrees(np.arccos(np.clip(np.abs(np.sum(nf * n_s, axis=1)), 0.0, 1.0))).mean())
+        a = float(_angles_deg(nf, n_s).mean())
         best = min(best, (a, float(lag)))
     h = float(groups[key][0].prediction_horizon)
     return {"segment": key, "horizon_ms": h * 1e3, "residual_lag_ms": best[1] * 1e3,

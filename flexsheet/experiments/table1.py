@@ -43,7 +43,7 @@ from flexsheet.model.shapes import Shape
 
 __all__ = ["StrokeErrors", "stroke_errors", "presented_contacts", "table1", "summarize", "table1_row",
            "PAPER_TABLE1", "TARGET_FACTOR", "FELT_TARGET_FACTOR", "target", "section_normals", "DD_CONVENTION", "paper_dd_ratio",
-           "stroke_tangents", "scene_table1_row"]
+           "stroke_tangents", "scene_table1_row", "errors_row"]
 
 #: the paper's Table I (Furukawa et al., §V-C): moving time (s, as the row key) → means and population
 #: standard deviations of Δd (mm) and Δθ (deg) over the moving phase
@@ -222,7 +222,12 @@ def table1_row(shape: Shape, measured, sheet_origin, sheet_normal, scene=None) -
     :func:`summarize` of Δd, Δθ (with the paper's 2R convention when the shape has a radius ``R``: the
     cylinder, the sphere) plus ``gap_mean_mm`` (mean |gap|, mm). The one metric of the in-process experiment
     and of a recorded run. Raises ``ValueError`` on bad shapes/values or no samples."""
-    err = table1(shape, measured, sheet_origin, sheet_normal, scene)
+    return errors_row(shape, table1(shape, measured, sheet_origin, sheet_normal, scene))
+
+
+def errors_row(shape: Shape, err: StrokeErrors) -> dict[str, float]:
+    """The row of :func:`table1_row` from errors already computed (:func:`table1`): :func:`summarize` (with the
+    2R convention when ``shape`` has a radius ``R``) plus ``gap_mean_mm``."""
     radius = getattr(shape, "R", None)
     row = summarize(err.dd, err.dtheta, float(radius) if isinstance(radius, (int, float)) else None)
     row["gap_mean_mm"] = float(np.mean(np.abs(err.gap)) * 1e3)

@@ -25,9 +25,9 @@ Per stereo pair (raw mono8 images of the calibrated size):
 6. Outlier gate: squared Mahalanobis distance from the constant-velocity Kalman prediction
    (:class:`~flexsheet.vision.predict.ConstantVelocityKF`) ≤ ``gate_chi2`` (χ²₃; 16.27 = 99.9 %), scaled
    by the measured mean normalised innovation² of the accepted fixes over 3 when it exceeds 3 (covariance
-   matching, Mehra 1972: a smooth filter does not model the finger's tremor and turns, and its raw gate
-   rejected 16 % of the true marker's fixes). The filter's process noise is set by its tracking index λ = σ_w·T²/σ_v (Kalata 1984; Bar-Shalom et al. §6.5):
-   q = λ²·σ_v²/T³ with σ_v² the mean variance of the measured position (from step 5) and T the measured
+   matching, Mehra 1972: a smooth filter does not model the finger's tremor and turns, so the raw gate would
+   reject true fixes; docs/planner.md). The filter's process noise is set by its tracking index
+   λ = σ_w·T²/σ_v (Kalata 1984; Bar-Shalom et al. §6.5): q = λ²·σ_v²/T³ with σ_v² the mean variance of the measured position (from step 5) and T the measured
    frame interval, so the filter smooths the same whatever the camera's noise or rate.
    After ``max_gate_misses`` consecutive rejections the track is reset (the next fix is accepted), so a
    wrong track cannot lock out the true marker. A track not updated for ``lost_reset_s`` is reset.
