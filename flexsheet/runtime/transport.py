@@ -816,7 +816,7 @@ class SubLinks:
         if not self.guards:
             drain_sub(self.sock, handler)
             return
-        if self._general is not handler:
+        if self._general != handler:   # a bound method is a new object at each access, equal to the last
             guards = self.guards
 
             def filtered(frames: list) -> None:
