@@ -1,3 +1,4 @@
+# PYTHON_ARGCOMPLETE_OK
 """The ``flexsheet`` command: ROS 2-style subcommands (launch, run, topic, node, bag, calibrate, experiment, bench).
 
 Each subcommand's ``--help`` shows a working example. Argument parsing is argparse; subcommands that own
@@ -336,27 +337,31 @@ def _add_keys_parser(sub) -> None:
 def _add_topic_parser(sub) -> None:
     s = sub.add_parser("topic", help="inspect topics of the live graph (from heartbeats)",
                        **_fmt("  flexsheet topic list\n  flexsheet topic info /fingertip\n"
-                              "  flexsheet topic echo /fingertip --count 3\n  flexsheet topic hz /camera/stereo"))
+                              "  flexsheet topic echo /fingertip --count 3\n  flexsheet topic hz /camera/stereo\n"
+                              "  flexsheet topic bw /camera/stereo --json"))
     ts = s.add_subparsers(dest="topic_cmd", required=True, metavar="VERB")
     for verb, helptext in (("list", "list topics with publishers, rates and types"),
                            ("info", "one topic: type, rate, publishers and subscribers with QoS and drops"),
-                           ("echo", "print messages of a topic"), ("hz", "measure a topic's rate")):
+                           ("echo", "print messages of a topic"), ("hz", "measure a topic's rate"),
+                           ("bw", "measure a topic's bandwidth")):
         t = ts.add_parser(verb, help=helptext, **_fmt(f"  flexsheet topic {verb}" + ("" if verb == "list" else " /fingertip")
-                                                      + (" --json" if verb in ("list", "info") else "")))
+                                                      + (" --json" if verb in ("list", "info") else "")
+                                                      + (" --count 2 --json" if verb == "echo" else "")
+                                                      + (" --window 2" if verb in ("hz", "bw") else "")))
         if verb != "list":
             t.add_argument("topic")
         t.add_argument("--launch", default=_launch_default(), help="launch file of the graph (default: "
                                                                    "$FLEXSHEET_LAUNCH or launch/sim.yaml)")
-        if verb != "hz":
+        if verb not in ("hz", "bw"):
             t.add_argument("--timeout", type=float, default=2.5,
                            help="s to wait for the first message (none: it is not published; exit 1)"
                            if verb == "echo" else "s to listen for heartbeats")
-        if verb in ("list", "info"):
-            t.add_argument("--json", action="store_true", help="one JSON document on stdout")
+        t.add_argument("--json", action="store_true", help="one JSON object per message, a line each" if
+                       verb == "echo" else "one JSON document on stdout")
         if verb == "echo":
             t.add_argument("--count", type=int, default=0, help="stop after N messages")
             t.add_argument("--arrays", action="store_true", help="print whole arrays (default: shape only)")
-        if verb == "hz":
+        if verb in ("hz", "bw"):
             t.add_argument("--window", type=float, default=5.0, help="s to measure")
         t.set_defaults(func=_tool(f"topic_{verb}"))
 
@@ -461,7 +466,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``flexsheet`` console script. Returns the process exit code."""
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    if argv is None:            # shell completion (argcomplete): answers and exits when the shell asks
+        import argcomplete
+
+        argcomplete.autocomplete(parser)
+    args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:

@@ -47,6 +47,7 @@ BENCHES: dict[str, str] = {
     "planner": "flexsheet.benches.planner:main",
     "arm": "nodes.arm_bridge.bench:main",
     "fem": "flexsheet.benches.fem:main",
+    "fem_startup": "nodes.fem.startup_bench:main",
     "render": "nodes.renderer.bench:main",
     "load": "flexsheet.benches.load:main",
     "viz": "nodes.viz.bench:main",

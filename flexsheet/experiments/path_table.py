@@ -93,7 +93,9 @@ def _job(args) -> tuple[float, float, str | None]:
 
 
 def _prefetch(scene_file, jobs_list, cache_dir, n_jobs: int) -> None:
-    if n_jobs <= 1 or len(jobs_list) <= 1:
+    from flexsheet.fem.workers import parallel
+
+    if not parallel(n_jobs) or len(jobs_list) <= 1:
         return
     from flexsheet.fem.workers import run_workers
 
@@ -344,10 +346,17 @@ def main(argv=None) -> int:  # pragma: no cover - thin CLI for a by-hand run
     ap.add_argument("--stations", type=int, default=DEFAULT_STATIONS)
     ap.add_argument("--holdout-fraction", type=float, action="append", default=[])
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--scheduler", default=None, help="a dask scheduler, tcp://HOST:PORT (default: local)")
     ap.add_argument("--mesh-check", action="store_true")
     ap.add_argument("--ship", action="store_true")
     ap.add_argument("--cache-dir", default=None)
     a = ap.parse_args(argv)
+    from flexsheet.fem.workers import set_scheduler
+
+    try:
+        set_scheduler(a.scheduler)
+    except ValueError as exc:
+        ap.error(str(exc))
     return build_path_table(a.scene, a.out, a.cache_dir, a.stations, tuple(a.holdout_fraction), a.jobs,
                             a.mesh_check, a.ship)
 

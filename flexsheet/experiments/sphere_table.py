@@ -122,7 +122,9 @@ def _solve_missing(scene_file, sc, grid, spec, probes, cache, cache_dir, table, 
     want = list(dict.fromkeys(want))      # a held-out push is also the mesh study's table-mesh push: solve it once
     todo = [(a, s) for a, s in want if not os.path.exists(cache.path("spherealpha", _alpha_key(sc, a, grid, s, probes))
                                                           or "")]
-    if jobs > 1 and len(todo) > 1:
+    from flexsheet.fem.workers import parallel
+
+    if parallel(jobs) and len(todo) > 1:
         _log(f"{len(todo)} sphere pushes the cache lacks, in {min(jobs, len(todo))} worker processes")
         from flexsheet.fem.workers import run_workers
 

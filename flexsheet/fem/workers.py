@@ -1,13 +1,12 @@
 """The worker processes of the long reference solves: :func:`run_workers`, the one pool of every long solve
-(the cylinder's reference pushes, the sphere and path tables), a :class:`concurrent.futures.ProcessPoolExecutor`
-of spawned workers tied to their parent; and :func:`prefetch`, which solves the :class:`Solve` jobs a run
+(the cylinder's reference pushes, the sphere and path tables, the scenes' references) on dask.distributed (a
+local cluster, or a lab's with ``--scheduler``); and :func:`prefetch`, which solves the :class:`Solve` jobs a run
 reads and the cache lacks (:func:`missing_solves`) in such workers before the run reads them from the cache."""
 
 from __future__ import annotations
 
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,13 +67,14 @@ def missing_solves(jobs: list[Solve], mat: Material, cache: ArrayCache, probes: 
 
 
 def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache, probes: np.ndarray,
-             contact: str) -> None:
-    """Solve the ``jobs`` the cache lacks in ``n_workers`` processes (spawned, one BLAS thread each, their log
-    lines prefixed "[solver N]"), into ``cache``; the run then reads them from it. Does nothing with one
-    worker, a disabled cache or fewer than two solves missing. A failed solve is logged and left to the run,
-    which solves it again and raises with the cause. Ctrl-C terminates the workers at once."""
+             contact: str, scheduler: str | None = None) -> None:
+    """Solve the ``jobs`` the cache lacks on dask (:func:`run_workers`: ``n_workers`` local processes, or the
+    cluster at ``scheduler``; log lines prefixed "[solver N]"), into ``cache``; the run then reads them from
+    it, and a run interrupted and started again solves only what the cache still lacks. Does nothing with one
+    local worker, a disabled cache or fewer than two solves missing. A failed solve is logged and left to the
+    run, which solves it again and raises with the cause."""
 
-    if n_workers < 2 or not cache.cache_dir:
+    if not (parallel(n_workers) or scheduler) or not cache.cache_dir:
         return
     todo = missing_solves(jobs, mat, cache, probes, contact)
     if len(todo) < 2:
@@ -83,7 +83,7 @@ def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache
     _log(f"prefetch: {len(todo)} reference solves the cache lacks, in {n} worker processes (--jobs)")
     t0 = time.perf_counter()
     work = [(i, j, mat, cache.cache_dir, probes, contact) for i, j in enumerate(todo)]
-    for i, sec, err in run_workers(_solve_one, work, n):
+    for i, sec, err in run_workers(_solve_one, work, n, scheduler):
         j = todo[i]
         what = f"{j.spec.key()} at {j.angle_deg:g} deg, penalty {j.penalty_scale:g} E/h"
         _log(f"prefetch: {what} done in {sec:.0f} s" if err is None else
@@ -91,23 +91,30 @@ def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache
     _log(f"prefetch: done in {time.perf_counter() - t0:.0f} s")
 
 
-def _solver_init(counter) -> None:
-    """Worker start: a log prefix "[solver N] " (:data:`flexsheet.fem.reference_paths._LOG_PREFIX`, which
-    :func:`flexsheet.fem.reference_paths._log` reads); SIGINT ignored (the parent terminates the workers on
-    Ctrl-C); one BLAS and OpenMP thread, CHOLMOD's libraries loaded first so the limit reaches them; tied to
-    the parent, dies with it (:func:`flexsheet.runtime.background.lower_priority`, niceness unchanged)."""
+def _solver_init() -> None:
+    """Worker setup, once per worker process (:func:`_setup_plugin`): a log prefix
+    "[solver N] " (:data:`flexsheet.fem.reference_paths._LOG_PREFIX`, which
+    :func:`flexsheet.fem.reference_paths._log` reads; N the worker's name); one BLAS and OpenMP thread (the
+    nanny starts workers with ``OMP_NUM_THREADS=1``; CHOLMOD's libraries load under that limit); SIGINT
+    ignored and tied to its parent, dying with it even on ``kill -9``
+    (:func:`flexsheet.runtime.background.lower_priority`, niceness unchanged)."""
     from flexsheet.runtime.background import lower_priority
 
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = "1"
     try:
-        import sksparse.cholmod  # noqa: F401 - loads the BLAS/OpenMP CHOLMOD uses before the thread limit
+        import sksparse.cholmod  # noqa: F401 - loads the BLAS/OpenMP CHOLMOD uses under the thread limit
     except ImportError:
         pass
     lower_priority(0, idle=False)
-    with counter.get_lock():
-        counter.value += 1
-        reference_paths._LOG_PREFIX = f"[solver {counter.value}] "
+    try:
+        from distributed import get_worker
+
+        name = get_worker().name
+        name = name + 1 if isinstance(name, int) else name       # a local cluster's are 0 .. n-1
+    except (ImportError, ValueError):
+        name = os.getpid()
+    reference_paths._LOG_PREFIX = f"[solver {name}] "
 
 
 def _solve_one(args: tuple) -> tuple[int, float, str | None]:
@@ -124,38 +131,79 @@ def _solve_one(args: tuple) -> tuple[int, float, str | None]:
     return i, time.perf_counter() - t, None
 
 
-def run_workers(fn, work: list, n: int):
-    """Yield ``fn(w)`` for every ``w`` of ``work``, in the order they finish, computed in ``n`` spawned worker
-    processes (a :class:`concurrent.futures.ProcessPoolExecutor`) started by :func:`_solver_init` (one BLAS
-    thread, SIGINT ignored, tied to this process: killed with it, even by ``kill -9``). Ctrl-C, an error or
-    leaving the loop early terminates the workers at once (a running solve is not waited for). The one pool of
-    every long solve here (:func:`prefetch`, the sphere and path tables): a pool without the tie left its
-    workers solving for minutes after its parent was killed. ``fn`` must be importable (module
-    level) and catch its own errors."""
-    import multiprocessing
+def _setup_plugin():
+    """A dask ``WorkerPlugin`` that runs :func:`_solver_init` on every worker (its ``name`` makes it one per
+    cluster); built here so that importing this module does not import distributed."""
+    from distributed import WorkerPlugin
 
-    ctx = multiprocessing.get_context("spawn")
-    pool = ProcessPoolExecutor(n, mp_context=ctx, initializer=_solver_init, initargs=(ctx.Value("i", 0),))
-    finished = False
+    class _Setup(WorkerPlugin):
+        name = "flexsheet-solver"
+
+        def setup(self, worker) -> None:
+            _solver_init()
+
+    return _Setup()
+
+
+#: the dask scheduler every :func:`run_workers` uses ("tcp://HOST:PORT"), or None for a local cluster; set once
+#: by a command's ``--scheduler`` (:func:`set_scheduler`)
+SCHEDULER: str | None = None
+
+
+def set_scheduler(address: str | None) -> None:
+    """Run every later :func:`run_workers` on the dask cluster whose scheduler listens at ``address``
+    ("tcp://HOST:PORT"; None: a local cluster). Raises ``ValueError`` naming a malformed address."""
+    global SCHEDULER
+    if address is not None:
+        host, _, port = address.removeprefix("tcp://").rpartition(":")
+        if not address.startswith("tcp://") or not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise ValueError(f"--scheduler must be tcp://HOST:PORT, got {address!r}")
+    SCHEDULER = address
+
+
+def parallel(n: int) -> bool:
+    """Whether work should go to :func:`run_workers`: more than one local worker, or a cluster set."""
+    return n > 1 or SCHEDULER is not None
+
+
+def run_workers(fn, work: list, n: int, scheduler: str | None = None, key=None):
+    """Yield ``fn(w)`` for every ``w`` of ``work``, in the order they finish, computed on dask.distributed:
+    a :class:`distributed.LocalCluster` of ``n`` worker processes, one thread each (the default), or the
+    cluster whose scheduler listens at ``scheduler`` (default :data:`SCHEDULER`) ("tcp://HOST:8786", a lab's cluster: its workers need
+    flexsheet installed and the same cache folder, a shared disk). Every worker runs :func:`_solver_init`
+    first. Logs "k/N done" as results arrive. ``key(w)`` names a task (default: its index), so a result the
+    cluster still holds is not computed twice. Ctrl-C, an error or leaving the loop early cancels what is
+    left and closes a local cluster at once. ``fn`` must be importable (module level) and catch its own
+    errors. Raises ``ValueError`` for ``n`` < 1 and ``OSError`` when ``scheduler`` cannot be reached."""
+    from distributed import Client, LocalCluster, as_completed
+
+    if n < 1:
+        raise ValueError(f"n (worker processes) must be >= 1, got {n}")
+    scheduler = scheduler or SCHEDULER
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=50)
     try:
-        for done in as_completed([pool.submit(fn, w) for w in work]):
-            yield done.result()
-        finished = True
+        client = Client(cluster if cluster is not None else scheduler, timeout=10)
+    except (OSError, TimeoutError) as exc:
+        if cluster is not None:
+            cluster.close()
+        raise OSError(f"cannot reach the dask scheduler at {scheduler!r}: {exc}") from exc
+    try:
+        client.register_plugin(_setup_plugin())
+        futures = [client.submit(fn, w, pure=False, key=f"flexsheet-{key(w) if key else i}")
+                   for i, w in enumerate(work)]
+        for k, fut in enumerate(as_completed(futures), 1):
+            result = fut.result()
+            _log(f"workers: {k}/{len(futures)} done")
+            yield result
     finally:
-        if not finished:            # at once on Ctrl-C, an error or an early exit
-            _terminate_workers(pool)
-        pool.shutdown(wait=True, cancel_futures=True)
-
-
-def _terminate_workers(pool: ProcessPoolExecutor) -> None:
-    """Terminate ``pool``'s worker processes now, whatever they run (Python 3.14's
-    ``ProcessPoolExecutor.terminate_workers``; before it, each of the executor's processes)."""
-    stop = getattr(pool, "terminate_workers", None)
-    if stop is not None:
-        stop()
-        return
-    for proc in list((pool._processes or {}).values()):
-        proc.terminate()
+        for fut in locals().get("futures", []):
+            fut.cancel()
+        client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def default_jobs() -> int:

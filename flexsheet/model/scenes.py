@@ -61,7 +61,7 @@ from flexsheet.model import geometry as paper
 from flexsheet.yamlio import UniqueKeyLoader
 
 __all__ = ["SceneError", "Pose", "CylinderObject", "SphereObject", "RoundedBoxObject", "MeshObject", "MaterialSpec",
-           "Support", "Finger", "ArcStroke", "PolylineStroke", "Inclusion", "Scene", "load_scene", "parse_scene",
+           "Support", "Finger", "Use", "ArcStroke", "PolylineStroke", "Inclusion", "Scene", "load_scene", "parse_scene",
            "paper_scene", "is_paper_cylinder", "load_scene_or_paper", "cylinder_surface", "rotation_rpy", "SCENES_DIR", "DEFAULT_SCENE_FILE", "MAX_SCENE_BYTES",
            "MAX_EXTENT"]
 
@@ -247,6 +247,24 @@ class Finger(BaseModel):
     model_config = _CFG
     radius: float = Field(0.008, ge=0.001, le=0.03, description="m")
     contact: Literal["frictionless", "sticking"] = Field("frictionless", description="reference contact law")
+    contact_source: str = Field("", max_length=400, description="why this law: the cited source")
+
+
+class Use(BaseModel):
+    """The depths the scene is used at, and why: its FEM is judged over pushes 0…``max_depth`` m (at least
+    15 mm: palpating a soft body for a stiffer inclusion presses well past the first millimetres); its stroke
+    experiments press ``stroke_depth`` m (≤ ``max_depth``). Not part of the FEM's cache key."""
+
+    model_config = _CFG
+    max_depth: float = Field(0.05, ge=0.015, le=0.06, description="m")
+    stroke_depth: float = Field(0.010, ge=0.0, le=0.06, description="m")
+    reason: str = Field("", max_length=600)
+
+    @model_validator(mode="after")
+    def _order(self) -> Use:
+        if self.stroke_depth > self.max_depth:
+            raise ValueError(f"stroke_depth {self.stroke_depth} m exceeds max_depth {self.max_depth} m")
+        return self
 
 
 class ArcStroke(BaseModel):
@@ -332,6 +350,7 @@ class Scene(BaseModel):
     finger: Finger = Finger()
     stroke: StrokeSpec = ArcStroke(kind="arc")
     inclusions: list[Inclusion] = Field(default_factory=list, max_length=16)
+    use: Use = Use()
 
     _source: str = PrivateAttr("<scene>")
     _base_dir: Path = PrivateAttr(Path("."))
@@ -362,9 +381,10 @@ class Scene(BaseModel):
     def key(self) -> str:
         """SHA-256 hex of the scene's values and its mesh file's bytes: a cache key for precomputed FEM data."""
         # the default contact law is left out, so every key made before the field existed still holds (the
-        # shipped tables' keys; tests/unit/model/test_scenes.py)
-        h = hashlib.sha256(self.model_dump_json(
-            exclude={"finger": {"contact"}} if self.finger.contact == "frictionless" else None).encode())
+        # shipped tables' keys; tests/unit/model/test_scenes.py); so are what does not change the model: the
+        # depths the scene is used at and the contact law's source
+        finger = {"contact", "contact_source"} if self.finger.contact == "frictionless" else {"contact_source"}
+        h = hashlib.sha256(self.model_dump_json(exclude={"finger": finger, "use": True}).encode())
         if self.mesh_path is not None:
             h.update(self.mesh_path.read_bytes())
         return h.hexdigest()
@@ -813,7 +833,8 @@ def paper_scene() -> Scene:
                                      pose=Pose(position=tuple(float(x) for x in paper.CYLINDER_CENTER))),
                material=MaterialSpec(model="gent", E=10e3, nu=0.45, Jm=GENT_JM_RUBBER),
                stroke=ArcStroke(kind="arc", start=(1.0, 0.0, 0.0), toward=(0.0, 0.0, 1.0), start_deg=0.0,
-                                end_deg=60.0))
+                                end_deg=60.0),
+               use=Use(max_depth=0.05, stroke_depth=0.010, reason="the paper pushes its cylinder to 50 mm (Fig. 13)"))
     sc._source = "<paper>"
     return sc
 

@@ -1,5 +1,5 @@
-"""Introspection of the live graph: ``topic list|info|echo|hz`` and ``node list|info`` (``--json`` on the
-list and info verbs: one JSON document on stdout).
+"""Introspection of the live graph: ``topic list|info|echo|hz|bw`` and ``node list|info`` (``--json`` on every
+verb: one JSON document on stdout; ``echo``: one JSON object per message, a line each).
 
 Everything comes from what is on the wire now — heartbeats on ``/diagnostics`` and the topic itself —
 never from a cache. The endpoints to listen to come from the launch file (``--launch``, default
@@ -22,8 +22,8 @@ from flexsheet.runtime.transport import ZmqTransport
 from messages import Heartbeat
 from messages import topics as T
 
-__all__ = ["collect_heartbeats", "topic_list", "topic_info", "topic_echo", "topic_hz", "node_list", "node_info",
-           "containers_of", "graph_topics"]
+__all__ = ["collect_heartbeats", "topic_list", "topic_info", "topic_echo", "topic_hz", "topic_bw", "node_list",
+           "node_info", "containers_of", "graph_topics", "message_json"]
 
 
 def _peers(launch: str) -> tuple[list[str], object, set[str]]:
@@ -208,6 +208,29 @@ def _short(value) -> str:
     return repr(value)
 
 
+def _json_value(value, arrays: bool):
+    if isinstance(value, np.ndarray):
+        return value.tolist() if arrays else {"dtype": str(value.dtype), "shape": list(value.shape)}
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, bytes):
+        return {"bytes": len(value)}
+    if isinstance(value, (list, tuple)):
+        return [_json_value(v, arrays) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _json_value(v, arrays) for k, v in value.items()}
+    if hasattr(value, "__dict__"):
+        return {k: _json_value(v, arrays) for k, v in value.__dict__.items()}
+    return value if isinstance(value, (str, int, float, bool)) or value is None else repr(value)
+
+
+def message_json(topic: str, msg, arrays: bool = False) -> dict:
+    """A decoded message as a JSON-able dict: ``topic``, ``type`` (schema name), ``version`` and the fields
+    (arrays as lists with ``arrays``, else ``{"dtype", "shape"}``; nested messages as dicts)."""
+    return {"topic": topic, "type": msg.SCHEMA, "version": msg.VERSION,
+            **{k: _json_value(v, arrays) for k, v in msg.__dict__.items()}}
+
+
 def topic_echo(args: argparse.Namespace) -> int:
     """Print messages of ``args.topic`` as they arrive (arrays shown by shape unless ``--arrays``): exactly
     ``--count`` of them when given; when none arrives within ``--timeout`` s, say so and return 1."""
@@ -229,9 +252,12 @@ def topic_echo(args: argparse.Namespace) -> int:
             print(f"--- rejected: {exc}")
             return
         n += 1
-        print(f"--- {args.topic} [{msg.SCHEMA} v{msg.VERSION}]")
-        for k, v in msg.__dict__.items():
-            print(f"{k}: {v!r}" if (args.arrays or not isinstance(v, np.ndarray)) else f"{k}: {_short(v)}")
+        if getattr(args, "json", False):
+            print(json.dumps(message_json(args.topic, msg, args.arrays)), flush=True)
+        else:
+            print(f"--- {args.topic} [{msg.SCHEMA} v{msg.VERSION}]")
+            for k, v in msg.__dict__.items():
+                print(f"{k}: {v!r}" if (args.arrays or not isinstance(v, np.ndarray)) else f"{k}: {_short(v)}")
         if args.count and n >= args.count:
             done.set()
 
@@ -258,18 +284,19 @@ def topic_echo(args: argparse.Namespace) -> int:
         return 0
 
 
-def topic_hz(args: argparse.Namespace) -> int:
-    """Measure the arrival rate of ``args.topic`` over ``--window`` s: mean rate, min/max/std of periods."""
+def _listen(args: argparse.Namespace, keep) -> list | None:
+    """Subscribe to ``args.topic`` for ``args.window`` s; ``keep(frames)`` per message of it; the list of what
+    it returned, or None (the launch file is unusable: said)."""
     try:
         peers, curve, _ = _peers(args.launch)
     except LaunchError as exc:
         print(f"flexsheet: {exc}")
-        return 2
-    stamps: list[float] = []
+        return None
+    got: list = []
 
     def on_frames(frames: list) -> None:
         if bytes(frames[0]).decode(errors="replace") == args.topic:
-            stamps.append(time.monotonic())
+            got.append(keep(frames))
 
     async def main() -> None:
         tr = ZmqTransport("", peers, curve=curve)
@@ -281,10 +308,54 @@ def topic_hz(args: argparse.Namespace) -> int:
             tr.close()
 
     asyncio.run(main())
-    if len(stamps) < 2:
+    return got
+
+
+def topic_hz(args: argparse.Namespace) -> int:
+    """Measure the arrival rate of ``args.topic`` over ``--window`` s: mean rate, min/max/std of periods;
+    1 when fewer than two messages arrived."""
+    stamps = _listen(args, lambda frames: time.monotonic())
+    if stamps is None:
+        return 2
+    out = {"topic": args.topic, "window_s": args.window, "messages": len(stamps)}
+    if len(stamps) >= 2:
+        d = np.diff(stamps)
+        out.update(rate_hz=float(1 / d.mean()), period_min_s=float(d.min()), period_max_s=float(d.max()),
+                   period_std_s=float(d.std()))
+    if args.json:
+        print(json.dumps(out))
+    elif len(stamps) < 2:
         print(f"{args.topic}: {len(stamps)} messages in {args.window:.1f} s")
-        return 1
-    d = np.diff(stamps)
-    print(f"{args.topic}: average rate {1 / d.mean():.2f} Hz over {len(stamps)} msgs  "
-          f"min {d.min() * 1e3:.2f} ms max {d.max() * 1e3:.2f} ms std {d.std() * 1e3:.2f} ms")
-    return 0
+    else:
+        print(f"{args.topic}: average rate {out['rate_hz']:.2f} Hz over {len(stamps)} msgs  "
+              f"min {out['period_min_s'] * 1e3:.2f} ms max {out['period_max_s'] * 1e3:.2f} ms "
+              f"std {out['period_std_s'] * 1e3:.2f} ms")
+    return 0 if len(stamps) >= 2 else 1
+
+
+def topic_bw(args: argparse.Namespace) -> int:
+    """Measure the bandwidth of ``args.topic`` over ``--window`` s: bytes/s on the wire (every frame of each
+    message, topic frame included) and the mean, smallest and largest message; 1 when none arrived."""
+    sizes = _listen(args, lambda frames: sum(len(f) for f in frames))
+    if sizes is None:
+        return 2
+    out = {"topic": args.topic, "window_s": args.window, "messages": len(sizes),
+           "bytes_per_s": float(sum(sizes) / args.window)}
+    if sizes:
+        out.update(mean_bytes=float(np.mean(sizes)), min_bytes=int(min(sizes)), max_bytes=int(max(sizes)))
+    if args.json:
+        print(json.dumps(out))
+    elif not sizes:
+        print(f"{args.topic}: no messages in {args.window:.1f} s")
+    else:
+        print(f"{args.topic}: {_si(out['bytes_per_s'])}B/s from {len(sizes)} msgs  mean {_si(out['mean_bytes'])}B "
+              f"min {_si(out['min_bytes'])}B max {_si(out['max_bytes'])}B")
+    return 0 if sizes else 1
+
+
+def _si(x: float) -> str:
+    for unit in ("", "k", "M", "G"):
+        if abs(x) < 1000 or unit == "G":
+            return f"{x:.2f} {unit}" if unit else f"{x:.0f} "
+        x /= 1000.0
+    return f"{x:.2f} G"         # pragma: no cover - the loop returns

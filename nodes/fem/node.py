@@ -42,20 +42,14 @@ from flexsheet.fem.config import FemConfig
 from flexsheet.fem.material import Material
 from flexsheet.fem.mesh import MeshSpec
 from flexsheet.fem.realtime import RealtimeModel
-from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
+from flexsheet.fem.served import fem_models_as_cylinder
+from flexsheet.model.scenes import Scene, load_scene_or_paper
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.twin.timing import LAB
 from messages import Fingertip, ObjectDeformation, topics
 
 __all__ = ["FemParams", "FemNode", "fem_models_as_cylinder"]
-
-
-def fem_models_as_cylinder(sc: Scene) -> bool:
-    """Whether the cylinder FEM path models ``sc``: the paper's cylinder
-    (:func:`flexsheet.model.scenes.is_paper_cylinder`) with the back-half support and no inclusions (its
-    material may differ: E, ν are taken from the scene)."""
-    return is_paper_cylinder(sc) and sc.support.kind == "back_half" and not sc.inclusions
 
 
 def _scene_file(cls, v: str | None) -> str | None:

@@ -60,5 +60,18 @@ def test_topic_and_node_info_from_the_live_graph_as_json(demo_launch):
         assert r.returncode == 1 and "node 'nobody' not heard" in r.stderr and "talker" in r.stderr
         r = _flexsheet("topic", "info", "/nobody", "--launch", str(path))
         assert r.returncode == 1 and "/nobody: no live node" in r.stderr
+        # hz and bw over 2 s of the 50 Hz talker, echo as JSON lines
+        hz = json.loads(_flexsheet("topic", "hz", "/fingertip", "--window", "2", "--json", "--launch", str(path)).stdout)
+        assert 40.0 <= hz["rate_hz"] <= 60.0 and 70 <= hz["messages"] <= 110, hz
+        bw = json.loads(_flexsheet("topic", "bw", "/fingertip", "--window", "2", "--json", "--launch", str(path)).stdout)
+        assert 70 <= bw["messages"] <= 110 and 100 < bw["mean_bytes"] < 2000, bw
+        assert bw["min_bytes"] <= bw["mean_bytes"] <= bw["max_bytes"], bw
+        assert abs(bw["bytes_per_s"] - bw["mean_bytes"] * bw["messages"] / 2.0) < 1e-6 * bw["bytes_per_s"], bw
+        r = _flexsheet("topic", "echo", "/fingertip", "--count", "2", "--json", "--launch", str(path))
+        rows = [json.loads(x) for x in r.stdout.splitlines()]
+        assert len(rows) == 2 and all(m["topic"] == "/fingertip" and m["type"] == "flexsheet/Fingertip" for m in rows)
+        assert rows[1]["header"]["seq"] > rows[0]["header"]["seq"], rows
+        r = _flexsheet("topic", "bw", "/nobody", "--window", "0.5", "--launch", str(path))
+        assert r.returncode == 1 and "no messages" in r.stdout
     finally:
         lf.stop()

@@ -771,3 +771,24 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
                        (["--node-table", "--mesh-check"], "--mesh-check is for")):
         with pytest.raises(SystemExit, match=word):
             X.main(["--out", str(tmp_path / "o"), "--cache-dir", ""] + args)
+
+
+def test_scheduler_address_is_checked_before_any_work(tmp_path):
+    """--scheduler takes a dask scheduler's tcp://HOST:PORT; anything else is refused naming the value, and
+    the local cluster stays the default."""
+    from flexsheet.fem import workers
+
+    with pytest.raises(ValueError, match="tcp://HOST:PORT, got 'localhost:8786'"):
+        workers.set_scheduler("localhost:8786")
+    with pytest.raises(ValueError, match="got 'tcp://h:99999'"):
+        workers.set_scheduler("tcp://h:99999")
+    assert workers.SCHEDULER is None and not workers.parallel(1) and workers.parallel(2)
+    try:
+        workers.set_scheduler("tcp://10.77.0.1:8786")
+        assert workers.parallel(1)
+    finally:
+        workers.set_scheduler(None)
+    from flexsheet.experiments.fem import main
+
+    with pytest.raises(SystemExit, match="--scheduler must be tcp://HOST:PORT"):
+        main(["--quick", "--scheduler", "nowhere", "--out", str(tmp_path)])

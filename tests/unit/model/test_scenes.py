@@ -190,6 +190,8 @@ def _base() -> dict:
     (lambda d: d.update(inclusions=[{"center": [0.0, 0.0, 0.0], "radius": 0.005, "E": 5e4}]),
      "inclusions.0.center", "[0.0, 0.0, 0.0]"),
     (lambda d: d.update(support={"kind": "half_space"}), "support", "'half_space'"),
+    (lambda d: d["use"].update(max_depth=0.01), "use.max_depth", "0.01"),
+    (lambda d: d["use"].update(stroke_depth=0.04), "use", "stroke_depth 0.04 m exceeds max_depth 0.03 m"),
 ])
 def test_bad_scene_is_refused_naming_file_key_and_value(tmp_path, edit, key, value):
     d = _base()
@@ -278,3 +280,17 @@ def test_the_shipped_sphere_table_is_found_under_the_scene_key_and_a_sticking_fi
     # the sphere table's pushes are unloaded to their stable branch, which a sticking finger's anchors forbid
     with pytest.raises(ValueError, match="finger.contact must be 'frictionless'.*'sticking'"):
         sphere_frame(sticky)
+
+
+def test_every_shipped_scene_declares_its_depths_and_they_do_not_change_its_key(tmp_path):
+    """use.max_depth (the FEM's judged range, >= 15 mm) and use.stroke_depth, with the reason; neither is part of
+    the FEM's cache key, nor is the contact law's source."""
+    for name in ("cylinder", "sphere", "rounded_box", "organ"):
+        sc = load_scene(SCENES_DIR / f"{name}.yaml")
+        assert 0.015 <= sc.use.max_depth <= 0.06 and 0 < sc.use.stroke_depth <= sc.use.max_depth, name
+        assert len(sc.use.reason) > 20, name
+    assert load_scene(SCENES_DIR / "cylinder.yaml").use.max_depth == 0.05        # the paper's Fig. 13 push
+    d = _base()
+    d["use"] = {"max_depth": 0.02, "stroke_depth": 0.005, "reason": "another range"}
+    d["finger"]["contact_source"] = "a source"
+    assert load_scene(_write(tmp_path, d)).key() == load_scene(SCENES_DIR / "sphere.yaml").key()
