@@ -364,6 +364,21 @@ def _add_topic_parser(sub) -> None:
         if verb in ("hz", "bw"):
             t.add_argument("--window", type=float, default=5.0, help="s to measure")
         t.set_defaults(func=_tool(f"topic_{verb}"))
+    t = ts.add_parser("pub", help="publish a message (YAML) on a topic to the nodes that subscribe to it",
+                      **_fmt("  flexsheet topic pub /fingertip \"{position: [0.0, 0.0, 0.01], valid: true}\" "
+                             "--times 5 --rate 10\n  flexsheet topic pub /sheet/target \"{...}\" --launch "
+                             "launch/lab.yaml   # refused: guarded by security.publishers"))
+    t.add_argument("topic")
+    t.add_argument("message", nargs="?", default="", help="the message's fields as a YAML map (its type is the "
+                   "topic's; the header is stamped now unless given)")
+    t.add_argument("--times", type=int, default=1, help="messages to publish (default 1)")
+    t.add_argument("--rate", type=float, default=10.0, help="Hz between them (default 10)")
+    t.add_argument("--address", default="127.0.0.1", help="address to publish from, reachable by the nodes "
+                   "(default 127.0.0.1; on a lab host its launch-file address)")
+    t.add_argument("--launch", default=_launch_default(), help="launch file of the graph")
+    t.add_argument("--timeout", type=float, default=2.5, help="s to find the subscribers and for each call")
+    t.add_argument("--json", action="store_true", help="one JSON document on stdout")
+    t.set_defaults(func=_tool("topic_pub"))
 
 
 def _add_node_parser(sub) -> None:
@@ -383,6 +398,50 @@ def _add_node_parser(sub) -> None:
     t.add_argument("--timeout", type=float, default=2.5, help="s to listen for heartbeats")
     t.add_argument("--json", action="store_true", help="one JSON document on stdout")
     t.set_defaults(func=_tool("node_info"))
+
+
+def _add_param_parser(sub) -> None:
+    s = sub.add_parser("param", help="list, get and set the params of a running node",
+                       **_fmt("  flexsheet param list planner\n  flexsheet param get planner stiffness_scale\n"
+                              "  flexsheet param set planner stiffness_scale 0.5"))
+    ps = s.add_subparsers(dest="param_cmd", required=True, metavar="VERB")
+    for verb, helptext, example in (
+            ("list", "every param: type, value, default, description, settable at run time", "list planner --json"),
+            ("get", "one param's value", "get planner stiffness_scale"),
+            ("set", "set a run-time param (others are read-only while the node runs)",
+             "set planner stiffness_scale 0.5")):
+        t = ps.add_parser(verb, help=helptext, **_fmt(f"  flexsheet param {example}"))
+        t.add_argument("node", help="node name (as in the launch file)")
+        if verb != "list":
+            t.add_argument("name", help="param name")
+        if verb == "set":
+            t.add_argument("value", help="the new value (YAML: 0.5, true, [1, 2])")
+        _tool_args(t)
+        t.set_defaults(func=_tool(f"param_{verb}"))
+
+
+def _add_service_parser(sub) -> None:
+    s = sub.add_parser("service", help="list and call the services of a running node",
+                       **_fmt("  flexsheet service list planner\n  flexsheet service call planner param/get "
+                              "\"{name: stiffness_scale}\""))
+    ss = s.add_subparsers(dest="service_cmd", required=True, metavar="VERB")
+    t = ss.add_parser("list", help="the node's services, one line each", **_fmt("  flexsheet service list fem"))
+    t.add_argument("node", help="node name (as in the launch file)")
+    _tool_args(t)
+    t.set_defaults(func=_tool("service_list"))
+    t = ss.add_parser("call", help="call one service with YAML arguments",
+                      **_fmt("  flexsheet service call planner param/get \"{name: stiffness_scale}\""))
+    t.add_argument("node", help="node name (as in the launch file)")
+    t.add_argument("service", help="service name (service list shows them)")
+    t.add_argument("args", nargs="?", default="", help="arguments as a YAML map")
+    _tool_args(t)
+    t.set_defaults(func=_tool("service_call"))
+
+
+def _tool_args(t) -> None:
+    t.add_argument("--launch", default=_launch_default(), help="launch file of the graph")
+    t.add_argument("--timeout", type=float, default=2.5, help="s to find the node and for the reply")
+    t.add_argument("--json", action="store_true", help="one JSON document on stdout")
 
 
 def _add_bag_parser(sub) -> None:
@@ -459,7 +518,7 @@ def build_parser() -> argparse.ArgumentParser:
                "  flexsheet experiment stroke --out out/stroke"))
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add in (_add_launch_parser, _add_run_parser, _add_keys_parser, _add_topic_parser,
-                _add_node_parser, _add_bag_parser, _add_delegate_parsers):
+                _add_node_parser, _add_param_parser, _add_service_parser, _add_bag_parser, _add_delegate_parsers):
         add(sub)
     return p
 

@@ -35,7 +35,8 @@ class Heartbeat(Message):
     ``endpoint``: the node's bound publisher endpoint (``tcp://addr:port``); ``uptime`` s;
     ``state``: "ok", "warn" or "error"; ``message``: last warning/error line (one line);
     ``publishers``/``subscriptions``: :class:`TopicStats`; ``rejected_total``: all rejections;
-    ``last_rejection``: the last rejection reason (one line); ``period``: heartbeat period, s.
+    ``last_rejection``: the last rejection reason (one line); ``period``: heartbeat period, s;
+    ``service_endpoint``: the node's service socket (:mod:`flexsheet.runtime.services`), "" when it has none.
     """
 
     SCHEMA = "flexsheet/Heartbeat"
@@ -54,3 +55,4 @@ class Heartbeat(Message):
     rejected_total: int = 0
     last_rejection: str = ""
     period: float = 1.0
+    service_endpoint: str = ""

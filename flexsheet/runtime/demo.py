@@ -82,6 +82,7 @@ class ListenerNode(Node):
 
     Params = ListenerParams
     node_type = "listener"
+    DYNAMIC_PARAMS = frozenset({"delay"})
 
     async def setup(self) -> None:
         self.subscribe(T.FINGERTIP, self.on_fingertip, qos=QoS(self.params.qos))

@@ -463,6 +463,9 @@ class Node:
     #: every ready socket (:class:`~flexsheet.runtime.transport.ZmqTransport` ``drain_period``) — for nodes that
     #: want the newest of many inputs, not each on time (the Foxglove bridge). No effect in a container.
     DRAIN_PERIOD: ClassVar[float] = 0.0
+    #: the params ``flexsheet param set`` may change while the node runs (the others are read-only at run time);
+    #: the node reads them from ``self.params`` where it uses them, or reacts in :meth:`on_params_set`
+    DYNAMIC_PARAMS: ClassVar[frozenset[str]] = frozenset()
 
     def __init__(self, config: NodeConfig, transport: Transport | None = None) -> None:
         self.config = config
@@ -494,10 +497,25 @@ class Node:
         self.state_message = ""
         self._last_log = 0.0
         self._suppressed = 0
+        self.services = None  # its ServiceServer once running (flexsheet.runtime.services)
+        self._pending_services: dict[str, tuple[Callable, str]] = {}
 
     # ------------------------------------------------------------------ API for subclasses
     async def setup(self) -> None:
         """Create publishers, subscriptions and timers; do heavy precompute here. Override."""
+
+    def on_params_set(self, names: set[str]) -> None:
+        """Called on the loop after ``flexsheet param set`` changed ``names`` (of :attr:`DYNAMIC_PARAMS`) in
+        ``self.params``. Override to react (the default: nothing, the node reads the params where it uses them)."""
+
+    def service(self, name: str, handler: Callable[[dict], Any], doc: str) -> None:
+        """Offer ``handler(args: dict) -> result`` as the service ``name`` (``flexsheet service call NODE name``);
+        it runs on the loop, may be ``async``, returns plain msgpack types and raises ``ValueError`` with one
+        line for a bad request (:mod:`flexsheet.runtime.services`)."""
+        if self.services is not None:
+            self.services.add(name, handler, doc)
+        else:
+            self._pending_services[name] = (handler, doc)
 
     async def teardown(self) -> None:
         """Release resources on shutdown. Override if needed."""
@@ -674,7 +692,8 @@ class Node:
                          node_type=self.config.node_type, host=self.config.host, pid=os.getpid(),
                          endpoint=self.transport.endpoint, uptime=time.monotonic() - self._started, state=state,
                          message=message, publishers=pubs, subscriptions=subs,
-                         rejected_total=self.rejected_total, last_rejection=self.last_rejection, period=period)
+                         rejected_total=self.rejected_total, last_rejection=self.last_rejection, period=period,
+                         service_endpoint=self.services.endpoint if self.services is not None else "")
 
     async def run(self, install_signals: bool = True) -> None:
         """Start the transport, call :meth:`setup`, serve until SIGINT/SIGTERM or :meth:`shutdown`, tear down."""
@@ -687,6 +706,7 @@ class Node:
                 self._loop.add_signal_handler(sig, self._stop.set)
         await self.transport.start(self._on_frames)
         self._hb_pub = self.publisher(T.DIAGNOSTICS)
+        self._start_services()
         try:
             try:
                 await self.setup()
@@ -707,7 +727,49 @@ class Node:
         finally:
             await self._close()
 
+    def _start_services(self) -> None:
+        """Bind the service socket on the publisher's address (none without a TCP endpoint) with the built-in
+        services (:mod:`flexsheet.runtime.services`)."""
+        from flexsheet.runtime.services import ParamServices, ServiceServer
+
+        ep = self.transport.endpoint or ""
+        if not ep.startswith("tcp://"):
+            return
+        ctx = getattr(self.transport, "ctx", None) or getattr(getattr(self._bus, "sub", None), "ctx", None)
+        self.services = srv = ServiceServer(ep.rsplit(":", 1)[0], self.config.curve, ctx)
+        params = ParamServices(self)
+        srv.add("param/list", params.list, "every param: name, type, default, value, description, settable")
+        srv.add("param/get", params.get, "{name}: a param's value")
+        srv.add("param/set", params.set, "{name, value}: set a run-time param (DYNAMIC_PARAMS)")
+        srv.add("graph/connect", self._graph_connect, "{endpoint[, key]}: subscribe to one more publisher (topic pub); "
+                "key: its CURVE public key, one of the launch file's identities")
+        srv.add("graph/disconnect", self._graph_disconnect, "{endpoint}: drop a publisher graph/connect added")
+        for name, (handler, doc) in self._pending_services.items():
+            srv.add(name, handler, doc)
+        srv.start()
+
+    def _transport_links(self):
+        links = getattr(self.transport, "links", None)
+        return links if links is not None else getattr(getattr(self._bus, "sub", None), "links", None)
+
+    def _graph_connect(self, args: dict) -> str:
+        ep = args.get("endpoint")
+        if not isinstance(ep, str) or not ep.startswith("tcp://") or ":" not in ep[6:]:
+            raise ValueError(f"endpoint must be tcp://HOST:PORT, got {ep!r}")
+        links = self._transport_links()
+        if links is None:
+            raise ValueError("this node has no subscriber socket")
+        key = args.get("key")
+        links.add_peer(ep, key.encode() if isinstance(key, str) else None)
+        return ep
+
+    def _graph_disconnect(self, args: dict) -> bool:
+        links = self._transport_links()
+        return bool(links is not None and links.remove_peer(str(args.get("endpoint", ""))))
+
     async def _close(self) -> None:
+        if self.services is not None:
+            self.services.close()
         for task in self._timers:
             task.cancel()
         for lst in self._subs.values():

@@ -23,7 +23,8 @@ from messages import Heartbeat
 from messages import topics as T
 
 __all__ = ["collect_heartbeats", "topic_list", "topic_info", "topic_echo", "topic_hz", "topic_bw", "node_list",
-           "node_info", "containers_of", "graph_topics", "message_json"]
+           "node_info", "containers_of", "graph_topics", "message_json", "param_list", "param_get", "param_set",
+           "service_list", "service_call", "topic_pub"]
 
 
 def _peers(launch: str) -> tuple[list[str], object, set[str]]:
@@ -359,3 +360,215 @@ def _si(x: float) -> str:
             return f"{x:.2f} {unit}" if unit else f"{x:.0f} "
         x /= 1000.0
     return f"{x:.2f} G"         # pragma: no cover - the loop returns
+
+
+# ---------------------------------------------------------------------- services, params, topic pub
+def _node_service(args: argparse.Namespace) -> tuple[str, object, bytes | None] | int:
+    """(service endpoint, the tool's CURVE config, the node's public key) of ``args.node`` from its heartbeat,
+    or an exit code (said on stderr)."""
+    try:
+        lf = load_launch(args.launch)
+    except LaunchError as exc:
+        print(f"flexsheet: {exc}", file=sys.stderr)
+        return 2
+    curve = curve_config(lf, None)
+    beats = asyncio.run(collect_heartbeats(list(lf.endpoints().values()), args.timeout, curve, {args.node}))
+    hb = beats.get(args.node)
+    if hb is None:
+        print(f"node {args.node!r} not heard in {args.timeout:g} s (heard: {', '.join(sorted(beats)) or 'none'}; "
+              f"graph of {args.launch})", file=sys.stderr)
+        return 1
+    if not hb.service_endpoint:
+        print(f"node {args.node!r} offers no services (it has no TCP endpoint)", file=sys.stderr)
+        return 1
+    key = curve.server_keys.get(hb.endpoint) if curve is not None else None
+    return hb.service_endpoint, curve, key
+
+
+def _call(args: argparse.Namespace, service: str, call_args: dict):
+    """(True, result) or (False, exit code) after saying why on stderr."""
+    from flexsheet.runtime.services import ServiceError, call
+
+    found = _node_service(args)
+    if isinstance(found, int):
+        return False, found
+    ep, curve, key = found
+    try:
+        return True, call(ep, service, call_args, args.timeout, curve, key)
+    except ServiceError as exc:
+        print(f"{args.node} {service}: {exc}", file=sys.stderr)
+        return False, 1
+
+
+def _yaml_value(text: str):
+    import yaml
+
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise SystemExit(f"flexsheet: not a YAML value: {text!r} ({' '.join(str(exc).split())[:200]})") from None
+
+
+def param_list(args: argparse.Namespace) -> int:
+    """Every param of a running node: name, type, value, default, settable at run time, description."""
+    ok, rows = _call(args, "param/list", {})
+    if not ok:
+        return rows
+    if args.json:
+        print(json.dumps(rows))
+        return 0
+    for r in rows:
+        mark = "  (settable)" if r["dynamic"] else ""
+        print(f"{r['name']}: {r['type']} = {r['value']!r} (default {r['default']!r}){mark}")
+        if r["description"]:
+            print(f"    {r['description']}")
+    return 0
+
+
+def param_get(args: argparse.Namespace) -> int:
+    """One param's value."""
+    ok, value = _call(args, "param/get", {"name": args.name})
+    if not ok:
+        return value
+    print(json.dumps({"node": args.node, "name": args.name, "value": value}) if args.json else repr(value))
+    return 0
+
+
+def param_set(args: argparse.Namespace) -> int:
+    """Set a run-time param (YAML value); prints the value now in effect."""
+    ok, value = _call(args, "param/set", {"name": args.name, "value": _yaml_value(args.value)})
+    if not ok:
+        return value
+    print(json.dumps({"node": args.node, "name": args.name, "value": value}) if args.json else
+          f"set {args.node}.{args.name} = {value!r}")
+    return 0
+
+
+def service_list(args: argparse.Namespace) -> int:
+    """The services of a running node, one line each."""
+    ok, rows = _call(args, "list", {})
+    if not ok:
+        return rows
+    print(json.dumps(rows) if args.json else "\n".join(f"{k}: {v}" for k, v in rows.items()))
+    return 0
+
+
+def service_call(args: argparse.Namespace) -> int:
+    """Call one service with YAML arguments (a map); prints its result."""
+    call_args = _yaml_value(args.args) if args.args else {}
+    if not isinstance(call_args, dict):
+        print(f"flexsheet: service arguments must be a YAML map, got {args.args!r}", file=sys.stderr)
+        return 2
+    ok, result = _call(args, args.service, call_args)
+    if not ok:
+        return result
+    print(json.dumps(result) if args.json else repr(result))
+    return 0
+
+
+def _message(topic, data: dict, seq: int):
+    """The topic's message from ``data`` (a YAML map), with a header stamped now unless it has one."""
+    import re
+
+    from messages.common import Header
+
+    data = dict(data)
+    data.setdefault("header", {"stamp": time.time(), "frame_id": "display", "seq": seq})
+    if isinstance(data["header"], dict):
+        data["header"] = Header.model_validate(data["header"])
+    props = topic.type.model_json_schema().get("properties", {})
+    for name, f in topic.type.model_fields.items():
+        if f.annotation is np.ndarray and isinstance(data.get(name), list):     # YAML lists → the field's array
+            m = re.search(r"dtype=(\w+)", props.get(name, {}).get("description", ""))
+            data[name] = np.asarray(data[name], dtype=m.group(1) if m and m.group(1) != "any" else None)
+    return topic.type.model_validate(data)
+
+
+def topic_pub(args: argparse.Namespace) -> int:
+    """Publish a message on a topic, ROS 2's ``topic pub``: the message from YAML (its type is the topic's),
+    ``--times`` N at ``--rate`` Hz. The tool binds a publisher and asks every node subscribed to the topic to
+    connect to it (the ``graph/connect`` service), then disconnects them. A topic the launch file guards
+    (``security.publishers``) is refused."""
+    from pydantic import ValidationError
+
+    from flexsheet.runtime.codec import encode
+    from flexsheet.runtime.services import ServiceError, call_async
+
+    by_name = {t.name: t for t in T.ALL}
+    topic = by_name.get(args.topic)
+    if topic is None:
+        print(f"flexsheet: unknown topic {args.topic!r}; topics: {', '.join(sorted(by_name))}", file=sys.stderr)
+        return 2
+    data = _yaml_value(args.message) if args.message else {}
+    if not isinstance(data, dict):
+        print(f"flexsheet: the message must be a YAML map of {topic.type.SCHEMA}'s fields, got {args.message!r}",
+              file=sys.stderr)
+        return 2
+    try:
+        msgs = [_message(topic, data, i) for i in range(args.times)]
+    except ValidationError as exc:
+        e = exc.errors()[0]
+        print(f"flexsheet: {topic.type.SCHEMA} field '{'.'.join(str(x) for x in e['loc'])}': {e['msg']} "
+              f"(value {e.get('input')!r})", file=sys.stderr)
+        return 2
+    try:
+        lf = load_launch(args.launch)
+    except LaunchError as exc:
+        print(f"flexsheet: {exc}", file=sys.stderr)
+        return 2
+    guarded = lf.security.publishers
+    if args.topic in guarded:
+        print(f"flexsheet: {args.topic} is guarded by the launch file (security.publishers): only "
+              f"{', '.join(guarded[args.topic])} may publish it", file=sys.stderr)
+        return 1
+    curve = curve_config(lf, None)
+
+    async def main() -> int:
+        import zmq
+        import zmq.asyncio
+
+        beats = await collect_heartbeats(list(lf.endpoints().values()), args.timeout, curve, set(lf.nodes))
+        subs = {n: hb for n, hb in beats.items()
+                if hb.service_endpoint and any(s.topic == args.topic for s in hb.subscriptions)}
+        if not subs:
+            print(f"no node of the graph of {args.launch} subscribes to {args.topic} now", file=sys.stderr)
+            return 1
+        ctx = zmq.asyncio.Context()
+        pub = ctx.socket(zmq.PUB)
+        pub.setsockopt(zmq.LINGER, 500)
+        if curve is not None:
+            pub.curve_secretkey, pub.curve_publickey, pub.curve_server = curve.secret_key, curve.public_key, True
+        ep = f"tcp://{args.address}:{pub.bind_to_random_port('tcp://' + args.address)}"
+        reached = []
+        try:
+            for n, hb in subs.items():
+                key = curve.server_keys.get(hb.endpoint) if curve is not None else None
+                try:
+                    await call_async(hb.service_endpoint, "graph/connect",
+                                     {"endpoint": ep, **({"key": curve.public_key.decode()} if curve else {})},
+                                     args.timeout, curve, key)
+                    reached.append(n)
+                except ServiceError as exc:
+                    print(f"{n}: {exc}", file=sys.stderr)
+            await asyncio.sleep(0.5)            # the subscriptions travel to this publisher
+            for i, msg in enumerate(msgs):
+                await pub.send_multipart(encode(args.topic, msg))
+                if i + 1 < len(msgs):
+                    await asyncio.sleep(1.0 / args.rate)
+            await asyncio.sleep(0.2)
+        finally:
+            for n in reached:
+                hb = subs[n]
+                key = curve.server_keys.get(hb.endpoint) if curve is not None else None
+                try:
+                    await call_async(hb.service_endpoint, "graph/disconnect", {"endpoint": ep}, args.timeout, curve, key)
+                except ServiceError:
+                    pass
+            pub.close()
+            ctx.term()
+        out = {"topic": args.topic, "type": topic.type.SCHEMA, "published": len(msgs), "subscribers": reached}
+        print(json.dumps(out) if args.json else
+              f"published {len(msgs)} x {topic.type.SCHEMA} on {args.topic} to {', '.join(reached) or 'nobody'}")
+        return 0 if reached else 1
+
+    return asyncio.run(main())

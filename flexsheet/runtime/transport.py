@@ -461,6 +461,13 @@ class ZmqTransport(Transport):
             self.peers.append(endpoint)
             self.links.add_peer(endpoint)
 
+    def remove_peer(self, endpoint: str) -> bool:
+        """Disconnect from an endpoint :meth:`add_peer` added; False when it was not a peer."""
+        if endpoint in self.peers and self.links is not None:
+            self.peers.remove(endpoint)
+            return self.links.remove_peer(endpoint)
+        return False
+
     def link_report(self) -> str:
         return self.links.report() if self.links is not None else ""
 
@@ -600,6 +607,12 @@ class LinkWatch:
         """Watch one more endpoint (connected by the caller)."""
         if endpoint not in self.links:
             self.links[endpoint] = _Link(endpoint, _monotonic())
+
+    def remove(self, endpoint: str) -> None:
+        """Stop watching an endpoint (disconnected by the caller)."""
+        link = self.links.pop(endpoint, None)
+        if link is not None:
+            self._busy.discard(link)
 
     def poll(self, now: float | None = None) -> None:
         """Read the monitor's events and connect again to every endpoint whose session is gone."""
@@ -803,12 +816,32 @@ class SubLinks:
             if allowed:
                 self.guarded[allowed][0].setsockopt(option, topic)
 
-    def add_peer(self, endpoint: str) -> None:
-        """Connect the socket of every peer to one more endpoint (a tool that discovers late)."""
+    def add_peer(self, endpoint: str, server_key: bytes | None = None) -> None:
+        """Connect the socket of every peer to one more endpoint (a tool that discovers late). With CURVE the
+        endpoint's publisher must prove ``server_key`` (default: the key the launch file lists for it), which
+        must be one of the graph's identities; raises ``ValueError`` otherwise."""
         if endpoint not in self.peers:
+            if self.curve is not None:
+                key = server_key or self.curve.server_keys.get(endpoint)
+                if key is None or (server_key is not None and key not in self.curve.allowed_clients):
+                    raise ValueError(f"CURVE is on: {endpoint} needs the public key of one of the launch file's "
+                                     "identities")
+                self.sock.curve_serverkey = key
             self.peers.append(endpoint)
             self.sock.connect(endpoint)
             self.watch.add(endpoint)
+
+    def remove_peer(self, endpoint: str) -> bool:
+        """Disconnect from an endpoint :meth:`add_peer` added; False when it was not a peer."""
+        if endpoint not in self.peers:
+            return False
+        self.peers.remove(endpoint)
+        self.watch.remove(endpoint)
+        try:
+            self.sock.disconnect(endpoint)
+        except zmq.ZMQError:            # never connected (a malformed or refused endpoint)
+            pass
+        return True
 
     def drain(self, handler: FramesHandler) -> None:
         """Hand every waiting message of every socket to ``handler`` (:func:`drain_sub`), less the guarded

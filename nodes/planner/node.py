@@ -30,6 +30,7 @@ planner (:meth:`~flexsheet.planning.surface_planner.SurfacePlanner.update`).
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import replace
 
 import numpy as np
 from pydantic import Field
@@ -141,6 +142,12 @@ class PlannerNode(Node):
 
     Params = PlannerParams
     node_type = "planner"
+    DYNAMIC_PARAMS = frozenset({"stiffness_scale", "use_prediction"})
+
+    def on_params_set(self, names: set[str]) -> None:
+        """``stiffness_scale`` reaches the planner's config (``use_prediction`` is read per fingertip)."""
+        if "stiffness_scale" in names and getattr(self, "planner", None) is not None:
+            self.planner.cfg = replace(self.planner.cfg, stiffness_scale=self.params.stiffness_scale)
 
     async def setup(self) -> None:
         p: PlannerParams = self.params

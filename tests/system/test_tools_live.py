@@ -75,3 +75,48 @@ def test_topic_and_node_info_from_the_live_graph_as_json(demo_launch):
         assert r.returncode == 1 and "no messages" in r.stdout
     finally:
         lf.stop()
+
+
+def test_params_services_and_topic_pub_on_the_live_graph(demo_launch):
+    """param list/get/set and service list/call reach a running node through its service socket (found in its
+    heartbeat); a read-only or out-of-range param and an unknown service are refused with one line, and the node
+    keeps running; topic pub delivers exactly the messages it publishes to the subscribing node."""
+    import json
+
+    path = demo_launch(rate=5.0)
+    lf = Launch(path)
+    try:
+        lf.wait_for(r"heard seq=", count=2)
+        services = json.loads(_flexsheet("service", "list", "listener", "--json", "--launch", str(path)).stdout)
+        assert {"param/list", "param/get", "param/set", "graph/connect", "list"} <= set(services), services
+        rows = {r["name"]: r for r in json.loads(_flexsheet("param", "list", "listener", "--json", "--launch",
+                                                            str(path)).stdout)}
+        assert rows["delay"]["value"] == 0.0 and rows["delay"]["dynamic"] and rows["delay"]["type"] == "float"
+        assert rows["qos"]["value"] == "keep_all" and not rows["qos"]["dynamic"]
+        r = _flexsheet("param", "set", "listener", "delay", "0.002", "--launch", str(path))
+        assert r.returncode == 0 and "set listener.delay = 0.002" in r.stdout, r.stderr
+        got = json.loads(_flexsheet("param", "get", "listener", "delay", "--json", "--launch", str(path)).stdout)
+        assert got["value"] == 0.002
+        r = _flexsheet("param", "set", "listener", "qos", "latest", "--launch", str(path))
+        assert r.returncode == 1 and "param 'qos' is read-only at run time" in r.stderr, r.stderr
+        r = _flexsheet("param", "set", "listener", "delay", "-1", "--launch", str(path))
+        assert r.returncode == 1 and "param 'delay'" in r.stderr and "greater than or equal to 0" in r.stderr
+        r = _flexsheet("service", "call", "listener", "nope", "--launch", str(path))
+        assert r.returncode == 1 and "no service 'nope'" in r.stderr
+        r = _flexsheet("param", "get", "nobody", "x", "--timeout", "1", "--launch", str(path))
+        assert r.returncode == 1 and "node 'nobody' not heard" in r.stderr
+        # topic pub: three fingertips at x = 0.777 m reach the listener, and only three
+        msg = ("{position: [0.777, 0.0, 0.0], covariance: [[1.0e-8, 0, 0], [0, 1.0e-8, 0], [0, 0, 1.0e-8]], "
+               "valid: true, predicted_position: [0.777, 0.0, 0.0], exposure_stamp: 0.0}")
+        r = _flexsheet("topic", "pub", "/fingertip", msg, "--times", "3", "--rate", "20", "--json", "--launch", str(path))
+        assert r.returncode == 0, r.stderr
+        assert json.loads(r.stdout) == {"topic": "/fingertip", "type": "flexsheet/Fingertip", "published": 3,
+                                        "subscribers": ["listener"]}
+        lf.wait_for(r"x=0\.777", count=3)
+        time.sleep(0.5)
+        assert sum("x=0.777" in line for line in lf.lines) == 3
+        r = _flexsheet("topic", "pub", "/fingertip", "{position: [1, 2]}", "--launch", str(path))
+        assert r.returncode == 2 and "field 'position'" in r.stderr, r.stderr
+        assert lf.proc.poll() is None                       # the node took every bad request and runs on
+    finally:
+        lf.stop()
