@@ -11,6 +11,7 @@ that velocity as feed-forward (:mod:`flexsheet.arm.limiter`), within the joint l
 
 from __future__ import annotations
 
+import math
 from enum import StrEnum
 
 import numpy as np
@@ -74,6 +75,29 @@ class TargetTracker:
         self.refused = 0
         self._history: list[tuple[float, np.ndarray]] = []   # (source stamp, goal) of the last accepted goals
         self.velocity = np.zeros(6)
+        #: (6,) rad: a goal a service set (hold, home, move-to); while set, targets are not followed
+        self.manual: np.ndarray | None = None
+
+    def move_to(self, q) -> np.ndarray:
+        """Stream to joints ``q`` (6,) rad and stay there, ignoring targets until :meth:`release`. Raises
+        ``ValueError`` naming the joint outside the kinematics' limits."""
+        q = self.kin.check_q(q)
+        bad = [f"J{i + 1} {math.degrees(v):.1f} deg outside [{math.degrees(lo):.1f}, {math.degrees(hi):.1f}]"
+               for i, (v, lo, hi) in enumerate(zip(q, self.kin.q_lower, self.kin.q_upper, strict=True))
+               if not lo - 1e-9 <= v <= hi + 1e-9]
+        if bad:
+            raise ValueError("joints outside the limits (with the bridge's margin): " + "; ".join(bad))
+        self.manual = q.copy()
+        self.goal = self.manual.copy()
+        self.velocity = np.zeros(6)
+        self._history.clear()
+        return self.manual
+
+    def release(self) -> None:
+        """Follow targets again (from the next one; the arm holds where it is until then)."""
+        self.manual = None
+        self.last_target_at = None
+        self._history.clear()
 
     def seed(self, q) -> None:
         """Start IK from joints ``q`` (6,) rad (the measured joints) if no goal exists yet."""
@@ -128,7 +152,10 @@ class TargetTracker:
         self.velocity = (t @ (q - q.mean(axis=0))) / float(t @ t)
 
     def status(self, now: float) -> str:
-        """"ok", "hold:no_target" (none yet or timed out) or "hold:<ik status>" (last target refused)."""
+        """"ok", "hold:no_target" (none yet or timed out), "hold:<ik status>" (last target refused) or
+        "manual" (a service's goal, :meth:`move_to`)."""
+        if self.manual is not None:
+            return "manual"
         if self.last_target_at is None or now - self.last_target_at > self.target_timeout:
             return BridgeStatus.NO_TARGET
         return BridgeStatus.OK if self.ik_status == "ok" else f"hold:{self.ik_status}"
@@ -138,6 +165,8 @@ class TargetTracker:
         fresh, the IK goal moved on at :attr:`velocity` for the time since it arrived (at most
         :data:`EXTRAPOLATE_MAX_S`); else ``q_command`` at rest (hold where the command is: the limiter brakes
         to a stop)."""
+        if self.manual is not None:
+            return self.manual, np.zeros(6)
         if self.goal is None or self.status(now) == BridgeStatus.NO_TARGET:
             return q_command, np.zeros(6)
         ahead = min(max(now - self.last_target_at, 0.0), EXTRAPOLATE_MAX_S)

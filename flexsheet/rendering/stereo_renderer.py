@@ -244,6 +244,16 @@ class StereoRenderer:
             self.ctx.copy_framebuffer(self.fbo, self.msaa)
         self.ctx.finish()
 
+    def show_image(self, image: np.ndarray) -> None:
+        """Put ``image`` (H, W, 3) uint8 RGB, top row first, the projector's size, in both eyes' halves of the
+        frame instead of a rendered pair (registration patterns). Raises ``ValueError`` for another shape."""
+        W, H = self.projector.width, self.projector.height
+        img = np.asarray(image)
+        if img.shape != (H, W, 3) or img.dtype != np.uint8:
+            raise ValueError(f"image must be ({H}, {W}, 3) uint8, got {img.shape} {img.dtype}")
+        pair = np.ascontiguousarray(np.concatenate([img, img], axis=1)[::-1])
+        self.fbo.color_attachments[0].write(pair.tobytes())
+
     def read_pair(self, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """(left, right) uint8 RGB images (h, w, 3), top row first, downscaled by ``scale`` ∈ (0, 1] (area)."""
         if not (0.0 < scale <= 1.0):

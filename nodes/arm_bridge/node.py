@@ -138,6 +138,46 @@ class ArmBridgeNode(Node):
             self.timer(p.period, self._sim_cycle)
         else:
             self.stream.start()
+        self._q_measured: np.ndarray | None = None
+        self.service("hold", self.srv_hold, "stop following targets and stay where the arm is; returns its joints, rad")
+        self.service("home", self.srv_home, "move to the home sheet's clamp pose (IK), within the speed limits")
+        self.service("move_to", self.srv_move_to, "{joints: [6] rad} or {pose: 4x4 clamp pose, m, display frame}: "
+                     "move there within the speed limits and stay")
+        self.service("release", self.srv_release, "follow the targets again")
+
+    def _require_state(self) -> np.ndarray:
+        if self._q_measured is None:
+            raise ValueError(f"the {self.params.arm} arm's controller has not reported its joints yet")
+        return self._q_measured
+
+    def _ik(self, T, what: str) -> np.ndarray:
+        res = self.kin.ik(np.asarray(T, float), self._require_state(), max_jump=10.0)
+        if not res.ok:
+            raise ValueError(f"{what} is unreachable for the {self.params.arm} arm: {res.status}")
+        return res.q
+
+    def srv_hold(self, args: dict) -> list[float]:
+        return self.tracker.move_to(self._require_state()).tolist()
+
+    def srv_home(self, args: dict) -> list[float]:
+        from flexsheet.model.sheet import clamp_poses
+
+        left, right = clamp_poses(np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), 0.05)
+        return self.tracker.move_to(self._ik(left if self.params.arm == "left" else right, "the home pose")).tolist()
+
+    def srv_move_to(self, args: dict) -> list[float]:
+        if ("joints" in args) == ("pose" in args):
+            raise ValueError("move_to takes one of joints ([6] rad) or pose (4x4, m, display frame)")
+        if "joints" in args:
+            return self.tracker.move_to(args["joints"]).tolist()
+        T = np.asarray(args["pose"], float)
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+            raise ValueError(f"pose must be a finite 4x4 matrix, got shape {T.shape}")
+        return self.tracker.move_to(self._ik(T, "the pose")).tolist()
+
+    def srv_release(self, args: dict) -> str:
+        self.tracker.release()
+        return "following targets"
 
     async def _sim_cycle(self) -> None:
         await self.stream.step(self.now())
@@ -151,6 +191,9 @@ class ArmBridgeNode(Node):
         """New clamp target: IK now (or once the first controller state arrived)."""
         if msg.arm != self.params.arm:
             raise InputRejected(f"ArmTarget.arm={msg.arm!r} on the {self.params.arm} arm's topic")
+        if self.tracker.manual is not None:
+            raise InputRejected(f"the {self.params.arm} arm is held by a service (hold/home/move_to); "
+                                "`release` to follow targets")
         if self.tracker.goal is None:
             self._pending = msg
             return
@@ -177,6 +220,7 @@ class ArmBridgeNode(Node):
         if st is None:
             return
         q = st.position
+        self._q_measured = np.asarray(q, float)
         self.pub.publish(ArmJointState(
             header=self.pub.header("display"), arm=self.params.arm, position=q, velocity=st.velocity,
             commanded=rep.commanded, executing=st.active, pose=self.fk_kin.fk(q), status=st.status, fault=st.fault,

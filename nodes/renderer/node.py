@@ -153,6 +153,10 @@ class RendererNode(Node):
             (self.log.warning if loud else self.log.info)("%s", line)
         self.eye = geo.eye
         self.projector = geo.projector
+        self._image = None          # an image show_image set, drawn instead of the scene
+        self.service("show_image", self.srv_show_image, "{path}: show an image file in both eyes (registration "
+                     "patterns) instead of the scene, scaled to the projector")
+        self.service("clear_image", self.srv_clear_image, "draw the scene again")
         check_screen(self.eye, self.projector.position, paper.SCREEN_POINT, paper.SCREEN_NORMAL)
         self.sheet_config = SheetConfig(half_width=p.sheet_half_width, push_threshold=p.push_threshold,
                                         fine_modes=p.fine_modes, tension_ratio=p.tension_ratio,
@@ -489,10 +493,44 @@ class RendererNode(Node):
         self._request()
 
     # ------------------------------------------------------------------ drawing (GL / window thread)
+    def srv_show_image(self, args: dict) -> dict:
+        """``{path}``: show an image file (any size: scaled to the projector's, nearest neighbour for patterns)
+        in both eyes instead of the scene, until ``clear_image``."""
+        import cv2
+
+        path = args.get("path")
+        if not isinstance(path, str) or not path:
+            raise ValueError(f"show_image needs 'path' (an image file), got {path!r}")
+        img = cv2.imread(path, cv2.IMREAD_COLOR)
+        if img is None:
+            raise ValueError(f"cannot read an image from {path!r}")
+        W, H = self.projector.width, self.projector.height
+        if img.shape[:2] != (H, W):
+            img = cv2.resize(img, (W, H), interpolation=cv2.INTER_NEAREST)
+        self._image = img[:, :, ::-1].copy()        # BGR → RGB
+        self._request()
+        return {"path": path, "size": [W, H]}
+
+    def srv_clear_image(self, args: dict) -> str:
+        self._image = None
+        self._request()
+        return "drawing the scene"
+
     def _frame(self, publish: bool = True) -> RenderedFrame | None:
-        """Correct and draw the pair for the newest inputs; read it back if ``publish``."""
+        """Correct and draw the pair for the newest inputs (or the image ``show_image`` set); read it back if
+        ``publish``."""
         p: RendererParams = self.params
         t0 = time.perf_counter()
+        image = self._image
+        if image is not None:
+            self.renderer.show_image(image)
+            if not publish:
+                return None
+            left, right = self.renderer.read_pair(p.publish_scale)
+            self.frames += 1
+            return RenderedFrame(header=self.pub.header("projector"), left=left, right=right, scale=p.publish_scale,
+                                 correction="image", render_time=time.perf_counter() - t0,
+                                 source_stamp=self.state.source_stamp)
         mesh = self.state.take_mesh()
         stamp = self.state.source_stamp
         if mesh is not None:

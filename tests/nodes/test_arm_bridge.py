@@ -327,3 +327,54 @@ def test_stream_stop_ends_the_loop_when_a_cancellation_is_swallowed():
         return link.swallowed
 
     assert asyncio.run(scenario()) == 1
+
+
+def test_arm_services_hold_move_to_home_and_release_within_the_limits():
+    """The bridge's services (flexsheet service call arm_left hold|move_to|home|release): hold stays where the arm
+    is and refuses targets; move_to streams to the joints within the speed limit; a joint outside its limit or an
+    unreachable pose is refused naming it and nothing moves; home reaches the home sheet's clamp pose; release
+    follows targets again."""
+    async def scenario():
+        twin = await start_twin("left")
+        params = {"arm": "left", "port": twin.port, "backoff_min": 0.02, "backoff_max": 0.1, "target_timeout": 1.0}
+        try:
+            async with NodeHarness(ArmBridgeNode, params=params, name="arm_left") as h:
+                svc = h.node._pending_services
+                call = {name: handler for name, (handler, _) in svc.items()}
+                await asyncio.sleep(0.1)
+                q0 = np.array(call["hold"]({}))
+                h.inject(topics.ARM_LEFT_TARGET, target("left", 0.2, stamp=1.0))
+                await asyncio.sleep(0.2)
+                assert np.max(np.abs(twin.core.servo.q - q0)) < 1e-6            # held: the target was refused
+                assert h.node.rejected_total >= 1 and "held by a service" in h.node.last_rejection
+                goal = q0 + np.array([0.1, -0.05, 0.05, 0.0, 0.0, 0.1])
+                t0 = time.monotonic()
+                call["move_to"]({"joints": goal.tolist()})
+                twin.core.target_log = []
+                while np.max(np.abs(twin.core.servo.q - goal)) > 1e-3 and time.monotonic() - t0 < 5.0:
+                    await asyncio.sleep(0.02)
+                assert np.max(np.abs(twin.core.servo.q - goal)) <= 1e-3
+                assert _max_step(twin.core.target_log) <= 1.0 + 1e-6                # within the speed limit
+                for bad, why in (({"joints": [0.0, 0.0, 3.0, 0.0, 0.0, 0.0]}, "J3"),
+                                 ({"pose": np.eye(4).tolist()}, "unreachable"),
+                                 ({}, "one of joints")):
+                    try:
+                        call["move_to"](bad)
+                        raise AssertionError(f"{bad} accepted")
+                    except ValueError as exc:
+                        assert why in str(exc), exc
+                assert np.max(np.abs(h.node.tracker.manual - goal)) < 1e-12          # the refusals moved nothing
+                q_home = np.array(call["home"]({}))
+                while np.max(np.abs(twin.core.servo.q - q_home)) > 1e-3 and time.monotonic() - t0 < 10.0:
+                    await asyncio.sleep(0.02)
+                want = clamp_pose("left", 0.0)
+                assert np.linalg.norm(h.node.fk_kin.fk(twin.core.servo.q)[:3, 3] - want[:3, 3]) < 1e-3
+                call["release"]({})
+                for k in range(10):
+                    h.inject(topics.ARM_LEFT_TARGET, target("left", 0.002 * k, stamp=10.0 + k))
+                    await asyncio.sleep(0.02)
+                await asyncio.sleep(0.3)
+                assert h.node.tracker.status(h.node.now()) == "ok"
+        finally:
+            await twin.stop()
+    asyncio.run(scenario())

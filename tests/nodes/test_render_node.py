@@ -154,3 +154,31 @@ def test_window_output_params_are_validated(monkeypatch):
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "glfw" else real(name, *a))
     with pytest.raises(pydantic.ValidationError, match="glfw"):
         RendererParams(output="window")
+
+
+def test_show_image_replaces_the_scene_in_both_eyes_until_cleared(tmp_path):
+    """The renderer's show_image service (registration patterns through the projector): any image file, scaled
+    to the projector with nearest neighbour, fills both eyes of the published pair; a bad path is refused naming
+    it and the scene stays; clear_image draws the scene again."""
+    import cv2
+
+    pattern = np.zeros((48, 64, 3), np.uint8)
+    pattern[:, 32:] = (255, 0, 0)                        # RGB: the right half red
+    cv2.imwrite(str(tmp_path / "p.png"), pattern[:, :, ::-1])
+
+    async def scenario():
+        async with NodeHarness(RendererNode, params=PARAMS) as h:
+            call = {n: f for n, (f, _) in h.node._pending_services.items()}
+            await next_frame(h)
+            with pytest.raises(ValueError, match="cannot read an image from '/nope.png'"):
+                call["show_image"]({"path": "/nope.png"})
+            assert call["show_image"]({"path": str(tmp_path / "p.png")}) == {"path": str(tmp_path / "p.png"),
+                                                                           "size": [128, 96]}
+            m, _ = await frame_with(h, "image", timeout=10.0)
+            for img in (m.left, m.right):                    # published at scale 0.5: 64 x 48, the pattern itself
+                assert img.shape == (48, 64, 3)
+                assert np.array_equal(img, pattern), np.abs(img.astype(int) - pattern).max()
+            call["clear_image"]({})
+            m, _ = await frame_with(h, "flat", timeout=10.0)
+            assert m.left.max() > 100 and not np.array_equal(m.left, pattern)
+    asyncio.run(scenario())
