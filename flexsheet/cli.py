@@ -474,6 +474,7 @@ def _add_bag_parser(sub) -> None:
                              "exit status 1 if the bag is damaged (a 'damaged:' line) or cut short ('cut:'), "
                              "2 if it is not MCAP"))
     t.add_argument("file")
+    t.add_argument("--json", action="store_true", help="one JSON document on stdout (same exit status)")
     t.set_defaults(func=_bag("cmd_info"))
     t = bs.add_parser("export", help="transcode to JSON-encoded MCAP for Foxglove/Lichtblick, with the 3-D scene",
                       **_fmt("  flexsheet bag export run.mcap run_json.mcap     # open run_json.mcap in Foxglove\n"

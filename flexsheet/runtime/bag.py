@@ -284,12 +284,34 @@ def print_damage(s: BagSummary, out=sys.stdout) -> None:
                   f"{f'{lost:.2f} s' if lost is not None else 'unknown time'} without recording", file=out)
 
 
+def _plain(o):
+    """JSON-able: mapping keys as strings ("a/b" for a tuple), tuples as lists."""
+    if isinstance(o, dict):
+        return {"/".join(map(str, k)) if isinstance(k, tuple) else str(k): _plain(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_plain(v) for v in o]
+    return o
+
+
 def cmd_info(args: argparse.Namespace) -> int:
     try:
         s = bag_info(args.file)
     except (ValueError, OSError) as exc:
         return _fail("info", exc)
     size = Path(args.file).stat().st_size
+    if getattr(args, "json", False):
+        import dataclasses
+        import json
+
+        dur = s.end - s.start if s.end > s.start else 0.0
+        print(json.dumps({
+            "file": str(args.file), "bytes": size, "start": s.start, "end": s.end, "duration_s": dur,
+            "topics": {t: {"count": n, "rate_hz": n / dur if dur else 0.0, "type": s.schemas.get(t, ""),
+                           "encoding": s.encodings.get(t, "")} for t, n in sorted(s.counts.items())},
+            "dropped": dict(s.dropped), "malformed": dict(s.malformed),
+            "damaged": [_plain(dataclasses.asdict(d)) if dataclasses.is_dataclass(d) else str(d) for d in s.damaged],
+            "truncated": s.truncated, "cut_bytes": s.cut_bytes}, default=str))
+        return 1 if s.damaged or s.truncated else 0
     print(f"file:      {args.file} ({size / 1e6:.2f} MB)")
     print(f"duration:  {s.end - s.start:.3f} s  (start {_when(s.start)}, end {_when(s.end)})" if s.end
           else "duration:  - (no messages)")

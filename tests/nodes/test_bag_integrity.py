@@ -191,6 +191,13 @@ def test_flipped_bytes_in_one_chunk_lose_that_chunk_only_and_bag_info_says_so(tm
     assert f"{len(lost)} messages lost" in line and "1 unreadable part" in line
     assert f"{T.STEREO.name} {len(lost)}" in out.stdout
     assert _flexsheet("bag", "info", str(path)).returncode == 0
+    import json                                                     # --json: the same facts, the same status
+    out = _flexsheet("bag", "info", str(bad), "--json")
+    assert out.stdout.startswith("{"), (out.stdout[-500:], out.stderr[-1500:])
+    j = json.loads(out.stdout)
+    assert out.returncode == 1 and j["topics"][T.STEREO.name]["count"] == 400 - len(lost)
+    assert len(j["damaged"]) == 1 and j["damaged"][0]["offset"] == ci.chunk_start_offset and not j["truncated"]
+    assert json.loads(_flexsheet("bag", "info", str(path), "--json").stdout)["topics"][T.STEREO.name]["count"] == 400
 
 
 def test_a_damaged_chunk_length_in_a_cut_bag_skips_to_the_next_chunk(tmp_path):
