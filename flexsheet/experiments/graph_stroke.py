@@ -120,7 +120,8 @@ def main(argv: list[str] | None = None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
                                  epilog="example: flexsheet experiment stroke --out docs/figures/stroke\n"
                                         "         flexsheet experiment stroke --out /tmp/s --seeds 0 --set "
-                                        "triangulator.tracking_index=0.3")
+                                        "triangulator.tracking_index=0.3\n"
+                                        "         flexsheet experiment stroke --stability --out docs/figures/stroke/stability")
     ap.add_argument("--out", required=True, help="output folder (seed<N>/, summary.json, stroke.png, stroke.json)")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="truth seeds (default 0 1 2)")
     ap.add_argument("--duration", type=float, default=60.0,
@@ -128,8 +129,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--launch", default=str(ROOT / "launch" / "sim.yaml"), help="launch file (clock: sim)")
     ap.add_argument("--set", action="append", default=[], metavar="NODE.KEY=VALUE",
                     help="a param override passed to each run (flexsheet launch --set)")
+    ap.add_argument("--stability", action="store_true",
+                    help="instead: felt Δθ against camera noise, delay, marker loss and arm-base error, one at a "
+                         "time on truth seed 0, with each breaking point (flexsheet.experiments.graph_stability)")
     args = ap.parse_args(argv)
     out = Path(args.out)
+    if args.stability:
+        from flexsheet.experiments.graph_stability import run_stability
+
+        res = run_stability(out, Path(args.launch), args.seeds[0], log=lambda line: print(line, flush=True))
+        for name, e in res["errors"].items():
+            print(f"[stability] {name}: breaks the paper at {e['breaks_paper_at']}, the target at "
+                  f"{e['breaks_target_at']}", flush=True)
+        print(f"[stability] wrote {out}/stability.json, stability.png", flush=True)
+        return 0
     extra = [a for kv in args.set for a in ("--set", kv)]
     summaries = {}
     for seed in args.seeds:

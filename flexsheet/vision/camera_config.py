@@ -22,8 +22,9 @@ class CameraConfig:
     ``calib_file``, ``width``/``height`` px, ``focal_mm``, ``pixel_um``, ``baseline`` m); the twin's sensing
     (``None``: the realism's value: ``noise_dn``, ``shot_gain``, ``blur_px``, ``self_occlusion``,
     ``background_gain``, ``finger_dir``, ``drop_rate``; and ``noise_scale``, ``exposure_s``,
-    ``blur_samples``, ``clutter``, ``seed``, the standalone trajectory ``traj_*``); ``preview_rate`` Hz of the
-    decimated pairs on ``/camera/stereo_preview`` (0: off)."""
+    ``blur_samples``, ``clutter``, ``seed``, the standalone trajectory ``traj_*``); ``link_delay_s``: the twin's
+    link, extra delay from exposure to the frame in the graph, s (simulated clock only: stability sweeps);
+    ``preview_rate`` Hz of the decimated pairs on ``/camera/stereo_preview`` (0: off)."""
 
     source: Annotated[str, Field(pattern="^(sim|device|files|genicam)$")] = "sim"
     rate_hz: Annotated[float, Field(gt=0.0, le=1000.0)] = 48.0
@@ -45,6 +46,7 @@ class CameraConfig:
     finger_dir: tuple[float, float, float] | None = None
     drop_rate: Annotated[float | None, Field(ge=0.0, lt=1.0)] = None
     exposure_s: Annotated[float, Field(ge=0.0, le=0.05)] = 0.004
+    link_delay_s: Annotated[float, Field(ge=0.0, le=1.0)] = 0.0
     blur_samples: Annotated[int, Field(ge=1, le=50)] = 5
     clutter: bool = True
     seed: int = 0

@@ -230,7 +230,10 @@ class CameraNode(Node):
             self.subscribe(topics.FINGER_TRUTH, self.on_truth, qos=QoS.LATEST)
             # simulated clock: the pair leaves readout + transfer after mid-exposure (flexsheet/twin/timing.py)
             w, h = (int(v) for v in calib["image_size"])
-            self.timer(1.0 / p.rate_hz, self.on_sim_tick, sim_cost=LAB.camera_latency(p.exposure_s, w, h))
+            if p.link_delay_s > 0 and not self.clock.simulated:
+                raise ValueError(f"link_delay_s {p.link_delay_s:g} needs the simulated clock (launch file clock: sim)")
+            self.timer(1.0 / p.rate_hz, self.on_sim_tick,
+                       sim_cost=LAB.camera_latency(p.exposure_s, w, h) + p.link_delay_s)
         elif p.source == "genicam":
             from nodes.camera.genicam import GenICamConfig, GenICamStereo
 

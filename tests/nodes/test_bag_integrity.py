@@ -5,6 +5,7 @@ chunk CRCs and skips only a damaged chunk; a bag cut by kill -9 is recovered for
 from __future__ import annotations
 
 import asyncio
+import json
 import subprocess
 import sys
 import time
@@ -191,8 +192,7 @@ def test_flipped_bytes_in_one_chunk_lose_that_chunk_only_and_bag_info_says_so(tm
     assert f"{len(lost)} messages lost" in line and "1 unreadable part" in line
     assert f"{T.STEREO.name} {len(lost)}" in out.stdout
     assert _flexsheet("bag", "info", str(path)).returncode == 0
-    import json                                                     # --json: the same facts, the same status
-    out = _flexsheet("bag", "info", str(bad), "--json")
+    out = _flexsheet("bag", "info", str(bad), "--json")               # --json: the same facts, the same status
     assert out.stdout.startswith("{"), (out.stdout[-500:], out.stderr[-1500:])
     j = json.loads(out.stdout)
     assert out.returncode == 1 and j["topics"][T.STEREO.name]["count"] == 400 - len(lost)

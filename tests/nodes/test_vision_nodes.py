@@ -174,3 +174,21 @@ def test_camera_node_falls_back_to_trajectory_bumblebee2():
             truth, _ = default_trajectory(f.exposure_stamp - h.node._t0)
             assert res.valid and np.linalg.norm(res.position - truth) < 2e-3
     asyncio.run(scenario())
+
+
+def test_camera_link_delay_needs_the_simulated_clock():
+    """link_delay_s (the stability sweep's delay) is charged on the simulated clock only; on the wall clock the
+    camera twin refuses it at set-up, naming it, and a negative one is refused by the params."""
+    import pydantic
+    import pytest
+
+    from flexsheet.runtime.node import ConfigError
+
+    async def scenario():
+        async with NodeHarness(CameraNode, params={"rate_hz": 50.0, "twin": IDEAL, "link_delay_s": 0.05}):
+            pass
+
+    with pytest.raises((ValueError, ConfigError), match="link_delay_s 0.05 needs the simulated clock"):
+        asyncio.run(scenario())
+    with pytest.raises(pydantic.ValidationError, match="link_delay_s"):
+        CameraNode.Params.model_validate({"link_delay_s": -0.01})

@@ -191,3 +191,28 @@ def test_report_text_leaves_dd_2r_blank_on_a_shape_with_no_radius():
     line30 = next(li for li in text.splitlines() if li.startswith("30 s"))
     assert line10.split()[2:6] == ["0.500", "0.250", "-", "1.250"], line10
     assert line30.split()[2:6] == ["0.500", "0.250", "0.875", "1.250"], line30
+
+
+def test_graph_stability_sets_one_error_at_a_time_and_finds_where_it_breaks(tmp_path):
+    """flexsheet experiment stroke --stability: each error reaches the graph as one launch override (camera noise,
+    the camera link's delay in s, lost frames); the breaking points come from the felt rows; the chart says them."""
+    import json
+
+    from flexsheet.experiments.graph_stability import SWEEPS, _sets, chart
+    from flexsheet.experiments.stability import breaking_point
+
+    assert _sets("noise_scale", 8.0, tmp_path, 0) == ["camera.noise_scale=8"]
+    assert _sets("link_delay_ms", 50.0, tmp_path, 0) == ["camera.link_delay_s=0.05"]
+    assert _sets("drop_rate", 0.6, tmp_path, 0) == ["camera.drop_rate=0.6"]
+    assert _sets("base_error", 0.0, tmp_path, 0) == []                 # the twin's own registration
+    with pytest.raises(ValueError, match="unknown error 'x'"):
+        _sets("x", 1.0, tmp_path, 0)
+    assert all(v[1][0] == (1.0 if k == "noise_scale" else 0.0) for k, v in SWEEPS.items())   # baselines first
+    x, y = [0.0, 25.0, 50.0, 100.0], [0.11, 0.15, 0.30, 0.50]
+    assert breaking_point(x, y, 0.359) == pytest.approx(50.0 + 50.0 * (0.359 - 0.30) / 0.20)
+    assert breaking_point(x, y, 0.9) is None
+    res = {"title": "t", "paper_dtheta_deg": 0.359, "target_dtheta_deg": 0.18, "errors": {
+        "link_delay_ms": {"label": "ms", "rows": [{"value": a, "dtheta_mean_deg": b} for a, b in zip(x, y, strict=True)],
+                          "breaks_paper_at": breaking_point(x, y, 0.359), "breaks_target_at": breaking_point(x, y, 0.18)}}}
+    chart(res, tmp_path / "s.png")
+    assert (tmp_path / "s.png").stat().st_size > 5000 and json.dumps(res)
