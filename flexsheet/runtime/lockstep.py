@@ -98,6 +98,7 @@ class Lockstep:
         self.stats = LockstepStats()
         self.charged: dict[str, float] = collections.defaultdict(float)   # node name -> charged compute, s
         self.dropped = 0                # latest-QoS items superseded while their node was busy
+        self._delay = 0.0               # the running call's link delay (its output leaves that much later)
 
     @property
     def agenda(self) -> list:
@@ -123,8 +124,9 @@ class Lockstep:
             t = tm.due
         return t
 
-    async def _charged(self, node: Node, cost: float, call) -> None:
-        """Run ``call`` (an awaitable) as ``node``'s work of ``cost`` s: busy, output stamped at the end."""
+    async def _charged(self, node: Node, cost: float, call, delay: float = 0.0) -> None:
+        """Run ``call`` (an awaitable) as ``node``'s work of ``cost`` s: busy, output stamped at the end (and
+        ``delay`` s later again: a link's latency, during which the node is free)."""
         clock = self.clock
         if not self.live:
             await call
@@ -133,11 +135,13 @@ class Lockstep:
         if cost > 0.0:
             self.busy[node] = end
             self.charged[node.name] += cost
-        clock.emit = end
+        clock.emit = end + delay
+        self._delay = delay
         try:
             await call
         finally:
             clock.emit = None
+            self._delay = 0.0
 
     def charge(self, node: Node, seconds: float) -> None:
         """The running call of ``node`` takes ``seconds`` more of simulated time (live clock only; outside a
@@ -146,7 +150,7 @@ class Lockstep:
         if not self.live or clock.emit is None or not seconds > 0.0:
             return
         clock.emit += seconds
-        self.busy[node] = clock.emit
+        self.busy[node] = clock.emit - self._delay
         self.charged[node.name] += seconds
 
     async def drain(self) -> None:
@@ -198,7 +202,7 @@ class Lockstep:
             tm.due += tm.period
             if tm.due <= clock.now():           # overran: restart the schedule rather than burst
                 tm.due = clock.now() + tm.period
-            await self._charged(tm.node, tm.sim_cost, tm.node._fire(tm.callback))
+            await self._charged(tm.node, tm.sim_cost, tm.node._fire(tm.callback), tm.sim_delay)
             self.stats.timers += 1
         clock.set(t)
 

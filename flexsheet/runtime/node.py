@@ -141,13 +141,14 @@ class SimTimer:
     """A :meth:`Node.timer` on a :class:`SimClock`: fired by the lockstep driver when the replayed time passes
     ``due`` (s); ``cancel()`` stops it."""
 
-    __slots__ = ("period", "callback", "node", "due", "index", "cancelled", "sim_cost")
+    __slots__ = ("period", "callback", "node", "due", "index", "cancelled", "sim_cost", "sim_delay")
 
     def __init__(self, period: float, callback: Callable, node: Node, due: float | None, index: int,
-                 sim_cost: float = 0.0) -> None:
+                 sim_cost: float = 0.0, sim_delay: float = 0.0) -> None:
         self.period, self.callback, self.node, self.due, self.index = period, callback, node, due, index
         self.cancelled = False
         self.sim_cost = float(sim_cost)
+        self.sim_delay = float(sim_delay)
 
     def cancel(self) -> None:
         self.cancelled = True
@@ -199,9 +200,10 @@ class SimClock(Clock):
         elif t > self._t:
             self._t = t
 
-    def add_timer(self, period: float, callback: Callable, node: Node, sim_cost: float = 0.0) -> SimTimer:
+    def add_timer(self, period: float, callback: Callable, node: Node, sim_cost: float = 0.0,
+                  sim_delay: float = 0.0) -> SimTimer:
         tm = SimTimer(period, callback, node, None if self._t is None else self._t + period, next(self._count),
-                      sim_cost)
+                      sim_cost, sim_delay)
         self.timers.append(tm)
         return tm
 
@@ -571,14 +573,15 @@ class Node:
             self._start_sub(sub)
         return sub
 
-    def timer(self, period: float, callback: Callable[[], Any], sim_cost: float = 0.0):
+    def timer(self, period: float, callback: Callable[[], Any], sim_cost: float = 0.0, sim_delay: float = 0.0):
         """Call ``callback`` every ``period`` s of this node's clock (drift-free schedule). Sync callbacks run on
         the loop. Returns the timer's task (or a :class:`SimTimer` on a simulated clock): ``.cancel()`` stops it.
-        ``sim_cost`` s: as for :meth:`subscribe`."""
+        ``sim_cost`` s: as for :meth:`subscribe`; ``sim_delay`` s (simulated clock): what the callback publishes
+        is delivered that much later again, without keeping the node busy (a link's latency, pipelined)."""
         if not period > 0:
             raise ValueError(f"timer period must be > 0 s, got {period!r}")
         if self._clock.simulated:
-            tm = self._clock.add_timer(period, callback, self, sim_cost)
+            tm = self._clock.add_timer(period, callback, self, sim_cost, sim_delay)
             self._timers.append(tm)
             return tm
         return self._wall_timer(period, callback)

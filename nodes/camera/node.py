@@ -232,8 +232,8 @@ class CameraNode(Node):
             w, h = (int(v) for v in calib["image_size"])
             if p.link_delay_s > 0 and not self.clock.simulated:
                 raise ValueError(f"link_delay_s {p.link_delay_s:g} needs the simulated clock (launch file clock: sim)")
-            self.timer(1.0 / p.rate_hz, self.on_sim_tick,
-                       sim_cost=LAB.camera_latency(p.exposure_s, w, h) + p.link_delay_s)
+            self.timer(1.0 / p.rate_hz, self.on_sim_tick, sim_cost=LAB.camera_latency(p.exposure_s, w, h),
+                       sim_delay=p.link_delay_s)
         elif p.source == "genicam":
             from nodes.camera.genicam import GenICamConfig, GenICamStereo
 

@@ -122,6 +122,57 @@ def test_outputs_leave_after_the_declared_cost_and_a_busy_node_takes_only_the_ne
     assert max(s for _, s, _, _ in got) <= SIM_EPOCH + 0.2 + 1e-9
 
 
+class DelayedSource(Node):
+    """A 10 ms timer, 1 ms of work, its output 35 ms on the link (longer than its period: pipelined)."""
+
+    async def setup(self) -> None:
+        self.pub = self.publisher(T.FINGER_TRUTH)
+        self.n = 0
+        self.ticks: list[float] = []
+        self.timer(0.010, self.tick, sim_cost=0.001, sim_delay=0.035)
+
+    def tick(self) -> None:
+        self.n += 1
+        self.ticks.append(self.now())
+        self.pub.publish(_truth(self.pub, float(self.n)))
+
+
+class TruthSink(Node):
+    async def setup(self) -> None:
+        self.got: list[tuple[float, float, float]] = []
+        self.subscribe(T.FINGER_TRUTH, lambda m: self.got.append((self.now(), m.header.stamp, float(m.position[0]))),
+                       qos=QoS.KEEP_ALL)
+
+
+def test_a_link_delay_is_pipelined_and_never_keeps_its_node_busy():
+    """A timer's ``sim_delay`` (the camera link's ``link_delay_s``): each output arrives cost + delay after its
+    tick, stamped then, while the ticks go on every period (a busy node would tick every 36 ms)."""
+    async def main():
+        clock = SimClock(live=True)
+        clock.set(SIM_EPOCH)
+        bus = Bus("sim", clock=clock)
+        made: dict[str, Node] = {}
+
+        def member(cls, name):
+            cfg = NodeConfig(name=name, endpoint="", heartbeat_period=0.5)
+
+            def make(b: Bus) -> Node:
+                made[name] = cls(cfg, transport=ContainerTransport(b, ""))
+                return made[name]
+            return Member(name, make)
+
+        c = Container("sim", [member(DelayedSource, "source"), member(TruthSink, "sink")], bus,
+                      print_fn=lambda line: None, sim_until=0.2)
+        assert await asyncio.wait_for(c.run(install_signals=False), timeout=60) == 0
+        return made["source"].ticks, made["sink"].got
+
+    ticks, got = asyncio.run(main())
+    assert np.allclose(np.diff(ticks), 0.010, atol=1e-9) and len(ticks) >= 19
+    assert len(got) == len([t for t in ticks if t + 0.036 <= SIM_EPOCH + 0.2 + 1e-9])
+    for recv, stamp, value in got:
+        assert stamp == pytest.approx(ticks[int(value) - 1] + 0.036, abs=1e-9) and recv == pytest.approx(stamp)
+
+
 def test_two_runs_are_identical():
     a, b = _run(0.2)["sink"], _run(0.2)["sink"]
     assert len(a) >= 6 and a == b
