@@ -35,6 +35,7 @@ EXPERIMENTS: dict[str, str] = {
     "fem": "flexsheet.experiments.fem:main",
     "correction": "flexsheet.experiments.correction:main",
     "stability": "flexsheet.experiments.stability:main",
+    "compliance": "flexsheet.experiments.compliance:main",
     "latency_load": "flexsheet.experiments.latency_load:main",
     "determinism": "flexsheet.experiments.determinism:main",
     "faults": "flexsheet.experiments.faults:main",

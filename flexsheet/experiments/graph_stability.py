@@ -13,7 +13,8 @@ run's report gives the felt Δθ (the true finger against the true sheet). The e
   runs and handed to the graph (``display_calib``); the truth's arms stay where they are.
 
 The breaking point of an error is the smallest value at which the felt Δθ passes the paper's 0.359° (linear
-interpolation, :func:`flexsheet.experiments.stability.breaking_point`), and where it passes the felt target.
+interpolation, :func:`flexsheet.experiments.stability.breaking_point`), and where it passes the felt target; a
+value the launch refuses (its row says why: the planner takes bases tilted ≤ 1° only) counts as broken.
 Writes ``DIR/stability.json`` and ``DIR/stability.png`` (one panel per error: Δθ against the error, the
 target and the paper's line, the breaking point marked) and each run under ``DIR/<error>_<value>/``.
 """
@@ -91,7 +92,14 @@ def run_stability(out: Path, launch: Path, seed: int = 0, sweeps: dict | None = 
                 continue
             d = out / f"{error}_{v:g}"
             sets = [a for x in [SCRIPT, *_sets(error, v, out, seed)] for a in ("--set", x)]
-            s = run_seed(seed, d, DURATION_S, launch, sets, log=log)
+            try:
+                s = run_seed(seed, d, DURATION_S, launch, sets, log=log)
+            except RuntimeError:            # the launch refused the error (its first error line says why)
+                lines = (d / "launch.log").read_text(errors="replace").splitlines()
+                why = next((ln for ln in lines if "error" in ln.lower() or "Value error" in ln), lines[-1:] or [""])
+                rows.append({"value": v, "dtheta_mean_deg": None, "n": 0, "refused": str(why)[:300]})
+                log(f"[stability] {error} {v:g}: the launch refused it: {str(why)[:200]}")
+                continue
             felt = s.get("table1", {}).get("felt", {}).get("10", {})
             row = {"value": v, "dtheta_mean_deg": felt.get("dtheta_mean_deg"), "n": felt.get("n", 0),
                    "angle3d_mean_deg": felt.get("angle3d_mean_deg"), "gap_mean_mm": felt.get("gap_mean_mm")}
