@@ -46,10 +46,10 @@ DURATION_S = 24.0
 def _perturbed_calib(out: Path, scale: float, seed: int) -> Path:
     """The twin registration's display.yaml with both arm bases moved by ``scale`` (written under ``out``)."""
     from flexsheet.calibration.display_calib import load_display_calib, write_display_calib
-    from flexsheet.display.launch import TwinSpec, twin_registration
     from flexsheet.experiments.stability import perturb_bases
+    from flexsheet.twin.registration import sim_display_calib
 
-    src = twin_registration(TwinSpec(realism="realistic", truth_seed=seed), print_fn=lambda *a: None)
+    src = sim_display_calib(seed, "realistic")      # the launch's own twin registration (cached per seed)
     calib = load_display_calib(src)
     moved = perturb_bases({s: calib.arms[s].T_display_base for s in ("left", "right")}, scale, seed)
     for side in ("left", "right"):

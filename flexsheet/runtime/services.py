@@ -5,7 +5,8 @@ picks, and names it in its heartbeat (``Heartbeat.service_endpoint``), so a tool
 A request is one msgpack map ``{"service": NAME, "args": {...}}``; the reply is ``{"ok": true, "result": ...}``
 or ``{"ok": false, "error": "one line"}``. A bad request (not msgpack, unknown service, wrong arguments, a
 handler that raises) gets an error reply naming what was wrong; it never stops the node. With CURVE the socket
-is a CURVE server with the node's key, behind the same ZAP allow-list as its publisher.
+is a CURVE server with the node's key, behind the same ZAP allow-list as its publisher. The sockets are
+:mod:`flexsheet.runtime.transport`'s (the one file that talks to ZeroMQ).
 
 Built in on every node: ``list`` (the services with one line each), ``param/list``, ``param/get``,
 ``param/set`` (:class:`ParamServices`: a param listed in the node's ``DYNAMIC_PARAMS`` may be set while it runs,
@@ -24,8 +25,6 @@ from collections.abc import Callable
 from typing import Any
 
 import msgpack
-import zmq
-import zmq.asyncio
 
 __all__ = ["ServiceError", "ServiceServer", "ParamServices", "call", "MAX_REQUEST_BYTES"]
 
@@ -123,22 +122,15 @@ def _name_arg(args: dict) -> str:
 
 
 class ServiceServer:
-    """The node's ROUTER socket and its services (module doc). ``address`` the host address to bind
-    ("tcp://127.0.0.1"); ``curve``: the node's :class:`~flexsheet.runtime.transport.CurveConfig` or None;
-    ``ctx``: the node's ZeroMQ context (its ZAP authenticator then covers this socket too)."""
+    """The node's service socket and its services (module doc): a
+    :class:`~flexsheet.runtime.transport.ServiceSocket` on ``address`` ("tcp://127.0.0.1"), CURVE with the
+    node's :class:`~flexsheet.runtime.transport.CurveConfig` ``curve``, on the node's ZeroMQ context ``ctx``."""
 
-    def __init__(self, address: str, curve=None, ctx: zmq.Context | None = None) -> None:
-        self._ctx = zmq.asyncio.Context.shadow(ctx) if ctx is not None else zmq.asyncio.Context()
-        self._own_ctx = ctx is None
-        self.sock = self._ctx.socket(zmq.ROUTER)
-        self.sock.setsockopt(zmq.LINGER, 0)
-        self.sock.setsockopt(zmq.MAXMSGSIZE, MAX_REQUEST_BYTES + 256)
-        if curve is not None:
-            self.sock.curve_secretkey = curve.secret_key
-            self.sock.curve_publickey = curve.public_key
-            self.sock.curve_server = True
-        port = self.sock.bind_to_random_port(address)
-        self.endpoint = f"{address}:{port}"
+    def __init__(self, address: str, curve=None, ctx=None) -> None:
+        from flexsheet.runtime.transport import ServiceSocket
+
+        self.sock = ServiceSocket(address, curve, ctx, MAX_REQUEST_BYTES)
+        self.endpoint = self.sock.endpoint
         self.handlers: dict[str, tuple[Callable[[dict], Any], str]] = {}
         self._task: asyncio.Task | None = None
         self.calls = 0
@@ -157,15 +149,14 @@ class ServiceServer:
     async def _serve(self) -> None:
         while True:
             try:
-                frames = await self.sock.recv_multipart()
-            except (asyncio.CancelledError, zmq.ContextTerminated, zmq.ZMQError):
+                got = await self.sock.recv()
+            except asyncio.CancelledError:
                 return
-            ident, payload = frames[0], frames[-1]
+            if got is None:
+                return
+            ident, payload = got
             reply = await self._answer(payload)
-            try:
-                await self.sock.send_multipart([ident, b"", msgpack.packb(reply, use_bin_type=True)])
-            except zmq.ZMQError:            # the caller went away
-                pass
+            await self.sock.reply(ident, msgpack.packb(reply, use_bin_type=True))
 
     async def _answer(self, payload: bytes) -> dict:
         self.calls += 1
@@ -195,34 +186,21 @@ class ServiceServer:
     def close(self) -> None:
         if self._task is not None:
             self._task.cancel()
-        self.sock.close(0)
-        if self._own_ctx:
-            self._ctx.term()
+        self.sock.close()
 
 
 async def call_async(endpoint: str, service: str, args: dict | None = None, timeout: float = 2.0,
                      curve=None, server_key: bytes | None = None) -> Any:
-    """One request to the ROUTER at ``endpoint``; the result. ``curve`` (the caller's keys) with
+    """One request to the service socket at ``endpoint``; the result. ``curve`` (the caller's keys) with
     ``server_key`` (the node's public key) for a CURVE graph. Raises :class:`ServiceError` with the node's error
     line, or on no reply within ``timeout`` s."""
-    ctx = zmq.asyncio.Context()
-    sock = ctx.socket(zmq.DEALER)
-    sock.setsockopt(zmq.LINGER, 0)
-    if curve is not None:
-        sock.curve_secretkey = curve.secret_key
-        sock.curve_publickey = curve.public_key
-        sock.curve_serverkey = server_key
-    try:
-        sock.connect(endpoint)
-        await sock.send_multipart([b"", msgpack.packb({"service": service, "args": args or {}}, use_bin_type=True)])
-        try:
-            frames = await asyncio.wait_for(sock.recv_multipart(), timeout)
-        except TimeoutError:
-            raise ServiceError(f"no reply from {endpoint} to {service!r} within {timeout:g} s") from None
-        reply = msgpack.unpackb(frames[-1], raw=False)
-    finally:
-        sock.close(0)
-        ctx.term()
+    from flexsheet.runtime.transport import request
+
+    raw = await request(endpoint, msgpack.packb({"service": service, "args": args or {}}, use_bin_type=True),
+                        timeout, curve, server_key)
+    if raw is None:
+        raise ServiceError(f"no reply from {endpoint} to {service!r} within {timeout:g} s")
+    reply = msgpack.unpackb(raw, raw=False)
     if not reply.get("ok"):
         raise ServiceError(reply.get("error", "error"))
     return reply.get("result")

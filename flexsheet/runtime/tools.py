@@ -524,8 +524,7 @@ def topic_pub(args: argparse.Namespace) -> int:
     curve = curve_config(lf, None)
 
     async def main() -> int:
-        import zmq
-        import zmq.asyncio
+        from flexsheet.runtime.transport import ToolPublisher
 
         beats = await collect_heartbeats(list(lf.endpoints().values()), args.timeout, curve, set(lf.nodes))
         subs = {n: hb for n, hb in beats.items()
@@ -533,12 +532,8 @@ def topic_pub(args: argparse.Namespace) -> int:
         if not subs:
             print(f"no node of the graph of {args.launch} subscribes to {args.topic} now", file=sys.stderr)
             return 1
-        ctx = zmq.asyncio.Context()
-        pub = ctx.socket(zmq.PUB)
-        pub.setsockopt(zmq.LINGER, 500)
-        if curve is not None:
-            pub.curve_secretkey, pub.curve_publickey, pub.curve_server = curve.secret_key, curve.public_key, True
-        ep = f"tcp://{args.address}:{pub.bind_to_random_port('tcp://' + args.address)}"
+        pub = ToolPublisher(f"tcp://{args.address}", curve)
+        ep = pub.endpoint
         reached = []
         try:
             for n, hb in subs.items():
@@ -552,7 +547,7 @@ def topic_pub(args: argparse.Namespace) -> int:
                     print(f"{n}: {exc}", file=sys.stderr)
             await asyncio.sleep(0.5)            # the subscriptions travel to this publisher
             for i, msg in enumerate(msgs):
-                await pub.send_multipart(encode(args.topic, msg))
+                await pub.send(encode(args.topic, msg))
                 if i + 1 < len(msgs):
                     await asyncio.sleep(1.0 / args.rate)
             await asyncio.sleep(0.2)
@@ -565,7 +560,6 @@ def topic_pub(args: argparse.Namespace) -> int:
                 except ServiceError:
                     pass
             pub.close()
-            ctx.term()
         out = {"topic": args.topic, "type": topic.type.SCHEMA, "published": len(msgs), "subscribers": reached}
         print(json.dumps(out) if args.json else
               f"published {len(msgs)} x {topic.type.SCHEMA} on {args.topic} to {', '.join(reached) or 'nobody'}")
