@@ -70,13 +70,14 @@ class Sink(Node):
                 (self.now(), m.header.stamp, float(m.position[0]), t)), qos=QoS.KEEP_ALL)
 
 
-def _run(until: float) -> dict:
+def _container(until: float, members: list[tuple[type, str]]) -> dict[str, Node]:
+    """Run ``members`` (node class, name) in one container on a live simulated clock until ``until`` s past the
+    epoch; returns the nodes by name and the bus (key "bus")."""
     async def main() -> dict:
         clock = SimClock(live=True)
         clock.set(SIM_EPOCH)
         bus = Bus("sim", clock=clock)
-
-        made: dict[str, Node] = {}
+        made: dict = {"bus": bus}
 
         def member(cls, name):
             cfg = NodeConfig(name=name, endpoint="", heartbeat_period=0.5)
@@ -86,12 +87,17 @@ def _run(until: float) -> dict:
                 return made[name]
             return Member(name, make)
 
-        c = Container("sim", [member(Source, "source"), member(Worker, "worker"), member(Sink, "sink")], bus,
-                      print_fn=lambda line: None, sim_until=until)
-        code = await asyncio.wait_for(c.run(install_signals=False), timeout=60)
-        return {"code": code, "sink": list(made["sink"].got), "bus": bus, "seen": made["worker"].seen}
+        c = Container("sim", [member(cls, name) for cls, name in members], bus, print_fn=lambda line: None,
+                      sim_until=until)
+        made["code"] = await asyncio.wait_for(c.run(install_signals=False), timeout=60)
+        return made
 
     return asyncio.run(main())
+
+
+def _run(until: float) -> dict:
+    made = _container(until, [(Source, "source"), (Worker, "worker"), (Sink, "sink")])
+    return {"code": made["code"], "sink": list(made["sink"].got), "bus": made["bus"], "seen": made["worker"].seen}
 
 
 @pytest.fixture(scope="module")
@@ -147,26 +153,9 @@ class TruthSink(Node):
 def test_a_link_delay_is_pipelined_and_never_keeps_its_node_busy():
     """A timer's ``sim_delay`` (the camera link's ``link_delay_s``): each output arrives cost + delay after its
     tick, stamped then, while the ticks go on every period (a busy node would tick every 36 ms)."""
-    async def main():
-        clock = SimClock(live=True)
-        clock.set(SIM_EPOCH)
-        bus = Bus("sim", clock=clock)
-        made: dict[str, Node] = {}
-
-        def member(cls, name):
-            cfg = NodeConfig(name=name, endpoint="", heartbeat_period=0.5)
-
-            def make(b: Bus) -> Node:
-                made[name] = cls(cfg, transport=ContainerTransport(b, ""))
-                return made[name]
-            return Member(name, make)
-
-        c = Container("sim", [member(DelayedSource, "source"), member(TruthSink, "sink")], bus,
-                      print_fn=lambda line: None, sim_until=0.2)
-        assert await asyncio.wait_for(c.run(install_signals=False), timeout=60) == 0
-        return made["source"].ticks, made["sink"].got
-
-    ticks, got = asyncio.run(main())
+    made = _container(0.2, [(DelayedSource, "source"), (TruthSink, "sink")])
+    assert made["code"] == 0
+    ticks, got = made["source"].ticks, made["sink"].got
     assert np.allclose(np.diff(ticks), 0.010, atol=1e-9) and len(ticks) >= 19
     assert len(got) == len([t for t in ticks if t + 0.036 <= SIM_EPOCH + 0.2 + 1e-9])
     for recv, stamp, value in got:
