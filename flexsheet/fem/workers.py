@@ -91,7 +91,7 @@ def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache
     _log(f"prefetch: done in {time.perf_counter() - t0:.0f} s")
 
 
-def _solver_init() -> None:
+def _solver_init(name=None) -> None:
     """Worker setup, once per worker process (:func:`_setup_plugin`): a log prefix
     "[solver N] " (:data:`flexsheet.fem.reference_paths._LOG_PREFIX`, which
     :func:`flexsheet.fem.reference_paths._log` reads; N the worker's name); one BLAS and OpenMP thread (the
@@ -107,13 +107,8 @@ def _solver_init() -> None:
     except ImportError:
         pass
     lower_priority(0, idle=False)
-    try:
-        from distributed import get_worker
-
-        name = get_worker().name
-        name = name + 1 if isinstance(name, int) else name       # a local cluster's are 0 .. n-1
-    except (ImportError, ValueError):
-        name = os.getpid()
+    name = os.getpid() if name is None else name
+    name = name + 1 if isinstance(name, int) and name < 1000 else name       # a local cluster's are 0 .. n-1
     reference_paths._LOG_PREFIX = f"[solver {name}] "
 
 
@@ -140,7 +135,7 @@ def _setup_plugin():
         name = "flexsheet-solver"
 
         def setup(self, worker) -> None:
-            _solver_init()
+            _solver_init(worker.name)
 
     return _Setup()
 
