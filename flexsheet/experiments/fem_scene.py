@@ -247,6 +247,20 @@ def _scene_push(sc, rt, st: dict, verts, faces, cache, f: float, depths) -> dict
     return push
 
 
+def _judged_range(depths: np.ndarray, change: np.ndarray | None) -> float | None:
+    """The deepest depth (m) up to which the reference's two levels differ by ≤ :data:`CONVERGED_PX` at every
+    judged depth (the range a served figure is judged over when the reference does not converge over the
+    scene's whole range); None without two levels or when it converges nowhere up to 15 mm, the least judged
+    range the scenes may have."""
+    if change is None:
+        return None
+    ok = np.asarray(change) <= CONVERGED_PX
+    n = int(np.argmin(ok)) if not ok.all() else len(ok)
+    if n == 0 or depths[n - 1] < 0.015 - 1e-9:
+        return None
+    return float(depths[n - 1])
+
+
 def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | None = None, jobs: int = 1,
               levels: tuple[float, ...] | None = None) -> dict:
     """Judge the model the FEM node serves for the scene file ``scene_path`` (:func:`flexsheet.fem.served.served_model`)
@@ -287,6 +301,7 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     pushes = [_scene_push(sc, rt, st, verts, faces, cache, f, depths) for f in st["fractions"]]
     served = np.max([p["served_px"] for p in pushes], axis=0)
     change = (np.max([p["level_change_px"] for p in pushes], axis=0) if len(st["levels"]) > 1 else None)
+    judged = _judged_range(depths, change)
     summary = {
         "scene": {"name": sc.name, "file": str(sc.source), "kind": sc.object.kind, "key": sc.key(),
                   "description": sc.description, "max_depth_mm": sc.use.max_depth * 1e3,
@@ -302,6 +317,11 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
                     "seen_vertices_by_depth": np.min([p["seen_vertices"] for p in pushes], axis=0).tolist(),
                     "target_px": TARGET_PX, "meets_target": bool(served.max() <= TARGET_PX),
                     "linear_fine_px": float(max(max(p["linear_fine_px"]) for p in pushes)),
+                    "converged_to_mm": judged * 1e3 if judged is not None else None,
+                    "max_px_in_converged_range": float(served[depths <= judged + 1e-9].max())
+                    if judged is not None else None,
+                    "band_beyond_px": [float(served[depths > judged + 1e-9].min()), float(served[depths > judged + 1e-9].max())]
+                    if judged is not None and np.any(depths > judged + 1e-9) else None,
                     "metric": "rendered vertices either eye (V -/+ 32 mm along y) sees on the reference's deformed "
                               "surface, the finger an occluding capsule; error: the distance between where the eye "
                               "sees the model's and the reference's vertex on the imaginary screen, in projector "

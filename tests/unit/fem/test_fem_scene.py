@@ -344,3 +344,16 @@ def test_the_organ_is_judged_as_the_eyes_see_it_over_its_declared_depths(tmp_pat
     chart = json.loads((tmp_path / "out" / "accuracy_organ.json").read_text())
     assert chart["verdict"]["served"] == ("met" if v["max_px_in_range"] <= 1.0 else "MISSED")
     assert (tmp_path / "out" / "accuracy_organ.png").stat().st_size > 5000
+
+
+def test_the_judged_range_ends_where_the_reference_stops_converging_but_not_below_15_mm():
+    """visible.converged_to_mm: the deepest depth up to which the two reference levels agree to 0.5 px at every
+    depth (the rounded box's 4/3 mm levels: 25 mm); none below the 15 mm floor (the organ's: 10 mm)."""
+    from flexsheet.experiments.fem_scene import _judged_range
+
+    d = np.arange(1, 7) * 0.005
+    assert _judged_range(d, np.array([0.12, 0.25, 0.44, 0.45, 0.46, 0.59])) == pytest.approx(0.025)
+    assert _judged_range(d, np.full(6, 0.3)) == pytest.approx(0.030)
+    assert _judged_range(d[:3], np.array([0.13, 0.44, 0.87])) is None
+    assert _judged_range(d, np.array([0.6, 0.1, 0.1, 0.1, 0.1, 0.1])) is None     # not converged at 5 mm
+    assert _judged_range(d, None) is None
