@@ -170,7 +170,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         for line in exc.lines or [str(exc)]:
             print(f"flexsheet launch: {args.file}: {line}", file=sys.stderr)
         return EXIT_CONFIG
-    result = check_launch(args.file, host=args.host, out=out, overrides=parsed)
+    result = check_launch(args.file, host=args.host, out=out, overrides=parsed, probe=args.probe)
     for line in result.warnings:
         print(line, file=sys.stderr)
     for line in result.errors:
@@ -280,6 +280,8 @@ def _add_launch_parser(sub) -> None:
     s.add_argument("--check", action="store_true",
                    help="only check the file for this host (--host) and this machine: one line per error, exit 78 "
                         "on any, 0 when it would start")
+    s.add_argument("--probe", action="store_true",
+                   help="also ask whether the devices this host's nodes name are there (cameras), before anything starts")
     s.set_defaults(func=cmd_launch)
 
 

@@ -249,8 +249,9 @@ class CheckResult:
 
 
 class _Checker:
-    def __init__(self, lf: LaunchFile, host: str | None, out: str | None, overrides: dict[str, dict]) -> None:
-        self.lf, self.host, self.out, self.overrides = lf, host, out, overrides
+    def __init__(self, lf: LaunchFile, host: str | None, out: str | None, overrides: dict[str, dict],
+                 probe: bool = False) -> None:
+        self.lf, self.host, self.out, self.overrides, self.probe = lf, host, out, overrides, probe
         self.res = CheckResult(lf.path)
         self.subs = substitutions(lf, out)
         self.hosts = [host] if host else list(lf.hosts)
@@ -428,7 +429,10 @@ class _Checker:
             injected = {k for k in self.graph_wide if k in model.model_fields and k not in params}
             params.update({k: self.graph_wide[k] for k in injected})
             try:
-                model.model_validate(params)
+                validated = model.model_validate(params)
+                if self.probe and here:         # the devices the node names, asked on this machine
+                    for line in cls.probe(validated):
+                        self.res.errors.append(f"{self.lf.path}: {where}: probe: {line}")
             except ValidationError as exc:
                 for e in exc.errors():
                     key = ".".join(str(p) for p in e["loc"])
@@ -504,10 +508,11 @@ def _one_line(text: str) -> str:
 
 
 def check_launch(path: str | Path, host: str | None = None, out: str | None = None,
-                 overrides: dict[str, dict] | None = None) -> CheckResult:
+                 overrides: dict[str, dict] | None = None, probe: bool = False) -> CheckResult:
     """Check launch file ``path`` for ``host`` (None: every host, all on this machine) with ``--out`` folder
-    ``out`` and ``overrides`` (node → {param: value}, the ``--set`` values). Returns a :class:`CheckResult`;
-    never raises for a bad file (its problems are the result's ``errors``)."""
+    ``out`` and ``overrides`` (node → {param: value}, the ``--set`` values); with ``probe`` also ask each of the
+    host's nodes whether the devices it names are there (:meth:`flexsheet.runtime.node.Node.probe`). Returns a
+    :class:`CheckResult`; never raises for a bad file (its problems are the result's ``errors``)."""
     try:
         lf = load_launch(path)
     except LaunchError as exc:
@@ -515,4 +520,4 @@ def check_launch(path: str | Path, host: str | None = None, out: str | None = No
     if host is not None and host not in lf.hosts:
         return CheckResult(lf.path, errors=[f"{lf.path}: --host = {host!r}: not a host of the file; hosts: "
                                             f"{', '.join(lf.hosts)}"])
-    return _Checker(lf, host, out, overrides or {}).run()
+    return _Checker(lf, host, out, overrides or {}, probe).run()

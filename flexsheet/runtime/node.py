@@ -506,6 +506,12 @@ class Node:
     async def setup(self) -> None:
         """Create publishers, subscriptions and timers; do heavy precompute here. Override."""
 
+    @classmethod
+    def probe(cls, params: BaseModel) -> list[str]:
+        """The devices the validated ``params`` name that this machine lacks, one line each (``flexsheet launch
+        --check --probe``); override in nodes that open devices. The default: none to probe."""
+        return []
+
     def on_params_set(self, names: set[str]) -> None:
         """Called on the loop after ``flexsheet param set`` changed ``names`` (of :attr:`DYNAMIC_PARAMS`) in
         ``self.params``. Override to react (the default: nothing, the node reads the params where it uses them)."""

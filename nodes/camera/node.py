@@ -196,6 +196,41 @@ class CameraNode(Node):
     so a viewer does not receive the 48 Hz stream it would mostly drop (docs/visualise.md)."""
 
     Params = CameraParams
+
+    @classmethod
+    def probe(cls, params) -> list[str]:
+        """The cameras ``params`` name that this machine does not see (``flexsheet launch --check --probe``):
+        GenICam serials/ids by Aravis discovery (~1 s), UVC devices by opening them; sim and files: none."""
+        p = params
+        if p.source == "genicam":
+            from nodes.camera.genicam import list_devices, resolve_device
+
+            try:
+                devices = list_devices()
+            except RuntimeError as exc:
+                return [f"camera: cannot discover GenICam cameras here: {exc}"]
+            out = []
+            for side, key in (("left_id", p.left_id), ("right_id", p.right_id)):
+                try:
+                    resolve_device(key, devices)
+                except ValueError as exc:
+                    out.append(f"camera {side}: {exc}")
+            return out
+        if p.source == "device":
+            import cv2
+
+            out = []
+            for side, dev in (("device_left", p.device_left), ("device_right", p.device_right)):
+                if dev is None:
+                    continue
+                cap = cv2.VideoCapture(dev)
+                try:
+                    if not cap.isOpened():
+                        out.append(f"camera {side} = {dev!r}: no such video device can be opened here")
+                finally:
+                    cap.release()
+            return out
+        return []
     node_type = "camera"
 
     async def setup(self) -> None:

@@ -400,3 +400,25 @@ def test_deploy_doc_commands_pass_the_check(keys, tmp_path, monkeypatch):
             res = check_launch(lf.path, host=lf.nodes[args.name].host,
                                overrides={args.name: _parse_params(args.param or [])})
         assert _here(res.errors, res.path) == [], f"{cmd}:\n" + "\n".join(res.errors)
+
+
+def test_probe_names_the_cameras_this_machine_does_not_see(tmp_path):
+    """``--check --probe``: the camera node's GenICam serials (Aravis discovery) and UVC devices are asked for on
+    the checked host; without ``--probe`` the same file passes; another host's camera is not probed here."""
+    doc = _mutate(BASE, "nodes.cam", {"type": "camera", "host": "main",
+                                      "params": {"source": "genicam", "left_id": "SN-LEFT-0", "right_id": "SN-RIGHT-0"}})
+    path = tmp_path / "chk.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    assert check_launch(path, host="main").errors == []
+    errs = check_launch(path, host="main", probe=True).errors
+    assert len(errs) == 2, errs
+    assert "node cam: probe: camera left_id: camera 'SN-LEFT-0' not found; cameras found:" in errs[0]
+    assert "camera right_id: camera 'SN-RIGHT-0' not found" in errs[1]
+    assert check_launch(path, host="arm1", probe=True).errors == []
+    uvc = _mutate(BASE, "nodes.cam", {"type": "camera", "host": "main",
+                                      "params": {"source": "device", "device_left": 57}})
+    path.write_text(yaml.safe_dump(uvc, sort_keys=False))
+    errs = check_launch(path, host="main", probe=True).errors
+    assert errs == [f"{path}: node cam: probe: camera device_left = 57: no such video device can be opened here"]
+    r = flexsheet("launch", str(path), "--check", "--host", "main", "--probe")
+    assert r.returncode == EXIT_CONFIG and "probe: camera device_left = 57" in r.stderr, r.stderr
