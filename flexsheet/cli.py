@@ -367,9 +367,11 @@ def _add_topic_parser(sub) -> None:
             t.add_argument("--window", type=float, default=5.0, help="s to measure")
         t.set_defaults(func=_tool(f"topic_{verb}"))
     t = ts.add_parser("pub", help="publish a message (YAML) on a topic to the nodes that subscribe to it",
-                      **_fmt("  flexsheet topic pub /fingertip \"{position: [0.0, 0.0, 0.01], valid: true}\" "
-                             "--times 5 --rate 10\n  flexsheet topic pub /sheet/target \"{...}\" --launch "
-                             "launch/lab.yaml   # refused: guarded by security.publishers"))
+                      **_fmt("  flexsheet topic pub /fingertip \"{position: [0.0, 0.0, 0.01], covariance: [[1.0e-8, 0, 0], "
+                             "[0, 1.0e-8, 0], [0, 0, 1.0e-8]], valid: true, predicted_position: [0.0, 0.0, 0.01], "
+                             "exposure_stamp: 0.0}\" --times 5 --rate 10\n"
+                             "  (every field without a default is required; the header is stamped with the graph's "
+                             "clock; a topic guarded by security.publishers is refused)"))
     t.add_argument("topic")
     t.add_argument("message", nargs="?", default="", help="the message's fields as a YAML map (its type is the "
                    "topic's; the header is stamped now unless given)")

@@ -94,9 +94,11 @@ def run_stability(out: Path, launch: Path, seed: int = 0, sweeps: dict | None = 
             sets = [a for x in [SCRIPT, *_sets(error, v, out, seed)] for a in ("--set", x)]
             try:
                 s = run_seed(seed, d, DURATION_S, launch, sets, log=log)
-            except RuntimeError:            # the launch refused the error (its first error line says why)
+            except RuntimeError:            # refused at launch (a param check), else a failure to report
                 lines = (d / "launch.log").read_text(errors="replace").splitlines()
-                why = next((ln for ln in lines if "error" in ln.lower() or "Value error" in ln), lines[-1:] or [""])
+                if not any("nothing started" in ln for ln in lines):
+                    raise
+                why = next((ln for ln in lines if "error" in ln.lower()), lines[-1] if lines else "")
                 rows.append({"value": v, "dtheta_mean_deg": None, "n": 0, "refused": str(why)[:300]})
                 log(f"[stability] {error} {v:g}: the launch refused it: {str(why)[:200]}")
                 continue

@@ -141,14 +141,15 @@ def stiffness_along_path(scene, depths_mm=DEPTHS_MM, n: int = 121) -> dict:
     return out
 
 
-def _run_series(scene, mode: str, scale: float, seed: int = 0, depth: float = 5e-4, push_depth: float = 0.010,
+def _run_series(scene, mode: str, scale: float, seed: int = 0, depth: float = 5e-4, push_depth: float | None = None,
                 moving_time: float = 10.0) -> tuple[dict, dict]:
     """One scripted run through the planner (realistic twin ``seed``; ``mode`` as the world's segments, finger
-    ``depth`` m while stroking, ``push_depth`` m for stroke_push): per sample during the moving phase the
+    ``depth`` m while stroking, ``push_depth`` m for stroke_push, default the scene's ``use.stroke_depth``): per sample during the moving phase the
     contact's arc (mm), the planned depth (mm), the object's stiffness (the planner's request / ``scale``),
     the requested and presented stiffness and the tension (N/m), the status at the limit, the tumour's
     ``contrast`` (the estimate at the contact and depth over the same without the inclusions) and the tension
     the same request without the tumour would need at the same place on the sheet."""
+    push_depth = scene.use.stroke_depth if push_depth is None else push_depth
     tw = make_twin("realistic", seed, None)
     rec: list = []
     kw = {"mode": mode, "depth": depth}

@@ -60,12 +60,15 @@ QUICK = {"calibration_scale": [0.0, 16.0], "dropout": [0.0, 0.5], "marker_px": [
 
 def breaking_point(x, y, limit: float) -> float | None:
     """Smallest x where y crosses above ``limit`` (linear interpolation between points; x increasing), the first
-    x if y starts above it, ``None`` if it never does."""
+    x if y starts above it, ``None`` if it never does; a point without a finite y (a run that was refused) is
+    broken: its x, unless a crossing came before."""
     x = np.asarray(x, float)
     y = np.asarray(y, float)
-    if y[0] > limit:
+    if not np.isfinite(y[0]) or y[0] > limit:
         return float(x[0])
     for i in range(1, len(x)):
+        if not np.isfinite(y[i]):           # no figure there (refused, failed): broken at x[i] at the latest
+            return float(x[i])
         if y[i] > limit:
             t = (limit - y[i - 1]) / (y[i] - y[i - 1])
             return float(x[i - 1] + t * (x[i] - x[i - 1]))

@@ -19,7 +19,9 @@ def fem_models_as_cylinder(sc: Scene) -> bool:
 
 
 def served_model(sc: Scene, cfg: FemConfig | None = None, cache_dir: str | None = None, log=None):
-    """The model the FEM node serves for ``sc`` with the params ``cfg`` (default :class:`FemConfig`'s), its
+    """The model the FEM node serves for ``sc`` at its default params (``cfg``: :class:`FemConfig`; its accuracy
+    target, depth range, max depth, strain limit and arc are used; the mesh overrides, ``model`` and the
+    no-scene ``E``/``nu``/``finger_radius`` are not: the scene's own finger and material are), its
     precomputation from ``cache_dir`` (None: the default cache; the installed and shipped stores are read
     too) or computed. Returns (model, what: one line naming the model and its table, or "linear ...").
     Raises ``ValueError`` for an unusable stored table."""

@@ -165,8 +165,8 @@ def run_workers(fn, work: list, n: int, scheduler: str | None = None, key=None):
     """Yield ``fn(w)`` for every ``w`` of ``work``, in the order they finish, computed on dask.distributed:
     a :class:`distributed.LocalCluster` of ``n`` worker processes, one thread each (the default), or the
     cluster whose scheduler listens at ``scheduler`` (default :data:`SCHEDULER`) ("tcp://HOST:8786", a lab's cluster: its workers need
-    flexsheet installed and the same cache folder, a shared disk). Every worker runs :func:`_solver_init`
-    first. Logs "k/N done" as results arrive. ``key(w)`` names a task (default: its index), so a result the
+    flexsheet installed and the same cache folder, a shared disk). Every local worker runs :func:`_solver_init`
+    first (a lab's workers are not changed: no plugin is left on its scheduler). Logs "k/N done" as results arrive. ``key(w)`` names a task (default: its index), so a result the
     cluster still holds is not computed twice. Ctrl-C, an error or leaving the loop early cancels what is
     left and closes a local cluster at once. ``fn`` must be importable (module level) and catch its own
     errors. Raises ``ValueError`` for ``n`` < 1 and ``OSError`` when ``scheduler`` cannot be reached."""
@@ -185,9 +185,13 @@ def run_workers(fn, work: list, n: int, scheduler: str | None = None, key=None):
         if cluster is not None:
             cluster.close()
         raise OSError(f"cannot reach the dask scheduler at {scheduler!r}: {exc}") from exc
+    import uuid
+
+    run = uuid.uuid4().hex[:12]             # task keys unique per run: a shared scheduler holds others' too
     try:
-        client.register_plugin(_setup_plugin())
-        futures = [client.submit(fn, w, pure=False, key=f"flexsheet-{key(w) if key else i}")
+        if cluster is not None:             # our own workers only; a lab's cluster's workers are left as they are
+            client.register_plugin(_setup_plugin())
+        futures = [client.submit(fn, w, pure=False, key=f"flexsheet-{run}-{key(w) if key else i}")
                    for i, w in enumerate(work)]
         for k, fut in enumerate(as_completed(futures), 1):
             result = fut.result()

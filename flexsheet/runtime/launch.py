@@ -428,7 +428,8 @@ def curve_config(lf: LaunchFile, host: str | None, node: str | None = None) -> C
     server_keys = {lf.endpoint_of(n): keys[n].encode() for n in lf.nodes}
     guards = {t: [lf.endpoint_of(n) for n in names] for t, names in sec.publishers.items()}
     return CurveConfig(public_key=public, secret_key=secret, server_keys=server_keys,
-                       allowed_clients=[keys[k].encode() for k in identities(lf)], topic_publishers=guards)
+                       allowed_clients=[keys[k].encode() for k in identities(lf)], topic_publishers=guards,
+                       tool_keys=[keys[h].encode() for h in lf.hosts if h in keys])
 
 
 def _apply_toplevel_env(raw: dict, path: Path) -> dict:

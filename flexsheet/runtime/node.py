@@ -500,7 +500,8 @@ class Node:
         self._last_log = 0.0
         self._suppressed = 0
         self.services = None  # its ServiceServer once running (flexsheet.runtime.services)
-        self._pending_services: dict[str, tuple[Callable, str]] = {}
+        self._pending_services: dict[str, tuple[Callable, str, bool]] = {}
+        self._tool_peers: set[str] = set()    # endpoints graph/connect added (only those graph/disconnect drops)
 
     # ------------------------------------------------------------------ API for subclasses
     async def setup(self) -> None:
@@ -516,14 +517,15 @@ class Node:
         """Called on the loop after ``flexsheet param set`` changed ``names`` (of :attr:`DYNAMIC_PARAMS`) in
         ``self.params``. Override to react (the default: nothing, the node reads the params where it uses them)."""
 
-    def service(self, name: str, handler: Callable[[dict], Any], doc: str) -> None:
+    def service(self, name: str, handler: Callable[[dict], Any], doc: str, commanding: bool = False) -> None:
         """Offer ``handler(args: dict) -> result`` as the service ``name`` (``flexsheet service call NODE name``);
         it runs on the loop, may be ``async``, returns plain msgpack types and raises ``ValueError`` with one
-        line for a bad request (:mod:`flexsheet.runtime.services`)."""
+        line for a bad request. ``commanding``: it changes what the node does (moves, settings), so only the
+        hosts' tools may call it (:mod:`flexsheet.runtime.services`). Served once :meth:`setup` returned."""
         if self.services is not None:
-            self.services.add(name, handler, doc)
+            self.services.add(name, handler, doc, commanding)
         else:
-            self._pending_services[name] = (handler, doc)
+            self._pending_services[name] = (handler, doc, commanding)
 
     async def teardown(self) -> None:
         """Release resources on shutdown. Override if needed."""
@@ -582,8 +584,9 @@ class Node:
     def timer(self, period: float, callback: Callable[[], Any], sim_cost: float = 0.0, sim_delay: float = 0.0):
         """Call ``callback`` every ``period`` s of this node's clock (drift-free schedule). Sync callbacks run on
         the loop. Returns the timer's task (or a :class:`SimTimer` on a simulated clock): ``.cancel()`` stops it.
-        ``sim_cost`` s: as for :meth:`subscribe`; ``sim_delay`` s (simulated clock): what the callback publishes
-        is delivered that much later again, without keeping the node busy (a link's latency, pipelined)."""
+        ``sim_cost`` s: as for :meth:`subscribe`; ``sim_delay`` s (a live simulated clock, ``clock: sim``; 0 in a
+        lockstep replay): what the callback publishes is delivered that much later again, without keeping the
+        node busy (a link's latency, pipelined)."""
         if not period > 0:
             raise ValueError(f"timer period must be > 0 s, got {period!r}")
         if self._clock.simulated:
@@ -715,7 +718,6 @@ class Node:
                 self._loop.add_signal_handler(sig, self._stop.set)
         await self.transport.start(self._on_frames)
         self._hb_pub = self.publisher(T.DIAGNOSTICS)
-        self._start_services()
         try:
             try:
                 await self.setup()
@@ -727,6 +729,7 @@ class Node:
                 for sub in lst:
                     if sub.task is None:
                         self._start_sub(sub)
+            self._start_services()
             self._wall_timer(self.config.heartbeat_period, lambda: self._hb_pub.publish(self.heartbeat()))
             self.ready = True
             self.log.info("%s up: endpoint %s, %d peers, publishes %s", self.name, self.transport.endpoint or "-",
@@ -749,12 +752,14 @@ class Node:
         params = ParamServices(self)
         srv.add("param/list", params.list, "every param: name, type, default, value, description, settable")
         srv.add("param/get", params.get, "{name}: a param's value")
-        srv.add("param/set", params.set, "{name, value}: set a run-time param (DYNAMIC_PARAMS)")
+        srv.add("param/set", params.set, "{name, value}: set a run-time param (DYNAMIC_PARAMS)", commanding=True)
+        srv.add("clock/now", lambda args: self.now(), "the node's clock now, s (simulated on a simulated graph)")
         srv.add("graph/connect", self._graph_connect, "{endpoint[, key]}: subscribe to one more publisher (topic pub); "
-                "key: its CURVE public key, one of the launch file's identities")
-        srv.add("graph/disconnect", self._graph_disconnect, "{endpoint}: drop a publisher graph/connect added")
-        for name, (handler, doc) in self._pending_services.items():
-            srv.add(name, handler, doc)
+                "key: its CURVE public key, one of the launch file's identities", commanding=True)
+        srv.add("graph/disconnect", self._graph_disconnect, "{endpoint}: drop a publisher graph/connect added",
+                commanding=True)
+        for name, (handler, doc, commanding) in self._pending_services.items():
+            srv.add(name, handler, doc, commanding)
         srv.start()
 
     def _transport_links(self):
@@ -769,12 +774,17 @@ class Node:
         if links is None:
             raise ValueError("this node has no subscriber socket")
         key = args.get("key")
-        links.add_peer(ep, key.encode() if isinstance(key, str) else None)
+        links.add_peer(ep, key.encode() if isinstance(key, str) else None)    # ValueError names a bad one
+        self._tool_peers.add(ep)
         return ep
 
     def _graph_disconnect(self, args: dict) -> bool:
+        ep = str(args.get("endpoint", ""))
+        if ep not in self._tool_peers:
+            raise ValueError(f"{ep!r} was not added by graph/connect (the launch file's peers stay)")
+        self._tool_peers.discard(ep)
         links = self._transport_links()
-        return bool(links is not None and links.remove_peer(str(args.get("endpoint", ""))))
+        return bool(links is not None and links.remove_peer(ep))
 
     async def _close(self) -> None:
         if self.services is not None:

@@ -131,16 +131,34 @@ class ServiceServer:
 
         self.sock = ServiceSocket(address, curve, ctx, MAX_REQUEST_BYTES)
         self.endpoint = self.sock.endpoint
+        self.curve = curve
+        host = address.removeprefix("tcp://")
+        self.loopback = host.startswith("127.") or host in ("localhost", "[::1]")
         self.handlers: dict[str, tuple[Callable[[dict], Any], str]] = {}
+        self.commanding: set[str] = set()
         self._task: asyncio.Task | None = None
         self.calls = 0
         self.errors = 0
         self.add("list", lambda args: {n: d for n, (_, d) in sorted(self.handlers.items())},
                  "the services of this node, one line each")
 
-    def add(self, name: str, handler: Callable[[dict], Any], doc: str) -> None:
-        """Register ``handler(args) -> result`` (plain msgpack types; may be ``async``) as ``name``."""
+    def add(self, name: str, handler: Callable[[dict], Any], doc: str, commanding: bool = False) -> None:
+        """Register ``handler(args) -> result`` (plain msgpack types; may be ``async``) as ``name``;
+        ``commanding``: it changes what the node does (module doc: who may call it)."""
         self.handlers[name] = (handler, doc)
+        if commanding:
+            self.commanding.add(name)
+
+    def _refusal(self, name: str, caller: str) -> str | None:
+        """Why ``caller`` (a Z85 key, "" without CURVE) may not call commanding service ``name``, or None."""
+        if name not in self.commanding:
+            return None
+        if self.curve is None:
+            return None if self.loopback else (f"{name!r} commands the node: on a networked graph it needs CURVE "
+                                               "(security.curve) and a host's key")
+        if caller.encode() not in self.curve.tool_keys:
+            return f"{name!r} commands the node: only a host's key (a tool run on a host) may call it"
+        return None
 
     def start(self) -> None:
         """Serve on the running loop."""
@@ -154,11 +172,18 @@ class ServiceServer:
                 return
             if got is None:
                 return
-            ident, payload = got
-            reply = await self._answer(payload)
-            await self.sock.reply(ident, msgpack.packb(reply, use_bin_type=True))
+            ident, payload, caller = got
+            reply = await self._answer(payload, caller)
+            try:
+                packed = msgpack.packb(reply, use_bin_type=True)
+            except (TypeError, ValueError, OverflowError) as exc:   # a result msgpack cannot carry
+                self.errors += 1
+                log.warning("service reply not serialisable: %s", exc)
+                packed = msgpack.packb({"ok": False, "error": f"the result cannot be sent: {exc}"[:500]},
+                                       use_bin_type=True)
+            await self.sock.reply(ident, packed)
 
-    async def _answer(self, payload: bytes) -> dict:
+    async def _answer(self, payload: bytes, caller: str = "") -> dict:
         self.calls += 1
         try:
             if len(payload) > MAX_REQUEST_BYTES:
@@ -174,6 +199,9 @@ class ServiceServer:
                 raise ValueError(f"'args' must be a map, got {type(args).__name__}")
             if name not in self.handlers:
                 raise ValueError(f"no service {name!r}; services: {', '.join(sorted(self.handlers))}")
+            refused = self._refusal(name, caller)
+            if refused:
+                raise ValueError(refused)
             result = self.handlers[name][0](args)
             if asyncio.iscoroutine(result):
                 result = await result

@@ -466,14 +466,15 @@ def service_call(args: argparse.Namespace) -> int:
     return 0
 
 
-def _message(topic, data: dict, seq: int):
-    """The topic's message from ``data`` (a YAML map), with a header stamped now unless it has one."""
+def _message(topic, data: dict, seq: int, now: float):
+    """The topic's message from ``data`` (a YAML map), with a header stamped ``now`` (the graph's clock) unless
+    it has one."""
     import re
 
     from messages.common import Header
 
     data = dict(data)
-    data.setdefault("header", {"stamp": time.time(), "frame_id": "display", "seq": seq})
+    data.setdefault("header", {"stamp": float(now), "frame_id": "display", "seq": seq})
     if isinstance(data["header"], dict):
         data["header"] = Header.model_validate(data["header"])
     props = topic.type.model_json_schema().get("properties", {})
@@ -505,7 +506,7 @@ def topic_pub(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     try:
-        msgs = [_message(topic, data, i) for i in range(args.times)]
+        _message(topic, data, 0, 0.0)                    # refuse a bad message before the graph is asked
     except ValidationError as exc:
         e = exc.errors()[0]
         print(f"flexsheet: {topic.type.SCHEMA} field '{'.'.join(str(x) for x in e['loc'])}': {e['msg']} "
@@ -545,10 +546,16 @@ def topic_pub(args: argparse.Namespace) -> int:
                     reached.append(n)
                 except ServiceError as exc:
                     print(f"{n}: {exc}", file=sys.stderr)
-            await asyncio.sleep(0.5)            # the subscriptions travel to this publisher
-            for i, msg in enumerate(msgs):
-                await pub.send(encode(args.topic, msg))
-                if i + 1 < len(msgs):
+            # every subscriber's subscription has reached this publisher (a message sent before is lost)
+            await pub.wait_subscribers(args.topic, len(reached), args.timeout)
+            first = subs[reached[0]] if reached else None
+            for i in range(args.times):         # stamped with the graph's clock (simulated on a simulated graph)
+                now = time.time()
+                if first is not None:
+                    key = curve.server_keys.get(first.endpoint) if curve is not None else None
+                    now = float(await call_async(first.service_endpoint, "clock/now", {}, args.timeout, curve, key))
+                await pub.send(encode(args.topic, _message(topic, data, i, now)))
+                if i + 1 < args.times:
                     await asyncio.sleep(1.0 / args.rate)
             await asyncio.sleep(0.2)
         finally:
@@ -560,9 +567,10 @@ def topic_pub(args: argparse.Namespace) -> int:
                 except ServiceError:
                     pass
             pub.close()
-        out = {"topic": args.topic, "type": topic.type.SCHEMA, "published": len(msgs), "subscribers": reached}
+        out = {"topic": args.topic, "type": topic.type.SCHEMA, "published": args.times if reached else 0,
+               "subscribers": reached}
         print(json.dumps(out) if args.json else
-              f"published {len(msgs)} x {topic.type.SCHEMA} on {args.topic} to {', '.join(reached) or 'nobody'}")
+              f"published {out['published']} x {topic.type.SCHEMA} on {args.topic} to {', '.join(reached) or 'nobody'}")
         return 0 if reached else 1
 
     return asyncio.run(main())

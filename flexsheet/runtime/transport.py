@@ -77,6 +77,7 @@ class CurveConfig:
     publisher lacks that secret key fails the handshake and none of its messages arrive.
     ``allowed_clients``: Z85 public keys allowed to subscribe to this node's publisher (ZAP check);
     any other subscriber is refused.
+    ``tool_keys``: the hosts' keys, the callers allowed a node's commanding services (:mod:`flexsheet.runtime.services`).
     ``topic_publishers``: guarded topic → the endpoints allowed to publish it (the launch file's
     ``security.publishers``, per node as SROS2 grants per participant): a guarded topic is received only on a
     SUB socket connected to those endpoints alone, each pinned to its node's key (:class:`SubLinks`).
@@ -88,6 +89,8 @@ class CurveConfig:
     server_keys: dict[str, bytes] = field(default_factory=dict)
     allowed_clients: list[bytes] = field(default_factory=list)
     topic_publishers: dict[str, list[str]] = field(default_factory=dict)
+    #: Z85 public keys of the hosts (the tools run there): the only callers a node's commanding services take
+    tool_keys: list[bytes] = field(default_factory=list)
 
 
 class _AllowList:
@@ -828,8 +831,11 @@ class SubLinks:
                     raise ValueError(f"CURVE is on: {endpoint} needs the public key of one of the launch file's "
                                      "identities")
                 self.sock.curve_serverkey = key
+            try:                                # a malformed endpoint raises before anything is recorded
+                self.sock.connect(endpoint)
+            except zmq.ZMQError as exc:
+                raise ValueError(f"cannot connect to {endpoint!r}: {exc}") from None
             self.peers.append(endpoint)
-            self.sock.connect(endpoint)
             self.watch.add(endpoint)
 
     def remove_peer(self, endpoint: str) -> bool:
@@ -1011,13 +1017,18 @@ class ServiceSocket:
             self.sock.curve_server = True
         self.endpoint = f"{address}:{self.sock.bind_to_random_port(address)}"
 
-    async def recv(self) -> tuple[bytes, bytes] | None:
-        """(caller identity, request payload), or None once the socket is closed."""
+    async def recv(self) -> tuple[bytes, bytes, str] | None:
+        """(caller identity, request payload, the caller's CURVE public key in Z85 or "" without CURVE), or None
+        once the socket is closed."""
         try:
-            frames = await self.sock.recv_multipart()
+            frames = await self.sock.recv_multipart(copy=False)
         except (zmq.ContextTerminated, zmq.ZMQError):
             return None
-        return frames[0], frames[-1]
+        try:
+            user = frames[-1].get("User-Id") or ""
+        except zmq.ZMQError:
+            user = ""
+        return frames[0].bytes, frames[-1].bytes, user
 
     async def reply(self, ident: bytes, payload: bytes) -> None:
         """Answer the caller ``ident`` (a caller that went away is ignored)."""
@@ -1059,21 +1070,36 @@ async def request(endpoint: str, payload: bytes, timeout: float, curve: CurveCon
 
 
 class ToolPublisher:
-    """A tool's own publisher (``flexsheet topic pub``): a PUB bound on ``address`` ("tcp://HOST") at a port the
-    OS picks (:attr:`endpoint`), a CURVE server with the host's keys when ``curve``; nodes connect to it on
-    request (``graph/connect``)."""
+    """A tool's own publisher (``flexsheet topic pub``): an XPUB bound on ``address`` ("tcp://HOST") at a port
+    the OS picks (:attr:`endpoint`), a CURVE server with the host's keys when ``curve``; nodes connect to it on
+    request (``graph/connect``) and :meth:`wait_subscribers` waits until their subscriptions arrived."""
 
     def __init__(self, address: str, curve: CurveConfig | None = None) -> None:
         import zmq.asyncio
 
         self._ctx = zmq.asyncio.Context()
-        self.sock = self._ctx.socket(zmq.PUB)
+        self.sock = self._ctx.socket(zmq.XPUB)
+        self.sock.setsockopt(zmq.XPUB_VERBOSE, 1)
         self.sock.setsockopt(zmq.LINGER, 500)
         if curve is not None:
             self.sock.curve_secretkey = curve.secret_key
             self.sock.curve_publickey = curve.public_key
             self.sock.curve_server = True
         self.endpoint = f"{address}:{self.sock.bind_to_random_port(address)}"
+
+    async def wait_subscribers(self, topic: str, n: int, timeout: float) -> int:
+        """Wait (at most ``timeout`` s) until ``n`` subscriptions covering ``topic`` arrived; returns how many did."""
+        got, t = 0, topic.encode()
+        loop = asyncio.get_running_loop()
+        end = loop.time() + timeout
+        while got < n and loop.time() < end:
+            try:
+                msg = await asyncio.wait_for(self.sock.recv(), max(0.0, end - loop.time()))
+            except TimeoutError:
+                break
+            if msg[:1] == b"\x01" and t.startswith(msg[1:]):
+                got += 1
+        return got
 
     async def send(self, frames: list) -> None:
         await self.sock.send_multipart(frames)

@@ -139,15 +139,19 @@ class ArmBridgeNode(Node):
         else:
             self.stream.start()
         self._q_measured: np.ndarray | None = None
-        self.service("hold", self.srv_hold, "stop following targets and stay where the arm is; returns its joints, rad")
-        self.service("home", self.srv_home, "move to the home sheet's clamp pose (IK), within the speed limits")
+        self.service("hold", self.srv_hold, "stop following targets and stay where the arm is; returns its joints, rad",
+                     commanding=True)
+        self.service("home", self.srv_home, "move to the home sheet's clamp pose (IK), within the speed limits",
+                     commanding=True)
         self.service("move_to", self.srv_move_to, "{joints: [6] rad} or {pose: 4x4 clamp pose, m, display frame}: "
-                     "move there within the speed limits and stay")
-        self.service("release", self.srv_release, "follow the targets again")
+                     "move there within the speed limits and stay", commanding=True)
+        self.service("release", self.srv_release, "follow the targets again", commanding=True)
 
     def _require_state(self) -> np.ndarray:
-        if self._q_measured is None:
-            raise ValueError(f"the {self.params.arm} arm's controller has not reported its joints yet")
+        """The joints the controller reported last; raises ``ValueError`` while it is not connected (a stale
+        reading would move the arm back to an old pose once it is)."""
+        if self._q_measured is None or not self.stream.connected:
+            raise ValueError(f"the {self.params.arm} arm's controller is not connected: no current joints to act on")
         return self._q_measured
 
     def _ik(self, T, what: str) -> np.ndarray:

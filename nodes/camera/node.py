@@ -253,6 +253,9 @@ class CameraNode(Node):
         self._t0 = self.now()
         self.frames = 0
         self.dropped = 0
+        if p.link_delay_s > 0 and (p.source != "sim" or not self.clock.simulated):
+            raise ValueError(f"link_delay_s {p.link_delay_s:g} is the camera twin's on the simulated clock (source sim, "
+                             f"launch file clock: sim); here source {p.source}")
         if p.source == "sim":
             from flexsheet.twin.truth import TwinTruth
 
@@ -265,8 +268,6 @@ class CameraNode(Node):
             self.subscribe(topics.FINGER_TRUTH, self.on_truth, qos=QoS.LATEST)
             # simulated clock: the pair leaves readout + transfer after mid-exposure (flexsheet/twin/timing.py)
             w, h = (int(v) for v in calib["image_size"])
-            if p.link_delay_s > 0 and not self.clock.simulated:
-                raise ValueError(f"link_delay_s {p.link_delay_s:g} needs the simulated clock (launch file clock: sim)")
             self.timer(1.0 / p.rate_hz, self.on_sim_tick, sim_cost=LAB.camera_latency(p.exposure_s, w, h),
                        sim_delay=p.link_delay_s)
         elif p.source == "genicam":

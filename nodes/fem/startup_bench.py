@@ -37,10 +37,11 @@ def startup_s(scene: str, timeout: float = 120.0) -> dict:
     with tempfile.TemporaryDirectory() as home:
         env = dict(os.environ, HOME=home)
         env.pop("FLEXSHEET_KEYS", None)
+        log_path = os.path.join(home, "fem.log")
+        log = open(log_path, "w")           # a file, not a pipe: a chatty node never blocks on a full pipe
         t0 = time.monotonic()
         proc = subprocess.Popen([sys.executable, "-m", "flexsheet", "run", "fem", "--param", f"scene={scene}",
-                                 "--endpoint", ep], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                text=True)
+                                 "--endpoint", ep], env=env, stdout=subprocess.DEVNULL, stderr=log, text=True)
         try:
             while time.monotonic() - t0 < timeout:
                 hb = asyncio.run(collect_heartbeats([ep], 0.5, None, {"fem"})).get("fem")
@@ -49,14 +50,17 @@ def startup_s(scene: str, timeout: float = 120.0) -> dict:
                             "table": "LINEAR" not in hb.message and "loaded" in hb.message}
                 if proc.poll() is not None:
                     break
-            raise TimeoutError(f"fem on {scene}: not serving after {time.monotonic() - t0:.0f} s: "
-                               + " | ".join((proc.stderr.read() if proc.poll() is not None else "").splitlines()[-5:]))
+            log.flush()
+            with open(log_path) as fh:
+                tail = fh.read().splitlines()[-5:]
+            raise TimeoutError(f"fem on {scene}: not serving after {time.monotonic() - t0:.0f} s: " + " | ".join(tail))
         finally:
             proc.terminate()
             try:
                 proc.wait(10)
             except subprocess.TimeoutExpired:
                 proc.kill()
+            log.close()
 
 
 def main(argv: list[str] | None = None) -> int:

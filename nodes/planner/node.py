@@ -219,9 +219,10 @@ class PlannerNode(Node):
         if not msg.valid:
             plan = self.planner.hold(Hold.MARKER_LOST)
         else:
-            pos = msg.predicted_position if self.params.use_prediction else msg.position
+            predict = self.params.use_prediction        # read once: param set may change it meanwhile
+            pos = msg.predicted_position if predict else msg.position
             k, source = self._stiffness()
-            plan = self.planner.update(msg.header.stamp + (msg.prediction_horizon if self.params.use_prediction else 0.0),
+            plan = self.planner.update(msg.header.stamp + (msg.prediction_horizon if predict else 0.0),
                                        pos, k, now=self.now())
             if plan is not None and not plan.status.startswith("hold"):
                 self._note_source(source)

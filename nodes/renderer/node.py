@@ -155,8 +155,8 @@ class RendererNode(Node):
         self.projector = geo.projector
         self._image = None          # an image show_image set, drawn instead of the scene
         self.service("show_image", self.srv_show_image, "{path}: show an image file in both eyes (registration "
-                     "patterns) instead of the scene, scaled to the projector")
-        self.service("clear_image", self.srv_clear_image, "draw the scene again")
+                     "patterns) instead of the scene, scaled to the projector", commanding=True)
+        self.service("clear_image", self.srv_clear_image, "draw the scene again", commanding=True)
         check_screen(self.eye, self.projector.position, paper.SCREEN_POINT, paper.SCREEN_NORMAL)
         self.sheet_config = SheetConfig(half_width=p.sheet_half_width, push_threshold=p.push_threshold,
                                         fine_modes=p.fine_modes, tension_ratio=p.tension_ratio,

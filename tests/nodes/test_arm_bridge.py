@@ -340,7 +340,7 @@ def test_arm_services_hold_move_to_home_and_release_within_the_limits():
         try:
             async with NodeHarness(ArmBridgeNode, params=params, name="arm_left") as h:
                 svc = h.node._pending_services
-                call = {name: handler for name, (handler, _) in svc.items()}
+                call = {name: handler for name, (handler, *_) in svc.items()}
                 await asyncio.sleep(0.1)
                 q0 = np.array(call["hold"]({}))
                 h.inject(topics.ARM_LEFT_TARGET, target("left", 0.2, stamp=1.0))

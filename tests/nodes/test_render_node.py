@@ -168,7 +168,7 @@ def test_show_image_replaces_the_scene_in_both_eyes_until_cleared(tmp_path):
 
     async def scenario():
         async with NodeHarness(RendererNode, params=PARAMS) as h:
-            call = {n: f for n, (f, _) in h.node._pending_services.items()}
+            call = {n: f for n, (f, *_) in h.node._pending_services.items()}
             await next_frame(h)
             with pytest.raises(ValueError, match="cannot read an image from '/nope.png'"):
                 call["show_image"]({"path": "/nope.png"})

@@ -188,7 +188,7 @@ def test_camera_link_delay_needs_the_simulated_clock():
         async with NodeHarness(CameraNode, params={"rate_hz": 50.0, "twin": IDEAL, "link_delay_s": 0.05}):
             pass
 
-    with pytest.raises((ValueError, ConfigError), match="link_delay_s 0.05 needs the simulated clock"):
+    with pytest.raises((ValueError, ConfigError), match="link_delay_s 0.05 is the camera twin.s on the simulated clock"):
         asyncio.run(scenario())
     with pytest.raises(pydantic.ValidationError, match="link_delay_s"):
         CameraNode.Params.model_validate({"link_delay_s": -0.01})

@@ -115,6 +115,9 @@ def test_params_services_and_topic_pub_on_the_live_graph(demo_launch):
         lf.wait_for(r"x=0\.777", count=3)
         time.sleep(0.5)
         assert sum("x=0.777" in line for line in lf.lines) == 3
+        talker = json.loads(_flexsheet("node", "info", "talker", "--json", "--launch", str(path)).stdout)["endpoint"]
+        r = _flexsheet("service", "call", "listener", "graph/disconnect", f"{{endpoint: '{talker}'}}", "--launch", str(path))
+        assert r.returncode == 1 and "was not added by graph/connect" in r.stderr, r.stderr   # the file's peers stay
         r = _flexsheet("topic", "pub", "/fingertip", "{position: [1, 2]}", "--launch", str(path))
         assert r.returncode == 2 and "field 'position'" in r.stderr, r.stderr
         assert lf.proc.poll() is None                       # the node took every bad request and runs on

@@ -243,3 +243,11 @@ def test_the_presentable_range_comes_from_the_first_limit_and_the_mapping_keeps_
     for c in res["tumour_contrast"]:
         assert c["felt"] == (c["presented"] >= 0.23) and c["presented"] <= c["asked"] + 1e-12
     assert (tmp_path / "compliance.png").stat().st_size > 5000
+
+
+def test_a_refused_value_is_where_the_error_breaks_at_the_latest():
+    from flexsheet.experiments.stability import breaking_point
+
+    assert breaking_point([0.0, 4.0, 8.0, 16.0], [0.11, 0.15, 0.28, float("inf")], 0.359) == 16.0
+    assert breaking_point([0.0, 4.0, 8.0, 16.0], [0.11, 0.40, 0.28, float("nan")], 0.359) == pytest.approx(
+        0.0 + 4.0 * (0.359 - 0.11) / (0.40 - 0.11))
