@@ -374,14 +374,12 @@ def _add_topic_parser(sub) -> None:
                              "clock; a topic guarded by security.publishers is refused)"))
     t.add_argument("topic")
     t.add_argument("message", nargs="?", default="", help="the message's fields as a YAML map (its type is the "
-                   "topic's; the header is stamped now unless given)")
+                   "topic's; the header is stamped with the graph's clock unless given)")
     t.add_argument("--times", type=int, default=1, help="messages to publish (default 1)")
     t.add_argument("--rate", type=float, default=10.0, help="Hz between them (default 10)")
     t.add_argument("--address", default="127.0.0.1", help="address to publish from, reachable by the nodes "
                    "(default 127.0.0.1; on a lab host its launch-file address)")
-    t.add_argument("--launch", default=_launch_default(), help="launch file of the graph")
-    t.add_argument("--timeout", type=float, default=2.5, help="s to find the subscribers and for each call")
-    t.add_argument("--json", action="store_true", help="one JSON document on stdout")
+    _tool_args(t, "s to find the subscribers and for each call")
     t.set_defaults(func=_tool("topic_pub"))
 
 
@@ -391,16 +389,12 @@ def _add_node_parser(sub) -> None:
     ns = s.add_subparsers(dest="node_cmd", required=True, metavar="VERB")
     t = ns.add_parser("list", help="list live nodes with host, pid, state and rejections",
                       **_fmt("  flexsheet node list --launch launch/sim.yaml --json"))
-    t.add_argument("--launch", default=_launch_default(), help="launch file of the graph")
-    t.add_argument("--timeout", type=float, default=2.5, help="s to listen for heartbeats")
-    t.add_argument("--json", action="store_true", help="one JSON document on stdout")
+    _tool_args(t, "s to listen for heartbeats")
     t.set_defaults(func=_tool("node_list"))
     t = ns.add_parser("info", help="one node: host, pid, state, its topics with rates, QoS and drops",
                       **_fmt("  flexsheet node info planner --launch launch/sim.yaml"))
     t.add_argument("name", help="node name (as in the launch file)")
-    t.add_argument("--launch", default=_launch_default(), help="launch file of the graph")
-    t.add_argument("--timeout", type=float, default=2.5, help="s to listen for heartbeats")
-    t.add_argument("--json", action="store_true", help="one JSON document on stdout")
+    _tool_args(t, "s to listen for heartbeats")
     t.set_defaults(func=_tool("node_info"))
 
 
@@ -442,9 +436,10 @@ def _add_service_parser(sub) -> None:
     t.set_defaults(func=_tool("service_call"))
 
 
-def _tool_args(t) -> None:
+def _tool_args(t, timeout_help: str = "s to find the node and for the reply") -> None:
+    """The run-time tools' common flags: ``--launch``, ``--timeout``, ``--json``."""
     t.add_argument("--launch", default=_launch_default(), help="launch file of the graph")
-    t.add_argument("--timeout", type=float, default=2.5, help="s to find the node and for the reply")
+    t.add_argument("--timeout", type=float, default=2.5, help=timeout_help)
     t.add_argument("--json", action="store_true", help="one JSON document on stdout")
 
 
