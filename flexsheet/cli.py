@@ -176,6 +176,10 @@ def cmd_launch(args: argparse.Namespace) -> int:
     for line in result.errors:
         print(line, file=sys.stderr)
     what = f"host {args.host}" if args.host else f"all hosts ({', '.join(result.hosts)})"
+    if args.check and args.json:        # one JSON document on stdout (the lines stay on stderr), same status
+        print(json.dumps({"file": str(args.file), "hosts": result.hosts, "nodes": result.nodes, "ok": not result.errors,
+                          "errors": result.errors, "warnings": result.warnings}))
+        return EXIT_CONFIG if result.errors else 0
     if result.errors:
         print(f"flexsheet launch: {len(result.errors)} error(s) in {args.file} for {what}; nothing started",
               file=sys.stderr)
@@ -280,6 +284,8 @@ def _add_launch_parser(sub) -> None:
     s.add_argument("--check", action="store_true",
                    help="only check the file for this host (--host) and this machine: one line per error, exit 78 "
                         "on any, 0 when it would start")
+    s.add_argument("--json", action="store_true",
+                   help="with --check: one JSON document on stdout (file, hosts, nodes, ok, errors, warnings)")
     s.add_argument("--probe", action="store_true",
                    help="also ask whether the devices this host's nodes name are there (cameras), before anything starts")
     s.set_defaults(func=cmd_launch)

@@ -422,3 +422,18 @@ def test_probe_names_the_cameras_this_machine_does_not_see(tmp_path):
     assert errs == [f"{path}: node cam: probe: camera device_left = 57: no such video device can be opened here"]
     r = flexsheet("launch", str(path), "--check", "--host", "main", "--probe")
     assert r.returncode == EXIT_CONFIG and "probe: camera device_left = 57" in r.stderr, r.stderr
+
+
+def test_check_json_is_one_document_with_the_same_lines_and_status(tmp_path):
+    import json
+
+    path = tmp_path / "chk.yaml"
+    path.write_text(yaml.safe_dump(BASE, sort_keys=False))
+    r = flexsheet("launch", str(path), "--check", "--json")
+    j = json.loads(r.stdout)
+    assert r.returncode == 0 and j["ok"] and j["errors"] == [] and j["nodes"] == 3 and j["hosts"] == ["main", "arm1"]
+    path.write_text(yaml.safe_dump(_mutate(BASE, "nodes.talker.params.rate", -3), sort_keys=False))
+    r = flexsheet("launch", str(path), "--check", "--json")
+    j = json.loads(r.stdout)
+    assert r.returncode == EXIT_CONFIG and not j["ok"] and len(j["errors"]) == 1
+    assert "params.rate = -3" in j["errors"][0] and j["errors"][0] in r.stderr
