@@ -203,8 +203,8 @@ def _ref_job(args: tuple) -> tuple[float, float, str | None]:
 def _scene_push(sc, rt, st: dict, verts, faces, cache, f: float, depths) -> dict:
     """One push point (fraction ``f`` of the stroke): the reference's levels, the served model and linear P2 on
     the finest level's mesh, each judged by the eyes against the finest level (px,
-    :func:`flexsheet.fem.eye_view.visible_px_error`)."""
-    from flexsheet.fem.eye_view import visible_px_error
+    :func:`flexsheet.fem.eye_view.visible_px_errors`: what the eyes see found once per depth)."""
+    from flexsheet.fem.eye_view import visible_px_errors
 
     q, n = sc.stroke_at([f])
     q, n = q[0], n[0]
@@ -216,11 +216,12 @@ def _scene_push(sc, rt, st: dict, verts, faces, cache, f: float, depths) -> dict
     served, seen, lin, change = [], [], [], []
     for j, fg in enumerate(fingers):
         ref_pts = verts + fine["u"][j]
-        e, k = visible_px_error(ups[j].vertices, ref_pts, faces, fg)
+        coarse = [verts + refs[-2]["u"][j]] if len(refs) > 1 else []
+        (e, e_lin, *e_change), k = visible_px_errors([ups[j].vertices, verts + lin_u[j], *coarse], ref_pts, faces, fg)
         served.append(e)
         seen.append(k)
-        lin.append(visible_px_error(verts + lin_u[j], ref_pts, faces, fg)[0])
-        change.append(visible_px_error(verts + refs[-2]["u"][j], ref_pts, faces, fg)[0] if len(refs) > 1 else None)
+        lin.append(e_lin)
+        change.append(e_change[0] if e_change else None)
     levels = [{"h_fine_m": h, "dofs": int(r["dofs"]), "seconds": float(r["seconds"]),
                "newton_converged": bool(np.all(r["converged"])), "force_N": r["force"].tolist(),
                "inverted": r["inverted"].tolist()} for h, r in zip(st["levels"], refs, strict=True)]

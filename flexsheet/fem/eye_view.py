@@ -17,7 +17,8 @@ import numpy as np
 from flexsheet.model import geometry
 from flexsheet.model.projector import eye_positions
 
-__all__ = ["FINGER_LENGTH", "IPD", "eyes", "finger_capsule", "seen", "screen_px", "visible_px_error"]
+__all__ = ["FINGER_LENGTH", "IPD", "eyes", "finger_capsule", "seen", "screen_px", "visible_px_error",
+           "visible_px_errors"]
 
 #: the finger's length behind the tip's centre, m: an adult index finger's distal and middle phalanges
 #: (assumption; a longer finger hides no more, the capsule then ends beside the user's hand)
@@ -107,22 +108,32 @@ def screen_px(points: np.ndarray, eye: np.ndarray) -> np.ndarray:
     return s[:, 1:] / geometry.PIXEL_ON_SCREEN
 
 
-def visible_px_error(model_pts: np.ndarray, ref_pts: np.ndarray, faces: np.ndarray, finger=None,
-                     eye_pair: np.ndarray | None = None) -> tuple[float, int]:
-    """The largest visible error, px, of ``model_pts`` against ``ref_pts`` (k, 3) m (the same rendered vertices,
-    deformed by the model and by the reference), and how many vertices either eye sees: visibility on the
-    reference's surface (``faces`` (F, 3)) with the ``finger`` (:class:`flexsheet.fem.contact.Finger` or None)
-    occluding; ``eye_pair`` (2, 3) m, default :func:`eyes`. 0.0 when no vertex is seen."""
-    m = np.asarray(model_pts, float)
+def visible_px_errors(models: list[np.ndarray], ref_pts: np.ndarray, faces: np.ndarray, finger=None,
+                      eye_pair: np.ndarray | None = None) -> tuple[list[float], int]:
+    """The largest visible error, px, of each of ``models`` (each (k, 3) m) against ``ref_pts`` (k, 3) m (the
+    same rendered vertices, deformed by a model and by the reference), and how many vertices either eye sees:
+    visibility on the reference's surface (``faces`` (F, 3)) with the ``finger``
+    (:class:`flexsheet.fem.contact.Finger` or None) occluding, found once for all models; ``eye_pair`` (2, 3) m,
+    default :func:`eyes`. 0.0 when no vertex is seen. Raises ``ValueError`` for mismatched shapes."""
     r = np.asarray(ref_pts, float)
-    if m.shape != r.shape:
-        raise ValueError(f"model_pts {m.shape} and ref_pts {r.shape} must match")
+    ms = [np.asarray(m, float) for m in models]
+    for m in ms:
+        if m.shape != r.shape:
+            raise ValueError(f"model_pts {m.shape} and ref_pts {r.shape} must match")
     cap = finger_capsule(finger) if finger is not None else None
-    worst, seen_any = 0.0, np.zeros(len(r), bool)
+    worst, seen_any = [0.0] * len(ms), np.zeros(len(r), bool)
     for e in eyes() if eye_pair is None else np.asarray(eye_pair, float):
         vis = seen(r, faces, e, cap)
         seen_any |= vis
         if vis.any():
-            err = np.linalg.norm(screen_px(m[vis], e) - screen_px(r[vis], e), axis=1)
-            worst = max(worst, float(err.max()))
+            ref_px = screen_px(r[vis], e)
+            for i, m in enumerate(ms):
+                worst[i] = max(worst[i], float(np.linalg.norm(screen_px(m[vis], e) - ref_px, axis=1).max()))
     return worst, int(seen_any.sum())
+
+
+def visible_px_error(model_pts: np.ndarray, ref_pts: np.ndarray, faces: np.ndarray, finger=None,
+                     eye_pair: np.ndarray | None = None) -> tuple[float, int]:
+    """:func:`visible_px_errors` for one model: (its largest visible error, px; the vertices either eye sees)."""
+    errs, k = visible_px_errors([model_pts], ref_pts, faces, finger, eye_pair)
+    return errs[0], k
