@@ -4,7 +4,7 @@ from messages.arm import ArmJointState
 from messages.common import DISPLAY_FRAME, Header, Message, check_finite, ndarray
 from messages.diagnostics import Heartbeat, TopicStats
 from messages.fem import ObjectDeformation
-from messages.render import RenderedFrame
+from messages.render import ProjectorImage, RenderedFrame
 from messages.surface import ArmTarget, SheetTarget
 from messages.topics import Topic
 from messages.vision import Fingertip, StereoCalibration, StereoFrame
@@ -13,9 +13,9 @@ from messages.world import FingerTruth, SheetState
 MESSAGE_TYPES: dict[str, type[Message]] = {
     cls.SCHEMA: cls
     for cls in (StereoFrame, StereoCalibration, Fingertip, SheetTarget, ArmTarget, ArmJointState,
-                ObjectDeformation, RenderedFrame, FingerTruth, SheetState, Heartbeat)
+                ObjectDeformation, RenderedFrame, ProjectorImage, FingerTruth, SheetState, Heartbeat)
 }
 
 __all__ = ["ArmJointState", "ArmTarget", "DISPLAY_FRAME", "Fingertip", "FingerTruth", "Header", "Heartbeat",
-           "MESSAGE_TYPES", "Message", "ObjectDeformation", "RenderedFrame", "SheetState", "SheetTarget",
+           "MESSAGE_TYPES", "Message", "ObjectDeformation", "ProjectorImage", "RenderedFrame", "SheetState", "SheetTarget",
            "StereoCalibration", "StereoFrame", "Topic", "TopicStats", "check_finite", "ndarray"]

@@ -1,4 +1,5 @@
-"""Renderer messages: the downscaled stereo frame the projector emitted (for recording)."""
+"""Renderer messages: the downscaled stereo frame the projector emitted (for recording), and the image it shows
+instead of the scene (registration)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ from pydantic import Field
 
 from messages.common import Message, ndarray
 
-__all__ = ["RenderedFrame"]
+__all__ = ["RenderedFrame", "ProjectorImage"]
 
 
 class RenderedFrame(Message):
@@ -27,3 +28,19 @@ class RenderedFrame(Message):
     correction: str = Field(description="correction model used; \"image\" while show_image replaces the scene")
     render_time: float = Field(ge=0.0, description="time to correct and draw the pair, s")
     source_stamp: float = Field(default=0.0, description="exposure stamp of the driving fingertip, s")
+
+
+class ProjectorImage(Message):
+    """The image the projector shows in both eyes instead of the scene (the renderer's ``show_image`` service:
+    registration patterns), latched; ``showing`` false once ``clear_image`` brought the scene back.
+
+    ``image``: uint8 (h, w) luminance at the projector's resolution, px ((0, 0) when not showing).
+    ``header.stamp``: when the renderer took it, s (the graph's clock); ``name``: the file it came from.
+    """
+
+    SCHEMA = "flexsheet/ProjectorImage"
+    VERSION = 1
+
+    image: ndarray("uint8", (None, None), "projector image, luminance, (h, w) px")
+    showing: bool = Field(description="true while the image replaces the scene")
+    name: str = Field(default="", description="file the image came from")

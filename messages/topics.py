@@ -12,7 +12,7 @@ from messages.arm import ArmJointState
 from messages.common import Message
 from messages.diagnostics import Heartbeat
 from messages.fem import ObjectDeformation
-from messages.render import RenderedFrame
+from messages.render import ProjectorImage, RenderedFrame
 from messages.surface import ArmTarget, SheetTarget
 from messages.vision import Fingertip, StereoCalibration, StereoFrame
 from messages.world import FingerTruth, SheetState
@@ -44,12 +44,14 @@ ARM_LEFT_STATE = Topic("/arm/left/joint_state", ArmJointState, nominal_hz=140.0)
 ARM_RIGHT_STATE = Topic("/arm/right/joint_state", ArmJointState, nominal_hz=140.0)
 DEFORMATION = Topic("/object/deformation", ObjectDeformation, nominal_hz=48.0)
 RENDERED = Topic("/render/stereo", RenderedFrame, nominal_hz=10.0)
+#: what the projector shows instead of the scene (registration patterns), latched
+PROJECTOR_IMAGE = Topic("/projector/image", ProjectorImage, latched=True)
 FINGER_TRUTH = Topic("/world/finger", FingerTruth, nominal_hz=100.0)
 SHEET_STATE = Topic("/world/sheet", SheetState, nominal_hz=50.0)
 DIAGNOSTICS = Topic("/diagnostics", Heartbeat, nominal_hz=1.0)
 
 ALL = [STEREO, STEREO_PREVIEW, CALIBRATION, FINGERTIP, SHEET_TARGET, ARM_LEFT_TARGET, ARM_RIGHT_TARGET, ARM_LEFT_STATE,
-       ARM_RIGHT_STATE, DEFORMATION, RENDERED, FINGER_TRUTH, SHEET_STATE, DIAGNOSTICS]
+       ARM_RIGHT_STATE, DEFORMATION, RENDERED, PROJECTOR_IMAGE, FINGER_TRUTH, SHEET_STATE, DIAGNOSTICS]
 BY_NAME = {t.name: t for t in ALL}
 
 

@@ -21,6 +21,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 HOSTS = {"main": "10.77.0.1", "arm1": "10.77.0.2", "arm2": "10.77.0.3"}
 PREFIX = f"fs{os.getpid() % 10000}"
+KEYS_ROOT = Path("/tmp/flexsheet-test-keys")
 
 
 def sh(*cmd: str) -> None:
@@ -43,6 +44,18 @@ def set_cable(host: str, up: bool) -> None:
     sh("ip", "netns", "exec", switch(), "ip", "link", "set", cable(host), "up" if up else "down")
 
 
+def lab_keys() -> Path:
+    """CURVE keys for ``launch/lab_sim.yaml`` (CURVE on, as in the lab): generated once per test process into a
+    private folder that ``$FLEXSHEET_KEYS`` names for everything started afterwards (the hosts' launchers and
+    the tools run in their namespaces). Returns the folder."""
+    if not os.environ.get("FLEXSHEET_KEYS", "").startswith(str(KEYS_ROOT)):
+        folder = KEYS_ROOT / f"keys-{os.getpid()}"
+        subprocess.run([sys.executable, "-m", "flexsheet", "keys", "generate", "--launch", "launch/lab_sim.yaml",
+                        "-o", str(folder)], cwd=ROOT, check=True, capture_output=True, text=True)
+        os.environ["FLEXSHEET_KEYS"] = str(folder)
+    return Path(os.environ["FLEXSHEET_KEYS"])
+
+
 @contextlib.contextmanager
 def three_hosts():
     """Create the namespaces (see module doc); yields host → namespace name; removes them (and kills what
@@ -51,6 +64,7 @@ def three_hosts():
         raise RuntimeError("the three-namespace tests need root (CI runs as root)")
     sw = switch()
     names = {h: f"{PREFIX}-{h}" for h in HOSTS}
+    lab_keys()
     try:
         sh("ip", "netns", "add", sw)
         sh("ip", "netns", "exec", sw, "ip", "link", "add", "br0", "type", "bridge")

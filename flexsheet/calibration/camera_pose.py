@@ -51,7 +51,8 @@ __all__ = ["VIEW_PLAN", "detect_corners", "board_centre", "board_points", "sheet
            "CameraPoseResult", "detect_views", "estimate_camera_pose"]
 
 #: commanded sheet poses for the board views: (tilt about y °, turn about z °, origin (x, y, z) m), home
-#: first; all reachable by both RV-1As from the nominal bases and all facing the nominal camera. The order
+#: first; all reachable by both RV-1As from the nominal bases within the bridges' 0.02 rad joint margin, and all
+#: facing the nominal camera. The order
 #: interleaves tilts, turns and depth so any prefix is well conditioned.
 VIEW_PLAN: tuple = (
     (0, 0, (0, 0, 0)), (-35, 0, (0, 0, 0)), (0, -25, (0, 0, 0)), (0, 0, (0.08, 0, 0)), (0, 0, (-0.08, 0, 0)),
@@ -59,7 +60,7 @@ VIEW_PLAN: tuple = (
     (0, -25, (-0.08, 0, -0.06)), (-45, 0, (0, 0, 0)), (-25, -20, (0.06, 0, -0.07)),
     (-25, -20, (-0.06, 0, 0.07)), (-40, -15, (0, 0, 0.05)), (-15, -30, (0, 0, -0.05)),
     (-30, 0, (-0.08, 0, -0.06)), (15, -25, (0, 0, 0)), (-30, 10, (0, 0, 0)), (0, -15, (0, 0, 0)),
-    (-20, 0, (0, 0, 0)), (-35, -30, (0, 0, 0)),
+    (-20, 0, (0, 0, 0)), (-35, -28, (0, 0, 0)),
 )
 
 

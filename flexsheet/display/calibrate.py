@@ -210,46 +210,105 @@ def eye_main(argv: list[str] | None = None) -> int:
 
 
 def display_main(argv: list[str] | None = None) -> int:
-    """``flexsheet calibrate display``: every procedure in lab order (twin), or the error-vs-poses sweep."""
+    """``flexsheet calibrate display``: every procedure in lab order — in the twin (``--sim``) or driven through
+    the live graph (``--live``) — or the error-vs-poses sweep."""
     p = argparse.ArgumentParser(
         prog="flexsheet calibrate display", formatter_class=argparse.RawDescriptionHelpFormatter,
-        description="Run camera-pose, projector, arms and eye in the twin against a hidden truth; write "
-                    "OUT/display.yaml and OUT/summary.json (errors vs truth; cached per seed). --sweep charts each "
-                    "estimate's error against the number of poses.",
+        description="Run camera-pose, projector, arms and eye in lab order; write OUT/display.yaml and "
+                    "OUT/summary.json. --sim: in the twin against a hidden truth (errors vs truth; cached per "
+                    "seed). --live: through the running graph of --launch — the arms moved by their bridges, the "
+                    "patterns shown by the renderer, the camera's frames averaged; captures kept under OUT/frames "
+                    "(an interrupted run resumes); with the camera twin, scored against its truth. --sweep charts "
+                    "each estimate's error against the number of poses.",
         epilog="example:\n  flexsheet calibrate display --sim --truth-seed 1 --quick --out /tmp/disp1\n"
+               "  flexsheet calibrate display --live --launch launch/lab.yaml --host main --dry-run --out /tmp/live\n"
+               "  flexsheet calibrate display --live --launch launch/lab_sim.yaml --host main --truth-seed 0 "
+               "--quick --out /tmp/live\n"
                "  flexsheet calibrate display --sweep --seeds 1,2,3 --out docs/figures/calibration")
-    p.add_argument("--sim", action="store_true", help="run in the twin (the only mode of 'display')")
-    p.add_argument("--truth-seed", type=int, default=None)
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--sim", action="store_true", help="run in the offline twin (needs --truth-seed)")
+    mode.add_argument("--live", action="store_true", help="drive the running graph of --launch")
+    p.add_argument("--sweep", action="store_true", help="in the twin: error vs number of poses over --seeds (PNG + "
+                                                        "JSON)")
+    p.add_argument("--truth-seed", type=int, default=None,
+                   help="twin truth seed (--sim; with --live, a check that the camera twin renders this one)")
     p.add_argument("--realism", choices=("realistic", "ideal"), default="realistic")
     p.add_argument("--out", required=True, metavar="DIR")
     p.add_argument("--quick", action="store_true", help="the test preset (fewer poses; still within target)")
-    p.add_argument("--force", action="store_true", help="ignore the cache")
-    p.add_argument("--sweep", action="store_true", help="error vs number of poses over --seeds (PNG + JSON)")
+    p.add_argument("--force", action="store_true", help="ignore the cache (--sim)")
     p.add_argument("--seeds", default="1,2,3", help="truth seeds for --sweep")
+    p.add_argument("--launch", default=os.environ.get("FLEXSHEET_LAUNCH", "launch/lab.yaml"),
+                   help="--live: the running graph's launch file (default $FLEXSHEET_LAUNCH or launch/lab.yaml)")
+    p.add_argument("--host", default=None, help="--live: the host this runs on (the renderer's: it reads the "
+                                                "pattern files)")
+    p.add_argument("--dry-run", action="store_true",
+                   help="--live: print every commanded pose with its joints, check them against the joint limits, "
+                        "move nothing (exit 1 on a pose out of reach)")
+    p.add_argument("--settle", type=float, default=0.3, metavar="S",
+                   help="--live: seconds after the arms arrive or a pattern is shown before frames count")
     a = p.parse_args(argv)
+    opts = P.QUICK if a.quick else P.FULL
 
     def go():
         if a.sweep:
+            if a.live:
+                p.error("--sweep runs in the twin, not with --live")
             from flexsheet.experiments.registration_sweep import run_sweep
 
             seeds = [int(s) for s in a.seeds.split(",") if s.strip()]
             run_sweep(seeds, a.out, quick=a.quick, realism=a.realism, progress=_say)
             return 0
-        if not a.sim or a.truth_seed is None:
-            p.error("display needs --sim --truth-seed N (in the lab run the procedures one by one: docs/calibration.md)")
-        from flexsheet.twin.registration import run_display_sim
+        if a.live:
+            return _live(a, opts)
+        if not a.sim:
+            p.error("say where the frames come from: --sim (the twin), --live (the running graph) or --sweep")
+        if a.truth_seed is None:
+            p.error("--sim needs --truth-seed N")
+        from flexsheet.twin.registration import run_display_sim, verdicts
 
-        s = run_display_sim(a.truth_seed, a.out, P.QUICK if a.quick else P.FULL, a.realism, a.force, progress=_say)
-        t = s["targets"]
-        ok = (s["camera"]["translation_error_mm"] <= t["camera_mm"] and s["camera"]["rotation_error_deg"] <= t["camera_deg"]
-              and s["projector"]["translation_error_mm"] <= t["projector_mm"]
-              and s["projector"]["rotation_error_deg"] <= t["projector_deg"]
-              and s["projector"]["reprojection_px"] <= t["projector_px"]
-              and all(v["translation_error_mm"] <= t["arms_mm"] for v in s["arms"].values()))
+        s = run_display_sim(a.truth_seed, a.out, opts, a.realism, a.force, progress=_say)
+        ok = all(verdicts(s).values())
         _say(f"{'all within target' if ok else 'TARGET MISSED'}; wrote {a.out}/display.yaml, {a.out}/summary.json")
         return 0
 
     return _run(p, go)
+
+
+def _live(a, opts: P.Options) -> int:
+    from flexsheet.display.live import LiveError, check_plan, run_live
+    from flexsheet.runtime.launch import LaunchError
+
+    if not a.settle >= 0.0:
+        print(f"flexsheet calibrate display: error: --settle must be >= 0 s, got {a.settle}", file=sys.stderr)
+        return 2
+    lines, problems = check_plan(opts)
+    if a.dry_run:
+        for line in lines:
+            print(line)
+        for line in problems:
+            print(f"UNREACHABLE: {line}", file=sys.stderr)
+        print(f"{len(lines)} poses; {len(problems) or 'none'} out of reach"
+              + ("" if problems else " (arm configurations are planned again from the measured camera)"))
+        return 1 if problems else 0
+    if problems:
+        print(f"flexsheet calibrate display: {problems[0]} (--dry-run lists every pose)", file=sys.stderr)
+        return 1
+    try:
+        s = run_live(a.launch, a.out, opts, a.truth_seed, a.host, a.settle, progress=_say)
+    except (LiveError, LaunchError) as exc:
+        print(f"flexsheet calibrate display: {exc}", file=sys.stderr)
+        print(f"(frames captured so far are kept in {a.out}/frames: run the same command again to resume)",
+              file=sys.stderr)
+        return 1
+    if "verdicts" in s:
+        ok = all(s["verdicts"].values())
+        c, pj = s["camera"], s["projector"]
+        _say(f"camera {c['translation_error_mm']:.3f} mm {c['rotation_error_deg']:.4f}°, projector "
+             f"{pj['translation_error_mm']:.2f} mm {pj['rotation_error_deg']:.3f}° {pj['reprojection_px']:.3f} px, arms "
+             + ", ".join(f"{k} {v['translation_error_mm']:.3f} mm" for k, v in s["arms"].items())
+             + f": {'all within target' if ok else 'TARGET MISSED'}")
+    _say(f"wrote {a.out}/display.yaml, {a.out}/summary.json")
+    return 0
 
 
 def noise_main(argv: list[str] | None = None) -> int:

@@ -27,9 +27,10 @@ from flexsheet.calibration.procedures import (
 from flexsheet.twin.registration_camera import CalibrationTwin
 from flexsheet.twin.truth import TwinTruth
 
-__all__ = ["TwinSource", "run_display_sim", "sim_display_calib", "SUMMARY_VERSION"]
+__all__ = ["TwinSource", "run_display_sim", "sim_display_calib", "score_registration", "verdicts", "TARGETS",
+           "SUMMARY_VERSION"]
 
-SUMMARY_VERSION = 2
+SUMMARY_VERSION = 3
 
 Pair = tuple[np.ndarray, np.ndarray]
 
@@ -84,6 +85,44 @@ def _err(t, r):
     return {"translation_error_mm": t * 1e3, "rotation_error_deg": math.degrees(r)}
 
 
+#: the registration targets (issue 43): camera, projector, arm bases
+TARGETS = {"camera_mm": 0.5, "camera_deg": 0.1, "projector_mm": 2.0, "projector_deg": 0.2, "projector_px": 0.5,
+           "arms_mm": 1.0}
+
+
+def score_registration(truth: TwinTruth, cam, rc, proj, rp, arms: dict) -> dict:
+    """The estimates of :mod:`flexsheet.calibration.procedures` (camera entry + result, projector entry + result,
+    ``{side: (ArmEntry, ArmResult)}``) scored against ``truth``: ``camera``, ``projector``, ``arms.<side>``
+    (translation_error_mm, rotation_error_deg, residuals) and ``targets``. Call it only once every estimate is
+    fixed."""
+    out = {}
+    out["camera"] = {**_err(*truth.camera_pose_error(cam.T_display_camera)), "rms_px": rc.rms_px,
+                     "residual_mm": rc.residual_mm, "views": rc.n_views}
+    out["projector"] = {**_err(*truth.projector_pose_error(proj.T_display_projector)),
+                        "reprojection_px": rp.reprojection_px, "poses": rp.n_poses, "points": rp.n_inliers,
+                        "focal_error_px": float(proj.K[0, 0] - truth.projector_K[0, 0]),
+                        "principal_point_error_px": (proj.K[:2, 2] - truth.projector_K[:2, 2]).tolist()}
+    out["arms"] = {s: {**_err(*truth.base_error(s, e.T_display_base)), "residual_mm": r.residual_mm,
+                       "configs": r.n_configs,
+                       "marker_offset_error_mm": float(np.linalg.norm(e.marker_offset - truth.clamp_marker[s]) * 1e3)}
+                   for s, (e, r) in arms.items()}
+    out["targets"] = dict(TARGETS)
+    return out
+
+
+def verdicts(summary: dict) -> dict:
+    """``{name: bool}``: each target of ``summary["targets"]`` met (scored summaries only)."""
+    c, p, t = summary["camera"], summary["projector"], summary["targets"]
+    out = {"camera_mm": c["translation_error_mm"] <= t["camera_mm"],
+           "camera_deg": c["rotation_error_deg"] <= t["camera_deg"],
+           "projector_mm": p["translation_error_mm"] <= t["projector_mm"],
+           "projector_deg": p["rotation_error_deg"] <= t["projector_deg"],
+           "projector_px": p["reprojection_px"] <= t["projector_px"]}
+    for side, a in summary["arms"].items():
+        out[f"arms_{side}_mm"] = a["translation_error_mm"] <= t["arms_mm"]
+    return out
+
+
 def run_display_sim(seed: int, out_dir: str, opts: Options = FULL, realism: str = "realistic",
                     force: bool = False, progress=print) -> dict:
     """Run every procedure in the twin of truth ``seed``; write ``out_dir/display.yaml`` and
@@ -120,19 +159,7 @@ def run_display_sim(seed: int, out_dir: str, opts: Options = FULL, realism: str 
     calib.eye = run_eye(source=src.label)
     write_display_calib(ypath, calib)
     # scoring against the truth: only now, after every estimate is fixed
-    summary = dict(key)
-    summary["camera"] = {**_err(*truth.camera_pose_error(cam.T_display_camera)), "rms_px": rc.rms_px,
-                         "residual_mm": rc.residual_mm, "views": rc.n_views}
-    summary["projector"] = {**_err(*truth.projector_pose_error(proj.T_display_projector)),
-                            "reprojection_px": rp.reprojection_px, "poses": rp.n_poses, "points": rp.n_inliers,
-                            "focal_error_px": float(proj.K[0, 0] - truth.projector_K[0, 0]),
-                            "principal_point_error_px": (proj.K[:2, 2] - truth.projector_K[:2, 2]).tolist()}
-    summary["arms"] = {s: {**_err(*truth.base_error(s, e.T_display_base)), "residual_mm": r.residual_mm,
-                           "configs": r.n_configs,
-                           "marker_offset_error_mm": float(np.linalg.norm(e.marker_offset - truth.clamp_marker[s]) * 1e3)}
-                       for s, (e, r) in arms.items()}
-    summary["targets"] = {"camera_mm": 0.5, "camera_deg": 0.1, "projector_mm": 2.0, "projector_deg": 0.2,
-                          "projector_px": 0.5, "arms_mm": 1.0}
+    summary = {**key, **score_registration(truth, cam, rc, proj, rp, arms)}
     summary["timings"] = {**timings, "total_s": time.perf_counter() - t_all}
     with open(spath, "w") as fh:
         json.dump(summary, fh, indent=1)

@@ -38,7 +38,7 @@ from flexsheet.twin.truth import TwinTruth
 from flexsheet.vision.stereo_calibration import BoardSpec
 
 __all__ = ["NoiseModel", "XIMEA_NOISE", "CalibrationTwin", "measure_ximea_noise", "board_texture",
-           "sheet_pose_from_clamps"]
+           "sheet_pose_from_clamps", "commanded_sheet_joints"]
 
 
 @dataclass(frozen=True)
@@ -75,6 +75,39 @@ def sheet_pose_from_clamps(T_left: np.ndarray, T_right: np.ndarray) -> np.ndarra
     T[:3, :3] = np.column_stack([n, u, np.cross(n, u)])
     T[:3, 3] = o
     return T
+
+
+def commanded_sheet_joints(T_sheet_cmd: np.ndarray, stretch: float = 0.0, cache: dict | None = None) -> dict:
+    """The joints the lab commands to hold the sheet at ``T_sheet_cmd`` (4, 4, display frame): each clamp pose
+    (:func:`flexsheet.model.geometry.clamp_poses`) solved with the *nominal* kinematics, seeded at the home
+    joints. Returns ``{"left": (6,), "right": (6,)}`` rad; raises ``ValueError`` naming the arm that cannot
+    reach it. ``cache``: a dict to keep the kinematics in between calls."""
+    from flexsheet.arm.kinematics import LEFT_BASE, RIGHT_BASE, ArmKinematics, home_joints
+
+    cache = {} if cache is None else cache
+    T_sheet_cmd = np.asarray(T_sheet_cmd, float)
+    Tl, Tr = geometry.clamp_poses(T_sheet_cmd[:3, 3], T_sheet_cmd[:3, 0], T_sheet_cmd[:3, 1], stretch)
+    qs = {}
+    for side, T, base in (("left", Tl, LEFT_BASE), ("right", Tr, RIGHT_BASE)):
+        kin = cache.setdefault(side, ArmKinematics(side, base))
+        q = home_joints(side)
+        for _ in range(4):
+            r = kin.ik(T, q, max_jump=3.0)
+            q = r.q
+            if r.ok:
+                break
+        if not r.ok:
+            raise ValueError(f"commanded sheet pose not reachable by the {side} arm ({r.status})")
+        qs[side] = q
+    return qs
+
+
+@dataclass
+class _PatternMaps:
+    """:meth:`CalibrationTwin.pattern_maps`: sub-samples per pixel side and, per camera, the projector map."""
+
+    ss: int
+    maps: list
 
 
 def board_texture(board: BoardSpec, px_per_m: float = 8000.0, margin_squares: float = 0.5):
@@ -216,11 +249,21 @@ class CalibrationTwin:
     # ----------------------------------------------------------------------------------------- image model
     def _finish(self, acc: np.ndarray, ss: int, frames: int | None = None) -> np.ndarray:
         """Sub-sample image (H·ss, W·ss) DN → pixel integration, optical blur, sensor noise, uint8."""
+        return self.expose(self.clean(acc, ss), frames)
+
+    def clean(self, acc: np.ndarray, ss: int) -> np.ndarray:
+        """Sub-sample image (H·ss, W·ss) DN → the noise-free pixel image (H, W) float32 DN: pixel integration
+        and optical blur."""
         h, w = acc.shape[0] // ss, acc.shape[1] // ss
         # INTER_AREA with an integer factor is the exact block mean
         img = cv2.resize(acc, (w, h), interpolation=cv2.INTER_AREA) if ss > 1 else acc
         if self.noise.blur_px > 0:
             img = cv2.GaussianBlur(img.astype(np.float32), (0, 0), self.noise.blur_px)
+        return img
+
+    def expose(self, img: np.ndarray, frames: int | None = None) -> np.ndarray:
+        """A noise-free image from :meth:`clean` → what the camera delivers (uint8): sensor noise σ² = read² +
+        gain·I and quantisation per frame, ``frames`` frames averaged (default: the twin's ``frames``)."""
         sig = np.sqrt(self.noise.read_dn ** 2 + self.noise.shot_gain * np.maximum(img, 0.0))
         n = self.frames if frames is None else int(frames)
         acc = np.zeros(img.shape, np.float32)
@@ -232,23 +275,12 @@ class CalibrationTwin:
     def sheet_pose(self, T_sheet_cmd: np.ndarray, stretch: float = 0.0) -> np.ndarray:
         """Where the true arms put the sheet when the lab commands ``T_sheet_cmd`` (4, 4): the clamp poses are
         solved with the *nominal* kinematics (what the bridges would do), then the *true* arms move there."""
-        from flexsheet.arm.kinematics import LEFT_BASE, RIGHT_BASE, ArmKinematics, home_joints
+        qs = commanded_sheet_joints(T_sheet_cmd, stretch, self._ik)
+        return self.true_sheet_pose(qs["left"], qs["right"])
 
-        Tl, Tr = geometry.clamp_poses(T_sheet_cmd[:3, 3], T_sheet_cmd[:3, 0], T_sheet_cmd[:3, 1], stretch)
-        qs = {}
-        for side, T, base in (("left", Tl, LEFT_BASE), ("right", Tr, RIGHT_BASE)):
-            kin = self._ik.setdefault(side, ArmKinematics(side, base))
-            q = home_joints(side)
-            for _ in range(4):
-                r = kin.ik(T, q, max_jump=3.0)
-                q = r.q
-                if r.ok:
-                    break
-            if not r.ok:
-                raise ValueError(f"commanded sheet pose not reachable by the {side} arm ({r.status})")
-            qs[side] = q
-        return sheet_pose_from_clamps(self.truth.clamp_pose("left", qs["left"]),
-                                      self.truth.clamp_pose("right", qs["right"]))
+    def true_sheet_pose(self, q_left, q_right) -> np.ndarray:
+        """(4, 4) the sheet's true pose with the arms at joints ``q_left``, ``q_right`` (6,) rad."""
+        return sheet_pose_from_clamps(self.truth.clamp_pose("left", q_left), self.truth.clamp_pose("right", q_right))
 
     # ----------------------------------------------------------------------------------------- board views
     def board_views(self, board: BoardSpec, sheet_poses: list[np.ndarray], board_offset: float = 0.0,
@@ -258,6 +290,17 @@ class CalibrationTwin:
         the true arms (:meth:`sheet_pose`). ``board_offset`` m: printed surface in front of the sheet's mid
         plane (known to the procedure). ``bow_mm``: the board is not flat — a paraboloid bow toward the user of
         this sag (mm) at the sheet's corners (±120, ±120 mm); 0 = flat."""
+        out = []
+        for k, T_cmd in enumerate(sheet_poses):
+            T = np.eye(4) if k == 0 else self.sheet_pose(np.asarray(T_cmd, float))
+            pair = [self._finish(dn, self.ss) for dn in self.board_dn(board, T, board_offset, bow_mm)]
+            out.append((pair[0], pair[1]))
+        return out
+
+    def board_dn(self, board: BoardSpec, T_sheet: np.ndarray, board_offset: float = 0.0,
+                 bow_mm: float = 0.0) -> list[np.ndarray]:
+        """Sub-sample DN images (one per camera, (H·ss, W·ss) float32) of ``board`` on the sheet at its true pose
+        ``T_sheet`` (4, 4); arguments as :meth:`board_views`."""
         from flexsheet.calibration.camera_pose import board_centre
 
         key = (board, round(self.ss))
@@ -266,39 +309,34 @@ class CalibrationTwin:
         tex, ppm, (x0, y0) = self._tex[key]
         cx, cy = board_centre(board)
         half = 0.5 * geometry.SHEET_SIZE
+        T = np.asarray(T_sheet, float).copy()
+        T[:3, 3] += board_offset * T[:3, 0]
         out = []
-        for k, T_cmd in enumerate(sheet_poses):
-            T = np.eye(4) if k == 0 else self.sheet_pose(np.asarray(T_cmd, float))
-            T = T.copy()
-            T[:3, 3] += board_offset * T[:3, 0]
-            pair = []
-            for cam in self.cams:
-                u, v, ok, _ = cam.plane_hit(T, self.ss)
-                if bow_mm:
-                    # bowed board: a point at in-plane radius r sits sag·(r/r_corner)² toward the user, so the
-                    # ray meets it earlier; to first order its in-plane coordinate shifts along the ray
-                    r2 = (u * u + v * v) / (half * half * 2)
-                    dz = np.float32(bow_mm * 1e-3) * r2
-                    n_c = cam.T[:3, :3].T @ T[:3, 0]
-                    d = cam.rays(self.ss)
-                    cosd = (d @ n_c.astype(np.float32)) / np.linalg.norm(d, axis=-1)
-                    tan_scale = dz / np.maximum(np.abs(cosd), 0.2)
-                    a1c = (cam.T[:3, :3].T @ T[:3, 1]).astype(np.float32)
-                    a2c = (cam.T[:3, :3].T @ T[:3, 2]).astype(np.float32)
-                    dn = d / np.linalg.norm(d, axis=-1, keepdims=True)
-                    u = u + tan_scale * (dn @ a1c) * np.sign(cosd)
-                    v = v + tan_scale * (dn @ a2c) * np.sign(cosd)
-                bx, by = cx - u, cy - v
-                mx = ((bx - x0) * ppm - 0.5).astype(np.float32)
-                my = ((by - y0) * ppm - 0.5).astype(np.float32)
-                val = cv2.remap(tex, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
-                on_plate = (mx >= 0) & (my >= 0) & (mx <= tex.shape[1] - 1) & (my <= tex.shape[0] - 1) & ok
-                on_sheet = (np.abs(u) <= half) & (np.abs(v) <= half) & ok
-                nz = self.noise
-                dn = np.where(on_plate, nz.black_dn + (nz.white_dn - nz.black_dn) * np.clip(val, 0, 1),
-                              np.where(on_sheet, self.SHEET_DN, self.ROOM_DN)).astype(np.float32)
-                pair.append(self._finish(dn, self.ss))
-            out.append((pair[0], pair[1]))
+        for cam in self.cams:
+            u, v, ok, _ = cam.plane_hit(T, self.ss)
+            if bow_mm:
+                # bowed board: a point at in-plane radius r sits sag·(r/r_corner)² toward the user, so the
+                # ray meets it earlier; to first order its in-plane coordinate shifts along the ray
+                r2 = (u * u + v * v) / (half * half * 2)
+                dz = np.float32(bow_mm * 1e-3) * r2
+                n_c = cam.T[:3, :3].T @ T[:3, 0]
+                d = cam.rays(self.ss)
+                cosd = (d @ n_c.astype(np.float32)) / np.linalg.norm(d, axis=-1)
+                tan_scale = dz / np.maximum(np.abs(cosd), 0.2)
+                a1c = (cam.T[:3, :3].T @ T[:3, 1]).astype(np.float32)
+                a2c = (cam.T[:3, :3].T @ T[:3, 2]).astype(np.float32)
+                dn = d / np.linalg.norm(d, axis=-1, keepdims=True)
+                u = u + tan_scale * (dn @ a1c) * np.sign(cosd)
+                v = v + tan_scale * (dn @ a2c) * np.sign(cosd)
+            bx, by = cx - u, cy - v
+            mx = ((bx - x0) * ppm - 0.5).astype(np.float32)
+            my = ((by - y0) * ppm - 0.5).astype(np.float32)
+            val = cv2.remap(tex, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
+            on_plate = (mx >= 0) & (my >= 0) & (mx <= tex.shape[1] - 1) & (my <= tex.shape[0] - 1) & ok
+            on_sheet = (np.abs(u) <= half) & (np.abs(v) <= half) & ok
+            nz = self.noise
+            out.append(np.where(on_plate, nz.black_dn + (nz.white_dn - nz.black_dn) * np.clip(val, 0, 1),
+                                np.where(on_sheet, self.SHEET_DN, self.ROOM_DN)).astype(np.float32))
         return out
 
     # ----------------------------------------------------------------------------------------- patterns
@@ -314,13 +352,23 @@ class CalibrationTwin:
         ``home_exact``: render the home pose at the display frame instead of through the true arms.
         ``frames``: frames averaged per pattern (default: the twin's ``frames``).
         """
-        t = self.truth
         T = np.eye(4) if home_exact else self.sheet_pose(np.asarray(T_sheet_cmd, float))
+        maps = self.pattern_maps(T, white_dn, ambient_dn)
+        out = []
+        for pat in patterns:
+            pair = [self._finish(img, maps.ss, frames) for img in self.pattern_dn(maps, pat)]
+            out.append((pair[0], pair[1]))
+        return out
+
+    def pattern_maps(self, T_sheet: np.ndarray, white_dn: float = 190.0, ambient_dn: float = 12.0) -> _PatternMaps:
+        """Where each camera sub-sample looks into the true projector with the sheet at its true pose ``T_sheet``
+        (4, 4), and how bright a white projector pixel is there (arguments as :meth:`pattern_frames`)."""
+        t = self.truth
+        T = np.asarray(T_sheet, float)
         ss = max(2, self.ss - 1)
         half = 0.5 * geometry.SHEET_SIZE
         Tp = t.T_display_projector
         tvec = -Tp[:3, :3].T @ Tp[:3, 3]
-        pw, ph = t.projector_size
         maps = []
         for cam in self.cams:
             u, v, ok, Xc = cam.plane_hit(T, ss)
@@ -343,20 +391,26 @@ class CalibrationTwin:
             base = np.where(onb, np.float32(ambient_dn), np.float32(self.ROOM_DN)).astype(np.float32)
             maps.append((pu.reshape(onb.shape).astype(np.float32), pv.reshape(onb.shape).astype(np.float32),
                          gain, (base, box), full))
+        return _PatternMaps(ss, maps)
+
+    def pattern_dn(self, maps: _PatternMaps, pattern: np.ndarray | None) -> list[np.ndarray]:
+        """Sub-sample DN images (one per camera) of projector image ``pattern`` (uint8 (h, w) at the projector's
+        resolution; ``None``: the projector dark) through :meth:`pattern_maps`. Raises ``ValueError`` on
+        another size."""
+        pw, ph = self.truth.projector_size
+        if pattern is None:
+            pattern = np.zeros((ph, pw), np.uint8)
+        if pattern.shape != (ph, pw):
+            raise ValueError(f"pattern must be ({ph}, {pw}) (the projector's resolution), got {pattern.shape}")
+        p = cv2.GaussianBlur(pattern.astype(np.float32) / 255.0, (0, 0), self.PATTERN_BLUR_PX)
         out = []
-        for pat in patterns:
-            if pat.shape != (ph, pw):
-                raise ValueError(f"pattern must be ({ph}, {pw}) (the projector's resolution), got {pat.shape}")
-            p = cv2.GaussianBlur(pat.astype(np.float32) / 255.0, (0, 0), self.PATTERN_BLUR_PX)
-            pair = []
-            for mx, my, gain, bb, full in maps:
-                img = full.copy()
-                if mx is not None:
-                    base, box = bb
-                    val = cv2.remap(p, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
-                    img[box] = base + gain * val
-                pair.append(self._finish(img, ss, frames))
-            out.append((pair[0], pair[1]))
+        for mx, my, gain, bb, full in maps.maps:
+            img = full.copy()
+            if mx is not None:
+                base, box = bb
+                val = cv2.remap(p, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+                img[box] = base + gain * val
+            out.append(img)
         return out
 
     # ----------------------------------------------------------------------------------------- markers
@@ -370,18 +424,23 @@ class CalibrationTwin:
         other = "right" if side == "left" else "left"
         oq = home_joints(other) if other_q is None else np.asarray(other_q, float)
         P_other = self.truth.clamp_marker_position(other, oq)
-        r = 0.5 * self.truth.clamp_marker_diameter
         out = []
         for q in joint_list:
             P = self.truth.clamp_marker_position(side, np.asarray(q, float))
-            pair = []
-            for cam in self.cams:
-                base = self._room(cam)
-                acc = base.copy()
-                for X in (P, P_other):
-                    self._draw_sphere(acc, cam, X, r, marker_dn)
-                pair.append(self._finish(acc, self.ss))
+            pair = [self._finish(dn, self.ss) for dn in self.marker_dn([P, P_other], marker_dn)]
             out.append((pair[0], pair[1]))
+        return out
+
+    def marker_dn(self, centres: list[np.ndarray], marker_dn: float = 230.0) -> list[np.ndarray]:
+        """Sub-sample DN images (one per camera) of clamp markers (true diameter) at ``centres`` (each (3,) m,
+        display frame) in the dark room."""
+        r = 0.5 * self.truth.clamp_marker_diameter
+        out = []
+        for cam in self.cams:
+            acc = self._room(cam).copy()
+            for X in centres:
+                self._draw_sphere(acc, cam, X, r, marker_dn)
+            out.append(acc)
         return out
 
     def _room(self, cam: _Cam) -> np.ndarray:

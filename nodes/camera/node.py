@@ -53,7 +53,7 @@ from flexsheet.twin.timing import LAB
 from flexsheet.twin.truth_choice import TruthChoice
 from flexsheet.vision.camera_config import CameraConfig
 from flexsheet.vision.stereo_calibration import load_yaml, to_message
-from messages import FingerTruth, StereoFrame, topics
+from messages import ArmJointState, FingerTruth, ProjectorImage, StereoFrame, topics
 
 __all__ = ["CameraParams", "CameraNode", "published_registration", "sim_config"]
 
@@ -266,6 +266,7 @@ class CameraNode(Node):
             # the true cameras: the truth's (drawn around the XIMEA calibration) or, for another model, its own
             self.renderer = twin_renderer(truth, sim_config(p), calib=None if p.model == "ximea" else calib)
             self.subscribe(topics.FINGER_TRUTH, self.on_truth, qos=QoS.LATEST)
+            self._registration_twin(truth)
             # simulated clock: the pair leaves readout + transfer after mid-exposure (flexsheet/twin/timing.py)
             w, h = (int(v) for v in calib["image_size"])
             self.timer(1.0 / p.rate_hz, self.on_sim_tick, sim_cost=LAB.camera_latency(p.exposure_s, w, h),
@@ -299,6 +300,62 @@ class CameraNode(Node):
             self.files = FileSource(p.files_left, p.files_right, p.files_csv, p.rate_hz)
             self._file_task = asyncio.get_running_loop().create_task(self._play_files())
 
+    def _registration_twin(self, truth) -> None:
+        """The registration scenes (:mod:`flexsheet.twin.registration_scene`) a lab sets up by hand — the board
+        on the sheet, the projector's patterns, the dark room for the clamp markers — switched by the sim-only
+        service ``twin/scene``; the sheet follows the arms' joint states, the light ``/projector/image``."""
+        from flexsheet.twin.registration_scene import SCENES, RegistrationScene
+
+        self.scene = RegistrationScene(truth, seed=self.params.seed)
+        self._scene_lock = threading.Lock()
+        self._joints: dict[str, np.ndarray] = {}
+        self._projected: tuple[int, np.ndarray] | None = None
+        self._projected_stamp: float | None = None
+        for side in ("left", "right"):
+            self.subscribe(topics.arm_state(side), self.on_joint_state, qos=QoS.LATEST)
+        self.subscribe(topics.PROJECTOR_IMAGE, self.on_projector_image, qos=QoS.LATEST)
+        self.service("twin/scene", self.srv_scene,
+                     f"camera twin only: {{scene: {'|'.join(SCENES)}, board, square (m), offset (m)}}: what the "
+                     "operator set up in front of the camera (registration); finger: the display running",
+                     commanding=True)
+        self.service("twin/state", self.srv_twin_state,
+                     "camera twin only: {scene, projector_stamp (s: the /projector/image lighting the sheet now, or "
+                     "null), now (s)}; a frame exposed after now shows that image")
+
+    def srv_scene(self, args: dict) -> str:
+        unknown = set(args) - {"scene", "board", "square", "offset"}
+        if unknown:
+            raise ValueError(f"twin/scene takes scene, board, square, offset; got {', '.join(sorted(unknown))}")
+        with self._scene_lock:      # not while a frame of the old scene is being drawn
+            return self.scene.set_scene(args.get("scene", ""), args.get("board", "chessboard:9x8"),
+                                        args.get("square", 0.022), args.get("offset", 0.0))
+
+    def srv_twin_state(self, args: dict) -> dict:
+        with self._lock:
+            stamp = self._projected_stamp
+        return {"scene": self.scene.scene, "projector_stamp": stamp, "now": self.now()}
+
+    def on_joint_state(self, msg: ArmJointState) -> None:
+        """Keep each arm's measured joints (where the true arm is: the controller twin's readback)."""
+        with self._lock:
+            self._joints[msg.arm] = msg.position.copy()
+
+    def on_projector_image(self, msg: ProjectorImage) -> None:
+        """Keep what the projector shows (its seq tells images apart)."""
+        with self._lock:
+            self._projected = (msg.header.seq, msg.image) if msg.showing else None
+            self._projected_stamp = msg.header.stamp if msg.showing else None
+
+    def _registration_frame(self) -> tuple[np.ndarray, np.ndarray] | None:
+        with self._lock:
+            q = dict(self._joints)
+            projected = self._projected
+        if len(q) < 2:
+            self._log_limited(30, "camera twin: the registration scene waits for both arms' joint states")
+            return None
+        with self._scene_lock:
+            return self.scene.render(q["left"], q["right"], projected)
+
     def on_truth(self, msg: FingerTruth) -> None:
         """Keep the newest finger truth (position/velocity in the display frame)."""
         with self._lock:
@@ -331,6 +388,11 @@ class CameraNode(Node):
         t = self.now()
         if self._drop_rate > 0 and self._drop_rng.random() < self._drop_rate:
             self.dropped += 1            # the frame is lost on the link: nothing rendered, nothing published
+            return
+        if self.scene.scene != "finger":
+            pair = self._registration_frame()
+            if pair is not None:
+                self._publish(pair[0], pair[1], t)
             return
         pos, vel, visible = self._marker_state(t)
         left, right = self.renderer.render(pos, vel, visible)

@@ -39,6 +39,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Literal
 
+import numpy as np
 from pydantic import Field, field_validator
 
 from flexsheet.model import geometry as paper
@@ -64,6 +65,7 @@ from messages import (
     Fingertip,
     Heartbeat,
     ObjectDeformation,
+    ProjectorImage,
     RenderedFrame,
     SheetTarget,
     topics,
@@ -188,6 +190,7 @@ class RendererNode(Node):
         self._last_render = 0.0
         self._last_publish = 0.0
         self.pub = self.publisher(topics.RENDERED)
+        self.image_pub = self.publisher(topics.PROJECTOR_IMAGE)
         self._dirty = False
         if p.output == "window":
             await self._open_window()
@@ -495,7 +498,8 @@ class RendererNode(Node):
     # ------------------------------------------------------------------ drawing (GL / window thread)
     def srv_show_image(self, args: dict) -> dict:
         """``{path}``: show an image file (any size: scaled to the projector's, nearest neighbour for patterns)
-        in both eyes instead of the scene, until ``clear_image``."""
+        in both eyes instead of the scene, until ``clear_image``; latched on ``/projector/image``. Returns the
+        path, the projector's size and the stamp it was shown at (s, the graph's clock)."""
         import cv2
 
         path = args.get("path")
@@ -509,11 +513,16 @@ class RendererNode(Node):
             img = cv2.resize(img, (W, H), interpolation=cv2.INTER_NEAREST)
         self._image = img[:, :, ::-1].copy()        # BGR → RGB
         self._request()
-        return {"path": path, "size": [W, H]}
+        header = self.image_pub.header("projector")
+        self.image_pub.publish(ProjectorImage(header=header, image=cv2.cvtColor(img, cv2.COLOR_BGR2GRAY),
+                                              showing=True, name=path))
+        return {"path": path, "size": [W, H], "stamp": header.stamp}
 
     def srv_clear_image(self, args: dict) -> str:
         self._image = None
         self._request()
+        self.image_pub.publish(ProjectorImage(header=self.image_pub.header("projector"),
+                                              image=np.zeros((0, 0), np.uint8), showing=False))
         return "drawing the scene"
 
     def _frame(self, publish: bool = True) -> RenderedFrame | None:

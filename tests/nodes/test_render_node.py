@@ -172,13 +172,19 @@ def test_show_image_replaces_the_scene_in_both_eyes_until_cleared(tmp_path):
             await next_frame(h)
             with pytest.raises(ValueError, match="cannot read an image from '/nope.png'"):
                 call["show_image"]({"path": "/nope.png"})
-            assert call["show_image"]({"path": str(tmp_path / "p.png")}) == {"path": str(tmp_path / "p.png"),
-                                                                           "size": [128, 96]}
+            shown = call["show_image"]({"path": str(tmp_path / "p.png")})
+            assert {k: shown[k] for k in ("path", "size")} == {"path": str(tmp_path / "p.png"), "size": [128, 96]}
+            # latched on /projector/image at the projector's size: what the camera twin lights the sheet with
+            lit = (await h.wait_for(topics.PROJECTOR_IMAGE))[-1]
+            assert lit.showing and lit.header.stamp == shown["stamp"] and lit.image.shape == (96, 128)
+            red = round(0.299 * 255)                                 # luminance of pure red
+            assert int(lit.image[:, :64].max()) == 0 and abs(int(lit.image[:, 64:].min()) - red) <= 1
             m, _ = await frame_with(h, "image", timeout=10.0)
             for img in (m.left, m.right):                    # published at scale 0.5: 64 x 48, the pattern itself
                 assert img.shape == (48, 64, 3)
                 assert np.array_equal(img, pattern), np.abs(img.astype(int) - pattern).max()
             call["clear_image"]({})
+            assert not h.messages(topics.PROJECTOR_IMAGE)[-1].showing
             m, _ = await frame_with(h, "flat", timeout=10.0)
             assert m.left.max() > 100 and not np.array_equal(m.left, pattern)
     asyncio.run(scenario())
