@@ -34,7 +34,8 @@ def _common(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument("--truth-seed", type=int, default=None, help="twin truth seed (with --sim)")
     p.add_argument("--realism", choices=("realistic", "ideal"), default="realistic", help="twin realism")
     p.add_argument("--out", required=True, metavar="DIR", help="folder of display.yaml (entry added/replaced)")
-    p.add_argument("--quick", action="store_true", help="the test preset (fewer poses; still within target)")
+    p.add_argument("--quick", action="store_true", help="fewer poses (4 projector poses, 12 configurations per "
+                                                        "arm): faster, but the projector target can be missed")
 
 
 def _opts(a) -> P.Options:
@@ -234,7 +235,8 @@ def display_main(argv: list[str] | None = None) -> int:
                    help="twin truth seed (--sim; with --live, a check that the camera twin renders this one)")
     p.add_argument("--realism", choices=("realistic", "ideal"), default="realistic")
     p.add_argument("--out", required=True, metavar="DIR")
-    p.add_argument("--quick", action="store_true", help="the test preset (fewer poses; still within target)")
+    p.add_argument("--quick", action="store_true", help="fewer poses (4 projector poses, 12 configurations per "
+                                                        "arm): faster, but the projector target can be missed")
     p.add_argument("--force", action="store_true", help="ignore the cache (--sim)")
     p.add_argument("--seeds", default="1,2,3", help="truth seeds for --sweep")
     p.add_argument("--launch", default=os.environ.get("FLEXSHEET_LAUNCH", "launch/lab.yaml"),

@@ -278,6 +278,7 @@ class LiveSource:
                 for side, img in zip(("left", "right"), pair, strict=True):
                     if cp_mod.detect_corners(img, board) is None:
                         bad = path.replace("_left.png", f"_{side}.rejected.png")
+                        os.makedirs(os.path.dirname(bad), exist_ok=True)
                         cv2.imwrite(bad, img)
                         raise LiveError(f"{what}: the board ({self.opts.board}) is not found in the {side} image "
                                         f"(saved as {bad})")
