@@ -38,7 +38,7 @@ from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE, pose_matrix
 
 __all__ = [
     "URDF_PATH", "JOINT_NAMES", "Q_LOWER", "Q_UPPER", "QD_MAX", "DATASHEET_SPEED_DEG", "Q_HOME", "LEFT_BASE", "RIGHT_BASE",
-    "home_joints", "IKResult", "ArmKinematics",
+    "home_joints", "IKResult", "ArmKinematics", "clamp_joints",
     "rotation_angle",
 ]
 
@@ -235,3 +235,21 @@ class ArmKinematics:
         if float(np.max(np.abs(q - q_seed))) > max_jump:
             return IKResult(q, False, "jump", pos_err, rot_err, it, w)
         return IKResult(q, True, "ok", pos_err, rot_err, it, w)
+
+
+def clamp_joints(kin: dict, T_left: np.ndarray, T_right: np.ndarray) -> dict[str, np.ndarray]:
+    """The joints (side → (6,) rad) that put each clamp at its pose (4, 4, display frame), by ``kin[side]``
+    (:class:`ArmKinematics`) IK seeded at :func:`home_joints` (up to 4 tries, each from the last). Raises
+    ``ValueError`` naming the arm that cannot reach its pose."""
+    out = {}
+    for side, T in (("left", T_left), ("right", T_right)):
+        q = home_joints(side)
+        for _ in range(4):
+            r = kin[side].ik(T, q, max_jump=3.0)
+            q = r.q
+            if r.ok:
+                break
+        if not r.ok:
+            raise ValueError(f"commanded sheet pose not reachable by the {side} arm ({r.status})")
+        out[side] = q
+    return out

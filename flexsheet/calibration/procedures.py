@@ -26,8 +26,7 @@ from flexsheet.calibration.display_calib import (
 from flexsheet.calibration.eye import fixed_eye
 from flexsheet.vision.stereo_calibration import BoardSpec, parse_board
 
-__all__ = ["Options", "QUICK", "FULL", "run_camera_pose", "run_projector", "run_arms", "run_eye",
-           ]
+__all__ = ["Options", "QUICK", "FULL", "run_camera_pose", "run_projector", "run_arms", "run_eye", "run_all"]
 
 
 @dataclass(frozen=True)
@@ -146,3 +145,38 @@ def run_eye(V=None, ipd: float | None = None, source: str = "lab"):
     """The fixed-eye entry (paper's V unless given)."""
     nom = nominal_display_calib().eye
     return fixed_eye(nom.V if V is None else V, nom.ipd if ipd is None else ipd, source=source)
+
+
+@dataclass
+class Registration:
+    """:func:`run_all`'s result: ``calib`` (every entry), each step's estimator result (``camera``,
+    ``projector``: result objects; ``arms``: side → (ArmEntry, ArmResult)) and ``timings`` (s per step)."""
+
+    calib: DisplayCalib
+    camera_entry: CameraEntry
+    camera: object
+    projector_entry: ProjectorEntry
+    projector: object
+    arms: dict
+    timings: dict
+
+
+def run_all(source, opts: Options, progress=None) -> Registration:
+    """Camera pose, projector, arms and eye in lab order on ``source`` (each step from the ones before)."""
+    import time
+
+    timings = {}
+    t0 = time.perf_counter()
+    cam, rc = run_camera_pose(source, opts, progress=progress)
+    timings["camera_s"] = time.perf_counter() - t0
+    calib = DisplayCalib(camera=cam)
+    t0 = time.perf_counter()
+    proj, rp = run_projector(source, opts, calib, progress=progress)
+    timings["projector_s"] = time.perf_counter() - t0
+    calib.projector = proj
+    t0 = time.perf_counter()
+    arms = run_arms(source, opts, calib, progress=progress)
+    timings["arms_s"] = time.perf_counter() - t0
+    calib.arms = {s: e for s, (e, _) in arms.items()}
+    calib.eye = run_eye(source=source.label)
+    return Registration(calib, cam, rc, proj, rp, arms, timings)

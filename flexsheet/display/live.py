@@ -385,8 +385,8 @@ def run_live(launch: str, out: str, opts: Options, truth_seed: int | None = None
     import time
     from dataclasses import asdict
 
-    from flexsheet.calibration.display_calib import DisplayCalib, write_display_calib
-    from flexsheet.calibration.procedures import run_arms, run_camera_pose, run_eye, run_projector
+    from flexsheet.calibration.display_calib import write_display_calib
+    from flexsheet.calibration.procedures import run_all
     from flexsheet.runtime.client import GraphClient
     from flexsheet.runtime.services import ServiceError
 
@@ -415,36 +415,24 @@ def run_live(launch: str, out: str, opts: Options, truth_seed: int | None = None
             raise LiveError(f"--truth-seed scores against the camera twin's truth, but the camera's source is {kind!r}")
         src = LiveSource(client, roles, out, opts, twin=truth is not None, settle_s=settle_s, progress=progress,
                          ask=ask)
-        timings = {}
         try:
-            t0 = time.monotonic()
-            cam, rc = run_camera_pose(src, opts, progress=progress)
-            timings["camera_s"] = time.monotonic() - t0
-            calib = DisplayCalib(camera=cam)
-            t0 = time.monotonic()
-            proj, rp = run_projector(src, opts, calib, progress=progress)
-            timings["projector_s"] = time.monotonic() - t0
-            calib.projector = proj
-            t0 = time.monotonic()
-            arms = run_arms(src, opts, calib, progress=progress)
-            timings["arms_s"] = time.monotonic() - t0
+            reg = run_all(src, opts, progress=progress)
         except (ServiceError, TimeoutError) as exc:
             raise LiveError(str(exc)) from None
         finally:
             src.finish()
-        calib.arms = {s: e for s, (e, _) in arms.items()}
-        calib.eye = run_eye(source=src.label)
-        write_display_calib(os.path.join(out, "display.yaml"), calib)
+        write_display_calib(os.path.join(out, "display.yaml"), reg.calib)
         summary: dict = {"mode": "live", "launch": launch, "options": asdict(opts)}
         if truth is not None:
             from flexsheet.twin.registration import score_registration, verdicts
 
             summary.update(seed=truth.seed, realism=truth.realism)
-            summary.update(score_registration(truth, cam, rc, proj, rp, arms))
+            summary.update(score_registration(truth, reg.camera_entry, reg.camera, reg.projector_entry,
+                                              reg.projector, reg.arms))
             summary["verdicts"] = verdicts(summary)
         else:
-            summary.update(_residual_summary(rc, rp, arms))
-        summary["timings"] = {**timings, "total_s": time.monotonic() - t_all}
+            summary.update(_residual_summary(reg.camera, reg.projector, reg.arms))
+        summary["timings"] = {**reg.timings, "total_s": time.monotonic() - t_all}
         with open(os.path.join(out, "summary.json"), "w") as fh:
             json.dump(summary, fh, indent=1)
         return summary

@@ -13,17 +13,8 @@ from dataclasses import asdict
 
 import numpy as np
 
-from flexsheet.calibration.display_calib import DisplayCalib, write_display_calib
-from flexsheet.calibration.procedures import (
-    FULL,
-    QUICK,
-    Options,
-    _progress,
-    run_arms,
-    run_camera_pose,
-    run_eye,
-    run_projector,
-)
+from flexsheet.calibration.display_calib import write_display_calib
+from flexsheet.calibration.procedures import FULL, QUICK, Options, _progress, run_all
 from flexsheet.twin.registration_camera import CalibrationTwin
 from flexsheet.twin.truth import TwinTruth
 
@@ -143,24 +134,12 @@ def run_display_sim(seed: int, out_dir: str, opts: Options = FULL, realism: str 
     truth = TwinTruth.draw(int(seed), realism)
     src = TwinSource(CalibrationTwin(truth, seed=int(seed)), opts.board_frames, opts.pattern_frames,
                      opts.marker_frames)
-    timings = {}
-    t0 = time.perf_counter()
-    cam, rc = run_camera_pose(src, opts, progress=progress)
-    timings["camera_s"] = time.perf_counter() - t0
-    calib = DisplayCalib(camera=cam)
-    t0 = time.perf_counter()
-    proj, rp = run_projector(src, opts, calib, progress=progress)
-    timings["projector_s"] = time.perf_counter() - t0
-    calib.projector = proj
-    t0 = time.perf_counter()
-    arms = run_arms(src, opts, calib, progress=progress)
-    timings["arms_s"] = time.perf_counter() - t0
-    calib.arms = {s: e for s, (e, _) in arms.items()}
-    calib.eye = run_eye(source=src.label)
-    write_display_calib(ypath, calib)
+    reg = run_all(src, opts, progress=progress)
+    write_display_calib(ypath, reg.calib)
     # scoring against the truth: only now, after every estimate is fixed
-    summary = {**key, **score_registration(truth, cam, rc, proj, rp, arms)}
-    summary["timings"] = {**timings, "total_s": time.perf_counter() - t_all}
+    summary = {**key, **score_registration(truth, reg.camera_entry, reg.camera, reg.projector_entry,
+                                            reg.projector, reg.arms)}
+    summary["timings"] = {**reg.timings, "total_s": time.perf_counter() - t_all}
     with open(spath, "w") as fh:
         json.dump(summary, fh, indent=1)
     c, p = summary["camera"], summary["projector"]

@@ -82,24 +82,14 @@ def commanded_sheet_joints(T_sheet_cmd: np.ndarray, stretch: float = 0.0, cache:
     (:func:`flexsheet.model.geometry.clamp_poses`) solved with the *nominal* kinematics, seeded at the home
     joints. Returns ``{"left": (6,), "right": (6,)}`` rad; raises ``ValueError`` naming the arm that cannot
     reach it. ``cache``: a dict to keep the kinematics in between calls."""
-    from flexsheet.arm.kinematics import LEFT_BASE, RIGHT_BASE, ArmKinematics, home_joints
+    from flexsheet.arm.kinematics import LEFT_BASE, RIGHT_BASE, ArmKinematics, clamp_joints
 
     cache = {} if cache is None else cache
+    for side, base in (("left", LEFT_BASE), ("right", RIGHT_BASE)):
+        cache.setdefault(side, ArmKinematics(side, base))
     T_sheet_cmd = np.asarray(T_sheet_cmd, float)
     Tl, Tr = geometry.clamp_poses(T_sheet_cmd[:3, 3], T_sheet_cmd[:3, 0], T_sheet_cmd[:3, 1], stretch)
-    qs = {}
-    for side, T, base in (("left", Tl, LEFT_BASE), ("right", Tr, RIGHT_BASE)):
-        kin = cache.setdefault(side, ArmKinematics(side, base))
-        q = home_joints(side)
-        for _ in range(4):
-            r = kin.ik(T, q, max_jump=3.0)
-            q = r.q
-            if r.ok:
-                break
-        if not r.ok:
-            raise ValueError(f"commanded sheet pose not reachable by the {side} arm ({r.status})")
-        qs[side] = q
-    return qs
+    return clamp_joints(cache, Tl, Tr)
 
 
 @dataclass

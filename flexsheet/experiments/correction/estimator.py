@@ -48,21 +48,9 @@ class DisplayEstimator:
         """The bridges' joint commands (side → (6,) rad) for the commanded sheet pose: IK of the clamp poses
         (:func:`flexsheet.model.sheet.clamp_poses`) at the calibrated bases. Raises ``ValueError`` if an arm
         cannot reach it."""
-        from flexsheet.arm.kinematics import home_joints
+        from flexsheet.arm.kinematics import clamp_joints
 
-        Tl, Tr = clamp_poses(origin, normal, axis_u, stretch)
-        out = {}
-        for side, T in (("left", Tl), ("right", Tr)):
-            q = home_joints(side)
-            for _ in range(4):
-                r = self.kin[side].ik(T, q, max_jump=3.0)
-                q = r.q
-                if r.ok:
-                    break
-            if not r.ok:
-                raise ValueError(f"commanded sheet pose not reachable by the {side} arm ({r.status})")
-            out[side] = q
-        return out
+        return clamp_joints(self.kin, *clamp_poses(origin, normal, axis_u, stretch))
 
     def clamps(self, q: dict) -> tuple[np.ndarray, np.ndarray]:
         """The bridges' clamp poses (FK of the measured joints at the calibrated bases), (left, right) (4, 4)."""
