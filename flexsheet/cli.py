@@ -300,7 +300,10 @@ def _add_run_parser(sub) -> None:
                        **_fmt("  flexsheet run talker --param rate=5 --endpoint tcp://127.0.0.1:7201\n"
                               "  flexsheet run listener --peer tcp://127.0.0.1:7201\n"
                               "  flexsheet run planner --launch launch/sim.yaml --param use_prediction=false\n"
-                              "  flexsheet run --container main_pc --launch launch/sim_composed.yaml --host main"))
+                              "  flexsheet calibrate display --sim --truth-seed 0 --out out/calib   # the twin's "
+                              "display.yaml (a launch makes its own)\n"
+                              "  flexsheet run --container main_pc --launch launch/sim_composed.yaml --host main "
+                              "--set camera.display_calib=out/calib/display.yaml"))
     s.add_argument("node_type", metavar="NODE", nargs="?", help=f"node type: {', '.join(sorted(registry.NODES))}")
     s.add_argument("--name", help="node name (default: the type; with --launch: the node's key)")
     s.add_argument("--launch", help="take endpoint, peers and params from this launch file")
@@ -500,8 +503,8 @@ def _add_delegate_parsers(sub) -> None:
     for kind, table, helptext, example in (
             ("calibrate", registry.CALIBRATE, "calibrate devices and register the display (stereo, camera pose, "
              "projector, arms, eye; display = all of them)",
-             "  flexsheet calibrate stereo --left 'imgs/left*.jpg' --right 'imgs/right*.jpg' "
-             "--board chessboard:9x6 --square 0.024 -o calib.yaml\n"
+             "  flexsheet calibrate stereo --left 'tests/data/stereo_xi/left*.jpg' --right "
+             "'tests/data/stereo_xi/right*.jpg' --board chessboard:9x6 --square 0.024 -o calib.yaml\n"
              "  flexsheet calibrate display --sim --truth-seed 0 --out out/calib   # all of it, in the twin"),
             ("experiment", registry.EXPERIMENTS, "run an experiment: charts + JSON",
              "  flexsheet experiment stroke --out out/stroke\n  flexsheet experiment fem --out out/fem --quick"),

@@ -203,6 +203,8 @@ def is_cpu_test(path: Path) -> bool:
 
 def pytest_configure(config):
     config.addinivalue_line("markers", "cpu: pure computation, safe to run beside another test (tests/run.sh)")
+    config.addinivalue_line("markers", "serial: starts nodes or a graph although its module is in a phase-1 folder: "
+                                       "phase 2 (tests/run.sh)")
 
 
 #: modules that must run on one xdist worker, after the first: test_calibration_procedures registers the twin's
@@ -220,7 +222,7 @@ LONGEST_FIRST = ("test_fem_experiment", "test_calibration_procedures")
 def pytest_collection_modifyitems(config, items):
     for item in items:
         stem = item.path.stem
-        if is_cpu_test(item.path):
+        if is_cpu_test(item.path) and not item.get_closest_marker("serial"):
             item.add_marker(pytest.mark.cpu)
             # tests/run.sh distributes by group (--dist loadgroup): a module per worker, module fixtures once
             item.add_marker(pytest.mark.xdist_group(SAME_WORKER.get(stem, stem)))

@@ -532,7 +532,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="flexsheet experiment stroke_model", description=__doc__.split("\n")[0],
         epilog="example: flexsheet experiment stroke_model --out docs/figures/planner\n"
-               "         flexsheet experiment stroke_model --out /tmp/s --display-calib 'out/cal{seed}/display.yaml'",
+               "         flexsheet calibrate display --sim --truth-seed 0 --out out/cal0   # a display.yaml per seed\n"
+               "         flexsheet experiment stroke_model --out /tmp/s --seeds 1 "
+               "--display-calib 'out/cal{seed}/display.yaml'",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True, type=Path, help="output folder for summary.json and the chart")
     ap.add_argument("--seeds", type=int, default=3, help="truth seeds per twin (default 3)")
@@ -542,6 +544,10 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     if a.seeds < 1:
         ap.error(f"--seeds must be >= 1, got {a.seeds}")
+    for seed in range(a.seeds) if a.display_calib else ():
+        if not Path(a.display_calib.replace("{seed}", str(seed))).is_file():
+            ap.error(f"--display-calib: no {a.display_calib.replace('{seed}', str(seed))} for truth seed {seed} "
+                     f"(flexsheet calibrate display --sim --truth-seed {seed} --out DIR writes one)")
     s = run(a.out, a.seeds, a.quick, a.display_calib)
     print(DD_CONVENTION)
     for tw, rows in (("realistic", s), ("ideal", s["ideal"])):
