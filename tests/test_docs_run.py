@@ -199,10 +199,11 @@ SKIP: dict[str, str] = {
     "ssh arm2 ": "copies the arm PC's secrets to arm PC 2 over ssh",
     "flexsheet bench camera --genicam --left 21234567": "needs two real GigE cameras with these serials, "
                                                         "hardware-triggered",
-    "flexsheet calibrate display --live --launch launch/lab_sim.yaml": "needs launch/lab_sim.yaml running on "
-                                                                       "its three hosts (network namespaces, root)",
+    "flexsheet calibrate display --live --launch launch/lab_sim.yaml": (
+        "needs launch/lab_sim.yaml running on its three hosts: tests/system/test_live_registration.py runs it "
+        "there (network namespaces, a drawn truth seed)"),
     "flexsheet calibrate display --live --launch launch/lab.yaml --host main --out": (
-        "needs the lab's graph up (cameras, arms, projector); being rewritten (calibrate display --live)"),
+        "moves the lab's real arms (the graph up: cameras, arms, projector); its --dry-run runs as written"),
 }
 
 #: command -> (the cheaper form that runs instead, or P: parse only; why)

@@ -89,10 +89,15 @@ def _before_launch(lf: LaunchFile, print_fn, check_only: bool) -> dict:
     twin = lf.section("twin")
     if twin is None or not twin.registration or lf.section("display_calib") is not None:
         return {}
-    cached = twin_registration_path(twin)
-    if check_only and not cached.exists():
-        print_fn(f"note: the twin registration (truth seed {twin.truth_seed}) runs at start and writes {cached}")
-        return {}
+    if check_only:
+        from flexsheet.twin.registration import sim_display_calib_cached
+
+        cached = sim_display_calib_cached(twin.truth_seed, twin.realism)
+        if cached is None:
+            print_fn(f"note: the twin registration (truth seed {twin.truth_seed}) runs at start and writes "
+                     f"{twin_registration_path(twin)}")
+            return {}
+        return {"display_calib": cached}
     return {"display_calib": twin_registration(twin, print_fn=print_fn)}
 
 

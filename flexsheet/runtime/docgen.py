@@ -22,6 +22,20 @@ def _type_name(field) -> str:
     return getattr(ann, "__name__", str(ann)).replace("typing.", "")
 
 
+def _paragraphs(doc: str) -> str:
+    """A docstring as Markdown paragraphs, each on one line (a bullet list keeps its items)."""
+    out: list[str] = []
+    for block in inspect.cleandoc(doc).split("\n\n"):
+        items: list[str] = []
+        for line in block.splitlines():
+            if line.lstrip().startswith(("- ", "* ")) or not items:
+                items.append(line.strip())
+            else:
+                items[-1] += " " + line.strip()
+        out.append("\n".join(items))
+    return "\n\n".join(out)
+
+
 def render() -> str:
     """The Markdown text of docs/messages.md."""
     lines = ["# Messages (the wire contract)", "",
@@ -40,7 +54,7 @@ def render() -> str:
             continue
         seen.add(cls)
         schema = getattr(cls, "SCHEMA", cls.__name__)
-        lines += ["", f"## {cls.__name__} (`{schema}`)", inspect.cleandoc(cls.__doc__ or ""), "",
+        lines += ["", f"## {cls.__name__} (`{schema}`)", _paragraphs(cls.__doc__ or ""), "",
                   "| field | type | description |", "|---|---|---|"]
         for name, f in cls.model_fields.items():
             if name == "header":     # every message's, described above

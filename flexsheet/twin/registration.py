@@ -19,7 +19,7 @@ from flexsheet.twin.registration_camera import CalibrationTwin
 from flexsheet.twin.truth import TwinTruth
 
 __all__ = ["TwinSource", "run_display_sim", "sim_display_calib", "score_registration", "verdicts", "TARGETS",
-           "SUMMARY_VERSION"]
+           "SUMMARY_VERSION", "sim_display_calib_cached"]
 
 SUMMARY_VERSION = 3
 
@@ -123,13 +123,11 @@ def run_display_sim(seed: int, out_dir: str, opts: Options = FULL, realism: str 
     os.makedirs(out_dir, exist_ok=True)
     spath = os.path.join(out_dir, "summary.json")
     ypath = os.path.join(out_dir, "display.yaml")
-    key = {"seed": int(seed), "realism": realism, "options": asdict(opts), "version": SUMMARY_VERSION}
-    if not force and os.path.isfile(spath) and os.path.isfile(ypath):
-        with open(spath) as fh:
-            old = json.load(fh)
-        if all(old.get(k) == v for k, v in key.items()):
-            _progress(f"display: seed {seed}: cached ({spath})", progress)
-            return old
+    key = _cache_key(seed, realism, opts)
+    old = None if force else _cached(out_dir, key)
+    if old is not None:
+        _progress(f"display: seed {seed}: cached ({spath})", progress)
+        return old
     t_all = time.perf_counter()
     truth = TwinTruth.draw(int(seed), realism)
     src = TwinSource(CalibrationTwin(truth, seed=int(seed)), opts.board_frames, opts.pattern_frames,
@@ -150,12 +148,41 @@ def run_display_sim(seed: int, out_dir: str, opts: Options = FULL, realism: str 
     return summary
 
 
+def _cache_key(seed: int, realism: str, opts: Options) -> dict:
+    return {"seed": int(seed), "realism": realism, "options": asdict(opts), "version": SUMMARY_VERSION}
+
+
+def _cached(out_dir: str, key: dict) -> dict | None:
+    spath, ypath = os.path.join(out_dir, "summary.json"), os.path.join(out_dir, "display.yaml")
+    if not (os.path.isfile(spath) and os.path.isfile(ypath)):
+        return None
+    try:
+        with open(spath) as fh:
+            old = json.load(fh)
+    except (OSError, json.JSONDecodeError):
+        return None
+    return old if all(old.get(k) == v for k, v in key.items()) else None
+
+
+def _cache_dir(seed: int, realism: str, cache_root: str | None, quick: bool) -> str:
+    root = cache_root or os.environ.get("FLEXSHEET_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "flexsheet")
+    return os.path.join(root, "display", f"{realism}-{int(seed)}{'-quick' if quick else ''}")
+
+
+def sim_display_calib_cached(seed: int, realism: str = "realistic", cache_root: str | None = None,
+                             quick: bool = False) -> str | None:
+    """The path :func:`sim_display_calib` would return if its cache is current (same seed, realism, options and
+    procedure version), else ``None``: nothing runs."""
+    out = _cache_dir(seed, realism, cache_root, quick)
+    return os.path.join(out, "display.yaml") if _cached(out, _cache_key(seed, realism, QUICK if quick else FULL)) \
+        else None
+
+
 def sim_display_calib(seed: int, realism: str = "realistic", cache_root: str | None = None,
                       quick: bool = False, progress=None) -> str:
     """Path of the twin's ``display.yaml`` for truth ``seed``, running the procedures once per seed and caching
     them under ``cache_root`` (default ``$FLEXSHEET_CACHE`` or ``~/.cache/flexsheet``)/display/<realism>-<seed>.
     This is what the twin's estimator nodes should load at start-up (issue 15)."""
-    root = cache_root or os.environ.get("FLEXSHEET_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "flexsheet")
-    out = os.path.join(root, "display", f"{realism}-{int(seed)}{'-quick' if quick else ''}")
+    out = _cache_dir(seed, realism, cache_root, quick)
     run_display_sim(seed, out, QUICK if quick else FULL, realism, progress=progress)
     return os.path.join(out, "display.yaml")
