@@ -224,6 +224,12 @@ def cmd_keys(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as exc:
         print(f"flexsheet keys: {exc}", file=sys.stderr)
         return 2
+    if args.json:
+        print(json.dumps({"folder": str(folder), "public_keys": str(folder / PUBLIC_KEYS_FILE),
+                          "keys": {n: {"status": w, "secret": str(folder / (n + ".key_secret"))}
+                                   for n, w in status.items()},
+                          "hosts": {h: [str(folder / (n + ".key_secret")) for n in identities(lf, h)] for h in lf.hosts}}))
+        return 0
     for name, what in status.items():
         print(f"{name}: {'new keypair' if what == 'new' else 'kept the existing keypair (--force to replace)'}: "
               f"{folder / (name + '.key_secret')}")
@@ -342,6 +348,8 @@ def _add_keys_parser(sub) -> None:
     t.add_argument("-o", "--output", default=None, help="keys folder (default $FLEXSHEET_KEYS or ~/.flexsheet/keys)")
     t.add_argument("--force", action="store_true", help="replace existing keypairs (every host then needs the new "
                                                          "public_keys.yaml, and the owner its new secret)")
+    t.add_argument("--json", action="store_true", help="one JSON document on stdout: each key's status and file, "
+                                                       "the secret files each host needs")
     t.set_defaults(func=cmd_keys)
 
 
@@ -466,6 +474,7 @@ def _add_bag_parser(sub) -> None:
     t.add_argument("-o", "--output", default="", help="output .mcap (default: bag_<time>.mcap)")
     t.add_argument("--launch", default=_launch_default())
     t.add_argument("--duration", type=float, help="stop after S seconds")
+    t.add_argument("--json", action="store_true", help="one JSON document on stdout at the end (log on stderr)")
     t.set_defaults(func=_bag("cmd_record"))
     t = bs.add_parser("play", help="republish a bag with its original timing",
                       **_fmt("  flexsheet bag play run.mcap --rate 1 --endpoint tcp://127.0.0.1:7199\n"
@@ -476,6 +485,7 @@ def _add_bag_parser(sub) -> None:
     t.add_argument("--topics", nargs="*", help="only these topics")
     t.add_argument("--endpoint", default="tcp://127.0.0.1:7199", help="endpoint to publish on")
     t.add_argument("--start-delay", type=float, default=0.5, help="s to let subscribers connect")
+    t.add_argument("--json", action="store_true", help="one JSON document on stdout at the end (log on stderr)")
     t.set_defaults(func=_bag("cmd_play"))
     t = bs.add_parser("info", help="summary of any MCAP: topics, types, counts, duration, what is lost",
                       **_fmt("  flexsheet bag info run.mcap\n"
@@ -490,12 +500,14 @@ def _add_bag_parser(sub) -> None:
     t.add_argument("file")
     t.add_argument("output")
     t.add_argument("--no-foxglove", action="store_true", help="JSON copies only, no /viz/* scene channels")
+    t.add_argument("--json", action="store_true", help="one JSON document on stdout (progress stays on stderr)")
     t.set_defaults(func=_bag("cmd_export"))
     t = bs.add_parser("recover", help="rewrite a cut (kill -9) or damaged bag as a complete MCAP",
                       **_fmt("  flexsheet bag recover out/sim/sim.mcap out/sim/sim_recovered.mcap\n"
                              "prints the messages kept per topic and what was lost"))
     t.add_argument("file")
     t.add_argument("output")
+    t.add_argument("--json", action="store_true", help="one JSON document on stdout (same exit status)")
     t.set_defaults(func=_bag("cmd_recover"))
 
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import sys
 import time
 from pathlib import Path
@@ -241,6 +242,10 @@ def cmd_record(args: argparse.Namespace) -> int:
 
     asyncio.run(main())
     w = node.writer
+    if getattr(args, "json", False):
+        print(json.dumps({"file": str(w.path), "messages": sum(w.counts.values()), "counts": dict(w.counts),
+                          "malformed": dict(w.malformed), "lost": w.lost, "error": str(w.error or "") or None}))
+        return 1 if w.error else 0
     print(f"wrote {w.path}: {sum(w.counts.values())} messages, {sum(w.malformed.values())} malformed (stored raw), "
           f"{w.lost} lost")
     return 1 if w.error else 0
@@ -257,6 +262,8 @@ def cmd_play(args: argparse.Namespace) -> int:
                                  params={"file": args.file, "rate": args.rate, "loop": args.loop,
                                          "topics": args.topics or [], "start_delay": args.start_delay}))
     asyncio.run(node.run())
+    if getattr(args, "json", False):
+        print(json.dumps({"file": str(args.file), "sent": node.sent, "errors": node.errors_total}))
     return 1 if node.errors_total else 0
 
 
@@ -293,6 +300,14 @@ def _plain(o):
     return o
 
 
+def _damage_json(s: BagSummary) -> dict:
+    """What ``bag info --json`` says of damage, for the other verbs' ``--json``."""
+    import dataclasses
+
+    return {"damaged": [_plain(dataclasses.asdict(d)) if dataclasses.is_dataclass(d) else str(d) for d in s.damaged],
+            "lost": s.lost, "truncated": s.truncated, "cut_bytes": s.cut_bytes}
+
+
 def cmd_info(args: argparse.Namespace) -> int:
     try:
         s = bag_info(args.file)
@@ -300,17 +315,12 @@ def cmd_info(args: argparse.Namespace) -> int:
         return _fail("info", exc)
     size = Path(args.file).stat().st_size
     if getattr(args, "json", False):
-        import dataclasses
-        import json
-
         dur = s.end - s.start if s.end > s.start else 0.0
         print(json.dumps({
             "file": str(args.file), "bytes": size, "start": s.start, "end": s.end, "duration_s": dur,
             "topics": {t: {"count": n, "rate_hz": n / dur if dur else 0.0, "type": s.schemas.get(t, ""),
                            "encoding": s.encodings.get(t, "")} for t, n in sorted(s.counts.items())},
-            "dropped": dict(s.dropped), "malformed": dict(s.malformed),
-            "damaged": [_plain(dataclasses.asdict(d)) if dataclasses.is_dataclass(d) else str(d) for d in s.damaged],
-            "truncated": s.truncated, "cut_bytes": s.cut_bytes}, default=str))
+            "dropped": dict(s.dropped), "malformed": dict(s.malformed), **_damage_json(s)}, default=str))
         return 1 if s.damaged or s.truncated else 0
     print(f"file:      {args.file} ({size / 1e6:.2f} MB)")
     print(f"duration:  {s.end - s.start:.3f} s  (start {_when(s.start)}, end {_when(s.end)})" if s.end
@@ -345,6 +355,10 @@ def cmd_export(args: argparse.Namespace) -> int:
         counts = export_bag(args.file, args.output, foxglove=not args.no_foxglove, summary=s, progress=progress)
     except (ValueError, OSError) as exc:
         return _fail("export", exc)
+    if getattr(args, "json", False):
+        print(json.dumps({"file": str(args.file), "output": str(args.output), "counts": dict(sorted(counts.items())),
+                          **_damage_json(s)}))
+        return 1 if s.damaged or s.truncated else 0
     print(f"wrote {args.output}: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
     print_damage(s)
     return 1 if s.damaged or s.truncated else 0
@@ -356,6 +370,10 @@ def cmd_recover(args: argparse.Namespace) -> int:
         kept = recover_bag(args.file, args.output, summary=s)
     except (ValueError, OSError) as exc:
         return _fail("recover", exc)
+    if getattr(args, "json", False):
+        print(json.dumps({"file": str(args.file), "output": str(args.output), "kept": dict(sorted(kept.items())),
+                          **_damage_json(s)}))
+        return 0
     print(f"wrote {args.output}: {sum(kept.values())} messages kept on {len(kept)} topics")
     for topic, n in sorted(kept.items()):
         print(f"  kept {topic}: {n}")

@@ -248,6 +248,10 @@ def test_a_bag_cut_by_kill_9_is_recovered_for_the_stock_mcap_reader(tmp_path, sh
         assert out.returncode == 0 and f"kept {T.STEREO.name}: {len(expected)}" in out.stdout
         assert "TRUNCATED" in out.stdout
         assert _flexsheet("bag", "info", str(tmp_path / "cli.mcap")).returncode == 0
+        out = _flexsheet("bag", "recover", str(cut), str(tmp_path / "cli2.mcap"), "--json")   # the same facts
+        j = json.loads(out.stdout)
+        assert out.returncode == 0 and j["kept"] == {T.STEREO.name: len(expected)} and j["truncated"]
+        assert j["output"] == str(tmp_path / "cli2.mcap") and j["cut_bytes"] > 0
 
 
 def test_bag_play_refuses_a_bad_file_in_one_line(tmp_path):
@@ -279,6 +283,9 @@ def test_bag_info_reads_an_export_and_other_tools_bags(tmp_path):
     assert info.encodings["/fingertip"] == "json" and info.schemas["/camera/stereo/left"] == "foxglove.CompressedImage"
     out = _flexsheet("bag", "info", str(dst))
     assert out.returncode == 0 and "messages:  90" in out.stdout and "1970" not in out.stdout
+    out = _flexsheet("bag", "export", str(src), str(tmp_path / "cli.mcap"), "--no-foxglove", "--json")
+    j = json.loads(out.stdout)                          # one document on stdout; progress stays on stderr
+    assert out.returncode == 0 and j["counts"] == dict(sorted(counts.items())) and j["damaged"] == [], out.stderr
 
     other = tmp_path / "other.mcap"   # another tool's bag: ROS 2 cdr and protobuf channels, no flexsheet metadata
     with open(other, "wb") as fh:

@@ -198,6 +198,9 @@ def test_keys_generate_writes_what_the_launch_file_needs_and_keeps_existing_keys
     assert {h: c.public_key.decode() for h, c in cfgs.items()} == first
     assert "kept" in _keys(lf.path)
     assert yaml.safe_load((keys_env / "public_keys.yaml").read_text()) == first
+    j = json.loads(_keys(lf.path, "--json"))               # --json: each key's status, each host's secrets
+    assert {n: k["status"] for n, k in j["keys"].items()} == {n: "kept" for n in first}
+    assert j["hosts"]["arm1"] == [str(keys_env / "arm1.key_secret"), str(keys_env / "arm_left.key_secret")]
     _keys(lf.path, "arm_left", "--force")
     second = yaml.safe_load((keys_env / "public_keys.yaml").read_text())
     assert second["planner"] == first["planner"] and second["arm_left"] != first["arm_left"]
