@@ -33,11 +33,13 @@ def flexsheet(*args: str, env: dict | None = None, timeout: float = 120) -> subp
 
 @pytest.fixture
 def keys(tmp_path, monkeypatch) -> Path:
-    """``$FLEXSHEET_KEYS`` = a fresh folder, filled by ``flexsheet keys generate --launch launch/lab.yaml``."""
+    """``$FLEXSHEET_KEYS`` = a fresh folder, filled by ``flexsheet keys generate --launch launch/lab.yaml`` and
+    ``--launch launch/lab_sim.yaml`` (both run CURVE; one public_keys.yaml holds both files' identities)."""
     folder = tmp_path / "keys"
     monkeypatch.setenv("FLEXSHEET_KEYS", str(folder))
-    r = flexsheet(*LAB_KEYGEN)
-    assert r.returncode == 0, r.stderr
+    for keygen in (LAB_KEYGEN, ["keys", "generate", "--launch", "launch/lab_sim.yaml"]):
+        r = flexsheet(*keygen)
+        assert r.returncode == 0, r.stderr
     return folder
 
 
