@@ -224,7 +224,7 @@ def display_main(argv: list[str] | None = None) -> int:
         epilog="example:\n  flexsheet calibrate display --sim --truth-seed 1 --quick --out /tmp/disp1\n"
                "  flexsheet calibrate display --live --launch launch/lab.yaml --host main --dry-run --out /tmp/live\n"
                "  flexsheet calibrate display --live --launch launch/lab_sim.yaml --host main --truth-seed 0 "
-               "--quick --out /tmp/live\n"
+               "--out /tmp/live\n"
                "  flexsheet calibrate display --sweep --seeds 1,2,3 --out docs/figures/calibration")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--sim", action="store_true", help="run in the offline twin (needs --truth-seed)")
