@@ -103,10 +103,11 @@ class GraphClient:
     # ------------------------------------------------------------------ API
     def watch(self, topic: T.Topic, keep_latest: bool = True) -> None:
         """Subscribe to ``topic``; with ``keep_latest`` its newest message is kept (:meth:`latest`)."""
-        self._topics[topic.name] = topic
         if keep_latest:
             self._keep_latest = self._keep_latest | {topic.name}
-        self._do(lambda: self._tr.subscribe(topic.name))
+        if topic.name not in self._topics:        # subscribed once; a second watch only changes keep_latest
+            self._topics[topic.name] = topic
+            self._do(lambda: self._tr.subscribe(topic.name))
 
     def latest(self, topic: T.Topic) -> Message | None:
         """The newest message of a watched ``topic`` (None before the first)."""

@@ -76,13 +76,13 @@ class RegistrationScene:
         pkey = None if projector is None or self.scene != "patterns" else projector[0]
         key = (self.scene, jkey, pkey)
         if key != self._key:
-            self._clean = self._draw(ql, qr, projector)
+            self._clean = self._draw(ql, qr, jkey, projector)
             self._key = key
         tw = self.twin
         ss_out = [tw.expose(img) for img in self._clean]
         return ss_out[0], ss_out[1]
 
-    def _draw(self, ql, qr, projector) -> list[np.ndarray]:
+    def _draw(self, ql, qr, jkey, projector) -> list[np.ndarray]:
         tw = self.twin
         if self.scene == "markers":
             dn = tw.marker_dn([tw.truth.clamp_marker_position("left", ql), tw.truth.clamp_marker_position("right", qr)])
@@ -90,8 +90,7 @@ class RegistrationScene:
         T = np.eye(4) if self.at_home(ql, qr) and self.scene == "board" else tw.true_sheet_pose(ql, qr)
         if self.scene == "board":
             return [tw.clean(a, tw.ss) for a in tw.board_dn(self.board, T, self.board_offset)]
-        maps_key = tuple(np.round(np.concatenate([ql, qr]) / JOINT_KEY_RAD).astype(np.int64))
-        if self._maps is None or self._maps[0] != maps_key:
-            self._maps = (maps_key, tw.pattern_maps(T))
+        if self._maps is None or self._maps[0] != jkey:          # the sheet moved: where the projector lands
+            self._maps = (jkey, tw.pattern_maps(T))
         maps = self._maps[1]
         return [tw.clean(a, maps.ss) for a in tw.pattern_dn(maps, None if projector is None else projector[1])]
