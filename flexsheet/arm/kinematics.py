@@ -38,7 +38,7 @@ from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE, pose_matrix
 
 __all__ = [
     "URDF_PATH", "JOINT_NAMES", "Q_LOWER", "Q_UPPER", "QD_MAX", "DATASHEET_SPEED_DEG", "Q_HOME", "LEFT_BASE", "RIGHT_BASE",
-    "home_joints", "IKResult", "ArmKinematics", "clamp_joints",
+    "home_joints", "IKResult", "ArmKinematics", "clamp_joints", "outside_limits",
     "rotation_angle",
 ]
 
@@ -253,3 +253,10 @@ def clamp_joints(kin: dict, T_left: np.ndarray, T_right: np.ndarray) -> dict[str
             raise ValueError(f"commanded sheet pose not reachable by the {side} arm ({r.status})")
         out[side] = q
     return out
+
+
+def outside_limits(q, lower, upper) -> list[str]:
+    """One line per joint of ``q`` (6,) rad outside [``lower``, ``upper``] (6,) rad (1e-9 rad of slack), e.g.
+    ``"J3 60.7 deg outside [61.1, 153.9]"``; empty when all are inside."""
+    return [f"J{i + 1} {math.degrees(v):.1f} deg outside [{math.degrees(lo):.1f}, {math.degrees(hi):.1f}]"
+            for i, (v, lo, hi) in enumerate(zip(q, lower, upper, strict=True)) if not lo - 1e-9 <= v <= hi + 1e-9]

@@ -11,12 +11,11 @@ that velocity as feed-forward (:mod:`flexsheet.arm.limiter`), within the joint l
 
 from __future__ import annotations
 
-import math
 from enum import StrEnum
 
 import numpy as np
 
-from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, IKResult
+from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, IKResult, outside_limits
 
 __all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S"]
 
@@ -82,9 +81,7 @@ class TargetTracker:
         """Stream to joints ``q`` (6,) rad and stay there, ignoring targets until :meth:`release`. Raises
         ``ValueError`` naming the joint outside the kinematics' limits."""
         q = self.kin.check_q(q)
-        bad = [f"J{i + 1} {math.degrees(v):.1f} deg outside [{math.degrees(lo):.1f}, {math.degrees(hi):.1f}]"
-               for i, (v, lo, hi) in enumerate(zip(q, self.kin.q_lower, self.kin.q_upper, strict=True))
-               if not lo - 1e-9 <= v <= hi + 1e-9]
+        bad = outside_limits(q, self.kin.q_lower, self.kin.q_upper)
         if bad:
             raise ValueError("joints outside the limits (with the bridge's margin): " + "; ".join(bad))
         self.manual = q.copy()

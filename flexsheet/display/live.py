@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, home_joints
+from flexsheet.arm.bridge_config import BridgeConfig
+from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, home_joints, outside_limits
 from flexsheet.calibration import arms as arms_mod
 from flexsheet.calibration import camera_pose as cp_mod
 from flexsheet.calibration import projector as pj_mod
@@ -88,15 +89,12 @@ def plan(opts: Options) -> dict:
 
 
 def _limits_problem(q: np.ndarray, margin: float) -> str:
-    bad = [f"J{i + 1} {math.degrees(v):.1f}° outside [{math.degrees(lo + margin):.1f}, {math.degrees(hi - margin):.1f}]"
-           for i, (v, lo, hi) in enumerate(zip(q, Q_LOWER, Q_UPPER, strict=True))
-           if not lo + margin - 1e-9 <= v <= hi - margin + 1e-9]
-    return "; ".join(bad)
+    return "; ".join(outside_limits(q, Q_LOWER + margin, Q_UPPER - margin))
 
 
-def check_plan(opts: Options, margin: float = 0.02) -> tuple[list[str], list[str]]:
+def check_plan(opts: Options, margin: float = BridgeConfig.limit_margin) -> tuple[list[str], list[str]]:
     """(lines describing every commanded pose and its joints, problems): a pose whose nominal IK fails or whose
-    joints leave the RV-1A's limits less ``margin`` rad (the bridges' ``limit_margin``)."""
+    joints leave the RV-1A's limits less ``margin`` rad (default: the bridges' ``limit_margin``)."""
     p = plan(opts)
     lines, problems = [], []
     cache: dict = {}

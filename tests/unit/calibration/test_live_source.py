@@ -72,7 +72,7 @@ def test_a_pose_inside_the_margin_is_named(monkeypatch):
     """The plan's old 21st view (tilt 35°, turn 30°) put the left elbow 0.7° inside the bridges' margin."""
     monkeypatch.setattr(cp, "VIEW_PLAN", (*cp.VIEW_PLAN[:1], (-35, -30, (0, 0, 0))))
     _, problems = check_plan(QUICK.__class__(views=2, projector_poses=1, arm_configs=2))
-    assert problems == ["board view 2/2, left arm: J3 60.7° outside [61.1, 153.9]"]
+    assert problems == ["board view 2/2, left arm: J3 60.7 deg outside [61.1, 153.9]"]
 
 
 def test_dry_run_prints_the_poses_and_moves_nothing(capsys, tmp_path):
