@@ -40,6 +40,19 @@ def _parse_params(items: list[str]) -> dict:
     return params
 
 
+def _positive(flag: str):
+    """An argparse type: a finite float > 0, else one line naming ``flag`` and the value."""
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{flag} expects seconds or a factor > 0, got {text!r}") from None
+        if not (v > 0 and v != float("inf")):
+            raise argparse.ArgumentTypeError(f"{flag} must be a finite number > 0, got {text!r}")
+        return v
+    return parse
+
+
 def _setup_logging(name: str = "") -> None:
     logging.basicConfig(level=os.environ.get("FLEXSHEET_LOG", "INFO"),
                         format="%(levelname)s %(name)s: %(message)s", stream=sys.stdout)
@@ -154,6 +167,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
                                   "KEY=VALUE or KEY.SUB=VALUE (e.g. scene=FILE, twin.truth_seed=3)")
             overrides.setdefault(node, []).append(kv)
             parsed.setdefault(node, {}).update(_parse_params([kv]))
+        if args.rtf is not None:
+            toplevel["rtf"] = args.rtf
         if toplevel:   # the launcher's own load_launch and every node process read these (launch.TOPLEVEL_ENV)
             os.environ[TOPLEVEL_ENV] = json.dumps(toplevel)
         lf = load_launch(args.file)
@@ -167,8 +182,9 @@ def cmd_launch(args: argparse.Namespace) -> int:
                 toplevel.update(extra)
                 os.environ[TOPLEVEL_ENV] = json.dumps(toplevel)
     except LaunchError as exc:
-        for line in exc.lines or [str(exc)]:
-            print(f"flexsheet launch: {args.file}: {line}", file=sys.stderr)
+        for line in exc.lines or [str(exc)]:   # a line that names the file already is not prefixed again
+            named = line.startswith(f"{args.file}:") or line.startswith(f"{Path(args.file)}:")
+            print(f"flexsheet launch: {line}" if named else f"flexsheet launch: {args.file}: {line}", file=sys.stderr)
         return EXIT_CONFIG
     result = check_launch(args.file, host=args.host, out=out, overrides=parsed, probe=args.probe)
     for line in result.warnings:
@@ -271,22 +287,30 @@ def _delegate(table: dict[str, str], kind: str):
 
 def _add_launch_parser(sub) -> None:
     s = sub.add_parser("launch", help="start the nodes of a launch file (one host or all)",
-                       description="Start every node of a launch file as its own process, with prefixed output, "
-                                   "respawn and clean Ctrl-C shutdown. The file is checked first (params, hosts, "
+                       description="Start the nodes of a launch file: each node as its own process, or the nodes of "
+                                   "one container (every node of a 'clock: sim' file) in one process; with "
+                                   "prefixed output, respawn and clean Ctrl-C shutdown. The file is checked first (params, hosts, "
                                    "ports, files, CURVE keys); with an error nothing starts (exit 78).",
                        **_fmt("  flexsheet launch launch/sim.yaml --duration 60 --out out/sim\n"
                               "  flexsheet launch launch/lab.yaml --check --host main   # check only, start nothing\n"
                               "  flexsheet launch launch/lab.yaml --host arm1     # on arm PC 1\n"
-                              "  flexsheet launch launch/sim.yaml --set twin.truth_seed=2 --set scene=launch/scenes/sphere.yaml"))
+                              "  flexsheet launch launch/sim.yaml --set twin.truth_seed=2 --set scene=launch/scenes/sphere.yaml\n"
+                              "  flexsheet launch launch/sim.yaml --rtf 1 --set world.loop=true   # watch at real speed\n"
+                              "  flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 "
+                              "--set hosts.arm1.address=127.0.0.2 --set hosts.arm2.address=127.0.0.3"))
     s.add_argument("file", help="launch YAML file")
     s.add_argument("--host", help="start only the nodes of this host (default: all hosts, on this machine)")
-    s.add_argument("--duration", type=float, help="stop after this many seconds — simulated seconds in a "
-                                                   "'clock: sim' file (default: until Ctrl-C or the scripted "
-                                                   "run ends)")
+    s.add_argument("--duration", type=_positive("--duration"),
+                   help="stop after this many seconds — simulated seconds in a 'clock: sim' file (default: until "
+                        "Ctrl-C or the scripted run ends)")
+    s.add_argument("--rtf", type=_positive("--rtf"), metavar="X",
+                   help="'clock: sim' files: cap simulated time at X times wall time (1 = real speed, to watch; "
+                        "default: the file's clock.rtf, else as fast as this machine allows). Same messages either way")
     s.add_argument("--out", help="output folder for bags, charts and the report (substituted for $(out))")
     s.add_argument("--set", action="append", metavar="NODE.KEY=VALUE", default=[],
                    help="override one node parameter (YAML value), repeatable: --set world.loop=true; or a "
-                        "graph-wide setting: --set twin.truth_seed=3, --set scene=launch/scenes/sphere.yaml")
+                        "graph-wide setting: --set twin.truth_seed=3, --set scene=launch/scenes/sphere.yaml, "
+                        "--set hosts.main.address=127.0.0.1")
     s.add_argument("--check", action="store_true",
                    help="only check the file for this host (--host) and this machine: one line per error, exit 78 "
                         "on any, 0 when it would start")
@@ -553,9 +577,15 @@ def main(argv: list[str] | None = None) -> int:
         argcomplete.autocomplete(parser)
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()   # here, so that a reader gone away is caught below, not at interpreter exit
+        return code
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:   # the reader went away (``| head``): no traceback, the shell's 141 (128 + SIGPIPE)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())   # Python's own flush at exit must not fail again
+        return 141
 
 
 if __name__ == "__main__":

@@ -267,7 +267,15 @@ def cmd_play(args: argparse.Namespace) -> int:
     return 1 if node.errors_total else 0
 
 
+#: log times below this (s, 2001-09-09) are a simulated clock's: ``clock: sim`` graphs start at 1000 s
+#: (:data:`flexsheet.runtime.lockstep.SIM_EPOCH`); a wall-clock bag is always later
+SIMULATED_BEFORE = 1e9
+
+
 def _when(t: float) -> str:
+    """A log time as the bag's clock means it: a simulated time in seconds, a wall time as a local date."""
+    if t < SIMULATED_BEFORE:
+        return f"{t:.3f} s simulated"
     return time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(t))
 
 
@@ -318,6 +326,7 @@ def cmd_info(args: argparse.Namespace) -> int:
         dur = s.end - s.start if s.end > s.start else 0.0
         print(json.dumps({
             "file": str(args.file), "bytes": size, "start": s.start, "end": s.end, "duration_s": dur,
+            "clock": "sim" if s.end and s.start < SIMULATED_BEFORE else "wall",
             "topics": {t: {"count": n, "rate_hz": n / dur if dur else 0.0, "type": s.schemas.get(t, ""),
                            "encoding": s.encodings.get(t, "")} for t, n in sorted(s.counts.items())},
             "dropped": dict(s.dropped), "malformed": dict(s.malformed), **_damage_json(s)}, default=str))

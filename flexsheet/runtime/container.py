@@ -358,10 +358,11 @@ class Container:
 
     def __init__(self, name: str, members: list[Member], bus: Bus, shutdown_timeout: float = 3.0,
                  print_fn: Callable[[str], None] | None = None, cpu_file: str | None = None,
-                 sim_until: float | None = None, sim_file: str | None = None) -> None:
+                 sim_until: float | None = None, sim_file: str | None = None, rtf: float | None = None) -> None:
         self.name, self.members, self.bus = name, members, bus
         self.sim_until = sim_until   # live simulated clock: stop after this many simulated seconds
         self.sim_file = sim_file     # live simulated clock: where the run's clock figures go (JSON)
+        self.rtf = rtf               # live simulated clock: cap on simulated s per wall s (None: as fast as it can)
         self.active_s: dict[str, float] = {}   # live simulated clock: wall s from start until each node was active
         self.shutdown_timeout = shutdown_timeout
         self.print = print_fn or (lambda line: print(line, flush=True))
@@ -507,12 +508,13 @@ class Container:
                 self.active_s.setdefault(m.name, time.monotonic() - t0)
             ready_s = time.monotonic() - t0
             self.print(f"container {self.name}: every node active after {ready_s:.1f} s; simulated time starts at "
-                       f"{SIM_EPOCH:g} s" + (f" and runs {self.sim_until:g} s" if self.sim_until else ""))
+                       f"{SIM_EPOCH:g} s" + (f" and runs {self.sim_until:g} s" if self.sim_until else "")
+                       + (f", paced at {self.rtf:g}x wall time" if self.rtf else ""))
 
         stats = self.bus.lockstep.stats   # kept up to date while it runs: valid however the run ends
         try:
             await wait_ready()
-            await run_live(self.bus, self.sim_until, stopped)
+            await run_live(self.bus, self.sim_until, stopped, self.rtf)
             if self.sim_until is not None and not self._stopping:
                 self.reason = f"simulated duration {self.sim_until:g} s reached"
                 self.print(f"container {self.name}: {self.reason} in {stats.wall_s:.1f} s of wall time "
@@ -527,7 +529,7 @@ class Container:
         ls = self.bus.lockstep
         stats = ls.stats
         host_cpu = {m.name: m.cpu_s + (m.node.cpu_seconds() if m.node is not None else 0.0) for m in self.members}
-        data = {"clock": "sim", "ready_wall_s": ready_s, "active_wall_s": dict(self.active_s),
+        data = {"clock": "sim", "rtf_target": self.rtf, "ready_wall_s": ready_s, "active_wall_s": dict(self.active_s),
                 "sim_s": stats.bag_s, "wall_s": stats.wall_s, "realtime_factor": stats.speed,
                 "handled": stats.handled, "timer_ticks": stats.timers,
                 "superseded_latest": ls.dropped,
@@ -609,7 +611,7 @@ def container_from_launch(lf, name: str, host: str | None = None, out: str | Non
     cpu_file = os.path.join(out, f"cpu_{name}.json") if out else None
     sim_file = os.path.join(out, "sim_clock.json") if (out and live) else None
     return Container(name, members, bus, shutdown_timeout=lf.shutdown_timeout, print_fn=print_fn, cpu_file=cpu_file,
-                     sim_until=sim_until if live else None, sim_file=sim_file)
+                     sim_until=sim_until if live else None, sim_file=sim_file, rtf=lf.rtf if live else None)
 
 
 def run_container(launch: str, name: str, host: str | None = None, out: str | None = None,

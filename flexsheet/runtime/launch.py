@@ -4,6 +4,7 @@ A launch file (``launch/*.yaml``) is the single source of truth for hosts and po
 
     name: sim
     clock: sim                       # sim: one process on simulated time (flexsheet.runtime.lockstep); wall
+                                     # or {type: sim, rtf: 1.0}: simulated time paced at 1.0 x wall time
     hosts:
       main: {address: 127.0.0.1}
     base_port: 7100                  # nodes without a port get base_port + their index
@@ -40,7 +41,11 @@ get ``PR_SET_PDEATHSIG`` so that not even a ``kill -9`` of the launcher leaves o
 each child's CPU time (``/proc/<pid>/stat``) and writes ``$(out)/cpu.json`` when it stops.
 ``clock: sim`` (default ``wall``) runs the whole graph on simulated time: every node in one container,
 :data:`SIM_CONTAINER`, driven by :func:`flexsheet.runtime.lockstep.run_live` (the file's nodes must share one
-host; a node's own ``container:`` is then ignored); ``--duration`` counts simulated seconds.
+host; a node's own ``container:`` is then ignored); ``--duration`` counts simulated seconds. ``clock: {type: sim,
+rtf: X}`` (or ``flexsheet launch --rtf X``) caps simulated time at X times wall time (Gazebo's
+``real_time_factor``); unset, it runs as fast as the host allows. Pacing changes no published byte.
+A ``--set hosts.NAME.address=ADDR`` override (:func:`parse_toplevel_set`) moves a host, e.g. the lab's three
+hosts onto loopback addresses of one machine.
 Errors: :class:`LaunchError` naming the file, the key and the wrong value.
 Source: ros2/launch ``launch_service.py`` (minus its substitution layer), supervisord's policies.
 """
@@ -53,7 +58,15 @@ from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    TypeAdapter,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from flexsheet import registry
 from flexsheet.runtime.extensions import sections as launch_sections
@@ -63,7 +76,7 @@ from flexsheet.yamlio import UniqueKeyLoader
 
 __all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "SecuritySpec", "load_launch", "node_config",
            "curve_config", "identities", "keys_dir", "public_keys", "substitutions", "substitute", "keygen_command",
-           "TOPLEVEL_ENV", "parse_toplevel_set", "SIM_CONTAINER",
+           "TOPLEVEL_ENV", "CORE_SET", "parse_toplevel_set", "SIM_CONTAINER",
            "DEFAULT_KEYS_DIR", "PUBLIC_KEYS_FILE"]
 
 #: where ``flexsheet keys generate`` writes and CURVE looks when neither ``$FLEXSHEET_KEYS`` nor
@@ -187,6 +200,10 @@ class LaunchFile(BaseModel):
     description: str = ""
     clock: Literal["sim", "wall"] = Field(default="wall", description="sim: the whole graph in one process on "
                                           "simulated time (deterministic); wall: the host's clock")
+    rtf: float | None = Field(default=None, gt=0.0, le=1000.0,
+                              description="clock: sim only: cap simulated time at rtf x wall time (1.0: real "
+                                          "speed); None: as fast as the host allows. Written clock: {type: sim, "
+                                          "rtf: X} in the file, or flexsheet launch --rtf X")
     hosts: dict[str, HostSpec] = Field(default_factory=lambda: {"localhost": HostSpec()})
     base_port: int = Field(default=7100, ge=1024, le=65000)
     heartbeat_period: float = Field(default=1.0, gt=0.0)
@@ -198,6 +215,21 @@ class LaunchFile(BaseModel):
     nodes: dict[str, NodeSpec]
 
     path: Path | None = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _clock_mapping(cls, data: Any) -> Any:
+        """``clock: {type: sim, rtf: 1.0}`` → ``clock: sim`` + ``rtf: 1.0`` (the mapping's only keys)."""
+        if isinstance(data, dict) and isinstance(data.get("clock"), dict):
+            data = dict(data)
+            clock = dict(data.pop("clock"))
+            unknown = sorted(set(clock) - {"type", "rtf"})
+            if unknown:
+                raise ValueError(f"clock: unknown key {unknown[0]!r} (a mapping has type: sim|wall and rtf: X)")
+            data["clock"] = clock.get("type", "sim")
+            if clock.get("rtf") is not None:
+                data["rtf"] = clock["rtf"]
+        return data
 
     def section(self, key: str) -> Any:
         """The value of top-level section ``key`` (None when the file has none)."""
@@ -280,6 +312,9 @@ def load_launch(path: str | Path) -> LaunchFile:
         if spec.container is not None and spec.container in lf.nodes:
             lines.append(f"{path}: key 'nodes.{name}.container': container name {spec.container!r} is also a node "
                          "name; give the container its own name")
+    if lf.rtf is not None and lf.clock != "sim":
+        lines.append(f"{path}: key 'clock.rtf': {lf.rtf:g} paces simulated time; it needs clock: sim (this file "
+                     f"runs on the wall clock)")
     if lf.clock == "sim":
         hosts = sorted({s.host for s in lf.nodes.values()})
         if len(hosts) > 1:
@@ -432,8 +467,14 @@ def curve_config(lf: LaunchFile, host: str | None, node: str | None = None) -> C
                        tool_keys=[keys[h].encode() for h in lf.hosts if h in keys])
 
 
+#: launch-file keys of the core (not of an extension) that a top-level override may set: ``hosts`` (merged host
+#: by host: ``--set hosts.main.address=127.0.0.1``) and ``rtf`` (``flexsheet launch --rtf X``)
+CORE_SET = ("hosts", "rtf")
+
+
 def _apply_toplevel_env(raw: dict, path: Path) -> dict:
-    """``raw`` with the top-level overrides of ``$FLEXSHEET_LAUNCH_SET`` applied (``twin`` merged key by key)."""
+    """``raw`` with the top-level overrides of ``$FLEXSHEET_LAUNCH_SET`` applied (``twin`` merged key by key,
+    ``hosts`` host by host). Raises :class:`LaunchError` for a host the file lacks."""
     text = os.environ.get(TOPLEVEL_ENV)
     if not text:
         return raw
@@ -442,16 +483,34 @@ def _apply_toplevel_env(raw: dict, path: Path) -> dict:
     except ValueError:
         raise LaunchError(f"{path}: ${TOPLEVEL_ENV} is not JSON: {text[:200]!r}") from None
     keys = launch_sections()
-    if not isinstance(over, dict) or set(over) - set(keys):
-        raise LaunchError(f"{path}: ${TOPLEVEL_ENV} may set only {', '.join(keys)}, got {text[:200]!r}")
+    allowed = [*keys, *CORE_SET]
+    if not isinstance(over, dict) or set(over) - set(allowed):
+        raise LaunchError(f"{path}: ${TOPLEVEL_ENV} may set only {', '.join(allowed)}, got {text[:200]!r}")
     raw = dict(raw)
     for key, value in over.items():
-        if keys[key].parse_set is None and isinstance(value, dict):   # a mapping section: merged key by key
+        if key == "hosts":
+            raw["hosts"] = _merge_hosts(raw.get("hosts"), value, path)
+        elif key == "rtf":
+            clock = raw.get("clock", "wall")
+            raw["clock"] = {**(clock if isinstance(clock, dict) else {"type": clock}), "rtf": value}
+        elif keys[key].parse_set is None and isinstance(value, dict):   # a mapping section: merged key by key
             base = raw.get(key) if isinstance(raw.get(key), dict) else {}
             raw[key] = {**base, **value}
         else:
             raw[key] = value
     return raw
+
+
+def _merge_hosts(hosts: Any, over: dict, path: Path) -> dict:
+    """The file's ``hosts`` with ``over`` (host → {key: value}) merged in; a host the file lacks is an error."""
+    hosts = dict(hosts) if isinstance(hosts, dict) else {"localhost": {}}
+    for name, spec in over.items():
+        if name not in hosts:
+            raise LaunchError(f"{path}: --set hosts.{name}: no host {name!r} in this file; hosts: "
+                              f"{', '.join(hosts)}")
+        base = hosts[name] if isinstance(hosts[name], dict) else {}
+        hosts[name] = {**base, **spec}
+    return hosts
 
 
 def parse_toplevel_set(item: str, node_names) -> tuple[str, Any] | None:
@@ -461,6 +520,12 @@ def parse_toplevel_set(item: str, node_names) -> tuple[str, Any] | None:
     :class:`LaunchError` on a bad item."""
     known = launch_sections()
     head, dot, rest = item.partition(".")
+    if head == "hosts" and "hosts" not in node_names:
+        host, dot2, kv = rest.partition(".")
+        key, eq, value = kv.partition("=")
+        if not dot or not dot2 or not host or not key or not eq:
+            raise LaunchError(f"--set {item!r}: expected hosts.NAME.address=ADDRESS")
+        return "hosts", {host: {key: yaml.safe_load(value)}}
     if dot and head in known and known[head].parse_set is None and head not in node_names:
         key, eq, value = rest.partition("=")
         if not eq or not key:
@@ -470,6 +535,7 @@ def parse_toplevel_set(item: str, node_names) -> tuple[str, Any] | None:
     if eq and "." not in key:
         if key not in known or known[key].parse_set is None:
             forms = [f"{k}=VALUE" if s.parse_set else f"{k}.KEY=VALUE" for k, s in known.items()]
+            forms.append("hosts.NAME.address=ADDRESS")
             raise LaunchError(f"--set {item!r}: a top-level override is one of {', '.join(forms)}; a node param "
                               "is NODE.KEY=VALUE")
         return key, known[key].parse_set(value)

@@ -428,6 +428,9 @@ class _Checker:
             # graph-wide values, as node_config fills them in; each file is checked once, by its extension
             injected = {k for k in self.graph_wide if k in model.model_fields and k not in params}
             params.update({k: self.graph_wide[k] for k in injected})
+            # a graph-wide value its extension already refused (a missing scene file) is one error, not one per node
+            bad = [str(self.graph_wide[k]) for k in injected
+                   if any(line.startswith(f"{self.lf.path}: {k} = ") for line in self.res.errors)]
             try:
                 validated = model.model_validate(params)
                 if self.probe and here:         # the devices the node names, asked on this machine
@@ -436,6 +439,8 @@ class _Checker:
             except ValidationError as exc:
                 for e in exc.errors():
                     key = ".".join(str(p) for p in e["loc"])
+                    if any(v in e["msg"] or v == e.get("input") for v in bad):
+                        continue
                     if not key:  # a check across params (a model validator): the message names them
                         self.res.errors.append(f"{self.lf.path}: {where}: params: {e['msg'][:300]}")
                     elif e["type"] == "extra_forbidden":

@@ -211,14 +211,17 @@ class Lockstep:
 WALL_TOPICS = frozenset({"/diagnostics"})
 
 
-async def run_live(bus: Bus, until: float | None, stopped) -> LockstepStats:
+async def run_live(bus: Bus, until: float | None, stopped, rtf: float | None = None) -> LockstepStats:
     """Drive a live simulated graph (launch files' ``clock: sim``) for ``until`` s of simulated time from where
     its clock stands (:data:`SIM_EPOCH` if unset; None: until ``stopped()`` is true, e.g. a required node
     ended). The caller starts it once every node of the container is active (as ROS 2 lifecycle nodes);
     time then advances only when everything due has been handled: from one event (a timer, a delivery) to the
     next. The loop yields to asyncio between events, so signals, heartbeats and subscribers outside the process
-    are served. Returns the statistics, kept up to date while it runs (``bag_s``: simulated seconds,
-    ``wall_s``, ``speed`` = the real-time factor)."""
+    are served. ``rtf``: pace simulated time at most ``rtf`` x wall time (Gazebo's ``real_time_factor``; None: as
+    fast as the handlers allow): before an event at simulated ``t`` it waits until ``(t - epoch) / rtf`` wall
+    seconds have passed. Pacing only waits, so the events and what they publish are the same. Returns the
+    statistics, kept up to date while it runs (``bag_s``: simulated seconds, ``wall_s``, ``speed`` = the
+    real-time factor)."""
     ls = bus.lockstep
     if not ls.clock.started:
         ls.clock.set(SIM_EPOCH)
@@ -232,6 +235,11 @@ async def run_live(bus: Bus, until: float | None, stopped) -> LockstepStats:
         if nxt is None:
             await asyncio.sleep(0.001)
             continue
+        if rtf is not None:
+            lag = (min(nxt, end) - epoch) / rtf - (time.monotonic() - t0)
+            if lag > 0:   # ahead of the wall clock: wait (in slices, so a stop is heard)
+                await asyncio.sleep(min(lag, 0.05))
+                continue
         if nxt > end:
             await ls.advance(end)
             break

@@ -70,7 +70,7 @@ class Sink(Node):
                 (self.now(), m.header.stamp, float(m.position[0]), t)), qos=QoS.KEEP_ALL)
 
 
-def _container(until: float, members: list[tuple[type, str]]) -> dict[str, Node]:
+def _container(until: float, members: list[tuple[type, str]], rtf: float | None = None) -> dict[str, Node]:
     """Run ``members`` (node class, name) in one container on a live simulated clock until ``until`` s past the
     epoch; returns the nodes by name and the bus (key "bus")."""
     async def main() -> dict:
@@ -88,15 +88,15 @@ def _container(until: float, members: list[tuple[type, str]]) -> dict[str, Node]
             return Member(name, make)
 
         c = Container("sim", [member(cls, name) for cls, name in members], bus, print_fn=lambda line: None,
-                      sim_until=until)
+                      sim_until=until, rtf=rtf)
         made["code"] = await asyncio.wait_for(c.run(install_signals=False), timeout=60)
         return made
 
     return asyncio.run(main())
 
 
-def _run(until: float) -> dict:
-    made = _container(until, [(Source, "source"), (Worker, "worker"), (Sink, "sink")])
+def _run(until: float, rtf: float | None = None) -> dict:
+    made = _container(until, [(Source, "source"), (Worker, "worker"), (Sink, "sink")], rtf)
     return {"code": made["code"], "sink": list(made["sink"].got), "bus": made["bus"], "seen": made["worker"].seen}
 
 
@@ -167,6 +167,17 @@ def test_two_runs_are_identical():
     assert len(a) >= 6 and a == b
 
 
+def test_a_paced_run_keeps_to_the_wall_clock_and_publishes_the_same():
+    """rtf=0.5: 0.4 simulated s take 0.8 wall s (an unpaced run takes a small fraction), same messages."""
+    fast = _run(0.4)
+    paced = _run(0.4, rtf=0.5)
+    st = paced["bus"].lockstep.stats
+    assert st.bag_s == pytest.approx(0.4)
+    assert st.wall_s == pytest.approx(0.8, rel=0.05) and st.speed == pytest.approx(0.5, rel=0.05)
+    assert fast["bus"].lockstep.stats.wall_s < 0.5 * st.wall_s
+    assert len(paced["sink"]) >= 12 and paced["sink"] == fast["sink"]
+
+
 def _hashes(bag: Path) -> dict[str, str]:
     h: dict[str, hashlib._Hash] = {}
     for m in read_bag(bag):
@@ -177,14 +188,15 @@ def _hashes(bag: Path) -> dict[str, str]:
 
 
 def test_the_display_on_the_simulated_clock_is_byte_identical_run_to_run(tmp_path):
-    """Two runs of launch/sim.yaml (a 3 s stroke, truth seed 0) write the same messages on every
-    topic but /diagnostics (wall-clock liveness), stamps included; the summary says the clock."""
+    """Two runs of launch/sim.yaml (a 3 s stroke, truth seed 0), the second paced at real speed (--rtf 1), write
+    the same messages on every topic but /diagnostics (wall-clock liveness), stamps included; the paced one
+    keeps to the wall clock within 5 %; the summary says the clock."""
     outs = []
     for i in range(2):
         out = tmp_path / f"run{i}"
         res = subprocess.run([sys.executable, "-m", "flexsheet", "launch", "launch/sim.yaml", "--duration", "7",
                               "--out", str(out), "--set", "viz.port=0", "--set", "world.start_delay=1.0", "--set",
-                              "world.script=[{mode: stroke, moving_time: 3}]"],
+                              "world.script=[{mode: stroke, moving_time: 3}]", *(["--rtf", "1"] if i else [])],
                              cwd=ROOT, capture_output=True, text=True, timeout=600)
         assert res.returncode == 0, res.stdout[-4000:] + res.stderr[-2000:]
         outs.append(out)
@@ -196,6 +208,9 @@ def test_the_display_on_the_simulated_clock_is_byte_identical_run_to_run(tmp_pat
     s = json.loads((outs[0] / "summary.json").read_text())
     assert s["clock"] == "sim" and s["realtime_factor"] > 0 and s["seed"] == 0
     assert s["sim_clock"]["sim_s"] == pytest.approx(7.0)
+    paced = json.loads((outs[1] / "sim_clock.json").read_text())
+    assert s["sim_clock"]["rtf_target"] is None and paced["rtf_target"] == 1.0
+    assert paced["sim_s"] == pytest.approx(7.0) and paced["realtime_factor"] == pytest.approx(1.0, rel=0.05)
     chain = s["latency_ms"]["chain"]
     # the chain adds up: each end-to-end figure is the sum of its hops (deterministic costs: medians too)
     assert chain["exposure_to_arm_command"]["median"] == pytest.approx(
