@@ -19,11 +19,13 @@ import yaml
 
 from flexsheet import registry
 
-DEFAULT_LAUNCH = "launch/sim.yaml"
 
-
-def _launch_default() -> str:
-    return os.environ.get("FLEXSHEET_LAUNCH", DEFAULT_LAUNCH)
+def _graph_args(t) -> None:
+    """How a run-time tool finds the graph (:func:`flexsheet.runtime.discovery.resolve_graph`)."""
+    t.add_argument("--launch", metavar="FILE", help="the graph's launch file (needed for a graph on other hosts "
+                   "or one running CURVE); default: $FLEXSHEET_LAUNCH, else the nodes running on this machine")
+    t.add_argument("--endpoint", action="append", metavar="tcp://HOST:PORT",
+                   help="listen to this publisher only, repeatable (e.g. a bag player's tcp://127.0.0.1:7199)")
 
 
 def _fmt(prog_examples: str) -> dict:
@@ -393,8 +395,7 @@ def _add_topic_parser(sub) -> None:
                                                       + (" --window 2" if verb in ("hz", "bw") else "")))
         if verb != "list":
             t.add_argument("topic")
-        t.add_argument("--launch", default=_launch_default(), help="launch file of the graph (default: "
-                                                                   "$FLEXSHEET_LAUNCH or launch/sim.yaml)")
+        _graph_args(t)
         if verb not in ("hz", "bw"):
             t.add_argument("--timeout", type=float, default=2.5,
                            help="s to wait for the first message (none: it is not published; exit 1)"
@@ -479,7 +480,7 @@ def _add_service_parser(sub) -> None:
 
 def _tool_args(t, timeout_help: str = "s to find the node and for the reply") -> None:
     """The run-time tools' common flags: ``--launch``, ``--timeout``, ``--json``."""
-    t.add_argument("--launch", default=_launch_default(), help="launch file of the graph")
+    _graph_args(t)
     t.add_argument("--timeout", type=float, default=2.5, help=timeout_help)
     t.add_argument("--json", action="store_true", help="one JSON document on stdout")
 
@@ -496,12 +497,14 @@ def _add_bag_parser(sub) -> None:
                              "exit status 1 if the bag could not be written completely"))
     t.add_argument("topics", nargs="*", help="topics (default: all)")
     t.add_argument("-o", "--output", default="", help="output .mcap (default: bag_<time>.mcap)")
-    t.add_argument("--launch", default=_launch_default())
+    _graph_args(t)
     t.add_argument("--duration", type=float, help="stop after S seconds")
     t.add_argument("--json", action="store_true", help="one JSON document on stdout at the end (log on stderr)")
     t.set_defaults(func=_bag("cmd_record"))
     t = bs.add_parser("play", help="republish a bag with its original timing",
-                      **_fmt("  flexsheet bag play run.mcap --rate 1 --endpoint tcp://127.0.0.1:7199\n"
+                      **_fmt("  flexsheet bag play out/sim/sim.mcap --loop     # publishes on tcp://127.0.0.1:7199\n"
+                             "  flexsheet topic hz /fingertip                    # (another shell) finds the player\n"
+                             "  flexsheet run viz --peer tcp://127.0.0.1:7199    # Foxglove at ws://localhost:8765\n"
                              "exit status 2 (one line on stderr) if the file is missing or not MCAP"))
     t.add_argument("file")
     t.add_argument("--rate", type=float, default=1.0, help="playback speed factor")

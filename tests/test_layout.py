@@ -6,9 +6,11 @@
 - ``flexsheet/model/`` is pure: no transport (zmq, asyncio, msgpack, pymodbus), nothing above it;
 - a node (``nodes/X/``) imports only ``flexsheet.*``, ``messages`` and ``nodes.X`` itself;
 - no import cycle between folders (the packages of ``flexsheet/``, ``messages``, each node);
-- no ``.py`` under ``docs/``; ``README.md`` ≤ 150 lines, none over 300 characters; each ``docs/`` page ≤ 300
+- no ``.py`` under ``docs/``; ``README.md`` ≤ 100 lines, none over 300 characters; each ``docs/`` page ≤ 300
   lines; no work-log words outside
-  ``CHANGELOG.md``, in the docs or in the code's docstrings and comments.
+  ``CHANGELOG.md``, in the docs or in the code's docstrings and comments;
+- ``CHANGELOG.md`` (Keep a Changelog) ≤ 300 lines, none over 200 characters, with at least one released
+  version heading ``## [x.y.z] - YYYY-MM-DD``.
 """
 
 from __future__ import annotations
@@ -22,6 +24,8 @@ TRANSPORT = {"zmq", "asyncio", "msgpack", "pymodbus"}
 #: the library's packages that the generic runtime must not import
 #: a work-log reference (history belongs in CHANGELOG.md; docs, docstrings and comments describe today)
 WORK_LOG = re.compile(r"\bsessions? [0-9]+|\bsession-[0-9]+|this session|last session", re.I)
+#: a released version's heading in CHANGELOG.md (https://keepachangelog.com/en/1.1.0/)
+VERSION_HEADING = re.compile(r"^## \[[0-9]+\.[0-9]+\.[0-9]+\] - [0-9]{4}-[0-9]{2}-[0-9]{2}$")
 ABOVE_RUNTIME = ("model", "calibration", "experiments", "display", "twin", "fem", "vision", "planning", "arm",
                  "rendering", "viz", "benches")
 
@@ -151,7 +155,7 @@ def test_no_python_under_docs():
 
 def test_readme_and_docs_are_short_pages_of_current_state():
     readme = (ROOT / "README.md").read_text().splitlines()
-    assert len(readme) <= 150, f"README.md has {len(readme)} lines (at most 150)"
+    assert len(readme) <= 100, f"README.md has {len(readme)} lines (at most 100)"
     long = [i + 1 for i, line in enumerate(readme) if len(line) > 300]
     assert long == [], f"README.md lines over 300 characters: {long}"
     pages = {p.name: len(p.read_text().splitlines()) for p in (ROOT / "docs").glob("*.md")}
@@ -162,3 +166,12 @@ def test_readme_and_docs_are_short_pages_of_current_state():
     hist = [f"{p.relative_to(ROOT)}:{i + 1}" for p in pages + code
             for i, line in enumerate(p.read_text().splitlines()) if WORK_LOG.search(line)]
     assert hist == [], "development history outside CHANGELOG.md:\n" + "\n".join(hist[:20])
+
+
+def test_changelog_is_short_and_versioned():
+    lines = (ROOT / "CHANGELOG.md").read_text().splitlines()
+    assert len(lines) <= 300, f"CHANGELOG.md has {len(lines)} lines (at most 300)"
+    long = [i + 1 for i, line in enumerate(lines) if len(line) > 200]
+    assert long == [], f"CHANGELOG.md lines over 200 characters: {long}"
+    versions = [line for line in lines if VERSION_HEADING.match(line)]
+    assert versions, "CHANGELOG.md has no released version heading '## [x.y.z] - YYYY-MM-DD'"

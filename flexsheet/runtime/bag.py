@@ -171,6 +171,11 @@ class PlayerNode(Node):
             lockstep.check(self)  # ConfigError (exit 78) unless the player is in a lockstep container
             self._task = asyncio.get_running_loop().create_task(lockstep.play(self))
             return
+        ep = self.transport.endpoint or ""
+        if ep.startswith("tcp://"):   # a player is only a publisher: say how to watch it
+            self.log.info("playing %s on %s: watch with 'flexsheet topic hz TOPIC' (it finds this player on this "
+                          "machine; elsewhere --endpoint %s), or the live view: 'flexsheet run viz --peer %s' "
+                          "(Foxglove at ws://localhost:8765)", self.params.file, ep, ep, ep)
         asyncio.get_running_loop().create_task(self._play_safely())
 
     async def _play_safely(self) -> None:
@@ -215,11 +220,12 @@ class PlayerNode(Node):
 
 
 # ------------------------------------------------------------------------------------------------ CLI
-def _graph(launch: str):
-    from flexsheet.runtime.launch import curve_config, load_launch
+def _graph(launch: str | None, endpoints: list[str] | None = None):
+    """(peers, curve) of the graph to record (:func:`flexsheet.runtime.discovery.resolve_graph`)."""
+    from flexsheet.runtime.discovery import resolve_graph
 
-    lf = load_launch(launch)
-    return list(lf.endpoints().values()), curve_config(lf, None)
+    g = resolve_graph(launch, endpoints)
+    return g.peers, g.curve
 
 
 def _fail(verb: str, exc: Exception) -> int:
@@ -231,7 +237,10 @@ def cmd_record(args: argparse.Namespace) -> int:
     import logging
     logging.basicConfig(level="INFO", format="%(levelname)s %(name)s: %(message)s")
     out = args.output or time.strftime("bag_%Y%m%d_%H%M%S.mcap")
-    peers, curve = _graph(args.launch)
+    try:
+        peers, curve = _graph(args.launch, getattr(args, "endpoint", None))
+    except (LookupError, ValueError) as exc:   # LaunchError is a ValueError
+        return _fail("record", exc)
     node = RecorderNode(NodeConfig(name="bag_record", node_type="recorder", endpoint="", peers=peers, curve=curve,
                                    params={"output": out, "topics": args.topics}))
 

@@ -22,7 +22,7 @@ from pydantic import BaseModel, ValidationError
 
 from messages import Message, Topic
 
-__all__ = ["DecodeError", "encode", "decode", "decode_any", "peek_schema", "MAX_ARRAY_BYTES"]
+__all__ = ["DecodeError", "encode", "decode", "decode_any", "peek_schema", "peek_stamp", "MAX_ARRAY_BYTES"]
 
 EXT_NDARRAY = 1
 _HEAD = struct.Struct("<HB")  # buffer index, ndim; then ndim × uint64 dims, then the dtype string
@@ -241,3 +241,14 @@ def peek_schema(meta: bytes) -> tuple[str, int]:
     if not isinstance(obj, dict) or type(obj.get("s")) is not str or type(obj.get("v")) is not int:
         raise DecodeError("meta frame is not a flexsheet message envelope (str 's', int 'v')")
     return obj["s"], obj["v"]
+
+
+def peek_stamp(frames: list) -> float | None:
+    """The ``header.stamp`` (s, the sender's clock) of an encoded message ``[topic, meta, *buffers]``, read from
+    its meta frame without building arrays or validating; None when it has no numeric stamp."""
+    try:
+        obj = msgpack.unpackb(bytes(frames[1]), ext_hook=lambda c, d: None, raw=False)
+        stamp = obj["d"]["header"]["stamp"]
+    except Exception:  # noqa: BLE001 - garbage, a short message or a message without a header: no stamp
+        return None
+    return float(stamp) if isinstance(stamp, (int, float)) and not isinstance(stamp, bool) else None

@@ -500,6 +500,7 @@ class Node:
         self._last_log = 0.0
         self._suppressed = 0
         self.services = None  # its ServiceServer once running (flexsheet.runtime.services)
+        self._announced = None  # its entry in the local graph discovery (flexsheet.runtime.discovery) while up
         self._pending_services: dict[str, tuple[Callable, str, bool]] = {}
         self._tool_peers: set[str] = set()    # endpoints graph/connect added (only those graph/disconnect drops)
 
@@ -732,6 +733,8 @@ class Node:
             self._start_services()
             self._wall_timer(self.config.heartbeat_period, lambda: self._hb_pub.publish(self.heartbeat()))
             self.ready = True
+            from flexsheet.runtime.discovery import announce
+            self._announced = announce(self.name, self.transport.endpoint or "", self.config.curve is not None)
             self.log.info("%s up: endpoint %s, %d peers, publishes %s", self.name, self.transport.endpoint or "-",
                           len(getattr(self.transport, "peers", [])),
                           ", ".join(n for n in self._publishers if n != T.DIAGNOSTICS.name) or "-")
@@ -787,6 +790,9 @@ class Node:
         return bool(links is not None and links.remove_peer(ep))
 
     async def _close(self) -> None:
+        from flexsheet.runtime.discovery import withdraw
+        withdraw(self._announced)
+        self._announced = None
         if self.services is not None:
             self.services.close()
         for task in self._timers:

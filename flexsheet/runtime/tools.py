@@ -2,8 +2,9 @@
 verb: one JSON document on stdout; ``echo``: one JSON object per message, a line each).
 
 Everything comes from what is on the wire now — heartbeats on ``/diagnostics`` and the topic itself —
-never from a cache. The endpoints to listen to come from the launch file (``--launch``, default
-``$FLEXSHEET_LAUNCH`` or ``launch/sim.yaml``).
+never from a cache. The endpoints to listen to come from ``--launch FILE``, else ``--endpoint tcp://HOST:PORT``
+(repeatable: e.g. a bag player's), else ``$FLEXSHEET_LAUNCH``, else the nodes running on this machine
+(:mod:`flexsheet.runtime.discovery`).
 """
 
 from __future__ import annotations
@@ -16,20 +17,27 @@ import time
 
 import numpy as np
 
-from flexsheet.runtime.codec import DecodeError, decode, decode_any
-from flexsheet.runtime.launch import LaunchError, curve_config, load_launch
+from flexsheet.runtime.bag import SIMULATED_BEFORE
+from flexsheet.runtime.codec import DecodeError, decode, decode_any, peek_stamp
+from flexsheet.runtime.discovery import Graph, resolve_graph
+from flexsheet.runtime.launch import LaunchError, load_launch
 from flexsheet.runtime.transport import ZmqTransport
 from messages import Heartbeat
 from messages import topics as T
 
-__all__ = ["collect_heartbeats", "topic_list", "topic_info", "topic_echo", "topic_hz", "topic_bw", "node_list",
+__all__ = ["graph", "collect_heartbeats", "topic_list", "topic_info", "topic_echo", "topic_hz", "topic_bw", "node_list",
            "node_info", "containers_of", "graph_topics", "message_json", "param_list", "param_get", "param_set",
            "service_list", "service_call", "topic_pub"]
 
 
-def _peers(launch: str) -> tuple[list[str], object, set[str]]:
-    lf = load_launch(launch)
-    return list(lf.endpoints().values()), curve_config(lf, None), set(lf.nodes)
+def graph(args: argparse.Namespace) -> Graph | None:
+    """The graph of ``args.launch`` / ``args.endpoint`` (:func:`~flexsheet.runtime.discovery.resolve_graph`), or
+    None after saying on stderr, in one line, why there is none."""
+    try:
+        return resolve_graph(getattr(args, "launch", None), getattr(args, "endpoint", None))
+    except (LaunchError, LookupError) as exc:
+        print(f"flexsheet: {exc}", file=sys.stderr)
+        return None
 
 
 async def collect_heartbeats(peers: list[str], timeout: float, curve=None,
@@ -61,14 +69,12 @@ async def collect_heartbeats(peers: list[str], timeout: float, curve=None,
 
 
 def _beats(args: argparse.Namespace) -> dict[str, Heartbeat] | None:
-    try:
-        peers, curve, names = _peers(args.launch)
-    except LaunchError as exc:
-        print(f"flexsheet: {exc}")
+    g = graph(args)
+    if g is None:
         return None
-    beats = asyncio.run(collect_heartbeats(peers, args.timeout, curve, names))
+    beats = asyncio.run(collect_heartbeats(g.peers, args.timeout, g.curve, g.names))
     if not beats:
-        print(f"no live nodes heard in {args.timeout:.1f} s (graph of {args.launch})")
+        print(f"no live nodes heard in {args.timeout:.1f} s ({g.source})")
     return beats
 
 
@@ -132,8 +138,11 @@ def topic_info(args: argparse.Namespace) -> int:
     return 0
 
 
-def containers_of(launch: str) -> dict[str, str]:
-    """Node name → its ``container:`` in launch file ``launch`` (nodes alone in their process are absent)."""
+def containers_of(launch: str | None) -> dict[str, str]:
+    """Node name → its ``container:`` in launch file ``launch`` (nodes alone in their process are absent; no
+    launch file: none known)."""
+    if not launch:
+        return {}
     try:
         lf = load_launch(launch)
     except LaunchError:
@@ -235,11 +244,10 @@ def message_json(topic: str, msg, arrays: bool = False) -> dict:
 def topic_echo(args: argparse.Namespace) -> int:
     """Print messages of ``args.topic`` as they arrive (arrays shown by shape unless ``--arrays``): exactly
     ``--count`` of them when given; when none arrives within ``--timeout`` s, say so and return 1."""
-    try:
-        peers, curve, _ = _peers(args.launch)
-    except LaunchError as exc:
-        print(f"flexsheet: {exc}")
+    g = graph(args)
+    if g is None:
         return 2
+    peers, curve = g.peers, g.curve
     done = asyncio.Event()
     n = 0
 
@@ -271,7 +279,7 @@ def topic_echo(args: argparse.Namespace) -> int:
                 await asyncio.wait_for(asyncio.shield(done.wait()), timeout=args.timeout)
             except TimeoutError:
                 if n == 0:
-                    print(f"no message on {args.topic} in {args.timeout:g} s: nothing in the graph of {args.launch} "
+                    print(f"no message on {args.topic} in {args.timeout:g} s: nothing in {g.source} "
                           f"publishes it now (flexsheet topic list shows what is published)", file=sys.stderr)
                     return 1
                 await done.wait()
@@ -288,11 +296,10 @@ def topic_echo(args: argparse.Namespace) -> int:
 def _listen(args: argparse.Namespace, keep) -> list | None:
     """Subscribe to ``args.topic`` for ``args.window`` s; ``keep(frames)`` per message of it; the list of what
     it returned, or None (the launch file is unusable: said)."""
-    try:
-        peers, curve, _ = _peers(args.launch)
-    except LaunchError as exc:
-        print(f"flexsheet: {exc}")
+    g = graph(args)
+    if g is None:
         return None
+    peers, curve = g.peers, g.curve
     got: list = []
 
     def on_frames(frames: list) -> None:
@@ -312,45 +319,72 @@ def _listen(args: argparse.Namespace, keep) -> list | None:
     return got
 
 
+def _time_base(got: list[tuple[float, float | None, int]], window: float) -> tuple[str, np.ndarray, float]:
+    """``(clock, periods, span_s)`` of what arrived, as (arrival s, header stamp s, bytes): on a simulated graph
+    (every stamp before :data:`~flexsheet.runtime.bag.SIMULATED_BEFORE`) the periods between the messages' own
+    stamps, in arrival order (a step back, a looping bag's restart, is left out), so the rate is per simulated
+    second however fast the graph runs; else the periods between arrivals on the wall clock over the window."""
+    stamps = [s for _, s, _ in got]
+    if got and all(s is not None and s < SIMULATED_BEFORE for s in stamps):
+        d = np.diff(np.array(stamps, dtype=float))
+        d = d[d >= 0.0]
+        return "sim", d, float(d.sum())
+    return "wall", np.diff(np.array([a for a, _, _ in got], dtype=float)), float(window)
+
+
+def _frame_info(frames: list) -> tuple[float, float | None, int]:
+    return time.monotonic(), peek_stamp(frames), sum(len(f) for f in frames)
+
+
 def topic_hz(args: argparse.Namespace) -> int:
-    """Measure the arrival rate of ``args.topic`` over ``--window`` s: mean rate, min/max/std of periods;
-    1 when fewer than two messages arrived."""
-    stamps = _listen(args, lambda frames: time.monotonic())
-    if stamps is None:
+    """Measure the rate of ``args.topic`` over ``--window`` s: mean rate, min/max/std of periods, in simulated
+    time on a simulated graph (from the stamps) and wall time otherwise (arrivals), said in the output and as
+    ``clock`` in ``--json``; 1 when fewer than two messages arrived."""
+    got = _listen(args, _frame_info)
+    if got is None:
         return 2
-    out = {"topic": args.topic, "window_s": args.window, "messages": len(stamps)}
-    if len(stamps) >= 2:
-        d = np.diff(stamps)
-        out.update(rate_hz=float(1 / d.mean()), period_min_s=float(d.min()), period_max_s=float(d.max()),
-                   period_std_s=float(d.std()))
+    clock, d, _ = _time_base(got, args.window)
+    out = {"topic": args.topic, "window_s": args.window, "messages": len(got), "clock": clock}
+    if len(d) >= 1:
+        out.update(rate_hz=float(1 / d.mean()) if d.mean() > 0 else 0.0, period_min_s=float(d.min()),
+                   period_max_s=float(d.max()), period_std_s=float(d.std()))
     if args.json:
         print(json.dumps(out))
-    elif len(stamps) < 2:
-        print(f"{args.topic}: {len(stamps)} messages in {args.window:.1f} s")
+    elif len(d) < 1:
+        print(f"{args.topic}: {len(got)} messages in {args.window:.1f} s of wall time")
     else:
-        print(f"{args.topic}: average rate {out['rate_hz']:.2f} Hz over {len(stamps)} msgs  "
+        print(f"{args.topic}: average rate {out['rate_hz']:.2f} Hz ({_clock_words(clock)}) over {len(got)} msgs  "
               f"min {out['period_min_s'] * 1e3:.2f} ms max {out['period_max_s'] * 1e3:.2f} ms "
               f"std {out['period_std_s'] * 1e3:.2f} ms")
-    return 0 if len(stamps) >= 2 else 1
+    return 0 if len(d) >= 1 else 1
+
+
+def _clock_words(clock: str) -> str:
+    return "simulated time, from the stamps" if clock == "sim" else "wall time"
 
 
 def topic_bw(args: argparse.Namespace) -> int:
     """Measure the bandwidth of ``args.topic`` over ``--window`` s: bytes/s on the wire (every frame of each
-    message, topic frame included) and the mean, smallest and largest message; 1 when none arrived."""
-    sizes = _listen(args, lambda frames: sum(len(f) for f in frames))
-    if sizes is None:
+    message, topic frame included; per simulated second on a simulated graph, from the stamps) and the mean,
+    smallest and largest message; 1 when none arrived."""
+    got = _listen(args, _frame_info)
+    if got is None:
         return 2
-    out = {"topic": args.topic, "window_s": args.window, "messages": len(sizes),
-           "bytes_per_s": float(sum(sizes) / args.window)}
+    sizes = [n for _, _, n in got]
+    clock, d, span = _time_base(got, args.window)
+    if clock == "sim" and len(d):
+        span *= len(got) / len(d)   # n messages cover n periods; the span holds len(d) of them
+    out = {"topic": args.topic, "window_s": args.window, "messages": len(sizes), "clock": clock,
+           "bytes_per_s": float(sum(sizes) / span) if span > 0 else 0.0}
     if sizes:
         out.update(mean_bytes=float(np.mean(sizes)), min_bytes=int(min(sizes)), max_bytes=int(max(sizes)))
     if args.json:
         print(json.dumps(out))
     elif not sizes:
-        print(f"{args.topic}: no messages in {args.window:.1f} s")
+        print(f"{args.topic}: no messages in {args.window:.1f} s of wall time")
     else:
-        print(f"{args.topic}: {_si(out['bytes_per_s'])}B/s from {len(sizes)} msgs  mean {_si(out['mean_bytes'])}B "
-              f"min {_si(out['min_bytes'])}B max {_si(out['max_bytes'])}B")
+        print(f"{args.topic}: {_si(out['bytes_per_s'])}B/s ({_clock_words(clock)}) from {len(sizes)} msgs  "
+              f"mean {_si(out['mean_bytes'])}B min {_si(out['min_bytes'])}B max {_si(out['max_bytes'])}B")
     return 0 if sizes else 1
 
 
@@ -366,17 +400,15 @@ def _si(x: float) -> str:
 def _node_service(args: argparse.Namespace) -> tuple[str, object, bytes | None] | int:
     """(service endpoint, the tool's CURVE config, the node's public key) of ``args.node`` from its heartbeat,
     or an exit code (said on stderr)."""
-    try:
-        lf = load_launch(args.launch)
-    except LaunchError as exc:
-        print(f"flexsheet: {exc}", file=sys.stderr)
+    g = graph(args)
+    if g is None:
         return 2
-    curve = curve_config(lf, None)
-    beats = asyncio.run(collect_heartbeats(list(lf.endpoints().values()), args.timeout, curve, {args.node}))
+    curve = g.curve
+    beats = asyncio.run(collect_heartbeats(g.peers, args.timeout, curve, {args.node}))
     hb = beats.get(args.node)
     if hb is None:
         print(f"node {args.node!r} not heard in {args.timeout:g} s (heard: {', '.join(sorted(beats)) or 'none'}; "
-              f"graph of {args.launch})", file=sys.stderr)
+              f"{g.source})", file=sys.stderr)
         return 1
     if not hb.service_endpoint:
         print(f"node {args.node!r} offers no services (it has no TCP endpoint)", file=sys.stderr)
@@ -512,26 +544,24 @@ def topic_pub(args: argparse.Namespace) -> int:
         print(f"flexsheet: {topic.type.SCHEMA} field '{'.'.join(str(x) for x in e['loc'])}': {e['msg']} "
               f"(value {e.get('input')!r})", file=sys.stderr)
         return 2
-    try:
-        lf = load_launch(args.launch)
-    except LaunchError as exc:
-        print(f"flexsheet: {exc}", file=sys.stderr)
+    g = graph(args)
+    if g is None:
         return 2
-    guarded = lf.security.publishers
+    guarded = g.launch.security.publishers if g.launch is not None else {}
     if args.topic in guarded:
         print(f"flexsheet: {args.topic} is guarded by the launch file (security.publishers): only "
               f"{', '.join(guarded[args.topic])} may publish it", file=sys.stderr)
         return 1
-    curve = curve_config(lf, None)
+    curve = g.curve
 
     async def main() -> int:
         from flexsheet.runtime.transport import ToolPublisher
 
-        beats = await collect_heartbeats(list(lf.endpoints().values()), args.timeout, curve, set(lf.nodes))
+        beats = await collect_heartbeats(g.peers, args.timeout, curve, g.names)
         subs = {n: hb for n, hb in beats.items()
                 if hb.service_endpoint and any(s.topic == args.topic for s in hb.subscriptions)}
         if not subs:
-            print(f"no node of the graph of {args.launch} subscribes to {args.topic} now", file=sys.stderr)
+            print(f"no node of {g.source} subscribes to {args.topic} now", file=sys.stderr)
             return 1
         pub = ToolPublisher(f"tcp://{args.address}", curve)
         ep = pub.endpoint

@@ -107,3 +107,53 @@ def test_replay_reproduces_the_live_outputs(sim_run, tmp_path):
     dn = np.degrees([np.arccos(np.clip(live_t[s].normal @ replay_t[s].normal, -1, 1)) for s in common])
     # the planner's rate limiter integrates over arrival times, which jitter: compare within tolerances
     assert np.median(dp) < 1e-4 and np.median(dn) < 0.05, (np.median(dp), np.median(dn))
+
+
+def test_a_played_bag_is_seen_by_topic_hz_and_the_live_view(sim_run, tmp_path):
+    """The main job's bag played as docs/visualise.md says (``flexsheet bag play BAG --loop``): ``topic hz``, run
+    from another folder with no launch file, finds the player on this machine and reports the recorded
+    fingertip rate in simulated time; the viz node pointed at the player shows the bag's fingertips to a Foxglove
+    client."""
+    import asyncio
+    import os
+    import time
+
+    from conftest import free_port
+    from viz_watch import _connect
+
+    env = {**os.environ, "FLEXSHEET_GRAPH_DIR": str(tmp_path / "graph")}   # only this test's nodes are found
+    ep, port = f"tcp://127.0.0.1:{free_port()}", free_port()
+    cmd = [sys.executable, "-m", "flexsheet"]
+    player = subprocess.Popen([*cmd, "bag", "play", str(sim_run["out"] / "sim.mcap"), "--loop", "--endpoint", ep],
+                              cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    viz = subprocess.Popen([*cmd, "run", "viz", "--peer", ep, "-p", f"port={port}"], cwd=ROOT, env=env,
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    async def fingertips() -> list[dict]:
+        c = await _connect(port, viz, timeout=60.0)
+        try:
+            await c.wait_channels({"/fingertip"}, timeout=20.0)
+            await c.subscribe(["/fingertip"])
+            got, deadline = [], time.monotonic() + 30.0
+            while len(got) < 20:
+                m = await c.recv(deadline)
+                if m is not None and m[0] == "/fingertip":
+                    got.append(c.decode(m[0], m[2]))
+            return got
+        finally:
+            await c.ws.close()
+
+    try:
+        time.sleep(2.0)
+        r = subprocess.run([*cmd, "topic", "hz", "/fingertip", "--window", "3", "--json"], cwd=tmp_path, env=env,
+                           capture_output=True, text=True, timeout=60)
+        assert r.returncode == 0, r.stderr
+        hz = json.loads(r.stdout)
+        assert hz["clock"] == "sim" and 40.0 <= hz["rate_hz"] <= 56.0 and hz["messages"] >= 60, hz
+        tips = asyncio.run(fingertips())
+        assert len(tips) == 20 and all(abs(t["position"][0]) < 0.5 for t in tips if t["valid"]), tips[:2]
+        assert sum(t["valid"] for t in tips) >= 10
+    finally:
+        for p in (viz, player):
+            p.terminate()
+            p.wait(timeout=20)
