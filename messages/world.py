@@ -15,7 +15,8 @@ class FingerTruth(Message):
     ``position`` (3,) m and ``velocity`` (3,) m/s in the display frame. The script segment being played, as
     typed fields: ``segment`` (its index in the world's script, 0-based), ``mode`` ("stroke", "push",
     "stroke_push"), ``moving_time`` (s, the segment's time for the mark's travel; Table I's row key) and
-    ``phase`` (where in the segment: "approach", "idle", or the mode while the mark moves).
+    ``phase`` (where in the segment: "approach", "idle", or the mode while the mark moves; "paused" while a tool
+    has paused the script, the finger away from the display).
     ``target_angle``: angle of the target mark around the cylinder axis, rad (0 = facing the user).
     ``visible``: False when the script occludes the marker.
     """
@@ -29,8 +30,8 @@ class FingerTruth(Message):
     mode: str = Field(default="stroke", pattern="^(stroke|push|stroke_push)$",
                       description="segment mode: stroke | push | stroke_push")
     moving_time: float = Field(default=0.0, ge=0.0, description="segment moving time (mark's travel), s")
-    phase: str = Field(default="idle", pattern="^(approach|idle|stroke|push|stroke_push)$",
-                       description="script phase: approach | idle | the mode while the mark moves")
+    phase: str = Field(default="idle", pattern="^(approach|idle|stroke|push|stroke_push|paused)$",
+                       description="script phase: approach | idle | the mode while the mark moves | paused")
     target_angle: float = Field(default=0.0, description="target mark angle around the cylinder axis, rad")
     visible: bool = Field(default=True, description="marker visible to the camera")
 

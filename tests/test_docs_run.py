@@ -1,4 +1,4 @@
-"""Docs that run (issue 43): every command of docs/deploy.md and docs/calibration.md and every example line of a
+"""Docs that run: every command of docs/deploy.md and docs/calibration.md and every example line of a
 ``flexsheet`` --help is executed here, so neither drifts from the code.
 
 The commands are extracted mechanically (:func:`doc_commands`, :func:`help_commands`): fenced ``bash``/``sh``/
@@ -486,7 +486,7 @@ def make_sandbox(sb: Path) -> Path:
 def sandbox_env(sb: Path, **extra: str) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k not in ("FLEXSHEET_KEYS", "FLEXSHEET_LAUNCH")}
     env.update(HOME=str(sb / "home"), PATH=f"{sb / 'bin'}{os.pathsep}{env.get('PATH', '')}", REPO=str(ROOT),
-               PYTHONDONTWRITEBYTECODE="1", **extra)
+               PYTHONDONTWRITEBYTECODE="1", FLEXSHEET_GRAPH_DIR=str(sb / "graph"), **extra)
     return env
 
 

@@ -52,9 +52,12 @@ class TargetTracker:
     After a pause of the target stream longer than ``target_timeout`` (the arm held) the first target may ask
     ``max_jump`` plus what the fastest joint could have moved in the pause (``QD_MAX``'s largest, rad/s, times
     the pause): the finger went on meanwhile, and a respawned planner's first target is where it is now (a
-    planner dead 5.6 s left the left arm in ``hold:jump`` for 11 s in the faults scenario). The
-    streaming limiter still moves the arm there at the speed limit. A branch flip inside a flowing stream is
-    refused as before.
+    planner dead 5.6 s left the left arm in ``hold:jump`` for 11 s in the faults scenario). A stream that has not
+    started yet (the first target, or the first after :meth:`release`) counts its pause from the first target
+    heard, or from the release: a target refused then does not start the stream, so the allowance keeps growing
+    and the arm joins a stream that begins far away (after a registration moved it) instead of holding on
+    ``hold:jump`` for as long as the targets keep coming. The streaming limiter still moves the arm there at
+    the speed limit. A branch flip inside a flowing stream is refused as before.
     After :meth:`seed` (or the first target) ``goal`` is a (6,) rad joint vector.
     """
 
@@ -69,6 +72,8 @@ class TargetTracker:
         self.goal: np.ndarray | None = None
         self.source_stamp = 0.0
         self.last_target_at: float | None = None
+        #: s: when the arm last stopped following (the release, or the first target heard): a new stream's pause
+        self.held_since: float | None = None
         self.ik_status = "no_target"
         self.last_ik: IKResult | None = None
         self.refused = 0
@@ -90,10 +95,12 @@ class TargetTracker:
         self._history.clear()
         return self.manual
 
-    def release(self) -> None:
-        """Follow targets again (from the next one; the arm holds where it is until then)."""
+    def release(self, now: float | None = None) -> None:
+        """Follow targets again (from the next one; the arm holds where it is until then). ``now`` (s): the
+        release's time, from which a new stream's first target counts its pause (class doc)."""
         self.manual = None
         self.last_target_at = None
+        self.held_since = now
         self._history.clear()
 
     def seed(self, q) -> None:
@@ -114,12 +121,17 @@ class TargetTracker:
         if seed is None:
             raise ValueError("no seed: call seed(q_measured) or pass q_measured before the first target")
         max_jump = self.max_jump
-        resumed = self.last_target_at is not None and now - self.last_target_at > self.target_timeout
-        if resumed:
-            max_jump += float(np.max(QD_MAX)) * (now - self.last_target_at)     # resumed after a pause
+        if self.last_target_at is None and self.held_since is None:
+            self.held_since = now                       # the first target heard: the arm is held from here
+        flowing = self.last_target_at is not None and now - self.last_target_at <= self.target_timeout
+        resumed = not flowing
+        if resumed:                                     # resumed after a pause, or a stream not started yet
+            since = self.last_target_at if self.last_target_at is not None else self.held_since
+            max_jump += float(np.max(QD_MAX)) * max(now - since, 0.0)
         res = self.kin.ik(T_display_clamp, seed, max_jump=max_jump)
         self.last_ik = res
-        self.last_target_at = now
+        if res.ok or self.last_target_at is not None:   # a refused first target does not start the stream
+            self.last_target_at = now
         if res.ok:
             self.goal = res.q
             self.source_stamp = float(source_stamp)

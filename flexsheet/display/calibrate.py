@@ -241,6 +241,9 @@ def display_main(argv: list[str] | None = None) -> int:
     p.add_argument("--seeds", default="1,2,3", help="truth seeds for --sweep")
     p.add_argument("--launch", default=os.environ.get("FLEXSHEET_LAUNCH", "launch/lab.yaml"),
                    help="--live: the running graph's launch file (default $FLEXSHEET_LAUNCH or launch/lab.yaml)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="--live: a graph-wide setting the launch was started with, repeatable: the same "
+                        "--set hosts.NAME.address=ADDRESS as the lab on one machine (docs/deploy.md)")
     p.add_argument("--host", default=None, help="--live: the host this runs on (the renderer's: it reads the "
                                                 "pattern files)")
     p.add_argument("--dry-run", action="store_true",
@@ -296,6 +299,9 @@ def _live(a, opts: P.Options) -> int:
         print(f"flexsheet calibrate display: {problems[0]} (--dry-run lists every pose)", file=sys.stderr)
         return 1
     try:
+        from flexsheet.runtime.launch import apply_toplevel_sets
+
+        apply_toplevel_sets(a.set, a.launch)
         s = run_live(a.launch, a.out, opts, a.truth_seed, a.host, a.settle, progress=_say)
     except (LiveError, LaunchError) as exc:
         print(f"flexsheet calibrate display: {exc}", file=sys.stderr)

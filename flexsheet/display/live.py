@@ -54,6 +54,7 @@ class Roles:
     renderer: str
     arms: dict[str, str]                 # side → arm bridge node
     hosts: dict[str, str] = field(default_factory=dict)   # node → host
+    world: str | None = None             # the twin's world node (its script is paused meanwhile), if any
 
 
 def roles_of(lf) -> Roles:
@@ -72,7 +73,7 @@ def roles_of(lf) -> Roles:
         if side not in arms:
             raise LiveError(f"the launch file has no arm_bridge node for the {side} arm")
     return Roles(by_type["camera"][0], by_type["renderer"][0], arms,
-                 {n: s.host for n, s in lf.nodes.items()})
+                 {n: s.host for n, s in lf.nodes.items()}, (by_type.get("world") or [None])[0])
 
 
 def plan(opts: Options) -> dict:
@@ -189,11 +190,28 @@ class LiveSource:
             self.ask(self._ASK[scene].format(board=f"{self.opts.board}, {self.opts.square * 1e3:g} mm squares"))
         self._scene = scene
 
+    def begin(self) -> None:
+        """Before the first capture: the world twin's script paused (its finger away, so the planner holds and
+        nothing strokes the sheet the registration moves)."""
+        if self.roles.world is not None:
+            self.client.call(self.roles.world, "script/pause")
+            self.progress("live: the world's script is paused while the registration runs")
+
+    def _home(self) -> None:
+        """Both arms to the home sheet's clamp poses (the bridges' ``home``), waited for: the display's targets
+        start near there."""
+        goals = {side: np.asarray(self.client.call(node, "home"), float) for side, node in self.roles.arms.items()}
+        self._wait_there(goals, "home")
+
     def finish(self) -> None:
-        """Back to the display: the scene drawn again, the arms following targets, the camera twin's finger."""
-        for step in (lambda: self.client.call(self.roles.renderer, "clear_image"),
-                     *(lambda n=n: self.client.call(n, "release") for n in self.roles.arms.values()),
-                     lambda: self._set_scene("finger")):
+        """Back to the display: the scene drawn again, the arms home and following targets, the camera twin's
+        finger, the world's script running on."""
+        steps = [lambda: self.client.call(self.roles.renderer, "clear_image"), self._home,
+                 *(lambda n=n: self.client.call(n, "release") for n in self.roles.arms.values()),
+                 lambda: self._set_scene("finger")]
+        if self.roles.world is not None:
+            steps.append(lambda: self.client.call(self.roles.world, "script/resume"))
+        for step in steps:
             try:
                 step()
             except Exception as exc:  # noqa: BLE001 - best effort on the way out; said, not raised
@@ -207,6 +225,11 @@ class LiveSource:
                 self.client.call(self.roles.arms[side], "move_to", {"joints": [float(v) for v in q]})
             except Exception as exc:  # noqa: BLE001 - one line naming the pose
                 raise LiveError(f"{what}: the {side} arm refused it: {exc}") from None
+        self._wait_there(goals, what)
+
+    def _wait_there(self, goals: dict[str, np.ndarray], what: str) -> None:
+        """Wait until each arm of ``goals`` (side → (6,) rad) is there and still; :class:`LiveError` after the
+        move timeout, saying how far each still is."""
         topic = {"left": T.ARM_LEFT_STATE, "right": T.ARM_RIGHT_STATE}
 
         def there() -> bool:
@@ -414,6 +437,7 @@ def run_live(launch: str, out: str, opts: Options, truth_seed: int | None = None
         src = LiveSource(client, roles, out, opts, twin=truth is not None, settle_s=settle_s, progress=progress,
                          ask=ask)
         try:
+            src.begin()
             reg = run_all(src, opts, progress=progress)
         except (ServiceError, TimeoutError) as exc:
             raise LiveError(str(exc)) from None

@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         s = json.loads((run / "summary.json").read_text())
         runs.append({"hashes": topic_hashes(run / "sim.mcap"), "realtime_factor": s.get("realtime_factor"),
-                     "launch_wall_s": wall, "clock": s.get("clock"), "chain_ms": s["latency_ms"]["chain"],
+                     "launch_wall_s": wall, "clock": (s.get("clock") or {}).get("kind"), "chain_ms": s["latency_ms"]["chain"],
                      "sheet_at_pose_reached": s["latency_ms"].get("sheet_at_pose_reached"),
                      "readiness": s.get("readiness", {}), "table1": {k2: s[k2] for k2 in s if k2[:1].isdigit()}})
         print(f"[determinism] run {k}: real-time factor {s.get('realtime_factor', 0):.2f}, {wall:.0f} s wall",

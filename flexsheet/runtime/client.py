@@ -177,7 +177,14 @@ class GraphClient:
     def close(self) -> None:
         """Stop the loop and close the sockets."""
         if self._thread.is_alive():
-            self._loop.call_soon_threadsafe(self._tr.close)
+            async def shut() -> None:
+                self._tr.close()
+                for _ in range(3):          # let the transport's cancelled tasks finish before the loop stops
+                    await asyncio.sleep(0)
+            try:
+                asyncio.run_coroutine_threadsafe(shut(), self._loop).result(5.0)
+            except Exception:  # noqa: BLE001 - closing must not fail: the loop is stopped below regardless
+                pass
             self._loop.call_soon_threadsafe(self._loop.stop)
             self._thread.join(5.0)
 

@@ -76,7 +76,7 @@ from flexsheet.yamlio import UniqueKeyLoader
 
 __all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "SecuritySpec", "load_launch", "node_config",
            "curve_config", "identities", "keys_dir", "public_keys", "substitutions", "substitute", "keygen_command",
-           "TOPLEVEL_ENV", "CORE_SET", "parse_toplevel_set", "SIM_CONTAINER",
+           "TOPLEVEL_ENV", "CORE_SET", "parse_toplevel_set", "apply_toplevel_sets", "SIM_CONTAINER",
            "DEFAULT_KEYS_DIR", "PUBLIC_KEYS_FILE"]
 
 #: where ``flexsheet keys generate`` writes and CURVE looks when neither ``$FLEXSHEET_KEYS`` nor
@@ -540,6 +540,31 @@ def parse_toplevel_set(item: str, node_names) -> tuple[str, Any] | None:
                               "is NODE.KEY=VALUE")
         return key, known[key].parse_set(value)
     return None
+
+
+def apply_toplevel_sets(items: list[str], path: str | Path) -> dict:
+    """Apply the top-level ``--set`` items of a tool that reads launch file ``path`` (``hosts.NAME.address=…``,
+    ``twin.truth_seed=…``, ``scene=…``) for this process (:data:`TOPLEVEL_ENV`), so that every later
+    :func:`load_launch` sees them as the launcher's processes do; returns them. Raises :class:`LaunchError` for a
+    node override (``NODE.KEY=VALUE``: only ``flexsheet launch`` takes those) or a bad item."""
+    node_names = set(load_launch(path).nodes)
+    toplevel: dict = json.loads(os.environ.get(TOPLEVEL_ENV) or "{}")
+    for item in items:
+        top = parse_toplevel_set(item, node_names)
+        if top is None:
+            raise LaunchError(f"--set {item!r}: a node param; here only a graph-wide setting "
+                              "(hosts.NAME.address=ADDRESS, twin.truth_seed=N, scene=FILE)")
+        key, value = top
+        if key == "hosts":
+            merged = dict(toplevel.get("hosts", {}))
+            for host, spec in value.items():
+                merged[host] = {**merged.get(host, {}), **spec}
+            toplevel["hosts"] = merged
+        else:
+            toplevel[key] = {**toplevel.get(key, {}), **value} if isinstance(value, dict) else value
+    if toplevel:
+        os.environ[TOPLEVEL_ENV] = json.dumps(toplevel)
+    return toplevel
 
 
 def node_config(lf: LaunchFile, name: str, out: str | None = None, overrides: dict | None = None) -> NodeConfig:

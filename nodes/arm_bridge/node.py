@@ -139,6 +139,8 @@ class ArmBridgeNode(Node):
         else:
             self.stream.start()
         self._q_measured: np.ndarray | None = None
+        #: targets that arrived while a service held the arm (None: not held); said at the release
+        self.ignored_while_held: int | None = None
         self.service("hold", self.srv_hold, "stop following targets and stay where the arm is; returns its joints, rad",
                      commanding=True)
         self.service("home", self.srv_home, "move to the home sheet's clamp pose (IK), within the speed limits",
@@ -160,27 +162,40 @@ class ArmBridgeNode(Node):
             raise ValueError(f"{what} is unreachable for the {self.params.arm} arm: {res.status}")
         return res.q
 
+    def _held(self, q) -> list[float]:
+        """Hold on joints ``q`` for a service; the first hold says that targets are ignored until ``release``."""
+        q = self.tracker.move_to(q)
+        if self.ignored_while_held is None:
+            self.ignored_while_held = 0
+            self.log.info("%s arm: held by a service (hold/home/move_to): targets ignored until release",
+                          self.params.arm)
+        return q.tolist()
+
     def srv_hold(self, args: dict) -> list[float]:
-        return self.tracker.move_to(self._require_state()).tolist()
+        return self._held(self._require_state())
 
     def srv_home(self, args: dict) -> list[float]:
         from flexsheet.model.sheet import clamp_poses
 
         left, right = clamp_poses(np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), 0.05)
-        return self.tracker.move_to(self._ik(left if self.params.arm == "left" else right, "the home pose")).tolist()
+        return self._held(self._ik(left if self.params.arm == "left" else right, "the home pose"))
 
     def srv_move_to(self, args: dict) -> list[float]:
         if ("joints" in args) == ("pose" in args):
             raise ValueError("move_to takes one of joints ([6] rad) or pose (4x4, m, display frame)")
         if "joints" in args:
-            return self.tracker.move_to(args["joints"]).tolist()
+            return self._held(args["joints"])
         T = np.asarray(args["pose"], float)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise ValueError(f"pose must be a finite 4x4 matrix, got shape {T.shape}")
-        return self.tracker.move_to(self._ik(T, "the pose")).tolist()
+        return self._held(self._ik(T, "the pose"))
 
     def srv_release(self, args: dict) -> str:
-        self.tracker.release()
+        self.tracker.release(self.now())
+        if self.ignored_while_held is not None:
+            self.log.info("%s arm: released: following targets again (%d ignored while held)", self.params.arm,
+                          self.ignored_while_held)
+        self.ignored_while_held = None
         return "following targets"
 
     async def _sim_cycle(self) -> None:
@@ -195,9 +210,9 @@ class ArmBridgeNode(Node):
         """New clamp target: IK now (or once the first controller state arrived)."""
         if msg.arm != self.params.arm:
             raise InputRejected(f"ArmTarget.arm={msg.arm!r} on the {self.params.arm} arm's topic")
-        if self.tracker.manual is not None:
-            raise InputRejected(f"the {self.params.arm} arm is held by a service (hold/home/move_to); "
-                                "`release` to follow targets")
+        if self.tracker.manual is not None:   # by design while a tool holds the arm: counted, said at release
+            self.ignored_while_held += 1
+            return
         if self.tracker.goal is None:
             self._pending = msg
             return

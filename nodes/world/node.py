@@ -34,6 +34,7 @@ truth (:class:`flexsheet.twin.truth.TwinTruth`, param ``twin: {realism, truth_se
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import multiprocessing
 
@@ -96,6 +97,10 @@ def load_world_scene(path: str | None) -> Scene | None:
         raise ValueError(f"scene: {exc}") from None
 
 #: the paper's stroking experiment at 10 s and 30 s moving time, then a combined stroke and push
+#: m, display frame: where the finger waits while a tool pauses the script (0.30 m in front of the home sheet,
+#: toward the viewer: away from the sheet's and the arms' registration poses)
+AWAY = np.array([0.30, 0.0, 0.0])
+
 DEFAULT_SCRIPT = [Segment(mode="stroke", moving_time=10.0), Segment(mode="stroke", moving_time=30.0, seed=1),
                   Segment(mode="stroke_push", moving_time=10.0, push_depth=0.010, seed=2)]
 
@@ -167,8 +172,15 @@ class WorldNode(Node):
         self.t0: float | None = None
         self._arm_t0()
         self.last_progress = 0.0
+        self.paused_at: float | None = None   # script time stands still from here while a tool pauses it
+        self._no_sheet: tuple[str, int] | None = None   # (why, ticks) while no sheet can be made of the clamps
         self.timer(1.0 / p.rate_hz, self.tick_finger)
         self.timer(1.0 / p.sheet_rate_hz, self.tick_sheet)
+        self.service("script/pause", self.srv_pause, "stop the script's time and take the finger away from the "
+                     "display (out of the camera's view) until script/resume, e.g. for a registration",
+                     commanding=True)
+        self.service("script/resume", self.srv_resume, "the finger back where it was and the script on from there",
+                     commanding=True)
         self.log.info("twin: %s truth, seed %d (sheet E %.2f MPa, pre-strain %.4f, tension ratio %.3f)",
                       p.twin.realism, p.twin.truth_seed, self.truth.sheet_young * 1e-6, self.truth.sheet_prestrain,
                       self.truth.tension_ratio)
@@ -183,6 +195,21 @@ class WorldNode(Node):
         if self._worker is not None and self._worker.is_alive():
             self._worker.terminate()
             self._worker.join(timeout=1.0)
+
+    # ------------------------------------------------------------------------------------------ pause
+    def srv_pause(self, args: dict) -> str:
+        if self.paused_at is None:
+            self.paused_at = self.monotonic()
+            self.log.info("script paused by a tool: the finger is away until script/resume")
+        return "paused"
+
+    def srv_resume(self, args: dict) -> str:
+        if self.paused_at is not None:
+            if self.t0 is not None:
+                self.t0 += self.monotonic() - self.paused_at
+            self.log.info("script resumed after %.1f s", self.monotonic() - self.paused_at)
+            self.paused_at = None
+        return "running"
 
     # ------------------------------------------------------------------------------------------ FEM tables
     def _arm_t0(self) -> None:
@@ -267,6 +294,9 @@ class WorldNode(Node):
             self.last_progress = self.monotonic()
             self.log.info("waiting for %s before the script starts (%.0f s)", self._waiting_text(),
                           self.monotonic() - self.t_setup)
+        if self.paused_at is not None:
+            self._publish_away()
+            return
         t = -1.0 if self.t0 is None else self.monotonic() - self.t0
         if t < 0:
             i, ts = 0, 0.0
@@ -294,6 +324,12 @@ class WorldNode(Node):
                           done * 100, i + 1, len(self.scripts), script.mode, script.moving_time, script.phase(ts),
                           math.degrees(float(script.target_angle(ts))), 100.0 * float(script.target_fraction(ts)))
 
+    def _publish_away(self) -> None:
+        """The finger while the script is paused: at :data:`AWAY` (display frame), still, hidden from the camera."""
+        self.finger = AWAY.copy()
+        self.finger_pub.publish(FingerTruth(header=self.finger_pub.header("display"), position=AWAY.copy(),
+                                            velocity=np.zeros(3), phase="paused", visible=False))
+
     def tick_sheet(self) -> None:
         if "left" not in self.poses or "right" not in self.poses:
             self._poll_build(None)
@@ -302,8 +338,16 @@ class WorldNode(Node):
         try:
             sheet, stretch = self.phys.surface(self.poses["left"], self.poses["right"], self.finger)
         except ValueError as exc:      # e.g. the two true clamps coincide: no sheet to publish
-            self.log.warning("no sheet state: %s", exc)
+            why = str(exc)
+            if self._no_sheet is None or self._no_sheet[0] != why:   # said once per reason, not per tick
+                self.log.log(logging.INFO if self.paused_at is not None else logging.WARNING,
+                             "no sheet state: %s (said once until it changes)", why)
+                self._no_sheet = (why, 0)
+            self._no_sheet = (why, self._no_sheet[1] + 1)
             return
+        if self._no_sheet is not None:
+            self.log.info("sheet state again after %d ticks without one", self._no_sheet[1])
+            self._no_sheet = None
         pushed_now = -float((np.asarray(self.finger, float) - sheet.origin) @ sheet.normal) > 0.0
         self._poll_build(self.phys.missing_node(stretch) if (pushed_now and self._worker is None) else None)
         g = p.membrane_grid

@@ -4,13 +4,16 @@ bag into the planner and the FEM solver (launch/replay.yaml) whose outputs must 
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from conftest import MIN_TIPS_HZ
 
+from flexsheet.experiments.table1 import PAPER_TABLE1
 from flexsheet.runtime.bag import bag_info, read_bag
 from flexsheet.runtime.codec import decode_any
 
@@ -37,7 +40,7 @@ def test_sim_launch_prints_table1_and_latency_and_leaves_outputs(sim_run):
     assert sim_run["code"] == 0, stdout[-8000:]
     assert "Table I" in stdout and "Latency per hop and end to end" in stdout
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["clock"] == "sim" and summary["realtime_factor"] > 0
+    assert summary["clock"]["kind"] == "sim" and summary["realtime_factor"] > 0
     row = summary["10"]
     # the honest (realistic) twin on the simulated clock (deterministic for the seed): the sheet follows the
     # finger's tangent plane; a loop that does not track is tens of degrees off
@@ -62,6 +65,27 @@ def test_sim_launch_prints_table1_and_latency_and_leaves_outputs(sim_run):
     info = bag_info(out / "sim.mcap")
     assert not info.truncated and info.counts["/object/deformation"] > 100 and info.counts["/render/stereo"] > 20
     assert (out / "table1.png").stat().st_size > 1000 and (out / "report.md").exists()
+
+
+def test_sim_report_md_gives_the_felt_headline_and_modelled_latency(sim_run):
+    """The shared run's report.md (unit tests: tests/unit/experiments/test_report.py): the run is complete, the
+    10 s row's headline is the felt Δθ with the paper's figure, the target and its source and a verdict that
+    the unrounded numbers give; every latency row is modelled (clock: sim); one delay figure, the chain's."""
+    out = sim_run["out"]
+    assert sim_run["code"] == 0, sim_run["stdout"][-8000:]
+    md, s = (out / "report.md").read_text(), json.loads((out / "summary.json").read_text())
+    assert "Run: complete" in md and not s["run"]["partial"], s["run"]
+    hl = s["headline"]["rows"]["10"]
+    felt, tgt = s["table1"]["felt"]["10"]["dtheta_mean_deg"], PAPER_TABLE1["10"]["dtheta_mean_deg"] / 2
+    assert hl["dtheta_mean_deg"] == felt and hl["target_deg"] == tgt and hl["published_deg"] == 0.359
+    assert hl["verdict"] == ("met" if felt <= tgt else "MISSED") and hl["target_source"] == "paper Table I ÷ 2"
+    body = md.split("## Table I — felt Δθ, the headline", 1)[1].split("```")[1]
+    row = next(re.split(r"\s{2,}", li) for li in body.splitlines() if li.startswith("10 s"))
+    assert float(row[1]) == pytest.approx(felt, abs=5e-4) and row[3] == "0.359" and row[5] == "paper Table I ÷ 2"
+    assert row[7] == hl["verdict"]
+    assert {b["basis"] for b in s["latency_ms"]["basis"].values()} == {"modelled"}
+    chain = s["latency_ms"]["chain"]["exposure_to_sheet_at_pose"]
+    assert md.count("The delay:") == 1 and f"median {chain['median']:.1f} ms" in md
 
 
 def test_replay_reproduces_the_live_outputs(sim_run, tmp_path):

@@ -45,6 +45,10 @@ class ScriptedGraph:
                 raise ServiceError("joints outside the limits (with the bridge's margin): J3 59.0 deg outside")
             if not self.stuck:
                 self.q[side] = np.asarray(args["joints"], float)
+        if service == "home":
+            side = "left" if node == "arm_left" else "right"
+            self.q[side] = np.full(6, 0.1 if side == "left" else -0.1)
+            return self.q[side].tolist()
         return None
 
     def now(self, node):
@@ -80,6 +84,25 @@ def test_dry_run_prints_the_poses_and_moves_nothing(capsys, tmp_path):
     out = capsys.readouterr().out.splitlines()
     assert out[-1].startswith("49 poses; none out of reach")
     assert not os.path.exists(tmp_path / "frames")
+
+
+def test_the_world_is_paused_meanwhile_and_the_arms_go_home_before_they_follow_again(tmp_path):
+    """begin() pauses the world twin's script; finish() clears the image, homes both arms and waits for them,
+    releases them, gives the camera twin its finger back and resumes the script, in that order."""
+    g = ScriptedGraph()
+    roles = Roles("camera", "renderer", {"left": "arm_left", "right": "arm_right"}, world="world")
+    src = LiveSource(g, roles, str(tmp_path), QUICK, twin=True, settle_s=0.0, progress=lambda m: None)
+    src.begin()
+    assert g.calls == [("world", "script/pause", {})]
+    src._scene = "board"
+    src.finish()
+    assert [(n, s) for n, s, _ in g.calls[1:]] == [
+        ("renderer", "clear_image"), ("arm_left", "home"), ("arm_right", "home"), ("arm_left", "release"),
+        ("arm_right", "release"), ("camera", "twin/scene"), ("world", "script/resume")]
+    assert np.allclose(g.q["left"], 0.1) and np.allclose(g.q["right"], -0.1)
+    g2 = ScriptedGraph()
+    LiveSource(g2, ROLES, str(tmp_path), QUICK, twin=True, progress=lambda m: None).begin()
+    assert g2.calls == []                                  # a lab without a world twin: nothing to pause
 
 
 def test_a_board_not_found_is_refused_in_one_line_and_kept(tmp_path):

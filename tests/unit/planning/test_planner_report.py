@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from flexsheet.experiments.report import analyse
+from flexsheet.experiments.report_analysis import analyse
 from flexsheet.experiments.table1 import PAPER_TABLE1
 from flexsheet.model import geometry
 from flexsheet.model.shapes import paper_cylinder
@@ -117,7 +117,7 @@ def test_latency_chain_comes_from_the_nodes_stamps_and_adds_up():
     the sheet is at its pose at the later of the two arms' first readbacks within 0.1 mm and 0.05 deg."""
     from types import SimpleNamespace as NS
 
-    from flexsheet.experiments.report import latency_hops
+    from flexsheet.experiments.report_timing import latency_hops
     from flexsheet.twin.timing import LAB
 
     e = 100.0
@@ -183,7 +183,7 @@ def test_report_records_the_twin_and_both_dd_conventions(tmp_path):
 def test_report_text_leaves_dd_2r_blank_on_a_shape_with_no_radius():
     """The rounded box and the organ have no radius R, so their rows carry no Δd 2R: the text table prints "-"
     there (it printed "nan", which reads as a failed measurement), and the number where there is one."""
-    from flexsheet.experiments.report import _format
+    from flexsheet.experiments.report_text import format_text as _format
 
     row = {"dtheta_mean_deg": 0.5, "dtheta_std_deg": 0.25, "dd_mean_mm": 1.25, "n": 120}
     text = _format({"10": row, "30": {**row, "dd_2r_mean_mm": 0.875}, "latency_ms": {}})

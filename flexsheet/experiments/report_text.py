@@ -1,0 +1,237 @@
+"""The text of a run report (:mod:`flexsheet.experiments.report`): plain text for the terminal
+(:func:`format_text`) and ``report.md`` (:func:`markdown`), both from one list of sections
+(:func:`sections`). Tables are fixed-width: columns two or more spaces apart, the row key first."""
+
+from __future__ import annotations
+
+from flexsheet.experiments.report_verdicts import HEADLINE_METRIC, NO_TARGET, PARTIAL, digits, row_order
+from flexsheet.experiments.table1 import DD_CONVENTION, FELT_TARGET_FACTOR, PAPER_TABLE1, TARGET_FACTOR
+
+__all__ = ["sections", "format_text", "markdown", "CHARTS"]
+
+#: the charts report.md shows (file, caption)
+CHARTS = (("table1.png", "Table I headline: felt Δθ per segment"), ("felt.png", "felt Δθ over each segment"),
+          ("latency.png", "latency per hop"), ("graph.png", "node/topic graph"))
+
+_TARGETS_AT = "flexsheet/experiments/table1.py"
+
+
+def _table(header: list[str], rows: list[list[str]]) -> list[str]:
+    """Fixed-width lines, columns two spaces apart: numeric columns right-aligned, the others (and the first,
+    the row key) left-aligned."""
+    cols = [header, *rows]
+    w = [max(len(r[i]) for r in cols) for i in range(len(header))]
+    right = [i > 0 and all(r[i][:1] in "0123456789-+≤" for r in rows) for i in range(len(header))]
+    return ["  ".join(c.rjust(w[i]) if right[i] else c.ljust(w[i]) for i, c in enumerate(r)).rstrip() for r in cols]
+
+
+def _num(v: float | None, d: int = 3) -> str:
+    return "-" if v is None else f"{v:.{d}f}"
+
+
+def _label(key: str) -> str:
+    return f"{key} s"
+
+
+def _header(s: dict) -> list[str]:
+    run, sc, tw = s.get("run", {}), s.get("scene", {}), s.get("twin", {})
+    lines = []
+    if run:
+        lines.append(("Run: PARTIAL — " if run.get("partial") else "Run: complete — ") + run.get("note", "")
+                     + (": partial rows and the run get no verdict" if run.get("partial") else ""))
+    lines.append(f"scene: {sc.get('name', 'cylinder')} ({sc.get('file') or sc.get('source', 'the paper cylinder')})")
+    lines.append(f"twin: {tw.get('realism', '?')}, truth seed {tw.get('truth_seed', '?')} ({tw.get('source', '?')})")
+    ck = s.get("clock") if isinstance(s.get("clock"), dict) else {"kind": s.get("clock")}
+    clock = ck.get("kind")
+    if clock == "sim":
+        rtf, target = s.get("realtime_factor"), ck.get("rtf_target")
+        lines.append("clock: sim (simulated): every latency is modelled from the lab's declared timings"
+                     + (f"; real-time factor {rtf:.2f}" if isinstance(rtf, (int, float)) else "")
+                     + (f" (paced at {target:g})" if isinstance(target, (int, float)) else " (unpaced)"))
+    elif clock == "wall":
+        lines.append("clock: wall: latencies are measured on this host (the projector's is modelled)")
+    hl = s.get("headline")
+    if hl:
+        lines.append(f"Headline verdict (felt Δθ, Table I): {hl['overall']}")
+    return lines
+
+
+def _headline(s: dict) -> tuple[list[str], list[str]]:
+    hl = s.get("headline") or {}
+    prose = [f"One headline per stroking segment, the felt Δθ mean. {HEADLINE_METRIC[0].upper()}{HEADLINE_METRIC[1:]}.",
+             f"Target: paper Table I ÷ {FELT_TARGET_FACTOR:g} (FELT_TARGET_FACTOR in {_TARGETS_AT}), for the "
+             "paper's rows on the paper's cylinder only. Verdicts compare the unrounded mean with the unrounded "
+             "target (met: mean ≤ target); where both round alike, more digits are printed."]
+    rows = []
+    for k, r in hl.get("rows", {}).items():
+        tgt = r["target_deg"]
+        d = digits(r["dtheta_mean_deg"], tgt)
+        m = r["margin_pct"]
+        n = f"{r['n']}" + (f" of {r['expected_n']}" if r.get("expected_n") else "")
+        rows.append([_label(k), _num(r["dtheta_mean_deg"], d), _num(r["dtheta_std_deg"]), _num(r["published_deg"]),
+                     _num(tgt, d), r["target_source"] if tgt is not None else "-",
+                     "-" if m is None else f"{m:+.{digits(m, 0.0, 1, 4)}f} %", r["verdict"], n])
+        if r["partial"]:
+            cov = r.get("coverage")
+            prose.append(f"{_label(k)} is partial: the bag ends inside it"
+                         + (f" ({100 * cov:.0f} % of its moving time)" if cov is not None else "") + f": {PARTIAL}.")
+        elif tgt is None:
+            prose.append(f"{_label(k)}: {NO_TARGET} ({r['target_source']}).")
+    if not rows:
+        return ["No felt rows: the bag lacks /world/finger, /world/sheet or /fingertip in a stroke."], []
+    prose.append(f"Overall: {hl['overall']}.")
+    head = ["segment", "felt Δθ mean deg", "std deg", "paper Table I deg", "target deg", "target source",
+            "vs target", "verdict", "n"]
+    return prose, _table(head, rows)
+
+
+def _measured(s: dict) -> tuple[list[str], list[str]]:
+    keys = row_order(k for k in s if k[:1].isdigit() or k.startswith("stroke_push"))
+    prose = ["Measured fingertip (/fingertip) against the true sheet (/world/sheet): the metric of `flexsheet "
+             "experiment stroke` (summary.json rows \"10\", \"30\", …). No target.", DD_CONVENTION]
+    rows = [[_label(k), _num(s[k]["dtheta_mean_deg"]), _num(s[k]["dtheta_std_deg"]), _num(s[k].get("dd_2r_mean_mm")),
+             _num(s[k]["dd_mean_mm"]), str(s[k]["n"])] for k in keys]
+    head = ["segment", "Δθ mean deg", "Δθ std deg", "Δd 2R mm", "Δd R mm", "n"]
+    return prose, _table(head, rows) if rows else []
+
+
+def _paper_method(s: dict) -> tuple[list[str], list[str]]:
+    t1 = s.get("table1", {})
+    pm, v = t1.get("paper", {}), t1.get("verdicts", {})
+    prose = ["The paper's own method: the measured fingertip against the sheet the display believes (its "
+             "kinematics on the joint readback). A secondary check, not the headline: target paper Table I ÷ "
+             f"{TARGET_FACTOR:g} (TARGET_FACTOR in {_TARGETS_AT})."]
+    rows = []
+    for k in row_order(pm):
+        tgt = t1["targets"]["paper"][k] if f"paper.{k}" in v else None
+        d = digits(pm[k]["dtheta_mean_deg"], tgt)
+        rows.append([_label(k), _num(pm[k]["dtheta_mean_deg"], d),
+                     _num(PAPER_TABLE1[k]["dtheta_mean_deg"] if tgt is not None else None), _num(tgt, d),
+                     f"paper Table I ÷ {TARGET_FACTOR:g}" if tgt is not None else "-",
+                     v.get(f"paper.{k}", NO_TARGET), str(pm[k]["n"])])
+    head = ["segment", "Δθ mean deg", "paper Table I deg", "target deg", "target source", "verdict", "n"]
+    return prose, _table(head, rows) if rows else []
+
+
+def _decomposition(s: dict) -> tuple[list[str], list[str]]:
+    t1 = s.get("table1", {})
+    dc, felt = t1.get("decomposition", {}), t1.get("felt", {})
+    prose = ["What the felt error is made of, mean angles in deg: tremor (the true finger against its 0.21 s "
+             "average), camera (measured against true fingertip), prediction (predicted against true at the "
+             "horizon), kinematics (believed against true sheet), slow finger (the felt error without the tremor)."]
+    names = ("tremor", "camera", "prediction", "kinematics", "slow_finger")
+    rows = [[_label(k), *(_num(dc[k].get(n)) for n in names), _num(felt.get(k, {}).get("angle3d_mean_deg")),
+             _num(felt.get(k, {}).get("gap_mean_mm"))] for k in row_order(dc)]
+    head = ["segment", "tremor", "camera", "prediction", "kinematics", "slow finger", "felt 3-D deg", "felt gap mm"]
+    return prose, _table(head, rows) if rows else []
+
+
+def _delay(s: dict) -> tuple[list[str], list[str]]:
+    from flexsheet.experiments.report_timing import POSE_TOL_M
+
+    lat = s.get("latency_ms", {})
+    c = lat.get("chain", {}).get("exposure_to_sheet_at_pose", {})
+    arm = lat.get("chain", {}).get("exposure_to_arm_command", {})
+    basis = lat.get("basis", {}).get("exposure_to_sheet_at_pose", {}).get("basis", "from the nodes' stamps")
+    out = ["The delay: exposure → sheet at its pose: not measured (the bag lacks the arms' targets or joint "
+           "states)."]
+    if c.get("median") is not None:
+        share = lat.get("sheet_at_pose_reached")
+        reached = f" ({100 * share:.0f} %; the others never got there before the next target)" if share else ""
+        out[0] = (f"The delay: exposure → sheet at its pose, median {c['median']:.1f} ms (p99 {c['p99']:.1f} ms, "
+                  f"{basis}; latency chain `exposure_to_sheet_at_pose`): until both clamps' readback is within "
+                  f"{POSE_TOL_M * 1e3:g} mm and 0.05° of that sample's target, for {c['n']} of {arm.get('n', '?')} "
+                  f"samples{reached}.")
+    dl = s.get("delay", {})
+    if dl:
+        v = dl.get("stroke_speed_mm_per_s")
+        tol = (f" At this stroke's {v:.1f} mm/s the chain's {POSE_TOL_M * 1e3:g} mm tolerance is "
+               f"{POSE_TOL_M * 1e6 / v:.0f} ms of travel: the chain stops the clock that much before the exact "
+               "pose, and counts only the samples the clamps reached.") if v else ""
+        out.append(f"Not a second delay, the prediction check (segment {_label(dl['segment'])}): the true sheet "
+                   f"trails the true finger by {dl['residual_lag_ms']:+.1f} ms beyond the prediction's "
+                   f"{dl['horizon_ms']:.1f} ms lead (fitted; mean angle {dl['angle_at_best_deg']:.3f}° at best), so "
+                   f"a horizon of {dl['exposure_to_sheet_ms']:.1f} ms would cancel it (`delay.exposure_to_sheet_ms`)."
+                   + tol)
+    return out, []
+
+
+def _compliance(s: dict) -> tuple[list[str], list[str]]:
+    comp = s.get("compliance", {})
+    if not comp:
+        return ["No touching sheet targets in the bag."], []
+    f = "{0[median]:.1f} [{0[p5]:.1f}, {0[p95]:.1f}]".format
+    rows = []
+    for key in ["all", *row_order(k for k in comp if k != "all")]:
+        b = comp[key]
+        sc = b.get("stiffness_scale")
+        un = b.get("object_stiffness_unscaled_n_per_m")
+        rows.append([key if key == "all" else _label(key), f(b["tension_n_per_m"]), f(b["stiffness_n_per_m"]),
+                     f(b["object_stiffness_n_per_m"]),
+                     "not recorded" if sc is None else ", ".join(f"{x:g}" for x in sc),
+                     "-" if un is None else f(un), f"{100 * b['at_limit']:.0f} %"])
+    prose = ["The sheet at the contacts (/sheet/target while touching), median [p5, p95], N/m. Requested = the "
+             "object's stiffness × stiffness_scale (the planner's, from its heartbeat in /diagnostics); the "
+             "object's own stiffness is the request ÷ that scale. At limit: share of targets whose request the "
+             "sheet could not present."]
+    scaled = {x for b in comp.values() for x in (b.get("stiffness_scale") or []) if x != 1.0}
+    if scaled:
+        prose.append(f"Scaled: stiffness_scale {', '.join(f'{x:g}' for x in sorted(scaled))}: the requested column "
+                     "is the scaled request, not the object's stiffness.")
+    head = ["segment", "tension", "presented k", "requested k (scaled)", "stiffness_scale", "object k (unscaled)",
+            "at limit"]
+    return prose, _table(head, rows)
+
+
+def _latency(s: dict) -> tuple[list[str], list[str]]:
+    lat = s.get("latency_ms", {})
+    basis, tg = lat.get("basis", {}), lat.get("targets", {})
+    rows = []
+    for k, v in lat.get("chain", {}).items():
+        t = tg.get(k, {})
+        rows.append([k, _num(v["median"], 2), _num(v["p99"], 2), str(v["n"]), basis.get(k, {}).get("basis", "?"),
+                     f"≤ {t['target_ms']:g}" if t else "-", t.get("verdict", "-")])
+    prose = ["One chain per fingertip sample from the stamps the nodes set, ms. Modelled: the lab's declared "
+             "timings (flexsheet/twin/timing.py) charged on the simulated clock, a constant per hop where nothing "
+             "else varies (p99 = median); measured: the nodes' stamps on this host's clock."]
+    if tg:
+        prose.append("Targets: " + ", ".join(f"{k} ≤ {t['target_ms']:g} ms median" for k, t in tg.items())
+                     + f", {next(iter(tg.values()))['source']}.")
+    prose += [f"- {k}: {b['basis']}, {b.get('how', '')}" for k, b in basis.items()]
+    head = ["hop", "median ms", "p99 ms", "n", "basis", "target ms", "verdict"]
+    return prose, _table(head, rows) if rows else []
+
+
+def sections(summary: dict) -> list[tuple[str, list[str], list[str]]]:
+    """(heading, prose lines, table lines) of each part of the report; the first has no heading."""
+    return [("", _header(summary), []),
+            ("Table I — felt Δθ, the headline", *_headline(summary)),
+            ("Table I — measured fingertip vs true sheet (not the headline)", *_measured(summary)),
+            ("Table I — the paper's method (not the headline)", *_paper_method(summary)),
+            ("Table I — what the felt error is made of", *_decomposition(summary)),
+            ("Delay — exposure → sheet at its pose", *_delay(summary)),
+            ("Sheet tension and stiffness at the contacts", *_compliance(summary)),
+            ("Latency per hop and end to end", *_latency(summary))]
+
+
+def format_text(summary: dict) -> str:
+    """The report as plain text (the terminal)."""
+    out: list[str] = []
+    for head, prose, table in sections(summary):
+        if head:
+            out += ["", head, "-" * len(head)]
+        out += prose + ([""] + table if table else [])
+    return "\n".join(out)
+
+
+def markdown(summary: dict, title: str = "flexsheet run report", charts=CHARTS) -> str:
+    """``report.md``: headings, prose, the tables as code blocks, then ``charts`` ((file, caption) pairs)."""
+    out = [f"# {title}", ""]
+    for head, prose, table in sections(summary):
+        if head:
+            out += [f"## {head}", ""]
+        out += [p if p.startswith("- ") else p + "  " for p in prose] + [""]
+        if table:
+            out += ["```", *table, "```", ""]
+    out += ["## Charts", "", *(f"![{cap}]({f})\n" for f, cap in charts)]
+    return "\n".join(out)

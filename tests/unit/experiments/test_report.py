@@ -1,0 +1,277 @@
+"""The run report a researcher reads (flexsheet.experiments.report): report.md parsed back from a synthetic
+bag. One headline per Table I row (the felt Δθ) with the paper's figure, the target, the target's source and
+the verdict; latency rows labelled modelled or measured; one delay figure; the planner's stiffness_scale;
+a run cut inside a segment gets no verdict; charts with JSON that carry titles, units, targets, verdicts."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+
+import numpy as np
+import pytest
+
+from flexsheet.experiments.report import main
+from flexsheet.experiments.report_verdicts import NO_TARGET, PARTIAL, digits, headline, judge
+from flexsheet.experiments.table1 import PAPER_TABLE1
+from flexsheet.model import geometry
+from flexsheet.model.shapes import paper_cylinder
+from flexsheet.runtime.bag import BagWriter
+from flexsheet.runtime.codec import encode
+from messages import Fingertip, FingerTruth, Header, Heartbeat, SheetState, SheetTarget
+from messages import topics as T
+
+R = geometry.CYLINDER_RADIUS
+LAG = math.radians(0.5)        # the true sheet's tangent plane trails the true finger by this angle
+
+
+def _segments(script: list[tuple[str, float]]):
+    """(index, mode, moving_time, t0) of each segment: approach 1 s, hold 1 s, the move, hold 1 s."""
+    t0, out = 0.0, []
+    for i, (mode, mt) in enumerate(script):
+        out.append((i, mode, mt, t0))
+        t0 += 3.0 + mt
+    return out, t0
+
+
+def _state(t: float, segs) -> tuple[int, str, float, str, float]:
+    """(segment, mode, moving_time, phase, angle rad) at time t; the mark sweeps 60° over the moving time."""
+    for i, mode, mt, t0 in segs:
+        if t < t0 + 3.0 + mt:
+            u = t - t0
+            phase = "approach" if u < 1.0 else mode if 2.0 <= u < 2.0 + mt else "idle"
+            return i, mode, mt, phase, math.radians(60.0) * min(max(u - 2.0, 0.0), mt) / mt
+    i, mode, mt, _ = segs[-1]
+    return i, mode, mt, "idle", math.radians(60.0)
+
+
+def write_run(path, script, t_end: float | None = None, scale: float = 0.5) -> None:
+    """A recorded run of the world's ``script`` ((mode, moving time s) pairs), cut at ``t_end`` (default: its
+    end): truth and true sheet at 100 Hz, fingertips at 48 Hz (2 mm outside the cylinder, camera and
+    triangulator stamps 6.6 and 8.4 ms after exposure), the planner's touching targets (object 50 N/m, the
+    planner's heartbeat naming ``stiffness_scale``)."""
+    c, w = paper_cylinder(), BagWriter(path)
+    segs, total = _segments(script)
+    t_end = total if t_end is None else t_end
+
+    def put(topic, msg, t):
+        w.write(encode(topic, msg), int(round(t * 1e9)))
+
+    for k, t in enumerate(np.arange(0.0, t_end, 0.01)):
+        i, mode, mt, phase, a = _state(t, segs)
+        v = (np.array(c.point_at(_state(t + 1e-3, segs)[4], 0.0, R)) - np.array(c.point_at(a, 0.0, R))) / 1e-3
+        put(T.FINGER_TRUTH.name, FingerTruth(header=Header(stamp=t, seq=k), position=np.array(c.point_at(a, 0.0, R)),
+                                             velocity=v, segment=i, mode=mode, moving_time=mt, phase=phase), t)
+        b = a - LAG
+        o = np.array(c.point_at(b))
+        put(T.SHEET_STATE.name, SheetState(header=Header(stamp=t, seq=k), origin=o,
+                                           normal=np.array([math.cos(b), 0.0, -math.sin(b)]),
+                                           axis_u=np.array([0.0, 1.0, 0.0]), corners=np.zeros((4, 3)), pushed_point=o,
+                                           depth=0.0, stretch=0.02, membrane=np.zeros((2, 2))), t)
+    for k, t in enumerate(np.arange(0.005, t_end - 0.02, 1.0 / 48.0)):
+        p = np.array(c.point_at(_state(t, segs)[4], 0.0, R + 0.002))
+        put(T.FINGERTIP.name, Fingertip(header=Header(stamp=t + 0.0066, seq=k), position=p, covariance=np.eye(3) * 1e-8,
+                                        valid=True, predicted_position=p, prediction_horizon=0.025,
+                                        exposure_stamp=float(t),
+                                        frame_stamp=t + 0.0066, sent_stamp=t + 0.0084), t + 0.0084)
+        st, z3 = t + 0.009, np.zeros(3)
+        put(T.SHEET_TARGET.name, SheetTarget(header=Header(stamp=st, seq=k), contact_point=p, normal=z3, axis_u=z3,
+                                             axis_v=z3, sheet_origin=p, stretch=0.02, tension=100.0, stiffness=50.0,
+                                             object_stiffness=50.0, touching=True, status="ok",
+                                             source_stamp=float(t)), st)
+    for k, t in enumerate(np.arange(0.5, t_end, 1.0)):
+        msg = "stiffness: the FEM's dF/dd" + (f"; x {scale:g} (stiffness_scale)" if scale != 1.0 else "")
+        put(T.DIAGNOSTICS.name, Heartbeat(header=Header(stamp=t, seq=k), node="planner", node_type="planner",
+                                          message=msg), t)
+    w.close()
+
+
+def _section(md: str, heading: str) -> tuple[str, list[list[str]]]:
+    """The prose and the table rows (cells split at two or more spaces; header first) of a report.md section."""
+    body = md.split(f"## {heading}\n", 1)[1].split("\n## ", 1)[0]
+    prose = body.split("```")[0]
+    table = body.split("```\n")[1].split("```")[0] if "```" in body else ""
+    return prose, [re.split(r"\s{2,}", li.strip()) for li in table.splitlines() if li.strip()]
+
+
+def _rows(table: list[list[str]]) -> dict[str, dict[str, str]]:
+    head, *rows = table
+    return {r[0]: dict(zip(head, r, strict=True)) for r in rows}
+
+
+def _report(tmp_path, script, t_end=None, clock_sim=True, scale=0.5):
+    tmp_path.mkdir(exist_ok=True)
+    write_run(tmp_path / "run.mcap", script, t_end, scale)
+    if clock_sim:
+        (tmp_path / "sim_clock.json").write_text(json.dumps({"realtime_factor": 1.5}))
+    code = main(str(tmp_path))
+    return code, (tmp_path / "report.md").read_text(), json.loads((tmp_path / "summary.json").read_text())
+
+
+def test_report_md_gives_one_headline_per_row_with_its_target_source_and_verdict(tmp_path):
+    code, md, s = _report(tmp_path, [("stroke", 10.0)])
+    assert code == 0 and md.count("Run: complete") == 1 and "PARTIAL" not in md
+    prose, table = _section(md, "Table I — felt Δθ, the headline")
+    row = _rows(table)["10 s"]
+    felt = s["table1"]["felt"]["10"]["dtheta_mean_deg"]
+    assert felt == pytest.approx(math.degrees(LAG), abs=1e-3)              # the lag built into the sheet
+    assert float(row["felt Δθ mean deg"]) == pytest.approx(felt, abs=5e-4)
+    assert row["paper Table I deg"] == "0.359" and float(row["target deg"]) == pytest.approx(0.1795, abs=6e-4)
+    assert row["target source"] == "paper Table I ÷ 2" and "FELT_TARGET_FACTOR" in prose
+    assert row["verdict"] == "MISSED" and s["headline"]["overall"] == "MISSED"     # 0.5° > 0.1795°
+    assert float(row["vs target"].split()[0]) == pytest.approx(100 * (felt / 0.1795 - 1), abs=0.05)
+    n, _, expected = row["n"].partition(" of ")
+    assert int(n) == s["table1"]["felt"]["10"]["n"] and abs(int(expected) - 480) <= 2   # 10 s at 48 Hz
+    assert [k for k in s["headline"]["rows"]] == ["10"]                   # one headline per Table I row
+    # the other metrics in their own, named tables, never beside the headline
+    assert [h for h in table[0] if "Δθ" in h] == ["felt Δθ mean deg"]
+    assert "secondary check" in _section(md, "Table I — the paper's method (not the headline)")[0]
+    assert _rows(_section(md, "Table I — measured fingertip vs true sheet (not the headline)")[1])["10 s"]["n"] == n
+
+
+def test_latency_rows_say_modelled_on_the_sim_clock_and_measured_on_the_wall_clock(tmp_path):
+    _, md, s = _report(tmp_path / "sim", [("stroke", 10.0)])
+    prose, table = _section(md, "Latency per hop and end to end")
+    rows = _rows(table)
+    assert set(rows) == set(s["latency_ms"]["chain"]) and {r["basis"] for r in rows.values()} == {"modelled"}
+    assert float(rows["exposure_to_camera_frame"]["median ms"]) == pytest.approx(6.6, abs=0.01)
+    assert "declared" in prose
+    _, md, _ = _report(tmp_path / "wall", [("stroke", 10.0)], clock_sim=False)
+    rows = _rows(_section(md, "Latency per hop and end to end")[1])
+    assert rows["camera_frame_to_fingertip"]["basis"] == "measured"
+    assert rows["rendered_to_projected"]["basis"] == "modelled"                  # the projector, always
+
+
+def test_one_delay_figure_from_the_chain_and_the_scaled_stiffness_says_so(tmp_path):
+    _, md, s = _report(tmp_path, [("stroke", 10.0)], scale=0.5)
+    prose, _ = _section(md, "Delay — exposure → sheet at its pose")
+    assert prose.count("The delay:") == 1 and "not measured" in prose      # this bag has no arm chain
+    assert f"a horizon of {s['delay']['exposure_to_sheet_ms']:.1f} ms" in prose   # the prediction check, named
+    assert s["delay"]["exposure_to_sheet_ms"] == pytest.approx(1e3 * LAG / math.radians(6.0) + 25.0, abs=1.5)
+    prose, table = _section(md, "Sheet tension and stiffness at the contacts")
+    row = _rows(table)["10 s"]
+    assert row["stiffness_scale"] == "0.5" and row["requested k (scaled)"].startswith("50.0")
+    assert row["object k (unscaled)"].startswith("100.0") and "Scaled: stiffness_scale 0.5" in prose
+    assert s["compliance"]["10"]["object_stiffness_unscaled_n_per_m"]["median"] == pytest.approx(100.0)
+
+
+def test_a_run_cut_inside_a_segment_is_partial_and_gets_no_verdict(tmp_path):
+    code, md, s = _report(tmp_path, [("stroke", 10.0)], t_end=7.0)       # 5 s of the 10 s stroke
+    assert code == 0 and "Run: PARTIAL" in md and s["run"]["partial"]
+    row = _rows(_section(md, "Table I — felt Δθ, the headline")[1])["10 s"]
+    assert row["verdict"] == PARTIAL and s["table1"]["verdicts"] == {"felt.10": PARTIAL}
+    assert s["headline"]["overall"] == PARTIAL and s["segments"]["10"]["coverage"] == pytest.approx(0.5, abs=0.01)
+    n, _, expected = row["n"].partition(" of ")
+    assert int(n) < 0.6 * int(expected)
+    for heading in ("Table I — felt Δθ, the headline", "Latency per hop and end to end"):
+        verdicts = {r["verdict"] for r in _rows(_section(md, heading)[1]).values()}
+        assert verdicts <= {"-", PARTIAL}, (heading, verdicts)
+    assert "Headline verdict (felt Δθ, Table I): partial — no verdict" in md and "MISSED" not in md
+
+
+def test_a_complete_segment_keeps_its_verdict_when_a_later_one_is_cut(tmp_path):
+    _, md, s = _report(tmp_path, [("stroke", 10.0), ("stroke", 30.0)], t_end=13.0 + 5.0)
+    rows = _rows(_section(md, "Table I — felt Δθ, the headline")[1])
+    assert rows["10 s"]["verdict"] == "MISSED" and rows["30 s"]["verdict"] == PARTIAL
+    assert s["headline"]["overall"] == PARTIAL and "segment 30 s" in s["run"]["note"]
+
+
+def test_the_delay_is_the_chains_figure():
+    """The one delay figure is the latency chain's exposure → sheet at its pose; the fitted lag is named as the
+    prediction check, with why the two differ."""
+    from flexsheet.experiments.report_text import format_text
+
+    s = {"latency_ms": {"chain": {"exposure_to_sheet_at_pose": {"median": 14.33, "p99": 29.29, "n": 838},
+                                  "exposure_to_arm_command": {"median": 9.19, "p99": 9.19, "n": 1424}},
+                        "sheet_at_pose_reached": 838 / 1424,
+                        "basis": {"exposure_to_sheet_at_pose": {"basis": "modelled"}}},
+         "delay": {"segment": "10", "horizon_ms": 25.0, "residual_lag_ms": -1.0, "exposure_to_sheet_ms": 24.0,
+                   "angle_at_best_deg": 0.114, "stroke_speed_mm_per_s": 6.2}}
+    text = format_text(s)
+    delay = [li for li in text.splitlines() if li.startswith("The delay:")]
+    assert len(delay) == 1 and "median 14.3 ms (p99 29.3 ms, modelled" in delay[0] and "838 of 1424" in delay[0]
+    check = next(li for li in text.splitlines() if li.startswith("Not a second delay"))
+    assert "-1.0 ms beyond the prediction's 25.0 ms lead" in check and "horizon of 24.0 ms" in check
+    assert "16 ms of travel" in check                                       # 0.1 mm at 6.2 mm/s
+    assert "Delay exposure -> sheet" not in text
+
+
+def test_more_digits_where_figure_and_target_round_alike():
+    assert digits(0.11312, 0.1125) == 4 and digits(0.1128, 0.1125) == 4 and digits(0.118, 0.1125) == 3
+    assert digits(0.1125, 0.1125) == 3 and digits(0.11250001, 0.1125) == 6      # capped
+    from flexsheet.experiments.report_text import format_text
+
+    s = {"table1": {"felt": {"30": {"dtheta_mean_deg": 0.11312, "dtheta_std_deg": 0.09, "n": 1417}},
+                    "targets": {"felt": {"30": 0.1125}}, "verdicts": {"felt.30": "MISSED"}},
+         "segments": {"30": {"partial": False, "expected_n": 1440, "coverage": 1.0}}, "latency_ms": {}}
+    judge(s)
+    line = next(li for li in format_text(s).splitlines() if li.startswith("30 s"))
+    assert "0.1131" in line and "0.1125" in line and "MISSED" in line and "+0.6 %" in line, line
+
+
+def test_targets_belong_to_the_paper_cylinder_and_the_chart_clips_the_spread(tmp_path):
+    """Another scene (its verdicts empty): no paper row, no target, verdict "no target"; the chart draws this
+    scene's rows only and the spread of a row whose s.d. exceeds its mean stops at 0."""
+    from flexsheet.experiments.report_charts import latency_chart, table1_chart
+
+    felt = {"dtheta_mean_deg": 0.6, "dtheta_std_deg": 0.9, "dd_mean_mm": 1.2, "dd_std_mm": 2.0, "n": 400}
+    s = {"scene": {"name": "organ"}, "table1": {"felt": {"10": felt}, "targets": {}, "verdicts": {}},
+         "segments": {"10": {"partial": False}}, "run": {"partial": False},
+         "latency_ms": {"chain": {"exposure_to_arm_command": {"median": 15.5, "p99": 16.0, "n": 10}}}}
+    judge(s)
+    r = s["headline"]["rows"]["10"]
+    assert r["verdict"] == NO_TARGET and r["published_deg"] is None and r["target_deg"] is None
+    assert "not this scene" in r["target_source"] and s["headline"]["overall"] == NO_TARGET
+    data = table1_chart(s, tmp_path / "table1.png")
+    row = data["rows"]["10"]
+    assert row["dtheta_spread_deg"] == (0.0, 1.5) and row["dd_spread_mm"] == (0.0, pytest.approx(3.2))
+    assert row["published_dd_mm"] is None and "organ" in data["title"] and data["units"]["dd"] == "mm"
+    assert (tmp_path / "table1.png").stat().st_size > 5000
+    assert json.loads((tmp_path / "table1.json").read_text())["overall"] == NO_TARGET
+    assert s["latency_ms"]["targets"]["exposure_to_arm_command"]["verdict"] == "MISSED"    # 15.5 > 15 ms
+    lat = latency_chart(s, tmp_path / "latency.png")
+    assert lat["unit"] == "ms" and lat["rows"]["exposure_to_arm_command"]["target_ms"] == 15.0
+    assert (tmp_path / "latency.png").stat().st_size > 5000
+
+
+def test_charts_carry_title_units_target_and_verdict(tmp_path):
+    _report(tmp_path, [("stroke", 10.0)])
+    t1 = json.loads((tmp_path / "table1.json").read_text())
+    assert t1["rows"]["10"]["target_deg"] == pytest.approx(PAPER_TABLE1["10"]["dtheta_mean_deg"] / 2)
+    assert t1["rows"]["10"]["verdict"] == "MISSED" and t1["units"] == {"dtheta": "deg", "dd": "mm"} and t1["title"]
+    felt = json.loads((tmp_path / "felt.json").read_text())
+    assert felt["unit"] == "deg" and felt["verdicts"] == {"10": "MISSED"}
+    assert felt["target_source"]["10"] == "paper Table I ÷ 2"
+    lat = json.loads((tmp_path / "latency.json").read_text())
+    assert lat["unit"] == "ms" and lat["rows"]["exposure_to_camera_frame"]["basis"] == "modelled"
+    for f in ("table1.png", "felt.png", "latency.png"):
+        assert (tmp_path / f).stat().st_size > 5000, f
+        assert f in (tmp_path / "report.md").read_text()
+
+
+def test_headline_of_an_empty_summary_has_no_rows():
+    assert headline({}) == {"metric": headline({})["metric"], "target_source": "paper Table I ÷ 2", "rows": {},
+                            "overall": NO_TARGET}
+
+
+def test_segments_count_a_paused_stroke_once_and_a_cut_one_as_partial():
+    """stroke_segments on a truth at 100 Hz: a 10 s stroke paused for 5 s midway is one pass whose moved time
+    excludes the pause; a 30 s stroke the bag ends in is partial, with its share of the moving time."""
+    from types import SimpleNamespace as NS
+
+    from flexsheet.experiments.report_analysis import stroke_segments
+
+    def truth(t, seg, mt, phase):
+        return (t, NS(header=NS(stamp=t), segment=seg, mode="stroke", moving_time=mt, phase=phase))
+
+    ts = np.arange(0.0, 30.0, 0.01)
+    tr = [truth(t, 0, 10.0, "approach" if t < 1 else "idle" if t < 2 else "paused" if 6 <= t < 11
+                else "stroke" if t < 17 else "idle") for t in ts if t < 18]
+    tr += [truth(t, 1, 30.0, "approach" if t < 19 else "idle" if t < 20 else "stroke") for t in ts if t >= 18]
+    tips = [(t, NS(exposure_stamp=t)) for t in np.arange(0.0, 30.0, 1 / 48)]
+    seg, run = stroke_segments(tr, tips)
+    assert seg["10"]["passes"] == 1 and seg["10"]["moved_s"] == pytest.approx(10.0, abs=0.05)
+    assert not seg["10"]["partial"] and seg["10"]["expected_n"] == 480
+    assert seg["30"]["partial"] and seg["30"]["coverage"] == pytest.approx(10.0 / 30.0, abs=0.01)
+    assert run["partial"] and "segment 30 s" in run["note"] and "33 %" in run["note"]
