@@ -146,29 +146,21 @@ def cmd_launch(args: argparse.Namespace) -> int:
         LaunchError,
         load_launch,
         parse_toplevel_set,
+        split_sets,
     )
     from flexsheet.runtime.launch_check import check_launch
     from flexsheet.runtime.node import EXIT_CONFIG
     from flexsheet.runtime.supervisor import Supervisor
 
     out = str(Path(args.out).resolve()) if args.out else None
-    overrides: dict[str, list[str]] = {}
-    parsed: dict[str, dict] = {}
     try:
         node_names = set(load_launch(args.file).nodes)
-        toplevel: dict = {}
+        toplevel, parsed = split_sets(args.set, node_names)
+        overrides: dict[str, list[str]] = {}     # the node items as written: each node process parses its own
         for item in args.set:
-            top = parse_toplevel_set(item, node_names)
-            if top is not None:
-                key, value = top
-                toplevel[key] = {**toplevel.get(key, {}), **value} if isinstance(value, dict) else value
-                continue
-            node, dot, kv = item.partition(".")
-            if not dot or "=" not in kv:
-                raise LaunchError(f"--set {item!r}: expected NODE.KEY=VALUE, or a top-level section's "
-                                  "KEY=VALUE or KEY.SUB=VALUE (e.g. scene=FILE, twin.truth_seed=3)")
-            overrides.setdefault(node, []).append(kv)
-            parsed.setdefault(node, {}).update(_parse_params([kv]))
+            if parse_toplevel_set(item, node_names) is None:
+                node, _, kv = item.partition(".")
+                overrides.setdefault(node, []).append(kv)
         if args.rtf is not None:
             toplevel["rtf"] = args.rtf
         if toplevel:   # the launcher's own load_launch and every node process read these (launch.TOPLEVEL_ENV)

@@ -200,14 +200,28 @@ SKIP: dict[str, str] = {
     "flexsheet bench camera --genicam --left 21234567": "needs two real GigE cameras with these serials, "
                                                         "hardware-triggered",
     "flexsheet calibrate display --live --launch launch/lab_sim.yaml": (
-        "needs launch/lab_sim.yaml running on its three hosts: tests/system/test_live_registration.py runs it "
-        "there (network namespaces, a drawn truth seed)"),
+        "needs the lab on one machine running (minutes): tests/system/test_live_registration.py runs these commands "
+        "as written (a drawn truth seed)"),
     "flexsheet calibrate display --live --launch launch/lab.yaml --host main --out": (
         "moves the lab's real arms (the graph up: cameras, arms, projector); its --dry-run runs as written"),
 }
 
 #: command -> (the cheaper form that runs instead, or P: parse only; why)
 CHEAP: dict[str, tuple[str, str]] = {
+    # the lab on one machine (docs/deploy.md): its checked form; tests/system/test_live_registration.py runs it
+    "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
+    "--set hosts.arm2.address=127.0.0.3 --set world.loop=true --out out/lab": (
+        "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
+        "--set hosts.arm2.address=127.0.0.3 --set world.loop=true --out out/lab --check",
+        "runs until Ctrl-C; tests/system/test_live_registration.py runs it as written"),
+    "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
+    "--set hosts.arm2.address=127.0.0.3": (
+        "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
+        "--set hosts.arm2.address=127.0.0.3 --check", "runs until Ctrl-C; the check of the same hosts"),
+    "flexsheet launch launch/sim.yaml --rtf 1 --set world.loop=true": (
+        "flexsheet launch launch/sim.yaml --rtf 1 --set world.loop=true --check",
+        "runs until Ctrl-C; tests/system/test_simclock.py runs --rtf 1"),
+
     # launches: the check of the same file, host and settings (the live graph below runs launch/sim.yaml)
     "flexsheet launch launch/sim.yaml": ("flexsheet launch launch/sim.yaml --check",
                                          "the scripted run takes minutes; the live-graph cases run the file"),
@@ -377,7 +391,12 @@ _BLANK_FRAMES = ("python - <<'EOF'\nimport json, os, cv2, numpy as np\nroot = os
                  "json.dump({'arms': {a: {'joints': [[0.0] * 6]} for a in ('left', 'right')}, "
                  "'projector': {'width': 1024, 'height': 768}}, open(f'{root}/manifest.json', 'w'))\nEOF\n")
 _CAMERA_ENTRY = 'mkdir -p ~/.flexsheet && cp "$TWIN_DISPLAY" ~/.flexsheet/display.yaml\n'
+_LAB_KEYS = "flexsheet keys generate --launch launch/lab_sim.yaml >/dev/null\n"
 PREP: dict[str, str] = {
+    "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
+    "--set hosts.arm2.address=127.0.0.3 --set world.loop=true --out out/lab": _LAB_KEYS,
+    "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
+    "--set hosts.arm2.address=127.0.0.3": _LAB_KEYS,
     "flexsheet launch launch/lab.yaml --check --host main --set camera.calib_file=$HOME/.flexsheet/stereo.yaml":
         "mkdir -p ~/.flexsheet && cp $REPO/flexsheet/vision/ximea_calib.yaml ~/.flexsheet/stereo.yaml\n",
     "flexsheet calibrate camera-pose --images ~/reg --out ~/.flexsheet": _BLANK_FRAMES,
@@ -405,6 +424,7 @@ LIVE = (
     "flexsheet param list planner --json", "flexsheet param get planner stiffness_scale",
     "flexsheet param set planner stiffness_scale 0.5", "flexsheet service list planner",
     'flexsheet service call planner param/get "{name: stiffness_scale}"', "flexsheet service list fem",
+    "flexsheet topic hz /fingertip",
 )
 LIVE_IN_ORDER = ("flexsheet bag record -o run.mcap --duration 10", "flexsheet bag record -o run.mcap /fingertip "
                  "/sheet/target")
@@ -412,16 +432,18 @@ LIVE_IN_ORDER = ("flexsheet bag record -o run.mcap --duration 10", "flexsheet ba
 AFTER_GRAPH = (
     "flexsheet bag info run.mcap", "flexsheet bag play run.mcap --rate 0.5", "flexsheet bag export run.mcap "
     "run_json.mcap", "flexsheet bag recover cut.mcap fixed.mcap",
-    "flexsheet bag play run.mcap --rate 1 --endpoint tcp://127.0.0.1:7199",
     "flexsheet bag recover out/sim/sim.mcap out/sim/sim_recovered.mcap",
     "flexsheet calibrate projector --images ~/reg --out ~/.flexsheet",
     "flexsheet calibrate arms --images ~/reg --out ~/.flexsheet",
+    "flexsheet bag play out/sim/sim.mcap --loop", "flexsheet run viz --peer tcp://127.0.0.1:7199",
 )
 #: nodes that run until Ctrl-C -> a line of their output that says they are up (then Ctrl-C; they must exit 0)
 INTERRUPT: dict[str, str] = {
     "flexsheet run planner --launch launch/sim.yaml --param use_prediction=false": r"planner up:",
     "flexsheet run --container main_pc --launch launch/sim_composed.yaml --host main "
     "--set camera.display_calib=out/calib/display.yaml": r"camera up:(.|\n)*planner up:|planner up:(.|\n)*camera up:",
+    "flexsheet bag play out/sim/sim.mcap --loop": r"playing out/sim/sim\.mcap on tcp://",
+    "flexsheet run viz --peer tcp://127.0.0.1:7199": r"viz up:",
 }
 #: the talker and the listener of ``flexsheet run --help``: started together, the listener must hear the talker
 TALKER = "flexsheet run talker --param rate=5 --endpoint tcp://127.0.0.1:7201"

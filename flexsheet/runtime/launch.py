@@ -76,7 +76,7 @@ from flexsheet.yamlio import UniqueKeyLoader
 
 __all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "SecuritySpec", "load_launch", "node_config",
            "curve_config", "identities", "keys_dir", "public_keys", "substitutions", "substitute", "keygen_command",
-           "TOPLEVEL_ENV", "CORE_SET", "parse_toplevel_set", "apply_toplevel_sets", "SIM_CONTAINER",
+           "TOPLEVEL_ENV", "CORE_SET", "parse_toplevel_set", "split_sets", "apply_toplevel_sets", "SIM_CONTAINER",
            "DEFAULT_KEYS_DIR", "PUBLIC_KEYS_FILE"]
 
 #: where ``flexsheet keys generate`` writes and CURVE looks when neither ``$FLEXSHEET_KEYS`` nor
@@ -542,18 +542,23 @@ def parse_toplevel_set(item: str, node_names) -> tuple[str, Any] | None:
     return None
 
 
-def apply_toplevel_sets(items: list[str], path: str | Path) -> dict:
-    """Apply the top-level ``--set`` items of a tool that reads launch file ``path`` (``hosts.NAME.address=…``,
-    ``twin.truth_seed=…``, ``scene=…``) for this process (:data:`TOPLEVEL_ENV`), so that every later
-    :func:`load_launch` sees them as the launcher's processes do; returns them. Raises :class:`LaunchError` for a
-    node override (``NODE.KEY=VALUE``: only ``flexsheet launch`` takes those) or a bad item."""
-    node_names = set(load_launch(path).nodes)
-    toplevel: dict = json.loads(os.environ.get(TOPLEVEL_ENV) or "{}")
+def split_sets(items: list[str], node_names, toplevel: dict | None = None) -> tuple[dict, dict[str, dict]]:
+    """``--set`` items split into the top-level overrides (merged into ``toplevel``: ``hosts`` host by host, a
+    mapping section key by key) and the node params (node → {param: YAML value}). Raises :class:`LaunchError`
+    for an item that is neither."""
+    toplevel = dict(toplevel or {})
+    nodes: dict[str, dict] = {}
     for item in items:
         top = parse_toplevel_set(item, node_names)
         if top is None:
-            raise LaunchError(f"--set {item!r}: a node param; here only a graph-wide setting "
-                              "(hosts.NAME.address=ADDRESS, twin.truth_seed=N, scene=FILE)")
+            node, dot, kv = item.partition(".")
+            key, eq, value = kv.partition("=")
+            if not dot or not eq or not key:
+                raise LaunchError(f"--set {item!r}: expected NODE.KEY=VALUE, or a top-level section's "
+                                  "KEY=VALUE or KEY.SUB=VALUE (e.g. scene=FILE, twin.truth_seed=3, "
+                                  "hosts.main.address=127.0.0.1)")
+            nodes.setdefault(node, {})[key] = yaml.safe_load(value) if value else ""
+            continue
         key, value = top
         if key == "hosts":
             merged = dict(toplevel.get("hosts", {}))
@@ -562,6 +567,18 @@ def apply_toplevel_sets(items: list[str], path: str | Path) -> dict:
             toplevel["hosts"] = merged
         else:
             toplevel[key] = {**toplevel.get(key, {}), **value} if isinstance(value, dict) else value
+    return toplevel, nodes
+
+
+def apply_toplevel_sets(items: list[str], path: str | Path) -> dict:
+    """Apply the top-level ``--set`` items of a tool that reads launch file ``path`` (``hosts.NAME.address=…``,
+    ``twin.truth_seed=…``, ``scene=…``) for this process (:data:`TOPLEVEL_ENV`), so that every later
+    :func:`load_launch` sees them as the launcher's processes do; returns them. Raises :class:`LaunchError` for a
+    node override (``NODE.KEY=VALUE``: only ``flexsheet launch`` takes those) or a bad item."""
+    toplevel, nodes = split_sets(items, set(load_launch(path).nodes), json.loads(os.environ.get(TOPLEVEL_ENV) or "{}"))
+    if nodes:
+        raise LaunchError(f"--set {next(iter(nodes))}.…: a node param; here only a graph-wide setting "
+                          "(hosts.NAME.address=ADDRESS, twin.truth_seed=N, scene=FILE)")
     if toplevel:
         os.environ[TOPLEVEL_ENV] = json.dumps(toplevel)
     return toplevel

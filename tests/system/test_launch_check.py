@@ -5,6 +5,7 @@ anything starts; a node that exits with a configuration error is not respawned."
 from __future__ import annotations
 
 import asyncio
+import json
 import os
 import re
 import subprocess
@@ -17,7 +18,7 @@ import yaml
 from conftest import ROOT, free_port
 
 from flexsheet.runtime import ports
-from flexsheet.runtime.launch import load_launch
+from flexsheet.runtime.launch import TOPLEVEL_ENV, load_launch, split_sets
 from flexsheet.runtime.launch_check import check_launch
 from flexsheet.runtime.node import EXIT_CONFIG
 from flexsheet.runtime.ports import ephemeral_port_range
@@ -392,11 +393,10 @@ def test_deploy_doc_commands_pass_the_check(keys, tmp_path, monkeypatch):
     for cmd in cmds:
         args = build_parser().parse_args([os.path.expandvars(a) for a in shlex.split(cmd)[1:]])
         if args.command == "launch":
-            overrides: dict[str, dict] = {}
-            for item in args.set:
-                node, _, kv = item.partition(".")
-                overrides.setdefault(node, {}).update(_parse_params([kv]))
+            toplevel, overrides = split_sets(args.set, set(load_launch(ROOT / args.file).nodes))
+            monkeypatch.setenv(TOPLEVEL_ENV, json.dumps(toplevel))   # as flexsheet launch hands them on
             res = check_launch(ROOT / args.file, host=args.host, out=str(tmp_path / "out"), overrides=overrides)
+            monkeypatch.delenv(TOPLEVEL_ENV)
         else:
             lf = load_launch(ROOT / args.launch)
             res = check_launch(lf.path, host=lf.nodes[args.name].host,
