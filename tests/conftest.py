@@ -205,6 +205,8 @@ def pytest_configure(config):
     config.addinivalue_line("markers", "cpu: pure computation, safe to run beside another test (tests/run.sh)")
     config.addinivalue_line("markers", "serial: starts nodes or a graph although its module is in a phase-1 folder: "
                                        "phase 2 (tests/run.sh)")
+    config.addinivalue_line("markers", "slow: end-to-end work of over a minute a test: the slow tier, "
+                                       "tests/run.sh --slow (CI runs both tiers)")
 
 
 #: modules that must run on one xdist worker, after the first: test_calibration_procedures registers the twin's

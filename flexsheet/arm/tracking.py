@@ -42,6 +42,19 @@ class BridgeStatus(StrEnum):
     NO_TARGET = "hold:no_target"
     DISABLED = "hold:disabled"
     REFUSED = "hold:refused"
+    PEER = "hold:peer"
+
+
+def peer_holds(status: str) -> bool:
+    """Whether a partner arm's ``bridge_status`` makes this arm hold too: an IK refusal (``hold:unreachable``,
+    ``hold:limit:J<k>``, ``hold:singular``, ``hold:jump``), a controller fault (``fault:*``) or a lost controller
+    (``disconnected``): that clamp has stopped, and the sheet between them must not be pulled by the other.
+    Not a hold the partner shares itself (``hold:peer``: no deadlock), nor no target, a disabled controller or
+    a refused command (both arms see those alike, or the stream restarts at once)."""
+    if status.startswith("fault:") or status == "disconnected":
+        return True
+    return status.startswith("hold:") and status not in (BridgeStatus.NO_TARGET, BridgeStatus.DISABLED,
+                                                          BridgeStatus.REFUSED, BridgeStatus.PEER)
 
 
 class TargetTracker:
@@ -81,6 +94,9 @@ class TargetTracker:
         self.velocity = np.zeros(6)
         #: (6,) rad: a goal a service set (hold, home, move-to); while set, targets are not followed
         self.manual: np.ndarray | None = None
+        #: the partner arm's hold this arm shares (its bridge_status, e.g. "hold:limit:J3"), or None: the sheet
+        #: couples the two clamps, so while one arm cannot follow, the other stops too (:func:`peer_holds`)
+        self.peer_hold: str | None = None
 
     def move_to(self, q) -> np.ndarray:
         """Stream to joints ``q`` (6,) rad and stay there, ignoring targets until :meth:`release`. Raises
@@ -165,6 +181,8 @@ class TargetTracker:
         "manual" (a service's goal, :meth:`move_to`)."""
         if self.manual is not None:
             return "manual"
+        if self.peer_hold is not None:
+            return BridgeStatus.PEER
         if self.last_target_at is None or now - self.last_target_at > self.target_timeout:
             return BridgeStatus.NO_TARGET
         return BridgeStatus.OK if self.ik_status == "ok" else f"hold:{self.ik_status}"
@@ -176,7 +194,7 @@ class TargetTracker:
         to a stop)."""
         if self.manual is not None:
             return self.manual, np.zeros(6)
-        if self.goal is None or self.status(now) == BridgeStatus.NO_TARGET:
+        if self.goal is None or self.status(now) in (BridgeStatus.NO_TARGET, BridgeStatus.PEER):
             return q_command, np.zeros(6)
         ahead = min(max(now - self.last_target_at, 0.0), EXTRAPOLATE_MAX_S)
         w = self.velocity if ahead < EXTRAPOLATE_MAX_S else np.zeros(6)

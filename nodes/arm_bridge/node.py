@@ -15,7 +15,9 @@ carries the link counters (MXT: packets sent, replies, late, lost, repeats, refu
 "hold:unreachable" / "hold:limit:J<k>" / "hold:singular" / "hold:jump" (last target refused by IK: the arm
 stops short at the last good goal); "hold:disabled" (controller not enabled yet, or ``enabled: false``); "fault:watchdog",
 "fault:estop" (controller faulted; the bridge follows the measured joints); "hold:refused" (the controller did
-not take a command: the stream restarts from what it executes); "disconnected".
+not take a command: the stream restarts from what it executes); "disconnected"; "hold:peer" (the other arm
+holds on an IK refusal, a fault or a lost controller, read from its joint state: the sheet couples the clamps,
+so this arm stops where it is, from the cycle that state arrives in, until the other follows again).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from flexsheet.arm.bridge_config import DEFAULT_PERIOD, DEFAULT_PORT, BridgeConf
 from flexsheet.arm.kinematics import LEFT_BASE, Q_LOWER, Q_UPPER, QD_MAX, RIGHT_BASE, ArmKinematics
 from flexsheet.arm.limiter import StreamLimiter
 from flexsheet.arm.stream import ArmStream, CycleReport
-from flexsheet.arm.tracking import TargetTracker
+from flexsheet.arm.tracking import TargetTracker, peer_holds
 from flexsheet.calibration.display_calib import load_display_calib
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import config_fields, params_model
@@ -134,6 +136,9 @@ class ArmBridgeNode(Node):
         # every target is handled and a refused one counted (QoS latest would drop them before decoding)
         self.subscribe(topics.arm_target(p.arm), self.on_target, qos=QoS.KEEP_ALL, depth=256,
                        sim_cost=LAB.network_s + LAB.compute("arm_bridge"))
+        other = "right" if p.arm == "left" else "left"
+        self.subscribe(topics.arm_state(other), self.on_peer_state, qos=QoS.LATEST,
+                       sim_cost=LAB.network_s)
         if sim:   # the simulated clock's timer paces the cycles (the stream's own loop paces the wall clock)
             self.timer(p.period, self._sim_cycle)
         else:
@@ -205,6 +210,16 @@ class ArmBridgeNode(Node):
         stream = getattr(self, "stream", None)   # None when setup failed before the stream existed
         if stream is not None:
             await stream.stop(end=True)    # MXT: END, the controller's Mxt instruction finishes
+
+    def on_peer_state(self, msg: ArmJointState) -> None:
+        """The other arm's state: hold with it while it cannot follow (:func:`~flexsheet.arm.tracking.peer_holds`)."""
+        hold = msg.bridge_status if peer_holds(msg.bridge_status) else None
+        if hold != self.tracker.peer_hold:
+            if hold is not None:
+                self.log.warning("%s arm: holding with the %s arm (%s)", self.params.arm, msg.arm, hold)
+            else:
+                self.log.info("%s arm: the %s arm follows again: following too", self.params.arm, msg.arm)
+            self.tracker.peer_hold = hold
 
     async def on_target(self, msg: ArmTarget) -> None:
         """New clamp target: IK now (or once the first controller state arrived)."""

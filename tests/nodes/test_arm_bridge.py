@@ -12,7 +12,7 @@ from flexsheet.model import geometry
 from flexsheet.runtime.testing import NodeHarness
 from flexsheet.twin.controller import ControllerCore
 from flexsheet.twin.modbus_server import ControllerTwin
-from messages import ArmTarget, Header, topics
+from messages import ArmJointState, ArmTarget, Header, topics
 from messages import registers as reg
 from nodes.arm_bridge.node import ArmBridgeNode
 
@@ -375,6 +375,47 @@ def test_arm_services_hold_move_to_home_and_release_within_the_limits():
                     await asyncio.sleep(0.02)
                 await asyncio.sleep(0.3)
                 assert h.node.tracker.status(h.node.now()) == "ok"
+        finally:
+            await twin.stop()
+    asyncio.run(scenario())
+
+
+def _peer_state(side: str, status: str) -> ArmJointState:
+    z = np.zeros(6)
+    return ArmJointState(header=Header(stamp=time.time()), arm=side, position=home_joints(side), velocity=z,
+                         commanded=z, executing=z, pose=np.eye(4), status=0, bridge_status=status)
+
+
+def test_the_arm_holds_while_the_other_cannot_follow_and_follows_again_after_it():
+    """The sheet couples the clamps: while the right arm holds on a joint limit (its joint state says
+    hold:limit:J3), the left arm stops where it is (hold:peer) within a few cycles and does not move on new
+    targets; a partner that only lacks targets holds nobody; once the right arm follows, the left one reaches
+    its target."""
+    async def scenario():
+        twin = await start_twin("left")
+        params = {"arm": "left", "port": twin.port, "target_timeout": 1.0}
+        try:
+            async with NodeHarness(ArmBridgeNode, params=params, name="arm_left") as h:
+                for k in range(30):                                  # following a ramp
+                    h.inject(topics.ARM_LEFT_TARGET, target("left", -0.005 * k, stamp=1.0 + k))
+                    await asyncio.sleep(0.01)
+                h.inject(topics.ARM_RIGHT_STATE, _peer_state("right", "hold:limit:J3"))
+                await asyncio.sleep(0.05)
+                assert h.messages(topics.ARM_LEFT_STATE)[-1].bridge_status == "hold:peer"
+                await asyncio.sleep(0.1)                             # braking from the ramp's speed
+                q_held = twin.core.servo.q.copy()
+                for k in range(20):                                  # targets go on far away: not followed
+                    h.inject(topics.ARM_LEFT_TARGET, target("left", -0.3, stamp=40.0 + k))
+                    await asyncio.sleep(0.01)
+                assert np.max(np.abs(twin.core.servo.q - q_held)) < 1e-3, np.abs(twin.core.servo.q - q_held)
+                assert h.messages(topics.ARM_LEFT_STATE)[-1].bridge_status == "hold:peer"
+                h.inject(topics.ARM_RIGHT_STATE, _peer_state("right", "hold:no_target"))   # not a reason
+                for k in range(150):
+                    h.inject(topics.ARM_LEFT_TARGET, target("left", -0.3, stamp=60.0 + k))
+                    await asyncio.sleep(0.01)
+                last = h.messages(topics.ARM_LEFT_STATE)[-1]
+                assert last.bridge_status == "ok", last.bridge_status
+                assert np.linalg.norm(last.pose[:3, 3] - clamp_pose("left", -0.3)[:3, 3]) < 2e-3
         finally:
             await twin.stop()
     asyncio.run(scenario())

@@ -48,6 +48,9 @@ from flexsheet.runtime.bag import BagSummary, bag_info, read_bag  # noqa: E402
 from flexsheet.runtime.codec import decode_any  # noqa: E402
 from flexsheet.runtime.launch import load_launch  # noqa: E402
 
+#: the slow tier (tests/run.sh --slow): over a minute of end-to-end work
+pytestmark = pytest.mark.slow
+
 #: kill order, in groups killed together (nodes of different chains): the recorder first (see module doc),
 #: the slow-to-start FEM solver with the renderer and camera, the triangulator, the planner, then one arm's
 #: bridge with the other's controller twin, and the other way round. The world is required (its exit ends the run).

@@ -10,7 +10,11 @@ from __future__ import annotations
 
 import json
 
+import pytest
 from conftest import MIN_TIPS_HZ
+
+#: the slow tier (tests/run.sh --slow): over a minute of end-to-end work
+pytestmark = pytest.mark.slow
 
 
 def test_full_loop_across_three_hosts_and_a_host_going_away(lab_run):

@@ -22,6 +22,9 @@ from netns_util import ROOT, lab_keys
 
 from flexsheet.twin.registration import TARGETS, sim_display_calib
 
+#: the slow tier (tests/run.sh --slow): over a minute of end-to-end work
+pytestmark = pytest.mark.slow
+
 #: the documented loopback addresses of the three hosts (docs/deploy.md, "The lab on one machine")
 HOSTS = ["--set", "hosts.main.address=127.0.0.1", "--set", "hosts.arm1.address=127.0.0.2",
          "--set", "hosts.arm2.address=127.0.0.3"]

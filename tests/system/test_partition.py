@@ -16,10 +16,14 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from netns_util import CUT_S
 
 from flexsheet.runtime.bag import read_bag
 from flexsheet.runtime.codec import decode_any
+
+#: the slow tier (tests/run.sh --slow): over a minute of end-to-end work
+pytestmark = pytest.mark.slow
 
 STEP_TOLERANCE = 1.5      # the controller's own refusal threshold (× qd_max · period)
 

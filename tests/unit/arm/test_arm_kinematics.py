@@ -9,12 +9,13 @@ from flexsheet.arm.kinematics import (
     LEFT_BASE,
     Q_LOWER,
     Q_UPPER,
+    QD_MAX,
     RIGHT_BASE,
     ArmKinematics,
     home_joints,
     rotation_angle,
 )
-from flexsheet.arm.tracking import TargetTracker
+from flexsheet.arm.tracking import TargetTracker, peer_holds
 from flexsheet.model import geometry
 from flexsheet.model.sheet import clamp_poses
 
@@ -137,6 +138,48 @@ def test_a_target_after_a_pause_may_ask_what_the_arm_could_move_meanwhile():
     assert not res.ok and res.status == "jump"
     res = tr.set_target(kin.fk(q_far), 4.0, now=2.06)        # after a 2 s pause
     assert res.ok and np.abs(tr.goal - q_far).max() < 1e-6 and tr.status(2.07) == "ok"
+
+
+def test_a_stream_that_starts_far_away_is_joined_once_the_arm_could_have_got_there():
+    """After a release (a registration left the arm 0.9 rad away) targets flow every 20 ms from the start: the
+    first are refused as a jump, but they do not start the stream, so the allowance grows from the release
+    (0.5 rad + the fastest joint's speed × the time since) and a target is taken within 0.3 s; before, each
+    refused target restarted the stream and the arm held on hold:jump for as long as targets came."""
+    kin = ArmKinematics("left", LEFT_BASE)
+    q = home_joints("left")
+    q_far = q + np.array([0.9, 0.0, 0.0, 0.0, 0.0, 0.0])
+    tr = TargetTracker(kin, target_timeout=0.25, max_jump=0.5)
+    tr.move_to(q)
+    tr.release(now=10.0)
+    taken = None
+    for k in range(50):
+        if tr.set_target(kin.fk(q_far), 1.0 + k, now=10.0 + 0.02 * k).ok:
+            taken = 0.02 * k
+            break
+    need = (0.9 - 0.5) / float(np.max(QD_MAX))
+    assert taken is not None and need <= taken <= need + 0.021, (taken, need)
+    assert np.abs(tr.goal - q_far).max() < 1e-6 and tr.status(10.0 + taken) == "ok"
+    # once flowing, a branch jump is refused as before
+    assert tr.set_target(kin.fk(q), 99.0, now=10.0 + taken + 0.02).status == "jump"
+
+
+@pytest.mark.parametrize("status,holds", [("hold:limit:J3", True), ("hold:jump", True), ("hold:unreachable", True),
+                                          ("fault:watchdog", True), ("disconnected", True), ("ok", False),
+                                          ("hold:no_target", False), ("hold:disabled", False),
+                                          ("hold:peer", False), ("hold:refused", False), ("manual", False)])
+def test_which_partner_states_hold_this_arm_too(status, holds):
+    kin = ArmKinematics("left", LEFT_BASE)
+    q = home_joints("left")
+    tr = TargetTracker(kin)
+    tr.seed(q)
+    assert tr.set_target(kin.fk(q + 0.05), 1.0, now=0.0).ok
+    assert peer_holds(status) is holds
+    tr.peer_hold = status if peer_holds(status) else None
+    goal, vel = tr.reference(0.01, q)
+    if holds:
+        assert tr.status(0.01) == "hold:peer" and np.allclose(goal, q) and not vel.any()
+    else:
+        assert tr.status(0.01) == "ok" and np.allclose(goal, q + 0.05, atol=1e-6)
 
 
 @pytest.mark.parametrize("bad", [np.full((4, 4), np.nan), np.eye(3), np.diag([2.0, 1.0, 1.0, 1.0])])

@@ -18,7 +18,7 @@ import pytest
 ROOT = str(Path(__file__).resolve().parents[3])
 # the module's first test sets up the quick run (a subprocess of several minutes cold, timeout 1500 s in _run):
 # pytest-timeout counts fixture setup in that test's 300 s default
-pytestmark = pytest.mark.timeout(1500)
+pytestmark = [pytest.mark.timeout(1500), pytest.mark.slow]   # and the slow tier (tests/run.sh --slow)
 
 
 def _run(out, cache):
