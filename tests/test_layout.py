@@ -1,4 +1,4 @@
-"""The code layout's rules (issue 39), checked with ``ast`` so a violation names the file, line and import.
+"""The code layout's rules, checked with ``ast`` so a violation names the file, line and import.
 
 - ``flexsheet/`` is the library: nothing in it imports ``nodes`` (the adapters);
 - ``flexsheet/runtime/`` is generic: it imports nothing from ``model``, ``calibration``, ``experiments``,
@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 TRANSPORT = {"zmq", "asyncio", "msgpack", "pymodbus"}
 #: the library's packages that the generic runtime must not import
 #: a work-log reference (history belongs in CHANGELOG.md; docs, docstrings and comments describe today)
-WORK_LOG = re.compile(r"\bsessions? [0-9]+|\bsession-[0-9]+|this session|last session", re.I)
+WORK_LOG = re.compile(r"\bsessions? [0-9]+|\bsession-[0-9]+|this session|last session|\bissues? [0-9]+", re.I)
 #: a released version's heading in CHANGELOG.md (https://keepachangelog.com/en/1.1.0/)
 VERSION_HEADING = re.compile(r"^## \[[0-9]+\.[0-9]+\.[0-9]+\] - [0-9]{4}-[0-9]{2}-[0-9]{2}$")
 ABOVE_RUNTIME = ("model", "calibration", "experiments", "display", "twin", "fem", "vision", "planning", "arm",

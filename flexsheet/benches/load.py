@@ -1,6 +1,6 @@
 """``flexsheet bench load``: every topic of the display at 2× its nominal rate, real payloads, for S seconds.
 
-What it runs (issue 9, item 5), each as its own OS process talking ZeroMQ like the live graph:
+What it runs, each as its own OS process talking ZeroMQ like the live graph:
 
 * one publisher process per producing node of ``launch/sim.yaml`` (camera, triangulator, planner, arm_left,
   arm_right, fem, renderer, world), each a :class:`flexsheet.runtime.node.Node` publishing its topics of

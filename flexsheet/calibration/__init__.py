@@ -1,4 +1,4 @@
-"""Display registration (issue 14): pure estimators that put the stereo camera, the projector, the arms and the
+"""Display registration: pure estimators that put the stereo camera, the projector, the arms and the
 eye into the ``display`` frame, the twin that renders what the real camera would see from a hidden truth, and
 the ``flexsheet calibrate camera-pose | projector | arms | eye | display`` commands.
 

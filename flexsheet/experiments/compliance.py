@@ -1,5 +1,5 @@
 """``flexsheet experiment compliance --out DIR``: the stiffness the sheet can present, the scene's mapped into
-it, and whether a palpating finger can still feel the organ's tumour (issue 41, part 4).
+it, and whether a palpating finger can still feel the organ's tumour.
 
 1. **The presentable range** at the sheet's centre (:mod:`flexsheet.model.tension`: k = T·w·(1/a + 1/b)), between
    the least stretch (1 %) and the first of two limits:

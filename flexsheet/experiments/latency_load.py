@@ -1,4 +1,4 @@
-"""``flexsheet experiment latency_load``: the loop's latency against CPU load (issue 16).
+"""``flexsheet experiment latency_load``: the loop's latency against CPU load.
 
 The same wall-clock run (``flexsheet launch launch/sim_composed.yaml``, one stroke) is repeated with 0, 1 and 2 cores taken
 away by busy-loop processes (``nice 0``, one per core), and the report's hops are charted: camera frame → arm

@@ -1,4 +1,4 @@
-"""A scene's nonlinear path table (issue 17): ``flexsheet experiment fem --scene launch/scenes/NAME.yaml
+"""A scene's nonlinear path table: ``flexsheet experiment fem --scene launch/scenes/NAME.yaml
 --node-table [--stations K] [--holdout-fraction F ...] [--jobs N] [--ship] --out DIR`` for any scene but the
 paper's cylinder and the sphere (wired by :mod:`flexsheet.experiments.fem`; the runtime is
 :mod:`flexsheet.fem.path_snapshots`).

@@ -1,4 +1,4 @@
-"""``flexsheet experiment scenes``: the display on every shipped scene, in-process (issue 17) — Table I per
+"""``flexsheet experiment scenes``: the display on every shipped scene, in-process — Table I per
 scene and the organ's compliance along its stroke (the tumour's stiffness peak in the sheet's tension).
 
 1. **Table I per scene** (``launch/scenes/{cylinder,sphere,rounded_box,organ}.yaml``): the in-process stroke

@@ -1,4 +1,4 @@
-"""The sphere scene's nonlinear table (issue 17): ``flexsheet experiment fem --scene launch/scenes/sphere.yaml
+"""The sphere scene's nonlinear table: ``flexsheet experiment fem --scene launch/scenes/sphere.yaml
 --node-table [--azimuth A] [--holdout-azimuth A ...] [--jobs N] --out DIR`` (wired by
 :mod:`flexsheet.experiments.fem`; for the sphere "azimuth" is the polar angle α of the push from the support
 axis, along the stroke).

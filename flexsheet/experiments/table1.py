@@ -13,7 +13,7 @@ We make the definitions exact for any shape and sheet pose:
 * ``gap`` (extra): distance of D′ from the sheet plane along its normal (the sheet floating off, > 0, or
   cutting into, < 0, the virtual surface) — zero when the sheet is exactly tangent.
 * Fig. 9 is a cross-section: the **normal section along the stroke**, the plane through D spanned by the
-  object's true normal n(D) and the stroke's direction t there (any scene, issue 17:
+  object's true normal n(D) and the stroke's direction t there (any scene:
   :func:`stroke_tangents` gives t from the scene's path). The sheet normal's component along the section's
   binormal b = n × t is removed before D′ and Δθ are computed (it is small, and would otherwise make the
   support point jump along b). On the paper's cylinder the stroke runs around the axis, so b is the axis and

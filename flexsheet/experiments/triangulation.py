@@ -11,7 +11,7 @@ Writes to DIR:
   against the angle between the viewing direction and the baseline, and against depth up to 3 m;
   (c) partial occlusion of the marker in one image; (d) a second bright blob (reflection) at distance d,
   without and with a live track; (e) motion blur against finger speed (4 ms exposure).
-* ``honest.png`` / ``honest`` in ``summary.json`` — the honest twin (issue 15; :mod:`.vision_twin`): the
+* ``honest.png`` / ``honest`` in ``summary.json`` — the honest twin (:mod:`.vision_twin`): the
   fingertip error against the hidden truth, from rendered images, for ``--seeds`` truth seeds, realistic
   and ideal twin: static (a still finger, 0.43–0.52 m from the camera) and moving along the paper's stroke
   (10 s and 30 s), with the camera registration the twin's registration produced
@@ -59,7 +59,7 @@ from flexsheet.vision.tracker import FingertipTracker, TrackerConfig  # noqa: E4
 
 __all__ = ["main", "accuracy_speed", "stability", "honest", "honest_stability", "TARGET_MM"]
 
-TARGET_MM = 0.5            #: issue 15: fingertip error against truth, RMS, static at 0.5 m
+TARGET_MM = 0.5            #: fingertip error against truth, RMS, static at 0.5 m
 
 SIGMAS = (0.05, 0.1, 0.2, 0.5, 1.0)
 DEPTHS = (0.3, 0.5, 0.8, 1.2, 2.0)

@@ -1,4 +1,4 @@
-"""The honest vision twin (issue 15): fingertip error against the hidden truth, measured from rendered images.
+"""The honest vision twin: fingertip error against the hidden truth, measured from rendered images.
 
 The estimator sees what a lab has: the camera's registration (``display.yaml``'s camera entry, produced by
 the registration procedure on the twin's images) and the images. The truth

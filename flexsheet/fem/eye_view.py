@@ -1,5 +1,5 @@
 """What the user's eyes see of a pushed surface, and how far a model's surface is from the reference's there,
-in projector pixels (issue 42's accuracy metric of every FEM figure).
+in projector pixels (the accuracy metric of every FEM figure).
 
 A rendered vertex counts where an eye sees it: the segment from the eye to the vertex's position on the
 *reference's* deformed surface crosses neither that surface (self-occlusion: the crater's rim, the object's far

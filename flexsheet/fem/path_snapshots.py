@@ -1,4 +1,4 @@
-"""Nonlinear snapshots along a scene's stroke path (issue 17): the real-time model for scenes with no symmetry
+"""Nonlinear snapshots along a scene's stroke path: the real-time model for scenes with no symmetry
 that carries one push onto another (the rounded box, the organ), after Peterlík et al. 2010's precomputed
 snapshots, here stored as a **correction to the linear model**.
 

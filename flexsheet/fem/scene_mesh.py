@@ -1,4 +1,4 @@
-"""Tetrahedral mesh of any scene's object (issue 17): sphere, rounded box, cylinder, surface mesh (pure: gmsh
+"""Tetrahedral mesh of any scene's object: sphere, rounded box, cylinder, surface mesh (pure: gmsh
 builds it in memory).
 
 Geometry (display frame, m), from :class:`flexsheet.model.scenes.Scene`:

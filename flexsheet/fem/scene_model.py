@@ -1,4 +1,4 @@
-"""The real-time FEM model of any scene (issue 17): sphere, rounded box, organ with its stiff inclusion (pure
+"""The real-time FEM model of any scene: sphere, rounded box, organ with its stiff inclusion (pure
 apart from its optional disk cache of precomputed arrays).
 
 :class:`SceneModel` = the scene's tetrahedral mesh (:func:`flexsheet.fem.scene_mesh.scene_mesh`, refined along the
@@ -26,7 +26,7 @@ surface nodes a grazing finger touches give a stiffness that jumps from 0 to ten
 fingertip's measurement noise, which would make the sheet's tension flicker (the planner's estimate uses
 the same floor, ``min_contact_depth``).
 
-Cost per update (issue 17: ≥ 1 kHz): the condensed solve in single precision (G_aa gathered with one flat
+Cost per update (≥ 1 kHz): the condensed solve in single precision (G_aa gathered with one flat
 index, LAPACK ``spotrf``/``spotrs``, u = G_oaᵀ f; displacements within 0.05 µm of a float64 solve), the
 strain/inversion checks as one sparse gradient product plus exact bounds that leave few tets for the
 eigenvalues (:class:`flexsheet.fem.solver.TetChecks`), the fold test as one sparse product

@@ -97,7 +97,7 @@ class FemModel:
     ``fixed`` (P,) bool support points (boundary with x ≤ x_O, or ``support``'s); ``free`` (nf,) free DOF
     indices.
 
-    Any object (issue 17): ``support`` optional callable(points (P, 3) m) → (P,) bool that marks which
+    Any object: ``support`` optional callable(points (P, 3) m) → (P,) bool that marks which
     *boundary* DOF points are held (e.g. :meth:`flexsheet.model.scenes.Scene.fixed_mask`; default the
     cylinder's back half, x ≤ x_O); ``E_elem``/``nu_elem`` optional per-element Young's modulus (M,) Pa and
     Poisson's ratio (M,) (e.g. :meth:`~flexsheet.model.scenes.Scene.material_at` at the element centroids:

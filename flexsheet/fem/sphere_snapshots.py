@@ -1,4 +1,4 @@
-"""Nonlinear snapshots for the sphere scene (issue 17): the cylinder's table (:mod:`flexsheet.fem.snapshots`,
+"""Nonlinear snapshots for the sphere scene: the cylinder's table (:mod:`flexsheet.fem.snapshots`,
 Peterlík et al. 2010) carried over by the sphere's own symmetries.
 
 A sphere held by its back half (support ``back_half``: every surface point behind the plane through the centre

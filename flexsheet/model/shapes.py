@@ -13,7 +13,7 @@ cross-section), so the ray is radial. We generalise O to a *skeleton* inside the
 the axis segment shortened by ``end_margin`` at each end (cylinder) or a shrunk box (rounded box). The
 ray from the skeleton point nearest the fingertip through the fingertip is well defined everywhere except
 on the skeleton itself, is continuous across end caps and box edges, and for the cylinder's side is
-exactly the paper's radial construction. Non-convex meshes use the closest point (issue 4).
+exactly the paper's radial construction. Non-convex meshes use the closest point.
 
 Errors: constructors raise ``ValueError`` naming the bad field; :meth:`Shape.project` never raises for
 finite points: it returns ``singular=True`` (and a held direction) where the ray is undefined.
@@ -495,7 +495,7 @@ class MeshShape(Shape):
     Build with :meth:`from_file` (STL/OBJ/PLY…, via ``trimesh.load``) or from a ``trimesh.Trimesh``.
     ``translation`` (3,) m and ``scale`` are applied to the vertices. Raises ``ValueError`` if the mesh is
     not watertight (signed distance undefined). Convex meshes use the centre ray to the centroid; others
-    use the closest point (issue 4). Queries cost ~0.1–1 ms (trimesh), far above the analytic shapes.
+    use the closest point. Queries cost ~0.1–1 ms (trimesh), far above the analytic shapes.
     """
 
     kind = "mesh"

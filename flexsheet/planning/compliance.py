@@ -1,5 +1,5 @@
 """The object's local normal stiffness at the contact, estimated from the scene (pure): what the sheet must
-present when the FEM's dF/dd is not available (issue 17, "compliance from the scene").
+present when the FEM's dF/dd is not available ("compliance from the scene").
 
 Model — a rigid spherical fingertip of radius r_f (``scene.finger.radius``) pressed ``d`` m into the object's
 surface at contact point q:

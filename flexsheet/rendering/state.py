@@ -300,7 +300,7 @@ def load_geometry(scene_file: str | None = None, display_calib: str | None = Non
     (:func:`~flexsheet.rendering.stereo_renderer.scaled_projector`; None: the calibrated size).
 
     The imaginary screen → projector pixel mapping is then the calibration's: K_p, D and the pose from the
-    file, nothing from constants (issue 14). An eye in ``tracked`` mode is drawn from its fixed fallback V
+    file, nothing from constants. An eye in ``tracked`` mode is drawn from its fixed fallback V
     (no tracked-eye topic exists yet; the log says so). Raises ``ValueError`` naming the file and key: scene
     invalid, display.yaml unreadable or without its ``projector`` or ``eye`` entry.
     """

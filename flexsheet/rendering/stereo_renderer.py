@@ -3,7 +3,7 @@
 Pipeline per eye (all in the vertex shader ``shaders/correct.vert``, the same math as
 :mod:`flexsheet.rendering.correction`): vertex A → corrected A' (model ``none``/``flat``/``four_triangle``/``fine``)
 → its screen point on the line eye–A' → the projector pixel that lights it: the registered projector
-(``display.yaml``: intrinsics K_p, OpenCV distortion D, axes R and centre P in the display frame; issue 14),
+(``display.yaml``: intrinsics K_p, OpenCV distortion D, axes R and centre P in the display frame),
 so the imaginary-screen → pixel mapping is the calibration's, not a constant. Output: two RGB images of ``width × height`` projector
 pixels (left eye at V − IPD/2·ŷ, right at V + IPD/2·ŷ: the user faces −x, so +y is the user's right).
 

@@ -17,7 +17,7 @@ with the fingertip in a given moving time (10 s and 30 s in Table I). We script 
 * **Depth**: the fingertip sits ``depth`` m inside the virtual surface while stroking (light contact);
   "push" presses to ``push_depth`` and back (raised cosine) at the start angle; "stroke_push" presses
   (half sine) while stroking.
-* **Any scene** (issue 17): with ``scene`` (a :class:`flexsheet.model.scenes.Scene`) the mark moves along the
+* **Any scene**: with ``scene`` (a :class:`flexsheet.model.scenes.Scene`) the mark moves along the
   scene's stroke path instead (:meth:`~flexsheet.model.scenes.Scene.stroke_at`): the profile runs over the
   path's arc-length fraction 0 → 1 and the fingertip goes to p − depth·n (p the path point, n its outward
   normal; the approach comes in along n). The angular wander becomes an along-path wander of

@@ -76,7 +76,7 @@ def _err(t, r):
     return {"translation_error_mm": t * 1e3, "rotation_error_deg": math.degrees(r)}
 
 
-#: the registration targets (issue 43): camera, projector, arm bases
+#: the registration targets: camera, projector, arm bases
 TARGETS = {"camera_mm": 0.5, "camera_deg": 0.1, "projector_mm": 2.0, "projector_deg": 0.2, "projector_px": 0.5,
            "arms_mm": 1.0}
 
@@ -182,7 +182,7 @@ def sim_display_calib(seed: int, realism: str = "realistic", cache_root: str | N
                       quick: bool = False, progress=None) -> str:
     """Path of the twin's ``display.yaml`` for truth ``seed``, running the procedures once per seed and caching
     them under ``cache_root`` (default ``$FLEXSHEET_CACHE`` or ``~/.cache/flexsheet``)/display/<realism>-<seed>.
-    This is what the twin's estimator nodes should load at start-up (issue 15)."""
+    This is what the twin's estimator nodes should load at start-up."""
     out = _cache_dir(seed, realism, cache_root, quick)
     run_display_sim(seed, out, QUICK if quick else FULL, realism, progress=progress)
     return os.path.join(out, "display.yaml")

@@ -23,7 +23,7 @@ Method:
    discarded. The blob's ``area`` is Σ min(α, 1) over its pixels of α ≥ 0.25, the visible silhouette in px
    (the pipeline compares it between the views to detect partial occlusion). On the realistic twin the
    centroid error is 0.03 px rms without noise and 0.045 px rms (p99 0.08 px) with the measured sensor
-   noise, against 0.3 px for the top-hat centroid on a marker beside the finger (issue 15; docs/vision.md).
+   noise, against 0.3 px for the top-hat centroid on a marker beside the finger (docs/vision.md).
 
 Search region: an ROI (``roi_half`` px around a predicted position) when one is given, else the full frame;
 :meth:`MarkerDetector.detect` falls back to the full frame in the same image when the ROI holds no

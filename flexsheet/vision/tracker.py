@@ -15,8 +15,8 @@ Per stereo pair (raw mono8 images of the calibrated size):
    ``ambiguity_m`` away (e.g. a reflection on the epipolar line): then the frame is *ambiguous* → invalid.
    A pair must also have the marker's size: each view's visible area (Σα, :mod:`.detect`) within a factor
    ``size_ratio_max`` of π(f·d/2Z)², the disk a marker of diameter ``marker_diameter`` makes at the
-   triangulated depth Z — a clutter blob that happens to lie on the epipolar line rarely does (issue 15:
-   with the marker hidden by the finger, such pairs were accepted 100 mm off).
+   triangulated depth Z — a clutter blob that happens to lie on the epipolar line rarely does
+   (with the marker hidden by the finger, such pairs were accepted 100 mm off).
 4. Partial occlusion check: the marker blob's area (Σα) must agree between the views
    within ``area_ratio_max`` (a blob cut by an occluder has a centroid shifted along the epipolar line).
 5. Covariance σ²(JᵀJ)⁻¹, rotated into the display frame with ``T_display_camera``. The pixel noise σ is

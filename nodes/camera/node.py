@@ -15,7 +15,7 @@ the difference of the two mapped stamps (independent clocks); ``device`` 0 by co
 side-by-side device, an upper bound of |skew| for two devices; ``files`` 0 (unknown; the recording's).
 ``/diagnostics`` carries one line saying which, with the measured skew and dropped frames (GenICam).
 
-Honest twin (issue 15). ``/camera/calibration`` carries what a lab has: the camera's pose in the display frame
+Honest twin. ``/camera/calibration`` carries what a lab has: the camera's pose in the display frame
 ``T_display_camera`` from ``display.yaml``'s ``camera`` entry (param ``display_calib``, filled in by the launch
 file's top-level ``display_calib:``) with the stereo model that pose was fitted with (the entry's, else the
 stereo calibration file's: ``model``/``calib_file``). A missing ``display_calib`` is an error at start-up —

@@ -7,13 +7,13 @@ launch file's top-level ``scene:``; none = the paper's cylinder): its shape
 
 Subscribes ``/fingertip`` (QoS LATEST; ``predicted_position`` when ``use_prediction``) and
 ``/object/deformation`` (QoS LATEST). The sheet's tension is set so that its normal stiffness at the contact
-matches the object's local stiffness (issue 17): the FEM's dF/dd (``ObjectDeformation.stiffness``) while
+matches the object's local stiffness: the FEM's dF/dd (``ObjectDeformation.stiffness``) while
 fresh and *about this scene*, else the scene's estimate at the contact (:mod:`flexsheet.planning.compliance`:
 Hertz contact with the scene's material, stiffer over inclusions) when ``stiffness_from_scene``, else
 ``object_stiffness``; times ``stiffness_scale``; the stretch is clamped to what the arms can apply. Every
 ``/sheet/target`` carries the tension, the presented and the requested stiffness; the heartbeat's message
 says which source is in use. The FEM's stiffness counts as about this scene when the message's ``scene_key``
-(the FEM's :meth:`~flexsheet.model.scenes.Scene.key`, issue 17: the FEM meshes and solves any scene) equals
+(the FEM's :meth:`~flexsheet.model.scenes.Scene.key`: the FEM meshes and solves any scene) equals
 this scene's; a message without one (a bag recorded before the FEM read scenes) counts only on the paper's
 cylinder, the one object that FEM solved.
 Publishes ``/sheet/target``, ``/arm/left/target``, ``/arm/right/target`` with ``source_stamp`` = the

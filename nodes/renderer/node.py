@@ -12,7 +12,7 @@ new fingertip or deformation arrives (at most ``max_render_rate``; at least at `
 arrives) and publishes ``/render/stereo`` (:class:`messages.RenderedFrame`, downscaled by ``publish_scale``) at
 ``publish_rate``; ``source_stamp`` is the newest exposure stamp of the fingertip / deformation it drew.
 
-Geometry (issues 14, 17): the object is the ``scene`` file's (:mod:`flexsheet.model.scenes`; default the
+Geometry: the object is the ``scene`` file's (:mod:`flexsheet.model.scenes`; default the
 paper's cylinder), and the projector (K_p, distortion, pose) and the eye (V, ipd) come from ``display_calib``
 (``display.yaml``, filled in by the launcher from the launch file's top-level ``display_calib:``); without
 one the node draws through the nominal geometry and says so in its log. ``width``/``height`` only choose the

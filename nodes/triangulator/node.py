@@ -6,7 +6,7 @@ when the marker is lost, occluded, ambiguous or gated out. Bad frames (wrong siz
 pair) are rejected with a one-line reason and counted; the node keeps running. Frames that arrive before
 the calibration are rejected too.
 
-Registration (issue 15): with ``display_calib`` set (the launch file's top-level ``display_calib:`` fills it),
+Registration: with ``display_calib`` set (the launch file's top-level ``display_calib:`` fills it),
 the camera's pose in the display frame — and the stereo model it was fitted with, when the entry has one —
 come from that ``display.yaml``'s camera entry, overriding the ``/camera/calibration`` message's (the image
 size must agree; a pose differing from the message's by > 1 mm or 0.05° is logged). The node never reads

@@ -1,4 +1,4 @@
-"""The arm bridge takes its base pose from display.yaml (issue 14: every node's geometry from the registration)."""
+"""The arm bridge takes its base pose from display.yaml (every node's geometry from the registration)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""GenICam stereo camera (issue 13 item 4) and the honest skew of the UVC path.
+"""GenICam stereo camera and the honest skew of the UVC path.
 
 Pure parts without hardware: frame-id gaps, device→host clock mapping, pairing by device stamp, sync
 planning, device lookup, the UVC skew bound. The real GVCP/GVSP path: two Aravis fake GigE Vision cameras

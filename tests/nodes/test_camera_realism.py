@@ -1,4 +1,4 @@
-"""The honest camera twin (issue 15): images formed through a hidden truth, the calibration a lab would have,
+"""The honest camera twin: images formed through a hidden truth, the calibration a lab would have,
 realistic sensing (measured noise, optical blur, self-occlusion, dropped frames), and the fingertip error
 against the truth measured from the images — for three truth seeds (no tuning to one).
 
@@ -35,7 +35,7 @@ from messages import topics
 from nodes.camera.node import CameraNode
 
 SEEDS = (0, 1, 2)
-TARGET_MM = 0.5                     # issue 15: ≤ 0.5 mm RMS static at 0.5 m
+TARGET_MM = 0.5                     # ≤ 0.5 mm RMS static at 0.5 m
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Issue 44: the controller twin is as strict as a real controller, the links and the planner hold against hostile
+"""The controller twin is as strict as a real controller, the links and the planner hold against hostile
 input, every rejection is counted, and ``--check`` refuses absurd safety params.
 
 * one command per control cycle (the newest of the cycle), each step checked against the command executed in

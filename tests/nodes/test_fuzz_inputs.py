@@ -1,4 +1,4 @@
-"""Hostile input for the stereo calibration loader and the Modbus register decoder (issue 9, item 2).
+"""Hostile input for the stereo calibration loader and the Modbus register decoder.
 
 * :func:`flexsheet.vision.stereo_calibration.load_yaml`: random bytes, valid OpenCV YAML with mutated numbers
   (NaN/inf, huge, negative, zero), wrong shapes, missing keys. Contract (its docstring): ``ValueError``

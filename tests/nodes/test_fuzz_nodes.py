@@ -1,4 +1,4 @@
-"""Hostile frames into running nodes (issue 9, item 2) through :class:`flexsheet.runtime.testing.NodeHarness`.
+"""Hostile frames into running nodes through :class:`flexsheet.runtime.testing.NodeHarness`.
 
 For the triangulator, planner and FEM nodes (and the renderer when its node module exists), every subscribed
 topic gets a batch of fuzzed frame sets (random bytes, truncated meta, cut array buffers, extra/dropped

@@ -254,7 +254,7 @@ def _parse(out: str):
 
 
 def test_twin_node_answers_an_independent_client_300_moves(c_client, tmp_path):
-    """Done-criterion of issue 13: 300 MOVE packets at 7.11 ms from a client compiled from the public struct,
+    """Done-criterion of 300 MOVE packets at 7.11 ms from a client compiled from the public struct,
     every one replied, JOINT readback equal to the command within one cycle's step; the arm (FB_JOINT)
     follows; END ends the session (a later MOVE is not answered)."""
     from conftest import free_port

@@ -1,4 +1,4 @@
-"""The renderer draws any scene through the registered projector (issues 14 and 17).
+"""The renderer draws any scene through the registered projector.
 
 The expected images are computed here from first principles — the sphere's silhouette seen from the eye (its
 tangent cone) cut by the imaginary screen, mapped to projector pixels with a numpy pinhole (or

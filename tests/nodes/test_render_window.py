@@ -1,4 +1,4 @@
-"""The projector window (issue 13): under Xvfb, a screenshot read back through X equals the offscreen render of
+"""The projector window: under Xvfb, a screenshot read back through X equals the offscreen render of
 the same inputs in each stereo format; frame-sequential shows left then right and stays in phase across a
 dropped vsync; mirror_x flips; the node's window output publishes frames and reports pacing on /diagnostics.
 

@@ -1,4 +1,4 @@
-"""Every node takes the same scene (issue 17), planner and world side: the scripted finger follows the scene's
+"""Every node takes the same scene, planner and world side: the scripted finger follows the scene's
 stroke path, the planner presents the scene's tangent plane, the sheet's tension follows the scene's
 compliance (the organ's tumour), and the paper's cylinder as a scene gives the same finger and Table I.
 
@@ -238,7 +238,7 @@ def test_organ_planner_normals_are_smooth_and_local_support_finds_the_contact():
 # ---------------------------------------------------------------------------------------------- Table I
 def test_cylinder_scene_reproduces_the_table1_rows():
     """The in-process stroke on the paper's cylinder as a scene (path-following finger, section along the
-    scene's stroke) gives the cylinder's Table I row (axis cross-section) of before issue 17."""
+    scene's stroke) gives the cylinder's Table I row (axis cross-section) of before."""
     from flexsheet.experiments import stroke as st
     from flexsheet.experiments.table1 import scene_table1_row, table1_row
     from flexsheet.model.shapes import paper_cylinder

@@ -1,6 +1,6 @@
 """The paper's stroking run (Table I, 10 s stroke) through the whole simulated graph with both arms on MELFA
 real-time external control (MXT/UDP twins) instead of Modbus: ``flexsheet launch launch/sim_composed.yaml --set
-arm_left.protocol=mxt --set ctrl_left.protocol=mxt ...`` (issue 13: "the full stroking run must pass through
+arm_left.protocol=mxt --set ctrl_left.protocol=mxt ...`` ("the full stroking run must pass through
 MXT twins too"). Heavy (one sim launch, ~30 s on 2 cores). On the wall clock: the MXT session is paced by the
 controller's own 7.11 ms clock (the bridge answers its replies), which a simulated clock cannot drive."""
 

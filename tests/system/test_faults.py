@@ -1,4 +1,4 @@
-"""Faults in the full simulated graph (issue 9, item 3): ``kill -9`` of every node but the world, one after
+"""Faults in the full simulated graph: ``kill -9`` of every node but the world, one after
 another, while the paper's stroke runs (``launch/sim_composed.yaml``, the wall-clock graph of processes, through ``flexsheet launch``).
 
 What must hold:

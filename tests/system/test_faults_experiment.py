@@ -1,4 +1,4 @@
-"""``flexsheet experiment faults --quick``: every attack of issue 44 in one run, against its target (the
+"""``flexsheet experiment faults --quick``: every attack in one run, against its target (the
 attacks themselves are tested in detail in tests/nodes/test_controller_strict.py, test_bag_integrity.py and
 tests/system/test_links_heal.py)."""
 

@@ -1,4 +1,4 @@
-"""``flexsheet launch FILE --check`` (issue 13, item 1): every shipped launch file passes for every host once
+"""``flexsheet launch FILE --check``: every shipped launch file passes for every host once
 the keys exist; each kind of problem is one line naming node, key and value; a broken param is refused before
 anything starts; a node that exits with a configuration error is not respawned."""
 
@@ -209,7 +209,7 @@ def test_base_file_passes_and_files_are_checked_only_on_their_host(tmp_path):
 
 
 def test_display_calib_present_but_unreadable_is_one_clear_line(tmp_path):
-    """A top-level display_calib names the registration file (issue 14); --check reads it with the registration
+    """A top-level display_calib names the registration file; --check reads it with the registration
     module's loader (or says the loader is not available)."""
     (tmp_path / "display.yaml").write_text("%YAML:1.0\n---\nnothing: here\n")
     path = tmp_path / "chk.yaml"

@@ -1,4 +1,4 @@
-"""Links heal, memory is bounded (issue 44).
+"""Links heal, memory is bounded.
 
 * A listener that holds a dead node's port and speaks the wrong protocol used to cut that node off for good:
   libzmq ends a connection's session after a protocol or handshake error and never connects to that endpoint

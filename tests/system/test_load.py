@@ -1,4 +1,4 @@
-"""Load (issue 9, item 5), the short version: a LATEST subscriber slower than its publisher keeps one
+"""Load, the short version: a LATEST subscriber slower than its publisher keeps one
 message, whatever the publisher sends, so its memory stays flat. ``flexsheet bench load`` runs the full
 graph's topics at 2× for 60 s and reports the slopes and the p99 (docs/reliability.md)."""
 

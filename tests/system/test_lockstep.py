@@ -179,7 +179,7 @@ def test_sim_clock_timers_fire_in_due_order_and_never_go_back():
 def test_launch_file_lockstep_replay(bag, tmp_path):
     """The launch-file path: ``--set player.mode=lockstep`` on a player in a container (needs bag.py's hook)."""
     if "mode" not in PlayerParams.model_fields:
-        pytest.skip("PlayerParams has no 'mode' yet (bag.py hook from issue 16 not applied)")
+        pytest.skip("PlayerParams has no 'mode' yet (the bag.py lockstep hook is missing)")
     import subprocess
     import sys
 

@@ -1,4 +1,4 @@
-"""Partition (issue 9, item 4): in the three-host setup (tests/netns_util.py), main's cable to arm PC 1 is
+"""Partition: in the three-host setup (tests/netns_util.py), main's cable to arm PC 1 is
 pulled for 2 s mid-stroke (``ip link set <veth> down`` at the switch, then ``up``). On the wall clock: three
 hosts (network namespaces) are three processes and a real network, which one simulated clock cannot span.
 

@@ -1,4 +1,4 @@
-"""The whole simulated display on another scene, end to end (issue 17): ``flexsheet launch launch/sim.yaml --set
+"""The whole simulated display on another scene, end to end: ``flexsheet launch launch/sim.yaml --set
 scene=launch/scenes/sphere.yaml`` — every node takes the sphere, and the report's summary names the scene and
 has the stroke's Table I (Δθ) row measured on the sphere; the organ with its stiff inclusion: the FEM solves
 the organ (its messages carry the organ's scene key) and its stiffness peak over the inclusion reaches the
@@ -82,7 +82,7 @@ def test_sim_launch_on_the_sphere_scene_reports_the_scene_and_dtheta(tmp_path):
 
 # the tension's peak rides on the arms' lag behind the stiffness: +18 % and +7.5 % in some runs, but
 # +2 % and -0.5 % in two of three cold suites (the FEM's own peak held, +8 % or more, every time).
-# One rerun on failure (pytest-rerunfailures); the weak tension peak is flagged in the issue 17 note.
+# One rerun on failure (pytest-rerunfailures); the tension peak is weak (docs/scenes.md).
 @pytest.mark.flaky(reruns=1)
 def test_sim_launch_on_the_organ_shows_the_fem_stiffness_peak_over_the_inclusion_in_the_tension(tmp_path):
     """Palpation along the organ: a 3 mm stroke (the default 0.5 mm stroking contact feels the 8 mm-deep

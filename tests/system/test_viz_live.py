@@ -1,4 +1,4 @@
-"""The viz bridge in the running simulated display (issue 18), seen by an independent Foxglove client.
+"""The viz bridge in the running simulated display, seen by an independent Foxglove client.
 
 Launches the whole display, ``flexsheet launch launch/sim.yaml`` with only the viz port overridden
 (``--set viz.port=PORT``, a free port), and connects :class:`flexsheet.viz.wsclient.FoxgloveClient` while it

@@ -1,7 +1,7 @@
 """``flexsheet experiment correction``: the paper's Figs. 11 and 13 measured on the honest twin.
 
 The renderer corrects with **calibrated values only** and the twin's measurement camera photographs where that
-light lands on the **true** sheet, lit by the **true** projector (issue 15):
+light lands on the **true** sheet, lit by the **true** projector:
 
 * *Estimator side* (:class:`DisplayEstimator`, built from :class:`CalibratedDisplay` — ``display.yaml`` of the
   registration procedures run in the twin, :func:`flexsheet.twin.registration.sim_display_calib`): the

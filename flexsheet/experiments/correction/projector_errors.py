@@ -26,7 +26,7 @@ from flexsheet.twin.truth import TwinTruth
 #: :data:`PROJECTOR_UNIT_ERROR` in random directions
 PROJECTOR_SCALES = (0.0, 1.0, 3.0, 10.0, 30.0, 100.0)
 RANDOM_SCALES = (0.1, 0.25, 0.5, 1.0, 2.0, 4.0)
-#: one unit of random projector error: the registration target of issue 14 (2 mm, 0.2°) in a random direction,
+#: one unit of random projector error: the registration target (2 mm, 0.2°) in a random direction,
 #: with 0.5 px of principal point and 0.1 % of focal length (unlike a calibration's error, it is not constrained
 #: by the reprojection of the calibration points, so it moves the image: 0.2° is ~5 px on the screen)
 PROJECTOR_UNIT_ERROR = {"translation_mm": 2.0, "rotation_deg": 0.2, "principal_point_px": 0.5, "focal_rel": 0.001}

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from flexsheet.model import geometry
 
-#: one projector pixel on the imaginary screen, m: the target (issue 15)
+#: one projector pixel on the imaginary screen, m: the target
 PIXEL = geometry.PIXEL_ON_SCREEN
 #: clamp strain of both experiments: the planner's stretch for the default 30 N/m object
 #: (``stretch_for_stiffness`` → 0.0388), rounded to the world's FEM table node (``FemSettings.stretch_step``)

@@ -1,4 +1,4 @@
-"""``flexsheet experiment faults --out DIR [--quick]``: each hostile input and fault of issue 44 against the
+"""``flexsheet experiment faults --out DIR [--quick]``: each hostile input and fault against the
 runtime, the links and the twins, counted (:mod:`.experiment`)."""
 
 from flexsheet.experiments.faults.experiment import main

@@ -1,4 +1,4 @@
-"""``flexsheet experiment faults --out DIR [--quick]``: every attack of issue 44, counted.
+"""``flexsheet experiment faults --out DIR [--quick]``: every attack, counted.
 
 Runs, in this process (nothing else needs to be running):
 
@@ -102,7 +102,7 @@ def _chart(res: dict, path: Path) -> None:
     for i, n in enumerate(names):
         ax.text(0.5, i, v[n], ha="center", va="center", color="white", fontsize=8)
     ax.set_xticks([])
-    ax.set_title("flexsheet experiment faults: each attack's verdict against its target (issue 44)", fontsize=9)
+    ax.set_title("flexsheet experiment faults: each attack's verdict against its target", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

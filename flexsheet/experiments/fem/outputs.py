@@ -47,7 +47,7 @@ def model_table(cases: list[dict], cand: dict, law: str = "neo-Hookean") -> dict
 
 def summary(st: Settings, conv: dict, cand: dict, cases: list[dict], snap_info: dict, mat: Material,
             wall: float) -> dict:
-    """The ``summary.json`` object (keys named in issue 17 first)."""
+    """The ``summary.json`` object (the scene's keys first)."""
     s = cand["snapshots"]
     lin = cand["linear"]
     worst = max(s["errors_m"])

@@ -1,4 +1,4 @@
-"""`flexsheet experiment fem --quick` end to end, cold cache: the report keys of issue 17, and physics the
+"""`flexsheet experiment fem --quick` end to end, cold cache: the report keys, and physics the
 neo-Hookean reference must show whatever the mesh (force rising with depth, the Hertz force at a shallow push,
 no element inverted at a quadrature point, the nonlinear snapshots beating linear elasticity at 0-50 mm), and
 that a second run reads everything from the cache."""

@@ -1,4 +1,4 @@
-"""The FEM on any scene (issue 17): gmsh meshes every shipped scene, the sphere's force-depth at small depth
+"""The FEM on any scene: gmsh meshes every shipped scene, the sphere's force-depth at small depth
 agrees with Hertz's closed form, the organ is stiffer over its inclusion, bad input gives clear errors."""
 
 from __future__ import annotations
@@ -207,7 +207,7 @@ def _dense_condensed(z, fg):
 
 def test_organ_realtime_update_equals_a_dense_float64_solve_of_the_same_system():
     """The organ's real-time update (single-precision condensed solve, sparse strain/inversion operator, fold
-    test as a sparse product; issue 17's 1 kHz work) against the same linear system solved plainly in float64:
+    test as a sparse product; the 1 kHz work) against the same linear system solved plainly in float64:
     at the timed pushes (5 stroke points × 5/20/50 mm) and a light touch, the surface displacements agree
     within 0.1 µm (the display's pixel is 700 µm), force and dF/dd within 1e-6, and the checks the node
     relies on — inverted elements, max strain over the monitor tets near the contact, folded surface

@@ -77,7 +77,7 @@ def test_report_table1_from_bag_uses_typed_truth_and_the_one_metric(tmp_path):
     assert push["n"] >= 10 and "paper" not in push
     assert set(s["latency_ms"]["chain"]) >= {"fingertip_to_sheet_target", "exposure_to_arm_command",
                                              "exposure_to_projected"}
-    # felt (issue 41): the true finger against the true sheet, here the same lag; the 3-D angle equals the
+    # felt: the true finger against the true sheet, here the same lag; the 3-D angle equals the
     # section angle (the sheet's normal lies in the section); no joint readback in this bag: no paper row
     felt = s["table1"]["felt"]["10"]
     assert felt["dtheta_mean_deg"] == pytest.approx(math.degrees(LAG), abs=1e-3) and felt["n"] == n_stroke

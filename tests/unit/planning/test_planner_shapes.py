@@ -1,4 +1,4 @@
-"""Shapes: closest point, centre ray, geodesic length, singular and edge behaviour (issue 4)."""
+"""Shapes: closest point, centre ray, geodesic length, singular and edge behaviour."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""Planner: encountered placement, rolling without slip, pushing, limits, and the stability cases (issue 4)."""
+"""Planner: encountered placement, rolling without slip, pushing, limits, and the stability cases."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""Figs 11 and 13 on the honest twin (issue 15): the correction with calibrated values only, measured on the truth.
+"""Figs 11 and 13 on the honest twin: the correction with calibrated values only, measured on the truth.
 
 Three truth seeds, ``--quick``. The registration (``display.yaml``) comes from the twin's procedures
 (:func:`flexsheet.twin.registration.sim_display_calib`, cached per seed) and the true pushed sheet from the
@@ -127,7 +127,7 @@ def test_measurement_is_on_the_truth(meas):
 
 def test_ideal_twin_reproduces_in_model_inclined(meas):
     # ideal truth + nominal display.yaml = the old in-model experiment: uncorrected 24.60 mm at 50 deg and
-    # 2.32 mm at 10 deg, flat-corrected <= 0.14 mm (docs/renderer.md before issue 15)
+    # 2.32 mm at 10 deg, flat-corrected <= 0.14 mm (docs/renderer.md before)
     est = corr.DisplayEstimator(corr.CalibratedDisplay.nominal())
     world = corr.TwinWorld(TwinTruth.draw(1, "ideal"))
     r50 = corr.measure_inclined(est, world, meas, 50)

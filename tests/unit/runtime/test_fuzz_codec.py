@@ -1,4 +1,4 @@
-"""Hostile input against every message decoder (issue 9, item 2): property-based fuzzing with hypothesis.
+"""Hostile input against every message decoder: property-based fuzzing with hypothesis.
 
 Targets: :func:`flexsheet.runtime.codec.decode` for every topic of ``messages.topics.ALL``, :func:`decode_any` and
 :func:`peek_schema`. Inputs: random bytes, truncated frames, valid envelopes with mutated fields (wrong

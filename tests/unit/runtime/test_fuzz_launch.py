@@ -1,4 +1,4 @@
-"""Hostile launch files (issue 9, item 2): :func:`flexsheet.runtime.launch.load_launch` must give a
+"""Hostile launch files: :func:`flexsheet.runtime.launch.load_launch` must give a
 :class:`LaunchError` naming the file (and the key where one is at fault) or a valid graph — never another
 exception type, never a hang. Inputs: random bytes, non-UTF-8, random YAML documents, valid files with
 mutated keys (wrong types, NaN/inf, huge/negative numbers), alias bombs, over-deep nesting, duplicate keys.

@@ -69,7 +69,7 @@ def test_epipolar_constraint_on_real_corners(real_result):
 
 
 def test_held_out_validation_on_real_pairs():
-    """Scale-free validation (issue 15: the old |T| "real-scale check" was circular — the 24 mm square was
+    """Scale-free validation (the old |T| "real-scale check" was circular — the 24 mm square was
     inferred from |T|): each fold calibrated without its pairs, judged on them. Bounds from the 17-pair
     leave-one-out run (docs/vision.md: 0.16 px, 1.1 % spread): a 4-fold split trains on 12-13 pairs."""
     left, right, names = _pairs()
