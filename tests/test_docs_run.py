@@ -676,6 +676,11 @@ def sim_graph(sandbox, sim_fem_cache) -> dict[str, Result | str]:
                 "the sim did not come up:\n" + launch.text()[-4000:]
             time.sleep(0.1)
         time.sleep(1.0)                             # the first frames and heartbeats
+        # on a cold cache a node may still be building a table in the graph's one process (no heartbeat
+        # meanwhile): the tools run once every node of the graph is heard
+        while run_shell("flexsheet node list --timeout 5", sandbox).out.count("state=") < 12:
+            assert launch.proc.poll() is None and time.monotonic() < deadline, \
+                "the sim's nodes were not heard:\n" + launch.text()[-4000:]
         up = time.monotonic() - launch.t0
 
         def in_order() -> list[Result]:
