@@ -128,13 +128,17 @@ class HostLaunch:
         raise AssertionError(f"{needle!r} not seen in {timeout} s:\n" + "\n".join(self.lines[-60:]))
 
     def stop(self) -> None:
-        """SIGINT, then SIGKILL after 30 s."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
+        stop_launch(self.proc)
+
+
+def stop_launch(proc: subprocess.Popen) -> None:
+    """Stop a ``flexsheet launch`` process as Ctrl-C does: SIGINT, then SIGKILL after 30 s."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
 
 
 

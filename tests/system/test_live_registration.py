@@ -11,14 +11,13 @@ from __future__ import annotations
 
 import json
 import random
-import signal
 import subprocess
 import sys
 import threading
 import time
 
 import pytest
-from netns_util import ROOT, lab_keys
+from netns_util import ROOT, lab_keys, stop_launch
 
 from flexsheet.twin.registration import TARGETS, sim_display_calib
 
@@ -49,12 +48,7 @@ class Lab:
             time.sleep(0.5)
 
     def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
+        stop_launch(self.proc)
 
 
 @pytest.mark.timeout(1500)   # ~5 min on the 2-core machine: the graph's start, ~480 captures, the fits
