@@ -41,6 +41,10 @@ class BridgeConfig:
                                         "limit, 1/s")] = 2.0
     limit_margin: Annotated[float, Field(ge=0.0, le=0.2, description="kept from each joint limit, rad")] = 0.02
     max_ik_jump: Annotated[float, Field(gt=0.0, le=1.0, description="largest joint change one target may ask, rad")] = 0.5
+    span_band: Annotated[tuple[float, float] | None, Field(description="[lo, hi] m: the clamp span the two arms "
+                                                         "keep (this arm's command to the partner's measured clamp); "
+                                                         "a step further outside waits; None: no guard. Default: "
+                                                         "clamp strain 0.01-0.10 of the 0.240 m sheet")] = (0.2424, 0.264)
     enabled: Annotated[bool, Field(description="false: read the controller every cycle and command nothing (MXT: "
                                    "NULL packets; Modbus: reads only) — first bring-up")] = True
     auto_reset: Annotated[bool, Field(description="reset watchdog faults automatically (never e-stops)")] = True

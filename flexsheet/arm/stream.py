@@ -195,13 +195,27 @@ class ArmStream:
             self._first_write = (self.tracker.source_stamp, stamp)
             self._first_reported = False
 
+    def _next_command(self) -> np.ndarray:
+        """This period's command (6,) rad: the limiter's step toward the tracker's reference, unless that step
+        would leave the clamp, braking from there, further outside its span band (:meth:`TargetTracker.span_worse`:
+        the partner lags, or the joints' own paths swing the clamp); then the limiter brakes where it is.""" 
+        lim = self.limiter
+        before = lim.snapshot()
+        cmd = lim.step(*self.tracker.reference(self.clock(), lim.c))
+        # judged where the clamp would come to rest if it braked from here (v²/2a per joint), so that it stops
+        # at the band's edge rather than a braking distance past it
+        if self.tracker.span_worse(before[0], cmd + lim.v * np.abs(lim.v) / (2.0 * lim.qdd_max)):
+            lim.restore(before)
+            cmd = lim.step(before[0])
+        return cmd
+
     async def _rewrite(self) -> None:
         """Redo this period's step toward the newest goal and send it (the refresh path of the loop)."""
         self._dirty = False
         if self._snap is None or not self.link.connected or self.tracker.source_stamp == self._snap_target:
             return
         self.limiter.restore(self._snap)
-        cmd = self.limiter.step(*self.tracker.reference(self.clock(), self.limiter.c))
+        cmd = self._next_command()
         self._snap_target = self.tracker.source_stamp
         stamp = self.clock()
         try:
@@ -265,7 +279,7 @@ class ArmStream:
             if verdict.advance:
                 self._snap = self.limiter.snapshot()
                 self._snap_target = self.tracker.source_stamp
-                cmd = self.limiter.step(*self.tracker.reference(self.clock(), self.limiter.c))
+                cmd = self._next_command()
             else:
                 self._snap = None
                 cmd = self.limiter.c.copy()

@@ -11,6 +11,7 @@ that velocity as feed-forward (:mod:`flexsheet.arm.limiter`), within the joint l
 
 from __future__ import annotations
 
+import math
 from enum import StrEnum
 
 import numpy as np
@@ -97,6 +98,42 @@ class TargetTracker:
         #: the partner arm's hold this arm shares (its bridge_status, e.g. "hold:limit:J3"), or None: the sheet
         #: couples the two clamps, so while one arm cannot follow, the other stops too (:func:`peer_holds`)
         self.peer_hold: str | None = None
+        #: (3,) m, display frame: the partner clamp's measured position (its ``ArmJointState.pose``), or None
+        self.peer_clamp: np.ndarray | None = None
+        #: (lo, hi) m: the clamp span kept with the partner (:meth:`set_span_band`), or None: no guard
+        self.span_band: tuple[float, float] | None = None
+        #: cycles a step waited because it would have taken the span further outside the band
+        self.span_waits = 0
+
+    def set_span_band(self, band) -> None:
+        """Keep the clamp span within ``band`` = (lo, hi) m of the partner's clamp (None: no guard). Raises
+        ``ValueError`` unless 0 < lo < hi."""
+        if band is None:
+            self.span_band = None
+            return
+        lo, hi = (float(x) for x in band)
+        if not (0.0 < lo < hi and math.isfinite(hi)):
+            raise ValueError(f"span_band must be [lo, hi] m with 0 < lo < hi, got {list(band)!r}")
+        self.span_band = (lo, hi)
+
+    def _span_out(self, q: np.ndarray) -> float:
+        """How far (m) the clamp at joints ``q`` lies outside the span band from the partner's clamp (0 inside)."""
+        s = float(np.linalg.norm(self.kin.fk(q)[:3, 3] - self.peer_clamp))
+        lo, hi = self.span_band
+        return max(lo - s, s - hi, 0.0)
+
+    def span_worse(self, q_from, q_to) -> bool:
+        """Whether moving this clamp from joints ``q_from`` to ``q_to`` (6,) rad takes the clamp span further
+        outside :attr:`span_band` from the partner's measured clamp (:attr:`peer_clamp`); counted in
+        :attr:`span_waits`. False without a band or a partner state. The sheet couples the clamps: such a
+        step waits for the partner (or for a target that brings the span back)."""
+        if self.span_band is None or self.peer_clamp is None:
+            return False
+        out_to = self._span_out(np.asarray(q_to, float))
+        if out_to > 0.0 and out_to > self._span_out(np.asarray(q_from, float)) + 1e-6:
+            self.span_waits += 1
+            return True
+        return False
 
     def move_to(self, q) -> np.ndarray:
         """Stream to joints ``q`` (6,) rad and stay there, ignoring targets until :meth:`release`. Raises
@@ -198,7 +235,8 @@ class TargetTracker:
             return q_command, np.zeros(6)
         ahead = min(max(now - self.last_target_at, 0.0), EXTRAPOLATE_MAX_S)
         w = self.velocity if ahead < EXTRAPOLATE_MAX_S else np.zeros(6)
-        return self.goal + self.velocity * ahead, w
+        goal = self.goal + self.velocity * ahead
+        return goal, w
 
     def goal_for(self, now: float, q_command: np.ndarray) -> np.ndarray:
         """The goal of :meth:`reference` alone (6,) rad."""

@@ -627,6 +627,12 @@ class Node:
         if self._loop is not None and self._stop is not None:
             self._loop.call_soon_threadsafe(self._stop.set)
 
+    @property
+    def stopping(self) -> bool:
+        """Whether a stop was asked (:meth:`shutdown`, SIGINT/SIGTERM): long work in ``setup`` or an awaited
+        handler checks it to end early."""
+        return self._stop is not None and self._stop.is_set()
+
     def cpu_seconds(self) -> float:
         """CPU time spent in this node's sync handlers and timer callbacks so far, s (``time.thread_time``);
         decoding, the loop and threads the node starts itself are not included."""

@@ -137,7 +137,7 @@ class TruePhysics:
 #: after the cache. Regenerate: ``python -m flexsheet.twin.world --ship``.
 SHIPPED_TRUTH_TABLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "sheet_tables")
 #: (realism, truth seed, clamp strains) shipped
-SHIPPED_TRUTHS = (("realistic", 0, tuple(round(0.01 * k, 6) for k in range(1, 9))),)
+SHIPPED_TRUTHS = (("realistic", 0, tuple(round(0.01 * k, 6) for k in range(0, 13))),)
 
 
 def _cached_table(phys: SheetPhysics, s: FemSettings) -> IndentTable | None:

@@ -6,6 +6,7 @@ Pure and light (no transport, no FEM import until :meth:`SheetFemConfig.settings
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Annotated
 
@@ -26,17 +27,32 @@ _DEFAULT_MESH = (0.004, 0.008)
 @dataclass(frozen=True)
 class SheetFemConfig:
     """The true sheet's FEM tables (:mod:`flexsheet.twin.world`): ``stretch_step`` clamp strain between tables;
-    ``expected_stretch`` the table loaded (or, with ``wait``, built) at start; ``wait``: build that table
-    before the script starts; ``h_fine``/``h_coarse`` m element sizes; ``cache_dir`` ("": the default);
-    ``worker_nice``: niceness of the worker process that builds tables."""
+    ``prebuild`` [lo, hi]: the clamp strains whose tables are built (or loaded) before the script starts — and,
+    on a simulated clock, before simulated time starts — ``[]`` for none; ``workers``: processes building them
+    at once; ``h_fine``/``h_coarse`` m element sizes; ``cache_dir`` ("": the default); ``worker_nice``:
+    niceness of the worker processes. Raises ``ValueError`` for a ``prebuild`` that is not [] or 0 ≤ lo ≤ hi ≤ 0.5."""
 
     stretch_step: Annotated[float, Field(gt=0.0, le=0.1)] = 0.01
-    expected_stretch: Annotated[float, Field(ge=0.0, le=0.5)] = 0.04
-    wait: bool = False
+    #: the band the bridges keep the clamps in (arm ``span_band``, strain believed) and the calibration's
+    #: error around it: a default run's true clamp strain stays inside it
+    prebuild: list[float] = field(default_factory=lambda: [0.0, 0.12])
+    workers: Annotated[int, Field(ge=1, le=8)] = 2
     h_fine: Annotated[float, Field(ge=0.002, le=0.03)] = _DEFAULT_MESH[0]
     h_coarse: Annotated[float, Field(ge=0.002, le=0.06)] = _DEFAULT_MESH[1]
     cache_dir: str = ""
     worker_nice: Annotated[int, Field(ge=0, le=19)] = 15
+
+    def __post_init__(self) -> None:
+        pb = list(self.prebuild)
+        if pb and not (len(pb) == 2 and all(math.isfinite(float(x)) for x in pb) and 0.0 <= pb[0] <= pb[1] <= 0.5):
+            raise ValueError(f"prebuild must be [] or [lo, hi] with 0 <= lo <= hi <= 0.5 (clamp strain), got {pb!r}")
+
+    def prebuild_nodes(self) -> list[float]:
+        """The table nodes (clamp strains, ``stretch_step`` apart) of ``prebuild``, lowest first."""
+        if not self.prebuild:
+            return []
+        lo, hi, st = float(self.prebuild[0]), float(self.prebuild[1]), self.stretch_step
+        return [round(k * st, 6) for k in range(int(round(lo / st)), int(round(hi / st)) + 1)]
 
     def settings(self) -> FemSettings:
         """The :class:`~flexsheet.twin.world.FemSettings` these settings describe (the default mesh gives an

@@ -18,6 +18,10 @@ stops short at the last good goal); "hold:disabled" (controller not enabled yet,
 not take a command: the stream restarts from what it executes); "disconnected"; "hold:peer" (the other arm
 holds on an IK refusal, a fault or a lost controller, read from its joint state: the sheet couples the clamps,
 so this arm stops where it is, from the cycle that state arrives in, until the other follows again).
+
+Span guard (``span_band`` [lo, hi] m): a cycle whose goal would take this clamp further outside the band from
+the partner's measured clamp than the command already is waits at rest (counted as ``span waits`` in the
+heartbeat): when one arm lags or stops, the other does not slacken the sheet or over-pull it.
 """
 
 from __future__ import annotations
@@ -107,6 +111,7 @@ class ArmBridgeNode(Node):
         self.kin = ArmKinematics(p.arm, base, Q_LOWER + margin, Q_UPPER - margin)
         self.fk_kin = ArmKinematics(p.arm, base)
         self.tracker = TargetTracker(self.kin, p.target_timeout, p.max_ik_jump)
+        self.tracker.set_span_band(p.span_band)
         qd = QD_MAX * p.speed_scale
         limiter = StreamLimiter(np.clip(np.zeros(6), Q_LOWER, Q_UPPER), p.period, qd, qd * p.accel_scale,
                                 Q_LOWER, Q_UPPER, margin)
@@ -214,6 +219,7 @@ class ArmBridgeNode(Node):
 
     def on_peer_state(self, msg: ArmJointState) -> None:
         """The other arm's state: hold with it while it cannot follow (:func:`~flexsheet.arm.tracking.peer_holds`)."""
+        self.tracker.peer_clamp = np.asarray(msg.pose, float)[:3, 3].copy()
         hold = msg.bridge_status if peer_holds(msg.bridge_status) else None
         if hold != self.tracker.peer_hold:
             if hold is not None:
@@ -250,7 +256,8 @@ class ArmBridgeNode(Node):
             self._last_status = rep.bridge_status
             self._diag_at = rep.t_cycle
             counters = ", ".join(f"{k} {v}" for k, v in self.link.counters().items())
-            self.state_message = f"{rep.bridge_status}; {self.link.name}: {counters}"
+            waits = f"; span waits {self.tracker.span_waits}" if self.tracker.span_waits else ""
+            self.state_message = f"{rep.bridge_status}; {self.link.name}: {counters}{waits}"
         st = rep.state
         if st is None:
             return

@@ -169,6 +169,7 @@ class RendererNode(Node):
         self.table = None                     # the models' error table, once the first FEM table is there
         self._tables_wanted: list[float] = []
         self._tables_asked: set[float] = set()
+        self._sim_missing: list[float] = []
         self._tables_event = asyncio.Event()
         self._builds: set = set()
         self._failed: set[float] = set()
@@ -182,7 +183,10 @@ class RendererNode(Node):
         # one there is (a cached one near the home stretch now, if any)
         near = self.sheet_model.nearest_on_disk(self.sheet_model.node_of_span(self.state.last_good.half_span))
         if near is not None:
-            self._want_table(near)
+            if self.sim:
+                await self._sim_table(near)
+            else:
+                self._want_table(near)
         self.model_used = "none"
         self.frames = 0
         self.output = None
@@ -196,7 +200,7 @@ class RendererNode(Node):
             await self._open_window()
         elif self.sim:     # one thread: the loop's; each redraw is charged the lab's render time
             self._gl_init()
-            self.timer(1.0 / p.max_render_rate, self._sim_render)
+            self.timer(1.0 / p.max_render_rate, self._sim_tick)
         else:
             self._gl = ThreadPoolExecutor(1, thread_name_prefix="renderer-gl")
             await loop.run_in_executor(self._gl, self._gl_init)
@@ -347,9 +351,10 @@ class RendererNode(Node):
             self._last_publish = now
             self.pub.publish(msg)
 
-    def _sim_table(self, node: float) -> None:
-        """Load or build (in a spawned worker process, waited for) the pushed-sheet table of stretch ``node``,
-        then the error table once: on a simulated clock, before simulated time goes on."""
+    async def _sim_table(self, node: float) -> None:
+        """Load or build (in a spawned worker process, awaited: the loop stays free for heartbeats and signals)
+        the pushed-sheet table of stretch ``node``, then the error table once: on a simulated clock, before
+        simulated time goes on (the lockstep scheduler awaits the handler). A stop terminates the build."""
         if node in self._tables_asked:
             return
         self._tables_asked.add(node)
@@ -360,6 +365,12 @@ class RendererNode(Node):
                 target=build_table, args=(self.sheet_model.settings, node, 19), name=f"renderer-sheet-table-{node:g}",
                 daemon=True)
             start_worker(proc)
+            while proc.is_alive():
+                if self.stopping:
+                    proc.terminate()
+                    proc.join(timeout=1.0)
+                    return
+                await asyncio.sleep(0.05)
             proc.join()
             if proc.exitcode != 0 or not self.sheet_model.on_disk(node):
                 self.errors_total += 1
@@ -399,17 +410,25 @@ class RendererNode(Node):
         """Ask for the pushed-sheet table of stretch ``node`` (thread-safe; from the drawing thread too). A
         stretch outside the sheet's range (``SheetMaterial`` min/max stretch, as the planner) is not built: such
         a push stays on the 4-triangle model."""
+        if not self._in_range(node):
+            return
+        if self.sim:   # drawn meanwhile with what there is; the next render tick builds it, simulated time waiting
+            if node not in self._tables_asked and node not in self._sim_missing:
+                self._sim_missing.append(float(node))
+        else:
+            self._loop.call_soon_threadsafe(self._queue_table, float(node))
+
+    async def _sim_tick(self) -> None:
+        """Simulated clock: build the tables a drawing found missing (awaited), then redraw if wanted."""
+        while self._sim_missing:
+            await self._sim_table(self._sim_missing.pop(0))
+        self._sim_render()
+
+    def _in_range(self, node: float) -> bool:
         mat = self.sheet_model.material
-        if mat.min_stretch - 1e-9 <= node <= mat.max_stretch + 1e-9:
-            if getattr(self, "sim", False):
-                self._sim_table(float(node))
-            else:
-                self._loop.call_soon_threadsafe(self._queue_table, float(node))
+        return mat.min_stretch - 1e-9 <= node <= mat.max_stretch + 1e-9
 
     def _queue_table(self, node: float) -> None:
-        if self.sim:
-            self._sim_table(node)
-            return
         if node not in self._tables_asked:
             self._tables_asked.add(node)
             self._tables_wanted.append(node)
@@ -487,9 +506,15 @@ class RendererNode(Node):
         except ValueError as exc:
             raise InputRejected(str(exc)) from exc
 
-    def on_sheet_target(self, msg: SheetTarget) -> None:
-        """The planner's stretch: prepare its pushed-sheet table before the arms reach it."""
-        self._want_table(self.sheet_model.node_of(msg.stretch))
+    async def on_sheet_target(self, msg: SheetTarget) -> None:
+        """The planner's stretch: prepare its pushed-sheet table before the arms reach it (on a simulated clock
+        while simulated time waits)."""
+        node = self.sheet_model.node_of(msg.stretch)
+        if self.sim:
+            if self._in_range(node):
+                await self._sim_table(float(node))
+        else:
+            self._want_table(node)
 
     def on_fingertip(self, msg: Fingertip) -> None:
         self.state.set_fingertip(msg.position if msg.valid else None, msg.exposure_stamp)

@@ -18,9 +18,12 @@ truth (:class:`flexsheet.twin.truth.TwinTruth`, param ``twin: {realism, truth_se
   stamped with the time its pose was true — the mean stamp of the two joint states it comes from — so a world
   tick that runs late does not show as the display's lag in Table I (the finger's shape of a push is the
   finger's at publication).
-  The FEM tables are cached on disk per truth and clamp strain; a missing one is built in a niced worker
-  process when a push first needs it (``sheet_fem.wait``: build the expected one before the script starts).
-  Until it is ready a pushed sheet is published with its depth but a flat ``membrane`` (logged once).
+  The FEM tables are cached on disk per truth and clamp strain. Those of ``sheet_fem.prebuild`` (the clamp
+  strains the bridges' span band lets a run reach) are built in niced worker processes before the script
+  starts — on a simulated clock before simulated time starts — with a progress line per table. A strain
+  outside them is built when a push first needs it: on a simulated clock while simulated time waits (the
+  loop stays free: heartbeats, Ctrl-C); on the wall clock in a worker meanwhile, the pushed sheet published
+  with its depth but a flat ``membrane`` until it is ready (logged once).
 * Start: the script clock starts ``start_delay`` s after every node named in ``start_after`` has sent a
   heartbeat on ``/diagnostics`` (a node's heartbeats begin when its setup is done: an FEM node loading and
   attaching a scene's path table took 13 s of a loaded 2-core start, and a stroke that began before it was
@@ -33,10 +36,12 @@ truth (:class:`flexsheet.twin.truth.TwinTruth`, param ``twin: {realism, truth_se
 
 from __future__ import annotations
 
+import asyncio
 import dataclasses
 import logging
 import math
 import multiprocessing
+import time
 
 import numpy as np
 from pydantic import Field, field_validator
@@ -58,16 +63,17 @@ __all__ = ["WorldNode", "WorldParams", "Segment", "SheetFemParams"]
 SheetFemParams = params_model(
     "SheetFemParams",
     """The true sheet's FEM tables (:mod:`flexsheet.twin.world`): ``stretch_step`` clamp strain between tables;
-    ``expected_stretch`` the table loaded (or, with ``wait``, built) at start (the planner's default stiffness
-    asks ≈ 0.04); ``wait``: build that table before the script starts (first run of a truth seed: minutes;
-    then cached) — without it a missing table is built only when a push needs it;
-    ``h_fine``/``h_coarse`` m element sizes; ``cache_dir`` (default ``$FLEXSHEET_CACHE/sheet_fem`` or
-    ``~/.cache/flexsheet/sheet_fem``); ``worker_nice``: niceness of the worker process that builds tables.
-    Each is a field of — defined, defaulted and range-checked in —
+    ``prebuild`` [lo, hi] the clamp strains whose tables are ready before the script (and simulated time)
+    starts, built by ``workers`` processes at once (first run of a truth seed: minutes, with progress; then
+    cached), ``[]`` for none; ``h_fine``/``h_coarse`` m element sizes; ``cache_dir`` (default
+    ``$FLEXSHEET_CACHE/sheet_fem`` or ``~/.cache/flexsheet/sheet_fem``); ``worker_nice``: niceness of the
+    worker processes. Each is a field of — defined, defaulted and range-checked in —
     :class:`flexsheet.twin.world_config.SheetFemConfig`; ``settings()`` gives the
-    :class:`~flexsheet.twin.world.FemSettings`.""",
+    :class:`~flexsheet.twin.world.FemSettings`, ``prebuild_nodes()`` the table nodes of ``prebuild``.""",
     config_fields(SheetFemConfig),
-    methods={"settings": lambda self: build(SheetFemConfig, self).settings()},
+    check=lambda cfg: build(SheetFemConfig, cfg),
+    methods={"settings": lambda self: build(SheetFemConfig, self).settings(),
+             "prebuild_nodes": lambda self: build(SheetFemConfig, self).prebuild_nodes()},
     module=__name__,
 )
 
@@ -166,9 +172,9 @@ class WorldNode(Node):
         self.t_setup = self.monotonic()
         if self.waiting_for:
             self.subscribe(T.DIAGNOSTICS, self.on_heartbeat, qos=QoS.KEEP_ALL)
-        first = self.phys.node_of(p.sheet_fem.expected_stretch)
-        if not self.phys.try_load(first) and p.sheet_fem.wait:
-            self._start_build(first)
+        await self._prebuild(p.sheet_fem.prebuild_nodes())
+        if self.stopping:          # Ctrl-C during the tables: nothing else to set up
+            return
         self.t0: float | None = None
         self._arm_t0()
         self.last_progress = 0.0
@@ -218,16 +224,12 @@ class WorldNode(Node):
             self.log.warning("starting the script without a heartbeat from %s after %g s (start_timeout)",
                              ", ".join(sorted(self.waiting_for)), self.params.start_timeout)
             self.waiting_for = set()
-        if self.t0 is None and not self.waiting_for and not (self.params.sheet_fem.wait and self._building is not None):
+        if self.t0 is None and not self.waiting_for:
             self.t0 = self.monotonic() + self.params.start_delay
 
     def _waiting_text(self) -> str:
         """What the script clock waits for, for the log."""
-        parts = [f"the true sheet's FEM table (clamp strain {self._building})"] if (
-            self.params.sheet_fem.wait and self._building is not None) else []
-        if self.waiting_for:
-            parts.append("a heartbeat from " + ", ".join(sorted(self.waiting_for)))
-        return " and ".join(parts)
+        return "a heartbeat from " + ", ".join(sorted(self.waiting_for)) if self.waiting_for else "nothing"
 
     def on_heartbeat(self, msg: Heartbeat) -> None:
         """A node of ``start_after`` is up (its heartbeats begin after its setup): stop waiting for it."""
@@ -237,25 +239,75 @@ class WorldNode(Node):
                           "" if self.waiting_for else f"; the script starts in {self.params.start_delay:.1f} s")
             self._arm_t0()
 
-    def _start_build(self, node: float) -> None:
-        """Build table node ``node`` in a spawned, niced worker process (never blocks the loop; on a simulated
-        clock waited for: the true sheet is ready at the same simulated instant on every host)."""
+    def _spawn(self, node: float) -> multiprocessing.process.BaseProcess:
+        """A started, niced worker process building table node ``node`` (never blocks the loop)."""
         p = self.params
-        if self.clock.simulated:
-            self.log.info("building the true sheet's FEM table at clamp strain %.3f while simulated time waits", node)
-            build_table(p.twin.truth_seed, p.twin.realism, node, p.sheet_size, self.phys.settings)
-            if not self.phys.try_load(node):
-                self._failed.add(node)
-                self.log.warning("true sheet FEM table at clamp strain %s failed", node)
+        proc = multiprocessing.get_context("spawn").Process(
+            target=_build_worker, daemon=True, name=f"sheet-fem-{node:g}",
+            args=(p.twin.truth_seed, p.twin.realism, node, p.sheet_size, self.phys.settings, p.sheet_fem.worker_nice))
+        start_worker(proc)                      # SIGINT ignored from its first instruction
+        return proc
+
+    async def _prebuild(self, nodes: list[float]) -> None:
+        """Load the tables of ``nodes`` (clamp strains), building the missing ones in ``sheet_fem.workers``
+        worker processes at once before the script — and on a simulated clock simulated time — starts, one
+        progress line per table. The loop stays free meanwhile (the container's heartbeats, signals); a stop
+        ends it within 0.1 s, the workers terminated. A table that fails is logged and not tried again."""
+        missing = [n for n in nodes if not self.phys.try_load(n)]
+        if not missing:
             return
-        ctx = multiprocessing.get_context("spawn")
-        self._worker = ctx.Process(target=_build_worker, daemon=True, name=f"sheet-fem-{node:g}",
-                                   args=(p.twin.truth_seed, p.twin.realism, node, p.sheet_size,
-                                         self.phys.settings, p.sheet_fem.worker_nice))
-        start_worker(self._worker)             # SIGINT ignored from its first instruction
+        p = self.params
+        t0 = time.monotonic()
+        self.log.info("true sheet (%s truth, seed %d): building %d FEM table(s) at clamp strains %.3f-%.3f before "
+                      "the script starts, %d at a time (about 30-90 s each; cached for later runs)", p.twin.realism,
+                      p.twin.truth_seed, len(missing), missing[0], missing[-1], p.sheet_fem.workers)
+        queue, running, done = list(missing), {}, 0
+        try:
+            while queue or running:
+                while queue and len(running) < p.sheet_fem.workers:
+                    node = queue.pop(0)
+                    running[node] = (self._spawn(node), time.monotonic())
+                await asyncio.sleep(0.1)
+                if self.stopping:
+                    self.log.info("stopped while building the true sheet's tables (%d of %d built)", done,
+                                  len(missing))
+                    return
+                for node, (proc, ts) in list(running.items()):
+                    if proc.is_alive():
+                        continue
+                    del running[node]
+                    done += 1
+                    ok = self.phys.try_load(node)
+                    if not ok:
+                        self._failed.add(node)
+                    self.log.info("true sheet table %d/%d (clamp strain %.3f) %s in %.0f s", done, len(missing), node,
+                                  "built" if ok else f"FAILED (worker exit {proc.exitcode})", time.monotonic() - ts)
+        finally:
+            for proc, _ in running.values():
+                if proc.is_alive():
+                    proc.terminate()
+            for proc, _ in running.values():
+                proc.join(timeout=1.0)
+        self.log.info("true sheet tables ready after %.0f s", time.monotonic() - t0)
+
+    def _start_build(self, node: float) -> None:
+        """Build table node ``node`` in a worker process (:meth:`_spawn`); :meth:`_poll_build` collects it."""
+        self._worker = self._spawn(node)
         self._building = node
-        self.log.info("building the true sheet's FEM table at clamp strain %.3f in a worker process (pid %s)",
-                      node, self._worker.pid)
+        self.log.warning("the true sheet reached clamp strain %.3f, whose FEM table was not prebuilt "
+                         "(sheet_fem.prebuild %s): building it in a worker process (pid %s)%s", node,
+                         list(self.params.sheet_fem.prebuild), self._worker.pid,
+                         " while simulated time waits" if self.clock.simulated else "")
+
+    async def _build_held(self, node: float) -> None:
+        """On a simulated clock: build ``node`` while simulated time waits (this timer call is awaited by the
+        lockstep scheduler), the loop free for heartbeats and signals; returns early on a stop."""
+        self._start_build(node)
+        while self._worker is not None and self._worker.is_alive():
+            if self.stopping:
+                return
+            await asyncio.sleep(0.05)
+        self._poll_build(None)
 
     def _poll_build(self, wanted: float | None) -> None:
         if self._worker is not None and not self._worker.is_alive():
@@ -330,7 +382,7 @@ class WorldNode(Node):
         self.finger_pub.publish(FingerTruth(header=self.finger_pub.header("display"), position=AWAY.copy(),
                                             velocity=np.zeros(3), phase="paused", visible=False))
 
-    def tick_sheet(self) -> None:
+    async def tick_sheet(self) -> None:
         if "left" not in self.poses or "right" not in self.poses:
             self._poll_build(None)
             return
@@ -349,7 +401,14 @@ class WorldNode(Node):
             self.log.info("sheet state again after %d ticks without one", self._no_sheet[1])
             self._no_sheet = None
         pushed_now = -float((np.asarray(self.finger, float) - sheet.origin) @ sheet.normal) > 0.0
-        self._poll_build(self.phys.missing_node(stretch) if (pushed_now and self._worker is None) else None)
+        wanted = self.phys.missing_node(stretch) if (pushed_now and self._worker is None) else None
+        if wanted is not None and self.clock.simulated and wanted not in self._failed:
+            await self._build_held(wanted)      # the true sheet of this instant, never a stand-in
+            if self.stopping:
+                return
+            sheet, stretch = self.phys.surface(self.poses["left"], self.poses["right"], self.finger)
+        else:
+            self._poll_build(wanted)
         g = p.membrane_grid
         if sheet.membrane is not None:
             grid, depth, pushed = sheet.membrane.grid(g), float(sheet.membrane.depth), sheet.pushed_point

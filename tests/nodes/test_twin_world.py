@@ -13,7 +13,9 @@ from flexsheet.arm.kinematics import ArmKinematics, home_joints
 from flexsheet.calibration.display_calib import nominal_display_calib
 from flexsheet.model.sheet import clamp_poses, frame_from_clamps
 from flexsheet.model.sheet_fem import FemShape
+from flexsheet.runtime.node import NodeConfig
 from flexsheet.runtime.testing import NodeHarness
+from flexsheet.runtime.transport import InProcTransport
 from flexsheet.twin.truth import TwinTruth
 from flexsheet.twin.world import FemSettings, TruePhysics
 from messages import ArmJointState, Header
@@ -72,7 +74,7 @@ def test_world_node_publishes_the_sheet_of_the_true_kinematics(realism, tmp_path
     async def scenario():
         params = {"start_delay": 0.0, "script": [{"mode": "stroke", "moving_time": 2.0}], "rate_hz": 50.0,
                   "sheet_rate_hz": 50.0, "twin": {"realism": realism, "truth_seed": 1},
-                  "sheet_fem": {**COARSE, "expected_stretch": 0.04}}
+                  "sheet_fem": {**COARSE, "prebuild": []}}
         async with NodeHarness(WorldNode, params=params) as h:
             t_meas = h.node.now() - 0.300           # joints measured 0.3 s before the world got them
             h.inject(T.ARM_LEFT_STATE, _state("left", q["left"], fk["left"], t_meas))
@@ -138,7 +140,7 @@ def test_world_script_waits_for_the_heartbeats_of_start_after_then_starts(tmp_pa
     async def scenario():
         params = {"start_delay": 0.0, "start_after": ["fem", "renderer"], "rate_hz": 50.0, "sheet_rate_hz": 10.0,
                   "script": [{"mode": "stroke", "moving_time": 2.0, "approach_time": 0.2, "hold_before": 0.0}],
-                  "sheet_fem": {**COARSE, "expected_stretch": 0.04}}
+                  "sheet_fem": {**COARSE, "prebuild": []}}
         async with NodeHarness(WorldNode, params=params) as h:
             await asyncio.sleep(0.8)
             h.inject(T.DIAGNOSTICS, _heartbeat("planner", h.node.now()))     # not one of start_after
@@ -165,7 +167,7 @@ def test_world_script_starts_after_start_timeout_without_the_heartbeats(tmp_path
     async def scenario():
         params = {"start_delay": 0.0, "start_after": ["fme"], "start_timeout": 0.5, "rate_hz": 50.0,
                   "sheet_rate_hz": 10.0, "script": [{"mode": "stroke", "moving_time": 2.0, "approach_time": 0.2, "hold_before": 0.0}],
-                  "sheet_fem": {**COARSE, "expected_stretch": 0.04}}
+                  "sheet_fem": {**COARSE, "prebuild": []}}
         async with NodeHarness(WorldNode, params=params) as h:
             await asyncio.sleep(0.3)
             assert h.node.t0 is None
@@ -176,3 +178,41 @@ def test_world_script_starts_after_start_timeout_without_the_heartbeats(tmp_path
     assert any("without a heartbeat from fme" in r.getMessage() for r in caplog.records), caplog.text
     with pytest.raises(ValueError, match="start_timeout"):
         WorldParams(start_timeout=0.0)
+
+
+def test_world_builds_its_prebuild_tables_before_the_script_and_a_stop_ends_the_build(tmp_path, monkeypatch, caplog):
+    """The tables of ``sheet_fem.prebuild`` are ready when setup ends (one progress line each, two workers);
+    a second world finds them cached; a stop while they build ends the node within a second, workers gone."""
+    import multiprocessing
+    import time
+
+    monkeypatch.setenv("FLEXSHEET_CACHE", str(tmp_path))
+    params = {"start_delay": 0.0, "rate_hz": 50.0, "sheet_rate_hz": 10.0, "twin": {"realism": "realistic", "truth_seed": 5},
+              "script": [{"mode": "stroke", "moving_time": 2.0}], "sheet_fem": {**COARSE, "prebuild": [0.03, 0.04]}}
+
+    async def ready() -> set:
+        async with NodeHarness(WorldNode, params=params) as h:
+            return set(h.node.phys.tables)
+
+    with caplog.at_level("INFO"):
+        assert asyncio.run(ready()) == {0.03, 0.04}
+    built = [r.getMessage() for r in caplog.records if "true sheet table " in r.getMessage()]
+    assert len(built) == 2 and all("built" in m for m in built) and "2/2" in built[-1], built
+    caplog.clear()
+    with caplog.at_level("INFO"):
+        assert asyncio.run(ready()) == {0.03, 0.04}                  # cached: nothing built
+    assert not [r for r in caplog.records if "true sheet table" in r.getMessage()]
+
+    async def stopped_while_building() -> float:
+        node = WorldNode(NodeConfig(name="world", node_type="world", params={       # default mesh: 30 s a table
+            **params, "sheet_fem": {"prebuild": [0.05, 0.06]}}), transport=InProcTransport())
+        task = asyncio.get_running_loop().create_task(node.run(install_signals=False))
+        await asyncio.sleep(1.0)
+        assert len(multiprocessing.active_children()) == 2          # both tables building
+        t0 = time.monotonic()
+        node.shutdown()
+        await asyncio.wait_for(task, timeout=5.0)
+        return time.monotonic() - t0
+
+    assert asyncio.run(stopped_while_building()) < 1.0
+    assert not [p for p in multiprocessing.active_children() if p.name.startswith("sheet-fem")]
