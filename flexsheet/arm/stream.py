@@ -198,7 +198,7 @@ class ArmStream:
     def _next_command(self) -> np.ndarray:
         """This period's command (6,) rad: the limiter's step toward the tracker's reference, unless that step
         would leave the clamp, braking from there, further outside its span band (:meth:`TargetTracker.span_worse`:
-        the partner lags, or the joints' own paths swing the clamp); then the limiter brakes where it is.""" 
+        the partner lags, or the joints' own paths swing the clamp); then the limiter brakes where it is."""
         lim = self.limiter
         before = lim.snapshot()
         cmd = lim.step(*self.tracker.reference(self.clock(), lim.c))
