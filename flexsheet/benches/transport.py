@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import os
 import subprocess
 import sys
 import time
@@ -263,9 +264,41 @@ def _summarise(lat_res: dict, thr_res: dict) -> dict:
             "latency_samples": int(lat.size), "stereo_fps": fps, "stereo_frames": int(thr_res["got"])}
 
 
+def _codec_costs(n: int = 20000) -> dict:
+    """What validating a small message costs in this process, µs a message (median of 5 batches of ``n // 5``):
+    building a :class:`messages.Fingertip` (pydantic validation), encoding it and decoding it with validation
+    (the wire boundary). The runtime pays all three on every hop that crosses processes; raw pyzmq none."""
+    from flexsheet.runtime.codec import decode, encode
+    from messages import Header
+
+    pos, cov = np.zeros(3), np.eye(3)
+
+    def build() -> Fingertip:
+        return Fingertip(header=Header(stamp=1.0, frame_id="display", seq=1), position=pos, covariance=cov,
+                         valid=True, predicted_position=pos, exposure_stamp=1.0)
+
+    msg = build()
+    frames = encode(T.FINGERTIP.name, msg)
+    out = {}
+    for name, fn in (("build", build), ("encode", lambda: encode(T.FINGERTIP.name, msg)),
+                     ("decode", lambda: decode(frames, T.FINGERTIP))):
+        batches = []
+        for _ in range(5):
+            t0 = time.perf_counter()
+            for _ in range(n // 5):
+                fn()
+            batches.append((time.perf_counter() - t0) / (n // 5) * 1e6)
+        out[f"codec_{name}_us"] = float(np.median(batches))
+    return out
+
+
 def run_bench(n_lat: int = N_LAT, n_frames: int = N_FRAMES) -> dict:
     """Run both stacks and the intra-container case; returns a flat dict of figures with ``ratio`` keys
-    (runtime / raw) and ``composed_latency_median_us`` (and ``_p99_us``, ``composed_sync_*``)."""
+    (runtime / raw), ``composed_latency_median_us`` (and ``_p99_us``, ``composed_sync_*``), the validation's
+    own cost (``codec_*_us``) and the ratio it alone sets as a floor (``floor_ratio_latency_median``: raw's
+    median plus build, encode and decode, over raw's median), and the machine's load (``loadavg_1_before``,
+    ``loadavg_1_after``, ``cores``): figures taken beside other work are not comparable."""
+    load0 = os.getloadavg()[0]
     raw = _summarise(_raw_source("lat", n_lat), _raw_source("thr", n_frames))
     ours = _summarise(_node_source("lat", n_lat), _node_source("thr", n_frames))
     out = {f"runtime_{k}": v for k, v in ours.items()} | {f"raw_{k}": v for k, v in raw.items()}
@@ -278,6 +311,10 @@ def run_bench(n_lat: int = N_LAT, n_frames: int = N_FRAMES) -> dict:
         out[f"{key}_latency_p99_us"] = float(np.percentile(lat[:, 0], 99))
         out[f"{key}_build_latency_median_us"] = float(np.median(lat[:, 1]))
         out[f"{key}_latency_samples"] = int(len(lat))
+    out |= _codec_costs()
+    out["floor_ratio_latency_median"] = (raw["latency_median_us"] + out["codec_build_us"] + out["codec_encode_us"]
+                                         + out["codec_decode_us"]) / raw["latency_median_us"]
+    out |= {"loadavg_1_before": load0, "loadavg_1_after": os.getloadavg()[0], "cores": os.cpu_count()}
     return out
 
 
@@ -307,6 +344,8 @@ def main(argv: list[str] | None = None) -> int:
           f"{r['ratio_latency_p99']:8.2f}")
     print(f"{'stereo 2x640x480 u8':28}{r['runtime_stereo_fps']:9.0f}f/s{r['raw_stereo_fps']:9.0f}f/s"
           f"{r['ratio_stereo_fps']:8.2f}")
+    print(f"{'validation alone (floor)':28}build {r['codec_build_us']:.1f} + encode {r['codec_encode_us']:.1f} + decode "
+          f"{r['codec_decode_us']:.1f} us: ratio >= {r['floor_ratio_latency_median']:.2f} (load {r['loadavg_1_before']:.2f})")
     for key, label in (("composed", "in one container, async"), ("composed_sync", "in one container, def")):
         print(f"{label:28}{r[key + '_latency_median_us']:10.1f}us median {r[key + '_latency_p99_us']:8.1f}us p99 "
               f"(with building the message: {r[key + '_build_latency_median_us']:.1f}us median)")
