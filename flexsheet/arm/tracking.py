@@ -126,8 +126,9 @@ class TargetTracker:
         """Whether moving this clamp from joints ``q_from`` to ``q_to`` (6,) rad takes the clamp span further
         outside :attr:`span_band` from the partner's measured clamp (:attr:`peer_clamp`); counted in
         :attr:`span_waits`. False without a band or a partner state. The sheet couples the clamps: such a
-        step waits for the partner (or for a target that brings the span back)."""
-        if self.span_band is None or self.peer_clamp is None:
+        step waits for the partner (or for a target that brings the span back). A service's goal
+        (:meth:`move_to`: a registration's configurations, homing) is the operator's and is not judged."""
+        if self.span_band is None or self.peer_clamp is None or self.manual is not None:
             return False
         out_to = self._span_out(np.asarray(q_to, float))
         if out_to > 0.0 and out_to > self._span_out(np.asarray(q_from, float)) + 1e-6:

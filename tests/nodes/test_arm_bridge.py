@@ -380,10 +380,12 @@ def test_arm_services_hold_move_to_home_and_release_within_the_limits():
     asyncio.run(scenario())
 
 
-def _peer_state(side: str, status: str) -> ArmJointState:
+def _peer_state(side: str, status: str, theta: float = 0.0) -> ArmJointState:
+    """The partner's joint state with ``status``, its clamp where a sheet tangent at ``theta`` puts it (the span
+    guard measures the span to it)."""
     z = np.zeros(6)
     return ArmJointState(header=Header(stamp=time.time()), arm=side, position=home_joints(side), velocity=z,
-                         commanded=z, executing=z, pose=np.eye(4), status=0, bridge_status=status)
+                         commanded=z, executing=z, pose=clamp_pose(side, theta), status=0, bridge_status=status)
 
 
 def test_the_arm_holds_while_the_other_cannot_follow_and_follows_again_after_it():
@@ -409,7 +411,7 @@ def test_the_arm_holds_while_the_other_cannot_follow_and_follows_again_after_it(
                     await asyncio.sleep(0.01)
                 assert np.max(np.abs(twin.core.servo.q - q_held)) < 1e-3, np.abs(twin.core.servo.q - q_held)
                 assert h.messages(topics.ARM_LEFT_STATE)[-1].bridge_status == "hold:peer"
-                h.inject(topics.ARM_RIGHT_STATE, _peer_state("right", "hold:no_target"))   # not a reason
+                h.inject(topics.ARM_RIGHT_STATE, _peer_state("right", "hold:no_target", -0.3))   # not a reason
                 for k in range(150):
                     h.inject(topics.ARM_LEFT_TARGET, target("left", -0.3, stamp=60.0 + k))
                     await asyncio.sleep(0.01)

@@ -60,6 +60,11 @@ def test_without_a_partner_or_a_band_nothing_waits_and_a_bad_band_is_refused():
     t.peer_clamp = kr.fk(qr)[:3, 3]
     t.set_span_band(None)
     assert not t.span_worse(ql, _toward(kl, ql, -0.030)) and t.span_waits == 0
+    t.set_span_band(BAND)
+    t.move_to(_toward(kl, ql, -0.030))                              # a service's goal: the operator's, not judged
+    assert not t.span_worse(ql, _toward(kl, ql, -0.030)) and t.span_waits == 0
+    t.release()
+    assert t.span_worse(ql, _toward(kl, ql, -0.030)) and t.span_waits == 1
     for band in ((0.26, 0.25), (0.0, 0.2), (0.2, float("inf"))):
         with pytest.raises(ValueError, match="span_band"):
             t.set_span_band(band)
