@@ -47,7 +47,8 @@ class SheetState(Message):
     point of the finger's depression (equals ``origin`` projection when not pushed). ``depth`` m:
     depression along −normal. ``stretch``: engineering strain between clamps. ``membrane`` (G, G) m:
     out-of-plane deflection of the membrane sampled on a G×G grid over the sheet (u, v ∈ [−a, a]), positive
-    along −normal.
+    along −normal. ``force`` N: the finger's contact force on the true sheet (the truth's sheet FEM table at
+    the true depth; 0 when not pushed or before a table): what the finger feels.
     """
 
     SCHEMA = "flexsheet/SheetState"
@@ -61,3 +62,4 @@ class SheetState(Message):
     depth: float = Field(ge=0.0, description="depression depth, m")
     stretch: float = Field(ge=0.0, description="engineering strain between clamps")
     membrane: ndarray("float64", (None, None), "deflection grid, m, along -normal")
+    force: float = Field(default=0.0, ge=0.0, description="finger's contact force on the true sheet, N")

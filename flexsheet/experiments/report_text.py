@@ -156,6 +156,24 @@ def _delay(s: dict) -> tuple[list[str], list[str]]:
     return out, []
 
 
+def _softness(s: dict) -> tuple[list[str], list[str]]:
+    soft = s.get("softness", {})
+    if not soft:
+        return ["No press of 2 mm or more with both the true sheet's force (/world/sheet) and the object's "
+                "(/object/deformation) in the bag: no verdict."], []
+    r = soft["ratio"]
+    prose = ["While the finger presses (true sheet depth ≥ 2 mm): the finger's contact force on the true sheet "
+             "(/world/sheet force: the twin's sheet FEM, not the planner's model) against the virtual object's force "
+             "at the display's fingertip (/object/deformation contact_force × stiffness_scale). A ratio within "
+             "1 ± 0.15 goes unnoticed (Weber fraction, Bergmann Tiest & Kappers 2009)."]
+    row = [str(soft["n"]), f"{r['median']:.2f} [{r['p5']:.2f}, {r['p95']:.2f}]", f"{100 * soft['within_weber']:.0f} %",
+           f"{soft['felt_n']:.2f}", f"{soft['requested_n']:.2f}", f"{soft['felt_stiffness_n_per_m']:.0f}",
+           "1 ± 0.15", soft["verdict"]]
+    head = ["n", "felt / requested, median [p5, p95]", "within 15 %", "felt N", "requested N", "felt k N/m",
+            "target", "verdict"]
+    return prose, _table(head, [row])
+
+
 def _compliance(s: dict) -> tuple[list[str], list[str]]:
     comp = s.get("compliance", {})
     if not comp:
@@ -210,7 +228,8 @@ def sections(summary: dict) -> list[tuple[str, list[str], list[str]]]:
             ("Table I — the paper's method (not the headline)", *_paper_method(summary)),
             ("Table I — what the felt error is made of", *_decomposition(summary)),
             ("Delay — exposure → sheet at its pose", *_delay(summary)),
-            ("Sheet tension and stiffness at the contacts", *_compliance(summary)),
+            ("Softness felt — the true sheet's force against the object's", *_softness(summary)),
+            ("Sheet tension and stiffness at the contacts (the planner's model)", *_compliance(summary)),
             ("Latency per hop and end to end", *_latency(summary))]
 
 

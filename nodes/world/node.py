@@ -410,8 +410,10 @@ class WorldNode(Node):
         else:
             self._poll_build(wanted)
         g = p.membrane_grid
+        force = 0.0
         if sheet.membrane is not None:
             grid, depth, pushed = sheet.membrane.grid(g), float(sheet.membrane.depth), sheet.pushed_point
+            force = float(getattr(sheet.membrane, "force", 0.0))
         else:
             depth = max(0.0, -float((np.asarray(self.finger) - sheet.origin) @ sheet.normal))
             inside = abs(float((np.asarray(self.finger) - sheet.origin) @ sheet.axis_u)) < sheet.half_span
@@ -429,7 +431,7 @@ class WorldNode(Node):
         self.sheet_pub.publish(SheetState(
             header=self.sheet_pub.header("display", stamp=stamp), origin=sheet.origin, normal=sheet.normal, axis_u=sheet.axis_u,
             corners=sheet.corners, pushed_point=pushed, depth=depth, stretch=stretch,
-            membrane=np.ascontiguousarray(grid)))
+            membrane=np.ascontiguousarray(grid), force=max(force, 0.0)))
 
 
 def _build_worker(seed: int, realism: str, node: float, size: float, settings: FemSettings, nice: int) -> None:

@@ -149,7 +149,7 @@ def test_one_delay_figure_from_the_chain_and_the_scaled_stiffness_says_so(tmp_pa
     assert prose.count("The delay:") == 1 and "not measured" in prose      # this bag has no arm chain
     assert f"a horizon of {s['delay']['exposure_to_sheet_ms']:.1f} ms" in prose   # the prediction check, named
     assert s["delay"]["exposure_to_sheet_ms"] == pytest.approx(1e3 * LAG / math.radians(6.0) + 25.0, abs=1.5)
-    prose, table = _section(md, "Sheet tension and stiffness at the contacts")
+    prose, table = _section(md, "Sheet tension and stiffness at the contacts (the planner's model)")
     row = _rows(table)["10 s"]
     assert row["stiffness_scale"] == "0.5" and row["requested k (scaled)"].startswith("50.0")
     assert row["object k (unscaled)"].startswith("100.0") and "Scaled: stiffness_scale 0.5" in prose
