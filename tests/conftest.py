@@ -214,10 +214,12 @@ def pytest_configure(config):
 SAME_WORKER = {"test_correction_twin": "test_calibration_procedures"}
 
 
-#: the longest groups of phase 1 (~270 s: the quick FEM run's fixture; ~200 s: the twin's registrations and
-#: correction), collected first so each starts at once on a worker of its own and the short modules fill in
-#: around them (longest first; alphabetically the FEM experiment started after ~10 modules)
-LONGEST_FIRST = ("test_fem_experiment", "test_calibration_procedures")
+#: the longest groups of phase 1, longest first (every-day tier, cold: the twin's registrations and correction
+#: 85 s, the hyperelastic reference 52 s, the docs' commands 37 s, the scenes' FEM 32 s; the slow tier's quick
+#: FEM run ~270 s), collected first so they start at once on the two workers and the short modules fill in
+#: the tail (alphabetically a long one started last and ran alone)
+LONGEST_FIRST = ("test_fem_experiment", "test_calibration_procedures", "test_fem_hyperelastic", "test_docs_run",
+                 "test_fem_scene")
 
 
 @pytest.hookimpl(tryfirst=True)       # before pytest-xdist's own hook reads the xdist_group marks
