@@ -201,7 +201,7 @@ SKIP: dict[str, str] = {
                                                         "hardware-triggered",
     "flexsheet calibrate display --live --launch launch/lab_sim.yaml": (
         "needs the lab on one machine running (minutes): tests/system/test_live_registration.py runs these commands "
-        "as written (a drawn truth seed)"),
+        "(a drawn truth seed, without its true-sheet tables)"),
     "flexsheet calibrate display --live --launch launch/lab.yaml --host main --out": (
         "moves the lab's real arms (the graph up: cameras, arms, projector); its --dry-run runs as written"),
 }
@@ -213,7 +213,7 @@ CHEAP: dict[str, tuple[str, str]] = {
     "--set hosts.arm2.address=127.0.0.3 --set world.loop=true --out out/lab": (
         "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
         "--set hosts.arm2.address=127.0.0.3 --set world.loop=true --out out/lab --check",
-        "runs until Ctrl-C; tests/system/test_live_registration.py runs it as written"),
+        "runs until Ctrl-C; tests/system/test_live_registration.py runs it (plus world.sheet_fem={prebuild: []})"),
     "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
     "--set hosts.arm2.address=127.0.0.3": (
         "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
