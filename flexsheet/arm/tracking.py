@@ -236,8 +236,7 @@ class TargetTracker:
             return q_command, np.zeros(6)
         ahead = min(max(now - self.last_target_at, 0.0), EXTRAPOLATE_MAX_S)
         w = self.velocity if ahead < EXTRAPOLATE_MAX_S else np.zeros(6)
-        goal = self.goal + self.velocity * ahead
-        return goal, w
+        return self.goal + self.velocity * ahead, w
 
     def goal_for(self, now: float, q_command: np.ndarray) -> np.ndarray:
         """The goal of :meth:`reference` alone (6,) rad."""

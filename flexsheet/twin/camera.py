@@ -114,8 +114,8 @@ def default_trajectory(t: float, amplitude_rad: float = 1.05, period_s: float = 
 @dataclass
 class SimConfig:
     """Renderer settings (m, s, DN, px; module doc). Defaults are the **realistic** twin (measured read and
-    shot noise, optical blur, finger self-occlusion); :meth:`ideal` gives the idealised sensing of the twin
-    before (2 DN read noise only, marker always drawn over the finger).
+    shot noise, optical blur, finger self-occlusion); :meth:`ideal` gives the idealised sensing of the
+    earlier twin (2 DN read noise only, marker always drawn over the finger).
 
     ``finger_dir``: vector from the fingertip toward the hand, display frame; ``marker_setback``: the
     marker centre sits this far behind the capsule's tip along the finger, m; ``marker_ss``: ray-cast
@@ -148,7 +148,7 @@ class SimConfig:
 
     @classmethod
     def ideal(cls, **kw) -> SimConfig:
-        """The idealised sensing of the twin before read noise 2 DN only (no shot noise) and no
+        """The idealised sensing of the earlier twin: read noise 2 DN only (no shot noise) and no
         self-occlusion (the marker drawn over the finger); optics, exposure and scene as the realistic one."""
         base = {"noise_dn": 2.0, "shot_gain": 0.0, "self_occlusion": False}
         base.update(kw)

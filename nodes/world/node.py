@@ -413,7 +413,7 @@ class WorldNode(Node):
         force = 0.0
         if sheet.membrane is not None:
             grid, depth, pushed = sheet.membrane.grid(g), float(sheet.membrane.depth), sheet.pushed_point
-            force = float(getattr(sheet.membrane, "force", 0.0))
+            force = float(sheet.membrane.force)
         else:
             depth = max(0.0, -float((np.asarray(self.finger) - sheet.origin) @ sheet.normal))
             inside = abs(float((np.asarray(self.finger) - sheet.origin) @ sheet.axis_u)) < sheet.half_span
