@@ -56,7 +56,7 @@ from flexsheet.rendering.state import (
     sheet_model_for,
     silhouette_probes,
 )
-from flexsheet.runtime.background import start_worker
+from flexsheet.runtime.background import await_worker, start_worker
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.twin.timing import LAB
@@ -365,13 +365,8 @@ class RendererNode(Node):
                 target=build_table, args=(self.sheet_model.settings, node, 19), name=f"renderer-sheet-table-{node:g}",
                 daemon=True)
             start_worker(proc)
-            while proc.is_alive():
-                if self.stopping:
-                    proc.terminate()
-                    proc.join(timeout=1.0)
-                    return
-                await asyncio.sleep(0.05)
-            proc.join()
+            if not await await_worker(proc, lambda: self.stopping):
+                return
             if proc.exitcode != 0 or not self.sheet_model.on_disk(node):
                 self.errors_total += 1
                 self._failed.add(node)

@@ -47,7 +47,7 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from flexsheet.model.scenes import Scene, SceneError, load_scene
-from flexsheet.runtime.background import start_worker
+from flexsheet.runtime.background import await_worker, start_worker
 from flexsheet.runtime.node import InputRejected, Node, QoS
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.twin.finger import FingerScript
@@ -303,11 +303,8 @@ class WorldNode(Node):
         """On a simulated clock: build ``node`` while simulated time waits (this timer call is awaited by the
         lockstep scheduler), the loop free for heartbeats and signals; returns early on a stop."""
         self._start_build(node)
-        while self._worker is not None and self._worker.is_alive():
-            if self.stopping:
-                return
-            await asyncio.sleep(0.05)
-        self._poll_build(None)
+        if await await_worker(self._worker, lambda: self.stopping):
+            self._poll_build(None)
 
     def _poll_build(self, wanted: float | None) -> None:
         if self._worker is not None and not self._worker.is_alive():
