@@ -21,12 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from flexsheet.experiments.report_softness import felt_force
-from flexsheet.experiments.report_timing import (
-    compliance_summary,
-    latency_hops,
-    planner_scales,
-    watchdog_faults,
-)
+from flexsheet.experiments.report_timing import compliance_summary, latency_hops, watchdog_faults
 from flexsheet.experiments.report_verdicts import judge, table1_verdicts
 from flexsheet.experiments.table1 import (
     FELT_TARGET_FACTOR,
@@ -90,8 +85,7 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scen
     summary["run"], summary["segments"] = run, segments
     summary.update(table1_rows(d, scene, series, segments))
     summary["compliance"] = compliance_summary(d)
-    scales = [v for _, v in planner_scales(d)]
-    summary["softness"] = felt_force(d, scales[-1] if scales else 1.0)
+    summary["softness"] = felt_force(d)
     summary["latency_ms"] = latency_hops(d)
     summary["faults"] = watchdog_faults(d)
     if summary.get("delay"):

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from flexsheet.experiments.report_timing import planner_scales, scales_at
+
 __all__ = ["WEBER_FRACTION", "MIN_DEPTH", "felt_force"]
 
 #: a force or stiffness ratio within 1 ± this goes unnoticed (Bergmann Tiest & Kappers 2009)
@@ -25,31 +27,37 @@ MIN_DEPTH = 0.002
 MAX_GAP = 0.1
 
 
-def felt_force(d: dict[str, list], scale: float = 1.0) -> dict:
+def felt_force(d: dict[str, list], scales: list[tuple[float, float]] | None = None) -> dict:
     """Pair each ``/world/sheet`` sample pressed at least :data:`MIN_DEPTH` deep with the newest
     ``/object/deformation`` whose fingertip was exposed at most :data:`MAX_GAP` s before it (object force > 0),
-    and compare the sheet's true force with the object's times ``scale`` (the planner's ``stiffness_scale``).
+    and compare the sheet's true force with the object's times the planner's ``stiffness_scale`` in force when
+    the sheet sample arrived: ``scales`` [(arrival s, scale)] (None: from the planner's heartbeats in ``d``,
+    :func:`~flexsheet.experiments.report_timing.planner_scales`; 1 without any).
 
     ``d``: topic → [(log time, message)]. Returns ``{}`` without pressed samples, else ``{"n", "ratio"`` (felt /
     requested: median, p5, p95), ``"within_weber"`` (share of samples with |ratio − 1| ≤ 15 %),
     ``"felt_n"`` and ``"requested_n"`` (force medians, N), ``"felt_stiffness_n_per_m"`` (median secant force /
     depth of the true sheet), ``"target"``, ``"verdict"`` ("met" when the median ratio is within 1 ± 15 %)}``.
-    Raises ``ValueError`` for a non-positive ``scale``."""
-    if not scale > 0.0:
-        raise ValueError(f"scale must be > 0, got {scale!r}")
-    sheets = [m for _, m in d.get("/world/sheet", []) if m.depth >= MIN_DEPTH and m.force > 0.0]
+    Raises ``ValueError`` for a non-positive scale."""
+    scales = planner_scales(d) if scales is None else list(scales)
+    bad = [s for _, s in scales if not s > 0.0]
+    if bad:
+        raise ValueError(f"stiffness scale must be > 0, got {bad[0]!r}")
+    pressed = [(t, m) for t, m in d.get("/world/sheet", []) if m.depth >= MIN_DEPTH and m.force > 0.0]
+    scale = np.nan_to_num(scales_at(scales, np.array([t for t, _ in pressed])), nan=1.0)
+    sheets = [m for _, m in pressed]
     defs = sorted((m for _, m in d.get("/object/deformation", []) if m.contact_force > 0.0),
                   key=lambda m: m.source_stamp)
     if not sheets or not defs:
         return {}
     ds = np.array([m.source_stamp for m in defs])
     felt, req, depth = [], [], []
-    for s in sheets:
+    for s, sc in zip(sheets, scale, strict=True):
         k = int(np.searchsorted(ds, s.header.stamp, side="right")) - 1
         if k < 0 or s.header.stamp - ds[k] > MAX_GAP:
             continue
         felt.append(s.force)
-        req.append(defs[k].contact_force * scale)
+        req.append(defs[k].contact_force * float(sc))
         depth.append(s.depth)
     if not felt:
         return {}

@@ -162,7 +162,7 @@ def planner_scales(d: dict[str, list]) -> list[tuple[float, float]]:
     return out
 
 
-def _scales_at(scales: list[tuple[float, float]], t: np.ndarray) -> np.ndarray:
+def scales_at(scales: list[tuple[float, float]], t: np.ndarray) -> np.ndarray:
     """The scale in force at arrival times ``t``: the last heartbeat's before, else the first; NaN without any."""
     if not scales:
         return np.full(len(t), np.nan)
@@ -195,7 +195,7 @@ def compliance_summary(d: dict[str, list]) -> dict:
     tg = [(t, m) for t, m in d.get("/sheet/target", []) if m.touching and not m.status.startswith("hold")]
     if not tg:
         return {}
-    scale = _scales_at(planner_scales(d), np.array([t for t, _ in tg]))
+    scale = scales_at(planner_scales(d), np.array([t for t, _ in tg]))
     out: dict = {"all": _compliance_block([m for _, m in tg], scale)}
     truths = d.get("/world/finger", [])
     if truths:

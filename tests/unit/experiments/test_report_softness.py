@@ -43,8 +43,11 @@ def test_a_sheet_as_stiff_as_the_object_is_within_the_weber_fraction_and_a_softe
     soft = felt_force(_bag(0.07, 0.10))                          # 30 % softer than asked: noticeable
     assert soft["verdict"] == "MISSED" and soft["ratio"]["median"] == pytest.approx(0.7, abs=0.04)
     assert soft["within_weber"] < 0.1
-    # a stiffness_scale of 0.7 asks for that softer sheet
-    assert felt_force(_bag(0.07, 0.10), scale=0.7)["verdict"] == "met"
+    # a stiffness_scale of 0.7 (the planner's, from the run's start) asks for that softer sheet
+    assert felt_force(_bag(0.07, 0.10), scales=[(0.0, 0.7)])["verdict"] == "met"
+    # a scale set mid-press applies from then on only: half the samples judged at 0.7, half at 1
+    half = felt_force(_bag(0.07, 0.10), scales=[(0.0, 1.0), (2.0, 0.7)])
+    assert 0.4 < half["within_weber"] < 0.6
 
 
 def test_no_press_no_object_force_or_a_bad_scale():
@@ -52,4 +55,4 @@ def test_no_press_no_object_force_or_a_bad_scale():
     assert felt_force({"/world/sheet": bag["/world/sheet"]}) == {}
     assert felt_force({**bag, "/world/sheet": [(t, _sheet(t, 0.001, 0.1)) for t, _ in bag["/world/sheet"]]}) == {}
     with pytest.raises(ValueError, match="scale"):
-        felt_force(bag, scale=0.0)
+        felt_force(bag, scales=[(0.0, 0.0)])
