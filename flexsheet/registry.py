@@ -1,9 +1,11 @@
-"""Where the CLI finds node types, experiments, benchmarks and calibration commands.
+"""Where the CLI finds experiments, benchmarks and calibration commands (node types are entry points of the
+``flexsheet.nodes`` group: :mod:`flexsheet.runtime.plugins`).
 
 Each entry is ``"module:attribute"`` and is imported lazily, so ``flexsheet --help`` stays fast and a
-broken optional module only breaks its own subcommand. Node entries name a :class:`flexsheet.runtime.node.Node`
-subclass; experiment, bench and calibrate entries name a ``main(argv: list[str]) -> int`` function that
-parses its own arguments with argparse (its ``--help`` shows a working example).
+broken optional module only breaks its own subcommand. Experiment, bench and calibrate entries name a
+``main(argv: list[str]) -> int`` function that parses its own arguments with argparse (its ``--help`` shows a
+working example). The benches are entry points of the :data:`BENCHES_GROUP` group (pyproject.toml), the
+library's and the nodes' own alike.
 """
 
 from __future__ import annotations
@@ -11,48 +13,23 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-NODES: dict[str, str] = {
-    "camera": "nodes.camera.node:CameraNode",
-    "triangulator": "nodes.triangulator.node:TriangulatorNode",
-    "planner": "nodes.planner.node:PlannerNode",
-    "arm_bridge": "nodes.arm_bridge.node:ArmBridgeNode",
-    "arm_controller_sim": "nodes.arm_controller_sim.node:ArmControllerSimNode",
-    "fem": "nodes.fem.node:FemNode",
-    "renderer": "nodes.renderer.node:RendererNode",
-    "world": "nodes.world.node:WorldNode",
-    "viz": "nodes.viz.node:VizNode",
-    "recorder": "flexsheet.runtime.bag:RecorderNode",
-    "player": "flexsheet.runtime.bag:PlayerNode",
-    "talker": "flexsheet.runtime.demo:TalkerNode",
-    "listener": "flexsheet.runtime.demo:ListenerNode",
-}
+from flexsheet.runtime.plugins import table
+
+#: the entry-point group of ``flexsheet bench NAME``
+BENCHES_GROUP = "flexsheet.benches"
 
 EXPERIMENTS: dict[str, str] = {
     "triangulation": "flexsheet.experiments.triangulation:main",
-    "stroke": "flexsheet.experiments.graph_stroke:main",
-    "stroke_model": "flexsheet.experiments.stroke:main",
+    "stroke": "flexsheet.experiments.stroke:main",
+    "stroke_model": "flexsheet.experiments.stroke_model:main",
     "scenes": "flexsheet.experiments.scenes:main",
-    "fem": "flexsheet.experiments.fem:main",
-    "correction": "flexsheet.experiments.correction:main",
+    "fem": "flexsheet.experiments.fem.cli:main",
+    "correction": "flexsheet.experiments.correction.cli:main",
     "stability": "flexsheet.experiments.stability:main",
     "compliance": "flexsheet.experiments.compliance:main",
     "latency_load": "flexsheet.experiments.latency_load:main",
     "determinism": "flexsheet.experiments.determinism:main",
-    "faults": "flexsheet.experiments.faults:main",
-}
-
-BENCHES: dict[str, str] = {
-    "transport": "flexsheet.benches.transport:main",
-    "vision": "flexsheet.benches.vision:main",
-    "camera": "nodes.camera.bench:main",
-    "planner": "flexsheet.benches.planner:main",
-    "arm": "nodes.arm_bridge.bench:main",
-    "fem": "flexsheet.benches.fem:main",
-    "fem_startup": "nodes.fem.startup_bench:main",
-    "render": "nodes.renderer.bench:main",
-    "load": "flexsheet.benches.load:main",
-    "viz": "nodes.viz.bench:main",
-    "graph": "nodes.camera.graph_bench:main",
+    "faults": "flexsheet.experiments.faults.experiment:main",
 }
 
 CALIBRATE: dict[str, str] = {
@@ -64,6 +41,11 @@ CALIBRATE: dict[str, str] = {
     "display": "flexsheet.display.calibrate:display_main",
     "noise": "flexsheet.display.calibrate:noise_main",
 }
+
+
+def benches() -> dict[str, str]:
+    """Bench name → ``"module:main"``: the entry points of :data:`BENCHES_GROUP`, sorted by name."""
+    return table(BENCHES_GROUP)
 
 
 def load(spec: str) -> Any:

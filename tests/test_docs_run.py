@@ -136,7 +136,7 @@ DELEGATES = ("calibrate", "experiment", "bench")
 def _delegate_table(kind: str) -> dict[str, str]:
     from flexsheet import registry
 
-    return {"calibrate": registry.CALIBRATE, "experiment": registry.EXPERIMENTS, "bench": registry.BENCHES}[kind]
+    return {"calibrate": registry.CALIBRATE, "experiment": registry.EXPERIMENTS, "bench": registry.benches()}[kind]
 
 
 def help_commands() -> list[Cmd]:
@@ -299,7 +299,7 @@ CHEAP: dict[str, tuple[str, str]] = {
         "flexsheet experiment stroke --out out/stroke",
         "flexsheet experiment stroke --out docs/figures/stroke",
         "flexsheet experiment stroke --out /tmp/s --seeds 0 --set triangulator.tracking_index=0.3",
-        "flexsheet experiment stroke --stability --out docs/figures/stroke/stability",
+        "flexsheet experiment stability --graph --out docs/figures/stroke/stability",
         "flexsheet experiment stroke_model --out docs/figures/planner",
         "flexsheet experiment stroke_model --out /tmp/s --seeds 1 --display-calib 'out/cal{seed}/display.yaml'",
         "flexsheet experiment scenes --out docs/figures/scenes",

@@ -2,10 +2,15 @@
 
 - ``flexsheet/`` is the library: nothing in it imports ``nodes`` (the adapters);
 - ``flexsheet/runtime/`` is generic: it imports nothing from ``model``, ``calibration``, ``experiments``,
-  ``display``, ``twin`` or any algorithm package, and one file of it (``transport.py``) imports zmq;
+  ``display``, ``twin`` or any algorithm package, and only its ``zmq/`` package imports zmq;
+- node types are entry points (``flexsheet.nodes``): no file of ``flexsheet/`` names a ``nodes.…:Class``;
 - ``flexsheet/model/`` is pure: no transport (zmq, asyncio, msgpack, pymodbus), nothing above it;
 - a node (``nodes/X/``) imports only ``flexsheet.*``, ``messages`` and ``nodes.X`` itself;
-- no import cycle between folders (the packages of ``flexsheet/``, ``messages``, each node);
+- no import cycle between folders (the packages of ``flexsheet/``, ``messages``, each node), nor between the
+  modules inside a folder (imports under ``if TYPE_CHECKING:`` are not run and do not count);
+- no re-export: a module's ``__all__`` names only what it defines; no ``_private`` name is imported from
+  another module;
+- no file of ``flexsheet/`` or ``nodes/`` over 500 lines, no function over 80;
 - no ``.py`` under ``docs/``; ``README.md`` ≤ 100 lines, none over 300 characters; each ``docs/`` page ≤ 300
   lines; no work-log words outside
   ``CHANGELOG.md``, in the docs or in the code's docstrings and comments;
@@ -79,9 +84,28 @@ def test_the_runtime_is_generic():
     assert bad == [], "flexsheet/runtime/ must know nothing of the display:\n" + "\n".join(bad)
 
 
-def test_one_runtime_file_talks_to_zmq():
-    users = sorted({p.name for p, _, mod in _library_imports("runtime") if mod.split(".")[0] == "zmq"})
-    assert users == ["transport.py"], f"runtime files importing zmq: {users}"
+#: raw pyzmq outside the runtime, on purpose: the transport bench's baseline (the runtime against raw pyzmq) and
+#: the link attacks (a squatter and a slow reader are raw sockets, not nodes)
+RAW_ZMQ = {"flexsheet/benches/transport.py", "flexsheet/experiments/faults/links.py"}
+
+
+def test_only_the_runtime_zmq_package_talks_to_zmq():
+    users = sorted({str(p.relative_to(ROOT)) for p, _, mod in _library_imports() if mod.split(".")[0] == "zmq"})
+    assert any(u.startswith("flexsheet/runtime/zmq/") for u in users), "the check read no zmq import"
+    bad = [u for u in users if not u.startswith("flexsheet/runtime/zmq/") and u not in RAW_ZMQ]
+    assert bad == [], f"files outside flexsheet/runtime/zmq/ importing zmq: {bad}"
+
+
+#: an entry-point-like reference to an adapter, ``nodes.<name>.<module>:<attribute>``
+NODE_SPEC = re.compile(r"\bnodes\.[a-z_]+\.[a-z_]+:[A-Za-z_]+")
+
+
+def test_node_types_come_from_entry_points():
+    bad = [f"{p.relative_to(ROOT)}:{i + 1}" for p in sorted((ROOT / "flexsheet").rglob("*.py"))
+           for i, line in enumerate(p.read_text().splitlines()) if NODE_SPEC.search(line)]
+    assert bad == [], "flexsheet/ names adapters (use the flexsheet.nodes entry points):\n" + "\n".join(bad)
+    toml = (ROOT / "pyproject.toml").read_text()
+    assert '[project.entry-points."flexsheet.nodes"]' in toml and NODE_SPEC.search(toml)
 
 
 def test_nodes_import_only_flexsheet_messages_and_themselves():
@@ -175,3 +199,115 @@ def test_changelog_is_short_and_versioned():
     assert long == [], f"CHANGELOG.md lines over 200 characters: {long}"
     versions = [line for line in lines if VERSION_HEADING.match(line)]
     assert versions, "CHANGELOG.md has no released version heading '## [x.y.z] - YYYY-MM-DD'"
+
+
+# ------------------------------------------------------------------------------------ inside the folders
+def _code_files() -> list[Path]:
+    return [p for base in ("flexsheet", "messages", "nodes") for p in sorted((ROOT / base).rglob("*.py"))]
+
+
+def _run_imports(path: Path, modules: set[str]) -> list[tuple[int, str, list[str]]]:
+    """(line, module imported, names) of every import that runs (not under ``if TYPE_CHECKING:``); ``from a
+    import b`` names the module ``a.b`` when that is one of ``modules``."""
+    out: list[tuple[int, str, list[str]]] = []
+
+    def visit(node: ast.AST) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
+                for c in child.orelse:
+                    visit(c)
+                continue
+            if isinstance(child, ast.Import):
+                out.extend((child.lineno, a.name, []) for a in child.names)
+            elif isinstance(child, ast.ImportFrom) and child.module:
+                for a in child.names:
+                    sub = f"{child.module}.{a.name}"
+                    out.append((child.lineno, sub, []) if sub in modules else (child.lineno, child.module, [a.name]))
+            visit(child)
+
+    visit(ast.parse(path.read_text(), str(path)))
+    return out
+
+
+def _module_edges() -> tuple[dict[str, set[str]], dict[tuple[str, str], str]]:
+    files = _code_files()
+    modules = {_module(p) for p in files}
+    edges: dict[str, set[str]] = {}
+    where: dict[tuple[str, str], str] = {}
+    for path in files:
+        src = _module(path)
+        for line, mod, _ in _run_imports(path, modules):
+            if mod in modules and mod != src and _folder(mod) == _folder(src):
+                edges.setdefault(src, set()).add(mod)
+                where.setdefault((src, mod), f"{path.relative_to(ROOT)}:{line}")
+    return edges, where
+
+
+def test_no_import_cycle_inside_a_folder():
+    edges, where = _module_edges()
+    assert "flexsheet.runtime.node" in edges, "the module graph was not read"
+    assert _cycles(edges, where) == [], "import cycles inside folders:\n" + "\n".join(_cycles(edges, where))
+
+
+def test_no_private_name_is_imported_from_another_module():
+    files = _code_files() + sorted((ROOT / "tests").rglob("*.py"))
+    modules = {_module(p) for p in _code_files()}
+    bad = [f"{p.relative_to(ROOT)}:{line}: {mod}.{n}" for p in files for line, mod, names in _run_imports(p, modules)
+           if mod in modules and mod != _module(p) for n in names if n.startswith("_") and not n.startswith("__")]
+    assert bad == [], "private names imported from another module (make them public or move the caller):\n" + \
+        "\n".join(bad[:40])
+
+
+def _defined(tree: ast.Module) -> set[str]:
+    out: set[str] = set()
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            out.add(node.name)
+        elif isinstance(node, ast.Assign):
+            for t in node.targets:
+                out |= {n.id for n in ast.walk(t) if isinstance(n, ast.Name)}
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            out.add(node.target.id)
+    return out
+
+
+#: the message package's one import path of every message type (``from messages import Fingertip``), as a ROS
+#: message package's: the only module that names what others define
+FACADES = {"messages/__init__.py"}
+
+
+def test_no_module_re_exports_what_another_defines():
+    bad = []
+    for path in [p for p in _code_files() if str(p.relative_to(ROOT)) not in FACADES]:
+        tree = ast.parse(path.read_text(), str(path))
+        names = next((ast.literal_eval(n.value) for n in tree.body if isinstance(n, ast.Assign)
+                      and any(isinstance(t, ast.Name) and t.id == "__all__" for t in n.targets)), [])
+        foreign = sorted(set(names) - _defined(tree))
+        if foreign:
+            bad.append(f"{path.relative_to(ROOT)}: __all__ names {foreign}, defined elsewhere")
+    assert bad == [], "re-exports (import a name from the module that defines it):\n" + "\n".join(bad)
+
+
+def test_files_and_functions_are_short():
+    long_files, long_funcs = [], []
+    for path in [p for base in ("flexsheet", "nodes") for p in sorted((ROOT / base).rglob("*.py"))]:
+        text = path.read_text()
+        if len(text.splitlines()) > 500:
+            long_files.append(f"{path.relative_to(ROOT)}: {len(text.splitlines())} lines")
+        for node in ast.walk(ast.parse(text, str(path))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.end_lineno - node.lineno + 1 > 80:
+                long_funcs.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}: "
+                                  f"{node.end_lineno - node.lineno + 1} lines")
+    assert long_files == [], "files over 500 lines:\n" + "\n".join(long_files)
+    assert long_funcs == [], "functions over 80 lines:\n" + "\n".join(long_funcs)
+
+
+def test_the_inside_checks_see_planted_faults(tmp_path):
+    """A planted private import, a TYPE_CHECKING-only import and a re-export are read as such."""
+    f = tmp_path / "x.py"
+    f.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from flexsheet.model import sheet\n"
+                 "from flexsheet.model.sheet import _p, clamp_poses\n__all__ = ['clamp_poses', 'y']\ny = 1\n")
+    got = _run_imports(f, {"flexsheet.model.sheet"})
+    assert got == [(1, "typing", ["TYPE_CHECKING"]), (4, "flexsheet.model.sheet", ["_p"]),
+                   (4, "flexsheet.model.sheet", ["clamp_poses"])]
+    assert _defined(ast.parse(f.read_text())) == {"__all__", "y"}

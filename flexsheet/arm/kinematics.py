@@ -34,13 +34,10 @@ import numpy as np
 import pinocchio as pin
 
 from flexsheet.model.checks import check_pose
-from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE, pose_matrix
+from flexsheet.model.geometry import pose_matrix
 
-__all__ = [
-    "URDF_PATH", "JOINT_NAMES", "Q_LOWER", "Q_UPPER", "QD_MAX", "DATASHEET_SPEED_DEG", "Q_HOME", "LEFT_BASE", "RIGHT_BASE",
-    "home_joints", "IKResult", "ArmKinematics", "clamp_joints", "outside_limits",
-    "rotation_angle",
-]
+__all__ = ["URDF_PATH", "JOINT_NAMES", "Q_LOWER", "Q_UPPER", "QD_MAX", "DATASHEET_SPEED_DEG", "Q_HOME",
+           "home_joints", "IKResult", "ArmKinematics", "clamp_joints", "outside_limits", "rotation_angle"]
 
 URDF_PATH = Path(__file__).with_name("rv1a.urdf")
 JOINT_NAMES = ("J1", "J2", "J3", "J4", "J5", "J6")

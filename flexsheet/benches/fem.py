@@ -18,9 +18,10 @@ import numpy as np
 
 from flexsheet.fem.choose import choose, load_table
 from flexsheet.fem.contact import finger_at
+from flexsheet.fem.corotational import solve_corotational
 from flexsheet.fem.material import Material
 from flexsheet.fem.realtime import RealtimeModel
-from flexsheet.fem.solver import FemModel, solve_corotational, solve_full
+from flexsheet.fem.solver import FemModel, solve_full
 
 __all__ = ["main"]
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import logging
 import os
 import subprocess
 import sys
@@ -42,6 +43,8 @@ import numpy as np
 from flexsheet.runtime.ports import free_port
 from messages import topics as T
 from messages.samples import sample_fields
+
+log = logging.getLogger(__name__)
 
 #: producing node → its topics (as in launch/sim.yaml)
 GROUPS: dict[str, list[str]] = {
@@ -118,7 +121,8 @@ def _make_publisher(group: str, factor: float, random_images: bool = False):
 
 
 def _make_subscriber(out: Path):
-    from flexsheet.runtime.node import Node, QoS
+    from flexsheet.runtime.node import Node
+    from flexsheet.runtime.qos import QoS
 
     class LoadSubscriber(Node):
         """Subscribes every topic (KEEP_ALL) and keeps receive − stamp per topic (bench only)."""
@@ -162,7 +166,7 @@ def _child(argv: list[str]) -> int:
     ap.add_argument("--out", default="")
     ap.add_argument("--random-images", action="store_true")
     a = ap.parse_args(argv)
-    from flexsheet.runtime.node import NodeConfig
+    from flexsheet.runtime.config import NodeConfig
 
     if a.role == "pub":
         cls = _make_publisher(a.group, a.factor, a.random_images)
@@ -201,7 +205,7 @@ def slope_mb_per_min(t: np.ndarray, rss: np.ndarray) -> float:
 
 
 def run_load(seconds: float = 60.0, factor: float = 2.0, warmup: float = 10.0, sample: float = 0.5,
-             random_images: bool = False, log=print) -> dict:
+             random_images: bool = False) -> dict:
     """Run the load (see module doc) for ``seconds`` s; returns the results dict. ``warmup`` s are left out
     of the RSS slope fit (imports, first allocations, socket buffers filling)."""
     if not seconds > warmup:
@@ -247,7 +251,7 @@ def run_load(seconds: float = 60.0, factor: float = 2.0, warmup: float = 10.0, s
                 p.kill()
                 p.wait()
     sub = json.loads(sub_out.read_text())
-    from flexsheet.runtime.bag import bag_info
+    from flexsheet.runtime.bag_read import bag_info
 
     bag = bag_info(tmp / "load.mcap")
     procs_res = {}
@@ -319,8 +323,7 @@ def main(argv: list[str]) -> int:
     if not (a.seconds > 0 and a.factor > 0):
         ap.error(f"--seconds and --factor must be > 0, got {a.seconds}, {a.factor}")
     warmup = a.warmup if a.warmup is not None else min(10.0, a.seconds / 4)
-    res = run_load(a.seconds, a.factor, warmup, random_images=a.random_images,
-                   log=(lambda *x: None) if a.json else print)
+    res = run_load(a.seconds, a.factor, warmup, random_images=a.random_images)
     if a.out:
         _chart(res, Path(a.out))
     if a.json:

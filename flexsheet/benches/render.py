@@ -10,7 +10,8 @@ import numpy as np
 
 from flexsheet.model import geometry
 from flexsheet.model.sheet import SheetSurface, clamp_poses
-from flexsheet.rendering.state import RendererState, SheetConfig, sheet_model_for
+from flexsheet.model.sheet_model import SheetConfig, sheet_model_for
+from flexsheet.rendering.state import RendererState
 from flexsheet.rendering.stereo_renderer import StereoRenderer
 
 __all__ = ["BENCH_STRETCH", "bench_sheets", "sheet_update", "time_models"]

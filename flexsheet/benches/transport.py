@@ -34,8 +34,10 @@ import msgpack
 import numpy as np
 import zmq
 
-from flexsheet.runtime.node import Node, NodeConfig, QoS
+from flexsheet.runtime.config import NodeConfig
+from flexsheet.runtime.node import Node
 from flexsheet.runtime.ports import free_port
+from flexsheet.runtime.qos import QoS
 from messages import Fingertip, StereoFrame
 from messages import topics as T
 
@@ -223,7 +225,7 @@ class _LocalSink(Node):
 def _composed(n: int, sync: bool) -> list[tuple[float, float]]:
     """(publish → handler, build → handler) latencies (s) of ``n`` fingertips at 1 kHz between two nodes of one
     container (in this process)."""
-    from flexsheet.runtime.container import Bus, ContainerTransport
+    from flexsheet.runtime.bus import Bus, ContainerTransport
 
     async def main() -> list[float]:
         bus = Bus("bench")

@@ -25,13 +25,12 @@ import time
 import cv2
 import numpy as np
 
-from flexsheet.twin.camera import (
+from flexsheet.twin.camera import StereoCameraTwin, default_trajectory
+from flexsheet.twin.camera_config import SimConfig
+from flexsheet.vision.camera_model import (
     DEFAULT_CAMERA_POSITION,
-    SimConfig,
-    StereoRenderer,
     bumblebee2_calibration,
     camera_model,
-    default_trajectory,
     look_at,
 )
 from flexsheet.vision.stereo import StereoModel
@@ -48,7 +47,7 @@ def timing(n: int = 300, seed: int = 0, method: str = "optimal") -> dict:
     trajectory at 3× speed): ROI mode and full-frame mode. Returns a dict of medians/p95 and valid rate."""
     calib = bumblebee2_calibration()
     T = look_at(DEFAULT_CAMERA_POSITION)
-    rnd = StereoRenderer(calib, T, SimConfig(seed=seed))
+    rnd = StereoCameraTwin(calib, T, SimConfig(seed=seed))
     frames = []
     for k in range(n):
         pos, vel = default_trajectory(3.0 * k / 48.0)

@@ -42,14 +42,13 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-import yaml
 
 from flexsheet.model import geometry
-from flexsheet.vision.stereo_calibration import MAX_CALIB_BYTES, _CvYamlLoader
+from flexsheet.model.checks import check_pose
 
 __all__ = ["FORMAT_VERSION", "ENTRIES", "NOMINAL_CLAMP_MARKER", "NOMINAL_IPD", "Provenance", "CameraEntry",
-           "ProjectorEntry", "ArmEntry", "EyeEntry", "DisplayCalib", "nominal_display_calib", "load_display_calib",
-           "write_display_calib", "now_iso", "pose_from_rt", "xyzyaw_from_pose", "BOOTSTRAP_FILE", "STEREO_NAMES",
+           "ProjectorEntry", "ArmEntry", "EyeEntry", "DisplayCalib", "nominal_display_calib",
+           "now_iso", "pose_from_rt", "xyzyaw_from_pose", "BOOTSTRAP_FILE", "STEREO_NAMES",
            "stereo_vector", "stereo_from_vector"]
 
 FORMAT_VERSION = 1
@@ -96,7 +95,6 @@ def stereo_from_vector(v: np.ndarray, image_size) -> dict:
     return out
 
 
-
 def now_iso() -> str:
     """Current UTC time as ISO 8601 with seconds, e.g. ``2025-01-31T12:00:00Z``."""
     return _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
@@ -116,7 +114,7 @@ def xyzyaw_from_pose(T: np.ndarray, max_tilt_deg: float = 1.0) -> tuple[float, f
 
     Raises ``ValueError`` if the base is tilted more than ``max_tilt_deg`` (use the full 4×4 then).
     """
-    T = _check_pose("T", T, "")
+    T = check_pose("T", T)
     tilt = math.degrees(math.acos(max(-1.0, min(1.0, float(T[2, 2])))))
     if tilt > max_tilt_deg:
         raise ValueError(f"base is tilted {tilt:.3f} deg > {max_tilt_deg} deg from vertical; use the 4x4 pose")
@@ -152,7 +150,7 @@ class Provenance:
 class CameraEntry:
     """Stereo camera registration: ``T_display_camera`` (4, 4) left optical frame in the display frame, m;
     ``stereo``: the stereo model that pose was fitted with (dict with ``image_size`` (w, h), K1, D1, K2, D2, R,
-    T — the format of :func:`flexsheet.vision.stereo_calibration.load_yaml`), or ``None`` to keep the stereo file's;
+    T — the format of :func:`flexsheet.vision.calib_yaml.load_yaml`), or ``None`` to keep the stereo file's;
     ``cov`` (30, 30) or ``None``: covariance of (:func:`stereo_vector` of ``stereo``, the pose as the
     display→left-camera rotation vector and translation), rad/m/px units — the prior later steps refine under."""
 
@@ -269,11 +267,11 @@ def nominal_display_calib() -> DisplayCalib:
 
     Camera: the shipped XIMEA stereo calibration mounted at :func:`flexsheet.vision.camera_model.look_at`
     (``DEFAULT_CAMERA_POSITION``); projector: :meth:`flexsheet.model.projector.Projector.default`; arms:
-    :data:`flexsheet.arm.kinematics.LEFT_BASE`/``RIGHT_BASE`` with :data:`NOMINAL_CLAMP_MARKER`; eye: the
+    :data:`flexsheet.model.geometry.LEFT_BASE`/``RIGHT_BASE`` with :data:`NOMINAL_CLAMP_MARKER`; eye: the
     paper's fixed V (:data:`flexsheet.model.geometry.EYE`). Estimators start from these; the twin's truth is drawn
     around them (:mod:`flexsheet.twin.truth`).
     """
-    from flexsheet.arm.kinematics import LEFT_BASE, RIGHT_BASE
+    from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
     from flexsheet.model.projector import Projector
     from flexsheet.vision.camera_model import DEFAULT_CAMERA_POSITION, camera_model, look_at
 
@@ -290,235 +288,3 @@ def nominal_display_calib() -> DisplayCalib:
     return DisplayCalib(cam, proj, arms, eye)
 
 
-# ----------------------------------------------------------------------------------------------------- writing
-def _write_prov(fs: cv2.FileStorage, p: Provenance) -> None:
-    fs.startWriteStruct("provenance", cv2.FileNode_MAP)
-    fs.write("method", str(p.method))
-    fs.write("measured_at", str(p.measured_at))
-    fs.write("source", str(p.source))
-    fs.write("n_poses", int(p.n_poses))
-    fs.startWriteStruct("residuals", cv2.FileNode_MAP)
-    for k, v in p.residuals.items():
-        fs.write(str(k), float(v))
-    fs.endWriteStruct()
-    fs.endWriteStruct()
-
-
-def _mat(fs: cv2.FileStorage, name: str, a) -> None:
-    arr = np.asarray(a, np.float64)
-    fs.write(name, arr.reshape(-1, 1) if arr.ndim == 1 else arr)
-
-
-def write_display_calib(path: str, calib: DisplayCalib) -> None:
-    """Write ``calib`` as an OpenCV FileStorage YAML at ``path`` (layout in the module doc; absent entries are
-    left out). Validates every entry first and raises ``ValueError`` naming it."""
-    _validate(calib, path)
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    fs = cv2.FileStorage(path, cv2.FILE_STORAGE_WRITE)
-    if not fs.isOpened():
-        raise ValueError(f"cannot write display calibration {path!r}")
-    try:
-        fs.write("format_version", FORMAT_VERSION)
-        if calib.camera is not None:
-            c = calib.camera
-            fs.startWriteStruct("camera", cv2.FileNode_MAP)
-            _mat(fs, "T_display_camera", c.T_display_camera)
-            if c.stereo is not None:
-                fs.write("image_width", int(c.stereo["image_size"][0]))
-                fs.write("image_height", int(c.stereo["image_size"][1]))
-                for k in ("K1", "D1", "K2", "D2", "R", "T"):
-                    _mat(fs, k, c.stereo[k])
-            if c.cov is not None:
-                _mat(fs, "cov", c.cov)
-            _write_prov(fs, c.provenance)
-            fs.endWriteStruct()
-        if calib.projector is not None:
-            p = calib.projector
-            fs.startWriteStruct("projector", cv2.FileNode_MAP)
-            _mat(fs, "K", p.K)
-            _mat(fs, "D", p.D)
-            _mat(fs, "T_display_projector", p.T_display_projector)
-            fs.write("width", int(p.width))
-            fs.write("height", int(p.height))
-            _write_prov(fs, p.provenance)
-            fs.endWriteStruct()
-        if calib.arms:
-            fs.startWriteStruct("arms", cv2.FileNode_MAP)
-            for side in ("left", "right"):
-                if side in calib.arms:
-                    a = calib.arms[side]
-                    fs.startWriteStruct(side, cv2.FileNode_MAP)
-                    _mat(fs, "T_display_base", a.T_display_base)
-                    _mat(fs, "marker_offset", a.marker_offset)
-                    _write_prov(fs, a.provenance)
-                    fs.endWriteStruct()
-            fs.endWriteStruct()
-        if calib.eye is not None:
-            e = calib.eye
-            fs.startWriteStruct("eye", cv2.FileNode_MAP)
-            fs.write("mode", e.mode)
-            _mat(fs, "V", e.V)
-            fs.write("ipd", float(e.ipd))
-            _mat(fs, "glasses_eye_offset", e.glasses_eye_offset)
-            _write_prov(fs, e.provenance)
-            fs.endWriteStruct()
-    finally:
-        fs.release()
-
-
-# ----------------------------------------------------------------------------------------------------- reading
-def _check_pose(key: str, T, path: str) -> np.ndarray:
-    A = np.asarray(T, float)
-    where = f"{path}: {key}" if path else key
-    if A.shape != (4, 4) or not np.all(np.isfinite(A)):
-        raise ValueError(f"{where} must be a finite 4x4 transform, got shape {A.shape}")
-    if np.abs(A[3] - (0, 0, 0, 1)).max() > 1e-9:
-        raise ValueError(f"{where}: last row must be (0, 0, 0, 1), got {A[3].tolist()}")
-    R = A[:3, :3]
-    if np.abs(R.T @ R - np.eye(3)).max() > 1e-6 or np.linalg.det(R) < 0:
-        raise ValueError(f"{where}: rotation block is not a proper rotation (orthonormal, det +1)")
-    return A
-
-
-def _vec(key: str, v, n: int, path: str) -> np.ndarray:
-    a = np.asarray(v, float).ravel()
-    if a.shape != (n,) or not np.all(np.isfinite(a)):
-        raise ValueError(f"{path}: {key} must be {n} finite numbers, got shape {a.shape}")
-    return a
-
-
-def _validate(c: DisplayCalib, path: str) -> None:
-    if c.camera is not None:
-        _check_pose("camera.T_display_camera", c.camera.T_display_camera, path)
-        if c.camera.stereo is not None:
-            s = c.camera.stereo
-            for k, shape in (("K1", (3, 3)), ("K2", (3, 3)), ("R", (3, 3))):
-                a = np.asarray(s.get(k, np.nan), float)
-                if a.shape != shape or not np.all(np.isfinite(a)):
-                    raise ValueError(f"{path}: camera.{k} must be a finite {shape} matrix")
-            for k, n in (("D1", 5), ("D2", 5), ("T", 3)):
-                _vec(f"camera.{k}", s.get(k, np.nan), n, path)
-        if c.camera.cov is not None:
-            C = np.asarray(c.camera.cov, float)
-            if C.shape != (30, 30) or not np.all(np.isfinite(C)) or np.abs(C - C.T).max() > 1e-9 * max(1.0, np.abs(C).max()):
-                raise ValueError(f"{path}: camera.cov must be a finite symmetric 30x30 matrix, got {C.shape}")
-    if c.projector is not None:
-        p = c.projector
-        _check_pose("projector.T_display_projector", p.T_display_projector, path)
-        K = np.asarray(p.K, float)
-        if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
-            raise ValueError(f"{path}: projector.K must be a finite 3x3 matrix with positive focal lengths")
-        _vec("projector.D", p.D, 5, path)
-        if not (int(p.width) > 0 and int(p.height) > 0):
-            raise ValueError(f"{path}: projector.width/height must be positive, got {p.width}x{p.height}")
-    for side, a in c.arms.items():
-        if side not in ("left", "right"):
-            raise ValueError(f"{path}: arms.{side}: side must be 'left' or 'right'")
-        _check_pose(f"arms.{side}.T_display_base", a.T_display_base, path)
-        _vec(f"arms.{side}.marker_offset", a.marker_offset, 3, path)
-    if c.eye is not None:
-        if c.eye.mode not in ("fixed", "tracked"):
-            raise ValueError(f"{path}: eye.mode must be 'fixed' or 'tracked', got {c.eye.mode!r}")
-        _vec("eye.V", c.eye.V, 3, path)
-        _vec("eye.glasses_eye_offset", c.eye.glasses_eye_offset, 3, path)
-        if not (math.isfinite(c.eye.ipd) and 0.0 <= c.eye.ipd <= 0.1):
-            raise ValueError(f"{path}: eye.ipd must be in [0, 0.1] m, got {c.eye.ipd!r}")
-
-
-def _get(d: dict, key: str, prefix: str, path: str, kind: type | tuple):
-    if not isinstance(d, dict) or key not in d:
-        raise ValueError(f"{path}: missing key {prefix}{key}")
-    v = d[key]
-    if kind is float and type(v) is int:
-        v = float(v)
-    if not isinstance(v, kind) or isinstance(v, bool):
-        raise ValueError(f"{path}: {prefix}{key} has the wrong type ({type(v).__name__})")
-    return v
-
-
-def _read_prov(d: dict, prefix: str, path: str) -> Provenance:
-    p = _get(d, "provenance", prefix, path, dict)
-    pre = prefix + "provenance."
-    res = p.get("residuals", {}) or {}
-    if not isinstance(res, dict):
-        raise ValueError(f"{path}: {pre}residuals must be a map of numbers")
-    residuals = {}
-    for k, v in res.items():
-        if type(v) not in (int, float) or not math.isfinite(v):
-            raise ValueError(f"{path}: {pre}residuals.{k} must be a finite number, got {v!r:.40}")
-        residuals[str(k)] = float(v)
-    return Provenance(str(_get(p, "method", pre, path, str)), str(_get(p, "measured_at", pre, path, str)),
-                      str(_get(p, "source", pre, path, str)), int(_get(p, "n_poses", pre, path, int)), residuals)
-
-
-def load_display_calib(path: str, require: tuple[str, ...] = ()) -> DisplayCalib:
-    """Read a ``display.yaml`` written by :func:`write_display_calib` (or by hand in the same layout).
-
-    ``require``: entry names (:data:`ENTRIES`) that must be present. Returns a :class:`DisplayCalib` with
-    ``path`` set. Raises ``ValueError`` naming the file and the key when the file is missing, too large, not
-    YAML, of another ``format_version``, or an entry is malformed (wrong type, shape, non-finite, not a rigid
-    transform) or a required entry is absent.
-    """
-    if not os.path.isfile(path):
-        raise ValueError(f"display calibration file not found: {path!r}")
-    if os.path.getsize(path) > MAX_CALIB_BYTES:
-        raise ValueError(f"{path}: display calibration larger than {MAX_CALIB_BYTES} bytes")
-    try:
-        with open(path, "rb") as fh:
-            text = fh.read().decode("utf-8")
-        if text.startswith("%YAML"):
-            text = text.split("\n", 1)[1] if "\n" in text else ""
-        doc = yaml.load(text, Loader=_CvYamlLoader)  # noqa: S506 - a SafeLoader subclass
-    except (UnicodeDecodeError, yaml.YAMLError, ValueError, RecursionError) as exc:
-        raise ValueError(f"{path}: not a display calibration YAML ({' '.join(str(exc).split())[:200]})") from None
-    if not isinstance(doc, dict):
-        raise ValueError(f"{path}: not a display calibration YAML (top level is {type(doc).__name__})")
-    ver = doc.get("format_version")
-    if ver != FORMAT_VERSION:
-        raise ValueError(f"{path}: format_version must be {FORMAT_VERSION}, got {ver!r:.40}")
-    out = DisplayCalib(path=path)
-
-    def mat(d, key, prefix):
-        v = _get(d, key, prefix, path, np.ndarray)
-        return v
-
-    if "camera" in doc:
-        d = _get(doc, "camera", "", path, dict)
-        T = _check_pose("camera.T_display_camera", mat(d, "T_display_camera", "camera."), path)
-        stereo = None
-        if "K1" in d:
-            stereo = {"image_size": (int(_get(d, "image_width", "camera.", path, int)),
-                                     int(_get(d, "image_height", "camera.", path, int)))}
-            for k in ("K1", "K2", "R"):
-                stereo[k] = mat(d, k, "camera.")
-            for k, n in (("D1", 5), ("D2", 5), ("T", 3)):
-                stereo[k] = _vec(f"camera.{k}", mat(d, k, "camera."), n, path)
-        cov = mat(d, "cov", "camera.") if "cov" in d else None
-        out.camera = CameraEntry(T, _read_prov(d, "camera.", path), stereo, cov)
-    if "projector" in doc:
-        d = _get(doc, "projector", "", path, dict)
-        out.projector = ProjectorEntry(
-            mat(d, "K", "projector."), _vec("projector.D", mat(d, "D", "projector."), 5, path),
-            _check_pose("projector.T_display_projector", mat(d, "T_display_projector", "projector."), path),
-            int(_get(d, "width", "projector.", path, int)), int(_get(d, "height", "projector.", path, int)),
-            _read_prov(d, "projector.", path))
-    if "arms" in doc:
-        arms = _get(doc, "arms", "", path, dict)
-        for side in arms:
-            if side not in ("left", "right"):
-                raise ValueError(f"{path}: arms.{side}: side must be 'left' or 'right'")
-            d = _get(arms, side, "arms.", path, dict)
-            pre = f"arms.{side}."
-            out.arms[side] = ArmEntry(_check_pose(pre + "T_display_base", mat(d, "T_display_base", pre), path),
-                                      _vec(pre + "marker_offset", mat(d, "marker_offset", pre), 3, path),
-                                      _read_prov(d, pre, path))
-    if "eye" in doc:
-        d = _get(doc, "eye", "", path, dict)
-        off = d.get("glasses_eye_offset", np.zeros(3))
-        out.eye = EyeEntry(str(_get(d, "mode", "eye.", path, str)), _vec("eye.V", mat(d, "V", "eye."), 3, path),
-                           float(_get(d, "ipd", "eye.", path, float)), _read_prov(d, "eye.", path),
-                           _vec("eye.glasses_eye_offset", off, 3, path))
-    _validate(out, path)
-    if require:
-        out.require(*require)
-    return out

@@ -10,6 +10,7 @@ twin and scores each estimate against the truth.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 from flexsheet.calibration import arms as arms_mod
@@ -24,7 +25,10 @@ from flexsheet.calibration.display_calib import (
     nominal_display_calib,
 )
 from flexsheet.calibration.eye import fixed_eye
+from flexsheet.calibration.projector_joint import refine_joint
 from flexsheet.vision.stereo_calibration import BoardSpec, parse_board
+
+log = logging.getLogger(__name__)
 
 __all__ = ["Options", "QUICK", "FULL", "run_camera_pose", "run_projector", "run_arms", "run_eye", "run_all"]
 
@@ -59,21 +63,16 @@ FULL = Options()
 QUICK = Options(projector_poses=4, arm_configs=12)
 
 
-def _progress(msg: str, progress) -> None:
-    if progress:
-        progress(msg)
-
-
-def run_camera_pose(source, opts: Options, start: DisplayCalib | None = None, progress=None):
+def run_camera_pose(source, opts: Options, start: DisplayCalib | None = None):
     """Camera-pose procedure: board views from ``source`` → :class:`CameraEntry` and the estimator's result.
     ``start``: where the nominal camera comes from (default :func:`nominal_display_calib`)."""
     start = start or nominal_display_calib()
     board = opts.board_spec()
     poses = cp_mod.plan_board_views(opts.views)
-    _progress(f"camera-pose: capturing {len(poses)} board views", progress)
+    log.info(f"camera-pose: capturing {len(poses)} board views")
     views = source.board_views(board, poses, opts.board_offset)
     prior = None if opts.prior == "none" else (cp_mod.load_prior(opts.prior) if opts.prior else cp_mod.load_prior())
-    _progress("camera-pose: detecting corners and fitting", progress)
+    log.info("camera-pose: detecting corners and fitting")
     r = cp_mod.estimate_camera_pose(views, board, start.camera.stereo, start.camera.T_display_camera,
                                     offset=opts.board_offset, prior_cov=prior)
     prov = Provenance(f"camera-pose: {opts.board} {opts.square * 1e3:g} mm on the sheet at home + {r.n_views - 1} "
@@ -83,7 +82,7 @@ def run_camera_pose(source, opts: Options, start: DisplayCalib | None = None, pr
     return CameraEntry(r.T_display_camera, prov, r.stereo, 0.5 * (r.cov + r.cov.T)), r
 
 
-def run_projector(source, opts: Options, calib: DisplayCalib, progress=None):
+def run_projector(source, opts: Options, calib: DisplayCalib):
     """Projector procedure: Gray-code frames at each pose → :class:`ProjectorEntry` and the result. Needs
     ``calib.camera``. The number of poses is ``opts.projector_poses`` (twin) or the captured count (lab)."""
     calib.require("camera")
@@ -98,13 +97,13 @@ def run_projector(source, opts: Options, calib: DisplayCalib, progress=None):
     cam = calib.camera
     poses = []
     for k in range(n):
-        _progress(f"projector: pose {k + 1}/{n}: {len(pats)} patterns", progress)
+        log.info(f"projector: pose {k + 1}/{n}: {len(pats)} patterns")
         frames = source.pattern_frames(pats, plans[min(k, len(plans) - 1)], k)
         poses.append(pj_mod.triangulate_pose(frames, W, H, cam.stereo, cam.T_display_camera,
                                              spacing=opts.pattern_spacing))
-    _progress("projector: calibrating", progress)
+    log.info("projector: calibrating")
     r = pj_mod.estimate_projector(poses, nom.K, (W, H), fit_k1=opts.fit_k1)
-    j = pj_mod.refine_joint(poses, cam.stereo, cam.T_display_camera, None, r.K, r.D, r.T_display_projector,
+    j = refine_joint(poses, cam.stereo, cam.T_display_camera, None, r.K, r.D, r.T_display_projector,
                             fit_k1=opts.fit_k1)
     r.K, r.D, r.T_display_projector = j.K, j.D, j.T_display_projector
     r.reprojection_px, r.n_inliers = j.reprojection_px, j.n_points
@@ -117,7 +116,7 @@ def run_projector(source, opts: Options, calib: DisplayCalib, progress=None):
     return ProjectorEntry(j.K, j.D, j.T_display_projector, W, H, prov), r
 
 
-def run_arms(source, opts: Options, calib: DisplayCalib, sides=("left", "right"), progress=None):
+def run_arms(source, opts: Options, calib: DisplayCalib, sides=("left", "right")):
     """Arm procedure for each side: marker frames → {side: (ArmEntry, ArmResult)}. Needs ``calib.camera``."""
     calib.require("camera")
     cam = calib.camera
@@ -127,7 +126,7 @@ def run_arms(source, opts: Options, calib: DisplayCalib, sides=("left", "right")
         a = nom.arms[side]
         qs = arms_mod.plan_arm_configs(side, opts.arm_configs, a.T_display_base, a.marker_offset, cam.stereo,
                                        cam.T_display_camera)
-        _progress(f"arms: {side}: {len(qs)} configurations", progress)
+        log.info(f"arms: {side}: {len(qs)} configurations")
         frames, q_used = source.marker_frames(side, qs)
         _, ul, ur = arms_mod.predict_marker(side, q_used, a.T_display_base, a.marker_offset, cam.stereo,
                                             cam.T_display_camera)
@@ -161,21 +160,21 @@ class Registration:
     timings: dict
 
 
-def run_all(source, opts: Options, progress=None) -> Registration:
+def run_all(source, opts: Options) -> Registration:
     """Camera pose, projector, arms and eye in lab order on ``source`` (each step from the ones before)."""
     import time
 
     timings = {}
     t0 = time.perf_counter()
-    cam, rc = run_camera_pose(source, opts, progress=progress)
+    cam, rc = run_camera_pose(source, opts)
     timings["camera_s"] = time.perf_counter() - t0
     calib = DisplayCalib(camera=cam)
     t0 = time.perf_counter()
-    proj, rp = run_projector(source, opts, calib, progress=progress)
+    proj, rp = run_projector(source, opts, calib)
     timings["projector_s"] = time.perf_counter() - t0
     calib.projector = proj
     t0 = time.perf_counter()
-    arms = run_arms(source, opts, calib, progress=progress)
+    arms = run_arms(source, opts, calib)
     timings["arms_s"] = time.perf_counter() - t0
     calib.arms = {s: e for s, (e, _) in arms.items()}
     calib.eye = run_eye(source=source.label)

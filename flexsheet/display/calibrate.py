@@ -11,20 +11,19 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
 import os
 import sys
-import time
 from dataclasses import replace
 
 from flexsheet.calibration import procedures as P
-from flexsheet.calibration.display_calib import DisplayCalib, load_display_calib, write_display_calib
+from flexsheet.calibration.display_calib import DisplayCalib
+from flexsheet.calibration.display_calib_file import load_display_calib, write_display_calib
+
+log = logging.getLogger(__name__)
 
 __all__ = ["camera_pose_main", "projector_main", "arms_main", "eye_main", "display_main", "noise_main"]
-
-
-def _say(msg: str) -> None:
-    print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
 
 
 def _common(p: argparse.ArgumentParser, what: str) -> None:
@@ -102,7 +101,7 @@ def camera_pose_main(argv: list[str] | None = None) -> int:
         opts = _opts(a)
         src, truth = _source(a, p, opts)
         calib = _load_out(a.out)
-        entry, r = P.run_camera_pose(src, opts, progress=_say)
+        entry, r = P.run_camera_pose(src, opts)
         calib.camera = entry
         path = _write(a.out, calib)
         msg = (f"camera pose: {r.n_views} views, RMS {r.rms_px:.3f} px, home corners residual {r.residual_mm:.3f} mm "
@@ -110,8 +109,8 @@ def camera_pose_main(argv: list[str] | None = None) -> int:
         if truth is not None:
             et, er = truth.camera_pose_error(entry.T_display_camera)
             msg += f"; error vs truth {et * 1e3:.3f} mm, {math.degrees(er):.4f} deg"
-        _say(msg)
-        _say(f"wrote {path}")
+        log.info(msg)
+        log.info(f"wrote {path}")
         return 0
 
     return _run(p, go)
@@ -134,7 +133,7 @@ def projector_main(argv: list[str] | None = None) -> int:
         opts = _opts(a)
         src, truth = _source(a, p, opts)
         calib = _load_out(a.out)
-        entry, r = P.run_projector(src, opts, calib, progress=_say)
+        entry, r = P.run_projector(src, opts, calib)
         calib.projector = entry
         path = _write(a.out, calib)
         msg = (f"projector: {r.n_poses} poses, {r.n_points} correspondences ({r.n_inliers} used), "
@@ -142,8 +141,8 @@ def projector_main(argv: list[str] | None = None) -> int:
         if truth is not None:
             et, er = truth.projector_pose_error(entry.T_display_projector)
             msg += f"; error vs truth {et * 1e3:.2f} mm, {math.degrees(er):.3f} deg"
-        _say(msg)
-        _say(f"wrote {path}")
+        log.info(msg)
+        log.info(f"wrote {path}")
         return 0
 
     return _run(p, go)
@@ -166,15 +165,15 @@ def arms_main(argv: list[str] | None = None) -> int:
         src, truth = _source(a, p, opts)
         calib = _load_out(a.out)
         sides = ("left", "right") if a.side == "both" else (a.side,)
-        res = P.run_arms(src, opts, calib, sides, progress=_say)
+        res = P.run_arms(src, opts, calib, sides)
         for side, (entry, r) in res.items():
             calib.arms[side] = entry
             msg = f"arm {side}: {r.n_configs} configurations, residual {r.residual_mm:.3f} mm"
             if truth is not None:
                 et, er = truth.base_error(side, entry.T_display_base)
                 msg += f"; base error vs truth {et * 1e3:.3f} mm, {math.degrees(er):.3f} deg"
-            _say(msg)
-        _say(f"wrote {_write(a.out, calib)}")
+            log.info(msg)
+        log.info(f"wrote {_write(a.out, calib)}")
         return 0
 
     return _run(p, go)
@@ -204,7 +203,7 @@ def eye_main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--V and --eye-offset must be x,y,z numbers, got {a.V!r}, {a.eye_offset!r}") from None
         calib = _load_out(a.out)
         calib.eye = fixed_eye(V, a.ipd) if a.mode == "fixed" else tracked_eye_entry(V, a.ipd, off)
-        _say(f"eye: {a.mode}, V = {calib.eye.V.tolist()} m, ipd {calib.eye.ipd} m; wrote {_write(a.out, calib)}")
+        log.info(f"eye: {a.mode}, V = {calib.eye.V.tolist()} m, ipd {calib.eye.ipd} m; wrote {_write(a.out, calib)}")
         return 0
 
     return _run(p, go)
@@ -261,7 +260,7 @@ def display_main(argv: list[str] | None = None) -> int:
             from flexsheet.experiments.registration_sweep import run_sweep
 
             seeds = [int(s) for s in a.seeds.split(",") if s.strip()]
-            run_sweep(seeds, a.out, quick=a.quick, realism=a.realism, progress=_say)
+            run_sweep(seeds, a.out, quick=a.quick, realism=a.realism)
             return 0
         if a.live:
             return _live(a, opts)
@@ -271,9 +270,9 @@ def display_main(argv: list[str] | None = None) -> int:
             p.error("--sim needs --truth-seed N")
         from flexsheet.twin.registration import run_display_sim, verdicts
 
-        s = run_display_sim(a.truth_seed, a.out, opts, a.realism, a.force, progress=_say)
+        s = run_display_sim(a.truth_seed, a.out, opts, a.realism, a.force)
         ok = all(verdicts(s).values())
-        _say(f"{'all within target' if ok else 'TARGET MISSED'}; wrote {a.out}/display.yaml, {a.out}/summary.json")
+        log.info(f"{'all within target' if ok else 'TARGET MISSED'}; wrote {a.out}/display.yaml, {a.out}/summary.json")
         return 0
 
     return _run(p, go)
@@ -299,10 +298,10 @@ def _live(a, opts: P.Options) -> int:
         print(f"flexsheet calibrate display: {problems[0]} (--dry-run lists every pose)", file=sys.stderr)
         return 1
     try:
-        from flexsheet.runtime.launch import apply_toplevel_sets
+        from flexsheet.runtime.launch_sets import apply_toplevel_sets
 
         apply_toplevel_sets(a.set, a.launch)
-        s = run_live(a.launch, a.out, opts, a.truth_seed, a.host, a.settle, progress=_say)
+        s = run_live(a.launch, a.out, opts, a.truth_seed, a.host, a.settle)
     except (LiveError, LaunchError) as exc:
         print(f"flexsheet calibrate display: {exc}", file=sys.stderr)
         print(f"(frames captured so far are kept in {a.out}/frames: run the same command again to resume)",
@@ -311,11 +310,11 @@ def _live(a, opts: P.Options) -> int:
     if "verdicts" in s:
         ok = all(s["verdicts"].values())
         c, pj = s["camera"], s["projector"]
-        _say(f"camera {c['translation_error_mm']:.3f} mm {c['rotation_error_deg']:.4f}°, projector "
+        log.info(f"camera {c['translation_error_mm']:.3f} mm {c['rotation_error_deg']:.4f}°, projector "
              f"{pj['translation_error_mm']:.2f} mm {pj['rotation_error_deg']:.3f}° {pj['reprojection_px']:.3f} px, arms "
              + ", ".join(f"{k} {v['translation_error_mm']:.3f} mm" for k, v in s["arms"].items())
              + f": {'all within target' if ok else 'TARGET MISSED'}")
-    _say(f"wrote {a.out}/display.yaml, {a.out}/summary.json")
+    log.info(f"wrote {a.out}/display.yaml, {a.out}/summary.json")
     return 0
 
 
@@ -333,14 +332,14 @@ def noise_main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
 
     def go():
-        from flexsheet.twin.registration_camera import measure_ximea_noise
+        from flexsheet.twin.sensor_noise import measure_ximea_noise
 
-        _say(f"measuring {a.images} (render each view through its calibrated pose)…")
+        log.info(f"measuring {a.images} (render each view through its calibrated pose)…")
         r = measure_ximea_noise(a.images, a.square)
         os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
         with open(a.out, "w") as fh:
             json.dump(r, fh, indent=1)
-        _say(f"model {r['model']}; wrote {a.out}")
+        log.info(f"model {r['model']}; wrote {a.out}")
         return 0
 
     return _run(p, go)

@@ -19,9 +19,15 @@ from pathlib import Path
 
 from pydantic import ConfigDict
 
+from flexsheet.runtime.console import console_logger, show_lines
 from flexsheet.runtime.extensions import LaunchExtension, LaunchSection
 from flexsheet.runtime.launch import LaunchError, LaunchFile, substitute, substitutions
 from flexsheet.twin.truth_choice import TruthChoice
+
+#: the launcher's console (the display layer's lines among the launcher's own)
+log = console_logger("launch")
+#: the loggers of the twin's registration whose progress a launch shows
+REGISTRATION_LOGGERS = ("flexsheet.twin.registration", "flexsheet.calibration")
 
 __all__ = ["TwinSpec", "EXTENSION", "display_calib_path", "twin_registration", "twin_registration_path",
            "read_display_calib", "DISPLAY_NEEDS", "DISPLAY_COMMANDS"]
@@ -65,27 +71,30 @@ def twin_registration_path(twin: TwinSpec, cache_root: str | None = None) -> Pat
     return root / "display" / f"{twin.realism}-{twin.truth_seed}" / "display.yaml"
 
 
-def twin_registration(twin: TwinSpec, print_fn=print, cache_root: str | None = None) -> str:
+def twin_registration(twin: TwinSpec, cache_root: str | None = None) -> str:
     """Run the display registration in the twin for ``twin`` (the procedures of ``flexsheet calibrate display
     --sim``: camera pose, projector, arm bases, against images rendered from the hidden truth), cached per
     realism, seed, options and procedure version; returns the ``display.yaml`` path. The estimators get only
-    this file, never the truth. Raises :class:`LaunchError` when the registration fails."""
+    this file, never the truth. Its lines go to the launcher's console (``[launch] …``), the procedures'
+    progress with them. Raises :class:`LaunchError` when the registration fails."""
     from flexsheet.twin.registration import sim_display_calib
 
-    print_fn(f"[launch] twin registration ({twin.realism}, truth seed {twin.truth_seed}): the calibration "
+    for name in REGISTRATION_LOGGERS:
+        show_lines(name, prefix="[launch] ")
+    log.info(f"[launch] twin registration ({twin.realism}, truth seed {twin.truth_seed}): the calibration "
              f"procedures in the twin (cached per seed; the first run of a seed takes ~20-60 s) ...")
     try:
-        path = sim_display_calib(twin.truth_seed, twin.realism, cache_root=cache_root,
-                                 progress=lambda m: print_fn(f"[launch] {m}"))
+        path = sim_display_calib(twin.truth_seed, twin.realism, cache_root=cache_root)
     except (ValueError, RuntimeError, OSError) as exc:
         raise LaunchError(f"twin registration (truth seed {twin.truth_seed}) failed: {exc}") from None
-    print_fn(f"[launch] twin registration: {path}")
+    log.info(f"[launch] twin registration: {path}")
     return str(path)
 
 
-def _before_launch(lf: LaunchFile, print_fn, check_only: bool) -> dict:
+def before_launch(lf: LaunchFile, check_only: bool) -> dict:
     """The twin's registration, when the file asks for it and names no ``display_calib``: returns
-    ``{"display_calib": path}`` (nothing with ``check_only`` when the cache is cold: a note instead)."""
+    ``{"display_calib": path}`` (nothing with ``check_only`` when the cache is cold: a note, logged at
+    WARNING, instead)."""
     twin = lf.section("twin")
     if twin is None or not twin.registration or lf.section("display_calib") is not None:
         return {}
@@ -94,25 +103,25 @@ def _before_launch(lf: LaunchFile, print_fn, check_only: bool) -> dict:
 
         cached = sim_display_calib_cached(twin.truth_seed, twin.realism)
         if cached is None:
-            print_fn(f"note: the twin registration (truth seed {twin.truth_seed}) runs at start and writes "
-                     f"{twin_registration_path(twin)}")
+            log.warning(f"{lf.path}: the twin registration (truth seed {twin.truth_seed}) runs at start and "
+                        f"writes {twin_registration_path(twin)}")
             return {}
         return {"display_calib": cached}
-    return {"display_calib": twin_registration(twin, print_fn=print_fn)}
+    return {"display_calib": twin_registration(twin)}
 
 
 def read_display_calib(path: str) -> None:
-    """Parse a display calibration (:func:`flexsheet.calibration.display_calib.load_display_calib`); raises
+    """Parse a display calibration (:func:`flexsheet.calibration.display_calib_file.load_display_calib`); raises
     ``ValueError``."""
-    from flexsheet.calibration.display_calib import load_display_calib
+    from flexsheet.calibration.display_calib_file import load_display_calib
 
     load_display_calib(path)
 
 
 def read_stereo_calib(path: str) -> None:
-    """Parse a stereo calibration YAML (:func:`flexsheet.vision.stereo_calibration.load_yaml`); raises
+    """Parse a stereo calibration YAML (:func:`flexsheet.vision.calib_yaml.load_yaml`); raises
     ``ValueError``."""
-    from flexsheet.vision.stereo_calibration import load_yaml
+    from flexsheet.vision.calib_yaml import load_yaml
 
     load_yaml(path)
 
@@ -151,7 +160,7 @@ def _check_display_calib(c) -> None:
         c.err("display_calib", path, problem + (" (the registration writes it: docs/calibration.md)"
                                                 if problem == "no such file" else ""))
         return
-    from flexsheet.calibration.display_calib import load_display_calib
+    from flexsheet.calibration.display_calib_file import load_display_calib
 
     calib = load_display_calib(path)
     for name, spec in c.lf.nodes.items():
@@ -199,7 +208,7 @@ EXTENSION = LaunchExtension(
         LaunchSection("twin", TwinSpec | None, _twin_value, None,
                       "the twin's hidden truth (simulated graphs only)"),
     ),
-    before_launch=_before_launch,
+    before_launch=before_launch,
     check=_check,
     file_readers={"calib_file": read_stereo_calib, "display_calib": read_display_calib},
     output_params={("fem", "cache_dir"): "dir"},

@@ -17,6 +17,7 @@ bridges keep the RV-1A's joint limits (with their margin) and speed limits.
 from __future__ import annotations
 
 import json
+import logging
 import math
 import os
 import sys
@@ -36,6 +37,8 @@ from flexsheet.calibration.sources import ImageDirSource
 from flexsheet.twin.registration_camera import commanded_sheet_joints
 from messages import StereoFrame
 from messages import topics as T
+
+log = logging.getLogger(__name__)
 
 __all__ = ["Roles", "roles_of", "plan", "check_plan", "LiveSource", "LiveError"]
 
@@ -150,11 +153,10 @@ class LiveSource:
     kind = "live"
 
     def __init__(self, client, roles: Roles, out: str, opts: Options, twin: bool, settle_s: float = 0.3,
-                 move_timeout_s: float = 60.0, progress=print, ask=None):
+                 move_timeout_s: float = 60.0, ask=None):
         self.client, self.roles, self.opts, self.twin = client, roles, opts, twin
         self.root = os.path.join(out, "frames")
         self.settle_s, self.move_timeout_s = float(settle_s), float(move_timeout_s)
-        self.progress = progress
         self.ask = ask or self._ask_terminal
         self.manifest: dict = {}
         self._scene = None
@@ -195,7 +197,7 @@ class LiveSource:
         nothing strokes the sheet the registration moves)."""
         if self.roles.world is not None:
             self.client.call(self.roles.world, "script/pause")
-            self.progress("live: the world's script is paused while the registration runs")
+            log.info("live: the world's script is paused while the registration runs")
 
     def _home(self) -> None:
         """Both arms to the home sheet's clamp poses (the bridges' ``home``), waited for: the display's targets
@@ -215,7 +217,7 @@ class LiveSource:
             try:
                 step()
             except Exception as exc:  # noqa: BLE001 - best effort on the way out; said, not raised
-                self.progress(f"live: cleanup: {exc}")
+                log.info(f"live: cleanup: {exc}")
 
     # ------------------------------------------------------------------ arms and camera
     def _move(self, goals: dict[str, np.ndarray], what: str) -> None:
@@ -304,7 +306,7 @@ class LiveSource:
                         raise LiveError(f"{what}: the board ({self.opts.board}) is not found in the {side} image "
                                         f"(saved as {bad})")
                 self._save(path, pair)
-                self.progress(f"{what}: captured ({self.opts.board_frames} frames)")
+                log.info(f"{what}: captured ({self.opts.board_frames} frames)")
             out.append(pair)
         return out
 
@@ -344,7 +346,7 @@ class LiveSource:
         man = self._manifest()
         man["projector"] = {"width": int(patterns[0].shape[1]), "height": int(patterns[0].shape[0])}
         self._write_manifest(man)
-        self.progress(f"{what}: {len(patterns)} patterns captured")
+        log.info(f"{what}: {len(patterns)} patterns captured")
         return out
 
     def marker_frames(self, side: str, joints: list[np.ndarray]) -> tuple[list[Pair], list[np.ndarray]]:
@@ -370,7 +372,7 @@ class LiveSource:
                 man.setdefault("arms", {})[side] = {"joints": [np.asarray(v, float).tolist() for v in joints[:k + 1]]}
                 self._write_manifest(man)
             frames.append(pair)
-        self.progress(f"arms: {side}: {len(joints)} configurations captured")
+        log.info(f"arms: {side}: {len(joints)} configurations captured")
         return frames, [np.asarray(q, float) for q in joints]
 
     # ------------------------------------------------------------------ manifest
@@ -398,7 +400,7 @@ def _residual_summary(cam_r, proj_r, arms: dict) -> dict:
 
 
 def run_live(launch: str, out: str, opts: Options, truth_seed: int | None = None, host: str | None = None,
-             settle_s: float = 0.3, progress=print, ask=None) -> dict:
+             settle_s: float = 0.3, ask=None) -> dict:
     """Drive the registration through the running graph of ``launch`` (module doc); write ``out/display.yaml``
     and ``out/summary.json`` (the keys of ``calibrate display --sim``; errors against the truth only when the
     camera is the twin). ``truth_seed``: must be the camera twin's (a check). Returns the summary. Raises
@@ -406,7 +408,7 @@ def run_live(launch: str, out: str, opts: Options, truth_seed: int | None = None
     import time
     from dataclasses import asdict
 
-    from flexsheet.calibration.display_calib import write_display_calib
+    from flexsheet.calibration.display_calib_file import write_display_calib
     from flexsheet.calibration.procedures import run_all
     from flexsheet.runtime.client import GraphClient
     from flexsheet.runtime.services import ServiceError
@@ -434,11 +436,11 @@ def run_live(launch: str, out: str, opts: Options, truth_seed: int | None = None
             truth = TwinTruth.draw(int(twin_spec["truth_seed"]), twin_spec["realism"])
         elif truth_seed is not None:
             raise LiveError(f"--truth-seed scores against the camera twin's truth, but the camera's source is {kind!r}")
-        src = LiveSource(client, roles, out, opts, twin=truth is not None, settle_s=settle_s, progress=progress,
+        src = LiveSource(client, roles, out, opts, twin=truth is not None, settle_s=settle_s,
                          ask=ask)
         try:
             src.begin()
-            reg = run_all(src, opts, progress=progress)
+            reg = run_all(src, opts)
         except (ServiceError, TimeoutError) as exc:
             raise LiveError(str(exc)) from None
         finally:

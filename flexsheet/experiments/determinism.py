@@ -18,10 +18,12 @@ import sys
 import time
 from pathlib import Path
 
-from flexsheet.runtime.bag import read_bag
+from flexsheet.runtime.bag_read import read_bag
 
 __all__ = ["topic_hashes", "main"]
 
+#: simulated seconds of a ``--quick`` run: the nodes up, the finger's approach and the first stroke
+QUICK_S = 10.0
 TARGETS = {"exposure_to_arm_command_median_ms": 15.0, "exposure_to_projected_median_ms": 25.0,
            "realtime_factor_min": 1.0, "fem_active_s": 10.0}
 
@@ -64,12 +66,18 @@ def _chart(out: dict, path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="flexsheet experiment determinism", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
-                                 epilog="example: flexsheet experiment determinism --out docs/figures/simclock")
+                                 epilog="example: flexsheet experiment determinism --out docs/figures/simclock\n"
+                                        "         flexsheet experiment determinism --quick --out /tmp/det")
     ap.add_argument("--out", required=True, help="output folder (the two runs go into run1/, run2/)")
     ap.add_argument("--duration", type=float, default=30.0, help="simulated seconds per run (default 30)")
     ap.add_argument("--seed", type=int, default=0, help="twin truth seed (default 0)")
     ap.add_argument("--launch", default="launch/sim.yaml", help="a clock: sim launch file (default launch/sim.yaml)")
+    ap.add_argument("--quick", action="store_true", help=f"{QUICK_S:g} simulated s per run (the comparison only)")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.duration = QUICK_S
+    if not args.duration > 0:
+        ap.error(f"--duration must be > 0, got {args.duration}")
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     runs = []

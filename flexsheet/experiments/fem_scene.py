@@ -8,7 +8,7 @@ What it measures, for the model the FEM node serves for the scene (:func:`flexsh
 2. **Visible error against the reference**: at the stroke's middle (full: its start, middle and end), a rigid
    capsule finger pushed along the inward normal every 5 mm over the scene's declared range (``use.max_depth``)
    into the scene's compressible hyperelastic body (its law, its contact law, its support and inclusions: total
-   Lagrangian P2, Newton with load stepping, :mod:`flexsheet.fem.hyperelastic`), on gmsh meshes refined around
+   Lagrangian P2, Newton with load stepping, :mod:`flexsheet.fem.reference.hyperelastic`), on gmsh meshes refined around
    the push point. The error is the largest distance, in projector pixels, between where either eye sees the
    model's and the reference's rendered vertex on the imaginary screen, over the vertices the eye sees past the
    surface and the finger (:mod:`flexsheet.fem.eye_view`). Linear P2 on the reference's own mesh is judged too.
@@ -20,7 +20,7 @@ Outputs in ``out_dir``: ``summary.json`` (``scene`` with ``max_depth_mm``, ``con
 ``realtime.update_ms``, ``visible.max_px_in_range``, ``visible.range_mm``, ``reference.converged_px``, the
 pushes) and ``accuracy_<name>.png`` + ``.json``. Reference solves are cached
 (:class:`flexsheet.fem.cache.ArrayCache`, the key includes ``scene.key()``), solved first on dask when the cache
-lacks them (:func:`flexsheet.fem.workers.run_workers`). :func:`visible_errors` is the tables' older footprint
+lacks them (:func:`flexsheet.fem.reference.workers.run_workers`). :func:`visible_errors` is the tables' older footprint
 metric (mm), still used by the sphere and path tables' held-out checks.
 
 Run by hand, and the FEM stiffness and sheet tension along the stroke of a launch run
@@ -43,6 +43,7 @@ import numpy as np
 
 from flexsheet.fem.choose import visible_mask
 from flexsheet.fem.path_snapshots import GRID
+from flexsheet.fem.reference.progress import show_progress
 
 __all__ = ["run_scene", "main", "visible_errors", "TARGET_MM", "TARGET_PX", "CONVERGED_PX", "QUICK", "FULL"]
 
@@ -75,9 +76,12 @@ def scene_reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, p
     (largest principal Green–Lagrange strain), ``seconds``, ``dofs``, and the mesh (``points``, ``tets``,
     ``fixed``, ``E``, ``nu``)."""
     from flexsheet.fem.cache import cache_key
-    from flexsheet.fem.hyperelastic import SOLVER_VERSION, Capsule, HyperelasticModel, solve_path_capsule
     from flexsheet.fem.material import Material
     from flexsheet.fem.mesh import MeshSpec
+    from flexsheet.fem.reference.capsule_contact import Capsule
+    from flexsheet.fem.reference.hyperelastic import HyperelasticModel
+    from flexsheet.fem.reference.path_solver import solve_path_capsule
+    from flexsheet.fem.reference.versions import SOLVER_VERSION
     from flexsheet.fem.scene_mesh import scene_mesh
 
     depths = np.asarray(st["depths"], float)
@@ -164,7 +168,7 @@ def _finger(sc, q: np.ndarray, n: np.ndarray, depth: float):
     return finger_on_scene(q, n, float(depth), sc.finger.radius)
 
 
-def _update_ms(rt, sc, depths, n_calls: int) -> dict:
+def scene_update_ms(rt, sc, depths, n_calls: int) -> dict:
     """CPU and wall time (ms) of ``rt.update_finger`` at 5 stroke points × ``depths``, ``n_calls`` each."""
     pts, nrm = sc.stroke_points(5)
     ts, cpu, methods = [], [], []
@@ -184,7 +188,7 @@ def _update_ms(rt, sc, depths, n_calls: int) -> dict:
 
 
 def _ref_job(args: tuple) -> tuple[float, float, str | None]:
-    """Worker (:func:`flexsheet.fem.workers.run_workers`): one reference level of one push into the cache;
+    """Worker (:func:`flexsheet.fem.reference.workers.run_workers`): one reference level of one push into the cache;
     (h_fine, seconds, None or the error)."""
     scene_file, f, h, st, probes, cache_dir = args
     from flexsheet.fem.cache import ArrayCache
@@ -235,7 +239,7 @@ def _scene_push(sc, rt, st: dict, verts, faces, cache, f: float, depths) -> dict
     return push
 
 
-def _judged_range(depths: np.ndarray, change: np.ndarray | None) -> float | None:
+def judged_range(depths: np.ndarray, change: np.ndarray | None) -> float | None:
     """The deepest depth (m) up to which the reference's two levels differ by ≤ :data:`CONVERGED_PX` at every
     judged depth (the range a served figure is judged over when the reference does not converge over the
     scene's whole range); None without two levels or when it converges nowhere up to 15 mm, the least judged
@@ -255,21 +259,16 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     against the scene's nonlinear reference, as the eyes see it (module doc), over the scene's declared depths
     (``use.max_depth``); write ``out_dir``/summary.json and the accuracy chart; return the summary. The
     reference levels the cache lacks are solved first on dask (``jobs`` local processes or the
-    ``--scheduler``'s cluster, :func:`flexsheet.fem.workers.run_workers`). ``cache_dir``: the FEM cache (None:
+    ``--scheduler``'s cluster, :func:`flexsheet.fem.reference.workers.run_workers`). ``cache_dir``: the FEM cache (None:
     ~/.cache/flexsheet/fem). ``levels``: the reference levels' h_fine (m, coarse to fine; default the
-    settings'). Raises ``ValueError`` (:class:`flexsheet.model.scenes.SceneError`) for a bad scene file."""
+    settings'). Raises ``ValueError`` (:class:`flexsheet.model.scene_parts.SceneError`) for a bad scene file."""
     from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
     from flexsheet.fem.served import served_model
-    from flexsheet.fem.workers import parallel, run_workers
     from flexsheet.model.scenes import load_scene
 
     t0 = time.perf_counter()
     sc = load_scene(scene_path)
-    st = dict(QUICK if quick else FULL)
-    if levels is not None:
-        st["levels"] = tuple(levels)
-    n_d = int(sc.use.max_depth / DEPTH_STEP + 1e-9)         # never past the declared range
-    st["depths"] = tuple(np.round(np.arange(1, n_d + 1) * DEPTH_STEP, 9))
+    st = _scene_settings(sc, quick, levels)
     depths = np.asarray(st["depths"], float)
     cache_dir = cache_dir or DEFAULT_CACHE_DIR
     cache = ArrayCache(cache_dir, _log)
@@ -278,19 +277,54 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
          f"({sc.use.reason or 'no reason given'}), {sc.finger.contact} contact")
     rt, what = served_model(sc, cache_dir=cache_dir, log=_log)
     _log(f"served model: {what}")
-    timing = _update_ms(rt, sc, (0.005, depths[len(depths) // 2], depths[-1]), st["n_time"])
+    timing = scene_update_ms(rt, sc, (0.005, depths[len(depths) // 2], depths[-1]), st["n_time"])
     _log(f"update: CPU median {timing['median']:.3f} ms, p90 {timing['p90']:.3f} ms")
     verts = rt.rest_vertices.astype(float)
     faces = np.asarray(rt.faces)
+    _solve_references(scene_path, st, verts, cache_dir, jobs)
+    pushes = [_scene_push(sc, rt, st, verts, faces, cache, f, depths) for f in st["fractions"]]
+    summary = _summary(sc, quick, st, what, timing, pushes, t0)
+    served = np.asarray(summary["visible"]["px_by_depth"])
+    with open(os.path.join(out_dir, "summary.json"), "w") as fh:
+        json.dump(summary, fh, indent=1)
+    _plot(out_dir, summary)
+    _log(f"done in {summary['seconds']:.0f} s -> {out_dir}: visible {served.max():.2f} px (target {TARGET_PX}), "
+         f"reference levels {summary['reference']['converged_px']} px (target {CONVERGED_PX})")
+    return summary
+
+
+def _scene_settings(sc, quick: bool, levels: tuple[float, ...] | None) -> dict:
+    """:data:`QUICK` or :data:`FULL` for scene ``sc``: the reference ``levels`` (h_fine m) when given, and the
+    push depths every :data:`DEPTH_STEP` m up to the scene's declared ``use.max_depth`` (never past it)."""
+    st = dict(QUICK if quick else FULL)
+    if levels is not None:
+        st["levels"] = tuple(levels)
+    n_d = int(sc.use.max_depth / DEPTH_STEP + 1e-9)         # never past the declared range
+    st["depths"] = tuple(np.round(np.arange(1, n_d + 1) * DEPTH_STEP, 9))
+    return st
+
+
+def _solve_references(scene_path, st: dict, verts: np.ndarray, cache_dir: str, jobs: int) -> None:
+    """Solve every reference level of every push of ``st`` the cache lacks in ``jobs`` worker processes
+    (:func:`flexsheet.fem.reference.workers.run_workers`), sampled at the rendered vertices ``verts`` (S, 3) m;
+    with one local worker (and no cluster) nothing here: the pushes are solved as they are read."""
+    from flexsheet.fem.reference.workers import parallel, run_workers
+
     work = [(str(scene_path), f, h, st, verts, cache_dir) for f in st["fractions"] for h in st["levels"]]
     if parallel(jobs) and len(work) > 1:
         for h, sec, err in run_workers(_ref_job, work, min(jobs, len(work))):
             _log(f"reference level {h * 1e3:g} mm: {'failed: ' + err if err else 'done'} ({sec:.0f} s)")
-    pushes = [_scene_push(sc, rt, st, verts, faces, cache, f, depths) for f in st["fractions"]]
+
+
+def _summary(sc, quick: bool, st: dict, what: str, timing: dict, pushes: list[dict], t0: float) -> dict:
+    """summary.json of :func:`run_scene`: the scene, the served model (``what``) and its update ``timing``, the
+    visible error of ``pushes`` (:func:`_scene_push`) by depth, the reference's convergence; ``t0`` the run's
+    start (perf_counter)."""
+    depths = np.asarray(st["depths"], float)
     served = np.max([p["served_px"] for p in pushes], axis=0)
     change = (np.max([p["level_change_px"] for p in pushes], axis=0) if len(st["levels"]) > 1 else None)
-    judged = _judged_range(depths, change)
-    summary = {
+    judged = judged_range(depths, change)
+    return {
         "scene": {"name": sc.name, "file": str(sc.source), "kind": sc.object.kind, "key": sc.key(),
                   "description": sc.description, "max_depth_mm": sc.use.max_depth * 1e3,
                   "stroke_depth_mm": sc.use.stroke_depth * 1e3, "reason": sc.use.reason},
@@ -327,12 +361,6 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
         "pushes": pushes,
         "seconds": time.perf_counter() - t0,
     }
-    with open(os.path.join(out_dir, "summary.json"), "w") as fh:
-        json.dump(summary, fh, indent=1)
-    _plot(out_dir, summary)
-    _log(f"done in {summary['seconds']:.0f} s -> {out_dir}: visible {served.max():.2f} px (target {TARGET_PX}), "
-         f"reference levels {summary['reference']['converged_px']} px (target {CONVERGED_PX})")
-    return summary
 
 
 def _plot(out_dir: str, s: dict) -> None:
@@ -385,7 +413,7 @@ def compliance_along_stroke(run_dir: str, scene_path, out_dir: str, bin_mm: floa
     from scipy.spatial import cKDTree
 
     from flexsheet.model.scenes import load_scene
-    from flexsheet.runtime.bag import read_bag
+    from flexsheet.runtime.bag_read import read_bag
     from flexsheet.runtime.codec import decode_any
 
     sc = load_scene(scene_path)
@@ -450,6 +478,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--run", help="instead: chart the FEM stiffness and sheet tension along the stroke from "
                                   "this launch output folder (its sim.mcap)")
     args = ap.parse_args(argv)
+    show_progress()             # the worker pool's lines (flexsheet.fem.reference.workers) on stdout
     if args.run:
         c = compliance_along_stroke(args.run, args.scene, args.out)
         print(json.dumps(c, indent=1)[:3000])

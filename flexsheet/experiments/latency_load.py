@@ -19,6 +19,8 @@ from pathlib import Path
 
 HOPS = ("exposure_to_arm_command", "exposure_to_projected")
 SCRIPT = "world.script=[{mode: stroke, moving_time: 10}]"
+#: ``--quick``: one run on the machine as it is, a 4 s stroke
+QUICK_SCRIPT = "world.script=[{mode: stroke, moving_time: 4}]"
 
 
 def _busy(stop) -> None:
@@ -27,7 +29,7 @@ def _busy(stop) -> None:
             pass
 
 
-def run_once(launch: str, busy: int, out: Path, timeout: float = 400.0) -> dict:
+def run_once(launch: str, busy: int, out: Path, timeout: float = 400.0, script: str = SCRIPT) -> dict:
     """One sim run with ``busy`` busy-loop processes; returns its latency hops and watchdog trips.
     Raises ``RuntimeError`` when the launch fails (its last lines in the message)."""
     stop = mp.Event()
@@ -36,7 +38,7 @@ def run_once(launch: str, busy: int, out: Path, timeout: float = 400.0) -> dict:
         p.start()
     try:
         t0 = time.monotonic()
-        res = subprocess.run([sys.executable, "-m", "flexsheet", "launch", launch, "--out", str(out), "--set", SCRIPT],
+        res = subprocess.run([sys.executable, "-m", "flexsheet", "launch", launch, "--out", str(out), "--set", script],
                              capture_output=True, text=True, timeout=timeout)
         wall = time.monotonic() - t0
     finally:
@@ -81,11 +83,16 @@ def main(argv: list[str] | None = None) -> int:
         prog="flexsheet experiment latency_load", description=__doc__.split("\n\n")[0],
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="example:\n  flexsheet experiment latency_load --out docs/figures/realtime\n"
-               "  flexsheet experiment latency_load --out /tmp/ll --busy 0 2")
+               "  flexsheet experiment latency_load --out /tmp/ll --busy 0 2\n"
+               "  flexsheet experiment latency_load --out /tmp/ll --quick")
     p.add_argument("--out", default="docs/figures/realtime", help="output folder (JSON + PNG)")
     p.add_argument("--launch", default="launch/sim_composed.yaml", help="launch file to run (clock: wall: the load is what it measures)")
     p.add_argument("--busy", type=int, nargs="+", default=[0, 1, 2], help="busy cores per run (default 0 1 2)")
+    p.add_argument("--quick", action="store_true", help="one run, no busy core, a 4 s stroke")
     a = p.parse_args(argv)
+    script = QUICK_SCRIPT if a.quick else SCRIPT
+    if a.quick:
+        a.busy = [0]
     if any(b < 0 or b > 8 for b in a.busy):
         p.error(f"--busy: each value must be 0..8, got {a.busy}")
     out = Path(a.out)
@@ -93,12 +100,12 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for b in a.busy:
         print(f"[latency_load] run with {b} busy core(s) ...", flush=True)
-        rows.append(run_once(a.launch, b, out / f"run_busy{b}"))
+        rows.append(run_once(a.launch, b, out / f"run_busy{b}", script=script))
         r = rows[-1]["latency_ms"]
         print(f"[latency_load]   exposure -> arm {r[HOPS[0]]['median']:.2f} / {r[HOPS[0]]['p99']:.1f} ms, "
               f"exposure -> projected {r[HOPS[1]]['median']:.1f} / {r[HOPS[1]]['p99']:.1f} ms, "
               f"watchdog {rows[-1]['watchdog']}", flush=True)
-    (out / "latency_load.json").write_text(json.dumps({"runs": rows, "launch": a.launch, "script": SCRIPT}, indent=1))
+    (out / "latency_load.json").write_text(json.dumps({"runs": rows, "launch": a.launch, "script": script}, indent=1))
     chart(rows, out / "latency_load.png")
     print(f"[latency_load] wrote {out}/latency_load.json and latency_load.png", flush=True)
     return 0

@@ -37,7 +37,7 @@ import numpy as np
 
 __all__ = ["build_path_table", "table_key", "DEFAULT_STATIONS", "assemble_path_table"]
 
-from flexsheet.experiments.fem_scene import _update_ms, visible_errors
+from flexsheet.experiments.fem_scene import scene_update_ms, visible_errors
 from flexsheet.fem.path_snapshots import GRID, REACH
 
 TARGET_MM = 0.7
@@ -93,11 +93,11 @@ def _job(args) -> tuple[float, float, str | None]:
 
 
 def _prefetch(scene_file, jobs_list, cache_dir, n_jobs: int) -> None:
-    from flexsheet.fem.workers import parallel
+    from flexsheet.fem.reference.workers import parallel
 
     if not parallel(n_jobs) or len(jobs_list) <= 1:
         return
-    from flexsheet.fem.workers import run_workers
+    from flexsheet.fem.reference.workers import run_workers
 
     _log(f"solving {len(jobs_list)} pushes in {n_jobs} worker processes ...")
     for f, sec, err in run_workers(_job, [(scene_file, f, h, cache_dir) for f, h in jobs_list], n_jobs):
@@ -252,7 +252,7 @@ def _path_report(sc, fractions, table, refs, depths, held_out, look, lin_ms, che
             "lookup_ms": look["median"], "lookup_ms_p90": look["p90"], "lookup_methods": look["methods"],
             "linear_update_ms": lin_ms["median"],
             "lookup_timing": "the updating thread's CPU (time.thread_time) per update_finger at 5 points x "
-                             "5/20/45 mm along the stroke (flexsheet.experiments.fem_scene._update_ms)",
+                             "5/20/45 mm along the stroke (flexsheet.experiments.fem_scene.scene_update_ms)",
             "mesh_check": check, "target_mm": TARGET_MM, "shipped": shipped, "key": key,
             "seconds": time.perf_counter() - t0}
 
@@ -284,9 +284,9 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
     key = table_key(sc, rt)
     cache.save("pathsnap", key, table)
     shipped = _ship_path_table(cache, key, table, fractions, refs) if ship else None
-    lin_ms = _update_ms(rt, sc, LOOKUP_DEPTHS, 200)
+    lin_ms = scene_update_ms(rt, sc, LOOKUP_DEPTHS, 200)
     rt.attach_path_table(table)
-    look = _update_ms(rt, sc, LOOKUP_DEPTHS, 200)
+    look = scene_update_ms(rt, sc, LOOKUP_DEPTHS, 200)
     _log(f"look-up with the table: CPU median {look['median']:.3f} ms (linear alone {lin_ms['median']:.3f} ms)")
     depths = np.asarray(table["depths"][1:])            # the table's reach (every station converged to it)
     held_out = _held_out_pushes(sc, rt, verts, held, cache, holdout, depths)
@@ -351,8 +351,10 @@ def main(argv=None) -> int:  # pragma: no cover - thin CLI for a by-hand run
     ap.add_argument("--ship", action="store_true")
     ap.add_argument("--cache-dir", default=None)
     a = ap.parse_args(argv)
-    from flexsheet.fem.workers import set_scheduler
+    from flexsheet.fem.reference.progress import show_progress
+    from flexsheet.fem.reference.workers import set_scheduler
 
+    show_progress()             # the worker pool's lines on stdout
     try:
         set_scheduler(a.scheduler)
     except ValueError as exc:

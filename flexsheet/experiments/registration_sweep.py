@@ -11,6 +11,7 @@ from the full camera-pose run, as the lab would.
 from __future__ import annotations
 
 import json
+import logging
 import math
 import os
 
@@ -21,6 +22,9 @@ from flexsheet.calibration import camera_pose as cp_mod
 from flexsheet.calibration import projector as pj_mod
 from flexsheet.calibration.display_calib import nominal_display_calib
 from flexsheet.calibration.procedures import FULL, QUICK
+from flexsheet.calibration.projector_joint import refine_joint
+
+log = logging.getLogger(__name__)
 
 __all__ = ["CAMERA_N", "PROJECTOR_N", "ARMS_N", "run_sweep"]
 
@@ -40,11 +44,11 @@ def _deg(r):
 def _projector(pcs, cam, K, size, fit_k1):
     """The projector step as :func:`flexsheet.calibration.procedures.run_projector` does it."""
     r = pj_mod.estimate_projector(pcs, K, size, fit_k1=fit_k1)
-    return pj_mod.refine_joint(pcs, cam.stereo, cam.T_display_camera, None, r.K, r.D, r.T_display_projector,
+    return refine_joint(pcs, cam.stereo, cam.T_display_camera, None, r.K, r.D, r.T_display_projector,
                                fit_k1=fit_k1)
 
 
-def _seed_sweep(seed: int, realism: str, quick: bool, progress) -> dict:
+def _seed_sweep(seed: int, realism: str, quick: bool) -> dict:
     from flexsheet.twin.registration_camera import CalibrationTwin
     from flexsheet.twin.truth import TwinTruth
 
@@ -58,7 +62,7 @@ def _seed_sweep(seed: int, realism: str, quick: bool, progress) -> dict:
     board = opts.board_spec()
     prior = cp_mod.load_prior()
     out: dict = {"camera": {}, "projector": {}, "arms": {"left": {}, "right": {}}}
-    progress(f"sweep seed {seed}: {max(cam_n)} board views")
+    log.info(f"sweep seed {seed}: {max(cam_n)} board views")
     twin.frames = opts.board_frames
     views = twin.board_views(board, cp_mod.plan_board_views(max(cam_n)), opts.board_offset)
     best = None
@@ -68,7 +72,7 @@ def _seed_sweep(seed: int, realism: str, quick: bool, progress) -> dict:
         t, a = truth.camera_pose_error(r.T_display_camera)
         out["camera"][n] = {"translation_error_mm": t * 1e3, "rotation_error_deg": _deg(a), "rms_px": r.rms_px}
         best = r
-    progress(f"sweep seed {seed}: {max(pj_n)} projector poses")
+    log.info(f"sweep seed {seed}: {max(pj_n)} projector poses")
     W, H = nom.projector.width, nom.projector.height
     pats = pj_mod.gray_code_patterns(W, H)
     pcs = [pj_mod.triangulate_pose(twin.pattern_frames(pats, T, frames=opts.pattern_frames), W, H, best.stereo,
@@ -83,7 +87,7 @@ def _seed_sweep(seed: int, realism: str, quick: bool, progress) -> dict:
         t, a = truth.projector_pose_error(r.T_display_projector)
         out["projector"][n] = {"translation_error_mm": t * 1e3, "rotation_error_deg": _deg(a),
                                "reprojection_px": r.reprojection_px}
-    progress(f"sweep seed {seed}: {max(arm_n)} configurations per arm")
+    log.info(f"sweep seed {seed}: {max(arm_n)} configurations per arm")
     twin.frames = opts.marker_frames
     for side in ("left", "right"):
         a0 = nom.arms[side]
@@ -102,7 +106,7 @@ def _seed_sweep(seed: int, realism: str, quick: bool, progress) -> dict:
     return out
 
 
-def _failure_modes(seed: int, realism: str, progress) -> dict:
+def _failure_modes(seed: int, realism: str) -> dict:
     """A dark sheet (projector white on the sheet → decoded pixels, projector error or the refusal) and a bowed
     board (sag at the sheet corners → camera error with the bow fitted and with a flat board assumed), on one
     seed."""
@@ -116,7 +120,7 @@ def _failure_modes(seed: int, realism: str, progress) -> dict:
     board = opts.board_spec()
     prior = cp_mod.load_prior()
     out: dict = {"board_bow": {}, "dark_sheet": {}}
-    progress(f"failure modes (seed {seed}): bowed board")
+    log.info(f"failure modes (seed {seed}): bowed board")
     twin.frames = opts.board_frames
     cam = None
     for bow in BOW_MM:
@@ -133,7 +137,7 @@ def _failure_modes(seed: int, realism: str, progress) -> dict:
                 cam = r if (bow == 0.0 and fit) else cam
             except ValueError as e:
                 out["board_bow"][bow][key] = {"error": str(e)}
-    progress(f"failure modes (seed {seed}): dark sheet")
+    log.info(f"failure modes (seed {seed}): dark sheet")
     W, H = nom.projector.width, nom.projector.height
     pats = pj_mod.gray_code_patterns(W, H)
     plans = pj_mod.plan_projector_poses(3)
@@ -151,22 +155,21 @@ def _failure_modes(seed: int, realism: str, progress) -> dict:
     return out
 
 
-def run_sweep(seeds: list[int], out_dir: str, quick: bool = False, realism: str = "realistic",
-              progress=print) -> dict:
+def run_sweep(seeds: list[int], out_dir: str, quick: bool = False, realism: str = "realistic") -> dict:
     """Run the sweep over ``seeds`` and write ``out_dir/sweep.json`` and ``out_dir/calibration_sweep.png``.
     Returns the JSON dict. Raises ``ValueError`` on an empty seed list."""
     if not seeds:
         raise ValueError("need at least one seed")
     os.makedirs(out_dir, exist_ok=True)
-    per = {s: _seed_sweep(s, realism, quick, progress) for s in seeds}
+    per = {s: _seed_sweep(s, realism, quick) for s in seeds}
     doc = {"seeds": seeds, "realism": realism, "quick": quick,
            "targets": {"camera_mm": 0.5, "camera_deg": 0.1, "projector_mm": 2.0, "projector_deg": 0.2,
                        "projector_px": 0.5, "arms_mm": 1.0},
-           "per_seed": per, "failure_modes": _failure_modes(seeds[0], realism, progress)}
+           "per_seed": per, "failure_modes": _failure_modes(seeds[0], realism)}
     with open(os.path.join(out_dir, "sweep.json"), "w") as fh:
         json.dump(doc, fh, indent=1, default=str)
     _plot(doc, os.path.join(out_dir, "calibration_sweep.png"))
-    progress(f"wrote {out_dir}/sweep.json, {out_dir}/calibration_sweep.png")
+    log.info(f"wrote {out_dir}/sweep.json, {out_dir}/calibration_sweep.png")
     return doc
 
 

@@ -26,21 +26,21 @@ from flexsheet.experiments.report_verdicts import judge, table1_verdicts
 from flexsheet.experiments.table1 import (
     FELT_TARGET_FACTOR,
     PAPER_TABLE1,
+    STROKE_MODES,
     TARGET_FACTOR,
     errors_row,
     scene_table1_row,
+    segment_key,
     table1,
     target,
 )
 from flexsheet.model.scenes import Scene, paper_scene
-from flexsheet.runtime.bag import read_bag
+from flexsheet.runtime.bag_read import read_bag
 from flexsheet.runtime.codec import DecodeError, decode_any
 
-__all__ = ["analyse", "table1_rows", "felt_and_paper", "sheet_delay", "stroke_segments", "segment_key",
-           "is_paper", "STROKE_MODES", "TREMOR_WINDOW", "DELAY_LAGS"]
+__all__ = ["analyse", "table1_rows", "felt_and_paper", "sheet_delay", "stroke_segments",
+           "is_paper", "TREMOR_WINDOW", "DELAY_LAGS"]
 
-#: the truth's modes whose moving phase is a Table I stroke
-STROKE_MODES = ("stroke", "stroke_push")
 #: the finger's slow motion is its 0.21 s moving average (21 samples at the world's 100 Hz): the rest is tremor
 TREMOR_WINDOW = 21
 #: lags tried by :func:`sheet_delay`, s
@@ -93,12 +93,6 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scen
             summary["latency_ms"]["chain"]["exposure_to_sheet_at_pose"]["median"]
     judge(summary)
     return summary
-
-
-def segment_key(truth) -> str:
-    """The Table I row key of a truth sample's segment: ``"10"`` for "stroke", ``"stroke_push_10"``."""
-    mt = f"{truth.moving_time:g}"
-    return mt if truth.mode == "stroke" else f"{truth.mode}_{mt}"
 
 
 def stroke_segments(truths: list, tips: list | None = None) -> tuple[dict, dict]:

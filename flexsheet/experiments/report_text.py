@@ -210,7 +210,7 @@ def _latency(s: dict) -> tuple[list[str], list[str]]:
         rows.append([k, _num(v["median"], 2), _num(v["p99"], 2), str(v["n"]), basis.get(k, {}).get("basis", "?"),
                      f"≤ {t['target_ms']:g}" if t else "-", t.get("verdict", "-")])
     prose = ["One chain per fingertip sample from the stamps the nodes set, ms. Modelled: the lab's declared "
-             "timings (flexsheet/twin/timing.py) charged on the simulated clock, a constant per hop where nothing "
+             "timings (flexsheet/model/timing.py) charged on the simulated clock, a constant per hop where nothing "
              "else varies (p99 = median); measured: the nodes' stamps on this host's clock."]
     if tg:
         prose.append("Targets: " + ", ".join(f"{k} ≤ {t['target_ms']:g} ms median" for k, t in tg.items())

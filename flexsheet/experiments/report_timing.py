@@ -13,9 +13,9 @@ times), so the hops add up to the chain (``latency_ms.chain``; every value media
   ``exposure_to_sheet_at_pose``;
 * render chain: ``fingertip_to_deformation``, ``deformation_to_rendered_frame``, ``rendered_to_projected``
   (the first projector vsync after the frame plus the projector's input latency,
-  :meth:`flexsheet.twin.timing.LabTiming.projected_at`); end: ``exposure_to_projected``.
+  :meth:`flexsheet.model.timing.LabTiming.projected_at`); end: ``exposure_to_projected``.
 
-On the simulated clock every hop is *modelled*: the lab's declared timings (:mod:`flexsheet.twin.timing`)
+On the simulated clock every hop is *modelled*: the lab's declared timings (:mod:`flexsheet.model.timing`)
 charged to simulated time; on the wall clock the hops are *measured* on the host (:func:`latency_basis`).
 All hosts of the sim run share one clock; across PCs see docs/deploy.md on time sync.
 """
@@ -29,17 +29,15 @@ from pathlib import Path
 
 import numpy as np
 
+from flexsheet.experiments.table1 import STROKE_MODES, segment_key
+
 __all__ = ["latency_hops", "latency_basis", "compliance_summary", "planner_scales", "watchdog_faults",
-           "cpu_summary", "compute_vs_waiting", "POSE_TOL_M", "POSE_TOL_RAD", "HOP_NODES", "LATENCY_TARGETS_MS",
-           "LATENCY_TARGET_SOURCE"]
+           "cpu_summary", "compute_vs_waiting", "POSE_TOL_M", "POSE_TOL_RAD", "HOP_NODES"]
 
 #: a clamp at its commanded pose: position and rotation tolerance (m, rad)
 POSE_TOL_M, POSE_TOL_RAD = 1e-4, np.radians(0.05)
-#: the lab's latency budget, median ms, per end of the chain
-LATENCY_TARGETS_MS = {"exposure_to_arm_command": 15.0, "exposure_to_projected": 25.0}
-LATENCY_TARGET_SOURCE = "the lab's latency budget (docs/realtime.md)"
 
-#: hop → what the simulated clock charges for it (flexsheet/twin/timing.py)
+#: hop → what the simulated clock charges for it (flexsheet/model/timing.py)
 _MODELLED = {
     "exposure_to_camera_frame": "half the exposure + sensor readout + USB3 transfer + hand-over",
     "camera_frame_to_fingertip": "the triangulator's declared compute",
@@ -64,7 +62,7 @@ def _stats(x) -> dict:
 
 def latency_basis(clock: str) -> dict[str, dict]:
     """Per hop ``{"basis": "modelled" | "measured", "how"}``: on ``clock`` "sim" every hop is modelled (declared
-    lab timings, :mod:`flexsheet.twin.timing`); on the wall clock measured from the nodes' stamps, but the
+    lab timings, :mod:`flexsheet.model.timing`); on the wall clock measured from the nodes' stamps, but the
     projector (vsync and input latency), which is always modelled."""
     out = {}
     for hop, how in _MODELLED.items():
@@ -104,7 +102,7 @@ def _pose_times(d: dict[str, list]) -> dict[float, float]:
 def latency_hops(d: dict[str, list]) -> dict[str, dict]:
     """Latency chains (module doc), ms: ``{"chain": {hop: {"median", "p99", "n"}}, "sheet_at_pose_reached":
     share}``, matched through the stamps every message carries. ``d``: topic → (arrival s, message) pairs."""
-    from flexsheet.twin.timing import LAB
+    from flexsheet.model.timing import LAB
 
     tips = {m.exposure_stamp: m for _, m in d.get("/fingertip", []) if m.sent_stamp and m.frame_stamp}
     target = {}
@@ -190,7 +188,6 @@ def compliance_summary(d: dict[str, list]) -> dict:
     (presented), ``"object_stiffness_n_per_m"`` (requested: the object's × ``stiffness_scale``; each median,
     min, max, p5, p95), ``"at_limit"`` (share the sheet could not present), ``"stiffness_scale"`` (the values
     in force, :func:`planner_scales`; None when not recorded), ``"object_stiffness_unscaled_n_per_m"``}``."""
-    from flexsheet.experiments.report_analysis import STROKE_MODES, segment_key
 
     tg = [(t, m) for t, m in d.get("/sheet/target", []) if m.touching and not m.status.startswith("hold")]
     if not tg:

@@ -2,7 +2,7 @@
 scene and the organ's compliance along its stroke (the tumour's stiffness peak in the sheet's tension).
 
 1. **Table I per scene** (``launch/scenes/{cylinder,sphere,rounded_box,organ}.yaml``): the in-process stroke
-   of :func:`flexsheet.experiments.stroke.simulate` (honest twin, camera noise, Kalman prediction, latency,
+   of :func:`flexsheet.experiments.stroke_model.simulate` (honest twin, camera noise, Kalman prediction, latency,
    the arms' IK / command stream / servo / true kinematics) with the scripted finger on the scene's stroke
    path, the planner on the scene's shape with the tension from the scene's compliance estimate
    (:class:`flexsheet.planning.compliance.SceneCompliance`, what the planner node does while the FEM does not
@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
 import sys
 import time
@@ -34,11 +35,13 @@ from pathlib import Path
 
 import numpy as np
 
-from flexsheet.experiments.stroke import LatencyModel, launch_kf, make_twin, simulate
+from flexsheet.experiments.stroke_model import LatencyModel, launch_kf, make_twin, simulate
 from flexsheet.model.scenes import SCENES_DIR, load_scene
 from flexsheet.model.tension import SheetMaterial, max_stretch_within_force, stiffness, stretch_for_stiffness
 from flexsheet.planning.compliance import SceneCompliance
 from flexsheet.planning.surface_planner import PlannerConfig
+
+log = logging.getLogger(__name__)
 
 __all__ = ["SCENE_NAMES", "table1_for_scene", "stiffness_along_path", "organ_runs", "run", "main"]
 
@@ -74,7 +77,7 @@ def _compliance_stats(record: list, t0: float, t1: float) -> dict:
                                        for p in plans]))}
 
 
-def table1_for_scene(name: str, seeds: int = 3, times=(10.0, 30.0), log=print) -> dict:
+def table1_for_scene(name: str, seeds: int = 3, times=(10.0, 30.0)) -> dict:
     """Table I rows of scene ``name`` (module doc, item 1): ``{"10": mean row with ``per_seed``, …}``."""
     sc = load_scene(SCENES_DIR / f"{name}.yaml")
     lk = launch_kf()
@@ -92,7 +95,7 @@ def table1_for_scene(name: str, seeds: int = 3, times=(10.0, 30.0), log=print) -
             row.update({k: float(v) for k, v in st.items()})
             row.update(_compliance_stats(rec, t_move, t_move + T))
             rows.append(row)
-            log(f"  {name:<12} {T:>4g} s seed {s}: dθ {row['dtheta_mean_deg']:.3f}° Δd {row['dd_mean_mm']:.3f} mm, "
+            log.info(f"  {name:<12} {T:>4g} s seed {s}: dθ {row['dtheta_mean_deg']:.3f}° Δd {row['dd_mean_mm']:.3f} mm, "
                 f"tension {row['tension_n_per_m']['median']:.0f} N/m, IK refused {st['ik_refused']} "
                 f"({time.monotonic() - t_start:.1f} s)")
         keys = [k for k, v in rows[0].items() if isinstance(v, float)]
@@ -141,7 +144,7 @@ def stiffness_along_path(scene, depths_mm=DEPTHS_MM, n: int = 121) -> dict:
     return out
 
 
-def _run_series(scene, mode: str, scale: float, seed: int = 0, depth: float = 5e-4, push_depth: float | None = None,
+def run_series(scene, mode: str, scale: float, seed: int = 0, depth: float = 5e-4, push_depth: float | None = None,
                 moving_time: float = 10.0) -> tuple[dict, dict]:
     """One scripted run through the planner (realistic twin ``seed``; ``mode`` as the world's segments, finger
     ``depth`` m while stroking, ``push_depth`` m for stroke_push, default the scene's ``use.stroke_depth``): per sample during the moving phase the
@@ -188,7 +191,7 @@ def _binned(arc, y, edges) -> np.ndarray:
     return np.array([np.median(y[idx == i]) if np.any(idx == i) else np.nan for i in range(len(edges) - 1)])
 
 
-def _peak(series: dict, arc_inc: float, bin_mm: float = 4.0) -> dict:
+def peak_along_path(series: dict, arc_inc: float, bin_mm: float = 4.0) -> dict:
     """Where a run's requested stiffness, presented stiffness and tension peak along the path (medians in
     ``bin_mm`` bins of the contact's arc): the bin centre of each maximum, mm, the tumour's arc, and the
     presented stiffness there over the median of the bins farther than 15 mm from it."""
@@ -220,16 +223,16 @@ def organ_runs(quick: bool = False) -> dict:
     mat = SheetMaterial()
     k_sheet = {"min_n_per_m": stiffness(mat.min_stretch, mat), "max_n_per_m": stiffness(max_stretch_within_force(mat), mat),
                "note": "the sheet's normal stiffness at its centre between the stretch limits (tension.py)"}
-    palp1, _ = _run_series(sc, "stroke", 1.0, depth=PALPATION_DEPTH)
+    palp1, _ = run_series(sc, "stroke", 1.0, depth=PALPATION_DEPTH)
     scale = round(0.9 * k_sheet["max_n_per_m"] / float(np.percentile(palp1["object_n_per_m"], 99)), 3)
-    palp, _ = _run_series(sc, "stroke", scale, depth=PALPATION_DEPTH)
+    palp, _ = run_series(sc, "stroke", scale, depth=PALPATION_DEPTH)
     runs = {"palpation": palp, "palpation_unscaled": palp1}
     if not quick:
-        runs["light_stroke"], _ = _run_series(sc, "stroke", 1.0)
-        runs["stroke_push"], _ = _run_series(sc, "stroke_push", 1.0)
+        runs["light_stroke"], _ = run_series(sc, "stroke", 1.0)
+        runs["stroke_push"], _ = run_series(sc, "stroke_push", 1.0)
     return {"scene": str(SCENES_DIR / "organ.yaml"), "along_path": along, "peaks_along_path": peaks,
             "sheet_range": k_sheet, "runs": runs, "fitted_scale": scale,
-            "run_peaks": {k: _peak(v, arc_inc) for k, v in runs.items()}}
+            "run_peaks": {k: peak_along_path(v, arc_inc) for k, v in runs.items()}}
 
 
 def _plot(org: dict, path: Path) -> None:
@@ -285,13 +288,13 @@ def _plot(org: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def run(out: Path, seeds: int = 3, quick: bool = False, scenes=SCENE_NAMES, log=print) -> dict:
+def run(out: Path, seeds: int = 3, quick: bool = False, scenes=SCENE_NAMES) -> dict:
     """Both parts (module doc); writes the files under ``out`` and returns the summary."""
     times = (10.0,) if quick else (10.0, 30.0)
     n_seeds = 1 if quick else seeds
     table = {}
     for name in scenes:
-        log(f"[scenes] Table I on {name} ({n_seeds} seed(s), {', '.join(f'{t:g} s' for t in times)})")
+        log.info(f"[scenes] Table I on {name} ({n_seeds} seed(s), {', '.join(f'{t:g} s' for t in times)})")
         table[name] = table1_for_scene(name, n_seeds, times, log)
     summary: dict = {"table1": table, "twin": "realistic", "truth_seeds": list(range(n_seeds)),
                      "note": "planner tension from the scene's compliance estimate (no FEM); metric in the normal "
@@ -299,7 +302,7 @@ def run(out: Path, seeds: int = 3, quick: bool = False, scenes=SCENE_NAMES, log=
     out.mkdir(parents=True, exist_ok=True)
     (out / "table1_scenes.json").write_text(json.dumps(_rounded(table), indent=1))
     if "organ" in scenes:
-        log("[scenes] organ compliance along the stroke")
+        log.info("[scenes] organ compliance along the stroke")
         org = organ_runs(quick)
         (out / "compliance_organ.json").write_text(json.dumps(_rounded(org)))
         _plot(org, out / "compliance_organ.png")

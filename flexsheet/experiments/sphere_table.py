@@ -4,7 +4,7 @@
 axis, along the stroke).
 
 1. Every snapshot angle of :data:`flexsheet.fem.sphere_snapshots.DEFAULT_SPHERE_GRID` is solved
-   (:func:`flexsheet.fem.sphere_snapshots.solve_alpha`: the scene's hyperelastic body, full body, mesh refined along
+   (:func:`flexsheet.fem.reference.sphere_build.solve_alpha`: the scene's hyperelastic body, full body, mesh refined along
    that push path, 0 → 50 mm, stable branch), each cached apart (``--azimuth A`` solves one and exits; ``--jobs``
    solves the missing ones in worker processes); the table is assembled and stored under the key the FEM node
    looks up (:func:`flexsheet.fem.sphere_snapshots.sphere_table_key`).
@@ -50,7 +50,7 @@ def _alpha_key(sc, a: float, grid, spec, probes: np.ndarray) -> str:
     import gmsh
 
     from flexsheet.fem.cache import cache_key
-    from flexsheet.fem.hyperelastic import SOLVER_VERSION, UNLOAD_VERSION
+    from flexsheet.fem.reference.versions import SOLVER_VERSION, UNLOAD_VERSION
     from flexsheet.fem.sphere_snapshots import SPHERE_TABLE_VERSION
 
     return cache_key("sphere-alpha-1", SPHERE_TABLE_VERSION, sc.key(), grid.key(), *(f"{x:.9g}" for x in spec),
@@ -59,8 +59,8 @@ def _alpha_key(sc, a: float, grid, spec, probes: np.ndarray) -> str:
 
 
 def alpha_path(sc, a: float, grid, spec, probes: np.ndarray, cache) -> dict:
-    """:func:`flexsheet.fem.sphere_snapshots.solve_alpha` at ``a`` deg, cached (kind "spherealpha")."""
-    from flexsheet.fem.sphere_snapshots import solve_alpha
+    """:func:`flexsheet.fem.reference.sphere_build.solve_alpha` at ``a`` deg, cached (kind "spherealpha")."""
+    from flexsheet.fem.reference.sphere_build import solve_alpha
 
     z, _, _ = cache.get_or_compute("spherealpha", _alpha_key(sc, a, grid, spec, probes),
                                    lambda: solve_alpha(sc, a, grid, spec, probes, _log),
@@ -122,11 +122,11 @@ def _solve_missing(scene_file, sc, grid, spec, probes, cache, cache_dir, table, 
     want = list(dict.fromkeys(want))      # a held-out push is also the mesh study's table-mesh push: solve it once
     todo = [(a, s) for a, s in want if not os.path.exists(cache.path("spherealpha", _alpha_key(sc, a, grid, s, probes))
                                                           or "")]
-    from flexsheet.fem.workers import parallel
+    from flexsheet.fem.reference.workers import parallel
 
     if parallel(jobs) and len(todo) > 1:
         _log(f"{len(todo)} sphere pushes the cache lacks, in {min(jobs, len(todo))} worker processes")
-        from flexsheet.fem.workers import run_workers
+        from flexsheet.fem.reference.workers import run_workers
 
         for a, sec, err in run_workers(_job, [(scene_file, a, cache_dir, s) for a, s in todo], min(jobs, len(todo))):
             _log(f"sphere push at {a:g} deg: " + (f"done in {sec:.0f} s" if err is None else f"failed ({err})"))
@@ -135,7 +135,7 @@ def _solve_missing(scene_file, sc, grid, spec, probes, cache, cache_dir, table, 
 def _table_and_paths(sc, fr, grid, spec, probes, cache, key, table, E: float):
     """The table (assembled from the pushes and cached when ``table`` is None) and the snapshot angles' pushes
     (None where the cache lacks one)."""
-    from flexsheet.fem.sphere_snapshots import assemble_table
+    from flexsheet.fem.reference.sphere_build import assemble_table
 
     al = grid.alphas_deg
     if table is None:
@@ -357,10 +357,10 @@ def _packing_error(table, packed, paths, fr, rt, probes, r) -> float:
 def mesh_study_specs(spec) -> dict:
     """The meshes of ``--mesh-check``, name → (h, h_fine, refine radius, path depth) m: the table's ``spec``
     and each of :data:`MESH_STUDY_SPECS` (``level1`` …), each with its **twin** (``…_twin``: the same sizes,
-    the refinement tube ``TWIN_DR`` wider, as the cylinder's twins (:func:`flexsheet.fem.node_table.twin_spec`),
+    the refinement tube ``TWIN_DR`` wider, as the cylinder's twins (:func:`flexsheet.fem.reference.node_table.twin_spec`),
     so gmsh lays the elements out anew; the difference between a mesh and its twin is that mesh's noise, which
     no interpolation between pushes can beat)."""
-    from flexsheet.fem.node_table import TWIN_DR
+    from flexsheet.fem.reference.node_table import TWIN_DR
 
     def twin(x):
         return (x[0], x[1], x[2] + TWIN_DR, x[3])

@@ -5,7 +5,7 @@ sheet presents, θ and θ′ the angles of the object's tangent plane at D and D
 We make the definitions exact for any shape and sheet pose:
 
 * D = the measured fingertip projected onto the virtual surface by the planner's rule
-  (:meth:`flexsheet.model.shapes.Shape.project`) — the point the sheet should present.
+  (:meth:`flexsheet.model.shape_base.Shape.project`) — the point the sheet should present.
 * D′ = the point where the *actual* sheet plane (origin, normal) touches the object: the support point in
   the sheet's normal direction (:meth:`Shape.support`, ties on flat directions broken toward D).
 * θ′ is the sheet plane's orientation itself, so Δθ = the angle between the object's normal at D and the
@@ -19,7 +19,7 @@ We make the definitions exact for any shape and sheet pose:
   support point jump along b). On the paper's cylinder the stroke runs around the axis, so b is the axis and
   this is exactly the cylinder's cross-section; without tangents a shape with an ``axis`` (the cylinder) uses
   that cross-section directly (the same numbers, tested). Both the in-process experiment
-  (:mod:`flexsheet.experiments.stroke`) and the report of a recorded run (:mod:`flexsheet.experiments.report`)
+  (:mod:`flexsheet.experiments.stroke_model`) and the report of a recorded run (:mod:`flexsheet.experiments.report`)
   get their rows from :func:`table1_row`, and the paper's numbers from :data:`PAPER_TABLE1`.
 
 A bias common to D and the sheet (e.g. a camera calibration offset, the paper's 2.95 mm) cancels in Δd,
@@ -39,11 +39,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexsheet.model.shapes import Shape
+from flexsheet.model.shape_base import Shape
 
 __all__ = ["StrokeErrors", "stroke_errors", "presented_contacts", "table1", "summarize", "table1_row",
            "PAPER_TABLE1", "TARGET_FACTOR", "FELT_TARGET_FACTOR", "target", "section_normals", "DD_CONVENTION", "paper_dd_ratio",
-           "stroke_tangents", "scene_table1_row", "errors_row"]
+           "stroke_tangents", "scene_table1_row", "errors_row", "STROKE_MODES", "segment_key"]
 
 #: the paper's Table I (Furukawa et al., §V-C): moving time (s, as the row key) → means and population
 #: standard deviations of Δd (mm) and Δθ (deg) over the moving phase
@@ -241,3 +241,13 @@ def scene_table1_row(scene, measured, sheet_origin, sheet_normal) -> dict[str, f
     from flexsheet.planning.shape import planner_shape
 
     return table1_row(planner_shape(scene), measured, sheet_origin, sheet_normal, scene)
+
+
+#: the truth's modes whose moving phase is a Table I stroke
+STROKE_MODES = ("stroke", "stroke_push")
+
+
+def segment_key(truth) -> str:
+    """The Table I row key of a truth sample's segment: ``"10"`` for "stroke", ``"stroke_push_10"``."""
+    mt = f"{truth.moving_time:g}"
+    return mt if truth.mode == "stroke" else f"{truth.mode}_{mt}"

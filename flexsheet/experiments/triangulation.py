@@ -35,27 +35,27 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import os
 import time
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from flexsheet.benches.vision import mc_rms_mm, real_stereo_rms, timing  # noqa: E402
-from flexsheet.experiments import vision_twin as vt  # noqa: E402
-from flexsheet.twin.camera import (  # noqa: E402
+from flexsheet.benches.vision import mc_rms_mm, real_stereo_rms, timing
+from flexsheet.experiments import vision_twin as vt
+from flexsheet.experiments.triangulation_charts import plot_accuracy, plot_honest, plot_noise, plot_stability
+from flexsheet.twin.camera import StereoCameraTwin
+from flexsheet.twin.camera_config import SimConfig
+from flexsheet.vision.camera_model import (
     DEFAULT_CAMERA_POSITION,
-    SimConfig,
-    StereoRenderer,
     bumblebee2_calibration,
     camera_model,
     look_at,
 )
-from flexsheet.vision.stereo import METHODS, StereoModel  # noqa: E402
-from flexsheet.vision.tracker import FingertipTracker, TrackerConfig  # noqa: E402
+from flexsheet.vision.stereo import METHODS, StereoModel
+from flexsheet.vision.tracker import FingertipTracker, TrackerConfig
+
+log = logging.getLogger(__name__)
 
 __all__ = ["main", "accuracy_speed", "stability", "honest", "honest_stability", "TARGET_MM"]
 
@@ -222,7 +222,7 @@ def stability(seed: int = 0) -> dict:
     """Full-pipeline stability cases on the XIMEA twin (module doc). Errors in mm; NaN where invalid."""
     calib = camera_model("ximea")
     T = look_at(DEFAULT_CAMERA_POSITION)
-    rnd = StereoRenderer(calib, T, SimConfig(seed=seed))
+    rnd = StereoCameraTwin(calib, T, SimConfig(seed=seed))
     to_disp = lambda Xc: Xc @ T[:3, :3].T + T[:3, 3]  # noqa: E731
     out: dict = {}
     out["fov"] = _stability_fov(calib, T, rnd, to_disp)
@@ -238,10 +238,6 @@ def stability(seed: int = 0) -> dict:
 
 
 # ------------------------------------------------------------------------------------------ honest twin (15)
-def _log(msg: str) -> None:
-    print(msg, flush=True)
-
-
 def _breaking(xs, rms, valid) -> dict:
     """Where a sweep breaks: the swept values that fail (RMS over the target or valid rate under 0.9), the
     first failing value and the last passing one before it (None when every value passes / fails)."""
@@ -262,7 +258,7 @@ def honest(seeds=(0, 1, 2), quick: bool = False) -> dict:
     quick: 12 × 2), moving error along the 10 s and 30 s strokes (quick: 3 s of the 10 s stroke) with the
     twin's drop rate (realistic 1 %), and — diagnostic only — the static error with a perfect registration
     (the truth's own camera), which separates image error from registration error."""
-    from flexsheet.twin.camera import REALISTIC_DROP_RATE
+    from flexsheet.twin.camera_config import REALISTIC_DROP_RATE
 
     n_pts, frames = (12, 2) if quick else (40, 3)
     pts = vt.static_points(n_pts)
@@ -272,15 +268,15 @@ def honest(seeds=(0, 1, 2), quick: bool = False) -> dict:
         res = {}
         for seed in seeds:
             truth = vt.TwinTruth.draw(seed, realism)
-            entry, path = vt.registered_camera(truth, quick=quick, log=_log)
-            _log(f"  {realism} seed {seed}: static...")
+            entry, path = vt.registered_camera(truth, quick=quick)
+            log.info(f"  {realism} seed {seed}: static...")
             r = {"registration": vt.registration_error(truth, entry), "display_calib": path,
                  "static": vt.static_error(truth, entry.stereo, entry.T_display_camera, cfg, pts, frames, seed),
                  "static_perfect_registration": vt.static_error(truth, truth.camera_calib, truth.T_display_camera,
                                                                 cfg, pts, frames, seed)}
             drop = REALISTIC_DROP_RATE if realism == "realistic" else 0.0
             for mt in ((10.0,) if quick else (10.0, 30.0)):
-                _log(f"  {realism} seed {seed}: stroke {mt:.0f} s...")
+                log.info(f"  {realism} seed {seed}: stroke {mt:.0f} s...")
                 r[f"moving_{mt:.0f}s"] = vt.moving_error(truth, entry.stereo, entry.T_display_camera, cfg, mt, drop,
                                                          window_s=3.0 if quick else None, sim_seed=seed)
             res[str(seed)] = r
@@ -312,14 +308,14 @@ def _sweep(name, values, make, seeds) -> dict:
         valid.append(float(np.mean(vs)))
         wrong.append(float(np.mean(ws)))
         extra.append(ex)
-        _log(f"  {name} = {x}: RMS {rms[-1]:.3f} mm, valid {valid[-1] * 100:.0f} %, wrong {wrong[-1] * 100:.0f} %")
+        log.info(f"  {name} = {x}: RMS {rms[-1]:.3f} mm, valid {valid[-1] * 100:.0f} %, wrong {wrong[-1] * 100:.0f} %")
     return {"values": list(values), "rms_mm": rms, "valid_rate": valid, "wrong_rate": wrong, "detail": extra,
             "breaking": _breaking(values, rms, valid)}
 
 
 def _registered(seed, quick: bool):
     truth = vt.TwinTruth.draw(seed, "realistic")
-    entry, _ = vt.registered_camera(truth, quick=quick, log=_log)
+    entry, _ = vt.registered_camera(truth, quick=quick)
     return truth, entry
 
 
@@ -333,7 +329,7 @@ def _calib_case(x, seed, pts, register: bool = True) -> dict:
     truth = vt.scaled_truth(seed, x)
     if register:
         try:
-            e, _ = vt.registered_camera(truth, log=_log)
+            e, _ = vt.registered_camera(truth)
         except ValueError as exc:
             return {"rms_mm": float("nan"), "valid_rate": 0.0, "failed": str(exc)[:200]}
         st, T = e.stereo, e.T_display_camera
@@ -373,201 +369,21 @@ def honest_stability(seeds=(0, 1, 2), quick: bool = False) -> dict:
     pts = vt.static_points(n_pts, seed=5)
     out: dict = {"seeds": list(seeds), "points": n_pts}
     noise = (1.0, 4.0, 16.0) if quick else (0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
-    _log("stability: camera noise")
+    log.info("stability: camera noise")
     out["noise_scale"] = _sweep("noise_scale", noise, lambda x, s: _noise_case(x, s, pts, quick), seeds)
     scales = (0.5, 2.0, 8.0) if quick else (0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
-    _log("stability: calibration error (truth spreads scaled, registered again)")
+    log.info("stability: calibration error (truth spreads scaled, registered again)")
     out["calibration_scale"] = _sweep("spread_scale", scales, lambda x, s: _calib_case(x, s, pts), seeds)
-    _log("stability: calibration error, not registered (nominal calibration)")
+    log.info("stability: calibration error, not registered (nominal calibration)")
     out["calibration_scale_unregistered"] = _sweep("spread_scale", scales, lambda x, s: _calib_case(x, s, pts, False),
                                                    seeds)
     azs = (-60.0, 0.0, 40.0) if quick else (-90.0, -60.0, -30.0, -15.0, 0.0, 15.0, 30.0, 40.0, 60.0, 90.0)
-    _log("stability: finger direction (self-occlusion)")
+    log.info("stability: finger direction (self-occlusion)")
     out["finger_azimuth_deg"] = _sweep("finger_azimuth_deg", azs, lambda x, s: _finger_case(x, s, pts, quick), seeds)
     gains = (0.5, 1.0) if quick else (0.25, 0.5, 0.75, 1.0, 1.25)
-    _log("stability: background brightness (marker contrast)")
+    log.info("stability: background brightness (marker contrast)")
     out["background_gain"] = _sweep("background_gain", gains, lambda x, s: _bg_case(x, s, pts, quick), seeds)
     return out
-
-
-def _plot_honest(h: dict, st: dict | None, path: str) -> None:
-    fig, ax = plt.subplots(2, 3, figsize=(16, 9))
-    seeds = h["seeds"]
-    keys = [k for k in h["headline_rms_mm"]["realistic"] if k != "static_perfect_registration"]
-    w = 0.8 / (len(keys) + 1)
-    x = np.arange(len(seeds))
-    for i, k in enumerate(keys):
-        ax[0, 0].bar(x + i * w, h["headline_rms_mm"]["realistic"][k], w, label=f"realistic {k}")
-    ax[0, 0].bar(x + len(keys) * w, h["headline_rms_mm"]["ideal"]["static"], w, color="0.7", label="ideal static")
-    ax[0, 0].plot(x + 0 * w, h["headline_rms_mm"]["realistic"]["static_perfect_registration"], "k_", ms=18, mew=2,
-                  label="static, perfect registration (diagnostic)")
-    ax[0, 0].axhline(TARGET_MM, color="r", ls="--", lw=1, label=f"target {TARGET_MM} mm")
-    ax[0, 0].set_xticks(x + 0.4 - w / 2, [f"truth seed {s}" for s in seeds])
-    ax[0, 0].set_ylabel("fingertip RMS error vs truth, mm")
-    ax[0, 0].set_title("honest twin: registered camera, images → detector")
-    ax[0, 0].legend(fontsize=7)
-    if st:
-        def panel(a, sw, xlabel, title, logx=False, logy=False, x2=None):
-            a.plot(sw["values"], sw["rms_mm"], "o-", label="RMS error, mm")
-            a.axhline(TARGET_MM, color="r", ls="--", lw=1)
-            b = a.twinx()
-            b.plot(sw["values"], sw["valid_rate"], "s:", color="tab:green", label="valid rate")
-            b.plot(sw["values"], sw["wrong_rate"], "x:", color="tab:red", label="wrong rate (> 5 mm off)")
-            b.legend(fontsize=7, loc="upper right")
-            b.set_ylim(0, 1.05)
-            b.set_ylabel("valid rate")
-            if x2 is not None:
-                a.plot(x2["values"], x2["rms_mm"], "^--", color="tab:orange", label="not registered (nominal)")
-            bp = sw["breaking"]["first_failing"]
-            if bp is not None:
-                a.axvline(bp, color="0.5", lw=0.8)
-            a.set_xlabel(xlabel)
-            a.set_ylabel("RMS error, mm")
-            fl = sw["breaking"]["failing"]
-            a.set_title(f"{title}\nfails at {fl if len(fl) < 5 else f'{fl[0]}…{fl[-1]}'}" if fl else f"{title}\n"
-                        "no failure in the sweep")
-            if logx:
-                a.set_xscale("log")
-                a.set_xticks(sw["values"], [f"{v:g}" for v in sw["values"]])
-                a.minorticks_off()
-            if logy:
-                a.set_yscale("log")
-            a.legend(fontsize=7, loc="upper left")
-            return b
-        panel(ax[0, 1], st["noise_scale"], "camera noise × measured σ (read 2.5 DN, shot 0.31 DN/DN)",
-              "camera noise", logx=True, logy=True)
-        panel(ax[0, 2], st["calibration_scale"], "truth camera spreads × (stereo bootstrap σ, mount 10 mm / 1°)",
-              "calibration error (registered again)", logx=True, logy=True, x2=st["calibration_scale_unregistered"])
-        b = panel(ax[1, 0], st["finger_azimuth_deg"], "finger azimuth about +z, deg (elevation 40°; camera at −36°)",
-                  "self-occlusion by the finger", logy=True)
-        vis = [float(np.mean([d.get("visibility", np.nan) for d in det])) for det in st["finger_azimuth_deg"]["detail"]]
-        b.plot(st["finger_azimuth_deg"]["values"], vis, "d-.", color="tab:purple", label="marker visible fraction")
-        b.legend(fontsize=7, loc="center right")
-        panel(ax[1, 1], st["background_gain"], "background brightness × (sheet up to ~190 DN at 1)",
-              "marker contrast", logy=True)
-    ps = h["realistic"]["per_seed"]
-    txt = ["registration (camera entry) vs truth:"]
-    for s in seeds:
-        r = ps[str(s)]["registration"]
-        txt.append(f"  seed {s}: {r['translation_error_mm']:.2f} mm, {r['rotation_error_deg']:.3f} deg; "
-                   f"static bias {np.linalg.norm(ps[str(s)]['static']['bias_mm']):.2f} mm")
-    ax[1, 2].axis("off")
-    ax[1, 2].text(0.0, 1.0, "\n".join(txt), va="top", family="monospace", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-
-
-def _plot_noise(sn: dict, path: str) -> None:
-    B = np.array(sn["bins"])
-    lv = np.linspace(0, 240, 100)
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    ax.scatter(B[:, 0], B[:, 1], s=12 + 40 * B[:, 2] / B[:, 2].max(), label="flat patches, binned (area ∝ count)")
-    ax.plot(lv, np.sqrt(sn["read_dn"] ** 2 + sn["shot_gain"] * lv), "k-",
-            label=f"this fit: read {sn['read_dn']:.2f} DN, gain {sn['shot_gain']:.3f}")
-    rf = sn["registration_fit"]
-    ax.plot(lv, np.sqrt(rf["read_dn"] ** 2 + rf["shot_gain"] * lv), "r--",
-            label=f"twin (registration's board fit): read {rf['read_dn']} DN, gain {rf['shot_gain']}")
-    ax.set_xlabel("level, DN")
-    ax.set_ylabel("noise σ, DN")
-    ax.set_title(f"real XIMEA images ({sn['images']}): noise vs level; corner jitter {sn['corner_jitter_px']:.3f} px")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-def _plot_accuracy(acc: dict, path: str) -> None:
-    fig, ax = plt.subplots(1, 2, figsize=(12, 4.8))
-    marks = {"dlt": "o", "optimal": "s", "midpoint": "^"}
-    zi = acc["depths"].index(0.5)
-    for meth in METHODS:
-        t = acc["time_us"][meth]
-        for s in SIGMAS:
-            ax[0].scatter(t, acc["rms_mm"][meth][f"{s}"][zi], marker=marks[meth], s=40,
-                          c=[plt.cm.viridis(SIGMAS.index(s) / (len(SIGMAS) - 1))],
-                          label=f"{meth}" if s == SIGMAS[0] else None, edgecolors="k")
-    for s in SIGMAS:
-        ax[0].axhline(acc["floor_mm"][f"{s}"][zi], color=plt.cm.viridis(SIGMAS.index(s) / (len(SIGMAS) - 1)), ls=":",
-                      lw=1)
-        ax[0].text(ax[0].get_xlim()[1] if False else 0.5, acc["floor_mm"][f"{s}"][zi], f" floor σ={s} px",
-                   fontsize=7, va="bottom", transform=ax[0].get_yaxis_transform())
-    ax[0].set_yscale("log")
-    ax[0].set_xlabel("time per stereo pair, µs (triangulation + covariance)")
-    ax[0].set_ylabel("RMS 3-D error at 0.5 m, mm")
-    ax[0].set_title("accuracy vs speed (colour: σ; dotted: floor Z²√2σ/fB)")
-    ax[0].legend()
-    for meth in METHODS:
-        ax[1].plot(acc["depths"], acc["rms_mm"][meth]["0.1"], marker=marks[meth], label=meth)
-    ax[1].plot(acc["depths"], acc["floor_mm"]["0.1"], "k:", label="depth floor")
-    ax[1].axhline(0.3, color="r", lw=0.8, ls="--", label="target 0.3 mm")
-    ax[1].set_xlabel("depth Z, m")
-    ax[1].set_ylabel("RMS 3-D error, mm (σ = 0.1 px)")
-    ax[1].set_yscale("log")
-    ax[1].set_title("BumbleBee2 1024×768 reference (f 817 px, B 0.12 m)")
-    ax[1].legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-def _plot_stability(st: dict, path: str) -> None:
-    fig, ax = plt.subplots(2, 3, figsize=(15, 8.5))
-    f = st["fov"]
-    im = ax[0, 0].imshow(np.array(f["error_mm"], float), origin="upper", aspect="auto", cmap="magma",
-                         extent=[f["u_px"][0], f["u_px"][-1], f["v_px"][-1], f["v_px"][0]], vmin=0, vmax=1.0)
-    fig.colorbar(im, ax=ax[0, 0], label="error, mm (white = invalid)")
-    ax[0, 0].set_title(f"field of view at 0.5 m (XIMEA twin): valid {f['valid_fraction'] * 100:.0f} %")
-    ax[0, 0].set_xlabel("u, px")
-    ax[0, 0].set_ylabel("v, px")
-    d = st["degenerate"]
-    for meth in METHODS:
-        ax[0, 1].plot(d["angle_deg"], d["rms_mm"][meth], marker="o", label=meth)
-    ax[0, 1].set_yscale("log")
-    ax[0, 1].set_xscale("log")
-    ax[0, 1].set_xlabel("angle between the marker direction and the baseline, deg (0.5 m range, σ 0.1 px/f rad)")
-    ax[0, 1].set_ylabel("RMS error, mm")
-    ax[0, 1].set_title("near-degenerate rays: toward the baseline")
-    ax[0, 1].legend()
-    for meth in METHODS:
-        ax[0, 2].plot(d["depth_m"], d["depth_rms_mm"][meth], marker="o", label=meth)
-    ax[0, 2].set_xlabel("depth, m (σ 0.1 px)")
-    ax[0, 2].set_ylabel("RMS error, mm")
-    ax[0, 2].set_yscale("log")
-    ax[0, 2].set_title("near-degenerate rays: far marker")
-    ax[0, 2].legend()
-    o = st["occlusion"]
-    ax[1, 0].plot(o["fraction"], o["error_mm"], "o-")
-    for x, r in zip(o["fraction"], o["reason"], strict=False):
-        if r != "ok":
-            ax[1, 0].axvspan(x - 0.05, x + 0.05, color="0.85")
-    ax[1, 0].set_xlabel("fraction of the marker hidden in the left image")
-    ax[1, 0].set_ylabel("error, mm (grey: invalid)")
-    ax[1, 0].set_title("partial occlusion")
-    r = st["reflection"]
-    code = {"correct": 2, "invalid": 1, "wrong": 0}
-    for mode, mk in (("no_track", "o"), ("track", "s")):
-        ax[1, 1].plot(np.array(r["distance_m"]) * 1e3, [code[e["outcome"]] for e in r[mode]], mk + "-", label=mode)
-    ax[1, 1].set_yticks([0, 1, 2], ["wrong", "invalid", "correct"])
-    ax[1, 1].set_xscale("log")
-    ax[1, 1].set_xticks([x * 1e3 for x in r["distance_m"]], [f"{x * 1e3:g}" for x in r["distance_m"]])
-    ax[1, 1].minorticks_off()
-    ax[1, 1].set_xlabel("distance of the second bright blob, mm")
-    ax[1, 1].set_title("reflection (equal-brightness second dot)")
-    ax[1, 1].legend()
-    b = st["motion_blur"]
-    ax[1, 2].plot(b["speed_mps"], b["rms_error_mm"], "o-", label="RMS error, mm")
-    ax[1, 2].plot(b["speed_mps"], b["valid_rate"], "s--", label="valid rate")
-    ax2 = ax[1, 2].twiny()
-    ax2.set_xlim(ax[1, 2].get_xlim())
-    ax2.set_xticks(b["speed_mps"][::2], [f"{s:.0f}" for s in b["streak_px"][::2]])
-    ax2.set_xlabel("streak length, px")
-    ax[1, 2].set_xlabel("finger speed, m/s (4 ms exposure)")
-    ax[1, 2].set_title("motion blur")
-    ax[1, 2].legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -593,14 +409,14 @@ def main(argv: list[str] | None = None) -> int:
     from flexsheet.benches.vision import DATA
     from flexsheet.vision.stereo_calibration import parse_board, validate_stereo
 
-    _log("accuracy vs speed (geometry Monte Carlo)...")
+    log.info("accuracy vs speed (geometry Monte Carlo)...")
     ref = StereoModel.from_calib(bumblebee2_calibration(1024, 768, pixel_um=4.65))
     acc = accuracy_speed(ref, 300 if a.quick else a.samples)
-    _log("pipeline stability cases (realistic sensing, known calibration)...")
+    log.info("pipeline stability cases (realistic sensing, known calibration)...")
     st = stability()
     tm = timing(60 if a.quick else 200)
     real = real_stereo_rms()
-    _log("real calibration: held-out validation...")
+    log.info("real calibration: held-out validation...")
     import glob
 
     import cv2
@@ -608,11 +424,11 @@ def main(argv: list[str] | None = None) -> int:
     val = validate_stereo([cv2.imread(f, 0) for f in ls], [cv2.imread(f, 0) for f in rs],
                           parse_board("chessboard:9x6", 0.024), folds=4 if a.quick else 0,
                           names=[os.path.basename(f) for f in ls])
-    _log("real sensor noise...")
+    log.info("real sensor noise...")
     sn = vt.measure_sensor_noise(jitter_repeats=1 if a.quick else 4)
-    _log(f"honest twin, truth seeds {list(seeds)}...")
+    log.info(f"honest twin, truth seeds {list(seeds)}...")
     h = honest(seeds, a.quick)
-    _log("honest twin: stability sweeps...")
+    log.info("honest twin: stability sweeps...")
     hs = honest_stability(seeds, a.quick)
     summary = {
         "detect_triangulate_median_ms": tm["roi"]["median_ms"],
@@ -640,10 +456,10 @@ def main(argv: list[str] | None = None) -> int:
                 "known calibration; honest* against the hidden truth with the registered camera; stereo_baseline_mm "
                 "follows from the assumed 24 mm square (not a check)",
     }
-    _plot_accuracy(acc, os.path.join(a.out, "accuracy_speed.png"))
-    _plot_stability(st, os.path.join(a.out, "stability.png"))
-    _plot_honest(h, hs, os.path.join(a.out, "honest.png"))
-    _plot_noise(sn, os.path.join(a.out, "sensor_noise.png"))
+    plot_accuracy(acc, os.path.join(a.out, "accuracy_speed.png"), SIGMAS)
+    plot_stability(st, os.path.join(a.out, "stability.png"))
+    plot_honest(h, hs, os.path.join(a.out, "honest.png"), TARGET_MM)
+    plot_noise(sn, os.path.join(a.out, "sensor_noise.png"))
     with open(os.path.join(a.out, "summary.json"), "w") as fh:
         json.dump(summary, fh, indent=1, default=float)
     print(json.dumps({k: v for k, v in summary.items() if not isinstance(v, dict)}, indent=1))

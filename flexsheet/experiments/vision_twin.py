@@ -23,6 +23,7 @@ from __future__ import annotations
 import glob
 import hashlib
 import json
+import logging
 import math
 import os
 from dataclasses import asdict, replace
@@ -30,16 +31,14 @@ from dataclasses import asdict, replace
 import cv2
 import numpy as np
 
-from flexsheet.calibration.display_calib import (
-    CameraEntry,
-    DisplayCalib,
-    load_display_calib,
-    nominal_display_calib,
-    write_display_calib,
-)
-from flexsheet.twin.camera import XIMEA_SENSOR, SimConfig, twin_renderer
+from flexsheet.calibration.display_calib import CameraEntry, DisplayCalib, nominal_display_calib
+from flexsheet.calibration.display_calib_file import load_display_calib, write_display_calib
+from flexsheet.twin.camera import twin_renderer
+from flexsheet.twin.camera_config import XIMEA_SENSOR, SimConfig
 from flexsheet.twin.truth import Spreads, TwinTruth
 from flexsheet.vision.tracker import FingertipTracker, TrackerConfig
+
+log = logging.getLogger(__name__)
 
 __all__ = ["cache_dir", "registered_camera", "sim_config", "static_points",
            "static_error", "moving_error", "registration_error", "scaled_truth", "measure_sensor_noise",
@@ -77,8 +76,7 @@ def _key(truth: TwinTruth, n_views: int) -> str:
     return h.hexdigest()[:16]
 
 
-def registered_camera(truth: TwinTruth, quick: bool = False, cache: str | None = None,
-                      log=None) -> tuple[CameraEntry, str]:
+def registered_camera(truth: TwinTruth, quick: bool = False, cache: str | None = None) -> tuple[CameraEntry, str]:
     """The camera entry a lab would have for this truth, and the ``display.yaml`` path holding it.
 
     A realistic truth of the default spreads: the twin's whole registration for its seed
@@ -98,7 +96,7 @@ def registered_camera(truth: TwinTruth, quick: bool = False, cache: str | None =
             write_display_calib(path, DisplayCalib(camera=nominal_display_calib().camera))
         return load_display_calib(path, require=("camera",)).camera, path
     if truth.spreads == Spreads():
-        path = sim_display_calib(truth.seed, truth.realism, quick=quick, progress=log)
+        path = sim_display_calib(truth.seed, truth.realism, quick=quick)
         return load_display_calib(path, require=("camera",)).camera, path
     path = os.path.join(cache, f"camera_seed{truth.seed}_{_key(truth, P.QUICK.views)}.yaml")
     if os.path.isfile(path):
@@ -106,8 +104,7 @@ def registered_camera(truth: TwinTruth, quick: bool = False, cache: str | None =
     from flexsheet.twin.registration import TwinSource
     from flexsheet.twin.registration_camera import CalibrationTwin
 
-    if log:
-        log(f"registering the camera of a scaled truth (seed {truth.seed}, {P.QUICK.views} board views)...")
+    log.info(f"registering the camera of a scaled truth (seed {truth.seed}, {P.QUICK.views} board views)...")
     o = P.QUICK
     src = TwinSource(CalibrationTwin(truth, seed=truth.seed), o.board_frames, o.pattern_frames, o.marker_frames)
     entry, _ = P.run_camera_pose(src, o)
@@ -225,7 +222,7 @@ def scaled_truth(seed: int, scale: float) -> TwinTruth:
 def measure_sensor_noise(directory: str = XIMEA_DIR, block: int = 8, max_grad: float = 1.5,
                          jitter_repeats: int = 4, seed: int = 0) -> dict:
     """Read and shot noise of the real XIMEA images, and the corner jitter they cause (independent of the
-    registration's board-fit method, ``flexsheet.twin.registration_camera.measure_ximea_noise``).
+    registration's board-fit method, ``flexsheet.twin.sensor_noise.measure_ximea_noise``).
 
     Noise: every ``block``×``block`` patch of every image whose smoothed gradient stays below ``max_grad``
     DN/px (a flat board square or background) gives its mean level I and a robust σ from second differences

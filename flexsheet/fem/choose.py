@@ -20,11 +20,11 @@ import numpy as np
 
 from flexsheet.fem.contact import finger_at
 from flexsheet.fem.material import Material
-from flexsheet.fem.mesh import MeshSpec, cylinder_mesh
+from flexsheet.fem.mesh import MeshSpec, cylinder_tet_mesh
 from flexsheet.fem.solver import FemModel, solve_full
 
 __all__ = ["Choice", "evaluate_spec", "choose", "load_table", "visible_mask", "TABLE_PATH", "DEFAULT_SPEC",
-           "DEFAULT_ORDER", "choose_model", "load_model_table", "MODEL_TABLE_PATH", "MODEL_PREFERENCE"]
+           "DEFAULT_ORDER", "choose_fem_model", "load_model_table", "MODEL_TABLE_PATH", "MODEL_PREFERENCE"]
 
 TABLE_PATH = os.path.join(os.path.dirname(__file__), "accuracy_table.json")
 MODEL_TABLE_PATH = os.path.join(os.path.dirname(__file__), "model_table.json")
@@ -65,7 +65,7 @@ def evaluate_spec(spec: MeshSpec, ref_model: FemModel, ref_solutions: dict, mate
     finger footprint, m}, "surface_error_all_m": {depth: max over all vertices}, "surface_rms_m",
     "force_error_pct", "force_N"}; depth keys are "%.4f" m.
     """
-    mesh = cylinder_mesh(spec)
+    mesh = cylinder_tet_mesh(spec)
     model = FemModel(mesh, material, order=order)
     surf = np.flatnonzero(model.boundary & ~model.fixed)
     surf = surf[surf < len(mesh.points)]
@@ -122,8 +122,8 @@ def choose(table: dict | None, target: float, depth_min: float, depth_max: float
                                            f"accurate P{order} {spec.key()} ({n} DOF) has {err * 1e3:.2f} mm")
 
 
-def choose_model(table: dict | None, target: float, depth_max: float, update_ms_max: float = 1.0
-                 ) -> tuple[str, str]:
+def choose_fem_model(table: dict | None, target: float, depth_max: float, update_ms_max: float = 1.0
+                     ) -> tuple[str, str]:
     """(model kind, reason): the first of :data:`MODEL_PREFERENCE` whose largest visible-surface error against
     the nonlinear reference, over every tabulated contact position and depth ≤ ``depth_max`` (m), is within
     ``target`` (m) at ≤ ``update_ms_max`` ms per update; the most accurate one when none is. ``table`` is

@@ -16,11 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Finger", "finger_from_tip", "finger_at", "held_finger", "imposed_displacement"]
+__all__ = ["ContactFinger", "finger_from_tip", "finger_at", "held_finger", "imposed_displacement"]
 
 
 @dataclass(frozen=True)
-class Finger:
+class ContactFinger:
     """A fingertip sphere against the cylinder.
 
     ``center`` (3,) m sphere centre; ``direction`` (3,) unit push direction p̂ (into the object);
@@ -39,7 +39,7 @@ class Finger:
 
 
 def finger_at(angle: float, depth: float, radius: float, cyl_radius: float, cyl_center: np.ndarray,
-              axial: float = 0.0) -> Finger:
+              axial: float = 0.0) -> ContactFinger:
     """Finger pushing at azimuth ``angle`` (rad, around +x toward +z), axial offset ``axial`` (m) to ``depth`` (m).
 
     Raises ``ValueError`` naming the argument when not finite, radius ≤ 0 or depth < 0."""
@@ -54,10 +54,10 @@ def finger_at(angle: float, depth: float, radius: float, cyl_radius: float, cyl_
     out = np.array([math.cos(angle), 0.0, math.sin(angle)])
     cp = c0 + np.array([0.0, axial, 0.0]) + cyl_radius * out
     tip = cp - depth * out
-    return Finger(tip + radius * out, -out, float(radius), float(depth), cp, float(angle), float(axial))
+    return ContactFinger(tip + radius * out, -out, float(radius), float(depth), cp, float(angle), float(axial))
 
 
-def held_finger(p: np.ndarray, anchor: Finger, radius: float, max_depth: float) -> Finger:
+def held_finger(p: np.ndarray, anchor: ContactFinger, radius: float, max_depth: float) -> ContactFinger:
     """The finger at tip ``p`` (3,) m while a push holds its contact: ``anchor``'s contact point, direction,
     azimuth and axial position, depth measured along the held direction (≥ 0). Raises ``ValueError`` naming
     the tip when it is deeper than ``max_depth`` m. Shared by the cylinder's and the scenes' contact."""
@@ -65,12 +65,12 @@ def held_finger(p: np.ndarray, anchor: Finger, radius: float, max_depth: float) 
     if depth > max_depth:
         raise ValueError(f"tip {p.tolist()} is {depth * 1e3:.1f} mm deep, beyond max_depth "
                          f"{max_depth * 1e3:.1f} mm")
-    return Finger(p - radius * anchor.direction, anchor.direction, float(radius), max(0.0, depth),
+    return ContactFinger(p - radius * anchor.direction, anchor.direction, float(radius), max(0.0, depth),
                   anchor.contact_point, anchor.angle, anchor.axial)
 
 
 def finger_from_tip(tip: np.ndarray, radius: float, cyl_radius: float, cyl_length: float, cyl_center: np.ndarray,
-                    max_depth: float, anchor: Finger | None = None, sticky_depth: float = 0.005) -> Finger:
+                    max_depth: float, anchor: ContactFinger | None = None, sticky_depth: float = 0.005) -> ContactFinger:
     """Finger geometry from the measured fingertip position ``tip`` (3,) m, display frame.
 
     Without ``anchor`` the push direction points from ``tip`` to the cylinder axis. With ``anchor`` (the
@@ -102,11 +102,11 @@ def finger_from_tip(tip: np.ndarray, radius: float, cyl_radius: float, cyl_lengt
     if depth > max_depth:
         raise ValueError(f"tip {p.tolist()} is {depth * 1e3:.1f} mm deep, beyond max_depth {max_depth * 1e3:.1f} mm")
     cp = c0 + np.array([0.0, axial, 0.0]) + cyl_radius * out
-    return Finger(p + radius * out, -out, float(radius), max(0.0, depth), cp,
+    return ContactFinger(p + radius * out, -out, float(radius), max(0.0, depth), cp,
                   math.atan2(out[2], out[0]), axial)
 
 
-def imposed_displacement(points: np.ndarray, finger: Finger) -> tuple[np.ndarray, np.ndarray]:
+def imposed_displacement(points: np.ndarray, finger: ContactFinger) -> tuple[np.ndarray, np.ndarray]:
     """Surface points inside the finger sphere and their imposed displacements.
 
     ``points`` (P, 3) m undeformed positions. Returns ``inside`` (P,) bool and ``u`` (P, 3) m, zero outside:

@@ -113,7 +113,7 @@ def visible_px_errors(models: list[np.ndarray], ref_pts: np.ndarray, faces: np.n
     """The largest visible error, px, of each of ``models`` (each (k, 3) m) against ``ref_pts`` (k, 3) m (the
     same rendered vertices, deformed by a model and by the reference), and how many vertices either eye sees:
     visibility on the reference's surface (``faces`` (F, 3)) with the ``finger``
-    (:class:`flexsheet.fem.contact.Finger` or None) occluding, found once for all models; ``eye_pair`` (2, 3) m,
+    (:class:`flexsheet.fem.contact.ContactFinger` or None) occluding, found once for all models; ``eye_pair`` (2, 3) m,
     default :func:`eyes`. 0.0 when no vertex is seen. Raises ``ValueError`` for mismatched shapes."""
     r = np.asarray(ref_pts, float)
     ms = [np.asarray(m, float) for m in models]

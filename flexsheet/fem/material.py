@@ -14,19 +14,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from flexsheet.model.scenes import GENT_JM_RUBBER
-
-__all__ = ["Material", "SOFT_TISSUE", "GENT_JM_RUBBER"]
-
-# GENT_JM_RUBBER: Gent's natural-rubber limiting I1 - 3 (97.2), defined beside the scene format that names it
-# (flexsheet.model.scenes), re-exported here for the FEM
+__all__ = ["Material", "SOFT_TISSUE"]
 
 
 @dataclass(frozen=True)
 class Material:
     """Isotropic material: Young's modulus ``E`` (Pa, > 0) and Poisson's ratio ``nu`` (0 ≤ ν < 0.5) — all the
     linear models read — and ``Jm`` (> 0, dimensionless; ``math.inf``: none), the Gent limiting value of
-    I₁ − 3 that only the hyperelastic reference reads (:mod:`flexsheet.fem.hyperelastic`: W's isochoric-free part
+    I₁ − 3 that only the hyperelastic reference reads (:mod:`flexsheet.fem.reference.hyperelastic`: W's isochoric-free part
     −μJm/2 ln(1 − (I₁ − 3)/Jm), Gent 1996; Jm → ∞ is neo-Hookean μ/2 (I₁ − 3)).
 
     Raises ``ValueError`` naming the field when out of range or not finite (``Jm`` may be ``inf``)."""
@@ -45,7 +40,7 @@ class Material:
 
     @classmethod
     def of_scene(cls, m) -> Material:
-        """The material of a scene file's ``material`` (:class:`flexsheet.model.scenes.MaterialSpec`: ``model``,
+        """The material of a scene file's ``material`` (:class:`flexsheet.model.scene_parts.MaterialSpec`: ``model``,
         ``E``, ``nu``, ``Jm``): its ``Jm`` for ``model: gent``, else neo-Hookean (∞; the linear models read E, ν
         only). Raises ``ValueError`` as the constructor."""
         return cls(m.E, m.nu, m.Jm if m.model == "gent" else math.inf)

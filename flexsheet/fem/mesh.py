@@ -24,7 +24,8 @@ import numpy as np
 
 from flexsheet.model.geometry import CYLINDER_CENTER, CYLINDER_LENGTH, CYLINDER_RADIUS
 
-__all__ = ["TetMesh", "MeshSpec", "cylinder_mesh", "cylinder_part_mesh", "surface_faces", "write_mesh", "arc_points"]
+__all__ = ["TetMesh", "MeshSpec", "cylinder_tet_mesh", "cylinder_part_mesh", "surface_faces", "write_mesh", "arc_points",
+           "gmsh_tets", "finish_cylinder_mesh", "orient_tets"]
 
 _GMSH_LOCK = threading.Lock()   # gmsh is a process-wide singleton
 
@@ -100,8 +101,8 @@ def arc_points(radius: float, center: np.ndarray, arc_deg: float, spacing: float
     return np.column_stack([c[0] + radius * np.cos(phis), np.full(n, c[1]), c[2] + radius * np.sin(phis)])
 
 
-def _gmsh_tets(model: str, geometry, h: float, h_fine: float, refine_radius: float, centres, what: str,
-               extra_balls: tuple = ()):
+def gmsh_tets(model: str, geometry, h: float, h_fine: float, refine_radius: float, centres, what: str,
+              extra_balls: tuple = ()):
     """Run gmsh once: ``geometry(gmsh)`` adds the OpenCASCADE solid, element size ``h`` with ``h_fine`` within
     ``refine_radius`` of each point of ``centres`` (``Ball`` fields under a ``Min``), single-threaded Delaunay;
     ``extra_balls``: further (centres (K, 3) m, radius m, size m) groups of balls under the same ``Min``, each
@@ -155,12 +156,12 @@ def _gmsh_tets(model: str, geometry, h: float, h_fine: float, refine_radius: flo
     return pts_all[used], inv.reshape(-1, 4)
 
 
-def cylinder_mesh(spec: MeshSpec = MeshSpec(), radius: float = CYLINDER_RADIUS, length: float = CYLINDER_LENGTH,
-                  center: np.ndarray = CYLINDER_CENTER) -> TetMesh:
+def cylinder_tet_mesh(spec: MeshSpec = MeshSpec(), radius: float = CYLINDER_RADIUS, length: float = CYLINDER_LENGTH,
+                      center: np.ndarray = CYLINDER_CENTER) -> TetMesh:
     """Mesh the cylinder (axis +y through ``center``) with gmsh's OpenCASCADE kernel, P1 tetrahedra.
 
-    Returns a :class:`TetMesh` with the back-half support marked (boundary nodes with x ≤ center_x + 1e-9).
-    Raises ``ValueError`` on bad geometry and ``RuntimeError`` if gmsh fails. Source: gmsh Python API
+    Returns a :class:`TetMesh` (tetrahedra, not the renderer's triangle surface) with the back-half support
+    marked (boundary nodes with x ≤ center_x + 1e-9). Raises ``ValueError`` on bad geometry and ``RuntimeError`` if gmsh fails. Source: gmsh Python API
     (``occ.addCylinder``, ``Ball``/``Min`` size fields, ``generate(3)``). Deterministic for a given spec
     (single-threaded Delaunay with fixed options).
     """
@@ -175,9 +176,9 @@ def cylinder_mesh(spec: MeshSpec = MeshSpec(), radius: float = CYLINDER_RADIUS, 
 
     centres = (arc_points(radius, c, spec.arc_deg, spec.refine_radius / 2)
                if spec.refine_radius > 0 and spec.h_fine < spec.h else [])
-    points, tets = _gmsh_tets("cylinder", geometry, spec.h, spec.h_fine, spec.refine_radius, centres,
-                              f"the cylinder with {spec.key()}")
-    return _finish(points, tets, radius, length, c, spec)
+    points, tets = gmsh_tets("cylinder", geometry, spec.h, spec.h_fine, spec.refine_radius, centres,
+                             f"the cylinder with {spec.key()}")
+    return finish_cylinder_mesh(points, tets, radius, length, c, spec)
 
 
 def _part_geometry(c: np.ndarray, y0: float, radius: float, length: float, half_z: bool, cut_deg: float | None):
@@ -288,15 +289,15 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
         extra = (_skin_balls(skin, h_fine, refine_deg, radius, c, y0, half_z),)
     if tip is not None:
         extra = extra + (_tip_balls(tip, h_fine, refine_deg, radius, c),)
-    points, tets = _gmsh_tets("cylinder_part", geometry, h, h_fine, refine_radius, centres,
-                              f"the cylinder part (h={h}, h_fine={h_fine}, skin={skin}, tip={tip})", extra)
+    points, tets = gmsh_tets("cylinder_part", geometry, h, h_fine, refine_radius, centres,
+                             f"the cylinder part (h={h}, h_fine={h_fine}, skin={skin}, tip={tip})", extra)
     tets = orient_tets(points, tets)
     faces = surface_faces(points, tets)
     return TetMesh(points, tets, faces, np.zeros(len(points), bool), None, radius, length, c.copy())
 
 
-def _finish(points: np.ndarray, tets: np.ndarray, radius: float, length: float, center: np.ndarray,
-            spec: MeshSpec | None) -> TetMesh:
+def finish_cylinder_mesh(points: np.ndarray, tets: np.ndarray, radius: float, length: float, center: np.ndarray,
+                         spec: MeshSpec | None) -> TetMesh:
     tets = orient_tets(points, tets)
     faces = surface_faces(points, tets)
     fixed = np.zeros(len(points), bool)

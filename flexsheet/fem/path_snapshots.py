@@ -79,7 +79,7 @@ def path_table_key(scene_key: str, realtime_key: str) -> str:
     import json
 
     from flexsheet.fem.cache import cache_key
-    from flexsheet.fem.hyperelastic import SOLVER_VERSION
+    from flexsheet.fem.reference.versions import SOLVER_VERSION
 
     return cache_key(PATH_TABLE_VERSION, scene_key, realtime_key, SOLVER_VERSION, json.dumps(GRID, sort_keys=True),
                      f"reach={REACH:.9g}")

@@ -6,7 +6,7 @@ part of the strain-monitor zone (surface + interior nodes near the contact regio
 geometrically nonlinear mode:
 
 * **nonlinear snapshots** (:mod:`flexsheet.fem.snapshots`, Peterlík et al. 2010): hyperelastic (neo-Hookean or
-  Gent) reference solutions (:mod:`flexsheet.fem.hyperelastic`) precomputed over (contact azimuth, depth), rotated with the finger and
+  Gent) reference solutions (:mod:`flexsheet.fem.reference.hyperelastic`) precomputed over (contact azimuth, depth), rotated with the finger and
   interpolated per update. When attached (:meth:`RealtimeModel.attach_snapshots`) and the push lies in the
   table, this is what the node draws (``method = "snapshots"``); the linear model serves everything else.
 * the older corotational depth table (Niroomandi et al. 2013 / Filipovič & Peterlík 2009 with corotational FEM
@@ -24,20 +24,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
-from flexsheet.fem.contact import Finger, finger_at, finger_from_tip
+from flexsheet.fem.contact import ContactFinger, finger_at, finger_from_tip
+from flexsheet.fem.corotational import solve_corotational
+from flexsheet.fem.deformation_checks import TetChecks, element_checks
 from flexsheet.fem.material import Material
-from flexsheet.fem.mesh import MeshSpec, TetMesh, arc_points, cylinder_mesh
-from flexsheet.fem.solver import (
-    CapacitanceSolver,
-    FemModel,
-    OutsideCandidates,
-    TetChecks,
-    element_checks,
-    solve_corotational,
-    solve_full,
-)
+from flexsheet.fem.mesh import MeshSpec, TetMesh, arc_points, cylinder_tet_mesh
+from flexsheet.fem.solver import CapacitanceSolver, FemModel, OutsideCandidates, solve_full
 
-__all__ = ["RealtimeModel", "Update", "DEFAULT_CACHE_DIR", "CondensedSurface"]
+__all__ = ["RealtimeModel", "Update", "CondensedSurface", "dist_to_points"]
 
 _CACHE_VERSION = "2"
 
@@ -89,7 +83,7 @@ class CondensedSurface:
         float32 m, ``_rest_normals`` (F, 3), ``_surf_in_out`` (S,) output row of each surface node (−1: a support
         node, zero displacement), ``_mon_tets`` the monitored tetrahedra (all four nodes are outputs and
         ``monitor`` (N,) bool holds them) in output rows, ``_out_points`` and ``_tet_checks`` (their precomputed
-        :class:`flexsheet.fem.solver.TetChecks`)."""
+        :class:`flexsheet.fem.deformation_checks.TetChecks`)."""
         m = self.mesh
         self.n_candidates = len(self.solver.cand_pts)
         self.surface_nodes = m.surface_nodes
@@ -106,7 +100,7 @@ class CondensedSurface:
         self._tet_checks = TetChecks(self._out_points, self._mon_tets)
         # per-update helpers: the surface gather (support rows point at an appended zero row) and the fold
         # test as one sparse product (see folded_faces)
-        from flexsheet.fem.solver import fold_operator
+        from flexsheet.fem.deformation_checks import fold_operator
 
         self._surf_take = np.where(self._surf_in_out >= 0, self._surf_in_out, len(self.solver.out_pts))
         self._fold_op, self._fold_rest = fold_operator(self._rest.astype(np.float64), self.faces,
@@ -122,7 +116,7 @@ class CondensedSurface:
         """Mesh node count."""
         return len(self.mesh.points)
 
-    def _solve(self, fg: Finger):
+    def _solve(self, fg: ContactFinger):
         """(solution, displacements (O, 3) m of the output points, method): the condensed solve, or the full
         sparse one ("sparse") when the contact leaves the precomputed candidates."""
         try:
@@ -134,12 +128,12 @@ class CondensedSurface:
             sol.u_full = None
             return sol, u_out, "sparse"
 
-    def _checks(self, fg: Finger, u_out: np.ndarray) -> tuple[float, int]:
+    def _checks(self, fg: ContactFinger, u_out: np.ndarray) -> tuple[float, int]:
         """(max principal strain, inverted elements) over the monitor tets whose centroid lies within
         finger radius + depth + 2·h_fine of the undeformed surface point under the sphere (where strain
         concentrates; the rest of the monitor zone is not checked: over the cylinder's ±60° arc, 0–50 mm and
         three axial offsets this gave the same strain and inverted count as checking every monitor tet,
-        2026-11-23, for fingers not held), by the precomputed :class:`flexsheet.fem.solver.TetChecks`. ``u_out``
+        2026-11-23, for fingers not held), by the precomputed :class:`flexsheet.fem.deformation_checks.TetChecks`. ``u_out``
         (O, 3) m output-point displacements."""
         tc = self._tet_checks
         if tc.n_tets == 0:
@@ -162,7 +156,7 @@ class CondensedSurface:
 
         With x = rest + us, face edges e1 = x1 − x0, e2 = x2 − x0 and rest normal n0, the turned normal's
         component along n0 is (e1 × e2)·n0 = e2·(n0 × e1): both factors are linear in ``us``, so one
-        precomputed sparse product gives them for every face (:func:`flexsheet.fem.solver.fold_operator`)."""
+        precomputed sparse product gives them for every face (:func:`flexsheet.fem.deformation_checks.fold_operator`)."""
         nf = len(self.faces)
         y = self._fold_op @ np.ascontiguousarray(us, np.float64).reshape(-1) + self._fold_rest
         dot = (y[:3 * nf] * y[3 * nf:]).reshape(3, nf).sum(axis=0)
@@ -215,7 +209,7 @@ class RealtimeModel(CondensedSurface):
         self.precompute_s = time.perf_counter() - t0
 
     def attach_snapshots(self, table: dict, axial_max: float = 0.01) -> None:
-        """Serve pushes inside the nonlinear snapshot ``table`` (:func:`flexsheet.fem.snapshots.build_table`) from
+        """Serve pushes inside the nonlinear snapshot ``table`` (:func:`flexsheet.fem.reference.snapshot_build.build_table`) from
         it; raises ``ValueError`` when the table is inconsistent. Thread-safe to call while updates run (the
         model is swapped in one assignment)."""
         from flexsheet.fem.snapshots import SnapshotModel
@@ -225,11 +219,11 @@ class RealtimeModel(CondensedSurface):
     def _precompute(self) -> dict:
         """Mesh, candidate/output/monitor sets and the capacitance matrices (the cache entry's arrays)."""
         spec, order, reach = self.spec, self.order, self._reach
-        self.mesh = cylinder_mesh(spec)
+        self.mesh = cylinder_tet_mesh(spec)
         m = self.mesh
         model = self.model
         arc = arc_points(m.radius, m.center, spec.arc_deg, 0.001)
-        dist = _dist_to_points(model.points, arc)
+        dist = dist_to_points(model.points, arc)
         surf = model.boundary & ~model.fixed
         candidates = surf & (dist <= reach)
         monitor = (dist <= reach + 2 * spec.h_fine)[:len(m.points)]
@@ -300,15 +294,15 @@ class RealtimeModel(CondensedSurface):
         """Forget the held contact point (see ``anchor`` in :func:`finger_from_tip`)."""
         self._anchor = None
 
-    def update_finger(self, fg: Finger) -> Update:
-        """As :meth:`update` for a prepared :class:`Finger`: the nonlinear snapshots when attached and the push
+    def update_finger(self, fg: ContactFinger) -> Update:
+        """As :meth:`update` for a prepared :class:`ContactFinger`: the nonlinear snapshots when attached and the push
         lies in their table, the linear model otherwise."""
         snap = self.snapshots
         if snap is not None and fg.depth > 0 and snap.covers(fg.angle, fg.depth, fg.axial):
             return self._update_snapshots(snap, fg)
         return self._update_linear(fg)
 
-    def _update_snapshots(self, snap, fg: Finger) -> Update:
+    def _update_snapshots(self, snap, fg: ContactFinger) -> Update:
         us, force, stiff, strain, inv = snap.surface(fg.angle, fg.depth, fg.axial)
         if not (np.all(np.isfinite(us)) and math.isfinite(force) and math.isfinite(stiff)):
             return Update(self._rest.copy(), 0.0, 0.0, fg.depth, fg.contact_point.copy(), "snapshots", 0.0, 0,
@@ -318,7 +312,7 @@ class RealtimeModel(CondensedSurface):
         return Update(verts, force, stiff, fg.depth, fg.contact_point.copy(), "snapshots", strain, inv, status,
                       True)
 
-    def _update_linear(self, fg: Finger) -> Update:
+    def _update_linear(self, fg: ContactFinger) -> Update:
         sol, u_out, method = self._solve(fg)
         strain, inv = self._checks(fg, u_out) if sol.n_contact else (0.0, 0)
         us = self._surface_of(u_out)
@@ -344,7 +338,7 @@ class RealtimeModel(CondensedSurface):
         return Update(verts.astype(np.float32), float(force) if valid else 0.0, float(stiff) if valid else 0.0,
                       fg.depth, fg.contact_point.copy(), method, float(strain), int(inv), status, valid)
 
-    def _nonlinear_lookup(self, fg: Finger):
+    def _nonlinear_lookup(self, fg: ContactFinger):
         t = self.nonlinear
         if t is None:
             return None
@@ -362,8 +356,8 @@ class RealtimeModel(CondensedSurface):
         return U, float(F), float(max(k, 0.0)), int(max(t["inverted"][i, j], t["inverted"][i, j + 1]))
 
 
-def _dist_to_points(x: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Distance (N,) from each row of ``x`` (N, 3) to the nearest row of ``pts`` (K, 3)."""
+def dist_to_points(x: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Distance (N,) m from each row of ``x`` (N, 3) m to the nearest row of ``pts`` (K, 3) m."""
     from scipy.spatial import cKDTree
 
     return cKDTree(pts).query(x)[0]

@@ -6,7 +6,7 @@ Geometry (display frame, m), from :class:`flexsheet.model.scenes.Scene`:
 * analytic kinds through gmsh's OpenCASCADE kernel — ``occ.addSphere``; ``occ.addCylinder`` along the pose's
   local +y; ``occ.addBox`` with every edge rounded by ``occ.fillet`` (the scene's edge radius), rotated
   Rx(roll), Ry(pitch), Rz(yaw) about the origin and moved to the pose position (the convention of
-  :func:`flexsheet.model.scenes.rotation_rpy`);
+  :func:`flexsheet.model.scene_parts.rotation_rpy`);
 * a surface mesh (``kind: mesh``, e.g. the organ's ``kidney.obj``) — and any analytic kind OpenCASCADE fails
   on — through :meth:`Scene.write_surface` → STL → ``gmsh.merge`` + ``mesh.classifySurfaces`` +
   ``mesh.createGeometry`` (the surface is re-parametrised and remeshed at the requested sizes) + a volume on
@@ -14,7 +14,7 @@ Geometry (display frame, m), from :class:`flexsheet.model.scenes.Scene`:
 
 Sizes: ``h`` everywhere, ``h_fine`` within ``refine_radius`` of the scene's stroke path
 (:meth:`Scene.stroke_points`, where the finger goes) and of every inclusion's centre (``Ball`` fields under
-a ``Min``; :func:`flexsheet.fem.mesh._gmsh_tets`).
+a ``Min``; :func:`flexsheet.fem.mesh.gmsh_tets`).
 
 Support: boundary nodes where :meth:`Scene.fixed_mask` holds. Material: per-element (E, ν) from
 :meth:`Scene.material_at` at the element centroids (the inclusions, piecewise constant on the tets whose
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexsheet.fem.mesh import MeshSpec, TetMesh, _gmsh_tets, orient_tets, surface_faces
+from flexsheet.fem.mesh import MeshSpec, TetMesh, gmsh_tets, orient_tets, surface_faces
 
 __all__ = ["SceneMesh", "scene_mesh", "refine_centres", "DEFAULT_SCENE_SPEC"]
 
@@ -147,16 +147,16 @@ def scene_mesh(scene, spec: MeshSpec = DEFAULT_SCENE_SPEC, force_stl: bool = Fal
     points = tets = None
     if geometry is not None:
         try:
-            points, tets = _gmsh_tets(f"scene_{scene.name}", geometry, spec.h, spec.h_fine, spec.refine_radius,
-                                      centres, what)
+            points, tets = gmsh_tets(f"scene_{scene.name}", geometry, spec.h, spec.h_fine, spec.refine_radius,
+                                     centres, what)
         except RuntimeError:
             points = None                     # e.g. a fillet OpenCASCADE cannot build: mesh the surface instead
     if points is None:
         how = "stl"
         with tempfile.TemporaryDirectory(prefix="flexsheet_scene_") as d:
             path = scene.write_surface(os.path.join(d, "surface.stl"))
-            points, tets = _gmsh_tets(f"scene_{scene.name}", _stl_geometry(path), spec.h, spec.h_fine,
-                                      spec.refine_radius, centres, what)
+            points, tets = gmsh_tets(f"scene_{scene.name}", _stl_geometry(path), spec.h, spec.h_fine,
+                                     spec.refine_radius, centres, what)
     tets = orient_tets(points, tets)
     p = points[tets]
     vol = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0

@@ -15,7 +15,7 @@ dense set of surface samples (the scene's own surface mesh's vertices and face c
 there and the depth d = (q − tip)·n. Surface nodes inside the sphere get the imposed displacement onto its
 leading surface (:func:`flexsheet.fem.contact.imposed_displacement`, bonded Dirichlet contact). While pressed
 ≥ 5 mm the contact point and direction are held (a pressed finger does not slide; deep pushes stay defined).
-``Finger.angle`` and ``Finger.axial`` are 0 for scenes (they are the cylinder's coordinates).
+``ContactFinger.angle`` and ``ContactFinger.axial`` are 0 for scenes (they are the cylinder's coordinates).
 
 Outputs per update (:class:`flexsheet.fem.realtime.Update`): the deformed surface (the mesh's boundary corner
 nodes, float32 m, display frame), the contact force N and the local stiffness dF/dd N/m (the contact set
@@ -29,8 +29,8 @@ the same floor, ``min_contact_depth``).
 Cost per update (≥ 1 kHz): the condensed solve in single precision (G_aa gathered with one flat
 index, LAPACK ``spotrf``/``spotrs``, u = G_oaᵀ f; displacements within 0.05 µm of a float64 solve), the
 strain/inversion checks as one sparse gradient product plus exact bounds that leave few tets for the
-eigenvalues (:class:`flexsheet.fem.solver.TetChecks`), the fold test as one sparse product
-(:func:`flexsheet.fem.solver.fold_operator`): ~0.3 ms on the organ, 1 BLAS thread.
+eigenvalues (:class:`flexsheet.fem.deformation_checks.TetChecks`), the fold test as one sparse product
+(:func:`flexsheet.fem.deformation_checks.fold_operator`): ~0.3 ms on the organ, 1 BLAS thread.
 
 The stiffness is the held-contact-set dF/dd of the imposed-overlap contact: on a sphere ≈ 1.4 × Hertz's
 tangent stiffness 2E*·a (the overlap's circle is √2·a; docs/scenes.md), and the force ≈ Hertz/√2.
@@ -46,10 +46,10 @@ import time
 import numpy as np
 
 from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
-from flexsheet.fem.contact import Finger, held_finger
+from flexsheet.fem.contact import ContactFinger, held_finger
 from flexsheet.fem.material import Material
 from flexsheet.fem.mesh import MeshSpec, TetMesh
-from flexsheet.fem.realtime import CondensedSurface, Update, _dist_to_points
+from flexsheet.fem.realtime import CondensedSurface, Update, dist_to_points
 from flexsheet.fem.scene_mesh import DEFAULT_SCENE_SPEC, scene_mesh
 from flexsheet.fem.solver import CapacitanceSolver, FemModel
 
@@ -97,8 +97,8 @@ class SurfaceIndex:
 
 
 def scene_finger(tip, surface: SurfaceIndex, radius: float, max_depth: float, fixed_mask=None,
-                 anchor: Finger | None = None, sticky_depth: float = STICKY_DEPTH) -> Finger:
-    """Finger geometry (:class:`flexsheet.fem.contact.Finger`) from the measured fingertip ``tip`` (3,) m on a
+                 anchor: ContactFinger | None = None, sticky_depth: float = STICKY_DEPTH) -> ContactFinger:
+    """Finger geometry (:class:`flexsheet.fem.contact.ContactFinger`) from the measured fingertip ``tip`` (3,) m on a
     scene's surface (module doc). ``fixed_mask`` optional callable(points (1, 3)) → (1,) bool: a contact
     point the support holds is refused. Raises ``ValueError`` naming ``tip`` when it is not a finite (3,)
     vector, deeper than ``max_depth`` m, or its contact point lies on the support. A tip outside the object
@@ -115,10 +115,10 @@ def scene_finger(tip, surface: SurfaceIndex, radius: float, max_depth: float, fi
     if depth > 0 and fixed_mask is not None and bool(np.asarray(fixed_mask(cp[None]))[0]):
         raise ValueError(f"tip {p.tolist()} presses on the object's support (held surface) at "
                          f"{np.round(cp, 4).tolist()}")
-    return Finger(p + radius * n, -n, float(radius), max(0.0, depth), cp, 0.0, 0.0)
+    return ContactFinger(p + radius * n, -n, float(radius), max(0.0, depth), cp, 0.0, 0.0)
 
 
-def finger_on_scene(point, normal, depth: float, radius: float) -> Finger:
+def finger_on_scene(point, normal, depth: float, radius: float) -> ContactFinger:
     """A finger pushed ``depth`` m (≥ 0) along −``normal`` at the surface ``point`` (3,) m (outward unit
     ``normal`` (3,)); for experiments and tests. Raises ``ValueError`` for a negative or non-finite depth or
     radius ≤ 0."""
@@ -130,7 +130,7 @@ def finger_on_scene(point, normal, depth: float, radius: float) -> Finger:
     n = n / np.linalg.norm(n)
     q = np.asarray(point, float)
     tip = q - depth * n
-    return Finger(tip + radius * n, -n, float(radius), float(depth), q.copy(), 0.0, 0.0)
+    return ContactFinger(tip + radius * n, -n, float(radius), float(depth), q.copy(), 0.0, 0.0)
 
 
 _BLAS = None
@@ -228,7 +228,7 @@ class SceneModel(CondensedSurface):
         #: (S,) bool: the rendered vertices the scene's support holds (exactly at rest in every served push)
         self.held = np.asarray(self.mesh.fixed[self.surface_nodes], bool)
         self.surface = SurfaceIndex(scene)
-        self._anchor: Finger | None = None
+        self._anchor: ContactFinger | None = None
         self.snapshots = None
         #: the nonlinear path table (:meth:`attach_path_table`), or None
         self.path_table = None
@@ -273,7 +273,7 @@ class SceneModel(CondensedSurface):
         model = self._build_model(m, sm.E, sm.nu)
         n_path = max(2, int(math.ceil(self.scene.stroke_length() / 0.001)) + 1)
         path, _ = self.scene.stroke_points(n_path)
-        dist = _dist_to_points(model.points, path)
+        dist = dist_to_points(model.points, path)
         surf = model.boundary & ~model.fixed
         candidates = surf & (dist <= self.reach)
         if not candidates.any():
@@ -297,8 +297,8 @@ class SceneModel(CondensedSurface):
         return self._model
 
     # ------------------------------------------------------------------ updates
-    def finger(self, tip) -> Finger:
-        """The :class:`Finger` for fingertip ``tip`` (3,) m without changing the held contact (see
+    def finger(self, tip) -> ContactFinger:
+        """The :class:`ContactFinger` for fingertip ``tip`` (3,) m without changing the held contact (see
         :func:`scene_finger`). Raises ``ValueError``."""
         return scene_finger(tip, self.surface, self.finger_radius, self.max_depth, self.scene.fixed_mask,
                             anchor=self._anchor)
@@ -315,14 +315,14 @@ class SceneModel(CondensedSurface):
         """Forget the held contact point."""
         self._anchor = None
 
-    def update_finger(self, fg: Finger) -> Update:
-        """As :meth:`update` for a prepared :class:`Finger`: the capacitance solve, or the full sparse solve
+    def update_finger(self, fg: ContactFinger) -> Update:
+        """As :meth:`update` for a prepared :class:`ContactFinger`: the capacitance solve, or the full sparse solve
         when the finger touches surface outside the precomputed region (``method = "sparse"``); BLAS on one
         thread (:func:`one_blas_thread`)."""
         with one_blas_thread():
             return self._update_finger(fg)
 
-    def _update_finger(self, fg: Finger) -> Update:
+    def _update_finger(self, fg: ContactFinger) -> Update:
         snap = self.snapshots
         if snap is not None and fg.depth > 0:
             n, d = snap.radial_push(fg.contact_point + fg.depth * fg.direction)
@@ -352,7 +352,7 @@ class SceneModel(CondensedSurface):
                       float(stiffness) if valid else 0.0, fg.depth, fg.contact_point.copy(), method,
                       float(strain), int(inv), status, valid)
 
-    def _update_snapshots(self, snap, fg: Finger, normal: np.ndarray, depth: float) -> Update:
+    def _update_snapshots(self, snap, fg: ContactFinger, normal: np.ndarray, depth: float) -> Update:
         """The sphere table's answer (method "snapshots") for the radial push (``normal``, ``depth``) through the
         finger's leading point: its surface, force and dF/dd; the strain and inverted elements are the
         reference's at the bracketing snapshots."""
@@ -365,7 +365,7 @@ class SceneModel(CondensedSurface):
         return Update((self._rest + us.astype(np.float32)).astype(np.float32), force, stiff, fg.depth,
                       fg.contact_point.copy(), "snapshots", strain, inv, status, True)
 
-    def _floored_stiffness(self, fg: Finger, sol) -> float:
+    def _floored_stiffness(self, fg: ContactFinger, sol) -> float:
         """The linear solve ``sol``'s dF/dd, or for a touch lighter than :data:`STIFFNESS_FLOOR` that of a press
         that deep at the same point (one more capacitance solve; module doc)."""
         if 0.0 < fg.depth < STIFFNESS_FLOOR:
@@ -373,7 +373,7 @@ class SceneModel(CondensedSurface):
             return self._solve(press)[0].stiffness
         return sol.stiffness
 
-    def _update_path(self, pt, fg: Finger, fraction: float) -> Update:
+    def _update_path(self, pt, fg: ContactFinger, fraction: float) -> Update:
         """The path table's answer (method "path_snapshots"): the linear solve of this push plus the table's
         correction at (``fraction``, depth); force and dF/dd the linear model's times the table's ratios; the
         strain and inverted elements are the reference's at the bracketing samples. No fold test (as the
@@ -393,7 +393,7 @@ class SceneModel(CondensedSurface):
         return Update(verts.astype(np.float32), force if valid else 0.0, stiffness if valid else 0.0, fg.depth,
                       fg.contact_point.copy(), "path_snapshots", strain, inv, status, valid)
 
-    def surface_displacement(self, fg: Finger) -> tuple[np.ndarray, float, float]:
+    def surface_displacement(self, fg: ContactFinger) -> tuple[np.ndarray, float, float]:
         """(surface-node displacements (S, 3) m, force N, stiffness N/m) of one push, no checks (experiments)."""
         sol, u_out, _ = self._solve(fg)
         return self._surface_of(u_out), float(sol.force), float(sol.stiffness)

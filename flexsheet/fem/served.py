@@ -1,14 +1,19 @@
 """The real-time model the FEM node serves for a scene, built as the node builds it (:func:`served_model`), so
 that an experiment judges what the user sees: the paper's cylinder's :class:`~flexsheet.fem.realtime.RealtimeModel`
-(mesh from the model table, the shipped nonlinear snapshots where the model table picks them), any other
-scene's :class:`~flexsheet.fem.scene_model.SceneModel` with its stored sphere or path table."""
+(mesh and model kind from :func:`choose_cylinder_model`, the one choice the node makes too; the shipped nonlinear
+snapshots where it picks them), any other scene's :class:`~flexsheet.fem.scene_model.SceneModel` with its stored
+sphere or path table."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
+from flexsheet.fem.choose import choose, choose_fem_model, load_model_table, load_table
 from flexsheet.fem.config import FemConfig
+from flexsheet.fem.mesh import MeshSpec
 from flexsheet.model.scenes import Scene, is_paper_cylinder
 
-__all__ = ["fem_models_as_cylinder", "served_model"]
+__all__ = ["fem_models_as_cylinder", "served_model", "CylinderChoice", "choose_cylinder_model"]
 
 
 def fem_models_as_cylinder(sc: Scene) -> bool:
@@ -18,13 +23,46 @@ def fem_models_as_cylinder(sc: Scene) -> bool:
     return is_paper_cylinder(sc) and sc.support.kind == "back_half" and not sc.inclusions
 
 
+@dataclass(frozen=True)
+class CylinderChoice:
+    """The cylinder's real-time model as :func:`choose_cylinder_model` picks it: the mesh ``spec`` and element
+    ``order`` and why (``mesh_reason``, one log line), the model ``kind`` ("linear" or "snapshots"; "corotational"
+    where the model table picks it) and why (``kind_reason``)."""
+
+    spec: MeshSpec
+    order: int
+    mesh_reason: str
+    kind: str
+    kind_reason: str
+
+
+def choose_cylinder_model(cfg: FemConfig) -> CylinderChoice:
+    """The model the FEM node serves for the paper's cylinder with the settings ``cfg``. Mesh: the one
+    ``mesh_h``/``mesh_h_fine``/``refine_radius``/``order`` set when h and h_fine are > 0, else the cheapest the
+    accuracy table (:func:`flexsheet.fem.choose.choose`) finds within ``accuracy_target`` over
+    [``depth_min``, ``depth_max``] for ``nu`` and ``finger_radius``; the working arc ``arc_deg`` either way.
+    Kind: ``model`` when "linear" or "snapshots", else ("auto") the model table's pick over ``depth_max``
+    (:func:`flexsheet.fem.choose.choose_fem_model`). Raises ``ValueError`` on a non-positive target or depth."""
+    if cfg.mesh_h > 0 and cfg.mesh_h_fine > 0:
+        spec, order = MeshSpec(cfg.mesh_h, cfg.mesh_h_fine, cfg.refine_radius, cfg.arc_deg), cfg.order
+        mesh_reason = f"mesh set by params: P{order} {spec.key()}"
+    else:
+        ch = choose(load_table(), cfg.accuracy_target, cfg.depth_min, cfg.depth_max, cfg.nu, cfg.finger_radius)
+        spec, order = MeshSpec(ch.spec.h, ch.spec.h_fine, ch.spec.refine_radius, cfg.arc_deg), ch.order
+        mesh_reason = f"model choice: {ch.reason}"
+    kind, why = ("linear", "model=linear") if cfg.model == "linear" else (
+        ("snapshots", "model=snapshots") if cfg.model == "snapshots" else
+        choose_fem_model(load_model_table(), cfg.accuracy_target, cfg.depth_max))
+    return CylinderChoice(spec, order, mesh_reason, kind, why)
+
+
 def served_model(sc: Scene, cfg: FemConfig | None = None, cache_dir: str | None = None, log=None):
-    """The model the FEM node serves for ``sc`` at its default params (``cfg``: :class:`FemConfig`; its accuracy
-    target, depth range, max depth, strain limit and arc are used; the mesh overrides, ``model`` and the
-    no-scene ``E``/``nu``/``finger_radius`` are not: the scene's own finger and material are), its
-    precomputation from ``cache_dir`` (None: the default cache; the installed and shipped stores are read
-    too) or computed. Returns (model, what: one line naming the model and its table, or "linear ...").
-    Raises ``ValueError`` for an unusable stored table."""
+    """The model the FEM node serves for ``sc`` with the settings ``cfg`` (:class:`FemConfig`, default the node's
+    defaults; the cylinder's mesh and model kind as :func:`choose_cylinder_model` picks them, its max depth,
+    strain limit and snapshot reach; the scene's own finger and material, not the no-scene
+    ``E``/``nu``/``finger_radius``), its precomputation from ``cache_dir`` (None: the default cache; the installed
+    and shipped stores are read too) or computed. Returns (model, what: one line naming the model and its table,
+    or "linear ..."). Raises ``ValueError`` for an unusable stored table."""
     from flexsheet.fem.cache import ArrayCache
     from flexsheet.fem.material import Material
 
@@ -39,19 +77,15 @@ def served_model(sc: Scene, cfg: FemConfig | None = None, cache_dir: str | None 
         kind, where = attach_scene_table(m, cache)
         return m, (f"linear P2 scene model + the {kind} table ({where})" if where else
                    f"linear P2 scene model (no {kind} table stored)")
-    from flexsheet.fem.choose import choose, choose_model, load_model_table, load_table
-    from flexsheet.fem.mesh import MeshSpec
     from flexsheet.fem.realtime import RealtimeModel
-    from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_or_build
+    from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_snapshot_table
 
     mat = Material.of_scene(sc.material)
-    ch = choose(load_table(), cfg.accuracy_target, cfg.depth_min, cfg.depth_max, cfg.nu, cfg.finger_radius)
-    spec = MeshSpec(ch.spec.h, ch.spec.h_fine, ch.spec.refine_radius, cfg.arc_deg)
-    m = RealtimeModel(spec, mat, sc.finger.radius, cfg.max_depth, cfg.strain_limit, cache_dir, None, log, ch.order)
-    kind, _ = choose_model(load_model_table(), cfg.accuracy_target, cfg.depth_max)
-    if kind != "snapshots":
-        return m, f"linear P{ch.order} cylinder model (the model table picks {kind})"
-    table, _, _ = load_or_build(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, sc.finger.radius, build=False)
+    ch = choose_cylinder_model(cfg)
+    m = RealtimeModel(ch.spec, mat, sc.finger.radius, cfg.max_depth, cfg.strain_limit, cache_dir, None, log, ch.order)
+    if ch.kind != "snapshots":
+        return m, f"linear P{ch.order} cylinder model (the model table picks {ch.kind})"
+    table = load_snapshot_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, sc.finger.radius)
     if table is None:
         return m, f"linear P{ch.order} cylinder model (no snapshot table stored)"
     m.attach_snapshots(table, axial_max=cfg.snapshot_axial_max)

@@ -9,11 +9,11 @@ Three solvers share one :class:`FemModel` (stiffness assembled with scikit-fem, 
   Precompute once the Green's-function columns G = K_FF⁻¹ E_C for the candidate contact DOFs C, keeping only
   the rows the outputs need (surface + a strain-monitor zone). Per update: G_aa f = ū_a (m × m dense Cholesky,
   m = active contact DOFs), u_out = G_out,a f, and the reaction on the finger is −Σ f.
-* :func:`solve_corotational` — geometrically nonlinear mode: corotational (stiffness-warping) FEM with lagged
-  element rotations from the polar decomposition of the deformation gradient (Müller et al., SCA 2002;
-  Müller & Gross, GI 2004; SOFA TetrahedronFEMForceField method="polar"), solved quasi-statically.
+* :func:`flexsheet.fem.corotational.solve_corotational` — geometrically nonlinear mode: corotational
+  (stiffness-warping) FEM with lagged element rotations (its own module).
 
-Failure detection (:func:`element_checks`): inverted elements (det F ≤ 0) and the largest principal strain.
+Failure detection (inverted elements, the largest principal strain, folded faces):
+:mod:`flexsheet.fem.deformation_checks`; the sparse factorisation: :mod:`flexsheet.fem.sparse_factor`.
 Units SI; displacements m, forces N, stiffness N/m; display frame.
 """
 
@@ -23,70 +23,22 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from scipy.linalg.lapack import dpotrf as _dpotrf
 from scipy.linalg.lapack import dpotrs as _dpotrs
 from scipy.linalg.lapack import spotrf as _spotrf
 from scipy.linalg.lapack import spotrs as _spotrs
 
-from flexsheet.fem.contact import Finger, imposed_displacement
+from flexsheet.fem.contact import ContactFinger, imposed_displacement
+from flexsheet.fem.deformation_checks import grad_ops
 from flexsheet.fem.material import Material
 from flexsheet.fem.mesh import TetMesh
+from flexsheet.fem.sparse_factor import factor
 
-__all__ = ["FemModel", "Solution", "NotPositiveDefinite", "solve_full", "CapacitanceSolver", "solve_corotational",
-           "element_checks", "TetChecks", "fold_operator", "OutsideCandidates", "factor"]
+__all__ = ["FemModel", "Solution", "solve_full", "CapacitanceSolver", "OutsideCandidates", "contact_dofs"]
 
 
 class OutsideCandidates(ValueError):
     """The finger touches surface points outside the precomputed candidate set (use :func:`solve_full`)."""
-
-
-class NotPositiveDefinite(ValueError):
-    """:func:`factor` met a non-positive pivot: the matrix is not positive definite."""
-
-
-class _Cholesky:
-    """Sparse Cholesky of a symmetric positive-definite matrix (CHOLMOD, supernodal, through scikit-sparse; Chen,
-    Davis, Hager & Rajamanickam, ACM TOMS 35, 2008); ``solve(b)`` for (n,) or (n, k). Raises
-    :class:`NotPositiveDefinite` at a non-positive pivot (nothing is kept: cholespy, used before, leaked its
-    factor, ~0.5 GB each time, on that path)."""
-
-    __slots__ = ("_f",)
-
-    def __init__(self, A: sp.spmatrix):
-        from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
-
-        why = None
-        try:
-            # supernodal always: CHOLMOD's simplicial mode (what "auto" picks for very sparse matrices) is an
-            # LDLᵀ that factorises an indefinite matrix without complaint
-            self._f = cholesky(sp.csc_matrix(A), mode="supernodal")
-        except CholmodNotPositiveDefiniteError as exc:
-            why = str(exc)      # raised below, outside the handler: no __context__ holding the failed factor
-        if why is not None:
-            raise NotPositiveDefinite(why)
-
-    def solve(self, b: np.ndarray) -> np.ndarray:
-        """x with A x = b; ``b`` (n,) or (n, k)."""
-        return self._f(np.ascontiguousarray(b, np.float64))
-
-
-def factor(A: sp.spmatrix, backend: str = "auto"):
-    """Factorise a symmetric positive-definite sparse matrix; returns an object with ``.solve(b)``.
-
-    ``backend``: "cholmod" (CHOLMOD's supernodal Cholesky via scikit-sparse, 5–10× faster here), "superlu"
-    (scipy ``splu`` with a symmetric ordering) or "auto" (CHOLMOD when importable, else SuperLU). Raises
-    ``ValueError`` on an unknown backend and :class:`NotPositiveDefinite` (CHOLMOD) when A is not positive
-    definite."""
-    if backend not in ("auto", "cholmod", "superlu"):
-        raise ValueError(f"backend must be 'auto', 'cholmod' or 'superlu', got {backend!r}")
-    if backend in ("auto", "cholmod"):
-        try:
-            return _Cholesky(A)
-        except ImportError:
-            if backend == "cholmod":
-                raise
-    return spla.splu(sp.csc_matrix(A), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
 
 
 class FemModel:
@@ -170,7 +122,7 @@ class FemModel:
         p, t = self.mesh.points, self.mesh.tets
         if not hasattr(self, "_tree"):
             self._tree = cKDTree(p[t].mean(axis=1))
-            self._Dinv, _ = _grad_ops(p, t)
+            self._Dinv, _ = grad_ops(p, t)
         k = min(24, len(t))
         _, cand = self._tree.query(x, k=k)
         cand = np.atleast_2d(cand)
@@ -242,18 +194,20 @@ class Solution:
     u_full: np.ndarray | None = None     #: (n_dofs,) DOF vector (full solver only), for probing
 
 
-def _contact_dofs(model: FemModel, finger: Finger, candidates: np.ndarray | None = None):
+def contact_dofs(model: FemModel, finger: ContactFinger, candidates: np.ndarray | None = None):
+    """(contact points (c,) int indices of the free surface DOF points inside ``finger``, their imposed
+    displacements (c, 3) m): the Dirichlet contact of :func:`solve_full` and the corotational solve."""
     pts_idx = np.flatnonzero(model.boundary & ~model.fixed)
     inside, ubar = imposed_displacement(model.points[pts_idx], finger)
     return pts_idx[inside], ubar[inside]
 
 
-def solve_full(model: FemModel, finger: Finger) -> Solution:
+def solve_full(model: FemModel, finger: ContactFinger) -> Solution:
     """Baseline: sparse direct solve with Dirichlet DOFs = support ∪ contact points; refactors every call.
 
     Returns a :class:`Solution` whose ``u`` covers every DOF point (P, 3). Stiffness is dF/dd with the
     contact set held (a second right-hand side on the same factorisation)."""
-    cpts, ubar = _contact_dofs(model, finger)
+    cpts, ubar = contact_dofs(model, finger)
     n = model.n_dofs
     x = np.zeros(n)
     dx = np.zeros(n)
@@ -365,7 +319,7 @@ class CapacitanceSolver:
         """Bytes held by the precomputed matrices."""
         return self.G_cc.nbytes + self.G_co.nbytes
 
-    def solve(self, finger: Finger) -> Solution:
+    def solve(self, finger: ContactFinger) -> Solution:
         """One update: returns a :class:`Solution` with ``u`` (#outputs, 3) m at the output points.
 
         Raises :class:`OutsideCandidates` when a non-candidate surface point is inside the finger, and
@@ -403,252 +357,3 @@ class CapacitanceSolver:
         force = float(fvec @ finger.direction)
         stiff = float(f[:, 1].reshape(-1, 3).sum(axis=0) @ finger.direction)
         return Solution(u, max(force, 0.0), fvec, max(stiff, 0.0), len(k), "condensed")
-
-
-def fold_operator(rest: np.ndarray, faces: np.ndarray, normals: np.ndarray):
-    """Fold test of triangles as one sparse product: returns (op (6F, 3S) csr, op @ rest.ravel() (6F,)) for
-    ``faces`` (F, 3) over vertices ``rest`` (S, 3) m with rest normals ``normals`` (F, 3). For vertex positions
-    x (S, 3) m flattened, rows c·F + f of op @ x give e2_c = (x2 − x0)_c and rows 3F + c·F + f give
-    (n0 × e1)_c = Σ_b [n0]×_cb (x1 − x0)_b of face f, so Σ_c of their product is (e1 × e2)·n0, the turned
-    normal's component along the rest normal (≤ 0: the face folded over). Both are linear in x."""
-    F = len(faces)
-    v0, v1, v2 = (faces[:, i].astype(np.int64) for i in range(3))
-    n = np.asarray(normals, float)
-    skew = np.zeros((F, 3, 3))                           # [n0]× : skew[f] @ e = n0 × e
-    skew[:, 0, 1], skew[:, 0, 2] = -n[:, 2], n[:, 1]
-    skew[:, 1, 0], skew[:, 1, 2] = n[:, 2], -n[:, 0]
-    skew[:, 2, 0], skew[:, 2, 1] = -n[:, 1], n[:, 0]
-    f = np.arange(F)
-    rows, cols, vals = [], [], []
-    for c in range(3):
-        rows += [c * F + f, c * F + f]
-        cols += [3 * v2 + c, 3 * v0 + c]
-        vals += [np.ones(F), -np.ones(F)]
-        for b in range(3):
-            if b == c:
-                continue
-            rows += [3 * F + c * F + f, 3 * F + c * F + f]
-            cols += [3 * v1 + b, 3 * v0 + b]
-            vals += [skew[:, c, b], -skew[:, c, b]]
-    op = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                       shape=(6 * F, 3 * len(rest)))
-    return op, op @ np.asarray(rest, float).reshape(-1)
-
-
-def _grad_ops(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-tet inverse edge matrices Dm⁻¹ (M, 3, 3) and volumes (M,), for F = I + Du·Dm⁻¹."""
-    p = points[tets]
-    Dm = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], axis=2)
-    vol = np.linalg.det(Dm) / 6.0
-    return np.linalg.inv(Dm), vol
-
-
-def element_checks(points: np.ndarray, tets: np.ndarray, u: np.ndarray, Dm_inv: np.ndarray | None = None):
-    """Deformation checks of P1 tets: returns (max principal |strain| (small-strain ε = sym ∇u), number of
-    inverted tets (det F ≤ 0)). ``points`` (N, 3) m, ``tets`` (M, 4), ``u`` (N, 3) m node displacements."""
-    if len(tets) == 0:
-        return 0.0, 0
-    if Dm_inv is None:
-        Dm_inv, _ = _grad_ops(points, tets)
-    ue = u[tets]
-    Du = np.stack([ue[:, 1] - ue[:, 0], ue[:, 2] - ue[:, 0], ue[:, 3] - ue[:, 0]], axis=2)
-    H = Du @ Dm_inv
-    F = H + np.eye(3)
-    detF = (F[:, 0, 0] * (F[:, 1, 1] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 1])
-            - F[:, 0, 1] * (F[:, 1, 0] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 0])
-            + F[:, 0, 2] * (F[:, 1, 0] * F[:, 2, 1] - F[:, 1, 1] * F[:, 2, 0]))
-    inv = int(np.count_nonzero(detF <= 0.0))
-    return _max_abs_sym_eig(0.5 * (H + np.transpose(H, (0, 2, 1)))), inv
-
-
-class TetChecks:
-    """:func:`element_checks` of a fixed set of P1 tets, precomputed for the real-time loop (same results to
-    rounding).
-
-    ``points`` (N, 3) m, ``tets`` (M, 4) indices into them. The displacement gradient of every tet,
-    H = ∇u = Σ_a u_a ⊗ ∇N_a, is one sparse product ``B @ u.ravel()`` (B (9M, 3N), 4 entries a row, stored
-    component-major: row (3i + j)·M + m holds H_ij of tet m, so each H_ij is a contiguous (M,) array).
-    Exact bounds then skip most of the eigenvalue work: the largest |principal strain| of a tet lies in
-    [‖ε‖_F/√3, ‖ε‖_F] (ε = sym H), so only tets with ‖ε‖_F ≥ max‖ε‖_F/√3, and then only those with ‖ε‖_F ≥
-    the exact |λ|max of the tet with the largest ‖ε‖_F, can hold the maximum; they get LAPACK's symmetric
-    eigenvalues (``numpy.linalg.eigvalsh``). Likewise det(I + H) ≤ 0 needs ‖H‖_2 ≥ 1, so only tets with
-    ‖H‖_F ≥ 1 get the determinant. ``centroids`` (M, 3) m.
-    """
-
-    _T = np.array([0, 3, 6, 1, 4, 7, 2, 5, 8])          # row 3i + j -> row 3j + i (transpose)
-
-    def __init__(self, points: np.ndarray, tets: np.ndarray):
-        points = np.asarray(points, float)
-        tets = np.asarray(tets, np.int64).reshape(-1, 4)
-        M, N = len(tets), len(points)
-        self.n_points, self.n_tets = N, M
-        Dm_inv = _grad_ops(points, tets)[0] if M else np.zeros((0, 3, 3))
-        g = np.concatenate([-Dm_inv.sum(axis=1, keepdims=True), Dm_inv], axis=1)      # (M, 4, 3) ∇N_a
-        i, j, a = np.meshgrid(np.arange(3), np.arange(3), np.arange(4), indexing="ij")  # (3, 3, 4)
-        rows = ((3 * i + j)[..., None] * M + np.arange(M)).ravel()                     # row (3i+j)·M + m
-        cols = (3 * tets.T[a] + i[..., None]).ravel()                                  # u_a[i] of tet m
-        vals = np.transpose(g, (1, 2, 0))[a, j].ravel()                                # ∂N_a/∂x_j of tet m
-        self.B = sp.csr_matrix((vals, (rows, cols)), shape=(9 * M, 3 * N))
-        self.B.sum_duplicates()
-        self.centroids = points[tets].mean(axis=1) if M else np.zeros((0, 3))
-        self._c2 = np.einsum("ij,ij->i", self.centroids, self.centroids)
-
-    def gradients(self, u: np.ndarray) -> np.ndarray:
-        """Displacement gradients H (3, 3, M), H[i, j] = ∂u_i/∂x_j per tet, of node displacements ``u`` (N, 3)."""
-        return (self.B @ np.ascontiguousarray(u, float).reshape(-1)).reshape(3, 3, self.n_tets)
-
-    def near(self, point: np.ndarray, radius: float) -> np.ndarray:
-        """(M,) bool: tets whose centroid lies within ``radius`` m of ``point`` (3,) m."""
-        p = np.asarray(point, float)
-        return self._c2 - 2.0 * (self.centroids @ p) <= radius * radius - float(p @ p)
-
-    def __call__(self, u: np.ndarray, select: np.ndarray | None = None) -> tuple[float, int]:
-        """(max principal |strain|, number of inverted tets) as :func:`element_checks` over the tets where
-        ``select`` (M,) bool is True (None: all). ``u`` (N, 3) m."""
-        if self.n_tets == 0 or (select is not None and not select.any()):
-            return 0.0, 0
-        H = (self.B @ np.ascontiguousarray(u, float).reshape(-1)).reshape(9, self.n_tets)
-        fro_h = np.einsum("cm,cm->m", H, H)                                           # ‖H‖_F²
-        fro_e = 0.5 * (fro_h + np.einsum("cm,cm->m", H, H[self._T]))                  # ‖sym H‖_F²
-        if select is not None:
-            fro_e[~select] = 0.0
-            fro_h[~select] = 0.0
-        top = float(fro_e.max())
-        strain = 0.0
-        if top > 0.0:
-            k = np.flatnonzero(fro_e >= top * (1.0 / 3.0) * (1.0 - 1e-9))
-            Hk = H[:, k]
-            E = (0.5 * (Hk + Hk[self._T])).T.reshape(-1, 3, 3)
-            if len(k) > 8:          # sharper lower bound: the exact |λ|max of the tet with the largest ‖ε‖_F
-                fk = fro_e[k]
-                lam0 = float(np.abs(np.linalg.eigvalsh(E[int(np.argmax(fk))])).max())
-                E = E[fk >= lam0 * lam0 * (1.0 - 1e-9)]
-            strain = float(np.abs(np.linalg.eigvalsh(E)).max())
-        k = np.flatnonzero(fro_h >= 1.0 - 1e-9)
-        if len(k) == 0:
-            return strain, 0
-        F = H[:, k]
-        F[[0, 4, 8]] += 1.0
-        detF = (F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6])
-                + F[2] * (F[3] * F[7] - F[4] * F[6]))
-        return strain, int(np.count_nonzero(detF <= 0.0))
-
-
-def _max_abs_sym_eig(e: np.ndarray) -> float:
-    """Largest |eigenvalue| over a stack (M, 3, 3) of symmetric matrices, closed form (Smith, CACM 1961)."""
-    q = (e[:, 0, 0] + e[:, 1, 1] + e[:, 2, 2]) / 3.0
-    p1 = e[:, 0, 1] ** 2 + e[:, 0, 2] ** 2 + e[:, 1, 2] ** 2
-    d0, d1, d2 = e[:, 0, 0] - q, e[:, 1, 1] - q, e[:, 2, 2] - q
-    p = np.sqrt((d0 * d0 + d1 * d1 + d2 * d2 + 2 * p1) / 6.0)
-    ps = np.where(p > 0, p, 1.0)
-    b00, b11, b22 = d0 / ps, d1 / ps, d2 / ps
-    b01, b02, b12 = e[:, 0, 1] / ps, e[:, 0, 2] / ps, e[:, 1, 2] / ps
-    r = 0.5 * (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02))
-    phi = np.arccos(np.clip(r, -1.0, 1.0)) / 3.0
-    l1 = q + 2 * p * np.cos(phi)
-    l3 = q + 2 * p * np.cos(phi + 2 * np.pi / 3)
-    return float(max(np.max(np.abs(l1)), np.max(np.abs(l3))))
-
-
-def _element_stiffness(points, tets, material: Material):
-    """P1 element stiffness matrices (M, 12, 12), DOF order (node, component). Zienkiewicz, FEM vol. 1 §6."""
-    Dm_inv, vol = _grad_ops(points, tets)
-    # gradients of barycentric functions: rows of Dm_inv give grad of N1..N3, N0 = -sum
-    g = np.concatenate([-Dm_inv.sum(axis=1, keepdims=True), Dm_inv], axis=1)   # (M, 4, 3)
-    lam, mu = material.lame
-    M = len(tets)
-    B = np.zeros((M, 6, 12))
-    for a in range(4):
-        gx, gy, gz = g[:, a, 0], g[:, a, 1], g[:, a, 2]
-        c = 3 * a
-        B[:, 0, c], B[:, 1, c + 1], B[:, 2, c + 2] = gx, gy, gz
-        B[:, 3, c], B[:, 3, c + 1] = gy, gx
-        B[:, 4, c + 1], B[:, 4, c + 2] = gz, gy
-        B[:, 5, c], B[:, 5, c + 2] = gz, gx
-    D = np.zeros((6, 6))
-    D[:3, :3] = lam
-    D[np.arange(3), np.arange(3)] += 2 * mu
-    D[3:, 3:] = np.eye(3) * mu
-    return np.einsum("mki,kl,mlj->mij", B, D, B) * vol[:, None, None], Dm_inv
-
-
-def _polar_rotations(F: np.ndarray) -> np.ndarray:
-    U, _, Vt = np.linalg.svd(F)
-    R = U @ Vt
-    neg = np.linalg.det(R) < 0
-    if np.any(neg):
-        U[neg, :, 2] *= -1
-        R[neg] = U[neg] @ Vt[neg]
-    return R
-
-
-def solve_corotational(model: FemModel, finger: Finger, iters: int = 30, tol: float = 1e-6,
-                       u0: np.ndarray | None = None):
-    """Corotational (polar) FEM, P1 only, quasi-static, contact as :func:`solve_full`.
-
-    Internal force f_e = R_e K_e (R_eᵀ x_e − X_e) with R_e from the polar decomposition of F_e; Newton-like
-    iterations with the warped stiffness Σ R_e K_e R_eᵀ (Müller & Gross 2004) until the largest displacement
-    increment is below ``tol``·(depth + 1 mm). ``u0`` (N, 3) m optional warm start. Returns
-    (:class:`Solution` with ``u`` (N, 3), iterations used, converged flag). Raises ``ValueError`` for P2.
-    """
-    if model.order != 1:
-        raise ValueError(f"corotational solver needs order 1, got {model.order}")
-    mesh = model.mesh
-    X = model.points
-    tets = mesh.tets
-    Ke, Dm_inv = _element_stiffness(X, tets, model.material)
-    M = len(tets)
-    edofs = model.dofs[tets].reshape(M, 12)
-    rows = np.repeat(edofs, 12, axis=1).ravel()
-    cols = np.tile(edofs, (1, 12)).ravel()
-    n = model.n_dofs
-    cpts, ubar = _contact_dofs(model, finger)
-    cd = model.dofs[cpts].ravel()
-    D = np.union1d(model.fixed_dofs, cd)
-    mask = np.ones(n, bool)
-    mask[D] = False
-    interior = np.flatnonzero(mask)
-    x = np.zeros(n)
-    if u0 is not None:
-        x[model.dofs] = u0
-    x[model.fixed_dofs] = 0.0
-    x[cd] = ubar.ravel()
-    Xe = X[tets].reshape(M, 12)
-    scale = tol * (finger.depth + 1e-3)
-    converged, it = False, 0
-    for it in range(1, iters + 1):  # noqa: B007 - it is returned
-        ue = x[edofs].reshape(M, 4, 3)
-        Du = np.stack([ue[:, 1] - ue[:, 0], ue[:, 2] - ue[:, 0], ue[:, 3] - ue[:, 0]], axis=2)
-        F = np.eye(3) + Du @ Dm_inv
-        R = _polar_rotations(F)
-        Rb = np.zeros((M, 12, 12))
-        for a in range(4):
-            Rb[:, 3 * a:3 * a + 3, 3 * a:3 * a + 3] = R
-        RK = Rb @ Ke
-        KR = RK @ np.transpose(Rb, (0, 2, 1))
-        xe = Xe + x[edofs]
-        local = np.einsum("mji,mj->mi", Rb, xe) - Xe          # R^T x - X
-        fe = np.einsum("mij,mj->mi", RK, local)
-        fint = np.bincount(edofs.ravel(), weights=fe.ravel(), minlength=n)
-        Kt = sp.csr_matrix((KR.ravel(), (rows, cols)), shape=(n, n))
-        if len(interior) == 0:
-            converged = True
-            break
-        dx = factor(Kt[interior][:, interior]).solve(-fint[interior])
-        x[interior] += dx
-        if np.max(np.abs(dx)) < scale:
-            converged = True
-            break
-    # reaction: recompute internal force at the final state
-    ue = x[edofs].reshape(M, 4, 3)
-    Du = np.stack([ue[:, 1] - ue[:, 0], ue[:, 2] - ue[:, 0], ue[:, 3] - ue[:, 0]], axis=2)
-    R = _polar_rotations(np.eye(3) + Du @ Dm_inv)
-    Rb = np.zeros((M, 12, 12))
-    for a in range(4):
-        Rb[:, 3 * a:3 * a + 3, 3 * a:3 * a + 3] = R
-    local = np.einsum("mji,mj->mi", Rb, Xe + x[edofs]) - Xe
-    fe = np.einsum("mij,mjk,mk->mi", Rb, Ke, local)
-    fint = np.bincount(edofs.ravel(), weights=fe.ravel(), minlength=n)
-    fvec = fint[model.dofs[cpts]].sum(axis=0) if len(cpts) else np.zeros(3)
-    force = float(fvec @ finger.direction)
-    return Solution(x[model.dofs], max(force, 0.0), fvec, 0.0, len(cpts), "corotational"), it, converged

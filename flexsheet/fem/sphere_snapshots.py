@@ -8,11 +8,11 @@ angle α with e_a is therefore the push at α in one fixed plane — the stroke'
 stroke's ``toward`` direction made normal to e_a — rotated about e_a by ψ: **one parameter, α, plus the depth d,
 describes every push exactly.** The stroke of ``sphere.yaml`` is that plane's arc from α = 0 to 60°.
 
-* **Offline** (:func:`solve_alpha`): for each snapshot angle α_i (:class:`SphereGrid`, default 0–60° every 10°)
+* **Offline** (:func:`flexsheet.fem.reference.sphere_build.solve_alpha`): for each snapshot angle α_i (:class:`SphereGrid`, default 0–60° every 10°)
   the scene's hyperelastic body (the scene's law, Gent) on a gmsh mesh refined along that push
   path (:func:`flexsheet.fem.scene_mesh.scene_mesh` with ``refine_at``, full body, the scene's support) is pushed by
-  the rigid frictionless capsule finger 0 → 50 mm (:func:`flexsheet.fem.hyperelastic.solve_path_capsule`), the
-  stable branch kept where the push is bistable (:func:`flexsheet.fem.hyperelastic.stable_states`), and every depth
+  the rigid frictionless capsule finger 0 → 50 mm (:func:`flexsheet.fem.reference.path_solver.solve_path_capsule`), the
+  stable branch kept where the push is bistable (:func:`flexsheet.fem.reference.path_solver.stable_states`), and every depth
   sampled on a grid over the sphere in the stroke frame: θ (angle in the (e_a, e_b) plane from e_a, |θ| ≤
   ``theta_max_deg``) × φ (latitude toward e_c = e_a × e_b), display-frame components.
 * **Run time** (:meth:`SphereSnapshotModel.surface`): for a push with outward normal n at depth d, α = ∠(n, e_a)
@@ -25,20 +25,21 @@ describes every push exactly.** The stroke of ``sphere.yaml`` is that plane's ar
 
 Memory: float32, #α × #d × #θ × #φ × 3 × 4 bytes (≈ 64 MB for the default grid, 1° cells ≈ 0.62 mm on R 35 mm).
 Frames and units: display frame, m, N, rad (``_deg`` keys in degrees). Errors: ``ValueError`` naming the field.
+This module is the run-time side (grid, frame, key, look-up); the solves and the table's assembly are
+:mod:`flexsheet.fem.reference.sphere_build`.
 """
 
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from flexsheet.fem.snapshots import bilinear
 
-__all__ = ["SphereGrid", "SphereFrame", "sphere_frame", "solve_alpha", "assemble_table", "SphereSnapshotModel",
-           "SPHERE_TABLE_VERSION", "DEFAULT_SPHERE_GRID", "DEFAULT_SPHERE_SPEC", "grid_points", "sphere_table_key"]
+__all__ = ["SphereGrid", "SphereFrame", "sphere_frame", "SphereSnapshotModel", "SPHERE_TABLE_VERSION",
+           "DEFAULT_SPHERE_GRID", "DEFAULT_SPHERE_SPEC", "grid_points", "sphere_table_key"]
 
 SPHERE_TABLE_VERSION = "sphere-snap-1"
 
@@ -157,86 +158,8 @@ def grid_points(frame: SphereFrame, grid: SphereGrid) -> np.ndarray:
     return frame.center + frame.radius * loc @ frame.axes
 
 
-def solve_alpha(scene, alpha_deg: float, grid: SphereGrid = DEFAULT_SPHERE_GRID, spec=DEFAULT_SPHERE_SPEC,
-                probes: np.ndarray | None = None, log=None, iters: int = 60) -> dict:
-    """One snapshot angle: the scene's hyperelastic body pushed at polar angle ``alpha_deg`` (stroke plane)
-    through the grid's depths on a mesh refined along that push path (``spec`` = (h, h_fine, refine_radius,
-    path_depth) m), the loading path then its stable branch, sampled on the grid (and at ``probes`` (k, 3) m,
-    e.g. the real-time model's rendered vertices). Heavy (~10 min of one core at h_fine 4.5 mm): cache it.
-    Returns {"field": (D, T, P, 3) float32 m, "u_probes": (D, k, 3) float32, "force" (D,) N, "converged",
-    "inverted", "max_strain", "min_detF", "newton", "branch" (D,), "dofs", "cpu_seconds", "unload_seconds"};
-    row 0 is the rest state."""
-    from flexsheet.fem.hyperelastic import Capsule, HyperelasticModel, solve_path_capsule, stable_states
-    from flexsheet.fem.material import Material
-    from flexsheet.fem.mesh import MeshSpec
-    from flexsheet.fem.scene_mesh import scene_mesh
-
-    log = log or (lambda s: None)
-    fr = sphere_frame(scene)
-    if not (math.isfinite(alpha_deg) and 0 <= alpha_deg < 90):
-        raise ValueError(f"alpha_deg must be in [0, 90), got {alpha_deg!r}")
-    h, h_fine, rr, path = spec
-    n = fr.direction(math.radians(alpha_deg))
-    q = fr.center + fr.radius * n
-    steps = np.arange(0.0, path + 1e-12, rr / 3)
-    t0, c0 = time.perf_counter(), time.process_time()
-    sm = scene_mesh(scene, MeshSpec(h, h_fine, rr), refine_at=q[None] - steps[:, None] * n[None])
-    mat = Material.of_scene(scene.material)
-    m0 = HyperelasticModel(sm.mesh, mat, sym_y=False, sym_z=False, E_elem=sm.E, nu_elem=sm.nu)
-    model = HyperelasticModel(sm.mesh, mat, sym_y=False, sym_z=False, support=m0.dof_points(sm.mesh.fixed),
-                              E_elem=sm.E, nu_elem=sm.nu)
-    r = scene.finger.radius
-    depths = grid.depths()
-
-    def caps(d):
-        return Capsule(q - d * n + r * n, -n, r)
-
-    log(f"sphere table: alpha {alpha_deg:g} deg: {model.n} DOF, {len(depths) - 1} depths ...")
-    states = solve_path_capsule(model, caps, depths[1:], step=grid.depth_step, iters=iters, log=log,
-                                label=f"sphere {alpha_deg:g} deg")
-    cpu = time.process_time() - c0
-    t1 = time.perf_counter()
-    states, branch, _ = stable_states(model, caps, states, step=grid.depth_step, iters=iters, log=log)
-    unload = time.perf_counter() - t1
-    pts = grid_points(fr, grid)
-    P = model.probe_matrix(pts)
-    Pp = model.probe_matrix(np.asarray(probes, float)) if probes is not None else None
-    nt, nph, nd = len(grid.thetas()), len(grid.phis()), len(depths)
-    field = np.zeros((nd, nt, nph, 3), np.float32)
-    up = np.zeros((nd, 0 if probes is None else len(probes), 3), np.float32)
-    out = {k: np.zeros(nd) for k in ("force", "max_strain")}
-    out["min_detF"] = np.ones(nd)
-    out.update(converged=np.ones(nd, bool), inverted=np.zeros(nd, np.int64), newton=np.zeros(nd, np.int64))
-    for j, s in enumerate(states, start=1):
-        field[j] = np.asarray(P @ s.u).reshape(nt, nph, 3)
-        if Pp is not None:
-            up[j] = np.asarray(Pp @ s.u)
-        out["force"][j], out["max_strain"][j], out["min_detF"][j] = s.force, s.max_strain, s.min_detF
-        out["converged"][j], out["inverted"][j], out["newton"][j] = s.converged, s.inverted, s.iterations
-    log(f"sphere table: alpha {alpha_deg:g} deg done in {time.perf_counter() - t0:.0f} s "
-        f"(force at {depths[-1] * 1e3:g} mm {out['force'][-1]:.2f} N)")
-    return {"field": field, "u_probes": up, **out, "branch": np.concatenate([[0], branch]).astype(np.int64),
-            "dofs": np.array(model.n), "cpu_seconds": np.array(cpu), "unload_seconds": np.array(unload)}
-
-
-def assemble_table(frame: SphereFrame, grid: SphereGrid, per_alpha: list[dict], E: float) -> dict:
-    """The table arrays (:class:`SphereSnapshotModel`) from :func:`solve_alpha`'s results, one per grid angle
-    in order; ``E`` Pa the modulus they were solved with. Raises ``ValueError`` on a count or shape mismatch."""
-    if len(per_alpha) != len(grid.alphas_deg):
-        raise ValueError(f"per_alpha: {len(per_alpha)} results for {len(grid.alphas_deg)} grid angles")
-    field = np.stack([np.asarray(p["field"], np.float32) for p in per_alpha])
-    shape = (len(grid.alphas_deg), len(grid.depths()), len(grid.thetas()), len(grid.phis()), 3)
-    if field.shape != shape:
-        raise ValueError(f"per_alpha fields {field.shape} do not match the grid {shape}")
-    st = {k: np.stack([np.asarray(p[k]) for p in per_alpha]) for k in ("force", "max_strain", "inverted")}
-    return {"version": np.array(SPHERE_TABLE_VERSION), "E": np.array(float(E)),
-            "alphas": np.radians(np.asarray(grid.alphas_deg, float)), "depths": grid.depths(),
-            "theta": grid.thetas(), "phi": grid.phis(), "field": field, **st,
-            "center": frame.center, "radius": np.array(frame.radius), "axes": frame.axes}
-
-
 class SphereSnapshotModel:
-    """Run-time look-up of a sphere table (:func:`assemble_table`) at the rendered ``vertices`` (S, 3) m (rest,
+    """Run-time look-up of a sphere table (:func:`flexsheet.fem.reference.sphere_build.assemble_table`) at the rendered ``vertices`` (S, 3) m (rest,
     display frame); ``E`` Pa: the object's modulus (forces scale with it). ``ValueError`` when the table is
     inconsistent."""
 
@@ -336,14 +259,13 @@ class SphereSnapshotModel:
         return u, float(f), float(stiff), float(strain), inv
 
 
-
 def sphere_table_key(scene, grid: SphereGrid = DEFAULT_SPHERE_GRID, spec=DEFAULT_SPHERE_SPEC) -> str:
     """Cache key (kind "spheresnap") of ``scene``'s table: the scene's values (:meth:`Scene.key`, its material
     included), the grid, the mesh sizes, gmsh's version and the solver's versions — what the FEM node looks up."""
     import gmsh
 
     from flexsheet.fem.cache import cache_key
-    from flexsheet.fem.hyperelastic import SOLVER_VERSION, UNLOAD_VERSION
+    from flexsheet.fem.reference.versions import SOLVER_VERSION, UNLOAD_VERSION
 
     return cache_key(SPHERE_TABLE_VERSION, scene.key(), grid.key(), *(f"{x:.9g}" for x in spec), gmsh.__version__,
                      SOLVER_VERSION, UNLOAD_VERSION)

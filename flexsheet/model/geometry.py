@@ -59,15 +59,3 @@ def pose_matrix(x: float, y: float, z: float, yaw: float) -> np.ndarray:
     T[:3, 3] = (x, y, z)
     return T
 
-
-def __getattr__(name: str):
-    """``scene.clamp_poses`` / ``scene.sheet_rotation`` moved to :mod:`flexsheet.model.sheet` (the one home of
-    the sheet's geometry); re-exported lazily (sheet imports this module) for callers not yet updated."""
-    if name in _MOVED_TO_SHEET:
-        from flexsheet.model import sheet
-
-        return getattr(sheet, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-_MOVED_TO_SHEET = ("clamp_poses", "sheet_rotation")

@@ -27,7 +27,7 @@ What each consumer calls:
 
 * renderer / viz: :meth:`Scene.surface_mesh` → (vertices (N, 3) float32 m, faces (M, 3) int32), closed,
   outward-wound;
-* planner: :meth:`Scene.shape` → the :class:`flexsheet.model.shapes.Shape` (analytic where it can be);
+* planner: :meth:`Scene.shape` → the :class:`flexsheet.model.shape_base.Shape` (analytic where it can be);
 * FEM: :meth:`Scene.write_surface` (a surface file gmsh can mesh), :meth:`Scene.fixed_mask` (support),
   :meth:`Scene.material_at` (E, ν per point: the inclusions), ``scene.material.model``, :meth:`Scene.key`
   (cache key); ``scene.finger.radius``;
@@ -43,297 +43,53 @@ import hashlib
 import math
 import os
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 import numpy as np
 import yaml
 from pydantic import (
     BaseModel,
-    ConfigDict,
     Field,
     PrivateAttr,
     ValidationError,
-    field_validator,
-    model_validator,
 )
 
 from flexsheet.model import geometry as paper
+from flexsheet.model.scene_parts import (
+    GENT_JM_RUBBER,
+    MAX_EXTENT,
+    SCENE_CONFIG,
+    ArcStroke,
+    CylinderObject,
+    Finger,
+    Inclusion,
+    MaterialSpec,
+    MeshObject,
+    PolylineStroke,
+    Pose,
+    RoundedBoxObject,
+    SceneError,
+    SphereObject,
+    Support,
+    Use,
+)
+from flexsheet.model.scene_surface import corner_normals, object_surface
 from flexsheet.yamlio import UniqueKeyLoader
 
-__all__ = ["SceneError", "Pose", "CylinderObject", "SphereObject", "RoundedBoxObject", "MeshObject", "MaterialSpec",
-           "Support", "Finger", "Use", "ArcStroke", "PolylineStroke", "Inclusion", "Scene", "load_scene", "parse_scene",
-           "paper_scene", "is_paper_cylinder", "load_scene_or_paper", "cylinder_surface", "rotation_rpy", "SCENES_DIR", "DEFAULT_SCENE_FILE", "MAX_SCENE_BYTES",
-           "MAX_EXTENT"]
+__all__ = ["Scene", "load_scene", "parse_scene", "paper_scene", "is_paper_cylinder", "load_scene_or_paper",
+           "SCENES_DIR", "DEFAULT_SCENE_FILE", "MAX_SCENE_BYTES"]
 
 #: the shipped scenes (launch/scenes/ in the repository)
 SCENES_DIR = Path(__file__).resolve().parents[2] / "launch" / "scenes"
 #: the default scene: the paper's cylinder
 DEFAULT_SCENE_FILE = SCENES_DIR / "cylinder.yaml"
 MAX_SCENE_BYTES = 1 << 20
-MAX_MESH_BYTES = 32 << 20
-#: every surface point must lie within this distance of the display origin, m (the sheet is 240 mm square
-#: and the arms reach ±60° tilts around objects of the cylinder's size)
-MAX_EXTENT = 0.25
-
-Vec3 = tuple[float, float, float]
-_CFG = ConfigDict(extra="forbid", allow_inf_nan=False)
-
-
-class SceneError(ValueError):
-    """A scene file or value is invalid; the message names the file, the key and the value."""
-
-
-def rotation_rpy(rpy_deg) -> np.ndarray:
-    """R (3, 3) = Rz(yaw)·Ry(pitch)·Rx(roll) from (roll, pitch, yaw) in degrees; columns = local x, y, z axes
-    in the display frame (the convention of :class:`flexsheet.model.shapes.RoundedBox`)."""
-    r, p, y = np.radians(np.asarray(rpy_deg, dtype=float))
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    Rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
-    Ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
-    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
-    return Rz @ Ry @ Rx
-
-
-def _nonzero(v: Vec3) -> Vec3:
-    if float(np.linalg.norm(v)) <= 1e-12:
-        raise ValueError(f"must be a non-zero vector, got {list(v)}")
-    return v
-
-
-# ----------------------------------------------------------------------------------------------- the schema
-class Pose(BaseModel):
-    """Placement of the object's local frame: ``position`` (3,) m (the object's centre, display frame) and
-    ``rpy_deg`` (roll, pitch, yaw) degrees."""
-
-    model_config = _CFG
-    position: Vec3
-    rpy_deg: Vec3 = (0.0, 0.0, 0.0)
-
-    @property
-    def R(self) -> np.ndarray:
-        """Rotation (3, 3), local → display."""
-        return rotation_rpy(self.rpy_deg)
-
-    def apply(self, local) -> np.ndarray:
-        """Display-frame points (N, 3) float64 of local points (N, 3)."""
-        return np.asarray(local, dtype=float) @ self.R.T + np.asarray(self.position, dtype=float)
-
-
-class CylinderObject(BaseModel):
-    """Capped circular cylinder: ``radius``, ``length`` m; local axis +y."""
-
-    model_config = _CFG
-    kind: Literal["cylinder"]
-    radius: float = Field(gt=0.0, le=0.2, description="m")
-    length: float = Field(gt=0.0, le=0.4, description="m")
-    pose: Pose
-
-
-class SphereObject(BaseModel):
-    """Sphere of ``radius`` m."""
-
-    model_config = _CFG
-    kind: Literal["sphere"]
-    radius: float = Field(gt=0.0, le=0.2, description="m")
-    pose: Pose
-
-
-class RoundedBoxObject(BaseModel):
-    """Box of outer ``half_extents`` (3,) m with edges rounded by ``radius`` m (0: sharp; ≤ the smallest
-    half extent)."""
-
-    model_config = _CFG
-    kind: Literal["rounded_box"]
-    half_extents: Vec3
-    radius: float = Field(0.0, ge=0.0, description="edge radius, m")
-    pose: Pose
-
-    @field_validator("half_extents")
-    @classmethod
-    def _positive(cls, v: Vec3) -> Vec3:
-        if min(v) <= 0.0 or max(v) > 0.2:
-            raise ValueError(f"must be 3 half extents in (0, 0.2] m, got {list(v)}")
-        return v
-
-    @model_validator(mode="after")
-    def _radius_fits(self) -> RoundedBoxObject:
-        if self.radius > min(self.half_extents):
-            raise ValueError(f"radius {self.radius} m is larger than the smallest half extent "
-                             f"{min(self.half_extents)} m")
-        return self
-
-
-class MeshObject(BaseModel):
-    """A closed surface mesh file (OBJ, STL, PLY, OFF… through trimesh; other formats through meshio), path
-    relative to the scene file; ``scale`` converts its units to m (0.001 for a file in mm)."""
-
-    model_config = _CFG
-    kind: Literal["mesh"]
-    file: str = Field(min_length=1)
-    scale: float = Field(1.0, gt=0.0)
-    pose: Pose = Pose(position=(0.0, 0.0, 0.0))
 
 
 ObjectSpec = Annotated[CylinderObject | SphereObject | RoundedBoxObject | MeshObject, Field(discriminator="kind")]
 
 
-#: Gent's limiting chain extensibility (the largest I₁ − 3) for natural rubber, fitted to Treloar's data (Gent, Rubber
-#: Chem. Technol. 69, 1996; the value used by Horgan & Saccomandi, Math. Mech. Solids 7, 2002 — recalled, not
-#: re-fitted here): the *weakest* strain-stiffening of the published fits (soft tissues fit far smaller Jm, i.e.
-#: stiffen sooner), so the Gent solid closest to neo-Hookean that still has a limiting stretch (equibiaxial
-#: λ ≤ 7.1, uniaxial ≤ 9.9). The paper's cylinder (:func:`paper_scene`, ``cylinder.yaml``) is this solid: a
-#: neo-Hookean body under the paper's 50 mm push has no mesh-converged solution at the fingertip (docs/fem.md)
-GENT_JM_RUBBER = 97.2
-
-
-class MaterialSpec(BaseModel):
-    """Hyperelastic material of the object: ``model`` (``neo_hookean``, the default; ``gent``, a strain-stiffening
-    solid with limiting extensibility ``Jm`` = the largest I₁ − 3, Gent 1996, which needs ``Jm``; or ``linear``
-    small-strain elasticity), Young's modulus ``E`` Pa and Poisson's ratio ``nu`` (the small-strain limits of
-    either law: μ = E/(2(1+ν)), λ = Eν/((1+ν)(1−2ν))). Raises ``ValueError`` (pydantic) for ``gent`` without
-    ``Jm`` or ``Jm`` with another model."""
-
-    model_config = _CFG
-    model: Literal["neo_hookean", "gent", "linear"] = "neo_hookean"
-    E: float = Field(10e3, gt=0.0, le=1e9, description="Pa")
-    nu: float = Field(0.45, ge=0.0, lt=0.5)
-    Jm: float | None = Field(None, gt=0.0, le=1e6, description="Gent limiting I1 - 3 (dimensionless)")
-
-    @model_validator(mode="after")
-    def _jm(self) -> MaterialSpec:
-        if self.model == "gent" and self.Jm is None:
-            raise ValueError("model gent needs Jm (its limiting I1 - 3, e.g. 97.2 for natural rubber)")
-        if self.model != "gent" and self.Jm is not None:
-            raise ValueError(f"Jm is a Gent parameter; model {self.model!r} takes none")
-        return self
-
-
-class Support(BaseModel):
-    """How the object rests: boundary points with (p − point)·normal ≤ ``tolerance`` are fixed.
-
-    ``back_half``: ``point`` = the object's centre, ``normal`` = +x (toward the user) — the half of the surface
-    away from the user is held (the paper's cylinder lying on its back; the FEM's original rule).
-    ``half_space``: explicit ``point`` (3,) m and ``normal`` (3,) (e.g. a base face: a point on it, normal
-    pointing into the body)."""
-
-    model_config = _CFG
-    kind: Literal["back_half", "half_space"] = "back_half"
-    point: Vec3 | None = None
-    normal: Vec3 = (1.0, 0.0, 0.0)
-    tolerance: float = Field(1e-9, ge=0.0, le=0.05, description="m")
-
-    @field_validator("normal")
-    @classmethod
-    def _normal(cls, v: Vec3) -> Vec3:
-        return _nonzero(v)
-
-    @model_validator(mode="after")
-    def _point(self) -> Support:
-        if self.kind == "half_space" and self.point is None:
-            raise ValueError("kind half_space needs a point")
-        if self.kind == "back_half" and self.point is not None:
-            raise ValueError("kind back_half takes its point from the object's centre; use half_space")
-        return self
-
-
-class Finger(BaseModel):
-    """The user's fingertip as the FEM and the world see it: a sphere of ``radius`` m, and how the object's
-    surface meets it in the nonlinear reference (``contact``, :data:`flexsheet.fem.hyperelastic.CONTACT_LAWS`):
-    ``frictionless`` (the default: the surface slides freely over the fingertip) or ``sticking`` (a fingertip
-    that does not slip on the skin: a surface point that touched it moves with it). A modelling choice per
-    object: the rounded box's push beside its edge has a sliding mode under a frictionless fingertip that no
-    Newton solve on its quick mesh got past 25 mm, and skin does not slide on silicone."""
-
-    model_config = _CFG
-    radius: float = Field(0.008, ge=0.001, le=0.03, description="m")
-    contact: Literal["frictionless", "sticking"] = Field("frictionless", description="reference contact law")
-    contact_source: str = Field("", max_length=400, description="why this law: the cited source")
-
-
-class Use(BaseModel):
-    """The depths the scene is used at, and why: its FEM is judged over pushes 0…``max_depth`` m (at least
-    15 mm: palpating a soft body for a stiffer inclusion presses well past the first millimetres); its stroke
-    experiments press ``stroke_depth`` m (≤ ``max_depth``). Not part of the FEM's cache key."""
-
-    model_config = _CFG
-    max_depth: float = Field(0.05, ge=0.015, le=0.06, description="m")
-    stroke_depth: float = Field(0.010, ge=0.0, le=0.06, description="m")
-    reason: str = Field("", max_length=600)
-
-    @model_validator(mode="after")
-    def _order(self) -> Use:
-        if self.stroke_depth > self.max_depth:
-            raise ValueError(f"stroke_depth {self.stroke_depth} m exceeds max_depth {self.max_depth} m")
-        return self
-
-
-class ArcStroke(BaseModel):
-    """A stroke swept by a ray from ``center`` (default: the object's centre) whose direction turns from
-    ``start`` (angle 0) toward ``toward`` (angle 90°) between ``start_deg`` and ``end_deg``; each ray's exit
-    from the body is a point of the path. The paper's stroke: start +x (facing the user), toward +z, 0–60°."""
-
-    model_config = _CFG
-    kind: Literal["arc"]
-    center: Vec3 | None = None
-    start: Vec3 = (1.0, 0.0, 0.0)
-    toward: Vec3 = (0.0, 0.0, 1.0)
-    start_deg: float = Field(0.0, ge=-360.0, le=360.0)
-    end_deg: float = Field(60.0, ge=-360.0, le=360.0)
-
-    @field_validator("start", "toward")
-    @classmethod
-    def _dir(cls, v: Vec3) -> Vec3:
-        return _nonzero(v)
-
-    @model_validator(mode="after")
-    def _frame(self) -> ArcStroke:
-        a, b = np.asarray(self.start, float), np.asarray(self.toward, float)
-        if np.linalg.norm(np.cross(a, b)) <= 1e-6 * np.linalg.norm(a) * np.linalg.norm(b):
-            raise ValueError(f"start {list(self.start)} and toward {list(self.toward)} are parallel")
-        if abs(self.end_deg - self.start_deg) < 1e-6:
-            raise ValueError(f"end_deg equals start_deg ({self.start_deg}): an empty stroke")
-        return self
-
-    def basis(self) -> tuple[np.ndarray, np.ndarray]:
-        """(e0, e1): unit directions at angles 0 and 90° (Gram–Schmidt of ``start``, ``toward``)."""
-        e0 = np.asarray(self.start, float) / np.linalg.norm(self.start)
-        t = np.asarray(self.toward, float)
-        e1 = t - (t @ e0) * e0
-        return e0, e1 / np.linalg.norm(e1)
-
-
-class PolylineStroke(BaseModel):
-    """A stroke through ``points`` (≥ 2, (3,) m each, display frame, outside the body, e.g. just in front of
-    the surface); the straight segments between them are projected onto the surface (closest point)."""
-
-    model_config = _CFG
-    kind: Literal["polyline"]
-    points: list[Vec3] = Field(min_length=2, max_length=256)
-
-    @field_validator("points")
-    @classmethod
-    def _distinct(cls, v: list[Vec3]) -> list[Vec3]:
-        p = np.asarray(v, float)
-        seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
-        if np.any(seg < 1e-6):
-            i = int(np.argmin(seg))
-            raise ValueError(f"points {i} and {i + 1} coincide ({list(v[i])})")
-        return v
-
-
 StrokeSpec = Annotated[ArcStroke | PolylineStroke, Field(discriminator="kind")]
-
-
-class Inclusion(BaseModel):
-    """A stiffer sphere inside the body (a "tumour" palpation should find): ``center`` (3,) m, ``radius`` m,
-    ``E`` Pa, ``nu`` (None: the body's)."""
-
-    model_config = _CFG
-    name: str = "inclusion"
-    center: Vec3
-    radius: float = Field(gt=0.0, le=0.1, description="m")
-    E: float = Field(gt=0.0, le=1e9, description="Pa")
-    nu: float | None = Field(None, ge=0.0, lt=0.5)
 
 
 # ----------------------------------------------------------------------------------------------- the scene
@@ -341,7 +97,7 @@ class Scene(BaseModel):
     """One scene (module doc). Build with :func:`load_scene`, :func:`parse_scene` or :func:`paper_scene`;
     the geometry (mesh, shape, stroke) is computed on first use and cached."""
 
-    model_config = _CFG
+    model_config = SCENE_CONFIG
     name: str = Field(min_length=1, max_length=64)
     description: str = ""
     object: ObjectSpec
@@ -406,7 +162,7 @@ class Scene(BaseModel):
     def trimesh(self):
         """The surface as a ``trimesh.Trimesh`` in the display frame, m (closed, outward normals; cached)."""
         if self._mesh is None:
-            self._mesh = _build_mesh(self)
+            self._mesh = object_surface(self.object, self.mesh_path)
         return self._mesh
 
     def surface_mesh(self) -> tuple[np.ndarray, np.ndarray]:
@@ -425,7 +181,7 @@ class Scene(BaseModel):
         return path
 
     def shape(self):
-        """The planner's :class:`flexsheet.model.shapes.Shape` (analytic for cylinder/sphere/rounded box,
+        """The planner's :class:`flexsheet.model.shape_base.Shape` (analytic for cylinder/sphere/rounded box,
         :class:`~flexsheet.model.shapes.MeshShape` for a mesh; cached)."""
         if self._shape is None:
             from flexsheet.model import shapes
@@ -478,7 +234,7 @@ class Scene(BaseModel):
         m = self.trimesh()
         q, _, tri = trimesh.proximity.closest_point(m, p)
         if self._cnormals is None:
-            self._cnormals = _corner_normals(m)
+            self._cnormals = corner_normals(m)
         bary = trimesh.triangles.points_to_barycentric(m.triangles[tri], q)
         n = np.einsum("ij,ijk->ik", bary, self._cnormals[tri])
         return q, n / np.linalg.norm(n, axis=1, keepdims=True)
@@ -616,145 +372,6 @@ class Scene(BaseModel):
         except ValueError as exc:
             raise SceneError(f"{src}: key 'stroke': {exc}") from None
         return self
-
-
-# ----------------------------------------------------------------------------------------------- meshes
-def cylinder_surface(radius: float, length: float, n_around: int = 96, n_along: int = 48):
-    """Closed cylinder in its local frame (axis +y, centred), fine along the axis (per-vertex image correction
-    needs short edges): rings of ``n_around`` vertices at ``n_along`` + 1 heights, caps as fans around their
-    centres. Returns (vertices (N, 3) float64 m, faces (M, 3) int64, outward winding)."""
-    if n_around < 3 or n_along < 1 or not radius > 0 or not length > 0:
-        raise ValueError(f"bad cylinder: radius={radius}, length={length}, n_around={n_around}, n_along={n_along}")
-    th = np.linspace(0.0, 2 * math.pi, n_around, endpoint=False)
-    ys = np.linspace(-length / 2, length / 2, n_along + 1)
-    ring = np.stack([radius * np.cos(th), np.zeros_like(th), radius * np.sin(th)], axis=1)
-    v = np.concatenate([ring + [0.0, y, 0.0] for y in ys])
-    i = np.arange(n_around)
-    j = np.arange(n_along)[:, None]
-    a = j * n_around + i
-    b = j * n_around + (i + 1) % n_around
-    side = np.stack([np.stack([a, b, a + n_around], -1), np.stack([b, b + n_around, a + n_around], -1)], 2)
-    base = len(v)
-    top = n_along * n_around
-    caps = np.stack([np.stack([np.full(n_around, base), (i + 1) % n_around, i], -1),
-                     np.stack([np.full(n_around, base + 1), top + i, top + (i + 1) % n_around], -1)], 1)
-    v = np.concatenate([v, [[0.0, -length / 2, 0.0], [0.0, length / 2, 0.0]]])
-    f = np.concatenate([side.reshape(-1, 3), caps.reshape(-1, 3)])[:, ::-1]     # counter-clockwise from outside
-    return v, np.ascontiguousarray(f, dtype=np.int64)
-
-
-def _rounded_box_surface(half_extents, radius: float, step: float = 0.003, n_round: int = 6):
-    """Rounded box in its local frame: each face of the outer box gridded (≈ ``step`` m inside, ``n_round``
-    steps of equal angle across each rounded strip), every grid point P moved to the rounded surface along
-    P − clamp(P, inner box) (exact for the Minkowski sum of the inner box and a ball of ``radius``).
-    Returns (vertices (N, 3) float64, faces (M, 3) int64)."""
-    import trimesh
-
-    e = np.asarray(half_extents, float)
-    ei = e - radius
-
-    def coords(k: int) -> np.ndarray:
-        n = max(2, int(math.ceil(2 * ei[k] / step)))
-        inner = np.linspace(-ei[k], ei[k], n + 1) if ei[k] > 0 else np.array([0.0])
-        if radius <= 0:
-            return inner
-        t = ei[k] + radius * np.tan(np.linspace(0.0, math.pi / 4, n_round + 1)[1:])
-        return np.concatenate([-t[::-1], inner, t])
-
-    cs = [coords(k) for k in range(3)]
-    verts, faces = [], []
-    for ax in range(3):
-        u, w = [k for k in range(3) if k != ax]
-        for sign in (-1.0, 1.0):
-            U, W = np.meshgrid(cs[u], cs[w], indexing="ij")
-            P = np.zeros(U.shape + (3,))
-            P[..., ax] = sign * e[ax]
-            P[..., u], P[..., w] = U, W
-            nu, nw = U.shape
-            idx = np.arange(nu * nw).reshape(nu, nw) + sum(len(x) for x in verts)
-            q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
-            tri = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
-            # outward winding: (u, w, ax) right-handed for +ax faces
-            rh = np.cross(np.eye(3)[u], np.eye(3)[w])[ax] > 0
-            if (sign > 0) != rh:
-                tri = tri[:, ::-1]
-            verts.append(P.reshape(-1, 3))
-            faces.append(tri)
-    P = np.concatenate(verts)
-    if radius > 0:
-        inner = np.clip(P, -ei, ei)
-        d = P - inner
-        P = inner + radius * d / np.linalg.norm(d, axis=1, keepdims=True)
-    m = trimesh.Trimesh(P, np.concatenate(faces), process=False)
-    m.merge_vertices(digits_vertex=10)
-    m.remove_unreferenced_vertices()
-    return np.asarray(m.vertices), np.asarray(m.faces)
-
-
-def _corner_normals(m, crease_deg: float = 30.0) -> np.ndarray:
-    """Per-face corner normals (M, 3, 3) of a trimesh: at each corner the area-weighted mean of the normals
-    of the faces around that vertex within ``crease_deg`` of this face's normal — smooth across a curved
-    surface, the face normal across a sharp edge (a box)."""
-    fn = np.asarray(m.face_normals, dtype=float)
-    area_n = fn * np.asarray(m.area_faces, dtype=float)[:, None]
-    vf = np.asarray(m.vertex_faces)                     # (N, k) incident faces, padded with -1
-    cos_c = math.cos(math.radians(crease_deg))
-    out = np.empty((len(m.faces), 3, 3))
-    for c in range(3):
-        nb = vf[m.faces[:, c]]                          # (M, k)
-        ok = nb >= 0
-        nbn = area_n[np.where(ok, nb, 0)]               # (M, k, 3)
-        keep = ok & (np.einsum("mkj,mj->mk", fn[np.where(ok, nb, 0)], fn) >= cos_c)
-        s = np.einsum("mk,mkj->mj", keep.astype(float), nbn)
-        out[:, c] = s / np.linalg.norm(s, axis=1, keepdims=True)
-    return out
-
-
-def _load_mesh_file(path: Path):
-    """A closed ``trimesh.Trimesh`` from ``path`` (trimesh, else meshio's triangle cells). ``ValueError``."""
-    import trimesh
-
-    if not path.is_file():
-        raise ValueError(f"mesh file not found: {str(path)!r}")
-    if path.stat().st_size > MAX_MESH_BYTES:
-        raise ValueError(f"mesh file {str(path)!r} is larger than {MAX_MESH_BYTES >> 20} MiB")
-    try:
-        mesh = trimesh.load(str(path), force="mesh")
-    except Exception as exc:  # noqa: BLE001 - trimesh raises assorted errors; try meshio before giving up
-        try:
-            import meshio
-
-            mm = meshio.read(str(path))
-            tri = [c.data for c in mm.cells if c.type == "triangle"]
-            if not tri:
-                raise ValueError("no triangle cells") from None
-            mesh = trimesh.Trimesh(mm.points[:, :3], np.concatenate(tri))
-        except Exception as exc2:  # noqa: BLE001
-            raise ValueError(f"cannot read mesh file {str(path)!r}: {exc}; meshio: {exc2}") from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise ValueError(f"mesh file {str(path)!r} holds no triangles")
-    if not mesh.is_watertight:
-        raise ValueError(f"mesh file {str(path)!r} is not a closed (watertight) surface")
-    if mesh.volume < 0:
-        mesh.invert()
-    return mesh
-
-
-def _build_mesh(sc: Scene):
-    import trimesh
-
-    o = sc.object
-    if o.kind == "cylinder":
-        v, f = cylinder_surface(o.radius, o.length)
-    elif o.kind == "sphere":
-        ico = trimesh.creation.icosphere(subdivisions=4, radius=o.radius)
-        v, f = np.asarray(ico.vertices), np.asarray(ico.faces)
-    elif o.kind == "rounded_box":
-        v, f = _rounded_box_surface(o.half_extents, o.radius)
-    else:
-        mesh = _load_mesh_file(sc.mesh_path)
-        v, f = np.asarray(mesh.vertices) * o.scale, np.asarray(mesh.faces)
-    return trimesh.Trimesh(o.pose.apply(v), f, process=False)
 
 
 # ----------------------------------------------------------------------------------------------- loading

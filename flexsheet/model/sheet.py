@@ -187,7 +187,7 @@ def series_deflection(u, v, lam, mu, coef, a: float, b: float, v0: float):
 
 # -- pushed membrane -----------------------------------------------------------------------------------
 class DeflectionGrid:
-    """Mixin of every pushed-sheet shape (:class:`Membrane`, :class:`flexsheet.model.sheet_fem.FemShape`, the
+    """Mixin of every pushed-sheet shape (:class:`Membrane`, :class:`flexsheet.model.sheet_table.FemShape`, the
     renderer's ``SeriesShape``): :meth:`grid` from the shape's ``half_span`` a, ``half_width`` b (m) and
     ``deflection(u, v)``."""
 
@@ -276,7 +276,7 @@ class SheetSurface:
     right → left clamp; ``half_span`` a and ``half_width`` b (m) bound the sheet (|u| ≤ a, |v| ≤ b);
     ``membrane`` (or None for a flat sheet) gives the deflection along −normal — a :class:`Membrane` or any
     object with its interface (``push_u``, ``push_v``, ``depth``, ``deflection``, ``deflection_grad``,
-    ``grid``), e.g. the twin's true FEM shape :class:`flexsheet.model.sheet_fem.FemShape`; ``size`` (m) is the
+    ``grid``), e.g. the twin's true FEM shape :class:`flexsheet.model.sheet_table.FemShape`; ``size`` (m) is the
     unstretched side between the clamps (for :attr:`stretch`). Raises ``ValueError`` on non-finite, zero or
     non-orthogonal vectors and non-positive lengths (error names the field).
     """

@@ -11,7 +11,7 @@ display believes in (:meth:`flexsheet.viz.scene_builder.SceneBuilder.believed_sh
 the object's outline is seen (measured on the twin, docs/renderer.md). This module keeps the shader and
 replaces the shape it is given:
 
-1. **Table** (:meth:`NominalSheetModel.table`): :class:`flexsheet.model.sheet_fem.IndentTable` of
+1. **Table** (:meth:`NominalSheetModel.table`): :class:`flexsheet.model.sheet_table.IndentTable` of
    :class:`flexsheet.model.sheet_fem.SheetPhysics` with what the estimator knows — the clamp span measured by
    the arms (rounded to a ``stretch_step`` node), the sheet's NOMINAL Young's modulus and size
    (:class:`flexsheet.model.tension.SheetMaterial`), no pre-strain, and an ASSUMED tension ratio (default 1).
@@ -37,6 +37,7 @@ Units: m, sheet frame (u along axis_u, v along axis_v, w along −normal), as :m
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 from collections import OrderedDict
@@ -54,16 +55,20 @@ from flexsheet.model.sheet import (
     stretch_of_span,
 )
 from flexsheet.model.sheet import neumann_green as green
-from flexsheet.model.sheet_fem import TABLE_POSITIONS, IndentTable, SheetPhysics, default_cache_dir
+from flexsheet.model.sheet_fem import SheetPhysics
+from flexsheet.model.sheet_table import TABLE_POSITIONS, IndentTable, default_cache_dir
 from flexsheet.model.tension import SheetMaterial, tension
+
+log = logging.getLogger(__name__)
 
 #: the nominal tables of the default settings at clamp strains 0.01–0.07 (what 40 N per clamp can hold), shipped
 #: so that no display builds them while it runs (a table build beside the running graph slowed the loop:
 #: flexsheet/runtime/background.py). Regenerate: ``python -m flexsheet.model.sheet_model --ship``.
 SHIPPED_TABLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "sheet_tables")
 
-__all__ = ["SeriesShape", "PendingPush", "FourTriangleDent", "believed_sheet", "drawable", "NominalSheetModel", "MODEL_DEPTHS", "green", "fit_series", "table_grid",
-           "contact_of", "SheetConfig", "sheet_model_for", "ship_tables", "SHIPPED_TABLES"]
+__all__ = ["SeriesShape", "PendingPush", "FourTriangleDent", "believed_sheet", "drawable", "NominalSheetModel",
+           "MODEL_DEPTHS", "fit_series", "table_grid", "contact_of", "SheetConfig", "sheet_model_for",
+           "ship_tables", "SHIPPED_TABLES"]
 
 #: depths (m) of the nominal table (the fit interpolates between them)
 MODEL_DEPTHS = (0.005, 0.010, 0.020, 0.030, 0.040, 0.050, 0.060)
@@ -103,8 +108,8 @@ class SeriesShape(DeflectionGrid):
 def table_grid(table: IndentTable, depth: float, push_u: float, push_v: float, u: np.ndarray, v: np.ndarray,
                half_span: float) -> np.ndarray:
     """The table's shape on the tensor grid u (nu,) × v (nv,) m → (nu, nv) m for the measured clamp half span
-    ``half_span`` m: :meth:`flexsheet.model.sheet_fem.IndentTable.evaluate_grid` (equal to the point-wise
-    :meth:`~flexsheet.model.sheet_fem.IndentTable.evaluate` to rounding, ``tests/unit/rendering/test_render_live_sheet.py``).
+    ``half_span`` m: :meth:`flexsheet.model.sheet_table.IndentTable.evaluate_grid` (equal to the point-wise
+    :meth:`~flexsheet.model.sheet_table.IndentTable.evaluate` to rounding, ``tests/unit/rendering/test_render_live_sheet.py``).
     The fit's per-frame cost is this."""
     return table.evaluate_grid(depth, push_u, push_v, u, v, half_span)
 
@@ -220,14 +225,14 @@ class NominalSheetModel:
     series (module doc). ``material``: nominal sheet (:class:`SheetMaterial`); ``tension_ratio``: assumed
     T_v/T_u; ``prestrain``: assumed pre-strain (0); ``stretch_step``: spacing of the table nodes; ``depths``,
     ``positions`` (m) and ``mesh``: the tables (:class:`IndentTable`); ``cache_dir``: where they are cached
-    (default :func:`flexsheet.model.sheet_fem.default_cache_dir`); ``n_modes``, ``mu_scales``: the fit;
-    ``grid``: (nu, nv) samples of the fit; ``progress``: callable(str) for table builds. Raises ``ValueError``
-    on a bad setting."""
+    (default :func:`flexsheet.model.sheet_table.default_cache_dir`); ``n_modes``, ``mu_scales``: the fit;
+    ``grid``: (nu, nv) samples of the fit. Table builds log their progress. Raises ``ValueError`` on a bad
+    setting."""
 
     def __init__(self, material: SheetMaterial | None = None, *, tension_ratio: float = 1.0, prestrain: float = 0.0,
                  stretch_step: float = 0.01, depths=MODEL_DEPTHS, positions=TABLE_POSITIONS, mesh: dict | None = None,
                  cache_dir: str | None = None, n_modes: int = 16, mu_scales=(0.4, 0.7, 1.0, 1.6),
-                 grid: tuple[int, int] = (193, 121), progress=None, cache_size: int = 256) -> None:
+                 grid: tuple[int, int] = (193, 121), cache_size: int = 256) -> None:
         self.settings = {"material": material, "tension_ratio": tension_ratio, "prestrain": prestrain,
                          "stretch_step": stretch_step, "depths": tuple(depths), "positions": tuple(positions),
                          "mesh": dict(mesh or {}), "cache_dir": cache_dir, "n_modes": n_modes,
@@ -246,7 +251,6 @@ class NominalSheetModel:
         self.cache_dir = cache_dir or default_cache_dir()
         self.settings["cache_dir"] = self.cache_dir
         self.n_modes, self.mu_scales, self.grid_n = int(n_modes), tuple(float(s) for s in mu_scales), tuple(grid)
-        self.progress = progress
         self._tables: dict[float, IndentTable] = {}
         #: stretch node → node whose table stands in for it (set where a node's FEM fails to converge)
         self.substitute: dict[float, float] = {}
@@ -254,9 +258,9 @@ class NominalSheetModel:
         self._cache_size = int(cache_size)
 
     @classmethod
-    def nominal(cls, stretch: float | None = None, progress=None, **kw) -> NominalSheetModel:
+    def nominal(cls, stretch: float | None = None, **kw) -> NominalSheetModel:
         """The default model; with ``stretch``, its table at that node is built (or loaded) now."""
-        m = cls(progress=progress, **kw)
+        m = cls(**kw)
         if stretch is not None:
             m.table(m.node_of(stretch))
         return m
@@ -283,7 +287,7 @@ class NominalSheetModel:
             if ph.tension_u <= 0.0:
                 raise ValueError(f"no tension at stretch {node!r}: the nominal model needs a stretched sheet")
             self._tables[node] = IndentTable(ph, self.depths, self.positions, mesh=self.mesh,
-                                             cache_dir=self._folder_of(node), progress=self.progress)
+                                             cache_dir=self._folder_of(node))
         return self._tables[node]
 
     def _folder_of(self, node: float) -> str:
@@ -390,7 +394,7 @@ class SheetConfig:
     ``half_width`` m: half the free-edge length; ``push_threshold`` m: depth behind the flat sheet that counts
     as a push; the pushed sheet's model (:func:`sheet_model_for`): ``fine_modes`` clamped sine modes (each
     with 4 Green's-function terms, ≤ 16: the shader takes 64 terms), ``tension_ratio`` the ASSUMED T_v/T_u,
-    ``cache_dir`` where its FEM tables are cached (None: :func:`flexsheet.model.sheet_fem.default_cache_dir`),
+    ``cache_dir`` where its FEM tables are cached (None: :func:`flexsheet.model.sheet_table.default_cache_dir`),
     ``mesh`` the FEM mesh options (:class:`flexsheet.model.sheet_fem.SheetFEM` kwargs; {}: the default
     4 mm mesh)."""
 
@@ -402,16 +406,16 @@ class SheetConfig:
     mesh: dict = field(default_factory=dict)
 
 
-def sheet_model_for(config: SheetConfig = SheetConfig(), progress=None) -> NominalSheetModel:
+def sheet_model_for(config: SheetConfig = SheetConfig()) -> NominalSheetModel:
     """The display's pushed-sheet model for ``config``: the nominal FEM (the sheet's nominal E and size, no
     pre-strain, the assumed tension ratio) fitted into the fine shader's series; never the truth's values.
     The one constructor the renderer node, the Foxglove bridge, the experiments and the tests use. Raises
     ``ValueError`` on a bad setting."""
     return NominalSheetModel(tension_ratio=config.tension_ratio, n_modes=config.fine_modes,
-                             cache_dir=config.cache_dir, mesh=dict(config.mesh), progress=progress)
+                             cache_dir=config.cache_dir, mesh=dict(config.mesh))
 
 
-def ship_tables(nodes=tuple(round(0.01 * k, 6) for k in range(1, 12)), progress=print) -> list[str]:
+def ship_tables(nodes=tuple(round(0.01 * k, 6) for k in range(1, 12))) -> list[str]:
     """Build (or take from the cache) the default model's tables at ``nodes`` (the bridges' span band, clamp
     strain 0.01-0.10, and one step past it) and copy them into
     :data:`SHIPPED_TABLES`; returns the files written. Minutes cold (~40 s of one core per table)."""
@@ -421,7 +425,7 @@ def ship_tables(nodes=tuple(round(0.01 * k, 6) for k in range(1, 12)), progress=
     os.makedirs(SHIPPED_TABLES, exist_ok=True)
     out = []
     for node in nodes:
-        progress(f"sheet table at stretch {node:g}")
+        log.info(f"sheet table at stretch {node:g}")
         m.table(float(node))
         key = IndentTable.key_of(m.physics(node), m.depths, m.positions, m.mesh)
         src = os.path.join(m._folder_of(node), f"indent_{key}.npz")

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexsheet.model.shapes import Shape
+from flexsheet.model.shape_base import Shape
 from flexsheet.planning.shape import planner_shape, principal_curvatures
 
 __all__ = ["ContactStiffness", "SceneCompliance", "hertz_stiffness", "energy_share", "eshelby_factor"]

@@ -17,7 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexsheet.model.shapes import MeshShape, Shape
+from flexsheet.model.shape_base import Shape
+from flexsheet.model.shapes import MeshShape
 from flexsheet.model.vec import Vec, dot, norm, sub
 
 __all__ = ["planner_shape", "SmoothMeshShape", "principal_curvatures"]
@@ -80,7 +81,7 @@ class SmoothMeshShape(MeshShape):
 
 
 def planner_shape(scene) -> Shape:
-    """The :class:`flexsheet.model.shapes.Shape` the planner, the world and the Table I metric use for
+    """The :class:`flexsheet.model.shape_base.Shape` the planner, the world and the Table I metric use for
     ``scene`` (a :class:`flexsheet.model.scenes.Scene`): ``scene.shape()`` for analytic kinds, a
     :class:`SmoothMeshShape` for a mesh (one per scene object, cached)."""
     if scene.object.kind != "mesh":

@@ -3,7 +3,7 @@
 Paper §V-A and Fig. 7, generalised:
 
 * **Away** (fingertip farther than ``touch_distance`` from the surface): the contact point A is the
-  centre-ray hit (:meth:`flexsheet.model.shapes.Shape.project`; closest point for non-convex meshes) and the
+  centre-ray hit (:meth:`flexsheet.model.shape_base.Shape.project`; closest point for non-convex meshes) and the
   sheet is commanded to the tangent plane at A, so the finger meets it there. The sheet's in-plane axis
   ``axis_u`` is the reference direction (``u_ref``, +y: the clamp line at home) projected onto the
   tangent plane. A rolled offset left from a previous touch decays with time constant ``recentre_time``.
@@ -58,7 +58,7 @@ from typing import NamedTuple
 import numpy as np
 
 from flexsheet.model import geometry
-from flexsheet.model.shapes import Shape
+from flexsheet.model.shape_base import Shape
 from flexsheet.model.sheet import clamp_half_span, clamp_points, clamp_poses
 from flexsheet.model.tension import (
     SheetMaterial,
@@ -216,7 +216,7 @@ class _Sample(NamedTuple):
 class SurfacePlanner:
     """Stateful surface planner: feed fingertip samples to :meth:`update`, get :class:`Plan` s.
 
-    ``shape``: a :class:`flexsheet.model.shapes.Shape`; ``config``: :class:`PlannerConfig`; ``compliance``:
+    ``shape``: a :class:`flexsheet.model.shape_base.Shape`; ``config``: :class:`PlannerConfig`; ``compliance``:
     optional callable (contact (3,) m, normal (3,), depth m) → the object's stiffness N/m there (e.g.
     :class:`flexsheet.planning.compliance.SceneCompliance`), used when :meth:`update` gets no stiffness (else
     ``config.object_stiffness``). The first valid sample initialises the pose (no ramp). ``last`` is the last safe plan (``None`` before the first);

@@ -40,8 +40,8 @@ import numpy as np
 
 from flexsheet.model.sheet import SheetSurface
 
-__all__ = ["correct_vertices", "correct_vertices_pushed", "correct_vertices_fine", "screen_to_projector",
-           "project_vertices", "MODELS", "DEFAULT_MIN_COS", "choose_model", "predict_model_errors",
+__all__ = ["correct_vertices", "correct_vertices_pushed", "correct_vertices_fine",
+           "project_vertices", "MODELS", "DEFAULT_MIN_COS", "choose_sheet_model", "predict_model_errors",
            "land_on_triangles", "land_on_surface", "land_projector_rays", "check_screen", "fan_triangles"]
 
 #: correction models, cheapest first
@@ -276,20 +276,6 @@ def correct_vertices_fine(vertices, *, eye, projector, screen_point, screen_norm
     return (out, valid) if return_valid else out
 
 
-def screen_to_projector(points, *, K, R, position) -> np.ndarray:
-    """Pixel coordinates (N, 2) (OpenCV convention: x right, y down, pixel centres at integers) of display-
-    frame points (N, 3) m, for a projector with intrinsics ``K`` (3, 3) px and pose (``R`` (3, 3) columns =
-    projector x, y, z axes in the display frame; ``position`` (3,) m). Pinhole model (Hartley & Zisserman,
-    eq. 6.8). Points behind the projector get NaN."""
-    pts = np.asarray(points, dtype=float)
-    xc = (pts - np.asarray(position, dtype=float)) @ np.asarray(R, dtype=float)
-    z = xc[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        uv = (xc @ np.asarray(K, dtype=float).T)[:, :2] / z[:, None]
-    uv[z <= 0] = np.nan
-    return uv
-
-
 def project_vertices(vertices, *, eye, screen_point, screen_normal) -> np.ndarray:
     """Central projection of vertices (N, 3) from ``eye`` onto the imaginary screen (paper's point B), (N, 3) m.
 
@@ -315,7 +301,7 @@ def predict_model_errors(depth: float, *, eye, projector, screen_point, screen_n
     shape and where the eye expects the vertex. The reference (and the ``fine`` model's shape) is
     ``reference(sheet, depth)`` → a membrane-like shape pushed at the centre (the renderer's:
     :meth:`flexsheet.model.sheet_model.NominalSheetModel.shape`); at depth 0 the flat sheet. Used by
-    :func:`choose_model`. Raises ``ValueError`` on bad input.
+    :func:`choose_sheet_model`. Raises ``ValueError`` on bad input.
     """
     if not (math.isfinite(depth) and depth >= 0.0):
         raise ValueError(f"depth must be finite and >= 0, got {depth!r}")
@@ -350,7 +336,7 @@ def land_projector_rays(targets, projector, sheet: SheetSurface) -> np.ndarray:
     return c
 
 
-def choose_model(depth: float, table: dict[str, list[tuple[float, float]]],
+def choose_sheet_model(depth: float, table: dict[str, list[tuple[float, float]]],
                  target: float = 0.0007, models: tuple[str, ...] = MODELS) -> str:
     """Cheapest correction model whose predicted error at push ``depth`` (m) is ≤ ``target`` (m).
 

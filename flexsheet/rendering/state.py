@@ -11,7 +11,7 @@
   (:mod:`flexsheet.model.sheet_model`, re-exported here), built the same way for the node, the Foxglove
   bridge, the experiment and the tests; :func:`build_table` builds a missing table in a worker process.
 * :func:`pick_model` — the model for a sheet: the configured one, or with ``"auto"`` the cheapest whose
-  predicted error meets the accuracy target (:func:`flexsheet.rendering.correction.choose_model`).
+  predicted error meets the accuracy target (:func:`flexsheet.rendering.correction.choose_sheet_model`).
 * :func:`load_geometry` — what the node draws and through which projector: the scene's object
   (:mod:`flexsheet.model.scenes`) and the registered projector and eye (``display.yaml``,
   :mod:`flexsheet.calibration.display_calib`; the nominal geometry when none is named, said so in the log).
@@ -31,7 +31,7 @@ from flexsheet.model import geometry
 from flexsheet.model.checks import check_pose
 from flexsheet.model.projector import Projector
 from flexsheet.model.scenes import Scene, load_scene, paper_scene
-from flexsheet.model.sheet import SheetSurface
+from flexsheet.model.sheet import SheetSurface, clamp_poses
 from flexsheet.model.sheet_model import (
     NominalSheetModel,
     PendingPush,
@@ -39,11 +39,11 @@ from flexsheet.model.sheet_model import (
     believed_sheet,
     sheet_model_for,
 )
-from flexsheet.rendering.correction import MODELS, choose_model, predict_model_errors
+from flexsheet.rendering.correction import MODELS, choose_sheet_model, predict_model_errors
 from flexsheet.rendering.stereo_renderer import cylinder_mesh, scaled_projector, vertex_normals
 
-__all__ = ["RendererState", "SheetConfig", "ErrorTable", "pick_model", "check_sheet",
-           "silhouette_probes", "AUTO_MODELS", "RenderGeometry", "load_geometry", "sheet_model_for", "build_table"]
+__all__ = ["RendererState", "ErrorTable", "pick_model", "check_sheet", "silhouette_probes", "AUTO_MODELS",
+           "RenderGeometry", "load_geometry", "build_table"]
 
 #: models "auto" chooses among (cheapest first); "none" is never chosen automatically
 AUTO_MODELS = ("flat", "four_triangle", "fine")
@@ -109,7 +109,7 @@ class ErrorTable:
 
     def choose(self, depth: float, target: float, models: tuple[str, ...] = AUTO_MODELS) -> str:
         """Cheapest of ``models`` whose predicted error at ``depth`` m is ≤ ``target`` m (else the best one)."""
-        return choose_model(depth, self.rows, target, models=models)
+        return choose_sheet_model(depth, self.rows, target, models=models)
 
 
 def pick_model(correction: str, sheet: SheetSurface, table: ErrorTable | None, target: float) -> str:
@@ -168,7 +168,7 @@ class RendererState:
         self._mesh = (v, f, vertex_normals(v, f))
         self._mesh_dirty = True
         self._mesh_stamp = 0.0
-        self.home = dict(zip(("left", "right"), geometry.clamp_poses(np.zeros(3), geometry.SCREEN_NORMAL,
+        self.home = dict(zip(("left", "right"), clamp_poses(np.zeros(3), geometry.SCREEN_NORMAL,
                                                                   np.array([0.0, 1.0, 0.0]), 0.0), strict=True))
         self._pose: dict[str, np.ndarray | None] = {"left": None, "right": None}
         self._finger: np.ndarray | None = None
@@ -304,7 +304,8 @@ def load_geometry(scene_file: str | None = None, display_calib: str | None = Non
     (no tracked-eye topic exists yet; the log says so). Raises ``ValueError`` naming the file and key: scene
     invalid, display.yaml unreadable or without its ``projector`` or ``eye`` entry.
     """
-    from flexsheet.calibration.display_calib import load_display_calib, nominal_display_calib
+    from flexsheet.calibration.display_calib import nominal_display_calib
+    from flexsheet.calibration.display_calib_file import load_display_calib
 
     log = []
     sc = paper_scene() if not scene_file else load_scene(scene_file)

@@ -34,24 +34,19 @@ from pydantic import BaseModel, ConfigDict, Field
 from flexsheet.runtime.bag_export import export_bag
 from flexsheet.runtime.bag_read import (
     ENCODING,
-    GAP_TOPIC,
     MAGIC,
-    RAW_ENCODING,
-    BagMessage,
     BagSummary,
-    Damage,
     bag_info,
     clock_text,
     read_bag,
 )
 from flexsheet.runtime.bag_recover import recover_bag
-from flexsheet.runtime.bag_write import CHUNK_SIZE, MAX_SEQ_JUMP, BagWriter
-from flexsheet.runtime.node import Node, NodeConfig
+from flexsheet.runtime.bag_write import BagWriter
+from flexsheet.runtime.config import NodeConfig
+from flexsheet.runtime.node import Node
 from messages import Heartbeat, TopicStats
 
-__all__ = ["BagWriter", "read_bag", "BagMessage", "BagSummary", "Damage", "bag_info", "export_bag", "recover_bag",
-           "RecorderNode", "PlayerNode", "ENCODING", "RAW_ENCODING", "GAP_TOPIC", "CHUNK_SIZE", "MAX_SEQ_JUMP",
-           "check_mcap"]
+__all__ = ["RecorderNode", "PlayerNode", "check_mcap"]
 
 
 def check_mcap(path: str | Path) -> None:

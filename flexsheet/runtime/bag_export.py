@@ -139,6 +139,55 @@ def _schema(name: str) -> dict:
     return cls.model_json_schema() if cls else {}
 
 
+def _batches(scan: McapScan, progress: Callable[[float, int], None] | None, t_next: list[float], n_read: list[int],
+             gap_records: list[tuple[int, bytes]]) -> Iterator[list[tuple[str, int, bytes]]]:
+    """The lossless messages of ``scan`` as ``(topic, log time ns, data)`` in batches of about
+    ``_BATCH_BYTES`` or ``_BATCH_MESSAGES``; the recorder's gap records go to ``gap_records``. ``n_read[0]``
+    counts the messages read; ``progress`` is called when ``t_next[0]`` (monotonic s) has passed, then 2 s later."""
+    batch, size = [], 0
+    for kind, rec in scan.records():
+        if kind != "message":
+            continue
+        n_read[0] += 1
+        if progress is not None and time.monotonic() >= t_next[0]:
+            progress(scan.pos / max(scan.size, 1), n_read[0])
+            t_next[0] = time.monotonic() + 2.0
+        ch = scan.channels.get(rec[0])
+        if ch is None:
+            continue
+        if ch.topic == GAP_TOPIC:
+            gap_records.append((rec[2], rec[4]))
+        elif ch.message_encoding == ENCODING:
+            batch.append((ch.topic, rec[2], rec[4]))
+            size += len(rec[4])
+            if size > _BATCH_BYTES or len(batch) >= _BATCH_MESSAGES:
+                yield batch
+                batch, size = [], 0
+    if batch:
+        yield batch
+
+
+class _JsonChannels:
+    """The JSON channels of an export on MCAP writer ``w``: a schema per message type and a channel per topic,
+    registered on first use; each message written is counted in ``counts``."""
+
+    def __init__(self, w: Writer, counts: Counter) -> None:
+        self.w, self.counts = w, counts
+        self.sids: dict[str, int] = {}
+        self.chans: dict[str, int] = {}
+
+    def write(self, topic: str, schema_name: str, t: int, data: bytes) -> None:
+        w, sids, chans = self.w, self.sids, self.chans
+        ch = chans.get(topic)
+        if ch is None:
+            if schema_name not in sids:  # the schema is built once per type, not per message
+                sids[schema_name] = w.register_schema(schema_name, "jsonschema",
+                                                      json.dumps(_schema(schema_name)).encode())
+            ch = chans[topic] = w.register_channel(topic, "json", sids[schema_name])
+        w.add_message(ch, log_time=t, data=data, publish_time=t)
+        self.counts[topic] += 1
+
+
 def export_bag(src: str | Path, dst: str | Path, foxglove: bool = True, summary: BagSummary | None = None,
                progress: Callable[[float, int], None] | None = None, workers: int | None = None) -> Counter:
     """Transcode ``src`` to JSON-encoded MCAP ``dst`` (module docstring). Returns per-channel message counts;
@@ -152,44 +201,10 @@ def export_bag(src: str | Path, dst: str | Path, foxglove: bool = True, summary:
     t_next = [time.monotonic() + 2.0]
     gap_records: list[tuple[int, bytes]] = []
 
-    def batches() -> Iterator[list[tuple[str, int, bytes]]]:
-        batch, size = [], 0
-        for kind, rec in scan.records():
-            if kind != "message":
-                continue
-            n_read[0] += 1
-            if progress is not None and time.monotonic() >= t_next[0]:
-                progress(scan.pos / max(scan.size, 1), n_read[0])
-                t_next[0] = time.monotonic() + 2.0
-            ch = scan.channels.get(rec[0])
-            if ch is None:
-                continue
-            if ch.topic == GAP_TOPIC:
-                gap_records.append((rec[2], rec[4]))
-            elif ch.message_encoding == ENCODING:
-                batch.append((ch.topic, rec[2], rec[4]))
-                size += len(rec[4])
-                if size > _BATCH_BYTES or len(batch) >= _BATCH_MESSAGES:
-                    yield batch
-                    batch, size = [], 0
-        if batch:
-            yield batch
-
     with open(dst, "wb") as fh:
         w = Writer(fh, compression=CompressionType.LZ4)
         w.start(profile="", library="flexsheet")
-        sids: dict[str, int] = {}
-        chans: dict[str, int] = {}
-
-        def write(topic: str, schema_name: str, t: int, data: bytes) -> None:
-            ch = chans.get(topic)
-            if ch is None:
-                if schema_name not in sids:  # the schema is built once per type, not per message
-                    sids[schema_name] = w.register_schema(schema_name, "jsonschema",
-                                                          json.dumps(_schema(schema_name)).encode())
-                ch = chans[topic] = w.register_channel(topic, "json", sids[schema_name])
-            w.add_message(ch, log_time=t, data=data, publish_time=t)
-            counts[topic] += 1
+        write = _JsonChannels(w, counts).write
 
         pool = _pool(workers)  # forked before the scene builder loads anything
         scene = _pool(1, _scene_start) if (foxglove and pool is not None) else None
@@ -212,7 +227,7 @@ def export_bag(src: str | Path, dst: str | Path, foxglove: bool = True, summary:
                         for topic, t, data in batch:
                             fox.add_frames([topic.encode(), *msgpack.unpackb(data)], t)
 
-            for batch in batches():
+            for batch in _batches(scan, progress, t_next, n_read, gap_records):
                 pending.append((batch, pool.submit(_transcode, batch) if pool else _transcode(batch),
                                 scene.submit(_scene_batch, batch) if scene else None))
                 drain(2 * max(workers, 1))

@@ -15,8 +15,9 @@ from collections.abc import Callable
 from typing import Any
 
 from flexsheet.runtime.codec import DecodeError, decode
-from flexsheet.runtime.launch import curve_config, load_launch
-from flexsheet.runtime.transport import ZmqTransport
+from flexsheet.runtime.launch import load_launch
+from flexsheet.runtime.launch_config import curve_config
+from flexsheet.runtime.zmq.transport import ZmqTransport
 from messages import Heartbeat, Message
 from messages import topics as T
 

@@ -34,7 +34,7 @@ def _unpack_head(data: bytes) -> tuple[int, int]:
 
 
 @functools.lru_cache(maxsize=256)
-def _parse_descriptor(data: bytes) -> tuple[int, np.dtype, tuple[int, ...], int] | str:
+def parse_descriptor(data: bytes) -> tuple[int, np.dtype, tuple[int, ...], int] | str:
     """(buffer index, dtype, shape, nbytes) of an array descriptor, or the reason it is bad (cached:
     a topic's descriptors repeat message after message)."""
     try:
@@ -77,7 +77,7 @@ def _descriptor(data: bytes, topic_name: str) -> tuple[int, np.dtype, tuple[int,
     if type(data) is not bytes:
         data = bytes(data)
     # only short (well-formed-sized) descriptors go through the cache: a hostile huge one is not retained
-    parsed = _parse_descriptor(data) if len(data) <= 96 else _parse_descriptor.__wrapped__(data)
+    parsed = parse_descriptor(data) if len(data) <= 96 else parse_descriptor.__wrapped__(data)
     if isinstance(parsed, str):
         raise DecodeError(_line(f"{topic_name}: {parsed}"))
     return parsed

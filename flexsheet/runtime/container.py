@@ -9,10 +9,10 @@ in one process, started by the supervisor as ``flexsheet run --container NAME --
       planner:      {type: planner, host: main, container: vision}
 
 Between the nodes of a container a message travels as the frozen message object itself, through the
-container's :class:`Bus`: no encode, no decode, no copy, no socket; its numpy arrays are handed on as
+container's :class:`~flexsheet.runtime.bus.Bus`: no encode, no decode, no copy, no socket; its numpy arrays are handed on as
 read-only views (a receiver cannot write into the publisher's arrays; the publisher must not write into an
 array after publishing it, as with any zero-copy transport). Each node keeps its own publisher socket at its
-launch-file endpoint (:class:`flexsheet.runtime.transport.XPub`), so the rest of the graph, the recorder and
+launch-file endpoint (:class:`flexsheet.runtime.zmq.xpub.XPub`), so the rest of the graph, the recorder and
 the tools see the same endpoints, topics and heartbeats as before; a message is encoded — once — only when a
 subscriber outside the process has asked for its topic (XPUB subscription tracking) or the topic is latched.
 The container has one SUB socket, connected to every endpoint of the graph outside the container, and hands
@@ -41,292 +41,23 @@ import json
 import logging
 import os
 import signal
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
+from flexsheet.runtime.bus import Bus, ContainerTransport
+from flexsheet.runtime.clock import SimClock
+from flexsheet.runtime.config import EXIT_CONFIG, ConfigError, NodeConfig
+from flexsheet.runtime.console import console_logger
+from flexsheet.runtime.node import Node
+from flexsheet.runtime.plugins import node_class
+from flexsheet.runtime.transport import TransportError
 
-from flexsheet.runtime.codec import encode
-from flexsheet.runtime.node import EXIT_CONFIG, WALL_CLOCK, Clock, ConfigError, Node, NodeConfig, SimClock
-from flexsheet.runtime.transport import BusSocket, CurveConfig, Transport, TransportError, XPub
-from messages import Message
-from messages.common import array_spec
-
-__all__ = ["Bus", "ContainerTransport", "Container", "Member", "container_from_launch", "run_container",
-           "freeze_arrays"]
+__all__ = ["Container", "Member", "container_members", "container_from_launch", "run_container"]
 
 log = logging.getLogger("container")
-
-_ARRAY_FIELDS: dict[type, tuple[str, ...]] = {}
-
-
-def _array_fields(cls: type) -> tuple[str, ...]:
-    names = _ARRAY_FIELDS.get(cls)
-    if names is None:
-        names = _ARRAY_FIELDS[cls] = tuple(n for n, f in cls.model_fields.items() if array_spec(f) is not None)
-    return names
-
-
-def freeze_arrays(msg: Message) -> Message:
-    """Make every numpy array field of ``msg`` a read-only view (in place; the publisher's arrays keep their
-    own flags). Returns ``msg``. Cost: one view per writeable array field."""
-    d = msg.__dict__
-    for name in _array_fields(type(msg)):
-        a = d[name]
-        if type(a) is np.ndarray and a.flags.writeable:
-            ro = a.view()
-            ro.flags.writeable = False
-            d[name] = ro  # the model is frozen for its users; the runtime swaps in an equal read-only view
-    return msg
-
-
-class Bus:
-    """The in-process message bus of one container: routes message objects between its nodes, wire frames
-    from the rest of the graph to them, and owns the container's ZeroMQ context and SUB socket.
-
-    ``peers``: publisher endpoints outside the container; ``curve``: this host's CURVE settings (or None);
-    ``clock``: the nodes' clock (:data:`~flexsheet.runtime.node.WALL_CLOCK`, or a
-    :class:`~flexsheet.runtime.node.SimClock` for a lockstep replay, which also creates :attr:`lockstep`).
-    """
-
-    def __init__(self, name: str = "container", peers: list[str] | None = None, curve: CurveConfig | None = None,
-                 clock: Clock | None = None, rcvhwm: int = 20000) -> None:
-        self.name = name
-        self.peers = [p for p in dict.fromkeys(peers or []) if p]
-        self.curve = curve
-        self.clock = clock or WALL_CLOCK
-        self.lockstep = None
-        if self.clock.simulated:
-            from flexsheet.runtime.lockstep import Lockstep
-
-            self.lockstep = Lockstep(self)
-        self.rcvhwm = rcvhwm
-        self.nodes: list[Node] = []
-        self._prefixes: dict[Node, list[bytes]] = {}
-        self._targets: dict[bytes, tuple] = {}
-        self._latched_obj: dict[bytes, Message] = {}
-        self._latched_frames: dict[bytes, list] = {}
-        self.sub: BusSocket | None = None
-        self.loop: asyncio.AbstractEventLoop | None = None
-        self._loop_tid: int | None = None
-        self._poll_task: asyncio.Task | None = None
-        self.local_messages = 0  # messages handed on in-process (objects)
-        self.ready_check: Callable[[], bool] = lambda: all(n.ready for n in self.nodes)
-
-    # ------------------------------------------------------------------ lifecycle
-    async def start(self) -> None:
-        """Create the context (with the CURVE authenticator when ``curve``) and the SUB socket."""
-        if self.sub is not None:
-            return
-        self.loop = asyncio.get_running_loop()
-        self._loop_tid = threading.get_ident()
-        self.sub = BusSocket(self.peers, self.curve, self.rcvhwm)
-        for fd in self.sub.fds():
-            self.loop.add_reader(fd, self._drain_sub)
-        self._poll_task = self.loop.create_task(self._safety_poll())
-
-    def close(self) -> None:
-        if self._poll_task is not None:
-            self._poll_task.cancel()
-        if self.sub is not None:
-            if not self.sub.closed:
-                for fd in self.sub.fds():
-                    try:
-                        self.loop.remove_reader(fd)
-                    except Exception:  # noqa: BLE001 - loop may be closed already
-                        pass
-            self.sub.close()
-            self.sub = None
-
-    async def _safety_poll(self) -> None:
-        while True:  # ZeroMQ FDs are edge-triggered: catch an edge lost between drains
-            await asyncio.sleep(0.05)
-            self._drain_sub()
-            for node in list(self.nodes):
-                xpub = getattr(node.transport, "xpub", None)
-                if xpub is not None:
-                    xpub.drain()
-
-    def ready(self) -> bool:
-        """True when every node of the container finished its setup (the lockstep player waits for it)."""
-        return self.ready_check()
-
-    # ------------------------------------------------------------------ membership
-    def attach(self, node: Node) -> None:
-        if node not in self.nodes:
-            self.nodes.append(node)
-            self._prefixes.setdefault(node, [])
-            self.changed()
-
-    def detach(self, node: Node) -> None:
-        if node in self.nodes:
-            self.nodes.remove(node)
-        prefixes = self._prefixes.pop(node, [])
-        if self.sub is not None and not self.sub.closed:
-            for p in prefixes:
-                self.sub.unsubscribe(p)
-        self.changed()
-
-    def changed(self) -> None:
-        """Forget the routing cache (a node or a subscription came or went)."""
-        self._targets = {}
-
-    def subscribe(self, node: Node, topic: str) -> None:
-        """``node`` wants ``topic`` (a prefix, as ZeroMQ's): from the wire and from the other nodes; latched
-        values already published in the container are handed to it now."""
-        prefix = topic.encode()
-        self._prefixes.setdefault(node, []).append(prefix)
-        self.changed()
-        if self.sub is not None:
-            self.sub.subscribe(prefix)
-            self._drain_sub()
-        raw = _is_raw(node)
-        for name_b, msg in list(self._latched_obj.items()):
-            if name_b.startswith(prefix):
-                if raw:
-                    node._on_frames(encode(name_b.decode(), msg))
-                else:
-                    node._on_local(name_b, msg)
-        for name_b, frames in list(self._latched_frames.items()):
-            if name_b.startswith(prefix):
-                node._on_frames(frames)
-
-    def targets(self, topic: bytes) -> tuple:
-        """``(node, raw)`` of every node of the container subscribed to ``topic`` (cached)."""
-        t = self._targets.get(topic)
-        if t is None:
-            out = []
-            for node in self.nodes:
-                if any(topic.startswith(p) for p in self._prefixes.get(node, ())):
-                    raw = _is_raw(node)
-                    if raw or topic in node._subs_b:
-                        out.append((node, raw))
-            t = self._targets[topic] = tuple(out)
-        return t
-
-    # ------------------------------------------------------------------ routing
-    def publish(self, pub, msg: Message) -> list | None:
-        """Hand ``msg`` (published by ``pub``, any thread) to the container's subscribers as the object itself;
-        a node that takes raw frames (the recorder) gets it encoded. Returns those frames if it had to encode
-        (the publisher reuses them for the wire), else None."""
-        name_b = pub.name_b
-        if pub.latched:
-            self._latched_obj[name_b] = freeze_arrays(msg)
-        targets = self._targets.get(name_b)
-        if targets is None:
-            targets = self.targets(name_b)
-        if not targets:
-            return None
-        freeze_arrays(msg)
-        frames = None
-        for node, raw in targets:
-            if raw:
-                if frames is None:
-                    frames = encode(pub.name, msg)
-                self._raw(node, frames)
-            else:
-                node._on_local(name_b, msg)
-        self.local_messages += 1
-        return frames
-
-    def publish_frames(self, frames: list) -> None:
-        """Hand raw frames a node sent itself (the bag player) to the container's subscribers (decoded and
-        validated by each subscription, as frames from the wire are)."""
-        t = frames[0]
-        for node, raw in self.targets(t if type(t) is bytes else bytes(t)):
-            if raw:
-                self._raw(node, frames)
-            else:
-                node._on_frames(frames)
-
-    def latch_frames(self, topic: str, frames: list) -> None:
-        self._latched_frames[topic.encode()] = frames
-
-    def _raw(self, node: Node, frames: list) -> None:
-        if threading.get_ident() == self._loop_tid:
-            node._on_frames(frames)
-        else:  # a raw listener (the recorder) runs on the loop
-            self.loop.call_soon_threadsafe(node._on_frames, frames)
-
-    def _on_wire(self, frames: list) -> None:
-        t = frames[0]
-        for node, _ in self.targets(t if type(t) is bytes else bytes(t)):
-            node._on_frames(frames)
-
-    def _drain_sub(self) -> None:
-        if self.sub is not None:
-            self.sub.drain(self._on_wire)
-
-
-def _is_raw(node: Node) -> bool:
-    """True for a node that takes raw frames itself (overrides ``Node._on_frames``, as the recorder does)."""
-    return type(node)._on_frames is not Node._on_frames
-
-
-class ContainerTransport(Transport):
-    """The transport of one node in a container: its own XPUB at its endpoint, the container's :class:`Bus`
-    for everything in-process and for the SUB side. ``send`` (raw frames, e.g. the bag player) reaches the
-    container's nodes and the wire; the node's publish path uses the bus and :meth:`send_remote`."""
-
-    threadsafe_send = True
-
-    def __init__(self, bus: Bus, endpoint: str, sndhwm: int = 2000) -> None:
-        self.bus = bus
-        self.endpoint = endpoint
-        self.sndhwm = sndhwm
-        self.xpub: XPub | None = None
-        self.node: Node | None = None
-
-    @property
-    def peers(self) -> list[str]:
-        return self.bus.peers
-
-    def attach(self, node: Node) -> None:
-        self.node = node
-
-    async def start(self, on_frames) -> None:
-        await self.bus.start()
-        self.bus.attach(self.node)
-        if self.endpoint:
-            try:
-                curve = self.node.config.curve or self.bus.curve  # the node's own key (the bus: the host's)
-                self.xpub = XPub(self.bus.sub.ctx, self.endpoint, curve, self.sndhwm, asyncio.get_running_loop())
-            except TransportError:
-                self.bus.detach(self.node)
-                raise
-            self.endpoint = self.xpub.endpoint
-
-    def subscribe(self, topic: str) -> None:
-        self.bus.subscribe(self.node, topic)
-
-    def wants(self, topic: bytes) -> bool:
-        return self.xpub is not None and self.xpub.wants(topic)
-
-    def send(self, frames: list) -> bool:
-        self.bus.publish_frames(frames)
-        return self.send_remote(frames)
-
-    def send_remote(self, frames: list) -> bool:
-        xpub = self.xpub
-        return xpub is None or xpub.send(frames)
-
-    def set_latched(self, topic: str, frames: list) -> None:
-        self.bus.latch_frames(topic, frames)
-        self.set_latched_remote(topic, frames)
-
-    def set_latched_remote(self, topic: str, frames: list) -> None:
-        if self.xpub is not None:
-            self.xpub.set_latched(topic, frames)
-
-    def close(self) -> None:
-        if self.node is not None:
-            self.bus.detach(self.node)
-        if self.xpub is not None:
-            self.xpub.close()
 
 
 @dataclass
@@ -352,12 +83,12 @@ class Container:
     """Runs the :class:`Member` nodes of one container on one loop (see the module docstring).
 
     :meth:`run` returns the process exit status: 0 after a stop (signal, :meth:`stop`, every node ended by
-    itself), a required member's own status when it ends, :data:`~flexsheet.runtime.node.EXIT_CONFIG` when a
+    itself), a required member's own status when it ends, :data:`~flexsheet.runtime.config.EXIT_CONFIG` when a
     required member or every member has a configuration error.
     """
 
     def __init__(self, name: str, members: list[Member], bus: Bus, shutdown_timeout: float = 3.0,
-                 print_fn: Callable[[str], None] | None = None, cpu_file: str | None = None,
+                 cpu_file: str | None = None,
                  sim_until: float | None = None, sim_file: str | None = None, rtf: float | None = None) -> None:
         self.name, self.members, self.bus = name, members, bus
         self.sim_until = sim_until   # live simulated clock: stop after this many simulated seconds
@@ -365,7 +96,7 @@ class Container:
         self.rtf = rtf               # live simulated clock: cap on simulated s per wall s (None: as fast as it can)
         self.active_s: dict[str, float] = {}   # live simulated clock: wall s from start until each node was active
         self.shutdown_timeout = shutdown_timeout
-        self.print = print_fn or (lambda line: print(line, flush=True))
+        self.log = console_logger("container")   # what it says to the user (flexsheet.runtime.console)
         self.cpu_file = cpu_file
         self._stop = asyncio.Event()
         self._stopping = False
@@ -389,7 +120,7 @@ class Container:
                 node = m.make(self.bus)
             except ValidationError as exc:
                 for err in exc.errors():
-                    self.print(f"{m.name}: configuration error: param '{'.'.join(map(str, err['loc']))}': "
+                    self.log.info(f"{m.name}: configuration error: param '{'.'.join(map(str, err['loc']))}': "
                                f"{err['msg']} (value {err.get('input')!r:.200})")
                 code = EXIT_CONFIG
             else:
@@ -398,10 +129,10 @@ class Container:
                     await node.run(install_signals=False)
                     code = 0
                 except ConfigError as exc:
-                    self.print(f"{m.name}: configuration error: {exc}")
+                    self.log.info(f"{m.name}: configuration error: {exc}")
                     code = EXIT_CONFIG
                 except TransportError as exc:   # cannot bind or connect: a restart fails the same way
-                    self.print(f"{m.name}: configuration error: {exc}")
+                    self.log.info(f"{m.name}: configuration error: {exc}")
                     code = EXIT_CONFIG
                 except asyncio.CancelledError:
                     raise
@@ -414,19 +145,19 @@ class Container:
             m.codes.append(code)
             if self._stopping:
                 return code
-            self.print(f"{m.name}: ended with status {code}")
+            self.log.info(f"{m.name}: ended with status {code}")
             if code == EXIT_CONFIG:
-                self.print(f"{m.name}: configuration error: not restarted")
+                self.log.info(f"{m.name}: configuration error: not restarted")
                 return self._end(m, code)
             if m.required:
                 return self._end(m, code)
             if m.policy == "never" or (m.policy == "on-failure" and code == 0):
                 return self._end(m, code)
             if m.restarts >= m.max_restarts:
-                self.print(f"{m.name}: not restarted: {m.max_restarts} restarts used")
+                self.log.info(f"{m.name}: not restarted: {m.max_restarts} restarts used")
                 return self._end(m, code)
             m.restarts += 1
-            self.print(f"{m.name}: restarting in {m.delay:.1f} s (restart {m.restarts}/{m.max_restarts}; the other "
+            self.log.info(f"{m.name}: restarting in {m.delay:.1f} s (restart {m.restarts}/{m.max_restarts}; the other "
                        f"nodes of container {self.name} keep running)")
             await asyncio.sleep(m.delay)
             if self._stopping:
@@ -454,9 +185,9 @@ class Container:
         try:
             await self.bus.start()
         except TransportError as exc:
-            self.print(f"container {self.name}: configuration error: {exc}")
+            self.log.info(f"container {self.name}: configuration error: {exc}")
             return EXIT_CONFIG
-        self.print(f"container {self.name}: {len(self.members)} nodes in pid {os.getpid()}: "
+        self.log.info(f"container {self.name}: {len(self.members)} nodes in pid {os.getpid()}: "
                    + ", ".join(m.name for m in self.members)
                    + ((" (simulated clock)" if self.bus.clock.live else " (lockstep: replayed clock)")
                       if self.bus.lockstep is not None else ""))
@@ -472,7 +203,7 @@ class Container:
                 m.node.shutdown()
         done, pending = await asyncio.wait(tasks, timeout=self.shutdown_timeout * 2)
         for t in pending:
-            self.print(f"{tasks[t].name}: did not stop in {self.shutdown_timeout * 2:.1f} s; cancelled")
+            self.log.info(f"{tasks[t].name}: did not stop in {self.shutdown_timeout * 2:.1f} s; cancelled")
             t.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
         self.bus.close()
@@ -482,7 +213,7 @@ class Container:
         self._write_cpu(time.monotonic() - t0, time.process_time() - c0)
         failed = [m.name for m in self.members if any(c != 0 for c in m.codes)]
         if self.code == 0 and failed:   # a node that failed and was restarted here: the launch must know
-            self.print(f"container {self.name}: node(s) failed during the run: {', '.join(failed)}")
+            self.log.info(f"container {self.name}: node(s) failed during the run: {', '.join(failed)}")
             return 1
         return self.code
 
@@ -507,7 +238,7 @@ class Container:
             for m in self.members:
                 self.active_s.setdefault(m.name, time.monotonic() - t0)
             ready_s = time.monotonic() - t0
-            self.print(f"container {self.name}: every node active after {ready_s:.1f} s; simulated time starts at "
+            self.log.info(f"container {self.name}: every node active after {ready_s:.1f} s; simulated time starts at "
                        f"{SIM_EPOCH:g} s" + (f" and runs {self.sim_until:g} s" if self.sim_until else "")
                        + (f", paced at {self.rtf:g}x wall time" if self.rtf else ""))
 
@@ -517,7 +248,7 @@ class Container:
             await run_live(self.bus, self.sim_until, stopped, self.rtf)
             if self.sim_until is not None and not self._stopping:
                 self.reason = f"simulated duration {self.sim_until:g} s reached"
-                self.print(f"container {self.name}: {self.reason} in {stats.wall_s:.1f} s of wall time "
+                self.log.info(f"container {self.name}: {self.reason} in {stats.wall_s:.1f} s of wall time "
                            f"(real-time factor {stats.speed:.2f})")
                 self._stop.set()
         finally:
@@ -541,7 +272,7 @@ class Container:
             Path(self.sim_file).parent.mkdir(parents=True, exist_ok=True)
             Path(self.sim_file).write_text(json.dumps(data, indent=1))
         except OSError as exc:
-            self.print(f"container {self.name}: cannot write {self.sim_file}: {exc}")
+            self.log.info(f"container {self.name}: cannot write {self.sim_file}: {exc}")
 
     def _write_cpu(self, wall: float, cpu: float) -> None:
         if not self.cpu_file:
@@ -554,7 +285,7 @@ class Container:
             Path(self.cpu_file).parent.mkdir(parents=True, exist_ok=True)
             Path(self.cpu_file).write_text(json.dumps(data, indent=1))
         except OSError as exc:
-            self.print(f"container {self.name}: cannot write {self.cpu_file}: {exc}")
+            self.log.info(f"container {self.name}: cannot write {self.cpu_file}: {exc}")
 
 
 # ---------------------------------------------------------------------------------------------- from a launch file
@@ -565,16 +296,15 @@ def container_members(lf, name: str, host: str | None) -> list[str]:
 
 def container_from_launch(lf, name: str, host: str | None = None, out: str | None = None,
                           overrides: dict[str, dict[str, Any]] | None = None,
-                          print_fn: Callable[[str], None] | None = None,
                           sim_until: float | None = None) -> Container:
     """The :class:`Container` of nodes ``container: name`` on ``host`` of launch file ``lf``.
 
     ``overrides``: node → {param: value}. A container whose ``player`` node has ``mode: lockstep`` runs on a
-    :class:`~flexsheet.runtime.node.SimClock` (lockstep replay). Raises ``LaunchError`` when no node of the
+    :class:`~flexsheet.runtime.clock.SimClock` (lockstep replay). Raises ``LaunchError`` when no node of the
     file is in that container on that host, or when its nodes span hosts and ``host`` is None.
     """
-    from flexsheet import registry
-    from flexsheet.runtime.launch import LaunchError, curve_config, node_config
+    from flexsheet.runtime.launch import LaunchError
+    from flexsheet.runtime.launch_config import curve_config, node_config
 
     names = container_members(lf, name, host)
     if not names:
@@ -601,7 +331,7 @@ def container_from_launch(lf, name: str, host: str | None = None, out: str | Non
     members = []
     for n in names:
         spec = lf.nodes[n]
-        cls = registry.load(registry.NODES[spec.type])
+        cls = node_class(spec.type)
 
         def make(b: Bus, cls=cls, cfg=configs[n]) -> Node:
             return cls(cfg, transport=ContainerTransport(b, cfg.endpoint))
@@ -610,7 +340,7 @@ def container_from_launch(lf, name: str, host: str | None = None, out: str | Non
                               spec.required))
     cpu_file = os.path.join(out, f"cpu_{name}.json") if out else None
     sim_file = os.path.join(out, "sim_clock.json") if (out and live) else None
-    return Container(name, members, bus, shutdown_timeout=lf.shutdown_timeout, print_fn=print_fn, cpu_file=cpu_file,
+    return Container(name, members, bus, shutdown_timeout=lf.shutdown_timeout, cpu_file=cpu_file,
                      sim_until=sim_until if live else None, sim_file=sim_file, rtf=lf.rtf if live else None)
 
 

@@ -11,7 +11,8 @@ import time
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from flexsheet.runtime.node import Node, QoS
+from flexsheet.runtime.node import Node
+from flexsheet.runtime.qos import QoS
 from messages import Fingertip
 from messages import topics as T
 

@@ -107,7 +107,8 @@ def resolve_graph(launch: str | None, endpoints: list[str] | None = None) -> Gra
     """The :class:`Graph` for ``--launch`` / ``--endpoint`` (see the module docstring). Raises
     :class:`~flexsheet.runtime.launch.LaunchError` for an unusable launch file and :class:`LookupError` (one line
     naming what to give) when nothing is found."""
-    from flexsheet.runtime.launch import curve_config, load_launch
+    from flexsheet.runtime.launch import load_launch
+    from flexsheet.runtime.launch_config import curve_config
 
     launch = launch or (None if endpoints else os.environ.get("FLEXSHEET_LAUNCH"))
     if launch:

@@ -42,9 +42,9 @@ class LaunchSection:
 class LaunchExtension:
     """What one layer adds to launch files.
 
-    ``sections``: its top-level keys; ``before_launch(lf, set_values, print_fn, check_only)``: run by
+    ``sections``: its top-level keys; ``before_launch(lf, check_only)``: run by
     ``flexsheet launch`` after the file validates and before any node starts; returns top-level values to set
-    (e.g. a registration's output file) — raises ``flexsheet.runtime.launch.LaunchError``; ``check(checker)``:
+    (e.g. a registration's output file; what it says goes to the logging module) — raises ``flexsheet.runtime.launch.LaunchError``; ``check(checker)``:
     extra ``--check`` rules (``checker.err``/``warn``/``params``); ``file_readers``: param name → reader that
     raises ``ValueError``/``OSError`` for an input file it cannot use; ``output_params``: (node type, param) →
     ``"file"``/``"dir"`` written by the node; ``listen_params``: node type → (host param, port param)."""

@@ -53,7 +53,7 @@ def generate(hosts: list[str], folder: Path, force: bool = False) -> dict[str, s
     Returns name → ``"new"`` or ``"kept"``. Raises ``ValueError`` for a name that is not a plain name
     (letters, digits, ``_.-``) or an unreadable existing key file.
     """
-    from flexsheet.runtime.transport import create_curve_keypair, load_curve_keys
+    from flexsheet.runtime.zmq.curve import create_curve_keypair, load_curve_keys
 
     for host in hosts:
         if not _HOST.match(host):

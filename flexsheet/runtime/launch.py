@@ -10,7 +10,7 @@ A launch file (``launch/*.yaml``) is the single source of truth for hosts and po
     base_port: 7100                  # nodes without a port get base_port + their index
     nodes:
       talker:
-        type: talker                 # a key of flexsheet.registry.NODES
+        type: talker                 # a node type: an entry point of flexsheet.nodes (pyproject.toml)
         host: main
         params: {rate: 10.0}         # validated against the node's Params model
         remaps: {/chatter: /chatter2}
@@ -34,7 +34,7 @@ one ``container:`` on one host, one process for them all (``python -m flexsheet 
 :mod:`flexsheet.runtime.container`: messages between them are passed as objects; the container restarts a
 crashed node itself, the supervisor restarts the container process) — prefixes every
 output line with the node (or container) name as it arrives (line-buffered, never batched), respawns by policy
-(never a node that exits with :data:`~flexsheet.runtime.node.EXIT_CONFIG`, a configuration error), watches
+(never a node that exits with :data:`~flexsheet.runtime.config.EXIT_CONFIG`, a configuration error), watches
 the heartbeats of every node of the file (all hosts) and reports a node or host that goes silent, and on
 Ctrl-C/SIGTERM stops all children in reverse order with escalation SIGINT → SIGTERM → SIGKILL. Children
 get ``PR_SET_PDEATHSIG`` so that not even a ``kill -9`` of the launcher leaves orphans. With ``--out`` it samples
@@ -44,9 +44,11 @@ each child's CPU time (``/proc/<pid>/stat``) and writes ``$(out)/cpu.json`` when
 host; a node's own ``container:`` is then ignored); ``--duration`` counts simulated seconds. ``clock: {type: sim,
 rtf: X}`` (or ``flexsheet launch --rtf X``) caps simulated time at X times wall time (Gazebo's
 ``real_time_factor``); unset, it runs as fast as the host allows. Pacing changes no published byte.
-A ``--set hosts.NAME.address=ADDR`` override (:func:`parse_toplevel_set`) moves a host, e.g. the lab's three
-hosts onto loopback addresses of one machine.
-Errors: :class:`LaunchError` naming the file, the key and the wrong value.
+A ``--set hosts.NAME.address=ADDR`` override (:mod:`flexsheet.runtime.launch_sets`) moves a host, e.g. the lab's
+three hosts onto loopback addresses of one machine.
+What each node and tool takes from a file (its :class:`~flexsheet.runtime.config.NodeConfig`, its CURVE
+keys) is :mod:`flexsheet.runtime.launch_config`. Errors: :class:`LaunchError` naming the file, the key and the
+wrong value.
 Source: ros2/launch ``launch_service.py`` (minus its substitution layer), supervisord's policies.
 """
 
@@ -68,16 +70,13 @@ from pydantic import (
     model_validator,
 )
 
-from flexsheet import registry
 from flexsheet.runtime.extensions import sections as launch_sections
-from flexsheet.runtime.node import NodeConfig
-from flexsheet.runtime.transport import CurveConfig
+from flexsheet.runtime.plugins import node_types, unknown_node_type
 from flexsheet.yamlio import UniqueKeyLoader
 
-__all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "SecuritySpec", "load_launch", "node_config",
-           "curve_config", "identities", "keys_dir", "public_keys", "substitutions", "substitute", "keygen_command",
-           "TOPLEVEL_ENV", "CORE_SET", "parse_toplevel_set", "split_sets", "apply_toplevel_sets", "SIM_CONTAINER",
-           "DEFAULT_KEYS_DIR", "PUBLIC_KEYS_FILE"]
+__all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "SecuritySpec", "RespawnSpec", "load_launch",
+           "identities", "keys_dir", "substitutions", "substitute", "keygen_command", "short_repr", "TOPLEVEL_ENV",
+           "CORE_SET", "SIM_CONTAINER", "DEFAULT_KEYS_DIR", "PUBLIC_KEYS_FILE", "MAX_LAUNCH_BYTES"]
 
 #: where ``flexsheet keys generate`` writes and CURVE looks when neither ``$FLEXSHEET_KEYS`` nor
 #: ``security.keys_dir`` says otherwise
@@ -103,9 +102,9 @@ class LaunchError(ValueError):
 MAX_LAUNCH_BYTES = 1 << 20
 
 
-def _short(value: Any, limit: int = 120) -> str:
-    """Bounded one-line repr (``reprlib``): a YAML alias bomb or a deep structure must not make the error
-    message itself exponential in time and memory."""
+def short_repr(value: Any, limit: int = 120) -> str:
+    """Bounded one-line repr of ``value`` (``reprlib``), at most ``limit`` characters, for error messages: a
+    YAML alias bomb or a deep structure must not make the error message itself exponential in time and memory."""
     import reprlib
 
     r = reprlib.Repr()
@@ -138,7 +137,7 @@ class SecuritySpec(BaseModel):
     expand); both may be used if they agree. ``keys_dir``: where each host finds ``<name>.key_secret`` of itself
     and of its nodes (``$FLEXSHEET_KEYS`` overrides it; ``~`` and ``$(launch_dir)`` expand).
     ``publishers``: guarded topic → the nodes allowed to publish it (SROS2-style per-node policy): a subscriber
-    takes that topic only from those nodes' endpoints, proven by their keys (:class:`~flexsheet.runtime.transport.SubLinks`);
+    takes that topic only from those nodes' endpoints, proven by their keys (:class:`~flexsheet.runtime.zmq.subscriber.SubLinks`);
     any other topic comes from any node of the graph."""
 
     model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
@@ -182,8 +181,8 @@ class NodeSpec(BaseModel):
     @field_validator("type")
     @classmethod
     def _known_type(cls, v: str) -> str:
-        if v not in registry.NODES:
-            raise ValueError(f"unknown node type {v!r}; known: {', '.join(sorted(registry.NODES))}")
+        if v not in node_types():
+            raise ValueError(unknown_node_type(v))
         return v
 
 
@@ -254,13 +253,24 @@ def _error_lines(path: Path, exc: ValidationError, prefix: str = "") -> list[str
     for err in exc.errors():
         # a key with control characters (a YAML key "\n") is shown escaped
         key = ".".join([prefix] * bool(prefix) + [str(p) for p in err["loc"]]).encode("unicode_escape").decode("ascii")
-        lines.append(f"{path}: key '{key}': {err['msg']:.300} (value {_short(err.get('input'))})")
+        lines.append(f"{path}: key '{key}': {err['msg']:.300} (value {short_repr(err.get('input'))})")
     return lines
 
 
 def load_launch(path: str | Path) -> LaunchFile:
     """Read and validate a launch file. Raises :class:`LaunchError` naming file, key and value."""
     path = Path(path)
+    raw = _apply_toplevel_env(_read_mapping(path), path)
+    lf = _validate(raw, path)
+    lines = _graph_problems(lf, path)
+    if lines:
+        raise LaunchError(lines[0], lines)
+    lf.path = path
+    return lf
+
+
+def _read_mapping(path: Path) -> dict:
+    """The YAML mapping of launch file ``path`` (at most :data:`MAX_LAUNCH_BYTES`). Raises :class:`LaunchError`."""
     try:
         with open(path, "rb") as f:
             data = f.read(MAX_LAUNCH_BYTES + 1)
@@ -279,7 +289,12 @@ def load_launch(path: str | Path) -> LaunchFile:
         raise LaunchError(f"{path}: not valid YAML: nested too deeply") from None
     if not isinstance(raw, dict):
         raise LaunchError(f"{path}: top level must be a mapping with 'nodes', got {type(raw).__name__}")
-    raw = _apply_toplevel_env(raw, path)
+    return raw
+
+
+def _validate(raw: dict, path: Path) -> LaunchFile:
+    """``raw`` validated as a :class:`LaunchFile`, the launch extensions' sections by their types. Raises
+    :class:`LaunchError` with every error found."""
     known = launch_sections()
     found = {k: raw.pop(k) for k in list(raw) if k in known and k != "sections"}
     lines = []
@@ -296,6 +311,13 @@ def load_launch(path: str | Path) -> LaunchFile:
     if lines:
         raise LaunchError(lines[0], lines) from None
     lf.sections = checked
+    return lf
+
+
+def _graph_problems(lf: LaunchFile, path: Path) -> list[str]:
+    """The problems of the validated ``lf`` across its keys (hosts, endpoints, containers, clock, security), one
+    line each. A ``clock: sim`` file's nodes are put in :data:`SIM_CONTAINER` here."""
+    lines = []
     for name, spec in lf.nodes.items():
         if spec.host not in lf.hosts:
             lines.append(f"{path}: key 'nodes.{name}.host': unknown host {spec.host!r}; hosts: {', '.join(lf.hosts)}")
@@ -341,10 +363,7 @@ def load_launch(path: str | Path) -> LaunchFile:
             lines.append(f"{path}: key 'security.public_keys': curve is on but no public key for "
                          f"{', '.join(missing)} (run: flexsheet keys generate --launch {path}, or name "
                          f"the file it writes: security.public_keys_file: $(keys)/{PUBLIC_KEYS_FILE})")
-    if lines:
-        raise LaunchError(lines[0], lines)
-    lf.path = path
-    return lf
+    return lines
 
 
 def keygen_command(lf: LaunchFile) -> str:
@@ -391,82 +410,6 @@ def substitute(value: Any, subs: dict[str, str]) -> Any:
     return value
 
 
-def public_keys(lf: LaunchFile) -> dict[str, str]:
-    """Identity (host or node name) → Z85 public key allowed on ``lf``'s graph: ``security.public_keys`` merged
-    with the YAML mapping in ``security.public_keys_file``. Raises :class:`LaunchError` naming the file or the
-    identity (a missing file names
-    the ``flexsheet keys generate`` command that writes it)."""
-    sec = lf.security
-    keys = dict(sec.public_keys)
-    if sec.public_keys_file is None:
-        return keys
-    path = Path(os.path.expanduser(substitute(sec.public_keys_file, substitutions(lf))))
-    where = f"{lf.path}: key 'security.public_keys_file' = {str(path)!r}"
-    try:
-        with open(path, "rb") as f:
-            data = f.read(1 << 16)
-        raw = yaml.safe_load(data.decode("utf-8"))
-    except FileNotFoundError:
-        raise LaunchError(f"{where}: no such file (run: {keygen_command(lf)})") from None
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise LaunchError(f"{where}: unreadable ({' '.join(str(exc).split())[:200]})") from None
-    if not isinstance(raw, dict):
-        raise LaunchError(f"{where}: expected a mapping host: public key, got {type(raw).__name__} "
-                          f"(run: {keygen_command(lf)})")
-    for host, key in raw.items():
-        if not isinstance(host, str) or not isinstance(key, str) or len(key) != 40:
-            raise LaunchError(f"{where}: entry {_short(host)}: {_short(key)} is not name: <40 Z85 characters>")
-        if host in keys and keys[host] != key:
-            raise LaunchError(f"{where}: host {host!r} differs from security.public_keys.{host}")
-        keys[host] = key
-    return keys
-
-
-def curve_config(lf: LaunchFile, host: str | None, node: str | None = None) -> CurveConfig | None:
-    """The :class:`CurveConfig` of ``node`` (its own keypair), else of ``host``'s tools, under ``lf``'s security
-    settings (None when CURVE is off).
-
-    ``host`` None picks the first host whose secret key is present in the keys folder (tools). Publishers are
-    pinned to their nodes' keys; subscribers admitted are every identity of the file; guarded topics come from
-    ``security.publishers``. Raises :class:`LaunchError` naming the missing key file or identity and the
-    command that writes it.
-    """
-    sec = lf.security
-    if not sec.curve:
-        return None
-    from flexsheet.runtime.transport import load_curve_keys
-
-    kdir = keys_dir(lf)
-    keys = public_keys(lf)
-    missing = [h for h in identities(lf) if h not in keys]
-    if missing:
-        raise LaunchError(f"{lf.path}: key 'security.public_keys': curve is on but no public key for "
-                          f"{', '.join(missing)} (run: {keygen_command(lf)})")
-    if node is not None:
-        names = [node]
-    else:
-        names = [host] if host else [h for h in lf.hosts if (kdir / f"{h}.key_secret").exists()]
-    if not names:
-        raise LaunchError(f"{lf.path}: key 'security.keys_dir': no <host>.key_secret in {kdir} "
-                          f"(run: {keygen_command(lf)})")
-    who = names[0]
-    secret_file = kdir / f"{who}.key_secret"
-    if not secret_file.exists():
-        raise LaunchError(f"{lf.path}: key 'security.keys_dir': no secret key for {who!r} at "
-                          f"{secret_file} (run: {keygen_command(lf)}, and copy {who}.key_secret there)")
-    try:
-        public, secret = load_curve_keys(secret_file)
-    except (OSError, ValueError) as exc:
-        raise LaunchError(f"{lf.path}: key 'security.keys_dir': unreadable key file {secret_file}: {exc}") from None
-    if secret is None or public.decode() != keys.get(who):
-        raise LaunchError(f"{lf.path}: key 'security.public_keys.{who}': does not match {secret_file}")
-    server_keys = {lf.endpoint_of(n): keys[n].encode() for n in lf.nodes}
-    guards = {t: [lf.endpoint_of(n) for n in names] for t, names in sec.publishers.items()}
-    return CurveConfig(public_key=public, secret_key=secret, server_keys=server_keys,
-                       allowed_clients=[keys[k].encode() for k in identities(lf)], topic_publishers=guards,
-                       tool_keys=[keys[h].encode() for h in lf.hosts if h in keys])
-
-
 #: launch-file keys of the core (not of an extension) that a top-level override may set: ``hosts`` (merged host
 #: by host: ``--set hosts.main.address=127.0.0.1``) and ``rtf`` (``flexsheet launch --rtf X``)
 CORE_SET = ("hosts", "rtf")
@@ -511,99 +454,3 @@ def _merge_hosts(hosts: Any, over: dict, path: Path) -> dict:
         base = hosts[name] if isinstance(hosts[name], dict) else {}
         hosts[name] = {**base, **spec}
     return hosts
-
-
-def parse_toplevel_set(item: str, node_names) -> tuple[str, Any] | None:
-    """A ``--set`` item that overrides a top-level section of a launch extension: ``KEY=VALUE`` or, for a
-    mapping section, ``KEY.SUB=VALUE`` (when no node is named KEY). Returns ``(key, value)`` (a mapping
-    section's value as ``{SUB: VALUE}``, YAML-parsed), or ``None`` for a node override. Raises
-    :class:`LaunchError` on a bad item."""
-    known = launch_sections()
-    head, dot, rest = item.partition(".")
-    if head == "hosts" and "hosts" not in node_names:
-        host, dot2, kv = rest.partition(".")
-        key, eq, value = kv.partition("=")
-        if not dot or not dot2 or not host or not key or not eq:
-            raise LaunchError(f"--set {item!r}: expected hosts.NAME.address=ADDRESS")
-        return "hosts", {host: {key: yaml.safe_load(value)}}
-    if dot and head in known and known[head].parse_set is None and head not in node_names:
-        key, eq, value = rest.partition("=")
-        if not eq or not key:
-            raise LaunchError(f"--set {item!r}: expected {head}.KEY=VALUE")
-        return head, {key: yaml.safe_load(value)}
-    key, eq, value = item.partition("=")
-    if eq and "." not in key:
-        if key not in known or known[key].parse_set is None:
-            forms = [f"{k}=VALUE" if s.parse_set else f"{k}.KEY=VALUE" for k, s in known.items()]
-            forms.append("hosts.NAME.address=ADDRESS")
-            raise LaunchError(f"--set {item!r}: a top-level override is one of {', '.join(forms)}; a node param "
-                              "is NODE.KEY=VALUE")
-        return key, known[key].parse_set(value)
-    return None
-
-
-def split_sets(items: list[str], node_names, toplevel: dict | None = None) -> tuple[dict, dict[str, dict]]:
-    """``--set`` items split into the top-level overrides (merged into ``toplevel``: ``hosts`` host by host, a
-    mapping section key by key) and the node params (node → {param: YAML value}). Raises :class:`LaunchError`
-    for an item that is neither."""
-    toplevel = dict(toplevel or {})
-    nodes: dict[str, dict] = {}
-    for item in items:
-        top = parse_toplevel_set(item, node_names)
-        if top is None:
-            node, dot, kv = item.partition(".")
-            key, eq, value = kv.partition("=")
-            if not dot or not eq or not key:
-                raise LaunchError(f"--set {item!r}: expected NODE.KEY=VALUE, or a top-level section's "
-                                  "KEY=VALUE or KEY.SUB=VALUE (e.g. scene=FILE, twin.truth_seed=3, "
-                                  "hosts.main.address=127.0.0.1)")
-            nodes.setdefault(node, {})[key] = yaml.safe_load(value) if value else ""
-            continue
-        key, value = top
-        if key == "hosts":
-            merged = dict(toplevel.get("hosts", {}))
-            for host, spec in value.items():
-                merged[host] = {**merged.get(host, {}), **spec}
-            toplevel["hosts"] = merged
-        else:
-            toplevel[key] = {**toplevel.get(key, {}), **value} if isinstance(value, dict) else value
-    return toplevel, nodes
-
-
-def apply_toplevel_sets(items: list[str], path: str | Path) -> dict:
-    """Apply the top-level ``--set`` items of a tool that reads launch file ``path`` (``hosts.NAME.address=…``,
-    ``twin.truth_seed=…``, ``scene=…``) for this process (:data:`TOPLEVEL_ENV`), so that every later
-    :func:`load_launch` sees them as the launcher's processes do; returns them. Raises :class:`LaunchError` for a
-    node override (``NODE.KEY=VALUE``: only ``flexsheet launch`` takes those) or a bad item."""
-    toplevel, nodes = split_sets(items, set(load_launch(path).nodes), json.loads(os.environ.get(TOPLEVEL_ENV) or "{}"))
-    if nodes:
-        raise LaunchError(f"--set {next(iter(nodes))}.…: a node param; here only a graph-wide setting "
-                          "(hosts.NAME.address=ADDRESS, twin.truth_seed=N, scene=FILE)")
-    if toplevel:
-        os.environ[TOPLEVEL_ENV] = json.dumps(toplevel)
-    return toplevel
-
-
-def node_config(lf: LaunchFile, name: str, out: str | None = None, overrides: dict | None = None) -> NodeConfig:
-    """The :class:`NodeConfig` of node ``name`` in ``lf`` (params merged with ``overrides``, substituted).
-
-    Graph-wide settings reach the nodes that take them: for each top-level section of a launch extension
-    (:mod:`flexsheet.runtime.extensions`) whose node value is not None, a node whose ``Params`` has a field of
-    that name that its params leave unset gets the value there. Raises :class:`LaunchError` (unknown node, CURVE keys).
-    """
-    if name not in lf.nodes:
-        raise LaunchError(f"{lf.path}: no node named {name!r}; nodes: {', '.join(lf.nodes)}")
-    spec = lf.nodes[name]
-    params = substitute({**spec.params, **(overrides or {})}, substitutions(lf, out))
-    graph_wide = {key: sec.node_value(lf.section(key), lf, out) for key, sec in launch_sections().items()}
-    if any(v is not None and k not in params for k, v in graph_wide.items()):
-        try:
-            fields = registry.load(registry.NODES[spec.type]).Params.model_fields
-        except (ImportError, AttributeError, KeyError):
-            fields = {}
-        for key, value in graph_wide.items():
-            if value is not None and key not in params and key in fields:
-                params[key] = value
-    return NodeConfig(name=name, node_type=spec.type, host=spec.host, endpoint=lf.endpoint_of(name),
-                      peers=list(lf.endpoints().values()), params=params, remaps=spec.remaps,
-                      heartbeat_period=lf.heartbeat_period, curve=curve_config(lf, spec.host, name))

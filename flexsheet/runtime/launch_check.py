@@ -12,10 +12,10 @@ same check first and starts nothing when it finds an error. What is checked:
   device's address) is an IP address or a valid host name. Nothing is pinged;
 - **ports**: no two listening sockets on one machine (node endpoints, and the ports the launch extensions'
   device twins listen on) share a port;
-- **files** named by the nodes of the checked host(s): inputs (:func:`is_input_file_key`) exist and, where a
+- **files** named by the nodes of the checked host(s): inputs (:func:`~flexsheet.runtime.machine_checks.is_input_file_key`) exist and, where a
   launch extension knows a reader, parse; glob patterns match a file; output folders (:data:`OUTPUT_PARAMS`
   and the extensions') can be created and lie in a data folder: not under ``/proc``, ``/sys`` or ``/dev``, not
-  on a kernel pseudo filesystem (:data:`PSEUDO_FS`), and an output file that exists is a regular file;
+  on a kernel pseudo filesystem (:data:`~flexsheet.runtime.machine_checks.PSEUDO_FS`), and an output file that exists is a regular file;
 - **extensions**: each launch extension's own rules (:mod:`flexsheet.runtime.extensions`; the display's:
   :mod:`flexsheet.display.launch`);
 - **CURVE keys** (``security.curve: true``): the keys folder exists, the public keys cover every host and
@@ -36,68 +36,47 @@ self-connect), and the respawned node then cannot bind (seen in CI: a renderer u
 
 from __future__ import annotations
 
-import concurrent.futures
 import functools
-import glob
 import importlib.util
-import ipaddress
 import os
-import re
 import stat
-import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
-from flexsheet import registry
 from flexsheet.runtime.extensions import extensions
 from flexsheet.runtime.extensions import sections as launch_sections
 from flexsheet.runtime.launch import (
     LaunchError,
     LaunchFile,
-    _short,
     identities,
     keygen_command,
     keys_dir,
     load_launch,
-    public_keys,
+    short_repr,
     substitute,
     substitutions,
 )
+from flexsheet.runtime.launch_config import public_keys
+from flexsheet.runtime.machine_checks import (
+    GLOB_PARAMS,
+    address_problem,
+    check_file_param,
+    is_input_file_key,
+    loopback,
+    not_local,
+    output_problem,
+)
+from flexsheet.runtime.plugins import node_class
 from flexsheet.runtime.ports import ephemeral_port_range
 
-__all__ = ["CheckResult", "check_launch", "check_file_param", "is_input_file_key", "output_problem", "OUTPUT_PARAMS"]
+__all__ = ["CheckResult", "check_launch", "OUTPUT_PARAMS"]
 
 #: node type → (address param, port param) of a socket the node *listens* on besides its publisher
 #: (node type, param) → "file" (a file the node writes: its folder must be creatable) or "dir"
 OUTPUT_PARAMS: dict[tuple[str, str], str] = {("recorder", "output"): "file"}
-#: params whose value is a glob pattern of input files (at least one must match)
-GLOB_PARAMS = frozenset({"files_left", "files_right"})
-_INPUT_NAMES = frozenset({"calib_file", "display_calib", "scene", "file", "files_csv"})
-_HOSTNAME = re.compile(r"^(?=.{1,253}$)([A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}"
-                       r"[A-Za-z0-9])?)*\.?$")
-_RESOLVE_TIMEOUT_S = 2.0
-#: folders whose files are the kernel's or devices, never data: an output there is refused
-SYSTEM_DIRS = ("/proc", "/sys", "/dev")
-#: kernel pseudo filesystems (``/proc/self/mounts`` types): an output there is refused wherever it is mounted
-PSEUDO_FS = frozenset({"proc", "sysfs", "devtmpfs", "devpts", "cgroup", "cgroup2", "debugfs", "tracefs", "securityfs",
-                       "configfs", "fusectl", "bpf", "pstore", "mqueue", "hugetlbfs", "efivarfs", "binfmt_misc",
-                       "autofs", "selinuxfs", "rpc_pipefs", "nsfs"})
-
-
-def is_input_file_key(key: str) -> bool:
-    """True for a param that names an existing input file: ``calib_file``, ``display_calib``, ``scene``,
-    ``file``, ``files_csv`` or any ``*_file``."""
-    return key in _INPUT_NAMES or key.endswith("_file")
-
-
-@functools.cache
-def _file_readers() -> dict[str, Callable[[str], None]]:
-    """Param name → reader that raises ``ValueError``/``OSError`` for a file it cannot use (launch extensions)."""
-    return {k: r for ext in extensions() for k, r in ext.file_readers.items()}
 
 
 @functools.cache
@@ -108,129 +87,6 @@ def _output_params() -> dict[tuple[str, str], str]:
 @functools.cache
 def _listen_params() -> dict[str, tuple[str, str]]:
     return {k: v for ext in extensions() for k, v in ext.listen_params.items()}
-
-
-def check_file_param(key: str, value: str) -> str | None:
-    """The problem with input-file param ``key`` = ``value`` (a path, substitutions done), or None."""
-    if key in GLOB_PARAMS:
-        return None if glob.glob(os.path.expanduser(value)) else "no file matches this pattern"
-    path = os.path.expanduser(value)
-    if not os.path.exists(path):
-        return "no such file"
-    if not os.path.isfile(path):
-        return "not a file"
-    if not os.access(path, os.R_OK):
-        return "not readable"
-    reader = _file_readers().get(key)
-    if reader is not None:
-        try:
-            reader(path)
-        except (ValueError, OSError) as exc:
-            return "unusable: " + " ".join(str(exc).split())[:300]
-    return None
-
-
-def _mount_type(path: Path) -> str:
-    """The filesystem type of the mount that holds ``path`` (an existing path), from ``/proc/self/mounts``
-    ("" when unknown)."""
-    best, kind = "", ""
-    try:
-        lines = Path("/proc/self/mounts").read_text().splitlines()
-    except OSError:
-        return ""
-    target = str(path)
-    for line in lines:
-        f = line.split()
-        if len(f) < 3:
-            continue
-        mnt = f[1].replace("\\040", " ")
-        if (target == mnt or target.startswith(mnt.rstrip("/") + "/")) and len(mnt) > len(best):
-            best, kind = mnt, f[2]
-    return kind
-
-
-def output_problem(value: str, kind: str) -> str | None:
-    """The problem with output param value ``value`` (``kind``: "file", whose folder must be creatable, or
-    "dir"), or None: it must lie in a writable data folder (not under :data:`SYSTEM_DIRS`, not on a
-    :data:`PSEUDO_FS` filesystem), and an existing output file must be a regular file."""
-    target = Path(os.path.realpath(os.path.expanduser(value)))
-    for d in SYSTEM_DIRS:
-        if target == Path(d) or str(target).startswith(d + "/"):
-            return f"{target} is under {d}, not a data folder (the kernel's or devices' files); write to a folder " \
-                   f"on a disk, e.g. $(out)"
-    if kind == "file" and target.exists() and not target.is_file():
-        return f"{target} exists and is not a regular file"
-    folder = target if kind == "dir" else target.parent
-    problem = _creatable(folder)
-    if problem:
-        return problem
-    p = folder
-    while not p.exists():
-        p = p.parent
-    fs = _mount_type(p)
-    if fs in PSEUDO_FS:
-        return f"{p} is on a {fs} filesystem, not a data folder; write to a folder on a disk, e.g. $(out)"
-    return None
-
-
-def _creatable(path: Path) -> str | None:
-    p = path
-    while not p.exists():
-        if p.parent == p:
-            return "no existing parent folder"
-        p = p.parent
-    if not p.is_dir():
-        return f"{p} is not a folder"
-    if not os.access(p, os.W_OK | os.X_OK):
-        return f"folder {p} is not writable"
-    return None
-
-
-def _resolves(name: str) -> bool:
-    import socket
-
-    pool = concurrent.futures.ThreadPoolExecutor(1)
-    try:
-        return bool(pool.submit(socket.getaddrinfo, name, None).result(timeout=_RESOLVE_TIMEOUT_S))
-    except (OSError, concurrent.futures.TimeoutError):
-        return False
-    finally:
-        pool.shutdown(wait=False)
-
-
-def _address_problem(addr: str, resolve: bool) -> str | None:
-    try:
-        ip = ipaddress.ip_address(addr)
-    except ValueError:
-        if not _HOSTNAME.match(addr):
-            return "not an IP address or a host name"
-        if resolve and not _resolves(addr):
-            return "is not an IP address and does not resolve on this machine"
-        return None
-    if ip.is_unspecified:
-        return "the unspecified address: other hosts cannot connect to it; give the host's own address"
-    if ip.is_multicast:
-        return "a multicast address"
-    return None
-
-
-def _not_local(addr: str) -> str | None:
-    """Why no socket binds to ``addr`` on this machine (port 0), or None when one does."""
-    import socket
-
-    try:
-        infos = socket.getaddrinfo(addr, 0, type=socket.SOCK_STREAM)
-    except OSError as exc:
-        return str(exc)
-    reason = "no address"
-    for family, kind, proto, _, sockaddr in infos:
-        with socket.socket(family, kind, proto) as s:
-            try:
-                s.bind(sockaddr)
-                return None
-            except OSError as exc:
-                reason = exc.strerror or str(exc)
-    return reason
 
 
 @dataclass
@@ -261,7 +117,7 @@ class _Checker:
                            if (v := sec.node_value(lf.section(k), lf, out)) is not None}
 
     def err(self, where: str, value: Any, msg: str) -> None:
-        self.res.errors.append(f"{self.lf.path}: {where} = {_short(value)}: {msg}")
+        self.res.errors.append(f"{self.lf.path}: {where} = {short_repr(value)}: {msg}")
 
     def warn(self, msg: str) -> None:
         self.res.warnings.append(f"{self.lf.path}: warning: {msg}")
@@ -283,11 +139,11 @@ class _Checker:
     # ---------------------------------------------------------------------------------------------- hosts
     def check_hosts(self) -> None:
         for name, spec in self.lf.hosts.items():
-            problem = _address_problem(spec.address, resolve=True)
+            problem = address_problem(spec.address, resolve=True)
             if problem:
                 self.err(f"hosts.{name}.address", spec.address, problem)
             elif name in self.hosts and any(s.host == name for s in self.lf.nodes.values()):
-                reason = _not_local(spec.address)
+                reason = not_local(spec.address)
                 if reason:
                     self.err(f"hosts.{name}.address", spec.address,
                              f"not an address of this machine ({reason}): host {name}'s nodes cannot bind their "
@@ -340,7 +196,7 @@ class _Checker:
     def check_security(self) -> None:
         lf, sec = self.lf, self.lf.security
         if not sec.curve:
-            remote = [h for h, s in lf.hosts.items() if not _loopback(s.address)]
+            remote = [h for h, s in lf.hosts.items() if not loopback(s.address)]
             if remote:
                 self.warn(f"security.curve is off: anyone who reaches {', '.join(lf.hosts[h].address for h in remote)} "
                           f"can publish on the graph (arm targets included); see docs/deploy.md")
@@ -360,7 +216,7 @@ class _Checker:
         if missing:
             self.err("security.public_keys", sorted(keys), f"no public key for {', '.join(missing)} "
                                                           f"(run: {cmd})")
-        from flexsheet.runtime.transport import load_curve_keys
+        from flexsheet.runtime.zmq.curve import load_curve_keys
 
         for h in self.hosts:
             for who in identities(lf, h):
@@ -416,7 +272,7 @@ class _Checker:
             params = self.params(name)
             where = f"node {name}"
             try:
-                cls = registry.load(registry.NODES[spec.type])
+                cls = node_class(spec.type)
                 model: type[BaseModel] = cls.Params
             except (ImportError, AttributeError) as exc:
                 msg = f"node type {spec.type} cannot be imported here: {' '.join(str(exc).split())[:200]}"
@@ -453,7 +309,7 @@ class _Checker:
                         self.err(f"{where}: params.{key}", e.get("input"), e["msg"][:300])
             for key, value in params.items():
                 if key == "host" and isinstance(value, str):
-                    problem = _address_problem(value, resolve=False)
+                    problem = address_problem(value, resolve=False)
                     if problem:
                         self.err(f"{where}: params.host", value, problem)
                 if not here or not isinstance(value, str) or not value or key in injected:
@@ -493,17 +349,6 @@ class _Checker:
                     self.warn(f"container {cname} on host {host}: its nodes ask for different {key} "
                               f"({', '.join(f'{n}={v}' for n, v in values.items())}); one process runs at "
                               f"{key} {pick(values.values())}")
-
-
-def _iso(t: float) -> str:
-    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(t))
-
-
-def _loopback(address: str) -> bool:
-    try:
-        return ipaddress.ip_address(address).is_loopback
-    except ValueError:
-        return address == "localhost"
 
 
 def _one_line(text: str) -> str:

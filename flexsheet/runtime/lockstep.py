@@ -1,7 +1,7 @@
 """Simulated time for a container: a bag replayed in lockstep, or a live simulated graph (``clock: sim``).
 
 Live simulated graph. A launch file with ``clock: sim`` runs every node in one container on a
-:class:`~flexsheet.runtime.node.SimClock` driven by :func:`run_live` (Gazebo's lockstep, ROS 2's
+:class:`~flexsheet.runtime.clock.SimClock` driven by :func:`run_live` (Gazebo's lockstep, ROS 2's
 ``use_sim_time``, a discrete-event simulation): time starts once every node is set up and then jumps from
 event to event — a timer, a delivery — only when everything due has been handled. Each subscription and timer
 declares the simulated time one call takes (``sim_cost``: the lab PC's compute, a device's latency); the node
@@ -15,7 +15,7 @@ it reaches, and the messages those handlers publish are delivered and handled in
 fixed order: subscription order in the container) before the next bag message goes out. QoS ``latest``
 therefore never drops, and no two handlers ever run at once: the result does not depend on thread timing.
 
-The container's nodes run on the bag's clock (:class:`flexsheet.runtime.node.SimClock`, like ROS's
+The container's nodes run on the bag's clock (:class:`flexsheet.runtime.clock.SimClock`, like ROS's
 ``use_sim_time``): before a bag message is delivered the clock is set to its log time (when the recorder got
 it in the live run, i.e. about when the live nodes got it), so :meth:`Node.now`, the header stamps of every
 published message and :meth:`Node.timer` read replayed time. A timer fires, in due order, when the replayed
@@ -43,11 +43,12 @@ import threading
 import time
 from typing import TYPE_CHECKING, Any
 
-from flexsheet.runtime.node import ConfigError, QoS
+from flexsheet.runtime.config import ConfigError
+from flexsheet.runtime.qos import QoS
 
 if TYPE_CHECKING:
-    from flexsheet.runtime.container import Bus
-    from flexsheet.runtime.node import Node, Subscription
+    from flexsheet.runtime.node import Node
+    from flexsheet.runtime.subscription import Subscription
 
 __all__ = ["Lockstep", "check", "play", "run_live", "LockstepStats", "SIM_EPOCH", "WALL_TOPICS"]
 
@@ -74,8 +75,8 @@ class LockstepStats:
 
 
 class Lockstep:
-    """The discrete-event scheduler of a container's :class:`~flexsheet.runtime.container.Bus` on a
-    :class:`~flexsheet.runtime.node.SimClock`: subscriptions queue their input here (:meth:`enqueue`) instead
+    """The discrete-event scheduler of a container's :class:`~flexsheet.runtime.bus.Bus` (``bus``) on a
+    :class:`~flexsheet.runtime.clock.SimClock`: subscriptions queue their input here (:meth:`enqueue`) instead
     of on their consumers; :meth:`drain` handles what is due, one item at a time on the loop, and
     :meth:`advance` moves the clock to a later instant, firing timers and deliveries in due order.
 
@@ -87,7 +88,7 @@ class Lockstep:
     charge or wait (their content is wall time: they tell liveness, not simulated state).
     """
 
-    def __init__(self, bus: Bus) -> None:
+    def __init__(self, bus: Any) -> None:
         self.bus = bus
         self.clock = bus.clock
         self.live = bool(getattr(bus.clock, "live", False))
@@ -211,10 +212,11 @@ class Lockstep:
 WALL_TOPICS = frozenset({"/diagnostics"})
 
 
-async def run_live(bus: Bus, until: float | None, stopped, rtf: float | None = None) -> LockstepStats:
-    """Drive a live simulated graph (launch files' ``clock: sim``) for ``until`` s of simulated time from where
-    its clock stands (:data:`SIM_EPOCH` if unset; None: until ``stopped()`` is true, e.g. a required node
-    ended). The caller starts it once every node of the container is active (as ROS 2 lifecycle nodes);
+async def run_live(bus: Any, until: float | None, stopped, rtf: float | None = None) -> LockstepStats:
+    """Drive the live simulated graph of ``bus`` (a container's :class:`~flexsheet.runtime.bus.Bus` on a live
+    :class:`~flexsheet.runtime.clock.SimClock`; launch files' ``clock: sim``) for ``until`` s of simulated time
+    from where its clock stands (:data:`SIM_EPOCH` if unset; None: until ``stopped()`` is true, e.g. a required
+    node ended). The caller starts it once every node of the container is active (as ROS 2 lifecycle nodes);
     time then advances only when everything due has been handled: from one event (a timer, a delivery) to the
     next. The loop yields to asyncio between events, so signals, heartbeats and subscribers outside the process
     are served. ``rtf``: pace simulated time at most ``rtf`` x wall time (Gazebo's ``real_time_factor``; None: as
@@ -269,7 +271,7 @@ def check(player: Node) -> Lockstep:
 async def play(player: Node, messages=None) -> LockstepStats:
     """Play the bag of ``player`` (its params ``file``, ``topics``, ``start_delay``, ``exit_when_done``) into its
     container in lockstep (see the module docstring). ``messages``: an iterable of
-    :class:`flexsheet.runtime.bag.BagMessage` to play instead of reading ``file`` (tests). Sets
+    :class:`flexsheet.runtime.bag_read.BagMessage` to play instead of reading ``file`` (tests). Sets
     ``player.sent`` and ``player.done`` (if it has them); logs the replay speed; returns the statistics.
     """
     ls = check(player)
@@ -278,7 +280,7 @@ async def play(player: Node, messages=None) -> LockstepStats:
     while not player._bus.ready():  # every node of the container finished its setup (FEM precompute)
         await asyncio.sleep(0.01)
     if messages is None:
-        from flexsheet.runtime.bag import read_bag
+        from flexsheet.runtime.bag_read import read_bag
 
         messages = read_bag(p.file, list(p.topics) or None)
     from messages import topics as T

@@ -14,21 +14,22 @@ Threading model: the asyncio loop owns the sockets' reads. Each subscription has
 an ``async def`` handler runs on the loop (a consumer task), a plain ``def`` handler runs in the
 subscription's own worker thread (one thread per subscription, so messages of one topic stay in order and a
 slow handler never stalls the loop or other topics; the thread waits on its queue, so a message costs one
-thread wake-up and no loop iteration). :meth:`Publisher.publish` is thread-safe: from a worker thread it
-sends directly (the publisher socket has a lock), without waking the loop.
+thread wake-up and no loop iteration). :meth:`~flexsheet.runtime.publisher.Publisher.publish` is thread-safe:
+from a worker thread it sends directly (the publisher socket has a lock), without waking the loop.
 
 Publishing: a message is encoded once, and only when a subscriber outside this process may want it (the
-publisher socket tracks its subscriptions, :class:`flexsheet.runtime.transport.XPub`) or the topic is latched.
+publisher socket tracks its subscriptions, :class:`flexsheet.runtime.zmq.xpub.XPub`) or the topic is latched.
 In a composable container (:mod:`flexsheet.runtime.container`) the nodes of the container get the frozen
 message object itself (its arrays as read-only views), never a copy.
 
-Time: :meth:`Node.now`, the header stamps of :meth:`Publisher.header` and :meth:`Node.timer` read the node's
-:class:`Clock` — the wall clock, or in a lockstep replay the bag's clock (:class:`SimClock`, like ROS's
-``use_sim_time``). A node that wants replayable time reads ``self.now()``, never ``time.time()``.
+Time: :meth:`Node.now`, the header stamps of :meth:`~flexsheet.runtime.publisher.Publisher.header` and
+:meth:`Node.timer` read the node's :class:`~flexsheet.runtime.clock.Clock` — the wall clock, or in a lockstep
+replay the bag's clock (:class:`~flexsheet.runtime.clock.SimClock`, like ROS's ``use_sim_time``). A node that wants replayable time reads ``self.now()``, never ``time.time()``.
 
-QoS (per subscription): ``LATEST`` keeps only the newest message (depth 1: stale ones are dropped and
-counted), ``KEEP_ALL`` queues everything (bounded by ``depth``, default :data:`KEEP_ALL_DEPTH`, drops counted),
-``LATCHED`` is ``LATEST`` plus the publisher's last value delivered on joining.
+QoS (per subscription, :mod:`flexsheet.runtime.qos`): ``LATEST`` keeps only the newest message (depth 1: stale
+ones are dropped and counted), ``KEEP_ALL`` queues everything (bounded by ``depth``, default
+:data:`~flexsheet.runtime.qos.KEEP_ALL_DEPTH`, drops counted), ``LATCHED`` is ``LATEST`` plus the publisher's
+last value delivered on joining.
 
 Bad input never crashes a node: an undecodable or wrong-type message, or a handler raising
 :class:`InputRejected`/``ValueError``, is logged in one line, counted in diagnostics and skipped.
@@ -38,417 +39,43 @@ Source: rclpy ``create_publisher``/``create_subscription`` (API shape), DDS QoS 
 from __future__ import annotations
 
 import asyncio
-import collections
-import enum
 import inspect
-import itertools
 import logging
 import os
-import queue
 import signal
-import socket
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from pydantic import BaseModel, ConfigDict
 
-from flexsheet.runtime.codec import DecodeError, decode, encode
-from flexsheet.runtime.transport import CurveConfig, InProcTransport, Transport, ZmqTransport
-from messages import Header, Heartbeat, Message, Topic, TopicStats
+from flexsheet.runtime.clock import WALL_CLOCK, Clock, ticks
+from flexsheet.runtime.config import ConfigError, NodeConfig
+from flexsheet.runtime.publisher import Publisher
+from flexsheet.runtime.qos import QoS
+from flexsheet.runtime.subscription import Subscription, SubscriptionWorker
+from flexsheet.runtime.transport import Transport
+from flexsheet.runtime.zmq.transport import ZmqTransport
+from messages import Heartbeat, Message, Topic, TopicStats
 from messages import topics as T
 
-__all__ = ["Node", "NodeConfig", "QoS", "InputRejected", "ConfigError", "EXIT_CONFIG", "Publisher", "Subscription",
-           "EmptyParams", "ticks", "Clock", "SimClock", "SimTimer", "WALL_CLOCK"]
+__all__ = ["Node", "InputRejected", "EmptyParams", "WORKER_JOIN_S"]
 
-#: default queue bound of a ``KEEP_ALL`` subscription, messages: more than twice the deepest backlog measured (433
-#: messages: the 2x load bench's every-topic subscriber on 2 cores, docs/reliability.md), 3.5 s of the fastest
-#: topic at twice its rate (joint states, 280 Hz), ~70 s of a 14-node graph's /diagnostics. It was 1 000 000 (no bound in
-#: practice: the world's /diagnostics queue could grow without end). A KEEP_ALL subscriber of images passes a
-#: smaller ``depth`` (1000 stereo frames are 655 MB)
-KEEP_ALL_DEPTH = 1000
+_thread_time = time.thread_time
 
-#: exit status of a node whose configuration is unusable (BSD ``sysexits.h`` EX_CONFIG): a bad param, a missing
-#: or unreadable file a param names, a ``ValueError`` from :meth:`Node.setup`. The supervisor never respawns it.
-EXIT_CONFIG = 78
+#: how long a stopping node waits for its sync handlers to return, s (see :meth:`Node._join_workers`)
+WORKER_JOIN_S = 2.0   # within the launcher's 3 s before it escalates a SIGINT (launch.py shutdown_timeout)
 
 
 class InputRejected(ValueError):
     """Raised by a handler for input it refuses (message names the field and value). Counted, not fatal."""
 
 
-class ConfigError(ValueError):
-    """The node's configuration cannot work (message names the param and value). Raised from :meth:`Node.setup`
-    (a ``ValueError`` or ``FileNotFoundError`` there is turned into one); ``flexsheet run`` exits with
-    :data:`EXIT_CONFIG` and the launcher does not respawn the node."""
-
-
-class QoS(enum.Enum):
-    """Per-subscription quality of service (see module docstring)."""
-
-    LATEST = "latest"
-    KEEP_ALL = "keep_all"
-    LATCHED = "latched"
-
-
 class EmptyParams(BaseModel):
     """Parameters of a node that takes none."""
 
     model_config = ConfigDict(extra="forbid")
-
-
-@dataclass
-class NodeConfig:
-    """How a node is wired: its name, type, host, bound endpoint, peer endpoints and raw params.
-
-    Filled by the launcher (:mod:`flexsheet.runtime.launch`) or ``flexsheet run``. ``params`` are validated against
-    the node's ``Params`` model in :meth:`Node.__init__`, before any socket opens. ``remaps`` rename topics
-    (``{"/fingertip": "/fingertip_raw"}``).
-    """
-
-    name: str
-    node_type: str = ""
-    host: str = "localhost"
-    endpoint: str = "tcp://127.0.0.1:0"
-    peers: list[str] = field(default_factory=list)
-    params: dict[str, Any] = field(default_factory=dict)
-    remaps: dict[str, str] = field(default_factory=dict)
-    heartbeat_period: float = 1.0
-    curve: CurveConfig | None = None
-
-
-class Clock:
-    """The time a node reads (:meth:`Node.now`, header stamps, timers): here the wall clock, ``time.time()`` s."""
-
-    simulated = False
-
-    def now(self) -> float:
-        return time.time()
-
-    def stamp(self) -> float:
-        """The default ``Header.stamp`` of what is published now: :meth:`now` here; on a live simulated clock the
-        time the running handler's output leaves (its start plus its charged compute)."""
-        return time.time()
-
-
-#: the wall clock every node uses unless its container replays a bag in lockstep
-WALL_CLOCK = Clock()
-
-
-class SimTimer:
-    """A :meth:`Node.timer` on a :class:`SimClock`: fired by the lockstep driver when the replayed time passes
-    ``due`` (s); ``cancel()`` stops it."""
-
-    __slots__ = ("period", "callback", "node", "due", "index", "cancelled", "sim_cost", "sim_delay")
-
-    def __init__(self, period: float, callback: Callable, node: Node, due: float | None, index: int,
-                 sim_cost: float = 0.0, sim_delay: float = 0.0) -> None:
-        self.period, self.callback, self.node, self.due, self.index = period, callback, node, due, index
-        self.cancelled = False
-        self.sim_cost = float(sim_cost)
-        self.sim_delay = float(sim_delay)
-
-    def cancel(self) -> None:
-        self.cancelled = True
-
-    def done(self) -> bool:
-        return self.cancelled
-
-
-class SimClock(Clock):
-    """Simulated time (ROS ``use_sim_time``), driven by :mod:`flexsheet.runtime.lockstep`: in a lockstep
-    replay :meth:`set` to each bag message's log time before it is delivered; in a live simulated graph
-    (``live=True``, launch files' ``clock: sim``) advanced from event to event by the scheduler, which charges
-    each handler its declared compute (``sim_cost``). Never goes backwards. Reads 0.0 until first set.
-
-    Timers created on it (:meth:`add_timer`) fire in due order (ties in creation order), so two runs with the
-    same input run every callback at the same simulated instants.
-    """
-
-    simulated = True
-
-    def __init__(self, live: bool = False) -> None:
-        self._t: float | None = None
-        self.live = bool(live)
-        self.emit: float | None = None   # output time of the running handler (live: start + sim_cost)
-        self.timers: list[SimTimer] = []
-        self._count = itertools.count()
-
-    def stamp(self) -> float:
-        e = self.emit
-        return self.now() if e is None else e
-
-    @property
-    def started(self) -> bool:
-        return self._t is not None
-
-    def now(self) -> float:
-        t = self._t
-        return 0.0 if t is None else t
-
-    def set(self, t: float) -> None:
-        """Move the clock to ``t`` s (a smaller ``t`` keeps the clock where it is). The first call anchors the
-        timers created before it: their first tick is ``t + period``."""
-        t = float(t)
-        if self._t is None:
-            for tm in self.timers:
-                if tm.due is None:
-                    tm.due = t + tm.period
-            self._t = t
-        elif t > self._t:
-            self._t = t
-
-    def add_timer(self, period: float, callback: Callable, node: Node, sim_cost: float = 0.0,
-                  sim_delay: float = 0.0) -> SimTimer:
-        tm = SimTimer(period, callback, node, None if self._t is None else self._t + period, next(self._count),
-                      sim_cost, sim_delay)
-        self.timers.append(tm)
-        return tm
-
-    def next_due(self, t: float) -> SimTimer | None:
-        """The live timer due soonest at or before ``t`` (None if none); cancelled timers are dropped."""
-        self.timers = [tm for tm in self.timers if not tm.cancelled]
-        due = [tm for tm in self.timers if tm.due is not None and tm.due <= t]
-        return min(due, key=lambda tm: (tm.due, tm.index)) if due else None
-
-
-class _Stats:
-    __slots__ = ("count", "dropped", "rejected", "last_count", "rate")
-
-    def __init__(self) -> None:
-        self.count = self.dropped = self.rejected = self.last_count = 0
-        self.rate = 0.0
-
-
-class Publisher:
-    """Typed publisher for one topic. ``publish`` checks the type and is safe to call from any thread."""
-
-    def __init__(self, node: Node, topic: Topic) -> None:
-        self.node, self.topic = node, topic
-        self.name = topic.name
-        self.name_b = topic.name.encode()
-        self.latched = bool(topic.latched)
-        self._seq = itertools.count()  # next() is atomic under the GIL: no lock per message
-        self.stats = _Stats()
-
-    def header(self, frame_id: str = "display", stamp: float | None = None) -> Header:
-        """Next :class:`Header` for this publisher: ``seq`` incremented, ``stamp`` = the clock's
-        :meth:`Clock.stamp` if None (the wall clock's now; on a live simulated clock, when the output leaves)."""
-        return Header(stamp=self.node._clock.stamp() if stamp is None else float(stamp), frame_id=frame_id,
-                      seq=next(self._seq))
-
-    def publish(self, msg: Message) -> None:
-        """Deliver ``msg`` to the subscribers in this process (the object itself) and, encoded once, to those
-        outside it (only when there are any, or the topic is latched). Raises ``TypeError`` naming expected vs
-        given type."""
-        if type(msg) is not self.topic.type:
-            raise TypeError(f"{self.name}: expected {self.topic.type.__name__}, got {type(msg).__name__}")
-        node = self.node
-        self.stats.count += 1
-        bus = node._bus
-        frames = bus.publish(self, msg) if bus is not None else None
-        tr = node.transport
-        if self.latched or tr.wants(self.name_b):
-            if frames is None:
-                frames = encode(self.name, msg)
-            if tr.threadsafe_send or threading.get_ident() == node._loop_tid:
-                node._send(self, frames)
-            else:
-                node._loop.call_soon_threadsafe(node._send, self, frames)
-
-
-_thread_time = time.thread_time
-
-
-#: how long a stopping node waits for its sync handlers to return, s (see :meth:`Node._join_workers`)
-WORKER_JOIN_S = 2.0   # within the launcher's 3 s before it escalates a SIGINT (launch.py shutdown_timeout)
-
-
-class _Worker(threading.Thread):
-    """The worker thread of a sync handler's subscription, with the task-like ``done()`` and ``cancel()``."""
-
-    def __init__(self, sub: Subscription) -> None:
-        super().__init__(target=sub._work, name=f"sub{sub.topic.name}@{sub.node.name}", daemon=True)
-        self.sub = sub
-
-    def done(self) -> bool:
-        return not self.is_alive()
-
-    def cancel(self) -> None:
-        self.sub.close()
-
-
-class Subscription:
-    """One typed subscription: its queue, QoS, handler, consumer (task or worker thread) and statistics.
-
-    Queue items are wire frames (decoded and validated by the consumer: the wire boundary) or, from a node of
-    the same container, the message object itself (already validated when it was built).
-    """
-
-    def __init__(self, node: Node, topic: Topic, handler: Callable, qos: QoS, depth: int | None,
-                 sim_cost: float = 0.0) -> None:
-        self.node, self.topic, self.handler, self.qos = node, topic, handler, qos
-        self.sim_cost = float(sim_cost)  # s charged per message on a live simulated clock
-        self.newest: tuple | None = None  # live simulated clock: (due, order) of the newest queued item
-        self.name_b = topic.name.encode()
-        self.depth = depth or (1 if qos in (QoS.LATEST, QoS.LATCHED) else KEEP_ALL_DEPTH)
-        self.queue: collections.deque = collections.deque()
-        self.is_async = inspect.iscoroutinefunction(handler)
-        self.event = asyncio.Event() if self.is_async else None
-        self._wake: queue.SimpleQueue | None = None if self.is_async else queue.SimpleQueue()
-        self._lock = threading.Lock()
-        self._waiting = False
-        self._closed = False
-        self.stats = _Stats()
-        self.cpu_s = 0.0  # CPU time of the sync handler (its worker thread), s
-        self.last_seq: int | None = None
-        self.last_meta: Any = None
-        self.task: asyncio.Task | _Worker | None = None  # the consumer, once started (both have done(), cancel())
-
-    def start(self, loop: asyncio.AbstractEventLoop) -> None:
-        """Start the consumer: a task on ``loop`` (async handler) or the worker thread (sync handler)."""
-        if self.is_async:
-            self.task = loop.create_task(self.run())
-        else:
-            self.task = _Worker(self)
-            self.task.start()
-
-    def _fresh_latched(self, item: Any) -> bool:
-        if type(item) is list:
-            key = b"\0".join(bytes(f) for f in item[1:])
-            if key == self.last_meta:  # the same latched value resent for another late joiner
-                return False
-            self.last_meta = key
-        else:
-            if item is self.last_meta:
-                return False
-            self.last_meta = item
-        return True
-
-    def push(self, item: Any) -> None:
-        """Queue frames or a message (any thread); QoS: a full queue drops its oldest item (counted)."""
-        if self.qos is QoS.LATCHED and not self._fresh_latched(item):
-            return
-        sched = self.node._lockstep
-        if sched is not None:
-            sched.enqueue(self, item)
-            return
-        if self.is_async:
-            node = self.node
-            if threading.get_ident() != node._loop_tid:
-                node._loop.call_soon_threadsafe(self._push_async, item)
-            else:
-                self._push_async(item)
-            return
-        q = self.queue
-        with self._lock:
-            if len(q) >= self.depth:
-                q.popleft()
-                self.stats.dropped += 1
-                q.append(item)
-                return  # the dropped item's wake-up token serves this one
-            q.append(item)
-        self._wake.put(None)
-
-    def _push_async(self, item: Any) -> None:
-        q = self.queue
-        if len(q) >= self.depth:
-            q.popleft()
-            self.stats.dropped += 1
-        q.append(item)
-        if self._waiting:
-            self.event.set()
-
-    async def run(self) -> None:
-        """Consumer task of an async handler."""
-        q = self.queue
-        while True:
-            if not q:
-                self.event.clear()
-                self._waiting = True
-                try:
-                    await self.event.wait()
-                finally:
-                    self._waiting = False
-                continue
-            msg = self._accept(q.popleft())
-            if msg is not None:
-                await self._call_async(msg)
-
-    def _work(self) -> None:
-        """Worker thread of a sync handler: one wake-up token per queued item."""
-        get, q, lock = self._wake.get, self.queue, self._lock
-        while True:
-            get()
-            if self._closed:
-                return
-            with lock:
-                if not q:
-                    continue
-                item = q.popleft()
-            msg = self._accept(item)
-            if msg is not None:
-                self._call_sync(msg)
-
-    async def handle_now(self, item: Any) -> None:
-        """Handle one item to completion on the loop (lockstep replay: deterministic order, one at a time)."""
-        msg = self._accept(item)
-        if msg is None:
-            return
-        if self.is_async:
-            await self._call_async(msg)
-        else:
-            self._call_sync(msg)
-
-    def _accept(self, item: Any) -> Message | None:
-        """The message of a queue item (wire frames decoded and validated), counted; None if rejected."""
-        if type(item) is list:
-            try:
-                msg = decode(item, self.topic)
-            except DecodeError as exc:
-                self.stats.rejected += 1
-                self.node._reject(str(exc))
-                return None
-        else:
-            msg = item
-        seq = msg.header.seq
-        last = self.last_seq
-        if (last is not None and seq > last + 1 and self.qos is QoS.KEEP_ALL
-                and self.topic.name != T.DIAGNOSTICS.name):  # every node publishes /diagnostics
-            self.stats.dropped += seq - last - 1  # lost on the wire (HWM)
-        self.last_seq = seq
-        self.stats.count += 1
-        return msg
-
-    def _call_sync(self, msg: Message) -> None:
-        t0 = _thread_time()
-        try:
-            self.handler(msg)
-        except ValueError as exc:  # InputRejected included
-            self.stats.rejected += 1
-            self.node._reject(f"{self.topic.name}: {exc}")
-        except Exception:  # noqa: BLE001 - a handler bug must not kill the node; logged with traceback
-            self.node._handler_error(self.topic.name)
-        finally:
-            self.cpu_s += _thread_time() - t0
-
-    async def _call_async(self, msg: Message) -> None:
-        try:
-            await self.handler(msg)
-        except ValueError as exc:
-            self.stats.rejected += 1
-            self.node._reject(f"{self.topic.name}: {exc}")
-        except Exception:  # noqa: BLE001
-            self.node._handler_error(self.topic.name)
-
-    def close(self) -> None:
-        self._closed = True
-        if isinstance(self.task, asyncio.Task):
-            self.task.cancel()
-        elif self._wake is not None:
-            self._wake.put(None)
 
 
 class Node:
@@ -462,7 +89,7 @@ class Node:
     Params: ClassVar[type[BaseModel]] = EmptyParams
     node_type: ClassVar[str] = ""
     #: s; > 0: in its own process the node receives its inputs in batches every DRAIN_PERIOD s instead of on
-    #: every ready socket (:class:`~flexsheet.runtime.transport.ZmqTransport` ``drain_period``) — for nodes that
+    #: every ready socket (:class:`~flexsheet.runtime.zmq.transport.ZmqTransport` ``drain_period``) — for nodes that
     #: want the newest of many inputs, not each on time (the Foxglove bridge). No effect in a container.
     DRAIN_PERIOD: ClassVar[float] = 0.0
     #: the params ``flexsheet param set`` may change while the node runs (the others are read-only at run time);
@@ -823,7 +450,7 @@ class Node:
         ``std::terminate``: the process aborts with "terminate called without an active exception" after a
         clean stop (it failed CI in the triangulator; reproduced 20 of 20 with a ``cv2.GaussianBlur`` loop).
         """
-        workers = [s.task for lst in self._subs.values() for s in lst if isinstance(s.task, _Worker)]
+        workers = [s.task for lst in self._subs.values() for s in lst if isinstance(s.task, SubscriptionWorker)]
         deadline = time.monotonic() + WORKER_JOIN_S
         while any(w.is_alive() for w in workers) and time.monotonic() < deadline:
             await asyncio.sleep(0.005)
@@ -832,27 +459,3 @@ class Node:
             self.log.warning("%s: sync handler(s) still running %.0f s after the stop: %s (the process may abort "
                              "at exit)", self.name, WORKER_JOIN_S, ", ".join(late))
 
-
-async def ticks(period: float):
-    """Async generator: yields every ``period`` s on a drift-free schedule; an overrun restarts the schedule
-    rather than bursting to catch up. Used by :meth:`Node.timer` and the device twins' loops."""
-    nxt = time.monotonic()
-    while True:
-        nxt += period
-        delay = nxt - time.monotonic()
-        if delay > 0:
-            await asyncio.sleep(delay)
-        else:
-            nxt = time.monotonic()  # overrun: do not burst to catch up
-        yield
-
-
-def hostname() -> str:
-    """This machine's host name (for diagnostics)."""
-    return socket.gethostname()
-
-
-def in_process(node_cls: type[Node], name: str = "harness", params: dict | None = None) -> Node:
-    """Construct ``node_cls`` on an :class:`InProcTransport` (used by :mod:`flexsheet.runtime.testing`)."""
-    return node_cls(NodeConfig(name=name, node_type=node_cls.node_type, params=params or {}),
-                    transport=InProcTransport())

@@ -6,7 +6,7 @@ A request is one msgpack map ``{"service": NAME, "args": {...}}``; the reply is 
 or ``{"ok": false, "error": "one line"}``. A bad request (not msgpack, unknown service, wrong arguments, a
 handler that raises) gets an error reply naming what was wrong; it never stops the node. With CURVE the socket
 is a CURVE server with the node's key, behind the same ZAP allow-list as its publisher. The sockets are
-:mod:`flexsheet.runtime.transport`'s (the one file that talks to ZeroMQ).
+:mod:`flexsheet.runtime.zmq.reqrep`'s (the package :mod:`flexsheet.runtime.zmq` is the only code that talks to ZeroMQ).
 
 Built in on every node: ``list`` (the services with one line each), ``param/list``, ``param/get``,
 ``param/set`` (:class:`ParamServices`: a param listed in the node's ``DYNAMIC_PARAMS`` may be set while it runs,
@@ -123,11 +123,11 @@ def _name_arg(args: dict) -> str:
 
 class ServiceServer:
     """The node's service socket and its services (module doc): a
-    :class:`~flexsheet.runtime.transport.ServiceSocket` on ``address`` ("tcp://127.0.0.1"), CURVE with the
-    node's :class:`~flexsheet.runtime.transport.CurveConfig` ``curve``, on the node's ZeroMQ context ``ctx``."""
+    :class:`~flexsheet.runtime.zmq.reqrep.ServiceSocket` on ``address`` ("tcp://127.0.0.1"), CURVE with the
+    node's :class:`~flexsheet.runtime.zmq.curve.CurveConfig` ``curve``, on the node's ZeroMQ context ``ctx``."""
 
     def __init__(self, address: str, curve=None, ctx=None) -> None:
-        from flexsheet.runtime.transport import ServiceSocket
+        from flexsheet.runtime.zmq.reqrep import ServiceSocket
 
         self.sock = ServiceSocket(address, curve, ctx, MAX_REQUEST_BYTES)
         self.endpoint = self.sock.endpoint
@@ -222,7 +222,7 @@ async def call_async(endpoint: str, service: str, args: dict | None = None, time
     """One request to the service socket at ``endpoint``; the result. ``curve`` (the caller's keys) with
     ``server_key`` (the node's public key) for a CURVE graph. Raises :class:`ServiceError` with the node's error
     line, or on no reply within ``timeout`` s."""
-    from flexsheet.runtime.transport import request
+    from flexsheet.runtime.zmq.reqrep import request
 
     raw = await request(endpoint, msgpack.packb({"service": service, "args": args or {}}, use_bin_type=True),
                         timeout, curve, server_key)

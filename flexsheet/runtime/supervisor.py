@@ -14,8 +14,10 @@ import sys
 import time
 from pathlib import Path
 
-from flexsheet.runtime.launch import LaunchError, LaunchFile, NodeSpec, RespawnSpec, curve_config
-from flexsheet.runtime.node import EXIT_CONFIG
+from flexsheet.runtime.config import EXIT_CONFIG
+from flexsheet.runtime.console import console_logger
+from flexsheet.runtime.launch import LaunchError, LaunchFile, NodeSpec, RespawnSpec
+from flexsheet.runtime.launch_config import curve_config
 
 #: exit codes of a node or container stopped by the launcher that are not failures (0, SIGINT's 130 and the
 #: signals themselves)
@@ -120,17 +122,18 @@ class Supervisor:
 
     ``host`` None runs every node (all hosts on this machine). ``out`` is exported as ``FLEXSHEET_OUT`` and
     substituted for ``$(out)``. ``duration`` s stops the run after that long (None: until Ctrl-C or a
-    required node exits). ``print_fn`` receives each prefixed output line.
+    required node exits). Each prefixed output line and progress line is logged at INFO on
+    ``flexsheet.console.launch`` (:mod:`flexsheet.runtime.console`).
     """
 
     def __init__(self, lf: LaunchFile, host: str | None = None, out: str | None = None,
-                 duration: float | None = None, print_fn=None, python: str = sys.executable,
+                 duration: float | None = None, python: str = sys.executable,
                  overrides: dict[str, list[str]] | None = None) -> None:
         if host is not None and host not in lf.hosts:
             raise LaunchError(f"{lf.path}: --host {host!r} is not a host of the file; hosts: {', '.join(lf.hosts)}")
         self.lf, self.host, self.out, self.duration = lf, host, out, duration
         self.sim = getattr(lf, "clock", "wall") == "sim"   # the container counts simulated seconds itself
-        self.print = print_fn or (lambda line: print(line, flush=True))
+        self.log = console_logger("launch")
         self.python = python
         self.overrides = overrides or {}
         self.children = children_of(lf, host)
@@ -175,7 +178,7 @@ class Supervisor:
             line = await child.proc.stdout.readline()
             if not line:
                 break
-            self.print(self._fmt.format(child.name, line.decode(errors="replace").rstrip()))
+            self.log.info(self._fmt.format(child.name, line.decode(errors="replace").rstrip()))
 
     @staticmethod
     def _kill_group(pgid: int) -> None:
@@ -223,7 +226,7 @@ class Supervisor:
             await asyncio.wait_for(asyncio.shield(pump), timeout=2.0)
         except TimeoutError:
             pump.cancel()
-            self.print(self._fmt.format(child.name, "output still held open by another process 2 s after "
+            self.log.info(self._fmt.format(child.name, "output still held open by another process 2 s after "
                                                     "exit: no longer read"))
         return proc.returncode
 
@@ -239,7 +242,7 @@ class Supervisor:
             await self._spawn(child)
             child.pids.append(child.proc.pid)
             child.started_at = child.started_at or time.monotonic()
-            self.print(self._fmt.format(child.name, f"started pid {child.proc.pid}"
+            self.log.info(self._fmt.format(child.name, f"started pid {child.proc.pid}"
                                         + (f" (container: {', '.join(child.members)})" if child.members else "")))
             code = await self._exit_code(child, asyncio.create_task(self._pump(child)))
             self._record_exit(child, code)
@@ -247,11 +250,11 @@ class Supervisor:
                 if code not in STOP_EXITS:   # e.g. a container whose node failed and was restarted, or -9
                     child.failures.append(code)
                 return
-            self.print(self._fmt.format(child.name, f"exited with code {code}"))
+            self.log.info(self._fmt.format(child.name, f"exited with code {code}"))
             if code != 0:
                 child.failures.append(code)
             if code == EXIT_CONFIG:  # bad params or a missing file: a restart would fail the same way
-                self.print(self._fmt.format(child.name, "configuration error (see the line above): not respawned; "
+                self.log.info(self._fmt.format(child.name, "configuration error (see the line above): not respawned; "
                                                         f"check with: flexsheet launch {self.lf.path} --check"
                                                         + (f" --host {self.host}" if self.host else "")))
                 self.config_errors.append(child.name)
@@ -267,10 +270,10 @@ class Supervisor:
             if policy.policy == "never" or (policy.policy == "on-failure" and code == 0):
                 return
             if child.restarts >= policy.max_restarts:
-                self.print(self._fmt.format(child.name, f"not respawned: {policy.max_restarts} restarts used"))
+                self.log.info(self._fmt.format(child.name, f"not respawned: {policy.max_restarts} restarts used"))
                 return
             child.restarts += 1
-            self.print(self._fmt.format(child.name, f"respawning in {policy.delay:.1f} s "
+            self.log.info(self._fmt.format(child.name, f"respawning in {policy.delay:.1f} s "
                                                     f"(restart {child.restarts}/{policy.max_restarts})"))
             await asyncio.sleep(policy.delay)
             if self._stop.is_set():
@@ -290,7 +293,7 @@ class Supervisor:
                 await asyncio.wait_for(proc.wait(), timeout=self.lf.shutdown_timeout)
                 return
             except TimeoutError:
-                self.print(self._fmt.format(child.name, f"did not stop on {sig.name}; escalating"))
+                self.log.info(self._fmt.format(child.name, f"did not stop on {sig.name}; escalating"))
 
     async def run(self) -> int:
         """Run until Ctrl-C, SIGTERM, ``duration`` or a required node's exit. Returns 0; :data:`EXIT_CONFIG` if a
@@ -300,10 +303,10 @@ class Supervisor:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, self._on_signal, sig)
         if not self.children:
-            self.print(f"[launch] no nodes for host {self.host!r} in {self.lf.path}")
+            self.log.info(f"[launch] no nodes for host {self.host!r} in {self.lf.path}")
             return 0
         n_nodes = sum(len(c.members) or 1 for c in self.children)
-        self.print(f"[launch] {self.lf.name}: starting {n_nodes} nodes"
+        self.log.info(f"[launch] {self.lf.name}: starting {n_nodes} nodes"
                    + (f" in {len(self.children)} processes" if n_nodes != len(self.children) else "")
                    + (f" on host {self.host}" if self.host else ""))
         watchers = [loop.create_task(self._watch(c)) for c in self.children]
@@ -317,7 +320,7 @@ class Supervisor:
                 await self._stop.wait()
         except TimeoutError:
             self.reason = f"duration {self.duration:g} s reached"
-        self.print(f"[launch] stopping after {time.monotonic() - t0:.1f} s: {self.reason or 'stop requested'}")
+        self.log.info(f"[launch] stopping after {time.monotonic() - t0:.1f} s: {self.reason or 'stop requested'}")
         monitor.cancel()
         sampler.cancel()
         self._sample_now()
@@ -332,12 +335,12 @@ class Supervisor:
                 self._record_exit(c, rc)                              # and the run "failed"
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
-        self.print("[launch] all nodes stopped")
+        self.log.info("[launch] all nodes stopped")
         if self.out:
             self.write_cpu(Path(self.out) / "cpu.json", time.monotonic() - t0)
         failed = [c for c in self.children if c.failures]
         if failed:   # name them: a run's exit 1 must say whose exit it is (exits the launcher caused are not)
-            self.print("[launch] node(s) failed during the run: " + ", ".join(
+            self.log.info("[launch] node(s) failed during the run: " + ", ".join(
                 f"{c.name} (exit {', '.join(map(str, c.failures))})" for c in failed))
         if self.config_errors:
             return EXIT_CONFIG
@@ -354,7 +357,7 @@ class Supervisor:
         transition, a node that goes silent for ``3 × heartbeat_period`` (its host is gone, partitioned or
         the node hangs) and when it comes back. Counts go into ``self.lost_events``."""
         from flexsheet.runtime.codec import DecodeError, decode
-        from flexsheet.runtime.transport import ZmqTransport
+        from flexsheet.runtime.zmq.transport import ZmqTransport
         from messages import topics as T
 
         last: dict[str, float] = {}
@@ -369,7 +372,7 @@ class Supervisor:
             last[hb.node] = time.monotonic()
             if hb.node in lost:
                 lost.discard(hb.node)
-                self.print(f"[launch] node {hb.node} on host {host_of.get(hb.node, '?')} is back (heartbeat)")
+                self.log.info(f"[launch] node {hb.node} on host {host_of.get(hb.node, '?')} is back (heartbeat)")
 
         tr = ZmqTransport("", self.lf.endpoints().values(), curve=curve_config(self.lf, self.host or None))
         await tr.start(on_frames)
@@ -383,7 +386,7 @@ class Supervisor:
                     if name in self.lf.nodes and name not in lost and now - t > limit:
                         lost.add(name)
                         self.lost_events.append((name, host_of.get(name, "?")))
-                        self.print(f"[launch] node {name} on host {host_of.get(name, '?')} lost: no heartbeat "
+                        self.log.info(f"[launch] node {name} on host {host_of.get(name, '?')} lost: no heartbeat "
                                    f"for {now - t:.1f} s")
         finally:
             tr.close()
@@ -448,9 +451,9 @@ class Supervisor:
         """Write :meth:`cpu_report` as JSON to ``path`` (a failure is printed, never raised)."""
         try:
             path.write_text(json.dumps(self.cpu_report(wall_s), indent=1))
-            self.print(f"[launch] per-node CPU: {path}")
+            self.log.info(f"[launch] per-node CPU: {path}")
         except OSError as exc:
-            self.print(f"[launch] cannot write {path}: {exc}")
+            self.log.info(f"[launch] cannot write {path}: {exc}")
 
     def pids(self) -> list[int]:
         """PIDs of the running children."""

@@ -15,15 +15,20 @@ Source: dora-rs ``testing.py`` MockNode, proxystore's in-process stream (house r
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import logging
 import time
 from collections import defaultdict
+from collections.abc import Iterator
 
 from flexsheet.runtime.codec import decode, encode
-from flexsheet.runtime.node import Node, NodeConfig
+from flexsheet.runtime.config import NodeConfig
+from flexsheet.runtime.console import CONSOLE
+from flexsheet.runtime.node import Node
 from flexsheet.runtime.transport import InProcTransport
 from messages import Message, Topic
 
-__all__ = ["NodeHarness"]
+__all__ = ["NodeHarness", "console_lines"]
 
 
 class NodeHarness:
@@ -100,3 +105,28 @@ class NodeHarness:
         if topic is None:
             return self.node.rejected_total
         return sum(s.stats.rejected for s in self.node._subs.get(topic.name, []))
+
+
+class _Lines(logging.Handler):
+    def __init__(self, lines: list[str]) -> None:
+        super().__init__()
+        self.lines = lines
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.lines.append(record.getMessage())
+
+
+@contextlib.contextmanager
+def console_lines() -> Iterator[list[str]]:
+    """The lines a launcher or a container shows the user (:mod:`flexsheet.runtime.console`) while the block
+    runs, collected in the list it yields."""
+    lines: list[str] = []
+    log, handler = logging.getLogger(CONSOLE), _Lines(lines)
+    level = log.level
+    log.setLevel(logging.INFO)
+    log.addHandler(handler)
+    try:
+        yield lines
+    finally:
+        log.removeHandler(handler)
+        log.setLevel(level)

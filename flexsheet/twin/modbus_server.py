@@ -18,7 +18,7 @@ from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from flexsheet.runtime.node import ticks
+from flexsheet.runtime.clock import ticks
 from flexsheet.twin.controller import ControllerCore, WriteRejected
 from messages import registers as reg
 

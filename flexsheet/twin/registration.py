@@ -6,6 +6,7 @@ it is fixed, cached per seed (:func:`sim_display_calib`: the ``display.yaml`` th
 from __future__ import annotations
 
 import json
+import logging
 import math
 import os
 import time
@@ -13,10 +14,12 @@ from dataclasses import asdict
 
 import numpy as np
 
-from flexsheet.calibration.display_calib import write_display_calib
-from flexsheet.calibration.procedures import FULL, QUICK, Options, _progress, run_all
+from flexsheet.calibration.display_calib_file import write_display_calib
+from flexsheet.calibration.procedures import FULL, QUICK, Options, run_all
 from flexsheet.twin.registration_camera import CalibrationTwin
 from flexsheet.twin.truth import TwinTruth
+
+log = logging.getLogger(__name__)
 
 __all__ = ["TwinSource", "run_display_sim", "sim_display_calib", "score_registration", "verdicts", "TARGETS",
            "SUMMARY_VERSION", "sim_display_calib_cached"]
@@ -115,7 +118,7 @@ def verdicts(summary: dict) -> dict:
 
 
 def run_display_sim(seed: int, out_dir: str, opts: Options = FULL, realism: str = "realistic",
-                    force: bool = False, progress=print) -> dict:
+                    force: bool = False) -> dict:
     """Run every procedure in the twin of truth ``seed``; write ``out_dir/display.yaml`` and
     ``out_dir/summary.json`` (errors against the truth under ``camera``, ``projector``, ``arms.left``,
     ``arms.right``; residuals; options; timings). Cached: an existing summary with the same seed, realism,
@@ -126,13 +129,13 @@ def run_display_sim(seed: int, out_dir: str, opts: Options = FULL, realism: str 
     key = _cache_key(seed, realism, opts)
     old = None if force else _cached(out_dir, key)
     if old is not None:
-        _progress(f"display: seed {seed}: cached ({spath})", progress)
+        log.info(f"display: seed {seed}: cached ({spath})")
         return old
     t_all = time.perf_counter()
     truth = TwinTruth.draw(int(seed), realism)
     src = TwinSource(CalibrationTwin(truth, seed=int(seed)), opts.board_frames, opts.pattern_frames,
                      opts.marker_frames)
-    reg = run_all(src, opts, progress=progress)
+    reg = run_all(src, opts)
     write_display_calib(ypath, reg.calib)
     # scoring against the truth: only now, after every estimate is fixed
     summary = {**key, **score_registration(truth, reg.camera_entry, reg.camera, reg.projector_entry,
@@ -141,10 +144,10 @@ def run_display_sim(seed: int, out_dir: str, opts: Options = FULL, realism: str 
     with open(spath, "w") as fh:
         json.dump(summary, fh, indent=1)
     c, p = summary["camera"], summary["projector"]
-    _progress(f"display: seed {seed}: camera {c['translation_error_mm']:.3f} mm {c['rotation_error_deg']:.4f}°, "
+    log.info(f"display: seed {seed}: camera {c['translation_error_mm']:.3f} mm {c['rotation_error_deg']:.4f}°, "
               f"projector {p['translation_error_mm']:.2f} mm {p['rotation_error_deg']:.3f}° "
               f"{p['reprojection_px']:.3f} px, arms " + ", ".join(
-                  f"{s} {summary['arms'][s]['translation_error_mm']:.3f} mm" for s in summary["arms"]), progress)
+                  f"{s} {summary['arms'][s]['translation_error_mm']:.3f} mm" for s in summary["arms"]))
     return summary
 
 
@@ -179,10 +182,10 @@ def sim_display_calib_cached(seed: int, realism: str = "realistic", cache_root: 
 
 
 def sim_display_calib(seed: int, realism: str = "realistic", cache_root: str | None = None,
-                      quick: bool = False, progress=None) -> str:
+                      quick: bool = False) -> str:
     """Path of the twin's ``display.yaml`` for truth ``seed``, running the procedures once per seed and caching
     them under ``cache_root`` (default ``$FLEXSHEET_CACHE`` or ``~/.cache/flexsheet``)/display/<realism>-<seed>.
     This is what the twin's estimator nodes should load at start-up."""
     out = _cache_dir(seed, realism, cache_root, quick)
-    run_display_sim(seed, out, QUICK if quick else FULL, realism, progress=progress)
+    run_display_sim(seed, out, QUICK if quick else FULL, realism)
     return os.path.join(out, "display.yaml")

@@ -17,45 +17,26 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from flexsheet.model import geometry
 from flexsheet.model.sheet import SheetSurface, frame_from_clamps
-from flexsheet.model.sheet_fem import (
-    FINGER_RADIUS,
-    TABLE_DEPTHS,
-    TABLE_POSITIONS,
-    FemShape,
-    IndentTable,
-    SheetPhysics,
-)
+from flexsheet.model.sheet_fem import FINGER_RADIUS, SheetPhysics
+from flexsheet.model.sheet_table import FemShape, IndentTable
 from flexsheet.twin.truth import TwinTruth
+from flexsheet.twin.world_config import SheetFemConfig
 
-__all__ = ["FemSettings", "TruePhysics", "build_table"]
-
-
-@dataclass(frozen=True)
-class FemSettings:
-    """How the true sheet's FEM tables are made: ``stretch_step`` (clamp-strain spacing of the tables),
-    ``depths`` and ``positions`` (m, :class:`flexsheet.model.sheet_fem.IndentTable`), ``mesh`` (kwargs of
-    :class:`flexsheet.model.sheet_fem.SheetFEM`), ``cache_dir`` (folder of the cached tables)."""
-
-    stretch_step: float = 0.01
-    depths: tuple[float, ...] = TABLE_DEPTHS
-    positions: tuple[float, ...] = TABLE_POSITIONS
-    mesh: dict = field(default_factory=dict)
-    cache_dir: str = ""
+__all__ = ["TruePhysics", "build_table"]
 
 
-def build_table(truth_seed: int, realism: str, stretch: float, size: float, settings: FemSettings) -> str:
+def build_table(truth_seed: int, realism: str, stretch: float, size: float, config: SheetFemConfig) -> str:
     """Build (or find) the cached FEM table of the truth (``truth_seed``, ``realism``) at clamp strain
     ``stretch`` over the unstretched side ``size`` m; returns its cache key. Runs in a worker process: it
     redraws the truth from the seed (nothing but the seed crosses the process boundary)."""
     truth = TwinTruth.draw(int(truth_seed), realism)
     phys = SheetPhysics.from_truth(truth, stretch, size)
-    tab = IndentTable(phys, settings.depths, settings.positions, mesh=settings.mesh, cache_dir=settings.cache_dir)
+    tab = IndentTable(phys, config.depths, config.positions, mesh=config.mesh(), cache_dir=config.tables_dir())
     return tab.key
 
 
@@ -65,12 +46,12 @@ class TruePhysics:
     ``size`` m: the unstretched sheet side between the clamps; ``half_width`` m: half the sheet's width.
     """
 
-    def __init__(self, truth: TwinTruth, settings: FemSettings | None = None, size: float = geometry.SHEET_SIZE,
+    def __init__(self, truth: TwinTruth, config: SheetFemConfig | None = None, size: float = geometry.SHEET_SIZE,
                  half_width: float = geometry.SHEET_SIZE / 2) -> None:
         self.truth = truth
-        self.settings = settings or FemSettings()
-        if not (self.settings.stretch_step > 0.0 and math.isfinite(self.settings.stretch_step)):
-            raise ValueError(f"stretch_step must be > 0, got {self.settings.stretch_step!r}")
+        self.config = config or SheetFemConfig()
+        if not (self.config.stretch_step > 0.0 and math.isfinite(self.config.stretch_step)):
+            raise ValueError(f"stretch_step must be > 0, got {self.config.stretch_step!r}")
         self.size = float(size)
         self.half_width = float(half_width)
         self.tables: dict[float, IndentTable] = {}
@@ -83,7 +64,7 @@ class TruePhysics:
     # -------------------------------------------------------------------------------------------- sheet
     def node_of(self, stretch: float) -> float:
         """The table node (clamp strain) nearest ``stretch``, rounded to the step, ≥ 0."""
-        st = self.settings.stretch_step
+        st = self.config.stretch_step
         return round(max(0.0, round(stretch / st) * st), 6)
 
     def physics(self, node: float) -> SheetPhysics:
@@ -94,8 +75,7 @@ class TruePhysics:
         """Load node ``node``'s table if it is cached (never builds); returns whether it is available."""
         if node in self.tables:
             return True
-        s = self.settings
-        tab = _cached_table(self.physics(node), s)
+        tab = _cached_table(self.physics(node), self.config)
         if tab is not None:
             self.tables[node] = tab
         return tab is not None
@@ -140,10 +120,10 @@ SHIPPED_TRUTH_TABLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), 
 SHIPPED_TRUTHS = (("realistic", 0, tuple(round(0.01 * k, 6) for k in range(0, 13))),)
 
 
-def _cached_table(phys: SheetPhysics, s: FemSettings) -> IndentTable | None:
+def _cached_table(phys: SheetPhysics, cfg: SheetFemConfig) -> IndentTable | None:
     """The cached (or shipped) table of ``phys`` or ``None`` (nothing is built)."""
-    for folder in (s.cache_dir, SHIPPED_TRUTH_TABLES):
-        tab = IndentTable.cached(phys, s.depths, s.positions, mesh=s.mesh, cache_dir=folder)
+    for folder in (cfg.tables_dir(), SHIPPED_TRUTH_TABLES):
+        tab = IndentTable.cached(phys, cfg.depths, cfg.positions, mesh=cfg.mesh(), cache_dir=folder)
         if tab is not None:
             return tab
     return None
@@ -155,17 +135,16 @@ def ship(size: float = geometry.SHEET_SIZE) -> list[str]:
     import shutil
 
     from flexsheet.manifest import record
-    from flexsheet.twin.world_config import SheetFemConfig
 
     os.makedirs(SHIPPED_TRUTH_TABLES, exist_ok=True)
     out = []
     for realism, seed, nodes in SHIPPED_TRUTHS:
-        phys = TruePhysics(TwinTruth.draw(seed, realism), SheetFemConfig().settings(), size=size)
+        cfg = SheetFemConfig()
+        phys = TruePhysics(TwinTruth.draw(seed, realism), cfg, size=size)
         for node in nodes:
-            build_table(seed, realism, node, size, phys.settings)
-            key = IndentTable.key_of(phys.physics(node), phys.settings.depths, phys.settings.positions,
-                                     phys.settings.mesh)
-            src = os.path.join(phys.settings.cache_dir, f"indent_{key}.npz")
+            build_table(seed, realism, node, size, cfg)
+            key = IndentTable.key_of(phys.physics(node), cfg.depths, cfg.positions, cfg.mesh())
+            src = os.path.join(cfg.tables_dir(), f"indent_{key}.npz")
             dst = os.path.join(SHIPPED_TRUTH_TABLES, os.path.basename(src))
             if os.path.abspath(src) != os.path.abspath(dst):
                 shutil.copyfile(src, dst)

@@ -10,7 +10,7 @@ import os
 import cv2
 import numpy as np
 
-from flexsheet.vision.stereo_calibration import load_yaml
+from flexsheet.vision.calib_yaml import load_yaml
 
 __all__ = ["XIMEA_CALIB", "DEFAULT_CAMERA_POSITION", "DEFAULT_LOOK_AT", "bumblebee2_calibration", "camera_model",
            "look_at"]
@@ -26,7 +26,7 @@ def bumblebee2_calibration(width: int = 640, height: int = 480, focal_mm: float 
     """Ideal calibration dict of a BumbleBee2-like rectified-mount pair (Point Grey datasheet values).
 
     f = focal_mm / pixel_um · 1000 px, principal point at the image centre, same lens both sides, R = I,
-    T = (−baseline, 0, 0) m. Returns the dict format of :func:`flexsheet.vision.stereo_calibration.load_yaml`.
+    T = (−baseline, 0, 0) m. Returns the dict format of :func:`flexsheet.vision.calib_yaml.load_yaml`.
     Raises ``ValueError`` on non-positive sizes.
     """
     for name, v in (("width", width), ("height", height), ("focal_mm", focal_mm), ("pixel_um", pixel_um),

@@ -9,11 +9,13 @@ with R the triangulation covariance (m²).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from flexsheet.model.checks import check_point
 
-__all__ = ["ConstantVelocityKF"]
+__all__ = ["ConstantVelocityKF", "Predictor", "q_for_tracking_index"]
 
 
 class ConstantVelocityKF:
@@ -102,3 +104,33 @@ class ConstantVelocityKF:
     def velocity(self) -> np.ndarray:
         """Current velocity estimate (3,) m/s."""
         return self.x[3:].copy()
+
+
+def q_for_tracking_index(tracking_index: float, sigma_m: float, period: float) -> float:
+    """Process noise q (m²/s³) of the continuous white-noise-acceleration model for tracking index
+    λ = √(q T³)/σ_m, i.e. q = (λ σ_m)² / T³, from ``sigma_m`` (m) and ``period`` T (s). Its steady-state
+    Kalman filter is the α-β filter of Kalata's index λ. Raises ``ValueError`` for non-positive inputs."""
+    for name, v in (("tracking_index", tracking_index), ("sigma_m", sigma_m), ("period", period)):
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be finite and > 0, got {v!r}")
+    return (tracking_index * sigma_m) ** 2 / period ** 3
+
+
+class Predictor:
+    """The triangulator's fingertip prediction, in-process: :class:`ConstantVelocityKF` updated with each
+    measurement z (3,) m and its covariance R (3, 3) m², predicting ``position_at(t + h)`` as
+    :class:`flexsheet.vision.tracker.FingertipTracker` does. ``q`` m²/s³; ``v0_std`` m/s (the tracker's is
+    ``TrackerConfig.v0_std``). Raises ``ValueError`` for a non-positive ``q`` or ``v0_std``."""
+
+    def __init__(self, q: float, v0_std: float = 1.0):
+        self.kf = ConstantVelocityKF(q=q, v0_std=v0_std)
+        self.t = 0.0
+
+    def update(self, t: float, z: np.ndarray, R: np.ndarray) -> None:
+        """Fuse the measurement z (3,) m with covariance R (3, 3) m² taken at ``t`` s."""
+        self.kf.update(z, R, t)
+        self.t = t
+
+    def predict(self, h: float) -> np.ndarray:
+        """Position (3,) m ``h`` s after the last measurement."""
+        return self.kf.position_at(self.t + h)

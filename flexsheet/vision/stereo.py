@@ -77,7 +77,7 @@ class StereoModel:
 
     @classmethod
     def from_calib(cls, calib) -> StereoModel:
-        """Build from a calibration dict (:func:`flexsheet.vision.stereo_calibration.load_yaml`) or a
+        """Build from a calibration dict (:func:`flexsheet.vision.calib_yaml.load_yaml`) or a
         :class:`messages.StereoCalibration` (anything with K1, D1, K2, D2, R, T, image_size)."""
         get = (lambda k: calib[k]) if isinstance(calib, dict) else (lambda k: getattr(calib, k))
         return cls(get("K1"), get("D1"), get("K2"), get("D2"), get("R"), get("T"), get("image_size"))

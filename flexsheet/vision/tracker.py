@@ -37,13 +37,14 @@ Per stereo pair (raw mono8 images of the calibrated size):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from flexsheet.model.checks import check_pose
 from flexsheet.vision.detect import MarkerDetector, check_image
-from flexsheet.vision.predict import ConstantVelocityKF
+from flexsheet.vision.predict import ConstantVelocityKF, q_for_tracking_index
 from flexsheet.vision.stereo import METHODS, StereoModel
 
 __all__ = ["TrackerConfig", "TrackResult", "FingertipTracker", "PixelNoise"]
@@ -165,7 +166,7 @@ class TrackResult:
 class FingertipTracker:
     """Stateful per-frame pipeline (module doc).
 
-    ``calib``: calibration dict (:func:`flexsheet.vision.stereo_calibration.load_yaml`) or a
+    ``calib``: calibration dict (:func:`flexsheet.vision.calib_yaml.load_yaml`) or a
     :class:`messages.StereoCalibration`; ``config``: :class:`TrackerConfig`; ``T_display_camera`` (4, 4)
     overrides the calibration's (identity if neither has one). Raises ``ValueError`` on a bad config or
     calibration.
@@ -310,7 +311,7 @@ class FingertipTracker:
             dt = stamp - self.kf.t
             self.frame_dt = dt if self.frame_dt is None else self.frame_dt + 0.05 * (dt - self.frame_dt)
         if self.frame_dt is not None:   # q from the tracking index (module doc, step 6)
-            self.kf.q = c.tracking_index ** 2 * float(np.trace(cov_d)) / 3.0 / self.frame_dt ** 3
+            self.kf.q = q_for_tracking_index(c.tracking_index, math.sqrt(float(np.trace(cov_d)) / 3.0), self.frame_dt)
         self.kf.update(pos, cov_d, stamp)
         pred = self.kf.position_at(stamp + c.horizon_s) if c.horizon_s > 0 else pos.copy()
         return TrackResult(True, "ok", pos.copy(), cov_d, pred, residual, uvl.copy(), uvr.copy(), roi, X[k].copy())

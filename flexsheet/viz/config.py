@@ -1,8 +1,8 @@
 """The Foxglove bridge's settings (:class:`VizNodeConfig`): one definition of each — name, type, default and
 range — that ``nodes/viz``'s ``VizParams`` is built from (:func:`flexsheet.runtime.params.config_fields`).
-Pure and light (no transport, no foxglove import); the ranges are pydantic ``Field`` constraints in the
-annotations, checked when the params are. The geometry here is flat (lists of numbers, as a launch file
-writes them); :class:`flexsheet.viz.scene_builder.VizConfig` is what the scene builder takes. The believed sheet's
+No transport, no foxglove import; the ranges are pydantic ``Field`` constraints in the annotations, checked
+when the params are. The geometry there is flat (lists of numbers, as a launch file writes them);
+:class:`VizConfig`, built from it, is what the scene builder takes. The believed sheet's
 settings are the renderer's (:data:`flexsheet.rendering.config.SHEET_PARAMS`); the WebSocket server's
 address is the node's own."""
 
@@ -11,11 +11,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Annotated
 
+import numpy as np
 from pydantic import Field
 
 from flexsheet.model import geometry
+from flexsheet.model.projector import Projector
+from flexsheet.model.sheet_model import SheetConfig
 
-__all__ = ["VizNodeConfig"]
+__all__ = ["VizNodeConfig", "VizConfig"]
 
 
 @dataclass(frozen=True)
@@ -55,3 +58,44 @@ class VizNodeConfig:
                                              "yaw), m and rad")] = field(
         default_factory=lambda: list(geometry.RIGHT_BASE))
     sheet_grid: Annotated[int, Field(ge=2, le=200, description="sheet mesh vertices per side")] = 20
+
+
+@dataclass
+class VizConfig:
+    """Geometry the scene needs that no message carries (SI units, display frame).
+
+    ``eye`` (3,) cyclopean eye V, m; ``ipd`` m; ``projector``: :class:`Projector` (default: the paper's);
+    ``left_base``/``right_base``: arm bases (x, y, z, yaw) m, rad (as the arm bridges' ``base`` param);
+    ``sheet``: :class:`~flexsheet.model.sheet_model.SheetConfig` of the believed sheet — give it the
+    renderer's values (its params ``sheet_half_width``, ``push_threshold``, ``fine_modes``, ``tension_ratio``,
+    ``sheet_cache``, ``sheet_mesh``) and the bridge draws the dent the renderer corrects for;
+    ``sheet_half_width`` (read-only) is ``sheet.half_width``; ``sheet_grid`` n (n × n sheet vertices); ``frustum_depth`` m of the camera frusta; ``camera_scale`` ∈ (0, 1] image downscale.
+    """
+
+    eye: np.ndarray = field(default_factory=lambda: geometry.EYE.copy())
+    ipd: float = 0.064
+    projector: Projector = field(default_factory=Projector.default)
+    left_base: tuple = geometry.LEFT_BASE
+    right_base: tuple = geometry.RIGHT_BASE
+    sheet: SheetConfig = field(default_factory=SheetConfig)
+    sheet_grid: int = 20
+    frustum_depth: float = 0.45
+    camera_scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        self.eye = np.asarray(self.eye, dtype=float)
+        if self.eye.shape != (3,) or not np.all(np.isfinite(self.eye)):
+            raise ValueError(f"eye must be a finite (3,) vector, got {self.eye!r}")
+        if not (0.0 < self.camera_scale <= 1.0):
+            raise ValueError(f"camera_scale must be in (0, 1], got {self.camera_scale!r}")
+        if self.sheet_grid < 2:
+            raise ValueError(f"sheet_grid must be >= 2, got {self.sheet_grid!r}")
+        if not (self.frustum_depth > 0):
+            raise ValueError(f"frustum_depth must be > 0, got {self.frustum_depth!r}")
+        if not isinstance(self.sheet, SheetConfig):
+            raise ValueError(f"sheet must be a SheetConfig, got {type(self.sheet).__name__}")
+
+    @property
+    def sheet_half_width(self) -> float:
+        """Half the sheet's free-edge length, m (``sheet.half_width``)."""
+        return self.sheet.half_width

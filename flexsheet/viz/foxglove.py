@@ -89,7 +89,7 @@ def inputs_for(topic: str) -> list:
 JSON_EXCLUDE = {T.DEFORMATION.name: {"vertices", "faces"}}
 ARM_LINKS = ("base_link", "shoulder", "upper_arm", "elbow", "forearm", "wrist", "flange", "clamp")
 #: drawn diameter (m) of the segment from each link's origin to the next one's (RV-1A-like proportions)
-_LINK_DIAMETER = (0.12, 0.09, 0.07, 0.07, 0.06, 0.05, 0.04)
+LINK_DIAMETER = (0.12, 0.09, 0.07, 0.07, 0.06, 0.05, 0.04)
 
 def json_schema(topic: str, cls: type[Message]) -> dict:
     """JSON schema of the JSON copy of ``topic`` (the pydantic schema, less :data:`JSON_EXCLUDE` fields)."""

@@ -34,12 +34,14 @@ _RGBA = {
 }
 
 
-def _color(name: str) -> Color:
+def named_color(name: str) -> Color:
+    """The scene's colour of ``name`` (a key of the palette: "object", "sheet", "arm", …); ``KeyError`` else."""
     r, g, b, a = _RGBA[name]
     return Color(r=r, g=g, b=b, a=a)
 
 
-def _ts(stamp: float) -> Timestamp:
+def stamp_of(stamp: float) -> Timestamp:
+    """A foxglove ``Timestamp`` of ``stamp`` s (clamped at 0)."""
     return Timestamp.from_epoch_secs(max(0.0, float(stamp)))
 
 
@@ -47,7 +49,8 @@ def _p3(p) -> Point3:
     return Point3(x=float(p[0]), y=float(p[1]), z=float(p[2]))
 
 
-def _pose(p, q=(0.0, 0.0, 0.0, 1.0)) -> Pose:
+def pose_msg(p, q=(0.0, 0.0, 0.0, 1.0)) -> Pose:
+    """A foxglove ``Pose`` at ``p`` (3,) m with the quaternion ``q`` (x, y, z, w)."""
     return Pose(position=Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2])),
                 orientation=Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])))
 
@@ -63,7 +66,7 @@ def quaternions(R: np.ndarray) -> np.ndarray:
     return Rotation.from_matrix(flat).as_quat().reshape(*R.shape[:-2], 4)
 
 
-def _z_to(d: np.ndarray) -> np.ndarray:
+def rotation_z_to(d: np.ndarray) -> np.ndarray:
     """Quaternion (x, y, z, w) turning +z onto the unit vector ``d`` (3,) (shortest arc; q ∝ (z × d, 1 + z·d))."""
     if d[2] < -1.0 + 1e-9:
         return np.array([1.0, 0.0, 0.0, 0.0])
@@ -71,7 +74,7 @@ def _z_to(d: np.ndarray) -> np.ndarray:
     return q / math.sqrt(float(q @ q))
 
 
-def _x_to(d: np.ndarray) -> np.ndarray:
+def rotation_x_to(d: np.ndarray) -> np.ndarray:
     """Quaternion (x, y, z, w) turning +x onto the unit vector ``d`` (3,) (shortest arc; q ∝ (x × d, 1 + x·d))."""
     if d[0] < -1.0 + 1e-9:
         return np.array([0.0, 0.0, 1.0, 0.0])
@@ -79,7 +82,8 @@ def _x_to(d: np.ndarray) -> np.ndarray:
     return q / math.sqrt(float(q @ q))
 
 
-def _rigid_inv(Tm: np.ndarray) -> np.ndarray:
+def rigid_inverse(Tm: np.ndarray) -> np.ndarray:
+    """The inverse (4, 4) of a rigid transform ``Tm`` (4, 4) (Rᵀ, −Rᵀt)."""
     out = np.eye(4)
     out[:3, :3] = Tm[:3, :3].T
     out[:3, 3] = -Tm[:3, :3].T @ Tm[:3, 3]
@@ -109,7 +113,7 @@ def frustum_points(K: np.ndarray, width: float, height: float, T_display_sensor:
     return pts @ Tm[:3, :3].T + Tm[:3, 3]
 
 
-def _frustum_lines(pts: np.ndarray) -> list[Point3]:
+def frustum_lines(pts: np.ndarray) -> list[Point3]:
     """LINE_LIST points for a frustum (5, 3): four edges from the apex and the far rectangle."""
     idx = [0, 1, 0, 2, 0, 3, 0, 4, 1, 2, 2, 3, 3, 4, 4, 1]
     return [_p3(pts[i]) for i in idx]
@@ -159,7 +163,7 @@ def _varint(n: int) -> bytes:
     return bytes(out)
 
 
-def _len_field(number: int, payload: bytes) -> bytes:
+def len_field(number: int, payload: bytes) -> bytes:
     """One length-delimited field ``number`` (a submessage or packed array) on the wire."""
     return _varint(number << 3 | _LEN) + _varint(len(payload)) + payload
 
@@ -179,20 +183,20 @@ def _point3_field(number: int, pts: np.ndarray) -> bytes:
 def _fixed32_field(number: int, values: np.ndarray) -> bytes:
     """Packed repeated ``fixed32`` field ``number`` (proto3 packs repeated scalars)."""
     v = np.ascontiguousarray(values, dtype="<u4").ravel()
-    return _len_field(number, v.tobytes()) if len(v) else b""
+    return len_field(number, v.tobytes()) if len(v) else b""
 
 
 #: field numbers (foxglove/SceneUpdate.proto, SceneEntity.proto, TriangleListPrimitive.proto, LinePrimitive.proto)
-_SCENE_ENTITIES, _ENTITY_LINES, _ENTITY_TRIANGLES, _TRI_POINTS, _TRI_INDICES, _LINE_POINTS = 2, 11, 12, 2, 5, 5
+SCENE_ENTITIES, ENTITY_LINES, ENTITY_TRIANGLES, _TRI_POINTS, _TRI_INDICES, _LINE_POINTS = 2, 11, 12, 2, 5, 5
 
 
-def _triangles_bytes(points: np.ndarray, indices: np.ndarray, color: Color) -> bytes:
+def triangles_bytes(points: np.ndarray, indices: np.ndarray, color: Color) -> bytes:
     """Encoded ``foxglove.TriangleListPrimitive`` of ``points`` (N, 3) m and ``indices`` (3M,) (or (M, 3))."""
     return (TriangleListPrimitive(color=color).encode() + _point3_field(_TRI_POINTS, points)
             + _fixed32_field(_TRI_INDICES, indices))
 
 
-def _line_bytes(points: np.ndarray, line_type: LinePrimitiveLineType, color: Color, thickness: float) -> bytes:
+def line_bytes(points: np.ndarray, line_type: LinePrimitiveLineType, color: Color, thickness: float) -> bytes:
     """Encoded ``foxglove.LinePrimitive`` through ``points`` (N, 3) m (thickness in px, scale invariant)."""
     return (LinePrimitive(type=line_type, thickness=thickness, scale_invariant=True, color=color).encode()
             + _point3_field(_LINE_POINTS, points))

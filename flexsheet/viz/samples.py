@@ -3,7 +3,7 @@
 For tests and docs when no simulation runs: both arms holding the home sheet (joints
 :func:`flexsheet.arm.kinematics.home_joints`, clamp poses by FK), a fingertip pushing ``push`` m behind
 the sheet at the cylinder's front line, the object's surface as a cylinder grid dented under the finger,
-the shipped XIMEA stereo calibration mounted by :func:`flexsheet.twin.camera.look_at`, small images.
+the shipped XIMEA stereo calibration mounted by :func:`flexsheet.vision.camera_model.look_at`, small images.
 Nothing here is a model of the display: the numbers only need to be plausible and self-consistent.
 """
 
@@ -14,10 +14,11 @@ from functools import cache
 
 import numpy as np
 
-from flexsheet.arm.kinematics import LEFT_BASE, RIGHT_BASE, ArmKinematics, home_joints
+from flexsheet.arm.kinematics import ArmKinematics, home_joints
 from flexsheet.model import geometry
+from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
 from flexsheet.model.sheet import SheetSurface
-from flexsheet.twin.camera import DEFAULT_CAMERA_POSITION, camera_model, look_at
+from flexsheet.vision.camera_model import DEFAULT_CAMERA_POSITION, camera_model, look_at
 from flexsheet.vision.stereo_calibration import to_message
 from messages import (
     ArmJointState,

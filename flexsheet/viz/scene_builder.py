@@ -1,12 +1,11 @@
 """The 3-D scene the viz bridge serves (:class:`SceneBuilder`): the believed sheet and arms, the fingertip, the
 deformed object, cameras, projector and eyes as Foxglove ``SceneUpdate``/``FrameTransforms``, from the newest
-display messages (:class:`VizConfig`)."""
+display messages (:class:`flexsheet.viz.config.VizConfig`)."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 import numpy as np
 from foxglove.messages import (
@@ -28,33 +27,33 @@ from foxglove.messages import (
 from scipy.spatial.transform import Rotation
 
 from flexsheet.model import geometry
-from flexsheet.model.projector import Projector, eye_positions
-from flexsheet.model.sheet import SheetSurface
+from flexsheet.model.projector import eye_positions
+from flexsheet.model.sheet import SheetSurface, clamp_poses
 from flexsheet.model.sheet_model import (
     NominalSheetModel,
-    SheetConfig,
     believed_sheet,
     drawable,
     sheet_model_for,
 )
-from flexsheet.viz.foxglove import _LINK_DIAMETER, ARM_LINKS, JSON_EXCLUDE
+from flexsheet.viz.config import VizConfig
+from flexsheet.viz.foxglove import ARM_LINKS, JSON_EXCLUDE, LINK_DIAMETER
 from flexsheet.viz.primitives import (
-    _ENTITY_LINES,
-    _ENTITY_TRIANGLES,
-    _SCENE_ENTITIES,
-    _color,
-    _frustum_lines,
-    _len_field,
-    _line_bytes,
-    _pose,
-    _rigid_inv,
-    _triangles_bytes,
-    _ts,
-    _x_to,
-    _z_to,
+    ENTITY_LINES,
+    ENTITY_TRIANGLES,
+    SCENE_ENTITIES,
+    frustum_lines,
     frustum_points,
+    len_field,
+    line_bytes,
+    named_color,
+    pose_msg,
     quaternions,
+    rigid_inverse,
+    rotation_x_to,
+    rotation_z_to,
     sheet_mesh,
+    stamp_of,
+    triangles_bytes,
 )
 from messages import (
     ArmJointState,
@@ -70,48 +69,7 @@ from messages import (
 )
 from messages import topics as T
 
-__all__ = ["VizConfig", "SceneBuilder"]
-
-
-@dataclass
-class VizConfig:
-    """Geometry the scene needs that no message carries (SI units, display frame).
-
-    ``eye`` (3,) cyclopean eye V, m; ``ipd`` m; ``projector``: :class:`Projector` (default: the paper's);
-    ``left_base``/``right_base``: arm bases (x, y, z, yaw) m, rad (as the arm bridges' ``base`` param);
-    ``sheet``: :class:`~flexsheet.model.sheet_model.SheetConfig` of the believed sheet — give it the
-    renderer's values (its params ``sheet_half_width``, ``push_threshold``, ``fine_modes``, ``tension_ratio``,
-    ``sheet_cache``, ``sheet_mesh``) and the bridge draws the dent the renderer corrects for;
-    ``sheet_half_width`` (read-only) is ``sheet.half_width``; ``sheet_grid`` n (n × n sheet vertices); ``frustum_depth`` m of the camera frusta; ``camera_scale`` ∈ (0, 1] image downscale.
-    """
-
-    eye: np.ndarray = field(default_factory=lambda: geometry.EYE.copy())
-    ipd: float = 0.064
-    projector: Projector = field(default_factory=Projector.default)
-    left_base: tuple = geometry.LEFT_BASE
-    right_base: tuple = geometry.RIGHT_BASE
-    sheet: SheetConfig = field(default_factory=SheetConfig)
-    sheet_grid: int = 20
-    frustum_depth: float = 0.45
-    camera_scale: float = 1.0
-
-    def __post_init__(self) -> None:
-        self.eye = np.asarray(self.eye, dtype=float)
-        if self.eye.shape != (3,) or not np.all(np.isfinite(self.eye)):
-            raise ValueError(f"eye must be a finite (3,) vector, got {self.eye!r}")
-        if not (0.0 < self.camera_scale <= 1.0):
-            raise ValueError(f"camera_scale must be in (0, 1], got {self.camera_scale!r}")
-        if self.sheet_grid < 2:
-            raise ValueError(f"sheet_grid must be >= 2, got {self.sheet_grid!r}")
-        if not (self.frustum_depth > 0):
-            raise ValueError(f"frustum_depth must be > 0, got {self.frustum_depth!r}")
-        if not isinstance(self.sheet, SheetConfig):
-            raise ValueError(f"sheet must be a SheetConfig, got {type(self.sheet).__name__}")
-
-    @property
-    def sheet_half_width(self) -> float:
-        """Half the sheet's free-edge length, m (``sheet.half_width``)."""
-        return self.sheet.half_width
+__all__ = ["SceneBuilder"]
 
 
 class _Arm:
@@ -202,7 +160,7 @@ class SceneBuilder:
         heard from), or None before any joint state."""
         if not self._links:
             return None
-        home = geometry.clamp_poses(np.zeros(3), geometry.SCREEN_NORMAL, np.array([0.0, 1.0, 0.0]), 0.0)
+        home = clamp_poses(np.zeros(3), geometry.SCREEN_NORMAL, np.array([0.0, 1.0, 0.0]), 0.0)
         out = []
         for i, side in enumerate(("left", "right")):
             links = self._links.get(side)
@@ -236,7 +194,7 @@ class SceneBuilder:
     # ------------------------------------------------------------------ /viz/scene
     def _entity(self, eid: str, stamp: float, **prims) -> bytes:
         """Encoded ``foxglove.SceneEntity`` ``eid`` in frame ``display`` with SDK-built primitives."""
-        return SceneEntity(timestamp=_ts(stamp), frame_id="display", id=eid, **prims).encode()
+        return SceneEntity(timestamp=stamp_of(stamp), frame_id="display", id=eid, **prims).encode()
 
     def _cached(self, eid: str, key: tuple, build: Callable[[], bytes]) -> bytes:
         """Entity bytes of ``eid`` rebuilt only when one of the objects in ``key`` was replaced (compared by
@@ -254,14 +212,14 @@ class SceneBuilder:
 
     def _build_object(self, d: ObjectDeformation | None, stamp: float) -> bytes:
         if d is None:  # the FEM has not published: the undeformed paper cylinder (axis along y)
-            q = _z_to(np.asarray(geometry.CYLINDER_AXIS, dtype=float))
-            cyl = CylinderPrimitive(pose=_pose(geometry.CYLINDER_CENTER, q),
+            q = rotation_z_to(np.asarray(geometry.CYLINDER_AXIS, dtype=float))
+            cyl = CylinderPrimitive(pose=pose_msg(geometry.CYLINDER_CENTER, q),
                                     size=Vector3(x=2 * geometry.CYLINDER_RADIUS, y=2 * geometry.CYLINDER_RADIUS,
                                                  z=geometry.CYLINDER_LENGTH),
-                                    bottom_scale=1.0, top_scale=1.0, color=_color("object"))
+                                    bottom_scale=1.0, top_scale=1.0, color=named_color("object"))
             return self._entity("object", stamp, cylinders=[cyl])
-        tri = _triangles_bytes(d.vertices, d.faces, _color("object" if d.valid else "object_invalid"))
-        return self._entity("object", float(d.header.stamp)) + _len_field(_ENTITY_TRIANGLES, tri)
+        tri = triangles_bytes(d.vertices, d.faces, named_color("object" if d.valid else "object_invalid"))
+        return self._entity("object", float(d.header.stamp)) + len_field(ENTITY_TRIANGLES, tri)
 
     def _static_entities(self, stamp: float) -> list[bytes]:
         """Projector frustum and the eyes (fixed geometry): built once."""
@@ -271,28 +229,28 @@ class SceneBuilder:
             pts = frustum_points(P.K, P.width, P.height, self.T_display_projector, depth)
             proj = self._entity("projector", stamp, lines=[LinePrimitive(
                 type=LinePrimitiveLineType.LineList, thickness=2.0, scale_invariant=True,
-                points=_frustum_lines(pts), color=_color("projector"))],
+                points=frustum_lines(pts), color=named_color("projector"))],
                 texts=[self._label(P.position, "projector")])
             e = self.eyes
             eyes = self._entity("eyes", stamp, spheres=[
-                SpherePrimitive(pose=_pose(p), size=Vector3(x=0.012, y=0.012, z=0.012), color=_color("eye"))
+                SpherePrimitive(pose=pose_msg(p), size=Vector3(x=0.012, y=0.012, z=0.012), color=named_color("eye"))
                 for p in (e[0], e[1])], texts=[self._label(self.cfg.eye + [0, 0, 0.03], "eye")])
             self._static = [proj, eyes]
         return self._static
 
     @staticmethod
     def _label(p, text: str) -> TextPrimitive:
-        return TextPrimitive(pose=_pose(p), billboard=True, font_size=14.0, scale_invariant=True,
-                             color=_color("text"), text=text)
+        return TextPrimitive(pose=pose_msg(p), billboard=True, font_size=14.0, scale_invariant=True,
+                             color=named_color("text"), text=text)
 
     def _sphere(self, p, d: float, color: str) -> SpherePrimitive:
-        return SpherePrimitive(pose=_pose(p), size=Vector3(x=d, y=d, z=d), color=_color(color))
+        return SpherePrimitive(pose=pose_msg(p), size=Vector3(x=d, y=d, z=d), color=named_color(color))
 
     def _arrow(self, p, direction, length: float, color: str) -> ArrowPrimitive:
         n = np.asarray(direction, dtype=float)
-        q = _x_to(n / np.linalg.norm(n))  # arrows point along their +x
-        return ArrowPrimitive(pose=_pose(p, q), shaft_length=0.8 * length, shaft_diameter=0.003,
-                              head_length=0.2 * length, head_diameter=0.008, color=_color(color))
+        q = rotation_x_to(n / np.linalg.norm(n))  # arrows point along their +x
+        return ArrowPrimitive(pose=pose_msg(p, q), shaft_length=0.8 * length, shaft_diameter=0.003,
+                              head_length=0.2 * length, head_diameter=0.008, color=named_color(color))
 
     def _fingertip_entity(self, stamp: float) -> bytes:
         tip: Fingertip | None = self.get(T.FINGERTIP)
@@ -335,7 +293,7 @@ class SceneBuilder:
     def _build_sheet(self, sheet: SheetSurface, stamp: float) -> bytes:
         n = self.cfg.sheet_grid
         v, f = sheet_mesh(sheet, n)
-        return self._entity("sheet", stamp) + _len_field(_ENTITY_TRIANGLES, _triangles_bytes(v, f, _color("sheet")))
+        return self._entity("sheet", stamp) + len_field(ENTITY_TRIANGLES, triangles_bytes(v, f, named_color("sheet")))
 
     def _build_true_sheet(self, true: SheetState) -> bytes:
         g = true.membrane
@@ -348,9 +306,9 @@ class SceneBuilder:
         # every ~8th grid line of constant u, then of constant v
         rows = [P[i, :] for i in range(0, g.shape[0], max(1, g.shape[0] // 8))]
         rows += [P[:, j] for j in range(0, g.shape[1], max(1, g.shape[1] // 8))]
-        color = _color("sheet_true")
+        color = named_color("sheet_true")
         return self._entity("sheet_true", float(true.header.stamp)) + b"".join(
-            _len_field(_ENTITY_LINES, _line_bytes(r, LinePrimitiveLineType.LineStrip, color, 1.0)) for r in rows)
+            len_field(ENTITY_LINES, line_bytes(r, LinePrimitiveLineType.LineStrip, color, 1.0)) for r in rows)
 
     def _camera_entity(self, stamp: float) -> bytes | None:
         cal: StereoCalibration | None = self.get(T.CALIBRATION)
@@ -365,7 +323,7 @@ class SceneBuilder:
         for K, Tm in ((cal.K1, Tl), (cal.K2, Tr)):
             pts = frustum_points(K, w, h, Tm, self.cfg.frustum_depth)
             lines.append(LinePrimitive(type=LinePrimitiveLineType.LineList, thickness=2.0, scale_invariant=True,
-                                       points=_frustum_lines(pts), color=_color("camera")))
+                                       points=frustum_lines(pts), color=named_color("camera")))
         return self._entity("cameras", stamp, lines=lines, texts=[self._label(Tl[:3, 3], "camera")])
 
     @staticmethod
@@ -387,15 +345,15 @@ class SceneBuilder:
             L = float(np.linalg.norm(d))
             if L < 1e-6:
                 continue
-            dia = _LINK_DIAMETER[k]
-            cyls.append(CylinderPrimitive(pose=_pose(0.5 * (p[k] + p[k + 1]), _z_to(d / L)),
+            dia = LINK_DIAMETER[k]
+            cyls.append(CylinderPrimitive(pose=pose_msg(0.5 * (p[k] + p[k + 1]), rotation_z_to(d / L)),
                                           size=Vector3(x=dia, y=dia, z=L), bottom_scale=1.0, top_scale=1.0,
-                                          color=_color("arm")))
-        spheres = [self._sphere(p[k], _LINK_DIAMETER[min(k, len(_LINK_DIAMETER) - 1)] * 1.05, "arm")
+                                          color=named_color("arm")))
+        spheres = [self._sphere(p[k], LINK_DIAMETER[min(k, len(LINK_DIAMETER) - 1)] * 1.05, "arm")
                    for k in range(1, len(ARM_LINKS) - 1)]
         Tc = links[-1]
-        jaw = CubePrimitive(pose=_pose(Tc[:3, 3], quaternions(Tc[:3, :3])),
-                            size=Vector3(x=0.02, y=0.03, z=self.cfg.sheet_half_width * 2), color=_color("clamp"))
+        jaw = CubePrimitive(pose=pose_msg(Tc[:3, 3], quaternions(Tc[:3, :3])),
+                            size=Vector3(x=0.02, y=0.03, z=self.cfg.sheet_half_width * 2), color=named_color("clamp"))
         return self._entity(f"arm_{side}", stamp, cylinders=cyls, spheres=spheres, cubes=[jaw],
                             texts=[self._label(p[0] + [0, 0, -0.03], f"{side} arm")])
 
@@ -411,7 +369,7 @@ class SceneBuilder:
         cam = self._camera_entity(stamp)
         if cam is not None:
             ents.append(cam)
-        return b"".join(_len_field(_SCENE_ENTITIES, e) for e in ents)
+        return b"".join(len_field(SCENE_ENTITIES, e) for e in ents)
 
     # ------------------------------------------------------------------ /viz/tf
     def frames(self) -> list[tuple[str, str, np.ndarray]]:
@@ -423,7 +381,7 @@ class SceneBuilder:
         cal: StereoCalibration | None = self.get(T.CALIBRATION)
         if cal is not None:
             Tl, Tr = self._camera_poses(cal)
-            out += [("display", "camera_left", Tl), ("camera_left", "camera_right", _rigid_inv(Tl) @ Tr)]
+            out += [("display", "camera_left", Tl), ("camera_left", "camera_right", rigid_inverse(Tl) @ Tr)]
         sheet = self.believed_sheet()
         if sheet is not None:
             Ts = np.eye(4)
@@ -441,7 +399,7 @@ class SceneBuilder:
             parent, Tp = "display", np.eye(4)
             for name, Tl in zip(ARM_LINKS, links, strict=True):
                 child = f"{side}/{name}"
-                out.append((parent, child, _rigid_inv(Tp) @ Tl))
+                out.append((parent, child, rigid_inverse(Tp) @ Tl))
                 parent, Tp = child, Tl
         return out
 
@@ -450,7 +408,7 @@ class SceneBuilder:
         stamp = self.stamp if stamp is None else stamp
         fr = self.frames()
         q = quaternions(np.stack([Tm[:3, :3] for _, _, Tm in fr]))
-        ts = _ts(stamp)
+        ts = stamp_of(stamp)
         return FrameTransforms(transforms=[
             FrameTransform(timestamp=ts, parent_frame_id=p, child_frame_id=c,
                            translation=Vector3(x=float(Tm[0, 3]), y=float(Tm[1, 3]), z=float(Tm[2, 3])),
@@ -474,7 +432,7 @@ class SceneBuilder:
             img = cv2.resize(img, (max(1, round(img.shape[1] * s)), max(1, round(img.shape[0] * s))),
                              interpolation=cv2.INTER_AREA)
         img = np.ascontiguousarray(img)
-        return RawImage(timestamp=_ts(stamp), frame_id=frame, width=img.shape[1], height=img.shape[0],
+        return RawImage(timestamp=stamp_of(stamp), frame_id=frame, width=img.shape[1], height=img.shape[0],
                         encoding="mono8", step=img.shape[1], data=img.tobytes())
 
     def calibrations(self) -> tuple[CameraCalibration, CameraCalibration] | None:
@@ -490,7 +448,7 @@ class SceneBuilder:
         for K, D, frame in ((cal.K1, cal.D1, "camera_left"), (cal.K2, cal.D2, "camera_right")):
             Ks = S @ K
             P = np.hstack([Ks, np.zeros((3, 1))])
-            out.append(CameraCalibration(timestamp=_ts(cal.header.stamp), frame_id=frame, width=w, height=h,
+            out.append(CameraCalibration(timestamp=stamp_of(cal.header.stamp), frame_id=frame, width=w, height=h,
                                          distortion_model="plumb_bob", D=[float(x) for x in D],
                                          K=Ks.ravel().tolist(), R=np.eye(3).ravel().tolist(), P=P.ravel().tolist()))
         return out[0], out[1]
@@ -501,7 +459,7 @@ class SceneBuilder:
         if fr is None:
             return None
         img = np.ascontiguousarray(np.hstack([fr.left, fr.right]))
-        return RawImage(timestamp=_ts(fr.header.stamp), frame_id="projector", width=img.shape[1],
+        return RawImage(timestamp=stamp_of(fr.header.stamp), frame_id="projector", width=img.shape[1],
                         height=img.shape[0], encoding="rgb8", step=3 * img.shape[1], data=img.tobytes())
 
     # ------------------------------------------------------------------ JSON

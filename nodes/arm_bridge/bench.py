@@ -43,18 +43,12 @@ from pathlib import Path
 
 import numpy as np
 
-from flexsheet.arm.kinematics import (
-    LEFT_BASE,
-    Q_LOWER,
-    Q_UPPER,
-    QD_MAX,
-    RIGHT_BASE,
-    ArmKinematics,
-    home_joints,
-)
+from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints
 from flexsheet.arm.limiter import StreamLimiter
 from flexsheet.arm.tracking import TargetTracker
 from flexsheet.model import geometry
+from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
+from flexsheet.model.sheet import clamp_poses
 from flexsheet.twin.controller import ControllerCore
 from messages.registers import encode_joints
 
@@ -67,7 +61,7 @@ EPILOG = ("example: flexsheet bench arm --json --cycles 2000 --out docs/figures/
 def _clamp(side: str, theta: float, stretch: float = 0.05) -> np.ndarray:
     R = geometry.CYLINDER_RADIUS
     c, s = math.cos(theta), math.sin(theta)
-    L, Rr = geometry.clamp_poses(np.array([-R + R * c, 0.0, R * s]), np.array([c, 0.0, s]),
+    L, Rr = clamp_poses(np.array([-R + R * c, 0.0, R * s]), np.array([c, 0.0, s]),
                               np.array([0.0, 1.0, 0.0]), stretch)
     return L if side == "left" else Rr
 

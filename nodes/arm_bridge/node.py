@@ -33,14 +33,16 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from flexsheet.arm.bridge_config import DEFAULT_PERIOD, DEFAULT_PORT, BridgeConfig
-from flexsheet.arm.kinematics import LEFT_BASE, Q_LOWER, Q_UPPER, QD_MAX, RIGHT_BASE, ArmKinematics
+from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics
 from flexsheet.arm.limiter import StreamLimiter
 from flexsheet.arm.stream import ArmStream, CycleReport
 from flexsheet.arm.tracking import TargetTracker, peer_holds
-from flexsheet.calibration.display_calib import load_display_calib
-from flexsheet.runtime.node import InputRejected, Node, QoS
+from flexsheet.calibration.display_calib_file import load_display_calib
+from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
+from flexsheet.model.timing import LAB
+from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import config_fields, params_model
-from flexsheet.twin.timing import LAB
+from flexsheet.runtime.qos import QoS
 from messages import ArmJointState, ArmTarget, topics
 from nodes.arm_bridge.modbus_link import ModbusLink
 from nodes.arm_bridge.mxt_link import MxtLink
@@ -137,7 +139,7 @@ class ArmBridgeNode(Node):
         self._pending: ArmTarget | None = None
         self._last_status = ""
         self.pub = self.publisher(topics.arm_state(p.arm))
-        # simulated clock: the target crosses the lab network to the arm PC, then IK (flexsheet/twin/timing.py)
+        # simulated clock: the target crosses the lab network to the arm PC, then IK (flexsheet/model/timing.py)
         # every target is handled and a refused one counted (QoS latest would drop them before decoding)
         self.subscribe(topics.arm_target(p.arm), self.on_target, qos=QoS.KEEP_ALL, depth=256,
                        sim_cost=LAB.network_s + LAB.compute("arm_bridge"))

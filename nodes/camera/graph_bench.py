@@ -1,7 +1,8 @@
 """``flexsheet bench graph [--seconds S] [--json]``: the display's own path on the wall clock, without the twin.
 
 Here because the pairs come from the camera node's own twin renderer and registration; the other nodes are
-loaded by their registry names (:mod:`flexsheet.registry`), as the launcher does.
+loaded by their node types (the ``flexsheet.nodes`` entry points, :mod:`flexsheet.runtime.plugins`), as the
+launcher does.
 
 The nodes of the display (triangulator, planner, both arm bridges with their Modbus controller twins, FEM,
 renderer offscreen on this machine's GL) run in one container on the wall clock, fed by a player that
@@ -14,7 +15,7 @@ node, no camera rendering, no recorder beside them. From the stamps the nodes se
   (``RenderedFrame.header.stamp``; the renderer redraws and publishes every new input here, at most 120 Hz).
 
 Each with ``median_ms``, ``p99_ms``, ``n``, the target and the verdict. These are the lab's real-time figures
-(docs/realtime.md); the simulated clock charges the declared ones (flexsheet/twin/timing.py).
+(docs/realtime.md); the simulated clock charges the declared ones (flexsheet/model/timing.py).
 """
 
 from __future__ import annotations
@@ -30,8 +31,11 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from flexsheet.runtime.container import Bus, Container, ContainerTransport, Member
-from flexsheet.runtime.node import Node, NodeConfig, QoS
+from flexsheet.runtime.bus import Bus, ContainerTransport
+from flexsheet.runtime.config import NodeConfig
+from flexsheet.runtime.container import Container, Member
+from flexsheet.runtime.node import Node
+from flexsheet.runtime.qos import QoS
 from flexsheet.vision.stereo_calibration import to_message
 from messages import StereoFrame
 from messages import topics as T
@@ -44,9 +48,9 @@ TARGETS = {"camera_frame_to_arm_command": {"median_ms": 2.0, "p99_ms": 5.0},
 
 def _frames(n: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], object, np.ndarray]:
     """``n`` stereo pairs of the ideal twin along the paper's 10 s stroke, its calibration and camera pose."""
-    from flexsheet.twin.camera import camera_model
     from flexsheet.twin.finger import FingerScript
     from flexsheet.twin.truth import TwinTruth
+    from flexsheet.vision.camera_model import camera_model
     from nodes.camera.node import CameraParams, published_registration, sim_config, twin_renderer
 
     p = CameraParams(source="sim", model="ximea", twin={"realism": "ideal", "truth_seed": 0})
@@ -121,7 +125,7 @@ def _stats(x: list[float], target: dict) -> dict:
 
 
 async def _run(seconds: float, warmup: float, names: tuple[str, ...]) -> dict:
-    from flexsheet import registry
+    from flexsheet.runtime.plugins import node_class
 
     lf = yaml.safe_load((ROOT / "launch" / "sim.yaml").read_text())["nodes"]
     params = {n: dict(lf[n].get("params", {})) for n in lf}
@@ -142,9 +146,9 @@ async def _run(seconds: float, warmup: float, names: tuple[str, ...]) -> dict:
 
     members = [member("player", _Player, {})]
     for name in names:
-        members.append(member(name, registry.load(registry.NODES[lf[name]["type"]]), params[name]))
+        members.append(member(name, node_class(lf[name]["type"]), params[name]))
     members.append(member("sink", _Sink, {}))
-    c = Container("bench", members, bus, print_fn=lambda line: None)
+    c = Container("bench", members, bus)
     task = asyncio.get_running_loop().create_task(c.run(install_signals=False))
     t0 = time.monotonic()
     while not bus.ready():

@@ -23,7 +23,7 @@ except for the *ideal* twin, whose nominal registration is exact. The sim source
 hidden truth instead (param ``twin: {realism, truth_seed}`` → :meth:`flexsheet.twin.truth.TwinTruth.draw`):
 the truth's stereo intrinsics and distortion (``model: ximea``; another model renders with its own
 calibration), the truth's mount and marker size, the realistic sensor of
-:class:`flexsheet.twin.camera.SimConfig` (``twin.realism: ideal`` → :meth:`SimConfig.ideal`), and drops
+:class:`flexsheet.twin.camera_config.SimConfig` (``twin.realism: ideal`` → :meth:`SimConfig.ideal`), and drops
 a ``drop_rate`` fraction of its frames (never published, counted in ``/diagnostics``). The sensing params
 left unset (``null``) take the realism's value.
 """
@@ -40,19 +40,17 @@ import cv2
 import numpy as np
 from pydantic import Field, model_validator
 
-from flexsheet.runtime.node import Node, QoS
+from flexsheet.model.timing import LAB
+from flexsheet.runtime.node import Node
 from flexsheet.runtime.params import config_fields, params_model
-from flexsheet.twin.camera import (
-    REALISTIC_DROP_RATE,
-    SimConfig,
-    camera_model,
-    default_trajectory,
-    twin_renderer,
-)
-from flexsheet.twin.timing import LAB
+from flexsheet.runtime.qos import QoS
+from flexsheet.twin.camera import default_trajectory, twin_renderer
+from flexsheet.twin.camera_config import REALISTIC_DROP_RATE, SimConfig
 from flexsheet.twin.truth_choice import TruthChoice
+from flexsheet.vision.calib_yaml import load_yaml
 from flexsheet.vision.camera_config import CameraConfig
-from flexsheet.vision.stereo_calibration import load_yaml, to_message
+from flexsheet.vision.camera_model import camera_model
+from flexsheet.vision.stereo_calibration import to_message
 from messages import ArmJointState, FingerTruth, ProjectorImage, StereoFrame, topics
 
 __all__ = ["CameraParams", "CameraNode", "published_registration", "sim_config"]
@@ -166,7 +164,7 @@ def published_registration(p: CameraParams, calib: dict) -> tuple[dict, np.ndarr
     image size differs from the camera's."""
     size = tuple(int(v) for v in calib["image_size"])
     if p.display_calib:
-        from flexsheet.calibration.display_calib import load_display_calib
+        from flexsheet.calibration.display_calib_file import load_display_calib
 
         cam = load_display_calib(p.display_calib, require=("camera",)).camera
         stereo = cam.stereo if cam.stereo is not None else calib
@@ -267,7 +265,7 @@ class CameraNode(Node):
             self.renderer = twin_renderer(truth, sim_config(p), calib=None if p.model == "ximea" else calib)
             self.subscribe(topics.FINGER_TRUTH, self.on_truth, qos=QoS.LATEST)
             self._registration_twin(truth)
-            # simulated clock: the pair leaves readout + transfer after mid-exposure (flexsheet/twin/timing.py)
+            # simulated clock: the pair leaves readout + transfer after mid-exposure (flexsheet/model/timing.py)
             w, h = (int(v) for v in calib["image_size"])
             self.timer(1.0 / p.rate_hz, self.on_sim_tick, sim_cost=LAB.camera_latency(p.exposure_s, w, h),
                        sim_delay=p.link_delay_s)

@@ -7,8 +7,9 @@ frame, float32), faces, contact force N, local stiffness dF/dd N/m, depth, metho
 
 Start-up (``setup``): choose the mesh from the accuracy table (:mod:`flexsheet.fem.choose`, logged), then load the
 capacitance matrices from the disk cache or precompute them (logged with timing). Then the model the scene
-needs (:func:`flexsheet.fem.choose.choose_model`, from ``flexsheet/fem/model_table.json``): linear where it meets the
-accuracy target over ``depth_max``, otherwise the nonlinear snapshots (:mod:`flexsheet.fem.snapshots`), loaded
+needs (:func:`flexsheet.fem.choose.choose_fem_model`, from ``flexsheet/fem/model_table.json``; mesh and model are
+picked by :func:`flexsheet.fem.served.choose_cylinder_model`, which the experiments call too): linear where it
+meets the accuracy target over ``depth_max``, otherwise the nonlinear snapshots (:mod:`flexsheet.fem.snapshots`), loaded
 from the cache; when they are not cached the node serves the linear model and either builds them in a
 background thread at low priority (``snapshot_build``) or says how to build them
 (``flexsheet experiment fem --node-table``). The diagnostics message tells which model is being served and why.
@@ -37,19 +38,19 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from flexsheet.fem.cache import ArrayCache, cache_key
-from flexsheet.fem.choose import choose, choose_model, load_model_table, load_table
 from flexsheet.fem.config import FemConfig
 from flexsheet.fem.material import Material
 from flexsheet.fem.mesh import MeshSpec
 from flexsheet.fem.realtime import RealtimeModel
-from flexsheet.fem.served import fem_models_as_cylinder
+from flexsheet.fem.served import CylinderChoice, choose_cylinder_model, fem_models_as_cylinder
 from flexsheet.model.scenes import Scene, load_scene_or_paper
-from flexsheet.runtime.node import InputRejected, Node, QoS
+from flexsheet.model.timing import LAB
+from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
-from flexsheet.twin.timing import LAB
+from flexsheet.runtime.qos import QoS
 from messages import Fingertip, ObjectDeformation, topics
 
-__all__ = ["FemParams", "FemNode", "fem_models_as_cylinder"]
+__all__ = ["FemParams", "FemNode"]
 
 
 def _scene_file(cls, v: str | None) -> str | None:
@@ -108,13 +109,9 @@ class FemNode(Node):
         # a scene file's material; no scene: E, ν from the params with the paper scene's law (Gent, its Jm)
         mat = Material.of_scene(self.scene.material)
         mat = mat if p.scene else Material(p.E, p.nu, mat.Jm)
-        if p.mesh_h > 0 and p.mesh_h_fine > 0:
-            spec, order = MeshSpec(p.mesh_h, p.mesh_h_fine, p.refine_radius, p.arc_deg), p.order
-            self.log.info("fem: mesh set by params: P%d %s", order, spec.key())
-        else:
-            ch = choose(load_table(), p.accuracy_target, p.depth_min, p.depth_max, p.nu, p.finger_radius)
-            spec, order = MeshSpec(ch.spec.h, ch.spec.h_fine, ch.spec.refine_radius, p.arc_deg), ch.order
-            self.log.info("fem: model choice: %s", ch.reason)
+        choice = choose_cylinder_model(p.fem_config())
+        spec, order = choice.spec, choice.order
+        self.log.info("fem: %s", choice.mesh_reason)
         cache = p.cache_dir or None
         self.model = await asyncio.to_thread(
             RealtimeModel, spec, mat, p.finger_radius, p.max_depth, p.strain_limit, cache, None, self.log.info, order)
@@ -126,7 +123,7 @@ class FemNode(Node):
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST, sim_cost=LAB.compute("fem"))
         if p.nonlinear:
             await self._background(self._build_nonlinear, "fem-corotational")
-        await self._setup_snapshots(mat)
+        await self._setup_snapshots(mat, choice)
 
     async def _background(self, target, name: str, *args) -> None:
         """Run ``target(*args)`` in a daemon thread; on a simulated clock to completion before the node is
@@ -204,20 +201,18 @@ class FemNode(Node):
         except Exception:  # noqa: BLE001 - a warm-up must never take the node down
             self.log.exception("fem: assembling the scene's sparse fallback failed")
 
-    async def _setup_snapshots(self, mat: Material) -> None:
+    async def _setup_snapshots(self, mat: Material, choice: CylinderChoice) -> None:
         """Attach the nonlinear snapshots when the scene needs them (cache hit), else say why not."""
-        from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_or_build
+        from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_snapshot_table
 
         p: FemParams = self.params
-        kind, why = ("linear", "model=linear") if p.model == "linear" else (
-            ("snapshots", "model=snapshots") if p.model == "snapshots" else
-            choose_model(load_model_table(), p.accuracy_target, p.depth_max))
+        kind, why = choice.kind, choice.kind_reason
         self.log.info("fem: real-time model: %s (%s)", kind, why)
         if kind != "snapshots":
             self.state_message = f"fem: linear model ({why})"
             return
         cache = ArrayCache(p.cache_dir or None, self.log.info)
-        table, _, _ = load_or_build(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, p.finger_radius, build=False)
+        table = load_snapshot_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, p.finger_radius)
         if table is not None:
             self._attach(table, "loaded from the shipped store (flexsheet/fem/data)" if cache.shipped() else
                          "loaded from cache")
@@ -242,7 +237,8 @@ class FemNode(Node):
         self.log.info(self.state_message)
 
     def _build_snapshots(self, cache: ArrayCache, mat: Material) -> None:
-        from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_or_build
+        from flexsheet.fem.reference.snapshot_build import load_or_build
+        from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC
 
         try:
             os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)   # this thread only (Linux)

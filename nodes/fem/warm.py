@@ -18,7 +18,7 @@ from pathlib import Path
 import yaml
 
 from flexsheet.fem.cache import INSTALL_DIR
-from flexsheet.runtime.node import NodeConfig
+from flexsheet.runtime.config import NodeConfig
 from flexsheet.runtime.transport import InProcTransport
 from nodes.fem.node import FemNode
 

@@ -38,13 +38,14 @@ from pydantic import Field
 from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
 from flexsheet.model.shapes import make_shape
 from flexsheet.model.tension import SheetMaterial
+from flexsheet.model.timing import LAB
 from flexsheet.planning.compliance import SceneCompliance
 from flexsheet.planning.limits import MotionLimits, ReachModel
 from flexsheet.planning.shape import planner_shape
 from flexsheet.planning.surface_planner import INPUT_REJECTIONS, Hold, Plan, PlannerConfig, SurfacePlanner
-from flexsheet.runtime.node import InputRejected, Node, QoS
+from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
-from flexsheet.twin.timing import LAB
+from flexsheet.runtime.qos import QoS
 from messages import ArmTarget, Fingertip, ObjectDeformation, SheetTarget, topics
 
 __all__ = ["PlannerParams", "PlannerNode", "fem_solves_scene"]
@@ -73,7 +74,8 @@ def _reach(p) -> ReachModel:
         return reach
     from dataclasses import replace
 
-    from flexsheet.calibration.display_calib import load_display_calib, xyzyaw_from_pose
+    from flexsheet.calibration.display_calib import xyzyaw_from_pose
+    from flexsheet.calibration.display_calib_file import load_display_calib
 
     dc = load_display_calib(path, require=("arms.left", "arms.right"))
     return replace(reach, left_base=xyzyaw_from_pose(dc.arms["left"].T_display_base),

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import os
 import statistics
 import sys
@@ -27,16 +28,17 @@ import time
 
 from flexsheet.benches.render import bench_sheets, sheet_update, time_models
 from flexsheet.model.projector import Projector
-from flexsheet.rendering.state import sheet_model_for
+from flexsheet.model.sheet_model import sheet_model_for
 from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_mesh
+
+log = logging.getLogger(__name__)
 
 __all__ = ["main", "window_pacing"]
 
 
 
 def window_pacing(seconds: float = 5.0, *, stereo: str = "frame_sequential", refresh_hz: float | None = 120.0,
-                  redraw_hz: float = 30.0, width: int = 1024, height: int = 768, model: str = "four_triangle",
-                  progress=None) -> dict:
+                  redraw_hz: float = 30.0, width: int = 1024, height: int = 768, model: str = "four_triangle") -> dict:
     """Frame pacing of the projector window (see the module docstring); run it on a thread with no current
     EGL context. Returns {"present_only": stats, "with_redraws": stats, ...} (times in ms)."""
     from flexsheet.rendering.pacing import FramePacer
@@ -81,8 +83,7 @@ def window_pacing(seconds: float = 5.0, *, stereo: str = "frame_sequential", ref
                           "eye_resyncs": st.eye_resyncs, "redraws": len(draw_ms),
                           "redraw_median_ms": statistics.median(draw_ms) if draw_ms else 0.0,
                           "present_median_ms": statistics.median(present_ms)}
-            if progress:
-                progress(f"{phase}: {st.line()}")
+            log.info(f"{phase}: {st.line()}")
         return res
     finally:
         out.close()
@@ -100,7 +101,7 @@ def _window_main(args) -> dict:
             try:
                 box["res"] = window_pacing(args.seconds, stereo=args.stereo, refresh_hz=args.refresh_hz,
                                            redraw_hz=args.redraw_hz, width=args.width, height=args.height,
-                                           model=args.model, progress=lambda s: print(s, file=sys.stderr))
+                                           model=args.model)
             except BaseException as exc:  # noqa: BLE001 - re-raised in the caller's thread
                 box["err"] = exc
 

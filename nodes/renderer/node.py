@@ -32,34 +32,19 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
-import importlib.util
-import multiprocessing
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from typing import Literal
 
 import numpy as np
-from pydantic import Field, field_validator
 
 from flexsheet.model import geometry as paper
-from flexsheet.rendering.config import RendererConfig
+from flexsheet.model.sheet_model import SheetConfig, sheet_model_for
+from flexsheet.model.timing import LAB
 from flexsheet.rendering.correction import check_screen
-from flexsheet.rendering.state import (
-    ErrorTable,
-    PendingPush,
-    RendererState,
-    SheetConfig,
-    build_table,
-    load_geometry,
-    pick_model,
-    sheet_model_for,
-    silhouette_probes,
-)
-from flexsheet.runtime.background import await_worker, start_worker
-from flexsheet.runtime.node import InputRejected, Node, QoS
-from flexsheet.runtime.params import build, config_fields, params_model
-from flexsheet.twin.timing import LAB
+from flexsheet.rendering.state import PendingPush, RendererState, load_geometry, pick_model
+from flexsheet.runtime.node import InputRejected, Node
+from flexsheet.runtime.qos import QoS
 from messages import (
     ArmJointState,
     Fingertip,
@@ -70,76 +55,13 @@ from messages import (
     SheetTarget,
     topics,
 )
+from nodes.renderer.params import RendererParams
+from nodes.renderer.tables import SheetTables
 
-__all__ = ["RendererNode", "RendererParams"]
-
-
-def _scene_file(cls, v: str | None) -> str | None:
-    if v:                        # validated in full, so `flexsheet launch --check` names a bad key
-        from flexsheet.model.scenes import load_scene
-
-        load_scene(v)
-    return v
+__all__ = ["RendererNode"]
 
 
-def _window_lib(cls, v: str) -> str:
-    if v == "window" and importlib.util.find_spec("glfw") is None:
-        raise ValueError("output='window' (the projector window) needs the 'glfw' package, which is not "
-                         "installed (pip install glfw); use output='offscreen'")
-    return v
-
-
-def _monitor(cls, v: int | str) -> int | str:
-    if isinstance(v, int) and v < 0 or isinstance(v, str) and not v.strip():
-        raise ValueError(f"monitor must be an index >= 0 or part of a monitor's name, got {v!r}")
-    return v
-
-
-#: the files the node reads (filled by the launcher from the launch file's top-level sections)
-_FILES = {
-    "scene": (str | None, Field(None, description="scene file (launch/scenes/*.yaml) whose object is drawn until "
-                                                  "the FEM publishes; None: the paper's cylinder")),
-    "display_calib": (str | None, Field(None, description="display.yaml: the projector (K_p, D, pose) and the eye "
-                                                          "(V, ipd); None: the nominal geometry (logged)")),
-}
-
-#: the projector window (``output: window``): device settings, the node's own
-_WINDOW = {
-    "output": (Literal["offscreen", "window"], Field(
-        "offscreen", description="offscreen: headless EGL; window: the projector window (glfw)")),
-    "stereo": (Literal["frame_sequential", "side_by_side", "top_bottom", "mono"], Field(
-        "frame_sequential", description="window format: eyes on alternate vsyncs (active shutter glasses), "
-                                        "the halves of one frame, or one image from the cyclopean eye")),
-    "monitor": (int | str, Field(0, description="window: monitor index (0 = primary) or part of its name")),
-    "fullscreen": (bool, Field(True, description="window: take the whole monitor (false: a window, debugging)")),
-    "mirror_x": (bool, Field(False, description="window: flip each eye's image left-right")),
-    "refresh_hz": (float | None, Field(None, gt=0.0, le=500.0,
-                                       description="window: refresh rate to ask for, Hz (None: the monitor's)")),
-    "quad_buffer": (bool, Field(True, description="window, frame_sequential: use a quad-buffered stereo context "
-                                                  "where the driver offers one")),
-    "swap_eyes": (bool, Field(False, description="window, frame_sequential: right eye on even vsyncs")),
-}
-
-RendererParams = params_model(
-    "RendererParams",
-    """Renderer parameters (SI units, display frame).
-
-    The files (``scene``, ``display_calib``) and the projector window (``output`` … ``swap_eyes``) are the
-    node's own; every other param is a field of — defined, defaulted and range-checked in —
-    :class:`flexsheet.rendering.config.RendererConfig`; ``renderer_config()`` builds it.
-    """,
-    _FILES,
-    config_fields(RendererConfig),
-    _WINDOW,
-    validators={"_scene_file": field_validator("scene")(_scene_file),
-                "_window_lib": field_validator("output")(_window_lib),
-                "_monitor": field_validator("monitor")(_monitor)},
-    methods={"renderer_config": lambda self: build(RendererConfig, self)},
-    module=__name__,
-)
-
-
-class RendererNode(Node):
+class RendererNode(SheetTables, Node):
     """Projector renderer (see module docstring). Params: :class:`RendererParams`."""
 
     Params = RendererParams
@@ -351,35 +273,6 @@ class RendererNode(Node):
             self._last_publish = now
             self.pub.publish(msg)
 
-    async def _sim_table(self, node: float) -> None:
-        """Load or build (in a spawned worker process, awaited: the loop stays free for heartbeats and signals)
-        the pushed-sheet table of stretch ``node``, then the error table once: on a simulated clock, before
-        simulated time goes on (the lockstep scheduler awaits the handler). A stop terminates the build."""
-        if node in self._tables_asked:
-            return
-        self._tables_asked.add(node)
-        if not self.sheet_model.on_disk(node):
-            self.log.info("pushed-sheet FEM table for stretch %g not cached: building it (~30 s) while simulated "
-                          "time waits", node)
-            proc = multiprocessing.get_context("spawn").Process(
-                target=build_table, args=(self.sheet_model.settings, node, 19), name=f"renderer-sheet-table-{node:g}",
-                daemon=True)
-            start_worker(proc)
-            if not await await_worker(proc, lambda: self.stopping):
-                return
-            if proc.exitcode != 0 or not self.sheet_model.on_disk(node):
-                self.errors_total += 1
-                self._failed.add(node)
-                self.log.error("pushed-sheet table for stretch %g failed (exit code %s)", node, proc.exitcode)
-                self._substitute()
-                return
-        if self.table is None:
-            try:
-                self.table = self._error_table(node)
-            except (ValueError, ArithmeticError, OSError) as exc:
-                self.errors_total += 1
-                self.log.error("model error table at stretch %g failed: %s", node, exc)
-
     async def teardown(self) -> None:
         loop = asyncio.get_running_loop()
         if hasattr(self, "_render_task"):
@@ -399,93 +292,6 @@ class RendererNode(Node):
         if hasattr(self, "_window_thread"):
             self._stop_window.set()
             await loop.run_in_executor(None, self._window_thread.join, 5.0)
-
-    # ------------------------------------------------------------------ pushed-sheet tables
-    def _want_table(self, node: float) -> None:
-        """Ask for the pushed-sheet table of stretch ``node`` (thread-safe; from the drawing thread too). A
-        stretch outside the sheet's range (``SheetMaterial`` min/max stretch, as the planner) is not built: such
-        a push stays on the 4-triangle model."""
-        if not self._in_range(node):
-            return
-        if self.sim:   # drawn meanwhile with what there is; the next render tick builds it, simulated time waiting
-            if node not in self._tables_asked and node not in self._sim_missing:
-                self._sim_missing.append(float(node))
-        else:
-            self._loop.call_soon_threadsafe(self._queue_table, float(node))
-
-    async def _sim_tick(self) -> None:
-        """Simulated clock: build the tables a drawing found missing (awaited), then redraw if wanted."""
-        while self._sim_missing:
-            await self._sim_table(self._sim_missing.pop(0))
-        self._sim_render()
-
-    def _in_range(self, node: float) -> bool:
-        mat = self.sheet_model.material
-        return mat.min_stretch - 1e-9 <= node <= mat.max_stretch + 1e-9
-
-    def _queue_table(self, node: float) -> None:
-        if node not in self._tables_asked:
-            self._tables_asked.add(node)
-            self._tables_wanted.append(node)
-            self._tables_event.set()
-
-    async def _build_tables(self) -> None:
-        """One table at a time: load it if it is on disk, else build it in a worker process (spawned, niced),
-        then (once) the models' error table at that stretch."""
-        loop = asyncio.get_running_loop()
-        ctx = multiprocessing.get_context("spawn")
-        while True:
-            await self._tables_event.wait()
-            self._tables_event.clear()
-            while self._tables_wanted:
-                node = self._tables_wanted.pop(0)
-                if not self.sheet_model.on_disk(node):
-                    self.log.info("pushed-sheet FEM table for stretch %g not cached: building it (~30 s); pushes "
-                                  "at that stretch are drawn with the 4-triangle model meanwhile", node)
-                    t0 = time.monotonic()
-                    proc = ctx.Process(target=build_table, args=(self.sheet_model.settings, node, 19),
-                                       name=f"renderer-sheet-table-{node:g}", daemon=True)
-                    start_worker(proc)             # SIGINT ignored from its first instruction
-                    self._builds.add(proc)
-                    try:
-                        await loop.run_in_executor(None, proc.join)
-                    finally:
-                        self._builds.discard(proc)
-                    if proc.exitcode != 0 or not self.sheet_model.on_disk(node):
-                        self.errors_total += 1
-                        self._failed.add(node)
-                        self.log.error("pushed-sheet table for stretch %g failed (exit code %s; the FEM may not "
-                                       "converge at that stretch)", node, proc.exitcode)
-                        self._substitute()
-                        continue
-                    self.log.info("pushed-sheet table for stretch %g built in %.0f s", node, time.monotonic() - t0)
-                    self._substitute()
-                if self.table is None:
-                    try:
-                        self.table = await loop.run_in_executor(None, self._error_table, node)
-                        self.log.info("model error table ready (stretch %g)", node)
-                    except (ValueError, ArithmeticError, OSError) as exc:
-                        self.errors_total += 1
-                        self.log.error("model error table at stretch %g failed: %s", node, exc)
-                self._request()
-
-    def _substitute(self) -> None:
-        """Stand the nearest built table in for each stretch whose table failed (logged)."""
-        for node in sorted(self._failed):
-            sub = self.sheet_model.nearest_on_disk(node)
-            if sub is not None and self.sheet_model.substitute.get(node) != sub:
-                self.sheet_model.substitute[node] = sub
-                self.log.warning("pushes at stretch %g are drawn with the table of stretch %g", node, sub)
-                if self.table is None:
-                    self._queue_table(sub)
-
-    def _error_table(self, node: float) -> ErrorTable:
-        """The models' predicted errors on the home sheet at stretch ``node`` (its own model instance: the
-        drawing thread's is not shared)."""
-        geo = self.geometry
-        return ErrorTable.at_home(silhouette_probes(geo.mesh[0], center_x=float(geo.scene.center[0])), eye=self.eye,
-                                  projector=self.projector.position, stretch_node=node, config=self.sheet_config,
-                                  sheet_model=sheet_model_for(self.sheet_config))
 
     # ------------------------------------------------------------------ inputs (worker threads)
     def on_deformation(self, msg: ObjectDeformation) -> None:

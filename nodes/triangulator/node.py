@@ -20,9 +20,10 @@ import threading
 import numpy as np
 from pydantic import Field
 
-from flexsheet.runtime.node import InputRejected, Node, QoS
+from flexsheet.model.timing import LAB
+from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
-from flexsheet.twin.timing import LAB
+from flexsheet.runtime.qos import QoS
 from flexsheet.vision.tracker import FingertipTracker, TrackerConfig
 from messages import Fingertip, StereoCalibration, StereoFrame, topics
 
@@ -57,7 +58,7 @@ class TriangulatorNode(Node):
         self._lock = threading.Lock()
         self.display = None
         if p.display_calib:
-            from flexsheet.calibration.display_calib import load_display_calib
+            from flexsheet.calibration.display_calib_file import load_display_calib
 
             self.display = load_display_calib(p.display_calib, require=("camera",)).camera
         self.pub = self.publisher(topics.FINGERTIP)

@@ -17,7 +17,7 @@ Inputs: ``/fingertip``, ``/sheet/target``, ``/arm/left/joint_state``, ``/arm/rig
   other in the depth-1 queue meanwhile (counted as ``dropped`` in the heartbeat); while no viewer is
   connected the handlers decode nothing at all (they look for a viewer once a second);
 * in its own process the transport drains its inputs in batches every ``DRAIN_PERIOD`` (0.05 s;
-  :class:`~flexsheet.runtime.transport.ZmqTransport` ``drain_period``): ZeroMQ queues the ~650 input
+  :class:`~flexsheet.runtime.zmq.transport.ZmqTransport` ``drain_period``): ZeroMQ queues the ~650 input
   messages/s of the sim and the loop wakes ~20 times a second instead of once per message (in a composable
   container the bus delivers as usual);
 * outputs are built only for channels a viewer subscribes to: ``/viz/scene``, ``/viz/tf``, ``/viz/metrics``
@@ -44,11 +44,12 @@ from pydantic import Field, field_validator
 from flexsheet.model.projector import Projector
 from flexsheet.model.sheet_model import SheetConfig
 from flexsheet.rendering.config import SHEET_PARAMS, RendererConfig
-from flexsheet.runtime.node import InputRejected, Node, QoS
+from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import config_fields, params_model
-from flexsheet.viz.config import VizNodeConfig
+from flexsheet.runtime.qos import QoS
+from flexsheet.viz.config import VizConfig, VizNodeConfig
 from flexsheet.viz.foxglove import channel_schemas, inputs_for
-from flexsheet.viz.scene_builder import SceneBuilder, VizConfig
+from flexsheet.viz.scene_builder import SceneBuilder
 from flexsheet.viz.streams import FoxgloveStreams, Rates
 from messages import topics as T
 

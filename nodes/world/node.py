@@ -46,13 +46,15 @@ import time
 import numpy as np
 from pydantic import Field, field_validator
 
-from flexsheet.model.scenes import Scene, SceneError, load_scene
+from flexsheet.model.scene_parts import SceneError
+from flexsheet.model.scenes import Scene, load_scene
 from flexsheet.runtime.background import await_worker, start_worker
-from flexsheet.runtime.node import InputRejected, Node, QoS
+from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
+from flexsheet.runtime.qos import QoS
 from flexsheet.twin.finger import FingerScript
 from flexsheet.twin.truth import TwinTruth
-from flexsheet.twin.world import FemSettings, TruePhysics, build_table
+from flexsheet.twin.world import TruePhysics, build_table
 from flexsheet.twin.world_config import SheetFemConfig, WorldConfig
 from messages import ArmJointState, FingerTruth, Heartbeat, SheetState
 from messages import topics as T
@@ -68,11 +70,11 @@ SheetFemParams = params_model(
     cached), ``[]`` for none; ``h_fine``/``h_coarse`` m element sizes; ``cache_dir`` (default
     ``$FLEXSHEET_CACHE/sheet_fem`` or ``~/.cache/flexsheet/sheet_fem``); ``worker_nice``: niceness of the
     worker processes. Each is a field of — defined, defaulted and range-checked in —
-    :class:`flexsheet.twin.world_config.SheetFemConfig`; ``settings()`` gives the
-    :class:`~flexsheet.twin.world.FemSettings`, ``prebuild_nodes()`` the table nodes of ``prebuild``.""",
+    :class:`flexsheet.twin.world_config.SheetFemConfig`; ``config()`` gives it, ``prebuild_nodes()`` the table
+    nodes of ``prebuild``.""",
     config_fields(SheetFemConfig),
     check=lambda cfg: build(SheetFemConfig, cfg),
-    methods={"settings": lambda self: build(SheetFemConfig, self).settings(),
+    methods={"config": lambda self: build(SheetFemConfig, self),
              "prebuild_nodes": lambda self: build(SheetFemConfig, self).prebuild_nodes()},
     module=__name__,
 )
@@ -157,7 +159,7 @@ class WorldNode(Node):
         self.finger_pub = self.publisher(T.FINGER_TRUTH)
         self.sheet_pub = self.publisher(T.SHEET_STATE)
         self.truth = TwinTruth.draw(p.twin.truth_seed, p.twin.realism)
-        self.phys = TruePhysics(self.truth, p.sheet_fem.settings(), size=p.sheet_size)
+        self.phys = TruePhysics(self.truth, p.sheet_fem.config(), size=p.sheet_size)
         self.poses: dict[str, np.ndarray] = {}
         self.pose_stamps: dict[str, float] = {}
         self.finger = self.scripts[0].position(0.0)
@@ -244,7 +246,7 @@ class WorldNode(Node):
         p = self.params
         proc = multiprocessing.get_context("spawn").Process(
             target=_build_worker, daemon=True, name=f"sheet-fem-{node:g}",
-            args=(p.twin.truth_seed, p.twin.realism, node, p.sheet_size, self.phys.settings, p.sheet_fem.worker_nice))
+            args=(p.twin.truth_seed, p.twin.realism, node, p.sheet_size, self.phys.config, p.sheet_fem.worker_nice))
         start_worker(proc)                      # SIGINT ignored from its first instruction
         return proc
 
@@ -431,10 +433,10 @@ class WorldNode(Node):
             membrane=np.ascontiguousarray(grid), force=max(force, 0.0)))
 
 
-def _build_worker(seed: int, realism: str, node: float, size: float, settings: FemSettings, nice: int) -> None:
+def _build_worker(seed: int, realism: str, node: float, size: float, config: SheetFemConfig, nice: int) -> None:
     """Worker-process entry: lower the priority (niceness only, not the idle class: the world needs its true
     sheet, :func:`flexsheet.runtime.background.lower_priority`), then build (and cache) one FEM table."""
     from flexsheet.runtime.background import lower_priority
 
     lower_priority(nice, idle=False)
-    build_table(seed, realism, node, size, settings)
+    build_table(seed, realism, node, size, config)

@@ -9,6 +9,7 @@ from pymodbus.client import AsyncModbusTcpClient
 
 from flexsheet.arm.kinematics import QD_MAX, home_joints
 from flexsheet.model import geometry
+from flexsheet.model.sheet import clamp_poses
 from flexsheet.runtime.testing import NodeHarness
 from flexsheet.twin.controller import ControllerCore
 from flexsheet.twin.modbus_server import ControllerTwin
@@ -22,7 +23,7 @@ SPEED_SCALE = 0.5     # bridge default
 
 def clamp_pose(side, theta, stretch=0.05):
     c, s = math.cos(theta), math.sin(theta)
-    L, R = geometry.clamp_poses(np.array([-R_CYL + R_CYL * c, 0.0, R_CYL * s]), np.array([c, 0.0, s]),
+    L, R = clamp_poses(np.array([-R_CYL + R_CYL * c, 0.0, R_CYL * s]), np.array([c, 0.0, s]),
                              np.array([0.0, 1.0, 0.0]), stretch)
     return L if side == "left" else R
 
@@ -298,10 +299,11 @@ def test_stream_stop_ends_the_loop_when_a_cancellation_is_swallowed():
     """A lost cancellation (a reply and the cancel arriving together in pymodbus's ``wait_for``) must not keep
     the stream running: ``stop`` returns (bounded here by 2 s; it used to wait forever, and the node harness
     timed out after 5 s) and closes the link."""
-    from flexsheet.arm.kinematics import LEFT_BASE, Q_LOWER, Q_UPPER, ArmKinematics
+    from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, ArmKinematics
     from flexsheet.arm.limiter import StreamLimiter
     from flexsheet.arm.stream import ArmStream
     from flexsheet.arm.tracking import TargetTracker
+    from flexsheet.model.geometry import LEFT_BASE
 
     async def scenario():
         link = _CancelSwallowingLink()

@@ -8,8 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from flexsheet.calibration.display_calib import load_display_calib, nominal_display_calib, write_display_calib
-from flexsheet.runtime.node import ConfigError
+from flexsheet.calibration.display_calib import nominal_display_calib
+from flexsheet.calibration.display_calib_file import load_display_calib, write_display_calib
+from flexsheet.runtime.config import ConfigError
 from flexsheet.runtime.testing import NodeHarness
 from nodes.arm_bridge.node import ArmBridgeNode
 

@@ -18,18 +18,14 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from flexsheet.experiments.faults.bags import T0, fingertip, with_seq
-from flexsheet.runtime.bag import (
-    GAP_TOPIC,
-    BagSummary,
-    BagWriter,
-    RecorderNode,
-    bag_info,
-    export_bag,
-    read_bag,
-    recover_bag,
-)
+from flexsheet.runtime.bag import RecorderNode
+from flexsheet.runtime.bag_export import export_bag
+from flexsheet.runtime.bag_read import GAP_TOPIC, BagSummary, bag_info, read_bag
+from flexsheet.runtime.bag_recover import recover_bag
+from flexsheet.runtime.bag_write import BagWriter
 from flexsheet.runtime.codec import decode, encode
-from flexsheet.runtime.node import Node, NodeConfig
+from flexsheet.runtime.config import NodeConfig
+from flexsheet.runtime.node import Node
 from messages import Header, StereoFrame
 from messages import topics as T
 

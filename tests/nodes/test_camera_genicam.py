@@ -26,7 +26,8 @@ if str(ROOT) not in sys.path:
 
 from flexsheet.vision.stereo_sync import CamFrame, ClockMap, FrameIdTracker, StereoPairer  # noqa: E402
 from nodes.camera.device import DeviceSource, skew_upper_bound  # noqa: E402
-from nodes.camera.genicam import DeviceInfo, plan_sync, resolve_device  # noqa: E402
+from nodes.camera.genicam import DeviceInfo, resolve_device  # noqa: E402
+from nodes.camera.genicam_sync import plan_sync  # noqa: E402
 
 IMG = np.zeros((4, 6), np.uint8)
 
@@ -221,7 +222,8 @@ def test_camera_params_genicam_need_two_ids():
 def _display_yaml(folder) -> str:
     """A display.yaml with the nominal entries (the lab's registration stands in; these tests are about the
     GenICam path, not the geometry)."""
-    from flexsheet.calibration.display_calib import nominal_display_calib, write_display_calib
+    from flexsheet.calibration.display_calib import nominal_display_calib
+    from flexsheet.calibration.display_calib_file import write_display_calib
 
     path = str(Path(folder) / "display.yaml")
     write_display_calib(path, nominal_display_calib())

@@ -13,23 +13,14 @@ import math
 import numpy as np
 import pytest
 
-from flexsheet.calibration.display_calib import (
-    CameraEntry,
-    DisplayCalib,
-    Provenance,
-    nominal_display_calib,
-    write_display_calib,
-)
+from flexsheet.calibration.display_calib import CameraEntry, DisplayCalib, Provenance, nominal_display_calib
+from flexsheet.calibration.display_calib_file import write_display_calib
 from flexsheet.experiments import vision_twin as vt
 from flexsheet.runtime.testing import NodeHarness
-from flexsheet.twin.camera import (
-    XIMEA_SENSOR,
-    SimConfig,
-    StereoRenderer,
-    camera_model,
-    twin_renderer,
-)
+from flexsheet.twin.camera import StereoCameraTwin, twin_renderer
+from flexsheet.twin.camera_config import XIMEA_SENSOR, SimConfig
 from flexsheet.twin.truth import TwinTruth
+from flexsheet.vision.camera_model import camera_model
 from flexsheet.vision.tracker import FingertipTracker, TrackerConfig
 from messages import topics
 from nodes.camera.node import CameraNode
@@ -55,7 +46,7 @@ def test_true_camera_image_differs_from_nominal_render(seed):
     p = np.array([0.02, 0.01, 0.0])
     cfg = SimConfig(noise_scale=0.0)
     nom = nominal_display_calib().camera
-    nominal = StereoRenderer(nom.stereo, nom.T_display_camera, cfg)
+    nominal = StereoCameraTwin(nom.stereo, nom.T_display_camera, cfg)
     true = twin_renderer(TwinTruth.draw(seed), cfg)
     ul_n, ur_n = nominal.model.project(nominal.to_camera(p))
     ul_t, ur_t = true.model.project(true.to_camera(p))
@@ -66,7 +57,7 @@ def test_true_camera_image_differs_from_nominal_render(seed):
     assert np.mean(np.abs(Ln.astype(int) - Lt.astype(int))) > 1.0
     ideal = twin_renderer(TwinTruth.draw(seed, "ideal"), cfg)
     Li, Ri = ideal.render(p)
-    Ln2, Rn2 = StereoRenderer(nom.stereo, nom.T_display_camera, cfg).render(p)
+    Ln2, Rn2 = StereoCameraTwin(nom.stereo, nom.T_display_camera, cfg).render(p)
     assert np.array_equal(Li, Ln2) and np.array_equal(Ri, Rn2)
 
 

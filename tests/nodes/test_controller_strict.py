@@ -24,12 +24,13 @@ import pytest
 from pymodbus.client import AsyncModbusTcpClient
 from test_arm_bridge import read_state, start_twin, target
 
-from flexsheet.arm.kinematics import LEFT_BASE, Q_HOME, Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints
+from flexsheet.arm.kinematics import Q_HOME, Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints
 from flexsheet.arm.tracking import TargetRefused, TargetTracker
+from flexsheet.model.geometry import LEFT_BASE
 from flexsheet.model.shapes import make_shape
 from flexsheet.planning.surface_planner import Hold, PlannerConfig, SurfacePlanner
+from flexsheet.runtime.config import ConfigError
 from flexsheet.runtime.launch_check import check_launch
-from flexsheet.runtime.node import ConfigError
 from flexsheet.runtime.testing import NodeHarness
 from flexsheet.twin.controller import ControllerCore, WriteRejected
 from flexsheet.twin.modbus_server import ControllerTwin

@@ -74,8 +74,9 @@ def test_node_serves_cached_nonlinear_snapshots_and_says_so(tmp_path):
     from test_fem_hyperelastic import _analytic_table
 
     from flexsheet.fem.cache import ArrayCache
-    from flexsheet.fem.material import GENT_JM_RUBBER, Material
+    from flexsheet.fem.material import Material
     from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, table_key
+    from flexsheet.model.scene_parts import GENT_JM_RUBBER
 
     tab = _analytic_table([0.0, 10.0], [0.0, 0.01, 0.02])
     # the bare node's law is the paper scene's (Gent); a table under that key in cache_dir wins over the shipped one

@@ -1,6 +1,6 @@
 """Hostile input for the stereo calibration loader and the Modbus register decoder.
 
-* :func:`flexsheet.vision.stereo_calibration.load_yaml`: random bytes, valid OpenCV YAML with mutated numbers
+* :func:`flexsheet.vision.calib_yaml.load_yaml`: random bytes, valid OpenCV YAML with mutated numbers
   (NaN/inf, huge, negative, zero), wrong shapes, missing keys. Contract (its docstring): ``ValueError``
   naming the file and key, or a calibration with finite values of the documented shapes.
 * :mod:`messages.registers`: register images of any length and content (negative, > 65535,
@@ -24,7 +24,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from flexsheet.vision.stereo_calibration import load_yaml, write_yaml
+from flexsheet.vision.calib_yaml import load_yaml, write_yaml
 from messages import registers as reg
 
 FUZZ = settings(max_examples=60, deadline=None, database=None,
@@ -249,7 +249,7 @@ def test_register_wrong_containers_rejected():
 
 HEAP_REPRO = """
 import numpy as np
-from flexsheet.vision.stereo_calibration import load_yaml, write_yaml
+from flexsheet.vision.calib_yaml import load_yaml, write_yaml
 K = np.array([[800.0, 0, 320], [0, 800.0, 256], [0, 0, 1]])
 write_yaml("{d}/good.yaml", dict(image_size=(640, 512), K1=K, D1=np.zeros(5), K2=K, D2=np.zeros(5), R=np.eye(3),
                                  T=np.array([-0.1, 0, 0])))

@@ -150,13 +150,9 @@ def test_planner_survives_fuzz():
 
 
 def test_triangulator_survives_fuzz():
-    from flexsheet.twin.camera import (
-        DEFAULT_CAMERA_POSITION,
-        SimConfig,
-        StereoRenderer,
-        camera_model,
-        look_at,
-    )
+    from flexsheet.twin.camera import StereoCameraTwin
+    from flexsheet.twin.camera_config import SimConfig
+    from flexsheet.vision.camera_model import DEFAULT_CAMERA_POSITION, camera_model, look_at
     from flexsheet.vision.stereo_calibration import to_message
     from messages import StereoFrame
     from nodes.triangulator.node import TriangulatorNode
@@ -170,7 +166,7 @@ def test_triangulator_survives_fuzz():
             await h.settle(0.3)
             await _inject_all(h, topics.STEREO, "triangulator", 4)
             p = np.array([0.02, 0.01, 0.01])
-            L, R = StereoRenderer(calib, T_dc, SimConfig(seed=4)).render(p)
+            L, R = StereoCameraTwin(calib, T_dc, SimConfig(seed=4)).render(p)
             h.inject(topics.STEREO, StereoFrame(header=Header(stamp=200.0, frame_id="camera_left", seq=1), left=L,
                                                 right=R, exposure_stamp=200.0, exposure_time=0.004))
             out = (await h.wait_for(topics.FINGERTIP, n=1, timeout=5.0))[-1]

@@ -71,7 +71,7 @@ def test_params_validate():
 def test_experiment_kf_tuning_is_kalatas_alpha_beta_in_steady_state(lam, tol):
     """The stroke experiment runs the triangulator's real Kalman filter with q from a tracking index λ; its
     steady-state gains must be Kalata's closed-form α-β gains for that λ (IEEE T-AES 20(2), 1984)."""
-    from flexsheet.experiments.stroke import Predictor, q_for_tracking_index
+    from flexsheet.vision.predict import Predictor, q_for_tracking_index
 
     T, sig = 1.0 / 48.0, 1e-4
     pr = Predictor(q_for_tracking_index(lam, sig, T))
@@ -119,7 +119,8 @@ def test_bench_prints_json(capsys):
 
 def test_reach_takes_the_arm_bases_from_display_calib(tmp_path):
     """The planner (an estimator) takes the arm bases of the registered display, never the twin's truth."""
-    from flexsheet.calibration.display_calib import nominal_display_calib, write_display_calib
+    from flexsheet.calibration.display_calib import nominal_display_calib
+    from flexsheet.calibration.display_calib_file import write_display_calib
     from flexsheet.model.geometry import LEFT_BASE
 
     dc = nominal_display_calib()

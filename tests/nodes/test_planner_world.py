@@ -10,7 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from flexsheet.arm.kinematics import LEFT_BASE, RIGHT_BASE, ArmKinematics, home_joints
+from flexsheet.arm.kinematics import ArmKinematics, home_joints
+from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
 from flexsheet.model.sheet import clamp_poses
 from flexsheet.runtime.testing import NodeHarness
 from flexsheet.twin.finger import FingerScript

@@ -9,7 +9,8 @@ import pytest
 
 from flexsheet.runtime.testing import NodeHarness
 from messages import ArmJointState, Fingertip, Header, ObjectDeformation, topics
-from nodes.renderer.node import RendererNode, RendererParams
+from nodes.renderer.node import RendererNode
+from nodes.renderer.params import RendererParams
 
 PARAMS = {"width": 128, "height": 96, "publish_rate": 30.0, "publish_scale": 0.5}
 
@@ -128,7 +129,7 @@ def test_tilted_clamps_drive_the_flat_correction():
         async with NodeHarness(RendererNode, params=PARAMS) as h:
             th = np.radians(40)
             n = np.array([np.cos(th), 0, -np.sin(th)])
-            from flexsheet.model.geometry import clamp_poses
+            from flexsheet.model.sheet import clamp_poses
             Tl, Tr = clamp_poses(np.array([-0.01, 0, -0.02]), n, np.array([0.0, 1, 0]), 0.0)
             h.inject(topics.ARM_LEFT_STATE, arm("left", Tl))
             h.inject(topics.ARM_RIGHT_STATE, arm("right", Tr))

@@ -19,11 +19,10 @@ from flexsheet.calibration.display_calib import (
     DisplayCalib,
     ProjectorEntry,
     Provenance,
-    load_display_calib,
     nominal_display_calib,
     pose_from_rt,
-    write_display_calib,
 )
+from flexsheet.calibration.display_calib_file import load_display_calib, write_display_calib
 from flexsheet.model import geometry as paper
 from flexsheet.model.projector import Projector
 from flexsheet.model.scenes import SCENES_DIR, load_scene

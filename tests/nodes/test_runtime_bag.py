@@ -12,10 +12,15 @@ import numpy as np
 from conftest import free_port
 from mcap.reader import make_reader
 
-from flexsheet.runtime.bag import BagWriter, PlayerNode, RecorderNode, bag_info, export_bag, read_bag
+from flexsheet.runtime.bag import PlayerNode, RecorderNode
+from flexsheet.runtime.bag_export import export_bag
+from flexsheet.runtime.bag_read import bag_info, read_bag
+from flexsheet.runtime.bag_write import BagWriter
 from flexsheet.runtime.codec import decode, encode
+from flexsheet.runtime.config import NodeConfig
 from flexsheet.runtime.demo import TalkerNode
-from flexsheet.runtime.node import Node, NodeConfig, QoS
+from flexsheet.runtime.node import Node
+from flexsheet.runtime.qos import QoS
 from messages import Header, StereoCalibration, StereoFrame
 from messages import topics as T
 

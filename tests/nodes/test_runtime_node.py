@@ -15,8 +15,10 @@ import pytest
 from pydantic import ValidationError
 
 from flexsheet.runtime.codec import encode
+from flexsheet.runtime.config import NodeConfig
 from flexsheet.runtime.demo import ListenerNode, TalkerNode
-from flexsheet.runtime.node import Node, NodeConfig, QoS
+from flexsheet.runtime.node import Node
+from flexsheet.runtime.qos import QoS
 from flexsheet.runtime.testing import NodeHarness
 from messages import Fingertip, Header, Heartbeat
 from messages import topics as T
@@ -142,7 +144,7 @@ def test_publisher_rejects_wrong_type():
 def test_drain_period_receives_in_batches_and_loses_nothing():
     """``ZmqTransport(drain_period=…)`` (the Foxglove bridge's input batching): messages sent 30 ms apart over
     120 ms reach the handler in at most two drains of the 0.2 s period, every one of them, in order."""
-    from flexsheet.runtime.transport import ZmqTransport
+    from flexsheet.runtime.zmq.transport import ZmqTransport
     from tests.conftest import free_port
 
     with pytest.raises(ValueError, match="drain_period"):
@@ -294,14 +296,14 @@ def _pool_worker(path: str) -> str:
 
 
 def _pool_parent(path: str) -> None:
-    from flexsheet.fem.workers import run_workers
+    from flexsheet.fem.reference.workers import run_workers
 
     for _ in run_workers(_pool_worker, [path, path], 2):
         pass
 
 
 def test_experiment_workers_are_tied_to_their_parent(tmp_path):
-    """flexsheet.fem.workers.run_workers, the pool of the reference, sphere-table and path-table solves: its
+    """flexsheet.fem.reference.workers.run_workers, the pool of the reference, sphere-table and path-table solves: its
     workers ignore SIGINT, run one BLAS thread, and die when the experiment is killed (kill -9): the path table's
     own pool once left two workers solving for minutes after its parent was gone."""
     import multiprocessing as mp
@@ -330,7 +332,7 @@ def test_experiment_workers_are_tied_to_their_parent(tmp_path):
 
 _CLOSE_RACE = r"""
 import asyncio, sys, threading, time, zmq
-from flexsheet.runtime.transport import XPub
+from flexsheet.runtime.zmq.xpub import XPub
 port = int(sys.argv[1])
 for rnd in range(int(sys.argv[2])):
     ctx, sctx, loop = zmq.Context(), zmq.Context(), asyncio.new_event_loop()
@@ -369,7 +371,8 @@ def test_publisher_close_survives_subscribers_leaving_mid_message():
 _CV2_HANDLER_SCRIPT = r"""
 import asyncio, sys, time
 import cv2, numpy as np
-from flexsheet.runtime.node import Node, QoS
+from flexsheet.runtime.node import Node
+from flexsheet.runtime.qos import QoS
 from flexsheet.runtime.testing import NodeHarness
 from messages import topics as T
 sys.path.insert(0, {tests!r})

@@ -12,12 +12,13 @@ import pytest
 from flexsheet.arm.kinematics import ArmKinematics, home_joints
 from flexsheet.calibration.display_calib import nominal_display_calib
 from flexsheet.model.sheet import clamp_poses, frame_from_clamps
-from flexsheet.model.sheet_fem import FemShape
-from flexsheet.runtime.node import NodeConfig
+from flexsheet.model.sheet_table import FemShape
+from flexsheet.runtime.config import NodeConfig
 from flexsheet.runtime.testing import NodeHarness
 from flexsheet.runtime.transport import InProcTransport
 from flexsheet.twin.truth import TwinTruth
-from flexsheet.twin.world import FemSettings, TruePhysics
+from flexsheet.twin.world import TruePhysics
+from flexsheet.twin.world_config import SheetFemConfig
 from messages import ArmJointState, Header
 from messages import topics as T
 from nodes.world.node import WorldNode, WorldParams
@@ -93,7 +94,7 @@ def test_world_node_publishes_the_sheet_of_the_true_kinematics(realism, tmp_path
 
 def test_pushed_sheet_is_the_fem_shape_of_the_truth(tmp_path):
     truth = TwinTruth.draw(2, "realistic")
-    settings = FemSettings(depths=(0.01, 0.03), positions=(0.0, 0.048), mesh=COARSE, cache_dir=str(tmp_path))
+    settings = SheetFemConfig(depths=[0.01, 0.03], positions=[0.0, 0.048], cache_dir=str(tmp_path), **COARSE)
     phys = TruePhysics(truth, settings)
     node = phys.node_of(0.043)
     assert node == pytest.approx(0.04)

@@ -6,13 +6,9 @@ import numpy as np
 
 from flexsheet.runtime.codec import encode
 from flexsheet.runtime.testing import NodeHarness
-from flexsheet.twin.camera import (
-    DEFAULT_CAMERA_POSITION,
-    SimConfig,
-    StereoRenderer,
-    camera_model,
-    look_at,
-)
+from flexsheet.twin.camera import StereoCameraTwin
+from flexsheet.twin.camera_config import SimConfig
+from flexsheet.vision.camera_model import DEFAULT_CAMERA_POSITION, camera_model, look_at
 from flexsheet.vision.stereo_calibration import to_message
 from messages import FingerTruth, Header, StereoFrame, topics
 from nodes.camera.node import CameraNode
@@ -20,7 +16,7 @@ from nodes.triangulator.node import TriangulatorNode
 
 CALIB = camera_model("ximea")
 T_DC = look_at(DEFAULT_CAMERA_POSITION)
-RENDER = StereoRenderer(CALIB, T_DC, SimConfig.ideal(seed=4))   # node mechanics: the ideal twin's sensing
+RENDER = StereoCameraTwin(CALIB, T_DC, SimConfig.ideal(seed=4))   # node mechanics: the ideal twin's sensing
 IDEAL = {"realism": "ideal", "truth_seed": 0}
 
 
@@ -182,7 +178,7 @@ def test_camera_link_delay_needs_the_simulated_clock():
     import pydantic
     import pytest
 
-    from flexsheet.runtime.node import ConfigError
+    from flexsheet.runtime.config import ConfigError
 
     async def scenario():
         async with NodeHarness(CameraNode, params={"rate_hz": 50.0, "twin": IDEAL, "link_delay_s": 0.05}):

@@ -15,6 +15,7 @@ import pytest
 from conftest import free_port
 
 from flexsheet.model import geometry
+from flexsheet.model.sheet import clamp_poses
 from flexsheet.runtime.testing import NodeHarness
 from flexsheet.viz.samples import sample_state
 from flexsheet.viz.wsclient import FoxgloveClient
@@ -102,7 +103,7 @@ def test_client_sees_channels_and_decodes_scene_fingertip_and_frames():
         t = by_child[frame]
         M = mat(t) @ M
         frame = t.parent_frame_id
-    home_left, _ = geometry.clamp_poses(np.zeros(3), geometry.SCREEN_NORMAL, np.array([0.0, 1.0, 0.0]), 0.0)
+    home_left, _ = clamp_poses(np.zeros(3), geometry.SCREEN_NORMAL, np.array([0.0, 1.0, 0.0]), 0.0)
     assert np.linalg.norm(M[:3, 3] - home_left[:3, 3]) < 2e-3      # Q_HOME is given to 0.01 deg
     assert {"camera_left", "camera_right", "projector", "sheet", "right/base_link"} <= set(by_child)
     assert np.allclose(mat(by_child["projector"])[:3, 3], geometry.PROJECTOR)

@@ -18,7 +18,7 @@ import pytest
 from conftest import MIN_TIPS_HZ, private_ports
 
 from flexsheet.arm.kinematics import QD_MAX
-from flexsheet.runtime.bag import read_bag
+from flexsheet.runtime.bag_read import read_bag
 from flexsheet.runtime.codec import decode_any
 
 ROOT = Path(__file__).resolve().parents[2]

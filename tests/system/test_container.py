@@ -18,11 +18,15 @@ import pytest
 import zmq
 from conftest import free_port, pid_alive
 
-import flexsheet.runtime.container as container_mod
-import flexsheet.runtime.node as node_mod
+import flexsheet.runtime.bus as bus_mod
+import flexsheet.runtime.publisher as publisher_mod
+from flexsheet.runtime.bus import Bus, ContainerTransport
 from flexsheet.runtime.codec import decode
-from flexsheet.runtime.container import Bus, Container, ContainerTransport, Member
-from flexsheet.runtime.node import EXIT_CONFIG, Node, NodeConfig, QoS
+from flexsheet.runtime.config import EXIT_CONFIG, NodeConfig
+from flexsheet.runtime.container import Container, Member
+from flexsheet.runtime.node import Node
+from flexsheet.runtime.qos import QoS
+from flexsheet.runtime.testing import console_lines
 from messages import Fingertip, Header, StereoCalibration
 from messages import topics as T
 from messages.samples import sample_fields
@@ -97,14 +101,14 @@ async def _until(cond, timeout: float = 5.0) -> None:
 
 def test_in_process_message_is_the_object_itself_with_read_only_arrays_and_never_encoded(monkeypatch):
     calls = []
-    real = node_mod.encode
+    real = publisher_mod.encode
 
     def counting(topic, msg):
         calls.append(topic)
         return real(topic, msg)
 
-    monkeypatch.setattr(node_mod, "encode", counting)
-    monkeypatch.setattr(container_mod, "encode", counting)
+    monkeypatch.setattr(publisher_mod, "encode", counting)
+    monkeypatch.setattr(bus_mod, "encode", counting)
 
     async def scenario():
         bus = Bus("t")
@@ -131,13 +135,13 @@ def test_in_process_message_is_the_object_itself_with_read_only_arrays_and_never
 
 def test_encoded_once_only_while_someone_outside_subscribes(monkeypatch):
     calls = []
-    real = node_mod.encode
+    real = publisher_mod.encode
 
     def counting(topic, msg):
         calls.append(topic)
         return real(topic, msg)
 
-    monkeypatch.setattr(node_mod, "encode", counting)
+    monkeypatch.setattr(publisher_mod, "encode", counting)
     ep = f"tcp://127.0.0.1:{free_port()}"
 
     async def scenario():
@@ -230,8 +234,6 @@ class BadConfig(Node):
 
 
 def test_a_crashing_node_is_restarted_alone_and_its_neighbours_keep_their_state():
-    lines: list[str] = []
-
     async def scenario():
         bus = Bus("t")
 
@@ -240,7 +242,7 @@ def test_a_crashing_node_is_restarted_alone_and_its_neighbours_keep_their_state(
                                               transport=ContainerTransport(b, "")), **kw)
 
         c = Container("t", [member(Counter, "counter"), member(Crasher, "crasher", delay=0.05),
-                            member(BadConfig, "bad", delay=0.05)], bus, print_fn=lines.append)
+                            member(BadConfig, "bad", delay=0.05)], bus)
         task = asyncio.get_running_loop().create_task(c.run(install_signals=False))
         await _until(lambda: c.node("counter") is not None and c.node("counter").ready)
         counter = c.node("counter")
@@ -252,7 +254,8 @@ def test_a_crashing_node_is_restarted_alone_and_its_neighbours_keep_their_state(
         code = await task
         return c, same, ticks_after_restarts, counter.ticks, code
 
-    c, same, mid, end, code = asyncio.run(scenario())
+    with console_lines() as lines:
+        c, same, mid, end, code = asyncio.run(scenario())
     crasher = next(m for m in c.members if m.name == "crasher")
     bad = next(m for m in c.members if m.name == "bad")
     assert same and end > mid > 0                     # the counter was never restarted and kept counting

@@ -44,7 +44,7 @@ if str(ROOT) not in sys.path:
 
 from conftest import MIN_TIPS_HZ, private_ports  # noqa: E402
 
-from flexsheet.runtime.bag import BagSummary, bag_info, read_bag  # noqa: E402
+from flexsheet.runtime.bag_read import BagSummary, bag_info, read_bag  # noqa: E402
 from flexsheet.runtime.codec import decode_any  # noqa: E402
 from flexsheet.runtime.launch import load_launch  # noqa: E402
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 
-from flexsheet.experiments.faults import main
+from flexsheet.experiments.faults.experiment import main
 
 
 def test_every_attack_meets_its_target_in_quick_mode(tmp_path):

@@ -14,7 +14,7 @@ import pytest
 from conftest import MIN_TIPS_HZ
 
 from flexsheet.experiments.table1 import PAPER_TABLE1
-from flexsheet.runtime.bag import bag_info, read_bag
+from flexsheet.runtime.bag_read import bag_info, read_bag
 from flexsheet.runtime.codec import decode_any
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -60,7 +60,7 @@ def test_sim_launch_prints_table1_and_latency_and_leaves_outputs(sim_run):
     for hop in ("camera_frame_to_fingertip", "fingertip_to_sheet_target", "sheet_target_to_arm_command",
                 "exposure_to_arm_command", "fingertip_to_deformation", "exposure_to_projected"):
         assert chain[hop]["n"] > 20 and chain[hop]["median"] is not None, hop
-    # the modelled lab latency (flexsheet/twin/timing.py), issue targets: 15 ms and 25 ms medians
+    # the modelled lab latency (flexsheet/model/timing.py), issue targets: 15 ms and 25 ms medians
     assert chain["exposure_to_arm_command"]["median"] <= 15.0 and chain["exposure_to_projected"]["median"] <= 25.0
     info = bag_info(out / "sim.mcap")
     assert not info.truncated and info.counts["/object/deformation"] > 100 and info.counts["/render/stereo"] > 20

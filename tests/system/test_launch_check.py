@@ -18,11 +18,13 @@ import yaml
 from conftest import ROOT, free_port
 
 from flexsheet.runtime import ports
-from flexsheet.runtime.launch import TOPLEVEL_ENV, load_launch, split_sets
+from flexsheet.runtime.config import EXIT_CONFIG
+from flexsheet.runtime.launch import TOPLEVEL_ENV, load_launch
 from flexsheet.runtime.launch_check import check_launch
-from flexsheet.runtime.node import EXIT_CONFIG
+from flexsheet.runtime.launch_sets import split_sets
 from flexsheet.runtime.ports import ephemeral_port_range
 from flexsheet.runtime.supervisor import Supervisor
+from flexsheet.runtime.testing import console_lines
 
 LAB_KEYGEN = ["keys", "generate", "--launch", "launch/lab.yaml"]
 
@@ -46,7 +48,7 @@ def keys(tmp_path, monkeypatch) -> Path:
 
 def _tiny_bag(path: Path) -> Path:
     """A real one-message MCAP bag (what ``launch/replay.yaml`` plays)."""
-    from flexsheet.runtime.bag import BagWriter
+    from flexsheet.runtime.bag_write import BagWriter
     from flexsheet.runtime.codec import encode
     from messages import Fingertip, Header
     from messages.samples import sample_fields
@@ -61,10 +63,10 @@ def _tiny_bag(path: Path) -> Path:
 def _here(errors: list[str], path: Path) -> list[str]:
     """``errors`` less the one "not an address of this machine" line of each host of ``path`` whose address this
     machine lacks (the lab's 10.77.0.x); asserts that each such host got that line."""
-    from flexsheet.runtime.launch_check import _not_local
+    from flexsheet.runtime.machine_checks import not_local
 
     lf = load_launch(path)
-    absent = {h: s.address for h, s in lf.hosts.items() if _not_local(s.address)}
+    absent = {h: s.address for h, s in lf.hosts.items() if not_local(s.address)}
     out = []
     for e in errors:
         host = next((h for h, a in absent.items() if f"hosts.{h}.address = '{a}': not an address of this machine"
@@ -224,6 +226,7 @@ def test_display_calib_missing_or_stale_entries_are_named_per_host(tmp_path):
     """The entries the checked host's nodes need must be in display.yaml (a missing one names the calibrate
     command); the camera entry must be newer than the stereo calibration it was fitted with."""
     dc = pytest.importorskip("flexsheet.calibration.display_calib")
+    write_display_calib = pytest.importorskip("flexsheet.calibration.display_calib_file").write_display_calib
     import dataclasses
 
     stereo = tmp_path / "stereo.yaml"
@@ -236,7 +239,7 @@ def test_display_calib_missing_or_stale_entries_are_named_per_host(tmp_path):
     path = tmp_path / "chk.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     nominal = dc.nominal_display_calib()
-    dc.write_display_calib(str(tmp_path / "display.yaml"), nominal)
+    write_display_calib(str(tmp_path / "display.yaml"), nominal)
     res = check_launch(path, out=str(tmp_path / "out"))
     assert res.errors == [], res.errors      # nominal entries: warnings, one per entry a node uses
     assert sorted(w.split("'")[1] for w in res.warnings if "nominal" in w) == ["arms.right", "camera", "eye",
@@ -244,7 +247,7 @@ def test_display_calib_missing_or_stale_entries_are_named_per_host(tmp_path):
     measured = dc.Provenance("test fit", measured_at="2000-01-01T00:00:00Z", source="lab", n_poses=8)
     calib = dataclasses.replace(nominal, projector=None, arms={"left": nominal.arms["left"]},
                                 camera=dataclasses.replace(nominal.camera, provenance=measured))
-    dc.write_display_calib(str(tmp_path / "display.yaml"), calib)
+    write_display_calib(str(tmp_path / "display.yaml"), calib)
     main = check_launch(path, host="main", out=str(tmp_path / "out")).errors
     assert len(main) == 2, main
     assert "stale 'camera' entry: measured 2000-01-01T00:00:00Z, before node cam's calib_file" in main[0]
@@ -332,8 +335,8 @@ def test_broken_param_is_refused_before_anything_starts_with_one_clear_line(demo
 
 
 def _run_supervisor(lf, **kw) -> tuple[int, list[str]]:
-    lines: list[str] = []
-    code = asyncio.run(Supervisor(lf, print_fn=lines.append, **kw).run())
+    with console_lines() as lines:
+        code = asyncio.run(Supervisor(lf, **kw).run())
     return code, lines
 
 
@@ -382,7 +385,8 @@ def test_deploy_doc_commands_pass_the_check(keys, tmp_path, monkeypatch):
     own stereo calibration (step 5) stands in as a copy of the shipped one."""
     import shlex
 
-    from flexsheet.cli import _parse_params, build_parser
+    from flexsheet.cli import build_parser
+    from flexsheet.cli_commands import parse_params
 
     monkeypatch.setenv("HOME", str(tmp_path))
     (tmp_path / ".flexsheet").mkdir()
@@ -400,7 +404,7 @@ def test_deploy_doc_commands_pass_the_check(keys, tmp_path, monkeypatch):
         else:
             lf = load_launch(ROOT / args.launch)
             res = check_launch(lf.path, host=lf.nodes[args.name].host,
-                               overrides={args.name: _parse_params(args.param or [])})
+                               overrides={args.name: parse_params(args.param or [])})
         assert _here(res.errors, res.path) == [], f"{cmd}:\n" + "\n".join(res.errors)
 
 

@@ -4,10 +4,10 @@
   libzmq ends a connection's session after a protocol or handshake error and never connects to that endpoint
   again. Squatted by (a) a raw TCP listener that sends garbage (a ZMTP-like signature with a bad greeting) and
   (b) a plain ZMTP socket while the graph uses CURVE, then released and the real publisher restarted: the
-  subscriber receives again (:class:`flexsheet.runtime.transport.LinkWatch`). A control run without the watch
+  subscriber receives again (:class:`flexsheet.runtime.zmq.linkwatch.LinkWatch`). A control run without the watch
   receives nothing, so the squat really did kill the connection.
 * A subscriber that never reads big messages costs the publisher at most its byte budget
-  (:data:`flexsheet.runtime.transport.PUB_QUEUE_BYTES` per subscriber), and the messages its full queue could
+  (:data:`flexsheet.runtime.zmq.xpub.PUB_QUEUE_BYTES` per subscriber), and the messages its full queue could
   not take are counted in the publisher's ``dropped``.
 * ``flexsheet launch FILE --check`` refuses an output under /proc.
 
@@ -33,11 +33,11 @@ from flexsheet.experiments.faults.links import (
     memory_run,
     squat_then_restart,
 )
-from flexsheet.runtime import transport
+from flexsheet.runtime.config import NodeConfig
 from flexsheet.runtime.launch_check import check_launch
-from flexsheet.runtime.node import NodeConfig
 from flexsheet.runtime.ports import free_port
-from flexsheet.runtime.transport import LinkWatch
+from flexsheet.runtime.zmq import linkwatch
+from flexsheet.runtime.zmq.linkwatch import LinkWatch
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -83,11 +83,11 @@ def test_silent_endpoint_is_named_in_the_heartbeat(monkeypatch):
 
     records: list = []
     handler = _ListHandler(records)
-    transport.log.addHandler(handler)
+    linkwatch.log.addHandler(handler)
     try:
         hb, link, accepted = asyncio.run(run())
     finally:
-        transport.log.removeHandler(handler)
+        linkwatch.log.removeHandler(handler)
     assert hb.state == "warn" and f"no link to {ep}" in hb.message, hb
     assert accepted >= 3 and link.reconnects >= 2, (accepted, link.reconnects)  # back-off: 0.1, 0.2, 0.4, 0.8 s
     lines = [r for r in records if ep in r]

@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 
 from flexsheet.benches.load import payload_fields, rss_mb, slope_mb_per_min
-from flexsheet.runtime.node import Node, NodeConfig, QoS
+from flexsheet.runtime.config import NodeConfig
+from flexsheet.runtime.node import Node
 from flexsheet.runtime.ports import free_port
+from flexsheet.runtime.qos import QoS
 from messages import topics as T
 
 RATE = 2 * T.STEREO.nominal_hz          # 96 Hz of 655 kB stereo frames: 63 MB/s

@@ -14,10 +14,15 @@ import numpy as np
 import pytest
 
 from flexsheet.runtime import lockstep
-from flexsheet.runtime.bag import BagWriter, PlayerNode, PlayerParams, RecorderNode, read_bag
+from flexsheet.runtime.bag import PlayerNode, PlayerParams, RecorderNode
+from flexsheet.runtime.bag_read import read_bag
+from flexsheet.runtime.bag_write import BagWriter
+from flexsheet.runtime.bus import Bus, ContainerTransport
+from flexsheet.runtime.clock import SimClock
 from flexsheet.runtime.codec import decode, encode
-from flexsheet.runtime.container import Bus, Container, ContainerTransport, Member
-from flexsheet.runtime.node import ConfigError, Node, NodeConfig, SimClock
+from flexsheet.runtime.config import ConfigError, NodeConfig
+from flexsheet.runtime.container import Container, Member
+from flexsheet.runtime.node import Node
 from flexsheet.runtime.testing import NodeHarness
 from messages import Fingertip, FingerTruth, Header
 from messages import topics as T
@@ -93,7 +98,7 @@ def _replay(bag: Path, out: Path) -> dict:
             member(PlannerNode, "planner", {"object_stiffness": 20.0}),
             member(Ticker, "ticker", {}),
             member(RecorderNode, "recorder", {"output": str(out), "topics": OUT_TOPICS}),
-        ], bus, print_fn=lambda line: None)
+        ], bus)
         code = await asyncio.wait_for(c.run(install_signals=False), timeout=60)
         return {"code": code, "stats": bus.lockstep.stats}
 

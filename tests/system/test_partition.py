@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from netns_util import CUT_S
 
-from flexsheet.runtime.bag import read_bag
+from flexsheet.runtime.bag_read import read_bag
 from flexsheet.runtime.codec import decode_any
 
 #: the slow tier (tests/run.sh --slow): over a minute of end-to-end work

@@ -33,7 +33,7 @@ def _warm_fem(name: str) -> str:
 
 
 def _bag(path, topic):
-    from flexsheet.runtime.bag import read_bag
+    from flexsheet.runtime.bag_read import read_bag
     from flexsheet.runtime.codec import decode_any
 
     return [decode_any(x.frames) for x in read_bag(path, topics=[topic])]
@@ -65,7 +65,7 @@ def test_sim_launch_on_the_sphere_scene_reports_the_scene_and_dtheta(tmp_path):
     assert comp["n"] > MIN_TIPS and comp["tension_n_per_m"]["median"] > 0.0
     assert "scene: sphere" in out and res.returncode in (0, 1), out[-4000:]
     # the world's finger followed the sphere's path: every /world/finger sample of the stroke on the sphere
-    from flexsheet.runtime.bag import read_bag
+    from flexsheet.runtime.bag_read import read_bag
     from flexsheet.runtime.codec import decode_any
 
     c, R = np.array([-0.025 * math.sqrt(2.0), 0.0, 0.0]), 0.025 * math.sqrt(2.0)

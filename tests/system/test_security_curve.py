@@ -18,10 +18,13 @@ import yaml
 import zmq.auth
 from conftest import free_port
 
-from flexsheet.runtime.container import Bus, ContainerTransport
-from flexsheet.runtime.launch import LaunchError, curve_config, load_launch, node_config
-from flexsheet.runtime.node import Node, NodeConfig, QoS
-from flexsheet.runtime.transport import CurveConfig
+from flexsheet.runtime.bus import Bus, ContainerTransport
+from flexsheet.runtime.config import NodeConfig
+from flexsheet.runtime.launch import LaunchError, load_launch
+from flexsheet.runtime.launch_config import curve_config, node_config
+from flexsheet.runtime.node import Node
+from flexsheet.runtime.qos import QoS
+from flexsheet.runtime.zmq.curve import CurveConfig
 from messages import ArmTarget
 from messages import topics as T
 

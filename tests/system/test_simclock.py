@@ -13,10 +13,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flexsheet.runtime.bag import read_bag
-from flexsheet.runtime.container import Bus, Container, ContainerTransport, Member
+from flexsheet.runtime.bag_read import read_bag
+from flexsheet.runtime.bus import Bus, ContainerTransport
+from flexsheet.runtime.clock import SimClock
+from flexsheet.runtime.config import NodeConfig
+from flexsheet.runtime.container import Container, Member
 from flexsheet.runtime.lockstep import SIM_EPOCH
-from flexsheet.runtime.node import Node, NodeConfig, QoS, SimClock
+from flexsheet.runtime.node import Node
+from flexsheet.runtime.qos import QoS
 from messages import FingerTruth
 from messages import topics as T
 
@@ -87,8 +91,7 @@ def _container(until: float, members: list[tuple[type, str]], rtf: float | None 
                 return made[name]
             return Member(name, make)
 
-        c = Container("sim", [member(cls, name) for cls, name in members], bus, print_fn=lambda line: None,
-                      sim_until=until, rtf=rtf)
+        c = Container("sim", [member(cls, name) for cls, name in members], bus, sim_until=until, rtf=rtf)
         made["code"] = await asyncio.wait_for(c.run(install_signals=False), timeout=60)
         return made
 

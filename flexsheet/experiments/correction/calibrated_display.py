@@ -4,13 +4,17 @@ truth seed (:func:`display_calib_for`: a ``display.yaml``, or the registration p
 from __future__ import annotations
 
 import json
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from flexsheet.calibration.display_calib import DisplayCalib, load_display_calib, nominal_display_calib
+from flexsheet.calibration.display_calib import DisplayCalib, nominal_display_calib
+from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.projector import Projector
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -44,8 +48,7 @@ class CalibratedDisplay:
 
 
 
-def display_calib_for(seed: int, realism: str, path: str | None = None, quick: bool = False,
-                      progress=None) -> tuple[CalibratedDisplay, dict]:
+def display_calib_for(seed: int, realism: str, path: str | None = None, quick: bool = False) -> tuple[CalibratedDisplay, dict]:
     """The estimator's display for truth ``seed``: ``path`` (a display.yaml) if given, else the registration
     procedures run in the twin (:func:`flexsheet.twin.registration.sim_display_calib`, cached per seed;
     ``quick``: its quick preset). Returns (display, info with the path and, when known, the registration's own
@@ -53,7 +56,7 @@ def display_calib_for(seed: int, realism: str, path: str | None = None, quick: b
     if path is None:
         from flexsheet.twin.registration import sim_display_calib
 
-        path = sim_display_calib(int(seed), realism, quick=quick, progress=progress)
+        path = sim_display_calib(int(seed), realism, quick=quick)
     cal = CalibratedDisplay.from_display_calib(load_display_calib(path), path)
     info: dict = {"display_calib": path}
     sj = Path(path).with_name("summary.json")

@@ -40,7 +40,7 @@ from pathlib import Path
 from flexsheet.experiments.correction.experiment import run
 from flexsheet.experiments.correction.seeds import aggregate
 from flexsheet.experiments.correction.settings import PIXEL
-from flexsheet.experiments.correction.sheet_model import _sheet_model
+from flexsheet.experiments.correction.sheet_model import pushed_sheet_model
 from flexsheet.experiments.correction.speed import model_speed
 
 
@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     runs = _run_all(args, seeds, thetas, depths, realisms, single)
     if not single or args.speed:
-        speed = model_speed(_sheet_model(args.sheet_model, args.quick)) if args.speed else None
+        speed = model_speed(pushed_sheet_model(args.sheet_model, args.quick)) if args.speed else None
         aggregate(args.out, runs, speed)
         if speed:
             print("stereo pair ms:", {k: (round(v, 2) if isinstance(v, float) else v) for k, v in speed.items()})

@@ -15,9 +15,9 @@ class DisplayEstimator:
     """The display's estimators for one :class:`CalibratedDisplay` (and nothing else — by construction it takes
     no truth): the bridges' kinematics at the calibrated bases, the renderer's sheet, model choice and drawing.
 
-    ``config``: the renderer's :class:`flexsheet.rendering.state.SheetConfig`; ``sheet_model``: the renderer's
+    ``config``: the renderer's :class:`flexsheet.model.sheet_model.SheetConfig`; ``sheet_model``: the renderer's
     pushed-sheet model (:class:`flexsheet.model.sheet_model.NominalSheetModel`; None: the node's own,
-    :func:`flexsheet.rendering.state.sheet_model_for` ``config``), the ``fem_nominal`` column;
+    :func:`flexsheet.model.sheet_model.sheet_model_for` ``config``), the ``fem_nominal`` column;
     ``samples``: MSAA samples; ``target`` m: the ``auto`` model choice's accuracy target. Raises ``TypeError``
     if ``cal`` is not a :class:`CalibratedDisplay`.
     """
@@ -25,7 +25,8 @@ class DisplayEstimator:
     def __init__(self, cal: CalibratedDisplay, config=None, *, sheet_model=None, samples: int = 4,
                  target: float = PIXEL) -> None:
         from flexsheet.arm.kinematics import ArmKinematics
-        from flexsheet.rendering.state import ErrorTable, SheetConfig, sheet_model_for, silhouette_probes
+        from flexsheet.model.sheet_model import SheetConfig, sheet_model_for
+        from flexsheet.rendering.state import ErrorTable, silhouette_probes
         from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_mesh
 
         if not isinstance(cal, CalibratedDisplay):

@@ -3,6 +3,8 @@ measured on the true sheet without GL) and :func:`live_path`, its rows for a tru
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from flexsheet.experiments.correction.poses import HOME_POSE
@@ -12,13 +14,15 @@ from flexsheet.model import geometry
 from flexsheet.model.sheet import SheetSurface, clamp_poses, frame_from_clamps
 from flexsheet.twin.truth import TwinTruth
 
+log = logging.getLogger(__name__)
+
 
 class LivePath:
     """The renderer node's pushed-sheet correction measured on the true sheet without GL (``live_path`` of the
     summary; ``tests/unit/rendering/test_render_live_sheet.py``).
 
     Renderer side, as ``RendererNode.setup`` builds it: the sheet model of
-    :func:`flexsheet.rendering.state.sheet_model_for` ``config`` (or ``sheet_model``), a
+    :func:`flexsheet.model.sheet_model.sheet_model_for` ``config`` (or ``sheet_model``), a
     :class:`flexsheet.rendering.state.RendererState` fed both clamp poses (the home pose at ``stretch``) and the
     fingertip, the :class:`flexsheet.rendering.state.ErrorTable` and ``auto`` :func:`flexsheet.rendering.state.pick_model`,
     and the picked model's correction in numpy (the shader's twin, equal to 2e-6 m). Truth side: the twin's
@@ -30,13 +34,8 @@ class LivePath:
 
     def __init__(self, stretch: float = STRETCH, config=None, sheet_model=None, eye=geometry.EYE,
                  projector=geometry.PROJECTOR) -> None:
-        from flexsheet.rendering.state import (
-            ErrorTable,
-            RendererState,
-            SheetConfig,
-            sheet_model_for,
-            silhouette_probes,
-        )
+        from flexsheet.model.sheet_model import SheetConfig, sheet_model_for
+        from flexsheet.rendering.state import ErrorTable, RendererState, silhouette_probes
         from flexsheet.rendering.stereo_renderer import cylinder_mesh
 
         self.config = config or SheetConfig()
@@ -119,13 +118,12 @@ class LivePath:
         return row
 
 
-def live_path(truth: TwinTruth, depths_mm=(0, 10, 30, 50), progress=None) -> dict:
+def live_path(truth: TwinTruth, depths_mm=(0, 10, 30, 50)) -> dict:
     """:class:`LivePath` rows for ``truth`` at each depth (mm), keyed by the depth."""
     lp, world = LivePath(), TwinWorld(truth)
     out = {}
     for d in depths_mm:
         out[f"{d:g}"] = r = lp.measure(world, d * 1e-3)
-        if progress:
-            progress(f"[correction] live path {d:g} mm: {r['model']} max {r['max_mm']:.2f} mm, mean "
-                     f"{r['mean_mm']:.2f} mm (uncorrected max {r['uncorrected_max_mm']:.2f} mm)")
+        log.info(f"[correction] live path {d:g} mm: {r['model']} max {r['max_mm']:.2f} mm, mean "
+                 f"{r['mean_mm']:.2f} mm (uncorrected max {r['uncorrected_max_mm']:.2f} mm)")
     return out

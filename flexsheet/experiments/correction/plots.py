@@ -8,7 +8,9 @@ from pathlib import Path
 import numpy as np
 
 
-def _charts(out: Path, s: dict, thetas, depths, photos) -> None:
+def run_charts(out: Path, s: dict, thetas, depths, photos) -> None:
+    """Draw one run's figures into ``out`` (module doc) from its summary ``s``, the inclined angles ``thetas``
+    (deg), the push ``depths`` (mm) and the measurement camera's ``photos``."""
     import matplotlib
 
     matplotlib.use("Agg")

@@ -6,6 +6,7 @@ mapping error they induce (:func:`mapping_error_px`) and both figures' corrected
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 
 import cv2
@@ -15,12 +16,14 @@ from flexsheet.experiments.correction.calibrated_display import CalibratedDispla
 from flexsheet.experiments.correction.estimator import DisplayEstimator
 from flexsheet.experiments.correction.measurer import Measurer
 from flexsheet.experiments.correction.settings import PIXEL
-from flexsheet.experiments.correction.stability import breaking_point
 from flexsheet.experiments.correction.sweeps import measure_inclined, measure_pushed
 from flexsheet.experiments.correction.twin_world import TwinWorld
 from flexsheet.experiments.measurement import projector_pixels
+from flexsheet.experiments.stability import breaking_point
 from flexsheet.model.projector import Projector
 from flexsheet.twin.truth import TwinTruth
+
+log = logging.getLogger(__name__)
 
 #: projector calibration error scales: × the registration's own error (direction "calibrated"), and × one
 #: :data:`PROJECTOR_UNIT_ERROR` in random directions
@@ -58,7 +61,7 @@ def perturbed_projector(projector: Projector, scale: float, seed: int, direction
 
 def scaled_error(true: Projector, true_D, est: Projector, est_D, scale: float) -> tuple[Projector, np.ndarray]:
     """The projector whose error against ``true`` is ``scale`` × the error of ``est`` (K, D and centre
-    linearly; the rotation along the geodesic, exp(s·log(R_est R_trueᵀ)) R_true)."""
+    linearly; the rotation along the geodesic, exp(s·log.info(R_est R_trueᵀ)) R_true)."""
     K = true.K + scale * (est.K - true.K)
     D = np.asarray(true_D, float) + scale * (np.asarray(est_D, float) - np.asarray(true_D, float))
     w = cv2.Rodrigues(np.asarray(est.R, float) @ np.asarray(true.R, float).T)[0]
@@ -77,7 +80,7 @@ def mapping_error_px(true: Projector, true_D, est: Projector, est_D) -> float:
 
 def sweep_projector(cal: CalibratedDisplay, truth: TwinTruth, meas: Measurer, scales=PROJECTOR_SCALES,
                     random_scales=RANDOM_SCALES, theta: float = 50.0, depth_mm: float = 50.0, directions: int = 2,
-                    sheet_model=None, quick: bool = False, progress=None) -> dict:
+                    sheet_model=None, quick: bool = False) -> dict:
     """Both figures' corrected errors against a scaled projector calibration error (a sensitivity study: these
     estimator inputs are built from the truth on purpose). Two families, eye and arm bases kept calibrated:
 
@@ -106,10 +109,9 @@ def sweep_projector(cal: CalibratedDisplay, truth: TwinTruth, meas: Measurer, sc
     for k in scales:
         p, D = scaled_error(world.projector, world.distortion, cal.projector, cal.distortion, k)
         fam["calibrated"].append({"scale": float(k), **measure(p, D, f"truth + {k:g} × registration error")})
-        if progress:
-            r = fam["calibrated"][-1]
-            progress(f"[correction] stability: registration error × {k:g} ({r['mapping_px']:.2f} px): inclined "
-                     f"{r['inclined_corrected_mm']:.2f} mm, pushed {r['pushed_corrected_mm']:.2f} mm")
+        r = fam["calibrated"][-1]
+        log.info(f"[correction] stability: registration error × {k:g} ({r['mapping_px']:.2f} px): inclined "
+                 f"{r['inclined_corrected_mm']:.2f} mm, pushed {r['pushed_corrected_mm']:.2f} mm")
     for k in random_scales:
         acc = [measure(*(perturbed_projector(world.projector, k, truth.seed, d), world.distortion),
                        f"truth + {k:g} × unit (direction {d})") for d in range(directions)]
@@ -118,9 +120,8 @@ def sweep_projector(cal: CalibratedDisplay, truth: TwinTruth, meas: Measurer, sc
                               "mapping_px_all": [r["mapping_px"] for r in acc],
                               "inclined_corrected_all_mm": [r["inclined_corrected_mm"] for r in acc],
                               "pushed_corrected_all_mm": [r["pushed_corrected_mm"] for r in acc]})
-        if progress:
-            progress(f"[correction] stability: random projector error × {k:g}: worst inclined "
-                     f"{worst['inclined_corrected_mm']:.2f} mm at {worst['mapping_px']:.2f} px")
+        log.info(f"[correction] stability: random projector error × {k:g}: worst inclined "
+                 f"{worst['inclined_corrected_mm']:.2f} mm at {worst['mapping_px']:.2f} px")
     lim = PIXEL * 1e3
     out: dict = {"unit": PROJECTOR_UNIT_ERROR, "theta_deg": theta, "depth_mm": depth_mm, "criterion_mm": lim,
                  "directions": directions, **fam}

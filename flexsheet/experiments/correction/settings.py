@@ -13,7 +13,7 @@ STRETCH = 0.04
 #: depths (m) of the true sheet's FEM table (centre contact; solved directly at Fig. 13's depths)
 FEM_DEPTHS = (0.005, 0.010, 0.020, 0.030, 0.040, 0.050, 0.060)
 #: contact positions of the true sheet's table: the centre only (the true contact is within a few mm of it; the
-#: table's remapping moves the solution there, :class:`flexsheet.model.sheet_fem.IndentTable`)
+#: table's remapping moves the solution there, :class:`flexsheet.model.sheet_table.IndentTable`)
 FEM_POSITIONS = (0.0,)
 
 PAPER = {

@@ -3,20 +3,25 @@ description for the summary."""
 
 from __future__ import annotations
 
+import logging
+
 from flexsheet.experiments.correction.settings import STRETCH
 
+log = logging.getLogger(__name__)
 
-def _sheet_model(name: str, quick: bool = False, progress=None):
+
+def pushed_sheet_model(name: str, quick: bool = False):
     """The renderer's pushed-sheet model (``auto``/``fem``: the nominal FEM fit, the node's
-    :func:`flexsheet.rendering.state.sheet_model_for`); ``quick``: its table for centre contacts only (the experiment
+    :func:`flexsheet.model.sheet_model.sheet_model_for`); ``quick``: its table for centre contacts only (the experiment
     pushes at the centre; the node uses the full table)."""
     if name not in ("auto", "fem"):
         raise ValueError(f"sheet model must be 'auto' or 'fem', got {name!r}")
     from flexsheet.model.sheet_model import NominalSheetModel
 
     kw = {"positions": (0.0,)} if quick else {}
-    return NominalSheetModel.nominal(stretch=STRETCH, progress=progress, **kw)
+    return NominalSheetModel.nominal(stretch=STRETCH, **kw)
 
 
-def _model_info(model) -> dict:
+def sheet_model_info(model) -> dict:
+    """What the summary records of the pushed-sheet ``model`` (its ``describe()``)."""
     return model.describe()

@@ -1,17 +1,21 @@
 """Stability where the sheet model fails: the pushed error against an error in the true sheet the estimator
 cannot see (tension ratio, pre-strain; :func:`sweep_sheet`), and the breaking point where an error passes one
-projector pixel (:func:`breaking_point`)."""
+projector pixel (:func:`flexsheet.experiments.stability.breaking_point`)."""
 
 from __future__ import annotations
 
 import dataclasses
+import logging
 
 from flexsheet.experiments.correction.estimator import DisplayEstimator
 from flexsheet.experiments.correction.measurer import Measurer
 from flexsheet.experiments.correction.settings import MODEL_LABELS, PIXEL
 from flexsheet.experiments.correction.sweeps import measure_pushed
 from flexsheet.experiments.correction.twin_world import TwinWorld
+from flexsheet.experiments.stability import breaking_point
 from flexsheet.twin.truth import TwinTruth
+
+log = logging.getLogger(__name__)
 
 #: true tension ratios (the estimator assumes β = 1; the truth's spread is log-normal 20 %)
 TENSION_FACTORS = (0.3, 0.5, 0.7, 0.85, 1.0, 1.2, 1.4, 2.0, 3.0)
@@ -19,19 +23,8 @@ TENSION_FACTORS = (0.3, 0.5, 0.7, 0.85, 1.0, 1.2, 1.4, 2.0, 3.0)
 PRESTRAINS = (0.0, 0.005, 0.01, 0.02, 0.04)
 
 
-def breaking_point(xs, ys, limit: float):
-    """Smallest x (linear interpolation) at which y first exceeds ``limit`` going along ``xs``; None if never."""
-    for i, (x, y) in enumerate(zip(xs, ys, strict=True)):
-        if y > limit:
-            if i == 0:
-                return float(x)
-            x0, y0 = xs[i - 1], ys[i - 1]
-            return float(x0 + (limit - y0) * (x - x0) / (y - y0))
-    return None
-
-
 def sweep_sheet(est: DisplayEstimator, truth: TwinTruth, meas: Measurer, kind: str, values=None,
-                depth_mm: float = 50.0, quick: bool = False, progress=None) -> dict:
+                depth_mm: float = 50.0, quick: bool = False) -> dict:
     """Pushed error (``depth_mm``) of every model against an error in the true sheet the estimator cannot see:
     ``kind`` ``tension_ratio`` — the true β = value × the estimator's assumed β (1.0); ``prestrain`` — the true
     pre-strain = value (the estimator assumes 0; the same as an error in the clamp strain it measures). The
@@ -53,8 +46,7 @@ def sweep_sheet(est: DisplayEstimator, truth: TwinTruth, meas: Measurer, kind: s
         r = measure_pushed(est, TwinWorld(t), meas, depth_mm, models)
         rows.append({"value": float(x), **{MODEL_LABELS[m] + "_mm": r[MODEL_LABELS[m] + "_mm"] for m in models},
                      "picked": r["model"], "corrected_mm": r["corrected_mm"]})
-        if progress:
-            progress(f"[correction] stability: true {kind} {x:g}: picked {r['model']} {r['corrected_mm']:.2f} mm")
+        log.info(f"[correction] stability: true {kind} {x:g}: picked {r['model']} {r['corrected_mm']:.2f} mm")
     lim = PIXEL * 1e3
     out: dict = {"kind": kind, "depth_mm": depth_mm, "assumed": assumed, "rows": rows, "criterion_mm": lim}
     for m in ("corrected", *[MODEL_LABELS[m] for m in models]):

@@ -10,7 +10,8 @@ def _fmt(x, unit: str = "", nd: int = 2) -> str:
     return "not within the sweep" if x is None else f"{x:.{nd}f}{unit}"
 
 
-def _stability_chart(path: Path, stab: dict) -> None:
+def stability_chart(path: Path, stab: dict) -> None:
+    """Draw ``stability.png`` (module doc) at ``path`` from the stability sweeps ``stab``."""
     import matplotlib
 
     matplotlib.use("Agg")

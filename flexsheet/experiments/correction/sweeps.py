@@ -4,6 +4,8 @@ S (:func:`sweep_inclined`, :func:`sweep_pushed`)."""
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from flexsheet.experiments.correction.estimator import DisplayEstimator
@@ -12,6 +14,8 @@ from flexsheet.experiments.correction.poses import HOME_POSE, inclined_pose
 from flexsheet.experiments.correction.settings import MODEL_LABELS
 from flexsheet.experiments.correction.twin_world import TwinWorld
 from flexsheet.model.sheet import SheetSurface
+
+log = logging.getLogger(__name__)
 
 
 def _pose_dev(world_info: dict, est: SheetSurface) -> dict:
@@ -65,26 +69,26 @@ def measure_pushed(est: DisplayEstimator, world: TwinWorld, meas: Measurer, dept
     return row
 
 
-def sweep_inclined(est: DisplayEstimator, world: TwinWorld, meas: Measurer, thetas, photos: dict, say,
+def sweep_inclined(est: DisplayEstimator, world: TwinWorld, meas: Measurer, thetas, photos: dict,
                    tag: str) -> dict:
-    """Fig. 11: :func:`measure_inclined` at each of ``thetas`` deg, keyed by θ; ``say`` reports each row after
+    """Fig. 11: :func:`measure_inclined` at each of ``thetas`` deg, keyed by θ; each row is logged after
     ``tag``."""
     rows = {}
     for th in thetas:
         rows[f"{th:g}"] = r = measure_inclined(est, world, meas, th, photos)
-        say(f"{tag}: inclined {th:g}°: uncorrected {r['uncorrected_mm']:.2f} mm, "
-            f"{r['model']} {r['corrected_mm']:.2f} mm")
+        log.info(f"{tag}: inclined {th:g}°: uncorrected {r['uncorrected_mm']:.2f} mm, "
+                 f"{r['model']} {r['corrected_mm']:.2f} mm")
     return rows
 
 
-def sweep_pushed(est: DisplayEstimator, world: TwinWorld, meas: Measurer, depths, photos: dict, say,
+def sweep_pushed(est: DisplayEstimator, world: TwinWorld, meas: Measurer, depths, photos: dict,
                  tag: str) -> dict:
-    """Fig. 13: :func:`measure_pushed` of every model at each of ``depths`` mm, keyed by S; ``say`` reports
-    each row after ``tag``."""
+    """Fig. 13: :func:`measure_pushed` of every model at each of ``depths`` mm, keyed by S; each row is logged
+    after ``tag``."""
     rows = {}
     models = ("none", "four_triangle", "fine", "fem_nominal")
     for S in depths:
         rows[f"{S:g}"] = r = measure_pushed(est, world, meas, S, models, photos)
-        say(f"{tag}: pushed {S:g} mm: " + ", ".join(
+        log.info(f"{tag}: pushed {S:g} mm: " + ", ".join(
             f"{MODEL_LABELS[m]} {r[MODEL_LABELS[m] + '_mm']:.2f}" for m in models) + f" mm; picked {r['model']}")
     return rows

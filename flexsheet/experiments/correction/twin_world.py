@@ -14,11 +14,11 @@ from flexsheet.twin.truth import TwinTruth
 class TwinWorld:
     """The hidden truth's display, for the measurement only: the true projector (K, distortion, pose), the true
     clamp poses of commanded joints, the true sheet (flat, or pushed: the FEM table of
-    :class:`flexsheet.model.sheet_fem.IndentTable` with the truth's material, cached in ``cache_dir``)."""
+    :class:`flexsheet.model.sheet_table.IndentTable` with the truth's material, cached in ``cache_dir``)."""
 
     def __init__(self, truth: TwinTruth, *, cache_dir: str | None = None, fem_mesh: dict | None = None,
                  depths=FEM_DEPTHS, positions=FEM_POSITIONS, stretch: float = STRETCH) -> None:
-        from flexsheet.model.sheet_fem import default_cache_dir
+        from flexsheet.model.sheet_table import default_cache_dir
 
         self.truth = truth
         T = np.asarray(truth.T_display_projector, float)
@@ -33,7 +33,8 @@ class TwinWorld:
     def table(self):
         """The true sheet's FEM table at the commanded stretch (built once, ~3 s per table, cached on disk)."""
         if self._table is None:
-            from flexsheet.model.sheet_fem import IndentTable, SheetPhysics
+            from flexsheet.model.sheet_fem import SheetPhysics
+            from flexsheet.model.sheet_table import IndentTable
 
             self._table = IndentTable(SheetPhysics.from_truth(self.truth, self.stretch), self.depths, self.positions,
                                       mesh=self.fem_mesh, cache_dir=self.cache_dir)

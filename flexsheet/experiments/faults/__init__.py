@@ -1,6 +1,2 @@
 """``flexsheet experiment faults --out DIR [--quick]``: each hostile input and fault against the
 runtime, the links and the twins, counted (:mod:`.experiment`)."""
-
-from flexsheet.experiments.faults.experiment import main
-
-__all__ = ["main"]

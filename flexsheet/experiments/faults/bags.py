@@ -10,9 +10,9 @@ import msgpack
 import numpy as np
 from mcap.reader import make_reader
 
-from flexsheet.runtime.bag import BagWriter, bag_info, read_bag
-from flexsheet.runtime.bag_read import BagSummary
+from flexsheet.runtime.bag_read import BagSummary, bag_info, read_bag
 from flexsheet.runtime.bag_recover import recover_bag
+from flexsheet.runtime.bag_write import BagWriter
 from flexsheet.runtime.codec import encode
 from messages import Fingertip, Header, StereoFrame
 from messages import topics as T

@@ -21,42 +21,45 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import logging
 import sys
 import tempfile
 from pathlib import Path
 
 from flexsheet.experiments.faults import bags, controller, links, planner
 
+log = logging.getLogger(__name__)
+
 __all__ = ["run", "verdicts", "main"]
 
 TARGETS = {"recorder_lost": 0, "beyond_cap_rad": 0.0, "squat_recovery_s": 2.0, "memory_growth_mb": 100.0}
 
 
-def run(quick: bool = False, log=print) -> dict:
+def run(quick: bool = False) -> dict:
     """Every attack; returns ``{name: counts}`` (module doc)."""
     out: dict = {}
     with tempfile.TemporaryDirectory() as tmp:
         t = Path(tmp)
         for name, fn in (("recorder_malformed", bags.recorder_malformed), ("bag_flip", bags.bag_flip),
                          ("bag_cut_recover", bags.bag_cut_recover)):
-            log(f"[faults] {name} ...")
+            log.info(f"[faults] {name} ...")
             (t / name).mkdir()
             out[name] = fn(t / name)
     for name, fn in (("mxt_burst", controller.mxt_burst), ("modbus_burst", controller.modbus_burst),
                      ("mxt_stranger_end", controller.mxt_stranger_end), ("mxt_replay", controller.mxt_replay),
                      ("modbus_estop_network_reset", controller.modbus_estop_network_reset),
                      ("planner_future_stamp", planner.future_stamp)):
-        log(f"[faults] {name} ...")
+        log.info(f"[faults] {name} ...")
         out[name] = fn()
     for variant in ("garbage", "plain_zmtp_vs_curve"):
-        log(f"[faults] squat {variant} ...")
+        log.info(f"[faults] squat {variant} ...")
         r = asyncio.run(links.squat_then_restart(variant))
         out[f"squat_{variant}"] = {k: r[k] for k in ("received", "recovery_s", "reconnects", "failures")}
-    log("[faults] stolen keys: arm targets from the main host's key and from the triangulator's ...")
+    log.info("[faults] stolen keys: arm targets from the main host's key and from the triangulator's ...")
     with tempfile.TemporaryDirectory() as tmp:
         out["stolen_keys"] = links.stolen_keys(Path(tmp))
     if not quick:
-        log("[faults] never-reading subscriber of stereo frames (8 s) ...")
+        log.info("[faults] never-reading subscriber of stereo frames (8 s) ...")
         r = links.memory_run()
         out["never_reading_subscriber"] = {k: r[k] for k in ("published", "dropped", "growth_mb", "offered_mb")}
     return out
@@ -117,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
-    r = run(args.quick, log=lambda line: print(line, flush=True))
+    r = run(args.quick)
     res = {"results": r, "targets": TARGETS, "verdicts": verdicts(r), "quick": args.quick}
     (out_dir / "faults.json").write_text(json.dumps(res, indent=1))
     _chart(res, out_dir / "faults.png")

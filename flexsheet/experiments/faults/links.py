@@ -1,4 +1,4 @@
-"""Attacks on the links (:mod:`flexsheet.runtime.transport`): a node's port squatted while it is down by a
+"""Attacks on the links (:mod:`flexsheet.runtime.zmq`): a node's port squatted while it is down by a
 listener that speaks the wrong protocol (garbage after a ZMTP signature; plain ZMTP against CURVE), then
 released; a subscriber that never reads 655 kB stereo frames; arm targets sent with a stolen host key and with
 another node's own key (authorization per node). Used by ``flexsheet experiment faults`` and
@@ -19,9 +19,11 @@ from pathlib import Path
 import numpy as np
 import zmq
 
-from flexsheet.runtime.node import Node, NodeConfig, QoS
+from flexsheet.runtime.config import NodeConfig
+from flexsheet.runtime.node import Node
 from flexsheet.runtime.ports import free_port
-from flexsheet.runtime.transport import CurveConfig
+from flexsheet.runtime.qos import QoS
+from flexsheet.runtime.zmq.curve import CurveConfig
 from messages import ArmTarget
 from messages import topics as T
 
@@ -162,7 +164,8 @@ def stolen_keys(folder: Path, seconds: float = 1.0) -> dict:
     ``folder``. Returns the targets received from each (the thief's handshake fails; the triangulator's publisher
     is never asked for the topic) and the bridge's link report."""
     from flexsheet.runtime.keys import generate
-    from flexsheet.runtime.launch import curve_config, identities, load_launch, node_config
+    from flexsheet.runtime.launch import identities, load_launch
+    from flexsheet.runtime.launch_config import curve_config, node_config
 
     p = free_port(span=3)
     path = folder / "per_node_keys.yaml"
@@ -199,14 +202,15 @@ def stolen_keys(folder: Path, seconds: float = 1.0) -> dict:
 PUBLISHER = r"""
 import asyncio, json, sys, time
 import numpy as np
-from flexsheet.runtime.node import Node, NodeConfig
+from flexsheet.runtime.config import NodeConfig
+from flexsheet.runtime.node import Node
 from messages import StereoFrame
 from messages import topics as T
 
 ep, seconds, hz, budget = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
 if budget:   # the control run: another byte budget
-    from flexsheet.runtime import transport
-    transport.XPub.__init__.__defaults__ = (budget,)
+    from flexsheet.runtime.zmq import xpub
+    xpub.XPub.__init__.__defaults__ = (budget,)
 
 def rss_mb():
     for line in open("/proc/self/status"):

@@ -1,5 +1,5 @@
-"""Attack on time: one fingertip stamped 1e12 s among good ones, into the planner node (loaded by its registry
-name, as the launcher does) through the in-process harness. The planner must refuse it alone and serve the
+"""Attack on time: one fingertip stamped 1e12 s among good ones, into the planner node (loaded by its node
+type, as the launcher does) through the in-process harness. The planner must refuse it alone and serve the
 good ones after it."""
 
 from __future__ import annotations
@@ -23,10 +23,10 @@ def _tip(stamp: float, y: float) -> Fingertip:
 
 def future_stamp(n_after: int = 10) -> dict:
     """3 good fingertips, one stamped 1e12, ``n_after`` good ones: counts of refusals and of served targets."""
-    from flexsheet import registry
+    from flexsheet.runtime.plugins import node_class
     from flexsheet.runtime.testing import NodeHarness
 
-    planner = registry.load(registry.NODES["planner"])
+    planner = node_class("planner")
 
     async def scenario() -> dict:
         params = {"shape": "cylinder", "object_stiffness": 20.0, "stiffness_from_scene": False}

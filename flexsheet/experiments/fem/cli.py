@@ -3,7 +3,7 @@
 of the pushed cylinder, and the real-time model that reproduces it (``--scene`` with another object: the same
 study on that scene, :mod:`flexsheet.experiments.fem_scene`).
 
-1. **Reference** (:mod:`flexsheet.fem.hyperelastic`): the default scene's hyperelastic solid (a Gent solid, Jm 97.2,
+1. **Reference** (:mod:`flexsheet.fem.reference.hyperelastic`): the default scene's hyperelastic solid (a Gent solid, Jm 97.2,
    ``--Jm``; ``--Jm inf`` is the neo-Hookean solid of the committed full, quick_neohookean, fold and
    held-out figures), total Lagrangian, P2, Newton with load
    stepping (≤ 60 iterations per step), rigid frictionless finger (sphere + shaft), pushed 0 → 50 mm at
@@ -22,7 +22,7 @@ study on that scene, :mod:`flexsheet.experiments.fem_scene`).
    half model's own asymmetry; and whether the quarter models' symmetric solution is stable against asymmetric
    modes (:func:`mirror_stability`, the 3.4 and 2.5 mm meshes, cached). **Fold study** (``fold_study.json/png``,
    :func:`fold_study`; ``--fold-study`` runs only it): the reference has no self-contact, so the last three
-   levels' states are checked for a surface that passes through itself or creases (:mod:`flexsheet.fem.fold`),
+   levels' states are checked for a surface that passes through itself or creases (:mod:`flexsheet.fem.reference.fold`),
    and for where the largest strain and the levels' largest differences sit; then a sequence that refines the
    push point with the tube (:data:`TIP_LEVELS`, :func:`tip_sequence`: its verdict, a finer tip alone, and
    azimuth-0 snapshot tables on the plain and the tip meshes against its finest level). **Material study**
@@ -72,6 +72,7 @@ one azimuth (for a run over several sittings or machines); every solve is cached
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import os
 import time
@@ -81,13 +82,16 @@ from flexsheet.experiments.fem.plots import plot_node_table
 from flexsheet.experiments.fem.runs import run
 from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
 from flexsheet.fem.choose import MODEL_TABLE_PATH
-from flexsheet.fem.hyperelastic import CONTACT_LAWS, DEFAULT_CONTACT
-from flexsheet.fem.material import GENT_JM_RUBBER, Material
-from flexsheet.fem.node_table import _check_azimuth, build_node_table
-from flexsheet.fem.reference_paths import _log
-from flexsheet.fem.reference_settings import DEFAULT_MATERIAL, settings_for
+from flexsheet.fem.material import Material
+from flexsheet.fem.reference.capsule_contact import CONTACT_LAWS, DEFAULT_CONTACT
+from flexsheet.fem.reference.node_table import build_node_table, check_azimuth
+from flexsheet.fem.reference.progress import show_progress
+from flexsheet.fem.reference.settings import DEFAULT_MATERIAL, settings_for
+from flexsheet.fem.reference.workers import default_jobs, set_scheduler
 from flexsheet.fem.snapshots import DEFAULT_GRID
-from flexsheet.fem.workers import default_jobs, set_scheduler
+from flexsheet.model.scene_parts import GENT_JM_RUBBER
+
+log = logging.getLogger(__name__)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -218,8 +222,10 @@ def _add_scene_args(p: argparse.ArgumentParser) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the experiment; returns 0. See the module docstring for the outputs."""
+    """Run the experiment; returns 0. See the module docstring for the outputs. Progress lines go to stdout
+    (:func:`flexsheet.fem.reference.progress.show_progress`)."""
     args = _parser().parse_args(argv)
+    show_progress()
     try:
         set_scheduler(args.scheduler)
     except ValueError as exc:
@@ -241,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
     _check_table_values(args)
     st = replace(settings_for(args.quick), contact=args.contact)
     t0 = time.perf_counter()
-    cache = ArrayCache(args.cache_dir or None, _log)
+    cache = ArrayCache(args.cache_dir or None, log.info)
     _check_table_flags(args)
     if args.node_table:
         if args.quick or args.level is not None:
@@ -374,4 +380,4 @@ def _check_table_flags(args) -> None:
     if args.azimuth is not None:
         if not args.node_table:
             raise SystemExit("flexsheet experiment fem: --azimuth is for --node-table")
-        _check_azimuth(args.azimuth)
+        check_azimuth(args.azimuth)

@@ -1,6 +1,6 @@
 """What the full run writes besides the studies: the failure map (:func:`failure_map`), the node's model table
 (:func:`model_table`, ``flexsheet/fem/model_table.json``), ``summary.json`` (:func:`summary`), and the JSON
-writer of every output (:func:`_write`)."""
+writer of every output (:func:`write_json`)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import os
 
 import numpy as np
 
-from flexsheet.fem.hyperelastic import solver_tag
 from flexsheet.fem.material import Material
-from flexsheet.fem.reference_settings import FINGER_R, TARGET, Settings, _law
+from flexsheet.fem.reference.settings import FINGER_R, TARGET, Settings, law_name
+from flexsheet.fem.reference.versions import solver_tag
 
 
 def failure_map(cases: list[dict], cand: dict) -> dict:
@@ -83,7 +83,7 @@ def summary(st: Settings, conv: dict, cand: dict, cases: list[dict], snap_info: 
                      "max_visible_error_mm_0_50_rest_footprint": max(s["errors_rest_footprint_m"]) * 1e3,
                      **snap_info},
         "linear": {"update_ms": lin["time_ms"]["median"], "max_visible_error_mm_0_50": max(lin["errors_m"]) * 1e3},
-        "reference": {"converged": conv["converged"], "model": f"compressible {_law(mat)}, total Lagrangian, P2, "
+        "reference": {"converged": conv["converged"], "model": f"compressible {law_name(mat)}, total Lagrangian, P2, "
                       f"Newton + load stepping, rigid finger (penalty), {st.contact} contact", "contact": st.contact,
                       "solver": solver_tag(st.contact), **{
                           k: conv[k] for k in ("monotone_decrease", "last_refinement_change_mm",
@@ -119,6 +119,7 @@ def summary(st: Settings, conv: dict, cand: dict, cases: list[dict], snap_info: 
     }
 
 
-def _write(out: str, name: str, data: dict) -> None:
+def write_json(out: str, name: str, data: dict) -> None:
+    """Write ``data`` as ``out``/``name``.json (indented one space)."""
     with open(os.path.join(out, name + ".json"), "w") as fh:
         json.dump(data, fh, indent=1)

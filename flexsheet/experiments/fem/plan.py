@@ -1,4 +1,4 @@
-"""Every reference push a run reads (:func:`planned_solves`), for :func:`flexsheet.fem.workers.prefetch` to solve
+"""Every reference push a run reads (:func:`planned_solves`), for :func:`flexsheet.fem.reference.workers.prefetch` to solve
 in worker processes before the run reads them from the cache."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ from dataclasses import replace
 
 from flexsheet.experiments.fem.studies.holdout import holdout_grid
 from flexsheet.experiments.fem.studies.tip import tip_specs
-from flexsheet.fem.reference_settings import Settings
-from flexsheet.fem.workers import Solve
+from flexsheet.fem.reference.settings import Settings
+from flexsheet.fem.reference.workers import Solve
 
 
 def planned_solves(st: Settings, study: str = "full") -> list[Solve]:

@@ -7,7 +7,7 @@ import os
 
 import numpy as np
 
-from flexsheet.fem.reference_settings import TARGET
+from flexsheet.fem.reference.settings import TARGET
 
 
 def plot_convergence(out: str, conv: dict, law: str = "neo-Hookean") -> None:

@@ -6,6 +6,7 @@ convergence, penalty, skin and mirror studies, the snapshot table, the candidate
 from __future__ import annotations
 
 import json
+import logging
 import time
 from dataclasses import replace
 
@@ -15,7 +16,7 @@ from flexsheet.experiments.fem.candidates import (
     snapshot_source,
     validation_set,
 )
-from flexsheet.experiments.fem.outputs import _write, failure_map, model_table, summary
+from flexsheet.experiments.fem.outputs import failure_map, model_table, summary, write_json
 from flexsheet.experiments.fem.plan import planned_solves
 from flexsheet.experiments.fem.plots import (
     plot_candidates,
@@ -33,13 +34,16 @@ from flexsheet.experiments.fem.studies.material import material_study
 from flexsheet.experiments.fem.studies.mirror import mirror_study
 from flexsheet.fem.cache import ArrayCache
 from flexsheet.fem.choose import MODEL_TABLE_PATH
-from flexsheet.fem.hyperelastic import DEFAULT_CONTACT, PENALTY_SCALE
-from flexsheet.fem.material import GENT_JM_RUBBER, Material
+from flexsheet.fem.material import Material
 from flexsheet.fem.realtime import RealtimeModel
-from flexsheet.fem.reference_paths import _depths, _log, reference_path, snapshot_table
-from flexsheet.fem.reference_settings import DEFAULT_MATERIAL, PENALTY_TOL_MM, Settings, _law
+from flexsheet.fem.reference.capsule_contact import DEFAULT_CONTACT, PENALTY_SCALE
+from flexsheet.fem.reference.paths import push_depths, reference_path, snapshot_table
+from flexsheet.fem.reference.settings import DEFAULT_MATERIAL, PENALTY_TOL_MM, Settings, law_name
+from flexsheet.fem.reference.workers import prefetch
 from flexsheet.fem.visible_error import realtime_model
-from flexsheet.fem.workers import prefetch
+from flexsheet.model.scene_parts import GENT_JM_RUBBER
+
+log = logging.getLogger(__name__)
 
 
 def run(args, st: Settings, mat: Material, cache: ArrayCache, t0: float) -> int:
@@ -53,9 +57,9 @@ def run(args, st: Settings, mat: Material, cache: ArrayCache, t0: float) -> int:
         if not 0 <= args.level < len(st.levels):
             raise SystemExit(f"--level must be in [0, {len(st.levels) - 1}], got {args.level}")
         last = args.level == len(st.levels) - 1
-        reference_path(st.levels[args.level], 0.0, _depths(st.fine_step if last else st.depth_step), mat, cache,
+        reference_path(st.levels[args.level], 0.0, push_depths(st.fine_step if last else st.depth_step), mat, cache,
                        probes, st.contact)
-        _log(f"level {args.level} cached in {time.perf_counter() - t0:.1f} s")
+        log.info(f"level {args.level} cached in {time.perf_counter() - t0:.1f} s")
         return 0
     if args.material_study:
         mats = (Material(mat.E, mat.nu), Material(mat.E, mat.nu, mat.Jm if mat.gent else GENT_JM_RUBBER))
@@ -66,7 +70,7 @@ def run(args, st: Settings, mat: Material, cache: ArrayCache, t0: float) -> int:
         "fold" if args.fold_study else "full"
     prefetch(planned_solves(st, study), args.jobs, mat, cache, probes, st.contact)
     if args.holdout_study:
-        fine = reference_path(st.levels[-1], 0.0, _depths(st.fine_step), mat, cache, probes, st.contact)
+        fine = reference_path(st.levels[-1], 0.0, push_depths(st.fine_step), mat, cache, probes, st.contact)
         return _study_done(args.out, "holdout_study", holdout_study(st, mat, cache, rm, fine), plot_holdout_study, t0)
     if args.fold_study:
         return _study_done(args.out, "fold_study", fold_study(st, mat, cache, rm), plot_fold_study, t0)
@@ -79,9 +83,9 @@ def run(args, st: Settings, mat: Material, cache: ArrayCache, t0: float) -> int:
 
 def _study_done(out: str, name: str, result: dict, plot, t0: float) -> int:
     """Write a study run alone: ``name``.json and its figure (``plot``) into ``out``, and log it; returns 0."""
-    _write(out, name, result)
+    write_json(out, name, result)
     plot(out, result)
-    _log(f"{name.replace('_', ' ')} done in {time.perf_counter() - t0:.1f} s -> {out}/{name}.json")
+    log.info(f"{name.replace('_', ' ')} done in {time.perf_counter() - t0:.1f} s -> {out}/{name}.json")
     return 0
 
 
@@ -104,8 +108,8 @@ def _full_run(args, st: Settings, mat: Material, cache: ArrayCache, rm: Realtime
     fmap = failure_map(cases, cand)
     summ = summary(st, conv, cand, cases, snap_info, mat, time.perf_counter() - t0)
     _write_full(args, st, mat, conv, ms, cand, cases, fmap, summ)
-    _log(json.dumps(summ["realtime"], indent=1))
-    _log(f"done in {time.perf_counter() - t0:.1f} s -> {args.out}")
+    log.info(json.dumps(summ["realtime"], indent=1))
+    log.info(f"done in {time.perf_counter() - t0:.1f} s -> {args.out}")
     return 0
 
 
@@ -126,20 +130,20 @@ def _write_full(args, st: Settings, mat: Material, conv: dict, ms: dict, cand: d
                 fmap: dict, summ: dict) -> None:
     """The full run's JSON files and figures into ``args.out``, the node's model table where it is due, and the
     linear study when asked for."""
-    _write(args.out, "convergence", conv)
-    _write(args.out, "mirror_study", ms)
-    _write(args.out, "failure_map", fmap)
-    _write(args.out, "accuracy_speed", {k: {"name": v["name"], "update_ms": v["time_ms"],
-                                            "max_visible_error_mm_0_50": max(v["errors_m"]) * 1e3}
-                                        for k, v in cand.items()})
-    _write(args.out, "summary", summ)
+    write_json(args.out, "convergence", conv)
+    write_json(args.out, "mirror_study", ms)
+    write_json(args.out, "failure_map", fmap)
+    write_json(args.out, "accuracy_speed", {k: {"name": v["name"], "update_ms": v["time_ms"],
+                                                "max_visible_error_mm_0_50": max(v["errors_m"]) * 1e3}
+                                            for k, v in cand.items()})
+    write_json(args.out, "summary", summ)
     # the node's model table: a full run of the default scene's material and contact law (or asked for)
     if (not st.quick and st.contact == DEFAULT_CONTACT and mat == DEFAULT_MATERIAL) \
             or args.write_model_table:
         with open(MODEL_TABLE_PATH, "w") as fh:
-            json.dump(model_table(cases, cand, _law(mat)), fh, indent=1)
-    plot_convergence(args.out, conv, _law(mat))
+            json.dump(model_table(cases, cand, law_name(mat)), fh, indent=1)
+    plot_convergence(args.out, conv, law_name(mat))
     plot_mirror_study(args.out, ms)
-    plot_candidates(args.out, cand, fmap, _law(mat))
+    plot_candidates(args.out, cand, fmap, law_name(mat))
     if args.linear_study:
         linear_study(args.out, mat)

@@ -5,18 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from flexsheet.arm.kinematics import (
-    LEFT_BASE,
-    Q_LOWER,
-    Q_UPPER,
-    QD_MAX,
-    RIGHT_BASE,
-    ArmKinematics,
-    home_joints,
-    rotation_angle,
-)
+from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints, rotation_angle
 from flexsheet.arm.tracking import TargetTracker, peer_holds
 from flexsheet.model import geometry
+from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
 from flexsheet.model.sheet import clamp_poses
 
 R_CYL = geometry.CYLINDER_RADIUS

@@ -3,10 +3,11 @@
 import numpy as np
 import pytest
 
-from flexsheet.arm.kinematics import LEFT_BASE, QD_MAX, RIGHT_BASE, ArmKinematics, home_joints
+from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, home_joints
 from flexsheet.arm.limiter import StreamLimiter
 from flexsheet.arm.stream import ArmStream
 from flexsheet.arm.tracking import TargetTracker
+from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
 from flexsheet.model.sheet import clamp_poses
 
 BAND = (0.2424, 0.264)        # clamp strain 0.01-0.10 of the 0.240 m sheet

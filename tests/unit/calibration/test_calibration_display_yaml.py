@@ -13,11 +13,10 @@ from flexsheet.calibration.display_calib import (
     ArmEntry,
     DisplayCalib,
     Provenance,
-    load_display_calib,
     nominal_display_calib,
-    write_display_calib,
     xyzyaw_from_pose,
 )
+from flexsheet.calibration.display_calib_file import load_display_calib, write_display_calib
 from flexsheet.model import geometry
 
 
@@ -86,7 +85,7 @@ def test_malformed_entries_name_the_key(tmp_path):
                        "T_display_projector: !!opencv-matrix\n      rows: 4\n      cols: 4\n      dt: d\n      data: [ 0.5,")
     assert bad != text
     path.write_text(bad)
-    with pytest.raises(ValueError, match=r"display\.yaml: projector\.T_display_projector: rotation block"):
+    with pytest.raises(ValueError, match=r"display\.yaml: projector\.T_display_projector rotation block is not a proper rotation"):
         load_display_calib(str(path))
     path.write_text(text.replace("   ipd: ", "   ipd_m: "))
     with pytest.raises(ValueError, match=r"missing key eye\.ipd"):

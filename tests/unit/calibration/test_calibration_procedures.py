@@ -15,7 +15,8 @@ import pytest
 from flexsheet.calibration import arms as arms_mod
 from flexsheet.calibration import camera_pose as cp
 from flexsheet.calibration import projector as pj
-from flexsheet.calibration.display_calib import ENTRIES, load_display_calib, nominal_display_calib
+from flexsheet.calibration.display_calib import ENTRIES, nominal_display_calib
+from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.calibration.eye import glasses_eye_offset, glasses_pose, tracked_eyes
 from flexsheet.calibration.procedures import QUICK
 from flexsheet.calibration.sources import ImageDirSource, save_frames
@@ -48,7 +49,7 @@ def _share_with_the_cache(seed: int, out: Path) -> None:
 @pytest.fixture(scope="module", params=SEEDS)
 def sim(request, tmp_path_factory):
     out = tmp_path_factory.mktemp(f"display{request.param}")
-    s = run_display_sim(request.param, str(out), QUICK, progress=None)     # always run here, never cached
+    s = run_display_sim(request.param, str(out), QUICK)     # always run here, never cached
     _share_with_the_cache(request.param, out)
     return request.param, out, s
 
@@ -79,7 +80,7 @@ def test_every_procedure_within_target(sim):
 
 def test_summary_is_cached_per_seed(sim):
     seed, out, s = sim
-    again = run_display_sim(seed, str(out), QUICK, progress=None)
+    again = run_display_sim(seed, str(out), QUICK)
     assert again == json.loads((out / "summary.json").read_text())
     assert again["timings"] == s["timings"]           # not re-run
 

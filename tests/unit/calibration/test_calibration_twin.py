@@ -16,7 +16,8 @@ import pytest
 from flexsheet.arm.kinematics import ArmKinematics, home_joints
 from flexsheet.calibration import projector as pj
 from flexsheet.calibration.display_calib import nominal_display_calib
-from flexsheet.twin.registration_camera import XIMEA_NOISE, CalibrationTwin, _Cam, measure_ximea_noise
+from flexsheet.twin.registration_camera import XIMEA_NOISE, CalibrationTwin, TrueCamera
+from flexsheet.twin.sensor_noise import measure_ximea_noise
 from flexsheet.twin.truth import Spreads, TwinTruth
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -59,7 +60,7 @@ def test_truth_spreads_match_their_documented_sigmas():
 def test_twin_rays_reproject_exactly():
     t = TwinTruth.draw(2)
     c = t.camera_calib
-    cam = _Cam(c["K1"], c["D1"], c["image_size"], np.eye(4))
+    cam = TrueCamera(c["K1"], c["D1"], c["image_size"], np.eye(4))
     r = cam.rays(2)
     rng = np.random.default_rng(0)
     idx = rng.integers(0, [r.shape[0], r.shape[1]], (500, 2))

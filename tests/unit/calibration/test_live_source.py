@@ -91,7 +91,7 @@ def test_the_world_is_paused_meanwhile_and_the_arms_go_home_before_they_follow_a
     releases them, gives the camera twin its finger back and resumes the script, in that order."""
     g = ScriptedGraph()
     roles = Roles("camera", "renderer", {"left": "arm_left", "right": "arm_right"}, world="world")
-    src = LiveSource(g, roles, str(tmp_path), QUICK, twin=True, settle_s=0.0, progress=lambda m: None)
+    src = LiveSource(g, roles, str(tmp_path), QUICK, twin=True, settle_s=0.0)
     src.begin()
     assert g.calls == [("world", "script/pause", {})]
     src._scene = "board"
@@ -101,13 +101,13 @@ def test_the_world_is_paused_meanwhile_and_the_arms_go_home_before_they_follow_a
         ("arm_right", "release"), ("camera", "twin/scene"), ("world", "script/resume")]
     assert np.allclose(g.q["left"], 0.1) and np.allclose(g.q["right"], -0.1)
     g2 = ScriptedGraph()
-    LiveSource(g2, ROLES, str(tmp_path), QUICK, twin=True, progress=lambda m: None).begin()
+    LiveSource(g2, ROLES, str(tmp_path), QUICK, twin=True).begin()
     assert g2.calls == []                                  # a lab without a world twin: nothing to pause
 
 
 def test_a_board_not_found_is_refused_in_one_line_and_kept(tmp_path):
     g = ScriptedGraph()                                   # a black image: no board
-    src = LiveSource(g, ROLES, str(tmp_path), QUICK, twin=True, settle_s=0.0, progress=lambda m: None)
+    src = LiveSource(g, ROLES, str(tmp_path), QUICK, twin=True, settle_s=0.0)
     with pytest.raises(LiveError, match=r"^camera-pose: view 1/2: the board \(chessboard:9x8\) is not found in "
                                         r"the left image \(saved as .*view00_left.rejected.png\)$"):
         src.board_views(QUICK.board_spec(), cp.plan_board_views(2))
@@ -125,18 +125,17 @@ def test_captured_views_are_resumed_without_moving(tmp_path):
         for side in ("left", "right"):
             cv2.imwrite(str(d / f"view{k:02d}_{side}.png"), img)
     g = ScriptedGraph()
-    views = LiveSource(g, ROLES, str(tmp_path), QUICK, twin=True, progress=lambda m: None).board_views(
+    views = LiveSource(g, ROLES, str(tmp_path), QUICK, twin=True).board_views(
         QUICK.board_spec(), cp.plan_board_views(2))
     assert len(views) == 2 and all(int(a[0, 0]) == 77 for a, _ in views)
     assert g.calls == []
 
 
 def test_an_arm_that_refuses_or_does_not_arrive_stops_the_run_naming_it(tmp_path):
-    src = LiveSource(ScriptedGraph(refuse="right"), ROLES, str(tmp_path), QUICK, twin=True, progress=lambda m: None)
+    src = LiveSource(ScriptedGraph(refuse="right"), ROLES, str(tmp_path), QUICK, twin=True)
     with pytest.raises(LiveError, match="^camera-pose: view 1/2: the right arm refused it: joints outside the limits"):
         src.board_views(QUICK.board_spec(), cp.plan_board_views(2))
-    src = LiveSource(ScriptedGraph(stuck=True), ROLES, str(tmp_path), QUICK, twin=True, move_timeout_s=0.2,
-                     progress=lambda m: None)
+    src = LiveSource(ScriptedGraph(stuck=True), ROLES, str(tmp_path), QUICK, twin=True, move_timeout_s=0.2)
     with pytest.raises(LiveError, match=r"did not arrive within 0.2 s \(still left [0-9.]+°, right [0-9.]+° away\)"):
         src.board_views(QUICK.board_spec(), cp.plan_board_views(2))
 
@@ -151,8 +150,7 @@ def test_marker_captures_resume_from_the_manifest(tmp_path):
         cv2.imwrite(str(d / f"config00_{side}.png"), np.full((512, 640), 9, np.uint8))
     (tmp_path / "frames" / "manifest.json").write_text(json.dumps({"arms": {"left": {"joints": [qs[0].tolist()]}}}))
     g = ScriptedGraph(image=np.full((512, 640), 50, np.uint8))
-    frames, used = LiveSource(g, ROLES, str(tmp_path), QUICK, twin=True, settle_s=0.0,
-                              progress=lambda m: None).marker_frames("left", qs)
+    frames, used = LiveSource(g, ROLES, str(tmp_path), QUICK, twin=True, settle_s=0.0).marker_frames("left", qs)
     assert [int(a[0, 0]) for a, _ in frames] == [9, 50, 50]
     moved = [np.asarray(a["joints"]) for n, s, a in g.calls if s == "move_to" and n == "arm_left"]
     assert len(moved) == 2 and np.allclose(moved[0], qs[1])
@@ -163,8 +161,9 @@ def test_marker_captures_resume_from_the_manifest(tmp_path):
 def test_launch_check_with_a_stale_twin_registration_notes_it_and_runs_nothing(tmp_path, monkeypatch):
     """``flexsheet launch … --check`` must not run the twin's registration: a cache written by older procedures
     (another summary version) reads as absent — a note — like an empty one; a current one is used as is."""
-    from flexsheet.display.launch import _before_launch
+    from flexsheet.display.launch import before_launch
     from flexsheet.runtime.launch import TOPLEVEL_ENV, load_launch
+    from flexsheet.runtime.testing import console_lines
     from flexsheet.twin import registration as reg
 
     monkeypatch.setenv("FLEXSHEET_CACHE", str(tmp_path))
@@ -176,8 +175,9 @@ def test_launch_check_with_a_stale_twin_registration_notes_it_and_runs_nothing(t
     (d / "summary.json").write_text(json.dumps({**key, "version": reg.SUMMARY_VERSION - 1}))
     monkeypatch.setenv(TOPLEVEL_ENV, json.dumps({"twin": {"truth_seed": 77, "realism": "realistic"}}))
     lf = load_launch(Path(__file__).resolve().parents[3] / "launch" / "sim.yaml")
-    said = []
-    assert _before_launch(lf, said.append, check_only=True) == {}
-    assert said == [f"note: the twin registration (truth seed 77) runs at start and writes {d / 'display.yaml'}"]
+    with console_lines() as said:
+        assert before_launch(lf, check_only=True) == {}
+    assert said == [f"{lf.path}: the twin registration (truth seed 77) runs at start and writes "
+                    f"{d / 'display.yaml'}"]
     (d / "summary.json").write_text(json.dumps(key))
-    assert _before_launch(lf, said.append, check_only=True) == {"display_calib": str(d / "display.yaml")}
+    assert before_launch(lf, check_only=True) == {"display_calib": str(d / "display.yaml")}

@@ -17,7 +17,7 @@ from flexsheet.experiments.report_verdicts import NO_TARGET, PARTIAL, digits, he
 from flexsheet.experiments.table1 import PAPER_TABLE1
 from flexsheet.model import geometry
 from flexsheet.model.shapes import paper_cylinder
-from flexsheet.runtime.bag import BagWriter
+from flexsheet.runtime.bag_write import BagWriter
 from flexsheet.runtime.codec import encode
 from messages import Fingertip, FingerTruth, Header, Heartbeat, SheetState, SheetTarget
 from messages import topics as T

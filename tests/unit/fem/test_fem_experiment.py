@@ -122,9 +122,12 @@ def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its
     by construction) and not on the half model. ``--mirror-study`` alone writes the same study from the cache."""
     from dataclasses import replace
 
-    from flexsheet.experiments import fem as X
+    from flexsheet.experiments.fem.studies.mirror import mirror_asymmetry
     from flexsheet.fem.cache import ArrayCache
     from flexsheet.fem.material import Material
+    from flexsheet.fem.reference.paths import reference_path
+    from flexsheet.fem.reference.settings import settings_for
+    from flexsheet.fem.visible_error import realtime_model
 
     base, s, _ = quick
     with open(base / "out" / "convergence.json") as fh:
@@ -145,18 +148,18 @@ def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its
     assert os.path.getsize(base / "out" / "mirror_study.png") > 5000
     # the instrument: on the quarter model's own path it reads 0 (u_dof is float32: 1e-5 m is rounding); on the half
     # model a uniform field u = (0, 0, a) is read as |a - (-a)| = 2a
-    st, mat = X.settings_for(True), Material()
-    rm = X.realtime_model(st, mat, str(base / "cache"))
+    st, mat = settings_for(True), Material()
+    rm = realtime_model(st, mat, str(base / "cache"))
     depths = np.array(ms["depths_m"])
     cache = ArrayCache(str(base / "cache"))
-    q = X.reference_path(st.levels[-1], 0.0, depths, mat, cache, rm.rest_vertices.astype(float), st.contact)
-    assert max(X.mirror_asymmetry(q, st.levels[-1], depths, mat, rm)) < 1e-5
+    q = reference_path(st.levels[-1], 0.0, depths, mat, cache, rm.rest_vertices.astype(float), st.contact)
+    assert max(mirror_asymmetry(q, st.levels[-1], depths, mat, rm)) < 1e-5
     half = replace(st.levels[0], half_z=False, cut=True)   # the study's own half model, cached by the run
-    h = X.reference_path(half, 0.0, depths, mat, cache, rm.rest_vertices.astype(float), st.contact)
+    h = reference_path(half, 0.0, depths, mat, cache, rm.rest_vertices.astype(float), st.contact)
     a = 0.003
     uni = {"u_dof": np.broadcast_to([0.0, 0.0, a], h["u_dof"][:1].shape).astype(np.float32),
            "u": np.broadcast_to([0.0, 0.0, a], h["u"][:1].shape)}
-    assert X.mirror_asymmetry(uni, half, depths[:1], mat, rm)[0] == pytest.approx(2 * a, rel=1e-5)
+    assert mirror_asymmetry(uni, half, depths[:1], mat, rm)[0] == pytest.approx(2 * a, rel=1e-5)
     r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--Jm", "inf", "--mirror-study", "--out",
                         str(base / "mirror"), "--cache-dir", str(base / "cache")], cwd=ROOT, capture_output=True,
                        text=True, timeout=600)
@@ -177,10 +180,13 @@ def test_mirror_stability_finds_the_lowest_eigenvalues_of_each_symmetry_block(qu
 
     import scipy.linalg
 
-    from flexsheet.experiments import fem as X
+    from flexsheet.experiments.fem.studies.mirror import mirror_blocks, mirror_stability
     from flexsheet.fem.cache import ArrayCache
-    from flexsheet.fem.hyperelastic import capsule_at
     from flexsheet.fem.material import Material
+    from flexsheet.fem.reference.capsule_contact import capsule_at
+    from flexsheet.fem.reference.paths import push_depths, reference_model, reference_path
+    from flexsheet.fem.reference.settings import FINGER_R, settings_for
+    from flexsheet.fem.visible_error import realtime_model
 
     base, s, _ = quick
     with open(base / "out" / "convergence.json") as fh:
@@ -193,31 +199,31 @@ def test_mirror_stability_finds_the_lowest_eigenvalues_of_each_symmetry_block(qu
         assert all(v > 0 for v in r["sym_N_per_m"])
         assert r["anti_positive_definite"] == [v > 0 for v in r["anti_N_per_m"]]
         assert max(r["residual_N"]) < 1e-3 * max(conv["levels"][-1]["force_N"])
-    st, mat = X.settings_for(True), Material()
+    st, mat = settings_for(True), Material()
     spec = st.levels[0]
-    rm = X.realtime_model(st, mat, str(base / "cache"))
-    depths = X._depths(st.depth_step)
-    p = X.reference_path(spec, 0.0, depths, mat, ArrayCache(str(base / "cache")), rm.rest_vertices.astype(float),
+    rm = realtime_model(st, mat, str(base / "cache"))
+    depths = push_depths(st.depth_step)
+    p = reference_path(spec, 0.0, depths, mat, ArrayCache(str(base / "cache")), rm.rest_vertices.astype(float),
                          st.contact)
     j = len(depths) // 2
-    got = X.mirror_stability({"u_dof": p["u_dof"][j:j + 1]}, spec, depths[j:j + 1], mat)
-    m = X._ref_model(spec, 0.0, mat)
-    sym, anti = X.mirror_blocks(m)
+    got = mirror_stability({"u_dof": p["u_dof"][j:j + 1]}, spec, depths[j:j + 1], mat)
+    m = reference_model(spec, 0.0, mat)
+    sym, anti = mirror_blocks(m)
     on_z = np.abs(m.points[:, 2] - m.mesh.center[2]) < 1e-9
     inner = on_z & ~m.support & (np.abs(m.points[:, 1] - m.mesh.center[1]) > 1e-9)
     assert inner.any() and not sym[inner][:, :2].any() and sym[inner][:, 2].all()
     assert anti[inner][:, :2].all() and not anti[inner][:, 2].any()
     assert sym[m.support].all() and anti[m.support].all()
-    _, K = m.residual_tangent(p["u_dof"][j].astype(float), capsule_at(0.0, float(depths[j]), X.FINGER_R, m.mesh.radius,
+    _, K = m.residual_tangent(p["u_dof"][j].astype(float), capsule_at(0.0, float(depths[j]), FINGER_R, m.mesh.radius,
                                                                       m.mesh.center), m.penalty())
     for name, fixed in (("sym_N_per_m", sym), ("anti_N_per_m", anti)):
         fr = np.flatnonzero(~fixed.ravel())
         lo = scipy.linalg.eigvalsh(K[fr][:, fr].toarray(), subset_by_index=[0, 0])[0]
         assert got[name][0] == pytest.approx(lo, rel=1e-6), name
     with pytest.raises(ValueError, match="quarter model"):
-        X.mirror_stability(p, replace(spec, half_z=False), depths, mat)
+        mirror_stability(p, replace(spec, half_z=False), depths, mat)
     with pytest.raises(ValueError, match="frictionless"):
-        X.mirror_stability(p, spec, depths, mat, contact="sticking")
+        mirror_stability(p, spec, depths, mat, contact="sticking")
 
 
 def test_penalty_study_shows_the_default_penalty_converged(quick):
@@ -364,7 +370,7 @@ def test_full_settings_judge_the_nodes_snapshot_mesh_against_a_finer_one():
     """The node's snapshot table (DEFAULT_REF_SPEC) is one of the full convergence study's meshes and the
     snapshots the experiment judges are taken on it, against a finer mesh: the accuracy reported is the
     node's, and it includes its mesh's own error. The levels refine by ~1.33 each."""
-    from flexsheet.experiments.fem import settings_for
+    from flexsheet.fem.reference.settings import settings_for
     from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC
 
     st = settings_for(False)
@@ -389,49 +395,52 @@ def test_planned_solves_list_each_push_the_run_reads_once_by_cache_key():
     quick run 5; ``--mirror-study`` the levels and the half models (its stability check reads two levels);
     ``--holdout-study`` the finest level, the snapshot mesh's azimuth-0 level and its cut paths at 5 and 10 only
     (the table's blend at 5 reads 0 and 10, not 20)."""
-    from flexsheet.experiments import fem as X
+    from flexsheet.experiments.fem.plan import planned_solves
+    from flexsheet.experiments.fem.studies.holdout import holdout_grid
     from flexsheet.fem.material import Material
+    from flexsheet.fem.reference.paths import push_depths, reference_key
+    from flexsheet.fem.reference.settings import settings_for
 
     probes = np.zeros((1, 3))
 
     def keys(st, study="full"):
         out = []
-        for j in X.planned_solves(st, study):
-            out.append(X._reference_keys(j.spec, j.angle_deg, X._depths(j.step), Material(), probes,
-                                         "frictionless", j.penalty_scale)[0])
+        for j in planned_solves(st, study):
+            out.append(reference_key(j.spec, j.angle_deg, push_depths(j.step), Material(), probes,
+                                     "frictionless", j.penalty_scale))
         return out
 
-    full, quick = X.settings_for(False), X.settings_for(True)
+    full, quick = settings_for(False), settings_for(True)
     assert len(set(keys(full))) == 16 and len(set(keys(quick))) == 5
     assert len(set(keys(full, "mirror"))) == 8 and set(keys(full, "mirror")) <= set(keys(full))
-    hold = X.planned_solves(full, "holdout")
+    hold = planned_solves(full, "holdout")
     assert len(set(keys(full, "holdout"))) == 4 and set(keys(full, "holdout")) <= set(keys(full))
     assert sorted(j.angle_deg for j in hold) == [0.0, 0.0, 5.0, 10.0]
     # the table's pushes and the held-out ones are read as their stable branch (stable_path), the levels not
     assert sorted((j.angle_deg, j.stable, j.spec == full.snap_spec) for j in hold) == \
         [(0.0, False, False), (0.0, True, True), (5.0, True, True), (10.0, True, True)]
-    assert {j.spec for j in X.planned_solves(full) if j.stable} == \
+    assert {j.spec for j in planned_solves(full) if j.stable} == \
         {full.snap_spec} | {replace(full.levels[-2], skin_h=h) for h in full.skin_sizes}
-    assert [j.stable for j in X.planned_solves(quick)].count(True) == 3
-    assert X.holdout_grid(full).grid.angles_deg == (0.0, 10.0)
+    assert [j.stable for j in planned_solves(quick)].count(True) == 3
+    assert holdout_grid(full).grid.angles_deg == (0.0, 10.0)
     with pytest.raises(ValueError, match="held-out azimuth 25 deg is outside"):
-        X.holdout_grid(replace(full, holdout_deg=(25.0,)))
-    assert X.holdout_grid(replace(full, holdout_deg=(15.0,))).grid.angles_deg == (0.0, 10.0, 20.0)
+        holdout_grid(replace(full, holdout_deg=(25.0,)))
+    assert holdout_grid(replace(full, holdout_deg=(15.0,))).grid.angles_deg == (0.0, 10.0, 20.0)
     with pytest.raises(ValueError, match="hold no azimuth out"):
-        X.holdout_grid(quick)
+        holdout_grid(quick)
     # the fold study: the last three levels (the full run's), the tip-refined sequence and its tip check
     assert len(set(keys(full, "fold"))) == 7 and len(set(keys(full, "fold")) & set(keys(full))) == 3
     assert len(set(keys(quick, "fold"))) == 4 and len(set(keys(quick, "fold")) & set(keys(quick))) == 2
     # the material study (per material): the five levels, and the snapshot mesh's stable branch (its table)
-    mat = X.planned_solves(full, "material")
+    mat = planned_solves(full, "material")
     assert len(set(keys(full, "material"))) == 6 and len(set(keys(full, "material")) & set(keys(full))) == 5
     assert [j.spec for j in mat if j.stable] == [full.snap_spec] == [full.levels[-2]]
     # its tip check is the fold study's (3.4 mm tube + 0.8 mm tip): one solve, shared
     assert set(keys(full, "material")) - set(keys(full)) <= set(keys(full, "fold"))
     assert len(set(keys(quick, "material"))) == 2                       # quick: no tip check
     with pytest.raises(ValueError, match="study must be"):
-        X.planned_solves(full, "mirror_only")
-    costs = [j.cost() for j in X.planned_solves(full)]
+        planned_solves(full, "mirror_only")
+    costs = [j.cost() for j in planned_solves(full)]
     assert costs == sorted(costs, reverse=True)
 
 
@@ -464,60 +473,18 @@ def test_reference_path_solves_off_axis_pushes_on_the_half_model_under_one_key()
     meshes it: the quarter and the half spec give one cache entry (one solve), and −0° is 0°."""
     from dataclasses import replace
 
-    from flexsheet.experiments import fem as X
     from flexsheet.fem.material import Material
+    from flexsheet.fem.reference.paths import push_depths, reference_path
     from flexsheet.fem.snapshots import DEFAULT_REF_SPEC
 
     c = _KeyRecorder()
     probes = np.zeros((2, 3))
-    d = X._depths(0.0025)
+    d = push_depths(0.0025)
     for spec, a in ((DEFAULT_REF_SPEC, 10.0), (replace(DEFAULT_REF_SPEC, half_z=False), 10.0),
                     (DEFAULT_REF_SPEC, 0.0), (DEFAULT_REF_SPEC, -0.0)):
-        X.reference_path(spec, a, d, Material(), c, probes)
+        reference_path(spec, a, d, Material(), c, probes)
     (k10q, w10), (k10h, _), (k0, w0), (k0m, _) = c.seen
     assert k10q == k10h and "hz=0" in w10 and k0 == k0m and "hz=1" in w0 and k0 != k10q
-
-
-def test_a_previous_version_path_is_reused_only_when_no_newton_call_ran_out(tmp_path, monkeypatch):
-    """nh-7 changed only what follows a Newton call that ran out of iterations, so a cached nh-6 path with fewer
-    than NEWTON_ITERS iterations at every depth is re-keyed and read (no solve); one with a depth at NEWTON_ITERS
-    (a call ran out there: nh-7 would continue it) is solved again; prefetch's plan (missing_solves) agrees."""
-    from flexsheet.experiments import fem as X
-    from flexsheet.fem import reference_paths as R
-    from flexsheet.fem.cache import ArrayCache
-    from flexsheet.fem.material import Material
-    from flexsheet.fem.snapshots import DEFAULT_REF_SPEC
-
-    assert X.SOLVER_VERSION == "nh-7" and X.PREVIOUS_VERSION == "nh-6"
-    d, probes = X._depths(0.0025), np.zeros((2, 3))
-
-    k = _KeyRecorder()
-    monkeypatch.setattr(R, "SOLVER_VERSION", X.PREVIOUS_VERSION)
-    X.reference_path(DEFAULT_REF_SPEC, 0.0, d, Material(), k, probes)
-    monkeypatch.undo()
-    ((old_key, _),) = k.seen
-
-    class Solved(Exception):
-        pass
-
-    def no_solve(*a, **kw):
-        raise Solved
-
-    monkeypatch.setattr(R, "_ref_model", no_solve)
-    for newton_max, reused in ((X.NEWTON_ITERS - 1, True), (X.NEWTON_ITERS, False)):
-        cache = ArrayCache(str(tmp_path / f"c{newton_max}"))
-        old = _fake_path_dict(4, d) | {"newton": np.full(len(d), 5)}
-        old["newton"][7] = newton_max
-        cache.save("reference", old_key, old)
-        # prefetch plans the same: a path it counts as present is one reference_path reads
-        job = X.Solve(DEFAULT_REF_SPEC, 0.0, 0.0025)
-        assert X.missing_solves([job, job], Material(), cache, probes, X.DEFAULT_CONTACT) == ([] if reused else [job])
-        if reused:
-            z = X.reference_path(DEFAULT_REF_SPEC, 0.0, d, Material(), cache, probes)
-            assert np.array_equal(z["force"], old["force"]) and len(os.listdir(tmp_path / f"c{newton_max}")) == 2
-        else:
-            with pytest.raises(Solved):
-                X.reference_path(DEFAULT_REF_SPEC, 0.0, d, Material(), cache, probes)
 
 
 def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeypatch):
@@ -525,14 +492,17 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     stores it under the key the FEM node loads; each azimuth's states come from a cached stable path on the
     table's mesh (its loading path: reference_path takes the half model away from azimuth 0), and `--azimuth A`
     solves just that path (the solves themselves are hours: replaced by markers)."""
-    from flexsheet.experiments import fem as X
     from flexsheet.experiments.fem import cli as CLI
     from flexsheet.experiments.fem import runs as RUNS
-    from flexsheet.fem import node_table as NT
-    from flexsheet.fem import reference_paths as R
+    from flexsheet.experiments.fem.cli import main
     from flexsheet.fem.cache import ArrayCache
-    from flexsheet.fem.material import GENT_JM_RUBBER, Material
-    from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_or_build
+    from flexsheet.fem.material import Material
+    from flexsheet.fem.reference import node_table as NT
+    from flexsheet.fem.reference import paths as R
+    from flexsheet.fem.reference.settings import settings_for
+    from flexsheet.fem.reference.snapshot_build import load_or_build
+    from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC
+    from flexsheet.model.scene_parts import GENT_JM_RUBBER
     from nodes.fem.node import FemParams
 
     paths, seen = [], {}
@@ -551,7 +521,7 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     monkeypatch.setattr(R, "reference_path", fake_path)
     # stable_path's unloading sweep (test_stable_path_takes_the_unloaded_rows_only...) left out: its loading read
     monkeypatch.setattr(NT, "stable_path", lambda *a, **kw: R.reference_path(*a, **kw))
-    monkeypatch.setattr("flexsheet.fem.snapshots.build_table", fake_build)
+    monkeypatch.setattr("flexsheet.fem.reference.snapshot_build.build_table", fake_build)
     # the rendered vertices the paths are sampled at (the full settings' linear model: a 17 s precompute)
     verts = np.random.default_rng(0).uniform(-0.03, 0.03, (7, 3)).astype(np.float32)
     for where in (NT, RUNS):            # the node table's build and the --level run
@@ -562,8 +532,8 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     monkeypatch.setattr(NT, "node_table_report", lambda table, paths, mat, key: reported.update(
         angles=sorted(paths), Jm=mat.Jm, key=key) or {"key": key})
     monkeypatch.setattr(CLI, "plot_node_table", lambda out, rep: None)
-    monkeypatch.setattr(NT, "_table_update_ms", lambda table, verts, mat: {"median_ms": -1.0})
-    assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--jobs", "1"]) == 0
+    monkeypatch.setattr(NT, "table_update_ms", lambda table, verts, mat: {"median_ms": -1.0})
+    assert main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--jobs", "1"]) == 0
     assert reported["angles"] == list(DEFAULT_GRID.angles_deg) and reported["Jm"] == GENT_JM_RUBBER
     with open(tmp_path / "o" / "node_table.json") as fh:
         assert json.load(fh) == {"key": reported["key"], "update": {"median_ms": -1.0}, "held_out": [],
@@ -575,10 +545,10 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     assert [s.depth for s in st30] == pytest.approx(DEFAULT_GRID.depths()[1:]) and st30[-1].force == 19.0
     paths.clear()
     seen.clear()
-    assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table"]) == 0
+    assert main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table"]) == 0
     assert paths == [] and seen == {}           # the table is found: nothing solved or built again
     paths.clear()
-    assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table",
+    assert main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table",
                    "--azimuth", "20"]) == 0
     assert paths == [(DEFAULT_REF_SPEC, 20.0, 0.05, 20)]
     # azimuth 0 of the node table is the full run's 3.4 mm convergence level: the same solve (cache key)
@@ -586,17 +556,17 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     for where in (R, RUNS):             # the node table's stable_path reads R's, the --level run its own
         monkeypatch.setattr(where, "reference_path", lambda spec, a, d, mat, cache, probes, contact="frictionless",
                             *r: calls.append((spec, a, np.round(d, 9).tolist(), probes.tobytes(), contact)) or {})
-    level = [lv.h_fine for lv in X.settings_for(False).levels].index(DEFAULT_REF_SPEC.h_fine)
-    assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--level", str(level)]) == 0
-    assert X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table",
+    level = [lv.h_fine for lv in settings_for(False).levels].index(DEFAULT_REF_SPEC.h_fine)
+    assert main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--level", str(level)]) == 0
+    assert main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table",
                    "--azimuth", "-0"]) == 0
     assert len(calls) == 2 and calls[0] == calls[1] and calls[0][3] == verts.astype(float).tobytes()
     with pytest.raises(SystemExit, match="--azimuth must be one of"):
-        X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--azimuth", "15"])
+        main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--azimuth", "15"])
     with pytest.raises(SystemExit, match="--azimuth is for --node-table"):
-        X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--azimuth", "10"])
+        main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--azimuth", "10"])
     with pytest.raises(SystemExit, match="node-table"):
-        X.main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--quick"])
+        main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--quick"])
     # the default material is the default scene's (Gent, Jm 97.2): the key the bare FEM node looks up too
     table, hit, _ = load_or_build(ArrayCache(str(tmp_path / "c")), DEFAULT_GRID, DEFAULT_REF_SPEC,
                                   Material(p.E, p.nu, GENT_JM_RUBBER), p.finger_radius, build=False)
@@ -607,10 +577,10 @@ def test_stable_path_takes_the_unloaded_rows_only_and_keeps_the_dtypes(tmp_path,
     """stable_path: rows where stable_states took the unloaded state come from its record, the others are the
     loading path's as cached, every array keeps its dtype; the energies and branch flags are stored; a second
     call reads the "stable" cache entry without touching the loading path."""
-    from flexsheet.fem import reference_paths as X
     from flexsheet.fem.cache import ArrayCache
-    from flexsheet.fem.hyperelastic import RefSpec
     from flexsheet.fem.material import Material
+    from flexsheet.fem.reference import paths as X
+    from flexsheet.fem.reference.mesh import RefSpec
 
     depths = np.array([0.01, 0.02, 0.03])
     n_dof, k = 4, 2
@@ -639,7 +609,7 @@ def test_stable_path_takes_the_unloaded_rows_only_and_keeps_the_dtypes(tmp_path,
                 "converged": np.array([True] * n)}
 
     monkeypatch.setattr(X, "reference_path", fake_reference_path)
-    monkeypatch.setattr(X, "_ref_model", lambda *a, **kw: FakeModel())
+    monkeypatch.setattr(X, "reference_model", lambda *a, **kw: FakeModel())
     monkeypatch.setattr(X, "stable_states", fake_stable_states)
     monkeypatch.setattr(X, "_path_record", fake_record)
     cache = ArrayCache(str(tmp_path), None, shipped_dir=None)
@@ -665,9 +635,20 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
     grid interpolates display-frame components of a rotating field: a few µm, not exact.)"""
     from test_fem_hyperelastic import C, L, R, _analytic_table
 
-    from flexsheet.experiments import fem as X
-    from flexsheet.fem import node_table as NT
-    from flexsheet.fem.material import GENT_JM_RUBBER, Material
+    from flexsheet.experiments.fem.cli import main
+    from flexsheet.experiments.fem.plots import plot_node_table
+    from flexsheet.fem.material import Material
+    from flexsheet.fem.reference import node_table as NT
+    from flexsheet.fem.reference.node_table import (
+        node_table_between_depths,
+        node_table_compare,
+        node_table_holdout,
+        node_table_report,
+        table_update_ms,
+        twin_spec,
+    )
+    from flexsheet.fem.snapshots import DEFAULT_REF_SPEC
+    from flexsheet.model.scene_parts import GENT_JM_RUBBER
 
     depths = [0.0, 0.01, 0.02]
     tab = _analytic_table([0.0, 10.0], depths)
@@ -677,14 +658,14 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
         return {"dofs": np.array(100 + extra), "cpu_seconds": np.array(1.0), "newton": np.array([3, 4]),
                 "converged": np.array([True, True]), "branch": np.array([0, 1]), "unload_seconds": np.array(2.0)}
 
-    rep = X.node_table_report(tab, {0.0: path(), 10.0: path(1)}, mat, "k")
+    rep = node_table_report(tab, {0.0: path(), 10.0: path(1)}, mat, "k")
     assert [r["azimuth_deg"] for r in rep["azimuths"]] == [0.0, 10.0] and rep["material"]["Jm"] == GENT_JM_RUBBER
     for r in rep["azimuths"]:
         assert r["apex_depth_error_mm"] == pytest.approx([-20.0, -40.0], abs=1e-3)
         assert r["unloaded_state_at_mm"] == [20.0] and r["force_N"] == pytest.approx([0.0, 1.0, 2.0])
     assert [r["dofs"] for r in rep["azimuths"]] == [100, 101]
     # a path this machine's cache lacks (the table shipped, its solves not): its facts are left out, not invented
-    r10 = X.node_table_report(tab, {0.0: path(), 10.0: None}, mat, "k")["azimuths"][1]
+    r10 = node_table_report(tab, {0.0: path(), 10.0: None}, mat, "k")["azimuths"][1]
     assert r10["path"] == "not in this machine's cache" and "dofs" not in r10 and r10["force_N"][2] == 2.0
     # held out at 5 deg: the rendered vertices on the side, away from the held back half and the fingertip
     th, ys = np.meshgrid(np.radians(np.arange(-60.0, 61.0, 7.5)), np.array([-0.04, -0.02, 0.0, 0.02, 0.04]))
@@ -702,12 +683,12 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
 
     held = {"u": np.stack([exact(d) for d in depths[1:]]), "dofs": np.array(7), "cpu_seconds": np.array(3.0)}
     monkeypatch.setattr(NT, "stable_path", lambda *a, **kw: held)
-    h = X.node_table_holdout(tab, mat, None, rm, 5.0)
+    h = node_table_holdout(tab, mat, None, rm, 5.0)
     assert h["depths_mm"] == pytest.approx([10.0, 20.0]) and h["max_error_mm"] < 5e-3    # 1° grid: µm
     far = int(np.argmax(np.abs(th - phi)))                 # a vertex far from the fingertip: visible
     held["u"] = held["u"].copy()
     held["u"][1, far] += [0.0, 0.001, 0.0]
-    h = X.node_table_holdout(tab, mat, None, rm, 5.0)
+    h = node_table_holdout(tab, mat, None, rm, 5.0)
     assert h["error_mm"][1] == pytest.approx(1.0, abs=1e-3) and h["over_target_from_mm"] == pytest.approx(20.0)
     # the twin (--mesh-check): the same push on the table mesh's twin (here 0.5 mm off at 10 mm, the same at 20 mm),
     # its difference read as the mesh's noise
@@ -715,21 +696,21 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
     twin_u[0, far] += [0.0, 0.0, 0.0005]
     specs = []
     monkeypatch.setattr(NT, "stable_path", lambda spec, *a, **kw: specs.append(spec) or (
-        held if spec == X.DEFAULT_REF_SPEC else {**held, "u": twin_u, "converged": np.array([True, True])}))
-    h = X.node_table_holdout(tab, mat, None, rm, 5.0, twin=True)
-    assert specs == [X.DEFAULT_REF_SPEC, X.twin_spec(X.DEFAULT_REF_SPEC)]
-    assert specs[1].refine_radius == pytest.approx(X.DEFAULT_REF_SPEC.refine_radius + 1e-4)
+        held if spec == DEFAULT_REF_SPEC else {**held, "u": twin_u, "converged": np.array([True, True])}))
+    h = node_table_holdout(tab, mat, None, rm, 5.0, twin=True)
+    assert specs == [DEFAULT_REF_SPEC, twin_spec(DEFAULT_REF_SPEC)]
+    assert specs[1].refine_radius == pytest.approx(DEFAULT_REF_SPEC.refine_radius + 1e-4)
     assert h["twin"]["noise_mm"] == pytest.approx([0.5, 0.0], abs=1e-6) and h["error_mm"][1] == pytest.approx(1.0, abs=1e-3)
     # two tables judged side by side at the same pushes: the held-out one's error as node_table_holdout gives it,
     # and a table azimuth named as held, not judged
-    rows = X.node_table_compare({"a": tab, "b": tab}, [5.0, 10.0], mat, None, rm)
+    rows = node_table_compare({"a": tab, "b": tab}, [5.0, 10.0], mat, None, rm)
     assert [r["azimuth_deg"] for r in rows] == [5.0, 10.0] and rows[0]["depths_mm"] == pytest.approx([10.0, 20.0])
     assert rows[0]["a"] == rows[0]["b"] and rows[0]["a"]["error_mm"][1] == pytest.approx(1.0, abs=1e-3)
     assert rows[0]["a"]["over_target_from_mm"] == pytest.approx(20.0) and rows[1] == {
         "azimuth_deg": 10.0, "a": "holds this azimuth", "b": "holds this azimuth"}
     for bad in (0.0, 10.0, 12.0, -3.0):
         with pytest.raises(ValueError, match="held-out azimuth"):
-            X.node_table_holdout(tab, mat, None, rm, bad)
+            node_table_holdout(tab, mat, None, rm, bad)
     # between the table's depths at one of its azimuths: the analytic field is linear in depth, so the table's
     # depth blend is exact at the midpoints too; a 1 mm flaw at a midpoint reads there, and only there
     fine = [0.005, 0.01, 0.015, 0.02]
@@ -742,22 +723,22 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
     on0 = {"u": np.stack([exact0(d) for d in fine]), "dofs": np.array(9), "cpu_seconds": np.array(4.0),
            "branch": np.array([0, 0, 1, 1])}
     monkeypatch.setattr(NT, "stable_path", lambda spec, a, d, *r, **kw: seen.append(np.round(d, 9).tolist()) or on0)
-    b = X.node_table_between_depths(tab, mat, None, rm, 0.0)
+    b = node_table_between_depths(tab, mat, None, rm, 0.0)
     assert seen == [fine] and b["depths_mm"] == pytest.approx([5.0, 10.0, 15.0, 20.0]) and b["max_error_mm"] < 5e-3
     assert b["unloaded_state_at_mm"] == pytest.approx([15.0, 20.0]) and b["over_target_from_mm"] is None
     far0 = int(np.argmax(np.abs(th)))
     on0["u"] = on0["u"].copy()
     on0["u"][2, far0] += [0.0, 0.0, 0.001]
-    b = X.node_table_between_depths(tab, mat, None, rm, 0.0)
+    b = node_table_between_depths(tab, mat, None, rm, 0.0)
     assert b["max_error_mm_between_depths"] == pytest.approx(1.0, abs=1e-3) and b["max_error_mm_at_table_depths"] < 5e-3
     assert b["over_target_from_mm"] == pytest.approx(15.0)
     with pytest.raises(ValueError, match="one of the table's"):
-        X.node_table_between_depths(tab, mat, None, rm, 5.0)
+        node_table_between_depths(tab, mat, None, rm, 5.0)
     rep["between_depths"] = [b]
-    rep["update"] = X._table_update_ms(tab, verts, mat, n=3)
+    rep["update"] = table_update_ms(tab, verts, mat, n=3)
     assert rep["update"]["calls"] == 9 and 0.0 < rep["update"]["median_ms"] <= rep["update"]["p90_ms"]
     rep["held_out"] = [h]
-    X.plot_node_table(str(tmp_path), rep)
+    plot_node_table(str(tmp_path), rep)
     assert os.path.getsize(tmp_path / "node_table.png") > 5000
     for args, word in ((["--node-table", "--holdout-azimuth", "10"], "strictly between"),
                        (["--node-table", "--holdout-azimuth", "5"], "strictly between"),      # a table azimuth
@@ -770,13 +751,13 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
                        (["--between-depths", "0"], "is for --node-table"),
                        (["--node-table", "--mesh-check"], "--mesh-check is for")):
         with pytest.raises(SystemExit, match=word):
-            X.main(["--out", str(tmp_path / "o"), "--cache-dir", ""] + args)
+            main(["--out", str(tmp_path / "o"), "--cache-dir", ""] + args)
 
 
 def test_scheduler_address_is_checked_before_any_work(tmp_path):
     """--scheduler takes a dask scheduler's tcp://HOST:PORT; anything else is refused naming the value, and
     the local cluster stays the default."""
-    from flexsheet.fem import workers
+    from flexsheet.fem.reference import workers
 
     with pytest.raises(ValueError, match="tcp://HOST:PORT, got 'localhost:8786'"):
         workers.set_scheduler("localhost:8786")
@@ -788,7 +769,7 @@ def test_scheduler_address_is_checked_before_any_work(tmp_path):
         assert workers.parallel(1)
     finally:
         workers.set_scheduler(None)
-    from flexsheet.experiments.fem import main
+    from flexsheet.experiments.fem.cli import main
 
     with pytest.raises(SystemExit, match="--scheduler must be tcp://HOST:PORT"):
         main(["--quick", "--scheduler", "nowhere", "--out", str(tmp_path)])

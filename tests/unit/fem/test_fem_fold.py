@@ -1,13 +1,21 @@
-"""Self-contact and crease checks of deformed states (flexsheet/fem/fold.py), on shapes whose answer is known."""
+"""Self-contact and crease checks of deformed states (flexsheet/fem/reference/fold.py), on shapes whose answer is known."""
 
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from flexsheet.fem.fold import CREASE_STRETCH, fold_report, outer_surface, surface_stretch, winding_numbers
-from flexsheet.fem.hyperelastic import Capsule, HyperelasticModel, RefSpec, capsule_at, reference_mesh
 from flexsheet.fem.material import Material
+from flexsheet.fem.reference.capsule_contact import Capsule, capsule_at
+from flexsheet.fem.reference.fold import (
+    CREASE_STRETCH,
+    fold_report,
+    outer_surface,
+    surface_stretch,
+    winding_numbers,
+)
+from flexsheet.fem.reference.hyperelastic import HyperelasticModel
+from flexsheet.fem.reference.mesh import RefSpec, reference_mesh
 
 
 def _slab(nx=11, ny=3, nz=3, lx=1.0, ly=0.4, lz=0.2):
@@ -132,19 +140,19 @@ def test_a_quarter_model_moved_through_its_mirror_plane_penetrates_its_mirror_im
 
 
 def test_the_tip_sequence_verdict_needs_three_levels_a_falling_difference_and_a_quiet_tip_check():
-    from flexsheet.experiments.fem import _tip_verdict
+    from flexsheet.experiments.fem.studies.tip import tip_verdict
 
     depths = np.array([0.0025, 0.005, 0.0075])
     good = np.array([[0.2, 0.6, 0.9], [0.1, 0.2, 0.3]])          # mm: coarse, middle vs the finest
-    v = _tip_verdict(good, depths, True, 0, None)
+    v = tip_verdict(good, depths, True, 0, None)
     assert v["converged"] and v["monotone_decrease"] and v["last_refinement_change_mm"] == pytest.approx(0.3)
     assert v["converged_to_depth_mm"] == pytest.approx(7.5)
-    assert _tip_verdict(good, depths, True, 0, 0.30)["converged"]
-    assert not _tip_verdict(good, depths, True, 0, 0.80)["converged"]          # a finer tip still moves it
-    assert "tip_check" in _tip_verdict(good, depths, True, 0, 0.80)["criterion"]
-    assert not _tip_verdict(good[1:], depths, True, 0, None)["converged"]     # two levels
-    assert not _tip_verdict(good, depths, False, 0, None)["converged"]        # Newton failed on the finest
-    assert not _tip_verdict(good, depths, True, 3, None)["converged"]         # inverted elements
+    assert tip_verdict(good, depths, True, 0, 0.30)["converged"]
+    assert not tip_verdict(good, depths, True, 0, 0.80)["converged"]          # a finer tip still moves it
+    assert "tip_check" in tip_verdict(good, depths, True, 0, 0.80)["criterion"]
+    assert not tip_verdict(good[1:], depths, True, 0, None)["converged"]     # two levels
+    assert not tip_verdict(good, depths, False, 0, None)["converged"]        # Newton failed on the finest
+    assert not tip_verdict(good, depths, True, 3, None)["converged"]         # inverted elements
     worse = np.array([[0.2, 0.6, 0.9], [0.1, 0.7, 0.3]])        # not falling at 5 mm, and over 0.35 mm there
-    w = _tip_verdict(worse, depths, True, 0, None)
+    w = tip_verdict(worse, depths, True, 0, None)
     assert not w["converged"] and not w["monotone_decrease"] and w["converged_to_depth_mm"] == pytest.approx(2.5)

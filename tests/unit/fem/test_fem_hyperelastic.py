@@ -8,11 +8,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from flexsheet.fem import hyperelastic as H
-from flexsheet.fem import newton as N
 from flexsheet.fem.cache import ArrayCache, cache_key
-from flexsheet.fem.choose import choose_model
+from flexsheet.fem.choose import choose_fem_model
 from flexsheet.fem.material import Material
+from flexsheet.fem.reference import capsule_contact as CC
+from flexsheet.fem.reference import hyperelastic as H
+from flexsheet.fem.reference import kinematics as KIN
+from flexsheet.fem.reference import mesh as RM
+from flexsheet.fem.reference import newton as N
+from flexsheet.fem.reference import path_solver as PS
 from flexsheet.fem.snapshots import TABLE_VERSION, SnapshotGrid, SnapshotModel
 
 MAT = Material()
@@ -20,7 +24,7 @@ MAT = Material()
 
 @pytest.fixture(scope="module")
 def quarter():
-    mesh = H.reference_mesh(H.RefSpec(0.016, 0.008, 0.018, half_z=True), 0.0)
+    mesh = RM.reference_mesh(RM.RefSpec(0.016, 0.008, 0.018, half_z=True), 0.0)
     return H.HyperelasticModel(mesh, MAT, sym_y=True, sym_z=True, intorder=2)
 
 
@@ -43,7 +47,7 @@ def test_residual_and_tangent_are_the_derivatives_of_the_energy(quarter, Jm, sca
         assert ((F * F).sum(axis=(2, 3)) - 3).max() > 1.0
     v = rng.standard_normal(u.shape)
     eps = 1e-7
-    for caps in (None, H.capsule_at(0.0, 0.006, 0.008, m.mesh.radius, m.mesh.center)):
+    for caps in (None, CC.capsule_at(0.0, 0.006, 0.008, m.mesh.radius, m.mesh.center)):
         k = m.penalty()
         r, K = m.residual_tangent(u, caps, k)
         rp, _ = m.residual_tangent(u + eps * v, caps, k, need_K=False)
@@ -65,7 +69,7 @@ def test_projected_tangent_is_the_clamped_material_tangent_element_by_element(qu
                                                            intorder=2)
     u = _smooth_field(m, 0.2)                 # indefinite at some points of 244 of the 311 elements
     F = m.deformation(u)
-    Finv, J = H.inv_det3(F)
+    Finv, J = KIN.inv_det3(F)
     np.testing.assert_allclose(J, np.linalg.det(F), rtol=1e-12)
     np.testing.assert_allclose(Finv, np.linalg.inv(F), rtol=1e-10, atol=1e-12)
     corr = m._projection(F, Finv, np.log(J), m._gent_factor(F))
@@ -199,7 +203,7 @@ def test_material_rejects_a_bad_gent_limit(bad):
 
 
 def test_capsule_gap_sphere_and_shaft():
-    c = H.capsule_at(0.0, 0.010, 0.008, 0.035, np.array([-0.035, 0.0, 0.0]))
+    c = CC.capsule_at(0.0, 0.010, 0.008, 0.035, np.array([-0.035, 0.0, 0.0]))
     assert np.allclose(c.direction, [-1, 0, 0]) and np.allclose(c.center, [-0.010 + 0.008, 0, 0])
     g, n = c.gap(np.array([[-0.010, 0.0, 0.0], [-0.002, 0.0, 0.009], [0.05, 0.0, 0.0085]]))
     assert abs(g[0]) < 1e-12 and np.allclose(n[0], [-1, 0, 0])        # leading point on the sphere
@@ -212,26 +216,26 @@ def test_capsule_gap_sphere_and_shaft():
 def test_capsule_rejects_bad_input(bad, word):
     args = dict(angle=0.0, depth=0.01, radius=0.008, cyl_radius=0.035, cyl_center=np.zeros(3)) | bad
     with pytest.raises(ValueError, match=word):
-        H.capsule_at(**args)
+        CC.capsule_at(**args)
 
 
 def test_solve_path_rejects_bad_depths(quarter):
     for bad in ([-0.001], [float("nan")], [0.02, 0.01], []):
         with pytest.raises(ValueError, match="depths"):
-            H.solve_path(quarter, 0.0, bad, 0.008)
+            PS.solve_path(quarter, 0.0, bad, 0.008)
     with pytest.raises(ValueError, match="h_fine"):
-        H.RefSpec(0.01, 0.02)
+        RM.RefSpec(0.01, 0.02)
 
 
 def test_tip_refinement_is_fine_at_the_push_point_only():
     """The tip option sizes the material at the push point itself (what ends up stretched over the fingertip);
     a spec without it keeps its key."""
-    base = H.RefSpec(0.016, 0.008, 0.012, half_z=True)
+    base = RM.RefSpec(0.016, 0.008, 0.012, half_z=True)
     tip = replace(base, tip_h=0.002, tip_radius=0.005)
     assert tip.key() == base.key() + ",tip=0.002/0.005"
 
     def edges(spec):
-        m = H.reference_mesh(spec, 0.0)
+        m = RM.reference_mesh(spec, 0.0)
         e = np.concatenate([m.tets[:, [a, b]] for a, b in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))])
         apex = m.center + np.array([m.radius, 0.0, 0.0])
         dist = np.linalg.norm(m.points[e].mean(axis=1) - apex, axis=1)
@@ -252,12 +256,12 @@ def test_tip_refinement_is_fine_at_the_push_point_only():
 def test_skin_refinement_is_fine_in_the_surface_layer_around_the_push_only():
     """The skin option sizes the surface layer near the push point; the rest of the mesh and the key of a
     spec without it are unchanged (cached references keep their keys)."""
-    base = H.RefSpec(0.016, 0.008, 0.012, half_z=True)
+    base = RM.RefSpec(0.016, 0.008, 0.012, half_z=True)
     skin = replace(base, skin_h=0.003, skin_radius=0.015, skin_depth=0.004)
     assert base.key() == "h=0.016,hf=0.008,rr=0.012,hz=1" and skin.key().endswith(",sk=0.003/0.015/0.004")
 
     def edges(spec):
-        m = H.reference_mesh(spec, 0.0)
+        m = RM.reference_mesh(spec, 0.0)
         e = np.concatenate([m.tets[:, [a, b]] for a, b in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))])
         mid = m.points[e].mean(axis=1) - m.center
         length = np.linalg.norm(m.points[e[:, 0]] - m.points[e[:, 1]], axis=1)
@@ -281,14 +285,14 @@ def test_skin_refinement_is_fine_in_the_surface_layer_around_the_push_only():
     with pytest.raises(ValueError, match=r"skin_depth must be >= skin_h = 0.003 m \(one element thick\), got 0.002"):
         replace(base, skin_h=0.003, skin_depth=0.002)
     with pytest.raises(ValueError, match="size balls"):
-        H.reference_mesh(replace(base, skin_h=0.0005, skin_depth=0.0005, skin_radius=0.05), 0.0)
+        RM.reference_mesh(replace(base, skin_h=0.0005, skin_depth=0.0005, skin_radius=0.05), 0.0)
 
 
 def test_cut_half_mesh_has_nodes_on_the_plane_through_the_push_axis():
     """``cut``: the half model's mesh conforms to the plane through the cylinder's axis and the push axis at the
     push's azimuth (a line of nodes under the fingertip, as the quarter model has on its mirror plane); without it
     at most a stray node lies on that plane. A quarter model ignores it (same key, same mesh)."""
-    base = H.RefSpec(0.016, 0.008, 0.012)
+    base = RM.RefSpec(0.016, 0.008, 0.012)
     cut = replace(base, cut=True)
     assert cut.key() == base.key() + ",cut"
     assert replace(base, half_z=True, cut=True).key() == replace(base, half_z=True).key()
@@ -297,7 +301,7 @@ def test_cut_half_mesh_has_nodes_on_the_plane_through_the_push_axis():
         normal = np.array([-math.sin(a), 0.0, math.cos(a)])
         push = np.array([math.cos(a), 0.0, math.sin(a)])
         for spec, want in ((base, False), (cut, True)):
-            m = H.reference_mesh(spec, ang)
+            m = RM.reference_mesh(spec, ang)
             rel = m.points - m.center
             on = np.abs(rel @ normal) < 1e-9
             assert (on.sum() > 20) == want and (want or on.sum() <= 2), (ang, spec.key(), on.sum())
@@ -319,11 +323,11 @@ def test_cut_brings_the_half_model_to_the_quarter_models_force():
     plane through the push axis is stiffer than the quarter model of the same sizes (on this coarse mesh +3.4 %
     at 10 mm; +8-9 % at 40-50 mm on the 3.4 mm one, the experiment's mirror study); cut, it is within a fifth of
     that gap. (Three solves, ~25 s.)"""
-    base = H.RefSpec(0.016, 0.012, 0.018, path_depth=0.055)
+    base = RM.RefSpec(0.016, 0.012, 0.018, path_depth=0.055)
     f = {}
     for name, spec in (("quarter", replace(base, half_z=True)), ("half", base), ("cut", replace(base, cut=True))):
-        m = H.HyperelasticModel(H.reference_mesh(spec, 0.0), Material(), sym_y=True, sym_z=spec.half_z)
-        (st,) = H.solve_path(m, 0.0, [0.01], 0.008, step=0.0025)
+        m = H.HyperelasticModel(RM.reference_mesh(spec, 0.0), Material(), sym_y=True, sym_z=spec.half_z)
+        (st,) = PS.solve_path(m, 0.0, [0.01], 0.008, step=0.0025)
         assert st.converged
         f[name] = st.force
     gap_half, gap_cut = abs(f["half"] / f["quarter"] - 1), abs(f["cut"] / f["quarter"] - 1)
@@ -333,7 +337,7 @@ def test_cut_brings_the_half_model_to_the_quarter_models_force():
 def test_reference_push_is_physical_at_small_depth(quarter):
     """5 mm push: the force grows with depth, the finger is not penetrated by more than 1 % of the depth,
     no element is inverted, the body moves along the push and is symmetric (full force = 4 × quarter)."""
-    st = H.solve_path(quarter, 0.0, [0.0025, 0.005], 0.008, step=0.0025)
+    st = PS.solve_path(quarter, 0.0, [0.0025, 0.005], 0.008, step=0.0025)
     assert all(s.converged for s in st)
     assert 0 < st[0].force < st[1].force
     assert st[1].inverted == 0 and st[1].min_detF > 0.5
@@ -411,7 +415,7 @@ def test_packed_table_rounds_within_float16_and_looks_up_as_the_original(tmp_pat
     """pack_table: float16 surface fields, off by at most 2^-16 m (|u| < 64 mm), read back through the shipped
     directory (compressed) into a SnapshotModel that answers within that of the float32 table; a value no
     displacement has is refused."""
-    from flexsheet.fem.snapshots import pack_table
+    from flexsheet.fem.reference.snapshot_build import pack_table
 
     tab = _analytic_table([0.0, 10.0], [0.0, 0.015, 0.03])            # |u| up to 44 mm
     assert 0.032 < np.abs(tab["side"]).max() < 0.064
@@ -442,7 +446,7 @@ def _linear_states(model, ang, depths, log=None):
     out = []
     for d in depths:
         u = 20.0 * d * (1.0 + math.radians(ang)) * X @ A.T
-        out.append(H.PathState(depth=float(d), u=u, force=100.0 * d * (1.0 + ang), force_vec=np.zeros(3),
+        out.append(PS.PathState(depth=float(d), u=u, force=100.0 * d * (1.0 + ang), force_vec=np.zeros(3),
                                iterations=3, converged=True, min_detF=1.0, inverted=0, max_strain=0.01 * d,
                                penetration=0.0, n_contact=0))
     if log is not None:
@@ -455,7 +459,7 @@ def test_a_table_is_extended_azimuth_by_azimuth_from_a_shipped_one(tmp_path):
     shipped one would be) gives its azimuths as they are stored, and only the new azimuth is solved; the extended
     table equals the one built whole within float16's rounding (exactly at the solved azimuth); a table sampled
     otherwise is refused, and reusable_table finds only a proper subset of the grid's azimuths."""
-    from flexsheet.fem.snapshots import (
+    from flexsheet.fem.reference.snapshot_build import (
         build_table,
         load_or_build,
         pack_table,
@@ -463,7 +467,7 @@ def test_a_table_is_extended_azimuth_by_azimuth_from_a_shipped_one(tmp_path):
         reused_azimuths,
     )
 
-    spec = H.RefSpec(0.016, 0.012, 0.012, half_z=True, path_depth=0.012, cut=True)
+    spec = RM.RefSpec(0.016, 0.012, 0.012, half_z=True, path_depth=0.012, cut=True)
     grid = SnapshotGrid(angles_deg=(0.0, 10.0, 20.0), depth_max=0.005, depth_step=0.0025, dtheta_deg=5.0,
                         dy=0.005, drho=0.005)
     asked: list[float] = []
@@ -577,13 +581,13 @@ def test_choose_model_prefers_linear_where_it_suffices():
          "max_error_m_by_depth": {"0.0050": 0.0003, "0.0300": 0.004, "0.0500": 0.012}},
         {"kind": "snapshots", "name": "snap", "update_ms": 0.3,
          "max_error_m_by_depth": {"0.0050": 0.0002, "0.0300": 0.0004, "0.0500": 0.0006}}]}
-    assert choose_model(table, 0.0007, 0.005)[0] == "linear"
-    assert choose_model(table, 0.0007, 0.05)[0] == "snapshots"
-    kind, why = choose_model(table, 0.0001, 0.05)
+    assert choose_fem_model(table, 0.0007, 0.005)[0] == "linear"
+    assert choose_fem_model(table, 0.0007, 0.05)[0] == "snapshots"
+    kind, why = choose_fem_model(table, 0.0001, 0.05)
     assert kind == "snapshots" and "no model meets" in why
-    assert choose_model(None, 0.0007, 0.05)[0] == "snapshots"
+    assert choose_fem_model(None, 0.0007, 0.05)[0] == "snapshots"
     with pytest.raises(ValueError, match="depth_max"):
-        choose_model(table, 0.0007, float("nan"))
+        choose_fem_model(table, 0.0007, float("nan"))
 
 
 def test_reference_converges_with_refinement_at_moderate_depth():
@@ -591,7 +595,7 @@ def test_reference_converges_with_refinement_at_moderate_depth():
     at 20 mm no element is inverted, at the quadrature points nor at the element nodes."""
     from flexsheet.fem.choose import visible_mask
     from flexsheet.fem.contact import finger_at
-    from flexsheet.fem.snapshots import _probe, _sample
+    from flexsheet.fem.reference.snapshot_build import folded_probe, unfolded_sample
 
     th = np.radians(np.linspace(-80, 80, 33))
     ys = np.linspace(0.0, 0.05, 11)
@@ -599,10 +603,10 @@ def test_reference_converges_with_refinement_at_moderate_depth():
     pts = np.column_stack([C[0] + R * np.cos(T.ravel()), Y.ravel(), C[2] + R * np.sin(T.ravel())])
     out = []
     for hf in (0.008, 0.0057, 0.004):
-        m = H.HyperelasticModel(H.reference_mesh(H.RefSpec(0.016, hf, 0.018, True), 0.0), MAT, True, True)
-        st = H.solve_path(m, 0.0, [0.01, 0.02], 0.008, step=0.005)
+        m = H.HyperelasticModel(RM.reference_mesh(RM.RefSpec(0.016, hf, 0.018, True), 0.0), MAT, True, True)
+        st = PS.solve_path(m, 0.0, [0.01, 0.02], 0.008, step=0.005)
         assert all(s.converged for s in st)
-        out.append([_sample(_probe(m, pts), s.u, pts, m) for s in st])
+        out.append([unfolded_sample(folded_probe(m, pts), s.u, pts, m) for s in st])
     assert st[-1].inverted == 0 and st[-1].min_detF > 0
     for j, d in enumerate((0.01, 0.02)):
         vis = visible_mask(pts, finger_at(0.0, d, 0.008, R, C))
@@ -618,7 +622,7 @@ def test_per_element_material_and_support_override(quarter):
     m = quarter
     ne = len(m.mesh.tets)
     u = _smooth_field(m, 0.05)
-    caps = H.capsule_at(0.0, 0.004, 0.008, m.mesh.radius, m.mesh.center)
+    caps = CC.capsule_at(0.0, 0.004, 0.008, m.mesh.radius, m.mesh.center)
     same = H.HyperelasticModel(m.mesh, MAT, sym_y=True, sym_z=True, intorder=2, support=m.support.copy(),
                                E_elem=np.full(ne, MAT.E), nu_elem=np.full(ne, MAT.nu))
     r0, K0 = m.residual_tangent(u, caps, m.penalty())
@@ -650,14 +654,14 @@ def test_per_element_material_and_support_override(quarter):
 def test_solve_path_capsule_matches_the_cylinder_path(quarter):
     """The callable-finger variant reproduces the azimuth form for the same finger; refuses a non-callable."""
     m = quarter
-    a = H.solve_path(m, 0.0, [0.004], 0.008, step=0.002)
-    b = H.solve_path_capsule(m, lambda d: H.capsule_at(0.0, d, 0.008, m.mesh.radius, m.mesh.center), [0.004],
+    a = PS.solve_path(m, 0.0, [0.004], 0.008, step=0.002)
+    b = PS.solve_path_capsule(m, lambda d: CC.capsule_at(0.0, d, 0.008, m.mesh.radius, m.mesh.center), [0.004],
                              step=0.002)
     assert a[0].converged and b[0].converged and a[0].force > 0.05
     assert b[0].force == pytest.approx(a[0].force, rel=1e-12)
     assert np.abs(b[0].u - a[0].u).max() <= 1e-12
     with pytest.raises(ValueError, match="capsule"):
-        H.solve_path_capsule(m, 0.0, [0.004])
+        PS.solve_path_capsule(m, 0.0, [0.004])
 
 
 # ---- sticking contact (the fingertip does not slip on the tissue) ------------------------------------------------
@@ -669,7 +673,7 @@ def test_sticking_residual_and_tangent_are_the_derivatives_of_the_energy(quarter
     m = quarter
     rng = np.random.default_rng(1)
     u = _smooth_field(m, 0.1) + 1e-4 * rng.standard_normal((len(m.points), 3))
-    caps = H.capsule_at(0.0, 0.006, 0.008, m.mesh.radius, m.mesh.center)
+    caps = CC.capsule_at(0.0, 0.006, 0.008, m.mesh.radius, m.mesh.center)
     a = m.stick_anchors(u, caps)
     stuck = np.isfinite(a[..., 0])
     assert 5 < stuck.sum() < stuck.size
@@ -677,11 +681,11 @@ def test_sticking_residual_and_tangent_are_the_derivatives_of_the_energy(quarter
     # (continuous force when a point sticks): |x − anchor|·k = −φ'(g), so the anchor lies ε/2 … ε outside
     x = m._contact_x(u)[stuck]
     gx, _ = caps.gap(x)
-    d1 = H._pen(gx, m.penalty(), m.eps)[1]
+    d1 = CC.smooth_penalty(gx, m.penalty(), m.eps)[1]
     assert np.allclose(m.penalty() * np.linalg.norm(x - caps.center - a[stuck], axis=1), -d1, rtol=1e-9, atol=1e-9)
     g, _ = caps.gap(caps.center + a[stuck])
     assert np.all((g > 0.5 * m.eps - 1e-12) & (g < m.eps + 1e-12)), (g.min(), g.max())
-    deeper = H.capsule_at(0.0, 0.009, 0.008, m.mesh.radius, m.mesh.center)
+    deeper = CC.capsule_at(0.0, 0.009, 0.008, m.mesh.radius, m.mesh.center)
     a2 = m.stick_anchors(u, deeper, a)                                 # deeper: more points stick
     assert np.isfinite(a2[..., 0]).sum() > stuck.sum() and np.array_equal(a2[stuck], a[stuck])
     caps = replace(caps, anchors=a + np.where(stuck[..., None], 2e-4 * rng.standard_normal(a.shape), np.nan))
@@ -706,8 +710,8 @@ def test_sticking_push_holds_the_surface_on_the_finger(quarter):
     over the sphere; the stuck surface needs more force (friction stiffens the contact); both converge with no
     inverted element; an unknown law is refused."""
     m = quarter
-    fr = H.solve_path(m, 0.0, [0.004, 0.008], 0.008, step=0.002, contact="frictionless")
-    st = H.solve_path(m, 0.0, [0.004, 0.008], 0.008, step=0.002, contact="sticking")
+    fr = PS.solve_path(m, 0.0, [0.004, 0.008], 0.008, step=0.002, contact="frictionless")
+    st = PS.solve_path(m, 0.0, [0.004, 0.008], 0.008, step=0.002, contact="sticking")
     for s in fr + st:
         assert s.converged and s.inverted == 0
     assert "anchors" not in fr[1].extra
@@ -716,7 +720,7 @@ def test_sticking_push_holds_the_surface_on_the_finger(quarter):
     a = st[1].extra["anchors"]
     stuck = np.isfinite(a[..., 0])
     assert stuck.sum() >= 1
-    c4, c8 = (H.capsule_at(0.0, d, 0.008, m.mesh.radius, m.mesh.center).center for d in (0.004, 0.008))
+    c4, c8 = (CC.capsule_at(0.0, d, 0.008, m.mesh.radius, m.mesh.center).center for d in (0.004, 0.008))
     on = np.linalg.norm(m._contact_x(st[1].u)[stuck] - c8 - a[stuck], axis=1).max()
     assert on < 5e-5                                                    # held on its finger point
     held = np.isfinite(st[0].extra["anchors"][..., 0])                # stuck already at 4 mm
@@ -725,14 +729,14 @@ def test_sticking_push_holds_the_surface_on_the_finger(quarter):
            for s in (fr, st)]                                           # motion relative to the finger, 4 -> 8 mm
     assert rel[1] < 0.3 * rel[0], rel
     with pytest.raises(ValueError, match="contact"):
-        H.solve_path(m, 0.0, [0.004], 0.008, contact="glued")
+        PS.solve_path(m, 0.0, [0.004], 0.008, contact="glued")
 
 
 def test_load_steps_after_a_halved_step_keep_the_halved_size(quarter, monkeypatch):
     """A step that fails (stagnates: not converged before running out of iterations) is halved and the steps
     after it stay that small (once the path got hard, Newton is not sent back into the 2.5 mm steps that cost 60
     iterations per try on the 3.4 mm mesh at 47.5 mm)."""
-    real = H._newton
+    real = N.newton_minimise
     tried = []
 
     def flaky(model, u, caps, k, iters, tol_u, tol_r, log, state=None, max_step=0.001, shifted=False):
@@ -741,8 +745,8 @@ def test_load_steps_after_a_halved_step_keep_the_halved_size(quarter, monkeypatc
             return u, 3, False
         return real(model, u, caps, k, iters, tol_u, tol_r, log, state, max_step, shifted)
 
-    monkeypatch.setattr(N, "_newton", flaky)
-    st = H.solve_path(quarter, 0.0, [0.002, 0.004, 0.006], 0.008, step=0.002)
+    monkeypatch.setattr(N, "newton_minimise", flaky)
+    st = PS.solve_path(quarter, 0.0, [0.002, 0.004, 0.006], 0.008, step=0.002)
     assert all(s.converged for s in st)
     # 2 mm, then 4 mm fails, 3 mm (halved), then 1 mm steps to 6 mm
     assert np.allclose(tried, [0.002, 0.004, 0.003, 0.004, 0.005, 0.006], atol=1e-9), tried
@@ -758,15 +762,15 @@ def test_pcg_solves_spd_and_reports_negative_curvature():
     B = rng.normal(size=(40, 40))
     A = sp.csr_matrix(B @ B.T + 40 * np.eye(40))
     b = rng.normal(size=40)
-    x, its = H._pcg(A, b, lambda r: r / A.diagonal(), 1e-10, 200)
+    x, its = N.pcg(A, b, lambda r: r / A.diagonal(), 1e-10, 200)
     assert x is not None and 0 < its <= 200
     assert np.linalg.norm(x - np.linalg.solve(A.toarray(), b)) < 1e-8 * np.linalg.norm(x)
     D = sp.diags(np.r_[np.ones(39), -1.0]).tocsr()
     e = np.zeros(40)
     e[-1] = 1.0
-    x, its = H._pcg(D, e, lambda r: r, 1e-10, 50)
+    x, its = N.pcg(D, e, lambda r: r, 1e-10, 50)
     assert x is None and its < 0
-    x, its = H._pcg(A, b, lambda r: r, 1e-14, 2)
+    x, its = N.pcg(A, b, lambda r: r, 1e-14, 2)
     assert x is None and its == 2
 
 
@@ -801,30 +805,30 @@ def test_newton_that_crawls_on_the_projected_tangent_switches_to_the_shifted_tru
     projected Newton alone; the shift is the least of the tried ones that makes the tangent positive definite."""
     u0 = np.array([[0.05, 0.3, 1e-4]])
     st: dict = {}
-    u, its, conv = H._newton(_LimitPoint(), u0, None, 0.0, 60, 1e-10, 1e-9, None, st, max_step=10.0)
+    u, its, conv = N.newton_minimise(_LimitPoint(), u0, None, 0.0, 60, 1e-10, 1e-9, None, st, max_step=10.0)
     assert conv and abs(u[0, 0] - 1.0) < 1e-9 and abs(u[0, 1]) < 1e-9, (u, its)
     # the first projected step has no residual before it, the second still cuts it (the first solved x1 and x2);
     # the CRAWL_ITERS after them crawl, and the next step is shifted
-    assert st["projected"] == H.CRAWL_ITERS + 2 and st["shifted"] >= 1, st
+    assert st["projected"] == N.CRAWL_ITERS + 2 and st["shifted"] >= 1, st
     # x0 ≈ 0.05·1.035⁶: −∂²Π/∂x0² ≈ 3.9 needs μ·max diag = μ·10⁶ > 3.9, so μ = 1e-5 (1e-6 gives 1.0)
     assert st["mu"] == pytest.approx(1e-5)
     monkeypatch.setattr(N, "CRAWL_ITERS", 10 ** 6)   # projected Newton alone
     st2: dict = {}
-    u2, its2, conv2 = H._newton(_LimitPoint(), u0, None, 0.0, 400, 1e-10, 1e-9, None, st2, max_step=10.0)
+    u2, its2, conv2 = N.newton_minimise(_LimitPoint(), u0, None, 0.0, 400, 1e-10, 1e-9, None, st2, max_step=10.0)
     assert conv2 and abs(u2[0, 0] - 1.0) < 1e-9 and "shifted" not in st2
     assert its < 0.25 * its2, (its, its2)
     # where no shift makes the tangent positive definite (here at the second shifted step), that step is projected
     # and the solve stays in shifted mode: one more projected step, not a second crawl (the bug it had: 10)
-    real, calls = H._shifted_step, []
+    real, calls = N.shifted_step, []
     monkeypatch.setattr(N, "CRAWL_ITERS", 4)
-    monkeypatch.setattr(N, "_shifted_step", lambda *a: calls.append(1) or (None if len(calls) == 2 else real(*a)))
+    monkeypatch.setattr(N, "shifted_step", lambda *a: calls.append(1) or (None if len(calls) == 2 else real(*a)))
     st3: dict = {}
-    u3, its3, conv3 = H._newton(_LimitPoint(), u0, None, 0.0, 60, 1e-10, 1e-9, None, st3, max_step=10.0)
-    assert conv3 and abs(u3[0, 0] - 1.0) < 1e-9 and st3["projected"] == H.CRAWL_ITERS + 3, st3
+    u3, its3, conv3 = N.newton_minimise(_LimitPoint(), u0, None, 0.0, 60, 1e-10, 1e-9, None, st3, max_step=10.0)
+    assert conv3 and abs(u3[0, 0] - 1.0) < 1e-9 and st3["projected"] == N.CRAWL_ITERS + 3, st3
     # a call that continues one which ended shifted (nh-7) starts shifted: no projected step, no second crawl
-    monkeypatch.setattr(N, "_shifted_step", real)
+    monkeypatch.setattr(N, "shifted_step", real)
     st4: dict = {}
-    u4, its4, conv4 = H._newton(_LimitPoint(), u0, None, 0.0, 60, 1e-10, 1e-9, None, st4, max_step=10.0,
+    u4, its4, conv4 = N.newton_minimise(_LimitPoint(), u0, None, 0.0, 60, 1e-10, 1e-9, None, st4, max_step=10.0,
                                 shifted=True)
     assert conv4 and abs(u4[0, 0] - 1.0) < 1e-9 and "projected" not in st4, st4
     assert its4 < its, (its4, its)
@@ -837,14 +841,14 @@ def test_shifted_step_gives_up_beyond_the_largest_shift():
     import scipy.sparse as sp
 
     K = sp.csr_matrix(np.diag([-5.0, 1e3]))
-    assert H._shifted_step(K, np.array([1.0, 1.0]), {}) is None
+    assert N.shifted_step(K, np.array([1.0, 1.0]), {}) is None
     K = sp.csr_matrix(np.diag([-0.5, 1e4]))          # needs μ·10⁴ > 0.5: μ = 1e-4
     st: dict = {}
-    d = H._shifted_step(K, np.array([1.0, 1.0]), st)
+    d = N.shifted_step(K, np.array([1.0, 1.0]), st)
     assert d is not None and float(np.array([1.0, 1.0]) @ d) < 0 and st["mu"] == pytest.approx(1e-4)
     K = sp.csr_matrix(np.diag([-0.5, 1e3]))          # only the largest shift, μ = SHIFT_MAX, makes it definite
     st = {}
-    assert H._shifted_step(K, np.array([1.0, 1.0]), st) is not None and st["mu"] == pytest.approx(H.SHIFT_MAX)
+    assert N.shifted_step(K, np.array([1.0, 1.0]), st) is not None and st["mu"] == pytest.approx(N.SHIFT_MAX)
 
 
 def test_lagged_preconditioner_newton_reaches_the_same_states_with_fewer_factorisations(quarter, monkeypatch):
@@ -855,16 +859,16 @@ def test_lagged_preconditioner_newton_reaches_the_same_states_with_fewer_factori
     counts = {}
 
     def run(label):
-        real = H._newton
+        real = N.newton_minimise
 
         def counting(model, u, caps, k, iters, tol_u, tol_r, log, state=None, max_step=0.001, shifted=False):
             out = real(model, u, caps, k, iters, tol_u, tol_r, log, state, max_step, shifted)
             counts[label] = dict(state)
             return out
 
-        monkeypatch.setattr(N, "_newton", counting)
-        st = H.solve_path(quarter, 0.0, depths, 0.008, step=0.005)
-        monkeypatch.setattr(N, "_newton", real)
+        monkeypatch.setattr(N, "newton_minimise", counting)
+        st = PS.solve_path(quarter, 0.0, depths, 0.008, step=0.005)
+        monkeypatch.setattr(N, "newton_minimise", real)
         return st
 
     nk = run("nk")
@@ -881,10 +885,10 @@ def test_lagged_preconditioner_newton_reaches_the_same_states_with_fewer_factori
 def test_stiffer_penalty_penetrates_less_and_is_validated(quarter):
     """κ = scale·E/h: at a 10 mm push a 100× softer finger penetrates ~100× deeper; bad scales are refused."""
     soft = H.HyperelasticModel(quarter.mesh, MAT, sym_y=True, sym_z=True, intorder=2,
-                               penalty_scale=H.PENALTY_SCALE / 100)
+                               penalty_scale=CC.PENALTY_SCALE / 100)
     assert soft.penalty() == pytest.approx(quarter.penalty() / 100)
-    a = H.solve_path(quarter, 0.0, [0.01], 0.008, step=0.005)[-1]
-    b = H.solve_path(soft, 0.0, [0.01], 0.008, step=0.005)[-1]
+    a = PS.solve_path(quarter, 0.0, [0.01], 0.008, step=0.005)[-1]
+    b = PS.solve_path(soft, 0.0, [0.01], 0.008, step=0.005)[-1]
     assert a.converged and b.converged
     assert b.penetration > 20 * max(a.penetration, 1e-9) and b.penetration > 1e-5
     assert b.force < a.force                                       # the soft finger sinks in: less push-back
@@ -894,10 +898,10 @@ def test_stiffer_penalty_penetrates_less_and_is_validated(quarter):
 
 
 def _newton_calls(monkeypatch, budget):
-    """Patch ``N._newton`` so that call i may take only ``budget(i)`` iterations (reporting the full ``iters``
+    """Patch ``N.newton_minimise`` so that call i may take only ``budget(i)`` iterations (reporting the full ``iters``
     when it runs out, as the real one does; a call that stagnates exactly at its budget reads as run out too);
     returns the list of calls (start u, finger centre, returned u, iterations, converged, shifted)."""
-    real, calls = H._newton, []
+    real, calls = N.newton_minimise, []
 
     def limited(model, u, caps, k, iters, tol_u, tol_r, log, state=None, max_step=0.001, shifted=False):
         n = min(iters, budget(len(calls)))
@@ -906,16 +910,16 @@ def _newton_calls(monkeypatch, budget):
         calls.append((u.copy(), caps.center.copy(), un.copy(), its, conv, shifted))
         return un, its, conv
 
-    monkeypatch.setattr(N, "_newton", limited)
+    monkeypatch.setattr(N, "newton_minimise", limited)
     return calls
 
 
 def test_a_load_step_out_of_iterations_is_continued_from_where_it_got_not_halved(quarter, monkeypatch):
     """nh-7: a Newton call that runs out of iterations (a snap-through still descending) is continued from its
     last iterate at the same depth; the load step is not halved and the path ends where the plain solve does."""
-    plain = H.solve_path(quarter, 0.0, [0.005, 0.01], 0.008, step=0.005, iters=30)
+    plain = PS.solve_path(quarter, 0.0, [0.005, 0.01], 0.008, step=0.005, iters=30)
     calls = _newton_calls(monkeypatch, lambda i: 2 if i == 1 else 10 ** 6)   # the second load step runs out at 2
-    cont = H.solve_path(quarter, 0.0, [0.005, 0.01], 0.008, step=0.005, iters=30)
+    cont = PS.solve_path(quarter, 0.0, [0.005, 0.01], 0.008, step=0.005, iters=30)
     assert all(s.converged for s in plain + cont)
     assert len(calls) == 3, [(c[3], c[4]) for c in calls]         # step 1; step 2 runs out; its continuation
     assert not calls[1][4] and calls[1][3] == 30 and calls[2][4]
@@ -929,14 +933,14 @@ def test_a_load_step_out_of_iterations_is_continued_from_where_it_got_not_halved
 def test_a_load_step_that_keeps_running_out_is_halved_after_resume_max_continuations(quarter, monkeypatch):
     """After RESUME_MAX continuations that also run out, the load step is halved as before (from the last
     converged state, not from the stuck iterate)."""
-    plain = H.solve_path(quarter, 0.0, [0.005, 0.01], 0.008, step=0.005, iters=30)
-    calls = _newton_calls(monkeypatch, lambda i: 1 if 1 <= i <= 1 + H.RESUME_MAX else 10 ** 6)
-    st = H.solve_path(quarter, 0.0, [0.005, 0.01], 0.008, step=0.005, iters=30)
+    plain = PS.solve_path(quarter, 0.0, [0.005, 0.01], 0.008, step=0.005, iters=30)
+    calls = _newton_calls(monkeypatch, lambda i: 1 if 1 <= i <= 1 + N.RESUME_MAX else 10 ** 6)
+    st = PS.solve_path(quarter, 0.0, [0.005, 0.01], 0.008, step=0.005, iters=30)
     assert all(s.converged for s in st)
-    stuck = calls[1:2 + H.RESUME_MAX]                            # the first call and RESUME_MAX continuations
+    stuck = calls[1:2 + N.RESUME_MAX]                            # the first call and RESUME_MAX continuations
     assert all(not c[4] for c in stuck) and all(np.array_equal(c[1], calls[1][1]) for c in stuck)
     assert all(np.array_equal(b[0], a[2]) for a, b in zip(stuck[:-1], stuck[1:], strict=True))   # from its last iterate
-    halved = calls[2 + H.RESUME_MAX]
+    halved = calls[2 + N.RESUME_MAX]
     assert np.linalg.norm(halved[1] - calls[0][1]) == pytest.approx(0.0025, abs=1e-12)   # 2.5 mm past 5 mm
     assert not np.array_equal(halved[0], stuck[-1][2])           # the halved step restarts from converged
     assert np.abs(st[1].u - plain[1].u).max() < 1e-7 and abs(st[1].force - plain[1].force) < 1e-5
@@ -944,24 +948,24 @@ def test_a_load_step_that_keeps_running_out_is_halved_after_resume_max_continuat
 
 
 def _caps(m, angle=0.0):
-    return lambda d: H.capsule_at(angle, d, 0.008, m.mesh.radius, m.mesh.center)
+    return lambda d: CC.capsule_at(angle, d, 0.008, m.mesh.radius, m.mesh.center)
 
 
 @pytest.fixture(scope="module")
 def loading(quarter):
-    return H.solve_path(quarter, 0.0, [0.004, 0.008, 0.012], 0.008, step=0.004)
+    return PS.solve_path(quarter, 0.0, [0.004, 0.008, 0.012], 0.008, step=0.004)
 
 
 def test_unload_sweep_finds_the_loading_path_where_there_is_one_branch(quarter, loading):
     """A push without hysteresis: unloading from the deepest state lands on the loading state at every depth
     (the sweep runs to the shallowest), and the stable branch is the loading path."""
     st = loading
-    sw = H.unload_sweep(quarter, _caps(quarter), st, step=0.002)
+    sw = PS.unload_sweep(quarter, _caps(quarter), st, step=0.002)
     assert [s.depth for s in sw] == pytest.approx([0.004, 0.008, 0.012]) and all(s.converged for s in sw)
     for a, b in zip(sw[:2], st[:2], strict=True):
-        assert np.abs(a.u - b.u).max() <= H.BRANCH_MEET_TOL
+        assert np.abs(a.u - b.u).max() <= PS.BRANCH_MEET_TOL
         assert abs(a.extra["energy"] - a.extra["energy_loading"]) <= 1e-6 * abs(a.extra["energy"])
-    chosen, branch, energies = H.stable_states(quarter, _caps(quarter), st, step=0.002)
+    chosen, branch, energies = PS.stable_states(quarter, _caps(quarter), st, step=0.002)
     assert branch.tolist() == [0, 0, 0] and energies.shape == (3, 2)
     assert np.allclose(energies[:, 0], energies[:, 1], rtol=1e-6) and all(c is s for c, s in zip(chosen, st, strict=True))
 
@@ -975,15 +979,15 @@ def test_stable_states_replaces_a_higher_energy_state_by_the_unloaded_equilibriu
     X = quarter.points - quarter.mesh.center
     bump = 0.0005 * np.exp(-((X[:, 1] ** 2 + X[:, 2] ** 2) / 0.01 ** 2))[:, None] * np.array([0.0, 0.0, 1.0])
     bad[1] = replace(st[1], u=st[1].u + bump * (X[:, 2:3] > 0))
-    chosen, branch, energies = H.stable_states(quarter, _caps(quarter), bad, step=0.002)
+    chosen, branch, energies = PS.stable_states(quarter, _caps(quarter), bad, step=0.002)
     assert branch.tolist() == [0, 1, 0]
     assert energies[1, 1] < energies[1, 0] and chosen[1].extra["energy"] == energies[1, 1]
     assert np.abs(chosen[1].u - st[1].u).max() < 2e-5
     assert chosen[0] is bad[0] and chosen[2] is bad[2]
     with pytest.raises(ValueError, match="ascending"):
-        H.unload_sweep(quarter, _caps(quarter), st[::-1])
+        PS.unload_sweep(quarter, _caps(quarter), st[::-1])
     with pytest.raises(ValueError, match="non-empty"):
-        H.unload_sweep(quarter, _caps(quarter), [])
+        PS.unload_sweep(quarter, _caps(quarter), [])
     stuck = [replace(x, extra={"anchors": np.zeros((1, 1, 3))}) for x in st]
     with pytest.raises(ValueError, match="frictionless"):
-        H.unload_sweep(quarter, _caps(quarter), stuck)
+        PS.unload_sweep(quarter, _caps(quarter), stuck)

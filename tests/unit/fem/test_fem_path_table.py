@@ -233,7 +233,7 @@ def test_assembly_turns_a_station_push_into_its_reference(model):
 
 
 def test_the_cli_refuses_what_a_path_table_does_not_take(tmp_path):
-    from flexsheet.experiments.fem import main
+    from flexsheet.experiments.fem.cli import main
 
     box = str(SCENES_DIR / "rounded_box.yaml")
     out = str(tmp_path / "out")

@@ -212,8 +212,8 @@ def test_organ_realtime_update_equals_a_dense_float64_solve_of_the_same_system()
     within 0.1 µm (the display's pixel is 700 µm), force and dF/dd within 1e-6, and the checks the node
     relies on — inverted elements, max strain over the monitor tets near the contact, folded surface
     triangles (np.cross) — give the same verdicts. Three pushes also match the full sparse FEM solve."""
+    from flexsheet.fem.deformation_checks import element_checks
     from flexsheet.fem.scene_model import STIFFNESS_FLOOR
-    from flexsheet.fem.solver import element_checks
 
     sc = load_scene(SCENES_DIR / "organ.yaml")
     rt = SceneModel(sc)                               # the default cache, as the experiment and the node
@@ -273,9 +273,9 @@ def test_organ_realtime_update_equals_a_dense_float64_solve_of_the_same_system()
 
 
 def test_tet_checks_equal_element_checks_on_random_deformations():
-    """flexsheet.fem.solver.TetChecks (sparse gradient operator + exact bounds that skip tets) against the plain
+    """flexsheet.fem.deformation_checks.TetChecks (sparse gradient operator + exact bounds that skip tets) against the plain
     element_checks, from small strain to many inverted tets, with and without a selection."""
-    from flexsheet.fem.solver import TetChecks, element_checks
+    from flexsheet.fem.deformation_checks import TetChecks, element_checks
 
     sc = load_scene(SCENES_DIR / "sphere.yaml")
     m = scene_mesh(sc, MeshSpec(0.02, 0.02, 0.0)).mesh
@@ -297,9 +297,9 @@ def test_tet_checks_equal_element_checks_on_random_deformations():
 
 
 def test_fold_operator_counts_the_faces_np_cross_finds_folded():
-    """flexsheet.fem.solver.fold_operator ((e1 × e2)·n0 as a sparse product) against np.cross on random moves of
+    """flexsheet.fem.deformation_checks.fold_operator ((e1 × e2)·n0 as a sparse product) against np.cross on random moves of
     the sphere's surface, from none folded to many."""
-    from flexsheet.fem.solver import fold_operator
+    from flexsheet.fem.deformation_checks import fold_operator
 
     m = scene_mesh(load_scene(SCENES_DIR / "sphere.yaml"), MeshSpec(0.02, 0.02, 0.0)).mesh
     x0 = m.points[m.surface_nodes]
@@ -349,11 +349,11 @@ def test_the_organ_is_judged_as_the_eyes_see_it_over_its_declared_depths(tmp_pat
 def test_the_judged_range_ends_where_the_reference_stops_converging_but_not_below_15_mm():
     """visible.converged_to_mm: the deepest depth up to which the two reference levels agree to 0.5 px at every
     depth (the rounded box's 4/3 mm levels: 25 mm); none below the 15 mm floor (the organ's: 10 mm)."""
-    from flexsheet.experiments.fem_scene import _judged_range
+    from flexsheet.experiments.fem_scene import judged_range
 
     d = np.arange(1, 7) * 0.005
-    assert _judged_range(d, np.array([0.12, 0.25, 0.44, 0.45, 0.46, 0.59])) == pytest.approx(0.025)
-    assert _judged_range(d, np.full(6, 0.3)) == pytest.approx(0.030)
-    assert _judged_range(d[:3], np.array([0.13, 0.44, 0.87])) is None
-    assert _judged_range(d, np.array([0.6, 0.1, 0.1, 0.1, 0.1, 0.1])) is None     # not converged at 5 mm
-    assert _judged_range(d, None) is None
+    assert judged_range(d, np.array([0.12, 0.25, 0.44, 0.45, 0.46, 0.59])) == pytest.approx(0.025)
+    assert judged_range(d, np.full(6, 0.3)) == pytest.approx(0.030)
+    assert judged_range(d[:3], np.array([0.13, 0.44, 0.87])) is None
+    assert judged_range(d, np.array([0.6, 0.1, 0.1, 0.1, 0.1, 0.1])) is None     # not converged at 5 mm
+    assert judged_range(d, None) is None

@@ -7,10 +7,12 @@ import pytest
 
 from flexsheet.fem.choose import Choice, choose
 from flexsheet.fem.contact import finger_at, finger_from_tip, imposed_displacement
+from flexsheet.fem.corotational import solve_corotational
 from flexsheet.fem.material import Material
-from flexsheet.fem.mesh import MeshSpec, cylinder_mesh
+from flexsheet.fem.mesh import MeshSpec, cylinder_tet_mesh
 from flexsheet.fem.realtime import RealtimeModel
-from flexsheet.fem.solver import CapacitanceSolver, FemModel, factor, solve_corotational, solve_full
+from flexsheet.fem.solver import CapacitanceSolver, FemModel, solve_full
+from flexsheet.fem.sparse_factor import factor
 
 MAT = Material()
 COARSE = MeshSpec(0.012, 0.006, 0.012)
@@ -18,7 +20,7 @@ COARSE = MeshSpec(0.012, 0.006, 0.012)
 
 @pytest.fixture(scope="module")
 def mesh():
-    return cylinder_mesh(COARSE)
+    return cylinder_tet_mesh(COARSE)
 
 
 @pytest.fixture(scope="module")
@@ -110,10 +112,10 @@ def test_capacitance_matrix_is_reciprocal(p1):
 def test_force_is_mirror_symmetric_and_normal(mesh, p1, p2):
     """Mirroring the mesh z -> -z and the push angle gives the same force (exactly); on one unstructured mesh
     the +/- angle forces of the P2 model agree within 5 %, and a central push has no lateral force."""
-    from flexsheet.fem.mesh import _finish
+    from flexsheet.fem.mesh import finish_cylinder_mesh
 
-    mirrored = _finish(mesh.points * np.array([1.0, 1.0, -1.0]), mesh.tets, mesh.radius, mesh.length,
-                       mesh.center, mesh.spec)
+    mirrored = finish_cylinder_mesh(mesh.points * np.array([1.0, 1.0, -1.0]), mesh.tets, mesh.radius, mesh.length,
+                                    mesh.center, mesh.spec)
     pm = FemModel(mirrored, MAT, order=1)
     a = solve_full(p1, finger_at(0.3, 0.006, 0.008, mesh.radius, mesh.center))
     b = solve_full(pm, finger_at(-0.3, 0.006, 0.008, mesh.radius, mesh.center))
@@ -145,7 +147,7 @@ def test_force_grows_with_depth_and_is_linear_for_fixed_contact_set(p1):
 def test_convergence_with_refinement():
     """Strain energy under a mesh-independent imposed displacement decreases toward the P2 value."""
     def energy(spec, order):
-        mesh = cylinder_mesh(spec)
+        mesh = cylinder_tet_mesh(spec)
         m = FemModel(mesh, MAT, order=order)
         face = m.boundary & (m.points[:, 1] > mesh.length / 2 - 1e-9) & ~m.fixed
         bd = np.union1d(m.fixed_dofs, m.dofs[face].ravel())
@@ -293,8 +295,8 @@ def test_cholesky_solves_spd_systems_and_refuses_an_indefinite_matrix_without_ke
     NotPositiveDefinite error, which the reference reads as "take the projected tangent" (None)."""
     import scipy.sparse as sp
 
-    from flexsheet.fem.hyperelastic import _cholesky
-    from flexsheet.fem.solver import NotPositiveDefinite, factor
+    from flexsheet.fem.reference.newton import cholesky_or_none
+    from flexsheet.fem.sparse_factor import NotPositiveDefinite, factor
 
     n = 400
     lap = sp.diags([-np.ones(n - 1), 2.05 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="csr")
@@ -307,8 +309,8 @@ def test_cholesky_solves_spd_systems_and_refuses_an_indefinite_matrix_without_ke
     with pytest.raises(NotPositiveDefinite) as err:
         factor(bad, "cholmod")
     assert err.value.__context__ is None and err.value.__cause__ is None     # nothing refers to the failed factor
-    assert _cholesky(bad) is None
-    fac = _cholesky(lap)
+    assert cholesky_or_none(bad) is None
+    fac = cholesky_or_none(lap)
     assert np.abs(lap @ fac.solve(b[:, 1]) - b[:, 1]).max() < 1e-10
     with pytest.raises(ValueError, match="backend"):
         factor(lap, "mumps")

@@ -7,14 +7,8 @@ import os
 import numpy as np
 import pytest
 
-from flexsheet.fem.sphere_snapshots import (
-    SphereGrid,
-    SphereSnapshotModel,
-    assemble_table,
-    grid_points,
-    solve_alpha,
-    sphere_frame,
-)
+from flexsheet.fem.reference.sphere_build import assemble_table, solve_alpha
+from flexsheet.fem.sphere_snapshots import SphereGrid, SphereSnapshotModel, grid_points, sphere_frame
 from flexsheet.model.scenes import SCENES_DIR, load_scene
 
 SPHERE = SCENES_DIR / "sphere.yaml"
@@ -109,9 +103,11 @@ def test_the_support_axis_symmetry_holds_in_the_fem():
     equals the stroke-plane table's answer turned by ψ; both are coarse meshes (h_fine 12 mm), so they differ by
     their meshing, a small share of the displacement; a table read without the turn (the dent in the wrong
     plane) is off by about the depth."""
-    from flexsheet.fem.hyperelastic import Capsule, HyperelasticModel, solve_path_capsule
     from flexsheet.fem.material import Material
     from flexsheet.fem.mesh import MeshSpec
+    from flexsheet.fem.reference.capsule_contact import Capsule
+    from flexsheet.fem.reference.hyperelastic import HyperelasticModel
+    from flexsheet.fem.reference.path_solver import solve_path_capsule
     from flexsheet.fem.scene_mesh import scene_mesh
 
     sc = load_scene(SPHERE)
@@ -150,8 +146,8 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
     store within float16 rounding; an unconverged push is not shipped; bad arguments are refused."""
     import json
 
-    from flexsheet.experiments import fem as X
     from flexsheet.experiments import sphere_table as T
+    from flexsheet.experiments.fem.cli import main
     from flexsheet.fem import sphere_snapshots as S
     from flexsheet.fem.cache import ArrayCache
 
@@ -182,7 +178,7 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
     monkeypatch.setattr(T, "alpha_path", fake_alpha_path)
     cache_dir = str(tmp_path / "cache")
     out = tmp_path / "o"
-    assert X.main(["--out", str(out), "--cache-dir", cache_dir, "--scene", str(SPHERE), "--node-table",
+    assert main(["--out", str(out), "--cache-dir", cache_dir, "--scene", str(SPHERE), "--node-table",
                    "--holdout-azimuth", "5", "--ship", "--jobs", "1"]) == 0
     rep = json.loads((out / "sphere_table.json").read_text())
     assert [r["alpha_deg"] for r in rep["alphas"]] == list(grid.alphas_deg) and rep["material"]["law"] == "gent"
@@ -198,14 +194,14 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
     assert np.array_equal(store["theta"], grid.thetas()[::2]) and store["theta"][-1] == grid.thetas()[-1]
     converged["ok"] = False                       # a push that did not converge at its deepest step
     with pytest.raises(SystemExit, match="not shipping"):
-        X.main(["--out", str(out), "--cache-dir", str(tmp_path / "cache2"), "--scene", str(SPHERE), "--node-table",
+        main(["--out", str(out), "--cache-dir", str(tmp_path / "cache2"), "--scene", str(SPHERE), "--node-table",
                 "--ship", "--jobs", "1"])
     # --mesh-check at the held-out angle: every study mesh and its twin solved, each mesh's noise and the table
     # against each read back (at 10 mm: 2 x 0.1 mm on the table's h_fine 4.5 mm, 2 x 0.1 x 6/4.5 mm on 6 mm)
     converged["ok"] = True
     calls.clear()
     monkeypatch.setattr(T, "MESH_STUDY_SPECS", ((0.012, 0.006, 0.030, 0.055),))
-    assert X.main(["--out", str(out), "--cache-dir", cache_dir, "--scene", str(SPHERE), "--node-table",
+    assert main(["--out", str(out), "--cache-dir", cache_dir, "--scene", str(SPHERE), "--node-table",
                    "--holdout-azimuth", "5", "--mesh-check", "--jobs", "1"]) == 0
     specs = T.mesh_study_specs(S.DEFAULT_SPHERE_SPEC)
     assert len(specs) == 4 and {c for c in calls if c[0] == 5.0} == {(5.0, x) for x in specs.values()}
@@ -223,4 +219,4 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
                        (["--scene", str(SPHERE), "--node-table", "--holdout-azimuth", "60"], "strictly between"),
                        (["--scene", str(SPHERE), "--between-depths", "0"], "cylinder")):
         with pytest.raises(SystemExit, match=word):
-            X.main(["--out", str(out), "--cache-dir", ""] + args)
+            main(["--out", str(out), "--cache-dir", ""] + args)

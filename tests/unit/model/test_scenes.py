@@ -14,7 +14,8 @@ import yaml
 
 from flexsheet.model import geometry as paper
 from flexsheet.model import shapes
-from flexsheet.model.scenes import SCENES_DIR, SceneError, load_scene, paper_scene, parse_scene
+from flexsheet.model.scene_parts import SceneError
+from flexsheet.model.scenes import SCENES_DIR, load_scene, paper_scene, parse_scene
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -250,12 +251,17 @@ def test_a_closed_stl_from_elsewhere_is_a_scene(tmp_path):
 def test_planner_tension_follows_the_organ_tumour():
     """Palpation in-process: stroking the organ pressed 5 mm, the sheet presents its stiffness (scaled into the
     arms' range) — peaking over the tumour, and the tension above what the same place needs without it."""
-    from flexsheet.experiments.scenes import PALPATION_DEPTH, _peak, _run_series, stiffness_along_path
+    from flexsheet.experiments.scenes import (
+        PALPATION_DEPTH,
+        peak_along_path,
+        run_series,
+        stiffness_along_path,
+    )
 
     sc = load_scene(SCENES_DIR / "organ.yaml")
     arc_inc = stiffness_along_path(sc, (0.5,), n=41)["inclusions"][0]["arc_mm"]
-    series, _ = _run_series(sc, "stroke", 0.36, depth=PALPATION_DEPTH)
-    pk = _peak(series, arc_inc)
+    series, _ = run_series(sc, "stroke", 0.36, depth=PALPATION_DEPTH)
+    pk = peak_along_path(series, arc_inc)
     for key in ("presented_n_per_m", "contrast", "tension_over_no_tumour"):
         assert abs(pk[key]["arc_of_max_mm"] - arc_inc) < 6.0, (key, pk)
         assert pk[key]["max_over_far_median"] > 1.05, (key, pk)

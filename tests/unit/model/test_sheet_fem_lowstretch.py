@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from flexsheet.model.sheet import clamp_half_span
-from flexsheet.model.sheet_fem import IndentTable, SheetFEM, SheetPhysics
+from flexsheet.model.sheet_fem import SheetFEM, SheetPhysics
+from flexsheet.model.sheet_table import IndentTable
 from flexsheet.model.tension import SheetMaterial, tension
 
 #: coarse mesh: 12 mm elements (the plain membrane stalled on it at 1 % and 2 % for the contact (72, 36) mm)

@@ -13,7 +13,7 @@ from flexsheet.experiments.report_analysis import analyse
 from flexsheet.experiments.table1 import PAPER_TABLE1
 from flexsheet.model import geometry
 from flexsheet.model.shapes import paper_cylinder
-from flexsheet.runtime.bag import BagWriter
+from flexsheet.runtime.bag_write import BagWriter
 from flexsheet.runtime.codec import encode
 from messages import Fingertip, FingerTruth, Header, SheetState
 from messages import topics as T
@@ -96,7 +96,7 @@ def test_report_table1_from_bag_uses_typed_truth_and_the_one_metric(tmp_path):
 def test_graph_stroke_judges_every_row_by_its_worst_seed():
     """flexsheet experiment stroke's aggregate: a row is met only when every seed meets it; a seed missing a row
     leaves that row unmeasured (MISSED)."""
-    from flexsheet.experiments.graph_stroke import aggregate
+    from flexsheet.experiments.stroke import aggregate
 
     def run(felt10, felt30, paper10):
         return {"table1": {"felt": {"10": {"dtheta_mean_deg": felt10, "n": 400}, "30": {"dtheta_mean_deg": felt30}},
@@ -118,7 +118,7 @@ def test_latency_chain_comes_from_the_nodes_stamps_and_adds_up():
     from types import SimpleNamespace as NS
 
     from flexsheet.experiments.report_timing import latency_hops
-    from flexsheet.twin.timing import LAB
+    from flexsheet.model.timing import LAB
 
     e = 100.0
     goal = np.eye(4)
@@ -194,27 +194,26 @@ def test_report_text_leaves_dd_2r_blank_on_a_shape_with_no_radius():
 
 
 def test_graph_stability_sets_one_error_at_a_time_and_finds_where_it_breaks(tmp_path):
-    """flexsheet experiment stroke --stability: each error reaches the graph as one launch override (camera noise,
+    """flexsheet experiment stability --graph: each error reaches the graph as one launch override (camera noise,
     the camera link's delay in s, lost frames); the breaking points come from the felt rows; the chart says them."""
     import json
 
-    from flexsheet.experiments.graph_stability import SWEEPS, _sets, chart
-    from flexsheet.experiments.stability import breaking_point
+    from flexsheet.experiments.stability import GRAPH_SWEEPS, breaking_point, graph_chart, graph_sets
 
-    assert _sets("noise_scale", 8.0, tmp_path, 0) == ["camera.noise_scale=8"]
-    assert _sets("link_delay_ms", 50.0, tmp_path, 0) == ["camera.link_delay_s=0.05"]
-    assert _sets("drop_rate", 0.6, tmp_path, 0) == ["camera.drop_rate=0.6"]
-    assert _sets("base_error", 0.0, tmp_path, 0) == []                 # the twin's own registration
+    assert graph_sets("noise_scale", 8.0, tmp_path, 0) == ["camera.noise_scale=8"]
+    assert graph_sets("link_delay_ms", 50.0, tmp_path, 0) == ["camera.link_delay_s=0.05"]
+    assert graph_sets("drop_rate", 0.6, tmp_path, 0) == ["camera.drop_rate=0.6"]
+    assert graph_sets("base_error", 0.0, tmp_path, 0) == []                 # the twin's own registration
     with pytest.raises(ValueError, match="unknown error 'x'"):
-        _sets("x", 1.0, tmp_path, 0)
-    assert all(v[1][0] == (1.0 if k == "noise_scale" else 0.0) for k, v in SWEEPS.items())   # baselines first
+        graph_sets("x", 1.0, tmp_path, 0)
+    assert all(v[1][0] == (1.0 if k == "noise_scale" else 0.0) for k, v in GRAPH_SWEEPS.items())   # baselines first
     x, y = [0.0, 25.0, 50.0, 100.0], [0.11, 0.15, 0.30, 0.50]
     assert breaking_point(x, y, 0.359) == pytest.approx(50.0 + 50.0 * (0.359 - 0.30) / 0.20)
     assert breaking_point(x, y, 0.9) is None
     res = {"title": "t", "paper_dtheta_deg": 0.359, "target_dtheta_deg": 0.18, "errors": {
         "link_delay_ms": {"label": "ms", "rows": [{"value": a, "dtheta_mean_deg": b} for a, b in zip(x, y, strict=True)],
                           "breaks_paper_at": breaking_point(x, y, 0.359), "breaks_target_at": breaking_point(x, y, 0.18)}}}
-    chart(res, tmp_path / "s.png")
+    graph_chart(res, tmp_path / "s.png")
     assert (tmp_path / "s.png").stat().st_size > 5000 and json.dumps(res)
 
 

@@ -7,7 +7,8 @@ import pytest
 import trimesh
 
 from flexsheet.model import geometry
-from flexsheet.model.shapes import Cylinder, MeshShape, RoundedBox, Shape, make_shape, paper_cylinder
+from flexsheet.model.shape_base import Shape
+from flexsheet.model.shapes import Cylinder, MeshShape, RoundedBox, make_shape, paper_cylinder
 from flexsheet.model.tension import (
     SheetMaterial,
     clamp_force,

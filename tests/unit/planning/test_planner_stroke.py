@@ -309,9 +309,9 @@ def test_experiment_quick_writes_summary(tmp_path, monkeypatch):
     """The stroke experiment's quick run (pure computation, no node: phase 1 of tests/run.sh)."""
     import json
 
-    from flexsheet.experiments import stroke as experiment
+    from flexsheet.experiments import stroke_model as experiment
 
-    monkeypatch.setattr(experiment, "_plot", lambda *a, **k: None)   # chart drawing is not under test
+    monkeypatch.setattr(experiment, "plot_chart", lambda *a, **k: None)   # chart drawing is not under test
     assert experiment.main(["--out", str(tmp_path), "--seeds", "1", "--quick"]) == 0
     s = json.loads((tmp_path / "summary.json").read_text())
     R = experiment.paper_cylinder().R

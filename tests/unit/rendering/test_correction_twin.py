@@ -14,8 +14,21 @@ import cv2
 import numpy as np
 import pytest
 
-from flexsheet.experiments import correction as corr
+from flexsheet.experiments.correction.calibrated_display import CalibratedDisplay
+from flexsheet.experiments.correction.cli import main
+from flexsheet.experiments.correction.estimator import DisplayEstimator
+from flexsheet.experiments.correction.measurer import Measurer
+from flexsheet.experiments.correction.poses import inclined_pose
+from flexsheet.experiments.correction.projector_errors import (
+    mapping_error_px,
+    perturbed_projector,
+    scaled_error,
+)
+from flexsheet.experiments.correction.sheet_model import pushed_sheet_model
+from flexsheet.experiments.correction.sweeps import measure_inclined, measure_pushed
+from flexsheet.experiments.correction.twin_world import TwinWorld
 from flexsheet.experiments.measurement import projector_pixels
+from flexsheet.experiments.stability import breaking_point
 from flexsheet.model import geometry
 from flexsheet.model.projector import Projector
 from flexsheet.twin.truth import TwinTruth
@@ -30,7 +43,7 @@ def runs(tmp_path_factory):
     out = {}
     for seed in SEEDS:
         d = tmp_path_factory.mktemp(f"corr{seed}")
-        rc = corr.main(["--twin", "realistic", "--truth-seed", str(seed), "--quick", "--out", str(d)])
+        rc = main(["--twin", "realistic", "--truth-seed", str(seed), "--quick", "--out", str(d)])
         assert rc == 0
         out[seed] = json.loads((d / "summary.json").read_text())
     return out
@@ -38,7 +51,7 @@ def runs(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def meas():
-    return corr.Measurer()
+    return Measurer()
 
 
 def test_summary_keys_per_seed(runs):
@@ -83,14 +96,14 @@ def test_seeds_differ(runs):
 def test_estimator_takes_no_truth():
     truth = TwinTruth.draw(0, "realistic")
     with pytest.raises(TypeError):
-        corr.DisplayEstimator(truth)
+        DisplayEstimator(truth)
     with pytest.raises(TypeError):
-        corr.CalibratedDisplay.from_display_calib(truth)
+        CalibratedDisplay.from_display_calib(truth)
     # by construction: the estimator's inputs are a CalibratedDisplay (projector, distortion, eye, ipd, bases,
     # source) plus renderer settings — no field or parameter can carry the truth
-    fields = {f.name for f in dataclasses.fields(corr.CalibratedDisplay)}
+    fields = {f.name for f in dataclasses.fields(CalibratedDisplay)}
     assert fields == {"projector", "distortion", "eye", "ipd", "bases", "source"}
-    params = inspect.signature(corr.DisplayEstimator.__init__).parameters
+    params = inspect.signature(DisplayEstimator.__init__).parameters
     assert list(params) == ["self", "cal", "config", "sheet_model", "samples", "target"]
     # the nominal sheet model's physics is the nominal material whatever the truth
     from flexsheet.model.sheet_model import NominalSheetModel
@@ -102,16 +115,16 @@ def test_estimator_takes_no_truth():
 
 def test_measurement_is_on_the_truth(meas):
     """Same estimator (same display.yaml), two truths: the projector image is identical, the measurement not."""
-    cal = corr.CalibratedDisplay.nominal()
-    est = corr.DisplayEstimator(cal)
+    cal = CalibratedDisplay.nominal()
+    est = DisplayEstimator(cal)
     t0 = TwinTruth.draw(0, "ideal")
-    w0 = corr.TwinWorld(t0)
+    w0 = TwinWorld(t0)
     # a truth whose projector is 8 mm off and turned 0.4 deg, and whose sheet is softer across (beta 0.6)
     T = t0.T_display_projector.copy()
     T[:3, :3] = cv2.Rodrigues(np.radians([0.0, 0.4, 0.0]))[0] @ T[:3, :3]
     T[:3, 3] += [0.0, 0.008, 0.0]
-    w1 = corr.TwinWorld(dataclasses.replace(t0, T_display_projector=T, tension_ratio=0.6))
-    q = est.joints(*corr.inclined_pose(50))
+    w1 = TwinWorld(dataclasses.replace(t0, T_display_projector=T, tension_ratio=0.6))
+    q = est.joints(*inclined_pose(50))
     img = est.draw("flat", est.sheet(q))
     np.testing.assert_array_equal(img, est.draw("flat", est.sheet(q)))      # the estimator is deterministic
     e0 = meas.errors(meas.shoot(img, w0, w0.sheet(q)[0]), "hud")
@@ -119,8 +132,8 @@ def test_measurement_is_on_the_truth(meas):
     assert e0["mean_mm"] < 0.25                       # ideal truth = nominal display: the old in-model figure
     assert e1["mean_mm"] > e0["mean_mm"] + 0.3        # a different truth is measured, the image is not
     assert e1["position_mm"] > 3.0
-    r0 = corr.measure_pushed(est, w0, meas, 50.0, ("four_triangle",))
-    r1 = corr.measure_pushed(est, w1, meas, 50.0, ("four_triangle",))
+    r0 = measure_pushed(est, w0, meas, 50.0, ("four_triangle",))
+    r1 = measure_pushed(est, w1, meas, 50.0, ("four_triangle",))
     assert abs(r1["four_triangle_mm"] - r0["four_triangle_mm"]) > 0.1
     est.release()
 
@@ -128,10 +141,10 @@ def test_measurement_is_on_the_truth(meas):
 def test_ideal_twin_reproduces_in_model_inclined(meas):
     # ideal truth + nominal display.yaml = the old in-model experiment: uncorrected 24.60 mm at 50 deg and
     # 2.32 mm at 10 deg, flat-corrected <= 0.14 mm (docs/renderer.md before)
-    est = corr.DisplayEstimator(corr.CalibratedDisplay.nominal())
-    world = corr.TwinWorld(TwinTruth.draw(1, "ideal"))
-    r50 = corr.measure_inclined(est, world, meas, 50)
-    r10 = corr.measure_inclined(est, world, meas, 10)
+    est = DisplayEstimator(CalibratedDisplay.nominal())
+    world = TwinWorld(TwinTruth.draw(1, "ideal"))
+    r50 = measure_inclined(est, world, meas, 50)
+    r10 = measure_inclined(est, world, meas, 10)
     est.release()
     assert r50["uncorrected_mm"] == pytest.approx(24.60, abs=0.15)
     assert r10["uncorrected_mm"] == pytest.approx(2.32, abs=0.15)
@@ -151,15 +164,15 @@ def test_projector_pixels_match_opencv():
 
 
 def test_breaking_point():
-    assert corr.breaking_point([0, 1, 2, 4], [0.1, 0.3, 0.9, 2.0], 0.7) == pytest.approx(1 + 0.4 / 0.6)
-    assert corr.breaking_point([0, 1], [0.1, 0.2], 0.7) is None
-    assert corr.breaking_point([1, 2], [0.9, 1.0], 0.7) == 1.0
+    assert breaking_point([0, 1, 2, 4], [0.1, 0.3, 0.9, 2.0], 0.7) == pytest.approx(1 + 0.4 / 0.6)
+    assert breaking_point([0, 1], [0.1, 0.2], 0.7) is None
+    assert breaking_point([1, 2], [0.9, 1.0], 0.7) == 1.0
 
 
 def test_perturbed_projector_scale():
-    p = corr.TwinWorld(TwinTruth.draw(2, "realistic")).projector
-    assert np.allclose(corr.perturbed_projector(p, 0.0, 2).K, p.K)
-    q = corr.perturbed_projector(p, 3.0, 2)
+    p = TwinWorld(TwinTruth.draw(2, "realistic")).projector
+    assert np.allclose(perturbed_projector(p, 0.0, 2).K, p.K)
+    q = perturbed_projector(p, 3.0, 2)
     assert np.linalg.norm(q.position - p.position) == pytest.approx(0.006, rel=1e-9)
     ang = math.degrees(math.acos((np.trace(q.R.T @ p.R) - 1) / 2))
     assert ang == pytest.approx(0.6, rel=1e-6)
@@ -167,11 +180,11 @@ def test_perturbed_projector_scale():
 
 def test_cli_rejects_bad_input(tmp_path):
     with pytest.raises(SystemExit):
-        corr.main(["--out", str(tmp_path), "--truth-seed", "-1"])
+        main(["--out", str(tmp_path), "--truth-seed", "-1"])
     with pytest.raises(SystemExit):
-        corr.main(["--out", str(tmp_path), "--depths", "80"])
+        main(["--out", str(tmp_path), "--depths", "80"])
     with pytest.raises(ValueError, match="sheet model"):
-        corr._sheet_model("bogus")
+        pushed_sheet_model("bogus")
     assert geometry.PIXEL_ON_SCREEN * 1e3 == pytest.approx(TARGET_MM)
 
 
@@ -204,15 +217,15 @@ def test_shader_draws_the_fitted_fem_shape(tmp_path):
 
 
 def test_scaled_registration_error():
-    w = corr.TwinWorld(TwinTruth.draw(1, "realistic"))
-    est = corr.perturbed_projector(w.projector, 1.0, 1, 0)
+    w = TwinWorld(TwinTruth.draw(1, "realistic"))
+    est = perturbed_projector(w.projector, 1.0, 1, 0)
     D = w.distortion + [0.002, 0, 0, 0, 0]
-    p0, d0 = corr.scaled_error(w.projector, w.distortion, est, D, 0.0)
-    p1, d1 = corr.scaled_error(w.projector, w.distortion, est, D, 1.0)
-    assert corr.mapping_error_px(w.projector, w.distortion, p0, d0) < 1e-9
+    p0, d0 = scaled_error(w.projector, w.distortion, est, D, 0.0)
+    p1, d1 = scaled_error(w.projector, w.distortion, est, D, 1.0)
+    assert mapping_error_px(w.projector, w.distortion, p0, d0) < 1e-9
     np.testing.assert_allclose(p1.R, est.R, atol=1e-12)
     np.testing.assert_allclose(p1.position, est.position, atol=1e-12)
     np.testing.assert_allclose(d1, D)
-    m1 = corr.mapping_error_px(w.projector, w.distortion, p1, d1)
-    m2 = corr.mapping_error_px(w.projector, w.distortion, *corr.scaled_error(w.projector, w.distortion, est, D, 2.0))
+    m1 = mapping_error_px(w.projector, w.distortion, p1, d1)
+    m2 = mapping_error_px(w.projector, w.distortion, *scaled_error(w.projector, w.distortion, est, D, 2.0))
     assert 1.0 < m1 < 10.0 and m2 == pytest.approx(2 * m1, rel=0.05)      # ~linear for small errors

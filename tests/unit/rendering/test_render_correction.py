@@ -6,7 +6,7 @@ import pytest
 from flexsheet.model import geometry
 from flexsheet.model.sheet import Membrane, SheetSurface
 from flexsheet.rendering.correction import (
-    choose_model,
+    choose_sheet_model,
     correct_vertices,
     correct_vertices_fine,
     correct_vertices_pushed,
@@ -212,13 +212,13 @@ def test_membrane_boundary_conditions_and_pde():
 def test_choose_model_picks_cheapest_meeting_target():
     table = {"none": [(0.0, 0.0), (0.05, 0.01)], "flat": [(0.0, 0.0), (0.05, 0.01)],
              "four_triangle": [(0.0, 0.0), (0.05, 0.002)], "fine": [(0.0, 0.0), (0.05, 0.0001)]}
-    assert choose_model(0.0, table) == "none"
-    assert choose_model(0.0, table, models=("flat", "four_triangle", "fine")) == "flat"
-    assert choose_model(0.0125, table, target=0.001) == "four_triangle"   # 4-tri 0.0005 there
-    assert choose_model(0.05, table, target=0.0007) == "fine"
-    assert choose_model(0.05, table, target=1e-6) == "fine"               # none meets: least error
+    assert choose_sheet_model(0.0, table) == "none"
+    assert choose_sheet_model(0.0, table, models=("flat", "four_triangle", "fine")) == "flat"
+    assert choose_sheet_model(0.0125, table, target=0.001) == "four_triangle"   # 4-tri 0.0005 there
+    assert choose_sheet_model(0.05, table, target=0.0007) == "fine"
+    assert choose_sheet_model(0.05, table, target=1e-6) == "fine"               # none meets: least error
     with pytest.raises(ValueError, match="depth"):
-        choose_model(float("nan"), table)
+        choose_sheet_model(float("nan"), table)
 
 
 def test_predicted_errors_grow_with_depth_and_fine_is_reference():

@@ -1,7 +1,7 @@
 """The live renderer's pushed-sheet correction, measured against the twin's TRUE sheet.
 
 :class:`flexsheet.experiments.correction.LivePath` builds the renderer side exactly as ``RendererNode.setup``
-does: :func:`flexsheet.rendering.state.sheet_model_for` of the node's default :class:`SheetConfig` (the nominal FEM:
+does: :func:`flexsheet.model.sheet_model.sheet_model_for` of the node's default :class:`SheetConfig` (the nominal FEM:
 nominal E, no pre-strain, assumed tension ratio 1), :class:`RendererState` fed the clamp poses and the fingertip,
 :class:`ErrorTable` + :func:`pick_model` ``auto``, and the picked model's correction (the numpy twin of the
 shader, equal to 2e-6 m: tests/unit/rendering/test_correction_twin.py).
@@ -17,11 +17,12 @@ correction experiment, docs/renderer.md). The first run on a clean machine build
 import numpy as np
 import pytest
 
-from flexsheet.experiments.correction import LivePath, TwinWorld
+from flexsheet.experiments.correction.live_path import LivePath
+from flexsheet.experiments.correction.twin_world import TwinWorld
 from flexsheet.model import geometry
 from flexsheet.model.sheet import clamp_half_span, clamp_poses
-from flexsheet.model.sheet_model import NominalSheetModel, PendingPush, table_grid
-from flexsheet.rendering.state import RendererState, SheetConfig, pick_model
+from flexsheet.model.sheet_model import NominalSheetModel, PendingPush, SheetConfig, table_grid
+from flexsheet.rendering.state import RendererState, pick_model
 from flexsheet.twin.truth import TwinTruth
 
 STRETCH = 0.04            # the planner's stretch for the default 30 N/m object, on a table node

@@ -14,10 +14,11 @@ import numpy as np
 import pytest
 
 from flexsheet import cli
-from flexsheet.runtime.bag import BagWriter
+from flexsheet.runtime.bag_write import BagWriter
 from flexsheet.runtime.codec import encode
-from flexsheet.runtime.launch import TOPLEVEL_ENV, LaunchError, load_launch, parse_toplevel_set
+from flexsheet.runtime.launch import TOPLEVEL_ENV, LaunchError, load_launch
 from flexsheet.runtime.launch_check import check_launch
+from flexsheet.runtime.launch_sets import parse_toplevel_set
 from messages import Fingertip, Header
 from messages import topics as T
 

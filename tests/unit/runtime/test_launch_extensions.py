@@ -10,7 +10,9 @@ import pytest
 
 from flexsheet.display.launch import TwinSpec
 from flexsheet.runtime.extensions import bag_channels, extensions, sections
-from flexsheet.runtime.launch import LaunchError, load_launch, node_config, parse_toplevel_set
+from flexsheet.runtime.launch import LaunchError, load_launch
+from flexsheet.runtime.launch_config import node_config
+from flexsheet.runtime.launch_sets import parse_toplevel_set
 
 
 def _write(tmp_path: Path, text: str) -> Path:

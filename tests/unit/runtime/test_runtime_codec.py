@@ -88,10 +88,10 @@ def test_a_descriptor_with_many_huge_dims_gives_one_bounded_line():
     the shape the same way as the buffer-size one)."""
     import struct
 
-    from flexsheet.runtime.codec import _parse_descriptor
+    from flexsheet.runtime.codec import parse_descriptor
 
     dims = [1] * 23 + [2 ** 31] * 4 + [2 ** 63] * 10
     data = struct.pack("<HB", 2, len(dims)) + struct.pack(f"<{len(dims)}Q", *dims) + b"<f8"
-    why = _parse_descriptor(data)
+    why = parse_descriptor(data)
     assert isinstance(why, str) and "\n" not in why and len(why) <= 200, why
     assert "... 37 dims" in why and "needs" in why

@@ -55,7 +55,7 @@ def test_commanding_services_take_only_the_hosts_tools():
     another node's; without CURVE only on a loopback graph. Reading services stay open to every identity."""
     import zmq
 
-    from flexsheet.runtime.transport import CurveConfig
+    from flexsheet.runtime.zmq.curve import CurveConfig
 
     pk = lambda o: msgpack.packb(o, use_bin_type=True)          # noqa: E731
     (host_pub, _), (node_pub, _) = zmq.curve_keypair(), zmq.curve_keypair()

@@ -10,7 +10,7 @@ import pinocchio as pin
 import pytest
 
 from flexsheet.arm.kinematics import DATASHEET_SPEED_DEG, JOINT_NAMES, QD_MAX, URDF_PATH
-from flexsheet.experiments.stroke import ArmChain, make_twin, simulate
+from flexsheet.experiments.stroke_model import ArmChain, make_twin, simulate
 
 
 def test_urdf_speeds_are_the_rv1a_datasheet():

@@ -8,13 +8,9 @@ import numpy as np
 import pytest
 
 from flexsheet.model.sheet import SheetSurface
-from flexsheet.model.sheet_fem import (
-    FINGER_RADIUS,
-    IndentTable,
-    SheetFEM,
-    SheetPhysics,
-    linear_patch_deflection,
-)
+from flexsheet.model.sheet_fem import FINGER_RADIUS, SheetFEM, SheetPhysics
+from flexsheet.model.sheet_linear import linear_patch_deflection
+from flexsheet.model.sheet_table import IndentTable
 from flexsheet.twin.truth import TwinTruth
 
 COARSE = {"h_fine": 0.008, "h_coarse": 0.012}

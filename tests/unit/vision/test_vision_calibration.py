@@ -8,16 +8,15 @@ import cv2
 import numpy as np
 import pytest
 
-from flexsheet.twin.camera import XIMEA_CALIB
+from flexsheet.vision.calib_yaml import load_yaml, write_yaml
+from flexsheet.vision.camera_model import XIMEA_CALIB
 from flexsheet.vision.stereo_calibration import (
     calibrate_stereo,
     detect_board,
-    load_yaml,
     main,
     parse_board,
     to_message,
     validate_stereo,
-    write_yaml,
 )
 
 DATA = str(Path(__file__).resolve().parents[2] / "data" / "stereo_xi")

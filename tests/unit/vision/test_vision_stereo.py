@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from flexsheet.twin.camera import bumblebee2_calibration, camera_model
+from flexsheet.vision.camera_model import bumblebee2_calibration, camera_model
 from flexsheet.vision.predict import ConstantVelocityKF
 from flexsheet.vision.stereo import METHODS, StereoModel
 

@@ -5,13 +5,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from flexsheet.twin.camera import (
-    DEFAULT_CAMERA_POSITION,
-    SimConfig,
-    StereoRenderer,
-    camera_model,
-    look_at,
-)
+from flexsheet.twin.camera import StereoCameraTwin
+from flexsheet.twin.camera_config import SimConfig
+from flexsheet.vision.camera_model import DEFAULT_CAMERA_POSITION, camera_model, look_at
 from flexsheet.vision.detect import MarkerDetector
 from flexsheet.vision.tracker import FingertipTracker, TrackerConfig
 
@@ -24,7 +20,7 @@ def _setup(model="ximea", ideal=False, **sim):
     twin's sensing (SimConfig.ideal), else the realistic sensor."""
     calib = camera_model(model)
     T = look_at(DEFAULT_CAMERA_POSITION)
-    return calib, T, StereoRenderer(calib, T, SimConfig.ideal(**sim) if ideal else SimConfig(**sim))
+    return calib, T, StereoCameraTwin(calib, T, SimConfig.ideal(**sim) if ideal else SimConfig(**sim))
 
 
 @pytest.mark.parametrize("model", ["ximea", "bumblebee2"])

@@ -14,7 +14,8 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from flexsheet.runtime.bag import ENCODING, BagWriter, read_bag
+from flexsheet.runtime.bag_read import ENCODING, read_bag
+from flexsheet.runtime.bag_write import BagWriter
 from flexsheet.runtime.codec import encode
 from flexsheet.viz.foxglove_bag import FoxgloveBagChannels, add_foxglove
 from flexsheet.viz.samples import sample_state

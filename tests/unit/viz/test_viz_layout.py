@@ -12,7 +12,7 @@ from mcap.writer import Writer
 
 from flexsheet.model import geometry
 from flexsheet.model.projector import Projector
-from flexsheet.model.sheet import SheetSurface
+from flexsheet.model.sheet import SheetSurface, clamp_poses
 from flexsheet.runtime.codec import encode
 from flexsheet.viz.foxglove import channel_schemas, inputs_for
 from flexsheet.viz.foxglove_bag import FoxgloveBagChannels
@@ -105,7 +105,7 @@ def test_frustum_corners_reproject_to_the_image_corners():
 
 
 def test_sheet_mesh_carries_the_membrane_depression():
-    clamps = geometry.clamp_poses(np.zeros(3), geometry.SCREEN_NORMAL, np.array([0.0, 1.0, 0.0]), 0.0)
+    clamps = clamp_poses(np.zeros(3), geometry.SCREEN_NORMAL, np.array([0.0, 1.0, 0.0]), 0.0)
     sheet = SheetSurface.from_clamps(*clamps, pushed_point=np.array([-0.01, 0.0, 0.0]),
                                      membrane_kwargs={"modes": 64})
     v, f = sheet_mesh(sheet, 21)

@@ -16,12 +16,14 @@ import numpy as np
 import pytest
 from foxglove.messages import SceneUpdate
 
-from flexsheet.arm.kinematics import LEFT_BASE, RIGHT_BASE, ArmKinematics, home_joints
+from flexsheet.arm.kinematics import ArmKinematics, home_joints
 from flexsheet.model import geometry
+from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
 from flexsheet.model.sheet import SheetSurface, clamp_poses
 from flexsheet.model.sheet_model import FourTriangleDent, SeriesShape, SheetConfig
 from flexsheet.rendering.state import RendererState
-from flexsheet.viz.scene_builder import SceneBuilder, VizConfig
+from flexsheet.viz.config import VizConfig
+from flexsheet.viz.scene_builder import SceneBuilder
 from messages import ArmJointState, Fingertip, Header
 
 TOL = 5e-5          # 0.05 mm

@@ -4,20 +4,23 @@ written beside it: the contact penalty's convergence (:func:`penalty_study`) and
 
 from __future__ import annotations
 
+import logging
 from dataclasses import replace
 
 import numpy as np
 
 from flexsheet.fem.cache import ArrayCache
-from flexsheet.fem.hyperelastic import PENALTY_SCALE
 from flexsheet.fem.material import Material
 from flexsheet.fem.realtime import RealtimeModel
-from flexsheet.fem.reference_paths import _at_depths, _depths, _log, reference_path
-from flexsheet.fem.reference_settings import PENALTY_TOL_MM, TARGET, Settings
-from flexsheet.fem.visible_error import _visible_diffs
+from flexsheet.fem.reference.capsule_contact import PENALTY_SCALE
+from flexsheet.fem.reference.paths import at_depths, push_depths, reference_path
+from flexsheet.fem.reference.settings import PENALTY_TOL_MM, TARGET, Settings
+from flexsheet.fem.visible_error import visible_diffs
+
+log = logging.getLogger(__name__)
 
 
-def _sequence_verdict(e: np.ndarray, depths: np.ndarray) -> tuple[bool, float, float]:
+def sequence_verdict(e: np.ndarray, depths: np.ndarray) -> tuple[bool, float, float]:
     """Mesh-sequence verdict from ``e`` (L-1, D) mm, each coarser level's visible-surface difference to the
     finest at ``depths`` (D,) m: (the difference falls with every refinement at every depth ≥ 5 mm, the last
     refinement's largest change in mm, the deepest depth in mm to which both hold with the last change ≤ half
@@ -33,16 +36,16 @@ def _sequence_verdict(e: np.ndarray, depths: np.ndarray) -> tuple[bool, float, f
 def convergence(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel) -> tuple[dict, dict]:
     """Mesh convergence at azimuth 0 on the rendered vertices; returns (report, finest level's path, sampled
     every ``st.fine_step``)."""
-    depths = _depths(st.depth_step)
-    fdepths = _depths(st.fine_step)
+    depths = push_depths(st.depth_step)
+    fdepths = push_depths(st.fine_step)
     verts = rm.rest_vertices.astype(float)
     fixed = rm.mesh.fixed[rm.surface_nodes]
     paths = [reference_path(s, 0.0, depths, mat, cache, verts, st.contact) for s in st.levels[:-1]]
     fine = reference_path(st.levels[-1], 0.0, fdepths, mat, cache, verts, st.contact)
-    paths.append(_at_depths(fine, fdepths, depths))
+    paths.append(at_depths(fine, fdepths, depths))
     rep = {"depths_m": depths.tolist(), "levels": []}
     for s, p in zip(st.levels, paths, strict=True):
-        err = _visible_diffs(p, paths[-1], depths, verts, fixed, rm.mesh)
+        err = visible_diffs(p, paths[-1], depths, verts, fixed, rm.mesh)
         rep["levels"].append({"spec": s.__dict__, "h_fine_m": s.h_fine, "dofs": int(p["dofs"]),
                               "seconds": float(p["seconds"]), "error_vs_finest_mm": [e * 1e3 for e in err],
                               "force_N": p["force"].tolist(), "inverted_nodal": p["inverted"].tolist(),
@@ -53,7 +56,7 @@ def convergence(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMode
                               "cpu_seconds": float(p["cpu_seconds"])})
     e = np.array([lv["error_vs_finest_mm"] for lv in rep["levels"][:-1]])          # (L-1, D)
     deep = depths >= 0.005 - 1e-12
-    monotone, last, rep["converged_to_depth_mm"] = _sequence_verdict(e, depths)
+    monotone, last, rep["converged_to_depth_mm"] = sequence_verdict(e, depths)
     no_qp = int(fine["inverted_qp"].max()) == 0
     rep.update({"monotone_decrease": monotone, "last_refinement_change_mm": last,
                 "finest_inverted_nodal_at_50mm": int(fine["inverted"][-1]),
@@ -71,8 +74,8 @@ def convergence(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMode
         with np.errstate(divide="ignore", invalid="ignore"):
             p_obs = np.log(e[-2] / e[-1]) / np.log(r)
         rep["observed_order_median"] = float(np.nanmedian(p_obs[deep]))
-    _log(f"convergence: errors vs finest at 50 mm {[round(float(x[-1]), 3) for x in e]} mm, converged "
-         f"{rep['converged']}")
+    log.info(f"convergence: errors vs finest at 50 mm {[round(float(x[-1]), 3) for x in e]} mm, converged "
+             f"{rep['converged']}")
     return rep, fine
 
 
@@ -82,14 +85,14 @@ def penalty_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMo
     and the force at 50 mm. ``converged``: the default scale (:data:`PENALTY_SCALE`) lies within
     ``PENALTY_TOL_MM`` of the next 10× stiffer one at every depth (the penalty error is then below the mesh's)
     and Newton converged at every load step of both."""
-    depths = _depths(st.depth_step)
+    depths = push_depths(st.depth_step)
     verts = rm.rest_vertices.astype(float)
     fixed = rm.mesh.fixed[rm.surface_nodes]
     spec = st.levels[st.penalty_level]
     scales = sorted(st.penalty_scales)
     paths = [reference_path(spec, 0.0, depths, mat, cache, verts, st.contact, sc) for sc in scales]
     rows = [{"penalty_scale": sc,
-             "error_vs_stiffest_mm": [e * 1e3 for e in _visible_diffs(p, paths[-1], depths, verts, fixed, rm.mesh)], "penetration_mm_at_50mm": float(p["penetration"][-1]) * 1e3,
+             "error_vs_stiffest_mm": [e * 1e3 for e in visible_diffs(p, paths[-1], depths, verts, fixed, rm.mesh)], "penetration_mm_at_50mm": float(p["penetration"][-1]) * 1e3,
              "penetration_mm_max": float(np.max(p["penetration"])) * 1e3, "force_N_at_50mm": float(p["force"][-1]),
              "newton_converged": bool(p["converged"].all()), "cpu_seconds": float(p["cpu_seconds"])}
             for sc, p in zip(scales, paths, strict=True)]
@@ -97,47 +100,47 @@ def penalty_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMo
     nxt = 10 * PENALTY_SCALE
     if nxt in scales:
         j = scales.index(nxt)
-        change = max(_visible_diffs(paths[i], paths[j], depths, verts, fixed, rm.mesh)) * 1e3
+        change = max(visible_diffs(paths[i], paths[j], depths, verts, fixed, rm.mesh)) * 1e3
     else:
         change = float("nan")
     rep = {"mesh": spec.__dict__, "depths_m": depths.tolist(), "default_scale": PENALTY_SCALE, "scales": rows,
            "default_vs_10x_stiffer_mm": change, "tolerance_mm": PENALTY_TOL_MM,
            "converged": bool(change <= PENALTY_TOL_MM and rows[i]["newton_converged"]
                              and (nxt not in scales or rows[scales.index(nxt)]["newton_converged"]))}
-    _log(f"penalty study on h_fine {spec.h_fine * 1e3:g} mm: default vs 10x stiffer {change:.3f} mm, penetration at "
-         f"50 mm {[round(r['penetration_mm_at_50mm'], 3) for r in rows]} mm for {scales}")
+    log.info(f"penalty study on h_fine {spec.h_fine * 1e3:g} mm: default vs 10x stiffer {change:.3f} mm, penetration at "
+             f"50 mm {[round(r['penetration_mm_at_50mm'], 3) for r in rows]} mm for {scales}")
     return rep
 
 
 def skin_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, conv: dict, fine: dict) -> dict:
     """Where the unconverged part of the reference lies: the next-to-finest convergence mesh (full mode: the
     snapshot mesh) with only its surface layer refined (``skin_h`` in ``st.skin_sizes``: the material that
-    wraps the fingertip and lines the crater, :class:`flexsheet.fem.hyperelastic.RefSpec`), against the same mesh
+    wraps the fingertip and lines the crater, :class:`flexsheet.fem.reference.mesh.RefSpec`), against the same mesh
     refined throughout its push tube (the finest convergence level). ``conv``: :func:`convergence`'s report;
     ``fine``: its finest path. Per variant the largest visible-surface difference (mm, per depth) to the
     unrefined mesh and to the finest level (visible on the finer of the two, as in :func:`convergence`), the
     force at 50 mm, DOF and CPU, and ``change_vs_previous_mm`` (to the previous, coarser skin; the first: to the
     unrefined mesh); ``tube_change_mm``: the finest level against the unrefined mesh (from ``conv``). Azimuth 0,
     every ``st.depth_step``."""
-    depths = _depths(st.depth_step)
+    depths = push_depths(st.depth_step)
     verts = rm.rest_vertices.astype(float)
     fixed = rm.mesh.fixed[rm.surface_nodes]
     unrefined = st.levels[-2]
     base = reference_path(unrefined, 0.0, depths, mat, cache, verts, st.contact)
-    fine = _at_depths(fine, _depths(st.fine_step), depths)
+    fine = at_depths(fine, push_depths(st.fine_step), depths)
     rows, prev = [], base
     for h in st.skin_sizes:
         spec = replace(unrefined, skin_h=h)
         p = reference_path(spec, 0.0, depths, mat, cache, verts, st.contact)
         rows.append({"skin_h_m": h, "spec": spec.__dict__, "dofs": int(p["dofs"]), "cpu_seconds": float(p["cpu_seconds"]),
                      "newton_converged": bool(p["converged"].all()), "force_N_at_50mm": float(p["force"][-1]),
-                     "change_vs_unrefined_mm": [e * 1e3 for e in _visible_diffs(base, p, depths, verts, fixed, rm.mesh)],
-                     "change_vs_previous_mm": [e * 1e3 for e in _visible_diffs(prev, p, depths, verts, fixed, rm.mesh)],
-                     "diff_vs_finest_mm": [e * 1e3 for e in _visible_diffs(p, fine, depths, verts, fixed, rm.mesh)]})
+                     "change_vs_unrefined_mm": [e * 1e3 for e in visible_diffs(base, p, depths, verts, fixed, rm.mesh)],
+                     "change_vs_previous_mm": [e * 1e3 for e in visible_diffs(prev, p, depths, verts, fixed, rm.mesh)],
+                     "diff_vs_finest_mm": [e * 1e3 for e in visible_diffs(p, fine, depths, verts, fixed, rm.mesh)]})
         prev = p
     tube = conv["levels"][-2]["error_vs_finest_mm"]
-    _log("skin study at 50 mm: skin refinement moves the visible surface by "
-         f"{[round(r['change_vs_unrefined_mm'][-1], 2) for r in rows]} mm, the tube refinement by {tube[-1]:.2f} mm")
+    log.info("skin study at 50 mm: skin refinement moves the visible surface by "
+             f"{[round(r['change_vs_unrefined_mm'][-1], 2) for r in rows]} mm, the tube refinement by {tube[-1]:.2f} mm")
     return {"depths_m": depths.tolist(), "unrefined": unrefined.__dict__, "finest": st.levels[-1].__dict__,
             "unrefined_dofs": int(base["dofs"]), "unrefined_force_N_at_50mm": float(base["force"][-1]),
             "finest_force_N_at_50mm": float(fine["force"][-1]), "tube_change_mm": tube, "skins": rows}

@@ -1,5 +1,5 @@
 """The fold check of a reference path (:func:`fold_path`, cached): does its surface pass through itself or
-crease (the reference has no self-contact), and its JSON form (:func:`_fold_rep`)."""
+crease (the reference has no self-contact), and its JSON form (:func:`fold_path_json`)."""
 
 from __future__ import annotations
 
@@ -9,31 +9,38 @@ import time
 import numpy as np
 
 from flexsheet.fem.cache import ArrayCache, cache_key
-from flexsheet.fem.fold import CREASE_STRETCH, VERTEX_TOL, fold_report, lateral_distance, outer_surface
-from flexsheet.fem.hyperelastic import RefSpec, capsule_at
 from flexsheet.fem.material import Material
-from flexsheet.fem.reference_paths import _as_solved, _check_dofs, _ref_model
-from flexsheet.fem.reference_settings import FINGER_R
+from flexsheet.fem.reference.capsule_contact import capsule_at
+from flexsheet.fem.reference.fold import (
+    CREASE_STRETCH,
+    VERTEX_TOL,
+    fold_report,
+    lateral_distance,
+    outer_surface,
+)
+from flexsheet.fem.reference.mesh import RefSpec
+from flexsheet.fem.reference.paths import as_solved, check_dofs, reference_model
+from flexsheet.fem.reference.settings import FINGER_R
 
 FOLD_REGION = 0.03      #: m: surface points within this rest distance of the push axis are checked for folds
-FOLD_VERSION = "fold-3"  #: bump when flexsheet/fem/fold.py's checks change (fold_path's cache key)
+FOLD_VERSION = "fold-3"  #: bump when flexsheet/fem/reference/fold.py's checks change (fold_path's cache key)
 
 
 def fold_path(spec: RefSpec, angle_deg: float, path: dict, depths: np.ndarray, mat: Material,
               cache: ArrayCache) -> dict:
-    """Self-contact and crease check (:func:`flexsheet.fem.fold.fold_report`) of every state of a
+    """Self-contact and crease check (:func:`flexsheet.fem.reference.fold.fold_report`) of every state of a
     :func:`reference_path` ``path`` (its ``u_dof``, at ``depths`` m) on ``spec``'s mesh at ``angle_deg``: the
     reference has no self-contact, so where its surface passes through itself it is not a physical solution.
     Cached (kind "fold", keyed by the states themselves). Returns (D,) arrays: "max_winding" (0.5 on a smooth
     surface, α/2π at the bottom of a fold of interior angle α, > 1 where the surface lies inside the body),
     "n_penetrating" (surface points with w > 1), "max_penetration" m, "min_stretch" (smallest in-plane stretch
     of the surface triangles off the footprint), "n_creased" (triangles below
-    :data:`flexsheet.fem.fold.CREASE_STRETCH`), "worst_lateral" / "worst_drop" m (the largest-w point's rest
+    :data:`flexsheet.fem.reference.fold.CREASE_STRETCH`), "worst_lateral" / "worst_drop" m (the largest-w point's rest
     distance from the push axis and its motion along the push); the same with the footprint included ("all_…":
     the material over the fingertip); "max_strain" the largest principal Green–Lagrange strain of any element
     and "max_strain_lateral_m" that element's rest distance from the push axis; "seconds". Raises ``RuntimeError`` when the
-    re-made mesh has another DOF count than the path (:func:`_check_dofs`)."""
-    spec, angle_deg = _as_solved(spec, angle_deg)
+    re-made mesh has another DOF count than the path (:func:`check_dofs`)."""
+    spec, angle_deg = as_solved(spec, angle_deg)
     ud = np.asarray(path["u_dof"])
     key = cache_key(FOLD_VERSION, spec.key(), angle_deg, np.round(depths, 9).tolist(), FOLD_REGION, FINGER_R,
                     CREASE_STRETCH, VERTEX_TOL,
@@ -41,8 +48,8 @@ def fold_path(spec: RefSpec, angle_deg: float, path: dict, depths: np.ndarray, m
 
     def compute() -> dict:
         t = time.perf_counter()
-        model = _ref_model(spec, angle_deg, mat)
-        _check_dofs(path, model)
+        model = reference_model(spec, angle_deg, mat)
+        check_dofs(path, model)
         surf = outer_surface(model)
         rows = []
         for j, d in enumerate(depths):
@@ -70,7 +77,7 @@ def fold_path(spec: RefSpec, angle_deg: float, path: dict, depths: np.ndarray, m
     return z
 
 
-def _fold_rep(f: dict) -> dict:
+def fold_path_json(f: dict) -> dict:
     """The JSON form of a :func:`fold_path` result (mm where a length)."""
     return {"max_winding": f["max_winding"].tolist(), "n_penetrating": f["n_penetrating"].astype(int).tolist(),
             "max_penetration_mm": (f["max_penetration_m"] * 1e3).tolist(), "min_stretch": f["min_stretch"].tolist(),

@@ -3,15 +3,18 @@ between azimuths alone, on a table of the azimuths around each held-out one (:fu
 
 from __future__ import annotations
 
+import logging
 from dataclasses import replace
 
 from flexsheet.experiments.fem.candidates import snapshot_source, validation_set
 from flexsheet.fem.cache import ArrayCache
 from flexsheet.fem.material import Material
 from flexsheet.fem.realtime import RealtimeModel
-from flexsheet.fem.reference_paths import _log, snapshot_table
-from flexsheet.fem.reference_settings import FINGER_R, TARGET, Settings
+from flexsheet.fem.reference.paths import snapshot_table
+from flexsheet.fem.reference.settings import FINGER_R, TARGET, Settings
 from flexsheet.fem.visible_error import errors
+
+log = logging.getLogger(__name__)
 
 
 def holdout_grid(st: Settings) -> Settings:
@@ -57,8 +60,8 @@ def holdout_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMo
                      else f"the finest convergence mesh (h_fine {st.levels[-1].h_fine * 1e3:g} mm)",
                      "depths_mm": [d for d, _ in pairs], "error_mm": [e for _, e in pairs],
                      "max_error_mm": max(e for _, e in pairs), "breaks_at_depth_mm": min(bad) if bad else None})
-        _log(f"holdout study: azimuth {a:g} deg: worst visible error {rows[-1]['max_error_mm']:.2f} mm"
-             + (f", over the target from {min(bad):g} mm" if bad else ", within the target"))
+        log.info(f"holdout study: azimuth {a:g} deg: worst visible error {rows[-1]['max_error_mm']:.2f} mm"
+                 + (f", over the target from {min(bad):g} mm" if bad else ", within the target"))
     return {"snapshot_azimuths_deg": list(hs.grid.angles_deg), "held_out_deg": list(hs.holdout_deg),
             "snapshot_depth_step_mm": hs.grid.depth_step * 1e3, "snapshot_mesh": hs.snap_spec.__dict__,
             "table_build_s": sec, "table_cache_hit": hit, "target_mm": TARGET * 1e3,

@@ -4,20 +4,22 @@ leaves the corotational solution (:func:`_stability`)."""
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
 
 from flexsheet.experiments.fem.candidates import update_ms
-from flexsheet.experiments.fem.outputs import _write
+from flexsheet.experiments.fem.outputs import write_json
 from flexsheet.experiments.fem.plots import plot_linear_study
 from flexsheet.fem.contact import finger_at
 from flexsheet.fem.material import Material
 from flexsheet.fem.mesh import MeshSpec
 from flexsheet.fem.realtime import RealtimeModel
-from flexsheet.fem.reference_paths import _log
-from flexsheet.fem.reference_settings import FINGER_R, TARGET
+from flexsheet.fem.reference.settings import FINGER_R, TARGET
 from flexsheet.fem.solver import solve_full
+
+log = logging.getLogger(__name__)
 
 
 def linear_study(out: str, mat: Material) -> None:
@@ -25,7 +27,7 @@ def linear_study(out: str, mat: Material) -> None:
     :func:`flexsheet.fem.choose.choose`), the Hertz exponent check and the linear/corotational stability curve.
     Writes linear_accuracy_speed, hertz, stability (.json/.png) and accuracy_table.json into ``out``."""
     from flexsheet.fem.choose import choose
-    from flexsheet.fem.mesh import cylinder_mesh
+    from flexsheet.fem.mesh import cylinder_tet_mesh
     from flexsheet.fem.solver import FemModel
 
     ref_spec = MeshSpec(0.010, 0.002, 0.015)
@@ -35,19 +37,19 @@ def linear_study(out: str, mat: Material) -> None:
     cands += [(MeshSpec(h, hf, rr), 2) for h, hf, rr in ((0.016, 0.006, 0.012), (0.012, 0.006, 0.012),
                                                          (0.012, 0.004, 0.012), (0.012, 0.003, 0.012),
                                                          (0.010, 0.004, 0.012))]
-    ref_mesh = cylinder_mesh(ref_spec)
+    ref_mesh = cylinder_tet_mesh(ref_spec)
     ref_model = FemModel(ref_mesh, mat, order=2)
     refs = {d: solve_full(ref_model, finger_at(0.0, d, FINGER_R, ref_mesh.radius, ref_mesh.center)) for d in depths}
     table, rows = _linear_candidates(cands, ref_spec, ref_model, refs, mat)
     table["depths"] = depths
-    _write(out, "accuracy_table", table)
+    write_json(out, "accuracy_table", table)
     ch = choose(table, TARGET, 0.005, 0.03, mat.nu, FINGER_R)
-    _log("linear mesh choice over 5-30 mm: " + ch.reason)
-    _write(out, "linear_accuracy_speed", {"candidates": rows, "depth_m": 0.03, "choice": ch.reason})
+    log.info("linear mesh choice over 5-30 mm: " + ch.reason)
+    write_json(out, "linear_accuracy_speed", {"candidates": rows, "depth_m": 0.03, "choice": ch.reason})
     hz = _hertz(mat)
-    _write(out, "hertz", hz)
+    write_json(out, "hertz", hz)
     stab = _stability(ch.spec, mat)
-    _write(out, "stability", stab)
+    write_json(out, "stability", stab)
     plot_linear_study(out, rows, hz, stab)
 
 
@@ -68,19 +70,19 @@ def _linear_candidates(cands, ref_spec, ref_model, refs, mat):
                      "surface_error_mm_at_30mm": ev["surface_error_m"]["0.0300"] * 1e3,
                      "force_error_pct_at_30mm": ev["force_error_pct"]["0.0300"],
                      "max_error_mm": max(ev["surface_error_m"].values()) * 1e3})
-        _log(f"  linear P{order} {spec.key()}: err@30 {rows[-1]['surface_error_mm_at_30mm']:.2f} mm, "
-             f"update {t:.3f} ms ({fg.depth * 1e3:.0f} mm)")
+        log.info(f"  linear P{order} {spec.key()}: err@30 {rows[-1]['surface_error_mm_at_30mm']:.2f} mm, "
+                 f"update {t:.3f} ms ({fg.depth * 1e3:.0f} mm)")
     return table, rows
 
 
 def _hertz(mat: Material) -> dict:
     """Small-depth force exponent of the linear P2 model against Hertz (Johnson, Contact Mechanics §4.2)."""
-    from flexsheet.fem.mesh import cylinder_mesh
+    from flexsheet.fem.mesh import cylinder_tet_mesh
     from flexsheet.fem.solver import FemModel
 
     spec = MeshSpec(0.012, 0.002, 0.008)
     depths = [0.0005, 0.00075, 0.001, 0.0015, 0.002]
-    mesh = cylinder_mesh(spec)
+    mesh = cylinder_tet_mesh(spec)
     model = FemModel(mesh, mat, order=2)
     F = [solve_full(model, finger_at(0.0, d, FINGER_R, mesh.radius, mesh.center)).force for d in depths]
     if min(F) <= 0:
@@ -97,10 +99,12 @@ def _hertz(mat: Material) -> dict:
 
 def _stability(spec: MeshSpec, mat: Material) -> dict:
     """Linear against corotational (P1) over depth on ``spec``: strain, inverted tets, force, difference."""
-    from flexsheet.fem.mesh import cylinder_mesh
-    from flexsheet.fem.solver import FemModel, element_checks, solve_corotational
+    from flexsheet.fem.corotational import solve_corotational
+    from flexsheet.fem.deformation_checks import element_checks
+    from flexsheet.fem.mesh import cylinder_tet_mesh
+    from flexsheet.fem.solver import FemModel
 
-    mesh = cylinder_mesh(spec)
+    mesh = cylinder_tet_mesh(spec)
     model = FemModel(mesh, mat)
     surf = np.flatnonzero(model.boundary & ~model.fixed)
     depths = [0.0025, 0.005, 0.01, 0.015, 0.02, 0.03, 0.04, 0.05]

@@ -4,25 +4,29 @@ quarter models' stability against modes antisymmetric in z (:func:`mirror_stabil
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import replace
 
 import numpy as np
 
 from flexsheet.fem.cache import ArrayCache, cache_key
-from flexsheet.fem.hyperelastic import DEFAULT_CONTACT, PENALTY_SCALE, HyperelasticModel, RefSpec, capsule_at
 from flexsheet.fem.material import Material
 from flexsheet.fem.realtime import RealtimeModel
-from flexsheet.fem.reference_paths import (
-    _check_dofs,
-    _depths,
-    _log,
-    _ref_model,
-    _reference_key,
+from flexsheet.fem.reference.capsule_contact import DEFAULT_CONTACT, PENALTY_SCALE, capsule_at
+from flexsheet.fem.reference.hyperelastic import HyperelasticModel
+from flexsheet.fem.reference.mesh import RefSpec
+from flexsheet.fem.reference.paths import (
+    check_dofs,
+    push_depths,
+    reference_key,
+    reference_model,
     reference_path,
 )
-from flexsheet.fem.reference_settings import FINGER_R, Settings
-from flexsheet.fem.visible_error import _visible, _visible_diffs
+from flexsheet.fem.reference.settings import FINGER_R, Settings
+from flexsheet.fem.visible_error import visible_diffs, visible_vertices
+
+log = logging.getLogger(__name__)
 
 
 def mirror_asymmetry(path: dict, spec: RefSpec, depths: np.ndarray, mat: Material, rm: RealtimeModel) -> list[float]:
@@ -31,20 +35,20 @@ def mirror_asymmetry(path: dict, spec: RefSpec, depths: np.ndarray, mat: Materia
     through the cylinder's axis: how far the solution is from mirror-symmetric. u(M·x) is probed from the
     path's DOF field (``u_dof``) on the re-meshed model (gmsh is deterministic). A quarter model (``half_z``)
     gives 0 up to float32 rounding, by construction."""
-    from flexsheet.fem.snapshots import _probe, _sample
+    from flexsheet.fem.reference.snapshot_build import folded_probe, unfolded_sample
 
     verts = rm.rest_vertices.astype(float)
     fixed = rm.mesh.fixed[rm.surface_nodes]
     mirrored = verts.copy()
     mirrored[:, 2] = 2 * rm.mesh.center[2] - mirrored[:, 2]
-    model = _ref_model(spec, 0.0, mat)
-    _check_dofs(path, model)
-    P = _probe(model, mirrored)
+    model = reference_model(spec, 0.0, mat)
+    check_dofs(path, model)
+    P = folded_probe(model, mirrored)
     out = []
     for j, d in enumerate(depths):
-        um = _sample(P, path["u_dof"][j].astype(float), mirrored, model)
+        um = unfolded_sample(P, path["u_dof"][j].astype(float), mirrored, model)
         um[:, 2] *= -1.0
-        vis = _visible(verts + path["u"][j], fixed, 0.0, d, rm.mesh)
+        vis = visible_vertices(verts + path["u"][j], fixed, 0.0, d, rm.mesh)
         out.append(float(np.linalg.norm(path["u"][j] - um, axis=1)[vis].max()))
     return out
 
@@ -72,7 +76,7 @@ def mirror_stability(path: dict, spec: RefSpec, depths: np.ndarray, mat: Materia
     symmetric and an antisymmetric block (:func:`mirror_blocks`; both symmetric in y). Per converged state:
     the lowest eigenvalue of each (N/m, unit-norm DOF vectors, so mesh-dependent; scipy ``eigsh`` shift-invert,
     fixed start vector) and, definitively, whether the antisymmetric block is positive definite (CHOLMOD's
-    Cholesky succeeds: :func:`flexsheet.fem.solver.factor`). An antisymmetric block that is not positive definite is
+    Cholesky succeeds: :func:`flexsheet.fem.sparse_factor.factor`). An antisymmetric block that is not positive definite is
     a symmetry-breaking bifurcation; a small positive eigenvalue, a state a small asymmetry moves far
     (imperfection sensitivity, Koiter). Linear stability at the sampled states only: it does not exclude an
     asymmetric branch coexisting with the symmetric one. Returns {"sym_N_per_m", "anti_N_per_m",
@@ -82,15 +86,15 @@ def mirror_stability(path: dict, spec: RefSpec, depths: np.ndarray, mat: Materia
     count than the path (gmsh meshes differently)."""
     import scipy.sparse.linalg as sla
 
-    from flexsheet.fem.solver import NotPositiveDefinite, factor
+    from flexsheet.fem.sparse_factor import NotPositiveDefinite, factor
 
     if not spec.half_z:
         raise ValueError(f"mirror_stability needs a quarter model (half_z), got {spec.key()}")
     if contact != "frictionless":
         raise ValueError(f"mirror_stability supports the frictionless contact law only, got {contact!r}")
     tc = time.process_time()
-    m = _ref_model(spec, 0.0, mat)
-    _check_dofs(path, m)
+    m = reference_model(spec, 0.0, mat)
+    check_dofs(path, m)
     sym, anti = mirror_blocks(m)
     k = m.penalty()
     out = {"sym_N_per_m": [], "anti_N_per_m": [], "anti_positive_definite": [], "residual_N": [], "dofs": int(m.n)}
@@ -130,7 +134,7 @@ def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMod
     model of the same h_fine says the off-axis snapshots' meshes are as good as the quarter models the
     convergence study measures. Also ``stability``: :func:`mirror_stability` of the last two quarter levels
     (frictionless contact only; cached)."""
-    depths = _depths(st.fine_step)
+    depths = push_depths(st.fine_step)
     verts = rm.rest_vertices.astype(float)
     fixed = rm.mesh.fixed[rm.surface_nodes]
     quarter = {round(lv["h_fine_m"], 9): lv for lv in conv["levels"]}
@@ -144,19 +148,19 @@ def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMod
                      "cpu_seconds": float(p["cpu_seconds"]),
                      "newton_converged": bool(p["converged"].all()), "newton_iterations": p["newton"].tolist(),
                      "force_N": p["force"].tolist(), "asymmetry_mm": asym,
-                     "diff_vs_finest_quarter_mm": [e * 1e3 for e in _visible_diffs(p, fine, depths, verts, fixed, rm.mesh)],
+                     "diff_vs_finest_quarter_mm": [e * 1e3 for e in visible_diffs(p, fine, depths, verts, fixed, rm.mesh)],
                      "quarter_same_h_dofs": int(q["dofs"]) if q else None,
                      "quarter_same_h_force_N": q["force_N"] if q and len(q["force_N"]) == len(depths) else None})
-        _log(f"mirror study: half model (cut) h_fine {hf * 1e3:g} mm ({rows[-1]['dofs']} DOF) at 50 mm: "
-             f"{p['force'][-1]:.2f} N, {rows[-1]['diff_vs_finest_quarter_mm'][-1]:.2f} mm from the finest quarter "
-             f"model, asymmetry {asym[-1]:.2f} mm")
+        log.info(f"mirror study: half model (cut) h_fine {hf * 1e3:g} mm ({rows[-1]['dofs']} DOF) at 50 mm: "
+                 f"{p['force'][-1]:.2f} N, {rows[-1]['diff_vs_finest_quarter_mm'][-1]:.2f} mm from the finest quarter "
+                 f"model, asymmetry {asym[-1]:.2f} mm")
     stab = []
     # the next-to-finest (full mode: the node's) mesh and the finest; sticking contact: its anchors are not stored
     for spec in (st.levels[-2:] if st.contact == "frictionless" else []):
-        sd = depths if spec == st.levels[-1] else _depths(st.depth_step)
+        sd = depths if spec == st.levels[-1] else push_depths(st.depth_step)
         p = fine if spec == st.levels[-1] else reference_path(spec, 0.0, sd, mat, cache, verts, st.contact)
         t = time.perf_counter()
-        key = cache_key("mirror_stability-2", _reference_key(spec, 0.0, sd, mat, verts, st.contact, PENALTY_SCALE))
+        key = cache_key("mirror_stability-2", reference_key(spec, 0.0, sd, mat, verts, st.contact, PENALTY_SCALE))
         z, _, _ = cache.get_or_compute("stability", key,
                                        lambda spec=spec, p=p, sd=sd: {k: np.asarray(v) for k, v in
                                                                       mirror_stability(p, spec, sd, mat, st.contact).items()},
@@ -171,9 +175,9 @@ def mirror_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMod
         i = int(np.argmin(row["anti_over_sym"]))
         n_bad = len(sd) - int(np.sum(z["anti_positive_definite"]))
         verdict = "stable at every depth" if row["stable"] else f"UNSTABLE at {n_bad} of {len(sd)} depths"
-        _log(f"mirror stability, quarter model h_fine {spec.h_fine * 1e3:g} mm: antisymmetric modes {verdict}; "
-             f"lowest antisymmetric / symmetric eigenvalue {row['anti_over_sym'][i]:.3f} at {sd[i] * 1e3:g} mm "
-             f"({time.perf_counter() - t:.0f} s)")
+        log.info(f"mirror stability, quarter model h_fine {spec.h_fine * 1e3:g} mm: antisymmetric modes {verdict}; "
+                 f"lowest antisymmetric / symmetric eigenvalue {row['anti_over_sym'][i]:.3f} at {sd[i] * 1e3:g} mm "
+                 f"({time.perf_counter() - t:.0f} s)")
     return {"depths_m": depths.tolist(), "finest_quarter": st.levels[-1].__dict__,
             "finest_quarter_force_N": fine["force"].tolist(), "quarter_depths_m": conv["depths_m"],
             "quarter_levels": [{k: lv[k] for k in ("h_fine_m", "dofs", "force_N", "cpu_seconds")} for lv in conv["levels"]],

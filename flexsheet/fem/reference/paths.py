@@ -1,75 +1,56 @@
 """The cylinder's cached hyperelastic reference pushes: :func:`reference_path` (the loading path) and
-:func:`stable_path` (its stable branch where a push is bistable), their cache keys, the per-depth arrays cached,
-their states for a snapshot table (:func:`_path_states`, :func:`snapshot_table`), and the log every solve
-writes (:func:`_log`; a worker process of :mod:`flexsheet.fem.workers` sets :data:`_LOG_PREFIX`)."""
+:func:`stable_path` (its stable branch where a push is bistable), their cache keys (:func:`reference_key`,
+:func:`stable_key`), the per-depth arrays cached, and their states for a snapshot table (:func:`path_states`,
+:func:`snapshot_table`). Progress goes to this module's logger (:func:`flexsheet.fem.reference.progress.show_progress`
+prints it on the command line and in the worker processes of :mod:`flexsheet.fem.reference.workers`)."""
 
 from __future__ import annotations
 
+import logging
 import math
-import os
 import time
 from dataclasses import replace
 
 import numpy as np
 
 from flexsheet.fem.cache import ArrayCache, cache_key
-from flexsheet.fem.hyperelastic import (
-    DEFAULT_CONTACT,
-    PENALTY_SCALE,
-    PREVIOUS_VERSION,
-    SOLVER_VERSION,
-    UNLOAD_VERSION,
-    HyperelasticModel,
-    PathState,
-    RefSpec,
-    capsule_at,
-    reference_mesh,
-    solve_path,
-    solver_tag,
-    stable_states,
-)
 from flexsheet.fem.material import Material
-from flexsheet.fem.reference_settings import FINGER_R, NEWTON_ITERS, Settings
-from flexsheet.fem.snapshots import load_or_build
+from flexsheet.fem.reference.capsule_contact import DEFAULT_CONTACT, PENALTY_SCALE, capsule_at
+from flexsheet.fem.reference.hyperelastic import HyperelasticModel
+from flexsheet.fem.reference.mesh import RefSpec, reference_mesh
+from flexsheet.fem.reference.path_solver import PathState, solve_path, stable_states
+from flexsheet.fem.reference.settings import FINGER_R, NEWTON_ITERS, Settings
+from flexsheet.fem.reference.snapshot_build import folded_probe, load_or_build, unfolded_sample
+from flexsheet.fem.reference.versions import UNLOAD_VERSION, solver_tag
 
-_LOG_PREFIX = ""         #: set in prefetch workers ("[solver 1] "), so their lines can be told apart
+log = logging.getLogger(__name__)
 
 
-def _log(msg: str) -> None:
-    print(_LOG_PREFIX + msg, flush=True)
-
-
-def _ref_model(spec: RefSpec, angle_deg: float, mat: Material, penalty_scale: float = PENALTY_SCALE
-               ) -> HyperelasticModel:
+def reference_model(spec: RefSpec, angle_deg: float, mat: Material, penalty_scale: float = PENALTY_SCALE
+                    ) -> HyperelasticModel:
+    """The hyperelastic model :func:`reference_path` solves for ``spec`` at ``angle_deg`` (deg) with ``mat``: the
+    quarter model at azimuth 0 when ``spec.half_z``, else the half model; contact penalty ``penalty_scale``·E/h."""
     half_z = spec.half_z and angle_deg == 0.0
     mesh = reference_mesh(replace(spec, half_z=half_z), angle_deg)
     return HyperelasticModel(mesh, mat, sym_y=True, sym_z=half_z, penalty_scale=penalty_scale)
 
 
-def _load_step(depths: np.ndarray) -> float:
+def load_step(depths: np.ndarray) -> float:
     """Load step (m) of a :func:`reference_path` through ``depths`` m: their spacing, at most 2.5 mm."""
     return float(min(0.0025, np.min(np.diff(np.concatenate([[0.0], depths])))))
 
 
-def _reference_key(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, probes: np.ndarray,
-                   contact: str, penalty_scale: float, version: str = SOLVER_VERSION) -> str:
-    """Cache key of a :func:`reference_path` (``spec`` as it solves it: the half model off azimuth 0) with the
-    solver ``version``: everything the path depends on."""
-    return cache_key(solver_tag(contact, version), spec.key(), angle_deg, np.round(depths, 9).tolist(), mat.key(),
-                     FINGER_R, cache_key(np.round(probes, 9).tobytes()), f"step={_load_step(depths):.6g}",
+def reference_key(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, probes: np.ndarray,
+                  contact: str, penalty_scale: float) -> str:
+    """Cache key of the :func:`reference_path` that solves ``spec`` at ``angle_deg`` (:func:`as_solved` applied:
+    the half model off azimuth 0): everything the path depends on."""
+    spec, angle_deg = as_solved(spec, angle_deg)
+    return cache_key(solver_tag(contact), spec.key(), angle_deg, np.round(depths, 9).tolist(), mat.key(),
+                     FINGER_R, cache_key(np.round(probes, 9).tobytes()), f"step={load_step(depths):.6g}",
                      f"iters={NEWTON_ITERS}", f"pen={penalty_scale:g}")
 
 
-def _reference_keys(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, probes: np.ndarray,
-                    contact: str, penalty_scale: float) -> tuple[str, str]:
-    """(this solver version's, the previous version's) :func:`_reference_key` of the path :func:`reference_path`
-    solves for ``spec`` at ``angle_deg`` (:func:`_as_solved` applied)."""
-    spec, angle_deg = _as_solved(spec, angle_deg)
-    return tuple(_reference_key(spec, angle_deg, depths, mat, probes, contact, penalty_scale, v)
-                 for v in (SOLVER_VERSION, PREVIOUS_VERSION))
-
-
-def _check_dofs(path: dict, model: HyperelasticModel) -> None:
+def check_dofs(path: dict, model: HyperelasticModel) -> None:
     """Raise ``RuntimeError`` when the cached reference ``path`` (with its ``dofs``) has another DOF count than
     ``model``, the mesh re-made to read it (the cache key does not carry gmsh's version: a new gmsh may mesh
     differently)."""
@@ -78,30 +59,17 @@ def _check_dofs(path: dict, model: HyperelasticModel) -> None:
                            "gmsh meshes differently now; clear the fem cache (~/.cache/flexsheet/fem) and re-solve")
 
 
-def _as_solved(spec: RefSpec, angle_deg: float) -> tuple[RefSpec, float]:
+def as_solved(spec: RefSpec, angle_deg: float) -> tuple[RefSpec, float]:
     """(spec, azimuth) as :func:`reference_path` solves and keys them: -0.0 → 0.0, and the half model
     (``half_z`` off) away from azimuth 0."""
     angle_deg = float(angle_deg) + 0.0
     return (replace(spec, half_z=False) if angle_deg != 0.0 and spec.half_z else spec), angle_deg
 
 
-def _previous_version_path(cache: ArrayCache, old_key: str) -> dict | None:
-    """The cached path under the previous solver version's key when it is this version's too: no Newton call
-    ran out of iterations in it (PREVIOUS_VERSION; such a call counts NEWTON_ITERS at its depth by itself);
-    else None."""
-    p_old = cache.path("reference", old_key)
-    if p_old is None or not os.path.exists(p_old):
-        return None
-    old = cache.load("reference", old_key)
-    return old if old is not None and int(np.max(old["newton"])) < NEWTON_ITERS else None
-
-
 def _path_record(model: HyperelasticModel, states: list[PathState], probes: np.ndarray, angle_deg: float) -> dict:
     """The per-depth arrays :func:`reference_path` caches for ``states`` on ``model`` (see there), ``probes``
     (k, 3) m the rendered vertices."""
-    from flexsheet.fem.snapshots import _probe, _sample
-
-    P = _probe(model, probes)
+    P = folded_probe(model, probes)
     qp, vis = [], []
     a = math.radians(angle_deg)
     axis = np.array([math.cos(a), 0.0, math.sin(a)])
@@ -112,7 +80,7 @@ def _path_record(model: HyperelasticModel, states: list[PathState], probes: np.n
         xc = (model.points[model.edofs[bad]] + ue[bad]).mean(axis=1) - model.mesh.center
         lat = np.linalg.norm(xc - np.outer(xc @ axis, axis), axis=1)
         vis.append(int(np.count_nonzero(lat > FINGER_R + 0.002)))
-    return {"u": np.stack([_sample(P, s.u, probes, model) for s in states]),
+    return {"u": np.stack([unfolded_sample(P, s.u, probes, model) for s in states]),
             "u_dof": np.stack([s.u for s in states]).astype(np.float32),
             "force": np.array([s.force for s in states]), "inverted": np.array([s.inverted for s in states]),
             "inverted_qp": np.array(qp), "inverted_nodal_visible": np.array(vis),
@@ -126,33 +94,25 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
                    probes: np.ndarray, contact: str = DEFAULT_CONTACT, penalty_scale: float = PENALTY_SCALE) -> dict:
     """Hyperelastic (``mat``: neo-Hookean or Gent) push at ``angle_deg`` through ``depths`` (load steps = the depth spacing, ≤ 2.5 mm) on
     ``spec``'s mesh — its half model (``half_z`` off) away from azimuth 0, as
-    :func:`flexsheet.fem.snapshots.build_table` meshes it, so one solve serves both — sampled at ``probes`` (k, 3) m
+    :func:`flexsheet.fem.reference.snapshot_build.build_table` meshes it, so one solve serves both — sampled at ``probes`` (k, 3) m
     (display frame, mirrored into the modelled part); cached.
     Returns {"u": (D, k, 3) m, "u_dof": (D, P, 3) m float32 (every DOF point, for the snapshot table), "force",
     "inverted" (elements with det F ≤ 0 at a quadrature point or P2 node), "inverted_qp" (at a quadrature
     point), "inverted_nodal_visible" (nodally inverted elements whose deformed centroid lies outside the
     footprint, > finger radius + 2 mm from the push axis), "min_detF", "max_strain", "penetration", "newton",
     "seconds", "cpu_seconds", "dofs", "converged"}. ``contact``: the finger's contact law
-    (:data:`flexsheet.fem.hyperelastic.CONTACT_LAWS`); ``penalty_scale``: the contact penalty κ = scale·E/h."""
-    spec, angle_deg = _as_solved(spec, angle_deg)
-    step = _load_step(depths)
-    key, old_key = _reference_keys(spec, angle_deg, depths, mat, probes, contact, penalty_scale)
-    p_new = cache.path("reference", key)
-    if p_new is not None and not os.path.exists(p_new):
-        old = _previous_version_path(cache, old_key)
-        if old is not None:
-            _log(f"fem: reference {spec.key()} at {angle_deg:g} deg: the {PREVIOUS_VERSION} path (no Newton call ran "
-                 f"out of iterations) is the {SOLVER_VERSION} path; re-keyed")
-            cache.save("reference", key, old)
-            return old
+    (:data:`flexsheet.fem.reference.capsule_contact.CONTACT_LAWS`); ``penalty_scale``: the contact penalty κ = scale·E/h."""
+    spec, angle_deg = as_solved(spec, angle_deg)
+    step = load_step(depths)
+    key = reference_key(spec, angle_deg, depths, mat, probes, contact, penalty_scale)
 
     def compute() -> dict:
         t, tc = time.perf_counter(), time.process_time()
-        model = _ref_model(spec, angle_deg, mat, penalty_scale)
-        _log(f"reference {spec.key()} at {angle_deg:g} deg: {model.n} DOF, load steps {step * 1e3:g} mm, "
-             f"{contact} contact, penalty {penalty_scale:g} E/h ...")
+        model = reference_model(spec, angle_deg, mat, penalty_scale)
+        log.info(f"reference {spec.key()} at {angle_deg:g} deg: {model.n} DOF, load steps {step * 1e3:g} mm, "
+                 f"{contact} contact, penalty {penalty_scale:g} E/h ...")
         states = solve_path(model, math.radians(angle_deg), depths, FINGER_R, step=step, iters=NEWTON_ITERS,
-                            log=lambda s: _log("  " + s.strip()), contact=contact)
+                            log=lambda s: log.info("  " + s.strip()), contact=contact)
         return {**_path_record(model, states, probes, angle_deg),
                 "seconds": np.array(time.perf_counter() - t), "cpu_seconds": np.array(time.process_time() - tc),
                 "dofs": np.array(model.n)}
@@ -162,17 +122,16 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
     return z
 
 
-def _stable_key(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, probes: np.ndarray,
-                contact: str, penalty_scale: float) -> str:
+def stable_key(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, probes: np.ndarray,
+               contact: str, penalty_scale: float) -> str:
     """Cache key of a :func:`stable_path`: its loading path's key and the unloading sweep's version."""
-    spec, angle_deg = _as_solved(spec, angle_deg)
-    return cache_key(UNLOAD_VERSION, _reference_key(spec, angle_deg, depths, mat, probes, contact, penalty_scale))
+    return cache_key(UNLOAD_VERSION, reference_key(spec, angle_deg, depths, mat, probes, contact, penalty_scale))
 
 
 def stable_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, cache: ArrayCache,
                 probes: np.ndarray, contact: str = DEFAULT_CONTACT, penalty_scale: float = PENALTY_SCALE) -> dict:
     """:func:`reference_path` with the stable branch where the push is bistable: the loading path, then the
-    finger withdrawn from its deepest state back to the shallowest (:func:`flexsheet.fem.hyperelastic.stable_states`,
+    finger withdrawn from its deepest state back to the shallowest (:func:`flexsheet.fem.reference.path_solver.stable_states`,
     the path's load steps), and at each depth the state of lower total potential Π. The
     snapshot tables and the held-out pushes they are judged on read these, so both sides make the same choice.
     Cached (kind "stable", read before the loading path is); frictionless contact only (else the loading path
@@ -180,20 +139,20 @@ def stable_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Materi
     "energy_loading", "energy_unloading" (D,) J (Π of each branch's state), "unload_seconds"."""
     if contact != "frictionless":
         return reference_path(spec, angle_deg, depths, mat, cache, probes, contact, penalty_scale)
-    spec, angle_deg = _as_solved(spec, angle_deg)
-    key = _stable_key(spec, angle_deg, depths, mat, probes, contact, penalty_scale)
+    spec, angle_deg = as_solved(spec, angle_deg)
+    key = stable_key(spec, angle_deg, depths, mat, probes, contact, penalty_scale)
 
     def compute() -> dict:
         p = reference_path(spec, angle_deg, depths, mat, cache, probes, contact, penalty_scale)
         t = time.perf_counter()
-        model = _ref_model(spec, angle_deg, mat, penalty_scale)
-        _check_dofs(p, model)
-        states = _path_states(p, depths, depths)
+        model = reference_model(spec, angle_deg, mat, penalty_scale)
+        check_dofs(p, model)
+        states = path_states(p, depths, depths)
         a = math.radians(angle_deg)
         caps = lambda d: capsule_at(a, d, FINGER_R, model.mesh.radius, model.mesh.center)  # noqa: E731
-        _log(f"stable branch {spec.key()} at {angle_deg:g} deg: unloading from {depths[-1] * 1e3:g} mm ...")
-        chosen, branch, energies = stable_states(model, caps, states, step=_load_step(depths), iters=NEWTON_ITERS,
-                                                 log=lambda s: _log("  " + s.strip()))
+        log.info(f"stable branch {spec.key()} at {angle_deg:g} deg: unloading from {depths[-1] * 1e3:g} mm ...")
+        chosen, branch, energies = stable_states(model, caps, states, step=load_step(depths), iters=NEWTON_ITERS,
+                                                 log=lambda s: log.info("  " + s.strip()))
         return {**_merge_rows(p, branch, lambda rows: _path_record(model, [chosen[j] for j in rows], probes,
                                                                     angle_deg)),
                 "branch": branch, "energy_loading": energies[:, 0], "energy_unloading": energies[:, 1],
@@ -201,8 +160,8 @@ def stable_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Materi
 
     z, _, _ = cache.get_or_compute("stable", key, compute, f"stable branch {spec.key()} at {angle_deg:g} deg")
     n_un = int(np.sum(z["branch"]))
-    _log(f"stable branch {spec.key()} at {angle_deg:g} deg: the unloaded state at {n_un} of {len(depths)} depths"
-         + (f" ({', '.join(f'{d * 1e3:g}' for d in depths[np.asarray(z['branch']) == 1])} mm)" if n_un else ""))
+    log.info(f"stable branch {spec.key()} at {angle_deg:g} deg: the unloaded state at {n_un} of {len(depths)} depths"
+             + (f" ({', '.join(f'{d * 1e3:g}' for d in depths[np.asarray(z['branch']) == 1])} mm)" if n_un else ""))
     return z
 
 
@@ -220,25 +179,25 @@ def _merge_rows(p: dict, branch: np.ndarray, record) -> dict:
     return out
 
 
-def _depths(step: float) -> np.ndarray:
+def push_depths(step: float) -> np.ndarray:
     """Push depths step, 2·step, … 50 mm (m)."""
     return np.round(np.arange(1, int(round(0.05 / step)) + 1) * step, 9)
 
 
-def _at_depths(path: dict, path_depths: np.ndarray, depths: np.ndarray) -> dict:
+def at_depths(path: dict, path_depths: np.ndarray, depths: np.ndarray) -> dict:
     """``path`` (a :func:`reference_path` result sampled at ``path_depths``, m) with its per-depth arrays taken
     at the nearest of ``depths`` (m)."""
     sub = np.array([int(np.argmin(np.abs(path_depths - d))) for d in depths])
     return {k: (v[sub] if np.ndim(v) and len(v) == len(path_depths) else v) for k, v in path.items()}
 
 
-def _path_states(src: dict, src_depths: np.ndarray, depths, model=None) -> list[PathState] | None:
+def path_states(src: dict, src_depths: np.ndarray, depths, model=None) -> list[PathState] | None:
     """The states of the cached reference path ``src`` (:func:`reference_path`, solved at ``src_depths`` (D,) m)
-    at ``depths`` m, as :class:`PathState` for :func:`flexsheet.fem.snapshots.build_table`; None if one is missing.
+    at ``depths`` m, as :class:`PathState` for :func:`flexsheet.fem.reference.snapshot_build.build_table`; None if one is missing.
     Raises ``RuntimeError`` when ``model`` (the mesh the table samples) has another DOF count than the solve
     (the cache key does not carry gmsh's version: a new gmsh may mesh differently)."""
     if model is not None:
-        _check_dofs(src, model)
+        check_dofs(src, model)
     out = []
     for d in depths:
         j = int(np.argmin(np.abs(src_depths - d)))
@@ -250,26 +209,26 @@ def _path_states(src: dict, src_depths: np.ndarray, depths, model=None) -> list[
     return out
 
 
-def _cached_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, cache: ArrayCache,
+def cached_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Material, cache: ArrayCache,
                  probes: np.ndarray, contact: str = DEFAULT_CONTACT) -> dict | None:
     """:func:`stable_path` (frictionless; else :func:`reference_path`) when it is in ``cache``, else None —
     never solved here."""
     if contact == "frictionless":
-        return cache.load("stable", _stable_key(spec, angle_deg, depths, mat, probes, contact, PENALTY_SCALE))
-    return cache.load("reference", _reference_keys(spec, angle_deg, depths, mat, probes, contact, PENALTY_SCALE)[0])
+        return cache.load("stable", stable_key(spec, angle_deg, depths, mat, probes, contact, PENALTY_SCALE))
+    return cache.load("reference", reference_key(spec, angle_deg, depths, mat, probes, contact, PENALTY_SCALE))
 
 
 def snapshot_table(st: Settings, mat: Material, cache: ArrayCache, solved,
                    reuse: dict | None = None) -> tuple[dict, bool, float]:
     """The snapshot table of these settings (cached): (table, cache hit, seconds to build). ``solved``:
-    callable (azimuth deg, model, depths m) → states or None (:func:`flexsheet.fem.snapshots.build_table`), the
+    callable (azimuth deg, model, depths m) → states or None (:func:`flexsheet.fem.reference.snapshot_build.build_table`), the
     reference solves already made (:func:`snapshot_source`, :func:`node_table_path`); ``reuse``: a table whose
-    azimuths are copied, not solved (:func:`flexsheet.fem.snapshots.build_table`)."""
-    _log(f"snapshots: azimuths {st.grid.angles_deg} deg, depth step {st.grid.depth_step * 1e3:g} mm, "
-         f"mesh {st.snap_spec.key()} ...")
+    azimuths are copied, not solved (:func:`flexsheet.fem.reference.snapshot_build.build_table`)."""
+    log.info(f"snapshots: azimuths {st.grid.angles_deg} deg, depth step {st.grid.depth_step * 1e3:g} mm, "
+             f"mesh {st.snap_spec.key()} ...")
 
     table, hit, sec = load_or_build(cache, st.grid, st.snap_spec, mat, FINGER_R, build=True,
-                                    log=lambda s: _log("  " + s.strip()), solved=solved, contact=st.contact,
+                                    log=lambda s: log.info("  " + s.strip()), solved=solved, contact=st.contact,
                                     reuse=reuse)
     if hit:
         sec = float(np.sum(table["seconds"]))

@@ -1,5 +1,5 @@
 """The geometrically nonlinear reference pushed along a path (pure): load stepping in the push depth with
-Newton (:mod:`flexsheet.fem.newton`) at each step (:func:`solve_path`, :func:`solve_path_capsule`, one
+Newton (:mod:`flexsheet.fem.reference.newton`) at each step (:func:`solve_path`, :func:`solve_path_capsule`, one
 :class:`PathState` per requested depth), and the unloading sweep that finds the stable branch of a bistable
 push (:func:`unload_sweep`, :func:`stable_states`).
 
@@ -15,14 +15,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from flexsheet.fem.capsule_contact import CONTACT_LAWS, DEFAULT_CONTACT, Capsule, capsule_at
-from flexsheet.fem.newton import _newton_resumed
+from flexsheet.fem.reference.capsule_contact import CONTACT_LAWS, DEFAULT_CONTACT, Capsule, capsule_at
+from flexsheet.fem.reference.newton import newton_resumed
 
 if TYPE_CHECKING:
-    from flexsheet.fem.hyperelastic import HyperelasticModel
+    from flexsheet.fem.reference.hyperelastic import HyperelasticModel
 
-__all__ = ["PathState", "solve_path", "solve_path_capsule", "stable_states", "unload_sweep", "UNLOAD_VERSION",
-           "BRANCH_MEET_TOL"]
+__all__ = ["PathState", "solve_path", "solve_path_capsule", "stable_states", "unload_sweep", "BRANCH_MEET_TOL"]
 
 
 @dataclass
@@ -121,8 +120,8 @@ class _PathPush:
                 g2 = self.u + (self.u - self.u_prev) * (h / (self.d_cur - self.d_prev))
                 if math.isfinite(m.energy(g2, None, 0.0)):
                     guess = g2
-            u_new, its, conv, u_try = _newton_resumed(m, guess, caps, self.k, self.iters, self.tol_u, self.tol_r,
-                                                      self.nstate)
+            u_new, its, conv, u_try = newton_resumed(m, guess, caps, self.k, self.iters, self.tol_u, self.tol_r,
+                                                     self.nstate)
             u_last = u_try if u_try is not None else u_last
             its_total += its
             if conv:
@@ -155,9 +154,9 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
     through ``depths`` (m, ascending, ≥ 0), load steps of at most ``step`` m; returns one :class:`PathState`
     per requested depth (``force`` along the capsule's direction, full-body force with the symmetry planes).
     A Newton call that runs out of ``iters`` iterations (not failed: e.g. a snap-through under way) is continued
-    from its last iterate at the same depth, up to :data:`RESUME_MAX` more calls (nh-7; a step stuck for good
-    thus costs (1 + RESUME_MAX)× the iterations before each halving). A load step whose Newton solve fails
-    otherwise, or still has not converged then, is halved (up to ``substeps_max`` times) and the
+    from its last iterate at the same depth, up to :data:`~flexsheet.fem.reference.newton.RESUME_MAX` more calls
+    (nh-7; a step stuck for good thus costs (1 + RESUME_MAX)× the iterations before each halving). A load step
+    whose Newton solve fails otherwise, or still has not converged then, is halved (up to ``substeps_max`` times) and the
     load steps after it keep the halved size (the path got hard: on the 3.4 mm cylinder mesh a 2.5 mm step past
     47.5 mm spent 60 iterations per try before halving, nh-5); if it still fails, its last iterate is kept and
     the state is flagged ``converged=False`` (bounded time; the caller decides).
@@ -224,9 +223,6 @@ def stable_states(model: HyperelasticModel, capsule, states: list[PathState], st
     return out, branch, energies
 
 
-#: version of :func:`stable_states`' definition (cache keys of the stable paths and the snapshot tables built
-#: from them); bump when it changes
-UNLOAD_VERSION = "unload-2"
 #: two states of one push lie on the same branch when no DOF point is farther apart than this (m): 20× the
 #: Newton tolerance on the step, far below the 0.7 mm target (:func:`stable_states`)
 BRANCH_MEET_TOL = 2e-5
@@ -273,7 +269,7 @@ def unload_sweep(model: HyperelasticModel, capsule, states: list[PathState], ste
             u_last = None
             for _ in range(substeps_max + 1):
                 d_new = d_cur - h
-                u_new, its, conv, u_try = _newton_resumed(m, u, capsule(d_new), k, iters, tol_u, tol_r, nstate)
+                u_new, its, conv, u_try = newton_resumed(m, u, capsule(d_new), k, iters, tol_u, tol_r, nstate)
                 u_last = u_try if u_try is not None else u_last
                 its_total += its
                 if conv:

@@ -1,6 +1,20 @@
 """The geometrically nonlinear reference's finger (pure): a rigid capsule (the fingertip sphere swept back
-along its shaft), the contact laws, and the smoothed penalty that keeps the surface out of it (the "Finger"
-paragraph of :mod:`flexsheet.fem.hyperelastic`).
+along its shaft), the contact laws, and the smoothed penalty that keeps the surface out of it.
+
+* **Finger**: rigid frictionless *capsule* (the fingertip sphere of radius r plus the finger's shaft behind
+  it, along −p̂), non-penetration at the contact quadrature points of the outer surface of a
+  :class:`~flexsheet.fem.reference.hyperelastic.HyperelasticModel` (order
+  :data:`~flexsheet.fem.reference.hyperelastic.CONTACT_INTORDER`: 25 points per facet, because the facets around
+  the tip stretch several times over and the fingertip slipped between the 6 points of the order-4 rule),
+  penalty E_c = Σ w φ(g_i) (gap g_i = distance to the capsule's axis segment − r; φ a C² penalty that starts
+  ε = 20 µm before contact, :func:`smooth_penalty`); k = :data:`PENALTY_SCALE`·E/h, chosen by a penalty study
+  (the visible surface within 0.03 mm of a 10× stiffer finger; the loaded points stand off by < ε or penetrate
+  < 0.02 mm at 50 mm, reported). A real finger, not a bonded imposed displacement (the linear model's contact):
+  material slides along it and wraps around it.
+* **Sticking**: optionally (``contact="sticking"``,
+  :func:`~flexsheet.fem.reference.path_solver.solve_path_capsule`) a fingertip that does not slip: points that
+  touch it stick to it. It removes the frictionless snap-through under the tip but mesh-converges worse
+  (docs/fem.md), so frictionless stays the default (:data:`DEFAULT_CONTACT`).
 
 Units SI: m, N, Pa. Display frame (cylinder axis along +y through the mesh centre).
 """
@@ -12,15 +26,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["PENALTY_SCALE", "CONTACT_LAWS", "DEFAULT_CONTACT", "Capsule", "capsule_at"]
+__all__ = ["PENALTY_SCALE", "CONTACT_LAWS", "DEFAULT_CONTACT", "Capsule", "capsule_at", "smooth_penalty"]
 
 #: contact penalty κ = PENALTY_SCALE·E/h. Chosen by a penalty study (``flexsheet experiment fem``,
 #: ``reference.penalty_study``): on the 6 mm mesh at 50 mm the old 10³ penetrated the finger by 1.2 mm, made the
 #: force 10 % low and moved the visible surface by 2.2 mm against 10⁴; 10⁵ penetrates 0.004 mm and lies
 #: 0.03 mm from 10⁶ (docs/fem.md). Newton needs ~2.3× the CPU of 10³ for it. Changing it needs a
-#: SOLVER_VERSION bump (the snapshot tables' cache key carries the solver tag, not the penalty).
+#: :data:`~flexsheet.fem.reference.versions.SOLVER_VERSION` bump (the snapshot tables' cache key carries the
+#: solver tag, not the penalty).
 PENALTY_SCALE = 1e5
-CONTACT_LAWS = ("frictionless", "sticking")   #: finger contact laws (see :func:`solve_path_capsule`)
+#: finger contact laws (:func:`~flexsheet.fem.reference.path_solver.solve_path_capsule`)
+CONTACT_LAWS = ("frictionless", "sticking")
 DEFAULT_CONTACT = "frictionless"            #: the contact law the experiment and the snapshots use
 
 
@@ -74,8 +90,9 @@ def capsule_at(angle: float, depth: float, radius: float, cyl_radius: float, cyl
     return Capsule(cp - depth * out + radius * out, -out, float(radius))
 
 
-def _pen(g: np.ndarray, k: float, eps: float):
-    """Smoothed penalty φ(g) and its derivatives φ', φ'' for gaps ``g`` (m): k/(6ε)(ε − g)³ on [0, ε), the
+def smooth_penalty(g: np.ndarray, k: float, eps: float):
+    """Smoothed contact penalty φ(g) J/m² and its derivatives φ' N/m², φ'' N/m³ for gaps ``g`` (m; any shape),
+    stiffness ``k`` N/m³ and onset width ``eps`` m: k/(6ε)(ε − g)³ on [0, ε), the
     matching quadratic k/2 g² − kε/2 g + kε²/6 below 0 (C², so Newton sees no kink), 0 above ε."""
     g = np.asarray(g, float)
     inside = g < 0

@@ -1,6 +1,6 @@
 """Does a deformed reference state fold its own surface? Self-contact and crease checks (pure).
 
-The neo-Hookean reference (:mod:`flexsheet.fem.hyperelastic`) keeps the finger out of the object but has no
+The neo-Hookean reference (:mod:`flexsheet.fem.reference.hyperelastic`) keeps the finger out of the object but has no
 *self*-contact: nothing stops one part of the object's surface from passing through another. Pushed deep, the
 material dragged into the crater beside the finger is compressed along the crater's circumference (a ring at
 rest radius r pulled in to the finger's radius has hoop stretch ≈ r_f / r), and a neo-Hookean surface under
@@ -10,7 +10,7 @@ of a neo-Hookean half-space in plane strain is at a compressive stretch ≈ 0.65
 its fold at the mesh scale and lets the surface cross itself: such a solution cannot converge under mesh
 refinement there. These checks say whether, where and how much.
 
-* :func:`outer_surface` — the outer boundary of a :class:`~flexsheet.fem.hyperelastic.HyperelasticModel` as flat
+* :func:`outer_surface` — the outer boundary of a :class:`~flexsheet.fem.reference.hyperelastic.HyperelasticModel` as flat
   triangles (each P2 boundary facet split into 4 through its edge midpoints), oriented outward, and closed by
   mirroring across the model's symmetry planes.
 * :func:`winding_numbers` — the generalised winding number w(p) = Σ Ω_t(p) / 4π of that closed surface at
@@ -65,7 +65,7 @@ class Surface:
 
 
 def outer_surface(model) -> Surface:
-    """:class:`Surface` of a :class:`~flexsheet.fem.hyperelastic.HyperelasticModel`: its outer boundary facets (the
+    """:class:`Surface` of a :class:`~flexsheet.fem.reference.hyperelastic.HyperelasticModel`: its outer boundary facets (the
     boundary without the symmetry planes ``model.sym_y`` / ``model.sym_z``), each P2 facet as 4 flat triangles
     through its corner nodes and edge midpoints (DOF points), oriented away from the facet's tetrahedron.
     Raises ``ValueError`` if an edge midpoint is missing from the DOF points (not a P2 model)."""
@@ -153,7 +153,7 @@ def lateral_distance(x: np.ndarray, capsule) -> np.ndarray:
 
 def fold_report(model, surf: Surface, u: np.ndarray, capsule, region: float, margin: float = 0.002) -> dict:
     """Fold and self-contact check of one state: ``u`` (P, 3) m displacements of ``model``'s DOF points,
-    ``capsule`` the finger (:class:`~flexsheet.fem.hyperelastic.Capsule`), ``region`` m: only surface points within
+    ``capsule`` the finger (:class:`~flexsheet.fem.reference.capsule_contact.Capsule`), ``region`` m: only surface points within
     this lateral distance of the push axis (rest position) are checked (the crater; the rest stays smooth).
     Points whose deformed position lies inside the finger's footprint (lateral distance ≤ radius + ``margin``,
     as the visible-surface metric) are left out, and so are triangles whose deformed centroid does.

@@ -1,5 +1,5 @@
 """What a run of the cylinder's reference against the real-time model computes (:mod:`flexsheet.experiments.fem`,
-and the node table's build, :mod:`flexsheet.fem.node_table`): the finger, the accuracy target, the Newton
+and the node table's build, :mod:`flexsheet.fem.reference.node_table`): the finger, the accuracy target, the Newton
 budget per load step, the convergence meshes, the snapshot grid and the studies' meshes (:class:`Settings`,
 :func:`settings_for`), and the reference's default material."""
 
@@ -8,9 +8,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 from flexsheet.fem.choose import DEFAULT_SPEC
-from flexsheet.fem.hyperelastic import DEFAULT_CONTACT, PENALTY_SCALE, RefSpec
 from flexsheet.fem.material import Material
 from flexsheet.fem.mesh import MeshSpec
+from flexsheet.fem.reference.capsule_contact import DEFAULT_CONTACT, PENALTY_SCALE
+from flexsheet.fem.reference.mesh import RefSpec
 from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, SnapshotGrid
 from flexsheet.model.scenes import paper_scene
 
@@ -78,6 +79,6 @@ def settings_for(quick: bool) -> Settings:
 DEFAULT_MATERIAL = Material.of_scene(paper_scene().material)
 
 
-def _law(mat: Material) -> str:
-    """The reference's hyperelastic law in words: "neo-Hookean" or "Gent (Jm …)"."""
+def law_name(mat: Material) -> str:
+    """The reference's hyperelastic law of ``mat`` in words: "neo-Hookean" or "Gent (Jm …)"."""
     return f"Gent (Jm {mat.Jm:g})" if mat.gent else "neo-Hookean"

@@ -1,8 +1,22 @@
 """Newton's method of the geometrically nonlinear reference (pure): one load step's minimisation of the total
-potential Π of a :class:`flexsheet.fem.hyperelastic.HyperelasticModel` under a finger ("Newton" paragraph of
-:mod:`flexsheet.fem.hyperelastic`): the step from the true tangent by PCG with a lagged Cholesky preconditioner
-or a fresh sparse Cholesky, else from the projected tangent or the diagonally shifted true tangent, a
-backtracking line search with a trust region, and the continuation of a call that ran out of iterations.
+potential Π of a :class:`flexsheet.fem.reference.hyperelastic.HyperelasticModel` under a finger: the step from the
+true tangent by PCG with a lagged Cholesky preconditioner or a fresh sparse Cholesky, else from the projected
+tangent or the diagonally shifted true tangent, a backtracking line search with a trust region, and the
+continuation of a call that ran out of iterations.
+
+Minimise Π = ∫W dV + E_c; each step solves K_t δ = −r, first by PCG preconditioned with the
+last sparse Cholesky factorisation (Newton–Krylov with a lagged preconditioner, :data:`PCG_RTOL`), else by a
+fresh sparse Cholesky (CHOLMOD, :func:`cholesky_or_none`, which also tells whether K_t is positive definite; PCG's
+negative curvature tells it too).
+Where K_t is not positive definite — far from equilibrium — the material tangent is projected to its
+positive part (Teran et al. 2005); where Newton then crawls (:data:`CRAWL_ITERS` projected steps that each
+cut the residual by less than 10 %: a limit point, where the projection stiffens the direction the material
+snaps through), the true tangent plus the smallest diagonal shift that factorises takes over for the rest of
+the load step's Newton solve (Nocedal & Wright alg. 3.3, :func:`shifted_step`; solver nh-6). Then a
+backtracking line search keeps det F > 0 at every quadrature point and decreases Π (Armijo), with at most
+1 mm of motion per iteration so no surface point can jump across the finger. Load stepping: depth in steps
+of ``step`` m with a linear-extrapolation predictor. Converged when ‖δ‖∞ < ``tol_u`` and the free
+residual is below ``tol_r`` × the finger force scale.
 """
 
 from __future__ import annotations
@@ -13,20 +27,21 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as sp
 
-from flexsheet.fem.capsule_contact import Capsule
+from flexsheet.fem.reference.capsule_contact import Capsule
 
 if TYPE_CHECKING:
-    from flexsheet.fem.hyperelastic import HyperelasticModel
+    from flexsheet.fem.reference.hyperelastic import HyperelasticModel
 
-__all__ = ["PCG_RTOL", "PCG_MAXITER", "RESUME_MAX", "CRAWL_ITERS", "CRAWL_RATIO", "SHIFT_MIN", "SHIFT_MAX"]
+__all__ = ["PCG_RTOL", "PCG_MAXITER", "RESUME_MAX", "CRAWL_ITERS", "CRAWL_RATIO", "SHIFT_MIN", "SHIFT_MAX",
+           "cholesky_or_none", "pcg", "shifted_step", "newton_minimise", "newton_resumed"]
 
 
-def _cholesky(K: sp.spmatrix):
-    """Sparse Cholesky of the symmetric ``K`` (:func:`flexsheet.fem.solver.factor`, CHOLMOD): the factor (with
+def cholesky_or_none(K: sp.spmatrix):
+    """Sparse Cholesky of the symmetric ``K`` (:func:`flexsheet.fem.sparse_factor.factor`, CHOLMOD): the factor (with
     ``.solve(b)``) when K is positive definite, None when it is not (CHOLMOD stops at the first non-positive
     pivot). On a loaded 3.4 mm-mesh tangent (16 596 DOF): 0.69 s and 9.9 ms per solve, against
     3.8 s and 22 ms for the simplicial QDLDL used before, and 4.1 s for SuperLU in symmetric mode."""
-    from flexsheet.fem.solver import NotPositiveDefinite, factor
+    from flexsheet.fem.sparse_factor import NotPositiveDefinite, factor
 
     try:
         return factor(K, "cholmod")
@@ -34,7 +49,7 @@ def _cholesky(K: sp.spmatrix):
         return None
 
 
-def _pcg(A: sp.csr_matrix, b: np.ndarray, precond, rtol: float, maxiter: int) -> tuple[np.ndarray | None, int]:
+def pcg(A: sp.csr_matrix, b: np.ndarray, precond, rtol: float, maxiter: int) -> tuple[np.ndarray | None, int]:
     """Preconditioned conjugate gradients for A x = b (A symmetric; ``precond(r)`` applies M⁻¹). Returns
     (x, iterations), (None, −iterations) on negative curvature (pᵀAp ≤ 0: A is not positive definite), or
     (None, maxiter) when ‖r‖ ≤ ``rtol``·‖b‖ is not reached in ``maxiter`` iterations (Saad, *Iterative
@@ -79,7 +94,7 @@ def _pcg_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict) -> tuple[np.ndarra
     met negative curvature (K is then not positive definite: no factorisation of it is tried)."""
     if state.get("pc_n") != Kc.shape[0]:          # a preconditioner from another model: not usable
         return None, False
-    x, its = _pcg(Kc, -rf, state["pc"].solve, PCG_RTOL, PCG_MAXITER)
+    x, its = pcg(Kc, -rf, state["pc"].solve, PCG_RTOL, PCG_MAXITER)
     if x is not None and np.all(np.isfinite(x)) and float(rf @ x) < 0:
         state["pcg"] = state.get("pcg", 0) + 1
         return x, False
@@ -93,7 +108,7 @@ def _tangent_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict, projected: boo
     the Cholesky meets a non-positive pivot): the caller then takes the projected tangent. On the projected
     (semi-definite) tangent, rounding can leave it not quite positive definite: a diagonal shift, ×100 per try (at
     most 3 more factorisations; each ~1 s on 20k+ DOF); ``FloatingPointError`` if it is still not positive
-    definite then (:func:`solve_path_capsule` halves the load step on it)."""
+    definite then (:func:`~flexsheet.fem.reference.path_solver.solve_path_capsule` halves the load step on it)."""
     if state.get("pc") is not None:         # lagged factorisation as preconditioner (one PCG solve)
         x, indefinite = _pcg_step(Kc, rf, state)
         if x is not None:
@@ -101,14 +116,14 @@ def _tangent_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict, projected: boo
         if indefinite and not projected:
             return None, False
     state["factorisations"] = state.get("factorisations", 0) + 1
-    fac = _cholesky(Kc)
+    fac = cholesky_or_none(Kc)
     if fac is None and not projected:
         return None, False
     dmax = float(np.abs(Kc.diagonal()).max())
     shift = 1e-4 * dmax
     while fac is None and shift <= 1.0 * dmax:
         state["factorisations"] += 1
-        fac = _cholesky(Kc + shift * sp.identity(Kc.shape[0], format="csr"))
+        fac = cholesky_or_none(Kc + shift * sp.identity(Kc.shape[0], format="csr"))
         shift *= 100.0
     state["pc"], state["pc_n"] = fac, Kc.shape[0]
     if fac is None:
@@ -123,8 +138,8 @@ RESUME_MAX = 3
 
 #: Newton "crawls" on the projected tangent when this many consecutive projected steps each left the residual
 #: above CRAWL_RATIO of the one before (linear convergence: at a limit point the projection stiffens the soft
-#: direction, 3.5 % per iteration at the azimuth-10° stall, docs/fem.md); from then on :func:`_newton` takes the
-#: true tangent with a diagonal shift instead (:func:`_shifted_step`).
+#: direction, 3.5 % per iteration at the azimuth-10° stall, docs/fem.md); from then on :func:`newton_minimise` takes the
+#: true tangent with a diagonal shift instead (:func:`shifted_step`).
 CRAWL_ITERS = 4
 CRAWL_RATIO = 0.9
 #: the diagonal shift's first and largest try, × max |diag K| (Nocedal & Wright, *Numerical Optimization*, 2nd
@@ -132,7 +147,7 @@ CRAWL_RATIO = 0.9
 SHIFT_MIN, SHIFT_MAX = 1e-8, 1e-3
 
 
-def _shifted_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict) -> np.ndarray | None:
+def shifted_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict) -> np.ndarray | None:
     """Newton step δ (n,) from (Kc + μ I) δ = −rf with the smallest μ ∈ {SHIFT_MIN, …, SHIFT_MAX}·max |diag Kc|
     (×10, starting a tenth below the last μ that worked) for which the sparse Cholesky succeeds (Nocedal &
     Wright alg. 3.3: a descent direction that keeps the true tangent's curvature, unlike the element-wise
@@ -143,7 +158,7 @@ def _shifted_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict) -> np.ndarray 
     eye = sp.identity(Kc.shape[0], format="csr")
     while mu <= SHIFT_MAX * (1 + 1e-9):
         state["factorisations"] = state.get("factorisations", 0) + 1
-        fac = _cholesky(Kc + (mu * dmax) * eye)
+        fac = cholesky_or_none(Kc + (mu * dmax) * eye)
         if fac is not None:
             state["pc"], state["pc_n"], state["mu"] = fac, Kc.shape[0], mu
             state["shifted"] = state.get("shifted", 0) + 1
@@ -152,7 +167,7 @@ def _shifted_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict) -> np.ndarray 
     return None
 
 
-def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, iters: int, tol_u: float,
+def newton_minimise(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, iters: int, tol_u: float,
             tol_r: float, log, state: dict | None = None, max_step: float = 0.001,
             shifted: bool = False) -> tuple[np.ndarray, int, bool]:
     """Minimise Π from ``u``; returns (u, iterations, converged). ``state`` (dict) carries between calls the
@@ -161,7 +176,7 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
     projected tangent, ``"shifted"``: steps on the shifted true tangent, ``"factorisations"``, ``"pcg"``: steps
     solved by PCG). Where the true tangent is not positive definite the step is on the projected
     tangent, until Newton crawls there (:data:`CRAWL_ITERS`): then, for the rest of this call, on the true tangent
-    with a diagonal shift (:func:`_shifted_step`), which crosses the limit points the projection cannot
+    with a diagonal shift (:func:`shifted_step`), which crosses the limit points the projection cannot
     (``shifted=True``: from the first iteration, for a call that continues one that ended so;
     ``state["ended_shifted"]`` says how this one ended). Raises
     ``FloatingPointError`` when the line search fails or the projected tangent stays singular
@@ -185,7 +200,7 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
         Kc = model.constrained(K)
         delta, from_pcg = _tangent_step(Kc, rf, state, projected=False)
         if delta is None and shifted:
-            delta, from_pcg = _shifted_step(Kc, rf, state), False
+            delta, from_pcg = shifted_step(Kc, rf, state), False
         if delta is None:           # not positive definite (far from equilibrium): projected tangent, this step
             state["projected"] = state.get("projected", 0) + 1
             crawl = crawl + 1 if rn > CRAWL_RATIO * rn_prev else 0
@@ -234,7 +249,7 @@ def _newton(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, it
     return u, iters, False
 
 
-def _newton_resumed(m: HyperelasticModel, guess: np.ndarray, caps: Capsule, k: float, iters: int, tol_u: float,
+def newton_resumed(m: HyperelasticModel, guess: np.ndarray, caps: Capsule, k: float, iters: int, tol_u: float,
                     tol_r: float, nstate: dict) -> tuple[np.ndarray | None, int, bool, np.ndarray | None]:
     """One load step's Newton solve from ``guess``; a call that runs out of ``iters`` iterations, not failed
     (e.g. a snap-through still under way), is continued from where it got to, in the mode it ended in, up to
@@ -243,13 +258,13 @@ def _newton_resumed(m: HyperelasticModel, guess: np.ndarray, caps: Capsule, k: f
     None)."""
     its_total, u_last = 0, None
     try:
-        u_new, its, conv = _newton(m, guess, caps, k, iters, tol_u, tol_r, None, nstate)
+        u_new, its, conv = newton_minimise(m, guess, caps, k, iters, tol_u, tol_r, None, nstate)
         u_last = u_new
         for _ in range(RESUME_MAX):
             if conv or its < iters:
                 break
             its_total += its
-            u_new, its, conv = _newton(m, u_new, caps, k, iters, tol_u, tol_r, None, nstate,
+            u_new, its, conv = newton_minimise(m, u_new, caps, k, iters, tol_u, tol_r, None, nstate,
                                        shifted=nstate.get("ended_shifted", False))
             u_last = u_new
     except FloatingPointError:

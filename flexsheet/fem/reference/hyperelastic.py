@@ -23,42 +23,22 @@ the accuracy reference the real-time models are judged against (docs/fem.md, "Ph
   corners and edge midpoints (det F is cubic over the element): under the fingertip such a fold let a column of
   material collapse to zero thickness and the tip jump ahead at a mesh-dependent depth (the snap-through of
   solver nh-2). With the nodes in the rule the neo-Hookean barrier (−μ ln J → ∞) keeps every node's det F > 0.
-* **Finger**: rigid frictionless *capsule* (the fingertip sphere of radius r plus the finger's shaft behind
-  it, along −p̂), non-penetration at the contact quadrature points of the outer surface
-  (order :data:`CONTACT_INTORDER`: 25 points per facet, because the facets around the tip stretch several
-  times over and the fingertip slipped between the 6 points of the order-4 rule), penalty
-  E_c = Σ w φ(g_i) (gap g_i = distance to the capsule's axis segment − r; φ a C² penalty that starts
-  ε = 20 µm before contact, :func:`_pen`); k = :data:`PENALTY_SCALE`·E/h, chosen by a penalty study (the
-  visible surface within 0.03 mm of a 10× stiffer finger; the loaded points stand off by < ε or penetrate
-  < 0.02 mm at 50 mm, reported). A real finger, not a bonded
-  imposed displacement (the linear model's contact): material slides along it and wraps around it.
-  Optionally (``contact="sticking"``, :func:`solve_path_capsule`) a fingertip that does not slip: points that
-  touch it stick to it. It removes the frictionless snap-through under the tip but mesh-converges worse
-  (docs/fem.md), so frictionless stays the default (:data:`DEFAULT_CONTACT`).
+* **Finger**: a rigid capsule pressed onto the contact quadrature points of the outer surface (order
+  :data:`CONTACT_INTORDER`: 25 points per facet) through a smoothed penalty, frictionless or sticking
+  (:mod:`flexsheet.fem.reference.capsule_contact`, whose docstring gives the law and its choices).
 * **Support** as the linear model's: outer boundary points with x ≤ x_O fixed. Symmetry planes y = y_O
   (a push at y = y_O) and z = z_O (a push at azimuth 0) carry the normal displacement 0.
-* **Newton**: minimise Π = ∫W dV + E_c; each step solves K_t δ = −r, first by PCG preconditioned with the
-  last sparse Cholesky factorisation (Newton–Krylov with a lagged preconditioner, :data:`PCG_RTOL`), else by a
-  fresh sparse Cholesky (CHOLMOD, :func:`_cholesky`, which also tells whether K_t is positive definite; PCG's
-  negative curvature tells it too).
-  Where K_t is not positive definite — far from equilibrium — the material tangent is projected to its
-  positive part (Teran et al. 2005); where Newton then crawls (:data:`CRAWL_ITERS` projected steps that each
-  cut the residual by less than 10 %: a limit point, where the projection stiffens the direction the material
-  snaps through), the true tangent plus the smallest diagonal shift that factorises takes over for the rest of
-  the load step's Newton solve (Nocedal & Wright alg. 3.3, :func:`_shifted_step`; solver nh-6). Then a
-  backtracking line search keeps det F > 0 at every quadrature point and decreases Π (Armijo), with at most
-  1 mm of motion per iteration so no surface point can jump across the finger. Load stepping: depth in steps
-  of ``step`` m with a linear-extrapolation predictor. Converged when ‖δ‖∞ < ``tol_u`` and the free
-  residual is below ``tol_r`` × the finger force scale.
+* **Newton**: minimise Π = ∫W dV + E_c with load stepping in the depth (:mod:`flexsheet.fem.reference.newton`:
+  the steps, the tangent's projection, the line search, the convergence test).
 
 Units SI: m, N, Pa. Display frame (cylinder axis along +y through ``mesh.center``).
 
-Files: the mesh (:mod:`flexsheet.fem.reference_mesh`: :class:`RefSpec`, :func:`reference_mesh`); the finger
-and its contact penalty (:mod:`flexsheet.fem.capsule_contact`: :class:`Capsule`, :func:`capsule_at`); this
-module, the model (:class:`HyperelasticModel`: quadrature, energy, residual and tangent, contact forces) and the
-solver's version tags; Newton's method (:mod:`flexsheet.fem.newton`); the push along a path and the stable
-branch (:mod:`flexsheet.fem.path_solver`: :func:`solve_path`, :func:`solve_path_capsule`, :func:`stable_states`,
-:func:`unload_sweep`). The names of those modules are re-exported here.
+Files: the mesh (:mod:`flexsheet.fem.reference.mesh`), the finger (:mod:`~flexsheet.fem.reference.capsule_contact`),
+this module's model (:class:`HyperelasticModel`: quadrature, energy, residual and tangent, contact forces) with
+its 3 × 3 algebra (:mod:`~flexsheet.fem.reference.kinematics`) and projected tangent
+(:mod:`~flexsheet.fem.reference.projected_tangent`), the version tags (:mod:`~flexsheet.fem.reference.versions`),
+Newton's method (:mod:`~flexsheet.fem.reference.newton`), the push along a path and the stable branch
+(:mod:`~flexsheet.fem.reference.path_solver`).
 """
 
 from __future__ import annotations
@@ -69,59 +49,16 @@ import numbers
 import numpy as np
 import scipy.sparse as sp
 
-from flexsheet.fem.capsule_contact import CONTACT_LAWS, DEFAULT_CONTACT, PENALTY_SCALE, Capsule, capsule_at
-from flexsheet.fem.capsule_contact import _pen as _pen
 from flexsheet.fem.material import Material
 from flexsheet.fem.mesh import TetMesh
-from flexsheet.fem.newton import CRAWL_ITERS as CRAWL_ITERS
-from flexsheet.fem.newton import CRAWL_RATIO as CRAWL_RATIO
-from flexsheet.fem.newton import PCG_MAXITER as PCG_MAXITER
-from flexsheet.fem.newton import PCG_RTOL as PCG_RTOL
-from flexsheet.fem.newton import RESUME_MAX as RESUME_MAX
-from flexsheet.fem.newton import SHIFT_MAX as SHIFT_MAX
-from flexsheet.fem.newton import SHIFT_MIN as SHIFT_MIN
-from flexsheet.fem.newton import _cholesky as _cholesky
-from flexsheet.fem.newton import _newton as _newton
-from flexsheet.fem.newton import _newton_resumed as _newton_resumed
-from flexsheet.fem.newton import _pcg as _pcg
-from flexsheet.fem.newton import _pcg_step as _pcg_step
-from flexsheet.fem.newton import _shifted_step as _shifted_step
-from flexsheet.fem.newton import _tangent_step as _tangent_step
-from flexsheet.fem.path_solver import (
-    BRANCH_MEET_TOL,
-    UNLOAD_VERSION,
-    PathState,
-    solve_path,
-    solve_path_capsule,
-    stable_states,
-    unload_sweep,
-)
-from flexsheet.fem.path_solver import _check_path_args as _check_path_args
-from flexsheet.fem.path_solver import _path_state as _path_state
-from flexsheet.fem.path_solver import _PathPush as _PathPush
-from flexsheet.fem.reference_mesh import RefSpec, reference_mesh
+from flexsheet.fem.reference.capsule_contact import PENALTY_SCALE, Capsule, smooth_penalty
+from flexsheet.fem.reference.kinematics import gram, inv_det3
+from flexsheet.fem.reference.projected_tangent import projection_correction
 
-__all__ = ["unload_sweep", "stable_states", "BRANCH_MEET_TOL", "UNLOAD_VERSION", "SOLVER_VERSION", "PREVIOUS_VERSION", "CONTACT_LAWS", "DEFAULT_CONTACT", "RefSpec", "HyperelasticModel", "PathState",
-           "Capsule", "capsule_at", "solve_path", "solve_path_capsule", "reference_mesh", "solver_tag"]
+__all__ = ["HyperelasticModel", "NODE_WEIGHT", "CONTACT_INTORDER"]
 
-SOLVER_VERSION = "nh-7"     #: bump when the reference's formulation or defaults change (cache keys)
-#: the version before, and where its results are the current one's: nh-7 differs from nh-6 only in a Newton call
-#: that ran out of iterations (continued, :data:`RESUME_MAX`), so an nh-6 path in which no call ran out (fewer
-#: than ``iters`` Newton iterations at every depth: a call that runs out counts ``iters`` by itself) is the nh-7
-#: path, bit for bit — if it was computed by nh-6 as committed in 27126c8. The first nh-6 commit (4899088)
-#: differed where a diagonal shift failed (it fell back to crawling); the earliest cached azimuth-0 paths
-#: were computed by it, so for them "bit for bit" holds only if no shift failed (not recorded)
-PREVIOUS_VERSION = "nh-6"
 CONTACT_INTORDER = 10   #: facet quadrature order of the contact points (25 per facet; see the module docstring)
 NODE_WEIGHT = 0.05      #: share β of the element volume integrated at the 10 P2 nodes (see the module docstring)
-
-
-def solver_tag(contact: str = DEFAULT_CONTACT, version: str = SOLVER_VERSION) -> str:
-    """Cache-key tag of the reference solver ``version`` with this contact law (the version, plus the law when it
-    is not frictionless, so frictionless solves cached before the option existed stay valid)."""
-    if contact not in CONTACT_LAWS:
-        raise ValueError(f"contact must be one of {CONTACT_LAWS}, got {contact!r}")
-    return version if contact == "frictionless" else f"{version}-{contact}"
 
 
 class HyperelasticModel:
@@ -160,7 +97,7 @@ class HyperelasticModel:
         self._init_contact_quadrature(outer, support is None)
         self._init_material(material, E_elem, nu_elem)
         self._pattern()
-        self.eps = 2e-5           #: width (m) of the smooth onset of the contact penalty (see _pen)
+        self.eps = 2e-5           #: width (m) of the smooth onset of the contact penalty (see smooth_penalty)
         self.h_contact = float(np.sqrt(2.0 * np.percentile(self._cf_w.sum(axis=1), 10)))  #: fine facet size, m
 
     def _init_quadrature(self, intorder: int, node_weight: float) -> None:
@@ -262,8 +199,8 @@ class HyperelasticModel:
             self.E_ref = float(np.max(Ee))
         self.lam, self.mu = lam, mu      #: Lamé λ, μ (Pa): floats, or (E, 1) arrays per element
         self.Jm = float(material.Jm) if material.gent else None     #: Gent limiting I1 − 3, None: neo-Hookean
-        self._lam4 = lam if np.isscalar(lam) else lam[..., None, None]       # broadcast against (E, Q, 3, 3)
-        self._mu4 = mu if np.isscalar(mu) else mu[..., None, None]
+        self.lam4 = lam if np.isscalar(lam) else lam[..., None, None]   #: λ broadcast against (E, Q, 3, 3)
+        self.mu4 = mu if np.isscalar(mu) else mu[..., None, None]       #: μ likewise
 
     # ---- assembly ------------------------------------------------------------------------------------
     def _gent_factor(self, F: np.ndarray) -> np.ndarray | None:
@@ -336,7 +273,7 @@ class HyperelasticModel:
         e = float(np.sum(W * self.w))
         if caps is not None:
             g, _, w = self._contact_gaps(u, caps)
-            phi = _pen(g, k, self.eps)[0]
+            phi = smooth_penalty(g, k, self.eps)[0]
             if caps.anchors is not None:
                 st = np.isfinite(caps.anchors[..., 0])
                 if np.any(st):
@@ -365,7 +302,7 @@ class HyperelasticModel:
         if out.shape != x.shape:
             raise ValueError(f"anchors must have shape {x.shape}, got {out.shape}")
         new = (g < self.eps) & ~np.isfinite(out[..., 0])
-        d1 = _pen(g[new], self.penalty(), self.eps)[1]                  # φ'(g) ≤ 0: the push-out force
+        d1 = smooth_penalty(g[new], self.penalty(), self.eps)[1]                  # φ'(g) ≤ 0: the push-out force
         out[new] = x[new] - (d1 / self.penalty())[:, None] * n[new] - caps.center
         return out
 
@@ -374,7 +311,7 @@ class HyperelasticModel:
         quadrature points of ``facets``, and their area weights (fa, Qf) m² (``curvature``: include the
         normal's derivative, a negative term, in the frictionless part)."""
         g, nrm, w, dn = self._contact_gaps(u, caps, facets)
-        _, d1, d2 = _pen(g, k, self.eps)
+        _, d1, d2 = smooth_penalty(g, k, self.eps)
         f = d1[..., None] * nrm
         Hx = d2[..., None, None] * nrm[..., :, None] * nrm[..., None, :]
         if curvature:
@@ -424,9 +361,9 @@ class HyperelasticModel:
         FinvT = np.swapaxes(Finv, 2, 3)
         gent = self._gent_factor(F)             # None (neo-Hookean) or g = 1/(1 − (I1 − 3)/Jm) (E, Q)
         if gent is None:
-            P = self._mu4 * (F - FinvT) + (self.lam * lnJ)[..., None, None] * FinvT
+            P = self.mu4 * (F - FinvT) + (self.lam * lnJ)[..., None, None] * FinvT
         else:
-            P = self._mu4 * (gent[..., None, None] * F - FinvT) + (self.lam * lnJ)[..., None, None] * FinvT
+            P = self.mu4 * (gent[..., None, None] * F - FinvT) + (self.lam * lnJ)[..., None, None] * FinvT
         E, Q = lnJ.shape
         G = self.grad
         Gf = G.transpose(0, 2, 1, 3).reshape(E, 10, 3 * Q)                                 # [e, a, (q, J)]
@@ -444,19 +381,19 @@ class HyperelasticModel:
                 f, Hx, w = self._contact_dE(u, caps, k, fa, curvature=not project)
                 Nf = self._cf_N[fa]                                                         # (fa, Qf, 10)
                 Nw = Nf * w[..., None]                                                      # (fa, Qf, 10)
-                rc = _gram(Nw, f)                                                           # (fa, 10, 3)
+                rc = gram(Nw, f)                                                           # (fa, 10, 3)
                 vd = (3 * self._cf_dofs[fa][:, :, None] + np.arange(3)).reshape(len(fa), 30)
                 r += np.bincount(vd.ravel(), weights=rc.ravel(), minlength=self.n)
                 NN = (Nw[..., :, None] * Nf[..., None, :]).reshape(len(fa), -1, 100)       # [f, q, (a, b)]
-                Kc = _gram(NN, Hx.reshape(len(fa), -1, 9)).reshape(len(fa), 10, 10, 3, 3)   # [f, a, b, i, k]
+                Kc = gram(NN, Hx.reshape(len(fa), -1, 9)).reshape(len(fa), 10, 10, 3, 3)   # [f, a, b, i, k]
                 cdata = (vd, Kc.transpose(0, 1, 3, 2, 4).reshape(len(fa), 30, 30))
         if not need_K:
             return r, None
         H = (G @ Finv).reshape(E, Q, 30)                                                  # ∇N_a,J F⁻¹_Jm
         lw = self.lam * self.w
         c1w = (self.mu - self.lam * lnJ) * self.w
-        T3 = _gram(H * lw[..., None], H)
-        Y = _gram(H * c1w[..., None], H).reshape(E, 10, 3, 10, 3)
+        T3 = gram(H * lw[..., None], H)
+        Y = gram(H * c1w[..., None], H).reshape(E, 10, 3, 10, 3)
         muw = self.mu * self.w if gent is None else self.mu * gent * self.w
         T1 = (G * muw[..., None, None]).transpose(0, 2, 1, 3).reshape(E, 10, 3 * Q) @ np.swapaxes(Gf, 1, 2)
         Ke = T3.reshape(E, 10, 3, 10, 3) + Y.transpose(0, 1, 4, 3, 2)
@@ -464,7 +401,7 @@ class HyperelasticModel:
         if gent is not None:    # Gent's stiffening: (2μg²/Jm) F_iJ F_kL, i.e. Σ_q w c (∇N_a·F_i)(∇N_b·F_k)
             M = (G @ np.swapaxes(F, 2, 3)).reshape(E, Q, 30)                              # ∇N_a,J F_iJ
             cw = (2.0 / self.Jm) * self.mu * gent ** 2 * self.w
-            Ke += _gram(M * cw[..., None], M).reshape(E, 10, 3, 10, 3)
+            Ke += gram(M * cw[..., None], M).reshape(E, 10, 3, 10, 3)
         if project:
             Ke += self._projection(F, Finv, lnJ, gent)
         data = np.bincount(self._scatter, weights=Ke.ravel(), minlength=self._nnz)[self._csr_order]
@@ -479,33 +416,8 @@ class HyperelasticModel:
     def _projection(self, F: np.ndarray, Finv: np.ndarray, lnJ: np.ndarray, gent: np.ndarray | None = None
                     ) -> np.ndarray:
         """Element-matrix correction Σ_q w Bᵀ(A₊ − A)B (E, 10, 3, 10, 3) where A₊ clamps A's negative
-        eigenvalues to 0 (only quadrature points with a negative eigenvalue are touched). ``gent`` (E, Q): the
-        Gent factor g of :meth:`_gent_factor` (None: neo-Hookean)."""
-        E, Q = lnJ.shape
-        S = np.einsum("eqJk,eqLi->eqiJkL", Finv, Finv).reshape(E, Q, 9, 9)
-        f = np.swapaxes(Finv, 2, 3).reshape(E, Q, 9)
-        A = (self._mu4 * np.eye(9) + (self.mu - self.lam * lnJ)[..., None, None] * S
-             + self._lam4 * f[..., :, None] * f[..., None, :])
-        if gent is not None:    # μ(g − 1) I + (2μg²/Jm) F ⊗ F on top of the neo-Hookean tangent
-            fF = F.reshape(E, Q, 9)
-            A = A + (self._mu4 * (gent - 1.0)[..., None, None]) * np.eye(9) \
-                + ((2.0 / self.Jm) * self.mu * gent ** 2)[..., None, None] * fF[..., :, None] * fF[..., None, :]
-        ev, V = np.linalg.eigh(A)
-        out = np.zeros((E, 10, 3, 10, 3))
-        bad = ev[..., 0] < 0
-        if not np.any(bad):
-            return out
-        e_idx = np.flatnonzero(bad.any(axis=1))
-        evb, Vb = ev[e_idx], V[e_idx]
-        neg = np.minimum(evb, 0.0) * bad[e_idx][..., None]                      # A₊ − A = −V min(ev,0) Vᵀ
-        ne = len(e_idx)
-        D = -(Vb * neg[..., None, :]) @ np.swapaxes(Vb, -1, -2)                 # [e, q, (i, J), (k, L)]
-        G = self.grad[e_idx]                                                    # [e, q, b, L]
-        DG = (D.reshape(ne, Q, 27, 3) @ np.swapaxes(G, -1, -2)).reshape(ne, Q, 3, 3, 3, 10)    # [e, q, i, J, k, b]
-        Gw = (G * self.w[e_idx][..., None, None]).transpose(0, 2, 1, 3).reshape(ne, 10, 3 * Q)  # [e, a, (q, J)]
-        K = Gw @ DG.transpose(0, 1, 3, 2, 4, 5).reshape(ne, 3 * Q, 90)                         # [e, a, (i, k, b)]
-        out[e_idx] = K.reshape(ne, 10, 3, 3, 10).transpose(0, 1, 2, 4, 3)
-        return out
+        eigenvalues to 0 (:func:`flexsheet.fem.reference.projected_tangent.projection_correction`)."""
+        return projection_correction(self, F, Finv, lnJ, gent)
 
     def constrained(self, K: sp.csr_matrix) -> sp.csr_matrix:
         """K with fixed rows/columns replaced by the identity (same size; fixed DOFs then get δ = 0)."""
@@ -526,7 +438,7 @@ class HyperelasticModel:
         Jq = inv_det3(F)[1]
         Jn = inv_det3(self.nodal_deformation(u))[1]
         minJ = np.minimum(Jq.min(axis=1), Jn.min(axis=1))
-        C = _gram(F, F)
+        C = gram(F, F)
         Egl = 0.5 * (C - np.eye(3))
         return float(minJ.min()), int(np.count_nonzero(minJ <= 0)), float(np.linalg.eigvalsh(Egl).max())
 
@@ -559,8 +471,8 @@ class HyperelasticModel:
 
     def penalty(self, mesh_h: float | None = None) -> float:
         """Contact penalty per unit area, N/m³: ``penalty_scale``·E/h (default :data:`PENALTY_SCALE`), h the fine
-        contact-facet size. With the smoothed onset (:func:`_pen`) a point carries pressure p at the stand-off
-        g = ε − √(2εp/κ) for p < κε/2 (≈ 290·E on the 3.4 mm mesh) and penetrates (p − κε/2)/κ beyond: the
+        contact-facet size. With the smoothed onset (:func:`~flexsheet.fem.reference.capsule_contact.smooth_penalty`)
+        a point carries pressure p at the stand-off g = ε − √(2εp/κ) for p < κε/2 (≈ 290·E on the 3.4 mm mesh) and penetrates (p − κε/2)/κ beyond: the
         geometric contact error is at most ε = 20 µm plus that penetration."""
         return self.penalty_scale * self.E_ref / (mesh_h or self.h_contact)
 
@@ -573,24 +485,3 @@ class HyperelasticModel:
             raise ValueError(f"node_mask must have shape ({n0},), got {node_mask.shape}")
         return np.concatenate([node_mask, np.all(node_mask[self.skmesh.edges], axis=0)])
 
-
-def inv_det3(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Inverse (..., 3, 3) and determinant (...) of a stack of 3 × 3 matrices ``F`` (..., 3, 3), by cofactors
-    (Cramer's rule): a few times faster than ``np.linalg.inv``/``det``, which call LAPACK per matrix. The
-    inverse of a singular matrix has inf/nan entries (no error); callers check the determinant."""
-    a, b, c = F[..., 0, 0], F[..., 0, 1], F[..., 0, 2]
-    d, e, f = F[..., 1, 0], F[..., 1, 1], F[..., 1, 2]
-    g, h, i = F[..., 2, 0], F[..., 2, 1], F[..., 2, 2]
-    c00, c01, c02 = e * i - f * h, f * g - d * i, d * h - e * g
-    det = a * c00 + b * c01 + c * c02
-    adj = np.stack([np.stack([c00, c * h - b * i, b * f - c * e], axis=-1),
-                    np.stack([c01, a * i - c * g, c * d - a * f], axis=-1),
-                    np.stack([c02, b * g - a * h, a * e - b * d], axis=-1)], axis=-2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return adj / det[..., None, None], det
-
-
-def _gram(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Σ_k A[..., k, x] B[..., k, y]: (..., X, Y) from (..., K, X) and (..., K, Y), as a batched BLAS matmul
-    (np.einsum without ``optimize`` loops in C and is ~10× slower on these element batches)."""
-    return np.swapaxes(A, -1, -2) @ B

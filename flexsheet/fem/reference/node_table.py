@@ -9,6 +9,7 @@ push's own solve and, ``twin``, the mesh's noise, :func:`twin_spec`), between it
 from __future__ import annotations
 
 import json
+import logging
 import math
 import os
 import time
@@ -17,34 +18,28 @@ from dataclasses import replace
 import numpy as np
 
 from flexsheet.fem.cache import ArrayCache
-from flexsheet.fem.hyperelastic import DEFAULT_CONTACT, RefSpec
 from flexsheet.fem.material import Material
 from flexsheet.fem.realtime import RealtimeModel
-from flexsheet.fem.reference_paths import (
-    _cached_path,
-    _depths,
-    _log,
-    _path_states,
+from flexsheet.fem.reference.capsule_contact import DEFAULT_CONTACT
+from flexsheet.fem.reference.mesh import RefSpec
+from flexsheet.fem.reference.paths import (
+    cached_path,
+    path_states,
+    push_depths,
     snapshot_table,
     stable_path,
 )
-from flexsheet.fem.reference_settings import FINGER_R, TARGET, Settings, _law, settings_for
-from flexsheet.fem.snapshots import (
-    DEFAULT_GRID,
-    DEFAULT_REF_SPEC,
-    SnapshotModel,
-    load_or_build,
-    pack_table,
-    reusable_table,
-    reused_azimuths,
-    table_key,
-)
-from flexsheet.fem.visible_error import _visible_diffs, errors, realtime_model
-from flexsheet.fem.workers import Solve, prefetch
+from flexsheet.fem.reference.settings import FINGER_R, TARGET, Settings, law_name, settings_for
+from flexsheet.fem.reference.snapshot_build import load_or_build, pack_table, reusable_table, reused_azimuths
+from flexsheet.fem.reference.workers import Solve, prefetch
+from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, SnapshotModel, table_key
+from flexsheet.fem.visible_error import errors, realtime_model, visible_diffs
+
+log = logging.getLogger(__name__)
 
 
-def _check_azimuth(angle_deg: float) -> None:
-    """``SystemExit`` unless ``angle_deg`` is one of DEFAULT_GRID's azimuths."""
+def check_azimuth(angle_deg: float) -> None:
+    """``SystemExit`` unless ``angle_deg`` (deg) is one of DEFAULT_GRID's azimuths (the node table's)."""
     if float(angle_deg) not in DEFAULT_GRID.angles_deg:
         raise SystemExit(f"flexsheet experiment fem: --azimuth must be one of the node table's "
                          f"{[f'{a:g}' for a in DEFAULT_GRID.angles_deg]} deg, got {angle_deg:g}")
@@ -55,8 +50,8 @@ def node_table_path(angle_deg: float, mat: Material, cache: ArrayCache, rm: Real
     """One azimuth of the node's table: the reference path on its mesh (DEFAULT_REF_SPEC) through DEFAULT_GRID's
     depths, solved or taken from the cache (azimuth 0 is the full run's 3.4 mm level); returns
     (path, depths (D,) m). Raises ``SystemExit`` for an azimuth DEFAULT_GRID does not have."""
-    _check_azimuth(angle_deg)
-    depths = _depths(DEFAULT_GRID.depth_step)
+    check_azimuth(angle_deg)
+    depths = push_depths(DEFAULT_GRID.depth_step)
     return stable_path(DEFAULT_REF_SPEC, angle_deg, depths, mat, cache, rm.rest_vertices.astype(float),
                        contact), depths
 
@@ -95,7 +90,7 @@ def node_table_report(table: dict, paths: dict[float, dict], mat: Material, key:
                      "inverted": np.asarray(table["inverted"])[i].tolist(),
                      "apex_depth_error_mm": apex, "apex_depth_error_max_mm": max(abs(a) for a in apex)})
     return {"key": key, "material": {"E": mat.E, "nu": mat.nu, "Jm": mat.Jm if mat.gent else None,
-                                     "law": _law(mat)},
+                                     "law": law_name(mat)},
             "mesh": DEFAULT_REF_SPEC.__dict__, "grid": DEFAULT_GRID.key(), "depths_mm": (depths * 1e3).tolist(),
             "table_MB_float32": float(sum(np.asarray(table[k]).size * 4 for k in ("side", "cap")) / 1e6),
             "apex_check": "the table's displacement of the surface point under the fingertip along the inward "
@@ -118,8 +113,8 @@ def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: Realti
     """The node's table at an azimuth it does not hold, against that push's own stable path on the table's mesh
     (:func:`stable_path` on DEFAULT_REF_SPEC, solved here unless cached: ~30 min of one core): the
     interpolation across azimuth alone, every table depth, largest distance (mm) over the visible rendered
-    vertices (not held, outside the finger's footprint on the reference's deformed surface, :func:`_visible`).
-    ``twin``: also the same push on the mesh's twin (:func:`twin_spec`; another ~30 min), and that mesh's noise
+    vertices (not held, outside the finger's footprint on the reference's deformed surface,
+    :func:`flexsheet.fem.visible_error.visible_vertices`). ``twin``: also the same push on the mesh's twin (:func:`twin_spec`; another ~30 min), and that mesh's noise
     (``noise_mm``, the same distance between the two) beside the error. Raises ``ValueError`` for an azimuth
     the table holds or outside it."""
 
@@ -144,7 +139,7 @@ def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: Realti
            "cpu_seconds_loading": float(p["cpu_seconds"])}
     if twin:
         q = stable_path(twin_spec(DEFAULT_REF_SPEC), azimuth_deg, depths[1:], mat, cache, verts, contact)
-        noise = [e * 1e3 for e in _visible_diffs(q, p, depths[1:], verts, rm.mesh.fixed[rm.surface_nodes], rm.mesh,
+        noise = [e * 1e3 for e in visible_diffs(q, p, depths[1:], verts, rm.mesh.fixed[rm.surface_nodes], rm.mesh,
                                                  azimuth_deg)]
         row["twin"] = {"spec": twin_spec(DEFAULT_REF_SPEC).__dict__, "dofs": int(q["dofs"]),
                        "converged": bool(np.all(q["converged"])), "noise_mm": noise, "max_noise_mm": max(noise),
@@ -213,12 +208,11 @@ def node_table_between_depths(table: dict, mat: Material, cache: ArrayCache, rm:
             "dofs": int(p["dofs"]), "cpu_seconds_loading": float(p["cpu_seconds"])}
 
 
-def _table_update_ms(table: dict, verts: np.ndarray, mat: Material, n: int = 50) -> dict:
+def table_update_ms(table: dict, verts: np.ndarray, mat: Material, n: int = 50) -> dict:
     """CPU time (``time.thread_time``) of one snapshot look-up for the rendered vertices ``verts`` (k, 3) m — what
     the node does per update on the cylinder (:meth:`flexsheet.fem.snapshots.SnapshotModel.surface`) — at pushes
     between the table's azimuths (the first, middle and last midpoints: 5°, 35°, 55° for the node's) and at 0.1,
     0.4, 0.9 of its deepest push (5, 20, 45 mm), ``n`` calls each: median and 90th percentile, ms."""
-
     sm = SnapshotModel(table, verts, E=mat.E)
     mids = np.degrees(np.asarray(table["angles"], float))
     mids = (mids[:-1] + mids[1:]) / 2 if len(mids) > 1 else mids
@@ -243,12 +237,12 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
     the experiment's 8 mm). Every azimuth's path is a cached :func:`node_table_path` (azimuth 0: the full run's
     3.4 mm level), so ``azimuth`` (deg) solves just that one and returns: run the azimuths in parallel
     processes, or over several sittings, then once without it to assemble the table; without it the azimuths
-    the cache lacks are solved in ``jobs`` worker processes first (:func:`flexsheet.fem.workers.prefetch`).
-    ``ship``: also write the table, packed (:func:`flexsheet.fem.snapshots.pack_table`: float16 surface fields,
-    compressed), into the repository's ``flexsheet/fem/data/`` (:meth:`flexsheet.fem.cache.ArrayCache.ship`),
+    the cache lacks are solved in ``jobs`` worker processes first
+    (:func:`flexsheet.fem.reference.workers.prefetch`). ``ship``: also write the table, packed
+    (:func:`flexsheet.fem.reference.snapshot_build.pack_table`: float16 surface fields, compressed), into the repository's ``flexsheet/fem/data/`` (:meth:`flexsheet.fem.cache.ArrayCache.ship`),
     where the node finds it on a machine that never solved it. A table on fewer azimuths in the cache or the
-    shipped store (:func:`flexsheet.fem.snapshots.reusable_table`) is extended: only the azimuths it lacks are
-    solved. ``out``: write ``node_table.json`` there (:func:`node_table_report`), with the table judged at each
+    shipped store (:func:`flexsheet.fem.reference.snapshot_build.reusable_table`) is extended: only the azimuths it
+    lacks are solved. ``out``: write ``node_table.json`` there (:func:`node_table_report`), with the table judged at each
     ``holdout`` azimuth (deg, between the table's) against its own solve (:func:`node_table_holdout`; solved
     unless cached) and between its depths at each ``between`` azimuth (deg, one of the table's;
     :func:`node_table_between_depths`); ``twin`` (``--mesh-check``): each held-out push also on the mesh's twin,
@@ -259,14 +253,14 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
     rm = realtime_model(st, mat, cache_dir)
     if azimuth is not None:
         node_table_path(azimuth, mat, cache, rm, contact)
-        _log(f"node table: azimuth {azimuth:g} deg cached in {time.perf_counter() - t0:.0f} s")
+        log.info(f"node table: azimuth {azimuth:g} deg cached in {time.perf_counter() - t0:.0f} s")
         return 0
     key = table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact, mat.Jm)
-    _log(f"node table: azimuths {DEFAULT_GRID.angles_deg} deg on {DEFAULT_REF_SPEC.key()}; key {key}")
+    log.info(f"node table: azimuths {DEFAULT_GRID.angles_deg} deg on {DEFAULT_REF_SPEC.key()}; key {key}")
     table = _find_or_build(st, mat, cache, rm, jobs, t0)
     verts = rm.rest_vertices.astype(float)
-    depths = _depths(DEFAULT_GRID.depth_step)
-    paths = {a: _cached_path(DEFAULT_REF_SPEC, a, depths, mat, cache, verts, contact) for a in DEFAULT_GRID.angles_deg}
+    depths = push_depths(DEFAULT_GRID.depth_step)
+    paths = {a: cached_path(DEFAULT_REF_SPEC, a, depths, mat, cache, verts, contact) for a in DEFAULT_GRID.angles_deg}
     shipped = _ship(table, paths, mat, cache, contact) if ship else None
     if out and holdout:     # the held-out pushes (and their twins) the cache lacks, in worker processes
         specs = [DEFAULT_REF_SPEC] + ([twin_spec(DEFAULT_REF_SPEC)] if twin else [])
@@ -280,7 +274,7 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
         _write(out, "node_table", rep)
         if plot is not None:
             plot(out, rep)
-        _log(f"node table report -> {out}/node_table.json")
+        log.info(f"node table report -> {out}/node_table.json")
     return 0
 
 
@@ -291,25 +285,25 @@ def _find_or_build(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeM
     table, hit, _ = load_or_build(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, FINGER_R, build=False,
                                   contact=contact)
     if hit:     # in the cache or shipped: its paths are not solved again (a held-out check needs only its own)
-        _log("node table found (this machine's cache or flexsheet/fem/data): not solving its paths again")
+        log.info("node table found (this machine's cache or flexsheet/fem/data): not solving its paths again")
         return table
     base = reusable_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, FINGER_R, contact)
     have = set() if base is None else {round(float(a), 6) for a in np.degrees(base["angles"])}
     if base is not None:
-        _log(f"node table: extending the table on azimuths {sorted(have)} deg (this machine's cache or "
-             f"flexsheet/fem/data): only {[a for a in DEFAULT_GRID.angles_deg if a not in have]} deg are solved")
+        log.info(f"node table: extending the table on azimuths {sorted(have)} deg (this machine's cache or "
+                 f"flexsheet/fem/data): only {[a for a in DEFAULT_GRID.angles_deg if a not in have]} deg are solved")
     prefetch([Solve(DEFAULT_REF_SPEC, a, DEFAULT_GRID.depth_step, stable=True) for a in DEFAULT_GRID.angles_deg
               if a not in have], jobs, mat, cache, rm.rest_vertices.astype(float), contact)
 
     def solved(ang, model, depths):
-        states = _path_states(*node_table_path(ang, mat, cache, rm, contact), depths, model)
+        states = path_states(*node_table_path(ang, mat, cache, rm, contact), depths, model)
         if states is None:          # else build_table would solve it again, uncached
             raise RuntimeError(f"the node table's path at {ang:g} deg lacks a depth of {DEFAULT_GRID.key()}")
         return states
 
     table, _, sec = snapshot_table(st, mat, cache, solved, reuse=base)
-    _log(f"node table built in {sec:.0f} s: {sum(v.nbytes for v in table.values()) / 1e6:.0f} MB; total "
-         f"{time.perf_counter() - t0:.0f} s. The FEM node loads it at start (model: auto)")
+    log.info(f"node table built in {sec:.0f} s: {sum(v.nbytes for v in table.values()) / 1e6:.0f} MB; total "
+             f"{time.perf_counter() - t0:.0f} s. The FEM node loads it at start (model: auto)")
     return table
 
 
@@ -326,8 +320,8 @@ def _ship(table: dict, paths: dict[float, dict | None], mat: Material, cache: Ar
                          f"checked) at {missing} deg")
     packed, err = pack_table(table)
     p = cache.ship("snapshots", table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact, mat.Jm), packed)
-    _log(f"node table shipped: {p} ({os.path.getsize(p) / 1e6:.1f} MB, float16 surface fields: rounding "
-         f"<= {err * 1e3:.4f} mm); commit it")
+    log.info(f"node table shipped: {p} ({os.path.getsize(p) / 1e6:.1f} MB, float16 surface fields: rounding "
+             f"<= {err * 1e3:.4f} mm); commit it")
     return {"path": os.path.relpath(p, os.getcwd()), "MB": os.path.getsize(p) / 1e6, "float16_rounding_mm": err * 1e3}
 
 
@@ -335,15 +329,15 @@ def _judge(rep: dict, table: dict, mat: Material, cache: ArrayCache, rm: Realtim
            holdout: tuple[float, ...], between: tuple[float, ...], twin: bool) -> None:
     """Add to ``rep`` (:func:`node_table_report`) the table's look-up time, its errors at the ``holdout`` azimuths
     and between its depths at the ``between`` ones, and log them."""
-    rep["update"] = _table_update_ms(table, rm.rest_vertices.astype(float), mat)
+    rep["update"] = table_update_ms(table, rm.rest_vertices.astype(float), mat)
     rep["held_out"] = [node_table_holdout(table, mat, cache, rm, a, contact, twin) for a in holdout]
     rep["between_depths"] = [node_table_between_depths(table, mat, cache, rm, a, contact) for a in between]
     for h in rep["between_depths"]:
-        _log(f"node table between its depths at {h['azimuth_deg']:g} deg: worst visible error "
-             f"{h['max_error_mm_between_depths']:.2f} mm (at its own depths {h['max_error_mm_at_table_depths']:.2f})")
+        log.info(f"node table between its depths at {h['azimuth_deg']:g} deg: worst visible error "
+                 f"{h['max_error_mm_between_depths']:.2f} mm (at its own depths {h['max_error_mm_at_table_depths']:.2f})")
     for h in rep["held_out"]:
-        _log(f"node table held out at {h['azimuth_deg']:g} deg: worst visible error {h['max_error_mm']:.2f} mm"
-             + (f", over the target from {h['over_target_from_mm']:g} mm" if h["over_target_from_mm"] else ""))
+        log.info(f"node table held out at {h['azimuth_deg']:g} deg: worst visible error {h['max_error_mm']:.2f} mm"
+                 + (f", over the target from {h['over_target_from_mm']:g} mm" if h["over_target_from_mm"] else ""))
 
 
 def _write(out: str, name: str, data: dict) -> None:

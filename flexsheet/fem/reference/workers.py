@@ -5,32 +5,34 @@ reads and the cache lacks (:func:`missing_solves`) in such workers before the ru
 
 from __future__ import annotations
 
+import logging
 import os
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
-from flexsheet.fem import reference_paths
 from flexsheet.fem.cache import ArrayCache
-from flexsheet.fem.hyperelastic import PENALTY_SCALE, RefSpec
 from flexsheet.fem.material import Material
-from flexsheet.fem.reference_paths import (
-    _depths,
-    _load_step,
-    _log,
-    _previous_version_path,
-    _reference_keys,
-    _stable_key,
+from flexsheet.fem.reference.capsule_contact import PENALTY_SCALE
+from flexsheet.fem.reference.mesh import RefSpec
+from flexsheet.fem.reference.paths import (
+    load_step,
+    push_depths,
+    reference_key,
     reference_path,
+    stable_key,
     stable_path,
 )
+from flexsheet.fem.reference.progress import show_progress
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
 class Solve:
     """One :func:`reference_path` a run reads: mesh, azimuth (deg), output depth spacing (m; depths
-    ``_depths(step)``) and contact penalty scale; ``stable``: its :func:`stable_path` (the snapshot tables and
+    ``push_depths(step)``) and contact penalty scale; ``stable``: its :func:`stable_path` (the snapshot tables and
     the held-out pushes)."""
 
     spec: RefSpec
@@ -46,23 +48,22 @@ class Solve:
             self.spec.h_fine ** -3
         c *= self.spec.h_fine / self.spec.tip_h if self.spec.tip_h else 1.0      # a rough share for the tip
         half = self.angle_deg != 0.0 or not self.spec.half_z
-        return c * (2.0 if half else 1.0) / _load_step(_depths(self.step))
+        return c * (2.0 if half else 1.0) / load_step(push_depths(self.step))
 
 
 def missing_solves(jobs: list[Solve], mat: Material, cache: ArrayCache, probes: np.ndarray, contact: str
                    ) -> list[Solve]:
     """The ``jobs`` :func:`reference_path` (or, ``stable``, :func:`stable_path`) would solve, not read, from
-    ``cache`` (a previous version's path counts only when that version's path is this one's,
-    :func:`_previous_version_path`), each loading path once (its ``stable`` job where there is one)."""
+    ``cache``, each loading path once (its ``stable`` job where there is one)."""
     todo: dict[str, Solve] = {}             # by the loading path's key: one worker per path, its sweep included
     for j in jobs:
-        keys = _reference_keys(j.spec, j.angle_deg, _depths(j.step), mat, probes, contact, j.penalty_scale)
-        missing = not os.path.exists(cache.path("reference", keys[0])) and _previous_version_path(cache, keys[1]) is None
+        key = reference_key(j.spec, j.angle_deg, push_depths(j.step), mat, probes, contact, j.penalty_scale)
+        missing = not os.path.exists(cache.path("reference", key))
         if j.stable and contact == "frictionless":     # its unloading sweep too (stable_path)
-            sk = _stable_key(j.spec, j.angle_deg, _depths(j.step), mat, probes, contact, j.penalty_scale)
+            sk = stable_key(j.spec, j.angle_deg, push_depths(j.step), mat, probes, contact, j.penalty_scale)
             missing = missing or not os.path.exists(cache.path("stable", sk))
-        if missing and (keys[0] not in todo or j.stable):
-            todo[keys[0]] = j
+        if missing and (key not in todo or j.stable):
+            todo[key] = j
     return list(todo.values())
 
 
@@ -80,21 +81,20 @@ def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache
     if len(todo) < 2:
         return
     n = min(n_workers, len(todo))
-    _log(f"prefetch: {len(todo)} reference solves the cache lacks, in {n} worker processes (--jobs)")
+    log.info(f"prefetch: {len(todo)} reference solves the cache lacks, in {n} worker processes (--jobs)")
     t0 = time.perf_counter()
     work = [(i, j, mat, cache.cache_dir, probes, contact) for i, j in enumerate(todo)]
     for i, sec, err in run_workers(_solve_one, work, n, scheduler):
         j = todo[i]
         what = f"{j.spec.key()} at {j.angle_deg:g} deg, penalty {j.penalty_scale:g} E/h"
-        _log(f"prefetch: {what} done in {sec:.0f} s" if err is None else
-             f"prefetch: {what} failed ({err}); the run solves it itself")
-    _log(f"prefetch: done in {time.perf_counter() - t0:.0f} s")
+        log.info(f"prefetch: {what} done in {sec:.0f} s" if err is None else
+                 f"prefetch: {what} failed ({err}); the run solves it itself")
+    log.info(f"prefetch: done in {time.perf_counter() - t0:.0f} s")
 
 
 def _solver_init(name=None) -> None:
-    """Worker setup, once per worker process (:func:`_setup_plugin`): a log prefix
-    "[solver N] " (:data:`flexsheet.fem.reference_paths._LOG_PREFIX`, which
-    :func:`flexsheet.fem.reference_paths._log` reads; N the worker's name); one BLAS and OpenMP thread (the
+    """Worker setup, once per worker process (:func:`_setup_plugin`): the progress lines printed with the prefix
+    "[solver N] " (:func:`flexsheet.fem.reference.progress.show_progress`; N the worker's name); one BLAS and OpenMP thread (the
     nanny starts workers with ``OMP_NUM_THREADS=1``; CHOLMOD's libraries load under that limit); SIGINT
     ignored and tied to its parent, dying with it even on ``kill -9``
     (:func:`flexsheet.runtime.background.lower_priority`, niceness unchanged)."""
@@ -109,7 +109,7 @@ def _solver_init(name=None) -> None:
     lower_priority(0, idle=False)
     name = os.getpid() if name is None else name
     name = name + 1 if isinstance(name, int) and name < 1000 else name       # a local cluster's are 0 .. n-1
-    reference_paths._LOG_PREFIX = f"[solver {name}] "
+    show_progress(f"[solver {name}] ")
 
 
 def _solve_one(args: tuple) -> tuple[int, float, str | None]:
@@ -119,7 +119,7 @@ def _solve_one(args: tuple) -> tuple[int, float, str | None]:
     t = time.perf_counter()
     try:
         solve = stable_path if job.stable else reference_path
-        solve(job.spec, job.angle_deg, _depths(job.step), mat, ArrayCache(cache_dir, _log), probes, contact,
+        solve(job.spec, job.angle_deg, push_depths(job.step), mat, ArrayCache(cache_dir, log.info), probes, contact,
               job.penalty_scale)
     except Exception as exc:                    # noqa: BLE001 - reported; the run solves it again and raises
         return i, time.perf_counter() - t, f"{type(exc).__name__}: {exc}"
@@ -195,7 +195,7 @@ def run_workers(fn, work: list, n: int, scheduler: str | None = None, key=None):
                    for i, w in enumerate(work)]
         for k, fut in enumerate(as_completed(futures), 1):
             result = fut.result()
-            _log(f"workers: {k}/{len(futures)} done")
+            log.info(f"workers: {k}/{len(futures)} done")
             yield result
     finally:
         for fut in locals().get("futures", []):

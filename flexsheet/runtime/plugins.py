@@ -1,0 +1,46 @@
+"""What installed packages plug in: node types and commands declared as entry points (``pyproject.toml``), read
+with :mod:`importlib.metadata`. The runtime names none of them itself.
+
+- ``flexsheet.nodes`` (:data:`NODES_GROUP`): node type → its :class:`~flexsheet.runtime.node.Node` subclass,
+  as ``"module:Class"`` (``flexsheet run TYPE``, a launch file's ``type:``);
+- any other group of ``"module:attribute"`` entries (``flexsheet.benches``) is read with :func:`table`.
+
+An entry is imported only when it is used (:func:`node_class`), so ``flexsheet --help`` stays fast and a
+broken module breaks only its own node type.
+"""
+
+from __future__ import annotations
+
+import functools
+from importlib.metadata import entry_points
+
+__all__ = ["NODES_GROUP", "table", "node_types", "node_class", "unknown_node_type"]
+
+#: the entry-point group of the node types
+NODES_GROUP = "flexsheet.nodes"
+
+
+@functools.cache
+def table(group: str) -> dict[str, str]:
+    """Name → ``"module:attribute"`` of every entry point of ``group``, sorted by name (empty when no installed
+    package declares one: is flexsheet installed, ``pip install -e .``?). Shared: do not mutate."""
+    return {ep.name: ep.value for ep in sorted(entry_points(group=group), key=lambda e: e.name)}
+
+
+def node_types() -> dict[str, str]:
+    """Node type → ``"module:Class"`` of every installed node type (:data:`NODES_GROUP`), sorted by type."""
+    return table(NODES_GROUP)
+
+
+def unknown_node_type(name: str) -> str:
+    """The one-line error for node type ``name`` that no installed package declares, naming the known ones."""
+    return f"unknown node type {name!r}; known: {', '.join(sorted(node_types()))}"
+
+
+def node_class(name: str) -> type:
+    """The :class:`~flexsheet.runtime.node.Node` subclass of node type ``name``, its module imported now.
+    Raises ``LookupError`` (:func:`unknown_node_type`) for an unknown type, and ``ImportError`` or
+    ``AttributeError`` when its module cannot be imported here."""
+    for ep in entry_points(group=NODES_GROUP, name=name):
+        return ep.load()
+    raise LookupError(unknown_node_type(name))

@@ -1,0 +1,212 @@
+"""One typed subscription of a node (:class:`Subscription`, made by :meth:`flexsheet.runtime.node.Node.subscribe`):
+its queue and QoS, its consumer (a task on the loop for an ``async def`` handler, its own worker thread,
+:class:`SubscriptionWorker`, for a plain ``def``) and its counters. See :mod:`flexsheet.runtime.node` for the
+threading model."""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import inspect
+import queue
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from flexsheet.runtime.codec import DecodeError, decode
+from flexsheet.runtime.publisher import TopicCounters
+from flexsheet.runtime.qos import KEEP_ALL_DEPTH, QoS
+from messages import Message, Topic
+from messages import topics as T
+
+__all__ = ["Subscription", "SubscriptionWorker"]
+
+_thread_time = time.thread_time
+
+
+class SubscriptionWorker(threading.Thread):
+    """The worker thread of a sync handler's subscription, with the task-like ``done()`` and ``cancel()``."""
+
+    def __init__(self, sub: Subscription) -> None:
+        super().__init__(target=sub._work, name=f"sub{sub.topic.name}@{sub.node.name}", daemon=True)
+        self.sub = sub
+
+    def done(self) -> bool:
+        return not self.is_alive()
+
+    def cancel(self) -> None:
+        self.sub.close()
+
+
+class Subscription:
+    """One typed subscription of ``node`` (its :class:`~flexsheet.runtime.node.Node`): its queue, QoS, handler,
+    consumer (task or worker thread) and statistics.
+
+    Queue items are wire frames (decoded and validated by the consumer: the wire boundary) or, from a node of
+    the same container, the message object itself (already validated when it was built).
+    """
+
+    def __init__(self, node: Any, topic: Topic, handler: Callable, qos: QoS, depth: int | None,
+                 sim_cost: float = 0.0) -> None:
+        self.node, self.topic, self.handler, self.qos = node, topic, handler, qos
+        self.sim_cost = float(sim_cost)  # s charged per message on a live simulated clock
+        self.newest: tuple | None = None  # live simulated clock: (due, order) of the newest queued item
+        self.name_b = topic.name.encode()
+        self.depth = depth or (1 if qos in (QoS.LATEST, QoS.LATCHED) else KEEP_ALL_DEPTH)
+        self.queue: collections.deque = collections.deque()
+        self.is_async = inspect.iscoroutinefunction(handler)
+        self.event = asyncio.Event() if self.is_async else None
+        self._wake: queue.SimpleQueue | None = None if self.is_async else queue.SimpleQueue()
+        self._lock = threading.Lock()
+        self._waiting = False
+        self._closed = False
+        self.stats = TopicCounters()
+        self.cpu_s = 0.0  # CPU time of the sync handler (its worker thread), s
+        self.last_seq: int | None = None
+        self.last_meta: Any = None
+        self.task: asyncio.Task | SubscriptionWorker | None = None  # the consumer, once started (both have done(), cancel())
+
+    def start(self, loop: asyncio.AbstractEventLoop) -> None:
+        """Start the consumer: a task on ``loop`` (async handler) or the worker thread (sync handler)."""
+        if self.is_async:
+            self.task = loop.create_task(self.run())
+        else:
+            self.task = SubscriptionWorker(self)
+            self.task.start()
+
+    def _fresh_latched(self, item: Any) -> bool:
+        if type(item) is list:
+            key = b"\0".join(bytes(f) for f in item[1:])
+            if key == self.last_meta:  # the same latched value resent for another late joiner
+                return False
+            self.last_meta = key
+        else:
+            if item is self.last_meta:
+                return False
+            self.last_meta = item
+        return True
+
+    def push(self, item: Any) -> None:
+        """Queue frames or a message (any thread); QoS: a full queue drops its oldest item (counted)."""
+        if self.qos is QoS.LATCHED and not self._fresh_latched(item):
+            return
+        sched = self.node._lockstep
+        if sched is not None:
+            sched.enqueue(self, item)
+            return
+        if self.is_async:
+            node = self.node
+            if threading.get_ident() != node._loop_tid:
+                node._loop.call_soon_threadsafe(self._push_async, item)
+            else:
+                self._push_async(item)
+            return
+        q = self.queue
+        with self._lock:
+            if len(q) >= self.depth:
+                q.popleft()
+                self.stats.dropped += 1
+                q.append(item)
+                return  # the dropped item's wake-up token serves this one
+            q.append(item)
+        self._wake.put(None)
+
+    def _push_async(self, item: Any) -> None:
+        q = self.queue
+        if len(q) >= self.depth:
+            q.popleft()
+            self.stats.dropped += 1
+        q.append(item)
+        if self._waiting:
+            self.event.set()
+
+    async def run(self) -> None:
+        """Consumer task of an async handler."""
+        q = self.queue
+        while True:
+            if not q:
+                self.event.clear()
+                self._waiting = True
+                try:
+                    await self.event.wait()
+                finally:
+                    self._waiting = False
+                continue
+            msg = self._accept(q.popleft())
+            if msg is not None:
+                await self._call_async(msg)
+
+    def _work(self) -> None:
+        """Worker thread of a sync handler: one wake-up token per queued item."""
+        get, q, lock = self._wake.get, self.queue, self._lock
+        while True:
+            get()
+            if self._closed:
+                return
+            with lock:
+                if not q:
+                    continue
+                item = q.popleft()
+            msg = self._accept(item)
+            if msg is not None:
+                self._call_sync(msg)
+
+    async def handle_now(self, item: Any) -> None:
+        """Handle one item to completion on the loop (lockstep replay: deterministic order, one at a time)."""
+        msg = self._accept(item)
+        if msg is None:
+            return
+        if self.is_async:
+            await self._call_async(msg)
+        else:
+            self._call_sync(msg)
+
+    def _accept(self, item: Any) -> Message | None:
+        """The message of a queue item (wire frames decoded and validated), counted; None if rejected."""
+        if type(item) is list:
+            try:
+                msg = decode(item, self.topic)
+            except DecodeError as exc:
+                self.stats.rejected += 1
+                self.node._reject(str(exc))
+                return None
+        else:
+            msg = item
+        seq = msg.header.seq
+        last = self.last_seq
+        if (last is not None and seq > last + 1 and self.qos is QoS.KEEP_ALL
+                and self.topic.name != T.DIAGNOSTICS.name):  # every node publishes /diagnostics
+            self.stats.dropped += seq - last - 1  # lost on the wire (HWM)
+        self.last_seq = seq
+        self.stats.count += 1
+        return msg
+
+    def _call_sync(self, msg: Message) -> None:
+        t0 = _thread_time()
+        try:
+            self.handler(msg)
+        except ValueError as exc:  # InputRejected included
+            self.stats.rejected += 1
+            self.node._reject(f"{self.topic.name}: {exc}")
+        except Exception:  # noqa: BLE001 - a handler bug must not kill the node; logged with traceback
+            self.node._handler_error(self.topic.name)
+        finally:
+            self.cpu_s += _thread_time() - t0
+
+    async def _call_async(self, msg: Message) -> None:
+        try:
+            await self.handler(msg)
+        except ValueError as exc:
+            self.stats.rejected += 1
+            self.node._reject(f"{self.topic.name}: {exc}")
+        except Exception:  # noqa: BLE001
+            self.node._handler_error(self.topic.name)
+
+    def close(self) -> None:
+        self._closed = True
+        if isinstance(self.task, asyncio.Task):
+            self.task.cancel()
+        elif self._wake is not None:
+            self._wake.put(None)
+
