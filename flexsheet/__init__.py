@@ -1,3 +1,4 @@
-"""flexsheet runtime: node base, codec, transports, launch, bags, CLI (see docs/architecture.md)."""
+"""flexsheet: the encountered-type visual haptic display using a flexible sheet — the library (runtime, model,
+the algorithm packages, the twin, experiments); the nodes in ``nodes/`` are its adapters (docs/architecture.md)."""
 
-__version__ = "0.1.0"
+__version__ = "0.10.0"

@@ -11,7 +11,7 @@ import argparse
 import os
 import sys
 
-from flexsheet import registry
+from flexsheet import __version__, registry
 from flexsheet.cli_commands import cmd_keys, cmd_launch, cmd_run
 from flexsheet.runtime.console import LIBRARY, show_lines
 from flexsheet.runtime.plugins import node_types
@@ -351,6 +351,7 @@ def build_parser() -> argparse.ArgumentParser:
         **_fmt("  flexsheet launch launch/sim.yaml            # the whole display, simulated on localhost\n"
                "  flexsheet topic list                        # topics of the running graph\n"
                "  flexsheet experiment stroke --out out/stroke"))
+    p.add_argument("--version", action="version", version=f"flexsheet {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add in (_add_launch_parser, _add_run_parser, _add_keys_parser, _add_topic_parser,
                 _add_node_parser, _add_param_parser, _add_service_parser, _add_bag_parser, _add_delegate_parsers):

@@ -188,7 +188,7 @@ def sim_run(tmp_path_factory, sim_fem_cache):
     return {"out": out, "stdout": log.read_text(), "code": code, "viz": viz}
 
 
-#: The folder decides the CI phase (tests/run.sh): ``tests/unit/<package>/`` (and tests/test_layout.py) hold pure
+#: The folder decides the CI phase (tests/run.sh): ``tests/unit/`` (and tests/test_layout.py) hold pure
 #: computation — no node, process, socket, window or tight time bound — run first on two pytest-xdist workers
 #: (marker ``cpu``); ``tests/nodes/`` (the node harness) and ``tests/system/`` (launched graphs) run after, one by
 #: one, with the machine to themselves, because a test that judges a live loop against the clock needs it.
@@ -209,26 +209,56 @@ def pytest_configure(config):
                                        "tests/run.sh --slow (CI runs both tiers)")
 
 
-#: modules that must run on one xdist worker, after the first: test_calibration_procedures registers the twin's
-#: three seeds and shares them with the cache that test_correction_twin loads (on two workers it would redo them)
-SAME_WORKER = {"test_correction_twin": "test_calibration_procedures"}
+def group(path: Path) -> str:
+    """A test module's xdist group: its path under tests/ without ``.py`` (``unit/twin/test_registration``),
+    unique where stems are not (``unit/model/test_scenes`` and ``unit/experiments/test_scenes``)."""
+    return Path(path).resolve().relative_to(ROOT / "tests").with_suffix("").as_posix()
 
 
-#: the longest groups of phase 1, longest first (every-day tier, cold: the twin's registrations and correction
-#: 85 s, the hyperelastic reference 52 s, the docs' commands 37 s, the scenes' FEM 32 s; the slow tier's quick
-#: FEM run ~270 s), collected first so they start at once on the two workers and the short modules fill in
-#: the tail (alphabetically a long one started last and ran alone)
-LONGEST_FIRST = ("test_fem_experiment", "test_calibration_procedures", "test_fem_hyperelastic", "test_docs_run",
-                 "test_fem_scene")
+#: modules that run in another's group, on one xdist worker after it: unit/twin/test_registration registers
+#: the twin's three seeds and shares them with the cache that unit/experiments/test_correction loads (on two
+#: workers it would redo them); the calibration estimators' modules share one package fixture (the twin's board
+#: views and the camera pose from them, tests/unit/calibration/conftest.py), built once on one worker; so do the
+#: FEM's: the coarse cylinder's models (tests/unit/fem/conftest.py), the quarter reference model
+#: (tests/unit/fem/reference/conftest.py), the sphere's path-table model (tests/unit/conftest.py) and the quick
+#: FEM run of the slow tier (tests/unit/experiments/fem/conftest.py)
+SAME_WORKER = {"unit/experiments/test_correction": "unit/twin/test_registration",
+               "unit/calibration/test_arms": "unit/calibration/test_camera_pose",
+               "unit/calibration/test_projector": "unit/calibration/test_camera_pose",
+               "unit/calibration/test_sources": "unit/calibration/test_camera_pose",
+               "unit/fem/test_mesh": "unit/fem/test_solver",
+               "unit/fem/test_realtime": "unit/fem/test_solver",
+               "unit/fem/test_corotational": "unit/fem/test_solver",
+               "unit/fem/reference/test_projected_tangent": "unit/fem/reference/test_hyperelastic",
+               "unit/fem/reference/test_path_solver": "unit/fem/reference/test_hyperelastic",
+               "unit/fem/reference/test_newton": "unit/fem/reference/test_hyperelastic",
+               "unit/fem/test_scene_model": "unit/fem/test_path_snapshots",
+               "unit/experiments/test_path_table": "unit/fem/test_path_snapshots",
+               "unit/experiments/fem/test_outputs": "unit/experiments/fem/test_runs",
+               "unit/experiments/fem/test_candidates": "unit/experiments/fem/test_runs",
+               "unit/experiments/fem/studies/test_convergence": "unit/experiments/fem/test_runs",
+               "unit/experiments/fem/studies/test_mirror": "unit/experiments/fem/test_runs",
+               "unit/experiments/fem/studies/test_fold": "unit/experiments/fem/test_runs",
+               "unit/experiments/fem/studies/test_material": "unit/experiments/fem/test_runs"}
+
+
+#: the longest groups of phase 1, longest first (every-day tier: the twin's registrations and correction 85 s and
+#: the docs' commands 37 s cold; the hyperelastic reference's modules 63 s, the scenes' FEM experiment 25 s and the
+#: reference's meshes 15 s warm, beside another worker; the slow tier's quick FEM run ~270 s), collected first
+#: so they start at once on the two workers and the short modules fill in the tail (alphabetically a long one
+#: started last and ran alone)
+LONGEST_FIRST = ("unit/experiments/fem/test_runs", "unit/twin/test_registration",
+                 "unit/fem/reference/test_hyperelastic", "test_docs_run", "unit/experiments/test_fem_scene",
+                 "unit/fem/reference/test_mesh")
 
 
 @pytest.hookimpl(tryfirst=True)       # before pytest-xdist's own hook reads the xdist_group marks
 def pytest_collection_modifyitems(config, items):
     for item in items:
-        stem = item.path.stem
+        name = group(item.path)
         if is_cpu_test(item.path) and not item.get_closest_marker("serial"):
             item.add_marker(pytest.mark.cpu)
             # tests/run.sh distributes by group (--dist loadgroup): a module per worker, module fixtures once
-            item.add_marker(pytest.mark.xdist_group(SAME_WORKER.get(stem, stem)))
+            item.add_marker(pytest.mark.xdist_group(SAME_WORKER.get(name, name)))
     rank = {g: i for i, g in enumerate(LONGEST_FIRST)}
-    items.sort(key=lambda it: rank.get(SAME_WORKER.get(it.path.stem, it.path.stem), len(rank)))   # stable
+    items.sort(key=lambda it: rank.get(SAME_WORKER.get(group(it.path), group(it.path)), len(rank)))   # stable

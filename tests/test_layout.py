@@ -11,6 +11,10 @@
 - no re-export: a module's ``__all__`` names only what it defines; no ``_private`` name is imported from
   another module;
 - no file of ``flexsheet/`` or ``nodes/`` over 500 lines, no function over 80;
+- the unit tests mirror the library: ``tests/unit/<package>/test_<module>.py`` tests
+  ``flexsheet/<package>/<module>.py`` (or the package ``<module>/``), a subpackage's likewise
+  (``tests/unit/fem/reference/test_paths.py`` ``flexsheet/fem/reference/paths.py``), ``tests/unit/test_<x>.py``
+  ``flexsheet/<x>.py``;
 - no ``.py`` under ``docs/``; ``README.md`` ≤ 100 lines, none over 300 characters; each ``docs/`` page ≤ 300
   lines; no work-log words outside
   ``CHANGELOG.md``, in the docs or in the code's docstrings and comments;
@@ -311,3 +315,58 @@ def test_the_inside_checks_see_planted_faults(tmp_path):
     assert got == [(1, "typing", ["TYPE_CHECKING"]), (4, "flexsheet.model.sheet", ["_p"]),
                    (4, "flexsheet.model.sheet", ["clamp_poses"])]
     assert _defined(ast.parse(f.read_text())) == {"__all__", "y"}
+
+
+# -------------------------------------------------------------------------- the unit tests mirror the library
+#: folders of tests/unit/ that mirror a package other than flexsheet/<folder>/: the message package
+MIRRORS = {"messages": ROOT / "messages"}
+
+
+def _unmirrored(unit: Path, lib: Path, mirrors: dict[str, Path]) -> list[str]:
+    """The test files under ``unit`` (relative paths) whose name is no module of ``lib``: ``<package>/test_<m>.py``
+    needs the module ``lib/<package>/<m>.py`` or the package ``lib/<package>/<m>/`` (under ``mirrors[<package>]``
+    instead where given), ``<package>/<sub>/test_<m>.py`` the same in the subpackage ``lib/<package>/<sub>/``,
+    ``test_<x>.py`` directly in ``unit`` the module ``lib/<x>.py``."""
+    bad = []
+    for path in sorted(unit.rglob("test_*.py")):
+        rel = path.relative_to(unit)
+        name = rel.stem.removeprefix("test_")
+        if len(rel.parts) == 1:
+            found = (lib / f"{name}.py").is_file()
+        else:
+            base = mirrors.get(rel.parts[0], lib / rel.parts[0]).joinpath(*rel.parts[1:-1])
+            found = (base / f"{name}.py").is_file() or (base / name / "__init__.py").is_file()
+        if not found:
+            bad.append(rel.as_posix())
+    return bad
+
+
+def test_unit_tests_mirror_the_library():
+    """Every tests/unit/<package>/test_<module>.py tests flexsheet/<package>/<module>.py (or the package
+    flexsheet/<package>/<module>/), a subpackage's tests/unit/<package>/<sub>/test_<module>.py likewise, every
+    tests/unit/test_<x>.py tests flexsheet/<x>.py: a test lives where the module it judges does, and a module's
+    tests are found by its name."""
+    bad = _unmirrored(ROOT / "tests" / "unit", ROOT / "flexsheet", MIRRORS)
+    assert "arm/test_kinematics.py" not in bad and "test_cli.py" not in bad, "the rule read no test file"
+    assert bad == [], "unit tests named after no module (tests/unit/<package>/test_<module>.py for " \
+        "flexsheet/<package>/<module>.py):\n" + "\n".join(bad)
+
+
+def test_the_mirror_rule_refuses_a_planted_bad_name(tmp_path):
+    """A test named after no module (in a package or a subpackage), one in a folder the library lacks and one
+    for a missing top-level module are refused; a module's, a subpackage's, a subpackage's module's, a top-level
+    module's and a mirrored folder's tests pass."""
+    lib, unit, other = tmp_path / "lib", tmp_path / "unit", tmp_path / "messages"
+    for f in ("pkg/mod.py", "pkg/sub/__init__.py", "pkg/sub/leaf.py", "pkg/data/table.json", "cli.py"):
+        (lib / f).parent.mkdir(parents=True, exist_ok=True)
+        (lib / f).write_text("")
+    other.mkdir()
+    (other / "registers.py").write_text("")
+    for f in ("pkg/test_mod.py", "pkg/test_sub.py", "test_cli.py", "messages/test_registers.py", "pkg/conftest.py",
+              "pkg/test_pkg_mod.py", "pkg/test_data.py", "pkg/sub/test_mod.py", "pkg/sub/test_leaf.py",
+              "pkg/nosub/test_mod.py", "test_main.py", "nope/test_mod.py"):
+        (unit / f).parent.mkdir(parents=True, exist_ok=True)
+        (unit / f).write_text("")
+    assert _unmirrored(unit, lib, {"messages": other}) == ["nope/test_mod.py", "pkg/nosub/test_mod.py",
+                                                           "pkg/sub/test_mod.py", "pkg/test_data.py",
+                                                           "pkg/test_pkg_mod.py", "test_main.py"]

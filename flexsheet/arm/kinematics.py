@@ -48,7 +48,7 @@ Q_UPPER = np.array(_MODEL.upperPositionLimit, dtype=float)   #: (6,) rad, URDF u
 #: (6,) rad/s, the RV-1A datasheet's maximum joint speeds J1..J6 = 180, 90, 135, 180, 180, 210 deg/s (URDF
 #: ``velocity``; Mitsubishi BFP-A8050, see the URDF header). The bridge commands ``speed_scale`` × these.
 QD_MAX = np.array(_MODEL.velocityLimit, dtype=float)
-#: the datasheet values the URDF must carry, deg/s (checked by tests/unit/twin/test_twin_arm.py)
+#: the datasheet values the URDF must carry, deg/s (checked by tests/unit/arm/test_kinematics.py)
 DATASHEET_SPEED_DEG = (180.0, 90.0, 135.0, 180.0, 180.0, 210.0)
 # LEFT_BASE / RIGHT_BASE: the base poses (x, y, z, yaw) in the display frame (m, rad), defined once in
 # flexsheet.model.geometry and re-exported here (the arm bridge imports them from this module). They reach the

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
 import os
 import sys
@@ -43,7 +44,9 @@ import numpy as np
 
 from flexsheet.fem.choose import visible_mask
 from flexsheet.fem.path_snapshots import GRID
-from flexsheet.fem.reference.progress import show_progress
+from flexsheet.runtime.console import LIBRARY, show_lines
+
+log = logging.getLogger(__name__)
 
 __all__ = ["run_scene", "main", "visible_errors", "TARGET_MM", "TARGET_PX", "CONVERGED_PX", "QUICK", "FULL"]
 
@@ -61,10 +64,6 @@ FULL = {"fractions": (0.0, 0.5, 1.0),
         "depths": tuple(np.round(np.arange(1, int(round(GRID["depth_max"] / GRID["step"])) + 1) * GRID["step"], 9)),
         "step": GRID["step"], "levels": (GRID["h_fine"], 0.004, 0.003), "h": GRID["h"],
         "refine_radius": GRID["refine_radius"], "path_depth": GRID["path_depth"], "n_time": 300}
-
-
-def _log(msg: str) -> None:
-    print(f"[fem_scene] {msg}", file=sys.stderr, flush=True)
 
 
 def scene_reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, probes: np.ndarray, cache) -> dict:
@@ -102,9 +101,9 @@ def scene_reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, p
         model = HyperelasticModel(sm.mesh, mat, sym_y=False, sym_z=False, support=m0.dof_points(sm.mesh.fixed),
                                   E_elem=sm.E, nu_elem=sm.nu)
         r = sc.finger.radius
-        _log(f"reference h_fine {h_fine * 1e3:g} mm at {np.round(q * 1e3, 1).tolist()} mm: {model.n} DOF ...")
+        log.info(f"reference h_fine {h_fine * 1e3:g} mm at {np.round(q * 1e3, 1).tolist()} mm: {model.n} DOF ...")
         states = solve_path_capsule(model, lambda d: Capsule(q - d * n + r * n, -n, r), depths, step=st["step"],
-                                    log=lambda s: _log("  " + s.strip()), label=f"scene {sc.name}",
+                                    log=lambda s: log.info("  " + s.strip()), label=f"scene {sc.name}",
                                     contact=sc.finger.contact)
         P = model.probe_matrix(probes)
         return {"u": np.stack([np.asarray(P @ s.u) for s in states]), "force": np.array([s.force for s in states]),
@@ -198,7 +197,7 @@ def _ref_job(args: tuple) -> tuple[float, float, str | None]:
     try:
         sc = load_scene(scene_file)
         q, n = sc.stroke_at([f])
-        scene_reference(sc, q[0], n[0], h, st, probes, ArrayCache(cache_dir, _log))
+        scene_reference(sc, q[0], n[0], h, st, probes, ArrayCache(cache_dir, log.info))
     except Exception as exc:                    # noqa: BLE001 - reported; the run solves it again and raises
         return h, time.perf_counter() - t, f"{type(exc).__name__}: {exc}"
     return h, time.perf_counter() - t, None
@@ -234,7 +233,7 @@ def _scene_push(sc, rt, st: dict, verts, faces, cache, f: float, depths) -> dict
             "served_force_N": [u.force for u in ups], "served_stiffness_N_per_m": [u.stiffness for u in ups],
             "linear_fine_px": lin, "linear_fine_solve_ms": lin_ms, "reference_levels": levels,
             "level_change_px": change}
-    _log(f"push at {f:g} of the stroke: served {max(served):.2f} px, linear on the reference mesh "
+    log.info(f"push at {f:g} of the stroke: served {max(served):.2f} px, linear on the reference mesh "
          f"{max(lin):.2f} px, last refinement {max(change) if change[0] is not None else float('nan'):.2f} px")
     return push
 
@@ -271,14 +270,14 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     st = _scene_settings(sc, quick, levels)
     depths = np.asarray(st["depths"], float)
     cache_dir = cache_dir or DEFAULT_CACHE_DIR
-    cache = ArrayCache(cache_dir, _log)
+    cache = ArrayCache(cache_dir, log.info)
     os.makedirs(out_dir, exist_ok=True)
-    _log(f"scene {sc.name!r} ({sc.source}), {'quick' if quick else 'full'}: pushes 0-{depths[-1] * 1e3:g} mm "
+    log.info(f"scene {sc.name!r} ({sc.source}), {'quick' if quick else 'full'}: pushes 0-{depths[-1] * 1e3:g} mm "
          f"({sc.use.reason or 'no reason given'}), {sc.finger.contact} contact")
-    rt, what = served_model(sc, cache_dir=cache_dir, log=_log)
-    _log(f"served model: {what}")
+    rt, what = served_model(sc, cache_dir=cache_dir, log=log.info)
+    log.info(f"served model: {what}")
     timing = scene_update_ms(rt, sc, (0.005, depths[len(depths) // 2], depths[-1]), st["n_time"])
-    _log(f"update: CPU median {timing['median']:.3f} ms, p90 {timing['p90']:.3f} ms")
+    log.info(f"update: CPU median {timing['median']:.3f} ms, p90 {timing['p90']:.3f} ms")
     verts = rt.rest_vertices.astype(float)
     faces = np.asarray(rt.faces)
     _solve_references(scene_path, st, verts, cache_dir, jobs)
@@ -288,7 +287,7 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     with open(os.path.join(out_dir, "summary.json"), "w") as fh:
         json.dump(summary, fh, indent=1)
     _plot(out_dir, summary)
-    _log(f"done in {summary['seconds']:.0f} s -> {out_dir}: visible {served.max():.2f} px (target {TARGET_PX}), "
+    log.info(f"done in {summary['seconds']:.0f} s -> {out_dir}: visible {served.max():.2f} px (target {TARGET_PX}), "
          f"reference levels {summary['reference']['converged_px']} px (target {CONVERGED_PX})")
     return summary
 
@@ -313,7 +312,7 @@ def _solve_references(scene_path, st: dict, verts: np.ndarray, cache_dir: str, j
     work = [(str(scene_path), f, h, st, verts, cache_dir) for f in st["fractions"] for h in st["levels"]]
     if parallel(jobs) and len(work) > 1:
         for h, sec, err in run_workers(_ref_job, work, min(jobs, len(work))):
-            _log(f"reference level {h * 1e3:g} mm: {'failed: ' + err if err else 'done'} ({sec:.0f} s)")
+            log.info(f"reference level {h * 1e3:g} mm: {'failed: ' + err if err else 'done'} ({sec:.0f} s)")
 
 
 def _summary(sc, quick: bool, st: dict, what: str, timing: dict, pushes: list[dict], t0: float) -> dict:
@@ -478,7 +477,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--run", help="instead: chart the FEM stiffness and sheet tension along the stroke from "
                                   "this launch output folder (its sim.mcap)")
     args = ap.parse_args(argv)
-    show_progress()             # the worker pool's lines (flexsheet.fem.reference.workers) on stdout
+    show_lines(LIBRARY)         # the library's progress, the worker pool's (flexsheet.fem.reference.workers) included
     if args.run:
         c = compliance_along_stroke(args.run, args.scene, args.out)
         print(json.dumps(c, indent=1)[:3000])

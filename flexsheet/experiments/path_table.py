@@ -29,6 +29,7 @@ Outputs: ``DIR/path_table.json`` + ``path_table.png``: stations (DOF, CPU, Newto
 from __future__ import annotations
 
 import json
+import logging
 import os
 import sys
 import time
@@ -40,16 +41,14 @@ __all__ = ["build_path_table", "table_key", "DEFAULT_STATIONS", "assemble_path_t
 from flexsheet.experiments.fem_scene import scene_update_ms, visible_errors
 from flexsheet.fem.path_snapshots import GRID, REACH
 
+log = logging.getLogger(__name__)
+
 TARGET_MM = 0.7
 DEFAULT_STATIONS = 13          #: the shipped rounded box table's (7 missed by 4.7 mm over the edge)
 #: ``--mesh-check``'s finer level (h_fine, m): the scene FULL run's second level
 CHECK_H_FINE = 0.004
 #: the depths (m) the look-up is timed at, 5 stroke points each
 LOOKUP_DEPTHS = (0.005, 0.02, 0.045)
-
-
-def _log(msg: str) -> None:
-    print(f"[path_table] {msg}", file=sys.stderr, flush=True)
 
 
 def _st() -> dict:
@@ -86,7 +85,7 @@ def _job(args) -> tuple[float, float, str | None]:
 
         sc = load_scene(scene_file)
         rt = SceneModel(sc, cache_dir=cache_dir)
-        _push(sc, f, h_fine, rt.rest_vertices.astype(float), ArrayCache(cache_dir, _log))
+        _push(sc, f, h_fine, rt.rest_vertices.astype(float), ArrayCache(cache_dir, log.info))
         return f, time.perf_counter() - t, None
     except Exception as exc:  # noqa: BLE001 - reported by the parent, which solves it again in-process
         return f, time.perf_counter() - t, f"{type(exc).__name__}: {exc}"
@@ -99,9 +98,9 @@ def _prefetch(scene_file, jobs_list, cache_dir, n_jobs: int) -> None:
         return
     from flexsheet.fem.reference.workers import run_workers
 
-    _log(f"solving {len(jobs_list)} pushes in {n_jobs} worker processes ...")
+    log.info(f"solving {len(jobs_list)} pushes in {n_jobs} worker processes ...")
     for f, sec, err in run_workers(_job, [(scene_file, f, h, cache_dir) for f, h in jobs_list], n_jobs):
-        _log(f"  push at fraction {f:.4g}: {'failed: ' + err if err else 'done'} ({sec:.0f} s wall)")
+        log.info(f"  push at fraction {f:.4g}: {'failed: ' + err if err else 'done'} ({sec:.0f} s wall)")
 
 
 def _linear(rt, sc, q, n, depths) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -181,7 +180,7 @@ def _ship_path_table(cache, key: str, table: dict, fractions, refs) -> dict:
                          f"every depth of the stations at fractions {bad}")
     sp = cache.ship("pathsnap", key, table)
     shipped = {"path": os.path.relpath(sp, os.getcwd()), "MB": os.path.getsize(sp) / 1e6}
-    _log(f"path table shipped: {sp} ({shipped['MB']:.2f} MB)")
+    log.info(f"path table shipped: {sp} ({shipped['MB']:.2f} MB)")
     return shipped
 
 
@@ -210,7 +209,7 @@ def _held_out_pushes(sc, rt, verts, held, cache, holdout, depths) -> list[dict]:
                          "force_N": np.asarray(ref["force"])[:nd].tolist(),
                          "served_force_N": [up.force for up in ups],
                          "depths_over_target_mm": over})
-        _log(f"held out at {h:.4g}: table {max(e_tab):.2f} mm (over the target at {over} mm), linear "
+        log.info(f"held out at {h:.4g}: table {max(e_tab):.2f} mm (over the target at {over} mm), linear "
              f"{max(e_lin):.2f} mm")
     return held_out
 
@@ -226,7 +225,7 @@ def _path_mesh_check(sc, held, verts, cache, fractions, refs, depths) -> dict:
     check = {"fraction": f, "h_fine_m": CHECK_H_FINE, "dofs": int(fine["dofs"]),
              "cpu_seconds": float(fine["seconds"]), "newton_converged": bool(np.all(fine["converged"])),
              "change_mm": ch, "max_change_mm": max(ch)}
-    _log(f"mesh check at {f:.4g}: h_fine {CHECK_H_FINE * 1e3:g} mm moves the visible surface by "
+    log.info(f"mesh check at {f:.4g}: h_fine {CHECK_H_FINE * 1e3:g} mm moves the visible surface by "
          f"{max(ch):.2f} mm at most")
     return check
 
@@ -270,9 +269,9 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
     fractions, holdout = _path_fractions(stations, holdout)
     t0 = time.perf_counter()
     cache_dir = cache_dir or DEFAULT_CACHE_DIR
-    cache = ArrayCache(cache_dir, _log)
+    cache = ArrayCache(cache_dir, log.info)
     sc = load_scene(scene_file)
-    rt = SceneModel(sc, cache_dir=cache_dir, log=_log)
+    rt = SceneModel(sc, cache_dir=cache_dir, log=log.info)
     verts = rt.rest_vertices.astype(float)
     held = rt.held
     todo = [(float(f), GRID["h_fine"]) for f in fractions] + [(float(h), GRID["h_fine"]) for h in holdout]
@@ -287,7 +286,7 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
     lin_ms = scene_update_ms(rt, sc, LOOKUP_DEPTHS, 200)
     rt.attach_path_table(table)
     look = scene_update_ms(rt, sc, LOOKUP_DEPTHS, 200)
-    _log(f"look-up with the table: CPU median {look['median']:.3f} ms (linear alone {lin_ms['median']:.3f} ms)")
+    log.info(f"look-up with the table: CPU median {look['median']:.3f} ms (linear alone {lin_ms['median']:.3f} ms)")
     depths = np.asarray(table["depths"][1:])            # the table's reach (every station converged to it)
     held_out = _held_out_pushes(sc, rt, verts, held, cache, holdout, depths)
     check = _path_mesh_check(sc, held, verts, cache, fractions, refs, depths) if mesh_check else None
@@ -297,7 +296,7 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
         with open(os.path.join(out, "path_table.json"), "w") as fh:
             json.dump(rep, fh, indent=1)
         _plot(out, rep)
-        _log(f"report: {os.path.join(out, 'path_table.json')}")
+        log.info(f"report: {os.path.join(out, 'path_table.json')}")
     return 0
 
 
@@ -351,10 +350,10 @@ def main(argv=None) -> int:  # pragma: no cover - thin CLI for a by-hand run
     ap.add_argument("--ship", action="store_true")
     ap.add_argument("--cache-dir", default=None)
     a = ap.parse_args(argv)
-    from flexsheet.fem.reference.progress import show_progress
     from flexsheet.fem.reference.workers import set_scheduler
+    from flexsheet.runtime.console import LIBRARY, show_lines
 
-    show_progress()             # the worker pool's lines on stdout
+    show_lines(LIBRARY)         # the library's progress, the worker pool's included
     try:
         set_scheduler(a.scheduler)
     except ValueError as exc:

@@ -24,14 +24,16 @@ axis, along the stroke).
 
 from __future__ import annotations
 
+import logging
 import math
 import os
-import sys
 import time
 
 import numpy as np
 
 from flexsheet.experiments.fem_scene import visible_errors
+
+log = logging.getLogger(__name__)
 
 __all__ = ["build_sphere_table", "alpha_path"]
 
@@ -40,10 +42,6 @@ TARGET_MM = 0.7
 #: 4.5 mm table mesh's noise sits on the crater's rim, material that rested 15–28 mm from the push axis, outside
 #: its 15 mm tube; so the levels widen the tube)
 MESH_STUDY_SPECS = ((0.012, 0.006, 0.030, 0.055),)
-
-
-def _log(msg: str) -> None:
-    print(f"[sphere_table] {msg}", file=sys.stderr, flush=True)
 
 
 def _alpha_key(sc, a: float, grid, spec, probes: np.ndarray) -> str:
@@ -63,7 +61,7 @@ def alpha_path(sc, a: float, grid, spec, probes: np.ndarray, cache) -> dict:
     from flexsheet.fem.reference.sphere_build import solve_alpha
 
     z, _, _ = cache.get_or_compute("spherealpha", _alpha_key(sc, a, grid, spec, probes),
-                                   lambda: solve_alpha(sc, a, grid, spec, probes, _log),
+                                   lambda: solve_alpha(sc, a, grid, spec, probes, log.info),
                                    f"sphere push at {a:g} deg on h_fine {spec[1] * 1e3:g} mm")
     return z
 
@@ -80,7 +78,7 @@ def _job(args) -> tuple[float, float, str | None]:
 
         sc = load_scene(scene_file)
         probes = SceneModel(sc, cache_dir=cache_dir).rest_vertices.astype(float)
-        alpha_path(sc, a, DEFAULT_SPHERE_GRID, spec, probes, ArrayCache(cache_dir, _log))
+        alpha_path(sc, a, DEFAULT_SPHERE_GRID, spec, probes, ArrayCache(cache_dir, log.info))
         return a, time.perf_counter() - t, None
     except Exception as exc:  # noqa: BLE001 - reported; the run solves it itself and raises
         return a, time.perf_counter() - t, f"{type(exc).__name__}: {exc}"
@@ -125,11 +123,11 @@ def _solve_missing(scene_file, sc, grid, spec, probes, cache, cache_dir, table, 
     from flexsheet.fem.reference.workers import parallel
 
     if parallel(jobs) and len(todo) > 1:
-        _log(f"{len(todo)} sphere pushes the cache lacks, in {min(jobs, len(todo))} worker processes")
+        log.info(f"{len(todo)} sphere pushes the cache lacks, in {min(jobs, len(todo))} worker processes")
         from flexsheet.fem.reference.workers import run_workers
 
         for a, sec, err in run_workers(_job, [(scene_file, a, cache_dir, s) for a, s in todo], min(jobs, len(todo))):
-            _log(f"sphere push at {a:g} deg: " + (f"done in {sec:.0f} s" if err is None else f"failed ({err})"))
+            log.info(f"sphere push at {a:g} deg: " + (f"done in {sec:.0f} s" if err is None else f"failed ({err})"))
 
 
 def _table_and_paths(sc, fr, grid, spec, probes, cache, key, table, E: float):
@@ -142,7 +140,7 @@ def _table_and_paths(sc, fr, grid, spec, probes, cache, key, table, E: float):
         paths = [alpha_path(sc, a, grid, spec, probes, cache) for a in al]
         table = assemble_table(fr, grid, paths, E)
         cache.save("spheresnap", key, table)
-        _log(f"sphere table assembled: {table['field'].nbytes / 1e6:.0f} MB float32, key {key}")
+        log.info(f"sphere table assembled: {table['field'].nbytes / 1e6:.0f} MB float32, key {key}")
     else:
         paths = [cache.load("spherealpha", _alpha_key(sc, a, grid, spec, probes)) for a in al]
     return table, paths
@@ -172,7 +170,7 @@ def _shipped_report(table, paths, al, key, cache, fr, rt, probes, r: float, out,
                    "packing": "surface field as float16 on every second grid line (2° cells)",
                    "packing_error_mm": err}
         if ship:
-            _log(f"sphere table shipped: {sp} ({shipped['MB']:.1f} MB; packed against the full table: <= {err:.3f} "
+            log.info(f"sphere table shipped: {sp} ({shipped['MB']:.1f} MB; packed against the full table: <= {err:.3f} "
                  "mm on the visible surface); commit it")
         else:
             shipped["note"] = "shipped before this run; its packing error measured again"
@@ -220,7 +218,7 @@ def _held_out_rows(sc, fr, sm, rt, probes, grid, spec, cache, holdout, depths, r
                          "linear_error_mm": e_l, "max_snapshots_error_mm": max(e_s), "max_linear_error_mm": max(e_l),
                          "over_target_from_mm": min(bad) if bad else None, "dofs": int(p["dofs"]),
                          "converged": bool(np.all(p["converged"]))})
-        _log(f"held out {a:g} deg: snapshots {max(e_s):.2f} mm, linear {max(e_l):.2f} mm worst")
+        log.info(f"held out {a:g} deg: snapshots {max(e_s):.2f} mm, linear {max(e_l):.2f} mm worst")
     return held_out
 
 
@@ -282,12 +280,12 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
     al = grid.alphas_deg
     fr = _check_sphere_args(sc, al, alpha, holdout)
     cache_dir = cache_dir or DEFAULT_CACHE_DIR
-    cache = ArrayCache(cache_dir, _log)
-    rt = SceneModel(sc, cache_dir=cache_dir, log=_log)
+    cache = ArrayCache(cache_dir, log.info)
+    rt = SceneModel(sc, cache_dir=cache_dir, log=log.info)
     probes = rt.rest_vertices.astype(float)
     if alpha is not None:
         alpha_path(sc, alpha, grid, spec, probes, cache)
-        _log(f"sphere push at {alpha:g} deg cached in {time.perf_counter() - t0:.0f} s")
+        log.info(f"sphere push at {alpha:g} deg cached in {time.perf_counter() - t0:.0f} s")
         return 0
     key = sphere_table_key(sc, grid, spec)
     table = cache.load("spheresnap", key)
@@ -314,7 +312,7 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
     with open(os.path.join(out, "sphere_table.json"), "w") as fh:
         json.dump(rep, fh, indent=1)
     _plot(out, rep)
-    _log(f"sphere table report -> {out}/sphere_table.json ({time.perf_counter() - t0:.0f} s)")
+    log.info(f"sphere table report -> {out}/sphere_table.json ({time.perf_counter() - t0:.0f} s)")
     return 0
 
 
@@ -407,7 +405,7 @@ def _mesh_check(sc, fr, sm, probes, held, grid, spec, angles, cache) -> list[dic
             lv["vs_table_mesh_mm"] = diff(u[k], u["table"])
             lv["max_noise_mm"] = max(lv["noise_mm"])
             levels.append(lv)
-            _log(f"mesh study at {a:g} deg, {k} (h_fine {x[1] * 1e3:g} mm, tube {x[2] * 1e3:g} mm, {lv['dofs']} DOF): "
+            log.info(f"mesh study at {a:g} deg, {k} (h_fine {x[1] * 1e3:g} mm, tube {x[2] * 1e3:g} mm, {lv['dofs']} DOF): "
                  f"noise {lv['max_noise_mm']:.2f} mm, table against it {max(lv['snapshots_vs_this_mm']):.2f} mm")
         out.append({"alpha_deg": a, "depths_mm": (depths * 1e3).tolist(), "levels": levels,
                     "what": "largest distance over the visible rendered vertices, mm: noise = the same push on the "

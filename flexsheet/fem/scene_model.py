@@ -219,7 +219,7 @@ class SceneModel(CondensedSurface):
             self.mesh = TetMesh(z["points"], z["tets"], z["faces"], z["fixed"], spec,
                                 center=np.asarray(scene.center, float).copy())
             self.E_elem, self.nu_elem = np.asarray(z["E"]), np.asarray(z["nu"])
-            # single precision per update: displacements within 0.05 µm of float64 (tests/unit/fem/test_fem_scene.py)
+            # single precision per update: displacements within 0.05 µm of float64 (tests/unit/fem/test_scene_model.py)
             self.solver = CapacitanceSolver.from_arrays(z, dtype=np.float32)
             monitor = z["monitor"]
         except (KeyError, ValueError) as exc:

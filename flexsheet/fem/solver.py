@@ -296,7 +296,7 @@ class CapacitanceSolver:
         or a ``dtype`` other than float64/float32. ``dtype`` float32 keeps ``G_cc`` and ``G_co`` in single
         precision and runs the per-update Cholesky in it (LAPACK ``spotrf``/``spotrs``): half the memory and
         memory traffic. The capacitance blocks are well conditioned (cond(G_aa) ≈ 200 on the shipped scenes),
-        so the displacements move by < 0.05 µm at a 50 mm push (tests/unit/fem/test_fem_scene.py checks < 1 µm
+        so the displacements move by < 0.05 µm at a 50 mm push (tests/unit/fem/test_scene_model.py checks < 1 µm
         against a float64 dense solve); force and stiffness are summed in float64."""
         dtype = np.dtype(dtype)
         if dtype not in (np.dtype(np.float64), np.dtype(np.float32)):

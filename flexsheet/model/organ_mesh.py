@@ -2,7 +2,7 @@
 
 ``launch/scenes/kidney.obj`` is this module's output, shipped in the repository (≈ 150 kB) so that no run
 depends on the generator; ``python -m flexsheet.model.organ_mesh launch/scenes/kidney.obj`` writes it again,
-identically (tests/unit/model/test_scenes.py checks that the shipped file is what this code makes).
+identically (tests/unit/model/test_organ_mesh.py checks that the shipped file is what this code makes).
 
 Construction (organ frame: +x the anterior face, toward the user; +y the long axis; +z the lateral border):
 

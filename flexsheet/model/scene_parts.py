@@ -190,7 +190,7 @@ class Support(BaseModel):
 
 class Finger(BaseModel):
     """The user's fingertip as the FEM and the world see it: a sphere of ``radius`` m, and how the object's
-    surface meets it in the nonlinear reference (``contact``, :data:`flexsheet.fem.hyperelastic.CONTACT_LAWS`):
+    surface meets it in the nonlinear reference (``contact``, :data:`flexsheet.fem.reference.capsule_contact.CONTACT_LAWS`):
     ``frictionless`` (the default: the surface slides freely over the fingertip) or ``sticking`` (a fingertip
     that does not slip on the skin: a surface point that touched it moves with it). A modelling choice per
     object: the rounded box's push beside its edge has a sliding mode under a frictionless fingertip that no

@@ -109,7 +109,7 @@ def table_grid(table: IndentTable, depth: float, push_u: float, push_v: float, u
                half_span: float) -> np.ndarray:
     """The table's shape on the tensor grid u (nu,) × v (nv,) m → (nu, nv) m for the measured clamp half span
     ``half_span`` m: :meth:`flexsheet.model.sheet_table.IndentTable.evaluate_grid` (equal to the point-wise
-    :meth:`~flexsheet.model.sheet_table.IndentTable.evaluate` to rounding, ``tests/unit/rendering/test_render_live_sheet.py``).
+    :meth:`~flexsheet.model.sheet_table.IndentTable.evaluate` to rounding, ``tests/unit/model/test_sheet_model.py``).
     The fit's per-frame cost is this."""
     return table.evaluate_grid(depth, push_u, push_v, u, v, half_span)
 

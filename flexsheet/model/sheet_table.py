@@ -7,7 +7,7 @@ symmetry), cached on disk, and interpolated (:meth:`IndentTable.shape`): between
 blending the neighbouring solutions after a piecewise-linear remapping of each axis that moves their contact
 to the requested one while keeping the edges fixed (so the peak stays at the finger and the clamped edges
 stay at zero), and between depths by blending the two neighbouring depths' solutions, each scaled to the
-requested depth. ``tests/unit/twin/test_twin_sheet.py`` checks the interpolation against direct solves.
+requested depth. ``tests/unit/model/test_sheet_table.py`` checks the interpolation against direct solves.
 
 Units: m, N; frames: the sheet's (u, v)."""
 
@@ -241,7 +241,7 @@ class IndentTable:
         ``half_span`` m (default the table's). The same interpolation (contact remapping per axis, bilinear in
         the FEM nodes, blend of the neighbouring depths and contacts), done one axis after the other: equal to
         :meth:`evaluate` at (u[:, None], v[None, :]) to rounding (≲ 1e-16 m) and ~20× faster on a fit grid
-        (``tests/unit/rendering/test_render_live_sheet.py``). Raises ``ValueError`` when ``u`` or ``v`` is not 1-D."""
+        (``tests/unit/model/test_sheet_model.py``). Raises ``ValueError`` when ``u`` or ``v`` is not 1-D."""
         a_t, b = self.physics.half_span, self.physics.half_width
         u, v = np.asarray(u, float), np.asarray(v, float)
         if u.ndim != 1 or v.ndim != 1:

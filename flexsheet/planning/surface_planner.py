@@ -24,7 +24,7 @@ Paper §V-A and Fig. 7, generalised:
 * **Limits and safety**: the pose passes :class:`flexsheet.planning.limits.RateLimiter`; clamp points are
   checked by :class:`flexsheet.planning.limits.ReachModel`.
 
-Defined behaviour where methods fail (each has a test in ``tests/unit/planning/test_planner_stroke.py``):
+Defined behaviour where methods fail (each has a test in ``tests/unit/planning/test_surface_planner.py``):
 
 ==============================  =========================================================================
 fingertip on the skeleton       (cylinder axis, sphere centre): the last normal is held → ``hold:singular``

@@ -15,7 +15,7 @@ A. Three sheet models give C:
 * ``fine``:           the pushed sheet's shape (beyond the paper; the renderer's is the nominal FEM fit of
                       :mod:`flexsheet.model.sheet_model`), C found by Newton's method on the line V–A.
 
-Stability (each case is defined and tested, tests/unit/rendering/test_render_correction.py):
+Stability (each case is defined and tested, tests/unit/rendering/test_correction.py):
 
 * grazing rays: when |(V − A)·n| < ``min_cos`` |V − A| (eq. 2's denominator) or |(C − P)·n_o| <
   ``min_cos`` |C − P| (eq. 4's), the vertex is left uncorrected (output = input) and flagged invalid;

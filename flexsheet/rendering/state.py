@@ -40,7 +40,7 @@ from flexsheet.model.sheet_model import (
     sheet_model_for,
 )
 from flexsheet.rendering.correction import MODELS, choose_sheet_model, predict_model_errors
-from flexsheet.rendering.stereo_renderer import cylinder_mesh, scaled_projector, vertex_normals
+from flexsheet.rendering.stereo_renderer import cylinder_draw_mesh, scaled_projector, vertex_normals
 
 __all__ = ["RendererState", "ErrorTable", "pick_model", "check_sheet", "silhouette_probes", "AUTO_MODELS",
            "RenderGeometry", "load_geometry", "build_table"]
@@ -164,7 +164,7 @@ class RendererState:
         self.build = bool(build)
         self.on_missing = on_missing
         self._lock = threading.Lock()
-        v, f = cylinder_mesh() if mesh is None else (np.asarray(mesh[0], np.float32), np.asarray(mesh[1], np.int32))
+        v, f = cylinder_draw_mesh() if mesh is None else (np.asarray(mesh[0], np.float32), np.asarray(mesh[1], np.int32))
         self._mesh = (v, f, vertex_normals(v, f))
         self._mesh_dirty = True
         self._mesh_stamp = 0.0

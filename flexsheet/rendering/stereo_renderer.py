@@ -25,15 +25,15 @@ from flexsheet.model.scene_surface import cylinder_surface
 from flexsheet.model.sheet import SheetSurface
 from flexsheet.rendering.correction import DEFAULT_MIN_COS, fan_triangles
 
-__all__ = ["StereoRenderer", "cylinder_mesh", "scaled_projector", "vertex_normals", "MODE_IDS"]
+__all__ = ["StereoRenderer", "cylinder_draw_mesh", "scaled_projector", "vertex_normals", "MODE_IDS"]
 
 SHADER_DIR = Path(__file__).with_name("shaders")
 MODE_IDS = {"none": 0, "flat": 1, "four_triangle": 2, "fine": 3}
 MAX_SHADER_MODES = 64
 
 
-def cylinder_mesh(radius: float = geometry.CYLINDER_RADIUS, length: float = geometry.CYLINDER_LENGTH,
-                  center=geometry.CYLINDER_CENTER, n_around: int = 96, n_along: int = 48):
+def cylinder_draw_mesh(radius: float = geometry.CYLINDER_RADIUS, length: float = geometry.CYLINDER_LENGTH,
+                       center=geometry.CYLINDER_CENTER, n_around: int = 96, n_along: int = 48):
     """Closed cylinder with axis along +y through ``center`` (3,) m, finely tessellated along the axis
     (per-vertex correction needs short edges on a curved sheet): :func:`flexsheet.model.scene_surface.cylinder_surface`
     (the mesh of the cylinder scene). Returns (vertices (N, 3) float32 m, faces (M, 3) int32, wound

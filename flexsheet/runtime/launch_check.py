@@ -353,7 +353,7 @@ class _Checker:
 
 def _one_line(text: str) -> str:
     """``text`` with every non-printable character escaped as Python writes it (a param key or value may hold a
-    newline: ``params: {"\\n": null}``, found by tests/unit/runtime/test_fuzz_launch.py), so one problem is one line."""
+    newline: ``params: {"\\n": null}``, found by tests/unit/runtime/test_launch_check.py), so one problem is one line."""
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 

@@ -148,7 +148,7 @@ def _grid_faces(nu: int, nv: int) -> np.ndarray:
 # (protobuf.dev/programming-guides/encoding: "Concatenation"/"Repeated elements"). So the SDK encodes every
 # scalar part of an entity (timestamp, ids, colours, poses) and numpy writes only the bulk arrays below: the
 # repeated ``Point3 points`` (one length-delimited record of 3 doubles per point) and the packed
-# ``fixed32 indices``. tests/unit/viz/test_viz_layout.py decodes the result against the SDK's schema.
+# ``fixed32 indices``. tests/unit/viz/test_scene_builder.py decodes the result against the SDK's schema.
 _LEN = 2  # wire type of length-delimited fields (submessages, bytes, packed arrays)
 _POINT3_RECORD = np.dtype([("tag", "u1"), ("len", "u1"), ("tx", "u1"), ("x", "<f8"), ("ty", "u1"), ("y", "<f8"),
                            ("tz", "u1"), ("z", "<f8")])  # 29 bytes, unaligned: exactly the wire bytes

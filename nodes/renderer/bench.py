@@ -29,7 +29,7 @@ import time
 from flexsheet.benches.render import bench_sheets, sheet_update, time_models
 from flexsheet.model.projector import Projector
 from flexsheet.model.sheet_model import sheet_model_for
-from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_mesh
+from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh
 
 log = logging.getLogger(__name__)
 
@@ -47,7 +47,7 @@ def window_pacing(seconds: float = 5.0, *, stereo: str = "frame_sequential", ref
     out = WindowOutput(Projector.default(width, height), stereo=stereo, refresh_hz=refresh_hz, fullscreen=False)
     try:
         r = out.renderer
-        v, f = cylinder_mesh()
+        v, f = cylinder_draw_mesh()
         r.set_mesh(v, f)
         sheets = bench_sheets()
         other = bench_sheets(depth=0.02)
@@ -190,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as exc:
             ap.error(str(exc))
     else:
-        v, f = cylinder_mesh()
+        v, f = cylinder_draw_mesh()
     r = StereoRenderer(Projector.default(args.width, args.height))
     r.set_mesh(v, f)
     model = sheet_model_for()

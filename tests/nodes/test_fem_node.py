@@ -71,7 +71,7 @@ def test_node_serves_cached_nonlinear_snapshots_and_says_so(tmp_path):
     """A snapshot table in the cache (under the node's key) is attached at start-up: pushes inside it are
     answered by the snapshots (method "snapshots"), the diagnostics message says so; a push outside the table's
     azimuth range falls back to the linear model."""
-    from test_fem_hyperelastic import _analytic_table
+    from test_snapshots import _analytic_table
 
     from flexsheet.fem.cache import ArrayCache
     from flexsheet.fem.material import Material
@@ -211,10 +211,10 @@ def test_node_on_the_default_scene_serves_the_shipped_nonlinear_snapshots():
 
 def test_node_on_the_sphere_serves_its_nonlinear_table_when_cached(tmp_path):
     """A sphere table under the key the node looks up (here the closed-form dent of
-    tests/unit/fem/test_fem_sphere_table.py, 0-60° every 10°, 0-10 mm): the node on sphere.yaml attaches it, says so, and
+    tests/unit/fem/test_sphere_snapshots.py, 0-60° every 10°, 0-10 mm): the node on sphere.yaml attaches it, says so, and
     answers a push at 35° up the crown with it — the force is the table's bilinear value at the measured depth,
     the vertex under the finger moved by about the depth; a push beyond the table's 60° is the linear model's."""
-    from test_fem_sphere_table import _table
+    from test_sphere_snapshots import _table
 
     from flexsheet.fem.cache import ArrayCache
     from flexsheet.fem.sphere_snapshots import SphereGrid, sphere_frame, sphere_table_key
@@ -258,7 +258,8 @@ def test_node_on_a_scene_without_symmetry_serves_its_path_table_when_cached(tmp_
     says so, and its answer on the stroke is the model's table answer (linear solve + correction, force scaled by
     the table's ratio), not the linear one."""
     import yaml
-    from test_fem_path_table import _scene, _table
+    from test_path_snapshots import _table
+    from unit.conftest import _scene
 
     from flexsheet.fem.cache import ArrayCache
     from flexsheet.fem.mesh import MeshSpec

@@ -19,7 +19,7 @@ import struct
 import msgpack
 import numpy as np
 import pytest
-from test_fuzz_codec import sample  # noqa: E402 - the contract-driven sample builder (tests/ is on sys.path)
+from test_codec import sample  # noqa: E402 - the contract-driven sample builder (tests/ is on sys.path)
 
 from flexsheet.runtime.codec import encode
 from flexsheet.runtime.testing import NodeHarness

@@ -18,7 +18,7 @@ from flexsheet.model import geometry
 from flexsheet.model.projector import Projector
 from flexsheet.model.sheet import SheetSurface
 from flexsheet.rendering.pacing import LEFT, RIGHT, FramePacer, frame_layout
-from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_mesh
+from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh
 from flexsheet.runtime.testing import NodeHarness
 from messages import topics
 from nodes.renderer.xvfb import XvfbError, grab, xvfb
@@ -34,7 +34,7 @@ def _sheet():
 
 
 def _draw(r):
-    r.set_mesh(*cylinder_mesh(n_around=48, n_along=16))
+    r.set_mesh(*cylinder_draw_mesh(n_around=48, n_along=16))
     r.set_model("flat", _sheet())          # a pre-distorted, shaded image: not a trivial picture
     r.render_pair()
 

@@ -89,7 +89,7 @@ def _stereo(i: int) -> StereoFrame:
 
 
 def test_export_opens_with_mcap_reader_and_validates_against_stored_schema(tmp_path):
-    from test_runtime_codec import tip
+    from test_codec import tip
 
     from flexsheet.runtime.demo import TalkerNode  # noqa: F401  (the talker's message type is Fingertip)
 
@@ -106,7 +106,7 @@ def test_export_opens_with_mcap_reader_and_validates_against_stored_schema(tmp_p
         n = 0
         for schema, channel, message in reader.iter_messages():
             if channel.topic.startswith("/viz/") or channel.message_encoding == "protobuf":
-                continue   # the Foxglove scene channels: tests/unit/viz/test_viz_bag.py decodes them
+                continue   # the Foxglove scene channels: tests/unit/viz/test_foxglove_bag.py decodes them
             assert channel.message_encoding == "json" and schema.encoding == "jsonschema"
             data = json.loads(message.data)
             jsonschema.validate(data, json.loads(schema.data))

@@ -27,7 +27,7 @@ class DisplayEstimator:
         from flexsheet.arm.kinematics import ArmKinematics
         from flexsheet.model.sheet_model import SheetConfig, sheet_model_for
         from flexsheet.rendering.state import ErrorTable, silhouette_probes
-        from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_mesh
+        from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh
 
         if not isinstance(cal, CalibratedDisplay):
             raise TypeError(f"DisplayEstimator takes a CalibratedDisplay, got {type(cal).__name__}")
@@ -38,7 +38,7 @@ class DisplayEstimator:
         self.kin = {s: ArmKinematics(s, cal.bases[s]) for s in ("left", "right")}
         self.renderer = StereoRenderer(cal.projector, distortion=cal.distortion, eye=cal.eye, ipd=cal.ipd,
                                        samples=samples, shading=False)
-        v, f = cylinder_mesh()
+        v, f = cylinder_draw_mesh()
         self.renderer.set_mesh(v, f)
         home = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], clamp_half_span(STRETCH))
         self.table = ErrorTable.build(silhouette_probes(v), eye=cal.eye, projector=cal.projector.position,

@@ -19,7 +19,7 @@ log = logging.getLogger(__name__)
 
 class LivePath:
     """The renderer node's pushed-sheet correction measured on the true sheet without GL (``live_path`` of the
-    summary; ``tests/unit/rendering/test_render_live_sheet.py``).
+    summary; ``tests/unit/experiments/test_correction.py``).
 
     Renderer side, as ``RendererNode.setup`` builds it: the sheet model of
     :func:`flexsheet.model.sheet_model.sheet_model_for` ``config`` (or ``sheet_model``), a
@@ -36,13 +36,13 @@ class LivePath:
                  projector=geometry.PROJECTOR) -> None:
         from flexsheet.model.sheet_model import SheetConfig, sheet_model_for
         from flexsheet.rendering.state import ErrorTable, RendererState, silhouette_probes
-        from flexsheet.rendering.stereo_renderer import cylinder_mesh
+        from flexsheet.rendering.stereo_renderer import cylinder_draw_mesh
 
         self.config = config or SheetConfig()
         self.eye, self.projector = np.asarray(eye, float), np.asarray(projector, float)
         self.stretch = float(stretch)
         model = sheet_model if sheet_model is not None else sheet_model_for(self.config)
-        v, f = cylinder_mesh()
+        v, f = cylinder_draw_mesh()
         self.probes = silhouette_probes(v)
         self.clamps = clamp_poses(*HOME_POSE, self.stretch)
         self.table = ErrorTable.at_home(self.probes, eye=self.eye, projector=self.projector,

@@ -18,11 +18,11 @@ class Measurer:
     it up to pixel sampling). ``pixel`` m per camera pixel on the screen."""
 
     def __init__(self, pixel: float = 0.00035) -> None:
-        from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_mesh
+        from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh
 
         self.cam = MeasurementCamera(pixel=pixel, extent=(0.26, 0.22))
         r = StereoRenderer(samples=4, shading=False)
-        v, f = cylinder_mesh()
+        v, f = cylinder_draw_mesh()
         r.set_mesh(v, f)
         home = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
         with r.ctx:

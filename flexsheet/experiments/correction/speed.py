@@ -15,7 +15,7 @@ def model_speed(sheet_model=None, repeats: int = 10) -> dict:
     64-term nominal FEM fit; plus the GL renderer's name."""
     from flexsheet.benches.render import time_models
     from flexsheet.model.sheet import Membrane
-    from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_mesh
+    from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh
 
     a = clamp_half_span(STRETCH)
     home = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], a)
@@ -23,7 +23,7 @@ def model_speed(sheet_model=None, repeats: int = 10) -> dict:
     series = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], a,
                           membrane=Membrane(a, 0.12, 0.0, 0.0, 0.03, modes=16))
     rt = StereoRenderer()
-    v, f = cylinder_mesh()
+    v, f = cylinder_draw_mesh()
     rt.set_mesh(v, f)
     t = time_models(rt, repeats, sheets={"none": home, "flat": tilt, "four_triangle": series, "fine": series})
     out = {m: d["median_ms"] for m, d in t.items()}

@@ -85,7 +85,6 @@ from flexsheet.fem.choose import MODEL_TABLE_PATH
 from flexsheet.fem.material import Material
 from flexsheet.fem.reference.capsule_contact import CONTACT_LAWS, DEFAULT_CONTACT
 from flexsheet.fem.reference.node_table import build_node_table, check_azimuth
-from flexsheet.fem.reference.progress import show_progress
 from flexsheet.fem.reference.settings import DEFAULT_MATERIAL, settings_for
 from flexsheet.fem.reference.workers import default_jobs, set_scheduler
 from flexsheet.fem.snapshots import DEFAULT_GRID
@@ -222,10 +221,9 @@ def _add_scene_args(p: argparse.ArgumentParser) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the experiment; returns 0. See the module docstring for the outputs. Progress lines go to stdout
-    (:func:`flexsheet.fem.reference.progress.show_progress`)."""
+    """Run the experiment; returns 0. See the module docstring for the outputs. Progress goes to the modules'
+    loggers at INFO (``flexsheet experiment fem`` shows them: :func:`flexsheet.runtime.console.show_lines`)."""
     args = _parser().parse_args(argv)
-    show_progress()
     try:
         set_scheduler(args.scheduler)
     except ValueError as exc:

@@ -19,7 +19,7 @@ def planned_solves(st: Settings, study: str = "full") -> list[Solve]:
     :func:`mirror_study` (its stability check reads the last two levels), :func:`penalty_study`,
     :func:`skin_study`, :func:`validation_set`, :func:`snapshot_source`, :func:`snapshot_mesh_study` (the skin
     study's meshes) and :func:`holdout_study`; a path may be listed twice. A run after :func:`prefetch` of this
-    list solves nothing itself (tests/unit/fem/test_fem_experiment.py checks the quick run's log). ``ValueError`` on
+    list solves nothing itself (tests/unit/experiments/fem/test_runs.py checks the quick run's log). ``ValueError`` on
     another ``study``."""
     if study not in ("full", "mirror", "holdout", "fold", "material"):
         raise ValueError(f"study must be 'full', 'mirror', 'holdout', 'fold' or 'material', got {study!r}")

@@ -1,8 +1,8 @@
 """The cylinder's cached hyperelastic reference pushes: :func:`reference_path` (the loading path) and
 :func:`stable_path` (its stable branch where a push is bistable), their cache keys (:func:`reference_key`,
 :func:`stable_key`), the per-depth arrays cached, and their states for a snapshot table (:func:`path_states`,
-:func:`snapshot_table`). Progress goes to this module's logger (:func:`flexsheet.fem.reference.progress.show_progress`
-prints it on the command line and in the worker processes of :mod:`flexsheet.fem.reference.workers`)."""
+:func:`snapshot_table`). Progress goes to this module's logger at INFO (shown by the command line and, prefixed,
+in the worker processes of :mod:`flexsheet.fem.reference.workers`: :func:`flexsheet.runtime.console.show_lines`)."""
 
 from __future__ import annotations
 

@@ -24,7 +24,7 @@ from flexsheet.fem.reference.paths import (
     stable_key,
     stable_path,
 )
-from flexsheet.fem.reference.progress import show_progress
+from flexsheet.runtime.console import LIBRARY, show_lines
 
 log = logging.getLogger(__name__)
 
@@ -94,7 +94,8 @@ def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache
 
 def _solver_init(name=None) -> None:
     """Worker setup, once per worker process (:func:`_setup_plugin`): the progress lines printed with the prefix
-    "[solver N] " (:func:`flexsheet.fem.reference.progress.show_progress`; N the worker's name); one BLAS and OpenMP thread (the
+    "[solver N] " (:func:`flexsheet.runtime.console.show_lines` of the library's loggers; N the worker's name); one
+    BLAS and OpenMP thread (the
     nanny starts workers with ``OMP_NUM_THREADS=1``; CHOLMOD's libraries load under that limit); SIGINT
     ignored and tied to its parent, dying with it even on ``kill -9``
     (:func:`flexsheet.runtime.background.lower_priority`, niceness unchanged)."""
@@ -109,7 +110,7 @@ def _solver_init(name=None) -> None:
     lower_priority(0, idle=False)
     name = os.getpid() if name is None else name
     name = name + 1 if isinstance(name, int) and name < 1000 else name       # a local cluster's are 0 .. n-1
-    show_progress(f"[solver {name}] ")
+    show_lines(LIBRARY, prefix=f"[solver {name}] ")
 
 
 def _solve_one(args: tuple) -> tuple[int, float, str | None]:

@@ -1,6 +1,6 @@
 #version 330 core
 // Per-vertex image correction (Furukawa et al. §III-C, eqs 1-6) and projection into the projector image.
-// Mirrors flexsheet/rendering/correction.py exactly (same validity rules); tests/test_render_gl.py checks that
+// Mirrors flexsheet/rendering/correction.py exactly (same validity rules); tests/unit/rendering/test_stereo_renderer.py checks that
 // both agree within 1e-6 m through transform feedback. Units m, display frame.
 
 in vec3 in_pos;

@@ -1,7 +1,8 @@
 """The run report a researcher reads (flexsheet.experiments.report): report.md parsed back from a synthetic
 bag. One headline per Table I row (the felt Δθ) with the paper's figure, the target, the target's source and
 the verdict; latency rows labelled modelled or measured; one delay figure; the planner's stiffness_scale;
-a run cut inside a segment gets no verdict; charts with JSON that carry titles, units, targets, verdicts."""
+a run cut inside a segment gets no verdict; charts with JSON that carry titles, units, targets, verdicts; the twin
+the run used and both Δd conventions in summary.json."""
 
 from __future__ import annotations
 
@@ -11,9 +12,10 @@ import re
 
 import numpy as np
 import pytest
+from test_report_analysis import _write_bag
 
 from flexsheet.experiments.report import main
-from flexsheet.experiments.report_verdicts import NO_TARGET, PARTIAL, digits, headline, judge
+from flexsheet.experiments.report_verdicts import PARTIAL
 from flexsheet.experiments.table1 import PAPER_TABLE1
 from flexsheet.model import geometry
 from flexsheet.model.shapes import paper_cylinder
@@ -177,64 +179,6 @@ def test_a_complete_segment_keeps_its_verdict_when_a_later_one_is_cut(tmp_path):
     assert s["headline"]["overall"] == PARTIAL and "segment 30 s" in s["run"]["note"]
 
 
-def test_the_delay_is_the_chains_figure():
-    """The one delay figure is the latency chain's exposure → sheet at its pose; the fitted lag is named as the
-    prediction check, with why the two differ."""
-    from flexsheet.experiments.report_text import format_text
-
-    s = {"latency_ms": {"chain": {"exposure_to_sheet_at_pose": {"median": 14.33, "p99": 29.29, "n": 838},
-                                  "exposure_to_arm_command": {"median": 9.19, "p99": 9.19, "n": 1424}},
-                        "sheet_at_pose_reached": 838 / 1424,
-                        "basis": {"exposure_to_sheet_at_pose": {"basis": "modelled"}}},
-         "delay": {"segment": "10", "horizon_ms": 25.0, "residual_lag_ms": -1.0, "exposure_to_sheet_ms": 24.0,
-                   "angle_at_best_deg": 0.114, "stroke_speed_mm_per_s": 6.2}}
-    text = format_text(s)
-    delay = [li for li in text.splitlines() if li.startswith("The delay:")]
-    assert len(delay) == 1 and "median 14.3 ms (p99 29.3 ms, modelled" in delay[0] and "838 of 1424" in delay[0]
-    check = next(li for li in text.splitlines() if li.startswith("Not a second delay"))
-    assert "-1.0 ms beyond the prediction's 25.0 ms lead" in check and "horizon of 24.0 ms" in check
-    assert "16 ms of travel" in check                                       # 0.1 mm at 6.2 mm/s
-    assert "Delay exposure -> sheet" not in text
-
-
-def test_more_digits_where_figure_and_target_round_alike():
-    assert digits(0.11312, 0.1125) == 4 and digits(0.1128, 0.1125) == 4 and digits(0.118, 0.1125) == 3
-    assert digits(0.1125, 0.1125) == 3 and digits(0.11250001, 0.1125) == 6      # capped
-    from flexsheet.experiments.report_text import format_text
-
-    s = {"table1": {"felt": {"30": {"dtheta_mean_deg": 0.11312, "dtheta_std_deg": 0.09, "n": 1417}},
-                    "targets": {"felt": {"30": 0.1125}}, "verdicts": {"felt.30": "MISSED"}},
-         "segments": {"30": {"partial": False, "expected_n": 1440, "coverage": 1.0}}, "latency_ms": {}}
-    judge(s)
-    line = next(li for li in format_text(s).splitlines() if li.startswith("30 s"))
-    assert "0.1131" in line and "0.1125" in line and "MISSED" in line and "+0.6 %" in line, line
-
-
-def test_targets_belong_to_the_paper_cylinder_and_the_chart_clips_the_spread(tmp_path):
-    """Another scene (its verdicts empty): no paper row, no target, verdict "no target"; the chart draws this
-    scene's rows only and the spread of a row whose s.d. exceeds its mean stops at 0."""
-    from flexsheet.experiments.report_charts import latency_chart, table1_chart
-
-    felt = {"dtheta_mean_deg": 0.6, "dtheta_std_deg": 0.9, "dd_mean_mm": 1.2, "dd_std_mm": 2.0, "n": 400}
-    s = {"scene": {"name": "organ"}, "table1": {"felt": {"10": felt}, "targets": {}, "verdicts": {}},
-         "segments": {"10": {"partial": False}}, "run": {"partial": False},
-         "latency_ms": {"chain": {"exposure_to_arm_command": {"median": 15.5, "p99": 16.0, "n": 10}}}}
-    judge(s)
-    r = s["headline"]["rows"]["10"]
-    assert r["verdict"] == NO_TARGET and r["published_deg"] is None and r["target_deg"] is None
-    assert "not this scene" in r["target_source"] and s["headline"]["overall"] == NO_TARGET
-    data = table1_chart(s, tmp_path / "table1.png")
-    row = data["rows"]["10"]
-    assert row["dtheta_spread_deg"] == (0.0, 1.5) and row["dd_spread_mm"] == (0.0, pytest.approx(3.2))
-    assert row["published_dd_mm"] is None and "organ" in data["title"] and data["units"]["dd"] == "mm"
-    assert (tmp_path / "table1.png").stat().st_size > 5000
-    assert json.loads((tmp_path / "table1.json").read_text())["overall"] == NO_TARGET
-    assert s["latency_ms"]["targets"]["exposure_to_arm_command"]["verdict"] == "MISSED"    # 15.5 > 15 ms
-    lat = latency_chart(s, tmp_path / "latency.png")
-    assert lat["unit"] == "ms" and lat["rows"]["exposure_to_arm_command"]["target_ms"] == 15.0
-    assert (tmp_path / "latency.png").stat().st_size > 5000
-
-
 def test_charts_carry_title_units_target_and_verdict(tmp_path):
     _report(tmp_path, [("stroke", 10.0)])
     t1 = json.loads((tmp_path / "table1.json").read_text())
@@ -250,28 +194,29 @@ def test_charts_carry_title_units_target_and_verdict(tmp_path):
         assert f in (tmp_path / "report.md").read_text()
 
 
-def test_headline_of_an_empty_summary_has_no_rows():
-    assert headline({}) == {"metric": headline({})["metric"], "target_source": "paper Table I ÷ 2", "rows": {},
-                            "overall": NO_TARGET}
+def test_report_records_the_twin_and_both_dd_conventions(tmp_path):
+    """summary.json has Table I's Δθ headline with Δd on R and in the paper's 2R convention, and the twin the run
+    used (a launch file's top-level ``twin:``, else the world node's ``twin`` param)."""
 
+    from flexsheet.experiments.report import main, twin_settings
+    from flexsheet.experiments.table1 import paper_dd_ratio
+    from flexsheet.runtime.launch import load_launch
 
-def test_segments_count_a_paused_stroke_once_and_a_cut_one_as_partial():
-    """stroke_segments on a truth at 100 Hz: a 10 s stroke paused for 5 s midway is one pass whose moved time
-    excludes the pause; a 30 s stroke the bag ends in is partial, with its share of the moving time."""
-    from types import SimpleNamespace as NS
-
-    from flexsheet.experiments.report_analysis import stroke_segments
-
-    def truth(t, seg, mt, phase):
-        return (t, NS(header=NS(stamp=t), segment=seg, mode="stroke", moving_time=mt, phase=phase))
-
-    ts = np.arange(0.0, 30.0, 0.01)
-    tr = [truth(t, 0, 10.0, "approach" if t < 1 else "idle" if t < 2 else "paused" if 6 <= t < 11
-                else "stroke" if t < 17 else "idle") for t in ts if t < 18]
-    tr += [truth(t, 1, 30.0, "approach" if t < 19 else "idle" if t < 20 else "stroke") for t in ts if t >= 18]
-    tips = [(t, NS(exposure_stamp=t)) for t in np.arange(0.0, 30.0, 1 / 48)]
-    seg, run = stroke_segments(tr, tips)
-    assert seg["10"]["passes"] == 1 and seg["10"]["moved_s"] == pytest.approx(10.0, abs=0.05)
-    assert not seg["10"]["partial"] and seg["10"]["expected_n"] == 480
-    assert seg["30"]["partial"] and seg["30"]["coverage"] == pytest.approx(10.0 / 30.0, abs=0.01)
-    assert run["partial"] and "segment 30 s" in run["note"] and "33 %" in run["note"]
+    _write_bag(tmp_path / "run.mcap")
+    lf_path = tmp_path / "l.yaml"
+    lf_path.write_text("name: t\nnodes:\n  world:\n    type: world\n    params: {twin: {realism: ideal, truth_seed: 2}}\n")
+    assert main(str(tmp_path), load_launch(lf_path)) == 0
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert s["twin"] == {"realism": "ideal", "truth_seed": 2, "source": "world node params"}
+    row = s["10"]
+    assert row["dtheta_mean_deg"] == pytest.approx(math.degrees(LAG), abs=1e-4)
+    assert row["dd_2r_mean_mm"] == pytest.approx(2e3 * R * LAG, abs=1e-4)           # the paper's convention
+    assert row["dd_mean_mm"] == pytest.approx(2e3 * R * math.sin(LAG / 2), abs=1e-4)  # ours: the chord on R
+    assert paper_dd_ratio("10") == pytest.approx(2e3 * R, rel=0.01)                 # why: the paper's Δd/Δθ = 2R
+    assert "2R" in s["dd_convention"] and "2R" in (tmp_path / "report.md").read_text()
+    top_path = tmp_path / "top.yaml"
+    top_path.write_text("name: t\ntwin: {realism: realistic, truth_seed: 5, registration: false}\n"
+                        "nodes:\n  world:\n    type: world\n    params: {twin: {realism: ideal, truth_seed: 2}}\n")
+    assert twin_settings(load_launch(top_path)) == {"realism": "realistic", "truth_seed": 5,
+                                                    "source": "launch file twin section"}
+    assert twin_settings(None)["source"].startswith("world node defaults")

@@ -1,4 +1,5 @@
-"""What the finger feels against what the object asks: the true sheet's force over the object's, from a bag."""
+"""What the finger feels against what the object asks (flexsheet.experiments.report_softness): the true sheet's
+force over the object's, from a bag."""
 
 import numpy as np
 import pytest

@@ -1,0 +1,151 @@
+"""RV-1A kinematics (flexsheet.arm.kinematics): FK/IK round trip, reachability of the paper's sheet poses, refusals
+with clear status, the datasheet's joint speeds in the URDF."""
+
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from flexsheet.arm.kinematics import (
+    DATASHEET_SPEED_DEG,
+    JOINT_NAMES,
+    Q_LOWER,
+    Q_UPPER,
+    QD_MAX,
+    URDF_PATH,
+    ArmKinematics,
+    home_joints,
+    rotation_angle,
+)
+from flexsheet.arm.tracking import TargetTracker
+from flexsheet.model import geometry
+from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
+from flexsheet.model.sheet import clamp_poses
+
+R_CYL = geometry.CYLINDER_RADIUS
+
+
+def tilted_clamps(theta, stretch):
+    """Clamp poses of the sheet tangent to the cylinder at angle theta (contact (-R+R cos, 0, R sin))."""
+    c, s = math.cos(theta), math.sin(theta)
+    return clamp_poses(np.array([-R_CYL + R_CYL * c, 0.0, R_CYL * s]), np.array([c, 0.0, s]),
+                             np.array([0.0, 1.0, 0.0]), stretch)
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_fk_ik_round_trip_random_reachable_poses(side):
+    base = LEFT_BASE if side == "left" else RIGHT_BASE
+    kin = ArmKinematics(side, base)
+    rng = np.random.default_rng(7)
+    n_checked = 0
+    while n_checked < 150:
+        q = rng.uniform(Q_LOWER + 0.05, Q_UPPER - 0.05)
+        if kin.manipulability(q) < 2e-3:     # keep clear of singular poses for the accuracy check
+            continue
+        T = kin.fk(q)
+        seed = np.clip(q + rng.uniform(-0.15, 0.15, 6), Q_LOWER, Q_UPPER)
+        res = kin.ik(T, seed)
+        assert res.ok, (res.status, q, seed)
+        T2 = kin.fk(res.q)
+        assert np.linalg.norm(T2[:3, 3] - T[:3, 3]) <= 1e-5           # 0.01 mm
+        assert math.degrees(rotation_angle(T2[:3, :3], T[:3, :3])) <= 0.01
+        n_checked += 1
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_home_sheet_and_tilts_reachable_with_margin(side):
+    base = LEFT_BASE if side == "left" else RIGHT_BASE
+    kin = ArmKinematics(side, base)
+    idx = 0 if side == "left" else 1
+    for sign in (1.0, -1.0):
+        q = home_joints(side)
+        for deg in range(0, 61, 5):
+            for stretch in (0.0, 0.1):
+                T = tilted_clamps(sign * math.radians(deg), stretch)[idx]
+                res = kin.ik(T, q)
+                assert res.ok, (side, sign * deg, stretch, res.status)
+                assert np.all(res.q - Q_LOWER > math.radians(10)) and np.all(Q_UPPER - res.q > math.radians(10))
+                assert res.manipulability > 5e-3
+            q = res.q
+
+
+def test_home_joints_hold_the_home_clamp_frame():
+    for side, base, idx in (("left", LEFT_BASE, 0), ("right", RIGHT_BASE, 1)):
+        T = ArmKinematics(side, base).fk(home_joints(side))
+        want = clamp_poses(np.zeros(3), np.array([1.0, 0, 0]), np.array([0.0, 1, 0]), 0.0)[idx]
+        assert np.linalg.norm(T[:3, 3] - want[:3, 3]) < 1e-3
+        assert np.allclose(T[:3, :3], want[:3, :3], atol=1e-3)   # columns (normal, axis_u, axis_v)
+
+
+def test_unreachable_target_refused_and_goal_kept():
+    kin = ArmKinematics("left", LEFT_BASE)
+    q0 = home_joints("left")
+    far = kin.fk(q0)
+    far[:3, 3] += np.array([0.0, -1.5, 0.0])          # 1.5 m beyond the clamp: outside the 0.6 m reach
+    res = kin.ik(far, q0)
+    assert not res.ok and (res.status == "unreachable" or res.status.startswith("limit:"))
+    assert np.all(res.q >= Q_LOWER) and np.all(res.q <= Q_UPPER)
+    tr = TargetTracker(kin)
+    tr.seed(q0)
+    tr.set_target(far, 1.0, now=0.0)
+    assert np.array_equal(tr.goal, q0)                 # stops short: goal unchanged
+    assert tr.status(0.01).startswith("hold:")
+
+
+def test_target_beyond_joint_limit_reports_the_joint():
+    q_upper = Q_UPPER.copy()
+    q_upper[5] = math.radians(60.0)                    # J6 allowed only up to 60 deg here
+    kin = ArmKinematics("left", LEFT_BASE, Q_LOWER, q_upper)
+    q = home_joints("left").copy()
+    q[5] = math.radians(50.0)
+    T = kin.fk(q)
+    q_goal = q.copy()
+    q_goal[5] = math.radians(80.0)                     # needs J6 = 80 deg > 60
+    res = kin.ik(kin.fk(q_goal), q, max_jump=10.0)
+    assert not res.ok and res.status == "limit:J6"
+    assert res.q[5] <= q_upper[5] + 1e-12
+    assert kin.ik(T, q).ok
+
+
+def test_wrist_singularity_reported():
+    kin = ArmKinematics("left", LEFT_BASE)
+    q = home_joints("left").copy()
+    q[4] = 0.0                                          # J5 = 0: J4 and J6 aligned
+    assert kin.manipulability(q) < 1e-9
+    res = kin.ik(kin.fk(q), q + np.array([0, 0, 0, 0.0, 1e-4, 0]))
+    assert not res.ok and res.status == "singular"
+
+
+def test_branch_jump_refused():
+    kin = ArmKinematics("left", LEFT_BASE)
+    q = home_joints("left")
+    q_far = q + np.array([0.9, 0.0, 0.0, 0.0, 0.0, 0.0])
+    res = kin.ik(kin.fk(q_far), q, max_jump=0.5)
+    assert not res.ok and res.status == "jump"
+
+
+@pytest.mark.parametrize("bad", [np.full((4, 4), np.nan), np.eye(3), np.diag([2.0, 1.0, 1.0, 1.0])])
+def test_malformed_pose_raises_value_error(bad):
+    kin = ArmKinematics("left", LEFT_BASE)
+    with pytest.raises(ValueError, match="T_target"):
+        kin.ik(bad, home_joints("left"))
+
+
+def test_bad_side_and_seed_raise():
+    with pytest.raises(ValueError, match="side"):
+        ArmKinematics("middle")
+    kin = ArmKinematics("left", LEFT_BASE)
+    with pytest.raises(ValueError, match="q must"):
+        kin.fk([0.0, 1.0])
+
+
+def test_urdf_speeds_are_the_rv1a_datasheet():
+    # Mitsubishi BFP-A8050 RV-1A: J1 180, J2 90, J3 135, J4 180, J5 180, J6 210 deg/s
+    assert DATASHEET_SPEED_DEG == (180.0, 90.0, 135.0, 180.0, 180.0, 210.0)
+    model = pin.buildModelFromUrdf(str(URDF_PATH))
+    for k, name in enumerate(JOINT_NAMES):
+        j = model.getJointId(name)
+        assert math.degrees(model.velocityLimit[model.joints[j].idx_v]) == pytest.approx(DATASHEET_SPEED_DEG[k],
+                                                                                       abs=1e-9)
+    assert np.degrees(QD_MAX) == pytest.approx(DATASHEET_SPEED_DEG, abs=1e-9)

@@ -1,0 +1,45 @@
+"""The arm's command stream (flexsheet.arm.stream): the span guard brakes a step that would take the clamp span
+further outside its band, and goes on once the partner follows."""
+
+import numpy as np
+from test_tracking import BAND, _home, _tracker
+
+from flexsheet.arm.kinematics import QD_MAX
+from flexsheet.arm.limiter import StreamLimiter
+from flexsheet.arm.stream import ArmStream
+
+
+class _NoLink:
+    connected = True
+
+
+def test_the_stream_brakes_where_a_lagging_partner_would_slacken_the_sheet():
+    """A 30 mm target shift toward a partner that has not moved: the stream brakes at the band's edge (within
+    one braking distance) instead of closing the span; once the partner follows, it goes on to the target."""
+    kl, kr, ql, qr, left = _home()
+    t = _tracker(kl, ql)
+    peer = kr.fk(qr)[:3, 3]
+    t.peer_clamp = peer.copy()
+    period = 0.0071
+    qd = QD_MAX * 0.5
+    lim = StreamLimiter(ql, period, qd, qd * 2.0, np.full(6, -3.0), np.full(6, 3.0))
+    stream = ArmStream(t, lim, _NoLink(), clock=lambda: now)
+    T = np.array(left, float)
+    T[1, 3] -= 0.030
+    now = 1.0
+    t.set_target(T, now, now)
+    spans = []
+    for k in range(300):                                          # 2.1 s: far longer than the move needs
+        now = 1.0 + k * period
+        t.set_target(T, now, now)
+        cmd = stream._next_command()
+        spans.append(np.linalg.norm(kl.fk(cmd)[:3, 3] - peer))
+    assert min(spans) > BAND[0] - 0.001 and t.span_waits > 0       # held at the edge (braking: < 1 mm past it)
+    assert spans[-1] < BAND[0] + 0.001                            # and stays there, 20 mm short of the target
+    assert np.linalg.norm(kl.fk(lim.c)[:3, 3] - T[:3, 3]) > 0.015
+    t.peer_clamp = peer + np.array([0.0, -0.030, 0.0])           # the partner followed
+    for k in range(300):
+        now = 3.2 + k * period
+        t.set_target(T, now, now)
+        stream._next_command()
+    assert np.linalg.norm(kl.fk(lim.c)[:3, 3] - T[:3, 3]) < 1e-4   # reached the target

@@ -1,0 +1,132 @@
+"""The bridges' target tracker (flexsheet.arm.tracking): the span guard refuses a step that takes the clamp span
+further outside its band; a jump is allowed once the arm could have moved that far; which partner states hold
+this arm too."""
+
+import numpy as np
+import pytest
+
+from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, home_joints
+from flexsheet.arm.tracking import TargetTracker, peer_holds
+from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
+from flexsheet.model.sheet import clamp_poses
+
+BAND = (0.2424, 0.264)        # clamp strain 0.01-0.10 of the 0.240 m sheet
+
+
+def _home():
+    kl, kr = ArmKinematics("left", LEFT_BASE), ArmKinematics("right", RIGHT_BASE)
+    left, right = clamp_poses(np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), 0.05)
+    rl, rr = kl.ik(left, home_joints("left")), kr.ik(right, home_joints("right"))
+    assert rl.ok and rr.ok
+    return kl, kr, rl.q, rr.q, left
+
+
+def _tracker(kl, ql):
+    t = TargetTracker(kl)
+    t.set_span_band(BAND)
+    t.seed(ql)
+    return t
+
+
+def _toward(kl, q, dy):
+    """Joints that move the left clamp ``dy`` m along y (the span changes by dy)."""
+    T = kl.fk(q)
+    T[1, 3] += dy
+    res = kl.ik(T, q)
+    assert res.ok
+    return res.q
+
+
+def test_steps_that_take_the_span_further_out_are_refused_and_counted():
+    kl, kr, ql, qr, _ = _home()
+    t = _tracker(kl, ql)
+    t.peer_clamp = kr.fk(qr)[:3, 3]
+    span0 = np.linalg.norm(kl.fk(ql)[:3, 3] - t.peer_clamp)
+    assert span0 == pytest.approx(0.252, abs=1e-9)               # home: clamp strain 0.05, inside the band
+    assert not t.span_worse(ql, _toward(kl, ql, -0.005))          # 0.247 m: inside, taken
+    assert t.span_worse(ql, _toward(kl, ql, -0.012))              # 0.240 m: slack (below 0.2424)
+    assert t.span_worse(ql, _toward(kl, ql, +0.015))              # 0.267 m: over-pull (above 0.264)
+    assert t.span_waits == 2
+    # from outside the band, a step back toward it is taken, a step further out is not
+    q_slack = _toward(kl, ql, -0.015)                             # 0.237 m
+    assert not t.span_worse(q_slack, _toward(kl, ql, -0.013))
+    assert t.span_worse(q_slack, _toward(kl, ql, -0.016))
+    assert t.span_waits == 3
+
+
+def test_without_a_partner_or_a_band_nothing_waits_and_a_bad_band_is_refused():
+    kl, kr, ql, qr, _ = _home()
+    t = _tracker(kl, ql)
+    assert not t.span_worse(ql, _toward(kl, ql, -0.030))          # no partner state yet: no guard
+    t.peer_clamp = kr.fk(qr)[:3, 3]
+    t.set_span_band(None)
+    assert not t.span_worse(ql, _toward(kl, ql, -0.030)) and t.span_waits == 0
+    t.set_span_band(BAND)
+    t.move_to(_toward(kl, ql, -0.030))                              # a service's goal: the operator's, not judged
+    assert not t.span_worse(ql, _toward(kl, ql, -0.030)) and t.span_waits == 0
+    t.release()
+    assert t.span_worse(ql, _toward(kl, ql, -0.030)) and t.span_waits == 1
+    for band in ((0.26, 0.25), (0.0, 0.2), (0.2, float("inf"))):
+        with pytest.raises(ValueError, match="span_band"):
+            t.set_span_band(band)
+
+
+def test_a_target_after_a_pause_may_ask_what_the_arm_could_move_meanwhile():
+    """TargetTracker: within a flowing stream (targets 30 ms apart) a 0.9 rad change is a branch jump, refused
+    with the goal kept; the same target after the stream paused 2 s (a planner respawning while the finger moved
+    on) is taken: 0.5 rad + 2 s at the fastest joint's speed."""
+    kin = ArmKinematics("left", LEFT_BASE)
+    q = home_joints("left")
+    q_far = q + np.array([0.9, 0.0, 0.0, 0.0, 0.0, 0.0])
+    tr = TargetTracker(kin, target_timeout=0.25, max_jump=0.5)
+    tr.seed(q)
+    assert tr.set_target(kin.fk(q), 1.0, now=0.0).ok
+    res = tr.set_target(kin.fk(q_far), 2.0, now=0.03)
+    assert not res.ok and res.status == "jump" and np.allclose(tr.goal, q, atol=1e-6)
+    assert tr.status(0.04) == "hold:jump"
+    res = tr.set_target(kin.fk(q_far), 3.0, now=0.06)        # still flowing: still refused
+    assert not res.ok and res.status == "jump"
+    res = tr.set_target(kin.fk(q_far), 4.0, now=2.06)        # after a 2 s pause
+    assert res.ok and np.abs(tr.goal - q_far).max() < 1e-6 and tr.status(2.07) == "ok"
+
+
+def test_a_stream_that_starts_far_away_is_joined_once_the_arm_could_have_got_there():
+    """After a release (a registration left the arm 0.9 rad away) targets flow every 20 ms from the start: the
+    first are refused as a jump, but they do not start the stream, so the allowance grows from the release
+    (0.5 rad + the fastest joint's speed × the time since) and a target is taken within 0.3 s; before, each
+    refused target restarted the stream and the arm held on hold:jump for as long as targets came."""
+    kin = ArmKinematics("left", LEFT_BASE)
+    q = home_joints("left")
+    q_far = q + np.array([0.9, 0.0, 0.0, 0.0, 0.0, 0.0])
+    tr = TargetTracker(kin, target_timeout=0.25, max_jump=0.5)
+    tr.move_to(q)
+    tr.release(now=10.0)
+    taken = None
+    for k in range(50):
+        if tr.set_target(kin.fk(q_far), 1.0 + k, now=10.0 + 0.02 * k).ok:
+            taken = 0.02 * k
+            break
+    need = (0.9 - 0.5) / float(np.max(QD_MAX))
+    assert taken is not None and need <= taken <= need + 0.021, (taken, need)
+    assert np.abs(tr.goal - q_far).max() < 1e-6 and tr.status(10.0 + taken) == "ok"
+    # once flowing, a branch jump is refused as before
+    assert tr.set_target(kin.fk(q), 99.0, now=10.0 + taken + 0.02).status == "jump"
+
+
+@pytest.mark.parametrize("status,holds", [("hold:limit:J3", True), ("hold:jump", True), ("hold:unreachable", True),
+                                          ("fault:watchdog", True), ("disconnected", True), ("ok", False),
+                                          ("hold:no_target", False), ("hold:disabled", False),
+                                          ("hold:peer", False), ("hold:refused", False), ("manual", False)])
+def test_which_partner_states_hold_this_arm_too(status, holds):
+    kin = ArmKinematics("left", LEFT_BASE)
+    q = home_joints("left")
+    tr = TargetTracker(kin)
+    tr.seed(q)
+    assert tr.set_target(kin.fk(q + 0.05), 1.0, now=0.0).ok
+    assert peer_holds(status) is holds
+    tr.peer_hold = status if peer_holds(status) else None
+    goal, vel = tr.reference(0.01, q)
+    if holds:
+        assert tr.status(0.01) == "hold:peer" and np.allclose(goal, q) and not vel.any()
+    else:
+        assert tr.status(0.01) == "ok" and np.allclose(goal, q + 0.05, atol=1e-6)

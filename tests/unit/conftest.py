@@ -1,0 +1,27 @@
+"""A fixture shared by FEM and experiment modules, built once per worker: the real-time model of the sphere
+scene with a 4° stroke and a sticking finger, that path tables are attached to (fem/test_path_snapshots,
+fem/test_scene_model, experiments/test_path_table: one xdist group, ``SAME_WORKER`` in tests/conftest.py)."""
+
+from __future__ import annotations
+
+import pytest
+
+from flexsheet.fem.mesh import MeshSpec
+from flexsheet.fem.scene_model import SceneModel
+from flexsheet.model.scenes import SCENES_DIR, load_scene, parse_scene
+
+
+def _scene():
+    """The sphere with a 4° stroke and a sticking finger: no sphere table applies, so a path table does."""
+    sc = load_scene(SCENES_DIR / "sphere.yaml")
+    data = sc.model_dump()
+    data["stroke"] = {"kind": "arc", "start": [1.0, 0.0, 0.0], "toward": [0.0, 0.0, 1.0], "start_deg": 0.0,
+                      "end_deg": 4.0}
+    data["finger"] = {"radius": sc.finger.radius, "contact": "sticking"}
+    return parse_scene(data, "<sphere, short stroke, sticking>")
+
+
+@pytest.fixture(scope="package")
+def model(tmp_path_factory):
+    return SceneModel(_scene(), MeshSpec(0.015, 0.006, 0.012), order=1,
+                      cache_dir=str(tmp_path_factory.mktemp("pathcache")))

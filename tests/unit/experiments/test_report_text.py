@@ -1,0 +1,37 @@
+"""The report's text (flexsheet.experiments.report_text): the one delay figure, Δd 2R left blank where a shape
+has no radius."""
+
+from __future__ import annotations
+
+
+def test_report_text_leaves_dd_2r_blank_on_a_shape_with_no_radius():
+    """The rounded box and the organ have no radius R, so their rows carry no Δd 2R: the text table prints "-"
+    there (it printed "nan", which reads as a failed measurement), and the number where there is one."""
+    from flexsheet.experiments.report_text import format_text as _format
+
+    row = {"dtheta_mean_deg": 0.5, "dtheta_std_deg": 0.25, "dd_mean_mm": 1.25, "n": 120}
+    text = _format({"10": row, "30": {**row, "dd_2r_mean_mm": 0.875}, "latency_ms": {}})
+    line10 = next(li for li in text.splitlines() if li.startswith("10 s"))
+    line30 = next(li for li in text.splitlines() if li.startswith("30 s"))
+    assert line10.split()[2:6] == ["0.500", "0.250", "-", "1.250"], line10
+    assert line30.split()[2:6] == ["0.500", "0.250", "0.875", "1.250"], line30
+
+
+def test_the_delay_is_the_chains_figure():
+    """The one delay figure is the latency chain's exposure → sheet at its pose; the fitted lag is named as the
+    prediction check, with why the two differ."""
+    from flexsheet.experiments.report_text import format_text
+
+    s = {"latency_ms": {"chain": {"exposure_to_sheet_at_pose": {"median": 14.33, "p99": 29.29, "n": 838},
+                                  "exposure_to_arm_command": {"median": 9.19, "p99": 9.19, "n": 1424}},
+                        "sheet_at_pose_reached": 838 / 1424,
+                        "basis": {"exposure_to_sheet_at_pose": {"basis": "modelled"}}},
+         "delay": {"segment": "10", "horizon_ms": 25.0, "residual_lag_ms": -1.0, "exposure_to_sheet_ms": 24.0,
+                   "angle_at_best_deg": 0.114, "stroke_speed_mm_per_s": 6.2}}
+    text = format_text(s)
+    delay = [li for li in text.splitlines() if li.startswith("The delay:")]
+    assert len(delay) == 1 and "median 14.3 ms (p99 29.3 ms, modelled" in delay[0] and "838 of 1424" in delay[0]
+    check = next(li for li in text.splitlines() if li.startswith("Not a second delay"))
+    assert "-1.0 ms beyond the prediction's 25.0 ms lead" in check and "horizon of 24.0 ms" in check
+    assert "16 ms of travel" in check                                       # 0.1 mm at 6.2 mm/s
+    assert "Delay exposure -> sheet" not in text

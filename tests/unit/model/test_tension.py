@@ -1,0 +1,46 @@
+"""The sheet's tension model (flexsheet.model.tension): the Gent modulus and its small-strain limit, the string
+formula for the stiffness and its inverse, saturation reported."""
+
+import pytest
+
+from flexsheet.model.tension import (
+    SheetMaterial,
+    clamp_force,
+    gent_modulus,
+    stiffness,
+    stretch_for_stiffness,
+    tension,
+)
+
+
+def test_gent_modulus_and_small_strain_limit():
+    E = gent_modulus(50.0)
+    assert 2.3e6 < E < 2.6e6
+    mat = SheetMaterial()
+    eps = 1e-4   # neo-Hooke → Hooke: T ≈ E t ε at small strain
+    assert tension(eps, mat) == pytest.approx(mat.young * mat.thickness * eps, rel=1e-3)
+    assert clamp_force(eps, mat) == pytest.approx(mat.young * mat.thickness * mat.size * eps, rel=1e-3)
+
+
+def test_stiffness_string_formula_and_inverse_roundtrip():
+    mat = SheetMaterial()
+    e = 0.05
+    L = mat.size * 1.05
+    assert stiffness(e, mat) == pytest.approx(tension(e, mat) * mat.contact_width * 4.0 / L)
+    assert stiffness(e, mat, 0.05) > stiffness(e, mat)       # stiffer near a clamp
+    for k in (10.0, 20.0, 35.0):
+        r = stretch_for_stiffness(k, mat, 0.02)
+        assert r.saturated == ""
+        assert stiffness(r.stretch, mat, 0.02) == pytest.approx(k, rel=1e-8)
+
+
+def test_inverse_reports_saturation():
+    mat = SheetMaterial()
+    hi = stretch_for_stiffness(1e4, mat)
+    assert hi.saturated == "object_stiffer_than_sheet" and hi.force <= mat.max_force + 1e-6
+    lo = stretch_for_stiffness(0.0, mat)
+    assert lo.saturated == "object_softer_than_sheet" and lo.stretch == mat.min_stretch
+    with pytest.raises(ValueError, match="k_target"):
+        stretch_for_stiffness(float("nan"), mat)
+    with pytest.raises(ValueError, match="young"):
+        SheetMaterial(young=-1.0)

@@ -1,0 +1,251 @@
+"""The surface planner (flexsheet.planning.surface_planner): encountered placement, rolling without slip, pushing,
+limits, the stability cases, and clamps and tension from the sheet's geometry."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from flexsheet.model import geometry
+from flexsheet.model.shapes import make_shape, paper_cylinder
+from flexsheet.model.sheet import (
+    clamp_half_span,
+    clamp_points,
+    clamp_poses,
+)
+from flexsheet.model.tension import SheetMaterial, stiffness, tension
+from flexsheet.model.vec import cross, dot, norm, sub
+from flexsheet.planning.limits import MotionLimits, ReachModel
+from flexsheet.planning.surface_planner import PlannerConfig, SurfacePlanner
+
+R = geometry.CYLINDER_RADIUS
+DT = 1.0 / 48.0
+
+
+def _stroke(planner, shape, angles, h=None, depth=0.0005, t0=0.0):
+    plans = []
+    for k, a in enumerate(angles):
+        p = shape.point_at(a, 0.0 if h is None else h[k], R - depth)
+        plans.append(planner.update(t0 + k * DT, p))
+    return plans
+
+
+def test_placement_is_tangent_plane_at_centre_ray_hit():
+    c = paper_cylinder()
+    pl = SurfacePlanner(c)
+    p = (-R + 0.08 * math.cos(0.4), 0.0, -0.08 * math.sin(0.4))   # away from the object
+    plan = pl.update(0.0, p)
+    A = c.point_at(0.4)
+    assert not plan.touching and plan.status == "ok"
+    assert norm(sub(plan.contact, A)) < 1e-12 and norm(sub(plan.origin, A)) < 1e-12
+    n = plan.normal
+    assert abs(dot(n, sub(A, c.c)) - R) < 1e-12              # tangent plane at A
+    assert abs(dot(plan.axis_u, n)) < 1e-12 and plan.axis_u[1] > 0.99
+    # clamps match flexsheet.model.sheet.clamp_poses
+    Tl, Tr = plan.clamp_matrices()
+    El, Er = clamp_poses(np.array(plan.origin), np.array(plan.normal), np.array(plan.axis_u), plan.stretch)
+    assert np.allclose(Tl, El, atol=1e-12) and np.allclose(Tr, Er, atol=1e-12)
+
+
+def test_rolling_without_slip_arc_equals_sheet_length():
+    c = paper_cylinder()
+    pl = SurfacePlanner(c)
+    angles = np.radians(np.linspace(0, 60, 481))
+    plans = _stroke(pl, c, -angles)          # point_at positive angles go down (a × e1 = −z)
+    last = plans[-1]
+    arc = R * math.radians(60)
+    assert last.touching and last.status == "ok"
+    assert math.hypot(*last.offset) == pytest.approx(arc, rel=1e-9)
+    # A' (the sheet's material point that first touched A) is at distance arc from B along the sheet
+    Ap = sub(last.origin, (0.0, 0.0, 0.0))
+    B = last.contact
+    assert norm(sub(B, Ap)) == pytest.approx(arc, rel=1e-9)
+    assert abs(dot(sub(B, Ap), last.normal)) < 1e-12          # A'B lies in the sheet plane
+    assert dot(last.normal, sub(B, c.c)) == pytest.approx(R)  # tangent at B
+
+
+def test_two_d_stroking_around_and_along_is_path_independent_on_cylinder():
+    c = paper_cylinder()
+    n = 200
+    a1 = np.r_[np.linspace(0, 0.5, n), np.full(n, 0.5)]
+    h1 = np.r_[np.zeros(n), np.linspace(0, 0.03, n)]
+    a2 = np.r_[np.zeros(n), np.linspace(0, 0.5, n)]
+    h2 = np.r_[np.linspace(0, 0.03, n), np.full(n, 0.03)]
+    p1 = _stroke(SurfacePlanner(c), c, a1, h1)[-1]
+    p2 = _stroke(SurfacePlanner(c), c, a2, h2)[-1]
+    assert norm(sub(p1.origin, p2.origin)) < 1e-9            # cylinder is developable: no holonomy
+    assert p1.offset == pytest.approx(p2.offset, abs=1e-9)
+    assert abs(p1.offset[0]) == pytest.approx(0.03, abs=1e-9)
+
+
+def test_stroking_on_sphere_keeps_tangent_and_rolls_geodesic():
+    s = make_shape("sphere", {"center": (-0.04, 0.0, 0.0), "radius": 0.04})
+    pl = SurfacePlanner(s)
+    for k, a in enumerate(np.linspace(0, 0.6, 300)):
+        p = (-0.04 + 0.0395 * math.cos(a), 0.0395 * math.sin(a), 0.0)
+        plan = pl.update(k * DT, p)
+    assert plan.touching
+    assert math.hypot(*plan.offset) == pytest.approx(0.04 * 0.6, rel=1e-6)
+    assert dot(plan.normal, sub(plan.contact, s.c)) == pytest.approx(0.04)
+
+
+def test_pushing_keeps_tangent_pose_and_reports_depth():
+    c = paper_cylinder()
+    pl = SurfacePlanner(c)
+    pl.update(0.0, c.point_at(0.3, 0.0, R + 0.0005))
+    base = pl.update(DT, c.point_at(0.3, 0.0, R - 0.0005))
+    for k, d in enumerate(np.linspace(0.0005, 0.01, 40)):
+        plan = pl.update((k + 2) * DT, c.point_at(0.3, 0.0, R - d))
+    assert plan.touching and plan.depth == pytest.approx(0.01)
+    assert norm(sub(plan.contact, c.point_at(0.3))) < 1e-12
+    assert norm(sub(plan.origin, base.origin)) < 1e-12 and norm(sub(plan.normal, base.normal)) < 1e-12
+
+
+def test_stroke_and_push_combined():
+    c = paper_cylinder()
+    pl = SurfacePlanner(c)
+    angles = np.linspace(0, 0.5, 300)
+    depth = 0.004 * np.sin(np.linspace(0, math.pi, 300)) + 0.0005
+    for k, (a, d) in enumerate(zip(angles, depth, strict=False)):
+        plan = pl.update(k * DT, c.point_at(a, 0.0, R - d))
+    assert plan.touching and math.hypot(*plan.offset) == pytest.approx(R * 0.5, rel=1e-9)
+
+
+def test_axis_singularity_holds_last_normal():
+    c = paper_cylinder()
+    pl = SurfacePlanner(c)
+    pl.update(0.0, c.point_at(0.2, 0.0, R - 0.001))
+    n0 = pl.last.normal
+    plan = pl.update(DT, (-R, 0.0, 0.0))       # finger pushed onto the axis
+    assert "hold:singular" in plan.status
+    assert norm(sub(plan.normal, n0)) < 1e-9 or "rate_limited" in plan.status
+    assert all(math.isfinite(x) for x in plan.origin + plan.normal)
+
+
+def test_inside_object_projects_and_touches():
+    c = paper_cylinder()
+    pl = SurfacePlanner(c)
+    plan = pl.update(0.0, (-R + 0.5 * R * math.cos(0.2), 0.0, -0.5 * R * math.sin(0.2)))
+    assert plan.touching and plan.depth == pytest.approx(0.5 * R)
+    assert norm(sub(plan.contact, c.point_at(0.2))) < 1e-12
+
+
+def test_past_end_cap_rolls_over_rim_within_limits():
+    c = paper_cylinder()
+    lim = MotionLimits()
+    pl = SurfacePlanner(c, PlannerConfig(limits=lim))
+    ys = np.r_[np.linspace(0.0, 0.09, 400), np.full(200, 0.09)]
+    plans = [pl.update(k * DT, (0.0005, y, 0.0)) for k, y in enumerate(ys)]
+    contacts = [norm(sub(a.contact, b.contact)) for a, b in zip(plans, plans[1:], strict=False)]
+    speeds = [norm(sub(a.origin, b.origin)) / DT for a, b in zip(plans, plans[1:], strict=False)]
+    assert max(contacts) < 0.002                 # the contact wraps over the rim continuously
+    assert max(speeds) <= lim.v_max + 1e-9      # the sheet swinging about the rim is rate-limited
+    assert all("hold" not in p.status for p in plans)
+    # with the default arm bases the sheet cannot face the end cap: reported, arms held inside reach
+    assert "unreachable" in plans[-1].status and ReachModel().reachable(plans[-1].left, plans[-1].right)[0]
+    # with a larger workspace it settles tangent to the cap
+    pl = SurfacePlanner(c, PlannerConfig(reach=ReachModel(reach_max=0.8, reach_min=0.0)))
+    plans = [pl.update(k * DT, (0.0005, y, 0.0)) for k, y in enumerate(ys)]
+    assert plans[-1].normal[1] > 0.99 and plans[-1].status == "ok"
+
+
+def test_box_edge_sharp_is_rate_limited_rounded_is_not():
+    for radius, expect_limited in ((0.0, True), (0.01, False)):
+        b = make_shape("box", {"center": (-0.03, 0, 0), "half_extents": (0.03, 0.03, 0.03), "radius": radius})
+        pl = SurfacePlanner(b)
+        statuses = []
+        for k, z in enumerate(np.linspace(0.0, 0.06, 600)):
+            statuses.append(pl.update(k * DT, (0.01, 0.0, z)).status)
+        assert any("rate_limited" in s for s in statuses) == expect_limited, radius
+
+
+def test_sudden_jump_is_reacquired_and_ramped():
+    c = paper_cylinder()
+    lim = MotionLimits()
+    pl = SurfacePlanner(c, PlannerConfig(limits=lim))
+    for k in range(10):
+        pl.update(k * DT, c.point_at(0.0, 0.0, R - 0.0005))
+    o_prev = pl.last.origin
+    plan = pl.update(10 * DT, c.point_at(-1.0, 0.03, R + 0.01))     # marker re-acquired far away
+    assert "reacquired" in plan.status and "rate_limited" in plan.status
+    assert norm(sub(plan.origin, o_prev)) <= lim.a_max * DT * DT + 1e-12
+    speeds = []
+    for k in range(11, 200):
+        p = pl.update(k * DT, c.point_at(-1.0, 0.03, R + 0.01))
+        speeds.append(norm(sub(p.origin, o_prev)) / DT)
+        o_prev = p.origin
+    assert max(speeds) <= lim.v_max + 1e-9
+    assert norm(sub(p.contact, c.point_at(-1.0, 0.03))) < 1e-9 and p.status == "ok"
+
+
+@pytest.mark.parametrize("bad", [(float("nan"), 0.0, 0.0), (0.0, float("inf"), 0.0), (1.0, 2.0), "xyz", None])
+def test_invalid_input_holds_last_safe_pose(bad):
+    c = paper_cylinder()
+    pl = SurfacePlanner(c)
+    assert pl.update(0.0, bad) is None                      # nothing to hold yet, no exception
+    good = pl.update(0.0, (0.01, 0.0, 0.0))
+    plan = pl.update(DT, bad)
+    assert plan.status == "hold:invalid_fingertip"
+    assert plan.origin == good.origin and plan.left == good.left and plan.normal == good.normal
+    assert pl.counts["hold:invalid_fingertip"] == 2
+    stale = pl.update(0.0, (0.01, 0.0, 0.0))
+    assert stale.status == "hold:stale_fingertip"
+
+
+def test_unreachable_is_reported_and_not_clipped():
+    c = make_shape("plane")
+    reach = ReachModel(reach_max=0.45)
+    pl = SurfacePlanner(c, PlannerConfig(reach=reach, jump_distance=1.0))
+    ok = pl.update(0.0, (0.01, 0.0, 0.0))
+    assert ok.status == "ok" and ok.reach_margin > 0
+    o = ok.origin
+    for k in range(1, 300):                                   # finger walks up, sheet follows until the limit
+        plan = pl.update(k * DT, (0.01, 0.0, 0.0005 * k))
+        if "unreachable" in plan.status:
+            break
+        o = plan.origin
+    assert "unreachable" in plan.status and plan.reach_margin < 0
+    assert plan.origin == o                                   # held the last reachable pose, exactly
+    assert reach.reachable(plan.left, plan.right)[0]
+    assert plan.contact[2] == pytest.approx(0.0005 * k)      # the requested contact is still reported
+
+
+def test_object_stiffer_than_sheet_is_reported():
+    pl = SurfacePlanner(paper_cylinder())
+    plan = pl.update(0.0, (0.01, 0.0, 0.0), object_stiffness=5000.0)
+    assert "object_stiffer_than_sheet" in plan.status
+    assert plan.stiffness < 5000.0 and plan.stretch <= pl.cfg.material.max_stretch
+    for k in range(1, 40):                       # stretch is rate-limited back down
+        plan = pl.update(k * DT, (0.01, 0.0, 0.0), object_stiffness=20.0)
+    assert plan.status == "ok"
+    assert plan.stiffness == pytest.approx(20.0, rel=1e-6)
+
+
+def test_sheet_edge_slip_is_reported():
+    c = make_shape("plane")
+    pl = SurfacePlanner(c)
+    for k, y in enumerate(np.linspace(0.0, 0.2, 400)):
+        plan = pl.update(k * DT, (-0.0005, y, 0.0))
+    assert "slip:sheet_edge" in plan.status
+    assert abs(plan.offset[0]) <= 0.5 * 0.24 * (1 + plan.stretch) - pl.cfg.sheet_margin + 1e-12
+
+
+def test_cross_product_convention_axis_v():
+    plan = SurfacePlanner(paper_cylinder()).update(0.0, (0.01, 0.0, 0.0))
+    assert plan.axis_v == pytest.approx(cross(plan.normal, plan.axis_u)) and plan.axis_v[2] == pytest.approx(1.0)
+
+
+def test_planner_clamps_and_tension_use_the_sheet_geometry():
+    pl = SurfacePlanner(paper_cylinder())
+    plan = pl.update(0.0, (0.01, 0.0, 0.0), object_stiffness=20.0)
+    a = clamp_half_span(plan.stretch)
+    assert plan.left == pytest.approx(tuple(np.add(plan.origin, np.multiply(a, plan.axis_u))), abs=1e-15)
+    assert (plan.left, plan.right) == clamp_points(plan.origin, plan.axis_u, plan.stretch)
+    Tl, Tr = plan.clamp_matrices()
+    assert Tl[:3, 3] == pytest.approx(plan.left, abs=1e-15) and Tr[:3, 3] == pytest.approx(plan.right, abs=1e-15)
+    # string model at the centre: k = T·w·2/a with a the clamp half span
+    mat = SheetMaterial()
+    assert stiffness(plan.stretch, mat) == pytest.approx(tension(plan.stretch, mat) * mat.contact_width * 2 / a)
+    assert plan.stiffness == pytest.approx(20.0, rel=1e-6)

@@ -1,0 +1,36 @@
+"""Reading a bag (flexsheet.runtime.bag_read): a file that also carries Foxglove channels still reads as a
+flexsheet bag."""
+
+from __future__ import annotations
+
+import base64
+
+from test_foxglove_bag import _read, _run
+
+from flexsheet.runtime.bag_read import read_bag
+from flexsheet.runtime.bag_write import BagWriter
+from flexsheet.viz.foxglove_bag import FoxgloveBagChannels
+
+
+def test_a_bag_with_foxglove_channels_still_reads_as_a_flexsheet_bag(tmp_path):
+    """The recorder hook writes both kinds of channel into one file; read_bag (play, info, report) must
+    return the msgpack messages only. Needs read_bag to skip channels of other encodings (hook 1)."""
+    run, _ = _run()
+    path = tmp_path / "mixed.mcap"
+    bw = BagWriter(path)
+    fox = FoxgloveBagChannels(bw._writer)
+    for t, frames in run[:200]:
+        bw.write(frames, int(t * 1e9))
+    bw._q.put(None)          # let the writer thread drain, then add Foxglove channels to the same file
+    bw._thread.join()
+    for t, frames in run[:200]:
+        fox.add_frames(frames, int(t * 1e9))
+    fox.close()
+    bw._writer.finish()
+    bw._fh.close()
+    msgs = list(read_bag(path))
+    assert len(msgs) == 200 and all(m.schema.startswith("flexsheet/") for m in msgs)
+    assert fox.counts["/viz/scene"] > 0
+    # and the file is readable by the plain mcap reader with both kinds of channel
+    got = _read(path)
+    assert "/viz/scene" in got and base64  # noqa: B018
