@@ -320,6 +320,8 @@ CHEAP: dict[str, tuple[str, str]] = {
         "flexsheet experiment latency_load --out docs/figures/realtime",
         "flexsheet experiment latency_load --out /tmp/ll --busy 0 2",
         "flexsheet experiment determinism --out docs/figures/simclock",
+        "flexsheet experiment determinism --quick --out /tmp/det",           # run by the slow tier's
+        "flexsheet experiment latency_load --out /tmp/ll --quick",           # tests/system/test_experiments_quick.py
         "flexsheet experiment faults --out docs/figures/faults",
         "flexsheet experiment triangulation --out docs/figures/vision",
         "flexsheet experiment triangulation --out /tmp/tri --quick",
