@@ -10,7 +10,6 @@ import os
 
 import cv2
 import numpy as np
-import yaml
 
 from flexsheet.calibration.display_calib import (
     FORMAT_VERSION,
@@ -22,7 +21,7 @@ from flexsheet.calibration.display_calib import (
     Provenance,
 )
 from flexsheet.model.checks import check_pose
-from flexsheet.vision.calib_yaml import MAX_CALIB_BYTES, CvYamlLoader
+from flexsheet.vision.calib_yaml import read_cv_yaml
 
 __all__ = ["write_display_calib", "load_display_calib"]
 
@@ -188,20 +187,7 @@ def load_display_calib(path: str, require: tuple[str, ...] = ()) -> DisplayCalib
     YAML, of another ``format_version``, or an entry is malformed (wrong type, shape, non-finite, not a rigid
     transform) or a required entry is absent.
     """
-    if not os.path.isfile(path):
-        raise ValueError(f"display calibration file not found: {path!r}")
-    if os.path.getsize(path) > MAX_CALIB_BYTES:
-        raise ValueError(f"{path}: display calibration larger than {MAX_CALIB_BYTES} bytes")
-    try:
-        with open(path, "rb") as fh:
-            text = fh.read().decode("utf-8")
-        if text.startswith("%YAML"):
-            text = text.split("\n", 1)[1] if "\n" in text else ""
-        doc = yaml.load(text, Loader=CvYamlLoader)  # noqa: S506 - a SafeLoader subclass
-    except (UnicodeDecodeError, yaml.YAMLError, ValueError, RecursionError) as exc:
-        raise ValueError(f"{path}: not a display calibration YAML ({' '.join(str(exc).split())[:200]})") from None
-    if not isinstance(doc, dict):
-        raise ValueError(f"{path}: not a display calibration YAML (top level is {type(doc).__name__})")
+    doc = read_cv_yaml(path, "display calibration")
     ver = doc.get("format_version")
     if ver != FORMAT_VERSION:
         raise ValueError(f"{path}: format_version must be {FORMAT_VERSION}, got {ver!r:.40}")

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import yaml
 
-__all__ = ["write_yaml", "load_yaml", "CvYamlLoader", "MAX_CALIB_BYTES"]
+__all__ = ["write_yaml", "load_yaml", "read_cv_yaml", "CvYamlLoader", "MAX_CALIB_BYTES"]
 
 
 _MATS = ("K1", "D1", "K2", "D2", "R", "T", "E", "F", "R1", "R2", "P1", "P2", "Q", "per_pair_rms_px",
@@ -71,6 +71,27 @@ CvYamlLoader.add_constructor("tag:yaml.org,2002:opencv-matrix", _cv_matrix)
 MAX_CALIB_BYTES = 1 << 20
 
 
+def read_cv_yaml(path: str, what: str) -> dict:
+    """The top-level mapping of the OpenCV FileStorage YAML at ``path`` (``what`` names the file's kind in the
+    errors), read with :class:`CvYamlLoader`. Raises ``ValueError`` naming the file when it is missing, larger
+    than :data:`MAX_CALIB_BYTES`, not UTF-8, not YAML or not a mapping."""
+    if not os.path.isfile(path):
+        raise ValueError(f"{what} file not found: {path!r}")
+    if os.path.getsize(path) > MAX_CALIB_BYTES:
+        raise ValueError(f"{path}: {what} file larger than {MAX_CALIB_BYTES} bytes")
+    try:
+        with open(path, "rb") as fh:
+            text = fh.read().decode("utf-8")
+        if text.startswith("%YAML"):  # OpenCV writes "%YAML:1.0" or "%YAML 1.2"; PyYAML wants neither
+            text = text.split("\n", 1)[1] if "\n" in text else ""
+        doc = yaml.load(text, Loader=CvYamlLoader)  # noqa: S506 - a SafeLoader subclass
+    except (UnicodeDecodeError, yaml.YAMLError, ValueError, RecursionError) as exc:
+        raise ValueError(f"{path}: not a {what} YAML ({' '.join(str(exc).split())[:200]})") from None
+    if not isinstance(doc, dict):
+        raise ValueError(f"{path}: not a {what} YAML (top level is {type(doc).__name__})")
+    return doc
+
+
 def load_yaml(path: str) -> dict:
     """Read a calibration YAML written by :func:`write_yaml` (OpenCV FileStorage YAML with the same keys).
 
@@ -82,20 +103,7 @@ def load_yaml(path: str) -> dict:
     the file and key when the file is missing, too large, not such a YAML, or a key is absent, malformed,
     non-finite or of the wrong shape.
     """
-    if not os.path.isfile(path):
-        raise ValueError(f"calibration file not found: {path!r}")
-    if os.path.getsize(path) > MAX_CALIB_BYTES:
-        raise ValueError(f"{path}: calibration file larger than {MAX_CALIB_BYTES} bytes")
-    try:
-        with open(path, "rb") as fh:
-            text = fh.read().decode("utf-8")
-        if text.startswith("%YAML"):  # OpenCV writes "%YAML:1.0" or "%YAML 1.2"; PyYAML wants neither
-            text = text.split("\n", 1)[1] if "\n" in text else ""
-        doc = yaml.load(text, Loader=CvYamlLoader)  # noqa: S506 - a SafeLoader subclass
-    except (UnicodeDecodeError, yaml.YAMLError, ValueError, RecursionError) as exc:
-        raise ValueError(f"{path}: not a calibration YAML ({' '.join(str(exc).split())[:200]})") from None
-    if not isinstance(doc, dict):
-        raise ValueError(f"{path}: not a calibration YAML (top level is {type(doc).__name__})")
+    doc = read_cv_yaml(path, "calibration")
     out: dict = {}
     w, h = doc.get("image_width"), doc.get("image_height")
     if not (type(w) is int and type(h) is int and 0 < w <= 100_000 and 0 < h <= 100_000):
