@@ -299,6 +299,7 @@ CHEAP: dict[str, tuple[str, str]] = {
         "flexsheet experiment stroke --out out/stroke",
         "flexsheet experiment stroke --out docs/figures/stroke",
         "flexsheet experiment stroke --out /tmp/s --seeds 0 --set triangulator.tracking_index=0.3",
+        "flexsheet experiment stroke --quick --out /tmp/stroke_quick",     # the slow tier's test_experiments_quick
         "flexsheet experiment stability --graph --out docs/figures/stroke/stability",
         "flexsheet experiment stroke_model --out docs/figures/planner",
         "flexsheet experiment stroke_model --out /tmp/s --seeds 1 --display-calib 'out/cal{seed}/display.yaml'",

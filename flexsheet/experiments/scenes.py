@@ -295,7 +295,7 @@ def run(out: Path, seeds: int = 3, quick: bool = False, scenes=SCENE_NAMES) -> d
     table = {}
     for name in scenes:
         log.info(f"[scenes] Table I on {name} ({n_seeds} seed(s), {', '.join(f'{t:g} s' for t in times)})")
-        table[name] = table1_for_scene(name, n_seeds, times, log)
+        table[name] = table1_for_scene(name, n_seeds, times)
     summary: dict = {"table1": table, "twin": "realistic", "truth_seeds": list(range(n_seeds)),
                      "note": "planner tension from the scene's compliance estimate (no FEM); metric in the normal "
                              "section along each scene's stroke (for the cylinder: Fig. 9's cross-section)"}

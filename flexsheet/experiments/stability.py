@@ -60,7 +60,7 @@ import cv2
 import numpy as np
 
 from flexsheet.calibration.display_calib import pose_from_rt
-from flexsheet.experiments.stroke import run_seed
+from flexsheet.experiments.stroke import DURATION_10S, SCRIPT_10S, run_seed
 from flexsheet.experiments.stroke_model import MARKER_PX, make_twin, simulate
 from flexsheet.experiments.table1 import FELT_TARGET_FACTOR, PAPER_TABLE1, target
 from flexsheet.model import geometry
@@ -273,9 +273,6 @@ GRAPH_SWEEPS = {
     "drop_rate": ("camera frames lost, share", [0.0, 0.3, 0.6, 0.8]),
     "base_error": ("arm-base error, x (1 mm, 0.1 deg) per axis", [0.0, 4.0, 8.0, 16.0]),
 }
-#: the 10 s stroke alone, simulated seconds enough for it (start delay, approach, holds)
-GRAPH_SCRIPT = "world.script=[{mode: stroke, moving_time: 10.0}]"
-GRAPH_DURATION_S = 24.0
 
 
 def _perturbed_calib(out: Path, scale: float, seed: int) -> Path:
@@ -324,9 +321,9 @@ def run_graph(out: Path, launch: Path, seed: int = 0, sweeps: dict | None = None
                 rows.append(dict(baseline, value=v))
                 continue
             d = out / f"{error}_{v:g}"
-            sets = [a for x in [GRAPH_SCRIPT, *graph_sets(error, v, out, seed)] for a in ("--set", x)]
+            sets = [a for x in [SCRIPT_10S, *graph_sets(error, v, out, seed)] for a in ("--set", x)]
             try:
-                s = run_seed(seed, d, GRAPH_DURATION_S, launch, sets)
+                s = run_seed(seed, d, DURATION_10S, launch, sets)
             except RuntimeError:            # refused at launch (a param check), else a failure to report
                 lines = (d / "launch.log").read_text(errors="replace").splitlines()
                 if not any("nothing started" in ln for ln in lines):

@@ -34,6 +34,10 @@ __all__ = ["run_seed", "aggregate", "chart", "main", "ROWS"]
 ROOT = Path(__file__).resolve().parents[2]
 #: the rows judged: the paper's two moving times
 ROWS = tuple(PAPER_TABLE1)
+#: the 10 s stroke alone (``--quick``, and each run of ``experiment stability --graph``), and the simulated
+#: seconds it needs (start, approach, holds)
+SCRIPT_10S = "world.script=[{mode: stroke, moving_time: 10.0}]"
+DURATION_10S = 24.0
 
 
 def run_seed(seed: int, out: Path, duration: float, launch: Path, extra: list[str] | None = None) -> dict:
@@ -52,10 +56,10 @@ def run_seed(seed: int, out: Path, duration: float, launch: Path, extra: list[st
     return json.loads(path.read_text())
 
 
-def aggregate(summaries: dict[int, dict]) -> dict:
+def aggregate(summaries: dict[int, dict], rows: tuple[str, ...] = ROWS) -> dict:
     """Per seed and worst seed of each Table I row (felt: Δθ mean, 3-D angle, gap, Δd; paper: Δθ mean, Δd), the
-    delays, the targets and the verdicts (met only when the worst seed meets). ``summaries``: seed → a run
-    report's summary."""
+    delays, the targets and the verdicts of ``rows`` (met only when the worst seed meets). ``summaries``: seed →
+    a run report's summary."""
     out: dict = {"seeds": sorted(summaries), "table1": {"felt": {}, "paper": {}}, "delay": {},
                  "targets": {"felt": {k: target(k, FELT_TARGET_FACTOR)["dtheta_mean_deg"] for k in ROWS},
                              "paper": {k: target(k, TARGET_FACTOR)["dtheta_mean_deg"] for k in ROWS}},
@@ -74,7 +78,7 @@ def aggregate(summaries: dict[int, dict]) -> dict:
             out["delay"][seed] = s["delay"]
     out["verdicts"] = {}
     for kind in ("felt", "paper"):
-        for row in ROWS:
+        for row in rows:
             r = out["table1"][kind].get(row)
             if r is not None and len(r["per_seed"]) == len(summaries):
                 ok = r["dtheta_mean_deg"] <= out["targets"][kind][row]
@@ -122,28 +126,35 @@ def main(argv: list[str] | None = None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
                                  epilog="example: flexsheet experiment stroke --out docs/figures/stroke\n"
                                         "         flexsheet experiment stroke --out /tmp/s --seeds 0 --set "
-                                        "triangulator.tracking_index=0.3")
+                                        "triangulator.tracking_index=0.3\n"
+                                        "         flexsheet experiment stroke --quick --out /tmp/stroke_quick")
     ap.add_argument("--out", required=True, help="output folder (seed<N>/, summary.json, stroke.png, stroke.json)")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="truth seeds (default 0 1 2)")
     ap.add_argument("--duration", type=float, default=60.0,
                     help="simulated s per run (default 60: the world's 10 s stroke, 30 s stroke and 10 s push)")
     ap.add_argument("--launch", default=str(ROOT / "launch" / "sim.yaml"), help="launch file (clock: sim)")
+    ap.add_argument("--quick", action="store_true",
+                    help=f"truth seed 0 only, the 10 s stroke alone ({DURATION_10S:g} simulated s); judges that row")
     ap.add_argument("--set", action="append", default=[], metavar="NODE.KEY=VALUE",
                     help="a param override passed to each run (flexsheet launch --set)")
     args = ap.parse_args(argv)
     out = Path(args.out)
+    rows = ROWS
+    if args.quick:
+        args.seeds, args.duration, rows = [0], DURATION_10S, ("10",)
+        args.set = [SCRIPT_10S, *args.set]
     extra = [a for kv in args.set for a in ("--set", kv)]
     summaries = {}
     for seed in args.seeds:
         print(f"[stroke] seed {seed}: running the graph ({args.duration:g} simulated s) ...", flush=True)
         summaries[seed] = run_seed(seed, out / f"seed{seed}", args.duration, Path(args.launch), extra)
-    summary = aggregate(summaries)
+    summary = aggregate(summaries, rows)
     summary["overrides"] = args.set
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     (out / "stroke.json").write_text(json.dumps(summary, indent=1))
     chart(summary, out / "stroke.png")
     for kind in ("felt", "paper"):
-        for row in ROWS:
+        for row in rows:
             r = summary["table1"][kind].get(row)
             if r:
                 print(f"[stroke] {kind} {row} s: Δθ mean per seed {[round(v, 3) for v in r['dtheta_mean_deg_all']]} "

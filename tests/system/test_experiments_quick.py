@@ -1,6 +1,7 @@
-"""The two experiments that launch the graph, in their quick modes: ``flexsheet experiment determinism --quick``
-(two simulated-clock runs, byte-identical on every recorded topic) and ``flexsheet experiment latency_load
---quick`` (one wall-clock run with no busy core: the loop's two chain ends measured from the bag)."""
+"""The experiments that launch the graph, in their quick modes: ``flexsheet experiment determinism --quick`` (two
+simulated-clock runs, byte-identical on every recorded topic), ``flexsheet experiment latency_load --quick`` (one
+wall-clock run with no busy core: the loop's two chain ends measured from the bag) and ``flexsheet experiment
+stroke --quick`` (Table I's 10 s row on the graph)."""
 
 from __future__ import annotations
 
@@ -42,3 +43,19 @@ def test_latency_load_quick_measures_both_chain_ends(tmp_path):
     # a frame reaches the arm command before it reaches the projected image
     assert lat[HOPS[0]]["median"] < lat[HOPS[1]]["median"]
     assert (tmp_path / "latency_load.png").stat().st_size > 5_000
+
+
+def test_stroke_quick_judges_the_10s_row_on_the_graph(tmp_path):
+    """``flexsheet experiment stroke --quick``: truth seed 0, the 10 s stroke alone on the simulated-clock graph;
+    only that row is judged. The felt Δθ meets its target; the paper's way of measuring (measured finger against
+    the believed sheet) does not, so the command exits 1 as the full run does."""
+    from flexsheet.experiments.stroke import main
+
+    assert main(["--quick", "--out", str(tmp_path)]) == 1
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert s["seeds"] == [0] and set(s["verdicts"]) == {"felt.10", "paper.10"}
+    felt, paper = s["table1"]["felt"]["10"], s["table1"]["paper"]["10"]
+    assert s["verdicts"]["felt.10"] == "met" and 0.05 < felt["dtheta_mean_deg"] <= s["targets"]["felt"]["10"]
+    assert s["verdicts"]["paper.10"] == "MISSED" and paper["dtheta_mean_deg"] > felt["dtheta_mean_deg"]
+    assert felt["per_seed"]["0"]["n"] > 200                                 # the whole stroke was measured
+    assert (tmp_path / "stroke.png").stat().st_size > 5_000
