@@ -115,7 +115,7 @@ def warm_sim_fem(launch_file: Path = ROOT / "launch" / "sim.yaml") -> bool:
     ch = choose(load_table(), p.accuracy_target, p.depth_min, p.depth_max, p.nu, p.finger_radius)
     mesh = MeshSpec(ch.spec.h, ch.spec.h_fine, ch.spec.refine_radius, p.arc_deg)
     m = RealtimeModel(mesh, Material(p.E, p.nu), p.finger_radius, p.max_depth, p.strain_limit, p.cache_dir or None,
-                      None, None, ch.order)
+                      None, ch.order)
     return m.cache_hit
 
 

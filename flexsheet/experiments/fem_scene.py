@@ -102,8 +102,7 @@ def scene_reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, p
                                   E_elem=sm.E, nu_elem=sm.nu)
         r = sc.finger.radius
         log.info(f"reference h_fine {h_fine * 1e3:g} mm at {np.round(q * 1e3, 1).tolist()} mm: {model.n} DOF ...")
-        states = solve_path_capsule(model, lambda d: Capsule(q - d * n + r * n, -n, r), depths, step=st["step"],
-                                    log=lambda s: log.info("  " + s.strip()), label=f"scene {sc.name}",
+        states = solve_path_capsule(model, lambda d: Capsule(q - d * n + r * n, -n, r), depths, step=st["step"], label=f"scene {sc.name}",
                                     contact=sc.finger.contact)
         P = model.probe_matrix(probes)
         return {"u": np.stack([np.asarray(P @ s.u) for s in states]), "force": np.array([s.force for s in states]),
@@ -197,7 +196,7 @@ def _ref_job(args: tuple) -> tuple[float, float, str | None]:
     try:
         sc = load_scene(scene_file)
         q, n = sc.stroke_at([f])
-        scene_reference(sc, q[0], n[0], h, st, probes, ArrayCache(cache_dir, log.info))
+        scene_reference(sc, q[0], n[0], h, st, probes, ArrayCache(cache_dir))
     except Exception as exc:                    # noqa: BLE001 - reported; the run solves it again and raises
         return h, time.perf_counter() - t, f"{type(exc).__name__}: {exc}"
     return h, time.perf_counter() - t, None
@@ -270,11 +269,11 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     st = _scene_settings(sc, quick, levels)
     depths = np.asarray(st["depths"], float)
     cache_dir = cache_dir or DEFAULT_CACHE_DIR
-    cache = ArrayCache(cache_dir, log.info)
+    cache = ArrayCache(cache_dir)
     os.makedirs(out_dir, exist_ok=True)
     log.info(f"scene {sc.name!r} ({sc.source}), {'quick' if quick else 'full'}: pushes 0-{depths[-1] * 1e3:g} mm "
          f"({sc.use.reason or 'no reason given'}), {sc.finger.contact} contact")
-    rt, what = served_model(sc, cache_dir=cache_dir, log=log.info)
+    rt, what = served_model(sc, cache_dir=cache_dir)
     log.info(f"served model: {what}")
     timing = scene_update_ms(rt, sc, (0.005, depths[len(depths) // 2], depths[-1]), st["n_time"])
     log.info(f"update: CPU median {timing['median']:.3f} ms, p90 {timing['p90']:.3f} ms")

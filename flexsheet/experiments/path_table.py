@@ -85,7 +85,7 @@ def _job(args) -> tuple[float, float, str | None]:
 
         sc = load_scene(scene_file)
         rt = SceneModel(sc, cache_dir=cache_dir)
-        _push(sc, f, h_fine, rt.rest_vertices.astype(float), ArrayCache(cache_dir, log.info))
+        _push(sc, f, h_fine, rt.rest_vertices.astype(float), ArrayCache(cache_dir))
         return f, time.perf_counter() - t, None
     except Exception as exc:  # noqa: BLE001 - reported by the parent, which solves it again in-process
         return f, time.perf_counter() - t, f"{type(exc).__name__}: {exc}"
@@ -269,9 +269,9 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
     fractions, holdout = _path_fractions(stations, holdout)
     t0 = time.perf_counter()
     cache_dir = cache_dir or DEFAULT_CACHE_DIR
-    cache = ArrayCache(cache_dir, log.info)
+    cache = ArrayCache(cache_dir)
     sc = load_scene(scene_file)
-    rt = SceneModel(sc, cache_dir=cache_dir, log=log.info)
+    rt = SceneModel(sc, cache_dir=cache_dir)
     verts = rt.rest_vertices.astype(float)
     held = rt.held
     todo = [(float(f), GRID["h_fine"]) for f in fractions] + [(float(h), GRID["h_fine"]) for h in holdout]

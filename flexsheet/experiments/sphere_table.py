@@ -61,7 +61,7 @@ def alpha_path(sc, a: float, grid, spec, probes: np.ndarray, cache) -> dict:
     from flexsheet.fem.reference.sphere_build import solve_alpha
 
     z, _, _ = cache.get_or_compute("spherealpha", _alpha_key(sc, a, grid, spec, probes),
-                                   lambda: solve_alpha(sc, a, grid, spec, probes, log.info),
+                                   lambda: solve_alpha(sc, a, grid, spec, probes),
                                    f"sphere push at {a:g} deg on h_fine {spec[1] * 1e3:g} mm")
     return z
 
@@ -78,7 +78,7 @@ def _job(args) -> tuple[float, float, str | None]:
 
         sc = load_scene(scene_file)
         probes = SceneModel(sc, cache_dir=cache_dir).rest_vertices.astype(float)
-        alpha_path(sc, a, DEFAULT_SPHERE_GRID, spec, probes, ArrayCache(cache_dir, log.info))
+        alpha_path(sc, a, DEFAULT_SPHERE_GRID, spec, probes, ArrayCache(cache_dir))
         return a, time.perf_counter() - t, None
     except Exception as exc:  # noqa: BLE001 - reported; the run solves it itself and raises
         return a, time.perf_counter() - t, f"{type(exc).__name__}: {exc}"
@@ -280,8 +280,8 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
     al = grid.alphas_deg
     fr = _check_sphere_args(sc, al, alpha, holdout)
     cache_dir = cache_dir or DEFAULT_CACHE_DIR
-    cache = ArrayCache(cache_dir, log.info)
-    rt = SceneModel(sc, cache_dir=cache_dir, log=log.info)
+    cache = ArrayCache(cache_dir)
+    rt = SceneModel(sc, cache_dir=cache_dir)
     probes = rt.rest_vertices.astype(float)
     if alpha is not None:
         alpha_path(sc, alpha, grid, spec, probes, cache)

@@ -15,6 +15,7 @@ precomputing.
 from __future__ import annotations
 
 import hashlib
+import logging
 import os
 import time
 from collections.abc import Callable
@@ -22,6 +23,8 @@ from collections.abc import Callable
 import numpy as np
 
 from flexsheet.manifest import record
+
+log = logging.getLogger(__name__)
 
 __all__ = ["DEFAULT_CACHE_DIR", "SHIPPED_DIR", "INSTALL_DIR", "cache_key", "ArrayCache"]
 
@@ -39,15 +42,14 @@ def cache_key(*parts) -> str:
 class ArrayCache:
     """Named array sets on disk. ``cache_dir`` None or "" disables writing (and reading from it); ``shipped_dir``
     the read-only store searched after it (default :data:`SHIPPED_DIR`; None: none);
-    ``log`` optional callable(str) for one-line reports. ``kind`` must be a simple word (letters, digits, _)."""
+    what it does is logged (INFO; a cache it cannot use, WARNING). ``kind`` must be a simple word (letters, digits,
+    _)."""
 
-    def __init__(self, cache_dir: str | None, log: Callable[[str], None] | None = None,
-                 shipped_dir: str | None = ""):
+    def __init__(self, cache_dir: str | None, shipped_dir: str | None = ""):
         self.cache_dir = cache_dir or None
         # "" (the default): the module's SHIPPED_DIR as it is now (tests point it elsewhere); None: none
         self.shipped_dir = SHIPPED_DIR if shipped_dir == "" else shipped_dir
         self.install_dir = INSTALL_DIR if shipped_dir == "" else None   # the installer's precomputed entries
-        self.log = log or (lambda s: None)
         #: the file the last successful :meth:`load` read (in ``cache_dir`` or ``shipped_dir``), else None
         self.source: str | None = None
 
@@ -62,7 +64,7 @@ class ArrayCache:
         return os.path.join(self.cache_dir, self._name(kind, key)) if self.cache_dir else None
 
     def load(self, kind: str, key: str) -> dict[str, np.ndarray] | None:
-        """The stored arrays, or None when absent or unreadable (reported through ``log``)."""
+        """The stored arrays, or None when absent or unreadable (logged)."""
         name = self._name(kind, key)
         for d in (self.cache_dir, self.shipped_dir, self.install_dir):
             if not d:
@@ -76,7 +78,7 @@ class ArrayCache:
                 self.source = p
                 return out
             except (OSError, ValueError, KeyError) as exc:
-                self.log(f"fem: cache {p} unusable ({exc}); recomputing")
+                log.warning(f"fem: cache {p} unusable ({exc}); recomputing")
         return None
 
     def shipped(self) -> bool:
@@ -97,7 +99,7 @@ class ArrayCache:
             os.replace(tmp, p)
             return p
         except OSError as exc:
-            self.log(f"fem: could not write cache {p}: {exc}")
+            log.warning(f"fem: could not write cache {p}: {exc}")
             try:
                 os.remove(tmp)
             except OSError:
@@ -141,7 +143,7 @@ class ArrayCache:
         z = self.load(kind, key)
         if z is not None:
             where = f"the shipped store {self.shipped_dir}" if self.shipped() else "cache"
-            self.log(f"fem: {what or kind} loaded from {where} ({kind}_{key})")
+            log.info(f"fem: {what or kind} loaded from {where} ({kind}_{key})")
             return z, True, time.perf_counter() - t
         z = compute()
         self.save(kind, key, z)

@@ -17,6 +17,7 @@ All precomputed arrays go through :class:`flexsheet.fem.cache.ArrayCache`.
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from dataclasses import dataclass
@@ -30,6 +31,8 @@ from flexsheet.fem.deformation_checks import TetChecks, element_checks
 from flexsheet.fem.material import Material
 from flexsheet.fem.mesh import MeshSpec, TetMesh, arc_points, cylinder_tet_mesh
 from flexsheet.fem.solver import CapacitanceSolver, FemModel, OutsideCandidates, solve_full
+
+log = logging.getLogger(__name__)
 
 __all__ = ["RealtimeModel", "Update", "CondensedSurface", "dist_to_points"]
 
@@ -170,16 +173,14 @@ class RealtimeModel(CondensedSurface):
     edge-midpoint DOFs also take contact; outputs are the mesh's corner nodes); ``material``; ``finger_radius`` m; ``max_depth`` m (deeper input is
     rejected); ``strain_limit`` (largest principal small strain beyond which linear is declared invalid);
     ``cache_dir`` (None: no disk cache); ``reach`` m extra margin around the working arc for candidate
-    contact points (default finger_radius + 2 mm); ``log`` optional callable(str) for progress lines.
+    contact points (default finger_radius + 2 mm). Progress is logged.
     Raises ``ValueError`` on bad parameters. ``precompute_s`` and ``cache_hit`` tell how start-up went.
     """
 
     def __init__(self, spec: MeshSpec, material: Material, finger_radius: float = 0.008, max_depth: float = 0.05,
                  strain_limit: float = 1.0, cache_dir: str | None = DEFAULT_CACHE_DIR, reach: float | None = None,
-                 log=None, order: int = 2):
+                 order: int = 2):
         self._check_params(finger_radius, max_depth, strain_limit)
-        log = log or (lambda s: None)
-        self._log = log
         t0 = time.perf_counter()
         self.spec, self.material, self.order = spec, material, order
         self.finger_radius, self.max_depth, self.strain_limit = finger_radius, max_depth, strain_limit
@@ -190,7 +191,7 @@ class RealtimeModel(CondensedSurface):
         small_strain = Material(material.E, material.nu)
         self.cache_key = cache_key(_CACHE_VERSION, spec.key(), gmsh.__version__, small_strain.key(), f"{reach:.9g}",
                                    f"{finger_radius:.9g}", f"P{order}")
-        self.cache = ArrayCache(cache_dir, log)
+        self.cache = ArrayCache(cache_dir)
         self._model = self._p1 = None
         self._reach = reach
         z, self.cache_hit, _ = self.cache.get_or_compute("capacitance", self.cache_key, self._precompute,
@@ -229,7 +230,7 @@ class RealtimeModel(CondensedSurface):
         monitor = (dist <= reach + 2 * spec.h_fine)[:len(m.points)]
         corner = np.arange(len(model.points)) < len(m.points)
         outputs = (surf | (np.pad(monitor, (0, len(model.points) - len(m.points))) & ~model.fixed)) & corner
-        self._log(f"fem: precomputing capacitance matrices for {int(candidates.sum())} candidate contact points "
+        log.info(f"fem: precomputing capacitance matrices for {int(candidates.sum())} candidate contact points "
                   f"on a {len(m.points)}-node P{order} mesh ...")
         solver = CapacitanceSolver(model, candidates, outputs)
         return {"points": m.points, "tets": m.tets, "faces": m.faces, "fixed": m.fixed, "monitor": monitor,
@@ -251,11 +252,10 @@ class RealtimeModel(CondensedSurface):
             self._p1 = self.model if self.order == 1 else FemModel(self.mesh, self.material, order=1)
         return self._p1
 
-    def build_nonlinear_table(self, depths: np.ndarray | None = None, log=None) -> None:
+    def build_nonlinear_table(self, depths: np.ndarray | None = None) -> None:
         """Precompute corotational surface displacements at ``depths`` (m, ascending from 0) for pushes at
         the working-arc points (azimuth samples every 10°). Slow (seconds per depth): call it off the
         real-time path. Sets ``self.nonlinear``."""
-        log = log or (lambda s: None)
         if depths is None:
             depths = np.linspace(0.0, self.max_depth, 11)
         depths = np.asarray(depths, float)
@@ -275,7 +275,7 @@ class RealtimeModel(CondensedSurface):
                 U[i, j] = sol.u[self.surface_nodes]
                 F[i, j] = sol.force
                 _, inv[i, j] = element_checks(self.mesh.points, self.mesh.tets, sol.u)
-                log(f"fem: corotational table angle {math.degrees(ang):.0f} deg depth {d * 1e3:.0f} mm "
+                log.info(f"fem: corotational table angle {math.degrees(ang):.0f} deg depth {d * 1e3:.0f} mm "
                     f"force {sol.force:.3f} N")
         self.nonlinear = {"angles": angles, "depths": depths, "U": U, "F": F, "inverted": inv}
 

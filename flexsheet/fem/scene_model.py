@@ -40,6 +40,7 @@ Frames and units: display frame, m, N, N/m, Pa. Errors: ``ValueError`` naming th
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 
@@ -52,6 +53,8 @@ from flexsheet.fem.mesh import MeshSpec, TetMesh
 from flexsheet.fem.realtime import CondensedSurface, Update, dist_to_points
 from flexsheet.fem.scene_mesh import DEFAULT_SCENE_SPEC, scene_mesh
 from flexsheet.fem.solver import CapacitanceSolver, FemModel
+
+log = logging.getLogger(__name__)
 
 __all__ = ["SceneModel", "SurfaceIndex", "scene_finger", "finger_on_scene", "one_blas_thread", "STICKY_DEPTH",
            "STIFFNESS_FLOOR", "attach_scene_table", "scene_cache_key"]
@@ -183,7 +186,7 @@ class SceneModel(CondensedSurface):
     element order (2: P2, whose edge midpoints take contact too); ``finger_radius`` m (None: the scene's);
     ``max_depth`` m (deeper input is rejected); ``strain_limit``; ``cache_dir`` (None: no disk cache);
     ``reach`` m: candidate contact points lie within this distance of the stroke path (default finger
-    radius + 4 mm); ``log`` optional callable(str). Precompute (mesh, assembly, 3·#candidates sparse solves)
+    radius + 4 mm). Precompute (mesh, assembly, 3·#candidates sparse solves)
     is cached by :class:`flexsheet.fem.cache.ArrayCache` under a key of ``scene.key()``, the spec, gmsh's
     version, finger radius, reach and order. ``precompute_s``, ``cache_hit``, ``scene_key`` tell how start-up
     went and what is solved. Raises ``ValueError`` on bad parameters.
@@ -191,7 +194,7 @@ class SceneModel(CondensedSurface):
 
     def __init__(self, scene, spec: MeshSpec = DEFAULT_SCENE_SPEC, order: int = 2, finger_radius: float | None = None,
                  max_depth: float = 0.06, strain_limit: float = 1.0, cache_dir: str | None = DEFAULT_CACHE_DIR,
-                 reach: float | None = None, log=None):
+                 reach: float | None = None):
         from flexsheet.model.scenes import Scene
 
         if not isinstance(scene, Scene):
@@ -205,13 +208,12 @@ class SceneModel(CondensedSurface):
             raise ValueError(f"reach must be in (0, 0.05] m, got {reach!r}")
 
         t0 = time.perf_counter()
-        self._log = log or (lambda s: None)
         self.scene, self.spec, self.order = scene, spec, order
         self.scene_key = scene.key()
         self.material = Material(scene.material.E, scene.material.nu)
         self.finger_radius, self.max_depth, self.strain_limit, self.reach = finger_radius, max_depth, strain_limit, reach
         self.cache_key = scene_cache_key(scene, spec, order, finger_radius, reach)
-        self.cache = ArrayCache(cache_dir, self._log)
+        self.cache = ArrayCache(cache_dir)
         self._model = None
         z, self.cache_hit, _ = self.cache.get_or_compute("scenecap", self.cache_key, self._precompute,
                                                          f"capacitance matrices of scene {scene.name!r}")
@@ -268,7 +270,7 @@ class SceneModel(CondensedSurface):
     def _precompute(self) -> dict:
         sm = scene_mesh(self.scene, self.spec)
         m = sm.mesh
-        self._log(f"fem: scene {self.scene.name!r}: {len(m.points)}-node mesh ({sm.how}), "
+        log.info(f"fem: scene {self.scene.name!r}: {len(m.points)}-node mesh ({sm.how}), "
                   f"{int(np.count_nonzero(sm.E != self.material.E))} inclusion elements")
         model = self._build_model(m, sm.E, sm.nu)
         n_path = max(2, int(math.ceil(self.scene.stroke_length() / 0.001)) + 1)
@@ -282,7 +284,7 @@ class SceneModel(CondensedSurface):
         monitor = (dist <= self.reach + 2 * self.spec.h_fine)[:len(m.points)]
         corner = np.arange(len(model.points)) < len(m.points)
         outputs = (surf | (np.pad(monitor, (0, len(model.points) - len(m.points))) & ~model.fixed)) & corner
-        self._log(f"fem: scene {self.scene.name!r}: precomputing capacitance matrices for {int(candidates.sum())} "
+        log.info(f"fem: scene {self.scene.name!r}: precomputing capacitance matrices for {int(candidates.sum())} "
                   f"candidate contact points on a {len(m.points)}-node P{self.order} mesh ...")
         solver = CapacitanceSolver(model, candidates, outputs)
         self._model = model

@@ -56,7 +56,7 @@ def choose_cylinder_model(cfg: FemConfig) -> CylinderChoice:
     return CylinderChoice(spec, order, mesh_reason, kind, why)
 
 
-def served_model(sc: Scene, cfg: FemConfig | None = None, cache_dir: str | None = None, log=None):
+def served_model(sc: Scene, cfg: FemConfig | None = None, cache_dir: str | None = None):
     """The model the FEM node serves for ``sc`` with the settings ``cfg`` (:class:`FemConfig`, default the node's
     defaults; the cylinder's mesh and model kind as :func:`choose_cylinder_model` picks them, its max depth,
     strain limit and snapshot reach; the scene's own finger and material, not the no-scene
@@ -68,12 +68,12 @@ def served_model(sc: Scene, cfg: FemConfig | None = None, cache_dir: str | None 
 
     cfg = cfg or FemConfig()
     cache_dir = cache_dir or cfg.cache_dir
-    cache = ArrayCache(cache_dir, log)
+    cache = ArrayCache(cache_dir)
     if not fem_models_as_cylinder(sc):
         from flexsheet.fem.scene_mesh import DEFAULT_SCENE_SPEC
         from flexsheet.fem.scene_model import SceneModel, attach_scene_table
 
-        m = SceneModel(sc, DEFAULT_SCENE_SPEC, 2, None, cfg.max_depth, cfg.strain_limit, cache_dir, None, log)
+        m = SceneModel(sc, DEFAULT_SCENE_SPEC, 2, None, cfg.max_depth, cfg.strain_limit, cache_dir, None)
         kind, where = attach_scene_table(m, cache)
         return m, (f"linear P2 scene model + the {kind} table ({where})" if where else
                    f"linear P2 scene model (no {kind} table stored)")
@@ -82,7 +82,7 @@ def served_model(sc: Scene, cfg: FemConfig | None = None, cache_dir: str | None 
 
     mat = Material.of_scene(sc.material)
     ch = choose_cylinder_model(cfg)
-    m = RealtimeModel(ch.spec, mat, sc.finger.radius, cfg.max_depth, cfg.strain_limit, cache_dir, None, log, ch.order)
+    m = RealtimeModel(ch.spec, mat, sc.finger.radius, cfg.max_depth, cfg.strain_limit, cache_dir, None, ch.order)
     if ch.kind != "snapshots":
         return m, f"linear P{ch.order} cylinder model (the model table picks {ch.kind})"
     table = load_snapshot_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, sc.finger.radius)

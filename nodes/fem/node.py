@@ -114,7 +114,7 @@ class FemNode(Node):
         self.log.info("fem: %s", choice.mesh_reason)
         cache = p.cache_dir or None
         self.model = await asyncio.to_thread(
-            RealtimeModel, spec, mat, p.finger_radius, p.max_depth, p.strain_limit, cache, None, self.log.info, order)
+            RealtimeModel, spec, mat, p.finger_radius, p.max_depth, p.strain_limit, cache, None, order)
         m = self.model
         self.log.info("fem: ready in %.2f s (%s): P%d, %d nodes, %d candidate contact points, %.1f MB",
                       m.precompute_s, "cache hit" if m.cache_hit else "precomputed", order, m.n_nodes,
@@ -144,7 +144,7 @@ class FemNode(Node):
         if p.mesh_h > 0 and p.mesh_h_fine > 0:
             spec, order = MeshSpec(p.mesh_h, p.mesh_h_fine, p.refine_radius), p.order
         self.model = await asyncio.to_thread(SceneModel, sc, spec, order, None, p.max_depth, p.strain_limit,
-                                             p.cache_dir or None, None, self.log.info)
+                                             p.cache_dir or None, None)
         m = self.model
         self.log.info("fem: scene %r ready in %.2f s (%s): P%d %s, %d nodes, %d candidate contact points along "
                       "the stroke, %.1f MB", sc.name, m.precompute_s, "cache hit" if m.cache_hit else "precomputed",
@@ -165,7 +165,7 @@ class FemNode(Node):
         store has it, else serve linear and name the command that builds it."""
         from flexsheet.fem.scene_model import attach_scene_table
 
-        cache = ArrayCache(self.params.cache_dir or None, self.log.info)
+        cache = ArrayCache(self.params.cache_dir or None)
         try:
             kind, where = attach_scene_table(self.model, cache)
         except ValueError as exc:
@@ -211,7 +211,7 @@ class FemNode(Node):
         if kind != "snapshots":
             self.state_message = f"fem: linear model ({why})"
             return
-        cache = ArrayCache(p.cache_dir or None, self.log.info)
+        cache = ArrayCache(p.cache_dir or None)
         table = load_snapshot_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, p.finger_radius)
         if table is not None:
             self._attach(table, "loaded from the shipped store (flexsheet/fem/data)" if cache.shipped() else
@@ -247,7 +247,7 @@ class FemNode(Node):
         t = time.perf_counter()
         try:
             table, _, _ = load_or_build(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, self.params.finger_radius,
-                                        build=True, log=self.log.info)
+                                        build=True)
             self._attach(table, f"built in {time.perf_counter() - t:.0f} s")
         except Exception:  # noqa: BLE001 - background build must never take the node down
             self.state_message = "fem: building the nonlinear snapshots failed - serving the LINEAR model"
@@ -257,7 +257,7 @@ class FemNode(Node):
         m = self.model
         p: FemParams = self.params
         depths = np.linspace(0.0, min(p.depth_max, p.max_depth), p.nonlinear_steps)
-        cache = ArrayCache(p.cache_dir or None, self.log.info)
+        cache = ArrayCache(p.cache_dir or None)
         key = cache_key(m.cache_key, p.nonlinear_steps, f"{depths[-1]:.4f}")
         t = time.perf_counter()
 

@@ -245,7 +245,7 @@ def main(argv: list[str] | None = None) -> int:
     _check_table_values(args)
     st = replace(settings_for(args.quick), contact=args.contact)
     t0 = time.perf_counter()
-    cache = ArrayCache(args.cache_dir or None, log.info)
+    cache = ArrayCache(args.cache_dir or None)
     _check_table_flags(args)
     if args.node_table:
         if args.quick or args.level is not None:

@@ -8,6 +8,7 @@ Units SI: m, N, Pa. Display frame (cylinder axis along +y through the mesh centr
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from dataclasses import dataclass, field, replace
@@ -17,6 +18,8 @@ import numpy as np
 
 from flexsheet.fem.reference.capsule_contact import CONTACT_LAWS, DEFAULT_CONTACT, Capsule, capsule_at
 from flexsheet.fem.reference.newton import newton_resumed
+
+log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
     from flexsheet.fem.reference.hyperelastic import HyperelasticModel
@@ -49,7 +52,7 @@ class PathState:
 
 
 def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: float, step: float = 0.001,
-               iters: int = 30, tol_u: float = 1e-6, tol_r: float | None = None, log=None,
+               iters: int = 30, tol_u: float = 1e-6, tol_r: float | None = None,
                substeps_max: int = 3, contact: str = DEFAULT_CONTACT) -> list[PathState]:
     """Push the capsule finger radially into the cylinder at azimuth ``angle`` (rad, :func:`capsule_at` on
     ``model.mesh``'s radius and centre) through ``depths`` (m, ascending, ≥ 0); see :func:`solve_path_capsule`
@@ -58,7 +61,7 @@ def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: fl
         raise ValueError(f"angle must be finite, got {angle!r}")
     m = model
     return solve_path_capsule(model, lambda d: capsule_at(angle, d, finger_radius, m.mesh.radius, m.mesh.center),
-                              depths, step, iters, tol_u, tol_r, log, substeps_max,
+                              depths, step, iters, tol_u, tol_r, substeps_max,
                               label=f"angle {math.degrees(angle):.1f} deg", contact=contact)
 
 
@@ -84,9 +87,9 @@ class _PathPush:
     current load step size."""
 
     def __init__(self, m: HyperelasticModel, capsule, sticking: bool, step: float, iters: int, tol_u: float,
-                 tol_r: float | None, substeps_max: int, label: str, log):
+                 tol_r: float | None, substeps_max: int, label: str):
         self.m, self.capsule, self.sticking = m, capsule, sticking
-        self.iters, self.tol_u, self.substeps_max, self.label, self.log = iters, tol_u, substeps_max, label, log
+        self.iters, self.tol_u, self.substeps_max, self.label = iters, tol_u, substeps_max, label
         self.anchors = None
         self.k = m.penalty()
         self.tol_r = tol_r if tol_r is not None else 1e-6 * m.E_ref * m.h_contact ** 2 * 10
@@ -133,8 +136,7 @@ class _PathPush:
                 raise RuntimeError(f"Newton failed at depth {self.d_cur * 1e3:.2f} mm -> {d_new * 1e3:.2f} mm "
                                    f"({self.label})")
             u_new = u_last          # give up on this step: keep its last iterate, flagged not converged
-            if self.log:
-                self.log(f"  Newton did not converge at {d_new * 1e3:.2f} mm ({self.label})")
+            log.info(f"  Newton did not converge at {d_new * 1e3:.2f} mm ({self.label})")
         self.u_prev, self.d_prev = self.u, self.d_cur
         self.u, self.d_cur = u_new, d_new
         return its_total, conv
@@ -148,7 +150,7 @@ class _PathPush:
 
 
 def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 0.001, iters: int = 30,
-                       tol_u: float = 1e-6, tol_r: float | None = None, log=None, substeps_max: int = 3,
+                       tol_u: float = 1e-6, tol_r: float | None = None, substeps_max: int = 3,
                        label: str = "path", contact: str = DEFAULT_CONTACT) -> list[PathState]:
     """Push a rigid finger given by ``capsule(depth) -> Capsule`` (depth m; any object, any push direction)
     through ``depths`` (m, ascending, ≥ 0), load steps of at most ``step`` m; returns one :class:`PathState`
@@ -170,7 +172,7 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
     never released (a monotone push). Raises ``ValueError`` on bad depths or an unknown ``contact`` and
     ``RuntimeError`` when a step has no valid iterate at all."""
     depths = _check_path_args(depths, step, capsule, contact)
-    walk = _PathPush(model, capsule, contact == "sticking", step, iters, tol_u, tol_r, substeps_max, label, log)
+    walk = _PathPush(model, capsule, contact == "sticking", step, iters, tol_u, tol_r, substeps_max, label)
     out = []
     for target in depths:
         t0 = time.perf_counter()
@@ -182,8 +184,7 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
             conv_all &= conv
         st = walk.state(its_total, conv_all, t0)
         out.append(st)
-        if log:
-            log(f"  depth {walk.d_cur * 1e3:5.1f} mm: F={st.force:.4f} N, {its_total} Newton its, "
+        log.info(f"  depth {walk.d_cur * 1e3:5.1f} mm: F={st.force:.4f} N, {its_total} Newton its, "
                 f"min det F={st.min_detF:.3f}, inverted={st.inverted}, pen={st.penetration * 1e3:.3f} mm, "
                 f"{st.seconds:.1f} s")
     return out
@@ -201,7 +202,7 @@ def _path_state(m: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, de
 
 
 def stable_states(model: HyperelasticModel, capsule, states: list[PathState], step: float = 0.0025,
-                  iters: int = 30, log=None) -> tuple[list[PathState], np.ndarray, np.ndarray]:
+                  iters: int = 30) -> tuple[list[PathState], np.ndarray, np.ndarray]:
     """Per depth the lower-energy of the loading state (``states``, :func:`solve_path_capsule`) and the
     unloaded one (:func:`unload_sweep`): where a push is bistable, the stable branch rather than the metastable
     one the loading path may stay on (both are equilibria under the same finger; the lower total potential Π
@@ -212,7 +213,7 @@ def stable_states(model: HyperelasticModel, capsule, states: list[PathState], st
     model at 5° and 10°, 41 min of one core each with another solve beside it, about as long as the loading path:
     the unloading steps start from the previous state with no predictor and need up to ~35 iterations at
     5–20 mm)."""
-    sw = unload_sweep(model, capsule, states, step=step, iters=iters, log=log)
+    sw = unload_sweep(model, capsule, states, step=step, iters=iters)
     out, branch = [], np.zeros(len(states), np.int64)
     energies = np.array([[un.extra["energy_loading"], un.extra["energy"]] for un in sw])
     for j, (ld, un) in enumerate(zip(states, sw, strict=True)):
@@ -229,7 +230,7 @@ BRANCH_MEET_TOL = 2e-5
 
 
 def unload_sweep(model: HyperelasticModel, capsule, states: list[PathState], step: float = 0.0025,
-                 iters: int = 30, tol_u: float = 1e-6, tol_r: float | None = None, log=None,
+                 iters: int = 30, tol_u: float = 1e-6, tol_r: float | None = None,
                  substeps_max: int = 3) -> list[PathState]:
     """The equilibria of a frictionless push found by *unloading*: from the deepest of ``states`` (a loading
     path, :func:`solve_path_capsule`, ascending depths) the finger is withdrawn through the same depths, load
@@ -287,8 +288,7 @@ def unload_sweep(model: HyperelasticModel, capsule, states: list[PathState], ste
         e_un, e_ld = m.energy(u, caps, k), m.energy(states[j].u, caps, k)
         st.extra.update(energy=e_un, energy_loading=e_ld)
         out[j] = st
-        if log:
-            gap = float(np.abs(u - states[j].u).max())
-            log(f"  unloading {target * 1e3:5.2f} mm: {its_total} Newton its, Π {e_un:.6g} J against the loading "
-                f"path's {e_ld:.6g} J, {gap * 1e3:.3f} mm apart, {st.seconds:.1f} s")
+        gap = float(np.abs(u - states[j].u).max())
+        log.info(f"  unloading {target * 1e3:5.2f} mm: {its_total} Newton its, Π {e_un:.6g} J against the loading "
+                 f"path's {e_ld:.6g} J, {gap * 1e3:.3f} mm apart, {st.seconds:.1f} s")
     return out

@@ -111,8 +111,7 @@ def reference_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Mat
         model = reference_model(spec, angle_deg, mat, penalty_scale)
         log.info(f"reference {spec.key()} at {angle_deg:g} deg: {model.n} DOF, load steps {step * 1e3:g} mm, "
                  f"{contact} contact, penalty {penalty_scale:g} E/h ...")
-        states = solve_path(model, math.radians(angle_deg), depths, FINGER_R, step=step, iters=NEWTON_ITERS,
-                            log=lambda s: log.info("  " + s.strip()), contact=contact)
+        states = solve_path(model, math.radians(angle_deg), depths, FINGER_R, step=step, iters=NEWTON_ITERS, contact=contact)
         return {**_path_record(model, states, probes, angle_deg),
                 "seconds": np.array(time.perf_counter() - t), "cpu_seconds": np.array(time.process_time() - tc),
                 "dofs": np.array(model.n)}
@@ -151,8 +150,7 @@ def stable_path(spec: RefSpec, angle_deg: float, depths: np.ndarray, mat: Materi
         a = math.radians(angle_deg)
         caps = lambda d: capsule_at(a, d, FINGER_R, model.mesh.radius, model.mesh.center)  # noqa: E731
         log.info(f"stable branch {spec.key()} at {angle_deg:g} deg: unloading from {depths[-1] * 1e3:g} mm ...")
-        chosen, branch, energies = stable_states(model, caps, states, step=load_step(depths), iters=NEWTON_ITERS,
-                                                 log=lambda s: log.info("  " + s.strip()))
+        chosen, branch, energies = stable_states(model, caps, states, step=load_step(depths), iters=NEWTON_ITERS)
         return {**_merge_rows(p, branch, lambda rows: _path_record(model, [chosen[j] for j in rows], probes,
                                                                     angle_deg)),
                 "branch": branch, "energy_loading": energies[:, 0], "energy_unloading": energies[:, 1],
@@ -227,8 +225,7 @@ def snapshot_table(st: Settings, mat: Material, cache: ArrayCache, solved,
     log.info(f"snapshots: azimuths {st.grid.angles_deg} deg, depth step {st.grid.depth_step * 1e3:g} mm, "
              f"mesh {st.snap_spec.key()} ...")
 
-    table, hit, sec = load_or_build(cache, st.grid, st.snap_spec, mat, FINGER_R, build=True,
-                                    log=lambda s: log.info("  " + s.strip()), solved=solved, contact=st.contact,
+    table, hit, sec = load_or_build(cache, st.grid, st.snap_spec, mat, FINGER_R, build=True, solved=solved, contact=st.contact,
                                     reuse=reuse)
     if hit:
         sec = float(np.sum(table["seconds"]))

@@ -8,6 +8,7 @@ sampling of a (half or quarter) reference model anywhere on the whole body (:fun
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from dataclasses import replace
@@ -21,6 +22,8 @@ from flexsheet.fem.reference.mesh import RefSpec, reference_mesh
 from flexsheet.fem.reference.path_solver import solve_path, stable_states
 from flexsheet.fem.snapshots import TABLE_VERSION, SnapshotGrid, load_snapshot_table, table_key
 
+log = logging.getLogger(__name__)
+
 __all__ = ["build_table", "load_or_build", "reusable_table", "reused_azimuths", "pack_table", "folded_probe",
            "unfolded_sample", "PREVIOUS_ANGLES_DEG"]
 
@@ -30,7 +33,7 @@ PREVIOUS_ANGLES_DEG = (0.0, 5.0, 10.0, 20.0, 30.0, 40.0, 50.0, 55.0, 60.0)
 
 
 def load_or_build(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float,
-                  build: bool = True, log=None, solved=None,
+                  build: bool = True, solved=None,
                   contact: str = DEFAULT_CONTACT, reuse: dict | None = None) -> tuple[dict | None, bool, float]:
     """(table or None, cache hit, seconds): the table from ``cache`` (:class:`flexsheet.fem.cache.ArrayCache`), or
     built and stored when ``build`` (``solved``, ``contact``, ``reuse``: as :func:`build_table`)."""
@@ -40,7 +43,7 @@ def load_or_build(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, 
     if not build:
         return None, False, 0.0
     t = time.perf_counter()
-    z = build_table(grid, spec, material, finger_radius, log=log, solved=solved, contact=contact, reuse=reuse)
+    z = build_table(grid, spec, material, finger_radius, solved=solved, contact=contact, reuse=reuse)
     cache.save("snapshots", table_key(grid, spec, material.nu, finger_radius, contact, material.Jm), z)
     return z, False, time.perf_counter() - t
 
@@ -93,25 +96,25 @@ def _surface_samples(th: np.ndarray, ys: np.ndarray, rh: np.ndarray, R: float, L
 
 
 def _solve_azimuth(ang: float, spec: RefSpec, material: Material, finger_radius: float, grid: SnapshotGrid,
-                   depths: np.ndarray, solved, contact: str, log):
+                   depths: np.ndarray, solved, contact: str):
     """The reference model at azimuth ``ang`` deg and its states at ``depths[1:]`` (``solved``'s, else solved
     here: the loading path and, frictionless, its stable branch)."""
     s = spec if ang == 0.0 else replace(spec, half_z=False)
     mesh = reference_mesh(s, ang)
     model = HyperelasticModel(mesh, material, sym_y=True, sym_z=s.half_z)
     law = f"Gent Jm {material.Jm:g}" if material.gent else "neo-Hookean"
-    log(f"fem: snapshots at {ang:g} deg: {model.n} DOF P2 {law}, {len(depths) - 1} depths ...")
+    log.info(f"fem: snapshots at {ang:g} deg: {model.n} DOF P2 {law}, {len(depths) - 1} depths ...")
     states = solved(ang, model, depths[1:]) if solved is not None else None
     if states is None:
         states = solve_path(model, math.radians(ang), depths[1:], finger_radius, step=grid.depth_step,
-                            log=log, contact=contact)
+                            contact=contact)
         if contact == "frictionless":       # the stable branch where the push is bistable
             a = math.radians(ang)
 
             def caps(d, a=a, m=mesh):
                 return capsule_at(a, d, finger_radius, m.radius, m.center)
 
-            states, _, _ = stable_states(model, caps, states, step=grid.depth_step, log=log)
+            states, _, _ = stable_states(model, caps, states, step=grid.depth_step)
     return model, states
 
 
@@ -136,7 +139,7 @@ def _copy_reused(t: dict, i: int, reuse: dict, k: int) -> None:
     t["reused"][i] = True
 
 
-def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float, log=None,
+def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float,
                 progress=None, solved=None, contact: str = DEFAULT_CONTACT,
                 reuse: dict | None = None) -> dict[str, np.ndarray]:
     """Run the nonlinear reference at every snapshot azimuth and sample the surface; returns the table arrays
@@ -152,7 +155,6 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
     mm). The caller vouches for the spec, material, finger and contact (its cache key); its samples (depths, θ,
     y, ρ, E, version) are checked here: ``ValueError`` when they differ. The result's ``reused`` (A,) bool marks
     the copied azimuths."""
-    log = log or (lambda s: None)
     from flexsheet.model.geometry import CYLINDER_CENTER, CYLINDER_LENGTH, CYLINDER_RADIUS
 
     R, L, c = CYLINDER_RADIUS, CYLINDER_LENGTH, CYLINDER_CENTER
@@ -168,10 +170,10 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
     for i, ang in enumerate(grid.angles_deg):
         if ang in src:
             _copy_reused(t, i, reuse, src[ang])
-            log(f"fem: snapshots at {ang:g} deg taken from the table being extended (not solved again)")
+            log.info(f"fem: snapshots at {ang:g} deg taken from the table being extended (not solved again)")
             continue
         t0 = time.perf_counter()
-        model, states = _solve_azimuth(ang, spec, material, finger_radius, grid, depths, solved, contact, log)
+        model, states = _solve_azimuth(ang, spec, material, finger_radius, grid, depths, solved, contact)
         _store_states(t, i, model, states, free, side_pts, cap_pts, len(ys), len(rh))
         t["seconds"][i] = time.perf_counter() - t0
         if progress:

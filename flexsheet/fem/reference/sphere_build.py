@@ -6,6 +6,7 @@ angle."""
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 
@@ -27,11 +28,13 @@ from flexsheet.fem.sphere_snapshots import (
     sphere_frame,
 )
 
+log = logging.getLogger(__name__)
+
 __all__ = ["solve_alpha", "assemble_table"]
 
 
 def solve_alpha(scene, alpha_deg: float, grid: SphereGrid = DEFAULT_SPHERE_GRID, spec=DEFAULT_SPHERE_SPEC,
-                probes: np.ndarray | None = None, log=None, iters: int = 60) -> dict:
+                probes: np.ndarray | None = None, iters: int = 60) -> dict:
     """One snapshot angle: the scene's hyperelastic body pushed at polar angle ``alpha_deg`` (stroke plane)
     through the grid's depths on a mesh refined along that push path (``spec`` = (h, h_fine, refine_radius,
     path_depth) m), the loading path then its stable branch, sampled on the grid (and at ``probes`` (k, 3) m,
@@ -39,7 +42,6 @@ def solve_alpha(scene, alpha_deg: float, grid: SphereGrid = DEFAULT_SPHERE_GRID,
     Returns {"field": (D, T, P, 3) float32 m, "u_probes": (D, k, 3) float32, "force" (D,) N, "converged",
     "inverted", "max_strain", "min_detF", "newton", "branch" (D,), "dofs", "cpu_seconds", "unload_seconds"};
     row 0 is the rest state."""
-    log = log or (lambda s: None)
     fr = sphere_frame(scene)
     if not (math.isfinite(alpha_deg) and 0 <= alpha_deg < 90):
         raise ValueError(f"alpha_deg must be in [0, 90), got {alpha_deg!r}")
@@ -59,12 +61,12 @@ def solve_alpha(scene, alpha_deg: float, grid: SphereGrid = DEFAULT_SPHERE_GRID,
     def caps(d):
         return Capsule(q - d * n + r * n, -n, r)
 
-    log(f"sphere table: alpha {alpha_deg:g} deg: {model.n} DOF, {len(depths) - 1} depths ...")
-    states = solve_path_capsule(model, caps, depths[1:], step=grid.depth_step, iters=iters, log=log,
+    log.info(f"sphere table: alpha {alpha_deg:g} deg: {model.n} DOF, {len(depths) - 1} depths ...")
+    states = solve_path_capsule(model, caps, depths[1:], step=grid.depth_step, iters=iters,
                                 label=f"sphere {alpha_deg:g} deg")
     cpu = time.process_time() - c0
     t1 = time.perf_counter()
-    states, branch, _ = stable_states(model, caps, states, step=grid.depth_step, iters=iters, log=log)
+    states, branch, _ = stable_states(model, caps, states, step=grid.depth_step, iters=iters)
     unload = time.perf_counter() - t1
     pts = grid_points(fr, grid)
     P = model.probe_matrix(pts)
@@ -81,7 +83,7 @@ def solve_alpha(scene, alpha_deg: float, grid: SphereGrid = DEFAULT_SPHERE_GRID,
             up[j] = np.asarray(Pp @ s.u)
         out["force"][j], out["max_strain"][j], out["min_detF"][j] = s.force, s.max_strain, s.min_detF
         out["converged"][j], out["inverted"][j], out["newton"][j] = s.converged, s.inverted, s.iterations
-    log(f"sphere table: alpha {alpha_deg:g} deg done in {time.perf_counter() - t0:.0f} s "
+    log.info(f"sphere table: alpha {alpha_deg:g} deg done in {time.perf_counter() - t0:.0f} s "
         f"(force at {depths[-1] * 1e3:g} mm {out['force'][-1]:.2f} N)")
     return {"field": field, "u_probes": up, **out, "branch": np.concatenate([[0], branch]).astype(np.int64),
             "dofs": np.array(model.n), "cpu_seconds": np.array(cpu), "unload_seconds": np.array(unload)}

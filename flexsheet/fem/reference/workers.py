@@ -120,7 +120,7 @@ def _solve_one(args: tuple) -> tuple[int, float, str | None]:
     t = time.perf_counter()
     try:
         solve = stable_path if job.stable else reference_path
-        solve(job.spec, job.angle_deg, push_depths(job.step), mat, ArrayCache(cache_dir, log.info), probes, contact,
+        solve(job.spec, job.angle_deg, push_depths(job.step), mat, ArrayCache(cache_dir), probes, contact,
               job.penalty_scale)
     except Exception as exc:                    # noqa: BLE001 - reported; the run solves it again and raises
         return i, time.perf_counter() - t, f"{type(exc).__name__}: {exc}"
