@@ -74,7 +74,7 @@ def test_stable_path_takes_the_unloaded_rows_only_and_keeps_the_dtypes(tmp_path,
     class FakeModel:
         mesh = type("M", (), {"radius": 0.035, "center": np.zeros(3)})()
 
-    def fake_stable_states(model, caps, states, step, iters, log):
+    def fake_stable_states(model, caps, states, step, iters):
         moved = [replace(s, u=s.u + 1.0, force=10.0 + j) for j, s in enumerate(states)]
         return ([states[0], moved[1], states[2]], np.array([0, 1, 0]),
                 np.array([[3.0, 3.0], [2.0, 1.5], [1.0, 1.0]]))
@@ -91,7 +91,7 @@ def test_stable_path_takes_the_unloaded_rows_only_and_keeps_the_dtypes(tmp_path,
     monkeypatch.setattr(X, "reference_model", lambda *a, **kw: FakeModel())
     monkeypatch.setattr(X, "stable_states", fake_stable_states)
     monkeypatch.setattr(X, "_path_record", fake_record)
-    cache = ArrayCache(str(tmp_path), None, shipped_dir=None)
+    cache = ArrayCache(str(tmp_path), shipped_dir=None)
     spec, probes = RefSpec(0.016, 0.012), np.zeros((k, 3))
     z = X.stable_path(spec, 10.0, depths, Material(), cache, probes)
     assert z["branch"].tolist() == [0, 1, 0] and z["energy_unloading"].tolist() == [3.0, 1.5, 1.0]
