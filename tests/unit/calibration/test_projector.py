@@ -10,17 +10,6 @@ import pytest
 from flexsheet.calibration import arms as arms_mod
 from flexsheet.calibration import projector as pj
 from flexsheet.calibration.display_calib import nominal_display_calib
-from flexsheet.twin.registration_camera import CalibrationTwin
-from flexsheet.twin.truth import TwinTruth
-
-
-@pytest.fixture(scope="module")
-def home_patterns():
-    truth = TwinTruth.draw(3)
-    twin = CalibrationTwin(truth, seed=1)
-    W, H = truth.projector_size
-    pats = pj.gray_code_patterns(W, H)
-    return truth, twin, pats, twin.pattern_frames(pats, np.eye(4), home_exact=True, frames=1)
 
 
 def test_decoder_matches_opencv_getprojpixel(home_patterns):

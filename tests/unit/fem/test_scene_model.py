@@ -21,21 +21,12 @@ from flexsheet.fem.scene_model import (
     scene_finger,
 )
 from flexsheet.fem.solver import FemModel, solve_full
-from flexsheet.model.scenes import SCENES_DIR, load_scene, parse_scene
-
-
-def _small_push_scene(**extra):
-    """The sphere scene with a 2° stroke: its refined band is a ball around the push point only."""
-    sc = load_scene(SCENES_DIR / "sphere.yaml")
-    data = sc.model_dump()
-    data["stroke"] = {"kind": "arc", "start": [1.0, 0.0, 0.0], "toward": [0.0, 0.0, 1.0], "start_deg": 0.0,
-                      "end_deg": 2.0}
-    data.update(extra)
-    return parse_scene(data, "<sphere, short stroke>")
+from flexsheet.model.scenes import SCENES_DIR, load_scene
+from unit.fem.conftest import small_push_scene
 
 
 def test_scene_model_realtime_matches_the_full_solve_and_names_its_scene(tmp_path):
-    sc = _small_push_scene()
+    sc = small_push_scene()
     m = SceneModel(sc, MeshSpec(0.015, 0.006, 0.012), order=1, cache_dir=str(tmp_path))
     assert m.scene_key == sc.key() and not m.cache_hit
     q, n = sc.stroke_points(2)

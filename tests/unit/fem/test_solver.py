@@ -17,6 +17,7 @@ from flexsheet.fem.scene_model import finger_on_scene
 from flexsheet.fem.solver import CapacitanceSolver, FemModel, solve_full
 from flexsheet.fem.sparse_factor import factor
 from flexsheet.model.scenes import SCENES_DIR, load_scene, parse_scene
+from unit.fem.conftest import small_push_scene
 
 MAT = Material()
 
@@ -129,14 +130,6 @@ def test_convergence_with_refinement():
     assert (e12 - ref) < (e16 - ref)
 
 
-def _small_push_scene(**extra):
-    """The sphere scene with a 2° stroke: its refined band is a ball around the push point only."""
-    sc = load_scene(SCENES_DIR / "sphere.yaml")
-    data = sc.model_dump()
-    data["stroke"] = {"kind": "arc", "start": [1.0, 0.0, 0.0], "toward": [0.0, 0.0, 1.0], "start_deg": 0.0,
-                      "end_deg": 2.0}
-    data.update(extra)
-    return parse_scene(data, "<sphere, short stroke>")
 
 
 def test_sphere_force_depth_at_small_depth_matches_the_closed_form_of_its_contact():
@@ -151,7 +144,7 @@ def test_sphere_force_depth_at_small_depth_matches_the_closed_form_of_its_contac
     (Mossakovskii 1954; Spence, J. Elasticity 5 (1975)). Against Hertz (Johnson, Contact Mechanics, eq.
     4.23: F = 4/3·E*·√R_e·d^{3/2}) this contact gives 1/√2 of the force: the rim of the overlap is held up
     where Hertz's surface would sag free. Both grow as d^{3/2}."""
-    sc = _small_push_scene()
+    sc = small_push_scene()
     sm = scene_mesh(sc, MeshSpec(0.010, 0.0012, 0.007))
     model = FemModel(sm.mesh, Material(sc.material.E, sc.material.nu), order=2, support=sc.fixed_mask,
                      E_elem=sm.E, nu_elem=sm.nu)

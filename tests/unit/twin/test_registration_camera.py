@@ -7,10 +7,8 @@ import math
 
 import cv2
 import numpy as np
-import pytest
 
-from flexsheet.calibration import projector as pj
-from flexsheet.twin.registration_camera import XIMEA_NOISE, CalibrationTwin, TrueCamera
+from flexsheet.twin.registration_camera import XIMEA_NOISE, TrueCamera
 from flexsheet.twin.truth import TwinTruth
 
 
@@ -24,15 +22,6 @@ def test_twin_rays_reproject_exactly():
     uv = cv2.projectPoints(r[idx[:, 0], idx[:, 1]].astype(np.float64), np.zeros(3), np.zeros(3), c["K1"], c["D1"])[0]
     expect = np.column_stack([(idx[:, 1] + 0.5) / 2 - 0.5, (idx[:, 0] + 0.5) / 2 - 0.5])
     assert np.abs(uv.reshape(-1, 2) - expect).max() < 1e-3
-
-
-@pytest.fixture(scope="module")
-def home_patterns():
-    truth = TwinTruth.draw(3)
-    twin = CalibrationTwin(truth, seed=1)
-    W, H = truth.projector_size
-    pats = pj.gray_code_patterns(W, H)
-    return truth, twin, pats, twin.pattern_frames(pats, np.eye(4), home_exact=True, frames=1)
 
 
 def test_twin_noise_is_the_measured_ximea_level(home_patterns):
