@@ -16,11 +16,13 @@ class RenderedFrame(Message):
     ``left``, ``right``: uint8 (h, w, 3) RGB images in projector pixels (downscaled by ``scale``).
     ``correction``: "none", "flat", "four_triangle" or "fine". ``render_time``: time to correct and draw
     the pair, s. ``source_stamp``: exposure stamp of the fingertip that
-    drove this frame, s.
+    drove this frame, s. ``eyes`` (2, 3) m: the left and right eye the pair was corrected for (display frame);
+    ``eye_source``: where they came from: "tracked" (``/eye/pose``, predicted to photon time), "held" (the
+    last good tracked pose while the glasses are lost) or "fixed" (the registered viewpoint V).
     """
 
     SCHEMA = "flexsheet/RenderedFrame"
-    VERSION = 1
+    VERSION = 2
 
     left: ndarray("uint8", (None, None, 3), "left-eye image, RGB")
     right: ndarray("uint8", (None, None, 3), "right-eye image, RGB")
@@ -28,6 +30,9 @@ class RenderedFrame(Message):
     correction: str = Field(description="correction model used; \"image\" while show_image replaces the scene")
     render_time: float = Field(ge=0.0, description="time to correct and draw the pair, s")
     source_stamp: float = Field(default=0.0, description="exposure stamp of the driving fingertip, s")
+    eyes: ndarray("float64", (2, 3), "left and right eye drawn for, m, display frame")
+    eye_source: str = Field(default="fixed", pattern="^(tracked|held|fixed)$",
+                            description="tracked | held | fixed: where the eyes drawn for came from")
 
 
 class ProjectorImage(Message):

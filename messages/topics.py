@@ -14,8 +14,8 @@ from messages.diagnostics import Heartbeat
 from messages.fem import ObjectDeformation
 from messages.render import ProjectorImage, RenderedFrame
 from messages.surface import ArmTarget, SheetTarget
-from messages.vision import Fingertip, StereoCalibration, StereoFrame
-from messages.world import FingerTruth, SheetState
+from messages.vision import EyePose, Fingertip, StereoCalibration, StereoFrame
+from messages.world import FingerTruth, HeadTruth, SheetState
 
 
 @dataclass(frozen=True)
@@ -37,6 +37,8 @@ STEREO = Topic("/camera/stereo", StereoFrame, nominal_hz=48.0)
 STEREO_PREVIEW = Topic("/camera/stereo_preview", StereoFrame, nominal_hz=5.0)
 CALIBRATION = Topic("/camera/calibration", StereoCalibration, latched=True)
 FINGERTIP = Topic("/fingertip", Fingertip, nominal_hz=48.0)
+#: the viewer's tracked eyes (the head camera node)
+EYE_POSE = Topic("/eye/pose", EyePose, nominal_hz=60.0)
 SHEET_TARGET = Topic("/sheet/target", SheetTarget, nominal_hz=48.0)
 ARM_LEFT_TARGET = Topic("/arm/left/target", ArmTarget, nominal_hz=48.0)
 ARM_RIGHT_TARGET = Topic("/arm/right/target", ArmTarget, nominal_hz=48.0)
@@ -48,10 +50,12 @@ RENDERED = Topic("/render/stereo", RenderedFrame, nominal_hz=10.0)
 PROJECTOR_IMAGE = Topic("/projector/image", ProjectorImage, latched=True)
 FINGER_TRUTH = Topic("/world/finger", FingerTruth, nominal_hz=100.0)
 SHEET_STATE = Topic("/world/sheet", SheetState, nominal_hz=50.0)
+HEAD_TRUTH = Topic("/world/head", HeadTruth, nominal_hz=100.0)
 DIAGNOSTICS = Topic("/diagnostics", Heartbeat, nominal_hz=1.0)
 
 ALL = [STEREO, STEREO_PREVIEW, CALIBRATION, FINGERTIP, SHEET_TARGET, ARM_LEFT_TARGET, ARM_RIGHT_TARGET, ARM_LEFT_STATE,
-       ARM_RIGHT_STATE, DEFORMATION, RENDERED, PROJECTOR_IMAGE, FINGER_TRUTH, SHEET_STATE, DIAGNOSTICS]
+       ARM_RIGHT_STATE, DEFORMATION, RENDERED, PROJECTOR_IMAGE, FINGER_TRUTH, SHEET_STATE, DIAGNOSTICS, EYE_POSE,
+       HEAD_TRUTH]
 BY_NAME = {t.name: t for t in ALL}
 
 

@@ -6,7 +6,7 @@ from pydantic import Field
 
 from messages.common import Message, ndarray
 
-__all__ = ["StereoFrame", "StereoCalibration", "Fingertip"]
+__all__ = ["StereoFrame", "StereoCalibration", "Fingertip", "EyePose"]
 
 
 class StereoFrame(Message):
@@ -83,3 +83,29 @@ class Fingertip(Message):
     frame_stamp: float = Field(default=0.0, description="time the source stereo frame was published, s")
     sent_stamp: float = Field(default=0.0, description="time this estimate was published, s")
     reprojection_px: float = Field(default=0.0, ge=0.0, description="epipolar residual, px")
+
+
+class EyePose(Message):
+    """The viewer's tracked glasses and eyes from the head camera (:mod:`flexsheet.vision.glasses`).
+
+    ``header.stamp`` is the frame's mid-exposure time (s). ``position`` (3,) m and ``rotation`` (3, 3) (axes
+    as columns): the glasses frame in the display frame; ``left``/``right``/``eye`` (3,) m: both eyes and
+    their midpoint, display frame, at the stamp (the eye offset and IPD are the lab's measured ones);
+    ``velocity`` (3,) m/s of the midpoint, for prediction to photon time. ``valid`` False: the glasses were
+    not found (the geometry then repeats the last good pose, or V before any; ``age`` says how old it is).
+    ``markers``: board markers used; ``reprojection_px``: RMS PnP residual, px.
+    """
+
+    SCHEMA = "flexsheet/EyePose"
+    VERSION = 1
+
+    position: ndarray("float64", (3,), "glasses origin, m, display frame")
+    rotation: ndarray("float64", (3, 3), "glasses axes as columns, display frame")
+    left: ndarray("float64", (3,), "left eye, m, display frame")
+    right: ndarray("float64", (3,), "right eye, m, display frame")
+    eye: ndarray("float64", (3,), "cyclopean eye, m, display frame")
+    velocity: ndarray("float64", (3,), "cyclopean eye velocity, m/s, display frame")
+    valid: bool = Field(description="glasses found in this frame")
+    age: float = Field(default=0.0, ge=0.0, description="age of the pose carried when not valid, s")
+    markers: int = Field(default=0, ge=0, description="board markers used")
+    reprojection_px: float = Field(default=0.0, ge=0.0, description="RMS PnP reprojection error, px")

@@ -6,7 +6,7 @@ from pydantic import Field
 
 from messages.common import Message, ndarray
 
-__all__ = ["FingerTruth", "SheetState"]
+__all__ = ["FingerTruth", "HeadTruth", "SheetState"]
 
 
 class FingerTruth(Message):
@@ -63,3 +63,26 @@ class SheetState(Message):
     stretch: float = Field(ge=0.0, description="engineering strain between clamps")
     membrane: ndarray("float64", (None, None), "deflection grid, m, along -normal")
     force: float = Field(default=0.0, ge=0.0, description="finger's contact force on the true sheet, N")
+
+
+class HeadTruth(Message):
+    """True pose of the simulated viewer's head (drives the head camera twin and the report; never used by an
+    estimator).
+
+    ``position`` (3,) m: the glasses frame's origin (the bridge of the stereo glasses), display frame;
+    ``rotation`` (3, 3): the glasses frame's axes as columns (x from the right lens to the left lens, y up,
+    z toward the sheet when worn; :mod:`flexsheet.calibration.eye`). ``left``/``right``/``eye`` (3,) m: the
+    viewer's true eyes and their midpoint (the cyclopean eye). ``velocity`` (3,) m/s of the cyclopean eye.
+    ``visible``: False while the script occludes the glasses' markers.
+    """
+
+    SCHEMA = "flexsheet/HeadTruth"
+    VERSION = 1
+
+    position: ndarray("float64", (3,), "glasses origin, m, display frame")
+    rotation: ndarray("float64", (3, 3), "glasses axes as columns, display frame")
+    left: ndarray("float64", (3,), "true left eye, m, display frame")
+    right: ndarray("float64", (3,), "true right eye, m, display frame")
+    eye: ndarray("float64", (3,), "true cyclopean eye, m, display frame")
+    velocity: ndarray("float64", (3,), "cyclopean eye velocity, m/s, display frame")
+    visible: bool = Field(default=True, description="glasses markers visible to the head camera")

@@ -152,6 +152,23 @@ class ArmKinematics:
         q = self.check_q(q)
         return self.T_display_base @ self._link_pose(q).homogeneous @ self.T_link_tool
 
+    def joint_origins(self, q) -> np.ndarray:
+        """(8, 3) m, display frame: the chain's points at joints ``q`` (6,) rad, for link-level collision tests.
+
+        Rows: the base origin, the origins of J1…J6 (Pinocchio ``data.oMi``, i.e. the URDF joint frames) and the
+        clamp point (the tool-frame origin, the middle of the clamped edge = ``fk(q)[:3, 3]``). Consecutive rows
+        bound the links; the J3→J4 row pair is the chord of the elbow's dog-leg offset (−0.090, 0, 0.043) m of
+        ``rv1a.urdf``. Raises ``ValueError`` naming ``q`` if it is not a finite (6,) vector.
+        """
+        q = self.check_q(q)
+        pin.framesForwardKinematics(self.model, self.data, q)
+        local = np.empty((8, 3))
+        local[0] = 0.0
+        for i in range(1, 7):
+            local[i] = self.data.oMi[i].translation
+        local[7] = self.data.oMf[self.fid].translation
+        return local @ self.T_display_base[:3, :3].T + self.T_display_base[:3, 3]
+
     def jacobian(self, q) -> np.ndarray:
         """(6, 6) geometric Jacobian of the clamp frame, rows (v, ω) in the clamp frame (``pin.LOCAL``)."""
         q = self.check_q(q)

@@ -26,6 +26,10 @@ Layout (OpenCV FileStorage YAML; matrices are ``!!opencv-matrix``, units m / rad
        mode: fixed | tracked
        V: 3x1  ipd: m  glasses_eye_offset: 3x1 (cyclopean eye in the glasses marker frame, tracked mode)
        provenance: {...}
+    head_camera:                  # the camera facing the viewer (optional: without it the image is for V)
+       K: 3x3  D: 5x1  width, height
+       T_display_camera: 4x4      # its optical frame (+z forward, +x right, +y down) in the display frame
+       provenance: {...}
 
 ``provenance.measured_at`` is ISO 8601 UTC; ``source`` is ``lab``, ``twin seed N`` or ``nominal``.
 The file is written with ``cv2.FileStorage`` (so OpenCV reads it back) and read with PyYAML's safe loader
@@ -47,13 +51,13 @@ from flexsheet.model import geometry
 from flexsheet.model.checks import check_pose
 
 __all__ = ["FORMAT_VERSION", "ENTRIES", "NOMINAL_CLAMP_MARKER", "NOMINAL_IPD", "Provenance", "CameraEntry",
-           "ProjectorEntry", "ArmEntry", "EyeEntry", "DisplayCalib", "nominal_display_calib",
+           "ProjectorEntry", "ArmEntry", "EyeEntry", "HeadCameraEntry", "DisplayCalib", "nominal_display_calib",
            "now_iso", "pose_from_rt", "xyzyaw_from_pose", "BOOTSTRAP_FILE", "STEREO_NAMES",
            "stereo_vector", "stereo_from_vector"]
 
 FORMAT_VERSION = 1
 #: entry names, as :meth:`DisplayCalib.require` and the error messages spell them
-ENTRIES = ("camera", "projector", "arms.left", "arms.right", "eye")
+ENTRIES = ("camera", "projector", "arms.left", "arms.right", "eye", "head_camera")
 #: nominal clamp marker (a 10 mm retro-reflective sphere) in the clamp (tool) frame, m: 10 mm toward the user
 #: (normal) and 40 mm along axis_v from the middle of the clamped edge (design value; calibrated by ``arms``)
 NOMINAL_CLAMP_MARKER = (0.010, 0.0, 0.040)
@@ -209,6 +213,19 @@ class EyeEntry:
 
 
 @dataclass
+class HeadCameraEntry:
+    """The head camera (facing the viewer, for the glasses): ``K`` (3, 3) px, ``D`` (5,) OpenCV distortion,
+    ``width``/``height`` px, ``T_display_camera`` (4, 4) its optical frame in the display frame, m."""
+
+    K: np.ndarray
+    D: np.ndarray
+    width: int
+    height: int
+    T_display_camera: np.ndarray
+    provenance: Provenance
+
+
+@dataclass
 class DisplayCalib:
     """The whole ``display.yaml`` (module doc). Entries are ``None`` (``arms`` lacks the side) until measured."""
 
@@ -217,6 +234,7 @@ class DisplayCalib:
     arms: dict[str, ArmEntry] = field(default_factory=dict)
     eye: EyeEntry | None = None
     path: str = ""
+    head_camera: HeadCameraEntry | None = None
 
     def _entry(self, name: str):
         if name.startswith("arms."):
@@ -238,8 +256,8 @@ class DisplayCalib:
 
     def require(self, *names: str, max_age_s: float | None = None) -> DisplayCalib:
         """Raise ``ValueError`` naming the file and the entries that are missing (or stale, when ``max_age_s``
-        is given); returns ``self`` otherwise. ``names`` default to all :data:`ENTRIES`."""
-        names = names or ENTRIES
+        is given); returns ``self`` otherwise. ``names`` default to every entry but the optional ``head_camera``."""
+        names = names or tuple(n for n in ENTRIES if n != "head_camera")
         bad = [n for n in names if n not in ENTRIES]
         if bad:
             raise ValueError(f"unknown display calibration entries {bad}; known: {list(ENTRIES)}")
@@ -259,7 +277,7 @@ class DisplayCalib:
         arms = dict(self.arms)
         arms.update(other.arms)
         return DisplayCalib(other.camera or self.camera, other.projector or self.projector, arms,
-                            other.eye or self.eye, other.path or self.path)
+                            other.eye or self.eye, other.path or self.path, other.head_camera or self.head_camera)
 
 
 def nominal_display_calib() -> DisplayCalib:

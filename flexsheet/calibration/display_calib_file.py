@@ -17,6 +17,7 @@ from flexsheet.calibration.display_calib import (
     CameraEntry,
     DisplayCalib,
     EyeEntry,
+    HeadCameraEntry,
     ProjectorEntry,
     Provenance,
 )
@@ -98,6 +99,16 @@ def write_display_calib(path: str, calib: DisplayCalib) -> None:
             _mat(fs, "glasses_eye_offset", e.glasses_eye_offset)
             _write_prov(fs, e.provenance)
             fs.endWriteStruct()
+        if calib.head_camera is not None:
+            h = calib.head_camera
+            fs.startWriteStruct("head_camera", cv2.FileNode_MAP)
+            _mat(fs, "K", h.K)
+            _mat(fs, "D", h.D)
+            fs.write("width", int(h.width))
+            fs.write("height", int(h.height))
+            _mat(fs, "T_display_camera", h.T_display_camera)
+            _write_prov(fs, h.provenance)
+            fs.endWriteStruct()
     finally:
         fs.release()
 
@@ -151,6 +162,15 @@ def _validate(c: DisplayCalib, path: str) -> None:
         _vec("eye.glasses_eye_offset", c.eye.glasses_eye_offset, 3, path)
         if not (math.isfinite(c.eye.ipd) and 0.0 <= c.eye.ipd <= 0.1):
             raise ValueError(f"{path}: eye.ipd must be in [0, 0.1] m, got {c.eye.ipd!r}")
+    if c.head_camera is not None:
+        h = c.head_camera
+        _checked_pose("head_camera.T_display_camera", h.T_display_camera, path)
+        K = np.asarray(h.K, float)
+        if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+            raise ValueError(f"{path}: head_camera.K must be a finite 3x3 matrix with positive focal lengths")
+        _vec("head_camera.D", h.D, 5, path)
+        if not (int(h.width) > 0 and int(h.height) > 0):
+            raise ValueError(f"{path}: head_camera.width/height must be positive, got {h.width}x{h.height}")
 
 
 def _get(d: dict, key: str, prefix: str, path: str, kind: type | tuple):
@@ -233,6 +253,13 @@ def load_display_calib(path: str, require: tuple[str, ...] = ()) -> DisplayCalib
         out.eye = EyeEntry(str(_get(d, "mode", "eye.", path, str)), _vec("eye.V", mat(d, "V", "eye."), 3, path),
                            float(_get(d, "ipd", "eye.", path, float)), _read_prov(d, "eye.", path),
                            _vec("eye.glasses_eye_offset", off, 3, path))
+    if "head_camera" in doc:
+        d = _get(doc, "head_camera", "", path, dict)
+        pre = "head_camera."
+        out.head_camera = HeadCameraEntry(
+            mat(d, "K", pre), _vec(pre + "D", mat(d, "D", pre), 5, path), int(_get(d, "width", pre, path, int)),
+            int(_get(d, "height", pre, path, int)),
+            _checked_pose(pre + "T_display_camera", mat(d, "T_display_camera", pre), path), _read_prov(d, pre, path))
     _validate(out, path)
     if require:
         out.require(*require)

@@ -19,7 +19,12 @@ import numpy as np
 from flexsheet.calibration.display_calib import NOMINAL_IPD, EyeEntry, Provenance
 from flexsheet.model import geometry
 
-__all__ = ["fixed_eye", "glasses_pose", "glasses_eye_offset", "tracked_eyes", "tracked_eye_entry"]
+__all__ = ["GLASSES_AXES", "fixed_eye", "glasses_pose", "glasses_eye_offset", "tracked_eyes", "tracked_eye_entry"]
+
+
+#: the glasses axes (columns, display frame) of a viewer upright and facing the sheet (−x): x toward the viewer's
+#: left (−y), y up (+z), z toward the sheet (−x)
+GLASSES_AXES = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 
 def _vec3(name: str, v) -> np.ndarray:

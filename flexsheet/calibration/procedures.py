@@ -30,7 +30,7 @@ from flexsheet.vision.stereo_calibration import BoardSpec, parse_board
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Options", "QUICK", "FULL", "run_camera_pose", "run_projector", "run_arms", "run_eye", "run_all"]
+__all__ = ["Options", "QUICK", "FULL", "run_camera_pose", "run_projector", "run_arms", "run_eye", "run_head_camera", "run_all"]
 
 
 @dataclass(frozen=True)
@@ -161,7 +161,8 @@ class Registration:
 
 
 def run_all(source, opts: Options) -> Registration:
-    """Camera pose, projector, arms and eye in lab order on ``source`` (each step from the ones before)."""
+    """Camera pose, projector, arms and eye in lab order on ``source`` (each step from the ones before); then
+    the head camera and the tracked eye when the source has the head camera's scenes."""
     import time
 
     timings = {}
@@ -178,4 +179,34 @@ def run_all(source, opts: Options) -> Registration:
     timings["arms_s"] = time.perf_counter() - t0
     calib.arms = {s: e for s, (e, _) in arms.items()}
     calib.eye = run_eye(source=source.label)
+    if hasattr(source, "head_fixture_images"):
+        t0 = time.perf_counter()
+        calib.head_camera, calib.eye = run_head_camera(source)
+        timings["head_camera_s"] = time.perf_counter() - t0
+    else:
+        log.info("head camera: not registered by this source (the image is drawn for the fixed V)")
     return Registration(calib, cam, rc, proj, rp, arms, timings)
+
+
+def run_head_camera(source):
+    """The head camera's entry and the tracked eye entry (:mod:`flexsheet.calibration.head_camera`): the board
+    on the chin-rest fixture's steps, then the viewer on the chin rest and the pupillometer's IPD."""
+    import numpy as np
+
+    from flexsheet.calibration.head_camera import design_head_camera, eye_entry, fixture_poses, register_head_camera
+    from flexsheet.vision.glasses import GlassesBoard, GlassesTracker
+
+    board = GlassesBoard()
+    K0, _, w, h = design_head_camera()
+    poses = fixture_poses()
+    finder = GlassesTracker(K0, None, np.eye(4), board, np.zeros(3), 0.064)
+    entry = register_head_camera([finder.detect(im) for im in source.head_fixture_images(poses)], poses, board, K0,
+                                 (w, h), source.label)
+    tracker = GlassesTracker(entry.K, entry.D, entry.T_display_camera, board, np.zeros(3), 0.064)
+    pose = tracker.track(source.head_chin_rest_image())
+    if pose is None:
+        raise ValueError("head camera: the glasses on the chin rest were not found (is the viewer seated?)")
+    eye = eye_entry(pose.T_display_glasses, source.pupillometer_ipd(), source=source.label)
+    log.info(f"head camera: {entry.provenance.n_poses} fixture steps, {entry.provenance.residuals['rms_px']:.3f} px "
+             f"rms; eye offset {np.round(eye.glasses_eye_offset * 1e3, 1).tolist()} mm, ipd {eye.ipd * 1e3:.1f} mm")
+    return entry, eye

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from flexsheet.experiments.report_head import head_summary
 from flexsheet.experiments.report_softness import felt_force
 from flexsheet.experiments.report_timing import compliance_summary, latency_hops, watchdog_faults
 from flexsheet.experiments.report_verdicts import judge, table1_verdicts
@@ -86,6 +87,9 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scen
     summary.update(table1_rows(d, scene, series, segments))
     summary["compliance"] = compliance_summary(d)
     summary["softness"] = felt_force(d)
+    head = head_summary(d, scene or paper_scene(), series)
+    if head:
+        summary.update(head)
     summary["latency_ms"] = latency_hops(d)
     summary["faults"] = watchdog_faults(d)
     if summary.get("delay"):

@@ -52,6 +52,7 @@ class LabTiming:
         "fem": 0.00144,           # one realtime FEM update (nonlinear snapshots)
         "renderer": 0.0040,       # one corrected stereo pair on a desktop GPU (A: llvmpipe here takes ~13.6 ms)
         "arm_bridge": 0.00005,    # IK of one clamp target
+        "head_camera": 0.0031,    # ArUco detection, edge-line corners + PnP of the glasses board, one 640x512 frame
     })
 
     def camera_latency(self, exposure_s: float, width: int = 640, height: int = 512) -> float:

@@ -97,6 +97,8 @@ class Hold(StrEnum):
     STALE_FINGERTIP = "hold:stale_fingertip"
     FUTURE_STAMP = "hold:future_stamp"
     SINGULAR = "hold:singular"
+    HEAD_LOST = "hold:head_lost"
+    KEEP_OUT = "hold:keep_out"
 
 
 #: the holds caused by a refused input (the node reports them as rejected input)
@@ -223,8 +225,9 @@ class SurfacePlanner:
     :meth:`hold` republishes it with a reason (a lost marker, a refused input). ``counts`` counts statuses.
     """
 
-    def __init__(self, shape: Shape, config: PlannerConfig | None = None, compliance=None):
+    def __init__(self, shape: Shape, config: PlannerConfig | None = None, compliance=None, guard=None):
         self.shape = shape
+        self.guard = guard          # a flexsheet.planning.head_guard.HeadGuard, or None (no head tracking)
         self.cfg = config or PlannerConfig()
         self.compliance = compliance
         self.limiter = RateLimiter(self.cfg.limits)
@@ -414,9 +417,17 @@ class SurfacePlanner:
             o, Rc, st, limited = origin, R, stretch, False
         else:
             prev = self.limiter.snapshot()
+            if self.guard is not None:
+                self.limiter.limits = self.guard.limits(self.cfg.limits, prev.origin, prev.R, prev.stretch)
             o, Rc, st, limited = self.limiter.step(origin, R, stretch, dt)
         if limited:
             status.append("rate_limited")
+        if self.guard is not None and self.guard.eye is not None and prev is not None:
+            g = self.guard.step(prev.origin, prev.R, o, Rc, st, dt)
+            if g.retreat:            # the step would enter the head's keep-out: back off instead, at rest
+                status.append(Hold.KEEP_OUT)
+                o, Rc = tuple(float(x) for x in g.origin), tuple(tuple(float(x) for x in r) for r in g.R)
+                self.limiter.reset(o, Rc, st)
         axes = cols(Rc)
         left, right = clamp_points(o, axes[1], st, self.cfg.material.size)
         ok, margin = self.cfg.reach.reachable(left, right)

@@ -300,8 +300,8 @@ def load_geometry(scene_file: str | None = None, display_calib: str | None = Non
     (:func:`~flexsheet.rendering.stereo_renderer.scaled_projector`; None: the calibrated size).
 
     The imaginary screen → projector pixel mapping is then the calibration's: K_p, D and the pose from the
-    file, nothing from constants. An eye in ``tracked`` mode is drawn from its fixed fallback V
-    (no tracked-eye topic exists yet; the log says so). Raises ``ValueError`` naming the file and key: scene
+    file, nothing from constants. V ± IPD/2 are the eyes drawn for until ``/eye/pose`` tracks the viewer
+    (:mod:`flexsheet.rendering.viewpoint`), whatever the entry's mode. Raises ``ValueError`` naming the file and key: scene
     invalid, display.yaml unreadable or without its ``projector`` or ``eye`` entry.
     """
     from flexsheet.calibration.display_calib import nominal_display_calib
@@ -330,7 +330,7 @@ def load_geometry(scene_file: str | None = None, display_calib: str | None = Non
     if (proj.width, proj.height) != (pe.width, pe.height):
         log.append(f"drawing the {pe.width}x{pe.height} projector at {proj.width}x{proj.height} px (K rescaled)")
     if ee.mode == "tracked":
-        log.append("eye mode tracked: no tracked-eye input reaches the renderer yet; drawing for the fixed "
-                   f"fallback V {np.round(ee.V * 1e3, 1).tolist()} mm")
+        log.append(f"eye mode tracked: the pairs follow /eye/pose; V {np.round(ee.V * 1e3, 1).tolist()} mm while "
+                   "the glasses are not tracked")
     return RenderGeometry(sc, sc.surface_mesh(), proj, np.asarray(pe.D, float).ravel().copy(),
                           np.asarray(ee.V, float).copy(), float(ee.ipd), nominal, log)

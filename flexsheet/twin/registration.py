@@ -24,7 +24,7 @@ log = logging.getLogger(__name__)
 __all__ = ["TwinSource", "run_display_sim", "sim_display_calib", "score_registration", "verdicts", "TARGETS",
            "SUMMARY_VERSION", "sim_display_calib_cached"]
 
-SUMMARY_VERSION = 3
+SUMMARY_VERSION = 4
 
 Pair = tuple[np.ndarray, np.ndarray]
 
@@ -63,6 +63,27 @@ class TwinSource:
     def pattern_frames(self, patterns: list[np.ndarray], sheet_pose: np.ndarray, index: int) -> list[Pair]:
         """Stereo pairs of every pattern with the sheet at ``sheet_pose`` (pose number ``index``)."""
         return self.twin.pattern_frames(patterns, sheet_pose, white_dn=self.sheet_white_dn, frames=self.n_pattern_frames)
+
+    def head_fixture_images(self, poses: list[np.ndarray]) -> list[np.ndarray]:
+        """Head-camera images of the glasses board on the chin-rest fixture's steps
+        (:class:`flexsheet.twin.head_rig.HeadRigTwin`)."""
+        return self._head_rig().fixture_images(poses)
+
+    def head_chin_rest_image(self) -> np.ndarray:
+        """The viewer on the chin rest, glasses on, seen by the head camera."""
+        return self._head_rig().chin_rest_image()
+
+    def pupillometer_ipd(self) -> float:
+        """The viewer's IPD as the lab's pupillometer reads it, m."""
+        return self._head_rig().pupillometer_ipd()
+
+    def _head_rig(self):
+        from flexsheet.twin.head_rig import HeadRigTwin
+
+        if getattr(self, "_rig", None) is None:
+            t = self.twin.truth
+            self._rig = HeadRigTwin(t.seed, t.realism)
+        return self._rig
 
     def marker_frames(self, side: str, joints: list[np.ndarray]) -> tuple[list[Pair], list[np.ndarray]]:
         """Stereo pairs while arm ``side`` visits ``joints``; returns (frames, the joints actually commanded)."""

@@ -16,7 +16,7 @@ from flexsheet.model import geometry
 from flexsheet.model.sheet_table import TABLE_DEPTHS, TABLE_POSITIONS, default_cache_dir
 from flexsheet.twin.truth_choice import TruthChoice
 
-__all__ = ["SheetFemConfig", "WorldConfig"]
+__all__ = ["SheetFemConfig", "HeadScript", "WorldConfig"]
 
 #: the mesh of the tables the experiments build with the defaults (h_fine, h_coarse), m
 _DEFAULT_MESH = (0.004, 0.008)
@@ -74,11 +74,35 @@ class SheetFemConfig:
 
 
 @dataclass(frozen=True)
+class HeadScript:
+    """The viewer's head in the world (:class:`flexsheet.twin.head.HeadMotion`): ``still`` (no sway: the eye at
+    the paper's V), ``sway`` [x, y, z] m: the largest excursion of the eye; ``lean_in`` [start s, depth m, hold
+    s] in script time, [] for none (default: 0.24 m toward the sheet at 48 s, in the stroke-and-push, far enough
+    for the head's keep-out to reach the sheet's path); ``occlusions`` [[start s, duration s], ...]: the
+    glasses' markers hidden (default 1 s at 54.5 s). Raises ``ValueError`` on a malformed lean-in or span."""
+
+    still: bool = False
+    sway: list[float] = field(default_factory=lambda: [0.05, 0.05, 0.03])
+    lean_in: list[float] = field(default_factory=lambda: [48.0, 0.24, 2.0])
+    occlusions: list[list[float]] = field(default_factory=lambda: [[54.5, 1.0]])
+
+    def __post_init__(self) -> None:
+        if len(self.sway) != 3 or any(not (0.0 <= v <= 0.2) for v in self.sway):
+            raise ValueError(f"head.sway must be [x, y, z] in [0, 0.2] m, got {self.sway!r}")
+        if self.lean_in and (len(self.lean_in) != 3 or any(not v >= 0.0 for v in self.lean_in)
+                             or self.lean_in[1] > 0.35):
+            raise ValueError(f"head.lean_in must be [] or [start s, depth m <= 0.35, hold s], got {self.lean_in!r}")
+        for span in self.occlusions:
+            if len(span) != 2 or not (span[0] >= 0.0 and span[1] > 0.0):
+                raise ValueError(f"head.occlusions must be [start s, duration s > 0] pairs, got {span!r}")
+
+
+@dataclass(frozen=True)
 class WorldConfig:
     """The world twin's rates, truth and start (SI units): ``rate_hz`` of the finger, ``sheet_rate_hz`` of the
     sheet, ``membrane_grid`` G (G×G deflection samples), ``twin`` the hidden truth, ``sheet_size`` m,
     ``start_delay`` s after the nodes of ``start_after`` (or ``start_timeout`` s), ``loop``,
-    ``progress_period`` s."""
+    ``progress_period`` s, ``head`` the viewer's head (:class:`HeadScript`)."""
 
     rate_hz: Annotated[float, Field(gt=0.0, le=2000.0)] = 100.0
     sheet_rate_hz: Annotated[float, Field(gt=0.0, le=1000.0)] = 50.0
@@ -90,3 +114,4 @@ class WorldConfig:
     start_timeout: Annotated[float, Field(gt=0.0)] = 60.0
     loop: bool = False
     progress_period: Annotated[float, Field(gt=0.0)] = 2.0
+    head: HeadScript = field(default_factory=HeadScript)

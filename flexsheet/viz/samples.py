@@ -21,6 +21,8 @@ from flexsheet.model.sheet import SheetSurface
 from flexsheet.vision.camera_model import DEFAULT_CAMERA_POSITION, camera_model, look_at
 from flexsheet.vision.stereo_calibration import to_message
 from messages import (
+    EyePose,
+    HeadTruth,
     ArmJointState,
     Fingertip,
     FingerTruth,
@@ -114,5 +116,12 @@ def sample_state(stamp: float = 1.0e9, push: float = 0.004, seq: int = 0) -> dic
     img = np.zeros((48, 64, 3), np.uint8)
     img[12:36, 20:44] = (255, 160, 60)
     out[T.RENDERED.name] = RenderedFrame(header=h("projector"), left=img, right=np.ascontiguousarray(img[:, ::-1]),
-                                         scale=0.0625, correction="fine", render_time=0.004, source_stamp=exposure)
+                                         scale=0.0625, correction="fine", render_time=0.004, source_stamp=exposure,
+                                         eyes=np.stack([geometry.EYE - [0, 0.032, 0], geometry.EYE + [0, 0.032, 0]]),
+                                         eye_source="tracked")
+    left_eye, right_eye = geometry.EYE - [0.0, 0.032, 0.0], geometry.EYE + [0.0, 0.032, 0.0]
+    glasses = dict(position=geometry.EYE + [-0.015, 0.0, 0.0], rotation=np.array([[0.0, 0, -1], [-1, 0, 0], [0, 1, 0]]),
+                   left=left_eye, right=right_eye, eye=geometry.EYE.copy(), velocity=np.zeros(3))
+    out[T.EYE_POSE.name] = EyePose(header=h(), valid=True, markers=14, reprojection_px=0.1, **glasses)
+    out[T.HEAD_TRUTH.name] = HeadTruth(header=h(), **glasses)
     return out

@@ -17,7 +17,10 @@ says which source is in use. The FEM's stiffness counts as about this scene when
 this scene's; a message without one (a bag recorded before the FEM read scenes) counts only on the paper's
 cylinder, the one object that FEM solved.
 Publishes ``/sheet/target``, ``/arm/left/target``, ``/arm/right/target`` with ``source_stamp`` = the
-fingertip's ``exposure_stamp``. A lost marker (``valid=False``) or an input the planner refuses republishes
+fingertip's ``exposure_stamp``. The viewer's head (``/eye/pose``) bounds the sheet's motion: reduced speed near
+it, hold and back off before the sheet would enter its keep-out (``head_radius`` + ``keepout_margin``), hold while
+the glasses are lost (:mod:`flexsheet.planning.head_guard`); without a head camera this is inactive.
+A lost marker (``valid=False``) or an input the planner refuses republishes
 the last safe pose with status ``hold:<reason>``; an unreachable target holds the arms and says
 ``unreachable``. Malformed or NaN messages are rejected by the codec and counted in diagnostics.
 Time: a fingertip stamped more than ``future_stamp_tolerance`` s ahead of the node's clock (``self.now()``) is
@@ -40,13 +43,15 @@ from flexsheet.model.shapes import make_shape
 from flexsheet.model.tension import SheetMaterial
 from flexsheet.model.timing import LAB
 from flexsheet.planning.compliance import SceneCompliance
+from flexsheet.planning.head_guard import HeadGuard
+from flexsheet.planning.keepout import KeepOut
 from flexsheet.planning.limits import MotionLimits, ReachModel
 from flexsheet.planning.shape import planner_shape
 from flexsheet.planning.surface_planner import INPUT_REJECTIONS, Hold, Plan, PlannerConfig, SurfacePlanner
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.runtime.qos import QoS
-from messages import ArmTarget, Fingertip, ObjectDeformation, SheetTarget, topics
+from messages import ArmTarget, EyePose, Fingertip, ObjectDeformation, SheetTarget, topics
 
 __all__ = ["PlannerParams", "PlannerNode", "fem_solves_scene"]
 
@@ -136,6 +141,8 @@ PlannerParams = params_model(
     fem_timeout=(float, Field(default=0.5, gt=0.0)),
     fem_window=(float, Field(default=0.0, ge=0.0, le=5.0)),
     display_calib=(str | None, Field(default=None, description="display.yaml whose arm bases the reach check uses")),
+    head_radius=(float, Field(default=0.10, gt=0.0, le=0.3, description="head sphere about the head centre, m")),
+    keepout_margin=(float, Field(default=0.05, ge=0.0, le=0.3, description="keep-out margin around the head, m")),
 )
 
 
@@ -164,7 +171,9 @@ class PlannerNode(Node):
             compliance = SceneCompliance(self.scene, shape, p.min_contact_depth) if p.stiffness_from_scene else None
             self.log.info("%s", self.scene.describe())
         self._scene_key = self.scene.key() if self.scene is not None else None
-        self.planner = SurfacePlanner(shape, p.planner_config(), compliance)
+        cfg = p.planner_config()
+        self.guard = HeadGuard(KeepOut(head_radius=p.head_radius, margin=p.keepout_margin), cfg.material.size)
+        self.planner = SurfacePlanner(shape, cfg, compliance, self.guard)
         self._k_fem: float | None = None
         self._k_fem_at = 0.0
         self._k_hist: deque[tuple[float, float]] = deque(maxlen=256)
@@ -175,6 +184,19 @@ class PlannerNode(Node):
         self.pub_right = self.publisher(topics.ARM_RIGHT_TARGET)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST, sim_cost=LAB.compute("planner"))
         self.subscribe(topics.DEFORMATION, self.on_deformation, qos=QoS.LATEST)
+        self.subscribe(topics.EYE_POSE, self.on_eye_pose, qos=QoS.LATEST)
+
+    def on_eye_pose(self, msg: EyePose) -> None:
+        """The viewer's tracked eye: the keep-out follows it; lost glasses hold the sheet (:class:`HeadGuard`)."""
+        was = self.guard.state
+        try:
+            self.guard.set_eye(msg.eye, msg.valid)
+        except ValueError as exc:
+            raise InputRejected(f"/eye/pose: {exc}") from None
+        if self.guard.state != was:
+            (self.log.warning if self.guard.state == "lost" else self.log.info)(
+                "viewer's head %s", {"tracking": "tracked: the sheet keeps out of its keep-out volume",
+                                     "lost": "lost: holding the sheet until the glasses are seen again"}[self.guard.state])
 
     def on_deformation(self, msg: ObjectDeformation) -> None:
         """Keep the FEM's local stiffness (N/m) while the solution is valid, positive and about this scene
@@ -220,6 +242,8 @@ class PlannerNode(Node):
         """Plan and publish; a lost marker holds the last safe pose (status ``hold:marker_lost``)."""
         if not msg.valid:
             plan = self.planner.hold(Hold.MARKER_LOST)
+        elif self.guard.lost:
+            plan = self.planner.hold(Hold.HEAD_LOST)
         else:
             predict = self.params.use_prediction        # read once: param set may change it meanwhile
             pos = msg.predicted_position if predict else msg.position

@@ -2,7 +2,9 @@
 
 Subscribes ``/object/deformation`` (the scene's rigid object until the FEM publishes), both arms' joint states (the
 measured clamp poses give the actual sheet pose and its stretch), ``/fingertip`` (the pushed point and depth) and
-``/sheet/target`` (the stretch the planner sets: its pushed-sheet table is prepared before the arms get there).
+``/sheet/target`` (the stretch the planner sets: its pushed-sheet table is prepared before the arms get there) and
+``/eye/pose`` (the viewer's tracked eyes: each pair is corrected for them, predicted to the moment it is on the
+sheet; the last good pose while the glasses are lost, then the registered V: :mod:`flexsheet.rendering.viewpoint`).
 
 The pushed sheet's shape is the renderer's nominal FEM model (:mod:`flexsheet.model.sheet_model`: nominal sheet
 material, assumed tension ratio; never the twin's truth), one table per clamp-stretch node, cached on disk.
@@ -42,11 +44,14 @@ from flexsheet.model import geometry as paper
 from flexsheet.model.sheet_model import SheetConfig, sheet_model_for
 from flexsheet.model.timing import LAB
 from flexsheet.rendering.correction import check_screen
+from flexsheet.model.projector import eye_positions
 from flexsheet.rendering.state import PendingPush, RendererState, load_geometry, pick_model
+from flexsheet.rendering.viewpoint import Viewpoint
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.qos import QoS
 from messages import (
     ArmJointState,
+    EyePose,
     Fingertip,
     Heartbeat,
     ObjectDeformation,
@@ -73,7 +78,7 @@ class RendererNode(SheetTables, Node):
         geo = await loop.run_in_executor(None, load_geometry, p.scene, p.display_calib, p.width, p.height)
         self.geometry = geo
         for line in geo.log:
-            loud = (geo.nominal and "NOMINAL" in line) or line.startswith("eye mode tracked")
+            loud = geo.nominal and "NOMINAL" in line
             (self.log.warning if loud else self.log.info)("%s", line)
         self.eye = geo.eye
         self.projector = geo.projector
@@ -133,6 +138,8 @@ class RendererNode(SheetTables, Node):
         self.subscribe(topics.ARM_RIGHT_STATE, self.on_arm, qos=QoS.LATEST)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
         self.subscribe(topics.SHEET_TARGET, self.on_sheet_target, qos=QoS.LATEST)
+        self.viewpoint = Viewpoint(*eye_positions(self.eye, self.geometry.ipd))
+        self.subscribe(topics.EYE_POSE, self.on_eye_pose, qos=QoS.LATEST)
         self.timer(1.0 / p.publish_rate, self.on_timer)
         self._request()
 
@@ -322,6 +329,25 @@ class RendererNode(SheetTables, Node):
         self._request()
 
     # ------------------------------------------------------------------ drawing (GL / window thread)
+    def on_eye_pose(self, msg: EyePose) -> None:
+        """The tracked eyes: the pairs are corrected for them from now on (:class:`Viewpoint`)."""
+        try:
+            self.viewpoint.update(float(msg.header.stamp), msg.left, msg.right, msg.velocity, msg.valid)
+        except ValueError as exc:
+            raise InputRejected(f"/eye/pose: {exc}") from None
+        self._request()      # the head moved: the pair follows it even while the finger is still
+
+    def _eyes(self):
+        """The eyes of the pair drawn now, predicted to the moment it is on the sheet (logged on a change)."""
+        photon = LAB.projected_at(self.now() + LAB.compute("renderer"))
+        choice = self.viewpoint.eyes(photon)
+        if choice.say:
+            (self.log.warning if choice.source != "tracked" else self.log.info)("%s", choice.say)
+        if self.params.stereo == "mono":
+            mid = 0.5 * (choice.left + choice.right)
+            return choice, [mid, mid]
+        return choice, [choice.left, choice.right]
+
     def srv_show_image(self, args: dict) -> dict:
         """``{path}``: show an image file (any size: scaled to the projector's, nearest neighbour for patterns)
         in both eyes instead of the scene, until ``clear_image``; latched on ``/projector/image``. Returns the
@@ -365,7 +391,7 @@ class RendererNode(SheetTables, Node):
             self.frames += 1
             return RenderedFrame(header=self.pub.header("projector"), left=left, right=right, scale=p.publish_scale,
                                  correction="image", render_time=time.perf_counter() - t0,
-                                 source_stamp=self.state.source_stamp)
+                                 source_stamp=self.state.source_stamp, eyes=np.stack(self.viewpoint.fixed))
         mesh = self.state.take_mesh()
         stamp = self.state.source_stamp
         if mesh is not None:
@@ -385,7 +411,8 @@ class RendererNode(SheetTables, Node):
             self.state_message = f"model {model} failed ({exc}); drawing uncorrected"
             self.renderer.set_model("none")
         self.model_used = self.renderer.model
-        self.renderer.render_pair()
+        choice, eyes = self._eyes()
+        self.renderer.render_pair(eyes=eyes)
         # the host's drawing time; on a simulated clock the lab's declared one (the message must not depend on the host)
         render_time = LAB.compute("renderer") if self.sim else time.perf_counter() - t0
         if not publish:
@@ -393,7 +420,8 @@ class RendererNode(SheetTables, Node):
         left, right = self.renderer.read_pair(p.publish_scale)
         self.frames += 1
         return RenderedFrame(header=self.pub.header("projector"), left=left, right=right, scale=p.publish_scale,
-                             correction=self.model_used, render_time=render_time, source_stamp=stamp)
+                             correction=self.model_used, render_time=render_time, source_stamp=stamp,
+                             eyes=np.stack(eyes), eye_source=choice.source)
 
     async def on_timer(self) -> None:
         if self.monotonic() - self._last_render >= 1.0 / self.params.publish_rate:

@@ -24,6 +24,9 @@ truth (:class:`flexsheet.twin.truth.TwinTruth`, param ``twin: {realism, truth_se
   outside them is built when a push first needs it: on a simulated clock while simulated time waits (the
   loop stays free: heartbeats, Ctrl-C); on the wall clock in a worker meanwhile, the pushed sheet published
   with its depth but a flat ``membrane`` until it is ready (logged once).
+* Head: the viewer's true head (:mod:`flexsheet.twin.head`: a seeded slow sway about V, a scripted lean-in
+  toward the sheet and occlusions of the glasses, param ``head``; ``head.still: true`` keeps the eye at V) on
+  ``/world/head`` at ``rate_hz``, for the head camera's twin and the report.
 * Start: the script clock starts ``start_delay`` s after every node named in ``start_after`` has sent a
   heartbeat on ``/diagnostics`` (a node's heartbeats begin when its setup is done: an FEM node loading and
   attaching a scene's path table took 13 s of a loaded 2-core start, and a stroke that began before it was
@@ -53,10 +56,11 @@ from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.runtime.qos import QoS
 from flexsheet.twin.finger import FingerScript
+from flexsheet.twin.head import HeadMotion, Viewer
 from flexsheet.twin.truth import TwinTruth
 from flexsheet.twin.world import TruePhysics, build_table
 from flexsheet.twin.world_config import SheetFemConfig, WorldConfig
-from messages import ArmJointState, FingerTruth, Heartbeat, SheetState
+from messages import ArmJointState, FingerTruth, HeadTruth, Heartbeat, SheetState
 from messages import topics as T
 
 __all__ = ["WorldNode", "WorldParams", "Segment", "SheetFemParams"]
@@ -146,7 +150,7 @@ WorldParams = params_model(
 
 
 class WorldNode(Node):
-    """Publishes ``/world/finger`` and ``/world/sheet``; subscribes the two arms' joint states."""
+    """Publishes ``/world/finger``, ``/world/sheet`` and ``/world/head``; subscribes the two arms' joint states."""
 
     Params = WorldParams
     node_type = "world"
@@ -158,7 +162,12 @@ class WorldNode(Node):
         self.total = sum(s.duration for s in self.scripts)
         self.finger_pub = self.publisher(T.FINGER_TRUTH)
         self.sheet_pub = self.publisher(T.SHEET_STATE)
+        self.head_pub = self.publisher(T.HEAD_TRUTH)
         self.truth = TwinTruth.draw(p.twin.truth_seed, p.twin.realism)
+        h = p.head
+        self.head = HeadMotion(Viewer.draw(p.twin.truth_seed, p.twin.realism), seed=p.twin.truth_seed,
+                               sway=tuple(h.sway), still=h.still, lean_in=tuple(h.lean_in) if h.lean_in else None,
+                               occlusions=tuple(tuple(o) for o in h.occlusions))
         self.phys = TruePhysics(self.truth, p.sheet_fem.config(), size=p.sheet_size)
         self.poses: dict[str, np.ndarray] = {}
         self.pose_stamps: dict[str, float] = {}
@@ -346,6 +355,7 @@ class WorldNode(Node):
             self.log.info("waiting for %s before the script starts (%.0f s)", self._waiting_text(),
                           self.monotonic() - self.t_setup)
         if self.paused_at is not None:
+            self._publish_head(0.0 if self.t0 is None else max(self.paused_at - self.t0, 0.0))
             self._publish_away()
             return
         t = -1.0 if self.t0 is None else self.monotonic() - self.t0
@@ -359,6 +369,7 @@ class WorldNode(Node):
                 self.log.info("script finished after %.1f s", t)
                 self.shutdown()
                 return
+        self._publish_head(max(t, 0.0))
         script = self.scripts[i]
         pos, vel = script.state(ts)
         self.finger = pos
@@ -374,6 +385,14 @@ class WorldNode(Node):
             self.log.info("[%-30s] %3.0f%%  segment %d/%d %s %g s: %s, mark at %.1f deg (%.0f %% of the path)", bar,
                           done * 100, i + 1, len(self.scripts), script.mode, script.moving_time, script.phase(ts),
                           math.degrees(float(script.target_angle(ts))), 100.0 * float(script.target_fraction(ts)))
+
+    def _publish_head(self, t: float) -> None:
+        """The viewer's true head at script time ``t`` s on ``/world/head``."""
+        hs = self.head.state(t)
+        self.head_pub.publish(HeadTruth(
+            header=self.head_pub.header("display"), position=hs.T_display_glasses[:3, 3].copy(),
+            rotation=np.ascontiguousarray(hs.T_display_glasses[:3, :3]), left=hs.left, right=hs.right, eye=hs.eye,
+            velocity=hs.velocity, visible=hs.visible))
 
     def _publish_away(self) -> None:
         """The finger while the script is paused: at :data:`AWAY` (display frame), still, hidden from the camera."""

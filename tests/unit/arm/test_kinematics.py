@@ -78,6 +78,27 @@ def test_home_joints_hold_the_home_clamp_frame():
         assert np.allclose(T[:3, :3], want[:3, :3], atol=1e-3)   # columns (normal, axis_u, axis_v)
 
 
+def test_joint_origins_follow_the_urdf_chain():
+    """Base, J1…J6 and clamp points of the left arm at home, against the URDF's offsets by hand."""
+    kin = ArmKinematics("left", LEFT_BASE)
+    q = home_joints("left")
+    p = kin.joint_origins(q)
+    assert p.shape == (8, 3)
+    base = np.array(LEFT_BASE[:3])
+    np.testing.assert_allclose(p[0], base, atol=1e-12)
+    np.testing.assert_allclose(p[1], base + (0.0, 0.0, 0.165), atol=1e-12)     # J1 on the base z axis
+    np.testing.assert_allclose(p[2], base + (0.0, 0.0, 0.300), atol=1e-12)     # J2 0.135 m above J1
+    # J3: the 0.250 m upper arm turned by J2 about y, then J1 + base yaw about z
+    c1, s1 = math.cos(LEFT_BASE[3] + q[0]), math.sin(LEFT_BASE[3] + q[0])
+    arm = 0.250 * np.array([math.sin(q[1]) * c1, math.sin(q[1]) * s1, math.cos(q[1])])
+    np.testing.assert_allclose(p[3], p[2] + arm, atol=1e-12)
+    lengths = np.linalg.norm(np.diff(p[3:], axis=0), axis=1)
+    np.testing.assert_allclose(lengths, (math.hypot(0.090, 0.043), 0.117, 0.0527, 0.0493), atol=1e-12)
+    np.testing.assert_allclose(p[7], kin.fk(q)[:3, 3], atol=1e-12)
+    with pytest.raises(ValueError, match="q"):
+        kin.joint_origins(np.zeros(7))
+
+
 def test_unreachable_target_refused_and_goal_kept():
     kin = ArmKinematics("left", LEFT_BASE)
     q0 = home_joints("left")

@@ -1,0 +1,99 @@
+"""The planner's guard of the viewer's head: reduced speed near it, hold and retreat before the sheet enters it.
+
+:class:`HeadGuard` keeps the newest tracked eye (``/eye/pose``) and judges each rate-limited sheet pose the
+planner would send against the head's keep-out volume (:class:`flexsheet.planning.keepout.KeepOut`: a head
+sphere plus a margin, from the eye):
+
+* **near** (the current sheet within ``near_distance`` of the keep-out): the sheet's motion limits drop so no
+  point of the sheet moves faster than ``reduced_speed`` (ISO 10218-1's 250 mm/s): centre speed
+  ``v ≤ 0.6·reduced_speed`` and turn rate ``ω ≤ 0.4·reduced_speed / r`` (r: the sheet's corner radius);
+* **inside** (the next pose would put a point of the sheet or a clamp in the keep-out): the step is not taken;
+  the sheet backs off along −x (:func:`~flexsheet.planning.keepout.retreat_point`) at the reduced speed;
+* **lost** (the head camera runs but the glasses are not found): the planner holds, as for a lost fingertip.
+
+No tracked eye yet (no head camera): the guard is inactive and says so through :attr:`HeadGuard.state`.
+Units m, s; display frame.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from flexsheet.model.sheet import clamp_half_span
+from flexsheet.planning.keepout import KeepOut, KeepOutVerdict, check_targets, retreat_point, sheet_points
+from flexsheet.planning.limits import MotionLimits
+
+__all__ = ["HeadGuard", "GuardStep"]
+
+
+@dataclass(frozen=True)
+class GuardStep:
+    """What the guard made of one step: ``origin`` (3,) m and the rotation (3, 3) to send, ``retreat`` (True:
+    the step was replaced by a back-off), ``verdict`` of the pose sent."""
+
+    origin: np.ndarray
+    R: np.ndarray
+    retreat: bool
+    verdict: KeepOutVerdict
+
+
+class HeadGuard:
+    """See the module docstring. ``keepout``: the volume; ``size`` m: the unstretched sheet side."""
+
+    def __init__(self, keepout: KeepOut | None = None, size: float = 0.240) -> None:
+        self.keepout = keepout or KeepOut()
+        self.size = float(size)
+        self.eye: np.ndarray | None = None
+        self.lost = False
+        self.counts = {"near": 0, "retreat": 0}
+
+    @property
+    def state(self) -> str:
+        """"inactive" (no eye yet), "lost" or "tracking"."""
+        return "inactive" if self.eye is None else ("lost" if self.lost else "tracking")
+
+    def set_eye(self, eye, valid: bool) -> None:
+        """A new ``/eye/pose``: the cyclopean eye (3,) m and whether the glasses were found. Raises
+        ``ValueError`` on a non-finite eye."""
+        e = np.asarray(eye, float).ravel()
+        if e.shape != (3,) or not np.all(np.isfinite(e)):
+            raise ValueError(f"eye must be 3 finite numbers (m), got {eye!r}")
+        if valid:
+            self.eye, self.lost = e, False
+        elif self.eye is not None:
+            self.lost = True
+
+    def verdict(self, origin, R, stretch: float) -> KeepOutVerdict:
+        """The keep-out verdict of the sheet at ``origin`` (3,) m with axes ``R`` (3, 3) (columns n, u, v) and
+        clamp strain ``stretch``. Requires a tracked eye."""
+        Rm = np.asarray(R, float)
+        pts = sheet_points(np.asarray(origin, float), Rm[:, 0], Rm[:, 1], clamp_half_span(stretch, self.size),
+                           self.size)
+        return check_targets(self.keepout, self.eye, pts)
+
+    def limits(self, base: MotionLimits, origin, R, stretch: float) -> MotionLimits:
+        """``base``, or the reduced limits while the sheet at (``origin``, ``R``, ``stretch``) is near the head."""
+        if self.eye is None or origin is None:
+            return base
+        v = self.verdict(origin, R, stretch)
+        if v.clearance >= self.keepout.near_distance:
+            return base
+        self.counts["near"] += 1
+        r = math.hypot(0.5 * self.size, 0.5 * self.size)
+        vs = self.keepout.reduced_speed
+        return replace(base, v_max=min(base.v_max, 0.6 * vs), w_max=min(base.w_max, 0.4 * vs / r))
+
+    def step(self, prev_origin, prev_R, origin, R, stretch: float, dt: float) -> GuardStep:
+        """Judge the step from (``prev_origin``, ``prev_R``) to (``origin``, ``R``) at ``stretch`` over ``dt`` s:
+        the step itself if it keeps out of the volume, else a back-off from the previous pose."""
+        v = self.verdict(origin, R, stretch)
+        if not v.inside:
+            return GuardStep(np.asarray(origin, float), np.asarray(R, float), False, v)
+        self.counts["retreat"] += 1
+        Rp = np.asarray(prev_R, float)
+        step = 0.6 * self.keepout.reduced_speed * max(float(dt), 1e-3)
+        o = retreat_point(self.keepout, self.eye, np.asarray(prev_origin, float), Rp[:, 0], step)
+        return GuardStep(o, Rp, True, self.verdict(o, Rp, stretch))
