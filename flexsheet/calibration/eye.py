@@ -6,7 +6,7 @@
   stereo camera, give the glasses' pose (:func:`glasses_pose`, Kabsch/Umeyama least-squares rigid fit). The
   cyclopean eye sits at a fixed offset in the glasses frame (:func:`glasses_eye_offset`, measured once with
   the viewer in the reference position), and the eyes at ± IPD/2 along the glasses' x axis (from the right
-  lens to the left lens): :func:`tracked_eyes`. The correction then follows the viewer's head.
+  lens to the left lens): :func:`flexsheet.vision.glasses.tracked_eyes`. The correction then follows the viewer's head.
 
 Frames: ``display`` (:mod:`flexsheet.model.geometry`); the glasses frame: x from the right to the left lens,
 y up, z = x × y (toward the sheet when worn). Units m.
@@ -19,12 +19,7 @@ import numpy as np
 from flexsheet.calibration.display_calib import NOMINAL_IPD, EyeEntry, Provenance
 from flexsheet.model import geometry
 
-__all__ = ["GLASSES_AXES", "fixed_eye", "glasses_pose", "glasses_eye_offset", "tracked_eyes", "tracked_eye_entry"]
-
-
-#: the glasses axes (columns, display frame) of a viewer upright and facing the sheet (−x): x toward the viewer's
-#: left (−y), y up (+z), z toward the sheet (−x)
-GLASSES_AXES = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+__all__ = ["fixed_eye", "glasses_pose", "glasses_eye_offset", "tracked_eye_entry"]
 
 
 def _vec3(name: str, v) -> np.ndarray:
@@ -80,18 +75,6 @@ def glasses_eye_offset(T_display_glasses: np.ndarray, V_reference=geometry.EYE) 
     ``V_reference`` (3,) m (e.g. the chin rest that defines the paper's V)."""
     T = np.asarray(T_display_glasses, float)
     return T[:3, :3].T @ (_vec3("V_reference", V_reference) - T[:3, 3])
-
-
-def tracked_eyes(T_display_glasses: np.ndarray, eye_offset, ipd: float = NOMINAL_IPD):
-    """(left, right, V) eye positions (3,) m in the display frame for glasses at ``T_display_glasses`` (4, 4):
-    V = T · eye_offset, left/right = V ± ipd/2 · (glasses x axis). Raises ``ValueError`` on bad inputs."""
-    from flexsheet.model.checks import check_pose
-
-    T = check_pose("T_display_glasses", T_display_glasses)
-    V = T[:3, :3] @ _vec3("eye_offset", eye_offset) + T[:3, 3]
-    axis = T[:3, 0]
-    h = 0.5 * _ipd(ipd)
-    return V + h * axis, V - h * axis, V
 
 
 def tracked_eye_entry(V_fallback, ipd: float, eye_offset, source: str = "lab") -> EyeEntry:

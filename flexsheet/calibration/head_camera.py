@@ -23,9 +23,9 @@ import cv2
 import numpy as np
 
 from flexsheet.calibration.display_calib import EyeEntry, HeadCameraEntry, Provenance
-from flexsheet.calibration.eye import GLASSES_AXES, glasses_eye_offset, tracked_eye_entry
+from flexsheet.calibration.eye import glasses_eye_offset, tracked_eye_entry
 from flexsheet.model import geometry
-from flexsheet.vision.glasses import GlassesBoard
+from flexsheet.vision.glasses import GLASSES_AXES, GlassesBoard
 
 __all__ = ["design_head_camera", "fixture_poses", "register_head_camera", "eye_entry"]
 
@@ -47,7 +47,7 @@ def design_head_camera() -> tuple[np.ndarray, np.ndarray, int, int]:
 def fixture_poses(V=geometry.EYE) -> list[np.ndarray]:
     """The chin-rest fixture's steps: T_display_glasses (4, 4) of the board's glasses frame at V + (dx, dy, dz)
     for dx ∈ {−0.05, 0.05}, dy ∈ {−0.08, −0.04, 0, 0.04, 0.08}, dz ∈ {−0.04, 0, 0.04} m (30 steps), upright
-    and facing the sheet (:data:`~flexsheet.calibration.eye.GLASSES_AXES`)."""
+    and facing the sheet (:data:`~flexsheet.vision.glasses.GLASSES_AXES`)."""
     out = []
     for dx in (-0.05, 0.05):
         for dz in (-0.04, 0.0, 0.04):

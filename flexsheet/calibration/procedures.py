@@ -193,7 +193,12 @@ def run_head_camera(source):
     on the chin-rest fixture's steps, then the viewer on the chin rest and the pupillometer's IPD."""
     import numpy as np
 
-    from flexsheet.calibration.head_camera import design_head_camera, eye_entry, fixture_poses, register_head_camera
+    from flexsheet.calibration.head_camera import (
+        design_head_camera,
+        eye_entry,
+        fixture_poses,
+        register_head_camera,
+    )
     from flexsheet.vision.glasses import GlassesBoard, GlassesTracker
 
     board = GlassesBoard()

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexsheet.calibration.eye import GLASSES_AXES
 from flexsheet.model import geometry
+from flexsheet.vision.glasses import GLASSES_AXES
 
 __all__ = ["Viewer", "HeadState", "HeadMotion", "NOMINAL_EYE_OFFSET", "seeded_stream"]
 #: the cyclopean eye in the glasses frame, m: 12 mm below the frame's bridge bar and 15 mm behind the lenses

@@ -28,9 +28,7 @@ import math
 import cv2
 import numpy as np
 
-from flexsheet.model import geometry
 from flexsheet.model.checks import check_pose, check_positive, check_vector
-from flexsheet.vision.camera_model import look_at
 from flexsheet.vision.glasses import GlassesBoard, check_camera_matrix, check_dist
 
 __all__ = ["HeadCameraTwin"]

@@ -77,7 +77,7 @@ class HeadRigTwin:
 
     def chin_rest_image(self, V=geometry.EYE) -> np.ndarray:
         """The viewer on the chin rest (the true eye at ``V`` (3,) m to ~1 mm), glasses on: one image."""
-        from flexsheet.calibration.eye import GLASSES_AXES
+        from flexsheet.vision.glasses import GLASSES_AXES
 
         T = np.eye(4)
         T[:3, :3] = GLASSES_AXES

@@ -11,7 +11,7 @@ pose by PnP, the eyes from that pose (library; no I/O).
 * :class:`GlassesTracker`: detects the markers (``cv2.aruco.ArucoDetector``, sub-pixel corners), solves the
   board pose from all detected corners (planar IPPE, both solutions, each refined by Levenberg–Marquardt;
   the lower reprojection error wins), and gives ``T_display_glasses`` and the eyes
-  (:func:`flexsheet.calibration.eye.tracked_eyes`).
+  (:func:`tracked_eyes`).
 * :class:`HeadPredictor`: constant-velocity extrapolation of the eyes to the photon time.
 
 Frames: ``display`` (:mod:`flexsheet.model.geometry`); ``glasses`` (:mod:`flexsheet.calibration.eye`: x from
@@ -28,10 +28,13 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from flexsheet.calibration.eye import tracked_eyes
 from flexsheet.model.checks import check_point, check_pose, check_positive
 
-__all__ = ["GlassesBoard", "GlassesPose", "GlassesTracker", "HeadPredictor", "check_camera_matrix", "check_dist"]
+#: the glasses axes (columns, display frame) of a viewer upright and facing the sheet (−x): x toward the viewer's
+#: left (−y), y up (+z), z toward the sheet (−x)
+GLASSES_AXES = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
+__all__ = ["GLASSES_AXES", "tracked_eyes", "GlassesBoard", "GlassesPose", "GlassesTracker", "HeadPredictor", "check_camera_matrix", "check_dist"]
 
 _R_GLASSES_BOARD = np.diag([1.0, -1.0, -1.0])
 _DIST_LENGTHS = (4, 5, 8, 12, 14)
@@ -158,6 +161,18 @@ class GlassesBoard:
         img = np.clip(np.round(255.0 * (1.0 - cover)), 0, 255).astype(np.uint8)
         A = np.array([[1.0 / ppm, 0.0, 0.5 / ppm - self.gap], [0.0, 1.0 / ppm, 0.5 / ppm - self.gap], [0, 0, 1]])
         return img, A
+
+
+def tracked_eyes(T_display_glasses: np.ndarray, eye_offset, ipd: float):
+    """(left, right, V) eye positions (3,) m in the display frame for glasses at ``T_display_glasses`` (4, 4):
+    V = T · eye_offset (3,) m (the cyclopean eye in the glasses frame), left/right = V ± ipd/2 · (glasses x
+    axis). Raises ``ValueError`` on a bad pose, offset or an ipd outside [0, 0.1] m."""
+    T = check_pose("T_display_glasses", T_display_glasses)
+    V = T[:3, :3] @ check_point("eye_offset", eye_offset) + T[:3, 3]
+    if not (np.isfinite(ipd) and 0.0 <= ipd <= 0.1):
+        raise ValueError(f"ipd must be in [0, 0.1] m, got {ipd!r}")
+    h = 0.5 * float(ipd) * T[:3, 0]
+    return V + h, V - h, V
 
 
 @dataclass(frozen=True, eq=False)

@@ -21,12 +21,12 @@ from flexsheet.model.sheet import SheetSurface
 from flexsheet.vision.camera_model import DEFAULT_CAMERA_POSITION, camera_model, look_at
 from flexsheet.vision.stereo_calibration import to_message
 from messages import (
-    EyePose,
-    HeadTruth,
     ArmJointState,
+    EyePose,
     Fingertip,
     FingerTruth,
     Header,
+    HeadTruth,
     Message,
     ObjectDeformation,
     RenderedFrame,

@@ -41,10 +41,10 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from flexsheet.model import geometry as paper
+from flexsheet.model.projector import eye_positions
 from flexsheet.model.sheet_model import SheetConfig, sheet_model_for
 from flexsheet.model.timing import LAB
 from flexsheet.rendering.correction import check_screen
-from flexsheet.model.projector import eye_positions
 from flexsheet.rendering.state import PendingPush, RendererState, load_geometry, pick_model
 from flexsheet.rendering.viewpoint import Viewpoint
 from flexsheet.runtime.node import InputRejected, Node

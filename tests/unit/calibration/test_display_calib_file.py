@@ -11,6 +11,7 @@ from flexsheet.calibration.display_calib import (
     ENTRIES,
     ArmEntry,
     DisplayCalib,
+    HeadCameraEntry,
     Provenance,
     nominal_display_calib,
 )
@@ -27,6 +28,9 @@ def _measured() -> DisplayCalib:
     c.camera.cov = A @ A.T * 1e-6
     c.arms["left"] = ArmEntry(geometry.pose_matrix(-0.051, 0.552, -0.398, -1.57), np.array([0.011, -0.001, 0.041]),
                               Provenance("arms: test", n_poses=16, residuals={"residual_mm": 0.2}))
+    c.head_camera = HeadCameraEntry(np.array([[601.0, 0, 318.0], [0, 601.5, 257.0], [0, 0, 1]]),
+                                    np.array([-0.08, 0.05, 0, 0, 0]), 640, 512,
+                                    geometry.pose_matrix(0.002, 0.003, 0.199, 0.01), Provenance("head: test", n_poses=30))
     return c
 
 
@@ -63,6 +67,9 @@ def test_round_trip_through_opencv_filestorage(tmp_path):
     assert d.camera.provenance.n_poses == 21 and d.camera.stereo["image_size"] == (640, 512)
     np.testing.assert_allclose(d.camera.cov, c.camera.cov, rtol=1e-14)
     assert d.projector.projector().K[0, 0] == pytest.approx(c.projector.K[0, 0])
+    np.testing.assert_allclose(d.head_camera.T_display_camera, c.head_camera.T_display_camera, atol=1e-15)
+    np.testing.assert_allclose(d.head_camera.D, c.head_camera.D)
+    assert (d.head_camera.width, d.head_camera.K[1, 1]) == (640, 601.5)
 
 
 def test_missing_entry_is_named(tmp_path):
@@ -71,7 +78,8 @@ def test_missing_entry_is_named(tmp_path):
     write_display_calib(path, c)
     with pytest.raises(ValueError, match=r"display\.yaml: missing entries \['projector', 'arms.left'"):
         load_display_calib(path, require=("camera", "projector", "arms.left"))
-    assert load_display_calib(path, require=("camera",)).missing() == ["projector", "arms.left", "arms.right", "eye"]
+    assert load_display_calib(path, require=("camera",)).missing() == ["projector", "arms.left", "arms.right", "eye",
+                                                                      "head_camera"]
 
 
 def test_malformed_entries_name_the_key(tmp_path):

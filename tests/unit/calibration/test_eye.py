@@ -7,8 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from flexsheet.calibration.eye import glasses_eye_offset, glasses_pose, tracked_eyes
+from flexsheet.calibration.eye import glasses_eye_offset, glasses_pose
 from flexsheet.model import geometry
+from flexsheet.vision.glasses import tracked_eyes
 
 
 def test_tracked_eyes_follow_the_glasses():

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from flexsheet.calibration.eye import tracked_eyes
 from flexsheet.model import geometry
 from flexsheet.twin.head import HeadMotion, Viewer
+from flexsheet.vision.glasses import tracked_eyes
 
 
 def test_sway_stays_within_its_amplitudes_and_moves_centimetres():

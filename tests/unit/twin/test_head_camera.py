@@ -6,8 +6,8 @@ import cv2
 import numpy as np
 import pytest
 
-from flexsheet.model.geometry import EYE
 from flexsheet.calibration.head_camera import design_head_camera
+from flexsheet.model.geometry import EYE
 from flexsheet.twin.head_camera import HeadCameraTwin
 from flexsheet.vision.glasses import GlassesTracker
 

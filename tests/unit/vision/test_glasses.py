@@ -7,11 +7,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from flexsheet.calibration.eye import tracked_eyes
-from flexsheet.model.geometry import EYE
 from flexsheet.calibration.head_camera import design_head_camera
+from flexsheet.model.geometry import EYE
 from flexsheet.twin.head_camera import HeadCameraTwin
-from flexsheet.vision.glasses import GlassesBoard, GlassesPose, GlassesTracker, HeadPredictor
+from flexsheet.vision.glasses import GlassesBoard, GlassesPose, GlassesTracker, HeadPredictor, tracked_eyes
 
 EYE_OFFSET = np.array([0.0, 0.0, -0.012])          # cyclopean eye 12 mm behind the lenses (glasses frame)
 IPD = 0.064
