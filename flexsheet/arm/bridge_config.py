@@ -45,6 +45,10 @@ class BridgeConfig:
                                                          "keep (this arm's command to the partner's measured clamp); "
                                                          "a step further outside waits; None: no guard. Default: "
                                                          "clamp strain 0.01-0.10 of the 0.240 m sheet")] = (0.2424, 0.264)
+    keepout_margin: Annotated[float, Field(ge=0.0, le=0.3, description="m: the last line behind the planner's head "
+                                           "guard: a target that puts this arm's links (0.05 m capsules) or its "
+                                           "clamp within this margin of the tracked head's 0.10 m sphere is "
+                                           "refused (hold:keep_out); the planner keeps 0.05 m")] = 0.03
     enabled: Annotated[bool, Field(description="false: read the controller every cycle and command nothing (MXT: "
                                    "NULL packets; Modbus: reads only) — first bring-up")] = True
     auto_reset: Annotated[bool, Field(description="reset watchdog faults automatically (never e-stops)")] = True

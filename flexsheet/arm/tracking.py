@@ -12,6 +12,7 @@ that velocity as feed-forward (:mod:`flexsheet.arm.limiter`), within the joint l
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from enum import StrEnum
 
 import numpy as np
@@ -98,6 +99,9 @@ class TargetTracker:
         #: the partner arm's hold this arm shares (its bridge_status, e.g. "hold:limit:J3"), or None: the sheet
         #: couples the two clamps, so while one arm cannot follow, the other stops too (:func:`peer_holds`)
         self.peer_hold: str | None = None
+        #: ``q (6,) -> bool``: whether joints ``q`` put this arm or its clamp in the viewer's keep-out (the last
+        #: line behind the planner's head guard); such a target is refused as ``hold:keep_out``. None: no head
+        self.keep_out = None
         #: (3,) m, display frame: the partner clamp's measured position (its ``ArmJointState.pose``), or None
         self.peer_clamp: np.ndarray | None = None
         #: (lo, hi) m: the clamp span kept with the partner (:meth:`set_span_band`), or None: no guard
@@ -183,6 +187,8 @@ class TargetTracker:
             since = self.last_target_at if self.last_target_at is not None else self.held_since
             max_jump += float(np.max(QD_MAX)) * max(now - since, 0.0)
         res = self.kin.ik(T_display_clamp, seed, max_jump=max_jump)
+        if res.ok and self.keep_out is not None and self.keep_out(res.q):
+            res = replace(res, ok=False, status="keep_out")      # the arm would enter the viewer's keep-out
         self.last_ik = res
         if res.ok or self.last_target_at is not None:   # a refused first target does not start the stream
             self.last_target_at = now

@@ -33,7 +33,7 @@ from pathlib import Path
 from flexsheet.experiments.report_analysis import (
     analyse,
 )
-from flexsheet.experiments.report_charts import felt_chart, graph_chart, latency_chart, table1_chart
+from flexsheet.experiments.report_charts import felt_chart, graph_chart, head_chart, latency_chart, table1_chart
 from flexsheet.experiments.report_text import CHARTS, format_text, markdown
 from flexsheet.experiments.report_timing import (
     compute_vs_waiting,
@@ -145,6 +145,8 @@ def main(out: str, lf=None) -> int:
     table1_chart(summary, out_dir / "table1.png")
     felt_chart(summary, series, out_dir / "felt.png")
     latency_chart(summary, out_dir / "latency.png")
+    if summary.get("view") or summary.get("safety"):
+        head_chart(summary, series, out_dir / "head.png")
     if beats:
         graph_chart(beats, out_dir / "graph.png")
     charts = [(f, cap) for f, cap in CHARTS if (out_dir / f).exists()]

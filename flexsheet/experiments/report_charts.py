@@ -233,3 +233,49 @@ def graph_chart(heartbeats: list, path: Path) -> dict:
     path.with_suffix(".json").write_text(json.dumps(graph, indent=1))
     return graph
 
+
+
+def head_chart(summary: dict, series: dict, path: Path) -> dict:
+    """The viewer's head over the run: the view error per frame (median over the object's points, both eyes'
+    worse, px) drawn for the tracked eyes and as if for the fixed V, with the 1 px target; and the true sheet's
+    distance from the head sphere with the keep-out margin. Writes ``path`` (PNG) and its JSON; returns the data."""
+    head = series.get("head") or {}
+    vs, cl = head.get("view"), head.get("clearance") or {}
+    view, safety = summary.get("view", {}), summary.get("safety", {})
+    data = {"title": "The viewer's head: view error and keep-out distance", "units": {"view": "px", "distance": "m"},
+            "targets": {"view_error_px_median": 1.0, "min_head_distance_m": safety.get("margin_m")},
+            "verdicts": {"view": view.get("verdict"), "safety": safety.get("verdict")},
+            "t_s": vs["t"] if vs else [], "tracked_px": [max(r) for r in vs["tracked"]] if vs else [],
+            "fixed_px": [max(r) for r in vs["fixed"]] if vs else [], "distance_t_s": cl.get("t", []),
+            "distance_m": [c + safety.get("margin_m", 0.0) for c in cl.get("clearance_m", [])]}
+    path.with_suffix(".json").write_text(json.dumps(data))
+    if not data["t_s"] and not data["distance_t_s"]:
+        return data
+    plt = _plt()
+    fig, (a, b) = plt.subplots(2, 1, figsize=(7.5, 5.2), sharex=True)
+    t0 = min((data["t_s"] or [0.0])[0], (data["distance_t_s"] or [0.0])[0])
+    if data["t_s"]:
+        t = [x - t0 for x in data["t_s"]]
+        a.plot(t, data["fixed_px"], lw=0.6, color="#999999", label="as if drawn for the fixed V")
+        a.plot(t, data["tracked_px"], lw=0.8, label="drawn for the tracked eyes")
+        a.axhline(1.0, color="k", ls="--", lw=1.0, label="target: median ≤ 1 px")
+        a.set_ylabel("view error, median per frame (px)")
+        a.set_title(f"view error: tracked {view.get('tracked', {}).get('error_px_median', float('nan')):.2f} px median, "
+                    f"fixed V {view.get('fixed', {}).get('error_px_median', float('nan')):.2f} px; verdict: "
+                    f"{view.get('verdict')}", fontsize=8)
+        a.legend(fontsize=6)
+    if data["distance_t_s"]:
+        b.plot([x - t0 for x in data["distance_t_s"]], [1e3 * d for d in data["distance_m"]], lw=0.8,
+               label="true sheet to the true head sphere")
+        b.axhline(1e3 * safety["margin_m"], color="r", ls="--", lw=1.0, label="keep-out margin")
+        b.set_ylabel("distance (mm)")
+        b.set_title(f"keep-out: min {1e3 * safety['min_head_distance_m']:.0f} mm, {safety['keepout_violations']} "
+                    f"violations, near-head speed {safety['max_speed_near_head_mps']:.3f} m/s; verdict: "
+                    f"{safety['verdict']}", fontsize=8)
+        b.legend(fontsize=6)
+    b.set_xlabel("time in the run (s)")
+    fig.suptitle(data["title"], fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return data

@@ -54,10 +54,11 @@ def eye_summary(d: dict) -> dict:
     poses = [m for _, m in d.get("/eye/pose", [])]
     if heads is None or not poses:
         return {}
+    ts, L, R, _ = heads
+    poses = [m for m in poses if ts[0] <= m.header.stamp <= ts[-1]]     # while the world says where the head is
     ok = [m for m in poses if m.valid]
     if not ok:
         return {"valid_share": 0.0, "verdict": "MISSED"}
-    ts, L, R, _ = heads
     t = np.array([m.header.stamp for m in ok])
     el = np.linalg.norm(np.array([m.left for m in ok]) - _interp(ts, L, t), axis=1)
     er = np.linalg.norm(np.array([m.right for m in ok]) - _interp(ts, R, t), axis=1)

@@ -11,7 +11,8 @@ __all__ = ["sections", "format_text", "markdown", "CHARTS"]
 
 #: the charts report.md shows (file, caption)
 CHARTS = (("table1.png", "Table I headline: felt Δθ per segment"), ("felt.png", "felt Δθ over each segment"),
-          ("latency.png", "latency per hop"), ("graph.png", "node/topic graph"))
+          ("latency.png", "latency per hop"), ("head.png", "the viewer's head: view error and keep-out distance"),
+          ("graph.png", "node/topic graph"))
 
 _TARGETS_AT = "flexsheet/experiments/table1.py"
 
@@ -220,6 +221,36 @@ def _latency(s: dict) -> tuple[list[str], list[str]]:
     return prose, _table(head, rows) if rows else []
 
 
+def _head(s: dict) -> tuple[list[str], list[str]]:
+    eye, view, safety = s.get("eye", {}), s.get("view", {}), s.get("safety", {})
+    if not (eye or view or safety):
+        return ["No /world/head in the bag (no moving head in this run): no verdict."], []
+    prose = ["The image is corrected for the tracked eyes (/eye/pose). View error: where the true eyes see the "
+             "object's points on the true sheet against where they belong, on the imaginary screen, in projector px "
+             "(the same frames judged as if drawn for the fixed V beside it). Eye error: /eye/pose against the "
+             "true eyes. Keep-out: the true sheet's distance from the true head sphere."]
+    rows = []
+    if eye.get("error_mm"):
+        e = eye["error_mm"]
+        rows.append(["eye error, mm", f"{e['median']:.2f}", f"{e['p95']:.2f}", f"≤ {eye['target_mm']:g} median",
+                     eye["verdict"]])
+    for kind in ("tracked", "fixed"):
+        if kind in view:
+            v = view[kind]
+            rows.append([f"view error, {kind}, px", f"{v['error_px_median']:.2f}", f"{v['error_px_p95']:.2f}",
+                         "≤ 1 median, ≤ 2 p95" if kind == "tracked" else "(comparison)",
+                         view["verdict"] if kind == "tracked" else "-"])
+    if safety:
+        rows.append(["sheet from head sphere, m (min)", f"{safety['min_head_distance_m']:.3f}", "-",
+                     f"≥ {safety['margin_m']:g}", "met" if safety["min_head_distance_m"] >= safety["margin_m"]
+                     else "MISSED"])
+        rows.append(["keep-out violations (samples)", str(safety["keepout_violations"]), "-", "0",
+                     "met" if safety["keepout_violations"] == 0 else "MISSED"])
+        rows.append(["sheet speed near the head, m/s (max)", f"{safety['max_speed_near_head_mps']:.3f}", "-",
+                     "≤ 0.25", "met" if safety["max_speed_near_head_mps"] <= 0.25 else "MISSED"])
+    return prose, _table(["figure", "median", "p95", "target", "verdict"], rows)
+
+
 def sections(summary: dict) -> list[tuple[str, list[str], list[str]]]:
     """(heading, prose lines, table lines) of each part of the report; the first has no heading."""
     return [("", _header(summary), []),
@@ -229,6 +260,7 @@ def sections(summary: dict) -> list[tuple[str, list[str], list[str]]]:
             ("Table I — what the felt error is made of", *_decomposition(summary)),
             ("Delay — exposure → sheet at its pose", *_delay(summary)),
             ("Softness felt — the true sheet's force against the object's", *_softness(summary)),
+            ("The viewer's head — tracked image and keep-out", *_head(summary)),
             ("Sheet tension and stiffness at the contacts (the planner's model)", *_compliance(summary)),
             ("Latency per hop and end to end", *_latency(summary))]
 

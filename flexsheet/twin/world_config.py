@@ -77,14 +77,15 @@ class SheetFemConfig:
 class HeadScript:
     """The viewer's head in the world (:class:`flexsheet.twin.head.HeadMotion`): ``still`` (no sway: the eye at
     the paper's V), ``sway`` [x, y, z] m: the largest excursion of the eye; ``lean_in`` [start s, depth m, hold
-    s] in script time, [] for none (default: 0.24 m toward the sheet at 48 s, in the stroke-and-push, far enough
-    for the head's keep-out to reach the sheet's path); ``occlusions`` [[start s, duration s], ...]: the
-    glasses' markers hidden (default 1 s at 54.5 s). Raises ``ValueError`` on a malformed lean-in or span."""
+    s] in script time, [] for none (default: 0.24 m toward the sheet from 54 s, held 2.5 s, while the
+    stroke-and-push tilts the sheet toward the viewer: far enough for the head's keep-out to reach the sheet's
+    path); ``occlusions`` [[start s, duration s], ...]: the glasses' markers hidden (default 1 s at 49 s).
+    Raises ``ValueError`` on a malformed lean-in or span."""
 
     still: bool = False
     sway: list[float] = field(default_factory=lambda: [0.05, 0.05, 0.03])
-    lean_in: list[float] = field(default_factory=lambda: [48.0, 0.24, 2.0])
-    occlusions: list[list[float]] = field(default_factory=lambda: [[54.5, 1.0]])
+    lean_in: list[float] = field(default_factory=lambda: [54.0, 0.24, 2.5])
+    occlusions: list[list[float]] = field(default_factory=lambda: [[49.0, 1.0]])
 
     def __post_init__(self) -> None:
         if len(self.sway) != 3 or any(not (0.0 <= v <= 0.2) for v in self.sway):

@@ -12,7 +12,8 @@ controller status/fault, ``write_stamp`` (wall time the command left: Modbus wri
 carries the link counters (MXT: packets sent, replies, late, lost, repeats, refused).
 
 ``bridge_status``: "ok"; "hold:no_target" (no target yet, or none for ``target_timeout`` s: the arm stops);
-"hold:unreachable" / "hold:limit:J<k>" / "hold:singular" / "hold:jump" (last target refused by IK: the arm
+"hold:unreachable" / "hold:limit:J<k>" / "hold:singular" / "hold:jump" / "hold:keep_out" (last target refused by
+IK, or — once ``/eye/pose`` tracks the viewer — by the head's keep-out with ``keepout_margin``: the arm
 stops short at the last good goal); "hold:disabled" (controller not enabled yet, or ``enabled: false``); "fault:watchdog",
 "fault:estop" (controller faulted; the bridge follows the measured joints); "hold:refused" (the controller did
 not take a command: the stream restarts from what it executes); "disconnected"; "hold:peer" (the other arm
@@ -40,10 +41,11 @@ from flexsheet.arm.tracking import TargetTracker, peer_holds
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
 from flexsheet.model.timing import LAB
+from flexsheet.planning.keepout import KeepOut, arm_clearance
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import config_fields, params_model
 from flexsheet.runtime.qos import QoS
-from messages import ArmJointState, ArmTarget, topics
+from messages import ArmJointState, ArmTarget, EyePose, topics
 from nodes.arm_bridge.modbus_link import ModbusLink
 from nodes.arm_bridge.mxt_link import MxtLink
 
@@ -147,6 +149,9 @@ class ArmBridgeNode(Node):
         # a status read, no compute worth charging: on the simulated clock it must not keep the bridge busy (a
         # sim_cost here delayed its cycles and moved the default run's arm latency by 0.2 ms)
         self.subscribe(topics.arm_state(other), self.on_peer_state, qos=QoS.LATEST)
+        self.keepout = KeepOut(margin=p.keepout_margin)
+        self._eye: np.ndarray | None = None
+        self.subscribe(topics.EYE_POSE, self.on_eye_pose, qos=QoS.LATEST)
         if sim:   # the simulated clock's timer paces the cycles (the stream's own loop paces the wall clock)
             self.timer(p.period, self._sim_cycle)
         else:
@@ -229,6 +234,25 @@ class ArmBridgeNode(Node):
             else:
                 self.log.info("%s arm: the %s arm follows again: following too", self.params.arm, msg.arm)
             self.tracker.peer_hold = hold
+
+    def on_eye_pose(self, msg: EyePose) -> None:
+        """The viewer's tracked eye: from the first one, targets that would bring this arm into the head's
+        keep-out are refused (``hold:keep_out``, which the partner arm shares)."""
+        if msg.valid:
+            if not np.all(np.isfinite(msg.eye)):
+                raise InputRejected(f"/eye/pose: eye must be finite, got {msg.eye.tolist()}")
+            self._eye = np.asarray(msg.eye, float).copy()
+            self.tracker.keep_out = self._in_keep_out
+
+    def _in_keep_out(self, q: np.ndarray) -> bool:
+        """Whether joints ``q`` put this arm's links or its clamp bar (±0.12 m along the clamp's v axis) in the
+        keep-out of the newest tracked eye."""
+        V = self._eye
+        if arm_clearance(self.keepout, V, self.kin, q) < 0.0:
+            return True
+        T = self.kin.fk(q)
+        c, v = T[:3, 3], T[:3, 2]
+        return self.keepout.clearance_segments(V, (c - 0.12 * v)[None], (c + 0.12 * v)[None]) < 0.0
 
     async def on_target(self, msg: ArmTarget) -> None:
         """New clamp target: IK now (or once the first controller state arrived)."""

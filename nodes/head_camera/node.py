@@ -113,6 +113,24 @@ class HeadCameraNode(Node):
             self.cap.set(cv2.CAP_PROP_FPS, p.rate_hz)
             self.timer(1.0 / p.rate_hz, self.on_device_tick)
 
+    @classmethod
+    def probe(cls, params) -> list[str]:
+        """The head camera ``params`` name, if this machine cannot open it (``flexsheet launch --check --probe``):
+        a UVC device by opening it and reading one frame; sim: none."""
+        if params.source != "device":
+            return []
+        import cv2
+
+        dev = int(params.device) if params.device.isdigit() else params.device
+        cap = cv2.VideoCapture(dev)
+        try:
+            if not cap.isOpened():
+                return [f"head camera: cannot open UVC device {params.device!r} (cv2.VideoCapture)"]
+            ok, _ = cap.read()
+            return [] if ok else [f"head camera: UVC device {params.device!r} opened but gave no frame"]
+        finally:
+            cap.release()
+
     async def teardown(self) -> None:
         cap = getattr(self, "cap", None)
         if cap is not None:

@@ -130,3 +130,22 @@ def test_which_partner_states_hold_this_arm_too(status, holds):
         assert tr.status(0.01) == "hold:peer" and np.allclose(goal, q) and not vel.any()
     else:
         assert tr.status(0.01) == "ok" and np.allclose(goal, q + 0.05, atol=1e-6)
+
+
+def test_a_target_in_the_viewers_keep_out_is_refused_and_the_partner_holds_with_it():
+    from flexsheet.arm.tracking import TargetRefused
+    from flexsheet.planning.keepout import KeepOut, arm_clearance
+
+    kl, _, ql, _, left = _home()
+    t = _tracker(kl, ql)
+    ko = KeepOut(margin=0.03)
+    forward = left.copy()
+    forward[0, 3] += 0.02
+    t.keep_out = lambda q: arm_clearance(ko, [0.40, 0.0, 0.0], kl, q) < 0.0     # the viewer at V: far away
+    assert t.set_target(forward, 1.0, 1.0).ok and t.ik_status == "ok"
+    goal = t.goal.copy()
+    t.keep_out = lambda q: True                                                 # a head where the arm goes
+    with pytest.raises(TargetRefused):
+        t.set_target(left, 2.0, 1.01, strict=True)
+    assert t.ik_status == "keep_out" and np.allclose(t.goal, goal)              # it stops short at the last goal
+    assert t.status(1.02) == "hold:keep_out" and peer_holds("hold:keep_out")
