@@ -179,7 +179,7 @@ def run_all(source, opts: Options) -> Registration:
     timings["arms_s"] = time.perf_counter() - t0
     calib.arms = {s: e for s, (e, _) in arms.items()}
     calib.eye = run_eye(source=source.label)
-    if hasattr(source, "head_fixture_images"):
+    if getattr(source, "has_head_camera", False):
         t0 = time.perf_counter()
         calib.head_camera, calib.eye = run_head_camera(source)
         timings["head_camera_s"] = time.perf_counter() - t0

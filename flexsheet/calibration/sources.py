@@ -8,8 +8,11 @@ Captured-images layout (``--images DIR``; :func:`save_frames` writes it, e.g. fr
     DIR/projector/pose00/img00_left.png ... img41_right.png         # the patterns of gray_code_patterns(),
                                                                    # in order (42 for 1024x768), per pose
     DIR/arms/left/config00_left.png ..., DIR/arms/right/...
+    DIR/head/fixture00.png ... fixture29.png, chin_rest.png        # optional: the head camera (mono), the
+                                                                   # chin-rest fixture's steps in order
     DIR/manifest.json   {"arms": {"left": {"joints": [[q1..q6], ...]}, "right": {...}},   # commanded, rad
-                         "projector": {"width": 1024, "height": 768}}
+                         "projector": {"width": 1024, "height": 768},
+                         "head": {"ipd": 0.0635}}                  # the pupillometer's reading, m
 
 Images are 8-bit grayscale (PNG or any format ``cv2.imread`` reads), raw (not rectified), each ideally the mean
 of several frames (the procedures' precision assumes averaging; see docs/calibration.md).
@@ -71,6 +74,35 @@ class ImageDirSource:
     def label(self) -> str:
         return f"lab images {self.root}"
 
+    @property
+    def has_head_camera(self) -> bool:
+        """Whether the folder holds the head camera's registration images (``head/``)."""
+        return os.path.isdir(os.path.join(self.root, "head"))
+
+    def head_fixture_images(self, poses) -> list[np.ndarray]:
+        """The head camera's images of the chin-rest fixture's steps (``head/fixtureNN.*``, one per pose)."""
+        files = sorted(glob.glob(os.path.join(self.root, "head", "fixture*.*")))
+        if len(files) != len(poses):
+            raise ValueError(f"{self.root}/head: {len(files)} fixture images, expected {len(poses)} (one per step)")
+        return [_read(f) for f in files]
+
+    def head_chin_rest_image(self) -> np.ndarray:
+        """The head camera's image of the viewer on the chin rest (``head/chin_rest.*``)."""
+        files = glob.glob(os.path.join(self.root, "head", "chin_rest.*"))
+        if not files:
+            raise ValueError(f"no {self.root}/head/chin_rest.png (the viewer on the chin rest, glasses on)")
+        return _read(files[0])
+
+    def pupillometer_ipd(self) -> float:
+        """The viewer's IPD, m, from ``manifest.json`` ``head.ipd``."""
+        try:
+            ipd = float(self.manifest["head"]["ipd"])
+        except (KeyError, TypeError, ValueError):
+            raise ValueError(f"{self.root}/manifest.json lacks head.ipd (the pupillometer's reading, m)") from None
+        if not 0.0 < ipd <= 0.1:
+            raise ValueError(f"{self.root}/manifest.json: head.ipd must be in (0, 0.1] m, got {ipd!r}")
+        return ipd
+
     def board_views(self, board, sheet_poses=None, offset: float = 0.0) -> list[Pair]:
         views = _pairs(os.path.join(self.root, "camera_pose", "view*_{side}.*"))
         if not views:
@@ -101,9 +133,18 @@ class ImageDirSource:
 
 def save_frames(root: str, *, board_views: list[Pair] | None = None, projector: list[list[Pair]] | None = None,
                 arms: dict[str, tuple[list[Pair], list[np.ndarray]]] | None = None,
-                projector_size: tuple[int, int] | None = None) -> None:
-    """Write frames in the :class:`ImageDirSource` layout (PNG) plus ``manifest.json``."""
+                projector_size: tuple[int, int] | None = None,
+                head: tuple[list[np.ndarray], np.ndarray, float] | None = None) -> None:
+    """Write frames in the :class:`ImageDirSource` layout (PNG) plus ``manifest.json``; ``head``: (fixture
+    images, chin-rest image, IPD m) of the head camera."""
     man: dict = {}
+    if head:
+        d = os.path.join(root, "head")
+        os.makedirs(d, exist_ok=True)
+        for k, img in enumerate(head[0]):
+            cv2.imwrite(os.path.join(d, f"fixture{k:02d}.png"), img)
+        cv2.imwrite(os.path.join(d, "chin_rest.png"), head[1])
+        man["head"] = {"ipd": float(head[2])}
     if board_views:
         d = os.path.join(root, "camera_pose")
         os.makedirs(d, exist_ok=True)

@@ -64,6 +64,8 @@ class TwinSource:
         """Stereo pairs of every pattern with the sheet at ``sheet_pose`` (pose number ``index``)."""
         return self.twin.pattern_frames(patterns, sheet_pose, white_dn=self.sheet_white_dn, frames=self.n_pattern_frames)
 
+    has_head_camera = True
+
     def head_fixture_images(self, poses: list[np.ndarray]) -> list[np.ndarray]:
         """Head-camera images of the glasses board on the chin-rest fixture's steps
         (:class:`flexsheet.twin.head_rig.HeadRigTwin`)."""

@@ -45,3 +45,30 @@ def test_too_few_views_are_refused():
         register_head_camera([finder.detect(im) for im in rig.fixture_images(poses)], poses, rig.board, K0, (w, h))
     with pytest.raises(ValueError, match="one detection per"):
         register_head_camera([], poses, rig.board, K0, (w, h))
+
+
+def test_the_lab_images_give_the_twins_registration(tmp_path):
+    """Offline: the twin's head-camera images saved in the lab layout and read back register the same camera."""
+    from flexsheet.calibration.procedures import run_head_camera
+    from flexsheet.calibration.sources import ImageDirSource, save_frames
+    from flexsheet.twin.registration import TwinSource
+
+    class _Truth:
+        seed, realism = 6, "realistic"
+
+    class _Twin:
+        truth = _Truth()
+
+    twin = TwinSource(_Twin())
+    poses = fixture_poses()
+    save_frames(str(tmp_path), head=(twin.head_fixture_images(poses), twin.head_chin_rest_image(),
+                                     twin.pupillometer_ipd()))
+    lab = ImageDirSource(str(tmp_path))
+    assert lab.has_head_camera
+    a, ea = run_head_camera(TwinSource(_Twin()))
+    b, eb = run_head_camera(lab)
+    assert np.allclose(a.T_display_camera, b.T_display_camera, atol=1e-9)        # PNG is lossless
+    assert np.allclose(ea.glasses_eye_offset, eb.glasses_eye_offset, atol=1e-9) and ea.ipd == eb.ipd
+    (tmp_path / "manifest.json").write_text("{}")
+    with pytest.raises(ValueError, match="head.ipd"):
+        ImageDirSource(str(tmp_path)).pupillometer_ipd()
