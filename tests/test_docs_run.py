@@ -343,7 +343,8 @@ CHEAP: dict[str, tuple[str, str]] = {
 }
 
 #: lab checks that fail here on purpose: every error line must be one of these (and at least one must be there)
-LAB_ERRORS = re.compile(r"not an address of this machine|: probe: camera \w+: camera '\w+' not found")
+LAB_ERRORS = re.compile(r"not an address of this machine|: probe: camera \w+: camera '\w+' not found"
+                        r"|node head_camera: probe: head camera: cannot open UVC device '/dev/video0'")
 #: command (as written) -> (exit status, a regex its output must match, why)
 EXPECT: dict[str, tuple[int, str, str]] = {
     **{c: (78, "LAB", LAB_HOST) for c in (
