@@ -11,6 +11,10 @@ sphere plus a margin, from the eye):
   the sheet backs off along −x (:func:`~flexsheet.planning.keepout.retreat_point`) at the reduced speed;
 * **lost** (the head camera runs but the glasses are not found): the planner holds, as for a lost fingertip.
 
+The guard judges the *planned* sheet against the *tracked* head, so it keeps a guard band (``band``, 0.01 m)
+beyond the margin: the tracked eye's error (≤ 3.5 mm p95 in the twin, docs/head.md) and the arms' tracking of
+the planned clamps must not carry the true sheet into the margin.
+
 No tracked eye yet (no head camera): the guard is inactive and says so through :attr:`HeadGuard.state`.
 Units m, s; display frame.
 """
@@ -26,7 +30,7 @@ from flexsheet.model.sheet import clamp_half_span
 from flexsheet.planning.keepout import KeepOut, KeepOutVerdict, check_targets, retreat_point, sheet_points
 from flexsheet.planning.limits import MotionLimits
 
-__all__ = ["HeadGuard", "GuardStep"]
+__all__ = ["HeadGuard", "GuardStep", "GUARD_BAND"]
 
 
 @dataclass(frozen=True)
@@ -40,11 +44,19 @@ class GuardStep:
     verdict: KeepOutVerdict
 
 
-class HeadGuard:
-    """See the module docstring. ``keepout``: the volume; ``size`` m: the unstretched sheet side."""
+#: m the guard adds to the keep-out's margin for the errors of the tracked eye and of the arms (module doc)
+GUARD_BAND = 0.01
 
-    def __init__(self, keepout: KeepOut | None = None, size: float = 0.240) -> None:
-        self.keepout = keepout or KeepOut()
+
+class HeadGuard:
+    """See the module docstring. ``keepout``: the volume to keep out of; ``size`` m: the unstretched sheet side;
+    ``band`` m: added to its margin for the estimates' errors. Raises ``ValueError`` for a negative band."""
+
+    def __init__(self, keepout: KeepOut | None = None, size: float = 0.240, band: float = GUARD_BAND) -> None:
+        if not (math.isfinite(band) and band >= 0.0):
+            raise ValueError(f"band must be >= 0 m, got {band!r}")
+        base = keepout or KeepOut()
+        self.keepout = replace(base, margin=base.margin + band)
         self.size = float(size)
         self.eye: np.ndarray | None = None
         self.lost = False

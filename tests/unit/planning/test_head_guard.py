@@ -36,7 +36,7 @@ def test_limits_drop_near_the_head_so_no_sheet_point_exceeds_250_mm_s():
 
 def test_a_step_into_the_keep_out_backs_off_along_minus_x():
     g = HeadGuard()
-    g.set_eye([0.10, 0, 0], True)           # head centre (0.18, 0, 0.02): keep-out boundary at x = 0.03
+    g.set_eye([0.10, 0, 0], True)           # head centre (0.18, 0, 0.02): guarded boundary at x = 0.02
     st = g.step((0.0, 0, 0), R_HOME, (0.05, 0, 0), R_HOME, 0.02, 0.02)
     assert st.retreat and g.counts["retreat"] == 1
     assert st.origin[0] == pytest.approx(-0.6 * 0.25 * 0.02)          # one reduced-speed step back
@@ -44,5 +44,5 @@ def test_a_step_into_the_keep_out_backs_off_along_minus_x():
     ok = g.step((0.0, 0, 0), R_HOME, (-0.01, 0, 0), R_HOME, 0.02, 0.02)
     assert not ok.retreat and ok.origin[0] == pytest.approx(-0.01)
     # the verdict measures the sheet's nearest point: the centre grid point 0.03 m from the boundary
-    assert ok.verdict.clearance == pytest.approx(np.linalg.norm([0.18 + 0.01, 0, 0.02]) - 0.15, abs=2e-3)
+    assert ok.verdict.clearance == pytest.approx(np.linalg.norm([0.18 + 0.01, 0, 0.02]) - 0.16, abs=2e-3)
     assert clamp_half_span(0.02) > 0.12
