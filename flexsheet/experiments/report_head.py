@@ -26,7 +26,7 @@ from flexsheet.model import geometry
 from flexsheet.model.timing import LAB
 from flexsheet.planning.keepout import KeepOut
 
-__all__ = ["eye_summary", "view_summary", "safety_summary", "head_series", "head_summary"]
+__all__ = ["eye_summary", "view_summary", "safety_summary", "lost_summary", "head_series", "head_summary"]
 
 TARGETS = {"eye_error_mm_median": 2.0, "view_error_px_median": 1.0, "view_error_px_p95": 2.0,
            "keepout_violations": 0, "max_speed_near_head_mps": 0.25}
@@ -187,6 +187,39 @@ def safety_summary(d: dict, keepout: KeepOut | None = None) -> tuple[dict, dict]
     return out, {"t": t.tolist(), "clearance_m": clear.tolist()}
 
 
+def lost_summary(d: dict) -> dict:
+    """The glasses lost (the script hides them: ``/world/head`` ``visible`` false): per span, how long after the
+    first invalid ``/eye/pose`` the planner held (its first ``hold:head_lost`` target), the largest step of the
+    sheet target's centre while it held (mm: nothing may jump), and the frames drawn for the held pose. ``{}``
+    without a span."""
+    heads = [m for _, m in d.get("/world/head", [])]
+    spans, start = [], None
+    for m in heads:
+        if not m.visible and start is None:
+            start = m.header.stamp
+        elif m.visible and start is not None:
+            spans.append((start, m.header.stamp))
+            start = None
+    if not spans:
+        return {}
+    poses = [m for _, m in d.get("/eye/pose", [])]
+    targets = [(t, m) for t, m in d.get("/sheet/target", [])]
+    frames = [m for _, m in d.get("/render/stereo", [])]
+    out = []
+    for a, b in spans:
+        bad = [m.header.stamp for m in poses if not m.valid and a <= m.header.stamp <= b + 0.1]
+        held = [(m.header.stamp, m) for _, m in targets if "hold:head_lost" in m.status and a <= m.header.stamp <= b + 0.5]
+        steps = [float(np.linalg.norm(q.sheet_origin - p.sheet_origin)) for (_, p), (_, q) in zip(held, held[1:])]
+        out.append({"start_s": a, "duration_s": b - a,
+                    "hold_after_ms": 1e3 * (held[0][0] - bad[0]) if bad and held else None,
+                    "hold_step_mm_max": 1e3 * max(steps) if steps else 0.0,
+                    "frames_held": sum(1 for f in frames if f.eye_source == "held" and a <= f.header.stamp <= b + 0.1)})
+    ok = all(o["hold_after_ms"] is not None and o["hold_after_ms"] <= 1e3 / 60.0 and o["hold_step_mm_max"] < 0.1
+             for o in out)
+    return {"spans": out, "target": "hold within one head-camera period (16.7 ms), no step while held",
+            "verdict": "met" if ok else "MISSED"}
+
+
 def head_summary(d: dict, scene, series: dict | None = None) -> dict:
     """``{"eye", "view", "safety"}`` of a run's bag ``d`` (topic → [(log time, message)]) on ``scene`` (its
     surface mesh is the object judged); ``{}`` when the run had no head. The per-frame view errors and the
@@ -205,4 +238,7 @@ def head_summary(d: dict, scene, series: dict | None = None) -> dict:
     safety, clear = safety_summary(d)
     if series is not None:
         series["head"] = {"view": vs, "clearance": clear}
+    lost = lost_summary(d)
+    if lost:
+        safety["head_lost"] = lost
     return {"eye": eye_summary(d), "view": view_summary(vs), "safety": safety}

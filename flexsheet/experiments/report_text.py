@@ -248,6 +248,10 @@ def _head(s: dict) -> tuple[list[str], list[str]]:
                      "met" if safety["keepout_violations"] == 0 else "MISSED"])
         rows.append(["sheet speed near the head, m/s (max)", f"{safety['max_speed_near_head_mps']:.3f}", "-",
                      "≤ 0.25", "met" if safety["max_speed_near_head_mps"] <= 0.25 else "MISSED"])
+        for sp in safety.get("head_lost", {}).get("spans", []):
+            after = "never" if sp["hold_after_ms"] is None else f"{sp['hold_after_ms']:.1f}"
+            rows.append([f"glasses lost {sp['duration_s']:.1f} s: planner held after, ms", after,
+                         f"step {sp['hold_step_mm_max']:.2f} mm", "≤ 16.7, no step", safety["head_lost"]["verdict"]])
     return prose, _table(["figure", "median", "p95", "target", "verdict"], rows)
 
 

@@ -57,3 +57,25 @@ def test_no_head_topic_no_section():
     d = _bag()
     del d["/world/head"]
     assert head_summary(d, paper_scene()) == {}
+
+
+def test_lost_glasses_are_held_within_a_camera_period():
+    from flexsheet.experiments.report_head import lost_summary
+
+    d = _bag(n=100)
+    heads = d["/world/head"]
+    for k in range(40, 90):                                  # hidden from 100.8 s to 101.8 s
+        t, m = heads[k]
+        heads[k] = (t, m.model_copy(update={"visible": False}))
+    poses = d["/eye/pose"]
+    for k in range(41, 90):                                  # the camera notices one frame later
+        t, m = poses[k]
+        poses[k] = (t, m.model_copy(update={"valid": False}))
+    target = sample_state()["/sheet/target"]
+    d["/sheet/target"] = [(100.0 + 0.02 * k, target.model_copy(update={
+        "header": Header(stamp=100.0 + 0.02 * k), "status": "hold:head_lost" if 42 <= k < 90 else "ok"}))
+        for k in range(100)]
+    s = lost_summary(d)
+    (span,) = s["spans"]
+    assert span["duration_s"] == pytest.approx(1.0) and span["hold_after_ms"] == pytest.approx(20.0)
+    assert span["hold_step_mm_max"] == 0.0 and s["verdict"] == "MISSED"     # 20 ms > one 60 Hz period
