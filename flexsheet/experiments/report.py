@@ -33,7 +33,13 @@ from pathlib import Path
 from flexsheet.experiments.report_analysis import (
     analyse,
 )
-from flexsheet.experiments.report_charts import felt_chart, graph_chart, head_chart, latency_chart, table1_chart
+from flexsheet.experiments.report_charts import (
+    felt_chart,
+    graph_chart,
+    head_chart,
+    latency_chart,
+    table1_chart,
+)
 from flexsheet.experiments.report_text import CHARTS, format_text, markdown
 from flexsheet.experiments.report_timing import (
     compute_vs_waiting,

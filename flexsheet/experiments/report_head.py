@@ -208,8 +208,10 @@ def lost_summary(d: dict) -> dict:
     out = []
     for a, b in spans:
         bad = [m.header.stamp for m in poses if not m.valid and a <= m.header.stamp <= b + 0.1]
-        held = [(m.header.stamp, m) for _, m in targets if "hold:head_lost" in m.status and a <= m.header.stamp <= b + 0.5]
-        steps = [float(np.linalg.norm(q.sheet_origin - p.sheet_origin)) for (_, p), (_, q) in zip(held, held[1:])]
+        held = [(m.header.stamp, m) for _, m in targets
+                if "hold:head_lost" in m.status and a <= m.header.stamp <= b + 0.5]
+        steps = [float(np.linalg.norm(q.sheet_origin - p.sheet_origin))
+                 for (_, p), (_, q) in zip(held[:-1], held[1:], strict=True)]
         out.append({"start_s": a, "duration_s": b - a,
                     "hold_after_ms": 1e3 * (held[0][0] - bad[0]) if bad and held else None,
                     "hold_step_mm_max": 1e3 * max(steps) if steps else 0.0,
