@@ -126,6 +126,16 @@ def _vec(key: str, v, n: int, path: str) -> np.ndarray:
     return a
 
 
+def _check_intrinsics(name: str, e, path: str) -> None:
+    """Entry ``name``'s ``K`` (finite 3x3, positive focal lengths), ``D`` (5) and positive ``width``/``height``."""
+    K = np.asarray(e.K, float)
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise ValueError(f"{path}: {name}.K must be a finite 3x3 matrix with positive focal lengths")
+    _vec(f"{name}.D", e.D, 5, path)
+    if not (int(e.width) > 0 and int(e.height) > 0):
+        raise ValueError(f"{path}: {name}.width/height must be positive, got {e.width}x{e.height}")
+
+
 def _validate(c: DisplayCalib, path: str) -> None:
     if c.camera is not None:
         _checked_pose("camera.T_display_camera", c.camera.T_display_camera, path)
@@ -144,12 +154,7 @@ def _validate(c: DisplayCalib, path: str) -> None:
     if c.projector is not None:
         p = c.projector
         _checked_pose("projector.T_display_projector", p.T_display_projector, path)
-        K = np.asarray(p.K, float)
-        if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
-            raise ValueError(f"{path}: projector.K must be a finite 3x3 matrix with positive focal lengths")
-        _vec("projector.D", p.D, 5, path)
-        if not (int(p.width) > 0 and int(p.height) > 0):
-            raise ValueError(f"{path}: projector.width/height must be positive, got {p.width}x{p.height}")
+        _check_intrinsics("projector", p, path)
     for side, a in c.arms.items():
         if side not in ("left", "right"):
             raise ValueError(f"{path}: arms.{side}: side must be 'left' or 'right'")
@@ -163,14 +168,8 @@ def _validate(c: DisplayCalib, path: str) -> None:
         if not (math.isfinite(c.eye.ipd) and 0.0 <= c.eye.ipd <= 0.1):
             raise ValueError(f"{path}: eye.ipd must be in [0, 0.1] m, got {c.eye.ipd!r}")
     if c.head_camera is not None:
-        h = c.head_camera
-        _checked_pose("head_camera.T_display_camera", h.T_display_camera, path)
-        K = np.asarray(h.K, float)
-        if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
-            raise ValueError(f"{path}: head_camera.K must be a finite 3x3 matrix with positive focal lengths")
-        _vec("head_camera.D", h.D, 5, path)
-        if not (int(h.width) > 0 and int(h.height) > 0):
-            raise ValueError(f"{path}: head_camera.width/height must be positive, got {h.width}x{h.height}")
+        _checked_pose("head_camera.T_display_camera", c.head_camera.T_display_camera, path)
+        _check_intrinsics("head_camera", c.head_camera, path)
 
 
 def _get(d: dict, key: str, prefix: str, path: str, kind: type | tuple):
