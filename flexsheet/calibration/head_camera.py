@@ -33,15 +33,16 @@ __all__ = ["design_head_camera", "fixture_poses", "register_head_camera", "eye_e
 def design_head_camera() -> tuple[np.ndarray, np.ndarray, int, int]:
     """The head camera as designed: (K (3, 3) px, T_display_camera (4, 4), width, height).
 
-    A 640 × 512 global-shutter camera, fx = fy = 600 px (±28° × ±23°), principal point at the image centre,
-    mounted at (0, 0, 0.20) m in the display frame (above the sheet's top edge), its optical axis toward
-    (0.30, 0, 0) m (:func:`flexsheet.vision.camera_model.look_at`, up = +z): the glasses stay in view from
-    the paper's V (0.40 m) to a viewer leaning in to 0.15 m. The seed of its registration."""
+    A 640 × 512 global-shutter sensor mounted in portrait (the image 512 wide × 640 tall: ±23° across, ±28° up
+    and down), fx = fy = 600 px, principal point at the image centre, at (0, 0, 0.20) m in the display frame
+    (above the sheet's top edge), its optical axis toward (0.25, 0, 0) m
+    (:func:`flexsheet.vision.camera_model.look_at`, up = +z): the glasses stay in view from a viewer sitting
+    back at 0.45 m to one leaning in to 0.11 m, sway included. The seed of its registration."""
     from flexsheet.vision.camera_model import look_at
 
-    w, h = 640, 512
+    w, h = 512, 640
     K = np.array([[600.0, 0.0, (w - 1) / 2], [0.0, 600.0, (h - 1) / 2], [0.0, 0.0, 1.0]])
-    return K, look_at((0.0, 0.0, 0.20), (0.30, 0.0, 0.0), up=(0.0, 0.0, 1.0)), w, h
+    return K, look_at((0.0, 0.0, 0.20), (0.25, 0.0, 0.0), up=(0.0, 0.0, 1.0)), w, h
 
 
 def fixture_poses(V=geometry.EYE) -> list[np.ndarray]:

@@ -6,10 +6,13 @@ sphere plus a margin, from the eye):
 
 * **near** (the current sheet within ``near_distance`` of the keep-out): the sheet's motion limits drop so no
   point of the sheet moves faster than ``reduced_speed`` (ISO 10218-1's 250 mm/s): centre speed
-  ``v ≤ 0.6·reduced_speed`` and turn rate ``ω ≤ 0.4·reduced_speed / r`` (r: the sheet's corner radius);
+  ``v ≤ 0.45·reduced_speed``, turn rate ``ω ≤ 0.35·reduced_speed / r`` (r: the sheet's corner radius) and
+  clamp strain rate ``≤ 0.1·reduced_speed / (size/2)``: together at most 0.9 of it at any corner;
 * **inside** (the next pose would put a point of the sheet or a clamp in the keep-out): the step is not taken;
   the sheet backs off along −x (:func:`~flexsheet.planning.keepout.retreat_point`) at the reduced speed;
-* **lost** (the head camera runs but the glasses are not found): the planner holds, as for a lost fingertip.
+* **lost** (the head camera runs but the glasses are not found): the planner holds, as for a lost fingertip;
+  lost while near (:attr:`HeadGuard.near`), every step backs off from the last known head instead, since a head
+  that was that close may come closer unseen.
 
 The guard judges the *planned* sheet against the *tracked* head, so it keeps a guard band (``band``, 0.01 m)
 beyond the margin: the tracked eye's error (≤ 3.5 mm p95 in the twin, docs/head.md) and the arms' tracking of
@@ -60,6 +63,8 @@ class HeadGuard:
         self.size = float(size)
         self.eye: np.ndarray | None = None
         self.lost = False
+        #: the last judged sheet was within ``near_distance`` of the keep-out
+        self.near = False
         self.counts = {"near": 0, "retreat": 0}
 
     @property
@@ -91,21 +96,24 @@ class HeadGuard:
         if self.eye is None or origin is None:
             return base
         v = self.verdict(origin, R, stretch)
-        if v.clearance >= self.keepout.near_distance:
+        self.near = v.clearance < self.keepout.near_distance
+        if not self.near:
             return base
         self.counts["near"] += 1
         r = math.hypot(0.5 * self.size, 0.5 * self.size)
         vs = self.keepout.reduced_speed
-        return replace(base, v_max=min(base.v_max, 0.6 * vs), w_max=min(base.w_max, 0.4 * vs / r))
+        return replace(base, v_max=min(base.v_max, 0.45 * vs), w_max=min(base.w_max, 0.35 * vs / r),
+                       stretch_rate=min(base.stretch_rate, 0.1 * vs / (0.5 * self.size)))
 
     def step(self, prev_origin, prev_R, origin, R, stretch: float, dt: float) -> GuardStep:
         """Judge the step from (``prev_origin``, ``prev_R``) to (``origin``, ``R``) at ``stretch`` over ``dt`` s:
-        the step itself if it keeps out of the volume, else a back-off from the previous pose."""
+        the step itself if it keeps out of the volume (and the head is tracked), else a back-off from the
+        previous pose."""
         v = self.verdict(origin, R, stretch)
-        if not v.inside:
+        if not v.inside and not self.lost:
             return GuardStep(np.asarray(origin, float), np.asarray(R, float), False, v)
         self.counts["retreat"] += 1
         Rp = np.asarray(prev_R, float)
-        step = 0.6 * self.keepout.reduced_speed * max(float(dt), 1e-3)
+        step = 0.45 * self.keepout.reduced_speed * max(float(dt), 1e-3)
         o = retreat_point(self.keepout, self.eye, np.asarray(prev_origin, float), Rp[:, 0], step)
         return GuardStep(o, Rp, True, self.verdict(o, Rp, stretch))

@@ -424,8 +424,8 @@ class SurfacePlanner:
             status.append("rate_limited")
         if self.guard is not None and self.guard.eye is not None and prev is not None:
             g = self.guard.step(prev.origin, prev.R, o, Rc, st, dt)
-            if g.retreat:            # the step would enter the head's keep-out: back off instead, at rest
-                status.append(Hold.KEEP_OUT)
+            if g.retreat:            # the step would enter the head's keep-out (or it was lost near): back off
+                status.append(Hold.HEAD_LOST if self.guard.lost else Hold.KEEP_OUT)
                 o, Rc = tuple(float(x) for x in g.origin), tuple(tuple(float(x) for x in r) for r in g.R)
                 self.limiter.reset(o, Rc, st)
         axes = cols(Rc)

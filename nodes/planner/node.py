@@ -242,7 +242,7 @@ class PlannerNode(Node):
         """Plan and publish; a lost marker holds the last safe pose (status ``hold:marker_lost``)."""
         if not msg.valid:
             plan = self.planner.hold(Hold.MARKER_LOST)
-        elif self.guard.lost:
+        elif self.guard.lost and not self.guard.near:
             plan = self.planner.hold(Hold.HEAD_LOST)
         else:
             predict = self.params.use_prediction        # read once: param set may change it meanwhile

@@ -25,7 +25,7 @@ def test_registration_finds_the_true_camera_and_the_eye(seed):
     entry = register_head_camera([finder.detect(im) for im in rig.fixture_images(poses)], poses, rig.board, K0,
                                  (w, h), "twin")
     K, _, T, _, _ = true_head_camera(seed)
-    assert np.linalg.norm(entry.T_display_camera[:3, 3] - T[:3, 3]) < 0.004        # mount drawn ~5 mm off
+    assert np.linalg.norm(entry.T_display_camera[:3, 3] - T[:3, 3]) < 0.006        # mount drawn ~5 mm per axis off
     dR = cv2.Rodrigues(entry.T_display_camera[:3, :3].T @ T[:3, :3])[0]
     assert math.degrees(np.linalg.norm(dR)) < 0.8                                  # drawn ~1 deg off
     assert entry.provenance.residuals["rms_px"] < 1.5 and entry.provenance.n_poses >= 25

@@ -33,26 +33,27 @@ def _project(twin, X_display) -> np.ndarray:
 
 def test_design_camera_sees_the_eye_and_a_lean_in():
     K, T, w, h = design_head_camera()
-    assert (w, h) == (640, 512)
-    assert K == pytest.approx(np.array([[600.0, 0, 319.5], [0, 600.0, 255.5], [0, 0, 1]]), abs=1e-12)
+    assert (w, h) == (512, 640)                                       # the 640 x 512 sensor in portrait
+    assert K == pytest.approx(np.array([[600.0, 0, 255.5], [0, 600.0, 319.5], [0, 0, 1]]), abs=1e-12)
     assert T[:3, 3] == pytest.approx([0.0, 0.0, 0.20], abs=1e-12)
     assert np.linalg.det(T[:3, :3]) == pytest.approx(1.0, abs=1e-12)
     twin = _twin()
-    assert _project(twin, np.array([0.30, 0.0, 0.0])) == pytest.approx([319.5, 255.5], abs=1e-9)
-    for x in (0.16, 0.40, 0.45):                 # V and a viewer leaned in to 0.16 m stay in the image
-        u = _project(twin, np.array([x, 0.0, 0.0]))
-        assert 0 < u[0] < 640 and 20 < u[1] < 492
+    assert _project(twin, np.array([0.25, 0.0, 0.0])) == pytest.approx([255.5, 319.5], abs=1e-9)
+    for x, z in ((0.11, -0.03), (0.40, 0.0), (0.45, 0.07)):      # leaned in and low, at V, sat back and high
+        u = _project(twin, np.array([x, 0.0, z]))
+        assert 0 < u[0] < 512 and 10 < u[1] < 630
     # image +x = display −y (the viewer's left), image +y down
     assert T[:3, 0] == pytest.approx([0.0, -1.0, 0.0], abs=1e-12)
     u_left, u_up = _project(twin, EYE + [0.0, -0.01, 0.0]), _project(twin, EYE + [0.0, 0.0, 0.01])
-    assert u_left[0] > 319.5 + 10 and u_up[1] < 255.5 - 10
+    u_eye = _project(twin, EYE)
+    assert u_left[0] > u_eye[0] + 10 and u_up[1] < u_eye[1] - 10
 
 
 def test_board_drawn_where_it_projects():
     twin = _twin(noise_sigma=0.0, blur_px=0.0)
     T = _glasses()
     img = twin.render(T)
-    assert img.shape == (512, 640) and img.dtype == np.uint8
+    assert img.shape == (640, 512) and img.dtype == np.uint8
     Xc = twin.board_corners_camera(T)
     uv = ((Xc @ twin.K.T)[:, :2] / Xc[:, 2:]).reshape(-1, 4, 2)
     # marker interiors' border cells are black (25), the gap between markers white (210), far away background
@@ -62,7 +63,7 @@ def test_board_drawn_where_it_projects():
         assert img[int(round(border[1])), int(round(border[0]))] == 25
     gap = 0.5 * (uv[0, 1] + uv[1, 0])                           # between markers 0 and 1, top row
     assert img[int(round(gap[1])), int(round(gap[0]))] == 210
-    assert img[20, 20] == 90 and img[500, 620] == 90
+    assert img[20, 20] == 90 and img[620, 500] == 90
     lo, hi = uv.reshape(-1, 2).min(0), uv.reshape(-1, 2).max(0)
     assert 100 < hi[0] - lo[0] < 200 and 25 < hi[1] - lo[1] < 60       # a 0.10 × 0.03 m board at 0.44 m
 
