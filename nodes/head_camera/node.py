@@ -155,11 +155,14 @@ class HeadCameraNode(Node):
         image = self.twin.render(T, head.velocity, self.params.exposure_s, occluded=not head.visible)
         self._track(image, t)
 
-    def on_device_tick(self) -> None:
-        """Grab one UVC frame (stamped on arrival less half the exposure) and track it."""
+    async def on_device_tick(self) -> None:
+        """Grab one UVC frame in a worker thread (the loop stays free), stamped on arrival less half the exposure,
+        and track it."""
+        import asyncio
+
         import cv2
 
-        ok, frame = self.cap.read()
+        ok, frame = await asyncio.to_thread(self.cap.read)
         t = self.now() - 0.5 * self.params.exposure_s
         if not ok:
             raise InputRejected(f"device {self.params.device!r}: no frame")
