@@ -322,21 +322,29 @@ class GlassesTracker:
         params.perspectiveRemoveIgnoredMarginPerCell = 0.25
         self.detector = cv2.aruco.ArucoDetector(_dictionary(int(self.board.dictionary)), params)
         self._T_board_glasses = np.linalg.inv(self.board.T_glasses_board)
+        self._roi: tuple[float, float, float, float] | None = None    # where the last pose's markers were
         self._edge_s, self._edge_use = _edge_samples(self.board)
 
-    def detect(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def detect(self, image: np.ndarray, roi=None) -> tuple[np.ndarray, np.ndarray]:
         """The board's markers in ``image`` (H, W) uint8 (or (H, W, 3) BGR): (ids (M,) int, sorted; corners
-        (M, 4, 2) px, ArUco corner order). Other ids are dropped. Raises ``ValueError`` on a bad image."""
+        (M, 4, 2) px, ArUco corner order, full-image coordinates). ``roi`` (x0, y0, x1, y1) px: search only
+        there. Other ids are dropped. Raises ``ValueError`` on a bad image."""
         img = np.asarray(image)
         if img.dtype != np.uint8 or img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3):
             raise ValueError(f"image must be a uint8 (H, W) or (H, W, 3) array, got {img.dtype} {img.shape}")
         if img.ndim == 3:
             img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
-        corners, ids, _ = self.detector.detectMarkers(img)
+        x0, y0 = 0, 0
+        if roi is not None:                  # search the region only (detection costs ~ its area)
+            x0, y0, x1, y1 = (int(v) for v in roi)
+            x0, y0 = max(x0, 0), max(y0, 0)
+            corners, ids, _ = self.detector.detectMarkers(img[y0:max(y1, y0 + 1), x0:max(x1, x0 + 1)])
+        else:
+            corners, ids, _ = self.detector.detectMarkers(img)
         if ids is None or len(ids) == 0:
             return np.zeros(0, int), np.zeros((0, 4, 2))
         ids = ids.ravel().astype(int)
-        c = np.asarray(corners, float).reshape(-1, 4, 2)
+        c = np.asarray(corners, float).reshape(-1, 4, 2) + (x0, y0)
         keep = (ids >= self.board.first_id) & (ids < self.board.first_id + self.board.count)
         ids, c = ids[keep], c[keep]
         # a duplicated id (a reflection, a second pair of glasses) makes the correspondence ambiguous: drop it
@@ -367,10 +375,19 @@ class GlassesTracker:
 
     def track(self, image: np.ndarray) -> GlassesPose | None:
         """Glasses pose and eyes from one image (H, W) uint8 (display frame, m), or None when fewer than
-        ``min_markers`` board markers are found or PnP fails. Raises ``ValueError`` on a bad image."""
-        ids, corners = self.detect(image)
+        ``min_markers`` board markers are found or PnP fails. Raises ``ValueError`` on a bad image.
+
+        After a frame with a pose, the next search is the region around its markers (their box grown by its
+        own size each way, ≥ 40 px), and the whole image only when that finds too few."""
+        ids, corners = self.detect(image, self._roi) if self._roi is not None else (np.zeros(0, int), None)
+        if len(ids) < self.min_markers:
+            ids, corners = self.detect(image)
+        self._roi = None
         if len(ids) < self.min_markers:
             return None
+        lo, hi = corners.reshape(-1, 2).min(0), corners.reshape(-1, 2).max(0)
+        grow = np.maximum(hi - lo, 40.0)
+        self._roi = (*(lo - grow), *(hi + grow))
         obj = self.board.object_points_board().reshape(-1, 4, 3)[ids - self.board.first_id].reshape(-1, 3)
         sol = self._solve(obj, corners.reshape(-1, 2))
         if sol is None:

@@ -335,7 +335,8 @@ class RendererNode(SheetTables, Node):
             self.viewpoint.update(float(msg.header.stamp), msg.left, msg.right, msg.velocity, msg.valid)
         except ValueError as exc:
             raise InputRejected(f"/eye/pose: {exc}") from None
-        self._request()      # the head moved: the pair follows it even while the finger is still
+        # no redraw of its own: the next pair (each fingertip, at least publish_rate) takes the newest eyes; a
+        # redraw per pose kept the renderer busy enough to delay the fingertip's pairs by 4-12 ms
 
     def _eyes(self):
         """The eyes of the pair drawn now, predicted to the moment it is on the sheet (logged on a change)."""
