@@ -44,6 +44,8 @@ def run_seed(seed: int, out: Path, duration: float, launch: Path, extra: list[st
     """Run the graph of ``launch`` for ``duration`` simulated s on truth seed ``seed`` into ``out``; returns
     its ``summary.json``. Raises ``RuntimeError`` naming the seed and the log when the run writes none."""
     out.mkdir(parents=True, exist_ok=True)
+    for old in out.glob("*.mcap"):          # an earlier run's bags: the report reads every bag in the folder
+        old.unlink()
     cmd = [sys.executable, "-m", "flexsheet", "launch", str(launch), "--duration", f"{duration:g}", "--out",
            str(out), "--set", f"twin.truth_seed={seed}", *(extra or [])]
     t0 = time.monotonic()
