@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import inspect
 import json
 import logging
 import os
 import sys
+import time
 from pathlib import Path
 
 import yaml
@@ -178,10 +180,13 @@ def cmd_launch(args: argparse.Namespace) -> int:
     except (LaunchError, OSError) as exc:
         print(f"flexsheet launch: {exc}", file=sys.stderr)
         return EXIT_CONFIG
+    started = time.time()
     code = asyncio.run(sup.run())
     if lf.report and out and args.host in (None, "main", next(iter(lf.hosts))):
         report = registry.load(lf.report)
-        code = max(code, int(report(out, lf) or 0))
+        # a report that takes ``since`` reads only this run's files (a reused --out folder keeps earlier runs')
+        kw = {"since": started - 1.0} if "since" in inspect.signature(report).parameters else {}
+        code = max(code, int(report(out, lf, **kw) or 0))
     return code
 
 

@@ -50,7 +50,7 @@ from flexsheet.experiments.report_verdicts import judge
 from flexsheet.experiments.table1 import DD_CONVENTION
 from flexsheet.model.scenes import Scene, load_scene, paper_scene
 
-__all__ = ["twin_settings", "scene_settings", "main"]
+__all__ = ["twin_settings", "scene_settings", "run_bags", "main"]
 
 
 def twin_settings(lf=None) -> dict:
@@ -125,15 +125,27 @@ def _clock(summary: dict, out_dir: Path) -> None:
         summary["latency_ms"]["compute_vs_waiting"] = compute_vs_waiting(summary, out_dir)
 
 
-def main(out: str, lf=None) -> int:
-    """Analyse the bag in ``out`` (called by ``flexsheet launch`` after the run) and write the report. Returns 0,
-    or 1 without a Table I row."""
+def run_bags(out_dir: Path, since: float | None = None) -> list[Path]:
+    """The bags of a run in ``out_dir``, oldest first (a respawned recorder continues in ``<stem>.N.mcap``):
+    every ``*.mcap`` but replays, and with ``since`` (epoch s, the launch's start) only those written since, so
+    an earlier run's bags in a reused folder are left out."""
+    bags = [p for p in out_dir.glob("*.mcap") if not p.name.startswith("replay")]
+    if since is not None:
+        bags = [p for p in bags if p.stat().st_mtime >= since]
+    return sorted(bags, key=lambda p: p.stat().st_mtime)
+
+
+def main(out: str, lf=None, since: float | None = None) -> int:
+    """Analyse the run's bags in ``out`` (called by ``flexsheet launch`` after the run, with ``since`` its start,
+    epoch s: :func:`run_bags`) and write the report. Returns 0, or 1 without a Table I row."""
     out_dir = Path(out)
-    bags = sorted((p for p in out_dir.glob("*.mcap") if not p.name.startswith("replay")),
-                  key=lambda p: p.stat().st_mtime)
+    bags = run_bags(out_dir, since)
     if not bags:
-        print(f"[report] no bag in {out_dir}", flush=True)
+        print(f"[report] no bag in {out_dir}" + (" written by this run" if since is not None else ""), flush=True)
         return 1
+    older = len(run_bags(out_dir)) - len(bags)
+    if older:
+        print(f"[report] {older} bag(s) in {out_dir} from an earlier run left out", flush=True)
     beats: list = []
     series: dict = {}
     scene, scene_entry = scene_settings(lf, out)

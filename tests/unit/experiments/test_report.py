@@ -220,3 +220,19 @@ def test_report_records_the_twin_and_both_dd_conventions(tmp_path):
     assert twin_settings(load_launch(top_path)) == {"realism": "realistic", "truth_seed": 5,
                                                     "source": "launch file twin section"}
     assert twin_settings(None)["source"].startswith("world node defaults")
+
+
+def test_an_earlier_runs_bags_in_a_reused_folder_are_left_out(tmp_path):
+    """The launch passes its start: the report reads only the bags written since (a respawned recorder's parts
+    all are), not an earlier run's in the same --out folder; without a start, every bag, oldest first."""
+    import os
+
+    from flexsheet.experiments.report import run_bags
+
+    old, part0, part1, replay = (tmp_path / n for n in ("sim.mcap", "sim.1.mcap", "sim.2.mcap", "replay.mcap"))
+    for k, p in enumerate((old, part0, part1, replay)):
+        p.write_bytes(b"")
+        os.utime(p, (1000.0 + 100 * k, 1000.0 + 100 * k))
+    assert run_bags(tmp_path) == [old, part0, part1]
+    assert run_bags(tmp_path, since=1050.0) == [part0, part1]
+    assert run_bags(tmp_path, since=5000.0) == []
