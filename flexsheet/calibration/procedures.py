@@ -190,7 +190,7 @@ def run_all(source, opts: Options) -> Registration:
 
 def run_head_camera(source):
     """The head camera's entry and the tracked eye entry (:mod:`flexsheet.calibration.head_camera`): the board
-    on the chin-rest fixture's steps, then the viewer on the chin rest and the pupillometer's IPD."""
+    on the chin-rest fixture's steps, then the viewer's sittings on the chin rest and the pupillometer's IPD."""
     import numpy as np
 
     from flexsheet.calibration.head_camera import (
@@ -208,10 +208,12 @@ def run_head_camera(source):
     entry = register_head_camera([finder.detect(im) for im in source.head_fixture_images(poses)], poses, board, K0,
                                  (w, h), source.label)
     tracker = GlassesTracker(entry.K, entry.D, entry.T_display_camera, board, np.zeros(3), 0.064)
-    pose = tracker.track(source.head_chin_rest_image())
-    if pose is None:
-        raise ValueError("head camera: the glasses on the chin rest were not found (is the viewer seated?)")
-    eye = eye_entry(pose.T_display_glasses, source.pupillometer_ipd(), source=source.label)
+    poses = [tracker.track(im) for im in source.head_chin_rest_images()]
+    if not poses or any(p is None for p in poses):
+        raise ValueError("head camera: the glasses on the chin rest were not found in every sitting "
+                         f"({sum(p is not None for p in poses)} of {len(poses)}; is the viewer seated?)")
+    eye = eye_entry([p.T_display_glasses for p in poses], source.pupillometer_ipd(), source=source.label)
     log.info(f"head camera: {entry.provenance.n_poses} fixture steps, {entry.provenance.residuals['rms_px']:.3f} px "
-             f"rms; eye offset {np.round(eye.glasses_eye_offset * 1e3, 1).tolist()} mm, ipd {eye.ipd * 1e3:.1f} mm")
+             f"rms; eye offset {np.round(eye.glasses_eye_offset * 1e3, 1).tolist()} mm from {len(poses)} sittings, ipd "
+             f"{eye.ipd * 1e3:.1f} mm")
     return entry, eye

@@ -8,8 +8,8 @@ Captured-images layout (``--images DIR``; :func:`save_frames` writes it, e.g. fr
     DIR/projector/pose00/img00_left.png ... img41_right.png         # the patterns of gray_code_patterns(),
                                                                    # in order (42 for 1024x768), per pose
     DIR/arms/left/config00_left.png ..., DIR/arms/right/...
-    DIR/head/fixture00.png ... fixture29.png, chin_rest.png        # optional: the head camera (mono), the
-                                                                   # chin-rest fixture's steps in order
+    DIR/head/fixture00.png ... fixture29.png, chin_rest00.png ...  # optional: the head camera (mono), the
+                                                                   # fixture's steps in order, one per sitting
     DIR/manifest.json   {"arms": {"left": {"joints": [[q1..q6], ...]}, "right": {...}},   # commanded, rad
                          "projector": {"width": 1024, "height": 768},
                          "head": {"ipd": 0.0635}}                  # the pupillometer's reading, m
@@ -86,12 +86,12 @@ class ImageDirSource:
             raise ValueError(f"{self.root}/head: {len(files)} fixture images, expected {len(poses)} (one per step)")
         return [_read(f) for f in files]
 
-    def head_chin_rest_image(self) -> np.ndarray:
-        """The head camera's image of the viewer on the chin rest (``head/chin_rest.*``)."""
-        files = glob.glob(os.path.join(self.root, "head", "chin_rest.*"))
+    def head_chin_rest_images(self) -> list[np.ndarray]:
+        """The head camera's images of the viewer on the chin rest, one per sitting (``head/chin_restNN.*``)."""
+        files = sorted(glob.glob(os.path.join(self.root, "head", "chin_rest*.*")))
         if not files:
-            raise ValueError(f"no {self.root}/head/chin_rest.png (the viewer on the chin rest, glasses on)")
-        return _read(files[0])
+            raise ValueError(f"no {self.root}/head/chin_rest00.png (the viewer on the chin rest, glasses on)")
+        return [_read(f) for f in files]
 
     def pupillometer_ipd(self) -> float:
         """The viewer's IPD, m, from ``manifest.json`` ``head.ipd``."""
@@ -134,16 +134,17 @@ class ImageDirSource:
 def save_frames(root: str, *, board_views: list[Pair] | None = None, projector: list[list[Pair]] | None = None,
                 arms: dict[str, tuple[list[Pair], list[np.ndarray]]] | None = None,
                 projector_size: tuple[int, int] | None = None,
-                head: tuple[list[np.ndarray], np.ndarray, float] | None = None) -> None:
+                head: tuple[list[np.ndarray], list[np.ndarray], float] | None = None) -> None:
     """Write frames in the :class:`ImageDirSource` layout (PNG) plus ``manifest.json``; ``head``: (fixture
-    images, chin-rest image, IPD m) of the head camera."""
+    images, chin-rest images (one per sitting), IPD m) of the head camera."""
     man: dict = {}
     if head:
         d = os.path.join(root, "head")
         os.makedirs(d, exist_ok=True)
         for k, img in enumerate(head[0]):
             cv2.imwrite(os.path.join(d, f"fixture{k:02d}.png"), img)
-        cv2.imwrite(os.path.join(d, "chin_rest.png"), head[1])
+        for k, img in enumerate(head[1]):
+            cv2.imwrite(os.path.join(d, f"chin_rest{k:02d}.png"), img)
         man["head"] = {"ipd": float(head[2])}
     if board_views:
         d = os.path.join(root, "camera_pose")

@@ -24,7 +24,7 @@ log = logging.getLogger(__name__)
 __all__ = ["TwinSource", "run_display_sim", "sim_display_calib", "score_registration", "verdicts", "TARGETS",
            "SUMMARY_VERSION", "sim_display_calib_cached"]
 
-SUMMARY_VERSION = 6
+SUMMARY_VERSION = 7
 
 Pair = tuple[np.ndarray, np.ndarray]
 
@@ -71,9 +71,12 @@ class TwinSource:
         (:class:`flexsheet.twin.head_rig.HeadRigTwin`)."""
         return self._head_rig().fixture_images(poses)
 
-    def head_chin_rest_image(self) -> np.ndarray:
-        """The viewer on the chin rest, glasses on, seen by the head camera."""
-        return self._head_rig().chin_rest_image()
+    def head_chin_rest_images(self) -> list[np.ndarray]:
+        """The viewer on the chin rest, glasses on, seen by the head camera: one image per sitting."""
+        from flexsheet.calibration.head_camera import SITTINGS
+
+        rig = self._head_rig()
+        return [rig.chin_rest_image() for _ in range(SITTINGS)]
 
     def pupillometer_ipd(self) -> float:
         """The viewer's IPD as the lab's pupillometer reads it, m."""
