@@ -14,6 +14,7 @@ from pydantic import Field
 
 from flexsheet.model import geometry
 from flexsheet.model.sheet_table import TABLE_DEPTHS, TABLE_POSITIONS, default_cache_dir
+from flexsheet.twin.head import HeadMotion, Viewer
 from flexsheet.twin.truth_choice import TruthChoice
 
 __all__ = ["SheetFemConfig", "HeadScript", "WorldConfig"]
@@ -93,9 +94,16 @@ class HeadScript:
         if self.lean_in and (len(self.lean_in) != 3 or any(not v >= 0.0 for v in self.lean_in)
                              or self.lean_in[1] > 0.35):
             raise ValueError(f"head.lean_in must be [] or [start s, depth m <= 0.35, hold s], got {self.lean_in!r}")
-        for span in self.occlusions:
-            if len(span) != 2 or not (span[0] >= 0.0 and span[1] > 0.0):
-                raise ValueError(f"head.occlusions must be [start s, duration s > 0] pairs, got {span!r}")
+        try:                                 # the rest (the occlusion spans) is HeadMotion's own check
+            self.motion(Viewer.draw(0, "ideal"), 0)
+        except ValueError as exc:
+            raise ValueError(f"head.{exc}") from None
+
+    def motion(self, viewer: Viewer, seed: int) -> HeadMotion:
+        """The :class:`~flexsheet.twin.head.HeadMotion` this script plays for ``viewer`` and truth ``seed``."""
+        return HeadMotion(viewer, seed=seed, sway=tuple(self.sway), still=self.still,
+                          lean_in=tuple(self.lean_in) if self.lean_in else None,
+                          occlusions=tuple(tuple(o) for o in self.occlusions))
 
 
 @dataclass(frozen=True)

@@ -56,7 +56,7 @@ from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.runtime.qos import QoS
 from flexsheet.twin.finger import FingerScript
-from flexsheet.twin.head import HeadMotion, Viewer
+from flexsheet.twin.head import Viewer
 from flexsheet.twin.truth import TwinTruth
 from flexsheet.twin.world import TruePhysics, build_table
 from flexsheet.twin.world_config import SheetFemConfig, WorldConfig
@@ -164,10 +164,7 @@ class WorldNode(Node):
         self.sheet_pub = self.publisher(T.SHEET_STATE)
         self.head_pub = self.publisher(T.HEAD_TRUTH)
         self.truth = TwinTruth.draw(p.twin.truth_seed, p.twin.realism)
-        h = p.head
-        self.head = HeadMotion(Viewer.draw(p.twin.truth_seed, p.twin.realism), seed=p.twin.truth_seed,
-                               sway=tuple(h.sway), still=h.still, lean_in=tuple(h.lean_in) if h.lean_in else None,
-                               occlusions=tuple(tuple(o) for o in h.occlusions))
+        self.head = p.head.motion(Viewer.draw(p.twin.truth_seed, p.twin.realism), p.twin.truth_seed)
         self.phys = TruePhysics(self.truth, p.sheet_fem.config(), size=p.sheet_size)
         self.poses: dict[str, np.ndarray] = {}
         self.pose_stamps: dict[str, float] = {}
