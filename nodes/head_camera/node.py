@@ -79,6 +79,14 @@ def _tracker(p, log) -> GlassesTracker:
     return GlassesTracker(h.K, h.D, h.T_display_camera, board, e.glasses_eye_offset, ipd, p.min_markers)
 
 
+def _eye_pose(header, pose: GlassesPose, velocity: np.ndarray, valid: bool, age: float = 0.0) -> EyePose:
+    """The ``/eye/pose`` of glasses ``pose``: this frame's (``valid``) or the last good one carried, ``age`` s old."""
+    T = pose.T_display_glasses
+    return EyePose(header=header, position=T[:3, 3].copy(), rotation=np.ascontiguousarray(T[:3, :3]), left=pose.left,
+                   right=pose.right, eye=pose.V, velocity=velocity, valid=valid, age=age,
+                   markers=pose.markers if valid else 0, reprojection_px=pose.reprojection_px if valid else 0.0)
+
+
 class HeadCameraNode(Node):
     """Publishes :class:`messages.EyePose` on ``/eye/pose`` for every head-camera frame."""
 
@@ -175,20 +183,13 @@ class HeadCameraNode(Node):
             self.predictor.update(stamp, pose)
             self._last = (stamp, pose)
             v = self.predictor.velocity
-            vel = np.zeros(3) if v is None else v[2].copy()
-            self.pub.publish(EyePose(header=hdr, position=pose.T_display_glasses[:3, 3].copy(),
-                                     rotation=np.ascontiguousarray(pose.T_display_glasses[:3, :3]), left=pose.left,
-                                     right=pose.right, eye=pose.V, velocity=vel, valid=True, markers=pose.markers,
-                                     reprojection_px=pose.reprojection_px))
+            self.pub.publish(_eye_pose(hdr, pose, np.zeros(3) if v is None else v[2].copy(), True))
             return
         self.lost += 1
         if self._last is None:
             return          # nothing tracked yet: the renderer draws for V until the first pose
         t_good, good = self._last
-        self.pub.publish(EyePose(header=hdr, position=good.T_display_glasses[:3, 3].copy(),
-                                 rotation=np.ascontiguousarray(good.T_display_glasses[:3, :3]), left=good.left,
-                                 right=good.right, eye=good.V, velocity=np.zeros(3), valid=False,
-                                 age=max(stamp - t_good, 0.0)))
+        self.pub.publish(_eye_pose(hdr, good, np.zeros(3), False, age=max(stamp - t_good, 0.0)))
 
     def heartbeat(self):
         hb = super().heartbeat()
