@@ -38,6 +38,7 @@ CALIBRATE: dict[str, str] = {
     "projector": "flexsheet.display.calibrate:projector_main",
     "arms": "flexsheet.display.calibrate:arms_main",
     "eye": "flexsheet.display.calibrate:eye_main",
+    "sheet": "flexsheet.display.calibrate:sheet_main",
     "display": "flexsheet.display.calibrate:display_main",
     "noise": "flexsheet.display.calibrate:noise_main",
 }

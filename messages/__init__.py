@@ -8,14 +8,14 @@ from messages.render import ProjectorImage, RenderedFrame
 from messages.surface import ArmTarget, SheetTarget
 from messages.topics import Topic
 from messages.vision import EyePose, Fingertip, StereoCalibration, StereoFrame
-from messages.world import FingerTruth, HeadTruth, SheetState
+from messages.world import ContactTruth, FingerTruth, HeadTruth, SheetState
 
 MESSAGE_TYPES: dict[str, type[Message]] = {
     cls.SCHEMA: cls
     for cls in (StereoFrame, StereoCalibration, Fingertip, SheetTarget, ArmTarget, ArmJointState,
-                ObjectDeformation, RenderedFrame, ProjectorImage, FingerTruth, SheetState, Heartbeat, EyePose, HeadTruth)
+                ObjectDeformation, RenderedFrame, ProjectorImage, FingerTruth, SheetState, Heartbeat, EyePose, HeadTruth, ContactTruth)
 }
 
-__all__ = ["ArmJointState", "ArmTarget", "DISPLAY_FRAME", "EyePose", "Fingertip", "FingerTruth", "HeadTruth", "Header", "Heartbeat",
+__all__ = ["ArmJointState", "ArmTarget", "ContactTruth", "DISPLAY_FRAME", "EyePose", "Fingertip", "FingerTruth", "HeadTruth", "Header", "Heartbeat",
            "MESSAGE_TYPES", "Message", "ObjectDeformation", "ProjectorImage", "RenderedFrame", "SheetState", "SheetTarget",
            "StereoCalibration", "StereoFrame", "Topic", "TopicStats", "check_finite", "ndarray"]

@@ -15,7 +15,7 @@ from messages.fem import ObjectDeformation
 from messages.render import ProjectorImage, RenderedFrame
 from messages.surface import ArmTarget, SheetTarget
 from messages.vision import EyePose, Fingertip, StereoCalibration, StereoFrame
-from messages.world import FingerTruth, HeadTruth, SheetState
+from messages.world import ContactTruth, FingerTruth, HeadTruth, SheetState
 
 
 @dataclass(frozen=True)
@@ -51,11 +51,12 @@ PROJECTOR_IMAGE = Topic("/projector/image", ProjectorImage, latched=True)
 FINGER_TRUTH = Topic("/world/finger", FingerTruth, nominal_hz=100.0)
 SHEET_STATE = Topic("/world/sheet", SheetState, nominal_hz=50.0)
 HEAD_TRUTH = Topic("/world/head", HeadTruth, nominal_hz=100.0)
+CONTACT_TRUTH = Topic("/world/contact", ContactTruth, nominal_hz=50.0)
 DIAGNOSTICS = Topic("/diagnostics", Heartbeat, nominal_hz=1.0)
 
 ALL = [STEREO, STEREO_PREVIEW, CALIBRATION, FINGERTIP, SHEET_TARGET, ARM_LEFT_TARGET, ARM_RIGHT_TARGET, ARM_LEFT_STATE,
        ARM_RIGHT_STATE, DEFORMATION, RENDERED, PROJECTOR_IMAGE, FINGER_TRUTH, SHEET_STATE, DIAGNOSTICS, EYE_POSE,
-       HEAD_TRUTH]
+       HEAD_TRUTH, CONTACT_TRUTH]
 BY_NAME = {t.name: t for t in ALL}
 
 

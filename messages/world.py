@@ -47,12 +47,11 @@ class SheetState(Message):
     point of the finger's depression (equals ``origin`` projection when not pushed). ``depth`` m:
     depression along −normal. ``stretch``: engineering strain between clamps. ``membrane`` (G, G) m:
     out-of-plane deflection of the membrane sampled on a G×G grid over the sheet (u, v ∈ [−a, a]), positive
-    along −normal. ``force`` N: the finger's contact force on the true sheet (the truth's sheet FEM table at
-    the true depth; 0 when not pushed or before a table): what the finger feels.
+    along −normal. The finger's force on it is on ``/world/contact`` (:class:`ContactTruth`).
     """
 
     SCHEMA = "flexsheet/SheetState"
-    VERSION = 1
+    VERSION = 2
 
     origin: ndarray("float64", (3,), "sheet centre, m, display frame")
     normal: ndarray("float64", (3,), "unit sheet normal")
@@ -62,7 +61,27 @@ class SheetState(Message):
     depth: float = Field(ge=0.0, description="depression depth, m")
     stretch: float = Field(ge=0.0, description="engineering strain between clamps")
     membrane: ndarray("float64", (None, None), "deflection grid, m, along -normal")
-    force: float = Field(default=0.0, ge=0.0, description="finger's contact force on the true sheet, N")
+
+
+class ContactTruth(Message):
+    """The finger's true contact with the true sheet in the simulated world: what the finger feels. From the
+    twin's sheet FEM (:mod:`flexsheet.model.sheet_fem`, its table at the true clamp strain); the report compares
+    it with the force the object asks. Estimators never read it; a lab measures it with a load cell.
+
+    ``touching``: the finger is behind the sheet's plane within the clamps. ``depth`` m: the indentation along
+    the sheet's normal. ``force`` N: the normal contact force (0 while no table is ready). ``point`` (3,) m:
+    the contact point (the finger's apex on the pushed sheet), display frame. ``stiffness`` N/m: the sheet's
+    incremental stiffness dF/d(depth) there (0 while no table is ready).
+    """
+
+    SCHEMA = "flexsheet/ContactTruth"
+    VERSION = 1
+
+    touching: bool = Field(default=False, description="finger behind the sheet's plane, within the clamps")
+    depth: float = Field(ge=0.0, description="indentation along the sheet normal, m")
+    force: float = Field(ge=0.0, description="normal contact force, N")
+    point: ndarray("float64", (3,), "contact point, m, display frame")
+    stiffness: float = Field(ge=0.0, description="incremental stiffness dF/d(depth), N/m")
 
 
 class HeadTruth(Message):

@@ -30,6 +30,9 @@ Layout (OpenCV FileStorage YAML; matrices are ``!!opencv-matrix``, units m / rad
        K: 3x3  D: 5x1  width, height
        T_display_camera: 4x4      # its optical frame (+z forward, +x right, +y down) in the display frame
        provenance: {...}
+    sheet:                        # the sheet's force under a fingertip, identified from pushes (optional)
+       contact_width: m  contact_growth: 1  stretching: N/m^3  strain_offset: 1   # flexsheet.model.tension
+       provenance: {...}          # residuals: median_pct, rms_pct (the model against the presses)
 
 ``provenance.measured_at`` is ISO 8601 UTC; ``source`` is ``lab``, ``twin seed N`` or ``nominal``.
 The file is written with ``cv2.FileStorage`` (so OpenCV reads it back) and read with PyYAML's safe loader
@@ -51,13 +54,15 @@ from flexsheet.model import geometry
 from flexsheet.model.checks import check_pose
 
 __all__ = ["FORMAT_VERSION", "ENTRIES", "NOMINAL_CLAMP_MARKER", "NOMINAL_IPD", "Provenance", "CameraEntry",
-           "ProjectorEntry", "ArmEntry", "EyeEntry", "HeadCameraEntry", "DisplayCalib", "nominal_display_calib",
+           "ProjectorEntry", "ArmEntry", "EyeEntry", "HeadCameraEntry", "SheetEntry", "DisplayCalib", "OPTIONAL", "nominal_display_calib",
            "now_iso", "pose_from_rt", "xyzyaw_from_pose", "BOOTSTRAP_FILE", "STEREO_NAMES",
            "stereo_vector", "stereo_from_vector"]
 
 FORMAT_VERSION = 1
 #: entry names, as :meth:`DisplayCalib.require` and the error messages spell them
-ENTRIES = ("camera", "projector", "arms.left", "arms.right", "eye", "head_camera")
+ENTRIES = ("camera", "projector", "arms.left", "arms.right", "eye", "head_camera", "sheet")
+#: entries a display runs without (the head camera: the image is for V; the sheet: the nominal string band)
+OPTIONAL = ("head_camera", "sheet")
 #: nominal clamp marker (a 10 mm retro-reflective sphere) in the clamp (tool) frame, m: 10 mm toward the user
 #: (normal) and 40 mm along axis_v from the middle of the clamped edge (design value; calibrated by ``arms``)
 NOMINAL_CLAMP_MARKER = (0.010, 0.0, 0.040)
@@ -226,6 +231,29 @@ class HeadCameraEntry:
 
 
 @dataclass
+class SheetEntry:
+    """The sheet's force model identified from pushes (:mod:`flexsheet.calibration.sheet`): the terms of
+    :class:`flexsheet.model.tension.SheetMaterial` ``contact_width`` (m), ``contact_growth``, ``stretching``
+    (N/m³) and ``strain_offset``."""
+
+    contact_width: float
+    contact_growth: float
+    stretching: float
+    strain_offset: float
+    provenance: Provenance
+
+    def material(self, base=None):
+        """``base`` (a :class:`~flexsheet.model.tension.SheetMaterial`, default the nominal one) with these
+        terms."""
+        from dataclasses import replace
+
+        from flexsheet.model.tension import SheetMaterial
+
+        return replace(base or SheetMaterial(), contact_width=self.contact_width, contact_growth=self.contact_growth,
+                       stretching=self.stretching, strain_offset=self.strain_offset)
+
+
+@dataclass
 class DisplayCalib:
     """The whole ``display.yaml`` (module doc). Entries are ``None`` (``arms`` lacks the side) until measured."""
 
@@ -235,6 +263,7 @@ class DisplayCalib:
     eye: EyeEntry | None = None
     path: str = ""
     head_camera: HeadCameraEntry | None = None
+    sheet: SheetEntry | None = None
 
     def _entry(self, name: str):
         if name.startswith("arms."):
@@ -256,8 +285,8 @@ class DisplayCalib:
 
     def require(self, *names: str, max_age_s: float | None = None) -> DisplayCalib:
         """Raise ``ValueError`` naming the file and the entries that are missing (or stale, when ``max_age_s``
-        is given); returns ``self`` otherwise. ``names`` default to every entry but the optional ``head_camera``."""
-        names = names or tuple(n for n in ENTRIES if n != "head_camera")
+        is given); returns ``self`` otherwise. ``names`` default to every entry but the :data:`OPTIONAL` ones."""
+        names = names or tuple(n for n in ENTRIES if n not in OPTIONAL)
         bad = [n for n in names if n not in ENTRIES]
         if bad:
             raise ValueError(f"unknown display calibration entries {bad}; known: {list(ENTRIES)}")
@@ -277,7 +306,8 @@ class DisplayCalib:
         arms = dict(self.arms)
         arms.update(other.arms)
         return DisplayCalib(other.camera or self.camera, other.projector or self.projector, arms,
-                            other.eye or self.eye, other.path or self.path, other.head_camera or self.head_camera)
+                            other.eye or self.eye, other.path or self.path, other.head_camera or self.head_camera,
+                            other.sheet or self.sheet)
 
 
 def nominal_display_calib() -> DisplayCalib:

@@ -20,6 +20,7 @@ from flexsheet.calibration.display_calib import (
     HeadCameraEntry,
     ProjectorEntry,
     Provenance,
+    SheetEntry,
 )
 from flexsheet.model.checks import check_pose
 from flexsheet.vision.calib_yaml import read_cv_yaml
@@ -28,6 +29,10 @@ __all__ = ["write_display_calib", "load_display_calib"]
 
 
 # ----------------------------------------------------------------------------------------------------- writing
+#: the sheet entry's numbers, in :class:`SheetEntry`'s order
+SHEET_TERMS = ("contact_width", "contact_growth", "stretching", "strain_offset")
+
+
 def _write_prov(fs: cv2.FileStorage, p: Provenance) -> None:
     fs.startWriteStruct("provenance", cv2.FileNode_MAP)
     fs.write("method", str(p.method))
@@ -109,6 +114,12 @@ def write_display_calib(path: str, calib: DisplayCalib) -> None:
             _mat(fs, "T_display_camera", h.T_display_camera)
             _write_prov(fs, h.provenance)
             fs.endWriteStruct()
+        if calib.sheet is not None:
+            fs.startWriteStruct("sheet", cv2.FileNode_MAP)
+            for k in SHEET_TERMS:
+                fs.write(k, float(getattr(calib.sheet, k)))
+            _write_prov(fs, calib.sheet.provenance)
+            fs.endWriteStruct()
     finally:
         fs.release()
 
@@ -170,6 +181,11 @@ def _validate(c: DisplayCalib, path: str) -> None:
     if c.head_camera is not None:
         _checked_pose("head_camera.T_display_camera", c.head_camera.T_display_camera, path)
         _check_intrinsics("head_camera", c.head_camera, path)
+    if c.sheet is not None:
+        try:
+            c.sheet.material()                      # SheetMaterial checks each term and names it
+        except ValueError as exc:
+            raise ValueError(f"{path}: sheet: {exc}") from None
 
 
 def _get(d: dict, key: str, prefix: str, path: str, kind: type | tuple):
@@ -259,6 +275,10 @@ def load_display_calib(path: str, require: tuple[str, ...] = ()) -> DisplayCalib
             mat(d, "K", pre), _vec(pre + "D", mat(d, "D", pre), 5, path), int(_get(d, "width", pre, path, int)),
             int(_get(d, "height", pre, path, int)),
             _checked_pose(pre + "T_display_camera", mat(d, "T_display_camera", pre), path), _read_prov(d, pre, path))
+    if "sheet" in doc:
+        d = _get(doc, "sheet", "", path, dict)
+        out.sheet = SheetEntry(*(float(_get(d, k, "sheet.", path, float)) for k in SHEET_TERMS),
+                               _read_prov(d, "sheet.", path))
     _validate(out, path)
     if require:
         out.require(*require)

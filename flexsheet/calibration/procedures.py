@@ -30,7 +30,8 @@ from flexsheet.vision.stereo_calibration import BoardSpec, parse_board
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Options", "QUICK", "FULL", "run_camera_pose", "run_projector", "run_arms", "run_eye", "run_head_camera", "run_all"]
+__all__ = ["Options", "QUICK", "FULL", "run_camera_pose", "run_projector", "run_arms", "run_eye", "run_head_camera",
+           "run_sheet", "sheet_entry", "run_all"]
 
 
 @dataclass(frozen=True)
@@ -39,7 +40,8 @@ class Options:
     ``square`` m, ``board_offset`` m; ``views``: board views (home + tilts); ``board_frames``: frames averaged
     per view; ``projector_poses``; ``pattern_spacing`` projector px; ``pattern_frames``; ``arm_configs`` per arm;
     ``marker_frames``; ``prior``: stereo bootstrap JSON for the camera-pose prior ("" = shipped XIMEA one,
-    "none" = no prior); ``fit_k1``: projector radial term."""
+    "none" = no prior); ``fit_k1``: projector radial term; ``sheet_presses``: identify the sheet from probe
+    presses where the source has a load cell (:func:`run_sheet`)."""
 
     board: str = "chessboard:9x8"
     square: float = 0.022
@@ -53,6 +55,7 @@ class Options:
     marker_frames: int = 4
     prior: str = ""
     fit_k1: bool = True
+    sheet_presses: bool = True
 
     def board_spec(self) -> BoardSpec:
         return parse_board(self.board, self.square)
@@ -60,7 +63,7 @@ class Options:
 
 FULL = Options()
 #: the test/CI preset: fewer views, poses and configurations, still within the targets (docs/calibration.md)
-QUICK = Options(projector_poses=4, arm_configs=12)
+QUICK = Options(projector_poses=4, arm_configs=12, sheet_presses=False)
 
 
 def run_camera_pose(source, opts: Options, start: DisplayCalib | None = None):
@@ -185,7 +188,37 @@ def run_all(source, opts: Options) -> Registration:
         timings["head_camera_s"] = time.perf_counter() - t0
     else:
         log.info("head camera: not registered by this source (the image is drawn for the fixed V)")
+    if opts.sheet_presses and getattr(source, "has_load_cell", False):
+        t0 = time.perf_counter()
+        calib.sheet = run_sheet(source)
+        timings["sheet_s"] = time.perf_counter() - t0
     return Registration(calib, cam, rc, proj, rp, arms, timings)
+
+
+def run_sheet(source, plan=None):
+    """The sheet's entry (:mod:`flexsheet.calibration.sheet`): the probe pressed at each (stretch, u, v, depths)
+    of ``plan`` (default :func:`~flexsheet.calibration.sheet.plan_presses`), the planner's model fitted."""
+    from flexsheet.calibration.sheet import plan_presses
+
+    plan = plan or plan_presses()
+    return sheet_entry(source.sheet_presses(plan), plan, source.label)
+
+
+def sheet_entry(presses: list, plan: list, label: str):
+    """The sheet's entry fitted to ``presses`` (:class:`~flexsheet.calibration.sheet.Press` readings) taken on
+    ``plan`` by the source ``label``. Raises ``ValueError`` as :func:`~flexsheet.calibration.sheet.fit_sheet`."""
+    from flexsheet.calibration.display_calib import SheetEntry
+    from flexsheet.calibration.sheet import fit_sheet
+
+    fit = fit_sheet(presses)
+    log.info(f"sheet: {len(presses)} readings at {len(plan)} presses: w {fit.contact_width * 1e3:.1f} mm, "
+             f"growth {fit.contact_growth:.2f}, stretching {fit.stretching:.3g} N/m³, strain offset "
+             f"{fit.strain_offset:+.4f}; model within {fit.median_pct:.1f} % (median) of the readings")
+    prov = Provenance(f"sheet: probe on a load cell, {len(plan)} presses at clamp strains "
+                      f"{sorted({s for s, _, _, _ in plan})}, F = T g (w d + w2 d^2) + c d^3 fitted",
+                      source=label, n_poses=len(plan),
+                      residuals={"median_pct": fit.median_pct, "rms_pct": fit.rms_pct})
+    return SheetEntry(fit.contact_width, fit.contact_growth, fit.stretching, fit.strain_offset, prov)
 
 
 def run_head_camera(source):

@@ -27,7 +27,7 @@ import os
 import cv2
 import numpy as np
 
-__all__ = ["ImageDirSource", "save_frames"]
+__all__ = ["ImageDirSource", "PressFileSource", "save_frames"]
 
 Pair = tuple[np.ndarray, np.ndarray]
 
@@ -179,3 +179,48 @@ def save_frames(root: str, *, board_views: list[Pair] | None = None, projector: 
         man = old
     with open(path, "w") as fh:
         json.dump(man, fh, indent=1)
+
+
+class PressFileSource:
+    """A lab's probe readings for ``flexsheet calibrate sheet``: a CSV with a header row naming the columns
+    ``stretch`` (clamp strain), ``u_m``, ``v_m`` (contact from the sheet centre, m), ``depth_m`` (probe depth from
+    the flat sheet, m) and ``force_n`` (the load cell, N), one reading per row. Raises ``ValueError`` naming the
+    file, the row and the column of a missing or bad value."""
+
+    COLUMNS = ("stretch", "u_m", "v_m", "depth_m", "force_n")
+
+    def __init__(self, path: str) -> None:
+        import csv
+
+        from flexsheet.calibration.sheet import Press
+
+        if not os.path.isfile(path):
+            raise ValueError(f"presses file not found: {path!r}")
+        self.label = f"lab presses {os.path.basename(path)}"
+        self.readings = []
+        with open(path, newline="") as fh:
+            rows = csv.DictReader(fh)
+            missing = [c for c in self.COLUMNS if c not in (rows.fieldnames or [])]
+            if missing:
+                raise ValueError(f"{path}: missing columns {missing} (header: {rows.fieldnames})")
+            for i, row in enumerate(rows, 2):
+                vals = []
+                for c in self.COLUMNS:
+                    try:
+                        vals.append(float(row[c]))
+                    except (TypeError, ValueError):
+                        raise ValueError(f"{path}: row {i}: {c} must be a number, got {row[c]!r:.40}") from None
+                self.readings.append(Press(*vals))
+        if not self.readings:
+            raise ValueError(f"{path}: no readings")
+
+    def plan(self) -> list[tuple[float, float, float, tuple[float, ...]]]:
+        """The presses the readings were taken at: (stretch, u, v, depths) per (stretch, u, v), in file order."""
+        out: dict = {}
+        for r in self.readings:
+            out.setdefault((r.stretch, r.offset_u, r.offset_v), []).append(r.depth)
+        return [(s, u, v, tuple(sorted(ds))) for (s, u, v), ds in out.items()]
+
+    def sheet_presses(self, plan) -> list:
+        """The file's readings (``plan`` is theirs)."""
+        return list(self.readings)

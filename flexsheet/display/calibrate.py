@@ -209,6 +209,68 @@ def eye_main(argv: list[str] | None = None) -> int:
     return _run(p, go)
 
 
+def sheet_main(argv: list[str] | None = None) -> int:
+    """``flexsheet calibrate sheet``: the sheet's force under a fingertip, identified from probe presses."""
+    p = argparse.ArgumentParser(
+        prog="flexsheet calibrate sheet", formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Identify the planner's sheet model (docs/calibration.md, 'Sheet') from a probe pressed on a "
+                    "load cell into the tensioned sheet at several points and clamp strains: --sim presses the "
+                    "twin's true sheet, --presses reads a lab's readings (CSV with a header: stretch, u_m, v_m, "
+                    "depth_m, force_n). Writes the sheet entry into OUT/display.yaml and OUT/sheet.json (the fit, "
+                    "the readings, and in the twin the model's error against the true force).",
+        epilog="example:\n  flexsheet calibrate sheet --sim --truth-seed 0 --out /tmp/disp\n"
+               "  flexsheet calibrate sheet --presses lab/presses.csv --out /tmp/disp")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--sim", action="store_true", help="press the twin's true sheet (needs --truth-seed)")
+    src.add_argument("--presses", metavar="CSV", help="a lab's readings: stretch,u_m,v_m,depth_m,force_n per row")
+    p.add_argument("--truth-seed", type=int, default=None, help="twin truth seed (with --sim)")
+    p.add_argument("--realism", choices=("realistic", "ideal"), default="realistic", help="twin realism")
+    p.add_argument("--out", required=True, metavar="DIR", help="folder of display.yaml (entry added/replaced)")
+    a = p.parse_args(argv)
+
+    def go():
+        import json
+
+        from flexsheet.calibration.sheet import plan_presses
+
+        plan, truth = plan_presses(), None
+        if a.sim:
+            if a.truth_seed is None:
+                p.error("--sim needs --truth-seed N")
+            from flexsheet.twin.registration import TwinSource
+            from flexsheet.twin.registration_camera import CalibrationTwin
+            from flexsheet.twin.truth import TwinTruth
+
+            truth = TwinTruth.draw(a.truth_seed, a.realism)
+            source = TwinSource(CalibrationTwin(truth, seed=a.truth_seed))
+        else:
+            from flexsheet.calibration.sources import PressFileSource
+
+            source = PressFileSource(a.presses)
+            plan = source.plan()
+        readings = source.sheet_presses(plan)
+        os.makedirs(a.out, exist_ok=True)
+        calib = _load_out(a.out)
+        calib.sheet = P.sheet_entry(readings, plan, source.label)
+        doc = {"fit": {k: getattr(calib.sheet, k) for k in ("contact_width", "contact_growth", "stretching",
+                                                            "strain_offset")},
+               "residuals": calib.sheet.provenance.residuals, "source": source.label,
+               "readings": [r.__dict__ for r in readings]}
+        if truth is not None:               # scored against the hidden truth only now, the fit being fixed
+            from flexsheet.twin.registration import score_sheet
+
+            doc["truth"] = score_sheet(truth, calib.sheet)
+            log.info(f"sheet: against the true force {doc['truth']['model_error_pct']:.1f} % (median; the nominal "
+                     f"string band {doc['truth']['nominal_error_pct']:.0f} %; target "
+                     f"{doc['truth']['target_pct']:g} %)")
+        with open(os.path.join(a.out, "sheet.json"), "w") as fh:
+            json.dump(doc, fh, indent=1)
+        log.info(f"wrote {_write(a.out, calib)}, {os.path.join(a.out, 'sheet.json')}")
+        return 0
+
+    return _run(p, go)
+
+
 def display_main(argv: list[str] | None = None) -> int:
     """``flexsheet calibrate display``: every procedure in lab order — in the twin (``--sim``) or driven through
     the live graph (``--live``) — or the error-vs-poses sweep."""
@@ -219,17 +281,23 @@ def display_main(argv: list[str] | None = None) -> int:
                     "seed). --live: through the running graph of --launch — the arms moved by their bridges, the "
                     "patterns shown by the renderer, the camera's frames averaged; captures kept under OUT/frames "
                     "(an interrupted run resumes); with the camera twin, scored against its truth. --sweep charts "
-                    "each estimate's error against the number of poses.",
+                    "each estimate's error against the number of poses. --draws N registers N truths drawn at random and "
+                    "says how often each target is met (OUT/draws.json, draws.png).",
         epilog="example:\n  flexsheet calibrate display --sim --truth-seed 1 --quick --out /tmp/disp1\n"
                "  flexsheet calibrate display --live --launch launch/lab.yaml --host main --dry-run --out /tmp/live\n"
                "  flexsheet calibrate display --live --launch launch/lab_sim.yaml --host main --truth-seed 0 "
                "--out /tmp/live\n"
-               "  flexsheet calibrate display --sweep --seeds 1,2,3 --out docs/figures/calibration")
+               "  flexsheet calibrate display --sweep --seeds 1,2,3 --out docs/figures/calibration\n"
+               "  flexsheet calibrate display --draws 40 --out docs/figures/calibration/draws")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--sim", action="store_true", help="run in the offline twin (needs --truth-seed)")
     mode.add_argument("--live", action="store_true", help="drive the running graph of --launch")
     p.add_argument("--sweep", action="store_true", help="in the twin: error vs number of poses over --seeds (PNG + "
                                                         "JSON)")
+    p.add_argument("--draws", type=int, default=None, metavar="N",
+                   help="in the twin: the full registration on N truth seeds drawn with --draw-seed (or on "
+                        "--seeds), each scored; per target the median, the worst and the seeds that miss it")
+    p.add_argument("--draw-seed", type=int, default=20261126, help="--draws: the seed that draws the truths")
     p.add_argument("--truth-seed", type=int, default=None,
                    help="twin truth seed (--sim; with --live, a check that the camera twin renders this one)")
     p.add_argument("--realism", choices=("realistic", "ideal"), default="realistic")
@@ -237,7 +305,7 @@ def display_main(argv: list[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="fewer poses (4 projector poses, 12 configurations per "
                                                         "arm): faster, but the projector target can be missed")
     p.add_argument("--force", action="store_true", help="ignore the cache (--sim)")
-    p.add_argument("--seeds", default="1,2,3", help="truth seeds for --sweep")
+    p.add_argument("--seeds", default=None, help="truth seeds for --sweep (default 1,2,3) or --draws")
     p.add_argument("--launch", default=os.environ.get("FLEXSHEET_LAUNCH", "launch/lab.yaml"),
                    help="--live: the running graph's launch file (default $FLEXSHEET_LAUNCH or launch/lab.yaml)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -259,9 +327,11 @@ def display_main(argv: list[str] | None = None) -> int:
                 p.error("--sweep runs in the twin, not with --live")
             from flexsheet.experiments.registration_sweep import run_sweep
 
-            seeds = [int(s) for s in a.seeds.split(",") if s.strip()]
+            seeds = [int(s) for s in (a.seeds or "1,2,3").split(",") if s.strip()]
             run_sweep(seeds, a.out, quick=a.quick, realism=a.realism)
             return 0
+        if a.draws is not None or (a.seeds is not None and not a.live):
+            return _draws(a, p)
         if a.live:
             return _live(a, opts)
         if not a.sim:
@@ -276,6 +346,25 @@ def display_main(argv: list[str] | None = None) -> int:
         return 0
 
     return _run(p, go)
+
+
+def _draws(a, p: argparse.ArgumentParser) -> int:
+    """``--draws N`` (or ``--seeds``): the registration on many truths, each target's misses counted."""
+    if a.live:
+        p.error("--draws runs in the twin, not with --live")
+    from flexsheet.experiments.registration_draws import draw_seeds, run_draws
+
+    if a.seeds is not None:
+        seeds, draw = [int(s) for s in a.seeds.split(",") if s.strip()], None
+    else:
+        if a.draws < 1:
+            p.error(f"--draws must be >= 1, got {a.draws}")
+        seeds, draw = draw_seeds(a.draws, a.draw_seed), a.draw_seed
+    doc = run_draws(seeds, a.out, quick=a.quick, realism=a.realism, draw=draw)
+    missed = {k: f["verdict"] for k, f in doc["figures"].items() if f["misses"]}
+    log.info("every target met on every draw" if not missed else
+             "TARGET MISSED: " + "; ".join(f"{k} {v}" for k, v in missed.items()))
+    return 0
 
 
 def _live(a, opts: P.Options) -> int:

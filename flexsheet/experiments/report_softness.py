@@ -1,7 +1,7 @@
 """What the finger feels against what the object asks, from a run's bag (pure; no transport).
 
-The twin's true sheet carries the contact force of the finger on it (``SheetState.force``, N: the truth's sheet
-FEM table at the true depth, never a model of the planner's); the virtual object's force at the display's
+The world publishes the finger's true contact with the true sheet (``/world/contact``, ``ContactTruth``: depth
+and force, N, from the truth's sheet FEM table at the true depth, never a model of the planner's); the virtual object's force at the display's
 measured fingertip is the FEM node's ``ObjectDeformation.contact_force``. Their ratio, sample by sample while the
 finger presses, is the presented softness error a person could notice: a stiffness (or force-at-depth)
 difference under the Weber fraction of about 15 % goes unnoticed (Bergmann Tiest & Kappers, IEEE Trans.
@@ -28,7 +28,7 @@ MAX_GAP = 0.1
 
 
 def felt_force(d: dict[str, list], scales: list[tuple[float, float]] | None = None) -> dict:
-    """Pair each ``/world/sheet`` sample pressed at least :data:`MIN_DEPTH` deep with the newest
+    """Pair each ``/world/contact`` sample pressed at least :data:`MIN_DEPTH` deep with the newest
     ``/object/deformation`` whose fingertip was exposed at most :data:`MAX_GAP` s before it (object force > 0),
     and compare the sheet's true force with the object's times the planner's ``stiffness_scale`` in force when
     the sheet sample arrived: ``scales`` [(arrival s, scale)] (None: from the planner's heartbeats in ``d``,
@@ -43,7 +43,7 @@ def felt_force(d: dict[str, list], scales: list[tuple[float, float]] | None = No
     bad = [s for _, s in scales if not s > 0.0]
     if bad:
         raise ValueError(f"stiffness scale must be > 0, got {bad[0]!r}")
-    pressed = [(t, m) for t, m in d.get("/world/sheet", []) if m.depth >= MIN_DEPTH and m.force > 0.0]
+    pressed = [(t, m) for t, m in d.get("/world/contact", []) if m.depth >= MIN_DEPTH and m.force > 0.0]
     scale = np.nan_to_num(scales_at(scales, np.array([t for t, _ in pressed])), nan=1.0)
     sheets = [m for _, m in pressed]
     defs = sorted((m for _, m in d.get("/object/deformation", []) if m.contact_force > 0.0),

@@ -164,7 +164,7 @@ def _softness(s: dict) -> tuple[list[str], list[str]]:
                 "(/object/deformation) in the bag: no verdict."], []
     r = soft["ratio"]
     prose = ["While the finger presses (true sheet depth ≥ 2 mm): the finger's contact force on the true sheet "
-             "(/world/sheet force: the twin's sheet FEM, not the planner's model) against the virtual object's force "
+             "(/world/contact force: the twin's sheet FEM, not the planner's model) against the virtual object's force "
              "at the display's fingertip (/object/deformation contact_force × stiffness_scale). A ratio within "
              "1 ± 0.15 goes unnoticed (Weber fraction, Bergmann Tiest & Kappers 2009)."]
     row = [str(soft["n"]), f"{r['median']:.2f} [{r['p5']:.2f}, {r['p95']:.2f}]", f"{100 * soft['within_weber']:.0f} %",

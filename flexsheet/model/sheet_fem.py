@@ -83,8 +83,10 @@ class SheetPhysics:
 
     ``half_span`` a (m, clamps at u = ±a), ``half_width`` b (m, free edges at v = ±b), ``thickness`` t (m),
     ``young`` E (Pa), ``poisson`` ν, ``tension_u`` T_u (N/m, pre-tension along the clamp line),
-    ``tension_ratio`` β = T_v / T_u, ``finger_radius`` ρ (m), ``penalty`` k (N/m³). Raises ``ValueError``
-    naming the field for a non-positive or non-finite value (ν must lie in [0, 0.5]).
+    ``tension_ratio`` β = T_v / T_u of a uniform pre-stress, or ``None``: the pre-stress of the sheet gripped on
+    its clamp edges, T_u·n(u, v) (:func:`flexsheet.model.sheet_prestress.gripped_prestress`: T_v/T_u ≈ 0.035 at
+    the centre of the square sheet, rising toward the grips), ``finger_radius`` ρ (m), ``penalty`` k (N/m³).
+    Raises ``ValueError`` naming the field for a non-positive or non-finite value (ν must lie in [0, 0.5]).
     """
 
     half_span: float
@@ -93,43 +95,46 @@ class SheetPhysics:
     young: float = 2.46e6
     poisson: float = 0.5
     tension_u: float = 93.5
-    tension_ratio: float = 1.0
+    tension_ratio: float | None = 1.0
     finger_radius: float = FINGER_RADIUS
     penalty: float = 1e11
 
     def __post_init__(self) -> None:
-        for k in ("half_span", "half_width", "thickness", "young", "tension_u", "tension_ratio", "finger_radius",
-                  "penalty"):
+        for k in ("half_span", "half_width", "thickness", "young", "tension_u", "finger_radius", "penalty"):
             check_positive(k, getattr(self, k))
+        if self.tension_ratio is not None:
+            check_positive("tension_ratio", self.tension_ratio)
         if not (math.isfinite(self.poisson) and 0.0 <= self.poisson <= 0.5):
             raise ValueError(f"poisson must be in [0, 0.5], got {self.poisson!r}")
 
     @property
-    def tension_v(self) -> float:
-        """T_v = β·T_u, N/m."""
-        return self.tension_ratio * self.tension_u
+    def gripped(self) -> bool:
+        """Whether the pre-stress is the gripped sheet's plane-stress field (``tension_ratio`` None)."""
+        return self.tension_ratio is None
 
     @classmethod
     def from_truth(cls, truth, stretch: float, size: float = geometry.SHEET_SIZE, **kw) -> SheetPhysics:
         """Physics of the twin's true sheet (``truth``: a :class:`flexsheet.twin.truth.TwinTruth`) held at
-        clamp strain ``stretch`` (≥ 0) over the unstretched side ``size`` (m): a = size(1 + stretch)/2,
-        T_u = :func:`flexsheet.model.tension.tension` (stretch + truth pre-strain) with the truth's E, β = the
-        truth's tension ratio. ``kw`` overrides fields. Raises ``ValueError`` on a bad stretch."""
+        clamp strain ``stretch`` (≥ 0) over the unstretched side ``size`` (m): a = size(1 + stretch)/2, the
+        truth's E and thickness t, T_u = :func:`flexsheet.model.tension.tension` at the strain the sheet takes
+        between the jaws, stretch·(1 − grip slip) + pre-strain, and the truth's ``tension_ratio`` (None: the
+        gripped pre-stress field). ``kw`` overrides fields. Raises ``ValueError`` on a bad stretch."""
         from flexsheet.model.sheet import clamp_half_span
         from flexsheet.model.tension import SheetMaterial, tension
 
         if not (math.isfinite(stretch) and stretch >= 0.0):
             raise ValueError(f"stretch must be finite and >= 0, got {stretch!r}")
-        mat = SheetMaterial(young=float(truth.sheet_young), size=size)
+        mat = SheetMaterial(young=float(truth.sheet_young), thickness=float(truth.sheet_thickness), size=size)
+        strain = stretch * (1.0 - float(truth.grip_slip)) + float(truth.sheet_prestrain)
         args = {"half_span": clamp_half_span(stretch, size), "half_width": size / 2, "young": float(truth.sheet_young),
-                "tension_u": tension(stretch + float(truth.sheet_prestrain), mat),
-                "tension_ratio": float(truth.tension_ratio)}
+                "thickness": float(truth.sheet_thickness), "tension_u": tension(max(strain, 0.0), mat),
+                "tension_ratio": truth.tension_ratio}
         args.update(kw)
         return cls(**args)
 
     def key(self) -> dict:
         """JSON-able dict of the fields, rounded (for cache keys)."""
-        return {k: float(f"{v:.9g}") for k, v in asdict(self).items()}
+        return {k: None if v is None else float(f"{v:.9g}") for k, v in asdict(self).items()}
 
 
 def _axis_nodes(L: float, h_fine: float, h_coarse: float, extent: float) -> np.ndarray:
@@ -245,8 +250,13 @@ class SheetFEM:
         nu = physics.poisson
         A0 = physics.young * physics.thickness / (1.0 - nu * nu)
         self.C = A0 * np.array([[1.0, nu, 0.0], [nu, 1.0, 0.0], [0.0, 0.0, 0.5 * (1.0 - nu)]])
-        self._N0 = np.array([physics.tension_u, physics.tension_v, 0.0])      # pre-stress, Voigt, N/m
-        self._E0 = np.linalg.solve(self.C, self._N0)                           # its elastic strain
+        if physics.gripped:                                         # pre-stress, Voigt (3, nel, nq), N/m
+            from flexsheet.model.sheet_prestress import gripped_prestress, taut_floor
+            self._N0 = physics.tension_u * taut_floor(gripped_prestress(self.x, self.y, nu, intorder=5))
+        else:
+            n0 = np.array([physics.tension_u, physics.tension_ratio * physics.tension_u, 0.0])
+            self._N0 = np.broadcast_to(n0[:, None, None], (3,) + self.dx.shape).copy()
+        self._E0 = np.einsum("ij,jeq->ieq", np.linalg.inv(self.C), self._N0)   # its elastic strain
         #: tangent-only stiffness fraction added at wrinkled/slack points (Newton's matrix, not the equations)
         self.relax_eta = 1e-5
 
@@ -270,7 +280,8 @@ class SheetFEM:
         ∂T_rel/∂E (N/m) at the n non-taut points (only with ``tangent``, else None) and the mask of taut points
         (nel, nq), where the relaxed quantities are the plain ones, ½ e:C:e + N⁰:e, Nst and C."""
         p = self.phys
-        Et = e + self._E0[:, None, None]
+        N0 = self._N0
+        Et = e + self._E0
         m = 0.5 * (Et[0] + Et[1])
         r = np.sqrt((0.5 * (Et[0] - Et[1])) ** 2 + (0.5 * Et[2]) ** 2)
         e1, e2 = m + r, m - r
@@ -278,12 +289,12 @@ class SheetFEM:
         taut = e2 + nu * e1 > 0.0                                   # smaller principal stress > 0
         wrinkled = ~taut & (e1 > 0.0)
         # taut: the pre-stressed St Venant-Kirchhoff density (the N0 : grad u part is balanced on the edges)
-        dens = 0.5 * np.einsum("ieq,ieq->eq", e, Nst) + self._N0[0] * e[0] + self._N0[1] * e[1]
+        dens = 0.5 * np.einsum("ieq,ieq->eq", e, Nst) + np.einsum("ieq,ieq->eq", N0, e)
         S = Nst.copy()
         D = None
         if not np.all(taut):
             Yt = self.C[0, 0] * (1.0 - nu * nu)                     # uniaxial stiffness E·t, N/m
-            W0 = 0.5 * float(self._E0 @ self._N0)
+            W0 = 0.5 * np.einsum("ieq,ieq->eq", self._E0, N0)
             rr = np.where(wrinkled, r, 1.0)
             c, sn = (Et[0] - Et[1]) / (2.0 * rr), Et[2] / (2.0 * rr)
             a = np.stack([0.5 * (1.0 + c), 0.5 * (1.0 - c), 0.5 * sn])          # d e1 / dE (Voigt, eng. shear)
@@ -291,7 +302,7 @@ class SheetFEM:
             Trel = np.where(wrinkled, Yt * e1p, 0.0) * a                          # uniaxial along n1, or slack
             soft = ~taut
             dens = np.where(soft, np.where(wrinkled, 0.5 * Yt * e1p ** 2, 0.0) - W0, dens)
-            S = np.where(soft[None], Trel - self._N0[:, None, None], S)
+            S = np.where(soft[None], Trel - N0, S)
             if tangent:
                 a, c, sn, k = a[:, soft], c[soft], sn[soft], np.where(wrinkled[soft], Yt, 0.0)
                 bvec = np.stack([sn, -sn, -c])
@@ -303,7 +314,8 @@ class SheetFEM:
         p = self.phys
         g0, g1, w, e, Nst, u1x, u2y = self._fields(U)
         dens, _, _, _ = self._relaxed(e, Nst)
-        dens = dens - p.tension_u * u1x - p.tension_v * u2y
+        N0 = self._N0                                               # its work on the in-plane gradient: balanced
+        dens = dens - N0[0] * u1x - N0[1] * u2y - N0[2] * (e[2] - g0 * g1)
         dens = dens + 0.5 * p.penalty * np.maximum(phi - w, 0.0) ** 2
         if load is not None:
             dens = dens - load * w
@@ -330,13 +342,14 @@ class SheetFEM:
         gap = phi - w
         act = p.penalty * (gap > 0.0)
         pres = p.penalty * np.maximum(gap, 0.0)
-        T11 = p.tension_u + Nst[0]
-        T22 = p.tension_v + Nst[1]
-        T12 = Nst[2]
+        N0 = self._N0
+        T11 = N0[0] + Nst[0]
+        T22 = N0[1] + Nst[1]
+        T12 = N0[2] + Nst[2]
         dx = self.dx
         # residual
         r = np.einsum("ieqk,ieq->ek", B, Nst * dx)
-        rw = (dNx * (p.tension_u * g0 * dx)[:, :, None] + dNy * (p.tension_v * g1 * dx)[:, :, None]
+        rw = (dNx * ((N0[0] * g0 + N0[2] * g1) * dx)[:, :, None] + dNy * ((N0[2] * g0 + N0[1] * g1) * dx)[:, :, None]
               - Nv * (pres * dx)[:, :, None]).sum(axis=1)
         if load is not None:
             rw -= (Nv * (load * dx)[:, :, None]).sum(axis=1)

@@ -20,10 +20,13 @@ def linear_patch_deflection(physics: SheetPhysics, force: float, half_side: floa
     T_u w_uu + T_v w_vv = −p on |u| ≤ a, |v| ≤ b; w = 0 at u = ±a; w_v = 0 at v = ±b; p = force/(2c)² on
     |u|, |v| ≤ c (c = ``half_side``, centred). Modes sin(kπ(u + a)/2a)·cos(mπ(v + b)/2b), k = 1…``modes``,
     m = 0…``modes``. Returns w (m) at (u, v) (broadcast). Source: separation of variables, e.g. Timoshenko &
-    Woinowsky-Krieger §29 (Navier/Lévy series) for the membrane operator.
+    Woinowsky-Krieger §29 (Navier/Lévy series) for the membrane operator. Uniform pre-stress only: raises
+    ``ValueError`` for the gripped field (``physics.tension_ratio`` None).
     """
+    if physics.gripped:
+        raise ValueError("tension_ratio must be a number (a uniform pre-stress) for the linear series, got None")
     a, b, c = physics.half_span, physics.half_width, float(half_side)
-    Tu, Tv = physics.tension_u, physics.tension_v
+    Tu, Tv = physics.tension_u, physics.tension_ratio * physics.tension_u
     p = force / (2 * c) ** 2
     k = np.arange(1, modes + 1)
     m = np.arange(0, modes + 1)

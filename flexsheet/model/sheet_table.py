@@ -68,12 +68,18 @@ def _remap(q: np.ndarray, target: float, node: float, L: float) -> np.ndarray:
     return np.where(q <= target, lo, hi)
 
 
+#: depth step of the incremental stiffness, m
+STIFFNESS_STEP = 0.0005
+
+
 @dataclass(frozen=True)
 class FemShape(DeflectionGrid):
     """The true pushed sheet from an :class:`IndentTable` (the interface of
     :class:`flexsheet.model.sheet.Membrane`: ``half_span``, ``half_width``, ``push_u``, ``push_v``,
     ``depth``, ``tension_ratio``, :meth:`deflection`, :meth:`deflection_grad`, :meth:`grid`), so a
-    :class:`flexsheet.model.sheet.SheetSurface` can carry it. ``force``: interpolated contact force, N."""
+    :class:`flexsheet.model.sheet.SheetSurface` can carry it. ``force``: interpolated contact force, N;
+    ``stiffness``: its incremental stiffness dF/d(depth), N/m (central difference of the table's force over
+    ±0.5 mm of depth)."""
 
     table: IndentTable = field(repr=False)
     half_span: float
@@ -82,10 +88,11 @@ class FemShape(DeflectionGrid):
     push_v: float
     depth: float
     force: float = 0.0
+    stiffness: float = 0.0
 
     @property
-    def tension_ratio(self) -> float:
-        """The true tension ratio β the table was solved with."""
+    def tension_ratio(self) -> float | None:
+        """The uniform tension ratio β the table was solved with, or None: the gripped sheet's pre-stress."""
         return self.table.physics.tension_ratio
 
     def deflection(self, u, v) -> np.ndarray:
@@ -182,8 +189,12 @@ class IndentTable:
             raise ValueError(f"depth must be finite and >= 0, got {depth!r}")
         if not (abs(push_u) < a and abs(push_v) <= b):
             raise ValueError(f"pushed point ({push_u!r}, {push_v!r}) lies outside the sheet |u| < {a}, |v| <= {b}")
-        force = self._force(depth, abs(push_u) * self.physics.half_span / a, abs(push_v))
-        return FemShape(self, a, b, float(push_u), float(push_v), float(depth), force)
+        pu = abs(push_u) * self.physics.half_span / a
+        force = self._force(depth, pu, abs(push_v))
+        h = STIFFNESS_STEP
+        lo = max(depth - h, 0.0)
+        k = (self._force(depth + h, pu, abs(push_v)) - self._force(lo, pu, abs(push_v))) / (depth + h - lo)
+        return FemShape(self, a, b, float(push_u), float(push_v), float(depth), force, max(float(k), 0.0))
 
     @staticmethod
     def _bracket(axis: np.ndarray, q: float) -> list[tuple[int, float]]:

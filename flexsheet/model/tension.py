@@ -17,6 +17,12 @@ Model (the cheapest that captures the paper's Fig. 1 mechanism, "bias tension va
   stiffness at the contact is k = T·w·(1/a + 1/b)  [N/m] (small-deflection linearisation; geometric
   stiffening at depths ≳ 5 % of a is neglected, and the sheet's bending stiffness
   D = E t³ / 12(1 − ν²) ≈ 2.7·10⁻⁴ N·m is negligible against T·a² at ε ≥ 1 %).
+* Identified from pushes (:mod:`flexsheet.calibration.sheet`, ``flexsheet calibrate sheet``): a probe pressed
+  to depth d at several points and stretches gives the force F = T(ε + ε₀)·g·(w·d + w₂·d²) + c·d³, with
+  g = 1/a + 1/b, the sheet's own strain offset ε₀ (pre-strain less grip slip), the band's growth with depth
+  w₂ (the contact widens as the finger sinks in) and the membrane's stretching c (N/m³, large-deflection
+  stiffening, independent of the pre-tension). The stiffness the finger feels at depth d is its slope,
+  k = T(ε + ε₀)·g·(w + 2 w₂ d) + 3 c d². The defaults (w₂ = c = ε₀ = 0) are the string band above.
 * The inverse (requested stiffness → stretch) is solved by safeguarded Newton on λ (k is monotone in λ).
   Stretch is clamped to [``min_stretch``, ``max_stretch``] and the clamp force to ``max_force``; when the
   object is stiffer than the sheet can present, the result says so (``saturated=True``).
@@ -33,8 +39,8 @@ from flexsheet.model import geometry
 from flexsheet.model.checks import check_positive
 from flexsheet.model.sheet import clamp_half_span
 
-__all__ = ["SheetMaterial", "TensionResult", "gent_modulus", "tension", "clamp_force", "stiffness",
-           "stretch_for_stiffness", "max_stretch_within_force", "URETHANE_E"]
+__all__ = ["SheetMaterial", "TensionResult", "gent_modulus", "tension", "clamp_force", "contact_geometry", "stiffness",
+           "press_force", "stretch_for_stiffness", "stretch_for_force", "max_stretch_within_force", "URETHANE_E"]
 
 
 def gent_modulus(shore_a: float) -> float:
@@ -54,7 +60,9 @@ URETHANE_E = gent_modulus(50.0)
 @dataclass(frozen=True)
 class SheetMaterial:
     """The sheet and its limits. ``young`` Pa; ``thickness``, ``size`` (side, unstretched), ``contact_width`` m;
-    ``min_stretch``/``max_stretch`` engineering strain; ``max_force`` N per clamp (arm pull limit).
+    ``contact_growth`` w₂ (dimensionless), ``stretching`` c (N/m³) and ``strain_offset`` ε₀: the identified
+    terms of the module doc (0: the string band); ``min_stretch``/``max_stretch`` engineering strain between
+    the clamps; ``max_force`` N per clamp (arm pull limit).
 
     Defaults: paper §IV sheet; E per :data:`URETHANE_E`; max stretch 0.30 (well inside urethane's
     elongation at break, > 300 %, and in the range where neo-Hooke fits rubber within ~10 %, Treloar 1975);
@@ -66,6 +74,9 @@ class SheetMaterial:
     thickness: float = geometry.SHEET_THICKNESS
     size: float = geometry.SHEET_SIZE
     contact_width: float = 0.020
+    contact_growth: float = 0.0
+    stretching: float = 0.0
+    strain_offset: float = 0.0
     min_stretch: float = 0.01
     max_stretch: float = 0.30
     max_force: float = 40.0
@@ -75,6 +86,12 @@ class SheetMaterial:
             check_positive(name, getattr(self, name))
         if not (0.0 <= self.min_stretch < self.max_stretch):
             raise ValueError(f"min_stretch must be in [0, max_stretch), got {self.min_stretch!r}")
+        for name in ("contact_growth", "stretching"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+        if not (math.isfinite(self.strain_offset) and abs(self.strain_offset) < 0.1):
+            raise ValueError(f"strain_offset must be finite and within ±0.1, got {self.strain_offset!r}")
 
     @property
     def mu(self) -> float:
@@ -83,28 +100,49 @@ class SheetMaterial:
 
 
 def tension(stretch: float, mat: SheetMaterial) -> float:
-    """Membrane tension T (N/m, per unit current width) at engineering strain ``stretch`` (uniaxial neo-Hooke)."""
-    lam = 1.0 + stretch
+    """Membrane tension T (N/m, per unit current width) at clamp strain ``stretch`` (uniaxial neo-Hooke at the
+    sheet's strain ``stretch + mat.strain_offset``, 0 when that is not positive)."""
+    lam = 1.0 + max(stretch + mat.strain_offset, 0.0)
     return mat.mu * mat.thickness * (lam - lam ** -2) * math.sqrt(lam)
 
 
 def clamp_force(stretch: float, mat: SheetMaterial) -> float:
-    """Total pull on each clamp, N: F = μ t₀ W₀ (λ − λ⁻²)."""
-    lam = 1.0 + stretch
+    """Total pull on each clamp, N: F = μ t₀ W₀ (λ − λ⁻²) at the sheet's strain (as :func:`tension`)."""
+    lam = 1.0 + max(stretch + mat.strain_offset, 0.0)
     return mat.mu * mat.thickness * mat.size * (lam - lam ** -2)
 
 
-def stiffness(stretch: float, mat: SheetMaterial, offset_u: float = 0.0) -> float:
-    """Normal stiffness k (N/m) at a contact ``offset_u`` m from the sheet centre along axis_u (current length).
-
-    k = T·w·(1/a + 1/b), a, b = L/2 ∓ offset_u, L/2 = :func:`flexsheet.model.sheet.clamp_half_span`. Raises
-    ``ValueError`` when the contact is not strictly between the clamps.
-    """
+def contact_geometry(stretch: float, mat: SheetMaterial, offset_u: float = 0.0) -> float:
+    """g = 1/a + 1/b (1/m), a, b = L/2 ∓ ``offset_u`` the contact's distances to the clamps,
+    L/2 = :func:`flexsheet.model.sheet.clamp_half_span`. Raises ``ValueError`` when the contact is not strictly
+    between the clamps."""
     half = clamp_half_span(stretch, mat.size)
     a, b = half - offset_u, half + offset_u
     if a <= 0.0 or b <= 0.0:
         raise ValueError(f"offset_u must lie between the clamps (|offset_u| < {half:.4f} m), got {offset_u!r}")
-    return tension(stretch, mat) * mat.contact_width * (1.0 / a + 1.0 / b)
+    return 1.0 / a + 1.0 / b
+
+
+def stiffness(stretch: float, mat: SheetMaterial, offset_u: float = 0.0, depth: float = 0.0) -> float:
+    """Normal stiffness k (N/m) the finger feels at a contact ``offset_u`` m from the sheet centre along axis_u
+    (current length), pushed ``depth`` m deep: k = T·g·(w + 2 w₂ d) + 3 c d² (module doc; the string band
+    T·w·(1/a + 1/b) with the default material). Raises ``ValueError`` when the contact is not strictly between
+    the clamps or the depth is negative."""
+    if not (math.isfinite(depth) and depth >= 0.0):
+        raise ValueError(f"depth must be finite and >= 0, got {depth!r}")
+    g = contact_geometry(stretch, mat, offset_u)
+    return (tension(stretch, mat) * g * (mat.contact_width + 2.0 * mat.contact_growth * depth)
+            + 3.0 * mat.stretching * depth * depth)
+
+
+def press_force(stretch: float, mat: SheetMaterial, offset_u: float, depth: float) -> float:
+    """Force (N) of a press ``depth`` m deep at ``offset_u``: F = T·g·(w d + w₂ d²) + c d³ (module doc), the
+    integral of :func:`stiffness` over the depth. Raises ``ValueError`` as :func:`stiffness`."""
+    if not (math.isfinite(depth) and depth >= 0.0):
+        raise ValueError(f"depth must be finite and >= 0, got {depth!r}")
+    g = contact_geometry(stretch, mat, offset_u)
+    return (tension(stretch, mat) * g * (mat.contact_width * depth + mat.contact_growth * depth * depth)
+            + mat.stretching * depth ** 3)
 
 
 @dataclass(frozen=True, slots=True)
@@ -135,8 +173,9 @@ def max_stretch_within_force(mat: SheetMaterial) -> float:
 
 
 def stretch_for_stiffness(k_target: float, mat: SheetMaterial, offset_u: float = 0.0,
-                          eps_max: float | None = None) -> TensionResult:
-    """Stretch that makes the normal stiffness at the contact equal ``k_target`` N/m (inverse of :func:`stiffness`).
+                          eps_max: float | None = None, depth: float = 0.0) -> TensionResult:
+    """Stretch that makes the normal stiffness at the contact, pushed ``depth`` m deep, equal ``k_target`` N/m
+    (inverse of :func:`stiffness`).
 
     Safeguarded Newton on ε ∈ [min_stretch, ε_max] (k is strictly increasing in ε for |offset_u| < L/2),
     where ε_max is the largest stretch within ``max_stretch`` and ``max_force`` (pass ``eps_max`` to reuse a
@@ -145,31 +184,46 @@ def stretch_for_stiffness(k_target: float, mat: SheetMaterial, offset_u: float =
     """
     if not (math.isfinite(k_target) and k_target >= 0.0):
         raise ValueError(f"k_target must be finite and >= 0, got {k_target!r}")
+    e, sat = _invert(k_target, lambda e: stiffness(e, mat, offset_u, depth), mat, eps_max)
+    return TensionResult(e, tension(e, mat), stiffness(e, mat, offset_u, depth), clamp_force(e, mat), sat)
+
+
+def stretch_for_force(force: float, mat: SheetMaterial, offset_u: float, depth: float,
+                      eps_max: float | None = None) -> TensionResult:
+    """Stretch at which a press ``depth`` m deep at ``offset_u`` meets the force ``force`` N (inverse of
+    :func:`press_force`, increasing in ε): the sheet's force–depth follows the object's along a press when this
+    is solved at each depth. Limits and ``saturated`` as :func:`stretch_for_stiffness`; the result's
+    ``stiffness`` is the incremental one there. Raises ``ValueError`` for a negative or non-finite force, or a
+    depth that is not > 0."""
+    if not (math.isfinite(force) and force >= 0.0):
+        raise ValueError(f"force must be finite and >= 0, got {force!r}")
+    if not (math.isfinite(depth) and depth > 0.0):
+        raise ValueError(f"depth must be finite and > 0, got {depth!r}")
+    e, sat = _invert(force, lambda e: press_force(e, mat, offset_u, depth), mat, eps_max)
+    return TensionResult(e, tension(e, mat), stiffness(e, mat, offset_u, depth), clamp_force(e, mat), sat)
+
+
+def _invert(target: float, f_of, mat: SheetMaterial, eps_max: float | None) -> tuple[float, str]:
+    """(ε, saturated) with ``f_of(ε)`` = ``target`` for an increasing ``f_of`` on [min_stretch, ε_max]: the
+    bound and ``object_softer_than_sheet`` / ``object_stiffer_than_sheet`` outside; safeguarded Newton inside."""
     emax = max_stretch_within_force(mat) if eps_max is None else eps_max
     lo, hi = mat.min_stretch, emax
-
-    def k_of(e: float) -> float:
-        return stiffness(e, mat, offset_u)
-
-    klo, khi = k_of(lo), k_of(hi)
-    if k_target <= klo:
-        e, sat = lo, ("object_softer_than_sheet" if k_target < klo * (1 - 1e-9) else "")
-    elif k_target >= khi:
-        e, sat = hi, ("object_stiffer_than_sheet" if k_target > khi * (1 + 1e-9) else "")
-    else:
-        # initial guess from linear interpolation, then Newton with a bracket
-        e = lo + (hi - lo) * (k_target - klo) / (khi - klo)
-        sat = ""
-        for _ in range(30):
-            f = k_of(e) - k_target
-            if abs(f) <= 1e-10 * max(1.0, k_target):
-                break
-            if f > 0:
-                hi = e
-            else:
-                lo = e
-            h = 1e-7
-            g = (k_of(e + h) - k_of(e - h)) / (2 * h) if e - h > -1.0 else 0.0
-            en = e - f / g if g > 0 else 0.5 * (lo + hi)
-            e = en if lo < en < hi else 0.5 * (lo + hi)
-    return TensionResult(e, tension(e, mat), k_of(e), clamp_force(e, mat), sat)
+    flo, fhi = f_of(lo), f_of(hi)
+    if target <= flo:
+        return lo, ("object_softer_than_sheet" if target < flo * (1 - 1e-9) else "")
+    if target >= fhi:
+        return hi, ("object_stiffer_than_sheet" if target > fhi * (1 + 1e-9) else "")
+    e = lo + (hi - lo) * (target - flo) / (fhi - flo)            # linear guess, then Newton in a bracket
+    for _ in range(30):
+        r = f_of(e) - target
+        if abs(r) <= 1e-10 * max(1.0, target):
+            break
+        if r > 0:
+            hi = e
+        else:
+            lo = e
+        h = 1e-7
+        g = (f_of(e + h) - f_of(e - h)) / (2 * h) if e - h > -1.0 else 0.0
+        en = e - r / g if g > 0 else 0.5 * (lo + hi)
+        e = en if lo < en < hi else 0.5 * (lo + hi)
+    return e, ""

@@ -18,9 +18,14 @@ Paper §V-A and Fig. 7, generalised:
 * **Pushing**: a fingertip inside the object (negative distance) is projected onto the surface by the same
   rule; the sheet keeps the tangent pose there and the finger depresses it, so stroking and pushing combine.
 * **Compliance**: the stretch comes from :func:`flexsheet.model.tension.stretch_for_stiffness` for the
-  object's stiffness at the contact's distance from the clamps: the one passed in (the FEM's dF/dd), else the
-  scene's compliance model at the contact (:mod:`flexsheet.planning.compliance`), else the configured value;
-  times ``stiffness_scale``. The stretch is clamped to what the arms can apply (status says so).
+  object's stiffness at the contact's distance from the clamps and the push's depth: the one passed in (the
+  FEM's dF/dd), else the scene's compliance model at the contact (:mod:`flexsheet.planning.compliance`), else the
+  configured value; times ``stiffness_scale``. Pressed at least :data:`FORCE_DEPTH` deep with the object's
+  press given (the FEM's force at its depth), the stretch instead makes the sheet's force at this depth the
+  object's (:func:`~flexsheet.model.tension.stretch_for_force`, the force extrapolated to this depth by the
+  object's stiffness): the force–depth then follows the object's along the press, which matching the slope
+  alone does not (a sheet stiffens with depth differently from the object). The stretch is clamped to what the
+  arms can apply (status says so).
 * **Limits and safety**: the pose passes :class:`flexsheet.planning.limits.RateLimiter`; clamp points are
   checked by :class:`flexsheet.planning.limits.ReachModel`.
 
@@ -65,6 +70,7 @@ from flexsheet.model.tension import (
     TensionResult,
     max_stretch_within_force,
     stiffness,
+    stretch_for_force,
     stretch_for_stiffness,
     tension,
 )
@@ -84,7 +90,10 @@ from flexsheet.model.vec import (
 )
 from flexsheet.planning.limits import MotionLimits, RateLimiter, ReachModel
 
-__all__ = ["Hold", "INPUT_REJECTIONS", "PlannerConfig", "Plan", "SurfacePlanner"]
+__all__ = ["FORCE_DEPTH", "Hold", "INPUT_REJECTIONS", "PlannerConfig", "Plan", "SurfacePlanner"]
+
+#: from this push depth (m) on, a given object press is matched in force (module doc); shallower, in stiffness
+FORCE_DEPTH = 0.002
 
 
 class Hold(StrEnum):
@@ -246,7 +255,7 @@ class SurfacePlanner:
         self.s: tuple[float, float] = (0.0, 0.0)
         self.touching = False
         self.limiter.clear()
-        self._tcache: tuple[float, float, TensionResult] | None = None
+        self._tcache: tuple[float, float, float, TensionResult] | None = None
         self._k_model: float | None = None
         self.counts: dict[str, int] = {}
 
@@ -259,18 +268,21 @@ class SurfacePlanner:
             return None
         return replace(self.last, t=self.last.t if t is None else t, status=reason)
 
-    def _tension(self, k: float, off_u: float) -> TensionResult:
+    def _tension(self, k: float, off_u: float, depth: float) -> TensionResult:
         c = self._tcache
-        if c is not None and abs(c[0] - k) <= 1e-6 * max(1.0, k) and abs(c[1] - off_u) <= 1e-4:
-            return c[2]
-        r = stretch_for_stiffness(k, self.cfg.material, off_u, self._eps_max)
-        self._tcache = (k, off_u, r)
+        if (c is not None and abs(c[0] - k) <= 1e-6 * max(1.0, k) and abs(c[1] - off_u) <= 1e-4
+                and abs(c[2] - depth) <= 1e-4):
+            return c[3]
+        r = stretch_for_stiffness(k, self.cfg.material, off_u, self._eps_max, depth)
+        self._tcache = (k, off_u, depth, r)
         return r
 
-    def update(self, t: float, p, object_stiffness: float | None = None, now: float | None = None) -> Plan | None:
+    def update(self, t: float, p, object_stiffness: float | None = None, now: float | None = None,
+               object_press: tuple[float, float] | None = None) -> Plan | None:
         """Plan from a fingertip sample ``p`` (3,) m at time ``t`` s; ``object_stiffness`` N/m (e.g. the FEM's
         dF/dd) overrides the compliance model and the configured value; either is multiplied by
-        ``stiffness_scale``. ``now`` s: the caller's clock (the node's ``now()``, same time base as ``t``), which
+        ``stiffness_scale``. ``object_press`` (force N, depth m): the object's force at a depth (the FEM's last
+        solve), matched in force from :data:`FORCE_DEPTH` on (module doc); ignored when malformed. ``now`` s: the caller's clock (the node's ``now()``, same time base as ``t``), which
         judges stamps from the future and backward clock steps (see the module table); None: ``t`` alone.
         Returns the new :class:`Plan`, or a held copy of the last
         safe plan with status ``hold:<reason>`` for invalid input (``None`` if there is none yet). Never raises
@@ -302,8 +314,11 @@ class SurfacePlanner:
             self.touching = False
         su, sv, u = self._roll(q, n, s.dt, was_touching)
         v = cross(n, u)
-        # stiffness → stretch at the contact's distance from the clamps
-        tr = self._tension(k_obj, su)
+        # stiffness (or force) → stretch at the contact's distance from the clamps and the push's depth
+        depth = max(0.0, -dist)
+        force = self._object_force(object_press, k_obj, depth)
+        tr = (self._tension(k_obj, su, depth) if force is None
+              else stretch_for_force(force, self.cfg.material, su, depth, self._eps_max))
         if tr.saturated:
             status.append(tr.saturated)
         su, sv = self._keep_on_sheet(su, sv, tr.stretch, status)
@@ -312,8 +327,8 @@ class SurfacePlanner:
                                                                           tr.stretch, s.dt, status)
         mat = cfg.material
         plan = Plan(s.t, q, nc, uc, vc, o, (su, sv), st, tr.tension if st == tr.stretch else tension(st, mat),
-                    tr.stiffness if st == tr.stretch else _stiffness_or_zero(st, mat, su), k_obj,
-                    max(0.0, -dist), self.touching, ";".join(status) if status else "ok", left, right, margin,
+                    tr.stiffness if st == tr.stretch else _stiffness_or_zero(st, mat, su, depth), k_obj,
+                    depth, self.touching, ";".join(status) if status else "ok", left, right, margin,
                     mat.size, k_source)
         for s_ in status:
             self.counts[s_] = self.counts.get(s_, 0) + 1
@@ -354,6 +369,19 @@ class SurfacePlanner:
             self.counts["clock_rebase"] = self.counts.get("clock_rebase", 0) + 1
             dt = self.dt_last if self.dt_last is not None else self.cfg.max_dt
         return _Sample(t, p, k_obj, min(dt, self.cfg.max_dt), src)
+
+    def _object_force(self, press, k_obj: float, depth: float) -> float | None:
+        """The object's force (N, × ``stiffness_scale``) at ``depth``: the press (force, depth) extrapolated by
+        ``k_obj`` (already scaled); None below :data:`FORCE_DEPTH`, without a press or for a malformed one."""
+        if press is None or depth < FORCE_DEPTH:
+            return None
+        try:
+            f, d = float(press[0]), float(press[1])
+        except (TypeError, ValueError, IndexError):
+            return None
+        if not (math.isfinite(f) and math.isfinite(d) and f >= 0.0 and d >= 0.0):
+            return None
+        return max(0.0, f * self.cfg.stiffness_scale + k_obj * (depth - d))
 
     def _object_stiffness(self, s: _Sample, q: Vec, n: Vec, dist: float) -> tuple[float | None, str]:
         """(stiffness N/m × ``stiffness_scale``, source) for the sample: the one given (or the config's), else
@@ -441,9 +469,10 @@ class SurfacePlanner:
         return o, axes, st, left, right, margin
 
 
-def _stiffness_or_zero(stretch: float, mat: SheetMaterial, su: float) -> float:
-    """Stiffness presented at a rate-limited stretch (N/m); 0 when the contact is not between the clamps."""
+def _stiffness_or_zero(stretch: float, mat: SheetMaterial, su: float, depth: float) -> float:
+    """Stiffness presented at a rate-limited stretch and ``depth`` m (N/m); 0 when the contact is not between the
+    clamps."""
     try:
-        return stiffness(stretch, mat, su)
+        return stiffness(stretch, mat, su, depth)
     except ValueError:
         return 0.0

@@ -24,7 +24,7 @@ log = logging.getLogger(__name__)
 __all__ = ["TwinSource", "run_display_sim", "sim_display_calib", "score_registration", "verdicts", "TARGETS",
            "SUMMARY_VERSION", "sim_display_calib_cached"]
 
-SUMMARY_VERSION = 7
+SUMMARY_VERSION = 8
 
 Pair = tuple[np.ndarray, np.ndarray]
 
@@ -65,6 +65,21 @@ class TwinSource:
         return self.twin.pattern_frames(patterns, sheet_pose, white_dn=self.sheet_white_dn, frames=self.n_pattern_frames)
 
     has_head_camera = True
+    has_load_cell = True
+
+    def sheet_presses(self, plan) -> list:
+        """The probe's readings (:class:`flexsheet.calibration.sheet.Press`) for each (stretch, u, v, depths) of
+        ``plan`` on the true sheet (:class:`flexsheet.twin.load_cell.LoadCellTwin`)."""
+        cell = self._load_cell()
+        cell.prepare([s for s, _, _, _ in plan])
+        return [r for s, u, v, ds in plan for r in cell.press(s, u, v, ds)]
+
+    def _load_cell(self):
+        from flexsheet.twin.load_cell import LoadCellTwin
+
+        if getattr(self, "_cell", None) is None:
+            self._cell = LoadCellTwin(self.twin.truth, seed=self.twin.truth.seed)
+        return self._cell
 
     def head_fixture_images(self, poses: list[np.ndarray]) -> list[np.ndarray]:
         """Head-camera images of the glasses board on the chin-rest fixture's steps
@@ -110,11 +125,12 @@ TARGETS = {"camera_mm": 0.5, "camera_deg": 0.1, "projector_mm": 2.0, "projector_
            "arms_mm": 1.0}
 
 
-def score_registration(truth: TwinTruth, cam, rc, proj, rp, arms: dict) -> dict:
+def score_registration(truth: TwinTruth, cam, rc, proj, rp, arms: dict, sheet=None) -> dict:
     """The estimates of :mod:`flexsheet.calibration.procedures` (camera entry + result, projector entry + result,
-    ``{side: (ArmEntry, ArmResult)}``) scored against ``truth``: ``camera``, ``projector``, ``arms.<side>``
-    (translation_error_mm, rotation_error_deg, residuals) and ``targets``. Call it only once every estimate is
-    fixed."""
+    ``{side: (ArmEntry, ArmResult)}``, the sheet entry or None) scored against ``truth``: ``camera``,
+    ``projector``, ``arms.<side>`` (translation_error_mm, rotation_error_deg, residuals), ``sheet`` (the
+    identified model's and the nominal string band's median error against the true force over the presses, %)
+    and ``targets``. Call it only once every estimate is fixed."""
     out = {}
     out["camera"] = {**_err(*truth.camera_pose_error(cam.T_display_camera)), "rms_px": rc.rms_px,
                      "residual_mm": rc.residual_mm, "views": rc.n_views}
@@ -126,8 +142,29 @@ def score_registration(truth: TwinTruth, cam, rc, proj, rp, arms: dict) -> dict:
                        "configs": r.n_configs,
                        "marker_offset_error_mm": float(np.linalg.norm(e.marker_offset - truth.clamp_marker[s]) * 1e3)}
                    for s, (e, r) in arms.items()}
+    if sheet is not None:
+        out["sheet"] = score_sheet(truth, sheet)
     out["targets"] = dict(TARGETS)
     return out
+
+
+def score_sheet(truth: TwinTruth, sheet) -> dict:
+    """The sheet entry against the true force (noise-free) at every reading of the press plan:
+    ``model_error_pct`` / ``model_rms_pct`` (the identified model), ``nominal_error_pct`` (the string band it
+    replaces), ``fitted_median_pct`` (what the fit saw, with the load cell's noise) and ``target_pct``."""
+    from flexsheet.calibration.sheet import Press, model_error, plan_presses
+    from flexsheet.model.tension import SheetMaterial
+    from flexsheet.twin.load_cell import LoadCellTwin
+
+    cell = LoadCellTwin(truth)
+    true = [Press(s, u, v, d, cell.true_force(s, u, v, d)) for s, u, v, ds in plan_presses() for d in ds]
+    med, rms = model_error(sheet.material(), true)
+    return {"model_error_pct": med, "model_rms_pct": rms, "nominal_error_pct": model_error(SheetMaterial(), true)[0],
+            "fitted_median_pct": sheet.provenance.residuals.get("median_pct"), "target_pct": SHEET_TARGET_PCT}
+
+
+#: the identified sheet model's median error against the true force, %
+SHEET_TARGET_PCT = 10.0
 
 
 def verdicts(summary: dict) -> dict:
@@ -140,6 +177,8 @@ def verdicts(summary: dict) -> dict:
            "projector_px": p["reprojection_px"] <= t["projector_px"]}
     for side, a in summary["arms"].items():
         out[f"arms_{side}_mm"] = a["translation_error_mm"] <= t["arms_mm"]
+    if "sheet" in summary:
+        out["sheet_pct"] = summary["sheet"]["model_error_pct"] <= summary["sheet"]["target_pct"]
     return out
 
 
@@ -165,7 +204,7 @@ def run_display_sim(seed: int, out_dir: str, opts: Options = FULL, realism: str 
     write_display_calib(ypath, reg.calib)
     # scoring against the truth: only now, after every estimate is fixed
     summary = {**key, **score_registration(truth, reg.camera_entry, reg.camera, reg.projector_entry,
-                                            reg.projector, reg.arms)}
+                                            reg.projector, reg.arms, reg.calib.sheet)}
     summary["timings"] = {**reg.timings, "total_s": time.perf_counter() - t_all}
     with open(spath, "w") as fh:
         json.dump(summary, fh, indent=1)

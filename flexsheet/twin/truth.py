@@ -31,7 +31,8 @@ clamp marker offset        2 mm per axis           marker glued by hand on the c
 fingertip marker diameter  3 %                     a 4 mm retro-reflective dot cut by hand (assumption)
 sheet Young's modulus      15 %                    Shore A 50 ± 5 through Gent's relation (tension.py)
 sheet pre-strain           |N(0, 0.5 %)|           slack or pull left by clamping (assumption)
-sheet tension ratio T_v/Tu log-normal, 20 %        free-edge contraction and clamp misalignment (assumption)
+sheet thickness            5 %                     cast urethane sheet, ±0.1 mm on 1 mm ≈ 2σ (assumption)
+grip slip                  |N(0, 5 %)| of stretch  rubber sliding in the clamp jaws (assumption)
 =========================  ======================  =================================================================
 
 ``realism="ideal"`` gives the nominal values exactly (every deviation zero), the twin as it was before.
@@ -84,7 +85,8 @@ class Spreads:
     marker_diameter_rel: float = 0.03
     young_rel: float = 0.15
     prestrain: float = 0.005
-    tension_ratio_rel: float = 0.2
+    thickness_rel: float = 0.05
+    grip_slip: float = 0.05
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first negative or non-finite spread."""
@@ -192,7 +194,9 @@ class TwinTruth:
     ``T_display_projector`` (4, 4), ``projector_size`` (w, h); ``bases`` side → (4, 4); ``link_deltas`` side →
     (6, 3) m; ``joint_offsets`` side → (6,) rad; ``clamp_marker`` side → (3,) m in the clamp frame;
     ``clamp_marker_diameter`` m; ``marker_diameter`` m (fingertip); ``sheet_young`` Pa; ``sheet_prestrain``;
-    ``tension_ratio``.
+    ``sheet_thickness`` m; ``grip_slip``: the fraction of the clamps' stretch lost to the rubber sliding in the
+    jaws; ``tension_ratio``: None, the sheet's pre-stress is the gripped plane-stress field
+    (:mod:`flexsheet.model.sheet_prestress`), or a uniform T_v/T_u (never drawn: a stability sweep's what-if).
     """
 
     seed: int
@@ -212,7 +216,9 @@ class TwinTruth:
     marker_diameter: float = 0.004
     sheet_young: float = 0.0
     sheet_prestrain: float = 0.0
-    tension_ratio: float = 1.0
+    sheet_thickness: float = 0.001
+    grip_slip: float = 0.0
+    tension_ratio: float | None = None
     _arms: dict = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
@@ -220,6 +226,7 @@ class TwinTruth:
         """Draw the truth of ``seed`` (int ≥ 0). ``realism``: ``realistic`` (spreads applied) or ``ideal``
         (nominal exactly). Deterministic in (seed, realism, spreads). Raises ``ValueError`` on a bad realism,
         seed or spread."""
+        from flexsheet.model.geometry import SHEET_THICKNESS
         from flexsheet.model.tension import URETHANE_E
 
         if realism not in ("realistic", "ideal"):
@@ -273,9 +280,10 @@ class TwinTruth:
         marker_d = 0.004 * (1.0 + k * sp.marker_diameter_rel * rng.normal())
         young = URETHANE_E * max(0.3, 1.0 + k * sp.young_rel * rng.normal())
         prestrain = abs(k * sp.prestrain * rng.normal())
-        ratio = math.exp(k * sp.tension_ratio_rel * rng.normal())
+        thickness = SHEET_THICKNESS * max(0.5, 1.0 + k * sp.thickness_rel * rng.normal())
+        slip = min(0.5, abs(k * sp.grip_slip * rng.normal()))
         return cls(int(seed), realism, sp, cam, T_dc, K, Dp, T_dp, (p.width, p.height), bases, links, zeros,
-                   markers, 0.010, marker_d, young, prestrain, ratio)
+                   markers, 0.010, marker_d, young, prestrain, thickness, slip)
 
     def arm(self, side: str) -> TruthArm:
         """The true forward kinematics of arm ``side`` (cached)."""
@@ -317,7 +325,8 @@ class TwinTruth:
                 "joint_offsets": {s: a(v) for s, v in self.joint_offsets.items()},
                 "clamp_marker": {s: a(v) for s, v in self.clamp_marker.items()},
                 "marker_diameter": self.marker_diameter, "sheet_young": self.sheet_young,
-                "sheet_prestrain": self.sheet_prestrain, "tension_ratio": self.tension_ratio}
+                "sheet_prestrain": self.sheet_prestrain, "sheet_thickness": self.sheet_thickness,
+                "grip_slip": self.grip_slip}
 
 
 def _link_deltas(rng: np.random.Generator, sigma: float) -> np.ndarray:

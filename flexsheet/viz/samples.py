@@ -22,6 +22,7 @@ from flexsheet.vision.camera_model import DEFAULT_CAMERA_POSITION, camera_model,
 from flexsheet.vision.stereo_calibration import to_message
 from messages import (
     ArmJointState,
+    ContactTruth,
     EyePose,
     Fingertip,
     FingerTruth,
@@ -124,4 +125,6 @@ def sample_state(stamp: float = 1.0e9, push: float = 0.004, seq: int = 0) -> dic
                    left=left_eye, right=right_eye, eye=geometry.EYE.copy(), velocity=np.zeros(3))
     out[T.EYE_POSE.name] = EyePose(header=h(), valid=True, markers=14, reprojection_px=0.1, **glasses)
     out[T.HEAD_TRUTH.name] = HeadTruth(header=h(), **glasses)
+    out[T.CONTACT_TRUTH.name] = ContactTruth(header=h(), touching=True, depth=0.01, force=0.9,
+                                             point=np.array([-0.01, 0.0, 0.0]), stiffness=95.0)
     return out

@@ -69,28 +69,30 @@ def fem_solves_scene(msg: ObjectDeformation, sc: Scene, key: str | None = None) 
 _MATERIAL = {"size": "sheet_size"}         # launch-file name of SheetMaterial.size
 
 
-def _reach(p) -> ReachModel:
-    """The reach model: the bases of ``display_calib`` (the registered display, ``arms.left``/``arms.right``)
-    when the params name one, else the ``left_base``/``right_base`` params. Raises ``ValueError`` naming the
-    file and entry when it is missing, unreadable or lacks an arm."""
-    reach = build(ReachModel, p)
+def _registered(p) -> tuple[ReachModel, SheetMaterial]:
+    """The reach model and the sheet: with a ``display_calib`` (the registered display), its arm bases
+    (``arms.left``/``arms.right``) and, where it has one, its identified ``sheet`` entry's terms on top of the
+    sheet params; else the ``left_base``/``right_base`` and sheet params. Raises ``ValueError`` naming the file
+    and entry when it is missing, unreadable or lacks an arm."""
+    reach, material = build(ReachModel, p), build(SheetMaterial, p, rename=_MATERIAL)
     path = getattr(p, "display_calib", None)
     if not path:
-        return reach
+        return reach, material
     from dataclasses import replace
 
     from flexsheet.calibration.display_calib import xyzyaw_from_pose
     from flexsheet.calibration.display_calib_file import load_display_calib
 
     dc = load_display_calib(path, require=("arms.left", "arms.right"))
-    return replace(reach, left_base=xyzyaw_from_pose(dc.arms["left"].T_display_base),
-                   right_base=xyzyaw_from_pose(dc.arms["right"].T_display_base))
+    reach = replace(reach, left_base=xyzyaw_from_pose(dc.arms["left"].T_display_base),
+                    right_base=xyzyaw_from_pose(dc.arms["right"].T_display_base))
+    return reach, (dc.sheet.material(material) if dc.sheet is not None else material)
 
 
 def _planner_config(p) -> PlannerConfig:
     """The :class:`PlannerConfig` params ``p`` describe (raises ``ValueError`` on inconsistent values)."""
-    return build(PlannerConfig, p, material=build(SheetMaterial, p, rename=_MATERIAL),
-                 limits=build(MotionLimits, p), reach=_reach(p))
+    reach, material = _registered(p)
+    return build(PlannerConfig, p, material=material, limits=build(MotionLimits, p), reach=reach)
 
 
 def _check(p) -> PlannerConfig:
@@ -172,10 +174,16 @@ class PlannerNode(Node):
             self.log.info("%s", self.scene.describe())
         self._scene_key = self.scene.key() if self.scene is not None else None
         cfg = p.planner_config()
+        m = cfg.material
+        self.log.info("sheet model: %s (w %.1f mm, growth %.2f, stretching %.3g N/m³, strain offset %+.4f)",
+                      "identified from presses (display_calib sheet)" if m.stretching or m.contact_growth
+                      else "the nominal string band (no identified sheet in display_calib)",
+                      m.contact_width * 1e3, m.contact_growth, m.stretching, m.strain_offset)
         self.guard = HeadGuard(KeepOut(head_radius=p.head_radius, margin=p.keepout_margin), cfg.material.size)
         self.planner = SurfacePlanner(shape, cfg, compliance, self.guard)
         self._k_fem: float | None = None
         self._k_fem_at = 0.0
+        self._press: tuple[float, float] | None = None
         self._k_hist: deque[tuple[float, float]] = deque(maxlen=256)
         self._fem_other_scene = 0
         self._source = ""
@@ -199,8 +207,8 @@ class PlannerNode(Node):
                                      "lost": "lost: holding the sheet until the glasses are seen again"}[self.guard.state])
 
     def on_deformation(self, msg: ObjectDeformation) -> None:
-        """Keep the FEM's local stiffness (N/m) while the solution is valid, positive and about this scene
-        (:func:`fem_solves_scene`; a bare shape takes any)."""
+        """Keep the FEM's local stiffness (N/m) and its press (contact force N at its depth m) while the solution
+        is valid, positive and about this scene (:func:`fem_solves_scene`; a bare shape takes any)."""
         if not (msg.valid and msg.stiffness > 0.0):
             return
         if self.scene is not None and not fem_solves_scene(msg, self.scene, self._scene_key):
@@ -212,6 +220,7 @@ class PlannerNode(Node):
         recent = [k for t, k in self._k_hist if now - t <= w] if w > 0 else [float(msg.stiffness)]
         self._k_fem = float(np.median(recent))
         self._k_fem_at = now
+        self._press = (float(msg.contact_force), float(msg.depth))
 
     def _stiffness(self) -> tuple[float | None, str]:
         """(stiffness N/m, source): the FEM's while fresh ("fem"); ``None`` for the planner's compliance model
@@ -225,7 +234,7 @@ class PlannerNode(Node):
 
     def _note_source(self, source: str) -> None:
         """Say in the heartbeat's message which stiffness sets the tension (on change)."""
-        text = {"fem": "the FEM's dF/dd",
+        text = {"fem": "the FEM's dF/dd, and its force from 2 mm deep",
                 "scene": "the scene's estimate at the contact (Hertz contact + inclusions, flexsheet/planning/compliance.py)",
                 "param": f"object_stiffness {self.params.object_stiffness:g} N/m"}[source]
         if self._fem_other_scene and source != "fem":
@@ -249,7 +258,7 @@ class PlannerNode(Node):
             pos = msg.predicted_position if predict else msg.position
             k, source = self._stiffness()
             plan = self.planner.update(msg.header.stamp + (msg.prediction_horizon if predict else 0.0),
-                                       pos, k, now=self.now())
+                                       pos, k, now=self.now(), object_press=self._press if source == "fem" else None)
             if plan is not None and not plan.status.startswith("hold"):
                 self._note_source(source)
         if plan is None:

@@ -13,8 +13,9 @@ truth (:class:`flexsheet.twin.truth.TwinTruth`, param ``twin: {realism, truth_se
 * Sheet: the true clamp poses are the *true* arms' forward kinematics of the measured joint states
   (``ArmJointState.position``; the truth's base poses, link lengths and joint zero offsets — never the
   bridge's model in ``ArmJointState.pose``), and the pushed sheet's shape is the nonlinear membrane FEM of
-  :mod:`flexsheet.model.sheet_fem` with the truth's Young's modulus, pre-strain and tension ratio
-  (:mod:`flexsheet.twin.world`); published on ``/world/sheet`` (``membrane``: the deflection on a G×G grid),
+  :mod:`flexsheet.model.sheet_fem` with the truth's Young's modulus, thickness, pre-strain and grip slip and the
+  gripped sheet's pre-stress (:mod:`flexsheet.twin.world`); published on ``/world/sheet`` (``membrane``: the
+  deflection on a G×G grid) and the finger's contact on ``/world/contact`` (depth, force, incremental stiffness),
   stamped with the time its pose was true — the mean stamp of the two joint states it comes from — so a world
   tick that runs late does not show as the display's lag in Table I (the finger's shape of a push is the
   finger's at publication).
@@ -60,7 +61,7 @@ from flexsheet.twin.head import Viewer
 from flexsheet.twin.truth import TwinTruth
 from flexsheet.twin.world import TruePhysics, build_table
 from flexsheet.twin.world_config import SheetFemConfig, WorldConfig
-from messages import ArmJointState, FingerTruth, HeadTruth, Heartbeat, SheetState
+from messages import ArmJointState, ContactTruth, FingerTruth, HeadTruth, Heartbeat, SheetState
 from messages import topics as T
 
 __all__ = ["WorldNode", "WorldParams", "Segment", "SheetFemParams"]
@@ -150,7 +151,8 @@ WorldParams = params_model(
 
 
 class WorldNode(Node):
-    """Publishes ``/world/finger``, ``/world/sheet`` and ``/world/head``; subscribes the two arms' joint states."""
+    """Publishes ``/world/finger``, ``/world/sheet``, ``/world/contact`` and ``/world/head``; subscribes the two
+    arms' joint states."""
 
     Params = WorldParams
     node_type = "world"
@@ -162,6 +164,7 @@ class WorldNode(Node):
         self.total = sum(s.duration for s in self.scripts)
         self.finger_pub = self.publisher(T.FINGER_TRUTH)
         self.sheet_pub = self.publisher(T.SHEET_STATE)
+        self.contact_pub = self.publisher(T.CONTACT_TRUTH)
         self.head_pub = self.publisher(T.HEAD_TRUTH)
         self.truth = TwinTruth.draw(p.twin.truth_seed, p.twin.realism)
         self.head = p.head.motion(Viewer.draw(p.twin.truth_seed, p.twin.realism), p.twin.truth_seed)
@@ -195,9 +198,9 @@ class WorldNode(Node):
                      commanding=True)
         self.service("script/resume", self.srv_resume, "the finger back where it was and the script on from there",
                      commanding=True)
-        self.log.info("twin: %s truth, seed %d (sheet E %.2f MPa, pre-strain %.4f, tension ratio %.3f)",
-                      p.twin.realism, p.twin.truth_seed, self.truth.sheet_young * 1e-6, self.truth.sheet_prestrain,
-                      self.truth.tension_ratio)
+        self.log.info("twin: %s truth, seed %d (sheet E %.2f MPa, t %.3f mm, pre-strain %.4f, grip slip %.3f)",
+                      p.twin.realism, p.twin.truth_seed, self.truth.sheet_young * 1e-6,
+                      self.truth.sheet_thickness * 1e3, self.truth.sheet_prestrain, self.truth.grip_slip)
         self.log.info("finger on %s", self.scene.describe() + f", stroke {self.scene.stroke_length() * 1e3:.1f} mm"
                       if self.scene is not None else "the cylinder of the script's parameters")
         self.log.info("script: %s; %.1f s in all, starting in %.1f s%s",
@@ -425,10 +428,10 @@ class WorldNode(Node):
         else:
             self._poll_build(wanted)
         g = p.membrane_grid
-        force = 0.0
+        force = stiffness = 0.0
         if sheet.membrane is not None:
             grid, depth, pushed = sheet.membrane.grid(g), float(sheet.membrane.depth), sheet.pushed_point
-            force = float(sheet.membrane.force)
+            force, stiffness = float(sheet.membrane.force), float(sheet.membrane.stiffness)
         else:
             depth = max(0.0, -float((np.asarray(self.finger) - sheet.origin) @ sheet.normal))
             inside = abs(float((np.asarray(self.finger) - sheet.origin) @ sheet.axis_u)) < sheet.half_span
@@ -446,7 +449,10 @@ class WorldNode(Node):
         self.sheet_pub.publish(SheetState(
             header=self.sheet_pub.header("display", stamp=stamp), origin=sheet.origin, normal=sheet.normal, axis_u=sheet.axis_u,
             corners=sheet.corners, pushed_point=pushed, depth=depth, stretch=stretch,
-            membrane=np.ascontiguousarray(grid), force=max(force, 0.0)))
+            membrane=np.ascontiguousarray(grid)))
+        self.contact_pub.publish(ContactTruth(
+            header=self.contact_pub.header("display", stamp=stamp), touching=depth > 0.0, depth=depth,
+            force=max(force, 0.0), point=np.asarray(pushed, float), stiffness=max(stiffness, 0.0)))
 
 
 def _build_worker(seed: int, realism: str, node: float, size: float, config: SheetFemConfig, nice: int) -> None:

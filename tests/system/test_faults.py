@@ -68,7 +68,7 @@ PUBLISHES = {
     "arm_right": ["/arm/right/joint_state"],
     "fem": ["/object/deformation"],
     "renderer": ["/render/stereo"],
-    "world": ["/world/finger", "/world/sheet", "/world/head"],
+    "world": ["/world/finger", "/world/sheet", "/world/contact", "/world/head"],
     "head_camera": ["/eye/pose"],
 }
 #: a 45 s stroke the kills start in, then the paper's two stroking speeds (Table I rows 30 s and 10 s): ~95 s

@@ -65,7 +65,7 @@ def _header(realism: str, truth_seed: int, truth: TwinTruth, cal: CalibratedDisp
     """The summary's first keys: the truth's sheet, the estimator's sources, the target and the settings."""
     return {"twin": {"realism": realism, "truth_seed": int(truth_seed),
                      "truth_sheet": {"young_Pa": truth.sheet_young, "prestrain": truth.sheet_prestrain,
-                                     "tension_ratio": truth.tension_ratio}},
+                                     "thickness_m": truth.sheet_thickness, "grip_slip": truth.grip_slip}},
             "estimator": {"source": cal.source, **cal_info, "sheet_model": sheet_model_info(model_obj)},
             "target_mm": PIXEL * 1e3, "proper_mm": meas.proper, "paper": PAPER, "assumptions": ASSUMPTIONS,
             "stretch": STRETCH, "quick": bool(quick), "measurement_pixel_mm": pixel * 1e3}

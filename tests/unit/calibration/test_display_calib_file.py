@@ -13,6 +13,7 @@ from flexsheet.calibration.display_calib import (
     DisplayCalib,
     HeadCameraEntry,
     Provenance,
+    SheetEntry,
     nominal_display_calib,
 )
 from flexsheet.calibration.display_calib_file import load_display_calib, write_display_calib
@@ -31,6 +32,8 @@ def _measured() -> DisplayCalib:
     c.head_camera = HeadCameraEntry(np.array([[601.0, 0, 318.0], [0, 601.5, 257.0], [0, 0, 1]]),
                                     np.array([-0.08, 0.05, 0, 0, 0]), 640, 512,
                                     geometry.pose_matrix(0.002, 0.003, 0.199, 0.01), Provenance("head: test", n_poses=30))
+    c.sheet = SheetEntry(0.0231, 2.71, 18500.0, 0.0204, Provenance("sheet: test", n_poses=15,
+                                                                     residuals={"median_pct": 4.6}))
     return c
 
 
@@ -70,6 +73,9 @@ def test_round_trip_through_opencv_filestorage(tmp_path):
     np.testing.assert_allclose(d.head_camera.T_display_camera, c.head_camera.T_display_camera, atol=1e-15)
     np.testing.assert_allclose(d.head_camera.D, c.head_camera.D)
     assert (d.head_camera.width, d.head_camera.K[1, 1]) == (640, 601.5)
+    m = d.sheet.material()
+    assert (m.contact_width, m.contact_growth, m.stretching, m.strain_offset) == (0.0231, 2.71, 18500.0, 0.0204)
+    assert d.sheet.provenance.residuals == {"median_pct": 4.6}
 
 
 def test_missing_entry_is_named(tmp_path):
@@ -79,7 +85,7 @@ def test_missing_entry_is_named(tmp_path):
     with pytest.raises(ValueError, match=r"display\.yaml: missing entries \['projector', 'arms.left'"):
         load_display_calib(path, require=("camera", "projector", "arms.left"))
     assert load_display_calib(path, require=("camera",)).missing() == ["projector", "arms.left", "arms.right", "eye",
-                                                                      "head_camera"]
+                                                                      "head_camera", "sheet"]
 
 
 def test_malformed_entries_name_the_key(tmp_path):
@@ -104,6 +110,15 @@ def test_malformed_entries_name_the_key(tmp_path):
         load_display_calib(str(path))
     with pytest.raises(ValueError, match="not found"):
         load_display_calib(str(tmp_path / "nope.yaml"))
+    # a sheet entry with a negative stretching term, and one with a term missing
+    write_display_calib(str(path), _measured())
+    text = path.read_text()
+    path.write_text(text.replace("stretching: 18500.", "stretching: -18500."))
+    with pytest.raises(ValueError, match=r"display\.yaml: sheet: stretching must be finite and >= 0"):
+        load_display_calib(str(path))
+    path.write_text(text.replace("   contact_growth:", "   growth:"))
+    with pytest.raises(ValueError, match=r"missing key sheet\.contact_growth"):
+        load_display_calib(str(path))
 
 
 def test_write_refuses_a_bad_entry(tmp_path):

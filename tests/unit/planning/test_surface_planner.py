@@ -249,3 +249,39 @@ def test_planner_clamps_and_tension_use_the_sheet_geometry():
     mat = SheetMaterial()
     assert stiffness(plan.stretch, mat) == pytest.approx(tension(plan.stretch, mat) * mat.contact_width * 2 / a)
     assert plan.stiffness == pytest.approx(20.0, rel=1e-6)
+
+
+def test_a_given_object_press_is_matched_in_force_along_the_press():
+    """With the object's press (force at a depth) given, the planned stretch makes the identified sheet's force
+    at the finger's depth the object's, extrapolated by its stiffness; shallower than FORCE_DEPTH, and without a
+    press, the stiffness is matched instead."""
+    from flexsheet.model.tension import press_force
+    from flexsheet.planning.surface_planner import FORCE_DEPTH
+
+    rng = np.random.default_rng(8)
+    mat = SheetMaterial(contact_width=0.023, contact_growth=2.7, stretching=1.7e4, strain_offset=0.02,
+                        max_force=60.0)
+    c = paper_cylinder()
+    for d in (0.004, 0.008, 0.012):
+        k = float(rng.uniform(60.0, 140.0))
+        f_obj, d_obj = float(k * d * rng.uniform(0.6, 0.9)), d - 0.0005      # the FEM's solve, 0.5 mm earlier
+        pl = SurfacePlanner(c, PlannerConfig(material=mat))
+        pl.update(0.0, c.point_at(0.3, 0.0, R + 0.0005), k)
+        plan = None
+        for i, dd in enumerate(np.linspace(0.0, d, 30)):
+            plan = pl.update((i + 1) * DT, c.point_at(0.3, 0.0, R - dd), k, object_press=(f_obj, d_obj))
+        assert plan.depth == pytest.approx(d) and plan.depth >= FORCE_DEPTH and plan.status == "ok", plan.status
+        want = f_obj + k * (d - d_obj)
+        assert press_force(plan.stretch, mat, pl.s[0], d) == pytest.approx(want, rel=1e-6)
+        # the same push matched in stiffness presents the slope, and a different force
+        ps = SurfacePlanner(c, PlannerConfig(material=mat))
+        ps.update(0.0, c.point_at(0.3, 0.0, R + 0.0005), k)
+        for i, dd in enumerate(np.linspace(0.0, d, 30)):
+            q = ps.update((i + 1) * DT, c.point_at(0.3, 0.0, R - dd), k)
+        assert q.stiffness == pytest.approx(k, rel=1e-6)
+        assert abs(press_force(q.stretch, mat, ps.s[0], d) / want - 1.0) > 0.02
+    # a malformed press is ignored (stiffness matched), never raised
+    pl = SurfacePlanner(c, PlannerConfig(material=mat))
+    pl.update(0.0, c.point_at(0.3, 0.0, R - 0.005), 90.0)
+    plan = pl.update(DT, c.point_at(0.3, 0.0, R - 0.005), 90.0, object_press=(float("nan"), 0.005))
+    assert plan.stiffness == pytest.approx(90.0, rel=1e-6)

@@ -1,0 +1,140 @@
+"""The sheet's force under a fingertip, identified from pushes as a lab measures it (pure: numpy + scipy).
+
+A probe the size of a fingertip (an 8 mm-radius sphere) on a load cell, on a stage moving along the sheet's
+normal, is pressed into the tensioned sheet at several points and clamp strains; each press records the force
+at a few depths. The planner's sheet model (:mod:`flexsheet.model.tension`),
+
+    F = T(ε + ε₀)·g(u)·(w·d + w₂·d²) + c·d³,   g = 1/a + 1/b,
+
+is fitted to them: T is the nominal neo-Hookean tension (its modulus error goes into w), ε₀ the sheet's own
+strain offset (pre-strain less grip slip), w the band width, w₂ its growth with depth, c the membrane's
+stretching. For a given ε₀ the model is linear in (w, w₂, c) ≥ 0, so they come from a non-negative weighted
+least squares (``scipy.optimize.nnls``, weights 1/σ of the load cell's noise); ε₀ is the bounded scalar
+minimum of that fit's residual (``scipy.optimize.minimize_scalar``). The residual reported is the median and
+RMS relative error of the model against the presses.
+
+Units: m, N, N/m; strain dimensionless. Frames: the sheet's (u along the clamp line from the centre, v across).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from flexsheet.model.tension import SheetMaterial, contact_geometry, press_force, tension
+
+__all__ = ["Press", "PRESS_STRETCHES", "PRESS_POINTS", "PRESS_DEPTHS", "plan_presses", "SheetFit", "fit_sheet",
+           "model_error"]
+
+#: clamp strains pressed at (on the true sheet's table nodes; the bridges' span band is 0.01–0.10)
+PRESS_STRETCHES = (0.02, 0.05, 0.08)
+#: contact points (u, v), m from the sheet centre: the centre, toward a clamp and toward a free edge
+PRESS_POINTS = ((0.0, 0.0), (0.036, 0.0), (0.072, 0.0), (0.0, 0.036), (0.036, 0.036))
+#: probe depths per press, m
+PRESS_DEPTHS = (0.002, 0.004, 0.007, 0.010, 0.015, 0.020)
+#: load-cell noise (N, and relative) the fit weights by: a 10 N cell, 5 mN + 0.5 % of the reading
+NOISE_N, NOISE_REL = 0.005, 0.005
+
+
+@dataclass(frozen=True)
+class Press:
+    """One reading: clamp strain ``stretch``, contact ``offset_u``/``offset_v`` (m), probe ``depth`` (m) along the
+    sheet's normal from the flat sheet, ``force`` (N) on the load cell."""
+
+    stretch: float
+    offset_u: float
+    offset_v: float
+    depth: float
+    force: float
+
+
+def plan_presses(stretches=PRESS_STRETCHES, points=PRESS_POINTS, depths=PRESS_DEPTHS
+                 ) -> list[tuple[float, float, float, tuple[float, ...]]]:
+    """The presses to make: (stretch, u, v, depths) for every stretch and point. Raises ``ValueError`` on an
+    empty list, a negative stretch or a non-increasing depth list."""
+    if not stretches or not points or not depths:
+        raise ValueError("stretches, points and depths must be non-empty")
+    if any(not (math.isfinite(s) and s >= 0.0) for s in stretches):
+        raise ValueError(f"stretches must be finite and >= 0, got {stretches!r}")
+    if any(not d > 0.0 for d in depths) or np.any(np.diff(depths) <= 0):
+        raise ValueError(f"depths must be > 0 and increasing, got {depths!r}")
+    return [(float(s), float(u), float(v), tuple(float(d) for d in depths)) for s in stretches for u, v in points]
+
+
+@dataclass(frozen=True)
+class SheetFit:
+    """The identified model: ``contact_width`` w (m), ``contact_growth`` w₂, ``stretching`` c (N/m³),
+    ``strain_offset`` ε₀; ``median_pct``/``rms_pct``: the model's relative error against the presses, %;
+    ``n``: presses used."""
+
+    contact_width: float
+    contact_growth: float
+    stretching: float
+    strain_offset: float
+    median_pct: float
+    rms_pct: float
+    n: int
+
+    def material(self, base: SheetMaterial | None = None) -> SheetMaterial:
+        """``base`` (default the nominal :class:`SheetMaterial`) with the identified terms."""
+        return replace(base or SheetMaterial(), contact_width=self.contact_width,
+                       contact_growth=self.contact_growth, stretching=self.stretching,
+                       strain_offset=self.strain_offset)
+
+
+def _columns(presses: list[Press], mat: SheetMaterial) -> np.ndarray:
+    """(n, 3) regressors of (w, w₂, c) at ``mat``'s strain offset."""
+    rows = []
+    for p in presses:
+        tg = tension(p.stretch, mat) * contact_geometry(p.stretch, mat, p.offset_u)
+        rows.append((tg * p.depth, tg * p.depth ** 2, p.depth ** 3))
+    return np.array(rows)
+
+
+def fit_sheet(presses: list[Press], base: SheetMaterial | None = None, offset_bound: float = 0.03) -> SheetFit:
+    """Fit the model (module doc) to ``presses`` on top of ``base`` (nominal E, thickness, size). Raises
+    ``ValueError`` with fewer than 4 presses, a non-finite or negative reading, or presses at one strain only
+    (ε₀ and w cannot be told apart)."""
+    from scipy.optimize import minimize_scalar, nnls
+
+    base = base or SheetMaterial()
+    if len(presses) < 4:
+        raise ValueError(f"need at least 4 presses, got {len(presses)}")
+    for i, p in enumerate(presses):
+        vals = (p.stretch, p.offset_u, p.offset_v, p.depth, p.force)
+        if not all(math.isfinite(x) for x in vals) or p.depth <= 0.0 or p.force < 0.0 or p.stretch < 0.0:
+            raise ValueError(f"press {i}: stretch, depth and force must be finite, depth > 0 and force >= 0, got {p}")
+    if len({round(p.stretch, 6) for p in presses}) < 2:
+        raise ValueError("presses at two clamp strains at least are needed to separate the strain offset")
+    F = np.array([p.force for p in presses])
+    wgt = 1.0 / (NOISE_N + NOISE_REL * F)
+
+    def solve(eps0: float):
+        mat = replace(base, strain_offset=float(eps0))
+        A = _columns(presses, mat)
+        x, _ = nnls(A * wgt[:, None], F * wgt)
+        r = (A @ x - F) * wgt
+        return float(r @ r), x
+
+    lo = max(-offset_bound, -min(p.stretch for p in presses) + 1e-4)
+    best = minimize_scalar(lambda e: solve(e)[0], bounds=(lo, offset_bound), method="bounded",
+                           options={"xatol": 1e-5})
+    eps0 = float(best.x)
+    _, (w, w2, c) = solve(eps0)
+    fit = SheetFit(float(w), float(w2), float(c), eps0, 0.0, 0.0, len(presses))
+    med, rms = model_error(fit.material(base), presses)
+    return replace(fit, median_pct=med, rms_pct=rms)
+
+
+def model_error(mat: SheetMaterial, presses: list[Press], min_force: float = 0.02) -> tuple[float, float]:
+    """(median, RMS) relative error, %, of :func:`flexsheet.model.tension.press_force` with ``mat`` against
+    the presses' forces (those ≥ ``min_force`` N: a few mN divide into meaningless ratios). Raises
+    ``ValueError`` when no press is that strong."""
+    pairs = [(press_force(p.stretch, mat, p.offset_u, p.depth), p.force) for p in presses if p.force >= min_force]
+    if not pairs:
+        raise ValueError(f"no press of at least {min_force} N to judge the model by")
+    m, f = np.array(pairs).T
+    rel = np.abs(m - f) / f * 100.0
+    return float(np.median(rel)), float(np.sqrt(np.mean(rel ** 2)))

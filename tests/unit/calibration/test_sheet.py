@@ -1,0 +1,74 @@
+"""The sheet identified from presses (flexsheet.calibration.sheet): the fit recovers a model it is given, refuses
+what cannot identify it, and on the twin's gripped sheet (a probe on a load cell, flexsheet.twin.load_cell) it
+predicts the true force within the 10 % target where the nominal string band is off by tens of per cent."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flexsheet.calibration.sheet import Press, fit_sheet, model_error, plan_presses
+from flexsheet.model.tension import SheetMaterial, press_force, stiffness
+
+
+def test_fit_recovers_the_model_that_made_the_presses():
+    rng = np.random.default_rng(3)
+    truth = SheetMaterial(contact_width=float(rng.uniform(0.015, 0.03)), contact_growth=float(rng.uniform(0.5, 4)),
+                          stretching=float(rng.uniform(5e3, 4e4)), strain_offset=float(rng.uniform(-0.005, 0.02)))
+    presses = [Press(s, u, v, d, press_force(s, truth, u, d)) for s, u, v, ds in plan_presses() for d in ds]
+    fit = fit_sheet(presses)
+    assert fit.contact_width == pytest.approx(truth.contact_width, rel=1e-3)
+    assert fit.contact_growth == pytest.approx(truth.contact_growth, rel=1e-2)
+    assert fit.stretching == pytest.approx(truth.stretching, rel=1e-2)
+    assert fit.strain_offset == pytest.approx(truth.strain_offset, abs=1e-4)
+    assert fit.median_pct < 0.1 and fit.n == len(presses)
+    # the stiffness it presents is the force's slope along the press
+    m, d, h = fit.material(), 0.008, 1e-6
+    slope = (press_force(0.05, m, 0.02, d + h) - press_force(0.05, m, 0.02, d - h)) / (2 * h)
+    assert stiffness(0.05, m, 0.02, d) == pytest.approx(slope, rel=1e-6)
+
+
+def test_what_cannot_identify_the_sheet_is_refused():
+    one_strain = [Press(0.05, 0.0, 0.0, d, 10.0 * d) for d in (0.002, 0.005, 0.01, 0.02)]
+    with pytest.raises(ValueError, match="two clamp strains"):
+        fit_sheet(one_strain)
+    with pytest.raises(ValueError, match="at least 4"):
+        fit_sheet(one_strain[:3])
+    with pytest.raises(ValueError, match="press 1"):
+        fit_sheet([one_strain[0], Press(0.02, 0.0, 0.0, 0.01, float("nan"))] + one_strain[1:])
+    with pytest.raises(ValueError, match="depths"):
+        plan_presses(depths=(0.01, 0.005))
+    with pytest.raises(ValueError, match="no press"):
+        model_error(SheetMaterial(), [Press(0.05, 0.0, 0.0, 0.001, 0.001)])
+
+
+def test_the_twins_gripped_sheet_is_identified_within_ten_percent():
+    """Truth seed 0: its true-sheet tables ship, so this needs no FEM build (a drawn seed: the slow tier)."""
+    from flexsheet.calibration.procedures import run_sheet
+    from flexsheet.twin.registration import TwinSource, score_sheet
+    from flexsheet.twin.registration_camera import CalibrationTwin
+    from flexsheet.twin.truth import TwinTruth
+
+    truth = TwinTruth.draw(0, "realistic")
+    entry = run_sheet(TwinSource(CalibrationTwin(truth, seed=0)))
+    s = score_sheet(truth, entry)
+    assert s["model_error_pct"] <= s["target_pct"] == 10.0, s
+    assert s["nominal_error_pct"] > 40.0, s                 # the string band it replaces
+    assert entry.provenance.residuals["median_pct"] < 10.0 and entry.provenance.n_poses == 15
+
+
+@pytest.mark.slow
+def test_a_drawn_truths_sheet_is_identified_within_ten_percent():
+    """A truth seed drawn for this run: its three true-sheet tables are built first (~1.5 min)."""
+    import random
+
+    from flexsheet.calibration.procedures import run_sheet
+    from flexsheet.twin.registration import TwinSource, score_sheet
+    from flexsheet.twin.registration_camera import CalibrationTwin
+    from flexsheet.twin.truth import TwinTruth
+
+    seed = random.SystemRandom().randrange(10, 100_000)
+    truth = TwinTruth.draw(seed, "realistic")
+    s = score_sheet(truth, run_sheet(TwinSource(CalibrationTwin(truth, seed=seed))))
+    assert s["model_error_pct"] <= s["target_pct"], (seed, s)
+    assert s["nominal_error_pct"] > 2 * s["model_error_pct"], (seed, s)
