@@ -47,12 +47,16 @@ class ArmTarget(Message):
 
     ``pose`` (4, 4): homogeneous transform T_display_clamp, m. ``arm``: "left" or "right".
     ``source_stamp``: exposure stamp of the source fingertip, s. ``status`` as in :class:`SheetTarget`.
+    ``pull`` N: the sheet's pull on this clamp toward the sheet's centre at this target (the planned clamp
+    force); the bridge refuses a target whose joint torques Jᵀ·F pass the arm's limits
+    (:mod:`flexsheet.arm.pull_limit`, ``hold:torque:J<k>``).
     """
 
     SCHEMA = "flexsheet/ArmTarget"
-    VERSION = 1
+    VERSION = 2
 
     arm: str = Field(pattern="^(left|right)$", description="which arm: left or right")
     pose: ndarray("float64", (4, 4), "T_display_clamp, m")
     source_stamp: float = Field(default=0.0, description="exposure stamp of the source fingertip, s")
     status: str = Field(default="ok", description="'ok' or a reason")
+    pull: float = Field(default=0.0, ge=0.0, description="sheet's pull on the clamp toward the sheet centre, N")

@@ -18,6 +18,7 @@ from enum import StrEnum
 import numpy as np
 
 from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, IKResult, outside_limits
+from flexsheet.arm.pull_limit import max_pull
 
 __all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S"]
 
@@ -49,7 +50,7 @@ class BridgeStatus(StrEnum):
 
 def peer_holds(status: str) -> bool:
     """Whether a partner arm's ``bridge_status`` makes this arm hold too: an IK refusal (``hold:unreachable``,
-    ``hold:limit:J<k>``, ``hold:singular``, ``hold:jump``), a controller fault (``fault:*``) or a lost controller
+    ``hold:limit:J<k>``, ``hold:singular``, ``hold:jump``, ``hold:torque:J<k>``), a controller fault (``fault:*``) or a lost controller
     (``disconnected``): that clamp has stopped, and the sheet between them must not be pulled by the other.
     Not a hold the partner shares itself (``hold:peer``: no deadlock), nor no target, a disabled controller or
     a refused command (both arms see those alike, or the stream restarts at once)."""
@@ -167,8 +168,10 @@ class TargetTracker:
             self.goal = self.kin.check_q(q).copy()
 
     def set_target(self, T_display_clamp, source_stamp: float, now: float, q_measured=None, *,
-                   strict: bool = False) -> IKResult:
-        """Solve IK for a new target pose (4, 4) at time ``now`` (s); returns the :class:`IKResult`.
+                   strict: bool = False, pull: float = 0.0) -> IKResult:
+        """Solve IK for a new target pose (4, 4) at time ``now`` (s); returns the :class:`IKResult`. ``pull`` N:
+        the sheet's pull on the clamp there; a solution whose joint torques pass the arm's limits is refused as
+        ``torque:J<k>`` (:func:`flexsheet.arm.pull_limit.max_pull`).
 
         Seed: the current goal, else ``q_measured``; the jump limit as the class doc says. If the result is not
         ok, the goal is unchanged, ``ik_status`` holds the reason, ``refused`` counts it and, with ``strict``,
@@ -189,6 +192,10 @@ class TargetTracker:
         res = self.kin.ik(T_display_clamp, seed, max_jump=max_jump)
         if res.ok and self.keep_out is not None and self.keep_out(res.q):
             res = replace(res, ok=False, status="keep_out")      # the arm would enter the viewer's keep-out
+        if res.ok and pull > 0.0:
+            limit, joint = max_pull(self.kin, res.q)
+            if pull > limit:
+                res = replace(res, ok=False, status=f"torque:J{joint}")   # the sheet would overload a joint
         self.last_ik = res
         if res.ok or self.last_target_at is not None:   # a refused first target does not start the stream
             self.last_target_at = now

@@ -30,11 +30,16 @@ def _common(p: argparse.ArgumentParser, what: str) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--sim", action="store_true", help="frames from the twin (needs --truth-seed)")
     src.add_argument("--images", metavar="DIR", help="captured lab frames (layout: docs/calibration.md)")
+    _twin_and_out(p)
+    p.add_argument("--quick", action="store_true", help="fewer poses (4 projector poses, 12 configurations per "
+                                                        "arm): faster, but the projector target can be missed")
+
+
+def _twin_and_out(p: argparse.ArgumentParser) -> None:
+    """``--truth-seed``, ``--realism`` (with ``--sim``) and ``--out`` (the folder of display.yaml)."""
     p.add_argument("--truth-seed", type=int, default=None, help="twin truth seed (with --sim)")
     p.add_argument("--realism", choices=("realistic", "ideal"), default="realistic", help="twin realism")
     p.add_argument("--out", required=True, metavar="DIR", help="folder of display.yaml (entry added/replaced)")
-    p.add_argument("--quick", action="store_true", help="fewer poses (4 projector poses, 12 configurations per "
-                                                        "arm): faster, but the projector target can be missed")
 
 
 def _opts(a) -> P.Options:
@@ -223,9 +228,7 @@ def sheet_main(argv: list[str] | None = None) -> int:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--sim", action="store_true", help="press the twin's true sheet (needs --truth-seed)")
     src.add_argument("--presses", metavar="CSV", help="a lab's readings: stretch,u_m,v_m,depth_m,force_n per row")
-    p.add_argument("--truth-seed", type=int, default=None, help="twin truth seed (with --sim)")
-    p.add_argument("--realism", choices=("realistic", "ideal"), default="realistic", help="twin realism")
-    p.add_argument("--out", required=True, metavar="DIR", help="folder of display.yaml (entry added/replaced)")
+    _twin_and_out(p)
     a = p.parse_args(argv)
 
     def go():

@@ -241,7 +241,25 @@ class SurfacePlanner:
         self.compliance = compliance
         self.limiter = RateLimiter(self.cfg.limits)
         self._eps_max = max_stretch_within_force(self.cfg.material)
+        #: the arms' pull limit at their pose, N (None: only the material's ``max_force``), :meth:`set_pull_limit`
+        self.pull_limit: float | None = None
         self.reset()
+
+    def set_pull_limit(self, pull: float | None) -> None:
+        """Cap the clamp force at ``pull`` N (the arms' torque limit at their pose,
+        :func:`flexsheet.arm.pull_limit.max_pull`) below the material's ``max_force``; None lifts the cap. A
+        stretch asked beyond it is clamped and reported ``object_stiffer_than_sheet``. Raises ``ValueError`` for
+        a negative or NaN pull."""
+        if pull is not None and not (pull >= 0.0):
+            raise ValueError(f"pull limit must be >= 0 N or None, got {pull!r}")
+        if pull == self.pull_limit:
+            return
+        self.pull_limit = pull
+        mat = self.cfg.material
+        if pull is not None and pull < mat.max_force:
+            mat = replace(mat, max_force=max(float(pull), 1e-6))
+        self._eps_max = max(max_stretch_within_force(mat), mat.min_stretch)
+        self._tcache = None
 
     def reset(self) -> None:
         """Forget all state (as at start)."""

@@ -12,9 +12,10 @@ controller status/fault, ``write_stamp`` (wall time the command left: Modbus wri
 carries the link counters (MXT: packets sent, replies, late, lost, repeats, refused).
 
 ``bridge_status``: "ok"; "hold:no_target" (no target yet, or none for ``target_timeout`` s: the arm stops);
-"hold:unreachable" / "hold:limit:J<k>" / "hold:singular" / "hold:jump" / "hold:keep_out" (last target refused by
-IK, or — once ``/eye/pose`` tracks the viewer — by the head's keep-out with ``keepout_margin``: the arm
-stops short at the last good goal); "hold:disabled" (controller not enabled yet, or ``enabled: false``); "fault:watchdog",
+"hold:unreachable" / "hold:limit:J<k>" / "hold:singular" / "hold:jump" / "hold:keep_out" / "hold:torque:J<k>" (last
+target refused by IK, by the sheet's pull (``ArmTarget.pull``) passing a joint's torque limit there
+(:mod:`flexsheet.arm.pull_limit`), or — once ``/eye/pose`` tracks the viewer — by the head's keep-out with
+``keepout_margin``: the arm stops short at the last good goal); "hold:disabled" (controller not enabled yet, or ``enabled: false``); "fault:watchdog",
 "fault:estop" (controller faulted; the bridge follows the measured joints); "hold:refused" (the controller did
 not take a command: the stream restarts from what it executes); "disconnected"; "hold:peer" (the other arm
 holds on an IK refusal, a fault or a lost controller, read from its joint state: the sheet couples the clamps,
@@ -264,7 +265,7 @@ class ArmBridgeNode(Node):
         if self.tracker.goal is None:
             self._pending = msg
             return
-        self.tracker.set_target(msg.pose, msg.source_stamp, self.now(), strict=True)
+        self.tracker.set_target(msg.pose, msg.source_stamp, self.now(), strict=True, pull=msg.pull)
         if await self.stream.refresh() and self.clock.simulated:   # write it now rather than at the next tick
             await self.stream.rewrite_now()
 
@@ -273,7 +274,7 @@ class ArmBridgeNode(Node):
         if self._pending is not None and self.tracker.goal is not None:
             msg, self._pending = self._pending, None
             try:
-                self.tracker.set_target(msg.pose, msg.source_stamp, self.now(), strict=True)
+                self.tracker.set_target(msg.pose, msg.source_stamp, self.now(), strict=True, pull=msg.pull)
             except ValueError as exc:
                 self._reject(f"ArmTarget: {exc}")
         if rep.bridge_status != self._last_status or rep.t_cycle - self._diag_at > 1.0:

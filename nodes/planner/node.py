@@ -5,12 +5,15 @@ The object is the ``scene`` file's (:mod:`flexsheet.model.scenes`; the launcher 
 launch file's top-level ``scene:``; none = the paper's cylinder): its shape
 (:func:`flexsheet.planning.shape.planner_shape`) and its compliance.
 
-Subscribes ``/fingertip`` (QoS LATEST; ``predicted_position`` when ``use_prediction``) and
-``/object/deformation`` (QoS LATEST). The sheet's tension is set so that its normal stiffness at the contact
-matches the object's local stiffness: the FEM's dF/dd (``ObjectDeformation.stiffness``) while
-fresh and *about this scene*, else the scene's estimate at the contact (:mod:`flexsheet.planning.compliance`:
-Hertz contact with the scene's material, stiffer over inclusions) when ``stiffness_from_scene``, else
-``object_stiffness``; times ``stiffness_scale``; the stretch is clamped to what the arms can apply. Every
+Subscribes ``/fingertip`` (QoS LATEST; ``predicted_position`` when ``use_prediction``),
+``/object/deformation`` (QoS LATEST). The sheet's tension is set so that its normal
+stiffness at the contact matches the object's local stiffness: the FEM's dF/dd (``ObjectDeformation.stiffness``,
+and from 2 mm deep its contact force, matched in force) while fresh and *about this scene*, else the scene's
+estimate at the contact (:mod:`flexsheet.planning.compliance`: Hertz contact with the scene's material, stiffer
+over inclusions) when ``stiffness_from_scene``, else ``object_stiffness``; times ``stiffness_scale``; the sheet
+model is ``display_calib``'s identified ``sheet`` entry where it has one. The clamp force is capped at
+``pull_margin`` × the pull the arms' joint torques allow at the targets it sends them
+(:mod:`flexsheet.planning.pull_guard`) and at ``max_force``. Every
 ``/sheet/target`` carries the tension, the presented and the requested stiffness; the heartbeat's message
 says which source is in use. The FEM's stiffness counts as about this scene when the message's ``scene_key``
 (the FEM's :meth:`~flexsheet.model.scenes.Scene.key`: the FEM meshes and solves any scene) equals
@@ -40,12 +43,14 @@ from pydantic import Field
 
 from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
 from flexsheet.model.shapes import make_shape
-from flexsheet.model.tension import SheetMaterial
+from flexsheet.model.sheet import clamp_poses
+from flexsheet.model.tension import SheetMaterial, clamp_force
 from flexsheet.model.timing import LAB
 from flexsheet.planning.compliance import SceneCompliance
 from flexsheet.planning.head_guard import HeadGuard
 from flexsheet.planning.keepout import KeepOut
 from flexsheet.planning.limits import MotionLimits, ReachModel
+from flexsheet.planning.pull_guard import PullGuard
 from flexsheet.planning.shape import planner_shape
 from flexsheet.planning.surface_planner import INPUT_REJECTIONS, Hold, Plan, PlannerConfig, SurfacePlanner
 from flexsheet.runtime.node import InputRejected, Node
@@ -145,6 +150,9 @@ PlannerParams = params_model(
     display_calib=(str | None, Field(default=None, description="display.yaml whose arm bases the reach check uses")),
     head_radius=(float, Field(default=0.10, gt=0.0, le=0.3, description="head sphere about the head centre, m")),
     keepout_margin=(float, Field(default=0.05, ge=0.0, le=0.3, description="keep-out margin around the head, m")),
+    pull_margin=(float, Field(default=0.9, gt=0.0, le=1.0, description="share of the arms' torque-limited pull at "
+                              "the targets sent the clamp force may reach (the bridges refuse a target past "
+                              "the limit itself)")),
 )
 
 
@@ -193,6 +201,22 @@ class PlannerNode(Node):
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST, sim_cost=LAB.compute("planner"))
         self.subscribe(topics.DEFORMATION, self.on_deformation, qos=QoS.LATEST)
         self.subscribe(topics.EYE_POSE, self.on_eye_pose, qos=QoS.LATEST)
+        self.pull_guard = PullGuard({"left": cfg.reach.left_base, "right": cfg.reach.right_base}, p.pull_margin)
+        self._cap_pull(*clamp_poses(np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]),
+                                    cfg.material.min_stretch, cfg.material.size))        # the sheet's home pose
+
+    def _cap_pull(self, T_left: np.ndarray, T_right: np.ndarray) -> None:
+        """The next plans' clamp force: ``pull_margin`` × the arms' torque-limited pull at these targets
+        (:class:`PullGuard`); said when the limiting joint changes, or the limit by more than 10 %."""
+        limit = self.pull_guard.limit(T_left, T_right)
+        self.planner.set_pull_limit(limit)
+        side, joint, _ = self.pull_guard.limiting()
+        said = getattr(self, "_pull_said", None)
+        if limit is not None and (said is None or said[0] != joint or abs(limit - said[1]) > 0.1 * said[1]):
+            self._pull_said = (joint, limit)
+            self.log.info("clamp force limited to %.1f N by the %s arm's J%d torque at its target "
+                          "(flexsheet/arm/pull_limit.py; material max_force %.0f N)", limit, side, joint,
+                          self.planner.cfg.material.max_force)
 
     def on_eye_pose(self, msg: EyePose) -> None:
         """The viewer's tracked eye: the keep-out follows it; lost glasses hold the sheet (:class:`HeadGuard`)."""
@@ -279,7 +303,9 @@ class PlannerNode(Node):
             object_stiffness=float(plan.object_stiffness), touching=bool(plan.touching), status=plan.status,
             source_stamp=float(source_stamp)))
         Tl, Tr = plan.clamp_matrices()
+        pull = clamp_force(plan.stretch, self.planner.cfg.material)
+        self._cap_pull(Tl, Tr)                                  # for the next plans, at these targets
         self.pub_left.publish(ArmTarget(header=self.pub_left.header("display", st.stamp), arm="left", pose=Tl,
-                                        source_stamp=float(source_stamp), status=plan.status))
+                                        source_stamp=float(source_stamp), status=plan.status, pull=pull))
         self.pub_right.publish(ArmTarget(header=self.pub_right.header("display", st.stamp), arm="right", pose=Tr,
-                                         source_stamp=float(source_stamp), status=plan.status))
+                                         source_stamp=float(source_stamp), status=plan.status, pull=pull))

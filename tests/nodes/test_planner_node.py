@@ -158,3 +158,33 @@ def test_fem_stiffness_counts_only_for_the_scene_the_fem_solved():
     assert not fem_solves_scene(msg(""), organ)                  # unknown: not this organ
     assert fem_solves_scene(msg(""), paper_scene())              # unknown: the old FEM's cylinder
     assert fem_solves_scene(msg(paper_scene().key()), paper_scene())
+
+
+def test_the_pull_is_capped_at_the_targets_and_the_targets_carry_it():
+    """The clamp force is capped at pull_margin × the torque-limited pull at the targets the planner sends
+    (flexsheet.planning.pull_guard; 33.5 N at home, set by J3), and each ArmTarget carries the planned pull,
+    which never passes the arms' limit at that target."""
+    from flexsheet.arm.kinematics import ArmKinematics, home_joints
+    from flexsheet.arm.pull_limit import max_pull
+    from flexsheet.model.geometry import LEFT_BASE
+    from flexsheet.model.tension import SheetMaterial, clamp_force
+
+    async def scenario():
+        async with NodeHarness(PlannerNode, params={"shape": "cylinder", "object_stiffness": 900.0,
+                                                    "stiffness_from_scene": False}) as h:
+            home = max_pull(ArmKinematics("left", LEFT_BASE), home_joints("left"))[0]
+            assert h.node.planner.pull_limit == pytest.approx(0.9 * home, rel=0.02) and 0.9 * home < 40.0
+            t0 = time.time()
+            for k in range(5):
+                h.inject(topics.FINGERTIP, _ft([0.02 * np.cos(0.1 * k), 0.02 * np.sin(0.1 * k), 0.0],
+                                               stamp=t0 + 0.02 * k))
+                await asyncio.sleep(0.02)
+            sts = await h.wait_for(topics.SHEET_TARGET, n=5, timeout=2.0)
+            lefts = await h.wait_for(topics.ARM_LEFT_TARGET, n=5, timeout=2.0)
+            kin = ArmKinematics("left", LEFT_BASE)
+            for st, left in zip(sts, lefts, strict=True):
+                assert "object_stiffer_than_sheet" in st.status
+                assert left.pull == pytest.approx(clamp_force(st.stretch, SheetMaterial()), rel=1e-9)
+                q = kin.ik(left.pose, home_joints("left")).q
+                assert left.pull <= max_pull(kin, q)[0]          # the bridge takes it
+    asyncio.run(scenario())

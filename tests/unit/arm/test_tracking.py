@@ -149,3 +149,18 @@ def test_a_target_in_the_viewers_keep_out_is_refused_and_the_partner_holds_with_
         t.set_target(left, 2.0, 1.01, strict=True)
     assert t.ik_status == "keep_out" and np.allclose(t.goal, goal)              # it stops short at the last goal
     assert t.status(1.02) == "hold:keep_out" and peer_holds("hold:keep_out")
+
+
+def test_a_target_whose_pull_passes_a_joint_torque_is_refused_and_the_partner_holds_with_it():
+    from flexsheet.arm.pull_limit import max_pull
+    from flexsheet.arm.tracking import TargetRefused
+
+    kl, _, ql, _, left = _home()
+    t = _tracker(kl, ql)
+    limit, joint = max_pull(kl, ql)
+    assert t.set_target(left, 1.0, 1.0, pull=0.95 * limit).ok                # within the torque limit
+    goal = t.goal.copy()
+    with pytest.raises(TargetRefused):
+        t.set_target(left, 2.0, 1.01, strict=True, pull=1.05 * limit)
+    assert t.ik_status == f"torque:J{joint}" and np.allclose(t.goal, goal)
+    assert t.status(1.02) == f"hold:torque:J{joint}" and peer_holds(f"hold:torque:J{joint}")

@@ -285,3 +285,22 @@ def test_a_given_object_press_is_matched_in_force_along_the_press():
     pl.update(0.0, c.point_at(0.3, 0.0, R - 0.005), 90.0)
     plan = pl.update(DT, c.point_at(0.3, 0.0, R - 0.005), 90.0, object_press=(float("nan"), 0.005))
     assert plan.stiffness == pytest.approx(90.0, rel=1e-6)
+
+
+def test_the_arms_pull_limit_caps_the_clamp_force():
+    from flexsheet.model.tension import clamp_force
+
+    c = paper_cylinder()
+    pl = SurfacePlanner(c)
+    pl.set_pull_limit(25.0)
+    plan = None
+    for i in range(20):
+        plan = pl.update(i * DT, c.point_at(0.3, 0.0, R - 0.004), 400.0)        # stiffer than any sheet
+    assert clamp_force(plan.stretch, pl.cfg.material) == pytest.approx(25.0, rel=1e-6)
+    assert "object_stiffer_than_sheet" in plan.status
+    pl.set_pull_limit(None)                                                    # lifted: the material's 40 N
+    for i in range(20, 400):
+        plan = pl.update(i * DT, c.point_at(0.3, 0.0, R - 0.004), 400.0)
+    assert clamp_force(plan.stretch, pl.cfg.material) == pytest.approx(pl.cfg.material.max_force, rel=1e-6)
+    with pytest.raises(ValueError, match="pull limit"):
+        pl.set_pull_limit(float("nan"))
