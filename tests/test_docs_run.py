@@ -283,6 +283,7 @@ CHEAP: dict[str, tuple[str, str]] = {
     "flexsheet calibrate display --sim --truth-seed 0 --out out/cal0": (P, "the full registration: ~1-2 min"),
     "flexsheet calibrate display --sim --truth-seed 1 --quick --out /tmp/disp1": (P, "the twin's registration: ~1 min"),
     "flexsheet calibrate display --sweep --seeds 1,2,3 --out docs/figures/calibration": (P, LONG),
+    "flexsheet calibrate display --draws 40 --out docs/figures/calibration/draws": (P, LONG),
     "flexsheet calibrate camera-pose --sim --truth-seed 1 --quick --out /tmp/disp": (P, "renders and fits 12+ views"),
     "flexsheet calibrate projector --sim --truth-seed 1 --quick --out /tmp/disp": (P, "renders 4 x 42 patterns"),
     "flexsheet calibrate arms --sim --truth-seed 1 --quick --out /tmp/disp": (P, "renders 2 x 12 configurations"),

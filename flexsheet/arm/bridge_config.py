@@ -44,7 +44,8 @@ class BridgeConfig:
     span_band: Annotated[tuple[float, float] | None, Field(description="[lo, hi] m: the clamp span the two arms "
                                                          "keep (this arm's command to the partner's measured clamp); "
                                                          "a step further outside waits; None: no guard. Default: "
-                                                         "clamp strain 0.01-0.10 of the 0.240 m sheet")] = (0.2424, 0.264)
+                                                         "clamp strain 0.005-0.10 of the 0.240 m sheet: the planner's 0.01 least "
+                                                         "stretch with room below for the arms' tracking")] = (0.2412, 0.264)
     keepout_margin: Annotated[float, Field(ge=0.0, le=0.3, description="m: the last line behind the planner's head "
                                            "guard: a target that puts this arm's links (0.05 m capsules) or its "
                                            "clamp within this margin of the tracked head's 0.10 m sphere is "

@@ -221,10 +221,11 @@ def sheet_main(argv: list[str] | None = None) -> int:
         description="Identify the planner's sheet model (docs/calibration.md, 'Sheet') from a probe pressed on a "
                     "load cell into the tensioned sheet at several points and clamp strains: --sim presses the "
                     "twin's true sheet, --presses reads a lab's readings (CSV with a header: stretch, u_m, v_m, "
-                    "depth_m, force_n). Writes the sheet entry into OUT/display.yaml and OUT/sheet.json (the fit, "
-                    "the readings, and in the twin the model's error against the true force).",
+                    "depth_m, force_n). Writes the sheet entry into OUT/display.yaml, OUT/sheet.json (the fit, "
+                    "the readings, and in the twin the model's error against the true force) and the readings as "
+                    "OUT/presses.csv (the --presses format).",
         epilog="example:\n  flexsheet calibrate sheet --sim --truth-seed 0 --out /tmp/disp\n"
-               "  flexsheet calibrate sheet --presses lab/presses.csv --out /tmp/disp")
+               "  flexsheet calibrate sheet --presses docs/figures/calibration/sheet/presses.csv --out /tmp/disp")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--sim", action="store_true", help="press the twin's true sheet (needs --truth-seed)")
     src.add_argument("--presses", metavar="CSV", help="a lab's readings: stretch,u_m,v_m,depth_m,force_n per row")
@@ -232,9 +233,11 @@ def sheet_main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
 
     def go():
+        import csv
         import json
 
         from flexsheet.calibration.sheet import plan_presses
+        from flexsheet.calibration.sources import PressFileSource
 
         plan, truth = plan_presses(), None
         if a.sim:
@@ -247,8 +250,6 @@ def sheet_main(argv: list[str] | None = None) -> int:
             truth = TwinTruth.draw(a.truth_seed, a.realism)
             source = TwinSource(CalibrationTwin(truth, seed=a.truth_seed))
         else:
-            from flexsheet.calibration.sources import PressFileSource
-
             source = PressFileSource(a.presses)
             plan = source.plan()
         readings = source.sheet_presses(plan)
@@ -268,6 +269,10 @@ def sheet_main(argv: list[str] | None = None) -> int:
                      f"{doc['truth']['target_pct']:g} %)")
         with open(os.path.join(a.out, "sheet.json"), "w") as fh:
             json.dump(doc, fh, indent=1)
+        with open(os.path.join(a.out, "presses.csv"), "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(PressFileSource.COLUMNS)
+            w.writerows([r.stretch, r.offset_u, r.offset_v, r.depth, r.force] for r in readings)
         log.info(f"wrote {_write(a.out, calib)}, {os.path.join(a.out, 'sheet.json')}")
         return 0
 

@@ -144,7 +144,9 @@ def test_planner_survives_fuzz():
             await _inject_all(h, topics.DEFORMATION, "planner", 2)
             h.inject(topics.FINGERTIP, _tip([0.02, 0.0, 0.0], 1000.0))
             st = (await h.wait_for(topics.SHEET_TARGET, n=1, timeout=5.0))[-1]
-            assert st.status == "ok" and np.allclose(st.normal, [1, 0, 0])
+            # a fuzzed deformation may leave a stiffness the arms' pull cannot present: a plan, said so
+            assert st.status in ("ok", "object_stiffer_than_sheet", "object_softer_than_sheet"), st.status
+            assert np.allclose(st.normal, [1, 0, 0])
             COUNTS["planner /fingertip"]["alive"] = COUNTS["planner /object/deformation"]["alive"] = 1
     asyncio.run(scenario())
 

@@ -26,8 +26,7 @@ def test_dry_run_prints_the_poses_and_moves_nothing(capsys, tmp_path):
 
 def test_sheet_from_the_twin_and_from_a_lab_file_give_the_same_entry(tmp_path):
     """``flexsheet calibrate sheet``: the twin's presses (truth seed 0, whose true-sheet tables ship) fit within
-    the 10 % target against the true force; the same readings written as a lab's CSV fit to the same entry."""
-    import csv
+    the 10 % target against the true force; the readings it writes as a lab's CSV fit to the same entry."""
     import json
 
     from flexsheet.calibration.display_calib_file import load_display_calib
@@ -36,11 +35,8 @@ def test_sheet_from_the_twin_and_from_a_lab_file_give_the_same_entry(tmp_path):
     assert sheet_main(["--sim", "--truth-seed", "0", "--out", str(tmp_path / "sim")]) == 0
     doc = json.loads((tmp_path / "sim" / "sheet.json").read_text())
     assert doc["truth"]["model_error_pct"] <= 10.0 < doc["truth"]["nominal_error_pct"]
-    with open(tmp_path / "p.csv", "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["stretch", "u_m", "v_m", "depth_m", "force_n"])
-        for r in doc["readings"]:
-            w.writerow([r["stretch"], r["offset_u"], r["offset_v"], r["depth"], r["force"]])
+    assert len((tmp_path / "sim" / "presses.csv").read_text().splitlines()) == len(doc["readings"]) + 1
+    (tmp_path / "p.csv").write_bytes((tmp_path / "sim" / "presses.csv").read_bytes())
     assert sheet_main(["--presses", str(tmp_path / "p.csv"), "--out", str(tmp_path / "lab")]) == 0
     a = load_display_calib(str(tmp_path / "sim" / "display.yaml")).sheet
     b = load_display_calib(str(tmp_path / "lab" / "display.yaml")).sheet
