@@ -31,7 +31,7 @@ Layout (OpenCV FileStorage YAML; matrices are ``!!opencv-matrix``, units m / rad
        T_display_camera: 4x4      # its optical frame (+z forward, +x right, +y down) in the display frame
        provenance: {...}
     sheet:                        # the sheet's force under a fingertip, identified from pushes (optional)
-       contact_width: m  contact_growth: 1  stretching: N/m^3  strain_offset: 1   # flexsheet.model.tension
+       contact_width: m  contact_growth: 1  own_stiffness: N  own_growth: N/m  stretching: N/m^3  strain_offset: 1
        provenance: {...}          # residuals: median_pct, rms_pct (the model against the presses)
 
 ``provenance.measured_at`` is ISO 8601 UTC; ``source`` is ``lab``, ``twin seed N`` or ``nominal``.
@@ -233,11 +233,13 @@ class HeadCameraEntry:
 @dataclass
 class SheetEntry:
     """The sheet's force model identified from pushes (:mod:`flexsheet.calibration.sheet`): the terms of
-    :class:`flexsheet.model.tension.SheetMaterial` ``contact_width`` (m), ``contact_growth``, ``stretching``
-    (N/m³) and ``strain_offset``."""
+    :class:`flexsheet.model.tension.SheetMaterial` ``contact_width`` (m), ``contact_growth``, ``own_stiffness``
+    (N), ``own_growth`` (N/m), ``stretching`` (N/m³) and ``strain_offset``."""
 
     contact_width: float
     contact_growth: float
+    own_stiffness: float
+    own_growth: float
     stretching: float
     strain_offset: float
     provenance: Provenance
@@ -250,7 +252,8 @@ class SheetEntry:
         from flexsheet.model.tension import SheetMaterial
 
         return replace(base or SheetMaterial(), contact_width=self.contact_width, contact_growth=self.contact_growth,
-                       stretching=self.stretching, strain_offset=self.strain_offset)
+                       own_stiffness=self.own_stiffness, own_growth=self.own_growth, stretching=self.stretching,
+                       strain_offset=self.strain_offset)
 
 
 @dataclass

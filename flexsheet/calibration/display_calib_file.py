@@ -30,7 +30,7 @@ __all__ = ["write_display_calib", "load_display_calib"]
 
 # ----------------------------------------------------------------------------------------------------- writing
 #: the sheet entry's numbers, in :class:`SheetEntry`'s order
-SHEET_TERMS = ("contact_width", "contact_growth", "stretching", "strain_offset")
+SHEET_TERMS = ("contact_width", "contact_growth", "own_stiffness", "own_growth", "stretching", "strain_offset")
 
 
 def _write_prov(fs: cv2.FileStorage, p: Provenance) -> None:

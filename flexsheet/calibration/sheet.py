@@ -4,11 +4,12 @@ A probe the size of a fingertip (an 8 mm-radius sphere) on a load cell, on a sta
 normal, is pressed into the tensioned sheet at several points and clamp strains; each press records the force
 at a few depths. The planner's sheet model (:mod:`flexsheet.model.tension`),
 
-    F = T(ε + ε₀)·g(u)·(w·d + w₂·d²) + c·d³,   g = 1/a + 1/b,
+    F = g(u)·[T(ε + ε₀)·(w·d + w₂·d²) + b·d + a·d²] + c·d³,   g = 1/a + 1/b,
 
 is fitted to them: T is the nominal neo-Hookean tension (its modulus error goes into w), ε₀ the sheet's own
-strain offset (pre-strain less grip slip), w the band width, w₂ its growth with depth, c the membrane's
-stretching. For a given ε₀ the model is linear in (w, w₂, c) ≥ 0, so they come from a non-negative weighted
+strain offset (pre-strain less grip slip), w the band width, w₂ its growth with depth, b and a the sheet's own
+stiffness that does not scale with the pull, c the membrane's stretching. For a given ε₀ the model is linear in
+(w, w₂, b, a, c) ≥ 0, so they come from a non-negative weighted
 least squares (``scipy.optimize.nnls``, weights 1/σ of the load cell's noise); ε₀ is the bounded scalar
 minimum of that fit's residual (``scipy.optimize.minimize_scalar``). The residual reported is the median and
 RMS relative error of the model against the presses.
@@ -29,7 +30,7 @@ __all__ = ["Press", "PRESS_STRETCHES", "PRESS_POINTS", "PRESS_DEPTHS", "plan_pre
            "model_error"]
 
 #: clamp strains pressed at (on the true sheet's table nodes; the bridges' span band is 0.01–0.10)
-PRESS_STRETCHES = (0.02, 0.05, 0.08)
+PRESS_STRETCHES = (0.01, 0.04, 0.08)
 #: contact points (u, v), m from the sheet centre: the centre, toward a clamp and toward a free edge
 PRESS_POINTS = ((0.0, 0.0), (0.036, 0.0), (0.072, 0.0), (0.0, 0.036), (0.036, 0.036))
 #: probe depths per press, m
@@ -65,12 +66,14 @@ def plan_presses(stretches=PRESS_STRETCHES, points=PRESS_POINTS, depths=PRESS_DE
 
 @dataclass(frozen=True)
 class SheetFit:
-    """The identified model: ``contact_width`` w (m), ``contact_growth`` w₂, ``stretching`` c (N/m³),
-    ``strain_offset`` ε₀; ``median_pct``/``rms_pct``: the model's relative error against the presses, %;
-    ``n``: presses used."""
+    """The identified model: ``contact_width`` w (m), ``contact_growth`` w₂, ``own_stiffness`` b (N),
+    ``own_growth`` a (N/m), ``stretching`` c (N/m³), ``strain_offset`` ε₀; ``median_pct``/``rms_pct``: the
+    model's relative error against the presses, %; ``n``: presses used."""
 
     contact_width: float
     contact_growth: float
+    own_stiffness: float
+    own_growth: float
     stretching: float
     strain_offset: float
     median_pct: float
@@ -80,16 +83,17 @@ class SheetFit:
     def material(self, base: SheetMaterial | None = None) -> SheetMaterial:
         """``base`` (default the nominal :class:`SheetMaterial`) with the identified terms."""
         return replace(base or SheetMaterial(), contact_width=self.contact_width,
-                       contact_growth=self.contact_growth, stretching=self.stretching,
-                       strain_offset=self.strain_offset)
+                       contact_growth=self.contact_growth, own_stiffness=self.own_stiffness,
+                       own_growth=self.own_growth, stretching=self.stretching, strain_offset=self.strain_offset)
 
 
 def _columns(presses: list[Press], mat: SheetMaterial) -> np.ndarray:
-    """(n, 3) regressors of (w, w₂, c) at ``mat``'s strain offset."""
+    """(n, 5) regressors of (w, w₂, b, a, c) at ``mat``'s strain offset."""
     rows = []
     for p in presses:
-        tg = tension(p.stretch, mat) * contact_geometry(p.stretch, mat, p.offset_u)
-        rows.append((tg * p.depth, tg * p.depth ** 2, p.depth ** 3))
+        g = contact_geometry(p.stretch, mat, p.offset_u)
+        tg, d = tension(p.stretch, mat) * g, p.depth
+        rows.append((tg * d, tg * d * d, g * d, g * d * d, d ** 3))
     return np.array(rows)
 
 
@@ -122,8 +126,8 @@ def fit_sheet(presses: list[Press], base: SheetMaterial | None = None, offset_bo
     best = minimize_scalar(lambda e: solve(e)[0], bounds=(lo, offset_bound), method="bounded",
                            options={"xatol": 1e-5})
     eps0 = float(best.x)
-    _, (w, w2, c) = solve(eps0)
-    fit = SheetFit(float(w), float(w2), float(c), eps0, 0.0, 0.0, len(presses))
+    _, (w, w2, b, a, c) = solve(eps0)
+    fit = SheetFit(float(w), float(w2), float(b), float(a), float(c), eps0, 0.0, 0.0, len(presses))
     med, rms = model_error(fit.material(base), presses)
     return replace(fit, median_pct=med, rms_pct=rms)
 

@@ -256,8 +256,8 @@ def sheet_main(argv: list[str] | None = None) -> int:
         os.makedirs(a.out, exist_ok=True)
         calib = _load_out(a.out)
         calib.sheet = P.sheet_entry(readings, plan, source.label)
-        doc = {"fit": {k: getattr(calib.sheet, k) for k in ("contact_width", "contact_growth", "stretching",
-                                                            "strain_offset")},
+        doc = {"fit": {k: getattr(calib.sheet, k) for k in ("contact_width", "contact_growth", "own_stiffness",
+                                                            "own_growth", "stretching", "strain_offset")},
                "residuals": calib.sheet.provenance.residuals, "source": source.label,
                "readings": [r.__dict__ for r in readings]}
         if truth is not None:               # scored against the hidden truth only now, the fit being fixed

@@ -18,11 +18,14 @@ Model (the cheapest that captures the paper's Fig. 1 mechanism, "bias tension va
   stiffening at depths ≳ 5 % of a is neglected, and the sheet's bending stiffness
   D = E t³ / 12(1 − ν²) ≈ 2.7·10⁻⁴ N·m is negligible against T·a² at ε ≥ 1 %).
 * Identified from pushes (:mod:`flexsheet.calibration.sheet`, ``flexsheet calibrate sheet``): a probe pressed
-  to depth d at several points and stretches gives the force F = T(ε + ε₀)·g·(w·d + w₂·d²) + c·d³, with
-  g = 1/a + 1/b, the sheet's own strain offset ε₀ (pre-strain less grip slip), the band's growth with depth
-  w₂ (the contact widens as the finger sinks in) and the membrane's stretching c (N/m³, large-deflection
-  stiffening, independent of the pre-tension). The stiffness the finger feels at depth d is its slope,
-  k = T(ε + ε₀)·g·(w + 2 w₂ d) + 3 c d². The defaults (w₂ = c = ε₀ = 0) are the string band above.
+  to depth d at several points and stretches gives the force
+  F = g·[T(ε + ε₀)·(w·d + w₂·d²) + b·d + a·d²] + c·d³, with g = 1/a + 1/b, the sheet's own strain offset ε₀
+  (pre-strain less grip slip), the band's growth with depth w₂ (the contact widens as the finger sinks in),
+  the sheet's own stiffness b (N) and its growth a (N/m), which do not scale with the pull (a gripped sheet
+  is stiffer at low tension than a string band: measured 0.063 against 0.038 of T·g·d at 3 mm, 24 and 235 N/m),
+  and the membrane's stretching c (N/m³, large-deflection stiffening). The stiffness the finger feels at depth
+  d is its slope, k = g·[T·(w + 2 w₂ d) + b + 2 a d] + 3 c d². The defaults (w₂ = b = a = c = ε₀ = 0) are the
+  string band above.
 * The inverse (requested stiffness → stretch) is solved by safeguarded Newton on λ (k is monotone in λ).
   Stretch is clamped to [``min_stretch``, ``max_stretch``] and the clamp force to ``max_force``; when the
   object is stiffer than the sheet can present, the result says so (``saturated=True``).
@@ -60,8 +63,8 @@ URETHANE_E = gent_modulus(50.0)
 @dataclass(frozen=True)
 class SheetMaterial:
     """The sheet and its limits. ``young`` Pa; ``thickness``, ``size`` (side, unstretched), ``contact_width`` m;
-    ``contact_growth`` w₂ (dimensionless), ``stretching`` c (N/m³) and ``strain_offset`` ε₀: the identified
-    terms of the module doc (0: the string band); ``min_stretch``/``max_stretch`` engineering strain between
+    ``contact_growth`` w₂ (dimensionless), ``own_stiffness`` b (N), ``own_growth`` a (N/m), ``stretching`` c
+    (N/m³) and ``strain_offset`` ε₀: the identified terms of the module doc (0: the string band); ``min_stretch``/``max_stretch`` engineering strain between
     the clamps; ``max_force`` N per clamp (arm pull limit).
 
     Defaults: paper §IV sheet; E per :data:`URETHANE_E`; max stretch 0.30 (well inside urethane's
@@ -75,6 +78,8 @@ class SheetMaterial:
     size: float = geometry.SHEET_SIZE
     contact_width: float = 0.020
     contact_growth: float = 0.0
+    own_stiffness: float = 0.0
+    own_growth: float = 0.0
     stretching: float = 0.0
     strain_offset: float = 0.0
     min_stretch: float = 0.01
@@ -86,7 +91,7 @@ class SheetMaterial:
             check_positive(name, getattr(self, name))
         if not (0.0 <= self.min_stretch < self.max_stretch):
             raise ValueError(f"min_stretch must be in [0, max_stretch), got {self.min_stretch!r}")
-        for name in ("contact_growth", "stretching"):
+        for name in ("contact_growth", "own_stiffness", "own_growth", "stretching"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):
                 raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
@@ -125,24 +130,27 @@ def contact_geometry(stretch: float, mat: SheetMaterial, offset_u: float = 0.0) 
 
 def stiffness(stretch: float, mat: SheetMaterial, offset_u: float = 0.0, depth: float = 0.0) -> float:
     """Normal stiffness k (N/m) the finger feels at a contact ``offset_u`` m from the sheet centre along axis_u
-    (current length), pushed ``depth`` m deep: k = T·g·(w + 2 w₂ d) + 3 c d² (module doc; the string band
-    T·w·(1/a + 1/b) with the default material). Raises ``ValueError`` when the contact is not strictly between
-    the clamps or the depth is negative."""
+    (current length), pushed ``depth`` m deep: k = g·[T·(w + 2 w₂ d) + b + 2 a d] + 3 c d² (module doc; the
+    string band T·w·(1/a + 1/b) with the default material). Raises ``ValueError`` when the contact is not
+    strictly between the clamps or the depth is negative."""
     if not (math.isfinite(depth) and depth >= 0.0):
         raise ValueError(f"depth must be finite and >= 0, got {depth!r}")
     g = contact_geometry(stretch, mat, offset_u)
-    return (tension(stretch, mat) * g * (mat.contact_width + 2.0 * mat.contact_growth * depth)
+    return (g * (tension(stretch, mat) * (mat.contact_width + 2.0 * mat.contact_growth * depth)
+                 + mat.own_stiffness + 2.0 * mat.own_growth * depth)
             + 3.0 * mat.stretching * depth * depth)
 
 
 def press_force(stretch: float, mat: SheetMaterial, offset_u: float, depth: float) -> float:
-    """Force (N) of a press ``depth`` m deep at ``offset_u``: F = T·g·(w d + w₂ d²) + c d³ (module doc), the
-    integral of :func:`stiffness` over the depth. Raises ``ValueError`` as :func:`stiffness`."""
+    """Force (N) of a press ``depth`` m deep at ``offset_u``: F = g·[T·(w d + w₂ d²) + b d + a d²] + c d³
+    (module doc), the integral of :func:`stiffness` over the depth. Raises ``ValueError`` as :func:`stiffness`."""
     if not (math.isfinite(depth) and depth >= 0.0):
         raise ValueError(f"depth must be finite and >= 0, got {depth!r}")
     g = contact_geometry(stretch, mat, offset_u)
-    return (tension(stretch, mat) * g * (mat.contact_width * depth + mat.contact_growth * depth * depth)
-            + mat.stretching * depth ** 3)
+    d = depth
+    return (g * (tension(stretch, mat) * (mat.contact_width * d + mat.contact_growth * d * d)
+                 + mat.own_stiffness * d + mat.own_growth * d * d)
+            + mat.stretching * d ** 3)
 
 
 @dataclass(frozen=True, slots=True)

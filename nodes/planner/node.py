@@ -183,10 +183,12 @@ class PlannerNode(Node):
         self._scene_key = self.scene.key() if self.scene is not None else None
         cfg = p.planner_config()
         m = cfg.material
-        self.log.info("sheet model: %s (w %.1f mm, growth %.2f, stretching %.3g N/m³, strain offset %+.4f)",
-                      "identified from presses (display_calib sheet)" if m.stretching or m.contact_growth
+        identified = any((m.contact_growth, m.own_stiffness, m.own_growth, m.stretching, m.strain_offset))
+        self.log.info("sheet model: %s (w %.1f mm, growth %.2f, own %.3g N + %.3g N/m, stretching %.3g N/m³, "
+                      "strain offset %+.4f)", "identified from presses (display_calib sheet)" if identified
                       else "the nominal string band (no identified sheet in display_calib)",
-                      m.contact_width * 1e3, m.contact_growth, m.stretching, m.strain_offset)
+                      m.contact_width * 1e3, m.contact_growth, m.own_stiffness, m.own_growth, m.stretching,
+                      m.strain_offset)
         self.guard = HeadGuard(KeepOut(head_radius=p.head_radius, margin=p.keepout_margin), cfg.material.size)
         self.planner = SurfacePlanner(shape, cfg, compliance, self.guard)
         self._k_fem: float | None = None

@@ -86,8 +86,9 @@ def test_sim_launch_on_the_sphere_scene_reports_the_scene_and_dtheta(tmp_path):
 @pytest.mark.flaky(reruns=1)
 def test_sim_launch_on_the_organ_shows_the_fem_stiffness_peak_over_the_inclusion_in_the_tension(tmp_path):
     """Palpation along the organ: a 3 mm stroke (the default 0.5 mm stroking contact feels the 8 mm-deep
-    tumour by only ~5 %, within the FEM mesh's scatter) and the sheet asked for 0.3 x the organ's stiffness
-    (it can present at most ~55 N/m; the organ is ~130 N/m at 3 mm)."""
+    tumour by only ~5 %, within the FEM mesh's scatter) and the sheet asked for 0.5 x the organ's stiffness
+    (the identified sheet presents ~37-90 N/m at 3 mm, from its least stretch to the arms' pull limit; the organ
+    is ~100-130 N/m at 3 mm)."""
     from flexsheet.model.scenes import load_scene
 
     sc = load_scene(ROOT / "launch" / "scenes" / "organ.yaml")
@@ -95,7 +96,7 @@ def test_sim_launch_on_the_organ_shows_the_fem_stiffness_peak_over_the_inclusion
     res = subprocess.run([sys.executable, "-m", "flexsheet", "launch", "launch/sim.yaml", "--set",
                           "scene=launch/scenes/organ.yaml", "--set",
                           "world.script=[{mode: stroke, moving_time: 10, depth: 0.003}]",
-                          "--set", "planner.stiffness_scale=0.3", "--duration", "60", "--out", str(tmp_path)],
+                          "--set", "planner.stiffness_scale=0.5", "--duration", "60", "--out", str(tmp_path)],
                          cwd=ROOT, capture_output=True, text=True, timeout=300)
     out = res.stdout + res.stderr
     assert (tmp_path / "summary.json").exists(), out[-6000:]
@@ -127,5 +128,5 @@ def test_sim_launch_on_the_organ_shows_the_fem_stiffness_peak_over_the_inclusion
     tg = [m for m in _bag(tmp_path / "sim.mcap", "/sheet/target") if m.touching and not m.status.startswith("hold")]
     t_over, t_away = over_away([m.contact_point[1] for m in tg], [m.tension for m in tg])
     # the tension follows the stiffness through the arms' response, which lags it by a few mm of stroke:
-    # measured 141 vs 120 N/m (+18 %) and 133 vs 124 N/m (+7.5 %) in two runs
+    # measured 19.1 vs 16.5 N/m (+16 %; the identified sheet carries much of the force itself at low tension)
     assert t_over > 1.05 * t_away, (t_over, t_away)

@@ -14,11 +14,14 @@ from flexsheet.model.tension import SheetMaterial, press_force, stiffness
 def test_fit_recovers_the_model_that_made_the_presses():
     rng = np.random.default_rng(3)
     truth = SheetMaterial(contact_width=float(rng.uniform(0.015, 0.03)), contact_growth=float(rng.uniform(0.5, 4)),
+                          own_stiffness=float(rng.uniform(0.1, 1.0)), own_growth=float(rng.uniform(50, 500)),
                           stretching=float(rng.uniform(5e3, 4e4)), strain_offset=float(rng.uniform(-0.005, 0.02)))
     presses = [Press(s, u, v, d, press_force(s, truth, u, d)) for s, u, v, ds in plan_presses() for d in ds]
     fit = fit_sheet(presses)
     assert fit.contact_width == pytest.approx(truth.contact_width, rel=1e-3)
     assert fit.contact_growth == pytest.approx(truth.contact_growth, rel=1e-2)
+    assert fit.own_stiffness == pytest.approx(truth.own_stiffness, rel=2e-2)
+    assert fit.own_growth == pytest.approx(truth.own_growth, rel=2e-2)
     assert fit.stretching == pytest.approx(truth.stretching, rel=1e-2)
     assert fit.strain_offset == pytest.approx(truth.strain_offset, abs=1e-4)
     assert fit.median_pct < 0.1 and fit.n == len(presses)
