@@ -246,14 +246,10 @@ class SheetEntry:
 
     def material(self, base=None):
         """``base`` (a :class:`~flexsheet.model.tension.SheetMaterial`, default the nominal one) with these
-        terms."""
-        from dataclasses import replace
+        terms (:func:`flexsheet.calibration.sheet.with_terms`)."""
+        from flexsheet.calibration.sheet import with_terms
 
-        from flexsheet.model.tension import SheetMaterial
-
-        return replace(base or SheetMaterial(), contact_width=self.contact_width, contact_growth=self.contact_growth,
-                       own_stiffness=self.own_stiffness, own_growth=self.own_growth, stretching=self.stretching,
-                       strain_offset=self.strain_offset)
+        return with_terms(self, base)
 
 
 @dataclass

@@ -22,6 +22,7 @@ from flexsheet.calibration.display_calib import (
     Provenance,
     SheetEntry,
 )
+from flexsheet.calibration.sheet import TERMS
 from flexsheet.model.checks import check_pose
 from flexsheet.vision.calib_yaml import read_cv_yaml
 
@@ -29,10 +30,6 @@ __all__ = ["write_display_calib", "load_display_calib"]
 
 
 # ----------------------------------------------------------------------------------------------------- writing
-#: the sheet entry's numbers, in :class:`SheetEntry`'s order
-SHEET_TERMS = ("contact_width", "contact_growth", "own_stiffness", "own_growth", "stretching", "strain_offset")
-
-
 def _write_prov(fs: cv2.FileStorage, p: Provenance) -> None:
     fs.startWriteStruct("provenance", cv2.FileNode_MAP)
     fs.write("method", str(p.method))
@@ -116,7 +113,7 @@ def write_display_calib(path: str, calib: DisplayCalib) -> None:
             fs.endWriteStruct()
         if calib.sheet is not None:
             fs.startWriteStruct("sheet", cv2.FileNode_MAP)
-            for k in SHEET_TERMS:
+            for k in TERMS:
                 fs.write(k, float(getattr(calib.sheet, k)))
             _write_prov(fs, calib.sheet.provenance)
             fs.endWriteStruct()
@@ -277,7 +274,7 @@ def load_display_calib(path: str, require: tuple[str, ...] = ()) -> DisplayCalib
             _checked_pose(pre + "T_display_camera", mat(d, "T_display_camera", pre), path), _read_prov(d, pre, path))
     if "sheet" in doc:
         d = _get(doc, "sheet", "", path, dict)
-        out.sheet = SheetEntry(*(float(_get(d, k, "sheet.", path, float)) for k in SHEET_TERMS),
+        out.sheet = SheetEntry(*(float(_get(d, k, "sheet.", path, float)) for k in TERMS),
                                _read_prov(d, "sheet.", path))
     _validate(out, path)
     if require:

@@ -26,8 +26,8 @@ import numpy as np
 
 from flexsheet.model.tension import SheetMaterial, contact_geometry, press_force, tension
 
-__all__ = ["Press", "PRESS_STRETCHES", "PRESS_POINTS", "PRESS_DEPTHS", "plan_presses", "SheetFit", "fit_sheet",
-           "model_error"]
+__all__ = ["Press", "PRESS_STRETCHES", "PRESS_POINTS", "PRESS_DEPTHS", "plan_presses", "SheetFit", "TERMS",
+           "with_terms", "fit_sheet", "model_error"]
 
 #: clamp strains pressed at (on the true sheet's table nodes; the bridges' span band is 0.01–0.10)
 PRESS_STRETCHES = (0.01, 0.04, 0.08)
@@ -82,9 +82,18 @@ class SheetFit:
 
     def material(self, base: SheetMaterial | None = None) -> SheetMaterial:
         """``base`` (default the nominal :class:`SheetMaterial`) with the identified terms."""
-        return replace(base or SheetMaterial(), contact_width=self.contact_width,
-                       contact_growth=self.contact_growth, own_stiffness=self.own_stiffness,
-                       own_growth=self.own_growth, stretching=self.stretching, strain_offset=self.strain_offset)
+        return with_terms(self, base)
+
+
+#: the identified terms of :class:`~flexsheet.model.tension.SheetMaterial`, as the fit and ``display.yaml`` name them
+TERMS = ("contact_width", "contact_growth", "own_stiffness", "own_growth", "stretching", "strain_offset")
+
+
+def with_terms(src, base: SheetMaterial | None = None) -> SheetMaterial:
+    """``base`` (default the nominal :class:`SheetMaterial`) with the :data:`TERMS` of ``src`` (a
+    :class:`SheetFit` or a ``display.yaml`` sheet entry). Raises ``ValueError`` as :class:`SheetMaterial` does
+    for a term out of its range."""
+    return replace(base or SheetMaterial(), **{k: float(getattr(src, k)) for k in TERMS})
 
 
 def _columns(presses: list[Press], mat: SheetMaterial) -> np.ndarray:

@@ -236,7 +236,7 @@ def sheet_main(argv: list[str] | None = None) -> int:
         import csv
         import json
 
-        from flexsheet.calibration.sheet import plan_presses
+        from flexsheet.calibration.sheet import TERMS, plan_presses
         from flexsheet.calibration.sources import PressFileSource
 
         plan, truth = plan_presses(), None
@@ -256,8 +256,7 @@ def sheet_main(argv: list[str] | None = None) -> int:
         os.makedirs(a.out, exist_ok=True)
         calib = _load_out(a.out)
         calib.sheet = P.sheet_entry(readings, plan, source.label)
-        doc = {"fit": {k: getattr(calib.sheet, k) for k in ("contact_width", "contact_growth", "own_stiffness",
-                                                            "own_growth", "stretching", "strain_offset")},
+        doc = {"fit": {k: getattr(calib.sheet, k) for k in TERMS},
                "residuals": calib.sheet.provenance.residuals, "source": source.label,
                "readings": [r.__dict__ for r in readings]}
         if truth is not None:               # scored against the hidden truth only now, the fit being fixed
