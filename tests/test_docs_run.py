@@ -284,6 +284,11 @@ CHEAP: dict[str, tuple[str, str]] = {
     "flexsheet calibrate display --sim --truth-seed 1 --quick --out /tmp/disp1": (P, "the twin's registration: ~1 min"),
     "flexsheet calibrate display --sweep --seeds 1,2,3 --out docs/figures/calibration": (P, LONG),
     "flexsheet calibrate display --draws 40 --out docs/figures/calibration/draws": (P, LONG),
+    # the sandbox's docs/figures starts empty: the committed readings are written there first (seed 0: ~1 s)
+    "flexsheet calibrate sheet --presses docs/figures/calibration/sheet/presses.csv --out /tmp/disp": (
+        "flexsheet calibrate sheet --sim --truth-seed 0 --out docs/figures/calibration/sheet && "
+        "flexsheet calibrate sheet --presses docs/figures/calibration/sheet/presses.csv --out /tmp/disp",
+        "writes the readings it reads first"),
     "flexsheet calibrate camera-pose --sim --truth-seed 1 --quick --out /tmp/disp": (P, "renders and fits 12+ views"),
     "flexsheet calibrate projector --sim --truth-seed 1 --quick --out /tmp/disp": (P, "renders 4 x 42 patterns"),
     "flexsheet calibrate arms --sim --truth-seed 1 --quick --out /tmp/disp": (P, "renders 2 x 12 configurations"),
