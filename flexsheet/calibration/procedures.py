@@ -208,7 +208,7 @@ def sheet_entry(presses: list, plan: list, label: str):
     """The sheet's entry fitted to ``presses`` (:class:`~flexsheet.calibration.sheet.Press` readings) taken on
     ``plan`` by the source ``label``. Raises ``ValueError`` as :func:`~flexsheet.calibration.sheet.fit_sheet`."""
     from flexsheet.calibration.display_calib import SheetEntry
-    from flexsheet.calibration.sheet import fit_sheet
+    from flexsheet.calibration.sheet import TERMS, fit_sheet
 
     fit = fit_sheet(presses)
     log.info(f"sheet: {len(presses)} readings at {len(plan)} presses: w {fit.contact_width * 1e3:.1f} mm, "
@@ -219,8 +219,7 @@ def sheet_entry(presses: list, plan: list, label: str):
                       f"{sorted({s for s, _, _, _ in plan})}, F = g [T (w d + w2 d^2) + b d + a d^2] + c d^3 fitted",
                       source=label, n_poses=len(plan),
                       residuals={"median_pct": fit.median_pct, "rms_pct": fit.rms_pct})
-    return SheetEntry(fit.contact_width, fit.contact_growth, fit.own_stiffness, fit.own_growth, fit.stretching,
-                      fit.strain_offset, prov)
+    return SheetEntry(**{k: getattr(fit, k) for k in TERMS}, provenance=prov)
 
 
 def run_head_camera(source):

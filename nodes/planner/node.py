@@ -41,6 +41,7 @@ from dataclasses import replace
 import numpy as np
 from pydantic import Field
 
+from flexsheet.calibration.sheet import TERMS
 from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
 from flexsheet.model.shapes import make_shape
 from flexsheet.model.sheet import clamp_poses
@@ -183,7 +184,8 @@ class PlannerNode(Node):
         self._scene_key = self.scene.key() if self.scene is not None else None
         cfg = p.planner_config()
         m = cfg.material
-        identified = any((m.contact_growth, m.own_stiffness, m.own_growth, m.stretching, m.strain_offset))
+        params = build(SheetMaterial, p, rename=_MATERIAL)
+        identified = any(getattr(m, k) != getattr(params, k) for k in TERMS)
         self.log.info("sheet model: %s (w %.1f mm, growth %.2f, own %.3g N + %.3g N/m, stretching %.3g N/m³, "
                       "strain offset %+.4f)", "identified from presses (display_calib sheet)" if identified
                       else "the nominal string band (no identified sheet in display_calib)",
@@ -204,6 +206,7 @@ class PlannerNode(Node):
         self.subscribe(topics.DEFORMATION, self.on_deformation, qos=QoS.LATEST)
         self.subscribe(topics.EYE_POSE, self.on_eye_pose, qos=QoS.LATEST)
         self.pull_guard = PullGuard({"left": cfg.reach.left_base, "right": cfg.reach.right_base}, p.pull_margin)
+        self._pull_said: tuple[int, float] | None = None     # (joint, limit N) last said
         self._cap_pull(*clamp_poses(np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]),
                                     cfg.material.min_stretch, cfg.material.size))        # the sheet's home pose
 
@@ -213,7 +216,7 @@ class PlannerNode(Node):
         limit = self.pull_guard.limit(T_left, T_right)
         self.planner.set_pull_limit(limit)
         side, joint, _ = self.pull_guard.limiting()
-        said = getattr(self, "_pull_said", None)
+        said = self._pull_said
         if limit is not None and (said is None or said[0] != joint or abs(limit - said[1]) > 0.1 * said[1]):
             self._pull_said = (joint, limit)
             self.log.info("clamp force limited to %.1f N by the %s arm's J%d torque at its target "
