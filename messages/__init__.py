@@ -3,7 +3,7 @@
 from messages.arm import ArmJointState
 from messages.common import DISPLAY_FRAME, Header, Message, check_finite, ndarray
 from messages.diagnostics import Heartbeat, TopicStats
-from messages.fem import ObjectDeformation
+from messages.fem import ObjectDeformation, ObjectForceDepth
 from messages.render import ProjectorImage, RenderedFrame
 from messages.surface import ArmTarget, SheetTarget
 from messages.topics import Topic
@@ -13,9 +13,9 @@ from messages.world import ContactTruth, FingerTruth, HeadTruth, SheetState
 MESSAGE_TYPES: dict[str, type[Message]] = {
     cls.SCHEMA: cls
     for cls in (StereoFrame, StereoCalibration, Fingertip, SheetTarget, ArmTarget, ArmJointState,
-                ObjectDeformation, RenderedFrame, ProjectorImage, FingerTruth, SheetState, Heartbeat, EyePose, HeadTruth, ContactTruth)
+                ObjectDeformation, ObjectForceDepth, RenderedFrame, ProjectorImage, FingerTruth, SheetState, Heartbeat, EyePose, HeadTruth, ContactTruth)
 }
 
 __all__ = ["ArmJointState", "ArmTarget", "ContactTruth", "DISPLAY_FRAME", "EyePose", "Fingertip", "FingerTruth", "HeadTruth", "Header", "Heartbeat",
-           "MESSAGE_TYPES", "Message", "ObjectDeformation", "ProjectorImage", "RenderedFrame", "SheetState", "SheetTarget",
+           "MESSAGE_TYPES", "Message", "ObjectDeformation", "ObjectForceDepth", "ProjectorImage", "RenderedFrame", "SheetState", "SheetTarget",
            "StereoCalibration", "StereoFrame", "Topic", "TopicStats", "check_finite", "ndarray"]

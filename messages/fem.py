@@ -6,7 +6,7 @@ from pydantic import Field
 
 from messages.common import Message, ndarray
 
-__all__ = ["ObjectDeformation"]
+__all__ = ["ObjectDeformation", "ObjectForceDepth"]
 
 
 class ObjectDeformation(Message):
@@ -39,3 +39,26 @@ class ObjectDeformation(Message):
     valid: bool = Field(default=True, description="False: do not draw as deformed")
     source_stamp: float = Field(default=0.0, description="exposure stamp of the source fingertip, s")
     scene_key: str = Field(default="", description="Scene.key() of the object solved; \"\" = unknown")
+
+
+class ObjectForceDepth(Message):
+    """What the object asks the finger to feel, from the FEM model that deforms its image
+    (:mod:`flexsheet.fem.force_depth`; :class:`flexsheet.model.force_depth.ForceDepth`). Latched; published once
+    the FEM node's model is ready.
+
+    ``points`` (P, 3) m, display frame: undeformed surface points along the scene's stroke (the first is the
+    scene's ``reference``); ``normals`` (P, 3): their outward unit normals; ``names`` (P,); ``depths`` (D,) m
+    ascending from 0; ``force`` (P, D) N: the contact force for a fingertip pushed that deep along −normal;
+    ``scene_key``: the :meth:`flexsheet.model.scenes.Scene.key` of the object; ``method``: the model pushed.
+    """
+
+    SCHEMA = "flexsheet/ObjectForceDepth"
+    VERSION = 1
+
+    points: ndarray("float64", (None, 3), "surface points along the stroke, m, display frame")
+    normals: ndarray("float64", (None, 3), "outward unit normals")
+    names: list[str] = Field(description="point names; the first is 'reference'")
+    depths: ndarray("float64", (None,), "push depths, m, ascending from 0")
+    force: ndarray("float64", (None, None), "contact force per point and depth, N")
+    scene_key: str = Field(default="", description="Scene.key() of the object")
+    method: str = Field(default="", description="the FEM model pushed")

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from messages.arm import ArmJointState
 from messages.common import Message
 from messages.diagnostics import Heartbeat
-from messages.fem import ObjectDeformation
+from messages.fem import ObjectDeformation, ObjectForceDepth
 from messages.render import ProjectorImage, RenderedFrame
 from messages.surface import ArmTarget, SheetTarget
 from messages.vision import EyePose, Fingertip, StereoCalibration, StereoFrame
@@ -45,6 +45,8 @@ ARM_RIGHT_TARGET = Topic("/arm/right/target", ArmTarget, nominal_hz=48.0)
 ARM_LEFT_STATE = Topic("/arm/left/joint_state", ArmJointState, nominal_hz=140.0)
 ARM_RIGHT_STATE = Topic("/arm/right/joint_state", ArmJointState, nominal_hz=140.0)
 DEFORMATION = Topic("/object/deformation", ObjectDeformation, nominal_hz=48.0)
+#: the object's force-depth along its stroke (what the finger is asked to feel), latched
+FORCE_DEPTH = Topic("/object/force_depth", ObjectForceDepth, latched=True)
 RENDERED = Topic("/render/stereo", RenderedFrame, nominal_hz=10.0)
 #: what the projector shows instead of the scene (registration patterns), latched
 PROJECTOR_IMAGE = Topic("/projector/image", ProjectorImage, latched=True)
@@ -56,7 +58,7 @@ DIAGNOSTICS = Topic("/diagnostics", Heartbeat, nominal_hz=1.0)
 
 ALL = [STEREO, STEREO_PREVIEW, CALIBRATION, FINGERTIP, SHEET_TARGET, ARM_LEFT_TARGET, ARM_RIGHT_TARGET, ARM_LEFT_STATE,
        ARM_RIGHT_STATE, DEFORMATION, RENDERED, PROJECTOR_IMAGE, FINGER_TRUTH, SHEET_STATE, DIAGNOSTICS, EYE_POSE,
-       HEAD_TRUTH, CONTACT_TRUTH]
+       HEAD_TRUTH, CONTACT_TRUTH, FORCE_DEPTH]
 BY_NAME = {t.name: t for t in ALL}
 
 

@@ -1,30 +1,22 @@
-"""``flexsheet experiment compliance --out DIR``: the stiffness the sheet can present, the scene's mapped into
-it, and whether a palpating finger can still feel the organ's tumour.
+"""``flexsheet experiment compliance --scene FILE --out DIR``: what the object asks the finger to feel, from its
+own FEM, and how it maps into what the sheet can present.
 
-1. **The presentable range** at the sheet's centre (:mod:`flexsheet.model.tension`: k = T·w·(1/a + 1/b)), between
-   the least stretch (1 %) and the first of two limits:
+1. **The object's force–depth** (:func:`flexsheet.fem.force_depth.build_force_depth`): the FEM model the node
+   serves, pushed along the inward normal at points along the stroke (the first, its start, is ``reference``:
+   the sphere's crown). Checked against Hertz's closed form at 1–3 mm where it applies (a smooth convex body
+   without inclusions: the cylinder and the sphere). Written to ``DIR/force_depth.json``.
+2. **The presentable range** at the sheet's centre: the sheet model's force (``--sheet``: a ``sheet.json`` from
+   ``flexsheet calibrate sheet``; default the nominal string band) at its least stretch and at the largest the
+   arms allow at the home pose (``pull_margin`` 0.9 × the torque-limited pull,
+   :mod:`flexsheet.arm.pull_limit`, and the 30 % strain).
+3. **The mapping** (:func:`flexsheet.model.force_depth.scene_scale`): one scale per scene, the geometric centre
+   of the scales that keep every point's force over 2 mm to twice the stroke depth inside the range; every ratio
+   of two forces is kept. With ``--contrast-gain`` γ > 1 the request is s·F_ref·(F/F_ref)^γ.
+4. **Contrast**: per point, its force over the median point's at the same depth, less 1, as asked and as
+   presented (mapped and clipped to the range), against the Weber fraction (15 %, Bergmann Tiest & Kappers 2009).
 
-   * **what the arms can pull**: the RV-1A's rated payload, 1 kg (Mitsubishi BFP-A8050), taken as the static
-     pull each arm guarantees at its clamp, 9.81 N. *Assumption*: the allowable wrist moments and joint torques
-     at the pose (which may allow more where the pull passes near the joint axes) are not in the sources
-     available here; the planner's own default, 40 N, is an older unsourced assumption and is shown beside it;
-   * **the urethane sheet's strain**: 30 % (:class:`~flexsheet.model.tension.SheetMaterial` ``max_stretch``: the
-     range where the neo-Hookean law fits rubber within ~10 %, Treloar 1975; far inside a urethane's elongation
-     at break, > 300 %, an assumption for the paper's unnamed grade).
-
-2. **The mapping**: one scale s for the scene, the largest stiffness the sheet can present over the largest the
-   scene asks for along its stroke at its stroke depth (``use.stroke_depth``), so that every ratio of two
-   stiffnesses, which is what a palpating finger compares, is kept; below the range's floor the sheet presents
-   its floor (reported). The smallest stiffness difference a finger notices: a Weber fraction of 23 % (L. A.
-   Jones and I. W. Hunter, "A perceptual analysis of stiffness", Exp. Brain Res. 79:150–156, 1990).
-
-3. **What is presented**: along a push at the tumour's place on the stroke and at the median away from it, the
-   requested force–depth curve (the scene's stiffness estimate, :class:`flexsheet.planning.compliance.SceneCompliance`,
-   integrated over depth, times s) against the presented one (the sheet's stiffness within its range,
-   integrated); and the tumour's contrast (its stiffness over the same place without it, less 1) as asked and
-   as presented, against the Weber fraction, at each depth.
-
-Writes ``DIR/compliance.json`` and ``DIR/compliance.png``. Units: N, m, N/m in the JSON (mm in the chart).
+Writes ``DIR/force_depth.json``, ``DIR/compliance.json`` and ``DIR/compliance.png``. Units: N, m in the JSON
+(mm in the chart).
 """
 
 from __future__ import annotations
@@ -32,138 +24,145 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import replace
+import time
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["ARM_PULL_N", "WEBER", "presentable_range", "run", "main"]
+__all__ = ["WEBER", "presentable_range", "run", "main"]
 
-ARM_PULL_N = 1.0 * 9.81        #: the RV-1A's rated payload (1 kg) as the static pull per clamp, N (assumption above)
-WEBER = 0.23                   #: Weber fraction for stiffness (Jones & Hunter 1990)
-DEPTHS_MM = (0.5, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0)
+WEBER = 0.15                   #: Weber fraction for force/stiffness with the surface cue (Bergmann Tiest & Kappers 2009)
+PULL_MARGIN = 0.9              #: the planner's default share of the torque-limited pull
+FORCE_DEPTH = 0.002            #: the planner matches force from this depth (m)
 
 
-def presentable_range(arm_pull: float = ARM_PULL_N) -> dict:
-    """The sheet's stiffness at its centre (N/m) at the least stretch and at each limit; the presentable range is
-    the least stretch up to the first limit reached. Returns stretches, clamp forces and stiffnesses."""
-    from flexsheet.model.tension import SheetMaterial, clamp_force, max_stretch_within_force, stiffness
+def presentable_range(sheet_file: str | None = None) -> dict:
+    """The sheet at its centre: ``material`` (the model used), ``min_stretch``, ``max_stretch`` (the first of
+    :data:`PULL_MARGIN` × the arms' torque-limited pull at the home pose and the strain limit), ``pull_n`` (that
+    pull, N), ``limited_by`` ("arm_torque" or "strain"), ``source``. Raises ``ValueError`` for an unreadable
+    ``sheet_file``."""
+    from dataclasses import replace
+
+    from flexsheet.calibration.sheet import TERMS, with_terms
+    from flexsheet.model import geometry
+    from flexsheet.model.sheet import clamp_poses
+    from flexsheet.model.tension import SheetMaterial, clamp_force, max_stretch_within_force
+    from flexsheet.planning.pull_guard import PullGuard
 
     mat = SheetMaterial()
-    rows = {}
-    for name, m in (("arm_pull", replace(mat, max_force=arm_pull, max_stretch=10.0)),
-                    ("strain", replace(mat, max_force=1e9)),
-                    ("planner_default", mat)):
-        eps = max_stretch_within_force(m)
-        rows[name] = {"stretch": eps, "clamp_force_N": clamp_force(eps, mat), "k_n_per_m": stiffness(eps, mat)}
-    eps_max = min(rows["arm_pull"]["stretch"], rows["strain"]["stretch"])
-    return {"k_min_n_per_m": stiffness(mat.min_stretch, mat), "min_stretch": mat.min_stretch,
-            "k_max_n_per_m": stiffness(eps_max, mat), "max_stretch": eps_max,
-            "limited_by": "arm_pull" if rows["arm_pull"]["stretch"] <= rows["strain"]["stretch"] else "strain",
-            "limits": rows, "arm_pull_N": arm_pull}
+    source = "nominal string band (no identified sheet)"
+    if sheet_file:
+        try:
+            fit = json.loads(Path(sheet_file).read_text())["fit"]
+            mat = with_terms(type("Fit", (), {k: fit[k] for k in TERMS})(), mat)
+        except (OSError, KeyError, ValueError, TypeError) as exc:
+            raise ValueError(f"--sheet {sheet_file}: not a sheet.json of flexsheet calibrate sheet ({exc})") from None
+        source = f"identified ({sheet_file})"
+    guard = PullGuard({"left": geometry.LEFT_BASE, "right": geometry.RIGHT_BASE}, PULL_MARGIN)
+    Tl, Tr = clamp_poses(np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), mat.min_stretch, mat.size)
+    pull = guard.limit(Tl, Tr)
+    capped = replace(mat, max_force=min(mat.max_force, pull)) if pull is not None else mat
+    e_max = max_stretch_within_force(capped)
+    strain_first = e_max >= mat.max_stretch - 1e-12
+    return {"material": {k: getattr(mat, k) for k in TERMS}, "min_stretch": mat.min_stretch, "max_stretch": e_max,
+            "pull_n": pull, "clamp_force_at_max_n": clamp_force(e_max, mat),
+            "limited_by": "strain" if strain_first else "arm_torque", "source": source,
+            "_mat": mat}
 
 
-def run(out: Path, scene_file: str, arm_pull: float = ARM_PULL_N) -> dict:
-    """Items 1–3 of the module doc for ``scene_file``; writes and returns ``compliance.json``."""
-    from flexsheet.experiments.scenes import stiffness_along_path
+def run(out: Path, scene_file: str, sheet_file: str | None = None, gain: float = 1.0) -> dict:
+    """Items 1–4 of the module doc; writes and returns ``compliance.json`` (and ``force_depth.json``)."""
+    from flexsheet.fem.force_depth import build_force_depth, hertz_check
+    from flexsheet.fem.served import served_model
+    from flexsheet.model.force_depth import scene_scale
     from flexsheet.model.scenes import load_scene
-    from flexsheet.planning.compliance import SceneCompliance
+    from flexsheet.model.tension import press_force
 
     sc = load_scene(scene_file)
-    rng = presentable_range(arm_pull)
-    d_stroke = sc.use.stroke_depth * 1e3
-    along = stiffness_along_path(sc, depths_mm=tuple(sorted(set(DEPTHS_MM) | {d_stroke})))
-    k_stroke = np.asarray(along["k"][f"{d_stroke:g}"])
-    s = rng["k_max_n_per_m"] / float(k_stroke.max())
-    arc = np.asarray(along["arc_mm"])
-    C = SceneCompliance(sc)
-    f = np.linspace(0.0, 1.0, len(arc))
-    P, N = sc.stroke_at(f)
-    if sc.inclusions:
-        i_t = int(np.argmax(k_stroke / np.asarray(along["k_body"][f"{d_stroke:g}"])))
-    else:
-        i_t = int(np.argmax(k_stroke))
-    away = np.abs(arc - arc[i_t]) > 20.0
-    i_a = int(np.flatnonzero(away)[np.argsort(k_stroke[away])[len(np.flatnonzero(away)) // 2]]) if away.any() else 0
-    depths = np.linspace(0.0005, sc.use.stroke_depth, 40)
-
-    def curve(i: int) -> dict:
-        k = np.array([C.estimate(P[i], N[i], d).k for d in depths])
-        k_pres = np.clip(s * k, rng["k_min_n_per_m"], rng["k_max_n_per_m"])
-        F_req = np.concatenate([[0.0], np.cumsum(0.5 * (k[1:] + k[:-1]) * np.diff(depths))])
-        F_pres = np.concatenate([[0.0], np.cumsum(0.5 * (k_pres[1:] + k_pres[:-1]) * np.diff(depths))])
-        return {"arc_mm": float(arc[i]), "depth_m": depths.tolist(), "k_requested_n_per_m": k.tolist(),
-                "k_presented_n_per_m": k_pres.tolist(), "force_requested_N": F_req.tolist(),
-                "force_requested_scaled_N": (s * F_req).tolist(), "force_presented_N": F_pres.tolist(),
-                "floor_share": float(np.mean(s * k < rng["k_min_n_per_m"]))}
-
-    push = {"tumour": curve(i_t), "away": curve(i_a)}
-    contrast = []
-    for d in DEPTHS_MM:
-        k = np.asarray(along["k"][f"{d:g}"])
-        kb = np.asarray(along["k_body"][f"{d:g}"])
-        asked = float(k[i_t] / kb[i_t] - 1.0)
-        kp, kpb = (float(np.clip(s * x, rng["k_min_n_per_m"], rng["k_max_n_per_m"])) for x in (k[i_t], kb[i_t]))
-        presented = kp / kpb - 1.0
-        contrast.append({"depth_mm": d, "asked": asked, "presented": presented,
-                         "felt": presented >= WEBER, "tumour_k_presented_n_per_m": kp})
-    res = {"title": f"{sc.name}: stiffness presented against requested", "scene": str(scene_file),
-           "units": {"stiffness": "N/m", "force": "N", "depth": "m"}, "range": rng,
-           "requested_along_stroke": {"depth_mm": d_stroke, "k_min_n_per_m": float(k_stroke.min()),
-                                      "k_max_n_per_m": float(k_stroke.max())},
-           "scale": s, "weber_fraction": WEBER, "push": push, "tumour_contrast": contrast,
-           "verdict": {"tumour_felt_at_depths_mm": [c["depth_mm"] for c in contrast if c["felt"]],
-                       "at_stroke_depth": next(c for c in contrast if c["depth_mm"] == d_stroke)["felt"]
-                       if d_stroke in DEPTHS_MM else None},
-           "sources": {"arm_pull": "RV-1A rated payload 1 kg (Mitsubishi BFP-A8050) as a static pull: assumption",
-                       "strain": "neo-Hookean fit range 30 % (Treloar 1975)",
-                       "weber": "Jones & Hunter, Exp. Brain Res. 79:150-156 (1990): 23 %"}}
+    rng = presentable_range(sheet_file)          # a bad --sheet fails before the FEM is built
+    mat = rng.pop("_mat")
     out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    model, what = served_model(sc)
+    table = build_force_depth(sc, model)
+    build_s = time.perf_counter() - t0
+    hz = hertz_check(sc, table)
+    fd = {"title": f"{sc.name}: force-depth along the stroke, from the served FEM", "scene": str(scene_file),
+          "model": what, "build_s": build_s, "units": {"position": "m", "depth": "m", "force": "N"},
+          **table.to_json(), "hertz_check": hz,
+          "verdict": ("no closed form applies (inclusions or not a cylinder or sphere)" if hz is None else
+                      ("met" if all(abs(r - 1.0) <= 0.15 for r in hz["ratio"]) else "MISSED")
+                      + ": within 15 % of Hertz at 1-3 mm")}
+    (out / "force_depth.json").write_text(json.dumps(fd, indent=1))
+    e_lo, e_hi = rng["min_stretch"], rng["max_stretch"]
+    d_hi = 2.0 * sc.use.stroke_depth
+    floor = lambda d: press_force(e_lo, mat, 0.0, d)        # noqa: E731
+    ceil = lambda d: press_force(e_hi, mat, 0.0, d)         # noqa: E731
+    ss = scene_scale(table, floor, ceil, FORCE_DEPTH, d_hi, gain)
+    depths = [d for d in table.depths if FORCE_DEPTH - 1e-12 <= d <= d_hi + 1e-12]
+    points = []
+    for name, p in zip(table.names, table.points, strict=True):
+        asked = [table.force_at(p, d) / table.reference_force(d) - 1.0 for d in depths]
+        req = [table.mapped(p, d, ss.scale, gain)[0] for d in depths]
+        pres = [float(np.clip(r, floor(d), ceil(d))) for r, d in zip(req, depths, strict=True)]
+        ref_pres = [float(np.clip(ss.scale * table.reference_force(d), floor(d), ceil(d))) for d in depths]
+        presented = [a / b - 1.0 if b > 0 else 0.0 for a, b in zip(pres, ref_pres, strict=True)]
+        points.append({"name": name, "position_m": p.tolist(), "force_n": [table.force_at(p, d) for d in depths],
+                       "requested_n": req, "presented_n": pres, "contrast_asked": asked,
+                       "contrast_presented": presented})
+    best = max(points, key=lambda x: float(np.median(x["contrast_asked"])))
+    res = {"title": f"{sc.name}: force presented against requested", "scene": str(scene_file),
+           "units": {"force": "N", "depth": "m"}, "depth_m": depths, "range": rng,
+           "floor_n": [floor(d) for d in depths], "ceiling_n": [ceil(d) for d in depths],
+           "scale": ss.scale, "scale_low": ss.low, "scale_high": ss.high, "fits": ss.fits,
+           "saturated": ss.saturated, "contrast_gain": gain, "weber_fraction": WEBER, "points": points,
+           "stiffest_point": {"name": best["name"], "contrast_asked_median": float(np.median(best["contrast_asked"])),
+                              "contrast_presented_median": float(np.median(best["contrast_presented"]))},
+           "target": "saturated <= 0.05 of the scene's samples; contrast above the Weber fraction is felt",
+           "verdict": "met" if ss.saturated <= 0.05 else "MISSED",
+           "sources": {"force": "the served FEM (flexsheet/fem/served.py), pushed along the normal",
+                       "pull": "flexsheet/arm/pull_limit.py (torque limits: assumptions, flagged there)",
+                       "weber": "Bergmann Tiest & Kappers, IEEE Trans. Haptics 2:189 (2009): 15 %"}}
     (out / "compliance.json").write_text(json.dumps(res, indent=1))
-    _chart(res, out / "compliance.png")
+    _chart(res, fd, out / "compliance.png")
     return res
 
 
-def _chart(res: dict, path: Path) -> None:
+def _chart(res: dict, fd: dict, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rng = res["range"]
     fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(15, 4.6))
-    names = ["least stretch (1 %)", "arm pull 9.81 N", "strain 30 %", "planner default 40 N"]
-    vals = [rng["k_min_n_per_m"], rng["limits"]["arm_pull"]["k_n_per_m"], rng["limits"]["strain"]["k_n_per_m"],
-            rng["limits"]["planner_default"]["k_n_per_m"]]
-    a1.bar(names, vals, color=["tab:gray", "tab:blue", "tab:orange", "tab:gray"])
-    req = res["requested_along_stroke"]
-    a1.axhspan(req["k_min_n_per_m"], req["k_max_n_per_m"], color="tab:red", alpha=0.15,
-               label=f"requested along the stroke at {req['depth_mm']:g} mm")
-    a1.set_yscale("log")
-    a1.set_ylabel("stiffness at the sheet's centre, N/m (log)")
-    a1.set_title(f"presentable: {rng['k_min_n_per_m']:.1f}-{rng['k_max_n_per_m']:.1f} N/m "
-                 f"(limited by {rng['limited_by']})", fontsize=9)
-    a1.tick_params(axis="x", labelsize=7, rotation=15)
-    a1.legend(fontsize=7)
-    for key, mk in (("tumour", "-"), ("away", "--")):
-        p = res["push"][key]
-        d = np.asarray(p["depth_m"]) * 1e3
-        a2.plot(d, p["force_requested_scaled_N"], "k" + mk, lw=0.9, label=f"requested × {res['scale']:.3f}, {key}")
-        a2.plot(d, p["force_presented_N"], "tab:blue", ls=mk, label=f"presented, {key}")
+    D = np.asarray(fd["points"][0]["depth_m"]) * 1e3
+    for p in fd["points"]:
+        a1.plot(D, p["force_n"], lw=0.6, color="tab:blue" if p["name"] != "reference" else "k")
+    h = fd.get("hertz_check")
+    if h:
+        a1.plot(np.asarray(h["depth_m"]) * 1e3, h["hertz_n"], "r^", label="Hertz (Johnson 1985)")
+        a1.legend(fontsize=7)
+    a1.set_xlim(0, min(D[-1], 4 * res["depth_m"][-1] * 1e3))
+    a1.set_xlabel("push depth, mm")
+    a1.set_ylabel("object's force, N")
+    a1.set_title(f"object's force-depth ({len(fd['points'])} points; reference in black): {fd['verdict']}", fontsize=8)
+    d = np.asarray(res["depth_m"]) * 1e3
+    a2.fill_between(d, res["floor_n"], res["ceiling_n"], color="tab:green", alpha=0.15,
+                    label=f"presentable ({res['range']['limited_by']})")
+    for p in res["points"]:
+        a2.plot(d, p["requested_n"], lw=0.6, color="tab:blue")
     a2.set_xlabel("push depth, mm")
-    a2.set_ylabel("force, N")
-    a2.set_title("force-depth along a push: presented against requested", fontsize=9)
+    a2.set_ylabel("force asked of the sheet, N")
+    a2.set_title(f"one scale {res['scale']:.3g} (fits {res['scale_low']:.3g}-{res['scale_high']:.3g}); saturated "
+                 f"{100 * res['saturated']:.1f} % (target <= 5 %): {res['verdict']}", fontsize=8)
     a2.legend(fontsize=7)
-    c = res["tumour_contrast"]
-    d = [x["depth_mm"] for x in c]
-    a3.plot(d, [100 * x["asked"] for x in c], "o-", label="asked by the scene")
-    a3.plot(d, [100 * x["presented"] for x in c], "s--", label="presented")
-    a3.axhline(100 * res["weber_fraction"], color="r", ls=":", label="Weber fraction 23 % (target)")
-    felt = res["verdict"]["tumour_felt_at_depths_mm"]
-    a3.set_title("tumour contrast: " + (f"felt at {felt} mm" if felt else "MISSED: below the Weber fraction at "
-                                       "every depth"), fontsize=9)
+    b = next(p for p in res["points"] if p["name"] == res["stiffest_point"]["name"])
+    a3.plot(d, 100 * np.asarray(b["contrast_asked"]), "o-", label="asked by the object")
+    a3.plot(d, 100 * np.asarray(b["contrast_presented"]), "s--", label=f"presented (contrast_gain {res['contrast_gain']:g})")
+    a3.axhline(100 * res["weber_fraction"], color="r", ls=":", label="Weber fraction 15 %")
     a3.set_xlabel("push depth, mm")
-    a3.set_ylabel("stiffness over the same place without it, %")
+    a3.set_ylabel("force over the median point's, %")
+    a3.set_title(f"contrast at the stiffest point ({b['name']})", fontsize=8)
     a3.legend(fontsize=7)
     fig.suptitle(res["title"], fontsize=10)
     fig.tight_layout()
@@ -174,19 +173,26 @@ def _chart(res: dict, path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="flexsheet experiment compliance", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
-                                 epilog="example: flexsheet experiment compliance --out docs/figures/compliance")
-    ap.add_argument("--out", required=True, help="output folder (compliance.json, compliance.png)")
+                                 epilog="example: flexsheet experiment compliance --scene launch/scenes/organ.yaml "
+                                        "--sheet docs/figures/calibration/sheet/sheet.json --out docs/figures/compliance")
+    ap.add_argument("--out", required=True, help="output folder (force_depth.json, compliance.json, compliance.png)")
     ap.add_argument("--scene", default="launch/scenes/organ.yaml", help="scene file (default: the organ)")
-    ap.add_argument("--arm-pull", type=float, default=ARM_PULL_N, help="static pull per clamp the arms allow, N "
-                    "(default %(default)s: the RV-1A's 1 kg payload)")
+    ap.add_argument("--sheet", default=None, help="sheet.json of `flexsheet calibrate sheet` (default: the nominal "
+                    "string band)")
+    ap.add_argument("--contrast-gain", type=float, default=1.0, help="γ of the mapping (default 1: faithful)")
     a = ap.parse_args(argv)
-    if not a.arm_pull > 0:
-        ap.error(f"--arm-pull must be > 0 N, got {a.arm_pull}")
-    res = run(Path(a.out), a.scene, a.arm_pull)
-    r = res["range"]
-    print(f"presentable {r['k_min_n_per_m']:.1f}-{r['k_max_n_per_m']:.1f} N/m (limited by {r['limited_by']}); "
-          f"scale {res['scale']:.4f}; tumour felt at {res['verdict']['tumour_felt_at_depths_mm']} mm")
-    print(f"wrote {a.out}/compliance.json, compliance.png")
+    if not 0.0 < a.contrast_gain <= 5.0:
+        ap.error(f"--contrast-gain must be in (0, 5], got {a.contrast_gain}")
+    try:
+        res = run(Path(a.out), a.scene, a.sheet, a.contrast_gain)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    sp = res["stiffest_point"]
+    print(f"scale {res['scale']:.4g} (fits {res['scale_low']:.4g}-{res['scale_high']:.4g}); saturated "
+          f"{100 * res['saturated']:.1f} %: {res['verdict']}; stiffest point {sp['name']}: contrast asked "
+          f"{100 * sp['contrast_asked_median']:.1f} %, presented {100 * sp['contrast_presented_median']:.1f} %")
+    print(f"wrote {a.out}/force_depth.json, compliance.json, compliance.png")
     return 0
 
 

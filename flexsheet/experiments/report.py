@@ -34,6 +34,7 @@ from flexsheet.experiments.report_analysis import (
     analyse,
 )
 from flexsheet.experiments.report_charts import (
+    compliance_chart,
     felt_chart,
     graph_chart,
     head_chart,
@@ -163,6 +164,7 @@ def main(out: str, lf=None, since: float | None = None) -> int:
     table1_chart(summary, out_dir / "table1.png")
     felt_chart(summary, series, out_dir / "felt.png")
     latency_chart(summary, out_dir / "latency.png")
+    compliance_chart(summary, series, out_dir / "compliance.png")
     if summary.get("view") or summary.get("safety"):
         head_chart(summary, series, out_dir / "head.png")
     if beats:

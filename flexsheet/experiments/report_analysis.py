@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from flexsheet.experiments.report_head import head_summary
-from flexsheet.experiments.report_softness import felt_force
+from flexsheet.experiments.report_softness import felt_force, follow_lag, inclusion_contrast, sheet_summary
 from flexsheet.experiments.report_timing import compliance_summary, latency_hops, watchdog_faults
 from flexsheet.experiments.report_verdicts import judge, table1_verdicts
 from flexsheet.experiments.table1 import (
@@ -86,7 +86,23 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scen
     summary["run"], summary["segments"] = run, segments
     summary.update(table1_rows(d, scene, series, segments))
     summary["compliance"] = compliance_summary(d)
-    summary["softness"] = felt_force(d)
+    if summary["compliance"]:
+        felt = felt_force(d)
+        samples = felt.pop("samples", None)
+        if series is not None and samples:
+            series["compliance"] = samples
+        summary["compliance"]["felt"] = felt
+        fl = follow_lag(d)
+        if fl:
+            summary["compliance"]["follow_ms"] = fl["follow_ms"]
+            summary["compliance"]["follow"] = fl
+        ic = inclusion_contrast(d, scene)
+        if ic:
+            summary["compliance"]["inclusion_contrast_felt"] = ic["felt"]
+            summary["compliance"]["inclusion_contrast_requested"] = ic["requested"]
+            summary["compliance"]["inclusion_contrast"] = ic
+        summary["compliance"]["saturated"] = summary["compliance"]["all"]["at_limit"]
+    summary["sheet"] = sheet_summary(d)
     head = head_summary(d, scene or paper_scene(), series)
     if head:
         summary.update(head)

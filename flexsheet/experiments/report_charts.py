@@ -1,5 +1,5 @@
 """Charts of a run report (:mod:`flexsheet.experiments.report`): matplotlib Agg PNGs, each with a JSON of the
-same numbers beside it (``table1.json``, ``felt.json``, ``latency.json``, ``graph.json``). Each metric chart
+same numbers beside it (``table1.json``, ``felt.json``, ``latency.json``, ``graph.json``, ``compliance.json``). Each metric chart
 has a title, units (deg for angles, mm for lengths, ms for times), the target, the verdict and this scene's
 own rows; the paper's published bars only on the paper's cylinder."""
 
@@ -13,7 +13,7 @@ import numpy as np
 from flexsheet.experiments.report_verdicts import HEADLINE_METRIC, digits
 from flexsheet.experiments.table1 import PAPER_TABLE1
 
-__all__ = ["table1_chart", "felt_chart", "latency_chart", "graph_chart", "spread"]
+__all__ = ["table1_chart", "felt_chart", "latency_chart", "graph_chart", "compliance_chart", "spread"]
 
 
 def _plt():
@@ -145,6 +145,43 @@ def felt_chart(summary: dict, series: dict, path: Path) -> dict:
         ax.set_ylim(bottom=0.0)
         ax.legend(fontsize=6)
     fig.suptitle(data["title"], fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return data
+
+
+def compliance_chart(summary: dict, series: dict, path: Path) -> dict:
+    """The force the finger felt (``/world/contact``) against the mapped request at the same depth, per pressed
+    sample, with the ±15 % band, the target and the verdict (``summary["compliance"]["felt"]``). Writes ``path``
+    (PNG, when there are samples) and its JSON; returns the data."""
+    felt = (summary.get("compliance") or {}).get("felt") or {}
+    smp = series.get("compliance") or {}
+    data = {"title": "Force felt against force requested, while pressed >= 2 mm", "unit": {"force": "N", "depth": "mm"},
+            "target": felt.get("target"), "verdict": felt.get("verdict"), "within_15pct": felt.get("within_15pct"),
+            "basis": felt.get("basis"),
+            "depth_mm": [1e3 * x for x in smp.get("depth_m", [])], "felt_n": smp.get("felt_n", []),
+            "requested_n": smp.get("requested_n", [])}
+    path.with_suffix(".json").write_text(json.dumps(data, indent=1))
+    if not data["felt_n"]:
+        return data
+    plt = _plt()
+    d, f, r = (np.asarray(data[k], float) for k in ("depth_mm", "felt_n", "requested_n"))
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    a1.scatter(d, r, s=6, color="k", label="requested (mapped object)")
+    a1.scatter(d, f, s=6, color="tab:blue", label="felt (true sheet)")
+    a1.set_xlabel("indentation, mm")
+    a1.set_ylabel("force, N")
+    a1.legend(fontsize=7)
+    a1.set_title("force-depth along the presses", fontsize=8)
+    a2.scatter(d, f / r, s=6, color="tab:blue")
+    a2.axhspan(0.85, 1.15, color="tab:green", alpha=0.15, label="±15 % (Weber fraction)")
+    a2.set_xlabel("indentation, mm")
+    a2.set_ylabel("felt / requested")
+    a2.legend(fontsize=7)
+    w = data["within_15pct"]
+    a2.set_title(f"{100 * w:.0f} % within ±15 % (target >= 95 %): {data['verdict']}", fontsize=8)
+    fig.suptitle(data["title"], fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -11,7 +11,8 @@ __all__ = ["sections", "format_text", "markdown", "CHARTS"]
 
 #: the charts report.md shows (file, caption)
 CHARTS = (("table1.png", "Table I headline: felt Δθ per segment"), ("felt.png", "felt Δθ over each segment"),
-          ("latency.png", "latency per hop"), ("head.png", "the viewer's head: view error and keep-out distance"),
+          ("latency.png", "latency per hop"),
+          ("compliance.png", "force felt against force requested"), ("head.png", "the viewer's head: view error and keep-out distance"),
           ("graph.png", "node/topic graph"))
 
 _TARGETS_AT = "flexsheet/experiments/table1.py"
@@ -158,20 +159,36 @@ def _delay(s: dict) -> tuple[list[str], list[str]]:
 
 
 def _softness(s: dict) -> tuple[list[str], list[str]]:
-    soft = s.get("softness", {})
+    comp = s.get("compliance", {})
+    soft = comp.get("felt", {})
     if not soft:
-        return ["No press of 2 mm or more with both the true sheet's force (/world/sheet) and the object's "
-                "(/object/deformation) in the bag: no verdict."], []
+        return ["No press of 2 mm or more with both the true sheet's force (/world/contact) and the object's "
+                "request in the bag: no verdict."], []
     r = soft["ratio"]
+    basis = ("the object's force-depth from its FEM (/object/force_depth) at the true contact and depth, mapped "
+             "as the planner maps it (stiffness_scale, contrast_gain)" if soft.get("basis") == "force_depth" else
+             "the virtual object's force at the display's fingertip (/object/deformation contact_force × "
+             "stiffness_scale)")
     prose = ["While the finger presses (true sheet depth ≥ 2 mm): the finger's contact force on the true sheet "
-             "(/world/contact force: the twin's sheet FEM, not the planner's model) against the virtual object's force "
-             "at the display's fingertip (/object/deformation contact_force × stiffness_scale). A ratio within "
-             "1 ± 0.15 goes unnoticed (Weber fraction, Bergmann Tiest & Kappers 2009)."]
-    row = [str(soft["n"]), f"{r['median']:.2f} [{r['p5']:.2f}, {r['p95']:.2f}]", f"{100 * soft['within_weber']:.0f} %",
-           f"{soft['felt_n']:.2f}", f"{soft['requested_n']:.2f}", f"{soft['felt_stiffness_n_per_m']:.0f}",
-           "1 ± 0.15", soft["verdict"]]
-    head = ["n", "felt / requested, median [p5, p95]", "within 15 %", "felt N", "requested N", "felt k N/m",
+             "(/world/contact force: the twin's sheet FEM, not the planner's model) against " + basis + ". A ratio "
+             "within 1 ± 0.15 goes unnoticed (Weber fraction, Bergmann Tiest & Kappers 2009). Saturated: share of "
+             "touching targets whose request the sheet could not present (target ≤ 5 %)."]
+    sat = comp.get("saturated")
+    row = [str(soft["n"]), f"{r['median']:.2f} [{r['p5']:.2f}, {r['p95']:.2f}]", f"{100 * soft['within_15pct']:.0f} %",
+           f"{soft['felt_n']:.2f}", f"{soft['requested_n']:.2f}", "-" if sat is None else f"{100 * sat:.1f} %",
+           "≥ 95 % within", soft["verdict"]]
+    head = ["n", "felt / requested, median [p5, p95]", "within 15 %", "felt N", "requested N", "saturated",
             "target", "verdict"]
+    ic = comp.get("inclusion_contrast")
+    if ic:
+        prose.append(f"The inclusion, felt from true forces at matched depth (over its footprint against around it, "
+                     f"{len(ic['bins'])} depth bins): {100 * ic['felt']:+.1f} %; the object asks {100 * ic['requested']:+.1f} %, "
+                     f"the mapped request {100 * ic['mapped']:+.1f} %.")
+    sh = s.get("sheet", {})
+    if sh:
+        prose.append(f"The true sheet: clamp strain at most {sh['strain_true_max']:.3f} (limit 0.30), at most "
+                     f"{sh['strain_over_plan_max']:+.3f} over the plan (limit +0.02); one arm holding while the other "
+                     f"follows: {sh['one_arm_holds']} joint-state cycles (target 0): {sh['verdict']}.")
     return prose, _table(head, [row])
 
 
@@ -181,6 +198,7 @@ def _compliance(s: dict) -> tuple[list[str], list[str]]:
         return ["No touching sheet targets in the bag."], []
     f = "{0[median]:.1f} [{0[p5]:.1f}, {0[p95]:.1f}]".format
     rows = []
+    comp = {k: b for k, b in comp.items() if isinstance(b, dict) and "tension_n_per_m" in b}   # the segments
     for key in ["all", *row_order(k for k in comp if k != "all")]:
         b = comp[key]
         sc = b.get("stiffness_scale")

@@ -31,7 +31,7 @@ import numpy as np
 
 from flexsheet.experiments.table1 import STROKE_MODES, segment_key
 
-__all__ = ["latency_hops", "latency_basis", "compliance_summary", "planner_scales", "watchdog_faults",
+__all__ = ["latency_hops", "latency_basis", "compliance_summary", "planner_scales", "planner_gains", "watchdog_faults",
            "cpu_summary", "compute_vs_waiting", "POSE_TOL_M", "POSE_TOL_RAD", "HOP_NODES"]
 
 #: a clamp at its commanded pose: position and rotation tolerance (m, rad)
@@ -145,7 +145,8 @@ def _pct(x: np.ndarray) -> dict:
 
 
 #: the planner's heartbeat message names a scale other than 1 as "x 0.5 (stiffness_scale)" (nodes/planner)
-_SCALE = re.compile(r"\bx ([0-9.eE+-]+) \(stiffness_scale\)")
+_SCALE = re.compile(r"\bx ([0-9.eE+-]+) \(stiffness_scale[),]")
+_GAIN = re.compile(r"\bcontrast_gain ([0-9.eE+-]+)")
 
 
 def planner_scales(d: dict[str, list]) -> list[tuple[float, float]]:
@@ -156,6 +157,18 @@ def planner_scales(d: dict[str, list]) -> list[tuple[float, float]]:
         if hb is None or getattr(hb, "node_type", "") != "planner" or "stiffness:" not in hb.message:
             continue
         m = _SCALE.search(hb.message)
+        out.append((float(t), float(m.group(1)) if m else 1.0))
+    return out
+
+
+def planner_gains(d: dict[str, list]) -> list[tuple[float, float]]:
+    """(arrival s, ``contrast_gain``) from each planner heartbeat naming its stiffness source (no
+    "contrast_gain G" in it: 1), in arrival order."""
+    out = []
+    for t, hb in d.get("/diagnostics", []):
+        if hb is None or getattr(hb, "node_type", "") != "planner" or "stiffness:" not in hb.message:
+            continue
+        m = _GAIN.search(hb.message)
         out.append((float(t), float(m.group(1)) if m else 1.0))
     return out
 

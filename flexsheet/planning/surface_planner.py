@@ -17,9 +17,11 @@ Paper §V-A and Fig. 7, generalised:
   coordinates on the sheet.
 * **Pushing**: a fingertip inside the object (negative distance) is projected onto the surface by the same
   rule; the sheet keeps the tangent pose there and the finger depresses it, so stroking and pushing combine.
-* **Compliance**: the stretch comes from :func:`flexsheet.model.tension.stretch_for_stiffness` for the
-  object's stiffness at the contact's distance from the clamps and the push's depth: the one passed in (the
-  FEM's dF/dd), else the scene's compliance model at the contact (:mod:`flexsheet.planning.compliance`), else the
+* **Compliance**: with the object's force–depth table (:meth:`SurfacePlanner.set_force_depth`, from its own
+  FEM) the request at the contact and depth is the table's, mapped by ``stiffness_scale`` and
+  ``contrast_gain``, and matched in force. Without one, the stretch comes from
+  :func:`flexsheet.model.tension.stretch_for_stiffness` for the object's stiffness at the contact's distance
+  from the clamps and the push's depth: the one passed in (the FEM's dF/dd), else the scene's compliance model at the contact (:mod:`flexsheet.planning.compliance`), else the
   configured value; times ``stiffness_scale``. Pressed at least :data:`FORCE_DEPTH` deep with the object's
   press given (the FEM's force at its depth), the stretch instead makes the sheet's force at this depth the
   object's (:func:`~flexsheet.model.tension.stretch_for_force`, the force extrapolated to this depth by the
@@ -90,8 +92,10 @@ from flexsheet.model.vec import (
 )
 from flexsheet.planning.limits import MotionLimits, RateLimiter, ReachModel
 
-__all__ = ["FORCE_DEPTH", "Hold", "INPUT_REJECTIONS", "PlannerConfig", "Plan", "SurfacePlanner"]
+__all__ = ["FORCE_DEPTH", "TABLE_MIN_DEPTH", "Hold", "INPUT_REJECTIONS", "PlannerConfig", "Plan", "SurfacePlanner"]
 
+#: the table's force is matched no shallower than this (m): at 0 the contact law's force is 0
+TABLE_MIN_DEPTH = 0.0005
 #: from this push depth (m) on, a given object press is matched in force (module doc); shallower, in stiffness
 FORCE_DEPTH = 0.002
 
@@ -124,7 +128,10 @@ class PlannerConfig:
     edges; ``object_stiffness`` N/m: default virtual stiffness (used when neither a stiffness is passed nor
     a compliance model is given); ``stiffness_scale``: haptic scale — the sheet is asked for this many times
     the object's stiffness (1: the object's own; < 1 maps an object stiffer than the sheet into the range the
-    arms can apply, reported in every plan's ``object_stiffness``); ``stiffness_tau`` s: time constant of a
+    arms can apply, reported in every plan's ``object_stiffness``); ``contrast_gain`` γ: with the object's
+    force–depth table (:meth:`SurfacePlanner.set_force_depth`) the sheet is asked for
+    s·F_ref·(F/F_ref)^γ (:meth:`flexsheet.model.force_depth.ForceDepth.mapped`; 1: faithful, > 1 raises an
+    inclusion's contrast for palpation training, keeping the order); ``stiffness_tau`` s: time constant of a
     first-order low-pass on the compliance model's stiffness (it follows the measured push depth, which
     carries the camera's noise; 0: none); ``max_dt`` s: longer gaps count as one nominal period;
     ``future_stamp_tolerance`` s: how far ahead of the caller's clock (``update``'s ``now``) a sample's stamp
@@ -140,6 +147,7 @@ class PlannerConfig:
     sheet_margin: float = 0.03
     object_stiffness: float = 30.0
     stiffness_scale: float = 1.0
+    contrast_gain: float = 1.0
     stiffness_tau: float = 0.1
     max_dt: float = 0.1
     future_stamp_tolerance: float = 0.5
@@ -163,6 +171,8 @@ class PlannerConfig:
             raise ValueError(f"future_stamp_tolerance must be in (0, 60] s, got {self.future_stamp_tolerance!r}")
         if not (math.isfinite(self.stiffness_scale) and 0.0 < self.stiffness_scale <= 100.0):
             raise ValueError(f"stiffness_scale must be in (0, 100], got {self.stiffness_scale!r}")
+        if not (math.isfinite(self.contrast_gain) and 0.0 < self.contrast_gain <= 5.0):
+            raise ValueError(f"contrast_gain must be in (0, 5], got {self.contrast_gain!r}")
         if len(self.u_ref) != 3 or not finite(self.u_ref) or norm(self.u_ref) < 1e-9:
             raise ValueError(f"u_ref must be a non-zero finite (3,) vector, got {self.u_ref!r}")
 
@@ -243,7 +253,25 @@ class SurfacePlanner:
         self._eps_max = max_stretch_within_force(self.cfg.material)
         #: the arms' pull limit at their pose, N (None: only the material's ``max_force``), :meth:`set_pull_limit`
         self.pull_limit: float | None = None
+        #: the object's force–depth table (:meth:`set_force_depth`); None: the stiffness given or modelled
+        self.force_depth = None
         self.reset()
+
+    @property
+    def max_stretch(self) -> float:
+        """The largest stretch the planner asks for now: ``max_stretch`` and ``max_force``, capped by the pull
+        limit (:meth:`set_pull_limit`)."""
+        return self._eps_max
+
+    def set_force_depth(self, table) -> None:
+        """What the object asks, from its own FEM (:class:`flexsheet.model.force_depth.ForceDepth`; None: back to
+        the stiffness given to :meth:`update` or the compliance model). With a table the request at contact q,
+        depth d is ``table.mapped(q, max(d, TABLE_MIN_DEPTH), stiffness_scale, contrast_gain)``, matched in force at
+        that depth (the sheet's force–depth and the object's differ in shape, so matching the slope at a shallow
+        depth misses the force deeper); ``object_stiffness`` and ``object_press`` passed to :meth:`update` are
+        then not used (source "table")."""
+        self.force_depth = table
+        self._tcache = None
 
     def set_pull_limit(self, pull: float | None) -> None:
         """Cap the clamp force at ``pull`` N (the arms' torque limit at their pose,
@@ -322,7 +350,17 @@ class SurfacePlanner:
         if proj.singular:
             status.append(Hold.SINGULAR)
         q, n, dist = proj.point, proj.normal, proj.distance
-        k_obj, k_source = self._object_stiffness(s, q, n, dist)
+        depth = max(0.0, -dist)
+        table_force = 0.0
+        if self.force_depth is not None:
+            try:
+                table_force, k_obj = self.force_depth.mapped(q, max(depth, TABLE_MIN_DEPTH), cfg.stiffness_scale,
+                                                             cfg.contrast_gain)
+                k_source = "table"
+            except ValueError:
+                k_obj, k_source = None, "table"
+        else:
+            k_obj, k_source = self._object_stiffness(s, q, n, dist)
         if k_obj is None:
             return self.hold(Hold.INVALID_STIFFNESS, s.t)
         was_touching = self.touching
@@ -333,10 +371,12 @@ class SurfacePlanner:
         su, sv, u = self._roll(q, n, s.dt, was_touching)
         v = cross(n, u)
         # stiffness (or force) → stretch at the contact's distance from the clamps and the push's depth
-        depth = max(0.0, -dist)
-        force = self._object_force(object_press, k_obj, depth)
-        tr = (self._tension(k_obj, su, depth) if force is None
-              else stretch_for_force(force, self.cfg.material, su, depth, self._eps_max))
+        if self.force_depth is not None:         # the table's force, matched at every depth (≥ TABLE_MIN_DEPTH)
+            tr = stretch_for_force(table_force, self.cfg.material, su, max(depth, TABLE_MIN_DEPTH), self._eps_max)
+        else:
+            force = self._object_force(object_press, k_obj, depth)
+            tr = (self._tension(k_obj, su, depth) if force is None
+                  else stretch_for_force(force, self.cfg.material, su, depth, self._eps_max))
         if tr.saturated:
             status.append(tr.saturated)
         su, sv = self._keep_on_sheet(su, sv, tr.stretch, status)

@@ -48,7 +48,7 @@ from flexsheet.model.timing import LAB
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.runtime.qos import QoS
-from messages import Fingertip, ObjectDeformation, topics
+from messages import Fingertip, ObjectDeformation, ObjectForceDepth, topics
 
 __all__ = ["FemParams", "FemNode"]
 
@@ -120,10 +120,12 @@ class FemNode(Node):
                       m.precompute_s, "cache hit" if m.cache_hit else "precomputed", order, m.n_nodes,
                       m.n_candidates, m.solver.nbytes / 1e6)
         self.pub = self.publisher(topics.DEFORMATION)
+        self.pub_force_depth = self.publisher(topics.FORCE_DEPTH)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST, sim_cost=LAB.compute("fem"))
         if p.nonlinear:
             await self._background(self._build_nonlinear, "fem-corotational")
         await self._setup_snapshots(mat, choice)
+        await self._background(self._publish_force_depth, "fem-force-depth")
 
     async def _background(self, target, name: str, *args) -> None:
         """Run ``target(*args)`` in a daemon thread; on a simulated clock to completion before the node is
@@ -156,8 +158,35 @@ class FemNode(Node):
         # loaded machine; flexsheet/fem/path_snapshots.py), during which heartbeats must go on
         await asyncio.to_thread(self._setup_scene_table, sc)
         self.pub = self.publisher(topics.DEFORMATION)
+        self.pub_force_depth = self.publisher(topics.FORCE_DEPTH)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST, sim_cost=LAB.compute("fem"))
-        await self._background(self._warm_sparse, "fem-sparse")
+        await self._background(self._force_depth_then_warm, "fem-force-depth")
+
+    def _force_depth_then_warm(self) -> None:
+        self._publish_force_depth()
+        self._warm_sparse()
+
+    def _publish_force_depth(self) -> None:
+        """Push the served model along the stroke (:func:`flexsheet.fem.force_depth.build_force_depth`) and
+        publish what the finger is asked to feel on the latched ``/object/force_depth``. The model is held per
+        point (about 40 ms), so fingertips in between are served; a failure is logged, never fatal."""
+        from flexsheet.fem.force_depth import build_force_depth
+
+        t = time.perf_counter()
+        try:
+            fd = build_force_depth(self.scene, self.model, lock=self._lock)
+        except Exception:  # noqa: BLE001 - the table must never take the node down
+            self.log.exception("fem: building the force-depth table failed; the planner keeps its own estimate")
+            return
+        self.pub_force_depth.publish(ObjectForceDepth(
+            header=self.pub_force_depth.header("display"), points=fd.points, normals=fd.normals,
+            names=list(fd.names), depths=fd.depths, force=fd.force, scene_key=fd.scene_key,
+            method=type(self.model).__name__))
+        i = fd.names.index("reference")
+        self.log.info("fem: force-depth along the stroke: %d points x %d depths to %.0f mm in %.1f s; at the "
+                      "reference %.3f N at 5 mm, %.3f N at 10 mm", len(fd.names), len(fd.depths),
+                      fd.depths[-1] * 1e3, time.perf_counter() - t, fd.force_at(fd.points[i], 0.005),
+                      fd.force_at(fd.points[i], 0.01))
 
     def _setup_scene_table(self, sc: Scene) -> None:
         """Attach the scene's nonlinear table (:func:`flexsheet.fem.scene_model.attach_scene_table`: a sphere's
@@ -305,3 +334,4 @@ class FemNode(Node):
             faces=self.model.faces, contact_force=float(force), stiffness=float(stiff), depth=float(depth),
             contact_point=np.asarray(cp, np.float64), method=method, max_strain=float(strain), status=status,
             valid=bool(valid), source_stamp=float(msg.exposure_stamp), scene_key=self.scene_key))
+

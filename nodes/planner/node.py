@@ -6,14 +6,17 @@ launch file's top-level ``scene:``; none = the paper's cylinder): its shape
 (:func:`flexsheet.planning.shape.planner_shape`) and its compliance.
 
 Subscribes ``/fingertip`` (QoS LATEST; ``predicted_position`` when ``use_prediction``),
-``/object/deformation`` (QoS LATEST). The sheet's tension is set so that its normal
-stiffness at the contact matches the object's local stiffness: the FEM's dF/dd (``ObjectDeformation.stiffness``,
-and from 2 mm deep its contact force, matched in force) while fresh and *about this scene*, else the scene's
-estimate at the contact (:mod:`flexsheet.planning.compliance`: Hertz contact with the scene's material, stiffer
-over inclusions) when ``stiffness_from_scene``, else ``object_stiffness``; times ``stiffness_scale``; the sheet
-model is ``display_calib``'s identified ``sheet`` entry where it has one. The clamp force is capped at
-``pull_margin`` × the pull the arms' joint torques allow at the targets it sends them
-(:mod:`flexsheet.planning.pull_guard`) and at ``max_force``. Every
+``/object/deformation`` (QoS LATEST) and the latched ``/object/force_depth``. The sheet's tension is set so that
+the finger feels the object: once the FEM node's force–depth table of this scene has arrived, its force at the
+contact and depth, mapped by ``stiffness_scale`` (unless set, the scene's one scale,
+:func:`flexsheet.model.force_depth.scene_scale`, logged) and ``contrast_gain`` (:meth:`SurfacePlanner.set_force_depth`);
+before it, the FEM's dF/dd (``ObjectDeformation.stiffness``, and from 2 mm deep its contact force, matched in
+force) while fresh and *about this scene*, else the scene's estimate at the contact
+(:mod:`flexsheet.planning.compliance`: Hertz contact with the scene's material, stiffer over inclusions) when
+``stiffness_from_scene``, else ``object_stiffness``; times ``stiffness_scale``. The sheet model is
+``display_calib``'s identified ``sheet`` entry where it has one. The clamp force is capped at ``pull_margin`` ×
+the pull the arms' joint torques allow at the targets it sends them (:mod:`flexsheet.planning.pull_guard`) and
+at ``max_force``. Every
 ``/sheet/target`` carries the tension, the presented and the requested stiffness; the heartbeat's message
 says which source is in use. The FEM's stiffness counts as about this scene when the message's ``scene_key``
 (the FEM's :meth:`~flexsheet.model.scenes.Scene.key`: the FEM meshes and solves any scene) equals
@@ -45,7 +48,8 @@ from flexsheet.calibration.sheet import TERMS
 from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
 from flexsheet.model.shapes import make_shape
 from flexsheet.model.sheet import clamp_poses
-from flexsheet.model.tension import SheetMaterial, clamp_force
+from flexsheet.model.force_depth import ForceDepth, scene_scale
+from flexsheet.model.tension import SheetMaterial, clamp_force, press_force
 from flexsheet.model.timing import LAB
 from flexsheet.planning.compliance import SceneCompliance
 from flexsheet.planning.head_guard import HeadGuard
@@ -53,11 +57,11 @@ from flexsheet.planning.keepout import KeepOut
 from flexsheet.planning.limits import MotionLimits, ReachModel
 from flexsheet.planning.pull_guard import PullGuard
 from flexsheet.planning.shape import planner_shape
-from flexsheet.planning.surface_planner import INPUT_REJECTIONS, Hold, Plan, PlannerConfig, SurfacePlanner
+from flexsheet.planning.surface_planner import FORCE_DEPTH, INPUT_REJECTIONS, Hold, Plan, PlannerConfig, SurfacePlanner
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.runtime.qos import QoS
-from messages import ArmTarget, EyePose, Fingertip, ObjectDeformation, SheetTarget, topics
+from messages import ArmTarget, EyePose, Fingertip, ObjectDeformation, ObjectForceDepth, SheetTarget, topics
 
 __all__ = ["PlannerParams", "PlannerNode", "fem_solves_scene"]
 
@@ -162,12 +166,17 @@ class PlannerNode(Node):
 
     Params = PlannerParams
     node_type = "planner"
-    DYNAMIC_PARAMS = frozenset({"stiffness_scale", "use_prediction"})
+    DYNAMIC_PARAMS = frozenset({"stiffness_scale", "contrast_gain", "use_prediction"})
 
     def on_params_set(self, names: set[str]) -> None:
         """``stiffness_scale`` reaches the planner's config (``use_prediction`` is read per fingertip)."""
-        if "stiffness_scale" in names and getattr(self, "planner", None) is not None:
+        if getattr(self, "planner", None) is None:
+            return
+        if "stiffness_scale" in names:
             self.planner.cfg = replace(self.planner.cfg, stiffness_scale=self.params.stiffness_scale)
+            self.scene_scale = None
+        if "contrast_gain" in names:
+            self.planner.cfg = replace(self.planner.cfg, contrast_gain=self.params.contrast_gain)
 
     async def setup(self) -> None:
         p: PlannerParams = self.params
@@ -199,11 +208,13 @@ class PlannerNode(Node):
         self._k_hist: deque[tuple[float, float]] = deque(maxlen=256)
         self._fem_other_scene = 0
         self._source = ""
+        self.scene_scale = None
         self.pub_sheet = self.publisher(topics.SHEET_TARGET)
         self.pub_left = self.publisher(topics.ARM_LEFT_TARGET)
         self.pub_right = self.publisher(topics.ARM_RIGHT_TARGET)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST, sim_cost=LAB.compute("planner"))
         self.subscribe(topics.DEFORMATION, self.on_deformation, qos=QoS.LATEST)
+        self.subscribe(topics.FORCE_DEPTH, self.on_force_depth)
         self.subscribe(topics.EYE_POSE, self.on_eye_pose, qos=QoS.LATEST)
         self.pull_guard = PullGuard({"left": cfg.reach.left_base, "right": cfg.reach.right_base}, p.pull_margin)
         self._pull_said: tuple[int, float] | None = None     # (joint, limit N) last said
@@ -235,6 +246,35 @@ class PlannerNode(Node):
                 "viewer's head %s", {"tracking": "tracked: the sheet keeps out of its keep-out volume",
                                      "lost": "lost: holding the sheet until the glasses are seen again"}[self.guard.state])
 
+    def on_force_depth(self, msg: ObjectForceDepth) -> None:
+        """The object's force–depth from its FEM: the planner's request from now on
+        (:meth:`SurfacePlanner.set_force_depth`). Unless ``stiffness_scale`` was set, the scene's one scale
+        (:func:`flexsheet.model.force_depth.scene_scale`) maps it between the sheet's force at its least stretch
+        and at ``pull_margin`` × the arms' pull at the home pose, over 2 mm to twice the scene's stroke depth.
+        A table about another object is ignored; a malformed one is rejected (counted)."""
+        if self.scene is not None and msg.scene_key and msg.scene_key != self._scene_key:
+            self.log.warning("/object/force_depth is about another object than scene %r; ignored", self.scene.name)
+            return
+        try:
+            table = ForceDepth(msg.points, msg.normals, tuple(msg.names), msg.depths, msg.force, msg.scene_key)
+        except ValueError as exc:
+            raise InputRejected(f"/object/force_depth: {exc}") from None
+        p: PlannerParams = self.params
+        cfg = self.planner.cfg
+        if "stiffness_scale" not in p.model_fields_set:
+            mat = cfg.material
+            e_hi = self.planner.max_stretch
+            d_hi = 2.0 * (self.scene.use.stroke_depth if self.scene is not None else 0.01)
+            sc = scene_scale(table, lambda d: press_force(mat.min_stretch, mat, 0.0, d),
+                             lambda d: press_force(e_hi, mat, 0.0, d), FORCE_DEPTH, d_hi, cfg.contrast_gain)
+            self.planner.cfg = replace(cfg, stiffness_scale=sc.scale)
+            self.scene_scale = sc
+            self.log.info("object's force-depth from its FEM (%d points): one scale %.3g for the scene (presentable "
+                          "from %.3g to %.3g over %.0f-%.0f mm; %s, %.0f %% of its samples saturate)", len(table.names),
+                          sc.scale, sc.low, sc.high, FORCE_DEPTH * 1e3, d_hi * 1e3,
+                          "it fits" if sc.fits else "it does NOT fit", 100 * sc.saturated)
+        self.planner.set_force_depth(table)
+
     def on_deformation(self, msg: ObjectDeformation) -> None:
         """Keep the FEM's local stiffness (N/m) and its press (contact force N at its depth m) while the solution
         is valid, positive and about this scene (:func:`fem_solves_scene`; a bare shape takes any)."""
@@ -263,14 +303,18 @@ class PlannerNode(Node):
 
     def _note_source(self, source: str) -> None:
         """Say in the heartbeat's message which stiffness sets the tension (on change)."""
-        text = {"fem": "the FEM's dF/dd, and its force from 2 mm deep",
+        text = {"table": "the object's force-depth from its FEM (/object/force_depth)",
+                "fem": "the FEM's dF/dd, and its force from 2 mm deep",
                 "scene": "the scene's estimate at the contact (Hertz contact + inclusions, flexsheet/planning/compliance.py)",
                 "param": f"object_stiffness {self.params.object_stiffness:g} N/m"}[source]
         if self._fem_other_scene and source != "fem":
             text += (f"; the FEM's stiffness is not used: it solves another object than scene "
                      f"{self.scene.name!r} ({self._fem_other_scene} messages so far)")
-        if self.params.stiffness_scale != 1.0:
-            text += f"; x {self.params.stiffness_scale:g} (stiffness_scale)"
+        cfg = self.planner.cfg
+        if cfg.stiffness_scale != 1.0:
+            text += f"; x {cfg.stiffness_scale:.4g} (stiffness_scale" + (", the scene's)" if self.scene_scale else ")")
+        if cfg.contrast_gain != 1.0:
+            text += f"; contrast_gain {cfg.contrast_gain:g}"
         if text != self._source:
             self._source = text
             self.state_message = f"stiffness: {text}"
@@ -289,7 +333,7 @@ class PlannerNode(Node):
             plan = self.planner.update(msg.header.stamp + (msg.prediction_horizon if predict else 0.0),
                                        pos, k, now=self.now(), object_press=self._press if source == "fem" else None)
             if plan is not None and not plan.status.startswith("hold"):
-                self._note_source(source)
+                self._note_source("table" if plan.k_source == "table" else source)
         if plan is None:
             raise InputRejected(f"fingertip: no safe pose yet to hold (valid={msg.valid})")
         self.publish_plan(plan, msg.exposure_stamp)

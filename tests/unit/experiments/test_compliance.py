@@ -1,34 +1,43 @@
-"""``flexsheet experiment compliance`` (flexsheet.experiments.compliance): the presentable range and the mapping
-that keeps ratios."""
+"""``flexsheet experiment compliance`` (flexsheet.experiments.compliance): the object's force-depth from its FEM,
+the presentable range from the arms' torque and the sheet, one scale per scene, and the contrast a finger feels."""
 
 from __future__ import annotations
+
+import json
 
 import numpy as np
 import pytest
 
 
-def test_the_presentable_range_comes_from_the_first_limit_and_the_mapping_keeps_ratios(tmp_path):
-    """flexsheet experiment compliance: the range ends at the stretch where the clamp pulls the arm's 9.81 N (the
-    strain limit, 30 %, comes later); one scale maps the scene's largest request to the range's top, so the ratio
-    of two requests inside the range is the ratio presented; a request below the floor is presented at the floor
-    (no contrast); the tumour's contrast is judged against the 23 % Weber fraction."""
-    from flexsheet.experiments.compliance import presentable_range, run
-    from flexsheet.model.tension import SheetMaterial, clamp_force, stiffness
+def test_the_organ_maps_into_the_range_keeping_its_tumour_contrast_and_the_gain_raises_it(tmp_path):
+    from flexsheet.experiments.compliance import main, presentable_range
 
-    r = presentable_range(9.81)
-    mat = SheetMaterial()
-    assert r["limited_by"] == "arm_pull" and clamp_force(r["max_stretch"], mat) == pytest.approx(9.81, rel=1e-6)
-    assert r["k_max_n_per_m"] == pytest.approx(stiffness(r["max_stretch"], mat))
-    assert r["limits"]["strain"]["stretch"] == 0.30 and r["limits"]["strain"]["k_n_per_m"] > r["k_max_n_per_m"]
-    assert presentable_range(1e4)["limited_by"] == "strain"
-    res = run(tmp_path, "launch/scenes/organ.yaml")
-    s, rng = res["scale"], res["range"]
-    assert s * res["requested_along_stroke"]["k_max_n_per_m"] == pytest.approx(rng["k_max_n_per_m"])
-    t = res["push"]["tumour"]
-    k, kp = np.asarray(t["k_requested_n_per_m"]), np.asarray(t["k_presented_n_per_m"])
-    inside = s * k > rng["k_min_n_per_m"]
-    assert inside.any() and np.allclose(kp[inside], s * k[inside])          # ratios kept inside the range
-    assert np.all(kp[~inside] == rng["k_min_n_per_m"])                       # the floor below it
-    for c in res["tumour_contrast"]:
-        assert c["felt"] == (c["presented"] >= 0.23) and c["presented"] <= c["asked"] + 1e-12
-    assert (tmp_path / "compliance.png").stat().st_size > 5000
+    rng = presentable_range()
+    assert rng["limited_by"] == "arm_torque" and 25.0 < rng["pull_n"] < 40.0     # 0.9 x 33.5 N at home (J3)
+    assert rng["clamp_force_at_max_n"] == pytest.approx(rng["pull_n"], rel=1e-6)
+    assert main(["--scene", "launch/scenes/organ.yaml", "--out", str(tmp_path / "g1")]) == 0
+    res = json.loads((tmp_path / "g1" / "compliance.json").read_text())
+    fd = json.loads((tmp_path / "g1" / "force_depth.json").read_text())
+    assert fd["points"][0]["name"] == "reference" and fd["hertz_check"] is None
+    assert res["fits"] and res["saturated"] == 0.0 and res["scale_low"] <= res["scale"] <= res["scale_high"]
+    top = next(p for p in res["points"] if p["name"] == res["stiffest_point"]["name"])
+    asked, pres = np.asarray(top["contrast_asked"]), np.asarray(top["contrast_presented"])
+    assert np.median(asked) > 0.15                       # the FEM's tumour: above the Weber fraction
+    assert np.allclose(pres, asked, atol=1e-9)           # faithful inside the range: every ratio kept
+    assert main(["--scene", "launch/scenes/organ.yaml", "--contrast-gain", "2.5", "--out", str(tmp_path / "g2")]) == 0
+    res2 = json.loads((tmp_path / "g2" / "compliance.json").read_text())
+    top2 = next(p for p in res2["points"] if p["name"] == top["name"])
+    inside = np.asarray(top2["requested_n"]) == np.asarray(top2["presented_n"])
+    want = (1.0 + asked) ** 2.5 - 1.0
+    assert inside.any() and np.allclose(np.asarray(top2["contrast_presented"])[inside], want[inside], rtol=1e-6)
+    assert (tmp_path / "g1" / "compliance.png").stat().st_size > 5000
+
+
+def test_bad_arguments_are_refused_with_a_clear_message(tmp_path, capsys):
+    from flexsheet.experiments.compliance import main
+
+    with pytest.raises(SystemExit):
+        main(["--out", str(tmp_path), "--contrast-gain", "0"])
+    assert "--contrast-gain must be in (0, 5]" in capsys.readouterr().err
+    assert main(["--out", str(tmp_path), "--sheet", str(tmp_path / "missing.json")]) == 2
+    assert "--sheet" in capsys.readouterr().err

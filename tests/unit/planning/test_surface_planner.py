@@ -304,3 +304,38 @@ def test_the_arms_pull_limit_caps_the_clamp_force():
     assert clamp_force(plan.stretch, pl.cfg.material) == pytest.approx(pl.cfg.material.max_force, rel=1e-6)
     with pytest.raises(ValueError, match="pull limit"):
         pl.set_pull_limit(float("nan"))
+
+
+def test_with_the_objects_force_depth_table_its_mapped_force_is_matched_at_every_depth():
+    """With the object's table set, the stretch makes the identified sheet's force at the finger's depth (at
+    least TABLE_MIN_DEPTH) the table's force there, mapped by stiffness_scale and contrast_gain; the given
+    stiffness and press are not used."""
+    from flexsheet.model.force_depth import ForceDepth
+    from flexsheet.model.tension import press_force
+    from flexsheet.planning.surface_planner import TABLE_MIN_DEPTH
+
+    c = paper_cylinder()
+    ang = np.linspace(-0.2, 1.2, 8)
+    pts = np.array([c.point_at(a, 0.0) for a in ang])
+    nrm = np.array([[math.cos(a), 0.0, math.sin(a)] for a in ang])
+    depths = np.linspace(0.0, 0.03, 61)
+    force = np.array([(900.0 + 300.0 * (i == 4)) * depths ** 1.5 for i in range(8)])
+    table = ForceDepth(pts, nrm, tuple(f"p{i}" for i in range(8)), depths, force)
+    mat = SheetMaterial(contact_width=0.033, contact_growth=2.0, own_stiffness=0.5, own_growth=290.0)
+    checked = 0
+    for gain in (1.0, 2.5):
+        pl = SurfacePlanner(c, PlannerConfig(material=mat, stiffness_scale=0.8, contrast_gain=gain))
+        pl.set_force_depth(table)
+        pl.update(0.0, c.point_at(0.3, 0.0, R + 0.0005), 55.0)
+        for i, dd in enumerate(np.linspace(0.0, 0.008, 40)):
+            plan = pl.update((i + 1) * DT, c.point_at(0.3, 0.0, R - dd), 55.0, object_press=(5.0, 0.001))
+            d = max(plan.depth, TABLE_MIN_DEPTH)
+            want, k = table.mapped(plan.contact, d, 0.8, gain)
+            assert plan.k_source == "table" and plan.object_stiffness == pytest.approx(k)
+            if not plan.status.startswith("object_"):
+                assert press_force(plan.stretch, mat, pl.s[0], d) == pytest.approx(want, rel=1e-6), (dd, plan.status)
+                checked += 1
+    assert checked >= 20
+    pl.set_force_depth(None)                                      # back to the stiffness given
+    plan = pl.update(50 * DT, c.point_at(0.3, 0.0, R - 0.001), 55.0)
+    assert plan.k_source == "given" and plan.object_stiffness == pytest.approx(0.8 * 55.0)
