@@ -323,7 +323,8 @@ CHEAP: dict[str, tuple[str, str]] = {
         "flexsheet experiment correction --twin realistic --truth-seed 0 --quick --out /tmp/corr",
         "flexsheet experiment correction --twin both --seeds 0 1 2 --stability --speed --out docs/figures/renderer",
         "flexsheet experiment stability --quick --out /tmp/stab",
-        "flexsheet experiment compliance --out docs/figures/compliance",
+        "flexsheet experiment compliance --scene launch/scenes/organ.yaml --sheet docs/figures/calibration/sheet/sheet.json "
+        "--out docs/figures/compliance",
         "flexsheet experiment latency_load --out docs/figures/realtime",
         "flexsheet experiment latency_load --out /tmp/ll --busy 0 2",
         "flexsheet experiment determinism --out docs/figures/simclock",

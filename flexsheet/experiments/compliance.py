@@ -145,7 +145,8 @@ def _chart(res: dict, fd: dict, path: Path) -> None:
     a1.set_xlim(0, min(D[-1], 4 * res["depth_m"][-1] * 1e3))
     a1.set_xlabel("push depth, mm")
     a1.set_ylabel("object's force, N")
-    a1.set_title(f"object's force-depth ({len(fd['points'])} points; reference in black): {fd['verdict']}", fontsize=8)
+    hz = "Hertz at 1-3 mm: " + fd["verdict"].split(":")[0] if h else "no closed form applies"
+    a1.set_title(f"object's FEM force-depth, {len(fd['points'])} points ({hz})", fontsize=8)
     d = np.asarray(res["depth_m"]) * 1e3
     a2.fill_between(d, res["floor_n"], res["ceiling_n"], color="tab:green", alpha=0.15,
                     label=f"presentable ({res['range']['limited_by']})")
@@ -153,8 +154,8 @@ def _chart(res: dict, fd: dict, path: Path) -> None:
         a2.plot(d, p["requested_n"], lw=0.6, color="tab:blue")
     a2.set_xlabel("push depth, mm")
     a2.set_ylabel("force asked of the sheet, N")
-    a2.set_title(f"one scale {res['scale']:.3g} (fits {res['scale_low']:.3g}-{res['scale_high']:.3g}); saturated "
-                 f"{100 * res['saturated']:.1f} % (target <= 5 %): {res['verdict']}", fontsize=8)
+    a2.set_title(f"scale {res['scale']:.3g} (fits {res['scale_low']:.3g}-{res['scale_high']:.3g}); saturated "
+                 f"{100 * res['saturated']:.1f} % (<= 5 %): {res['verdict']}", fontsize=8)
     a2.legend(fontsize=7)
     b = next(p for p in res["points"] if p["name"] == res["stiffest_point"]["name"])
     a3.plot(d, 100 * np.asarray(b["contrast_asked"]), "o-", label="asked by the object")

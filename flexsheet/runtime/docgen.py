@@ -23,7 +23,8 @@ def _type_name(field) -> str:
 
 
 def _paragraphs(doc: str) -> str:
-    """A docstring as Markdown paragraphs, each on one line (a bullet list keeps its items)."""
+    """A docstring as Markdown, each paragraph on one line, paragraphs on consecutive lines (one Markdown
+    paragraph: the page stays within the docs' 300 lines) and a bullet list keeping its items."""
     out: list[str] = []
     for block in inspect.cleandoc(doc).split("\n\n"):
         items: list[str] = []
@@ -33,7 +34,7 @@ def _paragraphs(doc: str) -> str:
             else:
                 items[-1] += " " + line.strip()
         out.append("\n".join(items))
-    return "\n\n".join(out)
+    return "\n".join(out)
 
 
 def render() -> str:

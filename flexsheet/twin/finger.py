@@ -28,7 +28,8 @@ with the fingertip in a given moving time (10 s and 30 s in Table I). We script 
 Each noise is a fixed sum of sinusoids drawn from ``seed`` (numpy ``default_rng``), so :meth:`position`
 is a smooth deterministic function of time and :meth:`positions` is its vectorised form.
 
-Timeline: [0, approach_time) "approach" from ``approach_distance`` outside the start point; then
+Timeline: [0, approach_time) "approach" from ``approach_distance`` outside the start point (after another
+segment: from where that one ended, lifted off, :func:`after`); then
 ``hold_before`` s "idle" on the surface; ``moving_time`` s of "stroke" | "push" | "stroke_push"; then
 "idle". Units m, rad, s; display frame.
 """
@@ -44,7 +45,7 @@ import numpy as np
 from flexsheet.model import geometry
 from flexsheet.model.checks import check_point, check_positive, check_unit, check_vector
 
-__all__ = ["FingerScript", "MODES"]
+__all__ = ["FingerScript", "MODES", "after"]
 
 MODES = ("stroke", "push", "stroke_push")
 
@@ -302,3 +303,25 @@ def _path_at(tab: dict, arc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
         n[sel] = np.cos(th)[:, None] * N0 + np.sin(th)[:, None] * T0
         d[sel] = np.cos(th)[:, None] * T0 - np.sin(th)[:, None] * N0
     return q, n, d
+
+
+def after(prev: FingerScript, script: FingerScript, t: float, h: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
+    """(position (3,) m, velocity (3,) m/s) at time ``t`` s of segment ``script`` played after ``prev``: during
+    ``script``'s approach the finger leaves where ``prev`` ended, lifts off along ``prev``'s last normal by
+    ``approach_distance`` (in the first third of the approach) and blends (smoothstep) into ``script``'s own
+    approach. A real finger moves through free space between two strokes; jumping to the next start put it
+    behind the sheet still posed at the last stroke's end (a contact 3–4 mm deep that no finger makes). After
+    the approach: ``script.state(t)``."""
+    if not (0.0 <= t < script.approach_time):
+        return script.state(t)
+    p_end = prev.position(prev.duration)
+    n_end = prev.surface_point(prev.duration)[1][0]
+
+    def pos(x: float) -> np.ndarray:
+        x = min(max(x, 0.0), script.approach_time)
+        f = x / script.approach_time
+        w = float(_smoothstep(np.array(f)))
+        lift = script.approach_distance * float(_smoothstep(np.array(3.0 * f)))
+        return (1.0 - w) * (p_end + lift * n_end) + w * script.position(x)
+
+    return pos(t), (pos(t + h) - pos(t - h)) / (2.0 * h)

@@ -24,7 +24,7 @@ log = logging.getLogger(__name__)
 __all__ = ["TwinSource", "run_display_sim", "sim_display_calib", "score_registration", "verdicts", "TARGETS",
            "SUMMARY_VERSION", "sim_display_calib_cached"]
 
-SUMMARY_VERSION = 9
+SUMMARY_VERSION = 10
 
 Pair = tuple[np.ndarray, np.ndarray]
 

@@ -22,7 +22,9 @@ holds on an IK refusal, a fault or a lost controller, read from its joint state:
 so this arm stops where it is, from the cycle that state arrives in, until the other follows again).
 
 Span guard (``span_band`` [lo, hi] m): a cycle whose goal would take this clamp further outside the band from
-the partner's measured clamp than the command already is waits at rest (counted as ``span waits`` in the
+the partner's measured clamp than the command already is waits at rest — while the partner moves, and at most
+0.21 s while it is at rest too (both waiting for each other:
+:meth:`~flexsheet.arm.tracking.TargetTracker.span_worse`) (counted as ``span waits`` in the
 heartbeat): when one arm lags or stops, the other does not slacken the sheet or over-pull it.
 """
 
@@ -38,7 +40,7 @@ from flexsheet.arm.bridge_config import DEFAULT_PERIOD, DEFAULT_PORT, BridgeConf
 from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics
 from flexsheet.arm.limiter import StreamLimiter
 from flexsheet.arm.stream import ArmStream, CycleReport
-from flexsheet.arm.tracking import TargetTracker, peer_holds
+from flexsheet.arm.tracking import PEER_REST, TargetTracker, peer_holds
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
 from flexsheet.model.timing import LAB
@@ -228,6 +230,7 @@ class ArmBridgeNode(Node):
     def on_peer_state(self, msg: ArmJointState) -> None:
         """The other arm's state: hold with it while it cannot follow (:func:`~flexsheet.arm.tracking.peer_holds`)."""
         self.tracker.peer_clamp = np.asarray(msg.pose, float)[:3, 3].copy()
+        self.tracker.peer_moving = float(np.max(np.abs(msg.velocity))) > PEER_REST
         hold = msg.bridge_status if peer_holds(msg.bridge_status) else None
         if hold != self.tracker.peer_hold:
             if hold is not None:

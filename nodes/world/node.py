@@ -9,7 +9,8 @@ truth (:class:`flexsheet.twin.truth.TwinTruth`, param ``twin: {realism, truth_se
   of 0.3–0.8 s, in which the camera twin's finger froze (its extrapolation is capped at 0.1 s). The
   finger follows the stroke path of the ``scene`` (:mod:`flexsheet.model.scenes`; filled by the launcher
   from the launch file's top-level ``scene:``; none = the paper's cylinder): p − depth·n along the path, with
-  each segment's profile over the path fraction (stroke, push at the path's start, stroke_push).
+  each segment's profile over the path fraction (stroke, push at the path's start, stroke_push). Between two
+  segments the finger lifts off and moves through free space to the next start (:func:`flexsheet.twin.finger.after`).
 * Sheet: the true clamp poses are the *true* arms' forward kinematics of the measured joint states
   (``ArmJointState.position``; the truth's base poses, link lengths and joint zero offsets — never the
   bridge's model in ``ArmJointState.pose``), and the pushed sheet's shape is the nonlinear membrane FEM of
@@ -56,7 +57,7 @@ from flexsheet.runtime.background import await_worker, start_worker
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.runtime.qos import QoS
-from flexsheet.twin.finger import FingerScript
+from flexsheet.twin.finger import FingerScript, after
 from flexsheet.twin.head import Viewer
 from flexsheet.twin.truth import TwinTruth
 from flexsheet.twin.world import TruePhysics, build_table
@@ -371,7 +372,7 @@ class WorldNode(Node):
                 return
         self._publish_head(max(t, 0.0))
         script = self.scripts[i]
-        pos, vel = script.state(ts)
+        pos, vel = after(self.scripts[i - 1], script, ts) if i > 0 else script.state(ts)
         self.finger = pos
         self.finger_pub.publish(FingerTruth(
             header=self.finger_pub.header("display"), position=pos, velocity=vel, segment=i,

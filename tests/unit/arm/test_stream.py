@@ -14,12 +14,14 @@ class _NoLink:
 
 
 def test_the_stream_brakes_where_a_lagging_partner_would_slacken_the_sheet():
-    """A 30 mm target shift toward a partner that has not moved: the stream brakes at the band's edge (within
-    one braking distance) instead of closing the span; once the partner follows, it goes on to the target."""
+    """A 30 mm target shift toward a partner that is still moving but has not got there: the stream brakes at
+    the band's edge (within one braking distance) instead of closing the span; once the partner follows, it
+    goes on to the target."""
     kl, kr, ql, qr, left = _home()
     t = _tracker(kl, ql)
     peer = kr.fk(qr)[:3, 3]
     t.peer_clamp = peer.copy()
+    t.peer_moving = True
     period = 0.0071
     qd = QD_MAX * 0.5
     lim = StreamLimiter(ql, period, qd, qd * 2.0, np.full(6, -3.0), np.full(6, 3.0))
@@ -43,3 +45,28 @@ def test_the_stream_brakes_where_a_lagging_partner_would_slacken_the_sheet():
         t.set_target(T, now, now)
         stream._next_command()
     assert np.linalg.norm(kl.fk(lim.c)[:3, 3] - T[:3, 3]) < 1e-4   # reached the target
+
+
+def test_two_arms_at_rest_each_waiting_for_the_other_do_not_wait_for_ever():
+    """The same shift with the partner at rest: after REST_WAIT_CYCLES waits the step goes (the partner, waiting
+    for this arm, would never move first), and the target is reached."""
+    from flexsheet.arm.tracking import REST_WAIT_CYCLES
+
+    kl, kr, ql, qr, left = _home()
+    t = _tracker(kl, ql)
+    peer = kr.fk(qr)[:3, 3]
+    t.peer_clamp = peer.copy()
+    t.peer_moving = False
+    period = 0.0071
+    qd = QD_MAX * 0.5
+    lim = StreamLimiter(ql, period, qd, qd * 2.0, np.full(6, -3.0), np.full(6, 3.0))
+    stream = ArmStream(t, lim, _NoLink(), clock=lambda: now)
+    T = np.array(left, float)
+    T[1, 3] -= 0.030
+    now = 1.0
+    for k in range(300):
+        now = 1.0 + k * period
+        t.set_target(T, now, now)
+        stream._next_command()
+    assert REST_WAIT_CYCLES <= t.span_waits <= REST_WAIT_CYCLES + 5          # waited about 0.21 s, then went
+    assert np.linalg.norm(kl.fk(lim.c)[:3, 3] - T[:3, 3]) < 1e-4

@@ -37,3 +37,23 @@ def test_finger_script_state_is_position_and_velocity_in_one_call(t):
     p, v = fs.state(t)
     assert p == pytest.approx(fs.position(t), abs=1e-15) and v == pytest.approx(fs.velocity(t), rel=1e-9, abs=1e-12)
     assert np.linalg.norm(v) > 1e-4
+
+
+def test_between_segments_the_finger_lifts_off_and_moves_through_free_space():
+    """The next segment's approach starts where the last one ended (no jump), stays in front of the object
+    (never deeper than the last stroke's own light contact) and ends on the script's own approach; on the
+    paper's cylinder a jump put it 2.7 mm behind the sheet still tangent at 60 degrees."""
+    from flexsheet.twin.finger import after
+
+    a, b = FingerScript(mode="stroke", moving_time=10.0), FingerScript(mode="stroke", moving_time=30.0)
+    R = 0.025 * 2 ** 0.5
+    t = np.linspace(0.0, b.approach_time, 401)
+    P = np.array([after(a, b, x)[0] for x in t])
+    assert np.linalg.norm(P[0] - a.position(a.duration)) < 1e-12
+    assert np.linalg.norm(after(a, b, b.approach_time)[0] - b.position(b.approach_time)) < 1e-12
+    out = np.hypot(P[:, 0] + R, P[:, 2]) - R                           # distance outside the cylinder, m
+    assert out.min() >= -a.depth - 2e-4 and out.max() > 0.02         # lifted off by most of approach_distance
+    steps = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    assert steps.max() < 0.002                                        # continuous: < 2 mm per 2.5 ms
+    v_num = (after(a, b, 0.4 + 1e-4)[0] - after(a, b, 0.4 - 1e-4)[0]) / 2e-4
+    assert np.allclose(after(a, b, 0.4)[1], v_num, atol=1e-6)
