@@ -22,7 +22,7 @@ def sample_fields(cls: type[Message], seed: int = 0, shapes: dict[str, tuple[int
     Arrays take ``shapes[name]`` if given, else the declared shape with free dimensions set to 2; uint8
     arrays of ≥ 2 dims come from ``image(shape, rng)`` if given; ``faces`` index the ``vertices`` built
     before them; other integer arrays get values in 0..254, floats in [0.1, 0.9). Required scalars get
-    True / 0.5 / 1 / ``"left"`` (for a ``left|right`` pattern) or ``"ok"``. Deterministic given ``seed``.
+    True / 0.5 / 1 / ``"left"`` (for a ``left|right`` pattern) or ``"ok"``, a list of strings two ``"ok"``. Deterministic given ``seed``.
     Raises ``TypeError`` for a field kind it cannot fill.
     """
     rng = np.random.default_rng(seed)
@@ -53,6 +53,8 @@ def sample_fields(cls: type[Message], seed: int = 0, shapes: dict[str, tuple[int
                 kw[name] = 1
             elif ann is str:
                 kw[name] = "left" if pattern and "left" in pattern else "ok"
+            elif ann == list[str]:
+                kw[name] = ["ok", "ok"]             # one per row of the free dimension (2)
             else:
                 raise TypeError(f"{cls.__name__}.{name}: no sample for {ann}")
     return kw

@@ -280,6 +280,8 @@ class ArmStream:
                 self._snap = self.limiter.snapshot()
                 self._snap_target = self.tracker.source_stamp
                 cmd = self._next_command()
+                if status == BridgeStatus.OK and self.tracker.waiting:
+                    status = BridgeStatus.SPAN_WAIT
             else:
                 self._snap = None
                 cmd = self.limiter.c.copy()

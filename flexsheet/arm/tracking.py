@@ -20,16 +20,12 @@ import numpy as np
 from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, IKResult, outside_limits
 from flexsheet.arm.pull_limit import max_pull
 
-__all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S", "PEER_REST", "REST_WAIT_CYCLES"]
+__all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S"]
 
 #: goals the velocity is fitted over (16 at the camera's 48 Hz: the last 313 ms)
 VELOCITY_GOALS = 16
 #: the goal moves on at its velocity for at most this long after the newest target (then it waits there)
 EXTRAPOLATE_MAX_S = 0.05
-#: a partner arm whose fastest joint turns slower than this (rad/s) is at rest (:meth:`TargetTracker.span_worse`)
-PEER_REST = 0.005
-#: consecutive span waits (cycles; 0.21 s at the 7.1 ms MXT period) for a partner at rest before a step goes
-REST_WAIT_CYCLES = 30
 
 
 class TargetRefused(ValueError):
@@ -43,13 +39,15 @@ class TargetRefused(ValueError):
 
 class BridgeStatus(StrEnum):
     """The bridge's fixed statuses (``ArmState.bridge_status``; compares equal to its string). A refused IK
-    target is ``"hold:" + IKResult.status`` (``hold:unreachable``, ``hold:limit:J<k>``, ...)."""
+    target is ``"hold:" + IKResult.status`` (``hold:unreachable``, ``hold:limit:J<k>``, ...). ``wait:span``: following,
+    this cycle's step waited on the span guard (:meth:`TargetTracker.span_worse`)."""
 
     OK = "ok"
     NO_TARGET = "hold:no_target"
     DISABLED = "hold:disabled"
     REFUSED = "hold:refused"
     PEER = "hold:peer"
+    SPAN_WAIT = "wait:span"
 
 
 def peer_holds(status: str) -> bool:
@@ -109,9 +107,10 @@ class TargetTracker:
         self.keep_out = None
         #: (3,) m, display frame: the partner clamp's measured position (its ``ArmJointState.pose``), or None
         self.peer_clamp: np.ndarray | None = None
-        #: whether the partner arm moves (its last state's joint speed above :data:`PEER_REST`)
-        self.peer_moving = True
-        self._rest_waits = 0
+        #: whether this arm's last step waited on the span guard (:meth:`span_worse`; ``wait:span``)
+        self.waiting = False
+        #: whether the partner's last state said it waits on its span guard
+        self.peer_waiting = False
         #: (lo, hi) m: the clamp span kept with the partner (:meth:`set_span_band`), or None: no guard
         self.span_band: tuple[float, float] | None = None
         #: cycles a step waited because it would have taken the span further outside the band
@@ -137,23 +136,20 @@ class TargetTracker:
     def span_worse(self, q_from, q_to) -> bool:
         """Whether moving this clamp from joints ``q_from`` to ``q_to`` (6,) rad takes the clamp span further
         outside :attr:`span_band` from the partner's measured clamp (:attr:`peer_clamp`); counted in
-        :attr:`span_waits`. False without a band or a partner state. The sheet couples the clamps: such a
-        step waits for the partner while it moves (catching up), and at most :data:`REST_WAIT_CYCLES` cycles
-        while it is at rest (:attr:`peer_moving` False): two arms at rest, each waiting for the other, would
-        wait for ever (a 60° sheet yaw between two organ strokes stopped both arms for 30 s). A service's goal
+        :attr:`span_waits` and :attr:`waiting`. False without a band or a partner state. The sheet couples the
+        clamps: such a step waits for the partner, unless the partner waits too (:attr:`peer_waiting`, its
+        ``bridge_status`` ``wait:span``): then both step, as the planner's targets keep the span; two arms
+        each waiting for the other would wait for ever (a 60° sheet yaw between two organ strokes stopped both
+        arms for 30 s). A service's goal
         (:meth:`move_to`: a registration's configurations, homing) is the operator's and is not judged."""
         if self.span_band is None or self.peer_clamp is None or self.manual is not None:
             return False
-        if self.peer_moving:
-            self._rest_waits = 0
         out_to = self._span_out(np.asarray(q_to, float))
-        if out_to > 0.0 and out_to > self._span_out(np.asarray(q_from, float)) + 1e-6:
-            if not self.peer_moving:
-                self._rest_waits += 1
-                if self._rest_waits > REST_WAIT_CYCLES:
-                    return False                    # both arms at rest, each waiting for the other: go
+        if out_to > 0.0 and out_to > self._span_out(np.asarray(q_from, float)) + 1e-6 and not self.peer_waiting:
             self.span_waits += 1
+            self.waiting = True
             return True
+        self.waiting = False
         return False
 
     def move_to(self, q) -> np.ndarray:

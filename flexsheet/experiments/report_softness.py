@@ -45,23 +45,9 @@ def force_depth_table(d: dict[str, list]):
     return ForceDepth(m.points, m.normals, tuple(m.names), m.depths, m.force, m.scene_key)
 
 
-def _pressed(d: dict[str, list]) -> tuple[list, int]:
-    """(pressed ``/world/contact`` samples (≥ :data:`MIN_DEPTH`, force > 0) to judge, how many were left out): a
-    sample whose scripted finger (``/world/finger``, newest before it) is in its "approach" phase is left out.
-    Between segments the script puts the finger 30 mm off the next start point at once, which can be behind
-    the sheet still posed at the last segment's end; no real finger passes through the sheet."""
-    pressed = [(t, m) for t, m in d.get("/world/contact", []) if m.depth >= MIN_DEPTH and m.force > 0.0]
-    fingers = d.get("/world/finger", [])
-    if not fingers or not pressed:
-        return pressed, 0
-    tf = np.array([m.header.stamp for _, m in fingers])
-    keep = []
-    for t, m in pressed:
-        k = int(np.searchsorted(tf, m.header.stamp, side="right")) - 1
-        if k >= 0 and fingers[k][1].phase == "approach":
-            continue
-        keep.append((t, m))
-    return keep, len(pressed) - len(keep)
+def _pressed(d: dict[str, list]) -> list:
+    """The ``/world/contact`` samples pressed at least :data:`MIN_DEPTH` deep with a force, in log order."""
+    return [(t, m) for t, m in d.get("/world/contact", []) if m.depth >= MIN_DEPTH and m.force > 0.0]
 
 
 def felt_force(d: dict[str, list], scales: list[tuple[float, float]] | None = None) -> dict:
@@ -81,7 +67,7 @@ def felt_force(d: dict[str, list], scales: list[tuple[float, float]] | None = No
     bad = [s for _, s in scales if not s > 0.0]
     if bad:
         raise ValueError(f"stiffness scale must be > 0, got {bad[0]!r}")
-    pressed, excluded = _pressed(d)
+    pressed = _pressed(d)
     if not pressed:
         return {}
     arrival = np.array([t for t, _ in pressed])
@@ -115,7 +101,7 @@ def felt_force(d: dict[str, list], scales: list[tuple[float, float]] | None = No
     felt_a, req_a, dep_a = (np.array([x[i] for i in ok]) for x in (felt, req, depth))
     ratio = felt_a / req_a
     within = float(np.mean(np.abs(ratio - 1.0) <= WEBER_FRACTION))
-    return {"n": len(ok), "basis": basis, "excluded_reposition": excluded,
+    return {"n": len(ok), "basis": basis,
             "ratio": {"median": float(np.median(ratio)), "p5": float(np.percentile(ratio, 5)),
                       "p95": float(np.percentile(ratio, 95))},
             "within_15pct": within,
@@ -185,7 +171,7 @@ def inclusion_contrast(d: dict[str, list], scene, scales=None) -> dict:
     inc = incs[0]
     c, r = np.asarray(inc.center, float), float(inc.radius)
     top = table.points[int(np.argmin(np.linalg.norm(table.points - c, axis=1)))]
-    pressed, _ = _pressed(d)
+    pressed = _pressed(d)
     if not pressed:
         return {}
     scales = planner_scales(d) if scales is None else scales
@@ -232,7 +218,7 @@ def follow_lag(d: dict[str, list], window: float = 0.5) -> dict:
     world = [m for _, m in d.get("/world/sheet", [])]
     tg = sorted((m for _, m in d.get("/sheet/target", []) if not m.status.startswith("hold")),
                 key=lambda m: m.source_stamp)
-    pressed, _ = _pressed(d)
+    pressed = _pressed(d)
     if len(world) < 10 or len(tg) < 10 or not pressed:
         return {}
     tw = np.array([m.header.stamp for m in world])

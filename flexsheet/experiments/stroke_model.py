@@ -56,7 +56,8 @@ from flexsheet.experiments.table1 import DD_CONVENTION, PAPER_TABLE1, table1_row
 from flexsheet.model import geometry
 from flexsheet.model.shapes import paper_cylinder
 from flexsheet.model.sheet import frame_from_clamps
-from flexsheet.planning.surface_planner import Hold, PlannerConfig, SurfacePlanner
+from flexsheet.planning.plan import Hold
+from flexsheet.planning.surface_planner import PlannerConfig, SurfacePlanner
 from flexsheet.twin.finger import FingerScript
 from flexsheet.twin.servo import JointServo, ServoParams
 from flexsheet.twin.truth import TwinTruth

@@ -59,14 +59,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from enum import StrEnum
 from typing import NamedTuple
 
-import numpy as np
-
-from flexsheet.model import geometry
 from flexsheet.model.shape_base import Shape
-from flexsheet.model.sheet import clamp_half_span, clamp_points, clamp_poses
+from flexsheet.model.sheet import clamp_half_span, clamp_points
 from flexsheet.model.tension import (
     SheetMaterial,
     TensionResult,
@@ -91,32 +87,14 @@ from flexsheet.model.vec import (
     sub,
 )
 from flexsheet.planning.limits import MotionLimits, RateLimiter, ReachModel
+from flexsheet.planning.plan import Hold, Plan
 
-__all__ = ["FORCE_DEPTH", "TABLE_MIN_DEPTH", "Hold", "INPUT_REJECTIONS", "PlannerConfig", "Plan", "SurfacePlanner"]
+__all__ = ["FORCE_DEPTH", "TABLE_MIN_DEPTH", "PlannerConfig", "SurfacePlanner"]
 
 #: the table's force is matched no shallower than this (m): at 0 the contact law's force is 0
 TABLE_MIN_DEPTH = 0.0005
 #: from this push depth (m) on, a given object press is matched in force (module doc); shallower, in stiffness
 FORCE_DEPTH = 0.002
-
-
-class Hold(StrEnum):
-    """Why the planner holds its last safe plan (a :class:`Plan` ``status``; compares equal to its string)."""
-
-    MARKER_LOST = "hold:marker_lost"
-    INVALID_FINGERTIP = "hold:invalid_fingertip"
-    INVALID_STAMP = "hold:invalid_stamp"
-    INVALID_STIFFNESS = "hold:invalid_stiffness"
-    STALE_FINGERTIP = "hold:stale_fingertip"
-    FUTURE_STAMP = "hold:future_stamp"
-    SINGULAR = "hold:singular"
-    HEAD_LOST = "hold:head_lost"
-    KEEP_OUT = "hold:keep_out"
-
-
-#: the holds caused by a refused input (the node reports them as rejected input)
-INPUT_REJECTIONS = frozenset({Hold.INVALID_FINGERTIP, Hold.INVALID_STAMP, Hold.STALE_FINGERTIP,
-                              Hold.FUTURE_STAMP, Hold.INVALID_STIFFNESS})
 
 
 @dataclass(frozen=True)
@@ -175,52 +153,6 @@ class PlannerConfig:
             raise ValueError(f"contrast_gain must be in (0, 5], got {self.contrast_gain!r}")
         if len(self.u_ref) != 3 or not finite(self.u_ref) or norm(self.u_ref) < 1e-9:
             raise ValueError(f"u_ref must be a non-zero finite (3,) vector, got {self.u_ref!r}")
-
-
-@dataclass(frozen=True, slots=True)
-class Plan:
-    """One planner output (display frame, SI).
-
-    ``contact`` (3,) m: contact point on the virtual surface (desired); ``normal``, ``axis_u``, ``axis_v``
-    (3,) unit: commanded sheet frame; ``origin`` (3,) m: commanded sheet centre; ``offset`` (s_u, s_v) m:
-    contact position on the sheet relative to its centre; ``stretch``, ``tension`` N/m, ``stiffness`` N/m,
-    ``object_stiffness`` N/m; ``depth`` m: push depth (≥ 0 when the fingertip is inside); ``touching``;
-    ``status``: "ok" or ';'-joined reasons; ``left``/``right`` (3,) m: clamp points
-    (:func:`flexsheet.model.sheet.clamp_points`); ``reach_margin`` m; ``t`` s: time of the fingertip sample
-    planned from; ``sheet_size`` m: the unstretched sheet side between the clamps; ``k_source``: where
-    ``object_stiffness`` came from — "given" (passed to :meth:`SurfacePlanner.update`, e.g. the FEM's dF/dd),
-    "scene" (the compliance model at the contact) or "param" (``object_stiffness`` of the config); it is
-    already multiplied by ``stiffness_scale``.
-    """
-
-    t: float
-    contact: Vec
-    normal: Vec
-    axis_u: Vec
-    axis_v: Vec
-    origin: Vec
-    offset: tuple[float, float]
-    stretch: float
-    tension: float
-    stiffness: float
-    object_stiffness: float
-    depth: float
-    touching: bool
-    status: str
-    left: Vec
-    right: Vec
-    reach_margin: float
-    sheet_size: float = geometry.SHEET_SIZE
-    k_source: str = "param"
-
-    def rotation(self) -> np.ndarray:
-        """(3, 3) rotation with columns (normal, axis_u, axis_v)."""
-        return np.column_stack([self.normal, self.axis_u, self.axis_v])
-
-    def clamp_matrices(self) -> tuple[np.ndarray, np.ndarray]:
-        """Left and right clamp poses T_display_clamp (4, 4): :func:`flexsheet.model.sheet.clamp_poses` of this
-        plan's sheet (origin, normal, axis_u, stretch, sheet_size)."""
-        return clamp_poses(self.origin, self.normal, self.axis_u, self.stretch, self.sheet_size)
 
 
 class _Sample(NamedTuple):

@@ -22,10 +22,9 @@ holds on an IK refusal, a fault or a lost controller, read from its joint state:
 so this arm stops where it is, from the cycle that state arrives in, until the other follows again).
 
 Span guard (``span_band`` [lo, hi] m): a cycle whose goal would take this clamp further outside the band from
-the partner's measured clamp than the command already is waits at rest — while the partner moves, and at most
-0.21 s while it is at rest too (both waiting for each other:
-:meth:`~flexsheet.arm.tracking.TargetTracker.span_worse`) (counted as ``span waits`` in the
-heartbeat): when one arm lags or stops, the other does not slacken the sheet or over-pull it.
+the partner's measured clamp than the command already is waits at rest (``bridge_status`` ``wait:span``; counted
+as ``span waits`` in the heartbeat): when one arm lags or stops, the other does not slacken the sheet or over-pull
+it. When the partner says ``wait:span`` too, both step (:meth:`~flexsheet.arm.tracking.TargetTracker.span_worse`).
 """
 
 from __future__ import annotations
@@ -40,7 +39,7 @@ from flexsheet.arm.bridge_config import DEFAULT_PERIOD, DEFAULT_PORT, BridgeConf
 from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics
 from flexsheet.arm.limiter import StreamLimiter
 from flexsheet.arm.stream import ArmStream, CycleReport
-from flexsheet.arm.tracking import PEER_REST, TargetTracker, peer_holds
+from flexsheet.arm.tracking import BridgeStatus, TargetTracker, peer_holds
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
 from flexsheet.model.timing import LAB
@@ -230,7 +229,7 @@ class ArmBridgeNode(Node):
     def on_peer_state(self, msg: ArmJointState) -> None:
         """The other arm's state: hold with it while it cannot follow (:func:`~flexsheet.arm.tracking.peer_holds`)."""
         self.tracker.peer_clamp = np.asarray(msg.pose, float)[:3, 3].copy()
-        self.tracker.peer_moving = float(np.max(np.abs(msg.velocity))) > PEER_REST
+        self.tracker.peer_waiting = msg.bridge_status == BridgeStatus.SPAN_WAIT
         hold = msg.bridge_status if peer_holds(msg.bridge_status) else None
         if hold != self.tracker.peer_hold:
             if hold is not None:
@@ -280,14 +279,15 @@ class ArmBridgeNode(Node):
                 self.tracker.set_target(msg.pose, msg.source_stamp, self.now(), strict=True, pull=msg.pull)
             except ValueError as exc:
                 self._reject(f"ArmTarget: {exc}")
-        if rep.bridge_status != self._last_status or rep.t_cycle - self._diag_at > 1.0:
-            if rep.bridge_status != self._last_status:
-                self.log.info("%s arm: %s", self.params.arm, rep.bridge_status)
-            self._last_status = rep.bridge_status
+        shown = BridgeStatus.OK if rep.bridge_status == BridgeStatus.SPAN_WAIT else rep.bridge_status   # not logged
+        if shown != self._last_status or rep.t_cycle - self._diag_at > 1.0:
+            if shown != self._last_status:
+                self.log.info("%s arm: %s", self.params.arm, shown)
+            self._last_status = shown
             self._diag_at = rep.t_cycle
             counters = ", ".join(f"{k} {v}" for k, v in self.link.counters().items())
             waits = f"; span waits {self.tracker.span_waits}" if self.tracker.span_waits else ""
-            self.state_message = f"{rep.bridge_status}; {self.link.name}: {counters}{waits}"
+            self.state_message = f"{shown}; {self.link.name}: {counters}{waits}"
         st = rep.state
         if st is None:
             return

@@ -45,19 +45,20 @@ import numpy as np
 from pydantic import Field
 
 from flexsheet.calibration.sheet import TERMS
+from flexsheet.model.force_depth import ForceDepth, scene_scale
 from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
 from flexsheet.model.shapes import make_shape
 from flexsheet.model.sheet import clamp_poses
-from flexsheet.model.force_depth import ForceDepth, scene_scale
 from flexsheet.model.tension import SheetMaterial, clamp_force, press_force
 from flexsheet.model.timing import LAB
 from flexsheet.planning.compliance import SceneCompliance
 from flexsheet.planning.head_guard import HeadGuard
 from flexsheet.planning.keepout import KeepOut
 from flexsheet.planning.limits import MotionLimits, ReachModel
+from flexsheet.planning.plan import INPUT_REJECTIONS, Hold, Plan
 from flexsheet.planning.pull_guard import PullGuard
 from flexsheet.planning.shape import planner_shape
-from flexsheet.planning.surface_planner import FORCE_DEPTH, INPUT_REJECTIONS, Hold, Plan, PlannerConfig, SurfacePlanner
+from flexsheet.planning.surface_planner import FORCE_DEPTH, PlannerConfig, SurfacePlanner
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.runtime.qos import QoS

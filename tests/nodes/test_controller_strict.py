@@ -28,7 +28,8 @@ from flexsheet.arm.kinematics import Q_HOME, Q_LOWER, Q_UPPER, QD_MAX, ArmKinema
 from flexsheet.arm.tracking import TargetRefused, TargetTracker
 from flexsheet.model.geometry import LEFT_BASE
 from flexsheet.model.shapes import make_shape
-from flexsheet.planning.surface_planner import Hold, PlannerConfig, SurfacePlanner
+from flexsheet.planning.plan import Hold
+from flexsheet.planning.surface_planner import PlannerConfig, SurfacePlanner
 from flexsheet.runtime.config import ConfigError
 from flexsheet.runtime.launch_check import check_launch
 from flexsheet.runtime.testing import NodeHarness

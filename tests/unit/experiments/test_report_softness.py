@@ -74,22 +74,16 @@ def _contact(t: float, z: float, depth: float, force: float) -> ContactTruth:
                         point=np.array([0.0, 0.0, z]), stiffness=1.0)
 
 
-def test_with_the_objects_table_the_request_is_its_force_at_the_true_depth_and_reposition_is_left_out():
-    from messages import FingerTruth
-
-    contacts, fingers = [], []
+def test_with_the_objects_table_the_request_is_its_force_at_the_true_depth():
+    contacts = []
     for k in range(200):
         t = 1.0 + 0.02 * k
         depth = 0.002 + 0.008 * (k % 50) / 49
         felt = 0.5 * 1000.0 * depth ** 1.5 * (1.1 if k % 4 == 0 else 1.0)      # a quarter 10 % stiff: within
         contacts.append((t, _contact(t, 0.0, depth, felt)))
-        phase = "approach" if k < 20 else "stroke"
-        fingers.append((t - 0.001, FingerTruth(header=Header(stamp=t - 0.001), position=np.zeros(3), velocity=np.zeros(3),
-                                               segment=0, mode="stroke", moving_time=10.0, phase=phase,
-                                               target_angle=0.0, visible=True)))
-    d = {"/world/contact": contacts, "/object/force_depth": [(0.5, _table_msg())], "/world/finger": fingers}
+    d = {"/world/contact": contacts, "/object/force_depth": [(0.5, _table_msg())]}
     r = felt_force(d, scales=[(0.0, 0.5)])
-    assert r["basis"] == "force_depth" and r["n"] == 180 and r["excluded_reposition"] == 20
+    assert r["basis"] == "force_depth" and r["n"] == 200
     assert r["ratio"]["median"] == pytest.approx(1.0, abs=2e-3) and r["within_15pct"] == 1.0 and r["verdict"] == "met"
     r2 = felt_force(d, scales=[(0.0, 0.4)])                                   # a sheet 25 % stiffer than asked
     assert r2["within_15pct"] == 0.0 and r2["verdict"] == "MISSED"
