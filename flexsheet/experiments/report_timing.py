@@ -149,28 +149,26 @@ _SCALE = re.compile(r"\bx ([0-9.eE+-]+) \(stiffness_scale[),]")
 _GAIN = re.compile(r"\bcontrast_gain ([0-9.eE+-]+)")
 
 
-def planner_scales(d: dict[str, list]) -> list[tuple[float, float]]:
-    """(arrival s, ``stiffness_scale``) from each planner heartbeat in ``/diagnostics`` that names its stiffness
-    source (``stiffness: …``; no "x S (stiffness_scale)" in it: 1), in arrival order."""
+def _from_heartbeats(d: dict[str, list], pattern: re.Pattern) -> list[tuple[float, float]]:
+    """(arrival s, value) from each planner heartbeat in ``/diagnostics`` that names its stiffness source
+    (``stiffness: …``): ``pattern``'s first group, 1 without a match; in arrival order."""
     out = []
     for t, hb in d.get("/diagnostics", []):
         if hb is None or getattr(hb, "node_type", "") != "planner" or "stiffness:" not in hb.message:
             continue
-        m = _SCALE.search(hb.message)
+        m = pattern.search(hb.message)
         out.append((float(t), float(m.group(1)) if m else 1.0))
     return out
+
+
+def planner_scales(d: dict[str, list]) -> list[tuple[float, float]]:
+    """(arrival s, ``stiffness_scale``) from the planner's heartbeats ("x S (stiffness_scale…)"; none: 1)."""
+    return _from_heartbeats(d, _SCALE)
 
 
 def planner_gains(d: dict[str, list]) -> list[tuple[float, float]]:
-    """(arrival s, ``contrast_gain``) from each planner heartbeat naming its stiffness source (no
-    "contrast_gain G" in it: 1), in arrival order."""
-    out = []
-    for t, hb in d.get("/diagnostics", []):
-        if hb is None or getattr(hb, "node_type", "") != "planner" or "stiffness:" not in hb.message:
-            continue
-        m = _GAIN.search(hb.message)
-        out.append((float(t), float(m.group(1)) if m else 1.0))
-    return out
+    """(arrival s, ``contrast_gain``) from the planner's heartbeats ("contrast_gain G"; none: 1)."""
+    return _from_heartbeats(d, _GAIN)
 
 
 def scales_at(scales: list[tuple[float, float]], t: np.ndarray) -> np.ndarray:

@@ -13,10 +13,8 @@ class _NoLink:
     connected = True
 
 
-def test_the_stream_brakes_where_a_lagging_partner_would_slacken_the_sheet():
-    """A 30 mm target shift toward a partner that is still moving but has not got there: the stream brakes at
-    the band's edge (within one braking distance) instead of closing the span; once the partner follows, it
-    goes on to the target."""
+def _shift_toward_partner(clock):
+    """The left arm at home, its partner's clamp known, a stream and a target 30 mm toward the partner."""
     kl, kr, ql, qr, left = _home()
     t = _tracker(kl, ql)
     peer = kr.fk(qr)[:3, 3]
@@ -24,9 +22,17 @@ def test_the_stream_brakes_where_a_lagging_partner_would_slacken_the_sheet():
     period = 0.0071
     qd = QD_MAX * 0.5
     lim = StreamLimiter(ql, period, qd, qd * 2.0, np.full(6, -3.0), np.full(6, 3.0))
-    stream = ArmStream(t, lim, _NoLink(), clock=lambda: now)
+    stream = ArmStream(t, lim, _NoLink(), clock=clock)
     T = np.array(left, float)
     T[1, 3] -= 0.030
+    return kl, t, peer, lim, stream, T, period
+
+
+def test_the_stream_brakes_where_a_lagging_partner_would_slacken_the_sheet():
+    """A 30 mm target shift toward a partner that is still moving but has not got there: the stream brakes at
+    the band's edge (within one braking distance) instead of closing the span; once the partner follows, it
+    goes on to the target."""
+    kl, t, peer, lim, stream, T, period = _shift_toward_partner(lambda: now)
     now = 1.0
     t.set_target(T, now, now)
     spans = []
@@ -50,16 +56,7 @@ def test_two_arms_each_waiting_for_the_other_step_together():
     """The same shift while the partner says it waits on its own span guard (``wait:span``): the step goes (the
     partner, waiting for this arm, would never move first) and the target is reached; without that the arm
     waits and says so."""
-    kl, kr, ql, qr, left = _home()
-    t = _tracker(kl, ql)
-    peer = kr.fk(qr)[:3, 3]
-    t.peer_clamp = peer.copy()
-    period = 0.0071
-    qd = QD_MAX * 0.5
-    lim = StreamLimiter(ql, period, qd, qd * 2.0, np.full(6, -3.0), np.full(6, 3.0))
-    stream = ArmStream(t, lim, _NoLink(), clock=lambda: now)
-    T = np.array(left, float)
-    T[1, 3] -= 0.030
+    kl, t, peer, lim, stream, T, period = _shift_toward_partner(lambda: now)
     now = 1.0
     for k in range(300):
         now = 1.0 + k * period
