@@ -125,7 +125,7 @@ class FemNode(Node):
         if p.nonlinear:
             await self._background(self._build_nonlinear, "fem-corotational")
         await self._setup_snapshots(mat, choice)
-        await self._background(self._publish_force_depth, "fem-force-depth")
+        await asyncio.to_thread(self._publish_force_depth)
 
     async def _background(self, target, name: str, *args) -> None:
         """Run ``target(*args)`` in a daemon thread; on a simulated clock to completion before the node is
@@ -160,16 +160,14 @@ class FemNode(Node):
         self.pub = self.publisher(topics.DEFORMATION)
         self.pub_force_depth = self.publisher(topics.FORCE_DEPTH)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST, sim_cost=LAB.compute("fem"))
-        await self._background(self._force_depth_then_warm, "fem-force-depth")
-
-    def _force_depth_then_warm(self) -> None:
-        self._publish_force_depth()
-        self._warm_sparse()
+        await asyncio.to_thread(self._publish_force_depth)
+        await self._background(self._warm_sparse, "fem-sparse")
 
     def _publish_force_depth(self) -> None:
         """Push the served model along the stroke (:func:`flexsheet.fem.force_depth.build_force_depth`) and
-        publish what the finger is asked to feel on the latched ``/object/force_depth``. The model is held per
-        point (about 40 ms), so fingertips in between are served; a failure is logged, never fatal."""
+        publish what the finger is asked to feel on the latched ``/object/force_depth``: in setup, off the event
+        loop, before any fingertip is served (0.7–2 s; in a background thread it held the model's lock per push
+        and stalled the fingertips waiting for it). A failure is logged, never fatal."""
         from flexsheet.fem.force_depth import build_force_depth
 
         t = time.perf_counter()
