@@ -32,13 +32,11 @@ import numpy as np
 __all__ = ["WEBER", "presentable_range", "run", "main"]
 
 WEBER = 0.15                   #: Weber fraction for force/stiffness with the surface cue (Bergmann Tiest & Kappers 2009)
-PULL_MARGIN = 0.9              #: the planner's default share of the torque-limited pull
-FORCE_DEPTH = 0.002            #: the planner matches force from this depth (m)
 
 
 def presentable_range(sheet_file: str | None = None) -> dict:
     """The sheet at its centre: ``material`` (the model used), ``min_stretch``, ``max_stretch`` (the first of
-    :data:`PULL_MARGIN` × the arms' torque-limited pull at the home pose and the strain limit), ``pull_n`` (that
+    the pull guard's margin (0.9, :class:`flexsheet.planning.pull_guard.PullGuard`) × the arms' torque-limited pull at the home pose and the strain limit), ``pull_n`` (that
     pull, N), ``limited_by`` ("arm_torque" or "strain"), ``source``. Raises ``ValueError`` for an unreadable
     ``sheet_file``."""
     from dataclasses import replace
@@ -58,7 +56,7 @@ def presentable_range(sheet_file: str | None = None) -> dict:
         except (OSError, KeyError, ValueError, TypeError) as exc:
             raise ValueError(f"--sheet {sheet_file}: not a sheet.json of flexsheet calibrate sheet ({exc})") from None
         source = f"identified ({sheet_file})"
-    guard = PullGuard({"left": geometry.LEFT_BASE, "right": geometry.RIGHT_BASE}, PULL_MARGIN)
+    guard = PullGuard({"left": geometry.LEFT_BASE, "right": geometry.RIGHT_BASE})
     Tl, Tr = clamp_poses(np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), mat.min_stretch, mat.size)
     pull = guard.limit(Tl, Tr)
     capped = replace(mat, max_force=min(mat.max_force, pull)) if pull is not None else mat
@@ -74,9 +72,9 @@ def run(out: Path, scene_file: str, sheet_file: str | None = None, gain: float =
     """Items 1–4 of the module doc; writes and returns ``compliance.json`` (and ``force_depth.json``)."""
     from flexsheet.fem.force_depth import build_force_depth, hertz_check
     from flexsheet.fem.served import served_model
-    from flexsheet.model.force_depth import scene_scale
     from flexsheet.model.scenes import load_scene
     from flexsheet.model.tension import press_force
+    from flexsheet.planning.surface_planner import scale_depths, sheet_scene_scale
 
     sc = load_scene(scene_file)
     rng = presentable_range(sheet_file)          # a bad --sheet fails before the FEM is built
@@ -95,11 +93,11 @@ def run(out: Path, scene_file: str, sheet_file: str | None = None, gain: float =
                       + ": within 15 % of Hertz at 1-3 mm")}
     (out / "force_depth.json").write_text(json.dumps(fd, indent=1))
     e_lo, e_hi = rng["min_stretch"], rng["max_stretch"]
-    d_hi = 2.0 * sc.use.stroke_depth
+    d_lo, d_hi = scale_depths(sc.use.stroke_depth)
     floor = lambda d: press_force(e_lo, mat, 0.0, d)        # noqa: E731
     ceil = lambda d: press_force(e_hi, mat, 0.0, d)         # noqa: E731
-    ss = scene_scale(table, floor, ceil, FORCE_DEPTH, d_hi, gain)
-    depths = [d for d in table.depths if FORCE_DEPTH - 1e-12 <= d <= d_hi + 1e-12]
+    ss = sheet_scene_scale(table, mat, e_hi, sc.use.stroke_depth, gain)
+    depths = [d for d in table.depths if d_lo - 1e-12 <= d <= d_hi + 1e-12]
     points = []
     for name, p in zip(table.names, table.points, strict=True):
         asked = [table.force_at(p, d) / table.reference_force(d) - 1.0 for d in depths]

@@ -89,12 +89,30 @@ from flexsheet.model.vec import (
 from flexsheet.planning.limits import MotionLimits, RateLimiter, ReachModel
 from flexsheet.planning.plan import Hold, Plan
 
-__all__ = ["FORCE_DEPTH", "TABLE_MIN_DEPTH", "PlannerConfig", "SurfacePlanner"]
+__all__ = ["FORCE_DEPTH", "TABLE_MIN_DEPTH", "PlannerConfig", "SurfacePlanner", "scale_depths", "sheet_scene_scale"]
 
 #: the table's force is matched no shallower than this (m): at 0 the contact law's force is 0
 TABLE_MIN_DEPTH = 0.0005
 #: from this push depth (m) on, a given object press is matched in force (module doc); shallower, in stiffness
 FORCE_DEPTH = 0.002
+
+
+def scale_depths(stroke_depth: float) -> tuple[float, float]:
+    """(lo, hi) m: the depths a scene's one scale is fitted over, :data:`FORCE_DEPTH` to twice its stroke depth."""
+    return FORCE_DEPTH, 2.0 * float(stroke_depth)
+
+
+def sheet_scene_scale(table, mat: SheetMaterial, max_stretch: float, stroke_depth: float, gain: float = 1.0):
+    """The scene's one scale (:func:`flexsheet.model.force_depth.scene_scale`) for the sheet ``mat`` at its centre:
+    its force at ``mat.min_stretch`` and at ``max_stretch`` bound every mapped force of ``table`` over
+    :func:`scale_depths` of ``stroke_depth`` m, with contrast gain ``gain``. Raises ``ValueError`` as
+    ``scene_scale``."""
+    from flexsheet.model.force_depth import scene_scale
+    from flexsheet.model.tension import press_force
+
+    lo, hi = scale_depths(stroke_depth)
+    return scene_scale(table, lambda d: press_force(mat.min_stretch, mat, 0.0, d),
+                       lambda d: press_force(max_stretch, mat, 0.0, d), lo, hi, gain)
 
 
 @dataclass(frozen=True)

@@ -45,11 +45,11 @@ import numpy as np
 from pydantic import Field
 
 from flexsheet.calibration.sheet import TERMS
-from flexsheet.model.force_depth import ForceDepth, scene_scale
+from flexsheet.model.force_depth import ForceDepth
 from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
 from flexsheet.model.shapes import make_shape
 from flexsheet.model.sheet import clamp_poses
-from flexsheet.model.tension import SheetMaterial, clamp_force, press_force
+from flexsheet.model.tension import SheetMaterial, clamp_force
 from flexsheet.model.timing import LAB
 from flexsheet.planning.compliance import SceneCompliance
 from flexsheet.planning.head_guard import HeadGuard
@@ -58,7 +58,7 @@ from flexsheet.planning.limits import MotionLimits, ReachModel
 from flexsheet.planning.plan import INPUT_REJECTIONS, Hold, Plan
 from flexsheet.planning.pull_guard import PullGuard
 from flexsheet.planning.shape import planner_shape
-from flexsheet.planning.surface_planner import FORCE_DEPTH, PlannerConfig, SurfacePlanner
+from flexsheet.planning.surface_planner import PlannerConfig, SurfacePlanner, scale_depths, sheet_scene_scale
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.runtime.qos import QoS
@@ -263,16 +263,14 @@ class PlannerNode(Node):
         p: PlannerParams = self.params
         cfg = self.planner.cfg
         if "stiffness_scale" not in p.model_fields_set:
-            mat = cfg.material
-            e_hi = self.planner.max_stretch
-            d_hi = 2.0 * (self.scene.use.stroke_depth if self.scene is not None else 0.01)
-            sc = scene_scale(table, lambda d: press_force(mat.min_stretch, mat, 0.0, d),
-                             lambda d: press_force(e_hi, mat, 0.0, d), FORCE_DEPTH, d_hi, cfg.contrast_gain)
+            stroke_depth = self.scene.use.stroke_depth if self.scene is not None else 0.01
+            sc = sheet_scene_scale(table, cfg.material, self.planner.max_stretch, stroke_depth, cfg.contrast_gain)
             self.planner.cfg = replace(cfg, stiffness_scale=sc.scale)
             self.scene_scale = sc
+            d_lo, d_hi = scale_depths(stroke_depth)
             self.log.info("object's force-depth from its FEM (%d points): one scale %.3g for the scene (presentable "
                           "from %.3g to %.3g over %.0f-%.0f mm; %s, %.0f %% of its samples saturate)", len(table.names),
-                          sc.scale, sc.low, sc.high, FORCE_DEPTH * 1e3, d_hi * 1e3,
+                          sc.scale, sc.low, sc.high, d_lo * 1e3, d_hi * 1e3,
                           "it fits" if sc.fits else "it does NOT fit", 100 * sc.saturated)
         self.planner.set_force_depth(table)
 
