@@ -5,29 +5,30 @@
 What it measures, for the model the FEM node serves for the scene (:func:`flexsheet.fem.served.served_model`):
 
 1. **Update time**: thread CPU time of one ``update_finger`` at pushes along the stroke, median and p90, ms.
-2. **Visible error against the reference**: at the stroke's middle (full: its start, middle and end), a rigid
-   capsule finger pushed along the inward normal every 5 mm over the scene's declared range (``use.max_depth``)
-   into the scene's compressible hyperelastic body (its law, its contact law, its support and inclusions: total
-   Lagrangian P2, Newton with load stepping, :mod:`flexsheet.fem.reference.hyperelastic`), on gmsh meshes refined around
-   the push point. The error is the largest distance, in projector pixels, between where either eye sees the
-   model's and the reference's rendered vertex on the imaginary screen, over the vertices the eye sees past the
-   surface and the finger (:mod:`flexsheet.fem.eye_view`). Linear P2 on the reference's own mesh is judged too.
-3. **The reference's convergence**: its two finest levels' largest visible difference, px
-   (``reference.converged_px``, converged at ≤ 0.5 px); where they agree only part of the way,
-   ``visible.converged_to_mm`` (never under 15 mm) with the error there and the band beyond.
+2. **What the eyes see against the reference** (:mod:`flexsheet.fem.eye_judge`): at the stroke's middle (full:
+   its start, middle and end), a rigid capsule finger pushed along the inward normal every 5 mm over the scene's
+   declared range (``use.max_depth``) into the scene's compressible hyperelastic body (its law, its contact law,
+   its support and inclusions: total Lagrangian P2, Newton with load stepping,
+   :mod:`flexsheet.fem.reference.hyperelastic`), on gmsh meshes refined along the whole push path and on the
+   support's rim. **Shape** (each seen vertex's distance to the reference's surface, and each eye's outline) is
+   judged, **sliding** along the surface reported beside it, in projector pixels. Linear P2 on the reference's
+   own mesh is judged too.
+3. **The reference's band**: three levels (h_fine 8, 6, 4.5 mm: ratio 4/3) give the finest level's grid
+   convergence index per depth (:mod:`flexsheet.fem.reference.gci`); where it holds (≤ 0.5 px) only part of the
+   way, ``visible.converged_to_mm`` (never under 15 mm) with the error there and the band beyond.
+4. **What the eye notices as the finger moves** (:mod:`flexsheet.experiments.fem_motion`): the drawn dent
+   against the fingertip (``contact``) and frame-to-frame jumps (``temporal``) along the stroke and the push.
 
-Outputs in ``out_dir``: ``summary.json`` (``scene`` with ``max_depth_mm``, ``contact.law``,
-``realtime.update_ms``, ``visible.max_px_in_range``, ``visible.range_mm``, ``reference.converged_px``, the
-pushes) and ``accuracy_<name>.png`` + ``.json``. Reference solves are cached
-(:class:`flexsheet.fem.cache.ArrayCache`, the key includes ``scene.key()``), solved first on dask when the cache
-lacks them (:func:`flexsheet.fem.reference.workers.run_workers`). :func:`visible_errors` is the tables' older footprint
-metric (mm), still used by the sphere and path tables' held-out checks.
+Outputs in ``out_dir``: ``summary.json`` (``scene`` with ``max_depth_mm`` and ``contact``,
+``realtime.update_ms``, ``visible.shape_px_max``, ``visible.sliding_px_max``, ``reference.gci_px``,
+``contact.gap_px_max``, ``temporal.jump_px_p99``, the pushes) and ``accuracy_<name>.png`` + ``.json``. Reference
+solves are cached (:class:`flexsheet.fem.cache.ArrayCache`, the key includes ``scene.key()``), solved first on
+dask when the cache lacks them (:func:`flexsheet.fem.reference.workers.run_workers`). :func:`shape_px_by_depth` is
+the same shape metric for the sphere and path tables' held-out and mesh checks.
 
-Run by hand, and the FEM stiffness and sheet tension along the stroke of a launch run
-(:func:`compliance_along_stroke`)::
+Run by hand::
 
     python -m flexsheet.experiments.fem_scene --scene launch/scenes/sphere.yaml --quick --out docs/figures/scenes/sphere
-    python -m flexsheet.experiments.fem_scene --scene launch/scenes/organ.yaml --run out/organ --out docs/figures/scenes
 """
 
 from __future__ import annotations
@@ -35,28 +36,30 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 import os
 import sys
 import time
 
 import numpy as np
 
-from flexsheet.fem.choose import visible_mask
+from flexsheet.experiments.fem_motion import served_finger, served_motion
 from flexsheet.fem.path_snapshots import GRID
 from flexsheet.runtime.console import LIBRARY, show_lines
 
 log = logging.getLogger(__name__)
 
-__all__ = ["run_scene", "main", "visible_errors", "TARGET_MM", "TARGET_PX", "CONVERGED_PX", "QUICK", "FULL"]
+__all__ = ["run_scene", "main", "shape_px_by_depth", "TARGET_MM", "TARGET_PX", "CONVERGED_PX", "QUICK", "FULL"]
 
 TARGET_MM = 0.7                      #: one projector pixel on the screen, mm
 TARGET_PX = 1.0                      #: the served model's largest visible error, projector px
 CONVERGED_PX = 0.5                   #: a reference counts as converged where two levels differ by this, px
 DEPTH_STEP = 0.005                   #: the judged depths: every 5 mm to the scene's use.max_depth, m
-#: settings: push fractions along the stroke, recorded depths (m), load step (m), reference levels' h_fine (m)
+#: settings: push fractions along the stroke, recorded depths (m), load step (m), reference levels' h_fine (m,
+#: coarse to fine, ratio 4/3 for the grid convergence index), path refinement (True: down to the scene's
+#: use.max_depth), the support's rim on a mesh line (:func:`flexsheet.fem.scene_mesh.scene_mesh`)
 QUICK = {"fractions": (0.5,), "depths": tuple(np.round(np.arange(1, 7) * 0.005, 4)), "step": 0.0025,
-         "levels": (0.008, 0.006), "h": 0.012, "refine_radius": 0.015, "path_depth": 0.0, "n_time": 100}
+         "levels": (0.008, 0.006, 0.0045), "h": 0.012, "refine_radius": 0.015, "path_depth": True, "rim": True,
+         "n_time": 100}
 #: the full run: its first level is the path table's stations' mesh (:data:`flexsheet.fem.path_snapshots.GRID`), with
 #: the same outputs, so its pushes at the stroke's start, middle and end are those of a path table whose stations
 #: include them (any odd count: the default 13, or 7)
@@ -70,7 +73,7 @@ def scene_reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, p
     """The scene's hyperelastic push (its material, its finger's contact law) at surface point ``q`` (3,) m along
     −``n`` (outward unit normal (3,)) through ``st['depths']`` (D,) m (load steps ``st['step']``) on a mesh of size
     ``st['h']`` refined to ``h_fine`` m within ``st['refine_radius']`` of ``q`` (``st['path_depth']`` > 0: of the
-    whole push path down to that depth); cached (kind "scenereference"). Returns arrays: ``u`` (D, k, 3) m the
+    whole push path down to that depth; ``st['rim']``: the support's rim a refined mesh line); cached (kind "scenereference"). Returns arrays: ``u`` (D, k, 3) m the
     displacements at ``probes`` (k, 3) m, ``force`` (D,) N, ``converged``, ``inverted``, ``max_strain`` (D,)
     (largest principal Green–Lagrange strain), ``seconds``, ``dofs``, and the mesh (``points``, ``tets``,
     ``fixed``, ``E``, ``nu``)."""
@@ -85,9 +88,11 @@ def scene_reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, p
 
     depths = np.asarray(st["depths"], float)
     path = float(st.get("path_depth", 0.0))
+    rim = bool(st.get("rim", False))
     key = cache_key("scene-ref-2", SOLVER_VERSION, sc.key(), h_fine, st["h"], st["refine_radius"], st["step"],
                     np.round(q, 9).tolist(), np.round(n, 9).tolist(), np.round(depths, 9).tolist(),
-                    cache_key(np.round(probes, 9).tobytes()), *([f"path={path:.6g}"] if path > 0 else []))
+                    cache_key(np.round(probes, 9).tobytes()), *([f"path={path:.6g}"] if path > 0 else []),
+                    *(["rim"] if rim else []))
     # refine around the push point, or (path_depth > 0) along the whole push path: balls every
     # refine_radius/3 from q down to path_depth along -n (the tube the finger travels through)
     steps = np.arange(0.0, path + 1e-12, st["refine_radius"] / 3) if path > 0 else np.zeros(1)
@@ -95,7 +100,7 @@ def scene_reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, p
 
     def compute() -> dict:
         t = time.perf_counter()
-        sm = scene_mesh(sc, MeshSpec(st["h"], h_fine, st["refine_radius"]), refine_at=refine_at)
+        sm = scene_mesh(sc, MeshSpec(st["h"], h_fine, st["refine_radius"]), refine_at=refine_at, rim=rim)
         mat = Material.of_scene(sc.material)
         m0 = HyperelasticModel(sm.mesh, mat, sym_y=False, sym_z=False, E_elem=sm.E, nu_elem=sm.nu)
         model = HyperelasticModel(sm.mesh, mat, sym_y=False, sym_z=False, support=m0.dof_points(sm.mesh.fixed),
@@ -135,35 +140,18 @@ def _linear_fine(sc, ref: dict, q, n, depths, probes) -> tuple[np.ndarray, float
     return np.stack(us), float(np.median(ts) * 1e3)
 
 
-def visible_errors(model_u, ref_u, verts, held, q, n, depths, r) -> list[float]:
-    """Largest distance (mm) per depth between ``model_u`` and ``ref_u`` (D, S, 3) m over the visible rendered
-    vertices ``verts`` (S, 3) m: not ``held`` (S,) bool and outside the footprint of a finger of radius ``r`` m
-    pushed ``depths[j]`` m at surface point ``q`` along −``n`` (:func:`flexsheet.fem.choose.visible_mask` on the
-    reference's deformed positions)."""
-    from flexsheet.fem.scene_model import finger_on_scene
+def shape_px_by_depth(model_u, ref_u, verts, faces, fingers) -> list[float]:
+    """The largest visible shape error (px; the larger of the seen vertices' distance to the reference's surface and
+    the outlines', :func:`flexsheet.fem.eye_judge.judge`) per depth of ``model_u`` against ``ref_u`` ((D, S, 3) m
+    displacements of the rendered vertices ``verts`` (S, 3) m on ``faces`` (F, 3)), ``fingers[j]`` (D,) occluding:
+    the metric of every table check."""
+    from flexsheet.fem.eye_judge import judge
 
     out = []
-    for j, d in enumerate(depths):
-        vis = visible_mask(verts + ref_u[j], finger_on_scene(q, n, float(d), r)) & ~held
-        out.append(float(np.linalg.norm(model_u[j] - ref_u[j], axis=1)[vis].max()) * 1e3)
+    for j, fg in enumerate(fingers):
+        (o,), _ = judge([verts + np.asarray(model_u[j], float)], verts + np.asarray(ref_u[j], float), faces, fg)
+        out.append(max(o["shape_px"], o["silhouette_px"]))
     return out
-
-
-def _finger(sc, q: np.ndarray, n: np.ndarray, depth: float):
-    """The finger pushed ``depth`` m at surface point ``q`` along −``n`` as the scene's served model takes it:
-    the paper's cylinder's by azimuth and axial offset (:func:`flexsheet.fem.contact.finger_at`), any other
-    scene's by point and normal (:func:`flexsheet.fem.scene_model.finger_on_scene`)."""
-    from flexsheet.fem.served import fem_models_as_cylinder
-
-    if fem_models_as_cylinder(sc):
-        from flexsheet.fem.contact import finger_at
-
-        c = sc.center
-        return finger_at(math.atan2(q[2] - c[2], q[0] - c[0]), float(depth), sc.finger.radius,
-                         sc.object.radius, c, float(q[1] - c[1]))
-    from flexsheet.fem.scene_model import finger_on_scene
-
-    return finger_on_scene(q, n, float(depth), sc.finger.radius)
 
 
 def scene_update_ms(rt, sc, depths, n_calls: int) -> dict:
@@ -172,7 +160,7 @@ def scene_update_ms(rt, sc, depths, n_calls: int) -> dict:
     ts, cpu, methods = [], [], []
     for q, n in zip(pts, nrm, strict=True):
         for d in depths:
-            fg = _finger(sc, q, n, float(d))
+            fg = served_finger(sc, q, n, float(d))
             methods.append(rt.update_finger(fg).method)
             for _ in range(n_calls):
                 t, c = time.perf_counter(), time.thread_time()
@@ -205,46 +193,51 @@ def _ref_job(args: tuple) -> tuple[float, float, str | None]:
 def _scene_push(sc, rt, st: dict, verts, faces, cache, f: float, depths) -> dict:
     """One push point (fraction ``f`` of the stroke): the reference's levels, the served model and linear P2 on
     the finest level's mesh, each judged by the eyes against the finest level (px,
-    :func:`flexsheet.fem.eye_view.visible_px_errors`: what the eyes see found once per depth)."""
-    from flexsheet.fem.eye_view import visible_px_errors
+    :func:`flexsheet.fem.eye_judge.judge`: shape, silhouette and sliding), and each level against the next finer
+    one (shape and silhouette, for the convergence index)."""
+    from flexsheet.fem.eye_judge import judge
 
     q, n = sc.stroke_at([f])
     q, n = q[0], n[0]
     refs = [scene_reference(sc, q, n, h, st, verts, cache) for h in st["levels"]]
     fine = refs[-1]
-    fingers = [_finger(sc, q, n, float(d)) for d in depths]
+    fingers = [served_finger(sc, q, n, float(d)) for d in depths]
     ups = [rt.update_finger(fg) for fg in fingers]
     lin_u, lin_ms = _linear_fine(sc, fine, q, n, depths, verts)
-    served, seen, lin, change = [], [], [], []
+    rows = {k: [] for k in ("served_shape_px", "served_silhouette_px", "served_sliding_px", "served_total_px",
+                            "linear_fine_px", "seen_vertices")}
+    changes = [[] for _ in refs[:-1]]            # level i against level i+1, fine last
     for j, fg in enumerate(fingers):
-        ref_pts = verts + fine["u"][j]
-        coarse = [verts + refs[-2]["u"][j]] if len(refs) > 1 else []
-        (e, e_lin, *e_change), k = visible_px_errors([ups[j].vertices, verts + lin_u[j], *coarse], ref_pts, faces, fg)
-        served.append(e)
-        seen.append(k)
-        lin.append(e_lin)
-        change.append(e_change[0] if e_change else None)
+        (sv, li), k = judge([np.asarray(ups[j].vertices, float), verts + lin_u[j]], verts + fine["u"][j], faces, fg)
+        for key, v in (("served_shape_px", sv["shape_px"]), ("served_silhouette_px", sv["silhouette_px"]),
+                       ("served_sliding_px", sv["sliding_px"]), ("served_total_px", sv["total_px"]),
+                       ("linear_fine_px", max(li["shape_px"], li["silhouette_px"])), ("seen_vertices", k)):
+            rows[key].append(v)
+        for i in range(len(refs) - 1):
+            (c,), _ = judge([verts + refs[i]["u"][j]], verts + refs[i + 1]["u"][j], faces, fg)
+            changes[i].append(max(c["shape_px"], c["silhouette_px"]))
     levels = [{"h_fine_m": h, "dofs": int(r["dofs"]), "seconds": float(r["seconds"]),
                "newton_converged": bool(np.all(r["converged"])), "force_N": r["force"].tolist(),
                "inverted": r["inverted"].tolist()} for h, r in zip(st["levels"], refs, strict=True)]
-    push = {"fraction": f, "point_m": q.tolist(), "normal": n.tolist(), "depths_m": depths.tolist(),
-            "served_px": served, "seen_vertices": seen, "served_methods": sorted({u.method for u in ups}),
+    shape = np.maximum(rows["served_shape_px"], rows["served_silhouette_px"])
+    push = {"fraction": f, "point_m": q.tolist(), "normal": n.tolist(), "depths_m": depths.tolist(), **rows,
+            "served_px": shape.tolist(), "served_methods": sorted({u.method for u in ups}),
             "served_force_N": [u.force for u in ups], "served_stiffness_N_per_m": [u.stiffness for u in ups],
-            "linear_fine_px": lin, "linear_fine_solve_ms": lin_ms, "reference_levels": levels,
-            "level_change_px": change}
-    log.info(f"push at {f:g} of the stroke: served {max(served):.2f} px, linear on the reference mesh "
-         f"{max(lin):.2f} px, last refinement {max(change) if change[0] is not None else float('nan'):.2f} px")
+            "linear_fine_solve_ms": lin_ms, "reference_levels": levels, "level_change_px": changes}
+    log.info(f"push at {f:g} of the stroke: served shape {shape.max():.2f} px (sliding "
+             f"{max(rows['served_sliding_px']):.2f} px), linear on the reference mesh {max(rows['linear_fine_px']):.2f} px"
+             + (f", last refinement {max(changes[-1]):.2f} px" if changes else ""))
     return push
 
 
-def judged_range(depths: np.ndarray, change: np.ndarray | None) -> float | None:
-    """The deepest depth (m) up to which the reference's two levels differ by ≤ :data:`CONVERGED_PX` at every
-    judged depth (the range a served figure is judged over when the reference does not converge over the
-    scene's whole range); None without two levels or when it converges nowhere up to 15 mm, the least judged
-    range the scenes may have."""
-    if change is None:
+def judged_range(depths: np.ndarray, band: np.ndarray | None) -> float | None:
+    """The deepest depth (m) up to which the reference's band (px: its grid convergence index, or with two levels
+    their difference) is ≤ :data:`CONVERGED_PX` at every judged depth (the range a served figure is judged over
+    when the reference does not converge over the scene's whole range); None without a band or when it holds
+    nowhere up to 15 mm, the least judged range the scenes may have."""
+    if band is None:
         return None
-    ok = np.asarray(change) <= CONVERGED_PX
+    ok = np.asarray(band, float) <= CONVERGED_PX
     n = int(np.argmin(ok)) if not ok.all() else len(ok)
     if n == 0 or depths[n - 1] < 0.015 - 1e-9:
         return None
@@ -281,13 +274,14 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     faces = np.asarray(rt.faces)
     _solve_references(scene_path, st, verts, cache_dir, jobs)
     pushes = [_scene_push(sc, rt, st, verts, faces, cache, f, depths) for f in st["fractions"]]
-    summary = _summary(sc, quick, st, what, timing, pushes, t0)
+    summary = _summary(sc, quick, st, what, timing, pushes, served_motion(sc, rt), t0)
     served = np.asarray(summary["visible"]["px_by_depth"])
     with open(os.path.join(out_dir, "summary.json"), "w") as fh:
         json.dump(summary, fh, indent=1)
     _plot(out_dir, summary)
-    log.info(f"done in {summary['seconds']:.0f} s -> {out_dir}: visible {served.max():.2f} px (target {TARGET_PX}), "
-         f"reference levels {summary['reference']['converged_px']} px (target {CONVERGED_PX})")
+    log.info(f"done in {summary['seconds']:.0f} s -> {out_dir}: shape {served.max():.2f} px (target {TARGET_PX}), "
+             f"reference GCI {summary['reference']['gci_px']} px (target {CONVERGED_PX}), contact gap "
+             f"{summary['contact']['gap_px_max']:.2f} px, jump p99 {summary['temporal']['jump_px_p99']:.2f} px")
     return summary
 
 
@@ -299,6 +293,8 @@ def _scene_settings(sc, quick: bool, levels: tuple[float, ...] | None) -> dict:
         st["levels"] = tuple(levels)
     n_d = int(sc.use.max_depth / DEPTH_STEP + 1e-9)         # never past the declared range
     st["depths"] = tuple(np.round(np.arange(1, n_d + 1) * DEPTH_STEP, 9))
+    if st["path_depth"] is True:                            # refined along the whole push, to the declared depth
+        st["path_depth"] = float(sc.use.max_depth)
     return st
 
 
@@ -314,26 +310,51 @@ def _solve_references(scene_path, st: dict, verts: np.ndarray, cache_dir: str, j
             log.info(f"reference level {h * 1e3:g} mm: {'failed: ' + err if err else 'done'} ({sec:.0f} s)")
 
 
-def _summary(sc, quick: bool, st: dict, what: str, timing: dict, pushes: list[dict], t0: float) -> dict:
-    """summary.json of :func:`run_scene`: the scene, the served model (``what``) and its update ``timing``, the
-    visible error of ``pushes`` (:func:`_scene_push`) by depth, the reference's convergence; ``t0`` the run's
-    start (perf_counter)."""
+def _band(st: dict, pushes: list[dict]) -> dict:
+    """The reference's band per depth, px: with three levels the fine level's grid convergence index
+    (:func:`flexsheet.fem.reference.gci.gci_by_depth`) of the levels' visible shape differences; with two, their
+    difference."""
+    from flexsheet.fem.reference.gci import gci_by_depth
+
+    ch = [np.max([p["level_change_px"][i] for p in pushes], axis=0) for i in range(len(st["levels"]) - 1)]
+    if len(ch) >= 2:
+        g = gci_by_depth(ch[-1], ch[-2], tuple(st["levels"][-3:]))
+        return {"band": np.asarray(g["gci_px"]), "order": g["order"], "ratios": g["ratios"],
+                "changes": [c.tolist() for c in ch], "kind": "gci"}
+    return {"band": ch[0] if ch else None, "order": None, "ratios": None,
+            "changes": [c.tolist() for c in ch], "kind": "difference of two levels" if ch else None}
+
+
+def _summary(sc, quick: bool, st: dict, what: str, timing: dict, pushes: list[dict], motion: dict,
+             t0: float) -> dict:
+    """summary.json of :func:`run_scene`: the scene (its contact law), the served model (``what``) and its update
+    ``timing``, what the eyes see of ``pushes`` (:func:`_scene_push`) by depth, the reference's band, and the
+    ``motion`` blocks (:func:`flexsheet.experiments.fem_motion.served_motion`); ``t0`` the run's start."""
     depths = np.asarray(st["depths"], float)
-    served = np.max([p["served_px"] for p in pushes], axis=0)
-    change = (np.max([p["level_change_px"] for p in pushes], axis=0) if len(st["levels"]) > 1 else None)
-    judged = judged_range(depths, change)
+    mx = {k: np.max([p[k] for p in pushes], axis=0) for k in ("served_shape_px", "served_silhouette_px",
+                                                                "served_sliding_px", "served_total_px")}
+    served = np.maximum(mx["served_shape_px"], mx["served_silhouette_px"])
+    b = _band(st, pushes)
+    band = b["band"]
+    judged = judged_range(depths, band)
+    finite = band is not None and bool(np.all(np.isfinite(band)))
     return {
         "scene": {"name": sc.name, "file": str(sc.source), "kind": sc.object.kind, "key": sc.key(),
                   "description": sc.description, "max_depth_mm": sc.use.max_depth * 1e3,
-                  "stroke_depth_mm": sc.use.stroke_depth * 1e3, "reason": sc.use.reason},
-        "contact": {"law": sc.finger.contact, "source": sc.finger.contact_source},
+                  "stroke_depth_mm": sc.use.stroke_depth * 1e3, "reason": sc.use.reason,
+                  "contact": sc.finger.contact, "contact_source": sc.finger.contact_source},
         "settings": {"quick": quick, **{k: list(v) if isinstance(v, tuple) else v for k, v in st.items()}},
         "realtime": {"method": what, "update_ms": timing["median"], "update_ms_p90": timing["p90"],
                      "update_wall_ms": timing["wall_median"], "n_timed": timing["n"], "methods": timing["methods"],
                      "target_ms": 1.0, "meets_target": timing["median"] <= 1.0,
                      "update_timing": "the updating thread's CPU time (time.thread_time) per update_finger"},
-        "visible": {"max_px_in_range": float(served.max()), "range_mm": [0.0, depths[-1] * 1e3],
+        "visible": {"shape_px_max": float(served.max()), "range_mm": [0.0, depths[-1] * 1e3],
                     "px_by_depth": served.tolist(), "depths_mm": (depths * 1e3).tolist(),
+                    "shape_px_by_depth": mx["served_shape_px"].tolist(),
+                    "silhouette_px_by_depth": mx["served_silhouette_px"].tolist(),
+                    "sliding_px_by_depth": mx["served_sliding_px"].tolist(),
+                    "sliding_px_max": float(mx["served_sliding_px"].max()),
+                    "total_px_by_depth": mx["served_total_px"].tolist(),
                     "seen_vertices_by_depth": np.min([p["seen_vertices"] for p in pushes], axis=0).tolist(),
                     "target_px": TARGET_PX, "meets_target": bool(served.max() <= TARGET_PX),
                     "linear_fine_px": float(max(max(p["linear_fine_px"]) for p in pushes)),
@@ -343,19 +364,24 @@ def _summary(sc, quick: bool, st: dict, what: str, timing: dict, pushes: list[di
                     "band_beyond_px": [float(served[depths > judged + 1e-9].min()), float(served[depths > judged + 1e-9].max())]
                     if judged is not None and np.any(depths > judged + 1e-9) else None,
                     "metric": "rendered vertices either eye (V -/+ 32 mm along y) sees on the reference's deformed "
-                              "surface, the finger an occluding capsule; error: the distance between where the eye "
-                              "sees the model's and the reference's vertex on the imaginary screen, in projector "
-                              "pixels (0.7 mm); flexsheet/fem/eye_view.py"},
+                              "surface, the finger an occluding capsule; shape: each served vertex's distance to "
+                              "the reference's surface, and the outline's (Hausdorff), as the eyes see them on the "
+                              "imaginary screen, px (0.7 mm); sliding along the surface reported apart (a texture "
+                              "would show it); flexsheet/fem/eye_judge.py"},
         "reference": {"model": f"{sc.material.model} (compressible, nu {sc.material.nu:g}), total Lagrangian P2, "
                                f"Newton with load stepping, rigid {sc.finger.contact} capsule finger, full body",
-                      "converged_px": float(change.max()) if change is not None else None,
-                      "change_px_by_depth": change.tolist() if change is not None else None,
-                      "target_px": CONVERGED_PX,
-                      "converged": bool(change is not None and change.max() <= CONVERGED_PX and all(
+                      "gci_px": (float(np.max(band)) if finite else (None if band is None else "inf")),
+                      "gci_px_by_depth": [None if not np.isfinite(x) else float(x) for x in band]
+                      if band is not None else None,
+                      "band_kind": b["kind"], "order_by_depth": b["order"], "ratios": b["ratios"],
+                      "level_changes_px": b["changes"], "target_px": CONVERGED_PX,
+                      "converged_to_mm": judged * 1e3 if judged is not None else None,
+                      "converged": bool(finite and np.max(band) <= CONVERGED_PX and all(
                           lv["newton_converged"] for p in pushes for lv in p["reference_levels"])),
                       "levels": pushes[0]["reference_levels"],
-                      "criterion": f"the two finest levels differ by <= {CONVERGED_PX} px visible at every depth, "
-                                   "every Newton solve converged"},
+                      "criterion": f"the finest level's band (GCI of three levels at ratio 4/3, F_s 1.25, order "
+                                   f"capped at 2) <= {CONVERGED_PX} px at every depth, every Newton solve converged"},
+        **motion,
         "pushes": pushes,
         "seconds": time.perf_counter() - t0,
     }
@@ -372,9 +398,9 @@ def _plot(out_dir: str, s: dict) -> None:
     name = s["scene"]["name"]
     v, r = s["visible"], s["reference"]
     data = {"title": f"{name}: visible FEM error as the eyes see it", "units": {"depth": "mm", "error": "px"},
-            "depths_mm": v["depths_mm"], "served_px": v["px_by_depth"],
+            "depths_mm": v["depths_mm"], "served_px": v["px_by_depth"], "sliding_px": v["sliding_px_by_depth"],
             "linear_fine_px": np.max([p["linear_fine_px"] for p in s["pushes"]], axis=0).tolist(),
-            "reference_change_px": r["change_px_by_depth"], "target_px": v["target_px"],
+            "reference_change_px": r["gci_px_by_depth"], "target_px": v["target_px"],
             "converged_target_px": r["target_px"], "update_ms": s["realtime"]["update_ms"],
             "verdict": {"served": "met" if v["meets_target"] else "MISSED",
                         "reference": "met" if r["converged"] else "MISSED"}}
@@ -383,84 +409,20 @@ def _plot(out_dir: str, s: dict) -> None:
     fig, ax = plt.subplots(figsize=(7.5, 4.6))
     ax.plot(data["depths_mm"], data["served_px"], "D-",
             label=f"served model ({s['realtime']['update_ms']:.2f} ms/update): {data['verdict']['served']}")
+    ax.plot(data["depths_mm"], data["sliding_px"], "x:", label="served model: sliding (not judged)")
     ax.plot(data["depths_mm"], data["linear_fine_px"], "s-", label="linear P2 on the reference mesh")
     if data["reference_change_px"] is not None:
-        ax.plot(data["depths_mm"], data["reference_change_px"], "^--",
-                label=f"reference: last refinement's change: {data['verdict']['reference']}")
+        ax.plot(data["depths_mm"], [np.nan if x is None else x for x in data["reference_change_px"]], "^--",
+                label=f"reference: its band ({r['band_kind']}): {data['verdict']['reference']}")
         ax.axhline(r["target_px"], color="gray", ls=":", lw=0.8, label=f"converged: {r['target_px']} px")
     ax.axhline(v["target_px"], color="k", ls="--", lw=0.8, label=f"target {v['target_px']} px")
     ax.set_xlabel("push depth, mm")
-    ax.set_ylabel("largest visible error, projector px")
-    ax.set_title(data["title"] + f" (0-{v['range_mm'][1]:g} mm, {s['contact']['law']} contact)")
+    ax.set_ylabel("largest visible shape error, projector px")
+    ax.set_title(data["title"] + f" (0-{v['range_mm'][1]:g} mm, {s['scene']['contact']} contact)")
     ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(os.path.join(out_dir, f"accuracy_{name}.png"), dpi=110)
     plt.close(fig)
-
-
-def compliance_along_stroke(run_dir: str, scene_path, out_dir: str, bin_mm: float = 2.5) -> dict:
-    """From a launch run (``run_dir``/sim.mcap): the FEM's dF/dd (``/object/deformation``, valid, depth > 0)
-    and the sheet's tension and requested stiffness (``/sheet/target`` while touching) binned by the contact
-    point's position along the scene's stroke (arc length, mm; nearest of 400 path points), with each
-    inclusion's place on the path (the path point nearest its centre). Writes
-    ``fem_compliance_<scene>.png`` + ``.json`` into ``out_dir``; returns the numbers."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from scipy.spatial import cKDTree
-
-    from flexsheet.model.scenes import load_scene
-    from flexsheet.runtime.bag_read import read_bag
-    from flexsheet.runtime.codec import decode_any
-
-    sc = load_scene(scene_path)
-    bag = os.path.join(run_dir, "sim.mcap")
-    pts, _ = sc.stroke_points(400)
-    s_path = np.linspace(0.0, sc.stroke_length(), 400) * 1e3
-    tree = cKDTree(pts)
-    de = [m for m in (decode_any(x.frames) for x in read_bag(bag, topics=["/object/deformation"]))
-          if m.valid and m.depth > 0 and m.scene_key == sc.key()]
-    tg = [m for m in (decode_any(x.frames) for x in read_bag(bag, topics=["/sheet/target"]))
-          if m.touching and not m.status.startswith("hold")]
-    edges = np.arange(0.0, s_path[-1] + bin_mm, bin_mm)
-
-    def binned(cp, v):
-        if not len(cp):
-            return [], []
-        s = s_path[tree.query(np.asarray(cp))[1]]
-        k = np.digitize(s, edges) - 1
-        cen, med = [], []
-        for b in range(len(edges) - 1):
-            sel = k == b
-            if sel.sum() >= 3:
-                cen.append(float(0.5 * (edges[b] + edges[b + 1])))
-                med.append(float(np.median(np.asarray(v)[sel])))
-        return cen, med
-
-    out = {"scene": sc.name, "run": run_dir, "bin_mm": bin_mm, "n_deformations": len(de), "n_targets": len(tg),
-           "fem_stiffness_N_per_m": binned([m.contact_point for m in de], [m.stiffness for m in de]),
-           "fem_depth_mm": binned([m.contact_point for m in de], [m.depth * 1e3 for m in de]),
-           "tension_N_per_m": binned([m.contact_point for m in tg], [m.tension for m in tg]),
-           "requested_stiffness_N_per_m": binned([m.contact_point for m in tg], [m.object_stiffness for m in tg]),
-           "inclusions_at_mm": [float(s_path[tree.query(np.asarray(i.center))[1]]) for i in sc.inclusions]}
-    os.makedirs(out_dir, exist_ok=True)
-    with open(os.path.join(out_dir, f"fem_compliance_{sc.name}.json"), "w") as fh:
-        json.dump(out, fh, indent=1)
-    fig, ax = plt.subplots(figsize=(8, 4.2))
-    ax.plot(*out["fem_stiffness_N_per_m"], "o-", label="FEM dF/dd (N/m)")
-    ax.plot(*out["tension_N_per_m"], "s-", label="sheet tension (N/m)")
-    ax.plot(*out["requested_stiffness_N_per_m"], "^-", label="stiffness asked of the sheet (N/m)")
-    for i, x in enumerate(out["inclusions_at_mm"]):
-        ax.axvline(x, color="r", ls="--", lw=0.8, label="inclusion centre (nearest path point)" if i == 0 else None)
-    ax.set_xlabel("position along the stroke, mm")
-    ax.set_ylabel("N/m")
-    ax.set_title(f"{sc.name}: FEM stiffness and sheet tension along the stroke (medians per {bin_mm:g} mm)")
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(os.path.join(out_dir, f"fem_compliance_{sc.name}.png"), dpi=110)
-    plt.close(fig)
-    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -473,14 +435,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scene", required=True, help="scene file (launch/scenes/*.yaml)")
     ap.add_argument("--out", required=True, help="output folder")
     ap.add_argument("--quick", action="store_true", help="one push point, two reference levels")
-    ap.add_argument("--run", help="instead: chart the FEM stiffness and sheet tension along the stroke from "
-                                  "this launch output folder (its sim.mcap)")
     args = ap.parse_args(argv)
     show_lines(LIBRARY)         # the library's progress, the worker pool's (flexsheet.fem.reference.workers) included
-    if args.run:
-        c = compliance_along_stroke(args.run, args.scene, args.out)
-        print(json.dumps(c, indent=1)[:3000])
-        return 0
     try:
         s = run_scene(args.scene, args.out, args.quick)
     except ValueError as exc:

@@ -1,13 +1,12 @@
-"""What the user's eyes see of a pushed surface, and how far a model's surface is from the reference's there,
-in projector pixels (the accuracy metric of every FEM figure).
+"""What the user's eyes see of a pushed surface, and where on the imaginary screen, in projector pixels (the
+ground of every FEM accuracy figure; :mod:`flexsheet.fem.eye_judge` judges a served surface with it).
 
 A rendered vertex counts where an eye sees it: the segment from the eye to the vertex's position on the
 *reference's* deformed surface crosses neither that surface (self-occlusion: the crater's rim, the object's far
 side; a ray cast with :mod:`trimesh`) nor the finger, a capsule of the fingertip's radius from the tip's centre
-back toward the user (:data:`FINGER_LENGTH`). Its error is the distance between where the eye sees the model's
-vertex and the reference's on the imaginary screen (both projected from the eye onto it), divided by one projector
-pixel there (:data:`flexsheet.model.geometry.PIXEL_ON_SCREEN`): a displacement along the line of sight costs
-nothing, one across it costs what the eye notices. Both eyes (V ∓ IPD/2 along y) are judged; the worse counts.
+back toward the user (:data:`FINGER_LENGTH`). Where the eye sees a point is its projection from the eye onto the
+imaginary screen, in projector pixels there (:data:`flexsheet.model.geometry.PIXEL_ON_SCREEN`): a displacement
+along the line of sight costs nothing, one across it costs what the eye notices. Both eyes (V ∓ IPD/2 along y).
 Frame: ``display``; units m, px."""
 
 from __future__ import annotations
@@ -17,8 +16,7 @@ import numpy as np
 from flexsheet.model import geometry
 from flexsheet.model.projector import eye_positions
 
-__all__ = ["FINGER_LENGTH", "IPD", "eyes", "finger_capsule", "seen", "screen_px", "visible_px_error",
-           "visible_px_errors"]
+__all__ = ["FINGER_LENGTH", "IPD", "eyes", "finger_capsule", "seen", "screen_px"]
 
 #: the finger's length behind the tip's centre, m: an adult index finger's distal and middle phalanges
 #: (assumption; a longer finger hides no more, the capsule then ends beside the user's hand)
@@ -106,34 +104,3 @@ def screen_px(points: np.ndarray, eye: np.ndarray) -> np.ndarray:
         raise ValueError("a point lies in the plane through the eye parallel to the screen")
     s = e + ((geometry.SCREEN_POINT - e) @ n / den)[:, None] * rel
     return s[:, 1:] / geometry.PIXEL_ON_SCREEN
-
-
-def visible_px_errors(models: list[np.ndarray], ref_pts: np.ndarray, faces: np.ndarray, finger=None,
-                      eye_pair: np.ndarray | None = None) -> tuple[list[float], int]:
-    """The largest visible error, px, of each of ``models`` (each (k, 3) m) against ``ref_pts`` (k, 3) m (the
-    same rendered vertices, deformed by a model and by the reference), and how many vertices either eye sees:
-    visibility on the reference's surface (``faces`` (F, 3)) with the ``finger``
-    (:class:`flexsheet.fem.contact.ContactFinger` or None) occluding, found once for all models; ``eye_pair`` (2, 3) m,
-    default :func:`eyes`. 0.0 when no vertex is seen. Raises ``ValueError`` for mismatched shapes."""
-    r = np.asarray(ref_pts, float)
-    ms = [np.asarray(m, float) for m in models]
-    for m in ms:
-        if m.shape != r.shape:
-            raise ValueError(f"model_pts {m.shape} and ref_pts {r.shape} must match")
-    cap = finger_capsule(finger) if finger is not None else None
-    worst, seen_any = [0.0] * len(ms), np.zeros(len(r), bool)
-    for e in eyes() if eye_pair is None else np.asarray(eye_pair, float):
-        vis = seen(r, faces, e, cap)
-        seen_any |= vis
-        if vis.any():
-            ref_px = screen_px(r[vis], e)
-            for i, m in enumerate(ms):
-                worst[i] = max(worst[i], float(np.linalg.norm(screen_px(m[vis], e) - ref_px, axis=1).max()))
-    return worst, int(seen_any.sum())
-
-
-def visible_px_error(model_pts: np.ndarray, ref_pts: np.ndarray, faces: np.ndarray, finger=None,
-                     eye_pair: np.ndarray | None = None) -> tuple[float, int]:
-    """:func:`visible_px_errors` for one model: (its largest visible error, px; the vertices either eye sees)."""
-    errs, k = visible_px_errors([model_pts], ref_pts, faces, finger, eye_pair)
-    return errs[0], k

@@ -101,12 +101,52 @@ def arc_points(radius: float, center: np.ndarray, arc_deg: float, spacing: float
     return np.column_stack([c[0] + radius * np.cos(phis), np.full(n, c[1]), c[2] + radius * np.sin(phis)])
 
 
+def _split_at_rim(gmsh, point, normal, size: float, h: float) -> list[int]:
+    """Split the OpenCASCADE solid(s) by the plane through ``point`` (3,) m normal to ``normal`` (3,), so the
+    surface is meshed with a line where the plane meets it (the support's rim: a held-to-free transition on a
+    mesh line, not between nodes); returns a ``Threshold`` field: ``size`` m on those lines, graded to ``h``
+    over 3·``size``. Pieces of the cutting disk outside the solid are removed."""
+    occ = gmsh.model.occ
+    occ.synchronize()
+    vols = gmsh.model.getEntities(3)
+    x0, y0, z0, x1, y1, z1 = gmsh.model.getBoundingBox(-1, -1)
+    big = 2.0 * max(x1 - x0, y1 - y0, z1 - z0) + 0.01
+    p = np.asarray(point, float)
+    n = np.asarray(normal, float) / np.linalg.norm(normal)
+    disk = occ.addDisk(float(p[0]), float(p[1]), float(p[2]), big, big)      # in the plane z = p_z
+    axis = np.cross([0.0, 0.0, 1.0], n)
+    if np.linalg.norm(axis) > 1e-12:
+        occ.rotate([(2, disk)], *map(float, p), *map(float, axis), math.acos(float(np.clip(n[2], -1.0, 1.0))))
+    occ.fragment(vols, [(2, disk)])
+    occ.synchronize()
+    loose = [(2, t) for _, t in gmsh.model.getEntities(2) if len(gmsh.model.getAdjacencies(2, t)[0]) == 0]
+    if loose:
+        occ.remove(loose, recursive=True)
+        occ.synchronize()
+    rim = set()
+    for _, t in gmsh.model.getEntities(2):
+        if len(gmsh.model.getAdjacencies(2, t)[0]) == 2:                       # the cut between two volumes
+            rim.update(abs(int(c)) for c in gmsh.model.getAdjacencies(2, t)[1])
+    if not rim:
+        raise RuntimeError("the support's plane does not cut the solid: no rim to mesh")
+    dist = gmsh.model.mesh.field.add("Distance")
+    gmsh.model.mesh.field.setNumbers(dist, "CurvesList", sorted(rim))
+    gmsh.model.mesh.field.setNumber(dist, "Sampling", 400)
+    thr = gmsh.model.mesh.field.add("Threshold")
+    gmsh.model.mesh.field.setNumber(thr, "InField", dist)
+    for name, v in (("SizeMin", size), ("SizeMax", h), ("DistMin", 0.0), ("DistMax", 3.0 * size)):
+        gmsh.model.mesh.field.setNumber(thr, name, v)
+    return [thr]
+
+
 def gmsh_tets(model: str, geometry, h: float, h_fine: float, refine_radius: float, centres, what: str,
-              extra_balls: tuple = ()):
+              extra_balls: tuple = (), rim: tuple | None = None):
     """Run gmsh once: ``geometry(gmsh)`` adds the OpenCASCADE solid, element size ``h`` with ``h_fine`` within
     ``refine_radius`` of each point of ``centres`` (``Ball`` fields under a ``Min``), single-threaded Delaunay;
     ``extra_balls``: further (centres (K, 3) m, radius m, size m) groups of balls under the same ``Min``, each
-    graded to ``h`` over its radius. Returns (points (N, 3) m, tets (M, 4) int64 into ``points``, unoriented).
+    graded to ``h`` over its radius; ``rim`` (point (3,) m, normal (3,)): mesh the plane's cut of the surface as
+    lines of size ``h_fine`` (:func:`_split_at_rim`, OpenCASCADE solids only). Returns (points (N, 3) m, tets
+    (M, 4) int64 into ``points``, unoriented).
     Raises ``RuntimeError`` naming ``what`` if gmsh fails or produces no tetrahedra."""
     import gmsh
 
@@ -124,7 +164,7 @@ def gmsh_tets(model: str, geometry, h: float, h_fine: float, refine_radius: floa
             gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
             gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
             gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
-            fields = []
+            fields = [] if rim is None else _split_at_rim(gmsh, rim[0], rim[1], h_fine, h)
             for group, radius, size in ((centres, refine_radius, h_fine), *extra_balls):
                 for p in group:
                     f = gmsh.model.mesh.field.add("Ball")

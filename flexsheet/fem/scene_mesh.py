@@ -32,7 +32,7 @@ import numpy as np
 
 from flexsheet.fem.mesh import MeshSpec, TetMesh, gmsh_tets, orient_tets, surface_faces
 
-__all__ = ["SceneMesh", "scene_mesh", "refine_centres", "DEFAULT_SCENE_SPEC"]
+__all__ = ["SceneMesh", "scene_mesh", "refine_centres", "support_plane", "DEFAULT_SCENE_SPEC"]
 
 #: the cylinder's chosen real-time mesh sizes (flexsheet/fem/accuracy_table.json: P2 h 12 mm, h_fine 4 mm, band
 #: 12 mm) applied along any scene's stroke path
@@ -69,6 +69,14 @@ def refine_centres(scene, spec: MeshSpec) -> np.ndarray:
     pts, _ = scene.stroke_points(n)
     inc = [np.asarray(i.center, float) for i in scene.inclusions]
     return np.vstack([pts] + ([np.array(inc)] if inc else []))
+
+
+def support_plane(scene) -> tuple[np.ndarray, np.ndarray]:
+    """(point (3,) m, normal (3,)): the plane bounding the scene's held region (:class:`flexsheet.model.scene_parts.Support`)."""
+    s = scene.support
+    point = np.asarray(scene.center if s.kind == "back_half" else s.point, float)
+    n = np.asarray(s.normal, float)
+    return point + s.tolerance * n / np.linalg.norm(n), n / np.linalg.norm(n)
 
 
 def _occ_geometry(scene):
@@ -118,13 +126,15 @@ def _stl_geometry(path: str):
 
 
 def scene_mesh(scene, spec: MeshSpec = DEFAULT_SCENE_SPEC, force_stl: bool = False,
-               refine_at: np.ndarray | None = None) -> SceneMesh:
+               refine_at: np.ndarray | None = None, rim: bool = False) -> SceneMesh:
     """Mesh ``scene`` (a :class:`flexsheet.model.scenes.Scene`) with P1 tetrahedra refined along its stroke.
 
     ``spec``: sizes (``arc_deg`` is ignored: the refined band follows the scene's stroke path);
     ``force_stl``: mesh an analytic object through its STL surface too (tests compare both routes);
     ``refine_at`` optional (K, 3) m: refine around these points (and the inclusions) instead of the stroke
-    (a reference mesh around one push point).
+    (a reference mesh around one push point); ``rim``: the support's plane cuts the surface along a mesh line
+    refined to ``h_fine`` (a conforming support rim for the references; OpenCASCADE solids only, a remeshed STL
+    keeps the rim its nodes give).
     Returns a :class:`SceneMesh`. Raises ``ValueError`` when ``scene`` is not a Scene or its support holds no
     boundary node, ``RuntimeError`` when gmsh fails (naming the scene). Deterministic for a given scene and
     spec (single-threaded Delaunay)."""
@@ -148,7 +158,7 @@ def scene_mesh(scene, spec: MeshSpec = DEFAULT_SCENE_SPEC, force_stl: bool = Fal
     if geometry is not None:
         try:
             points, tets = gmsh_tets(f"scene_{scene.name}", geometry, spec.h, spec.h_fine, spec.refine_radius,
-                                     centres, what)
+                                     centres, what, rim=support_plane(scene) if rim else None)
         except RuntimeError:
             points = None                     # e.g. a fillet OpenCASCADE cannot build: mesh the surface instead
     if points is None:

@@ -85,7 +85,7 @@ def served_model(sc: Scene, cfg: FemConfig | None = None, cache_dir: str | None 
     m = RealtimeModel(ch.spec, mat, sc.finger.radius, cfg.max_depth, cfg.strain_limit, cache_dir, None, ch.order)
     if ch.kind != "snapshots":
         return m, f"linear P{ch.order} cylinder model (the model table picks {ch.kind})"
-    table = load_snapshot_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, sc.finger.radius)
+    table = load_snapshot_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, sc.finger.radius, sc.finger.contact)
     if table is None:
         return m, f"linear P{ch.order} cylinder model (no snapshot table stored)"
     m.attach_snapshots(table, axial_max=cfg.snapshot_axial_max)

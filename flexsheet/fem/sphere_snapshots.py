@@ -124,7 +124,7 @@ class SphereFrame:
 
 def sphere_frame(scene) -> SphereFrame:
     """The symmetry frame of ``scene`` (a :class:`flexsheet.model.scenes.Scene`) when the table applies: a
-    sphere, ``back_half`` support, no inclusions, a frictionless finger, an arc stroke about the sphere's centre starting on the
+    sphere, ``back_half`` support, no inclusions, an arc stroke about the sphere's centre starting on the
     support axis (+x). Raises ``ValueError`` naming what breaks the symmetry."""
     o = scene.object
     if o.kind != "sphere":
@@ -133,8 +133,6 @@ def sphere_frame(scene) -> SphereFrame:
         raise ValueError(f"support.kind must be 'back_half' (rotations about +x keep it), got {scene.support.kind!r}")
     if scene.inclusions:
         raise ValueError(f"inclusions break the sphere's symmetry: {len(scene.inclusions)} given")
-    if scene.finger.contact != "frictionless":   # the table's pushes are unloaded (stable_states): no anchors
-        raise ValueError(f"finger.contact must be 'frictionless' for a sphere table, got {scene.finger.contact!r}")
     st = scene.stroke
     if st.kind != "arc":
         raise ValueError(f"stroke.kind must be 'arc' for a sphere table, got {st.kind!r}")

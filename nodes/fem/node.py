@@ -239,7 +239,8 @@ class FemNode(Node):
             self.state_message = f"fem: linear model ({why})"
             return
         cache = ArrayCache(p.cache_dir or None)
-        table = load_snapshot_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, p.finger_radius)
+        table = load_snapshot_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, p.finger_radius,
+                                    self.scene.finger.contact)
         if table is not None:
             self._attach(table, "loaded from the shipped store (flexsheet/fem/data)" if cache.shipped() else
                          "loaded from cache")
@@ -274,7 +275,7 @@ class FemNode(Node):
         t = time.perf_counter()
         try:
             table, _, _ = load_or_build(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, self.params.finger_radius,
-                                        build=True)
+                                        build=True, contact=self.scene.finger.contact)
             self._attach(table, f"built in {time.perf_counter() - t:.0f} s")
         except Exception:  # noqa: BLE001 - background build must never take the node down
             self.state_message = "fem: building the nonlinear snapshots failed - serving the LINEAR model"

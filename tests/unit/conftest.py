@@ -18,11 +18,11 @@ from flexsheet.twin.truth import TwinTruth
 
 
 def _scene():
-    """The sphere with a 4° stroke and a sticking finger: no sphere table applies, so a path table does."""
+    """The sphere with a short polyline stroke over its crown (2.5 mm, as a 4° arc) and a sticking finger: no
+    sphere table applies (its stroke is no arc about the centre), so a path table does."""
     sc = load_scene(SCENES_DIR / "sphere.yaml")
     data = sc.model_dump()
-    data["stroke"] = {"kind": "arc", "start": [1.0, 0.0, 0.0], "toward": [0.0, 0.0, 1.0], "start_deg": 0.0,
-                      "end_deg": 4.0}
+    data["stroke"] = {"kind": "polyline", "points": [[0.0, 0.0, 0.0], [0.0, 0.0, 0.00247]]}
     data["finger"] = {"radius": sc.finger.radius, "contact": "sticking"}
     return parse_scene(data, "<sphere, short stroke, sticking>")
 

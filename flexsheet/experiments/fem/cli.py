@@ -264,8 +264,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _judge_cylinder(args) -> None:
     """The paper's cylinder judged as every scene is (:func:`flexsheet.experiments.fem_scene.run_scene`, into
-    ``--out``/visible/): its ``scene``, ``contact`` and ``visible`` blocks and ``reference.converged_px`` join
-    the run's summary.json. Only for the scene file's own material (no --E/--nu/--Jm)."""
+    ``--out``/visible/): its ``scene``, ``visible``, ``contact`` and ``temporal`` blocks and ``reference.gci_px``
+    join the run's summary.json. Only for the scene file's own material (no --E/--nu/--Jm)."""
     import json
 
     from flexsheet.experiments.fem_scene import run_scene
@@ -276,10 +276,10 @@ def _judge_cylinder(args) -> None:
     path = os.path.join(args.out, "summary.json")
     with open(path) as fh:
         summary = json.load(fh)
-    summary.update({k: s[k] for k in ("scene", "contact", "visible")})
+    summary.update({k: s[k] for k in ("scene", "visible", "contact", "temporal")})
     summary["realtime"]["update_ms_served"] = s["realtime"]["update_ms"]
-    summary["reference"].update({"converged_px": s["reference"]["converged_px"],
-                                 "converged_target_px": s["reference"]["target_px"],
+    summary["reference"].update({"gci_px": s["reference"]["gci_px"], "gci_px_by_depth": s["reference"]["gci_px_by_depth"],
+                                 "gci_target_px": s["reference"]["target_px"],
                                  "visible_levels": s["reference"]["levels"]})
     with open(path, "w") as fh:
         json.dump(summary, fh, indent=1)

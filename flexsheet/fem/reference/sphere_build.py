@@ -38,7 +38,8 @@ def solve_alpha(scene, alpha_deg: float, grid: SphereGrid = DEFAULT_SPHERE_GRID,
     """One snapshot angle: the scene's hyperelastic body pushed at polar angle ``alpha_deg`` (stroke plane)
     through the grid's depths on a mesh refined along that push path (``spec`` = (h, h_fine, refine_radius,
     path_depth) m), the loading path then its stable branch, sampled on the grid (and at ``probes`` (k, 3) m,
-    e.g. the real-time model's rendered vertices). Heavy (~10 min of one core at h_fine 4.5 mm): cache it.
+    e.g. the real-time model's rendered vertices), under the scene's contact law (a frictionless push keeps its
+    stable branch, :func:`stable_states`; a sticking one its loading path). Heavy (~10 min of one core at h_fine 4.5 mm): cache it.
     Returns {"field": (D, T, P, 3) float32 m, "u_probes": (D, k, 3) float32, "force" (D,) N, "converged",
     "inverted", "max_strain", "min_detF", "newton", "branch" (D,), "dofs", "cpu_seconds", "unload_seconds"};
     row 0 is the rest state."""
@@ -62,11 +63,15 @@ def solve_alpha(scene, alpha_deg: float, grid: SphereGrid = DEFAULT_SPHERE_GRID,
         return Capsule(q - d * n + r * n, -n, r)
 
     log.info(f"sphere table: alpha {alpha_deg:g} deg: {model.n} DOF, {len(depths) - 1} depths ...")
+    contact = scene.finger.contact
     states = solve_path_capsule(model, caps, depths[1:], step=grid.depth_step, iters=iters,
-                                label=f"sphere {alpha_deg:g} deg")
+                                label=f"sphere {alpha_deg:g} deg", contact=contact)
     cpu = time.process_time() - c0
     t1 = time.perf_counter()
-    states, branch, _ = stable_states(model, caps, states, step=grid.depth_step, iters=iters)
+    if contact == "frictionless":     # a sticking push is monotone: its anchors depend on the loading history
+        states, branch, _ = stable_states(model, caps, states, step=grid.depth_step, iters=iters)
+    else:
+        branch = np.zeros(len(states), np.int64)
     unload = time.perf_counter() - t1
     pts = grid_points(fr, grid)
     P = model.probe_matrix(pts)

@@ -58,7 +58,7 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
     assert [r["alpha_deg"] for r in rep["alphas"]] == list(grid.alphas_deg) and rep["material"]["law"] == "gent"
     h = rep["held_out"][0]
     assert h["alpha_deg"] == 5.0 and h["depths_mm"] == pytest.approx([5.0, 10.0])
-    assert h["max_snapshots_error_mm"] < 0.05 and h["max_linear_error_mm"] > 0.5
+    assert h["max_snapshots_shape_px"] < 0.07 and h["max_linear_shape_px"] > 0.7
     # packed (2° cells, float16) against the full table: the closed-form dent is smooth, so a few µm per mm of depth
     assert 0.0 < rep["shipped"]["packing_error_mm"] < 0.05 and os.path.getsize(out / "sphere_table.png") > 5e3
     key = S.sphere_table_key(sc, grid)
@@ -82,10 +82,12 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
     m = json.loads((out / "sphere_table.json").read_text())["mesh_check"][0]
     tab, lv = m["levels"]
     assert m["alpha_deg"] == 5.0 and tab["name"] == "table" and lv["spec_m"][1] == pytest.approx(0.006)
-    assert tab["noise_mm"][-1] == pytest.approx(0.2, rel=1e-6) and tab["vs_table_mesh_mm"][-1] == 0.0
-    assert lv["noise_mm"][-1] == pytest.approx(0.2 * 6 / 4.5, rel=1e-6)
-    assert lv["vs_table_mesh_mm"][-1] == pytest.approx(0.1 * (6 / 4.5 - 1), rel=1e-6)
-    assert abs(lv["snapshots_vs_this_mm"][-1] - 0.1 * (6 / 4.5 - 1)) < 0.05      # plus the α interpolation
+    # in px the 0.2 mm along +x shows as much as the eyes see of it: the figures scale with the offset
+    noise = tab["noise_px"][-1]
+    assert noise > 0.01 and tab["vs_table_mesh_px"][-1] == 0.0
+    assert lv["noise_px"][-1] == pytest.approx(noise * 6 / 4.5, rel=0.03)
+    assert lv["vs_table_mesh_px"][-1] == pytest.approx(noise / 2 * (6 / 4.5 - 1), rel=0.03)
+    assert abs(lv["snapshots_vs_this_px"][-1] - lv["vs_table_mesh_px"][-1]) < 0.07    # plus the α interpolation
     for args, word in ((["--mesh-check"], "--mesh-check is for"),
                        # the organ has no sphere symmetry: its --node-table is a path table (test_path_table)
                        (["--scene", str(SCENES_DIR / "organ.yaml"), "--node-table", "--azimuth", "10"],

@@ -6,10 +6,17 @@ import types
 import numpy as np
 import pytest
 
-from flexsheet.fem.eye_view import FINGER_LENGTH, eyes, finger_capsule, screen_px, seen, visible_px_error
+from flexsheet.fem.eye_judge import judge
+from flexsheet.fem.eye_view import FINGER_LENGTH, eyes, finger_capsule, screen_px, seen
 from flexsheet.model import geometry
 
 V = geometry.EYE
+
+
+def visible_px_error(model, ref, faces, eye_pair=None):
+    """The vertex-to-vertex figure (``total_px``) of :func:`flexsheet.fem.eye_judge.judge` and the seen count."""
+    out, k = judge([model], ref, faces, eye_pair=eye_pair, silhouette=False)
+    return out[0]["total_px"], k
 
 
 def _plane(n: int = 41, half: float = 0.05, x: float = 0.0):
