@@ -72,11 +72,13 @@ def refine_centres(scene, spec: MeshSpec) -> np.ndarray:
 
 
 def support_plane(scene) -> tuple[np.ndarray, np.ndarray]:
-    """(point (3,) m, normal (3,)): the plane bounding the scene's held region (:class:`flexsheet.model.scene_parts.Support`)."""
+    """(point (3,) m, unit normal (3,)): the plane bounding the scene's held region
+    (:class:`flexsheet.model.scene_parts.Support`: (p − point)·n ≤ tolerance), 1 pm inside it so the nodes a
+    mesh puts on the plane are held whatever their rounding."""
     s = scene.support
     point = np.asarray(scene.center if s.kind == "back_half" else s.point, float)
-    n = np.asarray(s.normal, float)
-    return point + s.tolerance * n / np.linalg.norm(n), n / np.linalg.norm(n)
+    n = np.asarray(s.normal, float) / np.linalg.norm(s.normal)
+    return point + (s.tolerance - 1e-12) * n, n
 
 
 def _occ_geometry(scene):

@@ -57,3 +57,34 @@ def test_sphere_mesh_volume_converges_to_the_analytic_volume():
     assert errs[1] < 0.012 and errs[1] < errs[0] / 2.5, errs      # chord error ∝ h²
     stl = scene_mesh(sc, MeshSpec(0.012, 0.012, 0.0), force_stl=True)   # the STL route meshes it too
     assert stl.how == "stl" and abs(stl.volume / exact - 1.0) < 0.05
+
+
+@pytest.mark.parametrize("name", ["sphere", "cylinder", "rounded_box"])
+def test_the_support_rim_is_a_mesh_line_when_asked(name):
+    """rim=True (the references): every held surface node that shares a triangle with a free one lies on the
+    support's plane, refined to h_fine along it; without it a back-half's held-to-free step falls between nodes."""
+    from flexsheet.fem.mesh import surface_faces
+    from flexsheet.fem.scene_mesh import support_plane
+
+    sc = load_scene(SCENES_DIR / f"{name}.yaml")
+    spec = MeshSpec(0.012, 0.006, 0.012)
+    p0, n = support_plane(sc)
+
+    def rim_offsets(m):
+        f = surface_faces(m.points, m.tets)
+        mixed = f[m.fixed[f].any(axis=1) & ~m.fixed[f].all(axis=1)]
+        rim = np.unique(mixed[m.fixed[mixed]])
+        return np.abs((m.points[rim] - p0) @ n), m.points[rim]
+
+    d_on, pts = rim_offsets(scene_mesh(sc, spec, rim=True).mesh)
+    assert d_on.max() < 1e-7 and len(d_on) >= 20
+    # the rim's nodes are h_fine apart along it (neighbours within 1.5 h_fine)
+    from scipy.spatial import cKDTree
+
+    gap = cKDTree(pts).query(pts, k=2)[0][:, 1]
+    assert np.median(gap) < 1.5 * spec.h_fine, np.median(gap)
+    d_off, _ = rim_offsets(scene_mesh(sc, spec).mesh)
+    if sc.support.kind == "back_half":                 # node selection: the step lies up to an element away
+        assert d_off.max() > 1e-3
+    else:                                              # the box's held back face: its edges, within the tolerance
+        assert d_off.max() <= sc.support.tolerance + 1e-9
