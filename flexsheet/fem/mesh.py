@@ -125,8 +125,13 @@ def _split_at_rim(gmsh, point, normal, size: float, h: float) -> list[int]:
         occ.synchronize()
     rim = set()
     for _, t in gmsh.model.getEntities(2):
-        if len(gmsh.model.getAdjacencies(2, t)[0]) == 2:                       # the cut between two volumes
-            rim.update(abs(int(c)) for c in gmsh.model.getAdjacencies(2, t)[1])
+        if len(gmsh.model.getAdjacencies(2, t)[0]) != 1:                       # the outer boundary's faces only
+            continue
+        for c in gmsh.model.getAdjacencies(2, t)[1]:
+            lo, hi = gmsh.model.getParametrizationBounds(1, abs(int(c)))
+            xyz = np.asarray(gmsh.model.getValue(1, abs(int(c)), list(np.linspace(lo[0], hi[0], 7))), float)
+            if np.abs((xyz.reshape(-1, 3) - p) @ n).max() < 1e-7:              # a curve in the plane
+                rim.add(abs(int(c)))
     if not rim:
         raise RuntimeError("the support's plane does not cut the solid: no rim to mesh")
     dist = gmsh.model.mesh.field.add("Distance")
@@ -283,7 +288,8 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
                        half_y: bool = True, half_z: bool = False, radius: float = CYLINDER_RADIUS,
                        length: float = CYLINDER_LENGTH, center: np.ndarray = CYLINDER_CENTER,
                        path_depth: float = 0.0, skin: tuple[float, float, float] | None = None,
-                       cut_deg: float | None = None, tip: tuple[float, float] | None = None) -> TetMesh:
+                       cut_deg: float | None = None, tip: tuple[float, float] | None = None,
+                       rim: bool = False) -> TetMesh:
     """Mesh a symmetric part of the cylinder for the nonlinear reference (P1 tetrahedra, gmsh OpenCASCADE).
 
     ``half_y``: keep y ≥ y_O only (the push at y = y_O is mirror-symmetric in y); ``half_z``: also keep
@@ -299,7 +305,8 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
     (size, radius) m: also size ``size`` within ``radius`` of each push point itself, graded to ``h`` over a
     further ``radius`` (the material that ends up over the fingertip). ``cut_deg``
     (deg, without ``half_z``): the mesh conforms to the plane through the axis and the push direction at that
-    azimuth (the solid is fragmented by it, so the two volumes share their nodes there). ``fixed`` marks
+    azimuth (the solid is fragmented by it, so the two volumes share their nodes there). ``rim``: the support's
+    plane x = x_O cuts the surface along mesh lines of size ``h_fine`` (:func:`_split_at_rim`). ``fixed`` marks
     nothing here: the caller knows which faces are symmetry planes. Raises ``ValueError`` on bad sizes or a
     ``cut_deg`` that is not finite or comes with ``half_z``, and ``RuntimeError`` if gmsh fails.
     """
@@ -330,7 +337,8 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
     if tip is not None:
         extra = extra + (_tip_balls(tip, h_fine, refine_deg, radius, c),)
     points, tets = gmsh_tets("cylinder_part", geometry, h, h_fine, refine_radius, centres,
-                             f"the cylinder part (h={h}, h_fine={h_fine}, skin={skin}, tip={tip})", extra)
+                             f"the cylinder part (h={h}, h_fine={h_fine}, skin={skin}, tip={tip})", extra,
+                             rim=(c, np.array([1.0, 0.0, 0.0])) if rim else None)
     tets = orient_tets(points, tets)
     faces = surface_faces(points, tets)
     return TetMesh(points, tets, faces, np.zeros(len(points), bool), None, radius, length, c.copy())

@@ -80,7 +80,10 @@ def test_node_serves_cached_nonlinear_snapshots_and_says_so(tmp_path):
 
     tab = _analytic_table([0.0, 10.0], [0.0, 0.01, 0.02])
     # the bare node's law is the paper scene's (Gent); a table under that key in cache_dir wins over the shipped one
-    key = table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, Material().nu, 0.008, Jm=GENT_JM_RUBBER)
+    from flexsheet.model.scenes import DEFAULT_SCENE_FILE, load_scene
+
+    law = load_scene(DEFAULT_SCENE_FILE).finger.contact         # the table is looked up under the scene's law
+    key = table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, Material().nu, 0.008, law, GENT_JM_RUBBER)
     ArrayCache(str(tmp_path)).save("snapshots", key, tab)
     params = dict(PARAMS, cache_dir=str(tmp_path), model="snapshots")
 

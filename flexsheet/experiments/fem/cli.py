@@ -362,9 +362,13 @@ def _check_table_values(args) -> None:
                              f"{[f'{x:g}' for x in DEFAULT_GRID.angles_deg]} deg, got {a:g}")
     if args.between_depths and (not args.node_table or args.azimuth is not None):
         raise SystemExit("flexsheet experiment fem: --between-depths is for --node-table without --azimuth")
-    if args.ship and args.contact != DEFAULT_CONTACT:
-        raise SystemExit(f"flexsheet experiment fem: --ship ships the table the node looks up ({DEFAULT_CONTACT} "
-                         f"contact); got --contact {args.contact}")
+    if args.ship and not args.scene:
+        from flexsheet.model.scenes import DEFAULT_SCENE_FILE, load_scene
+
+        law = load_scene(DEFAULT_SCENE_FILE).finger.contact
+        if args.contact != law:
+            raise SystemExit(f"flexsheet experiment fem: --ship ships the table the node looks up (the default "
+                             f"scene's {law} contact); got --contact {args.contact}")
 
 
 def _check_table_flags(args) -> None:

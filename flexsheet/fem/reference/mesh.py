@@ -22,7 +22,8 @@ class RefSpec:
     within ``tip_radius`` (m) of the contact point itself, graded to ``h`` over a further ``tip_radius`` (the
     material that ends up over the fingertip, stretched several times over: docs/fem.md, fold study); ``cut``: the mesh is conforming
     to the plane through the cylinder's axis and the push axis (nodes on it, as a quarter model has on its
-    mirror plane), for half models (a quarter model has it: ignored). Raises ``ValueError``."""
+    mirror plane), for half models (a quarter model has it: ignored); ``rim``: the support's rim (x = x_O) on mesh
+    lines of size ``h_fine``. Raises ``ValueError``."""
 
     h: float = 0.010
     h_fine: float = 0.002
@@ -35,6 +36,7 @@ class RefSpec:
     cut: bool = False
     tip_h: float = 0.0
     tip_radius: float = 0.005
+    rim: bool = False
 
     def __post_init__(self):
         for name in ("h", "h_fine"):
@@ -63,6 +65,7 @@ class RefSpec:
         k += f",pd={self.path_depth:.6g}" if self.path_depth > 0 else ""
         k += f",sk={self.skin_h:.6g}/{self.skin_radius:.6g}/{self.skin_depth:.6g}" if self.skin_h > 0 else ""
         k += f",tip={self.tip_h:.6g}/{self.tip_radius:.6g}" if self.tip_h > 0 else ""
+        k += ",rim" if self.rim else ""
         return k + (",cut" if self.cut and not self.half_z else "")      # a quarter model has the plane anyway
 
 
@@ -74,4 +77,4 @@ def reference_mesh(spec: RefSpec, angle_deg: float) -> TetMesh:
                               half_z=spec.half_z, path_depth=spec.path_depth,
                               skin=(spec.skin_h, spec.skin_radius, spec.skin_depth) if spec.skin_h > 0 else None,
                               tip=(spec.tip_h, spec.tip_radius) if spec.tip_h > 0 else None,
-                              cut_deg=float(angle_deg) if spec.cut and not spec.half_z else None)
+                              cut_deg=float(angle_deg) if spec.cut and not spec.half_z else None, rim=spec.rim)
