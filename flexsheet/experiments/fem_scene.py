@@ -23,8 +23,8 @@ Outputs in ``out_dir``: ``summary.json`` (``scene`` with ``max_depth_mm`` and ``
 ``realtime.update_ms``, ``visible.shape_px_max``, ``visible.sliding_px_max``, ``reference.gci_px``,
 ``contact.gap_px_max``, ``temporal.jump_px_p99``, the pushes) and ``accuracy_<name>.png`` + ``.json``. Reference
 solves are cached (:class:`flexsheet.fem.cache.ArrayCache`, the key includes ``scene.key()``), solved first on
-dask when the cache lacks them (:func:`flexsheet.fem.reference.workers.run_workers`). :func:`shape_px_by_depth` is
-the same shape metric for the sphere and path tables' held-out and mesh checks.
+dask when the cache lacks them (:func:`flexsheet.fem.reference.workers.run_workers`). :func:`flexsheet.fem.eye_judge.shape_px_by_depth`
+is the same shape metric for the sphere and path tables' held-out and mesh checks.
 
 Run by hand::
 
@@ -48,7 +48,7 @@ from flexsheet.runtime.console import LIBRARY, show_lines
 
 log = logging.getLogger(__name__)
 
-__all__ = ["run_scene", "main", "shape_px_by_depth", "TARGET_MM", "TARGET_PX", "CONVERGED_PX", "QUICK", "FULL"]
+__all__ = ["run_scene", "main", "TARGET_MM", "TARGET_PX", "CONVERGED_PX", "QUICK", "FULL"]
 
 TARGET_MM = 0.7                      #: one projector pixel on the screen, mm
 TARGET_PX = 1.0                      #: the served model's largest visible error, projector px
@@ -138,20 +138,6 @@ def _linear_fine(sc, ref: dict, q, n, depths, probes) -> tuple[np.ndarray, float
         ts.append(time.perf_counter() - t)
         us.append(model.probe(probes, sol.u_full))
     return np.stack(us), float(np.median(ts) * 1e3)
-
-
-def shape_px_by_depth(model_u, ref_u, verts, faces, fingers) -> list[float]:
-    """The largest visible shape error (px; the larger of the seen vertices' distance to the reference's surface and
-    the outlines', :func:`flexsheet.fem.eye_judge.judge`) per depth of ``model_u`` against ``ref_u`` ((D, S, 3) m
-    displacements of the rendered vertices ``verts`` (S, 3) m on ``faces`` (F, 3)), ``fingers[j]`` (D,) occluding:
-    the metric of every table check."""
-    from flexsheet.fem.eye_judge import judge
-
-    out = []
-    for j, fg in enumerate(fingers):
-        (o,), _ = judge([verts + np.asarray(model_u[j], float)], verts + np.asarray(ref_u[j], float), faces, fg)
-        out.append(max(o["shape_px"], o["silhouette_px"]))
-    return out
 
 
 def scene_update_ms(rt, sc, depths, n_calls: int) -> dict:
@@ -434,11 +420,13 @@ def main(argv: list[str] | None = None) -> int:
                "--out out/fem_sphere")
     ap.add_argument("--scene", required=True, help="scene file (launch/scenes/*.yaml)")
     ap.add_argument("--out", required=True, help="output folder")
-    ap.add_argument("--quick", action="store_true", help="one push point, two reference levels")
+    ap.add_argument("--quick", action="store_true", help="one push point (the stroke's middle), three reference "
+                                                         "levels (h_fine 8, 6, 4.5 mm)")
+    ap.add_argument("--jobs", type=int, default=1, help="reference levels solved in N worker processes (default 1)")
     args = ap.parse_args(argv)
     show_lines(LIBRARY)         # the library's progress, the worker pool's (flexsheet.fem.reference.workers) included
     try:
-        s = run_scene(args.scene, args.out, args.quick)
+        s = run_scene(args.scene, args.out, args.quick, jobs=args.jobs)
     except ValueError as exc:
         print(f"fem_scene: {exc}", file=sys.stderr)
         return 2

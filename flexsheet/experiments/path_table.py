@@ -16,7 +16,7 @@ paper's cylinder and the sphere (wired by :mod:`flexsheet.experiments.fem`; the 
 3. **Held out** (``--holdout-fraction``, default the midpoints of every second interval): a push between
    stations solved on its own mesh (refined along *its* path), against what the node serves there (the linear
    solve + the blended correction) and against the linear model alone: the largest visible shape error, px
-   (:func:`flexsheet.experiments.fem_scene.shape_px_by_depth`: what either eye sees, the finger occluding) at
+   (:func:`flexsheet.fem.eye_judge.shape_px_by_depth`: what either eye sees, the finger occluding) at
    every depth. This judges the interpolation along the stroke and in depth (and the two
    meshes' difference); it is not a judgement of the reference against physics, which is one mesh level here
    (``--mesh-check``: the same push at the middle station on a mesh refined to 4 mm, the next level, gives its
@@ -38,7 +38,8 @@ import numpy as np
 
 __all__ = ["build_path_table", "table_key", "DEFAULT_STATIONS", "assemble_path_table"]
 
-from flexsheet.experiments.fem_scene import scene_update_ms, shape_px_by_depth
+from flexsheet.experiments.fem_scene import scene_update_ms
+from flexsheet.fem.eye_judge import shape_px_by_depth
 from flexsheet.fem.path_snapshots import GRID, REACH
 
 log = logging.getLogger(__name__)

@@ -31,7 +31,7 @@ import time
 
 import numpy as np
 
-from flexsheet.experiments.fem_scene import shape_px_by_depth
+from flexsheet.fem.eye_judge import shape_px_by_depth
 
 log = logging.getLogger(__name__)
 
@@ -373,7 +373,7 @@ def mesh_study_specs(spec) -> dict:
 def _mesh_check(sc, fr, sm, probes, faces, grid, spec, angles, cache) -> list[dict]:
     """For each angle (the held-out ones, else 0°) and each mesh of :func:`mesh_study_specs` (the table's, its
     twin, the study's levels and their twins): the push solved on it, compared by the visible shape
-    (:func:`flexsheet.experiments.fem_scene.shape_px_by_depth`, px) at every depth: each mesh's noise (against
+    (:func:`flexsheet.fem.eye_judge.shape_px_by_depth`, px) at every depth: each mesh's noise (against
     its twin), each level against the table's mesh, and the table (interpolated in α) against each."""
     from flexsheet.fem.scene_model import finger_on_scene
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from flexsheet.fem.eye_view import eyes, finger_capsule, screen_px, seen
 
-__all__ = ["judge", "silhouette_px", "contour_segments", "contact_gap", "frame_jumps", "SILHOUETTE_STEP_PX"]
+__all__ = ["judge", "shape_px_by_depth", "silhouette_px", "contour_segments", "contact_gap", "frame_jumps", "SILHOUETTE_STEP_PX"]
 
 #: the outline is sampled every this many px on the screen before the Hausdorff distance (its error ≤ half)
 SILHOUETTE_STEP_PX = 0.05
@@ -220,4 +220,16 @@ def frame_jumps(frames: list[np.ndarray], faces: np.ndarray, fingers: list | Non
             vis = seen(fr[i + 1], f, e, cap)
             if vis.any():
                 out[i] = max(out[i], float(np.linalg.norm(j[i][vis], axis=1).max()))
+    return out
+
+
+def shape_px_by_depth(model_u, ref_u, verts, faces, fingers) -> list[float]:
+    """The largest visible shape error (px; the larger of the seen vertices' distance to the reference's surface and
+    the outlines', :func:`judge`) per depth of ``model_u`` against ``ref_u`` ((D, S, 3) m
+    displacements of the rendered vertices ``verts`` (S, 3) m on ``faces`` (F, 3)), ``fingers[j]`` (D,) occluding:
+    the metric of every table check."""
+    out = []
+    for j, fg in enumerate(fingers):
+        (o,), _ = judge([verts + np.asarray(model_u[j], float)], verts + np.asarray(ref_u[j], float), faces, fg)
+        out.append(max(o["shape_px"], o["silhouette_px"]))
     return out
