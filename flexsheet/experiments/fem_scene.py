@@ -240,6 +240,7 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     ~/.cache/flexsheet/fem). ``levels``: the reference levels' h_fine (m, coarse to fine; default the
     settings'). Raises ``ValueError`` (:class:`flexsheet.model.scene_parts.SceneError`) for a bad scene file."""
     from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
+    from flexsheet.fem.config import FemConfig
     from flexsheet.fem.served import served_model
     from flexsheet.model.scenes import load_scene
 
@@ -252,7 +253,7 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     os.makedirs(out_dir, exist_ok=True)
     log.info(f"scene {sc.name!r} ({sc.source}), {'quick' if quick else 'full'}: pushes 0-{depths[-1] * 1e3:g} mm "
          f"({sc.use.reason or 'no reason given'}), {sc.finger.contact} contact")
-    rt, what = served_model(sc, cache_dir=cache_dir)
+    rt, what = served_model(sc, FemConfig(arc_deg=launch_arc_deg(sc)), cache_dir=cache_dir)
     log.info(f"served model: {what}")
     timing = scene_update_ms(rt, sc, (0.005, depths[len(depths) // 2], depths[-1]), st["n_time"])
     log.info(f"update: CPU median {timing['median']:.3f} ms, p90 {timing['p90']:.3f} ms")
@@ -269,6 +270,18 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
              f"reference GCI {summary['reference']['gci_px']} px (target {CONVERGED_PX}), contact gap "
              f"{summary['contact']['gap_px_max']:.2f} px, jump p99 {summary['temporal']['jump_px_p99']:.2f} px")
     return summary
+
+
+def launch_arc_deg(sc) -> float:
+    """The FEM node's ``arc_deg`` for scene ``sc`` as the launch files set it: the paper cylinder's stroke arc
+    (launch/sim.yaml, launch/lab.yaml: 60°, so its rendered surface is refined where the finger goes), 0 for any
+    other scene (its mesh follows its stroke by itself)."""
+    from flexsheet.fem.served import fem_models_as_cylinder
+
+    st = sc.stroke
+    if fem_models_as_cylinder(sc) and st.kind == "arc":
+        return float(max(abs(st.start_deg), abs(st.end_deg)))
+    return 0.0
 
 
 def _scene_settings(sc, quick: bool, levels: tuple[float, ...] | None) -> dict:
