@@ -54,13 +54,10 @@ class SnapshotGrid:
     spacing along y near the push plane (coarser by 2× beyond 20 mm and 40 mm), ``drho`` m radial spacing on
     the cap. Raises ``ValueError`` on bad values."""
 
-    #: every 10°, and 5°, 7.5° and 55° besides: held out of the 10° table, the push at 5° was
-    #: 2.33 mm off at 47.5 mm and at 55° 1.44 mm at 35 mm (docs/figures/fem/node_table_seven); held out of the
-    #: nine-azimuth table, 15° was within 0.66 mm and 7.5° 1.96 mm off at 50 mm (docs/figures/fem/node_table_nine),
-    #: so 7.5° was added (its held-out solve); held out of this one, 6.25° misses at 40 mm only (0.96 mm) and 8.75°
-    #: from 30 mm (2.77 mm): the frictionless finger's slide changes steeply between 5° and 10° on this mesh
-    #: (docs/figures/fem/node_table, docs/fem.md)
-    angles_deg: tuple[float, ...] = (0.0, 5.0, 7.5, 10.0, 20.0, 30.0, 40.0, 50.0, 55.0, 60.0)
+    #: every 10° over the stroke (0–60°): a sticking finger carries the material with it, so the field turns
+    #: with the azimuth (a frictionless one let it slide by an amount that changed steeply between 5° and 10°,
+    #: which took 5°, 7.5° and 55° besides)
+    angles_deg: tuple[float, ...] = (0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0)
     depth_max: float = 0.05
     depth_step: float = 0.0025
     dtheta_deg: float = 0.5
@@ -114,14 +111,14 @@ class SnapshotGrid:
 
 
 DEFAULT_GRID = SnapshotGrid()
-#: mesh of the snapshot solves = the next-to-finest mesh of the experiment's convergence study (judged against
-#: the finest, 2.5 mm): P2, 12 mm elements, 3.4 mm within 18 mm of the fingertip's whole push path (55 mm deep)
-#: (docs/fem.md; a cut half model of ~31 000 DOF, ~40–70 min of one core per azimuth other than 0:
-#: ``flexsheet experiment fem --node-table --azimuth A``). Off azimuth 0 the half model is *cut*: its mesh has
-#: nodes on the plane through the push axis, as the quarter model has on its mirror plane; without them a half
-#: model is 8–12 % stiffer at 40–50 mm than the quarter model of the same h_fine, with them within
-#: 1.1 % on the 4.5 and 3.4 mm meshes (3.5 % on the 6 mm one; the experiment's mirror study, docs/fem.md)
-DEFAULT_REF_SPEC = RefSpec(0.012, 0.0034, 0.018, half_z=True, path_depth=0.055, cut=True)
+#: mesh of the snapshot solves, one of the experiment's convergence levels: P2, 12 mm elements, 4.5 mm within
+#: 18 mm of the fingertip's whole push path (55 mm deep) (docs/fem.md; a cut half model, ~10 min of one core per
+#: azimuth under the sticking finger: ``flexsheet experiment fem --node-table --contact sticking --azimuth A``).
+#: Off azimuth 0 the half model is *cut*: its mesh has nodes on the plane through the push axis, as the quarter
+#: model has on its mirror plane; without them a half model is 8–12 % stiffer at 40–50 mm than the quarter model
+#: of the same h_fine, with them within 1.1 % on the 4.5 and 3.4 mm meshes (3.5 % on the 6 mm one; the
+#: experiment's mirror study, docs/fem.md)
+DEFAULT_REF_SPEC = RefSpec(0.012, 0.0045, 0.018, half_z=True, path_depth=0.055, cut=True, rim=True)
 
 
 def table_key(grid: SnapshotGrid, spec: RefSpec, nu: float, finger_radius: float,

@@ -437,11 +437,17 @@ def load_scene(path: str | os.PathLike) -> Scene:
     return parse_scene(data, str(p), p.parent)
 
 
+#: why every shipped scene's finger sticks (docs/scenes.md "Contact law")
+STICKING_SOURCE = ("µ of moist skin and rubber-like materials typically > 1 (Derler & Gerhardt, Tribol. Lett. "
+                   "45:1-27, 2012): no slip")
+
+
 def paper_scene() -> Scene:
     """The paper's cylinder (§VI-A) from :mod:`flexsheet.model.geometry`'s constants — what
     ``launch/scenes/cylinder.yaml`` holds; the default wherever no scene is named. Its material is a Gent solid
     (E 10 kPa, ν 0.45, Jm :data:`GENT_JM_RUBBER`): the neo-Hookean body the paper's 50 mm push was first
-    modelled with has no mesh-converged solution there (docs/fem.md, the material study)."""
+    modelled with has no mesh-converged solution there (docs/fem.md, the material study). Its finger sticks (the
+    one contact law, :data:`STICKING_SOURCE`)."""
     R = paper.CYLINDER_RADIUS
     if not np.allclose(paper.CYLINDER_AXIS, [0.0, 1.0, 0.0]):      # pragma: no cover - a constant
         raise ValueError("paper_scene assumes the cylinder axis +y (the local axis, no rotation)")
@@ -451,7 +457,8 @@ def paper_scene() -> Scene:
                material=MaterialSpec(model="gent", E=10e3, nu=0.45, Jm=GENT_JM_RUBBER),
                stroke=ArcStroke(kind="arc", start=(1.0, 0.0, 0.0), toward=(0.0, 0.0, 1.0), start_deg=0.0,
                                 end_deg=60.0),
-               use=Use(max_depth=0.05, stroke_depth=0.010, reason="the paper pushes its cylinder to 50 mm (Fig. 13)"))
+               use=Use(max_depth=0.05, stroke_depth=0.010, reason="the paper pushes its cylinder to 50 mm (Fig. 13)"),
+               finger=Finger(radius=0.008, contact="sticking", contact_source=STICKING_SOURCE))
     sc._source = "<paper>"
     return sc
 

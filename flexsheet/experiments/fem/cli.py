@@ -135,9 +135,10 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--write-model-table", action="store_true",
                    help=f"write {os.path.relpath(MODEL_TABLE_PATH)} (default in full mode with the default "
                         "--contact and the default scene's material)")
-    p.add_argument("--contact", choices=CONTACT_LAWS, default=DEFAULT_CONTACT,
+    p.add_argument("--contact", choices=CONTACT_LAWS, default=None,
                    help="the finger's contact law in the reference: sticking (the fingertip does not slip on the "
-                        "tissue) or frictionless (default %(default)s)")
+                        f"tissue) or frictionless (default: with --node-table the default scene's, else "
+                        f"{DEFAULT_CONTACT})")
 
 
 def _add_study_args(p: argparse.ArgumentParser) -> None:
@@ -230,6 +231,8 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"flexsheet experiment fem: {exc}") from None
     if args.jobs < 1:
         raise SystemExit(f"flexsheet experiment fem: --jobs must be >= 1, got {args.jobs}")
+    if args.contact is None:
+        args.contact = _node_law() if args.node_table and not args.scene else DEFAULT_CONTACT
     os.makedirs(args.out, exist_ok=True)
     _check_modes(args)
     sm = DEFAULT_MATERIAL                        # the default scene's; a paper-cylinder --scene file's below
@@ -362,13 +365,13 @@ def _check_table_values(args) -> None:
                              f"{[f'{x:g}' for x in DEFAULT_GRID.angles_deg]} deg, got {a:g}")
     if args.between_depths and (not args.node_table or args.azimuth is not None):
         raise SystemExit("flexsheet experiment fem: --between-depths is for --node-table without --azimuth")
-    if args.ship and not args.scene:
-        from flexsheet.model.scenes import DEFAULT_SCENE_FILE, load_scene
 
-        law = load_scene(DEFAULT_SCENE_FILE).finger.contact
-        if args.contact != law:
-            raise SystemExit(f"flexsheet experiment fem: --ship ships the table the node looks up (the default "
-                             f"scene's {law} contact); got --contact {args.contact}")
+
+def _node_law() -> str:
+    """The contact law of the default scene (launch/scenes/cylinder.yaml): the node's table is looked up under it."""
+    from flexsheet.model.scenes import DEFAULT_SCENE_FILE, load_scene
+
+    return load_scene(DEFAULT_SCENE_FILE).finger.contact
 
 
 def _check_table_flags(args) -> None:
@@ -379,6 +382,9 @@ def _check_table_flags(args) -> None:
     if args.ship and (not args.node_table or args.azimuth is not None):
         raise SystemExit("flexsheet experiment fem: --ship is for --node-table without --azimuth (it ships the "
                          "assembled table)")
+    if args.ship and not args.scene and args.contact != _node_law():
+        raise SystemExit(f"flexsheet experiment fem: --ship ships the table the node looks up (the default "
+                         f"scene's {_node_law()} contact); got --contact {args.contact}")
     if args.azimuth is not None:
         if not args.node_table:
             raise SystemExit("flexsheet experiment fem: --azimuth is for --node-table")

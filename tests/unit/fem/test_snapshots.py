@@ -90,7 +90,7 @@ def test_shipped_node_table_is_the_default_scenes_and_stiffens_from_hertz():
     sc = load_scene(SCENES_DIR / "cylinder.yaml")
     mat = Material.of_scene(sc.material)
     assert mat.gent and mat.Jm == 97.2
-    key = table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, sc.finger.radius, Jm=mat.Jm)
+    key = table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, sc.finger.radius, sc.finger.contact, mat.Jm)
     tab = ArrayCache(None).load("snapshots", key)
     assert tab is not None, f"no shipped snapshot table under the node's key {key} in flexsheet/fem/data"
     assert np.allclose(np.degrees(tab["angles"]), DEFAULT_GRID.angles_deg)

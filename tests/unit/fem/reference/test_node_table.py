@@ -32,7 +32,6 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     from flexsheet.fem.material import Material
     from flexsheet.fem.reference import node_table as NT
     from flexsheet.fem.reference import paths as R
-    from flexsheet.fem.reference.settings import settings_for
     from flexsheet.fem.reference.snapshot_build import load_or_build
     from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC
     from flexsheet.model.scene_parts import GENT_JM_RUBBER
@@ -84,25 +83,25 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     assert main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table",
                    "--azimuth", "20"]) == 0
     assert paths == [(DEFAULT_REF_SPEC, 20.0, 0.05, 20)]
-    # azimuth 0 of the node table is the full run's 3.4 mm convergence level: the same solve (cache key)
+    # azimuth 0 of the node table: its own mesh (4.5 mm, the rim on a mesh line) under the default scene's law
     calls = []
-    for where in (R, RUNS):             # the node table's stable_path reads R's, the --level run its own
-        monkeypatch.setattr(where, "reference_path", lambda spec, a, d, mat, cache, probes, contact="frictionless",
-                            *r: calls.append((spec, a, np.round(d, 9).tolist(), probes.tobytes(), contact)) or {})
-    level = [lv.h_fine for lv in settings_for(False).levels].index(DEFAULT_REF_SPEC.h_fine)
-    assert main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--level", str(level)]) == 0
+    monkeypatch.setattr(R, "reference_path", lambda spec, a, d, mat, cache, probes, contact="frictionless",
+                        *r: calls.append((spec, a, np.round(d, 9).tolist(), probes.tobytes(), contact)) or {})
     assert main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table",
                    "--azimuth", "-0"]) == 0
-    assert len(calls) == 2 and calls[0] == calls[1] and calls[0][3] == verts.astype(float).tobytes()
+    assert len(calls) == 1 and calls[0][0] == DEFAULT_REF_SPEC and calls[0][4] == "sticking"
+    assert calls[0][3] == verts.astype(float).tobytes()
     with pytest.raises(SystemExit, match="--azimuth must be one of"):
         main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--azimuth", "15"])
     with pytest.raises(SystemExit, match="--azimuth is for --node-table"):
         main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--azimuth", "10"])
     with pytest.raises(SystemExit, match="node-table"):
         main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--quick"])
-    # the default material is the default scene's (Gent, Jm 97.2): the key the bare FEM node looks up too
+    # the default material and law are the default scene's (Gent, Jm 97.2; sticking): the key the bare node
+    # looks up too
     table, hit, _ = load_or_build(ArrayCache(str(tmp_path / "c")), DEFAULT_GRID, DEFAULT_REF_SPEC,
-                                  Material(p.E, p.nu, GENT_JM_RUBBER), p.finger_radius, build=False)
+                                  Material(p.E, p.nu, GENT_JM_RUBBER), p.finger_radius, build=False,
+                                  contact="sticking")
     assert hit and np.array_equal(table["marker"], np.arange(3.0))
 
 
@@ -221,12 +220,12 @@ def test_node_table_report_and_holdout_on_an_analytic_table(tmp_path, monkeypatc
     plot_node_table(str(tmp_path), rep)
     assert os.path.getsize(tmp_path / "node_table.png") > 5000
     for args, word in ((["--node-table", "--holdout-azimuth", "10"], "strictly between"),
-                       (["--node-table", "--holdout-azimuth", "5"], "strictly between"),      # a table azimuth
+                       (["--node-table", "--holdout-azimuth", "20"], "strictly between"),     # a table azimuth
                        (["--node-table", "--holdout-azimuth", "75"], "strictly between"),
                        (["--holdout-azimuth", "8.75"], "is for --node-table"),
                        (["--node-table", "--ship", "--azimuth", "10"], "--ship is for"),
                        (["--ship"], "--ship is for"),
-                       (["--node-table", "--ship", "--contact", "sticking"], "frictionless"),
+                       (["--node-table", "--ship", "--contact", "frictionless"], "sticking"),
                        (["--node-table", "--between-depths", "8.75"], "one of the node table's"),
                        (["--between-depths", "0"], "is for --node-table"),
                        (["--node-table", "--mesh-check"], "--mesh-check is for")):
