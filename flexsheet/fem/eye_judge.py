@@ -6,10 +6,10 @@ notices and what it does not, in projector pixels (:mod:`flexsheet.fem.eye_view`
   to the reference's own vertex, is **sliding** along the surface. Uniform shading does not show sliding (a
   texture would), so shape is judged and sliding reported beside it. Each is the largest distance, over both
   eyes, between where the eye sees the two points on the imaginary screen.
-* **Silhouette** (:func:`silhouette_px`): each eye's outline of the surface, the zero set of
-  n·(x − eye) interpolated over the triangles from area-weighted vertex normals (Hertzmann & Zorin,
-  SIGGRAPH 2000: smooth where the per-face outline zigzags), the parts the eye sees; the error is the symmetric
-  Hausdorff distance between the served and the reference outline on the screen.
+* **Silhouette** (:func:`silhouette_px`): each eye's outline of the surface against the background, the zero
+  set of n·(x − eye) interpolated over the triangles from area-weighted vertex normals (Hertzmann & Zorin,
+  SIGGRAPH 2000: smooth where the per-face outline zigzags), the parts the eye sees with nothing behind them;
+  the error is the symmetric Hausdorff distance between the served and the reference outline on the screen.
 * **Contact** (:func:`contact_gap`): the drawn dent against the fingertip's sphere: the surface's least distance
   to the sphere's centre less its radius (> 0 a gap, < 0 the surface drawn inside the finger), as each eye sees
   it: the larger of the gap's shift on the screen and its change of stereo disparity.
@@ -30,7 +30,7 @@ from flexsheet.fem.eye_view import eyes, finger_capsule, screen_px, seen
 __all__ = ["judge", "shape_px_by_depth", "silhouette_px", "contour_segments", "contact_gap", "frame_jumps", "SILHOUETTE_STEP_PX"]
 
 #: the outline is sampled every this many px on the screen before the Hausdorff distance (its error ≤ half)
-SILHOUETTE_STEP_PX = 0.05
+SILHOUETTE_STEP_PX = 0.1
 
 
 def _check_pts(name: str, a: np.ndarray, like: np.ndarray | None = None) -> np.ndarray:
@@ -76,21 +76,33 @@ def contour_segments(points: np.ndarray, faces: np.ndarray, eye: np.ndarray) -> 
     return np.concatenate(segs) if segs else np.zeros((0, 2, 3))
 
 
-def _outline_px(points, faces, eye, capsule, tol: float) -> np.ndarray:
-    """(n, 2) px: the seen outline's samples on the screen, every :data:`SILHOUETTE_STEP_PX`."""
+def _outline_px(points, faces, eye, capsule, tol) -> np.ndarray:
+    """(n, 2) px: the seen outline against the background on the screen, sampled every
+    :data:`SILHOUETTE_STEP_PX` (each sample tested on its own, so an occluder clips the outline where it ends)."""
     seg = contour_segments(points, faces, eye)
-    if not len(seg):
-        return np.zeros((0, 2))
-    mid = seg.mean(axis=1)
-    ok = _seen_points(mid, points, faces, eye, capsule, tol)
-    seg = seg[ok]
     if not len(seg):
         return np.zeros((0, 2))
     a, b = screen_px(seg[:, 0], eye), screen_px(seg[:, 1], eye)
     n = np.maximum(1, np.ceil(np.linalg.norm(b - a, axis=1) / SILHOUETTE_STEP_PX).astype(int))
-    t = np.concatenate([np.linspace(0.0, 1.0, k + 1) for k in n])
-    rep = np.repeat(np.arange(len(n)), n + 1)
-    return a[rep] + t[:, None] * (b - a)[rep]
+    t = np.concatenate([(np.arange(k) + 0.5) / k for k in n])
+    rep = np.repeat(np.arange(len(n)), n)
+    q = seg[rep, 0] + t[:, None] * (seg[rep, 1] - seg[rep, 0])
+    ok = _seen_points(q, points, faces, eye, capsule, tol) & _against_background(q, points, faces, eye, tol)
+    return screen_px(q[ok], eye)
+
+
+def _against_background(q, points, faces, eye, skip: float) -> np.ndarray:
+    """(m,) bool: outline points ``q`` (m, 3) m with nothing of the surface behind them on the eye's ray (from
+    ``skip`` m past the point on): the object's outline against the background, not a fold or a crater's wall
+    inside it, whose outline appears and vanishes as the surface turns by a hair at grazing."""
+    import trimesh
+
+    if not len(q):
+        return np.zeros(0, bool)
+    d = q - np.asarray(eye, float)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    mesh = trimesh.Trimesh(points, faces, process=False, validate=False)
+    return ~mesh.ray.intersects_any(q + skip * d, d)
 
 
 def _seen_points(q, points, faces, eye, capsule, tol: float) -> np.ndarray:

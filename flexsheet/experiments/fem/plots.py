@@ -259,19 +259,19 @@ def plot_node_table(out: str, rep: dict) -> None:
     a.set_title(f"node table, {rep['material']['law']}, E {rep['material']['E'] / 1e3:g} kPa", fontsize=10)
     a.legend(fontsize=7, title="azimuth")
     for i, h in enumerate(rep.get("held_out", [])):
-        b.plot(h["depths_mm"], h["error_mm"], ".-", color=("k", "0.45", "0.7")[i % 3], ms=4, lw=1.5,
-               label=f"held out {h['azimuth_deg']:g}°: visible-surface error")
+        b.plot(h["depths_mm"], h["shape_px"], ".-", color=("k", "0.45", "0.7")[i % 3], ms=4, lw=1.5,
+               label=f"held out {h['azimuth_deg']:g}°: visible shape error (px)")
         if h.get("twin"):
-            b.plot(h["depths_mm"], h["twin"]["noise_mm"], "v:", color=("k", "0.45", "0.7")[i % 3], ms=3, lw=1.2,
-                   label=f"{h['azimuth_deg']:g}°: the mesh's noise (twin mesh)")
+            b.plot(h["depths_mm"], h["twin"]["noise_px"], "v:", color=("k", "0.45", "0.7")[i % 3], ms=3, lw=1.2,
+                   label=f"{h['azimuth_deg']:g}°: the mesh's noise (twin mesh, px)")
     for h in rep.get("between_depths", []):
-        b.plot(h["depths_mm"], h["error_mm"], "rx-", ms=4, lw=1,
-               label=f"{h['azimuth_deg']:g}°, every {h['depths_mm'][0]:g} mm: visible-surface error")
+        b.plot(h["depths_mm"], h["shape_px"], "rx-", ms=4, lw=1,
+               label=f"{h['azimuth_deg']:g}°, every {h['depths_mm'][0]:g} mm: visible shape error (px)")
     if rep.get("held_out") or rep.get("between_depths"):
-        b.axhline(TARGET * 1e3, color="k", ls="--", lw=0.8, label="target 0.7 mm")
+        b.axhline(1.0, color="k", ls="--", lw=0.8, label="target 1 px")
     b.set_xlabel("push depth (mm)")
-    b.set_ylabel("mm")
-    b.set_title("apex displacement − depth per azimuth; held-out error", fontsize=10)
+    b.set_ylabel("apex: mm; errors: projector px")
+    b.set_title("apex displacement − depth per azimuth; held-out shape error", fontsize=10)
     b.legend(fontsize=6)
     fig.tight_layout()
     fig.savefig(os.path.join(out, "node_table.png"), dpi=110)

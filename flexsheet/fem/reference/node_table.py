@@ -29,11 +29,11 @@ from flexsheet.fem.reference.paths import (
     snapshot_table,
     stable_path,
 )
-from flexsheet.fem.reference.settings import FINGER_R, TARGET, Settings, law_name, settings_for
+from flexsheet.fem.reference.settings import FINGER_R, Settings, law_name, settings_for
 from flexsheet.fem.reference.snapshot_build import load_or_build, pack_table, reusable_table, reused_azimuths
 from flexsheet.fem.reference.workers import Solve, prefetch
 from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, SnapshotModel, table_key
-from flexsheet.fem.visible_error import errors, realtime_model, visible_diffs
+from flexsheet.fem.visible_error import realtime_model
 
 log = logging.getLogger(__name__)
 
@@ -108,14 +108,34 @@ def twin_spec(spec: RefSpec) -> RefSpec:
     return replace(spec, refine_radius=spec.refine_radius + TWIN_DR)
 
 
+#: a table check's target: the largest visible shape error, projector px
+TARGET_PX = 1.0
+
+
+def _fingers(rm, azimuth_deg: float, depths) -> list:
+    from flexsheet.fem.contact import finger_at
+
+    return [finger_at(math.radians(azimuth_deg), float(d), FINGER_R, rm.mesh.radius, rm.mesh.center) for d in depths]
+
+
+def _table_px(rm, table: dict, mat: Material, azimuth_deg: float, depths, ref_u) -> list[float]:
+    """The table's visible shape error (px, :func:`flexsheet.fem.eye_judge.shape_px_by_depth`) per depth at
+    ``azimuth_deg`` against the reference displacements ``ref_u`` (D, k, 3) m of the rendered vertices."""
+    from flexsheet.fem.eye_judge import shape_px_by_depth
+
+    verts = rm.rest_vertices.astype(float)
+    sm = SnapshotModel(table, verts, E=mat.E)
+    u = np.stack([sm.surface(math.radians(azimuth_deg), float(d), 0.0)[0] for d in depths])
+    return shape_px_by_depth(u, np.asarray(ref_u, float), verts, np.asarray(rm.faces), _fingers(rm, azimuth_deg, depths))
+
+
 def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: RealtimeModel, azimuth_deg: float,
                        contact: str = DEFAULT_CONTACT, twin: bool = False) -> dict:
     """The node's table at an azimuth it does not hold, against that push's own stable path on the table's mesh
-    (:func:`stable_path` on DEFAULT_REF_SPEC, solved here unless cached: ~30 min of one core): the
-    interpolation across azimuth alone, every table depth, largest distance (mm) over the visible rendered
-    vertices (not held, outside the finger's footprint on the reference's deformed surface,
-    :func:`flexsheet.fem.visible_error.visible_vertices`). ``twin``: also the same push on the mesh's twin (:func:`twin_spec`; another ~30 min), and that mesh's noise
-    (``noise_mm``, the same distance between the two) beside the error. Raises ``ValueError`` for an azimuth
+    (:func:`stable_path` on DEFAULT_REF_SPEC, solved here unless cached: ~10 min of one core): the
+    interpolation across azimuth alone, every table depth, the largest visible shape error (px, what either eye
+    sees, :func:`flexsheet.fem.eye_judge.shape_px_by_depth`). ``twin``: also the same push on the mesh's twin
+    (:func:`twin_spec`; as long again), and that mesh's noise (``noise_px``, the same figure between the two). Raises ``ValueError`` for an azimuth
     the table holds or outside it."""
 
     held = np.degrees(np.asarray(table["angles"], float))
@@ -125,24 +145,20 @@ def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: Realti
     depths = np.asarray(table["depths"], float)
     verts = rm.rest_vertices.astype(float)
     p = stable_path(DEFAULT_REF_SPEC, azimuth_deg, depths[1:], mat, cache, verts, contact)
-    cases = [{"angle_deg": float(azimuth_deg), "depth": float(d), "u": p["u"][j]} for j, d in enumerate(depths[1:])]
-    keep = rm.snapshots
-    try:                                    # the check every snapshot table gets (errors), on this table
-        rm.snapshots = SnapshotModel(table, verts, E=mat.E)
-        err = [e * 1e3 for e in errors(rm, cases, "snapshots")]
-    finally:
-        rm.snapshots = keep
-    bad = [float(d) * 1e3 for d, e in zip(depths[1:], err, strict=True) if e > TARGET * 1e3]
-    row = {"azimuth_deg": float(azimuth_deg), "against": "its own stable path on the table's mesh (cut half model)",
-           "depths_mm": (depths[1:] * 1e3).tolist(), "error_mm": err, "max_error_mm": max(err),
+    err = _table_px(rm, table, mat, azimuth_deg, depths[1:], p["u"])
+    bad = [float(d) * 1e3 for d, e in zip(depths[1:], err, strict=True) if e > TARGET_PX]
+    row = {"azimuth_deg": float(azimuth_deg), "against": "its own path on the table's mesh (cut half model)",
+           "depths_mm": (depths[1:] * 1e3).tolist(), "shape_px": err, "max_shape_px": max(err),
            "over_target_from_mm": min(bad) if bad else None, "dofs": int(p["dofs"]),
            "cpu_seconds_loading": float(p["cpu_seconds"])}
     if twin:
+        from flexsheet.fem.eye_judge import shape_px_by_depth
+
         q = stable_path(twin_spec(DEFAULT_REF_SPEC), azimuth_deg, depths[1:], mat, cache, verts, contact)
-        noise = [e * 1e3 for e in visible_diffs(q, p, depths[1:], verts, rm.mesh.fixed[rm.surface_nodes], rm.mesh,
-                                                 azimuth_deg)]
+        noise = shape_px_by_depth(np.asarray(q["u"], float), np.asarray(p["u"], float), verts, np.asarray(rm.faces),
+                                  _fingers(rm, azimuth_deg, depths[1:]))
         row["twin"] = {"spec": twin_spec(DEFAULT_REF_SPEC).__dict__, "dofs": int(q["dofs"]),
-                       "converged": bool(np.all(q["converged"])), "noise_mm": noise, "max_noise_mm": max(noise),
+                       "converged": bool(np.all(q["converged"])), "noise_px": noise, "max_noise_px": max(noise),
                        "what": "the same push on the twin mesh (same sizes, the tube 0.1 mm wider, laid out anew) "
                                "against the table mesh's solve, the same vertices: the mesh's noise"}
     return row
@@ -152,7 +168,7 @@ def node_table_compare(tables: dict[str, dict], azimuths, mat: Material, cache: 
                        contact: str = DEFAULT_CONTACT) -> list[dict]:
     """Several tables (name → table, e.g. the node's before and after azimuths were added) judged at the same
     held-out ``azimuths`` (deg) as :func:`node_table_holdout` judges each (its push solved unless cached). One row
-    per azimuth: {"azimuth_deg", "depths_mm", and per name {"error_mm" (rounded to µm), "max_error_mm",
+    per azimuth: {"azimuth_deg", "depths_mm", and per name {"shape_px" (rounded to 0.001 px), "max_shape_px",
     "over_target_from_mm"} or "holds this azimuth" where that table holds it}."""
     rows = []
     for az in (float(a) for a in azimuths):
@@ -162,7 +178,7 @@ def node_table_compare(tables: dict[str, dict], azimuths, mat: Material, cache: 
                 row[name] = "holds this azimuth"
                 continue
             r = node_table_holdout(tab, mat, cache, rm, az, contact)
-            row[name] = {"error_mm": [round(e, 3) for e in r["error_mm"]], "max_error_mm": round(r["max_error_mm"], 3),
+            row[name] = {"shape_px": [round(e, 3) for e in r["shape_px"]], "max_shape_px": round(r["max_shape_px"], 3),
                          "over_target_from_mm": r["over_target_from_mm"]}
             row["depths_mm"] = r["depths_mm"]
         rows.append(row)
@@ -174,8 +190,8 @@ def node_table_between_depths(table: dict, mat: Material, cache: ArrayCache, rm:
     """The node's table between its depths, at one of its azimuths: against that push's own stable path on the
     table's mesh solved at **half** the table's load step (:func:`stable_path` on DEFAULT_REF_SPEC through
     depths every step/2 to the table's deepest; solved unless cached: ~20 min of one core at azimuth 0, the
-    quarter model). Judged as :func:`node_table_holdout` judges (:func:`errors`: largest distance, mm, over the
-    visible rendered vertices) at every depth of that path: the midpoints are the interpolation in depth, and
+    quarter model). Judged as :func:`node_table_holdout` judges (the largest visible shape error, px) at every
+    depth of that path: the midpoints are the interpolation in depth, and
     with a bistable push they show what blending two branches' states costs; at the table's own depths the
     two sides differ only by float16 rounding and by a branch that the finer load step may leave elsewhere.
     Returns per-depth errors, the largest at the midpoints and at the table's depths, and the depths where each
@@ -189,20 +205,14 @@ def node_table_between_depths(table: dict, mat: Material, cache: ArrayCache, rm:
     fine = np.round(np.arange(1, int(round(depths[-1] / (step / 2))) + 1) * (step / 2), 9)
     verts = rm.rest_vertices.astype(float)
     p = stable_path(DEFAULT_REF_SPEC, azimuth_deg, fine, mat, cache, verts, contact)
-    cases = [{"angle_deg": float(azimuth_deg), "depth": float(d), "u": p["u"][j]} for j, d in enumerate(fine)]
-    keep = rm.snapshots
-    try:
-        rm.snapshots = SnapshotModel(table, verts, E=mat.E)
-        err = np.array([e * 1e3 for e in errors(rm, cases, "snapshots")])
-    finally:
-        rm.snapshots = keep
+    err = np.array(_table_px(rm, table, mat, azimuth_deg, fine, p["u"]))
     mid = np.abs(np.round(fine / step) * step - fine) > 1e-9
-    bad = fine[err > TARGET * 1e3]
+    bad = fine[err > TARGET_PX]
     return {"azimuth_deg": float(azimuth_deg),
             "against": f"its own stable path on the table's mesh, load step {step / 2 * 1e3:g} mm",
-            "depths_mm": (fine * 1e3).tolist(), "error_mm": err.tolist(), "max_error_mm": float(err.max()),
-            "max_error_mm_between_depths": float(err[mid].max()),
-            "max_error_mm_at_table_depths": float(err[~mid].max()),
+            "depths_mm": (fine * 1e3).tolist(), "shape_px": err.tolist(), "max_shape_px": float(err.max()),
+            "max_shape_px_between_depths": float(err[mid].max()),
+            "max_shape_px_at_table_depths": float(err[~mid].max()),
             "over_target_from_mm": float(bad.min() * 1e3) if len(bad) else None,
             "unloaded_state_at_mm": (fine[np.asarray(p["branch"]) == 1] * 1e3).tolist() if "branch" in p else None,
             "dofs": int(p["dofs"]), "cpu_seconds_loading": float(p["cpu_seconds"])}
@@ -333,10 +343,10 @@ def _judge(rep: dict, table: dict, mat: Material, cache: ArrayCache, rm: Realtim
     rep["held_out"] = [node_table_holdout(table, mat, cache, rm, a, contact, twin) for a in holdout]
     rep["between_depths"] = [node_table_between_depths(table, mat, cache, rm, a, contact) for a in between]
     for h in rep["between_depths"]:
-        log.info(f"node table between its depths at {h['azimuth_deg']:g} deg: worst visible error "
-                 f"{h['max_error_mm_between_depths']:.2f} mm (at its own depths {h['max_error_mm_at_table_depths']:.2f})")
+        log.info(f"node table between its depths at {h['azimuth_deg']:g} deg: worst visible shape "
+                 f"{h['max_shape_px_between_depths']:.2f} px (at its own depths {h['max_shape_px_at_table_depths']:.2f})")
     for h in rep["held_out"]:
-        log.info(f"node table held out at {h['azimuth_deg']:g} deg: worst visible error {h['max_error_mm']:.2f} mm"
+        log.info(f"node table held out at {h['azimuth_deg']:g} deg: worst visible shape {h['max_shape_px']:.2f} px"
                  + (f", over the target from {h['over_target_from_mm']:g} mm" if h["over_target_from_mm"] else ""))
 
 
