@@ -6,6 +6,7 @@ import types
 import numpy as np
 import pytest
 import trimesh
+from test_eye_view import _plane
 
 from flexsheet.fem.eye_judge import contact_gap, contour_segments, frame_jumps, judge, silhouette_px
 from flexsheet.fem.eye_view import IPD, eyes
@@ -13,18 +14,6 @@ from flexsheet.model import geometry
 
 PX = geometry.PIXEL_ON_SCREEN
 V = geometry.EYE
-
-
-def _plane(n: int = 41, half: float = 0.05, x: float = 0.0):
-    g = np.linspace(-half, half, n)
-    y, z = np.meshgrid(g, g)
-    pts = np.c_[np.full(y.size, x), y.ravel(), z.ravel()]
-    faces = []
-    for i in range(n - 1):
-        for j in range(n - 1):
-            a = i * n + j
-            faces += [[a, a + 1, a + n], [a + 1, a + n + 1, a + n]]
-    return pts, np.array(faces)
 
 
 def _sphere(R: float = 0.035, sub: int = 4):
