@@ -87,7 +87,7 @@ def _outline_px(points, faces, eye, capsule, tol) -> np.ndarray:
     t = np.concatenate([(np.arange(k) + 0.5) / k for k in n])
     rep = np.repeat(np.arange(len(n)), n)
     q = seg[rep, 0] + t[:, None] * (seg[rep, 1] - seg[rep, 0])
-    ok = _seen_points(q, points, faces, eye, capsule, tol) & _against_background(q, points, faces, eye, tol)
+    ok = seen(points, faces, eye, capsule, tol, targets=q) & _against_background(q, points, faces, eye, tol)
     return screen_px(q[ok], eye)
 
 
@@ -105,16 +105,30 @@ def _against_background(q, points, faces, eye, skip: float) -> np.ndarray:
     return ~mesh.ray.intersects_any(q + skip * d, d)
 
 
-def _seen_points(q, points, faces, eye, capsule, tol: float) -> np.ndarray:
-    """(m,) bool: points ``q`` (m, 3) on the surface that ``eye`` sees (the surface and the finger occluding)."""
-    allp = np.vstack([points, q])
-    return seen(allp, faces, eye, capsule, tol=tol)[len(points):]
-
-
 def _edge_length(points: np.ndarray, faces: np.ndarray) -> float:
     """The median edge length of the triangles, m."""
     p = points[faces]
     return float(np.median(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2)))
+
+
+def _outlines(points, faces, pair, capsule, tol) -> list[np.ndarray]:
+    """Per eye of ``pair``: :func:`_outline_px` of the surface ``points`` on ``faces``."""
+    return [_outline_px(points, faces, e, capsule, tol) for e in pair]
+
+
+def _hausdorff_px(model_outlines: list[np.ndarray], ref_outlines: list[np.ndarray]) -> float:
+    """The largest, over the eyes, symmetric Hausdorff distance (px) between two sets of :func:`_outlines`:
+    0.0 where neither is seen, ``inf`` where one is seen and the other not."""
+    from scipy.spatial import cKDTree
+
+    worst = 0.0
+    for a, b in zip(model_outlines, ref_outlines, strict=True):
+        if not len(a) and not len(b):
+            continue
+        if not len(a) or not len(b):
+            return float("inf")
+        worst = max(worst, float(cKDTree(b).query(a)[0].max()), float(cKDTree(a).query(b)[0].max()))
+    return worst
 
 
 def silhouette_px(model_pts: np.ndarray, ref_pts: np.ndarray, faces: np.ndarray, finger=None,
@@ -125,22 +139,13 @@ def silhouette_px(model_pts: np.ndarray, ref_pts: np.ndarray, faces: np.ndarray,
     more than ``tol`` m before it on the eye's ray (default twice the median edge: a grazing ray crosses the
     polygon's own chords that far before the smooth outline). 0.0 when neither outline is seen; ``inf``
     when one is seen and the other not. Raises ``ValueError`` for bad shapes."""
-    from scipy.spatial import cKDTree
-
     r = _check_pts("ref_pts", ref_pts)
     m = _check_pts("model_pts", model_pts, r)
     f = np.asarray(faces)
     cap = finger_capsule(finger) if finger is not None else None
     tol = 2.0 * _edge_length(r, f) if tol is None else tol
-    worst = 0.0
-    for e in eyes() if eye_pair is None else np.asarray(eye_pair, float):
-        a, b = _outline_px(m, f, e, cap, tol), _outline_px(r, f, e, cap, tol)
-        if not len(a) and not len(b):
-            continue
-        if not len(a) or not len(b):
-            return float("inf")
-        worst = max(worst, float(cKDTree(b).query(a)[0].max()), float(cKDTree(a).query(b)[0].max()))
-    return worst
+    pair = eyes() if eye_pair is None else np.asarray(eye_pair, float)
+    return _hausdorff_px(_outlines(m, f, pair, cap, tol), _outlines(r, f, pair, cap, tol))
 
 
 def judge(models: list[np.ndarray], ref_pts: np.ndarray, faces: np.ndarray, finger=None,
@@ -172,9 +177,11 @@ def judge(models: list[np.ndarray], ref_pts: np.ndarray, faces: np.ndarray, fing
             o["shape_px"] = max(o["shape_px"], float(np.linalg.norm(s_m - s_c, axis=1).max()))
             o["sliding_px"] = max(o["sliding_px"], float(np.linalg.norm(s_c - s_ref, axis=1).max()))
             o["total_px"] = max(o["total_px"], float(np.linalg.norm(s_m - s_ref, axis=1).max()))
-    if silhouette:
+    if silhouette:                       # the reference's outlines once, for every model
+        tol = 2.0 * _edge_length(r, f)
+        ref_out = _outlines(r, f, pair, cap, tol)
         for o, m in zip(out, ms, strict=True):
-            o["silhouette_px"] = silhouette_px(m, r, f, finger, pair)
+            o["silhouette_px"] = _hausdorff_px(_outlines(m, f, pair, cap, tol), ref_out)
     return out, int(seen_any.sum())
 
 

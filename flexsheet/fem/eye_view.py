@@ -59,11 +59,13 @@ def _segments_distance(p0: np.ndarray, p1: np.ndarray, a: np.ndarray, b: np.ndar
     return np.linalg.norm(q1 - q2, axis=1)
 
 
-def seen(points: np.ndarray, faces: np.ndarray, eye: np.ndarray, capsule=None, tol: float = 2e-4) -> np.ndarray:
+def seen(points: np.ndarray, faces: np.ndarray, eye: np.ndarray, capsule=None, tol: float = 2e-4,
+         targets: np.ndarray | None = None) -> np.ndarray:
     """(k,) bool: the vertices ``points`` (k, 3) m of the surface triangulated by ``faces`` (F, 3) int that
     ``eye`` (3,) m sees: no triangle of the surface crosses the segment eye → vertex more than ``tol`` m before
     the vertex, and (``capsule`` (a, b, r) of :func:`finger_capsule`) the segment keeps more than r from the
-    capsule's axis. Raises ``ValueError`` for mismatched shapes or an index outside ``points``."""
+    capsule's axis. ``targets`` (m, 3) m: test these points on the surface instead of its vertices ((m,) bool).
+    Raises ``ValueError`` for mismatched shapes or an index outside ``points``."""
     import trimesh
 
     pts = np.asarray(points, float)
@@ -72,13 +74,14 @@ def seen(points: np.ndarray, faces: np.ndarray, eye: np.ndarray, capsule=None, t
         raise ValueError(f"points must be (k, 3) and faces (F, 3), got {pts.shape} and {f.shape}")
     if len(f) and (f.min() < 0 or f.max() >= len(pts)):
         raise ValueError(f"faces index vertices 0..{len(pts) - 1}, got {f.min()}..{f.max()}")
+    q = pts if targets is None else np.asarray(targets, float).reshape(-1, 3)
     e = np.asarray(eye, float)
-    d = pts - e
+    d = q - e
     dist = np.linalg.norm(d, axis=1)
-    ok = np.ones(len(pts), bool)
+    ok = np.ones(len(q), bool)
     if capsule is not None:
         a, b, r = capsule
-        ok &= _segments_distance(np.broadcast_to(e, pts.shape), pts, np.asarray(a, float), np.asarray(b, float)) > r
+        ok &= _segments_distance(np.broadcast_to(e, q.shape), q, np.asarray(a, float), np.asarray(b, float)) > r
     mesh = trimesh.Trimesh(pts, f, process=False, validate=False)
     idx = np.flatnonzero(ok)
     if len(idx) and len(f):

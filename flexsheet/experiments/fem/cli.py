@@ -382,9 +382,9 @@ def _check_table_flags(args) -> None:
     if args.ship and (not args.node_table or args.azimuth is not None):
         raise SystemExit("flexsheet experiment fem: --ship is for --node-table without --azimuth (it ships the "
                          "assembled table)")
-    if args.ship and not args.scene and args.contact != _node_law():
+    if args.ship and not args.scene and args.contact != (law := _node_law()):
         raise SystemExit(f"flexsheet experiment fem: --ship ships the table the node looks up (the default "
-                         f"scene's {_node_law()} contact); got --contact {args.contact}")
+                         f"scene's {law} contact); got --contact {args.contact}")
     if args.azimuth is not None:
         if not args.node_table:
             raise SystemExit("flexsheet experiment fem: --azimuth is for --node-table")
