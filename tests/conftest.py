@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -146,6 +147,12 @@ def lab_run(tmp_path_factory, sim_fem_cache):
 SIM_SCRIPT = "world.script=[{mode: stroke, moving_time: 10}, {mode: stroke_push, moving_time: 4, push_depth: 0.01}]"
 
 
+#: a launcher's line for a node or container killed by a signal. The kill known is libzmq 4.3.5's (pyzmq's wheel)
+#: crash in its I/O thread, a use-after-free while tools connect and leave (``ZMQbg/IO/0 ... segfault`` in the
+#: kernel log, a few times in days of runs): the graph fixtures run a killed graph once more and say so.
+KILLED = re.compile(r"^\s*\[\s*(\S+?)\s*\] exited with code -(\d+)\s*$", re.M)
+
+
 @pytest.fixture(scope="session")
 def sim_run(tmp_path_factory, sim_fem_cache):
     """One launch of launch/sim.yaml (:data:`SIM_SCRIPT`, ``--set viz.port=PORT``: a free port), read by
@@ -154,7 +161,16 @@ def sim_run(tmp_path_factory, sim_fem_cache):
     mesh and the finger on the object: :func:`viz_watch.watch`). One launch instead of two (~11 s).
 
     Returns ``out`` (the launch's ``--out``), ``stdout`` (its output, stderr merged), ``code`` (exit code, or
-    "timeout" after 240 s) and ``viz`` (watch's (channels, SceneUpdate, fingertips) or the exception it raised)."""
+    "timeout" after 240 s) and ``viz`` (watch's (channels, SceneUpdate, fingertips) or the exception it raised).
+    A launch whose container was killed by a signal (:data:`KILLED`) runs once more, said on the test's output."""
+    r = _sim_run_once(tmp_path_factory)
+    if m := KILLED.search(r["stdout"]):
+        print(f"sim run: {m.group(1)} killed by signal {m.group(2)}; launching it once more")
+        r = _sim_run_once(tmp_path_factory)
+    return r
+
+
+def _sim_run_once(tmp_path_factory) -> dict:
     import asyncio
     import signal
     import subprocess

@@ -48,6 +48,7 @@ from pathlib import Path
 from unittest import mock
 
 import pytest
+from conftest import KILLED
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ("docs/deploy.md", "docs/calibration.md")
@@ -680,9 +681,8 @@ def sim_graph(sandbox, sim_fem_cache) -> dict[str, Result | str]:
     :class:`Result`, the launch's under :data:`GRAPH`, and the display.yaml of its twin registration under
     ``"display.yaml"``.
 
-    Once, and said on the test's output: a run whose container was killed by a signal is run again. libzmq
-    4.3.5 (pyzmq's wheel) can crash in its I/O thread on a use-after-free while tools connect and leave (seen
-    as ``ZMQbg/IO/0 ... segfault`` in the kernel log, a few times in days of runs); a second crash fails."""
+    Once, and said on the test's output: a run whose container was killed by a signal is run again
+    (:data:`conftest.KILLED`); a second kill fails."""
     try:
         return _sim_graph_once(sandbox)
     except AssertionError as exc:
@@ -694,10 +694,6 @@ def sim_graph(sandbox, sim_fem_cache) -> dict[str, Result | str]:
         for bag in sandbox.glob("run*.mcap"):        # the recorders of the first run's bags
             bag.unlink()
         return _sim_graph_once(sandbox)
-
-
-#: a launcher's line for a node or container killed by a signal
-KILLED = re.compile(r"^\s*\[\s*(\S+?)\s*\] exited with code -(\d+)\s*$", re.M)
 
 
 def _tail(launch: Proc) -> str:
