@@ -7,6 +7,8 @@
 # ~1 min with an empty pip cache, measured on the 2-core machine) while apt installs the runtime libraries
 # (Mesa, X, Xvfb, Aravis with its GTK viewer, iproute2), which pip does not need to install the wheels.
 set -euo pipefail
+# any failing step ends the install with a non-zero exit and this line naming it
+trap 'rc=$?; echo "[install] FAILED (exit $rc) at docker/install.sh line $LINENO: $BASH_COMMAND" >&2; exit $rc' ERR
 cd "$(dirname "$0")/.."
 export DEBIAN_FRONTEND=noninteractive
 APT_INSTALL=(apt-get install -y -qq --no-install-recommends)
@@ -41,5 +43,6 @@ rm -f "$pip_log"
 python3 -c "import flexsheet, messages, nodes; print('[install] flexsheet', flexsheet.__version__, 'ready')"
 # the FEM node's models for the shipped launch files and scenes, precomputed once here (not at every start on a
 # fresh HOME: ~12 s for the cylinder); searched read-only by every FEM cache (flexsheet/fem/cache.py)
-echo "[install] precomputing the FEM node's models (python3 -m nodes.fem.warm)"
+echo "[install] precomputing the FEM node's models (python3 -m nodes.fem.warm; exits 1 if any model failed)"
 python3 -m nodes.fem.warm
+echo "[install] done"

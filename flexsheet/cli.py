@@ -206,8 +206,6 @@ def _add_topic_parser(sub) -> None:
                    "topic's; the header is stamped with the graph's clock unless given)")
     t.add_argument("--times", type=int, default=1, help="messages to publish (default 1)")
     t.add_argument("--rate", type=float, default=10.0, help="Hz between them (default 10)")
-    t.add_argument("--address", default="127.0.0.1", help="address to publish from, reachable by the nodes "
-                   "(default 127.0.0.1; on a lab host its launch-file address)")
     _tool_args(t, "s to find the subscribers and for each call")
     t.set_defaults(func=_service_tool("topic_pub"))
 

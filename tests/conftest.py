@@ -147,9 +147,8 @@ def lab_run(tmp_path_factory, sim_fem_cache):
 SIM_SCRIPT = "world.script=[{mode: stroke, moving_time: 10}, {mode: stroke_push, moving_time: 4, push_depth: 0.01}]"
 
 
-#: a launcher's line for a node or container killed by a signal. The kill known is libzmq 4.3.5's (pyzmq's wheel)
-#: crash in its I/O thread, a use-after-free while tools connect and leave (``ZMQbg/IO/0 ... segfault`` in the
-#: kernel log, a few times in days of runs): the graph fixtures run a killed graph once more and say so.
+#: a launcher's line for a node or container killed by a signal: shown first in a graph fixture's failure (a
+#: crash fails the test; nothing is run again)
 KILLED = re.compile(r"^\s*\[\s*(\S+?)\s*\] exited with code -(\d+)\s*$", re.M)
 
 
@@ -162,15 +161,7 @@ def sim_run(tmp_path_factory, sim_fem_cache):
 
     Returns ``out`` (the launch's ``--out``), ``stdout`` (its output, stderr merged), ``code`` (exit code, or
     "timeout" after 240 s) and ``viz`` (watch's (channels, SceneUpdate, fingertips) or the exception it raised).
-    A launch whose container was killed by a signal (:data:`KILLED`) runs once more, said on the test's output."""
-    r = _sim_run_once(tmp_path_factory)
-    if m := KILLED.search(r["stdout"]):
-        print(f"sim run: {m.group(1)} killed by signal {m.group(2)}; launching it once more")
-        r = _sim_run_once(tmp_path_factory)
-    return r
-
-
-def _sim_run_once(tmp_path_factory) -> dict:
+    A launch whose container was killed by a signal (:data:`KILLED`) fails its tests, the kill's line first."""
     import asyncio
     import signal
     import subprocess

@@ -679,18 +679,8 @@ def sim_graph(sandbox, sim_fem_cache) -> dict[str, Result | str]:
     """:data:`GRAPH` (launch/sim.yaml on free ports) up; then every :data:`LIVE` command against it, six at a
     time (the :data:`LIVE_IN_ORDER` ones in turn on one worker); then Ctrl-C. Returns each command's
     :class:`Result`, the launch's under :data:`GRAPH`, and the display.yaml of its twin registration under
-    ``"display.yaml"``.
-
-    Once, and said on the test's output: a run whose container was killed by a signal, at any point of it, is run
-    again (:data:`conftest.KILLED`); a second kill fails."""
+    ``"display.yaml"``. A container killed by a signal fails the tests (:func:`_tail` shows its line first)."""
     results, failure = _sim_graph_once(sandbox)
-    launch = results[GRAPH]
-    if m := KILLED.search(launch.out + launch.err):
-        print(f"sim graph: {m.group(1)} killed by signal {m.group(2)}; running the graph once more")
-        shutil.rmtree(sandbox / "out" / "sim", ignore_errors=True)
-        for bag in sandbox.glob("run*.mcap"):        # the recorders of the first run's bags
-            bag.unlink()
-        results, failure = _sim_graph_once(sandbox)
     if failure is not None:
         raise failure
     return results

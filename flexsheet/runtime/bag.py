@@ -152,6 +152,8 @@ class PlayerNode(Node):
 
     Params = PlayerParams
     node_type = "player"
+    #: a bag may hold rendered stereo pairs (two 1024 x 768 RGB images): sizes the send queue
+    LARGEST_MESSAGE_BYTES = 2 * 1024 * 768 * 3 + (16 << 10)
 
     async def setup(self) -> None:
         try:

@@ -264,7 +264,8 @@ class ContainerTransport(Transport):
         if self.endpoint:
             try:
                 curve = self.node.config.curve or self.bus.curve  # the node's own key (the bus: the host's)
-                self.xpub = XPub(self.bus.sub.ctx, self.endpoint, curve, self.sndhwm, asyncio.get_running_loop())
+                self.xpub = XPub(self.bus.sub.ctx, self.endpoint, curve, self.sndhwm, asyncio.get_running_loop(),
+                                 self.node.LARGEST_MESSAGE_BYTES)
             except TransportError:
                 self.bus.detach(self.node)
                 raise

@@ -57,6 +57,7 @@ from flexsheet.runtime.qos import QoS
 from flexsheet.runtime.subscription import Subscription, SubscriptionWorker
 from flexsheet.runtime.transport import Transport
 from flexsheet.runtime.zmq.transport import ZmqTransport
+from flexsheet.runtime.zmq.xpub import SMALL_MESSAGE_BYTES
 from messages import Heartbeat, Message, Topic, TopicStats
 from messages import topics as T
 
@@ -96,13 +97,18 @@ class Node:
     #: the node reads them from ``self.params`` where it uses them, or reacts in :meth:`on_params_set`
     DYNAMIC_PARAMS: ClassVar[frozenset[str]] = frozenset()
 
+    #: the largest message this node publishes, bytes: sizes its publisher's high-water mark once, before bind
+    #: (:class:`~flexsheet.runtime.zmq.xpub.XPub`); a node of images declares its own
+    LARGEST_MESSAGE_BYTES: ClassVar[int] = SMALL_MESSAGE_BYTES
+
     def __init__(self, config: NodeConfig, transport: Transport | None = None) -> None:
         self.config = config
         self.name = config.name
         self.params = self.Params.model_validate(config.params)
         self.log = logging.getLogger(config.name)
         self.transport = transport or ZmqTransport(config.endpoint, config.peers, curve=config.curve,
-                                                   drain_period=self.DRAIN_PERIOD)
+                                                   drain_period=self.DRAIN_PERIOD,
+                                                   largest_bytes=self.LARGEST_MESSAGE_BYTES)
         self._bus = getattr(self.transport, "bus", None)  # the container's in-process bus, if any
         attach = getattr(self.transport, "attach", None)
         if attach is not None:
@@ -129,7 +135,6 @@ class Node:
         self.services = None  # its ServiceServer once running (flexsheet.runtime.services)
         self._announced = None  # its entry in the local graph discovery (flexsheet.runtime.discovery) while up
         self._pending_services: dict[str, tuple[Callable, str, bool]] = {}
-        self._tool_peers: set[str] = set()    # endpoints graph/connect added (only those graph/disconnect drops)
 
     # ------------------------------------------------------------------ API for subclasses
     async def setup(self) -> None:
@@ -390,10 +395,8 @@ class Node:
         srv.add("param/get", params.get, "{name}: a param's value")
         srv.add("param/set", params.set, "{name, value}: set a run-time param (DYNAMIC_PARAMS)", commanding=True)
         srv.add("clock/now", lambda args: self.now(), "the node's clock now, s (simulated on a simulated graph)")
-        srv.add("graph/connect", self._graph_connect, "{endpoint[, key]}: subscribe to one more publisher (topic pub); "
-                "key: its CURVE public key, one of the launch file's identities", commanding=True)
-        srv.add("graph/disconnect", self._graph_disconnect, "{endpoint}: drop a publisher graph/connect added",
-                commanding=True)
+        srv.add("topic/pub", self._topic_pub, "{topic, frames}: deliver one encoded message of a topic this node "
+                "subscribes to, as if it came from the wire (topic pub)", commanding=True)
         for name, (handler, doc, commanding) in self._pending_services.items():
             srv.add(name, handler, doc, commanding)
         srv.start()
@@ -402,25 +405,28 @@ class Node:
         links = getattr(self.transport, "links", None)
         return links if links is not None else getattr(getattr(self._bus, "sub", None), "links", None)
 
-    def _graph_connect(self, args: dict) -> str:
-        ep = args.get("endpoint")
-        if not isinstance(ep, str) or not ep.startswith("tcp://") or ":" not in ep[6:]:
-            raise ValueError(f"endpoint must be tcp://HOST:PORT, got {ep!r}")
+    def _topic_pub(self, args: dict) -> int:
+        """The ``topic/pub`` service (on the loop): ``frames`` (a list of bytes, the wire encoding, the first
+        frame the topic's name) go to this node's subscriptions of ``topic``, where they are decoded and
+        validated like any message from the wire. Returns the number of subscriptions reached. Raises
+        ``ValueError`` naming the field: a topic this node does not subscribe to, one the launch file guards
+        (``security.publishers``), or frames that are not the topic's bytes. A tool reaches the graph by a call
+        to each node's bound service socket, so the graph never connects to, nor disconnects from, a tool."""
+        topic, frames = args.get("topic"), args.get("frames")
+        if not isinstance(topic, str) or not topic:
+            raise ValueError(f"topic must be a topic name, got {topic!r}")
+        if not (isinstance(frames, list) and len(frames) >= 2 and all(isinstance(f, bytes) for f in frames)):
+            raise ValueError(f"frames must be a list of at least 2 byte strings, got {type(frames).__name__}")
+        if frames[0] != topic.encode():
+            raise ValueError(f"frames[0] must be the topic {topic!r}, got {frames[0][:80]!r}")
         links = self._transport_links()
-        if links is None:
-            raise ValueError("this node has no subscriber socket")
-        key = args.get("key")
-        links.add_peer(ep, key.encode() if isinstance(key, str) else None)    # ValueError names a bad one
-        self._tool_peers.add(ep)
-        return ep
-
-    def _graph_disconnect(self, args: dict) -> bool:
-        ep = str(args.get("endpoint", ""))
-        if ep not in self._tool_peers:
-            raise ValueError(f"{ep!r} was not added by graph/connect (the launch file's peers stay)")
-        self._tool_peers.discard(ep)
-        links = self._transport_links()
-        return bool(links is not None and links.remove_peer(ep))
+        if links is not None and topic.encode() in getattr(links, "guards", {}):
+            raise ValueError(f"topic {topic!r} is guarded by the launch file (security.publishers)")
+        subs = self._subs_b.get(frames[0])
+        if not subs:
+            raise ValueError(f"topic {topic!r}: this node does not subscribe to it")
+        self._on_frames(frames)
+        return len(subs)
 
     async def _close(self) -> None:
         from flexsheet.runtime.discovery import withdraw

@@ -141,9 +141,9 @@ def _message(topic, data: dict, seq: int, now: float):
 
 def topic_pub(args: argparse.Namespace) -> int:
     """Publish a message on a topic, ROS 2's ``topic pub``: the message from YAML (its type is the topic's),
-    ``--times`` N at ``--rate`` Hz. The tool binds a publisher and asks every node subscribed to the topic to
-    connect to it (the ``graph/connect`` service), then disconnects them. A topic the launch file guards
-    (``security.publishers``) is refused."""
+    ``--times`` N at ``--rate`` Hz. Every node subscribed to the topic gets each message through its
+    ``topic/pub`` service (the tool connects to the graph; the graph never connects to the tool). A topic the
+    launch file guards (``security.publishers``) is refused, here and by the nodes."""
     from pydantic import ValidationError
 
     by_name = {t.name: t for t in T.ALL}
@@ -175,11 +175,11 @@ def topic_pub(args: argparse.Namespace) -> int:
 
 
 async def _publish(args: argparse.Namespace, g: Graph, topic, data: dict) -> int:
-    """``topic pub`` once the message is known good: connect the subscribers of ``args.topic`` in graph ``g`` to a
-    tool publisher, publish, disconnect them (:func:`topic_pub`)."""
+    """``topic pub`` once the message is known good: each subscriber of ``args.topic`` in graph ``g`` gets every
+    message by a ``topic/pub`` call to its service socket (:func:`topic_pub`). The tool only connects, as a
+    client, so its leaving is a closed connection: the graph never connects to it nor disconnects from it."""
     from flexsheet.runtime.codec import encode
     from flexsheet.runtime.services import ServiceError, call_async
-    from flexsheet.runtime.zmq.xpub import ToolPublisher
 
     curve = g.curve
     beats = await collect_heartbeats(g.peers, args.timeout, curve, g.names)
@@ -188,40 +188,24 @@ async def _publish(args: argparse.Namespace, g: Graph, topic, data: dict) -> int
     if not subs:
         print(f"no node of {g.source} subscribes to {args.topic} now", file=sys.stderr)
         return 1
-    pub = ToolPublisher(f"tcp://{args.address}", curve)
-    ep = pub.endpoint
-    reached = []
-    try:
-        for n, hb in subs.items():
-            key = curve.server_keys.get(hb.endpoint) if curve is not None else None
+    keys = {n: (curve.server_keys.get(hb.endpoint) if curve is not None else None) for n, hb in subs.items()}
+    reached = list(subs)
+    for i in range(args.times):         # stamped with the graph's clock (simulated on a simulated graph)
+        now = time.time()
+        if reached:
+            first = subs[reached[0]]
+            now = float(await call_async(first.service_endpoint, "clock/now", {}, args.timeout, curve,
+                                         keys[reached[0]]))
+        frames = [bytes(f) for f in encode(args.topic, _message(topic, data, i, now))]
+        for n in list(reached):
             try:
-                await call_async(hb.service_endpoint, "graph/connect",
-                                 {"endpoint": ep, **({"key": curve.public_key.decode()} if curve else {})},
-                                 args.timeout, curve, key)
-                reached.append(n)
+                await call_async(subs[n].service_endpoint, "topic/pub", {"topic": args.topic, "frames": frames},
+                                 args.timeout, curve, keys[n])
             except ServiceError as exc:
                 print(f"{n}: {exc}", file=sys.stderr)
-        # every subscriber's subscription has reached this publisher (a message sent before is lost)
-        await pub.wait_subscribers(args.topic, len(reached), args.timeout)
-        first = subs[reached[0]] if reached else None
-        for i in range(args.times):         # stamped with the graph's clock (simulated on a simulated graph)
-            now = time.time()
-            if first is not None:
-                key = curve.server_keys.get(first.endpoint) if curve is not None else None
-                now = float(await call_async(first.service_endpoint, "clock/now", {}, args.timeout, curve, key))
-            await pub.send(encode(args.topic, _message(topic, data, i, now)))
-            if i + 1 < args.times:
-                await asyncio.sleep(1.0 / args.rate)
-        await asyncio.sleep(0.2)
-    finally:
-        for n in reached:
-            hb = subs[n]
-            key = curve.server_keys.get(hb.endpoint) if curve is not None else None
-            try:
-                await call_async(hb.service_endpoint, "graph/disconnect", {"endpoint": ep}, args.timeout, curve, key)
-            except ServiceError:
-                pass
-        pub.close()
+                reached.remove(n)
+        if i + 1 < args.times:
+            await asyncio.sleep(1.0 / args.rate)
     out = {"topic": args.topic, "type": topic.type.SCHEMA, "published": args.times if reached else 0,
            "subscribers": reached}
     print(json.dumps(out) if args.json else

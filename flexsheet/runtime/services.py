@@ -10,8 +10,8 @@ is a CURVE server with the node's key, behind the same ZAP allow-list as its pub
 
 Built in on every node: ``list`` (the services with one line each), ``param/list``, ``param/get``,
 ``param/set`` (:class:`ParamServices`: a param listed in the node's ``DYNAMIC_PARAMS`` may be set while it runs,
-validated by its ``Params`` model; every other param is read-only at run time), ``graph/connect`` and
-``graph/disconnect`` (subscribe to / drop one more publisher endpoint: ``flexsheet topic pub``).
+validated by its ``Params`` model; every other param is read-only at run time), ``clock/now`` and
+``topic/pub`` (one encoded message delivered to the node's subscriptions: ``flexsheet topic pub``).
 
 :func:`call` is the client: one request, one reply, within a timeout.
 """

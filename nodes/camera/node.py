@@ -194,6 +194,8 @@ class CameraNode(Node):
     so a viewer does not receive the 48 Hz stream it would mostly drop (docs/visualise.md)."""
 
     Params = CameraParams
+    #: a stereo pair of the XIMEA's 640 x 512 mono8 images, with room for its header (sizes the send queue)
+    LARGEST_MESSAGE_BYTES = 2 * 640 * 512 + (16 << 10)
 
     @classmethod
     def probe(cls, params) -> list[str]:

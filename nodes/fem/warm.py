@@ -1,10 +1,12 @@
 """Install-time warm-up of the FEM node: ``python3 -m nodes.fem.warm [--out DIR]``.
 
-Runs the FEM node's own setup, in this process, for the ``fem`` params of ``launch/sim.yaml`` on the paper's
-cylinder and on every scene of ``launch/scenes/``, with ``cache_dir`` = ``DIR`` (default
+Runs the FEM node as it runs in a graph (its loop, setup and first publications, then its teardown), in this
+process on an in-process transport, for the ``fem`` params of ``launch/sim.yaml`` on the paper's cylinder and
+on every scene of ``launch/scenes/`` (``--scene NAME`` for some of them), with ``cache_dir`` = ``DIR`` (default
 :data:`flexsheet.fem.cache.INSTALL_DIR`, which every FEM cache searches read-only). A node started later, on
 any ``HOME``, then loads its model instead of precomputing it (the capacitance matrices: ~12 s for the
 cylinder on the 2-core machine). ``docker/install.sh`` runs it; idempotent (a second run only loads).
+Exit status 1 when any model failed (each failure has its own ``FAILED`` line), 0 when every one is ready.
 """
 
 from __future__ import annotations
@@ -32,10 +34,17 @@ def param_sets(root: Path = ROOT) -> list[dict]:
 
 
 async def _warm(params: dict) -> None:
-    """The node's setup to its end (however long it takes), then its teardown."""
+    """Run the node until its setup has ended (however long it takes), then shut it down. Raises what its
+    setup raised (``RuntimeError`` when it stopped without being ready)."""
     node = FemNode(NodeConfig(name="fem", node_type="fem", params=params), transport=InProcTransport())
-    await node.setup()
-    await node.teardown()
+    task = asyncio.get_running_loop().create_task(node.run(install_signals=False))
+    while not node.ready and not task.done():
+        await asyncio.sleep(0.05)
+    if not task.done():
+        node.shutdown()
+    await task                                  # re-raises the setup's error
+    if not node.ready:
+        raise RuntimeError("the FEM node stopped before it was ready (its log says why)")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -43,17 +52,31 @@ def main(argv: list[str] | None = None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
                                  epilog="example: python3 -m nodes.fem.warm --out /tmp/fem_cache")
     ap.add_argument("--out", default=INSTALL_DIR, help=f"cache folder to fill (default {INSTALL_DIR})")
+    ap.add_argument("--scene", action="append", default=None, metavar="NAME",
+                    help="warm only these (repeatable): 'paper' for the paper's cylinder, else a file name of "
+                         "launch/scenes/ such as sphere.yaml (default: all)")
     args = ap.parse_args(argv)
-    for params in param_sets():
+    sets = param_sets()
+    names = [Path(p["scene"]).name if p.get("scene") else "paper" for p in sets]
+    unknown = sorted(set(args.scene or []) - set(names))
+    if unknown:
+        ap.error(f"--scene: unknown {', '.join(unknown)}; known: {', '.join(names)}")
+    failed = 0
+    for name, params in zip(names, sets):
+        if args.scene and name not in args.scene:
+            continue
         t = time.monotonic()
         what = Path(params.get("scene") or "the paper's cylinder").name
         try:
             asyncio.run(_warm({**params, "cache_dir": args.out}))
         except Exception as exc:  # noqa: BLE001 - one scene failing must not stop the rest; said plainly
             print(f"[fem warm] {what}: FAILED ({type(exc).__name__}: {exc})", flush=True)
+            failed += 1
             continue
         print(f"[fem warm] {what}: ready in {time.monotonic() - t:.1f} s ({args.out})", flush=True)
-    return 0
+    if failed:
+        print(f"[fem warm] {failed} model(s) FAILED (lines above)", file=sys.stderr, flush=True)
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":

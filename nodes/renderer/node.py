@@ -71,6 +71,8 @@ class RendererNode(SheetTables, Node):
 
     Params = RendererParams
     node_type = "renderer"
+    #: a rendered stereo pair of two 1024 x 768 RGB images, with room for its header (sizes the send queue)
+    LARGEST_MESSAGE_BYTES = 2 * 1024 * 768 * 3 + (16 << 10)
 
     async def setup(self) -> None:
         p: RendererParams = self.params

@@ -88,7 +88,7 @@ def test_params_services_and_topic_pub_on_the_live_graph(demo_launch):
     try:
         lf.wait_for(r"heard seq=", count=2)
         services = json.loads(_flexsheet("service", "list", "listener", "--json", "--launch", str(path)).stdout)
-        assert {"param/list", "param/get", "param/set", "graph/connect", "list"} <= set(services), services
+        assert {"param/list", "param/get", "param/set", "topic/pub", "list"} <= set(services), services
         rows = {r["name"]: r for r in json.loads(_flexsheet("param", "list", "listener", "--json", "--launch",
                                                             str(path)).stdout)}
         assert rows["delay"]["value"] == 0.0 and rows["delay"]["dynamic"] and rows["delay"]["type"] == "float"
@@ -115,9 +115,10 @@ def test_params_services_and_topic_pub_on_the_live_graph(demo_launch):
         lf.wait_for(r"x=0\.777", count=3)
         time.sleep(0.5)
         assert sum("x=0.777" in line for line in lf.lines) == 3
-        talker = json.loads(_flexsheet("node", "info", "talker", "--json", "--launch", str(path)).stdout)["endpoint"]
-        r = _flexsheet("service", "call", "listener", "graph/disconnect", f"{{endpoint: '{talker}'}}", "--launch", str(path))
-        assert r.returncode == 1 and "was not added by graph/connect" in r.stderr, r.stderr   # the file's peers stay
+        # topic/pub refuses, naming the field, a topic the node does not subscribe to and frames of another topic
+        r = _flexsheet("service", "call", "listener", "topic/pub", "{topic: /sheet/target, frames: [a, b]}",
+                       "--launch", str(path))
+        assert r.returncode == 1 and "frames must be a list" in r.stderr, r.stderr     # YAML strings, not bytes
         r = _flexsheet("topic", "pub", "/fingertip", "{position: [1, 2]}", "--launch", str(path))
         assert r.returncode == 2 and "field 'position'" in r.stderr, r.stderr
         assert lf.proc.poll() is None                       # the node took every bad request and runs on

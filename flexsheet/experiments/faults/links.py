@@ -210,7 +210,7 @@ from messages import topics as T
 ep, seconds, hz, budget = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
 if budget:   # the control run: another byte budget
     from flexsheet.runtime.zmq import xpub
-    xpub.XPub.__init__.__defaults__ = (budget,)
+    xpub.XPub.__init__.__defaults__ = (xpub.SMALL_MESSAGE_BYTES, budget)
 
 def rss_mb():
     for line in open("/proc/self/status"):
@@ -218,6 +218,8 @@ def rss_mb():
             return int(line.split()[1]) / 1024.0
 
 class Cam(Node):
+    LARGEST_MESSAGE_BYTES = 2 * 640 * 512 + (16 << 10)
+
     async def setup(self):
         self.pub = self.publisher(T.STEREO)
         self.img = np.random.default_rng(0).integers(0, 255, (512, 640), dtype=np.uint8)   # 2 x 328 kB

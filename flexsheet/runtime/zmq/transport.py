@@ -11,7 +11,7 @@ from flexsheet.runtime.transport import FramesHandler, Transport, TransportError
 from flexsheet.runtime.zmq.curve import AllowList, CurveConfig, allow_list
 from flexsheet.runtime.zmq.linkwatch import LinkWatch
 from flexsheet.runtime.zmq.subscriber import SubLinks
-from flexsheet.runtime.zmq.xpub import XPub
+from flexsheet.runtime.zmq.xpub import SMALL_MESSAGE_BYTES, XPub
 
 __all__ = ["ZmqTransport"]
 
@@ -28,6 +28,9 @@ class ZmqTransport(Transport):
         Endpoints to connect the SUB socket to (every publisher of the graph; may include ``endpoint``).
     sndhwm, rcvhwm : int
         ZeroMQ high-water marks in messages (drops beyond them are counted by the node via seq gaps).
+    largest_bytes : int
+        the largest message the node publishes, bytes: with ``sndhwm`` it sets the publisher's high-water mark
+        once, before bind (:class:`XPub`).
     drain_period : float
         0 (default): received messages are handled as soon as the SUB socket is readable (one loop wake-up per
         ready edge). > 0 s: the SUB socket is drained only every ``drain_period`` s, in one batch — for a node
@@ -41,7 +44,8 @@ class ZmqTransport(Transport):
     threadsafe_send = True
 
     def __init__(self, endpoint: str, peers: Iterable[str], *, sndhwm: int = 2000, rcvhwm: int = 20000,
-                 curve: CurveConfig | None = None, drain_period: float = 0.0) -> None:
+                 curve: CurveConfig | None = None, drain_period: float = 0.0,
+                 largest_bytes: int = SMALL_MESSAGE_BYTES) -> None:
         if not (drain_period >= 0.0 and drain_period < 10.0):
             raise ValueError(f"drain_period must be in [0, 10) s, got {drain_period!r}")
         self.endpoint = endpoint
@@ -51,6 +55,7 @@ class ZmqTransport(Transport):
         self.allow: AllowList | None = None
         self.peers = [p for p in dict.fromkeys(peers) if p]
         self.sndhwm, self.rcvhwm = sndhwm, rcvhwm
+        self.largest_bytes = largest_bytes
         self.ctx: zmq.Context | None = None
         self.xpub: XPub | None = None
         self.links: SubLinks | None = None
@@ -72,7 +77,7 @@ class ZmqTransport(Transport):
             self._auth, self.allow = allow_list(self.ctx, curve)
         if self.endpoint:
             try:
-                self.xpub = XPub(self.ctx, self.endpoint, curve, self.sndhwm, self._loop)
+                self.xpub = XPub(self.ctx, self.endpoint, curve, self.sndhwm, self._loop, self.largest_bytes)
             except TransportError:
                 self.close()
                 raise

@@ -1,10 +1,10 @@
-"""Publisher sockets: a node's bound XPUB (:class:`XPub`: thread-safe sends, latched values for late joiners,
-subscriptions tracked, queues bounded by bytes) and a tool's own (:class:`ToolPublisher`, ``flexsheet topic
-pub``)."""
+"""A node's bound XPUB (:class:`XPub`: thread-safe sends, latched values for late joiners, subscriptions
+tracked, queues bounded by bytes, every option set before bind)."""
 
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 
 import zmq
@@ -13,13 +13,28 @@ from flexsheet.runtime.transport import TransportError
 from flexsheet.runtime.zmq.curve import CurveConfig
 from flexsheet.runtime.zmq.frames import EVENTS, NOBLOCK, NOBLOCK_MORE, POLLIN, frame_nbytes, send_frames
 
-__all__ = ["XPub", "ToolPublisher", "PUB_QUEUE_BYTES", "MIN_SNDHWM", "CLOSE_LINGER_MS"]
+__all__ = ["XPub", "PUB_QUEUE_BYTES", "MIN_SNDHWM", "SMALL_MESSAGE_BYTES", "CLOSE_LINGER_MS",
+           "send_hwm"]
+
+log = logging.getLogger(__name__)
 
 #: bytes a publisher socket may queue for one subscriber that does not read (see :class:`XPub`): 32 MiB is
 #: ~50 stereo frames (655 kB, ~1 s at 48 Hz) or ~7 rendered frames (4.7 MB); small messages keep SNDHWM
 PUB_QUEUE_BYTES = 32 << 20
 #: the send high-water mark never goes below this many messages, however big the messages
 MIN_SNDHWM = 4
+#: the largest message a node declares by default, bytes (a node of images declares its own)
+SMALL_MESSAGE_BYTES = 16 << 10
+
+
+def send_hwm(sndhwm: int, largest_bytes: int, budget_bytes: int = PUB_QUEUE_BYTES) -> int:
+    """The send high-water mark (messages) that keeps one subscriber's queue of ``largest_bytes`` messages
+    within ``budget_bytes``: ``budget_bytes // largest_bytes``, at most ``sndhwm``, at least :data:`MIN_SNDHWM`.
+    Raises ``ValueError`` naming a value that is not a positive int."""
+    for name, v in (("sndhwm", sndhwm), ("largest_bytes", largest_bytes), ("budget_bytes", budget_bytes)):
+        if not (isinstance(v, int) and v >= 1):
+            raise ValueError(f"{name} must be an int >= 1, got {v!r}")
+    return max(MIN_SNDHWM, min(sndhwm, budget_bytes // largest_bytes))
 
 #: linger of a publisher socket at close, ms (see :meth:`XPub.close`)
 CLOSE_LINGER_MS = 100
@@ -33,25 +48,28 @@ class XPub:
     takes ``lock`` (ZeroMQ sockets may change threads only across a full memory barrier, which the lock gives).
     Raises :class:`TransportError` naming the endpoint when it cannot be bound.
 
-    Bounded by bytes: ``sndhwm`` (messages) is the most each subscriber's queue holds; once a message bigger than
-    ``budget_bytes / sndhwm`` is sent, the high-water mark (of every subscriber's queue, libzmq applies it to the
-    existing ones) drops to ``budget_bytes // largest message`` (at least :data:`MIN_SNDHWM`), so the queue of a
-    subscriber that stops reading holds about ``budget_bytes``. Counted drops: the socket runs with
+    Bounded by bytes, set once: the high-water mark is :func:`send_hwm` of ``sndhwm`` and ``largest_bytes`` (the
+    largest message the node declares), set before ``bind`` and never changed on the live socket (changing it
+    while a subscriber's pipe is torn down crashes libzmq 4.3.5's I/O thread: zeromq/libzmq#4524). A subscriber
+    that stops reading then holds about ``budget_bytes``. A message bigger than declared is still sent (counted
+    in ``oversize``; its node should declare more). Counted drops: the socket runs with
     ``XPUB_NODROP``, so a send that a full queue cannot take fails instead of vanishing; it is then sent again
     lossy (the subscribers with room still get it) and :meth:`send` returns False. ``dropped`` counts them.
     """
 
     def __init__(self, ctx: zmq.Context, endpoint: str, curve: CurveConfig | None, sndhwm: int,
-                 loop: asyncio.AbstractEventLoop, budget_bytes: int = PUB_QUEUE_BYTES) -> None:
+                 loop: asyncio.AbstractEventLoop, largest_bytes: int = SMALL_MESSAGE_BYTES,
+                 budget_bytes: int = PUB_QUEUE_BYTES) -> None:
         self.lock = threading.Lock()
         self.latched: dict[bytes, list] = {}
         self.prefixes: set[bytes] = set()
         self._wants: dict[bytes, bool] = {}
         self._loop = loop
         self.budget_bytes = int(budget_bytes)
-        self.sndhwm = self.max_sndhwm = max(1, int(sndhwm))
-        self.largest = self.budget_bytes // self.sndhwm  # a bigger message lowers the high-water mark
+        self.largest = int(largest_bytes)
+        self.sndhwm = send_hwm(max(1, int(sndhwm)), self.largest, self.budget_bytes)
         self.dropped = 0
+        self.oversize = 0   # messages bigger than ``largest`` (sent all the same; the HWM stays)
         self.sock = ctx.socket(zmq.XPUB)
         self.sock.setsockopt(zmq.LINGER, 0)
         if curve is not None:
@@ -103,7 +121,11 @@ class XPub:
             if sock.closed:
                 return False  # shutting down: a late publish from a worker thread is dropped, not an error
             if size > self.largest:
-                self._fit_hwm(size)
+                if not self.oversize:
+                    log.warning("%s: a %d-byte message is larger than the %d bytes its node declares "
+                                "(LARGEST_MESSAGE_BYTES): the queue bound is exceeded", self.endpoint, size,
+                                self.largest)
+                self.oversize += 1
             try:
                 send = sock.send
                 last = len(frames) - 1
@@ -118,14 +140,6 @@ class XPub:
         # a send can swallow the FD's edge for a subscription that arrived meanwhile: the safety poll (50 ms)
         # and wants() (which drains when its answer would be no) catch it
         return True
-
-    def _fit_hwm(self, size: int) -> None:
-        """Lower the send high-water mark so that ``size``-byte messages fit ``budget_bytes`` (lock held)."""
-        self.largest = size
-        hwm = max(MIN_SNDHWM, min(self.max_sndhwm, self.budget_bytes // size))
-        if hwm < self.sndhwm:
-            self.sock.setsockopt(zmq.SNDHWM, hwm)
-            self.sndhwm = hwm
 
     def _send_lossy(self, frames: list) -> None:
         """Send to the subscribers whose queue has room, the full ones skipped (lock held)."""
@@ -188,44 +202,3 @@ class XPub:
             # Reproduced with 4 subscribers closing as the XPUB closes after 0.6 MB frames: 6 aborts in 60
             # runs at linger 0, none in 210 at 100 ms. ctx.term() then waits at most CLOSE_LINGER_MS.
             self.sock.close(linger=CLOSE_LINGER_MS)
-
-
-class ToolPublisher:
-    """A tool's own publisher (``flexsheet topic pub``): an XPUB bound on ``address`` ("tcp://HOST") at a port
-    the OS picks (:attr:`endpoint`), a CURVE server with the host's keys when ``curve``; nodes connect to it on
-    request (``graph/connect``) and :meth:`wait_subscribers` waits until their subscriptions arrived."""
-
-    def __init__(self, address: str, curve: CurveConfig | None = None) -> None:
-        import zmq.asyncio
-
-        self._ctx = zmq.asyncio.Context()
-        self.sock = self._ctx.socket(zmq.XPUB)
-        self.sock.setsockopt(zmq.XPUB_VERBOSE, 1)
-        self.sock.setsockopt(zmq.LINGER, 500)
-        if curve is not None:
-            self.sock.curve_secretkey = curve.secret_key
-            self.sock.curve_publickey = curve.public_key
-            self.sock.curve_server = True
-        self.endpoint = f"{address}:{self.sock.bind_to_random_port(address)}"
-
-    async def wait_subscribers(self, topic: str, n: int, timeout: float) -> int:
-        """Wait (at most ``timeout`` s) until ``n`` subscriptions covering ``topic`` arrived; returns how many did."""
-        got, t = 0, topic.encode()
-        loop = asyncio.get_running_loop()
-        end = loop.time() + timeout
-        while got < n and loop.time() < end:
-            try:
-                msg = await asyncio.wait_for(self.sock.recv(), max(0.0, end - loop.time()))
-            except TimeoutError:
-                break
-            if msg[:1] == b"\x01" and t.startswith(msg[1:]):
-                got += 1
-        return got
-
-    async def send(self, frames: list) -> None:
-        await self.sock.send_multipart(frames)
-
-    def close(self) -> None:
-        self.sock.close()
-        self._ctx.term()
-
