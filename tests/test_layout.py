@@ -370,3 +370,57 @@ def test_the_mirror_rule_refuses_a_planted_bad_name(tmp_path):
     assert _unmirrored(unit, lib, {"messages": other}) == ["nope/test_mod.py", "pkg/nosub/test_mod.py",
                                                            "pkg/sub/test_mod.py", "pkg/test_data.py",
                                                            "pkg/test_pkg_mod.py", "test_main.py"]
+
+
+# ------------------------------------------------------------------ experiments sit on top of the product
+#: the CLI front ends, which wire the experiments' commands (``flexsheet experiment …``)
+CLI_FRONT_ENDS = {"flexsheet/cli.py", "flexsheet/cli_commands.py"}
+#: a launch file's ``report:`` line and the module it names
+REPORT_LINE = re.compile(r"^report:\s*([A-Za-z0-9_.:]+)", re.M)
+
+
+def _experiments_importers(root: Path) -> list[str]:
+    """The imports of ``flexsheet.experiments`` (``file:line``) in the code under ``root`` (``flexsheet/``,
+    ``nodes/``, ``messages/``) outside ``flexsheet/experiments/`` and the CLI front ends."""
+    bad = []
+    for base in ("flexsheet", "nodes", "messages"):
+        for path in sorted((root / base).rglob("*.py")):
+            rel = path.relative_to(root).as_posix()
+            if rel.startswith("flexsheet/experiments/") or rel in CLI_FRONT_ENDS:
+                continue
+            bad += [f"{rel}:{line}: {mod}" for line, mod in _imports(path)
+                    if mod == "flexsheet.experiments" or mod.startswith("flexsheet.experiments.")]
+    return bad
+
+
+def _reports_into_experiments(launch: Path) -> list[str]:
+    """The launch files under ``launch`` whose ``report:`` names a module of ``flexsheet.experiments``."""
+    return [f"{p.name}: {m}" for p in sorted(launch.rglob("*.yaml")) for m in REPORT_LINE.findall(p.read_text())
+            if m.split(":")[0] == "flexsheet.experiments" or m.startswith("flexsheet.experiments.")]
+
+
+def test_only_the_experiments_and_the_cli_import_the_experiments():
+    """The product (the report, the tables, the studies the commands share) is built below the experiments: only
+    ``flexsheet/experiments/`` and the CLI front ends import ``flexsheet.experiments``, and no launch's report runs
+    from it."""
+    assert _experiments_importers(ROOT) == [], "imports of flexsheet.experiments outside it and the CLI:\n" + \
+        "\n".join(_experiments_importers(ROOT))
+    assert REPORT_LINE.search((ROOT / "launch" / "sim.yaml").read_text()), "the check read no report: line"
+    assert _reports_into_experiments(ROOT / "launch") == [], "launch reports run from flexsheet.experiments"
+
+
+def test_the_experiments_rule_sees_planted_faults(tmp_path):
+    """A planted import of the experiments in the library and a launch report into them are refused; the
+    experiments' own imports and the CLI's are not."""
+    for f, text in {"flexsheet/fem/x.py": "def f():\n    from flexsheet.experiments.stroke import run\n",
+                    "flexsheet/experiments/y.py": "from flexsheet.experiments import stroke\n",
+                    "flexsheet/cli.py": "import flexsheet.experiments.scenes\n",
+                    "nodes/a/node.py": "from flexsheet import experiments\n",
+                    "launch/bad.yaml": "report: flexsheet.experiments.report:main\n",
+                    "launch/good.yaml": "report: flexsheet.analysis.report:main\n"}.items():
+        (tmp_path / f).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / f).write_text(text)
+    (tmp_path / "messages").mkdir()
+    assert _experiments_importers(tmp_path) == ["flexsheet/fem/x.py:2: flexsheet.experiments.stroke",
+                                                "nodes/a/node.py:1: flexsheet.experiments"]
+    assert _reports_into_experiments(tmp_path / "launch") == ["bad.yaml: flexsheet.experiments.report:main"]

@@ -332,7 +332,7 @@ def display_main(argv: list[str] | None = None) -> int:
         if a.sweep:
             if a.live:
                 p.error("--sweep runs in the twin, not with --live")
-            from flexsheet.experiments.registration_sweep import run_sweep
+            from flexsheet.twin.registration_sweep import run_sweep
 
             seeds = [int(s) for s in (a.seeds or "1,2,3").split(",") if s.strip()]
             run_sweep(seeds, a.out, quick=a.quick, realism=a.realism)
@@ -359,7 +359,7 @@ def _draws(a, p: argparse.ArgumentParser) -> int:
     """``--draws N`` (or ``--seeds``): the registration on many truths, each target's misses counted."""
     if a.live:
         p.error("--draws runs in the twin, not with --live")
-    from flexsheet.experiments.registration_draws import draw_seeds, run_draws
+    from flexsheet.twin.registration_draws import draw_seeds, run_draws
 
     if a.seeds is not None:
         seeds, draw = [int(s) for s in a.seeds.split(",") if s.strip()], None

@@ -14,33 +14,16 @@ import math
 import numpy as np
 
 from flexsheet.fem.eye_judge import contact_gap, frame_jumps
+from flexsheet.fem.served import served_finger
 
 log = logging.getLogger(__name__)
 
-__all__ = ["served_motion", "served_finger", "STROKE_STEP", "PUSH_STEP", "GAP_TARGET_PX", "JUMP_TARGET_PX"]
+__all__ = ["served_motion", "STROKE_STEP", "PUSH_STEP", "GAP_TARGET_PX", "JUMP_TARGET_PX"]
 
 STROKE_STEP = 0.0005     #: m of stroke a frame: a 30 mm/s stroke rendered at 60 Hz
 PUSH_STEP = 0.00025      #: m of depth a frame: a 15 mm/s press rendered at 60 Hz
 GAP_TARGET_PX = 1.0      #: the dent meets the fingertip within a pixel
 JUMP_TARGET_PX = 0.5     #: p99 of a frame's jump
-
-
-def served_finger(sc, q: np.ndarray, n: np.ndarray, depth: float):
-    """The finger pushed ``depth`` m at surface point ``q`` (3,) m along −``n`` (outward unit normal) as the
-    scene's served model takes it: the paper's cylinder's by azimuth and axial offset
-    (:func:`flexsheet.fem.contact.finger_at`), any other scene's by point and normal
-    (:func:`flexsheet.fem.scene_model.finger_on_scene`)."""
-    from flexsheet.fem.served import fem_models_as_cylinder
-
-    if fem_models_as_cylinder(sc):
-        from flexsheet.fem.contact import finger_at
-
-        c = sc.center
-        return finger_at(math.atan2(q[2] - c[2], q[0] - c[0]), float(depth), sc.finger.radius,
-                         sc.object.radius, c, float(q[1] - c[1]))
-    from flexsheet.fem.scene_model import finger_on_scene
-
-    return finger_on_scene(q, n, float(depth), sc.finger.radius)
 
 
 def _frames(sc, rt, pts, nrm, depths) -> tuple[list[np.ndarray], list, list[str]]:

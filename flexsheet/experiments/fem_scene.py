@@ -42,83 +42,19 @@ import time
 
 import numpy as np
 
-from flexsheet.experiments.fem_motion import served_finger, served_motion
-from flexsheet.fem.path_snapshots import GRID
+from flexsheet.experiments.fem_motion import served_motion
+from flexsheet.fem.reference.scene_reference import FULL, QUICK, scene_reference
+from flexsheet.fem.served import scene_update_ms, served_finger
 from flexsheet.runtime.console import LIBRARY, show_lines
 
 log = logging.getLogger(__name__)
 
-__all__ = ["run_scene", "main", "TARGET_MM", "TARGET_PX", "CONVERGED_PX", "QUICK", "FULL"]
+__all__ = ["run_scene", "main", "TARGET_MM", "TARGET_PX", "CONVERGED_PX"]
 
 TARGET_MM = 0.7                      #: one projector pixel on the screen, mm
 TARGET_PX = 1.0                      #: the served model's largest visible error, projector px
 CONVERGED_PX = 0.5                   #: a reference counts as converged where two levels differ by this, px
 DEPTH_STEP = 0.005                   #: the judged depths: every 5 mm to the scene's use.max_depth, m
-#: settings: push fractions along the stroke, recorded depths (m), load step (m), reference levels' h_fine (m,
-#: coarse to fine, ratio 4/3 for the grid convergence index), path refinement (True: down to the scene's
-#: use.max_depth), the support's rim on a mesh line (:func:`flexsheet.fem.scene_mesh.scene_mesh`)
-QUICK = {"fractions": (0.5,), "depths": tuple(np.round(np.arange(1, 7) * 0.005, 4)), "step": 0.0025,
-         "levels": (0.008, 0.006, 0.0045), "h": 0.012, "refine_radius": 0.015, "path_depth": True, "rim": True,
-         "n_time": 100}
-#: the full run: its first level is the path table's stations' mesh (:data:`flexsheet.fem.path_snapshots.GRID`), with
-#: the same outputs, so its pushes at the stroke's start, middle and end are those of a path table whose stations
-#: include them (any odd count: the default 13, or 7)
-FULL = {"fractions": (0.0, 0.5, 1.0),
-        "depths": tuple(np.round(np.arange(1, int(round(GRID["depth_max"] / GRID["step"])) + 1) * GRID["step"], 9)),
-        "step": GRID["step"], "levels": (GRID["h_fine"], 0.004, 0.003), "h": GRID["h"],
-        "refine_radius": GRID["refine_radius"], "path_depth": GRID["path_depth"], "n_time": 300}
-
-
-def scene_reference(sc, q: np.ndarray, n: np.ndarray, h_fine: float, st: dict, probes: np.ndarray, cache) -> dict:
-    """The scene's hyperelastic push (its material, its finger's contact law) at surface point ``q`` (3,) m along
-    −``n`` (outward unit normal (3,)) through ``st['depths']`` (D,) m (load steps ``st['step']``) on a mesh of size
-    ``st['h']`` refined to ``h_fine`` m within ``st['refine_radius']`` of ``q`` (``st['path_depth']`` > 0: of the
-    whole push path down to that depth; ``st['rim']``: the support's rim a refined mesh line); cached (kind "scenereference"). Returns arrays: ``u`` (D, k, 3) m the
-    displacements at ``probes`` (k, 3) m, ``force`` (D,) N, ``converged``, ``inverted``, ``max_strain`` (D,)
-    (largest principal Green–Lagrange strain), ``seconds``, ``dofs``, and the mesh (``points``, ``tets``,
-    ``fixed``, ``E``, ``nu``)."""
-    from flexsheet.fem.cache import cache_key
-    from flexsheet.fem.material import Material
-    from flexsheet.fem.mesh import MeshSpec
-    from flexsheet.fem.reference.capsule_contact import Capsule
-    from flexsheet.fem.reference.hyperelastic import HyperelasticModel
-    from flexsheet.fem.reference.path_solver import solve_path_capsule
-    from flexsheet.fem.reference.versions import SOLVER_VERSION
-    from flexsheet.fem.scene_mesh import scene_mesh
-
-    depths = np.asarray(st["depths"], float)
-    path = float(st.get("path_depth", 0.0))
-    rim = bool(st.get("rim", False))
-    key = cache_key("scene-ref-2", SOLVER_VERSION, sc.key(), h_fine, st["h"], st["refine_radius"], st["step"],
-                    np.round(q, 9).tolist(), np.round(n, 9).tolist(), np.round(depths, 9).tolist(),
-                    cache_key(np.round(probes, 9).tobytes()), *([f"path={path:.6g}"] if path > 0 else []),
-                    *(["rim"] if rim else []))
-    # refine around the push point, or (path_depth > 0) along the whole push path: balls every
-    # refine_radius/3 from q down to path_depth along -n (the tube the finger travels through)
-    steps = np.arange(0.0, path + 1e-12, st["refine_radius"] / 3) if path > 0 else np.zeros(1)
-    refine_at = q[None] - steps[:, None] * n[None]
-
-    def compute() -> dict:
-        t = time.perf_counter()
-        sm = scene_mesh(sc, MeshSpec(st["h"], h_fine, st["refine_radius"]), refine_at=refine_at, rim=rim)
-        mat = Material.of_scene(sc.material)
-        m0 = HyperelasticModel(sm.mesh, mat, sym_y=False, sym_z=False, E_elem=sm.E, nu_elem=sm.nu)
-        model = HyperelasticModel(sm.mesh, mat, sym_y=False, sym_z=False, support=m0.dof_points(sm.mesh.fixed),
-                                  E_elem=sm.E, nu_elem=sm.nu)
-        r = sc.finger.radius
-        log.info(f"reference h_fine {h_fine * 1e3:g} mm at {np.round(q * 1e3, 1).tolist()} mm: {model.n} DOF ...")
-        states = solve_path_capsule(model, lambda d: Capsule(q - d * n + r * n, -n, r), depths, step=st["step"], label=f"scene {sc.name}",
-                                    contact=sc.finger.contact)
-        P = model.probe_matrix(probes)
-        return {"u": np.stack([np.asarray(P @ s.u) for s in states]), "force": np.array([s.force for s in states]),
-                "converged": np.array([s.converged for s in states]), "inverted": np.array([s.inverted for s in states]),
-                "max_strain": np.array([s.max_strain for s in states]), "seconds": np.array(time.perf_counter() - t), "dofs": np.array(model.n),
-                "points": sm.mesh.points, "tets": sm.mesh.tets, "fixed": sm.mesh.fixed, "E": sm.E, "nu": sm.nu}
-
-    z, _, _ = cache.get_or_compute("scenereference", key, compute, f"scene reference h_fine {h_fine * 1e3:g} mm")
-    return z
-
-
 def _linear_fine(sc, ref: dict, q, n, depths, probes) -> tuple[np.ndarray, float]:
     """Linear P2 on the reference's mesh (full sparse solve): displacements (D, k, 3) at ``probes`` and the
     median solve time, ms."""
@@ -138,25 +74,6 @@ def _linear_fine(sc, ref: dict, q, n, depths, probes) -> tuple[np.ndarray, float
         ts.append(time.perf_counter() - t)
         us.append(model.probe(probes, sol.u_full))
     return np.stack(us), float(np.median(ts) * 1e3)
-
-
-def scene_update_ms(rt, sc, depths, n_calls: int) -> dict:
-    """CPU and wall time (ms) of ``rt.update_finger`` at 5 stroke points × ``depths``, ``n_calls`` each."""
-    pts, nrm = sc.stroke_points(5)
-    ts, cpu, methods = [], [], []
-    for q, n in zip(pts, nrm, strict=True):
-        for d in depths:
-            fg = served_finger(sc, q, n, float(d))
-            methods.append(rt.update_finger(fg).method)
-            for _ in range(n_calls):
-                t, c = time.perf_counter(), time.thread_time()
-                rt.update_finger(fg)
-                cpu.append(time.thread_time() - c)
-                ts.append(time.perf_counter() - t)
-    ts, cpu = np.array(ts) * 1e3, np.array(cpu) * 1e3
-    return {"median": float(np.median(cpu)), "p90": float(np.percentile(cpu, 90)),
-            "wall_median": float(np.median(ts)), "wall_p90": float(np.percentile(ts, 90)), "n": int(len(ts)),
-            "sparse_share": float(np.mean([m == "sparse" for m in methods])), "methods": sorted(set(methods))}
 
 
 def _ref_job(args: tuple) -> tuple[float, float, str | None]:
@@ -285,7 +202,7 @@ def launch_arc_deg(sc) -> float:
 
 
 def _scene_settings(sc, quick: bool, levels: tuple[float, ...] | None) -> dict:
-    """:data:`QUICK` or :data:`FULL` for scene ``sc``: the reference ``levels`` (h_fine m) when given, and the
+    """:data:`~flexsheet.fem.reference.scene_reference.QUICK` or ``FULL`` for scene ``sc``: the reference ``levels`` (h_fine m) when given, and the
     push depths every :data:`DEPTH_STEP` m up to the scene's declared ``use.max_depth`` (never past it)."""
     st = dict(QUICK if quick else FULL)
     if levels is not None:

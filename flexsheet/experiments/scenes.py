@@ -7,7 +7,7 @@ scene and the organ's compliance along its stroke (the tumour's stiffness peak i
    path, the planner on the scene's shape with the tension from the scene's compliance estimate
    (:class:`flexsheet.planning.compliance.SceneCompliance`, what the planner node does while the FEM does not
    solve the scene), and the metric in the normal section along the scene's stroke
-   (:func:`flexsheet.experiments.table1.scene_table1_row`). Realistic twin, truth seeds 0…``seeds``−1,
+   (:func:`flexsheet.analysis.table1.scene_table1_row`). Realistic twin, truth seeds 0…``seeds``−1,
    moving times 10 s and 30 s. Each row also has the tension the planner set at the contacts (median, p5,
    p95, N/m; truth seed 0's run), the requested object stiffness and the share of samples at the arms' limit.
 2. **The organ's compliance** (``organ.yaml``, a stiff 14 mm tumour 8.6 mm under the stroke):

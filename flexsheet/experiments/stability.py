@@ -59,10 +59,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from flexsheet.analysis.table1 import FELT_TARGET_FACTOR, PAPER_TABLE1, target
 from flexsheet.calibration.display_calib import pose_from_rt
 from flexsheet.experiments.stroke import DURATION_10S, SCRIPT_10S, run_seed
 from flexsheet.experiments.stroke_model import MARKER_PX, make_twin, simulate
-from flexsheet.experiments.table1 import FELT_TARGET_FACTOR, PAPER_TABLE1, target
 from flexsheet.model import geometry
 
 log = logging.getLogger(__name__)

@@ -3,7 +3,7 @@
 For each truth seed the whole graph of ``launch/sim.yaml`` runs on the simulated clock in one process
 (``flexsheet launch launch/sim.yaml --duration D --set twin.truth_seed=N``: the same node classes, params and
 messages as the lab; the twin's cameras, finger, arms and sheet; the geometry from the twin's registration,
-not the truth), and its run report (:mod:`flexsheet.experiments.report`) measures from the bag:
+not the truth), and its run report (:mod:`flexsheet.analysis.report`) measures from the bag:
 
 * ``felt``: the true fingertip against the true sheet (what the user feels; the headline);
 * ``paper``: the measured fingertip against the sheet the display believes (the paper's Table I);
@@ -25,7 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-from flexsheet.experiments.table1 import FELT_TARGET_FACTOR, PAPER_TABLE1, TARGET_FACTOR, target
+from flexsheet.analysis.table1 import FELT_TARGET_FACTOR, PAPER_TABLE1, TARGET_FACTOR, target
 
 log = logging.getLogger(__name__)
 

@@ -16,7 +16,7 @@ controller twin executes it one 7.1 ms tick later through its servo (:class:`fle
 JointServo`: first-order lag ``tau`` with the datasheet speed and acceleration limits), and the *true* sheet
 is where the truth's kinematics (:meth:`flexsheet.twin.truth.TwinTruth.clamp_pose`: true bases, link
 lengths, joint zero offsets) put the clamps at each exposure. The Table I row (Fig. 9,
-:func:`flexsheet.experiments.table1.table1_row`, the same metric as the report of a recorded run) is
+:func:`flexsheet.analysis.table1.table1_row`, the same metric as the report of a recorded run) is
 computed over the moving phase from the valid measurements.
 
 Twins (:mod:`flexsheet.twin.truth`): ``realistic`` (default; truth drawn per seed, ``marker_px`` = 0.1 px)
@@ -48,11 +48,11 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from flexsheet.analysis.table1 import DD_CONVENTION, PAPER_TABLE1, table1_row, target
 from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints
 from flexsheet.arm.limiter import StreamLimiter
 from flexsheet.arm.tracking import TargetTracker
 from flexsheet.experiments.stroke_model_chart import plot as plot_chart
-from flexsheet.experiments.table1 import DD_CONVENTION, PAPER_TABLE1, table1_row, target
 from flexsheet.model import geometry
 from flexsheet.model.shapes import paper_cylinder
 from flexsheet.model.sheet import frame_from_clamps
@@ -295,7 +295,7 @@ def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None
              q: float | None = None, sigma_px_filter: float | None = None, d_source: str = "measured",
              chain: ArmChain | None = None, stats: dict | None = None, scene=None, compliance=None,
              planner_config: PlannerConfig | None = None, record: list | None = None) -> dict[str, float]:
-    """Run one stroke on ``twin`` and return the Table I row (:func:`flexsheet.experiments.table1.table1_row`)
+    """Run one stroke on ``twin`` and return the Table I row (:func:`flexsheet.analysis.table1.table1_row`)
     over the moving phase, from the valid measurements. ``horizon`` (s, default: the latency budget plus the
     mean target hold), ``q`` (m²/s³, default: the launch file's) and ``sigma_px_filter`` (the covariance the
     triangulator assumes, default: the launch file's) set the filter. ``d_source``: D is the ``measured``
@@ -304,7 +304,7 @@ def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None
     (largest |q̇| / datasheet speed of either servo), ``ik_refused`` and ``dropped``. ``scene`` (a
     :class:`flexsheet.model.scenes.Scene`; ``None``: the paper's cylinder as before): the object, the finger's
     path (:class:`~flexsheet.twin.finger.FingerScript` on the scene) and the metric's section
-    (:func:`flexsheet.experiments.table1.scene_table1_row`). ``compliance``: the planner's stiffness model
+    (:func:`flexsheet.analysis.table1.scene_table1_row`). ``compliance``: the planner's stiffness model
     (e.g. :class:`flexsheet.planning.compliance.SceneCompliance`; ``None``: the config's ``object_stiffness``);
     ``planner_config``: the planner's :class:`PlannerConfig`; ``record``: if a list, gets one
     ``(t s, true fingertip (3,) m, Plan)`` per planned sample. Raises ``ValueError`` for an unknown

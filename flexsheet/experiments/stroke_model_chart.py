@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from flexsheet.experiments.table1 import PAPER_TABLE1, TARGET_FACTOR, target
+from flexsheet.analysis.table1 import PAPER_TABLE1, TARGET_FACTOR, target
 
 __all__ = ["plot"]
 

@@ -6,10 +6,10 @@ The cylinder's and the sphere's tables (:mod:`flexsheet.fem.snapshots`, :mod:`fl
 snapshot from one push to the next by the object's symmetry. A general body has none, so what this table stores
 is the part of the deformation the linear model gets wrong:
 
-* **Offline** (:mod:`flexsheet.experiments.path_table`): at K **stations** along the stroke (fractions
+* **Offline** (:mod:`flexsheet.fem.reference.path_table`): at K **stations** along the stroke (fractions
   f_0 < … < f_K-1 of its arc length; the stroke's start and end included) the scene's hyperelastic body is
   pushed along the inward surface normal 0 → ``depths[-1]`` (the nonlinear reference,
-  :func:`flexsheet.experiments.fem_scene.scene_reference`), and at every depth d_j the same push is solved by the
+  :func:`flexsheet.fem.reference.scene_reference.scene_reference`), and at every depth d_j the same push is solved by the
   real-time linear model (:class:`flexsheet.fem.scene_model.SceneModel`, its own mesh). The table holds, on the
   real-time model's rendered surface vertices (S, 3):
 
@@ -62,7 +62,7 @@ TABLE_FIELDS = ("fractions", "depths", "points", "normals", "rest_vertices", "co
 
 #: the stations' reference: load step and deepest depth (m), mesh sizes (m): h, h_fine along the push path
 #: (radius refine_radius, down to path_depth), as the scene FULL run's first level
-#: (:mod:`flexsheet.experiments.path_table` solves them)
+#: (:mod:`flexsheet.fem.reference.path_table` solves them)
 GRID = {"step": 0.0025, "depth_max": 0.05, "h": 0.012, "h_fine": 0.006, "refine_radius": 0.015,
         "path_depth": 0.05}
 #: how far off the stroke (m) a contact point may lie and still be served from the table

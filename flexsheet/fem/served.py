@@ -6,14 +6,26 @@ sphere or path table."""
 
 from __future__ import annotations
 
+import math
+import time
 from dataclasses import dataclass
 
+import numpy as np
+
+from flexsheet.fem.cache import ArrayCache
 from flexsheet.fem.choose import choose, choose_fem_model, load_model_table, load_table
 from flexsheet.fem.config import FemConfig
+from flexsheet.fem.contact import finger_at
+from flexsheet.fem.material import Material
 from flexsheet.fem.mesh import MeshSpec
+from flexsheet.fem.realtime import RealtimeModel
+from flexsheet.fem.scene_mesh import DEFAULT_SCENE_SPEC
+from flexsheet.fem.scene_model import SceneModel, attach_scene_table, finger_on_scene
+from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_snapshot_table
 from flexsheet.model.scenes import Scene, is_paper_cylinder
 
-__all__ = ["fem_models_as_cylinder", "served_model", "CylinderChoice", "choose_cylinder_model"]
+__all__ = ["fem_models_as_cylinder", "served_model", "served_finger", "scene_update_ms", "CylinderChoice",
+           "choose_cylinder_model"]
 
 
 def fem_models_as_cylinder(sc: Scene) -> bool:
@@ -63,23 +75,14 @@ def served_model(sc: Scene, cfg: FemConfig | None = None, cache_dir: str | None 
     ``E``/``nu``/``finger_radius``), its precomputation from ``cache_dir`` (None: the default cache; the installed
     and shipped stores are read too) or computed. Returns (model, what: one line naming the model and its table,
     or "linear ..."). Raises ``ValueError`` for an unusable stored table."""
-    from flexsheet.fem.cache import ArrayCache
-    from flexsheet.fem.material import Material
-
     cfg = cfg or FemConfig()
     cache_dir = cache_dir or cfg.cache_dir
     cache = ArrayCache(cache_dir)
     if not fem_models_as_cylinder(sc):
-        from flexsheet.fem.scene_mesh import DEFAULT_SCENE_SPEC
-        from flexsheet.fem.scene_model import SceneModel, attach_scene_table
-
         m = SceneModel(sc, DEFAULT_SCENE_SPEC, 2, None, cfg.max_depth, cfg.strain_limit, cache_dir, None)
         kind, where = attach_scene_table(m, cache)
         return m, (f"linear P2 scene model + the {kind} table ({where})" if where else
                    f"linear P2 scene model (no {kind} table stored)")
-    from flexsheet.fem.realtime import RealtimeModel
-    from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_snapshot_table
-
     mat = Material.of_scene(sc.material)
     ch = choose_cylinder_model(cfg)
     m = RealtimeModel(ch.spec, mat, sc.finger.radius, cfg.max_depth, cfg.strain_limit, cache_dir, None, ch.order)
@@ -90,3 +93,33 @@ def served_model(sc: Scene, cfg: FemConfig | None = None, cache_dir: str | None 
         return m, f"linear P{ch.order} cylinder model (no snapshot table stored)"
     m.attach_snapshots(table, axial_max=cfg.snapshot_axial_max)
     return m, f"P{ch.order} cylinder model + the nonlinear snapshot table"
+
+def served_finger(sc: Scene, q: np.ndarray, n: np.ndarray, depth: float):
+    """The finger pushed ``depth`` m at surface point ``q`` (3,) m along −``n`` (outward unit normal) as the
+    scene's served model takes it: the paper's cylinder's by azimuth and axial offset
+    (:func:`flexsheet.fem.contact.finger_at`), any other scene's by point and normal
+    (:func:`flexsheet.fem.scene_model.finger_on_scene`)."""
+    if fem_models_as_cylinder(sc):
+        c = sc.center
+        return finger_at(math.atan2(q[2] - c[2], q[0] - c[0]), float(depth), sc.finger.radius,
+                         sc.object.radius, c, float(q[1] - c[1]))
+    return finger_on_scene(q, n, float(depth), sc.finger.radius)
+
+
+def scene_update_ms(rt, sc, depths, n_calls: int) -> dict:
+    """CPU and wall time (ms) of ``rt.update_finger`` at 5 stroke points × ``depths``, ``n_calls`` each."""
+    pts, nrm = sc.stroke_points(5)
+    ts, cpu, methods = [], [], []
+    for q, n in zip(pts, nrm, strict=True):
+        for d in depths:
+            fg = served_finger(sc, q, n, float(d))
+            methods.append(rt.update_finger(fg).method)
+            for _ in range(n_calls):
+                t, c = time.perf_counter(), time.thread_time()
+                rt.update_finger(fg)
+                cpu.append(time.thread_time() - c)
+                ts.append(time.perf_counter() - t)
+    ts, cpu = np.array(ts) * 1e3, np.array(cpu) * 1e3
+    return {"median": float(np.median(cpu)), "p90": float(np.percentile(cpu, 90)),
+            "wall_median": float(np.median(ts)), "wall_p90": float(np.percentile(ts, 90)), "n": int(len(ts)),
+            "sparse_share": float(np.mean([m == "sparse" for m in methods])), "methods": sorted(set(methods))}

@@ -35,7 +35,7 @@ truth (:class:`flexsheet.twin.truth.TwinTruth`, param ``twin: {realism, truth_se
   half unserved), or after ``start_timeout`` s of waiting (logged as a warning naming the nodes missing), as
   an experimenter begins when the display is up.
 * Progress: one line every ``progress_period`` s; when the script ends the node exits, which ends a launch
-  in which it is ``required`` (then the launch's report runs, see :mod:`flexsheet.experiments.report`).
+  in which it is ``required`` (then the launch's report runs, see :mod:`flexsheet.analysis.report`).
   ``loop: true`` repeats the script until Ctrl-C (interactive mode).
 """
 

@@ -239,8 +239,8 @@ def test_organ_planner_normals_are_smooth_and_local_support_finds_the_contact():
 def test_cylinder_scene_reproduces_the_table1_rows():
     """The in-process stroke on the paper's cylinder as a scene (path-following finger, section along the
     scene's stroke) gives the cylinder's Table I row (axis cross-section) of before."""
+    from flexsheet.analysis.table1 import scene_table1_row, table1_row
     from flexsheet.experiments import stroke_model as st
-    from flexsheet.experiments.table1 import scene_table1_row, table1_row
     from flexsheet.model.shapes import paper_cylinder
 
     tw = st.make_twin("realistic", 0, None)

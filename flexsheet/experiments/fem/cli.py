@@ -210,7 +210,7 @@ def _add_scene_args(p: argparse.ArgumentParser) -> None:
                    help="with --scene (not the cylinder or the sphere) --node-table: the path table's stations, K "
                         "evenly spaced fractions of the stroke, ends included (default %(default)s, the shipped "
                         "rounded box table's; each a 0-50 mm push, 4-9 min wall two at a time on the rounded box); "
-                        "see flexsheet.experiments.path_table")
+                        "see flexsheet.fem.reference.path_table")
     p.add_argument("--holdout-fraction", type=float, action="append", default=[], metavar="F",
                    help="with --scene (not the cylinder or the sphere) --node-table: judge the path table at this "
                         "fraction of the stroke (between stations) against that push's own solve (default: the "
@@ -336,14 +336,14 @@ def _scene_table(args, sc) -> int:
     try:
         sphere_frame(sc)
     except ValueError:          # no symmetry to carry one push onto another: the path table
-        from flexsheet.experiments.path_table import build_path_table
+        from flexsheet.fem.reference.path_table import build_path_table
 
         if args.azimuth is not None or args.holdout_azimuth:
             raise SystemExit("flexsheet experiment fem: --azimuth / --holdout-azimuth are the cylinder's and "
                              "the sphere's; a path table takes --stations and --holdout-fraction") from None
         return build_path_table(args.scene, args.out, args.cache_dir or None, args.stations,
                                 tuple(args.holdout_fraction) or None, args.jobs, args.mesh_check, args.ship)
-    from flexsheet.experiments.sphere_table import build_sphere_table
+    from flexsheet.fem.reference.sphere_table import build_sphere_table
 
     return build_sphere_table(args.scene, args.out, args.cache_dir or None, args.azimuth,
                               tuple(args.holdout_azimuth), args.jobs, args.mesh_check, args.ship)

@@ -1,7 +1,7 @@
 """The offline build of the sphere scene's nonlinear table (:mod:`flexsheet.fem.sphere_snapshots` is its run-time
 look-up and describes the table): one snapshot angle's push of the scene's hyperelastic body, its stable branch
 and its samples on the table's grid (:func:`solve_alpha`), and the table's arrays from every angle's result
-(:func:`assemble_table`). :mod:`flexsheet.experiments.sphere_table` runs them. Heavy: ~10 min of one core per
+(:func:`assemble_table`). :mod:`flexsheet.fem.reference.sphere_table` runs them. Heavy: ~10 min of one core per
 angle."""
 
 from __future__ import annotations

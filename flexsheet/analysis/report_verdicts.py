@@ -1,7 +1,7 @@
-"""Verdicts of a run report (:mod:`flexsheet.experiments.report`): each judged on the unrounded numbers.
+"""Verdicts of a run report (:mod:`flexsheet.analysis.report`): each judged on the unrounded numbers.
 
 * Table I, the headline: the *felt* Δθ mean of each segment against paper Table I ÷
-  :data:`~flexsheet.experiments.table1.FELT_TARGET_FACTOR` (:func:`flexsheet.experiments.table1.target`);
+  :data:`~flexsheet.analysis.table1.FELT_TARGET_FACTOR` (:func:`flexsheet.analysis.table1.target`);
   met when mean ≤ target. Targets exist for the paper's rows (10 s, 30 s) on the paper's cylinder only.
 * A partial segment (the bag ends inside it) gets :data:`PARTIAL`; a partial run gets no overall verdict
   and no latency verdicts (its complete segments keep theirs).
@@ -10,7 +10,7 @@
 
 from __future__ import annotations
 
-from flexsheet.experiments.table1 import FELT_TARGET_FACTOR, PAPER_TABLE1
+from flexsheet.analysis.table1 import FELT_TARGET_FACTOR, PAPER_TABLE1
 
 __all__ = ["PARTIAL", "NO_TARGET", "table1_verdicts", "judge", "headline", "row_order", "digits",
            "HEADLINE_METRIC", "LATENCY_TARGETS_MS", "LATENCY_TARGET_SOURCE"]

@@ -1,4 +1,4 @@
-"""The run report a researcher reads (flexsheet.experiments.report): report.md parsed back from a synthetic
+"""The run report a researcher reads (flexsheet.analysis.report): report.md parsed back from a synthetic
 bag. One headline per Table I row (the felt Δθ) with the paper's figure, the target, the target's source and
 the verdict; latency rows labelled modelled or measured; one delay figure; the planner's stiffness_scale;
 a run cut inside a segment gets no verdict; charts with JSON that carry titles, units, targets, verdicts; the twin
@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from test_report_analysis import _write_bag
 
-from flexsheet.experiments.report import main
-from flexsheet.experiments.report_verdicts import PARTIAL
-from flexsheet.experiments.table1 import PAPER_TABLE1
+from flexsheet.analysis.report import main
+from flexsheet.analysis.report_verdicts import PARTIAL
+from flexsheet.analysis.table1 import PAPER_TABLE1
 from flexsheet.model import geometry
 from flexsheet.model.shapes import paper_cylinder
 from flexsheet.runtime.bag_write import BagWriter
@@ -198,8 +198,8 @@ def test_report_records_the_twin_and_both_dd_conventions(tmp_path):
     """summary.json has Table I's Δθ headline with Δd on R and in the paper's 2R convention, and the twin the run
     used (a launch file's top-level ``twin:``, else the world node's ``twin`` param)."""
 
-    from flexsheet.experiments.report import main, twin_settings
-    from flexsheet.experiments.table1 import paper_dd_ratio
+    from flexsheet.analysis.report import main, twin_settings
+    from flexsheet.analysis.table1 import paper_dd_ratio
     from flexsheet.runtime.launch import load_launch
 
     _write_bag(tmp_path / "run.mcap")
@@ -227,7 +227,7 @@ def test_an_earlier_runs_bags_in_a_reused_folder_are_left_out(tmp_path):
     all are), not an earlier run's in the same --out folder; without a start, every bag, oldest first."""
     import os
 
-    from flexsheet.experiments.report import run_bags
+    from flexsheet.analysis.report import run_bags
 
     old, part0, part1, replay = (tmp_path / n for n in ("sim.mcap", "sim.1.mcap", "sim.2.mcap", "replay.mcap"))
     for k, p in enumerate((old, part0, part1, replay)):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from flexsheet.experiments.report_head import head_summary
+from flexsheet.analysis.report_head import head_summary
 from flexsheet.model import geometry
 from flexsheet.model.scenes import paper_scene
 from flexsheet.viz.samples import sample_state
@@ -60,7 +60,7 @@ def test_no_head_topic_no_section():
 
 
 def test_lost_glasses_are_held_within_a_camera_period():
-    from flexsheet.experiments.report_head import lost_summary
+    from flexsheet.analysis.report_head import lost_summary
 
     d = _bag(n=100)
     heads = d["/world/head"]

@@ -1,4 +1,4 @@
-"""``flexsheet calibrate display --draws N`` (:mod:`flexsheet.experiments.registration_draws`): the truths are
+"""``flexsheet calibrate display --draws N`` (:mod:`flexsheet.twin.registration_draws`): the truths are
 drawn reproducibly, and each target's median, worst and missing seeds are counted from the per-seed summaries
 (here summaries with known errors stand in for the registrations, which take ~10 s a seed; the registration
 itself is tested in test_registration_sweep and the live test)."""
@@ -10,7 +10,7 @@ import json
 import numpy as np
 import pytest
 
-from flexsheet.experiments import registration_draws as rd
+from flexsheet.twin import registration_draws as rd
 from flexsheet.twin.registration import TARGETS
 
 

@@ -1,4 +1,4 @@
-"""Table I's metrics (flexsheet.experiments.table1): the Fig. 9 definitions of Δd and Δθ, the summary's
+"""Table I's metrics (flexsheet.analysis.table1): the Fig. 9 definitions of Δd and Δθ, the summary's
 medians, the rows from sheet poses on the cylinder."""
 
 import math
@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from flexsheet.experiments.table1 import stroke_errors, summarize, table1
+from flexsheet.analysis.table1 import stroke_errors, summarize, table1
 from flexsheet.model import geometry
 from flexsheet.model.shapes import paper_cylinder
 

@@ -1,4 +1,4 @@
-"""Latency, compliance, faults and CPU of a recorded run (parts of :mod:`flexsheet.experiments.report`).
+"""Latency, compliance, faults and CPU of a recorded run (parts of :mod:`flexsheet.analysis.report`).
 
 Latency, one chain per fingertip sample, from the stamps the nodes set (never the recorder's receive
 times), so the hops add up to the chain (``latency_ms.chain``; every value median, p99 and n, ms):
@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flexsheet.experiments.table1 import STROKE_MODES, segment_key
+from flexsheet.analysis.table1 import STROKE_MODES, segment_key
 
 __all__ = ["latency_hops", "latency_basis", "compliance_summary", "planner_scales", "planner_gains", "watchdog_faults",
            "cpu_summary", "compute_vs_waiting", "POSE_TOL_M", "POSE_TOL_RAD", "HOP_NODES"]

@@ -1,19 +1,19 @@
 """Report of a full-graph run, computed from the recorded bag only (``launch/sim.yaml``'s ``report``).
 
-``flexsheet launch FILE --out OUT`` calls :func:`main` after the run; ``python -m flexsheet.experiments.report
+``flexsheet launch FILE --out OUT`` calls :func:`main` after the run; ``python -m flexsheet.analysis.report
 OUT`` reports again from an existing ``OUT``. Reads ``OUT/*.mcap`` (the recorder's bag) and writes
-``OUT/summary.json``, ``OUT/report.md`` (:mod:`flexsheet.experiments.report_text`) and the charts with JSON
-beside them (``table1``, ``felt``, ``latency``, ``graph``: :mod:`flexsheet.experiments.report_charts`), and
+``OUT/summary.json``, ``OUT/report.md`` (:mod:`flexsheet.analysis.report_text`) and the charts with JSON
+beside them (``table1``, ``felt``, ``latency``, ``graph``: :mod:`flexsheet.analysis.report_charts`), and
 prints the report.
 
 * The headline, one per Table I row: the *felt* Δθ (the true fingertip against the true sheet), with the
   paper's published figure, the target (paper Table I ÷ 2) and the verdict
-  (:mod:`flexsheet.experiments.report_verdicts`); the measured fingertip's rows and the paper's own method
-  beside it as secondary tables (:mod:`flexsheet.experiments.report_analysis`).
+  (:mod:`flexsheet.analysis.report_verdicts`); the measured fingertip's rows and the paper's own method
+  beside it as secondary tables (:mod:`flexsheet.analysis.report_analysis`).
 * A segment the bag does not see end is partial and gets no verdict; a run that stopped early gets no overall
   or latency verdict (its complete segments keep theirs).
 * Latency per hop, each row *modelled* (``clock: sim``: the lab's declared timings) or *measured*
-  (:mod:`flexsheet.experiments.report_timing`); one delay figure, the chain's exposure → sheet at its pose.
+  (:mod:`flexsheet.analysis.report_timing`); one delay figure, the chain's exposure → sheet at its pose.
 * The tension at the contacts, with the planner's ``stiffness_scale`` and the object's unscaled stiffness.
 
 The twin (``twin.realism``, ``twin.truth_seed``: the launch file's top-level ``twin:``, else the world node's
@@ -30,10 +30,10 @@ import os
 import sys
 from pathlib import Path
 
-from flexsheet.experiments.report_analysis import (
+from flexsheet.analysis.report_analysis import (
     analyse,
 )
-from flexsheet.experiments.report_charts import (
+from flexsheet.analysis.report_charts import (
     compliance_chart,
     felt_chart,
     graph_chart,
@@ -41,14 +41,14 @@ from flexsheet.experiments.report_charts import (
     latency_chart,
     table1_chart,
 )
-from flexsheet.experiments.report_text import CHARTS, format_text, markdown
-from flexsheet.experiments.report_timing import (
+from flexsheet.analysis.report_text import CHARTS, format_text, markdown
+from flexsheet.analysis.report_timing import (
     compute_vs_waiting,
     cpu_summary,
     latency_basis,
 )
-from flexsheet.experiments.report_verdicts import judge
-from flexsheet.experiments.table1 import DD_CONVENTION
+from flexsheet.analysis.report_verdicts import judge
+from flexsheet.analysis.table1 import DD_CONVENTION
 from flexsheet.model.scenes import Scene, load_scene, paper_scene
 
 __all__ = ["twin_settings", "scene_settings", "run_bags", "main"]
@@ -109,7 +109,7 @@ def scene_settings(lf=None, out: str | None = None) -> tuple[Scene, dict]:
 
 def _clock(summary: dict, out_dir: Path) -> None:
     """``clock`` ("sim" when ``sim_clock.json`` exists, else "wall"), the sim clock's figures, and the latency
-    rows' basis (:func:`~flexsheet.experiments.report_timing.latency_basis`)."""
+    rows' basis (:func:`~flexsheet.analysis.report_timing.latency_basis`)."""
     clock = out_dir / "sim_clock.json"
     if clock.exists():   # a clock: sim run (flexsheet.runtime.container writes it)
         sim = json.loads(clock.read_text())

@@ -19,7 +19,7 @@ We make the definitions exact for any shape and sheet pose:
   support point jump along b). On the paper's cylinder the stroke runs around the axis, so b is the axis and
   this is exactly the cylinder's cross-section; without tangents a shape with an ``axis`` (the cylinder) uses
   that cross-section directly (the same numbers, tested). Both the in-process experiment
-  (:mod:`flexsheet.experiments.stroke_model`) and the report of a recorded run (:mod:`flexsheet.experiments.report`)
+  (:mod:`flexsheet.experiments.stroke_model`) and the report of a recorded run (:mod:`flexsheet.analysis.report`)
   get their rows from :func:`table1_row`, and the paper's numbers from :data:`PAPER_TABLE1`.
 
 A bias common to D and the sheet (e.g. a camera calibration offset, the paper's 2.95 mm) cancels in Δd,

@@ -1,4 +1,4 @@
-"""Table I of a recorded run, from its bag only (the numbers of :mod:`flexsheet.experiments.report`).
+"""Table I of a recorded run, from its bag only (the numbers of :mod:`flexsheet.analysis.report`).
 
 Per stroking segment, keyed by moving time in seconds (``"10"``; ``"stroke_push_4"`` for a stroke with a
 push), the ``/world/finger`` truth at each fingertip's exposure naming the segment:
@@ -7,10 +7,10 @@ push), the ``/world/finger`` truth at each fingertip's exposure naming the segme
 * ``paper``: the paper's own method, the measured fingertip against the sheet the display believes (its
   kinematics on the joint readback);
 * the top-level rows (``summary["10"]``): the measured fingertip against the true sheet, the metric of
-  ``flexsheet experiment stroke`` (:func:`flexsheet.experiments.table1.scene_table1_row`).
+  ``flexsheet experiment stroke`` (:func:`flexsheet.analysis.table1.scene_table1_row`).
 
 A segment whose moving phase the bag does not see end (the run stopped inside it) is *partial*
-(:func:`stroke_segments`) and gets no verdict (:mod:`flexsheet.experiments.report_verdicts`).
+(:func:`stroke_segments`) and gets no verdict (:mod:`flexsheet.analysis.report_verdicts`).
 """
 
 from __future__ import annotations
@@ -20,11 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from flexsheet.experiments.report_head import head_summary
-from flexsheet.experiments.report_softness import felt_force, follow_lag, inclusion_contrast, sheet_summary
-from flexsheet.experiments.report_timing import compliance_summary, latency_hops, watchdog_faults
-from flexsheet.experiments.report_verdicts import judge, table1_verdicts
-from flexsheet.experiments.table1 import (
+from flexsheet.analysis.report_head import head_summary
+from flexsheet.analysis.report_softness import felt_force, follow_lag, inclusion_contrast, sheet_summary
+from flexsheet.analysis.report_timing import compliance_summary, latency_hops, watchdog_faults
+from flexsheet.analysis.report_verdicts import judge, table1_verdicts
+from flexsheet.analysis.table1 import (
     FELT_TARGET_FACTOR,
     PAPER_TABLE1,
     STROKE_MODES,
@@ -72,7 +72,7 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scen
     """The summary of a bag, or of the parts of one run (a respawned recorder continues in ``<stem>.1.mcap``…),
     on ``scene`` (``None``: the paper's cylinder): ``bags``, ``counts`` per topic, ``run`` and ``segments``
     (:func:`stroke_segments`), the rows of :func:`table1_rows`, ``compliance``, ``latency_ms``, ``faults`` and
-    the verdicts (:func:`flexsheet.experiments.report_verdicts.judge`: ``headline``). The recorded
+    the verdicts (:func:`flexsheet.analysis.report_verdicts.judge`: ``headline``). The recorded
     ``/diagnostics`` (arrival time, Heartbeat) pairs are appended to ``heartbeats`` if given, the per-sample
     Table I series to ``series`` (:func:`felt_and_paper`)."""
     bags = [bags] if isinstance(bags, Path) else list(bags)
@@ -215,7 +215,7 @@ def is_paper(sc: Scene) -> bool:
 def table1_rows(d: dict[str, list], scene: Scene | None = None, series: dict | None = None,
                 segments: dict | None = None) -> dict:
     """Per stroking segment with ≥ 10 fingertips inside the recorded sheet states: the measured fingertip's
-    row (:func:`flexsheet.experiments.table1.scene_table1_row` on ``scene``, default the paper's cylinder;
+    row (:func:`flexsheet.analysis.table1.scene_table1_row` on ``scene``, default the paper's cylinder;
     ``paper``: the paper's published row, on the paper's cylinder only), plus ``fingertip_invalid``,
     ``table1`` (:func:`felt_and_paper`) and ``delay`` (:func:`sheet_delay`); empty without ``/fingertip``,
     ``/world/finger`` and ``/world/sheet``. ``d``: topic → time-sorted (arrival s, message) pairs."""
@@ -270,12 +270,12 @@ def _believed_sheet(d: dict[str, list], t: np.ndarray) -> tuple[np.ndarray, np.n
 def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_ts: np.ndarray,
                    series: dict | None = None, segments: dict | None = None, paper_scene_: bool = True) -> dict:
     """Table I two ways per stroking segment: ``felt`` (the true fingertip, interpolated at each exposure,
-    against the true sheet: the row of :func:`flexsheet.experiments.table1.errors_row` plus
+    against the true sheet: the row of :func:`flexsheet.analysis.table1.errors_row` plus
     ``angle3d_mean_deg``, the full 3-D angle between the object's normal and the sheet's) and ``paper`` (the
     measured fingertip against the sheet the display believes). Plus ``decomposition`` (:func:`_decomposition`),
-    ``targets`` (Δθ mean, deg: the paper's ÷ :data:`~flexsheet.experiments.table1.FELT_TARGET_FACTOR` felt,
-    ÷ :data:`~flexsheet.experiments.table1.TARGET_FACTOR` paper), ``target_source`` and ``verdicts``
-    (:func:`flexsheet.experiments.report_verdicts.table1_verdicts`: on the paper's cylinder only, none for a
+    ``targets`` (Δθ mean, deg: the paper's ÷ :data:`~flexsheet.analysis.table1.FELT_TARGET_FACTOR` felt,
+    ÷ :data:`~flexsheet.analysis.table1.TARGET_FACTOR` paper), ``target_source`` and ``verdicts``
+    (:func:`flexsheet.analysis.report_verdicts.table1_verdicts`: on the paper's cylinder only, none for a
     partial segment). ``series`` receives per segment the exposure times (s from the first) and per-sample Δθ
     (deg) of both."""
     from flexsheet.planning.shape import planner_shape

@@ -1,4 +1,4 @@
-"""A scene's path table command (flexsheet/experiments/path_table.py): the assembly turns a station's reference push
+"""A scene's path table command (flexsheet/fem/reference/path_table.py): the assembly turns a station's reference push
 into exactly the reference, and the arguments a path table does not take are refused. The model (fixture
 ``model``) is tests/unit/conftest.py's."""
 
@@ -15,7 +15,7 @@ from flexsheet.model.scenes import SCENES_DIR
 def test_assembly_turns_a_station_push_into_its_reference(model):
     """assemble_path_table on reference pushes that differ from the linear model's by a known field and force:
     the table served at that station and depth is the reference (the correction and ratios are exact)."""
-    from flexsheet.experiments import path_table as P
+    from flexsheet.fem.reference import path_table as P
 
     m = model
     m.path_table = None

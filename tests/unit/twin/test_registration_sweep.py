@@ -1,4 +1,4 @@
-"""``flexsheet calibrate display --sweep --quick`` (:func:`flexsheet.experiments.registration_sweep.run_sweep`) on
+"""``flexsheet calibrate display --sweep --quick`` (:func:`flexsheet.twin.registration_sweep.run_sweep`) on
 one drawn truth seed: each estimate's error falls with the number of poses and ends within its target, and the
 failure modes say why (a dark sheet, a bowed board)."""
 
@@ -8,7 +8,7 @@ import json
 
 import pytest
 
-from flexsheet.experiments.registration_sweep import run_sweep
+from flexsheet.twin.registration_sweep import run_sweep
 
 pytestmark = pytest.mark.slow
 
@@ -18,7 +18,7 @@ def _last(series: dict) -> dict:
 
 
 def test_quick_sweep_ends_within_every_target(tmp_path, caplog):
-    caplog.set_level("INFO", logger="flexsheet.experiments.registration_sweep")
+    caplog.set_level("INFO", logger="flexsheet.twin.registration_sweep")
     doc = run_sweep([3], str(tmp_path), quick=True)
     assert json.loads((tmp_path / "sweep.json").read_text())["seeds"] == [3]
     assert (tmp_path / "calibration_sweep.png").stat().st_size > 10_000
@@ -32,5 +32,5 @@ def test_quick_sweep_ends_within_every_target(tmp_path, caplog):
         assert _last(res["arms"][side])["translation_error_mm"] < t["arms_mm"], side
     fm = doc["failure_modes"]
     assert any("error" in v for v in fm["dark_sheet"].values()), fm["dark_sheet"]     # too dark: refused, named
-    said = [r.getMessage() for r in caplog.records if r.name == "flexsheet.experiments.registration_sweep"]
+    said = [r.getMessage() for r in caplog.records if r.name == "flexsheet.twin.registration_sweep"]
     assert said[0] == "sweep seed 3: 12 board views" and said[-1].startswith("wrote ")

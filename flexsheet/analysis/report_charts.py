@@ -1,4 +1,4 @@
-"""Charts of a run report (:mod:`flexsheet.experiments.report`): matplotlib Agg PNGs, each with a JSON of the
+"""Charts of a run report (:mod:`flexsheet.analysis.report`): matplotlib Agg PNGs, each with a JSON of the
 same numbers beside it (``table1.json``, ``felt.json``, ``latency.json``, ``graph.json``, ``compliance.json``). Each metric chart
 has a title, units (deg for angles, mm for lengths, ms for times), the target, the verdict and this scene's
 own rows; the paper's published bars only on the paper's cylinder."""
@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from flexsheet.experiments.report_verdicts import HEADLINE_METRIC, digits
-from flexsheet.experiments.table1 import PAPER_TABLE1
+from flexsheet.analysis.report_verdicts import HEADLINE_METRIC, digits
+from flexsheet.analysis.table1 import PAPER_TABLE1
 
 __all__ = ["table1_chart", "felt_chart", "latency_chart", "graph_chart", "compliance_chart", "spread"]
 

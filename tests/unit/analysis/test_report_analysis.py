@@ -1,4 +1,4 @@
-"""Table I from a recorded bag (flexsheet.experiments.report_analysis): the typed truth picks the stroking segments
+"""Table I from a recorded bag (flexsheet.analysis.report_analysis): the typed truth picks the stroking segments
 and the row matches the errors built into synthetic data (the sheet lagging the finger by a known angle); a paused
 stroke counts once, a cut one as partial."""
 
@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from flexsheet.experiments.report_analysis import analyse
-from flexsheet.experiments.table1 import PAPER_TABLE1
+from flexsheet.analysis.report_analysis import analyse
+from flexsheet.analysis.table1 import PAPER_TABLE1
 from flexsheet.model import geometry
 from flexsheet.model.shapes import paper_cylinder
 from flexsheet.runtime.bag_write import BagWriter
@@ -98,7 +98,7 @@ def test_segments_count_a_paused_stroke_once_and_a_cut_one_as_partial():
     excludes the pause; a 30 s stroke the bag ends in is partial, with its share of the moving time."""
     from types import SimpleNamespace as NS
 
-    from flexsheet.experiments.report_analysis import stroke_segments
+    from flexsheet.analysis.report_analysis import stroke_segments
 
     def truth(t, seg, mt, phase):
         return (t, NS(header=NS(stamp=t), segment=seg, mode="stroke", moving_time=mt, phase=phase))

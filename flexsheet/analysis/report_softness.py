@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexsheet.experiments.report_timing import planner_gains, planner_scales, scales_at
+from flexsheet.analysis.report_timing import planner_gains, planner_scales, scales_at
 
 __all__ = ["WEBER_FRACTION", "MIN_DEPTH", "WITHIN_TARGET", "STRAIN_LIMIT", "felt_force", "follow_lag", "force_depth_table", "inclusion_contrast", "sheet_summary"]
 
@@ -55,8 +55,8 @@ def felt_force(d: dict[str, list], scales: list[tuple[float, float]] | None = No
     there (module doc): with ``/object/force_depth``, the table's mapped force at the true contact point and
     depth (``"basis": "force_depth"``); without, the newest ``/object/deformation`` whose fingertip was exposed at
     most :data:`MAX_GAP` s before it, times the scale (``"basis": "deformation"``). ``scales`` [(arrival s,
-    scale)] (None: from the planner's heartbeats in ``d``, :func:`~flexsheet.experiments.report_timing.planner_scales`;
-    1 without any); the contrast gain likewise (:func:`~flexsheet.experiments.report_timing.planner_gains`).
+    scale)] (None: from the planner's heartbeats in ``d``, :func:`~flexsheet.analysis.report_timing.planner_scales`;
+    1 without any); the contrast gain likewise (:func:`~flexsheet.analysis.report_timing.planner_gains`).
 
     ``d``: topic → [(log time, message)]. Returns ``{}`` without pressed samples, else ``{"n", "basis", "ratio"``
     (felt / requested: median, p5, p95), ``"within_15pct"`` (share with |ratio − 1| ≤ 15 %), ``"felt_n"`` and

@@ -1,4 +1,4 @@
-"""The latency chain from a bag (flexsheet.experiments.report_timing): every hop a difference of the nodes'
+"""The latency chain from a bag (flexsheet.analysis.report_timing): every hop a difference of the nodes'
 stamps, the ends their sums."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ def test_latency_chain_comes_from_the_nodes_stamps_and_adds_up():
     the sheet is at its pose at the later of the two arms' first readbacks within 0.1 mm and 0.05 deg."""
     from types import SimpleNamespace as NS
 
-    from flexsheet.experiments.report_timing import latency_hops
+    from flexsheet.analysis.report_timing import latency_hops
     from flexsheet.model.timing import LAB
 
     e = 100.0

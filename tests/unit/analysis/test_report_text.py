@@ -1,4 +1,4 @@
-"""The report's text (flexsheet.experiments.report_text): the one delay figure, Δd 2R left blank where a shape
+"""The report's text (flexsheet.analysis.report_text): the one delay figure, Δd 2R left blank where a shape
 has no radius."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from __future__ import annotations
 def test_report_text_leaves_dd_2r_blank_on_a_shape_with_no_radius():
     """The rounded box and the organ have no radius R, so their rows carry no Δd 2R: the text table prints "-"
     there (it printed "nan", which reads as a failed measurement), and the number where there is one."""
-    from flexsheet.experiments.report_text import format_text as _format
+    from flexsheet.analysis.report_text import format_text as _format
 
     row = {"dtheta_mean_deg": 0.5, "dtheta_std_deg": 0.25, "dd_mean_mm": 1.25, "n": 120}
     text = _format({"10": row, "30": {**row, "dd_2r_mean_mm": 0.875}, "latency_ms": {}})
@@ -20,7 +20,7 @@ def test_report_text_leaves_dd_2r_blank_on_a_shape_with_no_radius():
 def test_the_delay_is_the_chains_figure():
     """The one delay figure is the latency chain's exposure → sheet at its pose; the fitted lag is named as the
     prediction check, with why the two differ."""
-    from flexsheet.experiments.report_text import format_text
+    from flexsheet.analysis.report_text import format_text
 
     s = {"latency_ms": {"chain": {"exposure_to_sheet_at_pose": {"median": 14.33, "p99": 29.29, "n": 838},
                                   "exposure_to_arm_command": {"median": 9.19, "p99": 9.19, "n": 1424}},

@@ -1,11 +1,11 @@
-"""The text of a run report (:mod:`flexsheet.experiments.report`): plain text for the terminal
+"""The text of a run report (:mod:`flexsheet.analysis.report`): plain text for the terminal
 (:func:`format_text`) and ``report.md`` (:func:`markdown`), both from one list of sections
 (:func:`sections`). Tables are fixed-width: columns two or more spaces apart, the row key first."""
 
 from __future__ import annotations
 
-from flexsheet.experiments.report_verdicts import HEADLINE_METRIC, NO_TARGET, PARTIAL, digits, row_order
-from flexsheet.experiments.table1 import DD_CONVENTION, FELT_TARGET_FACTOR, PAPER_TABLE1, TARGET_FACTOR
+from flexsheet.analysis.report_verdicts import HEADLINE_METRIC, NO_TARGET, PARTIAL, digits, row_order
+from flexsheet.analysis.table1 import DD_CONVENTION, FELT_TARGET_FACTOR, PAPER_TABLE1, TARGET_FACTOR
 
 __all__ = ["sections", "format_text", "markdown", "CHARTS"]
 
@@ -15,7 +15,7 @@ CHARTS = (("table1.png", "Table I headline: felt Δθ per segment"), ("felt.png"
           ("compliance.png", "force felt against force requested"), ("head.png", "the viewer's head: view error and keep-out distance"),
           ("graph.png", "node/topic graph"))
 
-_TARGETS_AT = "flexsheet/experiments/table1.py"
+_TARGETS_AT = "flexsheet/analysis/table1.py"
 
 
 def _table(header: list[str], rows: list[list[str]]) -> list[str]:
@@ -129,7 +129,7 @@ def _decomposition(s: dict) -> tuple[list[str], list[str]]:
 
 
 def _delay(s: dict) -> tuple[list[str], list[str]]:
-    from flexsheet.experiments.report_timing import POSE_TOL_M
+    from flexsheet.analysis.report_timing import POSE_TOL_M
 
     lat = s.get("latency_ms", {})
     c = lat.get("chain", {}).get("exposure_to_sheet_at_pose", {})

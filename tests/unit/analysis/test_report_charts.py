@@ -1,4 +1,4 @@
-"""The report's charts (flexsheet.experiments.report_charts): targets belong to the paper's cylinder, the
+"""The report's charts (flexsheet.analysis.report_charts): targets belong to the paper's cylinder, the
 spread clipped at 0."""
 
 from __future__ import annotations
@@ -7,13 +7,13 @@ import json
 
 import pytest
 
-from flexsheet.experiments.report_verdicts import NO_TARGET, judge
+from flexsheet.analysis.report_verdicts import NO_TARGET, judge
 
 
 def test_targets_belong_to_the_paper_cylinder_and_the_chart_clips_the_spread(tmp_path):
     """Another scene (its verdicts empty): no paper row, no target, verdict "no target"; the chart draws this
     scene's rows only and the spread of a row whose s.d. exceeds its mean stops at 0."""
-    from flexsheet.experiments.report_charts import latency_chart, table1_chart
+    from flexsheet.analysis.report_charts import latency_chart, table1_chart
 
     felt = {"dtheta_mean_deg": 0.6, "dtheta_std_deg": 0.9, "dd_mean_mm": 1.2, "dd_std_mm": 2.0, "n": 400}
     s = {"scene": {"name": "organ"}, "table1": {"felt": {"10": felt}, "targets": {}, "verdicts": {}},

@@ -1,10 +1,10 @@
-"""What the finger feels against what the object asks (flexsheet.experiments.report_softness): the true sheet's
+"""What the finger feels against what the object asks (flexsheet.analysis.report_softness): the true sheet's
 force over the object's, from a bag."""
 
 import numpy as np
 import pytest
 
-from flexsheet.experiments.report_softness import felt_force
+from flexsheet.analysis.report_softness import felt_force
 from messages import ContactTruth, Header, ObjectDeformation
 
 
@@ -90,7 +90,7 @@ def test_with_the_objects_table_the_request_is_its_force_at_the_true_depth():
 
 
 def test_the_inclusion_contrast_is_felt_from_true_forces_at_matched_depth():
-    from flexsheet.experiments.report_softness import inclusion_contrast
+    from flexsheet.analysis.report_softness import inclusion_contrast
     from flexsheet.model.scenes import load_scene
 
     class _Scene:                                                            # the organ's inclusion, moved onto +z
@@ -111,7 +111,7 @@ def test_the_inclusion_contrast_is_felt_from_true_forces_at_matched_depth():
 
 
 def test_the_sheet_summary_counts_one_arm_holding_per_cycle_and_the_strain_over_the_plan():
-    from flexsheet.experiments.report_softness import sheet_summary
+    from flexsheet.analysis.report_softness import sheet_summary
     from messages import ArmJointState, SheetState, SheetTarget
 
     def js(t, arm, status):

@@ -1,4 +1,4 @@
-"""The sphere scene's table command (flexsheet/experiments/sphere_table.py), its solves replaced by the closed-form
+"""The sphere scene's table command (flexsheet/fem/reference/sphere_table.py), its solves replaced by the closed-form
 dent of tests/unit/fem/test_sphere_snapshots.py."""
 
 import math
@@ -20,10 +20,10 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
     store within float16 rounding; an unconverged push is not shipped; bad arguments are refused."""
     import json
 
-    from flexsheet.experiments import sphere_table as T
     from flexsheet.experiments.fem.cli import main
     from flexsheet.fem import sphere_snapshots as S
     from flexsheet.fem.cache import ArrayCache
+    from flexsheet.fem.reference import sphere_table as T
 
     sc = load_scene(SPHERE)
     fr = sphere_frame(sc)

@@ -5,7 +5,7 @@ paper's cylinder and the sphere (wired by :mod:`flexsheet.experiments.fem`; the 
 
 1. **Stations**: K fractions of the stroke's arc length, evenly spaced, start and end included
    (``--stations``, default :data:`DEFAULT_STATIONS`, 13). At each, the scene's hyperelastic reference
-   (:func:`flexsheet.experiments.fem_scene.scene_reference`: the scene's law and finger contact, full body, its
+   (:func:`flexsheet.fem.reference.scene_reference.scene_reference`: the scene's law and finger contact, full body, its
    support and inclusions) is pushed along the inward normal 0 → :data:`GRID` ``depth_max`` in 2.5 mm steps on
    a mesh refined along the whole push path (``h_fine`` 6 mm within 15 mm of it: the scene FULL run's first
    level), sampled on the real-time model's rendered vertices; each push is cached on its own, ``--jobs``
@@ -38,9 +38,10 @@ import numpy as np
 
 __all__ = ["build_path_table", "table_key", "DEFAULT_STATIONS", "assemble_path_table"]
 
-from flexsheet.experiments.fem_scene import scene_update_ms
 from flexsheet.fem.eye_judge import shape_px_by_depth
 from flexsheet.fem.path_snapshots import GRID, REACH
+from flexsheet.fem.reference.scene_reference import FULL, scene_reference
+from flexsheet.fem.served import scene_update_ms
 
 log = logging.getLogger(__name__)
 
@@ -53,10 +54,8 @@ LOOKUP_DEPTHS = (0.005, 0.02, 0.045)
 
 
 def _st() -> dict:
-    """The stations' settings for :func:`flexsheet.experiments.fem_scene.scene_reference`: the scene full run's
-    (:data:`flexsheet.experiments.fem_scene.FULL`, whose first level is :data:`GRID`'s), so its pushes are shared."""
-    from flexsheet.experiments.fem_scene import FULL
-
+    """The stations' settings for :func:`flexsheet.fem.reference.scene_reference.scene_reference`: the scene full run's
+    (:data:`flexsheet.fem.reference.scene_reference.FULL`, whose first level is :data:`GRID`'s), so its pushes are shared."""
     return {k: FULL[k] for k in ("depths", "step", "h", "refine_radius", "path_depth")}
 
 
@@ -69,8 +68,6 @@ def table_key(sc, rt) -> str:
 
 
 def _push(sc, f: float, h_fine: float, probes, cache) -> dict:
-    from flexsheet.experiments.fem_scene import scene_reference
-
     q, n = sc.stroke_at([f])
     return scene_reference(sc, q[0], n[0], h_fine, _st(), probes, cache)
 
@@ -123,7 +120,7 @@ def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
 
 def assemble_path_table(sc, rt, fractions, refs: list[dict]) -> dict:
     """The path table (:data:`flexsheet.fem.path_snapshots.TABLE_FIELDS`) from the stations' reference pushes
-    ``refs`` (one :func:`flexsheet.experiments.fem_scene.scene_reference` result per fraction, sampled on
+    ``refs`` (one :func:`flexsheet.fem.reference.scene_reference.scene_reference` result per fraction, sampled on
     ``rt``'s rendered vertices at :data:`GRID`'s depths) and the real-time model ``rt``'s linear solves. The
     table reaches the deepest depth to which every station's Newton solve converged at every load step (so a
     scene whose reference stalls gets a shallower table, the linear model beyond it). Raises ``ValueError`` when
@@ -256,7 +253,7 @@ def _path_report(sc, fractions, table, refs, depths, held_out, look, lin_ms, che
             "lookup_ms": look["median"], "lookup_ms_p90": look["p90"], "lookup_methods": look["methods"],
             "linear_update_ms": lin_ms["median"],
             "lookup_timing": "the updating thread's CPU (time.thread_time) per update_finger at 5 points x "
-                             "5/20/45 mm along the stroke (flexsheet.experiments.fem_scene.scene_update_ms)",
+                             "5/20/45 mm along the stroke (flexsheet.fem.served.scene_update_ms)",
             "mesh_check": check, "target_px": TARGET_PX, "shipped": shipped, "key": key,
             "seconds": time.perf_counter() - t0}
 
@@ -342,7 +339,7 @@ def main(argv=None) -> int:  # pragma: no cover - thin CLI for a by-hand run
     import argparse
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 epilog="example: python -m flexsheet.experiments.path_table --scene "
+                                 epilog="example: python -m flexsheet.fem.reference.path_table --scene "
                                         "launch/scenes/rounded_box.yaml --jobs 2 --out out/rb_table")
     ap.add_argument("--scene", required=True)
     ap.add_argument("--out", required=True)
