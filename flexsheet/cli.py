@@ -14,11 +14,19 @@ import sys
 from flexsheet import __version__, registry
 from flexsheet.cli_commands import cmd_keys, cmd_launch, cmd_run
 from flexsheet.runtime.console import LIBRARY, show_lines
+from flexsheet.runtime.domain import DOMAIN_ENV, domain_id
 from flexsheet.runtime.plugins import node_types
+
+
+def _domain_arg(t) -> None:
+    """``--domain D``: the graph's domain (flexsheet/runtime/domain.py), as ``FLEXSHEET_DOMAIN_ID``."""
+    t.add_argument("--domain", metavar="D", help="run in domain D, 0..60 (default: $FLEXSHEET_DOMAIN_ID, else 0): "
+                   "each domain has its own ports and its own graph, as ROS_DOMAIN_ID")
 
 
 def _graph_args(t) -> None:
     """How a run-time tool finds the graph (:func:`flexsheet.runtime.discovery.resolve_graph`)."""
+    _domain_arg(t)
     t.add_argument("--launch", metavar="FILE", help="the graph's launch file (needed for a graph on other hosts "
                    "or one running CURVE); default: $FLEXSHEET_LAUNCH, else the nodes running on this machine")
     t.add_argument("--endpoint", action="append", metavar="tcp://HOST:PORT",
@@ -85,9 +93,11 @@ def _add_launch_parser(sub) -> None:
                               "  flexsheet launch launch/lab.yaml --host arm1     # on arm PC 1\n"
                               "  flexsheet launch launch/sim.yaml --set twin.truth_seed=2 --set scene=launch/scenes/sphere.yaml\n"
                               "  flexsheet launch launch/sim.yaml --rtf 1 --set world.loop=true   # watch at real speed\n"
+                              "  flexsheet launch launch/sim.yaml --domain 3 --out out/d3   # beside another graph\n"
                               "  flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 "
                               "--set hosts.arm1.address=127.0.0.2 --set hosts.arm2.address=127.0.0.3"))
     s.add_argument("file", help="launch YAML file")
+    _domain_arg(s)
     s.add_argument("--host", help="start only the nodes of this host (default: all hosts, on this machine)")
     s.add_argument("--duration", type=_positive("--duration"),
                    help="stop after this many seconds — simulated seconds in a 'clock: sim' file (default: until "
@@ -126,6 +136,7 @@ def _add_run_parser(sub) -> None:
     s.add_argument("node_type", metavar="NODE", nargs="?", help=f"node type: {', '.join(sorted(node_types()))}")
     s.add_argument("--name", help="node name (default: the type; with --launch: the node's key)")
     s.add_argument("--launch", help="take endpoint, peers and params from this launch file")
+    _domain_arg(s)
     s.add_argument("--param", "-p", action="append", metavar="KEY=VALUE", help="parameter (YAML value), repeatable")
     s.add_argument("--endpoint", default="tcp://127.0.0.1:0", help="publisher endpoint to bind (without --launch)")
     s.add_argument("--peer", action="append", metavar="ENDPOINT", help="publisher endpoint to subscribe to")
@@ -365,6 +376,12 @@ def main(argv: list[str] | None = None) -> int:
 
         argcomplete.autocomplete(parser)
     args = parser.parse_args(argv)
+    try:                  # the graph's domain, checked once; the processes this command starts inherit it
+        domain = domain_id(getattr(args, "domain", None))
+    except ValueError as exc:
+        parser.error(str(exc))
+    if getattr(args, "domain", None) is not None:
+        os.environ[DOMAIN_ENV] = str(domain)
     try:
         code = int(args.func(args) or 0)
         sys.stdout.flush()   # here, so that a reader gone away is caught below, not at interpreter exit

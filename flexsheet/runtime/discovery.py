@@ -1,7 +1,7 @@
 """Local graph discovery: how the run-time tools find the nodes running on this machine without a launch file.
 
 Every node with a TCP endpoint announces itself while it runs: one small JSON file per node, ``NAME-PID.json``
-(``{"node", "endpoint", "pid", "curve"}``), in :func:`graph_dir` (``$FLEXSHEET_GRAPH_DIR``, else
+(``{"node", "endpoint", "pid", "curve", "domain"}``), in :func:`graph_dir` (``$FLEXSHEET_GRAPH_DIR``, else
 ``$XDG_RUNTIME_DIR/flexsheet/graph``, else ``/tmp/flexsheet-graph-UID``), removed when it stops. An entry whose
 process is gone is stale and dropped. This plays the part of ROS 2's discovery on one host (``ros2 topic list``
 with no arguments): a launched graph, a lone ``flexsheet run`` node and a ``flexsheet bag play`` are found
@@ -20,6 +20,8 @@ import os
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from flexsheet.runtime.domain import domain_id
 
 __all__ = ["graph_dir", "announce", "withdraw", "discover", "resolve_graph", "Graph"]
 
@@ -44,7 +46,8 @@ def announce(node: str, endpoint: str, curve: bool) -> Path | None:
     try:
         folder.mkdir(parents=True, exist_ok=True, mode=0o700)
         tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps({"node": node, "endpoint": endpoint, "pid": os.getpid(), "curve": bool(curve)}))
+        tmp.write_text(json.dumps({"node": node, "endpoint": endpoint, "pid": os.getpid(), "curve": bool(curve),
+                                   "domain": domain_id()}))
         tmp.replace(path)
     except OSError:
         return None
@@ -71,8 +74,10 @@ def _alive(pid: int) -> bool:
 
 
 def discover() -> list[dict]:
-    """The live entries of :func:`graph_dir`, sorted by node name (stale and unreadable ones are removed)."""
+    """The live entries of :func:`graph_dir` in this process's domain (:func:`~flexsheet.runtime.domain.domain_id`;
+    an entry without one is domain 0), sorted by node name (stale and unreadable ones are removed)."""
     found = []
+    domain = domain_id()
     try:
         files = sorted(graph_dir().glob("*.json"))
     except OSError:
@@ -84,7 +89,8 @@ def discover() -> list[dict]:
         except (OSError, ValueError):
             ok = False
         if ok and _alive(e["pid"]):
-            found.append(e)
+            if e.get("domain", 0) == domain:
+                found.append(e)
         else:
             withdraw(f)
     return sorted(found, key=lambda e: (e["node"], e["pid"]))
@@ -126,7 +132,8 @@ def resolve_graph(launch: str | None, endpoints: list[str] | None = None) -> Gra
         raise LookupError(f"the graph on this machine runs CURVE ({', '.join(e['node'] for e in found)}): give "
                           "--launch FILE, its launch file, for its keys")
     if not plain:
-        raise LookupError(f"no flexsheet node is running on this machine (none announced in {graph_dir()}): start "
+        raise LookupError(f"no flexsheet node is running on this machine in domain {domain_id()} (none announced in "
+                          f"{graph_dir()}): start "
                           "one (flexsheet launch FILE, flexsheet bag play BAG), or give --launch FILE for a graph on "
                           "other hosts, or --endpoint tcp://HOST:PORT")
     names = {e["node"] for e in plain}

@@ -70,6 +70,7 @@ from pydantic import (
     model_validator,
 )
 
+from flexsheet.runtime.domain import domain_id, shift_port
 from flexsheet.runtime.extensions import sections as launch_sections
 from flexsheet.runtime.plugins import node_types, unknown_node_type
 from flexsheet.yamlio import UniqueKeyLoader
@@ -262,6 +263,15 @@ def load_launch(path: str | Path) -> LaunchFile:
     path = Path(path)
     raw = _apply_toplevel_env(_read_mapping(path), path)
     lf = _validate(raw, path)
+    try:
+        domain = domain_id()
+    except ValueError as exc:
+        raise LaunchError(f"{path}: {exc}") from None
+    if domain:                        # this machine's domain (flexsheet.runtime.domain): the file's ports move
+        lf.base_port = shift_port(lf.base_port, domain)
+        for spec in lf.nodes.values():
+            if spec.port is not None:
+                spec.port = shift_port(spec.port, domain)
     lines = _graph_problems(lf, path)
     if lines:
         raise LaunchError(lines[0], lines)

@@ -46,6 +46,7 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
+from flexsheet.runtime.domain import domain_id, shift_params
 from flexsheet.runtime.extensions import extensions
 from flexsheet.runtime.extensions import sections as launch_sections
 from flexsheet.runtime.launch import (
@@ -260,7 +261,7 @@ class _Checker:
     def params(self, name: str) -> dict:
         """Node ``name``'s params with the ``--set`` overrides and substitutions applied."""
         spec = self.lf.nodes[name]
-        return substitute({**spec.params, **self.overrides.get(name, {})}, self.subs)
+        return shift_params(substitute({**spec.params, **self.overrides.get(name, {})}, self.subs), domain_id())
 
     def check_nodes(self) -> None:
         for name in self.overrides:

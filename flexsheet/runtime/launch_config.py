@@ -10,6 +10,7 @@ from pathlib import Path
 import yaml
 
 from flexsheet.runtime.config import NodeConfig
+from flexsheet.runtime.domain import domain_id, shift_params
 from flexsheet.runtime.extensions import sections as launch_sections
 from flexsheet.runtime.launch import (
     LaunchError,
@@ -113,7 +114,7 @@ def node_config(lf: LaunchFile, name: str, out: str | None = None, overrides: di
     if name not in lf.nodes:
         raise LaunchError(f"{lf.path}: no node named {name!r}; nodes: {', '.join(lf.nodes)}")
     spec = lf.nodes[name]
-    params = substitute({**spec.params, **(overrides or {})}, substitutions(lf, out))
+    params = shift_params(substitute({**spec.params, **(overrides or {})}, substitutions(lf, out)), domain_id())
     graph_wide = {key: sec.node_value(lf.section(key), lf, out) for key, sec in launch_sections().items()}
     if any(v is not None and k not in params for k, v in graph_wide.items()):
         try:

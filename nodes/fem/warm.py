@@ -62,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         ap.error(f"--scene: unknown {', '.join(unknown)}; known: {', '.join(names)}")
     failed = 0
-    for name, params in zip(names, sets):
+    for name, params in zip(names, sets, strict=True):
         if args.scene and name not in args.scene:
             continue
         t = time.monotonic()

@@ -9,6 +9,7 @@ import threading
 
 import zmq
 
+from flexsheet.runtime.domain import port_holder
 from flexsheet.runtime.transport import TransportError
 from flexsheet.runtime.zmq.curve import CurveConfig
 from flexsheet.runtime.zmq.frames import EVENTS, NOBLOCK, NOBLOCK_MORE, POLLIN, frame_nbytes, send_frames
@@ -83,7 +84,10 @@ class XPub:
             self.sock.bind(endpoint)
         except zmq.ZMQError as exc:
             self.sock.close(linger=0)
-            raise TransportError(f"cannot bind publisher endpoint {endpoint!r}: {exc}") from None
+            holder = port_holder(int(endpoint.rsplit(":", 1)[1])) if exc.errno == zmq.EADDRINUSE else ""
+            raise TransportError(f"cannot bind publisher endpoint {endpoint!r}: {exc}"
+                                 + (f" (held by {holder}; another graph? give it another --domain)" if holder
+                                    else "")) from None
         self.endpoint = endpoint
         if endpoint.endswith(":0") or endpoint.endswith(":*"):
             self.endpoint = self.sock.getsockopt(zmq.LAST_ENDPOINT).decode()
