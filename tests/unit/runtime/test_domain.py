@@ -9,7 +9,13 @@ from pathlib import Path
 import pytest
 
 from flexsheet.runtime.domain import (
-    DOMAIN_ENV, DOMAIN_STRIDE, MAX_DOMAIN, domain_id, port_holder, shift_params, shift_port,
+    DOMAIN_ENV,
+    DOMAIN_STRIDE,
+    MAX_DOMAIN,
+    domain_id,
+    port_holder,
+    shift_params,
+    shift_port,
 )
 from flexsheet.runtime.launch import load_launch
 from flexsheet.runtime.launch_config import node_config
