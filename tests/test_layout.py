@@ -424,3 +424,60 @@ def test_the_experiments_rule_sees_planted_faults(tmp_path):
     assert _experiments_importers(tmp_path) == ["flexsheet/fem/x.py:2: flexsheet.experiments.stroke",
                                                 "nodes/a/node.py:1: flexsheet.experiments"]
     assert _reports_into_experiments(tmp_path / "launch") == ["bad.yaml: flexsheet.experiments.report:main"]
+
+
+# ---------------------------------------------------------------------------------- dependencies in sight
+#: the most project imports (``flexsheet``, ``nodes``, ``messages``) inside functions: a module's dependencies are
+#: read at its top; an import stays inside a function only for a heavy or optional dependency (a GL context, a
+#: camera SDK, dask, scipy.optimize, pinocchio) or the start-up time of the CLI, with its reason on its line
+MAX_LOCAL_IMPORTS = 60
+#: files whose imports inside functions share one reason: the CLI front ends load a command's modules only when
+#: it runs, so that ``flexsheet --help`` and completion start at once
+LAZY_FILES = {"flexsheet/cli.py": "start-up time", "flexsheet/cli_commands.py": "start-up time"}
+PROJECT = ("flexsheet", "nodes", "messages")
+
+
+def _local_imports(path: Path) -> list[tuple[int, str, bool]]:
+    """(line, module, whether a comment on its lines gives a reason) of each project import inside a function."""
+    lines = path.read_text().splitlines()
+    out: list[tuple[int, str, bool]] = []
+
+    def visit(node: ast.AST, inside: bool) -> None:
+        for child in ast.iter_child_nodes(node):
+            if inside and isinstance(child, (ast.Import, ast.ImportFrom)):
+                mods = [a.name for a in child.names] if isinstance(child, ast.Import) else [child.module or ""]
+                if any(m.split(".")[0] in PROJECT for m in mods):
+                    said = any("#" in line for line in lines[child.lineno - 1:child.end_lineno])
+                    out.append((child.lineno, mods[0], said))
+            visit(child, inside or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)))
+
+    visit(ast.parse("\n".join(lines), str(path)), False)
+    return out
+
+
+def _all_local_imports() -> list[tuple[str, int, str, bool]]:
+    return [(p.relative_to(ROOT).as_posix(), line, mod, said) for p in _code_files()
+            for line, mod, said in _local_imports(p)]
+
+
+def test_few_imports_inside_functions():
+    found = _all_local_imports()
+    assert found, "the check read no import inside a function"
+    assert len(found) <= MAX_LOCAL_IMPORTS, f"{len(found)} project imports inside functions (at most " \
+        f"{MAX_LOCAL_IMPORTS}): import at the module's top"
+
+
+def test_each_import_inside_a_function_says_why():
+    bad = [f"{rel}:{line}: {mod}" for rel, line, mod, said in _all_local_imports() if not said and rel not in LAZY_FILES]
+    assert bad == [], "imports inside functions without a reason on their line (# lazy: …):\n" + "\n".join(bad)
+
+
+def test_the_local_import_check_sees_planted_faults(tmp_path):
+    """A project import inside a function is found with or without its reason; one at the top, one of the
+    standard library inside a function and a nested function's are told apart."""
+    f = tmp_path / "x.py"
+    f.write_text("import os\nfrom flexsheet.model import sheet\n\n\ndef f():\n    import json\n"
+                 "    from flexsheet.fem.cache import ArrayCache\n    from messages import topics  # lazy: why\n\n"
+                 "    def g():\n        import nodes.camera.node\n")
+    assert _local_imports(f) == [(7, "flexsheet.fem.cache", False), (8, "messages", True),
+                                 (11, "nodes.camera.node", False)]

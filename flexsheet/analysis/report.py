@@ -50,6 +50,8 @@ from flexsheet.analysis.report_timing import (
 from flexsheet.analysis.report_verdicts import judge
 from flexsheet.analysis.table1 import DD_CONVENTION
 from flexsheet.model.scenes import Scene, load_scene, paper_scene
+from flexsheet.runtime.launch import substitute, substitutions
+from flexsheet.twin.truth_choice import TruthChoice
 
 __all__ = ["twin_settings", "scene_settings", "run_bags", "main"]
 
@@ -58,8 +60,6 @@ def twin_settings(lf=None) -> dict:
     """``{"realism", "truth_seed", "source"}`` of the twin a launch ran: the launch file's top-level ``twin``
     (a mapping or a model), else the world node's ``twin`` param, else the world's defaults (``source`` says
     which). ``lf``: the :class:`flexsheet.runtime.launch.LaunchFile` (or ``None``)."""
-    from flexsheet.twin.truth_choice import TruthChoice
-
     def as_dict(x) -> dict | None:
         if x is None:
             return None
@@ -88,8 +88,6 @@ def scene_settings(lf=None, out: str | None = None) -> tuple[Scene, dict]:
     path, source = None, "the paper's cylinder (the launch file names no scene)"
     scene = lf.section("scene") if lf is not None and hasattr(lf, "section") else None
     if scene:
-        from flexsheet.runtime.launch import substitute, substitutions
-
         path, source = os.path.expanduser(substitute(scene, substitutions(lf, out))), "launch file scene"
     elif lf is not None:
         for spec in getattr(lf, "nodes", {}).values():

@@ -36,6 +36,8 @@ from flexsheet.analysis.table1 import (
     target,
 )
 from flexsheet.model.scenes import Scene, paper_scene
+from flexsheet.model.sheet import frame_from_clamps
+from flexsheet.planning.shape import planner_shape
 from flexsheet.runtime.bag_read import read_bag
 from flexsheet.runtime.codec import DecodeError, decode_any
 
@@ -251,8 +253,6 @@ def _interp_points(samples: list, t: np.ndarray, attr: str = "position") -> np.n
 def _believed_sheet(d: dict[str, list], t: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """The sheet the display believes at times ``t``: its kinematics on the joint readback (the bridges'
     ``ArmJointState.pose``), both clamps interpolated, :func:`flexsheet.model.sheet.frame_from_clamps`."""
-    from flexsheet.model.sheet import frame_from_clamps
-
     left, right = d.get("/arm/left/joint_state", []), d.get("/arm/right/joint_state", [])
     if len(left) < 2 or len(right) < 2:
         return None
@@ -278,8 +278,6 @@ def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_
     (:func:`flexsheet.analysis.report_verdicts.table1_verdicts`: on the paper's cylinder only, none for a
     partial segment). ``series`` receives per segment the exposure times (s from the first) and per-sample Δθ
     (deg) of both."""
-    from flexsheet.planning.shape import planner_shape
-
     truths, sheets = d.get("/world/finger", []), d.get("/world/sheet", [])
     shape = planner_shape(scene)
     out: dict = {"felt": {}, "paper": {}}
@@ -359,8 +357,6 @@ def sheet_delay(d: dict[str, list], groups: dict[str, list], scene: Scene) -> di
     the longest segment). The prediction already leads by its horizon h, so h + L is the horizon that would
     cancel the lag. Returns ``{"segment", "horizon_ms", "residual_lag_ms", "exposure_to_sheet_ms" (h + L),
     "angle_at_best_deg", "stroke_speed_mm_per_s"}`` (the true finger's median speed in that segment), or {}."""
-    from flexsheet.planning.shape import planner_shape
-
     truths, sheets = d.get("/world/finger", []), d.get("/world/sheet", [])
     if not groups or len(truths) < 10 or len(sheets) < 10:
         return {}

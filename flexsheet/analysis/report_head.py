@@ -25,6 +25,7 @@ import numpy as np
 from flexsheet.model import geometry
 from flexsheet.model.timing import LAB
 from flexsheet.planning.keepout import KeepOut
+from flexsheet.rendering.stereo_renderer import vertex_normals
 
 __all__ = ["eye_summary", "view_summary", "safety_summary", "lost_summary", "head_series", "head_summary"]
 
@@ -226,8 +227,6 @@ def head_summary(d: dict, scene, series: dict | None = None) -> dict:
     """``{"eye", "view", "safety"}`` of a run's bag ``d`` (topic → [(log time, message)]) on ``scene`` (its
     surface mesh is the object judged); ``{}`` when the run had no head. The per-frame view errors and the
     clearance series go to ``series["head"]`` if given."""
-    from flexsheet.rendering.stereo_renderer import vertex_normals
-
     if not d.get("/world/head"):
         return {}
     V, F = scene.surface_mesh()[:2]

@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from flexsheet.analysis.report_timing import planner_gains, planner_scales, scales_at
+from flexsheet.model.force_depth import ForceDepth
 
 __all__ = ["WEBER_FRACTION", "MIN_DEPTH", "WITHIN_TARGET", "STRAIN_LIMIT", "felt_force", "follow_lag", "force_depth_table", "inclusion_contrast", "sheet_summary"]
 
@@ -36,8 +37,6 @@ WITHIN_TARGET = 0.95
 
 def force_depth_table(d: dict[str, list]):
     """The newest ``/object/force_depth`` in ``d`` as a :class:`~flexsheet.model.force_depth.ForceDepth`, or None."""
-    from flexsheet.model.force_depth import ForceDepth
-
     msgs = [m for _, m in d.get("/object/force_depth", []) if m is not None]
     if not msgs:
         return None

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+from flexsheet.analysis.report_timing import POSE_TOL_M
 from flexsheet.analysis.report_verdicts import HEADLINE_METRIC, NO_TARGET, PARTIAL, digits, row_order
 from flexsheet.analysis.table1 import DD_CONVENTION, FELT_TARGET_FACTOR, PAPER_TABLE1, TARGET_FACTOR
 
@@ -129,8 +130,6 @@ def _decomposition(s: dict) -> tuple[list[str], list[str]]:
 
 
 def _delay(s: dict) -> tuple[list[str], list[str]]:
-    from flexsheet.analysis.report_timing import POSE_TOL_M
-
     lat = s.get("latency_ms", {})
     c = lat.get("chain", {}).get("exposure_to_sheet_at_pose", {})
     arm = lat.get("chain", {}).get("exposure_to_arm_command", {})

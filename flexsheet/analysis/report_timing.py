@@ -30,6 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from flexsheet.analysis.table1 import STROKE_MODES, segment_key
+from flexsheet.model.timing import LAB
+from messages.registers import FAULT_WATCHDOG
 
 __all__ = ["latency_hops", "latency_basis", "compliance_summary", "planner_scales", "planner_gains", "watchdog_faults",
            "cpu_summary", "compute_vs_waiting", "POSE_TOL_M", "POSE_TOL_RAD", "HOP_NODES"]
@@ -102,8 +104,6 @@ def _pose_times(d: dict[str, list]) -> dict[float, float]:
 def latency_hops(d: dict[str, list]) -> dict[str, dict]:
     """Latency chains (module doc), ms: ``{"chain": {hop: {"median", "p99", "n"}}, "sheet_at_pose_reached":
     share}``, matched through the stamps every message carries. ``d``: topic → (arrival s, message) pairs."""
-    from flexsheet.model.timing import LAB
-
     tips = {m.exposure_stamp: m for _, m in d.get("/fingertip", []) if m.sent_stamp and m.frame_stamp}
     target = {}
     for _, m in d.get("/sheet/target", []):
@@ -222,8 +222,6 @@ def watchdog_faults(d: dict[str, list]) -> dict:
     """Watchdog trips over the run, from the controllers' status the bridges publish in ``/arm/<arm>/joint_state``:
     a trip is a state with ``fault == FAULT_WATCHDOG`` after one without (per arm, in stamp order; each is a hold
     and a fault on a real controller). Returns ``{"watchdog": total, "watchdog_per_arm": {arm: n}}``."""
-    from messages.registers import FAULT_WATCHDOG
-
     per_arm = {}
     for arm in ("left", "right"):
         prev, n = 0, 0

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexsheet.model.shape_base import Shape
+from flexsheet.planning.shape import planner_shape
 
 __all__ = ["StrokeErrors", "stroke_errors", "presented_contacts", "table1", "summarize", "table1_row",
            "PAPER_TABLE1", "TARGET_FACTOR", "FELT_TARGET_FACTOR", "target", "section_normals", "DD_CONVENTION", "paper_dd_ratio",
@@ -238,8 +239,6 @@ def scene_table1_row(scene, measured, sheet_origin, sheet_normal) -> dict[str, f
     """:func:`table1_row` on a :class:`flexsheet.model.scenes.Scene`: its shape as the planner sees it
     (:func:`flexsheet.planning.shape.planner_shape`: smooth normals on meshes) and the normal section along
     its stroke. For the paper's cylinder this gives the cylinder's Fig. 9 numbers."""
-    from flexsheet.planning.shape import planner_shape
-
     return table1_row(planner_shape(scene), measured, sheet_origin, sheet_normal, scene)
 
 

@@ -280,7 +280,7 @@ class ArmStream:
                 self._snap = self.limiter.snapshot()
                 self._snap_target = self.tracker.source_stamp
                 cmd = self._next_command()
-                if status == BridgeStatus.OK and self.tracker.waiting:
+                if status == BridgeStatus.OK and self.tracker.span.waiting:
                     status = BridgeStatus.SPAN_WAIT
             else:
                 self._snap = None

@@ -11,7 +11,6 @@ that velocity as feed-forward (:mod:`flexsheet.arm.limiter`), within the joint l
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from enum import StrEnum
 
@@ -19,6 +18,7 @@ import numpy as np
 
 from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, IKResult, outside_limits
 from flexsheet.arm.pull_limit import max_pull
+from flexsheet.arm.span_guard import SpanGuard
 
 __all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S"]
 
@@ -105,52 +105,14 @@ class TargetTracker:
         #: ``q (6,) -> bool``: whether joints ``q`` put this arm or its clamp in the viewer's keep-out (the last
         #: line behind the planner's head guard); such a target is refused as ``hold:keep_out``. None: no head
         self.keep_out = None
-        #: (3,) m, display frame: the partner clamp's measured position (its ``ArmJointState.pose``), or None
-        self.peer_clamp: np.ndarray | None = None
-        #: whether this arm's last step waited on the span guard (:meth:`span_worse`; ``wait:span``)
-        self.waiting = False
-        #: whether the partner's last state said it waits on its span guard
-        self.peer_waiting = False
-        #: (lo, hi) m: the clamp span kept with the partner (:meth:`set_span_band`), or None: no guard
-        self.span_band: tuple[float, float] | None = None
-        #: cycles a step waited because it would have taken the span further outside the band
-        self.span_waits = 0
-
-    def set_span_band(self, band) -> None:
-        """Keep the clamp span within ``band`` = (lo, hi) m of the partner's clamp (None: no guard). Raises
-        ``ValueError`` unless 0 < lo < hi."""
-        if band is None:
-            self.span_band = None
-            return
-        lo, hi = (float(x) for x in band)
-        if not (0.0 < lo < hi and math.isfinite(hi)):
-            raise ValueError(f"span_band must be [lo, hi] m with 0 < lo < hi, got {list(band)!r}")
-        self.span_band = (lo, hi)
-
-    def _span_out(self, q: np.ndarray) -> float:
-        """How far (m) the clamp at joints ``q`` lies outside the span band from the partner's clamp (0 inside)."""
-        s = float(np.linalg.norm(self.kin.fk(q)[:3, 3] - self.peer_clamp))
-        lo, hi = self.span_band
-        return max(lo - s, s - hi, 0.0)
+        #: the two-arm span guard (:class:`flexsheet.arm.span_guard.SpanGuard`): the band, the partner's clamp
+        self.span = SpanGuard(kin)
 
     def span_worse(self, q_from, q_to) -> bool:
-        """Whether moving this clamp from joints ``q_from`` to ``q_to`` (6,) rad takes the clamp span further
-        outside :attr:`span_band` from the partner's measured clamp (:attr:`peer_clamp`); counted in
-        :attr:`span_waits` and :attr:`waiting`. False without a band or a partner state. The sheet couples the
-        clamps: such a step waits for the partner, unless the partner waits too (:attr:`peer_waiting`, its
-        ``bridge_status`` ``wait:span``): then both step, as the planner's targets keep the span; two arms
-        each waiting for the other would wait for ever (a 60° sheet yaw between two organ strokes stopped both
-        arms for 30 s). A service's goal
-        (:meth:`move_to`: a registration's configurations, homing) is the operator's and is not judged."""
-        if self.span_band is None or self.peer_clamp is None or self.manual is not None:
-            return False
-        out_to = self._span_out(np.asarray(q_to, float))
-        if out_to > 0.0 and out_to > self._span_out(np.asarray(q_from, float)) + 1e-6 and not self.peer_waiting:
-            self.span_waits += 1
-            self.waiting = True
-            return True
-        self.waiting = False
-        return False
+        """Whether this arm's step from joints ``q_from`` to ``q_to`` (6,) rad waits on the span guard
+        (:meth:`flexsheet.arm.span_guard.SpanGuard.worse`; ``wait:span``). A service's goal (:meth:`move_to`: a
+        registration's configurations, homing) is the operator's and is not judged."""
+        return self.manual is None and self.span.worse(q_from, q_to)
 
     def move_to(self, q) -> np.ndarray:
         """Stream to joints ``q`` (6,) rad and stay there, ignoring targets until :meth:`release`. Raises

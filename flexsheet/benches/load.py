@@ -40,7 +40,12 @@ from pathlib import Path
 
 import numpy as np
 
+from flexsheet.runtime.bag import RecorderNode
+from flexsheet.runtime.bag_read import bag_info
+from flexsheet.runtime.config import NodeConfig
+from flexsheet.runtime.node import Node
 from flexsheet.runtime.ports import free_port
+from flexsheet.runtime.qos import QoS
 from messages import topics as T
 from messages.samples import sample_fields
 
@@ -96,8 +101,6 @@ def payload_fields(topic_name: str, seed: int = 0, random_images: bool = False) 
 
 # ------------------------------------------------------------------------------------------------ children
 def _make_publisher(group: str, factor: float, random_images: bool = False):
-    from flexsheet.runtime.node import Node
-
     class LoadPublisher(Node):
         """Publishes the topics of one producing node at ``factor`` × nominal rate (bench only)."""
 
@@ -121,9 +124,6 @@ def _make_publisher(group: str, factor: float, random_images: bool = False):
 
 
 def _make_subscriber(out: Path):
-    from flexsheet.runtime.node import Node
-    from flexsheet.runtime.qos import QoS
-
     class LoadSubscriber(Node):
         """Subscribes every topic (KEEP_ALL) and keeps receive − stamp per topic (bench only)."""
 
@@ -166,7 +166,6 @@ def _child(argv: list[str]) -> int:
     ap.add_argument("--out", default="")
     ap.add_argument("--random-images", action="store_true")
     a = ap.parse_args(argv)
-    from flexsheet.runtime.config import NodeConfig
 
     if a.role == "pub":
         cls = _make_publisher(a.group, a.factor, a.random_images)
@@ -175,8 +174,6 @@ def _child(argv: list[str]) -> int:
         cls = _make_subscriber(Path(a.out))
         node = cls(NodeConfig(name="load_sub", node_type="load_sub", endpoint=a.endpoint, peers=a.peers))
     else:
-        from flexsheet.runtime.bag import RecorderNode
-
         node = RecorderNode(NodeConfig(name="recorder", node_type="recorder", endpoint=a.endpoint, peers=a.peers,
                                        params={"output": a.out, "topics": RECORDED}))
     asyncio.run(node.run())
@@ -251,7 +248,6 @@ def run_load(seconds: float = 60.0, factor: float = 2.0, warmup: float = 10.0, s
                 p.kill()
                 p.wait()
     sub = json.loads(sub_out.read_text())
-    from flexsheet.runtime.bag_read import bag_info
 
     bag = bag_info(tmp / "load.mcap")
     procs_res = {}

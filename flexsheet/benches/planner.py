@@ -11,15 +11,15 @@ import statistics
 import sys
 import time
 
+from flexsheet.model.shapes import MeshShape, make_shape
+from flexsheet.planning.surface_planner import SurfacePlanner
+
 __all__ = ["measure", "main"]
 
 
 def measure(shape_kind: str = "cylinder", n: int = 2000) -> dict[str, float]:
     """Median and p95 µs of :meth:`SurfacePlanner.update` over ``n`` samples of a 48 Hz stroke on
     ``shape_kind`` (a mesh uses a trimesh icosphere), plus the median of ``Shape.project`` alone."""
-    from flexsheet.model.shapes import MeshShape, make_shape
-    from flexsheet.planning.surface_planner import SurfacePlanner
-
     if shape_kind == "mesh":
         import trimesh
 

@@ -34,11 +34,13 @@ import msgpack
 import numpy as np
 import zmq
 
+from flexsheet.runtime.bus import Bus, ContainerTransport
+from flexsheet.runtime.codec import decode, encode
 from flexsheet.runtime.config import NodeConfig
 from flexsheet.runtime.node import Node
 from flexsheet.runtime.ports import free_port
 from flexsheet.runtime.qos import QoS
-from messages import Fingertip, StereoFrame
+from messages import Fingertip, Header, StereoFrame
 from messages import topics as T
 
 N_LAT = 3000
@@ -225,8 +227,6 @@ class _LocalSink(Node):
 def _composed(n: int, sync: bool) -> list[tuple[float, float]]:
     """(publish → handler, build → handler) latencies (s) of ``n`` fingertips at 1 kHz between two nodes of one
     container (in this process)."""
-    from flexsheet.runtime.bus import Bus, ContainerTransport
-
     async def main() -> list[float]:
         bus = Bus("bench")
         src = _Source(NodeConfig(name="bench_source", endpoint="", heartbeat_period=10.0),
@@ -270,9 +270,6 @@ def _codec_costs(n: int = 20000) -> dict:
     """What validating a small message costs in this process, µs a message (median of 5 batches of ``n // 5``):
     building a :class:`messages.Fingertip` (pydantic validation), encoding it and decoding it with validation
     (the wire boundary). The runtime pays all three on every hop that crosses processes; raw pyzmq none."""
-    from flexsheet.runtime.codec import decode, encode
-    from messages import Header
-
     pos, cov = np.zeros(3), np.eye(3)
 
     def build() -> Fingertip:

@@ -50,8 +50,12 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from flexsheet.calibration.sheet import with_terms
 from flexsheet.model import geometry
 from flexsheet.model.checks import check_pose
+from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
+from flexsheet.model.projector import Projector
+from flexsheet.vision.camera_model import DEFAULT_CAMERA_POSITION, camera_model, look_at
 
 __all__ = ["FORMAT_VERSION", "ENTRIES", "NOMINAL_CLAMP_MARKER", "NOMINAL_IPD", "Provenance", "CameraEntry",
            "ProjectorEntry", "ArmEntry", "EyeEntry", "HeadCameraEntry", "SheetEntry", "DisplayCalib", "OPTIONAL", "nominal_display_calib",
@@ -188,8 +192,6 @@ class ProjectorEntry:
 
     def projector(self):
         """The pinhole :class:`flexsheet.model.projector.Projector` of this entry (``D`` is not part of it)."""
-        from flexsheet.model.projector import Projector
-
         return Projector(self.K.copy(), self.T_display_projector[:3, :3].copy(), self.position, self.width,
                          self.height)
 
@@ -247,8 +249,6 @@ class SheetEntry:
     def material(self, base=None):
         """``base`` (a :class:`~flexsheet.model.tension.SheetMaterial`, default the nominal one) with these
         terms (:func:`flexsheet.calibration.sheet.with_terms`)."""
-        from flexsheet.calibration.sheet import with_terms
-
         return with_terms(self, base)
 
 
@@ -318,10 +318,6 @@ def nominal_display_calib() -> DisplayCalib:
     paper's fixed V (:data:`flexsheet.model.geometry.EYE`). Estimators start from these; the twin's truth is drawn
     around them (:mod:`flexsheet.twin.truth`).
     """
-    from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
-    from flexsheet.model.projector import Projector
-    from flexsheet.vision.camera_model import DEFAULT_CAMERA_POSITION, camera_model, look_at
-
     nominal = Provenance("nominal (code constants)", source="nominal")
     cal = camera_model("ximea")
     stereo = {k: (np.array(cal[k], float) if k != "image_size" else tuple(cal[k]))

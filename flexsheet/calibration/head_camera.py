@@ -25,6 +25,7 @@ import numpy as np
 from flexsheet.calibration.display_calib import EyeEntry, HeadCameraEntry, Provenance
 from flexsheet.calibration.eye import glasses_eye_offset, tracked_eye_entry
 from flexsheet.model import geometry
+from flexsheet.vision.camera_model import look_at
 from flexsheet.vision.glasses import GLASSES_AXES, GlassesBoard
 
 __all__ = ["SITTINGS", "design_head_camera", "fixture_poses", "register_head_camera", "eye_entry"]
@@ -41,8 +42,6 @@ def design_head_camera() -> tuple[np.ndarray, np.ndarray, int, int]:
     (above the sheet's top edge), its optical axis toward (0.25, 0, 0) m
     (:func:`flexsheet.vision.camera_model.look_at`, up = +z): the glasses stay in view from a viewer sitting
     back at 0.45 m to one leaning in to 0.11 m, sway included. The seed of its registration."""
-    from flexsheet.vision.camera_model import look_at
-
     w, h = 512, 640
     K = np.array([[600.0, 0.0, (w - 1) / 2], [0.0, 600.0, (h - 1) / 2], [0.0, 0.0, 1.0]])
     return K, look_at((0.0, 0.0, 0.20), (0.25, 0.0, 0.0), up=(0.0, 0.0, 1.0)), w, h

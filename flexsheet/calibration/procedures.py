@@ -22,10 +22,19 @@ from flexsheet.calibration.display_calib import (
     DisplayCalib,
     ProjectorEntry,
     Provenance,
+    SheetEntry,
     nominal_display_calib,
 )
 from flexsheet.calibration.eye import fixed_eye
+from flexsheet.calibration.head_camera import (
+    design_head_camera,
+    eye_entry,
+    fixture_poses,
+    register_head_camera,
+)
 from flexsheet.calibration.projector_joint import refine_joint
+from flexsheet.calibration.sheet import TERMS, fit_sheet, plan_presses
+from flexsheet.vision.glasses import GlassesBoard, GlassesTracker
 from flexsheet.vision.stereo_calibration import BoardSpec, parse_board
 
 log = logging.getLogger(__name__)
@@ -198,8 +207,6 @@ def run_all(source, opts: Options) -> Registration:
 def run_sheet(source, plan=None):
     """The sheet's entry (:mod:`flexsheet.calibration.sheet`): the probe pressed at each (stretch, u, v, depths)
     of ``plan`` (default :func:`~flexsheet.calibration.sheet.plan_presses`), the planner's model fitted."""
-    from flexsheet.calibration.sheet import plan_presses
-
     plan = plan or plan_presses()
     return sheet_entry(source.sheet_presses(plan), plan, source.label)
 
@@ -207,9 +214,6 @@ def run_sheet(source, plan=None):
 def sheet_entry(presses: list, plan: list, label: str):
     """The sheet's entry fitted to ``presses`` (:class:`~flexsheet.calibration.sheet.Press` readings) taken on
     ``plan`` by the source ``label``. Raises ``ValueError`` as :func:`~flexsheet.calibration.sheet.fit_sheet`."""
-    from flexsheet.calibration.display_calib import SheetEntry
-    from flexsheet.calibration.sheet import TERMS, fit_sheet
-
     fit = fit_sheet(presses)
     log.info(f"sheet: {len(presses)} readings at {len(plan)} presses: w {fit.contact_width * 1e3:.1f} mm, "
              f"growth {fit.contact_growth:.2f}, own {fit.own_stiffness:.3g} N + {fit.own_growth:.3g} N/m, "
@@ -226,14 +230,6 @@ def run_head_camera(source):
     """The head camera's entry and the tracked eye entry (:mod:`flexsheet.calibration.head_camera`): the board
     on the chin-rest fixture's steps, then the viewer's sittings on the chin rest and the pupillometer's IPD."""
     import numpy as np
-
-    from flexsheet.calibration.head_camera import (
-        design_head_camera,
-        eye_entry,
-        fixture_poses,
-        register_head_camera,
-    )
-    from flexsheet.vision.glasses import GlassesBoard, GlassesTracker
 
     board = GlassesBoard()
     K0, _, w, h = design_head_camera()

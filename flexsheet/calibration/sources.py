@@ -27,6 +27,8 @@ import os
 import cv2
 import numpy as np
 
+from flexsheet.calibration.sheet import Press
+
 __all__ = ["ImageDirSource", "PressFileSource", "save_frames"]
 
 Pair = tuple[np.ndarray, np.ndarray]
@@ -191,8 +193,6 @@ class PressFileSource:
 
     def __init__(self, path: str) -> None:
         import csv
-
-        from flexsheet.calibration.sheet import Press
 
         if not os.path.isfile(path):
             raise ValueError(f"presses file not found: {path!r}")

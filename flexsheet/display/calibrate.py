@@ -20,6 +20,18 @@ from dataclasses import replace
 from flexsheet.calibration import procedures as P
 from flexsheet.calibration.display_calib import DisplayCalib
 from flexsheet.calibration.display_calib_file import load_display_calib, write_display_calib
+from flexsheet.calibration.eye import fixed_eye, tracked_eye_entry
+from flexsheet.calibration.sheet import TERMS, plan_presses
+from flexsheet.calibration.sources import ImageDirSource, PressFileSource
+from flexsheet.display.live import LiveError, check_plan, run_live
+from flexsheet.runtime.launch import LaunchError
+from flexsheet.runtime.launch_sets import apply_toplevel_sets
+from flexsheet.twin.registration import TwinSource, run_display_sim, score_sheet, verdicts
+from flexsheet.twin.registration_camera import CalibrationTwin
+from flexsheet.twin.registration_draws import draw_seeds, run_draws
+from flexsheet.twin.registration_sweep import run_sweep
+from flexsheet.twin.sensor_noise import measure_ximea_noise
+from flexsheet.twin.truth import TwinTruth
 
 log = logging.getLogger(__name__)
 
@@ -54,11 +66,6 @@ def _opts(a) -> P.Options:
 
 
 def _source(a, p: argparse.ArgumentParser, opts: P.Options):
-    from flexsheet.calibration.sources import ImageDirSource
-    from flexsheet.twin.registration import TwinSource
-    from flexsheet.twin.registration_camera import CalibrationTwin
-    from flexsheet.twin.truth import TwinTruth
-
     if a.sim:
         if a.truth_seed is None:
             p.error("--sim needs --truth-seed N")
@@ -199,8 +206,6 @@ def eye_main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
 
     def go():
-        from flexsheet.calibration.eye import fixed_eye, tracked_eye_entry
-
         try:
             V = [float(v) for v in a.V.split(",")]
             off = [float(v) for v in a.eye_offset.split(",")]
@@ -236,16 +241,10 @@ def sheet_main(argv: list[str] | None = None) -> int:
         import csv
         import json
 
-        from flexsheet.calibration.sheet import TERMS, plan_presses
-        from flexsheet.calibration.sources import PressFileSource
-
         plan, truth = plan_presses(), None
         if a.sim:
             if a.truth_seed is None:
                 p.error("--sim needs --truth-seed N")
-            from flexsheet.twin.registration import TwinSource
-            from flexsheet.twin.registration_camera import CalibrationTwin
-            from flexsheet.twin.truth import TwinTruth
 
             truth = TwinTruth.draw(a.truth_seed, a.realism)
             source = TwinSource(CalibrationTwin(truth, seed=a.truth_seed))
@@ -260,7 +259,6 @@ def sheet_main(argv: list[str] | None = None) -> int:
                "residuals": calib.sheet.provenance.residuals, "source": source.label,
                "readings": [r.__dict__ for r in readings]}
         if truth is not None:               # scored against the hidden truth only now, the fit being fixed
-            from flexsheet.twin.registration import score_sheet
 
             doc["truth"] = score_sheet(truth, calib.sheet)
             log.info(f"sheet: against the true force {doc['truth']['model_error_pct']:.1f} % (median; the nominal "
@@ -332,7 +330,6 @@ def display_main(argv: list[str] | None = None) -> int:
         if a.sweep:
             if a.live:
                 p.error("--sweep runs in the twin, not with --live")
-            from flexsheet.twin.registration_sweep import run_sweep
 
             seeds = [int(s) for s in (a.seeds or "1,2,3").split(",") if s.strip()]
             run_sweep(seeds, a.out, quick=a.quick, realism=a.realism)
@@ -345,7 +342,6 @@ def display_main(argv: list[str] | None = None) -> int:
             p.error("say where the frames come from: --sim (the twin), --live (the running graph) or --sweep")
         if a.truth_seed is None:
             p.error("--sim needs --truth-seed N")
-        from flexsheet.twin.registration import run_display_sim, verdicts
 
         s = run_display_sim(a.truth_seed, a.out, opts, a.realism, a.force)
         ok = all(verdicts(s).values())
@@ -359,7 +355,6 @@ def _draws(a, p: argparse.ArgumentParser) -> int:
     """``--draws N`` (or ``--seeds``): the registration on many truths, each target's misses counted."""
     if a.live:
         p.error("--draws runs in the twin, not with --live")
-    from flexsheet.twin.registration_draws import draw_seeds, run_draws
 
     if a.seeds is not None:
         seeds, draw = [int(s) for s in a.seeds.split(",") if s.strip()], None
@@ -375,9 +370,6 @@ def _draws(a, p: argparse.ArgumentParser) -> int:
 
 
 def _live(a, opts: P.Options) -> int:
-    from flexsheet.display.live import LiveError, check_plan, run_live
-    from flexsheet.runtime.launch import LaunchError
-
     if not a.settle >= 0.0:
         print(f"flexsheet calibrate display: error: --settle must be >= 0 s, got {a.settle}", file=sys.stderr)
         return 2
@@ -394,8 +386,6 @@ def _live(a, opts: P.Options) -> int:
         print(f"flexsheet calibrate display: {problems[0]} (--dry-run lists every pose)", file=sys.stderr)
         return 1
     try:
-        from flexsheet.runtime.launch_sets import apply_toplevel_sets
-
         apply_toplevel_sets(a.set, a.launch)
         s = run_live(a.launch, a.out, opts, a.truth_seed, a.host, a.settle)
     except (LiveError, LaunchError) as exc:
@@ -428,8 +418,6 @@ def noise_main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
 
     def go():
-        from flexsheet.twin.sensor_noise import measure_ximea_noise
-
         log.info(f"measuring {a.images} (render each view through its calibrated pose)…")
         r = measure_ximea_noise(a.images, a.square)
         os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)

@@ -19,10 +19,14 @@ from pathlib import Path
 
 from pydantic import ConfigDict
 
+from flexsheet.calibration.display_calib_file import load_display_calib
+from flexsheet.model.scenes import load_scene
 from flexsheet.runtime.console import console_logger, show_lines
 from flexsheet.runtime.extensions import LaunchExtension, LaunchSection
 from flexsheet.runtime.launch import LaunchError, LaunchFile, substitute, substitutions
+from flexsheet.twin.registration import sim_display_calib, sim_display_calib_cached
 from flexsheet.twin.truth_choice import TruthChoice
+from flexsheet.vision.calib_yaml import load_yaml
 
 #: the launcher's console (the display layer's lines among the launcher's own)
 log = console_logger("launch")
@@ -77,8 +81,6 @@ def twin_registration(twin: TwinSpec, cache_root: str | None = None) -> str:
     realism, seed, options and procedure version; returns the ``display.yaml`` path. The estimators get only
     this file, never the truth. Its lines go to the launcher's console (``[launch] …``), the procedures'
     progress with them. Raises :class:`LaunchError` when the registration fails."""
-    from flexsheet.twin.registration import sim_display_calib
-
     for name in REGISTRATION_LOGGERS:
         show_lines(name, prefix="[launch] ")
     log.info(f"[launch] twin registration ({twin.realism}, truth seed {twin.truth_seed}): the calibration "
@@ -99,8 +101,6 @@ def before_launch(lf: LaunchFile, check_only: bool) -> dict:
     if twin is None or not twin.registration or lf.section("display_calib") is not None:
         return {}
     if check_only:
-        from flexsheet.twin.registration import sim_display_calib_cached
-
         cached = sim_display_calib_cached(twin.truth_seed, twin.realism)
         if cached is None:
             log.warning(f"{lf.path}: the twin registration (truth seed {twin.truth_seed}) runs at start and "
@@ -113,16 +113,12 @@ def before_launch(lf: LaunchFile, check_only: bool) -> dict:
 def read_display_calib(path: str) -> None:
     """Parse a display calibration (:func:`flexsheet.calibration.display_calib_file.load_display_calib`); raises
     ``ValueError``."""
-    from flexsheet.calibration.display_calib_file import load_display_calib
-
     load_display_calib(path)
 
 
 def read_stereo_calib(path: str) -> None:
     """Parse a stereo calibration YAML (:func:`flexsheet.vision.calib_yaml.load_yaml`); raises
     ``ValueError``."""
-    from flexsheet.vision.calib_yaml import load_yaml
-
     load_yaml(path)
 
 
@@ -135,7 +131,6 @@ def _check_scene(c) -> None:
     if problem:
         c.err("scene", path, problem)
         return
-    from flexsheet.model.scenes import load_scene
 
     try:
         load_scene(path)
@@ -160,7 +155,6 @@ def _check_display_calib(c) -> None:
         c.err("display_calib", path, problem + (" (the registration writes it: docs/calibration.md)"
                                                 if problem == "no such file" else ""))
         return
-    from flexsheet.calibration.display_calib_file import load_display_calib
 
     calib = load_display_calib(path)
     for name, spec in c.lf.nodes.items():

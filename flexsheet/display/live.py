@@ -32,9 +32,14 @@ from flexsheet.calibration import arms as arms_mod
 from flexsheet.calibration import camera_pose as cp_mod
 from flexsheet.calibration import projector as pj_mod
 from flexsheet.calibration.display_calib import nominal_display_calib
-from flexsheet.calibration.procedures import Options
+from flexsheet.calibration.display_calib_file import write_display_calib
+from flexsheet.calibration.procedures import Options, run_all
 from flexsheet.calibration.sources import ImageDirSource
+from flexsheet.runtime.client import GraphClient
+from flexsheet.runtime.services import ServiceError
+from flexsheet.twin.registration import score_registration, verdicts
 from flexsheet.twin.registration_camera import commanded_sheet_joints
+from flexsheet.twin.truth import TwinTruth
 from messages import StereoFrame
 from messages import topics as T
 
@@ -408,11 +413,6 @@ def run_live(launch: str, out: str, opts: Options, truth_seed: int | None = None
     import time
     from dataclasses import asdict
 
-    from flexsheet.calibration.display_calib_file import write_display_calib
-    from flexsheet.calibration.procedures import run_all
-    from flexsheet.runtime.client import GraphClient
-    from flexsheet.runtime.services import ServiceError
-
     t_all = time.monotonic()
     os.makedirs(out, exist_ok=True)
     client = GraphClient(launch, host)
@@ -428,8 +428,6 @@ def run_live(launch: str, out: str, opts: Options, truth_seed: int | None = None
             raise LiveError(f"the graph of {launch} is not running (start it with flexsheet launch): {exc}") from None
         truth = None
         if twin_spec is not None:
-            from flexsheet.twin.truth import TwinTruth
-
             if truth_seed is not None and int(twin_spec["truth_seed"]) != int(truth_seed):
                 raise LiveError(f"--truth-seed {truth_seed} but the camera twin renders truth seed "
                                 f"{twin_spec['truth_seed']} (launch it with --set twin.truth_seed={truth_seed})")
@@ -448,8 +446,6 @@ def run_live(launch: str, out: str, opts: Options, truth_seed: int | None = None
         write_display_calib(os.path.join(out, "display.yaml"), reg.calib)
         summary: dict = {"mode": "live", "launch": launch, "options": asdict(opts)}
         if truth is not None:
-            from flexsheet.twin.registration import score_registration, verdicts
-
             summary.update(seed=truth.seed, realism=truth.realism)
             summary.update(score_registration(truth, reg.camera_entry, reg.camera, reg.projector_entry,
                                               reg.projector, reg.arms))

@@ -29,6 +29,16 @@ from pathlib import Path
 
 import numpy as np
 
+from flexsheet.calibration.sheet import TERMS, with_terms
+from flexsheet.fem.force_depth import build_force_depth, hertz_check
+from flexsheet.fem.served import served_model
+from flexsheet.model import geometry
+from flexsheet.model.scenes import load_scene
+from flexsheet.model.sheet import clamp_poses
+from flexsheet.model.tension import SheetMaterial, clamp_force, max_stretch_within_force, press_force
+from flexsheet.planning.pull_guard import PullGuard
+from flexsheet.planning.surface_planner import scale_depths, sheet_scene_scale
+
 __all__ = ["WEBER", "presentable_range", "run", "main"]
 
 WEBER = 0.15                   #: Weber fraction for force/stiffness with the surface cue (Bergmann Tiest & Kappers 2009)
@@ -40,12 +50,6 @@ def presentable_range(sheet_file: str | None = None) -> dict:
     pull, N), ``limited_by`` ("arm_torque" or "strain"), ``source``. Raises ``ValueError`` for an unreadable
     ``sheet_file``."""
     from dataclasses import replace
-
-    from flexsheet.calibration.sheet import TERMS, with_terms
-    from flexsheet.model import geometry
-    from flexsheet.model.sheet import clamp_poses
-    from flexsheet.model.tension import SheetMaterial, clamp_force, max_stretch_within_force
-    from flexsheet.planning.pull_guard import PullGuard
 
     mat = SheetMaterial()
     source = "nominal string band (no identified sheet)"
@@ -70,12 +74,6 @@ def presentable_range(sheet_file: str | None = None) -> dict:
 
 def run(out: Path, scene_file: str, sheet_file: str | None = None, gain: float = 1.0) -> dict:
     """Items 1–4 of the module doc; writes and returns ``compliance.json`` (and ``force_depth.json``)."""
-    from flexsheet.fem.force_depth import build_force_depth, hertz_check
-    from flexsheet.fem.served import served_model
-    from flexsheet.model.scenes import load_scene
-    from flexsheet.model.tension import press_force
-    from flexsheet.planning.surface_planner import scale_depths, sheet_scene_scale
-
     sc = load_scene(scene_file)
     rng = presentable_range(sheet_file)          # a bad --sheet fails before the FEM is built
     mat = rng.pop("_mat")

@@ -13,6 +13,10 @@ import sys
 
 import numpy as np
 
+from flexsheet.model.scenes import load_scene
+from flexsheet.runtime.bag_read import read_bag
+from flexsheet.runtime.codec import decode_any
+
 __all__ = ["compliance_along_stroke", "main"]
 
 
@@ -27,10 +31,6 @@ def compliance_along_stroke(run_dir: str, scene_path, out_dir: str, bin_mm: floa
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from scipy.spatial import cKDTree
-
-    from flexsheet.model.scenes import load_scene
-    from flexsheet.runtime.bag_read import read_bag
-    from flexsheet.runtime.codec import decode_any
 
     sc = load_scene(scene_path)
     bag = os.path.join(run_dir, "sim.mcap")

@@ -43,8 +43,18 @@ import time
 import numpy as np
 
 from flexsheet.experiments.fem_motion import served_motion
+from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
+from flexsheet.fem.config import FemConfig
+from flexsheet.fem.eye_judge import judge
+from flexsheet.fem.material import Material
+from flexsheet.fem.mesh import TetMesh, surface_faces
+from flexsheet.fem.reference.gci import gci_by_depth
 from flexsheet.fem.reference.scene_reference import FULL, QUICK, scene_reference
-from flexsheet.fem.served import scene_update_ms, served_finger
+from flexsheet.fem.reference.workers import parallel, run_workers
+from flexsheet.fem.scene_model import finger_on_scene
+from flexsheet.fem.served import fem_models_as_cylinder, scene_update_ms, served_finger, served_model
+from flexsheet.fem.solver import FemModel, solve_full
+from flexsheet.model.scenes import load_scene
 from flexsheet.runtime.console import LIBRARY, show_lines
 
 log = logging.getLogger(__name__)
@@ -58,11 +68,6 @@ DEPTH_STEP = 0.005                   #: the judged depths: every 5 mm to the sce
 def _linear_fine(sc, ref: dict, q, n, depths, probes) -> tuple[np.ndarray, float]:
     """Linear P2 on the reference's mesh (full sparse solve): displacements (D, k, 3) at ``probes`` and the
     median solve time, ms."""
-    from flexsheet.fem.material import Material
-    from flexsheet.fem.mesh import TetMesh, surface_faces
-    from flexsheet.fem.scene_model import finger_on_scene
-    from flexsheet.fem.solver import FemModel, solve_full
-
     mesh = TetMesh(ref["points"], ref["tets"], surface_faces(ref["points"], ref["tets"]), ref["fixed"],
                    center=sc.center.copy())
     model = FemModel(mesh, Material(sc.material.E, sc.material.nu), order=2, support=sc.fixed_mask,
@@ -80,8 +85,6 @@ def _ref_job(args: tuple) -> tuple[float, float, str | None]:
     """Worker (:func:`flexsheet.fem.reference.workers.run_workers`): one reference level of one push into the cache;
     (h_fine, seconds, None or the error)."""
     scene_file, f, h, st, probes, cache_dir = args
-    from flexsheet.fem.cache import ArrayCache
-    from flexsheet.model.scenes import load_scene
 
     t = time.perf_counter()
     try:
@@ -98,8 +101,6 @@ def _scene_push(sc, rt, st: dict, verts, faces, cache, f: float, depths) -> dict
     the finest level's mesh, each judged by the eyes against the finest level (px,
     :func:`flexsheet.fem.eye_judge.judge`: shape, silhouette and sliding), and each level against the next finer
     one (shape and silhouette, for the convergence index)."""
-    from flexsheet.fem.eye_judge import judge
-
     q, n = sc.stroke_at([f])
     q, n = q[0], n[0]
     refs = [scene_reference(sc, q, n, h, st, verts, cache) for h in st["levels"]]
@@ -156,11 +157,6 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     ``--scheduler``'s cluster, :func:`flexsheet.fem.reference.workers.run_workers`). ``cache_dir``: the FEM cache (None:
     ~/.cache/flexsheet/fem). ``levels``: the reference levels' h_fine (m, coarse to fine; default the
     settings'). Raises ``ValueError`` (:class:`flexsheet.model.scene_parts.SceneError`) for a bad scene file."""
-    from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
-    from flexsheet.fem.config import FemConfig
-    from flexsheet.fem.served import served_model
-    from flexsheet.model.scenes import load_scene
-
     t0 = time.perf_counter()
     sc = load_scene(scene_path)
     st = _scene_settings(sc, quick, levels)
@@ -193,8 +189,6 @@ def launch_arc_deg(sc) -> float:
     """The FEM node's ``arc_deg`` for scene ``sc`` as the launch files set it: the paper cylinder's stroke arc
     (launch/sim.yaml, launch/lab.yaml: 60°, so its rendered surface is refined where the finger goes), 0 for any
     other scene (its mesh follows its stroke by itself)."""
-    from flexsheet.fem.served import fem_models_as_cylinder
-
     st = sc.stroke
     if fem_models_as_cylinder(sc) and st.kind == "arc":
         return float(max(abs(st.start_deg), abs(st.end_deg)))
@@ -218,8 +212,6 @@ def _solve_references(scene_path, st: dict, verts: np.ndarray, cache_dir: str, j
     """Solve every reference level of every push of ``st`` the cache lacks in ``jobs`` worker processes
     (:func:`flexsheet.fem.reference.workers.run_workers`), sampled at the rendered vertices ``verts`` (S, 3) m;
     with one local worker (and no cluster) nothing here: the pushes are solved as they are read."""
-    from flexsheet.fem.reference.workers import parallel, run_workers
-
     work = [(str(scene_path), f, h, st, verts, cache_dir) for f in st["fractions"] for h in st["levels"]]
     if parallel(jobs) and len(work) > 1:
         for h, sec, err in run_workers(_ref_job, work, min(jobs, len(work))):
@@ -230,8 +222,6 @@ def _band(st: dict, pushes: list[dict]) -> dict:
     """The reference's band per depth, px: with three levels the fine level's grid convergence index
     (:func:`flexsheet.fem.reference.gci.gci_by_depth`) of the levels' visible shape differences; with two, their
     difference."""
-    from flexsheet.fem.reference.gci import gci_by_depth
-
     ch = [np.max([p["level_change_px"][i] for p in pushes], axis=0) for i in range(len(st["levels"]) - 1)]
     if len(ch) >= 2:
         g = gci_by_depth(ch[-1], ch[-2], tuple(st["levels"][-3:]))

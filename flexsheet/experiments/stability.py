@@ -61,9 +61,14 @@ import numpy as np
 
 from flexsheet.analysis.table1 import FELT_TARGET_FACTOR, PAPER_TABLE1, target
 from flexsheet.calibration.display_calib import pose_from_rt
+from flexsheet.calibration.display_calib_file import load_display_calib, write_display_calib
 from flexsheet.experiments.stroke import DURATION_10S, SCRIPT_10S, run_seed
 from flexsheet.experiments.stroke_model import MARKER_PX, make_twin, simulate
 from flexsheet.model import geometry
+from flexsheet.model.sheet import Membrane
+from flexsheet.model.sheet_fem import FINGER_RADIUS, SheetFEM, SheetPhysics
+from flexsheet.twin.registration import sim_display_calib
+from flexsheet.twin.truth import TwinTruth
 
 log = logging.getLogger(__name__)
 
@@ -141,10 +146,6 @@ def sweep_tension(values, stretch: float = 0.04, depths=(0.010, 0.030), mesh: di
     tension ratio β = each of ``values``, pushed at the centre to each of ``depths`` (m) at clamp strain
     ``stretch``: per β and depth ``rms_mm`` (whole sheet) and ``max_mm`` (outside twice the fingertip
     radius), plus the same for the membrane model told the true β (``*_true_beta``: the model's own floor)."""
-    from flexsheet.model.sheet import Membrane
-    from flexsheet.model.sheet_fem import FINGER_RADIUS, SheetFEM, SheetPhysics
-    from flexsheet.twin.truth import TwinTruth
-
     truth = TwinTruth.draw(0, "ideal")
     rows = []
     for beta in values:
@@ -277,9 +278,6 @@ GRAPH_SWEEPS = {
 
 def _perturbed_calib(out: Path, scale: float, seed: int) -> Path:
     """The twin registration's display.yaml with both arm bases moved by ``scale`` (written under ``out``)."""
-    from flexsheet.calibration.display_calib_file import load_display_calib, write_display_calib
-    from flexsheet.twin.registration import sim_display_calib
-
     src = sim_display_calib(seed, "realistic")      # the launch's own twin registration (cached per seed)
     calib = load_display_calib(src)
     moved = perturb_bases({s: calib.arms[s].T_display_base for s in ("left", "right")}, scale, seed)

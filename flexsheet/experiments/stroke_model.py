@@ -52,11 +52,14 @@ from flexsheet.analysis.table1 import DD_CONVENTION, PAPER_TABLE1, table1_row, t
 from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints
 from flexsheet.arm.limiter import StreamLimiter
 from flexsheet.arm.tracking import TargetTracker
+from flexsheet.calibration.display_calib import nominal_display_calib
+from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.experiments.stroke_model_chart import plot as plot_chart
 from flexsheet.model import geometry
 from flexsheet.model.shapes import paper_cylinder
 from flexsheet.model.sheet import frame_from_clamps
 from flexsheet.planning.plan import Hold
+from flexsheet.planning.shape import planner_shape
 from flexsheet.planning.surface_planner import PlannerConfig, SurfacePlanner
 from flexsheet.twin.finger import FingerScript
 from flexsheet.twin.servo import JointServo, ServoParams
@@ -155,9 +158,6 @@ def make_twin(realism: str, seed: int, display_calib: str | None = None, marker_
     (a path; ``{seed}`` is replaced by the seed) when given and present, else the nominal bases
     (:func:`flexsheet.calibration.display_calib.nominal_display_calib`). ``marker_px`` defaults to
     :data:`MARKER_PX` of the realism. Raises ``ValueError`` for a file that is given but unreadable."""
-    from flexsheet.calibration.display_calib import nominal_display_calib
-    from flexsheet.calibration.display_calib_file import load_display_calib
-
     truth = TwinTruth.draw(int(seed), realism)
     if display_calib:
         path = display_calib.replace("{seed}", str(seed))
@@ -317,8 +317,6 @@ def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None
     if scene is None:
         shape = paper_cylinder()
     else:
-        from flexsheet.planning.shape import planner_shape
-
         shape = planner_shape(scene)
     finger = FingerScript(moving_time=moving_time, seed=seed, scene=scene, **(finger_kw or {}))
     rng = np.random.default_rng(1000 + seed)

@@ -41,11 +41,11 @@ import time
 
 import numpy as np
 
-from flexsheet.benches.vision import mc_rms_mm, real_stereo_rms, timing
+from flexsheet.benches.vision import DATA, mc_rms_mm, real_stereo_rms, timing
 from flexsheet.experiments import vision_twin as vt
 from flexsheet.experiments.triangulation_charts import plot_accuracy, plot_honest, plot_noise, plot_stability
 from flexsheet.twin.camera import StereoCameraTwin
-from flexsheet.twin.camera_config import SimConfig
+from flexsheet.twin.camera_config import REALISTIC_DROP_RATE, SimConfig
 from flexsheet.vision.camera_model import (
     DEFAULT_CAMERA_POSITION,
     bumblebee2_calibration,
@@ -53,6 +53,7 @@ from flexsheet.vision.camera_model import (
     look_at,
 )
 from flexsheet.vision.stereo import METHODS, StereoModel
+from flexsheet.vision.stereo_calibration import parse_board, validate_stereo
 from flexsheet.vision.tracker import FingertipTracker, TrackerConfig
 
 log = logging.getLogger(__name__)
@@ -258,8 +259,6 @@ def honest(seeds=(0, 1, 2), quick: bool = False) -> dict:
     quick: 12 × 2), moving error along the 10 s and 30 s strokes (quick: 3 s of the 10 s stroke) with the
     twin's drop rate (realistic 1 %), and — diagnostic only — the static error with a perfect registration
     (the truth's own camera), which separates image error from registration error."""
-    from flexsheet.twin.camera_config import REALISTIC_DROP_RATE
-
     n_pts, frames = (12, 2) if quick else (40, 3)
     pts = vt.static_points(n_pts)
     out: dict = {"target_mm": TARGET_MM, "seeds": list(seeds), "points": n_pts, "frames_per_point": frames}
@@ -406,8 +405,6 @@ def main(argv: list[str] | None = None) -> int:
     if a.quick:
         seeds = seeds[:1]
     os.makedirs(a.out, exist_ok=True)
-    from flexsheet.benches.vision import DATA
-    from flexsheet.vision.stereo_calibration import parse_board, validate_stereo
 
     log.info("accuracy vs speed (geometry Monte Carlo)...")
     ref = StereoModel.from_calib(bumblebee2_calibration(1024, 768, pixel_um=4.65))

@@ -31,10 +31,14 @@ from dataclasses import asdict, replace
 import cv2
 import numpy as np
 
+from flexsheet.calibration import procedures as P
 from flexsheet.calibration.display_calib import CameraEntry, DisplayCalib, nominal_display_calib
 from flexsheet.calibration.display_calib_file import load_display_calib, write_display_calib
 from flexsheet.twin.camera import twin_renderer
 from flexsheet.twin.camera_config import XIMEA_SENSOR, SimConfig
+from flexsheet.twin.finger import FingerScript
+from flexsheet.twin.registration import TwinSource, sim_display_calib
+from flexsheet.twin.registration_camera import CalibrationTwin
 from flexsheet.twin.truth import Spreads, TwinTruth
 from flexsheet.vision.tracker import FingertipTracker, TrackerConfig
 
@@ -85,10 +89,6 @@ def registered_camera(truth: TwinTruth, quick: bool = False, cache: str | None =
     procedure alone (:func:`flexsheet.calibration.procedures.run_camera_pose`, test preset, twin board views),
     cached under :func:`cache_dir` by a hash of the truth's camera and arms and of the procedure's sources.
     Ideal truth: the nominal registration (exact for it). Raises ``ValueError`` when a procedure fails."""
-    from flexsheet.calibration import procedures as P
-    from flexsheet.twin.registration import sim_display_calib
-    from flexsheet.twin.truth import Spreads
-
     cache = cache or cache_dir()
     if truth.realism == "ideal":
         path = os.path.join(cache, "display_nominal.yaml")
@@ -101,8 +101,6 @@ def registered_camera(truth: TwinTruth, quick: bool = False, cache: str | None =
     path = os.path.join(cache, f"camera_seed{truth.seed}_{_key(truth, P.QUICK.views)}.yaml")
     if os.path.isfile(path):
         return load_display_calib(path, require=("camera",)).camera, path
-    from flexsheet.twin.registration import TwinSource
-    from flexsheet.twin.registration_camera import CalibrationTwin
 
     log.info(f"registering the camera of a scaled truth (seed {truth.seed}, {P.QUICK.views} board views)...")
     o = P.QUICK
@@ -171,8 +169,6 @@ def moving_error(truth: TwinTruth, calib: dict, T_display_camera: np.ndarray, cf
     ``rate_hz`` each dropped with probability ``drop_rate``; the camera twin renders each frame's motion blur
     from the script's velocity. ``window_s``: only that long a stretch from the middle of the stroke
     (quick runs). Returns the error summary plus ``speed_mps`` (mean, max) and ``dropped``."""
-    from flexsheet.twin.finger import FingerScript
-
     fs = FingerScript(moving_time=moving_time, seed=sim_seed)
     t0, t1 = fs.t_move, fs.t_move + moving_time
     if window_s is not None:

@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from flexsheet.fem.served import served_model
 from flexsheet.model.force_depth import ForceDepth
 
 __all__ = ["N_POINTS", "STEP", "SOLVED_FROM", "build_force_depth", "contact_fit", "hertz_check"]
@@ -49,8 +50,6 @@ def build_force_depth(scene, model=None, n_points: int = N_POINTS, step: float =
     if not (math.isfinite(step) and step > 0.0 and math.isfinite(d_max) and d_max >= 2 * step):
         raise ValueError(f"step and depth_max must be > 0 m with depth_max >= 2 steps, got {step!r}, {d_max!r}")
     if model is None:
-        from flexsheet.fem.served import served_model
-
         model, _ = served_model(scene)
     depths = np.arange(0.0, d_max + 0.5 * step, step)
     P, N = scene.stroke_at(np.linspace(0.0, 1.0, n_points))

@@ -51,6 +51,9 @@ import math
 
 import numpy as np
 
+from flexsheet.fem.cache import cache_key
+from flexsheet.fem.reference.versions import SOLVER_VERSION
+
 __all__ = ["PATH_TABLE_VERSION", "GRID", "REACH", "SHIFT_STEP", "PathSnapshotModel", "path_table_key", "check_path_table", "stiffness_from_force",
            "TABLE_FIELDS"]
 
@@ -77,9 +80,6 @@ def path_table_key(scene_key: str, realtime_key: str) -> str:
     real-time model it corrects (:attr:`flexsheet.fem.scene_model.SceneModel.cache_key`: mesh, gmsh version, reach,
     finger), the reference solver's version, :data:`GRID` and :data:`REACH` (the stations are in the table)."""
     import json
-
-    from flexsheet.fem.cache import cache_key
-    from flexsheet.fem.reference.versions import SOLVER_VERSION
 
     return cache_key(PATH_TABLE_VERSION, scene_key, realtime_key, SOLVER_VERSION, json.dumps(GRID, sort_keys=True),
                      f"reach={REACH:.9g}")

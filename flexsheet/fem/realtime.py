@@ -27,9 +27,10 @@ import numpy as np
 from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
 from flexsheet.fem.contact import ContactFinger, finger_at, finger_from_tip
 from flexsheet.fem.corotational import solve_corotational
-from flexsheet.fem.deformation_checks import TetChecks, element_checks
+from flexsheet.fem.deformation_checks import TetChecks, element_checks, fold_operator
 from flexsheet.fem.material import Material
 from flexsheet.fem.mesh import MeshSpec, TetMesh, arc_points, cylinder_tet_mesh
+from flexsheet.fem.snapshots import SnapshotModel
 from flexsheet.fem.solver import CapacitanceSolver, FemModel, OutsideCandidates, solve_full
 
 log = logging.getLogger(__name__)
@@ -103,7 +104,6 @@ class CondensedSurface:
         self._tet_checks = TetChecks(self._out_points, self._mon_tets)
         # per-update helpers: the surface gather (support rows point at an appended zero row) and the fold
         # test as one sparse product (see folded_faces)
-        from flexsheet.fem.deformation_checks import fold_operator
 
         self._surf_take = np.where(self._surf_in_out >= 0, self._surf_in_out, len(self.solver.out_pts))
         self._fold_op, self._fold_rest = fold_operator(self._rest.astype(np.float64), self.faces,
@@ -213,8 +213,6 @@ class RealtimeModel(CondensedSurface):
         """Serve pushes inside the nonlinear snapshot ``table`` (:func:`flexsheet.fem.reference.snapshot_build.build_table`) from
         it; raises ``ValueError`` when the table is inconsistent. Thread-safe to call while updates run (the
         model is swapped in one assignment)."""
-        from flexsheet.fem.snapshots import SnapshotModel
-
         self.snapshots = SnapshotModel(table, self._rest.astype(np.float64), axial_max=axial_max, E=self.material.E)
 
     def _precompute(self) -> dict:

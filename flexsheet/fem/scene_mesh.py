@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexsheet.fem.mesh import MeshSpec, TetMesh, gmsh_tets, orient_tets, surface_faces
+from flexsheet.model.scenes import Scene
 
 __all__ = ["SceneMesh", "scene_mesh", "refine_centres", "support_plane", "DEFAULT_SCENE_SPEC"]
 
@@ -140,8 +141,6 @@ def scene_mesh(scene, spec: MeshSpec = DEFAULT_SCENE_SPEC, force_stl: bool = Fal
     Returns a :class:`SceneMesh`. Raises ``ValueError`` when ``scene`` is not a Scene or its support holds no
     boundary node, ``RuntimeError`` when gmsh fails (naming the scene). Deterministic for a given scene and
     spec (single-threaded Delaunay)."""
-    from flexsheet.model.scenes import Scene
-
     if not isinstance(scene, Scene):
         raise ValueError(f"scene must be a flexsheet.model.scenes.Scene, got {type(scene).__name__}")
     if not isinstance(spec, MeshSpec):

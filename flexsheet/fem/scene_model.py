@@ -50,9 +50,12 @@ from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
 from flexsheet.fem.contact import ContactFinger, held_finger
 from flexsheet.fem.material import Material
 from flexsheet.fem.mesh import MeshSpec, TetMesh
+from flexsheet.fem.path_snapshots import PathSnapshotModel, path_table_key
 from flexsheet.fem.realtime import CondensedSurface, Update, dist_to_points
 from flexsheet.fem.scene_mesh import DEFAULT_SCENE_SPEC, scene_mesh
 from flexsheet.fem.solver import CapacitanceSolver, FemModel
+from flexsheet.fem.sphere_snapshots import SphereSnapshotModel, sphere_frame, sphere_table_key
+from flexsheet.model.scenes import Scene
 
 log = logging.getLogger(__name__)
 
@@ -195,8 +198,6 @@ class SceneModel(CondensedSurface):
     def __init__(self, scene, spec: MeshSpec = DEFAULT_SCENE_SPEC, order: int = 2, finger_radius: float | None = None,
                  max_depth: float = 0.06, strain_limit: float = 1.0, cache_dir: str | None = DEFAULT_CACHE_DIR,
                  reach: float | None = None):
-        from flexsheet.model.scenes import Scene
-
         if not isinstance(scene, Scene):
             raise ValueError(f"scene must be a flexsheet.model.scenes.Scene, got {type(scene).__name__}")
         finger_radius = scene.finger.radius if finger_radius is None else finger_radius
@@ -240,8 +241,6 @@ class SceneModel(CondensedSurface):
         """Serve pushes inside a sphere scene's nonlinear table (:mod:`flexsheet.fem.sphere_snapshots`) from it, the
         linear model elsewhere. Raises ``ValueError`` when the table is inconsistent or was built for another
         sphere (centre or radius). Thread-safe to call while updates run (one assignment)."""
-        from flexsheet.fem.sphere_snapshots import SphereSnapshotModel, sphere_frame
-
         fr = sphere_frame(self.scene)
         sm = SphereSnapshotModel(table, self._rest.astype(np.float64), E=self.material.E)
         if np.linalg.norm(sm.frame.center - fr.center) > 1e-9 or abs(sm.frame.radius - fr.radius) > 1e-9:
@@ -255,8 +254,6 @@ class SceneModel(CondensedSurface):
         depth), the linear model elsewhere. Raises ``ValueError`` when the table is inconsistent or was built on
         another real-time mesh. Precomputes the table's contact moves (about 1 s for the shipped tables); then
         thread-safe to call while updates run (one assignment)."""
-        from flexsheet.fem.path_snapshots import PathSnapshotModel
-
         n_path = max(2, int(math.ceil(self.scene.stroke_length() / 0.0002)) + 1)    # 0.2 mm apart
         pf = np.linspace(0.0, 1.0, n_path)
         path, _ = self.scene.stroke_at(pf)
@@ -408,9 +405,6 @@ def attach_scene_table(model: SceneModel, cache: ArrayCache) -> tuple[str | None
     ``cache`` (this machine's cache, then the shipped store ``flexsheet/fem/data``). Returns (kind "sphere" or "path",
     where: "cache" or "shipped store (flexsheet/fem/data)"), or (kind, None) when none is stored (the model stays
     linear). Raises ``ValueError`` when a stored table is unusable (inconsistent, another mesh)."""
-    from flexsheet.fem.path_snapshots import path_table_key
-    from flexsheet.fem.sphere_snapshots import sphere_frame, sphere_table_key
-
     try:
         sphere_frame(model.scene)
         kind, table = "sphere", cache.load("spheresnap", sphere_table_key(model.scene))

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexsheet.fem.cache import cache_key
 from flexsheet.fem.material import Material
 from flexsheet.fem.reference.capsule_contact import DEFAULT_CONTACT
 from flexsheet.fem.reference.mesh import RefSpec
@@ -128,8 +129,6 @@ def table_key(grid: SnapshotGrid, spec: RefSpec, nu: float, finger_radius: float
     ``Jm`` existed); forces are scaled by E at run time. ``contact``: the finger's contact law
     (:data:`flexsheet.fem.reference.capsule_contact.CONTACT_LAWS`)."""
     import gmsh
-
-    from flexsheet.fem.cache import cache_key
 
     # spec.key() of a quarter spec leaves out ``cut`` (its azimuth-0 mesh does not depend on it); the off-axis
     # entries' meshes do

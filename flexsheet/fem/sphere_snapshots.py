@@ -36,6 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexsheet.fem.cache import cache_key
+from flexsheet.fem.reference.versions import SOLVER_VERSION, UNLOAD_VERSION
 from flexsheet.fem.snapshots import bilinear
 
 __all__ = ["SphereGrid", "SphereFrame", "sphere_frame", "SphereSnapshotModel", "SPHERE_TABLE_VERSION",
@@ -261,9 +263,6 @@ def sphere_table_key(scene, grid: SphereGrid = DEFAULT_SPHERE_GRID, spec=DEFAULT
     """Cache key (kind "spheresnap") of ``scene``'s table: the scene's values (:meth:`Scene.key`, its material
     included), the grid, the mesh sizes, gmsh's version and the solver's versions — what the FEM node looks up."""
     import gmsh
-
-    from flexsheet.fem.cache import cache_key
-    from flexsheet.fem.reference.versions import SOLVER_VERSION, UNLOAD_VERSION
 
     return cache_key(SPHERE_TABLE_VERSION, scene.key(), grid.key(), *(f"{x:.9g}" for x in spec), gmsh.__version__,
                      SOLVER_VERSION, UNLOAD_VERSION)

@@ -55,6 +55,7 @@ from pydantic import (
 )
 
 from flexsheet.model import geometry as paper
+from flexsheet.model import shapes
 from flexsheet.model.scene_parts import (
     GENT_JM_RUBBER,
     MAX_EXTENT,
@@ -184,8 +185,6 @@ class Scene(BaseModel):
         """The planner's :class:`flexsheet.model.shape_base.Shape` (analytic for cylinder/sphere/rounded box,
         :class:`~flexsheet.model.shapes.MeshShape` for a mesh; cached)."""
         if self._shape is None:
-            from flexsheet.model import shapes
-
             o = self.object
             R = o.pose.R
             if o.kind == "cylinder":

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from flexsheet.model import geometry
 from flexsheet.model.checks import check_positive
 from flexsheet.model.shape_base import Shape, unit3, vec3
 from flexsheet.model.vec import Vec, add, axpy, cross, dot, norm, perp_unit, scale, sub, unit
@@ -423,8 +424,6 @@ class MeshShape(Shape):
 
 def paper_cylinder() -> Cylinder:
     """The paper's cylinder (§VI-A) in the display frame: Ø 50√2 mm × 120 mm, axis +y through (−R, 0, 0)."""
-    from flexsheet.model import geometry
-
     return Cylinder(tuple(geometry.CYLINDER_CENTER), tuple(geometry.CYLINDER_AXIS), geometry.CYLINDER_RADIUS,
                     geometry.CYLINDER_LENGTH)
 
@@ -438,8 +437,6 @@ def make_shape(kind: str, spec: dict[str, Any] | None = None) -> Shape:
     plane: point, normal (default: the home sheet plane x = 0); mesh: path, translation, scale.
     Raises ``ValueError`` naming an unknown kind or key, or a bad value.
     """
-    from flexsheet.model import geometry
-
     spec = dict(spec or {})
     R = geometry.CYLINDER_RADIUS
     try:

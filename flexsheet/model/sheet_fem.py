@@ -70,6 +70,9 @@ import scipy.sparse.linalg as spla
 
 from flexsheet.model import geometry
 from flexsheet.model.checks import check_positive
+from flexsheet.model.sheet import clamp_half_span
+from flexsheet.model.sheet_prestress import gripped_prestress, taut_floor
+from flexsheet.model.tension import SheetMaterial, tension
 
 __all__ = ["FINGER_RADIUS", "SheetPhysics", "SheetFEM", "IndentSolution", "bilinear"]
 
@@ -119,9 +122,6 @@ class SheetPhysics:
         truth's E and thickness t, T_u = :func:`flexsheet.model.tension.tension` at the strain the sheet takes
         between the jaws, stretch·(1 − grip slip) + pre-strain, and the truth's ``tension_ratio`` (None: the
         gripped pre-stress field). ``kw`` overrides fields. Raises ``ValueError`` on a bad stretch."""
-        from flexsheet.model.sheet import clamp_half_span
-        from flexsheet.model.tension import SheetMaterial, tension
-
         if not (math.isfinite(stretch) and stretch >= 0.0):
             raise ValueError(f"stretch must be finite and >= 0, got {stretch!r}")
         mat = SheetMaterial(young=float(truth.sheet_young), thickness=float(truth.sheet_thickness), size=size)
@@ -251,7 +251,6 @@ class SheetFEM:
         A0 = physics.young * physics.thickness / (1.0 - nu * nu)
         self.C = A0 * np.array([[1.0, nu, 0.0], [nu, 1.0, 0.0], [0.0, 0.0, 0.5 * (1.0 - nu)]])
         if physics.gripped:                                         # pre-stress, Voigt (3, nel, nq), N/m
-            from flexsheet.model.sheet_prestress import gripped_prestress, taut_floor
             self._N0 = physics.tension_u * taut_floor(gripped_prestress(self.x, self.y, nu, intorder=5))
         else:
             n0 = np.array([physics.tension_u, physics.tension_ratio * physics.tension_u, 0.0])

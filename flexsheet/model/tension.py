@@ -1,12 +1,13 @@
-"""Sheet tension for compliance: stretch → membrane tension → normal stiffness at the contact, and back (pure).
+"""Sheet tension for compliance: clamp strain → membrane tension → normal stiffness at the contact, and back
+(pure).
 
 Model (the cheapest that captures the paper's Fig. 1 mechanism, "bias tension varies the compliance"):
 
 * The urethane sheet (240 × 240 × 1 mm, paper §IV) is clamped along two opposite edges (the arms' clamps,
-  ``axis_u``) and free along the other two. Pulling the clamps apart by the engineering strain ε
-  (stretch λ = 1 + ε) puts it in uniaxial tension. Rubber is modelled as an incompressible neo-Hookean
-  solid (Treloar, *The Physics of Rubber Elasticity*, 3rd ed., 1975, ch. 5; shear modulus μ = E/3):
-  nominal stress P = μ (λ − λ⁻²), clamp force F = P·W₀·t₀, and tension per unit *current* width
+  ``axis_u``) and free along the other two. Pulling the clamps apart by the engineering strain ε (the
+  ``stretch`` of every name here; λ = 1 + ε is the stretch ratio) puts it in uniaxial tension. Rubber is
+  modelled as an incompressible neo-Hookean solid (Treloar, *The Physics of Rubber Elasticity*, 3rd ed.,
+  1975, ch. 5; shear modulus μ = E/3): nominal stress P = μ (λ − λ⁻²), clamp force F = P·W₀·t₀, and tension per unit *current* width
   T = F / (W₀ λ^{-1/2}) = μ t₀ (λ − λ⁻²) λ^{1/2}  [N/m].
 * Young's modulus: E = 2.46 MPa, assuming Shore A 50 urethane rubber (the paper gives no grade), from
   Gent's hardness relation E[MPa] = 0.0981 (56 + 7.62336 S) / (0.137505 (254 − 2.54 S))
@@ -26,11 +27,11 @@ Model (the cheapest that captures the paper's Fig. 1 mechanism, "bias tension va
   and the membrane's stretching c (N/m³, large-deflection stiffening). The stiffness the finger feels at depth
   d is its slope, k = g·[T·(w + 2 w₂ d) + b + 2 a d] + 3 c d². The defaults (w₂ = b = a = c = ε₀ = 0) are the
   string band above.
-* The inverse (requested stiffness → stretch) is solved by safeguarded Newton on λ (k is monotone in λ).
-  Stretch is clamped to [``min_stretch``, ``max_stretch``] and the clamp force to ``max_force``; when the
+* The inverse (requested stiffness → strain ε) is solved by safeguarded Newton on λ (k is monotone in λ).
+  ε is clamped to [``min_stretch``, ``max_stretch``] and the clamp force to ``max_force``; when the
   object is stiffer than the sheet can present, the result says so (``saturated=True``).
 
-Units: m, N, N/m, Pa; stretch is the engineering strain between the clamps (dimensionless).
+Units: m, N, N/m, Pa; ``stretch`` is ε, the engineering strain between the clamps (dimensionless), never λ.
 """
 
 from __future__ import annotations

@@ -61,12 +61,14 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
+from flexsheet.model.force_depth import scene_scale
 from flexsheet.model.shape_base import Shape
 from flexsheet.model.sheet import clamp_half_span, clamp_points
 from flexsheet.model.tension import (
     SheetMaterial,
     TensionResult,
     max_stretch_within_force,
+    press_force,
     stiffness,
     stretch_for_force,
     stretch_for_stiffness,
@@ -107,9 +109,6 @@ def sheet_scene_scale(table, mat: SheetMaterial, max_stretch: float, stroke_dept
     its force at ``mat.min_stretch`` and at ``max_stretch`` bound every mapped force of ``table`` over
     :func:`scale_depths` of ``stroke_depth`` m, with contrast gain ``gain``. Raises ``ValueError`` as
     ``scene_scale``."""
-    from flexsheet.model.force_depth import scene_scale
-    from flexsheet.model.tension import press_force
-
     lo, hi = scale_depths(stroke_depth)
     return scene_scale(table, lambda d: press_force(mat.min_stretch, mat, 0.0, d),
                        lambda d: press_force(max_stretch, mat, 0.0, d), lo, hi, gain)

@@ -27,11 +27,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from flexsheet.calibration.display_calib import nominal_display_calib
+from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model import geometry
 from flexsheet.model.checks import check_pose
 from flexsheet.model.projector import Projector
 from flexsheet.model.scenes import Scene, load_scene, paper_scene
-from flexsheet.model.sheet import SheetSurface, clamp_poses
+from flexsheet.model.sheet import SheetSurface, clamp_half_span, clamp_poses
 from flexsheet.model.sheet_model import (
     NominalSheetModel,
     PendingPush,
@@ -41,6 +43,7 @@ from flexsheet.model.sheet_model import (
 )
 from flexsheet.rendering.correction import MODELS, choose_sheet_model, predict_model_errors
 from flexsheet.rendering.stereo_renderer import cylinder_draw_mesh, scaled_projector, vertex_normals
+from flexsheet.runtime.background import lower_priority
 
 __all__ = ["RendererState", "ErrorTable", "pick_model", "check_sheet", "silhouette_probes", "AUTO_MODELS",
            "RenderGeometry", "load_geometry", "build_table"]
@@ -100,8 +103,6 @@ class ErrorTable:
         """:meth:`build` on the home (unpushed, untilted) sheet at clamp stretch ``stretch_node`` with
         ``config``'s half width, on the paper's imaginary screen: the table the renderer node picks its models
         from (and the correction experiment's live path)."""
-        from flexsheet.model.sheet import clamp_half_span
-
         home = SheetSurface(np.zeros(3), geometry.SCREEN_NORMAL, [0.0, 1.0, 0.0], clamp_half_span(stretch_node),
                             config.half_width)
         return cls.build(probes, eye=eye, projector=projector, screen_point=geometry.SCREEN_POINT,
@@ -135,8 +136,6 @@ def build_table(settings: dict, node: float, nice: int = 0) -> float:
     Module-level so that a worker process can run it (the node builds missing tables off its render loop, at
     ``nice`` below its priority, in the idle scheduling class: :func:`flexsheet.runtime.background.lower_priority`)."""
     if nice:
-        from flexsheet.runtime.background import lower_priority
-
         lower_priority(nice)
     NominalSheetModel(**settings).table(float(node))
     return float(node)
@@ -304,9 +303,6 @@ def load_geometry(scene_file: str | None = None, display_calib: str | None = Non
     (:mod:`flexsheet.rendering.viewpoint`), whatever the entry's mode. Raises ``ValueError`` naming the file and key: scene
     invalid, display.yaml unreadable or without its ``projector`` or ``eye`` entry.
     """
-    from flexsheet.calibration.display_calib import nominal_display_calib
-    from flexsheet.calibration.display_calib_file import load_display_calib
-
     log = []
     sc = paper_scene() if not scene_file else load_scene(scene_file)
     log.append(f"drawing {sc.describe()}")

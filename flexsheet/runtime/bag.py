@@ -31,6 +31,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from flexsheet.runtime import lockstep
 from flexsheet.runtime.bag_export import export_bag
 from flexsheet.runtime.bag_read import (
     ENCODING,
@@ -43,6 +44,7 @@ from flexsheet.runtime.bag_read import (
 from flexsheet.runtime.bag_recover import recover_bag
 from flexsheet.runtime.bag_write import BagWriter
 from flexsheet.runtime.config import NodeConfig
+from flexsheet.runtime.discovery import resolve_graph
 from flexsheet.runtime.node import Node
 from messages import Heartbeat, TopicStats
 
@@ -163,8 +165,6 @@ class PlayerNode(Node):
         self.done = asyncio.Event()
         self.sent = 0
         if self.params.mode == "lockstep":
-            from flexsheet.runtime import lockstep
-
             lockstep.check(self)  # ConfigError (exit 78) unless the player is in a lockstep container
             self._task = asyncio.get_running_loop().create_task(lockstep.play(self))
             return
@@ -219,8 +219,6 @@ class PlayerNode(Node):
 # ------------------------------------------------------------------------------------------------ CLI
 def _graph(launch: str | None, endpoints: list[str] | None = None):
     """(peers, curve) of the graph to record (:func:`flexsheet.runtime.discovery.resolve_graph`)."""
-    from flexsheet.runtime.discovery import resolve_graph
-
     g = resolve_graph(launch, endpoints)
     return g.peers, g.curve
 

@@ -29,6 +29,7 @@ from mcap.writer import CompressionType, Writer
 from flexsheet.runtime.bag_read import ENCODING, GAP_SCHEMA, GAP_TOPIC, BagSummary, McapScan
 from flexsheet.runtime.codec import DecodeError, decode_any
 from flexsheet.runtime.extensions import bag_channels
+from messages import MESSAGE_TYPES
 
 __all__ = ["export_bag"]
 
@@ -129,8 +130,6 @@ def _replay(w: Writer, ops: list[tuple], ids: dict) -> None:
 
 
 def _schema(name: str) -> dict:
-    from messages import MESSAGE_TYPES
-
     if name == _IMAGE:
         return _IMAGE_SCHEMA
     if name == "flexsheet.RecorderGap":

@@ -33,6 +33,7 @@ import msgpack
 from mcap.writer import CompressionType, Writer
 
 from flexsheet.runtime.bag_read import ENCODING, GAP_SCHEMA, GAP_TOPIC, RAW_ENCODING, McapScan
+from flexsheet.runtime.extensions import bag_channels
 
 __all__ = ["BagWriter", "MAX_SEQ_JUMP", "CHUNK_SIZE", "FLUSH_PERIOD"]
 
@@ -133,7 +134,6 @@ class BagWriter:
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self.foxglove = None
         if foxglove:  # Foxglove channels (/viz/*, images) beside the lossless ones: the bag opens with the scene
-            from flexsheet.runtime.extensions import bag_channels
             self.foxglove = bag_channels("foxglove")(self._writer)
         self._thread = threading.Thread(target=self._run, name="bag-writer", daemon=True)
         self._thread.start()

@@ -17,6 +17,7 @@ from typing import Any
 from flexsheet.runtime.codec import DecodeError, decode
 from flexsheet.runtime.launch import load_launch
 from flexsheet.runtime.launch_config import curve_config
+from flexsheet.runtime.services import ServiceError, call_async
 from flexsheet.runtime.zmq.transport import ZmqTransport
 from messages import Heartbeat, Message
 from messages import topics as T
@@ -161,8 +162,6 @@ class GraphClient:
     def call(self, node: str, service: str, args: dict | None = None, timeout: float = 5.0) -> Any:
         """Call ``service`` of ``node``; its result. Raises :class:`flexsheet.runtime.services.ServiceError`
         with the node's error line, ``TimeoutError`` when the node is not heard."""
-        from flexsheet.runtime.services import ServiceError, call_async
-
         hb = self.node(node, timeout)
         if not hb.service_endpoint:
             raise ServiceError(f"node {node!r} offers no services")

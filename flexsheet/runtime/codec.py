@@ -20,7 +20,7 @@ import msgpack
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from messages import Message, Topic
+from messages import MESSAGE_TYPES, Message, Topic
 
 __all__ = ["DecodeError", "encode", "decode", "decode_any", "peek_schema", "peek_stamp", "MAX_ARRAY_BYTES"]
 
@@ -219,8 +219,6 @@ def decode(frames: list, topic: Topic) -> Message:
 
 def decode_any(frames: list) -> Message:
     """Decode frames by the schema name they carry (used by tools that do not know the topic's type)."""
-    from messages import MESSAGE_TYPES
-
     topic_name = _topic_name(frames[0]) if frames else "?"
     obj = _unpack(frames, topic_name)
     cls = MESSAGE_TYPES.get(obj["s"]) if type(obj["s"]) is str else None

@@ -51,6 +51,9 @@ from flexsheet.runtime.bus import Bus, ContainerTransport
 from flexsheet.runtime.clock import SimClock
 from flexsheet.runtime.config import EXIT_CONFIG, ConfigError, NodeConfig
 from flexsheet.runtime.console import console_logger
+from flexsheet.runtime.launch import LaunchError, load_launch
+from flexsheet.runtime.launch_config import curve_config, node_config
+from flexsheet.runtime.lockstep import SIM_EPOCH, run_live
 from flexsheet.runtime.node import Node
 from flexsheet.runtime.plugins import node_class
 from flexsheet.runtime.transport import TransportError
@@ -220,8 +223,6 @@ class Container:
     async def _drive(self) -> None:
         """Drive the live simulated clock (:func:`flexsheet.runtime.lockstep.run_live`) until ``sim_until``
         simulated seconds (then stop the container) or the stop; write the clock figures."""
-        from flexsheet.runtime.lockstep import SIM_EPOCH, run_live
-
         t0 = time.monotonic()
         ready_s = None
 
@@ -303,9 +304,6 @@ def container_from_launch(lf, name: str, host: str | None = None, out: str | Non
     :class:`~flexsheet.runtime.clock.SimClock` (lockstep replay). Raises ``LaunchError`` when no node of the
     file is in that container on that host, or when its nodes span hosts and ``host`` is None.
     """
-    from flexsheet.runtime.launch import LaunchError
-    from flexsheet.runtime.launch_config import curve_config, node_config
-
     names = container_members(lf, name, host)
     if not names:
         where = f" on host {host!r}" if host else ""
@@ -324,7 +322,6 @@ def container_from_launch(lf, name: str, host: str | None = None, out: str | Non
     live = getattr(lf, "clock", "wall") == "sim"
     clock = SimClock(live=live) if (lockstep or live) else None
     if live:   # simulated time stands at its epoch while the nodes set up, then runs (run_live)
-        from flexsheet.runtime.lockstep import SIM_EPOCH
 
         clock.set(SIM_EPOCH)
     bus = Bus(name, peers, curve_config(lf, host), clock)
@@ -349,8 +346,6 @@ def run_container(launch: str, name: str, host: str | None = None, out: str | No
     """``flexsheet run --container NAME --launch FILE``: run that container in this process; returns the exit
     status (78 for a launch-file or configuration error)."""
     import sys
-
-    from flexsheet.runtime.launch import LaunchError, load_launch
 
     try:
         lf = load_launch(launch)

@@ -12,9 +12,12 @@ import time
 
 import numpy as np
 
+from flexsheet.runtime.codec import encode
 from flexsheet.runtime.discovery import Graph
+from flexsheet.runtime.services import ServiceError, call, call_async
 from flexsheet.runtime.tools import collect_heartbeats, graph
 from messages import topics as T
+from messages.common import Header
 
 __all__ = ["param_list", "param_get", "param_set", "service_list", "service_call", "topic_pub"]
 
@@ -41,8 +44,6 @@ def _node_service(args: argparse.Namespace) -> tuple[str, object, bytes | None] 
 
 def _call(args: argparse.Namespace, service: str, call_args: dict):
     """(True, result) or (False, exit code) after saying why on stderr."""
-    from flexsheet.runtime.services import ServiceError, call
-
     found = _node_service(args)
     if isinstance(found, int):
         return False, found
@@ -125,8 +126,6 @@ def _message(topic, data: dict, seq: int, now: float):
     it has one."""
     import re
 
-    from messages.common import Header
-
     data = dict(data)
     data.setdefault("header", {"stamp": float(now), "frame_id": "display", "seq": seq})
     if isinstance(data["header"], dict):
@@ -178,9 +177,6 @@ async def _publish(args: argparse.Namespace, g: Graph, topic, data: dict) -> int
     """``topic pub`` once the message is known good: each subscriber of ``args.topic`` in graph ``g`` gets every
     message by a ``topic/pub`` call to its service socket (:func:`topic_pub`). The tool only connects, as a
     client, so its leaving is a closed connection: the graph never connects to it nor disconnects from it."""
-    from flexsheet.runtime.codec import encode
-    from flexsheet.runtime.services import ServiceError, call_async
-
     curve = g.curve
     beats = await collect_heartbeats(g.peers, args.timeout, curve, g.names)
     subs = {n: hb for n, hb in beats.items()

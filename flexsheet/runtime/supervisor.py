@@ -14,10 +14,13 @@ import sys
 import time
 from pathlib import Path
 
+from flexsheet.runtime.codec import DecodeError, decode
 from flexsheet.runtime.config import EXIT_CONFIG
 from flexsheet.runtime.console import console_logger
 from flexsheet.runtime.launch import LaunchError, LaunchFile, NodeSpec, RespawnSpec
 from flexsheet.runtime.launch_config import curve_config
+from flexsheet.runtime.zmq.transport import ZmqTransport
+from messages import topics as T
 
 #: exit codes of a node or container stopped by the launcher that are not failures (0, SIGINT's 130 and the
 #: signals themselves)
@@ -356,10 +359,6 @@ class Supervisor:
         """Watch every node's heartbeat on ``/diagnostics`` (all hosts of the file) and report, once per
         transition, a node that goes silent for ``3 × heartbeat_period`` (its host is gone, partitioned or
         the node hangs) and when it comes back. Counts go into ``self.lost_events``."""
-        from flexsheet.runtime.codec import DecodeError, decode
-        from flexsheet.runtime.zmq.transport import ZmqTransport
-        from messages import topics as T
-
         last: dict[str, float] = {}
         host_of = {n: s.host for n, s in self.lf.nodes.items()}
         lost: set[str] = set()

@@ -55,7 +55,9 @@ import cv2
 import numpy as np
 
 from flexsheet.model.checks import check_pose
+from flexsheet.model.geometry import CYLINDER_CENTER, CYLINDER_RADIUS, SHEET_SIZE
 from flexsheet.twin.camera_config import SimConfig
+from flexsheet.vision.stereo import StereoModel
 
 __all__ = ["nail_normal", "StereoCameraTwin", "twin_renderer", "default_trajectory"]
 
@@ -82,8 +84,6 @@ def default_trajectory(t: float, amplitude_rad: float = 1.05, period_s: float = 
     θ(t) = amplitude · sin(2π t / period) around its axis (0 = facing the user), ``hover_m`` above its
     surface. Returns (position (3,) m, velocity (3,) m/s), display frame (scene: cylinder axis along y
     through (−R, 0, 0))."""
-    from flexsheet.model.geometry import CYLINDER_CENTER, CYLINDER_RADIUS
-
     w = 2 * math.pi / period_s
     th = amplitude_rad * math.sin(w * t)
     dth = amplitude_rad * w * math.cos(w * t)
@@ -158,8 +158,6 @@ class StereoCameraTwin:
     """
 
     def __init__(self, calib: dict, T_display_camera: np.ndarray, cfg: SimConfig | None = None):
-        from flexsheet.vision.stereo import StereoModel
-
         self.cfg = cfg or SimConfig()
         self.cfg.validate()
         T = check_pose("T_display_camera", T_display_camera, tol=1e-3)
@@ -203,8 +201,6 @@ class StereoCameraTwin:
         return A, A + c.finger_length * self._fdir
 
     def _background(self, side: str) -> np.ndarray:
-        from flexsheet.model.geometry import SHEET_SIZE
-
         w, h = self.size
         room = 25 + 8 * cv2.resize(self.rng.normal(0, 1, (8, 8)), (w, h), interpolation=cv2.INTER_CUBIC)
         img = np.clip(room, 0, 255).astype(np.uint8)

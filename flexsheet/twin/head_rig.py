@@ -19,7 +19,7 @@ from flexsheet.calibration.head_camera import design_head_camera
 from flexsheet.model import geometry
 from flexsheet.twin.head import Viewer, seeded_stream
 from flexsheet.twin.head_camera import HeadCameraTwin
-from flexsheet.vision.glasses import GlassesBoard
+from flexsheet.vision.glasses import GLASSES_AXES, GlassesBoard
 
 __all__ = ["true_head_camera", "HeadRigTwin"]
 
@@ -77,8 +77,6 @@ class HeadRigTwin:
 
     def chin_rest_image(self, V=geometry.EYE) -> np.ndarray:
         """The viewer on the chin rest (the true eye at ``V`` (3,) m to ~1 mm), glasses on: one image."""
-        from flexsheet.vision.glasses import GLASSES_AXES
-
         T = np.eye(4)
         T[:3, :3] = GLASSES_AXES
         eye = np.asarray(V, float) + (0.0 if self.ideal else self._rng.normal(0.0, 0.001, 3))

@@ -15,7 +15,12 @@ from dataclasses import asdict
 import numpy as np
 
 from flexsheet.calibration.display_calib_file import write_display_calib
+from flexsheet.calibration.head_camera import SITTINGS
 from flexsheet.calibration.procedures import FULL, QUICK, Options, run_all
+from flexsheet.calibration.sheet import Press, model_error, plan_presses
+from flexsheet.model.tension import SheetMaterial
+from flexsheet.twin.head_rig import HeadRigTwin
+from flexsheet.twin.load_cell import LoadCellTwin
 from flexsheet.twin.registration_camera import CalibrationTwin
 from flexsheet.twin.truth import TwinTruth
 
@@ -75,8 +80,6 @@ class TwinSource:
         return [r for s, u, v, ds in plan for r in cell.press(s, u, v, ds)]
 
     def _load_cell(self):
-        from flexsheet.twin.load_cell import LoadCellTwin
-
         if getattr(self, "_cell", None) is None:
             self._cell = LoadCellTwin(self.twin.truth, seed=self.twin.truth.seed)
         return self._cell
@@ -88,8 +91,6 @@ class TwinSource:
 
     def head_chin_rest_images(self) -> list[np.ndarray]:
         """The viewer on the chin rest, glasses on, seen by the head camera: one image per sitting."""
-        from flexsheet.calibration.head_camera import SITTINGS
-
         rig = self._head_rig()
         return [rig.chin_rest_image() for _ in range(SITTINGS)]
 
@@ -98,8 +99,6 @@ class TwinSource:
         return self._head_rig().pupillometer_ipd()
 
     def _head_rig(self):
-        from flexsheet.twin.head_rig import HeadRigTwin
-
         if getattr(self, "_rig", None) is None:
             t = self.twin.truth
             self._rig = HeadRigTwin(t.seed, t.realism)
@@ -152,10 +151,6 @@ def score_sheet(truth: TwinTruth, sheet) -> dict:
     """The sheet entry against the true force (noise-free) at every reading of the press plan:
     ``model_error_pct`` / ``model_rms_pct`` (the identified model), ``nominal_error_pct`` (the string band it
     replaces), ``fitted_median_pct`` (what the fit saw, with the load cell's noise) and ``target_pct``."""
-    from flexsheet.calibration.sheet import Press, model_error, plan_presses
-    from flexsheet.model.tension import SheetMaterial
-    from flexsheet.twin.load_cell import LoadCellTwin
-
     cell = LoadCellTwin(truth)
     true = [Press(s, u, v, d, cell.true_force(s, u, v, d)) for s, u, v, ds in plan_presses() for d in ds]
     med, rms = model_error(sheet.material(), true)

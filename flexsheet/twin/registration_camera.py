@@ -31,7 +31,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from flexsheet.arm.kinematics import ArmKinematics, clamp_joints, home_joints
+from flexsheet.calibration.camera_pose import board_centre
 from flexsheet.model import geometry
+from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
 from flexsheet.model.sheet import clamp_poses
 from flexsheet.twin.truth import TwinTruth
 from flexsheet.vision.stereo_calibration import BoardSpec
@@ -81,9 +84,6 @@ def commanded_sheet_joints(T_sheet_cmd: np.ndarray, stretch: float = 0.0, cache:
     (:func:`flexsheet.model.sheet.clamp_poses`) solved with the *nominal* kinematics, seeded at the home
     joints. Returns ``{"left": (6,), "right": (6,)}`` rad; raises ``ValueError`` naming the arm that cannot
     reach it. ``cache``: a dict to keep the kinematics in between calls."""
-    from flexsheet.arm.kinematics import ArmKinematics, clamp_joints
-    from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
-
     cache = {} if cache is None else cache
     for side, base in (("left", LEFT_BASE), ("right", RIGHT_BASE)):
         cache.setdefault(side, ArmKinematics(side, base))
@@ -291,8 +291,6 @@ class CalibrationTwin:
                  bow_mm: float = 0.0) -> list[np.ndarray]:
         """Sub-sample DN images (one per camera, (H·ss, W·ss) float32) of ``board`` on the sheet at its true pose
         ``T_sheet`` (4, 4); arguments as :meth:`board_views`."""
-        from flexsheet.calibration.camera_pose import board_centre
-
         key = (board, round(self.ss))
         if key not in self._tex:
             self._tex[key] = board_texture(board)
@@ -409,8 +407,6 @@ class CalibrationTwin:
         """Stereo pairs of the clamp markers while arm ``side`` goes through the commanded joints in
         ``joint_list`` (each (6,) rad) and the other arm rests at ``other_q`` (default: its home joints).
         Both arms' markers are in view (the detector must pick the right one)."""
-        from flexsheet.arm.kinematics import home_joints
-
         other = "right" if side == "left" else "left"
         oq = home_joints(other) if other_q is None else np.asarray(other_q, float)
         P_other = self.truth.clamp_marker_position(other, oq)

@@ -23,6 +23,8 @@ from flexsheet.calibration import projector as pj_mod
 from flexsheet.calibration.display_calib import nominal_display_calib
 from flexsheet.calibration.procedures import FULL, QUICK
 from flexsheet.calibration.projector_joint import refine_joint
+from flexsheet.twin.registration_camera import CalibrationTwin
+from flexsheet.twin.truth import TwinTruth
 
 log = logging.getLogger(__name__)
 
@@ -49,9 +51,6 @@ def _projector(pcs, cam, K, size, fit_k1):
 
 
 def _seed_sweep(seed: int, realism: str, quick: bool) -> dict:
-    from flexsheet.twin.registration_camera import CalibrationTwin
-    from flexsheet.twin.truth import TwinTruth
-
     opts = QUICK if quick else FULL
     cam_n = [n for n in CAMERA_N if n <= (12 if quick else 21)]
     pj_n = [n for n in PROJECTOR_N if n <= (5 if quick else 8)]
@@ -110,9 +109,6 @@ def _failure_modes(seed: int, realism: str) -> dict:
     """A dark sheet (projector white on the sheet → decoded pixels, projector error or the refusal) and a bowed
     board (sag at the sheet corners → camera error with the bow fitted and with a flat board assumed), on one
     seed."""
-    from flexsheet.twin.registration_camera import CalibrationTwin
-    from flexsheet.twin.truth import TwinTruth
-
     truth = TwinTruth.draw(seed, realism)
     twin = CalibrationTwin(truth, seed=seed + 1000)
     nom = nominal_display_calib()

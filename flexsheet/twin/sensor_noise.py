@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from flexsheet.twin.registration_camera import NoiseModel, TrueCamera, board_texture
+from flexsheet.vision.stereo_calibration import parse_board
 
 __all__ = ["measure_ximea_noise"]
 
@@ -111,8 +112,6 @@ def measure_ximea_noise(directory: str, square: float = 0.024, blur_grid=None) -
     ``black_dn``, ``white_dn``, ``corner_rms_px`` (per-view reprojection RMS of the calibration: corner jitter
     plus model error). Raises ``ValueError`` if no image shows the board.
     """
-    from flexsheet.vision.stereo_calibration import parse_board
-
     board = parse_board("chessboard:9x6", square)
     blur_grid = np.arange(0.3, 1.55, 0.06) if blur_grid is None else np.asarray(blur_grid)
     crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 40, 1e-3)

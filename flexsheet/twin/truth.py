@@ -49,6 +49,7 @@ import cv2
 import numpy as np
 import pinocchio as pin
 
+from flexsheet.arm.kinematics import URDF_PATH
 from flexsheet.calibration.display_calib import (
     BOOTSTRAP_FILE,
     NOMINAL_CLAMP_MARKER,
@@ -58,6 +59,9 @@ from flexsheet.calibration.display_calib import (
     stereo_from_vector,
     stereo_vector,
 )
+from flexsheet.model.geometry import SHEET_THICKNESS
+from flexsheet.model.tension import URETHANE_E
+from flexsheet.vision.stereo_calibration import detect_board, parse_board
 
 __all__ = ["Spreads", "TwinTruth", "TruthArm", "bootstrap_stereo_calibration", "random_rotation"]
 
@@ -109,8 +113,6 @@ def bootstrap_stereo_calibration(left: list[np.ndarray], right: list[np.ndarray]
     Raises ``ValueError`` when the board is not found in at least 6 pairs. Source: Efron & Tibshirani,
     *An Introduction to the Bootstrap* (1993), ch. 6.
     """
-    from flexsheet.vision.stereo_calibration import detect_board
-
     obj_all = board.object_points()
     data = []
     for a, b in zip(left, right, strict=True):
@@ -159,8 +161,6 @@ class TruthArm:
     for the right clamp)."""
 
     def __init__(self, side: str, T_display_base: np.ndarray, link_deltas: np.ndarray, joint_offsets: np.ndarray):
-        from flexsheet.arm.kinematics import URDF_PATH
-
         if side not in ("left", "right"):
             raise ValueError(f"side must be 'left' or 'right', got {side!r}")
         self.side = side
@@ -226,9 +226,6 @@ class TwinTruth:
         """Draw the truth of ``seed`` (int ≥ 0). ``realism``: ``realistic`` (spreads applied) or ``ideal``
         (nominal exactly). Deterministic in (seed, realism, spreads). Raises ``ValueError`` on a bad realism,
         seed or spread."""
-        from flexsheet.model.geometry import SHEET_THICKNESS
-        from flexsheet.model.tension import URETHANE_E
-
         if realism not in ("realistic", "ideal"):
             raise ValueError(f"realism must be 'realistic' or 'ideal', got {realism!r}")
         if not (isinstance(seed, (int, np.integer)) and seed >= 0):
@@ -332,8 +329,6 @@ class TwinTruth:
 def _link_deltas(rng: np.random.Generator, sigma: float) -> np.ndarray:
     """(6, 3) joint-origin offsets: σ on each non-zero component of the URDF's joint origins (the machined
     lengths), and σ/4 across them (assembly)."""
-    from flexsheet.arm.kinematics import URDF_PATH
-
     model = pin.buildModelFromUrdf(str(URDF_PATH))
     out = np.zeros((6, 3))
     for j in range(1, 7):
@@ -363,8 +358,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, help="print the truth of this seed as JSON")
     a = ap.parse_args(argv)
     if a.bootstrap:
-        from flexsheet.vision.stereo_calibration import parse_board
-
         ls = sorted(glob.glob(os.path.join(a.bootstrap, "left*.jpg")))
         rs = sorted(glob.glob(os.path.join(a.bootstrap, "right*.jpg")))
         imgs = [[cv2.imread(f, cv2.IMREAD_GRAYSCALE) for f in fs] for fs in (ls, rs)]

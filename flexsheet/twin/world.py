@@ -20,6 +20,7 @@ import os
 
 import numpy as np
 
+from flexsheet.manifest import record
 from flexsheet.model import geometry
 from flexsheet.model.sheet import SheetSurface, frame_from_clamps
 from flexsheet.model.sheet_fem import FINGER_RADIUS, SheetPhysics
@@ -133,8 +134,6 @@ def ship(size: float = geometry.SHEET_SIZE) -> list[str]:
     """Build (or take from the cache) the tables of :data:`SHIPPED_TRUTHS` and copy them into
     :data:`SHIPPED_TRUTH_TABLES`, entered in its manifest. Returns the paths."""
     import shutil
-
-    from flexsheet.manifest import record
 
     os.makedirs(SHIPPED_TRUTH_TABLES, exist_ok=True)
     out = []

@@ -44,6 +44,8 @@ import cv2
 import numpy as np
 
 from flexsheet.vision.calib_yaml import write_yaml
+from flexsheet.vision.stereo import StereoModel
+from messages import StereoCalibration
 
 __all__ = ["BoardSpec", "parse_board", "detect_board", "StereoCalibrationResult", "calibrate_stereo",
            "validate_stereo", "to_message", "main"]
@@ -249,8 +251,6 @@ def validate_stereo(left: list[np.ndarray], right: list[np.ndarray], board: Boar
     Friedman, *The Elements of Statistical Learning*, §7.10. Raises ``ValueError`` when fewer than 4 pairs
     show the board, folds is 1 or larger than the pairs, or a fold leaves fewer than 3 pairs to calibrate.
     """
-    from flexsheet.vision.stereo import StereoModel
-
     if len(left) != len(right):
         raise ValueError(f"left and right must have the same number of images, got {len(left)} and {len(right)}")
     names = names or [f"pair{i:02d}" for i in range(len(left))]
@@ -310,8 +310,6 @@ def to_message(calib: dict, header, T_display_camera: np.ndarray | None = None):
     ``header``: the :class:`messages.Header`; ``T_display_camera`` (4, 4) m overrides the dict's (identity
     when neither gives one). Raises pydantic ``ValidationError`` (a ``ValueError``) on bad shapes.
     """
-    from messages import StereoCalibration
-
     T_dc = T_display_camera if T_display_camera is not None else calib.get("T_display_camera", np.eye(4))
     f64 = lambda k: np.ascontiguousarray(np.asarray(calib[k], np.float64))  # noqa: E731
     return StereoCalibration(

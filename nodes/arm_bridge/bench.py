@@ -45,12 +45,17 @@ import numpy as np
 
 from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints
 from flexsheet.arm.limiter import StreamLimiter
+from flexsheet.arm.stream import ArmStream
 from flexsheet.arm.tracking import TargetTracker
 from flexsheet.model import geometry
 from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
 from flexsheet.model.sheet import clamp_poses
 from flexsheet.twin.controller import ControllerCore
+from flexsheet.twin.modbus_server import ControllerTwin
+from flexsheet.twin.mxt_server import MxtCore, MxtTwin
 from messages.registers import encode_joints
+from nodes.arm_bridge.modbus_link import ModbusLink
+from nodes.arm_bridge.mxt_link import MxtLink
 
 PERIOD = 0.0071
 MXT_PERIOD = 0.00711
@@ -149,8 +154,6 @@ def track_stroke(duration: float, side: str = "left") -> dict:
 
 
 def _twin_process(q, port_queue, stop_event) -> None:
-    from flexsheet.twin.modbus_server import ControllerTwin
-
     async def main():
         twin = ControllerTwin(ControllerCore(np.array(q), period=PERIOD, now=time.monotonic()))
         port_queue.put(await twin.start())
@@ -162,9 +165,6 @@ def _twin_process(q, port_queue, stop_event) -> None:
 
 def bench_cycle(n_cycles: int) -> dict:
     """Stream ``n_cycles`` cycles to a twin in another process; interval statistics (ms)."""
-    from flexsheet.arm.stream import ArmStream
-    from nodes.arm_bridge.modbus_link import ModbusLink
-
     ctx = mp.get_context("spawn")
     port_q, stop = ctx.Queue(), ctx.Event()
     proc = ctx.Process(target=_twin_process, args=(home_joints("left").tolist(), port_q, stop), daemon=True)
@@ -216,8 +216,6 @@ async def _drive(tr, stream, cycles: int) -> None:
 
 
 def _mxt_twin_process(q, period, port_queue, stop_event, result_queue) -> None:
-    from flexsheet.twin.mxt_server import MxtCore, MxtTwin
-
     async def main():
         core = MxtCore(np.array(q), period=period, timeout=0.0, now=time.monotonic())
         twin = MxtTwin(core, "127.0.0.1", 0)
@@ -236,9 +234,6 @@ def _mxt_twin_process(q, period, port_queue, stop_event, result_queue) -> None:
 
 def bench_mxt(n_cycles: int, period: float = MXT_PERIOD) -> dict:
     """Stream ``n_cycles`` MXT cycles to a twin in another process (see module doc); statistics in ms."""
-    from flexsheet.arm.stream import ArmStream
-    from nodes.arm_bridge.mxt_link import MxtLink
-
     ctx = mp.get_context("spawn")
     port_q, stop, res_q = ctx.Queue(), ctx.Event(), ctx.Queue()
     proc = ctx.Process(target=_mxt_twin_process, args=(home_joints("left").tolist(), period, port_q, stop, res_q),

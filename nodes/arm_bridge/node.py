@@ -24,7 +24,7 @@ so this arm stops where it is, from the cycle that state arrives in, until the o
 Span guard (``span_band`` [lo, hi] m): a cycle whose goal would take this clamp further outside the band from
 the partner's measured clamp than the command already is waits at rest (``bridge_status`` ``wait:span``; counted
 as ``span waits`` in the heartbeat): when one arm lags or stops, the other does not slacken the sheet or over-pull
-it. When the partner says ``wait:span`` too, both step (:meth:`~flexsheet.arm.tracking.TargetTracker.span_worse`).
+it. When the partner says ``wait:span`` too, both step (:meth:`~flexsheet.arm.span_guard.SpanGuard.worse`).
 """
 
 from __future__ import annotations
@@ -42,11 +42,13 @@ from flexsheet.arm.stream import ArmStream, CycleReport
 from flexsheet.arm.tracking import BridgeStatus, TargetTracker, peer_holds
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
+from flexsheet.model.sheet import clamp_poses
 from flexsheet.model.timing import LAB
 from flexsheet.planning.keepout import KeepOut, arm_clearance
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import config_fields, params_model
 from flexsheet.runtime.qos import QoS
+from flexsheet.twin.loopback import LoopbackModbusClient
 from messages import ArmJointState, ArmTarget, EyePose, topics
 from nodes.arm_bridge.modbus_link import ModbusLink
 from nodes.arm_bridge.mxt_link import MxtLink
@@ -117,7 +119,7 @@ class ArmBridgeNode(Node):
         self.kin = ArmKinematics(p.arm, base, Q_LOWER + margin, Q_UPPER - margin)
         self.fk_kin = ArmKinematics(p.arm, base)
         self.tracker = TargetTracker(self.kin, p.target_timeout, p.max_ik_jump)
-        self.tracker.set_span_band(p.span_band)
+        self.tracker.span.set_band(p.span_band)
         qd = QD_MAX * p.speed_scale
         limiter = StreamLimiter(np.clip(np.zeros(6), Q_LOWER, Q_UPPER), p.period, qd, qd * p.accel_scale,
                                 Q_LOWER, Q_UPPER, margin)
@@ -131,7 +133,6 @@ class ArmBridgeNode(Node):
         else:
             extra = {}
             if sim:   # the controller twin of this process, reached at a simulated instant
-                from flexsheet.twin.loopback import LoopbackModbusClient
 
                 extra["client_factory"] = LoopbackModbusClient
             self.link = ModbusLink(p.host, p.port, device_id=p.device_id, request_timeout=p.request_timeout,
@@ -195,8 +196,6 @@ class ArmBridgeNode(Node):
         return self._held(self._require_state())
 
     def srv_home(self, args: dict) -> list[float]:
-        from flexsheet.model.sheet import clamp_poses
-
         left, right = clamp_poses(np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), 0.05)
         return self._held(self._ik(left if self.params.arm == "left" else right, "the home pose"))
 
@@ -228,8 +227,8 @@ class ArmBridgeNode(Node):
 
     def on_peer_state(self, msg: ArmJointState) -> None:
         """The other arm's state: hold with it while it cannot follow (:func:`~flexsheet.arm.tracking.peer_holds`)."""
-        self.tracker.peer_clamp = np.asarray(msg.pose, float)[:3, 3].copy()
-        self.tracker.peer_waiting = msg.bridge_status == BridgeStatus.SPAN_WAIT
+        self.tracker.span.peer_clamp = np.asarray(msg.pose, float)[:3, 3].copy()
+        self.tracker.span.peer_waiting = msg.bridge_status == BridgeStatus.SPAN_WAIT
         hold = msg.bridge_status if peer_holds(msg.bridge_status) else None
         if hold != self.tracker.peer_hold:
             if hold is not None:
@@ -286,7 +285,7 @@ class ArmBridgeNode(Node):
             self._last_status = shown
             self._diag_at = rep.t_cycle
             counters = ", ".join(f"{k} {v}" for k, v in self.link.counters().items())
-            waits = f"; span waits {self.tracker.span_waits}" if self.tracker.span_waits else ""
+            waits = f"; span waits {self.tracker.span.waits}" if self.tracker.span.waits else ""
             self.state_message = f"{shown}; {self.link.name}: {counters}{waits}"
         st = rep.state
         if st is None:

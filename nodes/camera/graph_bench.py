@@ -35,10 +35,15 @@ from flexsheet.runtime.bus import Bus, ContainerTransport
 from flexsheet.runtime.config import NodeConfig
 from flexsheet.runtime.container import Container, Member
 from flexsheet.runtime.node import Node
+from flexsheet.runtime.plugins import node_class
 from flexsheet.runtime.qos import QoS
+from flexsheet.twin.finger import FingerScript
+from flexsheet.twin.truth import TwinTruth
+from flexsheet.vision.camera_model import camera_model
 from flexsheet.vision.stereo_calibration import to_message
 from messages import StereoFrame
 from messages import topics as T
+from nodes.camera.node import CameraParams, published_registration, sim_config, twin_renderer
 
 ROOT = Path(__file__).resolve().parents[2]
 RATE_HZ = 48.0
@@ -48,11 +53,6 @@ TARGETS = {"camera_frame_to_arm_command": {"median_ms": 2.0, "p99_ms": 5.0},
 
 def _frames(n: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], object, np.ndarray]:
     """``n`` stereo pairs of the ideal twin along the paper's 10 s stroke, its calibration and camera pose."""
-    from flexsheet.twin.finger import FingerScript
-    from flexsheet.twin.truth import TwinTruth
-    from flexsheet.vision.camera_model import camera_model
-    from nodes.camera.node import CameraParams, published_registration, sim_config, twin_renderer
-
     p = CameraParams(source="sim", model="ximea", twin={"realism": "ideal", "truth_seed": 0})
     calib = camera_model("ximea")
     published, T_dc, _ = published_registration(p, calib)
@@ -125,8 +125,6 @@ def _stats(x: list[float], target: dict) -> dict:
 
 
 async def _run(seconds: float, warmup: float, names: tuple[str, ...]) -> dict:
-    from flexsheet.runtime.plugins import node_class
-
     lf = yaml.safe_load((ROOT / "launch" / "sim.yaml").read_text())["nodes"]
     params = {n: dict(lf[n].get("params", {})) for n in lf}
     params["renderer"].update(publish_rate=120.0, max_render_rate=120.0)

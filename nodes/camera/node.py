@@ -40,6 +40,8 @@ import cv2
 import numpy as np
 from pydantic import Field, model_validator
 
+from flexsheet.calibration.display_calib import nominal_display_calib
+from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.timing import LAB
 from flexsheet.runtime.node import Node
 from flexsheet.runtime.params import config_fields, params_model
@@ -52,6 +54,9 @@ from flexsheet.vision.camera_config import CameraConfig
 from flexsheet.vision.camera_model import camera_model
 from flexsheet.vision.stereo_calibration import to_message
 from messages import ArmJointState, FingerTruth, ProjectorImage, StereoFrame, topics
+from nodes.camera.device import DeviceSource
+from nodes.camera.files import FileSource
+from nodes.camera.genicam import GenICamConfig, GenICamStereo, list_devices, resolve_device
 
 __all__ = ["CameraParams", "CameraNode", "published_registration", "sim_config"]
 
@@ -164,8 +169,6 @@ def published_registration(p: CameraParams, calib: dict) -> tuple[dict, np.ndarr
     image size differs from the camera's."""
     size = tuple(int(v) for v in calib["image_size"])
     if p.display_calib:
-        from flexsheet.calibration.display_calib_file import load_display_calib
-
         cam = load_display_calib(p.display_calib, require=("camera",)).camera
         stereo = cam.stereo if cam.stereo is not None else calib
         got = tuple(int(v) for v in stereo["image_size"])
@@ -177,8 +180,6 @@ def published_registration(p: CameraParams, calib: dict) -> tuple[dict, np.ndarr
         return (_with_rectification(stereo), np.asarray(cam.T_display_camera, float),
                 f"pose from {p.display_calib} ({cam.provenance.source}, {cam.provenance.measured_at}), {src}")
     if p.source == "sim" and p.twin.realism == "ideal":
-        from flexsheet.calibration.display_calib import nominal_display_calib
-
         return (_with_rectification(calib), nominal_display_calib().camera.T_display_camera.copy(),
                 "nominal registration (ideal twin: exact)")
     raise ValueError("display_calib is not set: the camera's pose in the display frame comes from display.yaml's "
@@ -203,8 +204,6 @@ class CameraNode(Node):
         GenICam serials/ids by Aravis discovery (~1 s), UVC devices by opening them; sim and files: none."""
         p = params
         if p.source == "genicam":
-            from nodes.camera.genicam import list_devices, resolve_device
-
             try:
                 devices = list_devices()
             except RuntimeError as exc:
@@ -257,7 +256,7 @@ class CameraNode(Node):
             raise ValueError(f"link_delay_s {p.link_delay_s:g} is the camera twin's on the simulated clock (source sim, "
                              f"launch file clock: sim); here source {p.source}")
         if p.source == "sim":
-            from flexsheet.twin.truth import TwinTruth
+            from flexsheet.twin.truth import TwinTruth  # lazy: pinocchio, sim only
 
             truth = TwinTruth.draw(p.twin.truth_seed, p.twin.realism)
             self._drop_rate = (REALISTIC_DROP_RATE if p.twin.realism == "realistic" else 0.0) \
@@ -272,8 +271,6 @@ class CameraNode(Node):
             self.timer(1.0 / p.rate_hz, self.on_sim_tick, sim_cost=LAB.camera_latency(p.exposure_s, w, h),
                        sim_delay=p.link_delay_s)
         elif p.source == "genicam":
-            from nodes.camera.genicam import GenICamConfig, GenICamStereo
-
             w, h = (int(v) for v in calib["image_size"])
             cfg = GenICamConfig(left_id=p.left_id, right_id=p.right_id, width=w, height=h,
                                 offset_x=p.offset_x, offset_y=p.offset_y, exposure_s=p.exposure_s,
@@ -289,14 +286,10 @@ class CameraNode(Node):
             except RuntimeError as exc:  # Aravis missing: an installation problem, respawning cannot help
                 raise ValueError(str(exc)) from None
         elif p.source == "device":
-            from nodes.camera.device import DeviceSource
-
             self.device = DeviceSource(p.device_left, p.device_right, tuple(calib["image_size"]),
                                        p.exposure_s, fallback_period_s=1.0 / p.rate_hz)
             self.timer(1.0 / p.rate_hz, self.on_device_tick)
         else:
-            from nodes.camera.files import FileSource
-
             self.files = FileSource(p.files_left, p.files_right, p.files_csv, p.rate_hz)
             self._file_task = asyncio.get_running_loop().create_task(self._play_files())
 
@@ -304,7 +297,7 @@ class CameraNode(Node):
         """The registration scenes (:mod:`flexsheet.twin.registration_scene`) a lab sets up by hand — the board
         on the sheet, the projector's patterns, the dark room for the clamp markers — switched by the sim-only
         service ``twin/scene``; the sheet follows the arms' joint states, the light ``/projector/image``."""
-        from flexsheet.twin.registration_scene import SCENES, RegistrationScene
+        from flexsheet.twin.registration_scene import SCENES, RegistrationScene  # lazy: scipy.optimize
 
         self.scene = RegistrationScene(truth, seed=self.params.seed)
         self._scene_lock = threading.Lock()

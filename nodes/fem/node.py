@@ -39,10 +39,15 @@ from pydantic import Field, field_validator
 
 from flexsheet.fem.cache import ArrayCache, cache_key
 from flexsheet.fem.config import FemConfig
+from flexsheet.fem.force_depth import build_force_depth
 from flexsheet.fem.material import Material
 from flexsheet.fem.mesh import MeshSpec
 from flexsheet.fem.realtime import RealtimeModel
+from flexsheet.fem.reference.snapshot_build import load_or_build
+from flexsheet.fem.scene_mesh import DEFAULT_SCENE_SPEC
+from flexsheet.fem.scene_model import SceneModel, attach_scene_table
 from flexsheet.fem.served import CylinderChoice, choose_cylinder_model, fem_models_as_cylinder
+from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_snapshot_table
 from flexsheet.model.scenes import Scene, load_scene_or_paper
 from flexsheet.model.timing import LAB
 from flexsheet.runtime.node import InputRejected, Node
@@ -137,9 +142,6 @@ class FemNode(Node):
 
     async def _setup_scene(self) -> None:
         """Mesh and precompute (or load from the cache) the scene's model, then subscribe."""
-        from flexsheet.fem.scene_mesh import DEFAULT_SCENE_SPEC
-        from flexsheet.fem.scene_model import SceneModel
-
         p: FemParams = self.params
         sc = self.scene
         spec, order = DEFAULT_SCENE_SPEC, 2
@@ -168,8 +170,6 @@ class FemNode(Node):
         publish what the finger is asked to feel on the latched ``/object/force_depth``: in setup, off the event
         loop, before any fingertip is served (0.7–2 s; in a background thread it held the model's lock per push
         and stalled the fingertips waiting for it). A failure is logged, never fatal."""
-        from flexsheet.fem.force_depth import build_force_depth
-
         t = time.perf_counter()
         try:
             fd = build_force_depth(self.scene, self.model, lock=self._lock)
@@ -190,8 +190,6 @@ class FemNode(Node):
         """Attach the scene's nonlinear table (:func:`flexsheet.fem.scene_model.attach_scene_table`: a sphere's
         sphere table, any other scene's path table along its stroke) when this machine's cache or the shipped
         store has it, else serve linear and name the command that builds it."""
-        from flexsheet.fem.scene_model import attach_scene_table
-
         cache = ArrayCache(self.params.cache_dir or None)
         try:
             kind, where = attach_scene_table(self.model, cache)
@@ -230,8 +228,6 @@ class FemNode(Node):
 
     async def _setup_snapshots(self, mat: Material, choice: CylinderChoice) -> None:
         """Attach the nonlinear snapshots when the scene needs them (cache hit), else say why not."""
-        from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_snapshot_table
-
         p: FemParams = self.params
         kind, why = choice.kind, choice.kind_reason
         self.log.info("fem: real-time model: %s (%s)", kind, why)
@@ -265,9 +261,6 @@ class FemNode(Node):
         self.log.info(self.state_message)
 
     def _build_snapshots(self, cache: ArrayCache, mat: Material) -> None:
-        from flexsheet.fem.reference.snapshot_build import load_or_build
-        from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC
-
         try:
             os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)   # this thread only (Linux)
         except (OSError, AttributeError):

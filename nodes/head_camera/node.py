@@ -33,6 +33,8 @@ from flexsheet.model.timing import LAB
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import params_model
 from flexsheet.runtime.qos import QoS
+from flexsheet.twin.head_camera import HeadCameraTwin
+from flexsheet.twin.head_rig import true_head_camera
 from flexsheet.twin.truth_choice import TruthChoice
 from flexsheet.vision.glasses import GlassesBoard, GlassesPose, GlassesTracker, HeadPredictor
 from messages import EyePose, HeadTruth, topics
@@ -102,9 +104,6 @@ class HeadCameraNode(Node):
         self._lock = threading.Lock()
         self.lost = 0
         if p.source == "sim":
-            from flexsheet.twin.head_camera import HeadCameraTwin
-            from flexsheet.twin.head_rig import true_head_camera
-
             K, D, T, w, h = true_head_camera(p.twin.truth_seed, p.twin.realism)
             self.twin = HeadCameraTwin(K, D, T, w, h, board=self.tracker.board, seed=p.twin.truth_seed)
             self._head: HeadTruth | None = None

@@ -44,10 +44,11 @@ from dataclasses import replace
 import numpy as np
 from pydantic import Field
 
+from flexsheet.calibration.display_calib import xyzyaw_from_pose
+from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.calibration.sheet import TERMS
 from flexsheet.model.force_depth import ForceDepth
 from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
-from flexsheet.model.shapes import make_shape
 from flexsheet.model.sheet import clamp_poses
 from flexsheet.model.tension import SheetMaterial, clamp_force
 from flexsheet.model.timing import LAB
@@ -91,9 +92,6 @@ def _registered(p) -> tuple[ReachModel, SheetMaterial]:
         return reach, material
     from dataclasses import replace
 
-    from flexsheet.calibration.display_calib import xyzyaw_from_pose
-    from flexsheet.calibration.display_calib_file import load_display_calib
-
     dc = load_display_calib(path, require=("arms.left", "arms.right"))
     reach = replace(reach, left_base=xyzyaw_from_pose(dc.arms["left"].T_display_base),
                     right_base=xyzyaw_from_pose(dc.arms["right"].T_display_base))
@@ -118,9 +116,8 @@ PlannerParams = params_model(
     """Planner parameters (launch file / ``--param k=v``). SI units, display frame.
 
     Node-only: ``scene``: the scene file (launch/scenes/*.yaml; filled by the launcher from the launch file's
-    ``scene:``; none = the paper's cylinder) — its shape and material; ``shape``/``shape_params``: a bare
-    shape instead (cylinder | sphere | box | plane | mesh, :func:`flexsheet.model.shapes.make_shape`; used
-    only without a ``scene`` and when not the default cylinder; no material: ``object_stiffness``).
+    ``scene:``; none = the paper's cylinder) — its shape and material (every shape a scene names:
+    launch/scenes/*.yaml, e.g. ``rounded_box``).
     ``use_prediction``: plan on ``Fingertip.predicted_position``; ``use_fem_stiffness``: use the FEM's
     stiffness while fresher than ``fem_timeout`` s and about this scene — with ``fem_window`` > 0 the median
     of its messages of the last ``fem_window`` s (default 0: the latest only; on the sphere, whose FEM dF/dd
@@ -145,8 +142,6 @@ PlannerParams = params_model(
     methods={"planner_config": _planner_config},
     module=__name__,
     scene=(str | None, Field(default=None, description="scene file (launch/scenes/*.yaml); none: the paper's")),
-    shape=(str, Field(default="cylinder", pattern="^(cylinder|sphere|box|plane|mesh)$")),
-    shape_params=(dict, Field(default_factory=dict)),
     use_prediction=(bool, False),
     use_fem_stiffness=(bool, True),
     stiffness_from_scene=(bool, True),
@@ -181,17 +176,11 @@ class PlannerNode(Node):
 
     async def setup(self) -> None:
         p: PlannerParams = self.params
-        bare = not p.scene and (p.shape != "cylinder" or p.shape_params)
-        self.scene: Scene | None = None if bare else load_scene_or_paper(p.scene)
-        if self.scene is None:
-            shape, compliance = make_shape(p.shape, p.shape_params), None
-            self.log.info("bare shape %s %s (no scene: object_stiffness %g N/m)", p.shape, p.shape_params,
-                          p.object_stiffness)
-        else:
-            shape = planner_shape(self.scene)
-            compliance = SceneCompliance(self.scene, shape, p.min_contact_depth) if p.stiffness_from_scene else None
-            self.log.info("%s", self.scene.describe())
-        self._scene_key = self.scene.key() if self.scene is not None else None
+        self.scene: Scene = load_scene_or_paper(p.scene)
+        shape = planner_shape(self.scene)
+        compliance = SceneCompliance(self.scene, shape, p.min_contact_depth) if p.stiffness_from_scene else None
+        self.log.info("%s", self.scene.describe())
+        self._scene_key = self.scene.key()
         cfg = p.planner_config()
         m = cfg.material
         params = build(SheetMaterial, p, rename=_MATERIAL)
@@ -253,7 +242,7 @@ class PlannerNode(Node):
         (:func:`flexsheet.model.force_depth.scene_scale`) maps it between the sheet's force at its least stretch
         and at ``pull_margin`` × the arms' pull at the home pose, over 2 mm to twice the scene's stroke depth.
         A table about another object is ignored; a malformed one is rejected (counted)."""
-        if self.scene is not None and msg.scene_key and msg.scene_key != self._scene_key:
+        if msg.scene_key and msg.scene_key != self._scene_key:
             self.log.warning("/object/force_depth is about another object than scene %r; ignored", self.scene.name)
             return
         try:
@@ -263,7 +252,7 @@ class PlannerNode(Node):
         p: PlannerParams = self.params
         cfg = self.planner.cfg
         if "stiffness_scale" not in p.model_fields_set:
-            stroke_depth = self.scene.use.stroke_depth if self.scene is not None else 0.01
+            stroke_depth = self.scene.use.stroke_depth
             sc = sheet_scene_scale(table, cfg.material, self.planner.max_stretch, stroke_depth, cfg.contrast_gain)
             self.planner.cfg = replace(cfg, stiffness_scale=sc.scale)
             self.scene_scale = sc
@@ -276,10 +265,10 @@ class PlannerNode(Node):
 
     def on_deformation(self, msg: ObjectDeformation) -> None:
         """Keep the FEM's local stiffness (N/m) and its press (contact force N at its depth m) while the solution
-        is valid, positive and about this scene (:func:`fem_solves_scene`; a bare shape takes any)."""
+        is valid, positive and about this scene (:func:`fem_solves_scene`)."""
         if not (msg.valid and msg.stiffness > 0.0):
             return
-        if self.scene is not None and not fem_solves_scene(msg, self.scene, self._scene_key):
+        if not fem_solves_scene(msg, self.scene, self._scene_key):
             self._fem_other_scene += 1
             return
         now = self.now()

@@ -28,8 +28,12 @@ import time
 
 from flexsheet.benches.render import bench_sheets, sheet_update, time_models
 from flexsheet.model.projector import Projector
+from flexsheet.model.scenes import load_scene
 from flexsheet.model.sheet_model import sheet_model_for
+from flexsheet.rendering.pacing import FramePacer
 from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh
+from nodes.renderer.window import WindowOutput
+from nodes.renderer.xvfb import xvfb
 
 log = logging.getLogger(__name__)
 
@@ -41,9 +45,6 @@ def window_pacing(seconds: float = 5.0, *, stereo: str = "frame_sequential", ref
                   redraw_hz: float = 30.0, width: int = 1024, height: int = 768, model: str = "four_triangle") -> dict:
     """Frame pacing of the projector window (see the module docstring); run it on a thread with no current
     EGL context. Returns {"present_only": stats, "with_redraws": stats, ...} (times in ms)."""
-    from flexsheet.rendering.pacing import FramePacer
-    from nodes.renderer.window import WindowOutput
-
     out = WindowOutput(Projector.default(width, height), stereo=stereo, refresh_hz=refresh_hz, fullscreen=False)
     try:
         r = out.renderer
@@ -91,8 +92,6 @@ def window_pacing(seconds: float = 5.0, *, stereo: str = "frame_sequential", ref
 
 def _window_main(args) -> dict:
     """Run :func:`window_pacing` on a thread of its own, on a private Xvfb if asked or if there is no DISPLAY."""
-    from nodes.renderer.xvfb import xvfb
-
     def run(display: str) -> dict:
         os.environ["DISPLAY"] = display
         box: dict = {}
@@ -183,8 +182,6 @@ def main(argv: list[str] | None = None) -> int:
     if args.window:
         return _window_report(ap, args)
     if args.scene:
-        from flexsheet.model.scenes import load_scene
-
         try:
             v, f = load_scene(args.scene).surface_mesh()
         except ValueError as exc:

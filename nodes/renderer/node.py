@@ -46,6 +46,7 @@ from flexsheet.model.sheet_model import SheetConfig, sheet_model_for
 from flexsheet.model.timing import LAB
 from flexsheet.rendering.correction import check_screen
 from flexsheet.rendering.state import PendingPush, RendererState, load_geometry, pick_model
+from flexsheet.rendering.stereo_renderer import StereoRenderer
 from flexsheet.rendering.viewpoint import Viewpoint
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.qos import QoS
@@ -62,6 +63,7 @@ from messages import (
 )
 from nodes.renderer.params import RendererParams
 from nodes.renderer.tables import SheetTables
+from nodes.renderer.window import WindowOutput
 
 __all__ = ["RendererNode"]
 
@@ -153,8 +155,6 @@ class RendererNode(SheetTables, Node):
 
     # ------------------------------------------------------------------ offscreen output (GL thread)
     def _gl_init(self) -> None:
-        from flexsheet.rendering.stereo_renderer import StereoRenderer
-
         self.renderer = StereoRenderer(self.projector, **self._renderer_kwargs())
 
     async def _render_loop(self) -> None:
@@ -188,8 +188,6 @@ class RendererNode(SheetTables, Node):
         await asyncio.wrap_future(ready)      # a WindowError (ValueError) is a configuration error
 
     def _window_main(self, ready: concurrent.futures.Future) -> None:
-        from nodes.renderer.window import WindowOutput
-
         p: RendererParams = self.params
         try:
             out = WindowOutput(self.projector, stereo=p.stereo, monitor=p.monitor, fullscreen=p.fullscreen,

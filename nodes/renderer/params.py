@@ -9,6 +9,7 @@ from typing import Literal
 
 from pydantic import Field, field_validator
 
+from flexsheet.model.scenes import load_scene
 from flexsheet.rendering.config import RendererConfig
 from flexsheet.runtime.params import build, config_fields, params_model
 
@@ -17,7 +18,6 @@ __all__ = ["RendererParams"]
 
 def _scene_file(cls, v: str | None) -> str | None:
     if v:                        # validated in full, so `flexsheet launch --check` names a bad key
-        from flexsheet.model.scenes import load_scene
 
         load_scene(v)
     return v

@@ -20,6 +20,7 @@ import threading
 import numpy as np
 from pydantic import Field
 
+from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.timing import LAB
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
@@ -58,8 +59,6 @@ class TriangulatorNode(Node):
         self._lock = threading.Lock()
         self.display = None
         if p.display_calib:
-            from flexsheet.calibration.display_calib_file import load_display_calib
-
             self.display = load_display_calib(p.display_calib, require=("camera",)).camera
         self.pub = self.publisher(topics.FINGERTIP)
         self.subscribe(topics.CALIBRATION, self.on_calibration, qos=QoS.LATCHED)

@@ -1,8 +1,9 @@
 """Node ``viz``: the Foxglove WebSocket bridge. Serves the display's state in Foxglove's own schemas.
 
 Thin shell around :mod:`flexsheet.viz.foxglove` (what is drawn, how it is encoded, at what rate) and
-the ``foxglove-sdk`` WebSocket server (default port 8765; the SDK speaks the Foxglove WebSocket protocol v1
-under the subprotocol name ``foxglove.sdk.v1``). Open ``ws://HOST:8765`` in Foxglove or Lichtblick and import
+the ``foxglove-sdk`` WebSocket server behind :class:`~flexsheet.viz.ws_relay.SubprotocolRelay` (default port
+8765; a viewer may offer either ``foxglove.websocket.v1``, as Lichtblick and the official ``@foxglove/ws-protocol``
+client do, or ``foxglove.sdk.v1``). Open ``ws://HOST:8765`` in Foxglove or Lichtblick and import
 ``docs/foxglove_layout.json`` (see docs/visualise.md).
 
 Inputs: ``/fingertip``, ``/sheet/target``, ``/arm/left/joint_state``, ``/arm/right/joint_state``,
@@ -51,6 +52,7 @@ from flexsheet.viz.config import VizConfig, VizNodeConfig
 from flexsheet.viz.foxglove import channel_schemas, inputs_for
 from flexsheet.viz.scene_builder import SceneBuilder
 from flexsheet.viz.streams import FoxgloveStreams, Rates
+from flexsheet.viz.ws_relay import SubprotocolRelay
 from messages import topics as T
 
 __all__ = ["VizNode", "VizParams"]
@@ -139,13 +141,19 @@ class VizNode(Node):
         self.context = foxglove.Context()
         self.channels = {topic: foxglove.Channel(topic, schema=schema, message_encoding=enc, context=self.context)
                          for topic, (schema, enc) in channel_schemas().items()}
-        try:
-            self.server = foxglove.start_server(name=f"flexsheet {self.name}", host=p.host, port=p.port,
+        try:    # the SDK's server on a loopback port of its own; viewers reach it through the relay
+            self.server = foxglove.start_server(name=f"flexsheet {self.name}", host="127.0.0.1", port=0,
                                                 context=self.context, message_backlog_size=p.backlog,
                                                 server_listener=_Listener(self))
         except Exception as exc:  # the SDK raises its own error type; name the address
-            raise RuntimeError(f"viz: cannot serve Foxglove on {p.host}:{p.port}: {exc}") from exc
-        self.port = self.server.port
+            raise RuntimeError(f"viz: cannot start the Foxglove server: {exc}") from exc
+        self.relay = SubprotocolRelay(p.host, p.port, self.server.port)
+        try:
+            self.relay.start()
+        except OSError as exc:
+            self.server.stop()
+            raise RuntimeError(f"viz: {exc}") from None
+        self.port = self.relay.port
         self.sent = 0
         self._subscribed: set[str] = set()
         self.timer(1.0 / p.poll_rate, self.on_poll)
@@ -204,6 +212,8 @@ class VizNode(Node):
             self.sent += 1
 
     async def teardown(self) -> None:
+        if hasattr(self, "relay"):
+            self.relay.stop()
         if hasattr(self, "server"):
             self.server.stop()
         for ch in getattr(self, "channels", {}).values():

@@ -53,7 +53,7 @@ from pydantic import Field, field_validator
 
 from flexsheet.model.scene_parts import SceneError
 from flexsheet.model.scenes import Scene, load_scene
-from flexsheet.runtime.background import await_worker, start_worker
+from flexsheet.runtime.background import await_worker, lower_priority, start_worker
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.runtime.qos import QoS
@@ -459,7 +459,5 @@ class WorldNode(Node):
 def _build_worker(seed: int, realism: str, node: float, size: float, config: SheetFemConfig, nice: int) -> None:
     """Worker-process entry: lower the priority (niceness only, not the idle class: the world needs its true
     sheet, :func:`flexsheet.runtime.background.lower_priority`), then build (and cache) one FEM table."""
-    from flexsheet.runtime.background import lower_priority
-
     lower_priority(nice, idle=False)
     build_table(seed, realism, node, size, config)

@@ -397,7 +397,7 @@ def _ft(stamp, p=(0.02, 0.0, 0.0)):
 
 def test_planner_rejects_a_fingertip_from_the_future_alone_and_serves_the_next():
     async def scenario():
-        params = {"shape": "cylinder", "object_stiffness": 20.0, "stiffness_from_scene": False}
+        params = {"object_stiffness": 20.0, "stiffness_from_scene": False}
         async with NodeHarness(PlannerNode, params=params) as h:
             for k in range(3):
                 h.inject(topics.FINGERTIP, _ft(time.time(), (0.02, 0.001 * k, 0.0)))

@@ -139,7 +139,7 @@ def test_planner_survives_fuzz():
     from nodes.planner.node import PlannerNode
 
     async def scenario():
-        async with NodeHarness(PlannerNode, params={"shape": "cylinder"}) as h:
+        async with NodeHarness(PlannerNode, params={}) as h:
             await _inject_all(h, topics.FINGERTIP, "planner", 1)
             await _inject_all(h, topics.DEFORMATION, "planner", 2)
             h.inject(topics.FINGERTIP, _tip([0.02, 0.0, 0.0], 1000.0))

@@ -84,7 +84,7 @@ def _eye(eye, valid, stamp):
 
 def test_the_planner_holds_when_the_glasses_are_lost_and_keeps_the_sheet_out_of_the_head():
     async def scenario():
-        async with NodeHarness(PlannerNode, params={"shape": "cylinder", "object_stiffness": 20.0,
+        async with NodeHarness(PlannerNode, params={"object_stiffness": 20.0,
                                                     "stiffness_from_scene": False}) as h:
             t = time.time()
             h.inject(topics.EYE_POSE, _eye(geometry.EYE, True, t))

@@ -21,7 +21,7 @@ def _ft(p, valid=True, stamp=None, pred=None):
 
 def test_node_publishes_targets_with_source_stamp_and_holds_on_lost_marker():
     async def scenario():
-        async with NodeHarness(PlannerNode, params={"shape": "cylinder", "object_stiffness": 20.0,
+        async with NodeHarness(PlannerNode, params={"object_stiffness": 20.0,
                                                     "stiffness_from_scene": False}) as h:
             m = _ft([0.02, 0.0, 0.0])
             h.inject(topics.FINGERTIP, m)
@@ -60,7 +60,7 @@ def test_node_uses_fem_stiffness_and_prediction():
 
 def test_params_validate():
     with pytest.raises(ValueError):
-        PlannerParams(shape="torus")
+        PlannerParams(shape="box")          # the old bare shape: scenes name shapes now
     with pytest.raises(ValueError):
         PlannerParams(bogus=1)
     cfg = PlannerParams(max_stretch=0.2, reach_max=0.5).planner_config()
@@ -170,7 +170,7 @@ def test_the_pull_is_capped_at_the_targets_and_the_targets_carry_it():
     from flexsheet.model.tension import SheetMaterial, clamp_force
 
     async def scenario():
-        async with NodeHarness(PlannerNode, params={"shape": "cylinder", "object_stiffness": 900.0,
+        async with NodeHarness(PlannerNode, params={"object_stiffness": 900.0,
                                                     "stiffness_from_scene": False}) as h:
             home = max_pull(ArmKinematics("left", LEFT_BASE), home_joints("left"))[0]
             assert h.node.planner.pull_limit == pytest.approx(0.9 * home, rel=0.02) and 0.9 * home < 40.0

@@ -13,6 +13,7 @@ import numpy as np
 from flexsheet.calibration.display_calib import DisplayCalib, nominal_display_calib
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.projector import Projector
+from flexsheet.twin.registration import sim_display_calib
 
 log = logging.getLogger(__name__)
 
@@ -54,8 +55,6 @@ def display_calib_for(seed: int, realism: str, path: str | None = None, quick: b
     ``quick``: its quick preset). Returns (display, info with the path and, when known, the registration's own
     errors against the truth from its summary.json)."""
     if path is None:
-        from flexsheet.twin.registration import sim_display_calib
-
         path = sim_display_calib(int(seed), realism, quick=quick)
     cal = CalibratedDisplay.from_display_calib(load_display_calib(path), path)
     info: dict = {"display_calib": path}

@@ -5,10 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from flexsheet.arm.kinematics import ArmKinematics, clamp_joints
 from flexsheet.experiments.correction.calibrated_display import CalibratedDisplay
 from flexsheet.experiments.correction.settings import PIXEL, STRETCH
 from flexsheet.model import geometry
 from flexsheet.model.sheet import SheetSurface, clamp_half_span, clamp_poses
+from flexsheet.model.sheet_model import SheetConfig, sheet_model_for
+from flexsheet.rendering.state import ErrorTable, RendererState, pick_model, silhouette_probes
+from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh
 
 
 class DisplayEstimator:
@@ -24,11 +28,6 @@ class DisplayEstimator:
 
     def __init__(self, cal: CalibratedDisplay, config=None, *, sheet_model=None, samples: int = 4,
                  target: float = PIXEL) -> None:
-        from flexsheet.arm.kinematics import ArmKinematics
-        from flexsheet.model.sheet_model import SheetConfig, sheet_model_for
-        from flexsheet.rendering.state import ErrorTable, silhouette_probes
-        from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh
-
         if not isinstance(cal, CalibratedDisplay):
             raise TypeError(f"DisplayEstimator takes a CalibratedDisplay, got {type(cal).__name__}")
         self.cal = cal
@@ -49,8 +48,6 @@ class DisplayEstimator:
         """The bridges' joint commands (side → (6,) rad) for the commanded sheet pose: IK of the clamp poses
         (:func:`flexsheet.model.sheet.clamp_poses`) at the calibrated bases. Raises ``ValueError`` if an arm
         cannot reach it."""
-        from flexsheet.arm.kinematics import clamp_joints
-
         return clamp_joints(self.kin, *clamp_poses(origin, normal, axis_u, stretch))
 
     def clamps(self, q: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -63,8 +60,6 @@ class DisplayEstimator:
         membrane is the ``sheet_model``'s (``fem_nominal``). ``series``: instead the renderer's OLD pushed-sheet
         model, the 16-mode sine series (:class:`flexsheet.model.sheet.Membrane`, tension ratio 1), for the
         comparison column ``fine`` only; the renderer no longer uses it."""
-        from flexsheet.rendering.state import RendererState
-
         Tl, Tr = self.clamps(q)
         if series:
             flat = SheetSurface.from_clamps(Tl, Tr, half_width=self.config.half_width)
@@ -81,8 +76,6 @@ class DisplayEstimator:
 
     def pick(self, sheet: SheetSurface) -> str:
         """The model the renderer's ``auto`` picks for ``sheet`` (:func:`flexsheet.rendering.state.pick_model`)."""
-        from flexsheet.rendering.state import pick_model
-
         return pick_model("auto", sheet, self.table, self.target)
 
     def draw(self, model: str, sheet: SheetSurface) -> np.ndarray:

@@ -10,8 +10,18 @@ import numpy as np
 from flexsheet.experiments.correction.poses import HOME_POSE
 from flexsheet.experiments.correction.settings import PIXEL, STRETCH
 from flexsheet.experiments.correction.twin_world import TwinWorld
+from flexsheet.experiments.measurement import trace_to_sheet
 from flexsheet.model import geometry
 from flexsheet.model.sheet import SheetSurface, clamp_poses, frame_from_clamps
+from flexsheet.model.sheet_model import SheetConfig, sheet_model_for
+from flexsheet.rendering.correction import (
+    correct_vertices,
+    correct_vertices_fine,
+    correct_vertices_pushed,
+    project_vertices,
+)
+from flexsheet.rendering.state import ErrorTable, RendererState, pick_model, silhouette_probes
+from flexsheet.rendering.stereo_renderer import cylinder_draw_mesh
 from flexsheet.twin.truth import TwinTruth
 
 log = logging.getLogger(__name__)
@@ -34,10 +44,6 @@ class LivePath:
 
     def __init__(self, stretch: float = STRETCH, config=None, sheet_model=None, eye=geometry.EYE,
                  projector=geometry.PROJECTOR) -> None:
-        from flexsheet.model.sheet_model import SheetConfig, sheet_model_for
-        from flexsheet.rendering.state import ErrorTable, RendererState, silhouette_probes
-        from flexsheet.rendering.stereo_renderer import cylinder_draw_mesh
-
         self.config = config or SheetConfig()
         self.eye, self.projector = np.asarray(eye, float), np.asarray(projector, float)
         self.stretch = float(stretch)
@@ -54,8 +60,6 @@ class LivePath:
 
     def sheet(self, finger) -> tuple[SheetSurface, str]:
         """(the renderer's sheet, the model ``auto`` picks) for the fingertip ``finger`` (3,) m."""
-        from flexsheet.rendering.state import pick_model
-
         self.state.set_fingertip(np.asarray(finger, float), 0.0)
         sheet, warn = self.state.sheet_for_frame()
         if warn:
@@ -64,12 +68,6 @@ class LivePath:
 
     def corrected(self, model: str, sheet: SheetSurface) -> np.ndarray:
         """A' (N, 3) m of the probes for ``model`` on ``sheet``."""
-        from flexsheet.rendering.correction import (
-            correct_vertices,
-            correct_vertices_fine,
-            correct_vertices_pushed,
-        )
-
         c = dict(eye=self.eye, projector=self.projector, screen_point=geometry.SCREEN_POINT,
                  screen_normal=geometry.SCREEN_NORMAL)
         if model == "fine":
@@ -90,9 +88,6 @@ class LivePath:
 
     def landing_error(self, a_hat, true: SheetSurface) -> np.ndarray:
         """Per probe, m: where the light for ``a_hat`` lands on ``true``, seen from the eye, against the probe."""
-        from flexsheet.experiments.measurement import trace_to_sheet
-        from flexsheet.rendering.correction import project_vertices
-
         scr = dict(eye=self.eye, screen_point=geometry.SCREEN_POINT, screen_normal=geometry.SCREEN_NORMAL)
         b = project_vertices(a_hat, **scr)                            # where the projector aims (its pinhole)
         grid = true.membrane.grid(241) if true.membrane is not None else None

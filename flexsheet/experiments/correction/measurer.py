@@ -9,6 +9,7 @@ from flexsheet.experiments.correction.twin_world import TwinWorld
 from flexsheet.experiments.measurement import MeasurementCamera, measure_edges, measure_sizes
 from flexsheet.model import geometry
 from flexsheet.model.sheet import SheetSurface
+from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh
 
 
 class Measurer:
@@ -18,8 +19,6 @@ class Measurer:
     it up to pixel sampling). ``pixel`` m per camera pixel on the screen."""
 
     def __init__(self, pixel: float = 0.00035) -> None:
-        from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh
-
         self.cam = MeasurementCamera(pixel=pixel, extent=(0.26, 0.22))
         r = StereoRenderer(samples=4, shading=False)
         v, f = cylinder_draw_mesh()

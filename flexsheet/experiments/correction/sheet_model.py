@@ -6,6 +6,7 @@ from __future__ import annotations
 import logging
 
 from flexsheet.experiments.correction.settings import STRETCH
+from flexsheet.model.sheet_model import NominalSheetModel
 
 log = logging.getLogger(__name__)
 
@@ -16,7 +17,6 @@ def pushed_sheet_model(name: str, quick: bool = False):
     pushes at the centre; the node uses the full table)."""
     if name not in ("auto", "fem"):
         raise ValueError(f"sheet model must be 'auto' or 'fem', got {name!r}")
-    from flexsheet.model.sheet_model import NominalSheetModel
 
     kw = {"positions": (0.0,)} if quick else {}
     return NominalSheetModel.nominal(stretch=STRETCH, **kw)

@@ -4,19 +4,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from flexsheet.benches.render import time_models
 from flexsheet.experiments.correction.poses import inclined_pose
 from flexsheet.experiments.correction.settings import STRETCH
-from flexsheet.model.sheet import SheetSurface, clamp_half_span
+from flexsheet.model.sheet import Membrane, SheetSurface, clamp_half_span
+from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh
 
 
 def model_speed(sheet_model=None, repeats: int = 10) -> dict:
     """Median ms per 2×1024×768 stereo pair (shaded, no MSAA, as the node draws) per model on the nominal
     projector: none, flat, four_triangle, fine (16-mode series) and, with ``sheet_model``, fine with its
     64-term nominal FEM fit; plus the GL renderer's name."""
-    from flexsheet.benches.render import time_models
-    from flexsheet.model.sheet import Membrane
-    from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh
-
     a = clamp_half_span(STRETCH)
     home = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], a)
     tilt = SheetSurface(*inclined_pose(30))

@@ -8,6 +8,8 @@ from flexsheet.experiments.correction.settings import FEM_DEPTHS, FEM_POSITIONS,
 from flexsheet.model import geometry
 from flexsheet.model.projector import Projector
 from flexsheet.model.sheet import SheetSurface, frame_from_clamps
+from flexsheet.model.sheet_fem import SheetPhysics
+from flexsheet.model.sheet_table import IndentTable, default_cache_dir
 from flexsheet.twin.truth import TwinTruth
 
 
@@ -18,8 +20,6 @@ class TwinWorld:
 
     def __init__(self, truth: TwinTruth, *, cache_dir: str | None = None, fem_mesh: dict | None = None,
                  depths=FEM_DEPTHS, positions=FEM_POSITIONS, stretch: float = STRETCH) -> None:
-        from flexsheet.model.sheet_table import default_cache_dir
-
         self.truth = truth
         T = np.asarray(truth.T_display_projector, float)
         w, h = truth.projector_size
@@ -33,9 +33,6 @@ class TwinWorld:
     def table(self):
         """The true sheet's FEM table at the commanded stretch (built once, ~3 s per table, cached on disk)."""
         if self._table is None:
-            from flexsheet.model.sheet_fem import SheetPhysics
-            from flexsheet.model.sheet_table import IndentTable
-
             self._table = IndentTable(SheetPhysics.from_truth(self.truth, self.stretch), self.depths, self.positions,
                                       mesh=self.fem_mesh, cache_dir=self.cache_dir)
         return self._table

@@ -20,6 +20,9 @@ import numpy as np
 import zmq
 
 from flexsheet.runtime.config import NodeConfig
+from flexsheet.runtime.keys import generate
+from flexsheet.runtime.launch import identities, load_launch
+from flexsheet.runtime.launch_config import curve_config, node_config
 from flexsheet.runtime.node import Node
 from flexsheet.runtime.ports import free_port
 from flexsheet.runtime.qos import QoS
@@ -163,10 +166,6 @@ def stolen_keys(folder: Path, seconds: float = 1.0) -> dict:
     the planner's endpoint, and the triangulator with its own key from its own endpoint. Keys are generated into
     ``folder``. Returns the targets received from each (the thief's handshake fails; the triangulator's publisher
     is never asked for the topic) and the bridge's link report."""
-    from flexsheet.runtime.keys import generate
-    from flexsheet.runtime.launch import identities, load_launch
-    from flexsheet.runtime.launch_config import curve_config, node_config
-
     p = free_port(span=3)
     path = folder / "per_node_keys.yaml"
     path.write_text(STOLEN_KEYS_LAUNCH.format(p=p, p1=p + 1, p2=p + 2))

@@ -9,6 +9,8 @@ import time
 
 import numpy as np
 
+from flexsheet.runtime.plugins import node_class
+from flexsheet.runtime.testing import NodeHarness
 from messages import Fingertip, Header
 from messages import topics as T
 
@@ -23,13 +25,10 @@ def _tip(stamp: float, y: float) -> Fingertip:
 
 def future_stamp(n_after: int = 10) -> dict:
     """3 good fingertips, one stamped 1e12, ``n_after`` good ones: counts of refusals and of served targets."""
-    from flexsheet.runtime.plugins import node_class
-    from flexsheet.runtime.testing import NodeHarness
-
     planner = node_class("planner")
 
     async def scenario() -> dict:
-        params = {"shape": "cylinder", "object_stiffness": 20.0, "stiffness_from_scene": False}
+        params = {"object_stiffness": 20.0, "stiffness_from_scene": False}
         async with NodeHarness(planner, params=params) as h:
             for k in range(3):
                 h.inject(T.FINGERTIP, _tip(time.time(), 0.001 * k))

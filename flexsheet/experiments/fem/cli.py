@@ -80,15 +80,20 @@ from dataclasses import replace
 
 from flexsheet.experiments.fem.plots import plot_node_table
 from flexsheet.experiments.fem.runs import run
+from flexsheet.experiments.fem_scene import run_scene
 from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
 from flexsheet.fem.choose import MODEL_TABLE_PATH
 from flexsheet.fem.material import Material
 from flexsheet.fem.reference.capsule_contact import CONTACT_LAWS, DEFAULT_CONTACT
 from flexsheet.fem.reference.node_table import build_node_table, check_azimuth
+from flexsheet.fem.reference.path_table import build_path_table
 from flexsheet.fem.reference.settings import DEFAULT_MATERIAL, settings_for
+from flexsheet.fem.reference.sphere_table import build_sphere_table
 from flexsheet.fem.reference.workers import default_jobs, set_scheduler
 from flexsheet.fem.snapshots import DEFAULT_GRID
+from flexsheet.fem.sphere_snapshots import sphere_frame
 from flexsheet.model.scene_parts import GENT_JM_RUBBER
+from flexsheet.model.scenes import DEFAULT_SCENE_FILE, is_paper_cylinder, load_scene, load_scene_or_paper
 
 log = logging.getLogger(__name__)
 
@@ -271,9 +276,6 @@ def _judge_cylinder(args) -> None:
     join the run's summary.json. Only for the scene file's own material (no --E/--nu/--Jm)."""
     import json
 
-    from flexsheet.experiments.fem_scene import run_scene
-    from flexsheet.model.scenes import DEFAULT_SCENE_FILE
-
     s = run_scene(args.scene or DEFAULT_SCENE_FILE, os.path.join(args.out, "visible"), True,
                   args.cache_dir or None, args.jobs)
     path = os.path.join(args.out, "summary.json")
@@ -310,8 +312,6 @@ def _scene(args) -> tuple[int | None, Material]:
     """``--scene``: another object than the paper's cylinder runs its own experiment (the path table, the
     sphere's table or :func:`flexsheet.experiments.fem_scene.run_scene`): (its return code, None); the paper's
     cylinder: (None, the scene file's material)."""
-    from flexsheet.model.scenes import is_paper_cylinder, load_scene_or_paper
-
     try:
         sc = load_scene_or_paper(args.scene)
     except ValueError as exc:
@@ -321,8 +321,6 @@ def _scene(args) -> tuple[int | None, Material]:
     if not is_paper_cylinder(sc) and args.node_table:
         return _scene_table(args, sc), None
     if not is_paper_cylinder(sc):
-        from flexsheet.experiments.fem_scene import run_scene
-
         run_scene(args.scene, args.out, args.quick, args.cache_dir or None, args.jobs)
         return 0, None
     return None, Material.of_scene(sc.material)
@@ -331,19 +329,15 @@ def _scene(args) -> tuple[int | None, Material]:
 def _scene_table(args, sc) -> int:
     """``--scene`` (not the cylinder) ``--node-table``: the sphere's table where the scene has the sphere's
     symmetry, else the path table."""
-    from flexsheet.fem.sphere_snapshots import sphere_frame
-
     try:
         sphere_frame(sc)
     except ValueError:          # no symmetry to carry one push onto another: the path table
-        from flexsheet.fem.reference.path_table import build_path_table
 
         if args.azimuth is not None or args.holdout_azimuth:
             raise SystemExit("flexsheet experiment fem: --azimuth / --holdout-azimuth are the cylinder's and "
                              "the sphere's; a path table takes --stations and --holdout-fraction") from None
         return build_path_table(args.scene, args.out, args.cache_dir or None, args.stations,
                                 tuple(args.holdout_fraction) or None, args.jobs, args.mesh_check, args.ship)
-    from flexsheet.fem.reference.sphere_table import build_sphere_table
 
     return build_sphere_table(args.scene, args.out, args.cache_dir or None, args.azimuth,
                               tuple(args.holdout_azimuth), args.jobs, args.mesh_check, args.ship)
@@ -369,8 +363,6 @@ def _check_table_values(args) -> None:
 
 def _node_law() -> str:
     """The contact law of the default scene (launch/scenes/cylinder.yaml): the node's table is looked up under it."""
-    from flexsheet.model.scenes import DEFAULT_SCENE_FILE, load_scene
-
     return load_scene(DEFAULT_SCENE_FILE).finger.contact
 
 

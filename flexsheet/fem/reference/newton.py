@@ -31,6 +31,7 @@ from flexsheet.fem.reference.capsule_contact import Capsule
 
 if TYPE_CHECKING:
     from flexsheet.fem.reference.hyperelastic import HyperelasticModel
+from flexsheet.fem.sparse_factor import NotPositiveDefinite, factor
 
 __all__ = ["PCG_RTOL", "PCG_MAXITER", "RESUME_MAX", "CRAWL_ITERS", "CRAWL_RATIO", "SHIFT_MIN", "SHIFT_MAX",
            "cholesky_or_none", "pcg", "shifted_step", "newton_minimise", "newton_resumed"]
@@ -41,8 +42,6 @@ def cholesky_or_none(K: sp.spmatrix):
     ``.solve(b)``) when K is positive definite, None when it is not (CHOLMOD stops at the first non-positive
     pivot). On a loaded 3.4 mm-mesh tangent (16 596 DOF): 0.69 s and 9.9 ms per solve, against
     3.8 s and 22 ms for the simplicial QDLDL used before, and 4.1 s for SuperLU in symmetric mode."""
-    from flexsheet.fem.sparse_factor import NotPositiveDefinite, factor
-
     try:
         return factor(K, "cholmod")
     except NotPositiveDefinite:

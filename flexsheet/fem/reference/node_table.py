@@ -18,6 +18,8 @@ from dataclasses import replace
 import numpy as np
 
 from flexsheet.fem.cache import ArrayCache
+from flexsheet.fem.contact import finger_at
+from flexsheet.fem.eye_judge import shape_px_by_depth
 from flexsheet.fem.material import Material
 from flexsheet.fem.realtime import RealtimeModel
 from flexsheet.fem.reference.capsule_contact import DEFAULT_CONTACT
@@ -113,16 +115,12 @@ TARGET_PX = 1.0
 
 
 def _fingers(rm, azimuth_deg: float, depths) -> list:
-    from flexsheet.fem.contact import finger_at
-
     return [finger_at(math.radians(azimuth_deg), float(d), FINGER_R, rm.mesh.radius, rm.mesh.center) for d in depths]
 
 
 def _table_px(rm, table: dict, mat: Material, azimuth_deg: float, depths, ref_u) -> list[float]:
     """The table's visible shape error (px, :func:`flexsheet.fem.eye_judge.shape_px_by_depth`) per depth at
     ``azimuth_deg`` against the reference displacements ``ref_u`` (D, k, 3) m of the rendered vertices."""
-    from flexsheet.fem.eye_judge import shape_px_by_depth
-
     verts = rm.rest_vertices.astype(float)
     sm = SnapshotModel(table, verts, E=mat.E)
     u = np.stack([sm.surface(math.radians(azimuth_deg), float(d), 0.0)[0] for d in depths])
@@ -152,8 +150,6 @@ def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: Realti
            "over_target_from_mm": min(bad) if bad else None, "dofs": int(p["dofs"]),
            "cpu_seconds_loading": float(p["cpu_seconds"])}
     if twin:
-        from flexsheet.fem.eye_judge import shape_px_by_depth
-
         q = stable_path(twin_spec(DEFAULT_REF_SPEC), azimuth_deg, depths[1:], mat, cache, verts, contact)
         noise = shape_px_by_depth(np.asarray(q["u"], float), np.asarray(p["u"], float), verts, np.asarray(rm.faces),
                                   _fingers(rm, azimuth_deg, depths[1:]))

@@ -38,10 +38,15 @@ import numpy as np
 
 __all__ = ["build_path_table", "table_key", "DEFAULT_STATIONS", "assemble_path_table"]
 
+from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
 from flexsheet.fem.eye_judge import shape_px_by_depth
-from flexsheet.fem.path_snapshots import GRID, REACH
+from flexsheet.fem.path_snapshots import GRID, REACH, path_table_key, stiffness_from_force
 from flexsheet.fem.reference.scene_reference import FULL, scene_reference
+from flexsheet.fem.reference.workers import parallel, run_workers, set_scheduler
+from flexsheet.fem.scene_model import SceneModel, finger_on_scene
 from flexsheet.fem.served import scene_update_ms
+from flexsheet.model.scenes import load_scene
+from flexsheet.runtime.console import LIBRARY, show_lines
 
 log = logging.getLogger(__name__)
 
@@ -62,8 +67,6 @@ def _st() -> dict:
 def table_key(sc, rt) -> str:
     """The key the FEM node looks a scene's path table up by (:func:`flexsheet.fem.path_snapshots.path_table_key`)
     for the scene ``sc`` and the real-time model ``rt`` it corrects."""
-    from flexsheet.fem.path_snapshots import path_table_key
-
     return path_table_key(sc.key(), rt.cache_key)
 
 
@@ -77,10 +80,6 @@ def _job(args) -> tuple[float, float, str | None]:
     scene_file, f, h_fine, cache_dir = args
     t = time.perf_counter()
     try:
-        from flexsheet.fem.cache import ArrayCache
-        from flexsheet.fem.scene_model import SceneModel
-        from flexsheet.model.scenes import load_scene
-
         sc = load_scene(scene_file)
         rt = SceneModel(sc, cache_dir=cache_dir)
         _push(sc, f, h_fine, rt.rest_vertices.astype(float), ArrayCache(cache_dir))
@@ -90,11 +89,8 @@ def _job(args) -> tuple[float, float, str | None]:
 
 
 def _prefetch(scene_file, jobs_list, cache_dir, n_jobs: int) -> None:
-    from flexsheet.fem.reference.workers import parallel
-
     if not parallel(n_jobs) or len(jobs_list) <= 1:
         return
-    from flexsheet.fem.reference.workers import run_workers
 
     log.info(f"solving {len(jobs_list)} pushes in {n_jobs} worker processes ...")
     for f, sec, err in run_workers(_job, [(scene_file, f, h, cache_dir) for f, h in jobs_list], n_jobs):
@@ -103,8 +99,6 @@ def _prefetch(scene_file, jobs_list, cache_dir, n_jobs: int) -> None:
 
 def _linear(rt, sc, q, n, depths) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The real-time linear model's surface displacement (D, S, 3), force (D,), stiffness (D,) at the push."""
-    from flexsheet.fem.scene_model import finger_on_scene
-
     out = [rt.surface_displacement(finger_on_scene(q, n, float(d), sc.finger.radius)) for d in depths]
     return (np.stack([o[0] for o in out]), np.array([o[1] for o in out]), np.array([o[2] for o in out]))
 
@@ -125,8 +119,6 @@ def assemble_path_table(sc, rt, fractions, refs: list[dict]) -> dict:
     table reaches the deepest depth to which every station's Newton solve converged at every load step (so a
     scene whose reference stalls gets a shallower table, the linear model beyond it). Raises ``ValueError`` when
     no station converged at the first depth."""
-    from flexsheet.fem.path_snapshots import stiffness_from_force
-
     depths = np.concatenate([[0.0], np.asarray(_st()["depths"])])
     ok = np.all([np.asarray(r["converged"], bool) for r in refs], axis=0)      # (D-1,) every station converged
     n_ok = int(np.argmin(ok)) if not ok.all() else len(ok)
@@ -184,8 +176,6 @@ def _ship_path_table(cache, key: str, table: dict, fractions, refs) -> dict:
 
 def _held_out_pushes(sc, rt, verts, cache, holdout, depths) -> list[dict]:
     """Per held-out fraction: its own push against what the node serves (table attached) and the linear model."""
-    from flexsheet.fem.scene_model import finger_on_scene
-
     nd = len(depths)
     held_out = []
     for h in holdout:
@@ -216,8 +206,6 @@ def _held_out_pushes(sc, rt, verts, cache, holdout, depths) -> list[dict]:
 
 def _path_mesh_check(sc, faces, verts, cache, fractions, refs, depths) -> dict:
     """``--mesh-check``: the middle station's push on the finer mesh against the table's, on the visible surface."""
-    from flexsheet.fem.scene_model import finger_on_scene
-
     nd = len(depths)
     f = float(fractions[len(fractions) // 2])
     fine = _push(sc, f, CHECK_H_FINE, verts, cache)
@@ -264,10 +252,6 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
     """Build (or find in the cache) the scene's path table and report it (module doc). ``holdout`` None: the
     midpoints of every second interval. Returns 0; raises ``SystemExit`` naming the argument for fewer than 2
     stations, a held-out fraction outside (0, 1) or on a station, or an unconverged station with ``ship``."""
-    from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
-    from flexsheet.fem.scene_model import SceneModel
-    from flexsheet.model.scenes import load_scene
-
     fractions, holdout = _path_fractions(stations, holdout)
     t0 = time.perf_counter()
     cache_dir = cache_dir or DEFAULT_CACHE_DIR
@@ -351,8 +335,6 @@ def main(argv=None) -> int:  # pragma: no cover - thin CLI for a by-hand run
     ap.add_argument("--ship", action="store_true")
     ap.add_argument("--cache-dir", default=None)
     a = ap.parse_args(argv)
-    from flexsheet.fem.reference.workers import set_scheduler
-    from flexsheet.runtime.console import LIBRARY, show_lines
 
     show_lines(LIBRARY)         # the library's progress, the worker pool's included
     try:

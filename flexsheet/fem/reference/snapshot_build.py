@@ -21,6 +21,7 @@ from flexsheet.fem.reference.hyperelastic import HyperelasticModel
 from flexsheet.fem.reference.mesh import RefSpec, reference_mesh
 from flexsheet.fem.reference.path_solver import solve_path, stable_states
 from flexsheet.fem.snapshots import TABLE_VERSION, SnapshotGrid, load_snapshot_table, table_key
+from flexsheet.model.geometry import CYLINDER_CENTER, CYLINDER_LENGTH, CYLINDER_RADIUS
 
 log = logging.getLogger(__name__)
 
@@ -155,8 +156,6 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
     mm). The caller vouches for the spec, material, finger and contact (its cache key); its samples (depths, θ,
     y, ρ, E, version) are checked here: ``ValueError`` when they differ. The result's ``reused`` (A,) bool marks
     the copied azimuths."""
-    from flexsheet.model.geometry import CYLINDER_CENTER, CYLINDER_LENGTH, CYLINDER_RADIUS
-
     R, L, c = CYLINDER_RADIUS, CYLINDER_LENGTH, CYLINDER_CENTER
     depths = grid.depths()
     th, ys, rh = grid.thetas(), grid.ys(L / 2), grid.rhos(R)

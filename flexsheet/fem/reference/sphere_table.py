@@ -31,7 +31,24 @@ import time
 
 import numpy as np
 
+from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
+from flexsheet.fem.choose import visible_mask
 from flexsheet.fem.eye_judge import shape_px_by_depth
+from flexsheet.fem.material import Material
+from flexsheet.fem.reference.node_table import TWIN_DR
+from flexsheet.fem.reference.sphere_build import assemble_table, solve_alpha
+from flexsheet.fem.reference.versions import SOLVER_VERSION, UNLOAD_VERSION
+from flexsheet.fem.reference.workers import parallel, run_workers
+from flexsheet.fem.scene_model import SceneModel, finger_on_scene
+from flexsheet.fem.sphere_snapshots import (
+    DEFAULT_SPHERE_GRID,
+    DEFAULT_SPHERE_SPEC,
+    SPHERE_TABLE_VERSION,
+    SphereSnapshotModel,
+    sphere_frame,
+    sphere_table_key,
+)
+from flexsheet.model.scenes import load_scene
 
 log = logging.getLogger(__name__)
 
@@ -47,10 +64,6 @@ MESH_STUDY_SPECS = ((0.012, 0.006, 0.030, 0.055),)
 def _alpha_key(sc, a: float, grid, spec, probes: np.ndarray) -> str:
     import gmsh
 
-    from flexsheet.fem.cache import cache_key
-    from flexsheet.fem.reference.versions import SOLVER_VERSION, UNLOAD_VERSION
-    from flexsheet.fem.sphere_snapshots import SPHERE_TABLE_VERSION
-
     return cache_key("sphere-alpha-1", SPHERE_TABLE_VERSION, sc.key(), grid.key(), *(f"{x:.9g}" for x in spec),
                      f"{a:.9g}", gmsh.__version__, SOLVER_VERSION, UNLOAD_VERSION,
                      cache_key(np.round(probes, 9).tobytes()))
@@ -58,8 +71,6 @@ def _alpha_key(sc, a: float, grid, spec, probes: np.ndarray) -> str:
 
 def alpha_path(sc, a: float, grid, spec, probes: np.ndarray, cache) -> dict:
     """:func:`flexsheet.fem.reference.sphere_build.solve_alpha` at ``a`` deg, cached (kind "spherealpha")."""
-    from flexsheet.fem.reference.sphere_build import solve_alpha
-
     z, _, _ = cache.get_or_compute("spherealpha", _alpha_key(sc, a, grid, spec, probes),
                                    lambda: solve_alpha(sc, a, grid, spec, probes),
                                    f"sphere push at {a:g} deg on h_fine {spec[1] * 1e3:g} mm")
@@ -71,11 +82,6 @@ def _job(args) -> tuple[float, float, str | None]:
     scene_file, a, cache_dir, spec = args
     t = time.perf_counter()
     try:
-        from flexsheet.fem.cache import ArrayCache
-        from flexsheet.fem.scene_model import SceneModel
-        from flexsheet.fem.sphere_snapshots import DEFAULT_SPHERE_GRID
-        from flexsheet.model.scenes import load_scene
-
         sc = load_scene(scene_file)
         probes = SceneModel(sc, cache_dir=cache_dir).rest_vertices.astype(float)
         alpha_path(sc, a, DEFAULT_SPHERE_GRID, spec, probes, ArrayCache(cache_dir))
@@ -93,8 +99,6 @@ def _hertz_force(E: float, nu: float, r_finger: float, R: float, d: float) -> fl
 
 def _check_sphere_args(sc, al, alpha: float | None, holdout: tuple[float, ...]):
     """The scene's sphere frame, after the arguments are checked (``SystemExit`` with the reason)."""
-    from flexsheet.fem.sphere_snapshots import sphere_frame
-
     try:
         fr = sphere_frame(sc)
     except ValueError as exc:
@@ -120,11 +124,9 @@ def _solve_missing(scene_file, sc, grid, spec, probes, cache, cache_dir, table, 
     want = list(dict.fromkeys(want))      # a held-out push is also the mesh study's table-mesh push: solve it once
     todo = [(a, s) for a, s in want if not os.path.exists(cache.path("spherealpha", _alpha_key(sc, a, grid, s, probes))
                                                           or "")]
-    from flexsheet.fem.reference.workers import parallel
 
     if parallel(jobs) and len(todo) > 1:
         log.info(f"{len(todo)} sphere pushes the cache lacks, in {min(jobs, len(todo))} worker processes")
-        from flexsheet.fem.reference.workers import run_workers
 
         for a, sec, err in run_workers(_job, [(scene_file, a, cache_dir, s) for a, s in todo], min(jobs, len(todo))):
             log.info(f"sphere push at {a:g} deg: " + (f"done in {sec:.0f} s" if err is None else f"failed ({err})"))
@@ -133,8 +135,6 @@ def _solve_missing(scene_file, sc, grid, spec, probes, cache, cache_dir, table, 
 def _table_and_paths(sc, fr, grid, spec, probes, cache, key, table, E: float):
     """The table (assembled from the pushes and cached when ``table`` is None) and the snapshot angles' pushes
     (None where the cache lacks one)."""
-    from flexsheet.fem.reference.sphere_build import assemble_table
-
     al = grid.alphas_deg
     if table is None:
         paths = [alpha_path(sc, a, grid, spec, probes, cache) for a in al]
@@ -149,8 +149,6 @@ def _table_and_paths(sc, fr, grid, spec, probes, cache, key, table, E: float):
 def _shipped_report(table, paths, al, key, cache, fr, rt, probes, r: float, out, ship: bool) -> dict | None:
     """With ``ship``: the packed table written into the shipped store (``SystemExit`` when a push is unconverged
     or not cached); else the one already shipped, when reporting. Its path, size and packing error, or None."""
-    from flexsheet.fem.cache import ArrayCache
-
     shipped = None
     packed = sp = None
     if ship:
@@ -198,8 +196,6 @@ def _alpha_rows(table, paths, al, depths, mat, r: float, fr) -> list[dict]:
 
 def _held_out_rows(sc, fr, sm, rt, probes, grid, spec, cache, holdout, depths, r: float) -> list[dict]:
     """Per held-out angle: its own push against the table and against the linear model, on the visible surface."""
-    from flexsheet.fem.scene_model import finger_on_scene
-
     held_out = []
     for a in holdout:
         p = alpha_path(sc, a, grid, spec, probes, cache)
@@ -264,17 +260,6 @@ def build_sphere_table(scene_file: str, out: str | None, cache_dir: str | None, 
     finds it on a machine that never solved it. Returns 0; ``SystemExit`` with the reason for a scene the table
     does not apply to, a bad angle, or a table that may not be shipped (an angle unconverged or not cached)."""
 
-    from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache
-    from flexsheet.fem.material import Material
-    from flexsheet.fem.scene_model import SceneModel
-    from flexsheet.fem.sphere_snapshots import (
-        DEFAULT_SPHERE_GRID,
-        DEFAULT_SPHERE_SPEC,
-        SphereSnapshotModel,
-        sphere_table_key,
-    )
-    from flexsheet.model.scenes import load_scene
-
     t0 = time.perf_counter()
     sc = load_scene(scene_file)
     grid, spec = DEFAULT_SPHERE_GRID, DEFAULT_SPHERE_SPEC
@@ -335,10 +320,6 @@ def pack_sphere_table(table: dict) -> dict:
 def _packing_error(table, packed, paths, fr, rt, probes, r) -> float:
     """Largest distance (mm) between the packed and the full table's surfaces over the visible rendered
     vertices, at every snapshot angle and depth (the footprint taken on the reference's deformed surface)."""
-    from flexsheet.fem.choose import visible_mask
-    from flexsheet.fem.scene_model import finger_on_scene
-    from flexsheet.fem.sphere_snapshots import SphereSnapshotModel
-
     full, small = SphereSnapshotModel(table, probes), SphereSnapshotModel(packed, probes)
     held = rt.held
     worst = 0.0
@@ -359,8 +340,6 @@ def mesh_study_specs(spec) -> dict:
     the refinement tube ``TWIN_DR`` wider, as the cylinder's twins (:func:`flexsheet.fem.reference.node_table.twin_spec`),
     so gmsh lays the elements out anew; the difference between a mesh and its twin is that mesh's noise, which
     no interpolation between pushes can beat)."""
-    from flexsheet.fem.reference.node_table import TWIN_DR
-
     def twin(x):
         return (x[0], x[1], x[2] + TWIN_DR, x[3])
 
@@ -375,8 +354,6 @@ def _mesh_check(sc, fr, sm, probes, faces, grid, spec, angles, cache) -> list[di
     twin, the study's levels and their twins): the push solved on it, compared by the visible shape
     (:func:`flexsheet.fem.eye_judge.shape_px_by_depth`, px) at every depth: each mesh's noise (against
     its twin), each level against the table's mesh, and the table (interpolated in α) against each."""
-    from flexsheet.fem.scene_model import finger_on_scene
-
     depths = grid.depths()[1:]
     r = sc.finger.radius
     specs = mesh_study_specs(spec)

@@ -24,6 +24,7 @@ from flexsheet.fem.reference.paths import (
     stable_key,
     stable_path,
 )
+from flexsheet.runtime.background import lower_priority
 from flexsheet.runtime.console import LIBRARY, show_lines
 
 log = logging.getLogger(__name__)
@@ -99,8 +100,6 @@ def _solver_init(name=None) -> None:
     nanny starts workers with ``OMP_NUM_THREADS=1``; CHOLMOD's libraries load under that limit); SIGINT
     ignored and tied to its parent, dying with it even on ``kill -9``
     (:func:`flexsheet.runtime.background.lower_priority`, niceness unchanged)."""
-    from flexsheet.runtime.background import lower_priority
-
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = "1"
     try:

@@ -18,7 +18,7 @@ def _shift_toward_partner(clock):
     kl, kr, ql, qr, left = _home()
     t = _tracker(kl, ql)
     peer = kr.fk(qr)[:3, 3]
-    t.peer_clamp = peer.copy()
+    t.span.peer_clamp = peer.copy()
     period = 0.0071
     qd = QD_MAX * 0.5
     lim = StreamLimiter(ql, period, qd, qd * 2.0, np.full(6, -3.0), np.full(6, 3.0))
@@ -41,10 +41,10 @@ def test_the_stream_brakes_where_a_lagging_partner_would_slacken_the_sheet():
         t.set_target(T, now, now)
         cmd = stream._next_command()
         spans.append(np.linalg.norm(kl.fk(cmd)[:3, 3] - peer))
-    assert min(spans) > BAND[0] - 0.001 and t.span_waits > 0       # held at the edge (braking: < 1 mm past it)
+    assert min(spans) > BAND[0] - 0.001 and t.span.waits > 0       # held at the edge (braking: < 1 mm past it)
     assert spans[-1] < BAND[0] + 0.001                            # and stays there, 20 mm short of the target
     assert np.linalg.norm(kl.fk(lim.c)[:3, 3] - T[:3, 3]) > 0.015
-    t.peer_clamp = peer + np.array([0.0, -0.030, 0.0])           # the partner followed
+    t.span.peer_clamp = peer + np.array([0.0, -0.030, 0.0])           # the partner followed
     for k in range(300):
         now = 3.2 + k * period
         t.set_target(T, now, now)
@@ -63,8 +63,8 @@ def test_two_arms_each_waiting_for_the_other_step_together():
         t.set_target(T, now, now)
         stream._next_command()
         if k == 150:
-            assert t.waiting and t.span_waits > 0            # waiting for a partner that does not wait
-            waits = t.span_waits
-            t.peer_waiting = True                            # the partner waits for this arm: step
-    assert t.span_waits == waits and not t.waiting
+            assert t.span.waiting and t.span.waits > 0            # waiting for a partner that does not wait
+            waits = t.span.waits
+            t.span.peer_waiting = True                            # the partner waits for this arm: step
+    assert t.span.waits == waits and not t.span.waiting
     assert np.linalg.norm(kl.fk(lim.c)[:3, 3] - T[:3, 3]) < 1e-4

@@ -1,6 +1,5 @@
-"""The bridges' target tracker (flexsheet.arm.tracking): the span guard refuses a step that takes the clamp span
-further outside its band; a jump is allowed once the arm could have moved that far; which partner states hold
-this arm too."""
+"""The bridges' target tracker (flexsheet.arm.tracking): a jump is allowed once the arm could have moved that
+far; which partner states hold this arm too (the span guard: test_span_guard.py)."""
 
 import numpy as np
 import pytest
@@ -23,52 +22,9 @@ def _home():
 
 def _tracker(kl, ql):
     t = TargetTracker(kl)
-    t.set_span_band(BAND)
+    t.span.set_band(BAND)
     t.seed(ql)
     return t
-
-
-def _toward(kl, q, dy):
-    """Joints that move the left clamp ``dy`` m along y (the span changes by dy)."""
-    T = kl.fk(q)
-    T[1, 3] += dy
-    res = kl.ik(T, q)
-    assert res.ok
-    return res.q
-
-
-def test_steps_that_take_the_span_further_out_are_refused_and_counted():
-    kl, kr, ql, qr, _ = _home()
-    t = _tracker(kl, ql)
-    t.peer_clamp = kr.fk(qr)[:3, 3]
-    span0 = np.linalg.norm(kl.fk(ql)[:3, 3] - t.peer_clamp)
-    assert span0 == pytest.approx(0.252, abs=1e-9)               # home: clamp strain 0.05, inside the band
-    assert not t.span_worse(ql, _toward(kl, ql, -0.005))          # 0.247 m: inside, taken
-    assert t.span_worse(ql, _toward(kl, ql, -0.012))              # 0.240 m: slack (below 0.2424)
-    assert t.span_worse(ql, _toward(kl, ql, +0.015))              # 0.267 m: over-pull (above 0.264)
-    assert t.span_waits == 2
-    # from outside the band, a step back toward it is taken, a step further out is not
-    q_slack = _toward(kl, ql, -0.015)                             # 0.237 m
-    assert not t.span_worse(q_slack, _toward(kl, ql, -0.013))
-    assert t.span_worse(q_slack, _toward(kl, ql, -0.016))
-    assert t.span_waits == 3
-
-
-def test_without_a_partner_or_a_band_nothing_waits_and_a_bad_band_is_refused():
-    kl, kr, ql, qr, _ = _home()
-    t = _tracker(kl, ql)
-    assert not t.span_worse(ql, _toward(kl, ql, -0.030))          # no partner state yet: no guard
-    t.peer_clamp = kr.fk(qr)[:3, 3]
-    t.set_span_band(None)
-    assert not t.span_worse(ql, _toward(kl, ql, -0.030)) and t.span_waits == 0
-    t.set_span_band(BAND)
-    t.move_to(_toward(kl, ql, -0.030))                              # a service's goal: the operator's, not judged
-    assert not t.span_worse(ql, _toward(kl, ql, -0.030)) and t.span_waits == 0
-    t.release()
-    assert t.span_worse(ql, _toward(kl, ql, -0.030)) and t.span_waits == 1
-    for band in ((0.26, 0.25), (0.0, 0.2), (0.2, float("inf"))):
-        with pytest.raises(ValueError, match="span_band"):
-            t.set_span_band(band)
 
 
 def test_a_target_after_a_pause_may_ask_what_the_arm_could_move_meanwhile():

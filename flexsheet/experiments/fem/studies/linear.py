@@ -12,12 +12,15 @@ import numpy as np
 from flexsheet.experiments.fem.candidates import update_ms
 from flexsheet.experiments.fem.outputs import write_json
 from flexsheet.experiments.fem.plots import plot_linear_study
+from flexsheet.fem.choose import choose, evaluate_spec
 from flexsheet.fem.contact import finger_at
+from flexsheet.fem.corotational import solve_corotational
+from flexsheet.fem.deformation_checks import element_checks
 from flexsheet.fem.material import Material
-from flexsheet.fem.mesh import MeshSpec
+from flexsheet.fem.mesh import MeshSpec, cylinder_tet_mesh
 from flexsheet.fem.realtime import RealtimeModel
 from flexsheet.fem.reference.settings import FINGER_R, TARGET
-from flexsheet.fem.solver import solve_full
+from flexsheet.fem.solver import FemModel, solve_full
 
 log = logging.getLogger(__name__)
 
@@ -26,10 +29,6 @@ def linear_study(out: str, mat: Material) -> None:
     """Linear P1/P2 meshes against a fine linear P2 solution (``accuracy_table.json``, read by
     :func:`flexsheet.fem.choose.choose`), the Hertz exponent check and the linear/corotational stability curve.
     Writes linear_accuracy_speed, hertz, stability (.json/.png) and accuracy_table.json into ``out``."""
-    from flexsheet.fem.choose import choose
-    from flexsheet.fem.mesh import cylinder_tet_mesh
-    from flexsheet.fem.solver import FemModel
-
     ref_spec = MeshSpec(0.010, 0.002, 0.015)
     depths = [0.005, 0.01, 0.02, 0.03, 0.04, 0.05]
     cands = [(MeshSpec(h, hf, rr), 1) for h, hf, rr in ((0.012, 0.004, 0.012), (0.010, 0.003, 0.012),
@@ -54,8 +53,6 @@ def linear_study(out: str, mat: Material) -> None:
 
 
 def _linear_candidates(cands, ref_spec, ref_model, refs, mat):
-    from flexsheet.fem.choose import evaluate_spec
-
     table = {"nu": mat.nu, "finger_radius": FINGER_R, "reference": {"spec": ref_spec.__dict__, "order": 2,
                                                                    "dofs": ref_model.n_dofs}, "candidates": []}
     rows = []
@@ -77,9 +74,6 @@ def _linear_candidates(cands, ref_spec, ref_model, refs, mat):
 
 def _hertz(mat: Material) -> dict:
     """Small-depth force exponent of the linear P2 model against Hertz (Johnson, Contact Mechanics §4.2)."""
-    from flexsheet.fem.mesh import cylinder_tet_mesh
-    from flexsheet.fem.solver import FemModel
-
     spec = MeshSpec(0.012, 0.002, 0.008)
     depths = [0.0005, 0.00075, 0.001, 0.0015, 0.002]
     mesh = cylinder_tet_mesh(spec)
@@ -99,11 +93,6 @@ def _hertz(mat: Material) -> dict:
 
 def _stability(spec: MeshSpec, mat: Material) -> dict:
     """Linear against corotational (P1) over depth on ``spec``: strain, inverted tets, force, difference."""
-    from flexsheet.fem.corotational import solve_corotational
-    from flexsheet.fem.deformation_checks import element_checks
-    from flexsheet.fem.mesh import cylinder_tet_mesh
-    from flexsheet.fem.solver import FemModel
-
     mesh = cylinder_tet_mesh(spec)
     model = FemModel(mesh, mat)
     surf = np.flatnonzero(model.boundary & ~model.fixed)

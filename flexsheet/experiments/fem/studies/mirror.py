@@ -24,6 +24,8 @@ from flexsheet.fem.reference.paths import (
     reference_path,
 )
 from flexsheet.fem.reference.settings import FINGER_R, Settings
+from flexsheet.fem.reference.snapshot_build import folded_probe, unfolded_sample
+from flexsheet.fem.sparse_factor import NotPositiveDefinite, factor
 from flexsheet.fem.visible_error import visible_diffs, visible_vertices
 
 log = logging.getLogger(__name__)
@@ -35,8 +37,6 @@ def mirror_asymmetry(path: dict, spec: RefSpec, depths: np.ndarray, mat: Materia
     through the cylinder's axis: how far the solution is from mirror-symmetric. u(M·x) is probed from the
     path's DOF field (``u_dof``) on the re-meshed model (gmsh is deterministic). A quarter model (``half_z``)
     gives 0 up to float32 rounding, by construction."""
-    from flexsheet.fem.reference.snapshot_build import folded_probe, unfolded_sample
-
     verts = rm.rest_vertices.astype(float)
     fixed = rm.mesh.fixed[rm.surface_nodes]
     mirrored = verts.copy()
@@ -85,8 +85,6 @@ def mirror_stability(path: dict, spec: RefSpec, depths: np.ndarray, mat: Materia
     sticking anchors are not stored with the path), ``RuntimeError`` when the re-meshed model has another DOF
     count than the path (gmsh meshes differently)."""
     import scipy.sparse.linalg as sla
-
-    from flexsheet.fem.sparse_factor import NotPositiveDefinite, factor
 
     if not spec.half_z:
         raise ValueError(f"mirror_stability needs a quarter model (half_z), got {spec.key()}")

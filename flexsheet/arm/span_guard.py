@@ -1,0 +1,71 @@
+"""The two-arm span guard (pure): the sheet couples the two clamps, so one arm's step must not pull the span
+between them further outside its band while the partner lags.
+
+:class:`SpanGuard` holds the band (``span_band`` [lo, hi] m of the bridge's parameters), the partner clamp's
+measured position (its ``ArmJointState.pose``) and whether the partner waits on its own guard (its
+``bridge_status`` ``wait:span``); :meth:`SpanGuard.worse` says whether a step waits. The bridge's tracker
+(:class:`flexsheet.arm.tracking.TargetTracker`) asks it for each streamed step.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from flexsheet.arm.kinematics import ArmKinematics
+
+__all__ = ["SpanGuard"]
+
+
+class SpanGuard:
+    """The clamp span one arm keeps with its partner. ``kin``: this arm's :class:`ArmKinematics` (its clamp's
+    position from joints). Without a band (:meth:`set_band`) or a partner state (:attr:`peer_clamp`) no step
+    waits."""
+
+    def __init__(self, kin: ArmKinematics) -> None:
+        self.kin = kin
+        #: (3,) m, display frame: the partner clamp's measured position (its ``ArmJointState.pose``), or None
+        self.peer_clamp: np.ndarray | None = None
+        #: whether this arm's last step waited on the guard (``wait:span``)
+        self.waiting = False
+        #: whether the partner's last state said it waits on its guard
+        self.peer_waiting = False
+        #: (lo, hi) m: the clamp span kept with the partner, or None: no guard
+        self.band: tuple[float, float] | None = None
+        #: steps that waited because they would have taken the span further outside the band
+        self.waits = 0
+
+    def set_band(self, band) -> None:
+        """Keep the clamp span within ``band`` = (lo, hi) m of the partner's clamp (None: no guard). Raises
+        ``ValueError`` unless 0 < lo < hi."""
+        if band is None:
+            self.band = None
+            return
+        lo, hi = (float(x) for x in band)
+        if not (0.0 < lo < hi and math.isfinite(hi)):
+            raise ValueError(f"span_band must be [lo, hi] m with 0 < lo < hi, got {list(band)!r}")
+        self.band = (lo, hi)
+
+    def outside(self, q: np.ndarray) -> float:
+        """How far (m) the clamp at joints ``q`` (6,) rad lies outside the band from the partner's clamp (0
+        inside)."""
+        s = float(np.linalg.norm(self.kin.fk(q)[:3, 3] - self.peer_clamp))
+        lo, hi = self.band
+        return max(lo - s, s - hi, 0.0)
+
+    def worse(self, q_from, q_to) -> bool:
+        """Whether moving this clamp from joints ``q_from`` to ``q_to`` (6,) rad takes the clamp span further
+        outside :attr:`band` from the partner's measured clamp (:attr:`peer_clamp`); counted in :attr:`waits`
+        and :attr:`waiting`. False without a band or a partner state. Such a step waits for the partner, unless
+        the partner waits too (:attr:`peer_waiting`): then both step, as the planner's targets keep the span;
+        two arms each waiting for the other would wait for ever."""
+        if self.band is None or self.peer_clamp is None:
+            return False
+        out_to = self.outside(np.asarray(q_to, float))
+        if out_to > 0.0 and out_to > self.outside(np.asarray(q_from, float)) + 1e-6 and not self.peer_waiting:
+            self.waits += 1
+            self.waiting = True
+            return True
+        self.waiting = False
+        return False
