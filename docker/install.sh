@@ -33,6 +33,12 @@ if command -v apt-get >/dev/null 2>&1; then
     iproute2 procps \
     xvfb xauth aravis-tools aravis-tools-cli gir1.2-aravis-0.8 util-linux >/dev/null
 fi
+if ! command -v npm >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1; then
+  echo "[install] apt packages: Node.js and npm (the viewers' own readers in the tests)"
+  "${APT_INSTALL[@]}" nodejs npm >/dev/null
+fi
+echo "[install] npm packages of the viewer checks (tests/js: the official Foxglove WebSocket client, MCAP reader)"
+(cd tests/js && npm ci --no-audit --no-fund --loglevel=error)
 if ! wait "$pip_pid"; then
   cat "$pip_log" >&2
   echo "[install] pip install failed (output above)" >&2

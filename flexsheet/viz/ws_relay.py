@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import socket
 import threading
 
 from websockets.asyncio.client import connect
@@ -28,16 +29,22 @@ log = logging.getLogger(__name__)
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 #: the only name the foxglove-sdk server accepts
 UPSTREAM_SUBPROTOCOL = "foxglove.sdk.v1"
+#: frames and bytes the relay holds for a viewer that stops reading: little, so that the server's per-viewer
+#: backlog (``message_backlog_size``) is what fills and drops the oldest frames, as without the relay
+RELAY_QUEUE = 2
+RELAY_RCVBUF = 64 << 10
 
 
 class SubprotocolRelay:
     """Relay viewers on ``host``:``port`` (0: a free port, see :attr:`port`) to the SDK server at
     ``upstream_port`` on 127.0.0.1. :meth:`start` returns once listening; raises ``OSError`` naming the address
-    when it cannot bind. :meth:`stop` closes every connection and ends the thread. ``viewers``: connected now."""
+    when it cannot bind. :meth:`stop` closes every connection and ends the thread. ``viewers``: connected now;
+    ``dropped``: message-data frames a slow viewer did not get."""
 
     def __init__(self, host: str, port: int, upstream_port: int) -> None:
         self.host, self.port, self.upstream = host, int(port), f"ws://127.0.0.1:{int(upstream_port)}"
         self.viewers = 0
+        self.dropped = 0
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._stop: asyncio.Event | None = None
@@ -72,7 +79,7 @@ class SubprotocolRelay:
         self._loop = asyncio.get_running_loop()
         self._stop = asyncio.Event()
         async with serve(self._viewer, self.host, self.port, subprotocols=SUBPROTOCOLS, max_size=None,
-                         compression=None) as server:
+                         compression=None, write_limit=RELAY_RCVBUF) as server:
             self.port = server.sockets[0].getsockname()[1]
             self._ready.set()
             await self._stop.wait()
@@ -80,10 +87,16 @@ class SubprotocolRelay:
     async def _viewer(self, ws: ServerConnection) -> None:
         """One viewer: an upstream connection of its own, frames copied both ways until either side closes."""
         self.viewers += 1
+        down = ws.transport.get_extra_info("socket")
+        if down is not None:
+            down.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, RELAY_RCVBUF)
         try:
             async with connect(self.upstream, subprotocols=[UPSTREAM_SUBPROTOCOL], max_size=None,
-                               compression=None) as up:
-                pumps = [asyncio.create_task(self._pump(ws, up)), asyncio.create_task(self._pump(up, ws))]
+                               compression=None, max_queue=RELAY_QUEUE) as up:
+                sock = up.transport.get_extra_info("socket")
+                if sock is not None:     # a viewer that stops reading backs up into the server's own backlog
+                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RELAY_RCVBUF)
+                pumps = [asyncio.create_task(self._pump(ws, up)), asyncio.create_task(self._to_viewer(up, ws))]
                 await asyncio.wait(pumps, return_when=asyncio.FIRST_COMPLETED)
                 for t in pumps:
                     t.cancel()
@@ -91,6 +104,22 @@ class SubprotocolRelay:
             log.warning("live view: viewer %s dropped: %s", ws.remote_address, exc)
         finally:
             self.viewers -= 1
+
+    async def _to_viewer(self, up, ws: ServerConnection) -> None:
+        """Server → viewer. A message-data frame (binary, opcode 1) that finds the viewer's send buffer above
+        :data:`RELAY_RCVBUF` is dropped (counted in ``dropped``), as the server drops for a slow viewer; every
+        other frame (control, advertisements, replies) is sent whatever it waits."""
+        try:
+            async for frame in up:
+                if (type(frame) is bytes and frame[:1] == b"\x01"
+                        and ws.transport.get_write_buffer_size() > RELAY_RCVBUF):
+                    self.dropped += 1
+                    continue
+                await ws.send(frame)
+        except ConnectionClosed:
+            pass
+        finally:
+            await ws.close()
 
     @staticmethod
     async def _pump(src, dst) -> None:

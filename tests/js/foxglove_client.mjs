@@ -1,14 +1,14 @@
-// The official Foxglove WebSocket client (@foxglove/ws-protocol) against a live view, decoding with the
-// viewers' own channel parser (@mcap/support parseChannel): node foxglove_client.mjs PORT SUBPROTOCOL SECONDS
+// The official Foxglove WebSocket client (@foxglove/ws-protocol) against a live view, decoding as the viewers do
+// (decode.mjs): node foxglove_client.mjs PORT SUBPROTOCOL SECONDS
 // Subscribes to every advertised channel and prints one JSON line: the subprotocol agreed, and per channel its
 // schema, encoding, messages decoded and the first decode error. Exit 0 once every channel decoded a message
 // (or at the deadline with what it has), 2 when it cannot connect.
 import wsProtocol from "@foxglove/ws-protocol";
-import * as mcapSupport from "@mcap/support";
 import WebSocket from "ws";
 
+import { channelParser } from "./decode.mjs";
+
 const { FoxgloveClient } = wsProtocol;
-const { parseChannel } = mcapSupport;
 
 const [port, subprotocol, seconds] = [process.argv[2], process.argv[3], Number(process.argv[4] ?? 20)];
 const ws = new WebSocket(`ws://127.0.0.1:${port}`, [subprotocol]);
@@ -33,8 +33,7 @@ client.on("advertise", (advertised) => {
     try {
       const data = ch.schemaEncoding === "protobuf" ? Buffer.from(ch.schema, "base64")
         : new TextEncoder().encode(ch.schema);
-      parse = parseChannel({ messageEncoding: ch.encoding,
-        schema: { name: ch.schemaName, encoding: ch.schemaEncoding ?? "", data } });
+      parse = channelParser(ch.encoding, ch.schemaName, ch.schemaEncoding ?? "", data);
     } catch (err) {
       row.error = `schema: ${err}`;
     }
