@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from flexsheet.runtime.domain import domain_id
+from flexsheet.runtime.launch import load_launch
+from flexsheet.runtime.launch_config import curve_config
 
 __all__ = ["graph_dir", "announce", "withdraw", "discover", "resolve_graph", "Graph"]
 
@@ -113,9 +115,6 @@ def resolve_graph(launch: str | None, endpoints: list[str] | None = None) -> Gra
     """The :class:`Graph` for ``--launch`` / ``--endpoint`` (see the module docstring). Raises
     :class:`~flexsheet.runtime.launch.LaunchError` for an unusable launch file and :class:`LookupError` (one line
     naming what to give) when nothing is found."""
-    from flexsheet.runtime.launch import load_launch
-    from flexsheet.runtime.launch_config import curve_config
-
     launch = launch or (None if endpoints else os.environ.get("FLEXSHEET_LAUNCH"))
     if launch:
         lf = load_launch(launch)

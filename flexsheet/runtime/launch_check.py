@@ -72,6 +72,7 @@ from flexsheet.runtime.machine_checks import (
 )
 from flexsheet.runtime.plugins import node_class
 from flexsheet.runtime.ports import ephemeral_port_range
+from flexsheet.runtime.zmq.curve import load_curve_keys
 
 __all__ = ["CheckResult", "check_launch", "OUTPUT_PARAMS"]
 
@@ -217,7 +218,6 @@ class _Checker:
         if missing:
             self.err("security.public_keys", sorted(keys), f"no public key for {', '.join(missing)} "
                                                           f"(run: {cmd})")
-        from flexsheet.runtime.zmq.curve import load_curve_keys
 
         for h in self.hosts:
             for who in identities(lf, h):

@@ -23,7 +23,7 @@ from flexsheet.runtime.launch import (
     substitutions,
 )
 from flexsheet.runtime.plugins import node_class
-from flexsheet.runtime.zmq.curve import CurveConfig
+from flexsheet.runtime.zmq.curve import CurveConfig, load_curve_keys
 
 __all__ = ["node_config", "curve_config", "public_keys"]
 
@@ -71,7 +71,6 @@ def curve_config(lf: LaunchFile, host: str | None, node: str | None = None) -> C
     sec = lf.security
     if not sec.curve:
         return None
-    from flexsheet.runtime.zmq.curve import load_curve_keys
 
     kdir = keys_dir(lf)
     keys = public_keys(lf)
