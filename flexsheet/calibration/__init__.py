@@ -1,9 +1,11 @@
-"""Display registration: pure estimators that put the stereo camera, the projector, the arms and the
-eye into the ``display`` frame, the twin that renders what the real camera would see from a hidden truth, and
-the ``flexsheet calibrate camera-pose | projector | arms | eye | display`` commands.
+"""Display registration: pure estimators that put the stereo camera, the projector, the arms, the head camera
+and the eye into the ``display`` frame, identify the sheet's force law, and write ``display.yaml``.
 
-Modules: :mod:`.camera_pose`, :mod:`.projector`, :mod:`.arms`, :mod:`.eye` (estimators, fed frames by either
-source), :mod:`.twin` (frames from the truth), :mod:`.sources` (the twin source and the lab's captured-images
-source), :mod:`.procedures` (the lab-order procedures on any source), :mod:`.cli` (commands). See
-docs/calibration.md.
+Modules: :mod:`.camera_pose`, :mod:`.projector` (+ :mod:`.projector_joint`, the joint refinement), :mod:`.arms`,
+:mod:`.eye`, :mod:`.head_camera`, :mod:`.sheet` (estimators, fed frames by either source), :mod:`.sources` (the
+lab's captured-images source; the twin's is :class:`flexsheet.twin.registration.TwinSource`),
+:mod:`.procedures` (the lab-order procedures on any source), :mod:`.display_calib` and
+:mod:`.display_calib_file` (the result and its file). The ``flexsheet calibrate …`` commands are
+:mod:`flexsheet.display.calibrate`; the registration run in the twin and its studies are in
+:mod:`flexsheet.twin`. See docs/calibration.md.
 """

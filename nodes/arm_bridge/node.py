@@ -1,10 +1,11 @@
 """Node ``arm_bridge``: one per arm PC. ArmTarget (clamp pose) → IK → limited command stream, one command per
 controller cycle (7.1 ms) → ArmJointState.
 
-Thin shell: IK and target logic in :mod:`.tracking` / :mod:`flexsheet.arm.kinematics`, command shaping in
-:mod:`.interp`, the protocol-independent streaming loop in :mod:`.link`, and one backend per ``protocol``:
-``modbus`` (:mod:`.modbus_link`, Modbus TCP register map, docs/register_map.md) or ``mxt``
-(:mod:`.mxt_link`, MELFA real-time external control over UDP, docs/arm.md). Subscribes
+Thin shell: IK and target logic in :mod:`flexsheet.arm.tracking` / :mod:`flexsheet.arm.kinematics`, the
+two-arm span guard in :mod:`flexsheet.arm.span_guard`, command shaping in :mod:`flexsheet.arm.limiter`, the
+protocol-independent streaming loop in :mod:`flexsheet.arm.stream`, and one backend per ``protocol``:
+``modbus`` (:mod:`nodes.arm_bridge.modbus_link`, Modbus TCP register map, docs/register_map.md) or ``mxt``
+(:mod:`nodes.arm_bridge.mxt_link`, MELFA real-time external control over UDP, docs/arm.md). Subscribes
 ``topics.arm_target(arm)`` (QoS.LATEST, async handler on the loop: IK takes tens of µs), publishes
 ``topics.arm_state(arm)`` every cycle with the measured joints, their FK clamp pose (display frame),
 controller status/fault, ``write_stamp`` (wall time the command left: Modbus write / MXT MOVE) and

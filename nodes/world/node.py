@@ -4,12 +4,10 @@ truth (:class:`flexsheet.twin.truth.TwinTruth`, param ``twin: {realism, truth_se
 * Finger: plays a list of :class:`flexsheet.twin.finger.FingerScript` segments one after the other (default:
   the paper's stroking experiment at 10 s and 30 s moving time, then a combined stroke and push) and
   publishes the true marker position on ``/world/finger`` at ``rate_hz`` (100 Hz; the camera twin renders it
-  with the truth's velocity between samples). 200 Hz (and a 100 Hz sheet) asked ~0.4 of a core of a 2-core
-  machine the whole graph shares: the world ran at 27 Hz in a loaded shared sim run (21 Hz in CI) with gaps
-  of 0.3–0.8 s, in which the camera twin's finger froze (its extrapolation is capped at 0.1 s). The
-  finger follows the stroke path of the ``scene`` (:mod:`flexsheet.model.scenes`; filled by the launcher
-  from the launch file's top-level ``scene:``; none = the paper's cylinder): p − depth·n along the path, with
-  each segment's profile over the path fraction (stroke, push at the path's start, stroke_push). Between two
+  with the truth's velocity between samples, extrapolating at most 0.1 s; 100 Hz and a 50 Hz sheet leave the
+  graph's other nodes their share of a loaded machine's cores). The finger follows the stroke path of the
+  ``scene`` (:mod:`flexsheet.model.scenes`; filled by the launcher from the launch file's top-level ``scene:``;
+  none = the paper's cylinder): p − depth·n along the path, with each segment's profile over the path fraction (stroke, push at the path's start, stroke_push). Between two
   segments the finger lifts off and moves through free space to the next start (:func:`flexsheet.twin.finger.after`).
 * Sheet: the true clamp poses are the *true* arms' forward kinematics of the measured joint states
   (``ArmJointState.position``; the truth's base poses, link lengths and joint zero offsets — never the

@@ -20,7 +20,7 @@ uniform vec3 u_q;
 uniform vec3 u_c[4];
 uniform vec3 u_tn[4];
 uniform int u_usable[4];
-// fine membrane (see membrane.py): w(u,v) = sum_k coef_k sin(lam_k (u + a)) G_k(v, v0)
+// fine membrane (flexsheet/model/sheet.py, the pushed membrane; numpy twin in correction.py): w(u,v) = sum_k coef_k sin(lam_k (u + a)) G_k(v, v0)
 uniform vec3 u_o;
 uniform vec3 u_n;
 uniform vec3 u_eu;
