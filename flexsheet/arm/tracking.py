@@ -69,13 +69,12 @@ class TargetTracker:
     ``max_jump``: rad, largest joint change one new target may ask of IK (larger = a branch jump, refused).
     After a pause of the target stream longer than ``target_timeout`` (the arm held) the first target may ask
     ``max_jump`` plus what the fastest joint could have moved in the pause (``QD_MAX``'s largest, rad/s, times
-    the pause): the finger went on meanwhile, and a respawned planner's first target is where it is now (a
-    planner dead 5.6 s left the left arm in ``hold:jump`` for 11 s in the faults scenario). A stream that has not
-    started yet (the first target, or the first after :meth:`release`) counts its pause from the first target
-    heard, or from the release: a target refused then does not start the stream, so the allowance keeps growing
-    and the arm joins a stream that begins far away (after a registration moved it) instead of holding on
-    ``hold:jump`` for as long as the targets keep coming. The streaming limiter still moves the arm there at
-    the speed limit. A branch flip inside a flowing stream is refused as before.
+    the pause): the finger went on meanwhile, and a respawned planner's first target is where it is now. A
+    stream that has not started yet (the first target, or the first after :meth:`release`) counts its pause
+    from the first target heard, or from the release: a target refused then does not start the stream, so the
+    allowance keeps growing and the arm joins a stream that begins far away (after a registration moved it)
+    instead of holding on ``hold:jump`` for as long as the targets keep coming. The streaming limiter still moves the arm there at
+    the speed limit. A branch flip inside a flowing stream is refused.
     After :meth:`seed` (or the first target) ``goal`` is a (6,) rad joint vector.
     """
 

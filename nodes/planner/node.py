@@ -120,10 +120,9 @@ PlannerParams = params_model(
     launch/scenes/*.yaml, e.g. ``rounded_box``).
     ``use_prediction``: plan on ``Fingertip.predicted_position``; ``use_fem_stiffness``: use the FEM's
     stiffness while fresher than ``fem_timeout`` s and about this scene — with ``fem_window`` > 0 the median
-    of its messages of the last ``fem_window`` s (default 0: the latest only; on the sphere, whose FEM dF/dd
-    jumps with the few surface nodes a light touch moves, a 0.3 s median took the stroke's Δθ from 20.9° to
-    4.7° in one run and 18.8° in another, while on the cylinder it lags the tension: 0.60–0.64° against
-    0.40–0.51° with the latest value, two runs each of tests/system/test_integration_sim.py's script); ``stiffness_from_scene``: else the
+    of its messages of the last ``fem_window`` s (default 0: the latest only; a median steadies a scene whose
+    FEM dF/dd jumps with the few surface nodes a light touch moves, such as the sphere, but lags the tension
+    on the cylinder); ``stiffness_from_scene``: else the
     scene's compliance estimate at the contact (:mod:`flexsheet.planning.compliance`), else ``object_stiffness``;
     ``min_contact_depth`` m: the depth below which the estimate takes that depth (light touch);
     ``display_calib``: the display registration
