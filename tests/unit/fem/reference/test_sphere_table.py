@@ -29,6 +29,7 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
     fr = sphere_frame(sc)
     grid = SphereGrid(depth_max=0.01, depth_step=0.005)
     monkeypatch.setattr(S, "DEFAULT_SPHERE_GRID", grid)
+    monkeypatch.setattr(T, "DEFAULT_SPHERE_GRID", grid)       # the table builder reads its own import
     monkeypatch.setattr("flexsheet.fem.cache.SHIPPED_DIR", str(tmp_path / "shipped"))
     pts = grid_points(fr, grid)
     nt, nph = len(grid.thetas()), len(grid.phis())
