@@ -33,6 +33,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from flexsheet.runtime import lockstep
 from flexsheet.runtime.bag_export import export_bag
+from flexsheet.runtime.bag_json import JSON_ENCODING
 from flexsheet.runtime.bag_read import (
     ENCODING,
     MAGIC,
@@ -348,7 +349,7 @@ def cmd_info(args: argparse.Namespace) -> int:
     for topic, n in sorted(s.counts.items()):
         rate = n / (s.end - s.start) if s.end > s.start else 0.0
         kind = s.schemas.get(topic) or s.encodings.get(topic, "")
-        enc = "" if s.encodings.get(topic) == ENCODING else f"  [{s.encodings.get(topic)}]"
+        enc = "" if s.encodings.get(topic) in (ENCODING, JSON_ENCODING) else f"  [{s.encodings.get(topic)}]"
         print(f"  {topic:<{w}}  {n:7d} msgs  {rate:8.1f} Hz  {kind}{enc}")
     for topic, n in sorted(s.malformed.items()):
         print(f"  {topic:<{w}}  {n:7d} msgs  malformed, stored raw")

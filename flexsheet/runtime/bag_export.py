@@ -26,6 +26,7 @@ import msgpack
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
+from flexsheet.runtime.bag_json import PART_OF, ViewerDecoder
 from flexsheet.runtime.bag_read import ENCODING, GAP_SCHEMA, GAP_TOPIC, BagSummary, McapScan
 from flexsheet.runtime.codec import DecodeError, decode_any
 from flexsheet.runtime.extensions import bag_channels
@@ -144,6 +145,7 @@ def _batches(scan: McapScan, progress: Callable[[float, int], None] | None, t_ne
     ``_BATCH_BYTES`` or ``_BATCH_MESSAGES``; the recorder's gap records go to ``gap_records``. ``n_read[0]``
     counts the messages read; ``progress`` is called when ``t_next[0]`` (monotonic s) has passed, then 2 s later."""
     batch, size = [], 0
+    viewer = ViewerDecoder()
     for kind, rec in scan.records():
         if kind != "message":
             continue
@@ -156,14 +158,30 @@ def _batches(scan: McapScan, progress: Callable[[float, int], None] | None, t_ne
             continue
         if ch.topic == GAP_TOPIC:
             gap_records.append((rec[2], rec[4]))
-        elif ch.message_encoding == ENCODING:
-            batch.append((ch.topic, rec[2], rec[4]))
-            size += len(rec[4])
+        else:
+            data = rec[4] if ch.message_encoding == ENCODING else _assembled(viewer, scan, ch, rec[4], rec[2])
+            if data is None:
+                continue
+            batch.append((ch.metadata.get(PART_OF, ch.topic), rec[2], data))
+            size += len(data)
             if size > _BATCH_BYTES or len(batch) >= _BATCH_MESSAGES:
                 yield batch
                 batch, size = [], 0
     if batch:
         yield batch
+
+
+def _assembled(viewer: ViewerDecoder, scan: McapScan, ch, data: bytes, log_time: int) -> bytes | None:
+    """A recorder's ``json`` message (with its image parts) as the msgpack list of its wire frames after the topic,
+    as older bags stored it; None for an image part (held until its message) and any other channel."""
+    sch = scan.schemas.get(ch.schema_id)
+    if sch is None or not viewer.wants(ch.message_encoding, sch.name, ch.metadata):
+        return None
+    try:
+        frames = viewer.frames(ch.topic, sch.name, ch.metadata, data, sch.data, log_time)
+    except (ValueError, TypeError):
+        return None
+    return None if frames is None else msgpack.packb([bytes(f) for f in frames[1:]])
 
 
 class _JsonChannels:

@@ -30,6 +30,8 @@ import msgpack
 from mcap.data_stream import ReadDataStream
 from mcap.records import Attachment, Channel, ChunkIndex, Header, MessageIndex, Metadata, Schema
 
+from flexsheet.runtime.bag_json import FIELD, JSON_ENCODING, PART_OF, Parts, ViewerDecoder
+
 __all__ = ["ENCODING", "RAW_ENCODING", "GAP_TOPIC", "GAP_SCHEMA", "Damage", "BagSummary", "BagMessage", "McapScan", "read_bag",
            "bag_info", "clock_text"]
 
@@ -84,7 +86,8 @@ class BagSummary:
     sequence gaps, queue full, write errors), ``malformed``: messages stored as they came (not a flexsheet
     envelope), ``gaps``: the recorder's down times, ``damaged``: unreadable parts, ``truncated``: the file ends
     before its footer (a crash or a cut copy), ``cut_bytes``: the unreadable tail, ``cut_span``: the time range
-    (s) of the partial chunk there, if its header survived."""
+    (s) of the partial chunk there, if its header survived; ``incomplete``: messages per topic whose record was
+    read but an image part of it went with a damaged or cut chunk (not counted in ``counts``)."""
 
     counts: Counter = field(default_factory=Counter)
     schemas: dict[str, str] = field(default_factory=dict)
@@ -98,6 +101,7 @@ class BagSummary:
     truncated: bool = False
     cut_bytes: int = 0
     cut_span: tuple[float, float] | None = None
+    incomplete: Counter = field(default_factory=Counter)
 
     @property
     def lost(self) -> int:
@@ -142,12 +146,12 @@ class McapScan:
         self.schemas: dict[int, Schema] = {}
         self.complete = False           # the footer and its summary CRC are intact
         self._chunk_index: list[ChunkIndex] = []
-        self._pending: Counter | None = None  # counts of the damaged chunk the following message indexes describe
+        self._pending: dict | None = None  # log times of the damaged chunk the following message indexes describe
         self._data_end = 0
         self.pos = 0                    # byte offset reached (progress)
         self.size = 0
         self.header = None              # the file's Header record (profile, library)
-        self._lost_by_channel: list[tuple[Damage, Counter]] = []
+        self._lost_by_channel: list[tuple[Damage, dict]] = []
 
     # ---------------------------------------------------------------- footer and summary
     def _read_summary(self, mm) -> None:
@@ -240,7 +244,7 @@ class McapScan:
     def _damage(self, offset: int, length: int, reason: str, t0: int = 0, t1: int = 0) -> None:
         d = Damage(offset, length, reason, t0 / 1e9, t1 / 1e9)
         self.summary.damaged.append(d)
-        by_channel: Counter = Counter()
+        by_channel: dict[int, list[int]] = {}      # channel -> log times (ns) of its records in the damage
         self._lost_by_channel.append((d, by_channel))
         for ci in self._chunk_index:  # the summary's index says what the chunks in this range held
             if offset <= ci.chunk_start_offset < offset + length:
@@ -249,13 +253,13 @@ class McapScan:
                 self._index_counts(ci, by_channel)
         self._pending = None if by_channel else by_channel  # else: the message indexes that follow will say
 
-    def _index_counts(self, ci: ChunkIndex, by_channel: Counter) -> None:
+    def _index_counts(self, ci: ChunkIndex, by_channel: dict) -> None:
         for cid, off in ci.message_index_offsets.items():
             try:
                 op, n = struct.unpack_from("<BQ", self._mm, off)
                 if op == _OP_MSG_INDEX:
                     mi = MessageIndex.read(ReadDataStream(io.BytesIO(self._mm[off + 9:off + 9 + n])))
-                    by_channel[cid] += len(mi.records)
+                    by_channel.setdefault(cid, []).extend(t for t, _ in mi.records)
             except Exception:  # noqa: BLE001 - an index in a damaged area says nothing
                 continue
 
@@ -329,7 +333,7 @@ class McapScan:
                 if self._pending is not None:
                     try:
                         mi = MessageIndex.read(ReadDataStream(io.BytesIO(mm[pos + 9:pos + 9 + n])))
-                        self._pending[mi.channel_id] += len(mi.records)
+                        self._pending.setdefault(mi.channel_id, []).extend(t for t, _ in mi.records)
                     except Exception:  # noqa: BLE001 - a damaged index only costs the count
                         pass
             elif op in (_OP_SCHEMA, _OP_CHANNEL, _OP_METADATA, _OP_ATTACHMENT, _OP_MESSAGE):
@@ -383,16 +387,26 @@ class McapScan:
         except (KeyError, ValueError):
             return
         if cid not in self.channels:
+            try:
+                meta = json.loads(m.get("metadata", "{}"))
+            except ValueError:
+                meta = {}
             self.channels[cid] = Channel(id=cid, topic=m.get("topic", ""), message_encoding=m.get("encoding", ""),
-                                         metadata={}, schema_id=sid)
+                                         metadata=meta if isinstance(meta, dict) else {}, schema_id=sid)
         if sid and sid not in self.schemas:
             self.schemas[sid] = Schema(id=sid, data=b"", encoding="", name=m.get("schema", ""))
 
     def _finish(self) -> None:
+        """Each damage's lost messages per topic: the distinct log times of its records per message topic (a
+        message's image parts count with it, :mod:`flexsheet.runtime.bag_json`)."""
         for d, by_channel in self._lost_by_channel:
-            for cid, k in by_channel.items():
+            times: dict[str, set] = {}
+            for cid, ts in by_channel.items():
                 ch = self.channels.get(cid)
-                d.counts[ch.topic if ch else f"<channel {cid}>"] += k
+                topic = (ch.metadata.get(PART_OF, ch.topic)) if ch else f"<channel {cid}>"
+                times.setdefault(topic, set()).update(ts if ch else range(len(ts)))
+            for topic, ts in times.items():
+                d.counts[topic] += len(ts)
 
 
 def _note_metadata(summary: BagSummary, md: Metadata) -> None:
@@ -404,26 +418,43 @@ def _note_metadata(summary: BagSummary, md: Metadata) -> None:
 
 
 def read_bag(path: str | Path, topics: list[str] | None = None, summary: BagSummary | None = None) -> Iterator[BagMessage]:
-    """Iterate the lossless messages of a bag in file order, every chunk's CRC checked.
+    """Iterate the flexsheet messages of a bag in file order, as wire frames, every chunk's CRC checked: the
+    recorder's ``json`` messages with their image parts (:mod:`flexsheet.runtime.bag_json`), and the
+    ``flexsheet-msgpack`` ones of older bags.
 
     ``topics``: only these (all if empty). A damaged chunk is skipped (``summary.damaged``); a truncated file
     yields every message up to its last complete chunk and sets ``summary.truncated``; the recorder's drop
-    counts go to ``summary.dropped``. Other channels (Foxglove, malformed input, gap records) are not yielded.
-    Raises ``ValueError`` naming the file if it is not an MCAP file at all.
+    counts go to ``summary.dropped``. Other channels (Foxglove, malformed input, gap records) are not yielded;
+    a record that does not parse is skipped. Raises ``ValueError`` naming the file if it is not an MCAP file.
     """
     scan = McapScan(path, summary)
     want = set(topics or ())
+    viewer = ViewerDecoder()
     for kind, rec in scan.records():
         if kind == "message":
             ch = scan.channels.get(rec[0])
-            if ch is None or ch.message_encoding != ENCODING or (want and ch.topic not in want):
+            if ch is None:
                 continue
-            try:
-                frames = msgpack.unpackb(rec[4])
-            except Exception:  # noqa: BLE001 - CRC-checked, so only a writer's bug gets here: skip
-                continue
-            schema = scan.schemas[ch.schema_id].name if ch.schema_id in scan.schemas else ""
-            yield BagMessage(ch.topic, schema, rec[2] / 1e9, [ch.topic.encode(), *frames])
+            sch = scan.schemas.get(ch.schema_id)
+            schema = sch.name if sch is not None else ""
+            if ch.message_encoding == ENCODING:
+                if want and ch.topic not in want:
+                    continue
+                try:
+                    frames = msgpack.unpackb(rec[4])
+                except Exception:  # noqa: BLE001 - CRC-checked, so only a writer's bug gets here: skip
+                    continue
+                yield BagMessage(ch.topic, schema, rec[2] / 1e9, [ch.topic.encode(), *frames])
+            elif viewer.wants(ch.message_encoding, schema, ch.metadata):
+                owner = ch.metadata.get(PART_OF, ch.topic)
+                if want and owner not in want:
+                    continue
+                try:
+                    frames = viewer.frames(ch.topic, schema, ch.metadata, rec[4], sch.data if sch else b"", rec[2])
+                except (ValueError, TypeError):
+                    continue
+                if frames is not None:
+                    yield BagMessage(ch.topic, schema, rec[2] / 1e9, frames)
         elif kind == "metadata":
             _note_metadata(scan.summary, rec)
 
@@ -433,6 +464,7 @@ def bag_info(path: str | Path) -> BagSummary:
     recorder and the read found lost (drops, malformed input, gaps, damage, truncation). Reads the whole file."""
     s = BagSummary()
     scan = McapScan(path, s)
+    parts = Parts()
     t0, t1 = None, 0
     for kind, rec in scan.records():
         if kind == "message":
@@ -446,6 +478,13 @@ def bag_info(path: str | Path) -> BagSummary:
                 continue
             if ch is not None and ch.message_encoding == RAW_ENCODING:
                 s.malformed[topic] += 1
+                continue
+            if ch is not None and PART_OF in ch.metadata:     # an image of a message: counted with the message
+                parts.add(ch.metadata[PART_OF], ch.metadata.get(FIELD, ""), rec[2])
+                continue
+            if ch is not None and ch.message_encoding == JSON_ENCODING and ch.schema_id in scan.schemas \
+                    and parts.whole(topic, scan.schemas[ch.schema_id].name, rec[2]) is None:
+                s.incomplete[topic] += 1                       # its image went with a damaged or cut chunk
                 continue
             s.counts[topic] += 1
             if topic not in s.encodings:

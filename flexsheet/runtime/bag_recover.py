@@ -14,13 +14,14 @@ from pathlib import Path
 
 from mcap.writer import CompressionType, Writer
 
+from flexsheet.runtime.bag_json import FIELD, JSON_ENCODING, PART_OF, Parts
 from flexsheet.runtime.bag_read import BagSummary, McapScan
 
 __all__ = ["recover_bag"]
 
 
 def recover_bag(src: str | Path, dst: str | Path, summary: BagSummary | None = None) -> Counter:
-    """Write what is readable of ``src`` to ``dst`` as a complete MCAP. Returns messages kept per topic;
+    """Write what is readable of ``src`` to ``dst`` as a complete MCAP. Returns whole messages kept per topic;
     damage and truncation go to ``summary``. Raises ``ValueError`` if ``src`` is not MCAP at all and
     ``FileNotFoundError`` if it is missing. ``src`` and ``dst`` must differ."""
     if Path(src).resolve() == Path(dst).resolve():
@@ -29,6 +30,7 @@ def recover_bag(src: str | Path, dst: str | Path, summary: BagSummary | None = N
     scan = McapScan(src, s)
     kept: Counter = Counter()
     unknown: Counter = Counter()
+    parts = Parts()
     with open(dst, "wb") as fh:
         w = Writer(fh, compression=CompressionType.LZ4)
         started = False
@@ -58,7 +60,12 @@ def recover_bag(src: str | Path, dst: str | Path, summary: BagSummary | None = N
                         schemas[sc.id] = sid
                     out = channels[cid] = w.register_channel(ch.topic, ch.message_encoding, sid, ch.metadata)
                 w.add_message(out, log_time=rec[2], data=rec[4], publish_time=rec[3], sequence=rec[1])
-                kept[scan.channels[cid].topic] += 1
+                ch = scan.channels[cid]
+                if PART_OF in ch.metadata:      # an image of a message (flexsheet.runtime.bag_json): counted with it
+                    parts.add(ch.metadata[PART_OF], ch.metadata.get(FIELD, ""), rec[2])
+                elif ch.message_encoding != JSON_ENCODING or ch.schema_id not in scan.schemas \
+                        or parts.whole(ch.topic, scan.schemas[ch.schema_id].name, rec[2]) is not None:
+                    kept[ch.topic] += 1
             elif kind == "metadata" and rec.name != "flexsheet.channel":  # channel ids are renumbered here
                 w.add_metadata(rec.name, rec.metadata)
             elif kind == "attachment":

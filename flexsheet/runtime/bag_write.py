@@ -1,12 +1,13 @@
 """The recorder's MCAP writer: stores whatever arrives, counts what it loses, never stops on bad input.
 
-Like rosbag2 it does not need to understand a message to store it. Each message is stored as its raw wire
-frames (msgpack list of the frames after the topic frame) on a channel per topic:
+Like rosbag2 it does not need to validate a message to store it. Each message goes on a channel per topic:
 
-* ``flexsheet-msgpack`` when its meta frame is a flexsheet envelope (a str schema name, an int version, a
-  dict body): what the player replays and the tools decode;
-* ``flexsheet-raw`` otherwise (a 1-frame message, a meta frame that is not msgpack or not an envelope): kept
-  byte for byte, counted as *malformed*, never replayed.
+* a flexsheet message envelope (a str schema name, an int version, a dict body) in the encodings every MCAP
+  viewer decodes (:mod:`flexsheet.runtime.bag_json`): ``json`` with its pydantic model's ``jsonschema``, its
+  images as ``foxglove.RawImage``; what the player replays and the tools decode;
+* anything else (a 1-frame message, a meta frame that is not msgpack or not an envelope, arrays that do not
+  match their descriptors): its raw wire frames (msgpack list of the frames after the topic frame) as
+  ``flexsheet-raw``, kept byte for byte, counted as *malformed*, never replayed.
 
 Publisher sequence gaps are counted as drops per topic (``header.seq``; a seq that is not an int is not
 counted, a step back or a jump over :data:`MAX_SEQ_JUMP` is a publisher restart, counted under ``resets``).
@@ -32,7 +33,9 @@ from pathlib import Path
 import msgpack
 from mcap.writer import CompressionType, Writer
 
+from flexsheet.runtime.bag_json import PART_OF, ViewerDecoder, ViewerEncoder
 from flexsheet.runtime.bag_read import ENCODING, GAP_SCHEMA, GAP_TOPIC, RAW_ENCODING, McapScan
+from flexsheet.runtime.codec import DecodeError
 from flexsheet.runtime.extensions import bag_channels
 
 __all__ = ["BagWriter", "MAX_SEQ_JUMP", "CHUNK_SIZE", "FLUSH_PERIOD"]
@@ -85,13 +88,6 @@ def _envelope(meta: bytes) -> tuple[str | None, object]:
     return obj["s"], header.get("seq") if isinstance(header, dict) else None
 
 
-def _schema_json(name: str) -> bytes:
-    from messages import MESSAGE_TYPES  # the message package loads on the writer thread, not at start-up
-
-    cls = MESSAGE_TYPES.get(name)
-    return json.dumps(cls.model_json_schema() if cls else {}).encode()
-
-
 class BagWriter:
     """Writes raw wire frames to an MCAP file from a background thread (the caller never blocks on disk).
 
@@ -118,7 +114,7 @@ class BagWriter:
         self.max_queue_bytes = max_queue_bytes
         self._queued = 0
         self._fh = _DirectFile(self.path)
-        self._writer = Writer(self._fh, chunk_size=chunk_size, compression=CompressionType.LZ4)
+        self._writer = Writer(self._fh, chunk_size=chunk_size, compression=CompressionType.ZSTD)
         self._writer.start(profile="flexsheet", library="flexsheet")
         self._channels: dict[tuple[str, str, str], int] = {}
         self._schemas: dict[str, int] = {}
@@ -131,6 +127,7 @@ class BagWriter:
         self._first: dict[str, int] = {}        # first log time per topic in this part (for the gap records)
         self._prev_last: dict[str, int] | None = None
         self._gaps_written: set[str] = set()
+        self._encoder = ViewerEncoder()
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self.foxglove = None
         if foxglove:  # Foxglove channels (/viz/*, images) beside the lossless ones: the bag opens with the scene
@@ -190,36 +187,45 @@ class BagWriter:
                 self.dropped["<write error>"] += 1
                 self.error = f"{type(exc).__name__}: {exc}"[:300]
 
-    def _channel(self, topic: str, encoding: str, schema: str) -> int:
+    def _channel(self, topic: str, encoding: str, schema: str, schema_encoding: str = "jsonschema",
+                 schema_data: bytes | None = None, metadata: dict | None = None) -> int:
         key = (topic, encoding, schema)
         ch = self._channels.get(key)
         if ch is None:
             sid = self._schemas.get(schema, 0)
             if schema and not sid:
-                data = GAP_SCHEMA if schema == "flexsheet.RecorderGap" else None
-                data = json.dumps(data).encode() if data else _schema_json(schema)
-                sid = self._schemas[schema] = self._writer.register_schema(schema, "jsonschema", data)
-            ch = self._channels[key] = self._writer.register_channel(topic, encoding, sid)
+                if schema_data is None:
+                    schema_data = json.dumps(GAP_SCHEMA).encode() if schema == GAP_SCHEMA["title"] else b"{}"
+                sid = self._schemas[schema] = self._writer.register_schema(schema, schema_encoding, schema_data)
+            ch = self._channels[key] = self._writer.register_channel(topic, encoding, sid, metadata or {})
             # the channel again outside the chunks: a later chunk's messages keep their topic even if the chunk
             # holding the Channel record is damaged (bag_read.McapScan reads these back)
             self._writer.add_metadata("flexsheet.channel", {"id": str(ch), "topic": topic, "encoding": encoding,
-                                                            "schema": schema, "schema_id": str(sid)})
+                                                            "schema": schema, "schema_id": str(sid),
+                                                            "metadata": json.dumps(metadata or {})})
         return ch
 
     def _store(self, frames: list, t_ns: int) -> None:
         topic = bytes(frames[0]).decode(errors="replace") if frames else ""
-        data = msgpack.packb([bytes(f) for f in frames[1:]])
         schema, seq = _envelope(bytes(frames[1])) if len(frames) > 1 else (None, None)
-        if schema is None:
+        records = None
+        if schema is not None:
+            try:
+                records = self._encoder.records(frames)
+            except (DecodeError, TypeError, ValueError):
+                records = None
+        if records is None:
+            data = msgpack.packb([bytes(f) for f in frames[1:]])
             self._writer.add_message(self._channel(topic, RAW_ENCODING, ""), log_time=t_ns, data=data,
                                      publish_time=t_ns)
             self.malformed[topic] += 1
             return
-        ch = self._channel(topic, ENCODING, schema)
         if type(seq) is int:
             self._count_gap(topic, seq)
-        self._writer.add_message(ch, log_time=t_ns, data=data, publish_time=t_ns,
-                                 sequence=seq & 0xFFFFFFFF if type(seq) is int else 0)
+        for r in records:
+            ch = self._channel(r.topic, r.encoding, r.schema, r.schema_encoding, r.schema_data, r.metadata)
+            self._writer.add_message(ch, log_time=t_ns, data=r.data, publish_time=t_ns,
+                                     sequence=seq & 0xFFFFFFFF if type(seq) is int else 0)
         self.counts[topic] += 1
         if topic not in self._first:
             self._first[topic] = t_ns
@@ -248,7 +254,10 @@ class BagWriter:
             for kind, rec in scan.records():
                 if kind == "message":
                     ch = scan.channels.get(rec[0])
-                    if ch is not None and ch.message_encoding == ENCODING and rec[2] > last.get(ch.topic, 0):
+                    sch = scan.schemas.get(ch.schema_id) if ch is not None else None
+                    if ch is not None and (ch.message_encoding == ENCODING or ViewerDecoder.wants(
+                            ch.message_encoding, sch.name if sch else "", ch.metadata)) \
+                            and PART_OF not in ch.metadata and rec[2] > last.get(ch.topic, 0):
                         last[ch.topic] = rec[2]
         except Exception:  # noqa: BLE001 - an unreadable previous part: the gap starts where we know nothing
             pass

@@ -22,7 +22,7 @@ from pydantic import BaseModel, ValidationError
 
 from messages import MESSAGE_TYPES, Message, Topic
 
-__all__ = ["DecodeError", "encode", "decode", "decode_any", "peek_schema", "peek_stamp", "MAX_ARRAY_BYTES"]
+__all__ = ["DecodeError", "encode", "pack", "unpack", "decode", "decode_any", "peek_schema", "peek_stamp", "MAX_ARRAY_BYTES"]
 
 EXT_NDARRAY = 1
 _HEAD = struct.Struct("<HB")  # buffer index, ndim; then ndim × uint64 dims, then the dtype string
@@ -152,9 +152,22 @@ def encode(topic: str, msg: Message) -> list:
     Buffers are the arrays' own memory (C-contiguous views; a non-contiguous array is copied once).
     Raises ``TypeError`` for a field value msgpack cannot carry.
     """
+    return pack(topic, msg.SCHEMA, msg.VERSION, msg.__dict__)
+
+
+def pack(topic: str, schema: str, version: int, fields: dict) -> list:
+    """Frames ``[topic, meta, *buffers]`` of a message given as its ``schema`` name, ``version`` and ``fields``
+    (plain values, dicts for nested models, numpy arrays), not validated (a receiver validates). Raises
+    ``TypeError`` for a value msgpack cannot carry."""
     buffers: list = []
-    meta = msgpack.packb({"s": msg.SCHEMA, "v": msg.VERSION, "d": _fields(msg.__dict__, buffers)}, default=_default)
+    meta = msgpack.packb({"s": schema, "v": version, "d": _fields(fields, buffers)}, default=_default)
     return [topic.encode(), meta, *buffers]
+
+
+def unpack(frames: list, topic_name: str) -> dict:
+    """The envelope ``{"s": schema, "v": version, "d": fields}`` of ``frames`` (arrays as read-only numpy views
+    of their buffers), not validated against its type. Raises :class:`DecodeError` naming ``topic_name``."""
+    return _unpack(frames, topic_name)
 
 
 def _unpack(frames: list, topic_name: str) -> dict:

@@ -25,6 +25,7 @@ from pathlib import Path
 
 from mcap.writer import Writer
 
+from flexsheet.runtime.bag_read import read_bag
 from flexsheet.runtime.codec import DecodeError, decode_any
 from flexsheet.viz.config import VizConfig
 from flexsheet.viz.foxglove import JSON_TOPICS, channel_schemas
@@ -145,8 +146,6 @@ def add_foxglove(src: str | Path, writer: Writer, rates: Rates | None = None, co
             add_foxglove("run.mcap", w, json_copies=True)
             w.finish()
     """
-    from flexsheet.runtime.bag_read import read_bag
-
     fox = FoxgloveBagChannels(writer, rates, config, json_copies)
     for m in read_bag(src):
         if not json_copies:

@@ -27,6 +27,7 @@ from foxglove.messages import (
 from scipy.spatial.transform import Rotation
 
 from flexsheet.model import geometry
+from flexsheet.model.checks import check_pose
 from flexsheet.model.projector import eye_positions
 from flexsheet.model.sheet import SheetSurface, clamp_poses
 from flexsheet.model.sheet_model import (
@@ -137,8 +138,6 @@ class SceneBuilder:
         elif isinstance(msg, ArmJointState):
             self._arm_links(msg.arm, msg.position)  # raises on bad joints; caches the link poses
         elif isinstance(msg, StereoCalibration):
-            from flexsheet.model.checks import check_pose
-
             check_pose(f"{topic}.T_display_camera", msg.T_display_camera)
         self.latest[topic] = msg
         self.stamp = max(self.stamp, float(msg.header.stamp))

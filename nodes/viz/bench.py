@@ -37,6 +37,7 @@ from flexsheet.viz.foxglove import (
     SCENE,
     TF,
 )
+from flexsheet.viz.wsclient import FoxgloveClient
 
 __all__ = ["main", "WINDOWS"]
 
@@ -70,8 +71,6 @@ def _find_viz(launch: Path, timeout: float = 60.0) -> int:
 
 
 async def _window(pid: int, port: int, channels, seconds: float) -> dict:
-    from flexsheet.viz.wsclient import FoxgloveClient
-
     c = None
     if channels != []:
         c = await FoxgloveClient.open(port)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -13,7 +14,7 @@ import numpy as np
 import pytest
 from conftest import MIN_TIPS_HZ
 
-from flexsheet.experiments.table1 import PAPER_TABLE1
+from flexsheet.analysis.table1 import PAPER_TABLE1
 from flexsheet.runtime.bag_read import bag_info, read_bag
 from flexsheet.runtime.codec import decode_any
 
@@ -65,6 +66,24 @@ def test_sim_launch_prints_table1_and_latency_and_leaves_outputs(sim_run):
     info = bag_info(out / "sim.mcap")
     assert not info.truncated and info.counts["/object/deformation"] > 100 and info.counts["/render/stereo"] > 20
     assert (out / "table1.png").stat().st_size > 1000 and (out / "report.md").exists()
+
+
+def test_the_official_mcap_reader_decodes_every_message_of_the_bag(sim_run):
+    """What Foxglove and Lichtblick read: @mcap/core's reader and their decoding (tests/js/mcap_read.mjs)."""
+    node, js = shutil.which("node"), ROOT / "tests" / "js"
+    assert node and (js / "node_modules" / "@mcap" / "core").is_dir(), "run docker/install.sh (Node.js, tests/js)"
+    bag = sim_run["out"] / "sim.mcap"
+    r = subprocess.run([node, str(js / "mcap_read.mjs"), str(bag)], capture_output=True, text=True, timeout=300,
+                       cwd=js)
+    assert r.returncode == 0, r.stderr[-2000:]
+    topics = json.loads(r.stdout.strip().splitlines()[-1])["topics"]
+    info = bag_info(bag)
+    assert set(info.counts) <= set(topics) and len(topics) >= 16, sorted(topics)   # every recorded topic ...
+    bad = {t: row for t, row in topics.items() if row["error"] or row["decoded"] != row["read"]}
+    assert bad == {}, bad                                                          # ... every message decoded
+    for t, n in info.counts.items():
+        assert topics[t]["decoded"] == n, (t, topics[t], n)
+    assert topics["/render/stereo/left"]["schema"] == "foxglove.RawImage"          # images as images
 
 
 def test_sim_report_md_gives_the_felt_headline_and_modelled_latency(sim_run):
