@@ -21,6 +21,7 @@ import numpy as np
 
 from flexsheet.runtime.clock import WALL_CLOCK, Clock
 from flexsheet.runtime.codec import encode
+from flexsheet.runtime.lockstep import Lockstep
 from flexsheet.runtime.node import Node
 from flexsheet.runtime.transport import Transport, TransportError
 from flexsheet.runtime.zmq.curve import CurveConfig
@@ -71,8 +72,6 @@ class Bus:
         self.clock = clock or WALL_CLOCK
         self.lockstep = None
         if self.clock.simulated:
-            from flexsheet.runtime.lockstep import Lockstep
-
             self.lockstep = Lockstep(self)
         self.rcvhwm = rcvhwm
         self.nodes: list[Node] = []

@@ -23,6 +23,7 @@ from pathlib import Path
 import yaml
 
 from flexsheet.runtime.launch import DEFAULT_KEYS_DIR, PUBLIC_KEYS_FILE
+from flexsheet.runtime.zmq.curve import create_curve_keypair, load_curve_keys
 
 __all__ = ["default_keys_dir", "generate", "read_public_keys"]
 
@@ -53,8 +54,6 @@ def generate(hosts: list[str], folder: Path, force: bool = False) -> dict[str, s
     Returns name → ``"new"`` or ``"kept"``. Raises ``ValueError`` for a name that is not a plain name
     (letters, digits, ``_.-``) or an unreadable existing key file.
     """
-    from flexsheet.runtime.zmq.curve import create_curve_keypair, load_curve_keys
-
     for host in hosts:
         if not _HOST.match(host):
             raise ValueError(f"name {host!r}: use letters, digits, '_', '.', '-' (a host or node of the launch file)")

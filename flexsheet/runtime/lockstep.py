@@ -49,6 +49,8 @@ from flexsheet.runtime.qos import QoS
 if TYPE_CHECKING:
     from flexsheet.runtime.node import Node
     from flexsheet.runtime.subscription import Subscription
+from flexsheet.runtime.bag_read import read_bag
+from messages import topics as T
 
 __all__ = ["Lockstep", "check", "play", "run_live", "LockstepStats", "SIM_EPOCH", "WALL_TOPICS"]
 
@@ -280,10 +282,7 @@ async def play(player: Node, messages=None) -> LockstepStats:
     while not player._bus.ready():  # every node of the container finished its setup (FEM precompute)
         await asyncio.sleep(0.01)
     if messages is None:
-        from flexsheet.runtime.bag_read import read_bag
-
         messages = read_bag(p.file, list(p.topics) or None)
-    from messages import topics as T
 
     latched = {t.name for t in T.ALL if t.latched}
     st = ls.stats

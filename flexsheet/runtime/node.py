@@ -52,8 +52,10 @@ from pydantic import BaseModel, ConfigDict
 
 from flexsheet.runtime.clock import WALL_CLOCK, Clock, ticks
 from flexsheet.runtime.config import ConfigError, NodeConfig
+from flexsheet.runtime.discovery import announce, withdraw
 from flexsheet.runtime.publisher import Publisher
 from flexsheet.runtime.qos import QoS
+from flexsheet.runtime.services import ParamServices, ServiceServer
 from flexsheet.runtime.subscription import Subscription, SubscriptionWorker
 from flexsheet.runtime.transport import Transport
 from flexsheet.runtime.zmq.transport import ZmqTransport
@@ -371,7 +373,6 @@ class Node:
             self._start_services()
             self._wall_timer(self.config.heartbeat_period, lambda: self._hb_pub.publish(self.heartbeat()))
             self.ready = True
-            from flexsheet.runtime.discovery import announce
             self._announced = announce(self.name, self.transport.endpoint or "", self.config.curve is not None)
             self.log.info("%s up: endpoint %s, %d peers, publishes %s", self.name, self.transport.endpoint or "-",
                           len(getattr(self.transport, "peers", [])),
@@ -383,8 +384,6 @@ class Node:
     def _start_services(self) -> None:
         """Bind the service socket on the publisher's address (none without a TCP endpoint) with the built-in
         services (:mod:`flexsheet.runtime.services`)."""
-        from flexsheet.runtime.services import ParamServices, ServiceServer
-
         ep = self.transport.endpoint or ""
         if not ep.startswith("tcp://"):
             return
@@ -429,7 +428,6 @@ class Node:
         return len(subs)
 
     async def _close(self) -> None:
-        from flexsheet.runtime.discovery import withdraw
         withdraw(self._announced)
         self._announced = None
         if self.services is not None:

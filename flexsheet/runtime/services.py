@@ -26,6 +26,8 @@ from typing import Any
 
 import msgpack
 
+from flexsheet.runtime.zmq.reqrep import ServiceSocket, request
+
 __all__ = ["ServiceError", "ServiceServer", "ParamServices", "call", "MAX_REQUEST_BYTES"]
 
 log = logging.getLogger(__name__)
@@ -127,8 +129,6 @@ class ServiceServer:
     node's :class:`~flexsheet.runtime.zmq.curve.CurveConfig` ``curve``, on the node's ZeroMQ context ``ctx``."""
 
     def __init__(self, address: str, curve=None, ctx=None) -> None:
-        from flexsheet.runtime.zmq.reqrep import ServiceSocket
-
         self.sock = ServiceSocket(address, curve, ctx, MAX_REQUEST_BYTES)
         self.endpoint = self.sock.endpoint
         self.curve = curve
@@ -222,8 +222,6 @@ async def call_async(endpoint: str, service: str, args: dict | None = None, time
     """One request to the service socket at ``endpoint``; the result. ``curve`` (the caller's keys) with
     ``server_key`` (the node's public key) for a CURVE graph. Raises :class:`ServiceError` with the node's error
     line, or on no reply within ``timeout`` s."""
-    from flexsheet.runtime.zmq.reqrep import request
-
     raw = await request(endpoint, msgpack.packb({"service": service, "args": args or {}}, use_bin_type=True),
                         timeout, curve, server_key)
     if raw is None:

@@ -3,7 +3,7 @@
 Example::
 
     async def scenario():
-        async with NodeHarness(PlannerNode, params={"shape": "cylinder"}) as h:
+        async with NodeHarness(PlannerNode, params={"object_stiffness": 20.0}) as h:
             h.inject(topics.FINGERTIP, msg)
             out = await h.wait_for(topics.SHEET_TARGET, n=1, timeout=2.0)
             assert h.rejected(topics.FINGERTIP) == 0

@@ -50,7 +50,7 @@ def test_sim_launch_prints_table1_and_latency_and_leaves_outputs(sim_run):
     assert 0.0 < row["dtheta_median_deg"] < 0.6 and 0.0 < row["dd_median_mm"] < 0.4, row
     assert row["dtheta_mean_deg"] < 0.6 and row["dd_mean_mm"] < 0.4, row
     # paper's 2R beside ours: per sample 2R·Δθ against twice the chord 2R·sin(Δθ/2), never smaller, larger by at
-    # most 2R·Δθ³/24 (module doc of flexsheet/experiments/table1.py); over the samples at most
+    # most 2R·Δθ³/24 (module doc of flexsheet/analysis/table1.py); over the samples at most
     # π·E[Δθ²] / (24·E[Δθ]) of the mean (Δθ ≤ π), from the row's own mean and std
     d2r = row["dd_2r_mean_mm"] - 2.0 * row["dd_mean_mm"]
     m, sd = np.radians(row["dtheta_mean_deg"]), np.radians(row["dtheta_std_deg"])
@@ -87,7 +87,7 @@ def test_the_official_mcap_reader_decodes_every_message_of_the_bag(sim_run):
 
 
 def test_sim_report_md_gives_the_felt_headline_and_modelled_latency(sim_run):
-    """The shared run's report.md (unit tests: tests/unit/experiments/test_report.py): the run is complete, the
+    """The shared run's report.md (unit tests: tests/unit/analysis/test_report.py): the run is complete, the
     10 s row's headline is the felt Δθ with the paper's figure, the target and its source and a verdict that
     the unrounded numbers give; every latency row is modelled (clock: sim); one delay figure, the chain's."""
     out = sim_run["out"]
