@@ -16,7 +16,14 @@ for _folder in sorted((ROOT / "tests").glob("**/")):   # a test module may impor
     if _folder.name not in ("data", "__pycache__") and "data" not in _folder.relative_to(ROOT / "tests").parts:
         sys.path.append(str(_folder))
 
+from flexsheet.runtime.domain import domain_id, shift_port  # noqa: E402
 from flexsheet.runtime.ports import free_port  # noqa: E402  (tests import it from here; ports below the ephemeral range)
+
+#: phase 2 runs on two pytest-xdist workers (tests/run.sh sets FLEXSHEET_TEST_DOMAINS): each worker's graphs run
+#: in a domain of their own (flexsheet/runtime/domain.py), 1 + the worker's number, so two launches of one file
+#: never share a port, and their tools discover only their own graph (tests/system/test_domains.py uses 3-5)
+if os.environ.get("FLEXSHEET_TEST_DOMAINS") and os.environ.get("PYTEST_XDIST_WORKER", "").startswith("gw"):
+    os.environ["FLEXSHEET_DOMAIN_ID"] = str(1 + int(os.environ["PYTEST_XDIST_WORKER"][2:]))
 
 #: the fewest valid fingertips (or planner targets while touching, or world finger samples) per second of a
 #: launched stroke: 5 Hz, a sixth of the camera's 30 fps. Not a speed test (flexsheet bench is): enough samples
@@ -177,7 +184,7 @@ def sim_run(tmp_path_factory, sim_fem_cache):
                                 cwd=ROOT, stdout=f, stderr=subprocess.STDOUT, start_new_session=True)
     try:
         try:
-            viz = asyncio.run(watch(port, proc))
+            viz = asyncio.run(watch(shift_port(port, domain_id()), proc))   # the launch moves it to its domain
         except (TimeoutError, OSError) as exc:
             viz = exc
         try:
@@ -214,6 +221,8 @@ def pytest_configure(config):
                                        "phase 2 (tests/run.sh)")
     config.addinivalue_line("markers", "slow: end-to-end work of over a minute a test: the slow tier, "
                                        "tests/run.sh --slow (CI runs both tiers)")
+    config.addinivalue_line("markers", "alone: judges a live loop against the wall clock, needs the machine to "
+                                       "itself: phase 3, one by one (tests/run.sh)")
 
 
 def group(path: Path) -> str:
@@ -240,7 +249,7 @@ SAME_WORKER = {"unit/experiments/test_correction": "unit/twin/test_registration"
                "unit/fem/reference/test_path_solver": "unit/fem/reference/test_hyperelastic",
                "unit/fem/reference/test_newton": "unit/fem/reference/test_hyperelastic",
                "unit/fem/test_scene_model": "unit/fem/test_path_snapshots",
-               "unit/experiments/test_path_table": "unit/fem/test_path_snapshots",
+               "unit/fem/reference/test_path_table": "unit/fem/test_path_snapshots",
                "unit/experiments/fem/test_outputs": "unit/experiments/fem/test_runs",
                "unit/experiments/fem/test_candidates": "unit/experiments/fem/test_runs",
                "unit/experiments/fem/studies/test_convergence": "unit/experiments/fem/test_runs",
@@ -259,6 +268,17 @@ LONGEST_FIRST = ("unit/experiments/fem/test_runs", "unit/twin/test_registration"
                  "unit/fem/reference/test_mesh")
 
 
+#: phase 2: modules that share a session fixture run in one group (the shared sim run, ``sim_run``)
+SAME_WORKER_2 = {"system/test_viz_live": "system/test_integration_sim"}
+
+#: the modules of phase 3 (marker ``alone``): they judge a live loop against the wall clock (rates, jitter,
+#: deadlines) and need the machine to themselves
+ALONE = ("nodes/test_controller_strict", "nodes/test_arm_mxt", "nodes/test_mxt", "system/test_arm_mxt_sim",
+         "system/test_load", "system/test_links_heal", "system/test_partition", "system/test_churn",
+         "nodes/test_render_node", "nodes/test_camera_genicam", "nodes/test_twin_world",
+         "system/test_faults_experiment", "system/test_simclock")
+
+
 @pytest.hookimpl(tryfirst=True)       # before pytest-xdist's own hook reads the xdist_group marks
 def pytest_collection_modifyitems(config, items):
     for item in items:
@@ -267,5 +287,9 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.cpu)
             # tests/run.sh distributes by group (--dist loadgroup): a module per worker, module fixtures once
             item.add_marker(pytest.mark.xdist_group(SAME_WORKER.get(name, name)))
+        elif name in ALONE:
+            item.add_marker(pytest.mark.alone)
+        else:                 # phase 2: a module per worker too, each worker in its own domain
+            item.add_marker(pytest.mark.xdist_group(SAME_WORKER_2.get(name, name)))
     rank = {g: i for i, g in enumerate(LONGEST_FIRST)}
     items.sort(key=lambda it: rank.get(SAME_WORKER.get(group(it.path), group(it.path)), len(rank)))   # stable

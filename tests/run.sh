@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
-# The test suite, as the README and CI run it, in two phases on the 2-core machine:
+# The test suite, as the README and CI run it, in three phases on the 2-core machine:
 #   1. the pure-computation modules (tests/unit/ and tests/test_layout.py: marker `cpu`, set by folder in tests/conftest.py) on two pytest-xdist workers,
 #      a module per worker (tests/conftest.py: groups; the longest groups first, LONGEST_FIRST, so not
 #      xdist's reorder by test count), one BLAS/OpenMP thread each;
-#   2. everything else (nodes, launches, sockets, windows, deadlines) one by one, with the machine to itself:
-#      those tests judge a live loop against the clock.
+#   2. the nodes and launched graphs on two workers, a module per worker, each worker's graphs in a domain of
+#      their own (FLEXSHEET_TEST_DOMAINS: tests/conftest.py sets FLEXSHEET_DOMAIN_ID 10 + the worker's number);
+#   3. the tests that judge a live loop against the wall clock (marker `alone`, tests/conftest.py ALONE) one by
+#      one, with the machine to themselves.
 # Two tiers: by default the tests of every-day work; `tests/run.sh --slow` runs the other tier, the end-to-end tests
 # that take over a minute each (marker `slow`: the lab on one machine registered live, the three-namespace lab,
 # the faults run, the FEM experiment's study); CI runs both (.ci/run). docs/testing.md lists the tiers and times.
@@ -26,7 +28,7 @@ for arg in "$@"; do
 done
 LOADAVG0=$(cut -d' ' -f1-3 /proc/loadavg)
 t0=$(date +%s)
-echo "[tests] tier: $tier; phase 1/2: pure computation (-m 'cpu and $tier') on 2 workers"
+echo "[tests] tier: $tier; phase 1/3: pure computation (-m 'cpu and $tier') on 2 workers"
 OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 python3 -m pytest -q -n 2 --dist loadgroup --no-loadscope-reorder -m "cpu and $tier" "${args[@]}"
 a=$?
 t1=$(date +%s)
@@ -36,20 +38,30 @@ if [ $a -eq 1 ]; then
     case "$arg" in -x|--exitfirst) echo "[tests] phase 1 failed and -x: phase 2 not run" >&2; exit 1;; esac
   done
 fi
-echo "[tests] phase 2/2: nodes, launches and timing (-m 'not cpu and $tier'), one by one"
-python3 -m pytest -q -m "not cpu and $tier" "${args[@]}"
+echo "[tests] phase 2/3: nodes and launched graphs (-m 'not cpu and not alone and $tier') on 2 workers, a domain each"
+FLEXSHEET_TEST_DOMAINS=1 python3 -m pytest -q -n 2 --dist loadgroup --no-loadscope-reorder --durations=15 \
+  -m "not cpu and not alone and $tier" "${args[@]}"
 b=$?
 t2=$(date +%s)
-# 5 = no tests collected in that phase (e.g. a selection inside the other phase's modules)
-if [ $a -eq 5 ] && [ $b -ne 5 ]; then a=0; fi
-if [ $b -eq 5 ] && [ $a -ne 5 ]; then b=0; fi
-p1=$((t1 - t0)); p2=$((t2 - t1)); tot=$((t2 - t0))
-echo "[tests] tier '$tier': phase 1 exit $a in $p1 s, phase 2 exit $b in $p2 s, $tot s in all"
+case $b in 2|3|4) echo "[tests] phase 2 ended with exit $b (interrupted or an error): phase 3 not run" >&2; exit $b;; esac
+echo "[tests] phase 3/3: live loops against the wall clock (-m 'not cpu and alone and $tier'), one by one"
+python3 -m pytest -q -m "not cpu and alone and $tier" "${args[@]}"
+c=$?
+t3=$(date +%s)
+# 5 = no tests collected in that phase (e.g. a selection inside another phase's modules)
+ran=0
+for x in $a $b $c; do [ "$x" -ne 5 ] && ran=1; done
+if [ $ran -eq 1 ]; then
+  [ $a -eq 5 ] && a=0; [ $b -eq 5 ] && b=0; [ $c -eq 5 ] && c=0
+fi
+p1=$((t1 - t0)); p2=$((t2 - t1)); p3=$((t3 - t2)); tot=$((t3 - t0))
+echo "[tests] tier '$tier': phase 1 exit $a in $p1 s, phase 2 exit $b in $p2 s, phase 3 exit $c in $p3 s, $tot s in all"
 if [ -n "${SUITE_JSON:-}" ]; then
   mkdir -p "$(dirname "$SUITE_JSON")"
-  printf '{"tier": "%s", "phase1_s": %d, "phase2_s": %d, "total_s": %d, "phase1_exit": %d, "phase2_exit": %d, "args": "%s", "cores": %d, "loadavg_before": "%s", "date": "%s", "target_s": %s}\n' \
-    "$tier" "$p1" "$p2" "$tot" "$a" "$b" "${args[*]:-}" "$(nproc)" "$LOADAVG0" "$(date -u +%FT%TZ)" \
-    "$([ "$tier" = "slow" ] && echo null || echo 600)" > "$SUITE_JSON"
+  printf '{"tier": "%s", "phase1_s": %d, "phase2_s": %d, "phase3_s": %d, "total_s": %d, "phase1_exit": %d, "phase2_exit": %d, "phase3_exit": %d, "args": "%s", "cores": %d, "loadavg_before": "%s", "date": "%s", "target_s": %s}\n' \
+    "$tier" "$p1" "$p2" "$p3" "$tot" "$a" "$b" "$c" "${args[*]:-}" "$(nproc)" "$LOADAVG0" "$(date -u +%FT%TZ)" \
+    "$([ "$tier" = "slow" ] && echo 720 || echo 480)" > "$SUITE_JSON"
 fi
 [ $a -ne 0 ] && exit $a
-exit $b
+[ $b -ne 0 ] && exit $b
+exit $c

@@ -222,6 +222,9 @@ CHEAP: dict[str, tuple[str, str]] = {
     "flexsheet launch launch/sim.yaml --rtf 1 --set world.loop=true": (
         "flexsheet launch launch/sim.yaml --rtf 1 --set world.loop=true --check",
         "runs until Ctrl-C; tests/system/test_simclock.py runs --rtf 1"),
+    "flexsheet launch launch/sim.yaml --domain 3 --out out/d3": (
+        "flexsheet launch launch/sim.yaml --domain 3 --out out/d3 --check",
+        "the scripted run takes minutes; tests/system/test_domains.py runs two graphs in domains 3 and 4"),
 
     # launches: the check of the same file, host and settings (the live graph below runs launch/sim.yaml)
     "flexsheet launch launch/sim.yaml": ("flexsheet launch launch/sim.yaml --check",

@@ -13,6 +13,8 @@ import random
 import socket
 from pathlib import Path
 
+from flexsheet.runtime.domain import DOMAIN_STRIDE, domain_id
+
 __all__ = ["EPHEMERAL_RANGE_FILE", "LOW_PORT", "ephemeral_port_range", "free_port"]
 
 EPHEMERAL_RANGE_FILE = Path("/proc/sys/net/ipv4/ip_local_port_range")
@@ -31,14 +33,15 @@ def ephemeral_port_range(path: Path = EPHEMERAL_RANGE_FILE) -> tuple[int, int]:
 
 def free_port(span: int = 1, host: str = "127.0.0.1") -> int:
     """A TCP port on ``host`` that is free right now, with the ``span - 1`` ports above it, all outside
-    :func:`ephemeral_port_range` (see the module doc for why): in [:data:`LOW_PORT`, start of the range), or,
+    :func:`ephemeral_port_range` (see the module doc for why), also once a launch file in this process's domain
+    moves it (:mod:`flexsheet.runtime.domain`): in [:data:`LOW_PORT`, start of the range − the domain's shift), or,
     where the range starts too low for that, above its end. Another process may take it before the caller
     binds it. Raises ``ValueError`` on ``span`` < 1 and ``RuntimeError`` when the range leaves no room on
     either side, or no free block is found in 500 random tries."""
     if not (isinstance(span, int) and span >= 1):
         raise ValueError(f"span must be an int >= 1, got {span!r}")
     lo, hi = ephemeral_port_range()
-    lo = min(lo, 32768)
+    lo = min(lo, 32768) - DOMAIN_STRIDE * domain_id()     # a launch file written with it moves by its domain
     if lo - span > LOW_PORT:
         first, last = LOW_PORT, lo - span              # ports first .. last - 1 start a block
     elif 65536 - span > hi + 1:

@@ -23,12 +23,12 @@ def test_two_graphs_of_one_file_run_side_by_side_and_tools_see_their_own_domain(
     env = {k: v for k, v in os.environ.items() if k != DOMAIN_ENV}
     env["FLEXSHEET_GRAPH_DIR"] = str(tmp_path / "graph")         # this test's discovery only
     procs = {d: subprocess.Popen([sys.executable, "-m", "flexsheet", "launch", str(path), "--domain", str(d),
-                                  "--duration", "8"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                  "--duration", "20"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                  text=True) for d in (3, 4)}
     try:
         seen: dict[int, list] = {}
-        end = time.monotonic() + 30
-        while time.monotonic() < end and len(seen) < 2:
+        end = time.monotonic() + 60
+        while time.monotonic() < end and len(seen) < 2 and all(p.poll() is None for p in procs.values()):
             for d in (3, 4):
                 r = _flexsheet("node", "list", "--json", env={**env, DOMAIN_ENV: str(d)})
                 rows = json.loads(r.stdout) if r.returncode == 0 and r.stdout.strip() else []
@@ -40,7 +40,7 @@ def test_two_graphs_of_one_file_run_side_by_side_and_tools_see_their_own_domain(
         assert [p4 - p3 for p3, p4 in zip(ports[3], ports[4], strict=True)] == [DOMAIN_STRIDE] * len(ports[3])
         r = _flexsheet("node", "list", "--json", "--domain", "5", env=env)
         assert r.returncode != 0 and "domain 5" in r.stderr, (r.stdout, r.stderr)       # nobody in domain 5
-        outs = {d: p.communicate(timeout=60)[0] for d, p in procs.items()}
+        outs = {d: p.communicate(timeout=90)[0] for d, p in procs.items()}
         for d, p in procs.items():
             assert p.returncode == 0, outs[d][-3000:]
             assert "heard seq=" in outs[d]

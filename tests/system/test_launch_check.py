@@ -26,6 +26,12 @@ from flexsheet.runtime.ports import ephemeral_port_range
 from flexsheet.runtime.supervisor import Supervisor
 from flexsheet.runtime.testing import console_lines
 
+
+@pytest.fixture(autouse=True)
+def _domain_0(monkeypatch):
+    """The checks name the ports the files give: domain 0 (a worker's own domain would move them)."""
+    monkeypatch.delenv("FLEXSHEET_DOMAIN_ID", raising=False)
+
 LAB_KEYGEN = ["keys", "generate", "--launch", "launch/lab.yaml"]
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 from conftest import free_port, pid_alive
 
+from flexsheet.runtime.domain import domain_id, shift_port
 from flexsheet.runtime.launch import LaunchError, load_launch
 
 
@@ -186,6 +187,7 @@ nodes:
 """)
     holder = socket.socket()
     holder.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    port = shift_port(port, domain_id())           # where the launch binds it in this process's domain
     holder.bind(("127.0.0.1", port))
     holder.listen()
     try:

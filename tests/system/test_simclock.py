@@ -193,7 +193,8 @@ def _hashes(bag: Path) -> dict[str, str]:
 def test_the_display_on_the_simulated_clock_is_byte_identical_run_to_run(tmp_path):
     """Two runs of launch/sim.yaml (a 3 s stroke, truth seed 0), the second paced at real speed (--rtf 1), write
     the same messages on every topic but /diagnostics (wall-clock liveness), stamps included; the paced one
-    keeps to the wall clock within 5 %; the summary says the clock."""
+    keeps to the wall clock within 5 % where the machine can (the unpaced run faster than real time), else it
+    runs as fast as the unpaced one; the summary says the clock."""
     outs = []
     for i in range(2):
         out = tmp_path / f"run{i}"
@@ -214,7 +215,14 @@ def test_the_display_on_the_simulated_clock_is_byte_identical_run_to_run(tmp_pat
     paced = json.loads((outs[1] / "sim_clock.json").read_text())
     assert s["clock"]["rtf_target"] is None and json.loads((outs[1] / "summary.json").read_text())["clock"][
         "rtf_target"] == 1.0
-    assert paced["sim_s"] == pytest.approx(7.0) and paced["realtime_factor"] == pytest.approx(1.0, rel=0.05)
+    # --rtf 1 caps simulated time at the wall clock: never ahead of it; within 5 % of it where this machine runs
+    # the graph faster than real time unpaced, else as fast as it can (the unpaced run's factor, within noise)
+    unpaced, rtf = s["realtime_factor"], paced["realtime_factor"]
+    assert paced["sim_s"] == pytest.approx(7.0) and rtf <= 1.05, (rtf, unpaced)
+    if unpaced >= 1.1:
+        assert rtf == pytest.approx(1.0, rel=0.05), (rtf, unpaced)
+    else:
+        assert rtf >= 0.75 * unpaced, (rtf, unpaced)
     chain = s["latency_ms"]["chain"]
     # the chain adds up: each end-to-end figure is the sum of its hops (deterministic costs: medians too)
     assert chain["exposure_to_arm_command"]["median"] == pytest.approx(
