@@ -272,11 +272,13 @@ LONGEST_FIRST = ("unit/experiments/fem/test_runs", "unit/twin/test_registration"
 SAME_WORKER_2 = {"system/test_viz_live": "system/test_integration_sim"}
 
 #: the modules of phase 3 (marker ``alone``): they judge a live loop against the wall clock (rates, jitter,
-#: deadlines) and need the machine to themselves
+#: deadlines) and need the machine to themselves, or they set up network namespaces and lab hosts of fixed names
+#: and addresses (the three hosts, the partition, the live registration) that two at once would share
 ALONE = ("nodes/test_controller_strict", "nodes/test_arm_mxt", "nodes/test_mxt", "system/test_arm_mxt_sim",
          "system/test_load", "system/test_links_heal", "system/test_partition", "system/test_churn",
          "nodes/test_render_node", "nodes/test_camera_genicam", "nodes/test_twin_world",
-         "system/test_faults_experiment", "system/test_simclock")
+         "system/test_faults_experiment", "system/test_simclock", "system/test_integration_netns",
+         "system/test_live_registration", "system/test_faults", "system/test_experiments_quick")
 
 
 @pytest.hookimpl(tryfirst=True)       # before pytest-xdist's own hook reads the xdist_group marks
