@@ -100,6 +100,8 @@ class FemNode(Node):
     """See the module docstring."""
 
     Params = FemParams
+    #: a deformation (~20 kB of vertices) or the force-depth table (~23 kB), with room (sizes the send queue)
+    LARGEST_MESSAGE_BYTES = 64 << 10
 
     async def setup(self) -> None:
         """Choose the model, load or precompute it (may take seconds: runs in a worker thread), then subscribe."""
