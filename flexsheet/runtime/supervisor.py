@@ -58,6 +58,7 @@ class _Child:
         self.proc: asyncio.subprocess.Process | None = None
         self.restarts = 0
         self.stopping = False
+        self.lines_read = 0       # output lines logged: a stopping node still talking is not hung
         self.exit_codes: list[int] = []
         self.failures: list[int] = []  # exit codes of incarnations that failed (not by the launcher's stop)
         self.cpu_s = 0.0          # CPU time of the ended incarnations, s
@@ -141,6 +142,7 @@ class Supervisor:
         self.overrides = overrides or {}
         self.children = children_of(lf, host)
         self._stop = asyncio.Event()
+        self._lines_read = 0          # node output lines logged: a stopping node still talking is not hung
         self.reason = ""
         self.lost_events: list[tuple[str, str]] = []
         self.config_errors: list[str] = []  # nodes that exited with EXIT_CONFIG (not respawned)
@@ -181,6 +183,8 @@ class Supervisor:
             line = await child.proc.stdout.readline()
             if not line:
                 break
+            self._lines_read += 1
+            child.lines_read += 1
             self.log.info(self._fmt.format(child.name, line.decode(errors="replace").rstrip()))
 
     @staticmethod
@@ -292,11 +296,26 @@ class Supervisor:
                 os.killpg(proc.pid, sig)
             except ProcessLookupError:
                 return
-            try:
-                await asyncio.wait_for(proc.wait(), timeout=self.lf.shutdown_timeout)
+            for _ in range(6):       # a node still printing its last output gets up to 6 timeouts, not one
+                before = child.lines_read
+                try:
+                    await asyncio.wait_for(asyncio.shield(proc.wait()), timeout=self.lf.shutdown_timeout)
+                    return
+                except TimeoutError:
+                    if child.lines_read == before:
+                        break
+            self.log.info(self._fmt.format(child.name, f"did not stop on {sig.name}; escalating"))
+
+    async def _drain(self, watchers: list[asyncio.Task], quiet_s: float = 3.0, limit_s: float = 120.0) -> None:
+        """Wait for the watchers to record their nodes' exits (≤ 1 s reap + 2 s of output), and for longer while
+        the stopped nodes' last output is still arriving (a node with much to say as it stops, on a loaded
+        machine: no line is dropped while lines keep coming); at most ``limit_s``."""
+        t_end = time.monotonic() + limit_s
+        while True:
+            before = self._lines_read
+            _, pending = await asyncio.wait(watchers, timeout=quiet_s)
+            if not pending or self._lines_read == before or time.monotonic() > t_end:
                 return
-            except TimeoutError:
-                self.log.info(self._fmt.format(child.name, f"did not stop on {sig.name}; escalating"))
 
     async def run(self) -> int:
         """Run until Ctrl-C, SIGTERM, ``duration`` or a required node's exit. Returns 0; :data:`EXIT_CONFIG` if a
@@ -328,7 +347,7 @@ class Supervisor:
         sampler.cancel()
         self._sample_now()
         await asyncio.gather(*(self._stop_child(c) for c in reversed(self.children)))
-        await asyncio.wait(watchers, timeout=3.0)   # each records its node's exit (≤ 1 s reap + 2 s of output)
+        await self._drain(watchers)
         for w in watchers:
             w.cancel()
         await asyncio.gather(*watchers, return_exceptions=True)
