@@ -45,13 +45,14 @@ class SheetState(Message):
     ``origin`` (3,) m: sheet centre; ``normal`` (3,), ``axis_u`` (3,): unit vectors (display frame).
     ``corners`` (4, 3) m: sheet corners in order around the sheet. ``pushed_point`` (3,) m: the deepest
     point of the finger's depression (equals ``origin`` projection when not pushed). ``depth`` m:
-    depression along −normal. ``stretch``: engineering strain between clamps. ``membrane`` (G, G) m:
+    depression along −normal. ``stretch``: engineering strain between the true clamps, signed (negative when
+    they are closer than the sheet's side: slack). ``membrane`` (G, G) m:
     out-of-plane deflection of the membrane sampled on a G×G grid over the sheet (u, v ∈ [−a, a]), positive
     along −normal. The finger's force on it is on ``/world/contact`` (:class:`ContactTruth`).
     """
 
     SCHEMA = "flexsheet/SheetState"
-    VERSION = 2
+    VERSION = 3    # v3: ``stretch`` signed (negative: the clamps closer than the sheet's side, slack)
 
     origin: ndarray("float64", (3,), "sheet centre, m, display frame")
     normal: ndarray("float64", (3,), "unit sheet normal")
@@ -59,7 +60,7 @@ class SheetState(Message):
     corners: ndarray("float64", (4, 3), "sheet corners, m, display frame")
     pushed_point: ndarray("float64", (3,), "deepest point of the depression, m")
     depth: float = Field(ge=0.0, description="depression depth, m")
-    stretch: float = Field(ge=0.0, description="engineering strain between clamps")
+    stretch: float = Field(gt=-1.0, description="engineering strain between clamps, signed (negative: slack)")
     membrane: ndarray("float64", (None, None), "deflection grid, m, along -normal")
 
 

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from flexsheet.analysis.report_head import head_summary
+from flexsheet.analysis.report_motion import motion_summary
 from flexsheet.analysis.report_softness import felt_force, follow_lag, inclusion_contrast, sheet_summary
 from flexsheet.analysis.report_timing import compliance_summary, latency_hops, watchdog_faults
 from flexsheet.analysis.report_verdicts import judge, table1_verdicts
@@ -104,7 +105,7 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scen
             summary["compliance"]["inclusion_contrast_requested"] = ic["requested"]
             summary["compliance"]["inclusion_contrast"] = ic
         summary["compliance"]["saturated"] = summary["compliance"]["all"]["at_limit"]
-    summary["sheet"] = sheet_summary(d)
+    summary["sheet"] = {**sheet_summary(d), **motion_summary(d)}
     head = head_summary(d, scene or paper_scene(), series)
     if head:
         summary.update(head)

@@ -188,6 +188,11 @@ def _softness(s: dict) -> tuple[list[str], list[str]]:
         prose.append(f"The true sheet: clamp strain at most {sh['strain_true_max']:.3f} (limit 0.30), at most "
                      f"{sh['strain_over_plan_max']:+.3f} over the plan (limit +0.02); one arm holding while the other "
                      f"follows: {sh['one_arm_holds']} joint-state cycles (target 0): {sh['verdict']}.")
+        if "span_error_mm" in sh:
+            se = sh["span_error_mm"]
+            prose.append(f"The clamp span against the planned motion: median {se['median']:.2f} mm, p99 {se['p99']:.2f} mm "
+                         f"(target ≤ 1.0), max {se['max']:.2f} mm; guard cycles {sh['guard_waits']} (target 0): "
+                         f"{sh['motion_verdict']}.")
     return prose, _table(head, [row])
 
 

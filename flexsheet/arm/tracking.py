@@ -7,6 +7,12 @@ when targets stop arriving for longer than ``target_timeout``. Between targets t
 velocity of the last few goals (a least-squares line through the last :data:`VELOCITY_GOALS` goals over their
 source stamps; at most :data:`EXTRAPOLATE_MAX_S` past the newest), and the streaming limiter follows it with
 that velocity as feed-forward (:mod:`flexsheet.arm.limiter`), within the joint limits.
+
+A target that carries the sheet's motion (:class:`flexsheet.arm.sheet_motion.SheetSegment`, the same in both
+arms' targets) is followed along it instead: each cycle the clamp's pose on the segment at that instant, IK seeded
+from the last cycle's, with the clamp's twist mapped through the Jacobian as the velocity feed-forward. The two
+bridges evaluate one trajectory at one instant, so the clamps move as one; the limiter is then only the last
+guard of the joint limits. Where IK refuses a point on the way, the arm streams to the target's IK goal as above.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ import numpy as np
 
 from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, IKResult, outside_limits
 from flexsheet.arm.pull_limit import max_pull
+from flexsheet.arm.sheet_motion import SheetSegment
 from flexsheet.arm.span_guard import SpanGuard
 
 __all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S"]
@@ -106,6 +113,12 @@ class TargetTracker:
         self.keep_out = None
         #: the two-arm span guard (:class:`flexsheet.arm.span_guard.SpanGuard`): the band, the partner's clamp
         self.span = SpanGuard(kin)
+        #: the sheet's motion the arm follows (:class:`SheetSegment`), or None: stream to :attr:`goal`
+        self.motion: SheetSegment | None = None
+        #: (6,) rad: the joints of the last point followed on :attr:`motion` (the next cycle's IK seed)
+        self._motion_q: np.ndarray | None = None
+        #: cycles a point on the motion was refused by IK (the arm streamed to the goal instead)
+        self.motion_refused = 0
 
     def span_worse(self, q_from, q_to) -> bool:
         """Whether this arm's step from joints ``q_from`` to ``q_to`` (6,) rad waits on the span guard
@@ -121,6 +134,7 @@ class TargetTracker:
         if bad:
             raise ValueError("joints outside the limits (with the bridge's margin): " + "; ".join(bad))
         self.manual = q.copy()
+        self.motion = None
         self.goal = self.manual.copy()
         self.velocity = np.zeros(6)
         self._history.clear()
@@ -140,10 +154,11 @@ class TargetTracker:
             self.goal = self.kin.check_q(q).copy()
 
     def set_target(self, T_display_clamp, source_stamp: float, now: float, q_measured=None, *,
-                   strict: bool = False, pull: float = 0.0) -> IKResult:
+                   strict: bool = False, pull: float = 0.0, motion: SheetSegment | None = None) -> IKResult:
         """Solve IK for a new target pose (4, 4) at time ``now`` (s); returns the :class:`IKResult`. ``pull`` N:
         the sheet's pull on the clamp there; a solution whose joint torques pass the arm's limits is refused as
-        ``torque:J<k>`` (:func:`flexsheet.arm.pull_limit.max_pull`).
+        ``torque:J<k>`` (:func:`flexsheet.arm.pull_limit.max_pull`). ``motion``: the sheet's motion to the
+        target (module doc), followed once the target is accepted; None: stream to its IK goal.
 
         Seed: the current goal, else ``q_measured``; the jump limit as the class doc says. If the result is not
         ok, the goal is unchanged, ``ik_status`` holds the reason, ``refused`` counts it and, with ``strict``,
@@ -172,6 +187,9 @@ class TargetTracker:
         if res.ok or self.last_target_at is not None:   # a refused first target does not start the stream
             self.last_target_at = now
         if res.ok:
+            if motion is not None and self.motion is None:
+                self._motion_q = self.goal.copy() if self.goal is not None else res.q.copy()
+            self.motion = motion
             self.goal = res.q
             self.source_stamp = float(source_stamp)
             self.ik_status = "ok"
@@ -219,9 +237,29 @@ class TargetTracker:
             return self.manual, np.zeros(6)
         if self.goal is None or self.status(now) in (BridgeStatus.NO_TARGET, BridgeStatus.PEER):
             return q_command, np.zeros(6)
+        if self.motion is not None and self.ik_status == "ok":
+            ref = self._on_motion(now)
+            if ref is not None:
+                return ref
         ahead = min(max(now - self.last_target_at, 0.0), EXTRAPOLATE_MAX_S)
         w = self.velocity if ahead < EXTRAPOLATE_MAX_S else np.zeros(6)
         return self.goal + self.velocity * ahead, w
+
+    def _on_motion(self, now: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """Joints (6,) rad of the clamp's point on :attr:`motion` at ``now`` and their velocity (6,) rad/s (the
+        clamp's twist through the Jacobian); None when IK refuses the point (counted in ``motion_refused``)."""
+        T, twist = self.motion.clamp(self.kin.side, now)
+        seed = self._motion_q if self._motion_q is not None else self.goal
+        res = self.kin.ik(T, seed, max_jump=self.max_jump)
+        if not res.ok:
+            self.motion_refused += 1
+            return None
+        self._motion_q = res.q
+        try:
+            w = np.linalg.solve(self.kin.jacobian(res.q), twist)
+        except np.linalg.LinAlgError:
+            w = np.zeros(6)
+        return res.q, w
 
     def goal_for(self, now: float, q_command: np.ndarray) -> np.ndarray:
         """The goal of :meth:`reference` alone (6,) rad."""

@@ -6,8 +6,8 @@
   ``ArmJointState.pose``. Under the ideal truth the two agree exactly.
 * **Sheet**: the pushed sheet's shape is the nonlinear membrane FEM of :mod:`flexsheet.model.sheet_fem` with
   the truth's Young's modulus, pre-strain and tension ratio, held at the measured clamp span. Its tables are
-  solved per clamp-strain node (``stretch_step`` apart, the nearest available node is used, the actual span
-  mapped onto it) and cached on disk; :meth:`TruePhysics.missing_node` names the node still to be built, which
+  solved per clamp-strain node (``stretch_step`` apart; the force is interpolated between the two nodes around
+  the actual span, the shape is the nearer node's, mapped onto the span) and cached on disk; :meth:`TruePhysics.missing_node` names the node still to be built, which
   the node builds in a worker process (:func:`build_table`) so that the world's timers never wait on it.
 
 Units: m, rad; frames: display (clamps), the sheet's own (u, v) for the deflection.
@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import os
+from dataclasses import replace
 
 import numpy as np
 
@@ -81,28 +82,52 @@ class TruePhysics:
             self.tables[node] = tab
         return tab is not None
 
+    def bracket(self, stretch: float) -> tuple[float, float, float]:
+        """(lower node, upper node, weight of the upper) around ``stretch``: the table nodes either side of it
+        (``stretch_step`` apart; a slack sheet, below 0, takes node 0 alone: weight 0)."""
+        st = self.config.stretch_step
+        x = max(0.0, stretch) / st
+        k = math.floor(x)
+        return round(k * st, 6), round((k + 1) * st, 6), x - k
+
     def missing_node(self, stretch: float) -> float | None:
-        """The node ``stretch`` wants when its table is neither loaded nor cached, else ``None``."""
+        """The node ``stretch`` wants when its table is neither loaded nor cached, else ``None``: the nearest
+        node first, then the other one around it (the force is interpolated between the two)."""
         node = self.node_of(stretch)
-        return None if self.try_load(node) else node
+        if not self.try_load(node):
+            return node
+        lo, hi, w = self.bracket(stretch)
+        other = hi if node == lo else lo
+        if w > 1e-9 and not self.try_load(other):
+            return other
+        return None
 
     def shape(self, depth: float, push_u: float, push_v: float, half_span: float) -> FemShape | None:
-        """The true pushed shape from the nearest loaded table node to the measured span ``half_span`` (m),
-        or ``None`` while no table is loaded. Raises ``ValueError`` for a contact outside the sheet."""
+        """The true pushed shape at the measured span ``half_span`` (m), or ``None`` while no table is loaded.
+        Its force and stiffness are interpolated linearly in clamp strain between the two table nodes around
+        the span (the nearest loaded node's alone while the other is not loaded), so the true force does not
+        step between tables; the deflection is the nearer node's. Raises ``ValueError`` for a contact outside
+        the sheet."""
         if not self.tables:
             return None
         stretch = 2.0 * half_span / self.size - 1.0
+        lo, hi, w = self.bracket(stretch)
+        if lo in self.tables and hi in self.tables and w > 1e-9:
+            a = self.tables[lo].shape(depth, push_u, push_v, half_span)
+            b = self.tables[hi].shape(depth, push_u, push_v, half_span)
+            return replace(a if w < 0.5 else b, force=(1.0 - w) * a.force + w * b.force,
+                           stiffness=(1.0 - w) * a.stiffness + w * b.stiffness)
         node = min(self.tables, key=lambda n: abs(n - stretch))
         return self.tables[node].shape(depth, push_u, push_v, half_span)
 
     def surface(self, T_left: np.ndarray, T_right: np.ndarray, finger: np.ndarray | None
                 ) -> tuple[SheetSurface, float]:
         """The true sheet held by the true clamp poses (4, 4), pushed by the fingertip ``finger`` (3,) m when
-        it is behind the sheet plane and inside it. Returns (surface, clamp strain). The surface's
+        it is behind the sheet plane and inside it. Returns (surface, clamp strain, signed: negative when slack). The surface's
         ``membrane`` is a :class:`FemShape` (or ``None``: flat, or no table yet). Raises ``ValueError`` for
         clamps that hold no sheet (see :func:`flexsheet.model.sheet.frame_from_clamps`)."""
         origin, n, eu, a = frame_from_clamps(T_left, T_right)
-        stretch = max(0.0, 2.0 * a / self.size - 1.0)
+        stretch = 2.0 * a / self.size - 1.0
         mem = None
         if finger is not None:
             d = np.asarray(finger, float) - origin

@@ -1,7 +1,8 @@
 """Node ``arm_bridge``: one per arm PC. ArmTarget (clamp pose) → IK → limited command stream, one command per
 controller cycle (7.1 ms) → ArmJointState.
 
-Thin shell: IK and target logic in :mod:`flexsheet.arm.tracking` / :mod:`flexsheet.arm.kinematics`, the
+Thin shell: IK and target logic in :mod:`flexsheet.arm.tracking` / :mod:`flexsheet.arm.kinematics` (the
+sheet's motion both bridges follow at the same instant: :mod:`flexsheet.arm.sheet_motion`), the
 two-arm span guard in :mod:`flexsheet.arm.span_guard`, command shaping in :mod:`flexsheet.arm.limiter`, the
 protocol-independent streaming loop in :mod:`flexsheet.arm.stream`, and one backend per ``protocol``:
 ``modbus`` (:mod:`nodes.arm_bridge.modbus_link`, Modbus TCP register map, docs/register_map.md) or ``mxt``
@@ -39,6 +40,7 @@ from pydantic import Field, model_validator
 from flexsheet.arm.bridge_config import DEFAULT_PERIOD, DEFAULT_PORT, BridgeConfig
 from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics
 from flexsheet.arm.limiter import StreamLimiter
+from flexsheet.arm.sheet_motion import SheetSegment
 from flexsheet.arm.stream import ArmStream, CycleReport
 from flexsheet.arm.tracking import BridgeStatus, TargetTracker, peer_holds
 from flexsheet.calibration.display_calib_file import load_display_calib
@@ -264,10 +266,11 @@ class ArmBridgeNode(Node):
         if self.tracker.manual is not None:   # by design while a tool holds the arm: counted, said at release
             self.ignored_while_held += 1
             return
+        motion = SheetSegment.from_fields(msg)     # a MotionError (a ValueError) names the bad field
         if self.tracker.goal is None:
             self._pending = msg
             return
-        self.tracker.set_target(msg.pose, msg.source_stamp, self.now(), strict=True, pull=msg.pull)
+        self.tracker.set_target(msg.pose, msg.source_stamp, self.now(), strict=True, pull=msg.pull, motion=motion)
         if await self.stream.refresh() and self.clock.simulated:   # write it now rather than at the next tick
             await self.stream.rewrite_now()
 
@@ -276,7 +279,8 @@ class ArmBridgeNode(Node):
         if self._pending is not None and self.tracker.goal is not None:
             msg, self._pending = self._pending, None
             try:
-                self.tracker.set_target(msg.pose, msg.source_stamp, self.now(), strict=True, pull=msg.pull)
+                self.tracker.set_target(msg.pose, msg.source_stamp, self.now(), strict=True, pull=msg.pull,
+                                        motion=SheetSegment.from_fields(msg))
             except ValueError as exc:
                 self._reject(f"ArmTarget: {exc}")
         shown = BridgeStatus.OK if rep.bridge_status == BridgeStatus.SPAN_WAIT else rep.bridge_status   # not logged
@@ -287,6 +291,8 @@ class ArmBridgeNode(Node):
             self._diag_at = rep.t_cycle
             counters = ", ".join(f"{k} {v}" for k, v in self.link.counters().items())
             waits = f"; span waits {self.tracker.span.waits}" if self.tracker.span.waits else ""
+            if self.tracker.motion_refused:
+                waits += f"; motion points refused by IK {self.tracker.motion_refused}"
             self.state_message = f"{shown}; {self.link.name}: {counters}{waits}"
         st = rep.state
         if st is None:

@@ -44,12 +44,15 @@ from dataclasses import replace
 import numpy as np
 from pydantic import Field
 
+from flexsheet.arm.bridge_config import BridgeConfig
+from flexsheet.arm.kinematics import QD_MAX
+from flexsheet.arm.sheet_motion import JointRates, MotionError, SheetLimits, SheetShaper
 from flexsheet.calibration.display_calib import xyzyaw_from_pose
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.calibration.sheet import TERMS
 from flexsheet.model.force_depth import ForceDepth
 from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
-from flexsheet.model.sheet import clamp_poses
+from flexsheet.model.sheet import clamp_poses, sheet_rotation
 from flexsheet.model.tension import SheetMaterial, clamp_force
 from flexsheet.model.timing import LAB
 from flexsheet.planning.compliance import SceneCompliance
@@ -153,6 +156,11 @@ PlannerParams = params_model(
     pull_margin=(float, Field(default=0.9, gt=0.0, le=1.0, description="share of the arms' torque-limited pull at "
                               "the targets sent the clamp force may reach (the bridges refuse a target past "
                               "the limit itself)")),
+    arm_speed_scale=(float, Field(default=BridgeConfig.speed_scale, gt=0.0, le=1.0,
+                                  description="the bridges' speed_scale: the sheet's motion is slowed until both "
+                                  "arms' joints stay within it (flexsheet/arm/sheet_motion.py)")),
+    arm_accel_scale=(float, Field(default=BridgeConfig.accel_scale, gt=0.0, le=100.0,
+                                  description="the bridges' accel_scale, 1/s, likewise")),
 )
 
 
@@ -191,6 +199,10 @@ class PlannerNode(Node):
                       m.strain_offset)
         self.guard = HeadGuard(KeepOut(head_radius=p.head_radius, margin=p.keepout_margin), cfg.material.size)
         self.planner = SurfacePlanner(shape, cfg, compliance, self.guard)
+        qd = QD_MAX * p.arm_speed_scale                          # the two arms' one motion, within both arms' joints
+        self.shaper = SheetShaper(size=cfg.material.size, rates=JointRates(
+            {"left": cfg.reach.left_base, "right": cfg.reach.right_base}, qd, qd * p.arm_accel_scale))
+        self._motion_q: dict[str, np.ndarray] = {}
         self._k_fem: float | None = None
         self._k_fem_at = 0.0
         self._press: tuple[float, float] | None = None
@@ -341,7 +353,27 @@ class PlannerNode(Node):
         Tl, Tr = plan.clamp_matrices()
         pull = clamp_force(plan.stretch, self.planner.cfg.material)
         self._cap_pull(Tl, Tr)                                  # for the next plans, at these targets
+        motion = self._motion(plan)
         self.pub_left.publish(ArmTarget(header=self.pub_left.header("display", st.stamp), arm="left", pose=Tl,
-                                        source_stamp=float(source_stamp), status=plan.status, pull=pull))
+                                        source_stamp=float(source_stamp), status=plan.status, pull=pull, **motion))
         self.pub_right.publish(ArmTarget(header=self.pub_right.header("display", st.stamp), arm="right", pose=Tr,
-                                         source_stamp=float(source_stamp), status=plan.status, pull=pull))
+                                         source_stamp=float(source_stamp), status=plan.status, pull=pull, **motion))
+
+    def _motion(self, plan: Plan) -> dict:
+        """The sheet's motion from where it is now to ``plan``, as :class:`ArmTarget` fields (both arms get the
+        same: :mod:`flexsheet.arm.sheet_motion`), under the planner's current limits (reduced near the head).
+        ``{}`` when ruckig fails: the bridges then stream to the goal joint by joint (said once)."""
+        lim = self.planner.limiter.limits
+        self.shaper.size = float(plan.sheet_size)
+        q_goal = dict(self.pull_guard.seed)                     # the IK of this plan's two targets
+        self.shaper.rates.at({s: [q_goal[s]] + ([self._motion_q[s]] if s in self._motion_q else []) for s in q_goal})
+        self._motion_q = q_goal
+        try:
+            seg = self.shaper.update(self.now(), plan.origin, sheet_rotation(plan.normal, plan.axis_u), plan.stretch,
+                                     SheetLimits.from_rates(lim.v_max, lim.a_max, lim.w_max, lim.alpha_max,
+                                                            lim.stretch_rate))
+        except MotionError as exc:
+            if self.shaper.failures == 1:
+                self.log.warning("sheet motion: %s; the arms stream to this target joint by joint (said once)", exc)
+            return {}
+        return seg.fields()

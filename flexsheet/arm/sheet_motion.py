@@ -1,0 +1,383 @@
+"""The two arms' one motion: a time-parametrised motion of the sheet in cooperative task space (pure; ruckig).
+
+The sheet's state ``x`` (7,): its centre ``o`` (3,) m, its orientation as a rotation vector ``r`` (3,) rad about
+the segment's reference rotation (``R = R_ref · exp([r]×)``, so ``r`` is in the sheet's own frame at the
+segment's start), and the clamp strain ``ε``. The absolute part of the pair's motion is (o, R), the tangent
+plane's pose; the relative part is the clamps' span ``size·(1 + ε)`` along ``axis_u`` with one common
+orientation (:func:`flexsheet.model.sheet.clamp_poses`). Both clamps are derived from one state at one instant,
+so the span is the planned one all along the path, not only at its ends (cooperative task space: Chiacchio,
+Chiaverini & Siciliano 1996; Caccavale et al. 2000).
+
+A :class:`SheetSegment` is the start time ``t0`` (s, the graph's clock), the reference rotation, the start state
+with its velocity and acceleration, the goal and the per-DOF limits. Ruckig (Berscheid & Kröger, "Jerk-limited
+real-time trajectory generation with arbitrary target states", RSS 2021) gives the time-optimal jerk-limited
+trajectory with phase synchronisation: every DOF starts and stops together, on a straight line in this space
+when the start is at rest or moving along that line (else time-synchronised). Ruckig is deterministic: the
+planner and both bridges compute one trajectory from one segment, and evaluate it at the same instant.
+
+Limits (:class:`SheetLimits`) bound the norm of the centre's speed, the sheet's angular speed and the strain
+rate: each DOF of a group gets the group's bound times its share of the group's displacement (at least
+:data:`MIN_SHARE`), so a phase-synchronised move keeps the norm within the bound. The arms' joints bound it too:
+:class:`JointRates` estimates the joint speeds and accelerations a segment asks of both arms, and the shaper
+slows the segment (both arms alike) until they are within the bridges' limits, so the bridges' per-joint limiters
+never have to brake one arm alone.
+"""
+
+from __future__ import annotations
+
+import atexit
+import math
+import weakref
+from dataclasses import dataclass, field
+
+import numpy as np
+from ruckig import InputParameter, Result, Ruckig, Synchronization, Trajectory
+from scipy.spatial.transform import Rotation
+
+from flexsheet.arm.kinematics import ArmKinematics
+from flexsheet.model import geometry
+
+__all__ = ["SheetLimits", "SheetSegment", "SheetShaper", "JointRates", "MotionError", "MIN_SHARE", "DOF"]
+
+#: the state's size: centre (3), rotation vector (3), strain (1)
+DOF = 7
+#: the least share of a group's bound a DOF gets (ruckig needs positive limits; a DOF that does not move keeps
+#: room to brake a start velocity)
+MIN_SHARE = 0.05
+_GROUPS = (slice(0, 3), slice(3, 6), slice(6, 7))
+#: segments holding a ruckig trajectory: their trajectories are freed at exit, before the interpreter's teardown
+#: (nanobind reports a binding object still alive then as a leak, on every node's exit)
+_LIVE: weakref.WeakSet = weakref.WeakSet()
+
+
+@atexit.register
+def _free_trajectories() -> None:
+    for seg in list(_LIVE):
+        seg.__dict__.pop("_traj", None)
+
+
+class MotionError(ValueError):
+    """A segment ruckig could not compute (bad limits or state); names what was wrong."""
+
+
+@dataclass(frozen=True)
+class SheetLimits:
+    """Bounds of the sheet's motion: centre ``v_max`` m/s, ``a_max`` m/s², ``j_max`` m/s³; orientation
+    ``w_max`` rad/s, ``alpha_max`` rad/s², ``jw_max`` rad/s³; strain ``stretch_rate`` 1/s, ``stretch_acc`` 1/s²,
+    ``stretch_jerk`` 1/s³. Raises ``ValueError`` naming a bound that is not finite and positive."""
+
+    v_max: float = 0.30
+    a_max: float = 3.0
+    j_max: float = 60.0
+    w_max: float = 3.0
+    alpha_max: float = 30.0
+    jw_max: float = 600.0
+    stretch_rate: float = 1.0
+    stretch_acc: float = 10.0
+    stretch_jerk: float = 200.0
+
+    def __post_init__(self) -> None:
+        for k, v in self.__dict__.items():
+            if not (math.isfinite(v) and v > 0.0):
+                raise ValueError(f"SheetLimits.{k} must be finite and > 0, got {v!r}")
+
+    @classmethod
+    def from_rates(cls, v_max: float, a_max: float, w_max: float, alpha_max: float, stretch_rate: float,
+                   ramp_s: float = 0.033, stretch_ramp_s: float = 0.01) -> SheetLimits:
+        """Limits with these speeds and accelerations (m/s, m/s², rad/s, rad/s², 1/s; the planner's
+        :class:`~flexsheet.planning.limits.MotionLimits`) and the jerk that reaches full acceleration in
+        ``ramp_s`` s; the strain reaches its full rate in ``stretch_ramp_s`` s (a press's tension must follow
+        the finger; the joints' own limits slow it where they must, :class:`JointRates`). Raises ``ValueError``
+        on a ramp that is not finite and positive."""
+        for name, v in (("ramp_s", ramp_s), ("stretch_ramp_s", stretch_ramp_s)):
+            if not (math.isfinite(v) and v > 0.0):
+                raise ValueError(f"{name} must be finite and > 0 s, got {v!r}")
+        sa = stretch_rate / stretch_ramp_s
+        return cls(v_max, a_max, a_max / ramp_s, w_max, alpha_max, alpha_max / ramp_s, stretch_rate, sa,
+                   sa / stretch_ramp_s)
+
+    def groups(self) -> np.ndarray:
+        """(3, 3): rows velocity, acceleration, jerk; columns centre, orientation, strain."""
+        return np.array([[self.v_max, self.w_max, self.stretch_rate],
+                         [self.a_max, self.alpha_max, self.stretch_acc],
+                         [self.j_max, self.jw_max, self.stretch_jerk]], dtype=float)
+
+    def per_dof(self, delta: np.ndarray) -> np.ndarray:
+        """(3, 7) per-DOF limits (velocity, acceleration, jerk) for a move by ``delta`` (7,): each group's bound
+        times the DOF's share of the group's displacement, at least :data:`MIN_SHARE`."""
+        g = self.groups()
+        out = np.empty((3, DOF))
+        for j, sl in enumerate(_GROUPS):
+            d = np.abs(np.asarray(delta, float)[sl])
+            n = float(np.linalg.norm(d))
+            share = np.maximum(d / n, MIN_SHARE) if n > 1e-12 else np.ones(d.size)
+            out[:, sl] = g[:, j:j + 1] * share[None, :]
+        return out
+
+
+def _hat(r) -> np.ndarray:
+    return np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+
+
+def _rot(rv) -> np.ndarray:
+    """exp([r]×) (3, 3), Rodrigues' formula."""
+    r = np.asarray(rv, float)
+    th = math.sqrt(float(r @ r))
+    K = _hat(r)
+    if th < 1e-9:
+        return np.eye(3) + K
+    return np.eye(3) + (math.sin(th) / th) * K + ((1.0 - math.cos(th)) / (th * th)) * (K @ K)
+
+
+def _log(R) -> np.ndarray:
+    """The rotation vector (3,) of a rotation (3, 3) (scipy's, robust near π)."""
+    return Rotation.from_matrix(np.asarray(R, float)).as_rotvec()
+
+
+@dataclass(frozen=True, eq=False)
+class SheetSegment:
+    """One segment of the sheet's motion (module doc).
+
+    ``t0`` s (graph clock); ``frame`` (3, 3): the reference rotation R_ref (columns normal, axis_u, axis_v at
+    ``r`` = 0, display frame); ``start`` (3, 7): the start state, its velocity and its acceleration; ``goal``
+    (7,); ``limits`` (3, 7): per-DOF velocity, acceleration and jerk; ``size`` m: the sheet's unstretched side.
+    Raises :class:`MotionError` if ruckig cannot compute it (non-finite values, limits not positive)."""
+
+    t0: float
+    frame: np.ndarray
+    start: np.ndarray
+    goal: np.ndarray
+    limits: np.ndarray
+    size: float = geometry.SHEET_SIZE
+    _traj: Trajectory = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        for name, shape in (("frame", (3, 3)), ("start", (3, DOF)), ("goal", (DOF,)), ("limits", (3, DOF))):
+            a = np.asarray(getattr(self, name), dtype=float)
+            if a.shape != shape or not np.all(np.isfinite(a)):
+                raise MotionError(f"SheetSegment.{name} must be a finite {shape} array, got shape {a.shape}")
+            object.__setattr__(self, name, a)
+        if np.abs(self.frame.T @ self.frame - np.eye(3)).max() > 1e-6 or np.linalg.det(self.frame) <= 0.0:
+            raise MotionError(f"SheetSegment.frame must be a rotation, got {self.frame.tolist()}")
+        if not (math.isfinite(self.t0) and self.size > 0.0):
+            raise MotionError(f"SheetSegment t0 must be finite and size > 0, got t0={self.t0!r}, size={self.size!r}")
+        if np.any(self.limits <= 0.0):
+            raise MotionError(f"SheetSegment.limits must be > 0, got {self.limits.tolist()}")
+        inp = InputParameter(DOF)
+        inp.current_position, inp.current_velocity, inp.current_acceleration = (r.tolist() for r in self.start)
+        inp.target_position = self.goal.tolist()
+        inp.target_velocity = [0.0] * DOF
+        inp.target_acceleration = [0.0] * DOF
+        inp.max_velocity, inp.max_acceleration, inp.max_jerk = (r.tolist() for r in self.limits)
+        inp.synchronization = Synchronization.Phase
+        traj = Trajectory(DOF)
+        res = Ruckig(DOF).calculate(inp, traj)
+        if res != Result.Working:
+            inp.synchronization = Synchronization.Time      # a start off the line: time-synchronised
+            res = Ruckig(DOF).calculate(inp, traj)
+        if res != Result.Working:
+            raise MotionError(f"ruckig could not compute the sheet segment: {res.name}")
+        object.__setattr__(self, "_traj", traj)
+        _LIVE.add(self)
+
+    @property
+    def duration(self) -> float:
+        """s from ``t0`` to the goal, at rest."""
+        return float(self._traj.duration)
+
+    def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(x, ẋ, ẍ), each (7,), at time ``t`` s: the start before ``t0``, the goal at rest after the end."""
+        tau = min(max(t - self.t0, 0.0), self._traj.duration)
+        p, v, a = self._traj.at_time(tau)
+        return np.asarray(p), np.asarray(v), np.asarray(a)
+
+    def rotation(self, r) -> np.ndarray:
+        """The sheet's rotation (3, 3) for the rotation vector ``r`` (3,) of this segment."""
+        return self.frame @ _rot(r)
+
+    def sheet(self, t: float) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray, float]:
+        """The sheet at time ``t``: (centre (3,) m, rotation (3, 3), strain, centre velocity (3,) m/s,
+        angular velocity (3,) rad/s in the display frame, strain rate 1/s)."""
+        x, xd, _ = self.state(t)
+        R = self.rotation(x[3:6])
+        # ω in the display frame: R · J_r(r) · ṙ (the right Jacobian of SO(3); body rate ≈ ṙ for small r)
+        w_body = _right_jacobian(x[3:6]) @ xd[3:6]
+        return x[:3], R, float(x[6]), xd[:3], R @ w_body, float(xd[6])
+
+    def clamp(self, arm: str, t: float, accel: bool = False) -> tuple[np.ndarray, ...]:
+        """The ``arm``'s ("left" or "right") clamp at time ``t``: pose T_display_clamp (4, 4) m, and its twist
+        (6,) (v m/s, ω rad/s) in the clamp's own frame, the frame of :meth:`ArmKinematics.jacobian`; with
+        ``accel`` also the twist's rate (6,) (m/s², rad/s²; the rotating frame's terms, second order, left out).
+        Raises ``ValueError`` for another arm name."""
+        if arm not in ("left", "right"):
+            raise ValueError(f"arm must be 'left' or 'right', got {arm!r}")
+        x, xd, xdd = self.state(t)
+        r = x[3:6]
+        R = self.frame @ _rot(r)
+        Jr = _right_jacobian(r)
+        w = R @ (Jr @ xd[3:6])                     # angular velocity, display frame
+        s = 1.0 if arm == "left" else -1.0
+        a = 0.5 * self.size * (1.0 + x[6])
+        ad = 0.5 * self.size * xd[6]
+        u = R[:, 1]
+        wxu = _cross(w, u)
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:3, 3] = x[:3] + s * a * u
+        v = xd[:3] + s * (ad * u + a * wxu)
+        twist = np.concatenate([R.T @ v, R.T @ w])
+        if not accel:
+            return T, twist
+        al = R @ (Jr @ xdd[3:6])                   # angular acceleration (first order in r), display frame
+        add = 0.5 * self.size * xdd[6]
+        acc = xdd[:3] + s * (add * u + 2.0 * ad * wxu + a * (_cross(al, u) + _cross(w, wxu)))
+        return T, twist, np.concatenate([R.T @ acc, R.T @ al])
+
+    def fields(self) -> dict:
+        """This segment as :class:`messages.ArmTarget`'s ``motion_*`` fields (the inverse of :meth:`from_fields`)."""
+        return {"motion_t0": float(self.t0), "motion_frame": self.frame.copy(),
+                "motion": np.vstack([self.start, self.goal[None, :], self.limits]), "motion_size": float(self.size)}
+
+    @classmethod
+    def from_fields(cls, msg) -> SheetSegment | None:
+        """The segment an :class:`messages.ArmTarget` carries, or None when it carries none (``motion_t0`` None).
+        Raises :class:`MotionError` naming the bad field."""
+        if msg.motion_t0 is None:
+            return None
+        m = np.asarray(msg.motion, float)
+        return cls(float(msg.motion_t0), msg.motion_frame, m[0:3], m[3], m[4:7], float(msg.motion_size))
+
+    def goal_pose(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """(centre (3,) m, rotation (3, 3), strain) at the goal."""
+        return self.goal[:3], self.rotation(self.goal[3:6]), float(self.goal[6])
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _right_jacobian(r: np.ndarray) -> np.ndarray:
+    """SO(3)'s right Jacobian J_r(r) (3, 3): body angular velocity = J_r(r)·ṙ for R = R_ref·exp([r]×)."""
+    th = math.sqrt(float(r @ r))
+    K = _hat(r)
+    if th < 1e-6:
+        return np.eye(3) - 0.5 * K
+    return (np.eye(3) - (1.0 - math.cos(th)) / th ** 2 * K + (th - math.sin(th)) / th ** 3 * (K @ K))
+
+
+class JointRates:
+    """The joint speeds and accelerations a segment asks of the two arms, relative to the bridges' limits.
+
+    ``bases``: {"left", "right"}: (x, y, z, yaw) or (4, 4) T_display_base (the registered ones); ``qd_max`` and
+    ``qdd_max`` (6,) rad/s and rad/s²: the bridges' limits (the URDF's × ``speed_scale``, × ``accel_scale``).
+    Joint rates are mapped from the clamps' twists through the Jacobians at the arms' joints for the segment's
+    goal and start (``samples`` instants; the Jacobian's change along one segment is second order here)."""
+
+    def __init__(self, bases: dict, qd_max, qdd_max, samples: int = 4) -> None:
+        if set(bases) != {"left", "right"}:
+            raise ValueError(f"bases must name 'left' and 'right', got {sorted(bases)}")
+        self.kin = {s: ArmKinematics(s, b) for s, b in bases.items()}
+        self.qd_max = np.asarray(qd_max, float)
+        self.qdd_max = np.asarray(qdd_max, float)
+        if self.qd_max.shape != (6,) or self.qdd_max.shape != (6,) or np.any(self.qd_max <= 0) or np.any(self.qdd_max <= 0):
+            raise ValueError(f"qd_max and qdd_max must be positive (6,) vectors, got {qd_max!r}, {qdd_max!r}")
+        self.samples = int(samples)
+        self._jinv: dict[str, list[np.ndarray]] = {}
+
+    def at(self, joints: dict) -> None:
+        """The arms' joints (6,) rad to map through: {side: [q, ...]} (e.g. the IK of this plan's targets and
+        of the last plan's). A singular Jacobian is skipped."""
+        self._jinv = {}
+        for side, qs in joints.items():
+            out = []
+            for q in qs:
+                try:
+                    out.append(np.linalg.inv(self.kin[side].jacobian(q)))
+                except np.linalg.LinAlgError:
+                    pass
+            self._jinv[side] = out
+
+    def ratios(self, seg: SheetSegment) -> tuple[float, float]:
+        """(peak joint speed / ``qd_max``, peak joint acceleration / ``qdd_max``) over both arms and the sampled
+        instants of ``seg``."""
+        if seg.duration <= 0.0 or not any(self._jinv.values()):
+            return 0.0, 0.0
+        rv = ra = 0.0
+        for side, jinvs in self._jinv.items():
+            for k in range(self.samples):
+                _, tw, dtw = seg.clamp(side, seg.t0 + seg.duration * (k + 0.5) / self.samples, accel=True)
+                for Ji in jinvs:
+                    rv = max(rv, float(np.max(np.abs(Ji @ tw) / self.qd_max)))
+                    ra = max(ra, float(np.max(np.abs(Ji @ dtw) / self.qdd_max)))
+        return rv, ra
+
+
+class SheetShaper:
+    """The planner's side: one segment per plan, each starting where the last one is at that instant (its
+    state, velocity and acceleration), so the motion stays continuous in position, velocity and acceleration.
+
+    ``limits``: :class:`SheetLimits`; ``size`` m: the sheet's side; ``rates``: a :class:`JointRates` whose
+    ``at`` the caller keeps current, or None (Cartesian limits only). :meth:`update` returns the new segment;
+    ``slowed`` counts the segments slowed for the joints."""
+
+    def __init__(self, limits: SheetLimits | None = None, size: float = geometry.SHEET_SIZE,
+                 rates: JointRates | None = None) -> None:
+        self.limits = limits or SheetLimits()
+        self.size = float(size)
+        self.rates = rates
+        self.segment: SheetSegment | None = None
+        self.failures = 0
+        self.slowed = 0
+
+    def reset(self) -> None:
+        """Forget the motion: the next :meth:`update` starts at its goal, at rest (after a hold or a jump the
+        bridges' joint limiters bring the arms there)."""
+        self.segment = None
+
+    def _start(self, t: float) -> np.ndarray:
+        """(3, 7): the current motion's state, velocity and acceleration at ``t``, in a segment whose rotation
+        vector is 0 at the current orientation: the body rate J_r(r)·ṙ and, to first order, its change
+        J_r(r)·r̈ (the J̇_r·ṙ term is second order in r, which stays small within a segment)."""
+        x, xd, xdd = self.segment.state(t)
+        out = np.zeros((3, DOF))
+        out[:, :3] = np.stack([x[:3], xd[:3], xdd[:3]])
+        out[:, 6] = (x[6], xd[6], xdd[6])
+        J = _right_jacobian(x[3:6])
+        out[1, 3:6] = J @ xd[3:6]
+        out[2, 3:6] = J @ xdd[3:6]
+        return out
+
+    def update(self, t: float, origin, rotation, stretch: float, limits: SheetLimits | None = None) -> SheetSegment:
+        """The segment from the current motion at ``t`` s to the sheet at ``origin`` (3,) m, ``rotation`` (3, 3)
+        and strain ``stretch``, under ``limits`` (default: the shaper's). Raises :class:`MotionError` when
+        ruckig fails (the shaper then restarts at the next goal, and counts it in ``failures``)."""
+        lim = limits or self.limits
+        o = np.asarray(origin, float)
+        if self.segment is None:
+            frame = np.asarray(rotation, float)
+            start = np.zeros((3, DOF))
+            start[0, :3] = o
+            start[0, 6] = stretch
+        else:
+            x = self.segment.state(t)[0]
+            frame = self.segment.rotation(x[3:6])
+            start = self._start(t)
+        goal = np.concatenate([o, _log(frame.T @ np.asarray(rotation, float)), [float(stretch)]])
+        try:
+            per_dof = lim.per_dof(goal - start[0])
+            seg = SheetSegment(float(t), frame, start, goal, per_dof, self.size)
+            if self.rates is not None:
+                for _ in range(2):            # slow both arms alike until their joints can follow (10 % spare)
+                    rv, ra = self.rates.ratios(seg)
+                    if rv <= 1.0 and ra <= 1.0:
+                        break
+                    kv, ka = max(rv, 1.0) * 1.1, max(ra, 1.0) * 1.1
+                    per_dof = per_dof / np.array([[kv], [ka], [ka * math.sqrt(ka)]])
+                    seg = SheetSegment(float(t), frame, start, goal, per_dof, self.size)
+                    self.slowed += 1
+        except MotionError:
+            self.failures += 1
+            self.segment = None
+            raise
+        self.segment = seg
+        return seg
