@@ -103,27 +103,23 @@ def netns():
 
 
 def warm_sim_fem(launch_file: Path = ROOT / "launch" / "sim.yaml") -> bool:
-    """Precompute (or load) the FEM node's capacitance model of ``launch_file``'s ``fem`` params (the paper's
-    cylinder) in the node's default disk cache, in this process; True on a cache hit.
+    """Precompute (or load) the FEM node's model of ``launch_file``'s ``fem`` params and scene (none: the default
+    scene, the paper's cylinder) in the node's default disk cache, in this process; True on a cache hit.
 
     On a machine that never ran the display the FEM node precomputes it at start-up (~10 s alone on the 2-core
     machine, over 60 s inside a running graph that starves it), so a launch's FEM would not be up for the first
-    part of the run. The key is the node's own (same params, same mesh choice), so the launched node hits it."""
+    part of the run. It is built as the node builds it (:func:`flexsheet.fem.served.build_model`), so the launched
+    node hits the same cache key."""
     import yaml
 
-    from flexsheet.fem.choose import choose, load_table
-    from flexsheet.fem.material import Material
-    from flexsheet.fem.mesh import MeshSpec
-    from flexsheet.fem.realtime import RealtimeModel
+    from flexsheet.fem.served import build_model
+    from flexsheet.model.scenes import DEFAULT_SCENE_FILE, load_scene
     from nodes.fem.node import FemParams
 
-    spec = yaml.safe_load(launch_file.read_text())["nodes"]["fem"]
-    p = FemParams(**spec.get("params", {}))
-    assert p.scene is None and p.mesh_h == 0.0, "warm_sim_fem covers the paper's cylinder with the chosen mesh"
-    ch = choose(load_table(), p.accuracy_target, p.depth_min, p.depth_max, p.nu, p.finger_radius)
-    mesh = MeshSpec(ch.spec.h, ch.spec.h_fine, ch.spec.refine_radius, p.arc_deg)
-    m = RealtimeModel(mesh, Material(p.E, p.nu), p.finger_radius, p.max_depth, p.strain_limit, p.cache_dir or None,
-                      None, ch.order)
+    spec = yaml.safe_load(launch_file.read_text())
+    p = FemParams(**spec["nodes"]["fem"].get("params", {}))
+    scene = spec.get("scene") or p.scene or DEFAULT_SCENE_FILE
+    m, _ = build_model(load_scene(scene), p.fem_config())
     return m.cache_hit
 
 

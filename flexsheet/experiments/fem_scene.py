@@ -52,7 +52,7 @@ from flexsheet.fem.reference.gci import gci_by_depth
 from flexsheet.fem.reference.scene_reference import FULL, QUICK, scene_reference
 from flexsheet.fem.reference.workers import parallel, run_workers
 from flexsheet.fem.scene_model import finger_on_scene
-from flexsheet.fem.served import fem_models_as_cylinder, scene_update_ms, served_finger, served_model
+from flexsheet.fem.served import scene_update_ms, served_finger, served_model, uses_cylinder_mesh
 from flexsheet.fem.solver import FemModel, solve_full
 from flexsheet.model.scenes import load_scene
 from flexsheet.runtime.console import LIBRARY, show_lines
@@ -190,7 +190,7 @@ def launch_arc_deg(sc) -> float:
     (launch/sim.yaml, launch/lab.yaml: 60°, so its rendered surface is refined where the finger goes), 0 for any
     other scene (its mesh follows its stroke by itself)."""
     st = sc.stroke
-    if fem_models_as_cylinder(sc) and st.kind == "arc":
+    if uses_cylinder_mesh(sc) and st.kind == "arc":
         return float(max(abs(st.start_deg), abs(st.end_deg)))
     return 0.0
 

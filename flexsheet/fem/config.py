@@ -10,22 +10,19 @@ from typing import Annotated
 from pydantic import Field
 
 from flexsheet.fem.cache import DEFAULT_CACHE_DIR
-from flexsheet.fem.material import Material
 
 __all__ = ["FemConfig"]
-
-_MATERIAL = Material()
 
 
 @dataclass(frozen=True)
 class FemConfig:
-    """How the FEM node chooses, builds and serves its model (SI units; the meaning of each field is in
-    ``nodes/fem``'s ``FemParams`` docstring).
+    """How the FEM node chooses, builds and serves its scene's model (SI units; the meaning of each field is in
+    ``nodes/fem``'s ``FemParams`` docstring). The object, its material and the finger are the scene file's.
 
     ``accuracy_target`` m; ``depth_min``/``depth_max`` m (the range the accuracy must hold over);
-    ``max_depth`` m (deeper input is rejected); ``finger_radius`` m; ``E`` Pa, ``nu`` (material);
-    ``strain_limit``; ``cache_dir`` ("" = no disk cache); ``mesh_h``/``mesh_h_fine``/``refine_radius`` m and
-    ``order`` (override the automatic mesh when h, h_fine > 0); ``arc_deg`` deg; ``nonlinear``,
+    ``max_depth`` m (deeper input is rejected); ``strain_limit``; ``cache_dir`` ("" = no disk cache);
+    ``mesh_h``/``mesh_h_fine``/``refine_radius`` m and ``order`` (override the automatic mesh when h, h_fine > 0);
+    ``arc_deg`` deg (the cylinder's working arc); ``nonlinear``,
     ``nonlinear_steps`` (the corotational depth table); ``use_prediction``; ``model`` auto | linear |
     snapshots; ``snapshot_build``; ``snapshot_axial_max`` m.
     """
@@ -34,9 +31,6 @@ class FemConfig:
     depth_min: Annotated[float, Field(ge=0.0)] = 0.005
     depth_max: Annotated[float, Field(gt=0.0)] = 0.03
     max_depth: Annotated[float, Field(gt=0.0, le=0.07)] = 0.06
-    finger_radius: Annotated[float, Field(ge=0.001, le=0.03)] = 0.008
-    E: Annotated[float, Field(gt=0.0)] = _MATERIAL.E
-    nu: Annotated[float, Field(ge=0.0, lt=0.5)] = _MATERIAL.nu
     strain_limit: Annotated[float, Field(gt=0.0)] = 1.0
     cache_dir: str = DEFAULT_CACHE_DIR
     mesh_h: Annotated[float, Field(ge=0.0)] = 0.0

@@ -1,14 +1,26 @@
-"""The real-time model the FEM node serves for a scene, built as the node builds it (:func:`served_model`), so
-that an experiment judges what the user sees: the paper's cylinder's :class:`~flexsheet.fem.realtime.RealtimeModel`
-(mesh and model kind from :func:`choose_cylinder_model`, the one choice the node makes too; the shipped nonlinear
-snapshots where it picks them), any other scene's :class:`~flexsheet.fem.scene_model.SceneModel` with its stored
-sphere or path table."""
+"""The model the FEM node serves for a scene, built one way: :func:`build_model` (the real-time linear model), then
+:func:`attach_table` (the scene's nonlinear table, where one is stored). The FEM node runs both at start-up and
+the experiments call them through :func:`served_model`, so that they judge what the user sees.
+
+Every object is a scene (``launch/scenes/*.yaml``; the default is
+:data:`~flexsheet.model.scenes.DEFAULT_SCENE_FILE`, the paper's cylinder), and its material and finger come from
+its file. What is built for it:
+
+- the paper's cylinder with its back-half support and no inclusions (:func:`uses_cylinder_mesh`): the
+  cylinder's own mesh, refined along the working arc (``arc_deg``), and its
+  :class:`~flexsheet.fem.realtime.RealtimeModel` (mesh and model kind from :func:`choose_cylinder_model`); its
+  table is the nonlinear snapshot table (:mod:`flexsheet.fem.snapshots`);
+- any other scene: its gmsh mesh refined along its stroke and its :class:`~flexsheet.fem.scene_model.SceneModel`;
+  its table is a sphere's sphere table, else the path table along its stroke
+  (:func:`flexsheet.fem.scene_model.attach_scene_table`).
+"""
 
 from __future__ import annotations
 
+import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -24,14 +36,14 @@ from flexsheet.fem.scene_model import SceneModel, attach_scene_table, finger_on_
 from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_snapshot_table
 from flexsheet.model.scenes import Scene, is_paper_cylinder
 
-__all__ = ["fem_models_as_cylinder", "served_model", "served_finger", "scene_update_ms", "CylinderChoice",
-           "choose_cylinder_model"]
+__all__ = ["uses_cylinder_mesh", "CylinderChoice", "choose_cylinder_model", "build_model", "TableState",
+           "attach_table", "snapshots_message", "served_model", "served_finger", "scene_update_ms"]
 
 
-def fem_models_as_cylinder(sc: Scene) -> bool:
-    """Whether the cylinder FEM path models ``sc``: the paper's cylinder
-    (:func:`flexsheet.model.scenes.is_paper_cylinder`) with the back-half support and no inclusions (its
-    material may differ: E, ν are taken from the scene)."""
+def uses_cylinder_mesh(sc: Scene) -> bool:
+    """Whether scene ``sc`` is served on the cylinder's own mesh (:class:`RealtimeModel`) with the cylinder's
+    snapshot table: the paper's cylinder (:func:`flexsheet.model.scenes.is_paper_cylinder`) with the back-half
+    support and no inclusions (its material may differ: E, ν and Jm are the scene's)."""
     return is_paper_cylinder(sc) and sc.support.kind == "back_half" and not sc.inclusions
 
 
@@ -48,18 +60,19 @@ class CylinderChoice:
     kind_reason: str
 
 
-def choose_cylinder_model(cfg: FemConfig) -> CylinderChoice:
-    """The model the FEM node serves for the paper's cylinder with the settings ``cfg``. Mesh: the one
+def choose_cylinder_model(cfg: FemConfig, sc: Scene) -> CylinderChoice:
+    """The model served for the cylinder scene ``sc`` with the settings ``cfg``. Mesh: the one
     ``mesh_h``/``mesh_h_fine``/``refine_radius``/``order`` set when h and h_fine are > 0, else the cheapest the
     accuracy table (:func:`flexsheet.fem.choose.choose`) finds within ``accuracy_target`` over
-    [``depth_min``, ``depth_max``] for ``nu`` and ``finger_radius``; the working arc ``arc_deg`` either way.
+    [``depth_min``, ``depth_max``] for the scene's ν and finger radius; the working arc ``arc_deg`` either way.
     Kind: ``model`` when "linear" or "snapshots", else ("auto") the model table's pick over ``depth_max``
     (:func:`flexsheet.fem.choose.choose_fem_model`). Raises ``ValueError`` on a non-positive target or depth."""
     if cfg.mesh_h > 0 and cfg.mesh_h_fine > 0:
         spec, order = MeshSpec(cfg.mesh_h, cfg.mesh_h_fine, cfg.refine_radius, cfg.arc_deg), cfg.order
         mesh_reason = f"mesh set by params: P{order} {spec.key()}"
     else:
-        ch = choose(load_table(), cfg.accuracy_target, cfg.depth_min, cfg.depth_max, cfg.nu, cfg.finger_radius)
+        ch = choose(load_table(), cfg.accuracy_target, cfg.depth_min, cfg.depth_max, sc.material.nu,
+                    sc.finger.radius)
         spec, order = MeshSpec(ch.spec.h, ch.spec.h_fine, ch.spec.refine_radius, cfg.arc_deg), ch.order
         mesh_reason = f"model choice: {ch.reason}"
     kind, why = ("linear", "model=linear") if cfg.model == "linear" else (
@@ -68,38 +81,136 @@ def choose_cylinder_model(cfg: FemConfig) -> CylinderChoice:
     return CylinderChoice(spec, order, mesh_reason, kind, why)
 
 
+def build_model(sc: Scene, cfg: FemConfig) -> tuple[RealtimeModel | SceneModel, str]:
+    """The real-time linear model of scene ``sc`` with the settings ``cfg`` (module doc): loaded from
+    ``cfg.cache_dir`` ("" = no disk cache), the installed or the shipped store, else precomputed (seconds) and
+    cached. Returns (model, one log line: mesh, how it was built, size, why this mesh). Raises ``ValueError`` on
+    bad settings or an inconsistent cache entry."""
+    cache_dir = cfg.cache_dir or None
+    if uses_cylinder_mesh(sc):
+        ch = choose_cylinder_model(cfg, sc)
+        spec, order, why = ch.spec, ch.order, f"the cylinder's mesh; {ch.mesh_reason}"
+        m = RealtimeModel(spec, Material.of_scene(sc.material), sc.finger.radius, cfg.max_depth, cfg.strain_limit,
+                          cache_dir, None, order)
+    else:
+        spec, order, why = DEFAULT_SCENE_SPEC, 2, "the scene's mesh along its stroke"
+        if cfg.mesh_h > 0 and cfg.mesh_h_fine > 0:
+            spec, order = MeshSpec(cfg.mesh_h, cfg.mesh_h_fine, cfg.refine_radius), cfg.order
+            why += ", sizes set by params"
+        m = SceneModel(sc, spec, order, None, cfg.max_depth, cfg.strain_limit, cache_dir, None)
+    line = (f"fem: scene {sc.name!r} ready in {m.precompute_s:.2f} s ({'cache hit' if m.cache_hit else 'precomputed'}):"
+            f" P{order} {spec.key()}, {m.n_nodes} nodes, {m.n_candidates} candidate contact points, "
+            f"{m.solver.nbytes / 1e6:.1f} MB ({why})")
+    return m, line
+
+
+@dataclass(frozen=True)
+class TableState:
+    """What :func:`attach_table` did: ``kind`` of the scene's table ("snapshots": the cylinder's, "sphere",
+    "path"; "none" with ``model`` "linear"; "table" when an unusable one's kind is unknown); ``where`` it was
+    loaded from (None: not attached, the linear model serves); ``message`` the node's diagnostics line and its
+    logging ``level``; ``what`` one line for the experiments' summaries; ``missing``: the table is wanted and
+    not stored; ``error``: why a stored table could not be used (else None)."""
+
+    kind: str
+    where: str | None
+    message: str
+    level: int
+    what: str
+    missing: bool = False
+    error: str | None = None
+
+
+def snapshots_message(sc: Scene, model: RealtimeModel, how: str) -> str:
+    """The diagnostics line of the cylinder scene ``sc``'s attached snapshot table, ``how`` it came
+    ("loaded from cache", "built in 900 s", ...)."""
+    s = model.snapshots
+    return (f"fem: scene {sc.name!r}: nonlinear snapshots {how}: |angle| <= {np.degrees(s.angle_max):.0f} deg, "
+            f"depth <= {s.depth_max * 1e3:.0f} mm ({s.nbytes / 1e6:.0f} MB)")
+
+
+def attach_table(model: RealtimeModel | SceneModel, sc: Scene, cfg: FemConfig) -> TableState:
+    """Attach scene ``sc``'s nonlinear table to ``model`` (from :func:`build_model`) as the settings ``cfg`` ask:
+    none with ``model`` "linear" (for the cylinder also where "auto" and the model table pick linear), else the
+    table stored in ``cfg.cache_dir``, the shipped store (``flexsheet/fem/data``) or the installed one. Without a
+    stored table, or with an unusable one, the linear model serves and the returned :class:`TableState` says so
+    (never raises for a table)."""
+    name = f"fem: scene {sc.name!r}"
+    cache = ArrayCache(cfg.cache_dir or None)
+    if isinstance(model, RealtimeModel):
+        return _attach_cylinder_table(model, sc, cfg, cache, name)
+    desc = f"P{model.order} scene model"
+    if cfg.model == "linear":
+        return TableState("none", None, f"{name}: linear {desc} (model=linear)", logging.INFO,
+                          f"linear {desc} (model=linear)")
+    try:
+        kind, where = attach_scene_table(model, cache)
+    except ValueError as exc:
+        msg = f"{name}: nonlinear table unusable ({exc}) - serving LINEAR"
+        return TableState("table", None, msg, logging.ERROR, f"linear {desc} (table unusable)", error=str(exc))
+    if where is None:
+        return TableState(kind, None, f"{name}: no nonlinear {kind} table cached - serving the LINEAR model (build it "
+                          f"with `flexsheet experiment fem --scene {sc.source or 'SCENE.yaml'} --node-table --out DIR`)",
+                          logging.WARNING, f"linear {desc} (no {kind} table stored)", missing=True)
+    if kind == "sphere":
+        sm = model.snapshots
+        msg = (f"{name}: nonlinear sphere snapshots loaded from {where}: polar angle <= "
+               f"{np.degrees(sm.alphas[-1]):.0f} deg, depth <= {sm.depth_max * 1e3:.0f} mm; linear elsewhere")
+    else:
+        pt = model.path_table
+        msg = (f"{name}: nonlinear path table loaded from {where}: {len(pt.fractions)} stations along the stroke, "
+               f"depth <= {pt.depth_max * 1e3:.0f} mm, within {pt.reach * 1e3:.0f} mm of the stroke; linear elsewhere")
+    return TableState(kind, where, msg, logging.INFO, f"linear {desc} + the {kind} table ({where})")
+
+
+def _attach_cylinder_table(model: RealtimeModel, sc: Scene, cfg: FemConfig, cache: ArrayCache,
+                           name: str) -> TableState:
+    """:func:`attach_table` for the cylinder: its snapshot table where the model kind is "snapshots"."""
+    ch = choose_cylinder_model(cfg, sc)
+    desc = f"P{model.order} cylinder model"
+    if ch.kind != "snapshots":
+        return TableState("snapshots", None, f"{name}: linear model ({ch.kind_reason})", logging.INFO,
+                          f"linear {desc} (the model table picks {ch.kind})")
+    mat = Material.of_scene(sc.material)
+    try:
+        table = load_snapshot_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, sc.finger.radius, sc.finger.contact)
+        if table is not None:
+            model.attach_snapshots(table, axial_max=cfg.snapshot_axial_max)
+    except ValueError as exc:
+        msg = f"{name}: nonlinear snapshot table unusable ({exc}) - serving LINEAR"
+        return TableState("snapshots", None, msg, logging.ERROR, f"linear {desc} (snapshot table unusable)",
+                          error=str(exc))
+    if table is None:
+        return TableState("snapshots", None, f"{name}: nonlinear snapshots not cached - serving the LINEAR model "
+                          f"(build them with `flexsheet experiment fem --node-table --nu {mat.nu:g} --Jm {mat.Jm:g}`, "
+                          "or set snapshot_build=true)", logging.WARNING, f"linear {desc} (no snapshot table stored)",
+                          missing=True)
+    where = "the shipped store (flexsheet/fem/data)" if cache.shipped() else "cache"
+    return TableState("snapshots", where, snapshots_message(sc, model, f"loaded from {where}"), logging.INFO,
+                      f"{desc} + the nonlinear snapshot table")
+
+
 def served_model(sc: Scene, cfg: FemConfig | None = None, cache_dir: str | None = None):
     """The model the FEM node serves for ``sc`` with the settings ``cfg`` (:class:`FemConfig`, default the node's
-    defaults; the cylinder's mesh and model kind as :func:`choose_cylinder_model` picks them, its max depth,
-    strain limit and snapshot reach; the scene's own finger and material, not the no-scene
-    ``E``/``nu``/``finger_radius``), its precomputation from ``cache_dir`` (None: the default cache; the installed
-    and shipped stores are read too) or computed. Returns (model, what: one line naming the model and its table,
-    or "linear ..."). Raises ``ValueError`` for an unusable stored table."""
+    defaults): :func:`build_model` then :func:`attach_table`, with ``cache_dir`` in place of ``cfg.cache_dir``
+    when given. Returns (model, what: one line naming the model and its table, or "linear ..."). Raises
+    ``ValueError`` for an unusable stored table (the node logs it and serves linear)."""
     cfg = cfg or FemConfig()
-    cache_dir = cache_dir or cfg.cache_dir
-    cache = ArrayCache(cache_dir)
-    if not fem_models_as_cylinder(sc):
-        m = SceneModel(sc, DEFAULT_SCENE_SPEC, 2, None, cfg.max_depth, cfg.strain_limit, cache_dir, None)
-        kind, where = attach_scene_table(m, cache)
-        return m, (f"linear P2 scene model + the {kind} table ({where})" if where else
-                   f"linear P2 scene model (no {kind} table stored)")
-    mat = Material.of_scene(sc.material)
-    ch = choose_cylinder_model(cfg)
-    m = RealtimeModel(ch.spec, mat, sc.finger.radius, cfg.max_depth, cfg.strain_limit, cache_dir, None, ch.order)
-    if ch.kind != "snapshots":
-        return m, f"linear P{ch.order} cylinder model (the model table picks {ch.kind})"
-    table = load_snapshot_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, sc.finger.radius, sc.finger.contact)
-    if table is None:
-        return m, f"linear P{ch.order} cylinder model (no snapshot table stored)"
-    m.attach_snapshots(table, axial_max=cfg.snapshot_axial_max)
-    return m, f"P{ch.order} cylinder model + the nonlinear snapshot table"
+    if cache_dir is not None:
+        cfg = replace(cfg, cache_dir=cache_dir)
+    m, _ = build_model(sc, cfg)
+    t = attach_table(m, sc, cfg)
+    if t.error is not None:
+        raise ValueError(f"scene {sc.name!r}: stored {t.kind} table unusable: {t.error}")
+    return m, t.what
+
 
 def served_finger(sc: Scene, q: np.ndarray, n: np.ndarray, depth: float):
     """The finger pushed ``depth`` m at surface point ``q`` (3,) m along −``n`` (outward unit normal) as the
-    scene's served model takes it: the paper's cylinder's by azimuth and axial offset
-    (:func:`flexsheet.fem.contact.finger_at`), any other scene's by point and normal
+    scene's served model takes it: on the cylinder's mesh by azimuth and axial offset
+    (:func:`flexsheet.fem.contact.finger_at`), on any other scene's by point and normal
     (:func:`flexsheet.fem.scene_model.finger_on_scene`)."""
-    if fem_models_as_cylinder(sc):
+    if uses_cylinder_mesh(sc):
         c = sc.center
         return finger_at(math.atan2(q[2] - c[2], q[0] - c[0]), float(depth), sc.finger.radius,
                          sc.object.radius, c, float(q[1] - c[1]))

@@ -1,24 +1,23 @@
-"""FEM node: fingertip in, deformed virtual object out. A thin shell around :class:`flexsheet.fem.realtime.RealtimeModel`.
+"""FEM node: fingertip in, deformed virtual object out. A thin shell around the model
+:mod:`flexsheet.fem.served` builds for its scene.
 
 Subscribes ``/fingertip`` (QoS LATEST; ``predicted_position`` when ``use_prediction``). Publishes
 ``/object/deformation`` (:class:`messages.ObjectDeformation`) per fingertip: deformed surface vertices (display
 frame, float32), faces, contact force N, local stiffness dF/dd N/m, depth, method, max strain, status, valid,
-``source_stamp`` = the fingertip's ``exposure_stamp``.
+``source_stamp`` = the fingertip's ``exposure_stamp``; and, latched, ``/object/force_depth`` (what the finger is
+asked to feel along the stroke).
 
-Start-up (``setup``): choose the mesh from the accuracy table (:mod:`flexsheet.fem.choose`, logged), then load the
-capacitance matrices from the disk cache or precompute them (logged with timing). Then the model the scene
-needs (:func:`flexsheet.fem.choose.choose_fem_model`, from ``flexsheet/fem/model_table.json``; mesh and model are
-picked by :func:`flexsheet.fem.served.choose_cylinder_model`, which the experiments call too): linear where it
-meets the accuracy target over ``depth_max``, otherwise the nonlinear snapshots (:mod:`flexsheet.fem.snapshots`), loaded
-from the cache; when they are not cached the node serves the linear model and either builds them in a
-background thread at low priority (``snapshot_build``) or says how to build them
-(``flexsheet experiment fem --node-table``). The diagnostics message tells which model is being served and why.
-The object is the ``scene`` param's (:mod:`flexsheet.model.scenes`; the launcher fills it from the launch file's
-top-level ``scene:``, as for the planner and the renderer; none = the paper's cylinder). The paper's cylinder
-(no scene, or a scene that is exactly it: same size and pose, back-half support, no inclusions) keeps the
-path above; any other scene (sphere, rounded box, organ with its stiff inclusion) is meshed by gmsh and solved
-by :class:`flexsheet.fem.scene_model.SceneModel` (linear, per-element material, capacitance over the stroke path,
-cached), without the nonlinear snapshots (they exist for the cylinder only; the diagnostics message says so).
+The object is the ``scene`` param's scene file (:mod:`flexsheet.model.scenes`; the launcher fills it from the
+launch file's top-level ``scene:``, as for the planner and the renderer; none = ``launch/scenes/cylinder.yaml``,
+the paper's cylinder), with its material and finger. Start-up (``setup``), one path for every scene, off the
+event loop: :func:`flexsheet.fem.served.build_model` loads its real-time linear model from the disk cache or
+precomputes it (logged with timing; the paper's cylinder on its own mesh, chosen from the accuracy table, any
+other scene on its gmsh mesh along the stroke), then :func:`flexsheet.fem.served.attach_table` attaches the
+scene's nonlinear table where one is stored (the cylinder's snapshot table, a sphere's table, a path table along
+the stroke; the cylinder's model table may pick linear instead, :func:`flexsheet.fem.choose.choose_fem_model`).
+Without a stored table the node serves the linear model and the diagnostics message names the command that
+builds it; the cylinder's snapshots can also be built in a background thread at low priority
+(``snapshot_build``). The diagnostics message tells which model is served and why.
 Every ``ObjectDeformation`` carries ``scene_key`` = the scene's :meth:`~flexsheet.model.scenes.Scene.key` so
 that the planner uses the FEM's dF/dd only for the object it presents.
 A lost marker publishes the rest shape with ``valid=False, status="rejected:marker_lost"``. NaN,
@@ -35,27 +34,28 @@ import threading
 import time
 
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
 from flexsheet.fem.cache import ArrayCache, cache_key
 from flexsheet.fem.config import FemConfig
 from flexsheet.fem.force_depth import build_force_depth
 from flexsheet.fem.material import Material
-from flexsheet.fem.mesh import MeshSpec
 from flexsheet.fem.realtime import RealtimeModel
 from flexsheet.fem.reference.snapshot_build import load_or_build
-from flexsheet.fem.scene_mesh import DEFAULT_SCENE_SPEC
-from flexsheet.fem.scene_model import SceneModel, attach_scene_table
-from flexsheet.fem.served import CylinderChoice, choose_cylinder_model, fem_models_as_cylinder
-from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_snapshot_table
-from flexsheet.model.scenes import Scene, load_scene_or_paper
+from flexsheet.fem.scene_model import SceneModel
+from flexsheet.fem.served import attach_table, build_model, snapshots_message
+from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC
+from flexsheet.model.scenes import DEFAULT_SCENE_FILE, load_scene, load_scene_or_paper
 from flexsheet.model.timing import LAB
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.runtime.qos import QoS
 from messages import Fingertip, ObjectDeformation, ObjectForceDepth, topics
 
-__all__ = ["FemParams", "FemNode"]
+__all__ = ["FemParams", "FemNode", "REMOVED_PARAMS"]
+
+#: params the node no longer takes, with the scene file's field that holds the setting now
+REMOVED_PARAMS = {"E": "material: E", "nu": "material: nu", "finger_radius": "finger: radius"}
 
 
 def _scene_file(cls, v: str | None) -> str | None:
@@ -63,36 +63,50 @@ def _scene_file(cls, v: str | None) -> str | None:
     return v
 
 
+def _no_removed_params(cls, data):
+    """Refuse a param that was removed, naming it and where its setting went."""
+    if isinstance(data, dict):
+        for k, where in REMOVED_PARAMS.items():
+            if k in data:
+                raise ValueError(f"fem param {k!r} (= {data[k]!r}) was removed: the object, its material and the "
+                                 f"finger are the scene file's; set {where!r} in the scene file (the launch file's "
+                                 "scene:, default launch/scenes/cylinder.yaml)")
+    return data
+
+
 FemParams = params_model(
     "FemParams",
     """FEM node parameters (launch file / ``--param k=v``). SI units.
 
+    ``scene``: the scene file (launch/scenes/*.yaml; filled by the launcher from the launch file's ``scene:``;
+    none = launch/scenes/cylinder.yaml, the paper's cylinder): the object, its material (E, ν, hyperelastic law),
+    support and finger radius all come from it.
     ``accuracy_target`` m (rendered-surface error target, default one projector pixel 0.7 mm);
-    ``depth_min``/``depth_max`` m push-depth range the accuracy must hold over; ``max_depth`` m deeper input is
-    rejected; ``finger_radius`` m; ``E`` Pa, ``nu``: material (soft-tissue defaults, see material.py; without a
-    scene file the hyperelastic law is the paper scene's, a Gent solid with Jm 97.2, whose snapshot table ships
-    in ``flexsheet/fem/data``);
+    ``depth_min``/``depth_max`` m push-depth range the accuracy must hold over (the cylinder's mesh and model
+    choice); ``max_depth`` m deeper input is rejected;
     ``strain_limit``: largest principal strain before linear is declared invalid; ``cache_dir`` ("" = no
-    disk cache); ``mesh_h``/``mesh_h_fine``/``refine_radius`` m and ``order`` override the automatic choice
-    when all of h, h_fine are > 0; ``arc_deg``: half-angle of the working arc (deg) whose neighbourhood gets
-    the precomputed contact region and refinement (0 = the front centre, the paper's push; elsewhere the full
-    sparse solve is used); ``nonlinear``: build the corotational depth table (background thread);
-    ``nonlinear_steps``: depth samples of that table; ``use_prediction``: use ``predicted_position``;
-    ``model``: "auto" (the model table decides), "linear" or "snapshots"; ``snapshot_build``: build missing
-    snapshots in a background thread (heavy: tens of minutes on a 2-core machine; else run
-    ``flexsheet experiment fem --node-table``); ``snapshot_axial_max`` m: largest axial offset of the push served by the
-    snapshots (translation along the axis). ``scene``: the scene file (launch/scenes/*.yaml; filled by the
-    launcher from the launch file's ``scene:``; none = the paper's cylinder); for a scene other than the
-    paper's cylinder its material, support and finger radius replace ``E``/``nu``/``finger_radius``, and
-    ``mesh_h``/``mesh_h_fine``/``refine_radius``/``order`` (when h, h_fine > 0) set its mesh (default
-    :data:`flexsheet.fem.scene_mesh.DEFAULT_SCENE_SPEC`, P2). Every param but ``scene`` is a field of —
-    defined, defaulted and range-checked in — :class:`flexsheet.fem.config.FemConfig`; ``fem_config()`` builds it.
+    disk cache); ``mesh_h``/``mesh_h_fine``/``refine_radius`` m and ``order`` override the automatic mesh
+    when all of h, h_fine are > 0 (default: the cylinder's from the accuracy table, any other scene's
+    :data:`flexsheet.fem.scene_mesh.DEFAULT_SCENE_SPEC`, P2); ``arc_deg``: half-angle of the cylinder's working
+    arc (deg) whose neighbourhood gets the precomputed contact region and refinement (0 = the front centre, the
+    paper's push; elsewhere the full sparse solve is used; other scenes follow their stroke); ``nonlinear``:
+    build the cylinder's corotational depth table (background thread); ``nonlinear_steps``: depth samples of
+    that table; ``use_prediction``: use ``predicted_position``; ``model``: "auto" (the scene's table where
+    stored; for the cylinder the model table decides), "linear" (no table) or "snapshots"; ``snapshot_build``:
+    build the cylinder's missing snapshots in a background thread (heavy: tens of minutes on a 2-core machine;
+    else run ``flexsheet experiment fem --node-table``); ``snapshot_axial_max`` m: largest axial offset of the
+    push served by the cylinder's snapshots (translation along the axis). Every param but ``scene`` is a
+    field of — defined, defaulted and range-checked in — :class:`flexsheet.fem.config.FemConfig`;
+    ``fem_config()`` builds it. Removed params (:data:`REMOVED_PARAMS`: ``E``, ``nu``, ``finger_radius``) are
+    refused with where their setting went.
     """,
     config_fields(FemConfig),
-    validators={"_scene_file": field_validator("scene")(_scene_file)},
+    validators={"_scene_file": field_validator("scene")(_scene_file),
+                "_no_removed_params": model_validator(mode="before")(_no_removed_params)},
     methods={"fem_config": lambda self: build(FemConfig, self)},
     module=__name__,
-    scene=(str | None, Field(default=None, description="scene file (launch/scenes/*.yaml); none: the paper's")),
+    scene=(str | None, Field(default=None, description="scene file (launch/scenes/*.yaml); none: "
+                                                       "launch/scenes/cylinder.yaml, the paper's cylinder")),
 )
 
 
@@ -104,35 +118,36 @@ class FemNode(Node):
     LARGEST_MESSAGE_BYTES = 64 << 10
 
     async def setup(self) -> None:
-        """Choose the model, load or precompute it (may take seconds: runs in a worker thread), then subscribe."""
+        """Load the scene, build its model and attach its table (may take seconds: in worker threads), then
+        subscribe and publish the force-depth table."""
         p: FemParams = self.params
-        self.scene = load_scene_or_paper(p.scene)
+        self.scene = load_scene(p.scene or DEFAULT_SCENE_FILE)
         self.scene_key = self.scene.key()
         self.log.info("fem: scene: %s", self.scene.describe())
         self._lock = threading.Lock()
-        if not fem_models_as_cylinder(self.scene):
-            await self._setup_scene()
-            return
-        # a scene file's material; no scene: E, ν from the params with the paper scene's law (Gent, its Jm)
-        mat = Material.of_scene(self.scene.material)
-        mat = mat if p.scene else Material(p.E, p.nu, mat.Jm)
-        choice = choose_cylinder_model(p.fem_config())
-        spec, order = choice.spec, choice.order
-        self.log.info("fem: %s", choice.mesh_reason)
-        cache = p.cache_dir or None
-        self.model = await asyncio.to_thread(
-            RealtimeModel, spec, mat, p.finger_radius, p.max_depth, p.strain_limit, cache, None, order)
-        m = self.model
-        self.log.info("fem: ready in %.2f s (%s): P%d, %d nodes, %d candidate contact points, %.1f MB",
-                      m.precompute_s, "cache hit" if m.cache_hit else "precomputed", order, m.n_nodes,
-                      m.n_candidates, m.solver.nbytes / 1e6)
+        cfg = p.fem_config()
+        self.model, built = await asyncio.to_thread(build_model, self.scene, cfg)
+        self.log.info("%s", built)
+        # off the event loop: attaching a path table precomputes its contact-following moves (2-5 s, more on a
+        # loaded machine; flexsheet/fem/path_snapshots.py), during which heartbeats must go on
+        table = await asyncio.to_thread(attach_table, self.model, self.scene, cfg)
+        self.state_message = table.message
+        self.log.log(table.level, table.message)
         self.pub = self.publisher(topics.DEFORMATION)
         self.pub_force_depth = self.publisher(topics.FORCE_DEPTH)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST, sim_cost=LAB.compute("fem"))
-        if p.nonlinear:
-            await self._background(self._build_nonlinear, "fem-corotational")
-        await self._setup_snapshots(mat, choice)
+        if isinstance(self.model, RealtimeModel):
+            if p.nonlinear:
+                await self._background(self._build_nonlinear, "fem-corotational")
+            if table.missing and p.snapshot_build:
+                self.state_message = (f"fem: scene {self.scene.name!r}: building nonlinear snapshots in the "
+                                      "background - serving the LINEAR model")
+                self.log.warning(self.state_message)
+                await self._background(self._build_snapshots, "fem-snapshots", ArrayCache(p.cache_dir or None),
+                                       Material.of_scene(self.scene.material))
         await asyncio.to_thread(self._publish_force_depth)
+        if isinstance(self.model, SceneModel):     # its sparse fallback serves any push off the stroke's band
+            await self._background(self._warm_sparse, "fem-sparse")
 
     async def _background(self, target, name: str, *args) -> None:
         """Run ``target(*args)`` in a daemon thread; on a simulated clock to completion before the node is
@@ -141,31 +156,6 @@ class FemNode(Node):
             await asyncio.to_thread(target, *args)
         else:
             threading.Thread(target=target, args=args, name=name, daemon=True).start()
-
-    async def _setup_scene(self) -> None:
-        """Mesh and precompute (or load from the cache) the scene's model, then subscribe."""
-        p: FemParams = self.params
-        sc = self.scene
-        spec, order = DEFAULT_SCENE_SPEC, 2
-        if p.mesh_h > 0 and p.mesh_h_fine > 0:
-            spec, order = MeshSpec(p.mesh_h, p.mesh_h_fine, p.refine_radius), p.order
-        self.model = await asyncio.to_thread(SceneModel, sc, spec, order, None, p.max_depth, p.strain_limit,
-                                             p.cache_dir or None, None)
-        m = self.model
-        self.log.info("fem: scene %r ready in %.2f s (%s): P%d %s, %d nodes, %d candidate contact points along "
-                      "the stroke, %.1f MB", sc.name, m.precompute_s, "cache hit" if m.cache_hit else "precomputed",
-                      order, spec.key(), m.n_nodes, m.n_candidates, m.solver.nbytes / 1e6)
-        self.state_message = (f"fem: scene {sc.name!r}: linear P{order} scene model with per-element material "
-                              f"({len(sc.inclusions)} inclusion(s)); nonlinear snapshots exist for the paper's "
-                              "cylinder, the sphere and along a scene's stroke (path tables) only")
-        # off the event loop: attaching a path table precomputes its contact-following moves (2-5 s, more on a
-        # loaded machine; flexsheet/fem/path_snapshots.py), during which heartbeats must go on
-        await asyncio.to_thread(self._setup_scene_table, sc)
-        self.pub = self.publisher(topics.DEFORMATION)
-        self.pub_force_depth = self.publisher(topics.FORCE_DEPTH)
-        self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST, sim_cost=LAB.compute("fem"))
-        await asyncio.to_thread(self._publish_force_depth)
-        await self._background(self._warm_sparse, "fem-sparse")
 
     def _publish_force_depth(self) -> None:
         """Push the served model along the stroke (:func:`flexsheet.fem.force_depth.build_force_depth`) and
@@ -188,35 +178,6 @@ class FemNode(Node):
                       fd.depths[-1] * 1e3, time.perf_counter() - t, fd.force_at(fd.points[i], 0.005),
                       fd.force_at(fd.points[i], 0.01))
 
-    def _setup_scene_table(self, sc: Scene) -> None:
-        """Attach the scene's nonlinear table (:func:`flexsheet.fem.scene_model.attach_scene_table`: a sphere's
-        sphere table, any other scene's path table along its stroke) when this machine's cache or the shipped
-        store has it, else serve linear and name the command that builds it."""
-        cache = ArrayCache(self.params.cache_dir or None)
-        try:
-            kind, where = attach_scene_table(self.model, cache)
-        except ValueError as exc:
-            self.state_message = f"fem: scene {sc.name!r}: nonlinear table unusable ({exc}) - serving LINEAR"
-            self.log.error(self.state_message)
-            return
-        if where is None:
-            self.state_message = (f"fem: scene {sc.name!r}: no nonlinear {kind} table cached - serving the LINEAR "
-                                  f"model (build it with `flexsheet experiment fem --scene {sc.source or 'SCENE.yaml'} "
-                                  "--node-table --out DIR`)")
-            self.log.warning(self.state_message)
-            return
-        if kind == "sphere":
-            sm = self.model.snapshots
-            self.state_message = (f"fem: scene {sc.name!r}: nonlinear sphere snapshots loaded from {where}: "
-                                  f"polar angle <= {np.degrees(sm.alphas[-1]):.0f} deg, depth <= "
-                                  f"{sm.depth_max * 1e3:.0f} mm; linear elsewhere")
-        else:
-            pt = self.model.path_table
-            self.state_message = (f"fem: scene {sc.name!r}: nonlinear path table loaded from {where}: "
-                                  f"{len(pt.fractions)} stations along the stroke, depth <= {pt.depth_max * 1e3:.0f} "
-                                  f"mm, within {pt.reach * 1e3:.0f} mm of the stroke; linear elsewhere")
-        self.log.info(self.state_message)
-
     def _warm_sparse(self) -> None:
         """Assemble the scene's full model (the sparse fallback) off the real-time path."""
         try:
@@ -228,55 +189,31 @@ class FemNode(Node):
         except Exception:  # noqa: BLE001 - a warm-up must never take the node down
             self.log.exception("fem: assembling the scene's sparse fallback failed")
 
-    async def _setup_snapshots(self, mat: Material, choice: CylinderChoice) -> None:
-        """Attach the nonlinear snapshots when the scene needs them (cache hit), else say why not."""
-        p: FemParams = self.params
-        kind, why = choice.kind, choice.kind_reason
-        self.log.info("fem: real-time model: %s (%s)", kind, why)
-        if kind != "snapshots":
-            self.state_message = f"fem: linear model ({why})"
-            return
-        cache = ArrayCache(p.cache_dir or None)
-        table = load_snapshot_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, p.finger_radius,
-                                    self.scene.finger.contact)
-        if table is not None:
-            self._attach(table, "loaded from the shipped store (flexsheet/fem/data)" if cache.shipped() else
-                         "loaded from cache")
-            return
-        if not p.snapshot_build:
-            self.state_message = ("fem: nonlinear snapshots not cached - serving the LINEAR model (build them with "
-                                  f"`flexsheet experiment fem --node-table --nu {mat.nu:g} --Jm {mat.Jm:g}`, or set "
-                                  "snapshot_build=true)")
-            self.log.warning(self.state_message)
-            return
-        self.state_message = "fem: building nonlinear snapshots in the background - serving the LINEAR model"
-        self.log.warning(self.state_message)
-        await self._background(self._build_snapshots, "fem-snapshots", cache, mat)
-
     def _attach(self, table: dict, how: str) -> None:
-        p: FemParams = self.params
+        """Attach the cylinder's snapshot ``table`` while fingertips are served, and say ``how`` it came."""
         with self._lock:
-            self.model.attach_snapshots(table, axial_max=p.snapshot_axial_max)
-        s = self.model.snapshots
-        self.state_message = (f"fem: nonlinear snapshots {how}: |angle| <= {np.degrees(s.angle_max):.0f} deg, "
-                              f"depth <= {s.depth_max * 1e3:.0f} mm ({s.nbytes / 1e6:.0f} MB)")
+            self.model.attach_snapshots(table, axial_max=self.params.snapshot_axial_max)
+        self.state_message = snapshots_message(self.scene, self.model, how)
         self.log.info(self.state_message)
 
     def _build_snapshots(self, cache: ArrayCache, mat: Material) -> None:
+        """Build the cylinder's missing snapshot table (tens of minutes; this thread at nice 19), then attach it."""
         try:
             os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)   # this thread only (Linux)
         except (OSError, AttributeError):
             pass
         t = time.perf_counter()
         try:
-            table, _, _ = load_or_build(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, self.params.finger_radius,
+            table, _, _ = load_or_build(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, self.scene.finger.radius,
                                         build=True, contact=self.scene.finger.contact)
             self._attach(table, f"built in {time.perf_counter() - t:.0f} s")
         except Exception:  # noqa: BLE001 - background build must never take the node down
-            self.state_message = "fem: building the nonlinear snapshots failed - serving the LINEAR model"
+            self.state_message = (f"fem: scene {self.scene.name!r}: building the nonlinear snapshots failed - "
+                                  "serving the LINEAR model")
             self.log.exception(self.state_message)
 
     def _build_nonlinear(self) -> None:
+        """Build (or load) the cylinder's corotational depth table and attach it (``nonlinear``)."""
         m = self.model
         p: FemParams = self.params
         depths = np.linspace(0.0, min(p.depth_max, p.max_depth), p.nonlinear_steps)

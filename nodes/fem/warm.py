@@ -1,8 +1,9 @@
 """Install-time warm-up of the FEM node: ``python3 -m nodes.fem.warm [--out DIR]``.
 
 Runs the FEM node as it runs in a graph (its loop, setup and first publications, then its teardown), in this
-process on an in-process transport, for the ``fem`` params of ``launch/sim.yaml`` on the paper's cylinder and
-on every scene of ``launch/scenes/`` (``--scene NAME`` for some of them), with ``cache_dir`` = ``DIR`` (default
+process on an in-process transport, for the ``fem`` params of ``launch/sim.yaml`` on every scene of
+``launch/scenes/`` (``--scene NAME`` for some of them; ``cylinder.yaml`` is also what a launch file without a
+``scene:`` serves), with ``cache_dir`` = ``DIR`` (default
 :data:`flexsheet.fem.cache.INSTALL_DIR`, which every FEM cache searches read-only). A node started later, on
 any ``HOME``, then loads its model instead of precomputing it (the capacitance matrices: ~12 s for the
 cylinder on the 2-core machine). ``docker/install.sh`` runs it; idempotent (a second run only loads).
@@ -28,9 +29,9 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def param_sets(root: Path = ROOT) -> list[dict]:
-    """The FEM params to warm: launch/sim.yaml's fem node alone and with each scene file."""
+    """The FEM params to warm: launch/sim.yaml's fem node's with each scene file."""
     base = dict(yaml.safe_load((root / "launch" / "sim.yaml").read_text())["nodes"]["fem"].get("params", {}))
-    return [base] + [{**base, "scene": str(p)} for p in sorted((root / "launch" / "scenes").glob("*.yaml"))]
+    return [{**base, "scene": str(p)} for p in sorted((root / "launch" / "scenes").glob("*.yaml"))]
 
 
 async def _warm(params: dict) -> None:
@@ -53,11 +54,11 @@ def main(argv: list[str] | None = None) -> int:
                                  epilog="example: python3 -m nodes.fem.warm --out /tmp/fem_cache")
     ap.add_argument("--out", default=INSTALL_DIR, help=f"cache folder to fill (default {INSTALL_DIR})")
     ap.add_argument("--scene", action="append", default=None, metavar="NAME",
-                    help="warm only these (repeatable): 'paper' for the paper's cylinder, else a file name of "
-                         "launch/scenes/ such as sphere.yaml (default: all)")
+                    help="warm only these (repeatable): a file name of launch/scenes/ such as sphere.yaml "
+                         "(default: all)")
     args = ap.parse_args(argv)
     sets = param_sets()
-    names = [Path(p["scene"]).name if p.get("scene") else "paper" for p in sets]
+    names = [Path(p["scene"]).name for p in sets]
     unknown = sorted(set(args.scene or []) - set(names))
     if unknown:
         ap.error(f"--scene: unknown {', '.join(unknown)}; known: {', '.join(names)}")
@@ -66,14 +67,13 @@ def main(argv: list[str] | None = None) -> int:
         if args.scene and name not in args.scene:
             continue
         t = time.monotonic()
-        what = Path(params.get("scene") or "the paper's cylinder").name
         try:
             asyncio.run(_warm({**params, "cache_dir": args.out}))
         except Exception as exc:  # noqa: BLE001 - one scene failing must not stop the rest; said plainly
-            print(f"[fem warm] {what}: FAILED ({type(exc).__name__}: {exc})", flush=True)
+            print(f"[fem warm] {name}: FAILED ({type(exc).__name__}: {exc})", flush=True)
             failed += 1
             continue
-        print(f"[fem warm] {what}: ready in {time.monotonic() - t:.1f} s ({args.out})", flush=True)
+        print(f"[fem warm] {name}: ready in {time.monotonic() - t:.1f} s ({args.out})", flush=True)
     if failed:
         print(f"[fem warm] {failed} model(s) FAILED (lines above)", file=sys.stderr, flush=True)
     return 1 if failed else 0

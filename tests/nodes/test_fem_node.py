@@ -297,3 +297,18 @@ def test_node_on_a_scene_without_symmetry_serves_its_path_table_when_cached(tmp_
             assert np.abs(np.asarray(d.vertices) - served.vertices).max() < 1e-7
 
     asyncio.run(scenario())
+
+
+def test_removed_params_are_refused_naming_the_scene_field():
+    """E, nu and finger_radius are the scene file's: a launch file that still sets one gets an error naming the
+    param, its value and the scene file's field that holds it now."""
+    import re
+
+    from nodes.fem.node import FemParams
+
+    for name, value, field in (("E", 5000.0, "material: E"), ("nu", 0.4, "material: nu"),
+                               ("finger_radius", 0.01, "finger: radius")):
+        with pytest.raises(ValueError, match=re.escape(f"fem param {name!r} (= {value!r}) was removed")) as exc:
+            FemParams(**{name: value, "arc_deg": 60.0})
+        assert f"set {field!r} in the scene file" in str(exc.value)
+    assert FemParams(arc_deg=60.0).fem_config().arc_deg == 60.0

@@ -35,7 +35,7 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     from flexsheet.fem.reference.snapshot_build import load_or_build
     from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC
     from flexsheet.model.scene_parts import GENT_JM_RUBBER
-    from nodes.fem.node import FemParams
+    from flexsheet.model.scenes import DEFAULT_SCENE_FILE, load_scene
 
     paths, seen = [], {}
     # the repository's shipped table has this very key: keep it out, the build below must run
@@ -70,8 +70,8 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
     with open(tmp_path / "o" / "node_table.json") as fh:
         assert json.load(fh) == {"key": reported["key"], "update": {"median_ms": -1.0}, "held_out": [],
                                  "between_depths": []}
-    p = FemParams()
-    assert seen["build"] == (DEFAULT_GRID, DEFAULT_REF_SPEC, p.nu, p.finger_radius)
+    sc = load_scene(DEFAULT_SCENE_FILE)           # the node's default scene: its ν and finger
+    assert seen["build"] == (DEFAULT_GRID, DEFAULT_REF_SPEC, sc.material.nu, sc.finger.radius)
     assert paths == [(DEFAULT_REF_SPEC, 0.0, 0.05, 20), (DEFAULT_REF_SPEC, 30.0, 0.05, 20)]   # fake_build's reads
     st30 = seen["states"][30.0]
     assert [s.depth for s in st30] == pytest.approx(DEFAULT_GRID.depths()[1:]) and st30[-1].force == 19.0
@@ -97,10 +97,10 @@ def test_node_table_command_builds_the_table_the_node_looks_up(tmp_path, monkeyp
         main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--azimuth", "10"])
     with pytest.raises(SystemExit, match="node-table"):
         main(["--out", str(tmp_path / "o"), "--cache-dir", str(tmp_path / "c"), "--node-table", "--quick"])
-    # the default material and law are the default scene's (Gent, Jm 97.2; sticking): the key the bare node
-    # looks up too
+    # the default material and law are the default scene's (Gent, Jm 97.2; sticking): the key the node looks up
+    # without a scene: param too
     table, hit, _ = load_or_build(ArrayCache(str(tmp_path / "c")), DEFAULT_GRID, DEFAULT_REF_SPEC,
-                                  Material(p.E, p.nu, GENT_JM_RUBBER), p.finger_radius, build=False,
+                                  Material(sc.material.E, sc.material.nu, GENT_JM_RUBBER), sc.finger.radius, build=False,
                                   contact="sticking")
     assert hit and np.array_equal(table["marker"], np.arange(3.0))
 
