@@ -55,9 +55,9 @@ class ArmTarget(Message):
     The sheet's motion to ``pose`` (:class:`flexsheet.arm.sheet_motion.SheetSegment`), the same in both arms'
     targets, so both bridges evaluate one trajectory at the same instant: ``motion_t0`` s (graph clock; None: no
     motion, the bridge's joint limiter shapes the way to ``pose``), ``motion_frame`` (3, 3) the segment's
-    reference rotation, ``motion`` (7, 7) rows: start state, its velocity, its acceleration, goal, and the
-    per-DOF velocity, acceleration and jerk limits (columns: centre x, y, z m; rotation vector rad; clamp
-    strain), ``motion_size`` m the sheet's unstretched side.
+    reference rotation, ``motion`` (8, 7) rows: start state, its velocity, its acceleration, goal, its
+    velocity, and the per-DOF velocity, acceleration and jerk limits (columns: centre x, y, z m; rotation vector rad; clamp
+    strain), ``motion_size`` m the sheet's unstretched side, ``motion_min_duration`` s its least duration.
     """
 
     SCHEMA = "flexsheet/ArmTarget"
@@ -71,6 +71,7 @@ class ArmTarget(Message):
     motion_t0: float | None = Field(default=None, description="start of the sheet's motion segment, s; None: none")
     motion_frame: ndarray("float64", (3, 3), "segment's reference rotation, display frame") = Field(
         default_factory=lambda: np.eye(3))
-    motion: ndarray("float64", (7, 7), "rows: start, velocity, acceleration, goal, v/a/j limits; "
-                    "columns: centre m, rotation vector rad, strain") = Field(default_factory=lambda: np.zeros((7, 7)))
+    motion: ndarray("float64", (8, 7), "rows: start, velocity, acceleration, goal, goal velocity, v/a/j limits; "
+                    "columns: centre m, rotation vector rad, strain") = Field(default_factory=lambda: np.zeros((8, 7)))
     motion_size: float = Field(default=0.24, gt=0.0, description="sheet's unstretched side, m")
+    motion_min_duration: float = Field(default=0.0, ge=0.0, description="the segment's least duration, s")

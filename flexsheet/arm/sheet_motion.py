@@ -9,7 +9,9 @@ so the span is the planned one all along the path, not only at its ends (coopera
 Chiaverini & Siciliano 1996; Caccavale et al. 2000).
 
 A :class:`SheetSegment` is the start time ``t0`` (s, the graph's clock), the reference rotation, the start state
-with its velocity and acceleration, the goal and the per-DOF limits. Ruckig (Berscheid & Kröger, "Jerk-limited
+with its velocity and acceleration, the goal with its velocity and the per-DOF limits. The planner's goal moves
+with the finger: the segment reaches it at its velocity, and runs on at that velocity for at most
+:data:`EXTRAPOLATE_S` after its end (the next plan is due before), then stops there. Ruckig (Berscheid & Kröger, "Jerk-limited
 real-time trajectory generation with arbitrary target states", RSS 2021) gives the time-optimal jerk-limited
 trajectory with phase synchronisation: every DOF starts and stops together, on a straight line in this space
 when the start is at rest or moving along that line (else time-synchronised). Ruckig is deterministic: the
@@ -37,7 +39,8 @@ from scipy.spatial.transform import Rotation
 from flexsheet.arm.kinematics import ArmKinematics
 from flexsheet.model import geometry
 
-__all__ = ["SheetLimits", "SheetSegment", "SheetShaper", "JointRates", "MotionError", "MIN_SHARE", "DOF"]
+__all__ = ["SheetLimits", "SheetSegment", "SheetShaper", "JointRates", "MotionError", "MIN_SHARE", "DOF",
+           "EXTRAPOLATE_S", "VELOCITY_PLANS", "plan_velocity"]
 
 #: the state's size: centre (3), rotation vector (3), strain (1)
 DOF = 7
@@ -45,6 +48,10 @@ DOF = 7
 #: room to brake a start velocity)
 MIN_SHARE = 0.05
 _GROUPS = (slice(0, 3), slice(3, 6), slice(6, 7))
+#: s: a segment runs on at its goal's velocity for at most this long past its end, then stops there
+EXTRAPOLATE_S = 0.05
+#: plans a goal's velocity is fitted over (16 at the camera's 48 Hz: the last 313 ms)
+VELOCITY_PLANS = 16
 #: segments holding a ruckig trajectory: their trajectories are freed at exit, before the interpreter's teardown
 #: (nanobind reports a binding object still alive then as a leak, on every node's exit)
 _LIVE: weakref.WeakSet = weakref.WeakSet()
@@ -83,7 +90,7 @@ class SheetLimits:
 
     @classmethod
     def from_rates(cls, v_max: float, a_max: float, w_max: float, alpha_max: float, stretch_rate: float,
-                   ramp_s: float = 0.033, stretch_ramp_s: float = 0.01) -> SheetLimits:
+                   ramp_s: float = 0.005, stretch_ramp_s: float = 0.01) -> SheetLimits:
         """Limits with these speeds and accelerations (m/s, m/s², rad/s, rad/s², 1/s; the planner's
         :class:`~flexsheet.planning.limits.MotionLimits`) and the jerk that reaches full acceleration in
         ``ramp_s`` s; the strain reaches its full rate in ``stretch_ramp_s`` s (a press's tension must follow
@@ -102,16 +109,22 @@ class SheetLimits:
                          [self.a_max, self.alpha_max, self.stretch_acc],
                          [self.j_max, self.jw_max, self.stretch_jerk]], dtype=float)
 
-    def per_dof(self, delta: np.ndarray) -> np.ndarray:
-        """(3, 7) per-DOF limits (velocity, acceleration, jerk) for a move by ``delta`` (7,): each group's bound
-        times the DOF's share of the group's displacement, at least :data:`MIN_SHARE`."""
+    def per_dof(self, delta: np.ndarray, velocity=None) -> np.ndarray:
+        """(3, 7) per-DOF limits (velocity, acceleration, jerk) for a move by ``delta`` (7,) ending at
+        ``velocity`` (7,) (None: at rest): each group's bound times the DOF's share of the group's displacement
+        or of its end velocity, whichever is larger, at least :data:`MIN_SHARE`; a DOF's velocity bound is never
+        below its end velocity."""
         g = self.groups()
+        vel = np.zeros(DOF) if velocity is None else np.abs(np.asarray(velocity, float))
         out = np.empty((3, DOF))
         for j, sl in enumerate(_GROUPS):
-            d = np.abs(np.asarray(delta, float)[sl])
-            n = float(np.linalg.norm(d))
-            share = np.maximum(d / n, MIN_SHARE) if n > 1e-12 else np.ones(d.size)
+            share = np.full(sl.stop - sl.start, MIN_SHARE)
+            for x in (np.abs(np.asarray(delta, float)[sl]), vel[sl]):
+                n = float(np.linalg.norm(x))
+                if n > 1e-12:
+                    share = np.maximum(share, x / n)
             out[:, sl] = g[:, j:j + 1] * share[None, :]
+        out[0] = np.maximum(out[0], vel * 1.001)
         return out
 
 
@@ -140,7 +153,9 @@ class SheetSegment:
 
     ``t0`` s (graph clock); ``frame`` (3, 3): the reference rotation R_ref (columns normal, axis_u, axis_v at
     ``r`` = 0, display frame); ``start`` (3, 7): the start state, its velocity and its acceleration; ``goal``
-    (7,); ``limits`` (3, 7): per-DOF velocity, acceleration and jerk; ``size`` m: the sheet's unstretched side.
+    (2, 7): the goal and its velocity; ``limits`` (3, 7): per-DOF velocity, acceleration and jerk; ``size`` m: the sheet's unstretched side;
+    ``min_duration`` s: the segment takes at least this long (the plan's period: a goal moving at its velocity is
+    reached on its track, not rushed to and passed).
     Raises :class:`MotionError` if ruckig cannot compute it (non-finite values, limits not positive)."""
 
     t0: float
@@ -149,27 +164,30 @@ class SheetSegment:
     goal: np.ndarray
     limits: np.ndarray
     size: float = geometry.SHEET_SIZE
+    min_duration: float = 0.0
     _traj: Trajectory = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        for name, shape in (("frame", (3, 3)), ("start", (3, DOF)), ("goal", (DOF,)), ("limits", (3, DOF))):
+        for name, shape in (("frame", (3, 3)), ("start", (3, DOF)), ("goal", (2, DOF)), ("limits", (3, DOF))):
             a = np.asarray(getattr(self, name), dtype=float)
             if a.shape != shape or not np.all(np.isfinite(a)):
                 raise MotionError(f"SheetSegment.{name} must be a finite {shape} array, got shape {a.shape}")
             object.__setattr__(self, name, a)
         if np.abs(self.frame.T @ self.frame - np.eye(3)).max() > 1e-6 or np.linalg.det(self.frame) <= 0.0:
             raise MotionError(f"SheetSegment.frame must be a rotation, got {self.frame.tolist()}")
-        if not (math.isfinite(self.t0) and self.size > 0.0):
-            raise MotionError(f"SheetSegment t0 must be finite and size > 0, got t0={self.t0!r}, size={self.size!r}")
+        if not (math.isfinite(self.t0) and self.size > 0.0 and 0.0 <= self.min_duration < 10.0):
+            raise MotionError(f"SheetSegment t0 must be finite, size > 0 and min_duration in [0, 10) s, got "
+                              f"t0={self.t0!r}, size={self.size!r}, min_duration={self.min_duration!r}")
         if np.any(self.limits <= 0.0):
             raise MotionError(f"SheetSegment.limits must be > 0, got {self.limits.tolist()}")
         inp = InputParameter(DOF)
         inp.current_position, inp.current_velocity, inp.current_acceleration = (r.tolist() for r in self.start)
-        inp.target_position = self.goal.tolist()
-        inp.target_velocity = [0.0] * DOF
+        inp.target_position, inp.target_velocity = (r.tolist() for r in self.goal)
         inp.target_acceleration = [0.0] * DOF
         inp.max_velocity, inp.max_acceleration, inp.max_jerk = (r.tolist() for r in self.limits)
         inp.synchronization = Synchronization.Phase
+        if self.min_duration > 0.0:
+            inp.minimum_duration = float(self.min_duration)
         traj = Trajectory(DOF)
         res = Ruckig(DOF).calculate(inp, traj)
         if res != Result.Working:
@@ -182,14 +200,21 @@ class SheetSegment:
 
     @property
     def duration(self) -> float:
-        """s from ``t0`` to the goal, at rest."""
+        """s from ``t0`` to the goal."""
         return float(self._traj.duration)
 
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(x, ẋ, ẍ), each (7,), at time ``t`` s: the start before ``t0``, the goal at rest after the end."""
-        tau = min(max(t - self.t0, 0.0), self._traj.duration)
-        p, v, a = self._traj.at_time(tau)
-        return np.asarray(p), np.asarray(v), np.asarray(a)
+        """(x, ẋ, ẍ), each (7,), at time ``t`` s: the start before ``t0``; after the end, the goal run on at its
+        velocity for at most :data:`EXTRAPOLATE_S`, then at rest there."""
+        tau = t - self.t0
+        end = self._traj.duration
+        if tau <= end:
+            p, v, a = self._traj.at_time(max(tau, 0.0))
+            return np.asarray(p), np.asarray(v), np.asarray(a)
+        over = tau - end
+        moving = over < EXTRAPOLATE_S
+        p = self.goal[0] + self.goal[1] * min(over, EXTRAPOLATE_S)
+        return p, (self.goal[1].copy() if moving else np.zeros(DOF)), np.zeros(DOF)
 
     def rotation(self, r) -> np.ndarray:
         """The sheet's rotation (3, 3) for the rotation vector ``r`` (3,) of this segment."""
@@ -236,7 +261,8 @@ class SheetSegment:
     def fields(self) -> dict:
         """This segment as :class:`messages.ArmTarget`'s ``motion_*`` fields (the inverse of :meth:`from_fields`)."""
         return {"motion_t0": float(self.t0), "motion_frame": self.frame.copy(),
-                "motion": np.vstack([self.start, self.goal[None, :], self.limits]), "motion_size": float(self.size)}
+                "motion": np.vstack([self.start, self.goal, self.limits]), "motion_size": float(self.size),
+                "motion_min_duration": float(self.min_duration)}
 
     @classmethod
     def from_fields(cls, msg) -> SheetSegment | None:
@@ -245,11 +271,13 @@ class SheetSegment:
         if msg.motion_t0 is None:
             return None
         m = np.asarray(msg.motion, float)
-        return cls(float(msg.motion_t0), msg.motion_frame, m[0:3], m[3], m[4:7], float(msg.motion_size))
+        return cls(float(msg.motion_t0), msg.motion_frame, m[0:3], m[3:5], m[5:8], float(msg.motion_size),
+                   float(msg.motion_min_duration))
 
     def goal_pose(self) -> tuple[np.ndarray, np.ndarray, float]:
         """(centre (3,) m, rotation (3, 3), strain) at the goal."""
-        return self.goal[:3], self.rotation(self.goal[3:6]), float(self.goal[6])
+        g = self.goal[0]
+        return g[:3], self.rotation(g[3:6]), float(g[6])
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -265,15 +293,34 @@ def _right_jacobian(r: np.ndarray) -> np.ndarray:
     return (np.eye(3) - (1.0 - math.cos(th)) / th ** 2 * K + (th - math.sin(th)) / th ** 3 * (K @ K))
 
 
+def plan_velocity(plans) -> tuple[np.ndarray, np.ndarray, float]:
+    """The velocity of a stream of plans: the slopes of least-squares lines over their times. ``plans``: at least
+    two (time s, centre (3,) m, rotation (3, 3), strain), oldest first. Returns (centre velocity (3,) m/s,
+    angular velocity (3,) rad/s display frame, strain rate 1/s); rotations as rotation vectors about the newest.
+    Raises ``ValueError`` for fewer than two plans or times that do not spread."""
+    if len(plans) < 2:
+        raise ValueError(f"plan_velocity needs at least two plans, got {len(plans)}")
+    t = np.array([p[0] for p in plans], float)
+    t = t - t.mean()
+    tt = float(t @ t)
+    if not tt > 0.0:
+        raise ValueError("plan_velocity: the plans' times do not spread")
+    Rn = plans[-1][2]
+    x = np.array([np.concatenate([p[1], _log(Rn.T @ p[2]), [p[3]]]) for p in plans])
+    slope = (t @ (x - x.mean(axis=0))) / tt
+    return slope[:3], Rn @ slope[3:6], float(slope[6])
+
+
 class JointRates:
     """The joint speeds and accelerations a segment asks of the two arms, relative to the bridges' limits.
 
     ``bases``: {"left", "right"}: (x, y, z, yaw) or (4, 4) T_display_base (the registered ones); ``qd_max`` and
     ``qdd_max`` (6,) rad/s and rad/s²: the bridges' limits (the URDF's × ``speed_scale``, × ``accel_scale``).
     Joint rates are mapped from the clamps' twists through the Jacobians at the arms' joints for the segment's
-    goal and start (``samples`` instants; the Jacobian's change along one segment is second order here)."""
+    goal and start (``samples`` instants; the Jacobian's change along one segment is second order here).
+    ``accel_allowance``: how far past ``qdd_max`` a segment's peak joint acceleration may go (:meth:`ratios`)."""
 
-    def __init__(self, bases: dict, qd_max, qdd_max, samples: int = 4) -> None:
+    def __init__(self, bases: dict, qd_max, qdd_max, samples: int = 4, accel_allowance: float = 3.0) -> None:
         if set(bases) != {"left", "right"}:
             raise ValueError(f"bases must name 'left' and 'right', got {sorted(bases)}")
         self.kin = {s: ArmKinematics(s, b) for s, b in bases.items()}
@@ -282,6 +329,9 @@ class JointRates:
         if self.qd_max.shape != (6,) or self.qdd_max.shape != (6,) or np.any(self.qd_max <= 0) or np.any(self.qdd_max <= 0):
             raise ValueError(f"qd_max and qdd_max must be positive (6,) vectors, got {qd_max!r}, {qdd_max!r}")
         self.samples = int(samples)
+        if not accel_allowance >= 1.0:
+            raise ValueError(f"accel_allowance must be >= 1, got {accel_allowance!r}")
+        self.accel_allowance = float(accel_allowance)
         self._jinv: dict[str, list[np.ndarray]] = {}
 
     def at(self, joints: dict) -> None:
@@ -298,8 +348,11 @@ class JointRates:
             self._jinv[side] = out
 
     def ratios(self, seg: SheetSegment) -> tuple[float, float]:
-        """(peak joint speed / ``qd_max``, peak joint acceleration / ``qdd_max``) over both arms and the sampled
-        instants of ``seg``."""
+        """(peak joint speed / ``qd_max``, peak joint acceleration / (``accel_allowance`` × ``qdd_max``)) over both
+        arms and the sampled instants of ``seg``. The allowance lets a brief acceleration past the limit through
+        (a correction of the finger's tremor, which the bridge's limiter absorbs in a fraction of a mm): slowing
+        every segment for it made the sheet lag the plan twice as far, while a large move's sustained
+        acceleration still slows it (``tests/unit/arm/test_sheet_motion.py``)."""
         if seg.duration <= 0.0 or not any(self._jinv.values()):
             return 0.0, 0.0
         rv = ra = 0.0
@@ -309,7 +362,7 @@ class JointRates:
                 for Ji in jinvs:
                     rv = max(rv, float(np.max(np.abs(Ji @ tw) / self.qd_max)))
                     ra = max(ra, float(np.max(np.abs(Ji @ dtw) / self.qdd_max)))
-        return rv, ra
+        return rv, ra / self.accel_allowance
 
 
 class SheetShaper:
@@ -347,14 +400,23 @@ class SheetShaper:
         out[2, 3:6] = J @ xdd[3:6]
         return out
 
-    def update(self, t: float, origin, rotation, stretch: float, limits: SheetLimits | None = None) -> SheetSegment:
+    def update(self, t: float, origin, rotation, stretch: float, limits: SheetLimits | None = None,
+               velocity=None, lead: float = 0.0) -> SheetSegment:
         """The segment from the current motion at ``t`` s to the sheet at ``origin`` (3,) m, ``rotation`` (3, 3)
-        and strain ``stretch``, under ``limits`` (default: the shaper's). Raises :class:`MotionError` when
-        ruckig fails (the shaper then restarts at the next goal, and counts it in ``failures``)."""
+        and strain ``stretch``, under ``limits`` (default: the shaper's). ``velocity``: the goal's (centre m/s
+        (3,), angular rad/s (3,) display frame, strain rate 1/s), or None (at rest); the goal is taken ``lead`` s
+        ahead at that velocity (the plan's period: the motion is on the plan's track when the next plan comes).
+        Raises :class:`MotionError` when ruckig fails (the shaper then restarts at the next goal, and counts it
+        in ``failures``)."""
         lim = limits or self.limits
         o = np.asarray(origin, float)
+        R = np.asarray(rotation, float)
+        v, w, ed = (np.zeros(3), np.zeros(3), 0.0) if velocity is None else (
+            np.asarray(velocity[0], float), np.asarray(velocity[1], float), float(velocity[2]))
+        if lead > 0.0:
+            o, R, stretch = o + v * lead, _rot(w * lead) @ R, stretch + ed * lead
         if self.segment is None:
-            frame = np.asarray(rotation, float)
+            frame = R
             start = np.zeros((3, DOF))
             start[0, :3] = o
             start[0, 6] = stretch
@@ -362,10 +424,13 @@ class SheetShaper:
             x = self.segment.state(t)[0]
             frame = self.segment.rotation(x[3:6])
             start = self._start(t)
-        goal = np.concatenate([o, _log(frame.T @ np.asarray(rotation, float)), [float(stretch)]])
+        rg = _log(frame.T @ R)
+        goal = np.zeros((2, DOF))
+        goal[0] = np.concatenate([o, rg, [float(stretch)]])
+        goal[1] = np.concatenate([v, np.linalg.solve(_right_jacobian(rg), R.T @ w), [ed]])
         try:
-            per_dof = lim.per_dof(goal - start[0])
-            seg = SheetSegment(float(t), frame, start, goal, per_dof, self.size)
+            per_dof = lim.per_dof(goal[0] - start[0], goal[1])
+            seg = SheetSegment(float(t), frame, start, goal, per_dof, self.size, lead)
             if self.rates is not None:
                 for _ in range(2):            # slow both arms alike until their joints can follow (10 % spare)
                     rv, ra = self.rates.ratios(seg)
@@ -373,7 +438,8 @@ class SheetShaper:
                         break
                     kv, ka = max(rv, 1.0) * 1.1, max(ra, 1.0) * 1.1
                     per_dof = per_dof / np.array([[kv], [ka], [ka * math.sqrt(ka)]])
-                    seg = SheetSegment(float(t), frame, start, goal, per_dof, self.size)
+                    per_dof[0] = np.maximum(per_dof[0], np.abs(goal[1]) * 1.001)
+                    seg = SheetSegment(float(t), frame, start, goal, per_dof, self.size, lead)
                     self.slowed += 1
         except MotionError:
             self.failures += 1

@@ -5,6 +5,11 @@ Prints one flat JSON object (``--json``) or a table. Figures (PNG + JSON of the 
 - ``ik_median_us`` / ``ik_p99_us``: IK seeded from the previous solution along a stroke of the paper's
   cylinder (tilt −60°…+60°, one target per 48 Hz camera frame), both arms' kinematics, tolerance 1e-9.
 - ``ik_cold_median_us``: IK from the home joints to random reachable sheet poses (tilt ±60°, stretch 0…0.1).
+- ``motion_cycle_median_us`` / ``motion_cycle_p99_us``: the bridge's work each cycle while it follows the sheet's
+  motion (:mod:`flexsheet.arm.sheet_motion`): the clamp's pose and twist on the segment, IK seeded from the last
+  cycle, the Jacobian solve (:meth:`TargetTracker.reference`); the planner's segments along the same stroke, a
+  new one every 48 Hz frame, the bridge cycling at 7.1 ms; ``motion_plan_median_us``: the planner's segment
+  (ruckig and the joint-rate check of both arms).
 - ``cycle_period_ms``, ``cycle_jitter_p99_ms`` (p99 of |interval − 7.1 ms|), ``cycle_late_p99_ms``
   (p99 of start − deadline): the bridge's :class:`~flexsheet.arm.stream.ArmStream` streaming to a twin
   running in a separate process, over ``--cycles`` cycles (default 10 000).
@@ -45,11 +50,12 @@ import numpy as np
 
 from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints
 from flexsheet.arm.limiter import StreamLimiter
+from flexsheet.arm.sheet_motion import JointRates, SheetShaper
 from flexsheet.arm.stream import ArmStream
 from flexsheet.arm.tracking import TargetTracker
 from flexsheet.model import geometry
 from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
-from flexsheet.model.sheet import clamp_poses
+from flexsheet.model.sheet import clamp_poses, sheet_rotation
 from flexsheet.twin.controller import ControllerCore
 from flexsheet.twin.modbus_server import ControllerTwin
 from flexsheet.twin.mxt_server import MxtCore, MxtTwin
@@ -105,7 +111,41 @@ def bench_ik(n_stroke: int = 480) -> dict:
         ok += r.ok
     out["ik_cold_median_us"] = float(np.median(cold) * 1e6)
     out["ik_cold_success"] = ok / 200.0
+    out.update(bench_motion(n_stroke))
     return out
+
+
+def bench_motion(n_stroke: int = 480) -> dict:
+    """The bridge's per-cycle work following the sheet's motion, and the planner's per-segment work (µs)."""
+    kin = {s: ArmKinematics(s, b) for s, b in (("left", LEFT_BASE), ("right", RIGHT_BASE))}
+    qd = QD_MAX * 0.5
+    shaper = SheetShaper(rates=JointRates({"left": LEFT_BASE, "right": RIGHT_BASE}, qd, 2.0 * qd))
+    tracker = TargetTracker(kin["left"])
+    q = {s: kin[s].ik(_clamp(s, -math.radians(60.0)), home_joints(s), max_jump=10.0).q for s in kin}
+    tracker.seed(q["left"])
+    R = geometry.CYLINDER_RADIUS
+    thetas = np.radians(60.0) * np.sin(np.linspace(-math.pi / 2, 3 * math.pi / 2, n_stroke))
+    plan_t, cycle_t, t = [], [], 0.0
+    for th in thetas:
+        c, s_ = math.cos(th), math.sin(th)
+        Rm = sheet_rotation(np.array([c, 0.0, s_]), np.array([0.0, 1.0, 0.0]))
+        T = {side: _clamp(side, th) for side in kin}
+        for side in kin:
+            r = kin[side].ik(T[side], q[side])
+            q[side] = r.q if r.ok else q[side]
+        shaper.rates.at({side: [q[side]] for side in kin})
+        t0 = time.perf_counter()
+        seg = shaper.update(t, np.array([-R + R * c, 0.0, R * s_]), Rm, 0.05)
+        plan_t.append(time.perf_counter() - t0)
+        tracker.set_target(T["left"], t, t, motion=seg)
+        for k in range(3):                               # a 7.1 ms cycle, about three per 48 Hz frame
+            t0 = time.perf_counter()
+            tracker.reference(t + k * PERIOD, tracker.goal)
+            cycle_t.append(time.perf_counter() - t0)
+        t += 1.0 / 48.0
+    return {"motion_cycle_median_us": float(np.median(cycle_t) * 1e6),
+            "motion_cycle_p99_us": float(np.percentile(cycle_t, 99) * 1e6),
+            "motion_plan_median_us": float(np.median(plan_t) * 1e6)}
 
 
 def track_stroke(duration: float, side: str = "left") -> dict:

@@ -46,7 +46,7 @@ from pydantic import Field
 
 from flexsheet.arm.bridge_config import BridgeConfig
 from flexsheet.arm.kinematics import QD_MAX
-from flexsheet.arm.sheet_motion import JointRates, MotionError, SheetLimits, SheetShaper
+from flexsheet.arm.sheet_motion import VELOCITY_PLANS, JointRates, MotionError, SheetLimits, SheetShaper, plan_velocity
 from flexsheet.calibration.display_calib import xyzyaw_from_pose
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.calibration.sheet import TERMS
@@ -203,6 +203,7 @@ class PlannerNode(Node):
         self.shaper = SheetShaper(size=cfg.material.size, rates=JointRates(
             {"left": cfg.reach.left_base, "right": cfg.reach.right_base}, qd, qd * p.arm_accel_scale))
         self._motion_q: dict[str, np.ndarray] = {}
+        self._plans: deque = deque(maxlen=VELOCITY_PLANS)       # (time s, origin, R, strain) of the last plans
         self._k_fem: float | None = None
         self._k_fem_at = 0.0
         self._press: tuple[float, float] | None = None
@@ -368,10 +369,22 @@ class PlannerNode(Node):
         q_goal = dict(self.pull_guard.seed)                     # the IK of this plan's two targets
         self.shaper.rates.at({s: [q_goal[s]] + ([self._motion_q[s]] if s in self._motion_q else []) for s in q_goal})
         self._motion_q = q_goal
+        # the plan's own velocity, fitted over its last plans, and its period: the motion reaches the plan's
+        # track by the next plan instead of stopping at each (a finger's tremor makes each plan's own rate noisy)
+        now = self.now()
+        R = sheet_rotation(plan.normal, plan.axis_u)
+        moving = not plan.status.startswith("hold")
+        hist = self._plans
+        if not moving or (hist and not 0.0 < now - hist[-1][0] <= 0.1):
+            hist.clear()
+        period = now - hist[-1][0] if hist else 0.0
+        hist.append((now, np.asarray(plan.origin, float), R, float(plan.stretch)))
+        velocity = plan_velocity(hist) if moving and len(hist) >= 2 else None
         try:
-            seg = self.shaper.update(self.now(), plan.origin, sheet_rotation(plan.normal, plan.axis_u), plan.stretch,
+            seg = self.shaper.update(now, plan.origin, R, plan.stretch,
                                      SheetLimits.from_rates(lim.v_max, lim.a_max, lim.w_max, lim.alpha_max,
-                                                            lim.stretch_rate))
+                                                            lim.stretch_rate),
+                                     velocity=velocity, lead=min(period, 0.05) if velocity is not None else 0.0)
         except MotionError as exc:
             if self.shaper.failures == 1:
                 self.log.warning("sheet motion: %s; the arms stream to this target joint by joint (said once)", exc)
