@@ -46,7 +46,14 @@ from pydantic import Field
 
 from flexsheet.arm.bridge_config import BridgeConfig
 from flexsheet.arm.kinematics import QD_MAX
-from flexsheet.arm.sheet_motion import VELOCITY_PLANS, JointRates, MotionError, SheetLimits, SheetShaper, plan_velocity
+from flexsheet.arm.sheet_motion import (
+    VELOCITY_PLANS,
+    JointRates,
+    MotionError,
+    SheetLimits,
+    SheetShaper,
+    plan_velocity,
+)
 from flexsheet.calibration.display_calib import xyzyaw_from_pose
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.calibration.sheet import TERMS
