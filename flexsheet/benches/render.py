@@ -33,8 +33,8 @@ def bench_sheets(depth: float = 0.03, theta_deg: float = 30.0, sheet_model=None)
 
 def sheet_update(frames: int = 200, sheet_model=None) -> dict[str, float]:
     """Per-frame cost (ms) of the node's sheet for a moving finger: :meth:`RendererState.sheet_for_frame` with a
-    new fingertip every frame (depth 10→50 mm and contact sweeping ±30 mm, so every frame misses the fit's
-    cache: nominal table on the fit grid + the 64-term fit), and with the same fingertip (cache hit). Wall
+    new fingertip every frame (depth 10→50 mm and contact sweeping ±30 mm, so every frame misses the depth
+    table's cache: the FEM tables on the depth table's grid), and with the same fingertip (cache hit). Wall
     times, plus the drawing thread's own CPU time per new fingertip (``new_finger_cpu_median_ms``: what the
     frame costs without other processes competing for the cores)."""
     st = RendererState(geometry.EYE, geometry.PROJECTOR, SheetConfig(), sheet_model=sheet_model or sheet_model_for())

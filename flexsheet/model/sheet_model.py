@@ -1,33 +1,27 @@
-"""The display's nominal pushed-sheet model: the nonlinear membrane FEM solved with the sheet's NOMINAL
-material, fitted into the renderer's "fine" shader's series form (pure: numpy; the FEM from
-:mod:`flexsheet.model.sheet_fem`).
+"""The display's pushed-sheet model: the geometrically nonlinear membrane FEM of the sheet gripped on its clamp
+edges, with the nominal material and the strain offset identified from pushes, sampled into a depth table that
+the renderer's "fine" shader reads from a texture (pure: numpy; the FEM from :mod:`flexsheet.model.sheet_fem`).
 
 This is the display's only pushed-sheet shape: the renderer corrects its image for it (``RendererState``
 attaches it to every push, :meth:`NominalSheetModel.pushed`) and the Foxglove bridge draws it as the sheet the
 display believes in (:meth:`flexsheet.viz.scene_builder.SceneBuilder.believed_sheet`); both build it with
-:func:`sheet_model_for` from the same :class:`SheetConfig`. Why: the old fine correction's sine-series membrane
-(:class:`flexsheet.model.sheet.Membrane`, small-slope, tension ratio 1) is linear; a 1 mm urethane sheet pushed
-10–50 mm is not — the push stretches it, the dent becomes conical, and the series is ~4 mm off at 50 mm where
-the object's outline is seen (measured on the twin, docs/renderer.md). This module keeps the shader and
-replaces the shape it is given:
+:func:`sheet_model_for` from the same :class:`SheetConfig`. It is the sheet the planner presses against: the
+planner's force model (:mod:`flexsheet.model.tension`) and this shape take the same identified strain offset ε₀
+from ``display.yaml``'s ``sheet`` entry (``flexsheet calibrate sheet``), and both describe a sheet gripped on
+two edges and free on the others (T_v/T_u ≈ 0.035 at its centre: :mod:`flexsheet.model.sheet_prestress`).
 
-1. **Table** (:meth:`NominalSheetModel.table`): :class:`flexsheet.model.sheet_table.IndentTable` of
-   :class:`flexsheet.model.sheet_fem.SheetPhysics` with what the estimator knows — the clamp span measured by
-   the arms (rounded to a ``stretch_step`` node), the sheet's NOMINAL Young's modulus and size
-   (:class:`flexsheet.model.tension.SheetMaterial`), no pre-strain, and an ASSUMED tension ratio (default 1).
-   Never the twin's truth: the truth's E (±15 %), pre-strain (|N(0, 0.5 %)|) and tension ratio (±20 %) differ
-   from these (:mod:`flexsheet.twin.truth`); under ``realism: ideal`` they coincide and the model is in-model
-   (an inverse crime, stated wherever that column is reported). Solved once per stretch node (~3 s per
-   contact position on one core) and cached on disk.
-2. **Fit** (:meth:`NominalSheetModel.shape`): the table's shape at the measured depth and contact, sampled on
-   a grid, is projected on the clamped sine modes ``sin(λ_k (u + a))``, λ_k = kπ/2a (exact for the clamped
-   edges u = ±a); the ``n_modes`` modes with the most energy are kept, and each mode's profile across the
-   sheet is fitted by least squares with ``len(mu_scales)`` Neumann Green's functions of the shader
-   (decay μ = λ_k·s for s in ``mu_scales``, centred on the contact, zero slope at the free edges v = ±b).
-   The result, a :class:`SeriesShape` of n_modes·len(mu_scales) ≤ 64 terms, is evaluated exactly like
-   :class:`flexsheet.model.sheet.Membrane` (same λ, μ, coef arrays), so the GLSL fine model draws it
-   unchanged. Fits are cached (LRU) on the contact rounded to 0.1 mm. Per new fingertip the table on the fit
-   grid (:func:`table_grid`) and the fit cost ~1–2 ms of CPU (``flexsheet bench render``).
+1. **Tables** (:meth:`NominalSheetModel.table`): :class:`flexsheet.model.sheet_table.IndentTable` of
+   :class:`flexsheet.model.sheet_fem.SheetPhysics` with what the display knows — the sheet's NOMINAL size, E and
+   thickness (the shape does not depend on E or t: the pre-tension and the push's stiffness scale together), the
+   gripped pre-stress, and the tension of the sheet's own strain, clamp strain + ε₀, on nodes every
+   ``stretch_step``. Never the twin's truth (:mod:`flexsheet.twin.truth`: its E, thickness, pre-strain and grip
+   slip are drawn, and only the presses' fit ε₀ reaches the display). Solved once per node (~2 min of one core
+   for the 9 contact positions) and cached on disk; the default model's tables ship (:data:`SHIPPED_TABLES`).
+2. **Depth table** (:meth:`NominalSheetModel.shape`): per push (measured clamp span, depth, contact) the
+   tables of the two strain nodes around clamp strain + ε₀ are evaluated on a uniform grid over the sheet every
+   ``grid_step`` (:func:`table_grid`) and blended linearly in strain: a :class:`SampledShape`, read between
+   samples by bilinear interpolation in numpy and, from a texture, in the shader (``shaders/correct.vert``).
+   Cached (LRU) on the contact rounded to 0.1 mm.
 3. **In the nodes**: :meth:`NominalSheetModel.shape` with ``build=False`` never builds a missing table in the
    caller's thread (a :class:`PendingPush` instead); the renderer node builds it in a worker process
    (:func:`flexsheet.rendering.state.build_table`), the bridge draws the push as 4 triangles meanwhile.
@@ -51,58 +45,99 @@ from flexsheet.model.sheet import (
     DeflectionGrid,
     SheetSurface,
     clamp_half_span,
-    series_deflection,
     stretch_of_span,
 )
-from flexsheet.model.sheet import neumann_green as green
 from flexsheet.model.sheet_fem import SheetPhysics
 from flexsheet.model.sheet_table import TABLE_POSITIONS, IndentTable, default_cache_dir
 from flexsheet.model.tension import SheetMaterial, tension
 
 log = logging.getLogger(__name__)
 
-#: the nominal tables of the default settings at clamp strains 0.01–0.07 (what 40 N per clamp can hold), shipped
+#: the default model's tables at sheet strains 0.01–0.11 (the bridges' span band and one step past it), shipped
 #: so that no display builds them while it runs (a table build beside the running graph slowed the loop:
 #: flexsheet/runtime/background.py). Regenerate: ``python -m flexsheet.model.sheet_model --ship``.
 SHIPPED_TABLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "sheet_tables")
 
-__all__ = ["SeriesShape", "PendingPush", "FourTriangleDent", "believed_sheet", "drawable", "NominalSheetModel",
-           "MODEL_DEPTHS", "fit_series", "table_grid", "contact_of", "SheetConfig", "sheet_model_for",
+__all__ = ["SampledShape", "GRID_STEP", "grid_size", "PendingPush", "FourTriangleDent", "believed_sheet", "drawable", "NominalSheetModel",
+           "MODEL_DEPTHS", "table_grid", "contact_of", "SheetConfig", "sheet_model_for",
            "ship_tables", "SHIPPED_TABLES"]
 
-#: depths (m) of the nominal table (the fit interpolates between them)
+#: depths (m) of the tables (the depth table interpolates between them)
 MODEL_DEPTHS = (0.005, 0.010, 0.020, 0.030, 0.040, 0.050, 0.060)
-#: most terms the fine shader evaluates (``flexsheet.rendering.stereo_renderer.MAX_SHADER_MODES``)
-MAX_TERMS = 64
+#: the depth table's sample spacing, m (docs/renderer.md: the image error against the table itself)
+GRID_STEP = 0.002
+
+
+def _bilinear(W: np.ndarray, a: float, b: float, u, v):
+    """(w, ∂w/∂u, ∂w/∂v) of the bilinear interpolant of ``W`` (nu, nv) on the uniform grid over u ∈ [−a, a] ×
+    v ∈ [−b, b] at (u, v) (broadcast; clamped onto the sheet). The derivatives are the interpolant's own, within
+    the cell the point falls in. The GLSL ``membrane()`` of ``shaders/correct.vert`` computes the same."""
+    nu, nv = W.shape
+    du, dv = 2.0 * a / (nu - 1), 2.0 * b / (nv - 1)
+    u, v = np.broadcast_arrays(np.asarray(u, float), np.asarray(v, float))
+    x = (np.clip(u, -a, a) + a) / du
+    y = (np.clip(v, -b, b) + b) / dv
+    i = np.clip(np.floor(x), 0, nu - 2).astype(np.intp)
+    j = np.clip(np.floor(y), 0, nv - 2).astype(np.intp)
+    tx, ty = x - i, y - j
+    w00, w10, w01, w11 = W[i, j], W[i + 1, j], W[i, j + 1], W[i + 1, j + 1]
+    w = (1.0 - ty) * ((1.0 - tx) * w00 + tx * w10) + ty * ((1.0 - tx) * w01 + tx * w11)
+    wu = ((1.0 - ty) * (w10 - w00) + ty * (w11 - w01)) / du
+    wv = ((1.0 - tx) * (w01 - w00) + tx * (w11 - w10)) / dv
+    return w, wu, wv
+
+
+def grid_size(half_span: float, half_width: float, step: float = GRID_STEP) -> tuple[int, int]:
+    """(nu, nv): samples of a depth table over the sheet 2a × 2b (``half_span`` a, ``half_width`` b, m) spaced no
+    more than ``step`` m. Raises ``ValueError`` for a non-positive size or step."""
+    for k, x in (("half_span", half_span), ("half_width", half_width), ("step", step)):
+        if not (math.isfinite(x) and x > 0.0):
+            raise ValueError(f"{k} must be finite and > 0, got {x!r}")
+    return int(math.ceil(2.0 * half_span / step - 1e-9)) + 1, int(math.ceil(2.0 * half_width / step - 1e-9)) + 1
 
 
 @dataclass(frozen=True)
-class SeriesShape(DeflectionGrid):
-    """A pushed-sheet deflection in the fine shader's form, w(u, v) = Σ_i coef_i sin(lam_i (u + a)) G(v; mu_i,
-    push_v) (m, along −normal), the interface of :class:`flexsheet.model.sheet.Membrane` (``half_span`` a,
-    ``half_width`` b, ``push_u``, ``push_v``, ``depth`` m; ``lam``, ``mu``, ``coef`` (K,); :meth:`deflection`,
-    :meth:`deflection_grad`, :meth:`grid`), so a :class:`SheetSurface` can carry it and
-    :meth:`flexsheet.rendering.stereo_renderer.StereoRenderer.set_model` sends it to the shader. ``source``: one line saying
-    what it was fitted to; ``fit_rms`` m: rms residual of the fit on its grid."""
+class SampledShape(DeflectionGrid):
+    """A pushed-sheet deflection as the renderer draws it: a depth table ``w`` (nu, nv) float32, m along −normal,
+    sampled at u_i = −a + i·2a/(nu − 1), v_j = −b + j·2b/(nv − 1) (``half_span`` a, ``half_width`` b, m), read
+    between samples by bilinear interpolation (:meth:`deflection_grad`; the fine shader samples the same table
+    from a texture). ``push_u``, ``push_v``, ``depth`` m: the contact it was sampled for; ``source``: one line
+    saying what was sampled. The interface of :class:`flexsheet.model.sheet.Membrane`, so a
+    :class:`SheetSurface` can carry it. Raises ``ValueError`` naming ``w`` for a table that is not 2-D, smaller
+    than 2×2 or not finite."""
 
     half_span: float
     half_width: float
     push_u: float
     push_v: float
     depth: float
-    lam: np.ndarray = field(repr=False)
-    mu: np.ndarray = field(repr=False)
-    coef: np.ndarray = field(repr=False)
+    w: np.ndarray = field(repr=False)
     source: str = ""
-    fit_rms: float = 0.0
+
+    def __post_init__(self) -> None:
+        W = np.asarray(self.w, dtype=np.float32)
+        if W.ndim != 2 or min(W.shape) < 2 or not np.all(np.isfinite(W)):
+            raise ValueError(f"w must be a finite (nu, nv) table with nu, nv >= 2, got shape {W.shape}")
+        object.__setattr__(self, "w", W)
+
+    @classmethod
+    def of(cls, shape, n_u: int, n_v: int, source: str = "") -> SampledShape:
+        """Any pushed-sheet ``shape`` (``half_span``, ``half_width``, ``push_u``, ``push_v``, ``depth``,
+        ``deflection``) sampled on an ``n_u`` × ``n_v`` grid. Raises ``ValueError`` for n < 2."""
+        if n_u < 2 or n_v < 2:
+            raise ValueError(f"n_u and n_v must be >= 2, got {n_u} x {n_v}")
+        a, b = shape.half_span, shape.half_width
+        u, v = np.linspace(-a, a, n_u), np.linspace(-b, b, n_v)
+        return cls(float(a), float(b), float(shape.push_u), float(shape.push_v), float(shape.depth),
+                   shape.deflection(u[:, None], v[None, :]), source or type(shape).__name__)
 
     def deflection(self, u, v) -> np.ndarray:
         """w(u, v), m; ``u``, ``v`` broadcastable (m, sheet frame, clamped onto the sheet)."""
         return self.deflection_grad(u, v)[0]
 
     def deflection_grad(self, u, v):
-        """(w, ∂w/∂u, ∂w/∂v) at (u, v), broadcast shape of the inputs (:func:`flexsheet.model.sheet.series_deflection`)."""
-        return series_deflection(u, v, self.lam, self.mu, self.coef, self.half_span, self.half_width, self.push_v)
+        """(w, ∂w/∂u, ∂w/∂v) at (u, v), broadcast shape of the inputs (bilinear, as the shader)."""
+        return _bilinear(self.w.astype(np.float64), self.half_span, self.half_width, u, v)
 
 
 def table_grid(table: IndentTable, depth: float, push_u: float, push_v: float, u: np.ndarray, v: np.ndarray,
@@ -110,7 +145,7 @@ def table_grid(table: IndentTable, depth: float, push_u: float, push_v: float, u
     """The table's shape on the tensor grid u (nu,) × v (nv,) m → (nu, nv) m for the measured clamp half span
     ``half_span`` m: :meth:`flexsheet.model.sheet_table.IndentTable.evaluate_grid` (equal to the point-wise
     :meth:`~flexsheet.model.sheet_table.IndentTable.evaluate` to rounding, ``tests/unit/model/test_sheet_model.py``).
-    The fit's per-frame cost is this."""
+    The depth table's per-push cost is this."""
     return table.evaluate_grid(depth, push_u, push_v, u, v, half_span)
 
 
@@ -127,7 +162,7 @@ def contact_of(sheet: SheetSurface, point) -> tuple[float, float, float]:
 
 @dataclass(frozen=True)
 class PendingPush:
-    """A push whose shape is not known yet (the nominal table of its stretch ``node`` is still being built):
+    """A push whose shape is not known yet (the table of its strain ``node`` is still being built):
     only the contact and depth (m), enough for the 4-triangle model (``SheetSurface.pushed_point``). It has no
     deflection: :func:`flexsheet.rendering.state.pick_model` never picks ``fine`` for it."""
 
@@ -144,8 +179,8 @@ class FourTriangleDent(DeflectionGrid):
     """The renderer's 4-triangle pushed sheet (paper §III-C-3: triangles (pushed point, corner i, corner i+1)),
     as a deflection for drawing: w(u, v) = depth · min((a − u)/(a − u0), (u + a)/(u0 + a), (b − v)/(b − v0),
     (v + b)/(v0 + b)) m along −normal (the tent over the sheet's rectangle with its apex at the contact
-    (u0, v0) = (``push_u``, ``push_v``)). The viz draws it for a :class:`PendingPush` (the nominal table of
-    that stretch is not built yet), which the renderer corrects with ``four_triangle``."""
+    (u0, v0) = (``push_u``, ``push_v``)). The viz draws it for a :class:`PendingPush` (the table of
+    that strain is not built yet), which the renderer corrects with ``four_triangle``."""
 
     half_span: float
     half_width: float
@@ -187,72 +222,41 @@ def drawable(sheet: SheetSurface) -> SheetSurface:
     return sheet
 
 
-def fit_series(w_grid: np.ndarray, a: float, b: float, push_u: float, push_v: float, depth: float,
-               n_modes: int = 16, mu_scales=(0.4, 0.7, 1.0, 1.6), max_k: int = 64, source: str = "") -> SeriesShape:
-    """Fit a deflection sampled on a grid (nu, nv) over u ∈ [−a, a] × v ∈ [−b, b] (m) with the shader's series
-    (module doc, step 2). Raises ``ValueError`` when n_modes·len(mu_scales) exceeds :data:`MAX_TERMS` or the
-    grid is too coarse (nu < 2·max_k + 1, nv < 2·len(mu_scales))."""
-    W = np.asarray(w_grid, float)
-    nu, nv = W.shape
-    J = len(mu_scales)
-    if n_modes < 1 or n_modes * J > MAX_TERMS:
-        raise ValueError(f"n_modes × len(mu_scales) must be in 1..{MAX_TERMS}, got {n_modes} × {J}")
-    if nu < 2 * max_k + 1 or nv < 2 * J:
-        raise ValueError(f"grid {nu}×{nv} too coarse for {max_k} modes and {J} decay rates")
-    u = np.linspace(-a, a, nu)
-    v = np.linspace(-b, b, nv)
-    wts = np.full(nu, u[1] - u[0])
-    wts[[0, -1]] *= 0.5
-    k = np.arange(1, max_k + 1)
-    lam_all = k * math.pi / (2.0 * a)
-    Phi = np.sin(lam_all[:, None] * (u[None, :] + a))           # (max_k, nu)
-    # einsum, not BLAS (@): these small products are what a frame costs, and a threaded BLAS on busy cores
-    # makes them 10-20x slower (flexsheet bench render, sheet_update)
-    F = np.einsum("ku,uv->kv", Phi * wts, W) / a                 # sine coefficients per v, (max_k, nv)
-    keep = np.sort(np.argsort(-(F ** 2).sum(axis=1))[:n_modes])
-    mus = lam_all[keep][:, None] * np.asarray(mu_scales, float)[None, :]          # (n_modes, J)
-    B = green(v, mus.ravel(), push_v, b).reshape(nv, len(keep), J).transpose(1, 0, 2)   # (n_modes, nv, J)
-    c = (np.linalg.pinv(B) @ F[keep][:, :, None])[:, :, 0]                          # least squares, (n_modes, J)
-    prof = np.einsum("mvj,mj->mv", B, c)                                             # fitted profiles (n_modes, nv)
-    R = np.einsum("mu,mv->uv", Phi[keep], prof)
-    lam, mu, coef = np.repeat(lam_all[keep], J), mus.ravel(), c.ravel()
-    rms = float(np.sqrt(np.mean((R - W) ** 2)))
-    return SeriesShape(float(a), float(b), float(push_u), float(push_v), float(depth), lam, mu, coef, source, rms)
-
-
 class NominalSheetModel:
-    """The pushed sheet as the renderer models it: nominal FEM tables per stretch node, fitted into the shader's
-    series (module doc). ``material``: nominal sheet (:class:`SheetMaterial`); ``tension_ratio``: assumed
-    T_v/T_u; ``prestrain``: assumed pre-strain (0); ``stretch_step``: spacing of the table nodes; ``depths``,
-    ``positions`` (m) and ``mesh``: the tables (:class:`IndentTable`); ``cache_dir``: where they are cached
-    (default :func:`flexsheet.model.sheet_table.default_cache_dir`); ``n_modes``, ``mu_scales``: the fit;
-    ``grid``: (nu, nv) samples of the fit. Table builds log their progress. Raises ``ValueError`` on a bad
-    setting."""
+    """The pushed sheet as the renderer models it: FEM tables of the sheet gripped on its clamp edges per sheet
+    strain node, sampled into depth tables (module doc). ``material``: nominal sheet (:class:`SheetMaterial`);
+    ``strain_offset``: the identified ε₀ of ``display.yaml``'s ``sheet`` entry (the sheet's strain is the clamp
+    strain + ε₀; 0 without one); ``tension_ratio``: None for the gripped pre-stress (default), or an ASSUMED
+    uniform T_v/T_u (a comparison, not the display's model); ``stretch_step``: spacing of the table nodes;
+    ``depths``, ``positions`` (m) and ``mesh``: the tables (:class:`IndentTable`); ``cache_dir``: where they are
+    cached (default :func:`flexsheet.model.sheet_table.default_cache_dir`); ``grid_step`` m: the depth table's
+    sample spacing (:class:`SampledShape`, :data:`GRID_STEP`). Table builds log their progress. Raises
+    ``ValueError`` naming the setting and value on a bad one."""
 
-    def __init__(self, material: SheetMaterial | None = None, *, tension_ratio: float = 1.0, prestrain: float = 0.0,
-                 stretch_step: float = 0.01, depths=MODEL_DEPTHS, positions=TABLE_POSITIONS, mesh: dict | None = None,
-                 cache_dir: str | None = None, n_modes: int = 16, mu_scales=(0.4, 0.7, 1.0, 1.6),
-                 grid: tuple[int, int] = (193, 121), cache_size: int = 256) -> None:
-        self.settings = {"material": material, "tension_ratio": tension_ratio, "prestrain": prestrain,
+    def __init__(self, material: SheetMaterial | None = None, *, strain_offset: float = 0.0,
+                 tension_ratio: float | None = None, stretch_step: float = 0.01, depths=MODEL_DEPTHS,
+                 positions=TABLE_POSITIONS, mesh: dict | None = None, cache_dir: str | None = None,
+                 grid_step: float = GRID_STEP, cache_size: int = 256) -> None:
+        self.settings = {"material": material, "strain_offset": strain_offset, "tension_ratio": tension_ratio,
                          "stretch_step": stretch_step, "depths": tuple(depths), "positions": tuple(positions),
-                         "mesh": dict(mesh or {}), "cache_dir": cache_dir, "n_modes": n_modes,
-                         "mu_scales": tuple(mu_scales), "grid": tuple(grid), "cache_size": cache_size}
+                         "mesh": dict(mesh or {}), "cache_dir": cache_dir, "grid_step": grid_step,
+                         "cache_size": cache_size}
         self.material = material or SheetMaterial()
-        for k, v in (("tension_ratio", tension_ratio), ("stretch_step", stretch_step)):
+        for k, v in (("tension_ratio", 1.0 if tension_ratio is None else tension_ratio),
+                     ("stretch_step", stretch_step), ("grid_step", grid_step)):
             if not (math.isfinite(v) and v > 0.0):
                 raise ValueError(f"{k} must be finite and > 0, got {v!r}")
-        if not (math.isfinite(prestrain) and prestrain >= 0.0):
-            raise ValueError(f"prestrain must be finite and >= 0, got {prestrain!r}")
-        if n_modes * len(mu_scales) > MAX_TERMS or n_modes < 1:
-            raise ValueError(f"n_modes × len(mu_scales) must be in 1..{MAX_TERMS}, got {n_modes} × {len(mu_scales)}")
-        self.tension_ratio, self.prestrain, self.stretch_step = float(tension_ratio), float(prestrain), float(stretch_step)
+        if not (math.isfinite(strain_offset) and abs(strain_offset) < 0.1):
+            raise ValueError(f"strain_offset must be finite and within ±0.1, got {strain_offset!r}")
+        self.tension_ratio = None if tension_ratio is None else float(tension_ratio)
+        self.strain_offset, self.stretch_step = float(strain_offset), float(stretch_step)
         self.depths, self.positions = tuple(depths), tuple(positions)
         self.mesh = dict(mesh or {})
         self.cache_dir = cache_dir or default_cache_dir()
         self.settings["cache_dir"] = self.cache_dir
-        self.n_modes, self.mu_scales, self.grid_n = int(n_modes), tuple(float(s) for s in mu_scales), tuple(grid)
+        self.grid_step = float(grid_step)
         self._tables: dict[float, IndentTable] = {}
-        #: stretch node → node whose table stands in for it (set where a node's FEM fails to converge)
+        #: strain node → node whose table stands in for it (set where a node's FEM fails to converge)
         self.substitute: dict[float, float] = {}
         self._fits: OrderedDict = OrderedDict()
         self._cache_size = int(cache_size)
@@ -266,22 +270,24 @@ class NominalSheetModel:
         return m
 
     def node_of(self, stretch: float) -> float:
-        """The table node (clamp strain) nearest ``stretch``, at least one step (the planner never leaves the
-        sheet slack: ``SheetMaterial.min_stretch`` = 0.01; an unstretched membrane has no pre-tension)."""
+        """The table node nearest the sheet's strain at clamp strain ``stretch`` (``stretch`` + ``strain_offset``),
+        at least one step (the planner never leaves the sheet slack: ``SheetMaterial.min_stretch`` = 0.01; an
+        unstretched membrane has no pre-tension)."""
         st = self.stretch_step
-        return round(max(st, round(float(stretch) / st) * st), 6)
+        return round(max(st, round((float(stretch) + self.strain_offset) / st) * st), 6)
 
     def physics(self, node: float) -> SheetPhysics:
-        """Nominal physics at clamp strain ``node``: E and size of ``material``, T_u = tension(node + prestrain),
-        the assumed tension ratio."""
+        """The physics of the table at sheet strain ``node``: E, thickness and size of ``material`` (the shape
+        does not depend on E or t: T and the stiffness of the push scale together), clamp half span and
+        T_u = tension at that strain, the gripped pre-stress (or the assumed ``tension_ratio``)."""
         size = self.material.size
         return SheetPhysics(half_span=clamp_half_span(node, size), half_width=size / 2, young=self.material.young,
-                            thickness=self.material.thickness,
-                            tension_u=tension(node + self.prestrain, self.material), tension_ratio=self.tension_ratio)
+                            thickness=self.material.thickness, tension_u=tension(node, self.material),
+                            tension_ratio=self.tension_ratio)
 
     def table(self, node: float) -> IndentTable:
-        """The nominal table at ``node`` (shipped, or built once and cached on disk; a build takes ~30 s on one
-        core)."""
+        """The table at strain node ``node`` (shipped, or built once and cached on disk; a build takes ~2 min of
+        one core)."""
         if node not in self._tables:
             ph = self.physics(node)
             if ph.tension_u <= 0.0:
@@ -323,37 +329,67 @@ class NominalSheetModel:
         return True
 
     def node_of_span(self, half_span: float) -> float:
-        """The table node of a measured clamp half span (m)."""
+        """The table node of a measured clamp half span (m): :meth:`node_of` its clamp strain."""
         return self.node_of(stretch_of_span(half_span, self.material.size))
 
+    def grid_of(self, half_span: float, half_width: float) -> tuple[int, int]:
+        """(nu, nv): samples of the depth table over the sheet 2a × 2b (m), :func:`grid_size` at ``grid_step``."""
+        return grid_size(half_span, half_width, self.grid_step)
+
     def shape(self, half_span: float, depth: float, push_u: float, push_v: float,
-              half_width: float = geometry.SHEET_SIZE / 2, build: bool = True) -> SeriesShape | None:
-        """The fitted pushed shape for the measured clamp half span (m), depth (m, > 0) and contact (m); with
-        ``build`` False, None when the table of its node is not built yet (:meth:`available`). Per call on a
-        cache miss: the table on the fit's grid (:func:`table_grid`) and the fit (``flexsheet bench render
-        --sheet``)."""
+              half_width: float = geometry.SHEET_SIZE / 2, build: bool = True) -> SampledShape | None:
+        """The pushed shape for the measured clamp half span (m), depth (m, > 0) and contact (m) as a depth table
+        (:class:`SampledShape`, :meth:`grid_of` samples of the FEM table, :func:`table_grid`); with ``build``
+        False, None when the table of its node is not built yet (:meth:`available`). Cached (LRU) on the
+        contact rounded to 0.1 mm. Raises ``ValueError`` for a depth that is not > 0."""
         if not (math.isfinite(depth) and depth > 0.0):
             raise ValueError(f"depth must be finite and > 0, got {depth!r}")
-        node = self.substitute.get(self.node_of_span(half_span), self.node_of_span(half_span))
-        key = (node, round(half_span, 5), round(depth, 4), round(push_u, 4), round(push_v, 4), round(half_width, 5))
+        strain = stretch_of_span(half_span, self.material.size) + self.strain_offset
+        nodes = [(self.substitute.get(n, n), wt) for n, wt in self.blend_of(strain)]
+        key = (tuple(nodes), round(half_span, 5), round(depth, 4), round(push_u, 4), round(push_v, 4),
+               round(half_width, 5))
         hit = self._fits.get(key)
         if hit is not None:
             self._fits.move_to_end(key)
             return hit
-        if not build and not self.available(node):
+        if not build and not all(self.available(n) for n, _ in nodes):
             return None
-        tab = self.table(node)
-        nu, nv = self.grid_n
+        nu, nv = self.grid_of(half_span, half_width)
         u = np.linspace(-half_span, half_span, nu)
         v = np.linspace(-half_width, half_width, nv)
-        W = table_grid(tab, depth, push_u, push_v, u, v, half_span)
-        src = (f"nominal FEM (E {self.material.young / 1e6:.2f} MPa, pre-strain {self.prestrain:g}, tension ratio "
-               f"{self.tension_ratio:g}, stretch node {node:g}), {self.n_modes}×{len(self.mu_scales)} terms")
-        out = fit_series(W, half_span, half_width, push_u, push_v, depth, self.n_modes, self.mu_scales, source=src)
+        W = sum(wt * table_grid(self.table(n), depth, push_u, push_v, u, v, half_span) for n, wt in nodes)
+        pre = "gripped" if self.tension_ratio is None else f"ASSUMED uniform T_v/T_u {self.tension_ratio:g}"
+        src = (f"sheet FEM ({pre}, sheet strain {strain:.4f} = clamp strain + identified offset "
+               f"{self.strain_offset:+.4f}; nodes {' + '.join(f'{wt:.2f}x{n:g}' for n, wt in nodes)}), "
+               f"depth table {nu}x{nv}")
+        out = SampledShape(half_span, half_width, push_u, push_v, depth, W, src)
         self._fits[key] = out
         if len(self._fits) > self._cache_size:
             self._fits.popitem(last=False)
         return out
+
+    def blend_of(self, strain: float) -> list[tuple[float, float]]:
+        """[(node, weight), ...]: the table nodes whose shapes, blended linearly, give the sheet at ``strain``
+        (the sheet's own strain, clamp strain + ``strain_offset``): the two around it, or one where the other's
+        weight is below 1 % (a shape change of ≲ 2 µm; at least one step, as :meth:`node_of`)."""
+        st = self.stretch_step
+        x = max(float(strain), st) / st
+        lo = math.floor(x + 1e-9)
+        t = x - lo
+        pairs = [(round(lo * st, 6), 1.0 - t), (round((lo + 1) * st, 6), t)]
+        keep = [(n, wt) for n, wt in pairs if wt >= 0.01]
+        total = sum(wt for _, wt in keep)
+        return [(n, wt / total) for n, wt in keep]
+
+    def missing(self, half_span: float) -> float | None:
+        """The first table node the shape at the measured clamp half span (m) needs that is not on disk (None:
+        all are): what the renderer node builds next."""
+        strain = stretch_of_span(half_span, self.material.size) + self.strain_offset
+        for n, _ in self.blend_of(strain):
+            n = self.substitute.get(n, n)
+            if not self.available(n):
+                return n
+        return None
 
     def surface(self, sheet: SheetSurface) -> SheetSurface:
         """``sheet`` with its membrane (the measured depth and contact) replaced by this model's shape; a flat
@@ -366,7 +402,7 @@ class NominalSheetModel:
     def pushed(self, flat: SheetSurface, finger, threshold: float = 0.0, build: bool = True) -> SheetSurface:
         """The sheet ``flat`` (from the clamps) pushed by the fingertip ``finger`` (3,) m, or ``flat`` itself when
         the finger is no more than ``threshold`` m behind it or off the sheet. Its membrane is this model's
-        shape, or, with ``build`` False and the table of its stretch node not built yet, a :class:`PendingPush`.
+        shape, or, with ``build`` False and a table it needs not built yet, a :class:`PendingPush`.
         Raises ``ValueError`` for a non-finite finger."""
         depth, pu, pv = contact_of(flat, finger)
         a, b = flat.half_span, flat.half_width
@@ -374,16 +410,17 @@ class NominalSheetModel:
             return flat
         shp = self.shape(a, depth, pu, pv, b, build=build)
         if shp is None:
-            shp = PendingPush(a, b, pu, pv, depth, self.node_of_span(a))
+            shp = PendingPush(a, b, pu, pv, depth, self.missing(a) or self.node_of_span(a))
         return replace(flat, membrane=shp)
 
     def describe(self) -> dict:
         """JSON-able description (for reports)."""
-        return {"name": "fem_nominal", "young_Pa": self.material.young, "prestrain": self.prestrain,
+        return {"name": "fem_gripped" if self.tension_ratio is None else "fem_uniform",
+                "young_Pa": self.material.young, "strain_offset": self.strain_offset,
                 "tension_ratio": self.tension_ratio, "stretch_step": self.stretch_step, "depths_m": list(self.depths),
-                "positions_m": list(self.positions), "mesh": self.mesh, "n_modes": self.n_modes,
-                "mu_scales": list(self.mu_scales), "terms": self.n_modes * len(self.mu_scales),
-                "note": "nominal material and assumed tension ratio; never the truth's"}
+                "positions_m": list(self.positions), "mesh": self.mesh, "grid_step_m": self.grid_step,
+                "note": "nominal E and size, the identified strain offset (display.yaml sheet entry); never the "
+                        "truth's"}
 
 
 @dataclass(frozen=True)
@@ -392,48 +429,55 @@ class SheetConfig:
     for it, the Foxglove bridge draws it).
 
     ``half_width`` m: half the free-edge length; ``push_threshold`` m: depth behind the flat sheet that counts
-    as a push; the pushed sheet's model (:func:`sheet_model_for`): ``fine_modes`` clamped sine modes (each
-    with 4 Green's-function terms, ≤ 16: the shader takes 64 terms), ``tension_ratio`` the ASSUMED T_v/T_u,
-    ``cache_dir`` where its FEM tables are cached (None: :func:`flexsheet.model.sheet_table.default_cache_dir`),
-    ``mesh`` the FEM mesh options (:class:`flexsheet.model.sheet_fem.SheetFEM` kwargs; {}: the default
-    4 mm mesh)."""
+    as a push; the pushed sheet's model (:func:`sheet_model_for`): ``grid_step`` m the depth table's sample
+    spacing, ``strain_offset`` the identified ε₀ (``display.yaml``'s ``sheet`` entry; 0 without one),
+    ``tension_ratio`` None (the gripped sheet) or an ASSUMED uniform T_v/T_u, ``cache_dir`` where its FEM tables
+    are cached (None: :func:`flexsheet.model.sheet_table.default_cache_dir`), ``mesh`` the FEM mesh options
+    (:class:`flexsheet.model.sheet_fem.SheetFEM` kwargs; {}: the default 4 mm mesh)."""
 
     half_width: float = geometry.SHEET_SIZE / 2
     push_threshold: float = 0.001
-    fine_modes: int = 16
-    tension_ratio: float = 1.0
+    grid_step: float = GRID_STEP
+    strain_offset: float = 0.0
+    tension_ratio: float | None = None
     cache_dir: str | None = None
     mesh: dict = field(default_factory=dict)
 
 
 def sheet_model_for(config: SheetConfig = SheetConfig()) -> NominalSheetModel:
-    """The display's pushed-sheet model for ``config``: the nominal FEM (the sheet's nominal E and size, no
-    pre-strain, the assumed tension ratio) fitted into the fine shader's series; never the truth's values.
+    """The display's pushed-sheet model for ``config``: the FEM of the sheet gripped on its clamp edges with the
+    nominal E and size and the identified strain offset, sampled into depth tables; never the truth's values.
     The one constructor the renderer node, the Foxglove bridge, the experiments and the tests use. Raises
     ``ValueError`` on a bad setting."""
-    return NominalSheetModel(tension_ratio=config.tension_ratio, n_modes=config.fine_modes,
-                             cache_dir=config.cache_dir, mesh=dict(config.mesh))
+    return NominalSheetModel(strain_offset=config.strain_offset, tension_ratio=config.tension_ratio,
+                             grid_step=config.grid_step, cache_dir=config.cache_dir, mesh=dict(config.mesh))
 
 
 def ship_tables(nodes=tuple(round(0.01 * k, 6) for k in range(1, 12))) -> list[str]:
-    """Build (or take from the cache) the default model's tables at ``nodes`` (the bridges' span band, clamp
-    strain 0.01-0.10, and one step past it) and copy them into
-    :data:`SHIPPED_TABLES`; returns the files written. Minutes cold (~40 s of one core per table)."""
+    """Build (or take from the cache) the default model's tables at ``nodes`` (sheet strains 0.01-0.11: the
+    bridges' span band, clamp strain 0.01-0.10, and one step past it) and copy them into
+    :data:`SHIPPED_TABLES`; returns the files written. Tens of minutes cold (~2 min of one core per table)."""
     import shutil
+    import tempfile
 
     m = NominalSheetModel()
     os.makedirs(SHIPPED_TABLES, exist_ok=True)
     out = []
     for node in nodes:
-        log.info(f"sheet table at stretch {node:g}")
+        log.info(f"sheet table at strain {node:g}")
         m.table(float(node))
-        key = IndentTable.key_of(m.physics(node), m.depths, m.positions, m.mesh)
-        src = os.path.join(m._folder_of(node), f"indent_{key}.npz")
-        dst = os.path.join(SHIPPED_TABLES, os.path.basename(src))
-        if os.path.abspath(src) != os.path.abspath(dst):
-            shutil.copyfile(src, dst)
-        record(dst, "python -m flexsheet.model.sheet_model --ship")
-        out.append(dst)
+    with tempfile.TemporaryDirectory() as tmp:         # staged: the first entry replaces the earlier models'
+        staged = []
+        for node in nodes:
+            key = IndentTable.key_of(m.physics(node), m.depths, m.positions, m.mesh)
+            name = f"indent_{key}.npz"
+            shutil.copyfile(os.path.join(m._folder_of(node), name), os.path.join(tmp, name))
+            staged.append(name)
+        for i, name in enumerate(staged):
+            dst = os.path.join(SHIPPED_TABLES, name)
+            shutil.copyfile(os.path.join(tmp, name), dst)
+            record(dst, "python -m flexsheet.model.sheet_model --ship", replaces="indent_" if i == 0 else None)
+            out.append(dst)
     return out
 
 

@@ -18,7 +18,7 @@ __all__ = ["RendererConfig", "SHEET_PARAMS"]
 
 #: the fields of :class:`RendererConfig` that describe the believed sheet; the Foxglove bridge's params take
 #: them from here too (same names, defaults and ranges: give both nodes the same values)
-SHEET_PARAMS = ("fine_modes", "tension_ratio", "sheet_cache", "sheet_mesh", "push_threshold", "sheet_half_width")
+SHEET_PARAMS = ("depth_table_step", "tension_ratio", "sheet_cache", "sheet_mesh", "push_threshold", "sheet_half_width")
 
 
 @dataclass(frozen=True)
@@ -32,10 +32,11 @@ class RendererConfig:
     height: Annotated[int | None, Field(ge=16, le=8192, description="image height per eye, px (as width)")] = None
     correction: Literal["auto", "none", "flat", "four_triangle", "fine"] = "auto"
     accuracy_target: Annotated[float, Field(gt=0.0, description="image error budget, m")] = paper.PIXEL_ON_SCREEN
-    fine_modes: Annotated[int, Field(ge=1, le=16, description="sine modes of the pushed-sheet fit (each with 4 "
-                                     "terms; the shader takes 64)")] = SheetConfig.fine_modes
-    tension_ratio: Annotated[float, Field(gt=0.0, description="ASSUMED T_v / T_u of the pushed-sheet model (not "
-                                          "measured)")] = SheetConfig.tension_ratio
+    depth_table_step: Annotated[float, Field(ge=0.0005, le=0.02, description="sample spacing of the pushed "
+                                             "sheet's depth table (the fine shader's texture), m")] = SheetConfig.grid_step
+    tension_ratio: Annotated[float | None, Field(gt=0.0, description="None: the sheet gripped on its clamp edges "
+                                                 "(the display's model); a number: an ASSUMED uniform T_v / T_u "
+                                                 "instead (a comparison)")] = SheetConfig.tension_ratio
     sheet_cache: Annotated[str | None, Field(description="folder of the pushed-sheet FEM tables (None: "
                                              "$FLEXSHEET_CACHE/sheet_fem or ~/.cache/flexsheet/sheet_fem)")] = None
     sheet_mesh: Annotated[dict[str, float], Field(description="FEM mesh of those tables (SheetFEM kwargs, e.g. "

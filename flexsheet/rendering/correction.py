@@ -12,8 +12,9 @@ A. Three sheet models give C:
 
 * ``flat``:           one plane (r_s, n_s), the pose from the arms (paper §III-C-2);
 * ``four_triangle``:  4 triangles (pushed point, corner i, corner i+1) (paper §III-C-3);
-* ``fine``:           the pushed sheet's shape (beyond the paper; the renderer's is the nominal FEM fit of
-                      :mod:`flexsheet.model.sheet_model`), C found by Newton's method on the line V–A.
+* ``fine``:           the pushed sheet's shape (beyond the paper; the renderer's is the gripped sheet's FEM
+                      depth table of :mod:`flexsheet.model.sheet_model`), C found by Newton's method on the
+                      line V–A.
 
 Stability (each case is defined and tested, tests/unit/rendering/test_correction.py):
 

@@ -5,7 +5,7 @@
   kept for frames whose inputs give an unusable sheet. Thread-safe (input handlers run in worker threads, the
   drawing in the GL thread).
 * :class:`ErrorTable` — each correction model's predicted image error against the renderer's pushed-sheet model
-  (the nominal FEM, :mod:`flexsheet.model.sheet_model`) over a range of push depths
+  (the gripped sheet's FEM depth table, :mod:`flexsheet.model.sheet_model`) over a range of push depths
   (:func:`flexsheet.rendering.correction.predict_model_errors`), computed once its first table is available.
 * :func:`sheet_model_for`, :class:`SheetConfig` — that pushed-sheet model and its settings
   (:mod:`flexsheet.model.sheet_model`, re-exported here), built the same way for the node, the Foxglove
@@ -278,7 +278,9 @@ class RenderGeometry:
     faces (M, 3) int32); ``projector``: the registered :class:`Projector` at the drawing resolution;
     ``distortion`` (5,) its OpenCV distortion; ``eye`` (3,) m the cyclopean eye V; ``ipd`` m; ``nominal``:
     True when no ``display.yaml`` was named (code constants, nothing measured); ``log``: lines for the node's
-    log (where each part came from)."""
+    log (where each part came from); ``strain_offset``: the sheet's identified strain offset ε₀ (``display.yaml``'s
+    ``sheet`` entry, the planner's too; 0 without one), which the pushed-sheet model takes
+    (:class:`~flexsheet.model.sheet_model.SheetConfig`)."""
 
     scene: Scene
     mesh: tuple[np.ndarray, np.ndarray]
@@ -288,6 +290,7 @@ class RenderGeometry:
     ipd: float
     nominal: bool
     log: list[str] = field(default_factory=list)
+    strain_offset: float = 0.0
 
 
 def load_geometry(scene_file: str | None = None, display_calib: str | None = None, width: int | None = None,
@@ -325,8 +328,16 @@ def load_geometry(scene_file: str | None = None, display_calib: str | None = Non
                    f"ipd {ee.ipd * 1e3:.1f} mm ({ee.provenance.source})")
     if (proj.width, proj.height) != (pe.width, pe.height):
         log.append(f"drawing the {pe.width}x{pe.height} projector at {proj.width}x{proj.height} px (K rescaled)")
+    sheet = None if nominal else dc.sheet
+    if sheet is not None:
+        log.append(f"pushed sheet: the sheet gripped on its clamp edges, strain offset {sheet.strain_offset:+.4f} "
+                   f"identified in {display_calib} ({sheet.provenance.source}; the planner's sheet entry)")
+    else:
+        log.append("pushed sheet: the sheet gripped on its clamp edges, strain offset 0 (no identified sheet entry; "
+                   "`flexsheet calibrate sheet` writes one)")
     if ee.mode == "tracked":
         log.append(f"eye mode tracked: the pairs follow /eye/pose; V {np.round(ee.V * 1e3, 1).tolist()} mm while "
                    "the glasses are not tracked")
     return RenderGeometry(sc, sc.surface_mesh(), proj, np.asarray(pe.D, float).ravel().copy(),
-                          np.asarray(ee.V, float).copy(), float(ee.ipd), nominal, log)
+                          np.asarray(ee.V, float).copy(), float(ee.ipd), nominal, log,
+                          0.0 if sheet is None else float(sheet.strain_offset))

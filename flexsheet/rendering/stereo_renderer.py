@@ -23,13 +23,16 @@ from flexsheet.model import geometry
 from flexsheet.model.projector import Projector, eye_positions
 from flexsheet.model.scene_surface import cylinder_surface
 from flexsheet.model.sheet import SheetSurface
+from flexsheet.model.sheet_model import GRID_STEP, SampledShape, grid_size
 from flexsheet.rendering.correction import DEFAULT_MIN_COS, fan_triangles
 
-__all__ = ["StereoRenderer", "cylinder_draw_mesh", "scaled_projector", "vertex_normals", "MODE_IDS"]
+__all__ = ["StereoRenderer", "cylinder_draw_mesh", "scaled_projector", "vertex_normals", "sampled", "MODE_IDS",
+           "DEPTH_UNIT"]
 
 SHADER_DIR = Path(__file__).with_name("shaders")
 MODE_IDS = {"none": 0, "flat": 1, "four_triangle": 2, "fine": 3}
-MAX_SHADER_MODES = 64
+#: texture unit of the fine model's depth table
+DEPTH_UNIT = 0
 
 
 def cylinder_draw_mesh(radius: float = geometry.CYLINDER_RADIUS, length: float = geometry.CYLINDER_LENGTH,
@@ -56,6 +59,15 @@ def scaled_projector(projector: Projector, width: int | None = None, height: int
     S = np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5], [0.0, 0.0, 1.0]])
     return Projector(S @ np.asarray(projector.K, dtype=float), np.asarray(projector.R, dtype=float).copy(),
                      np.asarray(projector.position, dtype=float).copy(), W, H)
+
+
+def sampled(shape) -> SampledShape:
+    """``shape`` as the fine shader draws it: a :class:`SampledShape` as it is, any other pushed-sheet shape
+    sampled every :data:`~flexsheet.model.sheet_model.GRID_STEP` over its sheet (the numpy twin of the drawing
+    corrects for this)."""
+    if isinstance(shape, SampledShape):
+        return shape
+    return SampledShape.of(shape, *grid_size(shape.half_span, shape.half_width, GRID_STEP))
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -130,6 +142,8 @@ class StereoRenderer:
         self.tf_vao = None
         self.n_vertices = 0
         self.model = "none"
+        self._wtex = None
+        self._upload_depth(np.zeros((2, 2), np.float32))
         self._set_common()
         self.set_model("none")
 
@@ -159,6 +173,7 @@ class StereoRenderer:
         self._set("u_far", self.far)
         self._set("u_color", self.color, (self.prog,))
         self._set("u_shading", int(self.shading), (self.prog,))
+        self._set("u_wtex", DEPTH_UNIT)
 
     def set_mesh(self, vertices, faces, normals=None) -> None:
         """Upload a mesh: ``vertices`` (N, 3) m, ``faces`` (M, 3) int indices < N, ``normals`` (N, 3) or None
@@ -184,13 +199,15 @@ class StereoRenderer:
         self.tf_vao = ctx.vertex_array(self.tf_prog, [(self._vbo, "3f 3x4", "in_pos")])
         self.n_vertices = len(v)
 
-    def set_model(self, model: str, sheet: SheetSurface | None = None, *, fine_modes: int | None = None) -> None:
+    def set_model(self, model: str, sheet: SheetSurface | None = None) -> None:
         """Choose the correction model and the sheet it corrects for.
 
         ``model`` ∈ {"none", "flat", "four_triangle", "fine"}; ``sheet`` the (measured) sheet (required
-        unless "none"). "fine" on a sheet without a membrane falls back to "flat" (identical result).
-        ``fine_modes`` truncates the membrane series sent to the shader (≤ 64). Raises ``ValueError``.
-        """
+        unless "none"). "fine" on a sheet without a membrane falls back to "flat" (identical result); its
+        membrane goes to the shader as a depth table (a texture): a
+        :class:`~flexsheet.model.sheet_model.SampledShape` as it is, any other shape sampled into one every
+        :data:`~flexsheet.model.sheet_model.GRID_STEP` (so the numpy twin of the drawing is the correction on
+        that sampled shape). Raises ``ValueError`` naming the argument."""
         if model not in MODE_IDS:
             raise ValueError(f"model must be one of {sorted(MODE_IDS)}, got {model!r}")
         if model != "none" and not isinstance(sheet, SheetSurface):
@@ -208,22 +225,28 @@ class StereoRenderer:
             self._set("u_tn", nrm.astype(np.float32))
             self._set("u_usable", usable.astype(np.int32))
         elif model == "fine":
-            m = sheet.membrane
-            k = min(len(m.coef), fine_modes or MAX_SHADER_MODES, MAX_SHADER_MODES)
-            pad = lambda a: np.pad(np.asarray(a[:k], dtype=np.float32), (0, MAX_SHADER_MODES - k))  # noqa: E731
+            m = sampled(sheet.membrane)
             self._set("u_o", tuple(sheet.origin))
             self._set("u_n", tuple(sheet.normal))
             self._set("u_eu", tuple(sheet.axis_u))
             self._set("u_ev", tuple(sheet.axis_v))
             self._set("u_a", float(m.half_span))
             self._set("u_b", float(m.half_width))
-            self._set("u_v0", float(m.push_v))
-            self._set("u_K", int(k))
-            self._set("u_lam", pad(m.lam))
-            self._set("u_mu", pad(m.mu))
-            self._set("u_coef", pad(m.coef))
+            self._upload_depth(m.w)
         self._set("u_mode", mode)
         self.model = model
+
+    def _upload_depth(self, w: np.ndarray) -> None:
+        """The depth table (nu, nv) float32 into the R32F texture (texel (i, j) = w[i, j]), reused while its size
+        stays."""
+        nu, nv = w.shape
+        if self._wtex is None or self._wtex.size != (nu, nv):
+            if self._wtex is not None:
+                self._wtex.release()
+            self._wtex = self.ctx.texture((nu, nv), 1, dtype="f4")
+            self._wtex.filter = (self.moderngl.NEAREST, self.moderngl.NEAREST)
+        self._wtex.write(np.ascontiguousarray(w.T, dtype=np.float32).tobytes())
+        self._set("u_wn", (int(nu), int(nv)))
 
     # -- drawing -----------------------------------------------------------------------------------------------
     def render_pair(self, eyes=None) -> None:
@@ -233,6 +256,7 @@ class StereoRenderer:
         W, H = self.projector.width, self.projector.height
         target = self.msaa or self.fbo
         target.use()
+        self._wtex.use(location=DEPTH_UNIT)
         self.ctx.enable(self.moderngl.DEPTH_TEST)
         target.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
         for i, e in enumerate(eyes if eyes is not None else self.eyes):
@@ -294,6 +318,7 @@ class StereoRenderer:
     def _feedback(self, eye) -> np.ndarray:
         self._set("u_eye", tuple(float(x) for x in eye), (self.tf_prog,))
         self.fbo.use()                    # EGL standalone contexts need a bound framebuffer for any draw
+        self._wtex.use(location=DEPTH_UNIT)
         out = self.ctx.buffer(reserve=self.n_vertices * 24)
         self.tf_vao.transform(out, mode=self.moderngl.POINTS, vertices=self.n_vertices)
         data = np.frombuffer(out.read(), dtype=np.float32).reshape(-1, 6)
@@ -312,7 +337,7 @@ class StereoRenderer:
             self.ctx.release()
             return
         objs = [self.vao, self.tf_vao, getattr(self, "_vbo", None), getattr(self, "_ibo", None), self.prog,
-                self.tf_prog, self.fbo, self.msaa]
+                self.tf_prog, self.fbo, self.msaa, self._wtex]
         for fb in (self.fbo, self.msaa):
             if fb is not None:
                 objs += list(fb.color_attachments) + [fb.depth_attachment]

@@ -67,7 +67,7 @@ class VizConfig:
     ``eye`` (3,) cyclopean eye V, m; ``ipd`` m; ``projector``: :class:`Projector` (default: the paper's);
     ``left_base``/``right_base``: arm bases (x, y, z, yaw) m, rad (as the arm bridges' ``base`` param);
     ``sheet``: :class:`~flexsheet.model.sheet_model.SheetConfig` of the believed sheet — give it the
-    renderer's values (its params ``sheet_half_width``, ``push_threshold``, ``fine_modes``, ``tension_ratio``,
+    renderer's values (its params ``sheet_half_width``, ``push_threshold``, ``depth_table_step``, ``tension_ratio``,
     ``sheet_cache``, ``sheet_mesh``) and the bridge draws the dent the renderer corrects for;
     ``sheet_half_width`` (read-only) is ``sheet.half_width``; ``sheet_grid`` n (n × n sheet vertices); ``frustum_depth`` m of the camera frusta; ``camera_scale`` ∈ (0, 1] image downscale.
     """

@@ -1,10 +1,10 @@
 """``flexsheet bench render``: time to correct and draw one stereo pair (2 × 1024 × 768) per correction model,
 and the per-frame cost of the pushed sheet's shape (``sheet_update``: the node's :class:`RendererState`
-turning a new fingertip into the nominal FEM fit the fine shader draws); with ``--window``, the projector
+turning a new fingertip into the depth table the fine shader draws); with ``--window``, the projector
 window's frame pacing.
 
 The time covers setting the sheet uniforms (the CPU part of the correction: triangle normals, membrane
-coefficients), drawing both eyes with the per-vertex correction in the vertex shader, and ``ctx.finish()``;
+depth table texture), drawing both eyes with the per-vertex correction in the vertex shader, and ``ctx.finish()``;
 read-back is reported separately (``readback_ms``). Figures on a shared CPU (llvmpipe) are pessimistic.
 
 ``--window`` opens the projector window (:mod:`nodes.renderer.window`; on a private Xvfb with ``--xvfb`` or
@@ -168,7 +168,7 @@ def _print_render(res: dict, args, per: dict, readback: float, sheet_ms: dict, n
     for m, d in per.items():
         print(f"  {m:14s} stereo pair {d['median_ms']:7.2f} ms (p90 {d['p90_ms']:.2f})")
     print(f"  read-back of the pair {readback:.2f} ms; target {res['target_ms']:.2f} ms (120 Hz)")
-    print(f"  pushed-sheet shape per frame (RendererState, nominal FEM fit): new fingertip "
+    print(f"  pushed-sheet shape per frame (RendererState, gripped FEM depth table): new fingertip "
           f"{sheet_ms['new_finger_median_ms']:.2f} ms median (p90 {sheet_ms['new_finger_p90_ms']:.2f}, max "
           f"{sheet_ms['new_finger_max_ms']:.2f}; CPU {sheet_ms['new_finger_cpu_median_ms']:.2f}), same fingertip {sheet_ms['same_finger_median_ms']:.3f} ms")
 

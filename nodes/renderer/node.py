@@ -6,9 +6,11 @@ measured clamp poses give the actual sheet pose and its stretch), ``/fingertip``
 ``/eye/pose`` (the viewer's tracked eyes: each pair is corrected for them, predicted to the moment it is on the
 sheet; the last good pose while the glasses are lost, then the registered V: :mod:`flexsheet.rendering.viewpoint`).
 
-The pushed sheet's shape is the renderer's nominal FEM model (:mod:`flexsheet.model.sheet_model`: nominal sheet
-material, assumed tension ratio; never the twin's truth), one table per clamp-stretch node, cached on disk.
-A table that is not on disk is built in a worker process at lower priority (~30 s per node on one core);
+The pushed sheet's shape is the FEM of the sheet gripped on its clamp edges (:mod:`flexsheet.model.sheet_model`:
+nominal material, the strain offset identified in ``display_calib``'s ``sheet`` entry, the planner's; never the
+twin's truth), one table per sheet-strain node (shipped, or cached on disk), sampled per push into a depth table
+that the fine shader reads from a texture.
+A table that is not on disk is built in a worker process at lower priority (~2 min per node on one core);
 meanwhile a push at that stretch is drawn with the 4-triangle model and ``/diagnostics`` says so. It redraws as soon as a
 new fingertip or deformation arrives (at most ``max_render_rate``; at least at ``publish_rate`` when nothing
 arrives) and publishes ``/render/stereo`` (:class:`messages.RenderedFrame`, downscaled by ``publish_scale``) at
@@ -92,8 +94,9 @@ class RendererNode(SheetTables, Node):
         self.service("clear_image", self.srv_clear_image, "draw the scene again", commanding=True)
         check_screen(self.eye, self.projector.position, paper.SCREEN_POINT, paper.SCREEN_NORMAL)
         self.sheet_config = SheetConfig(half_width=p.sheet_half_width, push_threshold=p.push_threshold,
-                                        fine_modes=p.fine_modes, tension_ratio=p.tension_ratio,
-                                        cache_dir=p.sheet_cache, mesh=dict(p.sheet_mesh))
+                                        grid_step=p.depth_table_step, strain_offset=geo.strain_offset,
+                                        tension_ratio=p.tension_ratio, cache_dir=p.sheet_cache,
+                                        mesh=dict(p.sheet_mesh))
         self.sheet_model = sheet_model_for(self.sheet_config)
         self.state = RendererState(self.eye, self.projector.position, self.sheet_config, mesh=geo.mesh,
                                    sheet_model=self.sheet_model, build=False, on_missing=self._want_table)

@@ -1,6 +1,6 @@
 """The renderer node's pushed-sheet tables (:class:`SheetTables`, a part of
-:class:`nodes.renderer.node.RendererNode`): one nominal FEM table per clamp-stretch node, loaded from disk or
-built in a spawned, niced worker process (~30 s per node on one core), then the models' error table once. On
+:class:`nodes.renderer.node.RendererNode`): one gripped-sheet FEM table per sheet-strain node, loaded from disk or
+built in a spawned, niced worker process (~2 min per node on one core), then the models' error table once. On
 the wall clock the builds run one at a time while pushes at that stretch are drawn with the 4-triangle model;
 on a simulated clock they are awaited while simulated time waits. A stretch whose table fails is drawn with
 the nearest built table (logged)."""
@@ -30,7 +30,7 @@ class SheetTables:
             return
         self._tables_asked.add(node)
         if not self.sheet_model.on_disk(node):
-            self.log.info("pushed-sheet FEM table for stretch %g not cached: building it (~30 s) while simulated "
+            self.log.info("pushed-sheet FEM table for stretch %g not cached: building it (~2 min) while simulated "
                           "time waits", node)
             proc = multiprocessing.get_context("spawn").Process(
                 target=build_table, args=(self.sheet_model.settings, node, 19), name=f"renderer-sheet-table-{node:g}",
@@ -90,7 +90,7 @@ class SheetTables:
             while self._tables_wanted:
                 node = self._tables_wanted.pop(0)
                 if not self.sheet_model.on_disk(node):
-                    self.log.info("pushed-sheet FEM table for stretch %g not cached: building it (~30 s); pushes "
+                    self.log.info("pushed-sheet FEM table for stretch %g not cached: building it (~2 min); pushes "
                                   "at that stretch are drawn with the 4-triangle model meanwhile", node)
                     t0 = time.monotonic()
                     proc = ctx.Process(target=build_table, args=(self.sheet_model.settings, node, 19),

@@ -84,7 +84,7 @@ _SERVER = {
 #: corrects for
 _SHEET = config_fields(
     RendererConfig, exclude=[f.name for f in dataclasses.fields(RendererConfig) if f.name not in SHEET_PARAMS],
-    descriptions={"fine_modes": "as the renderer's fine_modes", "tension_ratio": "as the renderer's tension_ratio",
+    descriptions={"depth_table_step": "as the renderer's depth_table_step, m", "tension_ratio": "as the renderer's tension_ratio",
                   "sheet_cache": "as the renderer's sheet_cache (its FEM tables are read from there, never built "
                                  "by the bridge)",
                   "sheet_mesh": "as the renderer's sheet_mesh", "push_threshold": "as the renderer's, m",
@@ -94,7 +94,7 @@ VizParams = params_model(
     "VizParams",
     """Parameters of the viz bridge (SI units, display frame).
 
-    The server's ``host``, ``port``, ``backlog`` are the node's own; the believed sheet's (``fine_modes`` …
+    The server's ``host``, ``port``, ``backlog`` are the node's own; the believed sheet's (``depth_table_step`` …
     ``sheet_half_width``) are the renderer's (:class:`flexsheet.rendering.config.RendererConfig`); every other
     param is a field of — defined, defaulted and range-checked in — :class:`flexsheet.viz.config.VizNodeConfig`.
     """,
@@ -133,7 +133,7 @@ class VizNode(Node):
                         left_base=tuple(p.left_base), right_base=tuple(p.right_base), sheet_grid=p.sheet_grid,
                         camera_scale=p.camera_scale,
                         sheet=SheetConfig(half_width=p.sheet_half_width, push_threshold=p.push_threshold,
-                                          fine_modes=p.fine_modes, tension_ratio=p.tension_ratio,
+                                          grid_step=p.depth_table_step, tension_ratio=p.tension_ratio,
                                           cache_dir=p.sheet_cache, mesh=dict(p.sheet_mesh)))
         self.streams = FoxgloveStreams(SceneBuilder(cfg), Rates(scene=p.scene_rate, camera=p.camera_rate,
                                                                 render=p.render_rate, json=p.json_rate,

@@ -22,7 +22,8 @@ log = logging.getLogger(__name__)
 class CalibratedDisplay:
     """Everything the estimators may know about the display: ``projector`` (calibrated K_p and pose),
     ``distortion`` (5,) its OpenCV distortion, ``eye`` (3,) m V, ``ipd`` m, ``bases`` side → T_display_base
-    (4, 4) of the calibrated arms, ``source`` (where it came from: a ``display.yaml`` path or ``nominal``)."""
+    (4, 4) of the calibrated arms, ``source`` (where it came from: a ``display.yaml`` path or ``nominal``),
+    ``strain_offset``: the sheet's identified strain offset ε₀ (its ``sheet`` entry; 0 without one)."""
 
     projector: Projector
     distortion: np.ndarray
@@ -30,6 +31,7 @@ class CalibratedDisplay:
     ipd: float
     bases: dict
     source: str
+    strain_offset: float = 0.0
 
     @classmethod
     def from_display_calib(cls, dc: DisplayCalib, source: str = "") -> CalibratedDisplay:
@@ -40,7 +42,8 @@ class CalibratedDisplay:
         p = dc.projector
         return cls(p.projector(), np.asarray(p.D, float).ravel().copy(), np.asarray(dc.eye.V, float).copy(),
                    float(dc.eye.ipd), {s: np.asarray(dc.arms[s].T_display_base, float).copy() for s in ("left", "right")},
-                   source or dc.path or "display calibration")
+                   source or dc.path or "display calibration",
+                   0.0 if dc.sheet is None else float(dc.sheet.strain_offset))
 
     @classmethod
     def nominal(cls) -> CalibratedDisplay:

@@ -65,7 +65,7 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--depths", type=float, nargs="+", default=None, help="push depths, mm (default 10..50)")
     ap.add_argument("--pixel", type=float, default=0.35, help="measurement camera pixel on the screen, mm")
     ap.add_argument("--sheet-model", choices=("auto", "fem"), default="auto",
-                    help="renderer's pushed-sheet model (the nominal FEM fit; the old series model is the "
+                    help="renderer's pushed-sheet model (the gripped FEM depth table; the old series model is the "
                          "comparison column 'fine')")
     ap.add_argument("--stability", action="store_true",
                     help="also sweep tension-ratio, pre-strain and projector errors (first realistic run)")

@@ -34,7 +34,7 @@ def run(out: Path, truth_seed: int = 0, realism: str = "realistic", *, thetas=(1
     out.mkdir(parents=True, exist_ok=True)
     truth = TwinTruth.draw(int(truth_seed), realism)
     cal, cal_info = display_calib_for(truth_seed, realism, display_calib, quick)
-    model_obj = pushed_sheet_model(sheet_model, quick=quick)
+    model_obj = pushed_sheet_model(sheet_model, quick=quick, strain_offset=cal.strain_offset)
     est = DisplayEstimator(cal, sheet_model=model_obj)
     world = TwinWorld(truth)
     meas = Measurer(pixel)
@@ -45,7 +45,7 @@ def run(out: Path, truth_seed: int = 0, realism: str = "realistic", *, thetas=(1
     s["pushed"] = sweep_pushed(est, world, meas, depths, photos, tag)
     s["live_path"] = {"note": "the renderer node's code path (RendererState, ErrorTable, auto) on the true FEM "
                               "sheet, ray-traced, same eye/projector both sides; max/mean over the silhouette, mm",
-                      "rows": live_path(truth, (0, 10, 30, 50))}
+                      "rows": live_path(truth, (0, 10, 30, 50), strain_offset=cal.strain_offset)}
     s["models_picked"] = {"inclined": sorted({r["model"] for r in s["inclined"].values()}),
                           "pushed": sorted({r["model"] for r in s["pushed"].values()})}
     s["choice_table_m"] = est.table.rows

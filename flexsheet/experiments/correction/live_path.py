@@ -104,7 +104,7 @@ class LivePath:
         true = self.true_sheet(world, finger)
         err = self.landing_error(self.corrected(model, sheet), true)
         row = {"model": model, "max_mm": float(err.max() * 1e3), "mean_mm": float(err.mean() * 1e3),
-               "terms": int(len(sheet.membrane.coef)) if sheet.membrane is not None else 0,
+               "depth_table": list(sheet.membrane.w.shape) if sheet.membrane is not None else None,
                "uncorrected_max_mm": float(self.landing_error(self.probes, true).max() * 1e3)}
         if depth > 0.0:
             old = SheetSurface.from_clamps(*self.clamps, half_width=self.config.half_width, pushed_point=finger,
@@ -113,9 +113,10 @@ class LivePath:
         return row
 
 
-def live_path(truth: TwinTruth, depths_mm=(0, 10, 30, 50)) -> dict:
-    """:class:`LivePath` rows for ``truth`` at each depth (mm), keyed by the depth."""
-    lp, world = LivePath(), TwinWorld(truth)
+def live_path(truth: TwinTruth, depths_mm=(0, 10, 30, 50), strain_offset: float = 0.0) -> dict:
+    """:class:`LivePath` rows for ``truth`` at each depth (mm), keyed by the depth; the renderer's sheet model
+    with the identified ``strain_offset`` (``display.yaml``'s sheet entry)."""
+    lp, world = LivePath(config=SheetConfig(strain_offset=float(strain_offset))), TwinWorld(truth)
     out = {}
     for d in depths_mm:
         out[f"{d:g}"] = r = lp.measure(world, d * 1e-3)

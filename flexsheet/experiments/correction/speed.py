@@ -14,7 +14,7 @@ from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_me
 def model_speed(sheet_model=None, repeats: int = 10) -> dict:
     """Median ms per 2×1024×768 stereo pair (shaded, no MSAA, as the node draws) per model on the nominal
     projector: none, flat, four_triangle, fine (16-mode series) and, with ``sheet_model``, fine with its
-    64-term nominal FEM fit; plus the GL renderer's name."""
+    gripped sheet's FEM depth table; plus the GL renderer's name."""
     a = clamp_half_span(STRETCH)
     home = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], a)
     tilt = SheetSurface(*inclined_pose(30))

@@ -20,18 +20,16 @@ uniform vec3 u_q;
 uniform vec3 u_c[4];
 uniform vec3 u_tn[4];
 uniform int u_usable[4];
-// fine membrane (flexsheet/model/sheet.py, the pushed membrane; numpy twin in correction.py): w(u,v) = sum_k coef_k sin(lam_k (u + a)) G_k(v, v0)
+// fine: the pushed sheet's depth table (flexsheet/model/sheet_model.py SampledShape; numpy twin in correction.py):
+// w (m, along -normal) at u_i = -a + i*du, v_j = -b + j*dv in texel (i, j) of u_wtex (R32F, nu x nv), bilinear
 uniform vec3 u_o;
 uniform vec3 u_n;
 uniform vec3 u_eu;
 uniform vec3 u_ev;
 uniform float u_a;
 uniform float u_b;
-uniform float u_v0;
-uniform int u_K;
-uniform float u_lam[64];
-uniform float u_mu[64];
-uniform float u_coef[64];
+uniform sampler2D u_wtex;
+uniform ivec2 u_wn;          // (nu, nv)
 // projector
 uniform mat3 u_Kp;           // intrinsics, px
 uniform mat3 u_Rp;           // columns: projector x, y, z axes in the display frame
@@ -47,26 +45,25 @@ out vec3 v_normal;
 out vec3 v_world;
 out vec2 v_pixel;            // projector pixel (transform feedback: tests compare it with cv2.projectPoints)
 
-// w, dw/du, dw/dv of the membrane (overflow-free Green's function)
+// w, dw/du, dw/dv of the depth table: bilinear between the four texels around (u, v), clamped onto the sheet
+// (texelFetch: exact float32 samples, no filtering hardware's reduced-precision weights)
 vec3 membrane(float u, float v) {
-    u = clamp(u, -u_a, u_a);
-    v = clamp(v, -u_b, u_b);
-    float lo = min(v, u_v0);
-    float hi = max(v, u_v0);
-    vec3 r = vec3(0.0);
-    for (int k = 0; k < u_K; ++k) {
-        float mu = u_mu[k];
-        float ex = exp(-2.0 * mu * (u_b + lo));
-        float ey = exp(-2.0 * mu * (u_b - hi));
-        float e = exp(-mu * (hi - lo));
-        float den = 2.0 * (1.0 - exp(-4.0 * mu * u_b));
-        float g = e * (1.0 + ex) * (1.0 + ey) / (mu * den);
-        float dg = (v >= u_v0) ? -e * (1.0 + ex) * (1.0 - ey) / den : e * (1.0 - ex) * (1.0 + ey) / den;
-        float ph = u_lam[k] * (u + u_a);
-        float s = sin(ph);
-        r += u_coef[k] * vec3(s * g, u_lam[k] * cos(ph) * g, s * dg);
-    }
-    return r;
+    float du = 2.0 * u_a / float(u_wn.x - 1);
+    float dv = 2.0 * u_b / float(u_wn.y - 1);
+    float x = (clamp(u, -u_a, u_a) + u_a) / du;
+    float y = (clamp(v, -u_b, u_b) + u_b) / dv;
+    int i = clamp(int(floor(x)), 0, u_wn.x - 2);
+    int j = clamp(int(floor(y)), 0, u_wn.y - 2);
+    float tx = x - float(i);
+    float ty = y - float(j);
+    float w00 = texelFetch(u_wtex, ivec2(i, j), 0).r;
+    float w10 = texelFetch(u_wtex, ivec2(i + 1, j), 0).r;
+    float w01 = texelFetch(u_wtex, ivec2(i, j + 1), 0).r;
+    float w11 = texelFetch(u_wtex, ivec2(i + 1, j + 1), 0).r;
+    float w = (1.0 - ty) * ((1.0 - tx) * w00 + tx * w10) + ty * ((1.0 - tx) * w01 + tx * w11);
+    float wu = ((1.0 - ty) * (w10 - w00) + ty * (w11 - w01)) / du;
+    float wv = ((1.0 - tx) * (w01 - w00) + tx * (w11 - w10)) / dv;
+    return vec3(w, wu, wv);
 }
 
 // eqs 3-6: landing point C -> shifted vertex A'

@@ -1,5 +1,6 @@
 """The stereo renderer (flexsheet.rendering.stereo_renderer): GLSL correction vs numpy (transform feedback), the
-fitted FEM shape in the fine shader, deterministic headless render, the left image for the user's left eye."""
+gripped sheet's depth table sampled by the fine shader (its light lands on the identified model's sheet, the
+uniform-tension model's does not), deterministic headless render, the left image for the user's left eye."""
 
 import numpy as np
 import pytest
@@ -8,7 +9,7 @@ from flexsheet.model import geometry
 from flexsheet.model.projector import Projector
 from flexsheet.model.sheet import Membrane, SheetSurface
 from flexsheet.rendering.correction import correct_vertices, correct_vertices_fine, correct_vertices_pushed
-from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh
+from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh, sampled
 
 COM = dict(projector=geometry.PROJECTOR, screen_point=geometry.SCREEN_POINT, screen_normal=geometry.SCREEN_NORMAL)
 R = geometry.CYLINDER_RADIUS
@@ -31,7 +32,9 @@ def gl():
 def sheets():
     th = np.radians(40)
     tilt = SheetSurface([-R + R * np.cos(th), 0, -R * np.sin(th)], [np.cos(th), 0, -np.sin(th)], [0, 1, 0])
-    push = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], membrane=Membrane(0.12, 0.12, 0.01, -0.02, 0.04, modes=16))
+    # any shape reaches the shader as a depth table; numpy corrects for that same sampled shape
+    push = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0],
+                        membrane=sampled(Membrane(0.12, 0.12, 0.01, -0.02, 0.04, modes=16)))
     return tilt, push
 
 
@@ -105,29 +108,56 @@ def test_left_image_is_drawn_for_the_users_left_eye():
     assert abs((col[0] - col[1]) - want) < 1.0
 
 
-def test_shader_draws_the_fitted_fem_shape(tmp_path):
-    """The fine GLSL model evaluates the nominal FEM fit (64 terms, cancelling coefficients) as numpy does."""
+def _landing_error(r, sheet_drawn, sheet_true, v):
+    """Max distance (m) on the imaginary screen, seen from V, between where the light the shader aims for each
+    vertex lands on ``sheet_true`` and where the eye expects the vertex."""
+    from flexsheet.rendering.correction import land_projector_rays, project_vertices
+
+    scr = dict(screen_point=geometry.SCREEN_POINT, screen_normal=geometry.SCREEN_NORMAL)
+    r.set_model("fine", sheet_drawn)
+    got, ok = r.transform(geometry.EYE)
+    assert ok.all()
+    b = project_vertices(got.astype(float), eye=geometry.EYE, **scr)
+    c = land_projector_rays(b, geometry.PROJECTOR, sheet_true)
+    return np.linalg.norm(project_vertices(c, eye=geometry.EYE, **scr) - project_vertices(v, eye=geometry.EYE, **scr),
+                          axis=1).max()
+
+
+def test_shader_samples_the_gripped_sheet_depth_table(tmp_path):
+    """The fine shader draws the identified, gripped sheet model from its depth table: the GLSL correction equals
+    numpy's on the same table (2e-6 m), the table's samples are the FEM table's, and the light it aims lands on
+    the FEM table's own sheet within 0.1 mm on the screen from 10 to 50 mm; drawn with the uniform-tension model
+    (T_v = T_u, what the renderer drew before) it lands > 0.5 mm off at 30 mm and more."""
     from flexsheet.model.sheet import SheetSurface
     from flexsheet.model.sheet_model import NominalSheetModel
     from flexsheet.rendering.correction import correct_vertices_fine
-    from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh
+    from flexsheet.rendering.state import silhouette_probes
 
-    m = NominalSheetModel(positions=(0.0,), mesh={"h_fine": 0.006, "h_coarse": 0.012}, cache_dir=str(tmp_path))
+    mesh = {"h_fine": 0.006, "h_coarse": 0.012}
+    m = NominalSheetModel(positions=(0.0,), mesh=mesh, cache_dir=str(tmp_path))
+    uniform = NominalSheetModel(positions=(0.0,), mesh=mesh, cache_dir=str(tmp_path), tension_ratio=1.0)
     a = 0.12 * 1.04
     r = StereoRenderer(Projector.default(256, 192, pixel=0.0028), shading=False)
     v, f = cylinder_draw_mesh(n_around=48, n_along=16)
-    r.set_mesh(v, f)
+    probes = silhouette_probes(v, step=1).astype(np.float32)
+    r.set_mesh(probes, np.array([[0, 1, 2]], np.int32))
     try:
-        for S, pu, pv in ((0.01, 0.0, 0.0), (0.05, 0.0, 0.0), (0.03, 0.002, -0.001)):
-            sheet = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], a, membrane=m.shape(a, S, pu, pv))
-            assert len(sheet.membrane.coef) == 64
+        for S, pu, pv in ((0.01, 0.0, 0.0), (0.03, 0.002, -0.001), (0.05, 0.0, 0.0)):
+            shp = m.shape(a, S, pu, pv)
+            true = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], a, membrane=m.table(0.04).shape(S, pu, pv, a))
+            sheet = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], a, membrane=shp)
             r.set_model("fine", sheet)
             got, got_ok = r.transform(geometry.EYE)
-            want, ok = correct_vertices_fine(v.astype(float), eye=geometry.EYE, projector=geometry.PROJECTOR,
+            want, ok = correct_vertices_fine(probes.astype(float), eye=geometry.EYE, projector=geometry.PROJECTOR,
                                              screen_point=geometry.SCREEN_POINT, screen_normal=geometry.SCREEN_NORMAL,
                                              sheet=sheet, return_valid=True)
             assert ok.all()
             np.testing.assert_array_equal(got_ok, ok)
             assert np.abs(got - want).max() < 2e-6
+            e_table = _landing_error(r, sheet, true, probes.astype(float))
+            assert e_table < 1e-4, (S, e_table)
+            old = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], a, membrane=uniform.shape(a, S, pu, pv))
+            e_old = _landing_error(r, old, true, probes.astype(float))
+            assert e_old > 5 * e_table and (S < 0.03 or e_old > 5e-4), (S, e_old)
     finally:
         r.release()

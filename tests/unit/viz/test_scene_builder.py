@@ -23,7 +23,7 @@ from flexsheet.arm.kinematics import ArmKinematics, home_joints
 from flexsheet.model import geometry
 from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
 from flexsheet.model.sheet import SheetSurface, clamp_poses
-from flexsheet.model.sheet_model import FourTriangleDent, SeriesShape, SheetConfig
+from flexsheet.model.sheet_model import FourTriangleDent, SampledShape, SheetConfig
 from flexsheet.rendering.state import RendererState
 from flexsheet.viz.config import VizConfig
 from flexsheet.viz.primitives import sheet_mesh
@@ -89,12 +89,12 @@ def test_bridge_draws_the_renderers_nominal_fem_dent(stretch, depth, pu, pv):
     b = _bridge(arms, _tip(tip_pos), cfg)
     believed = b.believed_sheet()
     ren = _renderer_sheet(arms, tip_pos, cfg)
-    assert isinstance(believed.membrane, SeriesShape) and isinstance(ren.membrane, SeriesShape)
+    assert isinstance(believed.membrane, SampledShape) and isinstance(ren.membrane, SampledShape)
     assert believed.half_span == pytest.approx(geometry.SHEET_SIZE * (1 + stretch) / 2, abs=1e-6)
     # at the contact: the fingertip's depth, as the renderer's model has it
     w_b = float(believed.membrane.deflection(pu, pv))
     w_r = float(ren.membrane.deflection(pu, pv))
-    # (the 64-term fit overshoots the fingertip depth by 0.4 mm at 30 mm, 0.95 mm at 45 mm off-centre)
+    # (the depth table, bilinear between 2 mm samples, cuts the fingertip's cap: within 1.5 mm of its depth)
     assert abs(w_b - w_r) < TOL and abs(w_b - depth) < 1.5e-3, (w_b, w_r, depth)
     # across the sheet: the vertices the bridge encodes, against the renderer's surface at the same (u, v)
     P = _drawn_sheet_points(b)
@@ -112,7 +112,7 @@ def test_bridge_draws_the_renderers_nominal_fem_dent(stretch, depth, pu, pv):
 
 
 def test_bridge_follows_the_renderers_config_and_draws_four_triangles_while_the_table_is_missing(tmp_path):
-    # an assumed tension ratio the shipped tables do not have, and an empty cache: the renderer meets a
+    # an assumed uniform tension ratio the shipped tables do not have, and an empty cache: the renderer meets a
     # PendingPush (it draws four_triangle); the bridge builds nothing and draws that 4-triangle tent
     cfg = SheetConfig(tension_ratio=1.3, cache_dir=str(tmp_path))
     depth, pu, pv = 0.03, 0.02, -0.01
