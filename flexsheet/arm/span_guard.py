@@ -27,6 +27,8 @@ class SpanGuard:
         self.kin = kin
         #: (3,) m, display frame: the partner clamp's measured position (its ``ArmJointState.pose``), or None
         self.peer_clamp: np.ndarray | None = None
+        #: s: the stamp of that measurement (its ``ArmJointState`` header), or None
+        self.peer_stamp: float | None = None
         #: whether this arm's last step waited on the guard (``wait:span``)
         self.waiting = False
         #: whether the partner's last state said it waits on its guard

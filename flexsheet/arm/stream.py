@@ -201,10 +201,12 @@ class ArmStream:
         the partner lags, or the joints' own paths swing the clamp); then the limiter brakes where it is."""
         lim = self.limiter
         before = lim.snapshot()
-        cmd = lim.step(*self.tracker.reference(self.clock(), lim.c))
+        now = self.clock()
+        cmd = lim.step(*self.tracker.reference(now, lim.c))
         # judged where the clamp would come to rest if it braked from here (v²/2a per joint), so that it stops
-        # at the band's edge rather than a braking distance past it
-        if self.tracker.span_worse(before[0], cmd + lim.v * np.abs(lim.v) / (2.0 * lim.qdd_max)):
+        # at the band's edge rather than a braking distance past it (or, with both arms on the sheet's motion,
+        # the step's end against the partner's place on it: TargetTracker.span_worse)
+        if self.tracker.span_worse(before[0], cmd, cmd + lim.v * np.abs(lim.v) / (2.0 * lim.qdd_max), now + self.period):
             lim.restore(before)
             cmd = lim.step(before[0])
         return cmd

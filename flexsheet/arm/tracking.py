@@ -27,12 +27,15 @@ from flexsheet.arm.pull_limit import max_pull
 from flexsheet.arm.sheet_motion import SheetSegment
 from flexsheet.arm.span_guard import SpanGuard
 
-__all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S"]
+__all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S", "PEER_ON_MOTION"]
 
 #: goals the velocity is fitted over (16 at the camera's 48 Hz: the last 313 ms)
 VELOCITY_GOALS = 16
 #: the goal moves on at its velocity for at most this long after the newest target (then it waits there)
 EXTRAPOLATE_MAX_S = 0.05
+#: m: a partner whose measured clamp is this close to the sheet's motion at its stamp follows it (the servo's lag
+#: at the planner's 0.3 m/s, 15 ms, is 4.5 mm)
+PEER_ON_MOTION = 0.01
 
 
 class TargetRefused(ValueError):
@@ -120,11 +123,31 @@ class TargetTracker:
         #: cycles a point on the motion was refused by IK (the arm streamed to the goal instead)
         self.motion_refused = 0
 
-    def span_worse(self, q_from, q_to) -> bool:
-        """Whether this arm's step from joints ``q_from`` to ``q_to`` (6,) rad waits on the span guard
-        (:meth:`flexsheet.arm.span_guard.SpanGuard.worse`; ``wait:span``). A service's goal (:meth:`move_to`: a
-        registration's configurations, homing) is the operator's and is not judged."""
-        return self.manual is None and self.span.worse(q_from, q_to)
+    def span_worse(self, q_from, q_to, q_stop=None, at: float | None = None) -> bool:
+        """Whether this arm's step from joints ``q_from`` to ``q_to`` (6,) rad, ending at time ``at`` s, waits on
+        the span guard (:meth:`flexsheet.arm.span_guard.SpanGuard.worse`; ``wait:span``); ``q_stop``: where the
+        clamp would come to rest braking from ``q_to`` (default ``q_to``). A service's goal (:meth:`move_to`: a
+        registration's configurations, homing) is the operator's and is not judged. While both arms follow the
+        sheet's motion, a partner whose measured clamp is on it (within :data:`PEER_ON_MOTION` of the motion at
+        its measurement's stamp) is judged where the motion has it at ``at``, against the step's end: its
+        measurement lags its command by the servo and a cycle, and judging against it, or this arm's braking
+        point, made the arms wait on each other in every fast move. Otherwise the braking point is judged
+        against the partner's measured clamp."""
+        if self.manual is not None:
+            return False
+        guard = self.span
+        measured = guard.peer_clamp
+        if (self.motion is not None and measured is not None and guard.peer_stamp is not None
+                and at is not None):
+            other = "right" if self.kin.side == "left" else "left"
+            at_meas = self.motion.clamp(other, guard.peer_stamp)[0][:3, 3]
+            if float(np.linalg.norm(measured - at_meas)) <= PEER_ON_MOTION:
+                guard.peer_clamp = self.motion.clamp(other, at)[0][:3, 3]
+                try:
+                    return guard.worse(q_from, q_to)
+                finally:
+                    guard.peer_clamp = measured
+        return guard.worse(q_from, q_to if q_stop is None else q_stop)
 
     def move_to(self, q) -> np.ndarray:
         """Stream to joints ``q`` (6,) rad and stay there, ignoring targets until :meth:`release`. Raises

@@ -231,6 +231,7 @@ class ArmBridgeNode(Node):
     def on_peer_state(self, msg: ArmJointState) -> None:
         """The other arm's state: hold with it while it cannot follow (:func:`~flexsheet.arm.tracking.peer_holds`)."""
         self.tracker.span.peer_clamp = np.asarray(msg.pose, float)[:3, 3].copy()
+        self.tracker.span.peer_stamp = float(msg.header.stamp)
         self.tracker.span.peer_waiting = msg.bridge_status == BridgeStatus.SPAN_WAIT
         hold = msg.bridge_status if peer_holds(msg.bridge_status) else None
         if hold != self.tracker.peer_hold:

@@ -120,3 +120,31 @@ def test_a_target_whose_pull_passes_a_joint_torque_is_refused_and_the_partner_ho
         t.set_target(left, 2.0, 1.01, strict=True, pull=1.05 * limit)
     assert t.ik_status == f"torque:J{joint}" and np.allclose(t.goal, goal)
     assert t.status(1.02) == f"hold:torque:J{joint}" and peer_holds(f"hold:torque:J{joint}")
+
+
+def test_the_span_guard_judges_a_partner_on_the_motion_where_the_motion_has_it_now():
+    """Both arms follow the sheet's motion (a 40 mm move along y at up to 0.3 m/s). The partner's measurement, 20 ms
+    old (servo and a cycle), lags by mm: judged against it, this arm's step on the motion waits (what stalled the
+    organ's repositioning); judged where the motion has the partner now, it does not. A partner that stopped,
+    40 mm off the motion, is judged where it was measured, and the step waits."""
+    from flexsheet.arm.sheet_motion import SheetShaper
+    from flexsheet.model.sheet import sheet_rotation
+    kl, kr, ql, qr, _ = _home()
+    R = sheet_rotation([1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    sh = SheetShaper()
+    sh.update(0.0, np.zeros(3), R, 0.05)
+    seg = sh.update(0.0, np.array([0.0, 0.04, 0.0]), R, 0.05)
+    t = 0.5 * seg.duration
+    Tl, Tr = seg.clamp("left", t)[0], seg.clamp("right", t)[0]
+    q_now = kl.ik(Tl, ql).q
+    q_next = kl.ik(seg.clamp("left", t + 0.0071)[0], q_now).q
+    tr = _tracker(kl, ql)
+    assert tr.set_target(seg.clamp("left", 10.0)[0], 0.0, 0.0, motion=seg).ok
+    tr.span.set_band((0.2515, 0.2525))             # the planned span 0.252 m, ± 0.5 mm: a lag of mm shows
+    tr.span.peer_clamp, tr.span.peer_stamp = seg.clamp("right", t - 0.02)[0][:3, 3], t - 0.02
+    assert not tr.span_worse(q_now, q_next, at=t + 0.0071)
+    tr.motion = None                               # the same step judged against the measurement itself
+    assert tr.span_worse(q_now, q_next, at=t + 0.0071)
+    tr.motion = seg
+    tr.span.peer_clamp = Tr[:3, 3] - np.array([0.0, 0.04, 0.0])     # stopped: 40 mm off the motion
+    assert tr.span_worse(q_now, q_next, at=t + 0.0071)
