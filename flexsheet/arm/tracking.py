@@ -273,7 +273,7 @@ class TargetTracker:
         clamp's twist through the Jacobian); None when IK refuses the point (counted in ``motion_refused``)."""
         T, twist = self.motion.clamp(self.kin.side, now)
         seed = self._motion_q if self._motion_q is not None else self.goal
-        res = self.kin.ik(T, seed, max_jump=self.max_jump)
+        res = self.kin.ik(T, seed, max_jump=self.max_jump, tol_pos=1e-7, tol_rot=1e-7)   # 0.1 µm: 1-2 iterations
         if not res.ok:
             self.motion_refused += 1
             return None

@@ -293,7 +293,7 @@ class ArmBridgeNode(Node):
             counters = ", ".join(f"{k} {v}" for k, v in self.link.counters().items())
             waits = f"; span waits {self.tracker.span.waits}" if self.tracker.span.waits else ""
             if self.tracker.motion_refused:
-                waits += f"; motion points refused by IK {self.tracker.motion_refused}"
+                waits += f"; motion points off IK {self.tracker.motion_refused}"
             self.state_message = f"{shown}; {self.link.name}: {counters}{waits}"
         st = rep.state
         if st is None:
