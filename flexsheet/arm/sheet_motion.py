@@ -40,7 +40,7 @@ from flexsheet.arm.kinematics import ArmKinematics
 from flexsheet.model import geometry
 
 __all__ = ["SheetLimits", "SheetSegment", "SheetShaper", "JointRates", "MotionError", "MIN_SHARE", "DOF",
-           "EXTRAPOLATE_S", "VELOCITY_PLANS", "plan_velocity"]
+           "EXTRAPOLATE_S", "VELOCITY_PLANS", "plan_velocity", "lsq_slope"]
 
 #: the state's size: centre (3), rotation vector (3), strain (1)
 DOF = 7
@@ -300,15 +300,22 @@ def plan_velocity(plans) -> tuple[np.ndarray, np.ndarray, float]:
     Raises ``ValueError`` for fewer than two plans or times that do not spread."""
     if len(plans) < 2:
         raise ValueError(f"plan_velocity needs at least two plans, got {len(plans)}")
-    t = np.array([p[0] for p in plans], float)
+    Rn = plans[-1][2]
+    x = np.array([np.concatenate([p[1], _log(Rn.T @ p[2]), [p[3]]]) for p in plans])
+    slope = lsq_slope([p[0] for p in plans], x)
+    return slope[:3], Rn @ slope[3:6], float(slope[6])
+
+
+def lsq_slope(t, x) -> np.ndarray:
+    """Slope (k,) of the least-squares line through samples ``x`` (n, k) at times ``t`` (n,) s. Raises
+    ``ValueError`` for times that do not spread."""
+    t = np.asarray(t, float)
     t = t - t.mean()
     tt = float(t @ t)
     if not tt > 0.0:
-        raise ValueError("plan_velocity: the plans' times do not spread")
-    Rn = plans[-1][2]
-    x = np.array([np.concatenate([p[1], _log(Rn.T @ p[2]), [p[3]]]) for p in plans])
-    slope = (t @ (x - x.mean(axis=0))) / tt
-    return slope[:3], Rn @ slope[3:6], float(slope[6])
+        raise ValueError("lsq_slope: the times do not spread")
+    x = np.asarray(x, float)
+    return (t @ (x - x.mean(axis=0))) / tt
 
 
 class JointRates:

@@ -24,7 +24,7 @@ import numpy as np
 
 from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, IKResult, outside_limits
 from flexsheet.arm.pull_limit import max_pull
-from flexsheet.arm.sheet_motion import SheetSegment
+from flexsheet.arm.sheet_motion import SheetSegment, lsq_slope
 from flexsheet.arm.span_guard import SpanGuard
 
 __all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S", "PEER_ON_MOTION"]
@@ -235,10 +235,7 @@ class TargetTracker:
         if len(h) < 2:
             self.velocity = np.zeros(6)
             return
-        t = np.array([x[0] for x in h])
-        t = t - t.mean()
-        q = np.array([x[1] for x in h])
-        self.velocity = (t @ (q - q.mean(axis=0))) / float(t @ t)
+        self.velocity = lsq_slope([x[0] for x in h], [x[1] for x in h])
 
     def status(self, now: float) -> str:
         """"ok", "hold:no_target" (none yet or timed out), "hold:<ik status>" (last target refused) or
