@@ -2,8 +2,8 @@
 planned one, every sample, moves included, and the cycles the fallback guards acted.
 
 The planned span at an instant is the sheet's motion both bridges were following then
-(:class:`flexsheet.arm.sheet_motion.SheetSegment`, rebuilt from the newest ``/arm/left/target`` before it; a
-target without a motion: its goal's strain), ``size·(1 + ε_plan(t))``; the true one is the world's
+(:class:`flexsheet.arm.sheet_motion.SheetSegment`, rebuilt from the newest ``/arm/left/target`` with a motion
+before it; a segment that does not rebuild: its goal's strain), ``size·(1 + ε_plan(t))``; the true one is the world's
 ``size·(1 + ε_true)`` (``/world/sheet``, signed: negative when slack), both with the planned sheet's side.
 The guards (the span guard's ``wait:span`` and the partner hold ``hold:peer``, :mod:`flexsheet.arm.tracking`) are
 the fault fallback: in a normal run they never act.
@@ -45,7 +45,7 @@ def _planned_strain(targets: list, stamps: np.ndarray) -> np.ndarray:
 
 
 def _goal_strain(m) -> float:
-    """The strain of a target's goal pose alone: its motion's goal when it has one, else NaN."""
+    """The strain of a target's motion's goal (the segment itself did not rebuild), else NaN."""
     return float(m.motion[3, 6]) if m.motion_t0 is not None else float("nan")
 
 
