@@ -130,6 +130,7 @@ class RendererNode(SheetTables, Node):
         self.pub = self.publisher(topics.RENDERED)
         self.image_pub = self.publisher(topics.PROJECTOR_IMAGE)
         self._dirty = False
+        self.viewpoint = Viewpoint(*eye_positions(self.eye, self.geometry.ipd))   # before the first frame
         if p.output == "window":
             await self._open_window()
         elif self.sim:     # one thread: the loop's; each redraw is charged the lab's render time
@@ -145,7 +146,6 @@ class RendererNode(SheetTables, Node):
         self.subscribe(topics.ARM_RIGHT_STATE, self.on_arm, qos=QoS.LATEST)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
         self.subscribe(topics.SHEET_TARGET, self.on_sheet_target, qos=QoS.LATEST)
-        self.viewpoint = Viewpoint(*eye_positions(self.eye, self.geometry.ipd))
         self.subscribe(topics.EYE_POSE, self.on_eye_pose, qos=QoS.LATEST)
         self.timer(1.0 / p.publish_rate, self.on_timer)
         self._request()

@@ -281,8 +281,14 @@ def test_twin_node_answers_an_independent_client_300_moves(c_client, tmp_path):
     q = np.array([cmds[i][1] for i in range(1, 301)])
     step = np.max(np.abs(np.diff(q, axis=0)))
     assert 0.001 < step < 0.01
-    err = np.array([np.max(np.abs(moves[i]["joint"] - q[i - 1])) for i in range(1, 301)])
-    assert err.max() <= step + 1e-6, (err.max(), step)                # JOINT = the command, within one step
+    # JOINT = the command its cycle executes: the packet's own, or a later one that arrived in the same cycle
+    # (newest wins; packets bunch when the machine stalls the client or the twin), never an earlier one
+    late = []                                                          # how many commands later each reply shows
+    for i in range(1, 301):
+        later = np.abs(moves[i]["joint"] - q[i - 1:]).max(axis=1)      # its own, then the later ones
+        assert later.min() < 1e-5, (i, later.min())                    # never an older command, always a sent one
+        late.append(int(np.flatnonzero(later < 1e-5)[0]))
+    assert np.mean(np.asarray(late) == 0) >= 0.9, late                 # mostly its own
     # the servo (FB_JOINT) follows: at the stroke's far end within tau·v, back home at the end
     fb = np.array([moves[i]["fb"] for i in range(1, 301)])
     assert np.max(np.abs(fb[149] - q[149])) < 0.01 and np.max(np.abs(fb[-1] - q[-1])) < 0.005
