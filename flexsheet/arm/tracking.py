@@ -27,7 +27,8 @@ from flexsheet.arm.pull_limit import max_pull
 from flexsheet.arm.sheet_motion import SheetSegment, lsq_slope
 from flexsheet.arm.span_guard import SpanGuard
 
-__all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S", "PEER_ON_MOTION"]
+__all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S", "PEER_ON_MOTION",
+           "SPAN_ON_MOTION"]
 
 #: goals the velocity is fitted over (16 at the camera's 48 Hz: the last 313 ms)
 VELOCITY_GOALS = 16
@@ -36,6 +37,11 @@ EXTRAPOLATE_MAX_S = 0.05
 #: m: a partner whose measured clamp is this close to the sheet's motion at its stamp follows it (the servo's lag
 #: at the planner's 0.3 m/s, 15 ms, is 4.5 mm)
 PEER_ON_MOTION = 0.01
+#: m: with both arms on the sheet's motion, a step waits only if it takes the clamp span further than this from
+#: the motion's own span (0.005 m is 0.02 clamp strain on the 0.240 m sheet, the most a plan may be over-stretched);
+#: the fixed band's floor sits only 0.0012 m under the planner's least stretch, so the arms' millimetre of
+#: tracking in a turn made one arm wait while the other moved on
+SPAN_ON_MOTION = 0.005
 
 
 class TargetRefused(ValueError):
@@ -129,24 +135,27 @@ class TargetTracker:
         clamp would come to rest braking from ``q_to`` (default ``q_to``). A service's goal (:meth:`move_to`: a
         registration's configurations, homing) is the operator's and is not judged. While both arms follow the
         sheet's motion, a partner whose measured clamp is on it (within :data:`PEER_ON_MOTION` of the motion at
-        its measurement's stamp) is judged where the motion has it at ``at``, against the step's end: its
-        measurement lags its command by the servo and a cycle, and judging against it, or this arm's braking
-        point, made the arms wait on each other in every fast move. Otherwise the braking point is judged
-        against the partner's measured clamp."""
+        its measurement's stamp) is judged where the motion has it at ``at``, against the step's end, and the
+        band is the motion's own span at ``at`` ± :data:`SPAN_ON_MOTION`: its measurement lags its command by
+        the servo and a cycle, and judging against it, this arm's braking point or the fixed band made the arms
+        wait on each other in fast moves and turns. Otherwise the braking point is judged against the
+        partner's measured clamp and the fixed band."""
         if self.manual is not None:
             return False
         guard = self.span
-        measured = guard.peer_clamp
+        measured, band = guard.peer_clamp, guard.band
         if (self.motion is not None and measured is not None and guard.peer_stamp is not None
-                and at is not None):
+                and at is not None and band is not None):
             other = "right" if self.kin.side == "left" else "left"
             at_meas = self.motion.clamp(other, guard.peer_stamp)[0][:3, 3]
             if float(np.linalg.norm(measured - at_meas)) <= PEER_ON_MOTION:
                 guard.peer_clamp = self.motion.clamp(other, at)[0][:3, 3]
+                span = float(np.linalg.norm(self.motion.clamp(self.kin.side, at)[0][:3, 3] - guard.peer_clamp))
+                guard.band = (max(span - SPAN_ON_MOTION, 1e-3), span + SPAN_ON_MOTION)
                 try:
                     return guard.worse(q_from, q_to)
                 finally:
-                    guard.peer_clamp = measured
+                    guard.peer_clamp, guard.band = measured, band
         return guard.worse(q_from, q_to if q_stop is None else q_stop)
 
     def move_to(self, q) -> np.ndarray:

@@ -148,3 +148,41 @@ def test_the_span_guard_judges_a_partner_on_the_motion_where_the_motion_has_it_n
     tr.motion = seg
     tr.span.peer_clamp = Tr[:3, 3] - np.array([0.0, 0.04, 0.0])     # stopped: 40 mm off the motion
     assert tr.span_worse(q_now, q_next, at=t + 0.0071)
+
+
+def test_on_the_motion_the_span_guard_keeps_the_motions_own_span_within_5_mm():
+    """Both arms on the sheet's motion: the band is the motion's span ± 5 mm (SPAN_ON_MOTION), not the fixed band
+    whose floor sits 1.2 mm under the planner's least stretch. A step 2 mm short of the motion (a turn's tracking)
+    goes on though the fixed band says it is out; a step that takes the span 6 mm short waits; an arm left 20 mm
+    over the span, its partner at rest on the motion's end, steps back toward it (no deadlock)."""
+    from flexsheet.arm.sheet_motion import SheetShaper
+    from flexsheet.arm.tracking import SPAN_ON_MOTION
+    from flexsheet.model.sheet import sheet_rotation
+    assert SPAN_ON_MOTION == pytest.approx(0.005)
+    kl, kr, ql, qr, _ = _home()
+    R = sheet_rotation([1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    sh = SheetShaper()
+    sh.update(0.0, np.zeros(3), R, 0.01)
+    seg = sh.update(0.0, np.array([0.0, 0.0, 0.03]), R, 0.01)        # planned span 0.2424 m
+    t = 0.5 * seg.duration
+    Tl, Tr = seg.clamp("left", t)[0], seg.clamp("right", t)[0]
+    span = float(np.linalg.norm(Tl[:3, 3] - Tr[:3, 3]))
+    assert span == pytest.approx(0.2424, abs=2e-4)
+    tr = _tracker(kl, ql)
+    tr.span.set_band((span - 0.0012, 0.264))                        # the fixed band: floor 1.2 mm under the plan
+    assert tr.set_target(seg.clamp("left", 10.0)[0], 0.0, 0.0, motion=seg).ok
+    tr.span.peer_clamp, tr.span.peer_stamp = Tr[:3, 3], t
+    toward = (Tr[:3, 3] - Tl[:3, 3]) / span                          # (3,) from this clamp to the partner's
+
+    def q_at(offset_m):                                              # this clamp moved offset_m toward the partner
+        T = Tl.copy()
+        T[:3, 3] += offset_m * toward
+        res = kl.ik(T, ql, max_jump=10.0)
+        assert res.ok
+        return res.q
+    assert not tr.span_worse(q_at(0.0015), q_at(0.002), at=t)      # 2 mm short: inside the motion's band
+    tr.motion = None
+    assert tr.span_worse(q_at(0.0015), q_at(0.002), at=t)          # the fixed band alone would have waited
+    tr.motion = seg
+    assert tr.span_worse(q_at(0.0055), q_at(0.006), at=t)          # 6 mm short and getting shorter: waits
+    assert not tr.span_worse(q_at(-0.020), q_at(-0.019), at=t)     # 20 mm over, stepping back: goes
