@@ -408,11 +408,14 @@ class SheetShaper:
         return out
 
     def update(self, t: float, origin, rotation, stretch: float, limits: SheetLimits | None = None,
-               velocity=None, lead: float = 0.0) -> SheetSegment:
+               velocity=None, lead: float = 0.0, current=None) -> SheetSegment:
         """The segment from the current motion at ``t`` s to the sheet at ``origin`` (3,) m, ``rotation`` (3, 3)
         and strain ``stretch``, under ``limits`` (default: the shaper's). ``velocity``: the goal's (centre m/s
         (3,), angular rad/s (3,) display frame, strain rate 1/s), or None (at rest); the goal is taken ``lead`` s
         ahead at that velocity (the plan's period: the motion is on the plan's track when the next plan comes).
+        ``current``: (origin (3,) m, rotation (3, 3), strain) of the sheet where the arms hold it (their measured
+        clamps), where a motion starts when there is none yet (the first plan, after :meth:`reset` or a failure);
+        None: it starts at the goal (the bridges' limiters then take the arms there joint by joint).
         Raises :class:`MotionError` when ruckig fails (the shaper then restarts at the next goal, and counts it
         in ``failures``)."""
         lim = limits or self.limits
@@ -423,10 +426,10 @@ class SheetShaper:
         if lead > 0.0:
             o, R, stretch = o + v * lead, _rot(w * lead) @ R, stretch + ed * lead
         if self.segment is None:
-            frame = R
+            frame = R if current is None else np.asarray(current[1], float)
             start = np.zeros((3, DOF))
-            start[0, :3] = o
-            start[0, 6] = stretch
+            start[0, :3] = o if current is None else np.asarray(current[0], float)
+            start[0, 6] = stretch if current is None else float(current[2])
         else:
             x = self.segment.state(t)[0]
             frame = self.segment.rotation(x[3:6])

@@ -59,7 +59,7 @@ from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.calibration.sheet import TERMS
 from flexsheet.model.force_depth import ForceDepth
 from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
-from flexsheet.model.sheet import clamp_poses, sheet_rotation
+from flexsheet.model.sheet import clamp_poses, frame_from_clamps, sheet_rotation
 from flexsheet.model.tension import SheetMaterial, clamp_force
 from flexsheet.model.timing import LAB
 from flexsheet.planning.compliance import SceneCompliance
@@ -73,7 +73,16 @@ from flexsheet.planning.surface_planner import PlannerConfig, SurfacePlanner, sc
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.runtime.qos import QoS
-from messages import ArmTarget, EyePose, Fingertip, ObjectDeformation, ObjectForceDepth, SheetTarget, topics
+from messages import (
+    ArmJointState,
+    ArmTarget,
+    EyePose,
+    Fingertip,
+    ObjectDeformation,
+    ObjectForceDepth,
+    SheetTarget,
+    topics,
+)
 
 __all__ = ["PlannerParams", "PlannerNode", "fem_solves_scene"]
 
@@ -225,6 +234,9 @@ class PlannerNode(Node):
         self.subscribe(topics.DEFORMATION, self.on_deformation, qos=QoS.LATEST)
         self.subscribe(topics.FORCE_DEPTH, self.on_force_depth)
         self.subscribe(topics.EYE_POSE, self.on_eye_pose, qos=QoS.LATEST)
+        self._clamps: dict[str, np.ndarray] = {}               # the arms' measured clamp poses (4, 4)
+        self.subscribe(topics.ARM_LEFT_STATE, self.on_arm_state, qos=QoS.LATEST)
+        self.subscribe(topics.ARM_RIGHT_STATE, self.on_arm_state, qos=QoS.LATEST)
         self.pull_guard = PullGuard({"left": cfg.reach.left_base, "right": cfg.reach.right_base}, p.pull_margin)
         self._pull_said: tuple[int, float] | None = None     # (joint, limit N) last said
         self._cap_pull(*clamp_poses(np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]),
@@ -242,6 +254,21 @@ class PlannerNode(Node):
             self.log.info("clamp force limited to %.1f N by the %s arm's J%d torque at its target "
                           "(flexsheet/arm/pull_limit.py; material max_force %.0f N)", limit, side, joint,
                           self.planner.cfg.material.max_force)
+
+    def on_arm_state(self, msg: ArmJointState) -> None:
+        """An arm's measured clamp pose (display frame): where a new sheet motion starts (:meth:`_motion`)."""
+        self._clamps[msg.arm] = np.asarray(msg.pose, float)
+
+    def _held_sheet(self, size: float):
+        """(origin (3,) m, rotation (3, 3), strain) of the sheet as the arms' measured clamps hold it, or None
+        (a state missing or not a sheet: :func:`flexsheet.model.sheet.frame_from_clamps`)."""
+        if len(self._clamps) < 2:
+            return None
+        try:
+            o, n, u, a = frame_from_clamps(self._clamps["left"], self._clamps["right"])
+        except ValueError:
+            return None
+        return o, sheet_rotation(n, u), max(2.0 * a / size - 1.0, 0.0)   # slack: from a straight sheet
 
     def on_eye_pose(self, msg: EyePose) -> None:
         """The viewer's tracked eye: the keep-out follows it; lost glasses hold the sheet (:class:`HeadGuard`)."""
@@ -391,7 +418,9 @@ class PlannerNode(Node):
             seg = self.shaper.update(now, plan.origin, R, plan.stretch,
                                      SheetLimits.from_rates(lim.v_max, lim.a_max, lim.w_max, lim.alpha_max,
                                                             lim.stretch_rate),
-                                     velocity=velocity, lead=min(period, 0.05) if velocity is not None else 0.0)
+                                     velocity=velocity, lead=min(period, 0.05) if velocity is not None else 0.0,
+                                     current=None if self.shaper.segment is not None
+                                     else self._held_sheet(float(plan.sheet_size)))
         except MotionError as exc:
             if self.shaper.failures == 1:
                 self.log.warning("sheet motion: %s; the arms stream to this target joint by joint (said once)", exc)

@@ -47,6 +47,22 @@ def test_the_span_is_the_planned_one_all_along_a_large_turn_and_the_twist_is_the
     assert np.allclose(seg.clamp("left", 10.0)[0], clamp_poses(o, R[:, 0], R[:, 1], eps)[0], atol=1e-12)
 
 
+def test_the_first_motion_starts_where_the_arms_hold_the_sheet_not_at_the_goal():
+    """The first plan (or the first after a reset) is 22 mm and 20° from the home pose the arms hold: given the
+    held sheet, the motion starts there at rest and reaches the goal; without it, it starts at the goal (the
+    arms then jump to it joint by joint: 34 mm off the motion and a 22 mm span error in the organ's start)."""
+    home = (np.zeros(3), R0, 0.0)
+    goal_o, goal_R = np.array([-0.002, -0.022, 0.007]), _turn(20.0)
+    seg = SheetShaper().update(0.0, goal_o, goal_R, 0.012, current=home)
+    assert np.allclose(seg.clamp("left", 0.0)[0], clamp_poses(np.zeros(3), R0[:, 0], R0[:, 1], 0.0)[0], atol=1e-12)
+    assert np.allclose(seg.clamp("left", 0.0)[1], 0.0, atol=1e-12)              # at rest
+    assert seg.duration > 0.1
+    o, R, eps = seg.goal_pose()
+    assert np.allclose(o, goal_o, atol=1e-9) and np.allclose(R, goal_R, atol=1e-9) and eps == pytest.approx(0.012)
+    cold = SheetShaper().update(0.0, goal_o, goal_R, 0.012)
+    assert cold.duration == 0.0 and np.allclose(cold.clamp("left", 0.0)[0][:3, 3], seg.clamp("left", 9.0)[0][:3, 3])
+
+
 def test_a_replan_mid_move_continues_in_pose_velocity_and_acceleration():
     sh = SheetShaper()
     sh.update(0.0, [0.0, 0.0, 0.0], R0, 0.01)

@@ -1,0 +1,143 @@
+"""``flexsheet bench sim``: where the simulated display's CPU time goes, per simulated second.
+
+It runs ``flexsheet launch FILE --duration S --out DIR`` (default ``launch/sim.yaml``, 20 simulated seconds, the
+scene and the truth seed of the file unless ``--set`` changes them) and reads what the launch writes at its stop:
+``DIR/sim_clock.json`` (simulated and wall span, each node's handler CPU on this host) and
+``DIR/cpu_sim_clock.json`` (the process's CPU). Reported, in CPU-seconds per simulated second:
+
+* each node: the thread CPU its handlers and timers took (``host_handler_cpu_s``), against :data:`BUDGET`;
+* ``runtime``: the rest of the process (the in-process bus, the lockstep scheduler, the codec, the event loop,
+  worker threads), against its budget;
+* ``total`` against ``1 / rtf_target`` (one process on one core: ``rtf_target`` simulated seconds per wall
+  second at most) and the run's ``realtime_factor`` (simulated over wall seconds, start-up excluded).
+
+The budgets split the target's one core among the nodes (an assumption: roughly each node's share of the work a
+lab PC does, with a sixth left to the runtime); the verdict is each against its budget. Writes ``sim.json`` and
+``sim.png`` (bars per node, the budget ticked) to ``--out`` when given. Timings mean something only on a quiet
+machine: the load average before the run is reported with them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+__all__ = ["BUDGET", "RTF_TARGET", "cost_per_sim_s", "main"]
+
+#: the target: simulated seconds per wall second of the default run
+RTF_TARGET = 1.5
+#: CPU-s per simulated s each node may take (their sum is 1 / RTF_TARGET, one core); "runtime": the process's rest
+BUDGET: dict[str, float] = {
+    "camera": 0.07, "head_camera": 0.06, "renderer": 0.07, "world": 0.07, "planner": 0.07, "arm_left": 0.035,
+    "arm_right": 0.035, "triangulator": 0.04, "fem": 0.04, "ctrl_left": 0.01, "ctrl_right": 0.01, "viz": 0.01,
+    "recorder": 0.02, "runtime": 0.12,
+}
+
+
+def cost_per_sim_s(sim_clock: dict, process: dict) -> dict:
+    """CPU-s per simulated s from a launch's ``sim_clock.json`` (``sim_clock``) and ``cpu_<container>.json``
+    (``process``) dicts: ``{"nodes": {name: x}, "runtime": x, "total": x, "sim_s", "wall_s",
+    "realtime_factor"}``. Raises ``ValueError`` naming the key when a file lacks one or the span is not > 0."""
+    for key in ("sim_s", "wall_s", "host_handler_cpu_s"):
+        if key not in sim_clock:
+            raise ValueError(f"sim_clock.json has no {key!r}: not a 'clock: sim' launch's output")
+    if "process_cpu_s" not in process:
+        raise ValueError("cpu_<container>.json has no 'process_cpu_s'")
+    sim_s = float(sim_clock["sim_s"])
+    if not sim_s > 0.0:
+        raise ValueError(f"sim_s must be > 0, got {sim_s!r}: the run never advanced simulated time")
+    nodes = {n: float(v) / sim_s for n, v in sim_clock["host_handler_cpu_s"].items()}
+    total = float(process["process_cpu_s"]) / sim_s
+    return {"nodes": nodes, "runtime": max(total - sum(nodes.values()), 0.0), "total": total, "sim_s": sim_s,
+            "wall_s": float(sim_clock["wall_s"]), "realtime_factor": float(sim_clock["realtime_factor"])}
+
+
+def _chart(result: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = sorted(result["per_sim_s"].items(), key=lambda kv: kv[1]["cpu"])
+    names = [k for k, _ in rows]
+    fig, ax = plt.subplots(figsize=(7.5, 0.32 * len(rows) + 1.6))
+    colors = ["tab:green" if r["ok"] else "tab:red" for _, r in rows]
+    ax.barh(names, [r["cpu"] for _, r in rows], color=colors)
+    ax.scatter([r["budget"] for _, r in rows], names, marker="|", s=300, color="k", label="budget")
+    ax.set_xlabel("CPU-seconds per simulated second")
+    t = result["total"]
+    ax.set_title(f"bench sim: {t['cpu']:.2f} CPU-s per simulated s (target ≤ {t['budget']:.2f}: "
+                 f"{'met' if t['ok'] else 'MISSED'}); realtime factor {result['realtime_factor']:.2f} "
+                 f"(target ≥ {RTF_TARGET})", fontsize=9)
+    ax.legend(loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the benchmark; print a table (one JSON object with ``--json``); 0 when the total and the realtime
+    factor meet their targets, 1 when not, 2 when the launch failed."""
+    ap = argparse.ArgumentParser(prog="flexsheet bench sim", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter,
+                                 epilog="example: flexsheet bench sim --duration 20 --out docs/figures/bench\n"
+                                        "         flexsheet bench sim --set scene=launch/scenes/organ.yaml --json")
+    ap.add_argument("--file", default="launch/sim.yaml", help="the launch file (default launch/sim.yaml)")
+    ap.add_argument("--duration", type=float, default=20.0, help="simulated seconds (default 20)")
+    ap.add_argument("--set", action="append", default=[], metavar="NODE.KEY=VALUE", help="passed to the launch")
+    ap.add_argument("--domain", type=int, default=None, help="the launch's domain (default: as the launch)")
+    ap.add_argument("--json", action="store_true", help="print one JSON object")
+    ap.add_argument("--out", default="", help="also write DIR/sim.json and DIR/sim.png")
+    args = ap.parse_args(argv)
+    if not args.duration > 0.0:
+        ap.error(f"--duration must be > 0 simulated seconds, got {args.duration!r}")
+    load0 = os.getloadavg()
+    with tempfile.TemporaryDirectory(prefix="flexsheet-bench-sim-") as tmp:
+        cmd = [sys.executable, "-m", "flexsheet", "launch", args.file, "--duration", str(args.duration),
+               "--out", tmp] + [x for s in args.set for x in ("--set", s)]
+        if args.domain is not None:
+            cmd += ["--domain", str(args.domain)]
+        print(f"[bench sim] {' '.join(cmd[2:])} (load average {load0[0]:.2f}) ...", file=sys.stderr, flush=True)
+        t0 = time.monotonic()
+        proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        wall = time.monotonic() - t0
+        files = {"sim_clock": Path(tmp) / "sim_clock.json"}
+        files["process"] = next(iter(sorted(Path(tmp).glob("cpu_*.json"))), Path(tmp) / "cpu_sim_clock.json")
+        if proc.returncode != 0 or not all(f.is_file() for f in files.values()):
+            sys.stderr.write(proc.stdout[-4000:])
+            print(f"[bench sim] the launch exited {proc.returncode} without its clock files", file=sys.stderr)
+            return 2
+        cost = cost_per_sim_s(json.loads(files["sim_clock"].read_text()), json.loads(files["process"].read_text()))
+    per = {n: {"cpu": round(v, 4), "budget": BUDGET.get(n, 0.01), "ok": v <= BUDGET.get(n, 0.01)}
+           for n, v in cost["nodes"].items()}
+    per["runtime"] = {"cpu": round(cost["runtime"], 4), "budget": BUDGET["runtime"],
+                      "ok": cost["runtime"] <= BUDGET["runtime"]}
+    budget_total = round(1.0 / RTF_TARGET, 4)
+    result = {"title": "bench sim: CPU-seconds per simulated second, per node", "units": "CPU-s per simulated s",
+              "file": args.file, "set": args.set, "duration_sim_s": round(cost["sim_s"], 3),
+              "wall_s": round(cost["wall_s"], 2), "launch_wall_s": round(wall, 2),
+              "realtime_factor": round(cost["realtime_factor"], 3), "rtf_target": RTF_TARGET,
+              "load_average_before": [round(x, 2) for x in load0], "per_sim_s": per,
+              "total": {"cpu": round(cost["total"], 4), "budget": budget_total, "ok": cost["total"] <= budget_total}}
+    result["verdict"] = ("met" if result["total"]["ok"] and cost["realtime_factor"] >= RTF_TARGET else "MISSED")
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "sim.json").write_text(json.dumps(result, indent=1) + "\n")
+        _chart(result, out / "sim.png")
+    if args.json:
+        print(json.dumps(result, indent=1))
+    else:
+        print(f"{'node':14s} {'CPU-s/sim-s':>11s} {'budget':>7s}")
+        for n, r in sorted(per.items(), key=lambda kv: -kv[1]["cpu"]):
+            print(f"{n:14s} {r['cpu']:11.3f} {r['budget']:7.3f} {'' if r['ok'] else 'OVER'}")
+        t = result["total"]
+        print(f"{'total':14s} {t['cpu']:11.3f} {t['budget']:7.3f} {'' if t['ok'] else 'OVER'}")
+        print(f"realtime factor {cost['realtime_factor']:.2f} (target ≥ {RTF_TARGET}): {result['verdict']}")
+    return 0 if result["verdict"] == "met" else 1
