@@ -236,27 +236,39 @@ class SheetSegment:
         Raises ``ValueError`` for another arm name."""
         if arm not in ("left", "right"):
             raise ValueError(f"arm must be 'left' or 'right', got {arm!r}")
+        return self._clamps(t, accel, (arm,))[0]
+
+    def _clamps(self, t: float, accel: bool, arms) -> list[tuple[np.ndarray, ...]]:
+        """:meth:`clamp` for each of ``arms`` from one evaluation of the trajectory at ``t``."""
         x, xd, xdd = self.state(t)
         r = x[3:6]
         R = self.frame @ _rot(r)
         Jr = _right_jacobian(r)
         w = R @ (Jr @ xd[3:6])                     # angular velocity, display frame
-        s = 1.0 if arm == "left" else -1.0
         a = 0.5 * self.size * (1.0 + x[6])
         ad = 0.5 * self.size * xd[6]
         u = R[:, 1]
         wxu = _cross(w, u)
-        T = np.eye(4)
-        T[:3, :3] = R
-        T[:3, 3] = x[:3] + s * a * u
-        v = xd[:3] + s * (ad * u + a * wxu)
-        twist = np.concatenate([R.T @ v, R.T @ w])
-        if not accel:
-            return T, twist
-        al = R @ (Jr @ xdd[3:6])                   # angular acceleration (first order in r), display frame
-        add = 0.5 * self.size * xdd[6]
-        acc = xdd[:3] + s * (add * u + 2.0 * ad * wxu + a * (_cross(al, u) + _cross(w, wxu)))
-        return T, twist, np.concatenate([R.T @ acc, R.T @ al])
+        if accel:
+            al = R @ (Jr @ xdd[3:6])               # angular acceleration (first order in r), display frame
+            add = 0.5 * self.size * xdd[6]
+            alxu_wwxu = _cross(al, u) + _cross(w, wxu)
+            ang_acc = R.T @ al
+        ang = R.T @ w
+        out = []
+        for arm in arms:
+            s = 1.0 if arm == "left" else -1.0
+            T = np.eye(4)
+            T[:3, :3] = R
+            T[:3, 3] = x[:3] + s * a * u
+            v = xd[:3] + s * (ad * u + a * wxu)
+            twist = np.concatenate([R.T @ v, ang])
+            if not accel:
+                out.append((T, twist))
+                continue
+            acc = xdd[:3] + s * (add * u + 2.0 * ad * wxu + a * alxu_wwxu)
+            out.append((T, twist, np.concatenate([R.T @ acc, ang_acc])))
+        return out
 
     def fields(self) -> dict:
         """This segment as :class:`messages.ArmTarget`'s ``motion_*`` fields (the inverse of :meth:`from_fields`)."""
@@ -339,7 +351,7 @@ class JointRates:
         if not accel_allowance >= 1.0:
             raise ValueError(f"accel_allowance must be >= 1, got {accel_allowance!r}")
         self.accel_allowance = float(accel_allowance)
-        self._jinv: dict[str, list[np.ndarray]] = {}
+        self._jinv: dict[str, np.ndarray] = {}     # side: (n, 6, 6) inverse Jacobians
 
     def at(self, joints: dict) -> None:
         """The arms' joints (6,) rad to map through: {side: [q, ...]} (e.g. the IK of this plan's targets and
@@ -352,7 +364,7 @@ class JointRates:
                     out.append(np.linalg.inv(self.kin[side].jacobian(q)))
                 except np.linalg.LinAlgError:
                     pass
-            self._jinv[side] = out
+            self._jinv[side] = np.asarray(out).reshape(-1, 6, 6)
 
     def ratios(self, seg: SheetSegment) -> tuple[float, float]:
         """(peak joint speed / ``qd_max``, peak joint acceleration / (``accel_allowance`` × ``qdd_max``)) over both
@@ -360,15 +372,16 @@ class JointRates:
         (a correction of the finger's tremor, which the bridge's limiter absorbs in a fraction of a mm): slowing
         every segment for it made the sheet lag the plan twice as far, while a large move's sustained
         acceleration still slows it (``tests/unit/arm/test_sheet_motion.py``)."""
-        if seg.duration <= 0.0 or not any(self._jinv.values()):
+        sides = [s for s, j in self._jinv.items() if len(j)]
+        if seg.duration <= 0.0 or not sides:
             return 0.0, 0.0
         rv = ra = 0.0
-        for side, jinvs in self._jinv.items():
-            for k in range(self.samples):
-                _, tw, dtw = seg.clamp(side, seg.t0 + seg.duration * (k + 0.5) / self.samples, accel=True)
-                for Ji in jinvs:
-                    rv = max(rv, float(np.max(np.abs(Ji @ tw) / self.qd_max)))
-                    ra = max(ra, float(np.max(np.abs(Ji @ dtw) / self.qdd_max)))
+        for k in range(self.samples):
+            clamps = seg._clamps(seg.t0 + seg.duration * (k + 0.5) / self.samples, True, sides)
+            for side, (_, tw, dtw) in zip(sides, clamps, strict=True):
+                Ji = self._jinv[side]                                   # (n, 6, 6)
+                rv = max(rv, float(np.max(np.abs(Ji @ tw) / self.qd_max)))
+                ra = max(ra, float(np.max(np.abs(Ji @ dtw) / self.qdd_max)))
         return rv, ra / self.accel_allowance
 
 
