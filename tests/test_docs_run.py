@@ -214,7 +214,7 @@ CHEAP: dict[str, tuple[str, str]] = {
     "--set hosts.arm2.address=127.0.0.3 --set world.loop=true --out out/lab": (
         "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
         "--set hosts.arm2.address=127.0.0.3 --set world.loop=true --out out/lab --check",
-        "runs until Ctrl-C; tests/system/test_live_registration.py runs it (plus world.sheet_fem={prebuild: []})"),
+        "runs until Ctrl-C; tests/system/test_live_registration.py runs it"),
     "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
     "--set hosts.arm2.address=127.0.0.3": (
         "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "

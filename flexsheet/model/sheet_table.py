@@ -146,6 +146,18 @@ class IndentTable:
             np.savez_compressed(tmp, x=self.x, y=self.y, W=self.W, F=self.F)
             os.replace(tmp, path)
 
+    @classmethod
+    def from_arrays(cls, physics: SheetPhysics, depths, positions, x, y, W, F) -> IndentTable:
+        """A table of solutions solved elsewhere: node coordinates ``x`` (nx,), ``y`` (ny,) m, deflections ``W``
+        (P, P, S, nx, ny) m and forces ``F`` (P, P, S) N over ``positions`` (P) × ``depths`` (S); nothing is
+        built or cached."""
+        tab = cls.__new__(cls)
+        tab.physics, tab.mesh, tab.cache_dir, tab.built_from_cache = physics, {}, None, True
+        tab.depths, tab.positions = np.asarray(depths, float), np.asarray(positions, float)
+        tab.x, tab.y, tab.W, tab.F = np.asarray(x, float), np.asarray(y, float), np.asarray(W), np.asarray(F, float)
+        tab.key = cls.key_of(physics, tab.depths, tab.positions)
+        return tab
+
     @staticmethod
     def key_of(physics: SheetPhysics, depths, positions, mesh: dict | None = None) -> str:
         """The cache key (20 hex digits) of a table: a hash of everything that defines it."""

@@ -76,7 +76,6 @@ class TwinSource:
         """The probe's readings (:class:`flexsheet.calibration.sheet.Press`) for each (stretch, u, v, depths) of
         ``plan`` on the true sheet (:class:`flexsheet.twin.load_cell.LoadCellTwin`)."""
         cell = self._load_cell()
-        cell.prepare([s for s, _, _, _ in plan])
         return [r for s, u, v, ds in plan for r in cell.press(s, u, v, ds)]
 
     def _load_cell(self):

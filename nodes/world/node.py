@@ -18,12 +18,10 @@ truth (:class:`flexsheet.twin.truth.TwinTruth`, param ``twin: {realism, truth_se
   stamped with the time its pose was true — the mean stamp of the two joint states it comes from — so a world
   tick that runs late does not show as the display's lag in Table I (the finger's shape of a push is the
   finger's at publication).
-  The FEM tables are cached on disk per truth and clamp strain. Those of ``sheet_fem.prebuild`` (the clamp
-  strains the bridges' span band lets a run reach) are built in niced worker processes before the script
-  starts — on a simulated clock before simulated time starts — with a progress line per table. A strain
-  outside them is built when a push first needs it: on a simulated clock while simulated time waits (the
-  loop stays free: heartbeats, Ctrl-C); on the wall clock in a worker meanwhile, the pushed sheet published
-  with its depth but a flat ``membrane`` until it is ready (logged once).
+  The true sheet comes from the shipped table family (:class:`flexsheet.twin.truth_sheet.TruthSheet`: the
+  drawn modulus and thickness scale its force, pre-strain and grip slip shift its strain), so a new truth seed
+  builds no table and simulated time starts at once; a family with tables missing stops the node at setup with
+  the command that ships them.
 * Head: the viewer's true head (:mod:`flexsheet.twin.head`: a seeded slow sway about V, a scripted lean-in
   toward the sheet and occlusions of the glasses, param ``head``; ``head.still: true`` keeps the eye at V) on
   ``/world/head`` at ``rate_hz``, for the head camera's twin and the report.
@@ -39,49 +37,26 @@ truth (:class:`flexsheet.twin.truth.TwinTruth`, param ``twin: {realism, truth_se
 
 from __future__ import annotations
 
-import asyncio
-import dataclasses
 import logging
 import math
-import multiprocessing
-import time
 
 import numpy as np
 from pydantic import Field, field_validator
 
 from flexsheet.model.scene_parts import SceneError
 from flexsheet.model.scenes import Scene, load_scene
-from flexsheet.runtime.background import await_worker, lower_priority, start_worker
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.runtime.qos import QoS
 from flexsheet.twin.finger import FingerScript, after
 from flexsheet.twin.head import Viewer
 from flexsheet.twin.truth import TwinTruth
-from flexsheet.twin.world import TruePhysics, build_table
-from flexsheet.twin.world_config import SheetFemConfig, WorldConfig
+from flexsheet.twin.world import TruePhysics
+from flexsheet.twin.world_config import WorldConfig
 from messages import ArmJointState, ContactTruth, FingerTruth, HeadTruth, Heartbeat, SheetState
 from messages import topics as T
 
-__all__ = ["WorldNode", "WorldParams", "Segment", "SheetFemParams"]
-
-
-SheetFemParams = params_model(
-    "SheetFemParams",
-    """The true sheet's FEM tables (:mod:`flexsheet.twin.world`): ``stretch_step`` clamp strain between tables;
-    ``prebuild`` [lo, hi] the clamp strains whose tables are ready before the script (and simulated time)
-    starts, built by ``workers`` processes at once (first run of a truth seed: minutes, with progress; then
-    cached), ``[]`` for none; ``h_fine``/``h_coarse`` m element sizes; ``cache_dir`` (default
-    ``$FLEXSHEET_CACHE/sheet_fem`` or ``~/.cache/flexsheet/sheet_fem``); ``worker_nice``: niceness of the
-    worker processes. Each is a field of — defined, defaulted and range-checked in —
-    :class:`flexsheet.twin.world_config.SheetFemConfig`; ``config()`` gives it, ``prebuild_nodes()`` the table
-    nodes of ``prebuild``.""",
-    config_fields(SheetFemConfig),
-    check=lambda cfg: build(SheetFemConfig, cfg),
-    methods={"config": lambda self: build(SheetFemConfig, self),
-             "prebuild_nodes": lambda self: build(SheetFemConfig, self).prebuild_nodes()},
-    module=__name__,
-)
+__all__ = ["WorldNode", "WorldParams", "Segment"]
 
 
 Segment = params_model(
@@ -122,27 +97,21 @@ def _scene_file(cls, v: str | None) -> str | None:
     return v
 
 
-#: the params of :class:`WorldConfig` that come before ``sheet_fem`` in ``WorldParams`` (the others after it)
-_BEFORE_SHEET_FEM = ("rate_hz", "sheet_rate_hz", "membrane_grid", "twin")
-_AFTER_SHEET_FEM = tuple(f.name for f in dataclasses.fields(WorldConfig) if f.name not in _BEFORE_SHEET_FEM)
-
 WorldParams = params_model(
     "WorldParams",
     """``script``: segments played in order; ``rate_hz`` of ``/world/finger``; ``sheet_rate_hz`` of
     ``/world/sheet``; ``membrane_grid`` G (G×G deflection samples of the true shape); ``twin``: the hidden
-    truth (:class:`~flexsheet.twin.truth_choice.TruthChoice`); ``sheet_fem``: the true sheet's FEM tables (:class:`SheetFemParams`);
+    truth (:class:`~flexsheet.twin.truth_choice.TruthChoice`);
     ``sheet_size`` m: unstretched sheet side between the clamps (for the stretch); ``start_delay`` s before the
     script starts (lets the graph connect and the arms reach the first pose), counted from the heartbeat of the
     last node named in ``start_after`` (node names of the launch file; empty: from the world's own start) or
     from ``start_timeout`` s of waiting for them; ``loop``: repeat until Ctrl-C;
     ``scene``: the scene file whose stroke path the finger follows (launch/scenes/*.yaml; none: the paper's
     cylinder by the segments' own parameters); ``progress_period`` s.
-    ``script``, ``sheet_fem`` and ``scene`` are the node's own; every other param is a field of — defined,
+    ``script`` and ``scene`` are the node's own; every other param is a field of — defined,
     defaulted and range-checked in — :class:`flexsheet.twin.world_config.WorldConfig`.""",
     {"script": (list[Segment], Field(default_factory=lambda: list(DEFAULT_SCRIPT), min_length=1))},
-    config_fields(WorldConfig, exclude=_AFTER_SHEET_FEM),
-    {"sheet_fem": (SheetFemParams, Field(default_factory=SheetFemParams))},
-    config_fields(WorldConfig, exclude=_BEFORE_SHEET_FEM),
+    config_fields(WorldConfig),
     validators={"_scene_file": field_validator("scene")(_scene_file)},
     module=__name__,
     scene=(str | None, Field(default=None)),
@@ -167,13 +136,11 @@ class WorldNode(Node):
         self.head_pub = self.publisher(T.HEAD_TRUTH)
         self.truth = TwinTruth.draw(p.twin.truth_seed, p.twin.realism)
         self.head = p.head.motion(Viewer.draw(p.twin.truth_seed, p.twin.realism), p.twin.truth_seed)
-        self.phys = TruePhysics(self.truth, p.sheet_fem.config(), size=p.sheet_size)
+        self.phys = TruePhysics(self.truth, size=p.sheet_size)    # FileNotFoundError: family not shipped
+        self.phys.sheet.preload()
         self.poses: dict[str, np.ndarray] = {}
         self.pose_stamps: dict[str, float] = {}
         self.finger = self.scripts[0].position(0.0)
-        self._worker: multiprocessing.process.BaseProcess | None = None
-        self._building: float | None = None
-        self._failed: set[float] = set()
         self._warned_flat = False
         self.subscribe(T.ARM_LEFT_STATE, self.on_arm, qos=QoS.LATEST)
         self.subscribe(T.ARM_RIGHT_STATE, self.on_arm, qos=QoS.LATEST)
@@ -182,9 +149,6 @@ class WorldNode(Node):
         self.t_setup = self.monotonic()
         if self.waiting_for:
             self.subscribe(T.DIAGNOSTICS, self.on_heartbeat, qos=QoS.KEEP_ALL)
-        await self._prebuild(p.sheet_fem.prebuild_nodes())
-        if self.stopping:          # Ctrl-C during the tables: nothing else to set up
-            return
         self.t0: float | None = None
         self._arm_t0()
         self.last_progress = 0.0
@@ -207,11 +171,6 @@ class WorldNode(Node):
                       "" if self.t0 is not None else
                       f" (after {self._waiting_text()})")
 
-    async def teardown(self) -> None:
-        if self._worker is not None and self._worker.is_alive():
-            self._worker.terminate()
-            self._worker.join(timeout=1.0)
-
     # ------------------------------------------------------------------------------------------ pause
     def srv_pause(self, args: dict) -> str:
         if self.paused_at is None:
@@ -227,9 +186,9 @@ class WorldNode(Node):
             self.paused_at = None
         return "running"
 
-    # ------------------------------------------------------------------------------------------ FEM tables
+    # ------------------------------------------------------------------------------------------ start
     def _arm_t0(self) -> None:
-        """Start the script clock unless it must wait for the first FEM table or a node of ``start_after``."""
+        """Start the script clock unless it must wait for a node of ``start_after``."""
         if self.waiting_for and self.monotonic() - self.t_setup > self.params.start_timeout:
             self.log.warning("starting the script without a heartbeat from %s after %g s (start_timeout)",
                              ", ".join(sorted(self.waiting_for)), self.params.start_timeout)
@@ -248,86 +207,6 @@ class WorldNode(Node):
             self.log.info("%s is up (%.1f s after the world)%s", msg.node, self.monotonic() - self.t_setup,
                           "" if self.waiting_for else f"; the script starts in {self.params.start_delay:.1f} s")
             self._arm_t0()
-
-    def _spawn(self, node: float) -> multiprocessing.process.BaseProcess:
-        """A started, niced worker process building table node ``node`` (never blocks the loop)."""
-        p = self.params
-        proc = multiprocessing.get_context("spawn").Process(
-            target=_build_worker, daemon=True, name=f"sheet-fem-{node:g}",
-            args=(p.twin.truth_seed, p.twin.realism, node, p.sheet_size, self.phys.config, p.sheet_fem.worker_nice))
-        start_worker(proc)                      # SIGINT ignored from its first instruction
-        return proc
-
-    async def _prebuild(self, nodes: list[float]) -> None:
-        """Load the tables of ``nodes`` (clamp strains), building the missing ones in ``sheet_fem.workers``
-        worker processes at once before the script — and on a simulated clock simulated time — starts, one
-        progress line per table. The loop stays free meanwhile (the container's heartbeats, signals); a stop
-        ends it within 0.1 s, the workers terminated. A table that fails is logged and not tried again."""
-        missing = [n for n in nodes if not self.phys.try_load(n)]
-        if not missing:
-            return
-        p = self.params
-        t0 = time.monotonic()
-        self.log.info("true sheet (%s truth, seed %d): building %d FEM table(s) at clamp strains %.3f-%.3f before "
-                      "the script starts, %d at a time (about 30-90 s each; cached for later runs)", p.twin.realism,
-                      p.twin.truth_seed, len(missing), missing[0], missing[-1], p.sheet_fem.workers)
-        queue, running, done = list(missing), {}, 0
-        try:
-            while queue or running:
-                while queue and len(running) < p.sheet_fem.workers:
-                    node = queue.pop(0)
-                    running[node] = (self._spawn(node), time.monotonic())
-                await asyncio.sleep(0.1)
-                if self.stopping:
-                    self.log.info("stopped while building the true sheet's tables (%d of %d built)", done,
-                                  len(missing))
-                    return
-                for node, (proc, ts) in list(running.items()):
-                    if proc.is_alive():
-                        continue
-                    del running[node]
-                    done += 1
-                    ok = self.phys.try_load(node)
-                    if not ok:
-                        self._failed.add(node)
-                    self.log.info("true sheet table %d/%d (clamp strain %.3f) %s in %.0f s", done, len(missing), node,
-                                  "built" if ok else f"FAILED (worker exit {proc.exitcode})", time.monotonic() - ts)
-        finally:
-            for proc, _ in running.values():
-                if proc.is_alive():
-                    proc.terminate()
-            for proc, _ in running.values():
-                proc.join(timeout=1.0)
-        self.log.info("true sheet tables ready after %.0f s", time.monotonic() - t0)
-
-    def _start_build(self, node: float) -> None:
-        """Build table node ``node`` in a worker process (:meth:`_spawn`); :meth:`_poll_build` collects it."""
-        self._worker = self._spawn(node)
-        self._building = node
-        self.log.warning("the true sheet reached clamp strain %.3f, whose FEM table was not prebuilt "
-                         "(sheet_fem.prebuild %s): building it in a worker process (pid %s)%s", node,
-                         list(self.params.sheet_fem.prebuild), self._worker.pid,
-                         " while simulated time waits" if self.clock.simulated else "")
-
-    async def _build_held(self, node: float) -> None:
-        """On a simulated clock: build ``node`` while simulated time waits (this timer call is awaited by the
-        lockstep scheduler), the loop free for heartbeats and signals; returns early on a stop."""
-        self._start_build(node)
-        if await await_worker(self._worker, lambda: self.stopping):
-            self._poll_build(None)
-
-    def _poll_build(self, wanted: float | None) -> None:
-        if self._worker is not None and not self._worker.is_alive():
-            node, code = self._building, self._worker.exitcode
-            self._worker, self._building = None, None
-            if node is not None and self.phys.try_load(node):
-                self.log.info("true sheet FEM table at clamp strain %.3f ready", node)
-            else:
-                self._failed.add(node)
-                self.log.warning("true sheet FEM table at clamp strain %s failed (worker exit %s)", node, code)
-            self._arm_t0()
-        if wanted is not None and self._worker is None and wanted not in self._failed:
-            self._start_build(wanted)
 
     def on_arm(self, msg: ArmJointState) -> None:
         """Keep the arm's *true* clamp pose: the truth's forward kinematics of the measured joints (the
@@ -401,7 +280,6 @@ class WorldNode(Node):
 
     async def tick_sheet(self) -> None:
         if "left" not in self.poses or "right" not in self.poses:
-            self._poll_build(None)
             return
         p: WorldParams = self.params
         try:
@@ -417,15 +295,6 @@ class WorldNode(Node):
         if self._no_sheet is not None:
             self.log.info("sheet state again after %d ticks without one", self._no_sheet[1])
             self._no_sheet = None
-        pushed_now = -float((np.asarray(self.finger, float) - sheet.origin) @ sheet.normal) > 0.0
-        wanted = self.phys.missing_node(stretch) if (pushed_now and self._worker is None) else None
-        if wanted is not None and self.clock.simulated and wanted not in self._failed:
-            await self._build_held(wanted)      # the true sheet of this instant, never a stand-in
-            if self.stopping:
-                return
-            sheet, stretch = self.phys.surface(self.poses["left"], self.poses["right"], self.finger)
-        else:
-            self._poll_build(wanted)
         g = p.membrane_grid
         force = stiffness = 0.0
         if sheet.membrane is not None:
@@ -436,8 +305,8 @@ class WorldNode(Node):
             inside = abs(float((np.asarray(self.finger) - sheet.origin) @ sheet.axis_u)) < sheet.half_span
             if depth > 0.0 and inside and not self._warned_flat:
                 self._warned_flat = True
-                self.log.warning("sheet pushed %.1f mm before its FEM table is ready: publishing the depth with a "
-                                 "flat membrane grid", depth * 1e3)
+                self.log.warning("sheet pushed %.1f mm within a fingertip of a clamp (outside the true sheet's "
+                                 "contacts): publishing the depth with a flat membrane grid", depth * 1e3)
             depth = depth if inside else 0.0
             pushed = np.asarray(self.finger, float) if depth > 0.0 else sheet.origin
             grid = np.zeros((g, g))
@@ -453,9 +322,3 @@ class WorldNode(Node):
             header=self.contact_pub.header("display", stamp=stamp), touching=depth > 0.0, depth=depth,
             force=max(force, 0.0), point=np.asarray(pushed, float), stiffness=max(stiffness, 0.0)))
 
-
-def _build_worker(seed: int, realism: str, node: float, size: float, config: SheetFemConfig, nice: int) -> None:
-    """Worker-process entry: lower the priority (niceness only, not the idle class: the world needs its true
-    sheet, :func:`flexsheet.runtime.background.lower_priority`), then build (and cache) one FEM table."""
-    lower_priority(nice, idle=False)
-    build_table(seed, realism, node, size, config)

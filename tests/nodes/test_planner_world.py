@@ -41,8 +41,7 @@ def test_world_publishes_typed_truth_and_sheet_from_measured_joints(tmp_path, mo
 
     async def scenario():
         params = {"start_delay": 0.0, "script": [{"mode": "stroke_push", "moving_time": 2.0, "seed": 3}],
-                  "rate_hz": 100.0, "sheet_rate_hz": 50.0, "twin": {"realism": "ideal"},
-                  "sheet_fem": {"h_fine": 0.012, "h_coarse": 0.02, "prebuild": []}}
+                  "rate_hz": 100.0, "sheet_rate_hz": 50.0, "twin": {"realism": "ideal"}}
         async with NodeHarness(WorldNode, params=params) as h:
             truth = (await h.wait_for(T.FINGER_TRUTH, n=2, timeout=3.0))[-1]
             assert (truth.segment, truth.mode, truth.moving_time, truth.phase) == (0, "stroke_push", 2.0, "approach")

@@ -76,7 +76,7 @@ def test_world_node_plays_the_scene_path(tmp_path, monkeypatch):
         params = {"start_delay": 0.0, "scene": str(SPHERE), "rate_hz": 200.0,
                   "script": [{"mode": "stroke", "moving_time": 1.0, "approach_time": 0.2, "hold_before": 0.1,
                               "tremor_rms": 0.0, "wander_deg": 0.0, "wander_axial": 0.0, "lag": 0.0}],
-                  "twin": {"realism": "ideal"}, "sheet_fem": {"h_fine": 0.012, "h_coarse": 0.02, "prebuild": []}}
+                  "twin": {"realism": "ideal"}}
         async with NodeHarness(WorldNode, params=params) as h:
             msgs = await h.wait_for(T.FINGER_TRUTH, n=200, timeout=6.0)
         moving = [m for m in msgs if m.phase == "stroke"]

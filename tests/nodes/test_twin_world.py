@@ -1,6 +1,6 @@
 """The world twin's truth: its clamps are the *true* arms' forward kinematics of the measured joints (they differ
-from the bridge model's FK under a realistic truth and equal it under the ideal one, three truth seeds), and the
-pushed sheet it publishes is the FEM shape of the truth's sheet."""
+from the bridge model's FK under a realistic truth and equal it under the ideal one, three truth seeds), it starts
+at once for a new truth seed (nothing to build), and a true-sheet family missing a table stops it at setup."""
 
 from __future__ import annotations
 
@@ -12,18 +12,13 @@ import pytest
 from flexsheet.arm.kinematics import ArmKinematics, home_joints
 from flexsheet.calibration.display_calib import nominal_display_calib
 from flexsheet.model.sheet import clamp_poses, frame_from_clamps
-from flexsheet.model.sheet_table import FemShape
-from flexsheet.runtime.config import NodeConfig
+from flexsheet.runtime.config import ConfigError
 from flexsheet.runtime.testing import NodeHarness
-from flexsheet.runtime.transport import InProcTransport
 from flexsheet.twin.truth import TwinTruth
 from flexsheet.twin.world import TruePhysics
-from flexsheet.twin.world_config import SheetFemConfig
 from messages import ArmJointState, Header
 from messages import topics as T
 from nodes.world.node import WorldNode, WorldParams
-
-COARSE = {"h_fine": 0.012, "h_coarse": 0.02}
 
 
 def _home_joints_and_bridge_fk(stretch: float = 0.04):
@@ -74,8 +69,7 @@ def test_world_node_publishes_the_sheet_of_the_true_kinematics(realism, tmp_path
 
     async def scenario():
         params = {"start_delay": 0.0, "script": [{"mode": "stroke", "moving_time": 2.0}], "rate_hz": 50.0,
-                  "sheet_rate_hz": 50.0, "twin": {"realism": realism, "truth_seed": 1},
-                  "sheet_fem": {**COARSE, "prebuild": []}}
+                  "sheet_rate_hz": 50.0, "twin": {"realism": realism, "truth_seed": 1}}
         async with NodeHarness(WorldNode, params=params) as h:
             t_meas = h.node.now() - 0.300           # joints measured 0.3 s before the world got them
             h.inject(T.ARM_LEFT_STATE, _state("left", q["left"], fk["left"], t_meas))
@@ -92,31 +86,6 @@ def test_world_node_publishes_the_sheet_of_the_true_kinematics(realism, tmp_path
     asyncio.run(scenario())
 
 
-def test_pushed_sheet_is_the_fem_shape_of_the_truth(tmp_path):
-    truth = TwinTruth.draw(2, "realistic")
-    settings = SheetFemConfig(depths=[0.01, 0.03], positions=[0.0, 0.048], cache_dir=str(tmp_path), **COARSE)
-    phys = TruePhysics(truth, settings)
-    node = phys.node_of(0.043)
-    assert node == pytest.approx(0.04)
-    assert phys.missing_node(0.043) == node                         # nothing cached yet: the node must build it
-    from flexsheet.twin.world import build_table
-
-    build_table(2, "realistic", node, 0.24, settings)
-    assert phys.missing_node(0.043) == pytest.approx(0.05)          # then the other node around it (interpolated)
-    build_table(2, "realistic", 0.05, 0.24, settings)
-    assert phys.missing_node(0.043) is None
-    Tl, Tr = clamp_poses(np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), 0.043)
-    finger = np.array([-0.012, 0.01, -0.02])                         # 12 mm behind the sheet
-    surf, stretch = phys.surface(Tl, Tr, finger)
-    assert stretch == pytest.approx(0.043, abs=1e-12)
-    assert isinstance(surf.membrane, FemShape)
-    assert surf.membrane.depth == pytest.approx(0.012) and surf.membrane.tension_ratio == truth.tension_ratio
-    assert surf.pushed_point == pytest.approx(finger, abs=1e-12)
-    assert surf.membrane.deflection(0.01, -0.02) == pytest.approx(0.012, rel=0.05)
-    flat, _ = phys.surface(Tl, Tr, np.array([0.01, 0.0, 0.0]))        # in front of the sheet: not pushed
-    assert flat.membrane is None
-
-
 def test_world_params_take_the_twin_and_refuse_bad_values():
     p = WorldParams(twin={"realism": "ideal", "truth_seed": 4})
     assert (p.twin.realism, p.twin.truth_seed) == ("ideal", 4)
@@ -125,8 +94,8 @@ def test_world_params_take_the_twin_and_refuse_bad_values():
         WorldParams(twin={"realism": "perfect"})
     with pytest.raises(ValueError, match="truth_seed"):
         WorldParams(twin={"truth_seed": -1})
-    with pytest.raises(ValueError, match="stretch_step"):
-        WorldParams(sheet_fem={"stretch_step": 0.0})
+    with pytest.raises(ValueError, match="sheet_fem"):                 # the true sheet has no settings
+        WorldParams(sheet_fem={"prebuild": []})
 
 
 def _heartbeat(node: str, stamp: float):
@@ -142,8 +111,7 @@ def test_world_script_waits_for_the_heartbeats_of_start_after_then_starts(tmp_pa
 
     async def scenario():
         params = {"start_delay": 0.0, "start_after": ["fem", "renderer"], "rate_hz": 50.0, "sheet_rate_hz": 10.0,
-                  "script": [{"mode": "stroke", "moving_time": 2.0, "approach_time": 0.2, "hold_before": 0.0}],
-                  "sheet_fem": {**COARSE, "prebuild": []}}
+                  "script": [{"mode": "stroke", "moving_time": 2.0, "approach_time": 0.2, "hold_before": 0.0}]}
         async with NodeHarness(WorldNode, params=params) as h:
             await asyncio.sleep(0.8)
             h.inject(T.DIAGNOSTICS, _heartbeat("planner", h.node.now()))     # not one of start_after
@@ -169,8 +137,7 @@ def test_world_script_starts_after_start_timeout_without_the_heartbeats(tmp_path
 
     async def scenario():
         params = {"start_delay": 0.0, "start_after": ["fme"], "start_timeout": 0.5, "rate_hz": 50.0,
-                  "sheet_rate_hz": 10.0, "script": [{"mode": "stroke", "moving_time": 2.0, "approach_time": 0.2, "hold_before": 0.0}],
-                  "sheet_fem": {**COARSE, "prebuild": []}}
+                  "sheet_rate_hz": 10.0, "script": [{"mode": "stroke", "moving_time": 2.0, "approach_time": 0.2, "hold_before": 0.0}]}
         async with NodeHarness(WorldNode, params=params) as h:
             await asyncio.sleep(0.3)
             assert h.node.t0 is None
@@ -183,39 +150,24 @@ def test_world_script_starts_after_start_timeout_without_the_heartbeats(tmp_path
         WorldParams(start_timeout=0.0)
 
 
-def test_world_builds_its_prebuild_tables_before_the_script_and_a_stop_ends_the_build(tmp_path, monkeypatch, caplog):
-    """The tables of ``sheet_fem.prebuild`` are ready when setup ends (one progress line each, two workers);
-    a second world finds them cached; a stop while they build ends the node within a second, workers gone."""
-    import multiprocessing
+def test_world_starts_without_building_and_a_family_missing_a_table_stops_it_at_setup(monkeypatch):
+    """A new truth seed's world is ready at once (no table to build: the family is shipped); a family that lacks
+    a table is an error at setup naming the command that ships it, never a build while simulated time runs."""
     import time
 
-    monkeypatch.setenv("FLEXSHEET_CACHE", str(tmp_path))
-    params = {"start_delay": 0.0, "rate_hz": 50.0, "sheet_rate_hz": 10.0, "twin": {"realism": "realistic", "truth_seed": 5},
-              "script": [{"mode": "stroke", "moving_time": 2.0}], "sheet_fem": {**COARSE, "prebuild": [0.03, 0.04]}}
+    from flexsheet.twin import truth_sheet
 
-    async def ready() -> set:
-        async with NodeHarness(WorldNode, params=params) as h:
-            return set(h.node.phys.tables)
+    params = {"start_delay": 0.0, "rate_hz": 50.0, "sheet_rate_hz": 10.0, "twin": {"truth_seed": 9137},
+              "script": [{"mode": "stroke", "moving_time": 2.0}]}
 
-    with caplog.at_level("INFO"):
-        assert asyncio.run(ready()) == {0.03, 0.04}
-    built = [r.getMessage() for r in caplog.records if "true sheet table " in r.getMessage()]
-    assert len(built) == 2 and all("built" in m for m in built) and "2/2" in built[-1], built
-    caplog.clear()
-    with caplog.at_level("INFO"):
-        assert asyncio.run(ready()) == {0.03, 0.04}                  # cached: nothing built
-    assert not [r for r in caplog.records if "true sheet table" in r.getMessage()]
-
-    async def stopped_while_building() -> float:
-        node = WorldNode(NodeConfig(name="world", node_type="world", params={       # default mesh: 30 s a table
-            **params, "sheet_fem": {"prebuild": [0.05, 0.06]}}), transport=InProcTransport())
-        task = asyncio.get_running_loop().create_task(node.run(install_signals=False))
-        await asyncio.sleep(1.0)
-        assert len(multiprocessing.active_children()) == 2          # both tables building
+    async def ready() -> float:
         t0 = time.monotonic()
-        node.shutdown()
-        await asyncio.wait_for(task, timeout=5.0)
-        return time.monotonic() - t0
+        async with NodeHarness(WorldNode, params=params) as h:
+            assert h.node.t0 is not None                               # the script clock armed in setup
+            return time.monotonic() - t0
 
-    assert asyncio.run(stopped_while_building()) < 1.0
-    assert not [p for p in multiprocessing.active_children() if p.name.startswith("sheet-fem")]
+    assert asyncio.run(ready()) < 10.0                                 # s, on a loaded 2-core machine
+    monkeypatch.setattr(truth_sheet, "_FAMILIES", {})
+    monkeypatch.setattr(truth_sheet, "node_path", lambda lay, s, folder="": f"/nonexistent/{lay}{s}.npz")
+    with pytest.raises(ConfigError, match="lacks 15 of 15 tables: build and ship them with .*truth_sheet --ship"):
+        asyncio.run(ready())

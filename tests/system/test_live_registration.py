@@ -66,9 +66,7 @@ def test_the_lab_on_one_machine_registers_a_drawn_truth_without_ik_refusals(tmp_
     lab_keys()                                                     # CURVE keys in a private $FLEXSHEET_KEYS
     sim_display_calib(seed, "realistic")      # the graph's own registration, cached before the launcher asks
     out = tmp_path / "live"
-    # the registration needs no true-sheet table: a drawn seed's 13 (about 4 min) are built when a push needs one
-    lab = Lab("--set", f"twin.truth_seed={seed}", "--set", "world.loop=true", "--set", "world.sheet_fem={prebuild: []}",
-              "--out", str(tmp_path / "lab"))
+    lab = Lab("--set", f"twin.truth_seed={seed}", "--set", "world.loop=true", "--out", str(tmp_path / "lab"))
     try:
         lab.wait(["left arm: ok", "right arm: ok", "segment 1/3"], 180)
         r = subprocess.run([sys.executable, "-m", "flexsheet", "calibrate", "display", "--live", "--launch",

@@ -10,7 +10,8 @@ from pathlib import Path
 from flexsheet import manifest
 
 ROOT = Path(__file__).resolve().parents[2]
-SHIPPED = [ROOT / "flexsheet" / "fem" / "data", ROOT / "flexsheet" / "model" / "sheet_tables"]
+SHIPPED = [ROOT / "flexsheet" / "fem" / "data", ROOT / "flexsheet" / "model" / "sheet_tables",
+           ROOT / "flexsheet" / "twin" / "sheet_tables"]
 
 
 def test_every_shipped_table_is_in_its_manifest_and_matches_it():
