@@ -29,7 +29,7 @@ log = logging.getLogger(__name__)
 __all__ = ["TwinSource", "run_display_sim", "sim_display_calib", "score_registration", "verdicts", "TARGETS",
            "SUMMARY_VERSION", "sim_display_calib_cached"]
 
-SUMMARY_VERSION = 10
+SUMMARY_VERSION = 11   # 11: the true sheet from the shipped family (truth_sheet.py)
 
 Pair = tuple[np.ndarray, np.ndarray]
 
