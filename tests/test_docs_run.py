@@ -350,6 +350,8 @@ CHEAP: dict[str, tuple[str, str]] = {
         "flexsheet bench viz --out out/bench_viz_10hz --param scene_rate=10 --param input_rate=10 "
         "--baseline out/bench_viz/viz_cpu.json",
         "flexsheet bench graph --seconds 10 --json > graph_bench.json",
+        "flexsheet bench sim --duration 20 --out docs/figures/bench",
+        "flexsheet bench sim --set scene=launch/scenes/organ.yaml --json",
     )},
 }
 
