@@ -236,10 +236,11 @@ class SheetSegment:
         Raises ``ValueError`` for another arm name."""
         if arm not in ("left", "right"):
             raise ValueError(f"arm must be 'left' or 'right', got {arm!r}")
-        return self._clamps(t, accel, (arm,))[0]
+        return self.clamps(t, accel, (arm,))[0]
 
-    def _clamps(self, t: float, accel: bool, arms) -> list[tuple[np.ndarray, ...]]:
-        """:meth:`clamp` for each of ``arms`` from one evaluation of the trajectory at ``t``."""
+    def clamps(self, t: float, accel: bool, arms) -> list[tuple[np.ndarray, ...]]:
+        """:meth:`clamp` for each of ``arms`` ("left"/"right") from one evaluation of the trajectory at ``t`` s:
+        a list of (T (4, 4), twist (6,)[, twist rate (6,) with ``accel``]) in the order of ``arms``."""
         x, xd, xdd = self.state(t)
         r = x[3:6]
         R = self.frame @ _rot(r)
@@ -377,7 +378,7 @@ class JointRates:
             return 0.0, 0.0
         rv = ra = 0.0
         for k in range(self.samples):
-            clamps = seg._clamps(seg.t0 + seg.duration * (k + 0.5) / self.samples, True, sides)
+            clamps = seg.clamps(seg.t0 + seg.duration * (k + 0.5) / self.samples, True, sides)
             for side, (_, tw, dtw) in zip(sides, clamps, strict=True):
                 Ji = self._jinv[side]                                   # (n, 6, 6)
                 rv = max(rv, float(np.max(np.abs(Ji @ tw) / self.qd_max)))

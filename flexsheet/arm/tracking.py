@@ -149,8 +149,9 @@ class TargetTracker:
             other = "right" if self.kin.side == "left" else "left"
             at_meas = self.motion.clamp(other, guard.peer_stamp)[0][:3, 3]
             if float(np.linalg.norm(measured - at_meas)) <= PEER_ON_MOTION:
-                guard.peer_clamp = self.motion.clamp(other, at)[0][:3, 3]
-                span = float(np.linalg.norm(self.motion.clamp(self.kin.side, at)[0][:3, 3] - guard.peer_clamp))
+                (mine, _), (theirs, _) = self.motion.clamps(at, False, (self.kin.side, other))
+                guard.peer_clamp = theirs[:3, 3]
+                span = float(np.linalg.norm(mine[:3, 3] - guard.peer_clamp))
                 guard.band = (max(span - SPAN_ON_MOTION, 1e-3), span + SPAN_ON_MOTION)
                 try:
                     return guard.worse(q_from, q_to)
