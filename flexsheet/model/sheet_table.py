@@ -28,7 +28,7 @@ from flexsheet.model.sheet_fem import SheetFEM, SheetPhysics, bilinear
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FemShape", "IndentTable", "TABLE_DEPTHS", "TABLE_POSITIONS", "TABLE_VERSION", "default_cache_dir"]
+__all__ = ["FemShape", "IndentTable", "bracket_weights", "TABLE_DEPTHS", "TABLE_POSITIONS", "TABLE_VERSION", "default_cache_dir"]
 
 
 #: depths (m) of the table, after 0 (flat)
@@ -107,6 +107,17 @@ class FemShape(DeflectionGrid):
         wv = (self.deflection(u, v + h) - self.deflection(u, v - h)) / (2 * h)
         return w, wu, wv
 
+
+
+def bracket_weights(axis: np.ndarray, q: float) -> list[tuple[int, float]]:
+    """(index, weight) pairs of linear interpolation on the increasing ``axis`` (n,) at ``q``, held at its ends."""
+    if q <= axis[0]:
+        return [(0, 1.0)]
+    if q >= axis[-1]:
+        return [(len(axis) - 1, 1.0)]
+    i = int(np.searchsorted(axis, q, side="right") - 1)
+    t = (q - axis[i]) / (axis[i + 1] - axis[i])
+    return [(i, 1.0 - t), (i + 1, t)]
 
 class IndentTable:
     """Solutions of one :class:`SheetPhysics` over ``depths`` (m, increasing, > 0) × ``positions`` (m, ≥ 0,
@@ -208,16 +219,6 @@ class IndentTable:
         k = (self._force(depth + h, pu, abs(push_v)) - self._force(lo, pu, abs(push_v))) / (depth + h - lo)
         return FemShape(self, a, b, float(push_u), float(push_v), float(depth), force, max(float(k), 0.0))
 
-    @staticmethod
-    def _bracket(axis: np.ndarray, q: float) -> list[tuple[int, float]]:
-        if q <= axis[0]:
-            return [(0, 1.0)]
-        if q >= axis[-1]:
-            return [(len(axis) - 1, 1.0)]
-        i = int(np.searchsorted(axis, q, side="right") - 1)
-        t = (q - axis[i]) / (axis[i + 1] - axis[i])
-        return [(i, 1.0 - t), (i + 1, t)]
-
     def _depth_weights(self, depth: float) -> list[tuple[int, float]]:
         """(index, weight) pairs whose fields, each scaled by depth/S_k, blend to the shape at ``depth``."""
         S = self.depths
@@ -225,12 +226,12 @@ class IndentTable:
             return [(0, depth / S[0])]
         if depth >= S[-1]:
             return [(len(S) - 1, depth / S[-1])]
-        return [(k, wt * depth / S[k]) for k, wt in self._bracket(S, depth)]
+        return [(k, wt * depth / S[k]) for k, wt in bracket_weights(S, depth)]
 
     def _force(self, depth: float, pu: float, pv: float) -> float:
         f = 0.0
-        for i, wi in self._bracket(self.positions, pu):
-            for j, wj in self._bracket(self.positions, pv):
+        for i, wi in bracket_weights(self.positions, pu):
+            for j, wj in bracket_weights(self.positions, pv):
                 for k, wk in self._depth_weights(depth):
                     f += wi * wj * wk * self.F[i, j, k]
         return float(f)
@@ -248,9 +249,9 @@ class IndentTable:
         vq = np.clip(v * math.copysign(1.0, push_v or 1.0), -b, b)
         pu, pv = abs(push_u) * s, abs(push_v)
         out = np.zeros(u.shape)
-        for i, wi in self._bracket(self.positions, pu):
+        for i, wi in bracket_weights(self.positions, pu):
             xu = _remap(uq, pu, self.positions[i], a_t)
-            for j, wj in self._bracket(self.positions, pv):
+            for j, wj in bracket_weights(self.positions, pv):
                 yv = _remap(vq, pv, self.positions[j], b)
                 for k, wk in self._depth_weights(depth):
                     out += (wi * wj * wk) * bilinear(self.x, self.y, self.W[i, j, k], xu, yv)
@@ -277,9 +278,9 @@ class IndentTable:
         pu, pv = abs(push_u) * s, abs(push_v)
         out = np.zeros((u.size, v.size))
         kw = self._depth_weights(depth)
-        for i, wi in self._bracket(self.positions, pu):
+        for i, wi in bracket_weights(self.positions, pu):
             iu, tu = _interp_1d(self.x, _remap(uq, pu, self.positions[i], a_t))
-            for j, wj in self._bracket(self.positions, pv):
+            for j, wj in bracket_weights(self.positions, pv):
                 iv, tv = _interp_1d(self.y, _remap(vq, pv, self.positions[j], b))
                 Wij = sum(wk * self.W[i, j, k] for k, wk in kw)
                 Wu = (1.0 - tu)[:, None] * Wij[iu] + tu[:, None] * Wij[iu + 1]            # along u, (nu, ny)

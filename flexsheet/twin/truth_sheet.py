@@ -44,7 +44,7 @@ from flexsheet.manifest import MANIFEST, record
 from flexsheet.model import geometry
 from flexsheet.model.sheet import clamp_half_span
 from flexsheet.model.sheet_fem import SheetFEM, SheetPhysics
-from flexsheet.model.sheet_table import TABLE_DEPTHS, TABLE_POSITIONS, IndentTable
+from flexsheet.model.sheet_table import TABLE_DEPTHS, TABLE_POSITIONS, IndentTable, bracket_weights
 from flexsheet.model.tension import URETHANE_E, SheetMaterial, tension
 from flexsheet.twin.truth import TwinTruth
 
@@ -145,22 +145,11 @@ def ship(folder: str = FAMILY_DIR) -> list[str]:
 
 
 # ------------------------------------------------------------------------------------------------ evaluation
-def _bracket(axis: np.ndarray, q: float) -> list[tuple[int, float]]:
-    """(index, weight) of linear interpolation on the increasing ``axis`` at ``q``, held at its ends."""
-    if q <= axis[0]:
-        return [(0, 1.0)]
-    if q >= axis[-1]:
-        return [(len(axis) - 1, 1.0)]
-    i = int(np.searchsorted(axis, q, side="right") - 1)
-    t = (q - axis[i]) / (axis[i + 1] - axis[i])
-    return [(i, 1.0 - t), (i + 1, t)]
-
-
 def _cubic_weights(axis: np.ndarray, q: float) -> list[tuple[int, float]]:
     """(index, weight) of the cubic through the 4 nodes of ``axis`` around ``q`` (Lagrange; held at the ends)."""
     n = len(axis)
     if q <= axis[0] or q >= axis[-1] or n < 4:
-        return _bracket(axis, q)
+        return bracket_weights(axis, q)
     i = int(np.searchsorted(axis, q, side="right") - 1)
     lo = min(max(i - 1, 0), n - 4)
     idx = range(lo, lo + 4)
@@ -200,8 +189,8 @@ class FamilyTable:
         bilinear between contacts; F/d cubic in d through the 4 depths around (held below the first, linear in
         d² beyond the last)."""
         g = 0.0
-        for i, wi in _bracket(self.positions, abs(pu)):
-            for j, wj in _bracket(self.positions, abs(pv)):
+        for i, wi in bracket_weights(self.positions, abs(pu)):
+            for j, wj in bracket_weights(self.positions, abs(pv)):
                 g = g + (wi * wj) * self._g[i, j]
         if depth > _D[-1]:
             gd = float(g[-1] + (g[-1] - g[-2]) * (depth ** 2 - _D2[-1]) / (_D2[-1] - _D2[-2]))
@@ -273,7 +262,7 @@ class TruthSheet:
         eps = self.strain(stretch)
         fa = sum(w * self.A[k].force(depth, push_u, push_v) for k, w in _cubic_weights(self._a, eps))
         r = 0.0
-        for k, w in _bracket(self._b, eps):
+        for k, w in bracket_weights(self._b, eps):
             a = self.A[self._a_of_b[k]].force(depth, push_u, push_v)
             r += w * (self.B[k].force(depth, push_u, push_v) / a if a > 0.0 else 1.0)
         return self.scale * fa * (1.0 + (r - 1.0) * (max(stretch, 0.0) - eps) / SPAN_OFFSET)
