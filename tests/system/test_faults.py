@@ -49,7 +49,7 @@ from flexsheet.runtime.codec import decode_any  # noqa: E402
 from flexsheet.runtime.launch import load_launch  # noqa: E402
 
 #: the slow tier (tests/run.sh --slow): over a minute of end-to-end work
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]   # the faulted run and its waits: minutes
 
 #: kill order, in groups killed together (nodes of different chains): the recorder first (see module doc),
 #: the slow-to-start FEM solver with the renderer and camera, the triangulator, the planner, then one arm's
@@ -190,7 +190,8 @@ def run_scenario(out: Path, cut_copy: Path) -> dict:
                 if name in WAIT_UP:
                     launch.wait(rf"^\[{name}\s*\] .* up: endpoint", UP_S, start=k["i_started"])
             time.sleep(max(SETTLE, *(SETTLE_AFTER.get(n, 0.0) for n in group)))
-        code = launch.proc.wait(timeout=150)
+        code = launch.proc.wait(timeout=300)      # a guard against a hang, not a speed test: on 2 cores the
+        # kills' respawns (a process start each) and the two bridges' IK every cycle slow the last stroke
     finally:
         launch.stop()
     for k in kills:   # when each respawned node was up again
