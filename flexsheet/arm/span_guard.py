@@ -49,23 +49,26 @@ class SpanGuard:
             raise ValueError(f"span_band must be [lo, hi] m with 0 < lo < hi, got {list(band)!r}")
         self.band = (lo, hi)
 
-    def outside(self, q: np.ndarray) -> float:
-        """How far (m) the clamp at joints ``q`` (6,) rad lies outside the band from the partner's clamp (0
-        inside)."""
-        s = float(np.linalg.norm(self.kin.fk(q)[:3, 3] - self.peer_clamp))
-        lo, hi = self.band
+    def outside(self, q: np.ndarray, peer: np.ndarray | None = None, band=None) -> float:
+        """How far (m) the clamp at joints ``q`` (6,) rad lies outside ``band`` (default :attr:`band`) from the
+        partner's clamp ``peer`` (3,) m (default :attr:`peer_clamp`); 0 inside."""
+        peer = self.peer_clamp if peer is None else peer
+        lo, hi = self.band if band is None else band
+        s = float(np.linalg.norm(self.kin.fk(q)[:3, 3] - peer))
         return max(lo - s, s - hi, 0.0)
 
-    def worse(self, q_from, q_to) -> bool:
+    def worse(self, q_from, q_to, peer: np.ndarray | None = None, band=None) -> bool:
         """Whether moving this clamp from joints ``q_from`` to ``q_to`` (6,) rad takes the clamp span further
-        outside :attr:`band` from the partner's measured clamp (:attr:`peer_clamp`); counted in :attr:`waits`
-        and :attr:`waiting`. False without a band or a partner state. Such a step waits for the partner, unless
-        the partner waits too (:attr:`peer_waiting`): then both step, as the planner's targets keep the span;
-        two arms each waiting for the other would wait for ever."""
-        if self.band is None or self.peer_clamp is None:
+        outside ``band`` (default :attr:`band`) from the partner's clamp ``peer`` (default its measured one,
+        :attr:`peer_clamp`); counted in :attr:`waits` and :attr:`waiting`. False without a band or a partner
+        state. Such a step waits for the partner, unless the partner waits too (:attr:`peer_waiting`): then both
+        step, as the planner's targets keep the span; two arms each waiting for the other would wait for ever."""
+        peer = self.peer_clamp if peer is None else peer
+        band = self.band if band is None else band
+        if band is None or peer is None:
             return False
-        out_to = self.outside(np.asarray(q_to, float))
-        if out_to > 0.0 and out_to > self.outside(np.asarray(q_from, float)) + 1e-6 and not self.peer_waiting:
+        out_to = self.outside(np.asarray(q_to, float), peer, band)
+        if out_to > 0.0 and out_to > self.outside(np.asarray(q_from, float), peer, band) + 1e-6 and not self.peer_waiting:
             self.waits += 1
             self.waiting = True
             return True

@@ -143,20 +143,16 @@ class TargetTracker:
         if self.manual is not None:
             return False
         guard = self.span
-        measured, band = guard.peer_clamp, guard.band
+        measured = guard.peer_clamp
         if (self.motion is not None and measured is not None and guard.peer_stamp is not None
-                and at is not None and band is not None):
+                and at is not None and guard.band is not None):
             other = "right" if self.kin.side == "left" else "left"
             at_meas = self.motion.clamp(other, guard.peer_stamp)[0][:3, 3]
             if float(np.linalg.norm(measured - at_meas)) <= PEER_ON_MOTION:
                 (mine, _), (theirs, _) = self.motion.clamps(at, False, (self.kin.side, other))
-                guard.peer_clamp = theirs[:3, 3]
-                span = float(np.linalg.norm(mine[:3, 3] - guard.peer_clamp))
-                guard.band = (max(span - SPAN_ON_MOTION, 1e-3), span + SPAN_ON_MOTION)
-                try:
-                    return guard.worse(q_from, q_to)
-                finally:
-                    guard.peer_clamp, guard.band = measured, band
+                span = float(np.linalg.norm(mine[:3, 3] - theirs[:3, 3]))
+                return guard.worse(q_from, q_to, theirs[:3, 3],
+                                   (max(span - SPAN_ON_MOTION, 1e-3), span + SPAN_ON_MOTION))
         return guard.worse(q_from, q_to if q_stop is None else q_stop)
 
     def move_to(self, q) -> np.ndarray:
