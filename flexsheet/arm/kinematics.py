@@ -134,6 +134,8 @@ class ArmKinematics:
         # tool offset as a pin.SE3 so IK works in the URDF chain without per-iteration matrix products
         self._M_link_tool = pin.SE3(self.T_link_tool[:3, :3].copy(), self.T_link_tool[:3, 3].copy())
         self._M_tool_link = self._M_link_tool.inverse()
+        # a clamp-frame twist in the URDF chain's link frame (the inverse of jacobian()'s action matrix)
+        self._A_link_tool = self._M_link_tool.toActionMatrix()
 
     # ------------------------------------------------------------------ forward kinematics
     def check_q(self, q) -> np.ndarray:
@@ -185,6 +187,20 @@ class ArmKinematics:
         """
         J = self.jacobian(q)
         return float(math.sqrt(max(0.0, np.linalg.det(J @ J.T))))
+
+    def _jacobian_placement(self, q: np.ndarray) -> np.ndarray:
+        """The link frame's Jacobian (6, 6) (``pin.LOCAL``) at ``q``, with ``data.oMf`` of the clamp updated."""
+        pin.computeJointJacobians(self.model, self.data, q)
+        pin.updateFramePlacement(self.model, self.data, self.fid)
+        return pin.getFrameJacobian(self.model, self.data, self.fid, pin.LOCAL)
+
+    def fk_manipulability(self, q) -> tuple[np.ndarray, float]:
+        """:meth:`fk` and :meth:`manipulability` of joints ``q`` (6,) rad from one kinematics pass:
+        (T_display_clamp (4, 4) m, Yoshikawa's manipulability). Raises ``ValueError`` naming ``q`` if bad."""
+        q = self.check_q(q)
+        J = self._jacobian_placement(q)
+        T = self.T_display_base @ self.data.oMf[self.fid].homogeneous @ self.T_link_tool
+        return T, abs(float(np.linalg.det(J)))     # = sqrt(det(J Jᵀ)) for a square J (the tool offset: det 1)
 
     # ------------------------------------------------------------------ inverse kinematics
     def ik(self, T_target, q_seed, *, tol_pos: float = 1e-9, tol_rot: float = 1e-9, max_iter: int = 60,
@@ -249,6 +265,26 @@ class ArmKinematics:
         if float(np.max(np.abs(q - q_seed))) > max_jump:
             return IKResult(q, False, "jump", pos_err, rot_err, it, w)
         return IKResult(q, True, "ok", pos_err, rot_err, it, w)
+
+
+    def track(self, T_target: np.ndarray, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """One Newton step of IK from joints ``q`` (6,) rad toward the clamp pose ``T_target`` (4, 4, display
+        frame, m), and the joint velocity (6,) rad/s that moves the clamp at ``twist`` (6,) (v m/s, ω rad/s, clamp
+        frame) there: ``q_next = q + J⁻¹·e`` and ``q̇ = J⁻¹·twist``, both with the Jacobian ``J`` at ``q``.
+        Returns (q_next, q̇, |e| (the pose error before the step: position m + rotation rad), manipulability at
+        ``q``). No checks (limits, singularity, a converged error): the caller that follows a smooth path
+        cycle by cycle judges them and falls back to :meth:`ik`. A step from a point a cycle behind ends within
+        the square of that error (a 2 mm step at 0.3 m/s: some µm), and the next cycle's step corrects it.
+        Raises ``numpy.linalg.LinAlgError`` at an exact singularity."""
+        T_base_link = self.T_base_display @ T_target @ self.T_link_tool
+        M_goal = pin.SE3(T_base_link[:3, :3], T_base_link[:3, 3])
+        J = self._jacobian_placement(q)
+        err = pin.log6(self.data.oMf[self.fid].actInv(M_goal)).vector
+        rhs = np.empty((6, 2))
+        rhs[:, 0] = err
+        rhs[:, 1] = self._A_link_tool @ twist
+        sol = np.linalg.solve(J, rhs)
+        return q + sol[:, 0], sol[:, 1], float(np.abs(err).max()), abs(float(np.linalg.det(J)))
 
 
 def clamp_joints(kin: dict, T_left: np.ndarray, T_right: np.ndarray) -> dict[str, np.ndarray]:

@@ -107,19 +107,30 @@ class StreamLimiter:
     def step(self, goal, goal_velocity=None) -> np.ndarray:
         """Advance one period toward ``goal`` (6,) rad moving at ``goal_velocity`` (6,) rad/s (None: at rest);
         returns the new command (6,) rad (a copy). A non-finite goal velocity is taken as 0."""
-        g = np.clip(np.asarray(goal, dtype=float), self.lo, self.hi)
-        T, a = self.T, self.qdd_max
-        w = np.zeros(6) if goal_velocity is None else np.asarray(goal_velocity, dtype=float)
-        w = np.clip(np.where(np.isfinite(w), w, 0.0), -self.qd_max, self.qd_max)
-        e = g - self.c
+        lo, hi, qd, c = self.lo, self.hi, self.qd_max, self.c
+        g = _clip(np.asarray(goal, dtype=float), lo, hi)
+        T, aT = self.T, self.qdd_max * self.T
+        if goal_velocity is None:
+            w = np.zeros(6)
+        else:
+            w = np.asarray(goal_velocity, dtype=float)
+            if not np.isfinite(w).all():
+                w = np.where(np.isfinite(w), w, 0.0)
+            w = _clip(w, -qd, qd)
+        e = g - c
         ae = np.abs(e)
-        v_mag = np.minimum(self._brake(ae), ae / T)
-        v_des = np.clip(w + np.sign(e) * v_mag, -self.qd_max, self.qd_max)
-        v = np.clip(v_des, self.v - a * T, self.v + a * T)
+        # the braking speeds of the distance to the goal, to the lower and to the upper limit, in one pass
+        b = self._brake(np.stack((ae, c - lo, hi - c)))
+        v_des = _clip(w + np.sign(e) * np.minimum(b[0], ae / T), -qd, qd)
+        v = _clip(v_des, self.v - aT, self.v + aT)
         # never faster toward a joint limit than the deceleration can stop before it (feasible by induction)
-        v = np.clip(v, -self._brake(self.c - self.lo), self._brake(self.hi - self.c))
-        v = np.clip(v, -self.qd_max, self.qd_max)
-        c_new = np.clip(self.c + v * T, self.lo, self.hi)
-        self.v = (c_new - self.c) / T
+        v = _clip(_clip(v, -b[1], b[2]), -qd, qd)
+        c_new = _clip(c + v * T, lo, hi)
+        self.v = (c_new - c) / T
         self.c = c_new
         return c_new.copy()
+
+
+def _clip(x: np.ndarray, lo, hi) -> np.ndarray:
+    """``np.clip`` for the limiter's (6,) vectors (a third of its call's overhead; NaN passes as there)."""
+    return np.minimum(np.maximum(x, lo), hi)

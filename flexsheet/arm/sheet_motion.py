@@ -206,15 +206,19 @@ class SheetSegment:
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(x, ẋ, ẍ), each (7,), at time ``t`` s: the start before ``t0``; after the end, the goal run on at its
         velocity for at most :data:`EXTRAPOLATE_S`, then at rest there."""
+        return tuple(np.asarray(v, float) for v in self._state(t))
+
+    def _state(self, t: float) -> tuple[list, list, list]:
+        """:meth:`state` as three lists of 7 floats (the bridges' per-cycle path: no array per value)."""
         tau = t - self.t0
         end = self._traj.duration
         if tau <= end:
-            p, v, a = self._traj.at_time(max(tau, 0.0))
-            return np.asarray(p), np.asarray(v), np.asarray(a)
+            return self._traj.at_time(max(tau, 0.0))
         over = tau - end
-        moving = over < EXTRAPOLATE_S
-        p = self.goal[0] + self.goal[1] * min(over, EXTRAPOLATE_S)
-        return p, (self.goal[1].copy() if moving else np.zeros(DOF)), np.zeros(DOF)
+        g, gv = self.goal
+        if over < EXTRAPOLATE_S:
+            return (g + gv * over).tolist(), gv.tolist(), [0.0] * DOF
+        return (g + gv * EXTRAPOLATE_S).tolist(), [0.0] * DOF, [0.0] * DOF
 
     def rotation(self, r) -> np.ndarray:
         """The sheet's rotation (3, 3) for the rotation vector ``r`` (3,) of this segment."""
@@ -240,36 +244,50 @@ class SheetSegment:
 
     def clamps(self, t: float, accel: bool, arms) -> list[tuple[np.ndarray, ...]]:
         """:meth:`clamp` for each of ``arms`` ("left"/"right") from one evaluation of the trajectory at ``t`` s:
-        a list of (T (4, 4), twist (6,)[, twist rate (6,) with ``accel``]) in the order of ``arms``."""
-        x, xd, xdd = self.state(t)
-        r = x[3:6]
-        R = self.frame @ _rot(r)
-        Jr = _right_jacobian(r)
-        w = R @ (Jr @ xd[3:6])                     # angular velocity, display frame
+        a list of (T (4, 4), twist (6,)[, twist rate (6,) with ``accel``]) in the order of ``arms``.
+
+        Worked in the sheet's own frame, where the clamp axis is e_y: with the body angular velocity
+        ω_b = J_r(r)·ṙ, the clamp's velocity there is Rᵀẋ_c ± (ȧ·e_y + a·ω_b × e_y) (a: half the span), and
+        the twist's angular part is ω_b itself (the clamps share the sheet's orientation)."""
+        x, xd, xdd = self._state(t)
+        E, C, D = _rodrigues(x[3], x[4], x[5])
+        R = self.frame @ E
+        wb = _right_jacobian_times(x[3], x[4], x[5], xd[3], xd[4], xd[5], C, D)
         a = 0.5 * self.size * (1.0 + x[6])
         ad = 0.5 * self.size * xd[6]
-        u = R[:, 1]
-        wxu = _cross(w, u)
+        vb = (R.T @ xd[:3]).tolist()
+        wx, wy, wz = wb
+        centre, u = np.asarray(x[:3], float), R[:, 1]
         if accel:
-            al = R @ (Jr @ xdd[3:6])               # angular acceleration (first order in r), display frame
+            ab = (R.T @ xdd[:3]).tolist()
+            al = _right_jacobian_times(x[3], x[4], x[5], xdd[3], xdd[4], xdd[5], C, D)
             add = 0.5 * self.size * xdd[6]
-            alxu_wwxu = _cross(al, u) + _cross(w, wxu)
-            ang_acc = R.T @ al
-        ang = R.T @ w
+            # ω_b × e_y = (−ω_z, 0, ω_x); ω_b × (ω_b × e_y) = (ω_x ω_y, −ω_x² − ω_z², ω_z ω_y)
+            rel = (-2.0 * ad * wz + a * (-al[2] + wx * wy),
+                   add - a * (wx * wx + wz * wz),
+                   2.0 * ad * wx + a * (al[0] + wz * wy))
         out = []
         for arm in arms:
             s = 1.0 if arm == "left" else -1.0
             T = np.eye(4)
             T[:3, :3] = R
-            T[:3, 3] = x[:3] + s * a * u
-            v = xd[:3] + s * (ad * u + a * wxu)
-            twist = np.concatenate([R.T @ v, ang])
+            T[:3, 3] = centre + (s * a) * u
+            twist = np.array([vb[0] - s * a * wz, vb[1] + s * ad, vb[2] + s * a * wx, wx, wy, wz])
             if not accel:
                 out.append((T, twist))
                 continue
-            acc = xdd[:3] + s * (add * u + 2.0 * ad * wxu + a * alxu_wwxu)
-            out.append((T, twist, np.concatenate([R.T @ acc, ang_acc])))
+            out.append((T, twist, np.array([ab[0] + s * rel[0], ab[1] + s * rel[1], ab[2] + s * rel[2],
+                                            al[0], al[1], al[2]])))
         return out
+
+    def clamp_points(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """The left and the right clamp's positions (3,) m, display frame, at time ``t`` s (the points of
+        :meth:`clamps`, without their orientation and twist: the span guard's per-cycle question)."""
+        x = self._state(t)[0]
+        E = _rodrigues(x[3], x[4], x[5])[0]
+        h = (0.5 * self.size * (1.0 + x[6])) * (self.frame @ E[:, 1])
+        c = np.asarray(x[:3], float)
+        return c + h, c - h
 
     def fields(self) -> dict:
         """This segment as :class:`messages.ArmTarget`'s ``motion_*`` fields (the inverse of :meth:`from_fields`)."""
@@ -295,6 +313,30 @@ class SheetSegment:
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _rodrigues(rx: float, ry: float, rz: float) -> tuple[np.ndarray, float, float]:
+    """exp([r]×) (3, 3) for the rotation vector (rx, ry, rz) rad, and the right Jacobian's coefficients
+    C = (1 − cos θ)/θ², D = (θ − sin θ)/θ³ (series below 1e-4 rad). exp([r]×) = I + A·K + B·K² with
+    A = sin θ/θ, B = C and K² = r rᵀ − θ² I."""
+    th2 = rx * rx + ry * ry + rz * rz
+    if th2 < 1e-8:
+        A, B, D = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0, 1.0 / 6.0 - th2 / 120.0
+    else:
+        th = math.sqrt(th2)
+        sn, cs = math.sin(th), math.cos(th)
+        A, B, D = sn / th, (1.0 - cs) / th2, (th - sn) / (th2 * th)
+    E = np.array([[1.0 + B * (rx * rx - th2), -A * rz + B * rx * ry, A * ry + B * rx * rz],
+                  [A * rz + B * rx * ry, 1.0 + B * (ry * ry - th2), -A * rx + B * ry * rz],
+                  [-A * ry + B * rx * rz, A * rx + B * ry * rz, 1.0 + B * (rz * rz - th2)]])
+    return E, B, D
+
+
+def _right_jacobian_times(rx, ry, rz, dx, dy, dz, C: float, D: float) -> tuple[float, float, float]:
+    """J_r(r)·ṙ (3,) as floats: ṙ − C·(r × ṙ) + D·r × (r × ṙ) (C, D from :func:`_rodrigues`)."""
+    cx, cy, cz = ry * dz - rz * dy, rz * dx - rx * dz, rx * dy - ry * dx
+    ccx, ccy, ccz = ry * cz - rz * cy, rz * cx - rx * cz, rx * cy - ry * cx
+    return dx - C * cx + D * ccx, dy - C * cy + D * ccy, dz - C * cz + D * ccz
 
 
 def _right_jacobian(r: np.ndarray) -> np.ndarray:

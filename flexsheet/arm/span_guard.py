@@ -37,6 +37,9 @@ class SpanGuard:
         self.band: tuple[float, float] | None = None
         #: steps that waited because they would have taken the span further outside the band
         self.waits = 0
+        #: clamp positions of the last two joint vectors judged (joints' bytes -> (3,) m): a step starts where the
+        #: last one ended
+        self._points: dict[bytes, np.ndarray] = {}
 
     def set_band(self, band) -> None:
         """Keep the clamp span within ``band`` = (lo, hi) m of the partner's clamp (None: no guard). Raises
@@ -54,8 +57,18 @@ class SpanGuard:
         partner's clamp ``peer`` (3,) m (default :attr:`peer_clamp`); 0 inside."""
         peer = self.peer_clamp if peer is None else peer
         lo, hi = self.band if band is None else band
-        s = float(np.linalg.norm(self.kin.fk(q)[:3, 3] - peer))
+        s = float(np.linalg.norm(self._point(q) - peer))
         return max(lo - s, s - hi, 0.0)
+
+    def _point(self, q) -> np.ndarray:
+        """The clamp's position (3,) m at joints ``q`` (6,) rad (remembered for the last two)."""
+        key = np.asarray(q, float).tobytes()
+        p = self._points.get(key)
+        if p is None:
+            if len(self._points) >= 2:
+                self._points.pop(next(iter(self._points)))
+            p = self._points[key] = self.kin.fk(q)[:3, 3]
+        return p
 
     def worse(self, q_from, q_to, peer: np.ndarray | None = None, band=None) -> bool:
         """Whether moving this clamp from joints ``q_from`` to ``q_to`` (6,) rad takes the clamp span further
@@ -67,8 +80,9 @@ class SpanGuard:
         band = self.band if band is None else band
         if band is None or peer is None:
             return False
-        out_to = self.outside(np.asarray(q_to, float), peer, band)
-        if out_to > 0.0 and out_to > self.outside(np.asarray(q_from, float), peer, band) + 1e-6 and not self.peer_waiting:
+        out_from = self.outside(q_from, peer, band)   # first: the last step's end, remembered (_point)
+        out_to = self.outside(q_to, peer, band)
+        if out_to > 0.0 and out_to > out_from + 1e-6 and not self.peer_waiting:
             self.waits += 1
             self.waiting = True
             return True

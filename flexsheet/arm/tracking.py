@@ -9,8 +9,9 @@ source stamps; at most :data:`EXTRAPOLATE_MAX_S` past the newest), and the strea
 that velocity as feed-forward (:mod:`flexsheet.arm.limiter`), within the joint limits.
 
 A target that carries the sheet's motion (:class:`flexsheet.arm.sheet_motion.SheetSegment`, the same in both
-arms' targets) is followed along it instead: each cycle the clamp's pose on the segment at that instant, IK seeded
-from the last cycle's, with the clamp's twist mapped through the Jacobian as the velocity feed-forward. The two
+arms' targets) is followed along it instead: each cycle the clamp's pose on the segment at that instant, reached by
+one Newton step from the last cycle's joints (IK where that point is far or near a singularity), with the clamp's
+twist mapped through the Jacobian as the velocity feed-forward. The two
 bridges evaluate one trajectory at one instant, so the clamps move as one; the limiter is then only the last
 guard of the joint limits. Where IK refuses a point on the way, the arm streams to the target's IK goal as above.
 """
@@ -28,7 +29,7 @@ from flexsheet.arm.sheet_motion import SheetSegment, lsq_slope
 from flexsheet.arm.span_guard import SpanGuard
 
 __all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S", "PEER_ON_MOTION",
-           "SPAN_ON_MOTION"]
+           "SPAN_ON_MOTION", "TRACK_STEP_MAX", "TRACK_W_MIN"]
 
 #: goals the velocity is fitted over (16 at the camera's 48 Hz: the last 313 ms)
 VELOCITY_GOALS = 16
@@ -42,6 +43,13 @@ PEER_ON_MOTION = 0.01
 #: the fixed band's floor sits only 0.0012 m under the planner's least stretch, so the arms' millimetre of
 #: tracking in a turn made one arm wait while the other moved on
 SPAN_ON_MOTION = 0.005
+#: m or rad (the largest of the pose error's six parts): on the sheet's motion, a cycle's Newton step
+#: (:meth:`ArmKinematics.track`) follows a point at most this far from the last; further, IK solves it (a cycle of
+#: the motion at its 0.3 m/s is 2.1 mm; the step's own error is then some µm, corrected the next cycle)
+TRACK_STEP_MAX = 0.005
+#: the least manipulability a Newton step is taken at (10× IK's ``w_singular``, where IK starts to damp): nearer
+#: a singularity IK solves the point, with its damping and its ``singular`` status
+TRACK_W_MIN = 2e-3
 
 
 class TargetRefused(ValueError):
@@ -147,12 +155,13 @@ class TargetTracker:
         if (self.motion is not None and measured is not None and guard.peer_stamp is not None
                 and at is not None and guard.band is not None):
             other = "right" if self.kin.side == "left" else "left"
-            at_meas = self.motion.clamp(other, guard.peer_stamp)[0][:3, 3]
+            k = 1 if other == "right" else 0
+            at_meas = self.motion.clamp_points(guard.peer_stamp)[k]
             if float(np.linalg.norm(measured - at_meas)) <= PEER_ON_MOTION:
-                (mine, _), (theirs, _) = self.motion.clamps(at, False, (self.kin.side, other))
-                span = float(np.linalg.norm(mine[:3, 3] - theirs[:3, 3]))
-                return guard.worse(q_from, q_to, theirs[:3, 3],
-                                   (max(span - SPAN_ON_MOTION, 1e-3), span + SPAN_ON_MOTION))
+                points = self.motion.clamp_points(at)
+                theirs = points[k]
+                span = float(np.linalg.norm(points[0] - points[1]))
+                return guard.worse(q_from, q_to, theirs, (max(span - SPAN_ON_MOTION, 1e-3), span + SPAN_ON_MOTION))
         return guard.worse(q_from, q_to if q_stop is None else q_stop)
 
     def move_to(self, q) -> np.ndarray:
@@ -273,16 +282,29 @@ class TargetTracker:
 
     def _on_motion(self, now: float) -> tuple[np.ndarray, np.ndarray] | None:
         """Joints (6,) rad of the clamp's point on :attr:`motion` at ``now`` and their velocity (6,) rad/s (the
-        clamp's twist through the Jacobian); None when IK refuses the point (counted in ``motion_refused``)."""
+        clamp's twist through the Jacobian); None when IK refuses the point (counted in ``motion_refused``).
+        From the last cycle's point, one Newton step (:meth:`ArmKinematics.track`) while its error is under
+        :data:`TRACK_STEP_MAX`, its manipulability over :data:`TRACK_W_MIN` and the step within the joint
+        limits; otherwise IK solves the point, with its checks."""
         T, twist = self.motion.clamp(self.kin.side, now)
+        kin = self.kin
+        if self._motion_q is not None:
+            try:
+                q, w, err, manip = kin.track(T, self._motion_q, twist)
+            except np.linalg.LinAlgError:
+                err = np.inf
+            if (err <= TRACK_STEP_MAX and manip >= TRACK_W_MIN and np.all(q >= kin.q_lower)
+                    and np.all(q <= kin.q_upper)):
+                self._motion_q = q
+                return q, w
         seed = self._motion_q if self._motion_q is not None else self.goal
-        res = self.kin.ik(T, seed, max_jump=self.max_jump, tol_pos=1e-7, tol_rot=1e-7)   # 0.1 µm: 1-2 iterations
+        res = kin.ik(T, seed, max_jump=self.max_jump, tol_pos=1e-7, tol_rot=1e-7)   # 0.1 µm: 1-2 iterations
         if not res.ok:
             self.motion_refused += 1
             return None
         self._motion_q = res.q
         try:
-            w = np.linalg.solve(self.kin.jacobian(res.q), twist)
+            w = np.linalg.solve(kin.jacobian(res.q), twist)
         except np.linalg.LinAlgError:
             w = np.zeros(6)
         return res.q, w

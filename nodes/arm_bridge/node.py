@@ -300,8 +300,9 @@ class ArmBridgeNode(Node):
             return
         q = st.position
         self._q_measured = np.asarray(q, float)
+        pose, manipulability = self.fk_kin.fk_manipulability(q)
         self.pub.publish(ArmJointState(
             header=self.pub.header("display"), arm=self.params.arm, position=q, velocity=st.velocity,
-            commanded=rep.commanded, executing=st.active, pose=self.fk_kin.fk(q), status=st.status, fault=st.fault,
-            manipulability=self.fk_kin.manipulability(q), target_stamp=rep.target_stamp,
+            commanded=rep.commanded, executing=st.active, pose=pose, status=st.status, fault=st.fault,
+            manipulability=manipulability, target_stamp=rep.target_stamp,
             write_stamp=rep.write_stamp, bridge_status=rep.bridge_status))

@@ -170,3 +170,25 @@ def test_urdf_speeds_are_the_rv1a_datasheet():
         assert math.degrees(model.velocityLimit[model.joints[j].idx_v]) == pytest.approx(DATASHEET_SPEED_DEG[k],
                                                                                        abs=1e-9)
     assert np.degrees(QD_MAX) == pytest.approx(DATASHEET_SPEED_DEG, abs=1e-9)
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_a_newton_step_converges_quadratically_and_its_rate_moves_the_clamp_at_the_twist(side):
+    kin = ArmKinematics(side, LEFT_BASE if side == "left" else RIGHT_BASE)
+    rng = np.random.default_rng(5)
+    q = home_joints(side)
+    for scale in (1e-2, 1e-3, 1e-4):
+        dq = rng.normal(size=6) * scale
+        T_goal = kin.fk(q + dq)
+        twist = rng.normal(size=6) * 0.1
+        q1, qd, err, w = kin.track(T_goal, q, twist)
+        # the residual after one step is second order in the step (error 1e-2 rad -> 1e-4 and less)
+        assert np.abs(q1 - (q + dq)).max() < 10.0 * scale ** 2, scale
+        assert err > 0.1 * scale and abs(w - kin.manipulability(q)) < 1e-12
+        # q̇ moves the clamp at the twist (clamp frame), checked by finite differences of the FK
+        h = 1e-7
+        T0, T1 = kin.fk(q), kin.fk(q + h * qd)
+        v = T0[:3, :3].T @ (T1[:3, 3] - T0[:3, 3]) / h
+        assert np.allclose(v, twist[:3], atol=1e-5)
+    T, m = kin.fk_manipulability(q)
+    assert np.abs(T - kin.fk(q)).max() < 1e-14 and abs(m - kin.manipulability(q)) < 1e-12

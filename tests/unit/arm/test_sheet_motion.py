@@ -47,6 +47,23 @@ def test_the_span_is_the_planned_one_all_along_a_large_turn_and_the_twist_is_the
     assert np.allclose(seg.clamp("left", 10.0)[0], clamp_poses(o, R[:, 0], R[:, 1], eps)[0], atol=1e-12)
 
 
+def test_the_clamps_points_and_twist_rate_agree_with_the_poses_and_twists_they_come_from():
+    sh = SheetShaper()
+    sh.update(0.0, [0.0, 0.0, 0.0], R0, 0.01)
+    seg = sh.update(0.0, [-0.03, 0.01, 0.02], _turn(50.0), 0.04)
+    h = 1e-6
+    for t in np.linspace(0.0, seg.duration, 23)[1:-1]:
+        left, right = seg.clamp_points(t)
+        cl = seg.clamps(t, True, ("left", "right"))
+        assert np.abs(left - cl[0][0][:3, 3]).max() < 1e-15 and np.abs(right - cl[1][0][:3, 3]).max() < 1e-15
+        for side, (T, tw, acc) in zip(("left", "right"), cl, strict=True):
+            # the twist's rate in the clamp frame, to first order in the rotation (the rotating frame's terms are
+            # second order): the finite difference of the twist, rotated into the frame at t
+            T2, tw2 = seg.clamp(side, t + h)
+            rate = np.concatenate([T[:3, :3].T @ T2[:3, :3] @ tw2[:3] - tw[:3], tw2[3:] - tw[3:]]) / h
+            assert np.allclose(acc, rate, atol=0.05 * max(1.0, np.abs(rate).max())), (side, t, acc, rate)
+
+
 def test_the_first_motion_starts_where_the_arms_hold_the_sheet_not_at_the_goal():
     """The first plan (or the first after a reset) is 22 mm and 20° from the home pose the arms hold: given the
     held sheet, the motion starts there at rest and reaches the goal; without it, it starts at the goal (the
