@@ -20,7 +20,7 @@ from flexsheet.runtime.qos import KEEP_ALL_DEPTH, QoS
 from messages import Message, Topic
 from messages import topics as T
 
-__all__ = ["Subscription", "SubscriptionWorker"]
+__all__ = ["Subscription", "SubscriptionWorker", "Sampled"]
 
 _thread_time = time.thread_time
 
@@ -39,12 +39,29 @@ class SubscriptionWorker(threading.Thread):
         self.sub.close()
 
 
+class Sampled:
+    """The consumer of a sampled subscription (:meth:`flexsheet.runtime.node.Node.sample`): none runs; the task-like
+    ``done()`` and ``cancel()`` of the others."""
+
+    def __init__(self, sub: Subscription) -> None:
+        self.sub = sub
+
+    def done(self) -> bool:
+        return self.sub._closed
+
+    def cancel(self) -> None:
+        self.sub.close()
+
+
 class Subscription:
     """One typed subscription of ``node`` (its :class:`~flexsheet.runtime.node.Node`): its queue, QoS, handler,
     consumer (task or worker thread) and statistics.
 
     Queue items are wire frames (decoded and validated by the consumer: the wire boundary) or, from a node of
     the same container, the message object itself (already validated when it was built).
+
+    ``handler`` None: a sampled subscription (:meth:`flexsheet.runtime.node.Node.sample`): no consumer; the newest
+    item is kept as it arrives and decoded only when :meth:`read` reads it.
     """
 
     def __init__(self, node: Any, topic: Topic, handler: Callable, qos: QoS, depth: int | None,
@@ -55,9 +72,14 @@ class Subscription:
         self.name_b = topic.name.encode()
         self.depth = depth or (1 if qos in (QoS.LATEST, QoS.LATCHED) else KEEP_ALL_DEPTH)
         self.queue: collections.deque = collections.deque()
+        self.sampled = handler is None
         self.is_async = inspect.iscoroutinefunction(handler)
         self.event = asyncio.Event() if self.is_async else None
-        self._wake: queue.SimpleQueue | None = None if self.is_async else queue.SimpleQueue()
+        self._wake: queue.SimpleQueue | None = None if self.is_async or self.sampled else queue.SimpleQueue()
+        self._held: Any = None          # sampled: the newest item, and the one decoded last with its message
+        self._held_read: Any = None
+        self._held_msg: Message | None = None
+        self._read_lock = threading.Lock()
         self._lock = threading.Lock()
         self._waiting = False
         self._closed = False
@@ -68,8 +90,11 @@ class Subscription:
         self.task: asyncio.Task | SubscriptionWorker | None = None  # the consumer, once started (both have done(), cancel())
 
     def start(self, loop: asyncio.AbstractEventLoop) -> None:
-        """Start the consumer: a task on ``loop`` (async handler) or the worker thread (sync handler)."""
-        if self.is_async:
+        """Start the consumer: a task on ``loop`` (async handler), the worker thread (sync handler), or none
+        (sampled)."""
+        if self.sampled:
+            self.task = Sampled(self)
+        elif self.is_async:
             self.task = loop.create_task(self.run())
         else:
             self.task = SubscriptionWorker(self)
@@ -94,6 +119,9 @@ class Subscription:
         sched = self.node._lockstep
         if sched is not None:
             sched.enqueue(self, item)
+            return
+        if self.sampled:
+            self._hold(item)
             return
         if self.is_async:
             node = self.node
@@ -152,8 +180,37 @@ class Subscription:
             if msg is not None:
                 self._call_sync(msg)
 
+    def _hold(self, item: Any) -> None:
+        with self._lock:
+            if self._held is not None and self._held is not self._held_read:
+                self.stats.dropped += 1        # never read: superseded, as a latest-QoS queue drops it
+            self._held = item
+
+    def read(self) -> Message | None:
+        """The newest message of a sampled subscription, decoded and validated now (once per message; any
+        thread), or None before the first. A message that fails validation is counted as rejected (the node's
+        ``rejected``, naming the topic) and the last good one is returned."""
+        with self._read_lock:
+            with self._lock:
+                item = self._held
+            if item is not None and item is not self._held_read:
+                self._held_read = item
+                msg = self._accept(item)
+                if msg is not None:
+                    self._held_msg = msg
+            return self._held_msg
+
+    def reject(self, reason: str) -> None:
+        """Count a message of this topic as rejected input, as a handler's ``ValueError`` is (for a sampled one
+        whose reader found it unusable): the node's ``rejected``, its reason naming the topic."""
+        self.stats.rejected += 1
+        self.node._reject(f"{self.topic.name}: {reason}")
+
     async def handle_now(self, item: Any) -> None:
         """Handle one item to completion on the loop (lockstep replay: deterministic order, one at a time)."""
+        if self.sampled:
+            self._hold(item)
+            return
         msg = self._accept(item)
         if msg is None:
             return

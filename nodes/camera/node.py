@@ -53,7 +53,7 @@ from flexsheet.vision.calib_yaml import load_yaml
 from flexsheet.vision.camera_config import CameraConfig
 from flexsheet.vision.camera_model import camera_model
 from flexsheet.vision.stereo_calibration import to_message
-from messages import ArmJointState, FingerTruth, ProjectorImage, StereoFrame, topics
+from messages import FingerTruth, ProjectorImage, StereoFrame, topics
 from nodes.camera.device import DeviceSource
 from nodes.camera.files import FileSource
 from nodes.camera.genicam import GenICamConfig, GenICamStereo, list_devices, resolve_device
@@ -301,11 +301,10 @@ class CameraNode(Node):
 
         self.scene = RegistrationScene(truth, seed=self.params.seed)
         self._scene_lock = threading.Lock()
-        self._joints: dict[str, np.ndarray] = {}
         self._projected: tuple[int, np.ndarray] | None = None
         self._projected_stamp: float | None = None
-        for side in ("left", "right"):
-            self.subscribe(topics.arm_state(side), self.on_joint_state, qos=QoS.LATEST)
+        # where the true arms are (the controller twins' readback), read per registration frame (sampled)
+        self._arm_states = {side: self.sample(topics.arm_state(side)) for side in ("left", "right")}
         self.subscribe(topics.PROJECTOR_IMAGE, self.on_projector_image, qos=QoS.LATEST)
         self.service("twin/scene", self.srv_scene,
                      f"camera twin only: {{scene: {'|'.join(SCENES)}, board, square (m), offset (m)}}: what the "
@@ -328,11 +327,6 @@ class CameraNode(Node):
             stamp = self._projected_stamp
         return {"scene": self.scene.scene, "projector_stamp": stamp, "now": self.now()}
 
-    def on_joint_state(self, msg: ArmJointState) -> None:
-        """Keep each arm's measured joints (where the true arm is: the controller twin's readback)."""
-        with self._lock:
-            self._joints[msg.arm] = msg.position.copy()
-
     def on_projector_image(self, msg: ProjectorImage) -> None:
         """Keep what the projector shows (its seq tells images apart)."""
         with self._lock:
@@ -340,8 +334,9 @@ class CameraNode(Node):
             self._projected_stamp = msg.header.stamp if msg.showing else None
 
     def _registration_frame(self) -> tuple[np.ndarray, np.ndarray] | None:
+        msgs = {side: sub.read() for side, sub in self._arm_states.items()}
+        q = {side: m.position for side, m in msgs.items() if m is not None}
         with self._lock:
-            q = dict(self._joints)
             projected = self._projected
         if len(q) < 2:
             self._log_limited(30, "camera twin: the registration scene waits for both arms' joint states")

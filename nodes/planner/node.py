@@ -74,7 +74,6 @@ from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.runtime.qos import QoS
 from messages import (
-    ArmJointState,
     ArmTarget,
     EyePose,
     Fingertip,
@@ -234,9 +233,9 @@ class PlannerNode(Node):
         self.subscribe(topics.DEFORMATION, self.on_deformation, qos=QoS.LATEST)
         self.subscribe(topics.FORCE_DEPTH, self.on_force_depth)
         self.subscribe(topics.EYE_POSE, self.on_eye_pose, qos=QoS.LATEST)
-        self._clamps: dict[str, np.ndarray] = {}               # the arms' measured clamp poses (4, 4)
-        self.subscribe(topics.ARM_LEFT_STATE, self.on_arm_state, qos=QoS.LATEST)
-        self.subscribe(topics.ARM_RIGHT_STATE, self.on_arm_state, qos=QoS.LATEST)
+        # the arms' measured clamp poses, read only where a motion starts from the held sheet (sampled: the
+        # 140 Hz joint states are decoded then, not each)
+        self._arm_states = {"left": self.sample(topics.ARM_LEFT_STATE), "right": self.sample(topics.ARM_RIGHT_STATE)}
         self.pull_guard = PullGuard({"left": cfg.reach.left_base, "right": cfg.reach.right_base}, p.pull_margin)
         self._pull_said: tuple[int, float] | None = None     # (joint, limit N) last said
         self._cap_pull(*clamp_poses(np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]),
@@ -255,17 +254,14 @@ class PlannerNode(Node):
                           "(flexsheet/arm/pull_limit.py; material max_force %.0f N)", limit, side, joint,
                           self.planner.cfg.material.max_force)
 
-    def on_arm_state(self, msg: ArmJointState) -> None:
-        """An arm's measured clamp pose (display frame): where a new sheet motion starts (:meth:`_motion`)."""
-        self._clamps[msg.arm] = np.asarray(msg.pose, float)
-
     def _held_sheet(self, size: float):
         """(origin (3,) m, rotation (3, 3), strain) of the sheet as the arms' measured clamps hold it, or None
         (a state missing or not a sheet: :func:`flexsheet.model.sheet.frame_from_clamps`)."""
-        if len(self._clamps) < 2:
+        left, right = (self._arm_states[side].read() for side in ("left", "right"))
+        if left is None or right is None:
             return None
         try:
-            o, n, u, a = frame_from_clamps(self._clamps["left"], self._clamps["right"])
+            o, n, u, a = frame_from_clamps(np.asarray(left.pose, float), np.asarray(right.pose, float))
         except ValueError:
             return None
         return o, sheet_rotation(n, u), max(2.0 * a / size - 1.0, 0.0)   # slack: from a straight sheet

@@ -142,8 +142,9 @@ class RendererNode(SheetTables, Node):
             self._want = asyncio.Event()
             self._render_task = loop.create_task(self._render_loop())
         self.subscribe(topics.DEFORMATION, self.on_deformation, qos=QoS.LATEST)
-        self.subscribe(topics.ARM_LEFT_STATE, self.on_arm, qos=QoS.LATEST)
-        self.subscribe(topics.ARM_RIGHT_STATE, self.on_arm, qos=QoS.LATEST)
+        # the clamps' poses, read per frame (sampled: the 140 Hz joint states are decoded per frame, not each)
+        self._arm_states = {"left": self.sample(topics.ARM_LEFT_STATE), "right": self.sample(topics.ARM_RIGHT_STATE)}
+        self._arm_read: dict[str, ArmJointState] = {}
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
         self.subscribe(topics.SHEET_TARGET, self.on_sheet_target, qos=QoS.LATEST)
         self.subscribe(topics.EYE_POSE, self.on_eye_pose, qos=QoS.LATEST)
@@ -311,11 +312,17 @@ class RendererNode(SheetTables, Node):
             raise InputRejected(str(exc)) from exc
         self._request()
 
-    def on_arm(self, msg: ArmJointState) -> None:
-        try:
-            self.state.set_arm_pose(msg.arm, msg.pose)
-        except ValueError as exc:
-            raise InputRejected(str(exc)) from exc
+    def _read_arms(self) -> None:
+        """Take each arm's newest clamp pose (a pose that gives an unusable sheet is rejected, counted)."""
+        for side, sub in self._arm_states.items():
+            msg = sub.read()
+            if msg is None or self._arm_read.get(side) is msg:
+                continue
+            self._arm_read[side] = msg
+            try:
+                self.state.set_arm_pose(side, msg.pose)
+            except ValueError as exc:
+                sub.reject(str(exc))
 
     async def on_sheet_target(self, msg: SheetTarget) -> None:
         """The planner's stretch: prepare its pushed-sheet table before the arms reach it (on a simulated clock
@@ -386,6 +393,7 @@ class RendererNode(SheetTables, Node):
         ``publish``."""
         p: RendererParams = self.params
         t0 = time.perf_counter()
+        self._read_arms()
         image = self._image
         if image is not None:
             self.renderer.show_image(image)

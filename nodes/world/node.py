@@ -45,7 +45,7 @@ from pydantic import Field, field_validator
 
 from flexsheet.model.scene_parts import SceneError
 from flexsheet.model.scenes import Scene, load_scene
-from flexsheet.runtime.node import InputRejected, Node
+from flexsheet.runtime.node import Node
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.runtime.qos import QoS
 from flexsheet.twin.finger import FingerScript, after
@@ -142,8 +142,10 @@ class WorldNode(Node):
         self.pose_stamps: dict[str, float] = {}
         self.finger = self.scripts[0].position(0.0)
         self._warned_flat = False
-        self.subscribe(T.ARM_LEFT_STATE, self.on_arm, qos=QoS.LATEST)
-        self.subscribe(T.ARM_RIGHT_STATE, self.on_arm, qos=QoS.LATEST)
+        # the arms' measured joints, read at each sheet tick (sampled: the 140 Hz joint states are decoded and
+        # put through the truth's FK per tick, not each)
+        self._arm_states = {"left": self.sample(T.ARM_LEFT_STATE), "right": self.sample(T.ARM_RIGHT_STATE)}
+        self._arm_read: dict[str, ArmJointState] = {}
         # on a simulated clock the graph's time starts only once every node is active: nothing to wait for
         self.waiting_for: set[str] = set() if self.clock.simulated else set(p.start_after)
         self.t_setup = self.monotonic()
@@ -208,14 +210,20 @@ class WorldNode(Node):
                           "" if self.waiting_for else f"; the script starts in {self.params.start_delay:.1f} s")
             self._arm_t0()
 
-    def on_arm(self, msg: ArmJointState) -> None:
-        """Keep the arm's *true* clamp pose: the truth's forward kinematics of the measured joints (the
-        bridge's own FK in ``msg.pose`` is not used). Joints the truth's FK refuses are rejected."""
-        try:
-            self.poses[msg.arm] = self.phys.clamp_pose(msg.arm, msg.position)
-            self.pose_stamps[msg.arm] = float(msg.header.stamp)
-        except ValueError as exc:
-            raise InputRejected(f"{msg.arm} arm joints: {exc}") from None
+    def _read_arms(self) -> None:
+        """Keep each arm's *true* clamp pose: the truth's forward kinematics of its newest measured joints (the
+        bridge's own FK in ``ArmJointState.pose`` is not used). Joints the truth's FK refuses are rejected (counted,
+        naming the arm); the last good pose stays."""
+        for side, sub in self._arm_states.items():
+            msg = sub.read()
+            if msg is None or self._arm_read.get(side) is msg:
+                continue
+            self._arm_read[side] = msg
+            try:
+                self.poses[side] = self.phys.clamp_pose(side, msg.position)
+                self.pose_stamps[side] = float(msg.header.stamp)
+            except ValueError as exc:
+                sub.reject(f"{side} arm joints: {exc}")
 
     def _segment(self, t: float) -> tuple[int, float]:
         """(segment index, time in it) at script time ``t`` s; (-1, overshoot) after the last segment."""
@@ -279,6 +287,7 @@ class WorldNode(Node):
                                             velocity=np.zeros(3), phase="paused", visible=False))
 
     async def tick_sheet(self) -> None:
+        self._read_arms()
         if "left" not in self.poses or "right" not in self.poses:
             return
         p: WorldParams = self.params

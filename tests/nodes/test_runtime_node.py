@@ -70,6 +70,37 @@ def test_latest_only_drops_stale_messages_and_counts_them():
     assert len(seen) <= 2 and dropped >= 18
 
 
+class Sampler(Node):
+    """Test node: /fingertip sampled (no handler), read when the test asks."""
+
+    async def setup(self) -> None:
+        self.tips = self.sample(T.FINGERTIP)
+
+
+def test_a_sampled_topic_decodes_only_the_newest_when_read_and_keeps_the_last_good_one():
+    async def scenario():
+        async with NodeHarness(Sampler) as h:
+            sub = h.node.tips
+            before = sub.read()
+            for i in range(20):
+                h.inject(T.FINGERTIP, tip(i, x=0.01 * i))
+            await h.settle(0.2)
+            decoded_before_read = sub.stats.count
+            first = sub.read()
+            again = sub.read()
+            h.inject_raw(T.FINGERTIP, [b"garbage"])
+            await h.settle(0.2)
+            after_bad = sub.read()
+            return (before, decoded_before_read, first, again, after_bad, sub.stats.count, sub.stats.dropped,
+                    h.node.rejected_total)
+    before, n0, first, again, after_bad, count, dropped, rejected = asyncio.run(scenario())
+    assert before is None and n0 == 0                 # nothing decoded until read
+    assert first.header.seq == 19 and abs(first.position[0] - 0.19) < 1e-12
+    assert again is first and count == 1              # read twice, decoded once
+    assert after_bad is first and rejected == 1      # a bad message is rejected; the last good one stays
+    assert dropped >= 18                              # the 19 superseded unread ones (and the last read one's not)
+
+
 def test_keep_all_handles_every_message_in_order():
     async def scenario():
         async with NodeHarness(make(QoS.KEEP_ALL)) as h:
