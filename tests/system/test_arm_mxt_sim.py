@@ -24,6 +24,8 @@ from flexsheet.runtime.codec import decode_any
 ROOT = Path(__file__).resolve().parents[2]
 MXT = ["arm_left.protocol=mxt", "ctrl_left.protocol=mxt", "arm_right.protocol=mxt", "ctrl_right.protocol=mxt"]
 SCRIPT = "world.script=[{mode: stroke, moving_time: 10}]"
+#: the slow tier (tests/run.sh --slow): a 150 s wall-clock run of the whole graph
+pytestmark = pytest.mark.slow
 
 
 # a 150 s real-time run of the whole graph on a shared 2-core machine. The servo is judged against the command
