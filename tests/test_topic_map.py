@@ -59,7 +59,7 @@ def _endpoints(source: str, arm: str | None) -> tuple[set[str], set[str]]:
         if isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute) and n.args:
             if n.func.attr == "publisher":
                 pub.update(_topic_of(n.args[0], arm))
-            elif n.func.attr == "subscribe":
+            elif n.func.attr in ("subscribe", "sample"):     # a sampled topic is subscribed too
                 sub.update(_topic_of(n.args[0], arm))
     return pub, sub
 

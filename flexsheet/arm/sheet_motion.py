@@ -132,16 +132,6 @@ def _hat(r) -> np.ndarray:
     return np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
 
 
-def _rot(rv) -> np.ndarray:
-    """exp([r]×) (3, 3), Rodrigues' formula."""
-    r = np.asarray(rv, float)
-    th = math.sqrt(float(r @ r))
-    K = _hat(r)
-    if th < 1e-9:
-        return np.eye(3) + K
-    return np.eye(3) + (math.sin(th) / th) * K + ((1.0 - math.cos(th)) / (th * th)) * (K @ K)
-
-
 def _log(R) -> np.ndarray:
     """The rotation vector (3,) of a rotation (3, 3) (scipy's, robust near π)."""
     return Rotation.from_matrix(np.asarray(R, float)).as_rotvec()
@@ -222,7 +212,7 @@ class SheetSegment:
 
     def rotation(self, r) -> np.ndarray:
         """The sheet's rotation (3, 3) for the rotation vector ``r`` (3,) of this segment."""
-        return self.frame @ _rot(r)
+        return self.frame @ _rodrigues(*np.asarray(r, float))[0]
 
     def sheet(self, t: float) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray, float]:
         """The sheet at time ``t``: (centre (3,) m, rotation (3, 3), strain, centre velocity (3,) m/s,
@@ -244,11 +234,9 @@ class SheetSegment:
 
     def clamps(self, t: float, accel: bool, arms) -> list[tuple[np.ndarray, ...]]:
         """:meth:`clamp` for each of ``arms`` ("left"/"right") from one evaluation of the trajectory at ``t`` s:
-        a list of (T (4, 4), twist (6,)[, twist rate (6,) with ``accel``]) in the order of ``arms``.
-
-        Worked in the sheet's own frame, where the clamp axis is e_y: with the body angular velocity
-        ω_b = J_r(r)·ṙ, the clamp's velocity there is Rᵀẋ_c ± (ȧ·e_y + a·ω_b × e_y) (a: half the span), and
-        the twist's angular part is ω_b itself (the clamps share the sheet's orientation)."""
+        a list of (T (4, 4), twist (6,)[, twist rate (6,) with ``accel``]) in the order of ``arms``. Worked in the
+        sheet's frame (clamp axis e_y): with ω_b = J_r(r)·ṙ the clamp moves at Rᵀẋ_c ± (ȧ·e_y + a·ω_b × e_y)
+        (a: half the span); the twist's angular part is ω_b (the clamps share the sheet's orientation)."""
         x, xd, xdd = self._state(t)
         E, C, D = _rodrigues(x[3], x[4], x[5])
         R = self.frame @ E
@@ -281,8 +269,7 @@ class SheetSegment:
         return out
 
     def clamp_points(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """The left and the right clamp's positions (3,) m, display frame, at time ``t`` s (the points of
-        :meth:`clamps`, without their orientation and twist: the span guard's per-cycle question)."""
+        """The left and the right clamp's positions (3,) m, display frame, at ``t`` s (:meth:`clamps`' points)."""
         x = self._state(t)[0]
         E = _rodrigues(x[3], x[4], x[5])[0]
         h = (0.5 * self.size * (1.0 + x[6])) * (self.frame @ E[:, 1])
@@ -341,11 +328,9 @@ def _right_jacobian_times(rx, ry, rz, dx, dy, dz, C: float, D: float) -> tuple[f
 
 def _right_jacobian(r: np.ndarray) -> np.ndarray:
     """SO(3)'s right Jacobian J_r(r) (3, 3): body angular velocity = J_r(r)·ṙ for R = R_ref·exp([r]×)."""
-    th = math.sqrt(float(r @ r))
+    _, C, D = _rodrigues(*np.asarray(r, float))
     K = _hat(r)
-    if th < 1e-6:
-        return np.eye(3) - 0.5 * K
-    return (np.eye(3) - (1.0 - math.cos(th)) / th ** 2 * K + (th - math.sin(th)) / th ** 3 * (K @ K))
+    return np.eye(3) - C * K + D * (K @ K)
 
 
 def plan_velocity(plans) -> tuple[np.ndarray, np.ndarray, float]:
@@ -480,7 +465,7 @@ class SheetShaper:
         v, w, ed = (np.zeros(3), np.zeros(3), 0.0) if velocity is None else (
             np.asarray(velocity[0], float), np.asarray(velocity[1], float), float(velocity[2]))
         if lead > 0.0:
-            o, R, stretch = o + v * lead, _rot(w * lead) @ R, stretch + ed * lead
+            o, R, stretch = o + v * lead, _rodrigues(*(w * lead))[0] @ R, stretch + ed * lead
         if self.segment is None:
             frame = R if current is None else np.asarray(current[1], float)
             start = np.zeros((3, DOF))
