@@ -80,6 +80,7 @@ class Subscription:
         self._held_read: Any = None
         self._held_msg: Message | None = None
         self._read_lock = threading.Lock()
+        self._taken: Message | None = None     # sampled: the message take() applied last
         self._lock = threading.Lock()
         self._waiting = False
         self._closed = False
@@ -199,6 +200,21 @@ class Subscription:
                 if msg is not None:
                     self._held_msg = msg
             return self._held_msg
+
+    def take(self, apply: Callable[[Message], Any]) -> bool:
+        """Call ``apply(msg)`` with the newest message of a sampled subscription if it is new since the last
+        take (:meth:`read`); a ``ValueError`` from it counts the message as rejected (:meth:`reject`). True if a
+        new message was applied without error."""
+        msg = self.read()
+        if msg is None or msg is self._taken:
+            return False
+        self._taken = msg
+        try:
+            apply(msg)
+        except ValueError as exc:
+            self.reject(str(exc))
+            return False
+        return True
 
     def reject(self, reason: str) -> None:
         """Count a message of this topic as rejected input, as a handler's ``ValueError`` is (for a sampled one

@@ -53,7 +53,6 @@ from flexsheet.rendering.viewpoint import Viewpoint
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.qos import QoS
 from messages import (
-    ArmJointState,
     EyePose,
     Fingertip,
     Heartbeat,
@@ -144,7 +143,6 @@ class RendererNode(SheetTables, Node):
         self.subscribe(topics.DEFORMATION, self.on_deformation, qos=QoS.LATEST)
         # the clamps' poses, read per frame (sampled: the 140 Hz joint states are decoded per frame, not each)
         self._arm_states = {"left": self.sample(topics.ARM_LEFT_STATE), "right": self.sample(topics.ARM_RIGHT_STATE)}
-        self._arm_read: dict[str, ArmJointState] = {}
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
         self.subscribe(topics.SHEET_TARGET, self.on_sheet_target, qos=QoS.LATEST)
         self.subscribe(topics.EYE_POSE, self.on_eye_pose, qos=QoS.LATEST)
@@ -315,14 +313,7 @@ class RendererNode(SheetTables, Node):
     def _read_arms(self) -> None:
         """Take each arm's newest clamp pose (a pose that gives an unusable sheet is rejected, counted)."""
         for side, sub in self._arm_states.items():
-            msg = sub.read()
-            if msg is None or self._arm_read.get(side) is msg:
-                continue
-            self._arm_read[side] = msg
-            try:
-                self.state.set_arm_pose(side, msg.pose)
-            except ValueError as exc:
-                sub.reject(str(exc))
+            sub.take(lambda msg, side=side: self.state.set_arm_pose(side, msg.pose))
 
     async def on_sheet_target(self, msg: SheetTarget) -> None:
         """The planner's stretch: prepare its pushed-sheet table before the arms reach it (on a simulated clock

@@ -145,7 +145,6 @@ class WorldNode(Node):
         # the arms' measured joints, read at each sheet tick (sampled: the 140 Hz joint states are decoded and
         # put through the truth's FK per tick, not each)
         self._arm_states = {"left": self.sample(T.ARM_LEFT_STATE), "right": self.sample(T.ARM_RIGHT_STATE)}
-        self._arm_read: dict[str, ArmJointState] = {}
         # on a simulated clock the graph's time starts only once every node is active: nothing to wait for
         self.waiting_for: set[str] = set() if self.clock.simulated else set(p.start_after)
         self.t_setup = self.monotonic()
@@ -215,15 +214,14 @@ class WorldNode(Node):
         bridge's own FK in ``ArmJointState.pose`` is not used). Joints the truth's FK refuses are rejected (counted,
         naming the arm); the last good pose stays."""
         for side, sub in self._arm_states.items():
-            msg = sub.read()
-            if msg is None or self._arm_read.get(side) is msg:
-                continue
-            self._arm_read[side] = msg
-            try:
-                self.poses[side] = self.phys.clamp_pose(side, msg.position)
-                self.pose_stamps[side] = float(msg.header.stamp)
-            except ValueError as exc:
-                sub.reject(f"{side} arm joints: {exc}")
+            sub.take(lambda msg, side=side: self._true_pose(side, msg))
+
+    def _true_pose(self, side: str, msg: ArmJointState) -> None:
+        try:
+            self.poses[side] = self.phys.clamp_pose(side, msg.position)
+        except ValueError as exc:
+            raise ValueError(f"{side} arm joints: {exc}") from None
+        self.pose_stamps[side] = float(msg.header.stamp)
 
     def _segment(self, t: float) -> tuple[int, float]:
         """(segment index, time in it) at script time ``t`` s; (-1, overshoot) after the last segment."""

@@ -101,6 +101,28 @@ def test_a_sampled_topic_decodes_only_the_newest_when_read_and_keeps_the_last_go
     assert dropped >= 18                              # the 19 superseded unread ones (and the last read one's not)
 
 
+def test_take_applies_each_new_sampled_message_once_and_counts_its_value_error_as_rejected():
+    async def scenario():
+        async with NodeHarness(Sampler) as h:
+            sub, seen = h.node.tips, []
+
+            def apply(msg):
+                if msg.position[0] > 1.0:
+                    raise ValueError(f"position.x out of workspace: {msg.position[0]}")
+                seen.append(msg.header.seq)
+            got = [sub.take(apply)]                     # nothing yet
+            h.inject(T.FINGERTIP, tip(3, x=0.5))
+            await h.settle(0.2)
+            got += [sub.take(apply), sub.take(apply)]   # new, then the same one again
+            h.inject(T.FINGERTIP, tip(4, x=2.0))
+            await h.settle(0.2)
+            got.append(sub.take(apply))                 # refused by apply
+            return got, seen, sub.stats.rejected, h.node.last_rejection
+    got, seen, rejected, reason = asyncio.run(scenario())
+    assert got == [False, True, False, False] and seen == [3]
+    assert rejected == 1 and "/fingertip" in reason and "out of workspace" in reason
+
+
 def test_keep_all_handles_every_message_in_order():
     async def scenario():
         async with NodeHarness(make(QoS.KEEP_ALL)) as h:
