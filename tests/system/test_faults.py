@@ -71,15 +71,13 @@ PUBLISHES = {
     "world": ["/world/finger", "/world/sheet", "/world/contact", "/world/head"],
     "head_camera": ["/eye/pose"],
 }
-#: a 45 s stroke the kills start in, then the paper's two stroking speeds (Table I rows 30 s and 10 s): ~95 s
-#: of script. All the kills were done ~27 s after the first segment started (warm, loaded 2-core
-#: machine: recorder at +0 s ... last arm pair up at +27 s) but took > 46 s on the same machine on a slower day
-#: (a Python loop 1.5-2x slower), when a script of the two paper strokes alone ended before the last
-#: arm pair's kill; with a 20 s first stroke (~69 s of script) a loaded suite still saw the script end before
-#: the last controller twin's respawn. The kills now have the 45 s and the 30 s strokes (~80 s), and the 10 s
-#: stroke after them shows the graph recovered. The FEM's precompute is cached before the launch (conftest.sim_fem_cache): a cold
-#: FEM start inside the graph took > 60 s on a fresh machine and the FEM was not up for its kill.
-SCRIPT = ("world.script=[{mode: stroke, moving_time: 45, seed: 2}, {mode: stroke, moving_time: 30}, "
+#: a 120 s stroke the kills start in, then the paper's two stroking speeds (Table I rows 30 s and 10 s): ~170 s
+#: of script, so that it outlasts the kill schedule, whose length depends on the machine: the kills once took
+#: 27 s, > 46 s on a slower day, and > 94 s on a quiet 2-core machine with the two-arm motion (each respawn waits
+#: for its node to be "up"); every shorter script ended before the last kill on some machine. The 10 s stroke after
+#: them shows the graph recovered. The FEM's precompute is cached before the launch (conftest.sim_fem_cache): a
+#: cold FEM start inside the graph took > 60 s on a fresh machine and the FEM was not up for its kill.
+SCRIPT = ("world.script=[{mode: stroke, moving_time: 120, seed: 2}, {mode: stroke, moving_time: 30}, "
           "{mode: stroke, moving_time: 10, seed: 1}]")
 SETTLE = 1.5              # s after a respawn (or, for WAIT_UP nodes, after "up") before the next kill
 #: longer for the recorder: "up" is before its subscriptions have connected to every publisher (ZeroMQ joins
