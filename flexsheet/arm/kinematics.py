@@ -266,7 +266,6 @@ class ArmKinematics:
             return IKResult(q, False, "jump", pos_err, rot_err, it, w)
         return IKResult(q, True, "ok", pos_err, rot_err, it, w)
 
-
     def track(self, T_target: np.ndarray, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
         """One Newton step of IK from joints ``q`` (6,) rad toward the clamp pose ``T_target`` (4, 4, display
         frame, m), and the joint velocity (6,) rad/s that moves the clamp at ``twist`` (6,) (v m/s, ω rad/s, clamp

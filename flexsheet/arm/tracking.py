@@ -154,8 +154,7 @@ class TargetTracker:
         measured = guard.peer_clamp
         if (self.motion is not None and measured is not None and guard.peer_stamp is not None
                 and at is not None and guard.band is not None):
-            other = "right" if self.kin.side == "left" else "left"
-            k = 1 if other == "right" else 0
+            k = 1 if self.kin.side == "left" else 0        # the partner's place in clamp_points (left, right)
             at_meas = self.motion.clamp_points(guard.peer_stamp)[k]
             if float(np.linalg.norm(measured - at_meas)) <= PEER_ON_MOTION:
                 points = self.motion.clamp_points(at)

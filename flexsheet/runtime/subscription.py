@@ -217,8 +217,8 @@ class Subscription:
         return True
 
     def reject(self, reason: str) -> None:
-        """Count a message of this topic as rejected input, as a handler's ``ValueError`` is (for a sampled one
-        whose reader found it unusable): the node's ``rejected``, its reason naming the topic."""
+        """Count a message of this topic as rejected input (a handler's ``ValueError``, or a sampled message its
+        reader found unusable): the node's ``rejected``, its reason naming the topic."""
         self.stats.rejected += 1
         self.node._reject(f"{self.topic.name}: {reason}")
 
@@ -260,8 +260,7 @@ class Subscription:
         try:
             self.handler(msg)
         except ValueError as exc:  # InputRejected included
-            self.stats.rejected += 1
-            self.node._reject(f"{self.topic.name}: {exc}")
+            self.reject(str(exc))
         except Exception:  # noqa: BLE001 - a handler bug must not kill the node; logged with traceback
             self.node._handler_error(self.topic.name)
         finally:
@@ -271,8 +270,7 @@ class Subscription:
         try:
             await self.handler(msg)
         except ValueError as exc:
-            self.stats.rejected += 1
-            self.node._reject(f"{self.topic.name}: {exc}")
+            self.reject(str(exc))
         except Exception:  # noqa: BLE001
             self.node._handler_error(self.topic.name)
 
