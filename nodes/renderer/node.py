@@ -128,6 +128,8 @@ class RendererNode(SheetTables, Node):
         self._last_publish = 0.0
         self.pub = self.publisher(topics.RENDERED)
         self.image_pub = self.publisher(topics.PROJECTOR_IMAGE)
+        # the clamps' poses, read per frame, before any output draws (sampled: the 140 Hz joint states are decoded per frame, not each)
+        self._arm_states = {"left": self.sample(topics.ARM_LEFT_STATE), "right": self.sample(topics.ARM_RIGHT_STATE)}
         self._dirty = False
         self.viewpoint = Viewpoint(*eye_positions(self.eye, self.geometry.ipd))   # before the first frame
         if p.output == "window":
@@ -141,8 +143,6 @@ class RendererNode(SheetTables, Node):
             self._want = asyncio.Event()
             self._render_task = loop.create_task(self._render_loop())
         self.subscribe(topics.DEFORMATION, self.on_deformation, qos=QoS.LATEST)
-        # the clamps' poses, read per frame (sampled: the 140 Hz joint states are decoded per frame, not each)
-        self._arm_states = {"left": self.sample(topics.ARM_LEFT_STATE), "right": self.sample(topics.ARM_RIGHT_STATE)}
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
         self.subscribe(topics.SHEET_TARGET, self.on_sheet_target, qos=QoS.LATEST)
         self.subscribe(topics.EYE_POSE, self.on_eye_pose, qos=QoS.LATEST)
