@@ -133,7 +133,7 @@ def _hat(r) -> np.ndarray:
 
 
 def _log(R) -> np.ndarray:
-    """The rotation vector (3,) of a rotation (3, 3) (scipy's, robust near π)."""
+    """The rotation vectors (..., 3) of rotations (..., 3, 3) (scipy's, robust near π; one call for a stack)."""
     return Rotation.from_matrix(np.asarray(R, float)).as_rotvec()
 
 
@@ -341,7 +341,8 @@ def plan_velocity(plans) -> tuple[np.ndarray, np.ndarray, float]:
     if len(plans) < 2:
         raise ValueError(f"plan_velocity needs at least two plans, got {len(plans)}")
     Rn = plans[-1][2]
-    x = np.array([np.concatenate([p[1], _log(Rn.T @ p[2]), [p[3]]]) for p in plans])
+    rv = _log(Rn.T @ np.array([p[2] for p in plans]))                  # (n, 3) about the newest, one call
+    x = np.column_stack([np.array([p[1] for p in plans]), rv, [p[3] for p in plans]])
     slope = lsq_slope([p[0] for p in plans], x)
     return slope[:3], Rn @ slope[3:6], float(slope[6])
 

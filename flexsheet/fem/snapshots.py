@@ -218,19 +218,28 @@ class SnapshotModel:
         w = float(np.clip((x - grid[j]) / (grid[j + 1] - grid[j]), 0.0, 1.0))
         return j, w
 
-    def _lookup(self, field: np.ndarray, th: np.ndarray, s: np.ndarray, s_grid: np.ndarray) -> np.ndarray:
-        """Bilinear look-up of ``field`` (nθ·nS, 3) at (θ, s) (k,) each → (k, 3); zero outside the θ range."""
+    def _weights(self, th: np.ndarray, s: np.ndarray, s_grid: np.ndarray):
+        """Bilinear look-up weights at (θ, s) (k,) each on the (θ, ``s_grid``) grid: (rows (4, k) into a field
+        (nθ·nS, 3), weights (4, k, 1), zero outside the θ range)."""
         tg = self.theta
-        it = np.clip(np.searchsorted(tg, th) - 1, 0, len(tg) - 2)
-        wt = np.clip((th - tg[it]) / (tg[it + 1] - tg[it]), 0.0, 1.0)
-        js = np.clip(np.searchsorted(s_grid, s) - 1, 0, len(s_grid) - 2)
-        ws = np.clip((s - s_grid[js]) / (s_grid[js + 1] - s_grid[js]), 0.0, 1.0)
+        it = np.minimum(np.maximum(np.searchsorted(tg, th) - 1, 0), len(tg) - 2)
+        wt = np.minimum(np.maximum((th - tg[it]) / (tg[it + 1] - tg[it]), 0.0), 1.0)
+        js = np.minimum(np.maximum(np.searchsorted(s_grid, s) - 1, 0), len(s_grid) - 2)
+        ws = np.minimum(np.maximum((s - s_grid[js]) / (s_grid[js + 1] - s_grid[js]), 0.0), 1.0)
         ns = len(s_grid)
         i00 = it * ns + js
-        out = ((1 - wt) * (1 - ws))[:, None] * field[i00] + ((1 - wt) * ws)[:, None] * field[i00 + 1] \
-            + (wt * (1 - ws))[:, None] * field[i00 + ns] + (wt * ws)[:, None] * field[i00 + ns + 1]
-        out[(th < tg[0]) | (th > tg[-1])] = 0.0
-        return out
+        w = np.empty((4, len(th), 1))
+        w[0, :, 0], w[1, :, 0], w[2, :, 0], w[3, :, 0] = (1 - wt) * (1 - ws), (1 - wt) * ws, wt * (1 - ws), wt * ws
+        w[:, (th < tg[0]) | (th > tg[-1])] = 0.0
+        return np.array([i00, i00 + 1, i00 + ns, i00 + ns + 1]), w
+
+    @staticmethod
+    def _gather(fields, rows: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """Σ over (weight, field) in ``fields`` of weight × the bilinear look-up (k, 3) at (``rows``, ``w``)."""
+        g = 0.0
+        for wj, f in fields:
+            g = g + wj * f[rows]                   # (4, k, 3)
+        return (g * w).sum(axis=0)
 
     def surface(self, angle: float, depth: float, axial: float = 0.0):
         """Surface displacements (S, 3) m of the rendered vertices for a push at azimuth ``angle`` (rad),
@@ -251,9 +260,9 @@ class SnapshotModel:
         ysg = np.where(yr >= 0, 1.0, -1.0)
         ia, wa = self._bracket(phi, self.angles)
         jd, wd = self._bracket(depth, self.depths)
-        side, cap = self._cap, None
-        side = ~self._cap
         cap = self._cap
+        side = ~cap
+        js = [(j, wj) for j, wj in ((jd, 1.0 - wd), (jd + 1, wd)) if wj != 0.0 and j < len(self.depths)]
         u = np.zeros((self.n_vertices, 3))
         for i, wi in ((ia, 1.0 - wa), (ia + 1, wa)):
             if wi == 0.0 or i >= len(self.angles):
@@ -261,13 +270,12 @@ class SnapshotModel:
             delta = phi - self.angles[i]
             tl = th - delta
             ui = np.zeros((self.n_vertices, 3))
-            for j, wj in ((jd, 1.0 - wd), (jd + 1, wd)):
-                if wj == 0.0 or j >= len(self.depths):
-                    continue
-                if side.any():
-                    ui[side] += wj * self._lookup(self._side_f[i, j], tl[side], ya[side], self.ys)
-                if cap.any():
-                    ui[cap] += wj * self._lookup(self._cap_f[i, j], tl[cap], self._rho[cap], self.rhos)
+            if side.any():          # one set of look-up weights for both depths
+                rows, w = self._weights(tl[side], ya[side], self.ys)
+                ui[side] = self._gather([(wj, self._side_f[i, j]) for j, wj in js], rows, w)
+            if cap.any():
+                rows, w = self._weights(tl[cap], self._rho[cap], self.rhos)
+                ui[cap] = self._gather([(wj, self._cap_f[i, j]) for j, wj in js], rows, w)
             cd, sd = math.cos(delta), math.sin(delta)
             ux, uz = ui[:, 0].copy(), ui[:, 2].copy()
             ui[:, 0] = cd * ux - sd * uz

@@ -246,6 +246,7 @@ class Container:
         stats = self.bus.lockstep.stats   # kept up to date while it runs: valid however the run ends
         try:
             await wait_ready()
+            self._cpu_at_start = (time.process_time(), self._host_cpu())    # the run's own CPU: from here on
             await run_live(self.bus, self.sim_until, stopped, self.rtf)
             if self.sim_until is not None and not self._stopping:
                 self.reason = f"simulated duration {self.sim_until:g} s reached"
@@ -260,20 +261,31 @@ class Container:
             return
         ls = self.bus.lockstep
         stats = ls.stats
-        host_cpu = {m.name: m.cpu_s + (m.node.cpu_seconds() if m.node is not None else 0.0) for m in self.members}
+        host_cpu = self._host_cpu()
+        run = {}
+        start = getattr(self, "_cpu_at_start", None)
+        if start is not None:         # start-up (tables, imports, set-up) and the stop left out
+            c0, h0 = start
+            run = {"process_cpu_run_s": time.process_time() - c0,
+                   "host_handler_cpu_run_s": {k: v - h0.get(k, 0.0) for k, v in host_cpu.items()}}
         data = {"clock": "sim", "rtf_target": self.rtf, "ready_wall_s": ready_s, "active_wall_s": dict(self.active_s),
                 "sim_s": stats.bag_s, "wall_s": stats.wall_s, "realtime_factor": stats.speed,
                 "handled": stats.handled, "timer_ticks": stats.timers,
                 "superseded_latest": ls.dropped,
                 "charged_compute_s": dict(sorted(ls.charged.items())),
-                "host_handler_cpu_s": host_cpu,
+                "host_handler_cpu_s": host_cpu, **run,
                 "note": "charged_compute_s: simulated time charged to each node (declared sim_cost: the lab's "
-                        "timings); host_handler_cpu_s: what its handlers took on this host (thread CPU time)"}
+                        "timings); host_handler_cpu_s: what its handlers took on this host (thread CPU time); "
+                        "*_run_s: the same, and the whole process's CPU, from the start of simulated time on"}
         try:
             Path(self.sim_file).parent.mkdir(parents=True, exist_ok=True)
             Path(self.sim_file).write_text(json.dumps(data, indent=1))
         except OSError as exc:
             self.log.info(f"container {self.name}: cannot write {self.sim_file}: {exc}")
+
+    def _host_cpu(self) -> dict[str, float]:
+        """Each member's CPU on this host so far, s: its set-up's and its handlers' (thread CPU time)."""
+        return {m.name: m.cpu_s + (m.node.cpu_seconds() if m.node is not None else 0.0) for m in self.members}
 
     def _write_cpu(self, wall: float, cpu: float) -> None:
         if not self.cpu_file:

@@ -236,8 +236,9 @@ def _edge_samples(board: GlassesBoard) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _edge_corners(gray: np.ndarray, corners: np.ndarray, K: np.ndarray, D: np.ndarray, edge_s: np.ndarray,
-                  usable: np.ndarray, cells: int) -> np.ndarray:
-    """Marker corners (M, 4, 2) px (ArUco order, raw image) refined by straight-edge fits.
+                  usable: np.ndarray, cells: int, origin=(0, 0)) -> np.ndarray:
+    """Marker corners (M, 4, 2) px (ArUco order, raw image) refined by straight-edge fits; ``gray`` is the
+    raw image's part whose top-left pixel is ``origin`` (x, y) px (it must hold every edge profile's reach).
 
     Each outer edge of each marker is located across its length at the fractions ``edge_s`` (S,) of the
     initial ``corners`` (M, 4, 2) px (``cells`` modules a side), where ``usable`` (M, 4, S) (else at all of
@@ -256,8 +257,8 @@ def _edge_corners(gray: np.ndarray, corners: np.ndarray, K: np.ndarray, D: np.nd
     n *= np.sign(np.sum(n * (mid - c.mean(1, keepdims=True)), -1, keepdims=True))   # outward
     p = c[:, :, None, :] + edge_s[None, None, :, None] * d[:, :, None, :]           # (M, 4, S, 2)
     q = p[..., None, :] + _EDGE_T[:, None] * n[:, :, None, None, :]                  # (M, 4, S, T, 2)
-    prof = cv2.remap(gray, q[..., 0].reshape(-1, len(_EDGE_T)).astype(np.float32),
-                     q[..., 1].reshape(-1, len(_EDGE_T)).astype(np.float32), cv2.INTER_LINEAR,
+    prof = cv2.remap(gray, (q[..., 0] - origin[0]).reshape(-1, len(_EDGE_T)).astype(np.float32),
+                     (q[..., 1] - origin[1]).reshape(-1, len(_EDGE_T)).astype(np.float32), cv2.INTER_LINEAR,
                      borderMode=cv2.BORDER_REPLICATE).reshape(M, 4, len(edge_s), len(_EDGE_T))
     g = np.clip(np.gradient(prof, _EDGE_T, axis=-1), 0.0, None)                      # dark inside, bright out
     sig = np.minimum(_EDGE_SIGMA, 0.45 * L[..., 0] / cells)[:, :, None, None]          # (M, 4, 1, 1) px
@@ -266,7 +267,8 @@ def _edge_corners(gray: np.ndarray, corners: np.ndarray, K: np.ndarray, D: np.nd
         w = g * np.exp(-0.5 * ((_EDGE_T - t[..., None]) / sig) ** 2)
         sw = w.sum(-1)
         t = (w * _EDGE_T).sum(-1) / np.maximum(sw, 1e-12)
-    ok = (sw > 1e-6) & (np.abs(t) < 2.0) & (g.max(-1) > 0.25 * np.median(g.max(-1)))
+    gm = g.max(-1)
+    ok = (sw > 1e-6) & (np.abs(t) < 2.0) & (gm > 0.25 * np.median(gm))
     ok &= usable | (np.sum(ok & usable, axis=-1, keepdims=True) < 4)
     e = (p + t[..., None] * n[:, :, None, :]).reshape(-1, 1, 2)
     e = cv2.undistortPoints(e, K, D).reshape(M, 4, len(edge_s), 2)                # normalised coordinates
@@ -352,9 +354,13 @@ class GlassesTracker:
         ids, c = ids[single], c[single]
         order = np.argsort(ids)
         ids, c = ids[order], c[order]
-        if len(ids):
-            c = _edge_corners(img.astype(np.float32), c, self.K, self.D, self._edge_s,
-                              self._edge_use[ids - self.board.first_id], self.board.cells)
+        if len(ids):            # the edge profiles read only the markers' box (+ the profile's reach, 2.5 px)
+            h, w = img.shape
+            (bx0, by0), (bx1, by1) = np.floor(c.reshape(-1, 2).min(0)) - 4, np.ceil(c.reshape(-1, 2).max(0)) + 5
+            bx0, by0 = int(min(max(bx0, 0), w - 1)), int(min(max(by0, 0), h - 1))
+            bx1, by1 = int(min(max(bx1, bx0 + 1), w)), int(min(max(by1, by0 + 1), h))
+            c = _edge_corners(img[by0:by1, bx0:bx1].astype(np.float32), c, self.K, self.D, self._edge_s,
+                              self._edge_use[ids - self.board.first_id], self.board.cells, origin=(bx0, by0))
         return ids, c
 
     def _solve(self, obj: np.ndarray, img: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
