@@ -263,10 +263,12 @@ def _edge_corners(gray: np.ndarray, corners: np.ndarray, K: np.ndarray, D: np.nd
     g = np.clip(np.gradient(prof, _EDGE_T, axis=-1), 0.0, None)                      # dark inside, bright out
     sig = np.minimum(_EDGE_SIGMA, 0.45 * L[..., 0] / cells)[:, :, None, None]          # (M, 4, 1, 1) px
     t = _EDGE_T[np.argmax(np.where(np.abs(_EDGE_T) <= 2.0, g, -1.0), axis=-1)]      # (M, 4, S)
+    k = -0.5 / sig ** 2
     for _ in range(6):                  # mean shift: a symmetric window, so a symmetric edge is unbiased
-        w = g * np.exp(-0.5 * ((_EDGE_T - t[..., None]) / sig) ** 2)
+        d = _EDGE_T - t[..., None]
+        w = g * np.exp(d * d * k)
         sw = w.sum(-1)
-        t = (w * _EDGE_T).sum(-1) / np.maximum(sw, 1e-12)
+        t = (w @ _EDGE_T) / np.maximum(sw, 1e-12)
     gm = g.max(-1)
     ok = (sw > 1e-6) & (np.abs(t) < 2.0) & (gm > 0.25 * np.median(gm))
     ok &= usable | (np.sum(ok & usable, axis=-1, keepdims=True) < 4)
