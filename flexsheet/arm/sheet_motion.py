@@ -334,15 +334,14 @@ def _right_jacobian(r: np.ndarray) -> np.ndarray:
 
 
 def plan_velocity(plans) -> tuple[np.ndarray, np.ndarray, float]:
-    """The velocity of a stream of plans: the slopes of least-squares lines over their times. ``plans``: at least
-    two (time s, centre (3,) m, rotation (3, 3), strain), oldest first. Returns (centre velocity (3,) m/s,
-    angular velocity (3,) rad/s display frame, strain rate 1/s); rotations as rotation vectors about the newest.
-    Raises ``ValueError`` for fewer than two plans or times that do not spread."""
+    """The velocity of plans: least-squares slopes over their times. ``plans``: at least two (time s, centre (3,)
+    m, rotation (3, 3), strain), oldest first. Returns (centre velocity (3,) m/s, angular velocity (3,) rad/s
+    display frame, strain rate 1/s). Raises ``ValueError`` for fewer than two plans or times that do not spread."""
     if len(plans) < 2:
         raise ValueError(f"plan_velocity needs at least two plans, got {len(plans)}")
-    Rn = plans[-1][2]
-    rv = _log(Rn.T @ np.array([p[2] for p in plans]))                  # (n, 3) about the newest, one call
-    x = np.column_stack([np.array([p[1] for p in plans]), rv, [p[3] for p in plans]])
+    Rn = plans[-1][2]      # rotation vectors (n, 3) about the newest, one call
+    x = np.column_stack([np.array([p[1] for p in plans]), _log(Rn.T @ np.array([p[2] for p in plans])),
+                         [p[3] for p in plans]])
     slope = lsq_slope([p[0] for p in plans], x)
     return slope[:3], Rn @ slope[3:6], float(slope[6])
 
