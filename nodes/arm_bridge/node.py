@@ -51,7 +51,9 @@ from flexsheet.planning.keepout import KeepOut, arm_clearance
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import config_fields, params_model
 from flexsheet.runtime.qos import QoS
+from flexsheet.twin.lab_clock import arm_clock_offset
 from flexsheet.twin.loopback import LoopbackModbusClient
+from flexsheet.twin.truth_choice import TruthChoice
 from messages import ArmJointState, ArmTarget, EyePose, topics
 from nodes.arm_bridge.modbus_link import ModbusLink
 from nodes.arm_bridge.mxt_link import MxtLink
@@ -73,6 +75,8 @@ _DEVICE = {
     "protocol": (Literal["modbus", "mxt"], Field(default="modbus", description="modbus (Modbus TCP register map) "
                                                  "or mxt (MELFA real-time external control, UDP)")),
     "host": (str, Field(default="127.0.0.1", description="controller (or twin) address")),
+    "twin": (TruthChoice, Field(default_factory=TruthChoice, description="simulated clock only: the hidden truth "
+                                "that draws this arm PC's clock offset from main (flexsheet/twin/lab_clock.py)")),
     "port": (int | None, Field(default=None, ge=1, le=65535, description="controller port: Modbus TCP "
                                "(default 15020) or MXT UDP (default 10000)")),
     "device_id": (int, Field(default=1, ge=0, le=255, description="Modbus unit id")),
@@ -85,8 +89,8 @@ ArmBridgeParams = params_model(
     "ArmBridgeParams",
     """Parameters of one arm bridge (SI units: m, rad, s).
 
-    ``arm``, ``protocol``, ``host``, ``port``, ``device_id`` and ``display_calib`` are the node's own (``port``
-    defaults by protocol); every other param is a field of — defined, defaulted and range-checked in —
+    ``arm``, ``protocol``, ``host``, ``port``, ``device_id``, ``display_calib`` and ``twin`` are the node's own
+    (``port`` defaults by protocol); every other param is a field of — defined, defaulted and range-checked in —
     :class:`flexsheet.arm.bridge_config.BridgeConfig` (``period`` defaults by protocol).
     """,
     _DEVICE,
@@ -127,6 +131,9 @@ class ArmBridgeNode(Node):
         limiter = StreamLimiter(np.clip(np.zeros(6), Q_LOWER, Q_UPPER), p.period, qd, qd * p.accel_scale,
                                 Q_LOWER, Q_UPPER, margin)
         sim = self.clock.simulated
+        # the arm PC's clock: main's plus its offset (the twin's draw on the simulated clock; the lab's own is
+        # whatever chrony leaves, docs/deploy.md); the sheet's motion is evaluated on it
+        self.clock_offset = arm_clock_offset(p.twin.truth_seed, p.twin.realism, p.arm) if sim else 0.0
         if sim and p.protocol == "mxt":
             raise ValueError("protocol mxt needs the wall clock (launch file clock: wall): its UDP session is "
                              "paced by the controller's own 7.1 ms clock")
@@ -141,7 +148,7 @@ class ArmBridgeNode(Node):
             self.link = ModbusLink(p.host, p.port, device_id=p.device_id, request_timeout=p.request_timeout,
                                    auto_reset=p.auto_reset, **extra)
         self.stream = ArmStream(self.tracker, limiter, self.link, backoff_min=p.backoff_min,
-                                backoff_max=p.backoff_max, on_cycle=self.on_cycle, clock=self.clock.stamp,
+                                backoff_max=p.backoff_max, on_cycle=self.on_cycle, clock=self.arm_now,
                                 enabled=p.enabled, monotonic=self.monotonic)
         self._diag_at = 0.0
         self._pending: ArmTarget | None = None
@@ -213,12 +220,16 @@ class ArmBridgeNode(Node):
         return self._held(self._ik(T, "the pose"))
 
     def srv_release(self, args: dict) -> str:
-        self.tracker.release(self.now())
+        self.tracker.release(self.arm_now())
         if self.ignored_while_held is not None:
             self.log.info("%s arm: released: following targets again (%d ignored while held)", self.params.arm,
                           self.ignored_while_held)
         self.ignored_while_held = None
         return "following targets"
+
+    def arm_now(self) -> float:
+        """This arm PC's clock, s: the graph's plus :attr:`clock_offset` (0 on the wall clock)."""
+        return self.clock.stamp() + self.clock_offset
 
     async def _sim_cycle(self) -> None:
         await self.stream.step(self.now())
@@ -271,7 +282,7 @@ class ArmBridgeNode(Node):
         if self.tracker.goal is None:
             self._pending = msg
             return
-        self.tracker.set_target(msg.pose, msg.source_stamp, self.now(), strict=True, pull=msg.pull, motion=motion)
+        self.tracker.set_target(msg.pose, msg.source_stamp, self.arm_now(), strict=True, pull=msg.pull, motion=motion)
         if await self.stream.refresh() and self.clock.simulated:   # write it now rather than at the next tick
             await self.stream.rewrite_now()
 
@@ -280,7 +291,7 @@ class ArmBridgeNode(Node):
         if self._pending is not None and self.tracker.goal is not None:
             msg, self._pending = self._pending, None
             try:
-                self.tracker.set_target(msg.pose, msg.source_stamp, self.now(), strict=True, pull=msg.pull,
+                self.tracker.set_target(msg.pose, msg.source_stamp, self.arm_now(), strict=True, pull=msg.pull,
                                         motion=SheetSegment.from_fields(msg))
             except ValueError as exc:
                 self._reject(f"ArmTarget: {exc}")
