@@ -148,7 +148,7 @@ class ArmBridgeNode(Node):
             self.link = ModbusLink(p.host, p.port, device_id=p.device_id, request_timeout=p.request_timeout,
                                    auto_reset=p.auto_reset, **extra)
         self.stream = ArmStream(self.tracker, limiter, self.link, backoff_min=p.backoff_min,
-                                backoff_max=p.backoff_max, on_cycle=self.on_cycle, clock=self.arm_now,
+                                backoff_max=p.backoff_max, on_cycle=self.on_cycle, clock=self.arm_stamp,
                                 enabled=p.enabled, monotonic=self.monotonic)
         self._diag_at = 0.0
         self._pending: ArmTarget | None = None
@@ -228,7 +228,11 @@ class ArmBridgeNode(Node):
         return "following targets"
 
     def arm_now(self) -> float:
-        """This arm PC's clock, s: the graph's plus :attr:`clock_offset` (0 on the wall clock)."""
+        """This arm PC's clock, s: the graph's :meth:`now` plus :attr:`clock_offset` (0 on the wall clock)."""
+        return self.now() + self.clock_offset
+
+    def arm_stamp(self) -> float:
+        """As :meth:`arm_now` for what leaves now (the graph's ``clock.stamp()``): the stream's clock."""
         return self.clock.stamp() + self.clock_offset
 
     async def _sim_cycle(self) -> None:

@@ -406,7 +406,10 @@ def test_the_arm_holds_while_the_other_cannot_follow_and_follows_again_after_it(
                 h.inject(topics.ARM_RIGHT_STATE, _peer_state("right", "hold:limit:J3"))
                 await asyncio.sleep(0.05)
                 assert h.messages(topics.ARM_LEFT_STATE)[-1].bridge_status == "hold:peer"
-                await asyncio.sleep(0.1)                             # braking from the ramp's speed
+                for _ in range(200):                                 # braking from the ramp's speed (0.1 s
+                    await asyncio.sleep(0.01)                        # quiet; longer on a loaded machine)
+                    if np.max(np.abs(twin.core.servo.v)) < 1e-6:
+                        break
                 q_held = twin.core.servo.q.copy()
                 for k in range(20):                                  # targets go on far away: not followed
                     h.inject(topics.ARM_LEFT_TARGET, target("left", -0.3, stamp=40.0 + k))
