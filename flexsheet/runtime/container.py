@@ -98,6 +98,7 @@ class Container:
         self.sim_file = sim_file     # live simulated clock: where the run's clock figures go (JSON)
         self.rtf = rtf               # live simulated clock: cap on simulated s per wall s (None: as fast as it can)
         self.active_s: dict[str, float] = {}   # live simulated clock: wall s from start until each node was active
+        self._cpu_at_start: tuple[float, dict[str, float]] | None = None   # (process CPU, members' CPU) when sim time starts
         self.shutdown_timeout = shutdown_timeout
         self.log = console_logger("container")   # what it says to the user (flexsheet.runtime.console)
         self.cpu_file = cpu_file
@@ -263,9 +264,8 @@ class Container:
         stats = ls.stats
         host_cpu = self._host_cpu()
         run = {}
-        start = getattr(self, "_cpu_at_start", None)
-        if start is not None:         # start-up (tables, imports, set-up) and the stop left out
-            c0, h0 = start
+        if self._cpu_at_start is not None:         # start-up (tables, imports, set-up) and the stop left out
+            c0, h0 = self._cpu_at_start
             run = {"process_cpu_run_s": time.process_time() - c0,
                    "host_handler_cpu_run_s": {k: v - h0.get(k, 0.0) for k, v in host_cpu.items()}}
         data = {"clock": "sim", "rtf_target": self.rtf, "ready_wall_s": ready_s, "active_wall_s": dict(self.active_s),
