@@ -94,6 +94,33 @@ def test_silent_endpoint_is_named_in_the_heartbeat(monkeypatch):
     assert 1 <= len(lines) <= 2, lines           # 3 s: one line (+1 if a 5 s window ends), not one per refusal
 
 
+def test_a_link_up_before_the_first_poll_is_seen_up():
+    """The monitor is attached before the first connect: a handshake that completes before the watch's first
+    poll (a quick peer, a slow loop) still marks the link up, so the heartbeat never warns of a live link."""
+    import time
+
+    import zmq
+
+    from flexsheet.runtime.zmq.subscriber import connect_sub
+
+    ctx = zmq.Context()
+    pub = ctx.socket(zmq.XPUB)
+    pub.setsockopt(zmq.LINGER, 0)
+    port = pub.bind_to_random_port("tcp://127.0.0.1")
+    ep = f"tcp://127.0.0.1:{port}"
+    sub, watch = connect_sub(ctx, [ep], None, 1000)
+    try:
+        time.sleep(0.5)                          # the handshake is long done before anyone polls
+        watch.poll()
+        assert watch.links[ep].up, ep
+        assert watch.report(now=time.monotonic() + 2 * LinkWatch.SILENT_S) == ""
+    finally:
+        watch.close()
+        sub.close(linger=0)
+        pub.close(linger=0)
+        ctx.term()
+
+
 class _ListHandler(logging.Handler):
     def __init__(self, out: list) -> None:
         super().__init__()

@@ -7,7 +7,6 @@ import subprocess
 import sys
 import time
 
-import pytest
 from test_runtime_launch import Launch
 
 
@@ -33,9 +32,6 @@ def test_echo_prints_exactly_count_and_an_absent_topic_says_so(demo_launch):
         lf.stop()
 
 
-# one rerun: on a loaded 2-core machine the talker's heartbeat can say "warn" for a peer link that was slow to come
-# up (its LinkWatch report), where the test expects "ok" (phase 2 of the suite, once; it passed alone at once)
-@pytest.mark.flaky(reruns=1)
 def test_topic_and_node_info_from_the_live_graph_as_json(demo_launch):
     """``topic info`` and ``node info`` (and ``--json`` on them and on the lists) report the talker's /fingertip
     with its rate and the listener's QoS from the heartbeats; an unknown topic or node is said, exit 1."""

@@ -19,8 +19,9 @@ _monotonic = time.monotonic
 
 
 def connect_sub(ctx: zmq.Context, peers: list[str], curve: CurveConfig | None, rcvhwm: int,
-                on_error: Callable[[], None] | None = None) -> zmq.Socket:
-    """A SUB socket on ``ctx`` connected to every endpoint of ``peers`` (CURVE client when ``curve``).
+                on_error: Callable[[], None] | None = None) -> tuple[zmq.Socket, LinkWatch]:
+    """A SUB socket on ``ctx`` connected to every endpoint of ``peers`` (CURVE client when ``curve``), and its
+    :class:`LinkWatch`, whose monitor is attached before the first connect (so no handshake goes unseen).
 
     Raises :class:`TransportError` naming the peer that cannot be connected (``on_error`` is called first).
     """
@@ -32,6 +33,7 @@ def connect_sub(ctx: zmq.Context, peers: list[str], curve: CurveConfig | None, r
     if curve is not None:
         sub.curve_secretkey = curve.secret_key
         sub.curve_publickey = curve.public_key
+    watch = LinkWatch(sub, peers, curve)   # the monitor first: a handshake done before it would never be seen
     for peer in peers:
         try:
             if curve is not None:
@@ -40,13 +42,14 @@ def connect_sub(ctx: zmq.Context, peers: list[str], curve: CurveConfig | None, r
                 sub.curve_serverkey = curve.server_keys[peer]  # applies to this connect only
             sub.connect(peer)
         except (zmq.ZMQError, TransportError) as exc:
+            watch.close()
             sub.close(linger=0)
             if on_error is not None:
                 on_error()
             if isinstance(exc, TransportError):
                 raise
             raise TransportError(f"cannot connect to peer endpoint {peer!r}: {exc}") from None
-    return sub
+    return sub, watch
 
 
 class SubLinks:
@@ -67,8 +70,7 @@ class SubLinks:
                  on_error: Callable[[], None] | None = None) -> None:
         self.peers = [p for p in dict.fromkeys(peers) if p]
         self.curve = curve
-        self.sock = connect_sub(ctx, self.peers, curve, rcvhwm, on_error)
-        self.watch = LinkWatch(self.sock, self.peers, curve)
+        self.sock, self.watch = connect_sub(ctx, self.peers, curve, rcvhwm, on_error)
         self.guards: dict[bytes, tuple[str, ...]] = {}
         self.guarded: dict[tuple[str, ...], tuple[zmq.Socket, LinkWatch]] = {}
         self._general = self._filtered = None
@@ -77,11 +79,10 @@ class SubLinks:
             self.guards[topic.encode()] = allowed
             if allowed and allowed not in self.guarded:
                 try:
-                    sock = connect_sub(ctx, list(allowed), curve, rcvhwm, on_error)
+                    self.guarded[allowed] = connect_sub(ctx, list(allowed), curve, rcvhwm, on_error)
                 except TransportError:
                     self.close()
                     raise
-                self.guarded[allowed] = (sock, LinkWatch(sock, allowed, curve))
 
     def fds(self) -> list[int]:
         """The (edge-triggered) file descriptors of every SUB socket, for ``loop.add_reader``."""
