@@ -52,12 +52,12 @@ from flexsheet.fem.reference.gci import gci_by_depth
 from flexsheet.fem.reference.scene_reference import FULL, QUICK, scene_reference
 from flexsheet.fem.reference.workers import parallel, run_workers
 from flexsheet.fem.scene_model import finger_on_scene
-from flexsheet.fem.served import scene_update_ms, served_finger, served_model, uses_cylinder_mesh
+from flexsheet.fem.served import launch_arc_deg, scene_update_ms, served_finger, served_model
 from flexsheet.fem.solver import FemModel, solve_full
 from flexsheet.model.scenes import load_scene
 from flexsheet.runtime.console import LIBRARY, show_lines
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("flexsheet.experiments.fem_scene")   # also when run as __main__
 
 __all__ = ["run_scene", "main", "TARGET_MM", "TARGET_PX", "CONVERGED_PX"]
 
@@ -183,16 +183,6 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
              f"reference GCI {summary['reference']['gci_px']} px (target {CONVERGED_PX}), contact gap "
              f"{summary['contact']['gap_px_max']:.2f} px, jump p99 {summary['temporal']['jump_px_p99']:.2f} px")
     return summary
-
-
-def launch_arc_deg(sc) -> float:
-    """The FEM node's ``arc_deg`` for scene ``sc`` as the launch files set it: the paper cylinder's stroke arc
-    (launch/sim.yaml, launch/lab.yaml: 60°, so its rendered surface is refined where the finger goes), 0 for any
-    other scene (its mesh follows its stroke by itself)."""
-    st = sc.stroke
-    if uses_cylinder_mesh(sc) and st.kind == "arc":
-        return float(max(abs(st.start_deg), abs(st.end_deg)))
-    return 0.0
 
 
 def _scene_settings(sc, quick: bool, levels: tuple[float, ...] | None) -> dict:

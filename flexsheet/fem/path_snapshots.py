@@ -1,10 +1,10 @@
 """Nonlinear snapshots along a scene's stroke path: the real-time model for scenes with no symmetry
 that carries one push onto another (the rounded box, the organ), after Peterlík et al. 2010's precomputed
-snapshots, here stored as a **correction to the linear model**.
+snapshots: solved states, blended as the cylinder's and the sphere's tables blend theirs.
 
 The cylinder's and the sphere's tables (:mod:`flexsheet.fem.snapshots`, :mod:`flexsheet.fem.sphere_snapshots`) move a
-snapshot from one push to the next by the object's symmetry. A general body has none, so what this table stores
-is the part of the deformation the linear model gets wrong:
+snapshot from one push to the next by the object's symmetry. A general body has none, so this table holds
+pushes at stations along the stroke and moves each with the contact:
 
 * **Offline** (:mod:`flexsheet.fem.reference.path_table`): at K **stations** along the stroke (fractions
   f_0 < … < f_K-1 of its arc length; the stroke's start and end included) the scene's hyperelastic body is
@@ -13,34 +13,32 @@ is the part of the deformation the linear model gets wrong:
   real-time linear model (:class:`flexsheet.fem.scene_model.SceneModel`, its own mesh). The table holds, on the
   real-time model's rendered surface vertices (S, 3):
 
-  - ``correction`` (K, D, S, 3) m: reference displacement − linear displacement;
+  - ``correction`` (K, D, S, 3) m: reference displacement − linear displacement (the table is keyed to the
+    real-time model it was taken against; attaching it adds that model's station solves back,
+    :class:`PathSnapshotModel`'s ``linear``, so the served states are the reference's);
   - ``force_ratio`` / ``stiffness_ratio`` (K, D): the reference's force F and dF/dd (central differences in d)
     over the linear model's at the same push (at d = 0 the first depth's ratio);
   - ``inverted`` (K, D) and ``max_strain`` (K, D): the reference's inverted elements and largest principal
     Green–Lagrange strain.
 * **Run time** (:meth:`PathSnapshotModel.lookup`): the finger's contact point is located on the stroke (projected
   onto the segments of a dense path polyline beside its nearest sample: fraction f and lateral distance ℓ); inside the table (f within the
-  stations, ℓ ≤ ``reach``, 0 < d ≤ ``depths[-1]``) the served surface is **the linear model's solve for this
-  very push plus the correction blended in (f, d)** from the four neighbouring samples, and the force and
-  stiffness are the linear model's times the bilinearly blended ratios. At a station the served push is the
-  reference's (up to float32); between stations the linear part is exact for the push and only the correction
-  is interpolated. The linear model keeps its spatial detail (an inclusion's stiffness peak between stations),
-  the table adds the large-deformation part. Outside the table the node serves linear.
-* **The correction follows the contact.** A station's correction is a bump centred on *its* contact point.
-  Blending two of them at fixed vertices put two half bumps 5 mm either side of a push midway
-  between the organ's stations, worse than the linear model alone at 5–7.5 mm deep. So each station's
-  correction is first **moved along the surface with the contact**: at fraction f, vertex v takes station s's
-  correction at the rest-surface point nearest to v − (P(f) − P(f_s)) (P: the path polyline; barycentric on the
-  rendered triangles), then the two moved corrections are blended with weights 1 − a, a. The moves are
-  precomputed when the table is attached (``trimesh.proximity.closest_point``), at sub-fractions no more than
-  :data:`SHIFT_STEP` of path apart, as one sparse (S, 2S) matrix each, and blended linearly between
+  stations, ℓ ≤ ``reach``, 0 < d ≤ ``depths[-1]``) the served surface is **the stations' solved states
+  (the reference's surface displacement) blended in (f, d)** from the four neighbouring samples, each station's
+  first moved with the contact; the force and stiffness are the linear model's solve of this very push times
+  the bilinearly blended ratios, so the force keeps the linear model's spatial detail (an inclusion's
+  stiffness peak between stations). At a station the served surface is the reference's (up to float32).
+  The surface never comes from the linear solve: its bonded contact set changes a surface node at a time as
+  the finger moves, and the drawn surface jumped with it (the rounded box: 6.1 px p99 a frame).
+* **A state follows the contact.** A station's state is a dent centred on *its* contact point. Blending two
+  of them at fixed vertices puts two half dents either side of a push midway between stations. So each
+  station's state is first **moved along the surface with the contact**: at fraction f, vertex v takes
+  station s's displacement at the rest-surface point nearest to v − (P(f) − P(f_s)) (P: the path polyline;
+  barycentric on the rendered triangles), then the two moved states are blended with weights 1 − a, a. The
+  moves are precomputed when the table is attached (``trimesh.proximity.closest_point``), at sub-fractions no
+  more than :data:`SHIFT_STEP` of path apart, as one sparse (S, 2S) matrix each, and blended linearly between
   sub-fractions at run time (one or two sparse products: no search per update). At a station the move is the
-  identity. Held out on the organ (``docs/figures/scenes/organ/path_table``): 0.70 → 0.16 mm at
-  5 mm, 1.40 → 0.33 mm at 10 mm at the tumour; on the rounded box worse at one of three held-out points from
-  15 mm on (the correction there is tied to the rounded edge, not the contact; docs/scenes.md).
-  The move follows the contact *along* the path only (not its lateral offset ≤ ``reach``) and does not turn
-  the correction's vectors with the normal (2–3.5° between the organ's stations; turning them changed the
-  held-out errors by < 0.25 mm, one-off, not kept).
+  identity. The move follows the contact *along* the path only (not its lateral offset ≤ ``reach``) and does
+  not turn the vectors with the normal (2–3.5° between the organ's stations).
 
 Frames and units: display frame, m, N, N/m. Errors: ``ValueError`` naming the field.
 """
@@ -54,7 +52,7 @@ import numpy as np
 from flexsheet.fem.cache import cache_key
 from flexsheet.fem.reference.versions import SOLVER_VERSION
 
-__all__ = ["PATH_TABLE_VERSION", "GRID", "REACH", "SHIFT_STEP", "PathSnapshotModel", "path_table_key", "check_path_table", "stiffness_from_force",
+__all__ = ["PATH_TABLE_VERSION", "GRID", "REACH", "SHIFT_STEP", "PathSnapshotModel", "least_rotation", "path_table_key", "check_path_table", "stiffness_from_force",
            "TABLE_FIELDS"]
 
 PATH_TABLE_VERSION = "path-snap-1"
@@ -71,8 +69,21 @@ GRID = {"step": 0.0025, "depth_max": 0.05, "h": 0.012, "h_fine": 0.006, "refine_
 #: how far off the stroke (m) a contact point may lie and still be served from the table
 REACH = 0.004
 #: the largest path length (m) between two sub-fractions whose contact-following moves are precomputed
-#: (module doc); between them the moved corrections are blended linearly
+#: (module doc); between them the moved states are blended linearly
 SHIFT_STEP = 0.001
+
+
+def least_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(…, 3, 3) the least rotations taking unit vectors ``a`` (…, 3) to unit vectors ``b`` (…, 3) (broadcast;
+    Rodrigues about a × b). Opposite vectors have no least rotation: ``ValueError``."""
+    a, b = np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float))
+    v, c = np.cross(a, b), np.einsum("...i,...i->...", a, b)
+    if np.any(c <= -1.0 + 1e-9):
+        raise ValueError("least_rotation: opposite vectors have no least rotation")
+    vx = np.zeros(a.shape[:-1] + (3, 3))
+    vx[..., 0, 1], vx[..., 0, 2], vx[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    vx[..., 1, 0], vx[..., 2, 0], vx[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return np.eye(3) + vx + (vx @ vx) / (1.0 + c)[..., None, None]
 
 
 def path_table_key(scene_key: str, realtime_key: str) -> str:
@@ -126,14 +137,16 @@ class PathSnapshotModel:
 
     ``table``: the arrays of :data:`TABLE_FIELDS` (checked by :func:`check_path_table`); ``rest_vertices``
     (S, 3) m the real-time model's rendered vertices, which must be the table's (within 1 µm: the table
-    corrects that very mesh), and ``faces`` (F, 3) int its rendered triangles (the corrections move over them);
-    ``path`` (M, 3) m dense samples of the stroke on the surface at ``path_fractions`` (M,) ascending
-    (``Scene.stroke_at``). Raises ``ValueError`` when the table is inconsistent, was built on another mesh, or
+    corrects that very mesh), and ``faces`` (F, 3) int its rendered triangles (the states move over them);
+    ``path`` (M, 3) m dense samples of the stroke on the surface and ``path_normals`` (M, 3) its outward unit
+    normals there, at ``path_fractions`` (M,) ascending (``Scene.stroke_at``). Raises ``ValueError`` when the table is inconsistent, was built on another mesh, or
     the path samples or faces are bad. Attaching costs one ``closest_point`` query per vertex, sub-fraction and
-    station (module doc): about 1 s for either shipped table here."""
+    station (module doc): about 1 s for either shipped table here. ``linear`` (K, D, S, 3) m: the real-time
+    model's surface displacement at each station's push and table depth (the solves the table's
+    ``correction`` was taken against); the served states are ``linear + correction``."""
 
     def __init__(self, table: dict, rest_vertices: np.ndarray, faces: np.ndarray, path: np.ndarray,
-                 path_fractions: np.ndarray):
+                 path_normals: np.ndarray, path_fractions: np.ndarray, linear: np.ndarray):
         check_path_table(table)
         rv = np.asarray(rest_vertices, float)
         tv = np.asarray(table["rest_vertices"], float)
@@ -143,39 +156,56 @@ class PathSnapshotModel:
         p, pf = np.asarray(path, float), np.asarray(path_fractions, float)
         if p.ndim != 2 or p.shape[1] != 3 or len(p) < 2 or pf.shape != (len(p),) or np.any(np.diff(pf) <= 0):
             raise ValueError(f"path must be (M >= 2, 3) with ascending fractions (M,), got {p.shape} / {pf.shape}")
+        pn = np.asarray(path_normals, float)
+        if pn.shape != p.shape or not np.all(np.abs(np.linalg.norm(pn, axis=1) - 1.0) < 1e-6):
+            raise ValueError(f"path_normals must be unit vectors shaped as path {p.shape}, got {pn.shape}")
         self.fractions = np.asarray(table["fractions"], float)
         self.depths = np.asarray(table["depths"], float)
         self.depth_max = float(self.depths[-1])
         self.reach = float(np.asarray(table["reach"]))
-        self.correction = np.ascontiguousarray(table["correction"], dtype=np.float32)
+        lin = np.asarray(linear)
+        if lin.shape != np.shape(table["correction"]) or not np.all(np.isfinite(lin)):
+            raise ValueError(f"linear must be finite, shaped as the table's correction "
+                             f"{np.shape(table['correction'])}, got {lin.shape}")
+        self.state = np.ascontiguousarray(np.asarray(table["correction"], np.float64) + lin, dtype=np.float32)
         self.force_ratio = np.asarray(table["force_ratio"], float)
         self.stiffness_ratio = np.asarray(table["stiffness_ratio"], float)
         self.inverted = np.asarray(table["inverted"], float)
         self.max_strain = np.asarray(table["max_strain"], float)
-        self._path, self._path_f = p, pf
+        self._path, self._path_n, self._path_f = p, pn, pf
         fc = np.asarray(faces)
         if fc.ndim != 2 or fc.shape[1] != 3 or len(fc) == 0 or fc.min() < 0 or fc.max() >= len(rv):
             raise ValueError(f"faces must be (F >= 1, 3) indices into the {len(rv)} rendered vertices, got shape "
                              f"{fc.shape}")
-        self._sub, self._moves = self._contact_moves(rv, fc.astype(np.int64))
+        self._sub, self._moves, self._turns = self._contact_moves(rv, fc.astype(np.int64))
 
     def path_point(self, fraction) -> np.ndarray:
         """The path polyline's point(s) (…, 3) m at ``fraction`` (…,) of the stroke (linear between samples)."""
         f = np.asarray(fraction, float)
         return np.stack([np.interp(f, self._path_f, self._path[:, k]) for k in range(3)], axis=-1)
 
-    def _move_targets(self, rv: np.ndarray, g: np.ndarray, f0: float, f1: float) -> np.ndarray:
-        """(n+1, 2, S, 3) m: for each sub-fraction in ``g`` and each of the interval's two stations f0, f1, the
-        point whose nearest rest-surface point gives vertex v its moved correction: v − (P(g) − P(f_s)), the
-        contact's travel along the path (module doc)."""
+    def path_normal(self, fraction) -> np.ndarray:
+        """The path's outward unit normal(s) (…, 3) at ``fraction`` (…,) (linear between samples, normalised)."""
+        f = np.asarray(fraction, float)
+        n = np.stack([np.interp(f, self._path_f, self._path_n[:, k]) for k in range(3)], axis=-1)
+        return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+    def _move_targets(self, rv: np.ndarray, g: np.ndarray, f0: float, f1: float) -> tuple[np.ndarray, np.ndarray]:
+        """For each sub-fraction in ``g`` and each of the interval's two stations f0, f1: the turn R (n+1, 2, 3,
+        3) that takes the station's normal to the path's normal at g (the least rotation), and the point (n+1,
+        2, S, 3) m whose nearest rest-surface point gives vertex v its moved state, P(f_s) + Rᵀ(v − P(g)): the
+        contact's travel along the path and its turn (module doc)."""
         pg, ps = self.path_point(g), self.path_point(np.array([f0, f1]))
-        return rv[None, None] - (pg[:, None, None] - ps[None, :, None])
+        R = least_rotation(self.path_normal(np.array([f0, f1]))[None, :], self.path_normal(g)[:, None])
+        x = np.einsum("gsji,gvj->gsvi", R, rv[None] - pg[:, None])          # Rᵀ (v − P(g))
+        return R, x + ps[None, :, None]
 
     def _contact_moves(self, rv: np.ndarray, faces: np.ndarray):
-        """Per interval i between stations: its sub-fractions (n_i + 1,), and per sub-fraction g one sparse
-        matrix (S, 2S) float32 (CSR, 6 entries a row) that maps the two stations' stacked corrections (2S, 3) to
+        """Per interval i between stations: its sub-fractions (n_i + 1,), per sub-fraction g one sparse matrix
+        (S, 2S) float32 (CSR, 6 entries a row) that maps the two stations' stacked, turned states (2S, 3) to
         their moved sum: row v holds the barycentric weights of the rest-surface point nearest its
-        :meth:`_move_targets` point on its triangle's vertices, station s's columns offset by s·S (module doc)."""
+        :meth:`_move_targets` point on its triangle's vertices, station s's columns offset by s·S; and the
+        turns (n_i + 1, 2, 3, 3) float32 to apply to each station's state first (module doc)."""
         import scipy.sparse as sparse
         import trimesh
 
@@ -183,13 +213,15 @@ class PathSnapshotModel:
         seg = np.linalg.norm(np.diff(self._path, axis=0), axis=1)
         arc = np.concatenate([[0.0], np.cumsum(seg)])          # path length at each path sample
         mesh = trimesh.Trimesh(rv, faces, process=False)
-        subs, ys = [], []
+        subs, ys, turns = [], [], []
         for i in range(len(self.fractions) - 1):
             f0, f1 = self.fractions[i], self.fractions[i + 1]
             length = float(np.interp(f1, self._path_f, arc) - np.interp(f0, self._path_f, arc))
             g = np.linspace(f0, f1, max(1, int(math.ceil(length / SHIFT_STEP - 1e-9))) + 1)
             subs.append(g)
-            ys.append(self._move_targets(rv, g, f0, f1))
+            R, y = self._move_targets(rv, g, f0, f1)
+            ys.append(y)
+            turns.append(R.astype(np.float32))
         flat = np.concatenate([y.reshape(-1, 3) for y in ys])
         cp, _, tri = trimesh.proximity.closest_point(mesh, flat)
         bc = trimesh.triangles.points_to_barycentric(mesh.triangles[tri], cp)
@@ -204,7 +236,7 @@ class PathSnapshotModel:
             k += n_sub * 2 * S
             mats.append([sparse.csr_matrix((w[g].transpose(1, 0, 2).reshape(-1), cols[g].transpose(1, 0, 2).reshape(-1),
                                             indptr), shape=(S, 2 * S)) for g in range(n_sub)])
-        return subs, mats
+        return subs, mats, turns
 
     def locate(self, point) -> tuple[float, float]:
         """(fraction along the stroke, lateral distance m) of a contact point (3,) m: its projection onto the
@@ -236,21 +268,25 @@ class PathSnapshotModel:
         return i, min(max(w, 0.0), 1.0)
 
     def lookup(self, fraction: float, depth: float) -> tuple[np.ndarray, float, float, float, int]:
-        """(correction (S, 3) float32 m, force ratio, stiffness ratio, the reference's largest strain, its
-        inverted element count) at (``fraction``, ``depth`` m) (clamped to the table): each of the two
-        bracketing stations' corrections, linear in depth, moved with the contact to ``fraction`` (module doc),
+        """(surface displacement (S, 3) float32 m, force ratio, stiffness ratio, the reference's largest strain,
+        its inverted element count) at (``fraction``, ``depth`` m) (clamped to the table): each of the two
+        bracketing stations' states, linear in depth, moved with the contact to ``fraction`` (module doc),
         blended with weights 1 − a, a; the ratios, strain and count bilinear between the four samples around it.
         Raises ``ValueError`` for a non-finite argument."""
         if not (math.isfinite(fraction) and math.isfinite(depth)):
             raise ValueError(f"fraction and depth must be finite, got {fraction!r}, {depth!r}")
         i, a = self._cell(fraction, self.fractions)
         j, b = self._cell(depth, self.depths)
-        c = self.correction
+        c = self.state
         k, w = self._cell(fraction, self._sub[i])
-        both = np.concatenate([np.float32((1 - a) * (1 - b)) * c[i, j] + np.float32((1 - a) * b) * c[i, j + 1],
-                               np.float32(a * (1 - b)) * c[i + 1, j] + np.float32(a * b) * c[i + 1, j + 1]])
-        mv = self._moves[i]
-        u = mv[k] @ both if w == 0.0 else np.float32(1 - w) * (mv[k] @ both) + np.float32(w) * (mv[k + 1] @ both)
+        s0 = np.float32((1 - a) * (1 - b)) * c[i, j] + np.float32((1 - a) * b) * c[i, j + 1]
+        s1 = np.float32(a * (1 - b)) * c[i + 1, j] + np.float32(a * b) * c[i + 1, j + 1]
+        mv, tn = self._moves[i], self._turns[i]
+
+        def moved(g: int) -> np.ndarray:
+            return mv[g] @ np.concatenate([s0 @ tn[g, 0].T, s1 @ tn[g, 1].T])
+
+        u = moved(k) if w == 0.0 else np.float32(1 - w) * moved(k) + np.float32(w) * moved(k + 1)
 
         def bl(t):
             return float((1 - a) * ((1 - b) * t[i, j] + b * t[i, j + 1]) + a * ((1 - b) * t[i + 1, j] + b * t[i + 1, j + 1]))

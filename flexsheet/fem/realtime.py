@@ -119,11 +119,12 @@ class CondensedSurface:
         """Mesh node count."""
         return len(self.mesh.points)
 
-    def _solve(self, fg: ContactFinger):
+    def _solve(self, fg: ContactFinger, outputs: bool = True):
         """(solution, displacements (O, 3) m of the output points, method): the condensed solve, or the full
-        sparse one ("sparse") when the contact leaves the precomputed candidates."""
+        sparse one ("sparse") when the contact leaves the precomputed candidates. ``outputs`` False: the
+        condensed solve returns no displacements ((0, 3): force and dF/dd only)."""
         try:
-            sol = self.solver.solve(fg)
+            sol = self.solver.solve(fg, outputs)
             return sol, sol.u, "condensed"
         except OutsideCandidates:
             sol = solve_full(self.model, fg)

@@ -50,7 +50,7 @@ from flexsheet.fem.cache import DEFAULT_CACHE_DIR, ArrayCache, cache_key
 from flexsheet.fem.contact import ContactFinger, held_finger
 from flexsheet.fem.material import Material
 from flexsheet.fem.mesh import MeshSpec, TetMesh
-from flexsheet.fem.path_snapshots import PathSnapshotModel, path_table_key
+from flexsheet.fem.path_snapshots import PathSnapshotModel, check_path_table, path_table_key
 from flexsheet.fem.realtime import CondensedSurface, Update, dist_to_points
 from flexsheet.fem.scene_mesh import DEFAULT_SCENE_SPEC, scene_mesh
 from flexsheet.fem.solver import CapacitanceSolver, FemModel
@@ -249,15 +249,26 @@ class SceneModel(CondensedSurface):
         self.snapshots = sm
 
     def attach_path_table(self, table: dict) -> None:
-        """Serve pushes along the stroke from a path table (:mod:`flexsheet.fem.path_snapshots`: the linear solve plus
-        the nonlinear correction, each station's moved with the contact and blended along the stroke and in
-        depth), the linear model elsewhere. Raises ``ValueError`` when the table is inconsistent or was built on
-        another real-time mesh. Precomputes the table's contact moves (about 1 s for the shipped tables); then
-        thread-safe to call while updates run (one assignment)."""
+        """Serve pushes along the stroke from a path table (:mod:`flexsheet.fem.path_snapshots`: the stations'
+        solved states, each moved with the contact and blended along the stroke and in depth; the force the
+        linear solve's times the table's ratio), the linear model elsewhere. Raises ``ValueError`` when the
+        table is inconsistent or was built on another real-time mesh. Solves each station's push at each table
+        depth with this model (the states are these solves plus the table's correction) and precomputes the
+        contact moves (about 1 s for the shipped tables); then thread-safe to call while updates run (one
+        assignment)."""
         n_path = max(2, int(math.ceil(self.scene.stroke_length() / 0.0002)) + 1)    # 0.2 mm apart
         pf = np.linspace(0.0, 1.0, n_path)
-        path, _ = self.scene.stroke_at(pf)
-        pt = PathSnapshotModel(table, self._rest.astype(np.float64), self.faces, path, pf)
+        path, path_n = self.scene.stroke_at(pf)
+        check_path_table(table)
+        depths = np.asarray(table["depths"], float)
+        linear = np.zeros(np.shape(table["correction"]))
+        if linear.shape[2] == len(self._rest):      # else PathSnapshotModel refuses the table (another mesh)
+            for k, (q, n) in enumerate(zip(np.asarray(table["points"], float), np.asarray(table["normals"], float),
+                                           strict=True)):
+                for j in range(1, len(depths)):
+                    linear[k, j] = self.surface_displacement(finger_on_scene(q, n, float(depths[j]),
+                                                                             self.finger_radius))[0]
+        pt = PathSnapshotModel(table, self._rest.astype(np.float64), self.faces, path, path_n, pf, linear)
         self.path_table = pt
 
     # ------------------------------------------------------------------ precompute
@@ -369,20 +380,19 @@ class SceneModel(CondensedSurface):
         that deep at the same point (one more capacitance solve; module doc)."""
         if 0.0 < fg.depth < STIFFNESS_FLOOR:
             press = finger_on_scene(fg.contact_point, -fg.direction, STIFFNESS_FLOOR, fg.radius)
-            return self._solve(press)[0].stiffness
+            return self._solve(press, outputs=False)[0].stiffness
         return sol.stiffness
 
     def _update_path(self, pt, fg: ContactFinger, fraction: float) -> Update:
-        """The path table's answer (method "path_snapshots"): the linear solve of this push plus the table's
-        correction at (``fraction``, depth); force and dF/dd the linear model's times the table's ratios; the
+        """The path table's answer (method "path_snapshots"): the table's blended states at (``fraction``,
+        depth); force and dF/dd the linear solve of this push times the table's ratios; the
         strain and inverted elements are the reference's at the bracketing samples. No fold test (as the
         sphere's table): the reference's own surface, sampled on the rendered triangles, folds around the
         fingertip (rounded box, 50 mm: up to 102 of them at a station, all under or beside the finger), and the
         test exists to catch the *linear* model's overlapping surface; non-finite values give ``valid`` False."""
-        sol, u_out, _ = self._solve(fg)
+        sol = self._solve(fg, outputs=False)[0]       # its force and dF/dd; the surface is the table's
         stiffness = self._floored_stiffness(fg, sol)
-        corr, rf, rk, strain, inv = pt.lookup(fraction, fg.depth)
-        us = self._surface_of(u_out) + corr
+        us, rf, rk, strain, inv = pt.lookup(fraction, fg.depth)
         us[self.held] = 0.0
         force, stiffness = float(sol.force) * rf, float(stiffness) * rk
         status, valid = ("ok" if inv == 0 else f"nonlinear_invalid:inverted={inv}"), True

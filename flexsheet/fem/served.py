@@ -36,7 +36,7 @@ from flexsheet.fem.scene_model import SceneModel, attach_scene_table, finger_on_
 from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_snapshot_table
 from flexsheet.model.scenes import Scene, is_paper_cylinder
 
-__all__ = ["uses_cylinder_mesh", "CylinderChoice", "choose_cylinder_model", "build_model", "TableState",
+__all__ = ["uses_cylinder_mesh", "launch_arc_deg", "CylinderChoice", "choose_cylinder_model", "build_model", "TableState",
            "attach_table", "snapshots_message", "served_model", "served_finger", "scene_update_ms"]
 
 
@@ -45,6 +45,16 @@ def uses_cylinder_mesh(sc: Scene) -> bool:
     snapshot table: the paper's cylinder (:func:`flexsheet.model.scenes.is_paper_cylinder`) with the back-half
     support and no inclusions (its material may differ: E, ν and Jm are the scene's)."""
     return is_paper_cylinder(sc) and sc.support.kind == "back_half" and not sc.inclusions
+
+
+def launch_arc_deg(sc) -> float:
+    """The FEM node's ``arc_deg`` for scene ``sc`` as the launch files set it: the paper cylinder's stroke arc
+    (launch/sim.yaml, launch/lab.yaml: 60°, so its rendered surface is refined where the finger goes), 0 for any
+    other scene (its mesh follows its stroke by itself)."""
+    st = sc.stroke
+    if uses_cylinder_mesh(sc) and st.kind == "arc":
+        return float(max(abs(st.start_deg), abs(st.end_deg)))
+    return 0.0
 
 
 @dataclass(frozen=True)

@@ -319,8 +319,9 @@ class CapacitanceSolver:
         """Bytes held by the precomputed matrices."""
         return self.G_cc.nbytes + self.G_co.nbytes
 
-    def solve(self, finger: ContactFinger) -> Solution:
-        """One update: returns a :class:`Solution` with ``u`` (#outputs, 3) m at the output points.
+    def solve(self, finger: ContactFinger, outputs: bool = True) -> Solution:
+        """One update: returns a :class:`Solution` with ``u`` (#outputs, 3) m at the output points (``outputs``
+        False: ``u`` is (0, 3), for a caller that needs only the force and dF/dd, which skips the largest product).
 
         Raises :class:`OutsideCandidates` when a non-candidate surface point is inside the finger, and
         ``numpy.linalg.LinAlgError`` if the active block is not positive definite (a corrupt precompute).
@@ -333,7 +334,7 @@ class CapacitanceSolver:
         if inside[ncp:].any():
             raise OutsideCandidates("finger touches surface points outside the precomputed contact region")
         k = np.flatnonzero(inside[:ncp])
-        nout = len(self.out_pts)
+        nout = len(self.out_pts) if outputs else 0
         if len(k) == 0:
             return Solution(np.zeros((nout, 3)), 0.0, np.zeros(3), 0.0, 0, "condensed")
         a = (3 * k[:, None] + np.arange(3)[None, :]).ravel()
@@ -351,7 +352,8 @@ class CapacitanceSolver:
         f, info = potrs(c, rhs.T, lower=0, overwrite_b=1)
         if info != 0:                                   # pragma: no cover - only for invalid arguments
             raise np.linalg.LinAlgError(f"potrs failed (info {info})")
-        u = (f[:, 0] @ np.take(self.G_co, a, axis=0)).astype(np.float64).reshape(nout, 3)
+        u = ((f[:, 0] @ np.take(self.G_co, a, axis=0)).astype(np.float64).reshape(nout, 3) if outputs
+             else np.zeros((0, 3)))
         f = f.astype(np.float64)
         fvec = f[:, 0].reshape(-1, 3).sum(axis=0)
         force = float(fvec @ finger.direction)

@@ -14,8 +14,8 @@ paper's cylinder and the sphere (wired by :mod:`flexsheet.experiments.fem`; the 
    push, and the force and dF/dd ratios (module doc of :mod:`flexsheet.fem.path_snapshots`); stored under the key
    the FEM node looks up (:func:`table_key`); ``--ship`` also writes it into ``flexsheet/fem/data/``.
 3. **Held out** (``--holdout-fraction``, default the midpoints of every second interval): a push between
-   stations solved on its own mesh (refined along *its* path), against what the node serves there (the linear
-   solve + the blended correction) and against the linear model alone: the largest visible shape error, px
+   stations solved on its own mesh (refined along *its* path), against what the node serves there (the
+   stations' states moved and turned with the contact, blended) and against the linear model alone: the largest visible shape error, px
    (:func:`flexsheet.fem.eye_judge.shape_px_by_depth`: what either eye sees, the finger occluding) at
    every depth. This judges the interpolation along the stroke and in depth (and the two
    meshes' difference); it is not a judgement of the reference against physics, which is one mesh level here
@@ -225,9 +225,9 @@ def _path_report(sc, fractions, table, refs, depths, held_out, look, lin_ms, che
     """The report's JSON (``path_table.json``)."""
     return {"scene": {"name": sc.name, "file": str(sc.source), "key": sc.key(), "contact": sc.finger.contact,
                       "law": sc.material.model},
-            "what": "the scene's nonlinear path table (flexsheet/fem/path_snapshots.py): the real-time linear solve "
-                    "plus the reference-minus-linear correction, each station's moved with the contact and blended "
-                    "along the stroke and in depth; held-out "
+            "what": "the scene's nonlinear path table (flexsheet/fem/path_snapshots.py): the stations' solved states "
+                    "(the real-time linear solve plus the reference-minus-linear correction), each moved and turned "
+                    "with the contact and blended along the stroke and in depth; held-out "
                     "pushes between stations on their own meshes, the largest visible shape error (px)",
             "grid": GRID, "reach_m": REACH, "stroke_length_m": sc.stroke_length(),
             "stations": [{"fraction": float(f), "point_m": p.tolist(), "dofs": int(r["dofs"]),

@@ -58,27 +58,3 @@ def test_the_judged_range_ends_where_the_reference_stops_converging_but_not_belo
     assert judged_range(d[:3], np.array([0.13, 0.44, 0.87])) is None
     assert judged_range(d, np.array([0.6, 0.1, 0.1, 0.1, 0.1, 0.1])) is None     # not converged at 5 mm
     assert judged_range(d, None) is None
-
-
-def test_the_moving_finger_on_the_organ_every_frame_of_its_stroke_and_push(tmp_path):
-    """fem_motion.served_motion on the organ's served model (its path table): the push at the stroke's middle every
-    0.25 mm to 15 mm and the stroke every 0.5 mm at 10 mm; the dent meets the fingertip within a few mm, and the
-    frames' jumps are finite and counted per change."""
-    from flexsheet.experiments.fem_motion import PUSH_STEP, STROKE_STEP, served_motion
-    from flexsheet.fem.served import served_model
-    from flexsheet.model.scenes import load_scene
-
-    sc = load_scene(SCENES_DIR / "organ.yaml")
-    rt, what = served_model(sc, cache_dir=str(tmp_path))
-    assert "path table" in what
-    m = served_motion(sc, rt)
-    c, t = m["contact"], m["temporal"]
-    n_push = int(round(sc.use.max_depth / PUSH_STEP))
-    n_stroke = int(math.ceil(sc.stroke_length() / STROKE_STEP)) + 1
-    assert c["push"]["frames"] == n_push == 60 and c["stroke"]["frames"] == n_stroke
-    assert c["push"]["methods"] == ["path_snapshots"] and c["push_to_mm"] == pytest.approx(15.0)
-    assert len(c["push"]["gap_px"]) == n_push and len(t["push"]["jump_px"]) == n_push - 3
-    assert -3.0 < c["push"]["gap_mm_range"][0] <= c["push"]["gap_mm_range"][1] < 3.0, c["push"]["gap_mm_range"]
-    assert c["gap_px_max"] == max(max(c["push"]["gap_px"]), max(c["stroke"]["gap_px"]))
-    assert all(math.isfinite(x) and x >= 0 for x in t["stroke"]["jump_px"])
-    assert t["jump_px_p99"] <= t["jump_px_max"] and t["meets_target"] == (t["jump_px_p99"] <= 0.5)

@@ -1,9 +1,10 @@
-"""A scene's nonlinear path table (flexsheet/fem/path_snapshots.py): the served push is the linear model's solve of
-that push plus the table's correction, bilinear along the stroke and in depth, with the force and stiffness
-scaled by the table's ratios; outside the table (off the stroke, deeper) the linear model; bad tables are refused
-naming the field; the shipped tables fit a fresh mesh; each station's correction moves with the contact (a bump
-that travels along the stroke is served where the finger is, not as two half bumps at the stations). The model
-(fixture ``model``) is tests/unit/conftest.py's."""
+"""A scene's nonlinear path table (flexsheet/fem/path_snapshots.py): the served surface is the stations' solved
+states (the linear model's station solve plus the table's correction), each moved and turned with the contact,
+bilinear along the stroke and in depth, with the force and stiffness the linear solve of the push scaled by the
+table's ratios; outside the table (off the stroke, deeper) the linear model; bad tables are refused naming the
+field; the shipped tables fit a fresh mesh; each station's state moves with the contact (a bump that travels
+along the stroke is served where the finger is, not as two half bumps at the stations) and turns with the
+surface's normal. The model (fixture ``model``) is tests/unit/conftest.py's."""
 
 from __future__ import annotations
 
@@ -44,19 +45,29 @@ def _table(m: SceneModel) -> dict:
             "inverted": np.zeros((K, D)), "max_strain": 0.01 * dj + 0.001 * fi, "reach": np.array(0.003)}
 
 
-def _moved(m: SceneModel, field: np.ndarray, delta: np.ndarray) -> np.ndarray:
-    """``field`` (S, 3) over the rendered vertices taken at the rest-surface point nearest v − ``delta`` for
-    every vertex v (the module doc's move, here with the exact shift rather than the model's sub-fractions)."""
+def _moved(m: SceneModel, field: np.ndarray, p_f, n_f, p_s, n_s) -> np.ndarray:
+    """``field`` (S, 3) of a station at (``p_s``, ``n_s``) moved to the push at (``p_f``, ``n_f``): vertex v takes
+    R·field at the rest-surface point nearest p_s + Rᵀ(v − p_f), R the least rotation n_s → n_f (scipy's
+    ``align_vectors``; the module doc's move, here exact rather than at the model's sub-fractions)."""
     import trimesh
+    from scipy.spatial.transform import Rotation
 
+    R = Rotation.align_vectors([n_f], [n_s])[0].as_matrix()
     v = m.rest_vertices.astype(float)
     mesh = trimesh.Trimesh(v, m.faces, process=False)
-    cp, _, tri = trimesh.proximity.closest_point(mesh, v - delta)
+    cp, _, tri = trimesh.proximity.closest_point(mesh, p_s + (v - p_f) @ R)
     bc = trimesh.triangles.points_to_barycentric(mesh.triangles[tri], cp)
-    return np.einsum("sk,skc->sc", bc, field[m.faces[tri]])
+    return np.einsum("sk,skc->sc", bc, field[m.faces[tri]]) @ R.T
 
 
-def test_served_push_is_the_linear_solve_plus_the_moved_correction(model):
+def _state(m: SceneModel, i: int, j: int) -> np.ndarray:
+    """Station i's solved state at table depth j: the linear model's solve of that push plus the correction."""
+    q, n = m.scene.stroke_at([FRACTIONS[i]])
+    lin = m.surface_displacement(finger_on_scene(q[0], n[0], float(DEPTHS[j]), m.finger_radius))[0] if j else 0.0
+    return lin + _field(m, i, j)
+
+
+def test_served_surface_is_the_stations_states_moved_and_turned_with_the_contact(model):
     m = model
     m.path_table = None
     q, n = m.scene.stroke_at([0.75])                     # between stations 0.5 and 1.0, between depths 2 and 4 mm
@@ -70,29 +81,31 @@ def test_served_push_is_the_linear_solve_plus_the_moved_correction(model):
         f, lateral = m.path_table.locate(q[0])
         assert abs(f - 0.75) < 0.01 and lateral < 2e-4
         a, b = (f - 0.5) / 0.5, 0.5
-        p = m.scene.stroke_at([f, 0.5, 1.0])[0]
-        p_f, p_st = p[:1], p[1:]
-        c1 = (1 - b) * _field(m, 1, 1) + b * _field(m, 1, 2)             # station 0.5 at 3 mm
-        c2 = (1 - b) * _field(m, 2, 1) + b * _field(m, 2, 2)             # station 1.0 at 3 mm
-        want = (1 - a) * _moved(m, c1, p_f[0] - p_st[0]) + a * _moved(m, c2, p_f[0] - p_st[1])
+        p, nn = m.scene.stroke_at([f, 0.5, 1.0])
+        c1 = (1 - b) * _state(m, 1, 1) + b * _state(m, 1, 2)             # station 0.5 at 3 mm
+        c2 = (1 - b) * _state(m, 2, 1) + b * _state(m, 2, 2)             # station 1.0 at 3 mm
+        want = (1 - a) * _moved(m, c1, p[0], nn[0], p[1], nn[1]) + a * _moved(m, c2, p[0], nn[0], p[2], nn[2])
         held = m.mesh.fixed[m.surface_nodes]
         want[held] = 0.0
-        got = (up.vertices.astype(float) - m.rest_vertices) - (lin.vertices.astype(float) - m.rest_vertices)
-        # the model blends moves precomputed at sub-fractions <= 1 mm of path apart (here 0.62 mm) and a
-        # float32 field; the exact move differs from it by the piecewise-linear field's change over part of a
-        # sub-step: measured 2.0e-7 m of a 1.3e-3 m correction
-        assert np.abs(got - want).max() < 1e-6, np.abs(got - want).max()
+        got = up.vertices.astype(float) - m.rest_vertices
+        err = np.abs(got - want).max()
+        # the model blends moves precomputed at sub-fractions <= 1 mm of path apart (here 0.62 mm) and float32
+        # states; the exact move differs from it by the piecewise-linear field's change over part of a sub-step
+        assert err < 2e-6, err
         unmoved = (1 - a) * c1 + a * c2
         unmoved[held] = 0.0
-        # it did move: the fixed-vertex blend differs by 8.4e-6 m (a 0.6 mm move of this slow field), 40 x the
-        # served field's distance from the exact move
-        assert np.abs(got - unmoved).max() > 4e-6, np.abs(got - unmoved).max()
-        assert np.abs(want).max() > 5e-4                                 # the correction is not nothing
+        assert np.abs(got - unmoved).max() > 5 * err, (np.abs(got - unmoved).max(), err)   # it did move
+        unturned = (1 - a) * _moved(m, c1, p[0], nn[1], p[1], nn[1]) + a * _moved(m, c2, p[0], nn[2], p[2], nn[2])
+        unturned[held] = 0.0
+        assert np.abs(got - unturned).max() > 5 * err, (np.abs(got - unturned).max(), err)  # and turned
+        assert np.abs(want).max() > 5e-4                                 # the state is not nothing
+        lin_u = lin.vertices.astype(float) - m.rest_vertices
+        assert np.abs(got - lin_u).max() > 5e-4                          # nor the linear solve of the push
         ratio = 1.0 + 0.1 * (1 + a) + 0.05 * 1.5
         assert up.force == pytest.approx(lin.force * ratio, rel=1e-6)
         assert up.stiffness == pytest.approx(lin.stiffness * (ratio + 1.0), rel=1e-6)
         assert up.max_strain == pytest.approx(0.01 * 1.5 + 0.001 * (1 + a), rel=1e-6)
-        # at a station and a table depth the correction is that sample's, exactly
+        # at a station and a table depth the served state is that sample's: its linear solve + correction
         q1, n1 = m.scene.stroke_at([0.5])
         at = m.update_finger(finger_on_scene(q1[0], n1[0], 0.004, m.finger_radius))
         m.path_table, keep = None, m.path_table
@@ -144,10 +157,15 @@ def test_bad_tables_are_refused_naming_the_field(model):
     moved = dict(good, rest_vertices=good["rest_vertices"] + 1e-5)
     with pytest.raises(ValueError, match="another real-time mesh"):
         m.attach_path_table(moved)
-    path, _ = m.scene.stroke_at(np.linspace(0, 1, 50))
-    pm = PathSnapshotModel(good, m.rest_vertices, m.faces, path, np.linspace(0, 1, 50))
+    path, path_n = m.scene.stroke_at(np.linspace(0, 1, 50))
+    lin = np.zeros(good["correction"].shape)
+    pm = PathSnapshotModel(good, m.rest_vertices, m.faces, path, path_n, np.linspace(0, 1, 50), lin)
     with pytest.raises(ValueError, match="finite"):
         pm.lookup(float("nan"), 0.002)
+    with pytest.raises(ValueError, match="path_normals must be unit"):
+        PathSnapshotModel(good, m.rest_vertices, m.faces, path, 2 * path_n, np.linspace(0, 1, 50), lin)
+    with pytest.raises(ValueError, match="linear must be finite, shaped"):
+        PathSnapshotModel(good, m.rest_vertices, m.faces, path, path_n, np.linspace(0, 1, 50), lin[:2])
     assert m.path_table is None
 
 
@@ -217,13 +235,19 @@ def _flat_bump_table():
     return table, v, faces, path, np.linspace(0.0, 1.0, 201), bump, A
 
 
-def test_a_station_correction_moves_with_the_contact_along_the_stroke():
-    """Between stations the served correction is the bump where the finger is (within the 1 mm grid's linear
+def _flat(table, v, faces, path, pf) -> PathSnapshotModel:
+    """The flat table's model: normals +z along the path, the linear solves zero (the states are the bumps)."""
+    return PathSnapshotModel(table, v, faces, path, np.tile([0.0, 0.0, 1.0], (len(path), 1)), pf,
+                             np.zeros(table["correction"].shape))
+
+
+def test_a_station_state_moves_with_the_contact_along_the_stroke():
+    """Between stations the served state is the bump where the finger is (within the 1 mm grid's linear
     interpolation: measured 0.1 % on a sub-fraction, 1.5 % between them), where a fixed-vertex blend
     gives two half bumps (79 % of the height off at the finger); at a station it is the station's, exactly; along
     the stroke it changes smoothly (no jump at the sub-fractions or the stations)."""
     table, v, faces, path, pf, bump, A = _flat_bump_table()
-    pm = PathSnapshotModel(table, v, faces, path, pf)
+    pm = _flat(table, v, faces, path, pf)
     for f in (0.25, 0.275, 0.6, 0.83):                  # on a sub-fraction (x = 5 mm) and between them
         got = pm.lookup(f, 0.01)[0].astype(float)
         want = bump(0.020 * f)
@@ -238,4 +262,42 @@ def test_a_station_correction_moves_with_the_contact_along_the_stroke():
     assert step < 0.01 * A, step / A                      # a 0.02 mm move of the bump: ~0.004 A
     assert np.abs(walk[250] - walk[0]).max() > 0.5 * A    # and it does travel
     with pytest.raises(ValueError, match="faces must be"):
-        PathSnapshotModel(table, v, faces + len(v), path, pf)
+        _flat(table, v, faces + len(v), path, pf)
+
+
+def test_a_station_state_turns_with_the_normal_around_a_curved_stroke():
+    """On a cylinder (R 20 mm, axis y) with a stroke around it and stations at 0°, 20°, 40°, each station's
+    state a dent along its own inward normal (A 5 mm, σ 4 mm): between stations the served dent is the dent
+    where the finger is, within 2 % of A at every vertex (measured 1.3–1.7 % at 5°, 10°, 15°, 30°, the 1 mm
+    grid's interpolation); moved without the turn (translated along the chord, vectors kept) it is 2.7–3.1 %."""
+    R0, A, sig = 0.020, 0.005, 0.004
+    th, ys = np.radians(np.arange(-30.0, 90.5, 1.0)), np.arange(-0.012, 0.0125, 0.0005)
+    gt, gy = np.meshgrid(th, ys, indexing="ij")
+    v = np.stack([R0 * np.cos(gt.ravel()), gy.ravel(), R0 * np.sin(gt.ravel())], axis=1)
+    nt, ny = len(th), len(ys)
+    k = (np.arange(nt - 1)[:, None] * ny + np.arange(ny - 1)[None, :]).ravel()
+    faces = np.concatenate([np.stack([k, k + ny, k + ny + 1], 1), np.stack([k, k + ny + 1, k + 1], 1)])
+
+    def at(t):
+        return np.array([R0 * np.cos(t), 0.0, R0 * np.sin(t)]), np.array([np.cos(t), 0.0, np.sin(t)])
+
+    def dent(t):
+        p, n = at(t)
+        return -A * np.exp(-((v - p) ** 2).sum(axis=1) / sig ** 2)[:, None] * n[None, :]
+
+    st = np.radians([0.0, 20.0, 40.0])
+    state = np.zeros((3, 2, len(v), 3), np.float32)
+    for s_, t in enumerate(st):
+        state[s_, 1] = dent(t)
+    pts, nrm = zip(*(at(t) for t in st), strict=True)
+    table = {"fractions": np.array([0.0, 0.5, 1.0]), "depths": np.array([0.0, 0.01]), "points": np.array(pts),
+             "normals": np.array(nrm), "rest_vertices": v, "correction": state,
+             "force_ratio": np.ones((3, 2)), "stiffness_ratio": np.ones((3, 2)), "inverted": np.zeros((3, 2)),
+             "max_strain": np.zeros((3, 2)), "reach": np.array(0.004)}
+    pt_ = np.radians(np.linspace(0.0, 40.0, 401))
+    path, path_n = (np.array(x) for x in zip(*(at(t) for t in pt_), strict=True))
+    pm = PathSnapshotModel(table, v, faces, path, path_n, np.linspace(0.0, 1.0, 401), np.zeros(state.shape))
+    for deg in (5.0, 10.0, 15.0, 30.0):
+        u = pm.lookup(deg / 40.0, 0.01)[0].astype(float)
+        err = np.abs(u - dent(np.radians(deg))).max()
+        assert err < 0.02 * A, (deg, err / A)
