@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import sys
@@ -87,6 +88,20 @@ def pid_alive(pid: int) -> bool:
 
 
 os.environ.setdefault("FLEXSHEET_LOG", "INFO")
+
+
+@pytest.fixture(autouse=True)
+def _library_loggers_restored():
+    """A command's ``main`` run in-process shows its library's lines (``flexsheet.runtime.console.show_lines``:
+    its own handler, ``propagate`` off); put the library's loggers back after each test, so a later test's
+    ``caplog`` on the same worker still hears them."""
+    saved = [(lg, lg.handlers[:], lg.propagate, lg.level)
+             for lg in (logging.getLogger("flexsheet"), logging.getLogger("flexsheet.console"))]
+    yield
+    for lg, handlers, propagate, level in saved:
+        lg.handlers[:] = handlers
+        lg.propagate = propagate
+        lg.setLevel(level)
 
 
 @pytest.fixture

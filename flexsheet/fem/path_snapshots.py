@@ -27,6 +27,8 @@ pushes at stations along the stroke and moves each with the contact:
   first moved with the contact; the force and stiffness are the linear model's solve of this very push times
   the bilinearly blended ratios, so the force keeps the linear model's spatial detail (an inclusion's
   stiffness peak between stations). At a station the served surface is the reference's (up to float32).
+  The node then puts every vertex left inside the fingertip sphere on it
+  (:meth:`flexsheet.fem.scene_model.SceneModel._update_path`).
   The surface never comes from the linear solve: its bonded contact set changes a surface node at a time as
   the finger moves, and the drawn surface jumped with it (the rounded box: 6.1 px p99 a frame).
 * **A state follows the contact.** A station's state is a dent centred on *its* contact point. Blending two

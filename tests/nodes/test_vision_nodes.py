@@ -138,7 +138,8 @@ def test_camera_node_holds_a_stale_finger_truth_and_never_returns_to_the_param_p
     async def scenario():
         async with NodeHarness(CameraNode, params={"rate_hz": 50.0, "seed": 2, "twin": IDEAL}) as h:
             cal = (await h.wait_for(topics.CALIBRATION, n=1, timeout=3.0))[0]
-            p, v = np.array([-0.010, 0.0, 0.024]), np.array([-0.02, 0.0, 0.03])
+            # 15 mm to the side of the param path's plane (y = 0): never within 5 mm of it, whenever the frame
+            p, v = np.array([-0.010, 0.015, 0.024]), np.array([-0.02, 0.0, 0.03])
             h.inject(topics.FINGER_TRUTH, FingerTruth(header=Header(stamp=h.node.now()), position=p, velocity=v))
             await h.settle(1.0)
             n0 = len(h.messages(topics.STEREO))
