@@ -39,8 +39,9 @@ pushes at stations along the stroke and moves each with the contact:
   moves are precomputed when the table is attached (``trimesh.proximity.closest_point``), at sub-fractions no
   more than :data:`SHIFT_STEP` of path apart, as one sparse (S, 2S) matrix each, and blended linearly between
   sub-fractions at run time (one or two sparse products: no search per update). At a station the move is the
-  identity. The move follows the contact *along* the path only (not its lateral offset ≤ ``reach``) and does
-  not turn the vectors with the normal (2–3.5° between the organ's stations).
+  identity. The move turns each station's state by the least rotation from its normal to the path's normal
+  there; it follows the contact *along* the path only, so the node fades from the states to the linear solve
+  of the push as the contact's lateral offset goes from ``reach``/2 to ``reach`` (no jump at the table's side).
 
 Frames and units: display frame, m, N, N/m. Errors: ``ValueError`` naming the field.
 """

@@ -263,11 +263,12 @@ class SceneModel(CondensedSurface):
         depths = np.asarray(table["depths"], float)
         linear = np.zeros(np.shape(table["correction"]))
         if linear.shape[2] == len(self._rest):      # else PathSnapshotModel refuses the table (another mesh)
-            for k, (q, n) in enumerate(zip(np.asarray(table["points"], float), np.asarray(table["normals"], float),
-                                           strict=True)):
-                for j in range(1, len(depths)):
-                    linear[k, j] = self.surface_displacement(finger_on_scene(q, n, float(depths[j]),
-                                                                             self.finger_radius))[0]
+            with one_blas_thread():                  # beside the update thread on a small machine
+                for k, (q, n) in enumerate(zip(np.asarray(table["points"], float),
+                                               np.asarray(table["normals"], float), strict=True)):
+                    for j in range(1, len(depths)):
+                        linear[k, j] = self.surface_displacement(finger_on_scene(q, n, float(depths[j]),
+                                                                                 self.finger_radius))[0]
         pt = PathSnapshotModel(table, self._rest.astype(np.float64), self.faces, path, path_n, pf, linear)
         self.path_table = pt
 
@@ -342,7 +343,7 @@ class SceneModel(CondensedSurface):
         if pt is not None and fg.depth > 0:
             f, lateral = pt.locate(fg.contact_point)
             if pt.covers(f, lateral, fg.depth):
-                return self._update_path(pt, fg, f)
+                return self._update_path(pt, fg, f, lateral)
         sol, u_out, method = self._solve(fg)
         stiffness = self._floored_stiffness(fg, sol)
         strain, inv = self._checks(fg, u_out) if sol.n_contact else (0.0, 0)
@@ -383,18 +384,23 @@ class SceneModel(CondensedSurface):
             return self._solve(press, outputs=False)[0].stiffness
         return sol.stiffness
 
-    def _update_path(self, pt, fg: ContactFinger, fraction: float) -> Update:
+    def _update_path(self, pt, fg: ContactFinger, fraction: float, lateral: float = 0.0) -> Update:
         """The path table's answer (method "path_snapshots"): the table's blended states at (``fraction``,
-        depth); force and dF/dd the linear solve of this push times the table's ratios; the
+        depth), faded to the linear solve's surface as the contact's ``lateral`` offset (m) from the stroke goes
+        from half the table's reach to its reach (continuous at the table's side); no vertex inside the
+        fingertip; force and dF/dd the linear solve of this push times the table's ratios; the
         strain and inverted elements are the reference's at the bracketing samples. No fold test (as the
         sphere's table): the reference's own surface, sampled on the rendered triangles, folds around the
         fingertip (rounded box, 50 mm: up to 102 of them at a station, all under or beside the finger), and the
         test exists to catch the *linear* model's overlapping surface; non-finite values give ``valid`` False."""
-        sol = self._solve(fg, outputs=False)[0]       # its force and dF/dd; the surface is the table's
+        w = min(1.0, max(0.0, (pt.reach - lateral) / (0.5 * pt.reach)))   # the states' weight
+        sol, u_out, _ = self._solve(fg, outputs=w < 1.0)  # force and dF/dd; its surface only where it fades in
         stiffness = self._floored_stiffness(fg, sol)
         us, rf, rk, strain, inv = pt.lookup(fraction, fg.depth)
-        us[self.held] = 0.0
+        if w < 1.0:
+            us = np.float32(w) * us + np.float32(1.0 - w) * self._surface_of(u_out).astype(np.float32)
         us = self._outside_finger(us, fg)
+        us[self.held] = 0.0
         force, stiffness = float(sol.force) * rf, float(stiffness) * rk
         status, valid = ("ok" if inv == 0 else f"nonlinear_invalid:inverted={inv}"), True
         if not (np.all(np.isfinite(us)) and math.isfinite(force) and math.isfinite(stiffness)):

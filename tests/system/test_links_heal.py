@@ -95,21 +95,40 @@ def test_silent_endpoint_is_named_in_the_heartbeat(monkeypatch):
 
 
 def test_a_link_up_before_the_first_poll_is_seen_up():
-    """The monitor is attached before the first connect: a handshake that completes before the watch's first
-    poll (a quick peer, a slow loop) still marks the link up, so the heartbeat never warns of a live link."""
+    """The monitor is attached before the first connect (checked on the socket's call order: on a quick machine
+    the handshake rarely beats a monitor attached just after, so the order is what is tested), and a handshake
+    that completes before the watch's first poll still marks the link up: the heartbeat never warns of a
+    live link."""
     import time
 
     import zmq
 
     from flexsheet.runtime.zmq.subscriber import connect_sub
 
-    ctx = zmq.Context()
+    calls: list[str] = []
+
+    class Recording(zmq.Socket):
+        def get_monitor_socket(self, *a, **k):
+            calls.append("monitor")
+            return super().get_monitor_socket(*a, **k)
+
+        def connect(self, addr):
+            if addr.startswith("tcp://"):        # not the monitor's own inproc pair
+                calls.append("connect")
+            return super().connect(addr)
+
+    class Ctx(zmq.Context):
+        _socket_class = Recording
+
+    ctx = Ctx()
     pub = ctx.socket(zmq.XPUB)
     pub.setsockopt(zmq.LINGER, 0)
     port = pub.bind_to_random_port("tcp://127.0.0.1")
     ep = f"tcp://127.0.0.1:{port}"
+    calls.clear()
     sub, watch = connect_sub(ctx, [ep], None, 1000)
     try:
+        assert calls == ["monitor", "connect"], calls
         time.sleep(0.5)                          # the handshake is long done before anyone polls
         watch.poll()
         assert watch.links[ep].up, ep

@@ -143,6 +143,27 @@ def test_outside_the_table_the_linear_model_serves(model):
         assert deep.method == "condensed"
         assert m.update_finger(finger_on_scene(q[0], n[0], 0.006, m.finger_radius)).method == "path_snapshots"
         assert m.update_finger(finger_on_scene(q[0], n[0], 0.0, m.finger_radius)).depth == 0.0
+        # at the table's side the served surface fades into the linear solve: no jump as the contact leaves it
+        srf = []
+        for off in (0.0029, 0.0031):                                      # reach 3 mm
+            p_s, n_s = m.surface.project(q[0] + off * side)[:2]
+            lat = m.path_table.locate(p_s)[1]
+            fg_s = finger_on_scene(p_s, n_s, 0.003, m.finger_radius)
+            up = m.update_finger(fg_s)
+            srf.append((lat, up.method, up.vertices.astype(float)))
+            if up.method == "path_snapshots":                             # and what the states alone serve
+                states = m.path_table.lookup(m.path_table.locate(p_s)[0], 0.003)[0]
+        (l0, m0, v0), (l1, m1, v1) = srf
+        assert l0 < 0.003 < l1 and (m0, m1) == ("path_snapshots", "condensed"), (l0, l1, m0, m1)
+        m.path_table, keep = None, m.path_table                           # the linear model's own step there
+        lin0 = m.update_finger(finger_on_scene(*m.surface.project(q[0] + 0.0029 * side)[:2], 0.003,
+                                               m.finger_radius)).vertices.astype(float)
+        m.path_table = keep
+        step, lin_step = np.abs(v0 - v1).max(), np.abs(lin0 - v1).max()
+        unfaded = np.abs(m.rest_vertices + states - v1).max()
+        # the fade's last 0.1 mm of 1.5 mm (7 % of the states' weight) beyond the linear model's own step, not
+        # the whole difference between the states and the linear solve
+        assert step < lin_step + 0.15 * unfaded, (step, lin_step, unfaded)
     finally:
         m.path_table = None
 
