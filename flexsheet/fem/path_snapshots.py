@@ -29,13 +29,14 @@ pushes at stations along the stroke and moves each with the contact:
   stiffness peak between stations). At a station the served surface is the reference's (up to float32).
   The node then puts every vertex left inside the fingertip sphere on it
   (:meth:`flexsheet.fem.scene_model.SceneModel._update_path`).
-  The surface never comes from the linear solve: its bonded contact set changes a surface node at a time as
-  the finger moves, and the drawn surface jumped with it (the rounded box: 6.1 px p99 a frame).
+  On the stroke the surface never comes from the linear solve: its bonded contact set changes a surface node
+  at a time as the finger moves, and the drawn surface jumped with it (the rounded box: 6.1 px p99 a frame).
 * **A state follows the contact.** A station's state is a dent centred on *its* contact point. Blending two
   of them at fixed vertices puts two half dents either side of a push midway between stations. So each
-  station's state is first **moved along the surface with the contact**: at fraction f, vertex v takes
-  station s's displacement at the rest-surface point nearest to v − (P(f) − P(f_s)) (P: the path polyline;
-  barycentric on the rendered triangles), then the two moved states are blended with weights 1 − a, a. The
+  station's state is first **moved along the surface with the contact**: at fraction f, vertex v takes R
+  times station s's displacement at the rest-surface point nearest to P(f_s) + Rᵀ(v − P(f)) (P: the path
+  polyline; R: the least rotation from the station's normal to the path's at f; barycentric on the rendered
+  triangles), then the two moved states are blended with weights 1 − a, a. The
   moves are precomputed when the table is attached (``trimesh.proximity.closest_point``), at sub-fractions no
   more than :data:`SHIFT_STEP` of path apart, as one sparse (S, 2S) matrix each, and blended linearly between
   sub-fractions at run time (one or two sparse products: no search per update). At a station the move is the
@@ -182,15 +183,18 @@ class PathSnapshotModel:
                              f"{fc.shape}")
         self._sub, self._moves, self._turns = self._contact_moves(rv, fc.astype(np.int64))
 
+    def _along(self, samples: np.ndarray, fraction) -> np.ndarray:
+        """(…, 3): ``samples`` (M, 3) of the path interpolated linearly at ``fraction`` (…,)."""
+        f = np.asarray(fraction, float)
+        return np.stack([np.interp(f, self._path_f, samples[:, k]) for k in range(3)], axis=-1)
+
     def path_point(self, fraction) -> np.ndarray:
         """The path polyline's point(s) (…, 3) m at ``fraction`` (…,) of the stroke (linear between samples)."""
-        f = np.asarray(fraction, float)
-        return np.stack([np.interp(f, self._path_f, self._path[:, k]) for k in range(3)], axis=-1)
+        return self._along(self._path, fraction)
 
     def path_normal(self, fraction) -> np.ndarray:
         """The path's outward unit normal(s) (…, 3) at ``fraction`` (…,) (linear between samples, normalised)."""
-        f = np.asarray(fraction, float)
-        n = np.stack([np.interp(f, self._path_f, self._path_n[:, k]) for k in range(3)], axis=-1)
+        n = self._along(self._path_n, fraction)
         return n / np.linalg.norm(n, axis=-1, keepdims=True)
 
     def _move_targets(self, rv: np.ndarray, g: np.ndarray, f0: float, f1: float) -> tuple[np.ndarray, np.ndarray]:

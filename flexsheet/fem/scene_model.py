@@ -384,7 +384,7 @@ class SceneModel(CondensedSurface):
             return self._solve(press, outputs=False)[0].stiffness
         return sol.stiffness
 
-    def _update_path(self, pt, fg: ContactFinger, fraction: float, lateral: float = 0.0) -> Update:
+    def _update_path(self, pt, fg: ContactFinger, fraction: float, lateral: float) -> Update:
         """The path table's answer (method "path_snapshots"): the table's blended states at (``fraction``,
         depth), faded to the linear solve's surface as the contact's ``lateral`` offset (m) from the stroke goes
         from half the table's reach to its reach (continuous at the table's side); no vertex inside the
