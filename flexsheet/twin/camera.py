@@ -179,6 +179,7 @@ class StereoCameraTwin:
         fd = np.asarray(c.finger_dir, float)
         self._fdir = fd / np.linalg.norm(fd)
         self._nail = nail_normal(self._fdir)
+        self._corner_maps: dict[str, tuple[np.ndarray, np.ndarray]] = {}   # side → (corners, bands filled)
 
     # ------------------------------------------------------------------------------------------ geometry
     def to_camera(self, X_display: np.ndarray) -> np.ndarray:
@@ -233,21 +234,37 @@ class StereoCameraTwin:
         ul, ur = self.model.project(Xc, distort=True)
         return ul if side == "left" else ur
 
+    def _corner_rows(self, side: str, y0: int, y1: int) -> np.ndarray:
+        """Normalised image coordinates (H + 1, W + 1, 2) of the pixel corners of camera ``side`` (row y,
+        column x: the corner at (x − 0.5, y − 0.5) px), valid at least in corner rows [y0, y1]: the lens model
+        inverted exactly (``cv2.undistortPoints``, 40 iterations to 1e-12, each point on its own). Filled in
+        bands of 16 rows on first use and kept: the values a per-box inversion gives, each computed once."""
+        K, D = (self.model.K1, self.model.D1) if side == "left" else (self.model.K2, self.model.D2)
+        w, h = self.size
+        if side not in self._corner_maps:
+            self._corner_maps[side] = (np.empty((h + 1, w + 1, 2)), np.zeros((h + 16) // 16 + 1, bool))
+        g, done = self._corner_maps[side]
+        for b in range(y0 // 16, y1 // 16 + 1):
+            if not done[b]:
+                r0, r1 = 16 * b, min(16 * b + 16, h + 1)
+                GX, GY = np.meshgrid(np.arange(w + 1, dtype=np.float64) - 0.5,
+                                     np.arange(r0, r1, dtype=np.float64) - 0.5)
+                pts = np.stack([GX.ravel(), GY.ravel()], -1).reshape(-1, 1, 2)
+                g[r0:r1] = cv2.undistortPoints(pts, K, D, criteria=_UNDISTORT_CRIT).reshape(r1 - r0, w + 1, 2)
+                done[b] = True
+        return g
+
     def _rays(self, side: str, x0: int, y0: int, x1: int, y1: int, ss: int) -> np.ndarray:
         """Unit ray directions (M, 3), camera ``side``'s frame, of the ``ss``² sub-samples of every pixel in
-        [x0, x1) × [y0, y1) (sub-sample grid row-major). The lens model is inverted exactly
-        (``cv2.undistortPoints``, 40 iterations to 1e-12) at the pixel corners and interpolated bilinearly
-        inside each pixel (the interpolation error of the smooth lens map over 1 px is < 1e-4 px)."""
-        K, D = (self.model.K1, self.model.D1) if side == "left" else (self.model.K2, self.model.D2)
-        cx = np.arange(x0, x1 + 1, dtype=np.float64) - 0.5
-        cy = np.arange(y0, y1 + 1, dtype=np.float64) - 0.5
-        GX, GY = np.meshgrid(cx, cy)
-        pts = np.stack([GX.ravel(), GY.ravel()], -1).reshape(-1, 1, 2)
-        g = cv2.undistortPoints(pts, K, D, criteria=_UNDISTORT_CRIT).reshape(len(cy), len(cx), 2)
+        [x0, x1) × [y0, y1) (sub-sample grid row-major). The lens model is inverted exactly at the pixel
+        corners (:meth:`_corner_rows`) and interpolated bilinearly inside each pixel (the interpolation error
+        of the smooth lens map over 1 px is < 1e-4 px)."""
+        g = self._corner_rows(side, y0, y1)[y0:y1 + 1, x0:x1 + 1]
+        nx, ny = x1 - x0 + 1, y1 - y0 + 1
         s = (np.arange(x0 * ss, x1 * ss) + 0.5) / ss - x0          # sub-sample offsets from the first corner
         t = (np.arange(y0 * ss, y1 * ss) + 0.5) / ss - y0
-        i, fx = np.minimum(np.floor(s).astype(int), len(cx) - 2), s - np.minimum(np.floor(s), len(cx) - 2)
-        j, fy = np.minimum(np.floor(t).astype(int), len(cy) - 2), t - np.minimum(np.floor(t), len(cy) - 2)
+        i, fx = np.minimum(np.floor(s).astype(int), nx - 2), s - np.minimum(np.floor(s), nx - 2)
+        j, fy = np.minimum(np.floor(t).astype(int), ny - 2), t - np.minimum(np.floor(t), ny - 2)
         fx, fy = fx[None, :, None], fy[:, None, None]
         n = ((1 - fy) * ((1 - fx) * g[j][:, i] + fx * g[j][:, i + 1])
              + fy * ((1 - fx) * g[j + 1][:, i] + fx * g[j + 1][:, i + 1])).reshape(-1, 2)

@@ -264,11 +264,20 @@ def _edge_corners(gray: np.ndarray, corners: np.ndarray, K: np.ndarray, D: np.nd
     sig = np.minimum(_EDGE_SIGMA, 0.45 * L[..., 0] / cells)[:, :, None, None]          # (M, 4, 1, 1) px
     t = _EDGE_T[np.argmax(np.where(np.abs(_EDGE_T) <= 2.0, g, -1.0), axis=-1)]      # (M, 4, S)
     k = -0.5 / sig ** 2
-    for _ in range(6):                  # mean shift: a symmetric window, so a symmetric edge is unbiased
-        d = _EDGE_T - t[..., None]
-        w = g * np.exp(d * d * k)
-        sw = w.sum(-1)
-        t = (w @ _EDGE_T) / np.maximum(sw, 1e-12)
+    # mean shift: a symmetric window, so a symmetric edge is unbiased. Its weight g·exp(k (T − t)²) is
+    # g·exp(k T²) · r^j · (a factor of the profile alone, which cancels), r = exp(−2 k t ΔT), T_j = T_0 + j ΔT:
+    # one exp per profile and a running product, not one exp per sample. The last step is the direct form
+    # (its weight sum is the one the edge test below reads).
+    gk = g * np.exp(k * _EDGE_T ** 2)
+    step = -2.0 * k[..., 0] * (_EDGE_T[1] - _EDGE_T[0])                              # (M, 4, 1)
+    for _ in range(5):
+        r = np.exp(np.clip(step * t, -14.0, 14.0))[..., None]                          # (M, 4, S, 1); |exponent| ≤ 14: r^21 stays finite
+        w = gk * np.cumprod(np.broadcast_to(r, g.shape), axis=-1)
+        t = (w @ _EDGE_T) / np.maximum(w.sum(-1), 1e-300)
+    d = _EDGE_T - t[..., None]
+    w = g * np.exp(d * d * k)
+    sw = w.sum(-1)
+    t = (w @ _EDGE_T) / np.maximum(sw, 1e-12)
     gm = g.max(-1)
     ok = (sw > 1e-6) & (np.abs(t) < 2.0) & (gm > 0.25 * np.median(gm))
     ok &= usable | (np.sum(ok & usable, axis=-1, keepdims=True) < 4)
