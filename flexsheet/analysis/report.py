@@ -49,8 +49,11 @@ from flexsheet.analysis.report_timing import (
 )
 from flexsheet.analysis.report_verdicts import judge
 from flexsheet.analysis.table1 import DD_CONVENTION
+from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.scenes import Scene, load_scene, paper_scene
 from flexsheet.runtime.launch import substitute, substitutions
+from flexsheet.twin import registration
+from flexsheet.twin.truth import TwinTruth
 from flexsheet.twin.truth_choice import TruthChoice
 
 __all__ = ["twin_settings", "scene_settings", "run_bags", "main"]
@@ -124,6 +127,27 @@ def _clock(summary: dict, out_dir: Path) -> None:
         summary["latency_ms"]["compute_vs_waiting"] = compute_vs_waiting(summary, out_dir)
 
 
+def sheet_model_error(summary: dict, lf=None) -> None:
+    """``compliance.model_error_pct`` (and ``compliance.model_error``): the planner's identified sheet model
+    against the twin's true force over the working strains
+    (:func:`flexsheet.twin.registration.working_model_error`), when the run used the twin's registration of its
+    truth seed (the launch's ``display_calib`` is that cached registration, or it names none). A judge's figure:
+    it reads the truth, after the run."""
+    tw, comp = summary.get("twin", {}), summary.get("compliance")
+    if not comp or tw.get("truth_seed") is None:
+        return
+    path = registration.sim_display_calib_cached(int(tw["truth_seed"]), tw.get("realism", "realistic"))
+    named = lf.section("display_calib") if lf is not None and hasattr(lf, "section") else None
+    if named is not None and (path is None or os.path.realpath(str(named)) != os.path.realpath(path)):
+        return                              # the run's own display.yaml (a lab's): not the twin's registration
+    sheet = load_display_calib(path).sheet if path else None
+    if sheet is None:
+        return
+    err = registration.working_model_error(TwinTruth.draw(int(tw["truth_seed"]), tw.get("realism", "realistic")), sheet)
+    comp["model_error"] = err
+    comp["model_error_pct"] = err["median_pct"]
+
+
 def run_bags(out_dir: Path, since: float | None = None) -> list[Path]:
     """The bags of a run in ``out_dir``, oldest first (a respawned recorder continues in ``<stem>.N.mcap``):
     every ``*.mcap`` but replays, and with ``since`` (epoch s, the launch's start) only those written since, so
@@ -152,6 +176,7 @@ def main(out: str, lf=None, since: float | None = None) -> int:
     summary["scene"] = scene_entry
     summary["twin"] = twin_settings(lf)
     summary["seed"] = summary["twin"].get("truth_seed")
+    sheet_model_error(summary, lf)
     _clock(summary, out_dir)
     cpu = cpu_summary(out_dir)
     if cpu is not None:

@@ -183,6 +183,12 @@ def _softness(s: dict) -> tuple[list[str], list[str]]:
         prose.append(f"The inclusion, felt from true forces at matched depth (over its footprint against around it, "
                      f"{len(ic['bins'])} depth bins): {100 * ic['felt']:+.1f} %; the object asks {100 * ic['requested']:+.1f} %, "
                      f"the mapped request {100 * ic['mapped']:+.1f} %.")
+    me = comp.get("model_error")
+    if me:
+        prose.append(f"The planner's identified sheet model against the true force over clamp strains "
+                     f"{me['strains'][0]:g}–{me['strains'][1]:g}: median {me['median_pct']:.1f} % (target ≤ "
+                     f"{me['target_pct']:g} %: {'met' if me['median_pct'] <= me['target_pct'] else 'MISSED'}), "
+                     f"p90 {me['p90_pct']:.1f} %.")
     sh = s.get("sheet", {})
     if sh:
         prose.append(f"The true sheet: clamp strain at most {sh['strain_true_max']:.3f} (limit 0.30), at most "
@@ -193,6 +199,10 @@ def _softness(s: dict) -> tuple[list[str], list[str]]:
             prose.append(f"The clamp span against the planned motion: median {se['median']:.2f} mm, p99 {se['p99']:.2f} mm "
                          f"(target ≤ 1.0), max {se['max']:.2f} mm; guard cycles {sh['guard_waits']} (target 0): "
                          f"{sh['motion_verdict']}.")
+        if "path_dev_mm" in sh:
+            pd, sk = sh["path_dev_mm"], sh["arrival_skew_ms"]
+            prose.append(f"Each clamp against the motion at the same instant: p99 {pd['p99']:.2f} mm, max {pd['max']:.2f} mm; "
+                         f"the two clamps' lag behind it differs by p99 {sk['p99']:.0f} ms while the sheet moves.")
     return prose, _table(head, [row])
 
 

@@ -32,8 +32,9 @@ from flexsheet.model.tension import SheetMaterial, contact_geometry, press_force
 __all__ = ["Press", "PRESS_STRETCHES", "PRESS_POINTS", "PRESS_DEPTHS", "plan_presses", "SheetFit", "TERMS",
            "with_terms", "fit_sheet", "model_error"]
 
-#: clamp strains pressed at (on the true sheet's table nodes; the bridges' span band is 0.01–0.10)
-PRESS_STRETCHES = (0.01, 0.04, 0.08)
+#: clamp strains pressed at: dense over the strains the display works at (0.005–0.05), and 0.08 for the stiff end
+#: (the bridges' span band is 0.01–0.10)
+PRESS_STRETCHES = (0.005, 0.01, 0.015, 0.02, 0.025, 0.03, 0.04, 0.05, 0.08)
 #: contact points (u, v), m from the sheet centre: the centre, toward a clamp and toward a free edge
 PRESS_POINTS = ((0.0, 0.0), (0.036, 0.0), (0.072, 0.0), (0.0, 0.036), (0.036, 0.036))
 #: probe depths per press, m

@@ -17,8 +17,8 @@ import numpy as np
 from flexsheet.calibration.display_calib_file import write_display_calib
 from flexsheet.calibration.head_camera import SITTINGS
 from flexsheet.calibration.procedures import FULL, QUICK, Options, run_all
-from flexsheet.calibration.sheet import Press, model_error, plan_presses
-from flexsheet.model.tension import SheetMaterial
+from flexsheet.calibration.sheet import PRESS_DEPTHS, Press, model_error, plan_presses
+from flexsheet.model.tension import SheetMaterial, press_force
 from flexsheet.twin.head_rig import HeadRigTwin
 from flexsheet.twin.load_cell import LoadCellTwin
 from flexsheet.twin.registration_camera import CalibrationTwin
@@ -27,9 +27,10 @@ from flexsheet.twin.truth import TwinTruth
 log = logging.getLogger(__name__)
 
 __all__ = ["TwinSource", "run_display_sim", "sim_display_calib", "score_registration", "verdicts", "TARGETS",
-           "SUMMARY_VERSION", "sim_display_calib_cached"]
+           "SUMMARY_VERSION", "sim_display_calib_cached", "score_sheet", "working_model_error", "WORKING_STRAINS",
+           "WORKING_TARGET_PCT"]
 
-SUMMARY_VERSION = 11   # 11: the true sheet from the shipped family (truth_sheet.py)
+SUMMARY_VERSION = 12   # 12: the sheet pressed at nine strains, dense over the working range
 
 Pair = tuple[np.ndarray, np.ndarray]
 
@@ -149,12 +150,42 @@ def score_registration(truth: TwinTruth, cam, rc, proj, rp, arms: dict, sheet=No
 def score_sheet(truth: TwinTruth, sheet) -> dict:
     """The sheet entry against the true force (noise-free) at every reading of the press plan:
     ``model_error_pct`` / ``model_rms_pct`` (the identified model), ``nominal_error_pct`` (the string band it
-    replaces), ``fitted_median_pct`` (what the fit saw, with the load cell's noise) and ``target_pct``."""
+    replaces), ``fitted_median_pct`` (what the fit saw, with the load cell's noise) and ``target_pct``; and
+    ``working`` (:func:`working_model_error`): over the display's working strains, at contacts the plan does not
+    press."""
     cell = LoadCellTwin(truth)
     true = [Press(s, u, v, d, cell.true_force(s, u, v, d)) for s, u, v, ds in plan_presses() for d in ds]
     med, rms = model_error(sheet.material(), true)
     return {"model_error_pct": med, "model_rms_pct": rms, "nominal_error_pct": model_error(SheetMaterial(), true)[0],
-            "fitted_median_pct": sheet.provenance.residuals.get("median_pct"), "target_pct": SHEET_TARGET_PCT}
+            "fitted_median_pct": sheet.provenance.residuals.get("median_pct"), "target_pct": SHEET_TARGET_PCT,
+            "working": working_model_error(truth, sheet)}
+
+
+#: the display's working clamp strains, where the identified model is judged (every 0.005 from 0.005 to 0.05)
+WORKING_STRAINS = tuple(round(0.005 * k, 3) for k in range(1, 11))
+#: contacts judged there (u, v) m: the press plan's and three between them it never presses
+WORKING_POINTS = ((0.0, 0.0), (0.036, 0.0), (0.072, 0.0), (0.0, 0.036), (0.036, 0.036), (0.054, 0.0),
+                  (0.018, 0.018), (0.0, 0.054))
+#: the identified model's median error over the working strains, %
+WORKING_TARGET_PCT = 5.0
+
+
+def working_model_error(truth: TwinTruth, sheet) -> dict:
+    """The sheet entry's relative error against the true force (noise-free, forces ≥ 20 mN) over
+    :data:`WORKING_STRAINS` × :data:`WORKING_POINTS` × the plan's depths: ``median_pct``, ``p90_pct``,
+    ``max_pct``, ``n``, ``strains`` [lo, hi] and ``target_pct`` (:data:`WORKING_TARGET_PCT`, on the median). A
+    judge's figure: it reads the truth."""
+    cell, mat = LoadCellTwin(truth), sheet.material()
+    rel = []
+    for s in WORKING_STRAINS:
+        for u, v in WORKING_POINTS:
+            for d in PRESS_DEPTHS:
+                f = cell.true_force(s, u, v, d)
+                if f >= 0.02:
+                    rel.append(abs(press_force(s, mat, u, d) - f) / f * 100.0)
+    r = np.asarray(rel)
+    return {"median_pct": float(np.median(r)), "p90_pct": float(np.percentile(r, 90)), "max_pct": float(r.max()),
+            "n": int(len(r)), "strains": [WORKING_STRAINS[0], WORKING_STRAINS[-1]], "target_pct": WORKING_TARGET_PCT}
 
 
 #: the identified sheet model's median error against the true force, %
@@ -173,6 +204,9 @@ def verdicts(summary: dict) -> dict:
         out[f"arms_{side}_mm"] = a["translation_error_mm"] <= t["arms_mm"]
     if "sheet" in summary:
         out["sheet_pct"] = summary["sheet"]["model_error_pct"] <= summary["sheet"]["target_pct"]
+        if "working" in summary["sheet"]:
+            w = summary["sheet"]["working"]
+            out["sheet_working_pct"] = w["median_pct"] <= w["target_pct"]
     return out
 
 

@@ -378,9 +378,12 @@ class GlassesTracker:
         """Best board pose (rvec, tvec, RMS px) over both IPPE solutions, each refined (LM)."""
         best = None
         try:
-            n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, self.K, self.D, flags=cv2.SOLVEPNP_IPPE)
+            n, rvecs, tvecs, err = cv2.solvePnPGeneric(obj, img, self.K, self.D, flags=cv2.SOLVEPNP_IPPE)
         except cv2.error:
             return None
+        e = np.asarray(err, float).ravel()
+        if n == 2 and len(e) == 2 and e[1] > 2.0 * e[0] + 0.5:
+            n = 1               # the mirror solution far worse (IPPE sorts them): refining it cannot win
         for rv, tv in zip(rvecs[:n], tvecs[:n], strict=True):
             rv, tv = cv2.solvePnPRefineLM(obj, img, self.K, self.D, rv.copy(), tv.copy())
             proj, _ = cv2.projectPoints(obj, rv, tv, self.K, self.D)

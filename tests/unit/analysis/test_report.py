@@ -236,3 +236,35 @@ def test_an_earlier_runs_bags_in_a_reused_folder_are_left_out(tmp_path):
     assert run_bags(tmp_path) == [old, part0, part1]
     assert run_bags(tmp_path, since=1050.0) == [part0, part1]
     assert run_bags(tmp_path, since=5000.0) == []
+
+
+def test_the_report_judges_the_planners_sheet_model_against_the_truth_of_the_run(monkeypatch):
+    """``compliance.model_error_pct``: the identified entry of the run's seed is within 5 % over the working
+    strains; the same run judged with the nominal string band's entry reads far worse; a launch that names its
+    own display_calib (a lab) gets no figure."""
+    from dataclasses import replace
+
+    import flexsheet.twin.registration as reg
+    from flexsheet.analysis.report import sheet_model_error
+    from flexsheet.calibration.display_calib_file import load_display_calib
+
+    path = "docs/figures/calibration/sheet/display.yaml"     # seed 0's entry (flexsheet calibrate sheet --sim)
+    monkeypatch.setattr(reg, "sim_display_calib_cached", lambda seed, realism: path)
+    s = {"twin": {"truth_seed": 0, "realism": "realistic"}, "compliance": {"n": 1}}
+    sheet_model_error(s, None)
+    assert s["compliance"]["model_error_pct"] <= 5.0 and s["compliance"]["model_error"]["n"] > 400
+    entry = load_display_calib(path).sheet
+    nominal = replace(entry, contact_width=0.02, contact_growth=0.0, own_stiffness=0.0, own_growth=0.0,
+                      stretching=0.0, strain_offset=0.0)
+    monkeypatch.setattr(reg, "working_model_error",
+                        lambda truth, sheet, f=reg.working_model_error: f(truth, nominal))
+    s2 = {"twin": {"truth_seed": 0, "realism": "realistic"}, "compliance": {"n": 1}}
+    sheet_model_error(s2, None)
+    assert s2["compliance"]["model_error_pct"] > 30.0
+
+    class Lab:
+        def section(self, name):
+            return "/lab/display.yaml" if name == "display_calib" else None
+    s3 = {"twin": {"truth_seed": 0, "realism": "realistic"}, "compliance": {"n": 1}}
+    sheet_model_error(s3, Lab())
+    assert "model_error_pct" not in s3["compliance"]

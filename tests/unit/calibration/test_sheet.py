@@ -57,15 +57,17 @@ def test_the_twins_gripped_sheet_is_identified_within_ten_percent():
     s = score_sheet(truth, entry)
     assert s["model_error_pct"] <= s["target_pct"] == 10.0, s
     assert s["nominal_error_pct"] > 40.0, s                 # the string band it replaces
-    assert entry.provenance.residuals["median_pct"] < 10.0 and entry.provenance.n_poses == 15
+    assert entry.provenance.residuals["median_pct"] < 10.0 and entry.provenance.n_poses == 45
+    w = s["working"]                                        # strains 0.005-0.05, eight contacts, 3 never pressed
+    assert w["strains"] == [0.005, 0.05] and w["n"] > 400 and w["median_pct"] <= w["target_pct"] == 5.0, w
 
 
-def test_a_drawn_truths_sheet_is_identified_within_ten_percent():
+def test_a_drawn_truths_sheet_is_identified_within_ten_percent_and_within_five_over_the_working_strains():
     """A truth seed drawn for this run: its true sheet is the shipped family's, scaled and shifted (no build)."""
     import random
 
     from flexsheet.calibration.procedures import run_sheet
-    from flexsheet.twin.registration import TwinSource, score_sheet
+    from flexsheet.twin.registration import TwinSource, score_sheet, working_model_error
     from flexsheet.twin.registration_camera import CalibrationTwin
     from flexsheet.twin.truth import TwinTruth
 
@@ -74,3 +76,7 @@ def test_a_drawn_truths_sheet_is_identified_within_ten_percent():
     s = score_sheet(truth, run_sheet(TwinSource(CalibrationTwin(truth, seed=seed))))
     assert s["model_error_pct"] <= s["target_pct"], (seed, s)
     assert s["nominal_error_pct"] > 2 * s["model_error_pct"], (seed, s)
+    # the working strains: within 5 % (median), and closer than pressed at three strains only
+    sparse = run_sheet(TwinSource(CalibrationTwin(truth, seed=seed)), plan_presses(stretches=(0.01, 0.04, 0.08)))
+    w, w3 = s["working"], working_model_error(truth, sparse)
+    assert w["median_pct"] <= 5.0 and w["p90_pct"] < w3["p90_pct"], (seed, w, w3)
