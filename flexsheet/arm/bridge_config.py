@@ -38,7 +38,9 @@ class BridgeConfig:
                                            "s")] = 0.25
     speed_scale: Annotated[float, Field(gt=0.0, le=1.0, description="commanded speed limit × URDF speed")] = 0.5
     accel_scale: Annotated[float, Field(gt=0.0, le=100.0, description="commanded accel limit = scale × speed "
-                                        "limit, 1/s")] = 2.0
+                                        "limit, 1/s (6: a joint reaches its speed limit in 1/6 s; an assumption, "
+                                        "no RV-1A figure found: three quarters of the controller twin's limit, "
+                                        "accel_factor 4 × the full URDF speed)")] = 6.0
     limit_margin: Annotated[float, Field(ge=0.0, le=0.2, description="kept from each joint limit, rad")] = 0.02
     max_ik_jump: Annotated[float, Field(gt=0.0, le=1.0, description="largest joint change one target may ask, rad")] = 0.5
     span_band: Annotated[tuple[float, float] | None, Field(description="[lo, hi] m: the clamp span the two arms "

@@ -367,7 +367,7 @@ class JointRates:
     goal and start (``samples`` instants; the Jacobian's change along one segment is second order here).
     ``accel_allowance``: how far past ``qdd_max`` a segment's peak joint acceleration may go (:meth:`ratios`)."""
 
-    def __init__(self, bases: dict, qd_max, qdd_max, samples: int = 4, accel_allowance: float = 3.0) -> None:
+    def __init__(self, bases: dict, qd_max, qdd_max, samples: int = 4, accel_allowance: float = 1.0) -> None:
         if set(bases) != {"left", "right"}:
             raise ValueError(f"bases must name 'left' and 'right', got {sorted(bases)}")
         self.kin = {s: ArmKinematics(s, b) for s, b in bases.items()}
@@ -396,10 +396,10 @@ class JointRates:
 
     def ratios(self, seg: SheetSegment) -> tuple[float, float]:
         """(peak joint speed / ``qd_max``, peak joint acceleration / (``accel_allowance`` × ``qdd_max``)) over both
-        arms and the sampled instants of ``seg``. The allowance lets a brief acceleration past the limit through
-        (a correction of the finger's tremor, which the bridge's limiter absorbs in a fraction of a mm): slowing
-        every segment for it made the sheet lag the plan twice as far, while a large move's sustained
-        acceleration still slows it (``tests/unit/arm/test_sheet_motion.py``)."""
+        arms and the sampled instants of ``seg``. An allowance over 1 lets accelerations past the bridges' limit
+        through, which their limiters then do not follow: the clamps leave the motion (the organ, limit 2× speed,
+        allowance 3: 30 mm, span 5.3 mm p99). The default 1 with the bridges' limit at 6× speed gives the motion
+        the same accelerations, and the limiters follow them (``tests/unit/arm/test_sheet_motion.py``)."""
         sides = [s for s, j in self._jinv.items() if len(j)]
         if seg.duration <= 0.0 or not sides:
             return 0.0, 0.0

@@ -48,6 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
+from flexsheet.arm.bridge_config import BridgeConfig
 from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints
 from flexsheet.arm.limiter import StreamLimiter
 from flexsheet.arm.sheet_motion import JointRates, SheetShaper
@@ -119,7 +120,7 @@ def bench_motion(n_stroke: int = 480) -> dict:
     """The bridge's per-cycle work following the sheet's motion, and the planner's per-segment work (µs)."""
     kin = {s: ArmKinematics(s, b) for s, b in (("left", LEFT_BASE), ("right", RIGHT_BASE))}
     qd = QD_MAX * 0.5
-    shaper = SheetShaper(rates=JointRates({"left": LEFT_BASE, "right": RIGHT_BASE}, qd, 2.0 * qd))
+    shaper = SheetShaper(rates=JointRates({"left": LEFT_BASE, "right": RIGHT_BASE}, qd, BridgeConfig().accel_scale * qd))
     tracker = TargetTracker(kin["left"])
     q = {s: kin[s].ik(_clamp(s, -math.radians(60.0)), home_joints(s), max_jump=10.0).q for s in kin}
     tracker.seed(q["left"])
