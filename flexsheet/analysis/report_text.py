@@ -199,10 +199,12 @@ def _softness(s: dict) -> tuple[list[str], list[str]]:
             prose.append(f"The clamp span against the planned motion: median {se['median']:.2f} mm, p99 {se['p99']:.2f} mm "
                          f"(target ≤ 1.0), max {se['max']:.2f} mm; guard cycles {sh['guard_waits']} (target 0): "
                          f"{sh['motion_verdict']}.")
-        if "path_dev_mm" in sh:
-            pd, sk = sh["path_dev_mm"], sh["arrival_skew_ms"]
-            prose.append(f"Each clamp against the motion at the same instant: p99 {pd['p99']:.2f} mm, max {pd['max']:.2f} mm; "
-                         f"the two clamps' lag behind it differs by p99 {sk['p99']:.0f} ms while the sheet moves.")
+        pd, sk = sh.get("path_dev_mm", {}), sh.get("arrival_skew_ms", {})
+        if pd.get("n"):
+            skew = (f"the two clamps' lag behind it differs by p99 {sk['p99']:.0f} ms while the sheet moves"
+                    if sk.get("n") else "the sheet never moved fast enough to compare the clamps' lags")
+            prose.append(f"Each clamp against the motion at the same instant: p99 {pd['p99']:.2f} mm, max "
+                         f"{pd['max']:.2f} mm; {skew}.")
     return prose, _table(head, [row])
 
 

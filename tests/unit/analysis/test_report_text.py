@@ -35,3 +35,22 @@ def test_the_delay_is_the_chains_figure():
     assert "-1.0 ms beyond the prediction's 25.0 ms lead" in check and "horizon of 24.0 ms" in check
     assert "16 ms of travel" in check                                       # 0.1 mm at 6.2 mm/s
     assert "Delay exposure -> sheet" not in text
+
+
+def test_the_clamps_against_the_motion_are_written_only_when_measured():
+    """``sheet.path_dev_mm`` / ``arrival_skew_ms`` in the softness prose: both figures when measured; a run whose
+    sheet never moved fast enough gets the deviation alone, said so, and a summary without them no line."""
+    from flexsheet.analysis.report_text import _softness
+
+    soft = {"n": 3, "ratio": {"median": 1.0, "p5": 0.9, "p95": 1.1}, "within_15pct": 1.0, "felt_n": 1.0,
+            "requested_n": 1.0, "verdict": "met"}
+    sheet = {"strain_true_max": 0.03, "strain_over_plan_max": 0.004, "one_arm_holds": 0, "verdict": "met",
+             "path_dev_mm": {"median": 0.1, "p99": 0.53, "max": 1.65, "n": 100},
+             "arrival_skew_ms": {"median": 0.0, "p99": 27.0, "max": 30.0, "n": 40}}
+    text = " ".join(_softness({"compliance": {"felt": soft}, "sheet": sheet})[0])
+    assert "p99 0.53 mm, max 1.65 mm" in text and "differs by p99 27 ms" in text
+    sheet["arrival_skew_ms"] = {"median": None, "p99": None, "max": None, "n": 0}
+    text = " ".join(_softness({"compliance": {"felt": soft}, "sheet": sheet})[0])
+    assert "p99 0.53 mm" in text and "never moved fast enough" in text
+    del sheet["path_dev_mm"], sheet["arrival_skew_ms"]
+    assert "Each clamp" not in " ".join(_softness({"compliance": {"felt": soft}, "sheet": sheet})[0])
