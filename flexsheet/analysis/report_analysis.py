@@ -314,6 +314,8 @@ def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_
 
 def _normals(shape, points: np.ndarray) -> np.ndarray:
     """The object's unit normals (N, 3) at the points of ``shape`` nearest ``points`` (N, 3) m."""
+    if not shape.convex and hasattr(shape, "closest_many") and len(points):   # a mesh: one batched query
+        return shape.closest_many(points)[1]
     return np.array([shape.project(tuple(p)).normal for p in points])
 
 

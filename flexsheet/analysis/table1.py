@@ -117,13 +117,13 @@ def presented_contacts(shape: Shape, D, sheet_origin, sheet_normal) -> tuple[np.
     N = D.shape[0]
     Org = _as_points("sheet_origin", sheet_origin, N)
     Nn = _as_points("sheet_normal", sheet_normal, N)
-    Dp = np.empty((N, 3))
-    gap = np.empty(N)
-    for i in range(N):
-        n = tuple(Nn[i] / np.linalg.norm(Nn[i]))
-        s = shape.support(n, tuple(D[i]))
-        Dp[i] = s
-        gap[i] = float(np.dot(Org[i] - Dp[i], n))
+    Nu = Nn / np.linalg.norm(Nn, axis=1, keepdims=True)
+    many = getattr(shape, "support_many", None)
+    if many is not None:                     # a mesh: one batched closest-point query per iteration step
+        Dp = many(Nu, D)
+    else:
+        Dp = np.array([shape.support(tuple(Nu[i]), tuple(D[i])) for i in range(N)], float).reshape(N, 3)
+    gap = np.einsum("ij,ij->i", Org - Dp, Nu)
     return Dp, gap
 
 
@@ -183,10 +183,13 @@ def table1(shape: Shape, measured, sheet_origin, sheet_normal, scene=None) -> St
     D = np.empty((N, 3))
     nD = np.empty((N, 3))
     hint = None
-    for i in range(N):
-        pr = shape.project(tuple(M[i]), hint)
-        D[i], nD[i] = pr.point, pr.normal
-        hint = pr.normal
+    if not shape.convex and hasattr(shape, "closest_many"):   # a mesh: its projection is the closest point
+        D, nD, _ = shape.closest_many(M)
+    else:
+        for i in range(N):
+            pr = shape.project(tuple(M[i]), hint)
+            D[i], nD[i] = pr.point, pr.normal
+            hint = pr.normal
     tang = stroke_tangents(scene, D) if scene is not None else None
     nS = section_normals(shape, _as_points("sheet_normal", sheet_normal, N), nD if tang is not None else None, tang)
     Dp, gap = presented_contacts(shape, D, sheet_origin, nS)

@@ -49,6 +49,20 @@ class SmoothMeshShape(MeshShape):
         inside = side < 0.0 if abs(side) > 0.5 * d else bool(self.mesh.contains(x)[0])
         return q, n, (-d if inside else d)  # type: ignore[return-value]
 
+    def closest_many(self, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`closest` for points (N, 3) m at once: (q (N, 3) m, n (N, 3), signed distance (N,) m), one
+        batched closest-point query (and one containment test for the rows whose side is unclear)."""
+        x = np.asarray(points, float).reshape(-1, 3)
+        q, n = self.scene.surface_point(x)
+        r = x - q
+        d = np.linalg.norm(r, axis=1)
+        side = np.einsum("ij,ij->i", r, n)
+        inside = side < 0.0
+        unclear = (d > 1e-12) & (np.abs(side) <= 0.5 * d)
+        if unclear.any():
+            inside[unclear] = self.mesh.contains(x[unclear])
+        return q, n, np.where(d <= 1e-12, 0.0, np.where(inside, -d, d))
+
     def support(self, n: Vec, near: Vec, max_iter: int = 20) -> Vec:
         """The surface point near ``near`` (3,) m whose smooth normal is ``n`` (3,) unit: where a plane of normal
         ``n`` touches the surface there. Fixed-point iteration q ← closest(q + ρ (n − n_q)) with ρ the local
@@ -78,6 +92,38 @@ class SmoothMeshShape(MeshShape):
             if err < best_err:
                 best, best_err = qv, err
         return tuple(float(v) for v in best)  # type: ignore[return-value]
+
+    def support_many(self, normals, near, max_iter: int = 20) -> np.ndarray:
+        """:meth:`support` for many planes at once: the points (N, 3) m for unit ``normals`` (N, 3) near
+        ``near`` (N, 3) m. The same iteration row by row, each row stopping on its own, with one batched
+        closest-point query per step (a report's thousands of samples: one trimesh query per step, not per
+        sample and step)."""
+        nn = np.asarray(normals, float).reshape(-1, 3)
+        nn = nn / np.linalg.norm(nn, axis=1, keepdims=True)
+        qv, nv = self.scene.surface_point(np.asarray(near, float).reshape(-1, 3))
+        best, best_err = qv.copy(), np.linalg.norm(nn - nv, axis=1)
+        rho = np.full(len(nn), 0.03)
+        live = np.ones(len(nn), bool)
+        for _ in range(max_iter):
+            dn = nn - nv
+            dn -= np.einsum("ij,ij->i", dn, nv)[:, None] * nv
+            live &= np.linalg.norm(dn, axis=1) >= 1e-7
+            if not live.any():
+                break
+            i = np.flatnonzero(live)
+            step = rho[i, None] * dn[i]
+            ls = np.linalg.norm(step, axis=1)
+            big = ls > 0.01
+            step[big] *= (0.01 / ls[big])[:, None]
+            q1, n1 = self.scene.surface_point(qv[i] + step)
+            dq, dnn = np.linalg.norm(q1 - qv[i], axis=1), np.linalg.norm(n1 - nv[i], axis=1)
+            ok = dnn > 1e-12
+            rho[i[ok]] = np.clip(dq[ok] / dnn[ok], 0.005, 0.1)
+            qv[i], nv[i] = q1, n1
+            err = np.linalg.norm(nn[i] - n1, axis=1)
+            better = err < best_err[i]
+            best[i[better]], best_err[i[better]] = q1[better], err[better]
+        return best
 
 
 def planner_shape(scene) -> Shape:

@@ -235,6 +235,24 @@ def test_organ_planner_normals_are_smooth_and_local_support_finds_the_contact():
     assert d == pytest.approx(-0.004, abs=3e-4)                           # inside: negative distance
 
 
+def test_organ_batched_queries_give_the_one_at_a_time_answers():
+    """The report's batched closest points and supports (``closest_many``, ``support_many``) on the organ equal
+    the per-sample queries, inside and outside, for tilted planes near the stroke."""
+    shape = planner_shape(load_scene(ORGAN))
+    rng = np.random.default_rng(7)
+    P, N = load_scene(ORGAN).stroke_points(40)
+    x = P + N * rng.uniform(-0.004, 0.004, (len(P), 1))
+    q, n, d = shape.closest_many(x)
+    one = [shape.closest(tuple(p)) for p in x]
+    assert np.abs(q - np.array([o[0] for o in one])).max() < 1e-12 and np.abs(n - np.array([o[1] for o in one])).max() < 1e-12
+    assert np.abs(d - np.array([o[2] for o in one])).max() < 1e-12 and (d < 0).any() and (d > 0).any()
+    tilt = N + rng.normal(0.0, 0.08, N.shape)
+    tilt /= np.linalg.norm(tilt, axis=1, keepdims=True)
+    s = shape.support_many(tilt, P)
+    assert np.abs(s - np.array([shape.support(tuple(t), tuple(p)) for t, p in zip(tilt, P, strict=True)])).max() < 1e-9
+    assert np.abs(s - P).max() > 1e-3                                   # the tilted planes touch elsewhere
+
+
 # ---------------------------------------------------------------------------------------------- Table I
 def test_cylinder_scene_reproduces_the_table1_rows():
     """The in-process stroke on the paper's cylinder as a scene (path-following finger, section along the

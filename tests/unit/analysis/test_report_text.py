@@ -40,7 +40,14 @@ def test_the_delay_is_the_chains_figure():
 def test_the_clamps_against_the_motion_are_written_only_when_measured():
     """``sheet.path_dev_mm`` / ``arrival_skew_ms`` in the softness prose: both figures when measured; a run whose
     sheet never moved fast enough gets the deviation alone, said so, and a summary without them no line."""
-    from flexsheet.analysis.report_text import _softness
+    from flexsheet.analysis.report_text import sections
+
+    band = {"median": 1.0, "p5": 1.0, "p95": 1.0}
+    seg = {"tension_n_per_m": band, "stiffness_n_per_m": band, "object_stiffness_n_per_m": band, "at_limit": 0.0}
+
+    def _softness(summary):
+        summary["compliance"]["all"] = seg
+        return next(body for title, *body in sections(summary) if title.startswith("Softness felt"))
 
     soft = {"n": 3, "ratio": {"median": 1.0, "p5": 0.9, "p95": 1.1}, "within_15pct": 1.0, "felt_n": 1.0,
             "requested_n": 1.0, "verdict": "met"}
