@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -248,7 +249,8 @@ def test_the_report_judges_the_planners_sheet_model_against_the_truth_of_the_run
     from flexsheet.analysis.report import sheet_model_error
     from flexsheet.calibration.display_calib_file import load_display_calib
 
-    path = "docs/figures/calibration/sheet/display.yaml"     # seed 0's entry (flexsheet calibrate sheet --sim)
+    # seed 0's entry (flexsheet calibrate sheet --sim)
+    path = str(Path(__file__).resolve().parents[3] / "docs/figures/calibration/sheet/display.yaml")
     monkeypatch.setattr(reg, "sim_display_calib_cached", lambda seed, realism: path)
     s = {"twin": {"truth_seed": 0, "realism": "realistic"}, "compliance": {"n": 1}}
     sheet_model_error(s, None)
