@@ -31,12 +31,12 @@ GUARD_STATUSES = ("wait:span", "hold:peer")
 LAG_GRID_S, LAG_RANGE_S, MOVING_MPS = 0.002, (-0.1, 0.4), 0.02
 
 
-def _segments_at(targets: list, stamps: np.ndarray) -> list:
-    """The segment each of ``stamps`` (n,) s follows (the newest ``/arm/left/target`` with a motion at or before
-    it; None before the first or where it does not rebuild)."""
+def _segments_at(targets: list, stamps: np.ndarray, cache: dict) -> tuple[np.ndarray, list]:
+    """(k (n,): the index in ``targets`` of the newest ``/arm/left/target`` with a motion at or before each of
+    ``stamps`` (n,) s, −1 before the first; the segment each follows, None before the first or where it does not
+    rebuild). ``cache`` {index: segment}: segments rebuilt once per target across calls."""
     t0s = np.array([m.header.stamp for m in targets])
     k = np.searchsorted(t0s, stamps, side="right") - 1
-    cache: dict[int, SheetSegment | None] = {}
     out = []
     for j in k:
         if j < 0:
@@ -48,23 +48,24 @@ def _segments_at(targets: list, stamps: np.ndarray) -> list:
             except MotionError:
                 cache[j] = None
         out.append(cache[j])
-    return out
+    return k, out
 
 
-def _planned_clamps(targets: list, stamps: np.ndarray) -> np.ndarray:
+def _planned_clamps(targets: list, stamps: np.ndarray, cache: dict) -> np.ndarray:
     """The motion's (left, right) clamp positions (n, 2, 3) m at ``stamps`` (n,) s, NaN where none is followed."""
     out = np.full((len(stamps), 2, 3), np.nan)
-    for i, (t, seg) in enumerate(zip(stamps, _segments_at(targets, stamps), strict=True)):
+    for i, (t, seg) in enumerate(zip(stamps, _segments_at(targets, stamps, cache)[1], strict=True)):
         if seg is not None:
             out[i] = seg.clamp_points(float(t))
     return out
 
 
-def clamp_tracking(d: dict[str, list], targets: list) -> dict:
+def clamp_tracking(d: dict[str, list], targets: list, cache: dict | None = None) -> dict:
     """``path_dev_mm`` {median, p99, max, n}: each arm's measured clamp against the motion's at the same stamp,
     mm; ``arrival_skew_ms`` {median, p99, max, n}: |lag_left − lag_right| while the planned clamps move faster
     than :data:`MOVING_MPS`, ms (each lag the shift in :data:`LAG_RANGE_S` that lays the measured clamp nearest
-    the planned path, on a :data:`LAG_GRID_S` grid). ``{}`` without joint states after the first target."""
+    the planned path, on a :data:`LAG_GRID_S` grid). ``{}`` without joint states after the first target.
+    ``targets``: the ``/arm/left/target`` messages with a motion, by stamp; ``cache``: as :func:`_segments_at`."""
     start = targets[0].header.stamp
     meas = {}
     for i, side in enumerate(("left", "right")):
@@ -75,7 +76,7 @@ def clamp_tracking(d: dict[str, list], targets: list) -> dict:
         return {}
     t_end = max(v[1][-1] for v in meas.values())
     grid = np.arange(start, t_end + LAG_GRID_S, LAG_GRID_S)
-    path = _planned_clamps(targets, grid)                                    # (G, 2, 3)
+    path = _planned_clamps(targets, grid, {} if cache is None else cache)   # (G, 2, 3)
     lo, hi = (int(round(x / LAG_GRID_S)) for x in LAG_RANGE_S)
     dev, lags = [], {}
     for side, (i, ts, p) in meas.items():
@@ -101,12 +102,10 @@ def clamp_tracking(d: dict[str, list], targets: list) -> dict:
     return {"path_dev_mm": stats(dv), "arrival_skew_ms": stats(skew)}
 
 
-def _planned_strain(targets: list, stamps: np.ndarray) -> np.ndarray:
+def _planned_strain(targets: list, stamps: np.ndarray, cache: dict) -> np.ndarray:
     """ε_plan (n,) at ``stamps`` (n,) s from the ``/arm/left/target`` messages (NaN before the first)."""
     out = np.full(len(stamps), np.nan)
-    t0s = np.array([m.header.stamp for m in targets])
-    k = np.searchsorted(t0s, stamps, side="right") - 1
-    for i, (j, seg) in enumerate(zip(k, _segments_at(targets, stamps), strict=True)):
+    for i, (j, seg) in enumerate(zip(*_segments_at(targets, stamps, cache), strict=True)):
         if j >= 0:
             out[i] = seg.sheet(stamps[i])[2] if seg is not None else _goal_strain(targets[j])
     return out
@@ -131,7 +130,8 @@ def motion_summary(d: dict[str, list]) -> dict:
     tw = np.array([m.header.stamp for m in world])
     keep = tw >= targets[0].header.stamp
     size = float(targets[-1].motion_size)
-    plan = _planned_strain(targets, tw[keep])
+    segments: dict = {}                       # one rebuild per target for the span and the clamps alike
+    plan = _planned_strain(targets, tw[keep], segments)
     true = np.array([m.stretch for m in world])[keep]
     ok = np.isfinite(plan)
     if not ok.any():
@@ -140,6 +140,6 @@ def motion_summary(d: dict[str, list]) -> dict:
     span = {"median": float(np.median(err)), "p99": float(np.percentile(err, 99)), "max": float(err.max()),
             "n": int(ok.sum())}
     met = span["p99"] <= SPAN_ERROR_P99_MM and waits == 0
-    return {"span_error_mm": span, "guard_waits": int(waits), **clamp_tracking(d, targets),
+    return {"span_error_mm": span, "guard_waits": int(waits), **clamp_tracking(d, targets, segments),
             "motion_targets": {"span_error_mm.p99": SPAN_ERROR_P99_MM, "guard_waits": 0},
             "motion_verdict": "met" if met else "MISSED"}

@@ -30,7 +30,7 @@ import numpy as np
 from flexsheet.model.tension import SheetMaterial, contact_geometry, press_force, tension
 
 __all__ = ["Press", "PRESS_STRETCHES", "PRESS_POINTS", "PRESS_DEPTHS", "plan_presses", "SheetFit", "TERMS",
-           "with_terms", "fit_sheet", "model_error"]
+           "with_terms", "fit_sheet", "model_error", "relative_errors"]
 
 #: clamp strains pressed at: dense over the strains the display works at (0.005–0.05), and 0.08 for the stiff end
 #: (the bridges' span band is 0.01–0.10)
@@ -145,13 +145,18 @@ def fit_sheet(presses: list[Press], base: SheetMaterial | None = None, offset_bo
     return replace(fit, median_pct=med, rms_pct=rms)
 
 
-def model_error(mat: SheetMaterial, presses: list[Press], min_force: float = 0.02) -> tuple[float, float]:
-    """(median, RMS) relative error, %, of :func:`flexsheet.model.tension.press_force` with ``mat`` against
+def relative_errors(mat: SheetMaterial, presses: list[Press], min_force: float = 0.02) -> np.ndarray:
+    """|model − force| / force (n,), %, of :func:`flexsheet.model.tension.press_force` with ``mat`` against
     the presses' forces (those ≥ ``min_force`` N: a few mN divide into meaningless ratios). Raises
     ``ValueError`` when no press is that strong."""
     pairs = [(press_force(p.stretch, mat, p.offset_u, p.depth), p.force) for p in presses if p.force >= min_force]
     if not pairs:
         raise ValueError(f"no press of at least {min_force} N to judge the model by")
     m, f = np.array(pairs).T
-    rel = np.abs(m - f) / f * 100.0
+    return np.abs(m - f) / f * 100.0
+
+
+def model_error(mat: SheetMaterial, presses: list[Press], min_force: float = 0.02) -> tuple[float, float]:
+    """(median, RMS) of :func:`relative_errors`, %. Raises ``ValueError`` as it does."""
+    rel = relative_errors(mat, presses, min_force)
     return float(np.median(rel)), float(np.sqrt(np.mean(rel ** 2)))

@@ -17,8 +17,8 @@ import numpy as np
 from flexsheet.calibration.display_calib_file import write_display_calib
 from flexsheet.calibration.head_camera import SITTINGS
 from flexsheet.calibration.procedures import FULL, QUICK, Options, run_all
-from flexsheet.calibration.sheet import PRESS_DEPTHS, Press, model_error, plan_presses
-from flexsheet.model.tension import SheetMaterial, press_force
+from flexsheet.calibration.sheet import PRESS_DEPTHS, Press, model_error, plan_presses, relative_errors
+from flexsheet.model.tension import SheetMaterial
 from flexsheet.twin.head_rig import HeadRigTwin
 from flexsheet.twin.load_cell import LoadCellTwin
 from flexsheet.twin.registration_camera import CalibrationTwin
@@ -175,15 +175,9 @@ def working_model_error(truth: TwinTruth, sheet) -> dict:
     :data:`WORKING_STRAINS` × :data:`WORKING_POINTS` × the plan's depths: ``median_pct``, ``p90_pct``,
     ``max_pct``, ``n``, ``strains`` [lo, hi] and ``target_pct`` (:data:`WORKING_TARGET_PCT`, on the median). A
     judge's figure: it reads the truth."""
-    cell, mat = LoadCellTwin(truth), sheet.material()
-    rel = []
-    for s in WORKING_STRAINS:
-        for u, v in WORKING_POINTS:
-            for d in PRESS_DEPTHS:
-                f = cell.true_force(s, u, v, d)
-                if f >= 0.02:
-                    rel.append(abs(press_force(s, mat, u, d) - f) / f * 100.0)
-    r = np.asarray(rel)
+    cell = LoadCellTwin(truth)
+    r = relative_errors(sheet.material(), [Press(s, u, v, d, cell.true_force(s, u, v, d)) for s in WORKING_STRAINS
+                                           for u, v in WORKING_POINTS for d in PRESS_DEPTHS])
     return {"median_pct": float(np.median(r)), "p90_pct": float(np.percentile(r, 90)), "max_pct": float(r.max()),
             "n": int(len(r)), "strains": [WORKING_STRAINS[0], WORKING_STRAINS[-1]], "target_pct": WORKING_TARGET_PCT}
 
