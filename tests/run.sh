@@ -17,6 +17,14 @@
 # both tiers in one process, one by one (slower).
 set -u
 cd "$(dirname "$0")/.."
+# the virtual environment docker/install.sh made ($FLEXSHEET_VENV, default .venv): its python3, pytest, flexsheet
+venv=${FLEXSHEET_VENV:-$PWD/.venv}
+if [ -x "$venv/bin/python" ]; then
+  export VIRTUAL_ENV=$venv PATH="$venv/bin:$PATH"
+elif ! python3 -c "import flexsheet, pytest" >/dev/null 2>&1; then
+  echo "tests/run.sh: no virtual environment at $venv and python3 has no flexsheet: run bash docker/install.sh" >&2
+  exit 4
+fi
 tier="not slow"
 args=()
 for arg in "$@"; do

@@ -41,9 +41,10 @@ def _off_surface(position) -> float:
     return abs(float(_radius(np.asarray(position, dtype=float)[None])[0]) - R)
 
 
-async def watch(port: int, proc: subprocess.Popen) -> tuple[dict, object, list[dict]]:
+async def watch(port: int, proc: subprocess.Popen) -> tuple[dict, object, list[dict], dict]:
     """Connect, subscribe, and return (channels, a decoded SceneUpdate holding the FEM mesh, the valid /fingertip
-    messages up to the first one within 3 mm of the surface: the finger on the object)."""
+    messages up to the first one within 3 mm of the surface: the finger on the object, the server's
+    ``{"capabilities": [...], "times": [ns, ...]}``)."""
     c = await _connect(port, proc, timeout=90.0)
     try:
         await c.wait_channels({"/viz/scene", "/viz/tf", "/fingertip", "/camera/left"}, timeout=10.0)
@@ -64,6 +65,7 @@ async def watch(port: int, proc: subprocess.Popen) -> tuple[dict, object, list[d
                 msg = c.decode(topic, payload)
                 if msg["valid"]:
                     tips.append(msg)
-        return c.channels, scene, tips
+        return c.channels, scene, tips, {"capabilities": list((c.server_info or {}).get("capabilities", [])),
+                                         "times": list(c.times)}
     finally:
         await c.ws.close()

@@ -20,6 +20,7 @@ from pathlib import Path
 from pydantic import ConfigDict
 
 from flexsheet.calibration.display_calib_file import load_display_calib
+from flexsheet.dirs import cache_root as flexsheet_cache_root
 from flexsheet.model.scenes import load_scene
 from flexsheet.runtime.console import console_logger, show_lines
 from flexsheet.runtime.extensions import LaunchExtension, LaunchSection
@@ -71,7 +72,7 @@ def _set_path(text: str) -> str | None:
 def twin_registration_path(twin: TwinSpec, cache_root: str | None = None) -> Path:
     """Where :func:`twin_registration` caches the ``display.yaml`` of ``twin``'s realism and seed (the cache of
     :func:`flexsheet.twin.registration.sim_display_calib`)."""
-    root = Path(cache_root or os.environ.get("FLEXSHEET_CACHE") or "~/.cache/flexsheet").expanduser()
+    root = Path(cache_root or flexsheet_cache_root()).expanduser()
     return root / "display" / f"{twin.realism}-{twin.truth_seed}" / "display.yaml"
 
 

@@ -34,6 +34,7 @@ import numpy as np
 from flexsheet.calibration import procedures as P
 from flexsheet.calibration.display_calib import CameraEntry, DisplayCalib, nominal_display_calib
 from flexsheet.calibration.display_calib_file import load_display_calib, write_display_calib
+from flexsheet.dirs import cache_root
 from flexsheet.twin.camera import twin_renderer
 from flexsheet.twin.camera_config import XIMEA_SENSOR, SimConfig
 from flexsheet.twin.finger import FingerScript
@@ -56,8 +57,7 @@ _SOURCES = ("../calibration/camera_pose.py", "../twin/registration_camera.py", "
 
 def cache_dir() -> str:
     """Folder of cached twin registrations: ``$FLEXSHEET_CACHE/vision`` or ``~/.cache/flexsheet/vision``."""
-    root = os.environ.get("FLEXSHEET_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "flexsheet")
-    return os.path.join(root, "vision")
+    return os.path.join(cache_root(), "vision")
 
 
 def sim_config(realism: str, **kw) -> SimConfig:

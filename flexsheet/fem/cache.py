@@ -6,10 +6,11 @@ the *parts* that determine its content (mesh spec, gmsh version, material, finge
 a version string). Writes are atomic (temporary file + ``os.replace``), so a crash or a concurrent writer never
 leaves a half-written entry; an unreadable entry is reported and recomputed.
 
-Also searched, read-only, after ``cache_dir``: ``flexsheet/fem/data/`` (entries shipped with the repository),
-then ``flexsheet/fem/data/installed/`` (:data:`INSTALL_DIR`: what the installer precomputed for the shipped
-launch files and scenes, ``python3 -m nodes.fem.warm``; not in git), so a fresh ``HOME`` starts without
-precomputing.
+``cache_dir`` defaults to :data:`DEFAULT_CACHE_DIR`, the user's cache folder (``~/.cache/flexsheet/fem`` on
+Linux, :mod:`flexsheet.dirs`). Also searched, read-only, after ``cache_dir``: ``flexsheet/fem/data/`` (entries
+shipped with the repository), then :data:`INSTALL_DIRS` (``fem/`` of each install-time data folder of
+:func:`flexsheet.dirs.data_dirs`: what the installer precomputed for the shipped launch files and scenes,
+``python3 -m nodes.fem.warm``, into :data:`INSTALL_DIR`), so a fresh ``HOME`` starts without precomputing.
 """
 
 from __future__ import annotations
@@ -21,16 +22,22 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+import platformdirs
 
+from flexsheet.dirs import APP, data_dirs, install_data_dir
 from flexsheet.manifest import record
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_CACHE_DIR", "SHIPPED_DIR", "INSTALL_DIR", "cache_key", "ArrayCache"]
+__all__ = ["DEFAULT_CACHE_DIR", "SHIPPED_DIR", "INSTALL_DIR", "INSTALL_DIRS", "cache_key", "ArrayCache"]
 
-DEFAULT_CACHE_DIR = os.path.join(os.path.expanduser("~"), ".cache", "flexsheet", "fem")
+#: the user's FEM cache (not moved by ``$FLEXSHEET_CACHE``: a graph started with it still finds its models here)
+DEFAULT_CACHE_DIR = os.path.join(platformdirs.user_cache_dir(APP), "fem")
 SHIPPED_DIR = os.path.join(os.path.dirname(__file__), "data")
-INSTALL_DIR = os.path.join(SHIPPED_DIR, "installed")
+#: where the installer's warm-up writes (the machine's data folder as root, else the user's)
+INSTALL_DIR = os.path.join(install_data_dir(), "fem")
+#: the install-time folders every cache searches read-only, in order
+INSTALL_DIRS = tuple(os.path.join(d, "fem") for d in data_dirs())
 
 
 def cache_key(*parts) -> str:
@@ -49,7 +56,7 @@ class ArrayCache:
         self.cache_dir = cache_dir or None
         # "" (the default): the module's SHIPPED_DIR as it is now (tests point it elsewhere); None: none
         self.shipped_dir = SHIPPED_DIR if shipped_dir == "" else shipped_dir
-        self.install_dir = INSTALL_DIR if shipped_dir == "" else None   # the installer's precomputed entries
+        self.install_dirs = INSTALL_DIRS if shipped_dir == "" else ()   # the installer's precomputed entries
         #: the file the last successful :meth:`load` read (in ``cache_dir`` or ``shipped_dir``), else None
         self.source: str | None = None
 
@@ -66,7 +73,7 @@ class ArrayCache:
     def load(self, kind: str, key: str) -> dict[str, np.ndarray] | None:
         """The stored arrays, or None when absent or unreadable (logged)."""
         name = self._name(kind, key)
-        for d in (self.cache_dir, self.shipped_dir, self.install_dir):
+        for d in (self.cache_dir, self.shipped_dir, *self.install_dirs):
             if not d:
                 continue
             p = os.path.join(d, name)

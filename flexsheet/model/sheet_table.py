@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from flexsheet.dirs import cache_root
 from flexsheet.model.checks import check_positive
 from flexsheet.model.sheet import DeflectionGrid
 from flexsheet.model.sheet_fem import SheetFEM, SheetPhysics, bilinear
@@ -47,8 +48,7 @@ TABLE_VERSION = 2
 
 def default_cache_dir() -> str:
     """Folder for cached tables: ``$FLEXSHEET_CACHE/sheet_fem`` or ``~/.cache/flexsheet/sheet_fem``."""
-    root = os.environ.get("FLEXSHEET_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "flexsheet")
-    return os.path.join(root, "sheet_fem")
+    return os.path.join(cache_root(), "sheet_fem")
 
 
 # ------------------------------------------------------------------------------------------------ table

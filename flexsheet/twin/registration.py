@@ -18,6 +18,7 @@ from flexsheet.calibration.display_calib_file import write_display_calib
 from flexsheet.calibration.head_camera import SITTINGS
 from flexsheet.calibration.procedures import FULL, QUICK, Options, run_all
 from flexsheet.calibration.sheet import PRESS_DEPTHS, Press, model_error, plan_presses, relative_errors
+from flexsheet.dirs import cache_root as flexsheet_cache_root
 from flexsheet.model.tension import SheetMaterial
 from flexsheet.twin.head_rig import HeadRigTwin
 from flexsheet.twin.load_cell import LoadCellTwin
@@ -255,7 +256,7 @@ def _cached(out_dir: str, key: dict) -> dict | None:
 
 
 def _cache_dir(seed: int, realism: str, cache_root: str | None, quick: bool) -> str:
-    root = cache_root or os.environ.get("FLEXSHEET_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "flexsheet")
+    root = cache_root or flexsheet_cache_root()
     return os.path.join(root, "display", f"{realism}-{int(seed)}{'-quick' if quick else ''}")
 
 

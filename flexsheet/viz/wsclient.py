@@ -41,6 +41,8 @@ class FoxgloveClient:
         self.channels: dict[str, dict] = {}
         self.subs: dict[int, dict] = {}
         self.server_info: dict | None = None
+        #: the server times received (capability ``time``, binary opcode 0x02), ns, in arrival order
+        self.times: list[int] = []
 
     @classmethod
     async def open(cls, port: int, host: str = "127.0.0.1") -> FoxgloveClient:
@@ -66,7 +68,8 @@ class FoxgloveClient:
 
     async def recv(self, deadline: float):
         """Next frame before ``deadline`` (monotonic s): (topic, timestamp ns, payload) for message data, None
-        for a JSON op (advertise ops update ``channels``). Raises ``TimeoutError``."""
+        for a JSON op (advertise ops update ``channels``) or a server time (appended to ``times``). Raises
+        ``TimeoutError``; ``ValueError`` for a binary opcode the protocol does not define."""
         return await self._recv(deadline)
 
     async def _recv(self, deadline: float):
@@ -82,7 +85,11 @@ class FoxgloveClient:
             elif op["op"] == "serverInfo":
                 self.server_info = op
             return None
-        assert data[0] == 0x01, f"unexpected binary opcode {data[0]}"
+        if data[0] == 0x02:                           # Time: uint64 timestamp ns
+            self.times.append(struct.unpack_from("<Q", data, 1)[0])
+            return None
+        if data[0] != 0x01:
+            raise ValueError(f"unexpected binary opcode {data[0]}")
         sub_id, stamp_ns = struct.unpack_from("<IQ", data, 1)
         return self.subs[sub_id]["topic"], stamp_ns, data[13:]
 

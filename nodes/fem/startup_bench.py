@@ -2,7 +2,7 @@
 machine, from its process starting to serving its scene's shipped table.
 
 "Fresh": the node runs with an empty ``HOME`` (no user cache), so it reads only what ships in
-``flexsheet/fem/data`` and what the install built (``flexsheet/fem/data/installed``, by
+``flexsheet/fem/data`` and what the install built (the machine's data folder, ``/usr/local/share/flexsheet/fem``, by
 ``python -m nodes.fem.warm`` in ``docker/install.sh``). "Serving": its first heartbeat that lists its
 ``/fingertip`` subscription and whose message names the nonlinear table it loaded (a node that fell back to the
 linear model is reported as such). Each scene is started twice; the slower counts. Target: 10 s.

@@ -3,8 +3,10 @@
 Runs the FEM node as it runs in a graph (its loop, setup and first publications, then its teardown), in this
 process on an in-process transport, for the ``fem`` params of ``launch/sim.yaml`` on every scene of
 ``launch/scenes/`` (``--scene NAME`` for some of them; ``cylinder.yaml`` is also what a launch file without a
-``scene:`` serves), with ``cache_dir`` = ``DIR`` (default
-:data:`flexsheet.fem.cache.INSTALL_DIR`, which every FEM cache searches read-only). A node started later, on
+``scene:`` serves), with ``cache_dir`` = ``DIR`` (default :data:`flexsheet.fem.cache.INSTALL_DIR`: the machine's
+data folder as root, ``/usr/local/share/flexsheet/fem``, else the user's, ``~/.local/share/flexsheet/fem``;
+``$FLEXSHEET_DATA/fem`` when set; every FEM cache searches these read-only). ``launch/`` is the checkout's, or
+the current folder's for an installed package (the image's ``/opt/flexsheet``). A node started later, on
 any ``HOME``, then loads its model instead of precomputing it (the capacitance matrices: ~12 s for the
 cylinder on the 2-core machine). ``docker/install.sh`` runs it; idempotent (a second run only loads).
 Exit status 1 when any model failed (each failure has its own ``FAILED`` line), 0 when every one is ready.
@@ -28,8 +30,19 @@ from nodes.fem.node import FemNode
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def param_sets(root: Path = ROOT) -> list[dict]:
-    """The FEM params to warm: launch/sim.yaml's fem node's with each scene file."""
+def launch_root() -> Path:
+    """The folder holding ``launch/sim.yaml``: the checkout this module lives in, else the current folder.
+    Raises ``FileNotFoundError`` naming both when neither has it."""
+    for root in (ROOT, Path.cwd()):
+        if (root / "launch" / "sim.yaml").is_file():
+            return root
+    raise FileNotFoundError(f"launch/sim.yaml is in neither {ROOT} nor {Path.cwd()}: run from the checkout")
+
+
+def param_sets(root: Path | None = None) -> list[dict]:
+    """The FEM params to warm: launch/sim.yaml's fem node's with each scene file (``root``: default
+    :func:`launch_root`)."""
+    root = root or launch_root()
     base = dict(yaml.safe_load((root / "launch" / "sim.yaml").read_text())["nodes"]["fem"].get("params", {}))
     return [{**base, "scene": str(p)} for p in sorted((root / "launch" / "scenes").glob("*.yaml"))]
 

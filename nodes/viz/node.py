@@ -25,7 +25,11 @@ Inputs: ``/fingertip``, ``/sheet/target``, ``/arm/left/joint_state``, ``/arm/rig
   at ``scene_rate``, the camera images at ``camera_rate`` (downscaled by ``camera_scale``), ``/render/image``
   at ``render_rate``, the JSON copies of the plain topics as they arrive (≤ ``input_rate``); the scene is
   assembled from cached encoded entities, each rebuilt only when its input changed (foxglove_scene);
-* a slow viewer loses the oldest queued messages (the server keeps at most ``backlog`` per client).
+* a slow viewer loses the oldest queued messages (the server keeps at most ``backlog`` per client);
+* it advertises Foxglove's ``time`` capability and broadcasts the graph's time every ``TIME_PERIOD`` (0.25 s of
+  the graph's clock): on a simulated clock a viewer's timeline follows simulated time. The SDK server queues
+  these per viewer in a queue of ``backlog`` that it does not thin, and lets go a viewer whose queue is full (a
+  viewer that reads nothing for ``backlog`` × 0.25 s, 16 s at the defaults), so they are few.
 
 Publishes nothing on the graph (only its heartbeat). Input the scene cannot use (faces out of range, bad
 joints) is rejected and counted.
@@ -39,7 +43,7 @@ import math
 
 import foxglove
 import numpy as np
-from foxglove.websocket import ServerListener
+from foxglove.websocket import Capability, ServerListener
 from pydantic import Field, field_validator
 
 from flexsheet.model.projector import Projector
@@ -125,6 +129,7 @@ class VizNode(Node):
     Params = VizParams
     node_type = "viz"
     DRAIN_PERIOD = 0.05     #: s, inputs received in ~20 batches a second (module docstring)
+    TIME_PERIOD = 0.25      #: s of the graph's clock between two server times (module docstring)
 
     async def setup(self) -> None:
         p: VizParams = self.params
@@ -144,7 +149,7 @@ class VizNode(Node):
         try:    # the SDK's server on a loopback port of its own; viewers reach it through the relay
             self.server = foxglove.start_server(name=f"flexsheet {self.name}", host="127.0.0.1", port=0,
                                                 context=self.context, message_backlog_size=p.backlog,
-                                                server_listener=_Listener(self))
+                                                server_listener=_Listener(self), capabilities=[Capability.Time])
         except Exception as exc:  # the SDK raises its own error type; name the address
             raise RuntimeError(f"viz: cannot start the Foxglove server: {exc}") from exc
         self.relay = SubprotocolRelay(p.host, p.port, self.server.port)
@@ -156,6 +161,7 @@ class VizNode(Node):
         self.port = self.relay.port
         self.sent = 0
         self._subscribed: set[str] = set()
+        self._time_sent = -math.inf
         self.timer(1.0 / p.poll_rate, self.on_poll)
         self.log.info("Foxglove WebSocket server on ws://%s:%d", p.host, self.port)
 
@@ -205,6 +211,11 @@ class VizNode(Node):
 
     def on_poll(self) -> None:
         self._emit(self.streams.poll(self.now(), self.wanted))
+        # the viewers' timeline follows the graph's clock (simulated time on a simulated clock): capability "time"
+        now = self.now()
+        if now - self._time_sent >= self.TIME_PERIOD:
+            self._time_sent = now
+            self.server.broadcast_time(int(round(now * 1e9)))
 
     def _emit(self, outputs) -> None:
         for topic, data, t in outputs:

@@ -1,8 +1,9 @@
 // The official Foxglove WebSocket client (@foxglove/ws-protocol) against a live view, decoding as the viewers do
 // (decode.mjs): node foxglove_client.mjs PORT SUBPROTOCOL SECONDS
-// Subscribes to every advertised channel and prints one JSON line: the subprotocol agreed, and per channel its
-// schema, encoding, messages decoded and the first decode error. Exit 0 once every channel decoded a message
-// (or at the deadline with what it has), 2 when it cannot connect.
+// Subscribes to every advertised channel and prints one JSON line: the subprotocol agreed, the server's
+// capabilities, the server times it broadcast (count, first and last, ns as strings), and per channel its schema,
+// encoding, messages decoded and the first decode error. Exit 0 once every channel decoded a message and, when
+// the server offers "time", two times arrived (or at the deadline with what it has), 2 when it cannot connect.
 import wsProtocol from "@foxglove/ws-protocol";
 import WebSocket from "ws";
 
@@ -16,14 +17,25 @@ const client = new FoxgloveClient({ ws });
 const channels = new Map();   // subscription id -> {topic, parse, row}
 const rows = {};
 let agreed = null;
+let capabilities = [];
+const times = [];
 
 function finish(code) {
-  console.log(JSON.stringify({ subprotocol: agreed, channels: rows }));
+  const t = times.length ? { count: times.length, first: String(times[0]), last: String(times[times.length - 1]) }
+    : { count: 0, first: null, last: null };
+  console.log(JSON.stringify({ subprotocol: agreed, capabilities, time: t, channels: rows }));
   process.exit(code);
+}
+
+function done() {
+  const all = Object.values(rows);
+  return all.length > 0 && all.every((r) => r.decoded > 0) && (!capabilities.includes("time") || times.length >= 2);
 }
 
 ws.on("open", () => { agreed = ws.protocol; });
 client.on("error", (err) => { console.error(String(err)); });
+client.on("serverInfo", (info) => { capabilities = info.capabilities ?? []; });
+client.on("time", ({ timestamp }) => { times.push(timestamp); if (done()) finish(0); });
 ws.on("unexpected-response", (_req, res) => { console.error(`HTTP ${res.statusCode}`); finish(2); });
 client.on("advertise", (advertised) => {
   for (const ch of advertised) {
@@ -51,7 +63,6 @@ client.on("message", ({ subscriptionId, data }) => {
   } catch (err) {
     c.row.error ??= `decode: ${err}`;
   }
-  const all = Object.values(rows);
-  if (all.length > 0 && all.every((r) => r.decoded > 0)) finish(0);
+  if (done()) finish(0);
 });
 setTimeout(() => finish(0), seconds * 1000);

@@ -15,6 +15,7 @@ from nodes.fem import warm
 def empty_cache(tmp_path, monkeypatch):
     """An empty install folder and HOME: only the tables shipped in the repository are found."""
     monkeypatch.setattr(cache, "INSTALL_DIR", str(tmp_path / "installed"))
+    monkeypatch.setattr(cache, "INSTALL_DIRS", (str(tmp_path / "installed"),))
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
     return tmp_path / "out"
 

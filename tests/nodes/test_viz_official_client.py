@@ -58,3 +58,8 @@ def test_the_official_client_connects_with_either_subprotocol_and_decodes_every_
     undecoded = {t: r for t, r in rows.items() if r["decoded"] < 1 or r["error"]}
     assert undecoded == {}, undecoded
     assert rejected == 0
+    # the timeline follows the graph's clock (here the wall clock): capability "time" and its times advancing
+    assert "time" in res["capabilities"], res["capabilities"]
+    t = res["time"]
+    assert t["count"] >= 2 and int(t["last"]) > int(t["first"]), t
+    assert abs(int(t["last"]) * 1e-9 - time.time()) < 30.0, t

@@ -22,7 +22,13 @@ def test_independent_client_sees_the_running_sim(sim_run):
     ``--set viz.port=PORT``) ran, until it had the FEM's mesh and the finger on the object."""
     if isinstance(sim_run["viz"], BaseException):
         raise AssertionError(f"{sim_run['viz']!r}; launch output:\n{sim_run['stdout'][-5000:]}")
-    channels, su, tips = sim_run["viz"]
+    channels, su, tips, server = sim_run["viz"]
+
+    # the viewer's timeline follows simulated time: capability "time", times advancing with the graph's stamps
+    assert "time" in server["capabilities"], server["capabilities"]
+    times = [t * 1e-9 for t in server["times"]]
+    assert len(times) >= 2 and times[-1] > times[0], times
+    assert abs(times[-1] - tips[-1]["header"]["stamp"]) < 5.0, (times[-1], tips[-1]["header"]["stamp"])
 
     # advertised channels and their schema names (Foxglove's own schemas; our topics as JSON + jsonschema)
     names = {t: (ch["schemaName"], ch["encoding"]) for t, ch in channels.items()}

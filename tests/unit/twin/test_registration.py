@@ -13,6 +13,7 @@ import pytest
 from flexsheet.calibration.display_calib import ENTRIES, nominal_display_calib
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.calibration.procedures import QUICK
+from flexsheet.dirs import cache_root
 from flexsheet.twin.registration import run_display_sim
 from flexsheet.twin.truth import TwinTruth
 
@@ -25,8 +26,7 @@ def _share_with_the_cache(seed: int, out: Path) -> None:
     """Put this fresh run's files where :func:`flexsheet.twin.registration.sim_display_calib` caches the
     realistic quick registration of ``seed`` (when that entry is absent), so the tests that load it do not run
     the same procedures again: the same call (seed, realism, QUICK) whose summary key run_display_sim checks."""
-    root = os.environ.get("FLEXSHEET_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "flexsheet")
-    dst = Path(root) / "display" / f"realistic-{int(seed)}-quick"
+    dst = Path(cache_root()) / "display" / f"realistic-{int(seed)}-quick"
     if (dst / "summary.json").is_file() and (dst / "display.yaml").is_file():
         return
     dst.mkdir(parents=True, exist_ok=True)
