@@ -111,6 +111,10 @@ for exe in flexsheet register-python-argcomplete; do
 done
 echo "[install] $bindir/flexsheet -> $VENV/bin/flexsheet"
 case ":$PATH:" in *":$bindir:"*) ;; *) echo "[install] note: $bindir is not on PATH here; add it" >&2;; esac
+found=$(command -v flexsheet || true)
+if [ -n "$found" ] && [ "$(readlink -f "$found")" != "$(readlink -f "$VENV/bin/flexsheet")" ]; then
+  echo "[install] note: 'flexsheet' on this PATH is $found (another install), before $bindir/flexsheet" >&2
+fi
 # the FEM node's models for the shipped launch files and scenes, precomputed once here (not at every start on a
 # fresh HOME: ~12 s for the cylinder), into the machine's data folder (the user's when not root); searched
 # read-only by every FEM cache (flexsheet/fem/cache.py, flexsheet/dirs.py)

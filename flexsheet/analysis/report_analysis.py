@@ -22,6 +22,7 @@ import numpy as np
 
 from flexsheet.analysis.report_head import head_summary
 from flexsheet.analysis.report_motion import motion_summary
+from flexsheet.analysis.report_placement import placement
 from flexsheet.analysis.report_softness import felt_force, follow_lag, inclusion_contrast, sheet_summary
 from flexsheet.analysis.report_timing import compliance_summary, latency_hops, watchdog_faults
 from flexsheet.analysis.report_verdicts import judge, table1_verdicts
@@ -74,7 +75,9 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scen
             series: dict | None = None) -> dict:
     """The summary of a bag, or of the parts of one run (a respawned recorder continues in ``<stem>.1.mcap``…),
     on ``scene`` (``None``: the paper's cylinder): ``bags``, ``counts`` per topic, ``run`` and ``segments``
-    (:func:`stroke_segments`), the rows of :func:`table1_rows`, ``compliance``, ``latency_ms``, ``faults`` and
+    (:func:`stroke_segments`), the rows of :func:`table1_rows`, ``compliance`` (its ``felt``, ``follow``,
+    ``inclusion_contrast``: :mod:`flexsheet.analysis.report_softness`), ``placement``
+    (:func:`~flexsheet.analysis.report_placement.placement`), ``latency_ms``, ``faults`` and
     the verdicts (:func:`flexsheet.analysis.report_verdicts.judge`: ``headline``). The recorded
     ``/diagnostics`` (arrival time, Heartbeat) pairs are appended to ``heartbeats`` if given, the per-sample
     Table I series to ``series`` (:func:`felt_and_paper`)."""
@@ -90,7 +93,7 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scen
     summary.update(table1_rows(d, scene, series, segments))
     summary["compliance"] = compliance_summary(d)
     if summary["compliance"]:
-        felt = felt_force(d)
+        felt = felt_force(d, scene=scene or paper_scene())
         samples = felt.pop("samples", None)
         if series is not None and samples:
             series["compliance"] = samples
@@ -105,6 +108,9 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scen
             summary["compliance"]["inclusion_contrast_requested"] = ic["requested"]
             summary["compliance"]["inclusion_contrast"] = ic
         summary["compliance"]["saturated"] = summary["compliance"]["all"]["at_limit"]
+    pl = placement(d, scene or paper_scene())
+    if pl:
+        summary["placement"] = pl
     summary["sheet"] = {**sheet_summary(d), **motion_summary(d)}
     head = head_summary(d, scene or paper_scene(), series)
     if head:

@@ -164,11 +164,13 @@ def _softness(s: dict) -> tuple[list[str], list[str]]:
         return ["No press of 2 mm or more with both the true sheet's force (/world/contact) and the object's "
                 "request in the bag: no verdict."], []
     r = soft["ratio"]
-    basis = ("the object's force-depth from its FEM (/object/force_depth) at the true contact and depth, mapped "
-             "as the planner maps it (stiffness_scale, contrast_gain)" if soft.get("basis") == "force_depth" else
+    basis = ("the object's force-depth from its FEM (/object/force_depth) at the contact on the surface (the "
+             "dent's bottom moved back out along the sheet's normal) and the true sheet depth, mapped as the planner "
+             "maps it (stiffness_scale, contrast_gain)" if soft.get("basis") == "force_depth" else
              "the virtual object's force at the display's fingertip (/object/deformation contact_force × "
              "stiffness_scale)")
-    prose = ["While the finger presses (true sheet depth ≥ 2 mm): the finger's contact force on the true sheet "
+    into = "the object" if soft.get("gate") == "object_depth" else "the sheet"
+    prose = [f"While the finger presses (≥ 2 mm into {into}): the finger's contact force on the true sheet "
              "(/world/contact force: the twin's sheet FEM, not the planner's model) against " + basis + ". A ratio "
              "within 1 ± 0.15 goes unnoticed (Weber fraction, Bergmann Tiest & Kappers 2009). Saturated: share of "
              "touching targets whose request the sheet could not present (target ≤ 5 %)."]
@@ -178,11 +180,18 @@ def _softness(s: dict) -> tuple[list[str], list[str]]:
            "≥ 95 % within", soft["verdict"]]
     head = ["n", "felt / requested, median [p5, p95]", "within 15 %", "felt N", "requested N", "saturated",
             "target", "verdict"]
+    pp = soft.get("per_press")
+    if pp:
+        prose.append(f"Per press (one contiguous touch, its median ratio): {pp['n']} press(es), "
+                     f"{100 * pp['within_15pct']:.0f} % within 15 %, median {pp['ratio_median']:.2f}, worst "
+                     f"{pp['worst']:.2f}.")
     ic = comp.get("inclusion_contrast")
     if ic:
         prose.append(f"The inclusion, felt from true forces at matched depth (over its footprint against around it, "
                      f"{len(ic['bins'])} depth bins): {100 * ic['felt']:+.1f} %; the object asks {100 * ic['requested']:+.1f} %, "
-                     f"the mapped request {100 * ic['mapped']:+.1f} %.")
+                     f"the mapped request {100 * ic['mapped']:+.1f} %"
+                     + (f" (contrast_gain {', '.join(f'{g:g}' for g in ic['contrast_gain'])})."
+                        if ic.get("contrast_gain") else "."))
     me = comp.get("model_error")
     if me:
         prose.append(f"The planner's identified sheet model against the true force over clamp strains "
@@ -206,6 +215,33 @@ def _softness(s: dict) -> tuple[list[str], list[str]]:
             prose.append(f"Each clamp against the motion at the same instant: p99 {pd['p99']:.2f} mm, max "
                          f"{pd['max']:.2f} mm; {skew}.")
     return prose, _table(head, [row])
+
+
+def _placement(s: dict) -> tuple[list[str], list[str]]:
+    pl = s.get("placement", {})
+    if not pl:
+        return ["No touching sample with the true finger, the true sheet and the scene: no verdict."], []
+    prose = ["While the finger touches (inside the object, or behind the true sheet while the world says it "
+             "touches): the true sheet's plane ahead (+) or behind (−) the object's surface under the true finger, "
+             "along the object's normal, mm; per touch, the sheet's arrival at the surface under the finger "
+             f"(within {pl['targets']['arrival_tol_mm']:g} mm behind it, or ahead) against the finger's arrival "
+             "there, ms (negative: the sheet waited)."]
+    d, a = pl["distance_mm"], pl.get("arrival_ms")
+    rows = [["|distance|, mm", f"{d['p50']:.2f}", f"{d['p99']:.2f}", f"{d['max']:.2f}",
+             f"≤ {pl['targets']['distance_mm.p99']:g} p99", pl["verdicts"]["distance"]]]
+    first = "-" if pl["sheet_first"] is None else f"{100 * pl['sheet_first']:.0f} % of {pl['arrivals']}"
+    rows.append(["sheet first, touches", first, "-", "-", f"≥ {100 * pl['targets']['sheet_first']:.0f} %",
+                 pl["verdicts"]["sheet_first"]])
+    if a:
+        rows.append(["sheet − finger arrival, ms", f"{a['median']:.0f}", f"{a['p99']:.0f}", f"{a['max']:.0f}", "≤ 0",
+                     "-"])
+    phases = ", ".join(f"{k} p99 {v['p99']:.2f} mm (n {v['n']})" for k, v in pl.get("by_phase_mm", {}).items())
+    if phases:
+        prose.append(f"By the script's phase: {phases}.")
+    if pl.get("never") or pl.get("no_finger_arrival"):
+        prose.append(f"Touches whose sheet never arrived: {pl['never']}; touches that never pushed into the object "
+                     f"(the sheet ahead): {pl['no_finger_arrival']}.")
+    return prose, _table(["figure", "p50", "p99", "max", "target", "verdict"], rows)
 
 
 def _compliance(s: dict) -> tuple[list[str], list[str]]:
@@ -298,6 +334,7 @@ def sections(summary: dict) -> list[tuple[str, list[str], list[str]]]:
             ("Table I — what the felt error is made of", *_decomposition(summary)),
             ("Delay — exposure → sheet at its pose", *_delay(summary)),
             ("Softness felt — the true sheet's force against the object's", *_softness(summary)),
+            ("Placement — the true sheet against the object's surface under the finger", *_placement(summary)),
             ("The viewer's head — tracked image and keep-out", *_head(summary)),
             ("Sheet tension and stiffness at the contacts (the planner's model)", *_compliance(summary)),
             ("Latency per hop and end to end", *_latency(summary))]

@@ -6,6 +6,10 @@
 * A partial segment (the bag ends inside it) gets :data:`PARTIAL`; a partial run gets no overall verdict
   and no latency verdicts (its complete segments keep theirs).
 * Latency: the medians of the chain's ends against :data:`LATENCY_TARGETS_MS`.
+* Softness and placement are judged where they are measured (:mod:`flexsheet.analysis.report_softness`, "met" or
+  "MISSED" on the unrounded numbers, a partial run included): ``compliance.felt.verdict`` (share of samples within
+  the Weber fraction), ``placement.verdicts`` {distance (p99 |distance| mm), sheet_first (share of touches)} and
+  ``placement.verdict`` (both met).
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from flexsheet.analysis.report_softness import felt_force
-from messages import ContactTruth, Header, ObjectDeformation
+from messages import ContactTruth, Header, ObjectDeformation, SheetState
 
 
 def _sheet(t: float, depth: float, force: float) -> ContactTruth:
@@ -70,8 +70,9 @@ def _table_msg(c_body: float = 1000.0, c_top: float = 1000.0):
 
 
 def _contact(t: float, z: float, depth: float, force: float) -> ContactTruth:
+    """A contact at height z on the table's face (x = 0, normal +x): its point the dent's bottom, x = −depth."""
     return ContactTruth(header=Header(stamp=t), touching=True, depth=depth, force=force,
-                        point=np.array([0.0, 0.0, z]), stiffness=1.0)
+                        point=np.array([-depth, 0.0, z]), stiffness=1.0)
 
 
 def test_with_the_objects_table_the_request_is_its_force_at_the_true_depth():
@@ -137,3 +138,122 @@ def test_the_sheet_summary_counts_one_arm_holding_per_cycle_and_the_strain_over_
     s = sheet_summary(d)
     assert s["one_arm_holds"] == 3 and s["strain_true_max"] == pytest.approx(0.08)
     assert s["strain_over_plan_max"] == pytest.approx(0.03) and s["verdict"] == "MISSED"
+
+
+# ---- the request at the surface contact, the object-depth gate, per press -----------------------------------------
+
+BOX = "launch/scenes/rounded_box.yaml"      # front face x = 0, top face z = 30 mm, 8 mm edge about x = -8, z = 22 mm
+EDGE_C = np.array([-0.008, 0.0, 0.022])
+
+
+def _sheet_state(t: float, origin, normal) -> SheetState:
+    n = np.asarray(normal, float)
+    return SheetState(header=Header(stamp=t), origin=np.asarray(origin, float), normal=n / np.linalg.norm(n),
+                      axis_u=np.array([0.0, 1.0, 0.0]), corners=np.zeros((4, 3)), pushed_point=np.zeros(3),
+                      depth=0.0, stretch=0.05, membrane=np.zeros((2, 2)))
+
+
+def _edge_table():
+    """The box's stroke from the front face over the edge onto the top: c = 1000 on the front face, 1500 on the
+    edge's arc, 2500 on the top face (F = c·d^1.5, depths 0–20 mm in 0.5 mm steps)."""
+    from messages import ObjectForceDepth
+
+    front = [np.array([0.0, 0.0, z]) for z in (0.0, 0.01)]
+    arc = [EDGE_C + 0.008 * np.array([np.cos(a), 0.0, np.sin(a)]) for a in np.radians(np.arange(0, 91, 15))]
+    top = [np.array([x, 0.0, 0.03]) for x in (-0.008 - 0.002 * np.cos(np.radians(30)), -0.04)]   # above the bottom
+    nrm = ([np.array([1.0, 0, 0])] * 2 + [np.array([np.cos(a), 0.0, np.sin(a)]) for a in np.radians(np.arange(0, 91, 15))]
+           + [np.array([0, 0, 1.0])] * 2)
+    c = np.array([1000.0] * 2 + [1500.0] * 7 + [2500.0] * 2)
+    depths = np.linspace(0.0, 0.02, 41)
+    return ObjectForceDepth(header=Header(stamp=0.5), points=np.array(front + arc + top), normals=np.array(nrm),
+                            names=["reference"] + [f"p{i}" for i in range(10)], depths=depths,
+                            force=c[:, None] * depths[None, :] ** 1.5, scene_key="box")
+
+
+def test_over_the_rounded_edge_the_request_is_looked_up_at_the_surface_not_at_the_dents_bottom():
+    """A finger 10 mm into the sheet over the edge at 30°: the dent's bottom (2 mm past the edge's centre) projects
+    onto the top face (2500), the surface contact onto the arc (1500); the sheet presents the arc's force."""
+    from flexsheet.analysis.report_softness import force_depth_table, surface_points
+    from flexsheet.model.scenes import load_scene
+
+    u = np.array([np.cos(np.radians(30)), 0.0, np.sin(np.radians(30))])
+    depth = 0.01
+    bottom = EDGE_C + (0.008 - depth) * u
+    msg = _edge_table()
+    table = force_depth_table({"/object/force_depth": [(0.5, msg)]})
+    assert table.force_at(bottom, depth) == pytest.approx(2500.0 * depth ** 1.5, rel=1e-9)    # the old look-up
+    contacts = [(1.0 + 0.01 * k, ContactTruth(header=Header(stamp=1.0 + 0.01 * k), touching=True, depth=depth,
+                                              force=1500.0 * depth ** 1.5, point=bottom, stiffness=1.0))
+                for k in range(5)]
+    sheets = [(t, _sheet_state(m.header.stamp, EDGE_C + 0.008 * u, u)) for t, m in contacts]
+    d = {"/world/contact": contacts, "/world/sheet": sheets, "/object/force_depth": [(0.5, msg)]}
+    q = surface_points(d, [m for _, m in contacts])
+    assert np.allclose(q, EDGE_C + 0.008 * u, atol=1e-12)
+    for scene in (None, load_scene(BOX)):
+        r = felt_force(d, scales=[(0.0, 1.0)], scene=scene)
+        assert r["n"] == 5 and r["requested_n"] == pytest.approx(1500.0 * depth ** 1.5, rel=1e-6)
+        assert r["ratio"]["median"] == pytest.approx(1.0, abs=1e-6) and r["within_15pct"] == 1.0
+
+
+def test_a_finger_1_mm_into_the_object_is_not_judged_for_softness_even_when_2_5_mm_into_the_sheet():
+    """Front face (x = 0): a finger 1 mm in with the sheet 1.5 mm ahead (2.5 mm sheet depth, felt twice the
+    request) and one 3 mm in with the sheet at the surface (felt as asked). The object's depth judges the second
+    only; the sheet's depth (no scene) both."""
+    from flexsheet.model.scenes import load_scene
+
+    def c(t, x, depth, k):
+        return (t, ContactTruth(header=Header(stamp=t), touching=True, depth=depth, force=k * 1000.0 * depth ** 1.5,
+                                point=np.array([x, 0.0, 0.01]), stiffness=1.0))
+
+    contacts = [c(1.0, -0.001, 0.0025, 2.0), c(1.01, -0.003, 0.003, 1.0)]
+    sheets = [(1.0, _sheet_state(1.0, [0.0015, 0, 0.01], [1, 0, 0])), (1.01, _sheet_state(1.01, [0, 0, 0.01], [1, 0, 0]))]
+    d = {"/world/contact": contacts, "/world/sheet": sheets, "/object/force_depth": [(0.5, _table_msg())]}
+    judged = felt_force(d, scales=[(0.0, 1.0)], scene=load_scene(BOX))
+    assert judged["gate"] == "object_depth" and judged["n"] == 1 and judged["within_15pct"] == 1.0
+    assert judged["felt_n"] == pytest.approx(1000.0 * 0.003 ** 1.5)
+    both = felt_force(d, scales=[(0.0, 1.0)])
+    assert both["gate"] == "sheet_depth" and both["n"] == 2 and both["within_15pct"] == 0.5
+
+
+def test_each_press_gets_its_own_median_ratio():
+    """Three presses (touches apart): 10 samples at ratio 1.0, 10 at 1.3, 10 at 0.95 (one of them 2.0): per press
+    1.0, 1.3, 0.95 → 2 of 3 within 15 %, median 1.0, worst 1.3; per sample 20 of 30 within."""
+    contacts, t = [], 1.0
+    for ratio in (1.0, 1.3, 0.95):
+        for k in range(10):
+            r = 2.0 if (ratio == 0.95 and k == 0) else ratio
+            contacts.append((t, _contact(t, 0.01, 0.005, r * 1000.0 * 0.005 ** 1.5)))
+            t += 0.01
+        contacts.append((t, ContactTruth(header=Header(stamp=t), touching=False, depth=0.0, force=0.0,
+                                         point=np.zeros(3), stiffness=0.0)))
+        t += 0.5
+    d = {"/world/contact": contacts, "/object/force_depth": [(0.5, _table_msg())]}
+    r = felt_force(d, scales=[(0.0, 1.0)])
+    pp = r["per_press"]
+    assert pp["n"] == 3 and pp["ratios"] == pytest.approx([1.0, 1.3, 0.95], abs=1e-6)
+    assert pp["within_15pct"] == pytest.approx(2 / 3) and pp["ratio_median"] == pytest.approx(1.0, abs=1e-6)
+    assert pp["worst"] == pytest.approx(1.3, abs=1e-6)
+    assert r["within_15pct"] == pytest.approx(19 / 30)
+
+
+def test_the_inclusion_is_found_from_the_surface_contact_at_every_depth():
+    """As the inclusion test, but each contact at the dent's bottom (depth behind the surface along −x, the sheet's
+    normal +x): at 9 mm the bottom is farther than the 7 mm radius from the point above the inclusion, the
+    surface contact is not, so all three depth bins count and the contrast is the 30 % felt."""
+    from flexsheet.analysis.report_softness import inclusion_contrast
+
+    class _Scene:
+        inclusions = [type("I", (), {"center": (-0.007, 0.0, 0.02), "radius": 0.007})()]
+
+    contacts, sheets = [], []
+    for k in range(300):
+        t = 1.0 + 0.02 * k
+        z = 0.04 * (k % 100) / 99
+        depth = 0.003 + 0.006 * ((k // 100) % 3) / 2
+        felt = (1300.0 if abs(z - 0.02) <= 0.007 else 1000.0) * depth ** 1.5
+        contacts.append((t, ContactTruth(header=Header(stamp=t), touching=True, depth=depth, force=felt,
+                                         point=np.array([-depth, 0.0, z]), stiffness=1.0)))
+        sheets.append((t, _sheet_state(t, [0.0, 0.0, 0.02], [1, 0, 0])))
+    d = {"/world/contact": contacts, "/world/sheet": sheets, "/object/force_depth": [(0.5, _table_msg(1000.0, 1250.0))]}
+    ic = inclusion_contrast(d, _Scene())
+    assert len(ic["bins"]) == 3 and ic["felt"] == pytest.approx(0.30, abs=1e-6) and ic["contrast_gain"] == [1.0]

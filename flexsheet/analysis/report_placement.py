@@ -1,0 +1,156 @@
+"""Where the true sheet stands against the object's surface while the finger touches it, from a run's bag (pure;
+no transport): an encountered-type display promises the surface is there before the finger lands.
+
+Per touching sample, the true sheet's signed distance ahead of (+) or behind (−) the object's surface under the
+true fingertip, mm; per touch (a contiguous contact episode), the time from the finger's arrival at the object's
+surface to the sheet's, ms. Read from ``/world/finger``, ``/world/sheet`` and ``/world/contact`` (the twin's
+truth: this is the judge, not an estimator) and the scene's shape. Units: m, s; mm / ms only in report values.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flexsheet.analysis.report_softness import MAX_GAP, episodes, object_surface
+from flexsheet.planning.shape import planner_shape
+
+__all__ = ["PLACEMENT_P99_MM", "SHEET_FIRST_TARGET", "ARRIVAL_TOL", "ARRIVAL_LOOKBACK", "placement"]
+
+#: the true sheet may stand at most this far (mm, p99 of |distance|) ahead of or behind the object's surface
+PLACEMENT_P99_MM = 2.0
+#: the share of touches whose sheet must be at the object's surface before the finger
+SHEET_FIRST_TARGET = 0.99
+#: the sheet is "at" the object's surface when at most this far (m) behind it (or anywhere ahead)
+ARRIVAL_TOL = 0.0005
+#: how far back (s) before the finger's arrival a sheet's wait is measured
+ARRIVAL_LOOKBACK = 1.0
+
+
+def _sheet_at(d: dict[str, list], t: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The true sheet's plane at stamps ``t`` (N,) s: (origin (N, 3) m, unit normal (N, 3)), interpolated in
+    ``/world/sheet``; None without two sheet samples."""
+    sheets = sorted((m for _, m in d.get("/world/sheet", [])), key=lambda m: m.header.stamp)
+    if len(sheets) < 2:
+        return None
+    ts = np.array([m.header.stamp for m in sheets])
+    org = np.array([m.origin for m in sheets], float)
+    nrm = np.array([m.normal for m in sheets], float)
+    o = np.stack([np.interp(t, ts, org[:, k]) for k in range(3)], axis=1)
+    n = np.stack([np.interp(t, ts, nrm[:, k]) for k in range(3)], axis=1)
+    return o, n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def _crossing(t: np.ndarray, y: np.ndarray, i: int) -> float:
+    """The time y crosses 0 upward between samples i − 1 and i (linear), t[i] at the first sample."""
+    if i <= 0 or not np.isfinite(y[i - 1]) or y[i] == y[i - 1]:
+        return float(t[i])
+    return float(t[i - 1] + (t[i] - t[i - 1]) * (0.0 - y[i - 1]) / (y[i] - y[i - 1]))
+
+
+def _world_touch(d: dict[str, list], t: np.ndarray) -> np.ndarray:
+    """(N,) bool: the world's ``/world/contact`` touching at stamps ``t`` (nearest sample within MAX_GAP s)."""
+    contacts = sorted(((m.header.stamp, m.touching) for _, m in d.get("/world/contact", [])))
+    if not contacts:
+        return np.zeros(len(t), bool)
+    tc = np.array([c[0] for c in contacts])
+    on = np.array([c[1] for c in contacts], bool)
+    k = np.clip(np.searchsorted(tc, t), 0, len(tc) - 1)
+    km = np.clip(k - 1, 0, len(tc) - 1)
+    k = np.where(np.abs(tc[km] - t) < np.abs(tc[k] - t), km, k)
+    return on[k] & (np.abs(tc[k] - t) <= MAX_GAP)
+
+
+def _arrivals(t: np.ndarray, inside: np.ndarray, ahead: np.ndarray, runs) -> tuple[list[float], int, int]:
+    """Per touch (``runs``, index ranges) the sheet's arrival − the finger's, s (:func:`placement`); and the counts
+    of touches whose sheet never arrived and of those the finger never pushed into the object."""
+    there = ahead >= -ARRIVAL_TOL
+    arrivals, never, no_arrival = [], 0, 0
+    for a, b in runs:
+        f = next((i for i in range(a, b) if inside[i] >= 0.0), None)
+        if f is None:
+            no_arrival += 1
+            continue
+        tf = _crossing(t, inside, f) if f > 0 and inside[f - 1] <= 0.0 and t[f] - t[f - 1] <= MAX_GAP else float(t[f])
+        if there[f]:
+            i = f                                   # back to the start of the sheet's run at the surface
+            while i > 0 and there[i - 1] and tf - t[i - 1] <= ARRIVAL_LOOKBACK and t[i] - t[i - 1] <= MAX_GAP:
+                i -= 1
+            crossed = i > 0 and np.isfinite(ahead[i - 1]) and not there[i - 1] and t[i] - t[i - 1] <= MAX_GAP
+            arrivals.append((_crossing(t, ahead + ARRIVAL_TOL, i) if crossed else float(t[i])) - tf)
+        else:
+            g = next((i for i in range(f + 1, b) if there[i]), None)
+            if g is None:
+                never += 1
+                arrivals.append(float(t[b - 1]) - tf)
+            else:
+                arrivals.append(_crossing(t, ahead + ARRIVAL_TOL, g) - tf)
+    return arrivals, never, no_arrival
+
+
+def placement(d: dict[str, list], scene) -> dict:
+    """Where the true sheet stands against the object's surface while the finger touches (module doc).
+
+    On the ``/world/finger`` samples (the true fingertip, stamps s) with the true sheet's plane interpolated there
+    (``/world/sheet``): the object's surface under the finger (:func:`object_surface` of ``scene``, a
+    :class:`flexsheet.model.scenes.Scene`) and the signed distance of the sheet's plane from it along the object's
+    normal, + ahead (outside the object), − behind (none where the sheet's normal is more than 78° off the
+    object's, cos ≤ 0.2: a sheet still turning gives tens of mm along the normal). A sample touches when the finger is inside the object or behind
+    the sheet's plane with the world's ``/world/contact`` touching (nearest sample within :data:`MAX_GAP` s); a
+    touch is a contiguous run of them (:func:`episodes`). Per touch the finger arrives at the object's surface when
+    its indentation crosses 0; the sheet is there when at most :data:`ARRIVAL_TOL` behind the surface under the
+    finger. ``arrival_ms`` = sheet's arrival − finger's arrival: negative, the sheet waited (from the start of its
+    run there, at most :data:`ARRIVAL_LOOKBACK` s back); positive, late; a sheet that never arrives in the touch
+    is late by the rest of the touch (and counted in ``never``). Touches the finger never pushed into the object
+    (the sheet ahead) have no arrival (``no_finger_arrival``).
+
+    Returns ``{}`` without a scene, the finger, the sheet or a touching sample, else ``{"n"`` (touching samples),
+    ``"distance_mm"`` {p50, p99, max} of |distance|, ``"by_phase_mm"`` (the same per script phase of
+    ``/world/finger``, with n), ``"signed_mm"`` {median, p1, p99}, ``"touches"``,
+    ``"arrivals"`` (touches with a finger arrival), ``"sheet_first"`` (their share with arrival_ms ≤ 0),
+    ``"late"``, ``"never"``, ``"no_finger_arrival"``, ``"arrival_ms"`` {median, p99, max} (None without
+    arrivals), ``"targets"``, ``"verdicts"`` {distance, sheet_first}, ``"verdict"``}``."""
+    fingers = sorted((m for _, m in d.get("/world/finger", []) if m.phase != "paused"),
+                     key=lambda m: m.header.stamp)
+    if scene is None or len(fingers) < 2:
+        return {}
+    t = np.array([m.header.stamp for m in fingers], float)
+    x = np.array([m.position for m in fingers], float)
+    plane = _sheet_at(d, t)
+    if plane is None:
+        return {}
+    o, ns = plane
+    q, n, dist = object_surface(planner_shape(scene), x)
+    inside = -dist                                                  # the object's indentation, m
+    cos = np.einsum("ij,ij->i", n, ns)
+    ahead = np.where(cos > 0.2, np.einsum("ij,ij->i", o - q, ns) / np.where(cos > 0.2, cos, 1.0), np.nan)
+    behind_sheet = np.einsum("ij,ij->i", o - x, ns) > 0.0
+    touching = (inside > 0.0) | (behind_sheet & _world_touch(d, t))
+    runs = episodes(t, touching)
+    if not runs:
+        return {}
+    arrivals, never, no_arrival = _arrivals(t, inside, ahead, runs)
+    keep = touching & np.isfinite(ahead)
+    e = ahead[keep] * 1e3
+    if not e.size:
+        return {}
+    phases = np.array([m.phase for m in fingers])[keep]
+    by_phase = {p: {"n": int(np.sum(phases == p)), "p50": float(np.median(np.abs(e[phases == p]))),
+                    "p99": float(np.percentile(np.abs(e[phases == p]), 99)), "max": float(np.abs(e[phases == p]).max())}
+                for p in sorted(set(phases.tolist()))}
+    arr = np.array(arrivals) * 1e3
+    first = float(np.mean(arr <= 0.0)) if arr.size else None
+    dist_mm = {"p50": float(np.median(np.abs(e))), "p99": float(np.percentile(np.abs(e), 99)),
+               "max": float(np.abs(e).max())}
+    verdicts = {"distance": "met" if dist_mm["p99"] <= PLACEMENT_P99_MM else "MISSED",
+                "sheet_first": "met" if first is not None and first >= SHEET_FIRST_TARGET else "MISSED"}
+    return {"n": int(e.size), "distance_mm": dist_mm, "by_phase_mm": by_phase,
+            "signed_mm": {"median": float(np.median(e)), "p1": float(np.percentile(e, 1)),
+                          "p99": float(np.percentile(e, 99))},
+            "touches": len(runs), "arrivals": int(arr.size), "sheet_first": first,
+            "late": int(np.sum(arr > 0.0)), "never": never, "no_finger_arrival": no_arrival,
+            "arrival_ms": ({"median": float(np.median(arr)), "p99": float(np.percentile(arr, 99)),
+                            "max": float(arr.max())} if arr.size else None),
+            "targets": {"distance_mm.p99": PLACEMENT_P99_MM, "sheet_first": SHEET_FIRST_TARGET,
+                        "arrival_tol_mm": ARRIVAL_TOL * 1e3},
+            "verdicts": verdicts,
+            "verdict": "met" if all(v == "met" for v in verdicts.values()) else "MISSED"}

@@ -1,0 +1,55 @@
+"""The sheet's placement against the object's surface (flexsheet/analysis/report_placement.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flexsheet.analysis.report_placement import placement
+from flexsheet.model.scenes import load_scene
+from messages import FingerTruth, Header, SheetState
+
+BOX = "launch/scenes/rounded_box.yaml"      # front face x = 0, top face z = 30 mm
+
+
+def _sheet_state(t: float, origin, normal) -> SheetState:
+    n = np.asarray(normal, float)
+    return SheetState(header=Header(stamp=t), origin=np.asarray(origin, float), normal=n / np.linalg.norm(n),
+                      axis_u=np.array([0.0, 1.0, 0.0]), corners=np.zeros((4, 3)), pushed_point=np.zeros(3),
+                      depth=0.0, stretch=0.05, membrane=np.zeros((2, 2)))
+
+
+def _finger(t: float, x: float):
+    return (t, FingerTruth(header=Header(stamp=t), position=np.array([x, 0.0, 0.01]), velocity=np.zeros(3),
+                           phase="stroke"))
+
+
+def test_placement_measures_the_sheet_against_the_surface_and_counts_a_late_sheet():
+    """Two touches of the box's front face at 10 mm/s: in the first the sheet stands at the surface all along
+    (it waited 200 ms for the finger); in the second it stands 4 mm behind until 1.75 s and at the surface from
+    1.76 s, while the finger arrives at 1.70 s: late by 58.75 ms (the crossing of 0.5 mm behind, interpolated)."""
+    fingers, sheets = [], []
+    for k in range(251):
+        t = round(0.01 * k, 10)
+        if t <= 1.0:
+            x, xs = 0.002 - 0.01 * t, 0.0
+        elif t < 1.5:
+            x, xs = 0.02, 0.0
+        else:
+            x, xs = 0.002 - 0.01 * (t - 1.5), (-0.004 if t <= 1.75 + 1e-9 else 0.0)
+        fingers.append(_finger(t, x))
+        sheets.append((t, _sheet_state(t, [xs, 0.0, 0.01], [1, 0, 0])))
+    d = {"/world/finger": fingers, "/world/sheet": sheets}
+    p = placement(d, load_scene(BOX))
+    assert p["touches"] == 2 and p["arrivals"] == 2 and p["late"] == 1 and p["never"] == 0
+    assert p["sheet_first"] == 0.5 and p["verdicts"]["sheet_first"] == "MISSED"
+    assert p["arrival_ms"]["max"] == pytest.approx(58.75, abs=1e-6)
+    assert p["arrival_ms"]["median"] == pytest.approx(0.5 * (58.75 - 200.0), abs=1e-6)
+    assert p["distance_mm"]["max"] == pytest.approx(4.0, abs=1e-9) and p["distance_mm"]["p50"] == pytest.approx(0.0)
+    assert p["signed_mm"]["p1"] == pytest.approx(-4.0, abs=1e-9)                      # behind: negative
+    assert p["distance_mm"]["p99"] > 2.0 and p["verdicts"]["distance"] == "MISSED" and p["verdict"] == "MISSED"
+    # the same run with the sheet on time: met
+    on_time = [(t, _sheet_state(t, [0.0, 0.0, 0.01], [1, 0, 0])) for t, _ in sheets]
+    q = placement({**d, "/world/sheet": on_time}, load_scene(BOX))
+    assert q["sheet_first"] == 1.0 and q["distance_mm"]["max"] == pytest.approx(0.0, abs=1e-12) and q["verdict"] == "met"
+    assert placement(d, None) == {}
