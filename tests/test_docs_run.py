@@ -304,6 +304,9 @@ CHEAP: dict[str, tuple[str, str]] = {
     "flexsheet bag record -o run.mcap /fingertip /sheet/target": (
         "flexsheet bag record -o run.mcap /fingertip /sheet/target --duration 1", "until Ctrl-C: 1 s"),
     "flexsheet bag record -o run.mcap --duration 10": ("flexsheet bag record -o run.mcap --duration 1", "1 s"),
+    # on a port of its own: the next case (bag play --loop) binds the default one
+    "flexsheet bag play run.mcap --rate 0.5": ("flexsheet bag play run.mcap --rate 0.5 --endpoint tcp://127.0.0.1:7198",
+                                                "its own port"),
     # experiments and benchmarks
     **{c: (P, LONG) for c in (
         "flexsheet experiment stroke --out out/stroke",
