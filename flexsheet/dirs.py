@@ -29,11 +29,7 @@ def cache_root() -> str:
 def data_dirs() -> list[str]:
     """The install-time data folders (absolute paths), most specific first, without repeats (module docstring)."""
     dirs = [os.environ.get("FLEXSHEET_DATA") or "", platformdirs.user_data_dir(APP), platformdirs.site_data_dir(APP)]
-    out: list[str] = []
-    for d in dirs:
-        if d and os.path.abspath(os.path.expanduser(d)) not in out:
-            out.append(os.path.abspath(os.path.expanduser(d)))
-    return out
+    return list(dict.fromkeys(os.path.abspath(os.path.expanduser(d)) for d in dirs if d))
 
 
 def _writable(path: str) -> bool:
