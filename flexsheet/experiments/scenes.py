@@ -39,7 +39,7 @@ from flexsheet.experiments.stroke_model import LatencyModel, launch_kf, make_twi
 from flexsheet.model.scenes import SCENES_DIR, load_scene
 from flexsheet.model.tension import SheetMaterial, max_stretch_within_force, stiffness, stretch_for_stiffness
 from flexsheet.planning.compliance import SceneCompliance
-from flexsheet.planning.surface_planner import PlannerConfig
+from flexsheet.planning.planner_config import PlannerConfig
 
 log = logging.getLogger(__name__)
 

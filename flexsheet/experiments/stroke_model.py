@@ -59,8 +59,9 @@ from flexsheet.model import geometry
 from flexsheet.model.shapes import paper_cylinder
 from flexsheet.model.sheet import frame_from_clamps
 from flexsheet.planning.plan import Hold
+from flexsheet.planning.planner_config import PlannerConfig
 from flexsheet.planning.shape import planner_shape
-from flexsheet.planning.surface_planner import PlannerConfig, SurfacePlanner
+from flexsheet.planning.surface_planner import SurfacePlanner
 from flexsheet.twin.finger import FingerScript
 from flexsheet.twin.servo import JointServo, ServoParams
 from flexsheet.twin.truth import TwinTruth

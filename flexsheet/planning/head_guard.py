@@ -10,7 +10,7 @@ sphere plus a margin, from the eye):
   clamp strain rate ``≤ 0.1·reduced_speed / (size/2)``: together at most 0.9 of it at any corner;
 * **inside** (the next pose would put a point of the sheet or a clamp in the keep-out): the step is not taken;
   the sheet backs off along −x (:func:`~flexsheet.planning.keepout.retreat_point`) at the reduced speed;
-* **lost** (the head camera runs but the glasses are not found): the planner holds, as for a lost fingertip;
+* **lost** (the head camera runs but the glasses are not found): the planner holds the pose while the stretch follows the push (:meth:`~flexsheet.planning.surface_planner.SurfacePlanner.hold_pose`);
   lost while near (:attr:`HeadGuard.near`), every step backs off from the last known head instead, since a head
   that was that close may come closer unseen.
 

@@ -58,7 +58,7 @@ Units m, rad, s, N/m; all vectors in the display frame; vectors are float tuples
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import NamedTuple
 
 from flexsheet.model.force_depth import scene_scale
@@ -80,7 +80,6 @@ from flexsheet.model.vec import (
     cols,
     cross,
     dot,
-    finite,
     min_rotation,
     norm,
     perp_unit,
@@ -88,10 +87,11 @@ from flexsheet.model.vec import (
     rot_from_cols,
     sub,
 )
-from flexsheet.planning.limits import MotionLimits, RateLimiter, ReachModel
+from flexsheet.planning.limits import RateLimiter
 from flexsheet.planning.plan import Hold, Plan
+from flexsheet.planning.planner_config import PlannerConfig
 
-__all__ = ["FORCE_DEPTH", "TABLE_MIN_DEPTH", "PlannerConfig", "SurfacePlanner", "scale_depths", "sheet_scene_scale"]
+__all__ = ["FORCE_DEPTH", "TABLE_MIN_DEPTH", "SurfacePlanner", "scale_depths", "sheet_scene_scale"]
 
 #: the table's force is matched no shallower than this (m): at 0 the contact law's force is 0
 TABLE_MIN_DEPTH = 0.0005
@@ -112,64 +112,6 @@ def sheet_scene_scale(table, mat: SheetMaterial, max_stretch: float, stroke_dept
     lo, hi = scale_depths(stroke_depth)
     return scene_scale(table, lambda d: press_force(mat.min_stretch, mat, 0.0, d),
                        lambda d: press_force(max_stretch, mat, 0.0, d), lo, hi, gain)
-
-
-@dataclass(frozen=True)
-class PlannerConfig:
-    """Planner settings (SI). ``touch_distance``/``release_distance`` m: touch hysteresis on the signed
-    distance; ``singular_eps`` m: skeleton distance below which the centre ray is undefined;
-    ``jump_distance`` m: a larger step between samples is a re-acquired marker; ``recentre_time`` s;
-    ``u_ref`` (3,): preferred in-plane axis; ``sheet_margin`` m: the contact keeps this far from the sheet
-    edges; ``object_stiffness`` N/m: default virtual stiffness (used when neither a stiffness is passed nor
-    a compliance model is given); ``stiffness_scale``: haptic scale — the sheet is asked for this many times
-    the object's stiffness (1: the object's own; < 1 maps an object stiffer than the sheet into the range the
-    arms can apply, reported in every plan's ``object_stiffness``); ``contrast_gain`` γ: with the object's
-    force–depth table (:meth:`SurfacePlanner.set_force_depth`) the sheet is asked for
-    s·F_ref·(F/F_ref)^γ (:meth:`flexsheet.model.force_depth.ForceDepth.mapped`; 1: faithful, > 1 raises an
-    inclusion's contrast for palpation training, keeping the order); ``stiffness_tau`` s: time constant of a
-    first-order low-pass on the compliance model's stiffness (it follows the measured push depth, which
-    carries the camera's noise; 0: none); ``max_dt`` s: longer gaps count as one nominal period;
-    ``future_stamp_tolerance`` s: how far ahead of the caller's clock (``update``'s ``now``) a sample's stamp
-    may be (clock offsets between hosts, a prediction horizon) before it is refused. Raises ``ValueError`` on
-    bad values."""
-
-    touch_distance: float = 0.002
-    release_distance: float = 0.006
-    singular_eps: float = 1e-4
-    jump_distance: float = 0.03
-    recentre_time: float = 0.5
-    u_ref: Vec = (0.0, 1.0, 0.0)
-    sheet_margin: float = 0.03
-    object_stiffness: float = 30.0
-    stiffness_scale: float = 1.0
-    contrast_gain: float = 1.0
-    stiffness_tau: float = 0.1
-    max_dt: float = 0.1
-    future_stamp_tolerance: float = 0.5
-    material: SheetMaterial = field(default_factory=SheetMaterial)
-    limits: MotionLimits = field(default_factory=MotionLimits)
-    reach: ReachModel = field(default_factory=ReachModel)
-
-    def __post_init__(self) -> None:
-        for k in ("touch_distance", "release_distance", "singular_eps", "jump_distance", "recentre_time",
-                  "sheet_margin", "max_dt"):
-            v = getattr(self, k)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
-                raise ValueError(f"{k} must be finite and > 0, got {v!r}")
-        if self.release_distance < self.touch_distance:
-            raise ValueError(f"release_distance must be >= touch_distance, got {self.release_distance!r}")
-        if not (math.isfinite(self.object_stiffness) and self.object_stiffness >= 0.0):
-            raise ValueError(f"object_stiffness must be finite and >= 0, got {self.object_stiffness!r}")
-        if not (math.isfinite(self.stiffness_tau) and self.stiffness_tau >= 0.0):
-            raise ValueError(f"stiffness_tau must be finite and >= 0 s, got {self.stiffness_tau!r}")
-        if not (math.isfinite(self.future_stamp_tolerance) and 0.0 < self.future_stamp_tolerance <= 60.0):
-            raise ValueError(f"future_stamp_tolerance must be in (0, 60] s, got {self.future_stamp_tolerance!r}")
-        if not (math.isfinite(self.stiffness_scale) and 0.0 < self.stiffness_scale <= 100.0):
-            raise ValueError(f"stiffness_scale must be in (0, 100], got {self.stiffness_scale!r}")
-        if not (math.isfinite(self.contrast_gain) and 0.0 < self.contrast_gain <= 5.0):
-            raise ValueError(f"contrast_gain must be in (0, 5], got {self.contrast_gain!r}")
-        if len(self.u_ref) != 3 or not finite(self.u_ref) or norm(self.u_ref) < 1e-9:
-            raise ValueError(f"u_ref must be a non-zero finite (3,) vector, got {self.u_ref!r}")
 
 
 class _Sample(NamedTuple):
@@ -300,16 +242,7 @@ class SurfacePlanner:
             status.append(Hold.SINGULAR)
         q, n, dist = proj.point, proj.normal, proj.distance
         depth = max(0.0, -dist)
-        table_force = 0.0
-        if self.force_depth is not None:
-            try:
-                table_force, k_obj = self.force_depth.mapped(q, max(depth, TABLE_MIN_DEPTH), cfg.stiffness_scale,
-                                                             cfg.contrast_gain)
-                k_source = "table"
-            except ValueError:
-                k_obj, k_source = None, "table"
-        else:
-            k_obj, k_source = self._object_stiffness(s, q, n, dist)
+        k_obj, k_source, table_force = self._request(s, q, n, dist)
         if k_obj is None:
             return self.hold(Hold.INVALID_STIFFNESS, s.t)
         was_touching = self.touching
@@ -319,13 +252,7 @@ class SurfacePlanner:
             self.touching = False
         su, sv, u = self._roll(q, n, s.dt, was_touching)
         v = cross(n, u)
-        # stiffness (or force) → stretch at the contact's distance from the clamps and the push's depth
-        if self.force_depth is not None:         # the table's force, matched at every depth (≥ TABLE_MIN_DEPTH)
-            tr = stretch_for_force(table_force, self.cfg.material, su, max(depth, TABLE_MIN_DEPTH), self._eps_max)
-        else:
-            force = self._object_force(object_press, k_obj, depth)
-            tr = (self._tension(k_obj, su, depth) if force is None
-                  else stretch_for_force(force, self.cfg.material, su, depth, self._eps_max))
+        tr = self._stretch(k_obj, table_force, su, depth, object_press)
         if tr.saturated:
             status.append(tr.saturated)
         su, sv = self._keep_on_sheet(su, sv, tr.stretch, status)
@@ -346,7 +273,75 @@ class SurfacePlanner:
             self.last = plan
         return plan
 
+    def hold_pose(self, reason: str, t: float, p, object_stiffness: float | None = None, now: float | None = None,
+                  object_press: tuple[float, float] | None = None) -> Plan | None:
+        """The last plan's pose held, with status ``reason`` (a lost head), while the stretch still follows the
+        push: fingertip sample ``p`` (3,) m at ``t`` s is planned as :meth:`update` plans it (the request at its
+        contact and depth, at the held contact's offset on the sheet), and the stretch moves toward that at no
+        more than :meth:`hold_stretch_rate`, the sheet at rest. A refused sample, an unreachable stretch or no
+        plan yet: :meth:`hold` (``None`` before the first plan). Never raises for bad samples."""
+        s = self._sample(t, p, object_stiffness, now)
+        L = self.last
+        if L is None or not isinstance(s, _Sample):
+            return self.hold(reason)
+        proj = self.shape.project(s.p, L.normal, self.cfg.singular_eps)
+        depth = max(0.0, -proj.distance)
+        k_obj, k_source, table_force = self._request(s, proj.point, proj.normal, proj.distance)
+        if k_obj is None:
+            return self.hold(reason, s.t)
+        self.counts[reason] = self.counts.get(reason, 0) + 1
+        cfg, mat, su = self.cfg, self.cfg.material, L.offset[0]
+        tr = self._stretch(k_obj, table_force, su, depth, object_press)
+        dt = s.dt if s.dt is not None else cfg.max_dt
+        mx = self.hold_stretch_rate() * dt
+        st = L.stretch + max(-mx, min(mx, tr.stretch - L.stretch))
+        left, right = clamp_points(L.origin, L.axis_u, st, mat.size)
+        ok, margin = cfg.reach.reachable(left, right)
+        self.t_last, self.p_last = s.t, s.p
+        if s.dt is not None:
+            self.dt_last = s.dt
+        if self.touching and proj.distance > cfg.release_distance:
+            self.touching = False
+        elif not self.touching and proj.distance <= cfg.touch_distance:
+            self.touching = True
+        if not ok:
+            return replace(L, t=s.t, status=f"{reason};unreachable", reach_margin=margin)
+        self.limiter.reset(L.origin, rot_from_cols(L.normal, L.axis_u, L.axis_v), st)
+        self.last = replace(L, t=s.t, stretch=st, tension=tension(st, mat),
+                            stiffness=_stiffness_or_zero(st, mat, su, depth), object_stiffness=k_obj, depth=depth,
+                            touching=self.touching, status=reason, left=left, right=right, reach_margin=margin,
+                            k_source=k_source)
+        return self.last
+
+    def hold_stretch_rate(self) -> float:
+        """1/s: how fast :meth:`hold_pose` changes the stretch: the limits' ``stretch_rate``, and no faster than
+        moves each clamp (half the sheet's span from the centre) at the head guard's reduced speed (0.25 m/s
+        without a guard), the one motion of a held sheet near a head it cannot see."""
+        vs = self.guard.keepout.reduced_speed if self.guard is not None else 0.25
+        return min(self.cfg.limits.stretch_rate, vs / (0.5 * self.cfg.material.size))
+
     # -- the steps of update ----------------------------------------------------------------------
+    def _request(self, s: _Sample, q: Vec, n: Vec, dist: float) -> tuple[float | None, str, float]:
+        """What the object asks at contact ``q``, normal ``n``, signed distance ``dist`` m: (stiffness N/m or
+        None when none can be had, its source, the table's force N or 0 without a table)."""
+        if self.force_depth is None:
+            k_obj, k_source = self._object_stiffness(s, q, n, dist)
+            return k_obj, k_source, 0.0
+        cfg = self.cfg
+        try:
+            f, k_obj = self.force_depth.mapped(q, max(-dist, TABLE_MIN_DEPTH), cfg.stiffness_scale, cfg.contrast_gain)
+        except ValueError:
+            return None, "table", 0.0
+        return k_obj, "table", f
+
+    def _stretch(self, k_obj: float, table_force: float, su: float, depth: float, object_press) -> TensionResult:
+        """Stiffness (or force) → stretch at the contact's distance ``su`` m from the centre and ``depth`` m."""
+        if self.force_depth is not None:         # the table's force, matched at every depth (≥ TABLE_MIN_DEPTH)
+            return stretch_for_force(table_force, self.cfg.material, su, max(depth, TABLE_MIN_DEPTH), self._eps_max)
+        force = self._object_force(object_press, k_obj, depth)
+        return (self._tension(k_obj, su, depth) if force is None
+                else stretch_for_force(force, self.cfg.material, su, depth, self._eps_max))
+
     def _sample(self, t, p, object_stiffness, now=None) -> _Sample | tuple[str, float | None]:
         """The checked sample, or (hold reason, hold time) for an input the planner refuses."""
         try:

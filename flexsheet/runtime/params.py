@@ -1,7 +1,7 @@
 """A node's ``Params`` from the pure module's config dataclass: one definition of each setting.
 
 The algorithms keep their settings in frozen dataclasses beside the code that uses them (e.g.
-:class:`flexsheet.planning.surface_planner.PlannerConfig`, :class:`flexsheet.vision.tracker.TrackerConfig`,
+:class:`flexsheet.planning.planner_config.PlannerConfig`, :class:`flexsheet.vision.tracker.TrackerConfig`,
 :class:`flexsheet.twin.finger.FingerScript`), with the defaults and the range checks (``__post_init__``).
 A node's launch-file parameters are a flat pydantic model (``extra="forbid"``, so a typo is an error). This
 module builds those pydantic fields *from* the dataclass — same names, types and defaults — so nothing is

@@ -67,9 +67,10 @@ from flexsheet.planning.head_guard import HeadGuard
 from flexsheet.planning.keepout import KeepOut
 from flexsheet.planning.limits import MotionLimits, ReachModel
 from flexsheet.planning.plan import INPUT_REJECTIONS, Hold, Plan
+from flexsheet.planning.planner_config import PlannerConfig
 from flexsheet.planning.pull_guard import PullGuard
 from flexsheet.planning.shape import planner_shape
-from flexsheet.planning.surface_planner import PlannerConfig, SurfacePlanner, scale_depths, sheet_scene_scale
+from flexsheet.planning.surface_planner import SurfacePlanner, scale_depths, sheet_scene_scale
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import build, config_fields, params_model
 from flexsheet.runtime.qos import QoS
@@ -351,17 +352,20 @@ class PlannerNode(Node):
             self.log.info("sheet tension from %s", text)
 
     def on_fingertip(self, msg: Fingertip) -> None:
-        """Plan and publish; a lost marker holds the last safe pose (status ``hold:marker_lost``)."""
+        """Plan and publish; a lost marker holds the last safe pose (status ``hold:marker_lost``); a lost head
+        holds the pose while the stretch follows the push (``hold:head_lost``, :meth:`SurfacePlanner.hold_pose`)."""
         if not msg.valid:
             plan = self.planner.hold(Hold.MARKER_LOST)
-        elif self.guard.lost and not self.guard.near:
-            plan = self.planner.hold(Hold.HEAD_LOST)
         else:
             predict = self.params.use_prediction        # read once: param set may change it meanwhile
             pos = msg.predicted_position if predict else msg.position
             k, source = self._stiffness()
-            plan = self.planner.update(msg.header.stamp + (msg.prediction_horizon if predict else 0.0),
-                                       pos, k, now=self.now(), object_press=self._press if source == "fem" else None)
+            t = msg.header.stamp + (msg.prediction_horizon if predict else 0.0)
+            press = self._press if source == "fem" else None
+            if self.guard.lost and not self.guard.near:
+                plan = self.planner.hold_pose(Hold.HEAD_LOST, t, pos, k, now=self.now(), object_press=press)
+            else:
+                plan = self.planner.update(t, pos, k, now=self.now(), object_press=press)
             if plan is not None and not plan.status.startswith("hold"):
                 self._note_source("table" if plan.k_source == "table" else source)
         if plan is None:

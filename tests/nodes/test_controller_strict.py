@@ -29,7 +29,8 @@ from flexsheet.arm.tracking import TargetRefused, TargetTracker
 from flexsheet.model.geometry import LEFT_BASE
 from flexsheet.model.shapes import make_shape
 from flexsheet.planning.plan import Hold
-from flexsheet.planning.surface_planner import PlannerConfig, SurfacePlanner
+from flexsheet.planning.planner_config import PlannerConfig
+from flexsheet.planning.surface_planner import SurfacePlanner
 from flexsheet.runtime.config import ConfigError
 from flexsheet.runtime.launch_check import check_launch
 from flexsheet.runtime.testing import NodeHarness

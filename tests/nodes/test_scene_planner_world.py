@@ -16,8 +16,9 @@ import yaml
 
 from flexsheet.model.scenes import SCENES_DIR, load_scene, paper_scene
 from flexsheet.planning.compliance import SceneCompliance, energy_share, eshelby_factor
+from flexsheet.planning.planner_config import PlannerConfig
 from flexsheet.planning.shape import SmoothMeshShape, planner_shape
-from flexsheet.planning.surface_planner import PlannerConfig, SurfacePlanner
+from flexsheet.planning.surface_planner import SurfacePlanner
 from flexsheet.runtime.testing import NodeHarness
 from flexsheet.twin.finger import FingerScript
 from messages import Fingertip, Header, ObjectDeformation

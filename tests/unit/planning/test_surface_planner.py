@@ -18,7 +18,8 @@ from flexsheet.model.sheet import (
 from flexsheet.model.tension import SheetMaterial, stiffness, tension
 from flexsheet.model.vec import cross, dot, norm, sub
 from flexsheet.planning.limits import MotionLimits, ReachModel
-from flexsheet.planning.surface_planner import PlannerConfig, SurfacePlanner
+from flexsheet.planning.planner_config import PlannerConfig
+from flexsheet.planning.surface_planner import SurfacePlanner
 
 R = geometry.CYLINDER_RADIUS
 DT = 1.0 / 48.0
@@ -339,3 +340,47 @@ def test_with_the_objects_force_depth_table_its_mapped_force_is_matched_at_every
     pl.set_force_depth(None)                                      # back to the stiffness given
     plan = pl.update(50 * DT, c.point_at(0.3, 0.0, R - 0.001), 55.0)
     assert plan.k_source == "given" and plan.object_stiffness == pytest.approx(0.8 * 55.0)
+
+
+def test_a_held_pose_keeps_the_sheet_still_while_its_stretch_follows_the_push_within_the_clamp_speed():
+    """A lost head (hold_pose): the sheet's pose stays the last plan's, the stretch moves toward what update
+    would ask at the new depth, no faster than the clamps' 0.25 m/s near a head; a refused sample is held
+    whole. The object stiffens with depth (given press and slope), so the request changes along the push."""
+    from flexsheet.model.tension import press_force
+
+    k0 = float(np.random.default_rng(31).uniform(10.0, 18.0))
+
+    def push(planner, i, d, hold):
+        p = c.point_at(0.3, 0.0, R - d)
+        k, press = k0 * (1.0 + d / 0.004), (k0 * (d + d * d / 0.008), d)
+        if hold:
+            return planner.hold_pose("hold:head_lost", i * DT, p, k, object_press=press)
+        return planner.update(i * DT, p, k, object_press=press)
+
+    c = paper_cylinder()
+    mat = SheetMaterial()
+    pl, ref = SurfacePlanner(c), SurfacePlanner(c)
+    for p_ in (pl, ref):
+        push(p_, 0, 0.0, False)
+        base = push(p_, 1, 0.001, False)
+    rate = pl.hold_stretch_rate()
+    assert rate * 0.5 * mat.size == pytest.approx(min(pl.cfg.limits.stretch_rate * 0.5 * mat.size, 0.25))
+    prev, steps = base, 0
+    for i in range(2, 40):                       # the finger pushes to 12 mm at once and stays
+        plan, want = push(pl, i, 0.012, True), push(ref, i, 0.012, False)
+        assert plan.status == "hold:head_lost" and plan.depth == pytest.approx(0.012)
+        assert plan.origin == base.origin and plan.normal == base.normal and plan.axis_u == base.axis_u
+        assert abs(plan.stretch - prev.stretch) <= rate * DT + 1e-12          # each clamp ≤ 0.25 m/s
+        clamp_speed = max(norm(sub(plan.left, prev.left)), norm(sub(plan.right, prev.right))) / DT
+        assert clamp_speed <= 0.25 + 1e-9
+        steps += plan.stretch != prev.stretch
+        prev = plan
+    assert steps >= 2                                 # the jump needed more than one step at that rate
+    # the stretch reached what tracking asks at 12 mm: the same force there
+    assert plan.stretch > base.stretch + rate * DT and want.status == "ok"
+    assert press_force(plan.stretch, mat, base.offset[0], 0.012) == pytest.approx(
+        press_force(want.stretch, mat, want.offset[0], 0.012), rel=0.01)
+    assert pl.counts["hold:head_lost"] == 38
+    # a refused sample (NaN) holds the whole last plan
+    held = pl.hold_pose("hold:head_lost", 100.0, (math.nan, 0.0, 0.0), k0)
+    assert held.stretch == plan.stretch and held.origin == plan.origin and held.status == "hold:head_lost"
