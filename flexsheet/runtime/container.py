@@ -292,8 +292,8 @@ class Container:
             return
         data = {"container": self.name, "pid": os.getpid(), "wall_s": wall, "process_cpu_s": cpu,
                 "nodes": {m.name: {"handler_cpu_s": m.cpu_s, "restarts": m.restarts} for m in self.members},
-                "note": "handler_cpu_s: CPU of each node's sync handlers and timer callbacks (thread time); "
-                        "the rest of process_cpu_s is shared: the loop, decoding, async handlers, threads"}
+                "note": "handler_cpu_s: CPU of each node's handlers and timer callbacks (thread time; an async "
+                        "one's own steps); the rest of process_cpu_s is shared: the loop, decoding, threads"}
         try:
             Path(self.cpu_file).parent.mkdir(parents=True, exist_ok=True)
             Path(self.cpu_file).write_text(json.dumps(data, indent=1))

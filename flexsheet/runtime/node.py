@@ -52,6 +52,7 @@ from pydantic import BaseModel, ConfigDict
 
 from flexsheet.runtime.clock import WALL_CLOCK, Clock, ticks
 from flexsheet.runtime.config import ConfigError, NodeConfig
+from flexsheet.runtime.cpu_time import CpuCounter, timed
 from flexsheet.runtime.discovery import announce, withdraw
 from flexsheet.runtime.publisher import Publisher
 from flexsheet.runtime.qos import QoS
@@ -249,10 +250,11 @@ class Node:
 
     async def _fire(self, callback: Callable[[], Any], is_async: bool | None = None) -> None:
         """Run one timer callback; a ``ValueError`` is a rejection, anything else a logged handler error."""
-        t0 = _thread_time()
+        t0, cpu = _thread_time(), None
         try:
             if is_async if is_async is not None else inspect.iscoroutinefunction(callback):
-                await callback()
+                cpu = CpuCounter()      # its own steps only (flexsheet.runtime.cpu_time)
+                await timed(callback(), cpu)
             else:
                 callback()
         except ValueError as exc:
@@ -260,7 +262,7 @@ class Node:
         except Exception:  # noqa: BLE001
             self._handler_error("timer")
         finally:
-            self.timer_cpu_s += _thread_time() - t0
+            self.timer_cpu_s += cpu.s if cpu is not None else _thread_time() - t0
 
     def shutdown(self) -> None:
         """Ask the node to stop (thread-safe)."""
@@ -274,8 +276,9 @@ class Node:
         return self._stop is not None and self._stop.is_set()
 
     def cpu_seconds(self) -> float:
-        """CPU time spent in this node's sync handlers and timer callbacks so far, s (``time.thread_time``);
-        decoding, the loop and threads the node starts itself are not included."""
+        """CPU time spent in this node's handlers and timer callbacks so far, s (``time.thread_time``; an async
+        one's own steps, :mod:`flexsheet.runtime.cpu_time`); decoding, the loop and threads the node starts
+        itself are not included."""
         return self.timer_cpu_s + sum(s.cpu_s for lst in self._subs.values() for s in lst)
 
     # ------------------------------------------------------------------ runtime

@@ -15,6 +15,7 @@ from collections.abc import Callable
 from typing import Any
 
 from flexsheet.runtime.codec import DecodeError, decode
+from flexsheet.runtime.cpu_time import CpuCounter, timed
 from flexsheet.runtime.publisher import TopicCounters
 from flexsheet.runtime.qos import KEEP_ALL_DEPTH, QoS
 from messages import Message, Topic
@@ -267,12 +268,15 @@ class Subscription:
             self.cpu_s += _thread_time() - t0
 
     async def _call_async(self, msg: Message) -> None:
+        cpu = CpuCounter()          # its own steps only, not what the loop ran while it awaited
         try:
-            await self.handler(msg)
+            await timed(self.handler(msg), cpu)
         except ValueError as exc:
             self.reject(str(exc))
         except Exception:  # noqa: BLE001
             self.node._handler_error(self.topic.name)
+        finally:
+            self.cpu_s += cpu.s
 
     def close(self) -> None:
         self._closed = True

@@ -462,8 +462,7 @@ class Supervisor:
         return {"wall_s": round(wall_s, 3), "cores": os.cpu_count(), "processes": procs, "nodes": nodes,
                 "note": "cpu_percent: of one core over the whole run, start-up included; steady_cpu_percent: from "
                         f"{self.cpu_warmup_s:g} s after the start to the stop; container nodes: handler+timer thread "
-                        "CPU only, the rest of their process's cpu_s is shared (loop, decoding, async handlers, "
-                        "worker threads)"}
+                        "CPU only, the rest of their process's cpu_s is shared (loop, decoding, worker threads)"}
 
     def write_cpu(self, path: Path, wall_s: float) -> None:
         """Write :meth:`cpu_report` as JSON to ``path`` (a failure is printed, never raised)."""
