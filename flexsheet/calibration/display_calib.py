@@ -236,7 +236,7 @@ class HeadCameraEntry:
 class SheetEntry:
     """The sheet's force model identified from pushes (:mod:`flexsheet.calibration.sheet`): the terms of
     :class:`flexsheet.model.tension.SheetMaterial` ``contact_width`` (m), ``contact_growth``, ``own_stiffness``
-    (N), ``own_growth`` (N/m), ``stretching`` (N/m³), ``strain_offset`` and ``position_u``."""
+    (N), ``own_growth`` (N/m), ``stretching`` (N/m³), ``strain_offset``, ``position_u`` and ``position_v``."""
 
     contact_width: float
     contact_growth: float
@@ -245,6 +245,7 @@ class SheetEntry:
     stretching: float
     strain_offset: float
     position_u: float
+    position_v: float
     provenance: Provenance
 
     def material(self, base=None):

@@ -218,7 +218,7 @@ def sheet_entry(presses: list, plan: list, label: str):
     log.info(f"sheet: {len(presses)} readings at {len(plan)} presses: w {fit.contact_width * 1e3:.1f} mm, "
              f"growth {fit.contact_growth:.2f}, own {fit.own_stiffness:.3g} N + {fit.own_growth:.3g} N/m, "
              f"stretching {fit.stretching:.3g} N/m³, strain offset {fit.strain_offset:+.4f}, position "
-             f"{fit.position_u:+.3f} along the clamp line; model within "
+             f"{fit.position_u:+.3f} along / {fit.position_v:+.3f} across; model within "
              f"{fit.median_pct:.1f} % (median) of the readings")
     prov = Provenance(f"sheet: probe on a load cell, {len(plan)} presses at clamp strains "
                       f"{sorted({s for s, _, _, _ in plan})}, F = h (g [T (w d + w2 d^2) + b d + a d^2] + c d^3) fitted",

@@ -4,19 +4,20 @@ A probe the size of a fingertip (an 8 mm-radius sphere) on a load cell, on a sta
 normal, is pressed into the tensioned sheet at several points and clamp strains; each press records the force
 at a few depths. The planner's sheet model (:mod:`flexsheet.model.tension`),
 
-    F = h(u)·(g(u)·[T(ε + ε₀)·(w·d + w₂·d²) + b·d + a·d²] + c·d³),   g = 1/a + 1/b,   h = 1 + p_u·(2u/L₀)²,
+    F = h(u, v)·(g(u)·[T(ε + ε₀)·(w·d + w₂·d²) + b·d + a·d²] + c·d³),   g = 1/a + 1/b,
+    h = 1 + p_u·(2u/L₀)² + p_v·(2v/L₀)²,
 
 is fitted to them: T is the nominal neo-Hookean tension (its modulus error goes into w), ε₀ the sheet's own
 strain offset (pre-strain less grip slip), w the band width, w₂ its growth with depth, b and a the sheet's own
-stiffness that does not scale with the pull, c the membrane's stretching, p_u where along the clamp line the
-finger presses (the presses at the centre, 36 and 72 mm toward a clamp set it). For given (ε₀, p_u) the model is linear in
+stiffness that does not scale with the pull, c the membrane's stretching, p_u and p_v where the finger presses
+(the presses at the centre, toward a clamp and toward a free edge set them). For given (ε₀, p_u, p_v) the model is linear in
 (w, w₂, b, a, c) ≥ 0, so they come from a non-negative weighted
 least squares (``scipy.optimize.nnls``) in relative error, floored at the load cell's noise: weights
 1/(σ₀ + F), σ₀ = :data:`NOISE_N` — what a finger tells apart is a ratio (the Weber fraction), and weighting
 by the noise alone (1/(σ₀ + 0.5 %·F)) let the deep presses set the fit and left the 2 mm presses 14 % light
 (median; 4 % with relative weights; docs/figures/calibration/sheet); ε₀ is the bounded scalar
-minimum of that fit's residual (``scipy.optimize.minimize_scalar``), then (ε₀, p_u) together from there
-(Nelder–Mead; p_u needs presses at two distances along the clamp line, else it stays 0). The
+minimum of that fit's residual (``scipy.optimize.minimize_scalar``), then (ε₀, p_u, p_v) together from there
+(Nelder–Mead; p_u needs presses at two distances along the clamp line, p_v two across, else it stays 0). The
 residual reported is the median and RMS relative error of the model against the presses.
 
 Units: m, N, N/m; strain dimensionless. Frames: the sheet's (u along the clamp line from the centre, v across).
@@ -73,7 +74,8 @@ def plan_presses(stretches=PRESS_STRETCHES, points=PRESS_POINTS, depths=PRESS_DE
 @dataclass(frozen=True)
 class SheetFit:
     """The identified model: ``contact_width`` w (m), ``contact_growth`` w₂, ``own_stiffness`` b (N),
-    ``own_growth`` a (N/m), ``stretching`` c (N/m³), ``strain_offset`` ε₀, ``position_u`` p_u; ``median_pct``/``rms_pct``: the
+    ``own_growth`` a (N/m), ``stretching`` c (N/m³), ``strain_offset`` ε₀, ``position_u`` p_u, ``position_v`` p_v;
+    ``median_pct``/``rms_pct``: the
     model's relative error against the presses, %; ``n``: presses used."""
 
     contact_width: float
@@ -83,6 +85,7 @@ class SheetFit:
     stretching: float
     strain_offset: float
     position_u: float
+    position_v: float
     median_pct: float
     rms_pct: float
     n: int
@@ -94,7 +97,7 @@ class SheetFit:
 
 #: the identified terms of :class:`~flexsheet.model.tension.SheetMaterial`, as the fit and ``display.yaml`` name them
 TERMS = ("contact_width", "contact_growth", "own_stiffness", "own_growth", "stretching", "strain_offset",
-         "position_u")
+         "position_u", "position_v")
 
 
 def with_terms(src, base: SheetMaterial | None = None) -> SheetMaterial:
@@ -108,7 +111,7 @@ def _columns(presses: list[Press], mat: SheetMaterial) -> np.ndarray:
     """(n, 5) regressors of (w, w₂, b, a, c) at ``mat``'s strain offset and position terms."""
     rows = []
     for p in presses:
-        h = position_factor(mat, p.offset_u)
+        h = position_factor(mat, p.offset_u, p.offset_v)
         g = contact_geometry(p.stretch, mat, p.offset_u) * h
         tg, d = tension(p.stretch, mat) * g, p.depth
         rows.append((tg * d, tg * d * d, g * d, g * d * d, h * d ** 3))
@@ -133,8 +136,8 @@ def fit_sheet(presses: list[Press], base: SheetMaterial | None = None, offset_bo
     F = np.array([p.force for p in presses])
     wgt = 1.0 / (NOISE_N + F)           # relative error above the noise floor (module doc)
 
-    def solve(eps0: float, pu: float = 0.0):
-        mat = replace(base, strain_offset=float(eps0), position_u=float(pu))
+    def solve(eps0: float, pu: float = 0.0, pv: float = 0.0):
+        mat = replace(base, strain_offset=float(eps0), position_u=float(pu), position_v=float(pv))
         A = _columns(presses, mat)
         x, _ = nnls(A * wgt[:, None], F * wgt)
         r = (A @ x - F) * wgt
@@ -143,16 +146,19 @@ def fit_sheet(presses: list[Press], base: SheetMaterial | None = None, offset_bo
     lo = max(-offset_bound, -min(p.stretch for p in presses) + 1e-4)
     best = minimize_scalar(lambda e: solve(e)[0], bounds=(lo, offset_bound), method="bounded",
                            options={"xatol": 1e-5})
-    eps0, pu = float(best.x), 0.0
-    if len({round(abs(p.offset_u), 4) for p in presses}) >= 2:
+    eps0, pu, pv = float(best.x), 0.0, 0.0
+    free = [len({round(abs(getattr(p, k)), 4) for p in presses}) >= 2 for k in ("offset_u", "offset_v")]
+    if any(free):
         def cost(z):
-            if not (lo <= z[0] <= offset_bound and -0.9 <= z[1] <= 5.0):
+            e, u_, v_ = z[0], (z[1] if free[0] else 0.0), (z[-1] if free[1] else 0.0)
+            if not (lo <= e <= offset_bound and -0.9 <= u_ <= 5.0 and -0.9 <= v_ <= 5.0):
                 return math.inf
-            return solve(z[0], z[1])[0]
-        z = minimize(cost, [eps0, 0.0], method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-14, "maxiter": 4000}).x
-        eps0, pu = float(z[0]), float(z[1])
-    _, (w, w2, b, a, c) = solve(eps0, pu)
-    fit = SheetFit(float(w), float(w2), float(b), float(a), float(c), eps0, pu, 0.0, 0.0, len(presses))
+            return solve(e, u_, v_)[0]
+        z = minimize(cost, [eps0] + [0.0] * sum(free), method="Nelder-Mead",
+                     options={"xatol": 1e-6, "fatol": 1e-14, "maxiter": 4000}).x
+        eps0, pu, pv = float(z[0]), (float(z[1]) if free[0] else 0.0), (float(z[-1]) if free[1] else 0.0)
+    _, (w, w2, b, a, c) = solve(eps0, pu, pv)
+    fit = SheetFit(float(w), float(w2), float(b), float(a), float(c), eps0, pu, pv, 0.0, 0.0, len(presses))
     med, rms = model_error(fit.material(base), presses)
     return replace(fit, median_pct=med, rms_pct=rms)
 
@@ -161,7 +167,8 @@ def relative_errors(mat: SheetMaterial, presses: list[Press], min_force: float =
     """|model − force| / force (n,), %, of :func:`flexsheet.model.tension.press_force` with ``mat`` against
     the presses' forces (those ≥ ``min_force`` N: a few mN divide into meaningless ratios). Raises
     ``ValueError`` when no press is that strong."""
-    pairs = [(press_force(p.stretch, mat, p.offset_u, p.depth), p.force) for p in presses if p.force >= min_force]
+    pairs = [(press_force(p.stretch, mat, p.offset_u, p.depth, p.offset_v), p.force) for p in presses
+             if p.force >= min_force]
     if not pairs:
         raise ValueError(f"no press of at least {min_force} N to judge the model by")
     m, f = np.array(pairs).T

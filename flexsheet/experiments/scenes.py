@@ -177,7 +177,7 @@ def run_series(scene, mode: str, scale: float, seed: int = 0, depth: float = 5e-
               "at_limit": [("stiffer_than_sheet" in p.status) or ("softer_than_sheet" in p.status) for _, p in sel],
               "contrast": [e.k / e.k_body for e in est],
               "tension_without_tumour_n_per_m": [
-                  stretch_for_stiffness(p.object_stiffness * e.k_body / e.k, mat, p.offset[0], emax).tension
+                  stretch_for_stiffness(p.object_stiffness * e.k_body / e.k, mat, p.offset[0], emax, 0.0, p.offset[1]).tension
                   for (_, p), e in zip(sel, est, strict=True)],
               "stiffness_scale": scale, "finger_depth_mm": depth * 1e3,
               "push_depth_mm": push_depth * 1e3 if mode != "stroke" else None,

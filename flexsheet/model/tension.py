@@ -27,12 +27,11 @@ Model (the cheapest that captures the paper's Fig. 1 mechanism, "bias tension va
   and the membrane's stretching c (N/m³, large-deflection stiffening). The stiffness the finger feels at depth
   d is its slope, k = g·[T·(w + 2 w₂ d) + b + 2 a d] + 3 c d². The defaults (w₂ = b = a = c = ε₀ = 0) are the
   string band above.
-* Where along the clamp line the finger presses: a membrane is not a string band, so the force grows toward a
-  clamp faster than g does. Force and stiffness are multiplied by h = 1 + p_u·(2u/L₀)² (u from the centre along
-  the clamp line, L₀ the unstretched side), identified from presses at the centre, 36 and 72 mm toward a clamp
-  (the twin's presses: +5.6 % at 72 mm without it). Across the clamp line the static presses read 3.4 % softer
-  at 36 mm, but the display's touches there (the rounded box, truth seed 0) felt stiffer, not softer: no term
-  across. p_u = 0: the band alone.
+* Where the finger presses: a membrane is not a string band, so the force also depends on the contact's place
+  beyond g. Both are multiplied by h = 1 + p_u·(2u/L₀)² + p_v·(2v/L₀)² (u along the clamp line, v across, from
+  the centre; L₀ the unstretched side), identified from presses at the centre, toward a clamp and toward a free
+  edge (measured on the twin's presses: +5.6 % at u = 72 mm and −3.4 % at v = 36 mm without it). p_u = p_v = 0:
+  the band alone.
 * The inverse (requested stiffness → strain ε) is solved by safeguarded Newton on λ (k is monotone in λ).
   ε is clamped to [``min_stretch``, ``max_stretch``] and the clamp force to ``max_force``; when the
   object is stiffer than the sheet can present, the result says so (``saturated=True``).
@@ -71,8 +70,8 @@ URETHANE_E = gent_modulus(50.0)
 class SheetMaterial:
     """The sheet and its limits. ``young`` Pa; ``thickness``, ``size`` (side, unstretched), ``contact_width`` m;
     ``contact_growth`` w₂ (dimensionless), ``own_stiffness`` b (N), ``own_growth`` a (N/m), ``stretching`` c
-    (N/m³), ``strain_offset`` ε₀ and ``position_u`` p_u: the identified terms of the module doc (0: the string
-    band); ``min_stretch``/``max_stretch`` engineering strain between
+    (N/m³), ``strain_offset`` ε₀, ``position_u`` p_u and ``position_v`` p_v: the identified terms of the module doc (0: the
+    string band); ``min_stretch``/``max_stretch`` engineering strain between
     the clamps; ``max_force`` N per clamp (arm pull limit).
 
     Defaults: paper §IV sheet; E per :data:`URETHANE_E`; max stretch 0.30 (well inside urethane's
@@ -91,6 +90,7 @@ class SheetMaterial:
     stretching: float = 0.0
     strain_offset: float = 0.0
     position_u: float = 0.0
+    position_v: float = 0.0
     min_stretch: float = 0.01
     max_stretch: float = 0.30
     max_force: float = 40.0
@@ -106,8 +106,10 @@ class SheetMaterial:
                 raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
         if not (math.isfinite(self.strain_offset) and abs(self.strain_offset) < 0.1):
             raise ValueError(f"strain_offset must be finite and within ±0.1, got {self.strain_offset!r}")
-        if not (math.isfinite(self.position_u) and -0.9 <= self.position_u <= 5.0):   # h ≥ 0.1 over the sheet
-            raise ValueError(f"position_u must be finite and within [-0.9, 5], got {self.position_u!r}")
+        for name in ("position_u", "position_v"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and -0.9 <= v <= 5.0):      # h stays ≥ 0.1 over the whole sheet
+                raise ValueError(f"{name} must be finite and within [-0.9, 5], got {v!r}")
 
     @property
     def mu(self) -> float:
@@ -139,36 +141,39 @@ def contact_geometry(stretch: float, mat: SheetMaterial, offset_u: float = 0.0) 
     return 1.0 / a + 1.0 / b
 
 
-def position_factor(mat: SheetMaterial, offset_u: float) -> float:
-    """h = 1 + p_u·(2u/L₀)² (module doc) at the contact ``offset_u`` m from the sheet centre along the clamp line."""
-    if mat.position_u == 0.0:
+def position_factor(mat: SheetMaterial, offset_u: float, offset_v: float = 0.0) -> float:
+    """h = 1 + p_u·(2u/L₀)² + p_v·(2v/L₀)² (module doc) at the contact ``offset_u``, ``offset_v`` m from the sheet
+    centre (along and across the clamp line)."""
+    if mat.position_u == 0.0 and mat.position_v == 0.0:
         return 1.0
-    return 1.0 + mat.position_u * (offset_u / (0.5 * mat.size)) ** 2
+    h = 0.5 * mat.size
+    return 1.0 + mat.position_u * (offset_u / h) ** 2 + mat.position_v * (offset_v / h) ** 2
 
 
-def stiffness(stretch: float, mat: SheetMaterial, offset_u: float = 0.0, depth: float = 0.0) -> float:
+def stiffness(stretch: float, mat: SheetMaterial, offset_u: float = 0.0, depth: float = 0.0,
+              offset_v: float = 0.0) -> float:
     """Normal stiffness k (N/m) the finger feels at a contact ``offset_u`` m from the sheet centre along axis_u
-    (current length), pushed ``depth`` m deep: k = h·(g·[T·(w + 2 w₂ d) + b + 2 a d]
+    (current length) and ``offset_v`` m across, pushed ``depth`` m deep: k = h·(g·[T·(w + 2 w₂ d) + b + 2 a d]
     + 3 c d²) (module doc; the string band T·w·(1/a + 1/b) with the default material). Raises ``ValueError``
     when the contact is not strictly between the clamps or the depth is negative."""
     if not (math.isfinite(depth) and depth >= 0.0):
         raise ValueError(f"depth must be finite and >= 0, got {depth!r}")
     g = contact_geometry(stretch, mat, offset_u)
-    return position_factor(mat, offset_u) * (
+    return position_factor(mat, offset_u, offset_v) * (
         g * (tension(stretch, mat) * (mat.contact_width + 2.0 * mat.contact_growth * depth)
              + mat.own_stiffness + 2.0 * mat.own_growth * depth)
         + 3.0 * mat.stretching * depth * depth)
 
 
-def press_force(stretch: float, mat: SheetMaterial, offset_u: float, depth: float) -> float:
-    """Force (N) of a press ``depth`` m deep at ``offset_u``: F = h·(g·[T·(w d + w₂ d²) + b d + a d²]
+def press_force(stretch: float, mat: SheetMaterial, offset_u: float, depth: float, offset_v: float = 0.0) -> float:
+    """Force (N) of a press ``depth`` m deep at (``offset_u``, ``offset_v``): F = h·(g·[T·(w d + w₂ d²) + b d + a d²]
     + c d³) (module doc), the integral of :func:`stiffness` over the depth. Raises ``ValueError`` as
     :func:`stiffness`."""
     if not (math.isfinite(depth) and depth >= 0.0):
         raise ValueError(f"depth must be finite and >= 0, got {depth!r}")
     g = contact_geometry(stretch, mat, offset_u)
     d = depth
-    return position_factor(mat, offset_u) * (
+    return position_factor(mat, offset_u, offset_v) * (
         g * (tension(stretch, mat) * (mat.contact_width * d + mat.contact_growth * d * d)
              + mat.own_stiffness * d + mat.own_growth * d * d)
         + mat.stretching * d ** 3)
@@ -202,7 +207,7 @@ def max_stretch_within_force(mat: SheetMaterial) -> float:
 
 
 def stretch_for_stiffness(k_target: float, mat: SheetMaterial, offset_u: float = 0.0,
-                          eps_max: float | None = None, depth: float = 0.0) -> TensionResult:
+                          eps_max: float | None = None, depth: float = 0.0, offset_v: float = 0.0) -> TensionResult:
     """Stretch that makes the normal stiffness at the contact, pushed ``depth`` m deep, equal ``k_target`` N/m
     (inverse of :func:`stiffness`).
 
@@ -213,13 +218,13 @@ def stretch_for_stiffness(k_target: float, mat: SheetMaterial, offset_u: float =
     """
     if not (math.isfinite(k_target) and k_target >= 0.0):
         raise ValueError(f"k_target must be finite and >= 0, got {k_target!r}")
-    e, sat = _invert(k_target, lambda e: stiffness(e, mat, offset_u, depth), mat, eps_max)
-    return TensionResult(e, tension(e, mat), stiffness(e, mat, offset_u, depth), clamp_force(e, mat), sat)
+    e, sat = _invert(k_target, lambda e: stiffness(e, mat, offset_u, depth, offset_v), mat, eps_max)
+    return TensionResult(e, tension(e, mat), stiffness(e, mat, offset_u, depth, offset_v), clamp_force(e, mat), sat)
 
 
 def stretch_for_force(force: float, mat: SheetMaterial, offset_u: float, depth: float,
-                      eps_max: float | None = None) -> TensionResult:
-    """Stretch at which a press ``depth`` m deep at ``offset_u`` meets the force ``force`` N (inverse of
+                      eps_max: float | None = None, offset_v: float = 0.0) -> TensionResult:
+    """Stretch at which a press ``depth`` m deep at (``offset_u``, ``offset_v``) meets the force ``force`` N (inverse of
     :func:`press_force`, increasing in ε): the sheet's force–depth follows the object's along a press when this
     is solved at each depth. Limits and ``saturated`` as :func:`stretch_for_stiffness`; the result's
     ``stiffness`` is the incremental one there. Raises ``ValueError`` for a negative or non-finite force, or a
@@ -228,8 +233,8 @@ def stretch_for_force(force: float, mat: SheetMaterial, offset_u: float, depth: 
         raise ValueError(f"force must be finite and >= 0, got {force!r}")
     if not (math.isfinite(depth) and depth > 0.0):
         raise ValueError(f"depth must be finite and > 0, got {depth!r}")
-    e, sat = _invert(force, lambda e: press_force(e, mat, offset_u, depth), mat, eps_max)
-    return TensionResult(e, tension(e, mat), stiffness(e, mat, offset_u, depth), clamp_force(e, mat), sat)
+    e, sat = _invert(force, lambda e: press_force(e, mat, offset_u, depth, offset_v), mat, eps_max)
+    return TensionResult(e, tension(e, mat), stiffness(e, mat, offset_u, depth, offset_v), clamp_force(e, mat), sat)
 
 
 def _invert(target: float, f_of, mat: SheetMaterial, eps_max: float | None) -> tuple[float, str]:

@@ -192,7 +192,7 @@ class SurfacePlanner:
         self.s: tuple[float, float] = (0.0, 0.0)
         self.touching = False
         self.limiter.clear()
-        self._tcache: tuple[float, float, float, TensionResult] | None = None
+        self._tcache: tuple[float, float, float, float, TensionResult] | None = None
         self._k_model: float | None = None
         self.counts: dict[str, int] = {}
 
@@ -205,13 +205,13 @@ class SurfacePlanner:
             return None
         return replace(self.last, t=self.last.t if t is None else t, status=reason)
 
-    def _tension(self, k: float, off_u: float, depth: float) -> TensionResult:
+    def _tension(self, k: float, off_u: float, off_v: float, depth: float) -> TensionResult:
         c = self._tcache
         if (c is not None and abs(c[0] - k) <= 1e-6 * max(1.0, k) and abs(c[1] - off_u) <= 1e-4
-                and abs(c[2] - depth) <= 1e-4):
-            return c[3]
-        r = stretch_for_stiffness(k, self.cfg.material, off_u, self._eps_max, depth)
-        self._tcache = (k, off_u, depth, r)
+                and abs(c[2] - off_v) <= 1e-4 and abs(c[3] - depth) <= 1e-4):
+            return c[4]
+        r = stretch_for_stiffness(k, self.cfg.material, off_u, self._eps_max, depth, off_v)
+        self._tcache = (k, off_u, off_v, depth, r)
         return r
 
     def update(self, t: float, p, object_stiffness: float | None = None, now: float | None = None,
@@ -252,7 +252,7 @@ class SurfacePlanner:
             self.touching = False
         su, sv, u = self._roll(q, n, s.dt, was_touching)
         v = cross(n, u)
-        tr = self._stretch(k_obj, table_force, su, depth, object_press)
+        tr = self._stretch(k_obj, table_force, su, sv, depth, object_press)
         if tr.saturated:
             status.append(tr.saturated)
         su, sv = self._keep_on_sheet(su, sv, tr.stretch, status)
@@ -261,7 +261,7 @@ class SurfacePlanner:
                                                                           tr.stretch, s.dt, status)
         mat = cfg.material
         plan = Plan(s.t, q, nc, uc, vc, o, (su, sv), st, tr.tension if st == tr.stretch else tension(st, mat),
-                    tr.stiffness if st == tr.stretch else _stiffness_or_zero(st, mat, su, depth), k_obj,
+                    tr.stiffness if st == tr.stretch else _stiffness_or_zero(st, mat, su, sv, depth), k_obj,
                     depth, self.touching, ";".join(status) if status else "ok", left, right, margin,
                     mat.size, k_source)
         for s_ in status:
@@ -290,8 +290,8 @@ class SurfacePlanner:
         if k_obj is None:
             return self.hold(reason, s.t)
         self.counts[reason] = self.counts.get(reason, 0) + 1
-        cfg, mat, su = self.cfg, self.cfg.material, L.offset[0]
-        tr = self._stretch(k_obj, table_force, su, depth, object_press)
+        cfg, mat, (su, sv) = self.cfg, self.cfg.material, L.offset
+        tr = self._stretch(k_obj, table_force, su, sv, depth, object_press)
         dt = s.dt if s.dt is not None else cfg.max_dt
         mx = self.hold_stretch_rate() * dt
         st = L.stretch + max(-mx, min(mx, tr.stretch - L.stretch))
@@ -308,7 +308,7 @@ class SurfacePlanner:
             return replace(L, t=s.t, status=f"{reason};unreachable", reach_margin=margin)
         self.limiter.reset(L.origin, rot_from_cols(L.normal, L.axis_u, L.axis_v), st)
         self.last = replace(L, t=s.t, stretch=st, tension=tension(st, mat),
-                            stiffness=_stiffness_or_zero(st, mat, su, depth), object_stiffness=k_obj, depth=depth,
+                            stiffness=_stiffness_or_zero(st, mat, su, sv, depth), object_stiffness=k_obj, depth=depth,
                             touching=self.touching, status=reason, left=left, right=right, reach_margin=margin,
                             k_source=k_source)
         return self.last
@@ -334,15 +334,15 @@ class SurfacePlanner:
             return None, "table", 0.0
         return k_obj, "table", f
 
-    def _stretch(self, k_obj: float, table_force: float, su: float, depth: float, object_press) -> TensionResult:
-        """Stiffness (or force) → stretch at the contact ``su`` m from the sheet's centre along the clamp line and
-        ``depth`` m."""
+    def _stretch(self, k_obj: float, table_force: float, su: float, sv: float, depth: float,
+                 object_press) -> TensionResult:
+        """Stiffness (or force) → stretch at the contact (``su``, ``sv``) m from the sheet's centre and ``depth`` m."""
         mat = self.cfg.material
         if self.force_depth is not None:         # the table's force, matched at every depth (≥ TABLE_MIN_DEPTH)
-            return stretch_for_force(table_force, mat, su, max(depth, TABLE_MIN_DEPTH), self._eps_max)
+            return stretch_for_force(table_force, mat, su, max(depth, TABLE_MIN_DEPTH), self._eps_max, sv)
         force = self._object_force(object_press, k_obj, depth)
-        return (self._tension(k_obj, su, depth) if force is None
-                else stretch_for_force(force, mat, su, depth, self._eps_max))
+        return (self._tension(k_obj, su, sv, depth) if force is None
+                else stretch_for_force(force, mat, su, depth, self._eps_max, sv))
 
     def _sample(self, t, p, object_stiffness, now=None) -> _Sample | tuple[str, float | None]:
         """The checked sample, or (hold reason, hold time) for an input the planner refuses."""
@@ -473,10 +473,10 @@ class SurfacePlanner:
         return o, axes, st, left, right, margin
 
 
-def _stiffness_or_zero(stretch: float, mat: SheetMaterial, su: float, depth: float) -> float:
+def _stiffness_or_zero(stretch: float, mat: SheetMaterial, su: float, sv: float, depth: float) -> float:
     """Stiffness presented at a rate-limited stretch and ``depth`` m (N/m); 0 when the contact is not between the
     clamps."""
     try:
-        return stiffness(stretch, mat, su, depth)
+        return stiffness(stretch, mat, su, depth, sv)
     except ValueError:
         return 0.0

@@ -209,11 +209,11 @@ class PlannerNode(Node):
         params = build(SheetMaterial, p, rename=_MATERIAL)
         identified = any(getattr(m, k) != getattr(params, k) for k in TERMS)
         self.log.info("sheet model: %s (w %.1f mm, growth %.2f, own %.3g N + %.3g N/m, stretching %.3g N/m³, "
-                      "strain offset %+.4f, position %+.3f)",
+                      "strain offset %+.4f, position %+.3f along / %+.3f across)",
                       "identified from presses (display_calib sheet)" if identified
                       else "the nominal string band (no identified sheet in display_calib)",
                       m.contact_width * 1e3, m.contact_growth, m.own_stiffness, m.own_growth, m.stretching,
-                      m.strain_offset, m.position_u)
+                      m.strain_offset, m.position_u, m.position_v)
         self.guard = HeadGuard(KeepOut(head_radius=p.head_radius, margin=p.keepout_margin), cfg.material.size)
         self.planner = SurfacePlanner(shape, cfg, compliance, self.guard)
         qd = QD_MAX * p.arm_speed_scale                          # the two arms' one motion, within both arms' joints

@@ -32,7 +32,7 @@ def _measured() -> DisplayCalib:
     c.head_camera = HeadCameraEntry(np.array([[601.0, 0, 318.0], [0, 601.5, 257.0], [0, 0, 1]]),
                                     np.array([-0.08, 0.05, 0, 0, 0]), 640, 512,
                                     geometry.pose_matrix(0.002, 0.003, 0.199, 0.01), Provenance("head: test", n_poses=30))
-    c.sheet = SheetEntry(0.0231, 2.71, 0.51, 289.0, 18500.0, 0.0204, 0.21, Provenance("sheet: test", n_poses=15,
+    c.sheet = SheetEntry(0.0231, 2.71, 0.51, 289.0, 18500.0, 0.0204, 0.21, -0.47, Provenance("sheet: test", n_poses=15,
                                                                                 residuals={"median_pct": 4.6}))
     return c
 
@@ -75,7 +75,7 @@ def test_round_trip_through_opencv_filestorage(tmp_path):
     assert (d.head_camera.width, d.head_camera.K[1, 1]) == (640, 601.5)
     m = d.sheet.material()
     assert (m.contact_width, m.contact_growth, m.own_stiffness, m.own_growth, m.stretching, m.strain_offset,
-            m.position_u) == (0.0231, 2.71, 0.51, 289.0, 18500.0, 0.0204, 0.21)
+            m.position_u, m.position_v) == (0.0231, 2.71, 0.51, 289.0, 18500.0, 0.0204, 0.21, -0.47)
     assert d.sheet.provenance.residuals == {"median_pct": 4.6}
 
 
@@ -120,14 +120,14 @@ def test_malformed_entries_name_the_key(tmp_path):
     path.write_text(text.replace("   contact_growth:", "   growth:"))
     with pytest.raises(ValueError, match=r"missing key sheet\.contact_growth"):
         load_display_calib(str(path))
-    # a file written before the position term: the band alone there; a bad one is named
-    lines = [ln for ln in text.splitlines() if not ln.lstrip().startswith("position_u")]
-    assert len(lines) == len(text.splitlines()) - 1
+    # a file written before the position terms: the band alone there; a bad one is named
+    lines = [ln for ln in text.splitlines() if not ln.lstrip().startswith("position_")]
+    assert len(lines) == len(text.splitlines()) - 2
     path.write_text("\n".join(lines) + "\n")
     m = load_display_calib(str(path)).sheet.material()
-    assert (m.position_u, m.contact_width) == (0.0, 0.0231)
-    path.write_text(text.replace("position_u: 0.2", "position_u: -1.2"))
-    with pytest.raises(ValueError, match=r"display\.yaml: sheet: position_u must be finite and within"):
+    assert (m.position_u, m.position_v, m.contact_width) == (0.0, 0.0, 0.0231)
+    path.write_text(text.replace("position_v: -0.4", "position_v: -1.4"))
+    with pytest.raises(ValueError, match=r"display\.yaml: sheet: position_v must be finite and within"):
         load_display_calib(str(path))
 
 

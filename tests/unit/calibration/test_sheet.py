@@ -16,8 +16,8 @@ def test_fit_recovers_the_model_that_made_the_presses():
     truth = SheetMaterial(contact_width=float(rng.uniform(0.015, 0.03)), contact_growth=float(rng.uniform(0.5, 4)),
                           own_stiffness=float(rng.uniform(0.1, 1.0)), own_growth=float(rng.uniform(50, 500)),
                           stretching=float(rng.uniform(5e3, 4e4)), strain_offset=float(rng.uniform(-0.005, 0.02)),
-                          position_u=float(rng.uniform(-0.3, 0.6)))
-    presses = [Press(s, u, v, d, press_force(s, truth, u, d)) for s, u, v, ds in plan_presses() for d in ds]
+                          position_u=float(rng.uniform(-0.3, 0.6)), position_v=float(rng.uniform(-0.6, 0.3)))
+    presses = [Press(s, u, v, d, press_force(s, truth, u, d, v)) for s, u, v, ds in plan_presses() for d in ds]
     fit = fit_sheet(presses)
     assert fit.contact_width == pytest.approx(truth.contact_width, rel=1e-3)
     assert fit.contact_growth == pytest.approx(truth.contact_growth, rel=1e-2)
@@ -26,9 +26,10 @@ def test_fit_recovers_the_model_that_made_the_presses():
     assert fit.stretching == pytest.approx(truth.stretching, rel=1e-2)
     assert fit.strain_offset == pytest.approx(truth.strain_offset, abs=1e-4)
     assert fit.position_u == pytest.approx(truth.position_u, abs=2e-3)
-    # presses at one distance along the clamp line cannot tell p_u: it stays 0 (the band)
-    across = [p for p in presses if p.offset_u == 0.0]
-    assert fit_sheet(across).position_u == 0.0
+    assert fit.position_v == pytest.approx(truth.position_v, abs=2e-3)
+    # presses on the centre line alone cannot tell p_v: it stays 0 (the band), and p_u is still found
+    line = [p for p in presses if p.offset_v == 0.0]
+    assert fit_sheet(line).position_v == 0.0
     assert fit.median_pct < 0.1 and fit.n == len(presses)
     # the stiffness it presents is the force's slope along the press
     m, d, h = fit.material(), 0.008, 1e-6

@@ -65,18 +65,19 @@ def test_force_inverse_meets_the_force_and_saturates_at_the_pull_limit():
         stretch_for_force(-1.0, mat, 0.0, 0.01)
 
 
-def test_the_position_term_scales_force_and_stiffness_along_the_clamp_line_and_a_bad_one_is_named():
+def test_the_position_terms_scale_force_and_stiffness_where_the_finger_presses_and_bad_ones_are_named():
     from flexsheet.model.tension import position_factor, press_force
 
-    pu = float(np.random.default_rng(5).uniform(0.1, 0.5))
+    rng = np.random.default_rng(5)
+    pu, pv = float(rng.uniform(0.1, 0.5)), float(rng.uniform(-0.7, -0.2))
     band = SheetMaterial(contact_width=0.025, own_growth=200.0)
-    m = SheetMaterial(contact_width=0.025, own_growth=200.0, position_u=pu)
-    u, d, s = 0.06, 0.008, 0.03
-    h = 1.0 + pu * (u / 0.12) ** 2
-    assert position_factor(m, u) == pytest.approx(h) and position_factor(band, u) == 1.0
-    assert press_force(s, m, u, d) == pytest.approx(h * press_force(s, band, u, d), rel=1e-12)
-    assert stiffness(s, m, u, d) == pytest.approx(h * stiffness(s, band, u, d), rel=1e-12)
+    m = SheetMaterial(contact_width=0.025, own_growth=200.0, position_u=pu, position_v=pv)
+    u, v, d, s = 0.06, 0.03, 0.008, 0.03
+    h = 1.0 + pu * (u / 0.12) ** 2 + pv * (v / 0.12) ** 2
+    assert position_factor(m, u, v) == pytest.approx(h) and position_factor(band, u, v) == 1.0
+    assert press_force(s, m, u, d, v) == pytest.approx(h * press_force(s, band, u, d), rel=1e-12)
+    assert stiffness(s, m, u, d, v) == pytest.approx(h * stiffness(s, band, u, d), rel=1e-12)
     assert press_force(s, m, 0.0, d) == pytest.approx(press_force(s, band, 0.0, d), rel=1e-12)   # the centre
-    for name, bad in (("position_u", float("nan")), ("position_u", -1.0), ("position_u", 6.0)):
+    for name, bad in (("position_u", float("nan")), ("position_v", -1.0), ("position_u", 6.0)):
         with pytest.raises(ValueError, match=name):
             SheetMaterial(**{name: bad})
