@@ -31,7 +31,7 @@ __all__ = ["TwinSource", "run_display_sim", "sim_display_calib", "score_registra
            "SUMMARY_VERSION", "sim_display_calib_cached", "score_sheet", "working_model_error", "WORKING_STRAINS",
            "WORKING_TARGET_PCT"]
 
-SUMMARY_VERSION = 13   # 13: the sheet model knows where the finger presses (position_u, position_v)
+SUMMARY_VERSION = 14   # 14: the sheet model knows where the finger presses (position_u, position_v)
 
 Pair = tuple[np.ndarray, np.ndarray]
 
