@@ -131,8 +131,9 @@ def sheet_model_error(summary: dict, lf=None) -> None:
     """``compliance.model_error_pct`` (and ``compliance.model_error``): the planner's identified sheet model
     against the twin's true force over the working strains
     (:func:`flexsheet.twin.registration.working_model_error`), when the run used the twin's registration of its
-    truth seed (the launch's ``display_calib`` is that cached registration, or it names none). A judge's figure:
-    it reads the truth, after the run."""
+    truth seed (the launch's ``display_calib`` is that cached registration, or it names none); and
+    ``compliance.model_error_contacts`` at the run's own contacts on the sheet
+    (:func:`~flexsheet.twin.registration.contacts_model_error`). A judge's figure: it reads the truth, after the run."""
     tw, comp = summary.get("twin", {}), summary.get("compliance")
     if not comp or tw.get("truth_seed") is None:
         return
@@ -143,9 +144,13 @@ def sheet_model_error(summary: dict, lf=None) -> None:
     sheet = load_display_calib(path).sheet if path else None
     if sheet is None:
         return
-    err = registration.working_model_error(TwinTruth.draw(int(tw["truth_seed"]), tw.get("realism", "realistic")), sheet)
+    truth = TwinTruth.draw(int(tw["truth_seed"]), tw.get("realism", "realistic"))
+    err = registration.working_model_error(truth, sheet)
     comp["model_error"] = err
     comp["model_error_pct"] = err["median_pct"]
+    cs = comp.get("contacts_on_sheet")           # and where this run touched the sheet
+    if cs and cs.get("uv_m"):
+        comp["model_error_contacts"] = registration.contacts_model_error(truth, sheet, cs["uv_m"], cs["n"])
 
 
 def run_bags(out_dir: Path, since: float | None = None) -> list[Path]:

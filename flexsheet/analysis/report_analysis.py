@@ -23,7 +23,13 @@ import numpy as np
 from flexsheet.analysis.report_head import head_summary
 from flexsheet.analysis.report_motion import motion_summary
 from flexsheet.analysis.report_placement import placement
-from flexsheet.analysis.report_softness import felt_force, follow_lag, inclusion_contrast, sheet_summary
+from flexsheet.analysis.report_softness import (
+    felt_force,
+    follow_lag,
+    inclusion_contrast,
+    judged_contacts,
+    sheet_summary,
+)
 from flexsheet.analysis.report_timing import compliance_summary, latency_hops, watchdog_faults
 from flexsheet.analysis.report_verdicts import judge, table1_verdicts
 from flexsheet.analysis.table1 import (
@@ -98,6 +104,12 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scen
         if series is not None and samples:
             series["compliance"] = samples
         summary["compliance"]["felt"] = felt
+        uv = np.round(judged_contacts(d, scene or paper_scene()) * 500.0) / 500.0    # to 2 mm
+        if len(uv):
+            pos, n = np.unique(uv, axis=0, return_counts=True)
+            summary["compliance"]["contacts_on_sheet"] = {
+                "uv_m": pos.tolist(), "n": n.tolist(),
+                "note": "where on the sheet the judged samples were planned (u along the clamp line, v across), to 2 mm"}
         fl = follow_lag(d)
         if fl:
             summary["compliance"]["follow_ms"] = fl["follow_ms"]

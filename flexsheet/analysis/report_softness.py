@@ -33,7 +33,7 @@ from flexsheet.model.force_depth import ForceDepth
 from flexsheet.planning.shape import planner_shape
 
 __all__ = ["WEBER_FRACTION", "MIN_DEPTH", "MAX_GAP", "WITHIN_TARGET", "STRAIN_LIMIT", "felt_force", "follow_lag",
-           "force_depth_table", "inclusion_contrast", "sheet_summary", "surface_points", "object_surface",
+           "judged_contacts", "force_depth_table", "inclusion_contrast", "sheet_summary", "surface_points", "object_surface",
            "episodes"]
 
 #: a force or stiffness ratio within 1 ± this goes unnoticed (Bergmann Tiest & Kappers 2009)
@@ -374,3 +374,23 @@ def follow_lag(d: dict[str, list], window: float = 0.5) -> dict:
     ms = 1e3 * best
     return {"follow_ms": ms, "correlation": best_c, "n": int(use.sum()), "target_ms": FOLLOW_TARGET_MS,
             "verdict": "met" if ms <= FOLLOW_TARGET_MS else "MISSED"}
+
+
+def judged_contacts(d: dict[str, list], scene=None) -> np.ndarray:
+    """(n, 2) m: where on the sheet each judged sample (:func:`_pressed`) was planned, (u along the clamp line,
+    v across) from the sheet's centre, read from the newest ``/sheet/target`` at or before it (its contact point
+    less its origin, on its axes); (0, 2) without either topic."""
+    pressed, targets = _pressed(d, scene, force_depth_table(d)), d.get("/sheet/target", [])
+    if not pressed or not targets:
+        return np.zeros((0, 2))
+    tt = np.array([t for t, _ in targets])
+    out = []
+    for r in pressed:
+        k = int(np.searchsorted(tt, r["t"], side="right")) - 1
+        if k < 0:
+            continue
+        m = targets[k][1]
+        dv = np.asarray(m.contact_point, float) - np.asarray(m.sheet_origin, float)
+        out.append((float(dv @ np.asarray(m.axis_u, float)), float(dv @ np.asarray(m.axis_v, float))))
+    return np.array(out, float).reshape(-1, 2)
+

@@ -192,6 +192,11 @@ def _softness(s: dict) -> tuple[list[str], list[str]]:
                      f"the mapped request {100 * ic['mapped']:+.1f} %"
                      + (f" (contrast_gain {', '.join(f'{g:g}' for g in ic['contrast_gain'])})."
                         if ic.get("contrast_gain") else "."))
+    mc = comp.get("model_error_contacts")
+    if mc:
+        prose.append(f"At this run's {mc['contacts']} contact positions on the sheet, over the same strains: median "
+                     f"{mc['median_pct']:.1f} %, p90 {mc['p90_pct']:.1f} % (target ≤ {mc['target_pct']:g} % at p90: "
+                     f"{'met' if mc['p90_pct'] <= mc['target_pct'] else 'MISSED'}).")
     me = comp.get("model_error")
     if me:
         prose.append(f"The planner's identified sheet model against the true force over clamp strains "

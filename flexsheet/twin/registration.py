@@ -19,7 +19,7 @@ from flexsheet.calibration.head_camera import SITTINGS
 from flexsheet.calibration.procedures import FULL, QUICK, Options, run_all
 from flexsheet.calibration.sheet import PRESS_DEPTHS, Press, model_error, plan_presses, relative_errors
 from flexsheet.dirs import cache_root as flexsheet_cache_root
-from flexsheet.model.tension import SheetMaterial
+from flexsheet.model.tension import SheetMaterial, press_force
 from flexsheet.twin.head_rig import HeadRigTwin
 from flexsheet.twin.load_cell import LoadCellTwin
 from flexsheet.twin.registration_camera import CalibrationTwin
@@ -29,6 +29,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["TwinSource", "run_display_sim", "sim_display_calib", "score_registration", "verdicts", "TARGETS",
            "SUMMARY_VERSION", "sim_display_calib_cached", "score_sheet", "working_model_error", "WORKING_STRAINS",
+           "contacts_model_error",
            "WORKING_TARGET_PCT"]
 
 SUMMARY_VERSION = 14   # 14: the sheet model knows where the finger presses (position_u, position_v)
@@ -181,6 +182,34 @@ def working_model_error(truth: TwinTruth, sheet) -> dict:
                                            for u, v in WORKING_POINTS for d in PRESS_DEPTHS])
     return {"median_pct": float(np.median(r)), "p90_pct": float(np.percentile(r, 90)), "max_pct": float(r.max()),
             "n": int(len(r)), "strains": [WORKING_STRAINS[0], WORKING_STRAINS[-1]], "target_pct": WORKING_TARGET_PCT}
+
+
+def contacts_model_error(truth: TwinTruth, sheet, uv, weights=None) -> dict:
+    """The sheet entry's relative error against the true force (noise-free, forces ≥ 20 mN) where a run touched
+    the sheet: at the contacts ``uv`` (k, 2) m (u along the clamp line, v across) over :data:`WORKING_STRAINS`
+    × the plan's depths, each contact weighted by ``weights`` (k,) (its judged samples; None: 1).
+    ``median_pct``, ``p90_pct``, ``max_pct``, ``contacts``, ``strains`` and ``target_pct``
+    (:data:`WORKING_TARGET_PCT`, on the p90). A judge's figure: it reads the truth. Raises ``ValueError`` for no
+    contact or weights of another length."""
+    uv = np.asarray(uv, float).reshape(-1, 2)
+    w = np.ones(len(uv)) if weights is None else np.asarray(weights, float)
+    if not len(uv) or w.shape != (len(uv),):
+        raise ValueError(f"need contacts (k, 2) and k weights, got {uv.shape} and {w.shape}")
+    cell, mat = LoadCellTwin(truth), sheet.material()
+    err, wt = [], []
+    for (u, v), wi in zip(uv, w, strict=True):
+        for s in WORKING_STRAINS:
+            for d in PRESS_DEPTHS:
+                f = cell.true_force(s, u, v, d)
+                if f >= 0.02:
+                    err.append(abs(press_force(s, mat, u, d, v) / f - 1.0) * 100.0)
+                    wt.append(wi)
+    e, wt = np.array(err), np.array(wt)
+    order = np.argsort(e)
+    cum = np.cumsum(wt[order]) / wt.sum()
+    q = lambda p: float(e[order][min(np.searchsorted(cum, p), len(e) - 1)])   # noqa: E731 - weighted quantile
+    return {"median_pct": q(0.5), "p90_pct": q(0.9), "max_pct": float(e.max()), "contacts": int(len(uv)),
+            "strains": [WORKING_STRAINS[0], WORKING_STRAINS[-1]], "target_pct": WORKING_TARGET_PCT}
 
 
 #: the identified sheet model's median error against the true force, %

@@ -257,7 +257,7 @@ def test_the_report_judges_the_planners_sheet_model_against_the_truth_of_the_run
     assert s["compliance"]["model_error_pct"] <= 5.0 and s["compliance"]["model_error"]["n"] > 400
     entry = load_display_calib(path).sheet
     nominal = replace(entry, contact_width=0.02, contact_growth=0.0, own_stiffness=0.0, own_growth=0.0,
-                      stretching=0.0, strain_offset=0.0)
+                      stretching=0.0, strain_offset=0.0, position_u=0.0, position_v=0.0)
     monkeypatch.setattr(reg, "working_model_error",
                         lambda truth, sheet, f=reg.working_model_error: f(truth, nominal))
     s2 = {"twin": {"truth_seed": 0, "realism": "realistic"}, "compliance": {"n": 1}}
@@ -270,3 +270,29 @@ def test_the_report_judges_the_planners_sheet_model_against_the_truth_of_the_run
     s3 = {"twin": {"truth_seed": 0, "realism": "realistic"}, "compliance": {"n": 1}}
     sheet_model_error(s3, Lab())
     assert "model_error_pct" not in s3["compliance"]
+
+
+def test_the_report_judges_the_sheet_model_where_the_run_touched_the_sheet(monkeypatch):
+    """``compliance.model_error_contacts``: the identified entry against the truth at the run's own contacts,
+    weighted by their samples; a contact's weight moves the figure toward that contact's own error."""
+    import flexsheet.twin.registration as reg
+    from flexsheet.analysis.report import sheet_model_error
+    from flexsheet.calibration.display_calib_file import load_display_calib
+    from flexsheet.twin.truth import TwinTruth
+
+    path = str(Path(__file__).resolve().parents[3] / "docs/figures/calibration/sheet/display.yaml")
+    monkeypatch.setattr(reg, "sim_display_calib_cached", lambda seed, realism: path)
+    uv = [[0.0, 0.0], [0.054, 0.0]]
+    s = {"twin": {"truth_seed": 0, "realism": "realistic"},
+         "compliance": {"n": 1, "contacts_on_sheet": {"uv_m": uv, "n": [1, 1]}}}
+    sheet_model_error(s, None)
+    mc = s["compliance"]["model_error_contacts"]
+    assert mc["contacts"] == 2 and 0.0 < mc["median_pct"] <= mc["p90_pct"] <= mc["max_pct"] and mc["target_pct"] == 5.0
+    truth, sheet = TwinTruth.draw(0, "realistic"), load_display_calib(path).sheet
+    centre = reg.contacts_model_error(truth, sheet, uv[:1])
+    off = reg.contacts_model_error(truth, sheet, uv[1:])
+    heavy = reg.contacts_model_error(truth, sheet, uv, [1, 50])
+    assert abs(heavy["median_pct"] - off["median_pct"]) < abs(heavy["median_pct"] - centre["median_pct"])
+    with pytest.raises(ValueError, match="weights"):
+        reg.contacts_model_error(truth, sheet, uv, [1, 2, 3])
+

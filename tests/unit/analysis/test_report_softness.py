@@ -257,3 +257,25 @@ def test_the_inclusion_is_found_from_the_surface_contact_at_every_depth():
     d = {"/world/contact": contacts, "/world/sheet": sheets, "/object/force_depth": [(0.5, _table_msg(1000.0, 1250.0))]}
     ic = inclusion_contrast(d, _Scene())
     assert len(ic["bins"]) == 3 and ic["felt"] == pytest.approx(0.30, abs=1e-6) and ic["contrast_gain"] == [1.0]
+
+
+def test_the_judged_samples_contacts_on_the_sheet_are_read_from_the_plan_at_their_time():
+    """judged_contacts: (u, v) on the sheet of each judged sample, from the newest /sheet/target before it; a
+    sample too shallow to judge is left out."""
+    from flexsheet.analysis.report_softness import judged_contacts
+    from messages import SheetTarget
+
+    rng = np.random.default_rng(4)
+    origin = rng.uniform(-0.02, 0.02, 3)
+    u_ax, v_ax = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    offsets = rng.uniform(-0.06, 0.06, (4, 2))
+    targets = [(1.0 + 0.1 * k, SheetTarget(header=Header(stamp=1.0 + 0.1 * k),
+                                           contact_point=origin + su * u_ax + sv * v_ax, normal=np.array([1.0, 0, 0]),
+                                           axis_u=u_ax, axis_v=v_ax, sheet_origin=origin, stretch=0.03, tension=50.0,
+                                           stiffness=40.0, object_stiffness=40.0, touching=True, status="ok",
+                                           source_stamp=1.0 + 0.1 * k)) for k, (su, sv) in enumerate(offsets)]
+    depths = [0.004, 0.001, 0.006, 0.005]                     # the second is too shallow to judge
+    contacts = [(1.05 + 0.1 * k, _sheet(1.05 + 0.1 * k, dp, 30.0 * dp)) for k, dp in enumerate(depths)]
+    uv = judged_contacts({"/world/contact": contacts, "/sheet/target": targets})
+    np.testing.assert_allclose(uv, offsets[[0, 2, 3]], atol=1e-12)
+    assert judged_contacts({"/world/contact": contacts}).shape == (0, 2)
