@@ -309,7 +309,8 @@ class SurfacePlanner:
         self.limiter.reset(L.origin, rot_from_cols(L.normal, L.axis_u, L.axis_v), st)
         self.last = replace(L, t=s.t, stretch=st, tension=tension(st, mat),
                             stiffness=_stiffness_or_zero(st, mat, su, sv, depth), object_stiffness=k_obj, depth=depth,
-                            touching=self.touching, status=reason, left=left, right=right, reach_margin=margin,
+                            touching=self.touching, status=f"{reason};{tr.saturated}" if tr.saturated else reason,
+                            left=left, right=right, reach_margin=margin,
                             k_source=k_source)
         return self.last
 

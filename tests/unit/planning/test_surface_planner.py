@@ -382,6 +382,10 @@ def test_a_held_pose_keeps_the_sheet_still_while_its_stretch_follows_the_push_wi
     assert press_force(plan.stretch, mat, base.offset[0], 0.012) == pytest.approx(
         press_force(want.stretch, mat, want.offset[0], 0.012), rel=0.01)
     assert pl.counts["hold:head_lost"] == 38
+    # a request the sheet cannot meet says so, as tracking does
+    stiff = pl.hold_pose("hold:head_lost", 41 * DT, c.point_at(0.3, 0.0, R - 0.012), 5000.0)
+    assert stiff.status == "hold:head_lost;object_stiffer_than_sheet"
+    plan = stiff
     # a refused sample (NaN) holds the whole last plan
     held = pl.hold_pose("hold:head_lost", 100.0, (math.nan, 0.0, 0.0), k0)
     assert held.stretch == plan.stretch and held.origin == plan.origin and held.status == "hold:head_lost"
