@@ -22,7 +22,7 @@ from flexsheet.calibration.display_calib import (
     Provenance,
     SheetEntry,
 )
-from flexsheet.calibration.sheet import TERMS
+from flexsheet.calibration.sheet import OPTIONAL_TERMS, TERMS
 from flexsheet.model.checks import check_pose
 from flexsheet.vision.calib_yaml import read_cv_yaml
 
@@ -274,8 +274,7 @@ def load_display_calib(path: str, require: tuple[str, ...] = ()) -> DisplayCalib
             _checked_pose(pre + "T_display_camera", mat(d, "T_display_camera", pre), path), _read_prov(d, pre, path))
     if "sheet" in doc:
         d = _get(doc, "sheet", "", path, dict)
-        # the position terms came later: a file without them has the band alone there (0)
-        out.sheet = SheetEntry(*(float(_get(d, k, "sheet.", path, float)) if k in d or not k.startswith("position_")
+        out.sheet = SheetEntry(*(float(_get(d, k, "sheet.", path, float)) if k in d or k not in OPTIONAL_TERMS
                                  else 0.0 for k in TERMS), _read_prov(d, "sheet.", path))
     _validate(out, path)
     if require:

@@ -33,6 +33,7 @@ import numpy as np
 from flexsheet.model.tension import SheetMaterial, contact_geometry, position_factor, press_force, tension
 
 __all__ = ["Press", "PRESS_STRETCHES", "PRESS_POINTS", "PRESS_DEPTHS", "plan_presses", "SheetFit", "TERMS",
+           "OPTIONAL_TERMS",
            "with_terms", "fit_sheet", "model_error", "relative_errors"]
 
 #: clamp strains pressed at: dense over the strains the display works at (0.005–0.05), and 0.08 for the stiff end
@@ -98,6 +99,8 @@ class SheetFit:
 #: the identified terms of :class:`~flexsheet.model.tension.SheetMaterial`, as the fit and ``display.yaml`` name them
 TERMS = ("contact_width", "contact_growth", "own_stiffness", "own_growth", "stretching", "strain_offset",
          "position_u", "position_v")
+#: the :data:`TERMS` an older sheet entry may lack: read as 0 (the string band's, no position term)
+OPTIONAL_TERMS = ("position_u", "position_v")
 
 
 def with_terms(src, base: SheetMaterial | None = None) -> SheetMaterial:

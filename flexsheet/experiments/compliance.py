@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flexsheet.calibration.sheet import TERMS, with_terms
+from flexsheet.calibration.sheet import OPTIONAL_TERMS, TERMS, with_terms
 from flexsheet.fem.force_depth import build_force_depth, hertz_check
 from flexsheet.fem.served import served_model
 from flexsheet.model import geometry
@@ -56,7 +56,7 @@ def presentable_range(sheet_file: str | None = None) -> dict:
     if sheet_file:
         try:
             fit = json.loads(Path(sheet_file).read_text())["fit"]
-            mat = with_terms(type("Fit", (), {k: fit.get(k, 0.0) if k.startswith("position_") else fit[k] for k in TERMS})(), mat)
+            mat = with_terms(type("Fit", (), {k: fit.get(k, 0.0) if k in OPTIONAL_TERMS else fit[k] for k in TERMS})(), mat)
         except (OSError, KeyError, ValueError, TypeError) as exc:
             raise ValueError(f"--sheet {sheet_file}: not a sheet.json of flexsheet calibrate sheet ({exc})") from None
         source = f"identified ({sheet_file})"

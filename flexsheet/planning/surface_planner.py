@@ -246,10 +246,7 @@ class SurfacePlanner:
         if k_obj is None:
             return self.hold(Hold.INVALID_STIFFNESS, s.t)
         was_touching = self.touching
-        if not self.touching and dist <= cfg.touch_distance:
-            self.touching = True
-        elif self.touching and dist > cfg.release_distance:
-            self.touching = False
+        self._touch(dist)
         su, sv, u = self._roll(q, n, s.dt, was_touching)
         v = cross(n, u)
         tr = self._stretch(k_obj, table_force, su, sv, depth, object_press)
@@ -300,10 +297,7 @@ class SurfacePlanner:
         self.t_last, self.p_last = s.t, s.p
         if s.dt is not None:
             self.dt_last = s.dt
-        if self.touching and proj.distance > cfg.release_distance:
-            self.touching = False
-        elif not self.touching and proj.distance <= cfg.touch_distance:
-            self.touching = True
+        self._touch(proj.distance)
         if not ok:
             return replace(L, t=s.t, status=f"{reason};unreachable", reach_margin=margin)
         self.limiter.reset(L.origin, rot_from_cols(L.normal, L.axis_u, L.axis_v), st)
@@ -322,6 +316,14 @@ class SurfacePlanner:
         return min(self.cfg.limits.stretch_rate, vs / (0.5 * self.cfg.material.size))
 
     # -- the steps of update ----------------------------------------------------------------------
+    def _touch(self, dist: float) -> None:
+        """Touch hysteresis on the signed distance ``dist`` m: touching from ``touch_distance``, released beyond
+        ``release_distance``."""
+        if not self.touching and dist <= self.cfg.touch_distance:
+            self.touching = True
+        elif self.touching and dist > self.cfg.release_distance:
+            self.touching = False
+
     def _request(self, s: _Sample, q: Vec, n: Vec, dist: float) -> tuple[float | None, str, float]:
         """What the object asks at contact ``q``, normal ``n``, signed distance ``dist`` m: (stiffness N/m or
         None when none can be had, its source, the table's force N or 0 without a table)."""

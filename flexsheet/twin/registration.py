@@ -19,7 +19,7 @@ from flexsheet.calibration.head_camera import SITTINGS
 from flexsheet.calibration.procedures import FULL, QUICK, Options, run_all
 from flexsheet.calibration.sheet import PRESS_DEPTHS, Press, model_error, plan_presses, relative_errors
 from flexsheet.dirs import cache_root as flexsheet_cache_root
-from flexsheet.model.tension import SheetMaterial, press_force
+from flexsheet.model.tension import SheetMaterial
 from flexsheet.twin.head_rig import HeadRigTwin
 from flexsheet.twin.load_cell import LoadCellTwin
 from flexsheet.twin.registration_camera import CalibrationTwin
@@ -190,7 +190,7 @@ def contacts_model_error(truth: TwinTruth, sheet, uv, weights=None) -> dict:
     × the plan's depths, each contact weighted by ``weights`` (k,) (its judged samples; None: 1).
     ``median_pct``, ``p90_pct``, ``max_pct``, ``contacts``, ``strains`` and ``target_pct``
     (:data:`WORKING_TARGET_PCT`, on the p90). A judge's figure: it reads the truth. Raises ``ValueError`` for no
-    contact or weights of another length."""
+    contact, weights of another length, or no press of 20 mN at any contact."""
     uv = np.asarray(uv, float).reshape(-1, 2)
     w = np.ones(len(uv)) if weights is None else np.asarray(weights, float)
     if not len(uv) or w.shape != (len(uv),):
@@ -198,13 +198,16 @@ def contacts_model_error(truth: TwinTruth, sheet, uv, weights=None) -> dict:
     cell, mat = LoadCellTwin(truth), sheet.material()
     err, wt = [], []
     for (u, v), wi in zip(uv, w, strict=True):
-        for s in WORKING_STRAINS:
-            for d in PRESS_DEPTHS:
-                f = cell.true_force(s, u, v, d)
-                if f >= 0.02:
-                    err.append(abs(press_force(s, mat, u, d, v) / f - 1.0) * 100.0)
-                    wt.append(wi)
-    e, wt = np.array(err), np.array(wt)
+        try:
+            r = relative_errors(mat, [Press(s, u, v, d, cell.true_force(s, u, v, d)) for s in WORKING_STRAINS
+                                      for d in PRESS_DEPTHS])
+        except ValueError:          # no press there of 20 mN: nothing to judge the model by
+            continue
+        err.append(r)
+        wt.append(np.full(len(r), wi))
+    if not err:
+        raise ValueError(f"no press of 20 mN at any of the {len(uv)} contacts to judge the model by")
+    e, wt = np.concatenate(err), np.concatenate(wt)
     order = np.argsort(e)
     cum = np.cumsum(wt[order]) / wt.sum()
     q = lambda p: float(e[order][min(np.searchsorted(cum, p), len(e) - 1)])   # noqa: E731 - weighted quantile
