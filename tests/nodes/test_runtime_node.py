@@ -327,15 +327,19 @@ def test_a_node_worker_ignores_sigint_from_its_first_instruction():
 
     ctx = mp.get_context("spawn")
     got = {}
-    before = signal.getsignal(signal.SIGINT)
-    for how in ("start_worker", "plain"):
-        q = ctx.Queue()
-        p = ctx.Process(target=_sigint_at_start, args=(q,))
-        start_worker(p) if how == "start_worker" else p.start()
-        got[how] = q.get(timeout=60)
-        p.join(10)
-    assert got == {"start_worker": True, "plain": False}, got
-    assert signal.getsignal(signal.SIGINT) is before
+    outer = signal.signal(signal.SIGINT, signal.default_int_handler)   # a test process may run with it ignored,
+    try:                                                                # which every child would inherit
+        before = signal.getsignal(signal.SIGINT)
+        for how in ("start_worker", "plain"):
+            q = ctx.Queue()
+            p = ctx.Process(target=_sigint_at_start, args=(q,))
+            start_worker(p) if how == "start_worker" else p.start()
+            got[how] = q.get(timeout=60)
+            p.join(10)
+        assert got == {"start_worker": True, "plain": False}, got
+        assert signal.getsignal(signal.SIGINT) is before
+    finally:
+        signal.signal(signal.SIGINT, outer)
 
 
 def _pool_worker(path: str) -> str:
