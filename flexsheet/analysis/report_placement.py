@@ -5,6 +5,11 @@ Per touching sample, the true sheet's signed distance ahead of (+) or behind (�
 true fingertip, mm; per touch (a contiguous contact episode), the time from the finger's arrival at the object's
 surface to the sheet's, ms. Read from ``/world/finger``, ``/world/sheet`` and ``/world/contact`` (the twin's
 truth: this is the judge, not an estimator) and the scene's shape. Units: m, s; mm / ms only in report values.
+
+A sheet that yields to the viewer's head is not a placement error: while the planner's plan in force says
+``keep_out`` (:class:`flexsheet.planning.head_guard.HeadGuard` backed the sheet off a head leaning into its
+keep-out volume) and until the true sheet is back at the planned contact, a touching sample counts in
+``head_yield`` and not in the distance verdict (``distance_mm_all`` keeps every sample).
 """
 
 from __future__ import annotations
@@ -87,6 +92,29 @@ def _arrivals(t: np.ndarray, inside: np.ndarray, ahead: np.ndarray, runs) -> tup
     return arrivals, never, no_arrival
 
 
+def _head_yield(d: dict[str, list], t: np.ndarray, o: np.ndarray, ns: np.ndarray) -> np.ndarray:
+    """(N,) bool: the samples at stamps ``t`` (N,) s that fall in a yield to the head (module doc): from a plan in
+    force (``/sheet/target``, the newest at or before the sample) whose status names ``keep_out``, until the true
+    sheet's plane (``o`` (N, 3) m, unit ``ns`` (N, 3)) is within :data:`ARRIVAL_TOL` of that sample's planned
+    contact again. All False without ``/sheet/target``."""
+    plans = sorted((m for _, m in d.get("/sheet/target", [])), key=lambda m: m.header.stamp)
+    out = np.zeros(len(t), bool)
+    if not plans:
+        return out
+    ts = np.array([m.header.stamp for m in plans])
+    k = np.searchsorted(ts, t, side="right") - 1
+    keep_out = np.array(["keep_out" in m.status for m in plans])
+    cp = np.array([m.contact_point for m in plans], float)
+    for i in range(len(t)):
+        if k[i] < 0:
+            continue
+        if keep_out[k[i]]:
+            out[i] = True
+        elif i > 0 and out[i - 1]:
+            out[i] = abs(float(np.dot(o[i] - cp[k[i]], ns[i]))) > ARRIVAL_TOL
+    return out
+
+
 def placement(d: dict[str, list], scene) -> dict:
     """Where the true sheet stands against the object's surface while the finger touches (module doc).
 
@@ -96,7 +124,9 @@ def placement(d: dict[str, list], scene) -> dict:
     normal, + ahead (outside the object), − behind (none where the sheet's normal is more than 78° off the
     object's, cos ≤ 0.2: a sheet still turning gives tens of mm along the normal). A sample touches when the finger is inside the object or behind
     the sheet's plane with the world's ``/world/contact`` touching (nearest sample within :data:`MAX_GAP` s); a
-    touch is a contiguous run of them (:func:`episodes`). Per touch the finger arrives at the object's surface when
+    touch is a contiguous run of them (:func:`episodes`). Samples in a yield to the head (:func:`_head_yield`) are
+counted in ``head_yield`` {n, share of the touching samples} and left out of ``distance_mm``, ``by_phase_mm`` and
+``signed_mm``; ``distance_mm_all`` is over every touching sample. Per touch the finger arrives at the object's surface when
     its indentation crosses 0; the sheet is there when at most :data:`ARRIVAL_TOL` behind the surface under the
     finger. ``arrival_ms`` = sheet's arrival − finger's arrival: negative, the sheet waited (from the start of its
     run there, at most :data:`ARRIVAL_LOOKBACK` s back); positive, late; a sheet that never arrives in the touch
@@ -104,7 +134,7 @@ def placement(d: dict[str, list], scene) -> dict:
     (the sheet ahead) have no arrival (``no_finger_arrival``).
 
     Returns ``{}`` without a scene, the finger, the sheet or a touching sample, else ``{"n"`` (touching samples),
-    ``"distance_mm"`` {p50, p99, max} of |distance|, ``"by_phase_mm"`` (the same per script phase of
+    ``"distance_mm"`` {p50, p99, max} of |distance|, ``"distance_mm_all"``, ``"head_yield"``, ``"by_phase_mm"`` (the same per script phase of
     ``/world/finger``, with n), ``"signed_mm"`` {median, p1, p99}, ``"touches"``,
     ``"arrivals"`` (touches with a finger arrival), ``"sheet_first"`` (their share with arrival_ms ≤ 0),
     ``"late"``, ``"never"``, ``"no_finger_arrival"``, ``"arrival_ms"`` {median, p99, max} (None without
@@ -129,10 +159,15 @@ def placement(d: dict[str, list], scene) -> dict:
     if not runs:
         return {}
     arrivals, never, no_arrival = _arrivals(t, inside, ahead, runs)
-    keep = touching & np.isfinite(ahead)
+    judged = touching & np.isfinite(ahead)
+    if not judged.any():
+        return {}
+    yielded = _head_yield(d, t, o, ns)
+    keep = judged & ~yielded
+    e_all = ahead[judged] * 1e3
     e = ahead[keep] * 1e3
     if not e.size:
-        return {}
+        e = np.full(1, np.nan)
     phases = np.array([m.phase for m in fingers])[keep]
     by_phase = {p: {"n": int(np.sum(phases == p)), "p50": float(np.median(np.abs(e[phases == p]))),
                     "p99": float(np.percentile(np.abs(e[phases == p]), 99)), "max": float(np.abs(e[phases == p]).max())}
@@ -141,9 +176,13 @@ def placement(d: dict[str, list], scene) -> dict:
     first = float(np.mean(arr <= 0.0)) if arr.size else None
     dist_mm = {"p50": float(np.median(np.abs(e))), "p99": float(np.percentile(np.abs(e), 99)),
                "max": float(np.abs(e).max())}
+    dist_all = {"p50": float(np.median(np.abs(e_all))), "p99": float(np.percentile(np.abs(e_all), 99)),
+                "max": float(np.abs(e_all).max())}
     verdicts = {"distance": "met" if dist_mm["p99"] <= PLACEMENT_P99_MM else "MISSED",
                 "sheet_first": "met" if first is not None and first >= SHEET_FIRST_TARGET else "MISSED"}
-    return {"n": int(e.size), "distance_mm": dist_mm, "by_phase_mm": by_phase,
+    n_yield = int(np.sum(judged & yielded))
+    return {"n": int(keep.sum()), "distance_mm": dist_mm, "distance_mm_all": dist_all,
+            "head_yield": {"n": n_yield, "share": n_yield / int(judged.sum())}, "by_phase_mm": by_phase,
             "signed_mm": {"median": float(np.median(e)), "p1": float(np.percentile(e, 1)),
                           "p99": float(np.percentile(e, 99))},
             "touches": len(runs), "arrivals": int(arr.size), "sheet_first": first,

@@ -234,6 +234,11 @@ def _placement(s: dict) -> tuple[list[str], list[str]]:
     d, a = pl["distance_mm"], pl.get("arrival_ms")
     rows = [["|distance|, mm", f"{d['p50']:.2f}", f"{d['p99']:.2f}", f"{d['max']:.2f}",
              f"≤ {pl['targets']['distance_mm.p99']:g} p99", pl["verdicts"]["distance"]]]
+    hy, da = pl.get("head_yield"), pl.get("distance_mm_all")
+    if hy and da:
+        prose.append(f"The sheet yielded to the viewer's head (a keep_out plan, until back at the planned contact) in "
+                     f"{hy['n']} touching samples ({100 * hy['share']:.1f} %); they are left out of the distance "
+                     f"verdict. Over every touching sample: p99 {da['p99']:.2f} mm, max {da['max']:.2f} mm.")
     first = "-" if pl["sheet_first"] is None else f"{100 * pl['sheet_first']:.0f} % of {pl['arrivals']}"
     rows.append(["sheet first, touches", first, "-", "-", f"≥ {100 * pl['targets']['sheet_first']:.0f} %",
                  pl["verdicts"]["sheet_first"]])

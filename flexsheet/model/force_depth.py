@@ -33,6 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexsheet.model.checks import check_positive
+
 __all__ = ["REACH", "ForceDepth", "SceneScale", "scene_scale"]
 
 #: a contact farther than this (m) from the stroke's polyline still takes the nearest point's curve (reported by
@@ -113,10 +115,8 @@ class ForceDepth:
     def mapped(self, q, depth: float, scale: float, gain: float = 1.0) -> tuple[float, float]:
         """(force N, stiffness N/m) the sheet is asked for at contact ``q`` (3,) m, ``depth`` m, with the scene's
         ``scale`` s > 0 and ``gain`` γ > 0 (module doc). Raises ``ValueError`` for a bad input."""
-        if not (math.isfinite(scale) and scale > 0.0):
-            raise ValueError(f"scale must be finite and > 0, got {scale!r}")
-        if not (math.isfinite(gain) and gain > 0.0):
-            raise ValueError(f"contrast_gain must be finite and > 0, got {gain!r}")
+        check_positive("scale", scale)
+        check_positive("contrast_gain", gain)
         h = 5e-4
 
         def f(d: float) -> float:

@@ -41,6 +41,7 @@ import numpy as np
 
 from flexsheet.manifest import record
 from flexsheet.model import geometry
+from flexsheet.model.checks import check_positive
 from flexsheet.model.sheet import (
     DeflectionGrid,
     SheetSurface,
@@ -91,8 +92,7 @@ def grid_size(half_span: float, half_width: float, step: float = GRID_STEP) -> t
     """(nu, nv): samples of a depth table over the sheet 2a × 2b (``half_span`` a, ``half_width`` b, m) spaced no
     more than ``step`` m. Raises ``ValueError`` for a non-positive size or step."""
     for k, x in (("half_span", half_span), ("half_width", half_width), ("step", step)):
-        if not (math.isfinite(x) and x > 0.0):
-            raise ValueError(f"{k} must be finite and > 0, got {x!r}")
+        check_positive(k, x)
     return int(math.ceil(2.0 * half_span / step - 1e-9)) + 1, int(math.ceil(2.0 * half_width / step - 1e-9)) + 1
 
 
@@ -244,8 +244,7 @@ class NominalSheetModel:
         self.material = material or SheetMaterial()
         for k, v in (("tension_ratio", 1.0 if tension_ratio is None else tension_ratio),
                      ("stretch_step", stretch_step), ("grid_step", grid_step)):
-            if not (math.isfinite(v) and v > 0.0):
-                raise ValueError(f"{k} must be finite and > 0, got {v!r}")
+            check_positive(k, v)
         if not (math.isfinite(strain_offset) and abs(strain_offset) < 0.1):
             raise ValueError(f"strain_offset must be finite and within ±0.1, got {strain_offset!r}")
         self.tension_ratio = None if tension_ratio is None else float(tension_ratio)

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexsheet.model.checks import check_positive
 from flexsheet.model.shape_base import Shape
 from flexsheet.planning.shape import planner_shape, principal_curvatures
 
@@ -121,8 +122,7 @@ class SceneCompliance:
     def __init__(self, scene, shape: Shape | None = None, min_depth: float = 5e-4, curvature_step: float = 2e-3,
                  cache_distance: float = 1e-3) -> None:
         for k, v in (("min_depth", min_depth), ("curvature_step", curvature_step)):
-            if not (math.isfinite(v) and v > 0.0):
-                raise ValueError(f"{k} must be finite and > 0 m, got {v!r}")
+            check_positive(k, v)
         self.scene = scene
         self.shape = shape if shape is not None else planner_shape(scene)
         self.min_depth = float(min_depth)

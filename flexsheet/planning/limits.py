@@ -22,6 +22,7 @@ import math
 from dataclasses import dataclass, field
 
 from flexsheet.model import geometry
+from flexsheet.model.checks import check_positive
 from flexsheet.model.vec import (
     Mat,
     Vec,
@@ -58,9 +59,7 @@ class MotionLimits:
 
     def __post_init__(self) -> None:
         for k in ("v_max", "a_max", "w_max", "alpha_max", "stretch_rate"):
-            v = getattr(self, k)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
-                raise ValueError(f"{k} must be finite and > 0, got {v!r}")
+            object.__setattr__(self, k, check_positive(k, getattr(self, k)))
 
 
 def limit_step(err: Vec, vel: Vec, vmax: float, amax: float, dt: float) -> tuple[Vec, Vec, bool]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from flexsheet.model.checks import check_positive
 from flexsheet.model.tension import SheetMaterial
 from flexsheet.model.vec import Vec, finite, norm
 from flexsheet.planning.limits import MotionLimits, ReachModel
@@ -51,9 +52,7 @@ class PlannerConfig:
     def __post_init__(self) -> None:
         for k in ("touch_distance", "release_distance", "singular_eps", "jump_distance", "recentre_time",
                   "sheet_margin", "max_dt"):
-            v = getattr(self, k)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
-                raise ValueError(f"{k} must be finite and > 0, got {v!r}")
+            object.__setattr__(self, k, check_positive(k, getattr(self, k)))
         if self.release_distance < self.touch_distance:
             raise ValueError(f"release_distance must be >= touch_distance, got {self.release_distance!r}")
         if not (math.isfinite(self.object_stiffness) and self.object_stiffness >= 0.0):

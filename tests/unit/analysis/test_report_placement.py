@@ -53,3 +53,36 @@ def test_placement_measures_the_sheet_against_the_surface_and_counts_a_late_shee
     q = placement({**d, "/world/sheet": on_time}, load_scene(BOX))
     assert q["sheet_first"] == 1.0 and q["distance_mm"]["max"] == pytest.approx(0.0, abs=1e-12) and q["verdict"] == "met"
     assert placement(d, None) == {}
+
+
+def _plan(t: float, status: str):
+    from messages import SheetTarget
+
+    return (t, SheetTarget(header=Header(stamp=t), contact_point=np.array([0.0, 0.0, 0.01]),
+                           normal=np.array([1.0, 0.0, 0.0]), axis_u=np.array([0.0, 1.0, 0.0]),
+                           axis_v=np.array([0.0, 0.0, 1.0]), sheet_origin=np.array([0.0, 0.0, 0.01]), stretch=0.05,
+                           tension=100.0, stiffness=100.0, object_stiffness=100.0, touching=True, status=status))
+
+
+def test_a_sheet_that_yields_to_the_head_is_counted_apart_until_it_is_back_at_the_planned_contact():
+    """The finger rests 2 mm into the box's front face for 2 s. The sheet stands at the surface, then 6 mm behind
+    it from 0.50 to 1.20 s. The plans say keep_out from 0.45 to 0.90 s (the guard backed it off), then ok; the sheet
+    is back at 1.21 s. The 71 samples 0.50-1.20 s (and the 5 at the surface before, under a keep_out plan) are the
+    head's: the verdict is met and distance_mm_all keeps the 6 mm. With no keep_out plan the same run is MISSED."""
+    fingers, sheets, plans = [], [], []
+    for k in range(201):
+        t = round(0.01 * k, 10)
+        fingers.append(_finger(t, -0.002))
+        xs = -0.006 if 0.5 - 1e-9 <= t <= 1.2 + 1e-9 else 0.0
+        sheets.append((t, _sheet_state(t, [xs, 0.0, 0.01], [1, 0, 0])))
+        plans.append(_plan(t, "keep_out" if 0.45 - 1e-9 <= t <= 0.9 + 1e-9 else "ok"))
+    d = {"/world/finger": fingers, "/world/sheet": sheets, "/sheet/target": plans}
+    p = placement(d, load_scene(BOX))
+    assert p["head_yield"]["n"] == 76 and p["head_yield"]["share"] == pytest.approx(76 / 201)
+    assert p["n"] == 201 - 76
+    assert p["distance_mm"]["max"] == pytest.approx(0.0, abs=1e-9) and p["verdicts"]["distance"] == "met"
+    assert p["distance_mm_all"]["max"] == pytest.approx(6.0, abs=1e-9)
+    ok_plans = [(t, _plan(t, "ok")[1]) for t, _ in plans]
+    q = placement({**d, "/sheet/target": ok_plans}, load_scene(BOX))
+    assert q["head_yield"]["n"] == 0 and q["distance_mm"]["max"] == pytest.approx(6.0, abs=1e-9)
+    assert q["verdicts"]["distance"] == "MISSED"
