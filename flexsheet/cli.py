@@ -336,12 +336,12 @@ def _add_bag_parser(sub) -> None:
 
 def _add_delegate_parsers(sub) -> None:
     for kind, table, helptext, example in (
-            ("calibrate", registry.CALIBRATE, "calibrate devices and register the display (stereo, camera pose, "
+            ("calibrate", registry.calibrations(), "calibrate devices and register the display (stereo, camera pose, "
              "projector, arms, eye; display = all of them)",
              "  flexsheet calibrate stereo --left 'tests/data/stereo_xi/left*.jpg' --right "
              "'tests/data/stereo_xi/right*.jpg' --board chessboard:9x6 --square 0.024 -o calib.yaml\n"
              "  flexsheet calibrate display --sim --truth-seed 0 --out out/calib   # all of it, in the twin"),
-            ("experiment", registry.EXPERIMENTS, "run an experiment: charts + JSON",
+            ("experiment", registry.experiments(), "run an experiment: charts + JSON",
              "  flexsheet experiment stroke --out out/stroke\n  flexsheet experiment fem --out out/fem --quick"),
             ("bench", registry.benches(), "run a benchmark and print figures",
              "  flexsheet bench transport --json\n  flexsheet bench planner")):

@@ -4,8 +4,8 @@
 Each entry is ``"module:attribute"`` and is imported lazily, so ``flexsheet --help`` stays fast and a
 broken optional module only breaks its own subcommand. Experiment, bench and calibrate entries name a
 ``main(argv: list[str]) -> int`` function that parses its own arguments with argparse (its ``--help`` shows a
-working example). The benches are entry points of the :data:`BENCHES_GROUP` group (pyproject.toml), the
-library's and the nodes' own alike.
+working example). All three are entry points (pyproject.toml): :data:`EXPERIMENTS_GROUP`,
+:data:`CALIBRATE_GROUP` and :data:`BENCHES_GROUP` (the library's and the nodes' own benches alike).
 """
 
 from __future__ import annotations
@@ -18,30 +18,20 @@ from flexsheet.runtime.plugins import table
 #: the entry-point group of ``flexsheet bench NAME``
 BENCHES_GROUP = "flexsheet.benches"
 
-EXPERIMENTS: dict[str, str] = {
-    "triangulation": "flexsheet.experiments.triangulation:main",
-    "stroke": "flexsheet.experiments.stroke:main",
-    "stroke_model": "flexsheet.experiments.stroke_model:main",
-    "scenes": "flexsheet.experiments.scenes:main",
-    "fem": "flexsheet.experiments.fem.cli:main",
-    "correction": "flexsheet.experiments.correction.cli:main",
-    "stability": "flexsheet.experiments.stability:main",
-    "compliance": "flexsheet.experiments.compliance:main",
-    "latency_load": "flexsheet.experiments.latency_load:main",
-    "determinism": "flexsheet.experiments.determinism:main",
-    "faults": "flexsheet.experiments.faults.experiment:main",
-}
+#: the entry-point group of ``flexsheet experiment NAME``
+EXPERIMENTS_GROUP = "flexsheet.experiments"
+#: the entry-point group of ``flexsheet calibrate NAME``
+CALIBRATE_GROUP = "flexsheet.calibrate"
 
-CALIBRATE: dict[str, str] = {
-    "stereo": "flexsheet.vision.stereo_calibration:main",
-    "camera-pose": "flexsheet.display.calibrate:camera_pose_main",
-    "projector": "flexsheet.display.calibrate:projector_main",
-    "arms": "flexsheet.display.calibrate:arms_main",
-    "eye": "flexsheet.display.calibrate:eye_main",
-    "sheet": "flexsheet.display.calibrate:sheet_main",
-    "display": "flexsheet.display.calibrate:display_main",
-    "noise": "flexsheet.display.calibrate:noise_main",
-}
+
+def experiments() -> dict[str, str]:
+    """Experiment name → ``"module:main"``: the entry points of :data:`EXPERIMENTS_GROUP`, sorted by name."""
+    return table(EXPERIMENTS_GROUP)
+
+
+def calibrations() -> dict[str, str]:
+    """Calibration name → ``"module:main"``: the entry points of :data:`CALIBRATE_GROUP`, sorted by name."""
+    return table(CALIBRATE_GROUP)
 
 
 def benches() -> dict[str, str]:

@@ -137,7 +137,7 @@ DELEGATES = ("calibrate", "experiment", "bench")
 def _delegate_table(kind: str) -> dict[str, str]:
     from flexsheet import registry
 
-    return {"calibrate": registry.CALIBRATE, "experiment": registry.EXPERIMENTS, "bench": registry.benches()}[kind]
+    return {"calibrate": registry.calibrations, "experiment": registry.experiments, "bench": registry.benches}[kind]()
 
 
 def help_commands() -> list[Cmd]:

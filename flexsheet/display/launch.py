@@ -206,6 +206,7 @@ EXTENSION = LaunchExtension(
     before_launch=before_launch,
     check=_check,
     file_readers={"calib_file": read_stereo_calib, "display_calib": read_display_calib},
+    input_params=frozenset({"scene"}),
     output_params={("fem", "cache_dir"): "dir"},
     listen_params={"arm_controller_sim": ("host", "port")},
 )

@@ -46,7 +46,8 @@ class LaunchExtension:
     ``flexsheet launch`` after the file validates and before any node starts; returns top-level values to set
     (e.g. a registration's output file; what it says goes to the logging module) — raises ``flexsheet.runtime.launch.LaunchError``; ``check(checker)``:
     extra ``--check`` rules (``checker.err``/``warn``/``params``); ``file_readers``: param name → reader that
-    raises ``ValueError``/``OSError`` for an input file it cannot use; ``output_params``: (node type, param) →
+    raises ``ValueError``/``OSError`` for an input file it cannot use; ``input_params``: further param names
+    whose value is an input file that must exist (no reader); ``output_params``: (node type, param) →
     ``"file"``/``"dir"`` written by the node; ``listen_params``: node type → (host param, port param)."""
 
     name: str
@@ -54,6 +55,7 @@ class LaunchExtension:
     before_launch: Callable[..., dict] | None = None
     check: Callable[[Any], None] | None = None
     file_readers: dict[str, Callable[[str], None]] = field(default_factory=dict)
+    input_params: frozenset[str] = frozenset()
     output_params: dict[tuple[str, str], str] = field(default_factory=dict)
     listen_params: dict[str, tuple[str, str]] = field(default_factory=dict)
 

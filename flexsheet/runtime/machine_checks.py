@@ -20,7 +20,7 @@ __all__ = ["is_input_file_key", "check_file_param", "output_problem", "address_p
 
 #: params whose value is a glob pattern of input files (at least one must match)
 GLOB_PARAMS = frozenset({"files_left", "files_right"})
-_INPUT_NAMES = frozenset({"calib_file", "display_calib", "scene", "file", "files_csv"})
+_INPUT_NAMES = frozenset({"file", "files_csv"})
 _HOSTNAME = re.compile(r"^(?=.{1,253}$)([A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}"
                        r"[A-Za-z0-9])?)*\.?$")
 _RESOLVE_TIMEOUT_S = 2.0
@@ -33,9 +33,10 @@ PSEUDO_FS = frozenset({"proc", "sysfs", "devtmpfs", "devpts", "cgroup", "cgroup2
 
 
 def is_input_file_key(key: str) -> bool:
-    """True for a param that names an existing input file: ``calib_file``, ``display_calib``, ``scene``,
-    ``file``, ``files_csv`` or any ``*_file``."""
-    return key in _INPUT_NAMES or key.endswith("_file")
+    """True for a param that names an existing input file: ``file``, ``files_csv``, any ``*_file``, and the
+    launch extensions' ``file_readers`` and ``input_params`` (the display's: ``display_calib``, ``scene``)."""
+    return (key in _INPUT_NAMES or key.endswith("_file") or key in _file_readers()
+            or any(key in ext.input_params for ext in extensions()))
 
 
 @functools.cache
