@@ -49,6 +49,7 @@ from pydantic import Field, field_validator
 from flexsheet.model.projector import Projector
 from flexsheet.model.sheet_model import SheetConfig
 from flexsheet.rendering.config import SHEET_PARAMS, RendererConfig
+from flexsheet.runtime.heap import Trimmer
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import config_fields, params_model
 from flexsheet.runtime.qos import QoS
@@ -162,6 +163,7 @@ class VizNode(Node):
         self.sent = 0
         self._subscribed: set[str] = set()
         self._time_sent = -math.inf
+        self._trimmer = Trimmer()
         self.timer(1.0 / p.poll_rate, self.on_poll)
         self.log.info("Foxglove WebSocket server on ws://%s:%d", p.host, self.port)
 
@@ -211,6 +213,7 @@ class VizNode(Node):
 
     def on_poll(self) -> None:
         self._emit(self.streams.poll(self.now(), self.wanted))
+        self._trimmer.maybe()          # the freed frame buffers back to the OS every 10 s of wall time
         # the viewers' timeline follows the graph's clock (simulated time on a simulated clock): capability "time"
         now = self.now()
         if now - self._time_sent >= self.TIME_PERIOD:

@@ -1,0 +1,56 @@
+"""Give the process's freed heap back to the operating system (glibc ``malloc_trim``).
+
+A long-running node that allocates and frees many buffers of varying size (the recorder's compressed chunks, the
+live view's encoded frames) leaves free pages inside the C heap that its resident memory keeps counting: over an
+hour the recorder's grew by about 0.25 MB a minute that way. ``malloc_trim(0)`` returns them. Measured on the
+recorder's writer fed a bag's 1.2 M messages: resident growth 19.1 MB without, 9.6 MB with a trim after each
+flush (the rest is the MCAP writer's chunk index, kept until the bag closes). Not glibc (musl, macOS): a no-op.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import functools
+import time
+
+__all__ = ["release_free_memory", "Trimmer"]
+
+
+@functools.cache
+def _malloc_trim():
+    """glibc's ``malloc_trim`` or None where the C library has none."""
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        fn = libc.malloc_trim
+    except (OSError, AttributeError):
+        return None
+    fn.argtypes, fn.restype = [ctypes.c_size_t], ctypes.c_int
+    return fn
+
+
+def release_free_memory() -> bool:
+    """Return the C heap's free pages to the OS; True if some were (False: none, or not glibc). Thread-safe (glibc
+    locks each arena); ctypes releases the GIL for the call."""
+    fn = _malloc_trim()
+    return bool(fn(0)) if fn is not None else False
+
+
+class Trimmer:
+    """Calls :func:`release_free_memory` at most once per ``period`` s of the monotonic wall clock: ``maybe()`` from
+    any periodic callback (it never changes what a node publishes, so a simulated run stays byte-identical)."""
+
+    def __init__(self, period: float = 10.0) -> None:
+        if not period > 0.0:
+            raise ValueError(f"period must be > 0 s, got {period!r}")
+        self.period = float(period)
+        self._last = time.monotonic()
+
+    def maybe(self) -> bool:
+        """Trim if ``period`` has passed since the last trim; True if it trimmed."""
+        now = time.monotonic()
+        if now - self._last < self.period:
+            return False
+        self._last = now
+        release_free_memory()
+        return True
