@@ -74,7 +74,9 @@ def _bag(name: str):
 def _delegate(table: dict[str, str], kind: str):
     def call(args: argparse.Namespace) -> int:
         if args.name not in table:
-            print(f"flexsheet {kind}: unknown {kind} {args.name!r}; choose from: {', '.join(table)}", file=sys.stderr)
+            print(f"flexsheet {kind}: unknown {kind} {args.name!r}; choose from: {', '.join(table)}"
+                  + ("" if table else " (none registered: reinstall flexsheet, pip install -e ., to register its entry "
+                     "points)"), file=sys.stderr)
             return 2
         main = registry.load(table[args.name])
         show_lines(LIBRARY, clock=kind == "calibrate", stderr=kind == "bench")   # the library's progress (INFO)

@@ -8,8 +8,10 @@ truth: this is the judge, not an estimator) and the scene's shape. Units: m, s; 
 
 A sheet that yields to the viewer's head is not a placement error: while the planner's plan in force says
 ``keep_out`` (:class:`flexsheet.planning.head_guard.HeadGuard` backed the sheet off a head leaning into its
-keep-out volume) and until the true sheet is back at the planned contact, a touching sample counts in
-``head_yield`` and not in the distance verdict (``distance_mm_all`` keeps every sample).
+keep-out volume) and until the true sheet is back at the object's surface under the finger (at most
+:data:`YIELD_MAX` s after the last such plan), a touching sample counts in ``head_yield`` and not in the distance
+verdict (``distance_mm_all`` keeps every sample). A lost head (``hold:head_lost``) holds the pose without backing
+off, so it is judged like any other sample.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import numpy as np
 from flexsheet.analysis.report_softness import MAX_GAP, episodes, object_surface
 from flexsheet.planning.shape import planner_shape
 
-__all__ = ["PLACEMENT_P99_MM", "SHEET_FIRST_TARGET", "ARRIVAL_TOL", "ARRIVAL_LOOKBACK", "placement"]
+__all__ = ["PLACEMENT_P99_MM", "SHEET_FIRST_TARGET", "ARRIVAL_TOL", "ARRIVAL_LOOKBACK", "YIELD_MAX", "placement"]
 
 #: the true sheet may stand at most this far (mm, p99 of |distance|) ahead of or behind the object's surface
 PLACEMENT_P99_MM = 2.0
@@ -29,6 +31,9 @@ SHEET_FIRST_TARGET = 0.99
 ARRIVAL_TOL = 0.0005
 #: how far back (s) before the finger's arrival a sheet's wait is measured
 ARRIVAL_LOOKBACK = 1.0
+#: a yield to the head ends at the latest this long (s) after the last keep_out plan (the slowest return measured
+#: on the shipped scenes, seed 0, took 2.2 s)
+YIELD_MAX = 3.0
 
 
 def _sheet_at(d: dict[str, list], t: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -92,11 +97,12 @@ def _arrivals(t: np.ndarray, inside: np.ndarray, ahead: np.ndarray, runs) -> tup
     return arrivals, never, no_arrival
 
 
-def _head_yield(d: dict[str, list], t: np.ndarray, o: np.ndarray, ns: np.ndarray) -> np.ndarray:
+def _head_yield(d: dict[str, list], t: np.ndarray, ahead: np.ndarray) -> np.ndarray:
     """(N,) bool: the samples at stamps ``t`` (N,) s that fall in a yield to the head (module doc): from a plan in
     force (``/sheet/target``, the newest at or before the sample) whose status names ``keep_out``, until the true
-    sheet's plane (``o`` (N, 3) m, unit ``ns`` (N, 3)) is within :data:`ARRIVAL_TOL` of that sample's planned
-    contact again. All False without ``/sheet/target``."""
+    sheet is again at most :data:`ARRIVAL_TOL` behind the object's surface under the finger (``ahead`` (N,) m, NaN
+    where not measured) or :data:`YIELD_MAX` s have passed since the last such plan. All False without
+    ``/sheet/target``."""
     plans = sorted((m for _, m in d.get("/sheet/target", [])), key=lambda m: m.header.stamp)
     out = np.zeros(len(t), bool)
     if not plans:
@@ -104,15 +110,19 @@ def _head_yield(d: dict[str, list], t: np.ndarray, o: np.ndarray, ns: np.ndarray
     ts = np.array([m.header.stamp for m in plans])
     k = np.searchsorted(ts, t, side="right") - 1
     keep_out = np.array(["keep_out" in m.status for m in plans])
-    cp = np.array([m.contact_point for m in plans], float)
+    last = -np.inf                                  # stamp of the newest keep_out plan in force so far
     for i in range(len(t)):
-        if k[i] < 0:
-            continue
-        if keep_out[k[i]]:
-            out[i] = True
-        elif i > 0 and out[i - 1]:
-            out[i] = abs(float(np.dot(o[i] - cp[k[i]], ns[i]))) > ARRIVAL_TOL
+        if k[i] >= 0 and keep_out[k[i]]:
+            out[i], last = True, float(t[i])
+        elif i > 0 and out[i - 1] and t[i] - last <= YIELD_MAX:
+            out[i] = not (np.isfinite(ahead[i]) and ahead[i] >= -ARRIVAL_TOL)
     return out
+
+
+def _spread(e: np.ndarray) -> dict:
+    """{p50, p99, max} of |e| for a non-empty (N,) array."""
+    a = np.abs(e)
+    return {"p50": float(np.median(a)), "p99": float(np.percentile(a, 99)), "max": float(a.max())}
 
 
 def placement(d: dict[str, list], scene) -> dict:
@@ -125,20 +135,22 @@ def placement(d: dict[str, list], scene) -> dict:
     object's, cos ≤ 0.2: a sheet still turning gives tens of mm along the normal). A sample touches when the finger is inside the object or behind
     the sheet's plane with the world's ``/world/contact`` touching (nearest sample within :data:`MAX_GAP` s); a
     touch is a contiguous run of them (:func:`episodes`). Samples in a yield to the head (:func:`_head_yield`) are
-counted in ``head_yield`` {n, share of the touching samples} and left out of ``distance_mm``, ``by_phase_mm`` and
-``signed_mm``; ``distance_mm_all`` is over every touching sample. Per touch the finger arrives at the object's surface when
-    its indentation crosses 0; the sheet is there when at most :data:`ARRIVAL_TOL` behind the surface under the
+    counted in ``head_yield`` and left out of ``distance_mm``, ``by_phase_mm`` and ``signed_mm``. Per touch the
+    finger arrives at the object's surface when its indentation crosses 0; the sheet is there when at most :data:`ARRIVAL_TOL` behind the surface under the
     finger. ``arrival_ms`` = sheet's arrival − finger's arrival: negative, the sheet waited (from the start of its
     run there, at most :data:`ARRIVAL_LOOKBACK` s back); positive, late; a sheet that never arrives in the touch
     is late by the rest of the touch (and counted in ``never``). Touches the finger never pushed into the object
     (the sheet ahead) have no arrival (``no_finger_arrival``).
 
-    Returns ``{}`` without a scene, the finger, the sheet or a touching sample, else ``{"n"`` (touching samples),
-    ``"distance_mm"`` {p50, p99, max} of |distance|, ``"distance_mm_all"``, ``"head_yield"``, ``"by_phase_mm"`` (the same per script phase of
-    ``/world/finger``, with n), ``"signed_mm"`` {median, p1, p99}, ``"touches"``,
-    ``"arrivals"`` (touches with a finger arrival), ``"sheet_first"`` (their share with arrival_ms ≤ 0),
-    ``"late"``, ``"never"``, ``"no_finger_arrival"``, ``"arrival_ms"`` {median, p99, max} (None without
-    arrivals), ``"targets"``, ``"verdicts"`` {distance, sheet_first}, ``"verdict"``}``."""
+    Returns ``{}`` without a scene, the finger, the sheet or a touching sample, else ``{"n"`` (the touching samples
+    judged: with a measured distance, not in a yield), ``"distance_mm"`` {p50, p99, max} of |distance| (None when
+    every sample yielded; the distance verdict is then "no verdict"), ``"distance_mm_all"`` (the same over every
+    measured touching sample), ``"head_yield"`` {n, share of the measured touching samples}, ``"by_phase_mm"``
+    (as ``distance_mm`` per script phase of ``/world/finger``, with n), ``"signed_mm"`` {median, p1, p99} (None as
+    ``distance_mm``), ``"touches"``, ``"arrivals"`` (touches with a finger arrival), ``"sheet_first"`` (their share
+    with arrival_ms ≤ 0), ``"late"``, ``"never"``, ``"no_finger_arrival"``, ``"arrival_ms"`` {median, p99, max}
+    (None without arrivals), ``"targets"``, ``"verdicts"`` {distance, sheet_first}, ``"verdict"`` (MISSED if
+    either is)}``."""
     fingers = sorted((m for _, m in d.get("/world/finger", []) if m.phase != "paused"),
                      key=lambda m: m.header.stamp)
     if scene is None or len(fingers) < 2:
@@ -162,29 +174,26 @@ counted in ``head_yield`` {n, share of the touching samples} and left out of ``d
     judged = touching & np.isfinite(ahead)
     if not judged.any():
         return {}
-    yielded = _head_yield(d, t, o, ns)
+    yielded = _head_yield(d, t, ahead)
     keep = judged & ~yielded
     e_all = ahead[judged] * 1e3
     e = ahead[keep] * 1e3
-    if not e.size:
-        e = np.full(1, np.nan)
     phases = np.array([m.phase for m in fingers])[keep]
     by_phase = {p: {"n": int(np.sum(phases == p)), "p50": float(np.median(np.abs(e[phases == p]))),
                     "p99": float(np.percentile(np.abs(e[phases == p]), 99)), "max": float(np.abs(e[phases == p]).max())}
                 for p in sorted(set(phases.tolist()))}
     arr = np.array(arrivals) * 1e3
     first = float(np.mean(arr <= 0.0)) if arr.size else None
-    dist_mm = {"p50": float(np.median(np.abs(e))), "p99": float(np.percentile(np.abs(e), 99)),
-               "max": float(np.abs(e).max())}
-    dist_all = {"p50": float(np.median(np.abs(e_all))), "p99": float(np.percentile(np.abs(e_all), 99)),
-                "max": float(np.abs(e_all).max())}
-    verdicts = {"distance": "met" if dist_mm["p99"] <= PLACEMENT_P99_MM else "MISSED",
+    dist_mm = _spread(e) if e.size else None
+    dist_all = _spread(e_all)
+    verdicts = {"distance": "no verdict" if dist_mm is None else
+                ("met" if dist_mm["p99"] <= PLACEMENT_P99_MM else "MISSED"),
                 "sheet_first": "met" if first is not None and first >= SHEET_FIRST_TARGET else "MISSED"}
     n_yield = int(np.sum(judged & yielded))
     return {"n": int(keep.sum()), "distance_mm": dist_mm, "distance_mm_all": dist_all,
             "head_yield": {"n": n_yield, "share": n_yield / int(judged.sum())}, "by_phase_mm": by_phase,
-            "signed_mm": {"median": float(np.median(e)), "p1": float(np.percentile(e, 1)),
-                          "p99": float(np.percentile(e, 99))},
+            "signed_mm": ({"median": float(np.median(e)), "p1": float(np.percentile(e, 1)),
+                           "p99": float(np.percentile(e, 99))} if e.size else None),
             "touches": len(runs), "arrivals": int(arr.size), "sheet_first": first,
             "late": int(np.sum(arr > 0.0)), "never": never, "no_finger_arrival": no_arrival,
             "arrival_ms": ({"median": float(np.median(arr)), "p99": float(np.percentile(arr, 99)),
@@ -192,4 +201,4 @@ counted in ``head_yield`` {n, share of the touching samples} and left out of ``d
             "targets": {"distance_mm.p99": PLACEMENT_P99_MM, "sheet_first": SHEET_FIRST_TARGET,
                         "arrival_tol_mm": ARRIVAL_TOL * 1e3},
             "verdicts": verdicts,
-            "verdict": "met" if all(v == "met" for v in verdicts.values()) else "MISSED"}
+            "verdict": "MISSED" if "MISSED" in verdicts.values() else "met"}

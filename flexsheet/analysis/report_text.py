@@ -4,6 +4,8 @@
 
 from __future__ import annotations
 
+import math
+
 from flexsheet.analysis.report_timing import POSE_TOL_M
 from flexsheet.analysis.report_verdicts import HEADLINE_METRIC, NO_TARGET, PARTIAL, digits, row_order
 from flexsheet.analysis.table1 import DD_CONVENTION, FELT_TARGET_FACTOR, PAPER_TABLE1, TARGET_FACTOR
@@ -231,11 +233,11 @@ def _placement(s: dict) -> tuple[list[str], list[str]]:
              "along the object's normal, mm; per touch, the sheet's arrival at the surface under the finger "
              f"(within {pl['targets']['arrival_tol_mm']:g} mm behind it, or ahead) against the finger's arrival "
              "there, ms (negative: the sheet waited)."]
-    d, a = pl["distance_mm"], pl.get("arrival_ms")
+    d, a = pl["distance_mm"] or {"p50": math.nan, "p99": math.nan, "max": math.nan}, pl.get("arrival_ms")
     rows = [["|distance|, mm", f"{d['p50']:.2f}", f"{d['p99']:.2f}", f"{d['max']:.2f}",
              f"≤ {pl['targets']['distance_mm.p99']:g} p99", pl["verdicts"]["distance"]]]
     hy, da = pl.get("head_yield"), pl.get("distance_mm_all")
-    if hy and da:
+    if hy and hy["n"] and da:
         prose.append(f"The sheet yielded to the viewer's head (a keep_out plan, until back at the planned contact) in "
                      f"{hy['n']} touching samples ({100 * hy['share']:.1f} %); they are left out of the distance "
                      f"verdict. Over every touching sample: p99 {da['p99']:.2f} mm, max {da['max']:.2f} mm.")

@@ -37,7 +37,7 @@ from flexsheet.runtime.bag_json import PART_OF, ViewerDecoder, ViewerEncoder
 from flexsheet.runtime.bag_read import ENCODING, GAP_SCHEMA, GAP_TOPIC, RAW_ENCODING, McapScan
 from flexsheet.runtime.codec import DecodeError
 from flexsheet.runtime.extensions import bag_channels
-from flexsheet.runtime.heap import release_free_memory
+from flexsheet.runtime.heap import Trimmer
 
 __all__ = ["BagWriter", "MAX_SEQ_JUMP", "CHUNK_SIZE", "FLUSH_PERIOD"]
 
@@ -164,7 +164,7 @@ class BagWriter:
 
     # ---------------------------------------------------------------- the writer thread
     def _run(self) -> None:
-        flushed = time.monotonic()
+        flushed, trimmer = time.monotonic(), Trimmer()
         while True:
             try:
                 item = self._q.get(timeout=FLUSH_PERIOD)
@@ -175,7 +175,7 @@ class BagWriter:
                     self._writer.flush()
                 except Exception as exc:  # noqa: BLE001
                     self.error = f"{type(exc).__name__}: {exc}"[:300]
-                release_free_memory()        # the freed chunk buffers back to the OS (flexsheet/runtime/heap.py)
+                trimmer.maybe()              # the freed chunk buffers back to the OS (flexsheet/runtime/heap.py)
                 flushed = time.monotonic()
             if item is None:
                 return

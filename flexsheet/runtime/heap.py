@@ -4,15 +4,16 @@ A long-running node that allocates and frees many buffers of varying size (the r
 live view's encoded frames) leaves free pages inside the C heap that its resident memory keeps counting: over an
 hour the recorder's grew by about 0.25 MB a minute that way. ``malloc_trim(0)`` returns them. Measured on the
 recorder's writer fed a bag's 1.2 M messages: resident growth 19.1 MB without, 9.6 MB with a trim after each
-flush (the rest is the MCAP writer's chunk index, kept until the bag closes). Not glibc (musl, macOS): a no-op.
+flush (the rest is the MCAP writer's chunk index, kept until the bag closes). The bag writer and the live view
+trim every 10 s of wall time. Not glibc (musl, macOS): a no-op.
 """
 
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import functools
 import time
+from collections.abc import Callable
 
 __all__ = ["release_free_memory", "Trimmer"]
 
@@ -21,8 +22,7 @@ __all__ = ["release_free_memory", "Trimmer"]
 def _malloc_trim():
     """glibc's ``malloc_trim`` or None where the C library has none."""
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        fn = libc.malloc_trim
+        fn = ctypes.CDLL(None).malloc_trim         # the C library this process already has loaded
     except (OSError, AttributeError):
         return None
     fn.argtypes, fn.restype = [ctypes.c_size_t], ctypes.c_int
@@ -37,20 +37,22 @@ def release_free_memory() -> bool:
 
 
 class Trimmer:
-    """Calls :func:`release_free_memory` at most once per ``period`` s of the monotonic wall clock: ``maybe()`` from
-    any periodic callback (it never changes what a node publishes, so a simulated run stays byte-identical)."""
+    """Calls ``release`` (:func:`release_free_memory`) at most once per ``period`` s of ``clock`` (the monotonic wall
+    clock): ``maybe()`` from any periodic callback. It never changes what a node publishes, so a simulated run stays
+    byte-identical. Raises ``ValueError`` for a period that is not finite and > 0."""
 
-    def __init__(self, period: float = 10.0) -> None:
-        if not period > 0.0:
-            raise ValueError(f"period must be > 0 s, got {period!r}")
-        self.period = float(period)
-        self._last = time.monotonic()
+    def __init__(self, period: float = 10.0, clock: Callable[[], float] = time.monotonic,
+                 release: Callable[[], bool] = release_free_memory) -> None:
+        if not (isinstance(period, (int, float)) and 0.0 < period < float("inf")):
+            raise ValueError(f"period must be finite and > 0 s, got {period!r}")
+        self.period, self._clock, self._release = float(period), clock, release
+        self._last = clock()
 
     def maybe(self) -> bool:
         """Trim if ``period`` has passed since the last trim; True if it trimmed."""
-        now = time.monotonic()
+        now = self._clock()
         if now - self._last < self.period:
             return False
         self._last = now
-        release_free_memory()
+        self._release()
         return True

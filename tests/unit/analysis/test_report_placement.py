@@ -86,3 +86,27 @@ def test_a_sheet_that_yields_to_the_head_is_counted_apart_until_it_is_back_at_th
     q = placement({**d, "/sheet/target": ok_plans}, load_scene(BOX))
     assert q["head_yield"]["n"] == 0 and q["distance_mm"]["max"] == pytest.approx(6.0, abs=1e-9)
     assert q["verdicts"]["distance"] == "MISSED"
+
+
+def test_a_yield_ends_at_the_object_s_surface_and_a_later_miss_is_still_judged():
+    """The planned contact stands 0.6 mm off the true sheet all along (the planner's belief), so the sheet never
+    comes "back at the planned contact". The plans say keep_out 0.10-0.15 s; the sheet is at the object's surface
+    from 0.16 s, and 6 mm behind it again 1.50-1.90 s with ok plans: the yield ends at 0.16 s and the later 6 mm is
+    judged (MISSED). When every touching sample yields, the distance has no verdict and no NaN."""
+    fingers, sheets, plans = [], [], []
+    for k in range(201):
+        t = round(0.01 * k, 10)
+        fingers.append(_finger(t, -0.002))
+        xs = -0.006 if 0.1 - 1e-9 <= t <= 0.15 + 1e-9 or 1.5 - 1e-9 <= t <= 1.9 + 1e-9 else 0.0
+        sheets.append((t, _sheet_state(t, [xs, 0.0, 0.01], [1, 0, 0])))
+        t_, m = _plan(t, "keep_out" if 0.1 - 1e-9 <= t <= 0.15 + 1e-9 else "ok")
+        m = m.model_copy(update={"contact_point": np.array([0.0006, 0.0, 0.01])})
+        plans.append((t_, m))
+    d = {"/world/finger": fingers, "/world/sheet": sheets, "/sheet/target": plans}
+    p = placement(d, load_scene(BOX))
+    assert p["head_yield"]["n"] == 6
+    assert p["distance_mm"]["max"] == pytest.approx(6.0, abs=1e-9) and p["verdicts"]["distance"] == "MISSED"
+    all_out = [(t, _plan(t, "keep_out")[1]) for t, _ in plans]
+    q = placement({**d, "/sheet/target": all_out}, load_scene(BOX))
+    assert q["head_yield"]["n"] == 201 and q["n"] == 0 and q["distance_mm"] is None and q["signed_mm"] is None
+    assert q["verdicts"]["distance"] == "no verdict" and q["distance_mm_all"]["max"] == pytest.approx(6.0, abs=1e-9)

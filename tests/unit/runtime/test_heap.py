@@ -30,17 +30,16 @@ def test_a_fragmented_heap_shrinks_by_what_was_freed_in_it():
     assert len(kept) == 128
 
 
-def test_the_trimmer_trims_once_per_period(monkeypatch):
-    """With period 10 s: not at 5 s, once at 10 s, not again at 15 s, again at 20 s; a bad period is named."""
-    now = [100.0]
-    monkeypatch.setattr(heap.time, "monotonic", lambda: now[0])
-    calls = []
-    monkeypatch.setattr(heap, "release_free_memory", lambda: calls.append(now[0]) or True)
-    t = heap.Trimmer(10.0)
+def test_the_trimmer_trims_once_per_period():
+    """With period 10 s on an injected clock: not at 5 s, once at 10 s, not again at 15 s, again at 20 s; a bad
+    period is named."""
+    now, calls = [100.0], []
+    t = heap.Trimmer(10.0, clock=lambda: now[0], release=lambda: calls.append(now[0]) or True)
     got = []
     for s in (105.0, 110.0, 115.0, 120.0):
         now[0] = s
         got.append(t.maybe())
     assert got == [False, True, False, True] and calls == [110.0, 120.0]
-    with pytest.raises(ValueError, match="period"):
-        heap.Trimmer(0.0)
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="period"):
+            heap.Trimmer(bad)
