@@ -97,19 +97,21 @@ def _arrivals(t: np.ndarray, inside: np.ndarray, ahead: np.ndarray, runs) -> tup
     return arrivals, never, no_arrival
 
 
-def _head_yield(d: dict[str, list], t: np.ndarray, ahead: np.ndarray) -> np.ndarray:
-    """(N,) bool: the samples at stamps ``t`` (N,) s that fall in a yield to the head (module doc): from a plan in
-    force (``/sheet/target``, the newest at or before the sample) whose status names ``keep_out``, until the true
-    sheet is again at most :data:`ARRIVAL_TOL` behind the object's surface under the finger (``ahead`` (N,) m, NaN
-    where not measured) or :data:`YIELD_MAX` s have passed since the last such plan. All False without
-    ``/sheet/target``."""
+def _plans_in_force(d: dict[str, list], t: np.ndarray) -> tuple[list, np.ndarray]:
+    """The ``/sheet/target`` plans by stamp and, per stamp of ``t`` (N,) s, the index of the newest at or before it
+    (−1 before the first)."""
     plans = sorted((m for _, m in d.get("/sheet/target", [])), key=lambda m: m.header.stamp)
+    ts = np.array([m.header.stamp for m in plans], float)
+    return plans, (np.searchsorted(ts, t, side="right") - 1 if plans else np.full(len(t), -1))
+
+
+def _head_yield(plans: list, k: np.ndarray, t: np.ndarray, ahead: np.ndarray) -> np.ndarray:
+    """(N,) bool: the samples at stamps ``t`` (N,) s that fall in a yield to the head (module doc): from a plan in
+    force (``plans[k]``, :func:`_plans_in_force`) whose status names ``keep_out``, until the true sheet is again at
+    most :data:`ARRIVAL_TOL` behind the object's surface under the finger (``ahead`` (N,) m, NaN where not
+    measured) or :data:`YIELD_MAX` s have passed since the last such plan."""
     out = np.zeros(len(t), bool)
-    if not plans:
-        return out
-    ts = np.array([m.header.stamp for m in plans])
-    k = np.searchsorted(ts, t, side="right") - 1
-    keep_out = np.array(["keep_out" in m.status for m in plans])
+    keep_out = np.array(["keep_out" in m.status for m in plans], bool)
     last = -np.inf                                  # stamp of the newest keep_out plan in force so far
     for i in range(len(t)):
         if k[i] >= 0 and keep_out[k[i]]:
@@ -117,6 +119,29 @@ def _head_yield(d: dict[str, list], t: np.ndarray, ahead: np.ndarray) -> np.ndar
         elif i > 0 and out[i - 1] and t[i] - last <= YIELD_MAX:
             out[i] = not (np.isfinite(ahead[i]) and ahead[i] >= -ARRIVAL_TOL)
     return out
+
+
+def _split(plans: list, k: np.ndarray, o: np.ndarray, ns: np.ndarray, q: np.ndarray, cos: np.ndarray,
+           miss: np.ndarray) -> dict | None:
+    """The distance of the missed samples (``miss`` (N,) bool) split into three additive terms along the object's
+    normal (÷ cos, as the distance): ``arms`` the true sheet's plane (``o``, ``ns`` (N, 3)) off the plan's pose
+    (its ``sheet_origin``), ``plan_pose`` the plan's pose off its own contact (a limited or held plan) and
+    ``contact`` the planned contact off the object's surface under the true finger (``q`` (N, 3)). Returns
+    {n, median_mm {arms, plan_pose, contact}, share {…}: each term's sum ÷ the distance's sum (they add to 1)}, or
+    None without a missed sample under a plan."""
+    use = miss & (k >= 0)
+    if not use.any():
+        return None
+    kk = k[use]
+    so = np.array([plans[j].sheet_origin for j in kk], float)
+    cp = np.array([plans[j].contact_point for j in kk], float)
+    n_, c = ns[use], cos[use]
+    terms = {"arms": np.einsum("ij,ij->i", o[use] - so, n_) / c, "plan_pose": np.einsum("ij,ij->i", so - cp, n_) / c,
+             "contact": np.einsum("ij,ij->i", cp - q[use], n_) / c}
+    total = sum(terms.values())
+    den = float(total.sum())
+    return {"n": int(use.sum()), "median_mm": {name: float(np.median(v)) * 1e3 for name, v in terms.items()},
+            "share": {name: (float(v.sum()) / den if den else None) for name, v in terms.items()}}
 
 
 def _spread(e: np.ndarray) -> dict:
@@ -145,7 +170,8 @@ def placement(d: dict[str, list], scene) -> dict:
     Returns ``{}`` without a scene, the finger, the sheet or a touching sample, else ``{"n"`` (the touching samples
     judged: with a measured distance, not in a yield), ``"distance_mm"`` {p50, p99, max} of |distance| (None when
     every sample yielded; the distance verdict is then "no verdict"), ``"distance_mm_all"`` (the same over every
-    measured touching sample), ``"head_yield"`` {n, share of the measured touching samples}, ``"by_phase_mm"``
+    measured touching sample), ``"head_yield"`` {n, share of the measured touching samples}, ``"split"`` (the
+    judged samples farther than the target, split into additive causes: :func:`_split`), ``"by_phase_mm"``
     (as ``distance_mm`` per script phase of ``/world/finger``, with n), ``"signed_mm"`` {median, p1, p99} (None as
     ``distance_mm``), ``"touches"``, ``"arrivals"`` (touches with a finger arrival), ``"sheet_first"`` (their share
     with arrival_ms ≤ 0), ``"late"``, ``"never"``, ``"no_finger_arrival"``, ``"arrival_ms"`` {median, p99, max}
@@ -174,7 +200,8 @@ def placement(d: dict[str, list], scene) -> dict:
     judged = touching & np.isfinite(ahead)
     if not judged.any():
         return {}
-    yielded = _head_yield(d, t, ahead)
+    plans, k = _plans_in_force(d, t)
+    yielded = _head_yield(plans, k, t, ahead)
     keep = judged & ~yielded
     e_all = ahead[judged] * 1e3
     e = ahead[keep] * 1e3
@@ -192,6 +219,8 @@ def placement(d: dict[str, list], scene) -> dict:
     n_yield = int(np.sum(judged & yielded))
     return {"n": int(keep.sum()), "distance_mm": dist_mm, "distance_mm_all": dist_all,
             "head_yield": {"n": n_yield, "share": n_yield / int(judged.sum())}, "by_phase_mm": by_phase,
+            "split": _split(plans, k, o, ns, q, np.where(cos > 0.2, cos, 1.0),
+                            keep & (np.abs(ahead) * 1e3 > PLACEMENT_P99_MM)),
             "signed_mm": ({"median": float(np.median(e)), "p1": float(np.percentile(e, 1)),
                            "p99": float(np.percentile(e, 99))} if e.size else None),
             "touches": len(runs), "arrivals": int(arr.size), "sheet_first": first,

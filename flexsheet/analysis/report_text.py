@@ -241,6 +241,12 @@ def _placement(s: dict) -> tuple[list[str], list[str]]:
         prose.append(f"The sheet yielded to the viewer's head (a keep_out plan, until back at the planned contact) in "
                      f"{hy['n']} touching samples ({100 * hy['share']:.1f} %); they are left out of the distance "
                      f"verdict. Over every touching sample: p99 {da['p99']:.2f} mm, max {da['max']:.2f} mm.")
+    sp = pl.get("split")
+    if sp and all(v is not None for v in sp["share"].values()):
+        prose.append(f"The {sp['n']} samples beyond the target, split (shares of their summed distance, they add to "
+                     f"100 %): the arms off the plan's pose {100 * sp['share']['arms']:.0f} %, the plan's pose off its "
+                     f"contact (limited or held) {100 * sp['share']['plan_pose']:.0f} %, the planned contact off the "
+                     f"object's surface {100 * sp['share']['contact']:.0f} %.")
     first = "-" if pl["sheet_first"] is None else f"{100 * pl['sheet_first']:.0f} % of {pl['arrivals']}"
     rows.append(["sheet first, touches", first, "-", "-", f"≥ {100 * pl['targets']['sheet_first']:.0f} %",
                  pl["verdicts"]["sheet_first"]])

@@ -110,3 +110,27 @@ def test_a_yield_ends_at_the_object_s_surface_and_a_later_miss_is_still_judged()
     q = placement({**d, "/sheet/target": all_out}, load_scene(BOX))
     assert q["head_yield"]["n"] == 201 and q["n"] == 0 and q["distance_mm"] is None and q["signed_mm"] is None
     assert q["verdicts"]["distance"] == "no verdict" and q["distance_mm_all"]["max"] == pytest.approx(6.0, abs=1e-9)
+
+
+def test_the_misses_split_into_the_arms_the_plan_s_pose_and_its_contact():
+    """The sheet 6 mm behind the box's front face for 0.5 s under ok plans: with the plan's pose on the surface the
+    whole miss is the arms' (share 1, median −6 mm); with the plan's pose itself 6 mm back and the sheet on it, the
+    plan's pose (share 1); the planned contact on the surface in both (its term 0)."""
+    def run(plan_x: float) -> dict:
+        fingers, sheets, plans = [], [], []
+        for k in range(101):
+            t = round(0.01 * k, 10)
+            fingers.append(_finger(t, -0.002))
+            back = 0.2 - 1e-9 <= t <= 0.7 + 1e-9
+            sheets.append((t, _sheet_state(t, [-0.006 if back else 0.0, 0.0, 0.01], [1, 0, 0])))
+            t_, m = _plan(t, "ok")
+            m = m.model_copy(update={"sheet_origin": np.array([plan_x if back else 0.0, 0.0, 0.01])})
+            plans.append((t_, m))
+        return placement({"/world/finger": fingers, "/world/sheet": sheets, "/sheet/target": plans},
+                         load_scene(BOX))["split"]
+    arms, pose = run(0.0), run(-0.006)
+    assert arms["n"] == 51 and pose["n"] == 51
+    assert arms["share"]["arms"] == pytest.approx(1.0) and arms["share"]["plan_pose"] == pytest.approx(0.0, abs=1e-12)
+    assert arms["median_mm"]["arms"] == pytest.approx(-6.0, abs=1e-9)
+    assert pose["share"]["plan_pose"] == pytest.approx(1.0) and pose["share"]["arms"] == pytest.approx(0.0, abs=1e-12)
+    assert arms["share"]["contact"] == pytest.approx(0.0, abs=1e-12) == pose["share"]["contact"]
