@@ -115,8 +115,7 @@ class ForceDepth:
     def mapped(self, q, depth: float, scale: float, gain: float = 1.0) -> tuple[float, float]:
         """(force N, stiffness N/m) the sheet is asked for at contact ``q`` (3,) m, ``depth`` m, with the scene's
         ``scale`` s > 0 and ``gain`` γ > 0 (module doc). Raises ``ValueError`` for a bad input."""
-        check_positive("scale", scale)
-        check_positive("contrast_gain", gain)
+        scale, gain = check_positive("scale", scale), check_positive("contrast_gain", gain)
         h = 5e-4
 
         def f(d: float) -> float:

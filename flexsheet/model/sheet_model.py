@@ -91,8 +91,8 @@ def _bilinear(W: np.ndarray, a: float, b: float, u, v):
 def grid_size(half_span: float, half_width: float, step: float = GRID_STEP) -> tuple[int, int]:
     """(nu, nv): samples of a depth table over the sheet 2a × 2b (``half_span`` a, ``half_width`` b, m) spaced no
     more than ``step`` m. Raises ``ValueError`` for a non-positive size or step."""
-    for k, x in (("half_span", half_span), ("half_width", half_width), ("step", step)):
-        check_positive(k, x)
+    half_span, half_width, step = (check_positive(k, x) for k, x in
+                                   (("half_span", half_span), ("half_width", half_width), ("step", step)))
     return int(math.ceil(2.0 * half_span / step - 1e-9)) + 1, int(math.ceil(2.0 * half_width / step - 1e-9)) + 1
 
 
