@@ -211,8 +211,7 @@ def placement(d: dict[str, list], scene) -> dict:
                 for p in sorted(set(phases.tolist()))}
     arr = np.array(arrivals) * 1e3
     first = float(np.mean(arr <= 0.0)) if arr.size else None
-    dist_mm = _spread(e) if e.size else None
-    dist_all = _spread(e_all)
+    dist_mm, dist_all = (_spread(e) if e.size else None), _spread(e_all)
     verdicts = {"distance": "no verdict" if dist_mm is None else
                 ("met" if dist_mm["p99"] <= PLACEMENT_P99_MM else "MISSED"),
                 "sheet_first": "met" if first is not None and first >= SHEET_FIRST_TARGET else "MISSED"}
