@@ -190,7 +190,8 @@ def placement(d: dict[str, list], scene) -> dict:
     q, n, dist = object_surface(planner_shape(scene), x)
     inside = -dist                                                  # the object's indentation, m
     cos = np.einsum("ij,ij->i", n, ns)
-    ahead = np.where(cos > 0.2, np.einsum("ij,ij->i", o - q, ns) / np.where(cos > 0.2, cos, 1.0), np.nan)
+    c = np.where(cos > 0.2, cos, 1.0)                               # the normal's share; 1 where not measured
+    ahead = np.where(cos > 0.2, np.einsum("ij,ij->i", o - q, ns) / c, np.nan)
     behind_sheet = np.einsum("ij,ij->i", o - x, ns) > 0.0
     touching = (inside > 0.0) | (behind_sheet & _world_touch(d, t))
     runs = episodes(t, touching)
@@ -206,9 +207,7 @@ def placement(d: dict[str, list], scene) -> dict:
     e_all = ahead[judged] * 1e3
     e = ahead[keep] * 1e3
     phases = np.array([m.phase for m in fingers])[keep]
-    by_phase = {p: {"n": int(np.sum(phases == p)), "p50": float(np.median(np.abs(e[phases == p]))),
-                    "p99": float(np.percentile(np.abs(e[phases == p]), 99)), "max": float(np.abs(e[phases == p]).max())}
-                for p in sorted(set(phases.tolist()))}
+    by_phase = {p: {"n": int(np.sum(phases == p)), **_spread(e[phases == p])} for p in sorted(set(phases.tolist()))}
     arr = np.array(arrivals) * 1e3
     first = float(np.mean(arr <= 0.0)) if arr.size else None
     dist_mm, dist_all = (_spread(e) if e.size else None), _spread(e_all)
@@ -218,8 +217,7 @@ def placement(d: dict[str, list], scene) -> dict:
     n_yield = int(np.sum(judged & yielded))
     return {"n": int(keep.sum()), "distance_mm": dist_mm, "distance_mm_all": dist_all,
             "head_yield": {"n": n_yield, "share": n_yield / int(judged.sum())}, "by_phase_mm": by_phase,
-            "split": _split(plans, k, o, ns, q, np.where(cos > 0.2, cos, 1.0),
-                            keep & (np.abs(ahead) * 1e3 > PLACEMENT_P99_MM)),
+            "split": _split(plans, k, o, ns, q, c, keep & (np.abs(ahead) * 1e3 > PLACEMENT_P99_MM)),
             "signed_mm": ({"median": float(np.median(e)), "p1": float(np.percentile(e, 1)),
                            "p99": float(np.percentile(e, 99))} if e.size else None),
             "touches": len(runs), "arrivals": int(arr.size), "sheet_first": first,

@@ -238,7 +238,7 @@ def _placement(s: dict) -> tuple[list[str], list[str]]:
              f"≤ {pl['targets']['distance_mm.p99']:g} p99", pl["verdicts"]["distance"]]]
     hy, da = pl.get("head_yield"), pl.get("distance_mm_all")
     if hy and hy["n"] and da:
-        prose.append(f"The sheet yielded to the viewer's head (a keep_out plan, until back at the planned contact) in "
+        prose.append(f"The sheet yielded to the viewer's head (a keep_out plan, until back at the object's surface) in "
                      f"{hy['n']} touching samples ({100 * hy['share']:.1f} %); they are left out of the distance "
                      f"verdict. Over every touching sample: p99 {da['p99']:.2f} mm, max {da['max']:.2f} mm.")
     sp = pl.get("split")
