@@ -336,7 +336,6 @@ CHEAP: dict[str, tuple[str, str]] = {
         "flexsheet experiment latency_load --out /tmp/ll --busy 0 2",
         "flexsheet experiment determinism --out docs/figures/simclock",
         "flexsheet experiment head_rate --out docs/figures/head_rate --rates 60 30 20",
-        "flexsheet experiment head_rate --out docs/figures/head_rate --rates 60 30 20 15",
         "flexsheet experiment determinism --quick --out /tmp/det",           # run by the slow tier's
         "flexsheet experiment latency_load --out /tmp/ll --quick",           # tests/system/test_experiments_quick.py
         "flexsheet experiment faults --out docs/figures/faults",
