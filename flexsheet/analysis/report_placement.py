@@ -27,7 +27,8 @@ __all__ = ["PLACEMENT_P99_MM", "SHEET_FIRST_TARGET", "ARRIVAL_TOL", "ARRIVAL_LOO
 PLACEMENT_P99_MM = 2.0
 #: the share of touches whose sheet must be at the object's surface before the finger
 SHEET_FIRST_TARGET = 0.99
-#: the sheet is "at" the object's surface when at most this far (m) behind it (or anywhere ahead)
+#: the sheet is "at" the object's surface when at most this far (m) behind it and at most
+#: :data:`PLACEMENT_P99_MM` ahead (a sheet farther ahead is a wall in the air, not the object's surface)
 ARRIVAL_TOL = 0.0005
 #: how far back (s) before the finger's arrival a sheet's wait is measured
 ARRIVAL_LOOKBACK = 1.0
@@ -71,30 +72,41 @@ def _world_touch(d: dict[str, list], t: np.ndarray) -> np.ndarray:
 
 
 def _arrivals(t: np.ndarray, inside: np.ndarray, ahead: np.ndarray, runs) -> tuple[list[float], int, int]:
-    """Per touch (``runs``, index ranges) the sheet's arrival − the finger's, s (:func:`placement`); and the counts
-    of touches whose sheet never arrived and of those the finger never pushed into the object."""
-    there = ahead >= -ARRIVAL_TOL
+    """Per landing of the finger on the object (a run of samples in it, within the touches ``runs``, index
+    ranges) the sheet's arrival − the finger's, s (:func:`placement`); and the counts of landings whose sheet never
+    arrived and of touches the finger never pushed into the object."""
+    band = np.minimum(ahead + ARRIVAL_TOL, PLACEMENT_P99_MM * 1e-3 - ahead)   # ≥ 0: the sheet is at the surface
+    there = band >= 0.0
     arrivals, never, no_arrival = [], 0, 0
+    landings = []
     for a, b in runs:
-        f = next((i for i in range(a, b) if inside[i] >= 0.0), None)
-        if f is None:
+        inn = [(a + i, a + j) for i, j in _true_runs(inside[a:b] >= 0.0)]
+        if not inn:
             no_arrival += 1
-            continue
+        landings += inn
+    for f, b in landings:
         tf = _crossing(t, inside, f) if f > 0 and inside[f - 1] <= 0.0 and t[f] - t[f - 1] <= MAX_GAP else float(t[f])
         if there[f]:
             i = f                                   # back to the start of the sheet's run at the surface
             while i > 0 and there[i - 1] and tf - t[i - 1] <= ARRIVAL_LOOKBACK and t[i] - t[i - 1] <= MAX_GAP:
                 i -= 1
             crossed = i > 0 and np.isfinite(ahead[i - 1]) and not there[i - 1] and t[i] - t[i - 1] <= MAX_GAP
-            arrivals.append((_crossing(t, ahead + ARRIVAL_TOL, i) if crossed else float(t[i])) - tf)
+            arrivals.append((_crossing(t, band, i) if crossed else float(t[i])) - tf)
         else:
             g = next((i for i in range(f + 1, b) if there[i]), None)
             if g is None:
                 never += 1
                 arrivals.append(float(t[b - 1]) - tf)
             else:
-                arrivals.append(_crossing(t, ahead + ARRIVAL_TOL, g) - tf)
+                arrivals.append(_crossing(t, band, g) - tf)
     return arrivals, never, no_arrival
+
+
+def _true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """The runs of True in ``mask`` (N,) bool as (start, end) index ranges."""
+    m = np.concatenate([[False], np.asarray(mask, bool), [False]])
+    edges = np.flatnonzero(m[1:] != m[:-1])
+    return list(zip(edges[0::2].tolist(), edges[1::2].tolist(), strict=True))
 
 
 def _plans_in_force(d: dict[str, list], t: np.ndarray) -> tuple[list, np.ndarray]:
@@ -160,12 +172,14 @@ def placement(d: dict[str, list], scene) -> dict:
     object's, cos ≤ 0.2: a sheet still turning gives tens of mm along the normal). A sample touches when the finger is inside the object or behind
     the sheet's plane with the world's ``/world/contact`` touching (nearest sample within :data:`MAX_GAP` s); a
     touch is a contiguous run of them (:func:`episodes`). Samples in a yield to the head (:func:`_head_yield`) are
-    counted in ``head_yield`` and left out of ``distance_mm``, ``by_phase_mm`` and ``signed_mm``. Per touch the
-    finger arrives at the object's surface when its indentation crosses 0; the sheet is there when at most :data:`ARRIVAL_TOL` behind the surface under the
-    finger. ``arrival_ms`` = sheet's arrival − finger's arrival: negative, the sheet waited (from the start of its
-    run there, at most :data:`ARRIVAL_LOOKBACK` s back); positive, late; a sheet that never arrives in the touch
-    is late by the rest of the touch (and counted in ``never``). Touches the finger never pushed into the object
-    (the sheet ahead) have no arrival (``no_finger_arrival``).
+    counted in ``head_yield`` and left out of ``distance_mm``, ``by_phase_mm`` and ``signed_mm``. Per landing the
+    finger arrives at the object's surface when its indentation crosses 0; the sheet is there when at most
+    :data:`ARRIVAL_TOL` behind the surface under the finger and at most :data:`PLACEMENT_P99_MM` ahead of it.
+    ``arrival_ms`` = sheet's arrival − finger's arrival: negative, the sheet waited (from the start of its
+    run there, at most :data:`ARRIVAL_LOOKBACK` s back); positive, late; a sheet that never arrives while the finger
+    is in the object is late by the rest of that landing (and counted in ``never``). Each landing (a run of samples
+    with the finger in the object; one touch may hold several) is judged. Touches the finger never pushed into the
+    object (the sheet ahead) have no arrival (``no_finger_arrival``).
 
     Returns ``{}`` without a scene, the finger, the sheet or a touching sample, else ``{"n"`` (the touching samples
     judged: with a measured distance, not in a yield), ``"distance_mm"`` {p50, p99, max} of |distance| (None when
@@ -173,8 +187,8 @@ def placement(d: dict[str, list], scene) -> dict:
     measured touching sample), ``"head_yield"`` {n, share of the measured touching samples}, ``"split"`` (the
     judged samples farther than the target, split into additive causes: :func:`_split`), ``"by_phase_mm"``
     (as ``distance_mm`` per script phase of ``/world/finger``, with n), ``"signed_mm"`` {median, p1, p99} (None as
-    ``distance_mm``), ``"touches"``, ``"arrivals"`` (touches with a finger arrival), ``"sheet_first"`` (their share
-    with arrival_ms ≤ 0), ``"late"``, ``"never"``, ``"no_finger_arrival"``, ``"arrival_ms"`` {median, p99, max}
+    ``distance_mm``), ``"touches"``, ``"arrivals"`` (the finger's landings on the object), ``"sheet_first"``
+    (their share with arrival_ms ≤ 0), ``"late"``, ``"never"``, ``"no_finger_arrival"``, ``"arrival_ms"`` {median, p99, max}
     (None without arrivals), ``"targets"``, ``"verdicts"`` {distance, sheet_first}, ``"verdict"`` (MISSED if
     either is)}``."""
     fingers = sorted((m for _, m in d.get("/world/finger", []) if m.phase != "paused"),

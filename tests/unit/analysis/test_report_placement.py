@@ -134,3 +134,34 @@ def test_the_misses_split_into_the_arms_the_plan_s_pose_and_its_contact():
     assert arms["median_mm"]["arms"] == pytest.approx(-6.0, abs=1e-9)
     assert pose["share"]["plan_pose"] == pytest.approx(1.0) and pose["share"]["arms"] == pytest.approx(0.0, abs=1e-12)
     assert arms["share"]["contact"] == pytest.approx(0.0, abs=1e-12) == pose["share"]["contact"]
+
+
+def test_each_landing_is_judged_and_a_sheet_far_ahead_is_a_wall_in_the_air_not_there():
+    """One touch, two landings on the box's front face. The finger goes in at 0.2 s with the sheet at the
+    surface. It lifts out of the object but stays behind the sheet, which moved 6 mm ahead: still the same
+    touch (/world/contact touching). It lands again at 1.8 s while the sheet stands 6 mm ahead, a wall in the
+    air, and the sheet reaches the surface at 2.01 s: that landing is late by 208.9 ms (the crossing of the
+    2 mm band, interpolated). Counted per touch, the second landing was hidden and the sheet was "first"."""
+    from messages import ContactTruth
+
+    fingers, sheets, contacts = [], [], []
+    for k in range(251):
+        t = round(0.01 * k, 10)
+        if t <= 1.0:
+            x, xs = 0.002 - 0.01 * t, 0.0
+        elif t <= 1.5:
+            x, xs = -0.008 + 0.022 * (t - 1.0), 0.006
+        else:
+            x, xs = 0.003 - 0.01 * (t - 1.5), (0.006 if t <= 2.0 + 1e-9 else 0.0)
+        fingers.append(_finger(t, x))
+        sheets.append((t, _sheet_state(t, [xs, 0.0, 0.01], [1, 0, 0])))
+        contacts.append((t, ContactTruth(header=Header(stamp=t), touching=x < xs, depth=max(xs - x, 0.0), force=0.1,
+                                         point=np.zeros(3), stiffness=100.0)))
+    p = placement({"/world/finger": fingers, "/world/sheet": sheets, "/world/contact": contacts}, load_scene(BOX))
+    assert p["touches"] == 1 and p["arrivals"] == 2 and p["late"] == 1 and p["never"] == 0
+    assert p["sheet_first"] == 0.5 and p["verdicts"]["sheet_first"] == "MISSED"
+    assert p["arrival_ms"]["max"] == pytest.approx(1000.0 * (2.0 + 0.01 * 0.004 / 0.0045 - 1.8), abs=1e-6)
+    # the sheet 1.5 mm ahead at the second landing is within the band: there, and first
+    near = [(t, _sheet_state(t, [min(m.origin[0], 0.0015), 0.0, 0.01], [1, 0, 0])) for t, m in sheets]
+    q = placement({"/world/finger": fingers, "/world/sheet": near, "/world/contact": contacts}, load_scene(BOX))
+    assert q["arrivals"] == 2 and q["sheet_first"] == 1.0 and q["late"] == 0
