@@ -23,7 +23,7 @@ from flexsheet.calibration.display_calib_file import load_display_calib, write_d
 from flexsheet.calibration.eye import fixed_eye, tracked_eye_entry
 from flexsheet.calibration.sheet import TERMS, plan_presses
 from flexsheet.calibration.sources import ImageDirSource, PressFileSource
-from flexsheet.display.live import LiveError, check_plan, run_live
+from flexsheet.display.live import LiveError, check_plan, register_live
 from flexsheet.runtime.launch import LaunchError
 from flexsheet.runtime.launch_sets import apply_toplevel_sets
 from flexsheet.twin.registration import TwinSource, run_display_sim, score_sheet, verdicts
@@ -387,7 +387,7 @@ def _live(a, opts: P.Options) -> int:
         return 1
     try:
         apply_toplevel_sets(a.set, a.launch)
-        s = run_live(a.launch, a.out, opts, a.truth_seed, a.host, a.settle)
+        s = register_live(a.launch, a.out, opts, a.truth_seed, a.host, a.settle)
     except (LiveError, LaunchError) as exc:
         print(f"flexsheet calibrate display: {exc}", file=sys.stderr)
         print(f"(frames captured so far are kept in {a.out}/frames: run the same command again to resume)",

@@ -45,7 +45,7 @@ from messages import topics as T
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Roles", "roles_of", "plan", "check_plan", "LiveSource", "LiveError"]
+__all__ = ["Roles", "roles_of", "plan", "check_plan", "LiveSource", "LiveError", "register_live"]
 
 Pair = tuple[np.ndarray, np.ndarray]
 
@@ -404,7 +404,7 @@ def _residual_summary(cam_r, proj_r, arms: dict) -> dict:
             "arms": {s: {"residual_mm": r.residual_mm, "configs": r.n_configs} for s, (_, r) in arms.items()}}
 
 
-def run_live(launch: str, out: str, opts: Options, truth_seed: int | None = None, host: str | None = None,
+def register_live(launch: str, out: str, opts: Options, truth_seed: int | None = None, host: str | None = None,
              settle_s: float = 0.3, ask=None) -> dict:
     """Drive the registration through the running graph of ``launch`` (module doc); write ``out/display.yaml``
     and ``out/summary.json`` (the keys of ``calibrate display --sim``; errors against the truth only when the
