@@ -17,7 +17,7 @@ trajectory with phase synchronisation: every DOF starts and stops together, on a
 when the start is at rest or moving along that line (else time-synchronised). Ruckig is deterministic: the
 planner and both bridges compute one trajectory from one segment, and evaluate it at the same instant.
 
-Limits (:class:`SheetLimits`) bound the norm of the centre's speed, the sheet's angular speed and the strain
+Limits (:class:`MotionLimits`) bound the norm of the centre's speed, the sheet's angular speed and the strain
 rate: each DOF of a group gets the group's bound times its share of the group's displacement (at least
 :data:`MIN_SHARE`), so a phase-synchronised move keeps the norm within the bound. The arms' joints bound it too:
 :class:`JointRates` estimates the joint speeds and accelerations a segment asks of both arms, and the shaper
@@ -38,8 +38,9 @@ from scipy.spatial.transform import Rotation
 
 from flexsheet.arm.kinematics import ArmKinematics
 from flexsheet.model import geometry
+from flexsheet.model.motion_limits import MotionLimits
 
-__all__ = ["SheetLimits", "SheetSegment", "SheetShaper", "JointRates", "MotionError", "MIN_SHARE", "DOF",
+__all__ = ["per_dof", "SheetSegment", "SheetShaper", "JointRates", "MotionError", "MIN_SHARE", "DOF",
            "EXTRAPOLATE_S", "VELOCITY_PLANS", "plan_velocity", "lsq_slope"]
 
 #: the state's size: centre (3), rotation vector (3), strain (1)
@@ -67,65 +68,23 @@ class MotionError(ValueError):
     """A segment ruckig could not compute (bad limits or state); names what was wrong."""
 
 
-@dataclass(frozen=True)
-class SheetLimits:
-    """Bounds of the sheet's motion: centre ``v_max`` m/s, ``a_max`` m/s², ``j_max`` m/s³; orientation
-    ``w_max`` rad/s, ``alpha_max`` rad/s², ``jw_max`` rad/s³; strain ``stretch_rate`` 1/s, ``stretch_acc`` 1/s²,
-    ``stretch_jerk`` 1/s³. Raises ``ValueError`` naming a bound that is not finite and positive."""
-
-    v_max: float = 0.30
-    a_max: float = 3.0
-    j_max: float = 60.0
-    w_max: float = 3.0
-    alpha_max: float = 30.0
-    jw_max: float = 600.0
-    stretch_rate: float = 1.0
-    stretch_acc: float = 10.0
-    stretch_jerk: float = 200.0
-
-    def __post_init__(self) -> None:
-        for k, v in self.__dict__.items():
-            if not (math.isfinite(v) and v > 0.0):
-                raise ValueError(f"SheetLimits.{k} must be finite and > 0, got {v!r}")
-
-    @classmethod
-    def from_rates(cls, v_max: float, a_max: float, w_max: float, alpha_max: float, stretch_rate: float,
-                   ramp_s: float = 0.005, stretch_ramp_s: float = 0.01) -> SheetLimits:
-        """Limits with these speeds and accelerations (m/s, m/s², rad/s, rad/s², 1/s; the planner's
-        :class:`~flexsheet.planning.limits.MotionLimits`) and the jerk that reaches full acceleration in
-        ``ramp_s`` s; the strain reaches its full rate in ``stretch_ramp_s`` s (a press's tension must follow
-        the finger; the joints' own limits slow it where they must, :class:`JointRates`). Raises ``ValueError``
-        on a ramp that is not finite and positive."""
-        for name, v in (("ramp_s", ramp_s), ("stretch_ramp_s", stretch_ramp_s)):
-            if not (math.isfinite(v) and v > 0.0):
-                raise ValueError(f"{name} must be finite and > 0 s, got {v!r}")
-        sa = stretch_rate / stretch_ramp_s
-        return cls(v_max, a_max, a_max / ramp_s, w_max, alpha_max, alpha_max / ramp_s, stretch_rate, sa,
-                   sa / stretch_ramp_s)
-
-    def groups(self) -> np.ndarray:
-        """(3, 3): rows velocity, acceleration, jerk; columns centre, orientation, strain."""
-        return np.array([[self.v_max, self.w_max, self.stretch_rate],
-                         [self.a_max, self.alpha_max, self.stretch_acc],
-                         [self.j_max, self.jw_max, self.stretch_jerk]], dtype=float)
-
-    def per_dof(self, delta: np.ndarray, velocity=None) -> np.ndarray:
-        """(3, 7) per-DOF limits (velocity, acceleration, jerk) for a move by ``delta`` (7,) ending at
-        ``velocity`` (7,) (None: at rest): each group's bound times the DOF's share of the group's displacement
-        or of its end velocity, whichever is larger, at least :data:`MIN_SHARE`; a DOF's velocity bound is never
-        below its end velocity."""
-        g = self.groups()
-        vel = np.zeros(DOF) if velocity is None else np.abs(np.asarray(velocity, float))
-        out = np.empty((3, DOF))
-        for j, sl in enumerate(_GROUPS):
-            share = np.full(sl.stop - sl.start, MIN_SHARE)
-            for x in (np.abs(np.asarray(delta, float)[sl]), vel[sl]):
-                n = float(np.linalg.norm(x))
-                if n > 1e-12:
-                    share = np.maximum(share, x / n)
-            out[:, sl] = g[:, j:j + 1] * share[None, :]
-        out[0] = np.maximum(out[0], vel * 1.001)
-        return out
+def per_dof(limits: MotionLimits, delta: np.ndarray, velocity=None) -> np.ndarray:
+    """(3, 7) per-DOF limits (velocity, acceleration, jerk) of ``limits`` for a move by ``delta`` (7,) ending at
+    ``velocity`` (7,) (None: at rest): each group's bound times the DOF's share of the group's displacement
+    or of its end velocity, whichever is larger, at least :data:`MIN_SHARE`; a DOF's velocity bound is never
+    below its end velocity."""
+    g = limits.groups()
+    vel = np.zeros(DOF) if velocity is None else np.abs(np.asarray(velocity, float))
+    out = np.empty((3, DOF))
+    for j, sl in enumerate(_GROUPS):
+        share = np.full(sl.stop - sl.start, MIN_SHARE)
+        for x in (np.abs(np.asarray(delta, float)[sl]), vel[sl]):
+            n = float(np.linalg.norm(x))
+            if n > 1e-12:
+                share = np.maximum(share, x / n)
+        out[:, sl] = g[:, j:j + 1] * share[None, :]
+    out[0] = np.maximum(out[0], vel * 1.001)
+    return out
 
 
 def _hat(r) -> np.ndarray:
@@ -417,13 +376,13 @@ class SheetShaper:
     """The planner's side: one segment per plan, each starting where the last one is at that instant (its
     state, velocity and acceleration), so the motion stays continuous in position, velocity and acceleration.
 
-    ``limits``: :class:`SheetLimits`; ``size`` m: the sheet's side; ``rates``: a :class:`JointRates` whose
+    ``limits``: :class:`MotionLimits`; ``size`` m: the sheet's side; ``rates``: a :class:`JointRates` whose
     ``at`` the caller keeps current, or None (Cartesian limits only). :meth:`update` returns the new segment;
     ``slowed`` counts the segments slowed for the joints."""
 
-    def __init__(self, limits: SheetLimits | None = None, size: float = geometry.SHEET_SIZE,
+    def __init__(self, limits: MotionLimits | None = None, size: float = geometry.SHEET_SIZE,
                  rates: JointRates | None = None) -> None:
-        self.limits = limits or SheetLimits()
+        self.limits = limits or MotionLimits()
         self.size = float(size)
         self.rates = rates
         self.segment: SheetSegment | None = None
@@ -448,7 +407,7 @@ class SheetShaper:
         out[2, 3:6] = J @ xdd[3:6]
         return out
 
-    def update(self, t: float, origin, rotation, stretch: float, limits: SheetLimits | None = None,
+    def update(self, t: float, origin, rotation, stretch: float, limits: MotionLimits | None = None,
                velocity=None, lead: float = 0.0, current=None) -> SheetSegment:
         """The segment from the current motion at ``t`` s to the sheet at ``origin`` (3,) m, ``rotation`` (3, 3)
         and strain ``stretch``, under ``limits`` (default: the shaper's). ``velocity``: the goal's (centre m/s
@@ -480,17 +439,17 @@ class SheetShaper:
         goal[0] = np.concatenate([o, rg, [float(stretch)]])
         goal[1] = np.concatenate([v, np.linalg.solve(_right_jacobian(rg), R.T @ w), [ed]])
         try:
-            per_dof = lim.per_dof(goal[0] - start[0], goal[1])
-            seg = SheetSegment(float(t), frame, start, goal, per_dof, self.size, lead)
+            bounds = per_dof(lim, goal[0] - start[0], goal[1])
+            seg = SheetSegment(float(t), frame, start, goal, bounds, self.size, lead)
             if self.rates is not None:
                 for _ in range(2):            # slow both arms alike until their joints can follow (10 % spare)
                     rv, ra = self.rates.ratios(seg)
                     if rv <= 1.0 and ra <= 1.0:
                         break
                     kv, ka = max(rv, 1.0) * 1.1, max(ra, 1.0) * 1.1
-                    per_dof = per_dof / np.array([[kv], [ka], [ka * math.sqrt(ka)]])
-                    per_dof[0] = np.maximum(per_dof[0], np.abs(goal[1]) * 1.001)
-                    seg = SheetSegment(float(t), frame, start, goal, per_dof, self.size, lead)
+                    bounds = bounds / np.array([[kv], [ka], [ka * math.sqrt(ka)]])
+                    bounds[0] = np.maximum(bounds[0], np.abs(goal[1]) * 1.001)
+                    seg = SheetSegment(float(t), frame, start, goal, bounds, self.size, lead)
                     self.slowed += 1
         except MotionError:
             self.failures += 1

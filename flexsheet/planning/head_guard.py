@@ -29,9 +29,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from flexsheet.model.motion_limits import MotionLimits
 from flexsheet.model.sheet import clamp_half_span
 from flexsheet.planning.keepout import KeepOut, KeepOutVerdict, check_targets, retreat_point, sheet_points
-from flexsheet.planning.limits import MotionLimits
 
 __all__ = ["HeadGuard", "GuardStep", "GUARD_BAND"]
 

@@ -22,7 +22,7 @@ import math
 from dataclasses import dataclass, field
 
 from flexsheet.model import geometry
-from flexsheet.model.checks import check_positive
+from flexsheet.model.motion_limits import MotionLimits
 from flexsheet.model.vec import (
     Mat,
     Vec,
@@ -41,25 +41,7 @@ from flexsheet.model.vec import (
     unit,
 )
 
-__all__ = ["MotionLimits", "RateLimiter", "LimiterState", "ReachModel", "limit_step"]
-
-
-@dataclass(frozen=True)
-class MotionLimits:
-    """Bounds on the sheet motion: ``v_max`` m/s, ``a_max`` m/s², ``w_max`` rad/s, ``alpha_max`` rad/s²
-    (sheet centre and orientation), ``stretch_rate`` 1/s. Defaults are conservative for two RV-1A (rated
-    composite speed 2.2 m/s) moving a 0.24 m sheet together; a human stroke is ≲ 0.1 m/s and ≲ 1 rad/s.
-    Raises ``ValueError`` on a non-positive bound."""
-
-    v_max: float = 0.30
-    a_max: float = 3.0
-    w_max: float = 3.0
-    alpha_max: float = 30.0
-    stretch_rate: float = 1.0
-
-    def __post_init__(self) -> None:
-        for k in ("v_max", "a_max", "w_max", "alpha_max", "stretch_rate"):
-            object.__setattr__(self, k, check_positive(k, getattr(self, k)))
+__all__ = ["RateLimiter", "LimiterState", "ReachModel", "limit_step"]
 
 
 def limit_step(err: Vec, vel: Vec, vmax: float, amax: float, dt: float) -> tuple[Vec, Vec, bool]:

@@ -6,9 +6,10 @@ import math
 from dataclasses import dataclass, field
 
 from flexsheet.model.checks import check_positive
+from flexsheet.model.motion_limits import MotionLimits
 from flexsheet.model.tension import SheetMaterial
 from flexsheet.model.vec import Vec, finite, norm
-from flexsheet.planning.limits import MotionLimits, ReachModel
+from flexsheet.planning.limits import ReachModel
 
 __all__ = ["PlannerConfig"]
 

@@ -50,7 +50,6 @@ from flexsheet.arm.sheet_motion import (
     VELOCITY_PLANS,
     JointRates,
     MotionError,
-    SheetLimits,
     SheetShaper,
     plan_velocity,
 )
@@ -58,6 +57,7 @@ from flexsheet.calibration.display_calib import xyzyaw_from_pose
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.calibration.sheet import TERMS
 from flexsheet.model.force_depth import ForceDepth
+from flexsheet.model.motion_limits import MotionLimits
 from flexsheet.model.scenes import Scene, is_paper_cylinder, load_scene_or_paper
 from flexsheet.model.sheet import clamp_poses, frame_from_clamps, sheet_rotation
 from flexsheet.model.tension import SheetMaterial, clamp_force
@@ -65,7 +65,7 @@ from flexsheet.model.timing import LAB
 from flexsheet.planning.compliance import SceneCompliance
 from flexsheet.planning.head_guard import HeadGuard
 from flexsheet.planning.keepout import KeepOut
-from flexsheet.planning.limits import MotionLimits, ReachModel
+from flexsheet.planning.limits import ReachModel
 from flexsheet.planning.plan import INPUT_REJECTIONS, Hold, Plan
 from flexsheet.planning.planner_config import PlannerConfig
 from flexsheet.planning.pull_guard import PullGuard
@@ -416,9 +416,7 @@ class PlannerNode(Node):
         hist.append((now, np.asarray(plan.origin, float), R, float(plan.stretch)))
         velocity = plan_velocity(hist) if moving and len(hist) >= 2 else None
         try:
-            seg = self.shaper.update(now, plan.origin, R, plan.stretch,
-                                     SheetLimits.from_rates(lim.v_max, lim.a_max, lim.w_max, lim.alpha_max,
-                                                            lim.stretch_rate),
+            seg = self.shaper.update(now, plan.origin, R, plan.stretch, lim,
                                      velocity=velocity, lead=min(period, 0.05) if velocity is not None else 0.0,
                                      current=None if self.shaper.segment is not None
                                      else self._held_sheet(float(plan.sheet_size)))

@@ -93,8 +93,9 @@ def test_experiment_kf_tuning_is_kalatas_alpha_beta_in_steady_state(lam, tol):
 def test_params_are_the_pure_configs_fields():
     from dataclasses import fields
 
+    from flexsheet.model.motion_limits import MotionLimits
     from flexsheet.model.tension import SheetMaterial
-    from flexsheet.planning.limits import MotionLimits, ReachModel
+    from flexsheet.planning.limits import ReachModel
     from flexsheet.planning.planner_config import PlannerConfig
 
     names = set(PlannerParams.model_fields)

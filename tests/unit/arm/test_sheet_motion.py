@@ -13,9 +13,10 @@ from scipy.spatial.transform import Rotation
 from flexsheet.arm.bridge_config import BridgeConfig
 from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints
 from flexsheet.arm.limiter import StreamLimiter
-from flexsheet.arm.sheet_motion import JointRates, MotionError, SheetLimits, SheetSegment, SheetShaper
+from flexsheet.arm.sheet_motion import JointRates, MotionError, SheetSegment, SheetShaper
 from flexsheet.arm.tracking import TargetTracker
 from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE, SHEET_SIZE
+from flexsheet.model.motion_limits import MotionLimits
 from flexsheet.model.sheet import clamp_poses, sheet_rotation
 from messages import ArmTarget
 from messages.common import Header
@@ -95,7 +96,7 @@ def test_a_replan_mid_move_continues_in_pose_velocity_and_acceleration():
 
 
 def test_the_centre_speed_and_the_angular_speed_keep_their_norms():
-    lim = SheetLimits(v_max=0.2, a_max=2.0, j_max=40.0, w_max=1.0, alpha_max=10.0, jw_max=200.0)
+    lim = MotionLimits(v_max=0.2, a_max=2.0, w_max=1.0, alpha_max=10.0)
     sh = SheetShaper(lim)
     sh.update(0.0, [0.0, 0.0, 0.0], R0, 0.01)
     seg = sh.update(0.0, [-0.05, 0.05, 0.05], _turn(40.0, (1.0, 1.0, 1.0)), 0.01)

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from flexsheet.model.motion_limits import MotionLimits
 from flexsheet.model.sheet import clamp_half_span
 from flexsheet.planning.head_guard import HeadGuard
-from flexsheet.planning.limits import MotionLimits
 
 R_HOME = np.array([[1.0, 0, 0], [0, 1, 0], [0, 0, 1]])      # columns n = +x, u = +y, v = +z
 

@@ -7,8 +7,9 @@ import math
 
 import pytest
 
+from flexsheet.model.motion_limits import MotionLimits
 from flexsheet.model.vec import norm
-from flexsheet.planning.limits import MotionLimits, RateLimiter, limit_step
+from flexsheet.planning.limits import RateLimiter, limit_step
 
 
 def test_rate_limiter_snapshot_restore_and_clear():

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from flexsheet.model import geometry
+from flexsheet.model.motion_limits import MotionLimits
 from flexsheet.model.shapes import make_shape, paper_cylinder
 from flexsheet.model.sheet import (
     clamp_half_span,
@@ -18,7 +19,7 @@ from flexsheet.model.sheet import (
 )
 from flexsheet.model.tension import SheetMaterial, stiffness, tension
 from flexsheet.model.vec import cross, dot, norm, sub
-from flexsheet.planning.limits import MotionLimits, ReachModel
+from flexsheet.planning.limits import ReachModel
 from flexsheet.planning.planner_config import PlannerConfig
 from flexsheet.planning.surface_planner import SurfacePlanner
 
