@@ -80,7 +80,7 @@ def _arrivals(t: np.ndarray, inside: np.ndarray, ahead: np.ndarray, runs) -> tup
     arrivals, never, no_arrival = [], 0, 0
     landings = []
     for a, b in runs:
-        inn = [(a + i, a + j) for i, j in _true_runs(inside[a:b] >= 0.0)]
+        inn = [(a + i, a + j) for i, j in episodes(t[a:b], inside[a:b] >= 0.0)]
         if not inn:
             no_arrival += 1
         landings += inn
@@ -100,13 +100,6 @@ def _arrivals(t: np.ndarray, inside: np.ndarray, ahead: np.ndarray, runs) -> tup
             else:
                 arrivals.append(_crossing(t, band, g) - tf)
     return arrivals, never, no_arrival
-
-
-def _true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """The runs of True in ``mask`` (N,) bool as (start, end) index ranges."""
-    m = np.concatenate([[False], np.asarray(mask, bool), [False]])
-    edges = np.flatnonzero(m[1:] != m[:-1])
-    return list(zip(edges[0::2].tolist(), edges[1::2].tolist(), strict=True))
 
 
 def _plans_in_force(d: dict[str, list], t: np.ndarray) -> tuple[list, np.ndarray]:
@@ -188,9 +181,9 @@ def placement(d: dict[str, list], scene) -> dict:
     judged samples farther than the target, split into additive causes: :func:`_split`), ``"by_phase_mm"``
     (as ``distance_mm`` per script phase of ``/world/finger``, with n), ``"signed_mm"`` {median, p1, p99} (None as
     ``distance_mm``), ``"touches"``, ``"arrivals"`` (the finger's landings on the object), ``"sheet_first"``
-    (their share with arrival_ms ≤ 0), ``"late"``, ``"never"``, ``"no_finger_arrival"``, ``"arrival_ms"`` {median, p99, max}
-    (None without arrivals), ``"targets"``, ``"verdicts"`` {distance, sheet_first}, ``"verdict"`` (MISSED if
-    either is)}``."""
+    (their share with arrival_ms ≤ 0), ``"late"``, ``"never"``, ``"no_finger_arrival"``, ``"arrival_ms"``
+    {median, p99, max} (None without arrivals), ``"targets"``, ``"verdicts"`` {distance, sheet_first},
+    ``"verdict"`` (MISSED if either is)}``."""
     fingers = sorted((m for _, m in d.get("/world/finger", []) if m.phase != "paused"),
                      key=lambda m: m.header.stamp)
     if scene is None or len(fingers) < 2:

@@ -14,9 +14,10 @@ per rate (``--set head_camera.rate_hz=R``, the scene and truth seed of the file,
   error; and the head guard's figures (keep-out violations, speed near the head) and the paper's Table I
   felt angle, to show what else the rate moves.
 
-Writes ``DIR/head_rate.json`` and ``DIR/head_rate.png`` (view error and real-time factor against the rate,
-the targets drawn). The verdict per rate is the view and eye errors and the staleness against their targets;
-the chosen rate is the lowest that meets all of them. Timings mean something only on a quiet machine (the load average is kept).
+Writes ``DIR/head_rate.json`` and ``DIR/head_rate.png`` (view error, staleness and real-time factor against
+the rate, the targets drawn). The verdict per rate is the view and eye errors and the staleness against their
+targets; the chosen rate is the lowest that meets all of them. Timings mean something only on a quiet machine
+(the load average is kept).
 Each run's bag is deleted once read (``--keep`` keeps them under ``DIR/runs``).
 
 Example: ``flexsheet experiment head_rate --out docs/figures/head_rate --rates 60 30 20``
