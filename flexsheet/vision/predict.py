@@ -46,37 +46,38 @@ class ConstantVelocityKF:
         """Forget the track (the next :meth:`update` re-initialises)."""
         self.t = None
 
-    def _FQ(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    def _FQ(self, dt: float, q: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         F = np.eye(6)
         F[:3, 3:] = dt * np.eye(3)
-        q = self.q
+        q = self.q if q is None else q
         Q = np.zeros((6, 6))
         Q[:3, :3] = q * dt ** 3 / 3 * np.eye(3)
         Q[:3, 3:] = Q[3:, :3] = q * dt ** 2 / 2 * np.eye(3)
         Q[3:, 3:] = q * dt * np.eye(3)
         return F, Q
 
-    def predicted(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """Predicted state (6,) and covariance (6, 6) at time ``t`` (s) without changing the filter.
-        Raises ``ValueError`` if not initialised."""
+    def predicted(self, t: float, q: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted state (6,) and covariance (6, 6) at time ``t`` (s) without changing the filter, with process
+        noise ``q`` m²/s³ for this step (None: the filter's). Raises ``ValueError`` if not initialised."""
         if self.t is None:
             raise ValueError("filter not initialised: call update() first")
         dt = max(0.0, float(t) - self.t)
-        F, Q = self._FQ(dt)
+        F, Q = self._FQ(dt, q)
         return F @ self.x, F @ self.P @ F.T + Q
 
-    def mahalanobis2(self, z: np.ndarray, R: np.ndarray, t: float) -> float:
+    def mahalanobis2(self, z: np.ndarray, R: np.ndarray, t: float, q: float | None = None) -> float:
         """Squared Mahalanobis distance of measurement z (3,) m with covariance R (3, 3) m² from the
-        prediction at ``t`` (s); χ²(3) distributed for consistent data. Raises ``ValueError`` if not
-        initialised."""
-        x, P = self.predicted(t)
+        prediction at ``t`` (s) under process noise ``q`` m²/s³ (None: the filter's); χ²(3) distributed for
+        consistent data. Raises ``ValueError`` if not initialised."""
+        x, P = self.predicted(t, q)
         S = P[:3, :3] + R
         d = np.asarray(z, float) - x[:3]
         return float(d @ np.linalg.solve(S, d))
 
-    def update(self, z: np.ndarray, R: np.ndarray, t: float) -> None:
-        """Predict to ``t`` (s) and fuse measurement z (3,) m with covariance R (3, 3) m² (initialises on the
-        first call). Raises ``ValueError`` on non-finite input."""
+    def update(self, z: np.ndarray, R: np.ndarray, t: float, q: float | None = None) -> None:
+        """Predict to ``t`` (s) with process noise ``q`` m²/s³ for this step (None: the filter's) and fuse
+        measurement z (3,) m with covariance R (3, 3) m² (initialises on the first call). Raises ``ValueError``
+        on non-finite input."""
         z = check_point("z", z)
         R = np.asarray(R, float)
         if R.shape != (3, 3) or not np.all(np.isfinite(R)):
@@ -88,7 +89,7 @@ class ConstantVelocityKF:
             self.P[3:, 3:] = self.v0_std ** 2 * np.eye(3)
             self.t = float(t)
             return
-        x, P = self.predicted(t)
+        x, P = self.predicted(t, q)
         S = P[:3, :3] + R
         K = np.linalg.solve(S, P[:3, :]).T          # P Hᵀ S⁻¹ (6, 3)
         self.x = x + K @ (z - x[:3])

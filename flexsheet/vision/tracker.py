@@ -29,6 +29,11 @@ Per stereo pair (raw mono8 images of the calibrated size):
    reject true fixes; docs/planner.md). The filter's process noise is set by its tracking index
    λ = σ_w·T²/σ_v (Kalata 1984; Bar-Shalom et al. §6.5): q = λ²·σ_v²/T³ with σ_v² the mean variance of the measured position (from step 5) and T the measured
    frame interval, so the filter smooths the same whatever the camera's noise or rate.
+   A fix outside that gate is tested again under a manoeuvre: process noise q = a²T for a finger accelerating
+   at ``manoeuvre_accel`` a (the peak of a minimum-jerk reach, 5.77·D/T², Flash & Hogan 1985: 4.7 m/s² for 0.1 m
+   in 0.35 s), inside the same gate; it is then accepted and fused with that q, so the track follows the finger
+   into and out of a reach instead of refusing it (the smooth filter lags an acceleration by several of its σ).
+   A reflection or a clutter blob ≥ ``ambiguity_m`` off stays outside both gates.
    After ``max_gate_misses`` consecutive rejections the track is reset (the next fix is accepted), so a
    wrong track cannot lock out the true marker. A track not updated for ``lost_reset_s`` is reset.
 7. Output: valid fix with position (display frame, m), covariance (m²) and the position predicted
@@ -96,6 +101,7 @@ class TrackerConfig:
     lost_reset_s: float = 0.25
     horizon_s: float = 0.025          # the display's measured exposure -> sheet delay (docs/planner.md)
     tracking_index: float = 0.05
+    manoeuvre_accel: float = 5.0     # a finger's peak acceleration in a reach (module doc, step 6)
     v0_std: float = 1.0
     ambiguity_m: float = 0.01
     ambiguity_ratio: float = 0.8
@@ -117,7 +123,7 @@ class TrackerConfig:
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
         for name in ("sigma_px", "epipolar_tol_px", "z_min", "gate_chi2", "lost_reset_s", "tracking_index", "v0_std",
-                     "ambiguity_m"):
+                     "ambiguity_m", "manoeuvre_accel"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be positive and finite, got {v!r}")
@@ -191,6 +197,14 @@ class FingertipTracker:
         self.nis = 3.0                          # mean normalised innovation² of accepted fixes (3 if consistent)
         self._last_uv: tuple[np.ndarray, np.ndarray] | None = None
         self._misses = 0
+        self.manoeuvres = 0                     # fixes accepted by the manoeuvre gate (module doc, step 6)
+
+    def manoeuvre_q(self, stamp: float) -> float:
+        """Process noise q = a²·T (m²/s³) of a finger accelerating at ``manoeuvre_accel`` a over a frame
+        interval T (the measured one, else the time since the last fix at ``stamp`` s): over T its velocity
+        changes by about √(qT) = a·T (Bar-Shalom et al. §6.2.2)."""
+        T = self.frame_dt if self.frame_dt is not None else max(float(stamp) - float(self.kf.t or stamp), 1e-3)
+        return self.cfg.manoeuvre_accel ** 2 * T
 
     def reset(self) -> None:
         """Drop the track and the ROI (next frame searches the full images)."""
@@ -295,16 +309,22 @@ class FingertipTracker:
             return self._invalid("occluded", roi)
         # keep the ROI on the candidate even if gated: the marker is probably there
         self._last_uv = (uvl, uvr)
+        q_step = None                   # this update's process noise (None: the smooth model's)
         if self.kf.initialised:
+            gate = c.gate_chi2 * max(1.0, self.nis / 3.0)
             d2 = self.kf.mahalanobis2(pos, cov_d, stamp)
-            if d2 > c.gate_chi2 * max(1.0, self.nis / 3.0):
-                self._misses += 1
-                if self._misses >= c.max_gate_misses:
-                    self.kf.reset()
-                    self._misses = 0
-                return self._invalid("gated", roi)
-        if self.kf.initialised:
-            self.nis += 0.02 * (d2 - self.nis)
+            if d2 > gate:
+                # not the smooth model's: a manoeuvre within the finger's acceleration, or an outlier
+                q_step = self.manoeuvre_q(stamp)
+                if self.kf.mahalanobis2(pos, cov_d, stamp, q_step) > gate:
+                    self._misses += 1
+                    if self._misses >= c.max_gate_misses:
+                        self.kf.reset()
+                        self._misses = 0
+                    return self._invalid("gated", roi)
+                self.manoeuvres += 1
+            else:
+                self.nis += 0.02 * (d2 - self.nis)
         self._misses = 0
         self.noise.add(residual)
         if self.kf.initialised and 1e-3 < stamp - self.kf.t < 0.2:
@@ -312,6 +332,6 @@ class FingertipTracker:
             self.frame_dt = dt if self.frame_dt is None else self.frame_dt + 0.05 * (dt - self.frame_dt)
         if self.frame_dt is not None:   # q from the tracking index (module doc, step 6)
             self.kf.q = q_for_tracking_index(c.tracking_index, math.sqrt(float(np.trace(cov_d)) / 3.0), self.frame_dt)
-        self.kf.update(pos, cov_d, stamp)
+        self.kf.update(pos, cov_d, stamp, q_step)
         pred = self.kf.position_at(stamp + c.horizon_s) if c.horizon_s > 0 else pos.copy()
         return TrackResult(True, "ok", pos.copy(), cov_d, pred, residual, uvl.copy(), uvr.copy(), roi, X[k].copy())
