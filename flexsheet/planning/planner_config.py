@@ -40,7 +40,7 @@ class PlannerConfig:
     singular_eps: float = 1e-4
     jump_distance: float = 0.03
     recentre_time: float = 0.5
-    landing_horizon: float = 1.0
+    landing_horizon: float = 0.2
     velocity_tau: float = 0.05
     u_ref: Vec = (0.0, 1.0, 0.0)
     sheet_margin: float = 0.03

@@ -30,7 +30,7 @@ def _approach(speed=0.1, angle_deg=50.0):
 def test_the_landing_is_where_the_path_meets_the_surface_not_the_nearest_point():
     s = make_shape("sphere", SPHERE)
     L, v, at = _approach()
-    cfg = PlannerConfig()
+    cfg = PlannerConfig(landing_horizon=2.0)          # look far ahead: the path's own geometry is checked
     fp = FingerPath()
     errs = {}
     for k in range(60, 0, -1):                        # 1 s of samples, up to 1 frame before the landing
