@@ -19,8 +19,6 @@ class PlannerConfig:
     """Planner settings (SI). ``touch_distance``/``release_distance`` m: touch hysteresis on the signed
     distance; ``singular_eps`` m: skeleton distance below which the centre ray is undefined;
     ``jump_distance`` m: a larger step between samples is a re-acquired marker; ``recentre_time`` s;
-    ``landing_horizon`` H s and ``velocity_tau`` s: the finger's landing is predicted up to H/2 ahead from its
-    velocity, low-passed with ``velocity_tau`` (:meth:`SurfacePlanner.landing`);
     ``u_ref`` (3,): preferred in-plane axis; ``sheet_margin`` m: the contact keeps this far from the sheet
     edges; ``object_stiffness`` N/m: default virtual stiffness (used when neither a stiffness is passed nor
     a compliance model is given); ``stiffness_scale``: haptic scale — the sheet is asked for this many times
@@ -40,8 +38,6 @@ class PlannerConfig:
     singular_eps: float = 1e-4
     jump_distance: float = 0.03
     recentre_time: float = 0.5
-    landing_horizon: float = 0.2
-    velocity_tau: float = 0.05
     u_ref: Vec = (0.0, 1.0, 0.0)
     sheet_margin: float = 0.03
     object_stiffness: float = 30.0
@@ -56,7 +52,6 @@ class PlannerConfig:
 
     def __post_init__(self) -> None:
         for k in ("touch_distance", "release_distance", "singular_eps", "jump_distance", "recentre_time",
-                  "landing_horizon", "velocity_tau",
                   "sheet_margin", "max_dt"):
             object.__setattr__(self, k, check_positive(k, getattr(self, k)))
         if self.release_distance < self.touch_distance:

@@ -2,10 +2,9 @@
 
 Paper §V-A and Fig. 7, generalised:
 
-* **Away** (fingertip farther than ``touch_distance`` from the surface): the contact point A is where the
-  finger will land (:class:`flexsheet.planning.landing.FingerPath`: its path against the surface; at rest, the
-  centre-ray hit of :meth:`flexsheet.model.shape_base.Shape.project`, the closest point for non-convex meshes)
-  and the sheet is commanded to the tangent plane at A, so the finger meets it there. The sheet's in-plane axis
+* **Away** (fingertip farther than ``touch_distance`` from the surface): the contact point A is the
+  centre-ray hit (:meth:`flexsheet.model.shape_base.Shape.project`; closest point for non-convex meshes) and the
+  sheet is commanded to the tangent plane at A, so the finger meets it there. The sheet's in-plane axis
   ``axis_u`` is the reference direction (``u_ref``, +y: the clamp line at home) projected onto the
   tangent plane. A rolled offset left from a previous touch decays with time constant ``recentre_time``.
 * **Touching** (within ``touch_distance``, released beyond ``release_distance``: hysteresis): the sheet
@@ -88,7 +87,6 @@ from flexsheet.model.vec import (
     rot_from_cols,
     sub,
 )
-from flexsheet.planning.landing import FingerPath
 from flexsheet.planning.limits import RateLimiter
 from flexsheet.planning.plan import Hold, Plan
 from flexsheet.planning.planner_config import PlannerConfig
@@ -193,7 +191,6 @@ class SurfacePlanner:
         self.u_last: Vec | None = None
         self.s: tuple[float, float] = (0.0, 0.0)
         self.touching = False
-        self.finger = FingerPath()
         self.limiter.clear()
         self._tcache: tuple[float, float, float, float, TensionResult] | None = None
         self._k_model: float | None = None
@@ -240,14 +237,10 @@ class SurfacePlanner:
         if self.p_last is not None and norm(sub(s.p, self.p_last)) > cfg.jump_distance:
             self.touching = False
             status.append("reacquired")
-        self.finger.observe(s.p, None if status else s.dt, cfg.velocity_tau)
         proj = self.shape.project(s.p, self.n_last, cfg.singular_eps)
         if proj.singular:
             status.append(Hold.SINGULAR)
         q, n, dist = proj.point, proj.normal, proj.distance
-        if not self.touching and dist > cfg.touch_distance:
-            land = self.finger.landing(self.shape, s.p, proj, cfg)   # away: where the finger will land
-            q, n = land.point, land.normal
         depth = max(0.0, -dist)
         k_obj, k_source, table_force = self._request(s, q, n, dist)
         if k_obj is None:
@@ -302,7 +295,6 @@ class SurfacePlanner:
         left, right = clamp_points(L.origin, L.axis_u, st, mat.size)
         ok, margin = cfg.reach.reachable(left, right)
         self.t_last, self.p_last = s.t, s.p
-        self.finger.observe(s.p, s.dt, cfg.velocity_tau)
         if s.dt is not None:
             self.dt_last = s.dt
         self._touch(proj.distance)
