@@ -447,7 +447,9 @@ class SheetShaper:
                     if rv <= 1.0 and ra <= 1.0:
                         break
                     kv, ka = max(rv, 1.0) * 1.1, max(ra, 1.0) * 1.1
-                    bounds = bounds / np.array([[kv], [ka], [ka * math.sqrt(ka)]])
+                    # the jerk stays: a motion already accelerating past the lowered bound must be braked within
+                    # it, or it runs on while its acceleration ramps down (the strain overshot its goal 4-fold)
+                    bounds = bounds / np.array([[kv], [ka], [1.0]])
                     bounds[0] = np.maximum(bounds[0], np.abs(goal[1]) * 1.001)
                     seg = SheetSegment(float(t), frame, start, goal, bounds, self.size, lead)
                     self.slowed += 1
