@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from conftest import MIN_TIPS_HZ, private_ports
 
+from flexsheet.arm.bridge_config import BridgeConfig
 from flexsheet.arm.kinematics import QD_MAX
 from flexsheet.runtime.bag_read import read_bag
 from flexsheet.runtime.codec import decode_any
@@ -65,7 +66,7 @@ def test_table1_stroke_through_mxt_twins(tmp_path, sim_fem_cache):
             beats[msg.node] = msg.message
         else:
             states[msg.arm].append(msg)
-    step_limit = 0.5 * QD_MAX * 0.00711          # bridge speed_scale 0.5 at the MXT cycle
+    step_limit = BridgeConfig().speed_scale * QD_MAX * 0.00711     # the bridge's speed at the MXT cycle
     for arm in ("left", "right"):
         st = states[arm]
         assert len(st) > 1000, (arm, len(st))     # ~140 Hz over the run
