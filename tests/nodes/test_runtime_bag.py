@@ -15,7 +15,7 @@ from mcap.reader import make_reader
 from flexsheet.runtime.bag import PlayerNode, RecorderNode
 from flexsheet.runtime.bag_export import export_bag
 from flexsheet.runtime.bag_read import bag_info, read_bag
-from flexsheet.runtime.bag_write import BagWriter
+from flexsheet.runtime.bag_write import CHUNK_SIZE, FLUSH_PERIOD, BagWriter
 from flexsheet.runtime.codec import decode, encode
 from flexsheet.runtime.config import NodeConfig
 from flexsheet.runtime.demo import TalkerNode
@@ -148,6 +148,30 @@ class _Calib(Node):
         pub.publish(StereoCalibration(header=pub.header("camera_left"), image_size=np.array([640, 512]), K1=e, D1=np.zeros(5),
                                       K2=e, D2=np.zeros(5), R=e, T=np.array([-0.09, 0, 0]), R1=e, R2=e,
                                       P1=np.zeros((3, 4)), P2=np.zeros((3, 4)), Q=np.eye(4), T_display_camera=np.eye(4)))
+
+
+def test_a_second_of_the_recorders_images_is_one_chunk_so_the_index_in_memory_stays_small(tmp_path):
+    """The writer keeps one index per chunk until the bag closes (about 1.3 KB each). About 4.3 MB of images
+    (as much as the lab's recorder takes in a second, uncompressed) written within one flush period make one
+    chunk, cut by the flush or the close; 1 MiB chunks cut them 4 times, and over an hour's soak that index
+    was most of the recorder's growth."""
+    counts = {}
+    for size in (CHUNK_SIZE, 1024 * 1024):
+        path = tmp_path / f"rate_{size}.mcap"
+        w = BagWriter(path, chunk_size=size)
+        t0 = time.monotonic()
+        for i in range(7):                                   # 7 stereo pairs of 640 x 480 mono8: 4.3 MB
+            img = np.full((480, 640), i, np.uint8)
+            f = StereoFrame(header=Header(stamp=100.0 + i / 48, frame_id="camera_left", seq=i), left=img, right=img,
+                            exposure_stamp=100.0 + i / 48, exposure_time=0.004)
+            w.write(encode(T.STEREO.name, f), 1_000_000_000 + i * 20_000_000)
+        w.close()
+        elapsed = time.monotonic() - t0
+        with open(path, "rb") as fh:
+            counts[size] = len(make_reader(fh).get_summary().chunk_indexes)
+        assert counts[size] <= 7
+    assert counts[CHUNK_SIZE] <= 1 + int(elapsed / FLUSH_PERIOD)
+    assert counts[1024 * 1024] >= 4
 
 
 def test_latched_value_reaches_a_late_joiner_once():
