@@ -197,13 +197,12 @@ class FingertipTracker:
         self.nis = 3.0                          # mean normalised innovation² of accepted fixes (3 if consistent)
         self._last_uv: tuple[np.ndarray, np.ndarray] | None = None
         self._misses = 0
-        self.manoeuvres = 0                     # fixes accepted by the manoeuvre gate (module doc, step 6)
 
-    def manoeuvre_q(self, stamp: float) -> float:
+    def _manoeuvre_q(self, stamp: float) -> float:
         """Process noise q = a²·T (m²/s³) of a finger accelerating at ``manoeuvre_accel`` a over a frame
-        interval T (the measured one, else the time since the last fix at ``stamp`` s): over T its velocity
-        changes by about √(qT) = a·T (Bar-Shalom et al. §6.2.2)."""
-        T = self.frame_dt if self.frame_dt is not None else max(float(stamp) - float(self.kf.t or stamp), 1e-3)
+        interval T (the measured one, else the time since the last fix to ``stamp`` s; the track is live): over T
+        its velocity changes by about √(qT) = a·T (Bar-Shalom et al. §6.2.2)."""
+        T = self.frame_dt if self.frame_dt is not None else max(float(stamp) - self.kf.t, 1e-3)
         return self.cfg.manoeuvre_accel ** 2 * T
 
     def reset(self) -> None:
@@ -315,14 +314,13 @@ class FingertipTracker:
             d2 = self.kf.mahalanobis2(pos, cov_d, stamp)
             if d2 > gate:
                 # not the smooth model's: a manoeuvre within the finger's acceleration, or an outlier
-                q_step = self.manoeuvre_q(stamp)
+                q_step = self._manoeuvre_q(stamp)
                 if self.kf.mahalanobis2(pos, cov_d, stamp, q_step) > gate:
                     self._misses += 1
                     if self._misses >= c.max_gate_misses:
                         self.kf.reset()
                         self._misses = 0
                     return self._invalid("gated", roi)
-                self.manoeuvres += 1
             else:
                 self.nis += 0.02 * (d2 - self.nis)
         self._misses = 0

@@ -82,8 +82,8 @@ def test_record_then_play_is_byte_identical_with_original_timing(tmp_path):
     assert info.counts[T.FINGERTIP.name] == 60 and info.dropped == {} and not info.truncated
 
 
-def _stereo(i: int) -> StereoFrame:
-    img = np.full((48, 64), i % 255, np.uint8)
+def _stereo(i: int, shape: tuple[int, int] = (48, 64)) -> StereoFrame:
+    img = np.full(shape, i % 255, np.uint8)
     return StereoFrame(header=Header(stamp=100.0 + i / 48, frame_id="camera_left", seq=i), left=img, right=img,
                        exposure_stamp=100.0 + i / 48, exposure_time=0.004)
 
@@ -161,10 +161,7 @@ def test_a_second_of_the_recorders_images_is_one_chunk_so_the_index_in_memory_st
         w = BagWriter(path, chunk_size=size)
         t0 = time.monotonic()
         for i in range(7):                                   # 7 stereo pairs of 640 x 480 mono8: 4.3 MB
-            img = np.full((480, 640), i, np.uint8)
-            f = StereoFrame(header=Header(stamp=100.0 + i / 48, frame_id="camera_left", seq=i), left=img, right=img,
-                            exposure_stamp=100.0 + i / 48, exposure_time=0.004)
-            w.write(encode(T.STEREO.name, f), 1_000_000_000 + i * 20_000_000)
+            w.write(encode(T.STEREO.name, _stereo(i, (480, 640))), 1_000_000_000 + i * 20_000_000)
         w.close()
         elapsed = time.monotonic() - t0
         with open(path, "rb") as fh:
