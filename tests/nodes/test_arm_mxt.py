@@ -196,13 +196,17 @@ def test_bridge_reopens_after_a_no_packet_fault():
                 for k in range(40):
                     h.inject(topics.ARM_LEFT_TARGET, target("left", 0.2, stamp=3.0 + k))
                     await asyncio.sleep(0.02)
-                return h.messages(topics.ARM_LEFT_STATE), h.node.link.counters()
-        states, link = asyncio.run(scenario())
+                # the twin's counts while the bridge still streams: the harness's teardown may leave the twin
+                # silent past its 50 ms timeout before it stops (a trailing fault, seen once in a full suite)
+                core = twin.core
+                return (h.messages(topics.ARM_LEFT_STATE), h.node.link.counters(),
+                        (core.faults, core.sessions, core.unanswered, core.refused))
+        states, link, (faults, sessions, unanswered, refused) = asyncio.run(scenario())
     # one fault is provoked; a loaded machine can stall the bridge past the 50 ms timeout once more (seen once
     # in a full-suite run): every fault must still be followed by a reopened session
-    assert twin.core.faults >= 1 and twin.core.sessions == twin.core.faults + 1 and twin.core.unanswered >= 1
-    assert link["opens"] == twin.core.sessions
-    assert twin.core.refused == 0                             # the restart streamed from the fault pose
+    assert faults >= 1 and sessions == faults + 1 and unanswered >= 1
+    assert link["opens"] == sessions
+    assert refused == 0                                       # the restart streamed from the fault pose
     assert states[-1].bridge_status == "ok"
     want = clamp_pose("left", 0.2)
     assert np.linalg.norm(states[-1].pose[:3, 3] - want[:3, 3]) < 1e-4
