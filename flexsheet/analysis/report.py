@@ -51,10 +51,10 @@ from flexsheet.analysis.report_verdicts import judge
 from flexsheet.analysis.table1 import DD_CONVENTION
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.scenes import Scene, load_scene, paper_scene
+from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.runtime.launch import substitute, substitutions
 from flexsheet.twin import registration
 from flexsheet.twin.truth import TwinTruth
-from flexsheet.twin.truth_choice import TruthChoice
 
 __all__ = ["twin_settings", "scene_settings", "run_bags", "main"]
 

@@ -22,11 +22,11 @@ from pydantic import ConfigDict
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.dirs import cache_root as flexsheet_cache_root
 from flexsheet.model.scenes import load_scene
+from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.runtime.console import console_logger, show_lines
 from flexsheet.runtime.extensions import LaunchExtension, LaunchSection
 from flexsheet.runtime.launch import LaunchError, LaunchFile, substitute, substitutions
 from flexsheet.twin.registration import sim_display_calib, sim_display_calib_cached
-from flexsheet.twin.truth_choice import TruthChoice
 from flexsheet.vision.calib_yaml import load_yaml
 
 #: the launcher's console (the display layer's lines among the launcher's own)
@@ -47,7 +47,7 @@ DISPLAY_COMMANDS = {"camera": "flexsheet calibrate camera-pose", "projector": "f
 
 class TwinSpec(TruthChoice):
     """The top-level ``twin:`` section: which hidden truth every twin node draws (``realism``, ``truth_seed``:
-    :class:`~flexsheet.twin.truth_choice.TruthChoice`, the same config the twin nodes take) and
+    :class:`~flexsheet.model.truth_choice.TruthChoice`, the same config the twin nodes take) and
     ``registration``: before the nodes start, run the registration procedures in the twin
     (``flexsheet calibrate display --sim``, cached per seed) and give the estimators the ``display.yaml`` it
     writes (when the file names no ``display_calib`` of its own)."""

@@ -3,7 +3,8 @@ with :mod:`importlib.metadata`. The runtime names none of them itself.
 
 - ``flexsheet.nodes`` (:data:`NODES_GROUP`): node type → its :class:`~flexsheet.runtime.node.Node` subclass,
   as ``"module:Class"`` (``flexsheet run TYPE``, a launch file's ``type:``);
-- any other group of ``"module:attribute"`` entries (``flexsheet.benches``) is read with :func:`table`.
+- any other group of ``"module:attribute"`` entries (``flexsheet.benches``, a port's sources) is read with
+  :func:`table`, one entry loaded with :func:`plugin`.
 
 An entry is imported only when it is used (:func:`node_class`), so ``flexsheet --help`` stays fast and a
 broken module breaks only its own node type.
@@ -14,7 +15,7 @@ from __future__ import annotations
 import functools
 from importlib.metadata import entry_points
 
-__all__ = ["NODES_GROUP", "table", "node_types", "node_class", "unknown_node_type"]
+__all__ = ["NODES_GROUP", "table", "node_types", "node_class", "unknown_node_type", "plugin"]
 
 #: the entry-point group of the node types
 NODES_GROUP = "flexsheet.nodes"
@@ -44,3 +45,12 @@ def node_class(name: str) -> type:
     for ep in entry_points(group=NODES_GROUP, name=name):
         return ep.load()
     raise LookupError(unknown_node_type(name))
+
+
+def plugin(group: str, name: str, what: str = "entry") -> object:
+    """The object installed as ``name`` in entry-point ``group``, its module imported now. Raises
+    ``LookupError`` naming ``what`` and the installed names when there is none."""
+    for ep in entry_points(group=group, name=name):
+        return ep.load()
+    known = ", ".join(table(group)) or "none (is flexsheet installed: pip install -e .?)"
+    raise LookupError(f"unknown {what} {name!r} ({group}); known: {known}")

@@ -12,8 +12,8 @@ from typing import Annotated
 from pydantic import Field
 
 from flexsheet.model import geometry
+from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.twin.head import HeadMotion, Viewer
-from flexsheet.twin.truth_choice import TruthChoice
 
 __all__ = ["HeadScript", "WorldConfig"]
 

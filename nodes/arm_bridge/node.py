@@ -47,13 +47,13 @@ from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
 from flexsheet.model.sheet import clamp_poses
 from flexsheet.model.timing import LAB
+from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.planning.keepout import KeepOut, arm_clearance
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import config_fields, params_model
 from flexsheet.runtime.qos import QoS
 from flexsheet.twin.lab_clock import arm_clock_offset
 from flexsheet.twin.loopback import LoopbackModbusClient
-from flexsheet.twin.truth_choice import TruthChoice
 from messages import ArmJointState, ArmTarget, EyePose, topics
 from nodes.arm_bridge.modbus_link import ModbusLink
 from nodes.arm_bridge.mxt_link import MxtLink

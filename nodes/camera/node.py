@@ -43,12 +43,12 @@ from pydantic import Field, model_validator
 from flexsheet.calibration.display_calib import nominal_display_calib
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.timing import LAB
+from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.runtime.node import Node
 from flexsheet.runtime.params import config_fields, params_model
 from flexsheet.runtime.qos import QoS
 from flexsheet.twin.camera import default_trajectory, twin_renderer
 from flexsheet.twin.camera_config import REALISTIC_DROP_RATE, SimConfig
-from flexsheet.twin.truth_choice import TruthChoice
 from flexsheet.vision.calib_yaml import load_yaml
 from flexsheet.vision.camera_config import CameraConfig
 from flexsheet.vision.camera_model import camera_model

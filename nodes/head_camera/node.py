@@ -7,13 +7,10 @@ One :class:`messages.EyePose` per frame, stamped at mid-exposure, with the eye v
 (:class:`flexsheet.vision.glasses.HeadPredictor`) for the renderer's prediction to photon time. A frame without
 the glasses gives ``valid: false`` carrying the last good pose and its age.
 
-Sources (param ``source``):
-
-* ``sim``: the head camera's twin (:class:`flexsheet.twin.head_camera.HeadCameraTwin`) renders the glasses at
-  the world's ``/world/head`` through the hidden truth's camera (``twin: {realism, truth_seed}``); the tracker
-  uses only the registered camera (``display.yaml``'s ``head_camera`` entry).
-* ``device``: a UVC camera through OpenCV's ``cv2.VideoCapture`` (``device``: an index or a ``/dev/video*``
-  path), stamped on arrival less half the exposure.
+Frames come through the head camera port (:mod:`flexsheet.vision.head_camera_port`), the source named by param
+``source`` (an entry point): ``sim``, the head camera's twin at the world's true head
+(:mod:`flexsheet.twin.head_camera_source`; the tracker uses only the registered camera); ``device``, a UVC camera
+(:mod:`nodes.head_camera.uvc`), stamped on arrival less half the exposure.
 
 Geometry: the ``head_camera`` and ``eye`` entries of ``display_calib`` (the launch file's top-level
 ``display_calib:``). Without a head camera entry the node refuses to start, naming the fix (``flexsheet
@@ -22,7 +19,7 @@ calibrate display`` registers it). Bad frames are rejected and counted; the node
 
 from __future__ import annotations
 
-import threading
+import asyncio
 from typing import Literal
 
 import numpy as np
@@ -30,14 +27,13 @@ from pydantic import Field
 
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.timing import LAB
-from flexsheet.runtime.node import InputRejected, Node
+from flexsheet.model.truth_choice import TruthChoice
+from flexsheet.runtime.node import Node
 from flexsheet.runtime.params import params_model
 from flexsheet.runtime.qos import QoS
-from flexsheet.twin.head_camera import HeadCameraTwin
-from flexsheet.twin.head_rig import true_head_camera
-from flexsheet.twin.truth_choice import TruthChoice
 from flexsheet.vision.glasses import GlassesBoard, GlassesPose, GlassesTracker, HeadPredictor
-from messages import EyePose, HeadTruth, topics
+from flexsheet.vision.head_camera_port import head_camera_source
+from messages import EyePose, topics
 
 __all__ = ["HeadCameraParams", "HeadCameraNode"]
 
@@ -101,79 +97,36 @@ class HeadCameraNode(Node):
         self.predictor = HeadPredictor()
         self.pub = self.publisher(topics.EYE_POSE)
         self._last: tuple[float, GlassesPose] | None = None
-        self._lock = threading.Lock()
         self.lost = 0
-        if p.source == "sim":
-            K, D, T, w, h = true_head_camera(p.twin.truth_seed, p.twin.realism)
-            self.twin = HeadCameraTwin(K, D, T, w, h, board=self.tracker.board, seed=p.twin.truth_seed)
-            self._head: HeadTruth | None = None
-            self.subscribe(topics.HEAD_TRUTH, self.on_head, qos=QoS.LATEST)
-            self.timer(1.0 / p.rate_hz, self.on_sim_tick, sim_cost=LAB.camera_latency(p.exposure_s, w, h // 2)
-                       + LAB.compute("head_camera"))
-        else:
-            import cv2
-
-            dev = int(p.device) if p.device.isdigit() else p.device
-            self.cap = cv2.VideoCapture(dev)
-            if not self.cap.isOpened():
-                raise ValueError(f"device {p.device!r}: cannot open the head camera (cv2.VideoCapture)")
-            self.cap.set(cv2.CAP_PROP_FPS, p.rate_hz)
-            self.timer(1.0 / p.rate_hz, self.on_device_tick)
+        self.source = head_camera_source(p.source).open(p, self.tracker.board)
+        for topic in self.source.inputs:
+            self.subscribe(topic, lambda msg, t=topic: self.source.feed(t, msg), qos=QoS.LATEST)
+        self.timer(1.0 / p.rate_hz, self.on_frame_blocking if self.source.blocking else self.on_frame,
+                   sim_cost=self.source.frame_latency(p.exposure_s) + LAB.compute("head_camera"))
 
     @classmethod
     def probe(cls, params) -> list[str]:
-        """The head camera ``params`` name, if this machine cannot open it (``flexsheet launch --check --probe``):
-        a UVC device by opening it and reading one frame; sim: none."""
-        if params.source != "device":
-            return []
-        import cv2
-
-        dev = int(params.device) if params.device.isdigit() else params.device
-        cap = cv2.VideoCapture(dev)
-        try:
-            if not cap.isOpened():
-                return [f"head camera: cannot open UVC device {params.device!r} (cv2.VideoCapture)"]
-            ok, _ = cap.read()
-            return [] if ok else [f"head camera: UVC device {params.device!r} opened but gave no frame"]
-        finally:
-            cap.release()
+        """What stops the head camera of ``params`` on this machine (``flexsheet launch --check --probe``)."""
+        return head_camera_source(params.source).probe(params)
 
     async def teardown(self) -> None:
-        cap = getattr(self, "cap", None)
-        if cap is not None:
-            cap.release()
+        source = getattr(self, "source", None)
+        if source is not None:
+            source.close()
 
-    def on_head(self, msg: HeadTruth) -> None:
-        """Keep the newest true head (sim)."""
-        with self._lock:
-            self._head = msg
-
-    def on_sim_tick(self) -> None:
-        """Render the glasses at mid-exposure (the truth moved on by its velocity) and track them."""
-        with self._lock:
-            head = self._head
-        if head is None:
-            return
+    def on_frame(self) -> None:
+        """One frame, exposed around now less half the exposure, tracked."""
         t = self.now() - 0.5 * self.params.exposure_s
-        dt = min(max(t - head.header.stamp, 0.0), 0.1)
-        T = np.eye(4)
-        T[:3, :3] = head.rotation
-        T[:3, 3] = head.position + head.velocity * dt
-        image = self.twin.render(T, head.velocity, self.params.exposure_s, occluded=not head.visible)
-        self._track(image, t)
+        image = self.source.grab(t)
+        if image is not None:
+            self._track(image, t)
 
-    async def on_device_tick(self) -> None:
-        """Grab one UVC frame in a worker thread (the loop stays free), stamped on arrival less half the exposure,
-        and track it."""
-        import asyncio
-
-        import cv2
-
-        ok, frame = await asyncio.to_thread(self.cap.read)
-        t = self.now() - 0.5 * self.params.exposure_s
-        if not ok:
-            raise InputRejected(f"device {self.params.device!r}: no frame")
-        self._track(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if frame.ndim == 3 else frame, t)
+    async def on_frame_blocking(self) -> None:
+        """One frame from a device, waited for in a worker thread (the loop stays free), stamped on arrival less
+        half the exposure, and tracked."""
+        image = await asyncio.to_thread(self.source.grab, self.now() - 0.5 * self.params.exposure_s)
+        if image is not None:
+            self._track(image, self.now() - 0.5 * self.params.exposure_s)
 
     def _track(self, image: np.ndarray, stamp: float) -> None:
         pose = self.tracker.track(image)

@@ -101,7 +101,7 @@ WorldParams = params_model(
     "WorldParams",
     """``script``: segments played in order; ``rate_hz`` of ``/world/finger``; ``sheet_rate_hz`` of
     ``/world/sheet``; ``membrane_grid`` G (G×G deflection samples of the true shape); ``twin``: the hidden
-    truth (:class:`~flexsheet.twin.truth_choice.TruthChoice`);
+    truth (:class:`~flexsheet.model.truth_choice.TruthChoice`);
     ``sheet_size`` m: unstretched sheet side between the clamps (for the stretch); ``start_delay`` s before the
     script starts (lets the graph connect and the arms reach the first pose), counted from the heartbeat of the
     last node named in ``start_after`` (node names of the launch file; empty: from the world's own start) or
