@@ -43,12 +43,21 @@ for arg in "$@"; do
   esac
 done
 want() { case " $phases " in *" $1 "*) return 0;; esac; return 1; }
+# each phase collects only its own folders (a collection of every module costs ~10 s a phase); a path among the
+# arguments selects instead, then each phase keeps what of it its marker takes
+paths1=(tests/unit tests/test_*.py); paths2=(tests/nodes tests/system tests/test_docs_run.py)
+mapfile -t paths3 < <(python3 -c "import ast, pathlib; t = ast.parse(pathlib.Path('tests/conftest.py').read_text())
+print('\n'.join(f'tests/{m}.py' for n in t.body if isinstance(n, ast.Assign) and getattr(n.targets[0], 'id', '') == 'ALONE'
+                 for m in ast.literal_eval(n.value)))")
+for arg in ${args[@]+"${args[@]}"}; do
+  case "$arg" in -*) ;; *) if [ -e "${arg%%::*}" ]; then paths1=(); paths2=(); paths3=(); fi;; esac
+done
 LOADAVG0=$(cut -d' ' -f1-3 /proc/loadavg)
 t0=$(date +%s)
 a=5; b=5; c=5
 if want 1; then
   echo "[tests] $mode: tier $tier; phase 1/3: pure computation (-m 'cpu and $tier') on 2 workers"
-  OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 python3 -m pytest -q -n 2 --dist loadgroup --no-loadscope-reorder -m "cpu and $tier" "${args[@]}"
+  OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 python3 -m pytest -q -n 2 --dist loadgroup --no-loadscope-reorder -m "cpu and $tier" ${paths1[@]+"${paths1[@]}"} ${args[@]+"${args[@]}"}
   a=$?
 fi
 t1=$(date +%s)
@@ -61,14 +70,14 @@ fi
 if want 2; then
   echo "[tests] phase 2/3: nodes and launched graphs (-m 'not cpu and not alone and $tier') on 2 workers, a domain each"
   FLEXSHEET_TEST_DOMAINS=1 python3 -m pytest -q -n 2 --dist loadgroup --no-loadscope-reorder --durations=15 \
-    -m "not cpu and not alone and $tier" "${args[@]}"
+    -m "not cpu and not alone and $tier" ${paths2[@]+"${paths2[@]}"} ${args[@]+"${args[@]}"}
   b=$?
 fi
 t2=$(date +%s)
 case $b in 2|3|4) echo "[tests] phase 2 ended with exit $b (interrupted or an error): phase 3 not run" >&2; exit $b;; esac
 if want 3; then
   echo "[tests] phase 3/3: live loops against the wall clock (-m 'not cpu and alone and $tier'), one by one"
-  python3 -m pytest -q -m "not cpu and alone and $tier" "${args[@]}"
+  python3 -m pytest -q -m "not cpu and alone and $tier" ${paths3[@]+"${paths3[@]}"} ${args[@]+"${args[@]}"}
   c=$?
 fi
 t3=$(date +%s)
