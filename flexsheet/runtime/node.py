@@ -311,14 +311,15 @@ class Node:
     def _reject(self, reason: str) -> None:
         self.rejected_total += 1
         self.last_rejection = reason.splitlines()[0][:300]
-        self._log_limited(logging.WARNING, f"rejected: {self.last_rejection}")
+        self.log_limited(logging.WARNING, f"rejected: {self.last_rejection}")
 
     def _handler_error(self, where: str) -> None:
         self.errors_total += 1
         self.state_message = f"handler error in {where}"
         self.log.exception("handler error in %s (node keeps running)", where)
 
-    def _log_limited(self, level: int, line: str) -> None:
+    def log_limited(self, level: int, line: str) -> None:
+        """Log ``line`` at ``level`` at most once a second; the lines dropped meanwhile are counted in the next."""
         now = time.monotonic()
         if now - self._last_log >= 1.0:
             extra = f" (+{self._suppressed} more suppressed)" if self._suppressed else ""

@@ -37,13 +37,15 @@ from flexsheet.runtime.container import Container, Member
 from flexsheet.runtime.node import Node
 from flexsheet.runtime.plugins import node_class
 from flexsheet.runtime.qos import QoS
+from flexsheet.twin.camera import twin_renderer
+from flexsheet.twin.camera_source import sim_config
 from flexsheet.twin.finger import FingerScript
 from flexsheet.twin.truth import TwinTruth
 from flexsheet.vision.camera_model import camera_model
 from flexsheet.vision.stereo_calibration import to_message
 from messages import StereoFrame
 from messages import topics as T
-from nodes.camera.node import CameraParams, published_registration, sim_config, twin_renderer
+from nodes.camera.node import CameraParams, published_registration
 
 ROOT = Path(__file__).resolve().parents[2]
 RATE_HZ = 48.0
@@ -55,7 +57,7 @@ def _frames(n: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], object, np.nda
     """``n`` stereo pairs of the ideal twin along the paper's 10 s stroke, its calibration and camera pose."""
     p = CameraParams(source="sim", model="ximea", twin={"realism": "ideal", "truth_seed": 0})
     calib = camera_model("ximea")
-    published, T_dc, _ = published_registration(p, calib)
+    published, T_dc, _ = published_registration(p, calib, exact_nominal=True)
     renderer = twin_renderer(TwinTruth.draw(0, "ideal"), sim_config(p))
     script = FingerScript(mode="stroke", moving_time=10.0)   # the paper's 10 s stroke (the world's default)
     frames = []

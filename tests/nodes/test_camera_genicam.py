@@ -324,7 +324,7 @@ async def _child(out_path: str) -> None:
         async with NodeHarness(CameraNode, cam_params, name="camera") as cam, \
                 NodeHarness(TriangulatorNode, {"max_stereo_skew_s": 0.010}, name="triangulator") as tri:
             rec = {}
-            pairer = cam.node.genicam.pairer
+            pairer = cam.node.source.genicam.pairer
             forward = pairer.on_pair
 
             def spy(p):  # device stamps of each pair, keyed by the exposure stamp the node will publish
@@ -336,12 +336,12 @@ async def _child(out_path: str) -> None:
             n0 = len(cam.messages(topics.STEREO))
             cam.transport.listeners.append(tri.transport.deliver)   # camera -> triangulator (real codec)
             await asyncio.sleep(4.0)
-            await asyncio.to_thread(cam.node.genicam.close)         # stop acquisition, keep the figures
+            await asyncio.to_thread(cam.node.source.genicam.close)         # stop acquisition, keep the figures
             await tri.settle(0.5)
             cam.transport.listeners.clear()
             frames = cam.messages(topics.STEREO)[n0:]
             hb = cam.node.heartbeat()
-            stats = cam.node.genicam.stats()
+            stats = cam.node.source.genicam.stats()
             fts = tri.messages(topics.FINGERTIP)
             sub = tri.node._subs[topics.STEREO.name][0]
             rec = [rec[round(f.exposure_stamp, 6)] for f in frames]

@@ -177,8 +177,8 @@ def test_camera_node_publishes_the_calibrated_registration_not_the_truth(tmp_pat
             assert not np.allclose(cal.T_display_camera, nom.T_display_camera)
             shipped = camera_model("ximea")
             assert np.allclose(cal.K1, shipped["K1"]) and not np.allclose(cal.K1, truth.camera_calib["K1"])
-            assert np.allclose(h.node.renderer.T_dc, truth.T_display_camera)       # images: the truth's
-            assert np.allclose(h.node.renderer.model.K1, truth.camera_calib["K1"])
+            assert np.allclose(h.node.source.renderer.T_dc, truth.T_display_camera)       # images: the truth's
+            assert np.allclose(h.node.source.renderer.model.K1, truth.camera_calib["K1"])
             assert "display.yaml" in h.node.status_line() and "realistic twin, truth seed 2" in h.node.status_line()
     asyncio.run(scenario())
 
@@ -207,9 +207,9 @@ def test_camera_node_drops_frames_at_the_configured_rate(tmp_path):
             node = h.node
             for _ in range(60):       # 60 ticks: 0.6 s at 100 Hz, longer on a loaded machine (wall clock)
                 await h.settle(0.5)
-                if node.frames + node.dropped >= 60:
+                if node.frames + node.source.dropped >= 60:
                     break
-            frames, dropped = node.frames, node.dropped
+            frames, dropped = node.frames, node.source.dropped
             n = frames + dropped
             assert n >= 60
             frac = dropped / n
@@ -217,5 +217,5 @@ def test_camera_node_drops_frames_at_the_configured_rate(tmp_path):
             # every frame counted as sent arrives (the last may still be in flight when counted): seq 0..frames-1
             got = await h.wait_for(topics.STEREO, n=frames, timeout=5.0)
             assert [m.header.seq for m in got[:frames]] == list(range(frames))
-            assert f"dropped {node.dropped} of {node.frames + node.dropped}" in node.status_line()
+            assert f"dropped {node.source.dropped} of {node.frames + node.source.dropped}" in node.status_line()
     asyncio.run(scenario())

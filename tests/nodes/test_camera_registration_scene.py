@@ -58,7 +58,7 @@ def test_board_scene_follows_the_arms_and_waits_for_them():
             shift = np.linalg.norm(c1[1].mean(axis=0) - found[0][1].mean(axis=0))
             spread = np.ptp(c1[1][:, 0]) / np.ptp(found[0][1][:, 0])
             assert shift > 5.0 or abs(spread - 1.0) > 0.1, (shift, spread)
-            assert h.node.srv_twin_state({})["scene"] == "board"
+            assert h.node.source.srv_twin_state({})["scene"] == "board"
             assert call["twin/scene"]({"scene": "finger"}) == "finger"
     asyncio.run(scenario())
 
@@ -73,12 +73,12 @@ def test_pattern_scene_lights_the_sheet_with_the_projected_image():
             call["twin/scene"]({"scene": "patterns"})
             _hold(h, np.eye(4))
             dark = await _fresh(h)
-            assert h.node.srv_twin_state({})["projector_stamp"] is None
+            assert h.node.source.srv_twin_state({})["projector_stamp"] is None
             msg = ProjectorImage(header=Header(stamp=123.5, seq=7), image=np.full((h_, w), 255, np.uint8),
                                  showing=True, name="white.png")
             h.inject(topics.PROJECTOR_IMAGE, msg)
             await h.settle(0.2)
-            assert h.node.srv_twin_state({})["projector_stamp"] == 123.5
+            assert h.node.source.srv_twin_state({})["projector_stamp"] == 123.5
             lit = await _fresh(h)
             gain = lit.left.astype(float) - dark.left.astype(float)
             assert np.percentile(gain, 95) > 80.0                # the sheet, lit white, ≫ the sensor noise
@@ -117,5 +117,5 @@ def test_bad_scene_requests_are_refused_naming_the_field(args, match):
             call = {n: f for n, (f, *_) in h.node._pending_services.items()}
             with pytest.raises(ValueError, match=match):
                 call["twin/scene"](args)
-            assert h.node.scene.scene == "finger"                 # a refused request changes nothing
+            assert h.node.source.scene.scene == "finger"                 # a refused request changes nothing
     asyncio.run(scenario())

@@ -149,7 +149,7 @@ def test_camera_node_holds_a_stale_finger_truth_and_never_returns_to_the_param_p
             res = FingertipTracker(cal).process(f.left, f.right, f.exposure_stamp)
             held = p + 0.1 * v                                       # the extrapolation stops at 0.1 s
             assert res.valid and np.linalg.norm(res.position - held) < 2e-3, (res.position, held)
-            param, _ = default_trajectory(f.exposure_stamp - h.node._t0)
+            param, _ = default_trajectory(f.exposure_stamp - h.node.source._t0)
             assert np.linalg.norm(res.position - param) > 5e-3       # not the param path's finger
             line = h.node.status_line()
             assert "finger: /world/finger, last" in line and "s ago" in line, line
@@ -168,7 +168,7 @@ def test_camera_node_falls_back_to_trajectory_bumblebee2():
             from flexsheet.twin.camera import default_trajectory
             from flexsheet.vision.tracker import FingertipTracker
             res = FingertipTracker(cal).process(f.left, f.right, f.exposure_stamp)
-            truth, _ = default_trajectory(f.exposure_stamp - h.node._t0)
+            truth, _ = default_trajectory(f.exposure_stamp - h.node.source._t0)
             assert res.valid and np.linalg.norm(res.position - truth) < 2e-3
     asyncio.run(scenario())
 
