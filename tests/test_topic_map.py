@@ -1,7 +1,8 @@
 """The topic map of docs/architecture.md is generated: every topic of ``messages/topics.py`` with the nodes of
 ``launch/sim.yaml`` that publish and subscribe it, read with ``ast`` from each node type's module (its
-``self.publisher(...)`` and ``self.subscribe(...)`` calls; the arm topics by the node's ``arm`` param) and from the
-recorder's ``topics`` param. The Foxglove bridge (``viz``) subscribes to what a viewer opens, so it is not listed.
+``self.publisher(...)`` and ``self.subscribe(...)`` calls; the arm topics by the node's ``arm`` param), from its
+port's source (the module of the entry point its ``source`` param names: its ``subscribe`` calls and its ``inputs``)
+and from the recorder's ``topics`` param. The Foxglove bridge (``viz``) subscribes to what a viewer opens, so it is not listed.
 
 On a mismatch, the test prints the table to paste between the doc's ``topics:begin``/``topics:end`` markers.
 """
@@ -24,12 +25,19 @@ BEGIN, END = "<!-- topics:begin -->", "<!-- topics:end -->"
 #: node types whose topics come from the launch file or from a viewer, not from their code
 DYNAMIC = {"recorder", "player", "viz"}
 ARMS = ("left", "right")
+#: node type -> the entry-point group of its port's sources (its ``source`` param, default ``sim``, names one)
+PORTS = {"camera": "flexsheet.camera_sources", "head_camera": "flexsheet.head_camera_sources"}
+
+
+def _entry_files(group: str) -> dict[str, Path]:
+    """entry name -> the file of its module (the ``group`` entry points of pyproject.toml)."""
+    eps = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["entry-points"][group]
+    return {k: ROOT / (v.split(":")[0].replace(".", "/") + ".py") for k, v in eps.items()}
 
 
 def _type_files() -> dict[str, Path]:
-    """node type -> the file of its class (the ``flexsheet.nodes`` entry points of pyproject.toml)."""
-    eps = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["entry-points"]["flexsheet.nodes"]
-    return {k: ROOT / (v.split(":")[0].replace(".", "/") + ".py") for k, v in eps.items()}
+    """node type -> the file of its class (the ``flexsheet.nodes`` entry points)."""
+    return _entry_files("flexsheet.nodes")
 
 
 def _topic_of(arg: ast.expr, arm: str | None) -> list[str]:
@@ -61,6 +69,10 @@ def _endpoints(source: str, arm: str | None) -> tuple[set[str], set[str]]:
                 pub.update(_topic_of(n.args[0], arm))
             elif n.func.attr in ("subscribe", "sample"):     # a sampled topic is subscribed too
                 sub.update(_topic_of(n.args[0], arm))
+        elif isinstance(n, ast.Assign) and [getattr(t, "id", "") for t in n.targets] == ["inputs"] \
+                and isinstance(n.value, ast.Tuple):          # a port source's inputs: its node subscribes them
+            for e in n.value.elts:
+                sub.update(_topic_of(e, arm))
     return pub, sub
 
 
@@ -76,6 +88,10 @@ def topic_table(launch: dict, files: dict[str, Path]) -> str:
         if node["type"] in DYNAMIC:
             continue
         pub, sub = _endpoints(files[node["type"]].read_text(), params.get("arm"))
+        if node["type"] in PORTS:
+            port_pub, port_sub = _endpoints(_entry_files(PORTS[node["type"]])[params.get("source", "sim")].read_text(),
+                                            params.get("arm"))
+            pub, sub = pub | port_pub, sub | port_sub
         for t in pub:
             pubs[t].add(name)
         for t in sub:
