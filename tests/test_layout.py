@@ -125,8 +125,6 @@ def test_nodes_import_only_flexsheet_messages_and_themselves():
 
 #: the nodes that are devices' adapters (the world and the arm controller are the twin's own nodes)
 DEVICE_NODES = ("camera", "head_camera", "triangulator", "planner", "arm_bridge", "fem", "renderer", "viz")
-#: device nodes whose simulated side still lives in the node (their port not yet drawn); only ever shrinks
-TWIN_IN_NODE = {"arm_bridge"}
 
 
 def _adapter_files(name: str) -> list[Path]:
@@ -136,15 +134,12 @@ def _adapter_files(name: str) -> list[Path]:
 
 def test_device_nodes_reach_the_twin_only_through_ports():
     """A device node takes its device through a port (``flexsheet/vision/camera_port.py``,
-    ``head_camera_port.py``: an entry point per source); the twin provides the simulated side. No other device
-    node's adapter imports ``flexsheet.twin``."""
-    bad = [f"{p.relative_to(ROOT)}:{line}: imports {mod}" for name in DEVICE_NODES if name not in TWIN_IN_NODE
+    ``head_camera_port.py``, ``flexsheet/arm/controller_port.py``: an entry point per source); the twin provides
+    the simulated side. No device node's adapter imports ``flexsheet.twin``."""
+    bad = [f"{p.relative_to(ROOT)}:{line}: imports {mod}" for name in DEVICE_NODES
            for p in _adapter_files(name) for line, mod in _imports(p)
            if mod == "flexsheet.twin" or mod.startswith("flexsheet.twin.")]
     assert bad == [], "device nodes importing the twin (put it behind a port):\n" + "\n".join(bad)
-    still = {name for name in TWIN_IN_NODE if any(mod.startswith("flexsheet.twin") for p in _adapter_files(name)
-                                                  for _, mod in _imports(p))}
-    assert still == TWIN_IN_NODE, f"no longer importing the twin: remove from TWIN_IN_NODE: {TWIN_IN_NODE - still}"
 
 
 def test_model_is_pure():

@@ -38,6 +38,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from flexsheet.arm.bridge_config import DEFAULT_PERIOD, DEFAULT_PORT, BridgeConfig
+from flexsheet.arm.controller_port import controller_source
 from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics
 from flexsheet.arm.limiter import StreamLimiter
 from flexsheet.arm.sheet_motion import SheetSegment
@@ -52,8 +53,6 @@ from flexsheet.planning.keepout import KeepOut, arm_clearance
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import config_fields, params_model
 from flexsheet.runtime.qos import QoS
-from flexsheet.twin.lab_clock import arm_clock_offset
-from flexsheet.twin.loopback import LoopbackModbusClient
 from messages import ArmJointState, ArmTarget, EyePose, topics
 from nodes.arm_bridge.modbus_link import ModbusLink
 from nodes.arm_bridge.mxt_link import MxtLink
@@ -74,8 +73,11 @@ _DEVICE = {
     "arm": (str, Field(default="left", pattern="^(left|right)$", description="which sheet edge: left or right")),
     "protocol": (Literal["modbus", "mxt"], Field(default="modbus", description="modbus (Modbus TCP register map) "
                                                  "or mxt (MELFA real-time external control, UDP)")),
+    "source": (Literal["tcp", "sim"], Field(default="tcp", description="where the controller is "
+                                             "(flexsheet/arm/controller_port.py): tcp, over the network on the wall "
+                                             "clock; sim, the controller twin of this process on a simulated clock")),
     "host": (str, Field(default="127.0.0.1", description="controller (or twin) address")),
-    "twin": (TruthChoice, Field(default_factory=TruthChoice, description="simulated clock only: the hidden truth "
+    "twin": (TruthChoice, Field(default_factory=TruthChoice, description="source sim: the hidden truth "
                                 "that draws this arm PC's clock offset from main (flexsheet/twin/lab_clock.py)")),
     "port": (int | None, Field(default=None, ge=1, le=65535, description="controller port: Modbus TCP "
                                "(default 15020) or MXT UDP (default 10000)")),
@@ -89,7 +91,7 @@ ArmBridgeParams = params_model(
     "ArmBridgeParams",
     """Parameters of one arm bridge (SI units: m, rad, s).
 
-    ``arm``, ``protocol``, ``host``, ``port``, ``device_id``, ``display_calib`` and ``twin`` are the node's own
+    ``arm``, ``protocol``, ``source``, ``host``, ``port``, ``device_id``, ``display_calib`` and ``twin`` are the node's own
     (``port`` defaults by protocol); every other param is a field of — defined, defaulted and range-checked in —
     :class:`flexsheet.arm.bridge_config.BridgeConfig` (``period`` defaults by protocol).
     """,
@@ -130,23 +132,22 @@ class ArmBridgeNode(Node):
         qd = QD_MAX * p.speed_scale
         limiter = StreamLimiter(np.clip(np.zeros(6), Q_LOWER, Q_UPPER), p.period, qd, qd * p.accel_scale,
                                 Q_LOWER, Q_UPPER, margin)
-        sim = self.clock.simulated
-        # the arm PC's clock: main's plus its offset (the twin's draw on the simulated clock; the lab's own is
-        # whatever chrony leaves, docs/deploy.md); the sheet's motion is evaluated on it
-        self.clock_offset = arm_clock_offset(p.twin.truth_seed, p.twin.realism, p.arm) if sim else 0.0
-        if sim and p.protocol == "mxt":
-            raise ValueError("protocol mxt needs the wall clock (launch file clock: wall): its UDP session is "
-                             "paced by the controller's own 7.1 ms clock")
+        source = controller_source(p.source)
+        source.check_clock(self.clock.simulated)
+        if p.protocol not in source.protocols:
+            raise ValueError(f"source {p.source} carries protocol {' or '.join(sorted(source.protocols))}, not "
+                             f"{p.protocol}")
+        self._paced_by_node = source.paced_by_node
+        # the arm PC's clock: main's plus its offset (the twin's draw; the lab's own is whatever chrony leaves,
+        # docs/deploy.md); the sheet's motion is evaluated on it
+        self.clock_offset = source.clock_offset(p)
         if p.protocol == "mxt":
             self.link = MxtLink(p.host, p.port, period=p.period, open_timeout=p.mxt_open_timeout,
                                 lost_cycles=p.mxt_lost_cycles)
         else:
-            extra = {}
-            if sim:   # the controller twin of this process, reached at a simulated instant
-
-                extra["client_factory"] = LoopbackModbusClient
+            client = source.modbus_client()
             self.link = ModbusLink(p.host, p.port, device_id=p.device_id, request_timeout=p.request_timeout,
-                                   auto_reset=p.auto_reset, **extra)
+                                   auto_reset=p.auto_reset, **({} if client is None else {"client_factory": client}))
         self.stream = ArmStream(self.tracker, limiter, self.link, backoff_min=p.backoff_min,
                                 backoff_max=p.backoff_max, on_cycle=self.on_cycle, clock=self.arm_stamp,
                                 enabled=p.enabled, monotonic=self.monotonic)
@@ -165,8 +166,8 @@ class ArmBridgeNode(Node):
         self.keepout = KeepOut(margin=p.keepout_margin)
         self._eye: np.ndarray | None = None
         self.subscribe(topics.EYE_POSE, self.on_eye_pose, qos=QoS.LATEST)
-        if sim:   # the simulated clock's timer paces the cycles (the stream's own loop paces the wall clock)
-            self.timer(p.period, self._sim_cycle)
+        if self._paced_by_node:   # the node's timer paces the cycles (else the stream's own loop, on the wall clock)
+            self.timer(p.period, self._paced_cycle)
         else:
             self.stream.start()
         self._q_measured: np.ndarray | None = None
@@ -235,7 +236,7 @@ class ArmBridgeNode(Node):
         """As :meth:`arm_now` for what leaves now (the graph's ``clock.stamp()``): the stream's clock."""
         return self.clock.stamp() + self.clock_offset
 
-    async def _sim_cycle(self) -> None:
+    async def _paced_cycle(self) -> None:
         await self.stream.step(self.now())
 
     async def teardown(self) -> None:
@@ -287,7 +288,7 @@ class ArmBridgeNode(Node):
             self._pending = msg
             return
         self.tracker.set_target(msg.pose, msg.source_stamp, self.arm_now(), strict=True, pull=msg.pull, motion=motion)
-        if await self.stream.refresh() and self.clock.simulated:   # write it now rather than at the next tick
+        if await self.stream.refresh() and self._paced_by_node:   # write it now rather than at the next tick
             await self.stream.rewrite_now()
 
     def on_cycle(self, rep: CycleReport) -> None:

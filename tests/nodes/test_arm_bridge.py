@@ -426,3 +426,15 @@ def test_the_arm_holds_while_the_other_cannot_follow_and_follows_again_after_it(
         finally:
             await twin.stop()
     asyncio.run(scenario())
+
+
+def test_the_in_process_controller_twin_is_refused_on_the_wall_clock_naming_the_fix():
+    """``source: sim`` is the controller twin reached at simulated instants: on the wall clock the bridge does not
+    start, and says to use ``clock: sim`` or reach a controller twin node over the network (``source: tcp``)."""
+    import pytest
+
+    async def scenario():
+        async with NodeHarness(ArmBridgeNode, params={"arm": "left", "source": "sim"}):
+            pass
+    with pytest.raises(Exception, match=r"source sim is the controller twin.*clock: sim.*source: tcp"):
+        asyncio.run(scenario())

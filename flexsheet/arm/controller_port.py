@@ -1,0 +1,60 @@
+"""The arm controller port: how an arm bridge reaches its controller, and its arm PC's clock.
+
+An arm bridge (``nodes/arm_bridge``) streams one command per controller cycle over its ``protocol`` (Modbus TCP
+or MELFA MXT). Where that controller is, and what its arm PC's clock is, comes from a
+:class:`ControllerSource`: an entry point of the group :data:`SOURCES_GROUP` (``pyproject.toml``), named by the
+bridge's ``source`` param:
+
+* ``tcp``: a controller (or a controller twin node) over the network, on the wall clock; the arm PC's clock is
+  main's (chrony keeps them together, docs/deploy.md) (``nodes/arm_bridge/links.py``);
+* ``sim``: the controller twin of this process, reached in-process at simulated instants (Modbus only), the arm
+  PC's clock off main's by the hidden truth's draw (:class:`flexsheet.twin.controller_source.TwinController`).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar
+
+from flexsheet.runtime.plugins import plugin
+
+__all__ = ["SOURCES_GROUP", "ControllerSource", "controller_source"]
+
+#: the entry-point group of the controller sources (name: an arm bridge's ``source`` param)
+SOURCES_GROUP = "flexsheet.controller_sources"
+
+
+class ControllerSource(ABC):
+    """Where a bridge's controller is (module doc). Class-level: a source has no state of its own."""
+
+    #: the bridge protocols it carries
+    protocols: ClassVar[frozenset[str]] = frozenset()
+    #: True: the bridge's timer paces the cycles and a new target is written at once (the controller is
+    #: reached at the node clock's instants); False: the stream's own loop paces them on the wall clock
+    paced_by_node: ClassVar[bool] = False
+
+    @classmethod
+    @abstractmethod
+    def check_clock(cls, simulated: bool) -> None:
+        """Raises ``ValueError`` naming the fix when the node's clock (``simulated`` or the wall clock) cannot
+        reach this controller."""
+
+    @classmethod
+    def modbus_client(cls) -> type | None:
+        """The Modbus client class (pymodbus's ``AsyncModbusTcpClient`` interface); None: pymodbus's own TCP
+        client."""
+        return None
+
+    @classmethod
+    def clock_offset(cls, params: Any) -> float:
+        """The arm PC's clock minus main's, s, for the bridge's ``params``; 0 by default."""
+        return 0.0
+
+
+def controller_source(name: str) -> type[ControllerSource]:
+    """The :class:`ControllerSource` installed as ``name`` in :data:`SOURCES_GROUP`. Raises ``LookupError``
+    naming the installed ones."""
+    cls = plugin(SOURCES_GROUP, name, what="controller source")
+    if not (isinstance(cls, type) and issubclass(cls, ControllerSource)):
+        raise LookupError(f"controller source {name!r} ({SOURCES_GROUP}) is {cls!r}, not a ControllerSource")
+    return cls

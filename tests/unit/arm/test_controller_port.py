@@ -1,0 +1,40 @@
+"""The arm controller port: its sources are entry points, named by an arm bridge's ``source``; each says which
+clock and protocols reach it, and the arm PC's clock offset."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import pytest
+
+from flexsheet.arm.controller_port import SOURCES_GROUP, ControllerSource, controller_source
+from flexsheet.model.truth_choice import TruthChoice
+from flexsheet.twin.controller_source import TwinController
+from flexsheet.twin.loopback import LoopbackModbusClient
+
+
+def test_the_network_controller_carries_both_protocols_on_the_wall_clock_only():
+    tcp = controller_source("tcp")
+    assert issubclass(tcp, ControllerSource) and tcp.__module__ == "nodes.arm_bridge.links"
+    assert tcp.protocols == {"modbus", "mxt"} and not tcp.paced_by_node and tcp.modbus_client() is None
+    tcp.check_clock(False)
+    with pytest.raises(ValueError, match="source: sim"):
+        tcp.check_clock(True)
+    assert tcp.clock_offset(SimpleNamespace(arm="left")) == 0.0          # chrony keeps the PCs together
+
+
+def test_the_twin_is_modbus_in_process_on_a_simulated_clock_with_the_truths_clock_offset():
+    assert controller_source("sim") is TwinController
+    assert TwinController.protocols == {"modbus"} and TwinController.paced_by_node
+    assert TwinController.modbus_client() is LoopbackModbusClient
+    TwinController.check_clock(True)
+    with pytest.raises(ValueError, match="clock: sim"):
+        TwinController.check_clock(False)
+    ideal = TwinController.clock_offset(SimpleNamespace(arm="left", twin=TruthChoice(realism="ideal")))
+    real = [TwinController.clock_offset(SimpleNamespace(arm=a, twin=TruthChoice(truth_seed=3))) for a in ("left", "right")]
+    assert ideal == 0.0 and all(0.0 < abs(o) <= 0.25e-3 for o in real) and real[0] != real[1]
+
+
+def test_an_unknown_source_is_named_with_the_installed_ones():
+    with pytest.raises(LookupError, match=rf"unknown controller source 'udp' \({SOURCES_GROUP}\); known: sim, tcp"):
+        controller_source("udp")
