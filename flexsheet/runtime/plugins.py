@@ -47,10 +47,14 @@ def node_class(name: str) -> type:
     raise LookupError(unknown_node_type(name))
 
 
-def plugin(group: str, name: str, what: str = "entry") -> object:
-    """The object installed as ``name`` in entry-point ``group``, its module imported now. Raises
-    ``LookupError`` naming ``what`` and the installed names when there is none."""
+def plugin(group: str, name: str, what: str = "entry", base: type | None = None) -> object:
+    """The object installed as ``name`` in entry-point ``group``, its module imported now; with ``base``, a
+    subclass of it. Raises ``LookupError`` naming ``what`` and the installed names when there is none, or when
+    it is not a ``base``."""
     for ep in entry_points(group=group, name=name):
-        return ep.load()
+        obj = ep.load()
+        if base is not None and not (isinstance(obj, type) and issubclass(obj, base)):
+            raise LookupError(f"{what} {name!r} ({group}) is {obj!r}, not a {base.__name__}")
+        return obj
     known = ", ".join(table(group)) or "none (is flexsheet installed: pip install -e .?)"
     raise LookupError(f"unknown {what} {name!r} ({group}); known: {known}")

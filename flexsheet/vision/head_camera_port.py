@@ -74,7 +74,4 @@ class HeadCameraSource(ABC):
 def head_camera_source(name: str) -> type[HeadCameraSource]:
     """The :class:`HeadCameraSource` class installed as ``name`` in :data:`SOURCES_GROUP`. Raises
     ``LookupError`` naming the installed ones."""
-    cls = plugin(SOURCES_GROUP, name, what="head camera source")
-    if not (isinstance(cls, type) and issubclass(cls, HeadCameraSource)):
-        raise LookupError(f"head camera source {name!r} ({SOURCES_GROUP}) is {cls!r}, not a HeadCameraSource")
-    return cls
+    return plugin(SOURCES_GROUP, name, what="head camera source", base=HeadCameraSource)  # type: ignore[return-value]
