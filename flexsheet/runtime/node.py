@@ -182,6 +182,15 @@ class Node:
         """Time for intervals, s: ``time.monotonic()``, or :meth:`now` on a simulated clock."""
         return self._clock.now() if self._clock.simulated else time.monotonic()
 
+    async def background(self, target: Callable[..., Any], name: str, *args: Any) -> None:
+        """Run ``target(*args)`` in a daemon thread named ``name``, for work a node attaches when it is done. On
+        a simulated clock it runs to completion (in a worker thread, the loop free) before this returns: what it
+        attaches must not arrive at a host-dependent moment of simulated time."""
+        if self._clock.simulated:
+            await asyncio.to_thread(target, *args)
+        else:
+            threading.Thread(target=target, args=args, name=name, daemon=True).start()
+
     @property
     def clock(self) -> Clock:
         """This node's :class:`Clock` (``clock.simulated`` is True in a lockstep replay)."""

@@ -138,24 +138,16 @@ class FemNode(Node):
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST, sim_cost=LAB.compute("fem"))
         if isinstance(self.model, RealtimeModel):
             if p.nonlinear:
-                await self._background(self._build_nonlinear, "fem-corotational")
+                await self.background(self._build_nonlinear, "fem-corotational")
             if table.missing and p.snapshot_build:
                 self.state_message = (f"fem: scene {self.scene.name!r}: building nonlinear snapshots in the "
                                       "background - serving the LINEAR model")
                 self.log.warning(self.state_message)
-                await self._background(self._build_snapshots, "fem-snapshots", ArrayCache(p.cache_dir or None),
+                await self.background(self._build_snapshots, "fem-snapshots", ArrayCache(p.cache_dir or None),
                                        Material.of_scene(self.scene.material))
         await asyncio.to_thread(self._publish_force_depth)
         if isinstance(self.model, SceneModel):     # its sparse fallback serves any push off the stroke's band
-            await self._background(self._warm_sparse, "fem-sparse")
-
-    async def _background(self, target, name: str, *args) -> None:
-        """Run ``target(*args)`` in a daemon thread; on a simulated clock to completion before the node is
-        active (what it attaches must not arrive at a host-dependent moment of simulated time)."""
-        if self.clock.simulated:
-            await asyncio.to_thread(target, *args)
-        else:
-            threading.Thread(target=target, args=args, name=name, daemon=True).start()
+            await self.background(self._warm_sparse, "fem-sparse")
 
     def _publish_force_depth(self) -> None:
         """Push the served model along the stroke (:func:`flexsheet.fem.force_depth.build_force_depth`) and

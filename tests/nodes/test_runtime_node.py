@@ -472,3 +472,32 @@ def test_a_node_stopped_while_a_sync_handler_is_inside_opencv_exits_cleanly(run)
     assert "node stopped" in proc.stdout, proc.stderr[-2000:]
     assert "terminate called" not in proc.stderr, proc.stderr[-2000:]
     assert proc.returncode == 0, proc.stderr[-2000:]
+
+
+def test_background_work_runs_beside_the_wall_clock_and_to_completion_on_a_simulated_clock():
+    """``Node.background``: on the wall clock the call returns while the work runs in its named daemon thread; on
+    a simulated clock the work is done when the call returns (it attaches at a host-independent instant)."""
+    from flexsheet.runtime.clock import SimClock
+
+    release, names, done = threading.Event(), [], []
+
+    def work(tag: str) -> None:
+        names.append(threading.current_thread().name)
+        if tag == "wall":
+            release.wait(5.0)
+        done.append(tag)
+
+    async def scenario():
+        async with NodeHarness(ListenerNode, params={"delay": 0.0}) as h:
+            await h.node.background(work, "bg-wall", "wall")
+            assert done == []                                   # returned while the work waits
+            release.set()
+            for _ in range(100):
+                if done:
+                    break
+                await asyncio.sleep(0.01)
+            h.node._clock = SimClock()                          # the same node on a simulated clock
+            await h.node.background(work, "bg-sim", "sim")
+            assert done == ["wall", "sim"]                      # done when the call returned
+    asyncio.run(scenario())
+    assert names[0] == "bg-wall" and names[1] != "bg-wall"
