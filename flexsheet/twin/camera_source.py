@@ -56,7 +56,6 @@ class TwinCamera(CameraSource):
     def __init__(self, host: CameraHost, truth, calib: dict):
         p = host.params
         self.host = host
-        self.truth_choice = p.twin
         self._drop_rate = (REALISTIC_DROP_RATE if p.twin.realism == "realistic" else 0.0) \
             if p.drop_rate is None else float(p.drop_rate)
         self._drop_rng = np.random.default_rng([p.seed, p.twin.truth_seed, 31])
@@ -182,7 +181,7 @@ class TwinCamera(CameraSource):
             await asyncio.to_thread(self._frame)
 
     def status_line(self) -> str:
-        tc = self.truth_choice
+        tc = self.host.params.twin
         with self._lock:
             rx = self._truth_rx
         finger = ("finger: param trajectory (no /world/finger yet)" if not math.isfinite(rx)
