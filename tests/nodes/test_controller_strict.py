@@ -409,7 +409,7 @@ def test_planner_rejects_a_fingertip_from_the_future_alone_and_serves_the_next()
                 h.inject(topics.FINGERTIP, _ft(time.time(), (0.02, 0.003 + 0.001 * k, 0.0)))
                 await h.wait_for(topics.SHEET_TARGET, n=5 + k)
             return ([m.status for m in h.messages(topics.SHEET_TARGET)], h.rejected(topics.FINGERTIP),
-                    h.node.rejected_total, h.node.planner.counts)
+                    h.node.rejected_total, h.node.stage.planner.counts)
 
     statuses, rejected, total, counts = asyncio.run(scenario())
     served = [s for s in statuses[4:] if not s.startswith("hold")]

@@ -140,27 +140,6 @@ def test_reach_takes_the_arm_bases_from_display_calib(tmp_path):
         PlannerParams(display_calib=str(path))
 
 
-def test_fem_stiffness_counts_only_for_the_scene_the_fem_solved():
-    """``fem_solves_scene``: the FEM's dF/dd is used for the scene whose key its message names; an empty key
-    (a message from before the FEM read scenes) only on the paper's cylinder."""
-    from flexsheet.model.scenes import SCENES_DIR, load_scene, paper_scene
-    from nodes.planner.node import fem_solves_scene
-
-    organ, sphere = load_scene(SCENES_DIR / "organ.yaml"), load_scene(SCENES_DIR / "sphere.yaml")
-
-    def msg(key: str) -> ObjectDeformation:
-        return ObjectDeformation(header=Header(stamp=1.0), vertices=np.zeros((3, 3), np.float32),
-                                 faces=np.array([[0, 1, 2]], np.int32), contact_force=0.1, stiffness=120.0,
-                                 depth=0.003, contact_point=np.zeros(3), method="condensed", scene_key=key)
-
-    assert fem_solves_scene(msg(organ.key()), organ)
-    assert not fem_solves_scene(msg(organ.key()), sphere)
-    assert not fem_solves_scene(msg(sphere.key()), organ, organ.key())
-    assert not fem_solves_scene(msg(""), organ)                  # unknown: not this organ
-    assert fem_solves_scene(msg(""), paper_scene())              # unknown: the old FEM's cylinder
-    assert fem_solves_scene(msg(paper_scene().key()), paper_scene())
-
-
 def test_the_pull_is_capped_at_the_targets_and_the_targets_carry_it():
     """The clamp force is capped at pull_margin × the torque-limited pull at the targets the planner sends
     (flexsheet.planning.pull_guard; 33.5 N at home, set by J3), and each ArmTarget carries the planned pull,
@@ -174,7 +153,7 @@ def test_the_pull_is_capped_at_the_targets_and_the_targets_carry_it():
         async with NodeHarness(PlannerNode, params={"object_stiffness": 900.0,
                                                     "stiffness_from_scene": False}) as h:
             home = max_pull(ArmKinematics("left", LEFT_BASE), home_joints("left"))[0]
-            assert h.node.planner.pull_limit == pytest.approx(0.9 * home, rel=0.02) and 0.9 * home < 40.0
+            assert h.node.stage.planner.pull_limit == pytest.approx(0.9 * home, rel=0.02) and 0.9 * home < 40.0
             t0 = time.time()
             for k in range(5):
                 h.inject(topics.FINGERTIP, _ft([0.02 * np.cos(0.1 * k), 0.02 * np.sin(0.1 * k), 0.0],

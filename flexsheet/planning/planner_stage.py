@@ -1,0 +1,200 @@
+"""The planner node's work as one stage (pure; time is passed in): inputs in, a plan and both arms' command out.
+
+:class:`PlannerStage` holds the :class:`~flexsheet.planning.surface_planner.SurfacePlanner`, the viewer's
+:class:`~flexsheet.planning.head_guard.HeadGuard`, what the FEM said of the object (its latched force–depth
+table, or its fresh dF/dd and press), and the :class:`~flexsheet.planning.arm_command.ArmCommander`. The node
+turns messages into its calls and its results into messages. Each call returns the lines to log with it.
+
+Units: m, N, N/m, s; display frame.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from flexsheet.calibration.display_calib import xyzyaw_from_pose
+from flexsheet.calibration.display_calib_file import load_display_calib
+from flexsheet.calibration.sheet import TERMS
+from flexsheet.model.force_depth import ForceDepth
+from flexsheet.model.motion_limits import MotionLimits
+from flexsheet.model.scenes import Scene, is_paper_cylinder
+from flexsheet.model.tension import SheetMaterial
+from flexsheet.planning.arm_command import ArmCommand, ArmCommander
+from flexsheet.planning.compliance import SceneCompliance
+from flexsheet.planning.head_guard import HeadGuard
+from flexsheet.planning.keepout import KeepOut
+from flexsheet.planning.limits import ReachModel
+from flexsheet.planning.plan import Hold, Plan
+from flexsheet.planning.planner_config import PlannerConfig
+from flexsheet.planning.shape import planner_shape
+from flexsheet.planning.surface_planner import SurfacePlanner, scale_depths, sheet_scene_scale
+from flexsheet.runtime.params import build
+
+__all__ = ["PlannerStage", "planner_config", "fem_solves_scene", "MATERIAL_RENAME"]
+
+#: the sheet model's source, by whether it was identified
+IDENTIFIED = {True: "identified from presses (display_calib sheet)",
+              False: "the nominal string band (no identified sheet in display_calib)"}
+#: launch-file name of :attr:`SheetMaterial.size`
+MATERIAL_RENAME = {"size": "sheet_size"}
+
+
+def fem_solves_scene(scene_key: str, sc: Scene, key: str | None = None) -> bool:
+    """Whether a FEM message with ``scene_key`` is about scene ``sc``: it equals ``sc.key()`` (or ``key``,
+    precomputed); an empty key (a message from before the FEM read scenes) counts only when ``sc`` is the
+    paper's cylinder, the only object that FEM solved."""
+    if scene_key:
+        return scene_key == (key if key is not None else sc.key())
+    return is_paper_cylinder(sc)
+
+
+def _registered(p) -> tuple[ReachModel, SheetMaterial]:
+    """The reach model and the sheet: with a ``display_calib`` (the registered display), its arm bases
+    (``arms.left``/``arms.right``) and, where it has one, its identified ``sheet`` entry's terms on top of the
+    sheet params; else the ``left_base``/``right_base`` and sheet params. Raises ``ValueError`` naming the file
+    and entry when it is missing, unreadable or lacks an arm."""
+    reach, material = build(ReachModel, p), build(SheetMaterial, p, rename=MATERIAL_RENAME)
+    path = getattr(p, "display_calib", None)
+    if not path:
+        return reach, material
+    dc = load_display_calib(path, require=("arms.left", "arms.right"))
+    reach = replace(reach, left_base=xyzyaw_from_pose(dc.arms["left"].T_display_base),
+                    right_base=xyzyaw_from_pose(dc.arms["right"].T_display_base))
+    return reach, (dc.sheet.material(material) if dc.sheet is not None else material)
+
+
+def planner_config(p) -> PlannerConfig:
+    """The :class:`PlannerConfig` that params ``p`` (the planner node's) describe; raises ``ValueError`` on
+    inconsistent values or a bad ``display_calib``."""
+    reach, material = _registered(p)
+    return build(PlannerConfig, p, material=material, limits=build(MotionLimits, p), reach=reach)
+
+
+class PlannerStage:
+    """The planner's state and decisions. ``scene``: the object; ``p``: the planner node's params (read:
+    ``planner_config()``, ``stiffness_from_scene``, ``min_contact_depth``, ``head_radius``, ``keepout_margin``,
+    ``pull_margin``, ``arm_speed_scale``, ``arm_accel_scale``, ``use_fem_stiffness``, ``fem_timeout``,
+    ``fem_window``, ``object_stiffness``, and ``stiffness_scale`` in ``model_fields_set``). Raises
+    ``ValueError`` on an inconsistent config."""
+
+    def __init__(self, scene: Scene, p) -> None:
+        self.scene, self.p = scene, p
+        shape = planner_shape(scene)
+        compliance = SceneCompliance(scene, shape, p.min_contact_depth) if p.stiffness_from_scene else None
+        self.key = scene.key()
+        cfg = p.planner_config()
+        self.guard = HeadGuard(KeepOut(head_radius=p.head_radius, margin=p.keepout_margin), cfg.material.size)
+        self.planner = SurfacePlanner(shape, cfg, compliance, self.guard)
+        bases = {"left": cfg.reach.left_base, "right": cfg.reach.right_base}
+        self.commander = ArmCommander(bases, cfg.material, p.pull_margin, p.arm_speed_scale, p.arm_accel_scale)
+        self.k_fem: float | None = None
+        self._k_fem_at = 0.0
+        self._press: tuple[float, float] | None = None
+        self._k_hist: deque[tuple[float, float]] = deque(maxlen=256)
+        self.fem_other_scene = 0
+        self.scene_scale = None
+        self._source = ""
+        limit, self.first_line = self.commander.home_limit()
+        self.planner.set_pull_limit(limit)
+
+    def describe_sheet(self) -> str:
+        """The sheet model in words: identified from presses (``display_calib``'s ``sheet`` entry) or nominal."""
+        m = self.planner.cfg.material
+        nominal = build(SheetMaterial, self.p, rename=MATERIAL_RENAME)
+        identified = any(getattr(m, k) != getattr(nominal, k) for k in TERMS)
+        return (f"{IDENTIFIED[identified]} "
+                f"(w {m.contact_width * 1e3:.1f} mm, growth {m.contact_growth:.2f}, own {m.own_stiffness:.3g} N + "
+                f"{m.own_growth:.3g} N/m, stretching {m.stretching:.3g} N/m³, strain offset {m.strain_offset:+.4f}, "
+                f"position {m.position_u:+.3f} along / {m.position_v:+.3f} across)")
+
+    def set_force_depth(self, table: ForceDepth) -> str:
+        """The object's force–depth from its FEM: the request from now on. Unless ``stiffness_scale`` was set,
+        the scene's one scale (:func:`flexsheet.model.force_depth.scene_scale`) maps it between the sheet's force
+        at its least stretch and at the arms' pull at the home pose. Returns the line to log ('' none)."""
+        cfg, line = self.planner.cfg, ""
+        if "stiffness_scale" not in self.p.model_fields_set:
+            stroke_depth = self.scene.use.stroke_depth
+            sc = sheet_scene_scale(table, cfg.material, self.planner.max_stretch, stroke_depth, cfg.contrast_gain)
+            self.planner.cfg = replace(cfg, stiffness_scale=sc.scale)
+            self.scene_scale = sc
+            d_lo, d_hi = scale_depths(stroke_depth)
+            line = (f"object's force-depth from its FEM ({len(table.names)} points): one scale {sc.scale:.3g} for "
+                    f"the scene (presentable from {sc.low:.3g} to {sc.high:.3g} over {d_lo * 1e3:.0f}-"
+                    f"{d_hi * 1e3:.0f} mm; {'it fits' if sc.fits else 'it does NOT fit'}, "
+                    f"{100 * sc.saturated:.0f} % of its samples saturate)")
+        self.planner.set_force_depth(table)
+        return line
+
+    def set_fem(self, now: float, scene_key: str, stiffness: float, contact_force: float, depth: float) -> None:
+        """The FEM's local stiffness N/m and press (force N at depth m) of a valid solution at ``now`` s, kept
+        when positive and about this scene (:func:`fem_solves_scene`); with ``fem_window`` > 0 the median of the
+        last ``fem_window`` s."""
+        if not stiffness > 0.0:
+            return
+        if not fem_solves_scene(scene_key, self.scene, self.key):
+            self.fem_other_scene += 1
+            return
+        self._k_hist.append((now, float(stiffness)))
+        w = self.p.fem_window
+        recent = [k for t, k in self._k_hist if now - t <= w] if w > 0 else [float(stiffness)]
+        self.k_fem = float(np.median(recent))
+        self._k_fem_at = now
+        self._press = (float(contact_force), float(depth))
+
+    def stiffness(self, now: float) -> tuple[float | None, str]:
+        """(stiffness N/m, source): the FEM's while fresh ("fem"); ``None`` for the planner's compliance model
+        ("scene"); else ``object_stiffness`` ("param")."""
+        p = self.p
+        if p.use_fem_stiffness and self.k_fem is not None and now - self._k_fem_at <= p.fem_timeout:
+            return self.k_fem, "fem"
+        if self.planner.compliance is None:
+            return p.object_stiffness, "param"
+        return None, "scene"
+
+    def plan(self, now: float, t: float | None, pos) -> tuple[Plan | None, str]:
+        """The plan for a fingertip at ``pos`` (3,) m seen at ``t`` s (None: the marker is lost: hold), at ``now``
+        s; a lost head holds the pose while the stretch follows the push. Returns (plan or None when there is
+        no safe pose yet, a line on a change of the stiffness' source or '')."""
+        if t is None:
+            return self.planner.hold(Hold.MARKER_LOST), ""
+        k, source = self.stiffness(now)
+        press = self._press if source == "fem" else None
+        if self.guard.lost and not self.guard.near:
+            plan = self.planner.hold_pose(Hold.HEAD_LOST, t, pos, k, now=now, object_press=press)
+        else:
+            plan = self.planner.update(t, pos, k, now=now, object_press=press)
+        line = ""
+        if plan is not None and not plan.status.startswith("hold"):
+            line = self._note_source("table" if plan.k_source == "table" else source)
+        return plan, line
+
+    def command(self, plan: Plan, now: float, held: Callable[[float], tuple | None]) -> ArmCommand:
+        """Both arms' command for ``plan`` (:meth:`ArmCommander.command`, under the planner's current limits);
+        the pull limit at its targets caps the next plans."""
+        cmd, limit = self.commander.command(plan, now, self.planner.limiter.limits, held)
+        self.planner.set_pull_limit(limit)
+        return cmd
+
+    def _note_source(self, source: str) -> str:
+        """The stiffness' source in words when it changed, else ''."""
+        text = {"table": "the object's force-depth from its FEM (/object/force_depth)",
+                "fem": "the FEM's dF/dd, and its force from 2 mm deep",
+                "scene": "the scene's estimate at the contact (Hertz contact + inclusions, "
+                         "flexsheet/planning/compliance.py)",
+                "param": f"object_stiffness {self.p.object_stiffness:g} N/m"}[source]
+        if self.fem_other_scene and source != "fem":
+            text += (f"; the FEM's stiffness is not used: it solves another object than scene "
+                     f"{self.scene.name!r} ({self.fem_other_scene} messages so far)")
+        cfg = self.planner.cfg
+        if cfg.stiffness_scale != 1.0:
+            text += f"; x {cfg.stiffness_scale:.4g} (stiffness_scale" + (", the scene's)" if self.scene_scale else ")")
+        if cfg.contrast_gain != 1.0:
+            text += f"; contrast_gain {cfg.contrast_gain:g}"
+        if text == self._source:
+            return ""
+        self._source = text
+        return text
