@@ -13,7 +13,6 @@ bridge's ``source`` param:
 
 from __future__ import annotations
 
-from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
 from flexsheet.runtime.plugins import plugin
@@ -24,7 +23,7 @@ __all__ = ["SOURCES_GROUP", "ControllerSource", "controller_source"]
 SOURCES_GROUP = "flexsheet.controller_sources"
 
 
-class ControllerSource(ABC):
+class ControllerSource:
     """Where a bridge's controller is (module doc). Class-level: a source has no state of its own."""
 
     #: the bridge protocols it carries
@@ -33,11 +32,17 @@ class ControllerSource(ABC):
     #: reached at the node clock's instants); False: the stream's own loop paces them on the wall clock
     paced_by_node: ClassVar[bool] = False
 
+    #: the clock it is reached on: a simulated one (True) or the wall clock (False)
+    simulated_clock: ClassVar[bool] = False
+    #: what to do instead, said when the node runs on the other clock
+    other_clock: ClassVar[str] = ""
+
     @classmethod
-    @abstractmethod
-    def check_clock(cls, simulated: bool) -> None:
-        """Raises ``ValueError`` naming the fix when the node's clock (``simulated`` or the wall clock) cannot
-        reach this controller."""
+    def check_clock(cls, clock: Any) -> None:
+        """Raises ``ValueError`` naming the fix when the node's ``clock`` (its ``simulated``: a simulated clock or
+        the wall clock) cannot reach this controller."""
+        if bool(clock.simulated) != cls.simulated_clock:
+            raise ValueError(cls.other_clock)
 
     @classmethod
     def modbus_client(cls) -> type | None:

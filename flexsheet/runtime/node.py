@@ -191,6 +191,21 @@ class Node:
         else:
             threading.Thread(target=target, args=args, name=name, daemon=True).start()
 
+    async def pause(self, seconds: float, until: Callable[[], bool], poll: float) -> None:
+        """A handler's rest before its next message: on the wall clock sleep ``seconds``, then every ``poll`` s
+        until ``until()``; at once on a simulated clock, which waits for every handler (skip there instead)."""
+        if self._clock.simulated:
+            return
+        await asyncio.sleep(seconds)
+        while not until():
+            await asyncio.sleep(poll)
+
+    def require_wall_clock(self, what: str) -> None:
+        """Raise ``ValueError`` naming ``what`` when this node runs on a simulated clock (a real device's
+        timing, such as a window's vsync, cannot follow simulated time)."""
+        if self._clock.simulated:
+            raise ValueError(f"{what} needs the wall clock (launch file clock: wall), not a simulated one")
+
     @property
     def clock(self) -> Clock:
         """This node's :class:`Clock` (``clock.simulated`` is True in a lockstep replay)."""

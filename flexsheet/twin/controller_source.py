@@ -19,12 +19,10 @@ class TwinController(ControllerSource):
     protocols = frozenset({"modbus"})
     paced_by_node = True
 
-    @classmethod
-    def check_clock(cls, simulated: bool) -> None:
-        if not simulated:
-            raise ValueError("source sim is the controller twin of this process, reached at simulated instants: "
-                             "it needs the launch file's clock: sim; on the wall clock reach a controller twin node "
-                             "over the network (source: tcp)")
+    simulated_clock = True
+    other_clock = ("source sim is the controller twin of this process, reached at simulated instants: it needs the "
+                   "launch file's clock: sim; on the wall clock reach a controller twin node over the network "
+                   "(source: tcp)")
 
     @classmethod
     def modbus_client(cls) -> type:

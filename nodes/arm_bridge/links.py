@@ -14,9 +14,6 @@ class NetworkController(ControllerSource):
 
     protocols = frozenset({"modbus", "mxt"})
 
-    @classmethod
-    def check_clock(cls, simulated: bool) -> None:
-        if simulated:
-            raise ValueError("source tcp reaches a controller over the network on the wall clock (MXT's UDP session "
-                             "is paced by the controller's own 7.1 ms clock); on a simulated clock (clock: sim) use "
-                             "source: sim, the controller twin of this process")
+    other_clock = ("source tcp reaches a controller over the network on the wall clock (MXT's UDP session is "
+                   "paced by the controller's own 7.1 ms clock); on a simulated clock (clock: sim) use source: sim, "
+                   "the controller twin of this process")

@@ -133,7 +133,7 @@ class ArmBridgeNode(Node):
         limiter = StreamLimiter(np.clip(np.zeros(6), Q_LOWER, Q_UPPER), p.period, qd, qd * p.accel_scale,
                                 Q_LOWER, Q_UPPER, margin)
         source = controller_source(p.source)
-        source.check_clock(self.clock.simulated)
+        source.check_clock(self.clock)
         if p.protocol not in source.protocols:
             raise ValueError(f"source {p.source} carries protocol {' or '.join(sorted(source.protocols))}, not "
                              f"{p.protocol}")

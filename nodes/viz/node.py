@@ -37,7 +37,6 @@ joints) is rejected and counted.
 
 from __future__ import annotations
 
-import asyncio
 import dataclasses
 import math
 
@@ -188,23 +187,17 @@ class VizNode(Node):
         last = [-math.inf]
 
         async def on_message(msg) -> None:
-            if self.clock.simulated:
-                # a simulated clock waits for every handler: never sleep here; skip what the rate or an absent
-                # viewer does not want (the next message brings the newest state)
-                now = self.now()
-                if now - last[0] < rest or not self._watched():
-                    return
+            # skip what the rate or an absent viewer does not want (the next message brings the newest state)
+            now = self.monotonic()
+            if now - last[0] >= rest and self._watched():
                 last[0] = now
-            try:
-                out = self.streams.on_message(name, msg, self.now(), self.wanted)
-            except ValueError as exc:
-                raise InputRejected(str(exc)) from exc
-            self._emit(out)
-            if self.clock.simulated:
-                return
-            await asyncio.sleep(rest)  # QoS latest: what arrives meanwhile replaces itself (counted dropped)
-            while not self._watched():  # no viewer now: decode nothing, the newest message waits in the queue
-                await asyncio.sleep(_IDLE_S)
+                try:
+                    out = self.streams.on_message(name, msg, self.now(), self.wanted)
+                except ValueError as exc:
+                    raise InputRejected(str(exc)) from exc
+                self._emit(out)
+            # QoS latest: what arrives meanwhile replaces itself (counted dropped); no viewer: decode nothing
+            await self.pause(rest, self._watched, _IDLE_S)
         return on_message
 
     def _watched(self) -> bool:

@@ -224,8 +224,7 @@ def test_inputs_are_not_decoded_while_no_viewer_watches():
             return parked, h.node.streams.builder.get("/fingertip").header.seq, got
 
     parked, later, got = asyncio.run(scenario())
-    # the first arrival after the viewer left is decoded (the handler looks for viewers after handling), then
-    # nothing of seq 3..11 while nobody watched
-    assert parked == 2
+    # nothing of seq 2..11 is built while nobody watched (the handler looks for a viewer before building)
+    assert parked == 1
     assert later == 11                       # only the newest survived the depth-1 queue
     assert json.loads(got["/fingertip"][0])["header"]["seq"] == 11

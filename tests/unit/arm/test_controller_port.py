@@ -17,9 +17,9 @@ def test_the_network_controller_carries_both_protocols_on_the_wall_clock_only():
     tcp = controller_source("tcp")
     assert issubclass(tcp, ControllerSource) and tcp.__module__ == "nodes.arm_bridge.links"
     assert tcp.protocols == {"modbus", "mxt"} and not tcp.paced_by_node and tcp.modbus_client() is None
-    tcp.check_clock(False)
+    tcp.check_clock(SimpleNamespace(simulated=False))
     with pytest.raises(ValueError, match="source: sim"):
-        tcp.check_clock(True)
+        tcp.check_clock(SimpleNamespace(simulated=True))
     assert tcp.clock_offset(SimpleNamespace(arm="left")) == 0.0          # chrony keeps the PCs together
 
 
@@ -27,9 +27,9 @@ def test_the_twin_is_modbus_in_process_on_a_simulated_clock_with_the_truths_cloc
     assert controller_source("sim") is TwinController
     assert TwinController.protocols == {"modbus"} and TwinController.paced_by_node
     assert TwinController.modbus_client() is LoopbackModbusClient
-    TwinController.check_clock(True)
+    TwinController.check_clock(SimpleNamespace(simulated=True))
     with pytest.raises(ValueError, match="clock: sim"):
-        TwinController.check_clock(False)
+        TwinController.check_clock(SimpleNamespace(simulated=False))
     ideal = TwinController.clock_offset(SimpleNamespace(arm="left", twin=TruthChoice(realism="ideal")))
     real = [TwinController.clock_offset(SimpleNamespace(arm=a, twin=TruthChoice(truth_seed=3))) for a in ("left", "right")]
     assert ideal == 0.0 and all(0.0 < abs(o) <= 0.25e-3 for o in real) and real[0] != real[1]
