@@ -129,7 +129,7 @@ def warm_sim_fem(launch_file: Path = ROOT / "launch" / "sim.yaml") -> bool:
 
     from flexsheet.fem.served import build_model
     from flexsheet.model.scenes import DEFAULT_SCENE_FILE, load_scene
-    from nodes.fem.node import FemParams
+    from nodes.fem.params import FemParams
 
     spec = yaml.safe_load(launch_file.read_text())
     p = FemParams(**spec["nodes"]["fem"].get("params", {}))

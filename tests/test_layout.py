@@ -142,6 +142,46 @@ def test_device_nodes_reach_the_twin_only_through_ports():
     assert bad == [], "device nodes importing the twin (put it behind a port):\n" + "\n".join(bad)
 
 
+def _sim_branches(source: str) -> list[int]:
+    """Lines of ``source`` that branch on simulation: ``.simulated`` or ``.sim`` read, a name ``sim``, or a
+    comparison with ``"sim"``."""
+    lines = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Attribute) and node.attr in ("simulated", "sim"):
+            lines.append(node.lineno)
+        elif isinstance(node, ast.Name) and node.id == "sim":
+            lines.append(node.lineno)
+        elif isinstance(node, ast.Compare) and any(isinstance(c, ast.Constant) and c.value == "sim"
+                                                   for c in (node.left, *node.comparators)):
+            lines.append(node.lineno)
+    return sorted(set(lines))
+
+
+def test_device_nodes_do_not_branch_on_simulation_and_stay_short():
+    """A device node is the same code on both clocks (the runtime's :class:`PacedCall`, :meth:`Node.background`,
+    :meth:`Node.pause` and the ports hold the difference), its ``node.py`` is at most 250 lines, and the planner
+    imports nothing from ``flexsheet.arm`` (the two arms' command is :mod:`flexsheet.planning.arm_command`)."""
+    branches = [f"{p.relative_to(ROOT)}:{line}" for name in DEVICE_NODES for p in _adapter_files(name)
+                for line in _sim_branches(p.read_text())]
+    assert branches == [], "device nodes branching on simulation:\n" + "\n".join(branches)
+    long = {name: n for name in DEVICE_NODES
+            if (n := len((ROOT / "nodes" / name / "node.py").read_text().splitlines())) > 250}
+    assert long == {}, f"device node.py files over 250 lines: {long}"
+    arm = [f"{p.relative_to(ROOT)}:{line}: {mod}" for p in _adapter_files("planner") for line, mod in _imports(p)
+           if mod == "flexsheet.arm" or mod.startswith("flexsheet.arm.")]
+    assert arm == [], "the planner node imports the arms' package:\n" + "\n".join(arm)
+
+
+def test_the_simulation_branch_finder_sees_planted_branches():
+    planted = ("if self.clock.simulated:\n    pass\n"
+               "x = 1\n"
+               "if p.source == 'sim':\n    pass\n"
+               "y = self.sim\n"
+               "check(self.clock)\n"
+               "z = Literal['sim', 'tcp']\n")
+    assert _sim_branches(planted) == [1, 4, 6]
+
+
 def test_model_is_pure():
     bad = [f"{p.relative_to(ROOT)}:{line}: imports {mod}" for p, line, mod in _library_imports("model")
            if mod.split(".")[0] in TRANSPORT or (mod.startswith("flexsheet.") and _folder(mod) not in

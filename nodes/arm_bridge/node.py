@@ -32,12 +32,9 @@ it. When the partner says ``wait:span`` too, both step (:meth:`~flexsheet.arm.sp
 from __future__ import annotations
 
 import math
-from typing import Literal
 
 import numpy as np
-from pydantic import Field, model_validator
 
-from flexsheet.arm.bridge_config import DEFAULT_PERIOD, DEFAULT_PORT, BridgeConfig
 from flexsheet.arm.controller_port import controller_source
 from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics
 from flexsheet.arm.limiter import StreamLimiter
@@ -46,63 +43,20 @@ from flexsheet.arm.stream import ArmStream, CycleReport
 from flexsheet.arm.tracking import BridgeStatus, TargetTracker, peer_holds
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
-from flexsheet.model.sheet import clamp_poses
 from flexsheet.model.timing import LAB
-from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.planning.keepout import KeepOut, arm_clearance
 from flexsheet.runtime.node import InputRejected, Node
-from flexsheet.runtime.params import config_fields, params_model
 from flexsheet.runtime.qos import QoS
 from messages import ArmJointState, ArmTarget, EyePose, topics
 from nodes.arm_bridge.modbus_link import ModbusLink
 from nodes.arm_bridge.mxt_link import MxtLink
+from nodes.arm_bridge.params import ArmBridgeParams
+from nodes.arm_bridge.services import BridgeServices
 
-__all__ = ["ArmBridgeParams", "ArmBridgeNode"]
-
-
-def _protocol_defaults(self):
-    if self.port is None:
-        self.port = DEFAULT_PORT[self.protocol]
-    if self.period is None:
-        self.period = DEFAULT_PERIOD[self.protocol]
-    return self
+__all__ = ["ArmBridgeNode"]
 
 
-#: which arm and controller, and the registration file: the node's own
-_DEVICE = {
-    "arm": (str, Field(default="left", pattern="^(left|right)$", description="which sheet edge: left or right")),
-    "protocol": (Literal["modbus", "mxt"], Field(default="modbus", description="modbus (Modbus TCP register map) "
-                                                 "or mxt (MELFA real-time external control, UDP)")),
-    "source": (Literal["tcp", "sim"], Field(default="tcp", description="where the controller is "
-                                             "(flexsheet/arm/controller_port.py): tcp, over the network on the wall "
-                                             "clock; sim, the controller twin of this process on a simulated clock")),
-    "host": (str, Field(default="127.0.0.1", description="controller (or twin) address")),
-    "twin": (TruthChoice, Field(default_factory=TruthChoice, description="source sim: the hidden truth "
-                                "that draws this arm PC's clock offset from main (flexsheet/twin/lab_clock.py)")),
-    "port": (int | None, Field(default=None, ge=1, le=65535, description="controller port: Modbus TCP "
-                               "(default 15020) or MXT UDP (default 10000)")),
-    "device_id": (int, Field(default=1, ge=0, le=255, description="Modbus unit id")),
-    "display_calib": (str | None, Field(default=None, description="display.yaml (the registration): this arm's "
-                                        "base pose comes from its arms.<arm> entry (flexsheet calibrate arms); "
-                                        "the launch file's display_calib fills it")),
-}
-
-ArmBridgeParams = params_model(
-    "ArmBridgeParams",
-    """Parameters of one arm bridge (SI units: m, rad, s).
-
-    ``arm``, ``protocol``, ``source``, ``host``, ``port``, ``device_id``, ``display_calib`` and ``twin`` are the node's own
-    (``port`` defaults by protocol); every other param is a field of — defined, defaulted and range-checked in —
-    :class:`flexsheet.arm.bridge_config.BridgeConfig` (``period`` defaults by protocol).
-    """,
-    _DEVICE,
-    config_fields(BridgeConfig),
-    validators={"_protocol_defaults": model_validator(mode="after")(_protocol_defaults)},
-    module=__name__,
-)
-
-
-class ArmBridgeNode(Node):
+class ArmBridgeNode(BridgeServices, Node):
     """Node type ``arm_bridge`` (see module doc)."""
 
     Params = ArmBridgeParams
@@ -180,53 +134,6 @@ class ArmBridgeNode(Node):
         self.service("move_to", self.srv_move_to, "{joints: [6] rad} or {pose: 4x4 clamp pose, m, display frame}: "
                      "move there within the speed limits and stay", commanding=True)
         self.service("release", self.srv_release, "follow the targets again", commanding=True)
-
-    def _require_state(self) -> np.ndarray:
-        """The joints the controller reported last; raises ``ValueError`` while it is not connected (a stale
-        reading would move the arm back to an old pose once it is)."""
-        if self._q_measured is None or not self.stream.connected:
-            raise ValueError(f"the {self.params.arm} arm's controller is not connected: no current joints to act on")
-        return self._q_measured
-
-    def _ik(self, T, what: str) -> np.ndarray:
-        res = self.kin.ik(np.asarray(T, float), self._require_state(), max_jump=10.0)
-        if not res.ok:
-            raise ValueError(f"{what} is unreachable for the {self.params.arm} arm: {res.status}")
-        return res.q
-
-    def _held(self, q) -> list[float]:
-        """Hold on joints ``q`` for a service; the first hold says that targets are ignored until ``release``."""
-        q = self.tracker.move_to(q)
-        if self.ignored_while_held is None:
-            self.ignored_while_held = 0
-            self.log.info("%s arm: held by a service (hold/home/move_to): targets ignored until release",
-                          self.params.arm)
-        return q.tolist()
-
-    def srv_hold(self, args: dict) -> list[float]:
-        return self._held(self._require_state())
-
-    def srv_home(self, args: dict) -> list[float]:
-        left, right = clamp_poses(np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), 0.05)
-        return self._held(self._ik(left if self.params.arm == "left" else right, "the home pose"))
-
-    def srv_move_to(self, args: dict) -> list[float]:
-        if ("joints" in args) == ("pose" in args):
-            raise ValueError("move_to takes one of joints ([6] rad) or pose (4x4, m, display frame)")
-        if "joints" in args:
-            return self._held(args["joints"])
-        T = np.asarray(args["pose"], float)
-        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-            raise ValueError(f"pose must be a finite 4x4 matrix, got shape {T.shape}")
-        return self._held(self._ik(T, "the pose"))
-
-    def srv_release(self, args: dict) -> str:
-        self.tracker.release(self.arm_now())
-        if self.ignored_while_held is not None:
-            self.log.info("%s arm: released: following targets again (%d ignored while held)", self.params.arm,
-                          self.ignored_while_held)
-        self.ignored_while_held = None
-        return "following targets"
 
     def arm_now(self) -> float:
         """This arm PC's clock, s: the graph's :meth:`now` plus :attr:`clock_offset` (0 on the wall clock)."""

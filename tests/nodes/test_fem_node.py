@@ -135,7 +135,7 @@ def test_node_solves_the_scene_it_is_given_and_names_it():
     import pytest
 
     from flexsheet.model.scenes import SCENES_DIR, load_scene, paper_scene
-    from nodes.fem.node import FemParams
+    from nodes.fem.params import FemParams
 
     sphere = load_scene(SCENES_DIR / "sphere.yaml")
     c, R = sphere.center, sphere.object.radius
@@ -304,7 +304,7 @@ def test_removed_params_are_refused_naming_the_scene_field():
     param, its value and the scene file's field that holds it now."""
     import re
 
-    from nodes.fem.node import FemParams
+    from nodes.fem.params import FemParams
 
     for name, value, field in (("E", 5000.0, "material: E"), ("nu", 0.4, "material: nu"),
                                ("finger_radius", 0.01, "finger: radius")):

@@ -294,7 +294,7 @@ def test_the_recording_loses_only_the_dead_nodes_own_messages(faults):
 
 def _step_limit() -> np.ndarray:
     from flexsheet.arm.kinematics import QD_MAX
-    from nodes.arm_bridge.node import ArmBridgeParams
+    from nodes.arm_bridge.params import ArmBridgeParams
 
     p = ArmBridgeParams()
     return QD_MAX * p.speed_scale * p.period

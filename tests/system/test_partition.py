@@ -42,7 +42,7 @@ def test_a_2s_cut_to_arm1_holds_that_arm_and_it_recovers_without_a_jump(lab_run)
     tmp_path = r["out"]
 
     from flexsheet.arm.kinematics import QD_MAX
-    from nodes.arm_bridge.node import ArmBridgeParams
+    from nodes.arm_bridge.params import ArmBridgeParams
 
     p = ArmBridgeParams()
     limit = QD_MAX * p.speed_scale * p.period

@@ -79,7 +79,7 @@ def test_on_the_wall_clock_the_call_runs_in_its_own_thread_at_most_at_its_rate()
 
     asyncio.run(main())
     assert len(starts) == 4 and all(n.startswith("paced-test") for n in threads) and len(threads) == 1
-    assert min(b - a for a, b in zip(starts, starts[1:])) >= 0.05 - 0.002
+    assert min(b - a for a, b in zip(starts, starts[1:], strict=False)) >= 0.05 - 0.002
 
 
 def test_a_rate_that_is_not_positive_is_refused():
