@@ -71,8 +71,9 @@ class ContactTruth(Message):
 
     ``touching``: the finger is behind the sheet's plane within the clamps. ``depth`` m: the indentation along
     the sheet's normal. ``force`` N: the normal contact force (0 while no table is ready). ``point`` (3,) m:
-    the contact point (the finger's apex on the pushed sheet), display frame. ``stiffness`` N/m: the sheet's
-    incremental stiffness dF/d(depth) there (0 while no table is ready).
+    the bottom of the dent (the finger's apex on the pushed sheet; not the contact on the object's surface),
+    display frame. ``stiffness`` N/m: the sheet's incremental stiffness dF/d(depth) there (0 while no table is
+    ready).
     """
 
     SCHEMA = "flexsheet/ContactTruth"
@@ -81,7 +82,7 @@ class ContactTruth(Message):
     touching: bool = Field(default=False, description="finger behind the sheet's plane, within the clamps")
     depth: float = Field(ge=0.0, description="indentation along the sheet normal, m")
     force: float = Field(ge=0.0, description="normal contact force, N")
-    point: ndarray("float64", (3,), "contact point, m, display frame")
+    point: ndarray("float64", (3,), "bottom of the dent (the finger's apex on the pushed sheet), m, display frame")
     stiffness: float = Field(ge=0.0, description="incremental stiffness dF/d(depth), N/m")
 
 

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from flexsheet.model.checks import check_positive
 from flexsheet.model.geometry import CYLINDER_CENTER, CYLINDER_LENGTH, CYLINDER_RADIUS
 
 __all__ = ["TetMesh", "MeshSpec", "cylinder_tet_mesh", "cylinder_part_mesh", "surface_faces", "write_mesh", "arc_points",
@@ -210,10 +211,7 @@ def cylinder_tet_mesh(spec: MeshSpec = MeshSpec(), radius: float = CYLINDER_RADI
     (``occ.addCylinder``, ``Ball``/``Min`` size fields, ``generate(3)``). Deterministic for a given spec
     (single-threaded Delaunay with fixed options).
     """
-    if not (math.isfinite(radius) and radius > 0):
-        raise ValueError(f"radius must be > 0, got {radius!r}")
-    if not (math.isfinite(length) and length > 0):
-        raise ValueError(f"length must be > 0, got {length!r}")
+    radius, length = check_positive("radius", radius), check_positive("length", length)
     c = np.asarray(center, float)
 
     def geometry(gmsh) -> None:

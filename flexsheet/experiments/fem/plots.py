@@ -146,13 +146,13 @@ def plot_fold_study(out: str, fs: dict) -> None:
         ax[0].plot(d, r["max_winding"], "o-", color=col, ms=3, label=f"{lab}, off the footprint")
         ax[0].plot(d, r["with_footprint"]["max_winding"], "s--", color=col, ms=3, lw=0.8,
                    label=f"{lab}, footprint too (fingertip)")
-        ax[1].plot(d, r["min_stretch"], "o-", color=col, ms=3, label=lab)
+        ax[1].plot(d, r["min_stretch_ratio"], "o-", color=col, ms=3, label=lab)
         if "difference_to_finest_mm" in r:
             ax[2].plot(d, r["difference_to_finest_mm"], "o-", color=col, ms=3, label=f"{lab} vs finest")
     ax[0].axhline(0.5, color="k", lw=0.6, ls=":")
     ax[0].axhline(1.0, color="r", lw=0.8, ls="--", label="w = 1: surface inside the body")
     ax[0].set_ylabel("largest winding number w of the surface")
-    ax[1].axhline(fs["crease_stretch"], color="r", lw=0.8, ls="--", label="neo-Hookean crease onset")
+    ax[1].axhline(fs["crease_stretch_ratio"], color="r", lw=0.8, ls="--", label="neo-Hookean crease onset")
     ax[1].set_ylabel("smallest in-plane surface stretch off the footprint")
     ax[2].axhline(0.35, color="k", lw=0.8, ls="--", label="half the 0.7 mm target")
     ax[2].set_ylabel("visible-surface difference to the finest (mm)")

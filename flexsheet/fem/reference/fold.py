@@ -33,11 +33,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["Surface", "outer_surface", "winding_numbers", "fold_report", "surface_stretch", "lateral_distance",
-           "CREASE_STRETCH"]
+__all__ = ["Surface", "outer_surface", "winding_numbers", "fold_report", "surface_stretch_ratios", "lateral_distance",
+           "CREASE_STRETCH_RATIO"]
 
 VERTEX_TOL = 1e-9       #: m: a point this close to a triangle's vertex is that vertex (its solid angle is 0)
-CREASE_STRETCH = 0.65   #: compressive stretch at which a neo-Hookean surface creases (Hohlfeld & Mahadevan 2011)
+CREASE_STRETCH_RATIO = 0.65   #: compressive stretch at which a neo-Hookean surface creases (Hohlfeld & Mahadevan 2011)
 
 
 @dataclass
@@ -130,7 +130,7 @@ def winding_numbers(q: np.ndarray, verts: np.ndarray, tris: np.ndarray, chunk: i
     return out
 
 
-def surface_stretch(surf: Surface, x0: np.ndarray, x: np.ndarray) -> np.ndarray:
+def surface_stretch_ratios(surf: Surface, x0: np.ndarray, x: np.ndarray) -> np.ndarray:
     """(T, 2) principal in-plane stretches (smallest first) of the part's surface triangles between rest
     ``x0`` (P, 3) m and deformed ``x`` (P, 3) m DOF positions: the singular values of the map between the
     triangles' edge vectors. Raises ``numpy.linalg.LinAlgError`` on a degenerate rest triangle."""
@@ -162,9 +162,9 @@ def fold_report(model, surf: Surface, u: np.ndarray, capsule, region: float, mar
     "n_penetrating": points with w > 1, "max_penetration_m": the deepest of them from the nearest surface
     triangle that is not within 3 rest edge lengths of it (m; 0 if none), "worst_rest_m" (3,) rest position
     of the largest-w point, "worst_lateral_m" / "worst_drop_m": its rest distance from the push axis and how
-    far it moved along the push (m), "min_stretch": smallest in-plane stretch of the surface triangles off the
-    footprint (the crease criterion: < :data:`CREASE_STRETCH`), "n_creased_tris": how many are below it,
-    "max_stretch" the largest in-plane stretch there and "max_stretch_lateral_m" its triangle's rest distance from
+    far it moved along the push (m), "min_stretch_ratio": smallest in-plane stretch of the surface triangles off the
+    footprint (the crease criterion: < :data:`CREASE_STRETCH_RATIO`), "n_creased_tris": how many are below it,
+    "max_stretch_ratio" the largest in-plane stretch ratio λ there and "max_stretch_ratio_lateral_m" its triangle's rest distance from
     the push axis}. w is sampled at the surface's own points (DOF points): a facet that crosses another between
     them is not seen. "max_winding" is NaN when no point is checked; ``margin`` = -inf checks the footprint too."""
     X0 = model.points
@@ -200,12 +200,12 @@ def fold_report(model, surf: Surface, u: np.ndarray, capsule, region: float, mar
                 cp = closest_point(verts[tris[cand]], np.repeat(x[p][None], len(cand), axis=0))
                 depth.append(float(np.min(np.linalg.norm(cp - x[p], axis=1))))
         out["max_penetration_m"] = max(depth, default=0.0)
-    st = surface_stretch(surf, X0, x)
+    st = surface_stretch_ratios(surf, X0, x)
     tlat = lateral_distance(x[surf.tris].mean(axis=1), capsule)
     tlat0 = lateral_distance(X0[surf.tris].mean(axis=1), capsule)
     off = (tlat > capsule.radius + margin) & (tlat0 < region) & ~np.all(model.support[surf.tris], axis=1)
-    out["min_stretch"] = float(st[off, 0].min(initial=1.0))
-    out["n_creased_tris"] = int(np.count_nonzero(st[off, 0] < CREASE_STRETCH))
-    out["max_stretch"] = float(st[off, 1].max(initial=1.0))
-    out["max_stretch_lateral_m"] = float(tlat0[off][np.argmax(st[off, 1])]) if off.any() else None
+    out["min_stretch_ratio"] = float(st[off, 0].min(initial=1.0))
+    out["n_creased_tris"] = int(np.count_nonzero(st[off, 0] < CREASE_STRETCH_RATIO))
+    out["max_stretch_ratio"] = float(st[off, 1].max(initial=1.0))
+    out["max_stretch_ratio_lateral_m"] = float(tlat0[off][np.argmax(st[off, 1])]) if off.any() else None
     return out

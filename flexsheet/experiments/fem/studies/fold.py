@@ -12,7 +12,7 @@ from flexsheet.experiments.fem.studies.tip import tip_sequence
 from flexsheet.fem.cache import ArrayCache
 from flexsheet.fem.material import Material
 from flexsheet.fem.realtime import RealtimeModel
-from flexsheet.fem.reference.fold import CREASE_STRETCH
+from flexsheet.fem.reference.fold import CREASE_STRETCH_RATIO
 from flexsheet.fem.reference.paths import at_depths, push_depths, reference_path
 from flexsheet.fem.reference.settings import Settings
 from flexsheet.fem.visible_error import visible_diffs, visible_vertices
@@ -39,7 +39,7 @@ def fold_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel
     needs); "tip_sequence" (:func:`tip_sequence`). Returns {"depths_mm", "region_mm", "levels" (per level:
     "h_fine_mm", "dofs", :func:`fold_path_json`'s keys, "force_N", and for the coarser ones
     "difference_to_finest_mm" and "worst_difference_at" [{"lateral_mm", "drop_mm", "difference_mm"}]),
-    "tip_sequence", "fold_free_to_mm", "first_penetration_mm_by_h_fine_mm", "crease_stretch", "what"}; lengths
+    "tip_sequence", "fold_free_to_mm", "first_penetration_mm_by_h_fine_mm", "crease_stretch_ratio", "what"}; lengths
     in mm. Raises ``RuntimeError`` as :func:`fold_path`."""
     depths = push_depths(st.depth_step)
     verts = rm.rest_vertices.astype(float)
@@ -65,11 +65,11 @@ def fold_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel
                               if np.any(np.asarray(r["n_penetrating"]) > 0) else None) for r in rows}
     return {"depths_mm": (depths * 1e3).tolist(), "region_mm": FOLD_REGION * 1e3, "levels": rows,
             "tip_sequence": tip, "fold_free_to_mm": free, "first_penetration_mm_by_h_fine_mm": first,
-            "crease_stretch": CREASE_STRETCH,
+            "crease_stretch_ratio": CREASE_STRETCH_RATIO,
             "what": "self-contact and crease check of the reference at azimuth 0 (flexsheet/fem/reference/fold.py): the "
                     "generalised winding number w of the closed outer surface at its own points within "
                     f"{FOLD_REGION * 1e3:g} mm (rest) of the push axis, off the finger's footprint: 0.5 on a "
                     "smooth surface, alpha/2pi at the bottom of a fold of interior angle alpha, > 1 where the "
                     "point lies inside the body (the surface has passed through itself: the model has no "
-                    "self-contact); max_penetration_mm how deep; min_stretch the smallest in-plane stretch of "
+                    "self-contact); max_penetration_mm how deep; min_stretch_ratio the smallest in-plane stretch of "
                     "the surface triangles off the footprint (a neo-Hookean surface creases below ~0.65)"}

@@ -74,7 +74,7 @@ def tip_sequence(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMod
                      "newton_converged": bool(p["converged"].all()), "inverted_qp_max": int(p["inverted_qp"].max()),
                      "newton_iterations": p["newton"].tolist(),
                      "max_principal_strain": p["max_strain"].tolist(),
-                     "max_surface_stretch": f["all_max_stretch"].tolist(),
+                     "max_surface_stretch_ratio": f["all_max_stretch_ratio"].tolist(),
                      "max_winding_with_footprint": f["all_max_winding"].tolist(),
                      "n_penetrating": f["all_n_penetrating"].astype(int).tolist(),
                      "difference_to_finest_mm": [e * 1e3 for e in visible_diffs(p, paths[-1], depths, verts, fixed,

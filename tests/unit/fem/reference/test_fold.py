@@ -8,10 +8,10 @@ import pytest
 from flexsheet.fem.material import Material
 from flexsheet.fem.reference.capsule_contact import Capsule, capsule_at
 from flexsheet.fem.reference.fold import (
-    CREASE_STRETCH,
+    CREASE_STRETCH_RATIO,
     fold_report,
     outer_surface,
-    surface_stretch,
+    surface_stretch_ratios,
     winding_numbers,
 )
 from flexsheet.fem.reference.hyperelastic import HyperelasticModel
@@ -60,7 +60,7 @@ def test_the_undeformed_quarter_model_folds_nothing(quarter):
     caps = capsule_at(0.0, 0.01, 0.008, m.mesh.radius, m.mesh.center)
     rep = fold_report(m, s, np.zeros_like(m.points), caps, region=0.03)
     assert rep["n_penetrating"] == 0 and rep["max_penetration_m"] == 0.0
-    assert rep["max_winding"] < 0.53 and rep["min_stretch"] == pytest.approx(1.0, abs=1e-9)
+    assert rep["max_winding"] < 0.53 and rep["min_stretch_ratio"] == pytest.approx(1.0, abs=1e-9)
     assert rep["n_creased_tris"] == 0
 
 
@@ -110,12 +110,12 @@ def test_surface_stretch_reads_a_uniform_compression():
     m = _slab()
     s = outer_surface(m)
     x = m.points * np.array([0.5, 1.0, 1.0])
-    st = surface_stretch(s, m.points, x)
+    st = surface_stretch_ratios(s, m.points, x)
     top = np.all(np.abs(m.points[s.tris][:, :, 2] - 0.2) < 1e-9, axis=1)
     np.testing.assert_allclose(st[top, 0], 0.5, atol=1e-12)
     np.testing.assert_allclose(st[top, 1], 1.0, atol=1e-12)
     rep = fold_report(m, s, x - m.points, _far_finger(), region=10.0)
-    assert rep["min_stretch"] == pytest.approx(0.5, abs=1e-12) and 0.5 < CREASE_STRETCH
+    assert rep["min_stretch_ratio"] == pytest.approx(0.5, abs=1e-12) and 0.5 < CREASE_STRETCH_RATIO
     assert rep["n_creased_tris"] > 0
 
 

@@ -39,7 +39,7 @@ def test_fold_study_reads_the_levels_from_the_cache_and_finds_no_fold_on_the_coa
         assert 0.49 < max(lv["max_winding"]) < 0.6
         fp = lv["with_footprint"]
         assert max(fp["n_penetrating"]) == 0 and fp["max_winding"][-1] > max(lv["max_winding"])
-        assert fp["max_stretch"][-1] > 2.0 and lv["min_stretch"][-1] < lv["min_stretch"][0] < 1.0
+        assert fp["max_stretch_ratio"][-1] > 2.0 and lv["min_stretch_ratio"][-1] < lv["min_stretch_ratio"][0] < 1.0
         assert lv["max_principal_strain"][-1] > lv["max_principal_strain"][0] > 0
     assert fs["fold_free_to_mm"] == 50.0 and fs["first_penetration_mm_by_h_fine_mm"] == {"12.0": None, "9.0": None}
     tip = fs["tip_sequence"]
