@@ -66,7 +66,7 @@ def test_on_the_wall_clock_the_call_runs_in_its_own_thread_at_most_at_its_rate()
 
         def call():
             threads.add(threading.current_thread().name)
-            starts.append(time.monotonic())
+            starts.append(paced.last)            # the loop's start of this call (its thread runs it just after)
             return len(starts)
 
         paced = PacedCall(node, 20.0, call, done.put_nowait, lambda exc: None, cost=0.0, name="paced-test")
@@ -79,7 +79,7 @@ def test_on_the_wall_clock_the_call_runs_in_its_own_thread_at_most_at_its_rate()
 
     asyncio.run(main())
     assert len(starts) == 4 and all(n.startswith("paced-test") for n in threads) and len(threads) == 1
-    assert min(b - a for a, b in zip(starts, starts[1:], strict=False)) >= 0.05 - 0.002
+    assert min(b - a for a, b in zip(starts, starts[1:], strict=False)) >= 0.05 - 1e-3
 
 
 def test_a_rate_that_is_not_positive_is_refused():
