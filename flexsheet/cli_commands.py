@@ -41,8 +41,8 @@ def setup_logging(name: str = "") -> None:
 # ----------------------------------------------------------------------------------------------- run
 def cmd_run(args: argparse.Namespace) -> int:
     """Run one node. Exit status: 0 after a clean stop, 1 on a transport error, 2 for an unknown node type,
-    :data:`~flexsheet.runtime.config.EXIT_CONFIG` (78) for a configuration error (a bad param, a launch-file or
-    key problem, a ``ValueError`` from the node's setup): the launcher does not respawn those."""
+    :data:`~flexsheet.runtime.config.EXIT_CONFIG` (78) for a configuration error (a bad param, a launch-file
+    or key problem, a ``ValueError`` from the node's setup): the launcher does not respawn those."""
     from pydantic import ValidationError
 
     from flexsheet.runtime.config import EXIT_CONFIG, ConfigError, NodeConfig
@@ -66,7 +66,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             print(f"flexsheet run: configuration error: {exc}", file=sys.stderr)
             return EXIT_CONFIG
     else:
-        config = NodeConfig(name=args.name or args.node_type, node_type=args.node_type, endpoint=args.endpoint,
+        config = NodeConfig(name=args.name or args.node_type, node_type=args.node_type,
+                            endpoint=args.endpoint,
                             peers=args.peer or [], params=overrides)
     setup_logging()
     cls = node_class(args.node_type)
@@ -74,8 +75,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         node = cls(config)
     except ValidationError as exc:
         for err in exc.errors():
-            print(f"flexsheet run {config.name}: configuration error: param '{'.'.join(map(str, err['loc']))}': "
-                  f"{err['msg']} (value {err.get('input')!r:.200})", file=sys.stderr)
+            print(f"flexsheet run {config.name}: configuration error: param '{'.'.join(map(str, err['loc']))}"
+                  f"': {err['msg']} (value {err.get('input')!r:.200})", file=sys.stderr)
         return EXIT_CONFIG
     from flexsheet.runtime.transport import TransportError
     try:
@@ -97,10 +98,12 @@ def _run_container(args: argparse.Namespace) -> int:
     from flexsheet.runtime.container import run_container
 
     if not args.launch:
-        print("flexsheet run --container: needs --launch FILE (the container's nodes come from it)", file=sys.stderr)
+        print("flexsheet run --container: needs --launch FILE (the container's nodes come from "
+              "it)", file=sys.stderr)
         return EXIT_CONFIG
     if args.node_type or args.param:
-        print("flexsheet run --container: give node params as --set NODE.KEY=VALUE, not a node type or --param",
+        print("flexsheet run --container: give node params as --set NODE.KEY=VALUE, not a node type or "
+              "--param",
               file=sys.stderr)
         return 2
     overrides: dict[str, dict] = {}
@@ -140,7 +143,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
                 overrides.setdefault(node, []).append(kv)
         if args.rtf is not None:
             toplevel["rtf"] = args.rtf
-        if toplevel:   # the launcher's own load_launch and every node process read these (launch.TOPLEVEL_ENV)
+        if toplevel:  # the launcher's own load_launch and every node process read these (launch.TOPLEVEL_ENV)
             os.environ[TOPLEVEL_ENV] = json.dumps(toplevel)
         lf = load_launch(args.file)
         for ext in extensions():   # e.g. the display's twin registration (flexsheet.display.launch)
@@ -153,7 +156,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
     except LaunchError as exc:
         for line in exc.lines or [str(exc)]:   # a line that names the file already is not prefixed again
             named = line.startswith(f"{args.file}:") or line.startswith(f"{Path(args.file)}:")
-            print(f"flexsheet launch: {line}" if named else f"flexsheet launch: {args.file}: {line}", file=sys.stderr)
+            print(f"flexsheet launch: {line}" if named else f"flexsheet launch: {args.file}: "
+                                                            f"{line}", file=sys.stderr)
         return EXIT_CONFIG
     result = check_launch(args.file, host=args.host, out=out, overrides=parsed, probe=args.probe)
     for line in result.warnings:
@@ -162,15 +166,18 @@ def cmd_launch(args: argparse.Namespace) -> int:
         print(line, file=sys.stderr)
     what = f"host {args.host}" if args.host else f"all hosts ({', '.join(result.hosts)})"
     if args.check and args.json:        # one JSON document on stdout (the lines stay on stderr), same status
-        print(json.dumps({"file": str(args.file), "hosts": result.hosts, "nodes": result.nodes, "ok": not result.errors,
-                          "errors": result.errors, "warnings": result.warnings}))
+        print(
+            json.dumps({"file": str(args.file), "hosts": result.hosts, "nodes": result.nodes,
+                        "ok": not result.errors,
+                        "errors": result.errors, "warnings": result.warnings}))
         return EXIT_CONFIG if result.errors else 0
     if result.errors:
         print(f"flexsheet launch: {len(result.errors)} error(s) in {args.file} for {what}; nothing started",
               file=sys.stderr)
         return EXIT_CONFIG
     if args.check:
-        print(f"{args.file}: OK for {what}: {result.nodes} node(s); params, hosts, ports, files and keys checked")
+        print(f"{args.file}: OK for {what}: {result.nodes} node(s); params, hosts, ports, files and keys "
+              "checked")
         return 0
     try:
         lf = load_launch(args.file)
@@ -184,7 +191,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
     code = asyncio.run(sup.run())
     if lf.report and out and args.host in (None, "main", next(iter(lf.hosts))):
         report = registry.load(lf.report)
-        # a report that takes ``since`` reads only this run's files (a reused --out folder keeps earlier runs')
+        # a report that takes ``since`` reads only this run's
+        # files (a reused --out folder keeps earlier runs')
         kw = {"since": started - 1.0} if "since" in inspect.signature(report).parameters else {}
         code = max(code, int(report(out, lf, **kw) or 0))
     return code
@@ -204,8 +212,8 @@ def cmd_keys(args: argparse.Namespace) -> int:
     known = identities(lf)
     unknown = [n for n in args.names if n not in known]
     if unknown:
-        print(f"flexsheet keys: {unknown[0]!r} is no host or node of {args.launch} (hosts: {', '.join(lf.hosts)}; "
-              f"nodes: {', '.join(lf.nodes)})", file=sys.stderr)
+        print(f"flexsheet keys: {unknown[0]!r} is no host or node of {args.launch} (hosts: "
+              f"{', '.join(lf.hosts)}; nodes: {', '.join(lf.nodes)})", file=sys.stderr)
         return 2
     try:
         status = generate(args.names or known, folder, force=args.force)
@@ -216,10 +224,12 @@ def cmd_keys(args: argparse.Namespace) -> int:
         print(json.dumps({"folder": str(folder), "public_keys": str(folder / PUBLIC_KEYS_FILE),
                           "keys": {n: {"status": w, "secret": str(folder / (n + ".key_secret"))}
                                    for n, w in status.items()},
-                          "hosts": {h: [str(folder / (n + ".key_secret")) for n in identities(lf, h)] for h in lf.hosts}}))
+                          "hosts": {h: [str(folder / (n + ".key_secret")) for n in identities(lf, h)]
+                                    for h in lf.hosts}}))
         return 0
     for name, what in status.items():
-        print(f"{name}: {'new keypair' if what == 'new' else 'kept the existing keypair (--force to replace)'}: "
+        print(f"{name}: "
+              f"{'new keypair' if what == 'new' else 'kept the existing keypair (--force to replace)'}: "
               f"{folder / (name + '.key_secret')}")
     print(f"public keys of all hosts and nodes: {folder / PUBLIC_KEYS_FILE}")
     print("Each host needs public_keys.yaml and the secret keys of itself and its nodes in its keys folder "

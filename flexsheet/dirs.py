@@ -2,12 +2,12 @@
 installer precomputes (``python3 -m nodes.fem.warm``), never inside the installed package.
 
 * :func:`cache_root`: ``$FLEXSHEET_CACHE``, else the user's cache folder (Linux: ``~/.cache/flexsheet``, or
-  ``$XDG_CACHE_HOME/flexsheet``);
-* :func:`data_dirs`: the install-time data folders, searched read-only in this order: ``$FLEXSHEET_DATA`` if set,
-  the user's data folder (Linux: ``~/.local/share/flexsheet``), the machine's (``/usr/local/share/flexsheet``,
-  the first of ``$XDG_DATA_DIRS``);
-* :func:`install_data_dir`: where an installer writes: ``$FLEXSHEET_DATA``, else the machine's folder when this
-  user may write there (root, the image's build), else the user's.
+``$XDG_CACHE_HOME/flexsheet``);
+* :func:`data_dirs`: the install-time data folders, searched read-only in this order: ``$FLEXSHEET_DATA`` if
+  set, the user's data folder (Linux: ``~/.local/share/flexsheet``), the machine's
+  (``/usr/local/share/flexsheet``, the first of ``$XDG_DATA_DIRS``);
+* :func:`install_data_dir`: where an installer writes: ``$FLEXSHEET_DATA``, else the machine's folder when
+  this user may write there (root, the image's build), else the user's.
 """
 
 from __future__ import annotations
@@ -22,18 +22,23 @@ APP = "flexsheet"
 
 
 def cache_root() -> str:
-    """The cache folder (absolute path, str): ``$FLEXSHEET_CACHE`` or the user's cache folder for flexsheet."""
-    return os.path.abspath(os.path.expanduser(os.environ.get("FLEXSHEET_CACHE") or platformdirs.user_cache_dir(APP)))
+    """The cache folder (absolute path, str): ``$FLEXSHEET_CACHE`` or the user's cache folder for
+    flexsheet."""
+    return os.path.abspath(os.path.expanduser(os.environ.get("FLEXSHEET_CACHE")
+                                              or platformdirs.user_cache_dir(APP)))
 
 
 def data_dirs() -> list[str]:
-    """The install-time data folders (absolute paths), most specific first, without repeats (module docstring)."""
-    dirs = [os.environ.get("FLEXSHEET_DATA") or "", platformdirs.user_data_dir(APP), platformdirs.site_data_dir(APP)]
+    """The install-time data folders (absolute paths), most specific first, without repeats (module
+    docstring)."""
+    dirs = [os.environ.get("FLEXSHEET_DATA") or "", platformdirs.user_data_dir(APP),
+            platformdirs.site_data_dir(APP)]
     return list(dict.fromkeys(os.path.abspath(os.path.expanduser(d)) for d in dirs if d))
 
 
 def _writable(path: str) -> bool:
-    """True if ``path`` exists and is writable, or could be created by this user (its nearest existing parent)."""
+    """True if ``path`` exists and is writable, or could be created by this user (its nearest existing
+    parent)."""
     p = path
     while not os.path.exists(p):
         parent = os.path.dirname(p)
@@ -44,8 +49,8 @@ def _writable(path: str) -> bool:
 
 
 def install_data_dir() -> str:
-    """Where an installer writes its data (absolute path): ``$FLEXSHEET_DATA``, else the machine's data folder if
-    writable, else the user's."""
+    """Where an installer writes its data (absolute path): ``$FLEXSHEET_DATA``, else the machine's data folder
+    if writable, else the user's."""
     if os.environ.get("FLEXSHEET_DATA"):
         return os.path.abspath(os.path.expanduser(os.environ["FLEXSHEET_DATA"]))
     site = os.path.abspath(platformdirs.site_data_dir(APP))

@@ -43,7 +43,8 @@ def record(path: str | Path, command: str | None = None, replaces: str | None = 
             del entries[name]
     kind, _, key = path.stem.partition("_")
     entries[path.name] = {"kind": kind, "key": key, "sha256": sha256_of(path), "size": path.stat().st_size,
-                          "command": command or " ".join(shlex.quote(a) for a in ["flexsheet", *sys.argv[1:]])}
+                          "command": command
+                          or " ".join(shlex.quote(a) for a in ["flexsheet", *sys.argv[1:]])}
     tmp = folder / f"{MANIFEST}.{os.getpid()}.tmp"
     tmp.write_text(json.dumps(dict(sorted(entries.items())), indent=1) + "\n")
     os.replace(tmp, folder / MANIFEST)

@@ -1,6 +1,6 @@
-"""YAML the project reads from people (launch files, scene files): ``yaml.SafeLoader`` that refuses a key given
-twice in one mapping. PyYAML keeps the last one silently, so a second ``nodes:`` or a repeated node name would
-drop nodes without a word. Pure (PyYAML only)."""
+"""YAML the project reads from people (launch files, scene files): ``yaml.SafeLoader`` that refuses a key
+given twice in one mapping. PyYAML keeps the last one silently, so a second ``nodes:`` or a repeated node name
+would drop nodes without a word. Pure (PyYAML only)."""
 
 from __future__ import annotations
 

@@ -13,9 +13,12 @@ from messages.world import ContactTruth, FingerTruth, HeadTruth, SheetState
 MESSAGE_TYPES: dict[str, type[Message]] = {
     cls.SCHEMA: cls
     for cls in (StereoFrame, StereoCalibration, Fingertip, SheetTarget, ArmTarget, ArmJointState,
-                ObjectDeformation, ObjectForceDepth, RenderedFrame, ProjectorImage, FingerTruth, SheetState, Heartbeat, EyePose, HeadTruth, ContactTruth)
+                ObjectDeformation, ObjectForceDepth, RenderedFrame, ProjectorImage, FingerTruth, SheetState,
+                Heartbeat, EyePose, HeadTruth, ContactTruth)
 }
 
-__all__ = ["ArmJointState", "ArmTarget", "ContactTruth", "DISPLAY_FRAME", "EyePose", "Fingertip", "FingerTruth", "HeadTruth", "Header", "Heartbeat",
-           "MESSAGE_TYPES", "Message", "ObjectDeformation", "ObjectForceDepth", "ProjectorImage", "RenderedFrame", "SheetState", "SheetTarget",
+__all__ = ["ArmJointState", "ArmTarget", "ContactTruth", "DISPLAY_FRAME", "EyePose", "Fingertip",
+           "FingerTruth", "HeadTruth", "Header", "Heartbeat",
+           "MESSAGE_TYPES", "Message", "ObjectDeformation", "ObjectForceDepth", "ProjectorImage",
+           "RenderedFrame", "SheetState", "SheetTarget",
            "StereoCalibration", "StereoFrame", "Topic", "TopicStats", "check_finite", "ndarray"]

@@ -2,8 +2,8 @@
 
 Every message is a frozen, strict pydantic v2 model (``frozen=True, extra="forbid", strict=True``) that
 carries a :class:`Header` and two class constants, ``SCHEMA`` (a stable name such as
-``"flexsheet/Fingertip"``) and ``VERSION`` (an integer bumped on any incompatible change).  numpy arrays
-are declared with :func:`ndarray` and travel as raw buffers (see :mod:`flexsheet.runtime.codec`), never as lists.
+``"flexsheet/Fingertip"``) and ``VERSION`` (an integer bumped on any incompatible change). numpy arrays are
+declared with :func:`ndarray` and travel as raw buffers (see :mod:`flexsheet.runtime.codec`), never as lists.
 
 Units are SI (m, rad, s, N) everywhere; frames are named in ``frame_id`` and in field docs.
 """
@@ -20,7 +20,8 @@ from pydantic import BaseModel, ConfigDict, Field, PlainSerializer, PlainValidat
 __all__ = ["Header", "Message", "ndarray", "check_finite", "ArraySpec", "array_spec"]
 
 #: frame name of the world frame: origin at the centre of the sheet in its home pose (the paper's
-#: imaginary screen), +x toward the user (screen normal n_o), +y to the user's right (the user faces −x), +z up.
+#: imaginary screen), +x toward the user (screen normal
+#: n_o), +y to the user's right (the user faces −x), +z up.
 DISPLAY_FRAME = "display"
 
 
@@ -64,7 +65,8 @@ def _array_validator(dtype: str | None, shape: tuple[int | None, ...] | None):
 
 @dataclass(frozen=True)
 class ArraySpec:
-    """The declared dtype (None: any) and shape (None entries: free; None: any) of an :func:`ndarray` field."""
+    """The declared dtype (None: any) and shape (None entries: free; None: any) of an :func:`ndarray`
+    field."""
 
     dtype: str | None
     shape: tuple[int | None, ...] | None
@@ -90,8 +92,8 @@ def ndarray(dtype: str | None, shape: tuple[int | None, ...] | None = None, desc
         Expected shape; ``None`` entries are free dimensions. ``None`` accepts any shape.
 
     The field validates ``isinstance(ndarray)``, dtype and shape (raising ``ValueError`` with expected vs
-    got), serialises to nested lists in JSON mode (used only by ``bag export``), and advertises a JSON
-    schema of nested arrays of numbers. On the wire it travels as a raw buffer (:mod:`flexsheet.runtime.codec`).
+    got), serialises to nested lists in JSON mode (used only by ``bag export``), and advertises a JSON schema
+    of nested arrays of numbers. On the wire it travels as a raw buffer (:mod:`flexsheet.runtime.codec`).
     """
     depth = len(shape) if shape is not None else 1
     item: dict[str, Any] = {"type": "integer" if dtype and np.dtype(dtype).kind in "iub" else "number"}
@@ -100,7 +102,8 @@ def ndarray(dtype: str | None, shape: tuple[int | None, ...] | None = None, desc
     schema: dict[str, Any] = item
     for _ in range(depth):
         schema = {"type": "array", "items": schema}
-    schema["description"] = f"{description} [ndarray dtype={dtype or 'any'} shape={_fmt(shape) if shape else 'any'}]".strip()
+    schema["description"] = (f"{description} [ndarray dtype={dtype or 'any'} "
+                             f"shape={_fmt(shape) if shape else 'any'}]").strip()
     return Annotated[
         np.ndarray,
         PlainValidator(_array_validator(dtype, shape)),
@@ -125,8 +128,8 @@ class Message(BaseModel):
     Float fields and float arrays must be finite (``allow_inf_nan=False`` and the array validator): a NaN
     or inf is rejected with an error naming the field.
 
-    Subclasses set ``SCHEMA`` (str) and ``VERSION`` (int). A receiver that gets another schema or version on
-    a topic rejects the message with one log line and counts it in diagnostics (:mod:`flexsheet.runtime.codec`).
+    Subclasses set ``SCHEMA`` (str) and ``VERSION`` (int). A receiver that gets another schema or version on a
+    topic rejects the message with one log line and counts it in diagnostics (:mod:`flexsheet.runtime.codec`).
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid", strict=True, arbitrary_types_allowed=True,

@@ -43,8 +43,8 @@ class ObjectDeformation(Message):
 
 class ObjectForceDepth(Message):
     """What the object asks the finger to feel, from the FEM model that deforms its image
-    (:mod:`flexsheet.fem.force_depth`; :class:`flexsheet.model.force_depth.ForceDepth`). Latched; published once
-    the FEM node's model is ready.
+    (:mod:`flexsheet.fem.force_depth`; :class:`flexsheet.model.force_depth.ForceDepth`). Latched; published
+    once the FEM node's model is ready.
 
     ``points`` (P, 3) m, display frame: undeformed surface points along the scene's stroke (the first is the
     scene's ``reference``); ``normals`` (P, 3): their outward unit normals; ``names`` (P,); ``depths`` (D,) m

@@ -41,7 +41,7 @@ and PULSE ``int32 p1..p8`` (also the current types, %). Unused axes are sent as 
 
 Functions raise ``ValueError`` naming the field and the value on anything that does not fit the wire (wrong
 length, unknown command or type code, non-finite or float32-overflowing joints, counters out of range).
-"""
+"""  # noqa: E501 - a table, template or command line kept whole
 
 from __future__ import annotations
 
@@ -132,7 +132,8 @@ def encode_joint_data(q, name: str = "dat") -> bytes:
 
 
 def decode_joint_data(raw: bytes, n: int = 6) -> np.ndarray:
-    """The 40-byte union read as JOINT → the first ``n`` joints, (n,) float64 (rad). ``ValueError`` if not 40 bytes."""
+    """The 40-byte union read as JOINT → the first ``n`` joints, (n,) float64 (rad). ``ValueError`` if not 40
+    bytes."""
     if not isinstance(raw, (bytes, bytearray, memoryview)) or len(raw) != 40:
         raise ValueError(f"MXT union must be 40 bytes, got {type(raw).__name__} of length "
                          f"{len(raw) if hasattr(raw, '__len__') else '?'}")
@@ -146,9 +147,9 @@ class Packet:
     """One MXT datagram (the ``MXTCMD`` struct), request or reply.
 
     ``command``: ``CMD_*``. ``send_type``: type of ``data[0]`` when commanding. ``recv_types``: the four
-    monitor types (RecvType, RecvType1..3). ``data``: the four 40-byte unions (dat, dat1..3). ``send_io_type``,
-    ``recv_io_type``, ``bit_top``, ``bit_mask``, ``io_data``: the I/O window. ``tcount``: uint16;
-    ``ccount``: uint32 communication counter.
+    monitor types (RecvType, RecvType1..3). ``data``: the four 40-byte unions (dat, dat1..3).
+    ``send_io_type``, ``recv_io_type``, ``bit_top``, ``bit_mask``, ``io_data``: the I/O window. ``tcount``:
+    uint16; ``ccount``: uint32 communication counter.
     """
 
     command: int = CMD_NULL
@@ -176,7 +177,8 @@ class Packet:
             _type("RecvType" + (str(i) if i else ""), t)
         for i, d in enumerate(self.data):
             if not isinstance(d, (bytes, bytearray)) or len(d) != 40:
-                raise ValueError(f"MXT dat{i or ''} must be 40 bytes, got {len(d) if hasattr(d, '__len__') else d!r}")
+                raise ValueError(f"MXT dat{i or ''} must be 40 bytes, got "
+                                 f"{len(d) if hasattr(d, '__len__') else d!r}")
         for name, v in (("SendIOType", self.send_io_type), ("RecvIOType", self.recv_io_type),
                         ("BitTop", self.bit_top), ("BitMask", self.bit_mask), ("IoData", self.io_data),
                         ("TCount", self.tcount)):
@@ -188,7 +190,8 @@ class Packet:
         """The 196-byte datagram. Raises ``ValueError`` naming the bad field."""
         self.check()
         r, d = self.recv_types, self.data
-        return PACKET.pack(self.command, self.send_type, r[0], bytes(d[0]), self.send_io_type, self.recv_io_type,
+        return PACKET.pack(self.command, self.send_type, r[0], bytes(d[0]), self.send_io_type,
+                           self.recv_io_type,
                            self.bit_top, self.bit_mask, self.io_data, self.tcount, self.ccount,
                            r[1], bytes(d[1]), r[2], bytes(d[2]), r[3], bytes(d[3]))
 
@@ -228,7 +231,8 @@ def null_packet(ccount: int = 0, recv_types=(TYP_JOINT, TYP_FB_JOINT, TYP_NULL, 
 
 
 def move_packet(q, ccount: int, recv_types=(TYP_JOINT, TYP_FB_JOINT, TYP_NULL, TYP_NULL)) -> Packet:
-    """A MOVE in joint type: ``q`` (≤ 8,) rad in ``dat`` (unused axes 0). ``ValueError`` on bad joints/counter."""
+    """A MOVE in joint type: ``q`` (≤ 8,) rad in ``dat`` (unused axes 0). ``ValueError`` on bad
+    joints/counter."""
     return Packet(CMD_MOVE, TYP_JOINT, tuple(recv_types), (encode_joint_data(q), _ZERO, _ZERO, _ZERO),
                   ccount=ccount).check()
 

@@ -4,9 +4,9 @@ For controllers and PLC gateways that expose Modbus TCP, and the Modbus twin; a 
 driven over real-time external control instead (:mod:`messages.mxt`). :class:`ControllerState` is also the
 protocol-neutral controller state the bridge's MXT backend fills (with synthesised STATUS bits).
 
-Style follows robot Modbus servers such as Universal Robots' map: holding registers (function codes 03, 06, 16)
-carry what the client commands, input registers (04) what the controller measures. Device id: any (the twin
-answers every id). Addresses are 0-based protocol addresses.
+Style follows robot Modbus servers such as Universal Robots' map: holding registers (function codes 03, 06,
+16) carry what the client commands, input registers (04) what the controller measures. Device id: any (the
+twin answers every id). Addresses are 0-based protocol addresses.
 
 Fixed-point: a joint angle is a signed 32-bit integer in micro-radians (``SCALE = 1e-6`` rad per LSB,
 range ±2147.48 rad), split over two 16-bit registers, **high word first** (big-endian word order, "ABCD":
@@ -15,9 +15,9 @@ Modbus requires). Velocities use the same layout in micro-radians per second.
 
 Holding registers
   0  COMMAND     bit 0 ENABLE (servo on, follow targets), bit 1 STOP (e-stop, latched), bit 2 RESET
-                 (a 0→1 edge clears faults whose cause is gone). Other bits set → rejected (ILLEGAL DATA VALUE).
-  1  WATCHDOG    counter the client changes every cycle (any change counts; wraps 65535 → 0).
-  2..13 TARGET   J1..J6 joint targets, int32 µrad, 2 registers each. Must be written as whole pairs.
+                 (a 0→1 edge clears faults whose cause is gone). Other bits set → rejected (ILLEGAL DATA
+  VALUE). 1  WATCHDOG    counter the client changes every cycle (any change counts; wraps 65535 → 0). 2..13
+  TARGET   J1..J6 joint targets, int32 µrad, 2 registers each. Must be written as whole pairs.
 
 Input registers
   0  STATUS      bits, see ``ST_*``.
@@ -137,7 +137,8 @@ def encode_i32(value: float, scale: float = SCALE, name: str = "value") -> tuple
 
 
 def decode_i32(hi, lo, scale: float = SCALE, name: str = "value") -> float:
-    """Inverse of :func:`encode_i32`: registers (high, low) → value·scale. Raises ``ValueError`` on bad registers."""
+    """Inverse of :func:`encode_i32`: registers (high, low) → value·scale. Raises ``ValueError`` on bad
+    registers."""
     h = check_register(f"{name}.hi", hi)
     lo_ = check_register(f"{name}.lo", lo)
     (n,) = struct.unpack(">i", struct.pack(">HH", h, lo_))
@@ -158,7 +159,8 @@ def decode_u32(hi, lo, name: str = "value") -> int:
 
 
 def encode_joints(q, scale: float = SCALE, name: str = "q") -> list[int]:
-    """(6,) joint values (rad or rad/s) → 12 registers, high word first per joint. ``ValueError`` on bad input."""
+    """(6,) joint values (rad or rad/s) → 12 registers, high word first per joint. ``ValueError`` on bad
+    input."""
     a = np.asarray(q, dtype=float) if not isinstance(q, str) else None
     if a is None or a.shape != (N_JOINTS,):
         raise ValueError(f"{name} must be a ({N_JOINTS},) vector, got {q!r}")
@@ -201,15 +203,16 @@ def decode_status(status: int) -> list[str]:
 class ControllerState:
     """Decoded input-register image (see module doc): plain attributes, SI units.
 
-    ``status`` int, ``fault`` int, ``reject`` int, ``cycle`` int, ``position`` (6,) rad, ``velocity`` (6,) rad/s,
-    ``watchdog_echo`` int, ``active`` (6,) rad.
+    ``status`` int, ``fault`` int, ``reject`` int, ``cycle`` int, ``position`` (6,) rad, ``velocity`` (6,)
+    rad/s, ``watchdog_echo`` int, ``active`` (6,) rad.
     """
 
     __slots__ = ("status", "fault", "reject", "cycle", "position", "velocity", "watchdog_echo", "active")
 
     def __init__(self, status, fault, reject, cycle, position, velocity, watchdog_echo, active):
         self.status, self.fault, self.reject, self.cycle = status, fault, reject, cycle
-        self.position, self.velocity, self.watchdog_echo, self.active = position, velocity, watchdog_echo, active
+        self.position, self.velocity, self.watchdog_echo, self.active = (position, velocity, watchdog_echo,
+                                                                         active)
 
     def has(self, bit: int) -> bool:
         """True if STATUS bit ``bit`` (an ``ST_*`` constant) is set."""
@@ -217,7 +220,8 @@ class ControllerState:
 
 
 def decode_input(regs: Sequence[int]) -> ControllerState:
-    """Decode the ``IR_COUNT`` input registers into a :class:`ControllerState`. ``ValueError`` on bad length/values."""
+    """Decode the ``IR_COUNT`` input registers into a :class:`ControllerState`. ``ValueError`` on bad
+    length/values."""
     regs = _register_list(regs, "input image")
     if len(regs) != IR_COUNT:
         raise ValueError(f"input image needs {IR_COUNT} registers, got {len(regs)}")

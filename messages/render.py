@@ -1,5 +1,5 @@
-"""Renderer messages: the downscaled stereo frame the projector emitted (for recording), and the image it shows
-instead of the scene (registration)."""
+"""Renderer messages: the downscaled stereo frame the projector emitted (for recording), and the image it
+shows instead of the scene (registration)."""
 
 from __future__ import annotations
 
@@ -27,7 +27,8 @@ class RenderedFrame(Message):
     left: ndarray("uint8", (None, None, 3), "left-eye image, RGB")
     right: ndarray("uint8", (None, None, 3), "right-eye image, RGB")
     scale: float = Field(gt=0.0, le=1.0, description="downscale factor from projector resolution")
-    correction: str = Field(description="correction model used; \"image\" while show_image replaces the scene")
+    correction: str = Field(description="correction model used; \"image\" while show_image replaces the "
+                                        "scene")
     render_time: float = Field(ge=0.0, description="time to correct and draw the pair, s")
     source_stamp: float = Field(default=0.0, description="exposure stamp of the driving fingertip, s")
     eyes: ndarray("float64", (2, 3), "left and right eye drawn for, m, display frame")

@@ -19,11 +19,11 @@ def sample_fields(cls: type[Message], seed: int = 0, shapes: dict[str, tuple[int
                   image: Callable[[tuple[int, ...], np.random.Generator], np.ndarray] | None = None) -> dict:
     """Field values (all but ``header``) of a valid instance of message class ``cls``.
 
-    Arrays take ``shapes[name]`` if given, else the declared shape with free dimensions set to 2; uint8
-    arrays of ≥ 2 dims come from ``image(shape, rng)`` if given; ``faces`` index the ``vertices`` built
-    before them; other integer arrays get values in 0..254, floats in [0.1, 0.9). Required scalars get
-    True / 0.5 / 1 / ``"left"`` (for a ``left|right`` pattern) or ``"ok"``, a list of strings two ``"ok"``. Deterministic given ``seed``.
-    Raises ``TypeError`` for a field kind it cannot fill.
+    Arrays take ``shapes[name]`` if given, else the declared shape with free dimensions set to 2; uint8 arrays
+    of ≥ 2 dims come from ``image(shape, rng)`` if given; ``faces`` index the ``vertices`` built before them;
+    other integer arrays get values in 0..254, floats in [0.1, 0.9). Required scalars get True / 0.5 / 1 /
+    ``"left"`` (for a ``left|right`` pattern) or ``"ok"``, a list of strings two ``"ok"``. Deterministic given
+    ``seed``. Raises ``TypeError`` for a field kind it cannot fill.
     """
     rng = np.random.default_rng(seed)
     kw: dict = {}
@@ -44,7 +44,8 @@ def sample_fields(cls: type[Message], seed: int = 0, shapes: dict[str, tuple[int
                 kw[name] = rng.uniform(0.1, 0.9, shape).astype(dt)
         elif info.is_required():
             ann = info.annotation
-            pattern = next((getattr(m, "pattern", None) for m in info.metadata if getattr(m, "pattern", None)), None)
+            pattern = next((getattr(m, "pattern", None) for m in info.metadata
+                            if getattr(m, "pattern", None)), None)
             if ann is bool:
                 kw[name] = True
             elif ann is float:

@@ -53,11 +53,12 @@ class ArmTarget(Message):
     (:mod:`flexsheet.arm.pull_limit`, ``hold:torque:J<k>``).
 
     The sheet's motion to ``pose`` (:class:`flexsheet.arm.sheet_motion.SheetSegment`), the same in both arms'
-    targets, so both bridges evaluate one trajectory at the same instant: ``motion_t0`` s (graph clock; None: no
-    motion, the bridge's joint limiter shapes the way to ``pose``), ``motion_frame`` (3, 3) the segment's
+    targets, so both bridges evaluate one trajectory at the same instant: ``motion_t0`` s (graph clock; None:
+    no motion, the bridge's joint limiter shapes the way to ``pose``), ``motion_frame`` (3, 3) the segment's
     reference rotation, ``motion`` (8, 7) rows: start state, its velocity, its acceleration, goal, its
-    velocity, and the per-DOF velocity, acceleration and jerk limits (columns: centre x, y, z m; rotation vector rad; clamp
-    strain), ``motion_size`` m the sheet's unstretched side, ``motion_min_duration`` s its least duration.
+    velocity, and the per-DOF velocity, acceleration and jerk limits (columns: centre x, y, z m; rotation
+    vector rad; clamp strain), ``motion_size`` m the sheet's unstretched side, ``motion_min_duration`` s its
+    least duration.
     """
 
     SCHEMA = "flexsheet/ArmTarget"
@@ -67,11 +68,14 @@ class ArmTarget(Message):
     pose: ndarray("float64", (4, 4), "T_display_clamp, m")
     source_stamp: float = Field(default=0.0, description="exposure stamp of the source fingertip, s")
     status: str = Field(default="ok", description="'ok' or a reason")
-    pull: float = Field(default=0.0, ge=0.0, description="sheet's pull on the clamp toward the sheet centre, N")
-    motion_t0: float | None = Field(default=None, description="start of the sheet's motion segment, s; None: none")
+    pull: float = Field(default=0.0, ge=0.0, description="sheet's pull on the clamp toward the sheet centre, "
+                                                         "N")
+    motion_t0: float | None = Field(default=None, description="start of the sheet's motion segment, s; None: "
+                                                              "none")
     motion_frame: ndarray("float64", (3, 3), "segment's reference rotation, display frame") = Field(
         default_factory=lambda: np.eye(3))
-    motion: ndarray("float64", (8, 7), "rows: start, velocity, acceleration, goal, goal velocity, v/a/j limits; "
-                    "columns: centre m, rotation vector rad, strain") = Field(default_factory=lambda: np.zeros((8, 7)))
+    motion: ndarray("float64", (8, 7), "rows: start, velocity, acceleration, goal, goal velocity, v/a/j "
+                    "limits; columns: centre m, rotation vector rad, strain") = Field(default_factory=
+                                                                                  lambda: np.zeros((8, 7)))
     motion_size: float = Field(default=0.24, gt=0.0, description="sheet's unstretched side, m")
     motion_min_duration: float = Field(default=0.0, ge=0.0, description="the segment's least duration, s")

@@ -20,7 +20,8 @@ from messages.world import ContactTruth, FingerTruth, HeadTruth, SheetState
 
 @dataclass(frozen=True)
 class Topic:
-    """A topic name bound to its message type. ``latched`` marks topics whose last value goes to late joiners."""
+    """A topic name bound to its message type. ``latched`` marks topics whose last value goes to late
+    joiners."""
 
     name: str
     type: type[Message]
@@ -56,8 +57,10 @@ HEAD_TRUTH = Topic("/world/head", HeadTruth, nominal_hz=100.0)
 CONTACT_TRUTH = Topic("/world/contact", ContactTruth, nominal_hz=50.0)
 DIAGNOSTICS = Topic("/diagnostics", Heartbeat, nominal_hz=1.0)
 
-ALL = [STEREO, STEREO_PREVIEW, CALIBRATION, FINGERTIP, SHEET_TARGET, ARM_LEFT_TARGET, ARM_RIGHT_TARGET, ARM_LEFT_STATE,
-       ARM_RIGHT_STATE, DEFORMATION, RENDERED, PROJECTOR_IMAGE, FINGER_TRUTH, SHEET_STATE, DIAGNOSTICS, EYE_POSE,
+ALL = [STEREO, STEREO_PREVIEW, CALIBRATION, FINGERTIP, SHEET_TARGET, ARM_LEFT_TARGET, ARM_RIGHT_TARGET,
+       ARM_LEFT_STATE,
+       ARM_RIGHT_STATE, DEFORMATION, RENDERED, PROJECTOR_IMAGE, FINGER_TRUTH, SHEET_STATE, DIAGNOSTICS,
+       EYE_POSE,
        HEAD_TRUTH, CONTACT_TRUTH, FORCE_DEPTH]
 BY_NAME = {t.name: t for t in ALL}
 

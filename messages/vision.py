@@ -12,11 +12,11 @@ __all__ = ["StereoFrame", "StereoCalibration", "Fingertip", "EyePose"]
 class StereoFrame(Message):
     """A synchronised stereo pair from the camera node (mono8).
 
-    ``left``, ``right``: uint8 arrays of shape (H, W), raw (unrectified) images of the left and right
-    camera. ``exposure_stamp``: mid-exposure time, s (sender's clock); ``header.stamp``: the time
-    the frame was handed to the graph (after readout/transfer; for the twin, after rendering), s.
-    ``exposure_time``: shutter time, s. ``stereo_skew``: right minus left exposure time, s (0 for a
-    hardware-synchronised pair; a receiver rejects pairs whose |skew| exceeds its tolerance). ``header.frame_id`` is the left camera's optical frame
+    ``left``, ``right``: uint8 arrays of shape (H, W), raw (unrectified) images of the left and right camera.
+    ``exposure_stamp``: mid-exposure time, s (sender's clock); ``header.stamp``: the time the frame was handed
+    to the graph (after readout/transfer; for the twin, after rendering), s. ``exposure_time``: shutter time,
+    s. ``stereo_skew``: right minus left exposure time, s (0 for a hardware-synchronised pair; a receiver
+    rejects pairs whose |skew| exceeds its tolerance). ``header.frame_id`` is the left camera's optical frame
     (``"camera_left"``: +z forward, +x right, +y down, OpenCV convention).
     """
 
@@ -55,20 +55,22 @@ class StereoCalibration(Message):
     P1: ndarray("float64", (3, 4), "left rectified projection, px")
     P2: ndarray("float64", (3, 4), "right rectified projection, px")
     Q: ndarray("float64", (4, 4), "disparity-to-depth matrix")
-    T_display_camera: ndarray("float64", (4, 4), "pose of the left camera optical frame in the display frame, m")
+    T_display_camera: ndarray("float64", (4, 4), "pose of the left camera optical frame in the display "
+                                                 "frame, m")
     rms_px: float = Field(default=0.0, ge=0.0, description="stereo RMS reprojection error, px")
 
 
 class Fingertip(Message):
     """Triangulated fingertip marker position in the display frame.
 
-    ``position`` (3,) m, display frame; ``covariance`` (3, 3) m², from pixel-noise propagation.
-    ``valid`` is False when the marker is lost or gated out: then ``position`` is the zero vector and must
-    not be used (never a stale or invented position). ``predicted_position`` (3,) m is the constant-velocity
-    Kalman prediction ``prediction_horizon`` s ahead of ``header.stamp`` (horizon 0 when the predictor is
-    off; then it equals ``position``). ``exposure_stamp`` (s) is the camera exposure the estimate comes from,
+    ``position`` (3,) m, display frame; ``covariance`` (3, 3) m², from pixel-noise propagation. ``valid`` is
+    False when the marker is lost or gated out: then ``position`` is the zero vector and must not be used
+    (never a stale or invented position). ``predicted_position`` (3,) m is the constant-velocity Kalman
+    prediction ``prediction_horizon`` s ahead of ``header.stamp`` (horizon 0 when the predictor is off; then
+    it equals ``position``). ``exposure_stamp`` (s) is the camera exposure the estimate comes from,
     ``frame_stamp`` (s) the time that frame was published by the camera node (its ``header.stamp``) and
-    ``sent_stamp`` (s) the time this estimate was published, all carried for latency accounting. ``reprojection_px``: epipolar/reprojection residual, px.
+    ``sent_stamp`` (s) the time this estimate was published, all carried for latency accounting.
+    ``reprojection_px``: epipolar/reprojection residual, px.
     """
 
     SCHEMA = "flexsheet/Fingertip"

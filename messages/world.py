@@ -15,10 +15,10 @@ class FingerTruth(Message):
     ``position`` (3,) m and ``velocity`` (3,) m/s in the display frame. The script segment being played, as
     typed fields: ``segment`` (its index in the world's script, 0-based), ``mode`` ("stroke", "push",
     "stroke_push"), ``moving_time`` (s, the segment's time for the mark's travel; Table I's row key) and
-    ``phase`` (where in the segment: "approach", "idle", or the mode while the mark moves; "paused" while a tool
-    has paused the script, the finger away from the display).
-    ``target_angle``: angle of the target mark around the cylinder axis, rad (0 = facing the user).
-    ``visible``: False when the script occludes the marker.
+    ``phase`` (where in the segment: "approach", "idle", or the mode while the mark moves; "paused" while a
+    tool has paused the script, the finger away from the display). ``target_angle``: angle of the target mark
+    around the cylinder axis, rad (0 = facing the user). ``visible``: False when the script occludes the
+    marker.
     """
 
     SCHEMA = "flexsheet/FingerTruth"
@@ -66,8 +66,8 @@ class SheetState(Message):
 
 class ContactTruth(Message):
     """The finger's true contact with the true sheet in the simulated world: what the finger feels. From the
-    twin's sheet FEM (:mod:`flexsheet.model.sheet_fem`, its table at the true clamp strain); the report compares
-    it with the force the object asks. Estimators never read it; a lab measures it with a load cell.
+    twin's sheet FEM (:mod:`flexsheet.model.sheet_fem`, its table at the true clamp strain); the report
+    compares it with the force the object asks. Estimators never read it; a lab measures it with a load cell.
 
     ``touching``: the finger is behind the sheet's plane within the clamps. ``depth`` m: the indentation along
     the sheet's normal. ``force`` N: the normal contact force (0 while no table is ready). ``point`` (3,) m:
@@ -82,7 +82,8 @@ class ContactTruth(Message):
     touching: bool = Field(default=False, description="finger behind the sheet's plane, within the clamps")
     depth: float = Field(ge=0.0, description="indentation along the sheet normal, m")
     force: float = Field(ge=0.0, description="normal contact force, N")
-    point: ndarray("float64", (3,), "bottom of the dent (the finger's apex on the pushed sheet), m, display frame")
+    point: ndarray("float64", (3,), "bottom of the dent (the finger's apex on the pushed sheet), m, display "
+                                    "frame")
     stiffness: float = Field(ge=0.0, description="incremental stiffness dF/d(depth), N/m")
 
 

@@ -45,12 +45,13 @@ def set_cable(host: str, up: bool) -> None:
 
 
 def lab_keys() -> Path:
-    """CURVE keys for ``launch/lab_sim.yaml`` (CURVE on, as in the lab): generated once per test process into a
-    private folder that ``$FLEXSHEET_KEYS`` names for everything started afterwards (the hosts' launchers and
-    the tools run in their namespaces). Returns the folder."""
+    """CURVE keys for ``launch/lab_sim.yaml`` (CURVE on, as in the lab): generated once per test process into
+    a private folder that ``$FLEXSHEET_KEYS`` names for everything started afterwards (the hosts' launchers
+    and the tools run in their namespaces). Returns the folder."""
     if not os.environ.get("FLEXSHEET_KEYS", "").startswith(str(KEYS_ROOT)):
         folder = KEYS_ROOT / f"keys-{os.getpid()}"
-        subprocess.run([sys.executable, "-m", "flexsheet", "keys", "generate", "--launch", "launch/lab_sim.yaml",
+        subprocess.run([sys.executable, "-m", "flexsheet", "keys", "generate", "--launch",
+                        "launch/lab_sim.yaml",
                         "-o", str(folder)], cwd=ROOT, check=True, capture_output=True, text=True)
         os.environ["FLEXSHEET_KEYS"] = str(folder)
     return Path(os.environ["FLEXSHEET_KEYS"])
@@ -72,7 +73,8 @@ def three_hosts():
         for host, addr in HOSTS.items():
             ns = names[host]
             sh("ip", "netns", "add", ns)
-            sh("ip", "link", "add", cable(host), "netns", sw, "type", "veth", "peer", "name", "eth0", "netns", ns)
+            sh("ip", "link", "add", cable(host), "netns", sw, "type", "veth", "peer", "name", "eth0", "netns",
+               ns)
             sh("ip", "netns", "exec", sw, "ip", "link", "set", cable(host), "master", "br0", "up")
             sh("ip", "netns", "exec", ns, "ip", "addr", "add", f"{addr}/24", "dev", "eth0")
             sh("ip", "netns", "exec", ns, "ip", "link", "set", "eth0", "up")
@@ -143,8 +145,9 @@ def stop_launch(proc: subprocess.Popen) -> None:
 
 
 #: one three-host run serves both namespace tests (tests/conftest.py ``lab_run``): the 6 s stroke undisturbed
-#: (its Table I row), the 10 s stroke with main's cable to arm1 pulled for CUT_S (test_partition), then arm PC 2
-#: goes away at the 5 s stroke (test_integration_netns). One launch of the three hosts instead of two (~20 s).
+#: (its Table I row), the 10 s stroke with main's cable to arm1 pulled for CUT_S
+#: (test_partition), then arm PC 2 goes away at the 5 s stroke
+#: (test_integration_netns). One launch of the three hosts instead of two (~20 s).
 LAB_SCRIPT = ("world.script=[{mode: stroke, moving_time: 6}, {mode: stroke, moving_time: 10, seed: 1}, "
               "{mode: stroke, moving_time: 5, seed: 2}]")
 CUT_S = 2.0
@@ -180,7 +183,8 @@ def run_lab(out: Path) -> dict:
                     time.sleep(CUT_S)
                 finally:
                     # taken before the cable goes up: heartbeats queued during the cut flush at once, and main
-                    # can print "is back" before `ip link set up` has returned (CI stop 25 failed on that race)
+                    # can print "is back" before `ip link set up`
+                    # has returned (CI stop 25 failed on that race)
                     r["t_back"] = time.time()
                     set_cable("arm1", up=True)
                 # the arm held: its bridge saw no target for target_timeout and said so

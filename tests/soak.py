@@ -1,16 +1,18 @@
 """The hour's soak (``tests/run.sh --soak``; not in CI): does the graph stay up for hours without a leak?
 
-Runs ``launch/lab_sim.yaml`` (the lab's three hosts, CURVE on, moved onto loopback as docs/deploy.md does) on one
-machine with the world's script looping (``world.loop=true``), its recorder on, and a viz node added (the launch
-file written into ``OUT`` with one more node) to which a Foxglove client stays connected, subscribed to the scene,
-the fingertip and the arms, reading everything. Every minute it records each node's resident memory (psutil, by
-the pids the launcher reports when it starts each) and whether each node process still lives; at the end it stops the
-graph as Ctrl-C does and reads the bag back with the official MCAP reader (``mcap``), and from the arms'
-``/arm/*/joint_state`` stamps computes each minute's arm-cycle jitter (p99 of |interval − the median interval|).
+Runs ``launch/lab_sim.yaml`` (the lab's three hosts, CURVE on, moved onto loopback as docs/deploy.md does) on
+one machine with the world's script looping (``world.loop=true``), its recorder on, and a viz node added (the
+launch file written into ``OUT`` with one more node) to which a Foxglove client stays connected, subscribed to
+the scene, the fingertip and the arms, reading everything. Every minute it records each node's resident memory
+(psutil, by the pids the launcher reports when it starts each) and whether each node process still lives; at
+the end it stops the graph as Ctrl-C does and reads the bag back with the official MCAP reader (``mcap``), and
+from the arms' ``/arm/*/joint_state`` stamps computes each minute's arm-cycle jitter (p99 of |interval − the
+median interval|).
 
-Targets: no node's resident memory grows more than 10 % after its first 5 minutes; 0 node deaths; the bag reads
-back complete (a summary, every recorded topic present, no read error); every minute's jitter p99 within 1.5× that
-of the first 5 minutes. Writes ``OUT/soak.json`` and ``OUT/soak.png`` (title, units, targets, verdicts).
+Targets: no node's resident memory grows more than 10 % after its first 5 minutes; 0 node deaths; the bag
+reads back complete (a summary, every recorded topic present, no read error); every minute's jitter p99 within
+1.5× that of the first 5 minutes. Writes ``OUT/soak.json`` and ``OUT/soak.png`` (title, units, targets,
+verdicts).
 
     tests/run.sh --soak                                  # 60 min into out/soak
     python3 tests/soak.py --minutes 10 --out /tmp/soak   # a shorter one
@@ -60,12 +62,13 @@ def _launch_file(out: Path, port: int) -> Path:
 
 
 def _flexsheet(*args: str, **kw) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "flexsheet", *args], cwd=ROOT, capture_output=True, text=True, **kw)
+    return subprocess.run([sys.executable, "-m", "flexsheet", *args], cwd=ROOT, capture_output=True,
+                          text=True, **kw)
 
 
 def _node_pids(log: Path, want: set[str], timeout: float) -> dict[str, int]:
-    """Node name → pid, from the launcher's ``[name] started pid N`` lines, once every node in ``want`` started.
-    Raises ``RuntimeError`` naming the missing ones after ``timeout`` s."""
+    """Node name → pid, from the launcher's ``[name] started pid N`` lines, once every node in ``want``
+    started. Raises ``RuntimeError`` naming the missing ones after ``timeout`` s."""
     deadline = time.monotonic() + timeout
     seen: dict[str, int] = {}
     while time.monotonic() < deadline:
@@ -85,7 +88,8 @@ def _started(log: Path) -> dict[str, int]:
 
 
 class Viewer(threading.Thread):
-    """A Foxglove client that stays connected and reads everything (flexsheet.viz.wsclient), counting frames."""
+    """A Foxglove client that stays connected and reads everything (flexsheet.viz.wsclient), counting
+    frames."""
 
     def __init__(self, port: int) -> None:
         super().__init__(daemon=True)
@@ -105,7 +109,8 @@ class Viewer(threading.Thread):
                         raise
                     await asyncio.sleep(1.0)
             await c.wait_channels({"/viz/scene", "/fingertip"}, timeout=60.0)
-            await c.subscribe([t for t in ("/viz/scene", "/viz/tf", "/fingertip", *ARM_TOPICS) if t in c.channels])
+            await c.subscribe([t for t in ("/viz/scene", "/viz/tf", "/fingertip", *ARM_TOPICS)
+                               if t in c.channels])
             while not self.stop.is_set():
                 try:
                     m = await c._recv(time.monotonic() + 5.0)
@@ -168,14 +173,17 @@ def _chart(res: dict, path: Path) -> None:
         ax[0].plot(range(1, len(rss) + 1), rss, label=name)
     ax[0].axvline(WARMUP_MIN, color="grey", ls=":")
     ax[0].set(xlabel="minute", ylabel="resident memory (MB)",
-              title=f"memory: growth after min {WARMUP_MIN} ≤ {MEMORY_GROWTH:.0%}: {res['verdicts']['memory']}")
+              title=f"memory: growth after min {WARMUP_MIN} ≤ {MEMORY_GROWTH:.0%}: "
+                    f"{res['verdicts']['memory']}")
     ax[0].legend(fontsize=7, ncol=2)
     j = [np.nan if v is None else v for v in res["jitter_p99_ms"]]
     ax[1].plot(range(1, len(j) + 1), j, "o-")
     if res["jitter_baseline_ms"]:
-        ax[1].axhline(res["jitter_baseline_ms"] * JITTER_RATIO, color="r", ls="--", label=f"target {JITTER_RATIO}× warm-up")
+        ax[1].axhline(res["jitter_baseline_ms"] * JITTER_RATIO, color="r", ls="--",
+                      label=f"target {JITTER_RATIO}× warm-up")
         ax[1].legend()
-    ax[1].set(xlabel="minute", ylabel="arm cycle jitter p99 (ms)", title=f"arm cycle jitter: {res['verdicts']['jitter']}")
+    ax[1].set(xlabel="minute", ylabel="arm cycle jitter p99 (ms)",
+              title=f"arm cycle jitter: {res['verdicts']['jitter']}")
     fig.suptitle(f"soak: launch/lab_sim.yaml, {res['minutes']} min, viewer + recorder "
                  f"(deaths {res['deaths']}: {res['verdicts']['deaths']}; bag: {res['verdicts']['bag']})")
     fig.tight_layout()
@@ -187,7 +195,8 @@ def main(argv: list[str] | None = None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
                                  epilog="example:\n  python3 tests/soak.py --minutes 10 --out /tmp/soak")
     ap.add_argument("--minutes", type=int, default=60, help="how long the graph runs (default 60)")
-    ap.add_argument("--out", default="out/soak", help="folder of the bag, soak.json and soak.png (default out/soak)")
+    ap.add_argument("--out", default="out/soak", help="folder of the bag, soak.json and soak.png (default "
+                                                      "out/soak)")
     args = ap.parse_args(argv)
     if args.minutes <= WARMUP_MIN:
         ap.error(f"--minutes must exceed the {WARMUP_MIN}-minute warm-up, got {args.minutes}")
@@ -232,8 +241,8 @@ def main(argv: list[str] | None = None) -> int:
             if proc.poll() is not None:
                 raise RuntimeError(f"the launch ended at minute {minute} (exit {proc.returncode})")
             top = max(rss, key=lambda k: rss[k][-1] if rss[k][-1] == rss[k][-1] else 0)
-            print(f"[soak] minute {minute}/{args.minutes}: {len(procs) - len(dead)}/{len(procs)} nodes alive, "
-                  f"largest {top} {rss[top][-1]:.0f} MB, viewer frames {viewer.frames}", flush=True)
+            print(f"[soak] minute {minute}/{args.minutes}: {len(procs) - len(dead)}/{len(procs)} nodes "
+                  f"alive, largest {top} {rss[top][-1]:.0f} MB, viewer frames {viewer.frames}", flush=True)
         viewer.stop.set()
         viewer.join(timeout=15)
         res.update(t0=t_start, nodes=sorted(procs), rss_mb=rss, deaths=len(dead), died=dead,
@@ -257,7 +266,8 @@ def main(argv: list[str] | None = None) -> int:
         base = np.nanmax(a[:WARMUP_MIN]) if np.isfinite(a[:WARMUP_MIN]).any() else np.nan
         growth[n] = float(np.nanmax(a[WARMUP_MIN:]) / base - 1.0) if np.isfinite(base) else None
     res["rss_growth_after_warmup"] = growth
-    jit = _jitter_by_minute(stamps, min((s[0] for s in stamps.values() if s), default=res["t0"]), args.minutes)
+    jit = _jitter_by_minute(stamps, min((s[0] for s in stamps.values() if s), default=res["t0"]),
+                            args.minutes)
     base = [v for v in jit[:WARMUP_MIN] if v is not None]
     res["jitter_p99_ms"], res["jitter_baseline_ms"] = jit, (float(np.median(base)) if base else None)
     worst = max((g for g in growth.values() if g is not None), default=None)
@@ -268,7 +278,8 @@ def main(argv: list[str] | None = None) -> int:
         "bag": "met" if b["summary"] and b["read_error"] is None and all(t in b["topics"] for t in ARM_TOPICS)
                and b["summary_message_count"] == b["messages"] else "MISSED",
         "jitter": "met" if res["jitter_baseline_ms"] and all(
-            v is not None and v <= JITTER_RATIO * res["jitter_baseline_ms"] for v in jit[WARMUP_MIN:]) else "MISSED",
+            v is not None and v <= JITTER_RATIO * res["jitter_baseline_ms"] for v in jit[WARMUP_MIN:])
+        else "MISSED",
     }
     res["targets"] = {"memory_growth": MEMORY_GROWTH, "deaths": 0, "jitter_ratio": JITTER_RATIO,
                       "warmup_min": WARMUP_MIN}

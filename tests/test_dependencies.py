@@ -1,7 +1,7 @@
 """Every distribution the code imports is declared in pyproject.toml (``deptry``, configured in its
-``[tool.deptry]``): an import reached only through another package's dependencies (``lz4`` through ``mcap``) or
-preinstalled on one machine (``orjson``) breaks a clean install. The positive control plants the one undeclared
-import this project once shipped and sees it named."""
+``[tool.deptry]``): an import reached only through another package's dependencies (``lz4`` through ``mcap``)
+or preinstalled on one machine (``orjson``) breaks a clean install. The positive control plants the one
+undeclared import this project once shipped and sees it named."""
 
 from __future__ import annotations
 
@@ -38,7 +38,8 @@ def test_an_undeclared_import_is_named(tmp_path):
     assert len(lines) == len(text.splitlines()) - 1, "pyproject.toml no longer declares orjson on one line"
     (tmp_path / "pyproject.toml").write_text("\n".join(lines) + "\n")
     (tmp_path / "flexsheet" / "runtime").mkdir(parents=True)
-    shutil.copy(ROOT / "flexsheet" / "runtime" / "bag_json.py", tmp_path / "flexsheet" / "runtime" / "bag_json.py")
+    shutil.copy(ROOT / "flexsheet" / "runtime" / "bag_json.py",
+                tmp_path / "flexsheet" / "runtime" / "bag_json.py")
     r = _deptry(tmp_path)
     out = r.stdout + r.stderr
     assert r.returncode == 1, out

@@ -3,18 +3,18 @@
 
 The commands are extracted mechanically (:func:`doc_commands`, :func:`help_commands`): fenced ``bash``/``sh``/
 ``console`` blocks, lines that start with ``flexsheet ``, inline code spans that start with ``flexsheet `` or
-``python -m flexsheet``, and the ``example:`` lines of every parser of :func:`flexsheet.cli.build_parser` and of
-every calibrate/experiment/bench NAME. Each is one test case (id: file:line, or the --help and the example's
-number), handled by the first table that names it:
+``python -m flexsheet``, and the ``example:`` lines of every parser of :func:`flexsheet.cli.build_parser` and
+of every calibrate/experiment/bench NAME. Each is one test case (id: file:line, or the --help and the
+example's number), handled by the first table that names it:
 
 - :data:`SKIP` (command prefix → reason): a step only a lab machine can take; skipped with its reason;
 - :data:`CHEAP` (command → (form, reason)): a cheaper command that proves the same (``--check`` instead of a
   launch, a short ``--duration``, fewer images), or ``parse``: the command is parsed by the real parsers (its
   NAME's own argparse included) and the repository files it names must exist, but it is not run (experiments
   and benchmarks of minutes);
-- otherwise the command runs as written (or as its CHEAP form) in a sandbox (:func:`make_sandbox`: its own HOME,
-  launch files on free ports, outputs in a temporary folder) within :data:`BUDGET_S`, and must exit 0, or as
-  :data:`EXPECT` says where a lab step fails on purpose on a machine without the lab (for example a
+- otherwise the command runs as written (or as its CHEAP form) in a sandbox (:func:`make_sandbox`: its own
+  HOME, launch files on free ports, outputs in a temporary folder) within :data:`BUDGET_S`, and must exit 0,
+  or as :data:`EXPECT` says where a lab step fails on purpose on a machine without the lab (for example a
   ``--check`` exits 78 naming only the lab's addresses);
 - :data:`LIVE`: tool commands run against one live ``launch/sim.yaml`` graph (:func:`sim_graph`);
   :data:`INTERRUPT`: nodes and launches that run until Ctrl-C get it once they are up, and must stop cleanly.
@@ -128,7 +128,8 @@ def examples(text: str) -> list[str]:
     m = re.search(r"^examples?:", text, re.M)
     if not m:
         return []
-    return [normalise(c.group(1)) for line in text[m.start():].splitlines() if (c := HELP_CMD.match(line.strip()))]
+    return [normalise(c.group(1)) for line in text[m.start():].splitlines()
+            if (c := HELP_CMD.match(line.strip()))]
 
 
 DELEGATES = ("calibrate", "experiment", "bench")
@@ -137,13 +138,14 @@ DELEGATES = ("calibrate", "experiment", "bench")
 def _delegate_table(kind: str) -> dict[str, str]:
     from flexsheet import registry
 
-    return {"calibrate": registry.calibrations, "experiment": registry.experiments, "bench": registry.benches}[kind]()
+    return {"calibrate": registry.calibrations, "experiment": registry.experiments,
+            "bench": registry.benches}[kind]()
 
 
 def help_commands() -> list[Cmd]:
     """The example lines of ``flexsheet --help`` and of every subcommand's --help: the argparse tree of
-    :func:`flexsheet.cli.build_parser`, then each calibrate/experiment/bench NAME's own parser (its ``--help``,
-    run in this process)."""
+    :func:`flexsheet.cli.build_parser`, then each calibrate/experiment/bench NAME's own parser (its
+    ``--help``, run in this process)."""
     from flexsheet import cli, registry
 
     found: list[Cmd] = []
@@ -155,7 +157,8 @@ def help_commands() -> list[Cmd]:
             buf = io.StringIO()
             with contextlib.redirect_stdout(buf), contextlib.suppress(SystemExit):
                 registry.load(spec)(["--help"])
-            found += [Cmd(f"flexsheet {kind} {name} --help:{i}", c) for i, c in enumerate(examples(buf.getvalue()), 1)]
+            found += [Cmd(f"flexsheet {kind} {name} --help:{i}", c) for i,
+                      c in enumerate(examples(buf.getvalue()), 1)]
     return found
 
 
@@ -183,8 +186,8 @@ def subcommand_path(cmd: str) -> bool:
 # ----------------------------------------------------------------------------------------------- tables
 P = "parse"     # CHEAP form: parse with the real parsers, check the files it names; do not run
 LONG = "takes minutes (an experiment or benchmark of the figures); parsed with its own parser, not run"
-LAB_HOST = ("this machine has none of the lab's addresses (10.77.0.x): the check runs and fails on exactly that "
-            "(exit 78, nothing else wrong)")
+LAB_HOST = ("this machine has none of the lab's addresses (10.77.0.x): the check runs and fails on exactly "
+            "that (exit 78, nothing else wrong)")
 LAB_TOOL = ("the lab's graph is not on this network: the tool loads the file and its keys, listens briefly "
             "(short --timeout/--window) and says nothing was heard (exit 1)")
 
@@ -201,24 +204,27 @@ SKIP: dict[str, str] = {
     "flexsheet bench camera --genicam --left 21234567": "needs two real GigE cameras with these serials, "
                                                         "hardware-triggered",
     "flexsheet calibrate display --live --launch launch/lab_sim.yaml": (
-        "needs the lab on one machine running (minutes): tests/system/test_live_registration.py runs these commands "
-        "(a drawn truth seed, without its true-sheet tables)"),
+        "needs the lab on one machine running (minutes): tests/system/test_live_registration.py runs these "
+        "commands (a drawn truth seed, without its true-sheet tables)"),
     "flexsheet calibrate display --live --launch launch/lab.yaml --host main --out": (
         "moves the lab's real arms (the graph up: cameras, arms, projector); its --dry-run runs as written"),
 }
 
 #: command -> (the cheaper form that runs instead, or P: parse only; why)
 CHEAP: dict[str, tuple[str, str]] = {
-    # the lab on one machine (docs/deploy.md): its checked form; tests/system/test_live_registration.py runs it
-    "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
-    "--set hosts.arm2.address=127.0.0.3 --set world.loop=true --out out/lab": (
-        "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
-        "--set hosts.arm2.address=127.0.0.3 --set world.loop=true --out out/lab --check",
+    # the lab on one machine (docs/deploy.md): its checked
+    # form; tests/system/test_live_registration.py runs it
+    "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set "
+    "hosts.arm1.address=127.0.0.2 --set hosts.arm2.address=127.0.0.3 --set world.loop=true --out out/lab": (
+        "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set "
+        "hosts.arm1.address=127.0.0.2 --set hosts.arm2.address=127.0.0.3 --set world.loop=true --out out/lab "
+        "--check",
         "runs until Ctrl-C; tests/system/test_live_registration.py runs it"),
-    "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
-    "--set hosts.arm2.address=127.0.0.3": (
-        "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
-        "--set hosts.arm2.address=127.0.0.3 --check", "runs until Ctrl-C; the check of the same hosts"),
+    "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set "
+    "hosts.arm1.address=127.0.0.2 --set hosts.arm2.address=127.0.0.3": (
+        "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set "
+        "hosts.arm1.address=127.0.0.2 --set hosts.arm2.address=127.0.0.3 "
+        "--check", "runs until Ctrl-C; the check of the same hosts"),
     "flexsheet launch launch/sim.yaml --rtf 1 --set world.loop=true": (
         "flexsheet launch launch/sim.yaml --rtf 1 --set world.loop=true --check",
         "runs until Ctrl-C; tests/system/test_simclock.py runs --rtf 1"),
@@ -230,21 +236,26 @@ CHEAP: dict[str, tuple[str, str]] = {
     "flexsheet launch launch/sim.yaml": ("flexsheet launch launch/sim.yaml --check",
                                          "the scripted run takes minutes; the live-graph cases run the file"),
     "flexsheet launch launch/sim.yaml --set twin.truth_seed=2 --set scene=launch/scenes/sphere.yaml": (
-        "flexsheet launch launch/sim.yaml --set twin.truth_seed=2 --set scene=launch/scenes/sphere.yaml --check",
+        "flexsheet launch launch/sim.yaml --set twin.truth_seed=2 --set scene=launch/scenes/sphere.yaml "
+        "--check",
         "the scripted run takes minutes"),
     "flexsheet launch FILE --check --host H": ("flexsheet launch launch/lab.yaml --check --host arm2",
                                                "a template: the lab file and one of its hosts"),
     "flexsheet launch --check": ("flexsheet launch launch/sim.yaml --check", "the option, on the sim file"),
     "flexsheet launch launch/lab.yaml": ("flexsheet launch launch/lab.yaml --check", "the lab's three hosts"),
     "flexsheet calibrate display --live": (
-        "parse: flexsheet calibrate display --live --launch launch/lab.yaml --host main --out out/registration",
+        "parse: flexsheet calibrate display --live --launch launch/lab.yaml --host main --out "
+        "out/registration",
         "a heading: the option, with the lab's file"),
     "flexsheet launch launch/lab.yaml --host arm1 --set arm_left.enabled=false": (
-        "flexsheet launch launch/lab.yaml --host arm1 --set arm_left.enabled=false --check", "drives a real arm"),
+        "flexsheet launch launch/lab.yaml --host arm1 --set arm_left.enabled=false --check",
+        "drives a real arm"),
     "flexsheet launch launch/lab.yaml --host arm2 --set arm_right.enabled=false": (
-        "flexsheet launch launch/lab.yaml --host arm2 --set arm_right.enabled=false --check", "drives a real arm"),
+        "flexsheet launch launch/lab.yaml --host arm2 --set arm_right.enabled=false --check",
+        "drives a real arm"),
     "flexsheet launch launch/lab.yaml --host main --out out/lab_dry": (
-        "flexsheet launch launch/lab.yaml --host main --out out/lab_dry --check", "real cameras and projector"),
+        "flexsheet launch launch/lab.yaml --host main --out out/lab_dry --check",
+        "real cameras and projector"),
     "flexsheet launch launch/lab.yaml --host arm1": ("flexsheet launch launch/lab.yaml --host arm1 --check",
                                                      "drives a real arm"),
     "flexsheet launch launch/lab.yaml --host arm2": ("flexsheet launch launch/lab.yaml --host arm2 --check",
@@ -253,8 +264,10 @@ CHEAP: dict[str, tuple[str, str]] = {
         "flexsheet launch launch/lab.yaml --host main --out out/lab --check", "real cameras and projector"),
     # the run-time tools on the lab's file
     "flexsheet topic echo /arm/left/joint_state --launch launch/lab.yaml --count 3": (
-        "flexsheet topic echo /arm/left/joint_state --launch launch/lab.yaml --count 3 --timeout 0.5", LAB_TOOL),
-    "flexsheet node list --launch launch/lab.yaml": ("flexsheet node list --launch launch/lab.yaml --timeout 0.5",
+        "flexsheet topic echo /arm/left/joint_state --launch launch/lab.yaml --count 3 --timeout "
+        "0.5", LAB_TOOL),
+    "flexsheet node list --launch launch/lab.yaml": ("flexsheet node list --launch launch/lab.yaml --timeout "
+                                                     "0.5",
                                                      LAB_TOOL),
     "flexsheet topic hz /fingertip --launch launch/lab.yaml": (
         "flexsheet topic hz /fingertip --launch launch/lab.yaml --window 0.5", LAB_TOOL),
@@ -266,26 +279,31 @@ CHEAP: dict[str, tuple[str, str]] = {
     "flexsheet calibrate stereo --left 'calib/left*.png' --right 'calib/right*.png' --board chessboard:9x6 "
     "--square 0.024 -o ~/.flexsheet/stereo.yaml": (
         "flexsheet calibrate stereo --left 'tests/data/stereo_xi/left0[1-4].jpg' --right "
-        "'tests/data/stereo_xi/right0[1-4].jpg' --board chessboard:9x6 --square 0.024 -o ~/.flexsheet/stereo.yaml",
+        "'tests/data/stereo_xi/right0[1-4].jpg' --board chessboard:9x6 --square 0.024 -o "
+        "~/.flexsheet/stereo.yaml",
         "the lab's captured pairs: 4 shipped XIMEA pairs instead"),
-    "flexsheet calibrate stereo --left 'tests/data/stereo_xi/left*.jpg' --right 'tests/data/stereo_xi/right*.jpg' "
-    "--board chessboard:9x6 --square 0.024 -o calib.yaml": (
+    "flexsheet calibrate stereo --left 'tests/data/stereo_xi/left*.jpg' --right "
+    "'tests/data/stereo_xi/right*.jpg' --board chessboard:9x6 --square 0.024 -o calib.yaml": (
         "flexsheet calibrate stereo --left 'tests/data/stereo_xi/left0[1-4].jpg' --right "
         "'tests/data/stereo_xi/right0[1-4].jpg' --board chessboard:9x6 --square 0.024 -o calib.yaml",
         "4 of the 17 pairs (all 17: ~20 s)"),
-    "flexsheet calibrate stereo --left 'tests/data/stereo_xi/left*.jpg' --right 'tests/data/stereo_xi/right*.jpg' "
-    "--board chessboard:9x6 --square 0.024 -o calib.yaml --validate 0": (
+    "flexsheet calibrate stereo --left 'tests/data/stereo_xi/left*.jpg' --right "
+    "'tests/data/stereo_xi/right*.jpg' --board chessboard:9x6 --square 0.024 -o calib.yaml --validate 0": (
         "flexsheet calibrate stereo --left 'tests/data/stereo_xi/left0[1-4].jpg' --right "
-        "'tests/data/stereo_xi/right0[1-4].jpg' --board chessboard:9x6 --square 0.024 -o calib.yaml --validate 0",
+        "'tests/data/stereo_xi/right0[1-4].jpg' --board chessboard:9x6 --square 0.024 -o calib.yaml "
+        "--validate 0",
         "4 of the 17 pairs (all 17: ~20 s)"),
     "python -m flexsheet.twin.truth --bootstrap DIR": (
         "python -m flexsheet.twin.truth --help | grep -q -- '--bootstrap DIR'",
         "40 resampled stereo calibrations take minutes: the module and its option are there"),
     "flexsheet calibrate display --sim --truth-seed N --out DIR": (
-        "parse: flexsheet calibrate display --sim --truth-seed 1 --out out/disp1", "a template; minutes per seed"),
-    "flexsheet calibrate display --sim --truth-seed 0 --out out/calib": (P, "the full registration: ~1-2 min"),
+        "parse: flexsheet calibrate display --sim --truth-seed 1 --out out/disp1",
+        "a template; minutes per seed"),
+    "flexsheet calibrate display --sim --truth-seed 0 --out out/calib": (P,
+                                                                         "the full registration: ~1-2 min"),
     "flexsheet calibrate display --sim --truth-seed 0 --out out/cal0": (P, "the full registration: ~1-2 min"),
-    "flexsheet calibrate display --sim --truth-seed 1 --quick --out /tmp/disp1": (P, "the twin's registration: ~1 min"),
+    "flexsheet calibrate display --sim --truth-seed 1 --quick --out /tmp/disp1":
+        (P, "the twin's registration: ~1 min"),
     "flexsheet calibrate display --sweep --seeds 1,2,3 --out docs/figures/calibration": (P, LONG),
     "flexsheet calibrate display --draws 40 --out docs/figures/calibration/draws": (P, LONG),
     # the sandbox's docs/figures starts empty: the committed readings are written there first (seed 0: ~1 s)
@@ -293,9 +311,12 @@ CHEAP: dict[str, tuple[str, str]] = {
         "flexsheet calibrate sheet --sim --truth-seed 0 --out docs/figures/calibration/sheet && "
         "flexsheet calibrate sheet --presses docs/figures/calibration/sheet/presses.csv --out /tmp/disp",
         "writes the readings it reads first"),
-    "flexsheet calibrate camera-pose --sim --truth-seed 1 --quick --out /tmp/disp": (P, "renders and fits 12+ views"),
-    "flexsheet calibrate projector --sim --truth-seed 1 --quick --out /tmp/disp": (P, "renders 4 x 42 patterns"),
-    "flexsheet calibrate arms --sim --truth-seed 1 --quick --out /tmp/disp": (P, "renders 2 x 12 configurations"),
+    "flexsheet calibrate camera-pose --sim --truth-seed 1 --quick --out /tmp/disp":
+        (P, "renders and fits 12+ views"),
+    "flexsheet calibrate projector --sim --truth-seed 1 --quick --out /tmp/disp": (P,
+                                                                                   "renders 4 x 42 patterns"),
+    "flexsheet calibrate arms --sim --truth-seed 1 --quick --out /tmp/disp":
+        (P, "renders 2 x 12 configurations"),
     "flexsheet calibrate camera-pose --images lab/frames --out lab/": (
         P, "the lab's frames (docs/deploy.md's camera-pose step runs on blank frames in that layout)"),
     "flexsheet calibrate noise --images /work/shared/data/stereo_calib_xi --out "
@@ -303,7 +324,8 @@ CHEAP: dict[str, tuple[str, str]] = {
     # the run-time tools' recorders: one second instead of until Ctrl-C / ten
     "flexsheet bag record -o run.mcap /fingertip /sheet/target": (
         "flexsheet bag record -o run.mcap /fingertip /sheet/target --duration 1", "until Ctrl-C: 1 s"),
-    "flexsheet bag record -o run.mcap --duration 10": ("flexsheet bag record -o run.mcap --duration 1", "1 s"),
+    "flexsheet bag record -o run.mcap --duration 10": ("flexsheet bag record -o run.mcap --duration 1",
+                                                       "1 s"),
     # on a port of its own: the next case (bag play --loop) binds the default one
     "flexsheet bag play run.mcap --rate 0.5": ("flexsheet bag play run.mcap --rate 0.5 --endpoint tcp://127.0.0.1:7198",
                                                 "its own port"),
@@ -312,10 +334,12 @@ CHEAP: dict[str, tuple[str, str]] = {
         "flexsheet experiment stroke --out out/stroke",
         "flexsheet experiment stroke --out docs/figures/stroke",
         "flexsheet experiment stroke --out /tmp/s --seeds 0 --set triangulator.tracking_index=0.3",
-        "flexsheet experiment stroke --quick --out /tmp/stroke_quick",     # the slow tier's test_experiments_quick
+        # the slow tier's test_experiments_quick
+        "flexsheet experiment stroke --quick --out /tmp/stroke_quick",
         "flexsheet experiment stability --graph --out docs/figures/stroke/stability",
         "flexsheet experiment stroke_model --out docs/figures/planner",
-        "flexsheet experiment stroke_model --out /tmp/s --seeds 1 --display-calib 'out/cal{seed}/display.yaml'",
+        "flexsheet experiment stroke_model --out /tmp/s --seeds 1 --display-calib "
+        "'out/cal{seed}/display.yaml'",
         "flexsheet experiment scenes --out docs/figures/scenes",
         "flexsheet experiment scenes --out /tmp/sc --quick --scene organ",
         "flexsheet experiment fem --out out/fem --quick",
@@ -326,18 +350,20 @@ CHEAP: dict[str, tuple[str, str]] = {
         "flexsheet experiment fem --quick --fold-study --out /tmp/fem",
         "flexsheet experiment fem --quick --material-study --out /tmp/fem",
         "flexsheet experiment fem --quick --scene launch/scenes/sphere.yaml --out /tmp/fem_sphere",
-        "flexsheet experiment fem --scene launch/scenes/rounded_box.yaml --node-table --jobs 2 --out /tmp/rb_table",
+        "flexsheet experiment fem --scene launch/scenes/rounded_box.yaml --node-table --jobs 2 --out "
+        "/tmp/rb_table",
         "flexsheet experiment correction --twin realistic --truth-seed 0 --quick --out /tmp/corr",
-        "flexsheet experiment correction --twin both --seeds 0 1 2 --stability --speed --out docs/figures/renderer",
+        "flexsheet experiment correction --twin both --seeds 0 1 2 --stability --speed --out "
+        "docs/figures/renderer",
         "flexsheet experiment stability --quick --out /tmp/stab",
-        "flexsheet experiment compliance --scene launch/scenes/organ.yaml --sheet docs/figures/calibration/sheet/sheet.json "
-        "--out docs/figures/compliance",
+        "flexsheet experiment compliance --scene launch/scenes/organ.yaml --sheet "
+        "docs/figures/calibration/sheet/sheet.json --out docs/figures/compliance",
         "flexsheet experiment latency_load --out docs/figures/realtime",
         "flexsheet experiment latency_load --out /tmp/ll --busy 0 2",
         "flexsheet experiment determinism --out docs/figures/simclock",
         "flexsheet experiment head_rate --out docs/figures/head_rate --rates 60 30 20",
         "flexsheet experiment determinism --quick --out /tmp/det",           # run by the slow tier's
-        "flexsheet experiment latency_load --out /tmp/ll --quick",           # tests/system/test_experiments_quick.py
+        "flexsheet experiment latency_load --out /tmp/ll --quick",  # tests/system/test_experiments_quick.py
         "flexsheet experiment faults --out docs/figures/faults",
         "flexsheet experiment triangulation --out docs/figures/vision",
         "flexsheet experiment triangulation --out /tmp/tri --quick",
@@ -359,7 +385,8 @@ CHEAP: dict[str, tuple[str, str]] = {
     )},
 }
 
-#: lab checks that fail here on purpose: every error line must be one of these (and at least one must be there)
+#: lab checks that fail here on purpose: every error line
+#: must be one of these (and at least one must be there)
 LAB_ERRORS = re.compile(r"not an address of this machine|: probe: camera \w+: camera '\w+' not found"
                         r"|node head_camera: probe: head camera: cannot open UVC device '/dev/video0'")
 #: command (as written) -> (exit status, a regex its output must match, why)
@@ -369,7 +396,8 @@ EXPECT: dict[str, tuple[int, str, str]] = {
         "flexsheet launch launch/lab.yaml --check --host arm1",
         "flexsheet launch launch/lab.yaml --check --host arm2",
         "flexsheet launch launch/lab.yaml",
-        "flexsheet launch launch/lab.yaml --check --host main --set camera.calib_file=$HOME/.flexsheet/stereo.yaml",
+        "flexsheet launch launch/lab.yaml --check --host main --set "
+        "camera.calib_file=$HOME/.flexsheet/stereo.yaml",
         "flexsheet launch launch/lab.yaml --check --host main",
         "flexsheet launch FILE --check --host H",
         "flexsheet launch launch/lab.yaml --host arm1 --set arm_left.enabled=false",
@@ -378,8 +406,8 @@ EXPECT: dict[str, tuple[int, str, str]] = {
         "flexsheet launch launch/lab.yaml --host arm1",
         "flexsheet launch launch/lab.yaml --host arm2",
         "flexsheet launch launch/lab.yaml --host main --out out/lab",
-        "FLEXSHEET_KEYS=/tmp/k flexsheet keys generate --launch launch/lab.yaml && FLEXSHEET_KEYS=/tmp/k flexsheet "
-        "launch launch/lab.yaml --check --host arm1",
+        "FLEXSHEET_KEYS=/tmp/k flexsheet keys generate --launch launch/lab.yaml && FLEXSHEET_KEYS=/tmp/k "
+        "flexsheet launch launch/lab.yaml --check --host arm1",
     )},
     "flexsheet run arm_bridge --launch launch/lab.yaml --name arm_left --param enabled=false": (
         78, r"cannot bind publisher endpoint 'tcp://10\.77\.0\.2:", "the node needs arm PC 1's address"),
@@ -392,9 +420,11 @@ EXPECT: dict[str, tuple[int, str, str]] = {
         "flexsheet topic echo /arm/left/target --launch launch/lab.yaml --count 3",
         "flexsheet param list planner --launch launch/lab.yaml",
     )},
-    # the registration steps on blank frames in the documented folder layout: read, then refused by the estimator
+    # the registration steps on blank frames in the documented
+    # folder layout: read, then refused by the estimator
     "flexsheet calibrate camera-pose --images ~/reg --out ~/.flexsheet": (
-        2, r"board not found in the home view", "blank frames in the documented layout (docs/calibration.md)"),
+        2, r"board not found in the home view", "blank frames in the documented layout "
+                                                "(docs/calibration.md)"),
     "flexsheet calibrate projector --images ~/reg --out ~/.flexsheet": (
         2, r"patterns did not decode", "blank frames in the documented layout (docs/calibration.md)"),
     "flexsheet calibrate arms --images ~/reg --out ~/.flexsheet": (
@@ -414,41 +444,47 @@ _BLANK_FRAMES = ("python - <<'EOF'\nimport json, os, cv2, numpy as np\nroot = os
 _CAMERA_ENTRY = 'mkdir -p ~/.flexsheet && cp "$TWIN_DISPLAY" ~/.flexsheet/display.yaml\n'
 _LAB_KEYS = "flexsheet keys generate --launch launch/lab_sim.yaml >/dev/null\n"
 PREP: dict[str, str] = {
-    "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
-    "--set hosts.arm2.address=127.0.0.3 --set world.loop=true --out out/lab": _LAB_KEYS,
-    "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set hosts.arm1.address=127.0.0.2 "
-    "--set hosts.arm2.address=127.0.0.3": _LAB_KEYS,
-    "flexsheet launch launch/lab.yaml --check --host main --set camera.calib_file=$HOME/.flexsheet/stereo.yaml":
+    "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set "
+    "hosts.arm1.address=127.0.0.2 --set hosts.arm2.address=127.0.0.3 --set world.loop=true --out "
+    "out/lab": _LAB_KEYS,
+    "flexsheet launch launch/lab_sim.yaml --set hosts.main.address=127.0.0.1 --set "
+    "hosts.arm1.address=127.0.0.2 --set hosts.arm2.address=127.0.0.3": _LAB_KEYS,
+    "flexsheet launch launch/lab.yaml --check --host main --set "
+    "camera.calib_file=$HOME/.flexsheet/stereo.yaml":
         "mkdir -p ~/.flexsheet && cp $REPO/flexsheet/vision/ximea_calib.yaml ~/.flexsheet/stereo.yaml\n",
     "flexsheet calibrate camera-pose --images ~/reg --out ~/.flexsheet": _BLANK_FRAMES,
     "flexsheet calibrate projector --images ~/reg --out ~/.flexsheet": _BLANK_FRAMES + _CAMERA_ENTRY,
     "flexsheet calibrate arms --images ~/reg --out ~/.flexsheet": _BLANK_FRAMES + _CAMERA_ENTRY,
     "flexsheet run --container main_pc --launch launch/sim_composed.yaml --host main "
-    "--set camera.display_calib=out/calib/display.yaml": 'mkdir -p out/calib && cp "$TWIN_DISPLAY" out/calib/\n',
-    "flexsheet bag recover cut.mcap fixed.mcap": "head -c $(( $(stat -c %s run.mcap) * 2 / 3 )) run.mcap > cut.mcap\n",
+    "--set camera.display_calib=out/calib/display.yaml": 'mkdir -p out/calib && cp "$TWIN_DISPLAY" '
+                                                         'out/calib/\n',
+    "flexsheet bag recover cut.mcap fixed.mcap": "head -c $(( $(stat -c %s run.mcap) * 2 / 3 )) run.mcap > "
+                                                 "cut.mcap\n",
 }
 
 #: the server of the live graph: runs until its tools are done, then Ctrl-C (its bag and report are written)
 GRAPH = "flexsheet launch launch/sim.yaml --duration 60 --out out/sim"
-#: commands run (as written, or in their CHEAP form) against the live launch/sim.yaml graph, several at a time;
-#: the recorders one after the other, the one of /fingertip last (the bag the other bag examples read)
+#: commands run (as written, or in their CHEAP form) against the live launch/sim.yaml graph, several at a
+#: time; the recorders one after the other, the one of /fingertip last (the bag the other bag examples read)
 LIVE = (
     "flexsheet topic list", "flexsheet topic list --json", "flexsheet topic info /fingertip",
     "flexsheet topic info /fingertip --json", "flexsheet topic echo /fingertip --count 3",
     "flexsheet topic echo /fingertip --count 2 --json", "flexsheet topic hz /camera/stereo",
     "flexsheet topic bw /camera/stereo --json", "flexsheet topic hz /fingertip --window 2",
     "flexsheet topic bw /fingertip --window 2",
-    'flexsheet topic pub /fingertip "{position: [0.0, 0.0, 0.01], covariance: [[1.0e-8, 0, 0], [0, 1.0e-8, 0], '
-    '[0, 0, 1.0e-8]], valid: true, predicted_position: [0.0, 0.0, 0.01], exposure_stamp: 0.0}" --times 5 --rate 10',
-    "flexsheet node list", "flexsheet node info planner", "flexsheet node list --launch launch/sim.yaml --json",
+    'flexsheet topic pub /fingertip "{position: [0.0, 0.0, 0.01], covariance: [[1.0e-8, 0, 0], [0, 1.0e-8, '
+    '0], [0, 0, 1.0e-8]], valid: true, predicted_position: [0.0, 0.0, 0.01], exposure_stamp: 0.0}" --times 5 '
+    '--rate 10',
+    "flexsheet node list", "flexsheet node info planner", "flexsheet node list --launch launch/sim.yaml "
+                                                          "--json",
     "flexsheet node info planner --launch launch/sim.yaml", "flexsheet param list planner",
     "flexsheet param list planner --json", "flexsheet param get planner stiffness_scale",
     "flexsheet param set planner stiffness_scale 0.5", "flexsheet service list planner",
     'flexsheet service call planner param/get "{name: stiffness_scale}"', "flexsheet service list fem",
     "flexsheet topic hz /fingertip",
 )
-LIVE_IN_ORDER = ("flexsheet bag record -o run.mcap --duration 10", "flexsheet bag record -o run.mcap /fingertip "
-                 "/sheet/target")
+LIVE_IN_ORDER = ("flexsheet bag record -o run.mcap --duration 10", "flexsheet bag record -o run.mcap "
+                 "/fingertip /sheet/target")
 #: commands that read what the live graph left (its bag, run.mcap, the twin's display.yaml): run after it
 AFTER_GRAPH = (
     "flexsheet bag info run.mcap", "flexsheet bag play run.mcap --rate 0.5", "flexsheet bag export run.mcap "
@@ -462,11 +498,13 @@ AFTER_GRAPH = (
 INTERRUPT: dict[str, str] = {
     "flexsheet run planner --launch launch/sim.yaml --param use_prediction=false": r"planner up:",
     "flexsheet run --container main_pc --launch launch/sim_composed.yaml --host main "
-    "--set camera.display_calib=out/calib/display.yaml": r"camera up:(.|\n)*planner up:|planner up:(.|\n)*camera up:",
+    "--set camera.display_calib=out/calib/display.yaml": r"camera up:(.|\n)*planner up:|planner "
+                                                         r"up:(.|\n)*camera up:",
     "flexsheet bag play out/sim/sim.mcap --loop": r"playing out/sim/sim\.mcap on tcp://",
     "flexsheet run viz --peer tcp://127.0.0.1:7199": r"viz up:",
 }
-#: the talker and the listener of ``flexsheet run --help``: started together, the listener must hear the talker
+#: the talker and the listener of ``flexsheet run --help``:
+#: started together, the listener must hear the talker
 TALKER = "flexsheet run talker --param rate=5 --endpoint tcp://127.0.0.1:7201"
 LISTENER = "flexsheet run listener --peer tcp://127.0.0.1:7201"
 SERIAL = {*LIVE, *LIVE_IN_ORDER, *AFTER_GRAPH, *INTERRUPT, GRAPH, TALKER, LISTENER}
@@ -475,7 +513,8 @@ SERIAL = {*LIVE, *LIVE_IN_ORDER, *AFTER_GRAPH, *INTERRUPT, GRAPH, TALKER, LISTEN
 def table_keys() -> list[tuple[str, str]]:
     return ([("SKIP", k) for k in SKIP] + [("CHEAP", k) for k in CHEAP] + [("EXPECT", k) for k in EXPECT]
             + [("PREP", k) for k in PREP] + [("LIVE", k) for k in (*LIVE, *LIVE_IN_ORDER, GRAPH)]
-            + [("AFTER_GRAPH", k) for k in AFTER_GRAPH] + [("INTERRUPT", k) for k in (*INTERRUPT, TALKER, LISTENER)])
+            + [("AFTER_GRAPH", k) for k in AFTER_GRAPH]
+            + [("INTERRUPT", k) for k in (*INTERRUPT, TALKER, LISTENER)])
 
 
 def skip_reason(cmd: str) -> str | None:
@@ -488,10 +527,10 @@ REAL_HOME = Path(os.path.expanduser("~"))
 
 def make_sandbox(sb: Path) -> Path:
     """A working folder the commands run in as if it were the repository: its code and test data linked, its
-    own launch/ (the launch files with their ports moved to free ones, so that a graph here cannot collide with
-    another on this machine), docs/figures/, out/ and tmp/ for what the commands write (``/tmp/`` paths are
-    moved there), and its own HOME (``~/.flexsheet``: keys, display.yaml) whose ``.cache`` is the real one (the
-    FEM models and the twin's registrations, cached per machine). The lab file's CURVE keys are generated
+    own launch/ (the launch files with their ports moved to free ones, so that a graph here cannot collide
+    with another on this machine), docs/figures/, out/ and tmp/ for what the commands write (``/tmp/`` paths
+    are moved there), and its own HOME (``~/.flexsheet``: keys, display.yaml) whose ``.cache`` is the real one
+    (the FEM models and the twin's registrations, cached per machine). The lab file's CURVE keys are generated
     there first, so that a check of the lab file fails on the lab's addresses alone."""
     import yaml
 
@@ -568,7 +607,8 @@ class Proc:
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
         self.chunks: dict[str, list[str]] = {"out": [], "err": []}
         self.readers = [threading.Thread(target=lambda f=f, k=k: self.chunks[k].extend(iter(f.readline, "")),
-                                         daemon=True) for f, k in ((self.proc.stdout, "out"), (self.proc.stderr, "err"))]
+                                         daemon=True) for f,
+                        k in ((self.proc.stdout, "out"), (self.proc.stderr, "err"))]
         for r in self.readers:
             r.start()
 
@@ -613,13 +653,16 @@ def run_shell(cmd: str, sb: Path, timeout: float = BUDGET_S, up: str | None = No
 def check_result(r: Result, original: str, why: str = "") -> None:
     """The command's exit status and output are what :data:`EXPECT` says (exit 0 when it says nothing)."""
     if r.code == "timeout":
-        pytest.fail(f"over the budget ({BUDGET_S:.0f} s): give it a cheap form in CHEAP (or a SKIP reason)\n{r}")
+        pytest.fail(f"over the budget ({BUDGET_S:.0f} s): give it a cheap form in CHEAP (or a SKIP "
+                    f"reason)\n{r}")
     code, pattern, _ = EXPECT.get(original, (0, "", ""))
     assert r.code == code, f"expected exit {code}{' (' + why + ')' if why else ''}\n{r}"
     if pattern == "LAB":
         errors = [line for line in r.err.splitlines() if line.startswith("launch/lab.yaml: ")
                   and not line.startswith("launch/lab.yaml: warning:")]
-        assert errors and all(LAB_ERRORS.search(line) for line in errors), f"errors beyond the lab's addresses\n{r}"
+        assert (errors
+                and all(LAB_ERRORS.search(line)
+                        for line in errors)), f"errors beyond the lab's addresses\n{r}"
     elif pattern:
         assert re.search(pattern, r.out + r.err), f"expected {pattern!r} in its output\n{r}"
     assert "Traceback (most recent call last)" not in r.err, f"a traceback\n{r}"
@@ -631,8 +674,8 @@ class _Parsed(Exception):
 
 
 def parse_only(cmd: str) -> None:
-    """Parse ``cmd`` (``flexsheet ...``) with the real parsers, as far as the calibrate/experiment/bench NAME's
-    own (its ``parse_args`` returns, then it stops), and check that every repository file it names
+    """Parse ``cmd`` (``flexsheet ...``) with the real parsers, as far as the calibrate/experiment/bench
+    NAME's own (its ``parse_args`` returns, then it stops), and check that every repository file it names
     (``launch/``, ``tests/``, ``flexsheet/``, ``docker/``) exists. Fails with the parser's message."""
     from flexsheet import cli, registry
 
@@ -687,7 +730,8 @@ def sim_graph(sandbox, sim_fem_cache) -> dict[str, Result | str]:
     """:data:`GRAPH` (launch/sim.yaml on free ports) up; then every :data:`LIVE` command against it, six at a
     time (the :data:`LIVE_IN_ORDER` ones in turn on one worker); then Ctrl-C. Returns each command's
     :class:`Result`, the launch's under :data:`GRAPH`, and the display.yaml of its twin registration under
-    ``"display.yaml"``. A container killed by a signal fails the tests (:func:`_tail` shows its line first)."""
+    ``"display.yaml"``. A container killed by a signal fails the tests (:func:`_tail` shows its line
+    first)."""
     results, failure = _sim_graph_once(sandbox)
     if failure is not None:
         raise failure
@@ -726,10 +770,12 @@ def _sim_graph_once(sandbox: Path) -> tuple[dict[str, Result | str], AssertionEr
 
         with ThreadPoolExecutor(max_workers=6) as pool:
             ordered = pool.submit(in_order)
-            results.update(zip(LIVE, pool.map(lambda c: run_shell(localize(_form(c), sandbox), sandbox), LIVE), strict=True))
+            results.update(zip(LIVE,
+                               pool.map(lambda c: run_shell(localize(_form(c), sandbox), sandbox), LIVE),
+                               strict=True))
             results.update(zip(LIVE_IN_ORDER, ordered.result(), strict=True))
-        # the run's report judges Table I (exit 1 without a row): the first segment, the 10 s stroke, must be over
-        # before Ctrl-C, however slowly the graph ran beside its tools
+        # the run's report judges Table I (exit 1 without a row): the first segment, the 10 s
+        # stroke, must be over before Ctrl-C, however slowly the graph ran beside its tools
         while "segment 2/3" not in launch.text():
             assert launch.proc.poll() is None and time.monotonic() < deadline + 120, \
                 "the sim did not finish its first segment:\n" + _tail(launch)
@@ -738,13 +784,14 @@ def _sim_graph_once(sandbox: Path) -> tuple[dict[str, Result | str], AssertionEr
         failure = exc
     finally:
         t1 = time.monotonic()
-        launch.interrupt()                          # Ctrl-C: the launch stops its nodes, then writes its report
+        launch.interrupt()  # Ctrl-C: the launch stops its nodes, then writes its report
         r = launch.wait(120)
     results[GRAPH] = r
     m = re.search(r"twin registration: (\S+display\.yaml)", r.out + r.err)
     results["display.yaml"] = m.group(1) if m else ""
     if failure is None:
-        print(f"sim graph: up in {up:.1f} s, its tools {t1 - launch.t0 - up:.1f} s, stopped in {time.monotonic() - t1:.1f} s")
+        print(f"sim graph: up in {up:.1f} s, its tools {t1 - launch.t0 - up:.1f} s, stopped in "
+              f"{time.monotonic() - t1:.1f} s")
     return results, failure
 
 
@@ -753,7 +800,8 @@ def read_only(cmd: str) -> bool:
     another (not a keys command, nothing with a PREP step)."""
     form = _form(cmd)
     return ((" --check" in form or "--launch launch/lab.yaml" in form) and "keys" not in form
-            and cmd not in PREP and cmd not in SERIAL and not skip_reason(cmd) and CHEAP.get(cmd, ("",))[0] != P
+            and cmd not in PREP and cmd not in SERIAL and not skip_reason(cmd)
+            and CHEAP.get(cmd, ("",))[0] != P
             and not form.startswith("parse: "))
 
 
@@ -762,7 +810,8 @@ def batch(sandbox) -> dict[str, Result]:
     """The :func:`read_only` commands, two at a time (a check is ~1 s of Python start-up and imports)."""
     cmds = [c.cmd for c in COMMANDS if read_only(c.cmd)]
     with ThreadPoolExecutor(max_workers=2) as pool:
-        return dict(zip(cmds, pool.map(lambda c: run_shell(localize(_form(c), sandbox), sandbox), cmds), strict=True))
+        return dict(zip(cmds, pool.map(lambda c: run_shell(localize(_form(c), sandbox), sandbox), cmds),
+                        strict=True))
 
 
 @pytest.fixture(scope="module")
@@ -827,7 +876,8 @@ def test_a_command_is_run_one_way():
     ways = {}
     for c in COMMANDS:
         w = [name for name, hit in (("SKIP", skip_reason(c.cmd)), ("CHEAP", c.cmd in CHEAP),
-                                    ("LIVE", c.cmd in (*LIVE, *LIVE_IN_ORDER)), ("INTERRUPT", c.cmd in INTERRUPT))
+                                    ("LIVE", c.cmd in (*LIVE, *LIVE_IN_ORDER)),
+                                    ("INTERRUPT", c.cmd in INTERRUPT))
              if hit]
         if len(w) > 1 and w != ["CHEAP", "LIVE"]:
             ways[c.cmd] = w
@@ -835,15 +885,16 @@ def test_a_command_is_run_one_way():
 
 
 def test_the_extraction_finds_fences_lines_spans_and_examples(tmp_path):
-    """The extractor is not vacuous: a planted page gives its fenced, console, bare-line and inline commands with
-    their lines, and the help walk finds examples of nested parsers and of the NAMEs' own parsers."""
+    """The extractor is not vacuous: a planted page gives its fenced, console, bare-line and inline commands
+    with their lines, and the help walk finds examples of nested parsers and of the NAMEs' own parsers."""
     page = tmp_path / "p.md"
     page.write_text("intro `flexsheet bag info` and `flexsheet/cli.py`\n```bash\n# a comment\n"
                     "flexsheet keys generate --launch x.yaml   # note\nflexsheet a \\\n  --b\n```\n"
                     "```\nnot a command\n```\n```console\n$ ls -l\noutput\n```\nflexsheet topic list\n")
     got = [(c.id, c.cmd) for c in doc_commands(page, "p.md")]
     assert got == [("p.md:4", "flexsheet keys generate --launch x.yaml"), ("p.md:5", "flexsheet a --b"),
-                   ("p.md:12", "ls -l"), ("p.md:15", "flexsheet topic list"), ("p.md:1", "flexsheet bag info")]
+                   ("p.md:12", "ls -l"), ("p.md:15", "flexsheet topic list"),
+                   ("p.md:1", "flexsheet bag info")]
     assert examples("usage\n\nexample: flexsheet x --y 1\n         flexsheet z   # c\nexit status 1\n") == \
         ["flexsheet x --y 1", "flexsheet z"]
     ids = {c.id.rsplit(":", 1)[0] for c in COMMANDS}
@@ -852,7 +903,8 @@ def test_the_extraction_finds_fences_lines_spans_and_examples(tmp_path):
             "flexsheet experiment fem --help", "flexsheet bench planner --help"} <= ids
     assert sum(c.id.startswith("docs/deploy.md") for c in COMMANDS) >= 30
     assert subcommand_path("flexsheet bag info") and subcommand_path("flexsheet calibrate arms")
-    assert not subcommand_path("flexsheet bag info run.mcap") and not subcommand_path("flexsheet launch x.yaml")
+    assert not subcommand_path("flexsheet bag info run.mcap") and not subcommand_path(
+        "flexsheet launch x.yaml")
 
 
 def test_parse_only_rejects_a_bad_option_and_a_missing_file():

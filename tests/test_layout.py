@@ -9,12 +9,12 @@
 - no import cycle between folders (the packages of ``flexsheet/``, ``messages``, each node), nor between the
   modules inside a folder (imports under ``if TYPE_CHECKING:`` are not run and do not count);
 - no re-export: a module's ``__all__`` names only what it defines; no ``_private`` name is imported from
-  another module;
+another module;
 - no file of ``flexsheet/`` or ``nodes/`` over 500 lines, no function over 80;
 - the unit tests mirror the library: ``tests/unit/<package>/test_<module>.py`` tests
   ``flexsheet/<package>/<module>.py`` (or the package ``<module>/``), a subpackage's likewise
-  (``tests/unit/fem/reference/test_paths.py`` ``flexsheet/fem/reference/paths.py``), ``tests/unit/test_<x>.py``
-  ``flexsheet/<x>.py``;
+  (``tests/unit/fem/reference/test_paths.py`` ``flexsheet/fem/reference/paths.py``),
+  ``tests/unit/test_<x>.py`` ``flexsheet/<x>.py``;
 - no ``.py`` under ``docs/``; ``README.md`` ≤ 100 lines, none over 300 characters; each ``docs/`` page ≤ 300
   lines; no work-log words outside
   ``CHANGELOG.md``, in the docs or in the code's docstrings and comments;
@@ -46,7 +46,8 @@ def _imports(path: Path) -> list[tuple[int, str]]:
             out += [(n.lineno, a.name) for a in n.names]
         elif isinstance(n, ast.ImportFrom):
             if n.level:
-                raise AssertionError(f"{path.relative_to(ROOT)}:{n.lineno}: relative import; use absolute imports")
+                raise AssertionError(f"{path.relative_to(ROOT)}:{n.lineno}: relative import; use absolute "
+                                     "imports")
             out += [(n.lineno, n.module or "")]
             # ``from flexsheet import registry`` names the module flexsheet.registry
             out += [(n.lineno, f"{n.module}.{a.name}") for a in n.names if n.module in ("flexsheet", "nodes")]
@@ -73,7 +74,8 @@ def _module(path: Path) -> str:
 
 
 def _library_imports(sub: str = "") -> list[tuple[Path, int, str]]:
-    return [(p, line, mod) for p in sorted((ROOT / "flexsheet" / sub).rglob("*.py")) for line, mod in _imports(p)]
+    return [(p, line, mod) for p in sorted((ROOT / "flexsheet" / sub).rglob("*.py")) for line,
+            mod in _imports(p)]
 
 
 def test_the_library_imports_no_node():
@@ -84,17 +86,19 @@ def test_the_library_imports_no_node():
 
 def test_the_runtime_is_generic():
     bad = [f"{p.relative_to(ROOT)}:{line}: imports {mod}" for p, line, mod in _library_imports("runtime")
-           if mod.split(".")[0] == "flexsheet" and len(mod.split(".")) > 1 and mod.split(".")[1] in ABOVE_RUNTIME]
+           if mod.split(".")[0] == "flexsheet" and len(mod.split(".")) > 1
+           and mod.split(".")[1] in ABOVE_RUNTIME]
     assert bad == [], "flexsheet/runtime/ must know nothing of the display:\n" + "\n".join(bad)
 
 
-#: raw pyzmq outside the runtime, on purpose: the transport bench's baseline (the runtime against raw pyzmq) and
-#: the link attacks (a squatter and a slow reader are raw sockets, not nodes)
+#: raw pyzmq outside the runtime, on purpose: the transport bench's baseline (the runtime against
+#: raw pyzmq) and the link attacks (a squatter and a slow reader are raw sockets, not nodes)
 RAW_ZMQ = {"flexsheet/benches/transport.py", "flexsheet/experiments/faults/links.py"}
 
 
 def test_only_the_runtime_zmq_package_talks_to_zmq():
-    users = sorted({str(p.relative_to(ROOT)) for p, _, mod in _library_imports() if mod.split(".")[0] == "zmq"})
+    users = sorted({str(p.relative_to(ROOT)) for p, _,
+                    mod in _library_imports() if mod.split(".")[0] == "zmq"})
     assert any(u.startswith("flexsheet/runtime/zmq/") for u in users), "the check read no zmq import"
     bad = [u for u in users if not u.startswith("flexsheet/runtime/zmq/") and u not in RAW_ZMQ]
     assert bad == [], f"files outside flexsheet/runtime/zmq/ importing zmq: {bad}"
@@ -134,8 +138,8 @@ def _adapter_files(name: str) -> list[Path]:
 
 def test_device_nodes_reach_the_twin_only_through_ports():
     """A device node takes its device through a port (``flexsheet/vision/camera_port.py``,
-    ``head_camera_port.py``, ``flexsheet/arm/controller_port.py``: an entry point per source); the twin provides
-    the simulated side. No device node's adapter imports ``flexsheet.twin``."""
+    ``head_camera_port.py``, ``flexsheet/arm/controller_port.py``: an entry point per source); the twin
+    provides the simulated side. No device node's adapter imports ``flexsheet.twin``."""
     bad = [f"{p.relative_to(ROOT)}:{line}: imports {mod}" for name in DEVICE_NODES
            for p in _adapter_files(name) for line, mod in _imports(p)
            if mod == "flexsheet.twin" or mod.startswith("flexsheet.twin.")]
@@ -158,16 +162,18 @@ def _sim_branches(source: str) -> list[int]:
 
 
 def test_device_nodes_do_not_branch_on_simulation_and_stay_short():
-    """A device node is the same code on both clocks (the runtime's :class:`PacedCall`, :meth:`Node.background`,
-    :meth:`Node.pause` and the ports hold the difference), its ``node.py`` is at most 250 lines, and the planner
-    imports nothing from ``flexsheet.arm`` (the two arms' command is :mod:`flexsheet.planning.arm_command`)."""
+    """A device node is the same code on both clocks (the runtime's :class:`PacedCall`,
+    :meth:`Node.background`, :meth:`Node.pause` and the ports hold the difference), its ``node.py`` is at most
+    250 lines, and the planner imports nothing from ``flexsheet.arm`` (the two arms' command is
+    :mod:`flexsheet.planning.arm_command`)."""
     branches = [f"{p.relative_to(ROOT)}:{line}" for name in DEVICE_NODES for p in _adapter_files(name)
                 for line in _sim_branches(p.read_text())]
     assert branches == [], "device nodes branching on simulation:\n" + "\n".join(branches)
     long = {name: n for name in DEVICE_NODES
             if (n := len((ROOT / "nodes" / name / "node.py").read_text().splitlines())) > 250}
     assert long == {}, f"device node.py files over 250 lines: {long}"
-    arm = [f"{p.relative_to(ROOT)}:{line}: {mod}" for p in _adapter_files("planner") for line, mod in _imports(p)
+    arm = [f"{p.relative_to(ROOT)}:{line}: {mod}" for p in _adapter_files("planner") for line,
+           mod in _imports(p)
            if mod == "flexsheet.arm" or mod.startswith("flexsheet.arm.")]
     assert arm == [], "the planner node imports the arms' package:\n" + "\n".join(arm)
 
@@ -185,7 +191,8 @@ def test_the_simulation_branch_finder_sees_planted_branches():
 def test_model_is_pure():
     bad = [f"{p.relative_to(ROOT)}:{line}: imports {mod}" for p, line, mod in _library_imports("model")
            if mod.split(".")[0] in TRANSPORT or (mod.startswith("flexsheet.") and _folder(mod) not in
-                                                  ("flexsheet.model", "flexsheet.yamlio", "flexsheet.manifest",
+                                                  ("flexsheet.model", "flexsheet.yamlio",
+                                                   "flexsheet.manifest",
                                                    "flexsheet.dirs"))]
     assert bad == [], "flexsheet.model must stay pure:\n" + "\n".join(bad)
 
@@ -212,7 +219,8 @@ def _cycles(edges: dict[str, set[str]], where: dict[tuple[str, str], str]) -> li
                 reach(b, seen)
         return seen
 
-    return sorted(f"{a} -> {b} [{where[(a, b)]}] and back" for a in edges for b in edges[a] if a in reach(b, set()))
+    return sorted(f"{a} -> {b} [{where[(a, b)]}] and back" for a in edges for b in edges[a]
+                  if a in reach(b, set()))
 
 
 def test_no_import_cycle_between_folders():
@@ -232,7 +240,8 @@ def test_checker_reads_imports_with_lines(tmp_path):
     f = tmp_path / "x.py"
     f.write_text("import os\nfrom nodes.camera.node import CameraNode\nfrom flexsheet import registry\n")
     assert _imports(f) == [(1, "os"), (2, "nodes.camera.node"), (3, "flexsheet"), (3, "flexsheet.registry")]
-    assert _folder("nodes.camera.node") == "nodes.camera" and _folder("flexsheet.fem.solver") == "flexsheet.fem"
+    assert (_folder("nodes.camera.node") == "nodes.camera"
+            and _folder("flexsheet.fem.solver") == "flexsheet.fem")
     assert _folder("flexsheet.registry") == "flexsheet.registry" and _folder("numpy") is None
     assert _folder("flexsheet") is None
 
@@ -249,7 +258,8 @@ def test_readme_and_docs_are_short_pages_of_current_state():
     pages = {p.name: len(p.read_text().splitlines()) for p in (ROOT / "docs").glob("*.md")}
     assert {k: v for k, v in pages.items() if v > 300} == {}, "docs pages over 300 lines"
     pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
-    code = [p for base in ("flexsheet", "nodes", "messages", "tests") for p in sorted((ROOT / base).rglob("*.py"))
+    code = [p for base in ("flexsheet", "nodes", "messages", "tests")
+            for p in sorted((ROOT / base).rglob("*.py"))
             if p != Path(__file__).resolve()]
     hist = [f"{p.relative_to(ROOT)}:{i + 1}" for p in pages + code
             for i, line in enumerate(p.read_text().splitlines()) if WORK_LOG.search(line)]
@@ -286,7 +296,8 @@ def _run_imports(path: Path, modules: set[str]) -> list[tuple[int, str, list[str
             elif isinstance(child, ast.ImportFrom) and child.module:
                 for a in child.names:
                     sub = f"{child.module}.{a.name}"
-                    out.append((child.lineno, sub, []) if sub in modules else (child.lineno, child.module, [a.name]))
+                    out.append((child.lineno, sub, []) if sub in modules
+                               else (child.lineno, child.module, [a.name]))
             visit(child)
 
     visit(ast.parse(path.read_text(), str(path)))
@@ -316,9 +327,12 @@ def test_no_import_cycle_inside_a_folder():
 def test_no_private_name_is_imported_from_another_module():
     files = _code_files() + sorted((ROOT / "tests").rglob("*.py"))
     modules = {_module(p) for p in _code_files()}
-    bad = [f"{p.relative_to(ROOT)}:{line}: {mod}.{n}" for p in files for line, mod, names in _run_imports(p, modules)
-           if mod in modules and mod != _module(p) for n in names if n.startswith("_") and not n.startswith("__")]
-    assert bad == [], "private names imported from another module (make them public or move the caller):\n" + \
+    bad = [f"{p.relative_to(ROOT)}:{line}: {mod}.{n}" for p in files for line, mod,
+           names in _run_imports(p, modules)
+           if mod in modules and mod != _module(p) for n in names if n.startswith("_")
+           and not n.startswith("__")]
+    assert (bad
+            == []), "private names imported from another module (make them public or move the caller):\n" + \
         "\n".join(bad[:40])
 
 
@@ -359,7 +373,8 @@ def test_files_and_functions_are_short():
         if len(text.splitlines()) > 500:
             long_files.append(f"{path.relative_to(ROOT)}: {len(text.splitlines())} lines")
         for node in ast.walk(ast.parse(text, str(path))):
-            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.end_lineno - node.lineno + 1 > 80:
+            if (isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+                and node.end_lineno - node.lineno + 1 > 80):
                 long_funcs.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}: "
                                   f"{node.end_lineno - node.lineno + 1} lines")
     assert long_files == [], "files over 500 lines:\n" + "\n".join(long_files)
@@ -369,8 +384,9 @@ def test_files_and_functions_are_short():
 def test_the_inside_checks_see_planted_faults(tmp_path):
     """A planted private import, a TYPE_CHECKING-only import and a re-export are read as such."""
     f = tmp_path / "x.py"
-    f.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from flexsheet.model import sheet\n"
-                 "from flexsheet.model.sheet import _p, clamp_poses\n__all__ = ['clamp_poses', 'y']\ny = 1\n")
+    f.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from flexsheet.model import "
+                 "sheet\nfrom flexsheet.model.sheet import _p, clamp_poses\n__all__ = ['clamp_poses', "
+                 "'y']\ny = 1\n")
     got = _run_imports(f, {"flexsheet.model.sheet"})
     assert got == [(1, "typing", ["TYPE_CHECKING"]), (4, "flexsheet.model.sheet", ["_p"]),
                    (4, "flexsheet.model.sheet", ["clamp_poses"])]
@@ -383,10 +399,10 @@ MIRRORS = {"messages": ROOT / "messages"}
 
 
 def _unmirrored(unit: Path, lib: Path, mirrors: dict[str, Path]) -> list[str]:
-    """The test files under ``unit`` (relative paths) whose name is no module of ``lib``: ``<package>/test_<m>.py``
-    needs the module ``lib/<package>/<m>.py`` or the package ``lib/<package>/<m>/`` (under ``mirrors[<package>]``
-    instead where given), ``<package>/<sub>/test_<m>.py`` the same in the subpackage ``lib/<package>/<sub>/``,
-    ``test_<x>.py`` directly in ``unit`` the module ``lib/<x>.py``."""
+    """The test files under ``unit`` (relative paths) whose name is no module of ``lib``:
+    ``<package>/test_<m>.py`` needs the module ``lib/<package>/<m>.py`` or the package ``lib/<package>/<m>/``
+    (under ``mirrors[<package>]`` instead where given), ``<package>/<sub>/test_<m>.py`` the same in the
+    subpackage ``lib/<package>/<sub>/``, ``test_<x>.py`` directly in ``unit`` the module ``lib/<x>.py``."""
     bad = []
     for path in sorted(unit.rglob("test_*.py")):
         rel = path.relative_to(unit)
@@ -404,8 +420,8 @@ def _unmirrored(unit: Path, lib: Path, mirrors: dict[str, Path]) -> list[str]:
 def test_unit_tests_mirror_the_library():
     """Every tests/unit/<package>/test_<module>.py tests flexsheet/<package>/<module>.py (or the package
     flexsheet/<package>/<module>/), a subpackage's tests/unit/<package>/<sub>/test_<module>.py likewise, every
-    tests/unit/test_<x>.py tests flexsheet/<x>.py: a test lives where the module it judges does, and a module's
-    tests are found by its name."""
+    tests/unit/test_<x>.py tests flexsheet/<x>.py: a test lives where the module it judges does, and a
+    module's tests are found by its name."""
     bad = _unmirrored(ROOT / "tests" / "unit", ROOT / "flexsheet", MIRRORS)
     assert "arm/test_kinematics.py" not in bad and "test_cli.py" not in bad, "the rule read no test file"
     assert bad == [], "unit tests named after no module (tests/unit/<package>/test_<module>.py for " \
@@ -414,15 +430,16 @@ def test_unit_tests_mirror_the_library():
 
 def test_the_mirror_rule_refuses_a_planted_bad_name(tmp_path):
     """A test named after no module (in a package or a subpackage), one in a folder the library lacks and one
-    for a missing top-level module are refused; a module's, a subpackage's, a subpackage's module's, a top-level
-    module's and a mirrored folder's tests pass."""
+    for a missing top-level module are refused; a module's, a subpackage's, a subpackage's module's, a
+    top-level module's and a mirrored folder's tests pass."""
     lib, unit, other = tmp_path / "lib", tmp_path / "unit", tmp_path / "messages"
     for f in ("pkg/mod.py", "pkg/sub/__init__.py", "pkg/sub/leaf.py", "pkg/data/table.json", "cli.py"):
         (lib / f).parent.mkdir(parents=True, exist_ok=True)
         (lib / f).write_text("")
     other.mkdir()
     (other / "registers.py").write_text("")
-    for f in ("pkg/test_mod.py", "pkg/test_sub.py", "test_cli.py", "messages/test_registers.py", "pkg/conftest.py",
+    for f in ("pkg/test_mod.py", "pkg/test_sub.py", "test_cli.py", "messages/test_registers.py",
+              "pkg/conftest.py",
               "pkg/test_pkg_mod.py", "pkg/test_data.py", "pkg/sub/test_mod.py", "pkg/sub/test_leaf.py",
               "pkg/nosub/test_mod.py", "test_main.py", "nope/test_mod.py"):
         (unit / f).parent.mkdir(parents=True, exist_ok=True)
@@ -455,15 +472,17 @@ def _experiments_importers(root: Path) -> list[str]:
 
 def _reports_into_experiments(launch: Path) -> list[str]:
     """The launch files under ``launch`` whose ``report:`` names a module of ``flexsheet.experiments``."""
-    return [f"{p.name}: {m}" for p in sorted(launch.rglob("*.yaml")) for m in REPORT_LINE.findall(p.read_text())
+    return [f"{p.name}: {m}" for p in sorted(launch.rglob("*.yaml"))
+            for m in REPORT_LINE.findall(p.read_text())
             if m.split(":")[0] == "flexsheet.experiments" or m.startswith("flexsheet.experiments.")]
 
 
 def test_only_the_experiments_and_the_cli_import_the_experiments():
-    """The product (the report, the tables, the studies the commands share) is built below the experiments: only
-    ``flexsheet/experiments/`` and the CLI front ends import ``flexsheet.experiments``, and no launch's report runs
-    from it."""
-    assert _experiments_importers(ROOT) == [], "imports of flexsheet.experiments outside it and the CLI:\n" + \
+    """The product (the report, the tables, the studies the commands share) is built below the experiments:
+    only ``flexsheet/experiments/`` and the CLI front ends import ``flexsheet.experiments``, and no launch's
+    report runs from it."""
+    assert (_experiments_importers(ROOT)
+            == []), "imports of flexsheet.experiments outside it and the CLI:\n" + \
         "\n".join(_experiments_importers(ROOT))
     assert REPORT_LINE.search((ROOT / "launch" / "sim.yaml").read_text()), "the check read no report: line"
     assert _reports_into_experiments(ROOT / "launch") == [], "launch reports run from flexsheet.experiments"
@@ -487,25 +506,28 @@ def test_the_experiments_rule_sees_planted_faults(tmp_path):
 
 
 # ---------------------------------------------------------------------------------- dependencies in sight
-#: the most project imports (``flexsheet``, ``nodes``, ``messages``) inside functions: a module's dependencies are
-#: read at its top; an import stays inside a function only for a heavy or optional dependency (a GL context, a
-#: camera SDK, dask, scipy.optimize, pinocchio) or the start-up time of the CLI, with its reason on its line
+#: the most project imports (``flexsheet``, ``nodes``, ``messages``) inside functions: a
+#: module's dependencies are read at its top; an import stays inside a function only for
+#: a heavy or optional dependency (a GL context, a camera SDK, dask, scipy.optimize,
+#: pinocchio) or the start-up time of the CLI, with its reason on its line
 MAX_LOCAL_IMPORTS = 60
-#: files whose imports inside functions share one reason: the CLI front ends load a command's modules only when
-#: it runs, so that ``flexsheet --help`` and completion start at once
+#: files whose imports inside functions share one reason: the CLI front ends load a command's
+#: modules only when it runs, so that ``flexsheet --help`` and completion start at once
 LAZY_FILES = {"flexsheet/cli.py": "start-up time", "flexsheet/cli_commands.py": "start-up time"}
 PROJECT = ("flexsheet", "nodes", "messages")
 
 
 def _local_imports(path: Path) -> list[tuple[int, str, bool]]:
-    """(line, module, whether a comment on its lines gives a reason) of each project import inside a function."""
+    """(line, module, whether a comment on its lines gives a reason) of each project import inside a
+    function."""
     lines = path.read_text().splitlines()
     out: list[tuple[int, str, bool]] = []
 
     def visit(node: ast.AST, inside: bool) -> None:
         for child in ast.iter_child_nodes(node):
             if inside and isinstance(child, (ast.Import, ast.ImportFrom)):
-                mods = [a.name for a in child.names] if isinstance(child, ast.Import) else [child.module or ""]
+                mods = ([a.name for a in child.names] if isinstance(child, ast.Import)
+                        else [child.module or ""])
                 if any(m.split(".")[0] in PROJECT for m in mods):
                     said = any("#" in line for line in lines[child.lineno - 1:child.end_lineno])
                     out.append((child.lineno, mods[0], said))
@@ -528,8 +550,10 @@ def test_few_imports_inside_functions():
 
 
 def test_each_import_inside_a_function_says_why():
-    bad = [f"{rel}:{line}: {mod}" for rel, line, mod, said in _all_local_imports() if not said and rel not in LAZY_FILES]
-    assert bad == [], "imports inside functions without a reason on their line (# lazy: …):\n" + "\n".join(bad)
+    bad = [f"{rel}:{line}: {mod}" for rel, line, mod,
+           said in _all_local_imports() if not said and rel not in LAZY_FILES]
+    assert (bad
+            == []), "imports inside functions without a reason on their line (# lazy: …):\n" + "\n".join(bad)
 
 
 def test_the_local_import_check_sees_planted_faults(tmp_path):
@@ -537,7 +561,7 @@ def test_the_local_import_check_sees_planted_faults(tmp_path):
     standard library inside a function and a nested function's are told apart."""
     f = tmp_path / "x.py"
     f.write_text("import os\nfrom flexsheet.model import sheet\n\n\ndef f():\n    import json\n"
-                 "    from flexsheet.fem.cache import ArrayCache\n    from messages import topics  # lazy: why\n\n"
-                 "    def g():\n        import nodes.camera.node\n")
+                 "    from flexsheet.fem.cache import ArrayCache\n    from messages import topics  # lazy: "
+                 "why\n\n    def g():\n        import nodes.camera.node\n")
     assert _local_imports(f) == [(7, "flexsheet.fem.cache", False), (8, "messages", True),
                                  (11, "nodes.camera.node", False)]

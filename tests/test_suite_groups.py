@@ -1,6 +1,7 @@
-"""tests/run.sh's grouping holds: pytest-xdist's ``--dist loadgroup`` sends every test of one ``xdist_group`` to one
-worker, so a module's session fixtures (the shared sim run, the twin's registrations) are built once. With pytest 9
-and pytest-xdist 3.8 the groups silently fell apart into single tests (pyproject.toml caps pytest for it)."""
+"""tests/run.sh's grouping holds: pytest-xdist's ``--dist loadgroup`` sends every test of one ``xdist_group``
+to one worker, so a module's session fixtures (the shared sim run, the twin's registrations) are built once.
+With pytest 9 and pytest-xdist 3.8 the groups silently fell apart into single tests (pyproject.toml caps
+pytest for it)."""
 
 from __future__ import annotations
 
@@ -24,8 +25,10 @@ def test_loadgroup_keeps_a_group_on_one_worker(tmp_path):
         def test_b(k):
             open(f"b_{k}", "w").write(os.environ["PYTEST_XDIST_WORKER"])
     '''))
-    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-n", "2", "--dist", "loadgroup", "-p", "no:cacheprovider",
-                        "-p", "no:randomly", "test_groups.py"], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-n", "2", "--dist", "loadgroup", "-p",
+                        "no:cacheprovider",
+                        "-p", "no:randomly", "test_groups.py"], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=120)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     for g in ("a", "b"):
         workers = {(tmp_path / f"{g}_{k}").read_text() for k in range(6)}

@@ -1,8 +1,9 @@
 """The topic map of docs/architecture.md is generated: every topic of ``messages/topics.py`` with the nodes of
 ``launch/sim.yaml`` that publish and subscribe it, read with ``ast`` from each node type's module (its
-``self.publisher(...)`` and ``self.subscribe(...)`` calls; the arm topics by the node's ``arm`` param), from its
-port's source (the module of the entry point its ``source`` param names: its ``subscribe`` calls and its ``inputs``)
-and from the recorder's ``topics`` param. The Foxglove bridge (``viz``) subscribes to what a viewer opens, so it is not listed.
+``self.publisher(...)`` and ``self.subscribe(...)`` calls; the arm topics by the node's ``arm`` param), from
+its port's source (the module of the entry point its ``source`` param names: its ``subscribe`` calls and its
+``inputs``) and from the recorder's ``topics`` param. The Foxglove bridge (``viz``) subscribes to what a
+viewer opens, so it is not listed.
 
 On a mismatch, the test prints the table to paste between the doc's ``topics:begin``/``topics:end`` markers.
 """
@@ -69,8 +70,11 @@ def _endpoints(source: str, arm: str | None) -> tuple[set[str], set[str]]:
                 pub.update(_topic_of(n.args[0], arm))
             elif n.func.attr in ("subscribe", "sample"):     # a sampled topic is subscribed too
                 sub.update(_topic_of(n.args[0], arm))
-        elif isinstance(n, ast.Assign) and [getattr(t, "id", "") for t in n.targets] == ["inputs"] \
-                and isinstance(n.value, ast.Tuple):          # a port source's inputs: its node subscribes them
+        elif (
+            isinstance(n, ast.Assign)
+            and [getattr(t, "id", "") for t in n.targets] == ["inputs"]
+            and isinstance(n.value, ast.Tuple)
+        ):  # a port source's inputs: its node subscribes them
             for e in n.value.elts:
                 sub.update(_topic_of(e, arm))
     return pub, sub
@@ -89,7 +93,8 @@ def topic_table(launch: dict, files: dict[str, Path]) -> str:
             continue
         pub, sub = _endpoints(files[node["type"]].read_text(), params.get("arm"))
         if node["type"] in PORTS:
-            port_pub, port_sub = _endpoints(_entry_files(PORTS[node["type"]])[params.get("source", "sim")].read_text(),
+            port_pub, port_sub = _endpoints(
+                _entry_files(PORTS[node["type"]])[params.get("source", "sim")].read_text(),
                                             params.get("arm"))
             pub, sub = pub | port_pub, sub | port_sub
         for t in pub:

@@ -1,6 +1,6 @@
-"""An independent Foxglove client's view of the running simulated display (tests/system/test_viz_live.py): connect to
-the viz bridge of a launch, subscribe, and collect what it shows. Used by the shared sim run (tests/conftest.py
-``sim_run``), which connects it while the graph runs."""
+"""An independent Foxglove client's view of the running simulated display (tests/system/test_viz_live.py):
+connect to the viz bridge of a launch, subscribe, and collect what it shows. Used by the shared sim run
+(tests/conftest.py ``sim_run``), which connects it while the graph runs."""
 
 from __future__ import annotations
 
@@ -42,8 +42,8 @@ def _off_surface(position) -> float:
 
 
 async def watch(port: int, proc: subprocess.Popen) -> tuple[dict, object, list[dict], dict]:
-    """Connect, subscribe, and return (channels, a decoded SceneUpdate holding the FEM mesh, the valid /fingertip
-    messages up to the first one within 3 mm of the surface: the finger on the object, the server's
+    """Connect, subscribe, and return (channels, a decoded SceneUpdate holding the FEM mesh, the valid
+    /fingertip messages up to the first one within 3 mm of the surface: the finger on the object, the server's
     ``{"capabilities": [...], "times": [ns, ...]}``)."""
     c = await _connect(port, proc, timeout=90.0)
     try:
@@ -59,7 +59,7 @@ async def watch(port: int, proc: subprocess.Popen) -> tuple[dict, object, list[d
             if topic == "/viz/scene" and scene is None:
                 su = c.decode(topic, payload)
                 ents = {e.id: e for e in su.entities}
-                if "object" in ents and ents["object"].triangles:   # the FEM's mesh, not the fallback cylinder
+                if "object" in ents and ents["object"].triangles:  # the FEM's mesh, not the fallback cylinder
                     scene = su
             elif topic == "/fingertip":
                 msg = c.decode(topic, payload)

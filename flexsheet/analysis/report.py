@@ -130,17 +130,18 @@ def _clock(summary: dict, out_dir: Path) -> None:
 def sheet_model_error(summary: dict, lf=None) -> None:
     """``compliance.model_error_pct`` (and ``compliance.model_error``): the planner's identified sheet model
     against the twin's true force over the working strains
-    (:func:`flexsheet.twin.registration.working_model_error`), when the run used the twin's registration of its
-    truth seed (the launch's ``display_calib`` is that cached registration, or it names none); and
+    (:func:`flexsheet.twin.registration.working_model_error`), when the run used the twin's registration of
+    its truth seed (the launch's ``display_calib`` is that cached registration, or it names none); and
     ``compliance.model_error_contacts`` at the run's own contacts on the sheet
-    (:func:`~flexsheet.twin.registration.contacts_model_error`). A judge's figure: it reads the truth, after the run."""
+    (:func:`~flexsheet.twin.registration.contacts_model_error`). A judge's figure: it reads the truth, after
+    the run."""
     tw, comp = summary.get("twin", {}), summary.get("compliance")
     if not comp or tw.get("truth_seed") is None:
         return
     path = registration.sim_display_calib_cached(int(tw["truth_seed"]), tw.get("realism", "realistic"))
     named = lf.section("display_calib") if lf is not None and hasattr(lf, "section") else None
     if named is not None and (path is None or os.path.realpath(str(named)) != os.path.realpath(path)):
-        return                              # the run's own display.yaml (a lab's): not the twin's registration
+        return  # the run's own display.yaml (a lab's): not the twin's registration
     sheet = load_display_calib(path).sheet if path else None
     if sheet is None:
         return
@@ -155,8 +156,8 @@ def sheet_model_error(summary: dict, lf=None) -> None:
 
 def run_bags(out_dir: Path, since: float | None = None) -> list[Path]:
     """The bags of a run in ``out_dir``, oldest first (a respawned recorder continues in ``<stem>.N.mcap``):
-    every ``*.mcap`` but replays, and with ``since`` (epoch s, the launch's start) only those written since, so
-    an earlier run's bags in a reused folder are left out."""
+    every ``*.mcap`` but replays, and with ``since`` (epoch s, the launch's start) only those written since,
+    so an earlier run's bags in a reused folder are left out."""
     bags = [p for p in out_dir.glob("*.mcap") if not p.name.startswith("replay")]
     if since is not None:
         bags = [p for p in bags if p.stat().st_mtime >= since]
@@ -164,12 +165,13 @@ def run_bags(out_dir: Path, since: float | None = None) -> list[Path]:
 
 
 def main(out: str, lf=None, since: float | None = None) -> int:
-    """Analyse the run's bags in ``out`` (called by ``flexsheet launch`` after the run, with ``since`` its start,
-    epoch s: :func:`run_bags`) and write the report. Returns 0, or 1 without a Table I row."""
+    """Analyse the run's bags in ``out`` (called by ``flexsheet launch`` after the run, with ``since`` its
+    start, epoch s: :func:`run_bags`) and write the report. Returns 0, or 1 without a Table I row."""
     out_dir = Path(out)
     bags = run_bags(out_dir, since)
     if not bags:
-        print(f"[report] no bag in {out_dir}" + (" written by this run" if since is not None else ""), flush=True)
+        print(f"[report] no bag in {out_dir}" + (" written by this run" if since is not None else ""),
+              flush=True)
         return 1
     older = len(run_bags(out_dir)) - len(bags)
     if older:
@@ -201,8 +203,8 @@ def main(out: str, lf=None, since: float | None = None) -> int:
     title = f"flexsheet run report: {getattr(lf, 'name', None) or out_dir.name}"
     (out_dir / "report.md").write_text(markdown(summary, title, charts))
     print(format_text(summary), flush=True)
-    print(f"[report] wrote {out_dir}/summary.json, report.md, {', '.join(f for f, _ in charts)} and their JSON "
-          f"(from {', '.join(b.name for b in bags)})", flush=True)
+    print(f"[report] wrote {out_dir}/summary.json, report.md, {', '.join(f for f, _ in charts)} and their "
+          f"JSON (from {', '.join(b.name for b in bags)})", flush=True)
     return 0 if any(k[:1].isdigit() for k in summary) else 1
 
 

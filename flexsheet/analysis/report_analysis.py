@@ -52,7 +52,8 @@ from flexsheet.runtime.codec import DecodeError, decode_any
 __all__ = ["analyse", "table1_rows", "felt_and_paper", "sheet_delay", "stroke_segments",
            "is_paper", "TREMOR_WINDOW", "DELAY_LAGS"]
 
-#: the finger's slow motion is its 0.21 s moving average (21 samples at the world's 100 Hz): the rest is tremor
+#: the finger's slow motion is its 0.21 s moving average
+#: (21 samples at the world's 100 Hz): the rest is tremor
 TREMOR_WINDOW = 21
 #: lags tried by :func:`sheet_delay`, s
 DELAY_LAGS = np.arange(-0.030, 0.150001, 0.001)
@@ -79,14 +80,14 @@ def _interp_sheet(sheets: list, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scene | None = None,
             series: dict | None = None) -> dict:
-    """The summary of a bag, or of the parts of one run (a respawned recorder continues in ``<stem>.1.mcap``…),
-    on ``scene`` (``None``: the paper's cylinder): ``bags``, ``counts`` per topic, ``run`` and ``segments``
-    (:func:`stroke_segments`), the rows of :func:`table1_rows`, ``compliance`` (its ``felt``, ``follow``,
-    ``inclusion_contrast``: :mod:`flexsheet.analysis.report_softness`), ``placement``
-    (:func:`~flexsheet.analysis.report_placement.placement`), ``latency_ms``, ``faults`` and
-    the verdicts (:func:`flexsheet.analysis.report_verdicts.judge`: ``headline``). The recorded
-    ``/diagnostics`` (arrival time, Heartbeat) pairs are appended to ``heartbeats`` if given, the per-sample
-    Table I series to ``series`` (:func:`felt_and_paper`)."""
+    """The summary of a bag, or of the parts of one run (a respawned recorder continues in
+    ``<stem>.1.mcap``…), on ``scene`` (``None``: the paper's cylinder): ``bags``, ``counts`` per topic,
+    ``run`` and ``segments`` (:func:`stroke_segments`), the rows of :func:`table1_rows`, ``compliance`` (its
+    ``felt``, ``follow``, ``inclusion_contrast``: :mod:`flexsheet.analysis.report_softness`), ``placement``
+    (:func:`~flexsheet.analysis.report_placement.placement`), ``latency_ms``, ``faults`` and the verdicts
+    (:func:`flexsheet.analysis.report_verdicts.judge`: ``headline``). The recorded ``/diagnostics`` (arrival
+    time, Heartbeat) pairs are appended to ``heartbeats`` if given, the per-sample Table I series to
+    ``series`` (:func:`felt_and_paper`)."""
     bags = [bags] if isinstance(bags, Path) else list(bags)
     d = _load(bags)
     for msgs in d.values():
@@ -109,7 +110,8 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scen
             pos, n = np.unique(uv, axis=0, return_counts=True)
             summary["compliance"]["contacts_on_sheet"] = {
                 "uv_m": pos.tolist(), "n": n.tolist(),
-                "note": "where on the sheet the judged samples were planned (u along the clamp line, v across), to 2 mm"}
+                "note": "where on the sheet the judged samples were planned (u along the clamp line, v "
+                        "across), to 2 mm"}
         fl = follow_lag(d)
         if fl:
             summary["compliance"]["follow_ms"] = fl["follow_ms"]
@@ -137,8 +139,8 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scen
 
 
 def stroke_segments(truths: list, tips: list | None = None) -> tuple[dict, dict]:
-    """The moving phases of the Table I strokes in the truth (time-sorted (arrival, FingerTruth) pairs; samples
-    of a paused script are skipped: a pass resumes after them).
+    """The moving phases of the Table I strokes in the truth (time-sorted (arrival, FingerTruth) pairs;
+    samples of a paused script are skipped: a pass resumes after them).
 
     Returns ``segments``: key → ``{"mode", "moving_time_s", "passes", "moved_s", "coverage", "partial",
     "expected_n"}`` (``partial``: a pass whose moving phase the bag does not see end; ``coverage``: moved s
@@ -161,7 +163,8 @@ def stroke_segments(truths: list, tips: list | None = None) -> tuple[dict, dict]
         if cur is None or cur["segment"] != m.segment:
             if cur is not None:
                 cur["ended"] = True
-            cur = {"key": segment_key(m), "segment": m.segment, "mode": m.mode, "moving_time_s": m.moving_time,
+            cur = {"key": segment_key(m), "segment": m.segment, "mode": m.mode,
+                   "moving_time_s": m.moving_time,
                    "t0": t, "moved_s": 0.0, "ended": False}
             passes.append(cur)
         elif prev is not None:
@@ -170,8 +173,9 @@ def stroke_segments(truths: list, tips: list | None = None) -> tuple[dict, dict]
     rate = _tip_rate(tips or [])
     segments: dict = {}
     for p in (p for p in passes if p["mode"] in STROKE_MODES):
-        s = segments.setdefault(p["key"], {"mode": p["mode"], "moving_time_s": p["moving_time_s"], "passes": 0,
-                                           "moved_s": 0.0, "partial": False})
+        s = segments.setdefault(p["key"],
+                                {"mode": p["mode"], "moving_time_s": p["moving_time_s"], "passes": 0,
+                                 "moved_s": 0.0, "partial": False})
         s["passes"] += 1
         s["moved_s"] += p["moved_s"]
         s["partial"] = s["partial"] or not p["ended"]
@@ -199,10 +203,11 @@ def _run_state(truths: list, passes: list[dict], approach: dict[int, float]) -> 
         frac = p["moved_s"] / p["moving_time_s"] if p["moving_time_s"] > 0 else 0.0
         return {"partial": True, "note": f"the bag ends inside segment {p['key']} s ({p['mode']}, "
                                          f"{100 * frac:.0f} % of its {p['moving_time_s']:g} s moving time)"}
-    moved = any(p["segment"] == last.segment and p["t0"] > approach.get(last.segment, -np.inf) for p in passes)
+    moved = any(p["segment"] == last.segment and p["t0"] > approach.get(last.segment, -np.inf)
+                for p in passes)
     if last.phase != "idle" or not moved:
-        return {"partial": True, "note": f"the bag ends before the {last.mode} {last.moving_time:g} s segment "
-                                         "moved"}
+        return {"partial": True, "note": f"the bag ends before the {last.mode} {last.moving_time:g} s "
+                                         "segment moved"}
     return {"partial": False, "note": "the bag ends in a segment's closing hold, after its stroke"}
 
 
@@ -287,13 +292,14 @@ def _believed_sheet(d: dict[str, list], t: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_ts: np.ndarray,
-                   series: dict | None = None, segments: dict | None = None, paper_scene_: bool = True) -> dict:
+                   series: dict | None = None, segments: dict | None = None,
+                   paper_scene_: bool = True) -> dict:
     """Table I two ways per stroking segment: ``felt`` (the true fingertip, interpolated at each exposure,
-    against the true sheet: the row of :func:`flexsheet.analysis.table1.errors_row` plus
-    ``angle3d_mean_deg``, the full 3-D angle between the object's normal and the sheet's) and ``paper`` (the
-    measured fingertip against the sheet the display believes). Plus ``decomposition`` (:func:`_decomposition`),
-    ``targets`` (Δθ mean, deg: the paper's ÷ :data:`~flexsheet.analysis.table1.FELT_TARGET_FACTOR` felt,
-    ÷ :data:`~flexsheet.analysis.table1.TARGET_FACTOR` paper), ``target_source`` and ``verdicts``
+    against the true sheet: the row of :func:`flexsheet.analysis.table1.errors_row` plus ``angle3d_mean_deg``,
+    the full 3-D angle between the object's normal and the sheet's) and ``paper`` (the measured fingertip
+    against the sheet the display believes). Plus ``decomposition`` (:func:`_decomposition`), ``targets`` (Δθ
+    mean, deg: the paper's ÷ :data:`~flexsheet.analysis.table1.FELT_TARGET_FACTOR` felt, ÷
+    :data:`~flexsheet.analysis.table1.TARGET_FACTOR` paper), ``target_source`` and ``verdicts``
     (:func:`flexsheet.analysis.report_verdicts.table1_verdicts`: on the paper's cylinder only, none for a
     partial segment). ``series`` receives per segment the exposure times (s from the first) and per-sample Δθ
     (deg) of both."""
@@ -338,7 +344,8 @@ def _normals(shape, points: np.ndarray) -> np.ndarray:
 
 
 def _angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angles (N,) deg between the unit directions (N, 3) ``a`` and ``b`` (sign-blind, as normals of a plane)."""
+    """Angles (N,) deg between the unit directions (N, 3) ``a`` and ``b`` (sign-blind, as normals of a
+    plane)."""
     return np.degrees(np.arccos(np.clip(np.abs(np.sum(a * b, axis=1)), 0.0, 1.0)))
 
 
@@ -377,7 +384,8 @@ def sheet_delay(d: dict[str, list], groups: dict[str, list], scene: Scene) -> di
     normal at the true fingertip at t − L (least mean angle over :data:`DELAY_LAGS`, on the 10 s stroke, else
     the longest segment). The prediction already leads by its horizon h, so h + L is the horizon that would
     cancel the lag. Returns ``{"segment", "horizon_ms", "residual_lag_ms", "exposure_to_sheet_ms" (h + L),
-    "angle_at_best_deg", "stroke_speed_mm_per_s"}`` (the true finger's median speed in that segment), or {}."""
+    "angle_at_best_deg", "stroke_speed_mm_per_s"}`` (the true finger's median speed in that segment), or
+    {}."""
     truths, sheets = d.get("/world/finger", []), d.get("/world/sheet", [])
     if not groups or len(truths) < 10 or len(sheets) < 10:
         return {}

@@ -1,7 +1,7 @@
 """Charts of a run report (:mod:`flexsheet.analysis.report`): matplotlib Agg PNGs, each with a JSON of the
-same numbers beside it (``table1.json``, ``felt.json``, ``latency.json``, ``graph.json``, ``compliance.json``). Each metric chart
-has a title, units (deg for angles, mm for lengths, ms for times), the target, the verdict and this scene's
-own rows; the paper's published bars only on the paper's cylinder."""
+same numbers beside it (``table1.json``, ``felt.json``, ``latency.json``, ``graph.json``,
+``compliance.json``). Each metric chart has a title, units (deg for angles, mm for lengths, ms for times), the
+target, the verdict and this scene's own rows; the paper's published bars only on the paper's cylinder."""
 
 from __future__ import annotations
 
@@ -41,7 +41,8 @@ def _table1_data(summary: dict) -> dict:
         rows[k] = {"dtheta_mean_deg": r["dtheta_mean_deg"], "dtheta_std_deg": r["dtheta_std_deg"],
                    "dtheta_spread_deg": spread(r["dtheta_mean_deg"], r["dtheta_std_deg"]),
                    "published_deg": r["published_deg"], "target_deg": r["target_deg"],
-                   "target_source": r["target_source"], "verdict": r["verdict"], "partial": r["partial"], "n": r["n"],
+                   "target_source": r["target_source"], "verdict": r["verdict"], "partial": r["partial"],
+                   "n": r["n"],
                    "dd_mm": dd, "dd_spread_mm": spread(dd, dd_sd),
                    "dd_convention": "2R·Δθ (the paper's)" if paper else "|DD′| chord",
                    "published_dd_mm": PAPER_TABLE1[k]["dd_mean_mm"] if paper else None}
@@ -59,13 +60,15 @@ def _verdict_marks(ax, rows: dict, tops: list[float]) -> None:
                       label=f"target ({r['target_source']})" if i == first else None)
         d = digits(r["dtheta_mean_deg"], r["target_deg"])
         vs = "" if r["target_deg"] is None else f" vs {r['target_deg']:.{d}f}°"
-        ax.text(i, tops[i] * 1.03, f"{r['verdict']}\n{r['dtheta_mean_deg']:.{d}f}°{vs}", ha="center", va="bottom",
+        ax.text(i, tops[i] * 1.03, f"{r['verdict']}\n{r['dtheta_mean_deg']:.{d}f}°{vs}", ha="center",
+                va="bottom",
                 fontsize=7, color="#b00" if r["verdict"] == "MISSED" else "k")
 
 
 def table1_chart(summary: dict, path: Path) -> dict:
     """Felt Δθ (deg) and Δd (mm) per segment of this scene, with the target, the verdict and (paper's cylinder
-    only) the paper's published row. Writes ``path`` (PNG, when there are rows) and its JSON; returns the data."""
+    only) the paper's published row. Writes ``path`` (PNG, when there are rows) and its JSON; returns the
+    data."""
     data = _table1_data(summary)
     path.with_suffix(".json").write_text(json.dumps(data, indent=1))
     rows = data["rows"]
@@ -121,7 +124,8 @@ def felt_chart(summary: dict, series: dict, path: Path) -> dict:
             "target_source": {k: rows[k]["target_source"] for k in keys},
             "verdicts": {k: rows[k]["verdict"] for k in keys}, "delay": summary.get("delay", {}),
             "means": {k: {"felt": rows[k]["dtheta_mean_deg"],
-                          "paper_method": t1.get("paper", {}).get(k, {}).get("dtheta_mean_deg")} for k in keys},
+                          "paper_method": t1.get("paper", {}).get(k, {}).get("dtheta_mean_deg")}
+                      for k in keys},
             "series": {k: series[k] for k in keys}}
     path.with_suffix(".json").write_text(json.dumps(data))
     if not keys:
@@ -132,14 +136,15 @@ def felt_chart(summary: dict, series: dict, path: Path) -> dict:
         sr, r = series[k], rows[k]
         ax.plot(sr["t_s"], sr["felt_deg"], lw=0.6, label="felt (true finger vs true sheet)")
         if "paper_deg" in sr:
-            ax.plot(sr["t_s"], sr["paper_deg"], lw=0.5, alpha=0.5, color="#888888", label="paper's method (context)")
+            ax.plot(sr["t_s"], sr["paper_deg"], lw=0.5, alpha=0.5, color="#888888",
+                    label="paper's method (context)")
         if r["target_deg"] is not None:
             ax.axhline(r["target_deg"], color="k", ls="--", lw=1.0, label=f"target: {r['target_source']}")
         ax.axhline(r["dtheta_mean_deg"], color="C0", ls=":", lw=1.0, label="felt mean")
         d = digits(r["dtheta_mean_deg"], r["target_deg"])
         tgt = "no target" if r["target_deg"] is None else f"target {r['target_deg']:.{d}f}°"
-        ax.set_title(f"{k} s{' (partial)' if r['partial'] else ''}: mean {r['dtheta_mean_deg']:.{d}f}°, {tgt}\n"
-                     f"verdict: {r['verdict']}", fontsize=8)
+        ax.set_title(f"{k} s{' (partial)' if r['partial'] else ''}: mean {r['dtheta_mean_deg']:.{d}f}°, "
+                     f"{tgt}\nverdict: {r['verdict']}", fontsize=8)
         ax.set_xlabel("time in segment (s)")
         ax.set_ylabel("Δθ (deg)")
         ax.set_ylim(bottom=0.0)
@@ -152,13 +157,15 @@ def felt_chart(summary: dict, series: dict, path: Path) -> dict:
 
 
 def compliance_chart(summary: dict, series: dict, path: Path) -> dict:
-    """The force the finger felt (``/world/contact``) against the mapped request at the same depth, per pressed
-    sample, with the ±15 % band, the target and the verdict (``summary["compliance"]["felt"]``). Writes ``path``
-    (PNG, when there are samples) and its JSON; returns the data."""
+    """The force the finger felt (``/world/contact``) against the mapped request at the same depth, per
+    pressed sample, with the ±15 % band, the target and the verdict (``summary["compliance"]["felt"]``).
+    Writes ``path`` (PNG, when there are samples) and its JSON; returns the data."""
     felt = (summary.get("compliance") or {}).get("felt") or {}
     smp = series.get("compliance") or {}
-    data = {"title": "Force felt against force requested, while pressed >= 2 mm", "unit": {"force": "N", "depth": "mm"},
-            "target": felt.get("target"), "verdict": felt.get("verdict"), "within_15pct": felt.get("within_15pct"),
+    data = {"title": "Force felt against force requested, while pressed >= 2 mm",
+            "unit": {"force": "N", "depth": "mm"},
+            "target": felt.get("target"), "verdict": felt.get("verdict"),
+            "within_15pct": felt.get("within_15pct"),
             "basis": felt.get("basis"),
             "depth_mm": [1e3 * x for x in smp.get("depth_m", [])], "felt_n": smp.get("felt_n", []),
             "requested_n": smp.get("requested_n", [])}
@@ -196,8 +203,9 @@ def latency_chart(summary: dict, path: Path) -> dict:
     chain = {k: v for k, v in lat.get("chain", {}).items() if v["n"]}
     clock = (summary.get("clock") or {}).get("kind", "?") if isinstance(summary.get("clock"), dict) else "?"
     data = {"title": f"Latency per hop and end to end (clock {clock})", "unit": "ms",
-            "rows": {k: {**v, "basis": basis.get(k, {}).get("basis"), "target_ms": tg.get(k, {}).get("target_ms"),
-                         "verdict": tg.get(k, {}).get("verdict")} for k, v in chain.items()},
+            "rows":
+                {k: {**v, "basis": basis.get(k, {}).get("basis"), "target_ms": tg.get(k, {}).get("target_ms"),
+                     "verdict": tg.get(k, {}).get("verdict")} for k, v in chain.items()},
             "target_source": next(iter(tg.values()))["source"] if tg else None}
     path.with_suffix(".json").write_text(json.dumps(data, indent=1))
     if not chain:
@@ -252,17 +260,22 @@ def graph_chart(heartbeats: list, path: Path) -> dict:
     for n, v in graph["nodes"].items():
         ax.text(0.0, ny[n], f"{n}\n[{v['host']}]", ha="center", va="center", fontsize=8,
                 bbox={"boxstyle": "round", "fc": "#dbe9f6"})
-        ax.text(2.0, ny[n], n, ha="center", va="center", fontsize=8, bbox={"boxstyle": "round", "fc": "#dbe9f6"})
+        ax.text(2.0, ny[n], n, ha="center", va="center", fontsize=8,
+                bbox={"boxstyle": "round", "fc": "#dbe9f6"})
         for t in v["publishes"]:
-            ax.annotate("", (0.85, ty[t]), (0.18, ny[n]), arrowprops={"arrowstyle": "->", "color": "#1f77b4", "lw": 0.7})
+            ax.annotate("", (0.85, ty[t]), (0.18, ny[n]),
+                        arrowprops={"arrowstyle": "->", "color": "#1f77b4", "lw": 0.7})
         for t in v["subscribes"]:
-            ax.annotate("", (1.82, ny[n]), (1.15, ty[t]), arrowprops={"arrowstyle": "->", "color": "#ff7f0e", "lw": 0.7})
+            ax.annotate("", (1.82, ny[n]), (1.15, ty[t]),
+                        arrowprops={"arrowstyle": "->", "color": "#ff7f0e", "lw": 0.7})
     for t in topics:
-        ax.text(1.0, ty[t], t, ha="center", va="center", fontsize=8, bbox={"boxstyle": "square", "fc": "#fff3d6"})
+        ax.text(1.0, ty[t], t, ha="center", va="center", fontsize=8,
+                bbox={"boxstyle": "square", "fc": "#fff3d6"})
     ax.set_xlim(-0.4, 2.4)
     ax.set_ylim(-1, len(topics))
     ax.axis("off")
-    ax.set_title("flexsheet node/topic graph (from the recorded heartbeats): publishers → topics → subscribers",
+    ax.set_title("flexsheet node/topic graph (from the recorded heartbeats): publishers → topics → "
+                 "subscribers",
                  fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -274,12 +287,14 @@ def graph_chart(heartbeats: list, path: Path) -> dict:
 
 def head_chart(summary: dict, series: dict, path: Path) -> dict:
     """The viewer's head over the run: the view error per frame (median over the object's points, both eyes'
-    worse, px) drawn for the tracked eyes and as if for the fixed V, with the 1 px target; and the true sheet's
-    distance from the head sphere with the keep-out margin. Writes ``path`` (PNG) and its JSON; returns the data."""
+    worse, px) drawn for the tracked eyes and as if for the fixed V, with the 1 px target; and the true
+    sheet's distance from the head sphere with the keep-out margin. Writes ``path`` (PNG) and its JSON;
+    returns the data."""
     head = series.get("head") or {}
     vs, cl = head.get("view"), head.get("clearance") or {}
     view, safety = summary.get("view", {}), summary.get("safety", {})
-    data = {"title": "The viewer's head: view error and keep-out distance", "units": {"view": "px", "distance": "m"},
+    data = {"title": "The viewer's head: view error and keep-out distance",
+            "units": {"view": "px", "distance": "m"},
             "targets": {"view_error_px_median": 1.0, "min_head_distance_m": safety.get("margin_m")},
             "verdicts": {"view": view.get("verdict"), "safety": safety.get("verdict")},
             "t_s": vs["t"] if vs else [], "tracked_px": [max(r) for r in vs["tracked"]] if vs else [],
@@ -297,18 +312,18 @@ def head_chart(summary: dict, series: dict, path: Path) -> dict:
         a.plot(t, data["tracked_px"], lw=0.8, label="drawn for the tracked eyes")
         a.axhline(1.0, color="k", ls="--", lw=1.0, label="target: median ≤ 1 px")
         a.set_ylabel("view error, median per frame (px)")
-        a.set_title(f"view error: tracked {view.get('tracked', {}).get('error_px_median', float('nan')):.2f} px median, "
-                    f"fixed V {view.get('fixed', {}).get('error_px_median', float('nan')):.2f} px; verdict: "
-                    f"{view.get('verdict')}", fontsize=8)
+        a.set_title(f"view error: tracked {view.get('tracked', {}).get('error_px_median', float('nan')):.2f} "
+                    f"px median, fixed V {view.get('fixed', {}).get('error_px_median', float('nan')):.2f} "
+                    f"px; verdict: {view.get('verdict')}", fontsize=8)
         a.legend(fontsize=6)
     if data["distance_t_s"]:
         b.plot([x - t0 for x in data["distance_t_s"]], [1e3 * d for d in data["distance_m"]], lw=0.8,
                label="true sheet to the true head sphere")
         b.axhline(1e3 * safety["margin_m"], color="r", ls="--", lw=1.0, label="keep-out margin")
         b.set_ylabel("distance (mm)")
-        b.set_title(f"keep-out: min {1e3 * safety['min_head_distance_m']:.0f} mm, {safety['keepout_violations']} "
-                    f"violations, near-head speed {safety['max_speed_near_head_mps']:.3f} m/s; verdict: "
-                    f"{safety['verdict']}", fontsize=8)
+        b.set_title(f"keep-out: min {1e3 * safety['min_head_distance_m']:.0f} mm, "
+                    f"{safety['keepout_violations']} violations, near-head speed "
+                    f"{safety['max_speed_near_head_mps']:.3f} m/s; verdict: {safety['verdict']}", fontsize=8)
         b.legend(fontsize=6)
     b.set_xlabel("time in the run (s)")
     fig.suptitle(data["title"], fontsize=9)

@@ -1,13 +1,13 @@
-"""The viewer's head in a run, from its bag (pure; no transport): how well the eyes were tracked, what the viewer
-saw of the image, and how far the sheet kept from the head.
+"""The viewer's head in a run, from its bag (pure; no transport): how well the eyes were tracked, what the
+viewer saw of the image, and how far the sheet kept from the head.
 
 * ``eye``: each valid ``/eye/pose`` against the twin's true eyes (``/world/head``, interpolated to the pose's
   stamp): the larger of the two eyes' errors, mm.
 * ``view``: for each rendered pair (``/render/stereo``: the eyes it was corrected for), where each eye of the
   *true* viewer sees the object's points — on the true sheet (``/world/sheet``, its plane) at the moment the
-  frame is on it (:meth:`flexsheet.model.timing.LabTiming.projected_at`) — against where they belong: both rays
-  from the true eye, through the drawn point and through the object's point, meet the imaginary screen
-  (x = 0); their distance in projector pixels (:data:`~flexsheet.model.geometry.PIXEL_ON_SCREEN`). The points:
+  frame is on it (:meth:`flexsheet.model.timing.LabTiming.projected_at`) — against where they belong: both
+  rays from the true eye, through the drawn point and through the object's point, meet the imaginary screen (x
+  = 0); their distance in projector pixels (:data:`~flexsheet.model.geometry.PIXEL_ON_SCREEN`). The points:
   the object's surface vertices the true eye sees, the outline included. The same frames judged as if they had
   been drawn for the fixed V (``fixed``) give the comparison under the same head motion. This isolates the
   viewpoint: the sheet's own error (model, registration) is the correction experiment's.
@@ -41,22 +41,25 @@ def _heads(d: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | N
     h = [m for _, m in d.get("/world/head", [])]
     if len(h) < 2:
         return None
-    return (np.array([m.header.stamp for m in h]), np.array([m.left for m in h]), np.array([m.right for m in h]),
+    return (np.array([m.header.stamp for m in h]), np.array([m.left for m in h]),
+            np.array([m.right for m in h]),
             np.array([m.eye for m in h]))
 
 
 def _stats(x: np.ndarray) -> dict:
-    return {"median": float(np.median(x)), "p95": float(np.percentile(x, 95)), "max": float(np.max(x)), "n": len(x)}
+    return {"median": float(np.median(x)), "p95": float(np.percentile(x, 95)), "max": float(np.max(x)),
+            "n": len(x)}
 
 
 def eye_summary(d: dict) -> dict:
-    """``{"error_mm": {median, p95, max, n}, "valid_share", "target_mm", "verdict"}``, or ``{}`` without poses."""
+    """``{"error_mm": {median, p95, max, n}, "valid_share", "target_mm",
+    "verdict"}``, or ``{}`` without poses."""
     heads = _heads(d)
     poses = [m for _, m in d.get("/eye/pose", [])]
     if heads is None or not poses:
         return {}
     ts, L, R, _ = heads
-    poses = [m for m in poses if ts[0] <= m.header.stamp <= ts[-1]]     # while the world says where the head is
+    poses = [m for m in poses if ts[0] <= m.header.stamp <= ts[-1]]  # while the world says where the head is
     ok = [m for m in poses if m.valid]
     if not ok:
         return {"valid_share": 0.0, "verdict": "MISSED"}
@@ -69,7 +72,8 @@ def eye_summary(d: dict) -> dict:
 
 
 def _screen(E: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """Where the rays from eye ``E`` (3,) through points ``X`` (N, 3) meet the imaginary screen x = 0: (N, 2) y, z."""
+    """Where the rays from eye ``E`` (3,) through points ``X`` (N, 3) meet the imaginary screen x = 0: (N, 2)
+    y, z."""
     s = E[0] / (E[0] - X[:, 0])
     return (E[None, 1:] + s[:, None] * (X[:, 1:] - E[None, 1:]))
 
@@ -87,8 +91,10 @@ def _seen(E: np.ndarray, V: np.ndarray, N: np.ndarray) -> np.ndarray:
     return (np.einsum("ij,ij->i", N, d) / np.linalg.norm(d, axis=1)) >= -0.05
 
 
-def _frame_errors(drawn_for: np.ndarray, true_eye: np.ndarray, V: np.ndarray, N: np.ndarray, o, n) -> np.ndarray:
-    """px errors of the points of one eye image drawn for ``drawn_for`` seen from ``true_eye`` (sheet plane o, n)."""
+def _frame_errors(drawn_for: np.ndarray, true_eye: np.ndarray, V: np.ndarray, N: np.ndarray, o,
+                  n) -> np.ndarray:
+    """px errors of the points of one eye image drawn for ``drawn_for`` seen from ``true_eye`` (sheet plane o,
+    n)."""
     m = _seen(true_eye, V, N)
     X = V[m]
     S = _on_plane(drawn_for, X, o, n)            # where the projector lights each point on the true sheet
@@ -97,9 +103,9 @@ def _frame_errors(drawn_for: np.ndarray, true_eye: np.ndarray, V: np.ndarray, N:
 
 
 def head_series(d: dict, vertices: np.ndarray, normals: np.ndarray, fixed_eyes: np.ndarray) -> dict | None:
-    """Per rendered pair: ``t`` s, ``tracked``/``fixed`` (F, 2) median px error per eye and the per-point errors
-    pooled per eye (``tracked_all``/``fixed_all``: two lists of arrays). ``fixed_eyes`` (2, 3) m: V ∓ IPD/2.
-    None without heads, sheets or frames."""
+    """Per rendered pair: ``t`` s, ``tracked``/``fixed`` (F, 2) median px error per eye and the per-point
+    errors pooled per eye (``tracked_all``/``fixed_all``: two lists of arrays). ``fixed_eyes`` (2, 3) m: V ∓
+    IPD/2. None without heads, sheets or frames."""
     heads = _heads(d)
     frames = [m for _, m in d.get("/render/stereo", []) if m.correction != "image"]
     sheets = [m for _, m in d.get("/world/sheet", [])]
@@ -134,7 +140,8 @@ def head_series(d: dict, vertices: np.ndarray, normals: np.ndarray, fixed_eyes: 
 
 def view_summary(series: dict | None) -> dict:
     """``{"tracked": {"left"/"right": {error_px_median, error_px_p95}, "error_px_median", "error_px_p95"},
-    "fixed": {...}, "frames", "sources", "target", "verdict"}`` from :func:`head_series`; ``{}`` without it."""
+    "fixed": {...}, "frames", "sources", "target", "verdict"}`` from :func:`head_series`; ``{}`` without
+    it."""
     if series is None:
         return {}
     out: dict = {"frames": len(series["t"]),
@@ -148,7 +155,8 @@ def view_summary(series: dict | None) -> dict:
         per["error_px_p95"] = max(per["left"]["error_px_p95"], per["right"]["error_px_p95"])
         out[kind] = per
     tr = out["tracked"]
-    out["target"] = {"error_px_median": TARGETS["view_error_px_median"], "error_px_p95": TARGETS["view_error_px_p95"]}
+    out["target"] = {"error_px_median": TARGETS["view_error_px_median"],
+                     "error_px_p95": TARGETS["view_error_px_p95"]}
     out["verdict"] = ("met" if tr["error_px_median"] <= TARGETS["view_error_px_median"]
                       and tr["error_px_p95"] <= TARGETS["view_error_px_p95"] else "MISSED")
     return out
@@ -158,7 +166,8 @@ def safety_summary(d: dict, keepout: KeepOut | None = None) -> tuple[dict, dict]
     """(summary, series) of the true sheet (its corners and edges) against the true head's keep-out: the
     summary ``{"min_head_distance_m"`` (the smallest clearance from the keep-out boundary, m), ``"margin_m"``,
     ``"keepout_violations"`` (sheet samples with a point inside), ``"max_speed_near_head_mps"`` (the fastest
-    corner speed while within ``near_distance``), ``"targets"``, ``"verdict"}``; the series ``t``, ``clearance``."""
+    corner speed while within ``near_distance``), ``"targets"``, ``"verdict"}``; the series ``t``,
+    ``clearance``."""
     ko = keepout or KeepOut()
     heads = _heads(d)
     sheets = [m for _, m in d.get("/world/sheet", [])]
@@ -182,17 +191,18 @@ def safety_summary(d: dict, keepout: KeepOut | None = None) -> tuple[dict, dict]
            "keepout_violations": int((clear < 0.0).sum()),
            "max_speed_near_head_mps": float(speed[near].max()) if near.any() else 0.0,
            "near_samples": int(near.sum()),
-           "targets": {"keepout_violations": 0, "max_speed_near_head_mps": TARGETS["max_speed_near_head_mps"]}}
+           "targets": {"keepout_violations": 0,
+                       "max_speed_near_head_mps": TARGETS["max_speed_near_head_mps"]}}
     out["verdict"] = ("met" if out["keepout_violations"] == 0
                       and out["max_speed_near_head_mps"] <= TARGETS["max_speed_near_head_mps"] else "MISSED")
     return out, {"t": t.tolist(), "clearance_m": clear.tolist()}
 
 
 def lost_summary(d: dict) -> dict:
-    """The glasses lost (the script hides them: ``/world/head`` ``visible`` false): per span, how long after the
-    first invalid ``/eye/pose`` the planner held (its first ``hold:head_lost`` target), the largest step of the
-    sheet target's centre while it held (mm: nothing may jump), and the frames drawn for the held pose. ``{}``
-    without a span."""
+    """The glasses lost (the script hides them: ``/world/head`` ``visible`` false): per span, how long after
+    the first invalid ``/eye/pose`` the planner held (its first ``hold:head_lost`` target), the largest step
+    of the sheet target's centre while it held (mm: nothing may jump), and the frames drawn for the held pose.
+    ``{}`` without a span."""
     heads = [m for _, m in d.get("/world/head", [])]
     spans, start = [], None
     for m in heads:
@@ -216,8 +226,10 @@ def lost_summary(d: dict) -> dict:
         out.append({"start_s": a, "duration_s": b - a,
                     "hold_after_ms": 1e3 * (held[0][0] - bad[0]) if bad and held else None,
                     "hold_step_mm_max": 1e3 * max(steps) if steps else 0.0,
-                    "frames_held": sum(1 for f in frames if f.eye_source == "held" and a <= f.header.stamp <= b + 0.1)})
-    ok = all(o["hold_after_ms"] is not None and o["hold_after_ms"] <= 1e3 / 60.0 and o["hold_step_mm_max"] < 0.1
+                    "frames_held": sum(1 for f in frames if f.eye_source == "held"
+                                       and a <= f.header.stamp <= b + 0.1)})
+    ok = all(o["hold_after_ms"] is not None and o["hold_after_ms"] <= 1e3 / 60.0
+             and o["hold_step_mm_max"] < 0.1
              for o in out)
     return {"spans": out, "target": "hold within one head-camera period (16.7 ms), no step while held",
             "verdict": "met" if ok else "MISSED"}

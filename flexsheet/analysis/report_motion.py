@@ -3,14 +3,14 @@ planned one, every sample, moves included, and the cycles the fallback guards ac
 
 The planned span at an instant is the sheet's motion both bridges were following then
 (:class:`flexsheet.arm.sheet_motion.SheetSegment`, rebuilt from the newest ``/arm/left/target`` with a motion
-before it; a segment that does not rebuild: its goal's strain), ``size·(1 + ε_plan(t))``; the true one is the world's
-``size·(1 + ε_true)`` (``/world/sheet``, signed: negative when slack), both with the planned sheet's side.
-Each clamp's measured pose (``/arm/<side>/joint_state`` ``pose``: the bridge's forward kinematics of the measured
-joints) is compared with the motion's clamp at the same instant (``path_dev_mm``), and each clamp's lag behind
-the motion (the time shift that best lays the measured clamp on the planned clamp path) is compared between the
-two arms while the sheet moves (``arrival_skew_ms``: how far apart in time the two clamps travel the shared motion).
-The guards (the span guard's ``wait:span`` and the partner hold ``hold:peer``, :mod:`flexsheet.arm.tracking`) are
-the fault fallback: in a normal run they never act.
+before it; a segment that does not rebuild: its goal's strain), ``size·(1 + ε_plan(t))``; the true one is the
+world's ``size·(1 + ε_true)`` (``/world/sheet``, signed: negative when slack), both with the planned sheet's
+side. Each clamp's measured pose (``/arm/<side>/joint_state`` ``pose``: the bridge's forward kinematics of the
+measured joints) is compared with the motion's clamp at the same instant (``path_dev_mm``), and each clamp's
+lag behind the motion (the time shift that best lays the measured clamp on the planned clamp path) is compared
+between the two arms while the sheet moves (``arrival_skew_ms``: how far apart in time the two clamps travel
+the shared motion). The guards (the span guard's ``wait:span`` and the partner hold ``hold:peer``,
+:mod:`flexsheet.arm.tracking`) are the fault fallback: in a normal run they never act.
 
 Units: mm in the summary (labelled), s.
 """
@@ -27,14 +27,15 @@ __all__ = ["SPAN_ERROR_P99_MM", "motion_summary", "clamp_tracking"]
 SPAN_ERROR_P99_MM = 1.0
 #: the bridge statuses of a guard acting
 GUARD_STATUSES = ("wait:span", "hold:peer")
-#: the planned clamp path's sampling for the lag search, s; the lags searched, s; "moving": planned clamp speed, m/s
+#: the planned clamp path's sampling for the lag search, s;
+#: the lags searched, s; "moving": planned clamp speed, m/s
 LAG_GRID_S, LAG_RANGE_S, MOVING_MPS = 0.002, (-0.1, 0.4), 0.02
 
 
 def _segments_at(targets: list, stamps: np.ndarray, cache: dict) -> tuple[np.ndarray, list]:
     """(k (n,): the index in ``targets`` of the newest ``/arm/left/target`` with a motion at or before each of
-    ``stamps`` (n,) s, −1 before the first; the segment each follows, None before the first or where it does not
-    rebuild). ``cache`` {index: segment}: segments rebuilt once per target across calls."""
+    ``stamps`` (n,) s, −1 before the first; the segment each follows, None before the first or where it does
+    not rebuild). ``cache`` {index: segment}: segments rebuilt once per target across calls."""
     t0s = np.array([m.header.stamp for m in targets])
     k = np.searchsorted(t0s, stamps, side="right") - 1
     out = []
@@ -52,7 +53,8 @@ def _segments_at(targets: list, stamps: np.ndarray, cache: dict) -> tuple[np.nda
 
 
 def _planned_clamps(targets: list, stamps: np.ndarray, cache: dict) -> np.ndarray:
-    """The motion's (left, right) clamp positions (n, 2, 3) m at ``stamps`` (n,) s, NaN where none is followed."""
+    """The motion's (left, right) clamp positions (n, 2, 3) m at ``stamps`` (n,) s, NaN where none is
+    followed."""
     out = np.full((len(stamps), 2, 3), np.nan)
     for i, (t, seg) in enumerate(zip(stamps, _segments_at(targets, stamps, cache)[1], strict=True)):
         if seg is not None:
@@ -61,11 +63,12 @@ def _planned_clamps(targets: list, stamps: np.ndarray, cache: dict) -> np.ndarra
 
 
 def clamp_tracking(d: dict[str, list], targets: list, cache: dict | None = None) -> dict:
-    """``path_dev_mm`` {median, p99, max, n}: each arm's measured clamp against the motion's at the same stamp,
-    mm; ``arrival_skew_ms`` {median, p99, max, n}: |lag_left − lag_right| while the planned clamps move faster
-    than :data:`MOVING_MPS`, ms (each lag the shift in :data:`LAG_RANGE_S` that lays the measured clamp nearest
-    the planned path, on a :data:`LAG_GRID_S` grid). ``{}`` without joint states after the first target.
-    ``targets``: the ``/arm/left/target`` messages with a motion, by stamp; ``cache``: as :func:`_segments_at`."""
+    """``path_dev_mm`` {median, p99, max, n}: each arm's measured clamp against the motion's at the same
+    stamp, mm; ``arrival_skew_ms`` {median, p99, max, n}: |lag_left − lag_right| while the planned clamps move
+    faster than :data:`MOVING_MPS`, ms (each lag the shift in :data:`LAG_RANGE_S` that lays the measured clamp
+    nearest the planned path, on a :data:`LAG_GRID_S` grid). ``{}`` without joint states after the first
+    target. ``targets``: the ``/arm/left/target`` messages with a motion, by stamp; ``cache``: as
+    :func:`_segments_at`."""
     start = targets[0].header.stamp
     meas = {}
     for i, side in enumerate(("left", "right")):
@@ -117,9 +120,10 @@ def _goal_strain(m) -> float:
 
 
 def motion_summary(d: dict[str, list]) -> dict:
-    """``span_error_mm`` {median, p99, max}: |true − planned| clamp span, mm, over every ``/world/sheet`` sample
-    after the first target with a motion; ``guard_waits``: joint-state cycles of either bridge in a guard's
-    status; with ``targets`` and ``verdict``. ``{}`` without ``/world/sheet`` or targets with a motion."""
+    """``span_error_mm`` {median, p99, max}: |true − planned| clamp span, mm, over every ``/world/sheet``
+    sample after the first target with a motion; ``guard_waits``: joint-state cycles of either bridge in a
+    guard's status; with ``targets`` and ``verdict``. ``{}`` without ``/world/sheet`` or targets with a
+    motion."""
     world = [m for _, m in d.get("/world/sheet", [])]
     targets = sorted((m for _, m in d.get("/arm/left/target", []) if m.motion_t0 is not None),
                      key=lambda m: m.header.stamp)

@@ -1,17 +1,18 @@
-"""Where the true sheet stands against the object's surface while the finger touches it, from a run's bag (pure;
-no transport): an encountered-type display promises the surface is there before the finger lands.
+"""Where the true sheet stands against the object's surface while the finger touches it, from a run's bag
+(pure; no transport): an encountered-type display promises the surface is there before the finger lands.
 
-Per touching sample, the true sheet's signed distance ahead of (+) or behind (−) the object's surface under the
-true fingertip, mm; per touch (a contiguous contact episode), the time from the finger's arrival at the object's
-surface to the sheet's, ms. Read from ``/world/finger``, ``/world/sheet`` and ``/world/contact`` (the twin's
-truth: this is the judge, not an estimator) and the scene's shape. Units: m, s; mm / ms only in report values.
+Per touching sample, the true sheet's signed distance ahead of (+) or behind (−) the object's surface under
+the true fingertip, mm; per touch (a contiguous contact episode), the time from the finger's arrival at the
+object's surface to the sheet's, ms. Read from ``/world/finger``, ``/world/sheet`` and ``/world/contact`` (the
+twin's truth: this is the judge, not an estimator) and the scene's shape. Units: m, s; mm / ms only in report
+values.
 
 A sheet that yields to the viewer's head is not a placement error: while the planner's plan in force says
 ``keep_out`` (:class:`flexsheet.planning.head_guard.HeadGuard` backed the sheet off a head leaning into its
 keep-out volume) and until the true sheet is back at the object's surface under the finger (at most
-:data:`YIELD_MAX` s after the last such plan), a touching sample counts in ``head_yield`` and not in the distance
-verdict (``distance_mm_all`` keeps every sample). A lost head (``hold:head_lost``) holds the pose without backing
-off, so it is judged like any other sample.
+:data:`YIELD_MAX` s after the last such plan), a touching sample counts in ``head_yield`` and not in the
+distance verdict (``distance_mm_all`` keeps every sample). A lost head (``hold:head_lost``) holds the pose
+without backing off, so it is judged like any other sample.
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ import numpy as np
 from flexsheet.analysis.report_softness import MAX_GAP, episodes, object_surface
 from flexsheet.planning.shape import planner_shape
 
-__all__ = ["PLACEMENT_P99_MM", "SHEET_FIRST_TARGET", "ARRIVAL_TOL", "ARRIVAL_LOOKBACK", "YIELD_MAX", "placement"]
+__all__ = ["PLACEMENT_P99_MM", "SHEET_FIRST_TARGET", "ARRIVAL_TOL", "ARRIVAL_LOOKBACK", "YIELD_MAX",
+           "placement"]
 
 #: the true sheet may stand at most this far (mm, p99 of |distance|) ahead of or behind the object's surface
 PLACEMENT_P99_MM = 2.0
@@ -32,8 +34,8 @@ SHEET_FIRST_TARGET = 0.99
 ARRIVAL_TOL = 0.0005
 #: how far back (s) before the finger's arrival a sheet's wait is measured
 ARRIVAL_LOOKBACK = 1.0
-#: a yield to the head ends at the latest this long (s) after the last keep_out plan (the slowest return measured
-#: on the shipped scenes, seed 0, took 2.2 s)
+#: a yield to the head ends at the latest this long (s) after the last keep_out
+#: plan (the slowest return measured on the shipped scenes, seed 0, took 2.2 s)
 YIELD_MAX = 3.0
 
 
@@ -59,7 +61,8 @@ def _crossing(t: np.ndarray, y: np.ndarray, i: int) -> float:
 
 
 def _world_touch(d: dict[str, list], t: np.ndarray) -> np.ndarray:
-    """(N,) bool: the world's ``/world/contact`` touching at stamps ``t`` (nearest sample within MAX_GAP s)."""
+    """(N,) bool: the world's ``/world/contact`` touching at stamps ``t`` (nearest sample within MAX_GAP
+    s)."""
     contacts = sorted(((m.header.stamp, m.touching) for _, m in d.get("/world/contact", [])))
     if not contacts:
         return np.zeros(len(t), bool)
@@ -73,9 +76,10 @@ def _world_touch(d: dict[str, list], t: np.ndarray) -> np.ndarray:
 
 def _arrivals(t: np.ndarray, inside: np.ndarray, ahead: np.ndarray, runs) -> tuple[list[float], int, int]:
     """Per landing of the finger on the object (a run of samples in it, within the touches ``runs``, index
-    ranges) the sheet's arrival − the finger's, s (:func:`placement`); and the counts of landings whose sheet never
-    arrived and of touches the finger never pushed into the object."""
-    band = np.minimum(ahead + ARRIVAL_TOL, PLACEMENT_P99_MM * 1e-3 - ahead)   # ≥ 0: the sheet is at the surface
+    ranges) the sheet's arrival − the finger's, s (:func:`placement`); and the counts of landings whose sheet
+    never arrived and of touches the finger never pushed into the object."""
+    # ≥ 0: the sheet is at the surface
+    band = np.minimum(ahead + ARRIVAL_TOL, PLACEMENT_P99_MM * 1e-3 - ahead)
     there = band >= 0.0
     arrivals, never, no_arrival = [], 0, 0
     landings = []
@@ -85,7 +89,8 @@ def _arrivals(t: np.ndarray, inside: np.ndarray, ahead: np.ndarray, runs) -> tup
             no_arrival += 1
         landings += inn
     for f, b in landings:
-        tf = _crossing(t, inside, f) if f > 0 and inside[f - 1] <= 0.0 and t[f] - t[f - 1] <= MAX_GAP else float(t[f])
+        tf = (_crossing(t, inside, f) if f > 0 and inside[f - 1] <= 0.0 and t[f] - t[f - 1] <= MAX_GAP
+              else float(t[f]))
         if there[f]:
             i = f                                   # back to the start of the sheet's run at the surface
             while i > 0 and there[i - 1] and tf - t[i - 1] <= ARRIVAL_LOOKBACK and t[i] - t[i - 1] <= MAX_GAP:
@@ -103,18 +108,18 @@ def _arrivals(t: np.ndarray, inside: np.ndarray, ahead: np.ndarray, runs) -> tup
 
 
 def _plans_in_force(d: dict[str, list], t: np.ndarray) -> tuple[list, np.ndarray]:
-    """The ``/sheet/target`` plans by stamp and, per stamp of ``t`` (N,) s, the index of the newest at or before it
-    (−1 before the first)."""
+    """The ``/sheet/target`` plans by stamp and, per stamp of ``t`` (N,) s, the index of the newest at or
+    before it (−1 before the first)."""
     plans = sorted((m for _, m in d.get("/sheet/target", [])), key=lambda m: m.header.stamp)
     ts = np.array([m.header.stamp for m in plans], float)
     return plans, (np.searchsorted(ts, t, side="right") - 1 if plans else np.full(len(t), -1))
 
 
 def _head_yield(plans: list, k: np.ndarray, t: np.ndarray, ahead: np.ndarray) -> np.ndarray:
-    """(N,) bool: the samples at stamps ``t`` (N,) s that fall in a yield to the head (module doc): from a plan in
-    force (``plans[k]``, :func:`_plans_in_force`) whose status names ``keep_out``, until the true sheet is again at
-    most :data:`ARRIVAL_TOL` behind the object's surface under the finger (``ahead`` (N,) m, NaN where not
-    measured) or :data:`YIELD_MAX` s have passed since the last such plan."""
+    """(N,) bool: the samples at stamps ``t`` (N,) s that fall in a yield to the head (module doc): from a
+    plan in force (``plans[k]``, :func:`_plans_in_force`) whose status names ``keep_out``, until the true
+    sheet is again at most :data:`ARRIVAL_TOL` behind the object's surface under the finger (``ahead`` (N,) m,
+    NaN where not measured) or :data:`YIELD_MAX` s have passed since the last such plan."""
     out = np.zeros(len(t), bool)
     keep_out = np.array(["keep_out" in m.status for m in plans], bool)
     last = -np.inf                                  # stamp of the newest keep_out plan in force so far
@@ -128,11 +133,12 @@ def _head_yield(plans: list, k: np.ndarray, t: np.ndarray, ahead: np.ndarray) ->
 
 def _split(plans: list, k: np.ndarray, o: np.ndarray, ns: np.ndarray, q: np.ndarray, cos: np.ndarray,
            miss: np.ndarray) -> dict | None:
-    """The distance of the missed samples (``miss`` (N,) bool) split into three additive terms along the object's
-    normal (÷ cos, as the distance): ``arms`` the true sheet's plane (``o``, ``ns`` (N, 3)) off the plan's pose
-    (its ``sheet_origin``), ``plan_pose`` the plan's pose off its own contact (a limited or held plan) and
-    ``contact`` the planned contact off the object's surface under the true finger (``q`` (N, 3)). Returns
-    {n, median_mm {arms, plan_pose, contact}, share {…}: each term's sum ÷ the distance's sum (they add to 1)}, or
+    """The distance of the missed samples (``miss`` (N,) bool) split into three additive terms along the
+    object's normal (÷ cos, as the distance): ``arms`` the true sheet's plane (``o``, ``ns`` (N, 3)) off the
+    plan's pose (its ``sheet_origin``), ``plan_pose`` the plan's pose off its own contact (a limited or held
+    plan) and ``contact`` the planned contact off the object's surface under the true finger (``q`` (N, 3)).
+    Returns {n, median_mm {arms, plan_pose, contact}, share {…}: each term's sum ÷ the distance's sum (they
+    add to 1)}, or
     None without a missed sample under a plan."""
     use = miss & (k >= 0)
     if not use.any():
@@ -141,7 +147,8 @@ def _split(plans: list, k: np.ndarray, o: np.ndarray, ns: np.ndarray, q: np.ndar
     so = np.array([plans[j].sheet_origin for j in kk], float)
     cp = np.array([plans[j].contact_point for j in kk], float)
     n_, c = ns[use], cos[use]
-    terms = {"arms": np.einsum("ij,ij->i", o[use] - so, n_) / c, "plan_pose": np.einsum("ij,ij->i", so - cp, n_) / c,
+    terms = {"arms": np.einsum("ij,ij->i", o[use] - so, n_) / c,
+             "plan_pose": np.einsum("ij,ij->i", so - cp, n_) / c,
              "contact": np.einsum("ij,ij->i", cp - q[use], n_) / c}
     total = sum(terms.values())
     den = float(total.sum())
@@ -158,32 +165,32 @@ def _spread(e: np.ndarray) -> dict:
 def placement(d: dict[str, list], scene) -> dict:
     """Where the true sheet stands against the object's surface while the finger touches (module doc).
 
-    On the ``/world/finger`` samples (the true fingertip, stamps s) with the true sheet's plane interpolated there
-    (``/world/sheet``): the object's surface under the finger (:func:`object_surface` of ``scene``, a
-    :class:`flexsheet.model.scenes.Scene`) and the signed distance of the sheet's plane from it along the object's
-    normal, + ahead (outside the object), − behind (none where the sheet's normal is more than 78° off the
-    object's, cos ≤ 0.2: a sheet still turning gives tens of mm along the normal). A sample touches when the finger is inside the object or behind
-    the sheet's plane with the world's ``/world/contact`` touching (nearest sample within :data:`MAX_GAP` s); a
-    touch is a contiguous run of them (:func:`episodes`). Samples in a yield to the head (:func:`_head_yield`) are
-    counted in ``head_yield`` and left out of ``distance_mm``, ``by_phase_mm`` and ``signed_mm``. Per landing the
-    finger arrives at the object's surface when its indentation crosses 0; the sheet is there when at most
-    :data:`ARRIVAL_TOL` behind the surface under the finger and at most :data:`PLACEMENT_P99_MM` ahead of it.
-    ``arrival_ms`` = sheet's arrival − finger's arrival: negative, the sheet waited (from the start of its
-    run there, at most :data:`ARRIVAL_LOOKBACK` s back); positive, late; a sheet that never arrives while the finger
-    is in the object is late by the rest of that landing (and counted in ``never``). Each landing (a run of samples
-    with the finger in the object; one touch may hold several) is judged. Touches the finger never pushed into the
-    object (the sheet ahead) have no arrival (``no_finger_arrival``).
+    On the ``/world/finger`` samples (the true fingertip, stamps s) with the true sheet's plane interpolated
+    there (``/world/sheet``): the object's surface under the finger (:func:`object_surface` of ``scene``, a
+    :class:`flexsheet.model.scenes.Scene`) and the signed distance of the sheet's plane from it along the
+    object's normal, + ahead (outside the object), − behind (none where the normals are more than 78° apart,
+    cos ≤ 0.2: a sheet still turning gives tens of mm along the normal). A sample touches
+    when the finger is inside the object or behind the sheet's plane with the world's ``/world/contact``
+    touching (nearest sample within :data:`MAX_GAP` s); a touch is a contiguous run of them
+    (:func:`episodes`). Samples in a yield to the head (:func:`_head_yield`) are counted in ``head_yield`` and
+    left out of ``distance_mm``, ``by_phase_mm`` and ``signed_mm``. Per landing the finger arrives at the
+    object's surface when its indentation crosses 0; the sheet is there when at most :data:`ARRIVAL_TOL`
+    behind the surface under the finger and at most :data:`PLACEMENT_P99_MM` ahead of it. ``arrival_ms`` =
+    sheet's arrival − finger's arrival: negative, the sheet waited (from the start of its run there, at most
+    :data:`ARRIVAL_LOOKBACK` s back); positive, late; a sheet that never arrives while the finger is in the
+    object is late by the rest of that landing (and counted in ``never``). Each landing (a run with the finger
+    in the object) is judged; a touch never pushed into the object has no arrival (``no_finger_arrival``).
 
-    Returns ``{}`` without a scene, the finger, the sheet or a touching sample, else ``{"n"`` (the touching samples
-    judged: with a measured distance, not in a yield), ``"distance_mm"`` {p50, p99, max} of |distance| (None when
-    every sample yielded; the distance verdict is then "no verdict"), ``"distance_mm_all"`` (the same over every
-    measured touching sample), ``"head_yield"`` {n, share of the measured touching samples}, ``"split"`` (the
-    judged samples farther than the target, split into additive causes: :func:`_split`), ``"by_phase_mm"``
-    (as ``distance_mm`` per script phase of ``/world/finger``, with n), ``"signed_mm"`` {median, p1, p99} (None as
-    ``distance_mm``), ``"touches"``, ``"arrivals"`` (the finger's landings on the object), ``"sheet_first"``
-    (their share with arrival_ms ≤ 0), ``"late"``, ``"never"``, ``"no_finger_arrival"``, ``"arrival_ms"``
-    {median, p99, max} (None without arrivals), ``"targets"``, ``"verdicts"`` {distance, sheet_first},
-    ``"verdict"`` (MISSED if either is)}``."""
+    Returns ``{}`` without a scene, the finger, the sheet or a touching sample, else ``{"n"`` (the touching
+    samples judged: with a measured distance, not in a yield), ``"distance_mm"`` {p50, p99, max} of |distance|
+    (None when every sample yielded; the distance verdict is then "no verdict"), ``"distance_mm_all"`` (the
+    same over every measured touching sample), ``"head_yield"`` {n, share of the measured touching samples},
+    ``"split"`` (the judged samples farther than the target, split into additive causes: :func:`_split`),
+    ``"by_phase_mm"`` (as ``distance_mm`` per script phase of ``/world/finger``, with n), ``"signed_mm"``
+    {median, p1, p99} (None as ``distance_mm``), ``"touches"``, ``"arrivals"`` (the finger's landings on the
+    object), ``"sheet_first"`` (their share with arrival_ms ≤ 0), ``"late"``, ``"never"``,
+    ``"no_finger_arrival"``, ``"arrival_ms"`` {median, p99, max} (None without arrivals), ``"targets"``,
+    ``"verdicts"`` {distance, sheet_first}, ``"verdict"`` (MISSED if either is)}``."""
     fingers = sorted((m for _, m in d.get("/world/finger", []) if m.phase != "paused"),
                      key=lambda m: m.header.stamp)
     if scene is None or len(fingers) < 2:
@@ -209,12 +216,12 @@ def placement(d: dict[str, list], scene) -> dict:
     if not judged.any():
         return {}
     plans, k = _plans_in_force(d, t)
-    yielded = _head_yield(plans, k, t, ahead)
-    keep = judged & ~yielded
+    keep = judged & ~(yielded := _head_yield(plans, k, t, ahead))
     e_all = ahead[judged] * 1e3
     e = ahead[keep] * 1e3
     phases = np.array([m.phase for m in fingers])[keep]
-    by_phase = {p: {"n": int(np.sum(phases == p)), **_spread(e[phases == p])} for p in sorted(set(phases.tolist()))}
+    by_phase = {p: {"n": int(np.sum(phases == p)), **_spread(e[phases == p])}
+                for p in sorted(set(phases.tolist()))}
     arr = np.array(arrivals) * 1e3
     first = float(np.mean(arr <= 0.0)) if arr.size else None
     dist_mm, dist_all = (_spread(e) if e.size else None), _spread(e_all)

@@ -1,24 +1,24 @@
-"""What the finger feels against what the object asks, and where the sheet is when it feels it, from a run's bag
-(pure; no transport).
+"""What the finger feels against what the object asks, and where the sheet is when it feels it, from a run's
+bag (pure; no transport).
 
 The world publishes the finger's true contact with the true sheet (``/world/contact``, ``ContactTruth``: depth
-and force, N, from the truth's sheet FEM table at the true depth, never a model of the planner's; ``point``, the
-bottom of the dent, is the true fingertip). What the object asks at that contact and depth is its force–depth
-table from its own FEM (``/object/force_depth``, :class:`flexsheet.model.force_depth.ForceDepth`) mapped as the
-planner maps it (``stiffness_scale`` and ``contrast_gain`` in force, from the planner's heartbeats): the request at
-the *true* sheet depth, so the finger's tracking lag and the object's sticking contact (which drags its surface
-along a sliding finger) do not enter. The table is looked up at the contact on the *surface*
-(:func:`surface_points`: the dent's bottom moved back out along the true sheet's normal by the sheet's depth, the
-sheet's undented point under the finger), not at the dent's bottom: one indentation below a rounded edge
-(R 8 mm) the bottom projects onto the wrong station of the table. A bag without the table (recorded before it
-existed) pairs the FEM node's ``ObjectDeformation.contact_force`` at the display's measured fingertip instead.
-Their ratio, sample by sample while the finger presses, is the presented softness error a person could notice: a
-force-at-depth difference under the Weber fraction of about 15 % goes unnoticed (Bergmann Tiest & Kappers, IEEE
-Trans. Haptics 2:189, 2009, with the surface-deformation cue present).
+and force, N, from the truth's sheet FEM table at the true depth, never a model of the planner's; ``point``,
+the bottom of the dent, is the true fingertip). What the object asks at that contact and depth is its
+force–depth table from its own FEM (``/object/force_depth``, :class:`flexsheet.model.force_depth.ForceDepth`)
+mapped as the planner maps it (``stiffness_scale`` and ``contrast_gain`` in force, from the planner's
+heartbeats): the request at the *true* sheet depth, so the finger's tracking lag and the object's sticking
+contact (which drags its surface along a sliding finger) do not enter. The table is looked up at the contact
+on the *surface* (:func:`surface_points`: the dent's bottom moved back out along the true sheet's normal by
+the sheet's depth, the sheet's undented point under the finger), not at the dent's bottom: one indentation
+below a rounded edge (R 8 mm) the bottom projects onto the wrong station of the table. A bag without the table
+(recorded before it existed) pairs the FEM node's ``ObjectDeformation.contact_force`` at the display's
+measured fingertip instead. Their ratio, sample by sample while the finger presses, is the presented softness
+error a person could notice: a force-at-depth difference under the Weber fraction of about 15 % goes unnoticed
+(Bergmann Tiest & Kappers, IEEE Trans. Haptics 2:189, 2009, with the surface-deformation cue present).
 
-A sample is judged when the finger is :data:`MIN_DEPTH` into the *object* (its own indentation: the true fingertip
-against the scene's surface, :func:`object_surface`) and touches the sheet with a force; without a scene the
-sheet's depth gates instead. Where the sheet stands is judged apart
+A sample is judged when the finger is :data:`MIN_DEPTH` into the *object* (its own indentation: the true
+fingertip against the scene's surface, :func:`object_surface`) and touches the sheet with a force; without a
+scene the sheet's depth gates instead. Where the sheet stands is judged apart
 (:func:`flexsheet.analysis.report_placement.placement`).
 
 Units: N, m, N/m; stamps s; mm / ms only in report values named so.
@@ -32,14 +32,16 @@ from flexsheet.analysis.report_timing import planner_gains, planner_scales, scal
 from flexsheet.model.force_depth import ForceDepth
 from flexsheet.planning.shape import planner_shape
 
-__all__ = ["WEBER_FRACTION", "MIN_DEPTH", "MAX_GAP", "WITHIN_TARGET", "STRAIN_LIMIT", "felt_force", "follow_lag",
-           "judged_contacts", "force_depth_table", "inclusion_contrast", "sheet_summary", "surface_points", "object_surface",
+__all__ = ["WEBER_FRACTION", "MIN_DEPTH", "MAX_GAP", "WITHIN_TARGET", "STRAIN_LIMIT", "felt_force",
+           "follow_lag",
+           "judged_contacts", "force_depth_table", "inclusion_contrast", "sheet_summary", "surface_points",
+           "object_surface",
            "episodes"]
 
 #: a force or stiffness ratio within 1 ± this goes unnoticed (Bergmann Tiest & Kappers 2009)
 WEBER_FRACTION = 0.15
-#: pushes shallower than this (m) into the object are not judged: the fingertip grazes the surface, and a force
-#: of a few mN divides into a meaningless ratio
+#: pushes shallower than this (m) into the object are not judged: the fingertip
+#: grazes the surface, and a force of a few mN divides into a meaningless ratio
 MIN_DEPTH = 0.002
 #: an object force sample is paired with a sheet sample at most this long (s) after its fingertip's exposure;
 #: samples further apart than this (s) belong to different touches (:func:`episodes`)
@@ -49,7 +51,8 @@ WITHIN_TARGET = 0.95
 
 
 def force_depth_table(d: dict[str, list]):
-    """The newest ``/object/force_depth`` in ``d`` as a :class:`~flexsheet.model.force_depth.ForceDepth`, or None."""
+    """The newest ``/object/force_depth`` in ``d`` as a :class:`~flexsheet.model.force_depth.ForceDepth`, or
+    None."""
     msgs = [m for _, m in d.get("/object/force_depth", []) if m is not None]
     if not msgs:
         return None
@@ -58,10 +61,11 @@ def force_depth_table(d: dict[str, list]):
 
 
 def object_surface(shape, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The object's surface under fingertips ``points`` (N, 3) m, display frame: (surface point q (N, 3) m, outward
-    unit normal (N, 3), signed distance (N,) m, negative inside: minus the object's own indentation), by the
-    planner's placement rule (:meth:`flexsheet.model.shape_base.Shape.project`: the centre ray for a convex shape,
-    the closest point with smooth normals for a mesh). ``shape``: :func:`flexsheet.planning.shape.planner_shape`'s."""
+    """The object's surface under fingertips ``points`` (N, 3) m, display frame: (surface point q (N, 3) m,
+    outward unit normal (N, 3), signed distance (N,) m, negative inside: minus the object's own indentation),
+    by the planner's placement rule (:meth:`flexsheet.model.shape_base.Shape.project`: the centre ray for a
+    convex shape, the closest point with smooth normals for a mesh). ``shape``:
+    :func:`flexsheet.planning.shape.planner_shape`'s."""
     x = np.asarray(points, float).reshape(-1, 3)
     if not getattr(shape, "convex", True) and hasattr(shape, "closest_many"):
         return shape.closest_many(x)
@@ -75,12 +79,12 @@ def object_surface(shape, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def surface_points(d: dict[str, list], contacts: list, table=None) -> np.ndarray:
-    """The contact on the surface (N, 3) m, display frame, for ``/world/contact`` messages ``contacts`` (N): the
-    dent's bottom (``point``, the true fingertip) moved back out by the sheet's ``depth`` along the true sheet's
-    normal (the ``/world/sheet`` of the same stamp, else the nearest), i.e. the sheet's undented point under the
-    finger. Without ``/world/sheet`` (no bag of a run lacks it; synthetic ones may): along ``table``'s
-    (:class:`ForceDepth`) normal where the point projects (twice, from the point moved out), which over a curve
-    tighter than the depth can keep the wrong station; without either, the dent's bottom."""
+    """The contact on the surface (N, 3) m, display frame, for ``/world/contact`` messages ``contacts`` (N):
+    the dent's bottom (``point``, the true fingertip) moved back out by the sheet's ``depth`` along the true
+    sheet's normal (the ``/world/sheet`` of the same stamp, else the nearest), i.e. the sheet's undented point
+    under the finger. Without ``/world/sheet`` (no bag of a run lacks it; synthetic ones may): along
+    ``table``'s (:class:`ForceDepth`) normal where the point projects (twice, from the point moved out), which
+    over a curve tighter than the depth can keep the wrong station; without either, the dent's bottom."""
     p = np.array([m.point for m in contacts], float).reshape(-1, 3)
     depth = np.array([m.depth for m in contacts], float)
     sheets = sorted((m for _, m in d.get("/world/sheet", [])), key=lambda m: m.header.stamp)
@@ -105,8 +109,8 @@ def surface_points(d: dict[str, list], contacts: list, table=None) -> np.ndarray
 
 
 def episodes(stamps, on, gap: float = MAX_GAP) -> list[tuple[int, int]]:
-    """Contiguous runs [start, stop) of ``on`` (N,) bool over time-sorted ``stamps`` (N,) s, a run broken by an off
-    sample or a step longer than ``gap`` s: one touch (or press) each."""
+    """Contiguous runs [start, stop) of ``on`` (N,) bool over time-sorted ``stamps`` (N,) s, a run broken by
+    an off sample or a step longer than ``gap`` s: one touch (or press) each."""
     t, on = np.asarray(stamps, float), np.asarray(on, bool)
     out, start = [], None
     for i in range(len(t)):
@@ -121,10 +125,10 @@ def episodes(stamps, on, gap: float = MAX_GAP) -> list[tuple[int, int]]:
 
 
 def _pressed(d: dict[str, list], scene=None, table=None) -> list:
-    """The judged ``/world/contact`` samples, in stamp order: dicts ``{"t"`` (log time s), ``"m"`` (the message),
-    ``"q"`` (:func:`surface_points`), ``"object_depth"`` (m, None without a scene), ``"press"`` (index of its
-    contiguous touching run)}``. Judged: touching with a force and :data:`MIN_DEPTH` deep into the object (with
-    ``scene``), else into the sheet."""
+    """The judged ``/world/contact`` samples, in stamp order: dicts ``{"t"`` (log time s), ``"m"`` (the
+    message), ``"q"`` (:func:`surface_points`), ``"object_depth"`` (m, None without a scene), ``"press"``
+    (index of its contiguous touching run)}``. Judged: touching with a force and :data:`MIN_DEPTH` deep into
+    the object (with ``scene``), else into the sheet."""
     contacts = sorted(d.get("/world/contact", []), key=lambda tm: tm[1].header.stamp)
     if not contacts:
         return []
@@ -151,9 +155,9 @@ def _pressed(d: dict[str, list], scene=None, table=None) -> list:
 
 
 def _per_press(press: np.ndarray, ratio: np.ndarray) -> dict:
-    """Each press's median felt/requested ratio over its judged samples: ``{"n", "within_15pct"`` (share of presses
-    within the Weber fraction), ``"ratio_median"`` (median over presses), ``"worst"`` (the press ratio farthest
-    from 1), ``"ratios"`` (per press, in time order)}``."""
+    """Each press's median felt/requested ratio over its judged samples: ``{"n", "within_15pct"`` (share of
+    presses within the Weber fraction), ``"ratio_median"`` (median over presses), ``"worst"`` (the press ratio
+    farthest from 1), ``"ratios"`` (per press, in time order)}``."""
     meds = np.array([float(np.median(ratio[press == p])) for p in np.unique(press)])
     worst = float(meds[np.argmax(np.abs(meds - 1.0))])
     return {"n": int(len(meds)), "within_15pct": float(np.mean(np.abs(meds - 1.0) <= WEBER_FRACTION)),
@@ -162,22 +166,23 @@ def _per_press(press: np.ndarray, ratio: np.ndarray) -> dict:
 
 def felt_force(d: dict[str, list], scales: list[tuple[float, float]] | None = None, scene=None) -> dict:
     """Compare each judged ``/world/contact`` sample (:func:`_pressed`: touching with a force and at least
-    :data:`MIN_DEPTH` into the object of ``scene``, a :class:`flexsheet.model.scenes.Scene`; None: into the sheet)
-    with what the object asks there (module doc): with ``/object/force_depth``, the table's mapped force at the
-    contact on the surface (:func:`surface_points`) and the true sheet depth (``"basis": "force_depth"``); without,
-    the newest ``/object/deformation`` whose fingertip was exposed at most :data:`MAX_GAP` s before it, times the
-    scale (``"basis": "deformation"``). ``scales`` [(arrival s, scale)] (None: from the planner's heartbeats in
-    ``d``, :func:`~flexsheet.analysis.report_timing.planner_scales`; 1 without any); the contrast gain likewise
+    :data:`MIN_DEPTH` into the object of ``scene``, a :class:`flexsheet.model.scenes.Scene`; None: into the
+    sheet) with what the object asks there (module doc): with ``/object/force_depth``, the table's mapped
+    force at the contact on the surface (:func:`surface_points`) and the true sheet depth
+    (``"basis": "force_depth"``); without, the newest ``/object/deformation`` whose fingertip was exposed at
+    most :data:`MAX_GAP` s before it, times the scale (``"basis": "deformation"``). ``scales`` [(arrival s,
+    scale)] (None: from the planner's heartbeats in ``d``,
+    :func:`~flexsheet.analysis.report_timing.planner_scales`; 1 without any); the contrast gain likewise
     (:func:`~flexsheet.analysis.report_timing.planner_gains`).
 
-    ``d``: topic → [(log time, message)]. Returns ``{}`` without judged samples, else ``{"n", "basis", "gate"``
-    ("object_depth" or "sheet_depth"), ``"ratio"`` (felt / requested per sample: median, p5, p95),
-    ``"within_15pct"`` (share of samples with |ratio − 1| ≤ 15 %; since the surface look-up and the object-depth
-    gate, judged on those samples), ``"per_press"`` (:func:`_per_press`: one median ratio per contiguous touch),
-    ``"felt_n"`` and ``"requested_n"`` (force medians, N), ``"felt_stiffness_n_per_m"`` (median secant force /
-    depth of the true sheet), ``"samples"`` {depth_m, felt_n, requested_n} (for the chart), ``"target"``,
-    ``"verdict"`` ("met" when within_15pct ≥ :data:`WITHIN_TARGET`)}``. Raises ``ValueError`` for a non-positive
-    scale."""
+    ``d``: topic → [(log time, message)]. Returns ``{}`` without judged samples, else
+    ``{"n", "basis", "gate"`` ("object_depth" or "sheet_depth"), ``"ratio"`` (felt / requested per sample:
+    median, p5, p95), ``"within_15pct"`` (share of samples with |ratio − 1| ≤ 15 %; since the surface look-up
+    and the object-depth gate, judged on those samples), ``"per_press"`` (:func:`_per_press`: one median ratio
+    per contiguous touch), ``"felt_n"`` and ``"requested_n"`` (force medians, N), ``"felt_stiffness_n_per_m"``
+    (median secant force / depth of the true sheet), ``"samples"`` {depth_m, felt_n, requested_n} (for the
+    chart), ``"target"``, ``"verdict"`` ("met" when within_15pct ≥
+    :data:`WITHIN_TARGET`)}``. Raises ``ValueError`` for a non-positive scale."""
     scales = planner_scales(d) if scales is None else list(scales)
     bad = [s for _, s in scales if not s > 0.0]
     if bad:
@@ -244,9 +249,10 @@ STRAIN_OVER_PLAN = 0.02
 def sheet_summary(d: dict[str, list]) -> dict:
     """The true sheet against the plan, from a bag: ``strain_true_max`` (``/world/sheet`` stretch),
     ``strain_over_plan_max`` (true minus the newest ``/sheet/target`` stretch planned before it), and
-    ``one_arm_holds``: joint-state cycles of one bridge holding (``bridge_status`` "hold…"; not "hold:no_target",
-    a bridge before its first target) while the other's newest state does not; with ``targets`` and ``verdict`` (strain ≤ :data:`STRAIN_LIMIT`, ≤ :data:`STRAIN_OVER_PLAN`
-    over the plan, no one-arm hold). ``{}`` without ``/world/sheet``."""
+    ``one_arm_holds``: joint-state cycles of one bridge holding (``bridge_status`` "hold…"; not
+    "hold:no_target", a bridge before its first target) while the other's newest state does not; with
+    ``targets`` and ``verdict`` (strain ≤ :data:`STRAIN_LIMIT`, ≤ :data:`STRAIN_OVER_PLAN` over the plan, no
+    one-arm hold). ``{}`` without ``/world/sheet``."""
     world = [m for _, m in d.get("/world/sheet", [])]
     if not world:
         return {}
@@ -261,9 +267,10 @@ def sheet_summary(d: dict[str, list]) -> dict:
         if ok.any():
             plan = np.array([tg[i].stretch for i in k[ok]])
             over = float(np.max(true[ok] - plan))
-    states = sorted([(m.header.stamp, m.arm, m.bridge_status.startswith("hold") and m.bridge_status != "hold:no_target")
-                     for topic in ("/arm/left/joint_state", "/arm/right/joint_state")
-                     for _, m in d.get(topic, [])])
+    states = sorted(
+        [(m.header.stamp, m.arm, m.bridge_status.startswith("hold") and m.bridge_status != "hold:no_target")
+         for topic in ("/arm/left/joint_state", "/arm/right/joint_state")
+         for _, m in d.get(topic, [])])
     last: dict[str, bool] = {}
     one = 0
     for i, (t, arm, held) in enumerate(states):
@@ -274,7 +281,8 @@ def sheet_summary(d: dict[str, list]) -> dict:
             one += 1
     met = float(true.max()) <= STRAIN_LIMIT and not (over > STRAIN_OVER_PLAN) and one == 0
     return {"strain_true_max": float(true.max()), "strain_over_plan_max": over, "one_arm_holds": one,
-            "targets": {"strain_true_max": STRAIN_LIMIT, "strain_over_plan_max": STRAIN_OVER_PLAN, "one_arm_holds": 0},
+            "targets": {"strain_true_max": STRAIN_LIMIT, "strain_over_plan_max": STRAIN_OVER_PLAN,
+                        "one_arm_holds": 0},
             "verdict": "met" if met else "MISSED"}
 
 
@@ -282,13 +290,14 @@ def inclusion_contrast(d: dict[str, list], scene, scales=None) -> dict:
     """The inclusion's contrast a finger felt, from true forces at matched depth: judged ``/world/contact``
     samples (:func:`_pressed`: ≥ :data:`MIN_DEPTH` into the object when ``scene`` has an object, else into the
     sheet) over the inclusion's footprint (the contact on the surface, :func:`surface_points`, within the
-    inclusion's radius of the table's point nearest its centre) against those around it (beyond 2 radii), in 1 mm
-    bins of the true sheet depth holding both; per bin the median force over, over the median around, less 1; the
-    median over bins. The requested contrast is the object's own (its force–depth table at the same samples and
-    surface contacts, unmapped), the presented request's the mapped one (``stiffness_scale`` and the planner's
-    ``contrast_gain`` in force, from its heartbeats). ``{}`` without a scene inclusion, the table, or a bin with
-    both. Returns ``{"felt", "requested", "mapped", "contrast_gain"`` (the gains in force, sorted), ``"bins"``,
-    ``"n_over", "n_around"}`` (contrasts as fractions: 0.25 = 25 % stiffer over the inclusion)."""
+    inclusion's radius of the table's point nearest its centre) against those around it (beyond 2 radii), in 1
+    mm bins of the true sheet depth holding both; per bin the median force over, over the median around, less
+    1; the median over bins. The requested contrast is the object's own (its force–depth table at the same
+    samples and surface contacts, unmapped), the presented request's the mapped one (``stiffness_scale`` and
+    the planner's ``contrast_gain`` in force, from its heartbeats). ``{}`` without a scene inclusion, the
+    table, or a bin with both. Returns ``{"felt", "requested", "mapped", "contrast_gain"`` (the gains in
+    force, sorted), ``"bins"``, ``"n_over", "n_around"}`` (contrasts as fractions: 0.25 = 25 % stiffer over
+    the inclusion)."""
     table = force_depth_table(d)
     incs = list(getattr(scene, "inclusions", []) or []) if scene is not None else []
     if table is None or not incs:
@@ -319,7 +328,8 @@ def inclusion_contrast(d: dict[str, list], scene, scales=None) -> dict:
         if len(over) >= 3 and len(around) >= 3:
             med = lambda xs, k: float(np.median([x[k] for x in xs]))     # noqa: E731
             bins.append({"depth_mm": 1e3 * (b + 5e-4), "felt": med(over, 2) / med(around, 2) - 1.0,
-                         "requested": med(over, 3) / med(around, 3) - 1.0, "mapped": med(over, 4) / med(around, 4) - 1.0,
+                         "requested": med(over, 3) / med(around, 3) - 1.0,
+                         "mapped": med(over, 4) / med(around, 4) - 1.0,
                          "n_over": len(over), "n_around": len(around)})
     if not bins:
         return {}
@@ -335,14 +345,15 @@ FOLLOW_TARGET_MS = 60.0
 
 
 def follow_lag(d: dict[str, list], window: float = 0.5) -> dict:
-    """How late the true sheet's tension follows the finger: the delay τ (ms, 0–200 in 1 ms steps) at which the
-    rate of the true clamp strain (``/world/sheet`` stretch) best correlates with the rate of the planned one as a
-    function of the fingertip's exposure (``/sheet/target`` stretch at its ``source_stamp``, delayed by τ); both
-    resampled at 2 ms, over the ``window`` s around every sample pressed :data:`MIN_DEPTH` into the sheet
-    (:func:`_pressed` without a scene). Rates, not
-    values: the identified sheet's strain differs from the truth's by a near-constant offset, which made the fit on
-    values flat. A stroke asks a ramp, not a step, so the delay is the figure: 90 % of a step is reached a rise
-    time later. ``{}`` without samples. Returns ``{"follow_ms", "correlation", "n", "target_ms", "verdict"}``."""
+    """How late the true sheet's tension follows the finger: the delay τ (ms, 0–200 in 1 ms steps) at which
+    the rate of the true clamp strain (``/world/sheet`` stretch) best correlates with the rate of the planned
+    one as a function of the fingertip's exposure (``/sheet/target`` stretch at its ``source_stamp``, delayed
+    by τ); both resampled at 2 ms, over the ``window`` s around every sample pressed :data:`MIN_DEPTH` into
+    the sheet (:func:`_pressed` without a scene). Rates, not
+    values: the identified sheet's strain differs from the truth's by a near-constant offset, which made the
+    fit on values flat. A stroke asks a ramp, not a step, so the delay is the figure: 90 % of a step is
+    reached a rise time later. ``{}`` without samples. Returns
+    ``{"follow_ms", "correlation", "n", "target_ms", "verdict"}``."""
     world = [m for _, m in d.get("/world/sheet", [])]
     tg = sorted((m for _, m in d.get("/sheet/target", []) if not m.status.startswith("hold")),
                 key=lambda m: m.source_stamp)
@@ -377,9 +388,9 @@ def follow_lag(d: dict[str, list], window: float = 0.5) -> dict:
 
 
 def judged_contacts(d: dict[str, list], scene=None) -> np.ndarray:
-    """(n, 2) m: where on the sheet each judged sample (:func:`_pressed`) was planned, (u along the clamp line,
-    v across) from the sheet's centre, read from the newest ``/sheet/target`` at or before it (its contact point
-    less its origin, on its axes); (0, 2) without either topic."""
+    """(n, 2) m: where on the sheet each judged sample (:func:`_pressed`) was planned, (u along the clamp
+    line, v across) from the sheet's centre, read from the newest ``/sheet/target`` at or before it (its
+    contact point less its origin, on its axes); (0, 2) without either topic."""
     pressed, targets = _pressed(d, scene, force_depth_table(d)), d.get("/sheet/target", [])
     if not pressed or not targets:
         return np.zeros((0, 2))

@@ -15,7 +15,8 @@ __all__ = ["sections", "format_text", "markdown", "CHARTS"]
 #: the charts report.md shows (file, caption)
 CHARTS = (("table1.png", "Table I headline: felt Δθ per segment"), ("felt.png", "felt Δθ over each segment"),
           ("latency.png", "latency per hop"),
-          ("compliance.png", "force felt against force requested"), ("head.png", "the viewer's head: view error and keep-out distance"),
+          ("compliance.png", "force felt against force requested"),
+          ("head.png", "the viewer's head: view error and keep-out distance"),
           ("graph.png", "node/topic graph"))
 
 _TARGETS_AT = "flexsheet/analysis/table1.py"
@@ -27,7 +28,8 @@ def _table(header: list[str], rows: list[list[str]]) -> list[str]:
     cols = [header, *rows]
     w = [max(len(r[i]) for r in cols) for i in range(len(header))]
     right = [i > 0 and all(r[i][:1] in "0123456789-+≤" for r in rows) for i in range(len(header))]
-    return ["  ".join(c.rjust(w[i]) if right[i] else c.ljust(w[i]) for i, c in enumerate(r)).rstrip() for r in cols]
+    return ["  ".join(c.rjust(w[i]) if right[i] else c.ljust(w[i]) for i, c in enumerate(r)).rstrip()
+            for r in cols]
 
 
 def _num(v: float | None, d: int = 3) -> str:
@@ -44,8 +46,10 @@ def _header(s: dict) -> list[str]:
     if run:
         lines.append(("Run: PARTIAL — " if run.get("partial") else "Run: complete — ") + run.get("note", "")
                      + (": partial rows and the run get no verdict" if run.get("partial") else ""))
-    lines.append(f"scene: {sc.get('name', 'cylinder')} ({sc.get('file') or sc.get('source', 'the paper cylinder')})")
-    lines.append(f"twin: {tw.get('realism', '?')}, truth seed {tw.get('truth_seed', '?')} ({tw.get('source', '?')})")
+    lines.append(f"scene: {sc.get('name', 'cylinder')} "
+                 f"({sc.get('file') or sc.get('source', 'the paper cylinder')})")
+    lines.append(f"twin: {tw.get('realism', '?')}, truth seed {tw.get('truth_seed', '?')} "
+                 f"({tw.get('source', '?')})")
     ck = s.get("clock") if isinstance(s.get("clock"), dict) else {"kind": s.get("clock")}
     clock = ck.get("kind")
     if clock == "sim":
@@ -63,23 +67,26 @@ def _header(s: dict) -> list[str]:
 
 def _headline(s: dict) -> tuple[list[str], list[str]]:
     hl = s.get("headline") or {}
-    prose = [f"One headline per stroking segment, the felt Δθ mean. {HEADLINE_METRIC[0].upper()}{HEADLINE_METRIC[1:]}.",
+    prose = [f"One headline per stroking segment, the felt Δθ mean. {HEADLINE_METRIC[0].upper()}"
+             f"{HEADLINE_METRIC[1:]}.",
              f"Target: paper Table I ÷ {FELT_TARGET_FACTOR:g} (FELT_TARGET_FACTOR in {_TARGETS_AT}), for the "
-             "paper's rows on the paper's cylinder only. Verdicts compare the unrounded mean with the unrounded "
-             "target (met: mean ≤ target); where both round alike, more digits are printed."]
+             "paper's rows on the paper's cylinder only. Verdicts compare the unrounded mean with the "
+             "unrounded target (met: mean ≤ target); where both round alike, more digits are printed."]
     rows = []
     for k, r in hl.get("rows", {}).items():
         tgt = r["target_deg"]
         d = digits(r["dtheta_mean_deg"], tgt)
         m = r["margin_pct"]
         n = f"{r['n']}" + (f" of {r['expected_n']}" if r.get("expected_n") else "")
-        rows.append([_label(k), _num(r["dtheta_mean_deg"], d), _num(r["dtheta_std_deg"]), _num(r["published_deg"]),
+        rows.append([_label(k), _num(r["dtheta_mean_deg"], d), _num(r["dtheta_std_deg"]),
+                     _num(r["published_deg"]),
                      _num(tgt, d), r["target_source"] if tgt is not None else "-",
                      "-" if m is None else f"{m:+.{digits(m, 0.0, 1, 4)}f} %", r["verdict"], n])
         if r["partial"]:
             cov = r.get("coverage")
             prose.append(f"{_label(k)} is partial: the bag ends inside it"
-                         + (f" ({100 * cov:.0f} % of its moving time)" if cov is not None else "") + f": {PARTIAL}.")
+                         + (f" ({100 * cov:.0f} % of its moving time)" if cov is not None else "")
+                         + f": {PARTIAL}.")
         elif tgt is None:
             prose.append(f"{_label(k)}: {NO_TARGET} ({r['target_source']}).")
     if not rows:
@@ -92,9 +99,10 @@ def _headline(s: dict) -> tuple[list[str], list[str]]:
 
 def _measured(s: dict) -> tuple[list[str], list[str]]:
     keys = row_order(k for k in s if k[:1].isdigit() or k.startswith("stroke_push"))
-    prose = ["Measured fingertip (/fingertip) against the true sheet (/world/sheet): the metric of `flexsheet "
-             "experiment stroke` (summary.json rows \"10\", \"30\", …). No target.", DD_CONVENTION]
-    rows = [[_label(k), _num(s[k]["dtheta_mean_deg"]), _num(s[k]["dtheta_std_deg"]), _num(s[k].get("dd_2r_mean_mm")),
+    prose = ["Measured fingertip (/fingertip) against the true sheet (/world/sheet): the metric of "
+             "`flexsheet experiment stroke` (summary.json rows \"10\", \"30\", …). No target.", DD_CONVENTION]
+    rows = [[_label(k), _num(s[k]["dtheta_mean_deg"]), _num(s[k]["dtheta_std_deg"]),
+             _num(s[k].get("dd_2r_mean_mm")),
              _num(s[k]["dd_mean_mm"]), str(s[k]["n"])] for k in keys]
     head = ["segment", "Δθ mean deg", "Δθ std deg", "Δd 2R mm", "Δd R mm", "n"]
     return prose, _table(head, rows) if rows else []
@@ -123,11 +131,13 @@ def _decomposition(s: dict) -> tuple[list[str], list[str]]:
     dc, felt = t1.get("decomposition", {}), t1.get("felt", {})
     prose = ["What the felt error is made of, mean angles in deg: tremor (the true finger against its 0.21 s "
              "average), camera (measured against true fingertip), prediction (predicted against true at the "
-             "horizon), kinematics (believed against true sheet), slow finger (the felt error without the tremor)."]
+             "horizon), kinematics (believed against true sheet), slow finger (the felt error without the "
+             "tremor)."]
     names = ("tremor", "camera", "prediction", "kinematics", "slow_finger")
     rows = [[_label(k), *(_num(dc[k].get(n)) for n in names), _num(felt.get(k, {}).get("angle3d_mean_deg")),
              _num(felt.get(k, {}).get("gap_mean_mm"))] for k in row_order(dc)]
-    head = ["segment", "tremor", "camera", "prediction", "kinematics", "slow finger", "felt 3-D deg", "felt gap mm"]
+    head = ["segment", "tremor", "camera", "prediction", "kinematics", "slow finger", "felt 3-D deg",
+            "felt gap mm"]
     return prose, _table(head, rows) if rows else []
 
 
@@ -140,21 +150,23 @@ def _delay(s: dict) -> tuple[list[str], list[str]]:
            "states)."]
     if c.get("median") is not None:
         share = lat.get("sheet_at_pose_reached")
-        reached = f" ({100 * share:.0f} %; the others never got there before the next target)" if share else ""
-        out[0] = (f"The delay: exposure → sheet at its pose, median {c['median']:.1f} ms (p99 {c['p99']:.1f} ms, "
-                  f"{basis}; latency chain `exposure_to_sheet_at_pose`): until both clamps' readback is within "
-                  f"{POSE_TOL_M * 1e3:g} mm and 0.05° of that sample's target, for {c['n']} of {arm.get('n', '?')} "
-                  f"samples{reached}.")
+        reached = (f" ({100 * share:.0f} %; the others never got there before the next target)" if share
+                   else "")
+        out[0] = (f"The delay: exposure → sheet at its pose, median {c['median']:.1f} ms (p99 {c['p99']:.1f} "
+                  f"ms, {basis}; latency chain `exposure_to_sheet_at_pose`): until both clamps' readback is "
+                  f"within {POSE_TOL_M * 1e3:g} mm and 0.05° of that sample's target, for {c['n']} of "
+                  f"{arm.get('n', '?')} samples{reached}.")
     dl = s.get("delay", {})
     if dl:
         v = dl.get("stroke_speed_mm_per_s")
         tol = (f" At this stroke's {v:.1f} mm/s the chain's {POSE_TOL_M * 1e3:g} mm tolerance is "
-               f"{POSE_TOL_M * 1e6 / v:.0f} ms of travel: the chain stops the clock that much before the exact "
-               "pose, and counts only the samples the clamps reached.") if v else ""
-        out.append(f"Not a second delay, the prediction check (segment {_label(dl['segment'])}): the true sheet "
-                   f"trails the true finger by {dl['residual_lag_ms']:+.1f} ms beyond the prediction's "
-                   f"{dl['horizon_ms']:.1f} ms lead (fitted; mean angle {dl['angle_at_best_deg']:.3f}° at best), so "
-                   f"a horizon of {dl['exposure_to_sheet_ms']:.1f} ms would cancel it (`delay.exposure_to_sheet_ms`)."
+               f"{POSE_TOL_M * 1e6 / v:.0f} ms of travel: the chain stops the clock that much before the "
+               "exact pose, and counts only the samples the clamps reached.") if v else ""
+        out.append(f"Not a second delay, the prediction check (segment {_label(dl['segment'])}): the true "
+                   f"sheet trails the true finger by {dl['residual_lag_ms']:+.1f} ms beyond the prediction's "
+                   f"{dl['horizon_ms']:.1f} ms lead (fitted; mean angle {dl['angle_at_best_deg']:.3f}° at "
+                   f"best), so a horizon of {dl['exposure_to_sheet_ms']:.1f} ms would cancel it "
+                   "(`delay.exposure_to_sheet_ms`)."
                    + tol)
     return out, []
 
@@ -167,18 +179,21 @@ def _softness(s: dict) -> tuple[list[str], list[str]]:
                 "request in the bag: no verdict."], []
     r = soft["ratio"]
     basis = ("the object's force-depth from its FEM (/object/force_depth) at the contact on the surface (the "
-             "dent's bottom moved back out along the sheet's normal) and the true sheet depth, mapped as the planner "
-             "maps it (stiffness_scale, contrast_gain)" if soft.get("basis") == "force_depth" else
+             "dent's bottom moved back out along the sheet's normal) and the true sheet depth, mapped as the "
+             "planner maps it (stiffness_scale, contrast_gain)" if soft.get("basis") == "force_depth" else
              "the virtual object's force at the display's fingertip (/object/deformation contact_force × "
              "stiffness_scale)")
     into = "the object" if soft.get("gate") == "object_depth" else "the sheet"
     prose = [f"While the finger presses (≥ 2 mm into {into}): the finger's contact force on the true sheet "
-             "(/world/contact force: the twin's sheet FEM, not the planner's model) against " + basis + ". A ratio "
-             "within 1 ± 0.15 goes unnoticed (Weber fraction, Bergmann Tiest & Kappers 2009). Saturated: share of "
-             "touching targets whose request the sheet could not present (target ≤ 5 %)."]
+             "(/world/contact force: the twin's sheet FEM, not the planner's model) against " + basis
+             + ". A ratio "
+             "within 1 ± 0.15 goes unnoticed (Weber fraction, Bergmann Tiest & Kappers 2009). Saturated: "
+             "share of touching targets whose request the sheet could not present (target ≤ 5 %)."]
     sat = comp.get("saturated")
-    row = [str(soft["n"]), f"{r['median']:.2f} [{r['p5']:.2f}, {r['p95']:.2f}]", f"{100 * soft['within_15pct']:.0f} %",
-           f"{soft['felt_n']:.2f}", f"{soft['requested_n']:.2f}", "-" if sat is None else f"{100 * sat:.1f} %",
+    row = [str(soft["n"]), f"{r['median']:.2f} [{r['p5']:.2f}, {r['p95']:.2f}]",
+           f"{100 * soft['within_15pct']:.0f} %",
+           f"{soft['felt_n']:.2f}", f"{soft['requested_n']:.2f}",
+           "-" if sat is None else f"{100 * sat:.1f} %",
            "≥ 95 % within", soft["verdict"]]
     head = ["n", "felt / requested, median [p5, p95]", "within 15 %", "felt N", "requested N", "saturated",
             "target", "verdict"]
@@ -189,32 +204,34 @@ def _softness(s: dict) -> tuple[list[str], list[str]]:
                      f"{pp['worst']:.2f}.")
     ic = comp.get("inclusion_contrast")
     if ic:
-        prose.append(f"The inclusion, felt from true forces at matched depth (over its footprint against around it, "
-                     f"{len(ic['bins'])} depth bins): {100 * ic['felt']:+.1f} %; the object asks {100 * ic['requested']:+.1f} %, "
-                     f"the mapped request {100 * ic['mapped']:+.1f} %"
+        prose.append("The inclusion, felt from true forces at matched depth (over its footprint against "
+                     f"around it, {len(ic['bins'])} depth bins): {100 * ic['felt']:+.1f} %; the object asks "
+                     f"{100 * ic['requested']:+.1f} %, the mapped request {100 * ic['mapped']:+.1f} %"
                      + (f" (contrast_gain {', '.join(f'{g:g}' for g in ic['contrast_gain'])})."
                         if ic.get("contrast_gain") else "."))
     mc = comp.get("model_error_contacts")
     if mc:
-        prose.append(f"At this run's {mc['contacts']} contact positions on the sheet, over the same strains: median "
-                     f"{mc['median_pct']:.1f} %, p90 {mc['p90_pct']:.1f} % (target ≤ {mc['target_pct']:g} % at p90: "
+        prose.append(f"At this run's {mc['contacts']} contact positions on the sheet, over the same strains: "
+                     f"median {mc['median_pct']:.1f} %, p90 {mc['p90_pct']:.1f} % (target ≤ "
+                     f"{mc['target_pct']:g} % at p90: "
                      f"{'met' if mc['p90_pct'] <= mc['target_pct'] else 'MISSED'}).")
     me = comp.get("model_error")
     if me:
         prose.append(f"The planner's identified sheet model against the true force over clamp strains "
                      f"{me['strains'][0]:g}–{me['strains'][1]:g}: median {me['median_pct']:.1f} % (target ≤ "
-                     f"{me['target_pct']:g} %: {'met' if me['median_pct'] <= me['target_pct'] else 'MISSED'}), "
-                     f"p90 {me['p90_pct']:.1f} %.")
+                     f"{me['target_pct']:g} %: {'met' if me['median_pct'] <= me['target_pct'] else 'MISSED'}"
+                     f"), p90 {me['p90_pct']:.1f} %.")
     sh = s.get("sheet", {})
     if sh:
-        prose.append(f"The true sheet: clamp strain at most {sh['strain_true_max']:.3f} (limit 0.30), at most "
-                     f"{sh['strain_over_plan_max']:+.3f} over the plan (limit +0.02); one arm holding while the other "
-                     f"follows: {sh['one_arm_holds']} joint-state cycles (target 0): {sh['verdict']}.")
+        prose.append(f"The true sheet: clamp strain at most {sh['strain_true_max']:.3f} (limit 0.30), at "
+                     f"most {sh['strain_over_plan_max']:+.3f} over the plan (limit +0.02); one arm holding "
+                     f"while the other follows: {sh['one_arm_holds']} joint-state cycles (target 0): "
+                     f"{sh['verdict']}.")
         if "span_error_mm" in sh:
             se = sh["span_error_mm"]
-            prose.append(f"The clamp span against the planned motion: median {se['median']:.2f} mm, p99 {se['p99']:.2f} mm "
-                         f"(target ≤ 1.0), max {se['max']:.2f} mm; guard cycles {sh['guard_waits']} (target 0): "
-                         f"{sh['motion_verdict']}.")
+            prose.append(f"The clamp span against the planned motion: median {se['median']:.2f} mm, p99 "
+                         f"{se['p99']:.2f} mm (target ≤ 1.0), max {se['max']:.2f} mm; guard cycles "
+                         f"{sh['guard_waits']} (target 0): {sh['motion_verdict']}.")
         pd, sk = sh.get("path_dev_mm", {}), sh.get("arrival_skew_ms", {})
         if pd.get("n"):
             skew = (f"the two clamps' lag behind it differs by p99 {sk['p99']:.0f} ms while the sheet moves"
@@ -229,36 +246,40 @@ def _placement(s: dict) -> tuple[list[str], list[str]]:
     if not pl:
         return ["No touching sample with the true finger, the true sheet and the scene: no verdict."], []
     prose = ["While the finger touches (inside the object, or behind the true sheet while the world says it "
-             "touches): the true sheet's plane ahead (+) or behind (−) the object's surface under the true finger, "
+             "touches): the true sheet's plane ahead (+) or behind (−) the object's surface under the true "
+             "finger, "
              "along the object's normal, mm; per touch, the sheet's arrival at the surface under the finger "
-             f"(within {pl['targets']['arrival_tol_mm']:g} mm behind it, or ahead) against the finger's arrival "
-             "there, ms (negative: the sheet waited)."]
+             f"(within {pl['targets']['arrival_tol_mm']:g} mm behind it, or ahead) against the finger's "
+             "arrival there, ms (negative: the sheet waited)."]
     d, a = pl["distance_mm"] or {"p50": math.nan, "p99": math.nan, "max": math.nan}, pl.get("arrival_ms")
     rows = [["|distance|, mm", f"{d['p50']:.2f}", f"{d['p99']:.2f}", f"{d['max']:.2f}",
              f"≤ {pl['targets']['distance_mm.p99']:g} p99", pl["verdicts"]["distance"]]]
     hy, da = pl.get("head_yield"), pl.get("distance_mm_all")
     if hy and hy["n"] and da:
-        prose.append(f"The sheet yielded to the viewer's head (a keep_out plan, until back at the object's surface) in "
-                     f"{hy['n']} touching samples ({100 * hy['share']:.1f} %); they are left out of the distance "
-                     f"verdict. Over every touching sample: p99 {da['p99']:.2f} mm, max {da['max']:.2f} mm.")
+        prose.append("The sheet yielded to the viewer's head (a keep_out plan, until back at the object's "
+                     f"surface) in {hy['n']} touching samples ({100 * hy['share']:.1f} %); they are left out "
+                     f"of the distance verdict. Over every touching sample: p99 {da['p99']:.2f} mm, max "
+                     f"{da['max']:.2f} mm.")
     sp = pl.get("split")
     if sp and all(v is not None for v in sp["share"].values()):
-        prose.append(f"The {sp['n']} samples beyond the target, split (shares of their summed distance, they add to "
-                     f"100 %): the arms off the plan's pose {100 * sp['share']['arms']:.0f} %, the plan's pose off its "
-                     f"contact (limited or held) {100 * sp['share']['plan_pose']:.0f} %, the planned contact off the "
-                     f"object's surface {100 * sp['share']['contact']:.0f} %.")
+        prose.append(f"The {sp['n']} samples beyond the target, split (shares of their summed distance, they "
+                     f"add to 100 %): the arms off the plan's pose {100 * sp['share']['arms']:.0f} %, the "
+                     f"plan's pose off its contact (limited or held) {100 * sp['share']['plan_pose']:.0f} %, "
+                     f"the planned contact off the object's surface {100 * sp['share']['contact']:.0f} %.")
     first = "-" if pl["sheet_first"] is None else f"{100 * pl['sheet_first']:.0f} % of {pl['arrivals']}"
     rows.append(["sheet first, touches", first, "-", "-", f"≥ {100 * pl['targets']['sheet_first']:.0f} %",
                  pl["verdicts"]["sheet_first"]])
     if a:
-        rows.append(["sheet − finger arrival, ms", f"{a['median']:.0f}", f"{a['p99']:.0f}", f"{a['max']:.0f}", "≤ 0",
+        rows.append(["sheet − finger arrival, ms", f"{a['median']:.0f}", f"{a['p99']:.0f}", f"{a['max']:.0f}",
+                     "≤ 0",
                      "-"])
-    phases = ", ".join(f"{k} p99 {v['p99']:.2f} mm (n {v['n']})" for k, v in pl.get("by_phase_mm", {}).items())
+    phases = ", ".join(f"{k} p99 {v['p99']:.2f} mm (n {v['n']})" for k,
+                       v in pl.get("by_phase_mm", {}).items())
     if phases:
         prose.append(f"By the script's phase: {phases}.")
     if pl.get("never") or pl.get("no_finger_arrival"):
-        prose.append(f"Touches whose sheet never arrived: {pl['never']}; touches that never pushed into the object "
-                     f"(the sheet ahead): {pl['no_finger_arrival']}.")
+        prose.append(f"Touches whose sheet never arrived: {pl['never']}; touches that never pushed into the "
+                     f"object (the sheet ahead): {pl['no_finger_arrival']}.")
     return prose, _table(["figure", "p50", "p99", "max", "target", "verdict"], rows)
 
 
@@ -277,15 +298,17 @@ def _compliance(s: dict) -> tuple[list[str], list[str]]:
                      f(b["object_stiffness_n_per_m"]),
                      "not recorded" if sc is None else ", ".join(f"{x:g}" for x in sc),
                      "-" if un is None else f(un), f"{100 * b['at_limit']:.0f} %"])
-    prose = ["The sheet at the contacts (/sheet/target while touching), median [p5, p95], N/m. Requested = the "
+    prose = ["The sheet at the contacts (/sheet/target while touching), median [p5, p95], N/m. Requested = "
+             "the "
              "object's stiffness × stiffness_scale (the planner's, from its heartbeat in /diagnostics); the "
-             "object's own stiffness is the request ÷ that scale. At limit: share of targets whose request the "
-             "sheet could not present."]
+             "object's own stiffness is the request ÷ that scale. At limit: share of targets whose request "
+             "the sheet could not present."]
     scaled = {x for b in comp.values() for x in (b.get("stiffness_scale") or []) if x != 1.0}
     if scaled:
-        prose.append(f"Scaled: stiffness_scale {', '.join(f'{x:g}' for x in sorted(scaled))}: the requested column "
-                     "is the scaled request, not the object's stiffness.")
-    head = ["segment", "tension", "presented k", "requested k (scaled)", "stiffness_scale", "object k (unscaled)",
+        prose.append(f"Scaled: stiffness_scale {', '.join(f'{x:g}' for x in sorted(scaled))}: the requested "
+                     "column is the scaled request, not the object's stiffness.")
+    head = ["segment", "tension", "presented k", "requested k (scaled)", "stiffness_scale",
+            "object k (unscaled)",
             "at limit"]
     return prose, _table(head, rows)
 
@@ -296,11 +319,12 @@ def _latency(s: dict) -> tuple[list[str], list[str]]:
     rows = []
     for k, v in lat.get("chain", {}).items():
         t = tg.get(k, {})
-        rows.append([k, _num(v["median"], 2), _num(v["p99"], 2), str(v["n"]), basis.get(k, {}).get("basis", "?"),
+        rows.append([k, _num(v["median"], 2), _num(v["p99"], 2), str(v["n"]),
+                     basis.get(k, {}).get("basis", "?"),
                      f"≤ {t['target_ms']:g}" if t else "-", t.get("verdict", "-")])
     prose = ["One chain per fingertip sample from the stamps the nodes set, ms. Modelled: the lab's declared "
-             "timings (flexsheet/model/timing.py) charged on the simulated clock, a constant per hop where nothing "
-             "else varies (p99 = median); measured: the nodes' stamps on this host's clock."]
+             "timings (flexsheet/model/timing.py) charged on the simulated clock, a constant per hop where "
+             "nothing else varies (p99 = median); measured: the nodes' stamps on this host's clock."]
     if tg:
         prose.append("Targets: " + ", ".join(f"{k} ≤ {t['target_ms']:g} ms median" for k, t in tg.items())
                      + f", {next(iter(tg.values()))['source']}.")
@@ -313,14 +337,16 @@ def _head(s: dict) -> tuple[list[str], list[str]]:
     eye, view, safety = s.get("eye", {}), s.get("view", {}), s.get("safety", {})
     if not (eye or view or safety):
         return ["No /world/head in the bag (no moving head in this run): no verdict."], []
-    prose = ["The image is corrected for the tracked eyes (/eye/pose). View error: where the true eyes see the "
-             "object's points on the true sheet against where they belong, on the imaginary screen, in projector px "
-             "(the same frames judged as if drawn for the fixed V beside it). Eye error: /eye/pose against the "
-             "true eyes. Keep-out: the true sheet's distance from the true head sphere."]
+    prose = ["The image is corrected for the tracked eyes (/eye/pose). View error: where the true eyes see "
+             "the object's points on the true sheet against where they belong, on the imaginary screen, in "
+             "projector px (the same frames judged as if drawn for the fixed V beside it). Eye error: "
+             "/eye/pose against the true eyes. Keep-out: the true sheet's distance from the true head "
+             "sphere."]
     rows = []
     if eye.get("error_mm"):
         e = eye["error_mm"]
-        rows.append(["eye error, mm", f"{e['median']:.2f}", f"{e['p95']:.2f}", f"≤ {eye['target_mm']:g} median",
+        rows.append(["eye error, mm", f"{e['median']:.2f}", f"{e['p95']:.2f}",
+                     f"≤ {eye['target_mm']:g} median",
                      eye["verdict"]])
     for kind in ("tracked", "fixed"):
         if kind in view:
@@ -339,7 +365,8 @@ def _head(s: dict) -> tuple[list[str], list[str]]:
         for sp in safety.get("head_lost", {}).get("spans", []):
             after = "never" if sp["hold_after_ms"] is None else f"{sp['hold_after_ms']:.1f}"
             rows.append([f"glasses lost {sp['duration_s']:.1f} s: planner held after, ms", after,
-                         f"step {sp['hold_step_mm_max']:.2f} mm", "≤ 16.7, no step", safety["head_lost"]["verdict"]])
+                         f"step {sp['hold_step_mm_max']:.2f} mm", "≤ 16.7, no step",
+                         safety["head_lost"]["verdict"]])
     return prose, _table(["figure", "median", "p95", "target", "verdict"], rows)
 
 
@@ -352,7 +379,8 @@ def sections(summary: dict) -> list[tuple[str, list[str], list[str]]]:
             ("Table I — what the felt error is made of", *_decomposition(summary)),
             ("Delay — exposure → sheet at its pose", *_delay(summary)),
             ("Softness felt — the true sheet's force against the object's", *_softness(summary)),
-            ("Placement — the true sheet against the object's surface under the finger", *_placement(summary)),
+            ("Placement — the true sheet against the object's surface under the finger",
+             *_placement(summary)),
             ("The viewer's head — tracked image and keep-out", *_head(summary)),
             ("Sheet tension and stiffness at the contacts (the planner's model)", *_compliance(summary)),
             ("Latency per hop and end to end", *_latency(summary))]

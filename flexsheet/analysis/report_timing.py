@@ -33,7 +33,8 @@ from flexsheet.analysis.table1 import STROKE_MODES, segment_key
 from flexsheet.model.timing import LAB
 from messages.registers import FAULT_WATCHDOG
 
-__all__ = ["latency_hops", "latency_basis", "compliance_summary", "planner_scales", "planner_gains", "watchdog_faults",
+__all__ = ["latency_hops", "latency_basis", "compliance_summary", "planner_scales", "planner_gains",
+           "watchdog_faults",
            "cpu_summary", "compute_vs_waiting", "POSE_TOL_M", "POSE_TOL_RAD", "HOP_NODES"]
 
 #: a clamp at its commanded pose: position and rotation tolerance (m, rad)
@@ -63,9 +64,9 @@ def _stats(x) -> dict:
 
 
 def latency_basis(clock: str) -> dict[str, dict]:
-    """Per hop ``{"basis": "modelled" | "measured", "how"}``: on ``clock`` "sim" every hop is modelled (declared
-    lab timings, :mod:`flexsheet.model.timing`); on the wall clock measured from the nodes' stamps, but the
-    projector (vsync and input latency), which is always modelled."""
+    """Per hop ``{"basis": "modelled" | "measured", "how"}``: on ``clock`` "sim" every hop is modelled
+    (declared lab timings, :mod:`flexsheet.model.timing`); on the wall clock measured from the nodes' stamps,
+    but the projector (vsync and input latency), which is always modelled."""
     out = {}
     for hop, how in _MODELLED.items():
         if clock == "sim" or hop == "rendered_to_projected":
@@ -172,7 +173,8 @@ def planner_gains(d: dict[str, list]) -> list[tuple[float, float]]:
 
 
 def scales_at(scales: list[tuple[float, float]], t: np.ndarray) -> np.ndarray:
-    """The scale in force at arrival times ``t``: the last heartbeat's before, else the first; NaN without any."""
+    """The scale in force at arrival times ``t``: the last heartbeat's before, else the first; NaN without
+    any."""
     if not scales:
         return np.full(len(t), np.nan)
     ts, v = np.array([s[0] for s in scales]), np.array([s[1] for s in scales])
@@ -214,14 +216,16 @@ def compliance_summary(d: dict[str, list]) -> dict:
             tr = truths[k][1] if k >= 0 else None
             if tr is not None and tr.phase == tr.mode and tr.mode in STROKE_MODES:
                 groups[segment_key(tr)].append(i)
-        out.update({k: _compliance_block([tg[i][1] for i in v], scale[v]) for k, v in groups.items() if len(v) >= 5})
+        out.update({k: _compliance_block([tg[i][1] for i in v], scale[v]) for k,
+                    v in groups.items() if len(v) >= 5})
     return out
 
 
 def watchdog_faults(d: dict[str, list]) -> dict:
-    """Watchdog trips over the run, from the controllers' status the bridges publish in ``/arm/<arm>/joint_state``:
-    a trip is a state with ``fault == FAULT_WATCHDOG`` after one without (per arm, in stamp order; each is a hold
-    and a fault on a real controller). Returns ``{"watchdog": total, "watchdog_per_arm": {arm: n}}``."""
+    """Watchdog trips over the run, from the controllers' status the bridges publish in
+    ``/arm/<arm>/joint_state``: a trip is a state with ``fault == FAULT_WATCHDOG`` after one without (per arm,
+    in stamp order; each is a hold and a fault on a real controller). Returns
+    ``{"watchdog": total, "watchdog_per_arm": {arm: n}}``."""
     per_arm = {}
     for arm in ("left", "right"):
         prev, n = 0, 0
@@ -234,8 +238,8 @@ def watchdog_faults(d: dict[str, list]) -> dict:
 
 
 def cpu_summary(out_dir: Path) -> dict | None:
-    """Per-node CPU (% of one core) from ``$(out)/cpu.json``, written by the Supervisor at stop (steady state: from
-    10 s after each process started; a node in a container counts only its handler and timer threads, the
+    """Per-node CPU (% of one core) from ``$(out)/cpu.json``, written by the Supervisor at stop (steady state:
+    from 10 s after each process started; a node in a container counts only its handler and timer threads, the
     container's total is under ``process_percent``). ``None`` when the file is absent or unreadable."""
     cpu_file = out_dir / "cpu.json"
     if not cpu_file.exists():
@@ -243,7 +247,8 @@ def cpu_summary(out_dir: Path) -> dict | None:
     try:
         cpu = json.loads(cpu_file.read_text())
         return {"wall_s": cpu["wall_s"], "cores": cpu["cores"],
-                "node_percent": {n: v.get("steady_cpu_percent", v["cpu_percent"]) for n, v in cpu["nodes"].items()},
+                "node_percent": {n: v.get("steady_cpu_percent", v["cpu_percent"]) for n,
+                                 v in cpu["nodes"].items()},
                 "process_percent": {p: v.get("steady_cpu_percent", v["cpu_percent"])
                                     for p, v in cpu["processes"].items()},
                 "note": cpu["note"]}
@@ -279,6 +284,7 @@ def compute_vs_waiting(summary: dict, out_dir: Path) -> dict:
             c = 1e3 * cpu[node] / n
             out[hop] = {"node": node, "compute_ms": c, "waiting_ms": med - c, "median_ms": med}
     if out:
-        out["note"] = ("compute_ms: the node's mean CPU per output (all its handlers); waiting_ms: the hop's median "
-                       "minus it (negative where the node's other handlers make the mean exceed the median)")
+        out["note"] = ("compute_ms: the node's mean CPU per output (all its handlers); waiting_ms: the hop's "
+                       "median minus it (negative where the node's other handlers make the mean exceed the "
+                       "median)")
     return out

@@ -1,15 +1,15 @@
 """Verdicts of a run report (:mod:`flexsheet.analysis.report`): each judged on the unrounded numbers.
 
 * Table I, the headline: the *felt* Δθ mean of each segment against paper Table I ÷
-  :data:`~flexsheet.analysis.table1.FELT_TARGET_FACTOR` (:func:`flexsheet.analysis.table1.target`);
-  met when mean ≤ target. Targets exist for the paper's rows (10 s, 30 s) on the paper's cylinder only.
+  :data:`~flexsheet.analysis.table1.FELT_TARGET_FACTOR` (:func:`flexsheet.analysis.table1.target`); met when
+  mean ≤ target. Targets exist for the paper's rows (10 s, 30 s) on the paper's cylinder only.
 * A partial segment (the bag ends inside it) gets :data:`PARTIAL`; a partial run gets no overall verdict
   and no latency verdicts (its complete segments keep theirs).
 * Latency: the medians of the chain's ends against :data:`LATENCY_TARGETS_MS`.
-* Softness and placement are judged where they are measured (:mod:`flexsheet.analysis.report_softness`, "met" or
-  "MISSED" on the unrounded numbers, a partial run included): ``compliance.felt.verdict`` (share of samples within
-  the Weber fraction), ``placement.verdicts`` {distance (p99 |distance| mm), sheet_first (share of touches)} and
-  ``placement.verdict`` (both met).
+* Softness and placement are judged where they are measured (:mod:`flexsheet.analysis.report_softness`, "met"
+  or "MISSED" on the unrounded numbers, a partial run included): ``compliance.felt.verdict`` (share of samples
+  within the Weber fraction), ``placement.verdicts`` {distance (p99 |distance| mm), sheet_first (share of
+  touches)} and ``placement.verdict`` (both met).
 """
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ PARTIAL = "partial — no verdict"
 NO_TARGET = "no target"
 #: what the headline figure is
 HEADLINE_METRIC = ("felt Δθ: the angle between the object's normal at the true fingertip (/world/finger, at "
-                   "each exposure) and the true sheet (/world/sheet), in the stroke's normal section (paper Fig. 9)")
+                   "each exposure) and the true sheet (/world/sheet), in the stroke's normal section (paper "
+                   "Fig. 9)")
 
 
 def _verdict(value: float, tgt: float | None, partial: bool) -> str:

@@ -13,14 +13,14 @@ We make the definitions exact for any shape and sheet pose:
 * ``gap`` (extra): distance of D′ from the sheet plane along its normal (the sheet floating off, > 0, or
   cutting into, < 0, the virtual surface) — zero when the sheet is exactly tangent.
 * Fig. 9 is a cross-section: the **normal section along the stroke**, the plane through D spanned by the
-  object's true normal n(D) and the stroke's direction t there (any scene:
-  :func:`stroke_tangents` gives t from the scene's path). The sheet normal's component along the section's
-  binormal b = n × t is removed before D′ and Δθ are computed (it is small, and would otherwise make the
-  support point jump along b). On the paper's cylinder the stroke runs around the axis, so b is the axis and
-  this is exactly the cylinder's cross-section; without tangents a shape with an ``axis`` (the cylinder) uses
-  that cross-section directly (the same numbers, tested). Both the in-process experiment
-  (:mod:`flexsheet.experiments.stroke_model`) and the report of a recorded run (:mod:`flexsheet.analysis.report`)
-  get their rows from :func:`table1_row`, and the paper's numbers from :data:`PAPER_TABLE1`.
+  object's true normal n(D) and the stroke's direction t there (any scene: :func:`stroke_tangents` gives t
+  from the scene's path). The sheet normal's component along the section's binormal b = n × t is removed
+  before D′ and Δθ are computed (it is small, and would otherwise make the support point jump along b). On the
+  paper's cylinder the stroke runs around the axis, so b is the axis and this is exactly the cylinder's
+  cross-section; without tangents a shape with an ``axis`` (the cylinder) uses that cross-section directly
+  (the same numbers, tested). Both the in-process experiment (:mod:`flexsheet.experiments.stroke_model`) and
+  the report of a recorded run (:mod:`flexsheet.analysis.report`) get their rows from :func:`table1_row`, and
+  the paper's numbers from :data:`PAPER_TABLE1`.
 
 A bias common to D and the sheet (e.g. a camera calibration offset, the paper's 2.95 mm) cancels in Δd,
 which is why the paper's Δd has a small standard deviation.
@@ -43,7 +43,8 @@ from flexsheet.model.shape_base import Shape
 from flexsheet.planning.shape import planner_shape
 
 __all__ = ["StrokeErrors", "stroke_errors", "presented_contacts", "table1", "summarize", "table1_row",
-           "PAPER_TABLE1", "TARGET_FACTOR", "FELT_TARGET_FACTOR", "target", "section_normals", "DD_CONVENTION", "paper_dd_ratio",
+           "PAPER_TABLE1", "TARGET_FACTOR", "FELT_TARGET_FACTOR", "target", "section_normals",
+           "DD_CONVENTION", "paper_dd_ratio",
            "stroke_tangents", "scene_table1_row", "errors_row", "STROKE_MODES", "segment_key"]
 
 #: the paper's Table I (Furukawa et al., §V-C): moving time (s, as the row key) → means and population
@@ -57,8 +58,8 @@ TARGET_FACTOR = 4.0
 #: the target of the felt error (true finger against true sheet): this many times below the paper's
 FELT_TARGET_FACTOR = 2.0
 #: one line for every report that prints Δd (module doc)
-DD_CONVENTION = ("Δθ is the headline. Δd on R: |DD′| = chord ≈ R·Δθ (ours); Δd 2R: 2R·Δθ, the paper's convention "
-                 "(its rows have Δd/Δθ = 70.7 mm/rad = the cylinder's diameter).")
+DD_CONVENTION = ("Δθ is the headline. Δd on R: |DD′| = chord ≈ R·Δθ (ours); Δd 2R: 2R·Δθ, the paper's "
+                 "convention (its rows have Δd/Δθ = 70.7 mm/rad = the cylinder's diameter).")
 
 
 def paper_dd_ratio(key: str = "10") -> float:
@@ -128,11 +129,11 @@ def presented_contacts(shape: Shape, D, sheet_origin, sheet_normal) -> tuple[np.
 
 
 def section_normals(shape: Shape, normals, ref_normals=None, tangents=None) -> np.ndarray:
-    """Unit normals (N, 3) in the Fig. 9 cross-section (module doc). With ``ref_normals`` n(D) and ``tangents``
-    t (each (N, 3)): the component along the binormal b = n × t removed (the normal section along the
-    stroke). Without: for a shape with an ``axis`` (the cylinder) the component along the axis removed, else
-    just normalised. Raises ``ValueError`` on bad shapes/values, a normal along b (or the axis), or a tangent
-    along n."""
+    """Unit normals (N, 3) in the Fig. 9 cross-section (module doc). With ``ref_normals`` n(D) and
+    ``tangents`` t (each (N, 3)): the component along the binormal b = n × t removed (the normal section along
+    the stroke). Without: for a shape with an ``axis`` (the cylinder) the component along the axis removed,
+    else just normalised. Raises ``ValueError`` on bad shapes/values, a normal along b (or the axis), or a
+    tangent along n."""
     n = _as_points("sheet_normal", normals)
     if tangents is not None:
         N = n.shape[0]
@@ -153,7 +154,8 @@ def section_normals(shape: Shape, normals, ref_normals=None, tangents=None) -> n
             n = n - np.outer(n @ a, a)
     nrm = np.linalg.norm(n, axis=1, keepdims=True)
     if np.any(nrm < 1e-9):
-        raise ValueError("sheet_normal must be non-zero (and not along the section's binormal or the shape's axis)")
+        raise ValueError("sheet_normal must be non-zero (and not along the section's binormal or the shape's "
+                         "axis)")
     return n / nrm
 
 
@@ -191,7 +193,8 @@ def table1(shape: Shape, measured, sheet_origin, sheet_normal, scene=None) -> St
             D[i], nD[i] = pr.point, pr.normal
             hint = pr.normal
     tang = stroke_tangents(scene, D) if scene is not None else None
-    nS = section_normals(shape, _as_points("sheet_normal", sheet_normal, N), nD if tang is not None else None, tang)
+    nS = section_normals(shape, _as_points("sheet_normal", sheet_normal, N), nD if tang is not None else None,
+                         tang)
     Dp, gap = presented_contacts(shape, D, sheet_origin, nS)
     dd, dth = stroke_errors(D, Dp, nD, nS)
     return StrokeErrors(dd, dth, gap, D, Dp)
@@ -200,17 +203,19 @@ def table1(shape: Shape, measured, sheet_origin, sheet_normal, scene=None) -> St
 def summarize(dd, dtheta, radius: float | None = None) -> dict[str, float]:
     """Table I row: ``dd_mean_mm``, ``dd_std_mm``, ``dtheta_mean_deg``, ``dtheta_std_deg`` (population std),
     plus ``dd_p95_mm``, ``dtheta_p95_deg``, the medians ``dd_median_mm``, ``dtheta_median_deg`` (robust to a
-    stalled stretch of a run on a loaded machine, which the mean is not) and ``n``; with ``radius`` R (m) also the paper's convention
-    ``dd_2r_mean_mm``, ``dd_2r_std_mm`` = 2R·Δθ (module doc). Inputs (N,) m and rad; raises ``ValueError`` if
-    empty or the radius is not positive."""
+    stalled stretch of a run on a loaded machine, which the mean is not) and ``n``; with ``radius`` R (m) also
+    the paper's convention ``dd_2r_mean_mm``, ``dd_2r_std_mm`` = 2R·Δθ (module doc). Inputs (N,) m and rad;
+    raises ``ValueError`` if empty or the radius is not positive."""
     dd = np.asarray(dd, dtype=float)
     dth = np.asarray(dtheta, dtype=float)
     if dd.size == 0 or dd.shape != dth.shape:
-        raise ValueError(f"dd and dtheta must be non-empty and the same shape, got {dd.shape} and {dth.shape}")
+        raise ValueError(f"dd and dtheta must be non-empty and the same shape, got {dd.shape} and "
+                         f"{dth.shape}")
     d = math.degrees(1.0)
     row = {"dd_mean_mm": float(dd.mean() * 1e3), "dd_std_mm": float(dd.std() * 1e3),
            "dtheta_mean_deg": float(dth.mean() * d), "dtheta_std_deg": float(dth.std() * d),
-           "dd_p95_mm": float(np.percentile(dd, 95) * 1e3), "dtheta_p95_deg": float(np.percentile(dth, 95) * d),
+           "dd_p95_mm": float(np.percentile(dd, 95) * 1e3),
+           "dtheta_p95_deg": float(np.percentile(dth, 95) * d),
            "dd_median_mm": float(np.median(dd) * 1e3), "dtheta_median_deg": float(np.median(dth) * d),
            "n": int(dd.size)}
     if radius is not None:
@@ -230,8 +235,8 @@ def table1_row(shape: Shape, measured, sheet_origin, sheet_normal, scene=None) -
 
 
 def errors_row(shape: Shape, err: StrokeErrors) -> dict[str, float]:
-    """The row of :func:`table1_row` from errors already computed (:func:`table1`): :func:`summarize` (with the
-    2R convention when ``shape`` has a radius ``R``) plus ``gap_mean_mm``."""
+    """The row of :func:`table1_row` from errors already computed (:func:`table1`): :func:`summarize` (with
+    the 2R convention when ``shape`` has a radius ``R``) plus ``gap_mean_mm``."""
     radius = getattr(shape, "R", None)
     row = summarize(err.dd, err.dtheta, float(radius) if isinstance(radius, (int, float)) else None)
     row["gap_mean_mm"] = float(np.mean(np.abs(err.gap)) * 1e3)

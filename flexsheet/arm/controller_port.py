@@ -1,14 +1,15 @@
 """The arm controller port: how an arm bridge reaches its controller, and its arm PC's clock.
 
-An arm bridge (``nodes/arm_bridge``) streams one command per controller cycle over its ``protocol`` (Modbus TCP
-or MELFA MXT). Where that controller is, and what its arm PC's clock is, comes from a
-:class:`ControllerSource`: an entry point of the group :data:`SOURCES_GROUP` (``pyproject.toml``), named by the
-bridge's ``source`` param:
+An arm bridge (``nodes/arm_bridge``) streams one command per controller cycle over its ``protocol`` (Modbus
+TCP or MELFA MXT). Where that controller is, and what its arm PC's clock is, comes from a
+:class:`ControllerSource`: an entry point of the group :data:`SOURCES_GROUP` (``pyproject.toml``), named by
+the bridge's ``source`` param:
 
 * ``tcp``: a controller (or a controller twin node) over the network, on the wall clock; the arm PC's clock is
   main's (chrony keeps them together, docs/deploy.md) (``nodes/arm_bridge/links.py``);
-* ``sim``: the controller twin of this process, reached in-process at simulated instants (Modbus only), the arm
-  PC's clock off main's by the hidden truth's draw (:class:`flexsheet.twin.controller_source.TwinController`).
+* ``sim``: the controller twin of this process, reached in-process at simulated instants (Modbus only), the
+  arm PC's clock off main's by the hidden truth's draw
+  (:class:`flexsheet.twin.controller_source.TwinController`).
 """
 
 from __future__ import annotations
@@ -39,8 +40,8 @@ class ControllerSource:
 
     @classmethod
     def check_clock(cls, clock: Any) -> None:
-        """Raises ``ValueError`` naming the fix when the node's ``clock`` (its ``simulated``: a simulated clock or
-        the wall clock) cannot reach this controller."""
+        """Raises ``ValueError`` naming the fix when the node's ``clock`` (its ``simulated``: a simulated
+        clock or the wall clock) cannot reach this controller."""
         if bool(clock.simulated) != cls.simulated_clock:
             raise ValueError(cls.other_clock)
 

@@ -19,9 +19,9 @@ frame), Jacobian from Pinocchio (``LOCAL``), with the damping raised near singul
 each step capped and projected onto the joint limits. It is seeded from the current joints, so it
 follows the branch the arm is on and never flips configuration. It stops short and reports rather than
 jumping: the result carries ``ok`` and a ``status`` (``"ok"``, ``"unreachable"``, ``"limit:J<k>"``,
-``"singular"``, ``"jump"``).
-Source of the method: Siciliano et al., *Robotics: Modelling, Planning and Control*, §3.7; Buss,
-"Introduction to inverse kinematics with Jacobian transpose, pseudoinverse and damped least squares" (2004).
+``"singular"``, ``"jump"``). Source of the method: Siciliano et al., *Robotics: Modelling, Planning and
+Control*, §3.7; Buss, "Introduction to inverse kinematics with Jacobian transpose, pseudoinverse and damped
+least squares" (2004).
 """
 
 from __future__ import annotations
@@ -81,9 +81,9 @@ def rotation_angle(R_a: np.ndarray, R_b: np.ndarray) -> float:
 class IKResult:
     """Outcome of :meth:`ArmKinematics.ik`.
 
-    ``q`` (6,) rad: the solution when ``ok``; otherwise the best joint vector found, within the limits (callers
-    must not command it blindly — the bridge holds instead). ``ok``: converged within tolerance, within
-    limits, not singular, no jump. ``status``: "ok", "unreachable", "limit:J<k>", "singular" or "jump".
+    ``q`` (6,) rad: the solution when ``ok``; otherwise the best joint vector found, within the limits
+    (callers must not command it blindly — the bridge holds instead). ``ok``: converged within tolerance,
+    within limits, not singular, no jump. ``status``: "ok", "unreachable", "limit:J<k>", "singular" or "jump".
     ``pos_err`` m and ``rot_err`` rad: residual at ``q``. ``iterations``: DLS iterations used.
     ``manipulability``: Yoshikawa's measure at ``q``.
     """
@@ -130,7 +130,8 @@ class ArmKinematics:
         self.q_lower = Q_LOWER.copy() if q_lower is None else np.asarray(q_lower, dtype=float).copy()
         self.q_upper = Q_UPPER.copy() if q_upper is None else np.asarray(q_upper, dtype=float).copy()
         if self.q_lower.shape != (6,) or self.q_upper.shape != (6,) or np.any(self.q_lower >= self.q_upper):
-            raise ValueError(f"q_lower/q_upper must be (6,) with lower < upper, got {self.q_lower}, {self.q_upper}")
+            raise ValueError(f"q_lower/q_upper must be (6,) with lower < upper, got {self.q_lower}, "
+                             f"{self.q_upper}")
         # tool offset as a pin.SE3 so IK works in the URDF chain without per-iteration matrix products
         self._M_link_tool = pin.SE3(self.T_link_tool[:3, :3].copy(), self.T_link_tool[:3, 3].copy())
         self._M_tool_link = self._M_link_tool.inverse()
@@ -150,17 +151,20 @@ class ArmKinematics:
         return self.data.oMf[self.fid]
 
     def fk(self, q) -> np.ndarray:
-        """T_display_clamp (4, 4), m, of joints ``q`` (6,) rad (sheet convention of :mod:`flexsheet.model.geometry`)."""
+        """T_display_clamp (4, 4), m, of joints ``q`` (6,) rad (sheet convention of
+        :mod:`flexsheet.model.geometry`)."""
         q = self.check_q(q)
         return self.T_display_base @ self._link_pose(q).homogeneous @ self.T_link_tool
 
     def joint_origins(self, q) -> np.ndarray:
-        """(8, 3) m, display frame: the chain's points at joints ``q`` (6,) rad, for link-level collision tests.
+        """(8, 3) m, display frame: the chain's points at joints ``q`` (6,) rad, for link-level collision
+        tests.
 
-        Rows: the base origin, the origins of J1…J6 (Pinocchio ``data.oMi``, i.e. the URDF joint frames) and the
-        clamp point (the tool-frame origin, the middle of the clamped edge = ``fk(q)[:3, 3]``). Consecutive rows
-        bound the links; the J3→J4 row pair is the chord of the elbow's dog-leg offset (−0.090, 0, 0.043) m of
-        ``rv1a.urdf``. Raises ``ValueError`` naming ``q`` if it is not a finite (6,) vector.
+        Rows: the base origin, the origins of J1…J6 (Pinocchio ``data.oMi``, i.e. the URDF joint frames) and
+        the clamp point (the tool-frame origin, the middle of the clamped edge = ``fk(q)[:3, 3]``).
+        Consecutive rows bound the links; the J3→J4 row pair is the chord of the elbow's dog-leg offset
+        (−0.090, 0, 0.043) m of ``rv1a.urdf``. Raises ``ValueError`` naming ``q`` if it is not a finite (6,)
+        vector.
         """
         q = self.check_q(q)
         pin.framesForwardKinematics(self.model, self.data, q)
@@ -189,7 +193,8 @@ class ArmKinematics:
         return float(math.sqrt(max(0.0, np.linalg.det(J @ J.T))))
 
     def _jacobian_placement(self, q: np.ndarray) -> np.ndarray:
-        """The link frame's Jacobian (6, 6) (``pin.LOCAL``) at ``q``, with ``data.oMf`` of the clamp updated."""
+        """The link frame's Jacobian (6, 6) (``pin.LOCAL``) at ``q``, with ``data.oMf`` of the clamp
+        updated."""
         pin.computeJointJacobians(self.model, self.data, q)
         pin.updateFramePlacement(self.model, self.data, self.fid)
         return pin.getFrameJacobian(self.model, self.data, self.fid, pin.LOCAL)
@@ -206,7 +211,8 @@ class ArmKinematics:
     def ik(self, T_target, q_seed, *, tol_pos: float = 1e-9, tol_rot: float = 1e-9, max_iter: int = 60,
            max_step: float = 0.25, lambda_max: float = 0.05, w_singular: float = 2e-4,
            max_jump: float = 1.0) -> IKResult:
-        """Solve joints putting the clamp at ``T_target`` (4, 4, display frame, m), seeded at ``q_seed`` (6,) rad.
+        """Solve joints putting the clamp at ``T_target`` (4, 4, display frame, m), seeded at ``q_seed`` (6,)
+        rad.
 
         Damped least squares with adaptive damping (see module doc); each step is capped to ``max_step``
         rad (inf-norm) and projected onto [q_lower, q_upper]. Converged when the position error is
@@ -266,15 +272,16 @@ class ArmKinematics:
             return IKResult(q, False, "jump", pos_err, rot_err, it, w)
         return IKResult(q, True, "ok", pos_err, rot_err, it, w)
 
-    def track(self, T_target: np.ndarray, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+    def track(self, T_target: np.ndarray, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                                                     float, float]:
         """One Newton step of IK from joints ``q`` (6,) rad toward the clamp pose ``T_target`` (4, 4, display
-        frame, m), and the joint velocity (6,) rad/s that moves the clamp at ``twist`` (6,) (v m/s, ω rad/s, clamp
-        frame) there: ``q_next = q + J⁻¹·e`` and ``q̇ = J⁻¹·twist``, both with the Jacobian ``J`` at ``q``.
-        Returns (q_next, q̇, |e| (the pose error before the step: position m + rotation rad), manipulability at
-        ``q``). No checks (limits, singularity, a converged error): the caller that follows a smooth path
-        cycle by cycle judges them and falls back to :meth:`ik`. A step from a point a cycle behind ends within
-        the square of that error (a 2 mm step at 0.3 m/s: some µm), and the next cycle's step corrects it.
-        Raises ``numpy.linalg.LinAlgError`` at an exact singularity."""
+        frame, m), and the joint velocity (6,) rad/s that moves the clamp at ``twist`` (6,) (v m/s, ω rad/s,
+        clamp frame) there: ``q_next = q + J⁻¹·e`` and ``q̇ = J⁻¹·twist``, both with the Jacobian ``J`` at
+        ``q``. Returns (q_next, q̇, |e| (the pose error before the step: position m + rotation rad),
+        manipulability at ``q``). No checks (limits, singularity, a converged error): the caller that follows
+        a smooth path cycle by cycle judges them and falls back to :meth:`ik`. A step from a point a cycle
+        behind ends within the square of that error (a 2 mm step at 0.3 m/s: some µm), and the next cycle's
+        step corrects it. Raises ``numpy.linalg.LinAlgError`` at an exact singularity."""
         T_base_link = self.T_base_display @ T_target @ self.T_link_tool
         M_goal = pin.SE3(T_base_link[:3, :3], T_base_link[:3, 3])
         J = self._jacobian_placement(q)
@@ -308,4 +315,5 @@ def outside_limits(q, lower, upper) -> list[str]:
     """One line per joint of ``q`` (6,) rad outside [``lower``, ``upper``] (6,) rad (1e-9 rad of slack), e.g.
     ``"J3 60.7 deg outside [61.1, 153.9]"``; empty when all are inside."""
     return [f"J{i + 1} {math.degrees(v):.1f} deg outside [{math.degrees(lo):.1f}, {math.degrees(hi):.1f}]"
-            for i, (v, lo, hi) in enumerate(zip(q, lower, upper, strict=True)) if not lo - 1e-9 <= v <= hi + 1e-9]
+            for i,
+            (v, lo, hi) in enumerate(zip(q, lower, upper, strict=True)) if not lo - 1e-9 <= v <= hi + 1e-9]

@@ -4,10 +4,10 @@ asks for more than the position, velocity or acceleration limits (pure numpy).
 Per joint, each period ``T`` the command ``c`` moves with velocity ``v`` chosen as the fastest that
 (1) does not exceed ``qd_max``, (2) differs from the previous period's velocity by at most ``qdd_max·T``,
 (3) can still stop at the goal with deceleration ``qdd_max`` (the exact discrete braking curve, see
-``StreamLimiter._brake``),
-and (4) does not pass the goal in one period. The goal is first clipped into the joint range shrunk by
-``margin``. This is a per-joint time-optimal second-order rate limiter (bang-bang with braking; see
-Kröger & Wahl, "Online trajectory generation", IEEE T-RO 26(1), 2010, type-II OTG, for the general form).
+``StreamLimiter._brake``), and (4) does not pass the goal in one period. The goal is first clipped into the
+joint range shrunk by ``margin``. This is a per-joint time-optimal second-order rate limiter (bang-bang with
+braking; see Kröger & Wahl, "Online trajectory generation", IEEE T-RO 26(1), 2010, type-II OTG, for the
+general form).
 
 The velocity toward each joint limit is also capped by the braking curve of the distance to that limit,
 so the range is never left even when the goal jumps (the goal itself may be overshot when it jumps back
@@ -67,7 +67,8 @@ class StreamLimiter:
         self.v = np.zeros(6)
 
     def reset(self, q) -> None:
-        """Restart from joints ``q`` (6,) rad at rest (after a reconnect: q = measured). ``ValueError`` if bad."""
+        """Restart from joints ``q`` (6,) rad at rest (after a reconnect: q = measured). ``ValueError`` if
+        bad."""
         a = np.asarray(q, dtype=float)
         if a.shape != (6,) or not np.all(np.isfinite(a)):
             raise ValueError(f"q must be a finite (6,) vector, got {q!r}")

@@ -1,28 +1,29 @@
 """The two arms' one motion: a time-parametrised motion of the sheet in cooperative task space (pure; ruckig).
 
-The sheet's state ``x`` (7,): its centre ``o`` (3,) m, its orientation as a rotation vector ``r`` (3,) rad about
-the segment's reference rotation (``R = R_ref · exp([r]×)``, so ``r`` is in the sheet's own frame at the
+The sheet's state ``x`` (7,): its centre ``o`` (3,) m, its orientation as a rotation vector ``r`` (3,) rad
+about the segment's reference rotation (``R = R_ref · exp([r]×)``, so ``r`` is in the sheet's own frame at the
 segment's start), and the clamp strain ``ε``. The absolute part of the pair's motion is (o, R), the tangent
 plane's pose; the relative part is the clamps' span ``size·(1 + ε)`` along ``axis_u`` with one common
-orientation (:func:`flexsheet.model.sheet.clamp_poses`). Both clamps are derived from one state at one instant,
-so the span is the planned one all along the path, not only at its ends (cooperative task space: Chiacchio,
-Chiaverini & Siciliano 1996; Caccavale et al. 2000).
+orientation (:func:`flexsheet.model.sheet.clamp_poses`). Both clamps are derived from one state at one
+instant, so the span is the planned one all along the path, not only at its ends (cooperative task space:
+Chiacchio, Chiaverini & Siciliano 1996; Caccavale et al. 2000).
 
-A :class:`SheetSegment` is the start time ``t0`` (s, the graph's clock), the reference rotation, the start state
-with its velocity and acceleration, the goal with its velocity and the per-DOF limits. The planner's goal moves
-with the finger: the segment reaches it at its velocity, and runs on at that velocity for at most
-:data:`EXTRAPOLATE_S` after its end (the next plan is due before), then stops there. Ruckig (Berscheid & Kröger, "Jerk-limited
-real-time trajectory generation with arbitrary target states", RSS 2021) gives the time-optimal jerk-limited
-trajectory with phase synchronisation: every DOF starts and stops together, on a straight line in this space
-when the start is at rest or moving along that line (else time-synchronised). Ruckig is deterministic: the
-planner and both bridges compute one trajectory from one segment, and evaluate it at the same instant.
+A :class:`SheetSegment` is the start time ``t0`` (s, the graph's clock), the reference rotation, the start
+state with its velocity and acceleration, the goal with its velocity and the per-DOF limits. The planner's
+goal moves with the finger: the segment reaches it at its velocity, and runs on at that velocity for at most
+:data:`EXTRAPOLATE_S` after its end (the next plan is due before), then stops there. Ruckig (Berscheid &
+Kröger, "Jerk-limited real-time trajectory generation with arbitrary target states", RSS 2021) gives the
+time-optimal jerk-limited trajectory with phase synchronisation: every DOF starts and stops together, on a
+straight line in this space when the start is at rest or moving along that line (else time-synchronised).
+Ruckig is deterministic: the planner and both bridges compute one trajectory from one segment, and evaluate it
+at the same instant.
 
 Limits (:class:`MotionLimits`) bound the norm of the centre's speed, the sheet's angular speed and the strain
 rate: each DOF of a group gets the group's bound times its share of the group's displacement (at least
-:data:`MIN_SHARE`), so a phase-synchronised move keeps the norm within the bound. The arms' joints bound it too:
-:class:`JointRates` estimates the joint speeds and accelerations a segment asks of both arms, and the shaper
-slows the segment (both arms alike) until they are within the bridges' limits, so the bridges' per-joint limiters
-never have to brake one arm alone.
+:data:`MIN_SHARE`), so a phase-synchronised move keeps the norm within the bound. The arms' joints bound it
+too: :class:`JointRates` estimates the joint speeds and accelerations a segment asks of both arms, and the
+shaper slows the segment (both arms alike) until they are within the bridges' limits, so the bridges'
+per-joint limiters never have to brake one arm alone.
 """
 
 from __future__ import annotations
@@ -53,8 +54,8 @@ _GROUPS = (slice(0, 3), slice(3, 6), slice(6, 7))
 EXTRAPOLATE_S = 0.05
 #: plans a goal's velocity is fitted over (16 at the camera's 48 Hz: the last 313 ms)
 VELOCITY_PLANS = 16
-#: segments holding a ruckig trajectory: their trajectories are freed at exit, before the interpreter's teardown
-#: (nanobind reports a binding object still alive then as a leak, on every node's exit)
+#: segments holding a ruckig trajectory: their trajectories are freed at exit, before the interpreter's
+#: teardown (nanobind reports a binding object still alive then as a leak, on every node's exit)
 _LIVE: weakref.WeakSet = weakref.WeakSet()
 
 
@@ -69,8 +70,8 @@ class MotionError(ValueError):
 
 
 def per_dof(limits: MotionLimits, delta: np.ndarray, velocity=None) -> np.ndarray:
-    """(3, 7) per-DOF limits (velocity, acceleration, jerk) of ``limits`` for a move by ``delta`` (7,) ending at
-    ``velocity`` (7,) (None: at rest): each group's bound times the DOF's share of the group's displacement
+    """(3, 7) per-DOF limits (velocity, acceleration, jerk) of ``limits`` for a move by ``delta`` (7,) ending
+    at ``velocity`` (7,) (None: at rest): each group's bound times the DOF's share of the group's displacement
     or of its end velocity, whichever is larger, at least :data:`MIN_SHARE`; a DOF's velocity bound is never
     below its end velocity."""
     g = limits.groups()
@@ -92,7 +93,8 @@ def _hat(r) -> np.ndarray:
 
 
 def _log(R) -> np.ndarray:
-    """The rotation vectors (..., 3) of rotations (..., 3, 3) (scipy's, robust near π; one call for a stack)."""
+    """The rotation vectors (..., 3) of rotations (..., 3, 3) (scipy's, robust near π; one call for a
+    stack)."""
     return Rotation.from_matrix(np.asarray(R, float)).as_rotvec()
 
 
@@ -102,10 +104,10 @@ class SheetSegment:
 
     ``t0`` s (graph clock); ``frame`` (3, 3): the reference rotation R_ref (columns normal, axis_u, axis_v at
     ``r`` = 0, display frame); ``start`` (3, 7): the start state, its velocity and its acceleration; ``goal``
-    (2, 7): the goal and its velocity; ``limits`` (3, 7): per-DOF velocity, acceleration and jerk; ``size`` m: the sheet's unstretched side;
-    ``min_duration`` s: the segment takes at least this long (the plan's period: a goal moving at its velocity is
-    reached on its track, not rushed to and passed).
-    Raises :class:`MotionError` if ruckig cannot compute it (non-finite values, limits not positive)."""
+    (2, 7): the goal and its velocity; ``limits`` (3, 7): per-DOF velocity, acceleration and jerk; ``size`` m:
+    the sheet's unstretched side; ``min_duration`` s: the segment takes at least this long (the plan's period:
+    a goal moving at its velocity is reached on its track, not rushed to and passed). Raises
+    :class:`MotionError` if ruckig cannot compute it (non-finite values, limits not positive)."""
 
     t0: float
     frame: np.ndarray
@@ -130,7 +132,8 @@ class SheetSegment:
         if np.any(self.limits <= 0.0):
             raise MotionError(f"SheetSegment.limits must be > 0, got {self.limits.tolist()}")
         inp = InputParameter(DOF)
-        inp.current_position, inp.current_velocity, inp.current_acceleration = (r.tolist() for r in self.start)
+        inp.current_position, inp.current_velocity, inp.current_acceleration = (r.tolist()
+                                                                                for r in self.start)
         inp.target_position, inp.target_velocity = (r.tolist() for r in self.goal)
         inp.target_acceleration = [0.0] * DOF
         inp.max_velocity, inp.max_acceleration, inp.max_jerk = (r.tolist() for r in self.limits)
@@ -153,8 +156,8 @@ class SheetSegment:
         return float(self._traj.duration)
 
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(x, ẋ, ẍ), each (7,), at time ``t`` s: the start before ``t0``; after the end, the goal run on at its
-        velocity for at most :data:`EXTRAPOLATE_S`, then at rest there."""
+        """(x, ẋ, ẍ), each (7,), at time ``t`` s: the start before ``t0``; after the end, the goal run on at
+        its velocity for at most :data:`EXTRAPOLATE_S`, then at rest there."""
         return tuple(np.asarray(v, float) for v in self._state(t))
 
     def _state(self, t: float) -> tuple[list, list, list]:
@@ -185,17 +188,18 @@ class SheetSegment:
     def clamp(self, arm: str, t: float, accel: bool = False) -> tuple[np.ndarray, ...]:
         """The ``arm``'s ("left" or "right") clamp at time ``t``: pose T_display_clamp (4, 4) m, and its twist
         (6,) (v m/s, ω rad/s) in the clamp's own frame, the frame of :meth:`ArmKinematics.jacobian`; with
-        ``accel`` also the twist's rate (6,) (m/s², rad/s²; the rotating frame's terms, second order, left out).
-        Raises ``ValueError`` for another arm name."""
+        ``accel`` also the twist's rate (6,) (m/s², rad/s²; the rotating frame's terms, second order, left
+        out). Raises ``ValueError`` for another arm name."""
         if arm not in ("left", "right"):
             raise ValueError(f"arm must be 'left' or 'right', got {arm!r}")
         return self.clamps(t, accel, (arm,))[0]
 
     def clamps(self, t: float, accel: bool, arms) -> list[tuple[np.ndarray, ...]]:
-        """:meth:`clamp` for each of ``arms`` ("left"/"right") from one evaluation of the trajectory at ``t`` s:
-        a list of (T (4, 4), twist (6,)[, twist rate (6,) with ``accel``]) in the order of ``arms``. Worked in the
-        sheet's frame (clamp axis e_y): with ω_b = J_r(r)·ṙ the clamp moves at Rᵀẋ_c ± (ȧ·e_y + a·ω_b × e_y)
-        (a: half the span); the twist's angular part is ω_b (the clamps share the sheet's orientation)."""
+        """:meth:`clamp` for each of ``arms`` ("left"/"right") from one evaluation of the trajectory at ``t``
+        s: a list of (T (4, 4), twist (6,)[, twist rate (6,) with ``accel``]) in the order of ``arms``. Worked
+        in the sheet's frame (clamp axis e_y): with ω_b = J_r(r)·ṙ the clamp moves at Rᵀẋ_c ± (ȧ·e_y + a·ω_b ×
+        e_y) (a: half the span); the twist's angular part is ω_b (the clamps share the sheet's
+        orientation)."""
         x, xd, xdd = self._state(t)
         E, C, D = _rodrigues(x[3], x[4], x[5])
         R = self.frame @ E
@@ -228,7 +232,8 @@ class SheetSegment:
         return out
 
     def clamp_points(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """The left and the right clamp's positions (3,) m, display frame, at ``t`` s (:meth:`clamps`' points)."""
+        """The left and the right clamp's positions (3,) m, display frame, at ``t`` s (:meth:`clamps`'
+        points)."""
         x = self._state(t)[0]
         E = _rodrigues(x[3], x[4], x[5])[0]
         h = (0.5 * self.size * (1.0 + x[6])) * (self.frame @ E[:, 1])
@@ -236,15 +241,16 @@ class SheetSegment:
         return c + h, c - h
 
     def fields(self) -> dict:
-        """This segment as :class:`messages.ArmTarget`'s ``motion_*`` fields (the inverse of :meth:`from_fields`)."""
+        """This segment as :class:`messages.ArmTarget`'s ``motion_*`` fields (the inverse of
+        :meth:`from_fields`)."""
         return {"motion_t0": float(self.t0), "motion_frame": self.frame.copy(),
                 "motion": np.vstack([self.start, self.goal, self.limits]), "motion_size": float(self.size),
                 "motion_min_duration": float(self.min_duration)}
 
     @classmethod
     def from_fields(cls, msg) -> SheetSegment | None:
-        """The segment an :class:`messages.ArmTarget` carries, or None when it carries none (``motion_t0`` None).
-        Raises :class:`MotionError` naming the bad field."""
+        """The segment an :class:`messages.ArmTarget` carries, or None when it carries none (``motion_t0``
+        None). Raises :class:`MotionError` naming the bad field."""
         if msg.motion_t0 is None:
             return None
         m = np.asarray(msg.motion, float)
@@ -293,9 +299,10 @@ def _right_jacobian(r: np.ndarray) -> np.ndarray:
 
 
 def plan_velocity(plans) -> tuple[np.ndarray, np.ndarray, float]:
-    """The velocity of plans: least-squares slopes over their times. ``plans``: at least two (time s, centre (3,)
-    m, rotation (3, 3), strain), oldest first. Returns (centre velocity (3,) m/s, angular velocity (3,) rad/s
-    display frame, strain rate 1/s). Raises ``ValueError`` for fewer than two plans or times that do not spread."""
+    """The velocity of plans: least-squares slopes over their times. ``plans``: at least two (time s, centre
+    (3,) m, rotation (3, 3), strain), oldest first. Returns (centre velocity (3,) m/s, angular velocity (3,)
+    rad/s display frame, strain rate 1/s). Raises ``ValueError`` for fewer than two plans or times that do not
+    spread."""
     if len(plans) < 2:
         raise ValueError(f"plan_velocity needs at least two plans, got {len(plans)}")
     Rn = plans[-1][2]      # rotation vectors (n, 3) about the newest, one call
@@ -320,11 +327,12 @@ def lsq_slope(t, x) -> np.ndarray:
 class JointRates:
     """The joint speeds and accelerations a segment asks of the two arms, relative to the bridges' limits.
 
-    ``bases``: {"left", "right"}: (x, y, z, yaw) or (4, 4) T_display_base (the registered ones); ``qd_max`` and
-    ``qdd_max`` (6,) rad/s and rad/s²: the bridges' limits (the URDF's × ``speed_scale``, × ``accel_scale``).
-    Joint rates are mapped from the clamps' twists through the Jacobians at the arms' joints for the segment's
-    goal and start (``samples`` instants; the Jacobian's change along one segment is second order here).
-    ``accel_allowance``: how far past ``qdd_max`` a segment's peak joint acceleration may go (:meth:`ratios`)."""
+    ``bases``: {"left", "right"}: (x, y, z, yaw) or (4, 4) T_display_base (the registered ones); ``qd_max``
+    and ``qdd_max`` (6,) rad/s and rad/s²: the bridges' limits (the URDF's × ``speed_scale``, ×
+    ``accel_scale``). Joint rates are mapped from the clamps' twists through the Jacobians at the arms' joints
+    for the segment's goal and start (``samples`` instants; the Jacobian's change along one segment is second
+    order here). ``accel_allowance``: how far past ``qdd_max`` a segment's peak joint acceleration may go
+    (:meth:`ratios`)."""
 
     def __init__(self, bases: dict, qd_max, qdd_max, samples: int = 4, accel_allowance: float = 1.0) -> None:
         if set(bases) != {"left", "right"}:
@@ -332,7 +340,8 @@ class JointRates:
         self.kin = {s: ArmKinematics(s, b) for s, b in bases.items()}
         self.qd_max = np.asarray(qd_max, float)
         self.qdd_max = np.asarray(qdd_max, float)
-        if self.qd_max.shape != (6,) or self.qdd_max.shape != (6,) or np.any(self.qd_max <= 0) or np.any(self.qdd_max <= 0):
+        if (self.qd_max.shape != (6,) or self.qdd_max.shape != (6,) or np.any(self.qd_max <= 0)
+            or np.any(self.qdd_max <= 0)):
             raise ValueError(f"qd_max and qdd_max must be positive (6,) vectors, got {qd_max!r}, {qdd_max!r}")
         self.samples = int(samples)
         if not accel_allowance >= 1.0:
@@ -354,11 +363,12 @@ class JointRates:
             self._jinv[side] = np.asarray(out).reshape(-1, 6, 6)
 
     def ratios(self, seg: SheetSegment) -> tuple[float, float]:
-        """(peak joint speed / ``qd_max``, peak joint acceleration / (``accel_allowance`` × ``qdd_max``)) over both
-        arms and the sampled instants of ``seg``. An allowance over 1 lets accelerations past the bridges' limit
-        through, which their limiters then do not follow: the clamps leave the motion (the organ, limit 2× speed,
-        allowance 3: 30 mm, span 5.3 mm p99). The default 1 with the bridges' limit at 6× speed gives the motion
-        the same accelerations, and the limiters follow them (``tests/unit/arm/test_sheet_motion.py``)."""
+        """(peak joint speed / ``qd_max``, peak joint acceleration / (``accel_allowance`` × ``qdd_max``)) over
+        both arms and the sampled instants of ``seg``. An allowance over 1 lets accelerations past the
+        bridges' limit through, which their limiters then do not follow: the clamps leave the motion (the
+        organ, limit 2× speed, allowance 3: 30 mm, span 5.3 mm p99). The default 1 with the bridges' limit at
+        6× speed gives the motion the same accelerations, and the limiters follow them
+        (``tests/unit/arm/test_sheet_motion.py``)."""
         sides = [s for s, j in self._jinv.items() if len(j)]
         if seg.duration <= 0.0 or not sides:
             return 0.0, 0.0
@@ -409,15 +419,16 @@ class SheetShaper:
 
     def update(self, t: float, origin, rotation, stretch: float, limits: MotionLimits | None = None,
                velocity=None, lead: float = 0.0, current=None) -> SheetSegment:
-        """The segment from the current motion at ``t`` s to the sheet at ``origin`` (3,) m, ``rotation`` (3, 3)
-        and strain ``stretch``, under ``limits`` (default: the shaper's). ``velocity``: the goal's (centre m/s
-        (3,), angular rad/s (3,) display frame, strain rate 1/s), or None (at rest); the goal is taken ``lead`` s
-        ahead at that velocity (the plan's period: the motion is on the plan's track when the next plan comes).
-        ``current``: (origin (3,) m, rotation (3, 3), strain) of the sheet where the arms hold it (their measured
-        clamps), where a motion starts when there is none yet (the first plan, after :meth:`reset` or a failure);
+        """The segment from the current motion at ``t`` s to the sheet at ``origin`` (3,) m, ``rotation`` (3,
+        3) and strain ``stretch``, under ``limits`` (default: the shaper's). ``velocity``: the goal's (centre
+        m/s (3,), angular rad/s (3,) display frame, strain rate 1/s), or None (at rest); the goal is taken
+        ``lead`` s ahead at that velocity (the plan's period: the motion is on the plan's track when the next
+        plan comes). ``current``: (origin (3,) m, rotation (3, 3), strain) of the sheet where the arms hold it
+        (their measured clamps), where a motion starts when there is none yet (the first plan, after
+        :meth:`reset` or a failure);
         None: it starts at the goal (the bridges' limiters then take the arms there joint by joint).
-        Raises :class:`MotionError` when ruckig fails (the shaper then restarts at the next goal, and counts it
-        in ``failures``)."""
+        Raises :class:`MotionError` when ruckig fails (the shaper then restarts at the next goal, and counts
+        it in ``failures``)."""
         lim = limits or self.limits
         o = np.asarray(origin, float)
         R = np.asarray(rotation, float)
@@ -442,13 +453,14 @@ class SheetShaper:
             bounds = per_dof(lim, goal[0] - start[0], goal[1])
             seg = SheetSegment(float(t), frame, start, goal, bounds, self.size, lead)
             if self.rates is not None:
-                for _ in range(2):            # slow both arms alike until their joints can follow (10 % spare)
+                for _ in range(2):  # slow both arms alike until their joints can follow (10 % spare)
                     rv, ra = self.rates.ratios(seg)
                     if rv <= 1.0 and ra <= 1.0:
                         break
                     kv, ka = max(rv, 1.0) * 1.1, max(ra, 1.0) * 1.1
-                    # the jerk stays: a motion already accelerating past the lowered bound must be braked within
-                    # it, or it runs on while its acceleration ramps down (the strain overshot its goal 4-fold)
+                    # the jerk stays: a motion already accelerating past the lowered
+                    # bound must be braked within it, or it runs on while its
+                    # acceleration ramps down (the strain overshot its goal 4-fold)
                     bounds = bounds / np.array([[kv], [ka], [1.0]])
                     bounds[0] = np.maximum(bounds[0], np.abs(goal[1]) * 1.001)
                     seg = SheetSegment(float(t), frame, start, goal, bounds, self.size, lead)

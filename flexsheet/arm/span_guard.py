@@ -37,8 +37,8 @@ class SpanGuard:
         self.band: tuple[float, float] | None = None
         #: steps that waited because they would have taken the span further outside the band
         self.waits = 0
-        #: clamp positions of the last two joint vectors judged (joints' bytes -> (3,) m): a step starts where the
-        #: last one ended
+        #: clamp positions of the last two joint vectors judged (joints'
+        #: bytes -> (3,) m): a step starts where the last one ended
         self._points: dict[bytes, np.ndarray] = {}
 
     def set_band(self, band) -> None:
@@ -53,8 +53,8 @@ class SpanGuard:
         self.band = (lo, hi)
 
     def outside(self, q: np.ndarray, peer: np.ndarray | None = None, band=None) -> float:
-        """How far (m) the clamp at joints ``q`` (6,) rad lies outside ``band`` (default :attr:`band`) from the
-        partner's clamp ``peer`` (3,) m (default :attr:`peer_clamp`); 0 inside."""
+        """How far (m) the clamp at joints ``q`` (6,) rad lies outside ``band`` (default :attr:`band`) from
+        the partner's clamp ``peer`` (3,) m (default :attr:`peer_clamp`); 0 inside."""
         peer = self.peer_clamp if peer is None else peer
         lo, hi = self.band if band is None else band
         s = float(np.linalg.norm(self._point(q) - peer))
@@ -74,8 +74,9 @@ class SpanGuard:
         """Whether moving this clamp from joints ``q_from`` to ``q_to`` (6,) rad takes the clamp span further
         outside ``band`` (default :attr:`band`) from the partner's clamp ``peer`` (default its measured one,
         :attr:`peer_clamp`); counted in :attr:`waits` and :attr:`waiting`. False without a band or a partner
-        state. Such a step waits for the partner, unless the partner waits too (:attr:`peer_waiting`): then both
-        step, as the planner's targets keep the span; two arms each waiting for the other would wait for ever."""
+        state. Such a step waits for the partner, unless the partner waits too (:attr:`peer_waiting`): then
+        both step, as the planner's targets keep the span; two arms each waiting for the other would wait for
+        ever."""
         peer = self.peer_clamp if peer is None else peer
         band = self.band if band is None else band
         if band is None or peer is None:

@@ -19,8 +19,8 @@ snapshot (so one period's motion is still one period's step) and sends it, when 
 write per period (Modbus: yes; MXT: no, exactly one packet per controller cycle).
 
 Pacing: on absolute deadlines ``period`` apart (an overrun restarts the schedule, no burst), or earlier when
-the link says the controller is ready for the next command (:meth:`ControllerLink.ready_time`: MXT sends its next
-packet when the reply to the last one arrives, so the controller's clock paces the stream).
+the link says the controller is ready for the next command (:meth:`ControllerLink.ready_time`: MXT sends its
+next packet when the reply to the last one arrives, so the controller's clock paces the stream).
 """
 
 from __future__ import annotations
@@ -44,7 +44,8 @@ log = logging.getLogger(__name__)
 
 
 class LinkError(Exception):
-    """The controller link failed (timeout, reset, refused, no replies): the stream closes it and reopens it."""
+    """The controller link failed (timeout, reset, refused, no replies): the stream closes it and reopens
+    it."""
 
 
 @dataclass(frozen=True)
@@ -82,7 +83,8 @@ class ControllerLink(Protocol):
         """Send joint command (6,) rad; False if the controller refused it at once (Modbus exception)."""
 
     async def keepalive(self) -> None:
-        """Disabled stream: exchange state without commanding anything (MXT: a NULL packet; Modbus: nothing)."""
+        """Disabled stream: exchange state without commanding anything (MXT: a NULL packet; Modbus:
+        nothing)."""
 
     async def after_cycle(self) -> None:
         """Protocol housekeeping after the cycle was reported (Modbus: the COMMAND write)."""
@@ -197,8 +199,9 @@ class ArmStream:
 
     def _next_command(self) -> np.ndarray:
         """This period's command (6,) rad: the limiter's step toward the tracker's reference, unless that step
-        would leave the clamp, braking from there, further outside its span band (:meth:`TargetTracker.span_worse`:
-        the partner lags, or the joints' own paths swing the clamp); then the limiter brakes where it is."""
+        would leave the clamp, braking from there, further outside its span band
+        (:meth:`TargetTracker.span_worse`: the partner lags, or the joints' own paths swing the clamp); then
+        the limiter brakes where it is."""
         lim = self.limiter
         before = lim.snapshot()
         now = self.clock()
@@ -206,7 +209,8 @@ class ArmStream:
         # judged where the clamp would come to rest if it braked from here (v²/2a per joint), so that it stops
         # at the band's edge rather than a braking distance past it (or, with both arms on the sheet's motion,
         # the step's end against the partner's place on it: TargetTracker.span_worse)
-        if self.tracker.span_worse(before[0], cmd, cmd + lim.v * np.abs(lim.v) / (2.0 * lim.qdd_max), now + self.period):
+        if self.tracker.span_worse(before[0], cmd, cmd + lim.v * np.abs(lim.v) / (2.0 * lim.qdd_max),
+                                   now + self.period):
             lim.restore(before)
             cmd = lim.step(before[0])
         return cmd
@@ -230,8 +234,8 @@ class ArmStream:
             self.refreshes += 1
 
     async def rewrite_now(self) -> bool:
-        """For a driver without :meth:`run` (a simulated clock): after :meth:`refresh` marked the period dirty,
-        redo this period's step toward the new goal and send it now. True if it was sent."""
+        """For a driver without :meth:`run` (a simulated clock): after :meth:`refresh` marked the period
+        dirty, redo this period's step toward the new goal and send it now. True if it was sent."""
         if not self._dirty:
             return False
         n = self.refreshes

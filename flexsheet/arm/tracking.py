@@ -9,11 +9,11 @@ source stamps; at most :data:`EXTRAPOLATE_MAX_S` past the newest), and the strea
 that velocity as feed-forward (:mod:`flexsheet.arm.limiter`), within the joint limits.
 
 A target that carries the sheet's motion (:class:`flexsheet.arm.sheet_motion.SheetSegment`, the same in both
-arms' targets) is followed along it instead: each cycle the clamp's pose on the segment at that instant, reached by
-one Newton step from the last cycle's joints (IK where that point is far or near a singularity), with the clamp's
-twist mapped through the Jacobian as the velocity feed-forward. The two
-bridges evaluate one trajectory at one instant, so the clamps move as one; the limiter is then only the last
-guard of the joint limits. Where IK refuses a point on the way, the arm streams to the target's IK goal as above.
+arms' targets) is followed along it instead: each cycle the clamp's pose on the segment at that instant,
+reached by one Newton step from the last cycle's joints (IK where that point is far or near a singularity),
+with the clamp's twist mapped through the Jacobian as the velocity feed-forward. The two bridges evaluate one
+trajectory at one instant, so the clamps move as one; the limiter is then only the last guard of the joint
+limits. Where IK refuses a point on the way, the arm streams to the target's IK goal as above.
 """
 
 from __future__ import annotations
@@ -28,27 +28,29 @@ from flexsheet.arm.pull_limit import max_pull
 from flexsheet.arm.sheet_motion import SheetSegment, lsq_slope
 from flexsheet.arm.span_guard import SpanGuard
 
-__all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S", "PEER_ON_MOTION",
+__all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S",
+           "PEER_ON_MOTION",
            "SPAN_ON_MOTION", "TRACK_STEP_MAX", "TRACK_W_MIN"]
 
 #: goals the velocity is fitted over (16 at the camera's 48 Hz: the last 313 ms)
 VELOCITY_GOALS = 16
 #: the goal moves on at its velocity for at most this long after the newest target (then it waits there)
 EXTRAPOLATE_MAX_S = 0.05
-#: m: a partner whose measured clamp is this close to the sheet's motion at its stamp follows it (the servo's lag
-#: at the planner's 0.3 m/s, 15 ms, is 4.5 mm)
+#: m: a partner whose measured clamp is this close to the sheet's motion at its
+#: stamp follows it (the servo's lag at the planner's 0.3 m/s, 15 ms, is 4.5 mm)
 PEER_ON_MOTION = 0.01
-#: m: with both arms on the sheet's motion, a step waits only if it takes the clamp span further than this from
-#: the motion's own span (0.005 m is 0.02 clamp strain on the 0.240 m sheet, the most a plan may be over-stretched);
-#: the fixed band's floor sits only 0.0012 m under the planner's least stretch, so the arms' millimetre of
-#: tracking in a turn made one arm wait while the other moved on
+#: m: with both arms on the sheet's motion, a step waits only if it takes the clamp span further than
+#: this from the motion's own span (0.005 m is 0.02 clamp strain on the 0.240 m sheet, the most a
+#: plan may be over-stretched); the fixed band's floor sits only 0.0012 m under the planner's least
+#: stretch, so the arms' millimetre of tracking in a turn made one arm wait while the other moved on
 SPAN_ON_MOTION = 0.005
 #: m or rad (the largest of the pose error's six parts): on the sheet's motion, a cycle's Newton step
-#: (:meth:`ArmKinematics.track`) follows a point at most this far from the last; further, IK solves it (a cycle of
-#: the motion at its 0.3 m/s is 2.1 mm; the step's own error is then some µm, corrected the next cycle)
+#: (:meth:`ArmKinematics.track`) follows a point at most this far from the
+#: last; further, IK solves it (a cycle of the motion at its 0.3 m/s is
+#: 2.1 mm; the step's own error is then some µm, corrected the next cycle)
 TRACK_STEP_MAX = 0.005
-#: the least manipulability a Newton step is taken at (10× IK's ``w_singular``, where IK starts to damp): nearer
-#: a singularity IK solves the point, with its damping and its ``singular`` status
+#: the least manipulability a Newton step is taken at (10× IK's ``w_singular``, where IK starts to
+#: damp): nearer a singularity IK solves the point, with its damping and its ``singular`` status
 TRACK_W_MIN = 2e-3
 
 
@@ -63,8 +65,8 @@ class TargetRefused(ValueError):
 
 class BridgeStatus(StrEnum):
     """The bridge's fixed statuses (``ArmState.bridge_status``; compares equal to its string). A refused IK
-    target is ``"hold:" + IKResult.status`` (``hold:unreachable``, ``hold:limit:J<k>``, ...). ``wait:span``: following,
-    this cycle's step waited on the span guard (:meth:`TargetTracker.span_worse`)."""
+    target is ``"hold:" + IKResult.status`` (``hold:unreachable``, ``hold:limit:J<k>``, ...). ``wait:span``:
+    following, this cycle's step waited on the span guard (:meth:`TargetTracker.span_worse`)."""
 
     OK = "ok"
     NO_TARGET = "hold:no_target"
@@ -76,10 +78,11 @@ class BridgeStatus(StrEnum):
 
 def peer_holds(status: str) -> bool:
     """Whether a partner arm's ``bridge_status`` makes this arm hold too: an IK refusal (``hold:unreachable``,
-    ``hold:limit:J<k>``, ``hold:singular``, ``hold:jump``, ``hold:torque:J<k>``), a controller fault (``fault:*``) or a lost controller
-    (``disconnected``): that clamp has stopped, and the sheet between them must not be pulled by the other.
-    Not a hold the partner shares itself (``hold:peer``: no deadlock), nor no target, a disabled controller or
-    a refused command (both arms see those alike, or the stream restarts at once)."""
+    ``hold:limit:J<k>``, ``hold:singular``, ``hold:jump``, ``hold:torque:J<k>``), a controller fault
+    (``fault:*``) or a lost controller (``disconnected``): that clamp has stopped, and the sheet between them
+    must not be pulled by the other. Not a hold the partner shares itself (``hold:peer``: no deadlock), nor no
+    target, a disabled controller or a refused command (both arms see those alike, or the stream restarts at
+    once)."""
     if status.startswith("fault:") or status == "disconnected":
         return True
     return status.startswith("hold:") and status not in (BridgeStatus.NO_TARGET, BridgeStatus.DISABLED,
@@ -97,9 +100,9 @@ class TargetTracker:
     stream that has not started yet (the first target, or the first after :meth:`release`) counts its pause
     from the first target heard, or from the release: a target refused then does not start the stream, so the
     allowance keeps growing and the arm joins a stream that begins far away (after a registration moved it)
-    instead of holding on ``hold:jump`` for as long as the targets keep coming. The streaming limiter still moves the arm there at
-    the speed limit. A branch flip inside a flowing stream is refused.
-    After :meth:`seed` (or the first target) ``goal`` is a (6,) rad joint vector.
+    instead of holding on ``hold:jump`` for as long as the targets keep coming. The streaming limiter still
+    moves the arm there at the speed limit. A branch flip inside a flowing stream is refused. After
+    :meth:`seed` (or the first target) ``goal`` is a (6,) rad joint vector.
     """
 
     def __init__(self, kin: ArmKinematics, target_timeout: float = 0.25, max_jump: float = 0.5) -> None:
@@ -113,7 +116,8 @@ class TargetTracker:
         self.goal: np.ndarray | None = None
         self.source_stamp = 0.0
         self.last_target_at: float | None = None
-        #: s: when the arm last stopped following (the release, or the first target heard): a new stream's pause
+        #: s: when the arm last stopped following (the release,
+        #: or the first target heard): a new stream's pause
         self.held_since: float | None = None
         self.ik_status = "no_target"
         self.last_ik: IKResult | None = None
@@ -122,11 +126,13 @@ class TargetTracker:
         self.velocity = np.zeros(6)
         #: (6,) rad: a goal a service set (hold, home, move-to); while set, targets are not followed
         self.manual: np.ndarray | None = None
-        #: the partner arm's hold this arm shares (its bridge_status, e.g. "hold:limit:J3"), or None: the sheet
-        #: couples the two clamps, so while one arm cannot follow, the other stops too (:func:`peer_holds`)
+        #: the partner arm's hold this arm shares (its bridge_status, e.g.
+        #: "hold:limit:J3"), or None: the sheet couples the two clamps, so while
+        #: one arm cannot follow, the other stops too (:func:`peer_holds`)
         self.peer_hold: str | None = None
-        #: ``q (6,) -> bool``: whether joints ``q`` put this arm or its clamp in the viewer's keep-out (the last
-        #: line behind the planner's head guard); such a target is refused as ``hold:keep_out``. None: no head
+        #: ``q (6,) -> bool``: whether joints ``q`` put this arm or its clamp
+        #: in the viewer's keep-out (the last line behind the planner's head
+        #: guard); such a target is refused as ``hold:keep_out``. None: no head
         self.keep_out = None
         #: the two-arm span guard (:class:`flexsheet.arm.span_guard.SpanGuard`): the band, the partner's clamp
         self.span = SpanGuard(kin)
@@ -138,16 +144,17 @@ class TargetTracker:
         self.motion_refused = 0
 
     def span_worse(self, q_from, q_to, q_stop=None, at: float | None = None) -> bool:
-        """Whether this arm's step from joints ``q_from`` to ``q_to`` (6,) rad, ending at time ``at`` s, waits on
-        the span guard (:meth:`flexsheet.arm.span_guard.SpanGuard.worse`; ``wait:span``); ``q_stop``: where the
-        clamp would come to rest braking from ``q_to`` (default ``q_to``). A service's goal (:meth:`move_to`: a
-        registration's configurations, homing) is the operator's and is not judged. While both arms follow the
-        sheet's motion, a partner whose measured clamp is on it (within :data:`PEER_ON_MOTION` of the motion at
-        its measurement's stamp) is judged where the motion has it at ``at``, against the step's end, and the
-        band is the motion's own span at ``at`` ± :data:`SPAN_ON_MOTION`: its measurement lags its command by
-        the servo and a cycle, and judging against it, this arm's braking point or the fixed band made the arms
-        wait on each other in fast moves and turns. Otherwise the braking point is judged against the
-        partner's measured clamp and the fixed band."""
+        """Whether this arm's step from joints ``q_from`` to ``q_to`` (6,) rad, ending at time ``at`` s, waits
+        on the span guard (:meth:`flexsheet.arm.span_guard.SpanGuard.worse`; ``wait:span``); ``q_stop``: where
+        the clamp would come to rest braking from ``q_to`` (default ``q_to``). A service's goal
+        (:meth:`move_to`: a registration's configurations, homing) is the operator's and is not judged. While
+        both arms follow the sheet's motion, a partner whose measured clamp is on it (within
+        :data:`PEER_ON_MOTION` of the motion at its measurement's stamp) is judged where the motion has it at
+        ``at``, against the step's end, and the band is the motion's own span at ``at`` ±
+        :data:`SPAN_ON_MOTION`: its measurement lags its command by the servo and a cycle, and judging against
+        it, this arm's braking point or the fixed band made the arms wait on each other in fast moves and
+        turns. Otherwise the braking point is judged against the partner's measured clamp and the fixed
+        band."""
         if self.manual is not None:
             return False
         guard = self.span
@@ -160,7 +167,8 @@ class TargetTracker:
                 points = self.motion.clamp_points(at)
                 theirs = points[k]
                 span = float(np.linalg.norm(points[0] - points[1]))
-                return guard.worse(q_from, q_to, theirs, (max(span - SPAN_ON_MOTION, 1e-3), span + SPAN_ON_MOTION))
+                return guard.worse(q_from, q_to, theirs,
+                                   (max(span - SPAN_ON_MOTION, 1e-3), span + SPAN_ON_MOTION))
         return guard.worse(q_from, q_to if q_stop is None else q_stop)
 
     def move_to(self, q) -> np.ndarray:
@@ -192,15 +200,15 @@ class TargetTracker:
 
     def set_target(self, T_display_clamp, source_stamp: float, now: float, q_measured=None, *,
                    strict: bool = False, pull: float = 0.0, motion: SheetSegment | None = None) -> IKResult:
-        """Solve IK for a new target pose (4, 4) at time ``now`` (s); returns the :class:`IKResult`. ``pull`` N:
-        the sheet's pull on the clamp there; a solution whose joint torques pass the arm's limits is refused as
-        ``torque:J<k>`` (:func:`flexsheet.arm.pull_limit.max_pull`). ``motion``: the sheet's motion to the
-        target (module doc), followed once the target is accepted; None: stream to its IK goal.
+        """Solve IK for a new target pose (4, 4) at time ``now`` (s); returns the :class:`IKResult`. ``pull``
+        N: the sheet's pull on the clamp there; a solution whose joint torques pass the arm's limits is
+        refused as ``torque:J<k>`` (:func:`flexsheet.arm.pull_limit.max_pull`). ``motion``: the sheet's motion
+        to the target (module doc), followed once the target is accepted; None: stream to its IK goal.
 
-        Seed: the current goal, else ``q_measured``; the jump limit as the class doc says. If the result is not
-        ok, the goal is unchanged, ``ik_status`` holds the reason, ``refused`` counts it and, with ``strict``,
-        :class:`TargetRefused` is raised (after that bookkeeping: the hold status still shows). Raises
-        ``ValueError`` for a malformed pose (before anything changes).
+        Seed: the current goal, else ``q_measured``; the jump limit as the class doc says. If the result is
+        not ok, the goal is unchanged, ``ik_status`` holds the reason, ``refused`` counts it and, with
+        ``strict``, :class:`TargetRefused` is raised (after that bookkeeping: the hold status still shows).
+        Raises ``ValueError`` for a malformed pose (before anything changes).
         """
         seed = self.goal if self.goal is not None else q_measured
         if seed is None:
@@ -280,11 +288,11 @@ class TargetTracker:
         return self.goal + self.velocity * ahead, w
 
     def _on_motion(self, now: float) -> tuple[np.ndarray, np.ndarray] | None:
-        """Joints (6,) rad of the clamp's point on :attr:`motion` at ``now`` and their velocity (6,) rad/s (the
-        clamp's twist through the Jacobian); None when IK refuses the point (counted in ``motion_refused``).
-        From the last cycle's point, one Newton step (:meth:`ArmKinematics.track`) while its error is under
-        :data:`TRACK_STEP_MAX`, its manipulability over :data:`TRACK_W_MIN` and the step within the joint
-        limits; otherwise IK solves the point, with its checks."""
+        """Joints (6,) rad of the clamp's point on :attr:`motion` at ``now`` and their velocity (6,) rad/s
+        (the clamp's twist through the Jacobian); None when IK refuses the point (counted in
+        ``motion_refused``). From the last cycle's point, one Newton step (:meth:`ArmKinematics.track`) while
+        its error is under :data:`TRACK_STEP_MAX`, its manipulability over :data:`TRACK_W_MIN` and the step
+        within the joint limits; otherwise IK solves the point, with its checks."""
         T, twist = self.motion.clamp(self.kin.side, now)
         kin = self.kin
         if self._motion_q is not None:

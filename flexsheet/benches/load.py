@@ -174,7 +174,8 @@ def _child(argv: list[str]) -> int:
         cls = _make_subscriber(Path(a.out))
         node = cls(NodeConfig(name="load_sub", node_type="load_sub", endpoint=a.endpoint, peers=a.peers))
     else:
-        node = RecorderNode(NodeConfig(name="recorder", node_type="recorder", endpoint=a.endpoint, peers=a.peers,
+        node = RecorderNode(NodeConfig(name="recorder", node_type="recorder", endpoint=a.endpoint,
+                                       peers=a.peers,
                                        params={"output": a.out, "topics": RECORDED}))
     asyncio.run(node.run())
     return 0
@@ -224,7 +225,8 @@ def run_load(seconds: float = 60.0, factor: float = 2.0, warmup: float = 10.0, s
         time.sleep(1.0)   # subscribers first: they connect and reconnect until the publishers bind
         for g, ep in eps.items():
             procs[g] = subprocess.Popen([*py, "--role", "pub", "--group", g, "--endpoint", ep,
-                                         "--factor", str(factor)] + (["--random-images"] if random_images else []),
+                                         "--factor", str(factor)]
+                                        + (["--random-images"] if random_images else []),
                                         env=env)
         t0 = time.monotonic()
         samples: dict[str, list[tuple[float, float]]] = {k: [] for k in procs}
@@ -255,7 +257,8 @@ def run_load(seconds: float = 60.0, factor: float = 2.0, warmup: float = 10.0, s
         a = np.array(s)
         keep = a[:, 0] >= warmup
         procs_res[k] = {"peak_rss_mb": float(a[:, 1].max()), "rss_after_warmup_mb": float(a[keep, 1][0]),
-                        "rss_end_mb": float(a[-1, 1]), "slope_mb_per_min": slope_mb_per_min(a[keep, 0], a[keep, 1]),
+                        "rss_end_mb": float(a[-1, 1]),
+                        "slope_mb_per_min": slope_mb_per_min(a[keep, 0], a[keep, 1]),
                         "t": a[:, 0].tolist(), "rss": a[:, 1].tolist()}
     all_lat = np.concatenate([np.asarray(v, float) for v in sub["latency"].values() if v]) * 1e3
     topics = {}
@@ -271,7 +274,8 @@ def run_load(seconds: float = 60.0, factor: float = 2.0, warmup: float = 10.0, s
     return {"seconds": seconds, "factor": factor, "warmup": warmup, "cpus": os.cpu_count(),
             "random_images": random_images,
             "p50_ms": float(np.percentile(all_lat, 50)), "p99_ms": float(np.percentile(all_lat, 99)),
-            "messages": int(all_lat.size), "max_slope_mb_per_min": max(p["slope_mb_per_min"] for p in procs_res.values()),
+            "messages": int(all_lat.size),
+            "max_slope_mb_per_min": max(p["slope_mb_per_min"] for p in procs_res.values()),
             "subscriber_max_queue": sub["max_queue"], "recorder_dropped": dict(bag.dropped),
             "processes": procs_res, "topics": topics}
 
@@ -286,7 +290,8 @@ def _chart(res: dict, out: Path) -> None:
     for k, p in res["processes"].items():
         a.plot(p["t"], p["rss"], label=f"{k} ({p['slope_mb_per_min']:+.2f} MB/min)")
     a.axvline(res["warmup"], color="k", ls=":", lw=0.8)
-    a.set(xlabel="time, s", ylabel="RSS, MB", title=f"memory at {res['factor']:g}× nominal rates (fit after the dotted line)")
+    a.set(xlabel="time, s", ylabel="RSS, MB", title=f"memory at {res['factor']:g}× nominal rates (fit after "
+                                                    "the dotted line)")
     a.legend(fontsize=7)
     names = [n for n, t in res["topics"].items() if t["p99_ms"] is not None]
     x = np.arange(len(names))
@@ -306,11 +311,13 @@ def _chart(res: dict, out: Path) -> None:
 def main(argv: list[str]) -> int:
     """``flexsheet bench load [--seconds S] [--factor F] [--json] [--out DIR]`` (see module doc)."""
     ap = argparse.ArgumentParser(prog="flexsheet bench load", description=__doc__.splitlines()[0],
-                                 epilog="example:\n  flexsheet bench load --seconds 60 --out docs/figures/reliability",
+                                 epilog="example:\n  flexsheet bench load --seconds 60 --out "
+                                        "docs/figures/reliability",
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=60.0, help="load duration, s (default 60)")
     ap.add_argument("--factor", type=float, default=2.0, help="rate factor over nominal_hz (default 2)")
-    ap.add_argument("--warmup", type=float, default=None, help="s left out of the RSS fit (default min(10, S/4))")
+    ap.add_argument("--warmup", type=float, default=None, help="s left out of the RSS fit (default min(10, "
+                                                               "S/4))")
     ap.add_argument("--random-images", action="store_true",
                     help="incompressible noise images (the recorder's worst case) instead of image-like ones")
     ap.add_argument("--json", action="store_true", help="print the results as JSON")

@@ -44,7 +44,8 @@ def measure(shape_kind: str = "cylinder", n: int = 2000) -> dict[str, float]:
         shape.project(p)
         proj.append((time.perf_counter_ns() - t0) / 1e3)
     times.sort()
-    return {"update_median_us": statistics.median(times), "update_p95_us": times[int(0.95 * (len(times) - 1))],
+    return {"update_median_us": statistics.median(times),
+            "update_p95_us": times[int(0.95 * (len(times) - 1))],
             "project_median_us": statistics.median(proj), "n": n}
 
 

@@ -25,20 +25,23 @@ def bench_sheets(depth: float = 0.03, theta_deg: float = 30.0, sheet_model=None)
     by the renderer's pushed-sheet model (``sheet_model``; default the node's, its table built if missing)."""
     R = geometry.CYLINDER_RADIUS
     th = np.radians(theta_deg)
-    tilt = SheetSurface([-R + R * np.cos(th), 0.0, -R * np.sin(th)], [np.cos(th), 0.0, -np.sin(th)], [0, 1, 0])
+    tilt = SheetSurface([-R + R * np.cos(th), 0.0, -R * np.sin(th)], [np.cos(th), 0.0, -np.sin(th)],
+                        [0, 1, 0])
     flat = SheetSurface.from_clamps(*clamp_poses(np.zeros(3), [1, 0, 0], [0, 1, 0], BENCH_STRETCH))
     pushed = (sheet_model or sheet_model_for()).pushed(flat, np.array([-depth, 0.0, 0.0]))
     return {"none": tilt, "flat": tilt, "four_triangle": pushed, "fine": pushed}
 
 
 def sheet_update(frames: int = 200, sheet_model=None) -> dict[str, float]:
-    """Per-frame cost (ms) of the node's sheet for a moving finger: :meth:`RendererState.sheet_for_frame` with a
-    new fingertip every frame (depth 10→50 mm and contact sweeping ±30 mm, so every frame misses the depth
+    """Per-frame cost (ms) of the node's sheet for a moving finger: :meth:`RendererState.sheet_for_frame` with
+    a new fingertip every frame (depth 10→50 mm and contact sweeping ±30 mm, so every frame misses the depth
     table's cache: the FEM tables on the depth table's grid), and with the same fingertip (cache hit). Wall
     times, plus the drawing thread's own CPU time per new fingertip (``new_finger_cpu_median_ms``: what the
     frame costs without other processes competing for the cores)."""
-    st = RendererState(geometry.EYE, geometry.PROJECTOR, SheetConfig(), sheet_model=sheet_model or sheet_model_for())
-    for side, T in zip(("left", "right"), clamp_poses(np.zeros(3), [1, 0, 0], [0, 1, 0], BENCH_STRETCH), strict=True):
+    st = RendererState(geometry.EYE, geometry.PROJECTOR, SheetConfig(),
+                       sheet_model=sheet_model or sheet_model_for())
+    for side, T in zip(("left", "right"), clamp_poses(np.zeros(3), [1, 0, 0], [0, 1, 0], BENCH_STRETCH),
+                       strict=True):
         st.set_arm_pose(side, T)
     st.set_fingertip(np.array([-0.03, 0.0, 0.0]), 0.0)
     st.sheet_for_frame()                                         # loads the table

@@ -1,10 +1,10 @@
 """``flexsheet bench sim``: where the simulated display's CPU time goes, per simulated second.
 
-It runs ``flexsheet launch FILE --duration S --out DIR`` (default ``launch/sim.yaml``, 20 simulated seconds, the
-scene and the truth seed of the file unless ``--set`` changes them) and reads what the launch writes at its stop:
-``DIR/sim_clock.json``: the simulated and wall span, and from the start of simulated time to the stop (start-up
-left out, as the realtime factor leaves it out) each node's handler CPU on this host and the whole process's
-CPU. Reported, in CPU-seconds per simulated second:
+It runs ``flexsheet launch FILE --duration S --out DIR`` (default ``launch/sim.yaml``, 20 simulated seconds,
+the scene and the truth seed of the file unless ``--set`` changes them) and reads what the launch writes at
+its stop: ``DIR/sim_clock.json``: the simulated and wall span, and from the start of simulated time to the
+stop (start-up left out, as the realtime factor leaves it out) each node's handler CPU on this host and the
+whole process's CPU. Reported, in CPU-seconds per simulated second:
 
 * each node: the thread CPU its handlers and timers took (``host_handler_cpu_run_s``), against :data:`BUDGET`;
 * ``runtime``: the rest of the process (the in-process bus, the lockstep scheduler, the codec, the event loop,
@@ -12,10 +12,10 @@ CPU. Reported, in CPU-seconds per simulated second:
 * ``total`` against ``1 / rtf_target`` (one process on one core: ``rtf_target`` simulated seconds per wall
   second at most) and the run's ``realtime_factor`` (simulated over wall seconds, start-up excluded).
 
-The budgets split the target's one core among the nodes (an assumption: roughly each node's share of the work a
-lab PC does, with a sixth left to the runtime); the verdict is each against its budget. Writes ``sim.json`` and
-``sim.png`` (bars per node, the budget ticked) to ``--out`` when given. Timings mean something only on a quiet
-machine: the load average before the run is reported with them.
+The budgets split the target's one core among the nodes (an assumption: roughly each node's share of the work
+a lab PC does, with a sixth left to the runtime); the verdict is each against its budget. Writes ``sim.json``
+and ``sim.png`` (bars per node, the budget ticked) to ``--out`` when given. Timings mean something only on a
+quiet machine: the load average before the run is reported with them.
 """
 
 from __future__ import annotations
@@ -33,7 +33,8 @@ __all__ = ["BUDGET", "RTF_TARGET", "cost_per_sim_s", "main"]
 
 #: the target: simulated seconds per wall second of the default run
 RTF_TARGET = 1.5
-#: CPU-s per simulated s each node may take (their sum is 1 / RTF_TARGET, one core); "runtime": the process's rest
+#: CPU-s per simulated s each node may take (their sum is 1
+#: / RTF_TARGET, one core); "runtime": the process's rest
 BUDGET: dict[str, float] = {
     "camera": 0.07, "head_camera": 0.06, "renderer": 0.07, "world": 0.07, "planner": 0.07, "arm_left": 0.035,
     "arm_right": 0.035, "triangulator": 0.04, "fem": 0.04, "ctrl_left": 0.01, "ctrl_right": 0.01, "viz": 0.01,
@@ -42,14 +43,15 @@ BUDGET: dict[str, float] = {
 
 
 def cost_per_sim_s(sim_clock: dict) -> dict:
-    """CPU-s per simulated s from a launch's ``sim_clock.json`` dict, over the run itself (start-up and the stop
-    left out: ``host_handler_cpu_run_s``, ``process_cpu_run_s``): ``{"nodes": {name: x}, "runtime": x,
-    "total": x, "sim_s", "wall_s", "realtime_factor"}``. Raises ``ValueError`` naming the key when the file
-    lacks one or the span is not > 0."""
+    """CPU-s per simulated s from a launch's ``sim_clock.json`` dict, over the run itself (start-up and the
+    stop left out: ``host_handler_cpu_run_s``, ``process_cpu_run_s``):
+    ``{"nodes": {name: x}, "runtime": x, "total": x, "sim_s", "wall_s",
+    "realtime_factor"}``. Raises ``ValueError`` naming the key when the file lacks one or the span is not >
+    0."""
     for key in ("sim_s", "wall_s", "host_handler_cpu_run_s", "process_cpu_run_s"):
         if key not in sim_clock:
-            raise ValueError(f"sim_clock.json has no {key!r}: not a 'clock: sim' launch's output, or it never "
-                             "reached simulated time")
+            raise ValueError(f"sim_clock.json has no {key!r}: not a 'clock: sim' launch's output, or it "
+                             "never reached simulated time")
     sim_s = float(sim_clock["sim_s"])
     if not sim_s > 0.0:
         raise ValueError(f"sim_s must be > 0, got {sim_s!r}: the run never advanced simulated time")
@@ -87,11 +89,13 @@ def main(argv: list[str] | None = None) -> int:
     factor meet their targets, 1 when not, 2 when the launch failed."""
     ap = argparse.ArgumentParser(prog="flexsheet bench sim", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
-                                 epilog="example: flexsheet bench sim --duration 20 --out docs/figures/bench\n"
-                                        "         flexsheet bench sim --set scene=launch/scenes/organ.yaml --json")
+                                 epilog="example: flexsheet bench sim --duration 20 --out "
+                                        "docs/figures/bench\n         flexsheet bench sim --set "
+                                        "scene=launch/scenes/organ.yaml --json")
     ap.add_argument("--file", default="launch/sim.yaml", help="the launch file (default launch/sim.yaml)")
     ap.add_argument("--duration", type=float, default=20.0, help="simulated seconds (default 20)")
-    ap.add_argument("--set", action="append", default=[], metavar="NODE.KEY=VALUE", help="passed to the launch")
+    ap.add_argument("--set", action="append", default=[], metavar="NODE.KEY=VALUE",
+                    help="passed to the launch")
     ap.add_argument("--domain", type=int, default=None, help="the launch's domain (default: as the launch)")
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     ap.add_argument("--out", default="", help="also write DIR/sim.json and DIR/sim.png")
@@ -104,7 +108,8 @@ def main(argv: list[str] | None = None) -> int:
                "--out", tmp] + [x for s in args.set for x in ("--set", s)]
         if args.domain is not None:
             cmd += ["--domain", str(args.domain)]
-        print(f"[bench sim] {' '.join(cmd[2:])} (load average {load0[0]:.2f}) ...", file=sys.stderr, flush=True)
+        print(f"[bench sim] {' '.join(cmd[2:])} (load average {load0[0]:.2f}) ...", file=sys.stderr,
+              flush=True)
         t0 = time.monotonic()
         proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         wall = time.monotonic() - t0
@@ -119,13 +124,16 @@ def main(argv: list[str] | None = None) -> int:
     per["runtime"] = {"cpu": round(cost["runtime"], 4), "budget": BUDGET["runtime"],
                       "ok": cost["runtime"] <= BUDGET["runtime"]}
     budget_total = round(1.0 / RTF_TARGET, 4)
-    result = {"title": "bench sim: CPU-seconds per simulated second, per node", "units": "CPU-s per simulated s",
+    result = {"title": "bench sim: CPU-seconds per simulated second, per node",
+              "units": "CPU-s per simulated s",
               "file": args.file, "set": args.set, "duration_sim_s": round(cost["sim_s"], 3),
               "wall_s": round(cost["wall_s"], 2), "launch_wall_s": round(wall, 2),
               "realtime_factor": round(cost["realtime_factor"], 3), "rtf_target": RTF_TARGET,
               "load_average_before": [round(x, 2) for x in load0], "per_sim_s": per,
-              "total": {"cpu": round(cost["total"], 4), "budget": budget_total, "ok": cost["total"] <= budget_total}}
-    result["verdict"] = ("met" if result["total"]["ok"] and cost["realtime_factor"] >= RTF_TARGET else "MISSED")
+              "total": {"cpu": round(cost["total"], 4), "budget": budget_total,
+                        "ok": cost["total"] <= budget_total}}
+    result["verdict"] = ("met" if result["total"]["ok"] and cost["realtime_factor"] >= RTF_TARGET
+                         else "MISSED")
     if args.out:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)

@@ -2,18 +2,18 @@
 
 Measures, for both stacks:
 
-* one-way latency (median, p99) of a small message — a :class:`messages.Fingertip` (≈ 230 B on the wire)
-  for the runtime, the same fields packed as a msgpack map for raw — sent at 1 kHz so that queueing does
-  not mix in, both publishers sleeping between messages (a busy-waiting publisher keeps its core awake and
-  would measure CPU wake-up, not the stack); latency is ``time.monotonic()`` at the subscriber's handler minus the stamp taken just before
-  publishing (CLOCK_MONOTONIC is shared by all processes of one machine);
+* one-way latency (median, p99) of a small message — a :class:`messages.Fingertip` (≈ 230 B on the wire) for
+  the runtime, the same fields packed as a msgpack map for raw — sent at 1 kHz so that queueing does not mix
+  in, both publishers sleeping between messages (a busy-waiting publisher keeps its core awake and would
+  measure CPU wake-up, not the stack); latency is ``time.monotonic()`` at the subscriber's handler minus the
+  stamp taken just before publishing (CLOCK_MONOTONIC is shared by all processes of one machine);
 * throughput of 2×640×480 uint8 stereo frames (:class:`messages.StereoFrame` vs a raw multipart of the two
   buffers), sent as fast as the publisher can, counted at the subscriber;
 * intra-container latency (``composed_*``): the same small message between two nodes of one composable
   container (:mod:`flexsheet.runtime.container`: one process, one loop, the message object handed on), from
-  the call to ``publish`` to an ``async def`` handler (``composed_latency_*``) and to a plain ``def`` handler in
-  its worker thread (``composed_sync_latency_*``); ``composed_build_latency_median_us`` also counts building the
-  message (pydantic validation of a Fingertip), as the cross-process figures do.
+  the call to ``publish`` to an ``async def`` handler (``composed_latency_*``) and to a plain ``def`` handler
+  in its worker thread (``composed_sync_latency_*``); ``composed_build_latency_median_us`` also counts
+  building the message (pydantic validation of a Fingertip), as the cross-process figures do.
 
 The cross-process subscriber runs in a child process (``python -m flexsheet.benches.transport --sink …``)
 and reports JSON. Figures taken on a shared machine are pessimistic: run it at least twice and compare ranges
@@ -117,7 +117,8 @@ def _node_sink(endpoint: str, kind: str, n: int) -> dict:
 
 # ------------------------------------------------------------------------------------------ sources
 def _start_sink(stack: str, kind: str, endpoint: str, n: int) -> subprocess.Popen:
-    p = subprocess.Popen([sys.executable, "-m", "flexsheet.benches.transport", "--sink", stack, kind, endpoint, str(n)],
+    p = subprocess.Popen([sys.executable, "-m", "flexsheet.benches.transport", "--sink", stack, kind,
+                          endpoint, str(n)],
                          stdout=subprocess.PIPE, text=True)
     assert p.stdout is not None
     line = p.stdout.readline()
@@ -225,8 +226,8 @@ class _LocalSink(Node):
 
 
 def _composed(n: int, sync: bool) -> list[tuple[float, float]]:
-    """(publish → handler, build → handler) latencies (s) of ``n`` fingertips at 1 kHz between two nodes of one
-    container (in this process)."""
+    """(publish → handler, build → handler) latencies (s) of ``n`` fingertips at 1 kHz between two nodes of
+    one container (in this process)."""
     async def main() -> list[float]:
         bus = Bus("bench")
         src = _Source(NodeConfig(name="bench_source", endpoint="", heartbeat_period=10.0),
@@ -267,9 +268,10 @@ def _summarise(lat_res: dict, thr_res: dict) -> dict:
 
 
 def _codec_costs(n: int = 20000) -> dict:
-    """What validating a small message costs in this process, µs a message (median of 5 batches of ``n // 5``):
-    building a :class:`messages.Fingertip` (pydantic validation), encoding it and decoding it with validation
-    (the wire boundary). The runtime pays all three on every hop that crosses processes; raw pyzmq none."""
+    """What validating a small message costs in this process, µs a message (median of 5 batches of
+    ``n // 5``): building a :class:`messages.Fingertip` (pydantic validation), encoding it and decoding it
+    with validation (the wire boundary). The runtime pays all three on every hop that crosses processes; raw
+    pyzmq none."""
     pos, cov = np.zeros(3), np.eye(3)
 
     def build() -> Fingertip:
@@ -311,7 +313,8 @@ def run_bench(n_lat: int = N_LAT, n_frames: int = N_FRAMES) -> dict:
         out[f"{key}_build_latency_median_us"] = float(np.median(lat[:, 1]))
         out[f"{key}_latency_samples"] = int(len(lat))
     out |= _codec_costs()
-    out["floor_ratio_latency_median"] = (raw["latency_median_us"] + out["codec_build_us"] + out["codec_encode_us"]
+    out["floor_ratio_latency_median"] = (raw["latency_median_us"] + out["codec_build_us"]
+                                         + out["codec_encode_us"]
                                          + out["codec_decode_us"]) / raw["latency_median_us"]
     out |= {"loadavg_1_before": load0, "loadavg_1_after": os.getloadavg()[0], "cores": os.cpu_count()}
     return out
@@ -337,17 +340,18 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(r))
         return 0
     print(f"{'':28}{'runtime':>12}{'raw pyzmq':>12}{'ratio':>8}")
-    print(f"{'small msg latency median':28}{r['runtime_latency_median_us']:10.1f}us{r['raw_latency_median_us']:10.1f}us"
-          f"{r['ratio_latency_median']:8.2f}")
-    print(f"{'small msg latency p99':28}{r['runtime_latency_p99_us']:10.1f}us{r['raw_latency_p99_us']:10.1f}us"
-          f"{r['ratio_latency_p99']:8.2f}")
+    print(f"{'small msg latency median':28}{r['runtime_latency_median_us']:10.1f}us"
+          f"{r['raw_latency_median_us']:10.1f}us{r['ratio_latency_median']:8.2f}")
+    print(f"{'small msg latency p99':28}{r['runtime_latency_p99_us']:10.1f}us{r['raw_latency_p99_us']:10.1f}"
+          f"us{r['ratio_latency_p99']:8.2f}")
     print(f"{'stereo 2x640x480 u8':28}{r['runtime_stereo_fps']:9.0f}f/s{r['raw_stereo_fps']:9.0f}f/s"
           f"{r['ratio_stereo_fps']:8.2f}")
-    print(f"{'validation alone (floor)':28}build {r['codec_build_us']:.1f} + encode {r['codec_encode_us']:.1f} + decode "
-          f"{r['codec_decode_us']:.1f} us: ratio >= {r['floor_ratio_latency_median']:.2f} (load {r['loadavg_1_before']:.2f})")
+    print(f"{'validation alone (floor)':28}build {r['codec_build_us']:.1f} + encode "
+          f"{r['codec_encode_us']:.1f} + decode {r['codec_decode_us']:.1f} us: ratio >= "
+          f"{r['floor_ratio_latency_median']:.2f} (load {r['loadavg_1_before']:.2f})")
     for key, label in (("composed", "in one container, async"), ("composed_sync", "in one container, def")):
-        print(f"{label:28}{r[key + '_latency_median_us']:10.1f}us median {r[key + '_latency_p99_us']:8.1f}us p99 "
-              f"(with building the message: {r[key + '_build_latency_median_us']:.1f}us median)")
+        print(f"{label:28}{r[key + '_latency_median_us']:10.1f}us median {r[key + '_latency_p99_us']:8.1f}us "
+              f"p99 (with building the message: {r[key + '_build_latency_median_us']:.1f}us median)")
     return 0
 
 

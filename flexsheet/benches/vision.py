@@ -85,11 +85,14 @@ def mc_rms_mm(model: StereoModel, depth: float, sigma: float, method: str = "opt
 
 
 def real_stereo_rms(data: str = DATA) -> dict:
-    """Calibrate the real XIMEA pairs in ``data`` (chessboard 9×6, square 0.024 m); stereo RMS and baseline."""
-    lefts, rights = sorted(glob.glob(os.path.join(data, "left*.jpg"))), sorted(glob.glob(os.path.join(data, "right*.jpg")))
+    """Calibrate the real XIMEA pairs in ``data`` (chessboard 9×6, square 0.024 m); stereo RMS and
+    baseline."""
+    lefts, rights = (sorted(glob.glob(os.path.join(data, "left*.jpg"))),
+                     sorted(glob.glob(os.path.join(data, "right*.jpg"))))
     res = calibrate_stereo([cv2.imread(f, 0) for f in lefts], [cv2.imread(f, 0) for f in rights],
                            parse_board("chessboard:9x6", 0.024))
-    return {"stereo_rms_px": res.rms_px, "baseline_mm": float(np.linalg.norm(res.T) * 1e3), "pairs": len(res.used)}
+    return {"stereo_rms_px": res.rms_px, "baseline_mm": float(np.linalg.norm(res.T) * 1e3),
+            "pairs": len(res.used)}
 
 
 def main(argv: list[str] | None = None) -> int:

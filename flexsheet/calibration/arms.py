@@ -77,11 +77,12 @@ def plan_arm_configs(side: str, n: int, T_display_base: np.ndarray, marker_offse
     depth = (X - T_display_camera[:3, 3]) @ T_display_camera[:3, 2]
     ok = depth > 0.2
     for uv in (ul, ur):
-        ok &= (uv[:, 0] > margin_px) & (uv[:, 0] < w - margin_px) & (uv[:, 1] > margin_px) & (uv[:, 1] < h - margin_px)
+        ok &= ((uv[:, 0] > margin_px) & (uv[:, 0] < w - margin_px) & (uv[:, 1] > margin_px)
+               & (uv[:, 1] < h - margin_px))
     Q = Q[ok]
     if len(Q) < n:
-        raise ValueError(f"only {len(Q)} of {candidates} candidate configurations keep the {side} marker in view, "
-                         f"need {n}")
+        raise ValueError(f"only {len(Q)} of {candidates} candidate configurations keep the {side} marker in "
+                         f"view, need {n}")
     chosen = [0]                                     # home first (always first: ok keeps index 0 if in view)
     d = np.linalg.norm((Q - Q[0]) / span, axis=1)
     while len(chosen) < n:
@@ -94,9 +95,10 @@ def plan_arm_configs(side: str, n: int, T_display_base: np.ndarray, marker_offse
 def detect_marker(image: np.ndarray, predicted_uv, search_px: float = 45.0, min_area: int = 4,
                   min_peak_dn: float = 40.0) -> np.ndarray | None:
     """Centroid (2,) px of the bright blob nearest ``predicted_uv`` within ``search_px`` in a mono8 image, or
-    ``None``. Threshold halfway between the window's median (background) and its peak picks the blob;
-    centroid of the intensity above a quarter of the way from background to peak, over the blob dilated by
-    2 px (symmetric weights, so a symmetric blob gives its centre; the background slope stays out). Raises ``ValueError`` on a bad image."""
+    ``None``. Threshold halfway between the window's median (background) and its peak picks the blob; centroid
+    of the intensity above a quarter of the way from background to peak, over the blob dilated by 2 px
+    (symmetric weights, so a symmetric blob gives its centre; the background slope stays out). Raises
+    ``ValueError`` on a bad image."""
     if not isinstance(image, np.ndarray) or image.ndim != 2 or image.dtype != np.uint8:
         raise ValueError(f"image must be a (H, W) uint8 array, got {getattr(image, 'shape', type(image))}")
     h, w = image.shape
@@ -140,7 +142,8 @@ def triangulate_markers(frames: list[tuple[np.ndarray, np.ndarray]], predicted: 
     """Detect and triangulate the marker in each stereo pair. ``predicted``: (left (N, 2), right (N, 2)) raw
     pixels from :func:`predict_marker`. Returns (indices of the usable frames, X (M, 3) display m, skipped
     index → reason, covariances (M, 3, 3) m² in the display frame for a centroid σ of ``sigma_px``, from
-    :meth:`flexsheet.vision.stereo.StereoModel.covariance` — depth is ~10× worse than lateral and grows as Z²)."""
+    :meth:`flexsheet.vision.stereo.StereoModel.covariance` — depth is ~10× worse than lateral and grows as
+    Z²)."""
     model = StereoModel.from_calib(stereo)
     idx, pts, covs, skipped = [], [], [], {}
     Rdc = T_display_camera[:3, :3]
@@ -177,28 +180,28 @@ class ArmResult:
 
 
 def estimate_arm_base(side: str, q_list, X_display: np.ndarray, T_base_nominal: np.ndarray, marker_nominal,
-                      *, min_configs: int = 8, max_residual_mm: float = 2.0, level_sigma_deg: float | None = None,
+                      *, min_configs: int = 8, max_residual_mm: float = 2.0,
+                      level_sigma_deg: float | None = None,
                       marker_sigma_mm: float = 0.15, cov: np.ndarray | None = None,
                       skipped: dict[int, str] | None = None) -> ArmResult:
     """Least-squares base pose and marker offset of arm ``side`` (module doc).
 
     ``q_list`` (N, 6) rad: the commanded joints of the usable frames; ``X_display`` (N, 3) m: the triangulated
     markers; ``T_base_nominal`` (4, 4) and ``marker_nominal`` (3,) m: the starting point. ``level_sigma_deg``:
-    the base was levelled (spirit level / digital inclinometer) to this accuracy — a Gaussian prior on its roll
-    and pitch about vertical (the markers span only ±0.1 m, 0.5 m from the base origin). ``None``: no prior.
-    ``cov`` (N, 3, 3) m²: the markers' triangulation covariances (:func:`triangulate_markers`), whitening each
-    residual (Mahalanobis; depth counts ~10× less than lateral); without it an isotropic ``marker_sigma_mm``.
-    The reported residuals are Euclidean, mm. Raises ``ValueError``
-    with fewer than ``min_configs`` configurations, mismatched inputs, or an RMS residual above
-    ``max_residual_mm``.
+    the base was levelled (spirit level / digital inclinometer) to this accuracy — a Gaussian prior on its
+    roll and pitch about vertical (the markers span only ±0.1 m, 0.5 m from the base origin). ``None``: no
+    prior. ``cov`` (N, 3, 3) m²: the markers' triangulation covariances (:func:`triangulate_markers`),
+    whitening each residual (Mahalanobis; depth counts ~10× less than lateral); without it an isotropic
+    ``marker_sigma_mm``. The reported residuals are Euclidean, mm. Raises ``ValueError`` with fewer than
+    ``min_configs`` configurations, mismatched inputs, or an RMS residual above ``max_residual_mm``.
     """
     Q = np.asarray(q_list, float).reshape(-1, 6)
     X = np.asarray(X_display, float).reshape(-1, 3)
     if len(Q) != len(X):
         raise ValueError(f"q_list and X_display must have the same length, got {len(Q)} and {len(X)}")
     if len(Q) < min_configs:
-        raise ValueError(f"arm {side}: only {len(Q)} usable marker configurations, need at least {min_configs} "
-                         f"(skipped: {skipped or {}})")
+        raise ValueError(f"arm {side}: only {len(Q)} usable marker configurations, need at least "
+                         f"{min_configs} (skipped: {skipped or {}})")
     kin = ArmKinematics(side, np.eye(4))
     T_bc = np.array([kin.fk(q) for q in Q])          # clamp in the base frame
     Tn = np.asarray(T_base_nominal, float)
@@ -233,6 +236,7 @@ def estimate_arm_base(side: str, q_list, X_display: np.ndarray, T_base_nominal: 
     per = np.linalg.norm((Mb @ T[:3, :3].T + T[:3, 3]) - X, axis=1) * 1e3
     rms = float(np.sqrt(np.mean(per ** 2)))
     if rms > max_residual_mm:
-        raise ValueError(f"arm {side}: fit residual {rms:.2f} mm RMS > {max_residual_mm} mm (per configuration "
-                         f"{np.round(per, 2).tolist()}): wrong arm or joints, or a loose marker?")
+        raise ValueError(f"arm {side}: fit residual {rms:.2f} mm RMS > {max_residual_mm} mm (per "
+                         f"configuration {np.round(per, 2).tolist()}): wrong arm or joints, or a loose "
+                         "marker?")
     return ArmResult(T, m, rms, per, len(Q), dict(skipped or {}))

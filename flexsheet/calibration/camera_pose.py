@@ -11,10 +11,10 @@ Estimator (a stereo-consistent bundle adjustment, the structure of ``cv2.stereoC
 object pose in one view):
 
 1. Corners in every image (:func:`detect_corners`: ``cv2.findChessboardCorners`` + ``cornerSubPix`` with a
-   window scaled to the squares, or the ChArUco detector). A chessboard's 180° ordering ambiguity is resolved in
-   the home view by the pose nearest the nominal mount, and in the right image of every view by the
-   prediction from the left image's pose through the nominal stereo model; mirrored orderings (the detector orders corners by the
-   image, so it may hand back the board as if seen from behind) are rejected by PnP.
+   window scaled to the squares, or the ChArUco detector). A chessboard's 180° ordering ambiguity is resolved
+   in the home view by the pose nearest the nominal mount, and in the right image of every view by the
+   prediction from the left image's pose through the nominal stereo model; mirrored orderings (the detector
+   orders corners by the image, so it may hand back the board as if seen from behind) are rejected by PnP.
 2. Start: ``cv2.solvePnP`` on the home view's left image (display-frame corners) and on each other view's
    left image (board-frame corners), with the nominal intrinsics.
 3. ``scipy.optimize.least_squares`` over the 24 stereo parameters (per camera fx, fy, cx, cy, k1, k2, p1, p2,
@@ -47,13 +47,14 @@ from flexsheet.calibration.display_calib import BOOTSTRAP_FILE, stereo_from_vect
 from flexsheet.vision.stereo import StereoModel
 from flexsheet.vision.stereo_calibration import BoardSpec, detect_board
 
-__all__ = ["VIEW_PLAN", "detect_corners", "board_centre", "board_points", "sheet_pose", "plan_board_views", "load_prior",
+__all__ = ["VIEW_PLAN", "detect_corners", "board_centre", "board_points", "sheet_pose", "plan_board_views",
+           "load_prior",
            "CameraPoseResult", "detect_views", "estimate_camera_pose"]
 
 #: commanded sheet poses for the board views: (tilt about y °, turn about z °, origin (x, y, z) m), home
-#: first; all reachable by both RV-1As from the nominal bases within the bridges' 0.02 rad joint margin, and all
-#: facing the nominal camera. The order
-#: interleaves tilts, turns and depth so any prefix is well conditioned.
+#: first; all reachable by both RV-1As from the nominal bases within the
+#: bridges' 0.02 rad joint margin, and all facing the nominal camera. The
+#: order interleaves tilts, turns and depth so any prefix is well conditioned.
 VIEW_PLAN: tuple = (
     (0, 0, (0, 0, 0)), (-35, 0, (0, 0, 0)), (0, -25, (0, 0, 0)), (0, 0, (0.08, 0, 0)), (0, 0, (-0.08, 0, 0)),
     (0, 0, (0, 0, 0.08)), (0, 0, (0, 0, -0.08)), (-25, -20, (0, 0, 0)), (-30, 0, (0.08, 0, 0)),
@@ -101,8 +102,9 @@ def plan_board_views(n_views: int) -> list[np.ndarray]:
 
 
 def load_prior(path: str = BOOTSTRAP_FILE, scale: float = 1.0) -> np.ndarray:
-    """(24, 24) covariance of the stereo parameters (:func:`flexsheet.calibration.display_calib.stereo_vector` order) from a
-    bootstrap JSON (``{"deviations": (n, 24)}``), times ``scale``². Raises ``ValueError`` on a bad file."""
+    """(24, 24) covariance of the stereo parameters (:func:`flexsheet.calibration.display_calib.stereo_vector`
+    order) from a bootstrap JSON (``{"deviations": (n, 24)}``), times ``scale``². Raises ``ValueError`` on a
+    bad file."""
     try:
         with open(path) as fh:
             D = np.asarray(json.load(fh)["deviations"], float)
@@ -120,10 +122,10 @@ class CameraPoseResult:
     ``T_display_camera`` (4, 4) left optical frame in the display frame; ``stereo``: refined stereo dict;
     ``rms_px``: reprojection RMS over all corners and views; ``residual_mm``: RMS 3-D distance of the
     triangulated home corners from their design positions (mm); ``flatness_mm``: RMS of their out-of-plane
-    component (mm); ``per_view_rms_px`` (n,); ``used``/``skipped`` view indices with reasons; ``cov`` (30, 30):
-    covariance of (the 24 stereo parameters, the home pose as display→left rotation vector and translation),
-    the prior the projector step refines them under; ``sigma_px``: the corner σ the fit found; ``bow_mm``: the
-    board's fitted bow (sag at the farthest corner toward the user, mm).
+    component (mm); ``per_view_rms_px`` (n,); ``used``/``skipped`` view indices with reasons; ``cov`` (30,
+    30): covariance of (the 24 stereo parameters, the home pose as display→left rotation vector and
+    translation), the prior the projector step refines them under; ``sigma_px``: the corner σ the fit found;
+    ``bow_mm``: the board's fitted bow (sag at the farthest corner toward the user, mm).
     """
 
     T_display_camera: np.ndarray
@@ -149,8 +151,9 @@ def detect_corners(image: np.ndarray, board: BoardSpec, detector=None):
 
     Chessboards: ``cv2.findChessboardCorners`` then ``cv2.cornerSubPix`` with a window of 0.4× the smallest
     corner spacing (2…11 px; a fixed 11 px window reaches across the small, foreshortened squares of a board
-    0.5 m away and pulls corners by several px). ChArUco: :func:`flexsheet.vision.stereo_calibration.detect_board`.
-    Raises ``ValueError`` if ``image`` is not a 2-D uint8 array.
+    0.5 m away and pulls corners by several px). ChArUco:
+    :func:`flexsheet.vision.stereo_calibration.detect_board`. Raises ``ValueError`` if ``image`` is not a 2-D
+    uint8 array.
     """
     if not isinstance(image, np.ndarray) or image.ndim != 2 or image.dtype != np.uint8:
         raise ValueError(f"image must be a (H, W) uint8 array, got {getattr(image, 'shape', type(image))}")
@@ -215,7 +218,8 @@ def _order_right(board: BoardSpec, st: dict, P: np.ndarray, ul: np.ndarray, ur: 
     R = st["R"] @ cv2.Rodrigues(rv)[0]
     t = st["R"] @ tv.ravel() + np.asarray(st["T"], float).ravel()
     pred = cv2.projectPoints(P, cv2.Rodrigues(R)[0], t, st["K2"], st["D2"])[0].reshape(-1, 2)
-    errs = [(float(np.median(np.linalg.norm(c - pred, axis=1))), i, c) for i, c in enumerate(_orderings(board, ur))]
+    errs = [(float(np.median(np.linalg.norm(c - pred, axis=1))), i, c) for i,
+            c in enumerate(_orderings(board, ur))]
     return min(errs, key=lambda e: (e[0], e[1]))[2]
 
 
@@ -268,8 +272,8 @@ def _usable_views(views, board: BoardSpec, stereo_nominal: dict, T_dc_nominal: n
         raise ValueError(f"min_views must be >= 1, got {min_views!r}")
     dets, skipped = detect_views(views, board, stereo_nominal, T_dc_nominal, offset)
     if dets[0] is None:
-        raise ValueError(f"board not found in the home view (view 0): {skipped.get(0)}; it defines the display "
-                         f"frame — check the board is in view, lit and not occluded")
+        raise ValueError(f"board not found in the home view (view 0): {skipped.get(0)}; it defines the "
+                         f"display frame — check the board is in view, lit and not occluded")
     used = [k for k, d in enumerate(dets) if d is not None]
     if len(used) < min_views:
         raise ValueError(f"board found in only {len(used)} of {len(views)} views, need at least {min_views}: "
@@ -291,7 +295,8 @@ def _start_vector(obs: list, s0: np.ndarray, stereo_nominal: dict, fit_bow: bool
 
 
 def _prior_sqrt_inv(prior_cov: np.ndarray | None) -> np.ndarray | None:
-    """L⁻¹ of the prior's (regularised) Cholesky factor, or None without a prior. ``ValueError`` on a bad one."""
+    """L⁻¹ of the prior's (regularised) Cholesky factor, or None without a prior. ``ValueError`` on a bad
+    one."""
     if prior_cov is None:
         return None
     C = np.asarray(prior_cov, float)
@@ -305,8 +310,8 @@ _EX = np.array([1.0, 0.0, 0.0])
 
 
 class _BoardFit:
-    """The stereo bundle adjustment's residuals and analytic Jacobian (module doc, step 3): parameters x = the 24
-    stereo parameters, one pose (rotation vector, translation) per used view, and (``fit_bow``) the bow."""
+    """The stereo bundle adjustment's residuals and analytic Jacobian (module doc, step 3): parameters x = the
+    24 stereo parameters, one pose (rotation vector, translation) per used view, and (``fit_bow``) the bow."""
 
     def __init__(self, obs: list, P_sheet: np.ndarray, size: tuple, s0: np.ndarray, Linv: np.ndarray | None,
                  fit_bow: bool):
@@ -373,11 +378,13 @@ class _BoardFit:
         return self.model(v, sg, False)[0]
 
     def solve(self, x0: np.ndarray) -> tuple[np.ndarray, float]:
-        """Levenberg–Marquardt from ``x0``, σ re-estimated from the residuals and the fit repeated once: (x, σ)."""
+        """Levenberg–Marquardt from ``x0``, σ re-estimated from the residuals and the fit repeated once: (x,
+        σ)."""
         sigma = 0.1
         x = x0
         for _ in range(2):
-            sol = least_squares(self.residuals, x, jac=lambda v, sg: self.model(v, sg, True)[1], args=(sigma,),
+            sol = least_squares(self.residuals, x, jac=lambda v, sg: self.model(v, sg, True)[1],
+                                args=(sigma,),
                                 method="lm", x_scale="jac", max_nfev=400)
             x = sol.x
             data = sol.fun[:self.n_res] * sigma
@@ -409,16 +416,17 @@ def _home_residual(fit: _BoardFit, st: dict, T_dc: np.ndarray, bow: float) -> np
 
 
 def estimate_camera_pose(views: list[tuple[np.ndarray, np.ndarray]], board: BoardSpec, stereo_nominal: dict,
-                         T_dc_nominal: np.ndarray, *, offset: float = 0.0, prior_cov: np.ndarray | None = None,
+                         T_dc_nominal: np.ndarray, *, offset: float = 0.0,
+                         prior_cov: np.ndarray | None = None,
                          min_views: int = 3, max_rms_px: float = 0.6, fit_bow: bool = True,
                          max_bow_mm: float = 1.0) -> CameraPoseResult:
     """Estimate the stereo camera's pose in the display frame (module doc).
 
     ``views``: stereo pairs (left, right) mono8 (H, W); ``views[0]`` at the home pose, the others at any
-    poses. ``stereo_nominal``: the stereo calibration dict to start from (``image_size``, K1, D1, K2, D2, R, T);
-    ``T_dc_nominal`` (4, 4): the design mount (resolves the chessboard's 180° ambiguity; error tolerated
-    ≲ 10 cm). ``offset`` m: see :func:`board_points`. ``prior_cov`` (24, 24): covariance of the nominal
-    stereo parameters (:func:`load_prior`); ``None`` fits them without a prior (needs many, varied views).
+    poses. ``stereo_nominal``: the stereo calibration dict to start from (``image_size``, K1, D1, K2, D2, R,
+    T); ``T_dc_nominal`` (4, 4): the design mount (resolves the chessboard's 180° ambiguity; error tolerated ≲
+    10 cm). ``offset`` m: see :func:`board_points`. ``prior_cov`` (24, 24): covariance of the nominal stereo
+    parameters (:func:`load_prior`); ``None`` fits them without a prior (needs many, varied views).
     ``min_views``: usable views required (home included). ``fit_bow``: also fit the board's bow (one
     parameter: a paraboloid sag, m at the farthest corner, toward the user) — a bow of 0.25 mm otherwise costs
     0.9 mm of camera pose (the views fit a flat board just as well with other intrinsics); a fitted bow above
@@ -432,7 +440,8 @@ def estimate_camera_pose(views: list[tuple[np.ndarray, np.ndarray]], board: Boar
     for k in used:
         ids, ul, ur = dets[k]
         obs.append((P_sheet[ids], ul, ur))
-    x0 = _start_vector(obs, s0, stereo_nominal, fit_bow)  # starting poses: PnP with the nominal left intrinsics
+    # starting poses: PnP with the nominal left intrinsics
+    x0 = _start_vector(obs, s0, stereo_nominal, fit_bow)
     fit = _BoardFit(obs, P_sheet, size, s0, _prior_sqrt_inv(prior_cov), fit_bow)
     x, sigma = fit.solve(x0)
     # covariance of (stereo 24, home pose 6) from the final Jacobian (residuals are σ-normalised)
@@ -440,8 +449,9 @@ def estimate_camera_pose(views: list[tuple[np.ndarray, np.ndarray]], board: Boar
     cov = np.linalg.pinv(J.T @ J)[:30, :30]
     rms, per_view = fit.rms(x)
     if rms > max_rms_px:
-        raise ValueError(f"board fit RMS {rms:.3f} px > {max_rms_px} px (per view {np.round(per_view, 3).tolist()}): "
-                         f"is the board flat on the sheet and still during each capture?")
+        raise ValueError(f"board fit RMS {rms:.3f} px > {max_rms_px} px (per view "
+                         f"{np.round(per_view, 3).tolist()}): is the board flat on the sheet and still "
+                         "during each capture?")
     st = stereo_from_vector(x[:24], size)
     R_cd = cv2.Rodrigues(x[24:27])[0]
     t_cd = x[27:30]
@@ -450,9 +460,10 @@ def estimate_camera_pose(views: list[tuple[np.ndarray, np.ndarray]], board: Boar
     T_dc[:3, 3] = -R_cd.T @ t_cd
     bow = float(x[-1]) if fit_bow else 0.0
     if abs(bow) * 1e3 > max_bow_mm:
-        raise ValueError(f"the board is bowed by {bow * 1e3:.2f} mm at its farthest corner (> {max_bow_mm} mm): fix it flat "
-                         f"on a rigid plate (docs/calibration.md)")
+        raise ValueError(f"the board is bowed by {bow * 1e3:.2f} mm at its farthest corner (> {max_bow_mm} "
+                         f"mm): fix it flat on a rigid plate (docs/calibration.md)")
     err = _home_residual(fit, st, T_dc, bow)               # triangulated home corners vs design
     return CameraPoseResult(T_dc, st, rms, float(np.sqrt(np.mean(np.sum(err ** 2, 1)))) * 1e3,
-                            float(np.sqrt(np.mean(err[:, 0] ** 2))) * 1e3, np.array(per_view), len(used), used,
+                            float(np.sqrt(np.mean(err[:, 0] ** 2))) * 1e3, np.array(per_view), len(used),
+                            used,
                             skipped, cov, sigma, bow * 1e3)

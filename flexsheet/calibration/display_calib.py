@@ -1,10 +1,10 @@
-"""``display.yaml``: the display's registration — where the camera, the projector, the arms and the eye are in the
-``display`` frame, and how each was measured (pure: numpy + OpenCV FileStorage + PyYAML).
+"""``display.yaml``: the display's registration — where the camera, the projector, the arms and the eye are in
+the ``display`` frame, and how each was measured (pure: numpy + OpenCV FileStorage + PyYAML).
 
-One file, written by ``flexsheet calibrate camera-pose | projector | arms | eye | display`` and named by a launch
-file (``display_calib:``). Each entry is optional while the lab works through the procedures; a consumer asks
-for the entries it needs with :meth:`DisplayCalib.require` (missing → ``ValueError`` naming the file and key)
-and may refuse stale ones with :meth:`DisplayCalib.stale`.
+One file, written by ``flexsheet calibrate camera-pose | projector | arms | eye |
+display`` and named by a launch file (``display_calib:``). Each entry is optional while the lab works through
+the procedures; a consumer asks for the entries it needs with :meth:`DisplayCalib.require` (missing →
+``ValueError`` naming the file and key) and may refuse stale ones with :meth:`DisplayCalib.stale`.
 
 Layout (OpenCV FileStorage YAML; matrices are ``!!opencv-matrix``, units m / rad / px)::
 
@@ -13,32 +13,24 @@ Layout (OpenCV FileStorage YAML; matrices are ``!!opencv-matrix``, units m / rad
        T_display_camera: 4x4      # left camera pose in the display frame
        image_width, image_height, K1, D1, K2, D2, R, T   # stereo model refined by the camera-pose fit
        cov: 30x30                 # covariance of (stereo parameters, pose) — optional
-       provenance: {method, measured_at, source, n_poses, residuals: {rms_px, residual_mm, ...}}
-    projector:
-       K: 3x3  D: 5x1  width, height
-       T_display_projector: 4x4   # columns of R = projector x (image right), y (image down), z (optical axis);
-                                  # translation = the projection centre P
-       provenance: {...}
-    arms:
-       left:  {T_display_base: 4x4, marker_offset: 3x1 (clamp marker in the clamp frame), provenance}
-       right: {...}
-    eye:
-       mode: fixed | tracked
-       V: 3x1  ipd: m  glasses_eye_offset: 3x1 (cyclopean eye in the glasses marker frame, tracked mode)
-       provenance: {...}
-    head_camera:                  # the camera facing the viewer (optional: without it the image is for V)
-       K: 3x3  D: 5x1  width, height
-       T_display_camera: 4x4      # its optical frame (+z forward, +x right, +y down) in the display frame
-       provenance: {...}
-    sheet:                        # the sheet's force under a fingertip, identified from pushes (optional)
-       contact_width: m  contact_growth: 1  own_stiffness: N  own_growth: N/m  stretching: N/m^3  strain_offset: 1
-       provenance: {...}          # residuals: median_pct, rms_pct (the model against the presses)
+       provenance: {method, measured_at, source, n_poses, residuals: {rms_px, residual_mm, ...}} projector: K:
+       3x3  D: 5x1  width, height T_display_projector: 4x4   # columns of R = projector x (image right), y
+       (image down), z (optical axis);
+                                  # translation = the projection centre P provenance: {...} arms: left:
+    {T_display_base: 4x4, marker_offset: 3x1 (clamp marker in the clamp frame), provenance} right: {...} eye:
+    mode: fixed | tracked V: 3x1  ipd: m  glasses_eye_offset: 3x1 (cyclopean eye in the glasses marker frame,
+    tracked mode) provenance: {...} head_camera:                  # the camera facing the viewer (optional:
+    without it the image is for V) K: 3x3  D: 5x1  width, height T_display_camera: 4x4      # its optical
+    frame (+z forward, +x right, +y down) in the display frame provenance: {...} sheet:
+    # the sheet's force under a fingertip, identified from pushes (optional) contact_width: m  contact_growth:
+    1 own_stiffness: N  own_growth: N/m  stretching: N/m^3  strain_offset: 1 provenance: {...}          #
+    residuals: median_pct, rms_pct (the model against the presses)
 
-``provenance.measured_at`` is ISO 8601 UTC; ``source`` is ``lab``, ``twin seed N`` or ``nominal``.
-The file is written with ``cv2.FileStorage`` (so OpenCV reads it back) and read with PyYAML's safe loader
-(the ``!!opencv-matrix`` maps checked by :mod:`flexsheet.vision.stereo_calibration`), so a hostile file never reaches
-OpenCV's parser. Frames: :mod:`flexsheet.model.geometry`.
-"""
+``provenance.measured_at`` is ISO 8601 UTC; ``source`` is ``lab``, ``twin seed N`` or ``nominal``. The file is
+written with ``cv2.FileStorage`` (so OpenCV reads it back) and read with PyYAML's safe loader (the
+``!!opencv-matrix`` maps checked by :mod:`flexsheet.vision.stereo_calibration`), so a hostile file never
+reaches OpenCV's parser. Frames: :mod:`flexsheet.model.geometry`.
+"""  # noqa: E501 - a table, template or command line kept whole
 
 from __future__ import annotations
 
@@ -58,7 +50,8 @@ from flexsheet.model.projector import Projector
 from flexsheet.vision.camera_model import DEFAULT_CAMERA_POSITION, camera_model, look_at
 
 __all__ = ["FORMAT_VERSION", "ENTRIES", "NOMINAL_CLAMP_MARKER", "NOMINAL_IPD", "Provenance", "CameraEntry",
-           "ProjectorEntry", "ArmEntry", "EyeEntry", "HeadCameraEntry", "SheetEntry", "DisplayCalib", "OPTIONAL", "nominal_display_calib",
+           "ProjectorEntry", "ArmEntry", "EyeEntry", "HeadCameraEntry", "SheetEntry", "DisplayCalib",
+           "OPTIONAL", "nominal_display_calib",
            "now_iso", "pose_from_rt", "xyzyaw_from_pose", "BOOTSTRAP_FILE", "STEREO_NAMES",
            "stereo_vector", "stereo_from_vector"]
 
@@ -74,12 +67,16 @@ NOMINAL_CLAMP_MARKER = (0.010, 0.0, 0.040)
 NOMINAL_IPD = 0.064
 
 
-#: bootstrap deviations of the shipped XIMEA stereo calibration (``python -m flexsheet.twin.truth --bootstrap``):
-#: the uncertainty the stereo calibration leaves, used as the camera-pose prior and as the truth's spread
-BOOTSTRAP_FILE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "vision", "ximea_calib_bootstrap.json")
+#: bootstrap deviations of the shipped XIMEA stereo calibration
+#: (``python -m flexsheet.twin.truth --bootstrap``): the uncertainty the stereo
+#: calibration leaves, used as the camera-pose prior and as the truth's spread
+BOOTSTRAP_FILE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "vision",
+                              "ximea_calib_bootstrap.json")
 
-STEREO_NAMES = [f"{c}_{n}" for c in ("left", "right") for n in ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2",
-                                                                  "k3")] + ["rx", "ry", "rz", "tx", "ty", "tz"]
+STEREO_NAMES = [f"{c}_{n}" for c in ("left", "right")
+                for n in ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2",
+                                                                  "k3")] + ["rx", "ry", "rz", "tx", "ty",
+                                                                            "tz"]
 
 
 def stereo_vector(calib: dict) -> np.ndarray:
@@ -91,7 +88,8 @@ def stereo_vector(calib: dict) -> np.ndarray:
         dd = np.asarray(D, float).ravel()[:5]
         d[:dd.size] = dd
         v += [K[0, 0], K[1, 1], K[0, 2], K[1, 2], *d]
-    v += list(cv2.Rodrigues(np.asarray(calib["R"], float))[0].ravel()) + list(np.asarray(calib["T"], float).ravel())
+    v += list(cv2.Rodrigues(np.asarray(calib["R"], float))[0].ravel()) + list(np.asarray(calib["T"],
+                                                                                         float).ravel())
     return np.array(v, float)
 
 
@@ -130,7 +128,8 @@ def xyzyaw_from_pose(T: np.ndarray, max_tilt_deg: float = 1.0) -> tuple[float, f
     T = check_pose("T", T)
     tilt = math.degrees(math.acos(max(-1.0, min(1.0, float(T[2, 2])))))
     if tilt > max_tilt_deg:
-        raise ValueError(f"base is tilted {tilt:.3f} deg > {max_tilt_deg} deg from vertical; use the 4x4 pose")
+        raise ValueError(f"base is tilted {tilt:.3f} deg > {max_tilt_deg} deg from vertical; use the 4x4 "
+                         "pose")
     yaw = math.atan2(float(T[1, 0]), float(T[0, 0]))
     return float(T[0, 3]), float(T[1, 3]), float(T[2, 3]), yaw
 
@@ -162,10 +161,11 @@ class Provenance:
 @dataclass
 class CameraEntry:
     """Stereo camera registration: ``T_display_camera`` (4, 4) left optical frame in the display frame, m;
-    ``stereo``: the stereo model that pose was fitted with (dict with ``image_size`` (w, h), K1, D1, K2, D2, R,
-    T — the format of :func:`flexsheet.vision.calib_yaml.load_yaml`), or ``None`` to keep the stereo file's;
-    ``cov`` (30, 30) or ``None``: covariance of (:func:`stereo_vector` of ``stereo``, the pose as the
-    display→left-camera rotation vector and translation), rad/m/px units — the prior later steps refine under."""
+    ``stereo``: the stereo model that pose was fitted with (dict with ``image_size`` (w, h), K1, D1, K2, D2,
+    R, T — the format of :func:`flexsheet.vision.calib_yaml.load_yaml`), or ``None`` to keep the stereo
+    file's; ``cov`` (30, 30) or ``None``: covariance of (:func:`stereo_vector` of ``stereo``, the pose as the
+    display→left-camera rotation vector and translation), rad/m/px units — the prior later steps refine
+    under."""
 
     T_display_camera: np.ndarray
     provenance: Provenance
@@ -191,7 +191,8 @@ class ProjectorEntry:
         return self.T_display_projector[:3, 3].copy()
 
     def projector(self):
-        """The pinhole :class:`flexsheet.model.projector.Projector` of this entry (``D`` is not part of it)."""
+        """The pinhole :class:`flexsheet.model.projector.Projector` of this entry (``D`` is not part of
+        it)."""
         return Projector(self.K.copy(), self.T_display_projector[:3, :3].copy(), self.position, self.width,
                          self.height)
 
@@ -235,8 +236,9 @@ class HeadCameraEntry:
 @dataclass
 class SheetEntry:
     """The sheet's force model identified from pushes (:mod:`flexsheet.calibration.sheet`): the terms of
-    :class:`flexsheet.model.tension.SheetMaterial` ``contact_width`` (m), ``contact_growth``, ``own_stiffness``
-    (N), ``own_growth`` (N/m), ``stretching`` (N/m³), ``strain_offset``, ``position_u`` and ``position_v``."""
+    :class:`flexsheet.model.tension.SheetMaterial` ``contact_width`` (m), ``contact_growth``,
+    ``own_stiffness`` (N), ``own_growth`` (N/m), ``stretching`` (N/m³), ``strain_offset``, ``position_u`` and
+    ``position_v``."""
 
     contact_width: float
     contact_growth: float
@@ -256,7 +258,8 @@ class SheetEntry:
 
 @dataclass
 class DisplayCalib:
-    """The whole ``display.yaml`` (module doc). Entries are ``None`` (``arms`` lacks the side) until measured."""
+    """The whole ``display.yaml`` (module doc). Entries are ``None`` (``arms`` lacks the side) until
+    measured."""
 
     camera: CameraEntry | None = None
     projector: ProjectorEntry | None = None
@@ -276,7 +279,8 @@ class DisplayCalib:
         return [n for n in names if self._entry(n) is None]
 
     def stale(self, max_age_s: float, names=ENTRIES, now: _dt.datetime | None = None) -> list[str]:
-        """Names whose entry is older than ``max_age_s`` seconds (or was never measured: ``source: nominal``)."""
+        """Names whose entry is older than ``max_age_s`` seconds (or was never measured: ``source:
+        nominal``)."""
         out = []
         for n in names:
             e = self._entry(n)
@@ -286,7 +290,8 @@ class DisplayCalib:
 
     def require(self, *names: str, max_age_s: float | None = None) -> DisplayCalib:
         """Raise ``ValueError`` naming the file and the entries that are missing (or stale, when ``max_age_s``
-        is given); returns ``self`` otherwise. ``names`` default to every entry but the :data:`OPTIONAL` ones."""
+        is given); returns ``self`` otherwise. ``names`` default to every entry but the :data:`OPTIONAL`
+        ones."""
         names = names or tuple(n for n in ENTRIES if n not in OPTIONAL)
         bad = [n for n in names if n not in ENTRIES]
         if bad:
@@ -307,18 +312,20 @@ class DisplayCalib:
         arms = dict(self.arms)
         arms.update(other.arms)
         return DisplayCalib(other.camera or self.camera, other.projector or self.projector, arms,
-                            other.eye or self.eye, other.path or self.path, other.head_camera or self.head_camera,
+                            other.eye or self.eye, other.path or self.path,
+                            other.head_camera or self.head_camera,
                             other.sheet or self.sheet)
 
 
 def nominal_display_calib() -> DisplayCalib:
-    """The display as the code's constants describe it (nothing measured; every provenance ``source: nominal``).
+    """The display as the code's constants describe it (nothing measured; every provenance ``source:
+    nominal``).
 
     Camera: the shipped XIMEA stereo calibration mounted at :func:`flexsheet.vision.camera_model.look_at`
     (``DEFAULT_CAMERA_POSITION``); projector: :meth:`flexsheet.model.projector.Projector.default`; arms:
     :data:`flexsheet.model.geometry.LEFT_BASE`/``RIGHT_BASE`` with :data:`NOMINAL_CLAMP_MARKER`; eye: the
-    paper's fixed V (:data:`flexsheet.model.geometry.EYE`). Estimators start from these; the twin's truth is drawn
-    around them (:mod:`flexsheet.twin.truth`).
+    paper's fixed V (:data:`flexsheet.model.geometry.EYE`). Estimators start from these; the twin's truth is
+    drawn around them (:mod:`flexsheet.twin.truth`).
     """
     nominal = Provenance("nominal (code constants)", source="nominal")
     cal = camera_model("ximea")

@@ -29,7 +29,7 @@ from flexsheet.vision.calib_yaml import read_cv_yaml
 __all__ = ["write_display_calib", "load_display_calib"]
 
 
-# ----------------------------------------------------------------------------------------------------- writing
+# ---------------------------------------------------------------------------------------------------- writing
 def _write_prov(fs: cv2.FileStorage, p: Provenance) -> None:
     fs.startWriteStruct("provenance", cv2.FileNode_MAP)
     fs.write("method", str(p.method))
@@ -121,7 +121,7 @@ def write_display_calib(path: str, calib: DisplayCalib) -> None:
         fs.release()
 
 
-# ----------------------------------------------------------------------------------------------------- reading
+# ---------------------------------------------------------------------------------------------------- reading
 def _checked_pose(key: str, T, path: str) -> np.ndarray:
     """:func:`flexsheet.model.checks.check_pose` naming the file and key."""
     return check_pose(f"{path}: {key}" if path else key, T)
@@ -135,7 +135,8 @@ def _vec(key: str, v, n: int, path: str) -> np.ndarray:
 
 
 def _check_intrinsics(name: str, e, path: str) -> None:
-    """Entry ``name``'s ``K`` (finite 3x3, positive focal lengths), ``D`` (5) and positive ``width``/``height``."""
+    """Entry ``name``'s ``K`` (finite 3x3, positive focal lengths), ``D`` (5) and positive
+    ``width``/``height``."""
     K = np.asarray(e.K, float)
     if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
         raise ValueError(f"{path}: {name}.K must be a finite 3x3 matrix with positive focal lengths")
@@ -157,7 +158,8 @@ def _validate(c: DisplayCalib, path: str) -> None:
                 _vec(f"camera.{k}", s.get(k, np.nan), n, path)
         if c.camera.cov is not None:
             C = np.asarray(c.camera.cov, float)
-            if C.shape != (30, 30) or not np.all(np.isfinite(C)) or np.abs(C - C.T).max() > 1e-9 * max(1.0, np.abs(C).max()):
+            if (C.shape != (30, 30) or not np.all(np.isfinite(C))
+                or np.abs(C - C.T).max() > 1e-9 * max(1.0, np.abs(C).max())):
                 raise ValueError(f"{path}: camera.cov must be a finite symmetric 30x30 matrix, got {C.shape}")
     if c.projector is not None:
         p = c.projector
@@ -208,7 +210,8 @@ def _read_prov(d: dict, prefix: str, path: str) -> Provenance:
             raise ValueError(f"{path}: {pre}residuals.{k} must be a finite number, got {v!r:.40}")
         residuals[str(k)] = float(v)
     return Provenance(str(_get(p, "method", pre, path, str)), str(_get(p, "measured_at", pre, path, str)),
-                      str(_get(p, "source", pre, path, str)), int(_get(p, "n_poses", pre, path, int)), residuals)
+                      str(_get(p, "source", pre, path, str)), int(_get(p, "n_poses", pre, path, int)),
+                      residuals)
 
 
 def load_display_calib(path: str, require: tuple[str, ...] = ()) -> DisplayCalib:
@@ -256,22 +259,26 @@ def load_display_calib(path: str, require: tuple[str, ...] = ()) -> DisplayCalib
                 raise ValueError(f"{path}: arms.{side}: side must be 'left' or 'right'")
             d = _get(arms, side, "arms.", path, dict)
             pre = f"arms.{side}."
-            out.arms[side] = ArmEntry(_checked_pose(pre + "T_display_base", mat(d, "T_display_base", pre), path),
+            out.arms[side] = ArmEntry(_checked_pose(pre + "T_display_base", mat(d, "T_display_base", pre),
+                                                    path),
                                       _vec(pre + "marker_offset", mat(d, "marker_offset", pre), 3, path),
                                       _read_prov(d, pre, path))
     if "eye" in doc:
         d = _get(doc, "eye", "", path, dict)
         off = d.get("glasses_eye_offset", np.zeros(3))
-        out.eye = EyeEntry(str(_get(d, "mode", "eye.", path, str)), _vec("eye.V", mat(d, "V", "eye."), 3, path),
+        out.eye = EyeEntry(str(_get(d, "mode", "eye.", path, str)),
+                           _vec("eye.V", mat(d, "V", "eye."), 3, path),
                            float(_get(d, "ipd", "eye.", path, float)), _read_prov(d, "eye.", path),
                            _vec("eye.glasses_eye_offset", off, 3, path))
     if "head_camera" in doc:
         d = _get(doc, "head_camera", "", path, dict)
         pre = "head_camera."
         out.head_camera = HeadCameraEntry(
-            mat(d, "K", pre), _vec(pre + "D", mat(d, "D", pre), 5, path), int(_get(d, "width", pre, path, int)),
+            mat(d, "K", pre), _vec(pre + "D", mat(d, "D", pre), 5, path),
+            int(_get(d, "width", pre, path, int)),
             int(_get(d, "height", pre, path, int)),
-            _checked_pose(pre + "T_display_camera", mat(d, "T_display_camera", pre), path), _read_prov(d, pre, path))
+            _checked_pose(pre + "T_display_camera", mat(d, "T_display_camera", pre), path),
+            _read_prov(d, pre, path))
     if "sheet" in doc:
         d = _get(doc, "sheet", "", path, dict)
         out.sheet = SheetEntry(*(float(_get(d, k, "sheet.", path, float)) if k in d or k not in OPTIONAL_TERMS

@@ -1,12 +1,13 @@
-"""The viewer's eye for the image correction: the paper's fixed viewpoint V, or eyes that follow tracked glasses.
+"""The viewer's eye for the image correction: the paper's fixed viewpoint V, or eyes that follow tracked
+glasses.
 
 * ``fixed`` (Furukawa et al. §IV): V from ``display.yaml`` (default 400 mm in front of the sheet centre); the
   left/right eyes sit ± IPD/2 along +y (:func:`flexsheet.model.projector.eye_positions`).
-* ``tracked`` (beyond the paper): three or more markers on the stereo glasses, triangulated by the same
-  stereo camera, give the glasses' pose (:func:`glasses_pose`, Kabsch/Umeyama least-squares rigid fit). The
-  cyclopean eye sits at a fixed offset in the glasses frame (:func:`glasses_eye_offset`, measured once with
-  the viewer in the reference position), and the eyes at ± IPD/2 along the glasses' x axis (from the right
-  lens to the left lens): :func:`flexsheet.vision.glasses.tracked_eyes`. The correction then follows the viewer's head.
+* ``tracked`` (beyond the paper): three or more markers on the stereo glasses, triangulated by the same stereo
+  camera, give the glasses' pose (:func:`glasses_pose`, Kabsch/Umeyama least-squares rigid fit). The cyclopean
+  eye sits at a fixed offset in the glasses frame (:func:`glasses_eye_offset`, measured once with the viewer
+  in the reference position), and the eyes at ± IPD/2 along the glasses' x axis (from the right lens to the
+  left lens): :func:`flexsheet.vision.glasses.tracked_eyes`. The correction then follows the viewer's head.
 
 Frames: ``display`` (:mod:`flexsheet.model.geometry`); the glasses frame: x from the right to the left lens,
 y up, z = x × y (toward the sheet when worn). Units m.
@@ -78,7 +79,9 @@ def glasses_eye_offset(T_display_glasses: np.ndarray, V_reference=geometry.EYE) 
 
 
 def tracked_eye_entry(V_fallback, ipd: float, eye_offset, source: str = "lab") -> EyeEntry:
-    """``display.yaml`` eye entry for ``eye: tracked`` (``V_fallback`` used while the glasses are not seen)."""
+    """``display.yaml`` eye entry for ``eye: tracked`` (``V_fallback`` used while the glasses are not
+    seen)."""
     e = fixed_eye(V_fallback, ipd, "tracked glasses (fallback V)", source)
-    return EyeEntry("tracked", e.V, e.ipd, Provenance("tracked glasses markers (Kabsch), eye offset in the glasses "
-                                                      "frame", source=source), _vec3("eye_offset", eye_offset))
+    return EyeEntry("tracked", e.V, e.ipd, Provenance("tracked glasses markers (Kabsch), eye offset in the "
+                                                      "glasses frame", source=source),
+                    _vec3("eye_offset", eye_offset))

@@ -1,4 +1,5 @@
-"""Registering the head camera and measuring the viewer's eye in the glasses (``flexsheet calibrate display``).
+"""Registering the head camera and measuring the viewer's eye in the glasses
+(``flexsheet calibrate display``).
 
 **Head camera** (intrinsics and pose in the display frame at once). The glasses' board
 (:class:`flexsheet.vision.glasses.GlassesBoard`) rides on the chin-rest fixture that defines the paper's
@@ -30,7 +31,8 @@ from flexsheet.vision.glasses import GLASSES_AXES, GlassesBoard
 
 __all__ = ["SITTINGS", "design_head_camera", "fixture_poses", "register_head_camera", "eye_entry"]
 
-#: the viewer's sittings on the chin rest for the eye offset (each places the eye to ~1 mm; their mean to ~0.45 mm)
+#: the viewer's sittings on the chin rest for the eye offset
+#: (each places the eye to ~1 mm; their mean to ~0.45 mm)
 SITTINGS = 5
 
 
@@ -48,9 +50,9 @@ def design_head_camera() -> tuple[np.ndarray, np.ndarray, int, int]:
 
 
 def fixture_poses(V=geometry.EYE) -> list[np.ndarray]:
-    """The chin-rest fixture's steps: T_display_glasses (4, 4) of the board's glasses frame at V + (dx, dy, dz)
-    for dx ∈ {−0.05, 0.05}, dy ∈ {−0.08, −0.04, 0, 0.04, 0.08}, dz ∈ {−0.04, 0, 0.04} m (30 steps), upright
-    and facing the sheet (:data:`~flexsheet.vision.glasses.GLASSES_AXES`)."""
+    """The chin-rest fixture's steps: T_display_glasses (4, 4) of the board's glasses frame at V + (dx, dy,
+    dz) for dx ∈ {−0.05, 0.05}, dy ∈ {−0.08, −0.04, 0, 0.04, 0.08}, dz ∈ {−0.04, 0, 0.04} m (30 steps),
+    upright and facing the sheet (:data:`~flexsheet.vision.glasses.GLASSES_AXES`)."""
     out = []
     for dx in (-0.05, 0.05):
         for dz in (-0.04, 0.0, 0.04):
@@ -98,22 +100,25 @@ def register_head_camera(detections: list[tuple[np.ndarray, np.ndarray]], poses:
     T_cd = np.eye(4)
     T_cd[:3, :3] = cv2.Rodrigues(rvecs[0])[0]
     T_cd[:3, 3] = np.asarray(tvecs[0]).ravel()
-    return HeadCameraEntry(K, np.asarray(D, float).ravel()[:5], int(size[0]), int(size[1]), np.linalg.inv(T_cd),
+    return HeadCameraEntry(K, np.asarray(D, float).ravel()[:5], int(size[0]), int(size[1]),
+                           np.linalg.inv(T_cd),
                            Provenance("glasses board on the chin-rest fixture, one non-planar rig "
                                       "(cv2.calibrateCamera)", source=source, n_poses=steps,
                                       residuals={"rms_px": float(rms)}))
 
 
-def eye_entry(T_display_glasses: list[np.ndarray], ipd: float, V=geometry.EYE, source: str = "lab") -> EyeEntry:
-    """The tracked eye entry from the glasses' tracked poses (4, 4), one per sitting of the viewer on the chin rest
-    (the eye at ``V`` (3,) m each time), and the pupillometer's ``ipd`` m: the mean of the sittings' eye offsets
-    (each sitting places the eye anew, so its error averages down). Raises ``ValueError`` without a pose or on
-    bad inputs."""
+def eye_entry(T_display_glasses: list[np.ndarray], ipd: float, V=geometry.EYE,
+              source: str = "lab") -> EyeEntry:
+    """The tracked eye entry from the glasses' tracked poses (4, 4), one per sitting of the viewer on the chin
+    rest (the eye at ``V`` (3,) m each time), and the pupillometer's ``ipd`` m: the mean of the sittings' eye
+    offsets (each sitting places the eye anew, so its error averages down). Raises ``ValueError`` without a
+    pose or on bad inputs."""
     poses = list(T_display_glasses)
     if not poses:
         raise ValueError("need at least one tracked glasses pose from the chin rest")
     offsets = np.array([glasses_eye_offset(T, V) for T in poses])
     entry = tracked_eye_entry(V, ipd, offsets.mean(axis=0), source)
     entry.provenance.n_poses = len(poses)
-    entry.provenance.residuals["offset_spread_mm"] = float(1e3 * offsets.std(axis=0).max()) if len(poses) > 1 else 0.0
+    entry.provenance.residuals["offset_spread_mm"] = (float(1e3 * offsets.std(axis=0).max()) if len(poses) > 1
+                                                      else 0.0)
     return entry

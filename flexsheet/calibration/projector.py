@@ -19,11 +19,12 @@ calibrated stereo camera instead of a checkerboard: the sheet needs no markings 
 4. Points found in both cameras are triangulated (Hartley–Sturm, :class:`flexsheet.vision.stereo.StereoModel`)
    with the camera-pose step's stereo model and placed in the display frame by its ``T_display_camera``.
 5. All poses' 3-D ↔ projector-pixel pairs form one non-planar rig: ``cv2.calibrateCamera`` with
-   ``CALIB_USE_INTRINSIC_GUESS`` from the nominal projector (fixed aspect ratio, no tangential terms, k1 only),
-   refitted on the inliers (points within 3σ) — K_p, distortion and the pose (:func:`estimate_projector`).
-6. Refined (:func:`flexsheet.calibration.projector_joint.refine_joint`) by maximum likelihood with the projector as a third camera: the residuals
-   are the correspondences' reprojection errors in the two camera images, where the noise is, with each
-   point's depth along its projector ray eliminated. The reprojection RMS is reported in projector pixels.
+   ``CALIB_USE_INTRINSIC_GUESS`` from the nominal projector (fixed aspect ratio, no tangential terms, k1
+   only), refitted on the inliers (points within 3σ) — K_p, distortion and the pose
+(:func:`estimate_projector`). 6. Refined (:func:`flexsheet.calibration.projector_joint.refine_joint`) by
+maximum likelihood with the projector as a third camera: the residuals are the correspondences' reprojection
+errors in the two camera images, where the noise is, with each point's depth along its projector ray
+eliminated. The reprojection RMS is reported in projector pixels.
 
 Errors (``ValueError``): fewer than ``min_poses`` poses, a pose whose patterns do not decode (dark sheet,
 projector off, wrong pattern order: too few valid pixels), or too few correspondences in both cameras.
@@ -81,9 +82,10 @@ def decode(images: list[np.ndarray], width: int, height: int, min_contrast: floa
     """Decode one camera's captures of :func:`gray_code_patterns` (same order) into projector coordinates.
 
     Returns ``(col, row, valid)``: int32 (H, W) projector column/row per camera pixel (−1 where invalid) and
-    the bool mask. Vectorised equivalent of ``GrayCodePattern.getProjPixel`` (checked against it in the
-    tests) with a shadow mask (white − black ≥ ``min_contrast`` DN) and a per-bit reliability test
-    (|pattern − inverse| ≥ ``min_bit_contrast`` DN; 5 is OpenCV's ``whiteThreshold`` default). Raises ``ValueError`` on a wrong image count or shape.
+    the bool mask. Vectorised equivalent of ``GrayCodePattern.getProjPixel`` (checked against it in the tests)
+    with a shadow mask (white − black ≥ ``min_contrast`` DN) and a per-bit reliability test (|pattern −
+    inverse| ≥ ``min_bit_contrast`` DN; 5 is OpenCV's ``whiteThreshold`` default). Raises ``ValueError`` on a
+    wrong image count or shape.
     """
     nc, nr = _nbits(width), _nbits(height)
     need = 2 * (nc + nr) + 2
@@ -122,9 +124,9 @@ def grid_correspondences(col: np.ndarray, row: np.ndarray, valid: np.ndarray, sp
                          min_pixels: int = 12) -> tuple[np.ndarray, np.ndarray]:
     """Sub-pixel camera positions of projector grid points from one camera's decoded maps.
 
-    For every grid point (u, v) = spacing·(i, j), the valid camera pixels whose code lies in its cell
-    (|col − u| ≤ spacing/2, |row − v| ≤ spacing/2) fit (col, row) = A (x, y) + b by least squares; one pass
-    drops pixels off by > 1.5 projector px (mis-decoded bits) and refits. Returns ``(proj (M, 2), cam (M, 2))``:
+    For every grid point (u, v) = spacing·(i, j), the valid camera pixels whose code lies in its cell (|col −
+    u| ≤ spacing/2, |row − v| ≤ spacing/2) fit (col, row) = A (x, y) + b by least squares; one pass drops
+    pixels off by > 1.5 projector px (mis-decoded bits) and refits. Returns ``(proj (M, 2), cam (M, 2))``:
     projector points (px) and their raw camera positions (px), for cells with ≥ ``min_pixels`` pixels whose
     solution lies within their pixels' extent.
     """
@@ -144,12 +146,15 @@ def grid_correspondences(col: np.ndarray, row: np.ndarray, valid: np.ndarray, sp
     for _ in range(2):
         sol, ok = _cell_fit(inv, len(keys), x, y, c, r, keep)
         if _ == 0:
-            pc = sol["a"][inv, 0] + sol["a"][inv, 1] * (x - sol["mx"][inv]) + sol["a"][inv, 2] * (y - sol["my"][inv])
-            pr = sol["b"][inv, 0] + sol["b"][inv, 1] * (x - sol["mx"][inv]) + sol["b"][inv, 2] * (y - sol["my"][inv])
+            pc = (sol["a"][inv, 0] + sol["a"][inv, 1] * (x - sol["mx"][inv])
+                  + sol["a"][inv, 2] * (y - sol["my"][inv]))
+            pr = (sol["b"][inv, 0] + sol["b"][inv, 1] * (x - sol["mx"][inv])
+                  + sol["b"][inv, 2] * (y - sol["my"][inv]))
             keep = ok[inv] & (np.abs(pc - c) <= 1.5) & (np.abs(pr - r) <= 1.5)
     u = (keys // 100003).astype(np.float64) * spacing
     v = (keys % 100003).astype(np.float64) * spacing
-    A = np.stack([np.stack([sol["a"][:, 1], sol["a"][:, 2]], -1), np.stack([sol["b"][:, 1], sol["b"][:, 2]], -1)], 1)
+    A = np.stack([np.stack([sol["a"][:, 1], sol["a"][:, 2]], -1),
+                  np.stack([sol["b"][:, 1], sol["b"][:, 2]], -1)], 1)
     rhs = np.stack([u - sol["a"][:, 0], v - sol["b"][:, 0]], -1)
     det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
     good = ok & (np.abs(det) > 1e-6)
@@ -209,8 +214,8 @@ def triangulate_pose(frames: list[tuple[np.ndarray, np.ndarray]], width: int, he
     """Decode one pose's stereo captures of :func:`gray_code_patterns`, find grid correspondences in both
     cameras and triangulate them into the display frame. ``stereo``: the stereo dict the camera-pose step
     refined; ``T_display_camera`` (4, 4). Matches whose epipolar residual exceeds ``max_epipolar_px`` are
-    dropped. Raises ``ValueError`` if either camera decodes fewer than ``min_valid_pixels`` pixels or fewer than
-    20 grid points, or fewer than 20 points are seen by both."""
+    dropped. Raises ``ValueError`` if either camera decodes fewer than ``min_valid_pixels`` pixels or fewer
+    than 20 grid points, or fewer than 20 points are seen by both."""
     lefts = [f[0] for f in frames]
     rights = [f[1] for f in frames]
     model = StereoModel.from_calib(stereo)
@@ -223,16 +228,16 @@ def triangulate_pose(frames: list[tuple[np.ndarray, np.ndarray]], width: int, he
             lit = float(np.percentile(imgs[-2].astype(float) - imgs[-1].astype(float), 95))
             raise ValueError(f"patterns did not decode in the {side} camera: {nv} valid pixels (need "
                              f"{min_valid_pixels}), {len(proj)} grid points (need 20); white−black contrast "
-                             f"{lit:.1f} DN on the brightest 5 % of the image (need ≥ {min_contrast} DN, and well "
-                             f"above the noise): sheet too dark, projector off or out of focus, or frames out of "
-                             f"order")
+                             f"{lit:.1f} DN on the brightest 5 % of the image (need ≥ {min_contrast} DN, and "
+                             "well above the noise): sheet too dark, projector off or out of focus, or "
+                             f"frames out of order")
         res[side] = (proj, cam, nv)
     (pl, cl, nl), (pr, cr, nr) = res["left"], res["right"]
     kl = {(int(u), int(v)): i for i, (u, v) in enumerate(pl)}
     pairs = [(kl[(int(u), int(v))], j) for j, (u, v) in enumerate(pr) if (int(u), int(v)) in kl]
     if len(pairs) < 20:
-        raise ValueError(f"only {len(pairs)} projector points seen by both cameras (need >= 20): is the sheet in "
-                         f"view of both?")
+        raise ValueError(f"only {len(pairs)} projector points seen by both cameras (need >= 20): is the "
+                         f"sheet in view of both?")
     il, ir = np.array(pairs).T
     ul = model.undistort(cl[il], "left")
     ur = model.undistort(cr[ir], "right")
@@ -269,8 +274,8 @@ def estimate_projector(poses: list[PoseCorrespondences], K_guess: np.ndarray, si
     poses (a single flat pose cannot separate focal length from distance) or fewer than 50 points.
     """
     if len(poses) < min_poses:
-        raise ValueError(f"projector calibration needs at least {min_poses} sheet poses (home and tilts), got "
-                         f"{len(poses)}")
+        raise ValueError(f"projector calibration needs at least {min_poses} sheet poses (home and tilts), "
+                         f"got {len(poses)}")
     X = np.concatenate([p.X for p in poses]).astype(np.float64)
     uv = np.concatenate([p.uv for p in poses]).astype(np.float64)
     if len(X) < 50:
@@ -285,7 +290,8 @@ def estimate_projector(poses: list[PoseCorrespondences], K_guess: np.ndarray, si
     K, D, rv, tv = np.asarray(K_guess, float).copy(), np.zeros(5), None, None
     for _ in range(2):
         rms, K, D, rvs, tvs = cv2.calibrateCamera([X[keep].astype(np.float32)], [uv[keep].astype(np.float32)],
-                                                  tuple(int(s) for s in size), K.copy(), D.copy(), flags=flags,
+                                                  tuple(int(s) for s in size), K.copy(), D.copy(),
+                                                  flags=flags,
                                                   criteria=crit)
         rv, tv = rvs[0], tvs[0]
         pred = cv2.projectPoints(X, rv, tv, K, D)[0].reshape(-1, 2)
@@ -293,7 +299,8 @@ def estimate_projector(poses: list[PoseCorrespondences], K_guess: np.ndarray, si
         s = 1.4826 * np.median(err[keep])
         keep = err <= max(3.0 * s, 0.05)
     rms = float(np.sqrt(np.mean(err[keep] ** 2)))
-    per_pose = [float(np.sqrt(np.mean(err[keep & (which == k)] ** 2))) if np.any(keep & (which == k)) else math.nan
+    per_pose = [float(np.sqrt(np.mean(err[keep & (which == k)] ** 2))) if np.any(keep & (which == k))
+                else math.nan
                 for k in range(len(poses))]
     R = cv2.Rodrigues(rv)[0]                      # display -> projector
     T = np.eye(4)

@@ -1,6 +1,6 @@
-"""The joint refinement of the registration (:func:`refine_joint`): the stereo camera's intrinsics and pose and
-the projector's intrinsics and pose fitted together to the decoded Gray-code correspondences of every sheet
-pose, by nonlinear least squares on the camera-image reprojection errors (each point's depth along its
+"""The joint refinement of the registration (:func:`refine_joint`): the stereo camera's intrinsics and pose
+and the projector's intrinsics and pose fitted together to the decoded Gray-code correspondences of every
+sheet pose, by nonlinear least squares on the camera-image reprojection errors (each point's depth along its
 projector ray eliminated), with the camera calibration's covariance as a prior. Units: m, px."""
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ __all__ = ["JointResult", "refine_joint"]
 
 @dataclass
 class JointResult:
-    """Result of :func:`refine_joint`: the refined ``stereo`` dict and ``T_display_camera`` (4, 4), the projector
-    ``K`` (3, 3), ``D`` (5,), ``T_display_projector`` (4, 4); ``sigma_px`` the camera-pixel σ of the
+    """Result of :func:`refine_joint`: the refined ``stereo`` dict and ``T_display_camera`` (4, 4), the
+    projector ``K`` (3, 3), ``D`` (5,), ``T_display_projector`` (4, 4); ``sigma_px`` the camera-pixel σ of the
     correspondences; ``reprojection_px`` RMS in projector px of the re-triangulated points; ``n_points``."""
 
     stereo: dict
@@ -151,7 +151,8 @@ class _JointFit:
         sigma = 0.05
         v = self.full0[self.free].copy()
         for it in range(2):
-            sol = least_squares(self.fun, v, jac=self.jac, args=(sigma,), method="lm", x_scale="jac", max_nfev=60)
+            sol = least_squares(self.fun, v, jac=self.jac, args=(sigma,), method="lm", x_scale="jac",
+                                max_nfev=60)
             v = sol.x
             if it == 0:
                 res = self.cam_res(self.expand(v), self.points(self.expand(v), self.state["lam"]))
@@ -180,7 +181,8 @@ class _JointFit:
         T_dp[:3, 3] = -R_pd.T @ th[37:40]
         # reprojection in projector px of the points triangulated with the (refined) stereo model
         model = StereoModel.from_calib(st)
-        Xl = model.triangulate(model.undistort(self.lp[keep], "left"), model.undistort(self.rp[keep], "right"),
+        Xl = model.triangulate(model.undistort(self.lp[keep], "left"),
+                               model.undistort(self.rp[keep], "right"),
                                "optimal")
         Xd = Xl @ T_dc[:3, :3].T + T_dc[:3, 3]
         pred = cv2.projectPoints(Xd, th[34:37].copy(), th[37:40].copy(), Kp, Dp)[0].reshape(-1, 2)
@@ -189,23 +191,25 @@ class _JointFit:
 
 
 def refine_joint(poses: list[PoseCorrespondences], stereo: dict, T_display_camera: np.ndarray,
-                 camera_cov: np.ndarray | None, K: np.ndarray, D: np.ndarray, T_display_projector: np.ndarray, *,
-                 max_points: int = 3000, fit_k1: bool = True, n_effective: float | None = 200.0) -> JointResult:
+                 camera_cov: np.ndarray | None, K: np.ndarray, D: np.ndarray, T_display_projector: np.ndarray,
+                 *,
+                 max_points: int = 3000, fit_k1: bool = True,
+                 n_effective: float | None = 200.0) -> JointResult:
     """Maximum-likelihood projector (and optionally camera) refinement: the projector is a third camera.
 
     Each correspondence is a point on the ray of its projector pixel (u, v) at an unknown depth λ; its
     residuals are its reprojection errors in both camera images (px) — where the measurement noise is, unlike
     :func:`estimate_projector`, which treats the triangulated points as exact (their depth noise then biases
     the principal point and the rotation: 0.27° on one twin seed, 0.04° after this step). Parameters: the
-    projector's f (fx = fy), cx, cy, k1 and pose; with ``camera_cov`` (30, 30) also the 24 stereo parameters and
-    the camera pose, under the camera-pose step's estimate as a Gaussian prior (``None``: camera fixed, the
-    default of :mod:`flexsheet.calibration.procedures`). The depths are eliminated by variable projection
+    projector's f (fx = fy), cx, cy, k1 and pose; with ``camera_cov`` (30, 30) also the 24 stereo parameters
+    and the camera pose, under the camera-pose step's estimate as a Gaussian prior (``None``: camera fixed,
+    the default of :mod:`flexsheet.calibration.procedures`). The depths are eliminated by variable projection
     (Golub & Pereyra 1973): each λ is solved by Gauss–Newton for the current parameters and the Jacobian
     (finite differences) is projected onto the complement of ∂r/∂λ. Start: the triangulated points and the
-    :func:`estimate_projector` result. Points off by > 4σ after a first pass are dropped. ``n_effective``:
-    the correspondences share systematic errors (decoding, sampling) that do not average out, so they are
-    weighted as this many independent points (matters only when the camera is free). Raises ``ValueError``
-    on a bad covariance or fewer than 50 points.
+    :func:`estimate_projector` result. Points off by > 4σ after a first pass are dropped. ``n_effective``: the
+    correspondences share systematic errors (decoding, sampling) that do not average out, so they are weighted
+    as this many independent points (matters only when the camera is free). Raises ``ValueError`` on a bad
+    covariance or fewer than 50 points.
     """
     uv, lp, rp, X0 = _joint_points(poses, max_points)
     Lc = _camera_prior_sqrt_inv(camera_cov)

@@ -10,17 +10,18 @@ at a few depths. The planner's sheet model (:mod:`flexsheet.model.tension`),
 is fitted to them: T is the nominal neo-Hookean tension (its modulus error goes into w), ε₀ the sheet's own
 strain offset (pre-strain less grip slip), w the band width, w₂ its growth with depth, b and a the sheet's own
 stiffness that does not scale with the pull, c the membrane's stretching, p_u and p_v where the finger presses
-(the presses at the centre, toward a clamp and toward a free edge set them). For given (ε₀, p_u, p_v) the model is linear in
-(w, w₂, b, a, c) ≥ 0, so they come from a non-negative weighted
-least squares (``scipy.optimize.nnls``) in relative error, floored at the load cell's noise: weights
-1/(σ₀ + F), σ₀ = :data:`NOISE_N` — what a finger tells apart is a ratio (the Weber fraction), and weighting
-by the noise alone (1/(σ₀ + 0.5 %·F)) let the deep presses set the fit and left the 2 mm presses 14 % light
-(median; 4 % with relative weights; docs/figures/calibration/sheet); ε₀ is the bounded scalar
-minimum of that fit's residual (``scipy.optimize.minimize_scalar``), then (ε₀, p_u, p_v) together from there
-(Nelder–Mead; p_u needs presses at two distances along the clamp line, p_v two across, else it stays 0). The
-residual reported is the median and RMS relative error of the model against the presses.
+(the presses at the centre, toward a clamp and toward a free edge set them). For given (ε₀, p_u, p_v) the
+model is linear in (w, w₂, b, a, c) ≥ 0, so they come from a non-negative weighted least squares
+(``scipy.optimize.nnls``) in relative error, floored at the load cell's noise: weights 1/(σ₀ + F), σ₀ =
+:data:`NOISE_N` — what a finger tells apart is a ratio (the Weber fraction), and weighting by the noise alone
+(1/(σ₀ + 0.5 %·F)) let the deep presses set the fit and left the 2 mm presses 14 % light (median; 4 % with
+relative weights; docs/figures/calibration/sheet); ε₀ is the bounded scalar minimum of that fit's residual
+(``scipy.optimize.minimize_scalar``), then (ε₀, p_u, p_v) together from there (Nelder–Mead; p_u needs presses
+at two distances along the clamp line, p_v two across, else it stays 0). The residual reported is the median
+and RMS relative error of the model against the presses.
 
-Units: m, N, N/m; strain dimensionless. Frames: the sheet's (u along the clamp line from the centre, v across).
+Units: m, N, N/m; strain dimensionless. Frames: the sheet's (u along the clamp line from the centre, v
+across).
 """
 
 from __future__ import annotations
@@ -36,8 +37,8 @@ __all__ = ["Press", "PRESS_STRETCHES", "PRESS_POINTS", "PRESS_DEPTHS", "plan_pre
            "OPTIONAL_TERMS",
            "with_terms", "fit_sheet", "model_error", "relative_errors"]
 
-#: clamp strains pressed at: dense over the strains the display works at (0.005–0.05), and 0.08 for the stiff end
-#: (the bridges' span band is 0.01–0.10)
+#: clamp strains pressed at: dense over the strains the display works at
+#: (0.005–0.05), and 0.08 for the stiff end (the bridges' span band is 0.01–0.10)
 PRESS_STRETCHES = (0.005, 0.01, 0.015, 0.02, 0.025, 0.03, 0.04, 0.05, 0.08)
 #: contact points (u, v), m from the sheet centre: the centre, toward a clamp and toward a free edge
 PRESS_POINTS = ((0.0, 0.0), (0.036, 0.0), (0.072, 0.0), (0.0, 0.036), (0.036, 0.036))
@@ -49,8 +50,8 @@ NOISE_N, NOISE_REL = 0.005, 0.005
 
 @dataclass(frozen=True)
 class Press:
-    """One reading: clamp strain ``stretch``, contact ``offset_u``/``offset_v`` (m), probe ``depth`` (m) along the
-    sheet's normal from the flat sheet, ``force`` (N) on the load cell."""
+    """One reading: clamp strain ``stretch``, contact ``offset_u``/``offset_v`` (m), probe ``depth`` (m) along
+    the sheet's normal from the flat sheet, ``force`` (N) on the load cell."""
 
     stretch: float
     offset_u: float
@@ -69,15 +70,16 @@ def plan_presses(stretches=PRESS_STRETCHES, points=PRESS_POINTS, depths=PRESS_DE
         raise ValueError(f"stretches must be finite and >= 0, got {stretches!r}")
     if any(not d > 0.0 for d in depths) or np.any(np.diff(depths) <= 0):
         raise ValueError(f"depths must be > 0 and increasing, got {depths!r}")
-    return [(float(s), float(u), float(v), tuple(float(d) for d in depths)) for s in stretches for u, v in points]
+    return [(float(s), float(u), float(v), tuple(float(d) for d in depths)) for s in stretches for u,
+            v in points]
 
 
 @dataclass(frozen=True)
 class SheetFit:
     """The identified model: ``contact_width`` w (m), ``contact_growth`` w₂, ``own_stiffness`` b (N),
-    ``own_growth`` a (N/m), ``stretching`` c (N/m³), ``strain_offset`` ε₀, ``position_u`` p_u, ``position_v`` p_v;
-    ``median_pct``/``rms_pct``: the
-    model's relative error against the presses, %; ``n``: presses used."""
+    ``own_growth`` a (N/m), ``stretching`` c (N/m³), ``strain_offset`` ε₀, ``position_u`` p_u, ``position_v``
+    p_v; ``median_pct``/``rms_pct``: the model's relative error against the presses, %; ``n``: presses
+    used."""
 
     contact_width: float
     contact_growth: float
@@ -96,7 +98,8 @@ class SheetFit:
         return with_terms(self, base)
 
 
-#: the identified terms of :class:`~flexsheet.model.tension.SheetMaterial`, as the fit and ``display.yaml`` name them
+#: the identified terms of :class:`~flexsheet.model.tension.SheetMaterial`,
+#: as the fit and ``display.yaml`` name them
 TERMS = ("contact_width", "contact_growth", "own_stiffness", "own_growth", "stretching", "strain_offset",
          "position_u", "position_v")
 #: the :data:`TERMS` an older sheet entry may lack: read as 0 (the string band's, no position term)
@@ -121,7 +124,8 @@ def _columns(presses: list[Press], mat: SheetMaterial) -> np.ndarray:
     return np.array(rows)
 
 
-def fit_sheet(presses: list[Press], base: SheetMaterial | None = None, offset_bound: float = 0.03) -> SheetFit:
+def fit_sheet(presses: list[Press], base: SheetMaterial | None = None,
+              offset_bound: float = 0.03) -> SheetFit:
     """Fit the model (module doc) to ``presses`` on top of ``base`` (nominal E, thickness, size). Raises
     ``ValueError`` with fewer than 4 presses, a non-finite or negative reading, or presses at one strain only
     (ε₀ and w cannot be told apart)."""
@@ -133,7 +137,8 @@ def fit_sheet(presses: list[Press], base: SheetMaterial | None = None, offset_bo
     for i, p in enumerate(presses):
         vals = (p.stretch, p.offset_u, p.offset_v, p.depth, p.force)
         if not all(math.isfinite(x) for x in vals) or p.depth <= 0.0 or p.force < 0.0 or p.stretch < 0.0:
-            raise ValueError(f"press {i}: stretch, depth and force must be finite, depth > 0 and force >= 0, got {p}")
+            raise ValueError(f"press {i}: stretch, depth and force must be finite, depth > 0 and force >= 0, "
+                             f"got {p}")
     if len({round(p.stretch, 6) for p in presses}) < 2:
         raise ValueError("presses at two clamp strains at least are needed to separate the strain offset")
     F = np.array([p.force for p in presses])

@@ -1,6 +1,7 @@
 """Where the procedures get their frames in the lab: captured images (:class:`ImageDirSource`; the twin's
-source is :class:`flexsheet.twin.registration.TwinSource`). Both hand the same estimators the same things — stereo pairs and the commanded
-inputs (sheet poses, projector patterns, joint vectors) — so the lab and the twin run one code path.
+source is :class:`flexsheet.twin.registration.TwinSource`). Both hand the same estimators the same things —
+stereo pairs and the commanded inputs (sheet poses, projector patterns, joint vectors) — so the lab and the
+twin run one code path.
 
 Captured-images layout (``--images DIR``; :func:`save_frames` writes it, e.g. from the twin)::
 
@@ -14,8 +15,8 @@ Captured-images layout (``--images DIR``; :func:`save_frames` writes it, e.g. fr
                          "projector": {"width": 1024, "height": 768},
                          "head": {"ipd": 0.0635}}                  # the pupillometer's reading, m
 
-Images are 8-bit grayscale (PNG or any format ``cv2.imread`` reads), raw (not rectified), each ideally the mean
-of several frames (the procedures' precision assumes averaging; see docs/calibration.md).
+Images are 8-bit grayscale (PNG or any format ``cv2.imread`` reads), raw (not rectified), each ideally the
+mean of several frames (the procedures' precision assumes averaging; see docs/calibration.md).
 """
 
 from __future__ import annotations
@@ -85,11 +86,13 @@ class ImageDirSource:
         """The head camera's images of the chin-rest fixture's steps (``head/fixtureNN.*``, one per pose)."""
         files = sorted(glob.glob(os.path.join(self.root, "head", "fixture*.*")))
         if len(files) != len(poses):
-            raise ValueError(f"{self.root}/head: {len(files)} fixture images, expected {len(poses)} (one per step)")
+            raise ValueError(f"{self.root}/head: {len(files)} fixture images, expected {len(poses)} (one per "
+                             "step)")
         return [_read(f) for f in files]
 
     def head_chin_rest_images(self) -> list[np.ndarray]:
-        """The head camera's images of the viewer on the chin rest, one per sitting (``head/chin_restNN.*``)."""
+        """The head camera's images of the viewer on the chin rest, one per sitting
+        (``head/chin_restNN.*``)."""
         files = sorted(glob.glob(os.path.join(self.root, "head", "chin_rest*.*")))
         if not files:
             raise ValueError(f"no {self.root}/head/chin_rest00.png (the viewer on the chin rest, glasses on)")
@@ -100,7 +103,8 @@ class ImageDirSource:
         try:
             ipd = float(self.manifest["head"]["ipd"])
         except (KeyError, TypeError, ValueError):
-            raise ValueError(f"{self.root}/manifest.json lacks head.ipd (the pupillometer's reading, m)") from None
+            raise ValueError(f"{self.root}/manifest.json lacks head.ipd (the pupillometer's reading, "
+                             "m)") from None
         if not 0.0 < ipd <= 0.1:
             raise ValueError(f"{self.root}/manifest.json: head.ipd must be in (0, 0.1] m, got {ipd!r}")
         return ipd
@@ -108,7 +112,8 @@ class ImageDirSource:
     def board_views(self, board, sheet_poses=None, offset: float = 0.0) -> list[Pair]:
         views = _pairs(os.path.join(self.root, "camera_pose", "view*_{side}.*"))
         if not views:
-            raise ValueError(f"no board views in {os.path.join(self.root, 'camera_pose')} (view00_left.png, ...)")
+            raise ValueError(f"no board views in {os.path.join(self.root, 'camera_pose')} (view00_left.png, "
+                             "...)")
         return views
 
     def n_projector_poses(self) -> int:
@@ -118,7 +123,8 @@ class ImageDirSource:
         d = os.path.join(self.root, "projector", f"pose{index:02d}")
         frames = _pairs(os.path.join(d, "img*_{side}.*"))
         if len(frames) != len(patterns):
-            raise ValueError(f"{d}: {len(frames)} image pairs, expected {len(patterns)} (one per pattern, in order)")
+            raise ValueError(f"{d}: {len(frames)} image pairs, expected {len(patterns)} (one per pattern, in "
+                             "order)")
         return frames
 
     def marker_frames(self, side: str, joints=None) -> tuple[list[Pair], list[np.ndarray]]:
@@ -127,13 +133,16 @@ class ImageDirSource:
         try:
             q = [np.asarray(v, float) for v in self.manifest["arms"][side]["joints"]]
         except (KeyError, TypeError):
-            raise ValueError(f"{self.root}/manifest.json lacks arms.{side}.joints (commanded joints, rad)") from None
+            raise ValueError(f"{self.root}/manifest.json lacks arms.{side}.joints (commanded joints, "
+                             "rad)") from None
         if len(q) != len(frames) or any(v.shape != (6,) for v in q):
-            raise ValueError(f"arms.{side}: {len(frames)} image pairs but {len(q)} joint vectors (each 6 numbers)")
+            raise ValueError(f"arms.{side}: {len(frames)} image pairs but {len(q)} joint vectors (each 6 "
+                             "numbers)")
         return frames, q
 
 
-def save_frames(root: str, *, board_views: list[Pair] | None = None, projector: list[list[Pair]] | None = None,
+def save_frames(root: str, *, board_views: list[Pair] | None = None,
+                projector: list[list[Pair]] | None = None,
                 arms: dict[str, tuple[list[Pair], list[np.ndarray]]] | None = None,
                 projector_size: tuple[int, int] | None = None,
                 head: tuple[list[np.ndarray], list[np.ndarray], float] | None = None) -> None:
@@ -185,9 +194,9 @@ def save_frames(root: str, *, board_views: list[Pair] | None = None, projector: 
 
 class PressFileSource:
     """A lab's probe readings for ``flexsheet calibrate sheet``: a CSV with a header row naming the columns
-    ``stretch`` (clamp strain), ``u_m``, ``v_m`` (contact from the sheet centre, m), ``depth_m`` (probe depth from
-    the flat sheet, m) and ``force_n`` (the load cell, N), one reading per row. Raises ``ValueError`` naming the
-    file, the row and the column of a missing or bad value."""
+    ``stretch`` (clamp strain), ``u_m``, ``v_m`` (contact from the sheet centre, m), ``depth_m`` (probe depth
+    from the flat sheet, m) and ``force_n`` (the load cell, N), one reading per row. Raises ``ValueError``
+    naming the file, the row and the column of a missing or bad value."""
 
     COLUMNS = ("stretch", "u_m", "v_m", "depth_m", "force_n")
 
@@ -209,13 +218,15 @@ class PressFileSource:
                     try:
                         vals.append(float(row[c]))
                     except (TypeError, ValueError):
-                        raise ValueError(f"{path}: row {i}: {c} must be a number, got {row[c]!r:.40}") from None
+                        raise ValueError(f"{path}: row {i}: {c} must be a number, got "
+                                         f"{row[c]!r:.40}") from None
                 self.readings.append(Press(*vals))
         if not self.readings:
             raise ValueError(f"{path}: no readings")
 
     def plan(self) -> list[tuple[float, float, float, tuple[float, ...]]]:
-        """The presses the readings were taken at: (stretch, u, v, depths) per (stretch, u, v), in file order."""
+        """The presses the readings were taken at: (stretch, u, v, depths) per (stretch, u, v), in file
+        order."""
         out: dict = {}
         for r in self.readings:
             out.setdefault((r.stretch, r.offset_u, r.offset_v), []).append(r.depth)

@@ -43,21 +43,24 @@ def _common(p: argparse.ArgumentParser, what: str) -> None:
     src.add_argument("--sim", action="store_true", help="frames from the twin (needs --truth-seed)")
     src.add_argument("--images", metavar="DIR", help="captured lab frames (layout: docs/calibration.md)")
     _twin_and_out(p)
-    p.add_argument("--quick", action="store_true", help="fewer poses (4 projector poses, 12 configurations per "
-                                                        "arm): faster, but the projector target can be missed")
+    p.add_argument("--quick", action="store_true", help="fewer poses (4 projector poses, 12 configurations "
+                                                        "per arm): faster, but the projector target can be "
+                                                        "missed")
 
 
 def _twin_and_out(p: argparse.ArgumentParser) -> None:
     """``--truth-seed``, ``--realism`` (with ``--sim``) and ``--out`` (the folder of display.yaml)."""
     p.add_argument("--truth-seed", type=int, default=None, help="twin truth seed (with --sim)")
     p.add_argument("--realism", choices=("realistic", "ideal"), default="realistic", help="twin realism")
-    p.add_argument("--out", required=True, metavar="DIR", help="folder of display.yaml (entry added/replaced)")
+    p.add_argument("--out", required=True, metavar="DIR", help="folder of display.yaml (entry "
+                                                               "added/replaced)")
 
 
 def _opts(a) -> P.Options:
     o = P.QUICK if getattr(a, "quick", False) else P.FULL
     kw = {}
-    for k in ("board", "square", "board_offset", "views", "board_frames", "projector_poses", "pattern_spacing",
+    for k in ("board", "square", "board_offset", "views", "board_frames", "projector_poses",
+              "pattern_spacing",
               "arm_configs", "prior"):
         v = getattr(a, k, None)
         if v is not None:
@@ -98,14 +101,18 @@ def camera_pose_main(argv: list[str] | None = None) -> int:
     """``flexsheet calibrate camera-pose``: the stereo camera's pose from a board on the sheet."""
     p = argparse.ArgumentParser(
         prog="flexsheet calibrate camera-pose", formatter_class=argparse.RawDescriptionHelpFormatter,
-        description="Stereo camera pose in the display frame from a board on the sheet at home (+ tilted views).",
+        description="Stereo camera pose in the display frame from a board on the sheet at home (+ tilted "
+                    "views).",
         epilog="example:\n  flexsheet calibrate camera-pose --sim --truth-seed 1 --quick --out /tmp/disp\n"
                "  flexsheet calibrate camera-pose --images lab/frames --out lab/")
     _common(p, "camera")
-    p.add_argument("--board", default=None, help="chessboard:COLSxROWS or charuco:NXxNY:SQ:MK:DICT (default 9x8)")
+    p.add_argument("--board", default=None, help="chessboard:COLSxROWS or charuco:NXxNY:SQ:MK:DICT (default "
+                                                 "9x8)")
     p.add_argument("--square", type=float, default=None, help="square side, m (default 0.022)")
-    p.add_argument("--board-offset", type=float, default=None, help="printed face above the sheet mid-plane, m")
-    p.add_argument("--views", type=int, default=None, help="board views incl. home (twin; default 21, quick 12)")
+    p.add_argument("--board-offset", type=float, default=None, help="printed face above the sheet mid-plane, "
+                                                                    "m")
+    p.add_argument("--views", type=int, default=None, help="board views incl. home (twin; default 21, quick "
+                                                           "12)")
     p.add_argument("--prior", default=None, help="stereo bootstrap JSON for the prior, or 'none'")
     a = p.parse_args(argv)
 
@@ -116,8 +123,8 @@ def camera_pose_main(argv: list[str] | None = None) -> int:
         entry, r = P.run_camera_pose(src, opts)
         calib.camera = entry
         path = _write(a.out, calib)
-        msg = (f"camera pose: {r.n_views} views, RMS {r.rms_px:.3f} px, home corners residual {r.residual_mm:.3f} mm "
-               f"(flatness {r.flatness_mm:.3f} mm)")
+        msg = (f"camera pose: {r.n_views} views, RMS {r.rms_px:.3f} px, home corners residual "
+               f"{r.residual_mm:.3f} mm (flatness {r.flatness_mm:.3f} mm)")
         if truth is not None:
             et, er = truth.camera_pose_error(entry.T_display_camera)
             msg += f"; error vs truth {et * 1e3:.3f} mm, {math.degrees(er):.4f} deg"
@@ -137,8 +144,10 @@ def projector_main(argv: list[str] | None = None) -> int:
         epilog="example:\n  flexsheet calibrate camera-pose --sim --truth-seed 1 --quick --out /tmp/disp\n"
                "  flexsheet calibrate projector --sim --truth-seed 1 --quick --out /tmp/disp")
     _common(p, "projector")
-    p.add_argument("--poses", dest="projector_poses", type=int, default=None, help="sheet poses (twin; default 6)")
-    p.add_argument("--spacing", dest="pattern_spacing", type=int, default=None, help="grid spacing, projector px")
+    p.add_argument("--poses", dest="projector_poses", type=int, default=None,
+                   help="sheet poses (twin; default 6)")
+    p.add_argument("--spacing", dest="pattern_spacing", type=int, default=None,
+                   help="grid spacing, projector px")
     a = p.parse_args(argv)
 
     def go():
@@ -164,10 +173,12 @@ def arms_main(argv: list[str] | None = None) -> int:
     """``flexsheet calibrate arms``: each arm's base pose from its clamp marker."""
     p = argparse.ArgumentParser(
         prog="flexsheet calibrate arms", formatter_class=argparse.RawDescriptionHelpFormatter,
-        description="Arm base poses from a clamp marker at N >= 8 joint configurations (needs the camera entry).",
+        description="Arm base poses from a clamp marker at N >= 8 joint configurations (needs the camera "
+                    "entry).",
         epilog="example:\n  flexsheet calibrate arms --sim --truth-seed 1 --quick --out /tmp/disp")
     _common(p, "arms")
-    p.add_argument("--configs", dest="arm_configs", type=int, default=None, help=f"configurations per arm (default {P.FULL.arm_configs}; "
+    p.add_argument("--configs", dest="arm_configs", type=int, default=None,
+                   help=f"configurations per arm (default {P.FULL.arm_configs}; "
                                                              f"--quick {P.QUICK.arm_configs})")
     p.add_argument("--side", choices=("left", "right", "both"), default="both")
     a = p.parse_args(argv)
@@ -195,7 +206,8 @@ def eye_main(argv: list[str] | None = None) -> int:
     """``flexsheet calibrate eye``: the viewer's eye entry (fixed V, or tracked glasses)."""
     p = argparse.ArgumentParser(
         prog="flexsheet calibrate eye", formatter_class=argparse.RawDescriptionHelpFormatter,
-        description="Write the eye entry: the paper's fixed viewpoint V, or 'tracked' glasses with a fallback V.",
+        description="Write the eye entry: the paper's fixed viewpoint V, or 'tracked' glasses with a "
+                    "fallback V.",
         epilog="example:\n  flexsheet calibrate eye --V 0.4,0,0 --ipd 0.064 --out /tmp/disp\n"
                "  flexsheet calibrate eye --mode tracked --eye-offset 0,-0.03,-0.02 --out /tmp/disp")
     p.add_argument("--out", required=True, metavar="DIR")
@@ -210,10 +222,12 @@ def eye_main(argv: list[str] | None = None) -> int:
             V = [float(v) for v in a.V.split(",")]
             off = [float(v) for v in a.eye_offset.split(",")]
         except ValueError:
-            raise ValueError(f"--V and --eye-offset must be x,y,z numbers, got {a.V!r}, {a.eye_offset!r}") from None
+            raise ValueError(f"--V and --eye-offset must be x,y,z numbers, got {a.V!r}, "
+                             f"{a.eye_offset!r}") from None
         calib = _load_out(a.out)
         calib.eye = fixed_eye(V, a.ipd) if a.mode == "fixed" else tracked_eye_entry(V, a.ipd, off)
-        log.info(f"eye: {a.mode}, V = {calib.eye.V.tolist()} m, ipd {calib.eye.ipd} m; wrote {_write(a.out, calib)}")
+        log.info(f"eye: {a.mode}, V = {calib.eye.V.tolist()} m, ipd {calib.eye.ipd} m; wrote "
+                 f"{_write(a.out, calib)}")
         return 0
 
     return _run(p, go)
@@ -223,17 +237,19 @@ def sheet_main(argv: list[str] | None = None) -> int:
     """``flexsheet calibrate sheet``: the sheet's force under a fingertip, identified from probe presses."""
     p = argparse.ArgumentParser(
         prog="flexsheet calibrate sheet", formatter_class=argparse.RawDescriptionHelpFormatter,
-        description="Identify the planner's sheet model (docs/calibration.md, 'Sheet') from a probe pressed on a "
-                    "load cell into the tensioned sheet at several points and clamp strains: --sim presses the "
-                    "twin's true sheet, --presses reads a lab's readings (CSV with a header: stretch, u_m, v_m, "
-                    "depth_m, force_n). Writes the sheet entry into OUT/display.yaml, OUT/sheet.json (the fit, "
-                    "the readings, and in the twin the model's error against the true force) and the readings as "
-                    "OUT/presses.csv (the --presses format).",
+        description="Identify the planner's sheet model (docs/calibration.md, 'Sheet') from a probe pressed "
+                    "on a load cell into the tensioned sheet at several points and clamp strains: --sim "
+                    "presses the twin's true sheet, --presses reads a lab's readings (CSV with a header: "
+                    "stretch, u_m, v_m, depth_m, force_n). Writes the sheet entry into OUT/display.yaml, "
+                    "OUT/sheet.json (the fit, the readings, and in the twin the model's error against the "
+                    "true force) and the readings as OUT/presses.csv (the --presses format).",
         epilog="example:\n  flexsheet calibrate sheet --sim --truth-seed 0 --out /tmp/disp\n"
-               "  flexsheet calibrate sheet --presses docs/figures/calibration/sheet/presses.csv --out /tmp/disp")
+               "  flexsheet calibrate sheet --presses docs/figures/calibration/sheet/presses.csv --out "
+               "/tmp/disp")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--sim", action="store_true", help="press the twin's true sheet (needs --truth-seed)")
-    src.add_argument("--presses", metavar="CSV", help="a lab's readings: stretch,u_m,v_m,depth_m,force_n per row")
+    src.add_argument("--presses", metavar="CSV", help="a lab's readings: stretch,u_m,v_m,depth_m,force_n per "
+                                                      "row")
     _twin_and_out(p)
     a = p.parse_args(argv)
 
@@ -261,8 +277,8 @@ def sheet_main(argv: list[str] | None = None) -> int:
         if truth is not None:               # scored against the hidden truth only now, the fit being fixed
 
             doc["truth"] = score_sheet(truth, calib.sheet)
-            log.info(f"sheet: against the true force {doc['truth']['model_error_pct']:.1f} % (median; the nominal "
-                     f"string band {doc['truth']['nominal_error_pct']:.0f} %; target "
+            log.info(f"sheet: against the true force {doc['truth']['model_error_pct']:.1f} % (median; the "
+                     f"nominal string band {doc['truth']['nominal_error_pct']:.0f} %; target "
                      f"{doc['truth']['target_pct']:g} %)")
         with open(os.path.join(a.out, "sheet.json"), "w") as fh:
             json.dump(doc, fh, indent=1)
@@ -277,28 +293,29 @@ def sheet_main(argv: list[str] | None = None) -> int:
 
 
 def display_main(argv: list[str] | None = None) -> int:
-    """``flexsheet calibrate display``: every procedure in lab order — in the twin (``--sim``) or driven through
-    the live graph (``--live``) — or the error-vs-poses sweep."""
+    """``flexsheet calibrate display``: every procedure in lab order — in the twin (``--sim``) or driven
+    through the live graph (``--live``) — or the error-vs-poses sweep."""
     p = argparse.ArgumentParser(
         prog="flexsheet calibrate display", formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Run camera-pose, projector, arms and eye in lab order; write OUT/display.yaml and "
-                    "OUT/summary.json. --sim: in the twin against a hidden truth (errors vs truth; cached per "
-                    "seed). --live: through the running graph of --launch — the arms moved by their bridges, the "
-                    "patterns shown by the renderer, the camera's frames averaged; captures kept under OUT/frames "
-                    "(an interrupted run resumes); with the camera twin, scored against its truth. --sweep charts "
-                    "each estimate's error against the number of poses. --draws N registers N truths drawn at random and "
-                    "says how often each target is met (OUT/draws.json, draws.png).",
+                    "OUT/summary.json. --sim: in the twin against a hidden truth (errors vs truth; cached "
+                    "per seed). --live: through the running graph of --launch — the arms moved by their "
+                    "bridges, the patterns shown by the renderer, the camera's frames averaged; captures "
+                    "kept under OUT/frames (an interrupted run resumes); with the camera twin, scored "
+                    "against its truth. --sweep charts each estimate's error against the number of poses. "
+                    "--draws N registers N truths drawn at random and says how often each target is met "
+                    "(OUT/draws.json, draws.png).",
         epilog="example:\n  flexsheet calibrate display --sim --truth-seed 1 --quick --out /tmp/disp1\n"
-               "  flexsheet calibrate display --live --launch launch/lab.yaml --host main --dry-run --out /tmp/live\n"
-               "  flexsheet calibrate display --live --launch launch/lab_sim.yaml --host main --truth-seed 0 "
-               "--out /tmp/live\n"
+               "  flexsheet calibrate display --live --launch launch/lab.yaml --host main --dry-run --out "
+               "/tmp/live\n  flexsheet calibrate display --live --launch launch/lab_sim.yaml --host main "
+               "--truth-seed 0 --out /tmp/live\n"
                "  flexsheet calibrate display --sweep --seeds 1,2,3 --out docs/figures/calibration\n"
                "  flexsheet calibrate display --draws 40 --out docs/figures/calibration/draws")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--sim", action="store_true", help="run in the offline twin (needs --truth-seed)")
     mode.add_argument("--live", action="store_true", help="drive the running graph of --launch")
-    p.add_argument("--sweep", action="store_true", help="in the twin: error vs number of poses over --seeds (PNG + "
-                                                        "JSON)")
+    p.add_argument("--sweep", action="store_true", help="in the twin: error vs number of poses over --seeds "
+                                                        "(PNG + JSON)")
     p.add_argument("--draws", type=int, default=None, metavar="N",
                    help="in the twin: the full registration on N truth seeds drawn with --draw-seed (or on "
                         "--seeds), each scored; per target the median, the worst and the seeds that miss it")
@@ -307,20 +324,22 @@ def display_main(argv: list[str] | None = None) -> int:
                    help="twin truth seed (--sim; with --live, a check that the camera twin renders this one)")
     p.add_argument("--realism", choices=("realistic", "ideal"), default="realistic")
     p.add_argument("--out", required=True, metavar="DIR")
-    p.add_argument("--quick", action="store_true", help="fewer poses (4 projector poses, 12 configurations per "
-                                                        "arm): faster, but the projector target can be missed")
+    p.add_argument("--quick", action="store_true", help="fewer poses (4 projector poses, 12 configurations "
+                                                        "per arm): faster, but the projector target can be "
+                                                        "missed")
     p.add_argument("--force", action="store_true", help="ignore the cache (--sim)")
     p.add_argument("--seeds", default=None, help="truth seeds for --sweep (default 1,2,3) or --draws")
     p.add_argument("--launch", default=os.environ.get("FLEXSHEET_LAUNCH", "launch/lab.yaml"),
-                   help="--live: the running graph's launch file (default $FLEXSHEET_LAUNCH or launch/lab.yaml)")
+                   help="--live: the running graph's launch file (default $FLEXSHEET_LAUNCH or "
+                        "launch/lab.yaml)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="--live: a graph-wide setting the launch was started with, repeatable: the same "
                         "--set hosts.NAME.address=ADDRESS as the lab on one machine (docs/deploy.md)")
     p.add_argument("--host", default=None, help="--live: the host this runs on (the renderer's: it reads the "
                                                 "pattern files)")
     p.add_argument("--dry-run", action="store_true",
-                   help="--live: print every commanded pose with its joints, check them against the joint limits, "
-                        "move nothing (exit 1 on a pose out of reach)")
+                   help="--live: print every commanded pose with its joints, check them against the joint "
+                        "limits, move nothing (exit 1 on a pose out of reach)")
     p.add_argument("--settle", type=float, default=0.3, metavar="S",
                    help="--live: seconds after the arms arrive or a pattern is shown before frames count")
     a = p.parse_args(argv)
@@ -345,7 +364,8 @@ def display_main(argv: list[str] | None = None) -> int:
 
         s = run_display_sim(a.truth_seed, a.out, opts, a.realism, a.force)
         ok = all(verdicts(s).values())
-        log.info(f"{'all within target' if ok else 'TARGET MISSED'}; wrote {a.out}/display.yaml, {a.out}/summary.json")
+        log.info(f"{'all within target' if ok else 'TARGET MISSED'}; wrote {a.out}/display.yaml, "
+                 f"{a.out}/summary.json")
         return 0
 
     return _run(p, go)
@@ -397,7 +417,8 @@ def _live(a, opts: P.Options) -> int:
         ok = all(s["verdicts"].values())
         c, pj = s["camera"], s["projector"]
         log.info(f"camera {c['translation_error_mm']:.3f} mm {c['rotation_error_deg']:.4f}°, projector "
-             f"{pj['translation_error_mm']:.2f} mm {pj['rotation_error_deg']:.3f}° {pj['reprojection_px']:.3f} px, arms "
+             f"{pj['translation_error_mm']:.2f} mm {pj['rotation_error_deg']:.3f}° "
+             f"{pj['reprojection_px']:.3f} px, arms "
              + ", ".join(f"{k} {v['translation_error_mm']:.3f} mm" for k, v in s["arms"].items())
              + f": {'all within target' if ok else 'TARGET MISSED'}")
     log.info(f"wrote {a.out}/display.yaml, {a.out}/summary.json")

@@ -37,9 +37,11 @@ REGISTRATION_LOGGERS = ("flexsheet.twin.registration", "flexsheet.calibration")
 __all__ = ["TwinSpec", "EXTENSION", "display_calib_path", "twin_registration", "twin_registration_path",
            "read_display_calib", "DISPLAY_NEEDS", "DISPLAY_COMMANDS"]
 
-#: node type → the ``display.yaml`` entries its nodes take their geometry from (``{arm}``: the node's arm param)
+#: node type → the ``display.yaml`` entries its nodes take
+#: their geometry from (``{arm}``: the node's arm param)
 DISPLAY_NEEDS: dict[str, tuple[str, ...]] = {"camera": ("camera",), "renderer": ("projector", "eye"),
-                                             "planner": ("arms.left", "arms.right"), "arm_bridge": ("arms.{arm}",)}
+                                             "planner": ("arms.left", "arms.right"),
+                                             "arm_bridge": ("arms.{arm}",)}
 #: display.yaml entry → the command that measures it (docs/calibration.md)
 DISPLAY_COMMANDS = {"camera": "flexsheet calibrate camera-pose", "projector": "flexsheet calibrate projector",
                     "arms": "flexsheet calibrate arms", "eye": "flexsheet calibrate eye"}
@@ -70,8 +72,8 @@ def _set_path(text: str) -> str | None:
 
 
 def twin_registration_path(twin: TwinSpec, cache_root: str | None = None) -> Path:
-    """Where :func:`twin_registration` caches the ``display.yaml`` of ``twin``'s realism and seed (the cache of
-    :func:`flexsheet.twin.registration.sim_display_calib`)."""
+    """Where :func:`twin_registration` caches the ``display.yaml`` of ``twin``'s realism and seed (the cache
+    of :func:`flexsheet.twin.registration.sim_display_calib`)."""
     root = Path(cache_root or flexsheet_cache_root()).expanduser()
     return root / "display" / f"{twin.realism}-{twin.truth_seed}" / "display.yaml"
 
@@ -112,8 +114,8 @@ def before_launch(lf: LaunchFile, check_only: bool) -> dict:
 
 
 def read_display_calib(path: str) -> None:
-    """Parse a display calibration (:func:`flexsheet.calibration.display_calib_file.load_display_calib`); raises
-    ``ValueError``."""
+    """Parse a display calibration (:func:`flexsheet.calibration.display_calib_file.load_display_calib`);
+    raises ``ValueError``."""
     load_display_calib(path)
 
 
@@ -148,8 +150,9 @@ def _check_display_calib(c) -> None:
         users = [n for n, spec in c.lf.nodes.items() if spec.host in c.hosts and spec.type in DISPLAY_NEEDS]
         if users and (twin is None or not twin.registration):
             c.warn(f"no display_calib: node(s) {', '.join(users)} run on the nominal geometry (camera pose, "
-                   f"projector, eye, arm bases), not this display's; register it (flexsheet calibrate display, "
-                   f"docs/calibration.md) and name its display.yaml in the launch file: display_calib: FILE")
+                   "projector, eye, arm bases), not this display's; register it (flexsheet calibrate "
+                   "display, docs/calibration.md) and name its display.yaml in the launch file: "
+                   "display_calib: FILE")
         return
     problem = c.file_problem("display_calib", path)
     if problem:
@@ -177,10 +180,11 @@ def _check_display_calib(c) -> None:
             measured = time.time() - calib.camera.provenance.age_s()
             changed = os.path.getmtime(os.path.expanduser(calib_file))
             if calib.camera.provenance.source != "nominal" and measured < changed:
-                c.err("display_calib", path, f"stale 'camera' entry: measured {calib.camera.provenance.measured_at},"
+                c.err("display_calib", path, "stale 'camera' entry: measured "
+                                             f"{calib.camera.provenance.measured_at},"
                                              f" before node {name}'s calib_file {calib_file} changed "
-                                             f"({time.strftime('%Y-%m-%dT%H:%M:%S', time.localtime(changed))}); "
-                                             f"run: {DISPLAY_COMMANDS['camera']}")
+                                             f"({time.strftime('%Y-%m-%dT%H:%M:%S', time.localtime(changed))}"
+                                             f"); run: {DISPLAY_COMMANDS['camera']}")
 
 
 def _check(c) -> None:

@@ -91,7 +91,8 @@ def plan(opts: Options) -> dict:
     nom = nominal_display_calib()
     cam = nom.camera
     return {"board": cp_mod.plan_board_views(opts.views),
-            "projector": pj_mod.plan_projector_poses(min(max(opts.projector_poses, 1), len(pj_mod.POSE_PLAN))),
+            "projector":
+                pj_mod.plan_projector_poses(min(max(opts.projector_poses, 1), len(pj_mod.POSE_PLAN))),
             "arms": {s: arms_mod.plan_arm_configs(s, opts.arm_configs, nom.arms[s].T_display_base,
                                                   nom.arms[s].marker_offset, cam.stereo, cam.T_display_camera)
                      for s in ("left", "right")}}
@@ -102,8 +103,8 @@ def _limits_problem(q: np.ndarray, margin: float) -> str:
 
 
 def check_plan(opts: Options, margin: float = BridgeConfig.limit_margin) -> tuple[list[str], list[str]]:
-    """(lines describing every commanded pose and its joints, problems): a pose whose nominal IK fails or whose
-    joints leave the RV-1A's limits less ``margin`` rad (default: the bridges' ``limit_margin``)."""
+    """(lines describing every commanded pose and its joints, problems): a pose whose nominal IK fails or
+    whose joints leave the RV-1A's limits less ``margin`` rad (default: the bridges' ``limit_margin``)."""
     p = plan(opts)
     lines, problems = [], []
     cache: dict = {}
@@ -111,8 +112,8 @@ def check_plan(opts: Options, margin: float = BridgeConfig.limit_margin) -> tupl
     def sheet(label: str, Tc: np.ndarray) -> None:
         n = Tc[:3, 0]
         tilt = math.degrees(math.atan2(n[1], n[0])), math.degrees(math.asin(np.clip(n[2], -1, 1)))
-        head = (f"{label}: sheet at ({Tc[0, 3] * 1e3:+.0f}, {Tc[1, 3] * 1e3:+.0f}, {Tc[2, 3] * 1e3:+.0f}) mm, "
-                f"normal yaw {tilt[0]:+.1f}° pitch {tilt[1]:+.1f}°")
+        head = (f"{label}: sheet at ({Tc[0, 3] * 1e3:+.0f}, {Tc[1, 3] * 1e3:+.0f}, {Tc[2, 3] * 1e3:+.0f}) "
+                f"mm, normal yaw {tilt[0]:+.1f}° pitch {tilt[1]:+.1f}°")
         try:
             qs = commanded_sheet_joints(Tc, 0.0, cache)
         except ValueError as exc:
@@ -135,7 +136,8 @@ def check_plan(opts: Options, margin: float = BridgeConfig.limit_margin) -> tupl
             bad = _limits_problem(q, margin)
             if bad:
                 problems.append(f"arm {side} configuration {k + 1}: {bad}")
-            lines.append(f"arm {side} configuration {k + 1}/{len(qs)}: [{', '.join(f'{math.degrees(v):.1f}' for v in q)}]°"
+            lines.append(f"arm {side} configuration {k + 1}/{len(qs)}: "
+                         f"[{', '.join(f'{math.degrees(v):.1f}' for v in q)}]°"
                          + (" OUTSIDE THE LIMITS" if bad else ""))
     return lines, problems
 
@@ -181,8 +183,10 @@ class LiveSource:
         print(f"==> {line}, then press Enter", file=sys.stderr, flush=True)
         sys.stdin.readline()
 
-    _ASK = {"board": "clamp the calibration board ({board}) flat on the sheet, printed side toward the camera",
-            "patterns": "take the board off the sheet and darken the room (the projector lights the bare sheet)",
+    _ASK = {"board": "clamp the calibration board ({board}) flat on the sheet, printed side toward the "
+                     "camera",
+            "patterns": "take the board off the sheet and darken the room (the projector lights the bare "
+                        "sheet)",
             "markers": "unclamp the sheet from both arms and keep the room dark (only the clamp markers lit)",
             "finger": "take away what the registration needed (board, dark room): the display runs again"}
 
@@ -194,7 +198,8 @@ class LiveSource:
                                                               "square": self.opts.square,
                                                               "offset": self.opts.board_offset})
         else:
-            self.ask(self._ASK[scene].format(board=f"{self.opts.board}, {self.opts.square * 1e3:g} mm squares"))
+            self.ask(self._ASK[scene].format(board=f"{self.opts.board}, {self.opts.square * 1e3:g} mm "
+                                                   "squares"))
         self._scene = scene
 
     def begin(self) -> None:
@@ -205,9 +210,10 @@ class LiveSource:
             log.info("live: the world's script is paused while the registration runs")
 
     def _home(self) -> None:
-        """Both arms to the home sheet's clamp poses (the bridges' ``home``), waited for: the display's targets
-        start near there."""
-        goals = {side: np.asarray(self.client.call(node, "home"), float) for side, node in self.roles.arms.items()}
+        """Both arms to the home sheet's clamp poses (the bridges' ``home``), waited for: the display's
+        targets start near there."""
+        goals = {side: np.asarray(self.client.call(node, "home"), float) for side,
+                 node in self.roles.arms.items()}
         self._wait_there(goals, "home")
 
     def finish(self) -> None:
@@ -259,7 +265,8 @@ class LiveSource:
         if after is None:
             after = self.client.now(self.roles.camera) + self.settle_s
         try:
-            frames = self.client.collect(T.STEREO, n, after, timeout=30.0 + n, stamp=lambda m: m.exposure_stamp)
+            frames = self.client.collect(T.STEREO, n, after, timeout=30.0 + n,
+                                         stamp=lambda m: m.exposure_stamp)
         except TimeoutError as exc:
             raise LiveError(f"{what}: no camera frames ({exc})") from None
         return _mean(frames)
@@ -308,8 +315,8 @@ class LiveSource:
                         bad = path.replace("_left.png", f"_{side}.rejected.png")
                         os.makedirs(os.path.dirname(bad), exist_ok=True)
                         cv2.imwrite(bad, img)
-                        raise LiveError(f"{what}: the board ({self.opts.board}) is not found in the {side} image "
-                                        f"(saved as {bad})")
+                        raise LiveError(f"{what}: the board ({self.opts.board}) is not found in the {side} "
+                                        f"image (saved as {bad})")
                 self._save(path, pair)
                 log.info(f"{what}: captured ({self.opts.board_frames} frames)")
             out.append(pair)
@@ -374,7 +381,8 @@ class LiveSource:
                 self._move({side: np.asarray(q, float)}, what)
                 pair = self._capture(self.opts.marker_frames, what)
                 self._save(path, pair)
-                man.setdefault("arms", {})[side] = {"joints": [np.asarray(v, float).tolist() for v in joints[:k + 1]]}
+                man.setdefault("arms",
+                               {})[side] = {"joints": [np.asarray(v, float).tolist() for v in joints[:k + 1]]}
                 self._write_manifest(man)
             frames.append(pair)
         log.info(f"arms: {side}: {len(joints)} configurations captured")
@@ -404,7 +412,8 @@ def _residual_summary(cam_r, proj_r, arms: dict) -> dict:
             "arms": {s: {"residual_mm": r.residual_mm, "configs": r.n_configs} for s, (_, r) in arms.items()}}
 
 
-def register_live(launch: str, out: str, opts: Options, truth_seed: int | None = None, host: str | None = None,
+def register_live(launch: str, out: str, opts: Options, truth_seed: int | None = None,
+                  host: str | None = None,
              settle_s: float = 0.3, ask=None) -> dict:
     """Drive the registration through the running graph of ``launch`` (module doc); write ``out/display.yaml``
     and ``out/summary.json`` (the keys of ``calibrate display --sim``; errors against the truth only when the
@@ -419,21 +428,24 @@ def register_live(launch: str, out: str, opts: Options, truth_seed: int | None =
     try:
         roles = roles_of(client.lf)
         if host is not None and roles.hosts.get(roles.renderer) != host:
-            raise LiveError(f"the renderer runs on host {roles.hosts.get(roles.renderer)!r}, not {host!r}: it reads "
-                            "the pattern files, so run this on the renderer's host")
+            raise LiveError(f"the renderer runs on host {roles.hosts.get(roles.renderer)!r}, not {host!r}: "
+                            "it reads the pattern files, so run this on the renderer's host")
         try:
             kind = client.call(roles.camera, "param/get", {"name": "source"}, timeout=10.0)
             twin_spec = client.call(roles.camera, "param/get", {"name": "twin"}) if kind == "sim" else None
         except (TimeoutError, ServiceError) as exc:
-            raise LiveError(f"the graph of {launch} is not running (start it with flexsheet launch): {exc}") from None
+            raise LiveError(f"the graph of {launch} is not running (start it with flexsheet launch): "
+                            f"{exc}") from None
         truth = None
         if twin_spec is not None:
             if truth_seed is not None and int(twin_spec["truth_seed"]) != int(truth_seed):
                 raise LiveError(f"--truth-seed {truth_seed} but the camera twin renders truth seed "
-                                f"{twin_spec['truth_seed']} (launch it with --set twin.truth_seed={truth_seed})")
+                                f"{twin_spec['truth_seed']} (launch it with --set "
+                                f"twin.truth_seed={truth_seed})")
             truth = TwinTruth.draw(int(twin_spec["truth_seed"]), twin_spec["realism"])
         elif truth_seed is not None:
-            raise LiveError(f"--truth-seed scores against the camera twin's truth, but the camera's source is {kind!r}")
+            raise LiveError("--truth-seed scores against the camera twin's truth, but the camera's source "
+                            f"is {kind!r}")
         src = LiveSource(client, roles, out, opts, twin=truth is not None, settle_s=settle_s,
                          ask=ask)
         try:

@@ -1,19 +1,20 @@
-"""``flexsheet experiment compliance --scene FILE --out DIR``: what the object asks the finger to feel, from its
-own FEM, and how it maps into what the sheet can present.
+"""``flexsheet experiment compliance --scene FILE --out DIR``: what the object asks the finger to feel, from
+its own FEM, and how it maps into what the sheet can present.
 
 1. **The object's force–depth** (:func:`flexsheet.fem.force_depth.build_force_depth`): the FEM model the node
    serves, pushed along the inward normal at points along the stroke (the first, its start, is ``reference``:
    the sphere's crown). Checked against Hertz's closed form at 1–3 mm where it applies (a smooth convex body
    without inclusions: the cylinder and the sphere). Written to ``DIR/force_depth.json``.
-2. **The presentable range** at the sheet's centre: the sheet model's force (``--sheet``: a ``sheet.json`` from
-   ``flexsheet calibrate sheet``; default the nominal string band) at its least stretch and at the largest the
-   arms allow at the home pose (``pull_margin`` 0.9 × the torque-limited pull,
+2. **The presentable range** at the sheet's centre: the sheet model's force (``--sheet``: a ``sheet.json``
+   from ``flexsheet calibrate sheet``; default the nominal string band) at its least stretch and at the
+   largest the arms allow at the home pose (``pull_margin`` 0.9 × the torque-limited pull,
    :mod:`flexsheet.arm.pull_limit`, and the 30 % strain).
-3. **The mapping** (:func:`flexsheet.model.force_depth.scene_scale`): one scale per scene, the geometric centre
-   of the scales that keep every point's force over 2 mm to twice the stroke depth inside the range; every ratio
-   of two forces is kept. With ``--contrast-gain`` γ > 1 the request is s·F_ref·(F/F_ref)^γ.
+3. **The mapping** (:func:`flexsheet.model.force_depth.scene_scale`): one scale per scene, the geometric
+   centre of the scales that keep every point's force over 2 mm to twice the stroke depth inside the range;
+   every ratio of two forces is kept. With ``--contrast-gain`` γ > 1 the request is s·F_ref·(F/F_ref)^γ.
 4. **Contrast**: per point, its force over the median point's at the same depth, less 1, as asked and as
-   presented (mapped and clipped to the range), against the Weber fraction (15 %, Bergmann Tiest & Kappers 2009).
+   presented (mapped and clipped to the range), against the Weber fraction (15 %, Bergmann Tiest & Kappers
+   2009).
 
 Writes ``DIR/force_depth.json``, ``DIR/compliance.json`` and ``DIR/compliance.png``. Units: N, m in the JSON
 (mm in the chart).
@@ -41,14 +42,15 @@ from flexsheet.planning.surface_planner import scale_depths, sheet_scene_scale
 
 __all__ = ["WEBER", "presentable_range", "run", "main"]
 
-WEBER = 0.15                   #: Weber fraction for force/stiffness with the surface cue (Bergmann Tiest & Kappers 2009)
+#: Weber fraction for force/stiffness with the surface cue (Bergmann Tiest & Kappers 2009)
+WEBER = 0.15
 
 
 def presentable_range(sheet_file: str | None = None) -> dict:
     """The sheet at its centre: ``material`` (the model used), ``min_stretch``, ``max_stretch`` (the first of
-    the pull guard's margin (0.9, :class:`flexsheet.planning.pull_guard.PullGuard`) × the arms' torque-limited pull at the home pose and the strain limit), ``pull_n`` (that
-    pull, N), ``limited_by`` ("arm_torque" or "strain"), ``source``. Raises ``ValueError`` for an unreadable
-    ``sheet_file``."""
+    the pull guard's margin (0.9, :class:`flexsheet.planning.pull_guard.PullGuard`) × the arms' torque-limited
+    pull at the home pose and the strain limit), ``pull_n`` (that pull, N), ``limited_by`` ("arm_torque" or
+    "strain"), ``source``. Raises ``ValueError`` for an unreadable ``sheet_file``."""
     from dataclasses import replace
 
     mat = SheetMaterial()
@@ -56,17 +58,22 @@ def presentable_range(sheet_file: str | None = None) -> dict:
     if sheet_file:
         try:
             fit = json.loads(Path(sheet_file).read_text())["fit"]
-            mat = with_terms(type("Fit", (), {k: fit.get(k, 0.0) if k in OPTIONAL_TERMS else fit[k] for k in TERMS})(), mat)
+            mat = with_terms(type("Fit", (),
+                                  {k: fit.get(k, 0.0) if k in OPTIONAL_TERMS else fit[k] for k in TERMS})(),
+                             mat)
         except (OSError, KeyError, ValueError, TypeError) as exc:
-            raise ValueError(f"--sheet {sheet_file}: not a sheet.json of flexsheet calibrate sheet ({exc})") from None
+            raise ValueError(f"--sheet {sheet_file}: not a sheet.json of flexsheet calibrate sheet "
+                             f"({exc})") from None
         source = f"identified ({sheet_file})"
     guard = PullGuard({"left": geometry.LEFT_BASE, "right": geometry.RIGHT_BASE})
-    Tl, Tr = clamp_poses(np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), mat.min_stretch, mat.size)
+    Tl, Tr = clamp_poses(np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), mat.min_stretch,
+                         mat.size)
     pull = guard.limit(Tl, Tr)
     capped = replace(mat, max_force=min(mat.max_force, pull)) if pull is not None else mat
     e_max = max_stretch_within_force(capped)
     strain_first = e_max >= mat.max_stretch - 1e-12
-    return {"material": {k: getattr(mat, k) for k in TERMS}, "min_stretch": mat.min_stretch, "max_stretch": e_max,
+    return {"material": {k: getattr(mat, k) for k in TERMS}, "min_stretch": mat.min_stretch,
+            "max_stretch": e_max,
             "pull_n": pull, "clamp_force_at_max_n": clamp_force(e_max, mat),
             "limited_by": "strain" if strain_first else "arm_torque", "source": source,
             "_mat": mat}
@@ -103,7 +110,8 @@ def run(out: Path, scene_file: str, sheet_file: str | None = None, gain: float =
         pres = [float(np.clip(r, floor(d), ceil(d))) for r, d in zip(req, depths, strict=True)]
         ref_pres = [float(np.clip(ss.scale * table.reference_force(d), floor(d), ceil(d))) for d in depths]
         presented = [a / b - 1.0 if b > 0 else 0.0 for a, b in zip(pres, ref_pres, strict=True)]
-        points.append({"name": name, "position_m": p.tolist(), "force_n": [table.force_at(p, d) for d in depths],
+        points.append({"name": name, "position_m": p.tolist(),
+                       "force_n": [table.force_at(p, d) for d in depths],
                        "requested_n": req, "presented_n": pres, "contrast_asked": asked,
                        "contrast_presented": presented})
     best = max(points, key=lambda x: float(np.median(x["contrast_asked"])))
@@ -112,7 +120,8 @@ def run(out: Path, scene_file: str, sheet_file: str | None = None, gain: float =
            "floor_n": [floor(d) for d in depths], "ceiling_n": [ceil(d) for d in depths],
            "scale": ss.scale, "scale_low": ss.low, "scale_high": ss.high, "fits": ss.fits,
            "saturated": ss.saturated, "contrast_gain": gain, "weber_fraction": WEBER, "points": points,
-           "stiffest_point": {"name": best["name"], "contrast_asked_median": float(np.median(best["contrast_asked"])),
+           "stiffest_point": {"name": best["name"],
+                              "contrast_asked_median": float(np.median(best["contrast_asked"])),
                               "contrast_presented_median": float(np.median(best["contrast_presented"]))},
            "target": "saturated <= 0.05 of the scene's samples; contrast above the Weber fraction is felt",
            "verdict": "met" if ss.saturated <= 0.05 else "MISSED",
@@ -155,7 +164,8 @@ def _chart(res: dict, fd: dict, path: Path) -> None:
     a2.legend(fontsize=7)
     b = next(p for p in res["points"] if p["name"] == res["stiffest_point"]["name"])
     a3.plot(d, 100 * np.asarray(b["contrast_asked"]), "o-", label="asked by the object")
-    a3.plot(d, 100 * np.asarray(b["contrast_presented"]), "s--", label=f"presented (contrast_gain {res['contrast_gain']:g})")
+    a3.plot(d, 100 * np.asarray(b["contrast_presented"]), "s--",
+            label=f"presented (contrast_gain {res['contrast_gain']:g})")
     a3.axhline(100 * res["weber_fraction"], color="r", ls=":", label="Weber fraction 15 %")
     a3.set_xlabel("push depth, mm")
     a3.set_ylabel("force over the median point's, %")
@@ -170,12 +180,15 @@ def _chart(res: dict, fd: dict, path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="flexsheet experiment compliance", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
-                                 epilog="example: flexsheet experiment compliance --scene launch/scenes/organ.yaml "
-                                        "--sheet docs/figures/calibration/sheet/sheet.json --out docs/figures/compliance")
-    ap.add_argument("--out", required=True, help="output folder (force_depth.json, compliance.json, compliance.png)")
+                                 epilog="example: flexsheet experiment compliance --scene "
+                                        "launch/scenes/organ.yaml --sheet "
+                                        "docs/figures/calibration/sheet/sheet.json --out "
+                                        "docs/figures/compliance")
+    ap.add_argument("--out", required=True, help="output folder (force_depth.json, compliance.json, "
+                                                 "compliance.png)")
     ap.add_argument("--scene", default="launch/scenes/organ.yaml", help="scene file (default: the organ)")
-    ap.add_argument("--sheet", default=None, help="sheet.json of `flexsheet calibrate sheet` (default: the nominal "
-                    "string band)")
+    ap.add_argument("--sheet", default=None, help="sheet.json of `flexsheet calibrate sheet` (default: the "
+                    "nominal string band)")
     ap.add_argument("--contrast-gain", type=float, default=1.0, help="γ of the mapping (default 1: faithful)")
     a = ap.parse_args(argv)
     if not 0.0 < a.contrast_gain <= 5.0:
@@ -188,7 +201,8 @@ def main(argv: list[str] | None = None) -> int:
     sp = res["stiffest_point"]
     print(f"scale {res['scale']:.4g} (fits {res['scale_low']:.4g}-{res['scale_high']:.4g}); saturated "
           f"{100 * res['saturated']:.1f} %: {res['verdict']}; stiffest point {sp['name']}: contrast asked "
-          f"{100 * sp['contrast_asked_median']:.1f} %, presented {100 * sp['contrast_presented_median']:.1f} %")
+          f"{100 * sp['contrast_asked_median']:.1f} %, presented {100 * sp['contrast_presented_median']:.1f} "
+          "%")
     print(f"wrote {a.out}/force_depth.json, compliance.json, compliance.png")
     return 0
 

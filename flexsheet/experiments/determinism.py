@@ -1,10 +1,11 @@
-"""``flexsheet experiment determinism --out DIR``: the display on the simulated clock, run twice with one seed.
+"""``flexsheet experiment determinism --out DIR``: the display on the simulated clock, run twice with one
+seed.
 
-Runs ``flexsheet launch launch/sim.yaml --duration S --out DIR/runK`` twice (default 30 simulated seconds, truth
-seed 0) and writes ``DIR/determinism.json``: the SHA-256 of every recorded topic's messages (frames, stamps
-included) in each run and whether they agree, each run's ``realtime_factor`` and wall time, the modelled lab
-latency chain (``latency_ms.chain``) and the nodes' readiness, with the issue's targets and verdicts; and
-``DIR/determinism.png`` (realtime factor and the two chain ends against their targets).
+Runs ``flexsheet launch launch/sim.yaml --duration S --out DIR/runK`` twice (default 30 simulated seconds,
+truth seed 0) and writes ``DIR/determinism.json``: the SHA-256 of every recorded topic's messages (frames,
+stamps included) in each run and whether they agree, each run's ``realtime_factor`` and wall time, the
+modelled lab latency chain (``latency_ms.chain``) and the nodes' readiness, with the issue's targets and
+verdicts; and ``DIR/determinism.png`` (realtime factor and the two chain ends against their targets).
 ``/diagnostics`` is left out of the comparison: heartbeats carry wall time (liveness) by design.
 """
 
@@ -53,7 +54,8 @@ def _chart(out: dict, path: Path) -> None:
     ch = out["runs"][0]["chain_ms"]
     names = ["exposure_to_arm_command", "exposure_to_projected"]
     ax[1].bar(names, [ch[n]["median"] for n in names], label="median (simulated clock)")
-    ax[1].scatter(names, [TARGETS[f"{n}_median_ms"] for n in names], color="r", marker="_", s=600, label="target")
+    ax[1].scatter(names, [TARGETS[f"{n}_median_ms"] for n in names], color="r", marker="_", s=600,
+                  label="target")
     ax[1].set_ylabel("latency (ms)")
     ax[1].legend(fontsize=8)
     fig.suptitle(f"launch/sim.yaml twice, {out['duration_s']:g} s, seed {out['seed']}: "
@@ -66,13 +68,16 @@ def _chart(out: dict, path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="flexsheet experiment determinism", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
-                                 epilog="example: flexsheet experiment determinism --out docs/figures/simclock\n"
-                                        "         flexsheet experiment determinism --quick --out /tmp/det")
+                                 epilog="example: flexsheet experiment determinism --out "
+                                        "docs/figures/simclock\n         flexsheet experiment determinism "
+                                        "--quick --out /tmp/det")
     ap.add_argument("--out", required=True, help="output folder (the two runs go into run1/, run2/)")
     ap.add_argument("--duration", type=float, default=30.0, help="simulated seconds per run (default 30)")
     ap.add_argument("--seed", type=int, default=0, help="twin truth seed (default 0)")
-    ap.add_argument("--launch", default="launch/sim.yaml", help="a clock: sim launch file (default launch/sim.yaml)")
-    ap.add_argument("--quick", action="store_true", help=f"{QUICK_S:g} simulated s per run (the comparison only)")
+    ap.add_argument("--launch", default="launch/sim.yaml", help="a clock: sim launch file (default "
+                                                                "launch/sim.yaml)")
+    ap.add_argument("--quick", action="store_true", help=f"{QUICK_S:g} simulated s per run (the comparison "
+                                                         "only)")
     args = ap.parse_args(argv)
     if args.quick:
         args.duration = QUICK_S
@@ -96,9 +101,11 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         s = json.loads((run / "summary.json").read_text())
         runs.append({"hashes": topic_hashes(run / "sim.mcap"), "realtime_factor": s.get("realtime_factor"),
-                     "launch_wall_s": wall, "clock": (s.get("clock") or {}).get("kind"), "chain_ms": s["latency_ms"]["chain"],
+                     "launch_wall_s": wall, "clock": (s.get("clock") or {}).get("kind"),
+                     "chain_ms": s["latency_ms"]["chain"],
                      "sheet_at_pose_reached": s["latency_ms"].get("sheet_at_pose_reached"),
-                     "readiness": s.get("readiness", {}), "table1": {k2: s[k2] for k2 in s if k2[:1].isdigit()}})
+                     "readiness": s.get("readiness", {}),
+                     "table1": {k2: s[k2] for k2 in s if k2[:1].isdigit()}})
         print(f"[determinism] run {k}: real-time factor {s.get('realtime_factor', 0):.2f}, {wall:.0f} s wall",
               flush=True)
     a, b = runs[0]["hashes"], runs[1]["hashes"]
@@ -106,12 +113,14 @@ def main(argv: list[str] | None = None) -> int:
     same = {t: a.get(t) == b.get(t) for t in compared}
     ch = runs[0]["chain_ms"]
     fem_s = max(r["readiness"].get("fem_active_s", float("nan")) for r in runs)
-    out = {"launch": args.launch, "duration_s": args.duration, "seed": args.seed, "identical": all(same.values()),
+    out = {"launch": args.launch, "duration_s": args.duration, "seed": args.seed,
+           "identical": all(same.values()),
            "topics": same, "runs": runs, "targets": TARGETS,
            "verdicts": {
                "byte_identical": "met" if all(same.values()) else "MISSED",
                "realtime_factor": "met" if min(r["realtime_factor"] for r in runs) >= 1.0 else "MISSED",
-               "exposure_to_arm_command": "met" if ch["exposure_to_arm_command"]["median"] <= 15.0 else "MISSED",
+               "exposure_to_arm_command": "met" if ch["exposure_to_arm_command"]["median"] <= 15.0
+               else "MISSED",
                "exposure_to_projected": "met" if ch["exposure_to_projected"]["median"] <= 25.0 else "MISSED",
                "fem_active": "met" if fem_s <= 10.0 else "MISSED"},
            "note": "/diagnostics is not compared: heartbeats carry wall time by design"}

@@ -1,8 +1,8 @@
-"""The FEM's stiffness and the sheet's tension along a scene's stroke, from a launch run: where the planner asked
-the sheet for more over an inclusion (:func:`compliance_along_stroke`). Run::
+"""The FEM's stiffness and the sheet's tension along a scene's stroke, from a launch run: where the planner
+asked the sheet for more over an inclusion (:func:`compliance_along_stroke`). Run::
 
     python -m flexsheet.experiments.fem_compliance --scene launch/scenes/organ.yaml --run out/organ --out docs/figures/scenes
-"""
+"""  # noqa: E501 - a table, template or command line kept whole
 
 from __future__ import annotations
 
@@ -56,11 +56,13 @@ def compliance_along_stroke(run_dir: str, scene_path, out_dir: str, bin_mm: floa
                 med.append(float(np.median(np.asarray(v)[sel])))
         return cen, med
 
-    out = {"scene": sc.name, "run": run_dir, "bin_mm": bin_mm, "n_deformations": len(de), "n_targets": len(tg),
+    out = {"scene": sc.name, "run": run_dir, "bin_mm": bin_mm, "n_deformations": len(de),
+           "n_targets": len(tg),
            "fem_stiffness_N_per_m": binned([m.contact_point for m in de], [m.stiffness for m in de]),
            "fem_depth_mm": binned([m.contact_point for m in de], [m.depth * 1e3 for m in de]),
            "tension_N_per_m": binned([m.contact_point for m in tg], [m.tension for m in tg]),
-           "requested_stiffness_N_per_m": binned([m.contact_point for m in tg], [m.object_stiffness for m in tg]),
+           "requested_stiffness_N_per_m": binned([m.contact_point for m in tg],
+                                                 [m.object_stiffness for m in tg]),
            "inclusions_at_mm": [float(s_path[tree.query(np.asarray(i.center))[1]]) for i in sc.inclusions]}
     os.makedirs(out_dir, exist_ok=True)
     with open(os.path.join(out_dir, f"fem_compliance_{sc.name}.json"), "w") as fh:
@@ -70,7 +72,8 @@ def compliance_along_stroke(run_dir: str, scene_path, out_dir: str, bin_mm: floa
     ax.plot(*out["tension_N_per_m"], "s-", label="sheet tension (N/m)")
     ax.plot(*out["requested_stiffness_N_per_m"], "^-", label="stiffness asked of the sheet (N/m)")
     for i, x in enumerate(out["inclusions_at_mm"]):
-        ax.axvline(x, color="r", ls="--", lw=0.8, label="inclusion centre (nearest path point)" if i == 0 else None)
+        ax.axvline(x, color="r", ls="--", lw=0.8, label="inclusion centre (nearest path "
+                                                        "point)" if i == 0 else None)
     ax.set_xlabel("position along the stroke, mm")
     ax.set_ylabel("N/m")
     ax.set_title(f"{sc.name}: FEM stiffness and sheet tension along the stroke (medians per {bin_mm:g} mm)")
@@ -86,7 +89,8 @@ def main(argv: list[str] | None = None) -> int:
     """CLI (see the module doc)."""
     ap = argparse.ArgumentParser(
         prog="python -m flexsheet.experiments.fem_compliance",
-        description="The FEM's dF/dd and the sheet's tension along a scene's stroke, from a launch run's sim.mcap.",
+        description="The FEM's dF/dd and the sheet's tension along a scene's stroke, from a launch run's "
+                    "sim.mcap.",
         epilog="example: python -m flexsheet.experiments.fem_compliance --scene launch/scenes/organ.yaml "
                "--run out/organ --out docs/figures/scenes")
     ap.add_argument("--scene", required=True, help="scene file (launch/scenes/*.yaml)")

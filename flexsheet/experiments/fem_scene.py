@@ -6,30 +6,31 @@ What it measures, for the model the FEM node serves for the scene (:func:`flexsh
 
 1. **Update time**: thread CPU time of one ``update_finger`` at pushes along the stroke, median and p90, ms.
 2. **What the eyes see against the reference** (:mod:`flexsheet.fem.eye_judge`): at the stroke's middle (full:
-   its start, middle and end), a rigid capsule finger pushed along the inward normal every 5 mm over the scene's
-   declared range (``use.max_depth``) into the scene's compressible hyperelastic body (its law, its contact law,
-   its support and inclusions: total Lagrangian P2, Newton with load stepping,
+   its start, middle and end), a rigid capsule finger pushed along the inward normal every 5 mm over the
+   scene's declared range (``use.max_depth``) into the scene's compressible hyperelastic body (its law, its
+   contact law, its support and inclusions: total Lagrangian P2, Newton with load stepping,
    :mod:`flexsheet.fem.reference.hyperelastic`), on gmsh meshes refined along the whole push path and on the
-   support's rim. **Shape** (each seen vertex's distance to the reference's surface, and each eye's outline) is
-   judged, **sliding** along the surface reported beside it, in projector pixels. Linear P2 on the reference's
-   own mesh is judged too.
+   support's rim. **Shape** (each seen vertex's distance to the reference's surface, and each eye's outline)
+   is judged, **sliding** along the surface reported beside it, in projector pixels. Linear P2 on the
+   reference's own mesh is judged too.
 3. **The reference's band**: three levels (h_fine 8, 6, 4.5 mm: ratio 4/3) give the finest level's grid
-   convergence index per depth (:mod:`flexsheet.fem.reference.gci`); where it holds (≤ 0.5 px) only part of the
-   way, ``visible.converged_to_mm`` (never under 15 mm) with the error there and the band beyond.
+   convergence index per depth (:mod:`flexsheet.fem.reference.gci`); where it holds (≤ 0.5 px) only part of
+   the way, ``visible.converged_to_mm`` (never under 15 mm) with the error there and the band beyond.
 4. **What the eye notices as the finger moves** (:mod:`flexsheet.experiments.fem_motion`): the drawn dent
    against the fingertip (``contact``) and frame-to-frame jumps (``temporal``) along the stroke and the push.
 
 Outputs in ``out_dir``: ``summary.json`` (``scene`` with ``max_depth_mm`` and ``contact``,
 ``realtime.update_ms``, ``visible.shape_px_max``, ``visible.sliding_px_max``, ``reference.gci_px``,
-``contact.gap_px_max``, ``temporal.jump_px_p99``, the pushes) and ``accuracy_<name>.png`` + ``.json``. Reference
-solves are cached (:class:`flexsheet.fem.cache.ArrayCache`, the key includes ``scene.key()``), solved first on
-dask when the cache lacks them (:func:`flexsheet.fem.reference.workers.run_workers`). :func:`flexsheet.fem.eye_judge.shape_px_by_depth`
-is the same shape metric for the sphere and path tables' held-out and mesh checks.
+``contact.gap_px_max``, ``temporal.jump_px_p99``, the pushes) and ``accuracy_<name>.png`` + ``.json``.
+Reference solves are cached (:class:`flexsheet.fem.cache.ArrayCache`, the key includes ``scene.key()``),
+solved first on dask when the cache lacks them (:func:`flexsheet.fem.reference.workers.run_workers`).
+:func:`flexsheet.fem.eye_judge.shape_px_by_depth` is the same shape metric for the sphere and path tables'
+held-out and mesh checks.
 
 Run by hand::
 
     python -m flexsheet.experiments.fem_scene --scene launch/scenes/sphere.yaml --quick --out docs/figures/scenes/sphere
-"""
+"""  # noqa: E501 - a table, template or command line kept whole
 
 from __future__ import annotations
 
@@ -82,8 +83,8 @@ def _linear_fine(sc, ref: dict, q, n, depths, probes) -> tuple[np.ndarray, float
 
 
 def _ref_job(args: tuple) -> tuple[float, float, str | None]:
-    """Worker (:func:`flexsheet.fem.reference.workers.run_workers`): one reference level of one push into the cache;
-    (h_fine, seconds, None or the error)."""
+    """Worker (:func:`flexsheet.fem.reference.workers.run_workers`): one reference level of one push into the
+    cache; (h_fine, seconds, None or the error)."""
     scene_file, f, h, st, probes, cache_dir = args
 
     t = time.perf_counter()
@@ -97,10 +98,10 @@ def _ref_job(args: tuple) -> tuple[float, float, str | None]:
 
 
 def _scene_push(sc, rt, st: dict, verts, faces, cache, f: float, depths) -> dict:
-    """One push point (fraction ``f`` of the stroke): the reference's levels, the served model and linear P2 on
-    the finest level's mesh, each judged by the eyes against the finest level (px,
-    :func:`flexsheet.fem.eye_judge.judge`: shape, silhouette and sliding), and each level against the next finer
-    one (shape and silhouette, for the convergence index)."""
+    """One push point (fraction ``f`` of the stroke): the reference's levels, the served model and linear P2
+    on the finest level's mesh, each judged by the eyes against the finest level (px,
+    :func:`flexsheet.fem.eye_judge.judge`: shape, silhouette and sliding), and each level against the next
+    finer one (shape and silhouette, for the convergence index)."""
     q, n = sc.stroke_at([f])
     q, n = q[0], n[0]
     refs = [scene_reference(sc, q, n, h, st, verts, cache) for h in st["levels"]]
@@ -112,7 +113,8 @@ def _scene_push(sc, rt, st: dict, verts, faces, cache, f: float, depths) -> dict
                             "linear_fine_px", "seen_vertices")}
     changes = [[] for _ in refs[:-1]]            # level i against level i+1, fine last
     for j, fg in enumerate(fingers):
-        (sv, li), k = judge([np.asarray(ups[j].vertices, float), verts + lin_u[j]], verts + fine["u"][j], faces, fg)
+        (sv, li), k = judge([np.asarray(ups[j].vertices, float), verts + lin_u[j]], verts + fine["u"][j],
+                            faces, fg)
         for key, v in (("served_shape_px", sv["shape_px"]), ("served_silhouette_px", sv["silhouette_px"]),
                        ("served_sliding_px", sv["sliding_px"]), ("served_total_px", sv["total_px"]),
                        ("linear_fine_px", max(li["shape_px"], li["silhouette_px"])), ("seen_vertices", k)):
@@ -129,16 +131,17 @@ def _scene_push(sc, rt, st: dict, verts, faces, cache, f: float, depths) -> dict
             "served_force_N": [u.force for u in ups], "served_stiffness_N_per_m": [u.stiffness for u in ups],
             "linear_fine_solve_ms": lin_ms, "reference_levels": levels, "level_change_px": changes}
     log.info(f"push at {f:g} of the stroke: served shape {shape.max():.2f} px (sliding "
-             f"{max(rows['served_sliding_px']):.2f} px), linear on the reference mesh {max(rows['linear_fine_px']):.2f} px"
+             f"{max(rows['served_sliding_px']):.2f} px), linear on the reference mesh "
+             f"{max(rows['linear_fine_px']):.2f} px"
              + (f", last refinement {max(changes[-1]):.2f} px" if changes else ""))
     return push
 
 
 def judged_range(depths: np.ndarray, band: np.ndarray | None) -> float | None:
-    """The deepest depth (m) up to which the reference's band (px: its grid convergence index, or with two levels
-    their difference) is ≤ :data:`CONVERGED_PX` at every judged depth (the range a served figure is judged over
-    when the reference does not converge over the scene's whole range); None without a band or when it holds
-    nowhere up to 15 mm, the least judged range the scenes may have."""
+    """The deepest depth (m) up to which the reference's band (px: its grid convergence index, or with two
+    levels their difference) is ≤ :data:`CONVERGED_PX` at every judged depth (the range a served figure is
+    judged over when the reference does not converge over the scene's whole range); None without a band or
+    when it holds nowhere up to 15 mm, the least judged range the scenes may have."""
     if band is None:
         return None
     ok = np.asarray(band, float) <= CONVERGED_PX
@@ -150,13 +153,15 @@ def judged_range(depths: np.ndarray, band: np.ndarray | None) -> float | None:
 
 def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | None = None, jobs: int = 1,
               levels: tuple[float, ...] | None = None) -> dict:
-    """Judge the model the FEM node serves for the scene file ``scene_path`` (:func:`flexsheet.fem.served.served_model`)
-    against the scene's nonlinear reference, as the eyes see it (module doc), over the scene's declared depths
-    (``use.max_depth``); write ``out_dir``/summary.json and the accuracy chart; return the summary. The
-    reference levels the cache lacks are solved first on dask (``jobs`` local processes or the
-    ``--scheduler``'s cluster, :func:`flexsheet.fem.reference.workers.run_workers`). ``cache_dir``: the FEM cache (None:
+    """Judge the model the FEM node serves for the scene file ``scene_path``
+    (:func:`flexsheet.fem.served.served_model`) against the scene's nonlinear reference, as the eyes see it
+    (module doc), over the scene's declared depths (``use.max_depth``); write ``out_dir``/summary.json and the
+    accuracy chart; return the summary. The reference levels the cache lacks are solved first on dask
+    (``jobs`` local processes or the ``--scheduler``'s cluster,
+    :func:`flexsheet.fem.reference.workers.run_workers`). ``cache_dir``: the FEM cache (None:
     ~/.cache/flexsheet/fem). ``levels``: the reference levels' h_fine (m, coarse to fine; default the
-    settings'). Raises ``ValueError`` (:class:`flexsheet.model.scene_parts.SceneError`) for a bad scene file."""
+    settings'). Raises ``ValueError`` (:class:`flexsheet.model.scene_parts.SceneError`) for a bad scene
+    file."""
     t0 = time.perf_counter()
     sc = load_scene(scene_path)
     st = _scene_settings(sc, quick, levels)
@@ -164,8 +169,8 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     cache_dir = cache_dir or DEFAULT_CACHE_DIR
     cache = ArrayCache(cache_dir)
     os.makedirs(out_dir, exist_ok=True)
-    log.info(f"scene {sc.name!r} ({sc.source}), {'quick' if quick else 'full'}: pushes 0-{depths[-1] * 1e3:g} mm "
-         f"({sc.use.reason or 'no reason given'}), {sc.finger.contact} contact")
+    log.info(f"scene {sc.name!r} ({sc.source}), {'quick' if quick else 'full'}: pushes 0-{depths[-1] * 1e3:g}"
+         f" mm ({sc.use.reason or 'no reason given'}), {sc.finger.contact} contact")
     rt, what = served_model(sc, FemConfig(arc_deg=launch_arc_deg(sc)), cache_dir=cache_dir)
     log.info(f"served model: {what}")
     timing = scene_update_ms(rt, sc, (0.005, depths[len(depths) // 2], depths[-1]), st["n_time"])
@@ -179,29 +184,32 @@ def run_scene(scene_path, out_dir: str, quick: bool = True, cache_dir: str | Non
     with open(os.path.join(out_dir, "summary.json"), "w") as fh:
         json.dump(summary, fh, indent=1)
     _plot(out_dir, summary)
-    log.info(f"done in {summary['seconds']:.0f} s -> {out_dir}: shape {served.max():.2f} px (target {TARGET_PX}), "
+    log.info(f"done in {summary['seconds']:.0f} s -> {out_dir}: shape {served.max():.2f} px (target "
+             f"{TARGET_PX}), "
              f"reference GCI {summary['reference']['gci_px']} px (target {CONVERGED_PX}), contact gap "
-             f"{summary['contact']['gap_px_max']:.2f} px, jump p99 {summary['temporal']['jump_px_p99']:.2f} px")
+             f"{summary['contact']['gap_px_max']:.2f} px, jump p99 {summary['temporal']['jump_px_p99']:.2f} "
+             "px")
     return summary
 
 
 def _scene_settings(sc, quick: bool, levels: tuple[float, ...] | None) -> dict:
-    """:data:`~flexsheet.fem.reference.scene_reference.QUICK` or ``FULL`` for scene ``sc``: the reference ``levels`` (h_fine m) when given, and the
-    push depths every :data:`DEPTH_STEP` m up to the scene's declared ``use.max_depth`` (never past it)."""
+    """:data:`~flexsheet.fem.reference.scene_reference.QUICK` or ``FULL`` for scene ``sc``: the reference
+    ``levels`` (h_fine m) when given, and the push depths every :data:`DEPTH_STEP` m up to the scene's
+    declared ``use.max_depth`` (never past it)."""
     st = dict(QUICK if quick else FULL)
     if levels is not None:
         st["levels"] = tuple(levels)
     n_d = int(sc.use.max_depth / DEPTH_STEP + 1e-9)         # never past the declared range
     st["depths"] = tuple(np.round(np.arange(1, n_d + 1) * DEPTH_STEP, 9))
-    if st["path_depth"] is True:                            # refined along the whole push, to the declared depth
+    if st["path_depth"] is True:  # refined along the whole push, to the declared depth
         st["path_depth"] = float(sc.use.max_depth)
     return st
 
 
 def _solve_references(scene_path, st: dict, verts: np.ndarray, cache_dir: str, jobs: int) -> None:
     """Solve every reference level of every push of ``st`` the cache lacks in ``jobs`` worker processes
-    (:func:`flexsheet.fem.reference.workers.run_workers`), sampled at the rendered vertices ``verts`` (S, 3) m;
-    with one local worker (and no cluster) nothing here: the pushes are solved as they are read."""
+    (:func:`flexsheet.fem.reference.workers.run_workers`), sampled at the rendered vertices ``verts`` (S, 3)
+    m; with one local worker (and no cluster) nothing here: the pushes are solved as they are read."""
     work = [(str(scene_path), f, h, st, verts, cache_dir) for f in st["fractions"] for h in st["levels"]]
     if parallel(jobs) and len(work) > 1:
         for h, sec, err in run_workers(_ref_job, work, min(jobs, len(work))):
@@ -210,8 +218,8 @@ def _solve_references(scene_path, st: dict, verts: np.ndarray, cache_dir: str, j
 
 def _band(st: dict, pushes: list[dict]) -> dict:
     """The reference's band per depth, px: with three levels the fine level's grid convergence index
-    (:func:`flexsheet.fem.reference.gci.gci_by_depth`) of the levels' visible shape differences; with two, their
-    difference."""
+    (:func:`flexsheet.fem.reference.gci.gci_by_depth`) of the levels' visible shape differences; with two,
+    their difference."""
     ch = [np.max([p["level_change_px"][i] for p in pushes], axis=0) for i in range(len(st["levels"]) - 1)]
     if len(ch) >= 2:
         g = gci_by_depth(ch[-1], ch[-2], tuple(st["levels"][-3:]))
@@ -223,9 +231,10 @@ def _band(st: dict, pushes: list[dict]) -> dict:
 
 def _summary(sc, quick: bool, st: dict, what: str, timing: dict, pushes: list[dict], motion: dict,
              t0: float) -> dict:
-    """summary.json of :func:`run_scene`: the scene (its contact law), the served model (``what``) and its update
-    ``timing``, what the eyes see of ``pushes`` (:func:`_scene_push`) by depth, the reference's band, and the
-    ``motion`` blocks (:func:`flexsheet.experiments.fem_motion.served_motion`); ``t0`` the run's start."""
+    """summary.json of :func:`run_scene`: the scene (its contact law), the served model (``what``) and its
+    update ``timing``, what the eyes see of ``pushes`` (:func:`_scene_push`) by depth, the reference's band,
+    and the ``motion`` blocks (:func:`flexsheet.experiments.fem_motion.served_motion`); ``t0`` the run's
+    start."""
     depths = np.asarray(st["depths"], float)
     mx = {k: np.max([p[k] for p in pushes], axis=0) for k in ("served_shape_px", "served_silhouette_px",
                                                                 "served_sliding_px", "served_total_px")}
@@ -241,7 +250,8 @@ def _summary(sc, quick: bool, st: dict, what: str, timing: dict, pushes: list[di
                   "contact": sc.finger.contact, "contact_source": sc.finger.contact_source},
         "settings": {"quick": quick, **{k: list(v) if isinstance(v, tuple) else v for k, v in st.items()}},
         "realtime": {"method": what, "update_ms": timing["median"], "update_ms_p90": timing["p90"],
-                     "update_wall_ms": timing["wall_median"], "n_timed": timing["n"], "methods": timing["methods"],
+                     "update_wall_ms": timing["wall_median"], "n_timed": timing["n"],
+                     "methods": timing["methods"],
                      "target_ms": 1.0, "meets_target": timing["median"] <= 1.0,
                      "update_timing": "the updating thread's CPU time (time.thread_time) per update_finger"},
         "visible": {"shape_px_max": float(served.max()), "range_mm": [0.0, depths[-1] * 1e3],
@@ -257,15 +267,17 @@ def _summary(sc, quick: bool, st: dict, what: str, timing: dict, pushes: list[di
                     "converged_to_mm": judged * 1e3 if judged is not None else None,
                     "max_px_in_converged_range": float(served[depths <= judged + 1e-9].max())
                     if judged is not None else None,
-                    "band_beyond_px": [float(served[depths > judged + 1e-9].min()), float(served[depths > judged + 1e-9].max())]
+                    "band_beyond_px": [float(served[depths > judged + 1e-9].min()),
+                                       float(served[depths > judged + 1e-9].max())]
                     if judged is not None and np.any(depths > judged + 1e-9) else None,
-                    "metric": "rendered vertices either eye (V -/+ 32 mm along y) sees on the reference's deformed "
-                              "surface, the finger an occluding capsule; shape: each served vertex's distance to "
-                              "the reference's surface, and the outline's (Hausdorff), as the eyes see them on the "
-                              "imaginary screen, px (0.7 mm); sliding along the surface reported apart (a texture "
-                              "would show it); flexsheet/fem/eye_judge.py"},
-        "reference": {"model": f"{sc.material.model} (compressible, nu {sc.material.nu:g}), total Lagrangian P2, "
-                               f"Newton with load stepping, rigid {sc.finger.contact} capsule finger, full body",
+                    "metric": "rendered vertices either eye (V -/+ 32 mm along y) sees on the reference's "
+                              "deformed surface, the finger an occluding capsule; shape: each served "
+                              "vertex's distance to the reference's surface, and the outline's (Hausdorff), "
+                              "as the eyes see them on the imaginary screen, px (0.7 mm); sliding along the "
+                              "surface reported apart (a texture would show it); flexsheet/fem/eye_judge.py"},
+        "reference": {"model": f"{sc.material.model} (compressible, nu {sc.material.nu:g}), total Lagrangian "
+                               f"P2, Newton with load stepping, rigid {sc.finger.contact} capsule finger, "
+                               "full body",
                       "gci_px": (float(np.max(band)) if finite else (None if band is None else "inf")),
                       "gci_px_by_depth": [None if not np.isfinite(x) else float(x) for x in band]
                       if band is not None else None,
@@ -275,8 +287,9 @@ def _summary(sc, quick: bool, st: dict, what: str, timing: dict, pushes: list[di
                       "converged": bool(finite and np.max(band) <= CONVERGED_PX and all(
                           lv["newton_converged"] for p in pushes for lv in p["reference_levels"])),
                       "levels": pushes[0]["reference_levels"],
-                      "criterion": f"the finest level's band (GCI of three levels at ratio 4/3, F_s 1.25, order "
-                                   f"capped at 2) <= {CONVERGED_PX} px at every depth, every Newton solve converged"},
+                      "criterion": "the finest level's band (GCI of three levels at ratio 4/3, F_s 1.25, "
+                                   f"order capped at 2) <= {CONVERGED_PX} px at every depth, every Newton "
+                                   "solve converged"},
         **motion,
         "pushes": pushes,
         "seconds": time.perf_counter() - t0,
@@ -294,7 +307,8 @@ def _plot(out_dir: str, s: dict) -> None:
     name = s["scene"]["name"]
     v, r = s["visible"], s["reference"]
     data = {"title": f"{name}: visible FEM error as the eyes see it", "units": {"depth": "mm", "error": "px"},
-            "depths_mm": v["depths_mm"], "served_px": v["px_by_depth"], "sliding_px": v["sliding_px_by_depth"],
+            "depths_mm": v["depths_mm"], "served_px": v["px_by_depth"],
+            "sliding_px": v["sliding_px_by_depth"],
             "linear_fine_px": np.max([p["linear_fine_px"] for p in s["pushes"]], axis=0).tolist(),
             "reference_change_px": r["gci_px_by_depth"], "target_px": v["target_px"],
             "converged_target_px": r["target_px"], "update_ms": s["realtime"]["update_ms"],
@@ -330,11 +344,13 @@ def main(argv: list[str] | None = None) -> int:
                "--out out/fem_sphere")
     ap.add_argument("--scene", required=True, help="scene file (launch/scenes/*.yaml)")
     ap.add_argument("--out", required=True, help="output folder")
-    ap.add_argument("--quick", action="store_true", help="one push point (the stroke's middle), three reference "
-                                                         "levels (h_fine 8, 6, 4.5 mm)")
-    ap.add_argument("--jobs", type=int, default=1, help="reference levels solved in N worker processes (default 1)")
+    ap.add_argument("--quick", action="store_true", help="one push point (the stroke's middle), three "
+                                                         "reference levels (h_fine 8, 6, 4.5 mm)")
+    ap.add_argument("--jobs", type=int, default=1, help="reference levels solved in N worker processes "
+                                                        "(default 1)")
     args = ap.parse_args(argv)
-    show_lines(LIBRARY)         # the library's progress, the worker pool's (flexsheet.fem.reference.workers) included
+    # the library's progress, the worker pool's (flexsheet.fem.reference.workers) included
+    show_lines(LIBRARY)
     try:
         s = run_scene(args.scene, args.out, args.quick, jobs=args.jobs)
     except ValueError as exc:

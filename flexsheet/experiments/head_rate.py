@@ -1,4 +1,5 @@
-"""``flexsheet experiment head_rate --out DIR``: the head camera's frame rate, speed against what the eye sees.
+"""``flexsheet experiment head_rate --out DIR``: the head camera's frame rate, speed against what the eye
+sees.
 
 The head camera's twin renders the glasses and the tracker finds them in every frame, on the simulated
 display's one loop: about a fifth of its CPU at 60 Hz. This runs ``flexsheet launch launch/sim.yaml`` once
@@ -71,7 +72,8 @@ def row(rate_hz: float, summary: dict, timing: dict) -> dict:
     safety = summary["safety"]
     felt30 = summary["headline"]["rows"].get("30", {})
     out = {"rate_hz": float(rate_hz), "realtime_factor": float(summary["realtime_factor"]),
-           "view_error_px_median": float(view["error_px_median"]), "view_error_px_p95": float(view["error_px_p95"]),
+           "view_error_px_median": float(view["error_px_median"]),
+           "view_error_px_p95": float(view["error_px_p95"]),
            "eye_error_mm_median": float(eye["median"]), "eye_frames": int(eye["n"]),
            "keepout_violations": int(safety["keepout_violations"]),
            "max_speed_near_head_mps": float(safety["max_speed_near_head_mps"]),
@@ -113,14 +115,16 @@ def _chart(out: dict, path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="flexsheet experiment head_rate", description=__doc__.splitlines()[0],
-                                 epilog="example: flexsheet experiment head_rate --out docs/figures/head_rate "
-                                        "--rates 60 30 20",
+                                 epilog="example: flexsheet experiment head_rate --out "
+                                        "docs/figures/head_rate --rates 60 30 20",
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True, type=Path, help="folder for head_rate.json and head_rate.png")
-    ap.add_argument("--rates", nargs="+", type=float, default=[60.0, 30.0, 20.0], help="head camera rates, Hz")
+    ap.add_argument("--rates", nargs="+", type=float, default=[60.0, 30.0, 20.0],
+                    help="head camera rates, Hz")
     ap.add_argument("--file", default="launch/sim.yaml", help="the launch file (default launch/sim.yaml)")
     ap.add_argument("--duration", type=float, default=None, help="simulated seconds (default: the whole run)")
-    ap.add_argument("--set", action="append", default=[], metavar="NODE.KEY=VALUE", help="passed to each launch")
+    ap.add_argument("--set", action="append", default=[], metavar="NODE.KEY=VALUE",
+                    help="passed to each launch")
     ap.add_argument("--keep", action="store_true", help="keep each run's output under OUT/runs")
     a = ap.parse_args(argv)
     if not a.rates or any(not 0.0 < r <= 240.0 for r in a.rates):
@@ -140,7 +144,8 @@ def main(argv: list[str] | None = None) -> int:
         summary = run / "summary.json"
         if proc.returncode != 0 or not summary.exists():
             print(proc.stderr[-2000:], file=sys.stderr)
-            print(f"[head_rate] {rate:g} Hz: the launch exited {proc.returncode} without a summary", file=sys.stderr)
+            print(f"[head_rate] {rate:g} Hz: the launch exited {proc.returncode} without a "
+                  "summary", file=sys.stderr)
             return 1
         rows.append(row(rate, json.loads(summary.read_text()), head_timing(run / "sim.mcap")))
         print(f"[head_rate] {rate:g} Hz: " + json.dumps(rows[-1]), file=sys.stderr, flush=True)
@@ -158,7 +163,8 @@ def main(argv: list[str] | None = None) -> int:
            "verdict": "met" if met else "MISSED"}
     (a.out / "head_rate.json").write_text(json.dumps(out, indent=1) + "\n")
     _chart(out, a.out / "head_rate.png")
-    print(f"[head_rate] wrote {a.out / 'head_rate.json'} and head_rate.png; chosen {out['chosen_rate_hz']} Hz")
+    print(f"[head_rate] wrote {a.out / 'head_rate.json'} and head_rate.png; chosen {out['chosen_rate_hz']} "
+          "Hz")
     return 0
 
 

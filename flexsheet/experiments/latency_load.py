@@ -1,10 +1,10 @@
 """``flexsheet experiment latency_load``: the loop's latency against CPU load.
 
-The same wall-clock run (``flexsheet launch launch/sim_composed.yaml``, one stroke) is repeated with 0, 1 and 2 cores taken
-away by busy-loop processes (``nice 0``, one per core), and the report's hops are charted: camera frame → arm
-command and fingertip → rendered frame (median and p99, ms), plus the controllers' watchdog trips. Output:
-``OUT/latency_load.json`` and ``OUT/latency_load.png`` (matplotlib Agg). Each point is one run (noisy on a
-shared machine; the JSON keeps every run's numbers).
+The same wall-clock run (``flexsheet launch launch/sim_composed.yaml``, one stroke) is repeated with 0, 1 and
+2 cores taken away by busy-loop processes (``nice 0``, one per core), and the report's hops are charted:
+camera frame → arm command and fingertip → rendered frame (median and p99, ms), plus the controllers' watchdog
+trips. Output: ``OUT/latency_load.json`` and ``OUT/latency_load.png`` (matplotlib Agg). Each point is one run
+(noisy on a shared machine; the JSON keeps every run's numbers).
 """
 
 from __future__ import annotations
@@ -38,7 +38,8 @@ def run_once(launch: str, busy: int, out: Path, timeout: float = 400.0, script: 
         p.start()
     try:
         t0 = time.monotonic()
-        res = subprocess.run([sys.executable, "-m", "flexsheet", "launch", launch, "--out", str(out), "--set", script],
+        res = subprocess.run([sys.executable, "-m", "flexsheet", "launch", launch, "--out", str(out), "--set",
+                              script],
                              capture_output=True, text=True, timeout=timeout)
         wall = time.monotonic() - t0
     finally:
@@ -51,7 +52,8 @@ def run_once(launch: str, busy: int, out: Path, timeout: float = 400.0, script: 
         raise RuntimeError(f"launch with {busy} busy cores failed ({res.returncode}): "
                            + " | ".join(res.stdout.strip().splitlines()[-5:]))
     summary = json.loads((out / "summary.json").read_text())
-    return {"busy_cores": busy, "wall_s": wall, "latency_ms": {h: summary["latency_ms"]["chain"][h] for h in HOPS},
+    return {"busy_cores": busy, "wall_s": wall,
+            "latency_ms": {h: summary["latency_ms"]["chain"][h] for h in HOPS},
             "watchdog": summary.get("faults", {}).get("watchdog"),
             "dtheta_10_deg": summary.get("10", {}).get("dtheta_mean_deg")}
 
@@ -66,7 +68,8 @@ def chart(rows: list[dict], path: Path) -> None:
     x = [r["busy_cores"] for r in rows]
     for hop, colour in zip(HOPS, ("tab:blue", "tab:orange"), strict=True):
         ax.plot(x, [r["latency_ms"][hop]["median"] for r in rows], "o-", color=colour, label=f"{hop} median")
-        ax.plot(x, [r["latency_ms"][hop]["p99"] for r in rows], "s--", color=colour, alpha=0.6, label=f"{hop} p99")
+        ax.plot(x, [r["latency_ms"][hop]["p99"] for r in rows], "s--", color=colour, alpha=0.6,
+                label=f"{hop} p99")
     ax.set_yscale("log")
     ax.set_xlabel("cores taken by busy-loop processes (of 2)")
     ax.set_ylabel("latency, ms")
@@ -86,8 +89,10 @@ def main(argv: list[str] | None = None) -> int:
                "  flexsheet experiment latency_load --out /tmp/ll --busy 0 2\n"
                "  flexsheet experiment latency_load --out /tmp/ll --quick")
     p.add_argument("--out", default="docs/figures/realtime", help="output folder (JSON + PNG)")
-    p.add_argument("--launch", default="launch/sim_composed.yaml", help="launch file to run (clock: wall: the load is what it measures)")
-    p.add_argument("--busy", type=int, nargs="+", default=[0, 1, 2], help="busy cores per run (default 0 1 2)")
+    p.add_argument("--launch", default="launch/sim_composed.yaml",
+                   help="launch file to run (clock: wall: the load is what it measures)")
+    p.add_argument("--busy", type=int, nargs="+", default=[0, 1, 2],
+                   help="busy cores per run (default 0 1 2)")
     p.add_argument("--quick", action="store_true", help="one run, no busy core, a 4 s stroke")
     a = p.parse_args(argv)
     script = QUICK_SCRIPT if a.quick else SCRIPT
@@ -105,7 +110,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"[latency_load]   exposure -> arm {r[HOPS[0]]['median']:.2f} / {r[HOPS[0]]['p99']:.1f} ms, "
               f"exposure -> projected {r[HOPS[1]]['median']:.1f} / {r[HOPS[1]]['p99']:.1f} ms, "
               f"watchdog {rows[-1]['watchdog']}", flush=True)
-    (out / "latency_load.json").write_text(json.dumps({"runs": rows, "launch": a.launch, "script": script}, indent=1))
+    (out
+     / "latency_load.json").write_text(json.dumps({"runs": rows, "launch": a.launch, "script": script},
+                                                  indent=1))
     chart(rows, out / "latency_load.png")
     print(f"[latency_load] wrote {out}/latency_load.json and latency_load.png", flush=True)
     return 0

@@ -2,8 +2,8 @@
 really lands — on the actual flat, tilted or pushed sheet — and measures the cylinder's sizes in mm.
 
 Independent of the correction code: the true sheet is the membrane sampled on a G×G grid (the layout of
-:class:`messages.SheetState` ``membrane``), interpolated bilinearly, and each camera ray is intersected with it
-by bracketing bisection (the correction uses Newton on the analytic series). Light path, traced backwards:
+:class:`messages.SheetState` ``membrane``), interpolated bilinearly, and each camera ray is intersected with
+it by bracketing bisection (the correction uses Newton on the analytic series). Light path, traced backwards:
 camera pixel → ray from the eye → hit X on the true sheet → projector pixel that lights X (the TRUE
 projector: pinhole K, R, P plus its OpenCV lens distortion D, as ``cv2.projectPoints``) → bilinear sample of
 the projector image (``cv2.remap``). Rays that miss the sheet see black.
@@ -14,8 +14,8 @@ distortion passed to :meth:`MeasurementCamera.photograph` are the hidden truth's
 *calibrated* ones (``display.yaml``). This module never sees which is which.
 
 The camera's image plane is the imaginary screen itself (1 camera pixel = ``pixel`` m on the screen), so
-sizes are read directly in screen millimetres as in the paper ("1 pixel corresponds to 0.7 mm on the
-imaginary screen").
+sizes are read directly in screen millimetres as in the paper ("1 pixel corresponds to 0.7 mm on the imaginary
+screen").
 """
 
 from __future__ import annotations
@@ -32,12 +32,13 @@ from flexsheet.model.sheet import SheetSurface
 __all__ = ["MeasurementCamera", "measure_sizes", "measure_edges", "trace_to_sheet", "projector_pixels"]
 
 
-def projector_pixels(points: np.ndarray, projector: Projector, distortion=None) -> tuple[np.ndarray, np.ndarray]:
-    """Projector pixel (N, 2) (x right, y down, pixel centres at integers) that lights each display-frame point
-    (N, 3) m, and a mask (N,) of points in front of the projector. Pinhole K, R, P of ``projector`` and the
-    OpenCV distortion ``distortion`` (k1, k2, p1, p2, k3) (5,) or None, as ``cv2.projectPoints`` (Brown–Conrady
-    model; OpenCV docs, "Camera Calibration and 3D Reconstruction"). Raises ``ValueError`` for a distortion that
-    is not 5 finite numbers."""
+def projector_pixels(points: np.ndarray, projector: Projector, distortion=None) -> tuple[np.ndarray,
+                                                                                         np.ndarray]:
+    """Projector pixel (N, 2) (x right, y down, pixel centres at integers) that lights each display-frame
+    point (N, 3) m, and a mask (N,) of points in front of the projector. Pinhole K, R, P of ``projector`` and
+    the OpenCV distortion ``distortion`` (k1, k2, p1, p2, k3) (5,) or None, as ``cv2.projectPoints``
+    (Brown–Conrady model; OpenCV docs, "Camera Calibration and 3D Reconstruction"). Raises ``ValueError`` for
+    a distortion that is not 5 finite numbers."""
     pts = np.asarray(points, dtype=float)
     xc = (pts - np.asarray(projector.position, float)) @ np.asarray(projector.R, float)
     front = xc[:, 2] > 1e-9
@@ -46,7 +47,8 @@ def projector_pixels(points: np.ndarray, projector: Projector, distortion=None) 
     if distortion is not None:
         D = np.asarray(distortion, dtype=float).ravel()
         if D.shape != (5,) or not np.all(np.isfinite(D)):
-            raise ValueError(f"distortion must be 5 finite OpenCV coefficients (k1, k2, p1, p2, k3), got {distortion!r}")
+            raise ValueError("distortion must be 5 finite OpenCV coefficients (k1, k2, p1, p2, k3), got "
+                             f"{distortion!r}")
         k1, k2, p1, p2, k3 = D
         r2 = x * x + y * y
         radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
@@ -70,7 +72,8 @@ def _bilinear(grid: np.ndarray, a: float, b: float, u: np.ndarray, v: np.ndarray
 
 def trace_to_sheet(origin, dirs: np.ndarray, sheet: SheetSurface, grid: np.ndarray | None = None,
                    iters: int = 40) -> tuple[np.ndarray, np.ndarray]:
-    """Hit points (N, 3) m of rays ``origin`` (3,) + t·``dirs`` (N, 3) with the true sheet, and a hit mask (N,).
+    """Hit points (N, 3) m of rays ``origin`` (3,) + t·``dirs`` (N, 3) with the true sheet, and a hit mask
+    (N,).
 
     ``grid``: deflection (G, G) m over the sheet (None: flat). The hit is bracketed between the plane
     (depth 0) and depth max(grid) and found by ``iters`` bisection steps on depth(t) − w(t); rays parallel to
@@ -92,7 +95,8 @@ def trace_to_sheet(origin, dirs: np.ndarray, sheet: SheetSurface, grid: np.ndarr
         du, dv = d @ eu, d @ ev
         for _ in range(iters):
             mid = 0.5 * (lo + hi)
-            f = (h0 + mid * dn) - _bilinear(grid, sheet.half_span, sheet.half_width, pu + mid * du, pv + mid * dv)
+            f = ((h0 + mid * dn)
+                 - _bilinear(grid, sheet.half_span, sheet.half_width, pu + mid * du, pv + mid * dv))
             below = f < 0.0
             lo = np.where(below, mid, lo)
             hi = np.where(below, hi, mid)
@@ -137,10 +141,11 @@ class MeasurementCamera:
 
     def photograph(self, projector_image: np.ndarray, projector: Projector, sheet: SheetSurface,
                    distortion=None) -> np.ndarray:
-        """What the eye sees: (h, w) float32 in [0, 1] (grey level of ``projector_image`` (H, W) or (H, W, 3)).
+        """What the eye sees: (h, w) float32 in [0, 1] (grey level of ``projector_image`` (H, W) or (H, W,
+        3)).
 
-        ``projector``/``distortion``: the projector that really lights the sheet (pinhole + OpenCV D (5,), None:
-        pinhole); ``sheet``: the TRUE sheet (its membrane, if any, is sampled on the grid and traced
+        ``projector``/``distortion``: the projector that really lights the sheet (pinhole + OpenCV D (5,),
+        None: pinhole); ``sheet``: the TRUE sheet (its membrane, if any, is sampled on the grid and traced
         independently). Raises ``ValueError`` for a bad distortion."""
         import cv2
 
@@ -167,7 +172,8 @@ def _profile_span(profile: np.ndarray) -> tuple[float, float]:
         raise ValueError("the object is not visible in the photograph")
     i0, i1 = above[0], above[-1]
     a = i0 - (profile[i0] - 0.5) / max(profile[i0] - profile[i0 - 1], 1e-9) if i0 > 0 else float(i0)
-    b = i1 + (profile[i1] - 0.5) / max(profile[i1] - profile[i1 + 1], 1e-9) if i1 < len(profile) - 1 else float(i1)
+    b = (i1 + (profile[i1] - 0.5) / max(profile[i1] - profile[i1 + 1], 1e-9) if i1 < len(profile) - 1
+         else float(i1))
     return float(a), float(b)
 
 

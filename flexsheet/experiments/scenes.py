@@ -2,14 +2,14 @@
 scene and the organ's compliance along its stroke (the tumour's stiffness peak in the sheet's tension).
 
 1. **Table I per scene** (``launch/scenes/{cylinder,sphere,rounded_box,organ}.yaml``): the in-process stroke
-   of :func:`flexsheet.experiments.stroke_model.simulate` (honest twin, camera noise, Kalman prediction, latency,
-   the arms' IK / command stream / servo / true kinematics) with the scripted finger on the scene's stroke
-   path, the planner on the scene's shape with the tension from the scene's compliance estimate
+   of :func:`flexsheet.experiments.stroke_model.simulate` (honest twin, camera noise, Kalman prediction,
+   latency, the arms' IK / command stream / servo / true kinematics) with the scripted finger on the scene's
+   stroke path, the planner on the scene's shape with the tension from the scene's compliance estimate
    (:class:`flexsheet.planning.compliance.SceneCompliance`, what the planner node does while the FEM does not
    solve the scene), and the metric in the normal section along the scene's stroke
-   (:func:`flexsheet.analysis.table1.scene_table1_row`). Realistic twin, truth seeds 0…``seeds``−1,
-   moving times 10 s and 30 s. Each row also has the tension the planner set at the contacts (median, p5,
-   p95, N/m; truth seed 0's run), the requested object stiffness and the share of samples at the arms' limit.
+   (:func:`flexsheet.analysis.table1.scene_table1_row`). Realistic twin, truth seeds 0…``seeds``−1, moving
+   times 10 s and 30 s. Each row also has the tension the planner set at the contacts (median, p5, p95, N/m;
+   truth seed 0's run), the requested object stiffness and the share of samples at the arms' limit.
 2. **The organ's compliance** (``organ.yaml``, a stiff 14 mm tumour 8.6 mm under the stroke):
    a. the estimate along the path at fixed push depths 0.5, 2, 5 and 10 mm, with and without the inclusion;
    b. the scripted runs — the light stroke (0.5 mm, 10 s) and the world's stroke-and-push (10 s, pushed to
@@ -65,7 +65,8 @@ def _rounded(x, digits: int = 5):
 
 def _pct(x) -> dict:
     x = np.asarray(x, float)
-    return {"median": float(np.median(x)), "p5": float(np.percentile(x, 5)), "p95": float(np.percentile(x, 95))}
+    return {"median": float(np.median(x)), "p5": float(np.percentile(x, 5)),
+            "p95": float(np.percentile(x, 95))}
 
 
 def _compliance_stats(record: list, t0: float, t1: float) -> dict:
@@ -95,9 +96,9 @@ def table1_for_scene(name: str, seeds: int = 3, times=(10.0, 30.0)) -> dict:
             row.update({k: float(v) for k, v in st.items()})
             row.update(_compliance_stats(rec, t_move, t_move + T))
             rows.append(row)
-            log.info(f"  {name:<12} {T:>4g} s seed {s}: dθ {row['dtheta_mean_deg']:.3f}° Δd {row['dd_mean_mm']:.3f} mm, "
-                f"tension {row['tension_n_per_m']['median']:.0f} N/m, IK refused {st['ik_refused']} "
-                f"({time.monotonic() - t_start:.1f} s)")
+            log.info(f"  {name:<12} {T:>4g} s seed {s}: dθ {row['dtheta_mean_deg']:.3f}° Δd "
+                f"{row['dd_mean_mm']:.3f} mm, tension {row['tension_n_per_m']['median']:.0f} N/m, IK refused "
+                f"{st['ik_refused']} ({time.monotonic() - t_start:.1f} s)")
         keys = [k for k, v in rows[0].items() if isinstance(v, float)]
         mean = {k: float(np.mean([r[k] for r in rows])) for k in keys}
         mean["n"] = int(sum(r["n"] for r in rows))
@@ -105,7 +106,8 @@ def table1_for_scene(name: str, seeds: int = 3, times=(10.0, 30.0)) -> dict:
         for k in ("tension_n_per_m", "object_stiffness_n_per_m", "stiffness_n_per_m"):
             mean[k] = rows[0][k]                   # percentiles of truth seed 0's run
         mean["compliance_of_truth_seed"] = 0
-        mean["per_seed"] = [{"truth_seed": i, "dtheta_mean_deg": r["dtheta_mean_deg"], "dd_mean_mm": r["dd_mean_mm"],
+        mean["per_seed"] = [{"truth_seed": i, "dtheta_mean_deg": r["dtheta_mean_deg"],
+                             "dd_mean_mm": r["dd_mean_mm"],
                              "ik_refused": r["ik_refused"]} for i, r in enumerate(rows)]
         out[f"{T:g}"] = mean
     return out
@@ -144,14 +146,16 @@ def stiffness_along_path(scene, depths_mm=DEPTHS_MM, n: int = 121) -> dict:
     return out
 
 
-def run_series(scene, mode: str, scale: float, seed: int = 0, depth: float = 5e-4, push_depth: float | None = None,
-                moving_time: float = 10.0) -> tuple[dict, dict]:
+def run_series(scene, mode: str, scale: float, seed: int = 0, depth: float = 5e-4,
+               push_depth: float | None = None,
+               moving_time: float = 10.0) -> tuple[dict, dict]:
     """One scripted run through the planner (realistic twin ``seed``; ``mode`` as the world's segments, finger
-    ``depth`` m while stroking, ``push_depth`` m for stroke_push, default the scene's ``use.stroke_depth``): per sample during the moving phase the
-    contact's arc (mm), the planned depth (mm), the object's stiffness (the planner's request / ``scale``),
-    the requested and presented stiffness and the tension (N/m), the status at the limit, the tumour's
-    ``contrast`` (the estimate at the contact and depth over the same without the inclusions) and the tension
-    the same request without the tumour would need at the same place on the sheet."""
+    ``depth`` m while stroking, ``push_depth`` m for stroke_push, default the scene's ``use.stroke_depth``):
+    per sample during the moving phase the contact's arc (mm), the planned depth (mm), the object's stiffness
+    (the planner's request / ``scale``), the requested and presented stiffness and the tension (N/m), the
+    status at the limit, the tumour's ``contrast`` (the estimate at the contact and depth over the same
+    without the inclusions) and the tension the same request without the tumour would need at the same place
+    on the sheet."""
     push_depth = scene.use.stroke_depth if push_depth is None else push_depth
     tw = make_twin("realistic", seed, None)
     rec: list = []
@@ -173,11 +177,14 @@ def run_series(scene, mode: str, scale: float, seed: int = 0, depth: float = 5e-
               "depth_mm": [p.depth * 1e3 for _, p in sel],
               "requested_n_per_m": [p.object_stiffness for _, p in sel],
               "object_n_per_m": [p.object_stiffness / scale for _, p in sel],
-              "presented_n_per_m": [p.stiffness for _, p in sel], "tension_n_per_m": [p.tension for _, p in sel],
-              "at_limit": [("stiffer_than_sheet" in p.status) or ("softer_than_sheet" in p.status) for _, p in sel],
+              "presented_n_per_m": [p.stiffness for _, p in sel],
+              "tension_n_per_m": [p.tension for _, p in sel],
+              "at_limit": [("stiffer_than_sheet" in p.status) or ("softer_than_sheet" in p.status) for _,
+                           p in sel],
               "contrast": [e.k / e.k_body for e in est],
               "tension_without_tumour_n_per_m": [
-                  stretch_for_stiffness(p.object_stiffness * e.k_body / e.k, mat, p.offset[0], emax, 0.0, p.offset[1]).tension
+                  stretch_for_stiffness(p.object_stiffness * e.k_body / e.k, mat, p.offset[0], emax, 0.0,
+                                        p.offset[1]).tension
                   for (_, p), e in zip(sel, est, strict=True)],
               "stiffness_scale": scale, "finger_depth_mm": depth * 1e3,
               "push_depth_mm": push_depth * 1e3 if mode != "stroke" else None,
@@ -199,8 +206,10 @@ def peak_along_path(series: dict, arc_inc: float, bin_mm: float = 4.0) -> dict:
     edges = np.arange(0.0, arc.max() + bin_mm, bin_mm)
     mid = 0.5 * (edges[1:] + edges[:-1])
     out: dict = {"tumour_arc_mm": arc_inc}
-    tension_ratio = np.asarray(series["tension_n_per_m"]) / np.asarray(series["tension_without_tumour_n_per_m"])
-    for key in ("object_n_per_m", "presented_n_per_m", "tension_n_per_m", "contrast", "tension_over_no_tumour"):
+    tension_ratio = np.asarray(series["tension_n_per_m"]) / np.asarray(
+        series["tension_without_tumour_n_per_m"])
+    for key in ("object_n_per_m", "presented_n_per_m", "tension_n_per_m", "contrast",
+                "tension_over_no_tumour"):
         b = _binned(arc, tension_ratio if key == "tension_over_no_tumour" else series[key], edges)
         i = int(np.nanargmax(b))
         far = np.abs(mid - arc_inc) > 15.0
@@ -221,7 +230,8 @@ def organ_runs(quick: bool = False) -> dict:
                  "arc_of_contrast_max_mm": float(arc[np.argmax(k[d] / kb[d])]),
                  "k_max_n_per_m": float(np.max(k[d])), "k_min_n_per_m": float(np.min(k[d]))} for d in k}
     mat = SheetMaterial()
-    k_sheet = {"min_n_per_m": stiffness(mat.min_stretch, mat), "max_n_per_m": stiffness(max_stretch_within_force(mat), mat),
+    k_sheet = {"min_n_per_m": stiffness(mat.min_stretch, mat),
+               "max_n_per_m": stiffness(max_stretch_within_force(mat), mat),
                "note": "the sheet's normal stiffness at its centre between the stretch limits (tension.py)"}
     palp1, _ = run_series(sc, "stroke", 1.0, depth=PALPATION_DEPTH)
     scale = round(0.9 * k_sheet["max_n_per_m"] / float(np.percentile(palp1["object_n_per_m"], 99)), 3)
@@ -259,21 +269,24 @@ def _plot(org: dict, path: Path) -> None:
     r = org["runs"]["palpation"]
     s = r["stiffness_scale"]
     a = ax[1]
-    a.plot(r["arc_mm"], r["requested_n_per_m"], ".", ms=3, color="k", label=f"requested: object stiffness x {s:g}")
+    a.plot(r["arc_mm"], r["requested_n_per_m"], ".", ms=3, color="k",
+           label=f"requested: object stiffness x {s:g}")
     a.plot(r["arc_mm"], r["presented_n_per_m"], ".", ms=3, color="C0", label="sheet stiffness presented")
     a2 = a.twinx()
     a2.plot(r["arc_mm"], r["tension_n_per_m"], ".", ms=3, color="C1", label="sheet tension (right axis)")
     a2.plot(r["arc_mm"], r["tension_without_tumour_n_per_m"], ".", ms=1.5, color="C1", alpha=0.35,
             label="tension without the tumour (same place on the sheet)")
-    a.set(ylabel="stiffness [N/m]", title=f"organ, stroking pressed {r['finger_depth_mm']:g} mm (palpation), 10 s, "
-          f"stiffness_scale {s:g}: planner in-process, realistic twin\n(the tension falls along the path as the "
-          "sheet rolls: the contact nears a clamp, where less tension gives the same stiffness)", )
+    a.set(ylabel="stiffness [N/m]", title=f"organ, stroking pressed {r['finger_depth_mm']:g} mm (palpation), "
+          f"10 s, stiffness_scale {s:g}: planner in-process, realistic twin\n(the tension falls along the "
+          "path as the sheet rolls: the contact nears a clamp, where less tension gives the same "
+          "stiffness)", )
     a.title.set_fontsize(9)
     a2.set_ylabel("tension [N/m]")
     h1, l1 = a.get_legend_handles_labels()
     h2, l2 = a2.get_legend_handles_labels()
     a.legend(h1 + h2, l1 + l2, fontsize=7, loc="lower left")
-    styles = {"palpation": ("C0", f"pressed {r['finger_depth_mm']:g} mm"), "light_stroke": ("C2", "light stroke 0.5 mm"),
+    styles = {"palpation": ("C0", f"pressed {r['finger_depth_mm']:g} mm"),
+              "light_stroke": ("C2", "light stroke 0.5 mm"),
               "stroke_push": ("C3", "stroke and push (half sine to 10 mm)")}
     for key, (c, lbl) in styles.items():
         if key in org["runs"]:
@@ -297,8 +310,9 @@ def run(out: Path, seeds: int = 3, quick: bool = False, scenes=SCENE_NAMES) -> d
         log.info(f"[scenes] Table I on {name} ({n_seeds} seed(s), {', '.join(f'{t:g} s' for t in times)})")
         table[name] = table1_for_scene(name, n_seeds, times)
     summary: dict = {"table1": table, "twin": "realistic", "truth_seeds": list(range(n_seeds)),
-                     "note": "planner tension from the scene's compliance estimate (no FEM); metric in the normal "
-                             "section along each scene's stroke (for the cylinder: Fig. 9's cross-section)"}
+                     "note": "planner tension from the scene's compliance estimate (no FEM); metric in the "
+                             "normal section along each scene's stroke (for the cylinder: Fig. 9's "
+                             "cross-section)"}
     out.mkdir(parents=True, exist_ok=True)
     (out / "table1_scenes.json").write_text(json.dumps(_rounded(table), indent=1))
     if "organ" in scenes:
@@ -306,7 +320,8 @@ def run(out: Path, seeds: int = 3, quick: bool = False, scenes=SCENE_NAMES) -> d
         org = organ_runs(quick)
         (out / "compliance_organ.json").write_text(json.dumps(_rounded(org)))
         _plot(org, out / "compliance_organ.png")
-        summary["organ"] = {"peaks_along_path": org["peaks_along_path"], "inclusion": org["along_path"]["inclusions"],
+        summary["organ"] = {"peaks_along_path": org["peaks_along_path"],
+                            "inclusion": org["along_path"]["inclusions"],
                             "run_peaks": org["run_peaks"], "fitted_scale": org["fitted_scale"],
                             "sheet_range": org["sheet_range"]}
     (out / "summary.json").write_text(json.dumps(_rounded(summary), indent=1))
@@ -340,7 +355,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"organ {d} mm: stiffness max {p['k_max_n_per_m']:.1f} N/m at {p['arc_of_max_mm']:.1f} mm, "
                   f"tumour contrast x{p['contrast_max']:.3f} at {p['arc_of_contrast_max_mm']:.1f} mm "
                   f"(tumour at {s['organ']['inclusion'][0]['arc_mm']:.1f} mm)")
-    print(f"[scenes] wrote {a.out}/summary.json, table1_scenes.json" + (", compliance_organ.json/png" if "organ" in s else ""))
+    print(f"[scenes] wrote {a.out}/summary.json, table1_scenes.json"
+          + (", compliance_organ.json/png" if "organ" in s else ""))
     return 0
 
 

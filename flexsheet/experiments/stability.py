@@ -2,10 +2,10 @@
 sheet's shape) against the size of the error that breaks it.
 
 Each sweep varies one error on the realistic twin (:func:`flexsheet.experiments.stroke_model.make_twin`, the
-in-process chain of :func:`flexsheet.experiments.stroke_model.simulate`, 10 s stroke, the launch file's filter),
-all else at the twin's defaults, on two baselines: the realistic camera (marker noise
-:data:`flexsheet.experiments.stroke_model.MARKER_PX` ``realistic``) and a quiet camera (the ``ideal`` level), so that
-a factor's own breaking point is not hidden under the camera noise:
+in-process chain of :func:`flexsheet.experiments.stroke_model.simulate`, 10 s stroke, the launch file's
+filter), all else at the twin's defaults, on two baselines: the realistic camera (marker noise
+:data:`flexsheet.experiments.stroke_model.MARKER_PX` ``realistic``) and a quiet camera (the ``ideal`` level),
+so that a factor's own breaking point is not hidden under the camera noise:
 
 * **calibration error** — the estimator's arm bases are the true ones moved by ``scale`` × (1 mm per axis,
   0.1° per axis), a fixed random direction per truth seed (scale 0: perfectly registered bases; the truth's
@@ -72,7 +72,8 @@ from flexsheet.twin.truth import TwinTruth
 
 log = logging.getLogger(__name__)
 
-__all__ = ["breaking_point", "perturb_bases", "sweep_table1", "sweep_tension", "run", "run_graph", "graph_sets",
+__all__ = ["breaking_point", "perturb_bases", "sweep_table1", "sweep_tension", "run", "run_graph",
+           "graph_sets",
            "graph_chart", "GRAPH_SWEEPS", "main"]
 
 DEFAULT_OUT = Path("out") / "stability"
@@ -90,8 +91,9 @@ QUICK = {"calibration_scale": [0.0, 16.0], "dropout": [0.0, 0.5], "marker_px": [
 
 
 def breaking_point(x, y, limit: float) -> float | None:
-    """Smallest x where y crosses above ``limit`` (linear interpolation between points; x increasing), the first
-    x if y starts above it, ``None`` if it never does; a point without a finite y (a run that was refused) is
+    """Smallest x where y crosses above ``limit`` (linear interpolation between points; x increasing), the
+    first x if y starts above it, ``None`` if it never does; a point without a finite y (a run that was
+    refused) is
     broken: its x, unless a crossing came before."""
     x = np.asarray(x, float)
     y = np.asarray(y, float)
@@ -141,7 +143,8 @@ def sweep_table1(kind: str, values, seeds: int, marker_px: float, moving_time: f
     return rows
 
 
-def sweep_tension(values, stretch: float = 0.04, depths=(0.010, 0.030), mesh: dict | None = None) -> list[dict]:
+def sweep_tension(values, stretch: float = 0.04, depths=(0.010, 0.030),
+                  mesh: dict | None = None) -> list[dict]:
     """Shape error of the estimators' membrane model (β = 1, 256 modes) against the true FEM sheet with
     tension ratio β = each of ``values``, pushed at the centre to each of ``depths`` (m) at clamp strain
     ``stretch``: per β and depth ``rms_mm`` (whole sheet) and ``max_mm`` (outside twice the fingertip
@@ -163,7 +166,8 @@ def sweep_tension(values, stretch: float = 0.04, depths=(0.010, 0.030), mesh: di
                 out[f"{S * 1e3:g}mm_max_mm{tag}"] = float(np.max(np.abs(err[far])) * 1e3)
             out[f"{S * 1e3:g}mm_force_N"] = sol.force
         rows.append(out)
-        log.info(f"tension ratio {beta:g}: " + ", ".join(f"{k} {v:.3f}" for k, v in out.items() if "max" in k))
+        log.info(f"tension ratio {beta:g}: "
+                 + ", ".join(f"{k} {v:.3f}" for k, v in out.items() if "max" in k))
     return rows
 
 
@@ -176,11 +180,14 @@ def run(out: Path, quick: bool = False, seeds: int | None = None) -> dict:
     tg = target("10")["dtheta_mean_deg"]
     doc: dict = {"moving_time_s": mt, "truth_seeds": list(range(seeds)), "paper_dtheta_deg": paper,
                  "target_dtheta_deg": tg, "pixel_mm": PIXEL * 1e3, "baselines": {}, "quick": quick,
-                 "notes": {"calibration_scale": "estimator bases = true bases moved by scale × (1 mm, 0.1°) per axis",
-                           "tension_ratio": "Table I is independent of the tension ratio (Fig. 9 uses the clamps' "
-                                            "plane); the chart shows the pushed shape error it causes instead",
-                           "camera_bias": "a smooth camera calibration bias moves D and the sheet together and "
-                                          "cancels in Δθ (Fig. 9 uses the measured D); only noise counts"}}
+                 "notes": {"calibration_scale": "estimator bases = true bases moved by scale × (1 mm, 0.1°) "
+                                                "per axis",
+                           "tension_ratio": "Table I is independent of the tension ratio (Fig. 9 uses the "
+                                            "clamps' plane); the chart shows the pushed shape error it "
+                                            "causes instead",
+                           "camera_bias": "a smooth camera calibration bias moves D and the sheet together "
+                                          "and cancels in Δθ (Fig. 9 uses the measured D); only noise "
+                                          "counts"}}
 
     for base, px in (("realistic_camera", MARKER_PX["realistic"]), ("quiet_camera", MARKER_PX["ideal"])):
         b: dict = {"camera_px": px}
@@ -192,8 +199,8 @@ def run(out: Path, quick: bool = False, seeds: int | None = None) -> dict:
             ys = [r["dtheta_mean_deg"] for r in rows]
             b[kind] = {"rows": rows, "breaks_paper_at": breaking_point(xs, ys, paper),
                        "breaks_target_at": breaking_point(xs, ys, tg)}
-            log.info(f"{base} {kind}: above the paper from {b[kind]['breaks_paper_at']}, above the target from "
-                f"{b[kind]['breaks_target_at']}")
+            log.info(f"{base} {kind}: above the paper from {b[kind]['breaks_paper_at']}, above the target "
+                f"from {b[kind]['breaks_target_at']}")
         doc["baselines"][base] = b
     mesh = {"h_fine": 0.008, "h_coarse": 0.012} if quick else {}
     trows = sweep_tension(sw["tension_ratio"], mesh=mesh, depths=(0.010,) if quick else (0.010, 0.030))
@@ -210,7 +217,8 @@ def _tension_breaks(rows: list[dict], limit_mm: float, key: str = "10mm_max_mm")
     down = sorted((1.0 / r["tension_ratio"], r[key]) for r in rows if r["tension_ratio"] <= 1.0)
     above = breaking_point(*zip(*up, strict=True), limit_mm) if up else None
     inv = breaking_point(*zip(*down, strict=True), limit_mm) if down else None
-    return {"breaks_pixel_at_ratio_above": above, "breaks_pixel_at_ratio_below": None if inv is None else 1.0 / inv,
+    return {"breaks_pixel_at_ratio_above": above,
+            "breaks_pixel_at_ratio_below": None if inv is None else 1.0 / inv,
             "criterion": f"{key} > {limit_mm:g} mm"}
 
 
@@ -257,7 +265,8 @@ def _plot(doc: dict, path: Path) -> None:
             a.plot(bet, [r[k] for r in rows], style, label=k.replace("_mm", "").replace("_", " "))
     a.axhline(doc["pixel_mm"], color="r", lw=0.8, ls=":", label="one projector pixel")
     a.set(xlabel="true tension ratio β (model assumes 1)", ylabel="shape error outside the finger [mm]",
-          xscale="log", yscale="log", title="pushed sheet: membrane model vs true FEM\n(Table I does not depend on β)")
+          xscale="log", yscale="log", title="pushed sheet: membrane model vs true FEM\n(Table I does not "
+                                            "depend on β)")
     a.grid(True, alpha=0.3)
     a.legend(fontsize=7)
     fig.suptitle(f"Where the methods fail: {doc['moving_time_s']:g} s stroke, realistic twin, "
@@ -290,7 +299,8 @@ def _perturbed_calib(out: Path, scale: float, seed: int) -> Path:
 
 
 def graph_sets(error: str, value: float, out: Path, seed: int) -> list[str]:
-    """The ``--set`` overrides that give the graph ``error`` at ``value``; raises ``ValueError`` for an unknown error."""
+    """The ``--set`` overrides that give the graph ``error`` at ``value``; raises ``ValueError`` for an
+    unknown error."""
     if error == "noise_scale":
         return [f"camera.noise_scale={value:g}"]
     if error == "link_delay_ms":
@@ -303,8 +313,8 @@ def graph_sets(error: str, value: float, out: Path, seed: int) -> list[str]:
 
 
 def run_graph(out: Path, launch: Path, seed: int = 0, sweeps: dict | None = None) -> dict:
-    """Run every graph sweep (default :data:`GRAPH_SWEEPS`) into ``out``; returns and writes ``stability.json``
-    and ``stability.png``."""
+    """Run every graph sweep (default :data:`GRAPH_SWEEPS`) into ``out``; returns and writes
+    ``stability.json`` and ``stability.png``."""
     sweeps = sweeps or GRAPH_SWEEPS
     paper = PAPER_TABLE1["10"]["dtheta_mean_deg"]
     goal = target("10", FELT_TARGET_FACTOR)["dtheta_mean_deg"]
@@ -363,7 +373,8 @@ def graph_chart(res: dict, path: Path) -> None:
         ax.plot(x, y, "o-", label="felt Δθ, deg")
         ax.axhline(res["target_dtheta_deg"], color="g", ls="--", lw=0.9,
                    label=f"target {res['target_dtheta_deg']:.3f}°")
-        ax.axhline(res["paper_dtheta_deg"], color="r", ls=":", lw=0.9, label=f"paper {res['paper_dtheta_deg']:.3f}°")
+        ax.axhline(res["paper_dtheta_deg"], color="r", ls=":", lw=0.9,
+                   label=f"paper {res['paper_dtheta_deg']:.3f}°")
         for key, colour in (("breaks_target_at", "g"), ("breaks_paper_at", "r")):
             if e[key] is not None:
                 ax.axvline(e[key], color=colour, lw=0.6)
@@ -380,20 +391,24 @@ def graph_chart(res: dict, path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """CLI entry: ``flexsheet experiment stability [--out DIR] [--quick] [--seeds N] [--graph]``. Returns 0."""
+    """CLI entry: ``flexsheet experiment stability [--out DIR] [--quick] [--seeds N] [--graph]``. Returns
+    0."""
     ap = argparse.ArgumentParser(prog="flexsheet experiment stability", description=__doc__.split("\n")[0],
                                  epilog="example: flexsheet experiment stability --quick --out /tmp/stab\n"
                                         "         flexsheet experiment stability --graph --out "
                                         "docs/figures/stroke/stability",
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default {DEFAULT_OUT})")
-    ap.add_argument("--quick", action="store_true", help="two points per sweep, one seed, 5 s stroke, coarse FEM")
+    ap.add_argument("--quick", action="store_true", help="two points per sweep, one seed, 5 s stroke, coarse "
+                                                         "FEM")
     ap.add_argument("--seeds", type=int, default=None, help="truth seeds (default 3; quick 1)")
     ap.add_argument("--graph", action="store_true",
-                    help="instead: felt Δθ on the simulated-clock graph against camera noise, delay, marker loss and "
-                         "arm-base error, one at a time on one truth seed (--seed), with each breaking point")
+                    help="instead: felt Δθ on the simulated-clock graph against camera noise, delay, marker "
+                         "loss and arm-base error, one at a time on one truth seed (--seed), with each "
+                         "breaking point")
     ap.add_argument("--seed", type=int, default=0, help="--graph: the truth seed (default 0)")
-    ap.add_argument("--launch", type=Path, default=Path(__file__).resolve().parents[2] / "launch" / "sim.yaml",
+    ap.add_argument("--launch", type=Path,
+                    default=Path(__file__).resolve().parents[2] / "launch" / "sim.yaml",
                     help="--graph: the launch file (clock: sim; default launch/sim.yaml)")
     a = ap.parse_args(argv)
     if a.graph:
@@ -409,8 +424,8 @@ def main(argv: list[str] | None = None) -> int:
     for base, b in doc["baselines"].items():
         for kind in ("calibration_scale", "dropout", "marker_px"):
             if kind in b:
-                print(f"{base:>17} {kind:<18} above the paper from {b[kind]['breaks_paper_at']}, above the target "
-                      f"from {b[kind]['breaks_target_at']}")
+                print(f"{base:>17} {kind:<18} above the paper from {b[kind]['breaks_paper_at']}, above the "
+                      f"target from {b[kind]['breaks_target_at']}")
     t = doc["tension_ratio"]
     print(f"tension ratio: shape error > 1 px for β above {t['breaks_pixel_at_ratio_above']} / below "
           f"{t['breaks_pixel_at_ratio_below']} (model assumes 1)")

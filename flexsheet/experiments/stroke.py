@@ -1,4 +1,5 @@
-"""``flexsheet experiment stroke --out DIR [--seeds 0 1 2]``: Table I felt and paper, from the display's own graph.
+"""``flexsheet experiment stroke --out DIR [--seeds 0 1 2]``: Table I felt and paper, from the display's own
+graph.
 
 For each truth seed the whole graph of ``launch/sim.yaml`` runs on the simulated clock in one process
 (``flexsheet launch launch/sim.yaml --duration D --set twin.truth_seed=N``: the same node classes, params and
@@ -59,14 +60,15 @@ def run_seed(seed: int, out: Path, duration: float, launch: Path, extra: list[st
 
 
 def aggregate(summaries: dict[int, dict], rows: tuple[str, ...] = ROWS) -> dict:
-    """Per seed and worst seed of each Table I row (felt: Δθ mean, 3-D angle, gap, Δd; paper: Δθ mean, Δd), the
-    delays, the targets and the verdicts of ``rows`` (met only when the worst seed meets). ``summaries``: seed →
-    a run report's summary."""
+    """Per seed and worst seed of each Table I row (felt: Δθ mean, 3-D angle, gap, Δd; paper: Δθ mean, Δd),
+    the delays, the targets and the verdicts of ``rows`` (met only when the worst seed meets). ``summaries``:
+    seed → a run report's summary."""
     out: dict = {"seeds": sorted(summaries), "table1": {"felt": {}, "paper": {}}, "delay": {},
                  "targets": {"felt": {k: target(k, FELT_TARGET_FACTOR)["dtheta_mean_deg"] for k in ROWS},
                              "paper": {k: target(k, TARGET_FACTOR)["dtheta_mean_deg"] for k in ROWS}},
                  "paper_table1": PAPER_TABLE1}
-    fields = {"felt": ("dtheta_mean_deg", "angle3d_mean_deg", "gap_mean_mm", "dd_mean_mm", "dd_2r_mean_mm", "n"),
+    fields = {"felt": ("dtheta_mean_deg", "angle3d_mean_deg", "gap_mean_mm", "dd_mean_mm", "dd_2r_mean_mm",
+                       "n"),
               "paper": ("dtheta_mean_deg", "dd_mean_mm", "dd_2r_mean_mm", "n")}
     for kind, keys in fields.items():
         for row in sorted({r for s in summaries.values() for r in s.get("table1", {}).get(kind, {})}):
@@ -74,7 +76,8 @@ def aggregate(summaries: dict[int, dict], rows: tuple[str, ...] = ROWS) -> dict:
                    for seed, s in summaries.items() if row in s.get("table1", {}).get(kind, {})}
             worst = max(v["dtheta_mean_deg"] for v in per.values())
             out["table1"][kind][row] = {"per_seed": per, "dtheta_mean_deg": worst,
-                                        "dtheta_mean_deg_all": [per[s]["dtheta_mean_deg"] for s in sorted(per)]}
+                                        "dtheta_mean_deg_all": [per[s]["dtheta_mean_deg"]
+                                                                for s in sorted(per)]}
     for seed, s in summaries.items():
         if s.get("delay"):
             out["delay"][seed] = s["delay"]
@@ -117,8 +120,8 @@ def chart(summary: dict, path: Path) -> None:
         verdict = ", ".join(f"{r} s {summary['verdicts'][f'{kind}.{r}']}" for r in rows)
         ax.set_title(f"{kind}: dashed target, dotted the paper\n{verdict}", fontsize=8)
         ax.legend(fontsize=7)
-    fig.suptitle("Table I from the full graph on the simulated clock: felt (true finger vs true sheet) and paper "
-                 "(measured finger vs believed sheet)", fontsize=8)
+    fig.suptitle("Table I from the full graph on the simulated clock: felt (true finger vs true sheet) and "
+                 "paper (measured finger vs believed sheet)", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -139,14 +142,17 @@ def head_worst(summaries: dict[int, dict]) -> dict:
 
     return {"per_seed": per,
             "eye_error_mm_median": worst(lambda v: v.get("eye", {}).get("error_mm", {}).get("median")),
-            "view_tracked_px_median": worst(lambda v: v.get("view", {}).get("tracked", {}).get("error_px_median")),
+            "view_tracked_px_median":
+                worst(lambda v: v.get("view", {}).get("tracked", {}).get("error_px_median")),
             "view_tracked_px_p95": worst(lambda v: v.get("view", {}).get("tracked", {}).get("error_px_p95")),
-            "view_fixed_px_median": worst(lambda v: v.get("view", {}).get("fixed", {}).get("error_px_median"), min),
+            "view_fixed_px_median": worst(lambda v: v.get("view", {}).get("fixed", {}).get("error_px_median"),
+                                          min),
             "min_head_distance_m": worst(lambda v: v.get("safety", {}).get("min_head_distance_m"), min),
             "keepout_violations": worst(lambda v: v.get("safety", {}).get("keepout_violations")),
             "max_speed_near_head_mps": worst(lambda v: v.get("safety", {}).get("max_speed_near_head_mps")),
-            "verdicts": {k: ("met" if all(v.get(k, {}).get("verdict") == "met" for v in per.values()) else "MISSED")
-                         for k in ("eye", "view", "safety")}}
+            "verdicts":
+                {k: ("met" if all(v.get(k, {}).get("verdict") == "met" for v in per.values()) else "MISSED")
+                 for k in ("eye", "view", "safety")}}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -155,15 +161,18 @@ def main(argv: list[str] | None = None) -> int:
                                  epilog="example: flexsheet experiment stroke --out docs/figures/stroke\n"
                                         "         flexsheet experiment stroke --out /tmp/s --seeds 0 --set "
                                         "triangulator.tracking_index=0.3\n"
-                                        "         flexsheet experiment stroke --quick --out /tmp/stroke_quick")
-    ap.add_argument("--out", required=True, help="output folder (seed<N>/, summary.json, stroke.png, stroke.json)")
+                                        "         flexsheet experiment stroke --quick --out "
+                                        "/tmp/stroke_quick")
+    ap.add_argument("--out", required=True, help="output folder (seed<N>/, summary.json, stroke.png, "
+                                                 "stroke.json)")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="truth seeds (default 0 1 2)")
     ap.add_argument("--duration", type=float, default=70.0,
-                    help="simulated s per run, a cap (default 70; the world's script, a 10 s stroke, a 30 s stroke "
-                         "and a 10 s stroke and push, ends the run at 63 s)")
+                    help="simulated s per run, a cap (default 70; the world's script, a 10 s stroke, a 30 s "
+                         "stroke and a 10 s stroke and push, ends the run at 63 s)")
     ap.add_argument("--launch", default=str(ROOT / "launch" / "sim.yaml"), help="launch file (clock: sim)")
     ap.add_argument("--quick", action="store_true",
-                    help=f"truth seed 0 only, the 10 s stroke alone ({DURATION_10S:g} simulated s); judges that row")
+                    help=f"truth seed 0 only, the 10 s stroke alone ({DURATION_10S:g} simulated s); judges "
+                         "that row")
     ap.add_argument("--set", action="append", default=[], metavar="NODE.KEY=VALUE",
                     help="a param override passed to each run (flexsheet launch --set)")
     args = ap.parse_args(argv)
@@ -186,8 +195,9 @@ def main(argv: list[str] | None = None) -> int:
         for row in rows:
             r = summary["table1"][kind].get(row)
             if r:
-                print(f"[stroke] {kind} {row} s: Δθ mean per seed {[round(v, 3) for v in r['dtheta_mean_deg_all']]} "
-                      f"deg, worst {r['dtheta_mean_deg']:.3f}, target {summary['targets'][kind][row]:.3f}: "
+                print(f"[stroke] {kind} {row} s: Δθ mean per seed "
+                      f"{[round(v, 3) for v in r['dtheta_mean_deg_all']]} deg, worst "
+                      f"{r['dtheta_mean_deg']:.3f}, target {summary['targets'][kind][row]:.3f}: "
                       f"{summary['verdicts'][f'{kind}.{row}']}", flush=True)
     print(f"[stroke] wrote {out}/summary.json, stroke.png, stroke.json", flush=True)
     return 0 if all(v == "met" for v in summary["verdicts"].values()) else 1

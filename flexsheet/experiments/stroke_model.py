@@ -1,39 +1,33 @@
-"""``flexsheet experiment stroke_model``: the paper's Table I in-process, on the honest twin, with a latency model of
-the real loop and the arms' own chain (IK, command stream, servo, true kinematics).
+"""``flexsheet experiment stroke_model``: the paper's Table I in-process, on the honest twin, with a latency
+model of the real loop and the arms' own chain (IK, command stream, servo, true kinematics).
 
 The scripted finger (:class:`flexsheet.twin.finger.FingerScript`) follows the target mark from 0° to 60°
 around the paper's cylinder. A camera samples it at 48 Hz (BumbleBee2) with the triangulation noise of the
 stereo geometry (:meth:`flexsheet.vision.stereo.StereoModel.covariance` of the *true* camera at the fingertip
 for a marker-centre noise ``marker_px`` per image coordinate) and drops frames at rate ``dropout``; the
-triangulator's own constant-velocity Kalman filter (:class:`flexsheet.vision.predict.ConstantVelocityKF`,
-fed the covariance the triangulator computes for its ``sigma_px``) predicts the fingertip ``horizon`` s ahead;
-the :class:`flexsheet.planning.surface_planner.SurfacePlanner` plans (a lost frame holds the last plan, as the planner node
-does). The plan reaches the arm PCs after processing + network delay; each bridge solves IK with the
-*estimator's* model — the nominal RV-1A URDF at the calibrated base pose (``display.yaml``), or the nominal
-base when no calibration is given — streams it through the bridge's limiter
-(:class:`flexsheet.arm.limiter.StreamLimiter`: ``speed_scale`` × the RV-1A datasheet joint speeds), the
-controller twin executes it one 7.1 ms tick later through its servo (:class:`flexsheet.twin.servo.
-JointServo`: first-order lag ``tau`` with the datasheet speed and acceleration limits), and the *true* sheet
-is where the truth's kinematics (:meth:`flexsheet.twin.truth.TwinTruth.clamp_pose`: true bases, link
-lengths, joint zero offsets) put the clamps at each exposure. The Table I row (Fig. 9,
-:func:`flexsheet.analysis.table1.table1_row`, the same metric as the report of a recorded run) is
-computed over the moving phase from the valid measurements.
+triangulator's own constant-velocity Kalman filter (:class:`flexsheet.vision.predict.ConstantVelocityKF`, fed
+the covariance the triangulator computes for its ``sigma_px``) predicts the fingertip ``horizon`` s ahead; the
+:class:`flexsheet.planning.surface_planner.SurfacePlanner` plans (a lost frame holds the last plan, as the
+planner node does). The plan reaches the arm PCs after processing + network delay; each bridge solves IK with
+the *estimator's* model (the nominal RV-1A URDF at the calibrated base pose, ``display.yaml``), streams it
+through its limiter (:class:`flexsheet.arm.limiter.StreamLimiter`), the controller twin executes it one 7.1 ms
+tick later through its servo (:class:`flexsheet.twin.servo.JointServo`), and the *true* sheet is where the
+truth's kinematics (:meth:`flexsheet.twin.truth.TwinTruth.clamp_pose`) put the clamps at each exposure. The
+Table I row (Fig. 9, :func:`flexsheet.analysis.table1.table1_row`, the report's metric) is computed over the
+moving phase from the valid measurements.
 
 Twins (:mod:`flexsheet.twin.truth`): ``realistic`` (default; truth drawn per seed, ``marker_px`` = 0.1 px)
-and ``ideal`` (nominal truth, ``marker_px`` = 0.025 px: the camera twin before the honest-twin issue), three
-truth seeds each; the finger and noise seeds follow the truth seed.
-
-Filter settings: the triangulator's ``tracking_index``, ``horizon_s`` and ``sigma_px`` and the planner's ``use_prediction``
-are read from ``launch/sim.yaml`` (the defaults of :class:`flexsheet.vision.tracker.TrackerConfig` where
-the file sets none), so the in-process rows and the full graph use one filter.
+and ``ideal`` (nominal truth, ``marker_px`` = 0.025 px), three truth seeds each; the finger and noise seeds
+follow the truth seed. The triangulator's filter and the planner's ``use_prediction`` are read from
+``launch/sim.yaml`` (:class:`flexsheet.vision.tracker.TrackerConfig`'s defaults where it sets none): the
+in-process rows and the full graph use one filter.
 
 Outputs in ``--out DIR``: ``summary.json`` (Table I rows keyed by moving time "10", "30" — the realistic
 twin, mean of the seeds, with ``per_seed``, Δd on R and in the paper's 2R convention — ``ideal`` (the same
 for the ideal twin), the 10 s variant rows ``10_no_prediction``, ``10_truth_D``, ``10_filtered_D``,
 ``10_no_camera_noise``, ``10_q_tracking_index_0.1`` (the filter tuned for the realistic noise), the
-``noise_floor`` (the mean |Δθ| the measured D's own noise sets), the paper's values, the latency budget, the
-filter and the estimator's source), ``stroke_errors.png`` (Δθ and Δd against moving time and against loop
-latency, realistic twin seed 0) and ``stroke_errors.json`` (the chart's numbers).
+``noise_floor``, the paper's values, the latency budget, the filter and the estimator's source), and
+``stroke_errors.png``/``.json`` (Δθ and Δd against moving time and loop latency, realistic twin seed 0).
 """
 
 from __future__ import annotations
@@ -188,7 +182,8 @@ def launch_kf(path: Path = SIM_LAUNCH) -> dict:
     pl = ((nodes.get("planner") or {}).get("params") or {})
     out.update(tracking_index=float(tri.get("tracking_index", d.tracking_index)),
                horizon_s=float(tri.get("horizon_s", d.horizon_s)),
-               sigma_px=float(tri.get("sigma_px", d.sigma_px)), use_prediction=bool(pl.get("use_prediction", False)),
+               sigma_px=float(tri.get("sigma_px", d.sigma_px)),
+               use_prediction=bool(pl.get("use_prediction", False)),
                file=path.name)
     return out
 
@@ -203,8 +198,8 @@ def _camera_cov(twin: Twin, X_display: np.ndarray, sigma_px: float) -> np.ndarra
 
 
 def _measure(twin: Twin, finger, rng, Tc: float):
-    """The camera's exposures: times tk (s), the true fingertip, its measurement (the triangulation's noise for
-    the twin's marker σ) and which measurements are valid (the twin's dropout; the first always)."""
+    """The camera's exposures: times tk (s), the true fingertip, its measurement (the triangulation's noise
+    for the twin's marker σ) and which measurements are valid (the twin's dropout; the first always)."""
     tk = np.arange(0.0, finger.duration, Tc) + rng.uniform(0, Tc)
     true_p = finger.positions(tk)
     if twin.marker_px > 0.0:
@@ -241,7 +236,8 @@ def _plan_stroke(tk, true_p, meas, valid, Rf, kf: Predictor, planner, h: float, 
 
 
 def _arm_chains(twin: Twin, chain: ArmChain, latency: LatencyModel, first_clamps, Ts: float) -> dict:
-    """Per side (target tracker on the estimator's kinematics, stream limiter, servo), at rest on the first plan."""
+    """Per side (target tracker on the estimator's kinematics, stream limiter, servo), at rest on the first
+    plan."""
     chains = {}
     qd = QD_MAX * chain.speed_scale
     sp = ServoParams(tau=latency.servo_tau, qd_max=QD_MAX * chain.ctrl_speed_scale,
@@ -305,8 +301,8 @@ def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None
     (largest |q̇| / datasheet speed of either servo), ``ik_refused`` and ``dropped``. ``scene`` (a
     :class:`flexsheet.model.scenes.Scene`; ``None``: the paper's cylinder as before): the object, the finger's
     path (:class:`~flexsheet.twin.finger.FingerScript` on the scene) and the metric's section
-    (:func:`flexsheet.analysis.table1.scene_table1_row`). ``compliance``: the planner's stiffness model
-    (e.g. :class:`flexsheet.planning.compliance.SceneCompliance`; ``None``: the config's ``object_stiffness``);
+    (:func:`flexsheet.analysis.table1.scene_table1_row`). ``compliance``: the planner's stiffness model (e.g.
+    :class:`flexsheet.planning.compliance.SceneCompliance`; ``None``: the config's ``object_stiffness``);
     ``planner_config``: the planner's :class:`PlannerConfig`; ``record``: if a list, gets one
     ``(t s, true fingertip (3,) m, Plan)`` per planned sample. Raises ``ValueError`` for an unknown
     ``d_source``."""
@@ -325,14 +321,15 @@ def simulate(moving_time: float, twin: Twin, latency: LatencyModel | None = None
     bud = latency.budget()
     h = (bud["total"] + bud["target_hold_mean"]) if horizon is None else horizon
     sig_f = lk["sigma_px"] if sigma_px_filter is None else sigma_px_filter
-    Rf = _camera_cov(twin, meas, sig_f)              # the covariance the triangulator reports for its sigma_px
+    Rf = _camera_cov(twin, meas, sig_f)  # the covariance the triangulator reports for its sigma_px
     if q is None:   # the tracker's rule (q from its tracking index) on the noise the filter assumes
         q = q_for_tracking_index(lk["tracking_index"], _tangential_noise(twin, sig_f), latency.camera_period)
     kf = Predictor(q, v0_std=TrackerConfig.v0_std)
     planner = SurfacePlanner(shape, planner_config or PlannerConfig(), compliance)
     s = latency.scale
     delay_to_arm = s * (latency.exposure_to_host + latency.processing + latency.network)
-    arrivals, clamps, filt = _plan_stroke(tk, true_p, meas, valid, Rf, kf, planner, h, use_prediction, delay_to_arm,
+    arrivals, clamps, filt = _plan_stroke(tk, true_p, meas, valid, Rf, kf, planner, h, use_prediction,
+                                          delay_to_arm,
                                           record)
     # arms: IK at arrival (estimator model), limiter + servo per controller tick, true FK
     Ts = latency.servo_period
@@ -361,7 +358,8 @@ def _mean_rows(rows: list[dict[str, float]]) -> dict:
     return r
 
 
-def table_rows(realism: str, seeds: int, display_calib: str | None = None, latency: LatencyModel | None = None,
+def table_rows(realism: str, seeds: int, display_calib: str | None = None,
+               latency: LatencyModel | None = None,
                times=(10.0, 30.0), **kw) -> dict:
     """Table I rows of ``realism`` over truth seeds 0…``seeds``−1: ``{"10": mean row with per_seed, …}``.
     ``kw`` go to :func:`simulate` (``marker_px``/``dropout`` go to :func:`make_twin`)."""
@@ -376,8 +374,10 @@ def table_rows(realism: str, seeds: int, display_calib: str | None = None, laten
             row.update({k: float(v) for k, v in st.items()})
             rows.append(row)
         mean = _mean_rows(rows)
-        mean["per_seed"] = [{"truth_seed": s, "dtheta_mean_deg": r["dtheta_mean_deg"], "dd_mean_mm": r["dd_mean_mm"],
-                             "dd_2r_mean_mm": r["dd_2r_mean_mm"], "peak_joint_speed_ratio": r["peak_joint_speed_ratio"]}
+        mean["per_seed"] = [{"truth_seed": s, "dtheta_mean_deg": r["dtheta_mean_deg"],
+                             "dd_mean_mm": r["dd_mean_mm"],
+                             "dd_2r_mean_mm": r["dd_2r_mean_mm"],
+                             "peak_joint_speed_ratio": r["peak_joint_speed_ratio"]}
                             for s, r in enumerate(rows)]
         out[f"{T:g}"] = mean
     return out
@@ -397,7 +397,8 @@ def run(out: Path, seeds: int = 3, quick: bool = False, display_calib: str | Non
                      "arm_chain": asdict(ArmChain()), "latency_budget_ms": round(bud["total"] * 1e3, 3),
                      "latency_parts_ms": {k: round(v * 1e3, 3) for k, v in bud.items()},
                      "targets": {"10": target("10"), "30": target("30")},
-                     "filter": {**lk, "note": "the launch file's triangulator/planner settings, as the full graph"},
+                     "filter": {**lk, "note": "the launch file's triangulator/planner settings, as the full "
+                                              "graph"},
                      "twin": {"realism": "realistic", "truth_seeds": list(range(seeds)),
                               "estimator_bases": tw0.bases_source, "marker_px": MARKER_PX},
                      **real, "ideal": ideal}
@@ -421,12 +422,13 @@ def run(out: Path, seeds: int = 3, quick: bool = False, display_calib: str | Non
     summary["noise_floor"] = {
         "tangential_noise_mm": sig_t * 1e3,
         "dtheta_floor_deg": math.degrees(math.sqrt(2.0 / math.pi) * sig_t / paper_cylinder().R),
-        "note": "mean |Δθ| from the measured D's own noise alone: √(2/π)·σ_t/R (σ_t: the rms measurement noise "
-                "tangent to the cylinder in the stroke plane); the sheet cannot follow white noise"}
+        "note": "mean |Δθ| from the measured D's own noise alone: √(2/π)·σ_t/R (σ_t: the rms measurement "
+                "noise tangent to the cylinder in the stroke plane); the sheet cannot follow white noise"}
 
     times = [5.0, 10.0] if quick else [5.0, 10.0, 20.0, 30.0, 60.0]
     scales = [0.5, 4.0] if quick else [0.25, 0.5, 1.0, 2.0, 4.0]
-    chart: dict = {"moving_time_s": times, "latency_scale": scales, "latency_ms": [], "by_time": {}, "by_latency": {}}
+    chart: dict = {"moving_time_s": times, "latency_scale": scales, "latency_ms": [], "by_time": {},
+                   "by_latency": {}}
     for pred in (True, False):
         key = "prediction" if pred else "no_prediction"
         chart["by_time"][key] = [simulate(T, tw0, lat, 0, use_prediction=pred) for T in times]
@@ -456,26 +458,28 @@ def _tangential_noise(twin: Twin, marker_px: float) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """CLI entry: ``flexsheet experiment stroke_model --out DIR [--seeds N] [--quick] [--display-calib PATH]``."""
+    """CLI entry: ``flexsheet experiment stroke_model --out DIR [--seeds N] [--quick] [--display-calib
+    PATH]``."""
     ap = argparse.ArgumentParser(
         prog="flexsheet experiment stroke_model", description=__doc__.split("\n")[0],
         epilog="example: flexsheet experiment stroke_model --out docs/figures/planner\n"
-               "         flexsheet calibrate display --sim --truth-seed 0 --out out/cal0   # a display.yaml per seed\n"
-               "         flexsheet experiment stroke_model --out /tmp/s --seeds 1 "
+               "         flexsheet calibrate display --sim --truth-seed 0 --out out/cal0   # a display.yaml "
+               "per seed\n         flexsheet experiment stroke_model --out /tmp/s --seeds 1 "
                "--display-calib 'out/cal{seed}/display.yaml'",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True, type=Path, help="output folder for summary.json and the chart")
     ap.add_argument("--seeds", type=int, default=3, help="truth seeds per twin (default 3)")
     ap.add_argument("--quick", action="store_true", help="fewer sweep points, one variant row (for tests)")
     ap.add_argument("--display-calib", default=None,
-                    help="display.yaml with the calibrated arm bases ({seed} → truth seed); default: nominal bases")
+                    help="display.yaml with the calibrated arm bases ({seed} → truth seed); default: nominal "
+                         "bases")
     a = ap.parse_args(argv)
     if a.seeds < 1:
         ap.error(f"--seeds must be >= 1, got {a.seeds}")
     for seed in range(a.seeds) if a.display_calib else ():
         if not Path(a.display_calib.replace("{seed}", str(seed))).is_file():
-            ap.error(f"--display-calib: no {a.display_calib.replace('{seed}', str(seed))} for truth seed {seed} "
-                     f"(flexsheet calibrate display --sim --truth-seed {seed} --out DIR writes one)")
+            ap.error(f"--display-calib: no {a.display_calib.replace('{seed}', str(seed))} for truth seed "
+                     f"{seed} (flexsheet calibrate display --sim --truth-seed {seed} --out DIR writes one)")
     s = run(a.out, a.seeds, a.quick, a.display_calib)
     print(DD_CONVENTION)
     for tw, rows in (("realistic", s), ("ideal", s["ideal"])):

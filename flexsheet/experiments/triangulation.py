@@ -208,7 +208,8 @@ def _stability_motion_blur(calib, T, rnd, p0) -> dict:
 
 
 def _stability_end_to_end(calib, T, rnd, rng) -> float:
-    """End-to-end twin accuracy at 0.5 m (the twin's centroid noise is what it is; σ_px not imposed): RMS mm."""
+    """End-to-end twin accuracy at 0.5 m (the twin's centroid noise is what it is; σ_px not imposed): RMS
+    mm."""
     errs = []
     for _ in range(60):
         p = np.array([rng.uniform(0.0, 0.06), rng.uniform(-0.06, 0.06), rng.uniform(-0.05, 0.05)])
@@ -270,13 +271,16 @@ def honest(seeds=(0, 1, 2), quick: bool = False) -> dict:
             entry, path = vt.registered_camera(truth, quick=quick)
             log.info(f"  {realism} seed {seed}: static...")
             r = {"registration": vt.registration_error(truth, entry), "display_calib": path,
-                 "static": vt.static_error(truth, entry.stereo, entry.T_display_camera, cfg, pts, frames, seed),
-                 "static_perfect_registration": vt.static_error(truth, truth.camera_calib, truth.T_display_camera,
+                 "static": vt.static_error(truth, entry.stereo, entry.T_display_camera, cfg, pts, frames,
+                                           seed),
+                 "static_perfect_registration": vt.static_error(truth, truth.camera_calib,
+                                                                truth.T_display_camera,
                                                                 cfg, pts, frames, seed)}
             drop = REALISTIC_DROP_RATE if realism == "realistic" else 0.0
             for mt in ((10.0,) if quick else (10.0, 30.0)):
                 log.info(f"  {realism} seed {seed}: stroke {mt:.0f} s...")
-                r[f"moving_{mt:.0f}s"] = vt.moving_error(truth, entry.stereo, entry.T_display_camera, cfg, mt, drop,
+                r[f"moving_{mt:.0f}s"] = vt.moving_error(truth, entry.stereo, entry.T_display_camera, cfg, mt,
+                                                         drop,
                                                          window_s=3.0 if quick else None, sim_seed=seed)
             res[str(seed)] = r
         out[realism] = {"sensing": vt.sensing_summary(cfg), "per_seed": res}
@@ -307,7 +311,8 @@ def _sweep(name, values, make, seeds) -> dict:
         valid.append(float(np.mean(vs)))
         wrong.append(float(np.mean(ws)))
         extra.append(ex)
-        log.info(f"  {name} = {x}: RMS {rms[-1]:.3f} mm, valid {valid[-1] * 100:.0f} %, wrong {wrong[-1] * 100:.0f} %")
+        log.info(f"  {name} = {x}: RMS {rms[-1]:.3f} mm, valid {valid[-1] * 100:.0f} %, wrong "
+                 f"{wrong[-1] * 100:.0f} %")
     return {"values": list(values), "rms_mm": rms, "valid_rate": valid, "wrong_rate": wrong, "detail": extra,
             "breaking": _breaking(values, rms, valid)}
 
@@ -320,7 +325,8 @@ def _registered(seed, quick: bool):
 
 def _noise_case(x, seed, pts, quick: bool) -> dict:
     truth, e = _registered(seed, quick)
-    return vt.static_error(truth, e.stereo, e.T_display_camera, vt.sim_config("realistic", noise_scale=x), pts, 2,
+    return vt.static_error(truth, e.stereo, e.T_display_camera, vt.sim_config("realistic", noise_scale=x),
+                           pts, 2,
                            seed)
 
 
@@ -344,7 +350,8 @@ def _calib_case(x, seed, pts, register: bool = True) -> dict:
 def _finger_case(az, seed, pts, quick: bool) -> dict:
     truth, e = _registered(seed, quick)
     el = np.radians(40.0)
-    d = (float(np.cos(el) * np.cos(np.radians(az))), float(np.cos(el) * np.sin(np.radians(az))), float(np.sin(el)))
+    d = (float(np.cos(el) * np.cos(np.radians(az))), float(np.cos(el) * np.sin(np.radians(az))),
+         float(np.sin(el)))
     cfg = vt.sim_config("realistic", finger_dir=d)
     r = vt.static_error(truth, e.stereo, e.T_display_camera, cfg, pts, 2, seed)
     rnd = vt.twin_renderer(truth, cfg)
@@ -374,11 +381,13 @@ def honest_stability(seeds=(0, 1, 2), quick: bool = False) -> dict:
     log.info("stability: calibration error (truth spreads scaled, registered again)")
     out["calibration_scale"] = _sweep("spread_scale", scales, lambda x, s: _calib_case(x, s, pts), seeds)
     log.info("stability: calibration error, not registered (nominal calibration)")
-    out["calibration_scale_unregistered"] = _sweep("spread_scale", scales, lambda x, s: _calib_case(x, s, pts, False),
+    out["calibration_scale_unregistered"] = _sweep("spread_scale", scales, lambda x,
+                                                   s: _calib_case(x, s, pts, False),
                                                    seeds)
     azs = (-60.0, 0.0, 40.0) if quick else (-90.0, -60.0, -30.0, -15.0, 0.0, 15.0, 30.0, 40.0, 60.0, 90.0)
     log.info("stability: finger direction (self-occlusion)")
-    out["finger_azimuth_deg"] = _sweep("finger_azimuth_deg", azs, lambda x, s: _finger_case(x, s, pts, quick), seeds)
+    out["finger_azimuth_deg"] = _sweep("finger_azimuth_deg", azs, lambda x, s: _finger_case(x, s, pts, quick),
+                                       seeds)
     gains = (0.5, 1.0) if quick else (0.25, 0.5, 0.75, 1.0, 1.25)
     log.info("stability: background brightness (marker contrast)")
     out["background_gain"] = _sweep("background_gain", gains, lambda x, s: _bg_case(x, s, pts, quick), seeds)
@@ -387,10 +396,12 @@ def honest_stability(seeds=(0, 1, 2), quick: bool = False) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     """CLI ``flexsheet experiment triangulation --out DIR`` (argparse). Returns the exit code."""
-    p = argparse.ArgumentParser(prog="flexsheet experiment triangulation", description=__doc__.splitlines()[0],
+    p = argparse.ArgumentParser(prog="flexsheet experiment triangulation",
+                                description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
-                                epilog="example:\n  flexsheet experiment triangulation --out docs/figures/vision\n"
-                                       "  flexsheet experiment triangulation --out /tmp/tri --quick")
+                                epilog="example:\n  flexsheet experiment triangulation --out "
+                                       "docs/figures/vision\n  flexsheet experiment triangulation --out "
+                                       "/tmp/tri --quick")
     p.add_argument("--out", required=True, help="output folder (created)")
     p.add_argument("--samples", type=int, default=3000, help="Monte Carlo samples per cell (default 3000)")
     p.add_argument("--seeds", default="0,1,2", help="truth seeds of the honest twin (default 0,1,2)")
@@ -417,7 +428,8 @@ def main(argv: list[str] | None = None) -> int:
     import glob
 
     import cv2
-    ls, rs = sorted(glob.glob(os.path.join(DATA, "left*.jpg"))), sorted(glob.glob(os.path.join(DATA, "right*.jpg")))
+    ls, rs = (sorted(glob.glob(os.path.join(DATA, "left*.jpg"))),
+              sorted(glob.glob(os.path.join(DATA, "right*.jpg"))))
     val = validate_stereo([cv2.imread(f, 0) for f in ls], [cv2.imread(f, 0) for f in rs],
                           parse_board("chessboard:9x6", 0.024), folds=4 if a.quick else 0,
                           names=[os.path.basename(f) for f in ls])
@@ -449,9 +461,9 @@ def main(argv: list[str] | None = None) -> int:
         "quick": a.quick,
         "cpu_count": os.cpu_count(),
         "note": "timings on a shared 2-core machine (pessimistic); accuracy_speed on the BumbleBee2 1024x768 "
-                "reference model; stability on the XIMEA twin at the default mount with the realistic sensor and "
-                "known calibration; honest* against the hidden truth with the registered camera; stereo_baseline_mm "
-                "follows from the assumed 24 mm square (not a check)",
+                "reference model; stability on the XIMEA twin at the default mount with the realistic sensor "
+                "and known calibration; honest* against the hidden truth with the registered camera; "
+                "stereo_baseline_mm follows from the assumed 24 mm square (not a check)",
     }
     plot_accuracy(acc, os.path.join(a.out, "accuracy_speed.png"), SIGMAS)
     plot_stability(st, os.path.join(a.out, "stability.png"))

@@ -25,8 +25,10 @@ def plot_honest(h: dict, st: dict | None, path: str, target_mm: float) -> None:
     x = np.arange(len(seeds))
     for i, k in enumerate(keys):
         ax[0, 0].bar(x + i * w, h["headline_rms_mm"]["realistic"][k], w, label=f"realistic {k}")
-    ax[0, 0].bar(x + len(keys) * w, h["headline_rms_mm"]["ideal"]["static"], w, color="0.7", label="ideal static")
-    ax[0, 0].plot(x + 0 * w, h["headline_rms_mm"]["realistic"]["static_perfect_registration"], "k_", ms=18, mew=2,
+    ax[0, 0].bar(x + len(keys) * w, h["headline_rms_mm"]["ideal"]["static"], w, color="0.7",
+                 label="ideal static")
+    ax[0, 0].plot(x + 0 * w, h["headline_rms_mm"]["realistic"]["static_perfect_registration"], "k_", ms=18,
+                  mew=2,
                   label="static, perfect registration (diagnostic)")
     ax[0, 0].axhline(target_mm, color="r", ls="--", lw=1, label=f"target {target_mm} mm")
     ax[0, 0].set_xticks(x + 0.4 - w / 2, [f"truth seed {s}" for s in seeds])
@@ -44,14 +46,16 @@ def plot_honest(h: dict, st: dict | None, path: str, target_mm: float) -> None:
             b.set_ylim(0, 1.05)
             b.set_ylabel("valid rate")
             if x2 is not None:
-                a.plot(x2["values"], x2["rms_mm"], "^--", color="tab:orange", label="not registered (nominal)")
+                a.plot(x2["values"], x2["rms_mm"], "^--", color="tab:orange",
+                       label="not registered (nominal)")
             bp = sw["breaking"]["first_failing"]
             if bp is not None:
                 a.axvline(bp, color="0.5", lw=0.8)
             a.set_xlabel(xlabel)
             a.set_ylabel("RMS error, mm")
             fl = sw["breaking"]["failing"]
-            a.set_title(f"{title}\nfails at {fl if len(fl) < 5 else f'{fl[0]}…{fl[-1]}'}" if fl else f"{title}\n"
+            a.set_title(f"{title}\nfails at {fl if len(fl) < 5 else f'{fl[0]}…{fl[-1]}'}" if fl
+                        else f"{title}\n"
                         "no failure in the sweep")
             if logx:
                 a.set_xscale("log")
@@ -63,12 +67,17 @@ def plot_honest(h: dict, st: dict | None, path: str, target_mm: float) -> None:
             return b
         panel(ax[0, 1], st["noise_scale"], "camera noise × measured σ (read 2.5 DN, shot 0.31 DN/DN)",
               "camera noise", logx=True, logy=True)
-        panel(ax[0, 2], st["calibration_scale"], "truth camera spreads × (stereo bootstrap σ, mount 10 mm / 1°)",
-              "calibration error (registered again)", logx=True, logy=True, x2=st["calibration_scale_unregistered"])
-        b = panel(ax[1, 0], st["finger_azimuth_deg"], "finger azimuth about +z, deg (elevation 40°; camera at −36°)",
+        panel(ax[0, 2], st["calibration_scale"], "truth camera spreads × (stereo bootstrap σ, mount 10 mm / "
+                                                 "1°)",
+              "calibration error (registered again)", logx=True, logy=True,
+              x2=st["calibration_scale_unregistered"])
+        b = panel(ax[1, 0], st["finger_azimuth_deg"], "finger azimuth about +z, deg (elevation 40°; camera "
+                                                      "at −36°)",
                   "self-occlusion by the finger", logy=True)
-        vis = [float(np.mean([d.get("visibility", np.nan) for d in det])) for det in st["finger_azimuth_deg"]["detail"]]
-        b.plot(st["finger_azimuth_deg"]["values"], vis, "d-.", color="tab:purple", label="marker visible fraction")
+        vis = [float(np.mean([d.get("visibility", np.nan) for d in det]))
+               for det in st["finger_azimuth_deg"]["detail"]]
+        b.plot(st["finger_azimuth_deg"]["values"], vis, "d-.", color="tab:purple",
+               label="marker visible fraction")
         b.legend(fontsize=7, loc="center right")
         panel(ax[1, 1], st["background_gain"], "background brightness × (sheet up to ~190 DN at 1)",
               "marker contrast", logy=True)
@@ -90,7 +99,8 @@ def plot_noise(sn: dict, path: str) -> None:
     B = np.array(sn["bins"])
     lv = np.linspace(0, 240, 100)
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    ax.scatter(B[:, 0], B[:, 1], s=12 + 40 * B[:, 2] / B[:, 2].max(), label="flat patches, binned (area ∝ count)")
+    ax.scatter(B[:, 0], B[:, 1], s=12 + 40 * B[:, 2] / B[:, 2].max(),
+               label="flat patches, binned (area ∝ count)")
     ax.plot(lv, np.sqrt(sn["read_dn"] ** 2 + sn["shot_gain"] * lv), "k-",
             label=f"this fit: read {sn['read_dn']:.2f} DN, gain {sn['shot_gain']:.3f}")
     rf = sn["registration_fit"]
@@ -98,7 +108,8 @@ def plot_noise(sn: dict, path: str) -> None:
             label=f"twin (registration's board fit): read {rf['read_dn']} DN, gain {rf['shot_gain']}")
     ax.set_xlabel("level, DN")
     ax.set_ylabel("noise σ, DN")
-    ax.set_title(f"real XIMEA images ({sn['images']}): noise vs level; corner jitter {sn['corner_jitter_px']:.3f} px")
+    ax.set_title(f"real XIMEA images ({sn['images']}): noise vs level; corner jitter "
+                 f"{sn['corner_jitter_px']:.3f} px")
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -118,7 +129,8 @@ def plot_accuracy(acc: dict, path: str, sigmas: tuple[float, ...]) -> None:
                           c=[plt.cm.viridis(sigmas.index(s) / (len(sigmas) - 1))],
                           label=f"{meth}" if s == sigmas[0] else None, edgecolors="k")
     for s in sigmas:
-        ax[0].axhline(acc["floor_mm"][f"{s}"][zi], color=plt.cm.viridis(sigmas.index(s) / (len(sigmas) - 1)), ls=":",
+        ax[0].axhline(acc["floor_mm"][f"{s}"][zi], color=plt.cm.viridis(sigmas.index(s) / (len(sigmas) - 1)),
+                      ls=":",
                       lw=1)
         ax[0].text(ax[0].get_xlim()[1] if False else 0.5, acc["floor_mm"][f"{s}"][zi], f" floor σ={s} px",
                    fontsize=7, va="bottom", transform=ax[0].get_yaxis_transform())
@@ -156,7 +168,8 @@ def plot_stability(st: dict, path: str) -> None:
         ax[0, 1].plot(d["angle_deg"], d["rms_mm"][meth], marker="o", label=meth)
     ax[0, 1].set_yscale("log")
     ax[0, 1].set_xscale("log")
-    ax[0, 1].set_xlabel("angle between the marker direction and the baseline, deg (0.5 m range, σ 0.1 px/f rad)")
+    ax[0, 1].set_xlabel("angle between the marker direction and the baseline, deg (0.5 m range, σ 0.1 px/f "
+                        "rad)")
     ax[0, 1].set_ylabel("RMS error, mm")
     ax[0, 1].set_title("near-degenerate rays: toward the baseline")
     ax[0, 1].legend()
@@ -178,7 +191,8 @@ def plot_stability(st: dict, path: str) -> None:
     r = st["reflection"]
     code = {"correct": 2, "invalid": 1, "wrong": 0}
     for mode, mk in (("no_track", "o"), ("track", "s")):
-        ax[1, 1].plot(np.array(r["distance_m"]) * 1e3, [code[e["outcome"]] for e in r[mode]], mk + "-", label=mode)
+        ax[1, 1].plot(np.array(r["distance_m"]) * 1e3, [code[e["outcome"]] for e in r[mode]], mk + "-",
+                      label=mode)
     ax[1, 1].set_yticks([0, 1, 2], ["wrong", "invalid", "correct"])
     ax[1, 1].set_xscale("log")
     ax[1, 1].set_xticks([x * 1e3 for x in r["distance_m"]], [f"{x * 1e3:g}" for x in r["distance_m"]])

@@ -80,15 +80,17 @@ def _key(truth: TwinTruth, n_views: int) -> str:
     return h.hexdigest()[:16]
 
 
-def registered_camera(truth: TwinTruth, quick: bool = False, cache: str | None = None) -> tuple[CameraEntry, str]:
+def registered_camera(truth: TwinTruth, quick: bool = False, cache: str | None = None) -> tuple[CameraEntry,
+                                                                                                str]:
     """The camera entry a lab would have for this truth, and the ``display.yaml`` path holding it.
 
     A realistic truth of the default spreads: the twin's whole registration for its seed
     (:func:`flexsheet.twin.registration.sim_display_calib`, cached per seed — the file the twin's estimator
-    nodes load; ``quick``: its test preset). A truth drawn with other spreads (stability sweeps): the camera-pose
-    procedure alone (:func:`flexsheet.calibration.procedures.run_camera_pose`, test preset, twin board views),
-    cached under :func:`cache_dir` by a hash of the truth's camera and arms and of the procedure's sources.
-    Ideal truth: the nominal registration (exact for it). Raises ``ValueError`` when a procedure fails."""
+    nodes load; ``quick``: its test preset). A truth drawn with other spreads (stability sweeps): the
+    camera-pose procedure alone (:func:`flexsheet.calibration.procedures.run_camera_pose`, test preset, twin
+    board views), cached under :func:`cache_dir` by a hash of the truth's camera and arms and of the
+    procedure's sources. Ideal truth: the nominal registration (exact for it). Raises ``ValueError`` when a
+    procedure fails."""
     cache = cache or cache_dir()
     if truth.realism == "ideal":
         path = os.path.join(cache, "display_nominal.yaml")
@@ -104,7 +106,8 @@ def registered_camera(truth: TwinTruth, quick: bool = False, cache: str | None =
 
     log.info(f"registering the camera of a scaled truth (seed {truth.seed}, {P.QUICK.views} board views)...")
     o = P.QUICK
-    src = TwinSource(CalibrationTwin(truth, seed=truth.seed), o.board_frames, o.pattern_frames, o.marker_frames)
+    src = TwinSource(CalibrationTwin(truth, seed=truth.seed), o.board_frames, o.pattern_frames,
+                     o.marker_frames)
     entry, _ = P.run_camera_pose(src, o)
     write_display_calib(path, DisplayCalib(camera=entry))
     return load_display_calib(path, require=("camera",)).camera, path
@@ -114,7 +117,8 @@ def static_points(n: int, seed: int = 0) -> np.ndarray:
     """(n, 3) marker positions, display frame, m: in front of the sheet over the stroke's region (x 5–40 mm,
     y and z within ±50 mm of the sheet centre), 0.45–0.52 m from the default camera."""
     rng = np.random.default_rng([seed, 101])
-    return np.column_stack([rng.uniform(0.005, 0.04, n), rng.uniform(-0.05, 0.05, n), rng.uniform(-0.05, 0.05, n)])
+    return np.column_stack([rng.uniform(0.005, 0.04, n), rng.uniform(-0.05, 0.05, n),
+                            rng.uniform(-0.05, 0.05, n)])
 
 
 #: a valid fix farther than this from the truth is *wrong* (a false match), m
@@ -193,7 +197,8 @@ def moving_error(truth: TwinTruth, calib: dict, T_display_camera: np.ndarray, cf
             errs.append(res.position - p)
     out = _summ(errs, valid, len(ts) - dropped)
     sp = np.linalg.norm(V, axis=1)
-    out.update(reasons=reasons, dropped=dropped, frames=len(ts), speed_mps=[float(sp.mean()), float(sp.max())],
+    out.update(reasons=reasons, dropped=dropped, frames=len(ts),
+               speed_mps=[float(sp.mean()), float(sp.max())],
                moving_time_s=moving_time)
     return out
 
@@ -207,7 +212,8 @@ def registration_error(truth: TwinTruth, entry: CameraEntry) -> dict:
 
 
 def scaled_truth(seed: int, scale: float) -> TwinTruth:
-    """A realistic truth with the camera's spreads (stereo bootstrap spread, mount mm and deg) times ``scale``."""
+    """A realistic truth with the camera's spreads (stereo bootstrap spread, mount mm and deg) times
+    ``scale``."""
     sp = Spreads()
     sp = replace(sp, camera_scale=sp.camera_scale * scale, camera_mount_mm=sp.camera_mount_mm * scale,
                  camera_mount_deg=sp.camera_mount_deg * scale)
@@ -231,8 +237,8 @@ def measure_sensor_noise(directory: str = XIMEA_DIR, block: int = 8, max_grad: f
     re-injection estimates it from the measured noise: adding noise of the same level moves a corner by the
     same spread, to first order).
 
-    Returns a dict with ``bins`` (level, σ, count), ``read_dn``, ``shot_gain``, ``corner_jitter_px`` (RMS
-    per coordinate) and the registration's numbers for comparison. Raises ``ValueError`` when no image is found.
+    Returns a dict with ``bins`` (level, σ, count), ``read_dn``, ``shot_gain``, ``corner_jitter_px`` (RMS per
+    coordinate) and the registration's numbers for comparison. Raises ``ValueError`` when no image is found.
     """
     files = sorted(glob.glob(os.path.join(directory, "*.jpg")))
     if not files:
@@ -275,7 +281,8 @@ def measure_sensor_noise(directory: str = XIMEA_DIR, block: int = 8, max_grad: f
     crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 40, 1e-3)
     disp = []
     for im in imgs:
-        ok, c = cv2.findChessboardCorners(im, (9, 6), flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        ok, c = cv2.findChessboardCorners(im, (9, 6),
+                                          flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
         if not ok:
             continue
         c0 = cv2.cornerSubPix(im, c.copy(), (11, 11), (-1, -1), crit).reshape(-1, 2)

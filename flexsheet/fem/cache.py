@@ -2,8 +2,8 @@
 snapshots, reference solutions). Pure: numpy ``.npz`` files, no pickles.
 
 A cache entry is ``<cache_dir>/<kind>_<key>.npz`` where ``key`` is the first 24 hex digits of the SHA-256 of
-the *parts* that determine its content (mesh spec, gmsh version, material, finger radius, solver parameters,
-a version string). Writes are atomic (temporary file + ``os.replace``), so a crash or a concurrent writer never
+the *parts* that determine its content (mesh spec, gmsh version, material, finger radius, solver parameters, a
+version string). Writes are atomic (temporary file + ``os.replace``), so a crash or a concurrent writer never
 leaves a half-written entry; an unreadable entry is reported and recomputed.
 
 ``cache_dir`` defaults to :data:`DEFAULT_CACHE_DIR`, the user's cache folder (``~/.cache/flexsheet/fem`` on
@@ -31,7 +31,8 @@ log = logging.getLogger(__name__)
 
 __all__ = ["DEFAULT_CACHE_DIR", "SHIPPED_DIR", "INSTALL_DIR", "INSTALL_DIRS", "cache_key", "ArrayCache"]
 
-#: the user's FEM cache (not moved by ``$FLEXSHEET_CACHE``: a graph started with it still finds its models here)
+#: the user's FEM cache (not moved by ``$FLEXSHEET_CACHE``:
+#: a graph started with it still finds its models here)
 DEFAULT_CACHE_DIR = os.path.join(platformdirs.user_cache_dir(APP), "fem")
 SHIPPED_DIR = os.path.join(os.path.dirname(__file__), "data")
 #: where the installer's warm-up writes (the machine's data folder as root, else the user's)
@@ -47,9 +48,9 @@ def cache_key(*parts) -> str:
 
 
 class ArrayCache:
-    """Named array sets on disk. ``cache_dir`` None or "" disables writing (and reading from it); ``shipped_dir``
-    the read-only store searched after it (default :data:`SHIPPED_DIR`; None: none);
-    what it does is logged (INFO; a cache it cannot use, WARNING). ``kind`` must be a simple word (letters, digits,
+    """Named array sets on disk. ``cache_dir`` None or "" disables writing (and reading from it);
+    ``shipped_dir`` the read-only store searched after it (default :data:`SHIPPED_DIR`; None: none); what it
+    does is logged (INFO; a cache it cannot use, WARNING). ``kind`` must be a simple word (letters, digits,
     _)."""
 
     def __init__(self, cache_dir: str | None, shipped_dir: str | None = ""):
@@ -89,13 +90,14 @@ class ArrayCache:
         return None
 
     def shipped(self) -> bool:
-        """Whether the last successful :meth:`load` read the read-only shipped store (``flexsheet/fem/data/``) rather
-        than this machine's cache."""
+        """Whether the last successful :meth:`load` read the read-only shipped store (``flexsheet/fem/data/``)
+        rather than this machine's cache."""
         return bool(self.source and self.shipped_dir
                     and os.path.dirname(os.path.abspath(self.source)) == os.path.abspath(self.shipped_dir))
 
     def save(self, kind: str, key: str, arrays: dict[str, np.ndarray]) -> str | None:
-        """Store ``arrays`` atomically; returns the path, or None when disabled or the write failed (logged)."""
+        """Store ``arrays`` atomically; returns the path, or None when disabled or the write failed
+        (logged)."""
         p = self.path(kind, key)
         if p is None:
             return None
@@ -114,16 +116,16 @@ class ArrayCache:
             return None
 
     def ship(self, kind: str, key: str, arrays: dict[str, np.ndarray]) -> str:
-        """Write an entry into ``shipped_dir`` (the repository's read-only store, ``flexsheet/fem/data/``), zlib
-        compressed (``numpy.savez_compressed``), atomically; returns its path. For entries a fresh machine should
-        not have to compute (the FEM node's snapshot table: hours of CPU), entered in the folder's manifest
-        (:func:`flexsheet.manifest.record`, which deletes an older table of the same kind). Raises ``ValueError`` when there is no
-        shipped directory, ``OSError`` when it cannot be written."""
+        """Write an entry into ``shipped_dir`` (the repository's read-only store, ``flexsheet/fem/data/``),
+        zlib compressed (``numpy.savez_compressed``), atomically; returns its path. For entries a fresh
+        machine should not have to compute (the FEM node's snapshot table: hours of CPU), entered in the
+        folder's manifest (:func:`flexsheet.manifest.record`, which deletes an older table of the same kind).
+        Raises ``ValueError`` when there is no shipped directory, ``OSError`` when it cannot be written."""
         if not self.shipped_dir:
             raise ValueError("this cache has no shipped directory to write into")
         os.makedirs(self.shipped_dir, exist_ok=True)
         p = os.path.join(self.shipped_dir, self._name(kind, key))
-        if os.path.exists(p):           # the same arrays again: keep the file (a zip's bytes carry its write time)
+        if os.path.exists(p):  # the same arrays again: keep the file (a zip's bytes carry its write time)
             try:
                 with np.load(p, allow_pickle=False) as z:
                     if set(z.files) == set(arrays) and all(

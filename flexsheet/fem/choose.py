@@ -28,7 +28,8 @@ __all__ = ["Choice", "evaluate_spec", "choose", "load_table", "visible_mask", "T
 
 TABLE_PATH = os.path.join(os.path.dirname(__file__), "accuracy_table.json")
 MODEL_TABLE_PATH = os.path.join(os.path.dirname(__file__), "model_table.json")
-#: simplest first: linear needs no nonlinear precompute; the snapshots need the (cached or shipped) hyperelastic table
+#: simplest first: linear needs no nonlinear precompute; the
+#: snapshots need the (cached or shipped) hyperelastic table
 MODEL_PREFERENCE = ("linear", "corotational", "snapshots")
 DEFAULT_SPEC = MeshSpec(0.012, 0.004, 0.012)
 DEFAULT_ORDER = 2
@@ -36,8 +37,9 @@ DEFAULT_ORDER = 2
 
 @dataclass(frozen=True)
 class Choice:
-    """Chosen mesh ``spec`` and element ``order`` (1 or 2), its worst surface error ``error`` (m) over the depth
-    range (nan if unknown), ``met`` whether the target is met, and ``reason`` (one line for the start-up log)."""
+    """Chosen mesh ``spec`` and element ``order`` (1 or 2), its worst surface error ``error`` (m) over the
+    depth range (nan if unknown), ``met`` whether the target is met, and ``reason`` (one line for the start-up
+    log)."""
 
     spec: MeshSpec
     order: int
@@ -82,7 +84,8 @@ def evaluate_spec(spec: MeshSpec, ref_model: FemModel, ref_solutions: dict, mate
         out["surface_error_m"][key] = float(err[vis].max())
         out["surface_error_all_m"][key] = float(err.max())
         out["surface_rms_m"][key] = float(np.sqrt(np.mean(err ** 2)))
-        out["force_error_pct"][key] = float(100.0 * (sol.force - ref.force) / ref.force) if ref.force > 0 else 0.0
+        out["force_error_pct"][key] = (float(100.0 * (sol.force - ref.force) / ref.force) if ref.force > 0
+                                       else 0.0)
         out["force_N"][key] = float(sol.force)
     return out
 
@@ -98,28 +101,32 @@ def choose(table: dict | None, target: float, depth_min: float, depth_max: float
     if not (0 <= depth_min <= depth_max):
         raise ValueError(f"depth range must satisfy 0 <= min <= max, got [{depth_min!r}, {depth_max!r}]")
     if not table:
-        return Choice(DEFAULT_SPEC, DEFAULT_ORDER, float("nan"), False, "no accuracy table: default mesh " + DEFAULT_SPEC.key())
+        return Choice(DEFAULT_SPEC, DEFAULT_ORDER, float("nan"), False,
+                      "no accuracy table: default mesh " + DEFAULT_SPEC.key())
     if abs(table.get("nu", -1) - nu) > 1e-6 or abs(table.get("finger_radius", -1) - finger_radius) > 1e-9:
         return Choice(DEFAULT_SPEC, DEFAULT_ORDER, float("nan"), False,
-                      f"accuracy table is for nu={table.get('nu')}, finger_radius={table.get('finger_radius')} m; "
-                      f"default mesh {DEFAULT_SPEC.key()}")
+                      f"accuracy table is for nu={table.get('nu')}, "
+                      f"finger_radius={table.get('finger_radius')} m; default mesh {DEFAULT_SPEC.key()}")
     rows = []
     for e in table["candidates"]:
-        errs = [v for k, v in e["surface_error_m"].items() if depth_min - 1e-9 <= float(k) <= depth_max + 1e-9]
+        errs = [v for k,
+                v in e["surface_error_m"].items() if depth_min - 1e-9 <= float(k) <= depth_max + 1e-9]
         if not errs:
             continue
         rows.append((max(errs), e.get("dofs", e["mesh_nodes"]), MeshSpec(**e["spec"]), e.get("order", 1)))
     if not rows:
-        return Choice(DEFAULT_SPEC, DEFAULT_ORDER, float("nan"), False, "no tabulated depth in range: default mesh")
+        return Choice(DEFAULT_SPEC, DEFAULT_ORDER, float("nan"), False,
+                      "no tabulated depth in range: default mesh")
     ok = [r for r in rows if r[0] <= target]
     if ok:
         err, n, spec, order = min(ok, key=lambda r: (r[1], r[0]))
-        return Choice(spec, order, err, True, f"chose P{order} {spec.key()} ({n} DOF): worst surface error {err * 1e3:.2f} mm "
-                                       f"<= target {target * 1e3:.2f} mm over depths "
+        return Choice(spec, order, err, True, f"chose P{order} {spec.key()} ({n} DOF): worst surface error "
+                                       f"{err * 1e3:.2f} mm <= target {target * 1e3:.2f} mm over depths "
                                        f"{depth_min * 1e3:.0f}-{depth_max * 1e3:.0f} mm")
     err, n, spec, order = min(rows, key=lambda r: r[0])
-    return Choice(spec, order, err, False, f"target {target * 1e3:.2f} mm not met by any tabulated mesh; most "
-                                           f"accurate P{order} {spec.key()} ({n} DOF) has {err * 1e3:.2f} mm")
+    return Choice(spec, order, err, False, f"target {target * 1e3:.2f} mm not met by any tabulated mesh; "
+                                           f"most accurate P{order} {spec.key()} ({n} DOF) has "
+                                           f"{err * 1e3:.2f} mm")
 
 
 def choose_fem_model(table: dict | None, target: float, depth_max: float, update_ms_max: float = 1.0
@@ -145,8 +152,8 @@ def choose_fem_model(table: dict | None, target: float, depth_max: float, update
     for kind in MODEL_PREFERENCE:
         for k, err, ms, name in rows:
             if k == kind and err <= target and ms <= update_ms_max:
-                return kind, (f"{name}: worst visible error {err * 1e3:.2f} mm <= {target * 1e3:.2f} mm over 0-"
-                              f"{depth_max * 1e3:.0f} mm, {ms:.2f} ms/update")
+                return kind, (f"{name}: worst visible error {err * 1e3:.2f} mm <= {target * 1e3:.2f} mm over "
+                              f"0-{depth_max * 1e3:.0f} mm, {ms:.2f} ms/update")
     k, err, ms, name = min(rows, key=lambda r: r[1])
     return k, (f"no model meets {target * 1e3:.2f} mm over 0-{depth_max * 1e3:.0f} mm; most accurate {name}: "
                f"{err * 1e3:.2f} mm, {ms:.2f} ms/update")

@@ -16,15 +16,15 @@ __all__ = ["FemConfig"]
 
 @dataclass(frozen=True)
 class FemConfig:
-    """How the FEM node chooses, builds and serves its scene's model (SI units; the meaning of each field is in
-    ``nodes/fem``'s ``FemParams`` docstring). The object, its material and the finger are the scene file's.
+    """How the FEM node chooses, builds and serves its scene's model (SI units; the meaning of each field is
+    in ``nodes/fem``'s ``FemParams`` docstring). The object, its material and the finger are the scene file's.
 
     ``accuracy_target`` m; ``depth_min``/``depth_max`` m (the range the accuracy must hold over);
     ``max_depth`` m (deeper input is rejected); ``strain_limit``; ``cache_dir`` ("" = no disk cache);
-    ``mesh_h``/``mesh_h_fine``/``refine_radius`` m and ``order`` (override the automatic mesh when h, h_fine > 0);
-    ``arc_deg`` deg (the cylinder's working arc); ``nonlinear``,
-    ``nonlinear_steps`` (the corotational depth table); ``use_prediction``; ``model`` auto | linear |
-    snapshots; ``snapshot_build``; ``snapshot_axial_max`` m.
+    ``mesh_h``/``mesh_h_fine``/``refine_radius`` m and ``order`` (override the automatic mesh when h, h_fine >
+    0); ``arc_deg`` deg (the cylinder's working arc); ``nonlinear``, ``nonlinear_steps`` (the corotational
+    depth table); ``use_prediction``; ``model`` auto | linear | snapshots; ``snapshot_build``;
+    ``snapshot_axial_max`` m.
     """
 
     accuracy_target: Annotated[float, Field(gt=0.0)] = 0.0007

@@ -40,7 +40,8 @@ class ContactFinger:
 
 def finger_at(angle: float, depth: float, radius: float, cyl_radius: float, cyl_center: np.ndarray,
               axial: float = 0.0) -> ContactFinger:
-    """Finger pushing at azimuth ``angle`` (rad, around +x toward +z), axial offset ``axial`` (m) to ``depth`` (m).
+    """Finger pushing at azimuth ``angle`` (rad, around +x toward +z), axial offset ``axial`` (m) to ``depth``
+    (m).
 
     Raises ``ValueError`` naming the argument when not finite, radius ≤ 0 or depth < 0."""
     for name, v in (("angle", angle), ("depth", depth), ("radius", radius), ("axial", axial)):
@@ -54,7 +55,8 @@ def finger_at(angle: float, depth: float, radius: float, cyl_radius: float, cyl_
     out = np.array([math.cos(angle), 0.0, math.sin(angle)])
     cp = c0 + np.array([0.0, axial, 0.0]) + cyl_radius * out
     tip = cp - depth * out
-    return ContactFinger(tip + radius * out, -out, float(radius), float(depth), cp, float(angle), float(axial))
+    return ContactFinger(tip + radius * out, -out, float(radius), float(depth), cp, float(angle),
+                         float(axial))
 
 
 def held_finger(p: np.ndarray, anchor: ContactFinger, radius: float, max_depth: float) -> ContactFinger:
@@ -69,8 +71,10 @@ def held_finger(p: np.ndarray, anchor: ContactFinger, radius: float, max_depth: 
                   anchor.contact_point, anchor.angle, anchor.axial)
 
 
-def finger_from_tip(tip: np.ndarray, radius: float, cyl_radius: float, cyl_length: float, cyl_center: np.ndarray,
-                    max_depth: float, anchor: ContactFinger | None = None, sticky_depth: float = 0.005) -> ContactFinger:
+def finger_from_tip(tip: np.ndarray, radius: float, cyl_radius: float, cyl_length: float,
+                    cyl_center: np.ndarray,
+                    max_depth: float, anchor: ContactFinger | None = None,
+                    sticky_depth: float = 0.005) -> ContactFinger:
     """Finger geometry from the measured fingertip position ``tip`` (3,) m, display frame.
 
     Without ``anchor`` the push direction points from ``tip`` to the cylinder axis. With ``anchor`` (the
@@ -87,8 +91,8 @@ def finger_from_tip(tip: np.ndarray, radius: float, cyl_radius: float, cyl_lengt
     rel = p - c0
     axial = float(rel[1])
     if abs(axial) > cyl_length / 2:
-        raise ValueError(f"tip {p.tolist()} is beyond the cylinder's end faces (|y - y_O| = {abs(axial):.4f} m > "
-                         f"{cyl_length / 2:.4f} m)")
+        raise ValueError(f"tip {p.tolist()} is beyond the cylinder's end faces (|y - y_O| = {abs(axial):.4f} "
+                         f"m > {cyl_length / 2:.4f} m)")
     if anchor is not None and anchor.depth >= sticky_depth:
         return held_finger(p, anchor, radius, max_depth)
     radial = np.array([rel[0], 0.0, rel[2]])
@@ -100,7 +104,8 @@ def finger_from_tip(tip: np.ndarray, radius: float, cyl_radius: float, cyl_lengt
         raise ValueError(f"tip {p.tolist()} is on the back (fixed support) half of the cylinder")
     depth = cyl_radius - rho
     if depth > max_depth:
-        raise ValueError(f"tip {p.tolist()} is {depth * 1e3:.1f} mm deep, beyond max_depth {max_depth * 1e3:.1f} mm")
+        raise ValueError(f"tip {p.tolist()} is {depth * 1e3:.1f} mm deep, beyond max_depth "
+                         f"{max_depth * 1e3:.1f} mm")
     cp = c0 + np.array([0.0, axial, 0.0]) + cyl_radius * out
     return ContactFinger(p + radius * out, -out, float(radius), max(0.0, depth), cp,
                   math.atan2(out[2], out[0]), axial)

@@ -1,7 +1,7 @@
-"""Corotational (stiffness-warping) FEM of the cylinder under displacement-driven fingertip contact (pure): the
-geometrically nonlinear mode of the linear P1 model (:func:`solve_corotational`), with lagged element rotations
-from the polar decomposition of the deformation gradient (Müller et al., SCA 2002; Müller & Gross, GI 2004; SOFA
-TetrahedronFEMForceField method="polar"), solved quasi-statically. Units SI; display frame."""
+"""Corotational (stiffness-warping) FEM of the cylinder under displacement-driven fingertip contact (pure):
+the geometrically nonlinear mode of the linear P1 model (:func:`solve_corotational`), with lagged element
+rotations from the polar decomposition of the deformation gradient (Müller et al., SCA 2002; Müller & Gross,
+GI 2004; SOFA TetrahedronFEMForceField method="polar"), solved quasi-statically. Units SI; display frame."""
 
 from __future__ import annotations
 

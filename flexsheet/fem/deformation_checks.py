@@ -1,6 +1,6 @@
 """Failure detection of a deformed linear-model mesh (pure): inverted tetrahedra (det F ≤ 0) and the largest
-principal strain of P1 tets (:func:`element_checks`, and :class:`TetChecks` precomputed for the real-time loop),
-and the fold test of rendered triangles (:func:`fold_operator`). Units SI; display frame."""
+principal strain of P1 tets (:func:`element_checks`, and :class:`TetChecks` precomputed for the real-time
+loop), and the fold test of rendered triangles (:func:`fold_operator`). Units SI; display frame."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ __all__ = ["element_checks", "TetChecks", "fold_operator", "grad_ops"]
 
 def fold_operator(rest: np.ndarray, faces: np.ndarray, normals: np.ndarray):
     """Fold test of triangles as one sparse product: returns (op (6F, 3S) csr, op @ rest.ravel() (6F,)) for
-    ``faces`` (F, 3) over vertices ``rest`` (S, 3) m with rest normals ``normals`` (F, 3). For vertex positions
-    x (S, 3) m flattened, rows c·F + f of op @ x give e2_c = (x2 − x0)_c and rows 3F + c·F + f give
+    ``faces`` (F, 3) over vertices ``rest`` (S, 3) m with rest normals ``normals`` (F, 3). For vertex
+    positions x (S, 3) m flattened, rows c·F + f of op @ x give e2_c = (x2 − x0)_c and rows 3F + c·F + f give
     (n0 × e1)_c = Σ_b [n0]×_cb (x1 − x0)_b of face f, so Σ_c of their product is (e1 × e2)·n0, the turned
     normal's component along the rest normal (≤ 0: the face folded over). Both are linear in x."""
     F = len(faces)
@@ -100,7 +100,8 @@ class TetChecks:
         self._c2 = np.einsum("ij,ij->i", self.centroids, self.centroids)
 
     def gradients(self, u: np.ndarray) -> np.ndarray:
-        """Displacement gradients H (3, 3, M), H[i, j] = ∂u_i/∂x_j per tet, of node displacements ``u`` (N, 3)."""
+        """Displacement gradients H (3, 3, M), H[i, j] = ∂u_i/∂x_j per tet, of node displacements ``u`` (N,
+        3)."""
         return (self.B @ np.ascontiguousarray(u, float).reshape(-1)).reshape(3, 3, self.n_tets)
 
     def near(self, point: np.ndarray, radius: float) -> np.ndarray:

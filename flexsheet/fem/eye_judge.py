@@ -1,17 +1,19 @@
-"""The FEM's judge: how far a served surface is from the reference's as the eyes see it, split into what the eye
-notices and what it does not, in projector pixels (:mod:`flexsheet.fem.eye_view` finds what each eye sees).
+"""The FEM's judge: how far a served surface is from the reference's as the eyes see it, split into what the
+eye notices and what it does not, in projector pixels (:mod:`flexsheet.fem.eye_view` finds what each eye
+sees).
 
-* **Shape** (:func:`judge`): each rendered vertex the eye sees, moved to the reference's deformed surface by the
-  shortest way (the closest point on it, ``trimesh``), is its **shape** error; the rest, from that closest point
-  to the reference's own vertex, is **sliding** along the surface. Uniform shading does not show sliding (a
-  texture would), so shape is judged and sliding reported beside it. Each is the largest distance, over both
-  eyes, between where the eye sees the two points on the imaginary screen.
+* **Shape** (:func:`judge`): each rendered vertex the eye sees, moved to the reference's deformed surface by
+  the shortest way (the closest point on it, ``trimesh``), is its **shape** error; the rest, from that closest
+  point to the reference's own vertex, is **sliding** along the surface. Uniform shading does not show sliding
+  (a texture would), so shape is judged and sliding reported beside it. Each is the largest distance, over
+  both eyes, between where the eye sees the two points on the imaginary screen.
 * **Silhouette** (:func:`silhouette_px`): each eye's outline of the surface against the background, the zero
   set of n·(x − eye) interpolated over the triangles from area-weighted vertex normals (Hertzmann & Zorin,
   SIGGRAPH 2000: smooth where the per-face outline zigzags), the parts the eye sees with nothing behind them;
   the error is the symmetric Hausdorff distance between the served and the reference outline on the screen.
-* **Contact** (:func:`contact_gap`): the drawn dent against the fingertip's sphere: the surface's least distance
-  to the sphere's centre less its radius (> 0 a gap, < 0 the surface drawn inside the finger), as each eye sees
+* **Contact** (:func:`contact_gap`): the drawn dent against the fingertip's sphere: the surface's least
+  distance to the sphere's centre less its radius (> 0 a gap, < 0 the surface drawn inside the finger), as
+  each eye sees
   it: the larger of the gap's shift on the screen and its change of stereo disparity.
 * **Temporal** (:func:`frame_jumps`): each frame's change of the served surface less the change the frames
   around it make (a second difference: a smooth reference's change at frame rate is its neighbours' mean), so
@@ -27,7 +29,8 @@ import numpy as np
 
 from flexsheet.fem.eye_view import eyes, finger_capsule, screen_px, seen
 
-__all__ = ["judge", "shape_px_by_depth", "silhouette_px", "contour_segments", "contact_gap", "frame_jumps", "SILHOUETTE_STEP_PX"]
+__all__ = ["judge", "shape_px_by_depth", "silhouette_px", "contour_segments", "contact_gap", "frame_jumps",
+           "SILHOUETTE_STEP_PX"]
 
 #: the outline is sampled every this many px on the screen before the Hausdorff distance (its error ≤ half)
 SILHOUETTE_STEP_PX = 0.1
@@ -78,7 +81,8 @@ def contour_segments(points: np.ndarray, faces: np.ndarray, eye: np.ndarray) -> 
 
 def _outline_px(points, faces, eye, capsule, tol) -> np.ndarray:
     """(n, 2) px: the seen outline against the background on the screen, sampled every
-    :data:`SILHOUETTE_STEP_PX` (each sample tested on its own, so an occluder clips the outline where it ends)."""
+    :data:`SILHOUETTE_STEP_PX` (each sample tested on its own, so an occluder clips the outline where it
+    ends)."""
     seg = contour_segments(points, faces, eye)
     if not len(seg):
         return np.zeros((0, 2))
@@ -150,11 +154,11 @@ def silhouette_px(model_pts: np.ndarray, ref_pts: np.ndarray, faces: np.ndarray,
 
 def judge(models: list[np.ndarray], ref_pts: np.ndarray, faces: np.ndarray, finger=None,
           eye_pair: np.ndarray | None = None, silhouette: bool = True) -> tuple[list[dict], int]:
-    """Each of ``models`` (each (k, 3) m, the rendered vertices deformed by a model) against ``ref_pts`` (k, 3) m
-    (deformed by the reference) as the eyes see it (module doc): per model {"shape_px", "sliding_px",
-    "total_px" (the old vertex-to-vertex figure), "silhouette_px" (None unless ``silhouette``)}, the largest over
-    the vertices either eye sees on the reference's surface (``faces`` (F, 3)) past the ``finger``; and how many
-    vertices either eye sees. Raises ``ValueError`` for mismatched or non-finite input."""
+    """Each of ``models`` (each (k, 3) m, the rendered vertices deformed by a model) against ``ref_pts`` (k,
+    3) m (deformed by the reference) as the eyes see it (module doc): per model {"shape_px", "sliding_px",
+    "total_px" (the old vertex-to-vertex figure), "silhouette_px" (None unless ``silhouette``)}, the largest
+    over the vertices either eye sees on the reference's surface (``faces`` (F, 3)) past the ``finger``; and
+    how many vertices either eye sees. Raises ``ValueError`` for mismatched or non-finite input."""
     import trimesh
 
     r = _check_pts("ref_pts", ref_pts)
@@ -235,7 +239,8 @@ def frame_jumps(frames: list[np.ndarray], faces: np.ndarray, fingers: list | Non
         d = np.diff(s, axis=0)                                   # (N-1, k, 2)
         j = d[1:-1] - 0.5 * (d[:-2] + d[2:])                     # change k→k+1, k = 1..N-3
         for i in range(len(out)):
-            cap = finger_capsule(fingers[i + 1]) if fingers is not None and fingers[i + 1] is not None else None
+            cap = (finger_capsule(fingers[i + 1]) if fingers is not None and fingers[i + 1] is not None
+                   else None)
             vis = seen(fr[i + 1], f, e, cap)
             if vis.any():
                 out[i] = max(out[i], float(np.linalg.norm(j[i][vis], axis=1).max()))
@@ -243,12 +248,13 @@ def frame_jumps(frames: list[np.ndarray], faces: np.ndarray, fingers: list | Non
 
 
 def shape_px_by_depth(model_u, ref_u, verts, faces, fingers) -> list[float]:
-    """The largest visible shape error (px; the larger of the seen vertices' distance to the reference's surface and
-    the outlines', :func:`judge`) per depth of ``model_u`` against ``ref_u`` ((D, S, 3) m
-    displacements of the rendered vertices ``verts`` (S, 3) m on ``faces`` (F, 3)), ``fingers[j]`` (D,) occluding:
-    the metric of every table check."""
+    """The largest visible shape error (px; the larger of the seen vertices' distance to the reference's
+    surface and the outlines', :func:`judge`) per depth of ``model_u`` against ``ref_u`` ((D, S, 3) m
+    displacements of the rendered vertices ``verts`` (S, 3) m on ``faces`` (F, 3)), ``fingers[j]`` (D,)
+    occluding: the metric of every table check."""
     out = []
     for j, fg in enumerate(fingers):
-        (o,), _ = judge([verts + np.asarray(model_u[j], float)], verts + np.asarray(ref_u[j], float), faces, fg)
+        (o,), _ = judge([verts + np.asarray(model_u[j], float)], verts + np.asarray(ref_u[j], float), faces,
+                        fg)
         out.append(max(o["shape_px"], o["silhouette_px"]))
     return out

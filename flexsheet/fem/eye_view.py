@@ -2,11 +2,12 @@
 ground of every FEM accuracy figure; :mod:`flexsheet.fem.eye_judge` judges a served surface with it).
 
 A rendered vertex counts where an eye sees it: the segment from the eye to the vertex's position on the
-*reference's* deformed surface crosses neither that surface (self-occlusion: the crater's rim, the object's far
-side; a ray cast with :mod:`trimesh`) nor the finger, a capsule of the fingertip's radius from the tip's centre
-back toward the user (:data:`FINGER_LENGTH`). Where the eye sees a point is its projection from the eye onto the
-imaginary screen, in projector pixels there (:data:`flexsheet.model.geometry.PIXEL_ON_SCREEN`): a displacement
-along the line of sight costs nothing, one across it costs what the eye notices. Both eyes (V ∓ IPD/2 along y).
+*reference's* deformed surface crosses neither that surface (self-occlusion: the crater's rim, the object's
+far side; a ray cast with :mod:`trimesh`) nor the finger, a capsule of the fingertip's radius from the tip's
+centre back toward the user (:data:`FINGER_LENGTH`). Where the eye sees a point is its projection from the eye
+onto the imaginary screen, in projector pixels there (:data:`flexsheet.model.geometry.PIXEL_ON_SCREEN`): a
+displacement along the line of sight costs nothing, one across it costs what the eye notices. Both eyes (V ∓
+IPD/2 along y).
 Frame: ``display``; units m, px."""
 
 from __future__ import annotations
@@ -62,10 +63,10 @@ def _segments_distance(p0: np.ndarray, p1: np.ndarray, a: np.ndarray, b: np.ndar
 def seen(points: np.ndarray, faces: np.ndarray, eye: np.ndarray, capsule=None, tol: float = 2e-4,
          targets: np.ndarray | None = None) -> np.ndarray:
     """(k,) bool: the vertices ``points`` (k, 3) m of the surface triangulated by ``faces`` (F, 3) int that
-    ``eye`` (3,) m sees: no triangle of the surface crosses the segment eye → vertex more than ``tol`` m before
-    the vertex, and (``capsule`` (a, b, r) of :func:`finger_capsule`) the segment keeps more than r from the
-    capsule's axis. ``targets`` (m, 3) m: test these points on the surface instead of its vertices ((m,) bool).
-    Raises ``ValueError`` for mismatched shapes or an index outside ``points``."""
+    ``eye`` (3,) m sees: no triangle of the surface crosses the segment eye → vertex more than ``tol`` m
+    before the vertex, and (``capsule`` (a, b, r) of :func:`finger_capsule`) the segment keeps more than r
+    from the capsule's axis. ``targets`` (m, 3) m: test these points on the surface instead of its vertices
+    ((m,) bool). Raises ``ValueError`` for mismatched shapes or an index outside ``points``."""
     import trimesh
 
     pts = np.asarray(points, float)
@@ -81,7 +82,8 @@ def seen(points: np.ndarray, faces: np.ndarray, eye: np.ndarray, capsule=None, t
     ok = np.ones(len(q), bool)
     if capsule is not None:
         a, b, r = capsule
-        ok &= _segments_distance(np.broadcast_to(e, q.shape), q, np.asarray(a, float), np.asarray(b, float)) > r
+        ok &= (_segments_distance(np.broadcast_to(e, q.shape), q, np.asarray(a, float), np.asarray(b, float))
+               > r)
     mesh = trimesh.Trimesh(pts, f, process=False, validate=False)
     idx = np.flatnonzero(ok)
     if len(idx) and len(f):

@@ -20,9 +20,9 @@ __all__ = ["Material", "SOFT_TISSUE"]
 @dataclass(frozen=True)
 class Material:
     """Isotropic material: Young's modulus ``E`` (Pa, > 0) and Poisson's ratio ``nu`` (0 ≤ ν < 0.5) — all the
-    linear models read — and ``Jm`` (> 0, dimensionless; ``math.inf``: none), the Gent limiting value of
-    I₁ − 3 that only the hyperelastic reference reads (:mod:`flexsheet.fem.reference.hyperelastic`: W's isochoric-free part
-    −μJm/2 ln(1 − (I₁ − 3)/Jm), Gent 1996; Jm → ∞ is neo-Hookean μ/2 (I₁ − 3)).
+    linear models read — and ``Jm`` (> 0, dimensionless; ``math.inf``: none), the Gent limiting value of I₁ −
+    3 that only the hyperelastic reference reads (:mod:`flexsheet.fem.reference.hyperelastic`: W's
+    isochoric-free part −μJm/2 ln(1 − (I₁ − 3)/Jm), Gent 1996; Jm → ∞ is neo-Hookean μ/2 (I₁ − 3)).
 
     Raises ``ValueError`` naming the field when out of range or not finite (``Jm`` may be ``inf``)."""
 
@@ -40,9 +40,9 @@ class Material:
 
     @classmethod
     def of_scene(cls, m) -> Material:
-        """The material of a scene file's ``material`` (:class:`flexsheet.model.scene_parts.MaterialSpec`: ``model``,
-        ``E``, ``nu``, ``Jm``): its ``Jm`` for ``model: gent``, else neo-Hookean (∞; the linear models read E, ν
-        only). Raises ``ValueError`` as the constructor."""
+        """The material of a scene file's ``material`` (:class:`flexsheet.model.scene_parts.MaterialSpec`:
+        ``model``, ``E``, ``nu``, ``Jm``): its ``Jm`` for ``model: gent``, else neo-Hookean (∞; the linear
+        models read E, ν only). Raises ``ValueError`` as the constructor."""
         return cls(m.E, m.nu, m.Jm if m.model == "gent" else math.inf)
 
     @property

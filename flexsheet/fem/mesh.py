@@ -25,7 +25,8 @@ import numpy as np
 from flexsheet.model.checks import check_positive
 from flexsheet.model.geometry import CYLINDER_CENTER, CYLINDER_LENGTH, CYLINDER_RADIUS
 
-__all__ = ["TetMesh", "MeshSpec", "cylinder_tet_mesh", "cylinder_part_mesh", "surface_faces", "write_mesh", "arc_points",
+__all__ = ["TetMesh", "MeshSpec", "cylinder_tet_mesh", "cylinder_part_mesh", "surface_faces", "write_mesh",
+           "arc_points",
            "gmsh_tets", "finish_cylinder_mesh", "orient_tets"]
 
 _GMSH_LOCK = threading.Lock()   # gmsh is a process-wide singleton
@@ -35,7 +36,8 @@ _GMSH_LOCK = threading.Lock()   # gmsh is a process-wide singleton
 class MeshSpec:
     """Mesh resolution: ``h`` global element size (m), ``h_fine`` size in the refined band (m, ≤ h),
     ``refine_radius`` band half-width around the working arc (m; 0 = no refinement), ``arc_deg`` half-angle of
-    the working arc (deg, ≥ 0). Raises ``ValueError`` naming the field on non-positive or inconsistent values."""
+    the working arc (deg, ≥ 0). Raises ``ValueError`` naming the field on non-positive or inconsistent
+    values."""
 
     h: float = 0.008
     h_fine: float = 0.003
@@ -126,7 +128,7 @@ def _split_at_rim(gmsh, point, normal, size: float, h: float) -> list[int]:
         occ.synchronize()
     rim = set()
     for _, t in gmsh.model.getEntities(2):
-        if len(gmsh.model.getAdjacencies(2, t)[0]) != 1:                       # the outer boundary's faces only
+        if len(gmsh.model.getAdjacencies(2, t)[0]) != 1:  # the outer boundary's faces only
             continue
         for c in gmsh.model.getAdjacencies(2, t)[1]:
             lo, hi = gmsh.model.getParametrizationBounds(1, abs(int(c)))
@@ -148,12 +150,12 @@ def _split_at_rim(gmsh, point, normal, size: float, h: float) -> list[int]:
 def gmsh_tets(model: str, geometry, h: float, h_fine: float, refine_radius: float, centres, what: str,
               extra_balls: tuple = (), rim: tuple | None = None):
     """Run gmsh once: ``geometry(gmsh)`` adds the OpenCASCADE solid, element size ``h`` with ``h_fine`` within
-    ``refine_radius`` of each point of ``centres`` (``Ball`` fields under a ``Min``), single-threaded Delaunay;
-    ``extra_balls``: further (centres (K, 3) m, radius m, size m) groups of balls under the same ``Min``, each
-    graded to ``h`` over its radius; ``rim`` (point (3,) m, normal (3,)): mesh the plane's cut of the surface as
-    lines of size ``h_fine`` (:func:`_split_at_rim`, OpenCASCADE solids only). Returns (points (N, 3) m, tets
-    (M, 4) int64 into ``points``, unoriented).
-    Raises ``RuntimeError`` naming ``what`` if gmsh fails or produces no tetrahedra."""
+    ``refine_radius`` of each point of ``centres`` (``Ball`` fields under a ``Min``), single-threaded
+    Delaunay; ``extra_balls``: further (centres (K, 3) m, radius m, size m) groups of balls under the same
+    ``Min``, each graded to ``h`` over its radius; ``rim`` (point (3,) m, normal (3,)): mesh the plane's cut
+    of the surface as lines of size ``h_fine`` (:func:`_split_at_rim`, OpenCASCADE solids only). Returns
+    (points (N, 3) m, tets (M, 4) int64 into ``points``, unoriented). Raises ``RuntimeError`` naming ``what``
+    if gmsh fails or produces no tetrahedra."""
     import gmsh
 
     with _GMSH_LOCK:
@@ -202,14 +204,15 @@ def gmsh_tets(model: str, geometry, h: float, h_fine: float, refine_radius: floa
     return pts_all[used], inv.reshape(-1, 4)
 
 
-def cylinder_tet_mesh(spec: MeshSpec = MeshSpec(), radius: float = CYLINDER_RADIUS, length: float = CYLINDER_LENGTH,
+def cylinder_tet_mesh(spec: MeshSpec = MeshSpec(), radius: float = CYLINDER_RADIUS,
+                      length: float = CYLINDER_LENGTH,
                       center: np.ndarray = CYLINDER_CENTER) -> TetMesh:
     """Mesh the cylinder (axis +y through ``center``) with gmsh's OpenCASCADE kernel, P1 tetrahedra.
 
     Returns a :class:`TetMesh` (tetrahedra, not the renderer's triangle surface) with the back-half support
-    marked (boundary nodes with x ≤ center_x + 1e-9). Raises ``ValueError`` on bad geometry and ``RuntimeError`` if gmsh fails. Source: gmsh Python API
-    (``occ.addCylinder``, ``Ball``/``Min`` size fields, ``generate(3)``). Deterministic for a given spec
-    (single-threaded Delaunay with fixed options).
+    marked (boundary nodes with x ≤ center_x + 1e-9). Raises ``ValueError`` on bad geometry and
+    ``RuntimeError`` if gmsh fails. Source: gmsh Python API (``occ.addCylinder``, ``Ball``/``Min`` size
+    fields, ``generate(3)``). Deterministic for a given spec (single-threaded Delaunay with fixed options).
     """
     radius, length = check_positive("radius", radius), check_positive("length", length)
     c = np.asarray(center, float)
@@ -224,18 +227,21 @@ def cylinder_tet_mesh(spec: MeshSpec = MeshSpec(), radius: float = CYLINDER_RADI
     return finish_cylinder_mesh(points, tets, radius, length, c, spec)
 
 
-def _part_geometry(c: np.ndarray, y0: float, radius: float, length: float, half_z: bool, cut_deg: float | None):
+def _part_geometry(c: np.ndarray, y0: float, radius: float, length: float, half_z: bool,
+                   cut_deg: float | None):
     """:func:`cylinder_part_mesh`'s gmsh geometry: the cylinder from ``y0``, cut to z ≥ z_O (``half_z``),
     fragmented by the plane at azimuth ``cut_deg``."""
 
     def geometry(gmsh) -> None:
         cyl = gmsh.model.occ.addCylinder(c[0], y0, c[2], 0.0, c[1] + length / 2 - y0, 0.0, radius)
         if half_z:
-            box = gmsh.model.occ.addBox(c[0] - 2 * radius, y0 - 0.01, c[2], 4 * radius, length + 0.02, 2 * radius)
+            box = gmsh.model.occ.addBox(c[0] - 2 * radius, y0 - 0.01, c[2], 4 * radius, length + 0.02,
+                                        2 * radius)
             gmsh.model.occ.intersect([(3, cyl)], [(3, box)])
         if cut_deg is not None:
             # the plane through the cylinder's axis and the push direction at azimuth cut_deg: fragmenting the
-            # solid with it makes two volumes that gmsh meshes conformally, so the mesh has nodes on that plane
+            # solid with it makes two volumes that gmsh meshes
+            # conformally, so the mesh has nodes on that plane
             rect = gmsh.model.occ.addRectangle(c[0] - 2 * radius, y0 - 0.01, c[2], 4 * radius, length + 0.02)
             gmsh.model.occ.rotate([(2, rect)], c[0], c[1], c[2], 0.0, 1.0, 0.0, -math.radians(cut_deg))
             vols = gmsh.model.occ.getEntities(3)
@@ -244,8 +250,10 @@ def _part_geometry(c: np.ndarray, y0: float, radius: float, length: float, half_
     return geometry
 
 
-def _skin_balls(skin, h_fine: float, refine_deg, radius: float, c: np.ndarray, y0: float, half_z: bool) -> tuple:
-    """The skin's size balls (centres, radius, size) of :func:`cylinder_part_mesh` (``ValueError`` on bad sizes)."""
+def _skin_balls(skin, h_fine: float, refine_deg, radius: float, c: np.ndarray, y0: float,
+                half_z: bool) -> tuple:
+    """The skin's size balls (centres, radius, size) of :func:`cylinder_part_mesh` (``ValueError`` on bad
+    sizes)."""
     size, patch, depth = (float(v) for v in skin)
     if not (math.isfinite(size) and 0.0005 <= size <= h_fine):
         raise ValueError(f"skin size must be in [0.0005, h_fine={h_fine}] m, got {size!r}")
@@ -271,7 +279,8 @@ def _skin_balls(skin, h_fine: float, refine_deg, radius: float, c: np.ndarray, y
 
 
 def _tip_balls(tip, h_fine: float, refine_deg, radius: float, c: np.ndarray) -> tuple:
-    """The tip's size balls (centres, radius, size) of :func:`cylinder_part_mesh` (``ValueError`` on bad sizes)."""
+    """The tip's size balls (centres, radius, size) of :func:`cylinder_part_mesh` (``ValueError`` on bad
+    sizes)."""
     size, rad = (float(v) for v in tip)
     if not (math.isfinite(size) and 0.0005 <= size <= h_fine):
         raise ValueError(f"tip size must be in [0.0005, h_fine={h_fine}] m, got {size!r}")
@@ -290,10 +299,10 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
                        rim: bool = False) -> TetMesh:
     """Mesh a symmetric part of the cylinder for the nonlinear reference (P1 tetrahedra, gmsh OpenCASCADE).
 
-    ``half_y``: keep y ≥ y_O only (the push at y = y_O is mirror-symmetric in y); ``half_z``: also keep
-    z ≥ z_O (a push at azimuth 0 is mirror-symmetric in z too). Element size ``h`` (m), ``h_fine`` (m) within
-    ``refine_radius`` (m) of the side-surface points at azimuths ``refine_deg`` (deg, around +x toward +z,
-    at y = y_O), gmsh ``Ball`` + ``Min`` fields; with ``path_depth`` (m) > 0 the refined region is the whole
+    ``half_y``: keep y ≥ y_O only (the push at y = y_O is mirror-symmetric in y); ``half_z``: also keep z ≥
+    z_O (a push at azimuth 0 is mirror-symmetric in z too). Element size ``h`` (m), ``h_fine`` (m) within
+    ``refine_radius`` (m) of the side-surface points at azimuths ``refine_deg`` (deg, around +x toward +z, at
+    y = y_O), gmsh ``Ball`` + ``Min`` fields; with ``path_depth`` (m) > 0 the refined region is the whole
     *push path* instead: balls every ``refine_radius``/3 from each of those surface points down to
     ``path_depth`` along the inward normal (the tube the fingertip travels through and the ring of material
     that wraps it). Each ball grades from ``h_fine`` to ``h`` over a further ``refine_radius``. ``skin``
@@ -301,12 +310,12 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
     ``depth`` thick within ``patch radius`` (along the surface) of it, whose material wraps around the
     fingertip and lines the crater (balls of radius ``depth`` every ``depth``/2 on the surface). ``tip``
     (size, radius) m: also size ``size`` within ``radius`` of each push point itself, graded to ``h`` over a
-    further ``radius`` (the material that ends up over the fingertip). ``cut_deg``
-    (deg, without ``half_z``): the mesh conforms to the plane through the axis and the push direction at that
-    azimuth (the solid is fragmented by it, so the two volumes share their nodes there). ``rim``: the support's
-    plane x = x_O cuts the surface along mesh lines of size ``h_fine`` (:func:`_split_at_rim`). ``fixed`` marks
-    nothing here: the caller knows which faces are symmetry planes. Raises ``ValueError`` on bad sizes or a
-    ``cut_deg`` that is not finite or comes with ``half_z``, and ``RuntimeError`` if gmsh fails.
+    further ``radius`` (the material that ends up over the fingertip). ``cut_deg`` (deg, without ``half_z``):
+    the mesh conforms to the plane through the axis and the push direction at that azimuth (the solid is
+    fragmented by it, so the two volumes share their nodes there). ``rim``: the support's plane x = x_O cuts
+    the surface along mesh lines of size ``h_fine`` (:func:`_split_at_rim`). ``fixed`` marks nothing here: the
+    caller knows which faces are symmetry planes. Raises ``ValueError`` on bad sizes or a ``cut_deg`` that is
+    not finite or comes with ``half_z``, and ``RuntimeError`` if gmsh fails.
     """
     for name, v in (("h", h), ("h_fine", h_fine)):
         if not (math.isfinite(v) and 0.0005 <= v <= 0.05):
@@ -319,8 +328,8 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
     y0 = c[1] if half_y else c[1] - length / 2
     geometry = _part_geometry(c, y0, radius, length, half_z, cut_deg)
     if cut_deg is not None and (half_z or not math.isfinite(cut_deg)):
-        raise ValueError(f"cut_deg must be a finite azimuth (deg) on a part without the z mirror (half_z), got "
-                         f"{cut_deg!r} with half_z={half_z}")
+        raise ValueError("cut_deg must be a finite azimuth (deg) on a part without the z mirror (half_z), "
+                         f"got {cut_deg!r} with half_z={half_z}")
     if not (math.isfinite(path_depth) and 0.0 <= path_depth <= 2 * radius):
         raise ValueError(f"path_depth must be in [0, {2 * radius:.4g}] m, got {path_depth!r}")
     centres = []
@@ -342,7 +351,8 @@ def cylinder_part_mesh(h: float, h_fine: float, refine_radius: float, refine_deg
     return TetMesh(points, tets, faces, np.zeros(len(points), bool), None, radius, length, c.copy())
 
 
-def finish_cylinder_mesh(points: np.ndarray, tets: np.ndarray, radius: float, length: float, center: np.ndarray,
+def finish_cylinder_mesh(points: np.ndarray, tets: np.ndarray, radius: float, length: float,
+                         center: np.ndarray,
                          spec: MeshSpec | None) -> TetMesh:
     tets = orient_tets(points, tets)
     faces = surface_faces(points, tets)
@@ -381,7 +391,8 @@ def surface_faces(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
 
 
 def write_mesh(mesh: TetMesh, path: str) -> None:
-    """Write the mesh (tets + boundary triangles, point data ``fixed``) with meshio; format from the suffix."""
+    """Write the mesh (tets + boundary triangles, point data ``fixed``) with meshio; format from the
+    suffix."""
     import meshio
 
     meshio.write(path, meshio.Mesh(mesh.points, [("tetra", mesh.tets), ("triangle", mesh.faces)],

@@ -2,16 +2,16 @@
 that carries one push onto another (the rounded box, the organ), after Peterlík et al. 2010's precomputed
 snapshots: solved states, blended as the cylinder's and the sphere's tables blend theirs.
 
-The cylinder's and the sphere's tables (:mod:`flexsheet.fem.snapshots`, :mod:`flexsheet.fem.sphere_snapshots`) move a
-snapshot from one push to the next by the object's symmetry. A general body has none, so this table holds
-pushes at stations along the stroke and moves each with the contact:
+The cylinder's and the sphere's tables (:mod:`flexsheet.fem.snapshots`, :mod:`flexsheet.fem.sphere_snapshots`)
+move a snapshot from one push to the next by the object's symmetry. A general body has none, so this table
+holds pushes at stations along the stroke and moves each with the contact:
 
-* **Offline** (:mod:`flexsheet.fem.reference.path_table`): at K **stations** along the stroke (fractions
-  f_0 < … < f_K-1 of its arc length; the stroke's start and end included) the scene's hyperelastic body is
-  pushed along the inward surface normal 0 → ``depths[-1]`` (the nonlinear reference,
-  :func:`flexsheet.fem.reference.scene_reference.scene_reference`), and at every depth d_j the same push is solved by the
-  real-time linear model (:class:`flexsheet.fem.scene_model.SceneModel`, its own mesh). The table holds, on the
-  real-time model's rendered surface vertices (S, 3):
+* **Offline** (:mod:`flexsheet.fem.reference.path_table`): at K **stations** along the stroke (fractions f_0 <
+  … < f_K-1 of its arc length; the stroke's start and end included) the scene's hyperelastic body is pushed
+  along the inward surface normal 0 → ``depths[-1]`` (the nonlinear reference,
+  :func:`flexsheet.fem.reference.scene_reference.scene_reference`), and at every depth d_j the same push is
+  solved by the real-time linear model (:class:`flexsheet.fem.scene_model.SceneModel`, its own mesh). The
+  table holds, on the real-time model's rendered surface vertices (S, 3):
 
   - ``correction`` (K, D, S, 3) m: reference displacement − linear displacement (the table is keyed to the
     real-time model it was taken against; attaching it adds that model's station solves back,
@@ -19,30 +19,30 @@ pushes at stations along the stroke and moves each with the contact:
   - ``force_ratio`` / ``stiffness_ratio`` (K, D): the reference's force F and dF/dd (central differences in d)
     over the linear model's at the same push (at d = 0 the first depth's ratio);
   - ``inverted`` (K, D) and ``max_strain`` (K, D): the reference's inverted elements and largest principal
-    Green–Lagrange strain.
-* **Run time** (:meth:`PathSnapshotModel.lookup`): the finger's contact point is located on the stroke (projected
-  onto the segments of a dense path polyline beside its nearest sample: fraction f and lateral distance ℓ); inside the table (f within the
-  stations, ℓ ≤ ``reach``, 0 < d ≤ ``depths[-1]``) the served surface is **the stations' solved states
-  (the reference's surface displacement) blended in (f, d)** from the four neighbouring samples, each station's
-  first moved with the contact; the force and stiffness are the linear model's solve of this very push times
-  the bilinearly blended ratios, so the force keeps the linear model's spatial detail (an inclusion's
-  stiffness peak between stations). At a station the served surface is the reference's (up to float32).
-  The node then puts every vertex left inside the fingertip sphere on it
-  (:meth:`flexsheet.fem.scene_model.SceneModel._update_path`).
-  On the stroke the surface never comes from the linear solve: its bonded contact set changes a surface node
-  at a time as the finger moves, and the drawn surface jumped with it (the rounded box: 6.1 px p99 a frame).
-* **A state follows the contact.** A station's state is a dent centred on *its* contact point. Blending two
-  of them at fixed vertices puts two half dents either side of a push midway between stations. So each
-  station's state is first **moved along the surface with the contact**: at fraction f, vertex v takes R
-  times station s's displacement at the rest-surface point nearest to P(f_s) + Rᵀ(v − P(f)) (P: the path
-  polyline; R: the least rotation from the station's normal to the path's at f; barycentric on the rendered
-  triangles), then the two moved states are blended with weights 1 − a, a. The
-  moves are precomputed when the table is attached (``trimesh.proximity.closest_point``), at sub-fractions no
-  more than :data:`SHIFT_STEP` of path apart, as one sparse (S, 2S) matrix each, and blended linearly between
-  sub-fractions at run time (one or two sparse products: no search per update). At a station the move is the
-  identity. The move turns each station's state by the least rotation from its normal to the path's normal
-  there; it follows the contact *along* the path only, so the node fades from the states to the linear solve
-  of the push as the contact's lateral offset goes from ``reach``/2 to ``reach`` (no jump at the table's side).
+  Green–Lagrange strain.
+* **Run time** (:meth:`PathSnapshotModel.lookup`): the finger's contact point is located on the stroke
+  (projected onto the segments of a dense path polyline beside its nearest sample: fraction f and lateral
+  distance ℓ); inside the table (f within the stations, ℓ ≤ ``reach``, 0 < d ≤ ``depths[-1]``) the served
+  surface is **the stations' solved states (the reference's surface displacement) blended in (f, d)** from the
+  four neighbouring samples, each station's first moved with the contact; the force and stiffness are the
+  linear model's solve of this very push times the bilinearly blended ratios, so the force keeps the linear
+  model's spatial detail (an inclusion's stiffness peak between stations). At a station the served surface is
+  the reference's (up to float32). The node then puts every vertex left inside the fingertip sphere on it
+  (:meth:`flexsheet.fem.scene_model.SceneModel._update_path`). On the stroke the surface never comes from the
+  linear solve: its bonded contact set changes a surface node at a time as the finger moves, and the drawn
+  surface jumped with it (the rounded box: 6.1 px p99 a frame).
+* **A state follows the contact.** A station's state is a dent centred on *its* contact point. Blending two of
+  them at fixed vertices puts two half dents either side of a push midway between stations. So each station's
+  state is first **moved along the surface with the contact**: at fraction f, vertex v takes R times station
+  s's displacement at the rest-surface point nearest to P(f_s) + Rᵀ(v − P(f)) (P: the path polyline; R: the
+  least rotation from the station's normal to the path's at f; barycentric on the rendered triangles), then
+  the two moved states are blended with weights 1 − a, a. The moves are precomputed when the table is attached
+  (``trimesh.proximity.closest_point``), at sub-fractions no more than :data:`SHIFT_STEP` of path apart, as
+  one sparse (S, 2S) matrix each, and blended linearly between sub-fractions at run time (one or two sparse
+  products: no search per update). At a station the move is the identity. The move turns each station's state
+  by the least rotation from its normal to the path's normal there; it follows the contact *along* the path
+  only, so the node fades from the states to the linear solve of the push as the contact's lateral offset goes
+  from ``reach``/2 to ``reach`` (no jump at the table's side).
 
 Frames and units: display frame, m, N, N/m. Errors: ``ValueError`` naming the field.
 """
@@ -56,7 +56,8 @@ import numpy as np
 from flexsheet.fem.cache import cache_key
 from flexsheet.fem.reference.versions import SOLVER_VERSION
 
-__all__ = ["PATH_TABLE_VERSION", "GRID", "REACH", "SHIFT_STEP", "PathSnapshotModel", "least_rotation", "path_table_key", "check_path_table", "stiffness_from_force",
+__all__ = ["PATH_TABLE_VERSION", "GRID", "REACH", "SHIFT_STEP", "PathSnapshotModel", "least_rotation",
+           "path_table_key", "check_path_table", "stiffness_from_force",
            "TABLE_FIELDS"]
 
 PATH_TABLE_VERSION = "path-snap-1"
@@ -92,11 +93,13 @@ def least_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def path_table_key(scene_key: str, realtime_key: str) -> str:
     """The cache/shipped-store key (kind "pathsnap") of a scene's path table: the scene (``Scene.key()``), the
-    real-time model it corrects (:attr:`flexsheet.fem.scene_model.SceneModel.cache_key`: mesh, gmsh version, reach,
-    finger), the reference solver's version, :data:`GRID` and :data:`REACH` (the stations are in the table)."""
+    real-time model it corrects (:attr:`flexsheet.fem.scene_model.SceneModel.cache_key`: mesh, gmsh version,
+    reach, finger), the reference solver's version, :data:`GRID` and :data:`REACH` (the stations are in the
+    table)."""
     import json
 
-    return cache_key(PATH_TABLE_VERSION, scene_key, realtime_key, SOLVER_VERSION, json.dumps(GRID, sort_keys=True),
+    return cache_key(PATH_TABLE_VERSION, scene_key, realtime_key, SOLVER_VERSION,
+                     json.dumps(GRID, sort_keys=True),
                      f"reach={REACH:.9g}")
 
 
@@ -118,7 +121,8 @@ def check_path_table(t: dict) -> None:
             raise ValueError(f"path table: field {k!r} missing")
     fr, d = np.asarray(t["fractions"], float), np.asarray(t["depths"], float)
     if fr.ndim != 1 or len(fr) < 2 or np.any(np.diff(fr) <= 0) or fr[0] < 0 or fr[-1] > 1:
-        raise ValueError(f"path table: fractions must be >= 2 ascending values in [0, 1], got {fr.tolist()[:8]}")
+        raise ValueError("path table: fractions must be >= 2 ascending values in [0, 1], got "
+                         f"{fr.tolist()[:8]}")
     if d.ndim != 1 or len(d) < 2 or abs(d[0]) > 1e-12 or np.any(np.diff(d) <= 0):
         raise ValueError(f"path table: depths must ascend from 0 m, got {np.round(d, 6).tolist()[:8]}")
     K, D = len(fr), len(d)
@@ -139,12 +143,13 @@ def check_path_table(t: dict) -> None:
 class PathSnapshotModel:
     """Look-ups into a path table (module doc).
 
-    ``table``: the arrays of :data:`TABLE_FIELDS` (checked by :func:`check_path_table`); ``rest_vertices``
-    (S, 3) m the real-time model's rendered vertices, which must be the table's (within 1 µm: the table
-    corrects that very mesh), and ``faces`` (F, 3) int its rendered triangles (the states move over them);
-    ``path`` (M, 3) m dense samples of the stroke on the surface and ``path_normals`` (M, 3) its outward unit
-    normals there, at ``path_fractions`` (M,) ascending (``Scene.stroke_at``). Raises ``ValueError`` when the table is inconsistent, was built on another mesh, or
-    the path samples or faces are bad. Attaching costs one ``closest_point`` query per vertex, sub-fraction and
+    ``table``: the arrays of :data:`TABLE_FIELDS` (checked by :func:`check_path_table`); ``rest_vertices`` (S,
+    3) m the real-time model's rendered vertices, which must be the table's (within 1 µm: the table corrects
+    that very mesh), and ``faces`` (F, 3) int its rendered triangles (the states move over them); ``path`` (M,
+    3) m dense samples of the stroke on the surface and ``path_normals`` (M, 3) its outward unit normals
+    there, at ``path_fractions`` (M,) ascending (``Scene.stroke_at``). Raises ``ValueError`` when the table is
+    inconsistent, was built on another mesh, or the path samples or faces are bad. Attaching costs one
+    ``closest_point`` query per vertex, sub-fraction and
     station (module doc): about 1 s for either shipped table here. ``linear`` (K, D, S, 3) m: the real-time
     model's surface displacement at each station's push and table depth (the solves the table's
     ``correction`` was taken against); the served states are ``linear + correction``."""
@@ -155,11 +160,12 @@ class PathSnapshotModel:
         rv = np.asarray(rest_vertices, float)
         tv = np.asarray(table["rest_vertices"], float)
         if rv.shape != tv.shape or float(np.abs(rv - tv).max(initial=0.0)) > 1e-6:
-            raise ValueError(f"path table: built on another real-time mesh ({tv.shape[0]} rendered vertices) than "
-                             f"this model's ({rv.shape[0]}), or they moved by more than 1 um")
+            raise ValueError(f"path table: built on another real-time mesh ({tv.shape[0]} rendered vertices) "
+                             f"than this model's ({rv.shape[0]}), or they moved by more than 1 um")
         p, pf = np.asarray(path, float), np.asarray(path_fractions, float)
         if p.ndim != 2 or p.shape[1] != 3 or len(p) < 2 or pf.shape != (len(p),) or np.any(np.diff(pf) <= 0):
-            raise ValueError(f"path must be (M >= 2, 3) with ascending fractions (M,), got {p.shape} / {pf.shape}")
+            raise ValueError(f"path must be (M >= 2, 3) with ascending fractions (M,), got {p.shape} / "
+                             f"{pf.shape}")
         pn = np.asarray(path_normals, float)
         if pn.shape != p.shape or not np.all(np.abs(np.linalg.norm(pn, axis=1) - 1.0) < 1e-6):
             raise ValueError(f"path_normals must be unit vectors shaped as path {p.shape}, got {pn.shape}")
@@ -179,8 +185,8 @@ class PathSnapshotModel:
         self._path, self._path_n, self._path_f = p, pn, pf
         fc = np.asarray(faces)
         if fc.ndim != 2 or fc.shape[1] != 3 or len(fc) == 0 or fc.min() < 0 or fc.max() >= len(rv):
-            raise ValueError(f"faces must be (F >= 1, 3) indices into the {len(rv)} rendered vertices, got shape "
-                             f"{fc.shape}")
+            raise ValueError(f"faces must be (F >= 1, 3) indices into the {len(rv)} rendered vertices, got "
+                             f"shape {fc.shape}")
         self._sub, self._moves, self._turns = self._contact_moves(rv, fc.astype(np.int64))
 
     def _along(self, samples: np.ndarray, fraction) -> np.ndarray:
@@ -189,18 +195,22 @@ class PathSnapshotModel:
         return np.stack([np.interp(f, self._path_f, samples[:, k]) for k in range(3)], axis=-1)
 
     def path_point(self, fraction) -> np.ndarray:
-        """The path polyline's point(s) (…, 3) m at ``fraction`` (…,) of the stroke (linear between samples)."""
+        """The path polyline's point(s) (…, 3) m at ``fraction`` (…,) of the stroke (linear between
+        samples)."""
         return self._along(self._path, fraction)
 
     def path_normal(self, fraction) -> np.ndarray:
-        """The path's outward unit normal(s) (…, 3) at ``fraction`` (…,) (linear between samples, normalised)."""
+        """The path's outward unit normal(s) (…, 3) at ``fraction`` (…,) (linear between samples,
+        normalised)."""
         n = self._along(self._path_n, fraction)
         return n / np.linalg.norm(n, axis=-1, keepdims=True)
 
-    def _move_targets(self, rv: np.ndarray, g: np.ndarray, f0: float, f1: float) -> tuple[np.ndarray, np.ndarray]:
-        """For each sub-fraction in ``g`` and each of the interval's two stations f0, f1: the turn R (n+1, 2, 3,
-        3) that takes the station's normal to the path's normal at g (the least rotation), and the point (n+1,
-        2, S, 3) m whose nearest rest-surface point gives vertex v its moved state, P(f_s) + Rᵀ(v − P(g)): the
+    def _move_targets(self, rv: np.ndarray, g: np.ndarray, f0: float, f1: float) -> tuple[np.ndarray,
+                                                                                          np.ndarray]:
+        """For each sub-fraction in ``g`` and each of the interval's two stations f0, f1: the turn R (n+1, 2,
+        3, 3) that takes the station's normal to the path's normal at g (the least rotation), and the point
+        (n+1, 2, S, 3) m whose nearest rest-surface point gives vertex v its moved state, P(f_s) + Rᵀ(v −
+        P(g)): the
         contact's travel along the path and its turn (module doc)."""
         pg, ps = self.path_point(g), self.path_point(np.array([f0, f1]))
         R = least_rotation(self.path_normal(np.array([f0, f1]))[None, :], self.path_normal(g)[:, None])
@@ -238,11 +248,14 @@ class PathSnapshotModel:
         indptr = np.arange(0, 6 * S + 1, 6)
         for y in ys:
             n_sub = y.shape[0]
-            cols = cols_all[k:k + n_sub * 2 * S].reshape(n_sub, 2, S, 3) + (np.arange(2) * S)[None, :, None, None]
+            cols = (cols_all[k:k + n_sub * 2 * S].reshape(n_sub, 2, S, 3)
+                    + (np.arange(2) * S)[None, :, None, None])
             w = w_all[k:k + n_sub * 2 * S].reshape(n_sub, 2, S, 3)
             k += n_sub * 2 * S
-            mats.append([sparse.csr_matrix((w[g].transpose(1, 0, 2).reshape(-1), cols[g].transpose(1, 0, 2).reshape(-1),
-                                            indptr), shape=(S, 2 * S)) for g in range(n_sub)])
+            mats.append(
+                [sparse.csr_matrix((w[g].transpose(1, 0, 2).reshape(-1),
+                                    cols[g].transpose(1, 0, 2).reshape(-1),
+                                    indptr), shape=(S, 2 * S)) for g in range(n_sub)])
         return subs, mats, turns
 
     def locate(self, point) -> tuple[float, float]:
@@ -264,9 +277,10 @@ class PathSnapshotModel:
         return best_f, math.sqrt(best)
 
     def covers(self, fraction: float, lateral: float, depth: float) -> bool:
-        """Whether a push at ``fraction`` of the stroke, ``lateral`` m off it, ``depth`` m deep lies inside the
-        table (between its first and last station, within ``reach``, 0 < depth ≤ the table's deepest)."""
-        return bool(self.fractions[0] - 1e-9 <= fraction <= self.fractions[-1] + 1e-9 and lateral <= self.reach
+        """Whether a push at ``fraction`` of the stroke, ``lateral`` m off it, ``depth`` m deep lies inside
+        the table (between its first and last station, within ``reach``, 0 < depth ≤ the table's deepest)."""
+        return bool(self.fractions[0] - 1e-9 <= fraction <= self.fractions[-1] + 1e-9
+                    and lateral <= self.reach
                     and 0.0 < depth <= self.depth_max + 1e-9)
 
     def _cell(self, x: float, grid: np.ndarray) -> tuple[int, float]:
@@ -275,11 +289,11 @@ class PathSnapshotModel:
         return i, min(max(w, 0.0), 1.0)
 
     def lookup(self, fraction: float, depth: float) -> tuple[np.ndarray, float, float, float, int]:
-        """(surface displacement (S, 3) float32 m, force ratio, stiffness ratio, the reference's largest strain,
-        its inverted element count) at (``fraction``, ``depth`` m) (clamped to the table): each of the two
-        bracketing stations' states, linear in depth, moved with the contact to ``fraction`` (module doc),
-        blended with weights 1 − a, a; the ratios, strain and count bilinear between the four samples around it.
-        Raises ``ValueError`` for a non-finite argument."""
+        """(surface displacement (S, 3) float32 m, force ratio, stiffness ratio, the reference's largest
+        strain, its inverted element count) at (``fraction``, ``depth`` m) (clamped to the table): each of the
+        two bracketing stations' states, linear in depth, moved with the contact to ``fraction`` (module doc),
+        blended with weights 1 − a, a; the ratios, strain and count bilinear between the four samples around
+        it. Raises ``ValueError`` for a non-finite argument."""
         if not (math.isfinite(fraction) and math.isfinite(depth)):
             raise ValueError(f"fraction and depth must be finite, got {fraction!r}, {depth!r}")
         i, a = self._cell(fraction, self.fractions)
@@ -296,7 +310,8 @@ class PathSnapshotModel:
         u = moved(k) if w == 0.0 else np.float32(1 - w) * moved(k) + np.float32(w) * moved(k + 1)
 
         def bl(t):
-            return float((1 - a) * ((1 - b) * t[i, j] + b * t[i, j + 1]) + a * ((1 - b) * t[i + 1, j] + b * t[i + 1, j + 1]))
+            return float((1 - a) * ((1 - b) * t[i, j] + b * t[i, j + 1])
+                         + a * ((1 - b) * t[i + 1, j] + b * t[i + 1, j + 1]))
 
         inv = int(round(max(self.inverted[i, j], self.inverted[i, j + 1], self.inverted[i + 1, j],
                             self.inverted[i + 1, j + 1]))) if (a > 0 or b > 0) else int(self.inverted[i, j])

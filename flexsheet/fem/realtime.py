@@ -1,14 +1,15 @@
 """The real-time FEM model the node runs (pure apart from its optional disk cache of precomputed arrays).
 
 :class:`RealtimeModel` = mesh + linear P2 model + capacitance solver (James & Pai 2001) over the candidate
-contact region, with the full sparse solve as fallback when the finger leaves that region, failure checks on the
-part of the strain-monitor zone (surface + interior nodes near the contact region) near the finger, and the
-geometrically nonlinear mode:
+contact region, with the full sparse solve as fallback when the finger leaves that region, failure checks on
+the part of the strain-monitor zone (surface + interior nodes near the contact region) near the finger, and
+the geometrically nonlinear mode:
 
 * **nonlinear snapshots** (:mod:`flexsheet.fem.snapshots`, Peterlík et al. 2010): hyperelastic (neo-Hookean or
-  Gent) reference solutions (:mod:`flexsheet.fem.reference.hyperelastic`) precomputed over (contact azimuth, depth), rotated with the finger and
-  interpolated per update. When attached (:meth:`RealtimeModel.attach_snapshots`) and the push lies in the
-  table, this is what the node draws (``method = "snapshots"``); the linear model serves everything else.
+  Gent) reference solutions (:mod:`flexsheet.fem.reference.hyperelastic`) precomputed over (contact azimuth,
+  depth), rotated with the finger and interpolated per update. When attached
+  (:meth:`RealtimeModel.attach_snapshots`) and the push lies in the table, this is what the node draws
+  (``method = "snapshots"``); the linear model serves everything else.
 * the older corotational depth table (Niroomandi et al. 2013 / Filipovič & Peterlík 2009 with corotational FEM
   offline; unvalidated, off by default).
 
@@ -48,8 +49,8 @@ class Update:
 
     Policy: inverted elements or strain over the limit → status ``linear_invalid:<reason>`` (or the
     corotational table's answer, status ``nonlinear:...``); the deformation is still drawn (``valid``) unless
-    a rendered surface triangle folds over or a value is not finite — then ``valid`` is False, the vertices are
-    the rest shape and force/stiffness are 0."""
+    a rendered surface triangle folds over or a value is not finite — then ``valid`` is False, the vertices
+    are the rest shape and force/stiffness are 0."""
 
     vertices: np.ndarray
     force: float
@@ -66,8 +67,8 @@ class Update:
 class CondensedSurface:
     """What a condensed real-time model (``self.mesh``, ``self.solver``: :class:`CapacitanceSolver`,
     ``self.model``) shares, the cylinder's (:class:`RealtimeModel`) and any scene's
-    (:class:`flexsheet.fem.scene_model.SceneModel`): the rendered-surface and strain-monitor index maps, the rest
-    surface, the condensed solve (both subclasses load it in single precision:
+    (:class:`flexsheet.fem.scene_model.SceneModel`): the rendered-surface and strain-monitor index maps, the
+    rest surface, the condensed solve (both subclasses load it in single precision:
     :meth:`CapacitanceSolver.from_arrays`) with its sparse fallback, the strain and inversion check near the
     finger, the scatter to surface vertices, the fold check."""
 
@@ -84,10 +85,10 @@ class CondensedSurface:
 
     def _set_output_maps(self, monitor: np.ndarray) -> None:
         """Set ``n_candidates``, ``surface_nodes`` (S,), ``faces`` (F, 3) int32 into them, ``_rest`` (S, 3)
-        float32 m, ``_rest_normals`` (F, 3), ``_surf_in_out`` (S,) output row of each surface node (−1: a support
-        node, zero displacement), ``_mon_tets`` the monitored tetrahedra (all four nodes are outputs and
-        ``monitor`` (N,) bool holds them) in output rows, ``_out_points`` and ``_tet_checks`` (their precomputed
-        :class:`flexsheet.fem.deformation_checks.TetChecks`)."""
+        float32 m, ``_rest_normals`` (F, 3), ``_surf_in_out`` (S,) output row of each surface node (−1: a
+        support node, zero displacement), ``_mon_tets`` the monitored tetrahedra (all four nodes are outputs
+        and ``monitor`` (N,) bool holds them) in output rows, ``_out_points`` and ``_tet_checks`` (their
+        precomputed :class:`flexsheet.fem.deformation_checks.TetChecks`)."""
         m = self.mesh
         self.n_candidates = len(self.solver.cand_pts)
         self.surface_nodes = m.surface_nodes
@@ -133,17 +134,17 @@ class CondensedSurface:
             return sol, u_out, "sparse"
 
     def _checks(self, fg: ContactFinger, u_out: np.ndarray) -> tuple[float, int]:
-        """(max principal strain, inverted elements) over the monitor tets whose centroid lies within
-        finger radius + depth + 2·h_fine of the undeformed surface point under the sphere (where strain
-        concentrates; the rest of the monitor zone is not checked: over the cylinder's ±60° arc, 0–50 mm and
-        three axial offsets this gave the same strain and inverted count as checking every monitor tet,
-        2026-11-23, for fingers not held), by the precomputed :class:`flexsheet.fem.deformation_checks.TetChecks`. ``u_out``
+        """(max principal strain, inverted elements) over the monitor tets whose centroid lies within finger
+        radius + depth + 2·h_fine of the undeformed surface point under the sphere (where strain concentrates;
+        the rest of the monitor zone is not checked: over the cylinder's ±60° arc, 0–50 mm and three axial
+        offsets this gave the same strain and inverted count as checking every monitor tet, 2026-11-23, for
+        fingers not held), by the precomputed :class:`flexsheet.fem.deformation_checks.TetChecks`. ``u_out``
         (O, 3) m output-point displacements."""
         tc = self._tet_checks
         if tc.n_tets == 0:
             return 0.0, 0
-        # centred under the sphere as it is now (for a held finger, whose contact point stays at the anchor while
-        # the sphere slides, the anchor would go stale); for a finger not held this is its contact point
+        # centred under the sphere as it is now (for a held finger, whose contact point stays at the anchor
+        # while the sphere slides, the anchor would go stale); for a finger not held this is its contact point
         at = np.asarray(fg.center, float) + np.asarray(fg.direction, float) * (fg.radius - fg.depth)
         return tc(u_out, tc.near(at, self.finger_radius + fg.depth + 2 * self.spec.h_fine))
 
@@ -160,7 +161,8 @@ class CondensedSurface:
 
         With x = rest + us, face edges e1 = x1 − x0, e2 = x2 − x0 and rest normal n0, the turned normal's
         component along n0 is (e1 × e2)·n0 = e2·(n0 × e1): both factors are linear in ``us``, so one
-        precomputed sparse product gives them for every face (:func:`flexsheet.fem.deformation_checks.fold_operator`)."""
+        precomputed sparse product gives them for every face
+        (:func:`flexsheet.fem.deformation_checks.fold_operator`)."""
         nf = len(self.faces)
         y = self._fold_op @ np.ascontiguousarray(us, np.float64).reshape(-1) + self._fold_rest
         dot = (y[:3 * nf] * y[3 * nf:]).reshape(3, nf).sum(axis=0)
@@ -171,15 +173,18 @@ class RealtimeModel(CondensedSurface):
     """Real-time cylinder model.
 
     Parameters: ``spec`` mesh resolution; ``order`` element order of the capacitance model (2: P2, whose
-    edge-midpoint DOFs also take contact; outputs are the mesh's corner nodes); ``material``; ``finger_radius`` m; ``max_depth`` m (deeper input is
-    rejected); ``strain_limit`` (largest principal small strain beyond which linear is declared invalid);
-    ``cache_dir`` (None: no disk cache); ``reach`` m extra margin around the working arc for candidate
-    contact points (default finger_radius + 2 mm). Progress is logged.
-    Raises ``ValueError`` on bad parameters. ``precompute_s`` and ``cache_hit`` tell how start-up went.
+    edge-midpoint DOFs also take contact; outputs are the mesh's corner nodes); ``material``;
+    ``finger_radius`` m; ``max_depth`` m (deeper input is rejected); ``strain_limit`` (largest principal small
+    strain beyond which linear is declared invalid); ``cache_dir`` (None: no disk cache); ``reach`` m extra
+    margin around the working arc for candidate contact points (default finger_radius + 2 mm). Progress is
+    logged. Raises ``ValueError`` on bad parameters. ``precompute_s`` and ``cache_hit`` tell how start-up
+    went.
     """
 
-    def __init__(self, spec: MeshSpec, material: Material, finger_radius: float = 0.008, max_depth: float = 0.05,
-                 strain_limit: float = 1.0, cache_dir: str | None = DEFAULT_CACHE_DIR, reach: float | None = None,
+    def __init__(self, spec: MeshSpec, material: Material, finger_radius: float = 0.008,
+                 max_depth: float = 0.05,
+                 strain_limit: float = 1.0, cache_dir: str | None = DEFAULT_CACHE_DIR,
+                 reach: float | None = None,
                  order: int = 2):
         self._check_params(finger_radius, max_depth, strain_limit)
         t0 = time.perf_counter()
@@ -190,7 +195,8 @@ class RealtimeModel(CondensedSurface):
 
         # the linear (capacitance) model reads E and ν only: a Gent solid shares the neo-Hookean key
         small_strain = Material(material.E, material.nu)
-        self.cache_key = cache_key(_CACHE_VERSION, spec.key(), gmsh.__version__, small_strain.key(), f"{reach:.9g}",
+        self.cache_key = cache_key(_CACHE_VERSION, spec.key(), gmsh.__version__, small_strain.key(),
+                                   f"{reach:.9g}",
                                    f"{finger_radius:.9g}", f"P{order}")
         self.cache = ArrayCache(cache_dir)
         self._model = self._p1 = None
@@ -211,10 +217,12 @@ class RealtimeModel(CondensedSurface):
         self.precompute_s = time.perf_counter() - t0
 
     def attach_snapshots(self, table: dict, axial_max: float = 0.01) -> None:
-        """Serve pushes inside the nonlinear snapshot ``table`` (:func:`flexsheet.fem.reference.snapshot_build.build_table`) from
-        it; raises ``ValueError`` when the table is inconsistent. Thread-safe to call while updates run (the
-        model is swapped in one assignment)."""
-        self.snapshots = SnapshotModel(table, self._rest.astype(np.float64), axial_max=axial_max, E=self.material.E)
+        """Serve pushes inside the nonlinear snapshot ``table``
+        (:func:`flexsheet.fem.reference.snapshot_build.build_table`) from it; raises ``ValueError`` when the
+        table is inconsistent. Thread-safe to call while updates run (the model is swapped in one
+        assignment)."""
+        self.snapshots = SnapshotModel(table, self._rest.astype(np.float64), axial_max=axial_max,
+                                       E=self.material.E)
 
     def _precompute(self) -> dict:
         """Mesh, candidate/output/monitor sets and the capacitance matrices (the cache entry's arrays)."""
@@ -229,8 +237,8 @@ class RealtimeModel(CondensedSurface):
         monitor = (dist <= reach + 2 * spec.h_fine)[:len(m.points)]
         corner = np.arange(len(model.points)) < len(m.points)
         outputs = (surf | (np.pad(monitor, (0, len(model.points) - len(m.points))) & ~model.fixed)) & corner
-        log.info(f"fem: precomputing capacitance matrices for {int(candidates.sum())} candidate contact points "
-                  f"on a {len(m.points)}-node P{order} mesh ...")
+        log.info(f"fem: precomputing capacitance matrices for {int(candidates.sum())} candidate contact "
+                  f"points on a {len(m.points)}-node P{order} mesh ...")
         solver = CapacitanceSolver(model, candidates, outputs)
         return {"points": m.points, "tets": m.tets, "faces": m.faces, "fixed": m.fixed, "monitor": monitor,
                 **solver.arrays()}
@@ -259,7 +267,8 @@ class RealtimeModel(CondensedSurface):
             depths = np.linspace(0.0, self.max_depth, 11)
         depths = np.asarray(depths, float)
         nang = max(1, int(round(2 * self.spec.arc_deg / 10.0)) + 1)
-        angles = np.radians(np.linspace(-self.spec.arc_deg, self.spec.arc_deg, nang)) if nang > 1 else np.zeros(1)
+        angles = (np.radians(np.linspace(-self.spec.arc_deg, self.spec.arc_deg, nang)) if nang > 1
+                  else np.zeros(1))
         U = np.zeros((len(angles), len(depths), len(self.surface_nodes), 3), np.float32)
         F = np.zeros((len(angles), len(depths)))
         inv = np.zeros((len(angles), len(depths)), np.int64)
@@ -294,8 +303,8 @@ class RealtimeModel(CondensedSurface):
         self._anchor = None
 
     def update_finger(self, fg: ContactFinger) -> Update:
-        """As :meth:`update` for a prepared :class:`ContactFinger`: the nonlinear snapshots when attached and the push
-        lies in their table, the linear model otherwise."""
+        """As :meth:`update` for a prepared :class:`ContactFinger`: the nonlinear snapshots when attached and
+        the push lies in their table, the linear model otherwise."""
         snap = self.snapshots
         if snap is not None and fg.depth > 0 and snap.covers(fg.angle, fg.depth, fg.axial):
             return self._update_snapshots(snap, fg)
@@ -308,7 +317,8 @@ class RealtimeModel(CondensedSurface):
                           "nonlinear_invalid:non_finite", False)
         status = "ok" if inv == 0 else f"nonlinear_invalid:inverted={inv}"
         verts = (self._rest + us.astype(np.float32)).astype(np.float32)
-        return Update(verts, force, stiff, fg.depth, fg.contact_point.copy(), "snapshots", strain, inv, status,
+        return Update(verts, force, stiff, fg.depth, fg.contact_point.copy(), "snapshots", strain, inv,
+                      status,
                       True)
 
     def _update_linear(self, fg: ContactFinger) -> Update:
@@ -334,7 +344,8 @@ class RealtimeModel(CondensedSurface):
                 status, valid = f"linear_invalid:folded_surface={folded}" + (
                     f";{status.split(':', 1)[1]}" if status.startswith("linear_invalid") else ""), False
         verts = self._rest + (us.astype(np.float32) if valid else 0.0)
-        return Update(verts.astype(np.float32), float(force) if valid else 0.0, float(stiff) if valid else 0.0,
+        return Update(verts.astype(np.float32), float(force) if valid else 0.0,
+                      float(stiff) if valid else 0.0,
                       fg.depth, fg.contact_point.copy(), method, float(strain), int(inv), status, valid)
 
     def _nonlinear_lookup(self, fg: ContactFinger):

@@ -35,8 +35,8 @@ from flexsheet.model.scenes import Scene
 
 __all__ = ["SceneMesh", "scene_mesh", "refine_centres", "support_plane", "DEFAULT_SCENE_SPEC"]
 
-#: the cylinder's chosen real-time mesh sizes (flexsheet/fem/accuracy_table.json: P2 h 12 mm, h_fine 4 mm, band
-#: 12 mm) applied along any scene's stroke path
+#: the cylinder's chosen real-time mesh sizes (flexsheet/fem/accuracy_table.json:
+#: P2 h 12 mm, h_fine 4 mm, band 12 mm) applied along any scene's stroke path
 DEFAULT_SCENE_SPEC = MeshSpec(0.012, 0.004, 0.012)
 
 
@@ -57,7 +57,8 @@ class SceneMesh:
     def volume(self) -> float:
         """Total tetrahedron volume, m³."""
         p = self.mesh.points[self.mesh.tets]
-        return float(np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]).sum()
+        return float(np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]),
+                               p[:, 3] - p[:, 0]).sum()
                      / 6.0)
 
 
@@ -104,7 +105,8 @@ def _occ_geometry(scene):
                 occ.synchronize()
                 curves = [t for _, t in gmsh.model.getBoundary([(3, v)], combined=False, oriented=False,
                                                                recursive=False)]
-                edges = sorted({abs(t) for s in curves for _, t in gmsh.model.getBoundary([(2, s)], oriented=False)})
+                edges = sorted({abs(t) for s in curves for _,
+                                t in gmsh.model.getBoundary([(2, s)], oriented=False)})
                 out = occ.fillet([v], edges, [o.radius], removeVolume=True)
                 v = [t for d, t in out if d == 3][0]
             for angle, axis in ((roll, (1, 0, 0)), (pitch, (0, 1, 0)), (yaw, (0, 0, 1))):
@@ -118,7 +120,8 @@ def _occ_geometry(scene):
 def _stl_geometry(path: str):
     def geometry(gmsh) -> None:
         gmsh.merge(path)
-        # angle 40°: a face pair bending more is an edge (none on a smooth organ); curveAngle 180: no curve split
+        # angle 40°: a face pair bending more is an edge (none
+        # on a smooth organ); curveAngle 180: no curve split
         gmsh.model.mesh.classifySurfaces(math.radians(40.0), True, True, math.pi)
         gmsh.model.mesh.createGeometry()
         surfaces = [t for _, t in gmsh.model.getEntities(2)]
@@ -132,15 +135,14 @@ def scene_mesh(scene, spec: MeshSpec = DEFAULT_SCENE_SPEC, force_stl: bool = Fal
                refine_at: np.ndarray | None = None, rim: bool = False) -> SceneMesh:
     """Mesh ``scene`` (a :class:`flexsheet.model.scenes.Scene`) with P1 tetrahedra refined along its stroke.
 
-    ``spec``: sizes (``arc_deg`` is ignored: the refined band follows the scene's stroke path);
-    ``force_stl``: mesh an analytic object through its STL surface too (tests compare both routes);
-    ``refine_at`` optional (K, 3) m: refine around these points (and the inclusions) instead of the stroke
-    (a reference mesh around one push point); ``rim``: the support's plane cuts the surface along a mesh line
-    refined to ``h_fine`` (a conforming support rim for the references; OpenCASCADE solids only, a remeshed STL
-    keeps the rim its nodes give).
-    Returns a :class:`SceneMesh`. Raises ``ValueError`` when ``scene`` is not a Scene or its support holds no
-    boundary node, ``RuntimeError`` when gmsh fails (naming the scene). Deterministic for a given scene and
-    spec (single-threaded Delaunay)."""
+    ``spec``: sizes (``arc_deg`` is ignored: the refined band follows the scene's stroke path); ``force_stl``:
+    mesh an analytic object through its STL surface too (tests compare both routes); ``refine_at`` optional
+    (K, 3) m: refine around these points (and the inclusions) instead of the stroke (a reference mesh around
+    one push point); ``rim``: the support's plane cuts the surface along a mesh line refined to ``h_fine`` (a
+    conforming support rim for the references; OpenCASCADE solids only, a remeshed STL keeps the rim its nodes
+    give). Returns a :class:`SceneMesh`. Raises ``ValueError`` when ``scene`` is not a Scene or its support
+    holds no boundary node, ``RuntimeError`` when gmsh fails (naming the scene). Deterministic for a given
+    scene and spec (single-threaded Delaunay)."""
     if not isinstance(scene, Scene):
         raise ValueError(f"scene must be a flexsheet.model.scenes.Scene, got {type(scene).__name__}")
     if not isinstance(spec, MeshSpec):
@@ -161,7 +163,7 @@ def scene_mesh(scene, spec: MeshSpec = DEFAULT_SCENE_SPEC, force_stl: bool = Fal
             points, tets = gmsh_tets(f"scene_{scene.name}", geometry, spec.h, spec.h_fine, spec.refine_radius,
                                      centres, what, rim=support_plane(scene) if rim else None)
         except RuntimeError:
-            points = None                     # e.g. a fillet OpenCASCADE cannot build: mesh the surface instead
+            points = None  # e.g. a fillet OpenCASCADE cannot build: mesh the surface instead
     if points is None:
         how = "stl"
         with tempfile.TemporaryDirectory(prefix="flexsheet_scene_") as d:
@@ -178,8 +180,8 @@ def scene_mesh(scene, spec: MeshSpec = DEFAULT_SCENE_SPEC, force_stl: bool = Fal
     fixed = np.zeros(len(points), bool)
     fixed[surf] = scene.fixed_mask(points[surf])
     if not fixed.any():
-        raise ValueError(f"{scene.source}: key 'support': holds none of the {len(surf)} boundary nodes of the "
-                         "mesh: the object would float")
+        raise ValueError(f"{scene.source}: key 'support': holds none of the {len(surf)} boundary nodes of "
+                         "the mesh: the object would float")
     E, nu = scene.material_at(p.mean(axis=1))
     mesh = TetMesh(points, tets, faces, fixed, spec, center=np.asarray(scene.center, float).copy())
     return SceneMesh(mesh, np.asarray(E, float), np.asarray(nu, float), how)

@@ -1,12 +1,12 @@
 """The real-time FEM model of any scene: sphere, rounded box, organ with its stiff inclusion (pure
 apart from its optional disk cache of precomputed arrays).
 
-:class:`SceneModel` = the scene's tetrahedral mesh (:func:`flexsheet.fem.scene_mesh.scene_mesh`, refined along the
-stroke path) + linear elasticity with per-element material (:class:`flexsheet.fem.solver.FemModel` with the
-scene's support and ``E_elem``/``nu_elem``: the inclusions) + the capacitance solver (James & Pai 2001,
-:class:`flexsheet.fem.solver.CapacitanceSolver`) over the free surface DOF points within ``reach`` of the stroke
-path, with the full sparse solve (:func:`flexsheet.fem.solver.solve_full`) wherever the finger touches outside
-that region.
+:class:`SceneModel` = the scene's tetrahedral mesh (:func:`flexsheet.fem.scene_mesh.scene_mesh`, refined along
+the stroke path) + linear elasticity with per-element material (:class:`flexsheet.fem.solver.FemModel` with
+the scene's support and ``E_elem``/``nu_elem``: the inclusions) + the capacitance solver (James & Pai 2001,
+:class:`flexsheet.fem.solver.CapacitanceSolver`) over the free surface DOF points within ``reach`` of the
+stroke path, with the full sparse solve (:func:`flexsheet.fem.solver.solve_full`) wherever the finger touches
+outside that region.
 
 Contact (:func:`scene_finger`): the fingertip is a rigid sphere of radius r whose leading point is ``tip``.
 The contact point is ``tip``'s projection onto the scene's surface — the tangent plane at the nearest of a
@@ -104,11 +104,11 @@ class SurfaceIndex:
 
 def scene_finger(tip, surface: SurfaceIndex, radius: float, max_depth: float, fixed_mask=None,
                  anchor: ContactFinger | None = None, sticky_depth: float = STICKY_DEPTH) -> ContactFinger:
-    """Finger geometry (:class:`flexsheet.fem.contact.ContactFinger`) from the measured fingertip ``tip`` (3,) m on a
-    scene's surface (module doc). ``fixed_mask`` optional callable(points (1, 3)) → (1,) bool: a contact
-    point the support holds is refused. Raises ``ValueError`` naming ``tip`` when it is not a finite (3,)
-    vector, deeper than ``max_depth`` m, or its contact point lies on the support. A tip outside the object
-    gives depth 0 (no contact)."""
+    """Finger geometry (:class:`flexsheet.fem.contact.ContactFinger`) from the measured fingertip ``tip`` (3,)
+    m on a scene's surface (module doc). ``fixed_mask`` optional callable(points (1, 3)) → (1,) bool: a
+    contact point the support holds is refused. Raises ``ValueError`` naming ``tip`` when it is not a finite
+    (3,) vector, deeper than ``max_depth`` m, or its contact point lies on the support. A tip outside the
+    object gives depth 0 (no contact)."""
     p = np.asarray(tip, dtype=float)
     if p.shape != (3,) or not np.all(np.isfinite(p)):
         raise ValueError(f"tip must be a finite (3,) position in m, got {tip!r}")
@@ -117,7 +117,8 @@ def scene_finger(tip, surface: SurfaceIndex, radius: float, max_depth: float, fi
     cp, n, s = surface.project(p)
     depth = -s
     if depth > max_depth:
-        raise ValueError(f"tip {p.tolist()} is {depth * 1e3:.1f} mm deep, beyond max_depth {max_depth * 1e3:.1f} mm")
+        raise ValueError(f"tip {p.tolist()} is {depth * 1e3:.1f} mm deep, beyond max_depth "
+                         f"{max_depth * 1e3:.1f} mm")
     if depth > 0 and fixed_mask is not None and bool(np.asarray(fixed_mask(cp[None]))[0]):
         raise ValueError(f"tip {p.tolist()} presses on the object's support (held surface) at "
                          f"{np.round(cp, 4).tolist()}")
@@ -172,7 +173,8 @@ def one_blas_thread():
         try:
             from threadpoolctl import ThreadpoolController
 
-            _BLAS = _OneThread([lib for lib in ThreadpoolController().lib_controllers if lib.user_api == "blas"])
+            _BLAS = _OneThread([lib for lib in ThreadpoolController().lib_controllers
+                                if lib.user_api == "blas"])
         except ImportError:           # pragma: no cover - optional dependency
             _BLAS = False
     if _BLAS is False:
@@ -195,8 +197,10 @@ class SceneModel(CondensedSurface):
     went and what is solved. Raises ``ValueError`` on bad parameters.
     """
 
-    def __init__(self, scene, spec: MeshSpec = DEFAULT_SCENE_SPEC, order: int = 2, finger_radius: float | None = None,
-                 max_depth: float = 0.06, strain_limit: float = 1.0, cache_dir: str | None = DEFAULT_CACHE_DIR,
+    def __init__(self, scene, spec: MeshSpec = DEFAULT_SCENE_SPEC, order: int = 2,
+                 finger_radius: float | None = None,
+                 max_depth: float = 0.06, strain_limit: float = 1.0,
+                 cache_dir: str | None = DEFAULT_CACHE_DIR,
                  reach: float | None = None):
         if not isinstance(scene, Scene):
             raise ValueError(f"scene must be a flexsheet.model.scenes.Scene, got {type(scene).__name__}")
@@ -212,7 +216,8 @@ class SceneModel(CondensedSurface):
         self.scene, self.spec, self.order = scene, spec, order
         self.scene_key = scene.key()
         self.material = Material(scene.material.E, scene.material.nu)
-        self.finger_radius, self.max_depth, self.strain_limit, self.reach = finger_radius, max_depth, strain_limit, reach
+        self.finger_radius, self.max_depth, self.strain_limit, self.reach = (finger_radius, max_depth,
+                                                                             strain_limit, reach)
         self.cache_key = scene_cache_key(scene, spec, order, finger_radius, reach)
         self.cache = ArrayCache(cache_dir)
         self._model = None
@@ -222,11 +227,13 @@ class SceneModel(CondensedSurface):
             self.mesh = TetMesh(z["points"], z["tets"], z["faces"], z["fixed"], spec,
                                 center=np.asarray(scene.center, float).copy())
             self.E_elem, self.nu_elem = np.asarray(z["E"]), np.asarray(z["nu"])
-            # single precision per update: displacements within 0.05 µm of float64 (tests/unit/fem/test_scene_model.py)
+            # single precision per update: displacements within 0.05
+            # µm of float64 (tests/unit/fem/test_scene_model.py)
             self.solver = CapacitanceSolver.from_arrays(z, dtype=np.float32)
             monitor = z["monitor"]
         except (KeyError, ValueError) as exc:
-            raise ValueError(f"scene capacitance cache entry {self.cache_key} is inconsistent: {exc}") from exc
+            raise ValueError(f"scene capacitance cache entry {self.cache_key} is inconsistent: "
+                             f"{exc}") from exc
         self._set_output_maps(monitor)
         #: (S,) bool: the rendered vertices the scene's support holds (exactly at rest in every served push)
         self.held = np.asarray(self.mesh.fixed[self.surface_nodes], bool)
@@ -238,14 +245,15 @@ class SceneModel(CondensedSurface):
         self.precompute_s = time.perf_counter() - t0
 
     def attach_sphere_snapshots(self, table: dict) -> None:
-        """Serve pushes inside a sphere scene's nonlinear table (:mod:`flexsheet.fem.sphere_snapshots`) from it, the
-        linear model elsewhere. Raises ``ValueError`` when the table is inconsistent or was built for another
-        sphere (centre or radius). Thread-safe to call while updates run (one assignment)."""
+        """Serve pushes inside a sphere scene's nonlinear table (:mod:`flexsheet.fem.sphere_snapshots`) from
+        it, the linear model elsewhere. Raises ``ValueError`` when the table is inconsistent or was built for
+        another sphere (centre or radius). Thread-safe to call while updates run (one assignment)."""
         fr = sphere_frame(self.scene)
         sm = SphereSnapshotModel(table, self._rest.astype(np.float64), E=self.material.E)
         if np.linalg.norm(sm.frame.center - fr.center) > 1e-9 or abs(sm.frame.radius - fr.radius) > 1e-9:
-            raise ValueError(f"sphere table is for centre {sm.frame.center.tolist()} radius {sm.frame.radius:g} m, "
-                             f"the scene's sphere is at {fr.center.tolist()} radius {fr.radius:g} m")
+            raise ValueError(f"sphere table is for centre {sm.frame.center.tolist()} radius "
+                             f"{sm.frame.radius:g} m, the scene's sphere is at {fr.center.tolist()} radius "
+                             f"{fr.radius:g} m")
         self.snapshots = sm
 
     def attach_path_table(self, table: dict) -> None:
@@ -274,7 +282,8 @@ class SceneModel(CondensedSurface):
 
     # ------------------------------------------------------------------ precompute
     def _build_model(self, mesh: TetMesh, E: np.ndarray, nu: np.ndarray) -> FemModel:
-        return FemModel(mesh, self.material, order=self.order, support=self.scene.fixed_mask, E_elem=E, nu_elem=nu)
+        return FemModel(mesh, self.material, order=self.order, support=self.scene.fixed_mask, E_elem=E,
+                        nu_elem=nu)
 
     def _precompute(self) -> dict:
         sm = scene_mesh(self.scene, self.spec)
@@ -288,13 +297,15 @@ class SceneModel(CondensedSurface):
         surf = model.boundary & ~model.fixed
         candidates = surf & (dist <= self.reach)
         if not candidates.any():
-            raise ValueError(f"scene {self.scene.name!r}: no free surface node within reach {self.reach * 1e3:.1f} mm "
+            raise ValueError(f"scene {self.scene.name!r}: no free surface node within reach "
+                             f"{self.reach * 1e3:.1f} mm "
                              "of the stroke path (is the stroke on the support?)")
         monitor = (dist <= self.reach + 2 * self.spec.h_fine)[:len(m.points)]
         corner = np.arange(len(model.points)) < len(m.points)
         outputs = (surf | (np.pad(monitor, (0, len(model.points) - len(m.points))) & ~model.fixed)) & corner
-        log.info(f"fem: scene {self.scene.name!r}: precomputing capacitance matrices for {int(candidates.sum())} "
-                  f"candidate contact points on a {len(m.points)}-node P{self.order} mesh ...")
+        log.info(f"fem: scene {self.scene.name!r}: precomputing capacitance matrices for "
+                  f"{int(candidates.sum())} candidate contact points on a {len(m.points)}-node P{self.order} "
+                  "mesh ...")
         solver = CapacitanceSolver(model, candidates, outputs)
         self._model = model
         return {"points": m.points, "tets": m.tets, "faces": m.faces, "fixed": m.fixed, "monitor": monitor,
@@ -327,9 +338,9 @@ class SceneModel(CondensedSurface):
         self._anchor = None
 
     def update_finger(self, fg: ContactFinger) -> Update:
-        """As :meth:`update` for a prepared :class:`ContactFinger`: the capacitance solve, or the full sparse solve
-        when the finger touches surface outside the precomputed region (``method = "sparse"``); BLAS on one
-        thread (:func:`one_blas_thread`)."""
+        """As :meth:`update` for a prepared :class:`ContactFinger`: the capacitance solve, or the full sparse
+        solve when the finger touches surface outside the precomputed region (``method = "sparse"``); BLAS on
+        one thread (:func:`one_blas_thread`)."""
         with one_blas_thread():
             return self._update_finger(fg)
 
@@ -353,7 +364,8 @@ class SceneModel(CondensedSurface):
         if not finite:
             status, valid = "linear_invalid:non_finite", False
         elif inv > 0 or strain > self.strain_limit:
-            status = "linear_invalid:" + (f"inverted={inv}" if inv > 0 else f"strain={strain:.2f}>{self.strain_limit:g}")
+            status = "linear_invalid:" + (f"inverted={inv}" if inv > 0
+                                          else f"strain={strain:.2f}>{self.strain_limit:g}")
         if valid:
             folded = self.folded_faces(us)
             if folded:
@@ -364,8 +376,8 @@ class SceneModel(CondensedSurface):
                       float(strain), int(inv), status, valid)
 
     def _update_snapshots(self, snap, fg: ContactFinger, normal: np.ndarray, depth: float) -> Update:
-        """The sphere table's answer (method "snapshots") for the radial push (``normal``, ``depth``) through the
-        finger's leading point: its surface, force and dF/dd; the strain and inverted elements are the
+        """The sphere table's answer (method "snapshots") for the radial push (``normal``, ``depth``) through
+        the finger's leading point: its surface, force and dF/dd; the strain and inverted elements are the
         reference's at the bracketing snapshots."""
         us, force, stiff, strain, inv = snap.surface(normal, depth)
         us[self.held] = 0.0        # the look-up rotates the field; the held back half stays where it is
@@ -377,8 +389,8 @@ class SceneModel(CondensedSurface):
                       fg.contact_point.copy(), "snapshots", strain, inv, status, True)
 
     def _floored_stiffness(self, fg: ContactFinger, sol) -> float:
-        """The linear solve ``sol``'s dF/dd, or for a touch lighter than :data:`STIFFNESS_FLOOR` that of a press
-        that deep at the same point (one more capacitance solve; module doc)."""
+        """The linear solve ``sol``'s dF/dd, or for a touch lighter than :data:`STIFFNESS_FLOOR` that of a
+        press that deep at the same point (one more capacitance solve; module doc)."""
         if 0.0 < fg.depth < STIFFNESS_FLOOR:
             press = finger_on_scene(fg.contact_point, -fg.direction, STIFFNESS_FLOOR, fg.radius)
             return self._solve(press, outputs=False)[0].stiffness
@@ -386,15 +398,16 @@ class SceneModel(CondensedSurface):
 
     def _update_path(self, pt, fg: ContactFinger, fraction: float, lateral: float) -> Update:
         """The path table's answer (method "path_snapshots"): the table's blended states at (``fraction``,
-        depth), faded to the linear solve's surface as the contact's ``lateral`` offset (m) from the stroke goes
-        from half the table's reach to its reach (continuous at the table's side); no vertex inside the
-        fingertip; force and dF/dd the linear solve of this push times the table's ratios; the
-        strain and inverted elements are the reference's at the bracketing samples. No fold test (as the
-        sphere's table): the reference's own surface, sampled on the rendered triangles, folds around the
-        fingertip (rounded box, 50 mm: up to 102 of them at a station, all under or beside the finger), and the
-        test exists to catch the *linear* model's overlapping surface; non-finite values give ``valid`` False."""
+        depth), faded to the linear solve's surface as the contact's ``lateral`` offset (m) from the stroke
+        goes from half the table's reach to its reach (continuous at the table's side); no vertex inside the
+        fingertip; force and dF/dd the linear solve of this push times the table's ratios; the strain and
+        inverted elements are the reference's at the bracketing samples. No fold test (as the sphere's table):
+        the reference's own surface, sampled on the rendered triangles, folds around the fingertip (rounded
+        box, 50 mm: up to 102 of them at a station, all under or beside the finger), and the test exists to
+        catch the *linear* model's overlapping surface; non-finite values give ``valid`` False."""
         w = min(1.0, max(0.0, (pt.reach - lateral) / (0.5 * pt.reach)))   # the states' weight
-        sol, u_out, _ = self._solve(fg, outputs=w < 1.0)  # force and dF/dd; its surface only where it fades in
+        # force and dF/dd; its surface only where it fades in
+        sol, u_out, _ = self._solve(fg, outputs=w < 1.0)
         stiffness = self._floored_stiffness(fg, sol)
         us, rf, rk, strain, inv = pt.lookup(fraction, fg.depth)
         if w < 1.0:
@@ -406,14 +419,16 @@ class SceneModel(CondensedSurface):
         if not (np.all(np.isfinite(us)) and math.isfinite(force) and math.isfinite(stiffness)):
             status, valid = "nonlinear_invalid:non_finite", False
         verts = self._rest + (us.astype(np.float32) if valid else 0.0)
-        return Update(verts.astype(np.float32), force if valid else 0.0, stiffness if valid else 0.0, fg.depth,
+        return Update(verts.astype(np.float32), force if valid else 0.0, stiffness if valid else 0.0,
+                      fg.depth,
                       fg.contact_point.copy(), "path_snapshots", strain, inv, status, valid)
 
     def _outside_finger(self, us: np.ndarray, fg: ContactFinger) -> np.ndarray:
-        """``us`` (S, 3) with every vertex that the blend left inside the fingertip sphere put on it, along the
-        ray from its centre (the material under a rigid finger lies on it). A station's dent moved between
+        """``us`` (S, 3) with every vertex that the blend left inside the fingertip sphere put on it, along
+        the ray from its centre (the material under a rigid finger lies on it). A station's dent moved between
         stations loses depth to linear interpolation on the rendered triangles (h²/8r: 0.25 mm for 4 mm
-        triangles under an 8 mm fingertip); this keeps the drawn dent on the finger. Continuous in the finger's
+        triangles under an 8 mm fingertip); this keeps the drawn dent on the finger. Continuous in the
+        finger's
         position: a vertex reaching the sphere moves by nothing."""
         c = np.asarray(fg.center, np.float32)
         x = self._rest + us - c
@@ -425,17 +440,20 @@ class SceneModel(CondensedSurface):
         return us
 
     def surface_displacement(self, fg: ContactFinger) -> tuple[np.ndarray, float, float]:
-        """(surface-node displacements (S, 3) m, force N, stiffness N/m) of one push, no checks (experiments)."""
+        """(surface-node displacements (S, 3) m, force N, stiffness N/m) of one push, no checks
+        (experiments)."""
         sol, u_out, _ = self._solve(fg)
         return self._surface_of(u_out), float(sol.force), float(sol.stiffness)
 
 
 
 def attach_scene_table(model: SceneModel, cache: ArrayCache) -> tuple[str | None, str | None]:
-    """Attach the scene's nonlinear table to ``model`` as the FEM node serves it: a sphere scene's sphere table
-    (:mod:`flexsheet.fem.sphere_snapshots`), any other scene's path table (:mod:`flexsheet.fem.path_snapshots`), from
-    ``cache`` (this machine's cache, then the shipped store ``flexsheet/fem/data``). Returns (kind "sphere" or "path",
-    where: "cache" or "shipped store (flexsheet/fem/data)"), or (kind, None) when none is stored (the model stays
+    """Attach the scene's nonlinear table to ``model`` as the FEM node serves it: a sphere scene's sphere
+    table (:mod:`flexsheet.fem.sphere_snapshots`), any other scene's path table
+    (:mod:`flexsheet.fem.path_snapshots`), from ``cache`` (this machine's cache, then the shipped store
+    ``flexsheet/fem/data``). Returns (kind "sphere" or "path",
+    where: "cache" or "shipped store (flexsheet/fem/data)"), or (kind, None) when none is stored (the model
+    stays
     linear). Raises ``ValueError`` when a stored table is unusable (inconsistent, another mesh)."""
     try:
         sphere_frame(model.scene)

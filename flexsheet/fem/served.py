@@ -1,18 +1,18 @@
-"""The model the FEM node serves for a scene, built one way: :func:`build_model` (the real-time linear model), then
-:func:`attach_table` (the scene's nonlinear table, where one is stored). The FEM node runs both at start-up and
-the experiments call them through :func:`served_model`, so that they judge what the user sees.
+"""The model the FEM node serves for a scene, built one way: :func:`build_model` (the real-time linear model),
+then :func:`attach_table` (the scene's nonlinear table, where one is stored). The FEM node runs both at
+start-up and the experiments call them through :func:`served_model`, so that they judge what the user sees.
 
 Every object is a scene (``launch/scenes/*.yaml``; the default is
-:data:`~flexsheet.model.scenes.DEFAULT_SCENE_FILE`, the paper's cylinder), and its material and finger come from
-its file. What is built for it:
+:data:`~flexsheet.model.scenes.DEFAULT_SCENE_FILE`, the paper's cylinder), and its material and finger come
+from its file. What is built for it:
 
 - the paper's cylinder with its back-half support and no inclusions (:func:`uses_cylinder_mesh`): the
   cylinder's own mesh, refined along the working arc (``arc_deg``), and its
   :class:`~flexsheet.fem.realtime.RealtimeModel` (mesh and model kind from :func:`choose_cylinder_model`); its
   table is the nonlinear snapshot table (:mod:`flexsheet.fem.snapshots`);
-- any other scene: its gmsh mesh refined along its stroke and its :class:`~flexsheet.fem.scene_model.SceneModel`;
-  its table is a sphere's sphere table, else the path table along its stroke
-  (:func:`flexsheet.fem.scene_model.attach_scene_table`).
+- any other scene: its gmsh mesh refined along its stroke and its
+  :class:`~flexsheet.fem.scene_model.SceneModel`; its table is a sphere's sphere table, else the path table
+  along its stroke (:func:`flexsheet.fem.scene_model.attach_scene_table`).
 """
 
 from __future__ import annotations
@@ -36,7 +36,8 @@ from flexsheet.fem.scene_model import SceneModel, attach_scene_table, finger_on_
 from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, load_snapshot_table
 from flexsheet.model.scenes import Scene, is_paper_cylinder
 
-__all__ = ["uses_cylinder_mesh", "launch_arc_deg", "CylinderChoice", "choose_cylinder_model", "build_model", "TableState",
+__all__ = ["uses_cylinder_mesh", "launch_arc_deg", "CylinderChoice", "choose_cylinder_model", "build_model",
+           "TableState",
            "attach_table", "snapshots_message", "served_model", "served_finger", "scene_update_ms"]
 
 
@@ -49,8 +50,8 @@ def uses_cylinder_mesh(sc: Scene) -> bool:
 
 def launch_arc_deg(sc) -> float:
     """The FEM node's ``arc_deg`` for scene ``sc`` as the launch files set it: the paper cylinder's stroke arc
-    (launch/sim.yaml, launch/lab.yaml: 60°, so its rendered surface is refined where the finger goes), 0 for any
-    other scene (its mesh follows its stroke by itself)."""
+    (launch/sim.yaml, launch/lab.yaml: 60°, so its rendered surface is refined where the finger goes), 0 for
+    any other scene (its mesh follows its stroke by itself)."""
     st = sc.stroke
     if uses_cylinder_mesh(sc) and st.kind == "arc":
         return float(max(abs(st.start_deg), abs(st.end_deg)))
@@ -60,8 +61,8 @@ def launch_arc_deg(sc) -> float:
 @dataclass(frozen=True)
 class CylinderChoice:
     """The cylinder's real-time model as :func:`choose_cylinder_model` picks it: the mesh ``spec`` and element
-    ``order`` and why (``mesh_reason``, one log line), the model ``kind`` ("linear" or "snapshots"; "corotational"
-    where the model table picks it) and why (``kind_reason``)."""
+    ``order`` and why (``mesh_reason``, one log line), the model ``kind`` ("linear" or "snapshots";
+    "corotational" where the model table picks it) and why (``kind_reason``)."""
 
     spec: MeshSpec
     order: int
@@ -72,11 +73,12 @@ class CylinderChoice:
 
 def choose_cylinder_model(cfg: FemConfig, sc: Scene) -> CylinderChoice:
     """The model served for the cylinder scene ``sc`` with the settings ``cfg``. Mesh: the one
-    ``mesh_h``/``mesh_h_fine``/``refine_radius``/``order`` set when h and h_fine are > 0, else the cheapest the
-    accuracy table (:func:`flexsheet.fem.choose.choose`) finds within ``accuracy_target`` over
-    [``depth_min``, ``depth_max``] for the scene's ν and finger radius; the working arc ``arc_deg`` either way.
-    Kind: ``model`` when "linear" or "snapshots", else ("auto") the model table's pick over ``depth_max``
-    (:func:`flexsheet.fem.choose.choose_fem_model`). Raises ``ValueError`` on a non-positive target or depth."""
+    ``mesh_h``/``mesh_h_fine``/``refine_radius``/``order`` set when h and h_fine are > 0, else the cheapest
+    the accuracy table (:func:`flexsheet.fem.choose.choose`) finds within ``accuracy_target`` over
+    [``depth_min``, ``depth_max``] for the scene's ν and finger radius; the working arc ``arc_deg`` either
+    way. Kind: ``model`` when "linear" or "snapshots", else ("auto") the model table's pick over ``depth_max``
+    (:func:`flexsheet.fem.choose.choose_fem_model`). Raises ``ValueError`` on a non-positive target or
+    depth."""
     if cfg.mesh_h > 0 and cfg.mesh_h_fine > 0:
         spec, order = MeshSpec(cfg.mesh_h, cfg.mesh_h_fine, cfg.refine_radius, cfg.arc_deg), cfg.order
         mesh_reason = f"mesh set by params: P{order} {spec.key()}"
@@ -94,13 +96,14 @@ def choose_cylinder_model(cfg: FemConfig, sc: Scene) -> CylinderChoice:
 def build_model(sc: Scene, cfg: FemConfig) -> tuple[RealtimeModel | SceneModel, str]:
     """The real-time linear model of scene ``sc`` with the settings ``cfg`` (module doc): loaded from
     ``cfg.cache_dir`` ("" = no disk cache), the installed or the shipped store, else precomputed (seconds) and
-    cached. Returns (model, one log line: mesh, how it was built, size, why this mesh). Raises ``ValueError`` on
-    bad settings or an inconsistent cache entry."""
+    cached. Returns (model, one log line: mesh, how it was built, size, why this mesh). Raises ``ValueError``
+    on bad settings or an inconsistent cache entry."""
     cache_dir = cfg.cache_dir or None
     if uses_cylinder_mesh(sc):
         ch = choose_cylinder_model(cfg, sc)
         spec, order, why = ch.spec, ch.order, f"the cylinder's mesh; {ch.mesh_reason}"
-        m = RealtimeModel(spec, Material.of_scene(sc.material), sc.finger.radius, cfg.max_depth, cfg.strain_limit,
+        m = RealtimeModel(spec, Material.of_scene(sc.material), sc.finger.radius, cfg.max_depth,
+                          cfg.strain_limit,
                           cache_dir, None, order)
     else:
         spec, order, why = DEFAULT_SCENE_SPEC, 2, "the scene's mesh along its stroke"
@@ -108,9 +111,9 @@ def build_model(sc: Scene, cfg: FemConfig) -> tuple[RealtimeModel | SceneModel, 
             spec, order = MeshSpec(cfg.mesh_h, cfg.mesh_h_fine, cfg.refine_radius), cfg.order
             why += ", sizes set by params"
         m = SceneModel(sc, spec, order, None, cfg.max_depth, cfg.strain_limit, cache_dir, None)
-    line = (f"fem: scene {sc.name!r} ready in {m.precompute_s:.2f} s ({'cache hit' if m.cache_hit else 'precomputed'}):"
-            f" P{order} {spec.key()}, {m.n_nodes} nodes, {m.n_candidates} candidate contact points, "
-            f"{m.solver.nbytes / 1e6:.1f} MB ({why})")
+    line = (f"fem: scene {sc.name!r} ready in {m.precompute_s:.2f} s "
+            f"({'cache hit' if m.cache_hit else 'precomputed'}): P{order} {spec.key()}, {m.n_nodes} nodes, "
+            f"{m.n_candidates} candidate contact points, {m.solver.nbytes / 1e6:.1f} MB ({why})")
     return m, line
 
 
@@ -135,16 +138,16 @@ def snapshots_message(sc: Scene, model: RealtimeModel, how: str) -> str:
     """The diagnostics line of the cylinder scene ``sc``'s attached snapshot table, ``how`` it came
     ("loaded from cache", "built in 900 s", ...)."""
     s = model.snapshots
-    return (f"fem: scene {sc.name!r}: nonlinear snapshots {how}: |angle| <= {np.degrees(s.angle_max):.0f} deg, "
-            f"depth <= {s.depth_max * 1e3:.0f} mm ({s.nbytes / 1e6:.0f} MB)")
+    return (f"fem: scene {sc.name!r}: nonlinear snapshots {how}: |angle| <= {np.degrees(s.angle_max):.0f} "
+            f"deg, depth <= {s.depth_max * 1e3:.0f} mm ({s.nbytes / 1e6:.0f} MB)")
 
 
 def attach_table(model: RealtimeModel | SceneModel, sc: Scene, cfg: FemConfig) -> TableState:
-    """Attach scene ``sc``'s nonlinear table to ``model`` (from :func:`build_model`) as the settings ``cfg`` ask:
-    none with ``model`` "linear" (for the cylinder also where "auto" and the model table pick linear), else the
-    table stored in ``cfg.cache_dir``, the shipped store (``flexsheet/fem/data``) or the installed one. Without a
-    stored table, or with an unusable one, the linear model serves and the returned :class:`TableState` says so
-    (never raises for a table)."""
+    """Attach scene ``sc``'s nonlinear table to ``model`` (from :func:`build_model`) as the settings ``cfg``
+    ask: none with ``model`` "linear" (for the cylinder also where "auto" and the model table pick linear),
+    else the table stored in ``cfg.cache_dir``, the shipped store (``flexsheet/fem/data``) or the installed
+    one. Without a stored table, or with an unusable one, the linear model serves and the returned
+    :class:`TableState` says so (never raises for a table)."""
     name = f"fem: scene {sc.name!r}"
     cache = ArrayCache(cfg.cache_dir or None)
     if isinstance(model, RealtimeModel):
@@ -157,10 +160,12 @@ def attach_table(model: RealtimeModel | SceneModel, sc: Scene, cfg: FemConfig) -
         kind, where = attach_scene_table(model, cache)
     except ValueError as exc:
         msg = f"{name}: nonlinear table unusable ({exc}) - serving LINEAR"
-        return TableState("table", None, msg, logging.ERROR, f"linear {desc} (table unusable)", error=str(exc))
+        return TableState("table", None, msg, logging.ERROR, f"linear {desc} (table unusable)",
+                          error=str(exc))
     if where is None:
-        return TableState(kind, None, f"{name}: no nonlinear {kind} table cached - serving the LINEAR model (build it "
-                          f"with `flexsheet experiment fem --scene {sc.source or 'SCENE.yaml'} --node-table --out DIR`)",
+        return TableState(kind, None, f"{name}: no nonlinear {kind} table cached - serving the LINEAR model "
+                          f"(build it with `flexsheet experiment fem --scene {sc.source or 'SCENE.yaml'} "
+                          "--node-table --out DIR`)",
                           logging.WARNING, f"linear {desc} (no {kind} table stored)", missing=True)
     if kind == "sphere":
         sm = model.snapshots
@@ -168,8 +173,9 @@ def attach_table(model: RealtimeModel | SceneModel, sc: Scene, cfg: FemConfig) -
                f"{np.degrees(sm.alphas[-1]):.0f} deg, depth <= {sm.depth_max * 1e3:.0f} mm; linear elsewhere")
     else:
         pt = model.path_table
-        msg = (f"{name}: nonlinear path table loaded from {where}: {len(pt.fractions)} stations along the stroke, "
-               f"depth <= {pt.depth_max * 1e3:.0f} mm, within {pt.reach * 1e3:.0f} mm of the stroke; linear elsewhere")
+        msg = (f"{name}: nonlinear path table loaded from {where}: {len(pt.fractions)} stations along the "
+               f"stroke, depth <= {pt.depth_max * 1e3:.0f} mm, within {pt.reach * 1e3:.0f} mm of the stroke; "
+               "linear elsewhere")
     return TableState(kind, where, msg, logging.INFO, f"linear {desc} + the {kind} table ({where})")
 
 
@@ -183,7 +189,8 @@ def _attach_cylinder_table(model: RealtimeModel, sc: Scene, cfg: FemConfig, cach
                           f"linear {desc} (the model table picks {ch.kind})")
     mat = Material.of_scene(sc.material)
     try:
-        table = load_snapshot_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, sc.finger.radius, sc.finger.contact)
+        table = load_snapshot_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, sc.finger.radius,
+                                    sc.finger.contact)
         if table is not None:
             model.attach_snapshots(table, axial_max=cfg.snapshot_axial_max)
     except ValueError as exc:
@@ -191,9 +198,12 @@ def _attach_cylinder_table(model: RealtimeModel, sc: Scene, cfg: FemConfig, cach
         return TableState("snapshots", None, msg, logging.ERROR, f"linear {desc} (snapshot table unusable)",
                           error=str(exc))
     if table is None:
-        return TableState("snapshots", None, f"{name}: nonlinear snapshots not cached - serving the LINEAR model "
-                          f"(build them with `flexsheet experiment fem --node-table --nu {mat.nu:g} --Jm {mat.Jm:g}`, "
-                          "or set snapshot_build=true)", logging.WARNING, f"linear {desc} (no snapshot table stored)",
+        return TableState("snapshots", None, f"{name}: nonlinear snapshots not cached - serving the LINEAR "
+                                             "model "
+                          f"(build them with `flexsheet experiment fem --node-table --nu {mat.nu:g} --Jm "
+                          f"{mat.Jm:g}`, "
+                          "or set snapshot_build=true)", logging.WARNING,
+                          f"linear {desc} (no snapshot table stored)",
                           missing=True)
     where = "the shipped store (flexsheet/fem/data)" if cache.shipped() else "cache"
     return TableState("snapshots", where, snapshots_message(sc, model, f"loaded from {where}"), logging.INFO,
@@ -201,10 +211,10 @@ def _attach_cylinder_table(model: RealtimeModel, sc: Scene, cfg: FemConfig, cach
 
 
 def served_model(sc: Scene, cfg: FemConfig | None = None, cache_dir: str | None = None):
-    """The model the FEM node serves for ``sc`` with the settings ``cfg`` (:class:`FemConfig`, default the node's
-    defaults): :func:`build_model` then :func:`attach_table`, with ``cache_dir`` in place of ``cfg.cache_dir``
-    when given. Returns (model, what: one line naming the model and its table, or "linear ..."). Raises
-    ``ValueError`` for an unusable stored table (the node logs it and serves linear)."""
+    """The model the FEM node serves for ``sc`` with the settings ``cfg`` (:class:`FemConfig`, default the
+    node's defaults): :func:`build_model` then :func:`attach_table`, with ``cache_dir`` in place of
+    ``cfg.cache_dir`` when given. Returns (model, what: one line naming the model and its table, or "linear
+    ..."). Raises ``ValueError`` for an unusable stored table (the node logs it and serves linear)."""
     cfg = cfg or FemConfig()
     if cache_dir is not None:
         cfg = replace(cfg, cache_dir=cache_dir)

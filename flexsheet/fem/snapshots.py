@@ -1,16 +1,18 @@
-"""Precomputed nonlinear snapshots interpolated over contact position and depth: the real-time nonlinear model.
+"""Precomputed nonlinear snapshots interpolated over contact position and depth: the real-time nonlinear
+model.
 
 Peterlík, Sedef, Basdogan & Matyska, "Real-time visio-haptic interaction with static soft tissue models having
-geometric and material nonlinearity", Computers & Graphics 34(1), 2010: precompute nonlinear solutions over the
-finger's state space offline and interpolate them at haptic rate. Here the state is (azimuth φ of the contact
-point, push depth d, axial offset a) and the stored quantity is the displacement of the *surface*, the only
-thing the renderer draws.
+geometric and material nonlinearity", Computers & Graphics 34(1), 2010: precompute nonlinear solutions over
+the finger's state space offline and interpolate them at haptic rate. Here the state is (azimuth φ of the
+contact point, push depth d, axial offset a) and the stored quantity is the displacement of the *surface*, the
+only thing the renderer draws.
 
 * **Offline** (:func:`flexsheet.fem.reference.snapshot_build.build_table`): for each snapshot azimuth φ_i the
   hyperelastic reference (the material's law: neo-Hookean, or Gent — the paper's cylinder's)
-  (:mod:`flexsheet.fem.reference.hyperelastic`) is pushed 0 → d_max with load stepping, and every converged depth d_j is
-  sampled on a fixed surface grid: the side surface on (θ, y) and the end cap on (θ, ρ), display-frame
-  components. Also stored per (φ_i, d_j): finger force, largest strain, inverted elements, min det F.
+  (:mod:`flexsheet.fem.reference.hyperelastic`) is pushed 0 → d_max with load stepping, and every converged
+  depth d_j is sampled on a fixed surface grid: the side surface on (θ, y) and the end cap on (θ, ρ),
+  display-frame components. Also stored per (φ_i, d_j): finger force, largest strain, inverted elements, min
+  det F.
 * **Run time** (:meth:`SnapshotModel.surface`): the cylinder is rotationally symmetric about its axis except
   for the support, so each snapshot is *rotated with the finger*: for a push at φ between φ_i and φ_i+1 the
   field of snapshot i is rotated by δ_i = φ − φ_i about the axis (u(θ) ≈ R(δ_i)·U_i(θ − δ_i)) and the two are
@@ -22,8 +24,8 @@ thing the renderer draws.
 
 Memory: float32, (#φ × #d × #θ × (#y + #ρ) × 3) × 4 bytes (≈ 30 MB for the default table).
 
-This module is the run-time side (the grid, the table's key and look-up, :func:`load_snapshot_table`); the build
-is :mod:`flexsheet.fem.reference.snapshot_build`.
+This module is the run-time side (the grid, the table's key and look-up, :func:`load_snapshot_table`); the
+build is :mod:`flexsheet.fem.reference.snapshot_build`.
 """
 
 from __future__ import annotations
@@ -39,7 +41,8 @@ from flexsheet.fem.reference.capsule_contact import DEFAULT_CONTACT
 from flexsheet.fem.reference.mesh import RefSpec
 from flexsheet.fem.reference.versions import UNLOAD_VERSION, solver_tag
 
-__all__ = ["SnapshotGrid", "SnapshotModel", "surface_coords", "TABLE_VERSION", "DEFAULT_GRID", "DEFAULT_REF_SPEC",
+__all__ = ["SnapshotGrid", "SnapshotModel", "surface_coords", "TABLE_VERSION", "DEFAULT_GRID",
+           "DEFAULT_REF_SPEC",
            "table_key", "load_snapshot_table", "bilinear"]
 
 #: table layout and content; the solver and mesh enter the key through SOLVER_VERSION, spec. snap-2: every
@@ -81,8 +84,8 @@ class SnapshotGrid:
 
     def key(self) -> str:
         """Stable text key (cache keys)."""
-        return (f"a={','.join(f'{x:g}' for x in self.angles_deg)},dmax={self.depth_max:g},ds={self.depth_step:g},"
-                f"dt={self.dtheta_deg:g},dy={self.dy:g},dr={self.drho:g}")
+        return (f"a={','.join(f'{x:g}' for x in self.angles_deg)},dmax={self.depth_max:g},ds="
+                f"{self.depth_step:g},dt={self.dtheta_deg:g},dy={self.dy:g},dr={self.drho:g}")
 
     def depths(self) -> np.ndarray:
         """Depth samples (m), 0 … depth_max."""
@@ -113,12 +116,12 @@ class SnapshotGrid:
 
 DEFAULT_GRID = SnapshotGrid()
 #: mesh of the snapshot solves, one of the experiment's convergence levels: P2, 12 mm elements, 4.5 mm within
-#: 18 mm of the fingertip's whole push path (55 mm deep) (docs/fem.md; a cut half model, ~10 min of one core per
-#: azimuth under the sticking finger: ``flexsheet experiment fem --node-table --contact sticking --azimuth A``).
-#: Off azimuth 0 the half model is *cut*: its mesh has nodes on the plane through the push axis, as the quarter
-#: model has on its mirror plane; without them a half model is 8–12 % stiffer at 40–50 mm than the quarter model
-#: of the same h_fine, with them within 1.1 % on the 4.5 and 3.4 mm meshes (3.5 % on the 6 mm one; the
-#: experiment's mirror study, docs/fem.md)
+#: 18 mm of the fingertip's whole push path (55 mm deep) (docs/fem.md; a cut half model, ~10 min of one core
+#: per azimuth under the sticking finger: ``flexsheet experiment fem --node-table --contact sticking --azimuth
+#: A``). Off azimuth 0 the half model is *cut*: its mesh has nodes on the plane through the push axis, as the
+#: quarter model has on its mirror plane; without them a half model is 8–12 % stiffer at 40–50 mm than the
+#: quarter model of the same h_fine, with them within 1.1 % on the 4.5 and 3.4 mm meshes (3.5 % on the 6 mm
+#: one; the experiment's mirror study, docs/fem.md)
 DEFAULT_REF_SPEC = RefSpec(0.012, 0.0045, 0.018, half_z=True, path_depth=0.055, cut=True, rim=True)
 
 
@@ -132,7 +135,8 @@ def table_key(grid: SnapshotGrid, spec: RefSpec, nu: float, finger_radius: float
 
     # spec.key() of a quarter spec leaves out ``cut`` (its azimuth-0 mesh does not depend on it); the off-axis
     # entries' meshes do
-    return cache_key(TABLE_VERSION, solver_tag(contact), *([UNLOAD_VERSION] if contact == "frictionless" else []),
+    return cache_key(TABLE_VERSION, solver_tag(contact),
+                     *([UNLOAD_VERSION] if contact == "frictionless" else []),
                      grid.key(), spec.key(), f"cut={int(spec.cut)}",
                      gmsh.__version__, f"nu={nu:.9g}", f"r={finger_radius:.9g}",
                      *([f"Jm={Jm:.9g}"] if math.isfinite(Jm) else []))
@@ -140,9 +144,9 @@ def table_key(grid: SnapshotGrid, spec: RefSpec, nu: float, finger_radius: float
 
 def load_snapshot_table(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float,
                         contact: str = DEFAULT_CONTACT) -> dict | None:
-    """The snapshot table of ``grid`` on ``spec``'s mesh for ``material`` and a finger of ``finger_radius`` m from
-    ``cache`` (:class:`flexsheet.fem.cache.ArrayCache`: this machine's cache or the shipped store), or None —
-    never built here (:func:`flexsheet.fem.reference.snapshot_build.load_or_build` builds one)."""
+    """The snapshot table of ``grid`` on ``spec``'s mesh for ``material`` and a finger of ``finger_radius`` m
+    from ``cache`` (:class:`flexsheet.fem.cache.ArrayCache`: this machine's cache or the shipped store), or
+    None — never built here (:func:`flexsheet.fem.reference.snapshot_build.load_or_build` builds one)."""
     return cache.load("snapshots", table_key(grid, spec, material.nu, finger_radius, contact, material.Jm))
 
 
@@ -162,10 +166,10 @@ class SnapshotModel:
     """Run-time look-up of a snapshot table (dict of arrays from
     :func:`flexsheet.fem.reference.snapshot_build.build_table`, e.g. from the cache).
 
-    ``axial_max`` m: largest |axial offset| served (by translation along y); ``vertices`` (S, 3) m the rendered
-    surface vertices (undeformed, display frame) whose displacements :meth:`surface` returns; ``E`` Pa: the
-    object's modulus (forces scale with E; displacements do not). Raises ``ValueError`` when the table is
-    inconsistent.
+    ``axial_max`` m: largest |axial offset| served (by translation along y); ``vertices`` (S, 3) m the
+    rendered surface vertices (undeformed, display frame) whose displacements :meth:`surface` returns; ``E``
+    Pa: the object's modulus (forces scale with E; displacements do not). Raises ``ValueError`` when the table
+    is inconsistent.
     """
 
     def __init__(self, table: dict, vertices: np.ndarray, axial_max: float = 0.01, E: float | None = None):
@@ -179,7 +183,8 @@ class SnapshotModel:
         na, nd = len(self.angles), len(self.depths)
         if self.side.shape != (na, nd, len(self.theta), len(self.ys), 3) or \
                 self.cap.shape != (na, nd, len(self.theta), len(self.rhos), 3):
-            raise ValueError(f"snapshot table shapes {self.side.shape}, {self.cap.shape} do not match its axes")
+            raise ValueError(f"snapshot table shapes {self.side.shape}, {self.cap.shape} do not match its "
+                             "axes")
         self.force = np.asarray(t["force"], float) * ((E / float(t["E"])) if E else 1.0)
         self.max_strain = np.asarray(t["max_strain"], float)
         self.inverted = np.asarray(t["inverted"], np.int64)
@@ -229,13 +234,15 @@ class SnapshotModel:
         ns = len(s_grid)
         i00 = it * ns + js
         w = np.empty((4, len(th), 1))
-        w[0, :, 0], w[1, :, 0], w[2, :, 0], w[3, :, 0] = (1 - wt) * (1 - ws), (1 - wt) * ws, wt * (1 - ws), wt * ws
+        w[0, :, 0], w[1, :, 0], w[2, :, 0], w[3, :,
+                                              0] = (1 - wt) * (1 - ws), (1 - wt) * ws, wt * (1 - ws), wt * ws
         w[:, (th < tg[0]) | (th > tg[-1])] = 0.0
         return np.array([i00, i00 + 1, i00 + ns, i00 + ns + 1]), w
 
     @staticmethod
     def _gather(fields, rows: np.ndarray, w: np.ndarray) -> np.ndarray:
-        """Σ over (weight, field) in ``fields`` of weight × the bilinear look-up (k, 3) at (``rows``, ``w``)."""
+        """Σ over (weight, field) in ``fields`` of weight × the bilinear look-up (k, 3) at (``rows``,
+        ``w``)."""
         g = 0.0
         for wj, f in fields:
             g = g + wj * f[rows]                   # (4, k, 3)
@@ -250,8 +257,8 @@ class SnapshotModel:
         if not self.covers(angle, depth, axial):
             raise ValueError(f"push (angle {math.degrees(angle):.1f} deg, depth {depth * 1e3:.1f} mm, axial "
                              f"{axial * 1e3:.1f} mm) is outside the snapshot table (|angle| <= "
-                             f"{math.degrees(self.angle_max):.1f} deg, depth <= {self.depth_max * 1e3:.1f} mm, "
-                             f"|axial| <= {self.axial_max * 1e3:.1f} mm)")
+                             f"{math.degrees(self.angle_max):.1f} deg, depth <= {self.depth_max * 1e3:.1f} "
+                             f"mm, |axial| <= {self.axial_max * 1e3:.1f} mm)")
         mirror = angle < 0
         phi = abs(angle)
         th = -self._th if mirror else self._th

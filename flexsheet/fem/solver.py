@@ -1,4 +1,5 @@
-"""Linear (P1/P2) and corotational elasticity of the cylinder under displacement-driven fingertip contact (pure).
+"""Linear (P1/P2) and corotational elasticity of the cylinder under displacement-driven fingertip contact
+(pure).
 
 Three solvers share one :class:`FemModel` (stiffness assembled with scikit-fem, ``linear_elasticity``):
 
@@ -85,7 +86,8 @@ class FemModel:
         else:
             self.dofs = np.ascontiguousarray(np.vstack([nd, self.basis.edge_dofs.T]))
             e = self.skmesh.edges
-            self.points = np.vstack([self.skmesh.p.T, 0.5 * (self.skmesh.p[:, e[0]] + self.skmesh.p[:, e[1]]).T])
+            self.points = np.vstack([self.skmesh.p.T,
+                                     0.5 * (self.skmesh.p[:, e[0]] + self.skmesh.p[:, e[1]]).T])
         bd = np.zeros(self.K.shape[0], bool)
         bd[self.basis.get_dofs().flatten()] = True
         self.boundary = bd[self.dofs[:, 0]]
@@ -94,10 +96,12 @@ class FemModel:
         else:
             held = np.asarray(support(self.points), dtype=bool)
             if held.shape != (len(self.points),):
-                raise ValueError(f"support must return a ({len(self.points)},) bool mask, got shape {held.shape}")
+                raise ValueError(f"support must return a ({len(self.points)},) bool mask, got shape "
+                                 f"{held.shape}")
             self.fixed = self.boundary & held
             if not self.fixed.any():
-                raise ValueError("support holds no boundary point: the object would float (singular stiffness)")
+                raise ValueError("support holds no boundary point: the object would float (singular "
+                                 "stiffness)")
         fixed_dofs = self.dofs[self.fixed].ravel()
         mask = np.ones(self.K.shape[0], bool)
         mask[fixed_dofs] = False
@@ -143,7 +147,8 @@ class FemModel:
 
 
 def _element_material(n_tets: int, material: Material, E_elem, nu_elem) -> tuple[np.ndarray, np.ndarray]:
-    """Per-element (E (M,) Pa, ν (M,)); a missing one is the nominal ``material``'s. ``ValueError`` naming it."""
+    """Per-element (E (M,) Pa, ν (M,)); a missing one is the nominal ``material``'s. ``ValueError`` naming
+    it."""
     out = []
     for name, v, default in (("E_elem", E_elem, material.E), ("nu_elem", nu_elem, material.nu)):
         a = np.full(n_tets, float(default)) if v is None else np.asarray(v, dtype=float)
@@ -234,7 +239,8 @@ def solve_full(model: FemModel, finger: ContactFinger) -> Solution:
 
 
 class CapacitanceSolver:
-    """Real-time linear contact by the capacitance matrix (James & Pai 2001) over precomputed Green's functions.
+    """Real-time linear contact by the capacitance matrix (James & Pai 2001) over precomputed Green's
+    functions.
 
     ``candidates`` (P,) bool: surface DOF points the finger may touch (must be free, not support);
     ``outputs`` (P,) bool: DOF points whose displacement each update returns (e.g. free surface + monitor
@@ -282,7 +288,8 @@ class CapacitanceSolver:
     def _prepare(self) -> None:
         """Per-update helpers: every free surface point in one array (candidates first: one contact test per
         update) and ``G_cc`` flattened for a one-index gather of the active block."""
-        self._all_points = np.ascontiguousarray(np.vstack([self._cand_points, self._noncand_points.reshape(-1, 3)]))
+        self._all_points = np.ascontiguousarray(
+            np.vstack([self._cand_points, self._noncand_points.reshape(-1, 3)]))
         self._G_flat = np.ascontiguousarray(self.G_cc).reshape(-1)
 
     def arrays(self) -> dict:
@@ -292,12 +299,13 @@ class CapacitanceSolver:
 
     @classmethod
     def from_arrays(cls, z, dtype=np.float64) -> CapacitanceSolver:
-        """Rebuild a solver from :meth:`arrays` (no model needed); raises ``ValueError`` on inconsistent shapes
-        or a ``dtype`` other than float64/float32. ``dtype`` float32 keeps ``G_cc`` and ``G_co`` in single
-        precision and runs the per-update Cholesky in it (LAPACK ``spotrf``/``spotrs``): half the memory and
-        memory traffic. The capacitance blocks are well conditioned (cond(G_aa) ≈ 200 on the shipped scenes),
-        so the displacements move by < 0.05 µm at a 50 mm push (tests/unit/fem/test_scene_model.py checks < 1 µm
-        against a float64 dense solve); force and stiffness are summed in float64."""
+        """Rebuild a solver from :meth:`arrays` (no model needed); raises ``ValueError`` on inconsistent
+        shapes or a ``dtype`` other than float64/float32. ``dtype`` float32 keeps ``G_cc`` and ``G_co`` in
+        single precision and runs the per-update Cholesky in it (LAPACK ``spotrf``/``spotrs``): half the
+        memory and memory traffic. The capacitance blocks are well conditioned (cond(G_aa) ≈ 200 on the
+        shipped scenes), so the displacements move by < 0.05 µm at a 50 mm push
+        (tests/unit/fem/test_scene_model.py checks < 1 µm against a float64 dense solve); force and stiffness
+        are summed in float64."""
         dtype = np.dtype(dtype)
         if dtype not in (np.dtype(np.float64), np.dtype(np.float32)):
             raise ValueError(f"dtype must be float64 or float32, got {dtype}")
@@ -306,11 +314,13 @@ class CapacitanceSolver:
         self.cand_pts, self.out_pts = np.asarray(z["cand_pts"]), np.asarray(z["out_pts"])
         self.G_cc = np.ascontiguousarray(z["G_cc"], dtype=dtype)
         self.G_co = np.ascontiguousarray(z["G_co"], dtype=dtype)
-        self._cand_points, self._noncand_points = np.asarray(z["cand_points"]), np.asarray(z["noncand_points"])
+        self._cand_points, self._noncand_points = np.asarray(z["cand_points"]), np.asarray(
+            z["noncand_points"])
         nc = 3 * len(self.cand_pts)
         if (self.G_cc.shape != (nc, nc) or self.G_co.shape != (nc, 3 * len(self.out_pts))
                 or self._cand_points.shape != (len(self.cand_pts), 3)):
-            raise ValueError(f"precomputed matrices have inconsistent shapes {self.G_cc.shape}, {self.G_co.shape}")
+            raise ValueError(f"precomputed matrices have inconsistent shapes {self.G_cc.shape}, "
+                             f"{self.G_co.shape}")
         self._prepare()
         return self
 
@@ -320,8 +330,9 @@ class CapacitanceSolver:
         return self.G_cc.nbytes + self.G_co.nbytes
 
     def solve(self, finger: ContactFinger, outputs: bool = True) -> Solution:
-        """One update: returns a :class:`Solution` with ``u`` (#outputs, 3) m at the output points (``outputs``
-        False: ``u`` is (0, 3), for a caller that needs only the force and dF/dd, which skips the largest product).
+        """One update: returns a :class:`Solution` with ``u`` (#outputs, 3) m at the output points
+        (``outputs`` False: ``u`` is (0, 3), for a caller that needs only the force and dF/dd, which skips the
+        largest product).
 
         Raises :class:`OutsideCandidates` when a non-candidate surface point is inside the finger, and
         ``numpy.linalg.LinAlgError`` if the active block is not positive definite (a corrupt precompute).

@@ -1,7 +1,7 @@
 """Sparse factorisation of symmetric positive-definite matrices (pure): :func:`factor` (CHOLMOD's supernodal
-Cholesky through scikit-sparse, or SuperLU), and :class:`NotPositiveDefinite` when CHOLMOD meets a non-positive
-pivot. The linear models' solves (:mod:`flexsheet.fem.solver`, :mod:`flexsheet.fem.corotational`) and the
-nonlinear reference's Newton steps (:mod:`flexsheet.fem.reference.newton`) factorise with it."""
+Cholesky through scikit-sparse, or SuperLU), and :class:`NotPositiveDefinite` when CHOLMOD meets a
+non-positive pivot. The linear models' solves (:mod:`flexsheet.fem.solver`, :mod:`flexsheet.fem.corotational`)
+and the nonlinear reference's Newton steps (:mod:`flexsheet.fem.reference.newton`) factorise with it."""
 
 from __future__ import annotations
 
@@ -17,8 +17,8 @@ class NotPositiveDefinite(ValueError):
 
 
 class _Cholesky:
-    """Sparse Cholesky of a symmetric positive-definite matrix (CHOLMOD, supernodal, through scikit-sparse; Chen,
-    Davis, Hager & Rajamanickam, ACM TOMS 35, 2008); ``solve(b)`` for (n,) or (n, k). Raises
+    """Sparse Cholesky of a symmetric positive-definite matrix (CHOLMOD, supernodal, through scikit-sparse;
+    Chen, Davis, Hager & Rajamanickam, ACM TOMS 35, 2008); ``solve(b)`` for (n,) or (n, k). Raises
     :class:`NotPositiveDefinite` at a non-positive pivot (nothing is kept: cholespy, used before, leaked its
     factor, ~0.5 GB each time, on that path)."""
 

@@ -5,27 +5,28 @@ A sphere held by its back half (support ``back_half``: every surface point behin
 normal to +x) is mapped onto itself, support included, by any rotation about the **support axis** e_a (+x
 through the centre). A push along the inward normal at a surface point whose outward normal n makes the polar
 angle α with e_a is therefore the push at α in one fixed plane — the stroke's plane (e_a, e_b), e_b the arc
-stroke's ``toward`` direction made normal to e_a — rotated about e_a by ψ: **one parameter, α, plus the depth d,
-describes every push exactly.** The stroke of ``sphere.yaml`` is that plane's arc from α = 0 to 60°.
+stroke's ``toward`` direction made normal to e_a — rotated about e_a by ψ: **one parameter, α, plus the depth
+d, describes every push exactly.** The stroke of ``sphere.yaml`` is that plane's arc from α = 0 to 60°.
 
-* **Offline** (:func:`flexsheet.fem.reference.sphere_build.solve_alpha`): for each snapshot angle α_i (:class:`SphereGrid`, default 0–60° every 10°)
-  the scene's hyperelastic body (the scene's law, Gent) on a gmsh mesh refined along that push
-  path (:func:`flexsheet.fem.scene_mesh.scene_mesh` with ``refine_at``, full body, the scene's support) is pushed by
-  the rigid frictionless capsule finger 0 → 50 mm (:func:`flexsheet.fem.reference.path_solver.solve_path_capsule`), the
-  stable branch kept where the push is bistable (:func:`flexsheet.fem.reference.path_solver.stable_states`), and every depth
-  sampled on a grid over the sphere in the stroke frame: θ (angle in the (e_a, e_b) plane from e_a, |θ| ≤
-  ``theta_max_deg``) × φ (latitude toward e_c = e_a × e_b), display-frame components.
-* **Run time** (:meth:`SphereSnapshotModel.surface`): for a push with outward normal n at depth d, α = ∠(n, e_a)
-  and ψ the rotation about e_a that takes the stroke plane to n. Each rendered vertex is rotated back by −ψ;
-  for the two snapshot angles around α, the snapshot's field is rotated by δ_i = α − α_i within the plane
+* **Offline** (:func:`flexsheet.fem.reference.sphere_build.solve_alpha`): for each snapshot angle α_i
+  (:class:`SphereGrid`, default 0–60° every 10°) the scene's hyperelastic body (the scene's law, Gent) on a
+  gmsh mesh refined along that push path (:func:`flexsheet.fem.scene_mesh.scene_mesh` with ``refine_at``, full
+  body, the scene's support) is pushed by the rigid frictionless capsule finger 0 → 50 mm
+  (:func:`flexsheet.fem.reference.path_solver.solve_path_capsule`), the stable branch kept where the push is
+  bistable (:func:`flexsheet.fem.reference.path_solver.stable_states`), and every depth sampled on a grid over
+  the sphere in the stroke frame: θ (angle in the (e_a, e_b) plane from e_a, |θ| ≤ ``theta_max_deg``) × φ
+  (latitude toward e_c = e_a × e_b), display-frame components.
+* **Run time** (:meth:`SphereSnapshotModel.surface`): for a push with outward normal n at depth d, α = ∠(n,
+  e_a) and ψ the rotation about e_a that takes the stroke plane to n. Each rendered vertex is rotated back by
+  −ψ; for the two snapshot angles around α, the snapshot's field is rotated by δ_i = α − α_i within the plane
   (u(θ) ≈ Q(δ_i)·U_i(θ − δ_i), the cylinder's rotate-then-blend: about e_c this is *not* a symmetry — the
   support does not turn — so what the blend interpolates is the support's slow influence, as on the cylinder)
-  and the two are blended linearly in α and in d; the result is rotated by ψ (exact). Force and
-  stiffness dF/dd from the table's force, bilinear in (α, d).
+  and the two are blended linearly in α and in d; the result is rotated by ψ (exact). Force and stiffness
+  dF/dd from the table's force, bilinear in (α, d).
 
-Memory: float32, #α × #d × #θ × #φ × 3 × 4 bytes (≈ 64 MB for the default grid, 1° cells ≈ 0.62 mm on R 35 mm).
-Frames and units: display frame, m, N, rad (``_deg`` keys in degrees). Errors: ``ValueError`` naming the field.
-This module is the run-time side (grid, frame, key, look-up); the solves and the table's assembly are
+Memory: float32, #α × #d × #θ × #φ × 3 × 4 bytes (≈ 64 MB for the default grid, 1° cells ≈ 0.62 mm on R 35
+mm). Frames and units: display frame, m, N, rad (``_deg`` keys in degrees). Errors: ``ValueError`` naming the
+field. This module is the run-time side (grid, frame, key, look-up); the solves and the table's assembly are
 :mod:`flexsheet.fem.reference.sphere_build`.
 """
 
@@ -78,8 +79,9 @@ class SphereGrid:
 
     def key(self) -> str:
         """Text that fixes the grid (for cache keys)."""
-        return (f"a={','.join(f'{x:g}' for x in self.alphas_deg)},dmax={self.depth_max:g},dstep={self.depth_step:g},"
-                f"dth={self.dtheta_deg:g},dph={self.dphi_deg:g},thmax={self.theta_max_deg:g}")
+        return (f"a={','.join(f'{x:g}' for x in self.alphas_deg)},dmax={self.depth_max:g},dstep="
+                f"{self.depth_step:g},dth={self.dtheta_deg:g},dph={self.dphi_deg:g},thmax="
+                f"{self.theta_max_deg:g}")
 
     def depths(self) -> np.ndarray:
         """(D,) m: 0, step, … depth_max."""
@@ -97,8 +99,9 @@ class SphereGrid:
 
 
 DEFAULT_SPHERE_GRID = SphereGrid()
-#: the table's mesh: (h, h_fine, refine_radius, path_depth) m — h_fine 4.5 mm along the push path (the cylinder's
-#: next-to-finest level but one, for the build's time), the tube to 55 mm deep as the cylinder's reference
+#: the table's mesh: (h, h_fine, refine_radius, path_depth) m — h_fine 4.5
+#: mm along the push path (the cylinder's next-to-finest level but one, for
+#: the build's time), the tube to 55 mm deep as the cylinder's reference
 DEFAULT_SPHERE_SPEC = (0.012, 0.0045, 0.015, 0.055)
 
 
@@ -132,7 +135,8 @@ def sphere_frame(scene) -> SphereFrame:
     if o.kind != "sphere":
         raise ValueError(f"object.kind must be 'sphere' for a sphere table, got {o.kind!r}")
     if scene.support.kind != "back_half":
-        raise ValueError(f"support.kind must be 'back_half' (rotations about +x keep it), got {scene.support.kind!r}")
+        raise ValueError("support.kind must be 'back_half' (rotations about +x keep it), got "
+                         f"{scene.support.kind!r}")
     if scene.inclusions:
         raise ValueError(f"inclusions break the sphere's symmetry: {len(scene.inclusions)} given")
     st = scene.stroke
@@ -159,9 +163,9 @@ def grid_points(frame: SphereFrame, grid: SphereGrid) -> np.ndarray:
 
 
 class SphereSnapshotModel:
-    """Run-time look-up of a sphere table (:func:`flexsheet.fem.reference.sphere_build.assemble_table`) at the rendered ``vertices`` (S, 3) m (rest,
-    display frame); ``E`` Pa: the object's modulus (forces scale with it). ``ValueError`` when the table is
-    inconsistent."""
+    """Run-time look-up of a sphere table (:func:`flexsheet.fem.reference.sphere_build.assemble_table`) at the
+    rendered ``vertices`` (S, 3) m (rest, display frame); ``E`` Pa: the object's modulus (forces scale with
+    it). ``ValueError`` when the table is inconsistent."""
 
     def __init__(self, table: dict, vertices: np.ndarray, E: float | None = None):
         t = table
@@ -173,8 +177,10 @@ class SphereSnapshotModel:
         if self.field.shape != (len(self.alphas), len(self.depths), len(self.theta), len(self.phi), 3):
             raise ValueError(f"sphere table field {self.field.shape} does not match its axes")
         self.force = np.asarray(t["force"], float) * ((E / float(t["E"])) if E else 1.0)
-        self.max_strain, self.inverted = np.asarray(t["max_strain"], float), np.asarray(t["inverted"], np.int64)
-        self.frame = SphereFrame(np.asarray(t["center"], float), float(t["radius"]), np.asarray(t["axes"], float))
+        self.max_strain, self.inverted = np.asarray(t["max_strain"], float), np.asarray(t["inverted"],
+                                                                                        np.int64)
+        self.frame = SphereFrame(np.asarray(t["center"], float), float(t["radius"]),
+                                 np.asarray(t["axes"], float))
         v = np.asarray(vertices, float) - self.frame.center
         self._loc = v @ self.frame.axes.T                       # (S, 3) stroke-frame components (a, b, c)
         self._r = np.linalg.norm(v, axis=1)
@@ -187,9 +193,9 @@ class SphereSnapshotModel:
         return float(self.depths[-1])
 
     def radial_push(self, tip) -> tuple[np.ndarray, float]:
-        """(outward unit normal (3,), depth m) of the radial push whose leading point is ``tip`` (3,) m: the push
-        the table holds, exactly where the finger is (a contact normal taken from a surface sample nearby is
-        ~1° off on the scene's surface index, which moves the dent ~0.6 mm)."""
+        """(outward unit normal (3,), depth m) of the radial push whose leading point is ``tip`` (3,) m: the
+        push the table holds, exactly where the finger is (a contact normal taken from a surface sample nearby
+        is ~1° off on the scene's surface index, which moves the dent ~0.6 mm)."""
         rel = np.asarray(tip, float) - self.frame.center
         r = float(np.linalg.norm(rel))
         return (rel / r if r > 1e-12 else self.frame.axes[0].copy()), self.frame.radius - r
@@ -261,8 +267,10 @@ class SphereSnapshotModel:
 
 def sphere_table_key(scene, grid: SphereGrid = DEFAULT_SPHERE_GRID, spec=DEFAULT_SPHERE_SPEC) -> str:
     """Cache key (kind "spheresnap") of ``scene``'s table: the scene's values (:meth:`Scene.key`, its material
-    included), the grid, the mesh sizes, gmsh's version and the solver's versions — what the FEM node looks up."""
+    included), the grid, the mesh sizes, gmsh's version and the solver's versions — what the FEM node looks
+    up."""
     import gmsh
 
-    return cache_key(SPHERE_TABLE_VERSION, scene.key(), grid.key(), *(f"{x:.9g}" for x in spec), gmsh.__version__,
+    return cache_key(SPHERE_TABLE_VERSION, scene.key(), grid.key(), *(f"{x:.9g}" for x in spec),
+                     gmsh.__version__,
                      SOLVER_VERSION, UNLOAD_VERSION)

@@ -1,11 +1,10 @@
 """The paper's display geometry in the ``display`` frame, shared by every node (pure, no I/O).
 
-Frame ``display``: origin at the centre of the sheet in its home pose (the paper's imaginary screen),
-+x from the sheet toward the user (screen normal n_o), +y to the user's right (the user faces −x), +z up. Units m, rad.
-Note: the design card names +y "the user's left", but a right-handed frame with +x toward the user and +z
+Frame ``display``: origin at the centre of the sheet in its home pose (the paper's imaginary screen), +x from
+the sheet toward the user (screen normal n_o), +y to the user's right (the user faces −x), +z up. Units m,
+rad. Note: the design card names +y "the user's left", but a right-handed frame with +x toward the user and +z
 up has +y on the user's *right* (the user faces −x). All code uses right-handed coordinates and only the
-coordinates; the scene is symmetric in y, so the only effect is naming: the "left" arm/clamp is the one at
-+y.
+coordinates; the scene is symmetric in y, so the only effect is naming: the "left" arm/clamp is the one at +y.
 
 Sheet frame convention (used by :class:`messages.SheetTarget`, the planner, the arm bridges and the world;
 the functions that map it to the clamps and back live in :mod:`flexsheet.model.sheet`):

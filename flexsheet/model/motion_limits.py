@@ -26,9 +26,9 @@ STRETCH_RAMP_S = 0.01
 
 @dataclass(frozen=True)
 class MotionLimits:
-    """Bounds on the sheet motion: ``v_max`` m/s, ``a_max`` m/s², ``w_max`` rad/s, ``alpha_max`` rad/s²
-    (sheet centre and orientation), ``stretch_rate`` 1/s; the jerks and the strain's acceleration follow from
-    them (:attr:`j_max`, :attr:`jw_max`, :attr:`stretch_acc`, :attr:`stretch_jerk`). Defaults are conservative for
+    """Bounds on the sheet motion: ``v_max`` m/s, ``a_max`` m/s², ``w_max`` rad/s, ``alpha_max`` rad/s² (sheet
+    centre and orientation), ``stretch_rate`` 1/s; the jerks and the strain's acceleration follow from them
+    (:attr:`j_max`, :attr:`jw_max`, :attr:`stretch_acc`, :attr:`stretch_jerk`). Defaults are conservative for
     two RV-1A (rated composite speed 2.2 m/s) moving a 0.24 m sheet together; a human stroke is ≲ 0.1 m/s and
     ≲ 1 rad/s. Raises ``ValueError`` naming a bound that is not finite and positive."""
 

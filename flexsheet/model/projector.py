@@ -1,8 +1,8 @@
 """The projector model: a pinhole calibrated to the imaginary screen, and the viewer's eye positions.
 
-Pure (numpy). Frames: ``display`` (see :mod:`flexsheet.model.geometry`). Source: Furukawa et al. §IV (projector
-1000 mm behind and 250 mm below the screen, 0.7 mm per pixel on the screen, §VI); pinhole model after
-Hartley & Zisserman, *Multiple View Geometry*, §6.1.
+Pure (numpy). Frames: ``display`` (see :mod:`flexsheet.model.geometry`). Source: Furukawa et al. §IV
+(projector 1000 mm behind and 250 mm below the screen, 0.7 mm per pixel on the screen, §VI); pinhole model
+after Hartley & Zisserman, *Multiple View Geometry*, §6.1.
 """
 
 from __future__ import annotations
@@ -69,8 +69,8 @@ class Projector:
             if a.shape != (3, 3) or not np.all(np.isfinite(a)):
                 raise ValueError(f"projector {name} must be a finite 3x3 matrix, got shape {a.shape}")
         if not np.allclose(R.T @ R, np.eye(3), atol=1e-3) or np.linalg.det(R) < 0:
-            raise ValueError(f"projector R must be a rotation (columns = projector axes; a mirrored image is the "
-                             f"renderer's mirror_x, not a reflection in R), got {R.round(4).tolist()}")
+            raise ValueError("projector R must be a rotation (columns = projector axes; a mirrored image is "
+                             f"the renderer's mirror_x, not a reflection in R), got {R.round(4).tolist()}")
         return cls(K, R, d.position, width, height)
 
 

@@ -17,8 +17,10 @@ from pydantic import (
     model_validator,
 )
 
-__all__ = ["SceneError", "Pose", "CylinderObject", "SphereObject", "RoundedBoxObject", "MeshObject", "MaterialSpec",
-           "Support", "Finger", "Use", "ArcStroke", "PolylineStroke", "Inclusion", "rotation_rpy", "GENT_JM_RUBBER",
+__all__ = ["SceneError", "Pose", "CylinderObject", "SphereObject", "RoundedBoxObject", "MeshObject",
+           "MaterialSpec",
+           "Support", "Finger", "Use", "ArcStroke", "PolylineStroke", "Inclusion", "rotation_rpy",
+           "GENT_JM_RUBBER",
            "Vec3", "MAX_EXTENT", "SCENE_CONFIG"]
 
 
@@ -129,21 +131,22 @@ class MeshObject(BaseModel):
     pose: Pose = Pose(position=(0.0, 0.0, 0.0))
 
 
-#: Gent's limiting chain extensibility (the largest I₁ − 3) for natural rubber, fitted to Treloar's data (Gent, Rubber
-#: Chem. Technol. 69, 1996; the value used by Horgan & Saccomandi, Math. Mech. Solids 7, 2002 — recalled, not
-#: re-fitted here): the *weakest* strain-stiffening of the published fits (soft tissues fit far smaller Jm, i.e.
-#: stiffen sooner), so the Gent solid closest to neo-Hookean that still has a limiting stretch (equibiaxial
-#: λ ≤ 7.1, uniaxial ≤ 9.9). The paper's cylinder (:func:`paper_scene`, ``cylinder.yaml``) is this solid: a
-#: neo-Hookean body under the paper's 50 mm push has no mesh-converged solution at the fingertip (docs/fem.md)
+#: Gent's limiting chain extensibility (the largest I₁ − 3) for natural rubber, fitted to
+#: Treloar's data (Gent, Rubber Chem. Technol. 69, 1996; the value used by Horgan & Saccomandi,
+#: Math. Mech. Solids 7, 2002 — recalled, not re-fitted here): the *weakest* strain-stiffening of
+#: the published fits (soft tissues fit far smaller Jm, i.e. stiffen sooner), so the Gent solid
+#: closest to neo-Hookean that still has a limiting stretch (equibiaxial λ ≤ 7.1, uniaxial ≤ 9.9).
+#: The paper's cylinder (:func:`paper_scene`, ``cylinder.yaml``) is this solid: a neo-Hookean body
+#: under the paper's 50 mm push has no mesh-converged solution at the fingertip (docs/fem.md)
 GENT_JM_RUBBER = 97.2
 
 
 class MaterialSpec(BaseModel):
-    """Hyperelastic material of the object: ``model`` (``neo_hookean``, the default; ``gent``, a strain-stiffening
-    solid with limiting extensibility ``Jm`` = the largest I₁ − 3, Gent 1996, which needs ``Jm``; or ``linear``
-    small-strain elasticity), Young's modulus ``E`` Pa and Poisson's ratio ``nu`` (the small-strain limits of
-    either law: μ = E/(2(1+ν)), λ = Eν/((1+ν)(1−2ν))). Raises ``ValueError`` (pydantic) for ``gent`` without
-    ``Jm`` or ``Jm`` with another model."""
+    """Hyperelastic material of the object: ``model`` (``neo_hookean``, the default; ``gent``, a
+    strain-stiffening solid with limiting extensibility ``Jm`` = the largest I₁ − 3, Gent 1996, which needs
+    ``Jm``; or ``linear`` small-strain elasticity), Young's modulus ``E`` Pa and Poisson's ratio ``nu`` (the
+    small-strain limits of either law: μ = E/(2(1+ν)), λ = Eν/((1+ν)(1−2ν))). Raises ``ValueError`` (pydantic)
+    for ``gent`` without ``Jm`` or ``Jm`` with another model."""
 
     model_config = SCENE_CONFIG
     model: Literal["neo_hookean", "gent", "linear"] = "neo_hookean"
@@ -163,8 +166,8 @@ class MaterialSpec(BaseModel):
 class Support(BaseModel):
     """How the object rests: boundary points with (p − point)·normal ≤ ``tolerance`` are fixed.
 
-    ``back_half``: ``point`` = the object's centre, ``normal`` = +x (toward the user) — the half of the surface
-    away from the user is held (the paper's cylinder lying on its back; the FEM's original rule).
+    ``back_half``: ``point`` = the object's centre, ``normal`` = +x (toward the user) — the half of the
+    surface away from the user is held (the paper's cylinder lying on its back; the FEM's original rule).
     ``half_space``: explicit ``point`` (3,) m and ``normal`` (3,) (e.g. a base face: a point on it, normal
     pointing into the body)."""
 
@@ -190,9 +193,10 @@ class Support(BaseModel):
 
 class Finger(BaseModel):
     """The user's fingertip as the FEM and the world see it: a sphere of ``radius`` m, and how the object's
-    surface meets it in the nonlinear reference (``contact``, :data:`flexsheet.fem.reference.capsule_contact.CONTACT_LAWS`):
-    ``frictionless`` (the default: the surface slides freely over the fingertip) or ``sticking`` (a fingertip
-    that does not slip on the skin: a surface point that touched it moves with it). A modelling choice per
+    surface meets it in the nonlinear reference (``contact``,
+    :data:`flexsheet.fem.reference.capsule_contact.CONTACT_LAWS`): ``frictionless`` (the default: the surface
+    slides freely over the fingertip) or ``sticking`` (a fingertip that does not slip on the skin: a surface
+    point that touched it moves with it). A modelling choice per
     object: the rounded box's push beside its edge has a sliding mode under a frictionless fingertip that no
     Newton solve on its quick mesh got past 25 mm, and skin does not slide on silicone."""
 

@@ -1,5 +1,6 @@
-"""Triangle surfaces of a scene's object in the display frame: the cylinder's, the rounded box's, a mesh file's
-(trimesh; meshio as a fallback reader), and their corner normals (pure, no I/O beyond reading a mesh file)."""
+"""Triangle surfaces of a scene's object in the display frame: the cylinder's, the rounded box's, a mesh
+file's (trimesh; meshio as a fallback reader), and their corner normals (pure, no I/O beyond reading a mesh
+file)."""
 
 from __future__ import annotations
 
@@ -21,7 +22,8 @@ def cylinder_surface(radius: float, length: float, n_around: int = 96, n_along: 
     needs short edges): rings of ``n_around`` vertices at ``n_along`` + 1 heights, caps as fans around their
     centres. Returns (vertices (N, 3) float64 m, faces (M, 3) int64, outward winding)."""
     if n_around < 3 or n_along < 1 or not radius > 0 or not length > 0:
-        raise ValueError(f"bad cylinder: radius={radius}, length={length}, n_around={n_around}, n_along={n_along}")
+        raise ValueError(f"bad cylinder: radius={radius}, length={length}, n_around={n_around}, "
+                         f"n_along={n_along}")
     th = np.linspace(0.0, 2 * math.pi, n_around, endpoint=False)
     ys = np.linspace(-length / 2, length / 2, n_along + 1)
     ring = np.stack([radius * np.cos(th), np.zeros_like(th), radius * np.sin(th)], axis=1)
@@ -36,7 +38,7 @@ def cylinder_surface(radius: float, length: float, n_around: int = 96, n_along: 
     caps = np.stack([np.stack([np.full(n_around, base), (i + 1) % n_around, i], -1),
                      np.stack([np.full(n_around, base + 1), top + i, top + (i + 1) % n_around], -1)], 1)
     v = np.concatenate([v, [[0.0, -length / 2, 0.0], [0.0, length / 2, 0.0]]])
-    f = np.concatenate([side.reshape(-1, 3), caps.reshape(-1, 3)])[:, ::-1]     # counter-clockwise from outside
+    f = np.concatenate([side.reshape(-1, 3), caps.reshape(-1, 3)])[:, ::-1]  # counter-clockwise from outside
     return v, np.ascontiguousarray(f, dtype=np.int64)
 
 

@@ -1,20 +1,16 @@
-"""Scene files: the virtual object the display presents — its shape and pose, material, support, the finger and
-the stroke path (pure: numpy, pydantic, PyYAML, trimesh).
+"""Scene files: the virtual object the display presents — its shape and pose, material, support, the finger
+and the stroke path (pure: numpy, pydantic, PyYAML, trimesh).
 
 A scene is a YAML file beside the launch files (``launch/scenes/*.yaml``; docs/scenes.md)::
 
     name: cylinder
     description: the paper's cylinder (§VI-A)
-    object:                       # kind: cylinder | sphere | rounded_box | mesh
-      kind: cylinder
-      radius: 0.035355339059327376
-      length: 0.12
-      pose: {position: [-0.035355339059327376, 0.0, 0.0], rpy_deg: [0, 0, 0]}
-    material: {model: gent, E: 10000.0, nu: 0.45, Jm: 97.2}   # or {model: neo_hookean, E: ..., nu: ...}
-    support: {kind: back_half}    # or {kind: half_space, point: [...], normal: [...]}
-    finger: {radius: 0.008}
-    stroke: {kind: arc, start: [1, 0, 0], toward: [0, 0, 1], start_deg: 0, end_deg: 60}
-    inclusions: []                # stiffer spheres inside: [{name, center, radius, E, nu}]
+    object:                       # kind: cylinder | sphere | rounded_box | mesh kind: cylinder radius:
+      0.035355339059327376 length: 0.12 pose: {position: [-0.035355339059327376, 0.0, 0.0], rpy_deg: [0, 0,
+      0]} material: {model: gent, E: 10000.0, nu: 0.45, Jm: 97.2}   # or {model: neo_hookean, E: ..., nu: ...}
+      support: {kind: back_half}    # or {kind: half_space, point: [...], normal: [...]} finger: {radius:
+      0.008} stroke: {kind: arc, start: [1, 0, 0], toward: [0, 0, 1], start_deg: 0, end_deg: 60} inclusions:
+      []                # stiffer spheres inside: [{name, center, radius, E, nu}]
 
 Frames and units: every position is in the ``display`` frame (:mod:`flexsheet.model.geometry`), m; moduli Pa;
 angles in degrees where the key says ``_deg``. An object's local frame is placed by ``pose``: display point
@@ -26,7 +22,7 @@ object's *centre*: it must lie inside the body (the back-half support and arc st
 What each consumer calls:
 
 * renderer / viz: :meth:`Scene.surface_mesh` → (vertices (N, 3) float32 m, faces (M, 3) int32), closed,
-  outward-wound;
+outward-wound;
 * planner: :meth:`Scene.shape` → the :class:`flexsheet.model.shape_base.Shape` (analytic where it can be);
 * FEM: :meth:`Scene.write_surface` (a surface file gmsh can mesh), :meth:`Scene.fixed_mask` (support),
   :meth:`Scene.material_at` (E, ν per point: the inclusions), ``scene.material.model``, :meth:`Scene.key`
@@ -87,7 +83,8 @@ DEFAULT_SCENE_FILE = SCENES_DIR / "cylinder.yaml"
 MAX_SCENE_BYTES = 1 << 20
 
 
-ObjectSpec = Annotated[CylinderObject | SphereObject | RoundedBoxObject | MeshObject, Field(discriminator="kind")]
+ObjectSpec = Annotated[CylinderObject | SphereObject | RoundedBoxObject | MeshObject,
+                       Field(discriminator="kind")]
 
 
 StrokeSpec = Annotated[ArcStroke | PolylineStroke, Field(discriminator="kind")]
@@ -136,11 +133,13 @@ class Scene(BaseModel):
         return p if p.is_absolute() else (self._base_dir / p).resolve()
 
     def key(self) -> str:
-        """SHA-256 hex of the scene's values and its mesh file's bytes: a cache key for precomputed FEM data."""
+        """SHA-256 hex of the scene's values and its mesh file's bytes: a cache key for precomputed FEM
+        data."""
         # the default contact law is left out, so every key made before the field existed still holds (the
         # shipped tables' keys; tests/unit/model/test_scenes.py); so are what does not change the model: the
         # depths the scene is used at and the contact law's source
-        finger = {"contact", "contact_source"} if self.finger.contact == "frictionless" else {"contact_source"}
+        finger = {"contact",
+                  "contact_source"} if self.finger.contact == "frictionless" else {"contact_source"}
         h = hashlib.sha256(self.model_dump_json(exclude={"finger": finger, "use": True}).encode())
         if self.mesh_path is not None:
             h.update(self.mesh_path.read_bytes())
@@ -295,7 +294,7 @@ class Scene(BaseModel):
         out = np.empty((len(w), 3))
         for i, d in enumerate(w):
             lo, hi = 0.0, hi0
-            for _ in range(48):                          # bisection on the signed distance: hi0 / 2^48 < 1e-15 m
+            for _ in range(48):  # bisection on the signed distance: hi0 / 2^48 < 1e-15 m
                 mid = 0.5 * (lo + hi)
                 if shape.signed_distance(tuple(c + mid * d)) < 0.0:
                     lo = mid
@@ -346,8 +345,8 @@ class Scene(BaseModel):
         far = float(np.max(np.linalg.norm(m.vertices, axis=1)))
         if far > MAX_EXTENT:
             raise SceneError(f"{src}: key 'object.pose': position {list(self.object.pose.position)} puts the "
-                             f"object {far * 1e3:.0f} mm from the display origin; the display presents objects "
-                             f"within {MAX_EXTENT * 1e3:.0f} mm")
+                             f"object {far * 1e3:.0f} mm from the display origin; the display presents "
+                             f"objects within {MAX_EXTENT * 1e3:.0f} mm")
         if not self.contains(self.center[None])[0]:
             raise SceneError(f"{src}: key 'object.pose.position': the object's centre "
                              f"{np.round(self.center, 5).tolist()} is not inside the body")
@@ -358,14 +357,15 @@ class Scene(BaseModel):
                                  f"{inc.radius * 1e3:.1f} mm) is not inside the body: its centre "
                                  f"{list(inc.center)} is {-d * 1e3:.1f} mm deep")
         st = self.stroke
-        if st.kind == "arc" and st.center is not None and not self.contains(np.asarray(st.center, float)[None])[0]:
+        if (st.kind == "arc" and st.center is not None
+            and not self.contains(np.asarray(st.center, float)[None])[0]):
             raise SceneError(f"{src}: key 'stroke.center': {list(st.center)} is not inside the body")
         if st.kind == "polyline":
             bad = np.flatnonzero(self.contains(np.asarray(st.points, float)))
             if len(bad):
                 i = int(bad[0])
-                raise SceneError(f"{src}: key 'stroke.points.{i}': {list(st.points[i])} is inside the body; give "
-                                 "points in front of the surface (they are projected onto it)")
+                raise SceneError(f"{src}: key 'stroke.points.{i}': {list(st.points[i])} is inside the body; "
+                                 "give points in front of the surface (they are projected onto it)")
         try:
             self._stroke_table()
         except ValueError as exc:
@@ -387,7 +387,8 @@ def parse_scene(data, source: str = "<dict>", base_dir: str | os.PathLike = ".",
     resolves a relative mesh ``file``; ``check`` runs :meth:`Scene.check_geometry`. Raises
     :class:`SceneError` ``"<source>: key 'object.radius': <why> (value -0.01)"``."""
     if not isinstance(data, dict):
-        raise SceneError(f"{source}: a scene must be a mapping with 'name' and 'object', got {type(data).__name__}")
+        raise SceneError(f"{source}: a scene must be a mapping with 'name' and 'object', got "
+                         f"{type(data).__name__}")
     try:
         sc = Scene.model_validate(data)
     except ValidationError as exc:
@@ -437,16 +438,16 @@ def load_scene(path: str | os.PathLike) -> Scene:
 
 
 #: why every shipped scene's finger sticks (docs/scenes.md "Contact law")
-STICKING_SOURCE = ("µ of moist skin and rubber-like materials typically > 1 (Derler & Gerhardt, Tribol. Lett. "
-                   "45:1-27, 2012): no slip")
+STICKING_SOURCE = ("µ of moist skin and rubber-like materials typically > 1 (Derler & Gerhardt, Tribol. "
+                   "Lett. 45:1-27, 2012): no slip")
 
 
 def paper_scene() -> Scene:
     """The paper's cylinder (§VI-A) from :mod:`flexsheet.model.geometry`'s constants — what
-    ``launch/scenes/cylinder.yaml`` holds; the default wherever no scene is named. Its material is a Gent solid
-    (E 10 kPa, ν 0.45, Jm :data:`GENT_JM_RUBBER`): the neo-Hookean body the paper's 50 mm push was first
-    modelled with has no mesh-converged solution there (docs/fem.md, the material study). Its finger sticks (the
-    one contact law, :data:`STICKING_SOURCE`)."""
+    ``launch/scenes/cylinder.yaml`` holds; the default wherever no scene is named. Its material is a Gent
+    solid (E 10 kPa, ν 0.45, Jm :data:`GENT_JM_RUBBER`): the neo-Hookean body the paper's 50 mm push was first
+    modelled with has no mesh-converged solution there (docs/fem.md, the material study). Its finger sticks
+    (the one contact law, :data:`STICKING_SOURCE`)."""
     R = paper.CYLINDER_RADIUS
     if not np.allclose(paper.CYLINDER_AXIS, [0.0, 1.0, 0.0]):      # pragma: no cover - a constant
         raise ValueError("paper_scene assumes the cylinder axis +y (the local axis, no rotation)")
@@ -456,7 +457,8 @@ def paper_scene() -> Scene:
                material=MaterialSpec(model="gent", E=10e3, nu=0.45, Jm=GENT_JM_RUBBER),
                stroke=ArcStroke(kind="arc", start=(1.0, 0.0, 0.0), toward=(0.0, 0.0, 1.0), start_deg=0.0,
                                 end_deg=60.0),
-               use=Use(max_depth=0.05, stroke_depth=0.010, reason="the paper pushes its cylinder to 50 mm (Fig. 13)"),
+               use=Use(max_depth=0.05, stroke_depth=0.010, reason="the paper pushes its cylinder to 50 mm "
+                                                                  "(Fig. 13)"),
                finger=Finger(radius=0.008, contact="sticking", contact_source=STICKING_SOURCE))
     sc._source = "<paper>"
     return sc
@@ -467,7 +469,8 @@ def is_paper_cylinder(sc: Scene) -> bool:
     object the cylinder-specific FEM models and nonlinear snapshots were built for (material and stroke may
     differ)."""
     o, p = sc.object, paper_scene().object
-    return (o.kind == "cylinder" and np.allclose([o.radius, o.length], [p.radius, p.length], rtol=0, atol=1e-9)
+    return (o.kind == "cylinder"
+            and np.allclose([o.radius, o.length], [p.radius, p.length], rtol=0, atol=1e-9)
             and np.allclose(o.pose.position, p.pose.position, rtol=0, atol=1e-9)
             and np.allclose(o.pose.rpy_deg, p.pose.rpy_deg, rtol=0, atol=1e-9))
 

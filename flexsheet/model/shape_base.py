@@ -137,8 +137,9 @@ class Shape:
         return scale(t, norm(c) / tl)
 
     def arc_length(self, q0: Vec, q1: Vec, steps: int = 64) -> float:
-        """Surface (geodesic) length between surface points q0 and q1, m: exact for sphere/cylinder side/plane,
-        else the length of the straight chord's projection onto the surface in ``steps`` pieces."""
+        """Surface (geodesic) length between surface points q0 and q1, m: exact for sphere/cylinder
+        side/plane, else the length of the straight chord's projection onto the surface in ``steps``
+        pieces."""
         total = 0.0
         prev = q0
         for i in range(1, steps + 1):

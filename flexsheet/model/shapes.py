@@ -73,7 +73,8 @@ class Cylinder(Shape):
         """Point at ``angle`` rad around the axis, axial offset ``h`` m, distance ``radius`` m (default R)."""
         rr = self.R if radius is None else radius
         ca, sa = math.cos(angle), math.sin(angle)
-        rad = (self.e1[0] * ca + self.e2[0] * sa, self.e1[1] * ca + self.e2[1] * sa, self.e1[2] * ca + self.e2[2] * sa)
+        rad = (self.e1[0] * ca + self.e2[0] * sa, self.e1[1] * ca + self.e2[1] * sa,
+               self.e1[2] * ca + self.e2[2] * sa)
         return add(axpy(h, self.a, self.c), scale(rad, rr))
 
     def closest(self, p: Vec) -> tuple[Vec, Vec, float]:
@@ -272,7 +273,8 @@ class RoundedBox(Shape):
 
     def _dir_world(self, lp: Vec) -> Vec:
         a = self.ax
-        return (a[0][0] * lp[0] + a[1][0] * lp[1] + a[2][0] * lp[2], a[0][1] * lp[0] + a[1][1] * lp[1] + a[2][1] * lp[2],
+        return (a[0][0] * lp[0] + a[1][0] * lp[1] + a[2][0] * lp[2],
+                a[0][1] * lp[0] + a[1][1] * lp[1] + a[2][1] * lp[2],
                 a[0][2] * lp[0] + a[1][2] * lp[1] + a[2][2] * lp[2])
 
     def closest(self, p: Vec) -> tuple[Vec, Vec, float]:
@@ -441,7 +443,8 @@ def make_shape(kind: str, spec: dict[str, Any] | None = None) -> Shape:
     R = geometry.CYLINDER_RADIUS
     try:
         if kind == "cylinder":
-            d = {"center": tuple(geometry.CYLINDER_CENTER), "axis": tuple(geometry.CYLINDER_AXIS), "radius": R,
+            d = {"center": tuple(geometry.CYLINDER_CENTER), "axis": tuple(geometry.CYLINDER_AXIS),
+                 "radius": R,
                  "length": geometry.CYLINDER_LENGTH, "end_margin": None}
             d.update(spec)
             return Cylinder(**d)

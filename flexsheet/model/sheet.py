@@ -49,7 +49,8 @@ import numpy as np
 from flexsheet.model import geometry
 from flexsheet.model.checks import check_point, check_pose, check_positive, check_unit
 
-__all__ = ["Membrane", "DeflectionGrid", "SheetSurface", "TRUE_MODES", "neumann_green", "series_deflection", "sheet_rotation", "clamp_half_span", "stretch_of_span",
+__all__ = ["Membrane", "DeflectionGrid", "SheetSurface", "TRUE_MODES", "neumann_green", "series_deflection",
+           "sheet_rotation", "clamp_half_span", "stretch_of_span",
            "clamp_points", "clamp_poses", "frame_from_clamps"]
 
 #: number of modes of the reference ("true") membrane shape
@@ -94,7 +95,8 @@ def stretch_of_span(half_span: float, size: float = geometry.SHEET_SIZE) -> floa
 
 
 def clamp_points(origin: Sequence[float], axis_u: Sequence[float], stretch: float,
-                 size: float = geometry.SHEET_SIZE) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+                 size: float = geometry.SHEET_SIZE) -> tuple[tuple[float, float, float],
+                                                             tuple[float, float, float]]:
     """Left and right clamp points (3,) m: ``origin ± a·axis_u`` with a = :func:`clamp_half_span`.
 
     ``origin`` (3,) m and ``axis_u`` (3,) unit, any float sequences (plain tuples on the planner's hot path,
@@ -150,7 +152,8 @@ def frame_from_clamps(T_left, T_right) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return 0.5 * (pl + pr), n, eu, span / 2
 
 
-# -- the series form of a pushed sheet (the Membrane's, and the renderer's fitted shapes, which the fine shader draws)
+# -- the series form of a pushed sheet (the Membrane's, and
+# the renderer's fitted shapes, which the fine shader draws)
 def neumann_green(v, mu, v0: float, b: float, deriv: bool = False):
     """Neumann Green's function G(v; μ, v0) of g'' − μ²g = −δ(v − v0) on [−b, b] (zero slope at ±b), and
     dG/dv, for v (N,) m (clamped to [−b, b]) and μ (K,) 1/m: (N, K) arrays, in the overflow-free exponential
@@ -171,7 +174,8 @@ def neumann_green(v, mu, v0: float, b: float, deriv: bool = False):
 
 
 def series_deflection(u, v, lam, mu, coef, a: float, b: float, v0: float):
-    """(w, ∂w/∂u, ∂w/∂v) of w = Σ_i coef_i sin(lam_i (u + a)) G(v; mu_i, v0) at (u, v) m (broadcast; clamped onto
+    """(w, ∂w/∂u, ∂w/∂v) of w = Σ_i coef_i sin(lam_i (u + a)) G(v; mu_i, v0) at (u, v) m (broadcast; clamped
+    onto
     |u| ≤ a, |v| ≤ b), each of the broadcast shape; ``lam``, ``mu``, ``coef`` (K,)."""
     u, v = np.broadcast_arrays(np.asarray(u, dtype=float), np.asarray(v, dtype=float))
     shape = u.shape
@@ -187,8 +191,8 @@ def series_deflection(u, v, lam, mu, coef, a: float, b: float, v0: float):
 
 # -- pushed membrane -----------------------------------------------------------------------------------
 class DeflectionGrid:
-    """Mixin of every pushed-sheet shape (:class:`Membrane`, :class:`flexsheet.model.sheet_table.FemShape`, the
-    renderer's ``SeriesShape``): :meth:`grid` from the shape's ``half_span`` a, ``half_width`` b (m) and
+    """Mixin of every pushed-sheet shape (:class:`Membrane`, :class:`flexsheet.model.sheet_table.FemShape`,
+    the renderer's ``SeriesShape``): :meth:`grid` from the shape's ``half_span`` a, ``half_width`` b (m) and
     ``deflection(u, v)``."""
 
     def grid(self, n: int) -> np.ndarray:
@@ -239,8 +243,8 @@ class Membrane(DeflectionGrid):
         if self.depth < 0.0:
             raise ValueError(f"depth must be >= 0, got {self.depth!r}")
         if abs(self.push_u) >= a or abs(self.push_v) > b:
-            raise ValueError(f"pushed point (push_u, push_v)=({self.push_u!r}, {self.push_v!r}) lies outside the "
-                             f"sheet |u| < {a}, |v| <= {b}")
+            raise ValueError(f"pushed point (push_u, push_v)=({self.push_u!r}, {self.push_v!r}) lies outside "
+                             f"the sheet |u| < {a}, |v| <= {b}")
         k = np.arange(1, int(self.modes) + 1, dtype=float)
         lam = k * math.pi / (2.0 * a)
         mu = lam / math.sqrt(self.tension_ratio)
@@ -263,8 +267,10 @@ class Membrane(DeflectionGrid):
         return self.deflection_grad(u, v)[0]
 
     def deflection_grad(self, u, v):
-        """(w, ∂w/∂u, ∂w/∂v) at (u, v) (m, m/m, m/m), same broadcast shape as the inputs; see ``deflection``."""
-        return series_deflection(u, v, self.lam, self.mu, self.coef, self.half_span, self.half_width, self.push_v)
+        """(w, ∂w/∂u, ∂w/∂v) at (u, v) (m, m/m, m/m), same broadcast shape as the inputs; see
+        ``deflection``."""
+        return series_deflection(u, v, self.lam, self.mu, self.coef, self.half_span, self.half_width,
+                                 self.push_v)
 
 
 
@@ -276,9 +282,9 @@ class SheetSurface:
     right → left clamp; ``half_span`` a and ``half_width`` b (m) bound the sheet (|u| ≤ a, |v| ≤ b);
     ``membrane`` (or None for a flat sheet) gives the deflection along −normal — a :class:`Membrane` or any
     object with its interface (``push_u``, ``push_v``, ``depth``, ``deflection``, ``deflection_grad``,
-    ``grid``), e.g. the twin's true FEM shape :class:`flexsheet.model.sheet_table.FemShape`; ``size`` (m) is the
-    unstretched side between the clamps (for :attr:`stretch`). Raises ``ValueError`` on non-finite, zero or
-    non-orthogonal vectors and non-positive lengths (error names the field).
+    ``grid``), e.g. the twin's true FEM shape :class:`flexsheet.model.sheet_table.FemShape`; ``size`` (m) is
+    the unstretched side between the clamps (for :attr:`stretch`). Raises ``ValueError`` on non-finite, zero
+    or non-orthogonal vectors and non-positive lengths (error names the field).
     """
 
     origin: np.ndarray
@@ -316,7 +322,8 @@ class SheetSurface:
     def corners(self) -> np.ndarray:
         """(4, 3) corners in order around the sheet: (+u,+v), (−u,+v), (−u,−v), (+u,−v), m."""
         a, b, eu, ev = self.half_span, self.half_width, self.axis_u, self.axis_v
-        return np.array([self.origin + su * a * eu + sv * b * ev for su, sv in ((1, 1), (-1, 1), (-1, -1), (1, -1))])
+        return np.array([self.origin + su * a * eu + sv * b * ev for su,
+                         sv in ((1, 1), (-1, 1), (-1, -1), (1, -1))])
 
     @property
     def pushed_point(self) -> np.ndarray:
@@ -330,14 +337,18 @@ class SheetSurface:
         """Surface point for sheet coordinates u, v (arrays, m) → (..., 3) m."""
         u = np.asarray(u, dtype=float)
         v = np.asarray(v, dtype=float)
-        w = self.membrane.deflection(u, v) if self.membrane is not None else np.zeros(np.broadcast(u, v).shape)
-        return (self.origin + u[..., None] * self.axis_u + v[..., None] * self.axis_v - w[..., None] * self.normal)
+        w = (self.membrane.deflection(u, v) if self.membrane is not None
+             else np.zeros(np.broadcast(u, v).shape))
+        return (self.origin + u[..., None] * self.axis_u + v[..., None] * self.axis_v
+                - w[..., None] * self.normal)
 
     @classmethod
-    def from_clamps(cls, T_left: np.ndarray, T_right: np.ndarray, *, half_width: float = geometry.SHEET_SIZE / 2,
+    def from_clamps(cls, T_left: np.ndarray, T_right: np.ndarray, *,
+                    half_width: float = geometry.SHEET_SIZE / 2,
                     pushed_point: np.ndarray | None = None, membrane_kwargs: dict | None = None,
                     size: float = geometry.SHEET_SIZE) -> SheetSurface:
-        """Sheet from the two measured clamp poses T_display_clamp (4, 4) (convention of :mod:`flexsheet.model.geometry`).
+        """Sheet from the two measured clamp poses T_display_clamp (4, 4) (convention of
+        :mod:`flexsheet.model.geometry`).
 
         The frame comes from :func:`frame_from_clamps`. If ``pushed_point`` (3,) lies behind the plane
         (depth > 0) and inside the sheet, a :class:`Membrane` with that depth is attached (``membrane_kwargs``

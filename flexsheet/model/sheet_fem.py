@@ -49,10 +49,10 @@ deflection w (m, positive along −normal, away from the user).
 
 **Discretisation**: bilinear quadrilaterals (``skfem.ElementQuad1``) for u₁, u₂, w on a tensor-product mesh,
 ``h_fine`` (4 mm) over the central |u|, |v| ≤ ``fine_extent`` and ~``h_coarse`` (8 mm) outside; 3 × 3 Gauss
-points (so the contact cap is sampled every ~1.3 mm). scikit-fem provides the mesh, the basis (shape functions,
-gradients, quadrature weights) and the global coordinates; the element matrices of the nonlinear forms are
-evaluated with numpy ``einsum`` over all elements at once (the same integrals a ``BilinearForm`` would
-evaluate, ~20× faster) and solved with SciPy's SuperLU.
+points (so the contact cap is sampled every ~1.3 mm). scikit-fem provides the mesh, the basis (shape
+functions, gradients, quadrature weights) and the global coordinates; the element matrices of the nonlinear
+forms are evaluated with numpy ``einsum`` over all elements at once (the same integrals a ``BilinearForm``
+would evaluate, ~20× faster) and solved with SciPy's SuperLU.
 
 **Table**: :mod:`flexsheet.model.sheet_table` solves this once on a grid and interpolates it at 100 Hz.
 
@@ -86,10 +86,10 @@ class SheetPhysics:
 
     ``half_span`` a (m, clamps at u = ±a), ``half_width`` b (m, free edges at v = ±b), ``thickness`` t (m),
     ``young`` E (Pa), ``poisson`` ν, ``tension_u`` T_u (N/m, pre-tension along the clamp line),
-    ``tension_ratio`` β = T_v / T_u of a uniform pre-stress, or ``None``: the pre-stress of the sheet gripped on
-    its clamp edges, T_u·n(u, v) (:func:`flexsheet.model.sheet_prestress.gripped_prestress`: T_v/T_u ≈ 0.035 at
-    the centre of the square sheet, rising toward the grips), ``finger_radius`` ρ (m), ``penalty`` k (N/m³).
-    Raises ``ValueError`` naming the field for a non-positive or non-finite value (ν must lie in [0, 0.5]).
+    ``tension_ratio`` β = T_v / T_u of a uniform pre-stress, or ``None``: the pre-stress of the sheet gripped
+    on its clamp edges, T_u·n(u, v) (:func:`flexsheet.model.sheet_prestress.gripped_prestress`: T_v/T_u ≈
+    0.035 at the centre of the square sheet, rising toward the grips), ``finger_radius`` ρ (m), ``penalty`` k
+    (N/m³). Raises ``ValueError`` naming the field for a non-positive or non-finite value (ν in [0, 0.5)).
     """
 
     half_span: float
@@ -126,7 +126,8 @@ class SheetPhysics:
             raise ValueError(f"stretch must be finite and >= 0, got {stretch!r}")
         mat = SheetMaterial(young=float(truth.sheet_young), thickness=float(truth.sheet_thickness), size=size)
         strain = stretch * (1.0 - float(truth.grip_slip)) + float(truth.sheet_prestrain)
-        args = {"half_span": clamp_half_span(stretch, size), "half_width": size / 2, "young": float(truth.sheet_young),
+        args = {"half_span": clamp_half_span(stretch, size), "half_width": size / 2,
+                "young": float(truth.sheet_young),
                 "thickness": float(truth.sheet_thickness), "tension_u": tension(max(strain, 0.0), mat),
                 "tension_ratio": truth.tension_ratio}
         args.update(kw)
@@ -194,9 +195,8 @@ class SheetFEM:
 
     ``h_fine``/``h_coarse`` (m): element sizes inside/outside ``fine_extent`` (m) of the centre.
     Methods: :meth:`solve_indent` (rigid fingertip at a prescribed depth), :meth:`solve_pressure` (a uniform
-    pressure patch of prescribed force, for checks against the linear theory). Raises ``ValueError`` on bad
-    mesh sizes.
-    """
+    pressure patch of prescribed force, for checks against the linear theory). Raises ``ValueError`` on
+    bad mesh sizes."""
 
     def __init__(self, physics: SheetPhysics, h_fine: float = 0.004, h_coarse: float = 0.008,
                  fine_extent: float = 0.084) -> None:
@@ -205,7 +205,8 @@ class SheetFEM:
         for k, v in (("h_fine", h_fine), ("h_coarse", h_coarse), ("fine_extent", fine_extent)):
             check_positive(k, v)
         self.phys = physics
-        self.mesh_args = {"h_fine": float(h_fine), "h_coarse": float(h_coarse), "fine_extent": float(fine_extent)}
+        self.mesh_args = {"h_fine": float(h_fine), "h_coarse": float(h_coarse),
+                          "fine_extent": float(fine_extent)}
         a, b = physics.half_span, physics.half_width
         self.x = _axis_nodes(a, h_fine, h_coarse, fine_extent)
         self.y = _axis_nodes(b, h_fine, h_coarse, fine_extent)
@@ -263,7 +264,8 @@ class SheetFEM:
     def _fields(self, U: np.ndarray):
         Ue = U[self.edofs].reshape(-1, 4, 3)                        # (nel, 4, 3)
         def grad(c):
-            return (np.einsum("ea,eaq->eq", Ue[:, :, c], self.dNx), np.einsum("ea,eaq->eq", Ue[:, :, c], self.dNy))
+            return (np.einsum("ea,eaq->eq", Ue[:, :, c], self.dNx),
+                    np.einsum("ea,eaq->eq", Ue[:, :, c], self.dNy))
         u1x, u1y = grad(0)
         u2x, u2y = grad(1)
         g0, g1 = grad(2)
@@ -273,11 +275,11 @@ class SheetFEM:
         return g0, g1, w, e, Nst, u1x, u2y
 
     def _relaxed(self, e: np.ndarray, Nst: np.ndarray, tangent: bool = False):
-        """Tension-field relaxation (module doc) at every quadrature point: (W_rel − W₀, S, D, taut) with W the
-        strain energy density of the total strain E₀ + e (J/m², less its flat-sheet value W₀), S = T_rel − N⁰ the
-        relaxed total membrane stress less the pre-stress (3, nel, nq) N/m (Voigt), D (3, 3, n) = Newton's
-        ∂T_rel/∂E (N/m) at the n non-taut points (only with ``tangent``, else None) and the mask of taut points
-        (nel, nq), where the relaxed quantities are the plain ones, ½ e:C:e + N⁰:e, Nst and C."""
+        """Tension-field relaxation (module doc) at every quadrature point: (W_rel − W₀, S, D, taut) with W
+        the strain energy density of the total strain E₀ + e (J/m², less its flat-sheet value W₀), S = T_rel −
+        N⁰ the relaxed total membrane stress less the pre-stress (3, nel, nq) N/m (Voigt), D (3, 3, n) =
+        Newton's ∂T_rel/∂E (N/m) at the n non-taut points (only with ``tangent``, else None) and the mask of
+        taut points (nel, nq), where the relaxed quantities are the plain ones, ½ e:C:e + N⁰:e, Nst and C."""
         p = self.phys
         N0 = self._N0
         Et = e + self._E0
@@ -296,16 +298,18 @@ class SheetFEM:
             W0 = 0.5 * np.einsum("ieq,ieq->eq", self._E0, N0)
             rr = np.where(wrinkled, r, 1.0)
             c, sn = (Et[0] - Et[1]) / (2.0 * rr), Et[2] / (2.0 * rr)
-            a = np.stack([0.5 * (1.0 + c), 0.5 * (1.0 - c), 0.5 * sn])          # d e1 / dE (Voigt, eng. shear)
+            a = np.stack([0.5 * (1.0 + c), 0.5 * (1.0 - c), 0.5 * sn])  # d e1 / dE (Voigt, eng. shear)
             e1p = np.maximum(e1, 0.0)
-            Trel = np.where(wrinkled, Yt * e1p, 0.0) * a                          # uniaxial along n1, or slack
+            Trel = np.where(wrinkled, Yt * e1p, 0.0) * a  # uniaxial along n1, or slack
             soft = ~taut
             dens = np.where(soft, np.where(wrinkled, 0.5 * Yt * e1p ** 2, 0.0) - W0, dens)
             S = np.where(soft[None], Trel - N0, S)
             if tangent:
                 a, c, sn, k = a[:, soft], c[soft], sn[soft], np.where(wrinkled[soft], Yt, 0.0)
                 bvec = np.stack([sn, -sn, -c])
-                D = k * (np.einsum("in,jn->ijn", a, a) + (e1p[soft] / (4.0 * rr[soft])) * np.einsum("in,jn->ijn", bvec, bvec))
+                D = (k
+                     * (np.einsum("in,jn->ijn", a, a)
+                        + (e1p[soft] / (4.0 * rr[soft])) * np.einsum("in,jn->ijn", bvec, bvec)))
                 D += self.relax_eta * self.C[:, :, None]
         return dens, S, D, taut
 
@@ -313,7 +317,7 @@ class SheetFEM:
         p = self.phys
         g0, g1, w, e, Nst, u1x, u2y = self._fields(U)
         dens, _, _, _ = self._relaxed(e, Nst)
-        N0 = self._N0                                               # its work on the in-plane gradient: balanced
+        N0 = self._N0  # its work on the in-plane gradient: balanced
         dens = dens - N0[0] * u1x - N0[1] * u2y - N0[2] * (e[2] - g0 * g1)
         dens = dens + 0.5 * p.penalty * np.maximum(phi - w, 0.0) ** 2
         if load is not None:
@@ -348,7 +352,8 @@ class SheetFEM:
         dx = self.dx
         # residual
         r = np.einsum("ieqk,ieq->ek", B, Nst * dx)
-        rw = (dNx * ((N0[0] * g0 + N0[2] * g1) * dx)[:, :, None] + dNy * ((N0[2] * g0 + N0[1] * g1) * dx)[:, :, None]
+        rw = (dNx * ((N0[0] * g0 + N0[2] * g1) * dx)[:, :, None]
+              + dNy * ((N0[2] * g0 + N0[1] * g1) * dx)[:, :, None]
               - Nv * (pres * dx)[:, :, None]).sum(axis=1)
         if load is not None:
             rw -= (Nv * (load * dx)[:, :, None]).sum(axis=1)
@@ -356,18 +361,21 @@ class SheetFEM:
         r[:, :, 2] += rw
         # tangent: material Bᵀ C B + geometric (w-w block) + penalty
         CB = np.einsum("ij,jeqk->ieqk", self.C, B)
-        if D is not None:                                           # wrinkled/slack points: the relaxed tangent
+        if D is not None:  # wrinkled/slack points: the relaxed tangent
             soft = ~taut
             CB[:, soft, :] = np.einsum("ijn,jnk->ink", D, B[:, soft, :])
         CB *= dx[None, :, :, None]
         K = np.einsum("ieqk,ieql->ekl", B, CB).reshape(nel, 4, 3, 4, 3)
-        Kw = (np.einsum("eqa,eqb,eq->eab", dNx, dNx, T11 * dx) + np.einsum("eqa,eqb,eq->eab", dNy, dNy, T22 * dx)
-              + np.einsum("eqa,eqb,eq->eab", dNx, dNy, T12 * dx) + np.einsum("eqa,eqb,eq->eab", dNy, dNx, T12 * dx)
+        Kw = (np.einsum("eqa,eqb,eq->eab", dNx, dNx, T11 * dx)
+              + np.einsum("eqa,eqb,eq->eab", dNy, dNy, T22 * dx)
+              + np.einsum("eqa,eqb,eq->eab", dNx, dNy, T12 * dx)
+              + np.einsum("eqa,eqb,eq->eab", dNy, dNx, T12 * dx)
               + np.einsum("eqa,eqb,eq->eab", Nv, Nv, act * dx))
         K[:, :, 2, :, 2] += Kw
         R = np.zeros(self.ndof)
         np.add.at(R, self.edofs.ravel(), r.ravel())
-        data = np.bincount(self._slot, weights=K.reshape(nel, 12, 12).ravel()[self._keep], minlength=self._nnz)
+        data = np.bincount(self._slot, weights=K.reshape(nel, 12, 12).ravel()[self._keep],
+                           minlength=self._nnz)
         nf = self.free.size
         Kf = sp.csr_matrix((data, self._indices, self._indptr), shape=(nf, nf))
         return Kf, R[self.free], pres
@@ -399,7 +407,8 @@ class SheetFEM:
         K, R, _ = self._assemble(U, phi, load)
         rn = float(np.linalg.norm(R))
         if rn > 1e3 * tol:
-            raise ArithmeticError(f"sheet FEM: Newton did not converge in {max_iter} iterations (residual {rn:.3g} N)")
+            raise ArithmeticError(f"sheet FEM: Newton did not converge in {max_iter} iterations (residual "
+                                  f"{rn:.3g} N)")
         return U, it, rn
 
     def _solution(self, U, depth, u0, v0, force, iters, rn, pen) -> IndentSolution:
@@ -422,15 +431,16 @@ class SheetFEM:
     def solve_indent(self, depth, u0: float = 0.0, v0: float = 0.0, *, max_step: float = 0.010,
                      tol: float = 1e-7, max_iter: int = 40, start: IndentSolution | None = None
                      ) -> IndentSolution | list[IndentSolution]:
-        """Equilibrium under the rigid fingertip with its apex at ``depth`` S (m, > 0; or an increasing list of
-        depths → one solution per depth, continued from each other) at contact (u0, v0) (m).
+        """Equilibrium under the rigid fingertip with its apex at ``depth`` S (m, > 0; or an increasing list
+        of depths → one solution per depth, continued from each other) at contact (u0, v0) (m).
 
         Continuation from ``start`` (or the flat sheet) in steps ≤ ``max_step`` m; Newton until the residual
         ≤ ``tol`` N; a step whose Newton fails is retried in two halves (down to ``max_step``/64). Raises
         ``ValueError`` on a bad depth/contact, ``ArithmeticError`` if Newton still fails.
         """
         depths = [float(depth)] if np.ndim(depth) == 0 else [float(d) for d in depth]
-        if not depths or any(not (math.isfinite(d) and d > 0.0) for d in depths) or np.any(np.diff(depths) <= 0):
+        if (not depths or any(not (math.isfinite(d) and d > 0.0) for d in depths)
+            or np.any(np.diff(depths) <= 0)):
             raise ValueError(f"depth must be > 0 m (a list: strictly increasing), got {depth!r}")
         self._check_point(u0, v0)
         U = np.zeros(self.ndof)

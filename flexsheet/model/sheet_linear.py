@@ -24,7 +24,8 @@ def linear_patch_deflection(physics: SheetPhysics, force: float, half_side: floa
     ``ValueError`` for the gripped field (``physics.tension_ratio`` None).
     """
     if physics.gripped:
-        raise ValueError("tension_ratio must be a number (a uniform pre-stress) for the linear series, got None")
+        raise ValueError("tension_ratio must be a number (a uniform pre-stress) for the linear series, got "
+                         "None")
     a, b, c = physics.half_span, physics.half_width, float(half_side)
     Tu, Tv = physics.tension_u, physics.tension_ratio * physics.tension_u
     p = force / (2 * c) ** 2
@@ -34,9 +35,11 @@ def linear_patch_deflection(physics: SheetPhysics, force: float, half_side: floa
     nu_ = m * math.pi / (2 * b)
     Iu = (np.cos(lam * (a - c)) - np.cos(lam * (a + c))) / lam
     with np.errstate(divide="ignore", invalid="ignore"):
-        Iv = np.where(m == 0, 2 * c, (np.sin(nu_ * (b + c)) - np.sin(nu_ * (b - c))) / np.where(m == 0, 1, nu_))
+        Iv = np.where(m == 0, 2 * c,
+                      (np.sin(nu_ * (b + c)) - np.sin(nu_ * (b - c))) / np.where(m == 0, 1, nu_))
     normv = np.where(m == 0, 2 * b, b)
-    W = p * Iu[:, None] * Iv[None, :] / (a * normv[None, :]) / (Tu * lam[:, None] ** 2 + Tv * nu_[None, :] ** 2)
+    W = (p * Iu[:, None] * Iv[None, :] / (a * normv[None, :])
+         / (Tu * lam[:, None] ** 2 + Tv * nu_[None, :] ** 2))
     u, v = np.broadcast_arrays(np.asarray(u, float), np.asarray(v, float))
     su = np.sin(lam[None, :] * (u.ravel()[:, None] + a))
     cv = np.cos(nu_[None, :] * (v.ravel()[:, None] + b))

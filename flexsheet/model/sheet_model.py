@@ -1,30 +1,31 @@
-"""The display's pushed-sheet model: the geometrically nonlinear membrane FEM of the sheet gripped on its clamp
-edges, with the nominal material and the strain offset identified from pushes, sampled into a depth table that
-the renderer's "fine" shader reads from a texture (pure: numpy; the FEM from :mod:`flexsheet.model.sheet_fem`).
+"""The display's pushed-sheet model: the geometrically nonlinear membrane FEM of the sheet gripped on its
+clamp edges, with the nominal material and the strain offset identified from pushes, sampled into a depth
+table that the renderer's "fine" shader reads from a texture (pure: numpy; the FEM from
+:mod:`flexsheet.model.sheet_fem`).
 
 This is the display's only pushed-sheet shape: the renderer corrects its image for it (``RendererState``
 attaches it to every push, :meth:`NominalSheetModel.pushed`) and the Foxglove bridge draws it as the sheet the
 display believes in (:meth:`flexsheet.viz.scene_builder.SceneBuilder.believed_sheet`); both build it with
 :func:`sheet_model_for` from the same :class:`SheetConfig`. It is the sheet the planner presses against: the
-planner's force model (:mod:`flexsheet.model.tension`) and this shape take the same identified strain offset ε₀
-from ``display.yaml``'s ``sheet`` entry (``flexsheet calibrate sheet``), and both describe a sheet gripped on
-two edges and free on the others (T_v/T_u ≈ 0.035 at its centre: :mod:`flexsheet.model.sheet_prestress`).
+planner's force model (:mod:`flexsheet.model.tension`) and this shape take the same identified strain offset
+ε₀ from ``display.yaml``'s ``sheet`` entry (``flexsheet calibrate sheet``), and both describe a sheet gripped
+on two edges and free on the others (T_v/T_u ≈ 0.035 at its centre: :mod:`flexsheet.model.sheet_prestress`).
 
 1. **Tables** (:meth:`NominalSheetModel.table`): :class:`flexsheet.model.sheet_table.IndentTable` of
-   :class:`flexsheet.model.sheet_fem.SheetPhysics` with what the display knows — the sheet's NOMINAL size, E and
-   thickness (the shape does not depend on E or t: the pre-tension and the push's stiffness scale together), the
-   gripped pre-stress, and the tension of the sheet's own strain, clamp strain + ε₀, on nodes every
-   ``stretch_step``. Never the twin's truth (:mod:`flexsheet.twin.truth`: its E, thickness, pre-strain and grip
-   slip are drawn, and only the presses' fit ε₀ reaches the display). Solved once per node (~2 min of one core
-   for the 9 contact positions) and cached on disk; the default model's tables ship (:data:`SHIPPED_TABLES`).
-2. **Depth table** (:meth:`NominalSheetModel.shape`): per push (measured clamp span, depth, contact) the
-   tables of the two strain nodes around clamp strain + ε₀ are evaluated on a uniform grid over the sheet every
-   ``grid_step`` (:func:`table_grid`) and blended linearly in strain: a :class:`SampledShape`, read between
-   samples by bilinear interpolation in numpy and, from a texture, in the shader (``shaders/correct.vert``).
-   Cached (LRU) on the contact rounded to 0.1 mm.
-3. **In the nodes**: :meth:`NominalSheetModel.shape` with ``build=False`` never builds a missing table in the
-   caller's thread (a :class:`PendingPush` instead); the renderer node builds it in a worker process
-   (:func:`flexsheet.rendering.state.build_table`), the bridge draws the push as 4 triangles meanwhile.
+   :class:`flexsheet.model.sheet_fem.SheetPhysics` with what the display knows — the sheet's NOMINAL size, E
+   and thickness (the shape does not depend on E or t: the pre-tension and the push's stiffness scale
+   together), the gripped pre-stress, and the tension of the sheet's own strain, clamp strain + ε₀, on nodes
+   every ``stretch_step``. Never the twin's truth (:mod:`flexsheet.twin.truth`: its E, thickness, pre-strain
+   and grip slip are drawn, and only the presses' fit ε₀ reaches the display). Solved once per node (~2 min of
+   one core for the 9 contact positions) and cached on disk; the default model's tables ship
+(:data:`SHIPPED_TABLES`). 2. **Depth table** (:meth:`NominalSheetModel.shape`): per push (measured clamp span,
+depth, contact) the tables of the two strain nodes around clamp strain + ε₀ are evaluated on a uniform grid
+over the sheet every ``grid_step`` (:func:`table_grid`) and blended linearly in strain: a
+:class:`SampledShape`, read between samples by bilinear interpolation in numpy and, from a texture, in the
+shader (``shaders/correct.vert``). Cached (LRU) on the contact rounded to 0.1 mm. 3. **In the nodes**:
+:meth:`NominalSheetModel.shape` with ``build=False`` never builds a missing table in the caller's thread (a
+:class:`PendingPush` instead); the renderer node builds it in a worker process
+(:func:`flexsheet.rendering.state.build_table`), the bridge draws the push as 4 triangles meanwhile.
 
 Units: m, sheet frame (u along axis_u, v along axis_v, w along −normal), as :mod:`flexsheet.model.sheet`.
 """
@@ -42,24 +43,20 @@ import numpy as np
 from flexsheet.manifest import record
 from flexsheet.model import geometry
 from flexsheet.model.checks import check_positive
-from flexsheet.model.sheet import (
-    DeflectionGrid,
-    SheetSurface,
-    clamp_half_span,
-    stretch_of_span,
-)
+from flexsheet.model.sheet import DeflectionGrid, SheetSurface, clamp_half_span, stretch_of_span
 from flexsheet.model.sheet_fem import SheetPhysics
 from flexsheet.model.sheet_table import TABLE_POSITIONS, IndentTable, default_cache_dir
 from flexsheet.model.tension import SheetMaterial, tension
 
 log = logging.getLogger(__name__)
 
-#: the default model's tables at sheet strains 0.01–0.11 (the bridges' span band and one step past it), shipped
-#: so that no display builds them while it runs (a table build beside the running graph slowed the loop:
-#: flexsheet/runtime/background.py). Regenerate: ``python -m flexsheet.model.sheet_model --ship``.
+#: the default model's tables at sheet strains 0.01–0.11 (the bridges' span band and one step past it),
+#: shipped so that no display builds them while it runs (a table build beside the running graph slowed the
+#: loop: flexsheet/runtime/background.py). Regenerate: ``python -m flexsheet.model.sheet_model --ship``.
 SHIPPED_TABLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "sheet_tables")
 
-__all__ = ["SampledShape", "GRID_STEP", "grid_size", "PendingPush", "FourTriangleDent", "believed_sheet", "drawable", "NominalSheetModel",
+__all__ = ["SampledShape", "GRID_STEP", "grid_size", "PendingPush", "FourTriangleDent", "believed_sheet",
+           "drawable", "NominalSheetModel",
            "MODEL_DEPTHS", "table_grid", "contact_of", "SheetConfig", "sheet_model_for",
            "ship_tables", "SHIPPED_TABLES"]
 
@@ -71,8 +68,9 @@ GRID_STEP = 0.002
 
 def _bilinear(W: np.ndarray, a: float, b: float, u, v):
     """(w, ∂w/∂u, ∂w/∂v) of the bilinear interpolant of ``W`` (nu, nv) on the uniform grid over u ∈ [−a, a] ×
-    v ∈ [−b, b] at (u, v) (broadcast; clamped onto the sheet). The derivatives are the interpolant's own, within
-    the cell the point falls in. The GLSL ``membrane()`` of ``shaders/correct.vert`` computes the same."""
+    v ∈ [−b, b] at (u, v) (broadcast; clamped onto the sheet). The derivatives are the interpolant's own,
+    within the cell the point falls in. The GLSL ``membrane()`` of ``shaders/correct.vert`` computes the
+    same."""
     nu, nv = W.shape
     du, dv = 2.0 * a / (nu - 1), 2.0 * b / (nv - 1)
     u, v = np.broadcast_arrays(np.asarray(u, float), np.asarray(v, float))
@@ -89,22 +87,23 @@ def _bilinear(W: np.ndarray, a: float, b: float, u, v):
 
 
 def grid_size(half_span: float, half_width: float, step: float = GRID_STEP) -> tuple[int, int]:
-    """(nu, nv): samples of a depth table over the sheet 2a × 2b (``half_span`` a, ``half_width`` b, m) spaced no
-    more than ``step`` m. Raises ``ValueError`` for a non-positive size or step."""
+    """(nu, nv): samples of a depth table over the sheet 2a × 2b (``half_span`` a, ``half_width`` b, m) spaced
+    no more than ``step`` m. Raises ``ValueError`` for a non-positive size or step."""
     half_span, half_width, step = (check_positive(k, x) for k, x in
                                    (("half_span", half_span), ("half_width", half_width), ("step", step)))
-    return int(math.ceil(2.0 * half_span / step - 1e-9)) + 1, int(math.ceil(2.0 * half_width / step - 1e-9)) + 1
+    return (int(math.ceil(2.0 * half_span / step - 1e-9)) + 1,
+            int(math.ceil(2.0 * half_width / step - 1e-9)) + 1)
 
 
 @dataclass(frozen=True)
 class SampledShape(DeflectionGrid):
-    """A pushed-sheet deflection as the renderer draws it: a depth table ``w`` (nu, nv) float32, m along −normal,
-    sampled at u_i = −a + i·2a/(nu − 1), v_j = −b + j·2b/(nv − 1) (``half_span`` a, ``half_width`` b, m), read
-    between samples by bilinear interpolation (:meth:`deflection_grad`; the fine shader samples the same table
-    from a texture). ``push_u``, ``push_v``, ``depth`` m: the contact it was sampled for; ``source``: one line
-    saying what was sampled. The interface of :class:`flexsheet.model.sheet.Membrane`, so a
-    :class:`SheetSurface` can carry it. Raises ``ValueError`` naming ``w`` for a table that is not 2-D, smaller
-    than 2×2 or not finite."""
+    """A pushed-sheet deflection as the renderer draws it: a depth table ``w`` (nu, nv) float32, m along
+    −normal, sampled at u_i = −a + i·2a/(nu − 1), v_j = −b + j·2b/(nv − 1) (``half_span`` a, ``half_width`` b,
+    m), read between samples by bilinear interpolation (:meth:`deflection_grad`; the fine shader samples the
+    same table from a texture). ``push_u``, ``push_v``, ``depth`` m: the contact it was sampled for;
+    ``source``: one line saying what was sampled. The interface of :class:`flexsheet.model.sheet.Membrane`, so
+    a :class:`SheetSurface` can carry it. Raises ``ValueError`` naming ``w`` for a table that is not 2-D,
+    smaller than 2×2 or not finite."""
 
     half_span: float
     half_width: float
@@ -144,15 +143,15 @@ def table_grid(table: IndentTable, depth: float, push_u: float, push_v: float, u
                half_span: float) -> np.ndarray:
     """The table's shape on the tensor grid u (nu,) × v (nv,) m → (nu, nv) m for the measured clamp half span
     ``half_span`` m: :meth:`flexsheet.model.sheet_table.IndentTable.evaluate_grid` (equal to the point-wise
-    :meth:`~flexsheet.model.sheet_table.IndentTable.evaluate` to rounding, ``tests/unit/model/test_sheet_model.py``).
-    The depth table's per-push cost is this."""
+    :meth:`~flexsheet.model.sheet_table.IndentTable.evaluate` to rounding,
+    ``tests/unit/model/test_sheet_model.py``). The depth table's per-push cost is this."""
     return table.evaluate_grid(depth, push_u, push_v, u, v, half_span)
 
 
 def contact_of(sheet: SheetSurface, point) -> tuple[float, float, float]:
-    """(depth S, push_u, push_v) m of a fingertip ``point`` (3,) m on the flat ``sheet``: S = distance behind the
-    sheet plane along −normal, (push_u, push_v) its position in the sheet frame. Raises ``ValueError`` for a
-    non-finite point."""
+    """(depth S, push_u, push_v) m of a fingertip ``point`` (3,) m on the flat ``sheet``: S = distance behind
+    the sheet plane along −normal, (push_u, push_v) its position in the sheet frame. Raises ``ValueError`` for
+    a non-finite point."""
     p = np.asarray(point, dtype=float)
     if p.shape != (3,) or not np.all(np.isfinite(p)):
         raise ValueError(f"fingertip must be a finite (3,) point in m, got {point!r}")
@@ -176,11 +175,11 @@ class PendingPush:
 
 @dataclass(frozen=True)
 class FourTriangleDent(DeflectionGrid):
-    """The renderer's 4-triangle pushed sheet (paper §III-C-3: triangles (pushed point, corner i, corner i+1)),
-    as a deflection for drawing: w(u, v) = depth · min((a − u)/(a − u0), (u + a)/(u0 + a), (b − v)/(b − v0),
-    (v + b)/(v0 + b)) m along −normal (the tent over the sheet's rectangle with its apex at the contact
-    (u0, v0) = (``push_u``, ``push_v``)). The viz draws it for a :class:`PendingPush` (the table of
-    that strain is not built yet), which the renderer corrects with ``four_triangle``."""
+    """The renderer's 4-triangle pushed sheet (paper §III-C-3: triangles (pushed point, corner i, corner
+    i+1)), as a deflection for drawing: w(u, v) = depth · min((a − u)/(a − u0), (u + a)/(u0 + a), (b − v)/(b −
+    v0), (v + b)/(v0 + b)) m along −normal (the tent over the sheet's rectangle with its apex at the contact
+    (u0, v0) = (``push_u``, ``push_v``)). The viz draws it for a :class:`PendingPush` (the table of that
+    strain is not built yet), which the renderer corrects with ``four_triangle``."""
 
     half_span: float
     half_width: float
@@ -194,8 +193,10 @@ class FourTriangleDent(DeflectionGrid):
         u = np.clip(np.asarray(u, dtype=float), -a, a)
         v = np.clip(np.asarray(v, dtype=float), -b, b)
         tiny = 1e-12                        # a contact on a free edge (|v0| = b) leaves that side vertical
-        lam = np.minimum(np.minimum((a - u) / max(a - self.push_u, tiny), (u + a) / max(self.push_u + a, tiny)),
-                         np.minimum((b - v) / max(b - self.push_v, tiny), (v + b) / max(self.push_v + b, tiny)))
+        lam = np.minimum(np.minimum((a - u) / max(a - self.push_u, tiny),
+                                    (u + a) / max(self.push_u + a, tiny)),
+                         np.minimum((b - v) / max(b - self.push_v, tiny),
+                                    (v + b) / max(self.push_v + b, tiny)))
         return self.depth * np.clip(lam, 0.0, 1.0)
 
 
@@ -218,20 +219,22 @@ def drawable(sheet: SheetSurface) -> SheetSurface:
     corrects with meanwhile), so that it can be drawn; any other sheet unchanged."""
     m = sheet.membrane
     if isinstance(m, PendingPush):
-        return replace(sheet, membrane=FourTriangleDent(m.half_span, m.half_width, m.push_u, m.push_v, m.depth))
+        return replace(sheet,
+                       membrane=FourTriangleDent(m.half_span, m.half_width, m.push_u, m.push_v, m.depth))
     return sheet
 
 
 class NominalSheetModel:
-    """The pushed sheet as the renderer models it: FEM tables of the sheet gripped on its clamp edges per sheet
-    strain node, sampled into depth tables (module doc). ``material``: nominal sheet (:class:`SheetMaterial`);
-    ``strain_offset``: the identified ε₀ of ``display.yaml``'s ``sheet`` entry (the sheet's strain is the clamp
-    strain + ε₀; 0 without one); ``tension_ratio``: None for the gripped pre-stress (default), or an ASSUMED
-    uniform T_v/T_u (a comparison, not the display's model); ``stretch_step``: spacing of the table nodes;
-    ``depths``, ``positions`` (m) and ``mesh``: the tables (:class:`IndentTable`); ``cache_dir``: where they are
-    cached (default :func:`flexsheet.model.sheet_table.default_cache_dir`); ``grid_step`` m: the depth table's
-    sample spacing (:class:`SampledShape`, :data:`GRID_STEP`). Table builds log their progress. Raises
-    ``ValueError`` naming the setting and value on a bad one."""
+    """The pushed sheet as the renderer models it: FEM tables of the sheet gripped on its clamp edges per
+    sheet strain node, sampled into depth tables (module doc). ``material``: nominal sheet
+    (:class:`SheetMaterial`); ``strain_offset``: the identified ε₀ of ``display.yaml``'s ``sheet`` entry (the
+    sheet's strain is the clamp strain + ε₀; 0 without one); ``tension_ratio``: None for the gripped
+    pre-stress (default), or an ASSUMED uniform T_v/T_u (a comparison, not the display's model);
+    ``stretch_step``: spacing of the table nodes; ``depths``, ``positions`` (m) and ``mesh``: the tables
+    (:class:`IndentTable`); ``cache_dir``: where they are cached (default
+    :func:`flexsheet.model.sheet_table.default_cache_dir`); ``grid_step`` m: the depth table's sample spacing
+    (:class:`SampledShape`, :data:`GRID_STEP`). Table builds log their progress. Raises ``ValueError`` naming
+    the setting and value on a bad one."""
 
     def __init__(self, material: SheetMaterial | None = None, *, strain_offset: float = 0.0,
                  tension_ratio: float | None = None, stretch_step: float = 0.01, depths=MODEL_DEPTHS,
@@ -269,9 +272,9 @@ class NominalSheetModel:
         return m
 
     def node_of(self, stretch: float) -> float:
-        """The table node nearest the sheet's strain at clamp strain ``stretch`` (``stretch`` + ``strain_offset``),
-        at least one step (the planner never leaves the sheet slack: ``SheetMaterial.min_stretch`` = 0.01; an
-        unstretched membrane has no pre-tension)."""
+        """The table node nearest the sheet's strain at clamp strain ``stretch`` (``stretch`` +
+        ``strain_offset``), at least one step (the planner never leaves the sheet slack:
+        ``SheetMaterial.min_stretch`` = 0.01; an unstretched membrane has no pre-tension)."""
         st = self.stretch_step
         return round(max(st, round((float(stretch) + self.strain_offset) / st) * st), 6)
 
@@ -280,13 +283,14 @@ class NominalSheetModel:
         does not depend on E or t: T and the stiffness of the push scale together), clamp half span and
         T_u = tension at that strain, the gripped pre-stress (or the assumed ``tension_ratio``)."""
         size = self.material.size
-        return SheetPhysics(half_span=clamp_half_span(node, size), half_width=size / 2, young=self.material.young,
+        return SheetPhysics(half_span=clamp_half_span(node, size), half_width=size / 2,
+                            young=self.material.young,
                             thickness=self.material.thickness, tension_u=tension(node, self.material),
                             tension_ratio=self.tension_ratio)
 
     def table(self, node: float) -> IndentTable:
-        """The table at strain node ``node`` (shipped, or built once and cached on disk; a build takes ~2 min of
-        one core)."""
+        """The table at strain node ``node`` (shipped, or built once and cached on disk; a build takes ~2 min
+        of one core)."""
         if node not in self._tables:
             ph = self.physics(node)
             if ph.tension_u <= 0.0:
@@ -311,14 +315,16 @@ class NominalSheetModel:
         return min(have, key=lambda n: (abs(n - node), n)) if have else None
 
     def on_disk(self, node: float) -> bool:
-        """Whether the table at ``node`` is loaded or cached on disk (a file check; loads nothing, builds nothing)."""
+        """Whether the table at ``node`` is loaded or cached on disk (a file check; loads nothing, builds
+        nothing)."""
         if node in self._tables:
             return True
         key = IndentTable.key_of(self.physics(node), self.depths, self.positions, self.mesh)
         return os.path.isfile(os.path.join(self._folder_of(node), f"indent_{key}.npz"))
 
     def available(self, node: float) -> bool:
-        """Whether the table at ``node`` is loaded, or on disk (then it is loaded now, ~10 ms); never builds."""
+        """Whether the table at ``node`` is loaded, or on disk (then it is loaded now, ~10 ms); never
+        builds."""
         if node not in self._tables:
             tab = IndentTable.cached(self.physics(node), self.depths, self.positions, mesh=self.mesh,
                                      cache_dir=self._folder_of(node))
@@ -332,15 +338,16 @@ class NominalSheetModel:
         return self.node_of(stretch_of_span(half_span, self.material.size))
 
     def grid_of(self, half_span: float, half_width: float) -> tuple[int, int]:
-        """(nu, nv): samples of the depth table over the sheet 2a × 2b (m), :func:`grid_size` at ``grid_step``."""
+        """(nu, nv): samples of the depth table over the sheet 2a × 2b (m), :func:`grid_size` at
+        ``grid_step``."""
         return grid_size(half_span, half_width, self.grid_step)
 
     def shape(self, half_span: float, depth: float, push_u: float, push_v: float,
               half_width: float = geometry.SHEET_SIZE / 2, build: bool = True) -> SampledShape | None:
-        """The pushed shape for the measured clamp half span (m), depth (m, > 0) and contact (m) as a depth table
-        (:class:`SampledShape`, :meth:`grid_of` samples of the FEM table, :func:`table_grid`); with ``build``
-        False, None when the table of its node is not built yet (:meth:`available`). Cached (LRU) on the
-        contact rounded to 0.1 mm. Raises ``ValueError`` for a depth that is not > 0."""
+        """The pushed shape for the measured clamp half span (m), depth (m, > 0) and contact (m) as a depth
+        table (:class:`SampledShape`, :meth:`grid_of` samples of the FEM table, :func:`table_grid`); with
+        ``build`` False, None when the table of its node is not built yet (:meth:`available`). Cached (LRU) on
+        the contact rounded to 0.1 mm. Raises ``ValueError`` for a depth that is not > 0."""
         if not (math.isfinite(depth) and depth > 0.0):
             raise ValueError(f"depth must be finite and > 0, got {depth!r}")
         strain = stretch_of_span(half_span, self.material.size) + self.strain_offset
@@ -369,8 +376,8 @@ class NominalSheetModel:
 
     def blend_of(self, strain: float) -> list[tuple[float, float]]:
         """[(node, weight), ...]: the table nodes whose shapes, blended linearly, give the sheet at ``strain``
-        (the sheet's own strain, clamp strain + ``strain_offset``): the two around it, or one where the other's
-        weight is below 1 % (a shape change of ≲ 2 µm; at least one step, as :meth:`node_of`)."""
+        (the sheet's own strain, clamp strain + ``strain_offset``): the two around it, or one where the
+        other's weight is below 1 % (a shape change of ≲ 2 µm; at least one step, as :meth:`node_of`)."""
         st = self.stretch_step
         x = max(float(strain), st) / st
         lo = math.floor(x + 1e-9)
@@ -396,12 +403,13 @@ class NominalSheetModel:
         m = sheet.membrane
         if m is None or m.depth <= 0.0:
             return sheet
-        return replace(sheet, membrane=self.shape(sheet.half_span, m.depth, m.push_u, m.push_v, sheet.half_width))
+        return replace(sheet,
+                       membrane=self.shape(sheet.half_span, m.depth, m.push_u, m.push_v, sheet.half_width))
 
     def pushed(self, flat: SheetSurface, finger, threshold: float = 0.0, build: bool = True) -> SheetSurface:
-        """The sheet ``flat`` (from the clamps) pushed by the fingertip ``finger`` (3,) m, or ``flat`` itself when
-        the finger is no more than ``threshold`` m behind it or off the sheet. Its membrane is this model's
-        shape, or, with ``build`` False and a table it needs not built yet, a :class:`PendingPush`.
+        """The sheet ``flat`` (from the clamps) pushed by the fingertip ``finger`` (3,) m, or ``flat`` itself
+        when the finger is no more than ``threshold`` m behind it or off the sheet. Its membrane is this
+        model's shape, or, with ``build`` False and a table it needs not built yet, a :class:`PendingPush`.
         Raises ``ValueError`` for a non-finite finger."""
         depth, pu, pv = contact_of(flat, finger)
         a, b = flat.half_span, flat.half_width
@@ -416,23 +424,24 @@ class NominalSheetModel:
         """JSON-able description (for reports)."""
         return {"name": "fem_gripped" if self.tension_ratio is None else "fem_uniform",
                 "young_Pa": self.material.young, "strain_offset": self.strain_offset,
-                "tension_ratio": self.tension_ratio, "stretch_step": self.stretch_step, "depths_m": list(self.depths),
+                "tension_ratio": self.tension_ratio, "stretch_step": self.stretch_step,
+                "depths_m": list(self.depths),
                 "positions_m": list(self.positions), "mesh": self.mesh, "grid_step_m": self.grid_step,
-                "note": "nominal E and size, the identified strain offset (display.yaml sheet entry); never the "
-                        "truth's"}
+                "note": "nominal E and size, the identified strain offset (display.yaml sheet entry); never "
+                        "the truth's"}
 
 
 @dataclass(frozen=True)
 class SheetConfig:
-    """How the display turns clamp poses and the fingertip into the sheet it believes in (the renderer corrects
-    for it, the Foxglove bridge draws it).
+    """How the display turns clamp poses and the fingertip into the sheet it believes in (the renderer
+    corrects for it, the Foxglove bridge draws it).
 
     ``half_width`` m: half the free-edge length; ``push_threshold`` m: depth behind the flat sheet that counts
     as a push; the pushed sheet's model (:func:`sheet_model_for`): ``grid_step`` m the depth table's sample
     spacing, ``strain_offset`` the identified ε₀ (``display.yaml``'s ``sheet`` entry; 0 without one),
-    ``tension_ratio`` None (the gripped sheet) or an ASSUMED uniform T_v/T_u, ``cache_dir`` where its FEM tables
-    are cached (None: :func:`flexsheet.model.sheet_table.default_cache_dir`), ``mesh`` the FEM mesh options
-    (:class:`flexsheet.model.sheet_fem.SheetFEM` kwargs; {}: the default 4 mm mesh)."""
+    ``tension_ratio`` None (the gripped sheet) or an ASSUMED uniform T_v/T_u, ``cache_dir`` where its FEM
+    tables are cached (None: :func:`flexsheet.model.sheet_table.default_cache_dir`), ``mesh`` the FEM mesh
+    options (:class:`flexsheet.model.sheet_fem.SheetFEM` kwargs; {}: the default 4 mm mesh)."""
 
     half_width: float = geometry.SHEET_SIZE / 2
     push_threshold: float = 0.001
@@ -444,10 +453,10 @@ class SheetConfig:
 
 
 def sheet_model_for(config: SheetConfig = SheetConfig()) -> NominalSheetModel:
-    """The display's pushed-sheet model for ``config``: the FEM of the sheet gripped on its clamp edges with the
-    nominal E and size and the identified strain offset, sampled into depth tables; never the truth's values.
-    The one constructor the renderer node, the Foxglove bridge, the experiments and the tests use. Raises
-    ``ValueError`` on a bad setting."""
+    """The display's pushed-sheet model for ``config``: the FEM of the sheet gripped on its clamp edges with
+    the nominal E and size and the identified strain offset, sampled into depth tables; never the truth's
+    values. The one constructor the renderer node, the Foxglove bridge, the experiments and the tests use.
+    Raises ``ValueError`` on a bad setting."""
     return NominalSheetModel(strain_offset=config.strain_offset, tension_ratio=config.tension_ratio,
                              grid_step=config.grid_step, cache_dir=config.cache_dir, mesh=dict(config.mesh))
 
@@ -475,7 +484,8 @@ def ship_tables(nodes=tuple(round(0.01 * k, 6) for k in range(1, 12))) -> list[s
         for i, name in enumerate(staged):
             dst = os.path.join(SHIPPED_TABLES, name)
             shutil.copyfile(os.path.join(tmp, name), dst)
-            record(dst, "python -m flexsheet.model.sheet_model --ship", replaces="indent_" if i == 0 else None)
+            record(dst, "python -m flexsheet.model.sheet_model --ship",
+                   replaces="indent_" if i == 0 else None)
             out.append(dst)
     return out
 

@@ -67,10 +67,10 @@ def gripped_prestress(x: np.ndarray, y: np.ndarray, poisson: float = 0.5, intord
     return np.einsum("ij,jeq->ieq", C, e)
 
 
-#: smallest principal pre-stress kept, per unit T_u: the gripped field is ~0 across the free edges and slightly
-#: compressive at the grips' corners; the 1 mm sheet's bending carries ~1 N/m there without wrinkling
-#: (:mod:`flexsheet.model.sheet_fem`), so the flat sheet is taut everywhere and the sheet FEM's wrinkling
-#: relaxation acts on what the finger does
+#: smallest principal pre-stress kept, per unit T_u: the gripped field is ~0 across the free
+#: edges and slightly compressive at the grips' corners; the 1 mm sheet's bending carries ~1
+#: N/m there without wrinkling (:mod:`flexsheet.model.sheet_fem`), so the flat sheet is taut
+#: everywhere and the sheet FEM's wrinkling relaxation acts on what the finger does
 TAUT_FLOOR = 0.01
 
 

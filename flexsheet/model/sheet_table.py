@@ -29,7 +29,8 @@ from flexsheet.model.sheet_fem import SheetFEM, SheetPhysics, bilinear
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FemShape", "IndentTable", "bracket_weights", "TABLE_DEPTHS", "TABLE_POSITIONS", "TABLE_VERSION", "default_cache_dir"]
+__all__ = ["FemShape", "IndentTable", "bracket_weights", "TABLE_DEPTHS", "TABLE_POSITIONS", "TABLE_VERSION",
+           "default_cache_dir"]
 
 
 #: depths (m) of the table, after 0 (flat)
@@ -110,7 +111,8 @@ class FemShape(DeflectionGrid):
 
 
 def bracket_weights(axis: np.ndarray, q: float) -> list[tuple[int, float]]:
-    """(index, weight) pairs of linear interpolation on the increasing ``axis`` (n,) at ``q``, held at its ends."""
+    """(index, weight) pairs of linear interpolation on the increasing ``axis`` (n,) at ``q``, held at its
+    ends."""
     if q <= axis[0]:
         return [(0, 1.0)]
     if q >= axis[-1]:
@@ -122,7 +124,8 @@ def bracket_weights(axis: np.ndarray, q: float) -> list[tuple[int, float]]:
 class IndentTable:
     """Solutions of one :class:`SheetPhysics` over ``depths`` (m, increasing, > 0) × ``positions`` (m, ≥ 0,
     increasing, starting at 0, used for both |u₀| and |v₀|), built with :class:`SheetFEM` (``mesh`` kwargs) or
-    loaded from ``cache_dir`` (a file named by a hash of everything that defines it); a build logs its progress. Interpolation: module doc. Raises ``ValueError`` on bad axes."""
+    loaded from ``cache_dir`` (a file named by a hash of everything that defines it); a build logs its
+    progress. Interpolation: module doc. Raises ``ValueError`` on bad axes."""
 
     def __init__(self, physics: SheetPhysics, depths=TABLE_DEPTHS, positions=TABLE_POSITIONS, *,
                  mesh: dict | None = None, cache_dir: str | None = None) -> None:
@@ -159,13 +162,14 @@ class IndentTable:
 
     @classmethod
     def from_arrays(cls, physics: SheetPhysics, depths, positions, x, y, W, F) -> IndentTable:
-        """A table of solutions solved elsewhere: node coordinates ``x`` (nx,), ``y`` (ny,) m, deflections ``W``
-        (P, P, S, nx, ny) m and forces ``F`` (P, P, S) N over ``positions`` (P) × ``depths`` (S); nothing is
-        built or cached."""
+        """A table of solutions solved elsewhere: node coordinates ``x`` (nx,), ``y`` (ny,) m, deflections
+        ``W`` (P, P, S, nx, ny) m and forces ``F`` (P, P, S) N over ``positions`` (P) × ``depths`` (S);
+        nothing is built or cached."""
         tab = cls.__new__(cls)
         tab.physics, tab.mesh, tab.cache_dir, tab.built_from_cache = physics, {}, None, True
         tab.depths, tab.positions = np.asarray(depths, float), np.asarray(positions, float)
-        tab.x, tab.y, tab.W, tab.F = np.asarray(x, float), np.asarray(y, float), np.asarray(W), np.asarray(F, float)
+        tab.x, tab.y, tab.W, tab.F = (np.asarray(x, float), np.asarray(y, float), np.asarray(W),
+                                      np.asarray(F, float))
         tab.key = cls.key_of(physics, tab.depths, tab.positions)
         return tab
 
@@ -200,7 +204,8 @@ class IndentTable:
                     self.W[i, j, k] = s.w
                     self.F[i, j, k] = s.force
                 n += 1
-                log.info(f"sheet FEM table {n}/{P.size ** 2} (contact u={pu * 1e3:.0f} mm, v={pv * 1e3:.0f} mm)")
+                log.info(f"sheet FEM table {n}/{P.size ** 2} (contact u={pu * 1e3:.0f} mm, v={pv * 1e3:.0f} "
+                         "mm)")
 
     def shape(self, depth: float, push_u: float, push_v: float, half_span: float | None = None) -> FemShape:
         """The interpolated true shape at ``depth`` (m, ≥ 0), contact (push_u, push_v) (m); ``half_span``
@@ -211,7 +216,8 @@ class IndentTable:
         if not (math.isfinite(depth) and depth >= 0.0):
             raise ValueError(f"depth must be finite and >= 0, got {depth!r}")
         if not (abs(push_u) < a and abs(push_v) <= b):
-            raise ValueError(f"pushed point ({push_u!r}, {push_v!r}) lies outside the sheet |u| < {a}, |v| <= {b}")
+            raise ValueError(f"pushed point ({push_u!r}, {push_v!r}) lies outside the sheet |u| < {a}, |v| "
+                             f"<= {b}")
         pu = abs(push_u) * self.physics.half_span / a
         force = self._force(depth, pu, abs(push_v))
         h = STIFFNESS_STEP
@@ -238,7 +244,8 @@ class IndentTable:
 
     def evaluate(self, depth: float, push_u: float, push_v: float, u, v, half_span: float | None = None
                  ) -> np.ndarray:
-        """w (m) at sheet points (u, v) (broadcast) for the contact (push_u, push_v) at ``depth`` (module doc)."""
+        """w (m) at sheet points (u, v) (broadcast) for the contact (push_u, push_v) at ``depth`` (module
+        doc)."""
         a_t, b = self.physics.half_span, self.physics.half_width
         a = a_t if half_span is None else float(half_span)
         u, v = np.broadcast_arrays(np.asarray(u, float), np.asarray(v, float))
@@ -259,13 +266,14 @@ class IndentTable:
 
     def evaluate_grid(self, depth: float, push_u: float, push_v: float, u, v, half_span: float | None = None
                       ) -> np.ndarray:
-        """:meth:`evaluate` on the tensor grid ``u`` (nu,) × ``v`` (nv,) (m, sheet frame: u along the clamp line,
-        v across; points off the sheet are clamped onto it) → w (nu, nv), m along −normal, for the contact
-        (``push_u``, ``push_v``) m at ``depth`` m (≤ 0: a flat sheet, zeros) and the actual clamp half span
-        ``half_span`` m (default the table's). The same interpolation (contact remapping per axis, bilinear in
-        the FEM nodes, blend of the neighbouring depths and contacts), done one axis after the other: equal to
-        :meth:`evaluate` at (u[:, None], v[None, :]) to rounding (≲ 1e-16 m) and ~20× faster on a fit grid
-        (``tests/unit/model/test_sheet_model.py``). Raises ``ValueError`` when ``u`` or ``v`` is not 1-D."""
+        """:meth:`evaluate` on the tensor grid ``u`` (nu,) × ``v`` (nv,) (m, sheet frame: u along the clamp
+        line, v across; points off the sheet are clamped onto it) → w (nu, nv), m along −normal, for the
+        contact (``push_u``, ``push_v``) m at ``depth`` m (≤ 0: a flat sheet, zeros) and the actual clamp half
+        span ``half_span`` m (default the table's). The same interpolation (contact remapping per axis,
+        bilinear in the FEM nodes, blend of the neighbouring depths and contacts), done one axis after the
+        other: equal to :meth:`evaluate` at (u[:, None], v[None, :]) to rounding (≲ 1e-16 m) and ~20× faster
+        on a fit grid (``tests/unit/model/test_sheet_model.py``). Raises ``ValueError`` when ``u`` or ``v`` is
+        not 1-D."""
         a_t, b = self.physics.half_span, self.physics.half_width
         u, v = np.asarray(u, float), np.asarray(v, float)
         if u.ndim != 1 or v.ndim != 1:

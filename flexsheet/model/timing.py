@@ -2,9 +2,9 @@
 simulated time for each device and each handler of the display (``Node.subscribe(..., sim_cost=)``).
 
 The display's own compute is declared per handler as the CPU time it takes on this project's reference host
-(its mean per output in a full simulated run) times :attr:`LabTiming.compute_scale` for the lab's PC. Declared, not
-measured during the run: a run's result must not depend on how busy the host is. The run reports beside it
-what each node's handlers really took on the host (``sim_clock.json``: ``host_handler_cpu_s``).
+(its mean per output in a full simulated run) times :attr:`LabTiming.compute_scale` for the lab's PC.
+Declared, not measured during the run: a run's result must not depend on how busy the host is. The run reports
+beside it what each node's handlers really took on the host (``sim_clock.json``: ``host_handler_cpu_s``).
 
 Sources (A = an assumption, to be replaced by the lab's measurement):
 
@@ -44,15 +44,16 @@ class LabTiming:
     #: the lab PC's speed relative to the reference host on which ``compute_s`` was measured (1.0: alike)
     compute_scale: float = 1.0
     #: CPU time per call on the reference host, s: the mean handler CPU per output of each node in a full
-    #: ``launch/sim.yaml`` run on this project's 2-core machine (``sim_clock.json`` ``host_handler_cpu_s`` over
-    #: the output count, all the node's handlers included; docs/realtime.md)
+    #: ``launch/sim.yaml`` run on this project's 2-core machine (``sim_clock.json``
+    #: ``host_handler_cpu_s`` over the output count, all the node's handlers included; docs/realtime.md)
     compute_s: dict[str, float] = field(default_factory=lambda: {
         "triangulator": 0.00176,  # detect + undistort + triangulate + Kalman, one 640x512 pair
-        "planner": 0.00061,       # contact point, tangent plane, sheet target, two arm targets (+ FEM stiffness)
+        "planner": 0.00061,  # contact point, tangent plane, sheet target, two arm targets (+ FEM stiffness)
         "fem": 0.00144,           # one realtime FEM update (nonlinear snapshots)
-        "renderer": 0.0040,       # one corrected stereo pair on a desktop GPU (A: llvmpipe here takes ~13.6 ms)
+        "renderer": 0.0040,  # one corrected stereo pair on a desktop GPU (A: llvmpipe here takes ~13.6 ms)
         "arm_bridge": 0.00005,    # IK of one clamp target
-        "head_camera": 0.0031,    # ArUco detection, edge-line corners + PnP of the glasses board, one 640x512 frame
+        # ArUco detection, edge-line corners + PnP of the glasses board, one 640x512 frame
+        "head_camera": 0.0031,
     })
 
     def camera_latency(self, exposure_s: float, width: int = 640, height: int = 512) -> float:
@@ -60,7 +61,8 @@ class LabTiming:
         (``2·width·height`` bytes), hand-over. Raises ``ValueError`` for a negative exposure."""
         if not exposure_s >= 0.0:
             raise ValueError(f"exposure_s must be >= 0 s, got {exposure_s!r}")
-        return (0.5 * exposure_s + self.camera_readout_s + 2.0 * width * height / self.camera_transfer_bytes_per_s
+        return (0.5 * exposure_s + self.camera_readout_s + 2.0 * width * height
+                / self.camera_transfer_bytes_per_s
                 + self.camera_handover_s)
 
     def compute(self, what: str) -> float:
@@ -69,11 +71,12 @@ class LabTiming:
         try:
             return self.compute_s[what] * self.compute_scale
         except KeyError:
-            raise KeyError(f"no declared compute for {what!r}; known: {', '.join(sorted(self.compute_s))}") from None
+            raise KeyError(f"no declared compute for {what!r}; known: "
+                           f"{', '.join(sorted(self.compute_s))}") from None
 
     def projected_at(self, rendered: float) -> float:
-        """When a frame rendered (handed to the display) at ``rendered`` s is on the sheet: the next vsync of the
-        projector's refresh plus its input latency, s."""
+        """When a frame rendered (handed to the display) at ``rendered`` s is on the sheet: the next vsync of
+        the projector's refresh plus its input latency, s."""
         period = 1.0 / self.projector_refresh_hz
         return math.ceil(rendered / period) * period + self.projector_input_latency_s
 

@@ -88,7 +88,8 @@ def rodrigues(axis: Vec, angle: float, x: Vec) -> Vec:
     k = axis
     kx = cross(k, x)
     kd = dot(k, x) * (1.0 - c)
-    return (x[0] * c + kx[0] * s + k[0] * kd, x[1] * c + kx[1] * s + k[1] * kd, x[2] * c + kx[2] * s + k[2] * kd)
+    return (x[0] * c + kx[0] * s + k[0] * kd, x[1] * c + kx[1] * s + k[1] * kd,
+            x[2] * c + kx[2] * s + k[2] * kd)
 
 
 def matvec(R: Mat, x: Vec) -> Vec:
@@ -133,7 +134,8 @@ def rot_log(R: Mat) -> Vec:
 
 
 def min_rotation(a: Vec, b: Vec) -> tuple[Vec, float] | None:
-    """Axis and angle of the smallest rotation taking unit ``a`` to unit ``b``; ``None`` if a ≈ b or a ≈ −b."""
+    """Axis and angle of the smallest rotation taking unit ``a`` to unit ``b``; ``None`` if a ≈ b or a ≈
+    −b."""
     ax = cross(a, b)
     s = norm(ax)
     c = dot(a, b)

@@ -1,14 +1,15 @@
-"""The two arms' command for a plan (pure; time is passed in): both clamp poses, the pull, and the sheet's motion.
+"""The two arms' command for a plan (pure; time is passed in): both clamp poses, the pull, and the sheet's
+motion.
 
-The one owner of the two arms' motion on the planner's side. For each :class:`~flexsheet.planning.plan.Plan` the
-:class:`ArmCommander`
+The one owner of the two arms' motion on the planner's side. For each :class:`~flexsheet.planning.plan.Plan`
+the :class:`ArmCommander`
 
 - solves IK for both clamp targets (:class:`~flexsheet.planning.pull_guard.PullGuard`, seeded from the last
   solutions) and caps the next plans' clamp force at ``pull_margin`` × the arms' torque-limited pull there;
-- shapes the sheet's motion from where it is to the plan (:class:`flexsheet.arm.sheet_motion.SheetShaper`), within
-  both arms' joint rates (:class:`~flexsheet.arm.sheet_motion.JointRates` at ``speed_scale`` × the URDF's joint
-  speeds and ``accel_scale`` × that per second: the bridges' own scales), and at the plan's own velocity fitted
-  over its last plans, so that the motion reaches the plan's track by the next plan.
+- shapes the sheet's motion from where it is to the plan (:class:`flexsheet.arm.sheet_motion.SheetShaper`),
+  within both arms' joint rates (:class:`~flexsheet.arm.sheet_motion.JointRates` at ``speed_scale`` × the
+  URDF's joint speeds and ``accel_scale`` × that per second: the bridges' own scales), and at the plan's own
+  velocity fitted over its last plans, so that the motion reaches the plan's track by the next plan.
 
 Both arms get the same motion; each bridge evaluates it at one instant (:mod:`flexsheet.arm.tracking`).
 Units: m, rad, s, N; display frame.
@@ -42,9 +43,9 @@ ACCEL_SCALE = BridgeConfig.accel_scale
 class ArmCommand:
     """One plan's command to both arms. ``left``/``right``: clamp poses (4, 4), display frame; ``pull`` N: the
     sheet's clamp force at the plan's stretch; ``motion``: :class:`flexsheet.arm.sheet_motion.SheetSegment`
-    fields for :class:`messages.ArmTarget` (``{}`` when the motion could not be shaped: the bridges then stream
-    to the goal joint by joint); ``say``: a line to log (a new pull limit) or ''; ``warn``: a warning to log (the
-    motion's first failure) or ''."""
+    fields for :class:`messages.ArmTarget` (``{}`` when the motion could not be shaped: the bridges then
+    stream to the goal joint by joint); ``say``: a line to log (a new pull limit) or ''; ``warn``: a warning
+    to log (the motion's first failure) or ''."""
 
     left: np.ndarray
     right: np.ndarray
@@ -55,9 +56,9 @@ class ArmCommand:
 
 
 class ArmCommander:
-    """Both arms' command for each plan (see module docstring). ``bases``: {"left", "right"}: (x, y, z, yaw) of
-    the arms' bases (registered); ``material``: the sheet; ``pull_margin`` in (0, 1]; ``speed_scale`` in (0, 1],
-    ``accel_scale`` 1/s > 0. Raises ``ValueError`` on a bad margin or base."""
+    """Both arms' command for each plan (see module docstring). ``bases``: {"left", "right"}: (x, y, z, yaw)
+    of the arms' bases (registered); ``material``: the sheet; ``pull_margin`` in (0, 1]; ``speed_scale`` in
+    (0, 1], ``accel_scale`` 1/s > 0. Raises ``ValueError`` on a bad margin or base."""
 
     def __init__(self, bases: dict, material: SheetMaterial, pull_margin: float = 0.9,
                  speed_scale: float = SPEED_SCALE, accel_scale: float = ACCEL_SCALE) -> None:
@@ -66,7 +67,7 @@ class ArmCommander:
         qd = QD_MAX * speed_scale
         self.shaper = SheetShaper(size=material.size, rates=JointRates(bases, qd, qd * accel_scale))
         self._motion_q: dict[str, np.ndarray] = {}
-        self._plans: deque = deque(maxlen=VELOCITY_PLANS)       # (time s, origin, R, strain) of the last plans
+        self._plans: deque = deque(maxlen=VELOCITY_PLANS)  # (time s, origin, R, strain) of the last plans
         self._pull_said: tuple[int, float] | None = None      # (joint, limit N) last said
 
     def home_limit(self) -> tuple[float | None, str]:
@@ -78,8 +79,9 @@ class ArmCommander:
     def command(self, plan: Plan, now: float, limits: MotionLimits,
                 held: Callable[[float], tuple | None]) -> tuple[ArmCommand, float | None]:
         """(the command for ``plan`` at time ``now`` s, the pull limit N for the next plans or None).
-        ``limits``: the planner's current motion limits; ``held(size)``: the sheet as the arms' measured clamps
-        hold it ((origin (3,), R (3, 3), strain) or None), read only where a motion starts from rest."""
+        ``limits``: the planner's current motion limits; ``held(size)``: the sheet as the arms' measured
+        clamps hold it ((origin (3,), R (3, 3), strain) or None), read only where a motion starts from
+        rest."""
         Tl, Tr = plan.clamp_matrices()
         limit, said = self._cap_pull(Tl, Tr)                  # for the next plans, at these targets
         motion, failed = self._motion(plan, now, limits, held)
@@ -87,8 +89,8 @@ class ArmCommander:
         return ArmCommand(Tl, Tr, pull, motion, said, failed), limit
 
     def _cap_pull(self, T_left: np.ndarray, T_right: np.ndarray) -> tuple[float | None, str]:
-        """``pull_margin`` × the arms' torque-limited pull at these targets, and a line when the limiting joint
-        changes or the limit by more than 10 %."""
+        """``pull_margin`` × the arms' torque-limited pull at these targets, and a line when the limiting
+        joint changes or the limit by more than 10 %."""
         limit = self.pull_guard.limit(T_left, T_right)
         side, joint, _ = self.pull_guard.limiting()
         said = self._pull_said
@@ -100,13 +102,16 @@ class ArmCommander:
         return limit, ""
 
     def _motion(self, plan: Plan, now: float, limits: MotionLimits, held) -> tuple[dict, str]:
-        """The sheet's motion from where it is now to ``plan`` as message fields, and a line on its first failure."""
+        """The sheet's motion from where it is now to ``plan`` as message fields, and a line on its first
+        failure."""
         self.shaper.size = float(plan.sheet_size)
         q_goal = dict(self.pull_guard.seed)                     # the IK of this plan's two targets
-        self.shaper.rates.at({s: [q_goal[s]] + ([self._motion_q[s]] if s in self._motion_q else []) for s in q_goal})
+        self.shaper.rates.at({s: [q_goal[s]] + ([self._motion_q[s]] if s in self._motion_q else [])
+                              for s in q_goal})
         self._motion_q = q_goal
         # the plan's own velocity, fitted over its last plans, and its period: the motion reaches the plan's
-        # track by the next plan instead of stopping at each (a finger's tremor makes each plan's own rate noisy)
+        # track by the next plan instead of stopping at each
+        # (a finger's tremor makes each plan's own rate noisy)
         R = sheet_rotation(plan.normal, plan.axis_u)
         moving = not plan.status.startswith("hold")
         hist = self._plans
@@ -117,7 +122,8 @@ class ArmCommander:
         velocity = plan_velocity(hist) if moving and len(hist) >= 2 else None
         try:
             seg = self.shaper.update(now, plan.origin, R, plan.stretch, limits,
-                                     velocity=velocity, lead=min(period, 0.05) if velocity is not None else 0.0,
+                                     velocity=velocity,
+                                     lead=min(period, 0.05) if velocity is not None else 0.0,
                                      current=None if self.shaper.segment is not None
                                      else held(float(plan.sheet_size)))
         except MotionError as exc:

@@ -14,15 +14,15 @@ surface at contact point q:
    stiffness of a light touch, not for zero.
 2. **Inclusions** (the scene's stiffer spheres, a "tumour"): the effective modulus under the finger is the
    body's, raised by each inclusion in proportion to the share ``w`` of the indentation's strain energy that
-   lies inside it. The energy density is that of Boussinesq's point load on an incompressible half-space —
-   a purely radial stress σ_r = 3P·cosθ/(2πr²) (Johnson 1985, §3.2, ν = ½), so energy ∝ cos²θ/r⁴ —
-   regularised over the contact, ρ ∝ cos²θ/(r² + a²)² (θ from the inward normal, r from q); its integral over
-   the half-space is π²/(6a). ``w`` = ∫_inclusion ρ dV / ∫_half-space ρ dV by a fixed 1472-point midpoint grid in
-   the ball (within 1 % of a 2·10⁶-point Monte Carlo for the organ's tumour). The modulus rises by Eshelby's dilute result for a spherical inclusion in an incompressible
-   matrix (J. D. Eshelby, Proc. R. Soc. A 241, 376 (1957); μ_eff = μ(1 + (5/2)·φ·(μ_i − μ)/(μ_i + 3μ/2))),
-   with the energy share for the volume fraction φ:  E_eff = E·(1 + Σ_i w_i·(5/2)(c_i − 1)/(c_i + 3/2)),
-   c_i = E_i/E. For a small contrast this is the exact first-order perturbation (δk/k = w·δE/E); for a rigid
-   inclusion it stays finite (factor 5/2).
+   lies inside it. The energy density is that of Boussinesq's point load on an incompressible half-space — a
+   purely radial stress σ_r = 3P·cosθ/(2πr²) (Johnson 1985, §3.2, ν = ½), so energy ∝ cos²θ/r⁴ — regularised
+   over the contact, ρ ∝ cos²θ/(r² + a²)² (θ from the inward normal, r from q); its integral over the
+   half-space is π²/(6a). ``w`` = ∫_inclusion ρ dV / ∫_half-space ρ dV by a fixed 1472-point midpoint grid in
+   the ball (within 1 % of a 2·10⁶-point Monte Carlo for the organ's tumour). The modulus rises by Eshelby's
+   dilute result for a spherical inclusion in an incompressible matrix (J. D. Eshelby, Proc. R. Soc. A 241,
+   376 (1957); μ_eff = μ(1 + (5/2)·φ·(μ_i − μ)/(μ_i + 3μ/2))), with the energy share for the volume fraction
+   φ: E_eff = E·(1 + Σ_i w_i·(5/2)(c_i − 1)/(c_i + 3/2)), c_i = E_i/E. For a small contrast this is the exact
+   first-order perturbation (δk/k = w·δE/E); for a rigid inclusion it stays finite (factor 5/2).
 
 Validity: small strain (Hertz holds for a ≲ r_f/2, i.e. d ≲ r_f/4 on a flat object; at the paper's 10–50 mm
 pushes it is an order-of-magnitude estimate — the FEM's dF/dd replaces it wherever the FEM solves the scene);
@@ -53,7 +53,8 @@ def hertz_stiffness(E_star: float, R_e: float, depth: float) -> tuple[float, flo
     (Johnson 1985, eq. 4.22–4.23). Raises ``ValueError`` for a non-positive modulus or radius or a negative
     depth."""
     if not (E_star > 0.0 and R_e > 0.0 and depth >= 0.0 and math.isfinite(E_star * R_e * depth)):
-        raise ValueError(f"hertz_stiffness needs E_star > 0, R_e > 0, depth >= 0; got {E_star!r}, {R_e!r}, {depth!r}")
+        raise ValueError(f"hertz_stiffness needs E_star > 0, R_e > 0, depth >= 0; got {E_star!r}, {R_e!r}, "
+                         f"{depth!r}")
     a = math.sqrt(R_e * depth)
     return 2.0 * E_star * a, a
 
@@ -76,9 +77,10 @@ _BALL = _ball_quadrature()
 
 
 def energy_share(q, n, a: float, center, radius: float) -> float:
-    """Share w ∈ [0, 1] of the indentation's strain energy inside the ball (``center`` (3,) m, ``radius`` m) for
-    a contact at ``q`` (3,) m with outward normal ``n`` (3,) and contact radius ``a`` m (module doc, item 2).
-    Points of the ball above the tangent plane do not count. Raises ``ValueError`` for a ≤ 0 or radius ≤ 0."""
+    """Share w ∈ [0, 1] of the indentation's strain energy inside the ball (``center`` (3,) m, ``radius`` m)
+    for a contact at ``q`` (3,) m with outward normal ``n`` (3,) and contact radius ``a`` m (module doc, item
+    2). Points of the ball above the tangent plane do not count. Raises ``ValueError`` for a ≤ 0 or radius ≤
+    0."""
     if not (a > 0.0 and radius > 0.0):
         raise ValueError(f"energy_share needs a > 0 and radius > 0, got a={a!r}, radius={radius!r}")
     qv = np.asarray(q, float)
@@ -97,9 +99,9 @@ def energy_share(q, n, a: float, center, radius: float) -> float:
 
 @dataclass(frozen=True, slots=True)
 class ContactStiffness:
-    """One estimate: ``k`` N/m (dF/dd), ``depth`` m used (≥ ``min_depth``), ``a`` m contact radius, ``E_eff`` Pa
-    under the finger, ``E_body`` Pa, ``R_e`` m equivalent radius, ``kappa`` (κ₁, κ₂) 1/m, ``shares`` the energy
-    share of each inclusion, ``k_body`` N/m the same contact without the inclusions."""
+    """One estimate: ``k`` N/m (dF/dd), ``depth`` m used (≥ ``min_depth``), ``a`` m contact radius, ``E_eff``
+    Pa under the finger, ``E_body`` Pa, ``R_e`` m equivalent radius, ``kappa`` (κ₁, κ₂) 1/m, ``shares`` the
+    energy share of each inclusion, ``k_body`` N/m the same contact without the inclusions."""
 
     k: float
     depth: float
@@ -119,7 +121,8 @@ class SceneCompliance:
     curvature differences). Curvatures are cached per contact point (re-used within ``cache_distance`` m).
     Raises ``ValueError`` for a non-positive ``min_depth`` or ``curvature_step``."""
 
-    def __init__(self, scene, shape: Shape | None = None, min_depth: float = 5e-4, curvature_step: float = 2e-3,
+    def __init__(self, scene, shape: Shape | None = None, min_depth: float = 5e-4,
+                 curvature_step: float = 2e-3,
                  cache_distance: float = 1e-3) -> None:
         for k, v in (("min_depth", min_depth), ("curvature_step", curvature_step)):
             check_positive(k, v)
@@ -146,8 +149,8 @@ class SceneCompliance:
         return k
 
     def estimate(self, q, n, depth: float) -> ContactStiffness:
-        """The stiffness for a finger ``depth`` m (< ``min_depth``: ``min_depth``) into the surface at ``q`` (3,)
-        m with outward normal ``n`` (3,). Raises ``ValueError`` for non-finite input."""
+        """The stiffness for a finger ``depth`` m (< ``min_depth``: ``min_depth``) into the surface at ``q``
+        (3,) m with outward normal ``n`` (3,). Raises ``ValueError`` for non-finite input."""
         qv, nv = np.asarray(q, float), np.asarray(n, float)
         if qv.shape != (3,) or nv.shape != (3,) or not (np.all(np.isfinite(qv)) and np.all(np.isfinite(nv))
                                                          and math.isfinite(depth)):
@@ -161,7 +164,9 @@ class SceneCompliance:
         E_star = self.E / (1.0 - self.nu ** 2)
         k_body, a = hertz_stiffness(E_star, R_e, d)
         shares = tuple(energy_share(qv, nv, a, c, r) for c, r, _ in self.inclusions)
-        factor = 1.0 + sum(w * eshelby_factor(cr) for w, (_, _, cr) in zip(shares, self.inclusions, strict=True))
+        factor = (1.0
+                  + sum(w * eshelby_factor(cr) for w,
+                        (_, _, cr) in zip(shares, self.inclusions, strict=True)))
         factor = max(factor, 0.05)
         return ContactStiffness(k_body * factor, d, a, self.E * factor, self.E, R_e, (k1, k2), shares, k_body)
 

@@ -1,4 +1,5 @@
-"""The planner's guard of the viewer's head: reduced speed near it, hold and retreat before the sheet enters it.
+"""The planner's guard of the viewer's head: reduced speed near it, hold and retreat before the sheet enters
+it.
 
 :class:`HeadGuard` keeps the newest tracked eye (``/eye/pose``) and judges each rate-limited sheet pose the
 planner would send against the head's keep-out volume (:class:`flexsheet.planning.keepout.KeepOut`: a head
@@ -10,9 +11,10 @@ sphere plus a margin, from the eye):
   clamp strain rate ``≤ 0.1·reduced_speed / (size/2)``: together at most 0.9 of it at any corner;
 * **inside** (the next pose would put a point of the sheet or a clamp in the keep-out): the step is not taken;
   the sheet backs off along −x (:func:`~flexsheet.planning.keepout.retreat_point`) at the reduced speed;
-* **lost** (the head camera runs but the glasses are not found): the planner holds the pose while the stretch follows the push (:meth:`~flexsheet.planning.surface_planner.SurfacePlanner.hold_pose`);
-  lost while near (:attr:`HeadGuard.near`), every step backs off from the last known head instead, since a head
-  that was that close may come closer unseen.
+* **lost** (the head camera runs but the glasses are not found): the planner holds the pose while the stretch
+  follows the push (:meth:`~flexsheet.planning.surface_planner.SurfacePlanner.hold_pose`); lost while near
+  (:attr:`HeadGuard.near`), every step backs off from the last known head instead, since a head that was that
+  close may come closer unseen.
 
 The guard judges the *planned* sheet against the *tracked* head, so it keeps a guard band (``band``, 0.01 m)
 beyond the margin: the tracked eye's error (≤ 3.5 mm p95 in the twin, docs/head.md) and the arms' tracking of
@@ -52,8 +54,9 @@ GUARD_BAND = 0.01
 
 
 class HeadGuard:
-    """See the module docstring. ``keepout``: the volume to keep out of; ``size`` m: the unstretched sheet side;
-    ``band`` m: added to its margin for the estimates' errors. Raises ``ValueError`` for a negative band."""
+    """See the module docstring. ``keepout``: the volume to keep out of; ``size`` m: the unstretched sheet
+    side; ``band`` m: added to its margin for the estimates' errors. Raises ``ValueError`` for a negative
+    band."""
 
     def __init__(self, keepout: KeepOut | None = None, size: float = 0.240, band: float = GUARD_BAND) -> None:
         if not (math.isfinite(band) and band >= 0.0):
@@ -92,7 +95,8 @@ class HeadGuard:
         return check_targets(self.keepout, self.eye, pts)
 
     def limits(self, base: MotionLimits, origin, R, stretch: float) -> MotionLimits:
-        """``base``, or the reduced limits while the sheet at (``origin``, ``R``, ``stretch``) is near the head."""
+        """``base``, or the reduced limits while the sheet at (``origin``, ``R``, ``stretch``) is near the
+        head."""
         if self.eye is None or origin is None:
             return base
         v = self.verdict(origin, R, stretch)
@@ -106,8 +110,8 @@ class HeadGuard:
                        stretch_rate=min(base.stretch_rate, 0.1 * vs / (0.5 * self.size)))
 
     def step(self, prev_origin, prev_R, origin, R, stretch: float, dt: float) -> GuardStep:
-        """Judge the step from (``prev_origin``, ``prev_R``) to (``origin``, ``R``) at ``stretch`` over ``dt`` s:
-        the step itself if it keeps out of the volume (and the head is tracked), else a back-off from the
+        """Judge the step from (``prev_origin``, ``prev_R``) to (``origin``, ``R``) at ``stretch`` over ``dt``
+        s: the step itself if it keeps out of the volume (and the head is tracked), else a back-off from the
         previous pose."""
         v = self.verdict(origin, R, stretch)
         if not v.inside and not self.lost:

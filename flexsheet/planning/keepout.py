@@ -1,10 +1,10 @@
 """The viewer's keep-out volume: clearance of the sheet, clamps and arms from the tracked head (pure).
 
-Model: the head is a sphere of radius ``head_radius`` about a centre ``C = V + eye_to_head`` (``V`` the tracked
-cyclopean eye, display frame; the viewer faces −x, so the head's centre lies behind the eyes, at larger x),
-grown by ``margin``. The keep-out volume is the sphere of radius ``R = head_radius + margin`` about ``C``. A
-part's *clearance* is its smallest distance to that sphere's boundary: ``min |p − C| − R`` over its points, or
-over its segments for the arm links (capsules: minus the link radius); negative inside.
+Model: the head is a sphere of radius ``head_radius`` about a centre ``C = V + eye_to_head`` (``V`` the
+tracked cyclopean eye, display frame; the viewer faces −x, so the head's centre lies behind the eyes, at
+larger x), grown by ``margin``. The keep-out volume is the sphere of radius ``R = head_radius + margin`` about
+``C``. A part's *clearance* is its smallest distance to that sphere's boundary: ``min |p − C| − R`` over its
+points, or over its segments for the arm links (capsules: minus the link radius); negative inside.
 
 * The sheet is sampled as a grid over its whole flat rectangle (every ≤ ``spacing`` m) — a head leaning in
   meets the middle of the sheet before its outline — and each clamp bar as two lines, on the sheet and
@@ -45,7 +45,8 @@ from flexsheet.model.sheet import sheet_rotation
 if TYPE_CHECKING:
     from flexsheet.arm.kinematics import ArmKinematics
 
-__all__ = ["CLAMP_DEPTH", "CLAMP_REACH", "KeepOut", "KeepOutVerdict", "sheet_points", "arm_segments", "arm_clearance",
+__all__ = ["CLAMP_DEPTH", "CLAMP_REACH", "KeepOut", "KeepOutVerdict", "sheet_points", "arm_segments",
+           "arm_clearance",
            "check_targets", "retreat_point"]
 
 #: depth of a clamp bar behind the sheet, m (ASSUMED: the clamp is not specified beyond the URDF's jaw line)
@@ -127,8 +128,9 @@ class KeepOut:
         return float(np.min(_segment_distances(c, a, b))) - self.radius
 
     def speed_limit(self, clearance: float) -> float:
-        """Speed limit (m/s) at ``clearance`` (m): ``reduced_speed`` when clearance < ``near_distance`` (inside
-        included), else ``inf``. Raises ``ValueError`` naming ``clearance`` if it is NaN or not a number."""
+        """Speed limit (m/s) at ``clearance`` (m): ``reduced_speed`` when clearance < ``near_distance``
+        (inside included), else ``inf``. Raises ``ValueError`` naming ``clearance`` if it is NaN or not a
+        number."""
         try:
             x = float(clearance)
         except (TypeError, ValueError):
@@ -154,13 +156,14 @@ def sheet_points(origin, normal, axis_u, half_span: float, size: float = geometr
                  spacing: float = 0.02) -> dict[str, np.ndarray]:
     """Sample points (display frame, m) of the flat sheet and its clamp bars for the keep-out test.
 
-    The sheet centred at ``origin`` (3,) m with unit ``normal`` (toward the viewer) and ``axis_u`` (right → left
-    clamp), clamps at u = ±``half_span`` m, free edges at v = ±``size``/2 (``size`` the unstretched side, m).
-    Returns ``{"sheet": (Ns, 3), "left clamp": (Nc, 3), "right clamp": (Nc, 3)}``: the sheet as a grid over
+    The sheet centred at ``origin`` (3,) m with unit ``normal`` (toward the viewer) and ``axis_u`` (right →
+    left clamp), clamps at u = ±``half_span`` m, free edges at v = ±``size``/2 (``size`` the unstretched side,
+    m). Returns ``{"sheet": (Ns, 3), "left clamp": (Nc, 3), "right clamp": (Nc,
+    3)}``: the sheet as a grid over
     |u| ≤ half_span, |v| ≤ size/2 (corners and outline included) and each clamp bar as two lines along v at
-    u = ±half_span, on the sheet and ``CLAMP_DEPTH`` behind it (−normal), all every ≤ ``spacing`` m. Home sheet,
-    defaults: 13 × 13 sheet points, 26 per clamp. Raises ``ValueError`` naming the argument for a bad vector
-    (:func:`flexsheet.model.sheet.sheet_rotation`) or a non-positive length.
+    u = ±half_span, on the sheet and ``CLAMP_DEPTH`` behind it (−normal), all every ≤ ``spacing`` m. Home
+    sheet, defaults: 13 × 13 sheet points, 26 per clamp. Raises ``ValueError`` naming the argument for a bad
+    vector (:func:`flexsheet.model.sheet.sheet_rotation`) or a non-positive length.
     """
     R = sheet_rotation(normal, axis_u)
     o = check_point("origin", origin)
@@ -180,10 +183,11 @@ def sheet_points(origin, normal, axis_u, half_span: float, size: float = geometr
 
 
 def arm_segments(kin: ArmKinematics, q) -> tuple[np.ndarray, np.ndarray]:
-    """The arm's links as segments (a (7, 3), b (7, 3)) m, display frame, at joints ``q`` (6,) rad: a[k]–b[k] is
-    link k (0 base column … 5 wrist, 6 J6 to the flange face), between consecutive rows of
+    """The arm's links as segments (a (7, 3), b (7, 3)) m, display frame, at joints ``q`` (6,) rad: a[k]–b[k]
+    is link k (0 base column … 5 wrist, 6 J6 to the flange face), between consecutive rows of
     ``kin.joint_origins(q)`` (:meth:`flexsheet.arm.kinematics.ArmKinematics.joint_origins`: base, J1…J6,
-    clamp), the last one shortened by ``CLAMP_REACH`` (see the module doc). Raises ``ValueError`` naming ``q``.
+    clamp), the last one shortened by ``CLAMP_REACH`` (see the module doc). Raises ``ValueError`` naming
+    ``q``.
     """
     p = kin.joint_origins(q)
     a, b = p[:-1], p[1:].copy()
@@ -196,8 +200,8 @@ def arm_segments(kin: ArmKinematics, q) -> tuple[np.ndarray, np.ndarray]:
 
 def arm_clearance(keepout: KeepOut, V, kin: ArmKinematics, q, link_radius: float = 0.05) -> float:
     """Clearance (m) of one arm at joints ``q`` (6,) rad from the keep-out sphere for the eye ``V`` (3,) m:
-    :meth:`KeepOut.clearance_segments` of :func:`arm_segments` minus ``link_radius`` m (≥ 0; links as capsules).
-    Raises ``ValueError`` naming ``V``, ``q`` or ``link_radius``."""
+    :meth:`KeepOut.clearance_segments` of :func:`arm_segments` minus ``link_radius`` m (≥ 0; links as
+    capsules). Raises ``ValueError`` naming ``V``, ``q`` or ``link_radius``."""
     r = check_positive("link_radius", link_radius, allow_zero=True)
     return keepout.clearance_segments(V, *arm_segments(kin, q)) - r
 
@@ -206,11 +210,12 @@ def check_targets(keepout: KeepOut, V, sheet_pts, arm_segs: Mapping | None = Non
                   link_radius: float = 0.05) -> KeepOutVerdict:
     """Keep-out verdict for a sheet and its arms (the planner's targets or the bridges' commands).
 
-    ``V`` (3,) m: the tracked eye. ``sheet_pts``: a mapping part name → (N, 3) m points (:func:`sheet_points`),
-    or one (N, 3) array (named "sheet"). ``arm_segs``: optional mapping arm name → (a, b), (K, 3) m each
-    (:func:`arm_segments`), e.g. ``{"left arm": ..., "right arm": ...}``; segment k is reported as
-    "<arm name> link k" and its clearance is reduced by ``link_radius`` m (≥ 0). Returns the nearest part's
-    :class:`KeepOutVerdict` (ties go to the first part given). Raises ``ValueError`` naming the bad argument.
+    ``V`` (3,) m: the tracked eye. ``sheet_pts``: a mapping part name → (N, 3) m points
+    (:func:`sheet_points`), or one (N, 3) array (named "sheet"). ``arm_segs``: optional mapping arm name → (a,
+    b), (K, 3) m each (:func:`arm_segments`), e.g. ``{"left arm": ..., "right arm": ...}``; segment k is
+    reported as "<arm name> link k" and its clearance is reduced by ``link_radius`` m (≥ 0). Returns the
+    nearest part's :class:`KeepOutVerdict` (ties go to the first part given). Raises ``ValueError`` naming the
+    bad argument.
     """
     c = keepout.center(V)
     r = check_positive("link_radius", link_radius, allow_zero=True)
@@ -224,7 +229,8 @@ def check_targets(keepout: KeepOut, V, sheet_pts, arm_segs: Mapping | None = Non
         try:
             a, b = seg
         except (TypeError, ValueError):
-            raise ValueError(f"arm_segs[{name!r}] must be a pair (a, b) of (K, 3) arrays, got {seg!r}") from None
+            raise ValueError(f"arm_segs[{name!r}] must be a pair (a, b) of (K, 3) arrays, got "
+                             f"{seg!r}") from None
         a, b = _points(f"arm_segs[{name!r}] a", a), _points(f"arm_segs[{name!r}] b", b)
         if a.shape != b.shape:
             raise ValueError(f"arm_segs[{name!r}] a and b must have the same shape, got {a.shape}, {b.shape}")
@@ -242,11 +248,11 @@ def retreat_point(keepout: KeepOut, V, origin, normal, step: float) -> np.ndarra
     The away-from-head direction ``origin − C`` projected onto −x: the sheet moves along −x (toward its home
     side, away from the viewer, who sits at +x) by t = clip(need, 0, ``step``) m, where ``need`` is the move
     that puts the sheet's plane (through ``origin`` with unit ``normal`` (3,), taken with n_x ≥ 0)
-    ``radius + near_distance`` in front of the head centre C: need = (radius + near_distance − n·(C − origin)) /
-    n_x (the full ``step`` when n_x < 1e-3, where moving along x does not move the plane). The infinite plane
-    is nearer than the sheet, so ``need`` errs on the far side. If the head centre is not in front of the sheet
-    centre (C_x ≤ origin_x), −x is not away from it and ``origin`` is returned unchanged: the caller holds.
-    Raises ``ValueError`` naming ``V``, ``origin``, ``normal`` or ``step`` (> 0).
+    ``radius + near_distance`` in front of the head centre C: need = (radius + near_distance − n·(C − origin))
+    / n_x (the full ``step`` when n_x < 1e-3, where moving along x does not move the plane). The infinite
+    plane is nearer than the sheet, so ``need`` errs on the far side. If the head centre is not in front of
+    the sheet centre (C_x ≤ origin_x), −x is not away from it and ``origin`` is returned unchanged: the caller
+    holds. Raises ``ValueError`` naming ``V``, ``origin``, ``normal`` or ``step`` (> 0).
     """
     c = keepout.center(V)
     o = check_point("origin", origin)

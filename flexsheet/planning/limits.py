@@ -6,12 +6,12 @@
   time-optimal braking curve of a double integrator, e.g. Kröger & Wahl, IEEE T-RO 26(1), 2010, §II),
   then the change of velocity is bounded by a_max·dt. Within the limits it reaches the target in one
   step, so normal stroking passes through unchanged; a jump is ramped.
-* :class:`ReachModel` — is a clamp position inside a spherical shell around each arm's shoulder (J2)?
-  Bases come from :data:`flexsheet.model.geometry.LEFT_BASE`/``RIGHT_BASE``; J2 is ``shoulder_height`` above the
+* :class:`ReachModel` — is a clamp position inside a spherical shell around each arm's shoulder (J2)? Bases
+  come from :data:`flexsheet.model.geometry.LEFT_BASE`/``RIGHT_BASE``; J2 is ``shoulder_height`` above the
   base (0.165 + 0.135 m in ``flexsheet/arm/rv1a.urdf``). Default shell 0.32…0.53 m: upper arm 0.250 m
   + forearm 0.184 m + wrist/flange 0.102 m (same URDF) bounds the far side; the near side is where J3
-  reaches its 155° limit (the bases in :mod:`flexsheet.model.geometry` were moved out for that reason). This is a
-  workspace screen only — the arm bridge does the real IK and joint limits.
+  reaches its 155° limit (the bases in :mod:`flexsheet.model.geometry` were moved out for that reason). This
+  is a workspace screen only — the arm bridge does the real IK and joint limits.
 
 Units: m, rad, s. Vectors are float tuples (see :mod:`flexsheet.model.vec`).
 """
@@ -45,7 +45,8 @@ __all__ = ["RateLimiter", "LimiterState", "ReachModel", "limit_step"]
 
 
 def limit_step(err: Vec, vel: Vec, vmax: float, amax: float, dt: float) -> tuple[Vec, Vec, bool]:
-    """One limited step toward ``err`` (target − current) from velocity ``vel``; returns (step, new vel, limited).
+    """One limited step toward ``err`` (target − current) from velocity ``vel``; returns (step, new vel,
+    limited).
 
     Desired speed min(vmax, √(2·amax·|err|), |err|/dt) along err, velocity change ≤ amax·dt. ``limited`` is
     True when the step does not land on the target.
@@ -158,8 +159,9 @@ class RateLimiter:
 class ReachModel:
     """Spherical-shell workspace of each arm around its shoulder (J2).
 
-    ``left_base``/``right_base``: (x, y, z, yaw) in the display frame (defaults from :mod:`flexsheet.model.geometry`);
-    ``shoulder_height`` m above the base; ``reach_min``/``reach_max`` m from J2 to the clamp point.
+    ``left_base``/``right_base``: (x, y, z, yaw) in the display frame (defaults from
+    :mod:`flexsheet.model.geometry`); ``shoulder_height`` m above the base; ``reach_min``/``reach_max`` m from
+    J2 to the clamp point.
     """
 
     left_base: tuple[float, float, float, float] = geometry.LEFT_BASE

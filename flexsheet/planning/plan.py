@@ -45,10 +45,11 @@ class Plan:
     ``status``: "ok" or ';'-joined reasons; ``left``/``right`` (3,) m: clamp points
     (:func:`flexsheet.model.sheet.clamp_points`); ``reach_margin`` m; ``t`` s: time of the fingertip sample
     planned from; ``sheet_size`` m: the unstretched sheet side between the clamps; ``k_source``: where
-    ``object_stiffness`` came from — "given" (passed to :meth:`flexsheet.planning.surface_planner.SurfacePlanner.update`, e.g. the FEM's dF/dd),
-    "scene" (the compliance model at the contact), "param" (``object_stiffness`` of the config) or "table"
-    (the object's force–depth table, :meth:`flexsheet.planning.surface_planner.SurfacePlanner.set_force_depth`); it is already mapped by
-    ``stiffness_scale``.
+    ``object_stiffness`` came from — "given" (passed to
+    :meth:`flexsheet.planning.surface_planner.SurfacePlanner.update`, e.g. the FEM's dF/dd), "scene" (the
+    compliance model at the contact), "param" (``object_stiffness`` of the config) or "table" (the object's
+    force–depth table, :meth:`flexsheet.planning.surface_planner.SurfacePlanner.set_force_depth`); it is
+    already mapped by ``stiffness_scale``.
     """
 
     t: float
@@ -76,6 +77,6 @@ class Plan:
         return np.column_stack([self.normal, self.axis_u, self.axis_v])
 
     def clamp_matrices(self) -> tuple[np.ndarray, np.ndarray]:
-        """Left and right clamp poses T_display_clamp (4, 4): :func:`flexsheet.model.sheet.clamp_poses` of this
-        plan's sheet (origin, normal, axis_u, stretch, sheet_size)."""
+        """Left and right clamp poses T_display_clamp (4, 4): :func:`flexsheet.model.sheet.clamp_poses` of
+        this plan's sheet (origin, normal, axis_u, stretch, sheet_size)."""
         return clamp_poses(self.origin, self.normal, self.axis_u, self.stretch, self.sheet_size)

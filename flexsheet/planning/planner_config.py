@@ -61,7 +61,8 @@ class PlannerConfig:
         if not (math.isfinite(self.stiffness_tau) and self.stiffness_tau >= 0.0):
             raise ValueError(f"stiffness_tau must be finite and >= 0 s, got {self.stiffness_tau!r}")
         if not (math.isfinite(self.future_stamp_tolerance) and 0.0 < self.future_stamp_tolerance <= 60.0):
-            raise ValueError(f"future_stamp_tolerance must be in (0, 60] s, got {self.future_stamp_tolerance!r}")
+            raise ValueError("future_stamp_tolerance must be in (0, 60] s, got "
+                             f"{self.future_stamp_tolerance!r}")
         if not (math.isfinite(self.stiffness_scale) and 0.0 < self.stiffness_scale <= 100.0):
             raise ValueError(f"stiffness_scale must be in (0, 100], got {self.stiffness_scale!r}")
         if not (math.isfinite(self.contrast_gain) and 0.0 < self.contrast_gain <= 5.0):

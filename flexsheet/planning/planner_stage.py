@@ -1,4 +1,5 @@
-"""The planner node's work as one stage (pure; time is passed in): inputs in, a plan and both arms' command out.
+"""The planner node's work as one stage (pure; time is passed in): inputs in, a plan and both arms' command
+out.
 
 :class:`PlannerStage` holds the :class:`~flexsheet.planning.surface_planner.SurfacePlanner`, the viewer's
 :class:`~flexsheet.planning.head_guard.HeadGuard`, what the FEM said of the object (its latched force–depth
@@ -22,6 +23,7 @@ from flexsheet.calibration.sheet import TERMS
 from flexsheet.model.force_depth import ForceDepth
 from flexsheet.model.motion_limits import MotionLimits
 from flexsheet.model.scenes import Scene, is_paper_cylinder
+from flexsheet.model.sheet import frame_from_clamps, sheet_rotation
 from flexsheet.model.tension import SheetMaterial
 from flexsheet.planning.arm_command import ArmCommand, ArmCommander
 from flexsheet.planning.compliance import SceneCompliance
@@ -34,11 +36,15 @@ from flexsheet.planning.shape import planner_shape
 from flexsheet.planning.surface_planner import SurfacePlanner, scale_depths, sheet_scene_scale
 from flexsheet.runtime.params import build
 
-__all__ = ["PlannerStage", "planner_config", "fem_solves_scene", "MATERIAL_RENAME"]
+__all__ = ["PlannerStage", "planner_config", "fem_solves_scene", "held_sheet", "MATERIAL_RENAME",
+           "HEAD_WORDS"]
 
 #: the sheet model's source, by whether it was identified
 IDENTIFIED = {True: "identified from presses (display_calib sheet)",
               False: "the nominal string band (no identified sheet in display_calib)"}
+#: the viewer's head state in words (the planner's log)
+HEAD_WORDS = {"tracking": "tracked: the sheet keeps out of its keep-out volume",
+              "lost": "lost: holding the sheet until the glasses are seen again"}
 #: launch-file name of :attr:`SheetMaterial.size`
 MATERIAL_RENAME = {"size": "sheet_size"}
 
@@ -52,11 +58,22 @@ def fem_solves_scene(scene_key: str, sc: Scene, key: str | None = None) -> bool:
     return is_paper_cylinder(sc)
 
 
+def held_sheet(left_pose, right_pose, size: float) -> tuple | None:
+    """(origin (3,) m, rotation (3, 3), strain) of the sheet of side ``size`` m held by the measured clamp
+    poses (4, 4) (display frame), or None when they do not hold a sheet
+    (:func:`flexsheet.model.sheet.frame_from_clamps`); a slack sheet reads strain 0."""
+    try:
+        o, n, u, a = frame_from_clamps(np.asarray(left_pose, float), np.asarray(right_pose, float))
+    except ValueError:
+        return None
+    return o, sheet_rotation(n, u), max(2.0 * a / size - 1.0, 0.0)
+
+
 def _registered(p) -> tuple[ReachModel, SheetMaterial]:
     """The reach model and the sheet: with a ``display_calib`` (the registered display), its arm bases
     (``arms.left``/``arms.right``) and, where it has one, its identified ``sheet`` entry's terms on top of the
-    sheet params; else the ``left_base``/``right_base`` and sheet params. Raises ``ValueError`` naming the file
-    and entry when it is missing, unreadable or lacks an arm."""
+    sheet params; else the ``left_base``/``right_base`` and sheet params. Raises ``ValueError`` naming the
+    file and entry when it is missing, unreadable or lacks an arm."""
     reach, material = build(ReachModel, p), build(SheetMaterial, p, rename=MATERIAL_RENAME)
     path = getattr(p, "display_calib", None)
     if not path:
@@ -76,10 +93,10 @@ def planner_config(p) -> PlannerConfig:
 
 class PlannerStage:
     """The planner's state and decisions. ``scene``: the object; ``p``: the planner node's params (read:
-    ``planner_config()``, ``stiffness_from_scene``, ``min_contact_depth``, ``head_radius``, ``keepout_margin``,
-    ``pull_margin``, ``arm_speed_scale``, ``arm_accel_scale``, ``use_fem_stiffness``, ``fem_timeout``,
-    ``fem_window``, ``object_stiffness``, and ``stiffness_scale`` in ``model_fields_set``). Raises
-    ``ValueError`` on an inconsistent config."""
+    ``planner_config()``, ``stiffness_from_scene``, ``min_contact_depth``, ``head_radius``,
+    ``keepout_margin``, ``pull_margin``, ``arm_speed_scale``, ``arm_accel_scale``, ``use_fem_stiffness``,
+    ``fem_timeout``, ``fem_window``, ``object_stiffness``, and ``stiffness_scale`` in ``model_fields_set``).
+    Raises ``ValueError`` on an inconsistent config."""
 
     def __init__(self, scene: Scene, p) -> None:
         self.scene, self.p = scene, p
@@ -90,7 +107,8 @@ class PlannerStage:
         self.guard = HeadGuard(KeepOut(head_radius=p.head_radius, margin=p.keepout_margin), cfg.material.size)
         self.planner = SurfacePlanner(shape, cfg, compliance, self.guard)
         bases = {"left": cfg.reach.left_base, "right": cfg.reach.right_base}
-        self.commander = ArmCommander(bases, cfg.material, p.pull_margin, p.arm_speed_scale, p.arm_accel_scale)
+        self.commander = ArmCommander(bases, cfg.material, p.pull_margin, p.arm_speed_scale,
+                                      p.arm_accel_scale)
         self.k_fem: float | None = None
         self._k_fem_at = 0.0
         self._press: tuple[float, float] | None = None
@@ -102,37 +120,41 @@ class PlannerStage:
         self.planner.set_pull_limit(limit)
 
     def describe_sheet(self) -> str:
-        """The sheet model in words: identified from presses (``display_calib``'s ``sheet`` entry) or nominal."""
+        """The sheet model in words: identified from presses (``display_calib``'s ``sheet`` entry) or
+        nominal."""
         m = self.planner.cfg.material
         nominal = build(SheetMaterial, self.p, rename=MATERIAL_RENAME)
         identified = any(getattr(m, k) != getattr(nominal, k) for k in TERMS)
         return (f"{IDENTIFIED[identified]} "
-                f"(w {m.contact_width * 1e3:.1f} mm, growth {m.contact_growth:.2f}, own {m.own_stiffness:.3g} N + "
-                f"{m.own_growth:.3g} N/m, stretching {m.stretching:.3g} N/m³, strain offset {m.strain_offset:+.4f}, "
-                f"position {m.position_u:+.3f} along / {m.position_v:+.3f} across)")
+                f"(w {m.contact_width * 1e3:.1f} mm, growth {m.contact_growth:.2f}, own {m.own_stiffness:.3g}"
+                f" N + {m.own_growth:.3g} N/m, stretching {m.stretching:.3g} N/m³, strain offset "
+                f"{m.strain_offset:+.4f}, position {m.position_u:+.3f} along / {m.position_v:+.3f} across)")
 
     def set_force_depth(self, table: ForceDepth) -> str:
         """The object's force–depth from its FEM: the request from now on. Unless ``stiffness_scale`` was set,
-        the scene's one scale (:func:`flexsheet.model.force_depth.scene_scale`) maps it between the sheet's force
-        at its least stretch and at the arms' pull at the home pose. Returns the line to log ('' none)."""
+        the scene's one scale (:func:`flexsheet.model.force_depth.scene_scale`) maps it between the sheet's
+        force at its least stretch and at the arms' pull at the home pose. Returns the line to log (''
+        none)."""
         cfg, line = self.planner.cfg, ""
         if "stiffness_scale" not in self.p.model_fields_set:
             stroke_depth = self.scene.use.stroke_depth
-            sc = sheet_scene_scale(table, cfg.material, self.planner.max_stretch, stroke_depth, cfg.contrast_gain)
+            sc = sheet_scene_scale(table, cfg.material, self.planner.max_stretch, stroke_depth,
+                                   cfg.contrast_gain)
             self.planner.cfg = replace(cfg, stiffness_scale=sc.scale)
             self.scene_scale = sc
             d_lo, d_hi = scale_depths(stroke_depth)
-            line = (f"object's force-depth from its FEM ({len(table.names)} points): one scale {sc.scale:.3g} for "
-                    f"the scene (presentable from {sc.low:.3g} to {sc.high:.3g} over {d_lo * 1e3:.0f}-"
-                    f"{d_hi * 1e3:.0f} mm; {'it fits' if sc.fits else 'it does NOT fit'}, "
+            line = (f"object's force-depth from its FEM ({len(table.names)} points): one scale "
+                    f"{sc.scale:.3g} for the scene (presentable from {sc.low:.3g} to {sc.high:.3g} over "
+                    f"{d_lo * 1e3:.0f}-{d_hi * 1e3:.0f} mm; {'it fits' if sc.fits else 'it does NOT fit'}, "
                     f"{100 * sc.saturated:.0f} % of its samples saturate)")
         self.planner.set_force_depth(table)
         return line
 
-    def set_fem(self, now: float, scene_key: str, stiffness: float, contact_force: float, depth: float) -> None:
+    def set_fem(self, now: float, scene_key: str, stiffness: float, contact_force: float,
+                depth: float) -> None:
         """The FEM's local stiffness N/m and press (force N at depth m) of a valid solution at ``now`` s, kept
-        when positive and about this scene (:func:`fem_solves_scene`); with ``fem_window`` > 0 the median of the
-        last ``fem_window`` s."""
+        when positive and about this scene (:func:`fem_solves_scene`); with ``fem_window`` > 0 the median of
+        the last ``fem_window`` s."""
         if not stiffness > 0.0:
             return
         if not fem_solves_scene(scene_key, self.scene, self.key):
@@ -156,9 +178,9 @@ class PlannerStage:
         return None, "scene"
 
     def plan(self, now: float, t: float | None, pos) -> tuple[Plan | None, str]:
-        """The plan for a fingertip at ``pos`` (3,) m seen at ``t`` s (None: the marker is lost: hold), at ``now``
-        s; a lost head holds the pose while the stretch follows the push. Returns (plan or None when there is
-        no safe pose yet, a line on a change of the stiffness' source or '')."""
+        """The plan for a fingertip at ``pos`` (3,) m seen at ``t`` s (None: the marker is lost: hold), at
+        ``now`` s; a lost head holds the pose while the stretch follows the push. Returns (plan or None when
+        there is no safe pose yet, a line on a change of the stiffness' source or '')."""
         if t is None:
             return self.planner.hold(Hold.MARKER_LOST), ""
         k, source = self.stiffness(now)
@@ -191,7 +213,8 @@ class PlannerStage:
                      f"{self.scene.name!r} ({self.fem_other_scene} messages so far)")
         cfg = self.planner.cfg
         if cfg.stiffness_scale != 1.0:
-            text += f"; x {cfg.stiffness_scale:.4g} (stiffness_scale" + (", the scene's)" if self.scene_scale else ")")
+            text += (f"; x {cfg.stiffness_scale:.4g} (stiffness_scale"
+                     + (", the scene's)" if self.scene_scale else ")"))
         if cfg.contrast_gain != 1.0:
             text += f"; contrast_gain {cfg.contrast_gain:g}"
         if text == self._source:

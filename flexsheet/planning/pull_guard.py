@@ -1,12 +1,12 @@
 """The clamp force the planner may ask, from the arms' joint torques at the poses it sends them to (pure).
 
-:func:`flexsheet.arm.pull_limit.max_pull` bounds the sheet's pull at a joint configuration. The bridges refuse a
-target whose pull passes it (``hold:torque:J<k>``, and the other arm holds with it), so the planner must keep
-under it *at the targets it sends*, not at where the arms are: a held arm is far from its next target, and the
-limit there can be lower. :class:`PullGuard` solves IK for each plan's two clamp targets (seeded from the last
-solutions; ~0.1 ms an arm) and returns ``margin`` × the smaller arm's limit there, which the planner applies
-from its next plan on (:meth:`flexsheet.planning.surface_planner.SurfacePlanner.set_pull_limit`); targets move
-by a rate-limited step a cycle, which the margin covers.
+:func:`flexsheet.arm.pull_limit.max_pull` bounds the sheet's pull at a joint configuration. The bridges refuse
+a target whose pull passes it (``hold:torque:J<k>``, and the other arm holds with it), so the planner must
+keep under it *at the targets it sends*, not at where the arms are: a held arm is far from its next target,
+and the limit there can be lower. :class:`PullGuard` solves IK for each plan's two clamp targets (seeded from
+the last solutions; ~0.1 ms an arm) and returns ``margin`` × the smaller arm's limit there, which the planner
+applies from its next plan on (:meth:`flexsheet.planning.surface_planner.SurfacePlanner.set_pull_limit`);
+targets move by a rate-limited step a cycle, which the margin covers.
 
 Units: N, m, rad.
 """

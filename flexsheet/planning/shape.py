@@ -36,8 +36,8 @@ class SmoothMeshShape(MeshShape):
         self.scene = scene
 
     def closest(self, p: Vec) -> tuple[Vec, Vec, float]:
-        """Closest point q (3,) m, smooth outward normal n (3,), signed distance m (< 0 inside; the side from the
-        smooth normal where it is clear, else trimesh's containment test)."""
+        """Closest point q (3,) m, smooth outward normal n (3,), signed distance m (< 0 inside; the side from
+        the smooth normal where it is clear, else trimesh's containment test)."""
         x = np.asarray([p], dtype=float)
         qa, na = self.scene.surface_point(x)
         q = tuple(float(v) for v in qa[0])
@@ -64,9 +64,9 @@ class SmoothMeshShape(MeshShape):
         return q, n, np.where(d <= 1e-12, 0.0, np.where(inside, -d, d))
 
     def support(self, n: Vec, near: Vec, max_iter: int = 20) -> Vec:
-        """The surface point near ``near`` (3,) m whose smooth normal is ``n`` (3,) unit: where a plane of normal
-        ``n`` touches the surface there. Fixed-point iteration q ← closest(q + ρ (n − n_q)) with ρ the local
-        radius of curvature (secant estimate, 5–100 mm); stops at |n − n_q| < 1e-7 or after ``max_iter``
+        """The surface point near ``near`` (3,) m whose smooth normal is ``n`` (3,) unit: where a plane of
+        normal ``n`` touches the surface there. Fixed-point iteration q ← closest(q + ρ (n − n_q)) with ρ the
+        local radius of curvature (secant estimate, 5–100 mm); stops at |n − n_q| < 1e-7 or after ``max_iter``
         steps, returning the iterate whose normal is nearest ``n``."""
         nn = np.asarray(n, float) / np.linalg.norm(n)
         q, nq, _ = self.closest(near)

@@ -2,11 +2,11 @@
 
 Paper §V-A and Fig. 7, generalised:
 
-* **Away** (fingertip farther than ``touch_distance`` from the surface): the contact point A is the
-  centre-ray hit (:meth:`flexsheet.model.shape_base.Shape.project`; closest point for non-convex meshes) and the
-  sheet is commanded to the tangent plane at A, so the finger meets it there. The sheet's in-plane axis
-  ``axis_u`` is the reference direction (``u_ref``, +y: the clamp line at home) projected onto the
-  tangent plane. A rolled offset left from a previous touch decays with time constant ``recentre_time``.
+* **Away** (fingertip farther than ``touch_distance`` from the surface): the contact point A is the centre-ray
+  hit (:meth:`flexsheet.model.shape_base.Shape.project`; closest point for non-convex meshes) and the sheet is
+  commanded to the tangent plane at A, so the finger meets it there. The sheet's in-plane axis ``axis_u`` is
+  the reference direction (``u_ref``, +y: the clamp line at home) projected onto the tangent plane. A rolled
+  offset left from a previous touch decays with time constant ``recentre_time``.
 * **Touching** (within ``touch_distance``, released beyond ``release_distance``: hysteresis): the sheet
   rolls on the object without slip. Each update the contact moves on the surface from B₋ to B; the sheet
   rotates by the smallest rotation taking the old normal to the new one (rolling without spin, i.e.
@@ -21,13 +21,14 @@ Paper §V-A and Fig. 7, generalised:
   FEM) the request at the contact and depth is the table's, mapped by ``stiffness_scale`` and
   ``contrast_gain``, and matched in force. Without one, the stretch comes from
   :func:`flexsheet.model.tension.stretch_for_stiffness` for the object's stiffness at the contact's distance
-  from the clamps and the push's depth: the one passed in (the FEM's dF/dd), else the scene's compliance model at the contact (:mod:`flexsheet.planning.compliance`), else the
-  configured value; times ``stiffness_scale``. Pressed at least :data:`FORCE_DEPTH` deep with the object's
-  press given (the FEM's force at its depth), the stretch instead makes the sheet's force at this depth the
-  object's (:func:`~flexsheet.model.tension.stretch_for_force`, the force extrapolated to this depth by the
-  object's stiffness): the force–depth then follows the object's along the press, which matching the slope
-  alone does not (a sheet stiffens with depth differently from the object). The stretch is clamped to what the
-  arms can apply (status says so).
+  from the clamps and the push's depth: the one passed in (the FEM's dF/dd), else the scene's compliance model
+  at the contact (:mod:`flexsheet.planning.compliance`), else the configured value; times ``stiffness_scale``.
+  Pressed at least :data:`FORCE_DEPTH` deep with the object's press given (the FEM's force at its depth), the
+  stretch instead makes the sheet's force at this depth the object's
+  (:func:`~flexsheet.model.tension.stretch_for_force`, the force extrapolated to this depth by the object's
+  stiffness): the force–depth then follows the object's along the press, which matching the slope alone does
+  not (a sheet stiffens with depth differently from the object). The stretch is clamped to what the arms can
+  apply (status says so).
 * **Limits and safety**: the pose passes :class:`flexsheet.planning.limits.RateLimiter`; clamp points are
   checked by :class:`flexsheet.planning.limits.ReachModel`.
 
@@ -100,13 +101,14 @@ FORCE_DEPTH = 0.002
 
 
 def scale_depths(stroke_depth: float) -> tuple[float, float]:
-    """(lo, hi) m: the depths a scene's one scale is fitted over, :data:`FORCE_DEPTH` to twice its stroke depth."""
+    """(lo, hi) m: the depths a scene's one scale is fitted over, :data:`FORCE_DEPTH` to twice its stroke
+    depth."""
     return FORCE_DEPTH, 2.0 * float(stroke_depth)
 
 
 def sheet_scene_scale(table, mat: SheetMaterial, max_stretch: float, stroke_depth: float, gain: float = 1.0):
-    """The scene's one scale (:func:`flexsheet.model.force_depth.scene_scale`) for the sheet ``mat`` at its centre:
-    its force at ``mat.min_stretch`` and at ``max_stretch`` bound every mapped force of ``table`` over
+    """The scene's one scale (:func:`flexsheet.model.force_depth.scene_scale`) for the sheet ``mat`` at its
+    centre: its force at ``mat.min_stretch`` and at ``max_stretch`` bound every mapped force of ``table`` over
     :func:`scale_depths` of ``stroke_depth`` m, with contrast gain ``gain``. Raises ``ValueError`` as
     ``scene_scale``."""
     lo, hi = scale_depths(stroke_depth)
@@ -128,11 +130,12 @@ class _Sample(NamedTuple):
 class SurfacePlanner:
     """Stateful surface planner: feed fingertip samples to :meth:`update`, get :class:`Plan` s.
 
-    ``shape``: a :class:`flexsheet.model.shape_base.Shape`; ``config``: :class:`PlannerConfig`; ``compliance``:
-    optional callable (contact (3,) m, normal (3,), depth m) → the object's stiffness N/m there (e.g.
-    :class:`flexsheet.planning.compliance.SceneCompliance`), used when :meth:`update` gets no stiffness (else
-    ``config.object_stiffness``). The first valid sample initialises the pose (no ramp). ``last`` is the last safe plan (``None`` before the first);
-    :meth:`hold` republishes it with a reason (a lost marker, a refused input). ``counts`` counts statuses.
+    ``shape``: a :class:`flexsheet.model.shape_base.Shape`; ``config``: :class:`PlannerConfig`;
+    ``compliance``: optional callable (contact (3,) m, normal (3,), depth m) → the object's stiffness N/m
+    there (e.g. :class:`flexsheet.planning.compliance.SceneCompliance`), used when :meth:`update` gets no
+    stiffness (else ``config.object_stiffness``). The first valid sample initialises the pose (no ramp).
+    ``last`` is the last safe plan (``None`` before the first); :meth:`hold` republishes it with a reason (a
+    lost marker, a refused input). ``counts`` counts statuses.
     """
 
     def __init__(self, shape: Shape, config: PlannerConfig | None = None, compliance=None, guard=None):
@@ -142,7 +145,8 @@ class SurfacePlanner:
         self.compliance = compliance
         self.limiter = RateLimiter(self.cfg.limits)
         self._eps_max = max_stretch_within_force(self.cfg.material)
-        #: the arms' pull limit at their pose, N (None: only the material's ``max_force``), :meth:`set_pull_limit`
+        #: the arms' pull limit at their pose, N (None: only the
+        #: material's ``max_force``), :meth:`set_pull_limit`
         self.pull_limit: float | None = None
         #: the object's force–depth table (:meth:`set_force_depth`); None: the stiffness given or modelled
         self.force_depth = None
@@ -155,20 +159,20 @@ class SurfacePlanner:
         return self._eps_max
 
     def set_force_depth(self, table) -> None:
-        """What the object asks, from its own FEM (:class:`flexsheet.model.force_depth.ForceDepth`; None: back to
-        the stiffness given to :meth:`update` or the compliance model). With a table the request at contact q,
-        depth d is ``table.mapped(q, max(d, TABLE_MIN_DEPTH), stiffness_scale, contrast_gain)``, matched in force at
-        that depth (the sheet's force–depth and the object's differ in shape, so matching the slope at a shallow
-        depth misses the force deeper); ``object_stiffness`` and ``object_press`` passed to :meth:`update` are
-        then not used (source "table")."""
+        """What the object asks, from its own FEM (:class:`flexsheet.model.force_depth.ForceDepth`; None: back
+        to the stiffness given to :meth:`update` or the compliance model). With a table the request at contact
+        q, depth d is ``table.mapped(q, max(d, TABLE_MIN_DEPTH), stiffness_scale, contrast_gain)``, matched in
+        force at that depth (the sheet's force–depth and the object's differ in shape, so matching the slope
+        at a shallow depth misses the force deeper); ``object_stiffness`` and ``object_press`` passed to
+        :meth:`update` are then not used (source "table")."""
         self.force_depth = table
         self._tcache = None
 
     def set_pull_limit(self, pull: float | None) -> None:
         """Cap the clamp force at ``pull`` N (the arms' torque limit at their pose,
         :func:`flexsheet.arm.pull_limit.max_pull`) below the material's ``max_force``; None lifts the cap. A
-        stretch asked beyond it is clamped and reported ``object_stiffer_than_sheet``. Raises ``ValueError`` for
-        a negative or NaN pull."""
+        stretch asked beyond it is clamped and reported ``object_stiffer_than_sheet``. Raises ``ValueError``
+        for a negative or NaN pull."""
         if pull is not None and not (pull >= 0.0):
             raise ValueError(f"pull limit must be >= 0 N or None, got {pull!r}")
         if pull == self.pull_limit:
@@ -218,12 +222,12 @@ class SurfacePlanner:
                object_press: tuple[float, float] | None = None) -> Plan | None:
         """Plan from a fingertip sample ``p`` (3,) m at time ``t`` s; ``object_stiffness`` N/m (e.g. the FEM's
         dF/dd) overrides the compliance model and the configured value; either is multiplied by
-        ``stiffness_scale``. ``object_press`` (force N, depth m): the object's force at a depth (the FEM's last
-        solve), matched in force from :data:`FORCE_DEPTH` on (module doc); ignored when malformed. ``now`` s: the caller's clock (the node's ``now()``, same time base as ``t``), which
-        judges stamps from the future and backward clock steps (see the module table); None: ``t`` alone.
-        Returns the new :class:`Plan`, or a held copy of the last
-        safe plan with status ``hold:<reason>`` for invalid input (``None`` if there is none yet). Never raises
-        for bad samples: the reason is counted in ``counts``.
+        ``stiffness_scale``. ``object_press`` (force N, depth m): the object's force at a depth (the FEM's
+        last solve), matched in force from :data:`FORCE_DEPTH` on (module doc); ignored when malformed.
+        ``now`` s: the caller's clock (the node's ``now()``, same time base as ``t``), which judges stamps
+        from the future and backward clock steps (see the module table); None: ``t`` alone. Returns the new
+        :class:`Plan`, or a held copy of the last safe plan with status ``hold:<reason>`` for invalid input
+        (``None`` if there is none yet). Never raises for bad samples: the reason is counted in ``counts``.
 
         Steps: check the sample → re-acquisition → project onto the shape (§V-A) → touch hysteresis → roll
         or recentre (Fig. 7(b)) → stretch for the stiffness → keep the contact on the sheet → rate limits
@@ -270,12 +274,14 @@ class SurfacePlanner:
             self.last = plan
         return plan
 
-    def hold_pose(self, reason: str, t: float, p, object_stiffness: float | None = None, now: float | None = None,
+    def hold_pose(self, reason: str, t: float, p, object_stiffness: float | None = None,
+                  now: float | None = None,
                   object_press: tuple[float, float] | None = None) -> Plan | None:
-        """The last plan's pose held, with status ``reason`` (a lost head), while the stretch still follows the
-        push: fingertip sample ``p`` (3,) m at ``t`` s is planned as :meth:`update` plans it (the request at its
-        contact and depth, at the held contact's offset on the sheet), and the stretch moves toward that at no
-        more than :meth:`hold_stretch_rate`, the sheet at rest. A refused sample, an unreachable stretch or no
+        """The last plan's pose held, with status ``reason`` (a lost head), while the stretch still follows
+        the push: fingertip sample ``p`` (3,) m at ``t`` s is planned as :meth:`update` plans it (the request
+        at its contact and depth, at the held contact's offset on the sheet), and the stretch moves toward
+        that at no more than :meth:`hold_stretch_rate`, the sheet at rest. A refused sample, an unreachable
+        stretch or no
         plan yet: :meth:`hold` (``None`` before the first plan). Never raises for bad samples."""
         s = self._sample(t, p, object_stiffness, now)
         L = self.last
@@ -302,23 +308,25 @@ class SurfacePlanner:
             return replace(L, t=s.t, status=f"{reason};unreachable", reach_margin=margin)
         self.limiter.reset(L.origin, rot_from_cols(L.normal, L.axis_u, L.axis_v), st)
         self.last = replace(L, t=s.t, stretch=st, tension=tension(st, mat),
-                            stiffness=_stiffness_or_zero(st, mat, su, sv, depth), object_stiffness=k_obj, depth=depth,
-                            touching=self.touching, status=f"{reason};{tr.saturated}" if tr.saturated else reason,
+                            stiffness=_stiffness_or_zero(st, mat, su, sv, depth), object_stiffness=k_obj,
+                            depth=depth,
+                            touching=self.touching,
+                            status=f"{reason};{tr.saturated}" if tr.saturated else reason,
                             left=left, right=right, reach_margin=margin,
                             k_source=k_source)
         return self.last
 
     def hold_stretch_rate(self) -> float:
-        """1/s: how fast :meth:`hold_pose` changes the stretch: the limits' ``stretch_rate``, and no faster than
-        moves each clamp (half the sheet's span from the centre) at the head guard's reduced speed (0.25 m/s
-        without a guard), the one motion of a held sheet near a head it cannot see."""
+        """1/s: how fast :meth:`hold_pose` changes the stretch: the limits' ``stretch_rate``, and no faster
+        than moves each clamp (half the sheet's span from the centre) at the head guard's reduced speed (0.25
+        m/s without a guard), the one motion of a held sheet near a head it cannot see."""
         vs = self.guard.keepout.reduced_speed if self.guard is not None else 0.25
         return min(self.cfg.limits.stretch_rate, vs / (0.5 * self.cfg.material.size))
 
     # -- the steps of update ----------------------------------------------------------------------
     def _touch(self, dist: float) -> None:
-        """Touch hysteresis on the signed distance ``dist`` m: touching from ``touch_distance``, released beyond
-        ``release_distance``."""
+        """Touch hysteresis on the signed distance ``dist`` m: touching from ``touch_distance``, released
+        beyond ``release_distance``."""
         if not self.touching and dist <= self.cfg.touch_distance:
             self.touching = True
         elif self.touching and dist > self.cfg.release_distance:
@@ -332,16 +340,18 @@ class SurfacePlanner:
             return k_obj, k_source, 0.0
         cfg = self.cfg
         try:
-            f, k_obj = self.force_depth.mapped(q, max(-dist, TABLE_MIN_DEPTH), cfg.stiffness_scale, cfg.contrast_gain)
+            f, k_obj = self.force_depth.mapped(q, max(-dist, TABLE_MIN_DEPTH), cfg.stiffness_scale,
+                                               cfg.contrast_gain)
         except ValueError:
             return None, "table", 0.0
         return k_obj, "table", f
 
     def _stretch(self, k_obj: float, table_force: float, su: float, sv: float, depth: float,
                  object_press) -> TensionResult:
-        """Stiffness (or force) → stretch at the contact (``su``, ``sv``) m from the sheet's centre and ``depth`` m."""
+        """Stiffness (or force) → stretch at the contact (``su``, ``sv``) m from the sheet's centre and
+        ``depth`` m."""
         mat = self.cfg.material
-        if self.force_depth is not None:         # the table's force, matched at every depth (≥ TABLE_MIN_DEPTH)
+        if self.force_depth is not None:  # the table's force, matched at every depth (≥ TABLE_MIN_DEPTH)
             return stretch_for_force(table_force, mat, su, max(depth, TABLE_MIN_DEPTH), self._eps_max, sv)
         force = self._object_force(object_press, k_obj, depth)
         return (self._tension(k_obj, su, sv, depth) if force is None
@@ -378,8 +388,9 @@ class SurfacePlanner:
         return _Sample(t, p, k_obj, min(dt, self.cfg.max_dt), src)
 
     def _object_force(self, press, k_obj: float, depth: float) -> float | None:
-        """The object's force (N, × ``stiffness_scale``) at ``depth``: the press (force, depth) extrapolated by
-        ``k_obj`` (already scaled); None below :data:`FORCE_DEPTH`, without a press or for a malformed one."""
+        """The object's force (N, × ``stiffness_scale``) at ``depth``: the press (force, depth) extrapolated
+        by ``k_obj`` (already scaled); None below :data:`FORCE_DEPTH`, without a press or for a malformed
+        one."""
         if press is None or depth < FORCE_DEPTH:
             return None
         try:
@@ -410,10 +421,12 @@ class SurfacePlanner:
         return k * scale_k, "scene"
 
     def _roll(self, q: Vec, n: Vec, dt: float | None, was_touching: bool) -> tuple[float, float, Vec]:
-        """Contact coordinates (s_u, s_v) m on the sheet and the new ``axis_u`` for contact ``q``, normal ``n``.
+        """Contact coordinates (s_u, s_v) m on the sheet and the new ``axis_u`` for contact ``q``, normal
+        ``n``.
 
         Touching: rolling without slip — parallel-transport u, advance the material point by the geodesic
-        step. Not touching: the offset decays with ``recentre_time`` and u is ``u_ref`` in the tangent plane."""
+        step. Not touching: the offset decays with ``recentre_time`` and u is ``u_ref`` in the tangent
+        plane."""
         cfg = self.cfg
         su, sv = self.s
         if self.touching and was_touching and self.n_last is not None and self.q_last is not None \
@@ -429,7 +442,8 @@ class SurfacePlanner:
         if dt is not None and (su != 0.0 or sv != 0.0):
             f = math.exp(-dt / cfg.recentre_time)
             su, sv = su * f, sv * f
-        ref = cfg.u_ref if abs(dot(cfg.u_ref, n)) < 0.999 * norm(cfg.u_ref) or self.u_last is None else self.u_last
+        ref = (cfg.u_ref if abs(dot(cfg.u_ref, n)) < 0.999 * norm(cfg.u_ref) or self.u_last is None
+               else self.u_last)
         return su, sv, perp_unit(n, ref)
 
     def _keep_on_sheet(self, su: float, sv: float, stretch: float, status: list[str]) -> tuple[float, float]:
@@ -459,7 +473,7 @@ class SurfacePlanner:
             status.append("rate_limited")
         if self.guard is not None and self.guard.eye is not None and prev is not None:
             g = self.guard.step(prev.origin, prev.R, o, Rc, st, dt)
-            if g.retreat:            # the step would enter the head's keep-out (or it was lost near): back off
+            if g.retreat:  # the step would enter the head's keep-out (or it was lost near): back off
                 status.append(Hold.HEAD_LOST if self.guard.lost else Hold.KEEP_OUT)
                 o, Rc = tuple(float(x) for x in g.origin), tuple(tuple(float(x) for x in r) for r in g.R)
                 self.limiter.reset(o, Rc, st)
@@ -477,8 +491,8 @@ class SurfacePlanner:
 
 
 def _stiffness_or_zero(stretch: float, mat: SheetMaterial, su: float, sv: float, depth: float) -> float:
-    """Stiffness presented at a rate-limited stretch and ``depth`` m (N/m); 0 when the contact is not between the
-    clamps."""
+    """Stiffness presented at a rate-limited stretch and ``depth`` m (N/m); 0 when the contact is not between
+    the clamps."""
     try:
         return stiffness(stretch, mat, su, depth, sv)
     except ValueError:

@@ -77,8 +77,8 @@ def _verts(vertices) -> np.ndarray:
 
 
 def check_screen(eye, projector, screen_point, screen_normal):
-    """Validate the fixed geometry: eye V (3,) m in front of the imaginary screen (r_o, n_o), projector P (3,) m
-    behind it (rear projection). Returns (V, P, r_o, unit n_o) as float64 (3,) arrays. Raises ``ValueError``
+    """Validate the fixed geometry: eye V (3,) m in front of the imaginary screen (r_o, n_o), projector P (3,)
+    m behind it (rear projection). Returns (V, P, r_o, unit n_o) as float64 (3,) arrays. Raises ``ValueError``
     naming the argument for a bad shape, NaN/inf, a zero normal or a point on the wrong side."""
     v = _vec("eye", eye)
     p = _vec("projector", projector)
@@ -99,7 +99,7 @@ def _through_screen(a, c, valid, v, p, ro, no, min_cos):
     s2 = np.where(ok2, ((ro - p) @ no) / np.where(ok2, den2, 1.0), 0.0)
     ok2 &= s2 > 0.0                                                    # screen lies on the way P → C
     c_hat = s2[:, None] * c + (1.0 - s2[:, None]) * p                  # eq 4
-    den3 = (v - c_hat) @ no                                            # eq 6 denominator = eye–screen distance
+    den3 = (v - c_hat) @ no  # eq 6 denominator = eye–screen distance
     s3 = ((a - c_hat) @ no) / den3                                     # from eq 5
     a_hat = s3[:, None] * v + (1.0 - s3[:, None]) * c_hat              # eq 6
     valid &= ok2
@@ -135,12 +135,13 @@ def correct_vertices(vertices, *, eye, projector, screen_point, screen_normal, s
 
 
 def fan_triangles(pushed_point, corners, projector):
-    """The 4-triangle fan of the pushed sheet (paper §III-C-3): triangle i = (pushed point, corner i, corner i+1).
+    """The 4-triangle fan of the pushed sheet (paper §III-C-3): triangle i = (pushed point, corner i, corner
+    i+1).
 
-    ``pushed_point`` (3,) m, ``corners`` (4, 3) m in order around it, ``projector`` (3,) m (orients the normals
-    toward the user, away from the rear projector). Returns (q (3,), corners (4, 3), unit normals (4, 3),
-    usable (4,) bool: area above 1e-12 m², polygon normal (3,)); an unusable triangle gets the polygon normal.
-    Raises ``ValueError`` for NaN/bad shapes, zero-area corners or all four triangles degenerate."""
+    ``pushed_point`` (3,) m, ``corners`` (4, 3) m in order around it, ``projector`` (3,) m (orients the
+    normals toward the user, away from the rear projector). Returns (q (3,), corners (4, 3), unit normals (4,
+    3), usable (4,) bool: area above 1e-12 m², polygon normal (3,)); an unusable triangle gets the polygon
+    normal. Raises ``ValueError`` for NaN/bad shapes, zero-area corners or all four triangles degenerate."""
     q = _vec("pushed_point", pushed_point)
     cs = np.asarray(corners, dtype=float)
     if cs.shape != (4, 3) or not np.all(np.isfinite(cs)):
@@ -185,7 +186,8 @@ def land_on_triangles(a, v, q, cs, nrm, usable, min_cos):
     bmin = np.minimum(np.minimum(b1, b2), 1.0 - b1 - b2)
     bmin = np.where(ok, bmin, -np.inf)
     inside = bmin >= -1e-9
-    # first hit from the eye = largest s1 among the triangles the line passes inside; else the least-outside one
+    # first hit from the eye = largest s1 among the triangles
+    # the line passes inside; else the least-outside one
     score = np.where(inside, 1e6 + s1, bmin)
     k = np.argmax(score, axis=1)
     rows = np.arange(a.shape[0])
@@ -278,7 +280,8 @@ def correct_vertices_fine(vertices, *, eye, projector, screen_point, screen_norm
 
 
 def project_vertices(vertices, *, eye, screen_point, screen_normal) -> np.ndarray:
-    """Central projection of vertices (N, 3) from ``eye`` onto the imaginary screen (paper's point B), (N, 3) m.
+    """Central projection of vertices (N, 3) from ``eye`` onto the imaginary screen (paper's point B), (N, 3)
+    m.
 
     Raises ``ValueError`` if a vertex lies in the plane through the eye parallel to the screen."""
     a = _verts(vertices)
@@ -293,7 +296,8 @@ def project_vertices(vertices, *, eye, screen_point, screen_normal) -> np.ndarra
 
 
 def predict_model_errors(depth: float, *, eye, projector, screen_point, screen_normal, probes,
-                         sheet: SheetSurface, reference, min_cos: float = DEFAULT_MIN_COS) -> dict[str, float]:
+                         sheet: SheetSurface, reference, min_cos: float = DEFAULT_MIN_COS) -> dict[str,
+                                                                                                   float]:
     """Predicted image error (m, max over ``probes``) of each model against the renderer's pushed-sheet model.
 
     ``probes`` (N, 3) m are object points to check (e.g. the silhouette); ``sheet`` is the unpushed sheet pose
@@ -315,7 +319,8 @@ def predict_model_errors(depth: float, *, eye, projector, screen_point, screen_n
     shifted = {
         "none": probes,
         "flat": correct_vertices(probes, sheet_point=sheet.origin, sheet_normal=sheet.normal, **common),
-        "four_triangle": correct_vertices_pushed(probes, pushed_point=true.pushed_point, corners=sheet.corners,
+        "four_triangle": correct_vertices_pushed(probes, pushed_point=true.pushed_point,
+                                                 corners=sheet.corners,
                                                  **common),
         "fine": correct_vertices_fine(probes, sheet=true, **common),
     }
@@ -343,8 +348,9 @@ def choose_sheet_model(depth: float, table: dict[str, list[tuple[float, float]]]
 
     ``table`` maps model name → sorted [(depth m, predicted error m), ...] (from :func:`predict_model_errors`
     over a range of depths); errors are interpolated linearly in depth. Models are tried cheapest first
-    (``MODELS`` order, restricted to ``models``); if none meets the target, the one with the smallest predicted error is returned.
-    Raises ``ValueError`` for a non-finite/negative depth or target, or an empty table.
+    (``MODELS`` order, restricted to ``models``); if none meets the target, the one with the smallest
+    predicted error is returned. Raises ``ValueError`` for a non-finite/negative depth or target, or an empty
+    table.
     """
     if not (math.isfinite(depth) and depth >= 0.0):
         raise ValueError(f"depth must be finite and >= 0, got {depth!r}")

@@ -48,8 +48,8 @@ class PacingStats:
     def line(self) -> str:
         """One line for /diagnostics."""
         return (f"window {self.fps:.1f} fps (refresh {1e3 / self.period_ms:.1f} Hz), frame interval mean "
-                f"{self.interval_mean_ms:.2f} ms p99 {self.interval_p99_ms:.2f} ms, missed vsyncs {self.missed_vsyncs},"
-                f" eye resyncs {self.eye_resyncs} [{self.source}]")
+                f"{self.interval_mean_ms:.2f} ms p99 {self.interval_p99_ms:.2f} ms, missed vsyncs "
+                f"{self.missed_vsyncs}, eye resyncs {self.eye_resyncs} [{self.source}]")
 
 
 class FramePacer:
@@ -76,14 +76,14 @@ class FramePacer:
         self._dt: deque[float] = deque(maxlen=window)
 
     def next_eye(self) -> int:
-        """The eye (:data:`LEFT`/:data:`RIGHT`) of the frame that the next vsync will show: even vsyncs show the
-        left eye (the right with ``swap_eyes``)."""
+        """The eye (:data:`LEFT`/:data:`RIGHT`) of the frame that the next vsync will show: even vsyncs show
+        the left eye (the right with ``swap_eyes``)."""
         return ((self.vsync + 1) % 2) ^ int(self.swap_eyes)
 
     def on_swap(self, t: float, msc: int | None = None) -> int:
-        """Record a frame whose swap completed at time ``t`` s (and, if known, at media stream counter ``msc``).
-        Returns the number of vsyncs since the previous frame (1 when on time; 0 for the first frame). Raises
-        ``ValueError`` if time or the counter runs backwards."""
+        """Record a frame whose swap completed at time ``t`` s (and, if known, at media stream counter
+        ``msc``). Returns the number of vsyncs since the previous frame (1 when on time; 0 for the first
+        frame). Raises ``ValueError`` if time or the counter runs backwards."""
         if self._t is None:
             self._t, self._msc = float(t), msc
             self.vsync = 0 if msc is None else int(msc)
@@ -119,12 +119,14 @@ class FramePacer:
         if len(d) == 0:
             return PacingStats(self.frames, 0.0, 0.0, 0.0, self.missed, self.resyncs, self.period * 1e3,
                                self._source)
-        return PacingStats(self.frames, float(len(d) / d.sum()) if d.sum() > 0 else 0.0, float(d.mean() * 1e3),
+        return PacingStats(self.frames, float(len(d) / d.sum()) if d.sum() > 0 else 0.0,
+                           float(d.mean() * 1e3),
                            float(np.percentile(d, 99) * 1e3), self.missed, self.resyncs, self.period * 1e3,
                            self._source)
 
 
-def frame_layout(stereo: str, width: int, height: int) -> tuple[tuple[int, int], list[tuple[int | None, tuple]]]:
+def frame_layout(stereo: str, width: int, height: int) -> tuple[tuple[int, int],
+                                                                list[tuple[int | None, tuple]]]:
     """Output frame size and where each eye goes, for eye images of ``width × height`` px.
 
     Returns ((frame width, frame height), [(eye, viewport), ...]): ``eye`` is :data:`LEFT`, :data:`RIGHT` or

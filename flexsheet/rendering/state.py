@@ -1,11 +1,12 @@
-"""The renderer's state and decisions, pure (numpy; no GL, no transport): what the node draws and with which model.
+"""The renderer's state and decisions, pure (numpy; no GL, no transport): what the node draws and with which
+model.
 
 * :class:`RendererState` — the newest inputs (object mesh, both clamp poses, fingertip) and the sheet they
   give (:meth:`SheetSurface.from_clamps`, paper §III-C), validated when they arrive; the last good sheet is
   kept for frames whose inputs give an unusable sheet. Thread-safe (input handlers run in worker threads, the
   drawing in the GL thread).
-* :class:`ErrorTable` — each correction model's predicted image error against the renderer's pushed-sheet model
-  (the gripped sheet's FEM depth table, :mod:`flexsheet.model.sheet_model`) over a range of push depths
+* :class:`ErrorTable` — each correction model's predicted image error against the renderer's pushed-sheet
+  model (the gripped sheet's FEM depth table, :mod:`flexsheet.model.sheet_model`) over a range of push depths
   (:func:`flexsheet.rendering.correction.predict_model_errors`), computed once its first table is available.
 * :func:`sheet_model_for`, :class:`SheetConfig` — that pushed-sheet model and its settings
   (:mod:`flexsheet.model.sheet_model`, re-exported here), built the same way for the node, the Foxglove
@@ -53,7 +54,8 @@ AUTO_MODELS = ("flat", "four_triangle", "fine")
 
 
 def check_sheet(sheet: SheetSurface, eye, projector) -> None:
-    """Raise ``ValueError`` unless the eye (3,) m is in front of ``sheet`` and the projector (3,) m behind it."""
+    """Raise ``ValueError`` unless the eye (3,) m is in front of ``sheet`` and the projector (3,) m behind
+    it."""
     if (np.asarray(eye, dtype=float) - sheet.origin) @ sheet.normal <= 1e-6:
         raise ValueError(f"eye on the wrong side of the sheet (normal {sheet.normal.round(3).tolist()})")
     if (np.asarray(projector, dtype=float) - sheet.origin) @ sheet.normal >= -1e-6:
@@ -84,7 +86,8 @@ class ErrorTable:
         """Predict each model's error at each depth (m) for ``probes`` (N, 3) m on the unpushed ``sheet``
         (:func:`predict_model_errors`, ~0.1 s per depth) against ``sheet_model``'s shape pushed at the centre
         (:class:`flexsheet.model.sheet_model.NominalSheetModel`; also the ``fine`` model's shape). Builds the
-        table of ``sheet``'s stretch node if it is not cached (~30 s). Raises ``ValueError`` on bad geometry."""
+        table of ``sheet``'s stretch node if it is not cached (~30 s). Raises ``ValueError`` on bad
+        geometry."""
         rows = {m: [] for m in MODELS}
 
         def ref(s, depth):
@@ -103,13 +106,15 @@ class ErrorTable:
         """:meth:`build` on the home (unpushed, untilted) sheet at clamp stretch ``stretch_node`` with
         ``config``'s half width, on the paper's imaginary screen: the table the renderer node picks its models
         from (and the correction experiment's live path)."""
-        home = SheetSurface(np.zeros(3), geometry.SCREEN_NORMAL, [0.0, 1.0, 0.0], clamp_half_span(stretch_node),
+        home = SheetSurface(np.zeros(3), geometry.SCREEN_NORMAL, [0.0, 1.0, 0.0],
+                            clamp_half_span(stretch_node),
                             config.half_width)
         return cls.build(probes, eye=eye, projector=projector, screen_point=geometry.SCREEN_POINT,
                          screen_normal=geometry.SCREEN_NORMAL, sheet=home, sheet_model=sheet_model)
 
     def choose(self, depth: float, target: float, models: tuple[str, ...] = AUTO_MODELS) -> str:
-        """Cheapest of ``models`` whose predicted error at ``depth`` m is ≤ ``target`` m (else the best one)."""
+        """Cheapest of ``models`` whose predicted error at ``depth`` m is ≤ ``target`` m (else the best
+        one)."""
         return choose_sheet_model(depth, self.rows, target, models=models)
 
 
@@ -132,9 +137,10 @@ def pick_model(correction: str, sheet: SheetSurface, table: ErrorTable | None, t
 
 
 def build_table(settings: dict, node: float, nice: int = 0) -> float:
-    """Build the table of ``NominalSheetModel(**settings)`` at ``node`` and cache it on disk; returns ``node``.
-    Module-level so that a worker process can run it (the node builds missing tables off its render loop, at
-    ``nice`` below its priority, in the idle scheduling class: :func:`flexsheet.runtime.background.lower_priority`)."""
+    """Build the table of ``NominalSheetModel(**settings)`` at ``node`` and cache it on disk; returns
+    ``node``. Module-level so that a worker process can run it (the node builds missing tables off its render
+    loop, at ``nice`` below its priority, in the idle scheduling class:
+    :func:`flexsheet.runtime.background.lower_priority`)."""
     if nice:
         lower_priority(nice)
     NominalSheetModel(**settings).table(float(node))
@@ -155,7 +161,8 @@ class RendererState:
     """
 
     def __init__(self, eye, projector, config: SheetConfig = SheetConfig(), mesh=None,
-                 sheet_model: NominalSheetModel | None = None, *, build: bool = True, on_missing=None) -> None:
+                 sheet_model: NominalSheetModel | None = None, *, build: bool = True,
+                 on_missing=None) -> None:
         self.eye = np.asarray(eye, dtype=float)
         self.projector = np.asarray(projector, dtype=float)
         self.config = config
@@ -163,12 +170,14 @@ class RendererState:
         self.build = bool(build)
         self.on_missing = on_missing
         self._lock = threading.Lock()
-        v, f = cylinder_draw_mesh() if mesh is None else (np.asarray(mesh[0], np.float32), np.asarray(mesh[1], np.int32))
+        v, f = (cylinder_draw_mesh() if mesh is None
+                else (np.asarray(mesh[0], np.float32), np.asarray(mesh[1], np.int32)))
         self._mesh = (v, f, vertex_normals(v, f))
         self._mesh_dirty = True
         self._mesh_stamp = 0.0
         self.home = dict(zip(("left", "right"), clamp_poses(np.zeros(3), geometry.SCREEN_NORMAL,
-                                                                  np.array([0.0, 1.0, 0.0]), 0.0), strict=True))
+                                                                  np.array([0.0, 1.0, 0.0]), 0.0),
+                             strict=True))
         self._pose: dict[str, np.ndarray | None] = {"left": None, "right": None}
         self._finger: np.ndarray | None = None
         self._finger_stamp = 0.0
@@ -196,9 +205,9 @@ class RendererState:
             self._mesh_stamp = float(stamp)
 
     def set_arm_pose(self, arm: str, T) -> None:
-        """Clamp pose ``T`` (4, 4, display frame, m) of ``arm`` ("left"/"right"). Raises ``ValueError`` if it is
-        not a rigid transform or, with the other arm's latest pose, gives a sheet with the eye behind it or the
-        projector in front of it (the pose is then not taken)."""
+        """Clamp pose ``T`` (4, 4, display frame, m) of ``arm`` ("left"/"right"). Raises ``ValueError`` if it
+        is not a rigid transform or, with the other arm's latest pose, gives a sheet with the eye behind it or
+        the projector in front of it (the pose is then not taken)."""
         if arm not in ("left", "right"):
             raise ValueError(f"arm must be 'left' or 'right', got {arm!r}")
         T = check_pose(f"{arm} arm.pose", T, tol=1e-3)
@@ -217,7 +226,8 @@ class RendererState:
             self._pose[arm] = T
 
     def set_fingertip(self, position, stamp: float) -> None:
-        """Fingertip ``position`` (3,) m, or None when the tracker has no valid fix; ``stamp`` exposure time, s."""
+        """Fingertip ``position`` (3,) m, or None when the tracker has no valid fix; ``stamp`` exposure time,
+        s."""
         with self._lock:
             self._finger = None if position is None else np.asarray(position, dtype=float)
             self._finger_stamp = float(stamp)
@@ -244,10 +254,11 @@ class RendererState:
             return max(self._finger_stamp, self._mesh_stamp)
 
     def current_sheet(self) -> SheetSurface:
-        """The actual sheet from the latest clamp poses (home pose for an arm not heard from), pushed in by the
-        fingertip when it is more than ``push_threshold`` behind the flat sheet: the shape of ``sheet_model``
-        at the clamps' stretch, the fingertip's depth and contact (:meth:`NominalSheetModel.pushed`), or a
-        :class:`PendingPush` while that stretch's table is missing and ``build`` is False."""
+        """The actual sheet from the latest clamp poses (home pose for an arm not heard from), pushed in by
+        the fingertip when it is more than ``push_threshold`` behind the flat sheet: the shape of
+        ``sheet_model`` at the clamps' stretch, the fingertip's depth and contact
+        (:meth:`NominalSheetModel.pushed`), or a :class:`PendingPush` while that stretch's table is missing
+        and ``build`` is False."""
         c = self.config
         with self._lock:
             Tl = self._pose["left"] if self._pose["left"] is not None else self.home["left"]
@@ -278,8 +289,8 @@ class RenderGeometry:
     faces (M, 3) int32); ``projector``: the registered :class:`Projector` at the drawing resolution;
     ``distortion`` (5,) its OpenCV distortion; ``eye`` (3,) m the cyclopean eye V; ``ipd`` m; ``nominal``:
     True when no ``display.yaml`` was named (code constants, nothing measured); ``log``: lines for the node's
-    log (where each part came from); ``strain_offset``: the sheet's identified strain offset ε₀ (``display.yaml``'s
-    ``sheet`` entry, the planner's too; 0 without one), which the pushed-sheet model takes
+    log (where each part came from); ``strain_offset``: the sheet's identified strain offset ε₀
+    (``display.yaml``'s ``sheet`` entry, the planner's too; 0 without one), which the pushed-sheet model takes
     (:class:`~flexsheet.model.sheet_model.SheetConfig`)."""
 
     scene: Scene
@@ -297,14 +308,15 @@ def load_geometry(scene_file: str | None = None, display_calib: str | None = Non
                   height: int | None = None) -> RenderGeometry:
     """The renderer's geometry: the object of ``scene_file`` (None: the paper's cylinder,
     :func:`~flexsheet.model.scenes.paper_scene`) and the projector (K_p, D, pose, size) and eye (V, ipd) of
-    ``display_calib`` (``display.yaml``; None: :func:`~flexsheet.calibration.display_calib.nominal_display_calib`,
-    flagged ``nominal``). ``width``/``height`` px draw the same projector at another resolution
+    ``display_calib`` (``display.yaml``; None:
+    :func:`~flexsheet.calibration.display_calib.nominal_display_calib`, flagged ``nominal``).
+    ``width``/``height`` px draw the same projector at another resolution
     (:func:`~flexsheet.rendering.stereo_renderer.scaled_projector`; None: the calibrated size).
 
     The imaginary screen → projector pixel mapping is then the calibration's: K_p, D and the pose from the
     file, nothing from constants. V ± IPD/2 are the eyes drawn for until ``/eye/pose`` tracks the viewer
-    (:mod:`flexsheet.rendering.viewpoint`), whatever the entry's mode. Raises ``ValueError`` naming the file and key: scene
-    invalid, display.yaml unreadable or without its ``projector`` or ``eye`` entry.
+    (:mod:`flexsheet.rendering.viewpoint`), whatever the entry's mode. Raises ``ValueError`` naming the file
+    and key: scene invalid, display.yaml unreadable or without its ``projector`` or ``eye`` entry.
     """
     log = []
     sc = paper_scene() if not scene_file else load_scene(scene_file)
@@ -318,8 +330,9 @@ def load_geometry(scene_file: str | None = None, display_calib: str | None = Non
     pe, ee = dc.projector, dc.eye
     proj = scaled_projector(pe.projector(), width, height)
     if nominal:
-        log.append("display_calib not set: using the NOMINAL projector and eye (code constants, nothing measured; "
-                   "name a display.yaml in the launch file's display_calib: once `flexsheet calibrate` has run)")
+        log.append("display_calib not set: using the NOMINAL projector and eye (code constants, nothing "
+                   "measured; name a display.yaml in the launch file's display_calib: once `flexsheet "
+                   "calibrate` has run)")
     else:
         P = pe.position
         log.append(f"projector from {display_calib} ({pe.provenance.source}, {pe.provenance.measured_at}): "
@@ -327,17 +340,19 @@ def load_geometry(scene_file: str | None = None, display_calib: str | None = Non
                    f"P {np.round(P * 1e3, 1).tolist()} mm; eye V {np.round(ee.V * 1e3, 1).tolist()} mm, "
                    f"ipd {ee.ipd * 1e3:.1f} mm ({ee.provenance.source})")
     if (proj.width, proj.height) != (pe.width, pe.height):
-        log.append(f"drawing the {pe.width}x{pe.height} projector at {proj.width}x{proj.height} px (K rescaled)")
+        log.append(f"drawing the {pe.width}x{pe.height} projector at {proj.width}x{proj.height} px (K "
+                   "rescaled)")
     sheet = None if nominal else dc.sheet
     if sheet is not None:
-        log.append(f"pushed sheet: the sheet gripped on its clamp edges, strain offset {sheet.strain_offset:+.4f} "
-                   f"identified in {display_calib} ({sheet.provenance.source}; the planner's sheet entry)")
+        log.append("pushed sheet: the sheet gripped on its clamp edges, strain offset "
+                   f"{sheet.strain_offset:+.4f} identified in {display_calib} ({sheet.provenance.source}; "
+                   "the planner's sheet entry)")
     else:
-        log.append("pushed sheet: the sheet gripped on its clamp edges, strain offset 0 (no identified sheet entry; "
-                   "`flexsheet calibrate sheet` writes one)")
+        log.append("pushed sheet: the sheet gripped on its clamp edges, strain offset 0 (no identified sheet "
+                   "entry; `flexsheet calibrate sheet` writes one)")
     if ee.mode == "tracked":
-        log.append(f"eye mode tracked: the pairs follow /eye/pose; V {np.round(ee.V * 1e3, 1).tolist()} mm while "
-                   "the glasses are not tracked")
+        log.append(f"eye mode tracked: the pairs follow /eye/pose; V {np.round(ee.V * 1e3, 1).tolist()} mm "
+                   "while the glasses are not tracked")
     return RenderGeometry(sc, sc.surface_mesh(), proj, np.asarray(pe.D, float).ravel().copy(),
                           np.asarray(ee.V, float).copy(), float(ee.ipd), nominal, log,
                           0.0 if sheet is None else float(sheet.strain_offset))

@@ -1,11 +1,12 @@
 """moderngl stereo renderer: draws the (deformed) object for the left and right eye into projector pixels.
 
 Pipeline per eye (all in the vertex shader ``shaders/correct.vert``, the same math as
-:mod:`flexsheet.rendering.correction`): vertex A → corrected A' (model ``none``/``flat``/``four_triangle``/``fine``)
-→ its screen point on the line eye–A' → the projector pixel that lights it: the registered projector
-(``display.yaml``: intrinsics K_p, OpenCV distortion D, axes R and centre P in the display frame),
-so the imaginary-screen → pixel mapping is the calibration's, not a constant. Output: two RGB images of ``width × height`` projector
-pixels (left eye at V − IPD/2·ŷ, right at V + IPD/2·ŷ: the user faces −x, so +y is the user's right).
+:mod:`flexsheet.rendering.correction`): vertex A → corrected A' (model
+``none``/``flat``/``four_triangle``/``fine``) → its screen point on the line eye–A' → the projector pixel that
+lights it: the registered projector (``display.yaml``: intrinsics K_p, OpenCV distortion D, axes R and centre
+P in the display frame), so the imaginary-screen → pixel mapping is the calibration's, not a constant. Output:
+two RGB images of ``width × height`` projector pixels (left eye at V − IPD/2·ŷ, right at V + IPD/2·ŷ: the user
+faces −x, so +y is the user's right).
 
 The GL context is moderngl's standalone EGL context (headless; llvmpipe on machines without a GPU), or the
 context of a projector window (:mod:`nodes.renderer.window`, ``ctx=``): the drawing is the same, only the
@@ -26,7 +27,8 @@ from flexsheet.model.sheet import SheetSurface
 from flexsheet.model.sheet_model import GRID_STEP, SampledShape, grid_size
 from flexsheet.rendering.correction import DEFAULT_MIN_COS, fan_triangles
 
-__all__ = ["StereoRenderer", "cylinder_draw_mesh", "scaled_projector", "vertex_normals", "sampled", "MODE_IDS",
+__all__ = ["StereoRenderer", "cylinder_draw_mesh", "scaled_projector", "vertex_normals", "sampled",
+           "MODE_IDS",
            "DEPTH_UNIT"]
 
 SHADER_DIR = Path(__file__).with_name("shaders")
@@ -38,9 +40,10 @@ DEPTH_UNIT = 0
 def cylinder_draw_mesh(radius: float = geometry.CYLINDER_RADIUS, length: float = geometry.CYLINDER_LENGTH,
                        center=geometry.CYLINDER_CENTER, n_around: int = 96, n_along: int = 48):
     """Closed cylinder with axis along +y through ``center`` (3,) m, finely tessellated along the axis
-    (per-vertex correction needs short edges on a curved sheet): :func:`flexsheet.model.scene_surface.cylinder_surface`
-    (the mesh of the cylinder scene). Returns (vertices (N, 3) float32 m, faces (M, 3) int32, wound
-    counter-clockwise seen from outside). Raises ``ValueError`` for a bad size or tessellation."""
+    (per-vertex correction needs short edges on a curved sheet):
+    :func:`flexsheet.model.scene_surface.cylinder_surface` (the mesh of the cylinder scene). Returns (vertices
+    (N, 3) float32 m, faces (M, 3) int32, wound counter-clockwise seen from outside). Raises ``ValueError``
+    for a bad size or tessellation."""
     v, f = cylinder_surface(radius, length, n_around, n_along)
     return (v + np.asarray(center, dtype=float)).astype(np.float32), f.astype(np.int32)
 
@@ -89,13 +92,14 @@ class _Uniforms:
 
 
 class StereoRenderer:
-    """Stereo renderer of a triangle mesh with per-vertex correction (moderngl; headless EGL or a window's context).
+    """Stereo renderer of a triangle mesh with per-vertex correction (moderngl; headless EGL or a window's
+    context).
 
     ``projector``: :class:`Projector` (its width × height is the output size); ``distortion``: the projector's
     OpenCV distortion (k1, k2, p1, p2, k3) (5,) or None (pinhole), applied per vertex exactly as
-    ``cv2.projectPoints``; ``eye`` (3,) cyclopean eye V, m; ``ipd`` m; ``screen_point``/``screen_normal`` the imaginary screen; ``samples``: MSAA samples (0 =
-    off); ``ctx``: an existing moderngl context (default: a new standalone EGL context). Raises
-    ``RuntimeError`` if no EGL context can be created.
+    ``cv2.projectPoints``; ``eye`` (3,) cyclopean eye V, m; ``ipd`` m; ``screen_point``/``screen_normal`` the
+    imaginary screen; ``samples``: MSAA samples (0 = off); ``ctx``: an existing moderngl context (default: a
+    new standalone EGL context). Raises ``RuntimeError`` if no EGL context can be created.
     """
 
     def __init__(self, projector: Projector | None = None, *, eye=geometry.EYE, ipd: float = 0.064,
@@ -108,7 +112,8 @@ class StereoRenderer:
         self.projector = projector or Projector.default()
         D = np.zeros(5) if distortion is None else np.asarray(distortion, dtype=float).ravel()
         if D.shape != (5,) or not np.all(np.isfinite(D)):
-            raise ValueError(f"distortion must be 5 finite OpenCV coefficients (k1, k2, p1, p2, k3), got {distortion!r}")
+            raise ValueError("distortion must be 5 finite OpenCV coefficients (k1, k2, p1, p2, k3), got "
+                             f"{distortion!r}")
         self.distortion = D
         self.eye = np.asarray(eye, dtype=float)
         self.ipd = float(ipd)
@@ -133,8 +138,10 @@ class StereoRenderer:
                                    depth_attachment=ctx.depth_renderbuffer((2 * W, H)))
         self.msaa = None
         if self.samples > 0:
-            self.msaa = ctx.framebuffer(color_attachments=[ctx.renderbuffer((2 * W, H), 3, samples=self.samples)],
-                                        depth_attachment=ctx.depth_renderbuffer((2 * W, H), samples=self.samples))
+            self.msaa = ctx.framebuffer(color_attachments=
+                                            [ctx.renderbuffer((2 * W, H), 3, samples=self.samples)],
+                                        depth_attachment=ctx.depth_renderbuffer((2 * W, H),
+                                                                                samples=self.samples))
         self.color = tuple(float(c) for c in color)
         self.shading = bool(shading)
         self.near, self.far = float(near), float(far)
@@ -147,13 +154,14 @@ class StereoRenderer:
         self._set_common()
         self.set_model("none")
 
-    # -- state -------------------------------------------------------------------------------------------------
+    # -- state -----------------------------------------------------------------------------------------------
     def _set(self, name: str, value, progs=None) -> None:
         for prog in progs or (self.prog, self.tf_prog):
             if name in prog:
                 u = prog[name]
                 if isinstance(value, np.ndarray):
-                    u.write(np.ascontiguousarray(value, dtype=np.int32 if value.dtype.kind in "ib" else np.float32)
+                    u.write(np.ascontiguousarray(value,
+                                                 dtype=np.int32 if value.dtype.kind in "ib" else np.float32)
                             .tobytes())
                 else:
                     u.value = value
@@ -182,7 +190,8 @@ class StereoRenderer:
         f = np.asarray(faces)
         if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0 or not np.all(np.isfinite(v)):
             raise ValueError(f"vertices must be a finite non-empty (N, 3) array, got shape {v.shape}")
-        if f.ndim != 2 or f.shape[1] != 3 or f.dtype.kind not in "iu" or (f.size and (f.min() < 0 or f.max() >= len(v))):
+        if (f.ndim != 2 or f.shape[1] != 3 or f.dtype.kind not in "iu"
+            or (f.size and (f.min() < 0 or f.max() >= len(v)))):
             raise ValueError(f"faces must be (M, 3) int indices in [0, {len(v)}), got shape {f.shape}")
         n = vertex_normals(v, f) if normals is None else np.asarray(normals, dtype=np.float32)
         data = np.hstack([v, n]).astype(np.float32)
@@ -237,8 +246,8 @@ class StereoRenderer:
         self.model = model
 
     def _upload_depth(self, w: np.ndarray) -> None:
-        """The depth table (nu, nv) float32 into the R32F texture (texel (i, j) = w[i, j]), reused while its size
-        stays."""
+        """The depth table (nu, nv) float32 into the R32F texture (texel (i, j) = w[i, j]), reused while its
+        size stays."""
         nu, nv = w.shape
         if self._wtex is None or self._wtex.size != (nu, nv):
             if self._wtex is not None:
@@ -248,9 +257,10 @@ class StereoRenderer:
         self._wtex.write(np.ascontiguousarray(w.T, dtype=np.float32).tobytes())
         self._set("u_wn", (int(nu), int(nv)))
 
-    # -- drawing -----------------------------------------------------------------------------------------------
+    # -- drawing ---------------------------------------------------------------------------------------------
     def render_pair(self, eyes=None) -> None:
-        """Draw the left (x ∈ [0, W)) and right (x ∈ [W, 2W)) images into the framebuffer; waits for the GPU."""
+        """Draw the left (x ∈ [0, W)) and right (x ∈ [W, 2W)) images into the framebuffer; waits for the
+        GPU."""
         if self.vao is None:
             raise RuntimeError("set_mesh() first")
         W, H = self.projector.width, self.projector.height
@@ -278,7 +288,8 @@ class StereoRenderer:
         self.fbo.color_attachments[0].write(pair.tobytes())
 
     def read_pair(self, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-        """(left, right) uint8 RGB images (h, w, 3), top row first, downscaled by ``scale`` ∈ (0, 1] (area)."""
+        """(left, right) uint8 RGB images (h, w, 3), top row first, downscaled by ``scale`` ∈ (0, 1]
+        (area)."""
         if not (0.0 < scale <= 1.0):
             raise ValueError(f"scale must be in (0, 1], got {scale!r}")
         W, H = self.projector.width, self.projector.height

@@ -40,9 +40,9 @@ def _vec3(name: str, v) -> np.ndarray:
 
 
 class Viewpoint:
-    """See the module docstring. ``fixed_left``/``fixed_right`` (3,) m: the eyes at the registered V;
-    ``hold`` s: how long the last good pose is kept once lost; ``timeout`` s: a valid pose older than this counts
-    as lost; ``max_extrapolation`` s. Raises ``ValueError`` on non-finite eyes or non-positive times."""
+    """See the module docstring. ``fixed_left``/``fixed_right`` (3,) m: the eyes at the registered V; ``hold``
+    s: how long the last good pose is kept once lost; ``timeout`` s: a valid pose older than this counts as
+    lost; ``max_extrapolation`` s. Raises ``ValueError`` on non-finite eyes or non-positive times."""
 
     def __init__(self, fixed_left, fixed_right, *, hold: float = 2.0, timeout: float = 0.1,
                  max_extrapolation: float = 0.1) -> None:
@@ -50,15 +50,18 @@ class Viewpoint:
         for name, v in (("hold", hold), ("timeout", timeout), ("max_extrapolation", max_extrapolation)):
             if not (np.isfinite(v) and v > 0.0):
                 raise ValueError(f"{name} must be > 0 s, got {v!r}")
-        self.hold, self.timeout, self.max_extrapolation = float(hold), float(timeout), float(max_extrapolation)
-        self._good: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None   # stamp, left, right, velocity
+        self.hold, self.timeout, self.max_extrapolation = (float(hold), float(timeout),
+                                                           float(max_extrapolation))
+        # stamp, left, right, velocity
+        self._good: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None
         self._lost_since: float | None = None
         self._source = ""            # said on the first call too
         self.counts = {"tracked": 0, "held": 0, "fixed": 0}
 
     def update(self, stamp: float, left, right, velocity, valid: bool) -> None:
         """One ``/eye/pose``: its mid-exposure ``stamp`` s, the eyes (3,) m and the eye velocity (3,) m/s, and
-        whether the glasses were found. Raises ``ValueError`` on non-finite values (the last good pose stays)."""
+        whether the glasses were found. Raises ``ValueError`` on non-finite values (the last good pose
+        stays)."""
         if not np.isfinite(stamp):
             raise ValueError(f"stamp must be finite, got {stamp!r}")
         if not valid:

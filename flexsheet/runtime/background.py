@@ -8,9 +8,10 @@ is preempted at once) at niceness ``nice``, with one BLAS thread (OpenBLAS's spi
 compete with each other; ``threadpoolctl``), and ties it to its parent: when the node that started it dies
 (even ``kill -9``) the worker gets SIGKILL (``PR_SET_PDEATHSIG``). Without that an orphaned worker kept the
 dead node's stdout open, so the launcher never saw the node exit and never respawned it. The worker ignores
-SIGINT: its owner ends it (the node's teardown terminates it; the experiment's pool on Ctrl-C), or it dies with
-its owner. The launcher stops a node with SIGINT to its whole process group, and a worker that took it printed a
-``KeyboardInterrupt`` traceback at every shutdown during a table build."""
+SIGINT: its owner ends it (the node's teardown terminates it; the experiment's pool on Ctrl-C), or it dies
+with its owner. The launcher stops a node with SIGINT to its whole process group, and a worker that took it
+printed
+a ``KeyboardInterrupt`` traceback at every shutdown during a table build."""
 
 from __future__ import annotations
 
@@ -25,11 +26,12 @@ __all__ = ["lower_priority", "start_worker", "await_worker"]
 
 def lower_priority(nice: int = 19, idle: bool = True) -> str:
     """Make the calling process a background worker (module doc); call it first thing in the worker. Returns
-    what took effect, e.g. ``"SIGINT ignored, dies with its parent, SCHED_IDLE, nice +19, 1 BLAS thread"``. Never raises: a
-    step the OS refuses is skipped. Exits the process at once if its parent is already gone (the parent
-    :func:`multiprocessing.parent_process` names, so also one killed while this worker still imported). ``idle`` False:
-    niceness only, no ``SCHED_IDLE`` — for work the graph needs soon (the world's true sheet: in the idle class
-    a table could take minutes beside a running graph and, killed with its node, never reach the cache)."""
+    what took effect, e.g. ``"SIGINT ignored, dies with its parent, SCHED_IDLE, nice +19, 1 BLAS
+    thread"``. Never raises: a step the OS refuses is skipped. Exits the process at once if its parent is
+    already gone (the parent :func:`multiprocessing.parent_process` names, so also one killed while this
+    worker still imported). ``idle`` False: niceness only, no ``SCHED_IDLE`` — for work the graph needs soon
+    (the world's true sheet: in the idle class a table could take minutes beside a running graph and, killed
+    with its node, never reach the cache)."""
     done = []
     try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -73,8 +75,8 @@ def start_worker(proc) -> None:
     """``proc.start()`` (a :class:`multiprocessing.Process`) with SIGINT ignored in the child from its first
     instruction: an ignored disposition survives the spawn's fork + exec, and Python keeps it. The worker then
     ignores the launcher's SIGINT to the node's process group even while it still imports, before its
-    :func:`lower_priority` (a stop 1 s after a build started printed a ``KeyboardInterrupt`` traceback from the
-    worker's numpy import). The caller's own handler is restored at once. Off the main thread (where
+    :func:`lower_priority` (a stop 1 s after a build started printed a ``KeyboardInterrupt`` traceback from
+    the worker's numpy import). The caller's own handler is restored at once. Off the main thread (where
     Python may not touch signal handlers) it is a plain ``proc.start()``."""
     if threading.current_thread() is not threading.main_thread():
         proc.start()

@@ -3,11 +3,11 @@
 * Record (:mod:`~flexsheet.runtime.bag_write`) stores each message's raw wire frames (``meta`` + array
   buffers, msgpack-framed as one record, no re-encoding: lossless) on a channel per topic, with message
   encoding ``flexsheet-msgpack`` and the message's pydantic JSON schema (encoding ``jsonschema``). It trusts
-  nothing: a message that is not a flexsheet envelope is stored as it came (``flexsheet-raw``), and what is lost
-  (publisher sequence gaps, a full queue, write errors) is counted in the bag's metadata and the recorder's
-  heartbeat. Chunks are small (256 KiB, LZ4, written at least once a second) and unbuffered, so a bag cut by a
-  crash or ``kill -9`` stays readable up to its last complete chunk; a respawned recorder writes the time it
-  was down as ``/recorder/gap`` records.
+  nothing: a message that is not a flexsheet envelope is stored as it came (``flexsheet-raw``), and what is
+  lost (publisher sequence gaps, a full queue, write errors) is counted in the bag's metadata and the
+  recorder's heartbeat. Chunks are small (256 KiB, LZ4, written at least once a second) and unbuffered, so a
+  bag cut by a crash or ``kill -9`` stays readable up to its last complete chunk; a respawned recorder writes
+  the time it was down as ``/recorder/gap`` records.
 * Read (:mod:`~flexsheet.runtime.bag_read`) checks every chunk's CRC; a damaged chunk is skipped and reported
   with what it held, the rest of the file is read. ``bag info`` reads any MCAP.
 * Play republishes the same frames with the original relative timing (``--rate`` scales it), from a node
@@ -107,7 +107,8 @@ class RecorderNode(Node):
             return hb
         period = self.config.heartbeat_period
         subs = list(hb.subscriptions)
-        for topic in sorted(set(w.counts) | set(w.malformed) | {t for t in w.dropped if not t.startswith("<")}):
+        for topic in sorted(set(w.counts) | set(w.malformed)
+                            | {t for t in w.dropped if not t.startswith("<")}):
             n = w.counts[topic] + w.malformed[topic]
             rate = (n - self._last_counts.get(topic, 0)) / period
             self._last_counts[topic] = n
@@ -120,22 +121,24 @@ class RecorderNode(Node):
         elif malformed or lost:
             parts = ", ".join(f"{k} {v}" for k, v in sorted(w.dropped.items()))
             update.update(state="error" if hb.state == "error" else "warn",
-                          message=f"bag {w.path.name}: {sum(w.counts.values())} stored, {malformed} malformed "
-                                  f"(stored raw), {lost} lost" + (f" ({parts})" if parts else ""))
+                          message=f"bag {w.path.name}: {sum(w.counts.values())} stored, {malformed} "
+                                  f"malformed (stored raw), {lost} lost" + (f" ({parts})" if parts else ""))
         return hb.model_copy(update=update)
 
     async def teardown(self) -> None:
         self.writer.close()
-        self.log.info("bag %s: %d messages on %d topics, %d malformed (stored raw), %d lost%s", self.writer.path,
-                      sum(self.writer.counts.values()), len(self.writer.counts), sum(self.writer.malformed.values()),
+        self.log.info("bag %s: %d messages on %d topics, %d malformed (stored raw), %d lost%s",
+                      self.writer.path,
+                      sum(self.writer.counts.values()), len(self.writer.counts),
+                      sum(self.writer.malformed.values()),
                       self.writer.lost, f"; write error: {self.writer.error}" if self.writer.error else "")
 
 
 class PlayerParams(BaseModel):
-    """``file``: bag to play; ``rate``: speed factor; ``loop``; ``topics`` (empty: all);
-    ``start_delay`` s before the first message (subscribers connect); ``exit_when_done``; ``mode``:
-    ``realtime`` (the bag's timing × ``rate``) or ``lockstep`` (as fast as the nodes of the player's container
-    handle it, each message handled before the next, on the bag's clock: :mod:`flexsheet.runtime.lockstep`)."""
+    """``file``: bag to play; ``rate``: speed factor; ``loop``; ``topics`` (empty: all); ``start_delay`` s
+    before the first message (subscribers connect); ``exit_when_done``; ``mode``: ``realtime`` (the bag's
+    timing × ``rate``) or ``lockstep`` (as fast as the nodes of the player's container handle it, each message
+    handled before the next, on the bag's clock: :mod:`flexsheet.runtime.lockstep`)."""
 
     model_config = ConfigDict(extra="forbid")
     file: str
@@ -171,9 +174,9 @@ class PlayerNode(Node):
             return
         ep = self.transport.endpoint or ""
         if ep.startswith("tcp://"):   # a player is only a publisher: say how to watch it
-            self.log.info("playing %s on %s: watch with 'flexsheet topic hz TOPIC' (it finds this player on this "
-                          "machine; elsewhere --endpoint %s), or the live view: 'flexsheet run viz --peer %s' "
-                          "(Foxglove at ws://localhost:8765)", self.params.file, ep, ep, ep)
+            self.log.info("playing %s on %s: watch with 'flexsheet topic hz TOPIC' (it finds this player on "
+                          "this machine; elsewhere --endpoint %s), or the live view: 'flexsheet run viz "
+                          "--peer %s' (Foxglove at ws://localhost:8765)", self.params.file, ep, ep, ep)
         asyncio.get_running_loop().create_task(self._play_safely())
 
     async def _play_safely(self) -> None:
@@ -193,7 +196,8 @@ class PlayerNode(Node):
         while True:
             t0_bag = t0 = None
             for m in read_bag(self.params.file, self.params.topics or None, summary=summary):
-                if t0_bag is None:  # anchor once the bag is open, a little ahead: the first message then waits
+                # anchor once the bag is open, a little ahead: the first message then waits
+                if t0_bag is None:
                     t0_bag = m.log_time  # through the same timer as the rest and shares their wake-up latency
                     t0 = time.monotonic() + _PLAY_LEAD_S
                 due = t0 + (m.log_time - t0_bag) / self.params.rate
@@ -237,7 +241,8 @@ def cmd_record(args: argparse.Namespace) -> int:
         peers, curve = _graph(args.launch, getattr(args, "endpoint", None))
     except (LookupError, ValueError) as exc:   # LaunchError is a ValueError
         return _fail("record", exc)
-    node = RecorderNode(NodeConfig(name="bag_record", node_type="recorder", endpoint="", peers=peers, curve=curve,
+    node = RecorderNode(NodeConfig(name="bag_record", node_type="recorder", endpoint="", peers=peers,
+                                   curve=curve,
                                    params={"output": out, "topics": args.topics}))
 
     async def main() -> None:
@@ -249,10 +254,11 @@ def cmd_record(args: argparse.Namespace) -> int:
     w = node.writer
     if getattr(args, "json", False):
         print(json.dumps({"file": str(w.path), "messages": sum(w.counts.values()), "counts": dict(w.counts),
-                          "malformed": dict(w.malformed), "lost": w.lost, "error": str(w.error or "") or None}))
+                          "malformed": dict(w.malformed), "lost": w.lost,
+                          "error": str(w.error or "") or None}))
         return 1 if w.error else 0
-    print(f"wrote {w.path}: {sum(w.counts.values())} messages, {sum(w.malformed.values())} malformed (stored raw), "
-          f"{w.lost} lost")
+    print(f"wrote {w.path}: {sum(w.counts.values())} messages, {sum(w.malformed.values())} malformed (stored "
+          f"raw), {w.lost} lost")
     return 1 if w.error else 0
 
 
@@ -294,9 +300,10 @@ def print_damage(s: BagSummary, out=sys.stdout) -> None:
         if len(s.damaged) > 20:
             print(f"  … and {len(s.damaged) - 20} more", file=out)
     if s.truncated:
-        span = f", a partial chunk of {clock_text(s.cut_span[0])}–{clock_text(s.cut_span[1])}" if s.cut_span else ""
-        print(f"cut:       TRUNCATED: the file ends before its footer; {s.cut_bytes} bytes at the end unreadable"
-              f"{span} (flexsheet bag recover writes a complete copy)", file=out)
+        span = (f", a partial chunk of {clock_text(s.cut_span[0])}–{clock_text(s.cut_span[1])}" if s.cut_span
+                else "")
+        print(f"cut:       TRUNCATED: the file ends before its footer; {s.cut_bytes} bytes at the end "
+              f"unreadable{span} (flexsheet bag recover writes a complete copy)", file=out)
     for g in s.gaps:
         if g.get("topic") == "":
             lost = g.get("lost_s")
@@ -317,7 +324,8 @@ def _damage_json(s: BagSummary) -> dict:
     """What ``bag info --json`` says of damage, for the other verbs' ``--json``."""
     import dataclasses
 
-    return {"damaged": [_plain(dataclasses.asdict(d)) if dataclasses.is_dataclass(d) else str(d) for d in s.damaged],
+    return {"damaged": [_plain(dataclasses.asdict(d)) if dataclasses.is_dataclass(d) else str(d)
+                        for d in s.damaged],
             "lost": s.lost, "truncated": s.truncated, "cut_bytes": s.cut_bytes}
 
 
@@ -366,12 +374,15 @@ def cmd_export(args: argparse.Namespace) -> int:
 
     try:
         check_mcap(args.file)
-        counts = export_bag(args.file, args.output, foxglove=not args.no_foxglove, summary=s, progress=progress)
+        counts = export_bag(args.file, args.output, foxglove=not args.no_foxglove, summary=s,
+                            progress=progress)
     except (ValueError, OSError) as exc:
         return _fail("export", exc)
     if getattr(args, "json", False):
-        print(json.dumps({"file": str(args.file), "output": str(args.output), "counts": dict(sorted(counts.items())),
-                          **_damage_json(s)}))
+        print(
+            json.dumps({"file": str(args.file), "output": str(args.output),
+                        "counts": dict(sorted(counts.items())),
+                        **_damage_json(s)}))
         return 1 if s.damaged or s.truncated else 0
     print(f"wrote {args.output}: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
     print_damage(s)
@@ -385,8 +396,10 @@ def cmd_recover(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as exc:
         return _fail("recover", exc)
     if getattr(args, "json", False):
-        print(json.dumps({"file": str(args.file), "output": str(args.output), "kept": dict(sorted(kept.items())),
-                          **_damage_json(s)}))
+        print(
+            json.dumps({"file": str(args.file), "output": str(args.output),
+                        "kept": dict(sorted(kept.items())),
+                        **_damage_json(s)}))
         return 0
     print(f"wrote {args.output}: {sum(kept.values())} messages kept on {len(kept)} topics")
     for topic, n in sorted(kept.items()):

@@ -2,9 +2,10 @@
 
 Each lossless message becomes JSON on a channel of the same topic with the message's jsonschema; image fields
 (uint8 arrays of 2 or 3 dimensions) become ``foxglove.CompressedImage`` (PNG) channels ``<topic>/<field>``.
-The recorder's gap records are copied. With ``foxglove`` the scene channels of :mod:`flexsheet.viz.foxglove_bag`
-are added (through the ``flexsheet.bag_channels`` entry point), built lazily as while recording (only when an
-output is due). The source is read with every chunk's CRC checked (:mod:`flexsheet.runtime.bag_read`).
+The recorder's gap records are copied. With ``foxglove`` the scene channels of
+:mod:`flexsheet.viz.foxglove_bag` are added (through the ``flexsheet.bag_channels`` entry point), built lazily
+as while recording (only when an output is due). The source is read with every chunk's CRC checked
+(:mod:`flexsheet.runtime.bag_read`).
 
 Decoding and JSON encoding run in ``workers`` forked processes, batch by batch, in order, and the scene
 channels in one more (its writer calls are recorded there and replayed here, :class:`_Recorder`); this
@@ -71,8 +72,8 @@ def _transcode(batch: list[tuple[str, int, bytes]]) -> list[tuple]:
 
 
 class _Recorder:
-    """The calls a bag-channels object makes on its MCAP writer, recorded in the scene worker and replayed on the
-    real writer by :func:`_replay` (ids are the worker's own, mapped there)."""
+    """The calls a bag-channels object makes on its MCAP writer, recorded in the scene worker and replayed on
+    the real writer by :func:`_replay` (ids are the worker's own, mapped there)."""
 
     def __init__(self) -> None:
         self.ops: list[tuple] = []
@@ -88,7 +89,8 @@ class _Recorder:
         self.ops.append(("c", self._n, topic, message_encoding, schema_id))
         return self._n
 
-    def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int = 0) -> None:
+    def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int,
+                    sequence: int = 0) -> None:
         self.ops.append(("m", channel_id, log_time, data, publish_time, sequence))
 
     def take(self) -> list[tuple]:
@@ -119,7 +121,8 @@ def _scene_close() -> tuple[list[tuple], dict]:
 
 
 def _replay(w: Writer, ops: list[tuple], ids: dict) -> None:
-    """Apply recorded writer calls ``ops`` to ``w``; ``ids`` maps the worker's schema/channel ids to ``w``'s."""
+    """Apply recorded writer calls ``ops`` to ``w``; ``ids`` maps the worker's schema/channel ids to
+    ``w``'s."""
     for op in ops:
         if op[0] == "m":
             _, ch, log_time, data, publish_time, seq = op
@@ -139,11 +142,13 @@ def _schema(name: str) -> dict:
     return cls.model_json_schema() if cls else {}
 
 
-def _batches(scan: McapScan, progress: Callable[[float, int], None] | None, t_next: list[float], n_read: list[int],
+def _batches(scan: McapScan, progress: Callable[[float, int], None] | None, t_next: list[float],
+             n_read: list[int],
              gap_records: list[tuple[int, bytes]]) -> Iterator[list[tuple[str, int, bytes]]]:
     """The lossless messages of ``scan`` as ``(topic, log time ns, data)`` in batches of about
     ``_BATCH_BYTES`` or ``_BATCH_MESSAGES``; the recorder's gap records go to ``gap_records``. ``n_read[0]``
-    counts the messages read; ``progress`` is called when ``t_next[0]`` (monotonic s) has passed, then 2 s later."""
+    counts the messages read; ``progress`` is called when ``t_next[0]`` (monotonic s) has passed, then 2 s
+    later."""
     batch, size = [], 0
     viewer = ViewerDecoder()
     for kind, rec in scan.records():
@@ -172,8 +177,8 @@ def _batches(scan: McapScan, progress: Callable[[float, int], None] | None, t_ne
 
 
 def _assembled(viewer: ViewerDecoder, scan: McapScan, ch, data: bytes, log_time: int) -> bytes | None:
-    """A recorder's ``json`` message (with its image parts) as the msgpack list of its wire frames after the topic,
-    as older bags stored it; None for an image part (held until its message) and any other channel."""
+    """A recorder's ``json`` message (with its image parts) as the msgpack list of its wire frames after the
+    topic, as older bags stored it; None for an image part (held until its message) and any other channel."""
     sch = scan.schemas.get(ch.schema_id)
     if sch is None or not viewer.wants(ch.message_encoding, sch.name, ch.metadata):
         return None

@@ -1,18 +1,18 @@
-"""The bag's message encoding: what the recorder writes so that Foxglove, Lichtblick and any MCAP reader decode
-every message, and how a recorded message becomes wire frames again for ``bag play`` and the report.
+"""The bag's message encoding: what the recorder writes so that Foxglove, Lichtblick and any MCAP reader
+decode every message, and how a recorded message becomes wire frames again for ``bag play`` and the report.
 
 A flexsheet message on topic ``T`` is stored as
 
-* one ``foxglove.RawImage`` (``protobuf``, the schema from ``foxglove-sdk``) on channel ``T/<field>`` for each of
-  its image fields (``uint8`` arrays of 2 or 3 dimensions: ``mono8`` or ``rgb8``), written first; the channel's
-  metadata names the message's topic and field (``flexsheet.part_of``, ``flexsheet.field``);
+* one ``foxglove.RawImage`` (``protobuf``, the schema from ``foxglove-sdk``) on channel ``T/<field>`` for each
+  of its image fields (``uint8`` arrays of 2 or 3 dimensions: ``mono8`` or ``rgb8``), written first; the
+  channel's metadata names the message's topic and field (``flexsheet.part_of``, ``flexsheet.field``);
 * then the rest of it as ``json`` on channel ``T``, with the ``jsonschema`` of its pydantic model (the image
   fields left out); numpy arrays are nested lists of numbers; the channel's metadata carries the message's
   version (``flexsheet.version``).
 
 :class:`ViewerEncoder` makes these records from a message's wire frames (no validation: the recorder stores
-what came); :class:`ViewerDecoder` makes the wire frames again from them (arrays back to their declared dtype and
-shape, the images joined in), to be validated by whoever receives them, as any message from the wire.
+what came); :class:`ViewerDecoder` makes the wire frames again from them (arrays back to their declared dtype
+and shape, the images joined in), to be validated by whoever receives them, as any message from the wire.
 Source: MCAP well-known encodings (mcap.dev/spec/registry: json + jsonschema, protobuf); foxglove.RawImage.
 """
 
@@ -63,7 +63,8 @@ def image_fields(schema: str) -> tuple[str, ...]:
     out = []
     for name, f in cls.model_fields.items():
         spec = array_spec(f)
-        if spec is not None and spec.dtype == "uint8" and spec.shape is not None and len(spec.shape) in (2, 3):
+        if (spec is not None and spec.dtype == "uint8" and spec.shape is not None
+            and len(spec.shape) in (2, 3)):
             out.append(name)
     return tuple(out)
 
@@ -122,10 +123,10 @@ class ViewerEncoder:
 
 
 class Parts:
-    """Which messages of a bag are whole: the recorder writes a message's image parts before its JSON record, all
-    at the message's log time, so a JSON record read in file order is whole when every image field of its type
-    came as a part with the same topic and log time (a damaged or cut chunk can take some of them). Feed each
-    part to :meth:`add` and ask :meth:`whole` at each JSON record."""
+    """Which messages of a bag are whole: the recorder writes a message's image parts before its JSON record,
+    all at the message's log time, so a JSON record read in file order is whole when every image field of its
+    type came as a part with the same topic and log time (a damaged or cut chunk can take some of them). Feed
+    each part to :meth:`add` and ask :meth:`whole` at each JSON record."""
 
     def __init__(self) -> None:
         self.got: dict[str, tuple[int, dict]] = {}     # owner topic -> (log time ns, {field: value})
@@ -139,8 +140,8 @@ class Parts:
         parts[field] = value
 
     def whole(self, topic: str, schema: str, log_time: int) -> dict | None:
-        """The parts ``{field: value}`` of the message at ``log_time`` if it is whole (``{}`` for a type without
-        images), else None. The parts are handed over once."""
+        """The parts ``{field: value}`` of the message at ``log_time`` if it is whole (``{}`` for a type
+        without images), else None. The parts are handed over once."""
         if schema not in self._fields:
             self._fields[schema] = image_fields(schema)
         need = self._fields[schema]

@@ -32,8 +32,8 @@ from mcap.records import Attachment, Channel, ChunkIndex, Header, MessageIndex, 
 
 from flexsheet.runtime.bag_json import FIELD, JSON_ENCODING, PART_OF, Parts, ViewerDecoder
 
-__all__ = ["ENCODING", "RAW_ENCODING", "GAP_TOPIC", "GAP_SCHEMA", "Damage", "BagSummary", "BagMessage", "McapScan", "read_bag",
-           "bag_info", "clock_text"]
+__all__ = ["ENCODING", "RAW_ENCODING", "GAP_TOPIC", "GAP_SCHEMA", "Damage", "BagSummary", "BagMessage",
+           "McapScan", "read_bag", "bag_info", "clock_text"]
 
 #: message encoding of the recorder's lossless channels: msgpack list of the wire frames after the topic
 ENCODING = "flexsheet-msgpack"
@@ -84,10 +84,9 @@ class BagSummary:
     """What a read found. ``counts``/``schemas``/``encodings`` per topic (every channel but the recorder's
     bookkeeping), ``start``/``end`` s (log time), ``dropped``: the recorder's counts of what it lost (wire
     sequence gaps, queue full, write errors), ``malformed``: messages stored as they came (not a flexsheet
-    envelope), ``gaps``: the recorder's down times, ``damaged``: unreadable parts, ``truncated``: the file ends
-    before its footer (a crash or a cut copy), ``cut_bytes``: the unreadable tail, ``cut_span``: the time range
-    (s) of the partial chunk there, if its header survived; ``incomplete``: messages per topic whose record was
-    read but an image part of it went with a damaged or cut chunk (not counted in ``counts``)."""
+    envelope), ``gaps``: the recorder's down times, ``damaged``: unreadable parts, ``truncated``: no footer
+    (a crash, a cut copy), ``cut_bytes``: the unreadable tail, ``cut_span``: the partial chunk's span (s)
+    if its header survived; ``incomplete``: messages per topic that lost an image part (not in ``counts``)."""
 
     counts: Counter = field(default_factory=Counter)
     schemas: dict[str, str] = field(default_factory=dict)
@@ -111,7 +110,7 @@ class BagSummary:
 
 @dataclass
 class BagMessage:
-    """One recorded message: ``topic``, ``schema`` name, ``log_time`` (s), raw ``frames`` [topic, meta, *buffers]."""
+    """One recorded message: ``topic``, ``schema`` name, ``log_time`` s, raw ``frames`` [topic, meta, ...]."""
 
     topic: str
     schema: str
@@ -133,11 +132,10 @@ def _decompress(compression: str, data, size: int) -> bytes:
 
 class McapScan:
     """One pass over an MCAP file (see the module docstring). Iterate :meth:`records` for
-    ``("schema", Schema)``, ``("channel", Channel)``, ``("metadata", Metadata)``, ``("attachment", Attachment)``
-    and ``("message", (channel_id, sequence, log_time_ns, publish_time_ns, data))`` in file order; damage and
-    truncation go to ``summary``. ``channels``/``schemas``: known so far (seeded from the summary section when
-    it is intact, so a channel whose own record sat in a damaged chunk is still known). Raises ``ValueError``
-    naming the file if it is not MCAP, ``FileNotFoundError`` if it is missing."""
+    ``("schema", Schema)``, ``("channel", Channel)``, ``("metadata", Metadata)``,
+    ``("attachment", Attachment)`` and ``("message", (channel_id, sequence, log_time_ns, publish_time_ns,
+    data))`` in file order; damage and truncation go to ``summary``. ``channels``/``schemas``: known so far
+    (seeded from an intact summary section). Raises ``ValueError`` (not MCAP) or ``FileNotFoundError``."""
 
     def __init__(self, path: str | Path, summary: BagSummary | None = None) -> None:
         self.path = str(path)
@@ -146,7 +144,7 @@ class McapScan:
         self.schemas: dict[int, Schema] = {}
         self.complete = False           # the footer and its summary CRC are intact
         self._chunk_index: list[ChunkIndex] = []
-        self._pending: dict | None = None  # log times of the damaged chunk the following message indexes describe
+        self._pending: dict | None = None  # the damaged chunk's log times, for the next message indexes
         self._data_end = 0
         self.pos = 0                    # byte offset reached (progress)
         self.size = 0
@@ -192,8 +190,8 @@ class McapScan:
     # ---------------------------------------------------------------- chunks
     @staticmethod
     def _chunk_header(mm, pos: int, end: int):
-        """(start_ns, end_ns, size, crc, compression, records_offset, records_len) of a plausible chunk record at
-        ``pos`` whose record ends at or before ``end``, else None."""
+        """(start_ns, end_ns, size, crc, compression, records_offset, records_len) of a plausible chunk record
+        at ``pos`` whose record ends at or before ``end``, else None."""
         if pos + 9 + 32 > end or mm[pos] != _OP_CHUNK:
             return None
         n, t0, t1, size, crc, clen = struct.unpack_from("<QQQQII", mm, pos + 1)
@@ -391,7 +389,8 @@ class McapScan:
                 meta = json.loads(m.get("metadata", "{}"))
             except ValueError:
                 meta = {}
-            self.channels[cid] = Channel(id=cid, topic=m.get("topic", ""), message_encoding=m.get("encoding", ""),
+            self.channels[cid] = Channel(id=cid, topic=m.get("topic", ""),
+                                         message_encoding=m.get("encoding", ""),
                                          metadata=meta if isinstance(meta, dict) else {}, schema_id=sid)
         if sid and sid not in self.schemas:
             self.schemas[sid] = Schema(id=sid, data=b"", encoding="", name=m.get("schema", ""))
@@ -417,7 +416,8 @@ def _note_metadata(summary: BagSummary, md: Metadata) -> None:
             pass
 
 
-def read_bag(path: str | Path, topics: list[str] | None = None, summary: BagSummary | None = None) -> Iterator[BagMessage]:
+def read_bag(path: str | Path, topics: list[str] | None = None,
+             summary: BagSummary | None = None) -> Iterator[BagMessage]:
     """Iterate the flexsheet messages of a bag in file order, as wire frames, every chunk's CRC checked: the
     recorder's ``json`` messages with their image parts (:mod:`flexsheet.runtime.bag_json`), and the
     ``flexsheet-msgpack`` ones of older bags.
@@ -450,7 +450,8 @@ def read_bag(path: str | Path, topics: list[str] | None = None, summary: BagSumm
                 if want and owner not in want:
                     continue
                 try:
-                    frames = viewer.frames(ch.topic, schema, ch.metadata, rec[4], sch.data if sch else b"", rec[2])
+                    sdata = sch.data if sch else b""
+                    frames = viewer.frames(ch.topic, schema, ch.metadata, rec[4], sdata, rec[2])
                 except (ValueError, TypeError):
                     continue
                 if frames is not None:
@@ -461,7 +462,7 @@ def read_bag(path: str | Path, topics: list[str] | None = None, summary: BagSumm
 
 def bag_info(path: str | Path) -> BagSummary:
     """Counts, schemas, encodings and time span (log time) of every channel of any MCAP file, and what the
-    recorder and the read found lost (drops, malformed input, gaps, damage, truncation). Reads the whole file."""
+    recorder and the read found lost (drops, malformed input, gaps, damage, truncation). Reads it all."""
     s = BagSummary()
     scan = McapScan(path, s)
     parts = Parts()
@@ -479,7 +480,7 @@ def bag_info(path: str | Path) -> BagSummary:
             if ch is not None and ch.message_encoding == RAW_ENCODING:
                 s.malformed[topic] += 1
                 continue
-            if ch is not None and PART_OF in ch.metadata:     # an image of a message: counted with the message
+            if ch is not None and PART_OF in ch.metadata:      # an image of a message: counted with it
                 parts.add(ch.metadata[PART_OF], ch.metadata.get(FIELD, ""), rec[2])
                 continue
             if ch is not None and ch.message_encoding == JSON_ENCODING and ch.schema_id in scan.schemas \
@@ -489,7 +490,8 @@ def bag_info(path: str | Path) -> BagSummary:
             s.counts[topic] += 1
             if topic not in s.encodings:
                 s.encodings[topic] = ch.message_encoding if ch else "?"
-                s.schemas[topic] = scan.schemas[ch.schema_id].name if ch and ch.schema_id in scan.schemas else ""
+                s.schemas[topic] = (scan.schemas[ch.schema_id].name if ch and ch.schema_id in scan.schemas
+                                    else "")
             t0 = rec[2] if t0 is None or rec[2] < t0 else t0
             t1 = max(t1, rec[2])
         elif kind == "metadata":

@@ -61,7 +61,8 @@ def recover_bag(src: str | Path, dst: str | Path, summary: BagSummary | None = N
                     out = channels[cid] = w.register_channel(ch.topic, ch.message_encoding, sid, ch.metadata)
                 w.add_message(out, log_time=rec[2], data=rec[4], publish_time=rec[3], sequence=rec[1])
                 ch = scan.channels[cid]
-                if PART_OF in ch.metadata:      # an image of a message (flexsheet.runtime.bag_json): counted with it
+                # an image of a message (flexsheet.runtime.bag_json): counted with it
+                if PART_OF in ch.metadata:
                     parts.add(ch.metadata[PART_OF], ch.metadata.get(FIELD, ""), rec[2])
                 elif ch.message_encoding != JSON_ENCODING or ch.schema_id not in scan.schemas \
                         or parts.whole(ch.topic, scan.schemas[ch.schema_id].name, rec[2]) is not None:

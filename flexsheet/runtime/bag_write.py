@@ -14,10 +14,10 @@ counted, a step back or a jump over :data:`MAX_SEQ_JUMP` is a publisher restart,
 What cannot be stored is counted too: a full queue (``<recorder queue full>``), a failed write (``<write
 error>``). The counts are in the bag's ``recorder`` metadata at close and in the recorder's heartbeat.
 
-A respawned recorder continues in ``<stem>.N.mcap``; it reads the previous part's last message per topic
-(in the background) and writes a :data:`~flexsheet.runtime.bag_read.GAP_TOPIC` record per topic (JSON:
-``topic``, ``previous``, ``last_before``, ``first_after``, ``lost_s``; topic ``""`` for the recorder as a whole,
-whose ``first_after`` is the new part's start), so the time the recorder was down is written in the bag.
+A respawned recorder continues in ``<stem>.N.mcap``; it reads the previous part's last message per topic (in
+the background) and writes a :data:`~flexsheet.runtime.bag_read.GAP_TOPIC` record per topic (JSON: ``topic``,
+``previous``, ``last_before``, ``first_after``, ``lost_s``; topic ``""`` for the recorder as a whole, whose
+``first_after`` is the new part's start), so the time the recorder was down is written in the bag.
 """
 
 from __future__ import annotations
@@ -41,10 +41,10 @@ from flexsheet.runtime.heap import Trimmer
 
 __all__ = ["BagWriter", "MAX_SEQ_JUMP", "CHUNK_SIZE", "FLUSH_PERIOD"]
 
-#: bytes, uncompressed; a chunk is cut at this size or at each flush. The writer keeps one index (about 1.3 KB)
-#: per chunk in memory until the bag closes. The lab's recorder takes about 4.3 MB/s uncompressed (the images
-#: compress about 8-fold), so 1 MiB chunks were cut 4.5 times a second (16 000 an hour, 21 MB); at 8 MiB the
-#: once-a-second flush cuts them, 3 600 an hour (about 5 MB). The mcap CLI's default is 8 MiB too.
+#: bytes, uncompressed; a chunk is cut at this size or at each flush. The writer keeps one index (about 1.3
+#: KB) per chunk in memory until the bag closes. The lab's recorder takes about 4.3 MB/s uncompressed (the
+#: images compress about 8-fold), so 1 MiB chunks were cut 4.5 times a second (16 000 an hour, 21 MB); at 8
+#: MiB the once-a-second flush cuts them, 3 600 an hour (about 5 MB). The mcap CLI's default is 8 MiB too.
 CHUNK_SIZE = 8 * 1024 * 1024
 #: s; the chunk in progress is written at least this often (what a kill -9 can lose), even when it is not full
 FLUSH_PERIOD = 1.0
@@ -96,12 +96,12 @@ def _envelope(meta: bytes) -> tuple[str | None, object]:
 class BagWriter:
     """Writes raw wire frames to an MCAP file from a background thread (the caller never blocks on disk).
 
-    If ``path`` already holds data (a respawned recorder), the bag goes to ``<stem>.1.mcap``, ``.2``…
-    instead, so nothing recorded before is lost, and the gap is recorded (module docstring).
+    If ``path`` already holds data (a respawned recorder), the bag goes to ``<stem>.1.mcap``, ``.2``… instead,
+    so nothing recorded before is lost, and the gap is recorded (module docstring).
     ``write(frames, log_time_ns)`` queues one message (``frames`` = ``[topic, meta, *buffers]``, any content);
-    ``close()`` flushes and writes the summary and the ``recorder`` metadata. Counters: ``counts`` (stored, per
-    topic), ``malformed`` (stored raw, per topic), ``dropped`` (lost: wire gaps per topic, queue full, write
-    errors), ``resets`` (publisher restarts seen in the seq); ``error``: the last write error, if any.
+    ``close()`` flushes and writes the summary and the ``recorder`` metadata. Counters: ``counts`` (stored,
+    per topic), ``malformed`` (stored raw, per topic), ``dropped`` (lost: wire gaps per topic, queue full,
+    write errors), ``resets`` (publisher restarts seen in the seq); ``error``: the last write error, if any.
     """
 
     def __init__(self, path: str | Path, chunk_size: int = CHUNK_SIZE, max_queue_bytes: int = 256 << 20,
@@ -135,7 +135,8 @@ class BagWriter:
         self._encoder = ViewerEncoder()
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self.foxglove = None
-        if foxglove:  # Foxglove channels (/viz/*, images) beside the lossless ones: the bag opens with the scene
+        # Foxglove channels (/viz/*, images) beside the lossless ones: the bag opens with the scene
+        if foxglove:
             self.foxglove = bag_channels("foxglove")(self._writer)
         self._thread = threading.Thread(target=self._run, name="bag-writer", daemon=True)
         self._thread.start()
@@ -176,7 +177,7 @@ class BagWriter:
                     self._writer.flush()
                 except Exception as exc:  # noqa: BLE001
                     self.error = f"{type(exc).__name__}: {exc}"[:300]
-                trimmer.maybe()              # the freed chunk buffers back to the OS (flexsheet/runtime/heap.py)
+                trimmer.maybe()  # the freed chunk buffers back to the OS (flexsheet/runtime/heap.py)
                 flushed = time.monotonic()
             if item is None:
                 return
@@ -202,13 +203,15 @@ class BagWriter:
             if schema and not sid:
                 if schema_data is None:
                     schema_data = json.dumps(GAP_SCHEMA).encode() if schema == GAP_SCHEMA["title"] else b"{}"
-                sid = self._schemas[schema] = self._writer.register_schema(schema, schema_encoding, schema_data)
+                sid = self._schemas[schema] = self._writer.register_schema(schema, schema_encoding,
+                                                                           schema_data)
             ch = self._channels[key] = self._writer.register_channel(topic, encoding, sid, metadata or {})
-            # the channel again outside the chunks: a later chunk's messages keep their topic even if the chunk
-            # holding the Channel record is damaged (bag_read.McapScan reads these back)
-            self._writer.add_metadata("flexsheet.channel", {"id": str(ch), "topic": topic, "encoding": encoding,
-                                                            "schema": schema, "schema_id": str(sid),
-                                                            "metadata": json.dumps(metadata or {})})
+            # the channel again outside the chunks: a later chunk's messages keep their topic even if
+            # the chunk holding the Channel record is damaged (bag_read.McapScan reads these back)
+            self._writer.add_metadata("flexsheet.channel",
+                                      {"id": str(ch), "topic": topic, "encoding": encoding,
+                                       "schema": schema, "schema_id": str(sid),
+                                       "metadata": json.dumps(metadata or {})})
         return ch
 
     def _store(self, frames: list, t_ns: int) -> None:
@@ -272,16 +275,19 @@ class BagWriter:
 
     def _write_gaps(self, final: bool) -> None:
         prev = self._prev_last or {}
-        todo = [("", max(prev.values(), default=0), int(self.started * 1e9))] if "" not in self._gaps_written else []
+        todo = ([("", max(prev.values(), default=0), int(self.started * 1e9))] if "" not in self._gaps_written
+                else [])
         todo += [(t, prev[t], self._first.get(t)) for t in prev
                  if t not in self._gaps_written and (final or t in self._first)]
         for topic, before, after in todo:
-            rec = {"topic": topic, "previous": self.previous.name, "last_before": before / 1e9 if before else None,
+            rec = {"topic": topic, "previous": self.previous.name,
+                   "last_before": before / 1e9 if before else None,
                    "first_after": after / 1e9 if after else None,
                    "lost_s": (after - before) / 1e9 if before and after else None}
             t = after or int(time.time() * 1e9)
             try:
-                self._writer.add_message(self._channel(GAP_TOPIC, "json", "flexsheet.RecorderGap"), log_time=t,
+                self._writer.add_message(self._channel(GAP_TOPIC, "json", "flexsheet.RecorderGap"),
+                                         log_time=t,
                                          data=json.dumps(rec).encode(), publish_time=t)
             except Exception as exc:  # noqa: BLE001
                 self.error = f"{type(exc).__name__}: {exc}"[:300]

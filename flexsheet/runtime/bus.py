@@ -6,9 +6,10 @@ read-only views (:func:`freeze_arrays`: a receiver cannot write into the publish
 must not write into an array after publishing it, as with any zero-copy transport). Each node keeps its own
 publisher socket at its launch-file endpoint (:class:`ContainerTransport`, a
 :class:`flexsheet.runtime.zmq.xpub.XPub`); a message is encoded — once — only when a subscriber outside the
-process has asked for its topic or the topic is latched. The bus has the container's one SUB socket (:class:`flexsheet.runtime.zmq.subscriber.BusSocket`),
-connected to every endpoint of the graph outside the container, and hands what arrives to its nodes'
-subscriptions (decoded and validated there: the wire boundary).
+process has asked for its topic or the topic is latched. The bus has the container's one SUB socket
+(:class:`flexsheet.runtime.zmq.subscriber.BusSocket`), connected to every endpoint of the graph outside the
+container, and hands what arrives to its nodes' subscriptions (decoded and validated there: the wire
+boundary).
 """
 
 from __future__ import annotations
@@ -38,7 +39,8 @@ _ARRAY_FIELDS: dict[type, tuple[str, ...]] = {}
 def _array_fields(cls: type) -> tuple[str, ...]:
     names = _ARRAY_FIELDS.get(cls)
     if names is None:
-        names = _ARRAY_FIELDS[cls] = tuple(n for n, f in cls.model_fields.items() if array_spec(f) is not None)
+        names = _ARRAY_FIELDS[cls] = tuple(n for n,
+                                           f in cls.model_fields.items() if array_spec(f) is not None)
     return names
 
 
@@ -64,7 +66,8 @@ class Bus:
     :class:`~flexsheet.runtime.clock.SimClock` for a lockstep replay, which also creates :attr:`lockstep`).
     """
 
-    def __init__(self, name: str = "container", peers: list[str] | None = None, curve: CurveConfig | None = None,
+    def __init__(self, name: str = "container", peers: list[str] | None = None,
+                 curve: CurveConfig | None = None,
                  clock: Clock | None = None, rcvhwm: int = 20000) -> None:
         self.name = name
         self.peers = [p for p in dict.fromkeys(peers or []) if p]
@@ -179,9 +182,9 @@ class Bus:
 
     # ------------------------------------------------------------------ routing
     def publish(self, pub, msg: Message) -> list | None:
-        """Hand ``msg`` (published by ``pub``, any thread) to the container's subscribers as the object itself;
-        a node that takes raw frames (the recorder) gets it encoded. Returns those frames if it had to encode
-        (the publisher reuses them for the wire), else None."""
+        """Hand ``msg`` (published by ``pub``, any thread) to the container's subscribers as the object
+        itself; a node that takes raw frames (the recorder) gets it encoded. Returns those frames if it had to
+        encode (the publisher reuses them for the wire), else None."""
         name_b = pub.name_b
         if pub.latched:
             self._latched_obj[name_b] = freeze_arrays(msg)
@@ -263,7 +266,8 @@ class ContainerTransport(Transport):
         if self.endpoint:
             try:
                 curve = self.node.config.curve or self.bus.curve  # the node's own key (the bus: the host's)
-                self.xpub = XPub(self.bus.sub.ctx, self.endpoint, curve, self.sndhwm, asyncio.get_running_loop(),
+                self.xpub = XPub(self.bus.sub.ctx, self.endpoint, curve, self.sndhwm,
+                                 asyncio.get_running_loop(),
                                  self.node.LARGEST_MESSAGE_BYTES)
             except TransportError:
                 self.bus.detach(self.node)

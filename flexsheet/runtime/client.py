@@ -2,8 +2,8 @@
 --live``): the nodes' services, the newest message of a topic, and the next messages of a topic stamped after
 an instant.
 
-:class:`GraphClient` runs its own event loop in a background thread, subscribed to every endpoint of the launch
-file (with its CURVE keys); methods block the caller, never the loop. Nothing here knows the display.
+:class:`GraphClient` runs its own event loop in a background thread, subscribed to every endpoint of the
+launch file (with its CURVE keys); methods block the caller, never the loop. Nothing here knows the display.
 """
 
 from __future__ import annotations
@@ -26,8 +26,8 @@ __all__ = ["GraphClient"]
 
 
 class GraphClient:
-    """Connect to the graph of launch file ``launch`` as a tool of ``host`` (its CURVE keys; None: the first host
-    whose key is here); use as a context manager (or :meth:`close`).
+    """Connect to the graph of launch file ``launch`` as a tool of ``host`` (its CURVE keys; None: the first
+    host whose key is here); use as a context manager (or :meth:`close`).
 
     Raises :class:`flexsheet.runtime.launch.LaunchError` for an unusable launch file or missing keys."""
 
@@ -71,7 +71,8 @@ class GraphClient:
             return
         with self._lock:
             sink = self._collect.get(name)
-        if name != T.DIAGNOSTICS.name and sink is None and not topic.latched and name not in self._keep_latest:
+        if (name != T.DIAGNOSTICS.name and sink is None and not topic.latched
+            and name not in self._keep_latest):
             return
         try:
             msg = decode(frames, topic)
@@ -144,8 +145,8 @@ class GraphClient:
                 if len(good) >= n:
                     return good[:n]
                 if time.monotonic() > deadline:
-                    raise TimeoutError(f"{topic.name}: {len(good)} of {n} messages stamped after {after:.3f} s "
-                                       f"within {timeout:g} s")
+                    raise TimeoutError(f"{topic.name}: {len(good)} of {n} messages stamped after {after:.3f} "
+                                       f"s within {timeout:g} s")
                 time.sleep(0.01)
         finally:
             with self._lock:
@@ -157,7 +158,8 @@ class GraphClient:
             return self.wait(f"node {name!r} heard", lambda: self._beats.get(name), timeout)
         except TimeoutError:
             raise TimeoutError(f"node {name!r} not heard in {timeout:g} s (heard: "
-                               f"{', '.join(sorted(self._beats)) or 'none'}; graph of {self.launch})") from None
+                               f"{', '.join(sorted(self._beats)) or 'none'}; graph of "
+                               f"{self.launch})") from None
 
     def call(self, node: str, service: str, args: dict | None = None, timeout: float = 5.0) -> Any:
         """Call ``service`` of ``node``; its result. Raises :class:`flexsheet.runtime.services.ServiceError`

@@ -1,6 +1,6 @@
-"""The time a node reads: the wall clock (:class:`Clock`, :data:`WALL_CLOCK`) or simulated time (:class:`SimClock`,
-driven by :mod:`flexsheet.runtime.lockstep`, with its :class:`SimTimer`), and :func:`ticks`, a drift-free
-schedule on the wall clock."""
+"""The time a node reads: the wall clock (:class:`Clock`, :data:`WALL_CLOCK`) or simulated time
+(:class:`SimClock`, driven by :mod:`flexsheet.runtime.lockstep`, with its :class:`SimTimer`), and
+:func:`ticks`, a drift-free schedule on the wall clock."""
 
 from __future__ import annotations
 
@@ -23,8 +23,8 @@ class Clock:
         return time.time()
 
     def stamp(self) -> float:
-        """The default ``Header.stamp`` of what is published now: :meth:`now` here; on a live simulated clock the
-        time the running handler's output leaves (its start plus its charged compute)."""
+        """The default ``Header.stamp`` of what is published now: :meth:`now` here; on a live simulated clock
+        the time the running handler's output leaves (its start plus its charged compute)."""
         return time.time()
 
 
@@ -33,9 +33,9 @@ WALL_CLOCK = Clock()
 
 
 class SimTimer:
-    """A :meth:`~flexsheet.runtime.node.Node.timer` on a :class:`SimClock`: fired by the lockstep driver when the
-    replayed time passes ``due`` (s); ``cancel()`` stops it. ``node``: the :class:`~flexsheet.runtime.node.Node`
-    whose timer it is."""
+    """A :meth:`~flexsheet.runtime.node.Node.timer` on a :class:`SimClock`: fired by the lockstep driver when
+    the replayed time passes ``due`` (s); ``cancel()`` stops it. ``node``: the
+    :class:`~flexsheet.runtime.node.Node` whose timer it is."""
 
     __slots__ = ("period", "callback", "node", "due", "index", "cancelled", "sim_cost", "sim_delay")
 
@@ -98,7 +98,8 @@ class SimClock(Clock):
 
     def add_timer(self, period: float, callback: Callable, node: Any, sim_cost: float = 0.0,
                   sim_delay: float = 0.0) -> SimTimer:
-        tm = SimTimer(period, callback, node, None if self._t is None else self._t + period, next(self._count),
+        tm = SimTimer(period, callback, node, None if self._t is None else self._t + period,
+                      next(self._count),
                       sim_cost, sim_delay)
         self.timers.append(tm)
         return tm

@@ -22,7 +22,8 @@ from pydantic import BaseModel, ValidationError
 
 from messages import MESSAGE_TYPES, Message, Topic
 
-__all__ = ["DecodeError", "encode", "pack", "unpack", "decode", "decode_any", "peek_schema", "peek_stamp", "MAX_ARRAY_BYTES"]
+__all__ = ["DecodeError", "encode", "pack", "unpack", "decode", "decode_any", "peek_schema", "peek_stamp",
+           "MAX_ARRAY_BYTES"]
 
 EXT_NDARRAY = 1
 _HEAD = struct.Struct("<HB")  # buffer index, ndim; then ndim × uint64 dims, then the dtype string
@@ -53,8 +54,8 @@ def parse_descriptor(data: bytes) -> tuple[int, np.dtype, tuple[int, ...], int] 
         count *= n
     nbytes = count * dtype.itemsize
     if nbytes > MAX_ARRAY_BYTES:
-        return (f"array shape {_shape_text(shape)} dtype {dtype} needs {_count_text(nbytes)} bytes, more than the "
-                f"{MAX_ARRAY_BYTES} allowed")
+        return (f"array shape {_shape_text(shape)} dtype {dtype} needs {_count_text(nbytes)} bytes, more "
+                f"than the {MAX_ARRAY_BYTES} allowed")
     return idx, dtype, shape, nbytes
 
 
@@ -156,17 +157,18 @@ def encode(topic: str, msg: Message) -> list:
 
 
 def pack(topic: str, schema: str, version: int, fields: dict) -> list:
-    """Frames ``[topic, meta, *buffers]`` of a message given as its ``schema`` name, ``version`` and ``fields``
-    (plain values, dicts for nested models, numpy arrays), not validated (a receiver validates). Raises
-    ``TypeError`` for a value msgpack cannot carry."""
+    """Frames ``[topic, meta, *buffers]`` of a message given as its ``schema`` name, ``version`` and
+    ``fields`` (plain values, dicts for nested models, numpy arrays), not validated (a receiver validates).
+    Raises ``TypeError`` for a value msgpack cannot carry."""
     buffers: list = []
     meta = msgpack.packb({"s": schema, "v": version, "d": _fields(fields, buffers)}, default=_default)
     return [topic.encode(), meta, *buffers]
 
 
 def unpack(frames: list, topic_name: str) -> dict:
-    """The envelope ``{"s": schema, "v": version, "d": fields}`` of ``frames`` (arrays as read-only numpy views
-    of their buffers), not validated against its type. Raises :class:`DecodeError` naming ``topic_name``."""
+    """The envelope ``{"s": schema, "v": version, "d": fields}`` of ``frames`` (arrays as read-only numpy
+    views of their buffers), not validated against its type. Raises :class:`DecodeError` naming
+    ``topic_name``."""
     return _unpack(frames, topic_name)
 
 
@@ -188,8 +190,8 @@ def _unpack(frames: list, topic_name: str) -> dict:
             buf = buf.buffer if hasattr(buf, "buffer") else buf
             have = memoryview(buf).nbytes
         if have != nbytes:
-            raise DecodeError(f"{topic_name}: array shape {_shape_text(shape)} dtype {dtype} needs {nbytes} bytes, "
-                              f"buffer has {have}")
+            raise DecodeError(f"{topic_name}: array shape {_shape_text(shape)} dtype {dtype} needs {nbytes} "
+                              f"bytes, buffer has {have}")
         return np.frombuffer(buf, dtype=dtype).reshape(shape)
 
     meta = frames[1]
@@ -200,7 +202,8 @@ def _unpack(frames: list, topic_name: str) -> dict:
     except DecodeError:
         raise
     except Exception as exc:  # noqa: BLE001 - msgpack raises many types on garbage
-        raise DecodeError(_line(f"{topic_name}: undecodable meta frame ({type(exc).__name__}: {exc})")) from None
+        raise DecodeError(_line(f"{topic_name}: undecodable meta frame ({type(exc).__name__}: "
+                                f"{exc})")) from None
     if not isinstance(obj, dict) or not {"s", "v", "d"} <= obj.keys() or not isinstance(obj["d"], dict):
         raise DecodeError(f"{topic_name}: meta frame is not a flexsheet message envelope")
     return obj
@@ -243,7 +246,8 @@ def decode_any(frames: list) -> Message:
 def peek_schema(meta: bytes) -> tuple[str, int]:
     """Return ``(schema, version)`` of an encoded meta frame without building arrays or validating.
 
-    Raises :class:`DecodeError` if ``meta`` is not msgpack of an envelope with a str schema and an int version.
+    Raises :class:`DecodeError` if ``meta`` is not msgpack of an envelope with a str schema and an int
+    version.
     """
     try:
         obj = msgpack.unpackb(meta, ext_hook=lambda c, d: None, raw=False)
@@ -255,8 +259,8 @@ def peek_schema(meta: bytes) -> tuple[str, int]:
 
 
 def peek_stamp(frames: list) -> float | None:
-    """The ``header.stamp`` (s, the sender's clock) of an encoded message ``[topic, meta, *buffers]``, read from
-    its meta frame without building arrays or validating; None when it has no numeric stamp."""
+    """The ``header.stamp`` (s, the sender's clock) of an encoded message ``[topic, meta, *buffers]``, read
+    from its meta frame without building arrays or validating; None when it has no numeric stamp."""
     try:
         obj = msgpack.unpackb(bytes(frames[1]), ext_hook=lambda c, d: None, raw=False)
         stamp = obj["d"]["header"]["stamp"]

@@ -6,9 +6,9 @@ restart) and the output lines of the nodes the launcher relays to the :data:`CON
 experiment, a table build) logs its progress to its module's logger (``logging.getLogger(__name__)``) at INFO.
 
 :func:`show_lines` is how a command shows them: each record's message on stdout (or stderr), a line each,
-flushed at once (a WARNING or worse prefixed with its level), and kept from the root logger's handlers. Elsewhere they go
-where the application's logging sends them (``flexsheet.runtime.testing.console_lines`` collects the console's,
-pytest's ``caplog`` any logger's).
+flushed at once (a WARNING or worse prefixed with its level), and kept from the root logger's handlers.
+Elsewhere they go where the application's logging sends them (``flexsheet.runtime.testing.console_lines``
+collects the console's, pytest's ``caplog`` any logger's).
 """
 
 from __future__ import annotations

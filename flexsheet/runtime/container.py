@@ -1,4 +1,5 @@
-"""Composable nodes: several nodes of one host in one process and one asyncio loop (ROS 2 component containers).
+"""Composable nodes: several nodes of one host in one process and one asyncio loop (ROS 2 component
+containers).
 
 A launch file puts a node in a container with ``container: NAME``; the nodes of one container and one host run
 in one process, started by the supervisor as ``flexsheet run --container NAME --launch FILE --host HOST``::
@@ -9,25 +10,25 @@ in one process, started by the supervisor as ``flexsheet run --container NAME --
       planner:      {type: planner, host: main, container: vision}
 
 Between the nodes of a container a message travels as the frozen message object itself, through the
-container's :class:`~flexsheet.runtime.bus.Bus`: no encode, no decode, no copy, no socket; its numpy arrays are handed on as
-read-only views (a receiver cannot write into the publisher's arrays; the publisher must not write into an
-array after publishing it, as with any zero-copy transport). Each node keeps its own publisher socket at its
-launch-file endpoint (:class:`flexsheet.runtime.zmq.xpub.XPub`), so the rest of the graph, the recorder and
-the tools see the same endpoints, topics and heartbeats as before; a message is encoded — once — only when a
-subscriber outside the process has asked for its topic (XPUB subscription tracking) or the topic is latched.
-The container has one SUB socket, connected to every endpoint of the graph outside the container, and hands
-what arrives to its nodes' subscriptions as usual (decoded and validated there: the wire boundary).
+container's :class:`~flexsheet.runtime.bus.Bus`: no encode, no decode, no copy, no socket; its numpy arrays
+are handed on as read-only views (a receiver cannot write into the publisher's arrays; the publisher must not
+write into an array after publishing it, as with any zero-copy transport). Each node keeps its own publisher
+socket at its launch-file endpoint (:class:`flexsheet.runtime.zmq.xpub.XPub`), so the rest of the graph, the
+recorder and the tools see the same endpoints, topics and heartbeats as before; a message is encoded — once —
+only when a subscriber outside the process has asked for its topic (XPUB subscription tracking) or the topic
+is latched. The container has one SUB socket, connected to every endpoint of the graph outside the container,
+and hands what arrives to its nodes' subscriptions as usual (decoded and validated there: the wire boundary).
 
-QoS (latest, keep-all, latched: a latched object is kept and handed to a late in-process joiner),
-heartbeats, diagnostics, parameters and remaps work as for a node alone. A node that raises out of its
-``run`` (its setup, its transport) is restarted inside the container by its own ``respawn`` policy, as a fresh
-instance, while the other nodes keep running with their state; a configuration error (exit status 78 alone)
-is not restarted. What a container cannot contain: a crash of the interpreter itself (a segfault or abort
-in a C extension — OpenCV, numpy, pyzmq, a GL driver — ``os._exit``, the kernel's OOM killer) ends every node
-of the process (the supervisor then restarts the whole container by the members' policy); a handler that
-blocks the loop (a sync call in an ``async def``) stalls every node of the container; nodes share the GIL, so a
-pure-Python CPU hog in one slows the others; niceness and RT priority are per process (the container takes the
-smallest ``nice`` and the largest ``rt_priority`` of its members); a node's module-level globals are shared.
+QoS (latest, keep-all, latched: a latched object is kept and handed to a late in-process joiner), heartbeats,
+diagnostics, parameters and remaps work as for a node alone. A node that raises out of its ``run`` (its setup,
+its transport) is restarted inside the container by its own ``respawn`` policy, as a fresh instance, while the
+other nodes keep running with their state; a configuration error (exit status 78 alone) is not restarted. What
+a container cannot contain: a crash of the interpreter itself (a segfault or abort in a C extension — OpenCV,
+numpy, pyzmq, a GL driver — ``os._exit``, the kernel's OOM killer) ends every node of the process (the
+supervisor then restarts the whole container by the members' policy); a handler that blocks the loop (a sync
+call in an ``async def``) stalls every node of the container; nodes share the GIL, so a pure-Python CPU hog in
+one slows the others; niceness and RT priority are per process (the container takes the smallest ``nice`` and
+the largest ``rt_priority`` of its members); a node's module-level globals are shared.
 
 Errors: :class:`flexsheet.runtime.launch.LaunchError` for a container that names no node on the host.
 Source: ROS 2 ``rclcpp_components`` (component container, intra-process communication), ZeroMQ XPUB
@@ -66,8 +67,8 @@ log = logging.getLogger("container")
 @dataclass
 class Member:
     """One node of a container: ``make(bus)`` builds a fresh instance (each start and restart); ``policy``
-    (never | on-failure | always), ``delay`` s, ``max_restarts``: its launch-file respawn policy; ``required``:
-    when it ends, the container ends."""
+    (never | on-failure | always), ``delay`` s, ``max_restarts``: its launch-file respawn policy;
+    ``required``: when it ends, the container ends."""
 
     name: str
     make: Callable[[Bus], Node]
@@ -92,13 +93,16 @@ class Container:
 
     def __init__(self, name: str, members: list[Member], bus: Bus, shutdown_timeout: float = 3.0,
                  cpu_file: str | None = None,
-                 sim_until: float | None = None, sim_file: str | None = None, rtf: float | None = None) -> None:
+                 sim_until: float | None = None, sim_file: str | None = None,
+                 rtf: float | None = None) -> None:
         self.name, self.members, self.bus = name, members, bus
         self.sim_until = sim_until   # live simulated clock: stop after this many simulated seconds
         self.sim_file = sim_file     # live simulated clock: where the run's clock figures go (JSON)
-        self.rtf = rtf               # live simulated clock: cap on simulated s per wall s (None: as fast as it can)
-        self.active_s: dict[str, float] = {}   # live simulated clock: wall s from start until each node was active
-        self._cpu_at_start: tuple[float, dict[str, float]] | None = None   # (process CPU, members' CPU) when sim time starts
+        self.rtf = rtf  # live simulated clock: cap on simulated s per wall s (None: as fast as it can)
+        # live simulated clock: wall s from start until each node was active
+        self.active_s: dict[str, float] = {}
+        # (process CPU, members' CPU) when sim time starts
+        self._cpu_at_start: tuple[float, dict[str, float]] | None = None
         self.shutdown_timeout = shutdown_timeout
         self.log = console_logger("container")   # what it says to the user (flexsheet.runtime.console)
         self.cpu_file = cpu_file
@@ -141,7 +145,8 @@ class Container:
                 except asyncio.CancelledError:
                     raise
                 except Exception:  # noqa: BLE001 - a node's crash stays in the node
-                    log.exception("%s crashed (the other nodes of container %s keep running)", m.name, self.name)
+                    log.exception("%s crashed (the other nodes of container %s keep running)", m.name,
+                                  self.name)
                     code = 1
                 finally:
                     m.cpu_s += node.cpu_seconds()
@@ -161,8 +166,8 @@ class Container:
                 self.log.info(f"{m.name}: not restarted: {m.max_restarts} restarts used")
                 return self._end(m, code)
             m.restarts += 1
-            self.log.info(f"{m.name}: restarting in {m.delay:.1f} s (restart {m.restarts}/{m.max_restarts}; the other "
-                       f"nodes of container {self.name} keep running)")
+            self.log.info(f"{m.name}: restarting in {m.delay:.1f} s (restart {m.restarts}/{m.max_restarts}; "
+                       f"the other nodes of container {self.name} keep running)")
             await asyncio.sleep(m.delay)
             if self._stopping:
                 return code
@@ -240,8 +245,9 @@ class Container:
             for m in self.members:
                 self.active_s.setdefault(m.name, time.monotonic() - t0)
             ready_s = time.monotonic() - t0
-            self.log.info(f"container {self.name}: every node active after {ready_s:.1f} s; simulated time starts at "
-                       f"{SIM_EPOCH:g} s" + (f" and runs {self.sim_until:g} s" if self.sim_until else "")
+            self.log.info(f"container {self.name}: every node active after {ready_s:.1f} s; simulated time "
+                       f"starts at {SIM_EPOCH:g} "
+                       "s" + (f" and runs {self.sim_until:g} s" if self.sim_until else "")
                        + (f", paced at {self.rtf:g}x wall time" if self.rtf else ""))
 
         stats = self.bus.lockstep.stats   # kept up to date while it runs: valid however the run ends
@@ -268,15 +274,17 @@ class Container:
             c0, h0 = self._cpu_at_start
             run = {"process_cpu_run_s": time.process_time() - c0,
                    "host_handler_cpu_run_s": {k: v - h0.get(k, 0.0) for k, v in host_cpu.items()}}
-        data = {"clock": "sim", "rtf_target": self.rtf, "ready_wall_s": ready_s, "active_wall_s": dict(self.active_s),
+        data = {"clock": "sim", "rtf_target": self.rtf, "ready_wall_s": ready_s,
+                "active_wall_s": dict(self.active_s),
                 "sim_s": stats.bag_s, "wall_s": stats.wall_s, "realtime_factor": stats.speed,
                 "handled": stats.handled, "timer_ticks": stats.timers,
                 "superseded_latest": ls.dropped,
                 "charged_compute_s": dict(sorted(ls.charged.items())),
                 "host_handler_cpu_s": host_cpu, **run,
-                "note": "charged_compute_s: simulated time charged to each node (declared sim_cost: the lab's "
-                        "timings); host_handler_cpu_s: what its handlers took on this host (thread CPU time); "
-                        "*_run_s: the same, and the whole process's CPU, from the start of simulated time on"}
+                "note": "charged_compute_s: simulated time charged to each node (declared sim_cost: the "
+                        "lab's timings); host_handler_cpu_s: what its handlers took on this host (thread CPU "
+                        "time); *_run_s: the same, and the whole process's CPU, from the start of simulated "
+                        "time on"}
         try:
             Path(self.sim_file).parent.mkdir(parents=True, exist_ok=True)
             Path(self.sim_file).write_text(json.dumps(data, indent=1))
@@ -292,8 +300,9 @@ class Container:
             return
         data = {"container": self.name, "pid": os.getpid(), "wall_s": wall, "process_cpu_s": cpu,
                 "nodes": {m.name: {"handler_cpu_s": m.cpu_s, "restarts": m.restarts} for m in self.members},
-                "note": "handler_cpu_s: CPU of each node's handlers and timer callbacks (thread time; an async "
-                        "one's own steps); the rest of process_cpu_s is shared: the loop, decoding, threads"}
+                "note": "handler_cpu_s: CPU of each node's handlers and timer callbacks (thread time; an "
+                        "async one's own steps); the rest of process_cpu_s is shared: the loop, decoding, "
+                        "threads"}
         try:
             Path(self.cpu_file).parent.mkdir(parents=True, exist_ok=True)
             Path(self.cpu_file).write_text(json.dumps(data, indent=1))
@@ -301,7 +310,7 @@ class Container:
             self.log.info(f"container {self.name}: cannot write {self.cpu_file}: {exc}")
 
 
-# ---------------------------------------------------------------------------------------------- from a launch file
+# ----------------------------------------------------------------------------------------- from a launch file
 def container_members(lf, name: str, host: str | None) -> list[str]:
     """Names of the nodes of ``lf`` in container ``name`` on ``host`` (all hosts if None), in file order."""
     return [n for n, s in lf.nodes.items() if s.container == name and (host is None or s.host == host)]
@@ -320,15 +329,18 @@ def container_from_launch(lf, name: str, host: str | None = None, out: str | Non
     if not names:
         where = f" on host {host!r}" if host else ""
         known = sorted({s.container for s in lf.nodes.values() if s.container})
-        raise LaunchError(f"{lf.path}: no node has 'container: {name}'{where}; containers: {', '.join(known) or '-'}")
+        raise LaunchError(f"{lf.path}: no node has 'container: {name}'{where}; containers: "
+                          f"{', '.join(known) or '-'}")
     hosts = {lf.nodes[n].host for n in names}
     if len(hosts) > 1:
         raise LaunchError(f"{lf.path}: container {name!r} has nodes on hosts {', '.join(sorted(hosts))}: "
                           "give --host (one process per host)")
     host = hosts.pop()
     overrides = overrides or {}
-    configs: dict[str, NodeConfig] = {n: node_config(lf, n, out=out, overrides=overrides.get(n)) for n in names}
-    lockstep = any(lf.nodes[n].type == "player" and configs[n].params.get("mode") == "lockstep" for n in names)
+    configs: dict[str,
+                  NodeConfig] = {n: node_config(lf, n, out=out, overrides=overrides.get(n)) for n in names}
+    lockstep = any(lf.nodes[n].type == "player" and configs[n].params.get("mode") == "lockstep"
+                   for n in names)
     members_eps = {configs[n].endpoint for n in names}
     peers = [ep for ep in lf.endpoints().values() if ep not in members_eps]
     live = getattr(lf, "clock", "wall") == "sim"

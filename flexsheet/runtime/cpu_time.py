@@ -1,8 +1,8 @@
 """The thread CPU time of a coroutine's own steps (pure: the standard library).
 
 An async handler runs in steps between its awaits; timing it across ``await handler(msg)`` would also count
-everything the event loop ran meanwhile (other nodes' handlers, the bus). :func:`timed` drives the coroutine one
-step at a time and adds only the CPU time of its own steps (``time.thread_time``, s) to a counter, so
+everything the event loop ran meanwhile (other nodes' handlers, the bus). :func:`timed` drives the coroutine
+one step at a time and adds only the CPU time of its own steps (``time.thread_time``, s) to a counter, so
 ``flexsheet bench sim`` books an async handler's work under its node, as it books a sync one's.
 """
 

@@ -65,7 +65,8 @@ class TalkerNode(Node):
             return
         now = time.time()
         pos = np.array([0.001 * self.n, 0.0, 0.0])
-        self.pub.publish(Fingertip(header=self.pub.header("display", now), position=pos, covariance=np.eye(3) * 1e-8,
+        self.pub.publish(Fingertip(header=self.pub.header("display", now), position=pos,
+                                   covariance=np.eye(3) * 1e-8,
                                    valid=True, predicted_position=pos, exposure_stamp=now))
         self.n += 1
 

@@ -2,11 +2,11 @@
 
 Every node with a TCP endpoint announces itself while it runs: one small JSON file per node, ``NAME-PID.json``
 (``{"node", "endpoint", "pid", "curve", "domain"}``), in :func:`graph_dir` (``$FLEXSHEET_GRAPH_DIR``, else
-``$XDG_RUNTIME_DIR/flexsheet/graph``, else ``/tmp/flexsheet-graph-UID``), removed when it stops. An entry whose
-process is gone is stale and dropped. This plays the part of ROS 2's discovery on one host (``ros2 topic list``
-with no arguments): a launched graph, a lone ``flexsheet run`` node and a ``flexsheet bag play`` are found
-alike. A graph on other hosts, or one running CURVE (whose keys only its launch file names), is reached with
-``--launch FILE`` as before.
+``$XDG_RUNTIME_DIR/flexsheet/graph``, else ``/tmp/flexsheet-graph-UID``), removed when it stops. An entry
+whose process is gone is stale and dropped. This plays the part of ROS 2's discovery on one host
+(``ros2 topic list`` with no arguments): a launched graph, a lone ``flexsheet run`` node and a
+``flexsheet bag play`` are found alike. A graph on other hosts, or one running CURVE (whose keys only its
+launch file names), is reached with ``--launch FILE`` as before.
 
 :func:`resolve_graph` picks the graph a tool talks to: ``--launch FILE``, else ``--endpoint`` addresses, else
 ``$FLEXSHEET_LAUNCH``, else the nodes announced here; with none it raises :class:`LookupError` saying which
@@ -48,8 +48,9 @@ def announce(node: str, endpoint: str, curve: bool) -> Path | None:
     try:
         folder.mkdir(parents=True, exist_ok=True, mode=0o700)
         tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps({"node": node, "endpoint": endpoint, "pid": os.getpid(), "curve": bool(curve),
-                                   "domain": domain_id()}))
+        tmp.write_text(
+            json.dumps({"node": node, "endpoint": endpoint, "pid": os.getpid(), "curve": bool(curve),
+                        "domain": domain_id()}))
         tmp.replace(path)
     except OSError:
         return None
@@ -76,8 +77,9 @@ def _alive(pid: int) -> bool:
 
 
 def discover() -> list[dict]:
-    """The live entries of :func:`graph_dir` in this process's domain (:func:`~flexsheet.runtime.domain.domain_id`;
-    an entry without one is domain 0), sorted by node name (stale and unreadable ones are removed)."""
+    """The live entries of :func:`graph_dir` in this process's domain
+    (:func:`~flexsheet.runtime.domain.domain_id`; an entry without one is domain 0), sorted by node name
+    (stale and unreadable ones are removed)."""
     found = []
     domain = domain_id()
     try:
@@ -87,7 +89,8 @@ def discover() -> list[dict]:
     for f in files:
         try:
             e = json.loads(f.read_text())
-            ok = isinstance(e, dict) and isinstance(e.get("pid"), int) and str(e.get("endpoint", "")).startswith("tcp")
+            ok = (isinstance(e, dict) and isinstance(e.get("pid"), int)
+                  and str(e.get("endpoint", "")).startswith("tcp"))
         except (OSError, ValueError):
             ok = False
         if ok and _alive(e["pid"]):
@@ -101,8 +104,8 @@ def discover() -> list[dict]:
 @dataclass
 class Graph:
     """The graph a tool talks to: the publisher ``peers`` (endpoints), the tool's CURVE config (None: plain),
-    the node ``names`` expected (empty: unknown), the launch file if one named it, and ``source``, a phrase for
-    messages ("the graph of launch/sim.yaml", "3 nodes found on this machine")."""
+    the node ``names`` expected (empty: unknown), the launch file if one named it, and ``source``, a phrase
+    for messages ("the graph of launch/sim.yaml", "3 nodes found on this machine")."""
 
     peers: list[str]
     curve: object = None
@@ -113,8 +116,8 @@ class Graph:
 
 def resolve_graph(launch: str | None, endpoints: list[str] | None = None) -> Graph:
     """The :class:`Graph` for ``--launch`` / ``--endpoint`` (see the module docstring). Raises
-    :class:`~flexsheet.runtime.launch.LaunchError` for an unusable launch file and :class:`LookupError` (one line
-    naming what to give) when nothing is found."""
+    :class:`~flexsheet.runtime.launch.LaunchError` for an unusable launch file and :class:`LookupError` (one
+    line naming what to give) when nothing is found."""
     launch = launch or (None if endpoints else os.environ.get("FLEXSHEET_LAUNCH"))
     if launch:
         lf = load_launch(launch)
@@ -128,13 +131,13 @@ def resolve_graph(launch: str | None, endpoints: list[str] | None = None) -> Gra
     found = discover()
     plain = [e for e in found if not e.get("curve")]
     if found and not plain:
-        raise LookupError(f"the graph on this machine runs CURVE ({', '.join(e['node'] for e in found)}): give "
-                          "--launch FILE, its launch file, for its keys")
+        raise LookupError(f"the graph on this machine runs CURVE ({', '.join(e['node'] for e in found)}): "
+                          "give --launch FILE, its launch file, for its keys")
     if not plain:
-        raise LookupError(f"no flexsheet node is running on this machine in domain {domain_id()} (none announced in "
-                          f"{graph_dir()}): start "
-                          "one (flexsheet launch FILE, flexsheet bag play BAG), or give --launch FILE for a graph on "
-                          "other hosts, or --endpoint tcp://HOST:PORT")
+        raise LookupError(f"no flexsheet node is running on this machine in domain {domain_id()} (none "
+                          f"announced in {graph_dir()}): start "
+                          "one (flexsheet launch FILE, flexsheet bag play BAG), or give --launch FILE for a "
+                          "graph on other hosts, or --endpoint tcp://HOST:PORT")
     names = {e["node"] for e in plain}
     return Graph(sorted({e["endpoint"] for e in plain}), None, names, None,
                  f"{len(names)} node(s) found on this machine")

@@ -16,7 +16,8 @@ from messages.diagnostics import TopicStats
 
 def _type_name(field) -> str:
     ann = field.annotation
-    meta = " ".join(str(m.json_schema.get("description", "")) for m in field.metadata if hasattr(m, "json_schema"))
+    meta = " ".join(str(m.json_schema.get("description", "")) for m in field.metadata
+                    if hasattr(m, "json_schema"))
     if "ndarray" in meta:
         return meta[meta.index("[ndarray") + 1:].rstrip("]").replace("ndarray ", "ndarray ")
     return getattr(ann, "__name__", str(ann)).replace("typing.", "")
@@ -41,9 +42,9 @@ def render() -> str:
     """The Markdown text of docs/messages.md."""
     lines = ["# Messages (the wire contract)", "",
              "Generated from `messages/` by `python -m flexsheet.runtime.docgen`; do not edit by hand.", "",
-             "Every message is a frozen, strict pydantic v2 model with a `header` (`stamp` s on the sender's clock, "
-             "`frame_id`, `seq`) and carries its schema name and version on the wire. Arrays travel as raw "
-             "buffers (see `flexsheet/runtime/codec.py`). Units are SI; frame `display` is defined in "
+             "Every message is a frozen, strict pydantic v2 model with a `header` (`stamp` s on the sender's "
+             "clock, `frame_id`, `seq`) and carries its schema name and version on the wire. Arrays travel "
+             "as raw buffers (see `flexsheet/runtime/codec.py`). Units are SI; frame `display` is defined in "
              "`flexsheet/model/geometry.py`. Float fields and float arrays must be finite.", "",
              "| topic | type | latched | nominal rate |", "|---|---|---|---|"]
     for t in T.ALL:

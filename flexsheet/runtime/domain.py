@@ -1,12 +1,12 @@
 """Domains: several graphs on one machine, as ROS 2's ``ROS_DOMAIN_ID``.
 
-A graph runs in domain ``D`` (``FLEXSHEET_DOMAIN_ID``, or ``--domain D`` on ``flexsheet launch`` and every tool,
-which sets that variable for the processes it starts; default 0). In domain ``D`` every TCP port a launch file
-gives on this machine moves up by ``DOMAIN_STRIDE * D`` (:func:`shift_port`): ``base_port``, a node's ``port``
-and each node param named ``port`` or ``*_port`` whose node's ``host`` param is absent or a loopback address
-(a real controller's address and port stay as written). Port 0 (the OS picks) stays 0. Local discovery
-(:mod:`flexsheet.runtime.discovery`) shows each tool the nodes of its own domain only. DDS maps its domains
-to port ranges the same way (7400 + 250 D).
+A graph runs in domain ``D`` (``FLEXSHEET_DOMAIN_ID``, or ``--domain D`` on ``flexsheet launch`` and every
+tool, which sets that variable for the processes it starts; default 0). In domain ``D`` every TCP port a
+launch file gives on this machine moves up by ``DOMAIN_STRIDE * D`` (:func:`shift_port`): ``base_port``, a
+node's ``port`` and each node param named ``port`` or ``*_port`` whose node's ``host`` param is absent or a
+loopback address (a real controller's address and port stay as written). Port 0 (the OS picks) stays 0. Local
+discovery (:mod:`flexsheet.runtime.discovery`) shows each tool the nodes of its own domain only. DDS maps its
+domains to port ranges the same way (7400 + 250 D).
 
 :func:`port_holder` names the process that holds a TCP port, for the one line a launch prints when a port it
 needs is taken.
@@ -19,7 +19,8 @@ import re
 
 import psutil
 
-__all__ = ["DOMAIN_ENV", "DOMAIN_STRIDE", "MAX_DOMAIN", "domain_id", "shift_port", "shift_params", "port_holder"]
+__all__ = ["DOMAIN_ENV", "DOMAIN_STRIDE", "MAX_DOMAIN", "domain_id", "shift_port", "shift_params",
+           "port_holder"]
 
 DOMAIN_ENV = "FLEXSHEET_DOMAIN_ID"
 #: ports between two domains: room for 250 nodes and listening params per launch file
@@ -54,7 +55,8 @@ def shift_port(port: int, domain: int) -> int:
 
 
 def shift_params(params: dict, domain: int) -> dict:
-    """A node's ``params`` with its local ports moved to ``domain`` (see the module doc); the input is unchanged."""
+    """A node's ``params`` with its local ports moved to ``domain`` (see the module doc); the input is
+    unchanged."""
     if not domain:
         return params
     host = params.get("host")

@@ -1,12 +1,12 @@
 """Give the process's freed heap back to the operating system (glibc ``malloc_trim``).
 
-A long-running node that allocates and frees many buffers of varying size (the recorder's compressed chunks, the
-live view's encoded frames) leaves free pages inside the C heap that its resident memory keeps counting.
+A long-running node that allocates and frees many buffers of varying size (the recorder's compressed chunks,
+the live view's encoded frames) leaves free pages inside the C heap that its resident memory keeps counting.
 ``malloc_trim(0)`` returns them. Measured on the recorder's writer alone, fed a bag's 1.2 M messages: resident
-growth 19.1 MB without, 9.6 MB with a trim after each flush (the rest is the MCAP writer's chunk index, kept until
-the bag closes). In the hour's soak the viz node grew +7.3 % with it (+10.4 % without); the recorder's +13 % did
-not change, so its growth lies elsewhere. The bag writer and the live view
-trim every 10 s of wall time. Not glibc (musl, macOS): a no-op.
+growth 19.1 MB without, 9.6 MB with a trim after each flush (the rest is the MCAP writer's chunk index, kept
+until the bag closes). In the hour's soak the viz node grew +7.3 % with it (+10.4 % without); the recorder's
++13 % did not change, so its growth lies elsewhere. The bag writer and the live view trim every 10 s of wall
+time. Not glibc (musl, macOS): a no-op.
 """
 
 from __future__ import annotations
@@ -31,16 +31,16 @@ def _malloc_trim():
 
 
 def release_free_memory() -> bool:
-    """Return the C heap's free pages to the OS; True if some were (False: none, or not glibc). Thread-safe (glibc
-    locks each arena); ctypes releases the GIL for the call."""
+    """Return the C heap's free pages to the OS; True if some were (False: none, or not glibc). Thread-safe
+    (glibc locks each arena); ctypes releases the GIL for the call."""
     fn = _malloc_trim()
     return bool(fn(0)) if fn is not None else False
 
 
 class Trimmer:
-    """Calls ``release`` (:func:`release_free_memory`) at most once per ``period`` s of ``clock`` (the monotonic wall
-    clock): ``maybe()`` from any periodic callback. It never changes what a node publishes, so a simulated run stays
-    byte-identical. Raises ``ValueError`` for a period that is not finite and > 0."""
+    """Calls ``release`` (:func:`release_free_memory`) at most once per ``period`` s of ``clock`` (the
+    monotonic wall clock): ``maybe()`` from any periodic callback. It never changes what a node publishes, so
+    a simulated run stays byte-identical. Raises ``ValueError`` for a period that is not finite and > 0."""
 
     def __init__(self, period: float = 10.0, clock: Callable[[], float] = time.monotonic,
                  release: Callable[[], bool] = release_free_memory) -> None:

@@ -42,7 +42,8 @@ def read_public_keys(path: Path) -> dict[str, str]:
     raw = yaml.safe_load(path.read_text(encoding="utf-8"))
     if raw is None:
         return {}
-    if not isinstance(raw, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in raw.items()):
+    if (not isinstance(raw, dict)
+        or not all(isinstance(k, str) and isinstance(v, str) for k, v in raw.items())):
         raise ValueError(f"{path}: not a mapping host: public key")
     return raw
 
@@ -56,7 +57,8 @@ def generate(hosts: list[str], folder: Path, force: bool = False) -> dict[str, s
     """
     for host in hosts:
         if not _HOST.match(host):
-            raise ValueError(f"name {host!r}: use letters, digits, '_', '.', '-' (a host or node of the launch file)")
+            raise ValueError(f"name {host!r}: use letters, digits, '_', '.', '-' (a host or node of the "
+                             "launch file)")
     folder.mkdir(parents=True, exist_ok=True)
     os.chmod(folder, 0o700)
     status: dict[str, str] = {}
@@ -75,11 +77,13 @@ def generate(hosts: list[str], folder: Path, force: bool = False) -> dict[str, s
         try:
             public, _ = load_curve_keys(folder / f"{host}.key_secret")
         except (OSError, ValueError) as exc:
-            raise ValueError(f"{folder / f'{host}.key_secret'}: unreadable ({exc}); use --force to replace it") \
+            raise ValueError(f"{folder / f'{host}.key_secret'}: unreadable ({exc}); use --force to replace "
+                             "it") \
                 from None
         keys[host] = public.decode()
-    text = ("# CURVE public keys of the launch graph's hosts and nodes, written by `flexsheet keys generate`.\n"
-            "# Launch files name it: security: {curve: true, public_keys_file: $(keys)/public_keys.yaml}\n"
+    text = ("# CURVE public keys of the launch graph's hosts and nodes, written by `flexsheet keys "
+            "generate`.\n# Launch files name it: security: {curve: true, public_keys_file: "
+            "$(keys)/public_keys.yaml}\n"
             + yaml.safe_dump(keys, sort_keys=False))
     tmp = folder / (PUBLIC_KEYS_FILE + ".tmp")
     tmp.write_text(text, encoding="utf-8")

@@ -5,50 +5,43 @@ A launch file (``launch/*.yaml``) is the single source of truth for hosts and po
     name: sim
     clock: sim                       # sim: one process on simulated time (flexsheet.runtime.lockstep); wall
                                      # or {type: sim, rtf: 1.0}: simulated time paced at 1.0 x wall time
-    hosts:
-      main: {address: 127.0.0.1}
-    base_port: 7100                  # nodes without a port get base_port + their index
-    nodes:
-      talker:
-        type: talker                 # a node type: an entry point of flexsheet.nodes (pyproject.toml)
-        host: main
-        params: {rate: 10.0}         # validated against the node's Params model
-        remaps: {/chatter: /chatter2}
-        respawn: {policy: on-failure, delay: 0.5, max_restarts: 5}
-        required: false              # true: when it exits by itself, the whole launch stops
-        container: vision            # share one process (and loop) with the other nodes of this container
-    security:                        # ZeroMQ CURVE (docs/deploy.md); keys from `flexsheet keys generate`
-      curve: true
-      public_keys_file: $(keys)/public_keys.yaml
+      hosts: main: {address: 127.0.0.1} base_port: 7100                  # nodes without a port get base_port
+      + their index nodes: talker: type: talker                 # a node type: an entry point of
+      flexsheet.nodes (pyproject.toml) host: main params: {rate: 10.0}         # validated against the node's
+      Params model remaps: {/chatter: /chatter2} respawn: {policy: on-failure, delay: 0.5, max_restarts: 5}
+      required: false              # true: when it exits by itself, the whole launch stops container: vision
+      # share one process (and loop) with the other nodes of this container security:                        #
+      ZeroMQ CURVE (docs/deploy.md); keys from `flexsheet keys generate` curve: true public_keys_file:
+      $(keys)/public_keys.yaml
     # plus the top-level sections of the installed launch extensions (flexsheet.runtime.extensions)
 
-Every node publishes on ``tcp://<host address>:<port>`` (or an explicit ``endpoint:``) and subscribes to
-every node endpoint of the file, so the same file serves one machine (127.0.0.1) and the lab's three PCs;
-``flexsheet launch FILE --host NAME`` starts only that host's share. Strings in params may use ``$(out)`` (the ``--out`` folder) and ``$(launch_dir)``; the security paths may
-use ``$(keys)`` (the keys folder: ``$FLEXSHEET_KEYS``, else ``security.keys_dir``, else ~/.flexsheet/keys)
-and ``$(launch_dir)``. :mod:`flexsheet.runtime.launch_check` checks a file against this machine
-(``flexsheet launch FILE --check``) and ``flexsheet launch`` runs that check before it starts anything.
+Every node publishes on ``tcp://<host address>:<port>`` (or an explicit ``endpoint:``) and subscribes to every
+node endpoint of the file, so the same file serves one machine (127.0.0.1) and the lab's three PCs;
+``flexsheet launch FILE --host NAME`` starts only that host's share. Strings in params may use ``$(out)`` (the
+``--out`` folder) and ``$(launch_dir)``; the security paths may use ``$(keys)`` (the keys folder:
+``$FLEXSHEET_KEYS``, else ``security.keys_dir``, else ~/.flexsheet/keys) and ``$(launch_dir)``.
+:mod:`flexsheet.runtime.launch_check` checks a file against this machine (``flexsheet launch FILE --check``)
+and ``flexsheet launch`` runs that check before it starts anything.
 
 The supervisor starts each node as its own OS process (``python -m flexsheet run …``) — or, for the nodes of
 one ``container:`` on one host, one process for them all (``python -m flexsheet run --container NAME …``,
 :mod:`flexsheet.runtime.container`: messages between them are passed as objects; the container restarts a
-crashed node itself, the supervisor restarts the container process) — prefixes every
-output line with the node (or container) name as it arrives (line-buffered, never batched), respawns by policy
-(never a node that exits with :data:`~flexsheet.runtime.config.EXIT_CONFIG`, a configuration error), watches
-the heartbeats of every node of the file (all hosts) and reports a node or host that goes silent, and on
-Ctrl-C/SIGTERM stops all children in reverse order with escalation SIGINT → SIGTERM → SIGKILL. Children
-get ``PR_SET_PDEATHSIG`` so that not even a ``kill -9`` of the launcher leaves orphans. With ``--out`` it samples
-each child's CPU time (``/proc/<pid>/stat``) and writes ``$(out)/cpu.json`` when it stops.
-``clock: sim`` (default ``wall``) runs the whole graph on simulated time: every node in one container,
-:data:`SIM_CONTAINER`, driven by :func:`flexsheet.runtime.lockstep.run_live` (the file's nodes must share one
-host; a node's own ``container:`` is then ignored); ``--duration`` counts simulated seconds. ``clock: {type: sim,
+crashed node itself, the supervisor restarts the container process) — prefixes every output line with the node
+(or container) name as it arrives (line-buffered, never batched), respawns by policy (never a node that exits
+with :data:`~flexsheet.runtime.config.EXIT_CONFIG`, a configuration error), watches the heartbeats of every
+node of the file (all hosts) and reports a node or host that goes silent, and on Ctrl-C/SIGTERM stops all
+children in reverse order with escalation SIGINT → SIGTERM → SIGKILL. Children get ``PR_SET_PDEATHSIG`` so
+that not even a ``kill -9`` of the launcher leaves orphans. With ``--out`` it samples each child's CPU time
+(``/proc/<pid>/stat``) and writes ``$(out)/cpu.json`` when it stops. ``clock: sim`` (default ``wall``) runs
+the whole graph on simulated time: every node in one container, :data:`SIM_CONTAINER`, driven by
+:func:`flexsheet.runtime.lockstep.run_live` (the file's nodes must share one host; a node's own ``container:``
+is then ignored); ``--duration`` counts simulated seconds. ``clock: {type: sim,
 rtf: X}`` (or ``flexsheet launch --rtf X``) caps simulated time at X times wall time (Gazebo's
-``real_time_factor``); unset, it runs as fast as the host allows. Pacing changes no published byte.
-A ``--set hosts.NAME.address=ADDR`` override (:mod:`flexsheet.runtime.launch_sets`) moves a host, e.g. the lab's
-three hosts onto loopback addresses of one machine.
-What each node and tool takes from a file (its :class:`~flexsheet.runtime.config.NodeConfig`, its CURVE
-keys) is :mod:`flexsheet.runtime.launch_config`. Errors: :class:`LaunchError` naming the file, the key and the
-wrong value.
+``real_time_factor``); unset, it runs as fast as the host allows. Pacing changes no published byte. A
+``--set hosts.NAME.address=ADDR`` override (:mod:`flexsheet.runtime.launch_sets`) moves a host, e.g. the lab's
+three hosts onto loopback addresses of one machine. What each node and tool takes from a file (its
+:class:`~flexsheet.runtime.config.NodeConfig`, its CURVE keys) is :mod:`flexsheet.runtime.launch_config`.
+Errors: :class:`LaunchError` naming the file, the key and the wrong value.
 Source: ros2/launch ``launch_service.py`` (minus its substitution layer), supervisord's policies.
 """
 
@@ -76,7 +69,8 @@ from flexsheet.runtime.plugins import node_types, unknown_node_type
 from flexsheet.yamlio import UniqueKeyLoader
 
 __all__ = ["LaunchError", "LaunchFile", "NodeSpec", "HostSpec", "SecuritySpec", "RespawnSpec", "load_launch",
-           "identities", "keys_dir", "substitutions", "substitute", "keygen_command", "short_repr", "TOPLEVEL_ENV",
+           "identities", "keys_dir", "substitutions", "substitute", "keygen_command", "short_repr",
+           "TOPLEVEL_ENV",
            "CORE_SET", "SIM_CONTAINER", "DEFAULT_KEYS_DIR", "PUBLIC_KEYS_FILE", "MAX_LAUNCH_BYTES"]
 
 #: where ``flexsheet keys generate`` writes and CURVE looks when neither ``$FLEXSHEET_KEYS`` nor
@@ -105,11 +99,13 @@ MAX_LAUNCH_BYTES = 1 << 20
 
 def short_repr(value: Any, limit: int = 120) -> str:
     """Bounded one-line repr of ``value`` (``reprlib``), at most ``limit`` characters, for error messages: a
-    YAML alias bomb or a deep structure must not make the error message itself exponential in time and memory."""
+    YAML alias bomb or a deep structure must not make the error message itself exponential in time and
+    memory."""
     import reprlib
 
     r = reprlib.Repr()
-    r.maxlevel, r.maxlist, r.maxdict, r.maxtuple, r.maxset, r.maxstring, r.maxother = 3, 6, 6, 6, 6, limit, limit
+    r.maxlevel, r.maxlist, r.maxdict, r.maxtuple, r.maxset, r.maxstring, r.maxother = (3, 6, 6, 6, 6, limit,
+                                                                                       limit)
     return " ".join(r.repr(value).split())[:limit]
 
 
@@ -132,14 +128,15 @@ class RespawnSpec(BaseModel):
 class SecuritySpec(BaseModel):
     """ZeroMQ CURVE for the whole graph. Every node has its own keypair (its publisher proves it, its
     subscribers present it) and every host one more, for the tools run there (``topic echo``, the launcher's
-    heartbeat watch). The allowed keys are identity (node or host name) → Z85 public key (40 chars), given inline
-    (``public_keys``) or, so that no key is pasted into a launch file, read from ``public_keys_file`` (a YAML
-    mapping written by ``flexsheet keys generate --launch FILE``; ``$(keys)``, ``$(launch_dir)`` and ``~``
-    expand); both may be used if they agree. ``keys_dir``: where each host finds ``<name>.key_secret`` of itself
-    and of its nodes (``$FLEXSHEET_KEYS`` overrides it; ``~`` and ``$(launch_dir)`` expand).
-    ``publishers``: guarded topic → the nodes allowed to publish it (SROS2-style per-node policy): a subscriber
-    takes that topic only from those nodes' endpoints, proven by their keys (:class:`~flexsheet.runtime.zmq.subscriber.SubLinks`);
-    any other topic comes from any node of the graph."""
+    heartbeat watch). The allowed keys are identity (node or host name) → Z85 public key (40 chars), given
+    inline (``public_keys``) or, so that no key is pasted into a launch file, read from ``public_keys_file``
+    (a YAML mapping written by ``flexsheet keys generate --launch FILE``; ``$(keys)``, ``$(launch_dir)`` and
+    ``~`` expand); both may be used if they agree. ``keys_dir``: where each host finds ``<name>.key_secret``
+    of itself and of its nodes (``$FLEXSHEET_KEYS`` overrides it; ``~`` and ``$(launch_dir)`` expand).
+    ``publishers``: guarded topic → the nodes allowed to publish it (SROS2-style per-node policy): a
+    subscriber takes that topic only from those nodes' endpoints, proven by their keys
+    (:class:`~flexsheet.runtime.zmq.subscriber.SubLinks`); any other topic comes from any node of the
+    graph."""
 
     model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     curve: bool = False
@@ -172,12 +169,14 @@ class NodeSpec(BaseModel):
     required: bool = False
     nice: int = Field(default=0, ge=-20, le=19, description="process niceness (negative needs root)")
     rt_priority: int = Field(default=0, ge=0, le=90,
-                             description="SCHED_FIFO priority for a hard-periodic loop (needs root/CAP_SYS_NICE; "
-                                         "0 = normal scheduling; Linux RT throttling keeps 5 % for the rest; "
-                                         "processes the node starts run in the normal class: reset on fork)")
+                             description="SCHED_FIFO priority for a hard-periodic loop (needs "
+                                         "root/CAP_SYS_NICE; 0 = normal scheduling; Linux RT throttling "
+                                         "keeps 5 % for the rest; processes the node starts run in the "
+                                         "normal class: reset on fork)")
     container: str | None = Field(default=None, pattern=r"^[A-Za-z_][A-Za-z0-9_-]{0,63}$",
-                                  description="composable container: the nodes of one container and host run in "
-                                              "one process and one event loop (flexsheet.runtime.container)")
+                                  description="composable container: the nodes of one container and host run "
+                                              "in one process and one event loop "
+                                              "(flexsheet.runtime.container)")
 
     @field_validator("type")
     @classmethod
@@ -198,12 +197,12 @@ class LaunchFile(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     name: str = "graph"
     description: str = ""
-    clock: Literal["sim", "wall"] = Field(default="wall", description="sim: the whole graph in one process on "
-                                          "simulated time (deterministic); wall: the host's clock")
+    clock: Literal["sim", "wall"] = Field(default="wall", description="sim: the whole graph in one process "
+                                          "on simulated time (deterministic); wall: the host's clock")
     rtf: float | None = Field(default=None, gt=0.0, le=1000.0,
                               description="clock: sim only: cap simulated time at rtf x wall time (1.0: real "
-                                          "speed); None: as fast as the host allows. Written clock: {type: sim, "
-                                          "rtf: X} in the file, or flexsheet launch --rtf X")
+                                          "speed); None: as fast as the host allows. Written clock: {type: "
+                                          "sim, rtf: X} in the file, or flexsheet launch --rtf X")
     hosts: dict[str, HostSpec] = Field(default_factory=lambda: {"localhost": HostSpec()})
     base_port: int = Field(default=7100, ge=1024, le=65000)
     heartbeat_period: float = Field(default=1.0, gt=0.0)
@@ -225,7 +224,8 @@ class LaunchFile(BaseModel):
             clock = dict(data.pop("clock"))
             unknown = sorted(set(clock) - {"type", "rtf"})
             if unknown:
-                raise ValueError(f"clock: unknown key {unknown[0]!r} (a mapping has type: sim|wall and rtf: X)")
+                raise ValueError(f"clock: unknown key {unknown[0]!r} (a mapping has type: sim|wall and rtf: "
+                                 "X)")
             data["clock"] = clock.get("type", "sim")
             if clock.get("rtf") is not None:
                 data["rtf"] = clock["rtf"]
@@ -253,7 +253,8 @@ def _error_lines(path: Path, exc: ValidationError, prefix: str = "") -> list[str
     lines = []
     for err in exc.errors():
         # a key with control characters (a YAML key "\n") is shown escaped
-        key = ".".join([prefix] * bool(prefix) + [str(p) for p in err["loc"]]).encode("unicode_escape").decode("ascii")
+        key = ".".join([prefix] * bool(prefix)
+                       + [str(p) for p in err["loc"]]).encode("unicode_escape").decode("ascii")
         lines.append(f"{path}: key '{key}': {err['msg']:.300} (value {short_repr(err.get('input'))})")
     return lines
 
@@ -267,7 +268,7 @@ def load_launch(path: str | Path) -> LaunchFile:
         domain = domain_id()
     except ValueError as exc:
         raise LaunchError(f"{path}: {exc}") from None
-    if domain:                        # this machine's domain (flexsheet.runtime.domain): the file's ports move
+    if domain:  # this machine's domain (flexsheet.runtime.domain): the file's ports move
         lf.base_port = shift_port(lf.base_port, domain)
         for spec in lf.nodes.values():
             if spec.port is not None:
@@ -280,7 +281,8 @@ def load_launch(path: str | Path) -> LaunchFile:
 
 
 def _read_mapping(path: Path) -> dict:
-    """The YAML mapping of launch file ``path`` (at most :data:`MAX_LAUNCH_BYTES`). Raises :class:`LaunchError`."""
+    """The YAML mapping of launch file ``path`` (at most :data:`MAX_LAUNCH_BYTES`). Raises
+    :class:`LaunchError`."""
     try:
         with open(path, "rb") as f:
             data = f.read(MAX_LAUNCH_BYTES + 1)
@@ -325,47 +327,50 @@ def _validate(raw: dict, path: Path) -> LaunchFile:
 
 
 def _graph_problems(lf: LaunchFile, path: Path) -> list[str]:
-    """The problems of the validated ``lf`` across its keys (hosts, endpoints, containers, clock, security), one
-    line each. A ``clock: sim`` file's nodes are put in :data:`SIM_CONTAINER` here."""
+    """The problems of the validated ``lf`` across its keys (hosts, endpoints, containers, clock, security),
+    one line each. A ``clock: sim`` file's nodes are put in :data:`SIM_CONTAINER` here."""
     lines = []
     for name, spec in lf.nodes.items():
         if spec.host not in lf.hosts:
-            lines.append(f"{path}: key 'nodes.{name}.host': unknown host {spec.host!r}; hosts: {', '.join(lf.hosts)}")
+            lines.append(f"{path}: key 'nodes.{name}.host': unknown host {spec.host!r}; hosts: "
+                         f"{', '.join(lf.hosts)}")
     if not lines:
         seen: dict[str, str] = {}
         for name, ep in lf.endpoints().items():
             if lf.nodes[name].endpoint is None and int(ep.rsplit(":", 1)[1]) > 65535:
-                lines.append(f"{path}: key 'nodes.{name}.port': base_port {lf.base_port} + node index gives port "
-                             f"{ep.rsplit(':', 1)[1]} > 65535; lower base_port or give the node a port")
+                lines.append(f"{path}: key 'nodes.{name}.port': base_port {lf.base_port} + node index gives "
+                             f"port {ep.rsplit(':', 1)[1]} > 65535; lower base_port or give the node a port")
             elif ep in seen:
-                lines.append(f"{path}: key 'nodes.{name}.port': endpoint {ep} already used by node {seen[ep]!r}")
+                lines.append(f"{path}: key 'nodes.{name}.port': endpoint {ep} already used by node "
+                             f"{seen[ep]!r}")
             seen[ep] = name
     for name, spec in lf.nodes.items():
         if spec.container is not None and spec.container in lf.nodes:
-            lines.append(f"{path}: key 'nodes.{name}.container': container name {spec.container!r} is also a node "
-                         "name; give the container its own name")
+            lines.append(f"{path}: key 'nodes.{name}.container': container name {spec.container!r} is also a "
+                         "node name; give the container its own name")
     if lf.rtf is not None and lf.clock != "sim":
-        lines.append(f"{path}: key 'clock.rtf': {lf.rtf:g} paces simulated time; it needs clock: sim (this file "
-                     f"runs on the wall clock)")
+        lines.append(f"{path}: key 'clock.rtf': {lf.rtf:g} paces simulated time; it needs clock: sim (this "
+                     f"file runs on the wall clock)")
     if lf.clock == "sim":
         hosts = sorted({s.host for s in lf.nodes.values()})
         if len(hosts) > 1:
-            lines.append(f"{path}: key 'clock': sim runs the graph in one process, but its nodes are on hosts "
-                         f"{', '.join(hosts)}; put them on one host or use clock: wall")
+            lines.append(f"{path}: key 'clock': sim runs the graph in one process, but its nodes are on "
+                         f"hosts {', '.join(hosts)}; put them on one host or use clock: wall")
         for spec in lf.nodes.values():
             spec.container = SIM_CONTAINER
     clash = sorted(set(lf.hosts) & set(lf.nodes))
     if lf.security.curve and clash:
-        lines.append(f"{path}: key 'nodes.{clash[0]}': a node named like a host; under CURVE each has its own key "
-                     f"of that name: rename the node")
+        lines.append(f"{path}: key 'nodes.{clash[0]}': a node named like a host; under CURVE each has its "
+                     f"own key of that name: rename the node")
     for topic, names in lf.security.publishers.items():
         unknown = [n for n in names if n not in lf.nodes]
         if not topic.startswith("/") or unknown or not names:
-            lines.append(f"{path}: key 'security.publishers.{topic}': {names!r}: a topic (/name) and the nodes "
-                         f"of this file allowed to publish it" + (f"; no node named {unknown[0]!r}" if unknown else ""))
+            lines.append(f"{path}: key 'security.publishers.{topic}': {names!r}: a topic (/name) and the "
+                         f"nodes of this file allowed to publish it"
+                         + (f"; no node named {unknown[0]!r}" if unknown else ""))
         elif not lf.security.curve:
-            lines.append(f"{path}: key 'security.publishers': needs curve: true (the nodes prove who they are by "
-                         f"their keys)")
+            lines.append(f"{path}: key 'security.publishers': needs curve: true (the nodes prove who they "
+                         f"are by their keys)")
             break
     if lf.security.curve and lf.security.public_keys_file is None:  # a keys file is read when used (check)
         missing = [h for h in identities(lf) if h not in lf.security.public_keys]
@@ -382,7 +387,8 @@ def keygen_command(lf: LaunchFile) -> str:
 
 
 def identities(lf: LaunchFile, host: str | None = None) -> list[str]:
-    """The CURVE identities of ``lf`` (of ``host`` only, when given): each host (its tools), then each node."""
+    """The CURVE identities of ``lf`` (of ``host`` only, when given): each host (its tools), then each
+    node."""
     hosts = [h for h in lf.hosts if host is None or h == host]
     return hosts + [n for n, spec in lf.nodes.items() if host is None or spec.host == host]
 
@@ -392,8 +398,8 @@ def _launch_dir(lf: LaunchFile) -> str:
 
 
 def keys_dir(lf: LaunchFile | None = None) -> Path:
-    """The keys folder: ``$FLEXSHEET_KEYS``, else ``lf.security.keys_dir`` (``$(launch_dir)``, ``~`` expanded),
-    else :data:`DEFAULT_KEYS_DIR`. The folder need not exist."""
+    """The keys folder: ``$FLEXSHEET_KEYS``, else ``lf.security.keys_dir`` (``$(launch_dir)``, ``~``
+    expanded), else :data:`DEFAULT_KEYS_DIR`. The folder need not exist."""
     raw = os.environ.get("FLEXSHEET_KEYS") or (lf.security.keys_dir if lf is not None else DEFAULT_KEYS_DIR)
     if lf is not None:
         raw = raw.replace("$(launch_dir)", _launch_dir(lf))
@@ -408,7 +414,8 @@ def substitutions(lf: LaunchFile, out: str | None = None) -> dict[str, str]:
 
 
 def substitute(value: Any, subs: dict[str, str]) -> Any:
-    """``value`` with every ``$(k)`` in its strings (recursively through dicts and lists) replaced by ``subs[k]``."""
+    """``value`` with every ``$(k)`` in its strings (recursively through dicts and lists) replaced by
+    ``subs[k]``."""
     if isinstance(value, str):
         for k, v in subs.items():
             value = value.replace(f"$({k})", v)
@@ -420,8 +427,8 @@ def substitute(value: Any, subs: dict[str, str]) -> Any:
     return value
 
 
-#: launch-file keys of the core (not of an extension) that a top-level override may set: ``hosts`` (merged host
-#: by host: ``--set hosts.main.address=127.0.0.1``) and ``rtf`` (``flexsheet launch --rtf X``)
+#: launch-file keys of the core (not of an extension) that a top-level override may set: ``hosts`` (merged
+#: host by host: ``--set hosts.main.address=127.0.0.1``) and ``rtf`` (``flexsheet launch --rtf X``)
 CORE_SET = ("hosts", "rtf")
 
 
@@ -455,7 +462,8 @@ def _apply_toplevel_env(raw: dict, path: Path) -> dict:
 
 
 def _merge_hosts(hosts: Any, over: dict, path: Path) -> dict:
-    """The file's ``hosts`` with ``over`` (host → {key: value}) merged in; a host the file lacks is an error."""
+    """The file's ``hosts`` with ``over`` (host → {key: value}) merged in; a host the file lacks is an
+    error."""
     hosts = dict(hosts) if isinstance(hosts, dict) else {"localhost": {}}
     for name, spec in over.items():
         if name not in hosts:

@@ -12,12 +12,14 @@ same check first and starts nothing when it finds an error. What is checked:
   device's address) is an IP address or a valid host name. Nothing is pinged;
 - **ports**: no two listening sockets on one machine (node endpoints, and the ports the launch extensions'
   device twins listen on) share a port;
-- **files** named by the nodes of the checked host(s): inputs (:func:`~flexsheet.runtime.machine_checks.is_input_file_key`) exist and, where a
-  launch extension knows a reader, parse; glob patterns match a file; output folders (:data:`OUTPUT_PARAMS`
-  and the extensions') can be created and lie in a data folder: not under ``/proc``, ``/sys`` or ``/dev``, not
-  on a kernel pseudo filesystem (:data:`~flexsheet.runtime.machine_checks.PSEUDO_FS`), and an output file that exists is a regular file;
+- **files** named by the nodes of the checked host(s): inputs
+  (:func:`~flexsheet.runtime.machine_checks.is_input_file_key`) exist and, where a launch extension knows a
+  reader, parse; glob patterns match a file; output folders (:data:`OUTPUT_PARAMS` and the extensions') can be
+  created and lie in a data folder: not under ``/proc``, ``/sys`` or ``/dev``, not on a kernel pseudo
+  filesystem (:data:`~flexsheet.runtime.machine_checks.PSEUDO_FS`), and an output file that exists is a
+  regular file;
 - **extensions**: each launch extension's own rules (:mod:`flexsheet.runtime.extensions`; the display's:
-  :mod:`flexsheet.display.launch`);
+:mod:`flexsheet.display.launch`);
 - **CURVE keys** (``security.curve: true``): the keys folder exists, the public keys cover every host and
   node, and on each checked host ``<name>.key_secret`` of the host and of each of its nodes is there, matches
   its public key and is private (mode 0600). A missing key names the command that writes it,
@@ -26,9 +28,9 @@ same check first and starts nothing when it finds an error. What is checked:
 - **containers**: a player with ``mode: lockstep`` is in a container with other nodes.
 
 Warnings (printed, not failing): CURVE off on a graph whose hosts are not all loopback; a node type that
-cannot be imported on this machine for a node of another host; the nodes of one container asking for
-different ``nice`` or ``rt_priority`` (one process has one); a node's TCP port inside this machine's
-ephemeral port range (:func:`flexsheet.runtime.ports.ephemeral_port_range`): while that node restarts, a subscriber's ZeroMQ
+cannot be imported on this machine for a node of another host; the nodes of one container asking for different
+``nice`` or ``rt_priority`` (one process has one); a node's TCP port inside this machine's ephemeral port
+range (:func:`flexsheet.runtime.ports.ephemeral_port_range`): while that node restarts, a subscriber's ZeroMQ
 reconnect to the dead port can be given that same port as its own source port and connect to itself (a TCP
 self-connect), and the respawned node then cannot bind (seen in CI: a renderer used all its restarts on
 "Address already in use").
@@ -148,9 +150,9 @@ class _Checker:
                 reason = not_local(spec.address)
                 if reason:
                     self.err(f"hosts.{name}.address", spec.address,
-                             f"not an address of this machine ({reason}): host {name}'s nodes cannot bind their "
-                             f"endpoints here; run this on {name} itself (--host {name}), or give {name} this "
-                             f"machine's address")
+                             f"not an address of this machine ({reason}): host {name}'s nodes cannot bind "
+                             f"their endpoints here; run this on {name} itself (--host {name}), or give "
+                             f"{name} this machine's address")
 
     # ---------------------------------------------------------------------------------------------- ports
     def _machine(self, host: str) -> str:
@@ -189,10 +191,10 @@ class _Checker:
                 if lo <= port <= hi:
                     ephemeral.append(f"{name}.{keys[1]} ({port})")
         if ephemeral:
-            self.warn(f"{len(ephemeral)} listening port(s) lie in this machine's ephemeral port range {lo}-{hi} "
-                      f"({', '.join(ephemeral[:3])}{', ...' if len(ephemeral) > 3 else ''}): while such a node "
-                      f"restarts, a client's reconnect can take its port (TCP self-connect) and the node cannot "
-                      f"bind again; set base_port (and node ports) below {lo}")
+            self.warn(f"{len(ephemeral)} listening port(s) lie in this machine's ephemeral port range "
+                      f"{lo}-{hi} ({', '.join(ephemeral[:3])}{', ...' if len(ephemeral) > 3 else ''}): while "
+                      "such a node restarts, a client's reconnect can take its port (TCP self-connect) and "
+                      f"the node cannot bind again; set base_port (and node ports) below {lo}")
 
     # ---------------------------------------------------------------------------------------------- keys
     def check_security(self) -> None:
@@ -200,14 +202,16 @@ class _Checker:
         if not sec.curve:
             remote = [h for h, s in lf.hosts.items() if not loopback(s.address)]
             if remote:
-                self.warn(f"security.curve is off: anyone who reaches {', '.join(lf.hosts[h].address for h in remote)} "
-                          f"can publish on the graph (arm targets included); see docs/deploy.md")
+                self.warn("security.curve is off: anyone who reaches "
+                          f"{', '.join(lf.hosts[h].address for h in remote)} can publish on the graph (arm "
+                          "targets included); see docs/deploy.md")
             return
         cmd = keygen_command(lf)
         kdir = keys_dir(lf)
         origin = "$FLEXSHEET_KEYS" if os.environ.get("FLEXSHEET_KEYS") else "security.keys_dir"
         if not kdir.is_dir():
-            self.err(origin, str(kdir), f"no keys folder: CURVE is on and no keys were generated (run: {cmd})")
+            self.err(origin, str(kdir), "no keys folder: CURVE is on and no keys were generated (run: "
+                                        f"{cmd})")
             return
         try:
             keys = public_keys(lf)
@@ -223,8 +227,9 @@ class _Checker:
             for who in identities(lf, h):
                 secret = kdir / f"{who}.key_secret"
                 if not secret.is_file():
-                    self.err(origin, str(kdir), f"no secret key for {who} on host {h} ({secret.name}; run: {cmd}, "
-                                                f"then copy {secret.name} and public_keys.yaml to {h}'s keys folder)")
+                    self.err(origin, str(kdir), f"no secret key for {who} on host {h} ({secret.name}; run: "
+                                                f"{cmd}, then copy {secret.name} and public_keys.yaml to "
+                                                f"{h}'s keys folder)")
                     continue
                 try:
                     public, secret_key = load_curve_keys(secret)
@@ -232,14 +237,16 @@ class _Checker:
                     self.err(origin, str(secret), f"unreadable secret key of {who}: {exc}")
                     continue
                 if secret_key is None:
-                    self.err(origin, str(secret), f"{secret.name} holds no secret key (run: {cmd} --force {who})")
+                    self.err(origin, str(secret), f"{secret.name} holds no secret key (run: {cmd} --force "
+                                                  f"{who})")
                 elif who in keys and public.decode() != keys[who]:
-                    self.err(f"security.public_keys.{who}", keys[who], f"does not match {secret} (keys generated "
-                                                                      f"twice? copy the newest public_keys.yaml)")
+                    self.err(f"security.public_keys.{who}", keys[who],
+                             f"does not match {secret} (keys generated "
+                             f"twice? copy the newest public_keys.yaml)")
                 mode = stat.S_IMODE(secret.stat().st_mode)
                 if mode & 0o077:
-                    self.err(origin, str(secret), f"secret key readable by others (mode {mode:o}); run: chmod 600 "
-                                                  f"{secret}")
+                    self.err(origin, str(secret), f"secret key readable by others (mode {mode:o}); run: "
+                                                  f"chmod 600 {secret}")
 
     # ---------------------------------------------------------------------------------------------- files
     def file_problem(self, key: str, value: str) -> str | None:
@@ -261,7 +268,8 @@ class _Checker:
     def params(self, name: str) -> dict:
         """Node ``name``'s params with the ``--set`` overrides and substitutions applied."""
         spec = self.lf.nodes[name]
-        return shift_params(substitute({**spec.params, **self.overrides.get(name, {})}, self.subs), domain_id())
+        return shift_params(substitute({**spec.params, **self.overrides.get(name, {})}, self.subs),
+                            domain_id())
 
     def check_nodes(self) -> None:
         for name in self.overrides:
@@ -285,7 +293,8 @@ class _Checker:
             # graph-wide values, as node_config fills them in; each file is checked once, by its extension
             injected = {k for k in self.graph_wide if k in model.model_fields and k not in params}
             params.update({k: self.graph_wide[k] for k in injected})
-            # a graph-wide value its extension already refused (a missing scene file) is one error, not one per node
+            # a graph-wide value its extension already refused (a
+            # missing scene file) is one error, not one per node
             bad = [str(self.graph_wide[k]) for k in injected
                    if any(line.startswith(f"{self.lf.path}: {k} = ") for line in self.res.errors)]
             try:
@@ -326,7 +335,7 @@ class _Checker:
                         self.err(f"{where}: params.{key}", value, problem)
 
 
-    # ---------------------------------------------------------------------------------------------- containers
+    # --------------------------------------------------------------------------------------------- containers
     def check_containers(self) -> None:
         """A lockstep player must share a container with the nodes it drives; the members of one container
         share one niceness and RT priority (warned when they ask for different ones)."""
@@ -334,13 +343,16 @@ class _Checker:
         for name, spec in self.lf.nodes.items():
             if spec.container is not None and spec.host in self.hosts:
                 groups.setdefault((spec.container, spec.host), []).append(name)
-            if spec.type == "player" and spec.host in self.hosts and self.params(name).get("mode") == "lockstep":
+            if (spec.type == "player" and spec.host in self.hosts
+                and self.params(name).get("mode") == "lockstep"):
                 if spec.container is None:
-                    self.err(f"node {name}: params.mode", "lockstep", "a lockstep player must be in a container "
-                             "with the nodes it drives: give it and them 'container: NAME' (docs/realtime.md)")
+                    self.err(f"node {name}: params.mode", "lockstep", "a lockstep player must be in a "
+                             "container with the nodes it drives: give it and them 'container: NAME' "
+                             "(docs/realtime.md)")
                 elif len([n for n, s in self.lf.nodes.items() if s.container == spec.container
                           and s.host == spec.host]) < 2:
-                    self.err(f"node {name}: container", spec.container, "a lockstep player drives only the nodes "
+                    self.err(f"node {name}: container", spec.container,
+                             "a lockstep player drives only the nodes "
                              "of its container, and this container holds no other node")
         for (cname, host), names in groups.items():
             specs = [self.lf.nodes[n] for n in names]
@@ -353,17 +365,18 @@ class _Checker:
 
 
 def _one_line(text: str) -> str:
-    """``text`` with every non-printable character escaped as Python writes it (a param key or value may hold a
-    newline: ``params: {"\\n": null}``, found by tests/unit/runtime/test_launch_check.py), so one problem is one line."""
+    """``text`` with every non-printable character escaped as Python writes it (a param key or value may hold
+    a newline: ``params: {"\\n": null}``, found by tests/unit/runtime/test_launch_check.py), so one problem is
+             one line."""
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def check_launch(path: str | Path, host: str | None = None, out: str | None = None,
                  overrides: dict[str, dict] | None = None, probe: bool = False) -> CheckResult:
     """Check launch file ``path`` for ``host`` (None: every host, all on this machine) with ``--out`` folder
-    ``out`` and ``overrides`` (node → {param: value}, the ``--set`` values); with ``probe`` also ask each of the
-    host's nodes whether the devices it names are there (:meth:`flexsheet.runtime.node.Node.probe`). Returns a
-    :class:`CheckResult`; never raises for a bad file (its problems are the result's ``errors``)."""
+    ``out`` and ``overrides`` (node → {param: value}, the ``--set`` values); with ``probe`` also ask each of
+    the host's nodes whether the devices it names are there (:meth:`flexsheet.runtime.node.Node.probe`).
+    Returns a :class:`CheckResult`; never raises for a bad file (its problems are the result's ``errors``)."""
     try:
         lf = load_launch(path)
     except LaunchError as exc:

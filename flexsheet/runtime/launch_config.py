@@ -29,10 +29,9 @@ __all__ = ["node_config", "curve_config", "public_keys"]
 
 
 def public_keys(lf: LaunchFile) -> dict[str, str]:
-    """Identity (host or node name) → Z85 public key allowed on ``lf``'s graph: ``security.public_keys`` merged
-    with the YAML mapping in ``security.public_keys_file``. Raises :class:`LaunchError` naming the file or the
-    identity (a missing file names
-    the ``flexsheet keys generate`` command that writes it)."""
+    """Identity (host or node name) → Z85 public key allowed on ``lf``'s graph: ``security.public_keys``
+    merged with the YAML mapping in ``security.public_keys_file``. Raises :class:`LaunchError` naming the file
+    or the identity (a missing file names the ``flexsheet keys generate`` command that writes it)."""
     sec = lf.security
     keys = dict(sec.public_keys)
     if sec.public_keys_file is None:
@@ -52,7 +51,8 @@ def public_keys(lf: LaunchFile) -> dict[str, str]:
                           f"(run: {keygen_command(lf)})")
     for host, key in raw.items():
         if not isinstance(host, str) or not isinstance(key, str) or len(key) != 40:
-            raise LaunchError(f"{where}: entry {short_repr(host)}: {short_repr(key)} is not name: <40 Z85 characters>")
+            raise LaunchError(f"{where}: entry {short_repr(host)}: {short_repr(key)} is not name: <40 Z85 "
+                              "characters>")
         if host in keys and keys[host] != key:
             raise LaunchError(f"{where}: host {host!r} differs from security.public_keys.{host}")
         keys[host] = key
@@ -60,8 +60,8 @@ def public_keys(lf: LaunchFile) -> dict[str, str]:
 
 
 def curve_config(lf: LaunchFile, host: str | None, node: str | None = None) -> CurveConfig | None:
-    """The :class:`CurveConfig` of ``node`` (its own keypair), else of ``host``'s tools, under ``lf``'s security
-    settings (None when CURVE is off).
+    """The :class:`CurveConfig` of ``node`` (its own keypair), else of ``host``'s tools, under ``lf``'s
+    security settings (None when CURVE is off).
 
     ``host`` None picks the first host whose secret key is present in the keys folder (tools). Publishers are
     pinned to their nodes' keys; subscribers admitted are every identity of the file; guarded topics come from
@@ -93,7 +93,8 @@ def curve_config(lf: LaunchFile, host: str | None, node: str | None = None) -> C
     try:
         public, secret = load_curve_keys(secret_file)
     except (OSError, ValueError) as exc:
-        raise LaunchError(f"{lf.path}: key 'security.keys_dir': unreadable key file {secret_file}: {exc}") from None
+        raise LaunchError(f"{lf.path}: key 'security.keys_dir': unreadable key file {secret_file}: "
+                          f"{exc}") from None
     if secret is None or public.decode() != keys.get(who):
         raise LaunchError(f"{lf.path}: key 'security.public_keys.{who}': does not match {secret_file}")
     server_keys = {lf.endpoint_of(n): keys[n].encode() for n in lf.nodes}
@@ -103,17 +104,20 @@ def curve_config(lf: LaunchFile, host: str | None, node: str | None = None) -> C
                        tool_keys=[keys[h].encode() for h in lf.hosts if h in keys])
 
 
-def node_config(lf: LaunchFile, name: str, out: str | None = None, overrides: dict | None = None) -> NodeConfig:
+def node_config(lf: LaunchFile, name: str, out: str | None = None,
+                overrides: dict | None = None) -> NodeConfig:
     """The :class:`NodeConfig` of node ``name`` in ``lf`` (params merged with ``overrides``, substituted).
 
     Graph-wide settings reach the nodes that take them: for each top-level section of a launch extension
     (:mod:`flexsheet.runtime.extensions`) whose node value is not None, a node whose ``Params`` has a field of
-    that name that its params leave unset gets the value there. Raises :class:`LaunchError` (unknown node, CURVE keys).
+    that name that its params leave unset gets the value there. Raises :class:`LaunchError` (unknown node,
+    CURVE keys).
     """
     if name not in lf.nodes:
         raise LaunchError(f"{lf.path}: no node named {name!r}; nodes: {', '.join(lf.nodes)}")
     spec = lf.nodes[name]
-    params = shift_params(substitute({**spec.params, **(overrides or {})}, substitutions(lf, out)), domain_id())
+    params = shift_params(substitute({**spec.params, **(overrides or {})}, substitutions(lf, out)),
+                          domain_id())
     graph_wide = {key: sec.node_value(lf.section(key), lf, out) for key, sec in launch_sections().items()}
     if any(v is not None and k not in params for k, v in graph_wide.items()):
         try:

@@ -1,6 +1,6 @@
 """``--set`` items of ``flexsheet launch`` and the tools that read a launch file: a node's param
-(``NODE.KEY=VALUE``) or a graph-wide override (``hosts.NAME.address=ADDR``, a launch extension's ``KEY=VALUE`` or
-``KEY.SUB=VALUE``), handed to every :func:`~flexsheet.runtime.launch.load_launch` of the run through
+(``NODE.KEY=VALUE``) or a graph-wide override (``hosts.NAME.address=ADDR``, a launch extension's ``KEY=VALUE``
+or ``KEY.SUB=VALUE``), handed to every :func:`~flexsheet.runtime.launch.load_launch` of the run through
 :data:`~flexsheet.runtime.launch.TOPLEVEL_ENV`."""
 
 from __future__ import annotations
@@ -41,8 +41,8 @@ def parse_toplevel_set(item: str, node_names) -> tuple[str, Any] | None:
         if key not in known or known[key].parse_set is None:
             forms = [f"{k}=VALUE" if s.parse_set else f"{k}.KEY=VALUE" for k, s in known.items()]
             forms.append("hosts.NAME.address=ADDRESS")
-            raise LaunchError(f"--set {item!r}: a top-level override is one of {', '.join(forms)}; a node param "
-                              "is NODE.KEY=VALUE")
+            raise LaunchError(f"--set {item!r}: a top-level override is one of {', '.join(forms)}; a node "
+                              "param is NODE.KEY=VALUE")
         return key, known[key].parse_set(value)
     return None
 
@@ -76,11 +76,13 @@ def split_sets(items: list[str], node_names, toplevel: dict | None = None) -> tu
 
 
 def apply_toplevel_sets(items: list[str], path: str | Path) -> dict:
-    """Apply the top-level ``--set`` items of a tool that reads launch file ``path`` (``hosts.NAME.address=…``,
-    ``twin.truth_seed=…``, ``scene=…``) for this process (:data:`TOPLEVEL_ENV`), so that every later
-    :func:`load_launch` sees them as the launcher's processes do; returns them. Raises :class:`LaunchError` for a
-    node override (``NODE.KEY=VALUE``: only ``flexsheet launch`` takes those) or a bad item."""
-    toplevel, nodes = split_sets(items, set(load_launch(path).nodes), json.loads(os.environ.get(TOPLEVEL_ENV) or "{}"))
+    """Apply the top-level ``--set`` items of a tool that reads launch file ``path``
+    (``hosts.NAME.address=…``, ``twin.truth_seed=…``, ``scene=…``) for this process (:data:`TOPLEVEL_ENV`), so
+    that every later :func:`load_launch` sees them as the launcher's processes do; returns them. Raises
+    :class:`LaunchError` for a node override (``NODE.KEY=VALUE``: only ``flexsheet launch`` takes those) or a
+    bad item."""
+    toplevel, nodes = split_sets(items, set(load_launch(path).nodes),
+                                 json.loads(os.environ.get(TOPLEVEL_ENV) or "{}"))
     if nodes:
         raise LaunchError(f"--set {next(iter(nodes))}.…: a node param; here only a graph-wide setting "
                           "(hosts.NAME.address=ADDRESS, twin.truth_seed=N, scene=FILE)")

@@ -72,7 +72,8 @@ class LockstepStats:
         return self.bag_s / self.wall_s if self.wall_s > 0 else 0.0
 
     def as_dict(self) -> dict[str, Any]:
-        return {"messages": self.messages, "handled": self.handled, "timers": self.timers, "bag_s": self.bag_s,
+        return {"messages": self.messages, "handled": self.handled, "timers": self.timers,
+                "bag_s": self.bag_s,
                 "wall_s": self.wall_s, "speed": self.speed}
 
 
@@ -82,10 +83,10 @@ class Lockstep:
     of on their consumers; :meth:`drain` handles what is due, one item at a time on the loop, and
     :meth:`advance` moves the clock to a later instant, firing timers and deliveries in due order.
 
-    Live simulated clock (``clock.live``): a handler (or timer) with ``sim_cost`` c started at t makes its node
-    busy until t + c; what it publishes is delivered at t + c and stamped t + c (``Clock.stamp``); an item
-    due while its node is busy waits until the node is free (QoS ``latest``: only the newest waiting item is
-    handled, the older are dropped and counted). In a lockstep replay every cost is 0: breadth first, in
+    Live simulated clock (``clock.live``): a handler (or timer) with ``sim_cost`` c started at t makes its
+    node busy until t + c; what it publishes is delivered at t + c and stamped t + c (``Clock.stamp``); an
+    item due while its node is busy waits until the node is free (QoS ``latest``: only the newest waiting item
+    is handled, the older are dropped and counted). In a lockstep replay every cost is 0: breadth first, in
     publication order, as before. Wall-clock topics (``/diagnostics``) are handled when they arrive, without
     charge or wait (their content is wall time: they tell liveness, not simulated state).
     """
@@ -171,7 +172,8 @@ class Lockstep:
                     with self._lock:
                         heapq.heappush(heap, (free, order, sub, item))
                     continue
-                if self.live and sub.qos is not QoS.KEEP_ALL and sub.newest is not None and sub.newest[1] != order \
+                if self.live and sub.qos is not QoS.KEEP_ALL and sub.newest is not None and sub.newest[
+                    1] != order \
                         and sub.newest[0] <= clock.now():
                     self.dropped += 1           # a newer item for this latest-QoS subscription is due
                     sub.stats.dropped += 1
@@ -216,16 +218,16 @@ WALL_TOPICS = frozenset({"/diagnostics"})
 
 async def run_live(bus: Any, until: float | None, stopped, rtf: float | None = None) -> LockstepStats:
     """Drive the live simulated graph of ``bus`` (a container's :class:`~flexsheet.runtime.bus.Bus` on a live
-    :class:`~flexsheet.runtime.clock.SimClock`; launch files' ``clock: sim``) for ``until`` s of simulated time
-    from where its clock stands (:data:`SIM_EPOCH` if unset; None: until ``stopped()`` is true, e.g. a required
-    node ended). The caller starts it once every node of the container is active (as ROS 2 lifecycle nodes);
-    time then advances only when everything due has been handled: from one event (a timer, a delivery) to the
-    next. The loop yields to asyncio between events, so signals, heartbeats and subscribers outside the process
-    are served. ``rtf``: pace simulated time at most ``rtf`` x wall time (Gazebo's ``real_time_factor``; None: as
-    fast as the handlers allow): before an event at simulated ``t`` it waits until ``(t - epoch) / rtf`` wall
-    seconds have passed. Pacing only waits, so the events and what they publish are the same. Returns the
-    statistics, kept up to date while it runs (``bag_s``: simulated seconds, ``wall_s``, ``speed`` = the
-    real-time factor)."""
+    :class:`~flexsheet.runtime.clock.SimClock`; launch files' ``clock: sim``) for ``until`` s of simulated
+    time from where its clock stands (:data:`SIM_EPOCH` if unset; None: until ``stopped()`` is true, e.g. a
+    required node ended). The caller starts it once every node of the container is active (as ROS 2 lifecycle
+    nodes); time then advances only when everything due has been handled: from one event (a timer, a delivery)
+    to the next. The loop yields to asyncio between events, so signals, heartbeats and subscribers outside the
+    process are served. ``rtf``: pace simulated time at most ``rtf`` x wall time (Gazebo's
+    ``real_time_factor``; None: as fast as the handlers allow): before an event at simulated ``t`` it waits
+    until ``(t - epoch) / rtf`` wall seconds have passed. Pacing only waits, so the events and what they
+    publish are the same. Returns the statistics, kept up to date while it runs (``bag_s``: simulated seconds,
+    ``wall_s``, ``speed`` = the real-time factor)."""
     ls = bus.lockstep
     if not ls.clock.started:
         ls.clock.set(SIM_EPOCH)
@@ -263,16 +265,16 @@ def check(player: Node) -> Lockstep:
     player is not in a lockstep container, or asks for ``loop`` (replayed time cannot go back)."""
     ls = getattr(player, "_lockstep", None)
     if ls is None:
-        raise ConfigError(f"{player.name}: mode=lockstep needs the player in a container with the nodes it drives "
-                          "(container: NAME on the player and on each of them, docs/realtime.md)")
+        raise ConfigError(f"{player.name}: mode=lockstep needs the player in a container with the nodes it "
+                          "drives (container: NAME on the player and on each of them, docs/realtime.md)")
     if getattr(player.params, "loop", False):
         raise ConfigError(f"{player.name}: mode=lockstep cannot loop (the replayed clock would go back)")
     return ls
 
 
 async def play(player: Node, messages=None) -> LockstepStats:
-    """Play the bag of ``player`` (its params ``file``, ``topics``, ``start_delay``, ``exit_when_done``) into its
-    container in lockstep (see the module docstring). ``messages``: an iterable of
+    """Play the bag of ``player`` (its params ``file``, ``topics``, ``start_delay``, ``exit_when_done``) into
+    its container in lockstep (see the module docstring). ``messages``: an iterable of
     :class:`flexsheet.runtime.bag_read.BagMessage` to play instead of reading ``file`` (tests). Sets
     ``player.sent`` and ``player.done`` (if it has them); logs the replay speed; returns the statistics.
     """

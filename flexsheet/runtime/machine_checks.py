@@ -1,5 +1,5 @@
-"""What a launch check (:mod:`flexsheet.runtime.launch_check`) asks of this machine about one value: an input file
-(:func:`check_file_param`), an output path (:func:`output_problem`), an address (:func:`address_problem`,
+"""What a launch check (:mod:`flexsheet.runtime.launch_check`) asks of this machine about one value: an input
+file (:func:`check_file_param`), an output path (:func:`output_problem`), an address (:func:`address_problem`,
 :func:`not_local`, :func:`loopback`)."""
 
 from __future__ import annotations
@@ -15,20 +15,24 @@ from pathlib import Path
 
 from flexsheet.runtime.extensions import extensions
 
-__all__ = ["is_input_file_key", "check_file_param", "output_problem", "address_problem", "not_local", "loopback",
+__all__ = ["is_input_file_key", "check_file_param", "output_problem", "address_problem", "not_local",
+           "loopback",
            "GLOB_PARAMS", "SYSTEM_DIRS", "PSEUDO_FS"]
 
 #: params whose value is a glob pattern of input files (at least one must match)
 GLOB_PARAMS = frozenset({"files_left", "files_right"})
 _INPUT_NAMES = frozenset({"file", "files_csv"})
-_HOSTNAME = re.compile(r"^(?=.{1,253}$)([A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}"
+_HOSTNAME = re.compile(
+    r"^(?=.{1,253}$)([A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}"
                        r"[A-Za-z0-9])?)*\.?$")
 _RESOLVE_TIMEOUT_S = 2.0
 #: folders whose files are the kernel's or devices, never data: an output there is refused
 SYSTEM_DIRS = ("/proc", "/sys", "/dev")
 #: kernel pseudo filesystems (``/proc/self/mounts`` types): an output there is refused wherever it is mounted
-PSEUDO_FS = frozenset({"proc", "sysfs", "devtmpfs", "devpts", "cgroup", "cgroup2", "debugfs", "tracefs", "securityfs",
-                       "configfs", "fusectl", "bpf", "pstore", "mqueue", "hugetlbfs", "efivarfs", "binfmt_misc",
+PSEUDO_FS = frozenset({"proc", "sysfs", "devtmpfs", "devpts", "cgroup", "cgroup2", "debugfs", "tracefs",
+                       "securityfs",
+                       "configfs", "fusectl", "bpf", "pstore", "mqueue", "hugetlbfs", "efivarfs",
+                       "binfmt_misc",
                        "autofs", "selinuxfs", "rpc_pipefs", "nsfs"})
 
 
@@ -41,7 +45,8 @@ def is_input_file_key(key: str) -> bool:
 
 @functools.cache
 def _file_readers() -> dict[str, Callable[[str], None]]:
-    """Param name → reader that raises ``ValueError``/``OSError`` for a file it cannot use (launch extensions)."""
+    """Param name → reader that raises ``ValueError``/``OSError`` for a file it cannot use (launch
+    extensions)."""
     return {k: r for ext in extensions() for k, r in ext.file_readers.items()}
 
 
@@ -91,8 +96,10 @@ def output_problem(value: str, kind: str) -> str | None:
     target = Path(os.path.realpath(os.path.expanduser(value)))
     for d in SYSTEM_DIRS:
         if target == Path(d) or str(target).startswith(d + "/"):
-            return f"{target} is under {d}, not a data folder (the kernel's or devices' files); write to a folder " \
-                   f"on a disk, e.g. $(out)"
+            return (
+                f"{target} is under {d}, not a data folder (the kernel's or devices' files); write to a "
+                f"folder on a disk, e.g. $(out)"
+            )
     if kind == "file" and target.exists() and not target.is_file():
         return f"{target} exists and is not a regular file"
     folder = target if kind == "dir" else target.parent
@@ -134,8 +141,8 @@ def _resolves(name: str) -> bool:
 
 
 def address_problem(addr: str, resolve: bool) -> str | None:
-    """Why ``addr`` cannot be a host's address (not an IP address or a host name, one that does not resolve here
-    when ``resolve``, the unspecified or a multicast address), or None."""
+    """Why ``addr`` cannot be a host's address (not an IP address or a host name, one that does not resolve
+    here when ``resolve``, the unspecified or a multicast address), or None."""
     try:
         ip = ipaddress.ip_address(addr)
     except ValueError:

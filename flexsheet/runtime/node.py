@@ -1,4 +1,5 @@
-"""The :class:`Node` base: typed publishers and subscribers, QoS, timers, parameters and diagnostics on asyncio.
+"""The :class:`Node` base: typed publishers and subscribers, QoS, timers, parameters and diagnostics on
+asyncio.
 
 A node is a thin shell around a pure algorithm module::
 
@@ -6,9 +7,9 @@ A node is a thin shell around a pure algorithm module::
         Params = PlannerParams                      # pydantic model, validated before any socket opens
         async def setup(self):
             self.pub = self.publisher(topics.SHEET_TARGET)
-            self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST)
-            self.timer(0.01, self.on_timer)
-        def on_fingertip(self, msg): ...            # sync: runs in this subscription's worker thread
+            self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST) self.timer(0.01,
+        self.on_timer) def on_fingertip(self, msg): ...            # sync: runs in this subscription's worker
+        thread
 
 Threading model: the asyncio loop owns the sockets' reads. Each subscription has its own queue and consumer:
 an ``async def`` handler runs on the loop (a consumer task), a plain ``def`` handler runs in the
@@ -24,7 +25,8 @@ message object itself (its arrays as read-only views), never a copy.
 
 Time: :meth:`Node.now`, the header stamps of :meth:`~flexsheet.runtime.publisher.Publisher.header` and
 :meth:`Node.timer` read the node's :class:`~flexsheet.runtime.clock.Clock` — the wall clock, or in a lockstep
-replay the bag's clock (:class:`~flexsheet.runtime.clock.SimClock`, like ROS's ``use_sim_time``). A node that wants replayable time reads ``self.now()``, never ``time.time()``.
+replay the bag's clock (:class:`~flexsheet.runtime.clock.SimClock`, like ROS's ``use_sim_time``). A node that
+wants replayable time reads ``self.now()``, never ``time.time()``.
 
 QoS (per subscription, :mod:`flexsheet.runtime.qos`): ``LATEST`` keeps only the newest message (depth 1: stale
 ones are dropped and counted), ``KEEP_ALL`` queues everything (bounded by ``depth``, default
@@ -56,7 +58,7 @@ from flexsheet.runtime.cpu_time import CpuCounter, timed
 from flexsheet.runtime.discovery import announce, withdraw
 from flexsheet.runtime.publisher import Publisher
 from flexsheet.runtime.qos import QoS
-from flexsheet.runtime.services import ParamServices, ServiceServer
+from flexsheet.runtime.services import ParamServices, ServiceServer, topic_pub
 from flexsheet.runtime.subscription import Subscription, SubscriptionWorker
 from flexsheet.runtime.transport import Transport
 from flexsheet.runtime.zmq.transport import ZmqTransport
@@ -93,11 +95,12 @@ class Node:
     Params: ClassVar[type[BaseModel]] = EmptyParams
     node_type: ClassVar[str] = ""
     #: s; > 0: in its own process the node receives its inputs in batches every DRAIN_PERIOD s instead of on
-    #: every ready socket (:class:`~flexsheet.runtime.zmq.transport.ZmqTransport` ``drain_period``) — for nodes that
-    #: want the newest of many inputs, not each on time (the Foxglove bridge). No effect in a container.
+    #: every ready socket (:class:`~flexsheet.runtime.zmq.transport.ZmqTransport`
+    #: ``drain_period``) — for nodes that want the newest of many inputs, not
+    #: each on time (the Foxglove bridge). No effect in a container.
     DRAIN_PERIOD: ClassVar[float] = 0.0
-    #: the params ``flexsheet param set`` may change while the node runs (the others are read-only at run time);
-    #: the node reads them from ``self.params`` where it uses them, or reacts in :meth:`on_params_set`
+    #: the params ``flexsheet param set`` may change while the node runs (the others are read-only at run
+    #: time); the node reads them from ``self.params`` where it uses them, or reacts in :meth:`on_params_set`
     DYNAMIC_PARAMS: ClassVar[frozenset[str]] = frozenset()
 
     #: the largest message this node publishes, bytes: sizes its publisher's high-water mark once, before bind
@@ -136,7 +139,8 @@ class Node:
         self._last_log = 0.0
         self._suppressed = 0
         self.services = None  # its ServiceServer once running (flexsheet.runtime.services)
-        self._announced = None  # its entry in the local graph discovery (flexsheet.runtime.discovery) while up
+        # its entry in the local graph discovery (flexsheet.runtime.discovery) while up
+        self._announced = None
         self._pending_services: dict[str, tuple[Callable, str, bool]] = {}
 
     # ------------------------------------------------------------------ API for subclasses
@@ -145,19 +149,22 @@ class Node:
 
     @classmethod
     def probe(cls, params: BaseModel) -> list[str]:
-        """The devices the validated ``params`` name that this machine lacks, one line each (``flexsheet launch
-        --check --probe``); override in nodes that open devices. The default: none to probe."""
+        """The devices the validated ``params`` name that this machine lacks, one line each
+        (``flexsheet launch --check --probe``); override in nodes that open devices. The default: none to
+        probe."""
         return []
 
     def on_params_set(self, names: set[str]) -> None:
         """Called on the loop after ``flexsheet param set`` changed ``names`` (of :attr:`DYNAMIC_PARAMS`) in
-        ``self.params``. Override to react (the default: nothing, the node reads the params where it uses them)."""
+        ``self.params``. Override to react (the default: nothing, the node reads the params where it uses
+        them)."""
 
     def service(self, name: str, handler: Callable[[dict], Any], doc: str, commanding: bool = False) -> None:
-        """Offer ``handler(args: dict) -> result`` as the service ``name`` (``flexsheet service call NODE name``);
-        it runs on the loop, may be ``async``, returns plain msgpack types and raises ``ValueError`` with one
-        line for a bad request. ``commanding``: it changes what the node does (moves, settings), so only the
-        hosts' tools may call it (:mod:`flexsheet.runtime.services`). Served once :meth:`setup` returned."""
+        """Offer ``handler(args: dict) -> result`` as the service ``name``
+        (``flexsheet service call NODE name``); it runs on the loop, may be ``async``, returns plain msgpack
+        types and raises ``ValueError`` with one line for a bad request. ``commanding``: it changes what the
+        node does (moves, settings), so only the hosts' tools may call it (:mod:`flexsheet.runtime.services`).
+        Served once :meth:`setup` returned."""
         if self.services is not None:
             self.services.add(name, handler, doc, commanding)
         else:
@@ -167,8 +174,9 @@ class Node:
         """Release resources on shutdown. Override if needed."""
 
     def now(self) -> float:
-        """Current time, s: ``time.time()`` (the clock of ``Header.stamp``), or simulated time (:class:`SimClock`:
-        a lockstep replay's bag time, or a live simulated graph's; there the start of the running handler)."""
+        """Current time, s: ``time.time()`` (the clock of ``Header.stamp``), or simulated time
+        (:class:`SimClock`: a lockstep replay's bag time, or a live simulated graph's; there the start of the
+        running handler)."""
         return self._clock.now()
 
     def charge(self, seconds: float) -> None:
@@ -183,17 +191,18 @@ class Node:
         return self._clock.now() if self._clock.simulated else time.monotonic()
 
     async def background(self, target: Callable[..., Any], name: str, *args: Any) -> None:
-        """Run ``target(*args)`` in a daemon thread named ``name``, for work a node attaches when it is done. On
-        a simulated clock it runs to completion (in a worker thread, the loop free) before this returns: what it
-        attaches must not arrive at a host-dependent moment of simulated time."""
+        """Run ``target(*args)`` in a daemon thread named ``name``, for work a node attaches when it is done.
+        On a simulated clock it runs to completion (in a worker thread, the loop free) before this returns:
+        what it attaches must not arrive at a host-dependent moment of simulated time."""
         if self._clock.simulated:
             await asyncio.to_thread(target, *args)
         else:
             threading.Thread(target=target, args=args, name=name, daemon=True).start()
 
     async def pause(self, seconds: float, until: Callable[[], bool], poll: float) -> None:
-        """A handler's rest before its next message: on the wall clock sleep ``seconds``, then every ``poll`` s
-        until ``until()``; at once on a simulated clock, which waits for every handler (skip there instead)."""
+        """A handler's rest before its next message: on the wall clock sleep ``seconds``, then every ``poll``
+        s until ``until()``; at once on a simulated clock, which waits for every handler (skip there
+        instead)."""
         if self._clock.simulated:
             return
         await asyncio.sleep(seconds)
@@ -217,7 +226,8 @@ class Node:
         return topic.renamed(new) if new else topic
 
     def publisher(self, topic: Topic) -> Publisher:
-        """Typed publisher for ``topic`` (remaps applied). Latched topics keep their last value for late joiners."""
+        """Typed publisher for ``topic`` (remaps applied). Latched topics keep their last value for late
+        joiners."""
         topic = self.topic(topic)
         pub = self._publishers.get(topic.name)
         if pub is None:
@@ -228,9 +238,10 @@ class Node:
 
     def subscribe(self, topic: Topic, handler: Callable[[Any], Any], qos: QoS = QoS.LATEST,
                   depth: int | None = None, sim_cost: float = 0.0) -> Subscription:
-        """Subscribe ``handler`` to ``topic`` with ``qos``; ``depth`` overrides the queue bound. ``sim_cost`` s:
-        the simulated time one call takes on a live simulated clock (its compute on the lab's PC and the hops
-        before it; the node is busy meanwhile and its output leaves at the end); ignored on the wall clock."""
+        """Subscribe ``handler`` to ``topic`` with ``qos``; ``depth`` overrides the queue bound. ``sim_cost``
+        s: the simulated time one call takes on a live simulated clock (its compute on the lab's PC and the
+        hops before it; the node is busy meanwhile and its output leaves at the end); ignored on the wall
+        clock."""
         topic = self.topic(topic)
         sub = Subscription(self, topic, handler, qos, depth, sim_cost)
         self._subs.setdefault(topic.name, []).append(sub)
@@ -242,17 +253,19 @@ class Node:
         return sub
 
     def sample(self, topic: Topic) -> Subscription:
-        """Keep the newest message of ``topic`` without handling each: ``.read()`` on the returned subscription
-        decodes and validates it when the node reads it (None before the first). For a state read at the
-        node's own pace: a 140 Hz joint state read once per frame costs one decode per frame, not 140 a second."""
+        """Keep the newest message of ``topic`` without handling each: ``.read()`` on the returned
+        subscription decodes and validates it when the node reads it (None before the first). For a state read
+        at the node's own pace: a 140 Hz joint state read once per frame costs one decode per frame, not 140 a
+        second."""
         return self.subscribe(topic, None, QoS.LATEST)
 
-    def timer(self, period: float, callback: Callable[[], Any], sim_cost: float = 0.0, sim_delay: float = 0.0):
-        """Call ``callback`` every ``period`` s of this node's clock (drift-free schedule). Sync callbacks run on
-        the loop. Returns the timer's task (or a :class:`SimTimer` on a simulated clock): ``.cancel()`` stops it.
-        ``sim_cost`` s: as for :meth:`subscribe`; ``sim_delay`` s (a live simulated clock, ``clock: sim``; 0 in a
-        lockstep replay): what the callback publishes is delivered that much later again, without keeping the
-        node busy (a link's latency, pipelined)."""
+    def timer(self, period: float, callback: Callable[[], Any], sim_cost: float = 0.0,
+              sim_delay: float = 0.0):
+        """Call ``callback`` every ``period`` s of this node's clock (drift-free schedule). Sync callbacks run
+        on the loop. Returns the timer's task (or a :class:`SimTimer` on a simulated clock): ``.cancel()``
+        stops it. ``sim_cost`` s: as for :meth:`subscribe`; ``sim_delay`` s (a live simulated clock,
+        ``clock: sim``; 0 in a lockstep replay): what the callback publishes is delivered that much later
+        again, without keeping the node busy (a link's latency, pipelined)."""
         if not period > 0:
             raise ValueError(f"timer period must be > 0 s, got {period!r}")
         if self._clock.simulated:
@@ -300,9 +313,9 @@ class Node:
         return self._stop is not None and self._stop.is_set()
 
     def cpu_seconds(self) -> float:
-        """CPU time spent in this node's handlers and timer callbacks so far, s (``time.thread_time``; an async
-        one's own steps, :mod:`flexsheet.runtime.cpu_time`); decoding, the loop and threads the node starts
-        itself are not included."""
+        """CPU time spent in this node's handlers and timer callbacks so far, s (``time.thread_time``; an
+        async one's own steps, :mod:`flexsheet.runtime.cpu_time`); decoding, the loop and threads the node
+        starts itself are not included."""
         return self.timer_cpu_s + sum(s.cpu_s for lst in self._subs.values() for s in lst)
 
     # ------------------------------------------------------------------ runtime
@@ -318,7 +331,8 @@ class Node:
             pub.stats.dropped += 1
 
     def _on_frames(self, frames: list) -> None:
-        """Wire frames for this node (from the transport, on the loop): queue them on the topic's subscriptions."""
+        """Wire frames for this node (from the transport, on the loop): queue them on the topic's
+        subscriptions."""
         t = frames[0]
         subs = self._subs_b.get(t if type(t) is bytes else bytes(t))
         if subs:
@@ -343,7 +357,8 @@ class Node:
         self.log.exception("handler error in %s (node keeps running)", where)
 
     def log_limited(self, level: int, line: str) -> None:
-        """Log ``line`` at ``level`` at most once a second; the lines dropped meanwhile are counted in the next."""
+        """Log ``line`` at ``level`` at most once a second; the lines dropped meanwhile are counted in the
+        next."""
         now = time.monotonic()
         if now - self._last_log >= 1.0:
             extra = f" (+{self._suppressed} more suppressed)" if self._suppressed else ""
@@ -377,13 +392,16 @@ class Node:
             message = f"{message}; {links}" if message else links
         return Heartbeat(header=self._hb_pub.header("display", time.time()), node=self.name,
                          node_type=self.config.node_type, host=self.config.host, pid=os.getpid(),
-                         endpoint=self.transport.endpoint, uptime=time.monotonic() - self._started, state=state,
+                         endpoint=self.transport.endpoint, uptime=time.monotonic() - self._started,
+                         state=state,
                          message=message, publishers=pubs, subscriptions=subs,
-                         rejected_total=self.rejected_total, last_rejection=self.last_rejection, period=period,
+                         rejected_total=self.rejected_total, last_rejection=self.last_rejection,
+                         period=period,
                          service_endpoint=self.services.endpoint if self.services is not None else "")
 
     async def run(self, install_signals: bool = True) -> None:
-        """Start the transport, call :meth:`setup`, serve until SIGINT/SIGTERM or :meth:`shutdown`, tear down."""
+        """Start the transport, call :meth:`setup`, serve until SIGINT/SIGTERM or :meth:`shutdown`, tear
+        down."""
         self._loop = asyncio.get_running_loop()
         self._loop_thread = threading.current_thread()
         self._loop_tid = threading.get_ident()
@@ -407,8 +425,10 @@ class Node:
             self._start_services()
             self._wall_timer(self.config.heartbeat_period, lambda: self._hb_pub.publish(self.heartbeat()))
             self.ready = True
-            self._announced = announce(self.name, self.transport.endpoint or "", self.config.curve is not None)
-            self.log.info("%s up: endpoint %s, %d peers, publishes %s", self.name, self.transport.endpoint or "-",
+            self._announced = announce(self.name, self.transport.endpoint or "",
+                                       self.config.curve is not None)
+            self.log.info("%s up: endpoint %s, %d peers, publishes %s", self.name,
+                          self.transport.endpoint or "-",
                           len(getattr(self.transport, "peers", [])),
                           ", ".join(n for n in self._publishers if n != T.DIAGNOSTICS.name) or "-")
             await self._stop.wait()
@@ -426,40 +446,16 @@ class Node:
         params = ParamServices(self)
         srv.add("param/list", params.list, "every param: name, type, default, value, description, settable")
         srv.add("param/get", params.get, "{name}: a param's value")
-        srv.add("param/set", params.set, "{name, value}: set a run-time param (DYNAMIC_PARAMS)", commanding=True)
-        srv.add("clock/now", lambda args: self.now(), "the node's clock now, s (simulated on a simulated graph)")
-        srv.add("topic/pub", self._topic_pub, "{topic, frames}: deliver one encoded message of a topic this node "
-                "subscribes to, as if it came from the wire (topic pub)", commanding=True)
+        srv.add("param/set", params.set, "{name, value}: set a run-time param "
+                                         "(DYNAMIC_PARAMS)", commanding=True)
+        srv.add("clock/now", lambda args: self.now(), "the node's clock now, s (simulated on a simulated "
+                                                      "graph)")
+        srv.add("topic/pub", lambda args: topic_pub(self, args), "{topic, frames}: deliver one encoded "
+                "message of a topic this node subscribes to, as if it came from the wire (topic "
+                "pub)", commanding=True)
         for name, (handler, doc, commanding) in self._pending_services.items():
             srv.add(name, handler, doc, commanding)
         srv.start()
-
-    def _transport_links(self):
-        links = getattr(self.transport, "links", None)
-        return links if links is not None else getattr(getattr(self._bus, "sub", None), "links", None)
-
-    def _topic_pub(self, args: dict) -> int:
-        """The ``topic/pub`` service (on the loop): ``frames`` (a list of bytes, the wire encoding, the first
-        frame the topic's name) go to this node's subscriptions of ``topic``, where they are decoded and
-        validated like any message from the wire. Returns the number of subscriptions reached. Raises
-        ``ValueError`` naming the field: a topic this node does not subscribe to, one the launch file guards
-        (``security.publishers``), or frames that are not the topic's bytes. A tool reaches the graph by a call
-        to each node's bound service socket, so the graph never connects to, nor disconnects from, a tool."""
-        topic, frames = args.get("topic"), args.get("frames")
-        if not isinstance(topic, str) or not topic:
-            raise ValueError(f"topic must be a topic name, got {topic!r}")
-        if not (isinstance(frames, list) and len(frames) >= 2 and all(isinstance(f, bytes) for f in frames)):
-            raise ValueError(f"frames must be a list of at least 2 byte strings, got {type(frames).__name__}")
-        if frames[0] != topic.encode():
-            raise ValueError(f"frames[0] must be the topic {topic!r}, got {frames[0][:80]!r}")
-        links = self._transport_links()
-        if links is not None and topic.encode() in getattr(links, "guards", {}):
-            raise ValueError(f"topic {topic!r} is guarded by the launch file (security.publishers)")
-        subs = self._subs_b.get(frames[0])
-        if not subs:
-            raise ValueError(f"topic {topic!r}: this node does not subscribe to it")
-        self._on_frames(frames)
-        return len(subs)
 
     async def _close(self) -> None:
         withdraw(self._announced)
@@ -488,12 +484,13 @@ class Node:
         ``std::terminate``: the process aborts with "terminate called without an active exception" after a
         clean stop (it failed CI in the triangulator; reproduced 20 of 20 with a ``cv2.GaussianBlur`` loop).
         """
-        workers = [s.task for lst in self._subs.values() for s in lst if isinstance(s.task, SubscriptionWorker)]
+        workers = [s.task for lst in self._subs.values() for s in lst
+                   if isinstance(s.task, SubscriptionWorker)]
         deadline = time.monotonic() + WORKER_JOIN_S
         while any(w.is_alive() for w in workers) and time.monotonic() < deadline:
             await asyncio.sleep(0.005)
         late = [w.name for w in workers if w.is_alive()]
         if late:
-            self.log.warning("%s: sync handler(s) still running %.0f s after the stop: %s (the process may abort "
-                             "at exit)", self.name, WORKER_JOIN_S, ", ".join(late))
+            self.log.warning("%s: sync handler(s) still running %.0f s after the stop: %s (the process may "
+                             "abort at exit)", self.name, WORKER_JOIN_S, ", ".join(late))
 

@@ -1,11 +1,12 @@
-"""A node's heavy call (a drawing, a frame), run at most ``rate`` times a second after a request, on either clock.
+"""A node's heavy call (a drawing, a frame), run at most ``rate`` times a second after a request, on either
+clock.
 
-On the wall clock the call runs in a thread of its own (its context, e.g. an OpenGL one, lives there), the loop
-free; the loop waits for a request, keeps to the rate, awaits ``before`` and runs the call in that thread. On a
-simulated clock no host thread may run beside simulated time: the call runs on the loop thread at the request
-(or at the next tick of ``rate`` when the rate held it back; ``before`` is awaited there), and each call is
-charged ``cost`` s of simulated time (:meth:`flexsheet.runtime.node.Node.charge`), so what it publishes leaves
-when the lab's machine would have finished it. The node's code is the same on both clocks.
+On the wall clock the call runs in a thread of its own (its context, e.g. an OpenGL one, lives there), the
+loop free; the loop waits for a request, keeps to the rate, awaits ``before`` and runs the call in that
+thread. On a simulated clock no host thread may run beside simulated time: the call runs on the loop thread at
+the request (or at the next tick of ``rate`` when the rate held it back; ``before`` is awaited there), and
+each call is charged ``cost`` s of simulated time (:meth:`flexsheet.runtime.node.Node.charge`), so what it
+publishes leaves when the lab's machine would have finished it. The node's code is the same on both clocks.
 """
 
 from __future__ import annotations
@@ -20,12 +21,12 @@ __all__ = ["PacedCall"]
 
 
 class PacedCall:
-    """``call()`` at most ``rate`` Hz after :meth:`request` (see module docstring). ``done(result)`` runs on the
-    loop thread with what the call returned; a ``ValueError`` it raises goes to ``failed(exc)`` instead.
+    """``call()`` at most ``rate`` Hz after :meth:`request` (see module docstring). ``done(result)`` runs on
+    the loop thread with what the call returned; a ``ValueError`` it raises goes to ``failed(exc)`` instead.
     ``cost`` s: the lab's time for one call (charged on a simulated clock); ``name``: the thread's name;
-    ``before``: an async hook awaited before a call from the tick or the wall clock's loop (not from a
-    request on a simulated clock, which runs inside the requesting handler). Raises ``ValueError`` for a rate
-    that is not > 0."""
+    ``before``: an async hook awaited before a call from the tick or the wall clock's loop (not from a request
+    on a simulated clock, which runs inside the requesting handler). Raises ``ValueError`` for a rate that is
+    not > 0."""
 
     def __init__(self, node, rate: float, call: Callable[[], Any], done: Callable[[Any], None],
                  failed: Callable[[ValueError], None], cost: float, name: str,
@@ -42,8 +43,8 @@ class PacedCall:
         self._task: asyncio.Task | None = None
 
     async def start(self, init: Callable[[], None] | None = None) -> None:
-        """Run ``init()`` where the calls will run (the call's thread, or the loop thread on a simulated clock),
-        then start serving requests."""
+        """Run ``init()`` where the calls will run (the call's thread, or the loop thread on a simulated
+        clock), then start serving requests."""
         if self.simulated:
             if init is not None:
                 init()
@@ -57,7 +58,8 @@ class PacedCall:
         self._task = loop.create_task(self._serve())
 
     def request(self) -> None:
-        """Ask for a call (thread-safe on the wall clock; on a simulated clock it runs now if the rate allows)."""
+        """Ask for a call (thread-safe on the wall clock; on a simulated clock it runs now if the rate
+        allows)."""
         self._wanted = True
         if self.simulated:
             self._run_here()
@@ -65,8 +67,8 @@ class PacedCall:
             self.node._loop.call_soon_threadsafe(self._event.set)
 
     def elapsed(self, t0: float) -> float:
-        """The call's time so far, s, from ``t0 = time.perf_counter()`` at its start: the host's on the wall clock,
-        ``cost`` on a simulated clock (a message must not depend on the host)."""
+        """The call's time so far, s, from ``t0 = time.perf_counter()`` at its start: the host's on the wall
+        clock, ``cost`` on a simulated clock (a message must not depend on the host)."""
         return self.cost if self.simulated else time.perf_counter() - t0
 
     async def close(self, release: Callable[[], None] | None = None) -> None:

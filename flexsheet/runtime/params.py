@@ -2,12 +2,12 @@
 
 The algorithms keep their settings in frozen dataclasses beside the code that uses them (e.g.
 :class:`flexsheet.planning.planner_config.PlannerConfig`, :class:`flexsheet.vision.tracker.TrackerConfig`,
-:class:`flexsheet.twin.finger.FingerScript`), with the defaults and the range checks (``__post_init__``).
-A node's launch-file parameters are a flat pydantic model (``extra="forbid"``, so a typo is an error). This
+:class:`flexsheet.twin.finger.FingerScript`), with the defaults and the range checks (``__post_init__``). A
+node's launch-file parameters are a flat pydantic model (``extra="forbid"``, so a typo is an error). This
 module builds those pydantic fields *from* the dataclass — same names, types and defaults — so nothing is
-copied, and builds the dataclass back from a validated params object. Range checks stay in the dataclass:
-the params model calls it in an ``after`` validator, so a bad value still fails before any socket opens,
-with the dataclass's message naming the field.
+copied, and builds the dataclass back from a validated params object. Range checks stay in the dataclass: the
+params model calls it in an ``after`` validator, so a bad value still fails before any socket opens, with the
+dataclass's message naming the field.
 
 Example::
 
@@ -31,7 +31,8 @@ __all__ = ["config_fields", "params_model", "build"]
 
 def config_fields(cls: type, *, exclude: Iterable[str] = (), rename: Mapping[str, str] | None = None,
                   descriptions: Mapping[str, str] | None = None) -> dict[str, tuple[Any, Any]]:
-    """pydantic field definitions ``{param_name: (type, FieldInfo)}`` for the init fields of dataclass ``cls``.
+    """pydantic field definitions ``{param_name: (type, FieldInfo)}`` for the init fields of dataclass
+    ``cls``.
 
     Types come from the dataclass annotations (resolved with :func:`typing.get_type_hints`), defaults (or
     default factories) from its fields. ``exclude``: field names left out (e.g. nested configs flattened by
@@ -54,7 +55,8 @@ def config_fields(cls: type, *, exclude: Iterable[str] = (), rename: Mapping[str
     for name, f in fields.items():
         if name in excl:
             continue
-        desc = (descriptions or {}).get(name) or _annotated_description(hints[name]) or f"{cls.__name__}.{name}"
+        desc = ((descriptions or {}).get(name) or _annotated_description(hints[name])
+                or f"{cls.__name__}.{name}")
         if f.default is not dataclasses.MISSING:
             info = Field(default=f.default, description=desc)
         elif f.default_factory is not dataclasses.MISSING:

@@ -1,5 +1,5 @@
-"""What installed packages plug in: node types and commands declared as entry points (``pyproject.toml``), read
-with :mod:`importlib.metadata`. The runtime names none of them itself.
+"""What installed packages plug in: node types and commands declared as entry points (``pyproject.toml``),
+read with :mod:`importlib.metadata`. The runtime names none of them itself.
 
 - ``flexsheet.nodes`` (:data:`NODES_GROUP`): node type → its :class:`~flexsheet.runtime.node.Node` subclass,
   as ``"module:Class"`` (``flexsheet run TYPE``, a launch file's ``type:``);
@@ -23,8 +23,8 @@ NODES_GROUP = "flexsheet.nodes"
 
 @functools.cache
 def table(group: str) -> dict[str, str]:
-    """Name → ``"module:attribute"`` of every entry point of ``group``, sorted by name (empty when no installed
-    package declares one: is flexsheet installed, ``pip install -e .``?). Shared: do not mutate."""
+    """Name → ``"module:attribute"`` of every entry point of ``group``, sorted by name (empty when no
+    installed package declares one: is flexsheet installed, ``pip install -e .``?). Shared: do not mutate."""
     return {ep.name: ep.value for ep in sorted(entry_points(group=group), key=lambda e: e.name)}
 
 

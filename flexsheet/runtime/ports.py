@@ -33,11 +33,11 @@ def ephemeral_port_range(path: Path = EPHEMERAL_RANGE_FILE) -> tuple[int, int]:
 
 def free_port(span: int = 1, host: str = "127.0.0.1") -> int:
     """A TCP port on ``host`` that is free right now, with the ``span - 1`` ports above it, all outside
-    :func:`ephemeral_port_range` (see the module doc for why), also once a launch file in this process's domain
-    moves it (:mod:`flexsheet.runtime.domain`): in [:data:`LOW_PORT`, start of the range − the domain's shift), or,
-    where the range starts too low for that, above its end. Another process may take it before the caller
-    binds it. Raises ``ValueError`` on ``span`` < 1 and ``RuntimeError`` when the range leaves no room on
-    either side, or no free block is found in 500 random tries."""
+    :func:`ephemeral_port_range` (see the module doc for why), also once a launch file in this process's
+    domain moves it (:mod:`flexsheet.runtime.domain`): in [:data:`LOW_PORT`, start of the range − the domain's
+    shift), or, where the range starts too low for that, above its end. Another process may take it before the
+    caller binds it. Raises ``ValueError`` on ``span`` < 1 and ``RuntimeError`` when the range leaves no room
+    on either side, or no free block is found in 500 random tries."""
     if not (isinstance(span, int) and span >= 1):
         raise ValueError(f"span must be an int >= 1, got {span!r}")
     lo, hi = ephemeral_port_range()
@@ -47,8 +47,8 @@ def free_port(span: int = 1, host: str = "127.0.0.1") -> int:
     elif 65536 - span > hi + 1:
         first, last = hi + 1, 65536 - span
     else:
-        raise RuntimeError(f"the ephemeral port range {lo}-{hi} (net.ipv4.ip_local_port_range) leaves no room for "
-                           f"{span} port(s) below or above it; narrow it")
+        raise RuntimeError(f"the ephemeral port range {lo}-{hi} (net.ipv4.ip_local_port_range) leaves no "
+                           f"room for {span} port(s) below or above it; narrow it")
     rng = random.Random()
     for _ in range(500):
         port = rng.randrange(first, last)
@@ -64,4 +64,5 @@ def free_port(span: int = 1, host: str = "127.0.0.1") -> int:
         finally:
             for s in socks:
                 s.close()
-    raise RuntimeError(f"no {span} free TCP port(s) in a row in {first}-{last + span - 1} on {host} after 500 tries")
+    raise RuntimeError(f"no {span} free TCP port(s) in a row in {first}-{last + span - 1} on {host} after "
+                       "500 tries")

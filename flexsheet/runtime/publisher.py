@@ -38,8 +38,8 @@ class Publisher:
 
     def header(self, frame_id: str = "display", stamp: float | None = None) -> Header:
         """Next :class:`Header` for this publisher: ``seq`` incremented, ``stamp`` = the clock's
-        :meth:`flexsheet.runtime.clock.Clock.stamp` if None (the wall clock's now; on a live simulated clock, when
-        the output leaves)."""
+        :meth:`flexsheet.runtime.clock.Clock.stamp` if None (the wall clock's now; on a live simulated clock,
+        when the output leaves)."""
         return Header(stamp=self.node._clock.stamp() if stamp is None else float(stamp), frame_id=frame_id,
                       seq=next(self._seq))
 

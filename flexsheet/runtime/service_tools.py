@@ -1,6 +1,6 @@
 """The run-time tools that call a running node's services (:mod:`flexsheet.runtime.services`):
-``param list|get|set``, ``service list|call`` and ``topic pub`` (``--json`` on every verb: one JSON document on
-stdout). The node is found from its heartbeat (:mod:`flexsheet.runtime.tools`)."""
+``param list|get|set``, ``service list|call`` and ``topic pub`` (``--json`` on every verb: one JSON document
+on stdout). The node is found from its heartbeat (:mod:`flexsheet.runtime.tools`)."""
 
 from __future__ import annotations
 
@@ -32,8 +32,8 @@ def _node_service(args: argparse.Namespace) -> tuple[str, object, bytes | None] 
     beats = asyncio.run(collect_heartbeats(g.peers, args.timeout, curve, {args.node}))
     hb = beats.get(args.node)
     if hb is None:
-        print(f"node {args.node!r} not heard in {args.timeout:g} s (heard: {', '.join(sorted(beats)) or 'none'}; "
-              f"{g.source})", file=sys.stderr)
+        print(f"node {args.node!r} not heard in {args.timeout:g} s (heard: "
+              f"{', '.join(sorted(beats)) or 'none'}; {g.source})", file=sys.stderr)
         return 1
     if not hb.service_endpoint:
         print(f"node {args.node!r} offers no services (it has no TCP endpoint)", file=sys.stderr)
@@ -61,7 +61,8 @@ def _yaml_value(text: str):
     try:
         return yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise SystemExit(f"flexsheet: not a YAML value: {text!r} ({' '.join(str(exc).split())[:200]})") from None
+        raise SystemExit(f"flexsheet: not a YAML value: {text!r} ({' '.join(str(exc).split())[:200]}"
+                         ")") from None
 
 
 def param_list(args: argparse.Namespace) -> int:
@@ -122,8 +123,8 @@ def service_call(args: argparse.Namespace) -> int:
 
 
 def _message(topic, data: dict, seq: int, now: float):
-    """The topic's message from ``data`` (a YAML map), with a header stamped ``now`` (the graph's clock) unless
-    it has one."""
+    """The topic's message from ``data`` (a YAML map), with a header stamped ``now`` (the graph's clock)
+    unless it has one."""
     import re
 
     data = dict(data)
@@ -132,7 +133,7 @@ def _message(topic, data: dict, seq: int, now: float):
         data["header"] = Header.model_validate(data["header"])
     props = topic.type.model_json_schema().get("properties", {})
     for name, f in topic.type.model_fields.items():
-        if f.annotation is np.ndarray and isinstance(data.get(name), list):     # YAML lists → the field's array
+        if f.annotation is np.ndarray and isinstance(data.get(name), list):  # YAML lists → the field's array
             m = re.search(r"dtype=(\w+)", props.get(name, {}).get("description", ""))
             data[name] = np.asarray(data[name], dtype=m.group(1) if m and m.group(1) != "any" else None)
     return topic.type.model_validate(data)
@@ -148,11 +149,13 @@ def topic_pub(args: argparse.Namespace) -> int:
     by_name = {t.name: t for t in T.ALL}
     topic = by_name.get(args.topic)
     if topic is None:
-        print(f"flexsheet: unknown topic {args.topic!r}; topics: {', '.join(sorted(by_name))}", file=sys.stderr)
+        print(f"flexsheet: unknown topic {args.topic!r}; topics: {', '.join(sorted(by_name))}",
+              file=sys.stderr)
         return 2
     data = _yaml_value(args.message) if args.message else {}
     if not isinstance(data, dict):
-        print(f"flexsheet: the message must be a YAML map of {topic.type.SCHEMA}'s fields, got {args.message!r}",
+        print(f"flexsheet: the message must be a YAML map of {topic.type.SCHEMA}'s fields, got "
+              f"{args.message!r}",
               file=sys.stderr)
         return 2
     try:
@@ -174,9 +177,10 @@ def topic_pub(args: argparse.Namespace) -> int:
 
 
 async def _publish(args: argparse.Namespace, g: Graph, topic, data: dict) -> int:
-    """``topic pub`` once the message is known good: each subscriber of ``args.topic`` in graph ``g`` gets every
-    message by a ``topic/pub`` call to its service socket (:func:`topic_pub`). The tool only connects, as a
-    client, so its leaving is a closed connection: the graph never connects to it nor disconnects from it."""
+    """``topic pub`` once the message is known good: each subscriber of ``args.topic`` in graph ``g`` gets
+    every message by a ``topic/pub`` call to its service socket (:func:`topic_pub`). The tool only connects,
+    as a client, so its leaving is a closed connection: the graph never connects to it nor disconnects from
+    it."""
     curve = g.curve
     beats = await collect_heartbeats(g.peers, args.timeout, curve, g.names)
     subs = {n: hb for n, hb in beats.items()
@@ -195,7 +199,8 @@ async def _publish(args: argparse.Namespace, g: Graph, topic, data: dict) -> int
         frames = [bytes(f) for f in encode(args.topic, _message(topic, data, i, now))]
         for n in list(reached):
             try:
-                await call_async(subs[n].service_endpoint, "topic/pub", {"topic": args.topic, "frames": frames},
+                await call_async(subs[n].service_endpoint, "topic/pub",
+                                 {"topic": args.topic, "frames": frames},
                                  args.timeout, curve, keys[n])
             except ServiceError as exc:
                 print(f"{n}: {exc}", file=sys.stderr)
@@ -205,5 +210,6 @@ async def _publish(args: argparse.Namespace, g: Graph, topic, data: dict) -> int
     out = {"topic": args.topic, "type": topic.type.SCHEMA, "published": args.times if reached else 0,
            "subscribers": reached}
     print(json.dumps(out) if args.json else
-          f"published {out['published']} x {topic.type.SCHEMA} on {args.topic} to {', '.join(reached) or 'nobody'}")
+          f"published {out['published']} x {topic.type.SCHEMA} on {args.topic} to "
+          f"{', '.join(reached) or 'nobody'}")
     return 0 if reached else 1

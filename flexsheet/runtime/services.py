@@ -1,16 +1,17 @@
 """Services: request/reply calls into a running node, as ROS 2 services (and its run-time parameters).
 
-Every node binds one ZeroMQ ROUTER socket (:class:`ServiceServer`) on its publisher's address, on a port the OS
-picks, and names it in its heartbeat (``Heartbeat.service_endpoint``), so a tool finds it from ``/diagnostics``.
-A request is one msgpack map ``{"service": NAME, "args": {...}}``; the reply is ``{"ok": true, "result": ...}``
-or ``{"ok": false, "error": "one line"}``. A bad request (not msgpack, unknown service, wrong arguments, a
-handler that raises) gets an error reply naming what was wrong; it never stops the node. With CURVE the socket
-is a CURVE server with the node's key, behind the same ZAP allow-list as its publisher. The sockets are
-:mod:`flexsheet.runtime.zmq.reqrep`'s (the package :mod:`flexsheet.runtime.zmq` is the only code that talks to ZeroMQ).
+Every node binds one ZeroMQ ROUTER socket (:class:`ServiceServer`) on its publisher's address, on a port the
+OS picks, and names it in its heartbeat (``Heartbeat.service_endpoint``), so a tool finds it from
+``/diagnostics``. A request is one msgpack map ``{"service": NAME, "args": {...}}``; the reply is
+``{"ok": true, "result": ...}`` or ``{"ok": false, "error": "one line"}``. A bad request (not msgpack, unknown
+service, wrong arguments, a handler that raises) gets an error reply naming what was wrong; it never stops the
+node. With CURVE the socket is a CURVE server with the node's key, behind the same ZAP allow-list as its
+publisher. The sockets are :mod:`flexsheet.runtime.zmq.reqrep`'s (the package :mod:`flexsheet.runtime.zmq` is
+the only code that talks to ZeroMQ).
 
 Built in on every node: ``list`` (the services with one line each), ``param/list``, ``param/get``,
-``param/set`` (:class:`ParamServices`: a param listed in the node's ``DYNAMIC_PARAMS`` may be set while it runs,
-validated by its ``Params`` model; every other param is read-only at run time), ``clock/now`` and
+``param/set`` (:class:`ParamServices`: a param listed in the node's ``DYNAMIC_PARAMS`` may be set while it
+runs, validated by its ``Params`` model; every other param is read-only at run time), ``clock/now`` and
 ``topic/pub`` (one encoded message delivered to the node's subscriptions: ``flexsheet topic pub``).
 
 :func:`call` is the client: one request, one reply, within a timeout.
@@ -28,7 +29,7 @@ import msgpack
 
 from flexsheet.runtime.zmq.reqrep import ServiceSocket, request
 
-__all__ = ["ServiceError", "ServiceServer", "ParamServices", "call", "MAX_REQUEST_BYTES"]
+__all__ = ["ServiceError", "ServiceServer", "ParamServices", "call", "topic_pub", "MAX_REQUEST_BYTES"]
 
 log = logging.getLogger(__name__)
 
@@ -84,8 +85,8 @@ class ParamServices:
         return _jsonable(getattr(self.node.params, name))
 
     def set(self, args: dict) -> Any:
-        """``{"name": N, "value": V}`` → the value now in effect. Raises ``ValueError`` naming the param for an
-        unknown or read-only param or a value its model refuses."""
+        """``{"name": N, "value": V}`` → the value now in effect. Raises ``ValueError`` naming the param for
+        an unknown or read-only param or a value its model refuses."""
         name = _name_arg(args)
         if "value" not in args:
             raise ValueError("param/set needs 'value'")
@@ -109,6 +110,32 @@ class ParamServices:
         return _jsonable(getattr(new, name))
 
 
+def topic_pub(node: Any, args: dict) -> int:
+    """The ``topic/pub`` service of ``node`` (on its loop): ``frames`` (a list of bytes, the wire encoding,
+    the first frame the topic's name) go to the node's subscriptions of ``topic``, where they are decoded and
+    validated like any message from the wire. Returns the number of subscriptions reached. Raises
+    ``ValueError`` naming the field: a topic the node does not subscribe to, one the launch file guards
+    (``security.publishers``), or frames that are not the topic's bytes. A tool reaches the graph by a call to
+    each node's bound service socket, so the graph never connects to, nor disconnects from, a tool."""
+    topic, frames = args.get("topic"), args.get("frames")
+    if not isinstance(topic, str) or not topic:
+        raise ValueError(f"topic must be a topic name, got {topic!r}")
+    if not (isinstance(frames, list) and len(frames) >= 2 and all(isinstance(f, bytes) for f in frames)):
+        raise ValueError(f"frames must be a list of at least 2 byte strings, got {type(frames).__name__}")
+    if frames[0] != topic.encode():
+        raise ValueError(f"frames[0] must be the topic {topic!r}, got {frames[0][:80]!r}")
+    links = getattr(node.transport, "links", None)
+    if links is None:
+        links = getattr(getattr(node._bus, "sub", None), "links", None)
+    if links is not None and topic.encode() in getattr(links, "guards", {}):
+        raise ValueError(f"topic {topic!r} is guarded by the launch file (security.publishers)")
+    subs = node._subs_b.get(frames[0])
+    if not subs:
+        raise ValueError(f"topic {topic!r}: this node does not subscribe to it")
+    node._on_frames(frames)
+    return len(subs)
+
+
 def _type_name(t) -> str:
     origin = typing.get_origin(t)
     if origin is None:
@@ -126,7 +153,8 @@ def _name_arg(args: dict) -> str:
 class ServiceServer:
     """The node's service socket and its services (module doc): a
     :class:`~flexsheet.runtime.zmq.reqrep.ServiceSocket` on ``address`` ("tcp://127.0.0.1"), CURVE with the
-    node's :class:`~flexsheet.runtime.zmq.curve.CurveConfig` ``curve``, on the node's ZeroMQ context ``ctx``."""
+    node's :class:`~flexsheet.runtime.zmq.curve.CurveConfig` ``curve``, on the node's ZeroMQ context
+    ``ctx``."""
 
     def __init__(self, address: str, curve=None, ctx=None) -> None:
         self.sock = ServiceSocket(address, curve, ctx, MAX_REQUEST_BYTES)
@@ -154,8 +182,8 @@ class ServiceServer:
         if name not in self.commanding:
             return None
         if self.curve is None:
-            return None if self.loopback else (f"{name!r} commands the node: on a networked graph it needs CURVE "
-                                               "(security.curve) and a host's key")
+            return None if self.loopback else (f"{name!r} commands the node: on a networked graph it needs "
+                                               "CURVE (security.curve) and a host's key")
         if caller.encode() not in self.curve.tool_keys:
             return f"{name!r} commands the node: only a host's key (a tool run on a host) may call it"
         return None
@@ -220,8 +248,8 @@ class ServiceServer:
 async def call_async(endpoint: str, service: str, args: dict | None = None, timeout: float = 2.0,
                      curve=None, server_key: bytes | None = None) -> Any:
     """One request to the service socket at ``endpoint``; the result. ``curve`` (the caller's keys) with
-    ``server_key`` (the node's public key) for a CURVE graph. Raises :class:`ServiceError` with the node's error
-    line, or on no reply within ``timeout`` s."""
+    ``server_key`` (the node's public key) for a CURVE graph. Raises :class:`ServiceError` with the node's
+    error line, or on no reply within ``timeout`` s."""
     raw = await request(endpoint, msgpack.packb({"service": service, "args": args or {}}, use_bin_type=True),
                         timeout, curve, server_key)
     if raw is None:

@@ -1,7 +1,7 @@
-"""One typed subscription of a node (:class:`Subscription`, made by :meth:`flexsheet.runtime.node.Node.subscribe`):
-its queue and QoS, its consumer (a task on the loop for an ``async def`` handler, its own worker thread,
-:class:`SubscriptionWorker`, for a plain ``def``) and its counters. See :mod:`flexsheet.runtime.node` for the
-threading model."""
+"""One typed subscription of a node (:class:`Subscription`, made by
+:meth:`flexsheet.runtime.node.Node.subscribe`): its queue and QoS, its consumer (a task on the loop for an
+``async def`` handler, its own worker thread, :class:`SubscriptionWorker`, for a plain ``def``) and its
+counters. See :mod:`flexsheet.runtime.node` for the threading model."""
 
 from __future__ import annotations
 
@@ -41,8 +41,8 @@ class SubscriptionWorker(threading.Thread):
 
 
 class Sampled:
-    """The consumer of a sampled subscription (:meth:`flexsheet.runtime.node.Node.sample`): none runs; the task-like
-    ``done()`` and ``cancel()`` of the others."""
+    """The consumer of a sampled subscription (:meth:`flexsheet.runtime.node.Node.sample`): none runs; the
+    task-like ``done()`` and ``cancel()`` of the others."""
 
     def __init__(self, sub: Subscription) -> None:
         self.sub = sub
@@ -55,14 +55,14 @@ class Sampled:
 
 
 class Subscription:
-    """One typed subscription of ``node`` (its :class:`~flexsheet.runtime.node.Node`): its queue, QoS, handler,
-    consumer (task or worker thread) and statistics.
+    """One typed subscription of ``node`` (its :class:`~flexsheet.runtime.node.Node`): its queue, QoS,
+    handler, consumer (task or worker thread) and statistics.
 
     Queue items are wire frames (decoded and validated by the consumer: the wire boundary) or, from a node of
     the same container, the message object itself (already validated when it was built).
 
-    ``handler`` None: a sampled subscription (:meth:`flexsheet.runtime.node.Node.sample`): no consumer; the newest
-    item is kept as it arrives and decoded only when :meth:`read` reads it.
+    ``handler`` None: a sampled subscription (:meth:`flexsheet.runtime.node.Node.sample`): no consumer; the
+    newest item is kept as it arrives and decoded only when :meth:`read` reads it.
     """
 
     def __init__(self, node: Any, topic: Topic, handler: Callable, qos: QoS, depth: int | None,
@@ -89,7 +89,8 @@ class Subscription:
         self.cpu_s = 0.0  # CPU time of the sync handler (its worker thread), s
         self.last_seq: int | None = None
         self.last_meta: Any = None
-        self.task: asyncio.Task | SubscriptionWorker | None = None  # the consumer, once started (both have done(), cancel())
+        # the consumer, once started (both have done(), cancel())
+        self.task: asyncio.Task | SubscriptionWorker | None = None
 
     def start(self, loop: asyncio.AbstractEventLoop) -> None:
         """Start the consumer: a task on ``loop`` (async handler), the worker thread (sync handler), or none
@@ -204,8 +205,8 @@ class Subscription:
 
     def take(self, apply: Callable[[Message], Any]) -> bool:
         """Call ``apply(msg)`` with the newest message of a sampled subscription if it is new since the last
-        take (:meth:`read`); a ``ValueError`` from it counts the message as rejected (:meth:`reject`). True if a
-        new message was applied without error."""
+        take (:meth:`read`); a ``ValueError`` from it counts the message as rejected (:meth:`reject`). True if
+        a new message was applied without error."""
         msg = self.read()
         if msg is None or msg is self._taken:
             return False
@@ -218,8 +219,8 @@ class Subscription:
         return True
 
     def reject(self, reason: str) -> None:
-        """Count a message of this topic as rejected input (a handler's ``ValueError``, or a sampled message its
-        reader found unusable): the node's ``rejected``, its reason naming the topic."""
+        """Count a message of this topic as rejected input (a handler's ``ValueError``, or a sampled message
+        its reader found unusable): the node's ``rejected``, its reason naming the topic."""
         self.stats.rejected += 1
         self.node._reject(f"{self.topic.name}: {reason}")
 

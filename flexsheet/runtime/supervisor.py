@@ -1,5 +1,5 @@
-"""The launch supervisor: starts a launch file's nodes (or one host's share) as OS processes — one per node, or
-one per composable container — prefixes their output, respawns them by policy, forwards signals, escalates
+"""The launch supervisor: starts a launch file's nodes (or one host's share) as OS processes — one per node,
+or one per composable container — prefixes their output, respawns them by policy, forwards signals, escalates
 shutdown (SIGINT, SIGTERM, SIGKILL) and reports CPU per process (:class:`Supervisor`). The file model is
 :mod:`flexsheet.runtime.launch`."""
 
@@ -42,8 +42,9 @@ def _child_setup(nice: int, rt_priority: int = 0):
                 pass
         if rt_priority:
             try:
-                # reset on fork: a process the node starts (a table builder, a subprocess) begins in the normal
-                # class, not at the node's real-time priority, where its imports alone would starve the graph
+                # reset on fork: a process the node starts (a table builder, a
+                # subprocess) begins in the normal class, not at the node's
+                # real-time priority, where its imports alone would starve the graph
                 os.sched_setscheduler(0, os.SCHED_FIFO | getattr(os, "SCHED_RESET_ON_FORK", 0),
                                       os.sched_param(rt_priority))
             except (OSError, AttributeError):  # no privilege: normal scheduling
@@ -71,17 +72,20 @@ class _Child:
 def container_spec(lf: LaunchFile, members: list[str]) -> NodeSpec:
     """The process-level spec of a container whose nodes are ``members``: required if any member is; respawn
     ``always`` if any member's policy is, else ``on-failure`` if any is, else ``never``, with the smallest
-    delay and the largest ``max_restarts``; the smallest ``nice`` and the largest ``rt_priority``. The container
-    of a ``clock: sim`` file is required and runs at normal priority (simulated time needs no real-time class)."""
+    delay and the largest ``max_restarts``; the smallest ``nice`` and the largest ``rt_priority``. The
+    container of a ``clock: sim`` file is required and runs at normal priority (simulated time needs no
+    real-time class)."""
     specs = [lf.nodes[n] for n in members]
     if getattr(lf, "clock", "wall") == "sim":
-        return NodeSpec(type=specs[0].type, host=specs[0].host, respawn=RespawnSpec(policy="never"), required=True,
+        return NodeSpec(type=specs[0].type, host=specs[0].host, respawn=RespawnSpec(policy="never"),
+                        required=True,
                         container=specs[0].container)
     policies = {s.respawn.policy for s in specs}
     policy = "always" if "always" in policies else ("on-failure" if "on-failure" in policies else "never")
     respawn = RespawnSpec(policy=policy, delay=min(s.respawn.delay for s in specs),
                           max_restarts=max(s.respawn.max_restarts for s in specs))
-    return NodeSpec(type=specs[0].type, host=specs[0].host, respawn=respawn, required=any(s.required for s in specs),
+    return NodeSpec(type=specs[0].type, host=specs[0].host, respawn=respawn,
+                    required=any(s.required for s in specs),
                     nice=min(s.nice for s in specs), rt_priority=max(s.rt_priority for s in specs),
                     container=specs[0].container)
 
@@ -134,7 +138,8 @@ class Supervisor:
                  duration: float | None = None, python: str = sys.executable,
                  overrides: dict[str, list[str]] | None = None) -> None:
         if host is not None and host not in lf.hosts:
-            raise LaunchError(f"{lf.path}: --host {host!r} is not a host of the file; hosts: {', '.join(lf.hosts)}")
+            raise LaunchError(f"{lf.path}: --host {host!r} is not a host of the file; hosts: "
+                              f"{', '.join(lf.hosts)}")
         self.lf, self.host, self.out, self.duration = lf, host, out, duration
         self.sim = getattr(lf, "clock", "wall") == "sim"   # the container counts simulated seconds itself
         self.log = console_logger("launch")
@@ -151,7 +156,8 @@ class Supervisor:
 
     def _cmd(self, child: _Child) -> list[str]:
         if child.members:
-            cmd = [self.python, "-u", "-m", "flexsheet", "run", "--container", child.spec.container, "--launch",
+            cmd = [self.python, "-u", "-m", "flexsheet", "run", "--container", child.spec.container,
+                   "--launch",
                    str(self.lf.path), "--host", child.spec.host]
             if self.out:
                 cmd += ["--out", self.out]
@@ -175,7 +181,8 @@ class Supervisor:
             env["FLEXSHEET_OUT"] = self.out
         child.proc = await asyncio.create_subprocess_exec(
             *self._cmd(child), stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
-            stdin=asyncio.subprocess.DEVNULL, env=env, start_new_session=True, preexec_fn=_child_setup(child.spec.nice, child.spec.rt_priority))
+            stdin=asyncio.subprocess.DEVNULL, env=env, start_new_session=True,
+            preexec_fn=_child_setup(child.spec.nice, child.spec.rt_priority))
 
     async def _pump(self, child: _Child) -> None:
         assert child.proc is not None and child.proc.stdout is not None
@@ -198,10 +205,10 @@ class Supervisor:
     async def _exit_code(self, child: _Child, pump: asyncio.Task) -> int:
         """The node's exit code as soon as its process exits, its output read to the end. Whatever is left in
         its process group then (a worker it started that had not yet tied itself to its parent,
-        :mod:`flexsheet.runtime.background`) is killed: it would hold the node's output pipe open, and asyncio's
-        ``wait()`` waits for that pipe too, so the launcher would report neither the exit nor respawn the node
-        until the worker ended (the renderer's sheet table, ~30 s or more: a kill -9 during its worker's imports
-        stalled the respawn). Output still held open 2 s after that is no longer read."""
+        :mod:`flexsheet.runtime.background`) is killed: it would hold the node's output pipe open, and
+        asyncio's ``wait()`` waits for that pipe too, so the launcher would report neither the exit nor
+        respawn the node until the worker ended (the renderer's sheet table, ~30 s or more: a kill -9 during
+        its worker's imports stalled the respawn). Output still held open 2 s after that is no longer read."""
         proc = child.proc
         loop = asyncio.get_running_loop()
         exited = loop.create_future()
@@ -250,7 +257,8 @@ class Supervisor:
             child.pids.append(child.proc.pid)
             child.started_at = child.started_at or time.monotonic()
             self.log.info(self._fmt.format(child.name, f"started pid {child.proc.pid}"
-                                        + (f" (container: {', '.join(child.members)})" if child.members else "")))
+                                        + (f" (container: {', '.join(child.members)})" if child.members
+                                           else "")))
             code = await self._exit_code(child, asyncio.create_task(self._pump(child)))
             self._record_exit(child, code)
             if child.stopping or self._stop.is_set():
@@ -261,8 +269,9 @@ class Supervisor:
             if code != 0:
                 child.failures.append(code)
             if code == EXIT_CONFIG:  # bad params or a missing file: a restart would fail the same way
-                self.log.info(self._fmt.format(child.name, "configuration error (see the line above): not respawned; "
-                                                        f"check with: flexsheet launch {self.lf.path} --check"
+                self.log.info(self._fmt.format(child.name, "configuration error (see the line above): not "
+                                                        "respawned; check with: flexsheet launch "
+                                                        f"{self.lf.path} --check"
                                                         + (f" --host {self.host}" if self.host else "")))
                 self.config_errors.append(child.name)
                 if child.spec.required:
@@ -277,7 +286,8 @@ class Supervisor:
             if policy.policy == "never" or (policy.policy == "on-failure" and code == 0):
                 return
             if child.restarts >= policy.max_restarts:
-                self.log.info(self._fmt.format(child.name, f"not respawned: {policy.max_restarts} restarts used"))
+                self.log.info(self._fmt.format(child.name, f"not respawned: {policy.max_restarts} restarts "
+                                                           "used"))
                 return
             child.restarts += 1
             self.log.info(self._fmt.format(child.name, f"respawning in {policy.delay:.1f} s "
@@ -306,9 +316,11 @@ class Supervisor:
                         break
             self.log.info(self._fmt.format(child.name, f"did not stop on {sig.name}; escalating"))
 
-    async def _drain(self, watchers: list[asyncio.Task], quiet_s: float = 3.0, limit_s: float = 120.0) -> None:
-        """Wait for the watchers to record their nodes' exits (≤ 1 s reap + 2 s of output), and for longer while
-        the stopped nodes' last output is still arriving (a node with much to say as it stops, on a loaded
+    async def _drain(self, watchers: list[asyncio.Task], quiet_s: float = 3.0,
+                     limit_s: float = 120.0) -> None:
+        """Wait for the watchers to record their nodes' exits (≤ 1 s reap + 2 s of output), and for longer
+        while the stopped nodes' last output is still arriving (a node with much to say as it stops, on a
+        loaded
         machine: no line is dropped while lines keep coming); at most ``limit_s``."""
         t_end = time.monotonic() + limit_s
         while True:
@@ -318,9 +330,10 @@ class Supervisor:
                 return
 
     async def run(self) -> int:
-        """Run until Ctrl-C, SIGTERM, ``duration`` or a required node's exit. Returns 0; :data:`EXIT_CONFIG` if a
-        node had a configuration error (a bind failure included); else 1 if any node exited non-zero by itself
-        during the run (respawned or not). Exits caused by the launcher's own stop are never failures."""
+        """Run until Ctrl-C, SIGTERM, ``duration`` or a required node's exit. Returns 0; :data:`EXIT_CONFIG`
+        if a node had a configuration error (a bind failure included); else 1 if any node exited non-zero by
+        itself during the run (respawned or not). Exits caused by the launcher's own stop are never
+        failures."""
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, self._on_signal, sig)
@@ -342,7 +355,8 @@ class Supervisor:
                 await self._stop.wait()
         except TimeoutError:
             self.reason = f"duration {self.duration:g} s reached"
-        self.log.info(f"[launch] stopping after {time.monotonic() - t0:.1f} s: {self.reason or 'stop requested'}")
+        self.log.info(f"[launch] stopping after {time.monotonic() - t0:.1f} s: "
+                      f"{self.reason or 'stop requested'}")
         monitor.cancel()
         sampler.cancel()
         self._sample_now()
@@ -352,7 +366,7 @@ class Supervisor:
             w.cancel()
         await asyncio.gather(*watchers, return_exceptions=True)
         for c in self.children:     # a watcher cancelled while it still read the stopped node's last output
-            rc = c.proc.returncode if c.proc is not None else None    # never recorded that incarnation's exit:
+            rc = c.proc.returncode if c.proc is not None else None  # never recorded that incarnation's exit:
             if rc is not None and len(c.exit_codes) < len(c.pids):    # a respawned node kept its kill's -9
                 self._record_exit(c, rc)                              # and the run "failed"
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -390,7 +404,8 @@ class Supervisor:
             last[hb.node] = time.monotonic()
             if hb.node in lost:
                 lost.discard(hb.node)
-                self.log.info(f"[launch] node {hb.node} on host {host_of.get(hb.node, '?')} is back (heartbeat)")
+                self.log.info(f"[launch] node {hb.node} on host {host_of.get(hb.node, '?')} is back "
+                              "(heartbeat)")
 
         tr = ZmqTransport("", self.lf.endpoints().values(), curve=curve_config(self.lf, self.host or None))
         await tr.start(on_frames)
@@ -404,12 +419,13 @@ class Supervisor:
                     if name in self.lf.nodes and name not in lost and now - t > limit:
                         lost.add(name)
                         self.lost_events.append((name, host_of.get(name, "?")))
-                        self.log.info(f"[launch] node {name} on host {host_of.get(name, '?')} lost: no heartbeat "
-                                   f"for {now - t:.1f} s")
+                        self.log.info(f"[launch] node {name} on host {host_of.get(name, '?')} lost: no "
+                                   f"heartbeat for {now - t:.1f} s")
         finally:
             tr.close()
 
-    #: s after the start before the steady-state CPU share is measured (imports, precompute and caches excluded)
+    #: s after the start before the steady-state CPU share
+    #: is measured (imports, precompute and caches excluded)
     cpu_warmup_s = 10.0
 
     def _sample_now(self) -> None:
@@ -439,10 +455,12 @@ class Supervisor:
         now = time.monotonic()
         for c in self.children:
             cpu = c.cpu_s + c.cpu_live
-            procs[c.name] = {"cpu_s": round(cpu, 3), "cpu_percent": round(100.0 * cpu / wall_s, 2) if wall_s else 0.0,
+            procs[c.name] = {"cpu_s": round(cpu, 3),
+                             "cpu_percent": round(100.0 * cpu / wall_s, 2) if wall_s else 0.0,
                              "pids": c.pids, "nodes": c.members or [c.name], "restarts": c.restarts}
             if c.cpu_warm is not None and now - c.cpu_warm[0] > 1.0:
-                procs[c.name]["steady_cpu_percent"] = round(100.0 * (cpu - c.cpu_warm[1]) / (now - c.cpu_warm[0]), 2)
+                procs[c.name]["steady_cpu_percent"] = round(100.0 * (cpu - c.cpu_warm[1])
+                                                            / (now - c.cpu_warm[0]), 2)
             if not c.members:
                 nodes[c.name] = {"cpu_s": round(cpu, 3), "cpu_percent": procs[c.name]["cpu_percent"],
                                  "process": c.name}
@@ -452,17 +470,20 @@ class Supervisor:
             inner: dict = {}
             if self.out:
                 try:
-                    inner = json.loads((Path(self.out) / f"cpu_{c.spec.container}.json").read_text()).get("nodes", {})
+                    inner = json.loads((Path(self.out)
+                                        / f"cpu_{c.spec.container}.json").read_text()).get("nodes", {})
                 except (OSError, ValueError):
                     inner = {}
             for n in c.members:
                 v = float(inner.get(n, {}).get("handler_cpu_s", 0.0))
-                nodes[n] = {"cpu_s": round(v, 3), "cpu_percent": round(100.0 * v / wall_s, 2) if wall_s else 0.0,
+                nodes[n] = {"cpu_s": round(v, 3),
+                            "cpu_percent": round(100.0 * v / wall_s, 2) if wall_s else 0.0,
                             "process": c.name, "shared": True}
         return {"wall_s": round(wall_s, 3), "cores": os.cpu_count(), "processes": procs, "nodes": nodes,
-                "note": "cpu_percent: of one core over the whole run, start-up included; steady_cpu_percent: from "
-                        f"{self.cpu_warmup_s:g} s after the start to the stop; container nodes: handler+timer thread "
-                        "CPU only, the rest of their process's cpu_s is shared (loop, decoding, worker threads)"}
+                "note": "cpu_percent: of one core over the whole run, start-up included; steady_cpu_percent: "
+                        f"from {self.cpu_warmup_s:g} s after the start to the stop; container nodes: "
+                        "handler+timer thread CPU only, the rest of their process's cpu_s is shared (loop, "
+                        "decoding, worker threads)"}
 
     def write_cpu(self, path: Path, wall_s: float) -> None:
         """Write :meth:`cpu_report` as JSON to ``path`` (a failure is printed, never raised)."""

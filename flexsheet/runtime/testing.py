@@ -4,10 +4,8 @@ Example::
 
     async def scenario():
         async with NodeHarness(PlannerNode, params={"object_stiffness": 20.0}) as h:
-            h.inject(topics.FINGERTIP, msg)
-            out = await h.wait_for(topics.SHEET_TARGET, n=1, timeout=2.0)
-            assert h.rejected(topics.FINGERTIP) == 0
-    asyncio.run(scenario())
+            h.inject(topics.FINGERTIP, msg) out = await h.wait_for(topics.SHEET_TARGET, n=1, timeout=2.0)
+            assert h.rejected(topics.FINGERTIP) == 0 asyncio.run(scenario())
 
 Source: dora-rs ``testing.py`` MockNode, proxystore's in-process stream (house rule 3).
 """
@@ -55,7 +53,8 @@ class NodeHarness:
         self._task = asyncio.get_running_loop().create_task(self.node.run(install_signals=False))
         for _ in range(2000):  # wait for setup() to finish (heartbeat publisher exists after start)
             if self.node._stop is not None and hasattr(self.node, "_hb_pub") and all(
-                    s.task is not None for lst in self.node._subs.values() for s in lst) and self._setup_done():
+                    s.task is not None for lst in self.node._subs.values()
+                    for s in lst) and self._setup_done():
                 break
             if self._task.done():
                 self._task.result()  # re-raise a setup error
@@ -90,7 +89,8 @@ class NodeHarness:
         deadline = time.monotonic() + timeout
         while len(self._raw.get(topic.name, [])) < n:
             if time.monotonic() > deadline:
-                raise TimeoutError(f"{topic.name}: {len(self._raw.get(topic.name, []))} of {n} messages in {timeout} s")
+                raise TimeoutError(f"{topic.name}: {len(self._raw.get(topic.name, []))} of {n} messages in "
+                                   f"{timeout} s")
             if self._task is not None and self._task.done():
                 self._task.result()
             await asyncio.sleep(0.002)

@@ -26,13 +26,14 @@ from flexsheet.runtime.zmq.transport import ZmqTransport
 from messages import Heartbeat
 from messages import topics as T
 
-__all__ = ["graph", "collect_heartbeats", "topic_list", "topic_info", "topic_echo", "topic_hz", "topic_bw", "node_list",
+__all__ = ["graph", "collect_heartbeats", "topic_list", "topic_info", "topic_echo", "topic_hz", "topic_bw",
+           "node_list",
            "node_info", "containers_of", "graph_topics", "message_json"]
 
 
 def graph(args: argparse.Namespace) -> Graph | None:
-    """The graph of ``args.launch`` / ``args.endpoint`` (:func:`~flexsheet.runtime.discovery.resolve_graph`), or
-    None after saying on stderr, in one line, why there is none."""
+    """The graph of ``args.launch`` / ``args.endpoint`` (:func:`~flexsheet.runtime.discovery.resolve_graph`),
+    or None after saying on stderr, in one line, why there is none."""
     try:
         return resolve_graph(getattr(args, "launch", None), getattr(args, "endpoint", None))
     except (LaunchError, LookupError) as exc:
@@ -42,8 +43,8 @@ def graph(args: argparse.Namespace) -> Graph | None:
 
 async def collect_heartbeats(peers: list[str], timeout: float, curve=None,
                              expect: set[str] | None = None) -> dict[str, Heartbeat]:
-    """Listen to ``/diagnostics`` on ``peers`` for at most ``timeout`` s, or until every node of ``expect`` (the
-    launch file's) has been heard; returns node name → latest heartbeat."""
+    """Listen to ``/diagnostics`` on ``peers`` for at most ``timeout`` s, or until every node of ``expect``
+    (the launch file's) has been heard; returns node name → latest heartbeat."""
     beats: dict[str, Heartbeat] = {}
     done = asyncio.Event()
 
@@ -79,18 +80,22 @@ def _beats(args: argparse.Namespace) -> dict[str, Heartbeat] | None:
 
 
 def graph_topics(beats: dict[str, Heartbeat]) -> dict[str, dict]:
-    """Topic → ``{"type", "rate_hz", "publishers": [...], "subscribers": [...]}`` from heartbeats; each publisher
-    ``{"node", "host", "endpoint", "rate_hz", "count", "dropped"}``, each subscriber ``{"node", "host", "qos",
-    "rate_hz", "count", "dropped", "rejected"}`` (rates Hz over the nodes' last heartbeat period)."""
+    """Topic → ``{"type", "rate_hz", "publishers": [...], "subscribers": [...]}`` from heartbeats; each
+    publisher ``{"node", "host", "endpoint", "rate_hz", "count", "dropped"}``, each subscriber
+    ``{"node", "host", "qos", "rate_hz", "count", "dropped", "rejected"}`` (rates Hz over the nodes' last
+    heartbeat period)."""
     out: dict[str, dict] = {}
     for hb in beats.values():
         for st in hb.publishers:
-            t = out.setdefault(st.topic, {"type": st.type, "rate_hz": 0.0, "publishers": [], "subscribers": []})
-            t["publishers"].append({"node": hb.node, "host": hb.host, "endpoint": hb.endpoint, "rate_hz": st.rate_hz,
+            t = out.setdefault(st.topic,
+                               {"type": st.type, "rate_hz": 0.0, "publishers": [], "subscribers": []})
+            t["publishers"].append({"node": hb.node, "host": hb.host, "endpoint": hb.endpoint,
+                                    "rate_hz": st.rate_hz,
                                     "count": st.count, "dropped": st.dropped})
             t["rate_hz"] += st.rate_hz
         for st in hb.subscriptions:
-            t = out.setdefault(st.topic, {"type": st.type, "rate_hz": 0.0, "publishers": [], "subscribers": []})
+            t = out.setdefault(st.topic,
+                               {"type": st.type, "rate_hz": 0.0, "publishers": [], "subscribers": []})
             t["subscribers"].append({"node": hb.node, "host": hb.host, "qos": st.qos, "rate_hz": st.rate_hz,
                                      "count": st.count, "dropped": st.dropped, "rejected": st.rejected})
     return dict(sorted(out.items()))
@@ -121,13 +126,15 @@ def topic_info(args: argparse.Namespace) -> int:
         return 2 if beats is None else 1
     t = graph_topics(beats).get(args.topic)
     if t is None:
-        print(f"{args.topic}: no live node publishes or subscribes it (flexsheet topic list shows those that do)",
+        print(f"{args.topic}: no live node publishes or subscribes it (flexsheet topic list shows those that "
+              "do)",
               file=sys.stderr)
         return 1
     if args.json:
         print(json.dumps({"topic": args.topic, **t}, indent=1))
         return 0
-    print(f"topic: {args.topic}\ntype: {t['type']}\nrate: {t['rate_hz']:.1f} Hz\npublishers: {len(t['publishers'])}")
+    print(f"topic: {args.topic}\ntype: {t['type']}\nrate: {t['rate_hz']:.1f} Hz\npublishers: "
+          f"{len(t['publishers'])}")
     for p in t["publishers"]:
         print(f"  {p['node']} [{p['host']}] {p['endpoint']}  {p['rate_hz']:.1f} Hz, {p['count']} sent, "
               f"{p['dropped']} dropped")
@@ -197,12 +204,14 @@ def node_info(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(e, indent=1))
         return 0
-    print(f"node: {e['node']} ({e['type']}) host {e['host']} container {e['container'] or '-'} pid {e['pid']}\n"
-          f"endpoint: {e['endpoint'] or '-'}\nstate: {e['state']}{' (' + e['message'] + ')' if e['message'] else ''}"
-          f", up {e['uptime_s']:.1f} s, {e['rejected_total']} rejected")
+    print(f"node: {e['node']} ({e['type']}) host {e['host']} container {e['container'] or '-'} pid "
+          f"{e['pid']}\nendpoint: {e['endpoint'] or '-'}\nstate: "
+          f"{e['state']}{' (' + e['message'] + ')' if e['message'] else ''}, up {e['uptime_s']:.1f} s, "
+          f"{e['rejected_total']} rejected")
     print("publishers:")
     for p in e["publishers"]:
-        print(f"  {p['topic']} [{p['type']}] {p['rate_hz']:.1f} Hz, {p['count']} sent, {p['dropped']} dropped")
+        print(f"  {p['topic']} [{p['type']}] {p['rate_hz']:.1f} Hz, {p['count']} sent, {p['dropped']} "
+              "dropped")
     print("subscriptions:")
     for p in e["subscriptions"]:
         print(f"  {p['topic']} [{p['type']}] qos {p['qos']} {p['rate_hz']:.1f} Hz, {p['count']} received, "
@@ -266,7 +275,8 @@ def topic_echo(args: argparse.Namespace) -> int:
         else:
             print(f"--- {args.topic} [{msg.SCHEMA} v{msg.VERSION}]")
             for k, v in msg.__dict__.items():
-                print(f"{k}: {v!r}" if (args.arrays or not isinstance(v, np.ndarray)) else f"{k}: {_short(v)}")
+                print(f"{k}: {v!r}" if (args.arrays or not isinstance(v, np.ndarray))
+                      else f"{k}: {_short(v)}")
         if args.count and n >= args.count:
             done.set()
 
@@ -320,10 +330,11 @@ def _listen(args: argparse.Namespace, keep) -> list | None:
 
 
 def _time_base(got: list[tuple[float, float | None, int]], window: float) -> tuple[str, np.ndarray, float]:
-    """``(clock, periods, span_s)`` of what arrived, as (arrival s, header stamp s, bytes): on a simulated graph
-    (every stamp before :data:`~flexsheet.runtime.bag.SIMULATED_BEFORE`) the periods between the messages' own
-    stamps, in arrival order (a step back, a looping bag's restart, is left out), so the rate is per simulated
-    second however fast the graph runs; else the periods between arrivals on the wall clock over the window."""
+    """``(clock, periods, span_s)`` of what arrived, as (arrival s, header stamp s, bytes): on a simulated
+    graph (every stamp before :data:`~flexsheet.runtime.bag.SIMULATED_BEFORE`) the periods between the
+    messages' own stamps, in arrival order (a step back, a looping bag's restart, is left out), so the rate is
+    per simulated second however fast the graph runs; else the periods between arrivals on the wall clock over
+    the window."""
     stamps = [s for _, s, _ in got]
     if got and all(s is not None and s < SIMULATED_BEFORE for s in stamps):
         d = np.diff(np.array(stamps, dtype=float))
@@ -353,8 +364,8 @@ def topic_hz(args: argparse.Namespace) -> int:
     elif len(d) < 1:
         print(f"{args.topic}: {len(got)} messages in {args.window:.1f} s of wall time")
     else:
-        print(f"{args.topic}: average rate {out['rate_hz']:.2f} Hz ({_clock_words(clock)}) over {len(got)} msgs  "
-              f"min {out['period_min_s'] * 1e3:.2f} ms max {out['period_max_s'] * 1e3:.2f} ms "
+        print(f"{args.topic}: average rate {out['rate_hz']:.2f} Hz ({_clock_words(clock)}) over {len(got)} "
+              f"msgs  min {out['period_min_s'] * 1e3:.2f} ms max {out['period_max_s'] * 1e3:.2f} ms "
               f"std {out['period_std_s'] * 1e3:.2f} ms")
     return 0 if len(d) >= 1 else 1
 

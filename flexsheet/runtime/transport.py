@@ -22,8 +22,8 @@ class TransportError(RuntimeError):
 
 
 class Transport:
-    """Interface: ``start``, ``send``, ``subscribe``, ``set_latched``, ``close`` (called on the loop thread), plus
-    ``wants`` and ``send_remote`` for the node's publish path.
+    """Interface: ``start``, ``send``, ``subscribe``, ``set_latched``, ``close`` (called on the loop thread),
+    plus ``wants`` and ``send_remote`` for the node's publish path.
 
     ``threadsafe_send``: True when ``send``/``send_remote``/``set_latched``/``wants`` may be called from any
     thread (else the node marshals them onto its loop). ``bus``: the in-process bus of a composable container
@@ -62,8 +62,8 @@ class Transport:
 
     def link_report(self) -> str:
         """One line naming the peer endpoints this node has heard nothing from for a while (no link; see
-        :meth:`flexsheet.runtime.zmq.linkwatch.LinkWatch.report`), or "" (also for a transport without links, or a
-        container's node: its container's SUB socket is asked)."""
+        :meth:`flexsheet.runtime.zmq.linkwatch.LinkWatch.report`), or "" (also for a transport without links,
+        or a container's node: its container's SUB socket is asked)."""
         sock = getattr(self.bus, "sub", None)
         return sock.report() if sock is not None else ""
 

@@ -28,9 +28,9 @@ calibration the estimators use. Scene per image (8-bit mono, raw = distorted, li
   σ(I) table (≈ 0.6 ms per 640×512 image).
 
 Measured sensor numbers (:data:`XIMEA_SENSOR`): on the 17 real XIMEA pairs
-(/work/shared/data/stereo_calib_xi), read noise 2.54 DN, shot gain 0.312 DN/DN and optical blur σ 0.54 px
-(the registration's fit of a rendered board to each image, ``flexsheet.twin.sensor_noise.measure_ximea_noise``)
-— confirmed independently by ``flexsheet experiment triangulation`` (flat-patch second differences:
+(/work/shared/data/stereo_calib_xi), read noise 2.54 DN, shot gain 0.312 DN/DN and optical blur σ 0.54 px (the
+registration's fit of a rendered board to each image, ``flexsheet.twin.sensor_noise.measure_ximea_noise``) —
+confirmed independently by ``flexsheet experiment triangulation`` (flat-patch second differences:
 ``docs/figures/vision/sensor_noise.json``). The marker error therefore comes out of the image pipeline:
 nothing adds noise to a centroid.
 
@@ -152,9 +152,9 @@ def _capsule_hit(d: np.ndarray, A: np.ndarray, B: np.ndarray, r: float) -> np.nd
 class StereoCameraTwin:
     """Renders raw stereo pairs of the marker scene (module doc) through the camera it is given.
 
-    ``calib``: calibration dict (:func:`camera_model`) of the cameras that form the images; ``T_display_camera``
-    (4, 4): their left camera's pose in the display frame; ``cfg``: :class:`SimConfig`. In the twin both are
-    the truth's (:func:`twin_renderer`). Raises ``ValueError`` on a bad config or pose.
+    ``calib``: calibration dict (:func:`camera_model`) of the cameras that form the images;
+    ``T_display_camera`` (4, 4): their left camera's pose in the display frame; ``cfg``: :class:`SimConfig`.
+    In the twin both are the truth's (:func:`twin_renderer`). Raises ``ValueError`` on a bad config or pose.
     """
 
     def __init__(self, calib: dict, T_display_camera: np.ndarray, cfg: SimConfig | None = None):
@@ -189,7 +189,8 @@ class StereoCameraTwin:
     def _to_side(self, X_left: np.ndarray, side: str) -> np.ndarray:
         return X_left if side == "left" else X_left @ self.model.R.T + self.model.T
 
-    def finger_axis(self, position: np.ndarray, marker_diameter: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def finger_axis(self, position: np.ndarray, marker_diameter: float | None = None) -> tuple[np.ndarray,
+                                                                                               np.ndarray]:
         """Display-frame end points (A, B) (3,) m of the finger capsule's axis for a marker centred at
         ``position``: A the centre of the fingertip's cap, B toward the hand (module doc)."""
         c = self.cfg
@@ -427,7 +428,8 @@ class StereoCameraTwin:
                 mk, fg = self._box_coverage(side, box, S, rm, Ac if c.self_occlusion else None, Bc, rf)
                 if occlusion > 0:
                     # synthetic occluder: hide the marker beyond a vertical chord at the covered fraction
-                    u_c = float(np.mean(s_uv[:, 0])) + (f * rm / float(np.mean(S[:, 2]))) * (1 - 2 * occlusion)
+                    u_c = (float(np.mean(s_uv[:, 0])) + (f * rm / float(np.mean(S[:, 2])))
+                           * (1 - 2 * occlusion))
                     xx = np.arange(bx0, bx1, dtype=np.float32)[None, :]
                     keep = np.clip(u_c + 0.5 - xx, 0.0, 1.0)
                     fg = fg + mk * (1.0 - keep)

@@ -10,9 +10,9 @@ sensor of :class:`flexsheet.twin.camera_config.SimConfig` (``ideal`` → :meth:`
 ``drop_rate`` fraction of the frames is lost on the link (never published, counted). The sensing params left
 unset (``null``) take the realism's value. ``stereo_skew`` is 0: both views are rendered at one instant.
 
-The registration scenes a lab sets up by hand (:mod:`flexsheet.twin.registration_scene`: the board on the sheet,
-the projector's patterns, the dark room for the clamp markers) are switched by the service ``twin/scene``; the
-sheet follows the arms' joint states and the light ``/projector/image``. See
+The registration scenes a lab sets up by hand (:mod:`flexsheet.twin.registration_scene`: the board on the
+sheet, the projector's patterns, the dark room for the clamp markers) are switched by the service
+``twin/scene``; the sheet follows the arms' joint states and the light ``/projector/image``. See
 :mod:`flexsheet.vision.camera_port`.
 """
 
@@ -40,8 +40,9 @@ def sim_config(p) -> SimConfig:
     """The twin's :class:`SimConfig` for camera params ``p``: the realism's preset (:class:`SimConfig` or
     :meth:`SimConfig.ideal`) with every sensing param that is set (not ``None``) overriding it."""
     base = SimConfig() if p.twin.realism == "realistic" else SimConfig.ideal()
-    over = {k: getattr(p, k) for k in ("noise_dn", "shot_gain", "blur_px", "self_occlusion", "background_gain",
-                                      "finger_dir") if getattr(p, k) is not None}
+    over = {k: getattr(p, k)
+            for k in ("noise_dn", "shot_gain", "blur_px", "self_occlusion", "background_gain",
+                      "finger_dir") if getattr(p, k) is not None}
     cfg = replace(base, exposure_s=p.exposure_s, blur_samples=p.blur_samples, clutter=p.clutter, seed=p.seed,
                   noise_scale=p.noise_scale, **over)
     cfg.validate()
@@ -105,17 +106,18 @@ class TwinCamera(CameraSource):
         self._arm_states = {side: host.sample(topics.arm_state(side)) for side in ("left", "right")}
         host.subscribe(topics.PROJECTOR_IMAGE, self.on_projector_image, qos=QoS.LATEST)
         host.service("twin/scene", self.srv_scene,
-                     f"camera twin only: {{scene: {'|'.join(SCENES)}, board, square (m), offset (m)}}: what the "
-                     "operator set up in front of the camera (registration); finger: the display running",
+                     f"camera twin only: {{scene: {'|'.join(SCENES)}, board, square (m), offset (m)}}: what "
+                     "the operator set up in front of the camera (registration); finger: the display running",
                      commanding=True)
         host.service("twin/state", self.srv_twin_state,
-                     "camera twin only: {scene, projector_stamp (s: the /projector/image lighting the sheet now, or "
-                     "null), now (s)}; a frame exposed after now shows that image")
+                     "camera twin only: {scene, projector_stamp (s: the /projector/image lighting the sheet "
+                     "now, or null), now (s)}; a frame exposed after now shows that image")
 
     def srv_scene(self, args: dict) -> str:
         unknown = set(args) - {"scene", "board", "square", "offset"}
         if unknown:
-            raise ValueError(f"twin/scene takes scene, board, square, offset; got {', '.join(sorted(unknown))}")
+            raise ValueError("twin/scene takes scene, board, square, offset; got "
+                             f"{', '.join(sorted(unknown))}")
         with self._scene_lock:      # not while a frame of the old scene is being drawn
             return self.scene.set_scene(args.get("scene", ""), args.get("board", "chessboard:9x8"),
                                         args.get("square", 0.022), args.get("offset", 0.0))
@@ -137,7 +139,8 @@ class TwinCamera(CameraSource):
         with self._lock:
             projected = self._projected
         if len(q) < 2:
-            self.host.log_limited(logging.WARNING, "camera twin: the registration scene waits for both arms' joint states")
+            self.host.log_limited(logging.WARNING, "camera twin: the registration scene waits for both arms' "
+                                                   "joint states")
             return None
         with self._scene_lock:
             return self.scene.render(q["left"], q["right"], projected)
@@ -186,6 +189,6 @@ class TwinCamera(CameraSource):
             rx = self._truth_rx
         finger = ("finger: param trajectory (no /world/finger yet)" if not math.isfinite(rx)
                   else f"finger: /world/finger, last {self.host.now() - rx:.2f} s ago")
-        return (f"sim ({tc.realism} twin, truth seed {tc.truth_seed}; {self.host.registration}): stereo_skew 0 "
-                f"(the twin renders both views at one instant); dropped {self.dropped} of "
+        return (f"sim ({tc.realism} twin, truth seed {tc.truth_seed}; {self.host.registration}): stereo_skew "
+                f"0 (the twin renders both views at one instant); dropped {self.dropped} of "
                 f"{self.host.frames + self.dropped} frames (drop_rate {self._drop_rate:g}); {finger}")

@@ -1,7 +1,7 @@
 """The arm controller twin's logic, independent of Modbus transport (pure; time is passed in).
 
-:class:`ControllerCore` owns the register image of docs/register_map.md, validates every write (a refused write
-changes nothing and records a reject code), runs the joint servo (:mod:`.servo`) in fixed periods, and
+:class:`ControllerCore` owns the register image of docs/register_map.md, validates every write (a refused
+write changes nothing and records a reject code), runs the joint servo (:mod:`.servo`) in fixed periods, and
 implements the watchdog, the e-stop and the resets. Holding means the executed command is frozen at the joints
 measured when the hold began; the servo brakes to it under its acceleration limit.
 
@@ -79,7 +79,7 @@ class ControllerCore:
         self.wd_changed_at = float(now)
         self.rejections = 0
         self.writes = 0
-        self.superseded = 0                     # accepted targets replaced in the same period (never executed)
+        self.superseded = 0  # accepted targets replaced in the same period (never executed)
         self.executed = 0                       # cycles that took a new target
         self.network_resets_refused = 0         # RESET edges over the network while e-stopped
         self.local_resets = 0
@@ -97,13 +97,15 @@ class ControllerCore:
             self._reject(reg.REJ_ADDRESS, str(e))
         end = address + len(vals)
         if address < 0 or end > reg.HR_COUNT or not vals:
-            self._reject(reg.REJ_ADDRESS, f"write {address}..{end - 1} outside holding registers 0..{reg.HR_COUNT - 1}")
+            self._reject(reg.REJ_ADDRESS, f"write {address}..{end - 1} outside holding registers "
+                                          f"0..{reg.HR_COUNT - 1}")
         new = list(self.holding)
         new[address:end] = vals
         t_lo, t_hi = reg.HR_TARGET, reg.HR_TARGET + 12
         touches_targets = address < t_hi and end > t_lo
         if touches_targets and ((max(address, t_lo) - t_lo) % 2 or (min(end, t_hi) - t_lo) % 2):
-            self._reject(reg.REJ_PARTIAL_PAIR, f"write {address}..{end - 1} splits a 32-bit joint target pair")
+            self._reject(reg.REJ_PARTIAL_PAIR, f"write {address}..{end - 1} splits a 32-bit joint target "
+                                               "pair")
         if address <= reg.HR_COMMAND < end:
             try:
                 reg.check_command(new[reg.HR_COMMAND])
@@ -223,7 +225,8 @@ class ControllerCore:
         """One diagnostics line: state and counters."""
         return (f"modbus {'enabled' if self.enabled else 'held'}, fault {self.fault}: writes {self.writes}, "
                 f"rejected {self.rejections}, superseded {self.superseded}, executed {self.executed}, "
-                f"network resets refused (e-stop) {self.network_resets_refused}, local resets {self.local_resets}")
+                f"network resets refused (e-stop) {self.network_resets_refused}, local resets "
+                f"{self.local_resets}")
 
     def status_word(self, now: float) -> int:
         """STATUS register value at time ``now``."""

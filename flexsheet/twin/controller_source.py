@@ -20,9 +20,9 @@ class TwinController(ControllerSource):
     paced_by_node = True
 
     simulated_clock = True
-    other_clock = ("source sim is the controller twin of this process, reached at simulated instants: it needs the "
-                   "launch file's clock: sim; on the wall clock reach a controller twin node over the network "
-                   "(source: tcp)")
+    other_clock = ("source sim is the controller twin of this process, reached at simulated instants: it "
+                   "needs the launch file's clock: sim; on the wall clock reach a controller twin node over "
+                   "the network (source: tcp)")
 
     @classmethod
     def modbus_client(cls) -> type:

@@ -95,7 +95,8 @@ class FingerScript:
             raise ValueError(f"profile must be 'linear' or 'minjerk', got {self.profile!r}")
         for k in ("moving_time", "radius"):
             check_positive(k, getattr(self, k))
-        for k in ("depth", "push_depth", "approach_time", "approach_distance", "hold_before", "hold_after", "lag",
+        for k in ("depth", "push_depth", "approach_time", "approach_distance", "hold_before", "hold_after",
+                  "lag",
                   "wander_deg", "wander_axial", "tremor_rms"):
             check_positive(k, getattr(self, k), allow_zero=True)
         for k in ("start_angle", "end_angle"):
@@ -188,7 +189,8 @@ class FingerScript:
             raise ValueError("t must be finite")
         if self._path is not None:
             return self._scene_positions(t)
-        phi = np.asarray(self.target_angle(t - self.lag), float) + np.radians(self._noise(t, self._wander[0], self.wander_deg))
+        phi = (np.asarray(self.target_angle(t - self.lag), float)
+               + np.radians(self._noise(t, self._wander[0], self.wander_deg)))
         h = self._noise(t, self._wander[1], self.wander_axial)
         r = self.radius - self._depth(t)
         ap = np.clip(1.0 - t / self.approach_time, 0.0, 1.0) if self.approach_time > 0 else np.zeros_like(t)
@@ -216,8 +218,8 @@ class FingerScript:
         return p + trem
 
     def surface_point(self, t) -> tuple[np.ndarray, np.ndarray]:
-        """The mark's path point (N, 3) m and outward normal (N, 3) at times t (N,) s, without the finger's lag,
-        wander, depth and tremor (a scene's path; the cylinder's circle otherwise)."""
+        """The mark's path point (N, 3) m and outward normal (N, 3) at times t (N,) s, without the finger's
+        lag, wander, depth and tremor (a scene's path; the cylinder's circle otherwise)."""
         t = np.atleast_1d(np.asarray(t, float))
         if self._path is not None:
             q, n, _ = _path_at(self._path, np.asarray(self.target_fraction(t), float) * self._path["length"])
@@ -236,7 +238,8 @@ class FingerScript:
         return (p[1] - p[0]) / (2 * h)
 
     def state(self, t: float, h: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
-        """(:meth:`position`, :meth:`velocity`) at t s from one evaluation of three samples: (3,) m, (3,) m/s."""
+        """(:meth:`position`, :meth:`velocity`) at t s from one evaluation of three samples: (3,) m, (3,)
+        m/s."""
         p = self.positions(np.array([t - h, t, t + h]))
         return p[1], (p[2] - p[0]) / (2 * h)
 
@@ -257,7 +260,8 @@ def _path_table(scene) -> dict:
     try:
         P, N = scene.stroke_at(np.linspace(0.0, 1.0, PATH_SAMPLES))
     except (AttributeError, TypeError) as exc:
-        raise ValueError(f"scene must be a flexsheet.model.scenes.Scene, got {type(scene).__name__}: {exc}") from None
+        raise ValueError(f"scene must be a flexsheet.model.scenes.Scene, got {type(scene).__name__}: "
+                         f"{exc}") from None
     seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
     keep = np.concatenate([[True], seg > 1e-9])        # a projected polyline can repeat a surface point
     P, N = P[keep], N[keep]
@@ -276,9 +280,9 @@ def _path_table(scene) -> dict:
 
 
 def _path_at(tab: dict, arc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Point, normal and direction (each (N, 3)) at arc lengths ``arc`` (N,) m along the table; beyond the ends
-    the path goes on along the osculating circle of its end (the end's normal curvature; straight where it
-    is flat), so a wander past the start of an arc stays on the arc's circle."""
+    """Point, normal and direction (each (N, 3)) at arc lengths ``arc`` (N,) m along the table; beyond the
+    ends the path goes on along the osculating circle of its end (the end's normal curvature; straight where
+    it is flat), so a wander past the start of an arc stays on the arc's circle."""
     s, P, N, T = tab["s"], tab["P"], tab["N"], tab["T"]
     L = s[-1]
     a = np.clip(arc, 0.0, L)
@@ -305,13 +309,14 @@ def _path_at(tab: dict, arc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
     return q, n, d
 
 
-def after(prev: FingerScript, script: FingerScript, t: float, h: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
-    """(position (3,) m, velocity (3,) m/s) at time ``t`` s of segment ``script`` played after ``prev``: during
-    ``script``'s approach the finger leaves where ``prev`` ended, lifts off along ``prev``'s last normal by
-    ``approach_distance`` (in the first third of the approach) and blends (smoothstep) into ``script``'s own
-    approach. A real finger moves through free space between two strokes; jumping to the next start put it
-    behind the sheet still posed at the last stroke's end (a contact 3–4 mm deep that no finger makes). After
-    the approach: ``script.state(t)``."""
+def after(prev: FingerScript, script: FingerScript, t: float, h: float = 1e-4) -> tuple[np.ndarray,
+                                                                                        np.ndarray]:
+    """(position (3,) m, velocity (3,) m/s) at time ``t`` s of segment ``script`` played after ``prev``:
+    during ``script``'s approach the finger leaves where ``prev`` ended, lifts off along ``prev``'s last
+    normal by ``approach_distance`` (in the first third of the approach) and blends (smoothstep) into
+    ``script``'s own approach. A real finger moves through free space between two strokes; jumping to the next
+    start put it behind the sheet still posed at the last stroke's end (a contact 3–4 mm deep that no finger
+    makes). After the approach: ``script.state(t)``."""
     if not (0.0 <= t < script.approach_time):
         return script.state(t)
     p_end = prev.position(prev.duration)

@@ -1,12 +1,13 @@
-"""The simulated viewer's head: a seeded slow sway, a scripted lean-in and occlusions of the glasses (twin only).
+"""The simulated viewer's head: a seeded slow sway, a scripted lean-in and occlusions of the glasses (twin
+only).
 
-A seated viewer's head is never still. :class:`HeadMotion` moves the cyclopean eye about the paper's V by a sum
-of slow sinusoids per axis (a seated person's postural sway, 0.05–0.4 Hz, of centimetres: Kapteyn et al. 1983
-report a few cm of head sway at the frequencies of postural control), turns the head by a few degrees the same
-way, and plays a scripted lean-in toward the sheet and scripted occlusions of the glasses' markers (a hand in
-front of the glasses). The viewer's own measurements — the true interpupillary distance and the true eyes'
-offset in the glasses frame — are drawn per truth seed (:class:`Viewer`); the lab measures them with their
-errors (:meth:`Viewer.measured`), and only those measurements reach the tracker.
+A seated viewer's head is never still. :class:`HeadMotion` moves the cyclopean eye about the paper's V by a
+sum of slow sinusoids per axis (a seated person's postural sway, 0.05–0.4 Hz, of centimetres: Kapteyn et al.
+1983 report a few cm of head sway at the frequencies of postural control), turns the head by a few degrees the
+same way, and plays a scripted lean-in toward the sheet and scripted occlusions of the glasses' markers (a
+hand in front of the glasses). The viewer's own measurements — the true interpupillary distance and the true
+eyes' offset in the glasses frame — are drawn per truth seed (:class:`Viewer`); the lab measures them with
+their errors (:meth:`Viewer.measured`), and only those measurements reach the tracker.
 
 Frames: ``display`` (:mod:`flexsheet.model.geometry`); the glasses frame of :mod:`flexsheet.calibration.eye`
 (x from the right lens to the left lens, y up, z toward the sheet when worn). Units m, rad, s.
@@ -30,13 +31,15 @@ IPD_MEAN, IPD_SD = 0.063, 0.0035
 
 
 def seeded_stream(seed: int, name: str) -> np.random.Generator:
-    """A generator of its own per truth ``seed`` and ``name`` (drawing one thing never moves another's draws)."""
+    """A generator of its own per truth ``seed`` and ``name`` (drawing one thing never moves another's
+    draws)."""
     return np.random.default_rng([int(seed), sum(ord(c) * 131 ** i for i, c in enumerate(name)) % (2**31)])
 
 
 @dataclass(frozen=True)
 class Viewer:
-    """The viewer's true eyes: ``ipd`` m and ``eye_offset`` (3,) m in the glasses frame (how the glasses sit)."""
+    """The viewer's true eyes: ``ipd`` m and ``eye_offset`` (3,) m in the glasses frame (how the glasses
+    sit)."""
 
     ipd: float
     eye_offset: np.ndarray
@@ -60,8 +63,8 @@ class Viewer:
 
 @dataclass(frozen=True)
 class HeadState:
-    """The head at one instant: ``T_display_glasses`` (4, 4); ``left``, ``right``, ``eye`` (3,) m; ``velocity``
-    (3,) m/s of the cyclopean eye; ``visible``: the glasses' markers are not occluded."""
+    """The head at one instant: ``T_display_glasses`` (4, 4); ``left``, ``right``, ``eye`` (3,) m;
+    ``velocity`` (3,) m/s of the cyclopean eye; ``visible``: the glasses' markers are not occluded."""
 
     T_display_glasses: np.ndarray
     left: np.ndarray
@@ -75,12 +78,12 @@ class HeadState:
 class HeadMotion:
     """The viewer's head over script time ``t`` s (see the module docstring).
 
-    ``viewer``: the true eyes; ``seed``: the sway's phases and frequencies; ``sway`` (3,) m: the largest excursion
-    of the cyclopean eye along x, y, z (default ±50, ±50, ±30 mm); ``turn`` (3,) rad: the largest roll, pitch and
-    yaw; ``still``: no sway (the eye at ``home``). ``lean_in``: (start s, depth m toward the sheet, hold s), the
-    eye ramping in over 1.5 s and back over 1.5 s (minimum jerk), or None; ``occlusions``: (start s, duration s)
-    spans in which the markers are hidden. ``home`` (3,) m: the eye the sway is about (the paper's V).
-    Raises ``ValueError`` on negative amplitudes, depths or durations.
+    ``viewer``: the true eyes; ``seed``: the sway's phases and frequencies; ``sway`` (3,) m: the largest
+    excursion of the cyclopean eye along x, y, z (default ±50, ±50, ±30 mm); ``turn`` (3,) rad: the largest
+    roll, pitch and yaw; ``still``: no sway (the eye at ``home``). ``lean_in``: (start s, depth m toward the
+    sheet, hold s), the eye ramping in over 1.5 s and back over 1.5 s (minimum jerk), or None; ``occlusions``:
+    (start s, duration s) spans in which the markers are hidden. ``home`` (3,) m: the eye the sway is about
+    (the paper's V). Raises ``ValueError`` on negative amplitudes, depths or durations.
     """
 
     viewer: Viewer

@@ -5,9 +5,9 @@ Scene per image (8-bit mono, raw = distorted, like the real camera):
 
 * a uniform grey background (``background`` DN);
 * the printed board (black ``black`` DN, white ``white`` DN, one gap of white margin) warped into the image by
-  the exact homography of the board plane, from a texture whose scale matches the image's (area-averaged edges,
-  so edges fall where the geometry puts them). The board is drawn only while its printed face is toward the
-  camera and in front of it;
+  the exact homography of the board plane, from a texture whose scale matches the image's (area-averaged
+  edges, so edges fall where the geometry puts them). The board is drawn only while its printed face is toward
+  the camera and in front of it;
 * lens distortion (when ``dist`` is non-zero): the ideal image is remapped through the exact inverse of the
   OpenCV model (``cv2.undistortPoints`` of every raw pixel, computed once);
 * motion blur: a line kernel along the board centre's image-plane streak over the exposure ``exposure_s``
@@ -89,7 +89,8 @@ class HeadCameraTwin:
         self.rng = np.random.default_rng(seed)
         w, h = self.size
         self._pad = 64
-        self._bank = self.noise_sigma * self.rng.standard_normal((h + self._pad, w + self._pad), dtype=np.float32)
+        self._bank = (self.noise_sigma
+                      * self.rng.standard_normal((h + self._pad, w + self._pad), dtype=np.float32))
         self._textures: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._maps = None
         if np.any(self.D != 0):
@@ -116,9 +117,9 @@ class HeadCameraTwin:
         return self.board.object_points_glasses() @ T[:3, :3].T + T[:3, 3]
 
     def _draw_board(self, T_cb: np.ndarray, velocity_c: np.ndarray, exposure_s: float):
-        """The board drawn into the raw image's region that holds it: (region (h, w) float32 DN, distorted, not
-        blurred; box (x0, y0, x1, y1) px; streak (2,) px over the exposure), or None when the board is behind
-        the camera, turned away or outside the image."""
+        """The board drawn into the raw image's region that holds it: (region (h, w) float32 DN, distorted,
+        not blurred; box (x0, y0, x1, y1) px; streak (2,) px over the exposure), or None when the board is
+        behind the camera, turned away or outside the image."""
         w, h = self.size
         bw, bh = self.board.size
         g = self.board.gap
@@ -144,7 +145,8 @@ class HeadCameraTwin:
             streak = d * exposure_s
         m = int(math.ceil(4 * self.blur_px + 0.5 * float(np.hypot(*streak)))) + 4
         x0, y0 = (int(max(0, math.floor(v) - m)) for v in uv.min(0))
-        x1, y1 = int(min(w, math.ceil(uv[:, 0].max()) + m + 1)), int(min(h, math.ceil(uv[:, 1].max()) + m + 1))
+        x1, y1 = (int(min(w, math.ceil(uv[:, 0].max()) + m + 1)),
+                  int(min(h, math.ceil(uv[:, 1].max()) + m + 1)))
         if x1 <= x0 or y1 <= y0:
             return None
         bg = self.levels[0]
@@ -158,11 +160,12 @@ class HeadCameraTwin:
                             cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=bg)
         return roi, (x0, y0, x1, y1), streak
 
-    def render(self, T_display_glasses, velocity=None, exposure_s: float = 0.004, occluded: bool = False) -> np.ndarray:
-        """One raw frame (H, W) uint8 of the glasses at ``T_display_glasses`` (4, 4) (mid-exposure) translating
-        at ``velocity`` (3,) m/s (display frame; None: at rest) over ``exposure_s`` s (the streak of the board's
-        centre blurs the whole board); ``occluded``: a black frame. Raises ``ValueError`` on a bad pose,
-        velocity or exposure."""
+    def render(self, T_display_glasses, velocity=None, exposure_s: float = 0.004,
+               occluded: bool = False) -> np.ndarray:
+        """One raw frame (H, W) uint8 of the glasses at ``T_display_glasses`` (4, 4) (mid-exposure)
+        translating at ``velocity`` (3,) m/s (display frame; None: at rest) over ``exposure_s`` s (the streak
+        of the board's centre blurs the whole board); ``occluded``: a black frame. Raises ``ValueError`` on a
+        bad pose, velocity or exposure."""
         T = check_pose("T_display_glasses", T_display_glasses, tol=1e-6)
         v = np.zeros(3) if velocity is None else check_vector("velocity", velocity)
         exposure_s = check_positive("exposure_s", exposure_s, allow_zero=True)

@@ -1,6 +1,7 @@
-"""The head camera port's simulated side (``source: sim``): the head camera's twin renders the viewer's glasses
-at the world's true head (``/world/head``), through the hidden truth's camera (``twin: {realism, truth_seed}``);
-the tracker beside it knows only the registered camera. See :mod:`flexsheet.vision.head_camera_port`."""
+"""The head camera port's simulated side (``source: sim``): the head camera's twin renders the viewer's
+glasses at the world's true head (``/world/head``), through the hidden truth's camera
+(``twin: {realism, truth_seed}``); the tracker beside it knows only the registered camera. See
+:mod:`flexsheet.vision.head_camera_port`."""
 
 from __future__ import annotations
 
@@ -18,8 +19,8 @@ __all__ = ["TwinHeadCamera"]
 
 
 class TwinHeadCamera(HeadCameraSource):
-    """Frames of the head camera's twin (module doc): each drawn at its mid-exposure time, the newest true head
-    moved on by its velocity (by at most 0.1 s); an occluded head gives a dark frame."""
+    """Frames of the head camera's twin (module doc): each drawn at its mid-exposure time, the newest true
+    head moved on by its velocity (by at most 0.1 s); an occluded head gives a dark frame."""
 
     inputs = (topics.HEAD_TRUTH,)
 
@@ -31,7 +32,8 @@ class TwinHeadCamera(HeadCameraSource):
 
     @classmethod
     def open(cls, params, board) -> TwinHeadCamera:
-        """The twin of truth ``params.twin`` (``truth_seed``, ``realism``) drawing ``board``; ``params.exposure_s``."""
+        """The twin of truth ``params.twin`` (``truth_seed``, ``realism``) drawing ``board``;
+        ``params.exposure_s``."""
         K, D, T, w, h = true_head_camera(params.twin.truth_seed, params.twin.realism)
         return cls(HeadCameraTwin(K, D, T, w, h, board=board, seed=params.twin.truth_seed), params.exposure_s)
 
@@ -41,7 +43,8 @@ class TwinHeadCamera(HeadCameraSource):
             self._head = msg
 
     def frame_latency(self, exposure_s: float) -> float:
-        """The lab camera's readout and transfer of a frame of the twin's size (:data:`flexsheet.model.timing.LAB`)."""
+        """The lab camera's readout and transfer of a frame of the twin's size
+        (:data:`flexsheet.model.timing.LAB`)."""
         w, h = self.twin.size
         return LAB.camera_latency(exposure_s, w, h // 2)
 

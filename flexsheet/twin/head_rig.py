@@ -30,7 +30,8 @@ def _small_rotation(rng: np.random.Generator, sd_rad: float) -> np.ndarray:
     return cv2.Rodrigues(rng.normal(0.0, sd_rad, 3))[0]
 
 
-def true_head_camera(seed: int, realism: str = "realistic") -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+def true_head_camera(seed: int, realism: str = "realistic") -> tuple[np.ndarray, np.ndarray, np.ndarray, int,
+                                                                     int]:
     """(K (3, 3) px, D (5,), T_display_camera (4, 4), width, height) of the twin's head camera for truth
     ``seed``; ``realism`` "ideal": the design camera exactly. Raises ``ValueError`` on an unknown realism."""
     K, T, w, h = design_head_camera()

@@ -1,10 +1,10 @@
 """The lab PCs' clocks as the twin draws them: each arm PC's clock is off the main PC's by a drawn offset.
 
-The lab synchronises its three PCs with chrony (docs/deploy.md, "2. Time sync"), which keeps each arm PC within
-:data:`ARM_CLOCK_OFFSET_MAX` of main, so the two arm PCs within twice that (0.5 ms) of each other. Both bridges
-evaluate the sheet's motion at their own clock's instant against the segment's start stamp from main, so the
-offset puts one clamp ahead of the other on the path. A realistic truth draws each arm's offset uniformly in
-±:data:`ARM_CLOCK_OFFSET_MAX`, per truth seed and arm; an ideal one has none. Units s.
+The lab synchronises its three PCs with chrony (docs/deploy.md, "2. Time sync"), which keeps each arm PC
+within :data:`ARM_CLOCK_OFFSET_MAX` of main, so the two arm PCs within twice that (0.5 ms) of each other. Both
+bridges evaluate the sheet's motion at their own clock's instant against the segment's start stamp from main,
+so the offset puts one clamp ahead of the other on the path. A realistic truth draws each arm's offset
+uniformly in ±:data:`ARM_CLOCK_OFFSET_MAX`, per truth seed and arm; an ideal one has none. Units s.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ ARM_CLOCK_OFFSET_MAX = 0.25e-3
 
 def arm_clock_offset(truth_seed: int, realism: str, arm: str) -> float:
     """The ``arm`` ("left" or "right") PC's clock minus main's, s, for truth ``truth_seed`` (int ≥ 0) and
-    ``realism`` ("realistic": drawn in ±:data:`ARM_CLOCK_OFFSET_MAX`; "ideal": 0). Raises ``ValueError`` naming
-    a bad argument."""
+    ``realism`` ("realistic": drawn in ±:data:`ARM_CLOCK_OFFSET_MAX`; "ideal": 0). Raises ``ValueError``
+    naming a bad argument."""
     if arm not in ("left", "right"):
         raise ValueError(f"arm must be 'left' or 'right', got {arm!r}")
     if realism not in ("realistic", "ideal"):

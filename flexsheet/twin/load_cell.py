@@ -1,4 +1,5 @@
-"""A probe on a load cell pressed into the twin's true sheet: what ``flexsheet calibrate sheet`` reads in the twin.
+"""A probe on a load cell pressed into the twin's true sheet: what ``flexsheet calibrate sheet`` reads in the
+twin.
 
 The probe is a rigid sphere of the fingertip's radius on a stage that moves along the sheet's normal; the true
 force is the world's own true sheet (:class:`flexsheet.twin.truth_sheet.TruthSheet` of the truth, at the
@@ -25,8 +26,9 @@ DEPTH_SIGMA = 2e-5
 
 
 class LoadCellTwin:
-    """Presses on the true sheet of ``truth`` (a :class:`TwinTruth`); ``seed`` draws the noise; ``folder``: the
-    true sheet's table family (default the shipped one). Raises ``FileNotFoundError`` when it lacks tables."""
+    """Presses on the true sheet of ``truth`` (a :class:`TwinTruth`); ``seed`` draws the noise; ``folder``:
+    the true sheet's table family (default the shipped one). Raises ``FileNotFoundError`` when it lacks
+    tables."""
 
     def __init__(self, truth: TwinTruth, seed: int = 0, folder: str = FAMILY_DIR) -> None:
         self.truth = truth

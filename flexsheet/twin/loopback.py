@@ -42,7 +42,8 @@ class _Reply:
         return self.exception_code != 0
 
     def __repr__(self) -> str:
-        return f"ExceptionResponse(exception_code={self.exception_code})" if self.exception_code else "Response()"
+        return (f"ExceptionResponse(exception_code={self.exception_code})" if self.exception_code
+                else "Response()")
 
 
 class LoopbackModbusClient:

@@ -9,10 +9,11 @@ Behaviour (what the twin does; where a public source does not settle a point the
   looping program of docs/arm.md). Until a NULL packet arrives the twin is *idle* (the ``Mxt`` instruction
   waits): it answers NULL packets only, and the first NULL opens a session. MOVE and END packets outside a
   session get no answer (nobody listens on port 10000 then).
-* **Owner.** A session belongs to the address *and port* whose NULL opened it (the real controller accepts only
-  the PC named in ``Open``; the twin cannot know that address, so it binds the first one). Datagrams from any
-  other sender are dropped and counted (``foreign``), END included; another sender's NULL takes the session
-  over only after the owner has been silent for ``owner_timeout`` s (a respawned bridge on a new port).
+* **Owner.** A session belongs to the address *and port* whose NULL opened it (the real controller accepts
+  only the PC named in ``Open``; the twin cannot know that address, so it binds the first one). Datagrams from
+  any other sender are dropped and counted (``foreign``), END included; another sender's NULL takes the
+  session over only after the owner has been silent for ``owner_timeout`` s (a respawned bridge on a new
+  port).
 * **CCount** must increase within a session (serial-number order mod 2³²; the opening NULL may carry any
   value): a replayed or out-of-order packet is dropped unanswered and counted (``replayed``).
 * **Answers.** Every datagram the session takes gets one reply, sent to the owner at the twin's **next control
@@ -133,7 +134,8 @@ class MxtCore:
 
     # ------------------------------------------------------------------ packets
     def command(self) -> np.ndarray:
-        """The command the next cycle executes as things stand: the latched MOVE, else the current one (6,) rad."""
+        """The command the next cycle executes as things stand: the latched MOVE, else the current one (6,)
+        rad."""
         return (self.active if self.pending is None else self.pending).copy()
 
     def receive(self, pkt: mxt.Packet, now: float, addr: object = None) -> np.ndarray | None:
@@ -227,7 +229,8 @@ class MxtCore:
             else:
                 types.append(mxt.TYP_NULL)
                 data.append(bytes(40))
-        return mxt.Packet(req.command, req.send_type, tuple(types), tuple(data), tcount=min(self.missed_cycles, 0xFFFF),
+        return mxt.Packet(req.command, req.send_type, tuple(types), tuple(data),
+                          tcount=min(self.missed_cycles, 0xFFFF),
                           ccount=req.ccount)
 
     # ------------------------------------------------------------------ time
@@ -270,9 +273,9 @@ class MxtCore:
         """One diagnostics line: session state and counters."""
         return (f"mxt session {self.session} ({self.owner}): received {self.received}, moves {self.moves}, "
                 f"executed {self.executed}, superseded {self.superseded}, extra {self.extra}, refused "
-                f"{self.refused}, replayed {self.replayed}, foreign {self.foreign}, takeovers {self.takeovers}, "
-                f"missed cycles {self.missed_cycles}, timeouts {self.timeouts}, unanswered {self.unanswered}, "
-                f"malformed {self.malformed}, ends {self.ends}")
+                f"{self.refused}, replayed {self.replayed}, foreign {self.foreign}, takeovers "
+                f"{self.takeovers}, missed cycles {self.missed_cycles}, timeouts {self.timeouts}, unanswered "
+                f"{self.unanswered}, malformed {self.malformed}, ends {self.ends}")
 
 
 def _newer(c: int, last: int | None) -> bool:
@@ -343,8 +346,8 @@ class MxtTwin:
 
     def cycle(self, now: float) -> None:
         """At ``now``: run the control cycles due (servo), then answer the requests taken before them. A
-        request is answered only after a control cycle has run since it was taken (a wake-up that falls
-        short of the next cycle boundary answers nothing yet); its JOINT is the command that cycle executes."""
+        request is answered only after a control cycle has run since it was taken (a wake-up that falls short
+        of the next cycle boundary answers nothing yet); its JOINT is the command that cycle executes."""
         if self.tick_times is not None:
             self.tick_times.append(now)
         self.core.advance(now)

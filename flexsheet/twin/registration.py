@@ -1,6 +1,7 @@
 """The display's registration run in the twin: every procedure of :mod:`flexsheet.calibration.procedures` on
 frames rendered from a hidden truth (:class:`TwinSource`), each estimate scored against that truth only after
-it is fixed, cached per seed (:func:`sim_display_calib`: the ``display.yaml`` the twin's estimator nodes load).
+it is fixed, cached per seed (:func:`sim_display_calib`: the ``display.yaml`` the twin's estimator nodes
+load).
 """
 
 from __future__ import annotations
@@ -28,7 +29,8 @@ from flexsheet.twin.truth import TwinTruth
 log = logging.getLogger(__name__)
 
 __all__ = ["TwinSource", "run_display_sim", "sim_display_calib", "score_registration", "verdicts", "TARGETS",
-           "SUMMARY_VERSION", "sim_display_calib_cached", "score_sheet", "working_model_error", "WORKING_STRAINS",
+           "SUMMARY_VERSION", "sim_display_calib_cached", "score_sheet", "working_model_error",
+           "WORKING_STRAINS",
            "contacts_model_error",
            "WORKING_TARGET_PCT"]
 
@@ -70,14 +72,15 @@ class TwinSource:
 
     def pattern_frames(self, patterns: list[np.ndarray], sheet_pose: np.ndarray, index: int) -> list[Pair]:
         """Stereo pairs of every pattern with the sheet at ``sheet_pose`` (pose number ``index``)."""
-        return self.twin.pattern_frames(patterns, sheet_pose, white_dn=self.sheet_white_dn, frames=self.n_pattern_frames)
+        return self.twin.pattern_frames(patterns, sheet_pose, white_dn=self.sheet_white_dn,
+                                        frames=self.n_pattern_frames)
 
     has_head_camera = True
     has_load_cell = True
 
     def sheet_presses(self, plan) -> list:
-        """The probe's readings (:class:`flexsheet.calibration.sheet.Press`) for each (stretch, u, v, depths) of
-        ``plan`` on the true sheet (:class:`flexsheet.twin.load_cell.LoadCellTwin`)."""
+        """The probe's readings (:class:`flexsheet.calibration.sheet.Press`) for each (stretch, u, v, depths)
+        of ``plan`` on the true sheet (:class:`flexsheet.twin.load_cell.LoadCellTwin`)."""
         cell = self._load_cell()
         return [r for s, u, v, ds in plan for r in cell.press(s, u, v, ds)]
 
@@ -107,7 +110,8 @@ class TwinSource:
         return self._rig
 
     def marker_frames(self, side: str, joints: list[np.ndarray]) -> tuple[list[Pair], list[np.ndarray]]:
-        """Stereo pairs while arm ``side`` visits ``joints``; returns (frames, the joints actually commanded)."""
+        """Stereo pairs while arm ``side`` visits ``joints``; returns (frames, the joints actually
+        commanded)."""
         f = self.twin.frames
         self.twin.frames = self.n_marker_frames
         try:
@@ -122,13 +126,14 @@ def _err(t, r):
 
 
 #: the registration targets: camera, projector, arm bases
-TARGETS = {"camera_mm": 0.5, "camera_deg": 0.1, "projector_mm": 2.0, "projector_deg": 0.2, "projector_px": 0.5,
+TARGETS = {"camera_mm": 0.5, "camera_deg": 0.1, "projector_mm": 2.0, "projector_deg": 0.2,
+           "projector_px": 0.5,
            "arms_mm": 1.0}
 
 
 def score_registration(truth: TwinTruth, cam, rc, proj, rp, arms: dict, sheet=None) -> dict:
-    """The estimates of :mod:`flexsheet.calibration.procedures` (camera entry + result, projector entry + result,
-    ``{side: (ArmEntry, ArmResult)}``, the sheet entry or None) scored against ``truth``: ``camera``,
+    """The estimates of :mod:`flexsheet.calibration.procedures` (camera entry + result, projector entry +
+    result, ``{side: (ArmEntry, ArmResult)}``, the sheet entry or None) scored against ``truth``: ``camera``,
     ``projector``, ``arms.<side>`` (translation_error_mm, rotation_error_deg, residuals), ``sheet`` (the
     identified model's and the nominal string band's median error against the true force over the presses, %)
     and ``targets``. Call it only once every estimate is fixed."""
@@ -141,7 +146,8 @@ def score_registration(truth: TwinTruth, cam, rc, proj, rp, arms: dict, sheet=No
                         "principal_point_error_px": (proj.K[:2, 2] - truth.projector_K[:2, 2]).tolist()}
     out["arms"] = {s: {**_err(*truth.base_error(s, e.T_display_base)), "residual_mm": r.residual_mm,
                        "configs": r.n_configs,
-                       "marker_offset_error_mm": float(np.linalg.norm(e.marker_offset - truth.clamp_marker[s]) * 1e3)}
+                       "marker_offset_error_mm": float(np.linalg.norm(e.marker_offset - truth.clamp_marker[s])
+                                                       * 1e3)}
                    for s, (e, r) in arms.items()}
     if sheet is not None:
         out["sheet"] = score_sheet(truth, sheet)
@@ -153,12 +159,13 @@ def score_sheet(truth: TwinTruth, sheet) -> dict:
     """The sheet entry against the true force (noise-free) at every reading of the press plan:
     ``model_error_pct`` / ``model_rms_pct`` (the identified model), ``nominal_error_pct`` (the string band it
     replaces), ``fitted_median_pct`` (what the fit saw, with the load cell's noise) and ``target_pct``; and
-    ``working`` (:func:`working_model_error`): over the display's working strains, at contacts the plan does not
-    press."""
+    ``working`` (:func:`working_model_error`): over the display's working strains, at contacts the plan does
+    not press."""
     cell = LoadCellTwin(truth)
     true = [Press(s, u, v, d, cell.true_force(s, u, v, d)) for s, u, v, ds in plan_presses() for d in ds]
     med, rms = model_error(sheet.material(), true)
-    return {"model_error_pct": med, "model_rms_pct": rms, "nominal_error_pct": model_error(SheetMaterial(), true)[0],
+    return {"model_error_pct": med, "model_rms_pct": rms,
+            "nominal_error_pct": model_error(SheetMaterial(), true)[0],
             "fitted_median_pct": sheet.provenance.residuals.get("median_pct"), "target_pct": SHEET_TARGET_PCT,
             "working": working_model_error(truth, sheet)}
 
@@ -178,19 +185,22 @@ def working_model_error(truth: TwinTruth, sheet) -> dict:
     ``max_pct``, ``n``, ``strains`` [lo, hi] and ``target_pct`` (:data:`WORKING_TARGET_PCT`, on the median). A
     judge's figure: it reads the truth."""
     cell = LoadCellTwin(truth)
-    r = relative_errors(sheet.material(), [Press(s, u, v, d, cell.true_force(s, u, v, d)) for s in WORKING_STRAINS
-                                           for u, v in WORKING_POINTS for d in PRESS_DEPTHS])
-    return {"median_pct": float(np.median(r)), "p90_pct": float(np.percentile(r, 90)), "max_pct": float(r.max()),
-            "n": int(len(r)), "strains": [WORKING_STRAINS[0], WORKING_STRAINS[-1]], "target_pct": WORKING_TARGET_PCT}
+    r = relative_errors(sheet.material(),
+                        [Press(s, u, v, d, cell.true_force(s, u, v, d)) for s in WORKING_STRAINS
+                         for u, v in WORKING_POINTS for d in PRESS_DEPTHS])
+    return {"median_pct": float(np.median(r)), "p90_pct": float(np.percentile(r, 90)),
+            "max_pct": float(r.max()),
+            "n": int(len(r)), "strains": [WORKING_STRAINS[0], WORKING_STRAINS[-1]],
+            "target_pct": WORKING_TARGET_PCT}
 
 
 def contacts_model_error(truth: TwinTruth, sheet, uv, weights=None) -> dict:
-    """The sheet entry's relative error against the true force (noise-free, forces ≥ 20 mN) where a run touched
-    the sheet: at the contacts ``uv`` (k, 2) m (u along the clamp line, v across) over :data:`WORKING_STRAINS`
-    × the plan's depths, each contact weighted by ``weights`` (k,) (its judged samples; None: 1).
-    ``median_pct``, ``p90_pct``, ``max_pct``, ``contacts``, ``strains`` and ``target_pct``
-    (:data:`WORKING_TARGET_PCT`, on the p90). A judge's figure: it reads the truth. Raises ``ValueError`` for no
-    contact, weights of another length, or no press of 20 mN at any contact."""
+    """The sheet entry's relative error against the true force (noise-free, forces ≥ 20 mN) where a run
+    touched the sheet: at the contacts ``uv`` (k, 2) m (u along the clamp line, v across) over
+    :data:`WORKING_STRAINS` × the plan's depths, each contact weighted by ``weights`` (k,) (its judged
+    samples; None: 1). ``median_pct``, ``p90_pct``, ``max_pct``, ``contacts``, ``strains`` and ``target_pct``
+    (:data:`WORKING_TARGET_PCT`, on the p90). A judge's figure: it reads the truth. Raises ``ValueError`` for
+    no contact, weights of another length, or no press of 20 mN at any contact."""
     uv = np.asarray(uv, float).reshape(-1, 2)
     w = np.ones(len(uv)) if weights is None else np.asarray(weights, float)
     if not len(uv) or w.shape != (len(uv),):
@@ -264,8 +274,8 @@ def run_display_sim(seed: int, out_dir: str, opts: Options = FULL, realism: str 
     with open(spath, "w") as fh:
         json.dump(summary, fh, indent=1)
     c, p = summary["camera"], summary["projector"]
-    log.info(f"display: seed {seed}: camera {c['translation_error_mm']:.3f} mm {c['rotation_error_deg']:.4f}°, "
-              f"projector {p['translation_error_mm']:.2f} mm {p['rotation_error_deg']:.3f}° "
+    log.info(f"display: seed {seed}: camera {c['translation_error_mm']:.3f} mm {c['rotation_error_deg']:.4f}"
+              f"°, projector {p['translation_error_mm']:.2f} mm {p['rotation_error_deg']:.3f}° "
               f"{p['reprojection_px']:.3f} px, arms " + ", ".join(
                   f"{s} {summary['arms'][s]['translation_error_mm']:.3f} mm" for s in summary["arms"]))
     return summary
@@ -294,18 +304,20 @@ def _cache_dir(seed: int, realism: str, cache_root: str | None, quick: bool) -> 
 
 def sim_display_calib_cached(seed: int, realism: str = "realistic", cache_root: str | None = None,
                              quick: bool = False) -> str | None:
-    """The path :func:`sim_display_calib` would return if its cache is current (same seed, realism, options and
-    procedure version), else ``None``: nothing runs."""
+    """The path :func:`sim_display_calib` would return if its cache is current (same seed, realism, options
+    and procedure version), else ``None``: nothing runs."""
     out = _cache_dir(seed, realism, cache_root, quick)
-    return os.path.join(out, "display.yaml") if _cached(out, _cache_key(seed, realism, QUICK if quick else FULL)) \
+    return os.path.join(out, "display.yaml") if _cached(out,
+                                                        _cache_key(seed, realism, QUICK if quick else FULL)) \
         else None
 
 
 def sim_display_calib(seed: int, realism: str = "realistic", cache_root: str | None = None,
                       quick: bool = False) -> str:
-    """Path of the twin's ``display.yaml`` for truth ``seed``, running the procedures once per seed and caching
-    them under ``cache_root`` (default ``$FLEXSHEET_CACHE`` or ``~/.cache/flexsheet``)/display/<realism>-<seed>.
-    This is what the twin's estimator nodes should load at start-up."""
+    """Path of the twin's ``display.yaml`` for truth ``seed``, running the procedures once per seed and
+    caching them under ``cache_root`` (default ``$FLEXSHEET_CACHE`` or
+    ``~/.cache/flexsheet``)/display/<realism>-<seed>. This is what the twin's estimator nodes should load at
+    start-up."""
     out = _cache_dir(seed, realism, cache_root, quick)
     run_display_sim(seed, out, QUICK if quick else FULL, realism)
     return os.path.join(out, "display.yaml")

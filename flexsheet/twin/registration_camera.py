@@ -231,7 +231,8 @@ class CalibrationTwin:
         T_lr = np.eye(4)
         T_lr[:3, :3] = np.asarray(c["R"]).T
         T_lr[:3, 3] = -np.asarray(c["R"]).T @ np.asarray(c["T"]).ravel()
-        self.cams = (TrueCamera(c["K1"], c["D1"], c["image_size"], T_dl), TrueCamera(c["K2"], c["D2"], c["image_size"], T_dl @ T_lr))
+        self.cams = (TrueCamera(c["K1"], c["D1"], c["image_size"], T_dl),
+                     TrueCamera(c["K2"], c["D2"], c["image_size"], T_dl @ T_lr))
         self.size = tuple(c["image_size"])
         self._tex: dict = {}
         self._ik = {}
@@ -270,7 +271,8 @@ class CalibrationTwin:
 
     def true_sheet_pose(self, q_left, q_right) -> np.ndarray:
         """(4, 4) the sheet's true pose with the arms at joints ``q_left``, ``q_right`` (6,) rad."""
-        return sheet_pose_from_clamps(self.truth.clamp_pose("left", q_left), self.truth.clamp_pose("right", q_right))
+        return sheet_pose_from_clamps(self.truth.clamp_pose("left", q_left),
+                                      self.truth.clamp_pose("right", q_right))
 
     # ----------------------------------------------------------------------------------------- board views
     def board_views(self, board: BoardSpec, sheet_poses: list[np.ndarray], board_offset: float = 0.0,
@@ -278,8 +280,8 @@ class CalibrationTwin:
         """Stereo pairs of ``board`` on the sheet at each commanded pose (4, 4). The first pose is the home
         pose: the board is rendered exactly at the display frame (it defines it); the others are moved by
         the true arms (:meth:`sheet_pose`). ``board_offset`` m: printed surface in front of the sheet's mid
-        plane (known to the procedure). ``bow_mm``: the board is not flat — a paraboloid bow toward the user of
-        this sag (mm) at the sheet's corners (±120, ±120 mm); 0 = flat."""
+        plane (known to the procedure). ``bow_mm``: the board is not flat — a paraboloid bow toward the user
+        of this sag (mm) at the sheet's corners (±120, ±120 mm); 0 = flat."""
         out = []
         for k, T_cmd in enumerate(sheet_poses):
             T = np.eye(4) if k == 0 else self.sheet_pose(np.asarray(T_cmd, float))
@@ -289,8 +291,8 @@ class CalibrationTwin:
 
     def board_dn(self, board: BoardSpec, T_sheet: np.ndarray, board_offset: float = 0.0,
                  bow_mm: float = 0.0) -> list[np.ndarray]:
-        """Sub-sample DN images (one per camera, (H·ss, W·ss) float32) of ``board`` on the sheet at its true pose
-        ``T_sheet`` (4, 4); arguments as :meth:`board_views`."""
+        """Sub-sample DN images (one per camera, (H·ss, W·ss) float32) of ``board`` on the sheet at its true
+        pose ``T_sheet`` (4, 4); arguments as :meth:`board_views`."""
         key = (board, round(self.ss))
         if key not in self._tex:
             self._tex[key] = board_texture(board)
@@ -348,9 +350,11 @@ class CalibrationTwin:
             out.append((pair[0], pair[1]))
         return out
 
-    def pattern_maps(self, T_sheet: np.ndarray, white_dn: float = 190.0, ambient_dn: float = 12.0) -> _PatternMaps:
-        """Where each camera sub-sample looks into the true projector with the sheet at its true pose ``T_sheet``
-        (4, 4), and how bright a white projector pixel is there (arguments as :meth:`pattern_frames`)."""
+    def pattern_maps(self, T_sheet: np.ndarray, white_dn: float = 190.0,
+                     ambient_dn: float = 12.0) -> _PatternMaps:
+        """Where each camera sub-sample looks into the true projector with the sheet at its true pose
+        ``T_sheet`` (4, 4), and how bright a white projector pixel is there (arguments as
+        :meth:`pattern_frames`)."""
         t = self.truth
         T = np.asarray(T_sheet, float)
         ss = max(2, self.ss - 1)
@@ -382,14 +386,15 @@ class CalibrationTwin:
         return _PatternMaps(ss, maps)
 
     def pattern_dn(self, maps: _PatternMaps, pattern: np.ndarray | None) -> list[np.ndarray]:
-        """Sub-sample DN images (one per camera) of projector image ``pattern`` (uint8 (h, w) at the projector's
-        resolution; ``None``: the projector dark) through :meth:`pattern_maps`. Raises ``ValueError`` on
-        another size."""
+        """Sub-sample DN images (one per camera) of projector image ``pattern`` (uint8 (h, w) at the
+        projector's resolution; ``None``: the projector dark) through :meth:`pattern_maps`. Raises
+        ``ValueError`` on another size."""
         pw, ph = self.truth.projector_size
         if pattern is None:
             pattern = np.zeros((ph, pw), np.uint8)
         if pattern.shape != (ph, pw):
-            raise ValueError(f"pattern must be ({ph}, {pw}) (the projector's resolution), got {pattern.shape}")
+            raise ValueError(f"pattern must be ({ph}, {pw}) (the projector's resolution), got "
+                             f"{pattern.shape}")
         p = cv2.GaussianBlur(pattern.astype(np.float32) / 255.0, (0, 0), self.PATTERN_BLUR_PX)
         out = []
         for mx, my, gain, bb, full in maps.maps:

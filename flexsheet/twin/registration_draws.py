@@ -2,8 +2,8 @@
 
 One seed says little about a target that a bad draw of the as-built display can miss. This runs the full
 preset (``flexsheet.calibration.procedures.FULL``) on each truth seed, scores it against that seed's hidden
-truth (:func:`flexsheet.twin.registration.run_display_sim`) and writes ``OUT/draws.json``: per seed the errors,
-and per target the median, the worst and the seeds that miss it; ``OUT/draws.png`` charts each error
+truth (:func:`flexsheet.twin.registration.run_display_sim`) and writes ``OUT/draws.json``: per seed the
+errors, and per target the median, the worst and the seeds that miss it; ``OUT/draws.png`` charts each error
 against its target (matplotlib Agg), with the same numbers. Run by
 ``flexsheet calibrate display --draws 40 --out docs/figures/calibration/draws``.
 
@@ -66,17 +66,20 @@ def run_draws(seeds: list[int], out_dir: str, quick: bool = False, realism: str 
         s = run_display_sim(int(seed), os.path.join(out_dir, f"seed{int(seed)}"), opts, realism)
         per[str(seed)] = {path: _get(s, path) for path, _, _ in FIGURES}
         bad = [k for k, ok in verdicts(s).items() if not ok]
-        log.info(f"draws: {i}/{len(seeds)} seed {seed}: " + ("all met" if not bad else "MISSED " + ", ".join(bad)))
+        log.info(f"draws: {i}/{len(seeds)} seed {seed}: "
+                 + ("all met" if not bad else "MISSED " + ", ".join(bad)))
     figs = {}
     for path, key, label in FIGURES:
         v = np.array([per[str(s)][path] for s in seeds])
         miss = [int(s) for s, x in zip(seeds, v, strict=True) if x > TARGETS[key]]
         k = int(np.argmax(v))
         figs[path] = {"label": label, "median": float(np.median(v)), "p90": float(np.percentile(v, 90)),
-                      "worst": float(v[k]), "worst_seed": int(seeds[k]), "target": TARGETS[key], "misses": miss,
+                      "worst": float(v[k]), "worst_seed": int(seeds[k]), "target": TARGETS[key],
+                      "misses": miss,
                       "met_share": 1.0 - len(miss) / len(seeds),
                       "verdict": "met" if not miss else f"MISSED on {len(miss)} of {len(seeds)}"}
-    doc = {"seeds": [int(s) for s in seeds], "draw": draw, "realism": realism, "preset": "quick" if quick else "full",
+    doc = {"seeds": [int(s) for s in seeds], "draw": draw, "realism": realism,
+           "preset": "quick" if quick else "full",
            "targets": dict(TARGETS), "per_seed": per, "figures": figs}
     with open(os.path.join(out_dir, "draws.json"), "w") as fh:
         json.dump(doc, fh, indent=1)

@@ -65,7 +65,8 @@ class RegistrationScene:
         return bool(np.all(np.abs(q_left - self._home["left"]) <= HOME_TOL_RAD)
                     and np.all(np.abs(q_right - self._home["right"]) <= HOME_TOL_RAD))
 
-    def render(self, q_left, q_right, projector: tuple[int, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
+    def render(self, q_left, q_right, projector: tuple[int, np.ndarray] | None) -> tuple[np.ndarray,
+                                                                                         np.ndarray]:
         """One raw stereo pair (uint8 (H, W) each) of the current scene with the arms at ``q_left``,
         ``q_right`` (6,) rad and the projector showing ``projector`` ((id, uint8 (h, w) image) or ``None``:
         dark). Raises ``ValueError`` in the ``finger`` scene (the fingertip renderer draws that one)."""
@@ -85,7 +86,8 @@ class RegistrationScene:
     def _draw(self, ql, qr, jkey, projector) -> list[np.ndarray]:
         tw = self.twin
         if self.scene == "markers":
-            dn = tw.marker_dn([tw.truth.clamp_marker_position("left", ql), tw.truth.clamp_marker_position("right", qr)])
+            dn = tw.marker_dn([tw.truth.clamp_marker_position("left", ql),
+                               tw.truth.clamp_marker_position("right", qr)])
             return [tw.clean(a, tw.ss) for a in dn]
         T = np.eye(4) if self.at_home(ql, qr) and self.scene == "board" else tw.true_sheet_pose(ql, qr)
         if self.scene == "board":
@@ -93,4 +95,5 @@ class RegistrationScene:
         if self._maps is None or self._maps[0] != jkey:          # the sheet moved: where the projector lands
             self._maps = (jkey, tw.pattern_maps(T))
         maps = self._maps[1]
-        return [tw.clean(a, maps.ss) for a in tw.pattern_dn(maps, None if projector is None else projector[1])]
+        return [tw.clean(a, maps.ss)
+                for a in tw.pattern_dn(maps, None if projector is None else projector[1])]

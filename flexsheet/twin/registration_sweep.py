@@ -69,12 +69,14 @@ def _seed_sweep(seed: int, realism: str, quick: bool) -> dict:
         r = cp_mod.estimate_camera_pose(views[:n], board, nom.camera.stereo, nom.camera.T_display_camera,
                                         prior_cov=prior, min_views=1)
         t, a = truth.camera_pose_error(r.T_display_camera)
-        out["camera"][n] = {"translation_error_mm": t * 1e3, "rotation_error_deg": _deg(a), "rms_px": r.rms_px}
+        out["camera"][n] = {"translation_error_mm": t * 1e3, "rotation_error_deg": _deg(a),
+                            "rms_px": r.rms_px}
         best = r
     log.info(f"sweep seed {seed}: {max(pj_n)} projector poses")
     W, H = nom.projector.width, nom.projector.height
     pats = pj_mod.gray_code_patterns(W, H)
-    pcs = [pj_mod.triangulate_pose(twin.pattern_frames(pats, T, frames=opts.pattern_frames), W, H, best.stereo,
+    pcs = [pj_mod.triangulate_pose(twin.pattern_frames(pats, T, frames=opts.pattern_frames), W, H,
+                                   best.stereo,
                                    best.T_display_camera, spacing=opts.pattern_spacing)
            for T in pj_mod.plan_projector_poses(max(pj_n))]
     for n in pj_n:
@@ -106,9 +108,9 @@ def _seed_sweep(seed: int, realism: str, quick: bool) -> dict:
 
 
 def _failure_modes(seed: int, realism: str) -> dict:
-    """A dark sheet (projector white on the sheet → decoded pixels, projector error or the refusal) and a bowed
-    board (sag at the sheet corners → camera error with the bow fitted and with a flat board assumed), on one
-    seed."""
+    """A dark sheet (projector white on the sheet → decoded pixels, projector error or the refusal) and a
+    bowed board (sag at the sheet corners → camera error with the bow fitted and with a flat board assumed),
+    on one seed."""
     truth = TwinTruth.draw(seed, realism)
     twin = CalibrationTwin(truth, seed=seed + 1000)
     nom = nominal_display_calib()
@@ -178,14 +180,18 @@ def _plot(doc: dict, path: str) -> None:
     t = doc["targets"]
     panels = [("camera", "translation_error_mm", "camera pose error, mm", t["camera_mm"], "board views"),
               ("camera", "rotation_error_deg", "camera rotation error, deg", t["camera_deg"], "board views"),
-              ("projector", "translation_error_mm", "projector position error, mm", t["projector_mm"], "sheet poses"),
-              ("projector", "rotation_error_deg", "projector rotation error, deg", t["projector_deg"], "sheet poses"),
-              ("projector", "reprojection_px", "projector reprojection RMS, px", t["projector_px"], "sheet poses"),
+              ("projector", "translation_error_mm", "projector position error, mm", t["projector_mm"],
+               "sheet poses"),
+              ("projector", "rotation_error_deg", "projector rotation error, deg", t["projector_deg"],
+               "sheet poses"),
+              ("projector", "reprojection_px", "projector reprojection RMS, px", t["projector_px"],
+               "sheet poses"),
               ("arms", "translation_error_mm", "arm base error, mm", t["arms_mm"], "configurations per arm")]
     fig, axes = plt.subplots(2, 3, figsize=(13, 7.5))
     for ax, (part, key, title, target, xlabel) in zip(axes.ravel(), panels, strict=True):
         for s, res in doc["per_seed"].items():
-            series = [(part, res[part])] if part != "arms" else [(f"{side}", res["arms"][side]) for side in ("left", "right")]
+            series = ([(part, res[part])] if part != "arms"
+                      else [(f"{side}", res["arms"][side]) for side in ("left", "right")])
             for label, d in series:
                 xs = [int(n) for n in d if key in d[n]]
                 ys = [d[n][key] for n in d if key in d[n]]
@@ -198,7 +204,8 @@ def _plot(doc: dict, path: str) -> None:
         ax.grid(True, which="both", alpha=0.3)
     axes[0, 0].legend(fontsize=7)
     axes[1, 2].legend(fontsize=6, ncol=2)
-    fig.suptitle(f"Display registration in the twin ({doc['realism']} truth): error vs number of poses", fontsize=11)
+    fig.suptitle(f"Display registration in the twin ({doc['realism']} truth): error vs number of "
+                 "poses", fontsize=11)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

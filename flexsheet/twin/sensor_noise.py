@@ -26,7 +26,8 @@ def _board_images(directory: str, side: str, crit) -> tuple[list, list, list]:
     imgs, corners, names = [], [], []
     for f in sorted(glob.glob(os.path.join(directory, f"{side}*.jpg"))):
         im = cv2.imread(f, cv2.IMREAD_GRAYSCALE)
-        ok, c = cv2.findChessboardCorners(im, (9, 6), flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        ok, c = cv2.findChessboardCorners(im, (9, 6),
+                                          flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
         if not ok:
             continue
         imgs.append(im)
@@ -132,7 +133,9 @@ def measure_ximea_noise(directory: str, square: float = 0.024, blur_grid=None) -
         raise ValueError(f"no chessboard image found in {directory!r}")
     med = {k: float(np.median([p[k] for p in per_image])) for k in per_image[0] if k != "image"}
     # σ² = read² + gain·I through the two levels
-    gain = max(0.0, (med["sigma_white_dn"] ** 2 - med["sigma_black_dn"] ** 2) / max(med["white_dn"] - med["black_dn"], 1e-6))
+    gain = max(0.0,
+               (med["sigma_white_dn"] ** 2 - med["sigma_black_dn"] ** 2)
+               / max(med["white_dn"] - med["black_dn"], 1e-6))
     read = math.sqrt(max(0.0, med["sigma_black_dn"] ** 2 - gain * med["black_dn"]))
     model = NoiseModel(read_dn=round(read, 3), shot_gain=round(gain, 5), blur_px=round(med["blur_px"], 3),
                        black_dn=round(med["black_dn"], 1), white_dn=round(med["white_dn"], 1),

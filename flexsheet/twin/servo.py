@@ -25,8 +25,8 @@ __all__ = ["ServoParams", "JointServo"]
 
 @dataclass(frozen=True)
 class ServoParams:
-    """Servo parameters. ``tau`` s (> 0); ``qd_max`` (6,) rad/s; ``qdd_max`` (6,) rad/s²; ``q_lower``/``q_upper``
-    (6,) rad, hard stops the model never passes."""
+    """Servo parameters. ``tau`` s (> 0); ``qd_max`` (6,) rad/s; ``qdd_max`` (6,) rad/s²;
+    ``q_lower``/``q_upper`` (6,) rad, hard stops the model never passes."""
 
     tau: float = 0.015
     qd_max: np.ndarray = field(default_factory=lambda: QD_MAX.copy())

@@ -14,9 +14,9 @@ quantity                   σ                       why
 =========================  ======================  =================================================================
 stereo intrinsics,         bootstrap covariance    the uncertainty the real XIMEA calibration leaves: 40 bootstrap
 distortion, R, T           (× ``camera_scale``)    resamples of its 17 pairs (``ximea_calib_bootstrap.json``,
-                                                   :func:`bootstrap_stereo_calibration`): σ_f ≈ 1.5–2 px, σ_c ≈
-                                                   1–1.8 px, σ_T ≈ 0.25/0.3/1.3 mm, σ_R ≈ 0.15°; drawn jointly
-                                                   (correlations kept: k1/k2/k3 compensate each other)
+                                                   :func:`bootstrap_stereo_calibration`): σ_f ≈ 1.5–2 px, σ_c
+                                                   ≈ 1–1.8 px, σ_T ≈ 0.25/0.3/1.3 mm, σ_R ≈ 0.15°; drawn
+                                                   jointly (correlations kept: k1/k2/k3 compensate each other)
 camera mount               10 mm, 1° per axis      bracket placed by hand near the design pose (assumption)
 projector focal length     1 %                     zoom/focus ring set by hand; throw-ratio tolerance (assumption)
 projector principal point  5 px per axis           lens-shift tolerance (assumption)
@@ -36,7 +36,7 @@ grip slip                  |N(0, 5 %)| of stretch  rubber sliding in the clamp j
 =========================  ======================  =================================================================
 
 ``realism="ideal"`` gives the nominal values exactly (every deviation zero), the twin as it was before.
-"""
+"""  # noqa: E501 - a table, template or command line kept whole
 
 from __future__ import annotations
 
@@ -107,11 +107,11 @@ def random_rotation(rng: np.random.Generator, sigma_rad: float) -> np.ndarray:
 def bootstrap_stereo_calibration(left: list[np.ndarray], right: list[np.ndarray], board, n: int = 40,
                                  seed: int = 1) -> dict:
     """Bootstrap the stereo calibration of image pairs: ``n`` resamples (with replacement) of the pairs, each
-    calibrated like :func:`flexsheet.vision.stereo_calibration.calibrate_stereo` (intrinsics per camera, then the
-    extrinsics with them fixed). Returns ``{"names": [...24], "deviations": (n, 24) list}`` — each resample's
-    :func:`stereo_vector` minus the all-pairs one. ``board``: a :class:`flexsheet.vision.stereo_calibration.BoardSpec`.
-    Raises ``ValueError`` when the board is not found in at least 6 pairs. Source: Efron & Tibshirani,
-    *An Introduction to the Bootstrap* (1993), ch. 6.
+    calibrated like :func:`flexsheet.vision.stereo_calibration.calibrate_stereo` (intrinsics per camera, then
+    the extrinsics with them fixed). Returns ``{"names": [...24], "deviations": (n, 24) list}`` — each
+    resample's :func:`stereo_vector` minus the all-pairs one. ``board``: a
+    :class:`flexsheet.vision.stereo_calibration.BoardSpec`. Raises ``ValueError`` when the board is not found
+    in at least 6 pairs. Source: Efron & Tibshirani, *An Introduction to the Bootstrap* (1993), ch. 6.
     """
     obj_all = board.object_points()
     data = []
@@ -141,7 +141,8 @@ def bootstrap_stereo_calibration(left: list[np.ndarray], right: list[np.ndarray]
         idx = rng.integers(0, len(data), len(data))
         if len(set(idx.tolist())) >= 6:
             devs.append(calib(idx) - full)
-    return {"names": list(STEREO_NAMES), "deviations": np.round(np.array(devs), 10).tolist(), "n_pairs": len(data)}
+    return {"names": list(STEREO_NAMES), "deviations": np.round(np.array(devs), 10).tolist(),
+            "n_pairs": len(data)}
 
 
 def _bootstrap_deviations() -> np.ndarray:
@@ -156,11 +157,12 @@ def _bootstrap_deviations() -> np.ndarray:
 # ------------------------------------------------------------------------------------------------ truth arm
 class TruthArm:
     """Forward kinematics of one "as built" RV-1A: the URDF with every joint origin offset by ``link_deltas``
-    (6, 3) m, joint zeros offset by ``joint_offsets`` (6,) rad (actual angle = commanded + offset), the base at
-    ``T_display_base`` (4, 4). Tool frame as :class:`flexsheet.arm.kinematics.ArmKinematics` (flip about x
+    (6, 3) m, joint zeros offset by ``joint_offsets`` (6,) rad (actual angle = commanded + offset), the base
+    at ``T_display_base`` (4, 4). Tool frame as :class:`flexsheet.arm.kinematics.ArmKinematics` (flip about x
     for the right clamp)."""
 
-    def __init__(self, side: str, T_display_base: np.ndarray, link_deltas: np.ndarray, joint_offsets: np.ndarray):
+    def __init__(self, side: str, T_display_base: np.ndarray, link_deltas: np.ndarray,
+                 joint_offsets: np.ndarray):
         if side not in ("left", "right"):
             raise ValueError(f"side must be 'left' or 'right', got {side!r}")
         self.side = side
@@ -176,7 +178,8 @@ class TruthArm:
         self.T_link_tool = _FLIP_X if side == "right" else np.eye(4)
 
     def fk(self, q) -> np.ndarray:
-        """True T_display_clamp (4, 4) m for commanded joints ``q`` (6,) rad. Raises ``ValueError`` on bad q."""
+        """True T_display_clamp (4, 4) m for commanded joints ``q`` (6,) rad. Raises ``ValueError`` on bad
+        q."""
         q = np.asarray(q, float)
         if q.shape != (6,) or not np.all(np.isfinite(q)):
             raise ValueError(f"q must be a finite (6,) joint vector, got {q!r}")
@@ -194,8 +197,8 @@ class TwinTruth:
     ``T_display_projector`` (4, 4), ``projector_size`` (w, h); ``bases`` side → (4, 4); ``link_deltas`` side →
     (6, 3) m; ``joint_offsets`` side → (6,) rad; ``clamp_marker`` side → (3,) m in the clamp frame;
     ``clamp_marker_diameter`` m; ``marker_diameter`` m (fingertip); ``sheet_young`` Pa; ``sheet_prestrain``;
-    ``sheet_thickness`` m; ``grip_slip``: the fraction of the clamps' stretch lost to the rubber sliding in the
-    jaws; ``tension_ratio``: None, the sheet's pre-stress is the gripped plane-stress field
+    ``sheet_thickness`` m; ``grip_slip``: the fraction of the clamps' stretch lost to the rubber sliding in
+    the jaws; ``tension_ratio``: None, the sheet's pre-stress is the gripped plane-stress field
     (:mod:`flexsheet.model.sheet_prestress`), or a uniform T_v/T_u (never drawn: a stability sweep's what-if).
     """
 
@@ -266,7 +269,8 @@ class TwinTruth:
         bases, links, zeros, markers = {}, {}, {}, {}
         for side in ("left", "right"):
             Tb = nom.arms[side].T_display_base
-            tilt = np.array([rng.normal(0.0, k * sp.base_tilt_deg * deg), rng.normal(0.0, k * sp.base_tilt_deg * deg),
+            tilt = np.array([rng.normal(0.0, k * sp.base_tilt_deg * deg),
+                             rng.normal(0.0, k * sp.base_tilt_deg * deg),
                              rng.normal(0.0, k * sp.base_yaw_deg * deg)])
             bases[side] = pose_from_rt(cv2.Rodrigues(tilt)[0] @ Tb[:3, :3],
                                        Tb[:3, 3] + rng.normal(0.0, k * sp.base_mm * mm, 3))
@@ -285,7 +289,8 @@ class TwinTruth:
     def arm(self, side: str) -> TruthArm:
         """The true forward kinematics of arm ``side`` (cached)."""
         if side not in self._arms:
-            self._arms[side] = TruthArm(side, self.bases[side], self.link_deltas[side], self.joint_offsets[side])
+            self._arms[side] = TruthArm(side, self.bases[side], self.link_deltas[side],
+                                        self.joint_offsets[side])
         return self._arms[side]
 
     def clamp_pose(self, side: str, q) -> np.ndarray:
@@ -306,11 +311,13 @@ class TwinTruth:
         return _pose_error(T_display_camera, self.T_display_camera)
 
     def base_error(self, side: str, T_display_base: np.ndarray) -> tuple[float, float]:
-        """(translation error m, rotation error rad) of an estimated base pose of ``side`` against the truth."""
+        """(translation error m, rotation error rad) of an estimated base pose of ``side`` against the
+        truth."""
         return _pose_error(T_display_base, self.bases[side])
 
     def summary(self) -> dict:
-        """JSON-able dict of the truth (for the twin's logs and the honest-twin report; never for estimators)."""
+        """JSON-able dict of the truth (for the twin's logs and the honest-twin report; never for
+        estimators)."""
         def a(x):
             return np.asarray(x, float).round(9).tolist()
         return {"seed": self.seed, "realism": self.realism, "spreads": asdict(self.spreads),
@@ -347,7 +354,8 @@ def _pose_error(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float]:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m flexsheet.twin.truth --bootstrap DIR``: regenerate ``ximea_calib_bootstrap.json`` from the
-    real XIMEA pairs in DIR (``left*.jpg``/``right*.jpg``, chessboard 9×6, 24 mm); ``--seed N``: print a truth."""
+    real XIMEA pairs in DIR (``left*.jpg``/``right*.jpg``, chessboard 9×6, 24 mm); ``--seed N``: print a
+    truth."""
     import argparse
     import glob
 

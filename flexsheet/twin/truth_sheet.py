@@ -19,12 +19,12 @@ core). The force of a truth at depth d, contact (u, v), clamp strain s:
 
     F = (E t / E₀ t₀) · F_A(ε; d, u, v) · [1 + (R(ε; d, u, v) − 1)·(s − ε)/SPAN_OFFSET],
 
-F_A cubic in ε through the 4 layer-A strains around it, R = F_B/F_A linear in ε between layer B's
-(held beyond them), each table's F/d cubic in d through the 4 depths around (exact for α d + c d³) and bilinear
-between contacts. A slack clamp strain (s < 0) reads the sheet at s = 0 (its pre-strain only); an
-ε below 0.0025 reads 0.0025. The shape (deflection) is the nearest layer-A table's, mapped onto the actual
-span. ``tests/unit/twin/test_truth_sheet.py`` and ``python -m flexsheet.twin.truth_sheet --check`` compare
-it with full FEM solves of drawn truths.
+F_A cubic in ε through the 4 layer-A strains around it, R = F_B/F_A linear in ε between layer B's (held beyond
+them), each table's F/d cubic in d through the 4 depths around (exact for α d + c d³) and bilinear between
+contacts. A slack clamp strain (s < 0) reads the sheet at s = 0 (its pre-strain only); an ε below 0.0025 reads
+0.0025. The shape (deflection) is the nearest layer-A table's, mapped onto the actual span.
+``tests/unit/twin/test_truth_sheet.py`` and ``python -m flexsheet.twin.truth_sheet --check`` compare it with
+full FEM solves of drawn truths.
 
 Units: m, N, Pa; strains dimensionless.
 """
@@ -73,7 +73,8 @@ def family_physics(strain: float, span_strain: float) -> SheetPhysics:
     """The nominal gripped sheet (E₀, t₀, side SIZE) at the tension of ``strain`` ε held at the span of clamp
     strain ``span_strain``."""
     mat = SheetMaterial(young=E0, thickness=T0, size=SIZE)
-    return SheetPhysics(half_span=clamp_half_span(span_strain, SIZE), half_width=SIZE / 2, young=E0, thickness=T0,
+    return SheetPhysics(half_span=clamp_half_span(span_strain, SIZE), half_width=SIZE / 2, young=E0,
+                        thickness=T0,
                         tension_u=tension(strain, mat), tension_ratio=None)
 
 
@@ -86,14 +87,15 @@ def family_key() -> str:
 
 
 def node_path(layer: str, strain: float, folder: str = FAMILY_DIR) -> str:
-    """The file of family table ``layer`` ("A" or "B") at ``strain``: ``truthsheet_<layer><ε·10⁴>-<key>.npz``."""
+    """The file of family table ``layer`` ("A" or "B") at ``strain``:
+    ``truthsheet_<layer><ε·10⁴>-<key>.npz``."""
     return os.path.join(folder, f"truthsheet_{layer}{round(strain * 1e4):04d}-{family_key()}.npz")
 
 
 def build_node(layer: str, strain: float, folder: str = FAMILY_DIR) -> str:
-    """Solve family table ``layer`` at ``strain`` (9 contacts × :data:`FORCE_DEPTHS`, ~2–10 min of one core) and
-    write it (x (nx,), y (ny,) m; W (3, 3, 5, nx, ny) float32 m at TABLE_DEPTHS; F (3, 3, 5) N; Fd (3, 3, 13)
-    N at FORCE_DEPTHS). Returns the path."""
+    """Solve family table ``layer`` at ``strain`` (9 contacts × :data:`FORCE_DEPTHS`, ~2–10 min of one core)
+    and write it (x (nx,), y (ny,) m; W (3, 3, 5, nx, ny) float32 m at TABLE_DEPTHS; F (3, 3, 5) N; Fd (3, 3,
+    13) N at FORCE_DEPTHS). Returns the path."""
     span = strain + (SPAN_OFFSET if layer == "B" else 0.0)
     fem = SheetFEM(family_physics(strain, span))
     P, D = np.asarray(TABLE_POSITIONS), list(FORCE_DEPTHS)
@@ -146,7 +148,8 @@ def ship(folder: str = FAMILY_DIR) -> list[str]:
 
 # ------------------------------------------------------------------------------------------------ evaluation
 def _cubic_weights(axis: np.ndarray, q: float) -> list[tuple[int, float]]:
-    """(index, weight) of the cubic through the 4 nodes of ``axis`` around ``q`` (Lagrange; held at the ends)."""
+    """(index, weight) of the cubic through the 4 nodes of ``axis`` around ``q`` (Lagrange; held at the
+    ends)."""
     n = len(axis)
     if q <= axis[0] or q >= axis[-1] or n < 4:
         return bracket_weights(axis, q)
@@ -202,7 +205,8 @@ class FamilyTable:
         """The table's deflections as an :class:`flexsheet.model.sheet_table.IndentTable` (loaded once)."""
         if self._table is None:
             with np.load(self.path) as z:
-                self._table = IndentTable.from_arrays(family_physics(self.strain, self.span_strain), TABLE_DEPTHS,
+                self._table = IndentTable.from_arrays(family_physics(self.strain, self.span_strain),
+                                                      TABLE_DEPTHS,
                                                       TABLE_POSITIONS, z["x"], z["y"], z["W"], z["F"])
         return self._table
 
@@ -218,9 +222,9 @@ def load_family(folder: str = FAMILY_DIR) -> dict[str, list[FamilyTable]]:
         if missing:
             names = ", ".join(f"{lay}{s:g}" for lay, s in missing)
             raise FileNotFoundError(
-                f"the true sheet's table family in {folder} lacks {len(missing)} of {len(all_nodes())} tables: "
-                f"build and ship them with python -m flexsheet.twin.truth_sheet --ship (minutes to an hour of one "
-                f"core), then commit flexsheet/twin/sheet_tables/ (missing: {names})")
+                f"the true sheet's table family in {folder} lacks {len(missing)} of {len(all_nodes())} "
+                "tables: build and ship them with python -m flexsheet.twin.truth_sheet --ship (minutes to "
+                f"an hour of one core), then commit flexsheet/twin/sheet_tables/ (missing: {names})")
         _FAMILIES[folder] = {lay: [FamilyTable(node_path(lay, s, folder)) for s in strains]
                              for lay, strains in (("A", A_STRAINS), ("B", B_STRAINS))}
     return _FAMILIES[folder]
@@ -313,7 +317,8 @@ def check_points(seed: int, bins=CHECK_BINS, off_grid: bool = True) -> list[tupl
     return out
 
 
-def check(seeds, depths=CHECK_DEPTHS, bins=CHECK_BINS, off_grid: bool = True, folder: str = FAMILY_DIR) -> dict:
+def check(seeds, depths=CHECK_DEPTHS, bins=CHECK_BINS, off_grid: bool = True,
+          folder: str = FAMILY_DIR) -> dict:
     """The truth sheet against full FEM solves (:class:`SheetFEM` of :meth:`SheetPhysics.from_truth`, a slack
     strain at 0) of the realistic truths of ``seeds`` at :func:`check_points` × ``depths``: a JSON-able dict
     with every point's forces (N) and relative error (%), and the largest error per seed on and off the
@@ -331,7 +336,8 @@ def check(seeds, depths=CHECK_DEPTHS, bins=CHECK_BINS, off_grid: bool = True, fo
                 err = 100.0 * (f - sol.force) / sol.force
                 rows.append({"seed": int(seed), "stretch": round(s, 5), "strain": round(sheet.strain(s), 5),
                              "u": round(u, 4), "v": round(v, 4), "on_grid": on_grid, "depth": d,
-                             "fem_N": round(sol.force, 6), "truth_sheet_N": round(f, 6), "error_pct": round(err, 3)})
+                             "fem_N": round(sol.force, 6), "truth_sheet_N": round(f, 6),
+                             "error_pct": round(err, 3)})
                 key = f"{seed} {'on' if on_grid else 'off'}"
                 worst[key] = max(worst.get(key, 0.0), abs(err))
             log.info("check seed %d strain %.3f (%.3f, %.3f): worst %.2f %%", seed, s, u, v, worst[key])
@@ -349,15 +355,16 @@ def _loadavg() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``--ship``: build the family's missing tables and enter them in the manifest; ``--check [--json PATH]``:
-    :func:`check` on :func:`check_seeds` (~10 min of one core)."""
+    """``--ship``: build the family's missing tables and enter them in the manifest;
+    ``--check [--json PATH]``: :func:`check` on :func:`check_seeds` (~10 min of one core)."""
     import argparse
 
     ap = argparse.ArgumentParser(prog="python -m flexsheet.twin.truth_sheet",
                                  epilog="example: python -m flexsheet.twin.truth_sheet --check --json "
                                         "docs/figures/twin/truth_check.json")
     ap.add_argument("--ship", action="store_true", help="build the missing family tables and ship them")
-    ap.add_argument("--build", nargs="+", metavar="LAYER+STRAIN", help="build these tables only (e.g. A0.04 B0.1)")
+    ap.add_argument("--build", nargs="+", metavar="LAYER+STRAIN",
+                    help="build these tables only (e.g. A0.04 B0.1)")
     ap.add_argument("--check", action="store_true", help="compare with full FEM solves of three drawn truths")
     ap.add_argument("--json", help="write the check here")
     a = ap.parse_args(argv)

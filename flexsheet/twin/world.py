@@ -1,14 +1,15 @@
 """The world twin's physics of the display, from the hidden truth only (pure; no transport).
 
-* **Clamps**: the true clamp pose of each arm is the *true* forward kinematics of its measured joints —
-  the truth's base pose, link lengths and joint zero offsets (:meth:`flexsheet.twin.truth.TwinTruth.clamp_pose`)
-  — not the bridge's model (nominal URDF at the calibrated base), whose FK the bridge publishes in
+* **Clamps**: the true clamp pose of each arm is the *true* forward kinematics of its measured joints — the
+  truth's base pose, link lengths and joint zero offsets (:meth:`flexsheet.twin.truth.TwinTruth.clamp_pose`) —
+  not the bridge's model (nominal URDF at the calibrated base), whose FK the bridge publishes in
   ``ArmJointState.pose``. Under the ideal truth the two agree exactly.
 * **Sheet**: the pushed sheet is the truth's sheet FEM (:mod:`flexsheet.model.sheet_fem`, its Young's modulus,
-  thickness, pre-strain and grip slip) read from the shipped table family (:class:`flexsheet.twin.truth_sheet.TruthSheet`:
-  modulus and thickness an exact scale of the force, pre-strain and slip a shift of the strain, interpolated
-  between the family's strains), so a new truth seed builds nothing; the shape is the nearest family table's,
-  mapped onto the actual span. A family with tables missing is an error when the world starts.
+  thickness, pre-strain and grip slip) read from the shipped table family
+  (:class:`flexsheet.twin.truth_sheet.TruthSheet`: modulus and thickness an exact scale of the force,
+  pre-strain and slip a shift of the strain, interpolated between the family's strains), so a new truth seed
+  builds nothing; the shape is the nearest family table's, mapped onto the actual span. A family with tables
+  missing is an error when the world starts.
 
 Units: m, rad; frames: display (clamps), the sheet's own (u, v) for the deflection.
 """
@@ -30,9 +31,9 @@ __all__ = ["TruePhysics"]
 class TruePhysics:
     """True clamps and true sheet of one :class:`TwinTruth` (module doc).
 
-    ``folder``: the true sheet's table family (default the shipped one); ``size`` m: the unstretched sheet side
-    between the clamps; ``half_width`` m: half the sheet's width (both the family's: 0.24 m, 0.12 m). Raises
-    ``ValueError`` for another size, ``FileNotFoundError`` for a family that lacks tables.
+    ``folder``: the true sheet's table family (default the shipped one); ``size`` m: the unstretched sheet
+    side between the clamps; ``half_width`` m: half the sheet's width (both the family's: 0.24 m, 0.12 m).
+    Raises ``ValueError`` for another size, ``FileNotFoundError`` for a family that lacks tables.
     """
 
     def __init__(self, truth: TwinTruth, folder: str = FAMILY_DIR, size: float = geometry.SHEET_SIZE,
@@ -52,18 +53,18 @@ class TruePhysics:
 
     # -------------------------------------------------------------------------------------------- sheet
     def shape(self, depth: float, push_u: float, push_v: float, half_span: float) -> FemShape:
-        """The true pushed shape at the measured span ``half_span`` (m): force and stiffness of the truth's sheet
-        at that clamp strain, the deflection of the nearest family table. Raises ``ValueError`` for a contact
-        outside the sheet."""
+        """The true pushed shape at the measured span ``half_span`` (m): force and stiffness of the truth's
+        sheet at that clamp strain, the deflection of the nearest family table. Raises ``ValueError`` for a
+        contact outside the sheet."""
         stretch = 2.0 * half_span / self.size - 1.0
         return self.sheet.shape(depth, push_u, push_v, half_span, stretch)
 
     def surface(self, T_left: np.ndarray, T_right: np.ndarray, finger: np.ndarray | None
                 ) -> tuple[SheetSurface, float]:
         """The true sheet held by the true clamp poses (4, 4), pushed by the fingertip ``finger`` (3,) m when
-        it is behind the sheet plane and inside it. Returns (surface, clamp strain, signed: negative when slack). The surface's
-        ``membrane`` is a :class:`FemShape` (or ``None``: flat). Raises ``ValueError`` for
-        clamps that hold no sheet (see :func:`flexsheet.model.sheet.frame_from_clamps`)."""
+        it is behind the sheet plane and inside it. Returns (surface, clamp strain, signed: negative when
+        slack). The surface's ``membrane`` is a :class:`FemShape` (or ``None``: flat). Raises ``ValueError``
+        for clamps that hold no sheet (see :func:`flexsheet.model.sheet.frame_from_clamps`)."""
         origin, n, eu, a = frame_from_clamps(T_left, T_right)
         stretch = 2.0 * a / self.size - 1.0
         mem = None

@@ -20,9 +20,9 @@ __all__ = ["HeadScript", "WorldConfig"]
 
 @dataclass(frozen=True)
 class HeadScript:
-    """The viewer's head in the world (:class:`flexsheet.twin.head.HeadMotion`): ``still`` (no sway: the eye at
-    the paper's V), ``sway`` [x, y, z] m: the largest excursion of the eye; ``lean_in`` [start s, depth m, hold
-    s] in script time, [] for none (default: 0.24 m toward the sheet from 54 s, held 2.5 s, while the
+    """The viewer's head in the world (:class:`flexsheet.twin.head.HeadMotion`): ``still`` (no sway: the eye
+    at the paper's V), ``sway`` [x, y, z] m: the largest excursion of the eye; ``lean_in`` [start s, depth m,
+    hold s] in script time, [] for none (default: 0.24 m toward the sheet from 54 s, held 2.5 s, while the
     stroke-and-push tilts the sheet toward the viewer: far enough for the head's keep-out to reach the sheet's
     path); ``occlusions`` [[start s, duration s], ...]: the glasses' markers hidden (default 1 s at 49 s).
     Raises ``ValueError`` on a malformed lean-in or span."""
@@ -37,14 +37,16 @@ class HeadScript:
             raise ValueError(f"head.sway must be [x, y, z] in [0, 0.2] m, got {self.sway!r}")
         if self.lean_in and (len(self.lean_in) != 3 or any(not v >= 0.0 for v in self.lean_in)
                              or self.lean_in[1] > 0.35):
-            raise ValueError(f"head.lean_in must be [] or [start s, depth m <= 0.35, hold s], got {self.lean_in!r}")
+            raise ValueError("head.lean_in must be [] or [start s, depth m <= 0.35, hold s], got "
+                             f"{self.lean_in!r}")
         try:                                 # the rest (the occlusion spans) is HeadMotion's own check
             self.motion(Viewer.draw(0, "ideal"), 0)
         except ValueError as exc:
             raise ValueError(f"head.{exc}") from None
 
     def motion(self, viewer: Viewer, seed: int) -> HeadMotion:
-        """The :class:`~flexsheet.twin.head.HeadMotion` this script plays for ``viewer`` and truth ``seed``."""
+        """The :class:`~flexsheet.twin.head.HeadMotion` this script plays for ``viewer`` and truth
+        ``seed``."""
         return HeadMotion(viewer, seed=seed, sway=tuple(self.sway), still=self.still,
                           lean_in=tuple(self.lean_in) if self.lean_in else None,
                           occlusions=tuple(tuple(o) for o in self.occlusions))

@@ -1,5 +1,5 @@
-"""The stereo calibration's file: OpenCV ``FileStorage`` YAML written with ``cv2.FileStorage`` (so OpenCV reads
-it back) and read with PyYAML's safe loader (:class:`CvYamlLoader`: the ``!!opencv-matrix`` maps become
+"""The stereo calibration's file: OpenCV ``FileStorage`` YAML written with ``cv2.FileStorage`` (so OpenCV
+reads it back) and read with PyYAML's safe loader (:class:`CvYamlLoader`: the ``!!opencv-matrix`` maps become
 checked numpy arrays), so a hostile file never reaches OpenCV's parser. Units: px (intrinsics), m (T)."""
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ _SCALARS = ("rms_left_px", "rms_right_px", "rms_px")
 
 def write_yaml(path: str, calib: dict) -> None:
     """Write a calibration dict (see module doc; e.g. :meth:`StereoCalibrationResult.as_dict`) as an OpenCV
-    FileStorage YAML at ``path``. Matrices are written as ``!!opencv-matrix``; ``T``, ``D1``, ``D2`` as
-    column vectors. Raises ``ValueError`` if a required key (``image_size``, K1, D1, K2, D2, R, T) is missing."""
+    FileStorage YAML at ``path``. Matrices are written as ``!!opencv-matrix``; ``T``, ``D1``, ``D2`` as column
+    vectors. Raises ``ValueError`` if a required key (``image_size``, K1, D1, K2, D2, R, T) is missing."""
     for key in ("image_size", "K1", "D1", "K2", "D2", "R", "T"):
         if key not in calib:
             raise ValueError(f"calibration dict lacks required key {key!r}")
@@ -53,7 +53,8 @@ def _cv_matrix(loader: yaml.SafeLoader, node: yaml.Node) -> np.ndarray:
     m = loader.construct_mapping(node, deep=True)
     rows, cols, data = m.get("rows"), m.get("cols"), m.get("data")
     if not (type(rows) is int and type(cols) is int and 0 < rows <= 64 and 0 < cols <= 64):
-        raise ValueError(f"opencv-matrix rows/cols must be ints in 1..64, got rows={rows!r:.40} cols={cols!r:.40}")
+        raise ValueError(f"opencv-matrix rows/cols must be ints in 1..64, got rows={rows!r:.40} "
+                         f"cols={cols!r:.40}")
     if m.get("dt") not in ("d", "f"):
         raise ValueError(f"opencv-matrix dt must be 'd' or 'f', got {m.get('dt')!r:.40}")
     if not (isinstance(data, list) and len(data) == rows * cols
@@ -135,11 +136,13 @@ def load_yaml(path: str) -> dict:
         d[:min(5, out[key].size)] = out[key][:5]
         out[key] = d
     if "R1" not in out:
-        R1, R2, P1, P2, Q, _, _ = cv2.stereoRectify(out["K1"], out["D1"], out["K2"], out["D2"], out["image_size"],
+        R1, R2, P1, P2, Q, _, _ = cv2.stereoRectify(out["K1"], out["D1"], out["K2"], out["D2"],
+                                                    out["image_size"],
                                                     out["R"], out["T"].reshape(3, 1), alpha=0)
         out.update(R1=R1, R2=R2, P1=P1, P2=P2, Q=Q)
     if "E" not in out:
-        tx = np.array([[0, -out["T"][2], out["T"][1]], [out["T"][2], 0, -out["T"][0]], [-out["T"][1], out["T"][0], 0]])
+        tx = np.array([[0, -out["T"][2], out["T"][1]], [out["T"][2], 0, -out["T"][0]],
+                       [-out["T"][1], out["T"][0], 0]])
         out["E"] = tx @ out["R"]
         out["F"] = np.linalg.inv(out["K2"]).T @ out["E"] @ np.linalg.inv(out["K1"])
     return out

@@ -1,9 +1,9 @@
-"""The camera node's settings (:class:`CameraConfig`): one definition of each — name, type, default and range —
-that ``nodes/camera``'s ``CameraParams`` is built from (:func:`flexsheet.runtime.params.config_fields`). Pure:
-no transport, no camera driver; the ranges are pydantic ``Field`` constraints in the annotations, checked when
-the params are. The registration file and the twin's truth (``display_calib``, ``twin``), and the devices'
-settings (the GenICam pair's serials, trigger lines, PTP and transport; the V4L2 devices; the files source's
-paths) are the node's own params (docs/camera.md)."""
+"""The camera node's settings (:class:`CameraConfig`): one definition of each — name, type, default and range
+— that ``nodes/camera``'s ``CameraParams`` is built from (:func:`flexsheet.runtime.params.config_fields`).
+Pure: no transport, no camera driver; the ranges are pydantic ``Field`` constraints in the annotations,
+checked when the params are. The registration file and the twin's truth (``display_calib``, ``twin``), and the
+devices' settings (the GenICam pair's serials, trigger lines, PTP and transport; the V4L2 devices; the files
+source's paths) are the node's own params (docs/camera.md)."""
 
 from __future__ import annotations
 
@@ -21,9 +21,9 @@ class CameraConfig:
     ``rate_hz``; the camera model (sim) / calibration to publish (``model`` ximea | bumblebee2 | file,
     ``calib_file``, ``width``/``height`` px, ``focal_mm``, ``pixel_um``, ``baseline`` m); the twin's sensing
     (``None``: the realism's value: ``noise_dn``, ``shot_gain``, ``blur_px``, ``self_occlusion``,
-    ``background_gain``, ``finger_dir``, ``drop_rate``; and ``noise_scale``, ``exposure_s``,
-    ``blur_samples``, ``clutter``, ``seed``, the standalone trajectory ``traj_*``); ``link_delay_s``: the twin's
-    link, extra delay from exposure to the frame in the graph, s (simulated clock only: stability sweeps);
+    ``background_gain``, ``finger_dir``, ``drop_rate``; and ``noise_scale``, ``exposure_s``, ``blur_samples``,
+    ``clutter``, ``seed``, the standalone trajectory ``traj_*``); ``link_delay_s``: the twin's link, extra
+    delay from exposure to the frame in the graph, s (simulated clock only: stability sweeps);
     ``preview_rate`` Hz of the decimated pairs on ``/camera/stereo_preview`` (0: off)."""
 
     source: Annotated[str, Field(pattern="^(sim|device|files|genicam)$")] = "sim"

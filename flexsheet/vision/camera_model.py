@@ -12,12 +12,14 @@ import numpy as np
 
 from flexsheet.vision.calib_yaml import load_yaml
 
-__all__ = ["XIMEA_CALIB", "DEFAULT_CAMERA_POSITION", "DEFAULT_LOOK_AT", "bumblebee2_calibration", "camera_model",
+__all__ = ["XIMEA_CALIB", "DEFAULT_CAMERA_POSITION", "DEFAULT_LOOK_AT", "bumblebee2_calibration",
+           "camera_model",
            "look_at"]
 
 #: the shipped calibration of the lab's real XIMEA stereo pair (OpenCV FileStorage YAML)
 XIMEA_CALIB = os.path.join(os.path.dirname(os.path.abspath(__file__)), "ximea_calib.yaml")
-#: default mounting: above-right of the user's eye, 0.5 m from the sheet centre, looking at it (display frame, m)
+#: default mounting: above-right of the user's eye, 0.5 m
+#: from the sheet centre, looking at it (display frame, m)
 DEFAULT_CAMERA_POSITION = (0.38, -0.25, 0.22)
 DEFAULT_LOOK_AT = (0.0, 0.0, 0.0)
 

@@ -60,8 +60,8 @@ def check_image(name: str, img, shape: tuple[int, int] | None = None) -> np.ndar
 
 @dataclass(frozen=True)
 class Detection:
-    """Candidates found in one image: ``uv`` (K, 2) raw px, ``strength`` (K,) top-hat peak, DN,
-    ``area`` (K,) visible marker area Σα, px; ``roi`` True when found in the ROI (False: full-frame search)."""
+    """Candidates found in one image: ``uv`` (K, 2) raw px, ``strength`` (K,) top-hat peak, DN, ``area`` (K,)
+    visible marker area Σα, px; ``roi`` True when found in the ROI (False: full-frame search)."""
 
     uv: np.ndarray
     strength: np.ndarray
@@ -73,17 +73,18 @@ class MarkerDetector:
     """Bright-dot detector (module doc).
 
     Parameters (px unless stated): ``se_size`` odd top-hat element side (> marker diameter incl. blur
-    width; default 11); ``min_contrast`` DN (default 40); ``max_candidates`` (default 3);
-    ``patch_radius`` r of the centroid patch (default 10: a blur streak up to ~2r px fits); ``threshold_frac`` (default 0.2); ``roi_half``
-    half side of the tracking ROI (default 32); ``max_area`` px: larger blobs are not markers (default 150).
-    Raises ``ValueError`` naming the parameter when out of range.
+    width; default 11); ``min_contrast`` DN (default 40); ``max_candidates`` (default 3); ``patch_radius`` r
+    of the centroid patch (default 10: a blur streak up to ~2r px fits); ``threshold_frac`` (default 0.2);
+    ``roi_half`` half side of the tracking ROI (default 32); ``max_area`` px: larger blobs are not markers
+    (default 150). Raises ``ValueError`` naming the parameter when out of range.
     """
 
     #: the marker's mask: the top-hat's connected component above this fraction of the peak, grown by 1 px
     HOLE_FRAC = 0.35
 
     def __init__(self, se_size: int = 11, min_contrast: float = 40.0, max_candidates: int = 3,
-                 patch_radius: int = 10, threshold_frac: float = 0.2, roi_half: int = 32, max_area: int = 150):
+                 patch_radius: int = 10, threshold_frac: float = 0.2, roi_half: int = 32,
+                 max_area: int = 150):
         if se_size < 3 or se_size % 2 == 0:
             raise ValueError(f"se_size must be odd and >= 3, got {se_size}")
         if not (0 < min_contrast < 255):
@@ -108,7 +109,7 @@ class MarkerDetector:
         self._gx, self._gy = np.meshgrid(g, g)
         self._ring = np.hypot(self._gx, self._gy) > 0.6 * self.r
         self._k3 = np.ones((3, 3), np.uint8)
-        self._ring_k = int(0.9 * (int(self._ring.sum()) - 1))      # the ring's 90th percentile (order statistic)
+        self._ring_k = int(0.9 * (int(self._ring.sum()) - 1))  # the ring's 90th percentile (order statistic)
 
     def response(self, img: np.ndarray) -> np.ndarray:
         """White top-hat response of a mono8 image (H, W) → uint8 (H, W), DN."""
@@ -164,7 +165,8 @@ class MarkerDetector:
             touches = (bx == 0 or by == 0 or bx + bw == 2 * r + 1 or by + bh == 2 * r + 1
                        or gy0 <= 0 or gx0 <= 0 or gy0 + bh >= h or gx0 + bw >= w)
             s = wgt.sum()
-            # suppress this blob's box (grown by 1 px) for the next candidate; a second dot nearby stays findable
+            # suppress this blob's box (grown by 1 px) for the
+            # next candidate; a second dot nearby stays findable
             wy0, wx0 = ya - oy + by - 1, xa - ox + bx - 1      # work coordinates
             work[max(0, wy0):max(0, wy0 + bh + 2), max(0, wx0):max(0, wx0 + bw + 2)] = 0
             work[py, px] = 0
@@ -181,7 +183,8 @@ class MarkerDetector:
     def _coverage(self, img: np.ndarray, resp: np.ndarray, ya: int, xa: int, px0: int, py0: int,
                   peak: float) -> tuple[np.ndarray, np.ndarray]:
         """The marker's coverage α (2r+1, 2r+1) in the patch whose corner is (``ya``, ``xa``) in ``resp``
-        coordinates (``resp`` starts at (``py0``, ``px0``) in ``img``), and its grown top-hat blob (uint8 mask)."""
+        coordinates (``resp`` starts at (``py0``, ``px0``) in ``img``), and its grown top-hat blob (uint8
+        mask)."""
         r = self.r
         yb, xb = ya + 2 * r + 1, xa + 2 * r + 1
         patch_full = np.zeros((2 * r + 1, 2 * r + 1), np.float64)

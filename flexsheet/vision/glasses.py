@@ -1,5 +1,5 @@
-"""Tracking the viewer's stereo glasses with one head camera: a board of ArUco markers on the glasses' bar, its
-pose by PnP, the eyes from that pose (library; no I/O).
+"""Tracking the viewer's stereo glasses with one head camera: a board of ArUco markers on the glasses' bar,
+its pose by PnP, the eyes from that pose (library; no I/O).
 
 * :class:`GlassesBoard`: the rigid grid of ArUco markers printed on the bar above the lenses and its pose in
   the glasses frame. OpenCV's board frame (``cv2.aruco.GridBoard``): origin at the top-left corner of the
@@ -8,9 +8,9 @@ pose by PnP, the eyes from that pose (library; no I/O).
   and the head camera beside it, so the board's z is the glasses' −z: ``R_glasses_board = diag(1, −1, −1)``
   (board x = glasses x, from the right lens to the left; printed rows run left to right as the camera sees
   them, top row up).
-* :class:`GlassesTracker`: detects the markers (``cv2.aruco.ArucoDetector``; corners by edge-line fits), solves the
-  board pose from all detected corners (planar IPPE, both solutions, each refined by Levenberg–Marquardt;
-  the lower reprojection error wins), and gives ``T_display_glasses`` and the eyes
+* :class:`GlassesTracker`: detects the markers (``cv2.aruco.ArucoDetector``; corners by edge-line fits),
+  solves the board pose from all detected corners (planar IPPE, both solutions, each refined by
+  Levenberg–Marquardt; the lower reprojection error wins), and gives ``T_display_glasses`` and the eyes
   (:func:`tracked_eyes`).
 * :class:`HeadPredictor`: constant-velocity extrapolation of the eyes to the photon time.
 
@@ -30,11 +30,12 @@ import numpy as np
 
 from flexsheet.model.checks import check_point, check_pose, check_positive
 
-#: the glasses axes (columns, display frame) of a viewer upright and facing the sheet (−x): x toward the viewer's
-#: left (−y), y up (+z), z toward the sheet (−x)
+#: the glasses axes (columns, display frame) of a viewer upright and facing the
+#: sheet (−x): x toward the viewer's left (−y), y up (+z), z toward the sheet (−x)
 GLASSES_AXES = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
-__all__ = ["GLASSES_AXES", "tracked_eyes", "GlassesBoard", "GlassesPose", "GlassesTracker", "HeadPredictor", "check_camera_matrix", "check_dist"]
+__all__ = ["GLASSES_AXES", "tracked_eyes", "GlassesBoard", "GlassesPose", "GlassesTracker", "HeadPredictor",
+           "check_camera_matrix", "check_dist"]
 
 _R_GLASSES_BOARD = np.diag([1.0, -1.0, -1.0])
 _DIST_LENGTHS = (4, 5, 8, 12, 14)
@@ -136,9 +137,9 @@ class GlassesBoard:
     def image(self, px_per_m: float) -> tuple[np.ndarray, np.ndarray]:
         """The printed board with a white margin one ``gap`` wide, at ``px_per_m`` px/m: (image (H, W) uint8,
         black 0 / white 255, each pixel the exact white fraction of its area (equal to
-        ``cv_board().generateImage`` where the cells fall on whole pixels); ``A`` (3, 3) mapping a pixel (u, v, 1)
-        (pixel centres at integers) to board metres (x, y, 1): x = (u + 0.5)/px_per_m − gap, same for y).
-        Raises ``ValueError`` unless 100 ≤ px_per_m ≤ 1e5."""
+        ``cv_board().generateImage`` where the cells fall on whole pixels); ``A`` (3, 3) mapping a pixel (u,
+        v, 1) (pixel centres at integers) to board metres (x, y, 1): x = (u + 0.5)/px_per_m − gap, same for
+        y). Raises ``ValueError`` unless 100 ≤ px_per_m ≤ 1e5."""
         ppm = check_positive("px_per_m", px_per_m)
         if not 100.0 <= ppm <= 1e5:
             raise ValueError(f"px_per_m must be in [100, 1e5] px/m, got {px_per_m!r}")
@@ -151,15 +152,18 @@ class GlassesBoard:
         def overlap(n: int, count: int) -> np.ndarray:
             """(n, count·nb): the fraction of pixel i (along one axis) that cell j covers."""
             a = np.arange(n)[:, None] / ppm - self.gap                      # pixel starts, board metres
-            s = ((np.arange(count) * (self.marker + self.gap))[:, None] + np.arange(nb) * cell).ravel()[None, :]
+            s = ((np.arange(count) * (self.marker + self.gap))[:, None] + np.arange(nb) * cell).ravel()[None,
+                                                                                                        :]
             return np.clip(np.minimum(s + cell, a + 1.0 / ppm) - np.maximum(s, a), 0.0, None) * ppm
 
-        bits = np.stack([cv2.aruco.generateImageMarker(_dictionary(int(self.dictionary)), int(i), nb, borderBits=1)
-                         for i in self.ids]).reshape(self.rows, self.cols, nb, nb)
+        bits = np.stack(
+            [cv2.aruco.generateImageMarker(_dictionary(int(self.dictionary)), int(i), nb, borderBits=1)
+             for i in self.ids]).reshape(self.rows, self.cols, nb, nb)
         black = (bits == 0).transpose(0, 2, 1, 3).reshape(self.rows * nb, self.cols * nb).astype(float)
         cover = overlap(H, self.rows) @ black @ overlap(W, self.cols).T                # exact black area
         img = np.clip(np.round(255.0 * (1.0 - cover)), 0, 255).astype(np.uint8)
-        A = np.array([[1.0 / ppm, 0.0, 0.5 / ppm - self.gap], [0.0, 1.0 / ppm, 0.5 / ppm - self.gap], [0, 0, 1]])
+        A = np.array([[1.0 / ppm, 0.0, 0.5 / ppm - self.gap], [0.0, 1.0 / ppm, 0.5 / ppm - self.gap],
+                      [0, 0, 1]])
         return img, A
 
 
@@ -190,7 +194,8 @@ class GlassesPose:
 
 
 def check_camera_matrix(K) -> np.ndarray:
-    """``K`` as a (3, 3) camera matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]], fx, fy > 0; else ``ValueError``."""
+    """``K`` as a (3, 3) camera matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]], fx, fy > 0; else
+    ``ValueError``."""
     try:
         A = np.asarray(K, float)
     except (TypeError, ValueError):
@@ -216,7 +221,7 @@ def check_dist(D) -> np.ndarray:
     return a
 
 
-_EDGE_FRAC = (0.3, 0.5, 0.7)                         # profiles per inner cell along a marker edge (cell fractions)
+_EDGE_FRAC = (0.3, 0.5, 0.7)  # profiles per inner cell along a marker edge (cell fractions)
 _EDGE_T = np.linspace(-2.5, 2.5, 21)                 # offsets across the edge, px (outward +)
 _EDGE_SIGMA = 1.0                                    # mean-shift window σ, px (at most 0.45 of a module)
 
@@ -265,13 +270,14 @@ def _edge_corners(gray: np.ndarray, corners: np.ndarray, K: np.ndarray, D: np.nd
     t = _EDGE_T[np.argmax(np.where(np.abs(_EDGE_T) <= 2.0, g, -1.0), axis=-1)]      # (M, 4, S)
     k = -0.5 / sig ** 2
     # mean shift: a symmetric window, so a symmetric edge is unbiased. Its weight g·exp(k (T − t)²) is
-    # g·exp(k T²) · r^j · (a factor of the profile alone, which cancels), r = exp(−2 k t ΔT), T_j = T_0 + j ΔT:
-    # one exp per profile and a running product, not one exp per sample. The last step is the direct form
-    # (its weight sum is the one the edge test below reads).
+    # g·exp(k T²) · r^j · (a factor of the profile alone, which cancels), r = exp(−2 k t ΔT),
+    # T_j = T_0 + j ΔT: one exp per profile and a running product, not one exp per sample.
+    # The last step is the direct form (its weight sum is the one the edge test below reads).
     gk = g * np.exp(k * _EDGE_T ** 2)
     step = -2.0 * k[..., 0] * (_EDGE_T[1] - _EDGE_T[0])                              # (M, 4, 1)
     for _ in range(5):
-        r = np.exp(np.clip(step * t, -14.0, 14.0))[..., None]                          # (M, 4, S, 1); |exponent| ≤ 14: r^21 stays finite
+        # (M, 4, S, 1); |exponent| ≤ 14: r^21 stays finite
+        r = np.exp(np.clip(step * t, -14.0, 14.0))[..., None]
         w = gk * np.cumprod(np.broadcast_to(r, g.shape), axis=-1)
         t = (w @ _EDGE_T) / np.maximum(w.sum(-1), 1e-300)
     d = _EDGE_T - t[..., None]
@@ -323,14 +329,15 @@ class GlassesTracker:
             raise ValueError(f"ipd must be in [0, 0.1] m, got {ipd!r}")
         self.ipd = float(ipd)
         if not isinstance(min_markers, (int, np.integer)) or not 1 <= min_markers <= self.board.count:
-            raise ValueError(f"min_markers must be an integer in [1, {self.board.count}], got {min_markers!r}")
+            raise ValueError(f"min_markers must be an integer in [1, {self.board.count}], got "
+                             f"{min_markers!r}")
         self.min_markers = int(min_markers)
         params = cv2.aruco.DetectorParameters()
-        # no corner refinement here: the edge-line fit (_edge_corners) replaces the corners (cornerSubPix's were
-        # biased ~0.3 px inward on these ~20 px markers, and refining first changed nothing: 0.19 mm median eye
-        # error either way, 0.1 ms a frame saved)
+        # no corner refinement here: the edge-line fit (_edge_corners) replaces the corners
+        # (cornerSubPix's were biased ~0.3 px inward on these ~20 px markers, and refining first changed
+        # nothing: 0.19 mm median eye error either way, 0.1 ms a frame saved)
         params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE
-        params.perspectiveRemovePixelPerCell = 8           # small markers (~20 px): read the bits at cell centres
+        params.perspectiveRemovePixelPerCell = 8  # small markers (~20 px): read the bits at cell centres
         params.perspectiveRemoveIgnoredMarginPerCell = 0.25
         self.detector = cv2.aruco.ArucoDetector(_dictionary(int(self.board.dictionary)), params)
         self._T_board_glasses = np.linalg.inv(self.board.T_glasses_board)
@@ -367,7 +374,8 @@ class GlassesTracker:
         ids, c = ids[order], c[order]
         if len(ids):            # the edge profiles read only the markers' box (+ the profile's reach, 2.5 px)
             h, w = img.shape
-            (bx0, by0), (bx1, by1) = np.floor(c.reshape(-1, 2).min(0)) - 4, np.ceil(c.reshape(-1, 2).max(0)) + 5
+            (bx0, by0), (bx1, by1) = (np.floor(c.reshape(-1, 2).min(0)) - 4,
+                                      np.ceil(c.reshape(-1, 2).max(0)) + 5)
             bx0, by0 = int(min(max(bx0, 0), w - 1)), int(min(max(by0, 0), h - 1))
             bx1, by1 = int(min(max(bx1, bx0 + 1), w)), int(min(max(by1, by0 + 1), h))
             c = _edge_corners(img[by0:by1, bx0:bx1].astype(np.float32), c, self.K, self.D, self._edge_s,
@@ -375,8 +383,8 @@ class GlassesTracker:
         return ids, c
 
     def _solve(self, obj: np.ndarray, img: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
-        """Best board pose (rvec, tvec, RMS px) over the IPPE solutions, each refined (LM); the mirror solution is
-        skipped when IPPE finds it over 2× + 0.5 px worse than the first."""
+        """Best board pose (rvec, tvec, RMS px) over the IPPE solutions, each refined (LM); the mirror
+        solution is skipped when IPPE finds it over 2× + 0.5 px worse than the first."""
         best = None
         try:
             n, rvecs, tvecs, err = cv2.solvePnPGeneric(obj, img, self.K, self.D, flags=cv2.SOLVEPNP_IPPE)
@@ -428,7 +436,8 @@ class HeadPredictor:
     of the last two accepted poses, exponentially smoothed: v ← ``smoothing``·v_new + (1 − ``smoothing``)·v
     (``smoothing`` in (0, 1]; 1: no smoothing; the first difference initialises v). :meth:`predict`
     extrapolates linearly, by at most ``max_extrapolation`` s. After a gap longer than ``max_gap`` s between
-    poses the eyes are held still until the next difference restarts the velocity. Raises ``ValueError`` on bad parameters.
+    poses the eyes are held still until the next difference restarts the velocity. Raises ``ValueError`` on
+    bad parameters.
     """
 
     def __init__(self, smoothing: float = 0.5, max_extrapolation: float = 0.1, max_gap: float = 0.25):
@@ -442,8 +451,8 @@ class HeadPredictor:
         self.velocity: np.ndarray | None = None        # (3, 3) m/s, same rows
 
     def update(self, stamp: float, pose: GlassesPose) -> bool:
-        """Accept ``pose`` seen at ``stamp`` s. Returns False (pose ignored) unless ``stamp`` is later than the
-        last accepted one. Raises ``ValueError`` on a non-finite stamp or a non-finite pose."""
+        """Accept ``pose`` seen at ``stamp`` s. Returns False (pose ignored) unless ``stamp`` is later than
+        the last accepted one. Raises ``ValueError`` on a non-finite stamp or a non-finite pose."""
         t = float(stamp)
         if not np.isfinite(t):
             raise ValueError(f"stamp must be finite (s), got {stamp!r}")

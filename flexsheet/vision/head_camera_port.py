@@ -41,9 +41,9 @@ class HeadCameraSource(ABC):
     @classmethod
     @abstractmethod
     def open(cls, params: Any, board: Any) -> HeadCameraSource:
-        """The source of a head camera node's ``params`` (its ``device``, ``rate_hz``, ``exposure_s``, ``twin``)
-        for the glasses ``board`` (:class:`flexsheet.vision.glasses.GlassesBoard`). Raises ``ValueError`` naming
-        the param and the fix when it cannot open."""
+        """The source of a head camera node's ``params`` (its ``device``, ``rate_hz``, ``exposure_s``,
+        ``twin``) for the glasses ``board`` (:class:`flexsheet.vision.glasses.GlassesBoard`). Raises
+        ``ValueError`` naming the param and the fix when it cannot open."""
 
     @classmethod
     def probe(cls, params: Any) -> list[str]:
@@ -52,7 +52,8 @@ class HeadCameraSource(ABC):
         return []
 
     def feed(self, topic: Any, msg: Any) -> None:
-        """Take the newest message ``msg`` of ``topic``, one of :attr:`inputs`; a source without inputs needs none."""
+        """Take the newest message ``msg`` of ``topic``, one of :attr:`inputs`; a source without inputs needs
+        none."""
         return None
 
     @abstractmethod

@@ -57,8 +57,9 @@ class ConstantVelocityKF:
         return F, Q
 
     def predicted(self, t: float, q: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Predicted state (6,) and covariance (6, 6) at time ``t`` (s) without changing the filter, with process
-        noise ``q`` m²/s³ for this step (None: the filter's). Raises ``ValueError`` if not initialised."""
+        """Predicted state (6,) and covariance (6, 6) at time ``t`` (s) without changing the filter, with
+        process noise ``q`` m²/s³ for this step (None: the filter's). Raises ``ValueError`` if not
+        initialised."""
         if self.t is None:
             raise ValueError("filter not initialised: call update() first")
         dt = max(0.0, float(t) - self.t)
@@ -76,8 +77,8 @@ class ConstantVelocityKF:
 
     def update(self, z: np.ndarray, R: np.ndarray, t: float, q: float | None = None) -> None:
         """Predict to ``t`` (s) with process noise ``q`` m²/s³ for this step (None: the filter's) and fuse
-        measurement z (3,) m with covariance R (3, 3) m² (initialises on the first call). Raises ``ValueError``
-        on non-finite input."""
+        measurement z (3,) m with covariance R (3, 3) m² (initialises on the first call). Raises
+        ``ValueError`` on non-finite input."""
         z = check_point("z", z)
         R = np.asarray(R, float)
         if R.shape != (3, 3) or not np.all(np.isfinite(R)):

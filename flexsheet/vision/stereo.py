@@ -99,8 +99,8 @@ class StereoModel:
         return xl[:, :2] / xl[:, 2:], xr[:, :2] / xr[:, 2:]
 
     def undistort(self, uv: np.ndarray, side: str) -> np.ndarray:
-        """Raw pixels (N, 2) of camera ``side`` ("left"/"right") → ideal pixels (N, 2) (``cv2.undistortPoints``
-        with P = K). Raises ``ValueError`` for another side."""
+        """Raw pixels (N, 2) of camera ``side`` ("left"/"right") → ideal pixels (N, 2)
+        (``cv2.undistortPoints`` with P = K). Raises ``ValueError`` for another side."""
         if side not in ("left", "right"):
             raise ValueError(f"side must be 'left' or 'right', got {side!r}")
         K, D = (self.K1, self.D1) if side == "left" else (self.K2, self.D2)
@@ -172,7 +172,8 @@ class StereoModel:
         for k, P in enumerate((self.P1, self.P2)):
             h = X @ P[:, :3].T + P[:, 3]                       # (N, 3)
             u = h[:, :2] / h[:, 2:]
-            J[:, 2 * k:2 * k + 2, :] = (P[None, :2, :3] - u[:, :, None] * P[None, 2:3, :3]) / h[:, 2, None, None]
+            J[:, 2 * k:2 * k + 2,
+              :] = ((P[None, :2, :3] - u[:, :, None] * P[None, 2:3, :3]) / h[:, 2, None, None])
         return J
 
     def covariance(self, X: np.ndarray, sigma_px: float) -> np.ndarray:

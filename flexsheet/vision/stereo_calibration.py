@@ -111,13 +111,15 @@ def parse_board(spec: str, square: float | None = None) -> BoardSpec:
         try:
             sq, mk = float(parts[2]), float(parts[3])
         except ValueError:
-            raise ValueError(f"charuco square/marker must be numbers in m, got {parts[2]!r}, {parts[3]!r}") from None
+            raise ValueError(f"charuco square/marker must be numbers in m, got {parts[2]!r}, "
+                             f"{parts[3]!r}") from None
         if not (0 < mk < sq):
             raise ValueError(f"charuco needs 0 < marker < square, got square={sq}, marker={mk}")
         if not parts[4].startswith("DICT_") or not hasattr(cv2.aruco, parts[4]):
             raise ValueError(f"unknown aruco dictionary {parts[4]!r} in board spec {spec!r}")
         return BoardSpec("charuco", c, r, sq, mk, parts[4])
-    raise ValueError(f"board spec must be 'chessboard:COLSxROWS' or 'charuco:NXxNY:SQUARE:MARKER:DICT', got {spec!r}")
+    raise ValueError("board spec must be 'chessboard:COLSxROWS' or 'charuco:NXxNY:SQUARE:MARKER:DICT', got "
+                     f"{spec!r}")
 
 
 def detect_board(image: np.ndarray, board: BoardSpec,
@@ -132,7 +134,8 @@ def detect_board(image: np.ndarray, board: BoardSpec,
         raise ValueError(f"image must be a (H, W) uint8 array, got {getattr(image, 'shape', type(image))}")
     if board.kind == "chessboard":
         ok, corners = cv2.findChessboardCorners(
-            image, (board.cols, board.rows), flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+            image, (board.cols, board.rows),
+            flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
         if not ok:
             return None
         corners = cv2.cornerSubPix(image, corners, (11, 11), (-1, -1), _SUBPIX)
@@ -190,7 +193,8 @@ def calibrate_stereo(left: list[np.ndarray], right: list[np.ndarray], board: Boa
     when fewer than ``min_pairs`` pairs show the board in both images.
     """
     if len(left) != len(right):
-        raise ValueError(f"left and right must have the same number of images, got {len(left)} and {len(right)}")
+        raise ValueError(f"left and right must have the same number of images, got {len(left)} and "
+                         f"{len(right)}")
     names = names or [f"pair{i:02d}" for i in range(len(left))]
     if not left:
         raise ValueError("no image pairs given")
@@ -201,7 +205,8 @@ def calibrate_stereo(left: list[np.ndarray], right: list[np.ndarray], board: Boa
     for name, a, b in zip(names, left, right, strict=True):
         for side, img in (("left", a), ("right", b)):
             if img.shape[:2] != (h, w):
-                raise ValueError(f"image size of {name} {side} is {img.shape[1]}x{img.shape[0]}, expected {w}x{h}")
+                raise ValueError(f"image size of {name} {side} is {img.shape[1]}x{img.shape[0]}, expected "
+                                 f"{w}x{h}")
         da, db = detect_board(a, board, det), detect_board(b, board, det)
         if da is None or db is None:
             skipped.append(name)
@@ -218,7 +223,8 @@ def calibrate_stereo(left: list[np.ndarray], right: list[np.ndarray], board: Boa
         r_pts.append(db[1][ib].reshape(-1, 1, 2))
         used.append(name)
     if len(used) < min_pairs:
-        raise ValueError(f"board found in both images of only {len(used)} pairs, need at least {min_pairs}: {reasons}")
+        raise ValueError(f"board found in both images of only {len(used)} pairs, need at least {min_pairs}: "
+                         f"{reasons}")
     size = (w, h)
     rms1, K1, D1, _, _ = cv2.calibrateCamera(obj_pts, l_pts, size, None, None)
     rms2, K2, D2, _, _ = cv2.calibrateCamera(obj_pts, r_pts, size, None, None)
@@ -252,7 +258,8 @@ def validate_stereo(left: list[np.ndarray], right: list[np.ndarray], board: Boar
     show the board, folds is 1 or larger than the pairs, or a fold leaves fewer than 3 pairs to calibrate.
     """
     if len(left) != len(right):
-        raise ValueError(f"left and right must have the same number of images, got {len(left)} and {len(right)}")
+        raise ValueError(f"left and right must have the same number of images, got {len(left)} and "
+                         f"{len(right)}")
     names = names or [f"pair{i:02d}" for i in range(len(left))]
     det = cv2.aruco.CharucoDetector(board.charuco_board()) if board.kind == "charuco" else None
     found = []
@@ -290,7 +297,8 @@ def validate_stereo(left: list[np.ndarray], right: list[np.ndarray], board: Boar
                         d.append(float(np.linalg.norm(X[u] - X[v])))
             eps.append(e)
             sq_all += d
-            per[names[i]] = {"epipolar_rms_px": float(np.sqrt(np.mean(e ** 2))), "square_mean_m": float(np.mean(d)),
+            per[names[i]] = {"epipolar_rms_px": float(np.sqrt(np.mean(e ** 2))),
+                             "square_mean_m": float(np.mean(d)),
                              "depth_m": float(np.mean(X[:, 2]))}
     e = np.concatenate(eps)
     sq = np.asarray(sq_all)
@@ -313,20 +321,24 @@ def to_message(calib: dict, header, T_display_camera: np.ndarray | None = None):
     T_dc = T_display_camera if T_display_camera is not None else calib.get("T_display_camera", np.eye(4))
     f64 = lambda k: np.ascontiguousarray(np.asarray(calib[k], np.float64))  # noqa: E731
     return StereoCalibration(
-        header=header, image_size=np.array([int(calib["image_size"][0]), int(calib["image_size"][1])], np.int64),
-        K1=f64("K1"), D1=f64("D1").ravel(), K2=f64("K2"), D2=f64("D2").ravel(), R=f64("R"), T=f64("T").ravel(),
+        header=header,
+        image_size=np.array([int(calib["image_size"][0]), int(calib["image_size"][1])], np.int64),
+        K1=f64("K1"), D1=f64("D1").ravel(), K2=f64("K2"), D2=f64("D2").ravel(), R=f64("R"),
+        T=f64("T").ravel(),
         R1=f64("R1"), R2=f64("R2"), P1=f64("P1"), P2=f64("P2"), Q=f64("Q"),
-        T_display_camera=np.ascontiguousarray(np.asarray(T_dc, np.float64)), rms_px=float(calib.get("rms_px", 0.0)))
+        T_display_camera=np.ascontiguousarray(np.asarray(T_dc, np.float64)),
+        rms_px=float(calib.get("rms_px", 0.0)))
 
 
 def main(argv: list[str] | None = None) -> int:
     """CLI ``flexsheet calibrate stereo`` (argparse; see ``--help``). Returns the exit code."""
     p = argparse.ArgumentParser(
-        prog="flexsheet calibrate stereo", description="Stereo calibration from chessboard or ChArUco image pairs.",
+        prog="flexsheet calibrate stereo", description="Stereo calibration from chessboard or ChArUco image "
+                                                       "pairs.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="example:\n  flexsheet calibrate stereo --left 'tests/data/stereo_xi/left*.jpg' "
-               "--right 'tests/data/stereo_xi/right*.jpg' --board chessboard:9x6 --square 0.024 -o calib.yaml "
-               "--validate 0")
+               "--right 'tests/data/stereo_xi/right*.jpg' --board chessboard:9x6 --square 0.024 -o "
+               "calib.yaml --validate 0")
     p.add_argument("--left", required=True, help="glob of left images (sorted by name)")
     p.add_argument("--right", required=True, help="glob of right images (sorted by name, same count)")
     p.add_argument("--board", default="chessboard:9x6",
@@ -334,7 +346,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--square", type=float, default=None, help="chessboard square side, m")
     p.add_argument("-o", "--output", required=True, help="output FileStorage YAML")
     p.add_argument("--camera-pose", default=None,
-                   help="optional left-camera pose in the display frame as 'x,y,z,rx,ry,rz' (m, Rodrigues rad)")
+                   help="optional left-camera pose in the display frame as 'x,y,z,rx,ry,rz' (m, Rodrigues "
+                        "rad)")
     p.add_argument("--validate", type=int, default=None, metavar="FOLDS",
                    help="also cross-validate: held-out epipolar error and square spread over FOLDS folds "
                         "(0 = leave-one-out)")
@@ -367,8 +380,10 @@ def main(argv: list[str] | None = None) -> int:
             p.error(str(e))
     report = {"output": a.output, "pairs": len(lefts), "used": len(res.used), "skipped": res.skipped_reason,
               "rms_left_px": res.rms_left_px, "rms_right_px": res.rms_right_px, "stereo_rms_px": res.rms_px,
-              "baseline_m": float(np.linalg.norm(res.T)), "T_m": res.T.tolist(), "fx_left_px": float(res.K1[0, 0]),
-              "per_pair_rms_px": {n: [round(float(x), 4) for x in e] for n, e in zip(res.used, res.per_pair_rms_px, strict=False)}}
+              "baseline_m": float(np.linalg.norm(res.T)), "T_m": res.T.tolist(),
+              "fx_left_px": float(res.K1[0, 0]),
+              "per_pair_rms_px": {n: [round(float(x), 4) for x in e] for n,
+                                  e in zip(res.used, res.per_pair_rms_px, strict=False)}}
     if val is not None:
         report["validation"] = val
     if a.json:
@@ -382,11 +397,12 @@ def main(argv: list[str] | None = None) -> int:
         for n, why in res.skipped_reason.items():
             print(f"  skipped {n}: {why}")
         if val is not None:
-            print(f"held out ({val['folds']} folds, {val['pairs']} pairs): epipolar RMS {val['epipolar_rms_px']:.3f} px "
+            print(f"held out ({val['folds']} folds, {val['pairs']} pairs): epipolar RMS "
+                  f"{val['epipolar_rms_px']:.3f} px "
                   f"(p95 {val['epipolar_p95_px']:.3f}); square {val['square_mean_m'] * 1e3:.2f} mm, spread "
-                  f"{val['square_std_rel'] * 100:.2f} % (per pair {val['square_pair_spread_rel'] * 100:.2f} %, "
-                  f"depth slope {val['square_depth_slope_rel_per_m'] * 100:.2f} %/m); the square's absolute "
-                  "size is the --square you gave (not checkable from images)")
+                  f"{val['square_std_rel'] * 100:.2f} % (per pair {val['square_pair_spread_rel'] * 100:.2f} "
+                  f"%, depth slope {val['square_depth_slope_rel_per_m'] * 100:.2f} %/m); the square's "
+                  "absolute size is the --square you gave (not checkable from images)")
         print(f"wrote {a.output}")
     return 0
 

@@ -20,22 +20,22 @@ Per stereo pair (raw mono8 images of the calibrated size):
 4. Partial occlusion check: the marker blob's area (Σα) must agree between the views
    within ``area_ratio_max`` (a blob cut by an occluder has a centroid shifted along the epipolar line).
 5. Covariance σ²(JᵀJ)⁻¹, rotated into the display frame with ``T_display_camera``. The pixel noise σ is
-   measured from the data (:class:`PixelNoise`: the RMS epipolar residual of the accepted matches; ``sigma_px``
-   is only its prior until enough frames have been seen).
+   measured from the data (:class:`PixelNoise`: the RMS epipolar residual of the accepted matches;
+   ``sigma_px`` is only its prior until enough frames have been seen).
 6. Outlier gate: squared Mahalanobis distance from the constant-velocity Kalman prediction
-   (:class:`~flexsheet.vision.predict.ConstantVelocityKF`) ≤ ``gate_chi2`` (χ²₃; 16.27 = 99.9 %), scaled
-   by the measured mean normalised innovation² of the accepted fixes over 3 when it exceeds 3 (covariance
+   (:class:`~flexsheet.vision.predict.ConstantVelocityKF`) ≤ ``gate_chi2`` (χ²₃; 16.27 = 99.9 %), scaled by
+   the measured mean normalised innovation² of the accepted fixes over 3 when it exceeds 3 (covariance
    matching, Mehra 1972: a smooth filter does not model the finger's tremor and turns, so the raw gate would
-   reject true fixes; docs/planner.md). The filter's process noise is set by its tracking index
-   λ = σ_w·T²/σ_v (Kalata 1984; Bar-Shalom et al. §6.5): q = λ²·σ_v²/T³ with σ_v² the mean variance of the measured position (from step 5) and T the measured
-   frame interval, so the filter smooths the same whatever the camera's noise or rate.
-   A fix outside that gate is tested again under a manoeuvre: process noise q = a²T for a finger accelerating
-   at ``manoeuvre_accel`` a (the peak of a minimum-jerk reach, 5.77·D/T², Flash & Hogan 1985: 4.7 m/s² for 0.1 m
-   in 0.35 s), inside the same gate; it is then accepted and fused with that q, so the track follows the finger
-   into and out of a reach instead of refusing it (the smooth filter lags an acceleration by several of its σ).
-   A reflection or a clutter blob ≥ ``ambiguity_m`` off stays outside both gates.
-   After ``max_gate_misses`` consecutive rejections the track is reset (the next fix is accepted), so a
-   wrong track cannot lock out the true marker. A track not updated for ``lost_reset_s`` is reset.
+   reject true fixes; docs/planner.md). The filter's process noise is set by its tracking index λ = σ_w·T²/σ_v
+   (Kalata 1984; Bar-Shalom et al. §6.5): q = λ²·σ_v²/T³ with σ_v² the mean variance of the measured position
+   (from step 5) and T the measured frame interval, so the filter smooths the same whatever the camera's noise
+   or rate. A fix outside that gate is tested again under a manoeuvre: process noise q = a²T for a finger
+   accelerating at ``manoeuvre_accel`` a (the peak of a minimum-jerk reach, 5.77·D/T², Flash & Hogan 1985: 4.7
+   m/s² for 0.1 m in 0.35 s), inside the same gate; it is then accepted and fused with that q, so the track
+   follows the finger into and out of a reach instead of refusing it (the smooth filter lags an acceleration
+   by several of its σ). A reflection or a clutter blob ≥ ``ambiguity_m`` off stays outside both gates. After
+   ``max_gate_misses`` consecutive rejections the track is reset (the next fix is accepted), so a wrong track
+   cannot lock out the true marker. A track not updated for ``lost_reset_s`` is reset.
 7. Output: valid fix with position (display frame, m), covariance (m²) and the position predicted
    ``horizon_s`` ahead — or invalid with a reason and a zero position (never stale or invented).
 """
@@ -60,7 +60,8 @@ class PixelNoise:
     accepted matches. For i.i.d. N(0, σ²) noise on the four image coordinates r = σ·|N(0, 1)| to first order
     (the residual is the noise's component along the constraint's unit gradient; Hartley & Zisserman §11.4.3),
     so E[r²] = σ². The prior ``prior_px`` counts as ``PRIOR_WEIGHT`` residuals; after ``window`` residuals the
-    estimate is an exponential average over about that many. Raises ``ValueError`` for a non-positive prior."""
+    estimate is an exponential average over about that many. Raises ``ValueError`` for a non-positive
+    prior."""
 
     PRIOR_WEIGHT = 10
 
@@ -122,7 +123,8 @@ class TrackerConfig:
         :class:`~flexsheet.vision.detect.MarkerDetector`)."""
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
-        for name in ("sigma_px", "epipolar_tol_px", "z_min", "gate_chi2", "lost_reset_s", "tracking_index", "v0_std",
+        for name in ("sigma_px", "epipolar_tol_px", "z_min", "gate_chi2", "lost_reset_s", "tracking_index",
+                     "v0_std",
                      "ambiguity_m", "manoeuvre_accel"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
@@ -143,7 +145,8 @@ class TrackerConfig:
 
     def detector(self) -> MarkerDetector:
         """The :class:`~flexsheet.vision.detect.MarkerDetector` these settings describe (raises its
-        ``ValueError`` for a bad ``se_size``, ``min_contrast``, ``max_candidates``, ``patch_radius``, ``roi_half``)."""
+        ``ValueError`` for a bad ``se_size``, ``min_contrast``, ``max_candidates``, ``patch_radius``,
+        ``roi_half``)."""
         return MarkerDetector(se_size=self.se_size, min_contrast=self.min_contrast,
                               max_candidates=self.max_candidates, patch_radius=self.patch_radius,
                               roi_half=self.roi_half)
@@ -152,10 +155,10 @@ class TrackerConfig:
 @dataclass
 class TrackResult:
     """One frame's output. ``valid``; ``reason`` ("ok", "no_left", "no_right", "no_match", "depth", "size",
-    "ambiguous", "occluded", "gated"); ``position`` (3,) m display frame (zeros when invalid); ``covariance`` (3, 3) m²;
-    ``predicted`` (3,) m display (= position when horizon 0 or invalid); ``residual_px`` epipolar residual;
-    ``uv_left``/``uv_right`` (2,) raw px of the chosen marker (NaN when invalid); ``roi`` True when both
-    images were found in their ROI; ``position_camera`` (3,) m left-camera frame."""
+    "ambiguous", "occluded", "gated"); ``position`` (3,) m display frame (zeros when invalid); ``covariance``
+    (3, 3) m²; ``predicted`` (3,) m display (= position when horizon 0 or invalid); ``residual_px`` epipolar
+    residual; ``uv_left``/``uv_right`` (2,) raw px of the chosen marker (NaN when invalid); ``roi`` True when
+    both images were found in their ROI; ``position_camera`` (3,) m left-camera frame."""
 
     valid: bool
     reason: str
@@ -178,14 +181,16 @@ class FingertipTracker:
     calibration.
     """
 
-    def __init__(self, calib, config: TrackerConfig | None = None, T_display_camera: np.ndarray | None = None):
+    def __init__(self, calib, config: TrackerConfig | None = None,
+                 T_display_camera: np.ndarray | None = None):
         self.cfg = config or TrackerConfig()
         self.cfg.validate()
         self.model = StereoModel.from_calib(calib)
         if T_display_camera is None:
             T_display_camera = (calib.get("T_display_camera") if isinstance(calib, dict)
                                 else getattr(calib, "T_display_camera", None))
-        T = np.eye(4) if T_display_camera is None else check_pose("T_display_camera", T_display_camera, tol=1e-3)
+        T = (np.eye(4) if T_display_camera is None
+             else check_pose("T_display_camera", T_display_camera, tol=1e-3))
         self.R_dc, self.t_dc = T[:3, :3].copy(), T[:3, 3].copy()
         w, h = self.model.image_size
         self.shape = (h, w)
@@ -194,14 +199,14 @@ class FingertipTracker:
         self.kf = ConstantVelocityKF(q=1.0, v0_std=c.v0_std)   # q: set per update from the tracking index
         self.noise = PixelNoise(c.sigma_px)
         self.frame_dt: float | None = None      # measured frame interval, s (exponential average)
-        self.nis = 3.0                          # mean normalised innovation² of accepted fixes (3 if consistent)
+        self.nis = 3.0  # mean normalised innovation² of accepted fixes (3 if consistent)
         self._last_uv: tuple[np.ndarray, np.ndarray] | None = None
         self._misses = 0
 
     def _manoeuvre_q(self, stamp: float) -> float:
         """Process noise q = a²·T (m²/s³) of a finger accelerating at ``manoeuvre_accel`` a over a frame
-        interval T (the measured one, else the time since the last fix to ``stamp`` s; the track is live): over T
-        its velocity changes by about √(qT) = a·T (Bar-Shalom et al. §6.2.2)."""
+        interval T (the measured one, else the time since the last fix to ``stamp`` s; the track is live):
+        over T its velocity changes by about √(qT) = a·T (Bar-Shalom et al. §6.2.2)."""
         T = self.frame_dt if self.frame_dt is not None else max(float(stamp) - self.kf.t, 1e-3)
         return self.cfg.manoeuvre_accel ** 2 * T
 
@@ -212,7 +217,8 @@ class FingertipTracker:
         self._misses = 0
 
     def forget_roi(self) -> None:
-        """Search the full images in the next frame, keeping the track (ROI off, e.g. to time the full search)."""
+        """Search the full images in the next frame, keeping the track (ROI off, e.g. to time the full
+        search)."""
         self._last_uv = None
 
     def _invalid(self, reason: str, roi: bool = False) -> TrackResult:
@@ -329,7 +335,9 @@ class FingertipTracker:
             dt = stamp - self.kf.t
             self.frame_dt = dt if self.frame_dt is None else self.frame_dt + 0.05 * (dt - self.frame_dt)
         if self.frame_dt is not None:   # q from the tracking index (module doc, step 6)
-            self.kf.q = q_for_tracking_index(c.tracking_index, math.sqrt(float(np.trace(cov_d)) / 3.0), self.frame_dt)
+            self.kf.q = q_for_tracking_index(c.tracking_index, math.sqrt(float(np.trace(cov_d)) / 3.0),
+                                             self.frame_dt)
         self.kf.update(pos, cov_d, stamp, q_step)
         pred = self.kf.position_at(stamp + c.horizon_s) if c.horizon_s > 0 else pos.copy()
-        return TrackResult(True, "ok", pos.copy(), cov_d, pred, residual, uvl.copy(), uvr.copy(), roi, X[k].copy())
+        return TrackResult(True, "ok", pos.copy(), cov_d, pred, residual, uvl.copy(), uvr.copy(), roi,
+                           X[k].copy())

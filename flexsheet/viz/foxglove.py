@@ -10,14 +10,15 @@ live view showed. Pure apart from building messages: numpy, scipy, the ``foxglov
 Outputs (Foxglove topic: schema, what):
 
 * ``/viz/scene`` (``foxglove.SceneUpdate``), display frame: the object's surface mesh exactly as
-  ``/object/deformation`` carries it (the vertices the renderer draws; the undeformed paper cylinder until
-  the FEM has published); the sheet the display believes in (clamp poses by forward kinematics of both arms'
+  ``/object/deformation`` carries it (the vertices the renderer draws; the undeformed paper cylinder until the
+  FEM has published); the sheet the display believes in (clamp poses by forward kinematics of both arms'
   measured joints, :meth:`SheetSurface.from_clamps`; depressed by a valid fingertip behind it with the
   renderer's own pushed-sheet model, :func:`flexsheet.model.sheet_model.sheet_model_for` of the same
-  :class:`~flexsheet.model.sheet_model.SheetConfig`: the dent the projected image is corrected for); in the twin the true sheet (``/world/sheet``, wireframe); the fingertip measured, predicted
-  and true (``/world/finger``); the contact point with the object normal (``/sheet/target``) and the sheet
-  normal; camera and projector frusta; the eyes; both arms drawn from ``rv1a.urdf`` (link frames by
-  Pinocchio FK, a cylinder per link, a box for each clamp jaw).
+  :class:`~flexsheet.model.sheet_model.SheetConfig`: the dent the projected image is corrected for); in the
+  twin the true sheet (``/world/sheet``, wireframe); the fingertip measured, predicted and true
+  (``/world/finger``); the contact point with the object normal (``/sheet/target``) and the sheet normal;
+  camera and projector frusta; the eyes; both arms drawn from ``rv1a.urdf`` (link frames by Pinocchio FK, a
+  cylinder per link, a box for each clamp jaw).
 * ``/viz/tf`` (``foxglove.FrameTransforms``): ``display`` → ``camera_left`` → ``camera_right``,
   ``projector``, ``eye``, ``sheet``, ``sheet_target``, and per arm ``<arm>/base_link`` → … → ``<arm>/clamp``
   (the URDF links, ``<arm>`` = left | right).
@@ -30,9 +31,9 @@ Outputs (Foxglove topic: schema, what):
 * the plain topics (``/fingertip``, ``/sheet/target``, ``/arm/<arm>/joint_state``, ``/object/deformation``
   without its mesh arrays, ``/diagnostics``) as JSON with the message's JSON schema.
 
-Rates are set by :class:`flexsheet.viz.streams.Rates`; :class:`flexsheet.viz.streams.FoxgloveStreams` decides what is due from the newest inputs, with
-time given by the caller (wall clock live, log time in a bag). Source: Foxglove schemas
-(docs.foxglove.dev/docs/visualization/message-schemas), foxglove-sdk Python API.
+Rates are set by :class:`flexsheet.viz.streams.Rates`; :class:`flexsheet.viz.streams.FoxgloveStreams` decides
+what is due from the newest inputs, with time given by the caller (wall clock live, log time in a bag).
+Source: Foxglove schemas (docs.foxglove.dev/docs/visualization/message-schemas), foxglove-sdk Python API.
 """
 
 from __future__ import annotations
@@ -109,8 +110,8 @@ _METRICS_SCHEMA = {
     "properties": {
         "stamp": {"type": "number", "description": "time of the newest input, s"},
         "dtheta_deg": {"type": ["number", "null"],
-                       "description": "angle between the object normal at the contact (SheetTarget.normal) and the "
-                                      "measured sheet normal (arm FK), deg"},
+                       "description": "angle between the object normal at the contact (SheetTarget.normal) "
+                                      "and the measured sheet normal (arm FK), deg"},
         "tension": {"type": ["number", "null"], "description": "planned membrane tension, N/m"},
         "stretch": {"type": ["number", "null"], "description": "planned sheet strain"},
         "contact_force": {"type": ["number", "null"], "description": "FEM fingertip reaction, N"},
@@ -122,7 +123,8 @@ _METRICS_SCHEMA = {
 }
 
 _FOX_TYPES = {SCENE: SceneUpdate, TF: FrameTransforms, CAMERA_LEFT: RawImage, CAMERA_RIGHT: RawImage,
-              CAMERA_LEFT_INFO: CameraCalibration, CAMERA_RIGHT_INFO: CameraCalibration, RENDER_IMAGE: RawImage}
+              CAMERA_LEFT_INFO: CameraCalibration, CAMERA_RIGHT_INFO: CameraCalibration,
+              RENDER_IMAGE: RawImage}
 
 
 def channel_schemas() -> dict[str, tuple[Schema, str]]:

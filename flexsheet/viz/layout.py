@@ -29,20 +29,24 @@ __all__ = ["layout", "PLOTS", "main"]
 
 #: plot panels: id -> (title, [(message path, label)])
 PLOTS = {
-    "Plot!dtheta": ("Δθ: object normal vs measured sheet normal (deg)", [(f"{METRICS}.dtheta_deg", "Δθ (deg)")]),
+    "Plot!dtheta": ("Δθ: object normal vs measured sheet normal (deg)",
+                    [(f"{METRICS}.dtheta_deg", "Δθ (deg)")]),
     "Plot!latency": ("latency from camera exposure (ms)", [
         (f"{METRICS}.latency_ms.fingertip", "fingertip"), (f"{METRICS}.latency_ms.target", "sheet target"),
-        (f"{METRICS}.latency_ms.arm_left", "left arm write"), (f"{METRICS}.latency_ms.arm_right", "right arm write"),
+        (f"{METRICS}.latency_ms.arm_left", "left arm write"),
+        (f"{METRICS}.latency_ms.arm_right", "right arm write"),
         (f"{METRICS}.latency_ms.render", "rendered frame")]),
     "Plot!tension": ("sheet tension (N/m)", [(f"{METRICS}.tension", "tension (N/m)")]),
 }
 
 
 def _plot(title: str, series: list[tuple[str, str]]) -> dict:
-    return {"title": title, "paths": [{"value": v, "enabled": True, "timestampMethod": "receiveTime", "label": lab}
-                                      for v, lab in series],
+    return {"title": title,
+            "paths": [{"value": v, "enabled": True, "timestampMethod": "receiveTime", "label": lab}
+                      for v, lab in series],
             "showXAxisLabels": True, "showYAxisLabels": True, "showLegend": True, "legendDisplay": "floating",
-            "showPlotValuesInLegend": True, "isSynced": True, "xAxisVal": "timestamp", "sidebarDimension": 240}
+            "showPlotValuesInLegend": True, "isSynced": True, "xAxisVal": "timestamp",
+            "sidebarDimension": 240}
 
 
 def _image(topic: str, calibration: str | None) -> dict:
@@ -53,7 +57,8 @@ def _image(topic: str, calibration: str | None) -> dict:
                             "targetOffset": [0, 0, 0], "targetOrientation": [0, 0, 0, 1], "thetaOffset": 45,
                             "fovy": 45, "near": 0.01, "far": 100},
             "followMode": "follow-pose", "scene": {}, "transforms": {}, "topics": {}, "layers": {},
-            "publish": {"type": "point", "poseTopic": "/move_base_simple/goal", "pointTopic": "/clicked_point",
+            "publish": {"type": "point", "poseTopic": "/move_base_simple/goal",
+                        "pointTopic": "/clicked_point",
                         "poseEstimateTopic": "/initialpose", "poseEstimateXDeviation": 0.5,
                         "poseEstimateYDeviation": 0.5, "poseEstimateThetaDeviation": 0.26179939},
             "imageMode": mode}
@@ -62,8 +67,10 @@ def _image(topic: str, calibration: str | None) -> dict:
 def layout() -> dict:
     """The layout dict (see module docstring). Topic names come from :mod:`flexsheet.viz.foxglove`."""
     three_d = {
-        "cameraState": {"distance": 1.9, "perspective": True, "phi": 62, "thetaOffset": 35, "target": [-0.1, 0, -0.1],
-                        "targetOffset": [0, 0, 0], "targetOrientation": [0, 0, 0, 1], "fovy": 45, "near": 0.01,
+        "cameraState": {"distance": 1.9, "perspective": True, "phi": 62, "thetaOffset": 35,
+                        "target": [-0.1, 0, -0.1],
+                        "targetOffset": [0, 0, 0], "targetOrientation": [0, 0, 0, 1], "fovy": 45,
+                        "near": 0.01,
                         "far": 50},
         "followMode": "follow-pose", "followTf": "display",
         "scene": {"enableStats": False, "backgroundColor": "#1b1d22", "labelScaleFactor": 0.6,
@@ -79,12 +86,15 @@ def layout() -> dict:
         "imageMode": {},
     }
     config = {"3D!viz": three_d, "Image!left": _image(CAMERA_LEFT, CAMERA_LEFT_INFO),
-              "Image!right": _image(CAMERA_RIGHT, CAMERA_RIGHT_INFO), "Image!render": _image(RENDER_IMAGE, None)}
+              "Image!right": _image(CAMERA_RIGHT, CAMERA_RIGHT_INFO),
+              "Image!render": _image(RENDER_IMAGE, None)}
     config.update({k: _plot(t, s) for k, (t, s) in PLOTS.items()})
     images = {"direction": "column", "splitPercentage": 33.3, "first": "Image!left",
-              "second": {"direction": "column", "splitPercentage": 50, "first": "Image!right", "second": "Image!render"}}
+              "second": {"direction": "column", "splitPercentage": 50, "first": "Image!right",
+                         "second": "Image!render"}}
     plots = {"direction": "row", "splitPercentage": 33.3, "first": "Plot!dtheta",
-             "second": {"direction": "row", "splitPercentage": 50, "first": "Plot!latency", "second": "Plot!tension"}}
+             "second": {"direction": "row", "splitPercentage": 50, "first": "Plot!latency",
+                        "second": "Plot!tension"}}
     tree = {"direction": "column", "splitPercentage": 70,
             "first": {"direction": "row", "splitPercentage": 68, "first": "3D!viz", "second": images},
             "second": plots}
@@ -95,7 +105,8 @@ def layout() -> dict:
 def main(argv: list[str] | None = None) -> int:
     """Write the layout JSON to a file (or stdout with ``-``)."""
     ap = argparse.ArgumentParser(prog="python -m flexsheet.viz.layout", description=__doc__.splitlines()[0],
-                                 epilog="example:\n  python -m flexsheet.viz.layout docs/foxglove_layout.json",
+                                 epilog="example:\n  python -m flexsheet.viz.layout "
+                                        "docs/foxglove_layout.json",
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("output", nargs="?", default="-", help="output .json ('-': stdout)")
     args = ap.parse_args(argv)

@@ -1,4 +1,5 @@
-"""The Foxglove layout's panels rendered from a bag with matplotlib (for docs and for machines without a viewer).
+"""The Foxglove layout's panels rendered from a bag with matplotlib (for docs and for machines without a
+viewer).
 
 Reads the Foxglove channels of an MCAP file (as written by :mod:`flexsheet.viz.foxglove_bag` or the viz
 bridge), decodes them against the schemas stored in the file (protobuf FileDescriptorSets with the
@@ -111,7 +112,8 @@ def _draw_scene(ax, scene) -> dict:
             ax.plot(*np.stack([p - half, p + half]).T, color=_rgba(cu.color), lw=4)
             drawn[f"{e.id}:cubes"] += 1
         for sp in e.spheres:
-            ax.scatter([sp.pose.position.x], [sp.pose.position.y], [sp.pose.position.z], color=[_rgba(sp.color)],
+            ax.scatter([sp.pose.position.x], [sp.pose.position.y], [sp.pose.position.z],
+                       color=[_rgba(sp.color)],
                        s=max(6.0, sp.size.x * 2500), depthshade=False)
             drawn[f"{e.id}:spheres"] += 1
         for ar in e.arrows:
@@ -120,7 +122,8 @@ def _draw_scene(ax, scene) -> dict:
             ax.quiver(*p, *d, color=_rgba(ar.color), linewidth=1.5, arrow_length_ratio=0.3)
             drawn[f"{e.id}:arrows"] += 1
         for tx in e.texts:
-            ax.text(tx.pose.position.x, tx.pose.position.y, tx.pose.position.z, tx.text, color="w", fontsize=7)
+            ax.text(tx.pose.position.x, tx.pose.position.y, tx.pose.position.z, tx.text, color="w",
+                    fontsize=7)
     return dict(drawn)
 
 
@@ -171,7 +174,8 @@ def render(data: dict, out_png: str | Path, at: float | None = None) -> dict:
     t_scene, scene = _nearest(scenes, t_at)
     plt.style.use("dark_background")
     fig = plt.figure(figsize=(16, 9), dpi=100)
-    gs = fig.add_gridspec(3, 3, height_ratios=[1, 1, 0.7], width_ratios=[1.25, 1.25, 1], hspace=0.32, wspace=0.1,
+    gs = fig.add_gridspec(3, 3, height_ratios=[1, 1, 0.7], width_ratios=[1.25, 1.25, 1], hspace=0.32,
+                          wspace=0.1,
                           left=0.04, right=0.98, top=0.93, bottom=0.07)
     ax3 = fig.add_subplot(gs[0:2, 0:2], projection="3d")
     drawn = _draw_scene(ax3, scene)
@@ -186,7 +190,8 @@ def render(data: dict, out_png: str | Path, at: float | None = None) -> dict:
     ax3.set_zlabel("z (m)")
     ax3.set_title(f"3D: /viz/scene at t = {t_scene - t0:.2f} s (display frame)", fontsize=10)
     for k, topic in enumerate(_IMAGES):
-        _image(fig.add_subplot(gs[k, 2]) if k < 2 else fig.add_subplot(gs[2, 2]), _nearest(data.get(topic, []), t_scene),
+        _image(fig.add_subplot(gs[k, 2]) if k < 2 else fig.add_subplot(gs[2, 2]),
+               _nearest(data.get(topic, []), t_scene),
                topic)
     numbers: dict = {"bag_start": t0, "scene_time_s": t_scene - t0, "scene_entities": drawn, "plots": {}}
     row = gs[2, 0:2].subgridspec(1, len(PLOTS), wspace=0.3)
@@ -205,7 +210,8 @@ def render(data: dict, out_png: str | Path, at: float | None = None) -> dict:
         ax.tick_params(labelsize=7)
         if len(series) > 1:
             ax.legend(fontsize=6, loc="upper right")
-    fig.suptitle("flexsheet in the Foxglove layout's panels — drawn from the bag with matplotlib, not Foxglove",
+    fig.suptitle("flexsheet in the Foxglove layout's panels — drawn from the bag with matplotlib, not "
+                 "Foxglove",
                  fontsize=11)
     out_png = Path(out_png)
     out_png.parent.mkdir(parents=True, exist_ok=True)
@@ -217,18 +223,21 @@ def render(data: dict, out_png: str | Path, at: float | None = None) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m flexsheet.viz.preview", description=__doc__.splitlines()[0],
-                                 epilog="example:\n  python -m flexsheet.viz.preview run_foxglove.mcap preview.png --at 20",
+                                 epilog="example:\n  python -m flexsheet.viz.preview run_foxglove.mcap "
+                                        "preview.png --at 20",
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("bag", help="MCAP file with Foxglove channels")
     ap.add_argument("output", help="output .png (a .json of the plotted numbers is written beside it)")
-    ap.add_argument("--at", type=float, default=None, help="scene time, s from the bag start (default: deepest push)")
+    ap.add_argument("--at", type=float, default=None, help="scene time, s from the bag start (default: "
+                                                           "deepest push)")
     args = ap.parse_args(argv)
     try:
         numbers = render(read_foxglove(args.bag), args.output, args.at)
     except (ValueError, FileNotFoundError) as exc:
         print(f"preview: {exc}", file=sys.stderr)
         return 2
-    print(f"wrote {args.output} (scene at {numbers['scene_time_s']:.2f} s) and {Path(args.output).with_suffix('.json')}")
+    print(f"wrote {args.output} (scene at {numbers['scene_time_s']:.2f} s) and "
+          f"{Path(args.output).with_suffix('.json')}")
     return 0
 
 

@@ -26,7 +26,8 @@ from flexsheet.model.sheet import SheetSurface
 __all__ = ["quaternions", "frustum_points", "sheet_mesh"]
 
 _RGBA = {
-    "object": (0.95, 0.55, 0.20, 0.9), "object_invalid": (0.6, 0.6, 0.6, 0.7), "sheet": (0.75, 0.85, 1.0, 0.45),
+    "object": (0.95, 0.55, 0.20, 0.9), "object_invalid": (0.6, 0.6, 0.6, 0.7),
+    "sheet": (0.75, 0.85, 1.0, 0.45),
     "sheet_true": (1.0, 1.0, 1.0, 0.6), "measured": (0.1, 0.9, 0.2, 1.0), "predicted": (1.0, 0.9, 0.1, 1.0),
     "true": (0.9, 0.2, 0.9, 1.0), "contact": (1.0, 0.15, 0.15, 1.0), "sheet_normal": (0.2, 0.45, 1.0, 1.0),
     "camera": (0.2, 0.9, 0.9, 1.0), "projector": (1.0, 0.8, 0.3, 1.0), "eye": (0.3, 0.5, 1.0, 1.0),
@@ -35,7 +36,8 @@ _RGBA = {
 
 
 def named_color(name: str) -> Color:
-    """The scene's colour of ``name`` (a key of the palette: "object", "sheet", "arm", …); ``KeyError`` else."""
+    """The scene's colour of ``name`` (a key of the palette: "object", "sheet", "arm", …); ``KeyError``
+    else."""
     r, g, b, a = _RGBA[name]
     return Color(r=r, g=g, b=b, a=a)
 
@@ -67,7 +69,8 @@ def quaternions(R: np.ndarray) -> np.ndarray:
 
 
 def rotation_z_to(d: np.ndarray) -> np.ndarray:
-    """Quaternion (x, y, z, w) turning +z onto the unit vector ``d`` (3,) (shortest arc; q ∝ (z × d, 1 + z·d))."""
+    """Quaternion (x, y, z, w) turning +z onto the unit vector ``d`` (3,) (shortest arc; q ∝ (z × d, 1 +
+    z·d))."""
     if d[2] < -1.0 + 1e-9:
         return np.array([1.0, 0.0, 0.0, 0.0])
     q = np.array([-d[1], d[0], 0.0, 1.0 + d[2]])
@@ -75,7 +78,8 @@ def rotation_z_to(d: np.ndarray) -> np.ndarray:
 
 
 def rotation_x_to(d: np.ndarray) -> np.ndarray:
-    """Quaternion (x, y, z, w) turning +x onto the unit vector ``d`` (3,) (shortest arc; q ∝ (x × d, 1 + x·d))."""
+    """Quaternion (x, y, z, w) turning +x onto the unit vector ``d`` (3,) (shortest arc; q ∝ (x × d, 1 +
+    x·d))."""
     if d[0] < -1.0 + 1e-9:
         return np.array([0.0, 0.0, 1.0, 0.0])
     q = np.array([0.0, -d[2], d[1], 1.0 + d[0]])
@@ -150,7 +154,8 @@ def _grid_faces(nu: int, nv: int) -> np.ndarray:
 # repeated ``Point3 points`` (one length-delimited record of 3 doubles per point) and the packed
 # ``fixed32 indices``. tests/unit/viz/test_scene_builder.py decodes the result against the SDK's schema.
 _LEN = 2  # wire type of length-delimited fields (submessages, bytes, packed arrays)
-_POINT3_RECORD = np.dtype([("tag", "u1"), ("len", "u1"), ("tx", "u1"), ("x", "<f8"), ("ty", "u1"), ("y", "<f8"),
+_POINT3_RECORD = np.dtype([("tag", "u1"), ("len", "u1"), ("tx", "u1"), ("x", "<f8"), ("ty", "u1"),
+                           ("y", "<f8"),
                            ("tz", "u1"), ("z", "<f8")])  # 29 bytes, unaligned: exactly the wire bytes
 
 
@@ -186,7 +191,8 @@ def _fixed32_field(number: int, values: np.ndarray) -> bytes:
     return len_field(number, v.tobytes()) if len(v) else b""
 
 
-#: field numbers (foxglove/SceneUpdate.proto, SceneEntity.proto, TriangleListPrimitive.proto, LinePrimitive.proto)
+#: field numbers (foxglove/SceneUpdate.proto, SceneEntity.proto,
+#: TriangleListPrimitive.proto, LinePrimitive.proto)
 SCENE_ENTITIES, ENTITY_LINES, ENTITY_TRIANGLES, _TRI_POINTS, _TRI_INDICES, _LINE_POINTS = 2, 11, 12, 2, 5, 5
 
 

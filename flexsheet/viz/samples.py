@@ -41,9 +41,9 @@ __all__ = ["dented_cylinder", "sample_state"]
 
 
 def dented_cylinder(depth: float, n_around: int = 48, n_along: int = 24, width: float = 0.01):
-    """Side surface of the paper's cylinder (axis +y through ``geometry.CYLINDER_CENTER``) as a grid mesh, pushed
-    in by a Gaussian dent of ``depth`` m (σ = ``width`` m) at its front line (x = 0, y = 0).
-    Returns (vertices (N, 3) float32 m, faces (M, 3) int32). Raises ``ValueError`` on depth < 0."""
+    """Side surface of the paper's cylinder (axis +y through ``geometry.CYLINDER_CENTER``) as a grid mesh,
+    pushed in by a Gaussian dent of ``depth`` m (σ = ``width`` m) at its front line (x = 0, y = 0). Returns
+    (vertices (N, 3) float32 m, faces (M, 3) int32). Raises ``ValueError`` on depth < 0."""
     if not (depth >= 0 and math.isfinite(depth)):
         raise ValueError(f"depth must be >= 0, got {depth!r}")
     R, L, c = geometry.CYLINDER_RADIUS, geometry.CYLINDER_LENGTH, geometry.CYLINDER_CENTER
@@ -86,21 +86,27 @@ def sample_state(stamp: float = 1.0e9, push: float = 0.004, seq: int = 0) -> dic
         q = home_joints(side)
         poses[side] = kin.fk(q)
         topic = T.arm_state(side).name
-        out[topic] = ArmJointState(header=h(), arm=side, position=q, velocity=np.zeros(6), commanded=q, executing=q,
-                                   pose=poses[side], status=1, target_stamp=exposure, write_stamp=stamp - 0.002)
+        out[topic] = ArmJointState(header=h(), arm=side, position=q, velocity=np.zeros(6), commanded=q,
+                                   executing=q,
+                                   pose=poses[side], status=1, target_stamp=exposure,
+                                   write_stamp=stamp - 0.002)
     tip = np.array([-push, 0.01, 0.0])
     out[T.FINGERTIP.name] = Fingertip(header=h(), position=tip, covariance=np.eye(3) * 1e-8, valid=True,
                                       predicted_position=tip + [0.0, 0.002, 0.0], prediction_horizon=0.03,
                                       exposure_stamp=exposure, frame_stamp=stamp - 0.008, reprojection_px=0.2)
-    out[T.FINGER_TRUTH.name] = FingerTruth(header=h(), position=tip + [0.0002, 0.0, 0.0001], velocity=np.zeros(3),
+    out[T.FINGER_TRUTH.name] = FingerTruth(header=h(), position=tip + [0.0002, 0.0, 0.0001],
+                                           velocity=np.zeros(3),
                                            phase="push", visible=True)
     out[T.SHEET_TARGET.name] = SheetTarget(
-        header=h(), contact_point=np.zeros(3), normal=np.array([1.0, 0.0, 0.0]), axis_u=np.array([0.0, 1.0, 0.0]),
-        axis_v=np.array([0.0, 0.0, 1.0]), sheet_origin=np.zeros(3), stretch=0.05, tension=120.0, stiffness=300.0,
+        header=h(), contact_point=np.zeros(3), normal=np.array([1.0, 0.0, 0.0]),
+        axis_u=np.array([0.0, 1.0, 0.0]),
+        axis_v=np.array([0.0, 0.0, 1.0]), sheet_origin=np.zeros(3), stretch=0.05, tension=120.0,
+        stiffness=300.0,
         object_stiffness=250.0, touching=True, source_stamp=exposure)
     v, f = dented_cylinder(push)
     out[T.DEFORMATION.name] = ObjectDeformation(
-        header=h(), vertices=v, faces=f, contact_force=0.8, stiffness=250.0, depth=push, contact_point=np.zeros(3),
+        header=h(), vertices=v, faces=f, contact_force=0.8, stiffness=250.0, depth=push,
+        contact_point=np.zeros(3),
         method="condensed", source_stamp=exposure)
     sheet = SheetSurface.from_clamps(poses["left"], poses["right"], pushed_point=tip,
                                      membrane_kwargs={"modes": 64})
@@ -116,12 +122,17 @@ def sample_state(stamp: float = 1.0e9, push: float = 0.004, seq: int = 0) -> dic
                                      exposure_time=0.002)
     img = np.zeros((48, 64, 3), np.uint8)
     img[12:36, 20:44] = (255, 160, 60)
-    out[T.RENDERED.name] = RenderedFrame(header=h("projector"), left=img, right=np.ascontiguousarray(img[:, ::-1]),
-                                         scale=0.0625, correction="fine", render_time=0.004, source_stamp=exposure,
-                                         eyes=np.stack([geometry.EYE - [0, 0.032, 0], geometry.EYE + [0, 0.032, 0]]),
+    out[T.RENDERED.name] = RenderedFrame(header=h("projector"), left=img,
+                                         right=np.ascontiguousarray(img[:, ::-1]),
+                                         scale=0.0625, correction="fine", render_time=0.004,
+                                         source_stamp=exposure,
+                                         eyes=
+                                             np.stack([geometry.EYE - [0, 0.032, 0],
+                                                       geometry.EYE + [0, 0.032, 0]]),
                                          eye_source="tracked")
     left_eye, right_eye = geometry.EYE - [0.0, 0.032, 0.0], geometry.EYE + [0.0, 0.032, 0.0]
-    glasses = dict(position=geometry.EYE + [-0.015, 0.0, 0.0], rotation=np.array([[0.0, 0, -1], [-1, 0, 0], [0, 1, 0]]),
+    glasses = dict(position=geometry.EYE + [-0.015, 0.0, 0.0],
+                   rotation=np.array([[0.0, 0, -1], [-1, 0, 0], [0, 1, 0]]),
                    left=left_eye, right=right_eye, eye=geometry.EYE.copy(), velocity=np.zeros(3))
     out[T.EYE_POSE.name] = EyePose(header=h(), valid=True, markers=14, reprojection_px=0.1, **glasses)
     out[T.HEAD_TRUTH.name] = HeadTruth(header=h(), **glasses)

@@ -1,6 +1,6 @@
-"""The 3-D scene the viz bridge serves (:class:`SceneBuilder`): the believed sheet and arms, the fingertip, the
-deformed object, cameras, projector and eyes as Foxglove ``SceneUpdate``/``FrameTransforms``, from the newest
-display messages (:class:`flexsheet.viz.config.VizConfig`)."""
+"""The 3-D scene the viz bridge serves (:class:`SceneBuilder`): the believed sheet and arms, the fingertip,
+the deformed object, cameras, projector and eyes as Foxglove ``SceneUpdate``/``FrameTransforms``, from the
+newest display messages (:class:`flexsheet.viz.config.VizConfig`)."""
 
 from __future__ import annotations
 
@@ -30,12 +30,7 @@ from flexsheet.model import geometry
 from flexsheet.model.checks import check_pose
 from flexsheet.model.projector import eye_positions
 from flexsheet.model.sheet import SheetSurface, clamp_poses
-from flexsheet.model.sheet_model import (
-    NominalSheetModel,
-    believed_sheet,
-    drawable,
-    sheet_model_for,
-)
+from flexsheet.model.sheet_model import NominalSheetModel, believed_sheet, drawable, sheet_model_for
 from flexsheet.viz.config import VizConfig
 from flexsheet.viz.foxglove import ARM_LINKS, JSON_EXCLUDE, LINK_DIAMETER
 from flexsheet.viz.primitives import (
@@ -101,10 +96,8 @@ class SceneBuilder:
     """Holds the newest input of every topic and builds Foxglove messages from them.
 
     Feed it with :meth:`update` (topic name, decoded message); bad input raises ``ValueError`` naming the
-    topic and field and leaves the previous state. Build with :meth:`scene_bytes`, :meth:`transforms`,
-    :meth:`camera_images`, :meth:`calibrations`, :meth:`render_image`, :meth:`metrics`, :meth:`json_copy`.
-    Not thread-safe: call from one thread.
-    """
+    topic and field and leaves the previous state. Build with :meth:`scene_bytes`, :meth:`transforms` and
+    the others. Not thread-safe: call from one thread."""
 
     def __init__(self, config: VizConfig | None = None, sheet_model: NominalSheetModel | None = None) -> None:
         self.cfg = config or VizConfig()
@@ -116,7 +109,7 @@ class SceneBuilder:
         self._static: list[bytes] | None = None
         self._sheet_key: tuple | None = None
         self._sheet: SheetSurface | None = None
-        #: the renderer's pushed-sheet model for the same SheetConfig (tables loaded on first use, never built)
+        #: the renderer's pushed-sheet model of the same SheetConfig (tables loaded when used, never built)
         self.sheet_model: NominalSheetModel = sheet_model if sheet_model is not None else sheet_model_for(
             self.cfg.sheet)
         P = self.cfg.projector
@@ -148,15 +141,16 @@ class SceneBuilder:
 
     def _arm_links(self, side: str, q) -> np.ndarray:
         if self._arms is None:
-            self._arms = {"left": _Arm("left", self.cfg.left_base), "right": _Arm("right", self.cfg.right_base)}
+            self._arms = {"left": _Arm("left", self.cfg.left_base),
+                          "right": _Arm("right", self.cfg.right_base)}
         links = self._arms[side].link_poses(q)
         self._links[side] = links
         return links
 
     # ------------------------------------------------------------------ believed and true sheet
     def clamp_poses(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """(T_left, T_right) T_display_clamp (4, 4) from FK of the newest joint states (home pose for an arm not
-        heard from), or None before any joint state."""
+        """(T_left, T_right) T_display_clamp (4, 4) from FK of the newest joint states (home pose for an arm
+        not heard from), or None before any joint state."""
         if not self._links:
             return None
         home = clamp_poses(np.zeros(3), geometry.SCREEN_NORMAL, np.array([0.0, 1.0, 0.0]), 0.0)
@@ -168,11 +162,9 @@ class SceneBuilder:
 
     def believed_sheet(self) -> SheetSurface | None:
         """The sheet from the measured clamps, depressed by a valid fingertip more than
-        ``cfg.sheet.push_threshold`` behind it, or None before any joint state / for clamps that give no sheet.
-        The depression is the renderer's: :meth:`NominalSheetModel.pushed` of ``sheet_model``
-        (:func:`~flexsheet.model.sheet_model.sheet_model_for` ``cfg.sheet``, as ``RendererState``), with
-        ``build=False``: a stretch whose table is not on disk yet is drawn as :class:`FourTriangleDent` (what
-        the renderer draws meanwhile) until the renderer's worker has built it into the shared cache."""
+        ``cfg.sheet.push_threshold`` behind it (None before any joint state / for clamps that give no sheet),
+        as the renderer draws it (:meth:`NominalSheetModel.pushed`, ``build=False``: the 4-triangle dent until
+        the renderer's worker has built the stretch's table into the shared cache)."""
         key = tuple(id(self.latest.get(t.name)) for t in (T.ARM_LEFT_STATE, T.ARM_RIGHT_STATE, T.FINGERTIP))
         if key != self._sheet_key:
             self._sheet_key, self._sheet = key, self._believed_sheet()
@@ -199,7 +191,8 @@ class SceneBuilder:
         """Entity bytes of ``eid`` rebuilt only when one of the objects in ``key`` was replaced (compared by
         identity: the cache holds them, so an id cannot be reused while they are compared)."""
         hit = self._entities.get(eid)
-        if hit is not None and len(hit[0]) == len(key) and all(x is y for x, y in zip(hit[0], key, strict=True)):
+        if (hit is not None and len(hit[0]) == len(key)
+            and all(x is y for x, y in zip(hit[0], key, strict=True))):
             return hit[1]
         data = build()
         self._entities[eid] = (key, data)
@@ -213,8 +206,8 @@ class SceneBuilder:
         if d is None:  # the FEM has not published: the undeformed paper cylinder (axis along y)
             q = rotation_z_to(np.asarray(geometry.CYLINDER_AXIS, dtype=float))
             cyl = CylinderPrimitive(pose=pose_msg(geometry.CYLINDER_CENTER, q),
-                                    size=Vector3(x=2 * geometry.CYLINDER_RADIUS, y=2 * geometry.CYLINDER_RADIUS,
-                                                 z=geometry.CYLINDER_LENGTH),
+                                    size=Vector3(x=2 * geometry.CYLINDER_RADIUS,
+                                                 y=2 * geometry.CYLINDER_RADIUS, z=geometry.CYLINDER_LENGTH),
                                     bottom_scale=1.0, top_scale=1.0, color=named_color("object"))
             return self._entity("object", stamp, cylinders=[cyl])
         tri = triangles_bytes(d.vertices, d.faces, named_color("object" if d.valid else "object_invalid"))
@@ -232,7 +225,8 @@ class SceneBuilder:
                 texts=[self._label(P.position, "projector")])
             e = self.eyes
             eyes = self._entity("eyes", stamp, spheres=[
-                SpherePrimitive(pose=pose_msg(p), size=Vector3(x=0.012, y=0.012, z=0.012), color=named_color("eye"))
+                SpherePrimitive(pose=pose_msg(p), size=Vector3(x=0.012, y=0.012, z=0.012),
+                                color=named_color("eye"))
                 for p in (e[0], e[1])], texts=[self._label(self.cfg.eye + [0, 0, 0.03], "eye")])
             self._static = [proj, eyes]
         return self._static
@@ -292,7 +286,8 @@ class SceneBuilder:
     def _build_sheet(self, sheet: SheetSurface, stamp: float) -> bytes:
         n = self.cfg.sheet_grid
         v, f = sheet_mesh(sheet, n)
-        return self._entity("sheet", stamp) + len_field(ENTITY_TRIANGLES, triangles_bytes(v, f, named_color("sheet")))
+        return (self._entity("sheet", stamp)
+                + len_field(ENTITY_TRIANGLES, triangles_bytes(v, f, named_color("sheet"))))
 
     def _build_true_sheet(self, true: SheetState) -> bytes:
         g = true.membrane
@@ -301,7 +296,8 @@ class SceneBuilder:
         u = np.linspace(-a, a, g.shape[0])
         v = np.linspace(-b, b, g.shape[1])
         ev = np.cross(true.normal, true.axis_u)
-        P = (true.origin + u[:, None, None] * true.axis_u + v[None, :, None] * ev - g[:, :, None] * true.normal)
+        P = (true.origin + u[:, None, None] * true.axis_u + v[None, :, None] * ev
+             - g[:, :, None] * true.normal)
         # every ~8th grid line of constant u, then of constant v
         rows = [P[i, :] for i in range(0, g.shape[0], max(1, g.shape[0] // 8))]
         rows += [P[:, j] for j in range(0, g.shape[1], max(1, g.shape[1] // 8))]
@@ -321,8 +317,9 @@ class SceneBuilder:
         lines = []
         for K, Tm in ((cal.K1, Tl), (cal.K2, Tr)):
             pts = frustum_points(K, w, h, Tm, self.cfg.frustum_depth)
-            lines.append(LinePrimitive(type=LinePrimitiveLineType.LineList, thickness=2.0, scale_invariant=True,
-                                       points=frustum_lines(pts), color=named_color("camera")))
+            lines.append(LinePrimitive(type=LinePrimitiveLineType.LineList, thickness=2.0,
+                                       scale_invariant=True, points=frustum_lines(pts),
+                                       color=named_color("camera")))
         return self._entity("cameras", stamp, lines=lines, texts=[self._label(Tl[:3, 3], "camera")])
 
     @staticmethod
@@ -352,7 +349,8 @@ class SceneBuilder:
                    for k in range(1, len(ARM_LINKS) - 1)]
         Tc = links[-1]
         jaw = CubePrimitive(pose=pose_msg(Tc[:3, 3], quaternions(Tc[:3, :3])),
-                            size=Vector3(x=0.02, y=0.03, z=self.cfg.sheet_half_width * 2), color=named_color("clamp"))
+                            size=Vector3(x=0.02, y=0.03, z=self.cfg.sheet_half_width * 2),
+                            color=named_color("clamp"))
         return self._entity(f"arm_{side}", stamp, cylinders=cyls, spheres=spheres, cubes=[jaw],
                             texts=[self._label(p[0] + [0, 0, -0.03], f"{side} arm")])
 
@@ -363,7 +361,8 @@ class SceneBuilder:
         it was drawn from (``stamp``, s, default the newest input's, when it has none)."""
         stamp = self.stamp if stamp is None else stamp
         sheet = self.believed_sheet()
-        ents = [self._object_entity(stamp), *self._sheet_entities(stamp, sheet), self._fingertip_entity(stamp),
+        ents = [self._object_entity(stamp), *self._sheet_entities(stamp, sheet),
+                self._fingertip_entity(stamp),
                 self._contact_entity(stamp, sheet), *self._static_entities(stamp), *self._arm_entities(stamp)]
         cam = self._camera_entity(stamp)
         if cam is not None:
@@ -411,7 +410,8 @@ class SceneBuilder:
         return FrameTransforms(transforms=[
             FrameTransform(timestamp=ts, parent_frame_id=p, child_frame_id=c,
                            translation=Vector3(x=float(Tm[0, 3]), y=float(Tm[1, 3]), z=float(Tm[2, 3])),
-                           rotation=Quaternion(x=float(qi[0]), y=float(qi[1]), z=float(qi[2]), w=float(qi[3])))
+                           rotation=Quaternion(x=float(qi[0]), y=float(qi[1]), z=float(qi[2]),
+                                               w=float(qi[3])))
             for (p, c, Tm), qi in zip(fr, q, strict=True)])
 
     # ------------------------------------------------------------------ images
@@ -447,9 +447,11 @@ class SceneBuilder:
         for K, D, frame in ((cal.K1, cal.D1, "camera_left"), (cal.K2, cal.D2, "camera_right")):
             Ks = S @ K
             P = np.hstack([Ks, np.zeros((3, 1))])
-            out.append(CameraCalibration(timestamp=stamp_of(cal.header.stamp), frame_id=frame, width=w, height=h,
+            out.append(CameraCalibration(timestamp=stamp_of(cal.header.stamp), frame_id=frame, width=w,
+                                         height=h,
                                          distortion_model="plumb_bob", D=[float(x) for x in D],
-                                         K=Ks.ravel().tolist(), R=np.eye(3).ravel().tolist(), P=P.ravel().tolist()))
+                                         K=Ks.ravel().tolist(), R=np.eye(3).ravel().tolist(),
+                                         P=P.ravel().tolist()))
         return out[0], out[1]
 
     def render_image(self) -> RawImage | None:

@@ -37,9 +37,9 @@ RELAY_RCVBUF = 64 << 10
 
 class SubprotocolRelay:
     """Relay viewers on ``host``:``port`` (0: a free port, see :attr:`port`) to the SDK server at
-    ``upstream_port`` on 127.0.0.1. :meth:`start` returns once listening; raises ``OSError`` naming the address
-    when it cannot bind. :meth:`stop` closes every connection and ends the thread. ``viewers``: connected now;
-    ``dropped``: message-data frames a slow viewer did not get."""
+    ``upstream_port`` on 127.0.0.1. :meth:`start` returns once listening; raises ``OSError`` naming the
+    address when it cannot bind. :meth:`stop` closes every connection and ends the thread. ``viewers``:
+    connected now; ``dropped``: message-data frames a slow viewer did not get."""
 
     def __init__(self, host: str, port: int, upstream_port: int) -> None:
         self.host, self.port, self.upstream = host, int(port), f"ws://127.0.0.1:{int(upstream_port)}"
@@ -96,7 +96,8 @@ class SubprotocolRelay:
                 sock = up.transport.get_extra_info("socket")
                 if sock is not None:     # a viewer that stops reading backs up into the server's own backlog
                     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RELAY_RCVBUF)
-                pumps = [asyncio.create_task(self._pump(ws, up)), asyncio.create_task(self._to_viewer(up, ws))]
+                pumps = [asyncio.create_task(self._pump(ws, up)),
+                         asyncio.create_task(self._to_viewer(up, ws))]
                 await asyncio.wait(pumps, return_when=asyncio.FIRST_COMPLETED)
                 for t in pumps:
                     t.cancel()

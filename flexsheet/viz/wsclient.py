@@ -1,12 +1,13 @@
 """A minimal client of the Foxglove WebSocket protocol v1, independent of the foxglove-sdk (tests and bench).
 
-Speaks the protocol with the ``websockets`` library and offers both subprotocol names, ``foxglove.websocket.v1``
-(the ws-protocol spec) and ``foxglove.sdk.v1`` (the same protocol under the name foxglove-sdk servers require
-since 2025; they reject the old name with HTTP 400 — foxglove/ros-foxglove-bridge#382,
-lichtblick-suite/lichtblick#819). It reads the JSON ``serverInfo``/``advertise`` ops, sends ``subscribe``,
-and parses binary message-data frames (opcode 0x01, uint32 subscription id, uint64 timestamp ns, payload).
-Protobuf payloads are decoded with the ``protobuf`` package against the FileDescriptorSet the server
-advertised. Spec: github.com/foxglove/ws-protocol/blob/main/docs/spec.md.
+Speaks the protocol with the ``websockets`` library and offers both subprotocol names,
+``foxglove.websocket.v1`` (the ws-protocol spec) and ``foxglove.sdk.v1`` (the same protocol under the name
+foxglove-sdk servers require since 2025; they reject the old name with HTTP 400 —
+foxglove/ros-foxglove-bridge#382, lichtblick-suite/lichtblick#819). It reads the JSON
+``serverInfo``/``advertise`` ops, sends ``subscribe``, and parses binary message-data frames (opcode 0x01,
+uint32 subscription id, uint64 timestamp ns, payload). Protobuf payloads are decoded with the ``protobuf``
+package against the FileDescriptorSet the server advertised. Spec:
+github.com/foxglove/ws-protocol/blob/main/docs/spec.md.
 """
 
 from __future__ import annotations

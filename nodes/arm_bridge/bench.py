@@ -5,11 +5,11 @@ Prints one flat JSON object (``--json``) or a table. Figures (PNG + JSON of the 
 - ``ik_median_us`` / ``ik_p99_us``: IK seeded from the previous solution along a stroke of the paper's
   cylinder (tilt −60°…+60°, one target per 48 Hz camera frame), both arms' kinematics, tolerance 1e-9.
 - ``ik_cold_median_us``: IK from the home joints to random reachable sheet poses (tilt ±60°, stretch 0…0.1).
-- ``motion_cycle_median_us`` / ``motion_cycle_p99_us``: the bridge's work each cycle while it follows the sheet's
-  motion (:mod:`flexsheet.arm.sheet_motion`): the clamp's pose and twist on the segment, IK seeded from the last
-  cycle, the Jacobian solve (:meth:`TargetTracker.reference`); the planner's segments along the same stroke, a
-  new one every 48 Hz frame, the bridge cycling at 7.1 ms; ``motion_plan_median_us``: the planner's segment
-  (ruckig and the joint-rate check of both arms).
+- ``motion_cycle_median_us`` / ``motion_cycle_p99_us``: the bridge's work each cycle while it follows the
+  sheet's motion (:mod:`flexsheet.arm.sheet_motion`): the clamp's pose and twist on the segment, IK seeded
+  from the last cycle, the Jacobian solve (:meth:`TargetTracker.reference`); the planner's segments along the
+  same stroke, a new one every 48 Hz frame, the bridge cycling at 7.1 ms; ``motion_plan_median_us``: the
+  planner's segment (ruckig and the joint-rate check of both arms).
 - ``cycle_period_ms``, ``cycle_jitter_p99_ms`` (p99 of |interval − 7.1 ms|), ``cycle_late_p99_ms``
   (p99 of start − deadline): the bridge's :class:`~flexsheet.arm.stream.ArmStream` streaming to a twin
   running in a separate process, over ``--cycles`` cycles (default 10 000).
@@ -120,7 +120,8 @@ def bench_motion(n_stroke: int = 480) -> dict:
     """The bridge's per-cycle work following the sheet's motion, and the planner's per-segment work (µs)."""
     kin = {s: ArmKinematics(s, b) for s, b in (("left", LEFT_BASE), ("right", RIGHT_BASE))}
     qd = QD_MAX * 0.5
-    shaper = SheetShaper(rates=JointRates({"left": LEFT_BASE, "right": RIGHT_BASE}, qd, BridgeConfig().accel_scale * qd))
+    shaper = SheetShaper(rates=JointRates({"left": LEFT_BASE, "right": RIGHT_BASE}, qd,
+                                          BridgeConfig().accel_scale * qd))
     tracker = TargetTracker(kin["left"])
     q = {s: kin[s].ik(_clamp(s, -math.radians(60.0)), home_joints(s), max_jump=10.0).q for s in kin}
     tracker.seed(q["left"])
@@ -165,7 +166,8 @@ def track_stroke(duration: float, side: str = "left") -> dict:
     t_cam = 1.0 / 48.0
     next_cam = 0.0
     ts, pos_meas = [], []
-    theta_of = lambda t: th0 + math.radians(120.0) * 0.5 * (1 - math.cos(math.pi * min(t, duration) / duration))  # noqa: E731
+    theta_of = lambda t: th0 + math.radians(120.0) * 0.5 * (1  # noqa: E731
+                                                            - math.cos(math.pi * min(t, duration) / duration))
     refused = 0
     for k in range(n):
         t = k * PERIOD
@@ -229,7 +231,8 @@ def bench_cycle(n_cycles: int) -> dict:
     t = np.array(stream.cycle_times[50:])
     d = np.array(deadlines[50:])
     iv = np.diff(t)
-    return {"cycle_period_ms": float(iv.mean() * 1e3), "cycle_jitter_p99_ms": float(np.percentile(np.abs(iv - PERIOD), 99) * 1e3),
+    return {"cycle_period_ms": float(iv.mean() * 1e3),
+            "cycle_jitter_p99_ms": float(np.percentile(np.abs(iv - PERIOD), 99) * 1e3),
             "cycle_jitter_max_ms": float(np.max(np.abs(iv - PERIOD)) * 1e3),
             "cycle_late_p99_ms": float(np.percentile(t - d, 99) * 1e3), "cycles": int(len(t)),
             "reconnects": stream.reconnects, "intervals_ms": (iv * 1e3).tolist()}
@@ -277,7 +280,8 @@ def bench_mxt(n_cycles: int, period: float = MXT_PERIOD) -> dict:
     """Stream ``n_cycles`` MXT cycles to a twin in another process (see module doc); statistics in ms."""
     ctx = mp.get_context("spawn")
     port_q, stop, res_q = ctx.Queue(), ctx.Event(), ctx.Queue()
-    proc = ctx.Process(target=_mxt_twin_process, args=(home_joints("left").tolist(), period, port_q, stop, res_q),
+    proc = ctx.Process(target=_mxt_twin_process,
+                       args=(home_joints("left").tolist(), period, port_q, stop, res_q),
                        daemon=True)
     proc.start()
     twin_res: dict = {}
@@ -293,7 +297,8 @@ def bench_mxt(n_cycles: int, period: float = MXT_PERIOD) -> dict:
         def progress(rep) -> None:
             done[0] += 1
             if done[0] % 1000 == 0:
-                print(f"  mxt: {done[0]}/{n_cycles} cycles, lost {link.lost}, late {link.late}", file=sys.stderr)
+                print(f"  mxt: {done[0]}/{n_cycles} cycles, lost {link.lost}, late "
+                      f"{link.late}", file=sys.stderr)
         stream.on_cycle = progress
 
         asyncio.run(_drive(tr, stream, n_cycles + 100))
@@ -314,12 +319,16 @@ def bench_mxt(n_cycles: int, period: float = MXT_PERIOD) -> dict:
     dev = np.abs(iv - period)
     out = {"mxt_period_ms": period * 1e3, "mxt_cycles": int(len(iv)),
            "mxt_send_period_ms": float(iv.mean() * 1e3),
-           "mxt_jitter_p50_ms": float(np.median(dev) * 1e3), "mxt_jitter_p99_ms": float(np.percentile(dev, 99) * 1e3),
+           "mxt_jitter_p50_ms": float(np.median(dev) * 1e3),
+           "mxt_jitter_p99_ms": float(np.percentile(dev, 99) * 1e3),
            "mxt_jitter_max_ms": float(dev.max() * 1e3),
-           "mxt_rtt_p50_ms": float(np.median(rtt) * 1e3), "mxt_rtt_p99_ms": float(np.percentile(rtt, 99) * 1e3),
-           "mxt_react_p50_ms": float(np.median(react) * 1e3), "mxt_react_p99_ms": float(np.percentile(react, 99) * 1e3)}
+           "mxt_rtt_p50_ms": float(np.median(rtt) * 1e3),
+           "mxt_rtt_p99_ms": float(np.percentile(rtt, 99) * 1e3),
+           "mxt_react_p50_ms": float(np.median(react) * 1e3),
+           "mxt_react_p99_ms": float(np.percentile(react, 99) * 1e3)}
     out.update({f"mxt_{k}": v for k, v in link.counters().items() if k in ("sent", "replies", "lost", "late",
-                                                                            "repeats", "refused", "unmatched")})
+                                                                            "repeats", "refused",
+                                                                           "unmatched")})
     out.update(twin_res)
     out["intervals_ms"] = (iv * 1e3).tolist()
     return out
@@ -336,7 +345,8 @@ def _mxt_figure(out: Path, res: dict, iv: list) -> None:
     ax[0].axvline(res["mxt_period_ms"], color="k", ls="--")
     ax[0].set_xlabel("interval between MOVE packets [ms]")
     ax[0].set_ylabel("count")
-    ax[0].set_title(f"MXT stream, jitter p50 {res['mxt_jitter_p50_ms']:.2f} / p99 {res['mxt_jitter_p99_ms']:.2f} ms")
+    ax[0].set_title(f"MXT stream, jitter p50 {res['mxt_jitter_p50_ms']:.2f} / p99 "
+                    f"{res['mxt_jitter_p99_ms']:.2f} ms")
     ax[1].plot(np.arange(len(iv)), iv, ",")
     ax[1].set_xlabel("cycle")
     ax[1].set_ylabel("interval [ms]")
@@ -381,7 +391,8 @@ def _figures(out: Path, res: dict, iv: list, tracks: list) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """CLI entry: ``flexsheet bench arm [--protocol modbus|mxt] [--json] [--cycles N] [--out DIR]``."""
-    ap = argparse.ArgumentParser(prog="flexsheet bench arm", description=__doc__.splitlines()[0], epilog=EPILOG,
+    ap = argparse.ArgumentParser(prog="flexsheet bench arm", description=__doc__.splitlines()[0],
+                                 epilog=EPILOG,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--json", action="store_true", help="print one flat JSON object")
     ap.add_argument("--cycles", type=int, default=10000, help="bridge cycles to time (default 10000)")

@@ -117,7 +117,8 @@ class ModbusLink:
         return Verdict(True, "", reseed)
 
     async def send(self, cmd: np.ndarray, rewrite: bool = False) -> bool:
-        """One FC16 write of watchdog + targets (a rewrite keeps the watchdog value). Raises :class:`LinkError`."""
+        """One FC16 write of watchdog + targets (a rewrite keeps the watchdog value). Raises
+        :class:`LinkError`."""
         if self.client is None:
             raise LinkError("not connected")
         if not rewrite:

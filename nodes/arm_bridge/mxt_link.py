@@ -1,4 +1,5 @@
-"""The bridge's MELFA real-time external control ("MXT") backend: one 196-byte UDP packet per controller cycle.
+"""The bridge's MELFA real-time external control ("MXT") backend: one 196-byte UDP packet per controller
+cycle.
 
 Protocol facts and sources: ``design/mxt_protocol.md``; packet codec: :mod:`messages.mxt`. The controller
 must be running ``Open "ENET:<this PC>" As #1 / Mxt 1,1,<filter ms>`` (docs/arm.md).
@@ -123,7 +124,7 @@ class MxtLink:
         self.record = record
         self.send_times: list[float] = []
         self.rtts: list[float] = []
-        self.reactions: list[float] = []     # s from "controller ready" (reply in) to this send; nan: fallback
+        self.reactions: list[float] = []  # s from "controller ready" (reply in) to this send; nan: fallback
 
     # ------------------------------------------------------------------ socket
     def _on_datagram(self, data: bytes) -> None:
@@ -245,7 +246,8 @@ class MxtLink:
             status |= reg.ST_MOVING
         elif float(np.max(np.abs(fb - joint))) < 1e-4:
             status |= reg.ST_IN_POSITION
-        return reg.ControllerState(status=status, fault=reg.FAULT_NONE, reject=reg.REJ_NONE, cycle=self.replies,
+        return reg.ControllerState(status=status, fault=reg.FAULT_NONE, reject=reg.REJ_NONE,
+                                   cycle=self.replies,
                                    position=fb, velocity=vel, watchdog_echo=pkt.ccount & 0xFFFF, active=joint)
 
     async def read(self) -> reg.ControllerState:
@@ -342,10 +344,12 @@ class MxtLink:
         self.connected = False
 
     def counters(self) -> dict:
-        """Packets ``sent``, ``replies``, ``late``, ``lost``, ``unmatched``, ``repeats``, ``refused``, ``opens``,
-        ``controller_missed`` (the controller's TCount) and more."""
-        return {k: getattr(self, k) for k in ("sent", "replies", "late", "lost", "unmatched", "repeats", "refused",
-                                               "malformed", "socket_errors", "opens", "ends", "controller_missed")}
+        """Packets ``sent``, ``replies``, ``late``, ``lost``, ``unmatched``, ``repeats``, ``refused``,
+        ``opens``, ``controller_missed`` (the controller's TCount) and more."""
+        return {k: getattr(self, k)
+                for k in ("sent", "replies", "late", "lost", "unmatched", "repeats", "refused",
+                          "malformed", "socket_errors", "opens", "ends",
+                          "controller_missed")}
 
     def summary(self) -> str:
         """One diagnostics line of the counters."""

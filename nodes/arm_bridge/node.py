@@ -14,19 +14,21 @@ controller status/fault, ``write_stamp`` (wall time the command left: Modbus wri
 carries the link counters (MXT: packets sent, replies, late, lost, repeats, refused).
 
 ``bridge_status``: "ok"; "hold:no_target" (no target yet, or none for ``target_timeout`` s: the arm stops);
-"hold:unreachable" / "hold:limit:J<k>" / "hold:singular" / "hold:jump" / "hold:keep_out" / "hold:torque:J<k>" (last
-target refused by IK, by the sheet's pull (``ArmTarget.pull``) passing a joint's torque limit there
+"hold:unreachable" / "hold:limit:J<k>" / "hold:singular" / "hold:jump" / "hold:keep_out" / "hold:torque:J<k>"
+(last target refused by IK, by the sheet's pull (``ArmTarget.pull``) passing a joint's torque limit there
 (:mod:`flexsheet.arm.pull_limit`), or — once ``/eye/pose`` tracks the viewer — by the head's keep-out with
-``keepout_margin``: the arm stops short at the last good goal); "hold:disabled" (controller not enabled yet, or ``enabled: false``); "fault:watchdog",
-"fault:estop" (controller faulted; the bridge follows the measured joints); "hold:refused" (the controller did
-not take a command: the stream restarts from what it executes); "disconnected"; "hold:peer" (the other arm
-holds on an IK refusal, a fault or a lost controller, read from its joint state: the sheet couples the clamps,
-so this arm stops where it is, from the cycle that state arrives in, until the other follows again).
+``keepout_margin``: the arm stops short at the last good goal); "hold:disabled" (controller not enabled yet,
+or ``enabled: false``); "fault:watchdog", "fault:estop" (controller faulted; the bridge follows the measured
+joints); "hold:refused" (the controller did not take a command: the stream restarts from what it executes);
+"disconnected"; "hold:peer" (the other arm holds on an IK refusal, a fault or a lost controller, read from its
+joint state: the sheet couples the clamps, so this arm stops where it is, from the cycle that state arrives
+in, until the other follows again).
 
 Span guard (``span_band`` [lo, hi] m): a cycle whose goal would take this clamp further outside the band from
-the partner's measured clamp than the command already is waits at rest (``bridge_status`` ``wait:span``; counted
-as ``span waits`` in the heartbeat): when one arm lags or stops, the other does not slacken the sheet or over-pull
-it. When the partner says ``wait:span`` too, both step (:meth:`~flexsheet.arm.span_guard.SpanGuard.worse`).
+the partner's measured clamp than the command already is waits at rest (``bridge_status`` ``wait:span``;
+counted as ``span waits`` in the heartbeat): when one arm lags or stops, the other does not slacken the sheet
+or over-pull it. When the partner says ``wait:span`` too, both step
+(:meth:`~flexsheet.arm.span_guard.SpanGuard.worse`).
 """
 
 from __future__ import annotations
@@ -89,11 +91,11 @@ class ArmBridgeNode(BridgeServices, Node):
         source = controller_source(p.source)
         source.check_clock(self.clock)
         if p.protocol not in source.protocols:
-            raise ValueError(f"source {p.source} carries protocol {' or '.join(sorted(source.protocols))}, not "
-                             f"{p.protocol}")
+            raise ValueError(f"source {p.source} carries protocol {' or '.join(sorted(source.protocols))}, "
+                             f"not {p.protocol}")
         self._paced_by_node = source.paced_by_node
-        # the arm PC's clock: main's plus its offset (the twin's draw; the lab's own is whatever chrony leaves,
-        # docs/deploy.md); the sheet's motion is evaluated on it
+        # the arm PC's clock: main's plus its offset (the twin's draw; the lab's own is
+        # whatever chrony leaves, docs/deploy.md); the sheet's motion is evaluated on it
         self.clock_offset = source.clock_offset(p)
         if p.protocol == "mxt":
             self.link = MxtLink(p.host, p.port, period=p.period, open_timeout=p.mxt_open_timeout,
@@ -101,7 +103,8 @@ class ArmBridgeNode(BridgeServices, Node):
         else:
             client = source.modbus_client()
             self.link = ModbusLink(p.host, p.port, device_id=p.device_id, request_timeout=p.request_timeout,
-                                   auto_reset=p.auto_reset, **({} if client is None else {"client_factory": client}))
+                                   auto_reset=p.auto_reset,
+                                   **({} if client is None else {"client_factory": client}))
         self.stream = ArmStream(self.tracker, limiter, self.link, backoff_min=p.backoff_min,
                                 backoff_max=p.backoff_max, on_cycle=self.on_cycle, clock=self.arm_stamp,
                                 enabled=p.enabled, monotonic=self.monotonic)
@@ -109,8 +112,9 @@ class ArmBridgeNode(BridgeServices, Node):
         self._pending: ArmTarget | None = None
         self._last_status = ""
         self.pub = self.publisher(topics.arm_state(p.arm))
-        # simulated clock: the target crosses the lab network to the arm PC, then IK (flexsheet/model/timing.py)
-        # every target is handled and a refused one counted (QoS latest would drop them before decoding)
+        # simulated clock: the target crosses the lab network to the arm PC,
+        # then IK (flexsheet/model/timing.py) every target is handled and a
+        # refused one counted (QoS latest would drop them before decoding)
         self.subscribe(topics.arm_target(p.arm), self.on_target, qos=QoS.KEEP_ALL, depth=256,
                        sim_cost=LAB.network_s + LAB.compute("arm_bridge"))
         other = "right" if p.arm == "left" else "left"
@@ -120,19 +124,22 @@ class ArmBridgeNode(BridgeServices, Node):
         self.keepout = KeepOut(margin=p.keepout_margin)
         self._eye: np.ndarray | None = None
         self.subscribe(topics.EYE_POSE, self.on_eye_pose, qos=QoS.LATEST)
-        if self._paced_by_node:   # the node's timer paces the cycles (else the stream's own loop, on the wall clock)
+        # the node's timer paces the cycles (else the stream's own loop, on the wall clock)
+        if self._paced_by_node:
             self.timer(p.period, self._paced_cycle)
         else:
             self.stream.start()
         self._q_measured: np.ndarray | None = None
         #: targets that arrived while a service held the arm (None: not held); said at the release
         self.ignored_while_held: int | None = None
-        self.service("hold", self.srv_hold, "stop following targets and stay where the arm is; returns its joints, rad",
+        self.service("hold", self.srv_hold, "stop following targets and stay where the arm is; returns its "
+                                            "joints, rad",
                      commanding=True)
-        self.service("home", self.srv_home, "move to the home sheet's clamp pose (IK), within the speed limits",
+        self.service("home", self.srv_home, "move to the home sheet's clamp pose (IK), within the speed "
+                                            "limits",
                      commanding=True)
-        self.service("move_to", self.srv_move_to, "{joints: [6] rad} or {pose: 4x4 clamp pose, m, display frame}: "
-                     "move there within the speed limits and stay", commanding=True)
+        self.service("move_to", self.srv_move_to, "{joints: [6] rad} or {pose: 4x4 clamp pose, m, display "
+                     "frame}: move there within the speed limits and stay", commanding=True)
         self.service("release", self.srv_release, "follow the targets again", commanding=True)
 
     def arm_now(self) -> float:
@@ -152,7 +159,8 @@ class ArmBridgeNode(BridgeServices, Node):
             await stream.stop(end=True)    # MXT: END, the controller's Mxt instruction finishes
 
     def on_peer_state(self, msg: ArmJointState) -> None:
-        """The other arm's state: hold with it while it cannot follow (:func:`~flexsheet.arm.tracking.peer_holds`)."""
+        """The other arm's state: hold with it while it cannot follow
+        (:func:`~flexsheet.arm.tracking.peer_holds`)."""
         self.tracker.span.peer_clamp = np.asarray(msg.pose, float)[:3, 3].copy()
         self.tracker.span.peer_stamp = float(msg.header.stamp)
         self.tracker.span.peer_waiting = msg.bridge_status == BridgeStatus.SPAN_WAIT
@@ -174,8 +182,8 @@ class ArmBridgeNode(BridgeServices, Node):
             self.tracker.keep_out = self._in_keep_out
 
     def _in_keep_out(self, q: np.ndarray) -> bool:
-        """Whether joints ``q`` put this arm's links or its clamp bar (±0.12 m along the clamp's v axis) in the
-        keep-out of the newest tracked eye."""
+        """Whether joints ``q`` put this arm's links or its clamp bar (±0.12 m along the clamp's v axis) in
+        the keep-out of the newest tracked eye."""
         V = self._eye
         if arm_clearance(self.keepout, V, self.kin, q) < 0.0:
             return True
@@ -194,7 +202,8 @@ class ArmBridgeNode(BridgeServices, Node):
         if self.tracker.goal is None:
             self._pending = msg
             return
-        self.tracker.set_target(msg.pose, msg.source_stamp, self.arm_now(), strict=True, pull=msg.pull, motion=motion)
+        self.tracker.set_target(msg.pose, msg.source_stamp, self.arm_now(), strict=True, pull=msg.pull,
+                                motion=motion)
         if await self.stream.refresh() and self._paced_by_node:   # write it now rather than at the next tick
             await self.stream.rewrite_now()
 
@@ -203,11 +212,13 @@ class ArmBridgeNode(BridgeServices, Node):
         if self._pending is not None and self.tracker.goal is not None:
             msg, self._pending = self._pending, None
             try:
-                self.tracker.set_target(msg.pose, msg.source_stamp, self.arm_now(), strict=True, pull=msg.pull,
+                self.tracker.set_target(msg.pose, msg.source_stamp, self.arm_now(), strict=True,
+                                        pull=msg.pull,
                                         motion=SheetSegment.from_fields(msg))
             except ValueError as exc:
                 self._reject(f"ArmTarget: {exc}")
-        shown = BridgeStatus.OK if rep.bridge_status == BridgeStatus.SPAN_WAIT else rep.bridge_status   # not logged
+        # not logged
+        shown = BridgeStatus.OK if rep.bridge_status == BridgeStatus.SPAN_WAIT else rep.bridge_status
         if shown != self._last_status or rep.t_cycle - self._diag_at > 1.0:
             if shown != self._last_status:
                 self.log.info("%s arm: %s", self.params.arm, shown)

@@ -1,6 +1,7 @@
-"""The arm bridge's services (:class:`BridgeServices`, a part of :class:`nodes.arm_bridge.node.ArmBridgeNode`):
-``hold``, ``home`` and ``move_to`` hold the arm on joints (targets are ignored until ``release``); each acts on
-the joints the controller reported last and refuses while it is not connected."""
+"""The arm bridge's services (:class:`BridgeServices`, a part of
+:class:`nodes.arm_bridge.node.ArmBridgeNode`): ``hold``, ``home`` and ``move_to`` hold the arm on joints
+(targets are ignored until ``release``); each acts on the joints the controller reported last and refuses
+while it is not connected."""
 
 from __future__ import annotations
 
@@ -19,7 +20,8 @@ class BridgeServices:
         """The joints the controller reported last; raises ``ValueError`` while it is not connected (a stale
         reading would move the arm back to an old pose once it is)."""
         if self._q_measured is None or not self.stream.connected:
-            raise ValueError(f"the {self.params.arm} arm's controller is not connected: no current joints to act on")
+            raise ValueError(f"the {self.params.arm} arm's controller is not connected: no current joints to "
+                             "act on")
         return self._q_measured
 
     def _ik(self, T, what: str) -> np.ndarray:
@@ -29,7 +31,8 @@ class BridgeServices:
         return res.q
 
     def _held(self, q) -> list[float]:
-        """Hold on joints ``q`` for a service; the first hold says that targets are ignored until ``release``."""
+        """Hold on joints ``q`` for a service; the first hold says that targets are ignored until
+        ``release``."""
         q = self.tracker.move_to(q)
         if self.ignored_while_held is None:
             self.ignored_while_held = 0
@@ -57,7 +60,8 @@ class BridgeServices:
     def srv_release(self, args: dict) -> str:
         self.tracker.release(self.arm_now())
         if self.ignored_while_held is not None:
-            self.log.info("%s arm: released: following targets again (%d ignored while held)", self.params.arm,
+            self.log.info("%s arm: released: following targets again (%d ignored while held)",
+                          self.params.arm,
                           self.ignored_while_held)
         self.ignored_while_held = None
         return "following targets"

@@ -13,8 +13,7 @@ camera's ``GevTimestampTickFrequency``; a camera that reports no tick frequency 
 time* instead — :meth:`GenICamStereo.start` logs that case). It is mapped to host time (``time.time()``)
 with the offset :class:`~flexsheet.vision.stereo_sync.ClockMap` measures: by latching the device clock
 (``TimestampLatch``/``GevTimestampControlLatch``, re-latched every ``relatch_s``) where the camera offers
-it, else from the minimum of arrival − device stamp (late by the minimum delivery delay; documented in
-:class:`ClockMap`).
+it, else from the minimum of arrival − device stamp (late by the minimum delivery delay: :class:`ClockMap`).
 """
 
 from __future__ import annotations
@@ -36,8 +35,7 @@ log = logging.getLogger("camera.genicam")
 
 
 def aravis():
-    """The ``Aravis`` 0.8 GObject-introspection module. Raises ``RuntimeError`` naming the Debian packages
-    when it is missing."""
+    """The ``Aravis`` 0.8 GObject-introspection module. Raises ``RuntimeError`` naming the Debian packages."""
     try:
         import gi
 
@@ -480,7 +478,8 @@ def main(argv: list[str] | None = None) -> int:
     the serials go into the camera node's ``left_id``/``right_id``."""
     import argparse
 
-    p = argparse.ArgumentParser(prog="python3 -m nodes.camera.genicam", description=main.__doc__.splitlines()[0],
+    p = argparse.ArgumentParser(prog="python3 -m nodes.camera.genicam",
+                                description=main.__doc__.splitlines()[0],
                                 epilog="example:\n  python3 -m nodes.camera.genicam",
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.parse_args(argv)
@@ -490,7 +489,8 @@ def main(argv: list[str] | None = None) -> int:
         print(exc)
         return 2
     for d in devs:
-        print(f"serial {d.serial:16s} id {d.device_id:32s} {d.protocol:11s} {d.address:16s} {d.vendor} {d.model}")
+        print(f"serial {d.serial:16s} id {d.device_id:32s} {d.protocol:11s} {d.address:16s} {d.vendor} "
+              f"{d.model}")
     if not devs:
         print("no GenICam camera found (GigE: same subnet, firewall open for UDP 3956; USB3: udev rules)")
     return 0

@@ -1,4 +1,5 @@
-"""``flexsheet bench graph [--seconds S] [--json]``: the display's own path on the wall clock, without the twin.
+"""``flexsheet bench graph [--seconds S] [--json]``: the display's own path on the wall clock, without the
+twin.
 
 Here because the pairs come from the camera node's own twin renderer and registration; the other nodes are
 loaded by their node types (the ``flexsheet.nodes`` entry points, :mod:`flexsheet.runtime.plugins`), as the
@@ -119,9 +120,11 @@ class _Sink(Node):
 
 def _stats(x: list[float], target: dict) -> dict:
     a = np.asarray(x, float) * 1e3
-    out = {"median_ms": float(np.median(a)) if a.size else None, "p99_ms": float(np.percentile(a, 99)) if a.size
+    out = {"median_ms": float(np.median(a)) if a.size else None,
+           "p99_ms": float(np.percentile(a, 99)) if a.size
            else None, "n": int(a.size), "target": target}
-    out["verdict"] = "met" if a.size and all(out[k] is not None and out[k] <= v for k, v in target.items()) else \
+    out["verdict"] = "met" if a.size and all(out[k] is not None and out[k] <= v for k,
+                                             v in target.items()) else \
         "MISSED"
     return out
 
@@ -162,7 +165,8 @@ async def _run(seconds: float, warmup: float, names: tuple[str, ...]) -> dict:
     sink.renders.clear()
     sink.targets.clear()
     await asyncio.sleep(seconds)
-    tips, writes, renders, targets = dict(sink.tips), dict(sink.writes), dict(sink.renders), dict(sink.targets)
+    tips, writes, renders, targets = (dict(sink.tips), dict(sink.writes), dict(sink.renders),
+                                      dict(sink.targets))
     c.stop()
     await task
     hops = {"frame_to_fingertip": [s - f for f, s in tips.values()],
@@ -188,24 +192,28 @@ def measure(seconds: float, warmup: float) -> dict:
             "arm_path_hops_median_ms": arm["hops"],
             "fingertips": {"arm_run": arm["fingertips"], "render_run": ren["fingertips"]}, "seconds": seconds,
             "clock": "wall",
-            "note": "the display's nodes in one container on this host's wall clock, fed pre-rendered pairs at "
-                    "48 Hz (no world, camera twin or recorder load); the arm path (triangulator, planner, both "
-                    "bridges with their Modbus twins) and the render path (triangulator, FEM, renderer on this "
-                    "machine's GL) in separate runs"}
+            "note": "the display's nodes in one container on this host's wall clock, fed pre-rendered pairs "
+                    "at 48 Hz (no world, camera twin or recorder load); the arm path (triangulator, planner, "
+                    "both bridges with their Modbus twins) and the render path (triangulator, FEM, renderer "
+                    "on this machine's GL) in separate runs"}
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="flexsheet bench graph", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
-                                 epilog="example: flexsheet bench graph --seconds 10 --json > graph_bench.json")
+                                 epilog="example: flexsheet bench graph --seconds 10 --json > "
+                                        "graph_bench.json")
     ap.add_argument("--seconds", type=float, default=10.0, help="measured wall seconds (default 10)")
     ap.add_argument("--warmup", type=float, default=3.0, help="seconds after every node is up, not measured")
-    ap.add_argument("--frames", type=int, default=144, help="pre-rendered pairs played in a loop (default 144)")
+    ap.add_argument("--frames", type=int, default=144, help="pre-rendered pairs played in a loop (default "
+                                                            "144)")
     ap.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = ap.parse_args(argv)
-    print(f"[bench graph] rendering {args.frames} stereo pairs of the ideal twin ...", file=sys.stderr, flush=True)
+    print(f"[bench graph] rendering {args.frames} stereo pairs of the ideal twin ...", file=sys.stderr,
+          flush=True)
     _Player.frames, _Player.calib, _Player.T_dc = _frames(args.frames)
-    print(f"[bench graph] running the arm path, then the render path, {args.warmup:g} + {args.seconds:g} s each ...",
+    print(f"[bench graph] running the arm path, then the render path, {args.warmup:g} + {args.seconds:g} s "
+          "each ...",
           file=sys.stderr, flush=True)
     logging.getLogger().setLevel(logging.WARNING)
     out = measure(args.seconds, args.warmup)
@@ -214,6 +222,6 @@ def main(argv: list[str] | None = None) -> int:
     else:
         for k in ("camera_frame_to_arm_command", "fingertip_to_rendered_frame"):
             v = out[k]
-            print(f"{k:32s} median {v['median_ms']} ms  p99 {v['p99_ms']} ms  n {v['n']}  target {v['target']}: "
-                  f"{v['verdict']}")
+            print(f"{k:32s} median {v['median_ms']} ms  p99 {v['p99_ms']} ms  n {v['n']}  target "
+                  f"{v['target']}: {v['verdict']}")
     return 0

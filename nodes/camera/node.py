@@ -14,11 +14,11 @@ side-by-side device, an upper bound of |skew| for two devices; ``files`` 0 (unkn
 ``/diagnostics`` carries one line saying which, with the measured skew and dropped frames (GenICam).
 
 Honest twin. ``/camera/calibration`` carries what a lab has: the camera's pose in the display frame
-``T_display_camera`` from ``display.yaml``'s ``camera`` entry (param ``display_calib``, filled in by the launch
-file's top-level ``display_calib:``) with the stereo model that pose was fitted with (the entry's, else the
-stereo calibration file's: ``model``/``calib_file``). A missing ``display_calib`` is an error at start-up —
-except for a source whose nominal registration is exact (the *ideal* twin). The twin forms its images through
-the hidden truth instead (param ``twin: {realism, truth_seed}``).
+``T_display_camera`` from ``display.yaml``'s ``camera`` entry (param ``display_calib``, filled in by the
+launch file's top-level ``display_calib:``) with the stereo model that pose was fitted with (the entry's, else
+the stereo calibration file's: ``model``/``calib_file``). A missing ``display_calib`` is an error at start-up
+— except for a source whose nominal registration is exact (the *ideal* twin). The twin forms its images
+through the hidden truth instead (param ``twin: {realism, truth_seed}``).
 """
 
 from __future__ import annotations
@@ -119,52 +119,57 @@ CameraParams = params_model(
 
 
 def _with_rectification(st: dict) -> dict:
-    """A stereo dict (image_size, K1, D1, K2, D2, R, T) completed with R1, R2, P1, P2, Q (``cv2.stereoRectify``,
-    alpha 0) for :func:`flexsheet.vision.stereo_calibration.to_message`."""
-    out = {k: np.asarray(st[k], float) for k in ("K1", "D1", "K2", "D2", "R", "T", "R1", "R2", "P1", "P2", "Q")
+    """A stereo dict (image_size, K1, D1, K2, D2, R, T) completed with R1, R2, P1, P2, Q
+    (``cv2.stereoRectify``, alpha 0) for :func:`flexsheet.vision.stereo_calibration.to_message`."""
+    out = {k: np.asarray(st[k], float)
+           for k in ("K1", "D1", "K2", "D2", "R", "T", "R1", "R2", "P1", "P2", "Q")
            if k in st}
     out["image_size"] = tuple(int(x) for x in st["image_size"])
     out["rms_px"] = float(st.get("rms_px", 0.0))
     if "R1" not in out:
-        R1, R2, P1, P2, Q, _, _ = cv2.stereoRectify(out["K1"], out["D1"], out["K2"], out["D2"], out["image_size"],
+        R1, R2, P1, P2, Q, _, _ = cv2.stereoRectify(out["K1"], out["D1"], out["K2"], out["D2"],
+                                                    out["image_size"],
                                                     out["R"], out["T"].reshape(3, 1), alpha=0)
         out.update(R1=R1, R2=R2, P1=P1, P2=P2, Q=Q)
     return out
 
 
-def published_registration(p: CameraParams, calib: dict, exact_nominal: bool = False) -> tuple[dict, np.ndarray, str]:
+def published_registration(p: CameraParams, calib: dict, exact_nominal: bool = False) -> tuple[dict,
+                                                                                               np.ndarray,
+                                                                                               str]:
     """What ``/camera/calibration`` carries: (stereo dict, T_display_camera (4, 4), one line saying where they
-    come from). The pose from ``display.yaml``'s camera entry (``p.display_calib``), with its stereo model when
-    it has one (the pose was fitted with it), else ``calib`` (the stereo file). Without ``display_calib``:
-    the nominal registration when ``exact_nominal`` (the source's camera is the nominal one: the ideal twin). Raises ``ValueError`` naming the fix when
-    ``display_calib`` is missing (lab sources, realistic twin), unreadable, lacks the camera entry, or its
-    image size differs from the camera's."""
+    come from). The pose from ``display.yaml``'s camera entry (``p.display_calib``), with its stereo model
+    when it has one (the pose was fitted with it), else ``calib`` (the stereo file). Without
+    ``display_calib``: the nominal registration when ``exact_nominal`` (the source's camera is the nominal
+    one: the ideal twin). Raises ``ValueError`` naming the fix when ``display_calib`` is missing (lab sources,
+    realistic twin), unreadable, lacks the camera entry, or its image size differs from the camera's."""
     size = tuple(int(v) for v in calib["image_size"])
     if p.display_calib:
         cam = load_display_calib(p.display_calib, require=("camera",)).camera
         stereo = cam.stereo if cam.stereo is not None else calib
         got = tuple(int(v) for v in stereo["image_size"])
         if got != size:
-            raise ValueError(f"{p.display_calib}: camera entry is for {got[0]}x{got[1]} images but the camera "
-                             f"delivers {size[0]}x{size[1]} (model {p.model!r}); re-run flexsheet calibrate "
-                             "camera-pose with this camera")
+            raise ValueError(f"{p.display_calib}: camera entry is for {got[0]}x{got[1]} images but the "
+                             f"camera delivers {size[0]}x{size[1]} (model {p.model!r}); re-run flexsheet "
+                             "calibrate camera-pose with this camera")
         src = "display.yaml stereo" if cam.stereo is not None else "stereo file"
         return (_with_rectification(stereo), np.asarray(cam.T_display_camera, float),
                 f"pose from {p.display_calib} ({cam.provenance.source}, {cam.provenance.measured_at}), {src}")
     if exact_nominal:
         return (_with_rectification(calib), nominal_display_calib().camera.T_display_camera.copy(),
                 "nominal registration (ideal twin: exact)")
-    raise ValueError("display_calib is not set: the camera's pose in the display frame comes from display.yaml's "
-                     "camera entry. Lab: run `flexsheet calibrate camera-pose`; twin: `flexsheet calibrate display "
-                     "--sim --truth-seed N --out DIR`; then name the file in the launch file (`display_calib: "
-                     "DIR/display.yaml`) or in this node's params (docs/calibration.md)")
+    raise ValueError("display_calib is not set: the camera's pose in the display frame comes from "
+                     "display.yaml's camera entry. Lab: run `flexsheet calibrate camera-pose`; twin: "
+                     "`flexsheet calibrate display --sim --truth-seed N --out DIR`; then name the file in "
+                     "the launch file (`display_calib: DIR/display.yaml`) or in this node's params "
+                     "(docs/calibration.md)")
 
 
 class CameraNode(Node):
     """Publishes :class:`messages.StereoFrame` (at ``rate_hz``, or as the GenICam pair delivers) and latches
     :class:`messages.StereoCalibration`. Every pair at most ``preview_rate`` Hz is also published on
-    ``/camera/stereo_preview`` (the same message; encoded only when a subscriber outside the process wants it),
-    so a viewer does not receive the 48 Hz stream it would mostly drop (docs/visualise.md)."""
+    ``/camera/stereo_preview`` (the same message; encoded only when a subscriber outside the process wants
+    it), so a viewer does not receive the 48 Hz stream it would mostly drop (docs/visualise.md)."""
 
     Params = CameraParams
     #: a stereo pair of the XIMEA's 640 x 512 mono8 images, with room for its header (sizes the send queue)
@@ -174,8 +179,8 @@ class CameraNode(Node):
 
     @classmethod
     def probe(cls, params) -> list[str]:
-        """What stops the camera ``params`` name on this machine (``flexsheet launch --check --probe``): GenICam
-        serials/ids by Aravis discovery (~1 s), UVC devices by opening them; sim and files: none."""
+        """What stops the camera ``params`` name on this machine (``flexsheet launch --check --probe``):
+        GenICam serials/ids by Aravis discovery (~1 s), UVC devices by opening them; sim and files: none."""
         return camera_source(params.source).probe(params)
 
     async def setup(self) -> None:
@@ -196,8 +201,8 @@ class CameraNode(Node):
         self.calib_pub.publish(to_message(published, self.calib_pub.header("camera_left"), self.T_dc))
         self.frames = 0
         if p.link_delay_s > 0 and not source.models_link_delay:
-            raise ValueError(f"link_delay_s {p.link_delay_s:g} is the camera twin's on the simulated clock (source sim, "
-                             f"launch file clock: sim); here source {p.source}")
+            raise ValueError(f"link_delay_s {p.link_delay_s:g} is the camera twin's on the simulated clock "
+                             f"(source sim, launch file clock: sim); here source {p.source}")
         self.source = await source.open(self, calib)
 
     def publish_pair(self, left: np.ndarray, right: np.ndarray, stamp: float, skew: float = 0.0) -> None:

@@ -63,8 +63,8 @@ class GenICamCamera(CameraSource):
         return out
 
     def _on_pair(self, pair) -> None:
-        """Publish one pair (a camera thread): exposure stamp = left device stamp mapped to host time, moved to
-        mid-exposure; skew = measured right − left (``pair.skew_basis``)."""
+        """Publish one pair (a camera thread): exposure stamp = left device stamp mapped to host time, moved
+        to mid-exposure; skew = measured right − left (``pair.skew_basis``)."""
         p = self.host.params
         half = 0.5 * p.exposure_s
         stamp = pair.stamp_s + (half if p.timestamp_at == "exposure_start" else -half)
@@ -74,8 +74,8 @@ class GenICamCamera(CameraSource):
         return self.genicam.summary_line()
 
     def health(self, state: str) -> str:
-        """``warn`` when frames were dropped or left unpaired since the last heartbeat or no pair came for 1 s,
-        ``error`` when a camera lost its control channel."""
+        """``warn`` when frames were dropped or left unpaired since the last heartbeat or no pair came for 1
+        s, ``error`` when a camera lost its control channel."""
         s = self.genicam.stats()
         lost = sum(s.get(k, 0) for k in ("left_dropped", "right_dropped", "left_unpaired", "right_unpaired"))
         stale = s.get("last_pair_age_s", 0.0) > 1.0
@@ -135,8 +135,8 @@ class UvcCamera(CameraSource):
     def status_line(self) -> str:
         if self.device.skew_kind == "zero_by_construction":
             return "device (one side-by-side UVC device): stereo_skew 0 by construction, not measured"
-        return ("device (two UVC devices, unsynchronised): exposure skew unknown; stereo_skew is an upper bound = "
-                f"|grab interval| + frame period ({self.device.frame_period() * 1e3:.1f} ms)")
+        return ("device (two UVC devices, unsynchronised): exposure skew unknown; stereo_skew is an upper "
+                f"bound = |grab interval| + frame period ({self.device.frame_period() * 1e3:.1f} ms)")
 
     async def close(self) -> None:
         self.device.close()

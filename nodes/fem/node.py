@@ -2,25 +2,25 @@
 :mod:`flexsheet.fem.served` builds for its scene.
 
 Subscribes ``/fingertip`` (QoS LATEST; ``predicted_position`` when ``use_prediction``). Publishes
-``/object/deformation`` (:class:`messages.ObjectDeformation`) per fingertip: deformed surface vertices (display
-frame, float32), faces, contact force N, local stiffness dF/dd N/m, depth, method, max strain, status, valid,
-``source_stamp`` = the fingertip's ``exposure_stamp``; and, latched, ``/object/force_depth`` (what the finger is
-asked to feel along the stroke).
+``/object/deformation`` (:class:`messages.ObjectDeformation`) per fingertip: deformed surface vertices
+(display frame, float32), faces, contact force N, local stiffness dF/dd N/m, depth, method, max strain,
+status, valid, ``source_stamp`` = the fingertip's ``exposure_stamp``; and, latched, ``/object/force_depth``
+(what the finger is asked to feel along the stroke).
 
 The object is the ``scene`` param's scene file (:mod:`flexsheet.model.scenes`; the launcher fills it from the
-launch file's top-level ``scene:``, as for the planner and the renderer; none = ``launch/scenes/cylinder.yaml``,
-the paper's cylinder), with its material and finger. Start-up (``setup``), one path for every scene, off the
-event loop: :func:`flexsheet.fem.served.build_model` loads its real-time linear model from the disk cache or
-precomputes it (logged with timing; the paper's cylinder on its own mesh, chosen from the accuracy table, any
-other scene on its gmsh mesh along the stroke), then :func:`flexsheet.fem.served.attach_table` attaches the
-scene's nonlinear table where one is stored (the cylinder's snapshot table, a sphere's table, a path table along
-the stroke; the cylinder's model table may pick linear instead, :func:`flexsheet.fem.choose.choose_fem_model`).
-Without a stored table the node serves the linear model and the diagnostics message names the command that
-builds it; the cylinder's snapshots can also be built in a background thread at low priority
-(``snapshot_build``). The diagnostics message tells which model is served and why.
-Every ``ObjectDeformation`` carries ``scene_key`` = the scene's :meth:`~flexsheet.model.scenes.Scene.key` so
-that the planner uses the FEM's dF/dd only for the object it presents.
-A lost marker publishes the rest shape with ``valid=False, status="rejected:marker_lost"``. NaN,
+launch file's top-level ``scene:``, as for the planner and the renderer; none =
+``launch/scenes/cylinder.yaml``, the paper's cylinder), with its material and finger. Start-up (``setup``),
+one path for every scene, off the event loop: :func:`flexsheet.fem.served.build_model` loads its real-time
+linear model from the disk cache or precomputes it (logged with timing; the paper's cylinder on its own mesh,
+chosen from the accuracy table, any other scene on its gmsh mesh along the stroke), then
+:func:`flexsheet.fem.served.attach_table` attaches the scene's nonlinear table where one is stored (the
+cylinder's snapshot table, a sphere's table, a path table along the stroke; the cylinder's model table may
+pick linear instead, :func:`flexsheet.fem.choose.choose_fem_model`). Without a stored table the node serves
+the linear model and the diagnostics message names the command that builds it; the cylinder's snapshots can
+also be built in a background thread at low priority (``snapshot_build``). The diagnostics message tells which
+model is served and why. Every ``ObjectDeformation`` carries ``scene_key`` = the scene's
+:meth:`~flexsheet.model.scenes.Scene.key` so that the planner uses the FEM's dF/dd only for the object it
+presents. A lost marker publishes the rest shape with ``valid=False, status="rejected:marker_lost"``. NaN,
 out-of-object or too-deep fingertips raise :class:`InputRejected` (one log line, counted in diagnostics; the
 node keeps running).
 """
@@ -93,14 +93,15 @@ class FemNode(Node):
 
     def _publish_force_depth(self) -> None:
         """Push the served model along the stroke (:func:`flexsheet.fem.force_depth.build_force_depth`) and
-        publish what the finger is asked to feel on the latched ``/object/force_depth``: in setup, off the event
-        loop, before any fingertip is served (0.7–2 s; in a background thread it held the model's lock per push
-        and stalled the fingertips waiting for it). A failure is logged, never fatal."""
+        publish what the finger is asked to feel on the latched ``/object/force_depth``: in setup, off the
+        event loop, before any fingertip is served (0.7–2 s; in a background thread it held the model's lock
+        per push and stalled the fingertips waiting for it). A failure is logged, never fatal."""
         t = time.perf_counter()
         try:
             fd = build_force_depth(self.scene, self.model, lock=self._lock)
         except Exception:  # noqa: BLE001 - the table must never take the node down
-            self.log.exception("fem: building the force-depth table failed; the planner keeps its own estimate")
+            self.log.exception("fem: building the force-depth table failed; the planner keeps its own "
+                               "estimate")
             return
         self.pub_force_depth.publish(ObjectForceDepth(
             header=self.pub_force_depth.header("display"), points=fd.points, normals=fd.normals,
@@ -131,7 +132,8 @@ class FemNode(Node):
         self.log.info(self.state_message)
 
     def _build_snapshots(self, cache: ArrayCache, mat: Material) -> None:
-        """Build the cylinder's missing snapshot table (tens of minutes; this thread at nice 19), then attach it."""
+        """Build the cylinder's missing snapshot table (tens of minutes; this thread at nice 19), then attach
+        it."""
         try:
             os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)   # this thread only (Linux)
         except (OSError, AttributeError):
@@ -142,8 +144,8 @@ class FemNode(Node):
                                         build=True, contact=self.scene.finger.contact)
             self._attach(table, f"built in {time.perf_counter() - t:.0f} s")
         except Exception:  # noqa: BLE001 - background build must never take the node down
-            self.state_message = (f"fem: scene {self.scene.name!r}: building the nonlinear snapshots failed - "
-                                  "serving the LINEAR model")
+            self.state_message = (f"fem: scene {self.scene.name!r}: building the nonlinear snapshots failed "
+                                  "- serving the LINEAR model")
             self.log.exception(self.state_message)
 
     def _build_nonlinear(self) -> None:
@@ -174,7 +176,8 @@ class FemNode(Node):
         if not msg.valid:
             with self._lock:
                 m.reset()
-            self._publish(msg, m.rest_vertices, 0.0, 0.0, 0.0, np.zeros(3), "none", 0.0, "rejected:marker_lost", False)
+            self._publish(msg, m.rest_vertices, 0.0, 0.0, 0.0, np.zeros(3), "none", 0.0,
+                          "rejected:marker_lost", False)
             return
         tip = msg.predicted_position if self.params.use_prediction else msg.position
         try:

@@ -25,9 +25,9 @@ def _no_removed_params(cls, data):
     if isinstance(data, dict):
         for k, where in REMOVED_PARAMS.items():
             if k in data:
-                raise ValueError(f"fem param {k!r} (= {data[k]!r}) was removed: the object, its material and the "
-                                 f"finger are the scene file's; set {where!r} in the scene file (the launch file's "
-                                 "scene:, default launch/scenes/cylinder.yaml)")
+                raise ValueError(f"fem param {k!r} (= {data[k]!r}) was removed: the object, its material and "
+                                 f"the finger are the scene file's; set {where!r} in the scene file (the "
+                                 "launch file's scene:, default launch/scenes/cylinder.yaml)")
     return data
 
 
@@ -36,26 +36,25 @@ FemParams = params_model(
     """FEM node parameters (launch file / ``--param k=v``). SI units.
 
     ``scene``: the scene file (launch/scenes/*.yaml; filled by the launcher from the launch file's ``scene:``;
-    none = launch/scenes/cylinder.yaml, the paper's cylinder): the object, its material (E, ν, hyperelastic law),
-    support and finger radius all come from it.
-    ``accuracy_target`` m (rendered-surface error target, default one projector pixel 0.7 mm);
-    ``depth_min``/``depth_max`` m push-depth range the accuracy must hold over (the cylinder's mesh and model
-    choice); ``max_depth`` m deeper input is rejected;
-    ``strain_limit``: largest principal strain before linear is declared invalid; ``cache_dir`` ("" = no
-    disk cache); ``mesh_h``/``mesh_h_fine``/``refine_radius`` m and ``order`` override the automatic mesh
-    when all of h, h_fine are > 0 (default: the cylinder's from the accuracy table, any other scene's
-    :data:`flexsheet.fem.scene_mesh.DEFAULT_SCENE_SPEC`, P2); ``arc_deg``: half-angle of the cylinder's working
-    arc (deg) whose neighbourhood gets the precomputed contact region and refinement (0 = the front centre, the
-    paper's push; elsewhere the full sparse solve is used; other scenes follow their stroke); ``nonlinear``:
-    build the cylinder's corotational depth table (background thread); ``nonlinear_steps``: depth samples of
-    that table; ``use_prediction``: use ``predicted_position``; ``model``: "auto" (the scene's table where
-    stored; for the cylinder the model table decides), "linear" (no table) or "snapshots"; ``snapshot_build``:
-    build the cylinder's missing snapshots in a background thread (heavy: tens of minutes on a 2-core machine;
-    else run ``flexsheet experiment fem --node-table``); ``snapshot_axial_max`` m: largest axial offset of the
-    push served by the cylinder's snapshots (translation along the axis). Every param but ``scene`` is a
-    field of — defined, defaulted and range-checked in — :class:`flexsheet.fem.config.FemConfig`;
-    ``fem_config()`` builds it. Removed params (:data:`REMOVED_PARAMS`: ``E``, ``nu``, ``finger_radius``) are
-    refused with where their setting went.
+    none = launch/scenes/cylinder.yaml, the paper's cylinder): the object, its material (E, ν, hyperelastic
+    law), support and finger radius all come from it. ``accuracy_target`` m (rendered-surface error target,
+    default one projector pixel 0.7 mm); ``depth_min``/``depth_max`` m push-depth range the accuracy must hold
+    over (the cylinder's mesh and model choice); ``max_depth`` m deeper input is rejected; ``strain_limit``:
+    largest principal strain before linear is declared invalid; ``cache_dir`` ("" = no disk cache);
+    ``mesh_h``/``mesh_h_fine``/``refine_radius`` m and ``order`` override the automatic mesh when all of h,
+    h_fine are > 0 (default: the cylinder's from the accuracy table, any other scene's
+    :data:`flexsheet.fem.scene_mesh.DEFAULT_SCENE_SPEC`, P2); ``arc_deg``: half-angle of the cylinder's
+    working arc (deg) whose neighbourhood gets the precomputed contact region and refinement (0 = the front
+    centre, the paper's push; elsewhere the full sparse solve is used; other scenes follow their stroke);
+    ``nonlinear``: build the cylinder's corotational depth table (background thread); ``nonlinear_steps``:
+    depth samples of that table; ``use_prediction``: use ``predicted_position``; ``model``: "auto" (the
+    scene's table where stored; for the cylinder the model table decides), "linear" (no table) or "snapshots";
+    ``snapshot_build``: build the cylinder's missing snapshots in a background thread (heavy: tens of minutes
+    on a 2-core machine; else run ``flexsheet experiment fem --node-table``); ``snapshot_axial_max`` m:
+    largest axial offset of the push served by the cylinder's snapshots (translation along the axis). Every
+    param but ``scene`` is a field of — defined, defaulted and range-checked in —
+    :class:`flexsheet.fem.config.FemConfig`; ``fem_config()`` builds it. Removed params
+    (:data:`REMOVED_PARAMS`: ``E``, ``nu``, ``finger_radius``) are refused with where their setting went.
     """,
     config_fields(FemConfig),
     validators={"_scene_file": field_validator("scene")(_scene_file),

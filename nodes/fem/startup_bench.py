@@ -1,11 +1,13 @@
-"""``flexsheet bench fem_startup [--scene FILE ...] [--json] [--out DIR]``: how long the FEM node takes, on a fresh
-machine, from its process starting to serving its scene's shipped table.
+"""``flexsheet bench fem_startup [--scene FILE ...] [--json] [--out
+DIR]``: how long the FEM node takes, on a fresh machine, from its process starting to serving its scene's
+shipped table.
 
 "Fresh": the node runs with an empty ``HOME`` (no user cache), so it reads only what ships in
-``flexsheet/fem/data`` and what the install built (the machine's data folder, ``/usr/local/share/flexsheet/fem``, by
-``python -m nodes.fem.warm`` in ``docker/install.sh``). "Serving": its first heartbeat that lists its
-``/fingertip`` subscription and whose message names the nonlinear table it loaded (a node that fell back to the
-linear model is reported as such). Each scene is started twice; the slower counts. Target: 10 s.
+``flexsheet/fem/data`` and what the install built (the machine's data folder,
+``/usr/local/share/flexsheet/fem``, by ``python -m nodes.fem.warm`` in ``docker/install.sh``). "Serving": its
+first heartbeat that lists its ``/fingertip`` subscription and whose message names the nonlinear table it
+loaded (a node that fell back to the linear model is reported as such). Each scene is started twice; the
+slower counts. Target: 10 s.
 """
 
 from __future__ import annotations
@@ -30,8 +32,9 @@ SCENES = ("launch/scenes/cylinder.yaml", "launch/scenes/sphere.yaml", "launch/sc
 
 
 def startup_s(scene: str, timeout: float = 120.0) -> dict:
-    """Start ``flexsheet run fem`` on ``scene`` with an empty HOME; seconds until its heartbeat shows it serving,
-    with that heartbeat's message. Raises ``TimeoutError`` (the node's last log lines) past ``timeout`` s."""
+    """Start ``flexsheet run fem`` on ``scene`` with an empty HOME; seconds until its heartbeat shows it
+    serving, with that heartbeat's message. Raises ``TimeoutError`` (the node's last log lines) past
+    ``timeout`` s."""
     port = free_port()
     ep = f"tcp://127.0.0.1:{port}"
     with tempfile.TemporaryDirectory() as home:
@@ -53,7 +56,8 @@ def startup_s(scene: str, timeout: float = 120.0) -> dict:
             log.flush()
             with open(log_path) as fh:
                 tail = fh.read().splitlines()[-5:]
-            raise TimeoutError(f"fem on {scene}: not serving after {time.monotonic() - t0:.0f} s: " + " | ".join(tail))
+            raise TimeoutError(f"fem on {scene}: not serving after {time.monotonic() - t0:.0f} s: "
+                               + " | ".join(tail))
         finally:
             proc.terminate()
             try:
@@ -64,11 +68,12 @@ def startup_s(scene: str, timeout: float = 120.0) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the benchmark; print one line per scene (one JSON object with ``--json``); 0 when every scene serves
-    its table within the target, 1 otherwise."""
+    """Run the benchmark; print one line per scene (one JSON object with ``--json``); 0 when every scene
+    serves its table within the target, 1 otherwise."""
     ap = argparse.ArgumentParser(prog="flexsheet bench fem_startup", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
-                                 epilog="example: flexsheet bench fem_startup --scene launch/scenes/organ.yaml --json")
+                                 epilog="example: flexsheet bench fem_startup --scene "
+                                        "launch/scenes/organ.yaml --json")
     ap.add_argument("--scene", action="append", default=[], help="scene file (default: the four shipped)")
     ap.add_argument("--repeats", type=int, default=2, help="starts per scene; the slowest counts (default 2)")
     ap.add_argument("--json", action="store_true", help="print one JSON object")

@@ -3,13 +3,14 @@
 Runs the FEM node as it runs in a graph (its loop, setup and first publications, then its teardown), in this
 process on an in-process transport, for the ``fem`` params of ``launch/sim.yaml`` on every scene of
 ``launch/scenes/`` (``--scene NAME`` for some of them; ``cylinder.yaml`` is also what a launch file without a
-``scene:`` serves), with ``cache_dir`` = ``DIR`` (default :data:`flexsheet.fem.cache.INSTALL_DIR`: the machine's
-data folder as root, ``/usr/local/share/flexsheet/fem``, else the user's, ``~/.local/share/flexsheet/fem``;
-``$FLEXSHEET_DATA/fem`` when set; every FEM cache searches these read-only). ``launch/`` is the checkout's, or
-the current folder's for an installed package (the image's ``/opt/flexsheet``). A node started later, on
-any ``HOME``, then loads its model instead of precomputing it (the capacitance matrices: ~12 s for the
-cylinder on the 2-core machine). ``docker/install.sh`` runs it; idempotent (a second run only loads).
-Exit status 1 when any model failed (each failure has its own ``FAILED`` line), 0 when every one is ready.
+``scene:`` serves), with ``cache_dir`` = ``DIR`` (default :data:`flexsheet.fem.cache.INSTALL_DIR`: the
+machine's data folder as root, ``/usr/local/share/flexsheet/fem``, else the user's,
+``~/.local/share/flexsheet/fem``; ``$FLEXSHEET_DATA/fem`` when set; every FEM cache searches these read-only).
+``launch/`` is the checkout's, or the current folder's for an installed package (the image's
+``/opt/flexsheet``). A node started later, on any ``HOME``, then loads its model instead of precomputing it
+(the capacitance matrices: ~12 s for the cylinder on the 2-core machine). ``docker/install.sh`` runs it;
+idempotent (a second run only loads). Exit status 1 when any model failed (each failure has its own ``FAILED``
+line), 0 when every one is ready.
 """
 
 from __future__ import annotations

@@ -1,16 +1,16 @@
 """Head camera node: the camera facing the viewer, and the glasses tracker → ``/eye/pose``.
 
-Each frame of the head camera (a global-shutter camera beside or above the sheet, looking at the viewer) goes to
-:class:`flexsheet.vision.glasses.GlassesTracker`: the ArUco board on the stereo glasses is detected, its pose
-found by PnP, and the eyes placed by the lab's measured eye offset and IPD (``display.yaml``'s ``eye`` entry).
-One :class:`messages.EyePose` per frame, stamped at mid-exposure, with the eye velocity
-(:class:`flexsheet.vision.glasses.HeadPredictor`) for the renderer's prediction to photon time. A frame without
-the glasses gives ``valid: false`` carrying the last good pose and its age.
+Each frame of the head camera (a global-shutter camera beside or above the sheet, looking at the viewer) goes
+to :class:`flexsheet.vision.glasses.GlassesTracker`: the ArUco board on the stereo glasses is detected, its
+pose found by PnP, and the eyes placed by the lab's measured eye offset and IPD (``display.yaml``'s ``eye``
+entry). One :class:`messages.EyePose` per frame, stamped at mid-exposure, with the eye velocity
+(:class:`flexsheet.vision.glasses.HeadPredictor`) for the renderer's prediction to photon time. A frame
+without the glasses gives ``valid: false`` carrying the last good pose and its age.
 
 Frames come through the head camera port (:mod:`flexsheet.vision.head_camera_port`), the source named by param
 ``source`` (an entry point): ``sim``, the head camera's twin at the world's true head
-(:mod:`flexsheet.twin.head_camera_source`; the tracker uses only the registered camera); ``device``, a UVC camera
-(:mod:`nodes.head_camera.uvc`), stamped on arrival less half the exposure.
+(:mod:`flexsheet.twin.head_camera_source`; the tracker uses only the registered camera); ``device``, a UVC
+camera (:mod:`nodes.head_camera.uvc`), stamped on arrival less half the exposure.
 
 Geometry: the ``head_camera`` and ``eye`` entries of ``display_calib`` (the launch file's top-level
 ``display_calib:``). Without a head camera entry the node refuses to start, naming the fix (``flexsheet
@@ -42,7 +42,8 @@ HeadCameraParams = params_model(
     """Head camera and glasses tracker (SI units): ``source`` sim | device; ``device`` (UVC index or path);
     ``rate_hz`` frames per second; ``exposure_s``; ``board_rows``/``board_cols``/``marker_m``/``gap_m``: the
     glasses' ArUco grid (dictionary 4x4_50, ids from 0); ``min_markers`` for a pose; ``ipd`` m (None: the
-    ``eye`` entry's); ``display_calib`` (the head camera and eye entries); ``twin`` (sim: the hidden truth).""",
+    ``eye`` entry's); ``display_calib`` (the head camera and eye entries); ``twin`` (sim: the hidden
+    truth).""",
     module=__name__,
     source=(Literal["sim", "device"], Field(default="sim")),
     device=(str, Field(default="0", description="device source: a UVC index or a /dev/video* path")),
@@ -60,7 +61,8 @@ HeadCameraParams = params_model(
 
 
 def _tracker(p, log) -> GlassesTracker:
-    """The tracker of the registered head camera and the measured eye. Raises ``ValueError`` naming the fix."""
+    """The tracker of the registered head camera and the measured eye. Raises ``ValueError`` naming the
+    fix."""
     if not p.display_calib:
         raise ValueError("display_calib is not set: the head camera's pose and the eye offset come from "
                          "display.yaml (flexsheet calibrate display; the launch file's display_calib:)")
@@ -78,11 +80,14 @@ def _tracker(p, log) -> GlassesTracker:
 
 
 def _eye_pose(header, pose: GlassesPose, velocity: np.ndarray, valid: bool, age: float = 0.0) -> EyePose:
-    """The ``/eye/pose`` of glasses ``pose``: this frame's (``valid``) or the last good one carried, ``age`` s old."""
+    """The ``/eye/pose`` of glasses ``pose``: this frame's (``valid``) or the last good one carried, ``age`` s
+    old."""
     T = pose.T_display_glasses
-    return EyePose(header=header, position=T[:3, 3].copy(), rotation=np.ascontiguousarray(T[:3, :3]), left=pose.left,
+    return EyePose(header=header, position=T[:3, 3].copy(), rotation=np.ascontiguousarray(T[:3, :3]),
+                   left=pose.left,
                    right=pose.right, eye=pose.V, velocity=velocity, valid=valid, age=age,
-                   markers=pose.markers if valid else 0, reprojection_px=pose.reprojection_px if valid else 0.0)
+                   markers=pose.markers if valid else 0,
+                   reprojection_px=pose.reprojection_px if valid else 0.0)
 
 
 class HeadCameraNode(Node):
@@ -122,8 +127,8 @@ class HeadCameraNode(Node):
             self._track(image, t)
 
     async def on_frame_blocking(self) -> None:
-        """One frame from a device, waited for in a worker thread (the loop stays free), stamped on arrival less
-        half the exposure, and tracked."""
+        """One frame from a device, waited for in a worker thread (the loop stays free), stamped on arrival
+        less half the exposure, and tracked."""
         image = await asyncio.to_thread(self.source.grab, self.now() - 0.5 * self.params.exposure_s)
         if image is not None:
             self._track(image, self.now() - 0.5 * self.params.exposure_s)

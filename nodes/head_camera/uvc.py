@@ -1,5 +1,6 @@
 """The head camera port's lab side (``source: device``): a UVC camera through OpenCV's ``cv2.VideoCapture``
-(``device``: an index or a ``/dev/video*`` path), at ``rate_hz``. See :mod:`flexsheet.vision.head_camera_port`."""
+(``device``: an index or a ``/dev/video*`` path), at ``rate_hz``. See
+:mod:`flexsheet.vision.head_camera_port`."""
 
 from __future__ import annotations
 

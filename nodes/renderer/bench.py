@@ -3,16 +3,16 @@ and the per-frame cost of the pushed sheet's shape (``sheet_update``: the node's
 turning a new fingertip into the depth table the fine shader draws); with ``--window``, the projector
 window's frame pacing.
 
-The time covers setting the sheet uniforms (the CPU part of the correction: triangle normals, membrane
-depth table texture), drawing both eyes with the per-vertex correction in the vertex shader, and ``ctx.finish()``;
+The time covers setting the sheet uniforms (the CPU part of the correction: triangle normals, membrane depth
+table texture), drawing both eyes with the per-vertex correction in the vertex shader, and ``ctx.finish()``;
 read-back is reported separately (``readback_ms``). Figures on a shared CPU (llvmpipe) are pessimistic.
 
 ``--window`` opens the projector window (:mod:`nodes.renderer.window`; on a private Xvfb with ``--xvfb`` or
-when ``DISPLAY`` is unset) and presents frames for ``--seconds`` in the ``--stereo`` format at ``--refresh-hz``,
-twice: present only (the pair drawn once), then redrawing the pair at ``--redraw-hz`` (alternating two sheets,
-as new fingertips would). It reports the interval between swaps (mean, p99), the frame rate, missed vsyncs,
-eye resyncs, and whether swaps waited for the display (``pacing``: "vsync") or a timer paced them ("timer":
-Xvfb has no vsync).
+when ``DISPLAY`` is unset) and presents frames for ``--seconds`` in the ``--stereo`` format at
+``--refresh-hz``, twice: present only (the pair drawn once), then redrawing the pair at ``--redraw-hz``
+(alternating two sheets, as new fingertips would). It reports the interval between swaps (mean, p99), the
+frame rate, missed vsyncs, eye resyncs, and whether swaps waited for the display (``pacing``: "vsync") or a
+timer paced them ("timer": Xvfb has no vsync).
 """
 
 from __future__ import annotations
@@ -42,10 +42,12 @@ __all__ = ["main", "window_pacing"]
 
 
 def window_pacing(seconds: float = 5.0, *, stereo: str = "frame_sequential", refresh_hz: float | None = 120.0,
-                  redraw_hz: float = 30.0, width: int = 1024, height: int = 768, model: str = "four_triangle") -> dict:
+                  redraw_hz: float = 30.0, width: int = 1024, height: int = 768,
+                  model: str = "four_triangle") -> dict:
     """Frame pacing of the projector window (see the module docstring); run it on a thread with no current
     EGL context. Returns {"present_only": stats, "with_redraws": stats, ...} (times in ms)."""
-    out = WindowOutput(Projector.default(width, height), stereo=stereo, refresh_hz=refresh_hz, fullscreen=False)
+    out = WindowOutput(Projector.default(width, height), stereo=stereo, refresh_hz=refresh_hz,
+                       fullscreen=False)
     try:
         r = out.renderer
         v, f = cylinder_draw_mesh()
@@ -54,7 +56,8 @@ def window_pacing(seconds: float = 5.0, *, stereo: str = "frame_sequential", ref
         other = bench_sheets(depth=0.02)
         r.set_model(model, sheets[model])
         r.render_pair()
-        res = {"stereo": stereo, "size_per_eye": [width, height], "frame_size": list(out.presenter.frame_size),
+        res = {"stereo": stereo, "size_per_eye": [width, height],
+               "frame_size": list(out.presenter.frame_size),
                "refresh_hz": out.window.refresh_hz, "pacing": out.window.pacing,
                "quad_buffered": out.window.quad_buffered, "monitor": out.window.monitor_name,
                "gl_renderer": r.ctx.info.get("GL_RENDERER", "?"), "redraw_hz": redraw_hz, "model": model,
@@ -91,7 +94,8 @@ def window_pacing(seconds: float = 5.0, *, stereo: str = "frame_sequential", ref
 
 
 def _window_main(args) -> dict:
-    """Run :func:`window_pacing` on a thread of its own, on a private Xvfb if asked or if there is no DISPLAY."""
+    """Run :func:`window_pacing` on a thread of its own, on a private Xvfb if asked or if there is no
+    DISPLAY."""
     def run(display: str) -> dict:
         os.environ["DISPLAY"] = display
         box: dict = {}
@@ -131,13 +135,18 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--width", type=int, default=1024)
     ap.add_argument("--height", type=int, default=768)
     ap.add_argument("--model", default="four_triangle", help="model whose time is stereo_pair_ms")
-    ap.add_argument("--scene", default=None, help="scene file whose object is drawn (default: the paper's cylinder)")
-    ap.add_argument("--window", action="store_true", help="measure the projector window's frame pacing instead")
-    ap.add_argument("--xvfb", action="store_true", help="--window on a private Xvfb (default when DISPLAY is unset)")
+    ap.add_argument("--scene", default=None, help="scene file whose object is drawn (default: the paper's "
+                                                  "cylinder)")
+    ap.add_argument("--window", action="store_true", help="measure the projector window's frame pacing "
+                                                          "instead")
+    ap.add_argument("--xvfb", action="store_true", help="--window on a private Xvfb (default when DISPLAY is "
+                                                        "unset)")
     ap.add_argument("--seconds", type=float, default=5.0, help="--window: seconds per phase (default 5)")
     ap.add_argument("--stereo", default="frame_sequential",
-                    choices=["frame_sequential", "side_by_side", "top_bottom", "mono"], help="--window: format")
-    ap.add_argument("--refresh-hz", type=float, default=120.0, help="--window: refresh to ask for (default 120)")
+                    choices=["frame_sequential", "side_by_side", "top_bottom", "mono"],
+                    help="--window: format")
+    ap.add_argument("--refresh-hz", type=float, default=120.0, help="--window: refresh to ask for (default "
+                                                                    "120)")
     ap.add_argument("--redraw-hz", type=float, default=30.0,
                     help="--window: pair redraws per s in the second phase (default 30, as sim.yaml)")
     return ap
@@ -156,8 +165,8 @@ def _window_report(ap: argparse.ArgumentParser, args) -> int:
         for ph in ("present_only", "with_redraws"):
             d = res[ph]
             print(f"  {ph:13s} {d['fps']:6.1f} fps, interval mean {d['interval_mean_ms']:.2f} ms p99 "
-                  f"{d['interval_p99_ms']:.2f} ms, missed vsyncs {d['missed_vsyncs']} of {d['frames']} frames,"
-                  f" eye resyncs {d['eye_resyncs']}, redraw {d['redraw_median_ms']:.1f} ms, present "
+                  f"{d['interval_p99_ms']:.2f} ms, missed vsyncs {d['missed_vsyncs']} of {d['frames']} "
+                  f"frames, eye resyncs {d['eye_resyncs']}, redraw {d['redraw_median_ms']:.1f} ms, present "
                   f"{d['present_median_ms']:.2f} ms")
     return 0
 
@@ -170,7 +179,8 @@ def _print_render(res: dict, args, per: dict, readback: float, sheet_ms: dict, n
     print(f"  read-back of the pair {readback:.2f} ms; target {res['target_ms']:.2f} ms (120 Hz)")
     print(f"  pushed-sheet shape per frame (RendererState, gripped FEM depth table): new fingertip "
           f"{sheet_ms['new_finger_median_ms']:.2f} ms median (p90 {sheet_ms['new_finger_p90_ms']:.2f}, max "
-          f"{sheet_ms['new_finger_max_ms']:.2f}; CPU {sheet_ms['new_finger_cpu_median_ms']:.2f}), same fingertip {sheet_ms['same_finger_median_ms']:.3f} ms")
+          f"{sheet_ms['new_finger_max_ms']:.2f}; CPU {sheet_ms['new_finger_cpu_median_ms']:.2f}), same "
+          f"fingertip {sheet_ms['same_finger_median_ms']:.3f} ms")
 
 
 def main(argv: list[str] | None = None) -> int:

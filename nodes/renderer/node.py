@@ -1,23 +1,23 @@
 """Renderer node: draws the (deformed) object for both eyes, corrected for the actual sheet (paper §III-C).
 
-Subscribes ``/object/deformation`` (the scene's rigid object until the FEM publishes), both arms' joint states (the
-measured clamp poses give the actual sheet pose and its stretch), ``/fingertip`` (the pushed point and depth) and
-``/sheet/target`` (the stretch the planner sets: its pushed-sheet table is prepared before the arms get there) and
-``/eye/pose`` (the viewer's tracked eyes: each pair is corrected for them, predicted to the moment it is on the
-sheet; the last good pose while the glasses are lost, then the registered V: :mod:`flexsheet.rendering.viewpoint`).
+Subscribes ``/object/deformation`` (the rigid object until the FEM publishes), both arms' joint states (the
+actual sheet), ``/fingertip``, ``/sheet/target`` (its stretch's table is prepared before the arms get there)
+and ``/eye/pose`` (each pair is corrected for the tracked eyes: :mod:`flexsheet.rendering.viewpoint`).
 
-The pushed sheet's shape is the FEM of the sheet gripped on its clamp edges (:mod:`flexsheet.model.sheet_model`;
-never the twin's truth), one table per sheet-strain node (:mod:`nodes.renderer.tables`). It redraws as soon as a
-new fingertip or deformation arrives (at most ``max_render_rate``; at least at ``publish_rate``) and publishes
-``/render/stereo`` (:class:`messages.RenderedFrame`, downscaled by ``publish_scale``) at ``publish_rate``;
-``source_stamp`` is the newest exposure stamp of the fingertip / deformation it drew.
+The pushed sheet's shape is the FEM of the sheet gripped on its clamp edges
+(:mod:`flexsheet.model.sheet_model`; never the twin's truth), one table per sheet-strain node
+(:mod:`nodes.renderer.tables`). It redraws as soon as a new fingertip or deformation arrives (at most
+``max_render_rate``; at least at ``publish_rate``) and publishes ``/render/stereo``
+(:class:`messages.RenderedFrame`, downscaled by ``publish_scale``) at ``publish_rate``; ``source_stamp`` is
+the newest exposure stamp of the fingertip / deformation it drew.
 
 Geometry: the ``scene`` file's object (default the paper's cylinder); the projector and the eye from
 ``display_calib`` (without one the nominal geometry, said in the log). The state and the decisions are
-:mod:`flexsheet.rendering.state`; the drawing :mod:`flexsheet.rendering.stereo_renderer`. ``output: offscreen``
-(default) draws headless (EGL) in a GL thread of its own (:class:`flexsheet.runtime.paced.PacedCall`; on a
-simulated clock on the loop's, charged the lab's render time); ``output: window``:
-:mod:`nodes.renderer.window_thread`. Bad input is rejected and counted; the last good state keeps being drawn.
+:mod:`flexsheet.rendering.state`; the drawing :mod:`flexsheet.rendering.stereo_renderer`.
+``output: offscreen`` (default) draws headless (EGL) in a GL thread of its own
+(:class:`flexsheet.runtime.paced.PacedCall`; on a simulated clock on the loop's, charged the lab's render
+time); ``output: window``: :mod:`nodes.renderer.window_thread`. Bad input is rejected and counted; the last
+good state keeps being drawn.
 """
 
 from __future__ import annotations
@@ -38,14 +38,7 @@ from flexsheet.rendering.viewpoint import Viewpoint
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.paced import PacedCall
 from flexsheet.runtime.qos import QoS
-from messages import (
-    EyePose,
-    Fingertip,
-    ObjectDeformation,
-    RenderedFrame,
-    SheetTarget,
-    topics,
-)
+from messages import EyePose, Fingertip, ObjectDeformation, RenderedFrame, SheetTarget, topics
 from nodes.renderer.params import RendererParams
 from nodes.renderer.show_image import ImageServices
 from nodes.renderer.tables import SheetTables
@@ -73,8 +66,8 @@ class RendererNode(SheetTables, WindowThread, ImageServices, Node):
         self.eye = geo.eye
         self.projector = geo.projector
         self._image = None          # an image show_image set, drawn instead of the scene
-        self.service("show_image", self.srv_show_image, "{path}: show an image file in both eyes (registration "
-                     "patterns) instead of the scene, scaled to the projector", commanding=True)
+        self.service("show_image", self.srv_show_image, "{path}: show an image file in both eyes "
+                     "(registration patterns) instead of the scene, scaled to the projector", commanding=True)
         self.service("clear_image", self.srv_clear_image, "draw the scene again", commanding=True)
         check_screen(self.eye, self.projector.position, paper.SCREEN_POINT, paper.SCREEN_NORMAL)
         self.sheet_config = SheetConfig(half_width=p.sheet_half_width, push_threshold=p.push_threshold,
@@ -87,8 +80,8 @@ class RendererNode(SheetTables, WindowThread, ImageServices, Node):
         self._init_tables()
         if p.output == "window":
             self.require_wall_clock("output: window (a projector window shows frames on real vsyncs)")
-        # tables are built when a push or the planner's stretch needs them; the error table comes from the first
-        # one there is (a cached one near the home stretch now, if any)
+        # tables are built when a push or the planner's stretch needs them; the error table
+        # comes from the first one there is (a cached one near the home stretch now, if any)
         near = self.sheet_model.nearest_on_disk(self.sheet_model.node_of_span(self.state.last_good.half_span))
         if near is not None:
             await self._prepare(near)
@@ -96,13 +89,15 @@ class RendererNode(SheetTables, WindowThread, ImageServices, Node):
         self._last_render = self._last_publish = 0.0      # s, the node's monotonic time
         self.pub = self.publisher(topics.RENDERED)
         self.image_pub = self.publisher(topics.PROJECTOR_IMAGE)
-        # the clamps' poses, read per frame, before any output draws (sampled: the 140 Hz joint states are decoded per frame, not each)
-        self._arm_states = {"left": self.sample(topics.ARM_LEFT_STATE), "right": self.sample(topics.ARM_RIGHT_STATE)}
+        # the clamps' poses, read per frame, before any output draws
+        # (sampled: the 140 Hz joint states are decoded per frame, not each)
+        self._arm_states = {"left": self.sample(topics.ARM_LEFT_STATE),
+                            "right": self.sample(topics.ARM_RIGHT_STATE)}
         self.viewpoint = Viewpoint(*eye_positions(self.eye, self.geometry.ipd))   # before the first frame
         self.paced = None
         if p.output == "window":
             await self._open_window()
-        else:   # offscreen: drawn in a GL thread of its own (on a simulated clock, the loop's: charged the lab's time)
+        else:   # offscreen: a GL thread of its own (a simulated clock: the loop's, charged the lab's time)
             self.paced = PacedCall(self, p.max_render_rate, self._draw, self._drawn,
                                    lambda exc: self._reject(f"render: {exc}"), LAB.compute("renderer"),
                                    "renderer-gl", before=self._prepare_missing)
@@ -117,7 +112,8 @@ class RendererNode(SheetTables, WindowThread, ImageServices, Node):
     def _renderer_kwargs(self) -> dict:
         p: RendererParams = self.params
         return {"eye": self.eye, "ipd": 0.0 if p.stereo == "mono" else self.geometry.ipd,
-                "screen_point": paper.SCREEN_POINT, "screen_normal": paper.SCREEN_NORMAL, "samples": p.samples,
+                "screen_point": paper.SCREEN_POINT, "screen_normal": paper.SCREEN_NORMAL,
+                "samples": p.samples,
                 "distortion": self.geometry.distortion}
 
     # ------------------------------------------------------------------ offscreen output (GL thread)
@@ -125,8 +121,8 @@ class RendererNode(SheetTables, WindowThread, ImageServices, Node):
         self.renderer = StereoRenderer(self.projector, **self._renderer_kwargs())
 
     def _draw(self) -> RenderedFrame | None:
-        """(The GL thread.) The pair for the newest inputs, when ``publish_rate`` is due (an offscreen pair nobody
-        sees is not drawn)."""
+        """(The GL thread.) The pair for the newest inputs, when ``publish_rate`` is due (an offscreen pair
+        nobody sees is not drawn)."""
         if self.paced.last - self._last_publish < 1.0 / self.params.publish_rate - 1e-9:
             return None
         return self._frame(True)
@@ -168,8 +164,8 @@ class RendererNode(SheetTables, WindowThread, ImageServices, Node):
             sub.take(lambda msg, side=side: self.state.set_arm_pose(side, msg.pose))
 
     async def on_sheet_target(self, msg: SheetTarget) -> None:
-        """The planner's stretch: prepare its pushed-sheet table before the arms reach it (on a simulated clock
-        while simulated time waits)."""
+        """The planner's stretch: prepare its pushed-sheet table before the arms reach it (on a simulated
+        clock while simulated time waits)."""
         await self._prepare(float(self.sheet_model.node_of(msg.stretch)))
 
     def on_fingertip(self, msg: Fingertip) -> None:
@@ -210,7 +206,8 @@ class RendererNode(SheetTables, WindowThread, ImageServices, Node):
                 return None
             left, right = self.renderer.read_pair(p.publish_scale)
             self.frames += 1
-            return RenderedFrame(header=self.pub.header("projector"), left=left, right=right, scale=p.publish_scale,
+            return RenderedFrame(header=self.pub.header("projector"), left=left, right=right,
+                                 scale=p.publish_scale,
                                  correction="image", render_time=time.perf_counter() - t0,
                                  source_stamp=self.state.source_stamp, eyes=np.stack(self.viewpoint.fixed))
         mesh = self.state.take_mesh()
@@ -234,13 +231,15 @@ class RendererNode(SheetTables, WindowThread, ImageServices, Node):
         self.model_used = self.renderer.model
         choice, eyes = self._eyes()
         self.renderer.render_pair(eyes=eyes)
-        # the host's drawing time; on a simulated clock the lab's declared one (the message must not depend on the host)
+        # the host's drawing time; on a simulated clock the lab's
+        # declared one (the message must not depend on the host)
         render_time = self.paced.elapsed(t0) if self.paced is not None else time.perf_counter() - t0
         if not publish:
             return None
         left, right = self.renderer.read_pair(p.publish_scale)
         self.frames += 1
-        return RenderedFrame(header=self.pub.header("projector"), left=left, right=right, scale=p.publish_scale,
+        return RenderedFrame(header=self.pub.header("projector"), left=left, right=right,
+                             scale=p.publish_scale,
                              correction=self.model_used, render_time=render_time, source_stamp=stamp,
                              eyes=np.stack(eyes), eye_source=choice.source)
 

@@ -38,10 +38,11 @@ def _monitor(cls, v: int | str) -> int | str:
 
 #: the files the node reads (filled by the launcher from the launch file's top-level sections)
 _FILES = {
-    "scene": (str | None, Field(None, description="scene file (launch/scenes/*.yaml) whose object is drawn until "
-                                                  "the FEM publishes; None: the paper's cylinder")),
-    "display_calib": (str | None, Field(None, description="display.yaml: the projector (K_p, D, pose) and the eye "
-                                                          "(V, ipd); None: the nominal geometry (logged)")),
+    "scene": (str | None, Field(None, description="scene file (launch/scenes/*.yaml) whose object is drawn "
+                                                  "until the FEM publishes; None: the paper's cylinder")),
+    "display_calib": (str | None, Field(None, description="display.yaml: the projector (K_p, D, pose) and "
+                                                          "the eye (V, ipd); None: the nominal geometry "
+                                                          "(logged)")),
 }
 
 #: the projector window (``output: window``): device settings, the node's own
@@ -52,12 +53,14 @@ _WINDOW = {
         "frame_sequential", description="window format: eyes on alternate vsyncs (active shutter glasses), "
                                         "the halves of one frame, or one image from the cyclopean eye")),
     "monitor": (int | str, Field(0, description="window: monitor index (0 = primary) or part of its name")),
-    "fullscreen": (bool, Field(True, description="window: take the whole monitor (false: a window, debugging)")),
+    "fullscreen": (bool, Field(True, description="window: take the whole monitor (false: a window, "
+                                                 "debugging)")),
     "mirror_x": (bool, Field(False, description="window: flip each eye's image left-right")),
     "refresh_hz": (float | None, Field(None, gt=0.0, le=500.0,
-                                       description="window: refresh rate to ask for, Hz (None: the monitor's)")),
-    "quad_buffer": (bool, Field(True, description="window, frame_sequential: use a quad-buffered stereo context "
-                                                  "where the driver offers one")),
+                                       description="window: refresh rate to ask for, Hz (None: the "
+                                                   "monitor's)")),
+    "quad_buffer": (bool, Field(True, description="window, frame_sequential: use a quad-buffered stereo "
+                                                  "context where the driver offers one")),
     "swap_eyes": (bool, Field(False, description="window, frame_sequential: right eye on even vsyncs")),
 }
 

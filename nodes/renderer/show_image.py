@@ -1,6 +1,6 @@
-"""The renderer node's image services (:class:`ImageServices`, a part of :class:`nodes.renderer.node.RendererNode`):
-``show_image`` draws an image file (registration patterns) in both eyes instead of the scene, ``clear_image`` the
-scene again; each is latched on ``/projector/image``."""
+"""The renderer node's image services (:class:`ImageServices`, a part of
+:class:`nodes.renderer.node.RendererNode`): ``show_image`` draws an image file (registration patterns) in both
+eyes instead of the scene, ``clear_image`` the scene again; each is latched on ``/projector/image``."""
 
 from __future__ import annotations
 
@@ -13,12 +13,13 @@ __all__ = ["ImageServices"]
 
 
 class ImageServices:
-    """The image half of the renderer node; it uses the node's ``projector``, ``image_pub`` and ``_request``."""
+    """The image half of the renderer node; it uses the node's ``projector``, ``image_pub`` and
+    ``_request``."""
 
     def srv_show_image(self, args: dict) -> dict:
-        """``{path}``: show an image file (any size: scaled to the projector's, nearest neighbour for patterns)
-        in both eyes instead of the scene, until ``clear_image``; latched on ``/projector/image``. Returns the
-        path, the projector's size and the stamp it was shown at (s, the graph's clock)."""
+        """``{path}``: show an image file (any size: scaled to the projector's, nearest neighbour for
+        patterns) in both eyes instead of the scene, until ``clear_image``; latched on ``/projector/image``.
+        Returns the path, the projector's size and the stamp it was shown at (s, the graph's clock)."""
         path = args.get("path")
         if not isinstance(path, str) or not path:
             raise ValueError(f"show_image needs 'path' (an image file), got {path!r}")

@@ -1,9 +1,9 @@
 """The renderer node's pushed-sheet tables (:class:`SheetTables`, a part of
-:class:`nodes.renderer.node.RendererNode`): one gripped-sheet FEM table per sheet-strain node, loaded from disk or
-built in a spawned, niced worker process (~2 min per node on one core), then the models' error table once.
-Builds run one at a time in the node's background (:meth:`flexsheet.runtime.node.Node.background`: on the wall
-clock pushes at that stretch are drawn with the 4-triangle model meanwhile; on a simulated clock simulated time
-waits for them). A stretch whose table fails is drawn with the nearest built table (logged)."""
+:class:`nodes.renderer.node.RendererNode`): one gripped-sheet FEM table per sheet-strain node, loaded from
+disk or built in a spawned, niced worker process (~2 min per node on one core), then the models' error table
+once. Builds run one at a time in the node's background (:meth:`flexsheet.runtime.node.Node.background`: on
+the wall clock pushes at that stretch are drawn with the 4-triangle model meanwhile; on a simulated clock
+simulated time waits for them). A stretch whose table fails is drawn with the nearest built table (logged)."""
 
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ class SheetTables:
     def _init_tables(self) -> None:
         self.table = None                     # the models' error table, once the first FEM table is there
         self._tables_asked: set[float] = set()
-        self._missing: list[float] = []       # stretches a drawing found without a table (drained before a draw)
+        self._missing: list[float] = []  # stretches a drawing found without a table (drained before a draw)
         self._builds: set = set()
         self._failed: set[float] = set()
         self._build_lock = threading.Lock()
@@ -70,11 +70,12 @@ class SheetTables:
     def _build(self, node: float) -> bool:
         """Build the table of stretch ``node`` in a worker process; False when it failed (logged, counted, the
         nearest built table stands in) or the node stopped."""
-        self.log.info("pushed-sheet FEM table for stretch %g not cached: building it (~2 min); pushes at that "
-                      "stretch are drawn with the 4-triangle model meanwhile", node)
+        self.log.info("pushed-sheet FEM table for stretch %g not cached: building it (~2 min); pushes at "
+                      "that stretch are drawn with the 4-triangle model meanwhile", node)
         t0 = time.monotonic()
         proc = multiprocessing.get_context("spawn").Process(
-            target=build_table, args=(self.sheet_model.settings, node, 19), name=f"renderer-sheet-table-{node:g}",
+            target=build_table, args=(self.sheet_model.settings, node, 19),
+            name=f"renderer-sheet-table-{node:g}",
             daemon=True)
         start_worker(proc)                       # SIGINT ignored from its first instruction
         self._builds.add(proc)
@@ -87,8 +88,8 @@ class SheetTables:
         if proc.exitcode != 0 or not self.sheet_model.on_disk(node):
             self.errors_total += 1
             self._failed.add(node)
-            self.log.error("pushed-sheet table for stretch %g failed (exit code %s; the FEM may not converge at "
-                           "that stretch)", node, proc.exitcode)
+            self.log.error("pushed-sheet table for stretch %g failed (exit code %s; the FEM may not converge "
+                           "at that stretch)", node, proc.exitcode)
             self._substitute()
             return False
         self.log.info("pushed-sheet table for stretch %g built in %.0f s", node, time.monotonic() - t0)
@@ -114,7 +115,9 @@ class SheetTables:
         """The models' predicted errors on the home sheet at stretch ``node`` (its own model instance: the
         drawing thread's is not shared)."""
         geo = self.geometry
-        return ErrorTable.at_home(silhouette_probes(geo.mesh[0], center_x=float(geo.scene.center[0])), eye=self.eye,
-                                  projector=self.projector.position, stretch_node=node, config=self.sheet_config,
+        return ErrorTable.at_home(silhouette_probes(geo.mesh[0], center_x=float(geo.scene.center[0])),
+                                  eye=self.eye,
+                                  projector=self.projector.position, stretch_node=node,
+                                  config=self.sheet_config,
                                   sheet_model=sheet_model_for(self.sheet_config))
 

@@ -1,10 +1,11 @@
 """Projector output: a real window (glfw) showing the stereo pair that :class:`StereoRenderer` draws.
 
 The drawing is the offscreen renderer's, unchanged: :class:`WindowOutput` creates the
-:class:`~flexsheet.rendering.stereo_renderer.StereoRenderer` on the window's OpenGL context (``moderngl.create_context()``
-after ``glfw.make_context_current``), the renderer draws both eyes into its framebuffer texture exactly as
-headless, and :class:`Presenter` copies the eye images into the window's back buffer at 1:1 (texelFetch), in
-the chosen stereo format (:func:`flexsheet.rendering.pacing.frame_layout`), optionally mirrored left-right.
+:class:`~flexsheet.rendering.stereo_renderer.StereoRenderer` on the window's OpenGL context
+(``moderngl.create_context()`` after ``glfw.make_context_current``), the renderer draws both eyes into its
+framebuffer texture exactly as headless, and :class:`Presenter` copies the eye images into the window's back
+buffer at 1:1 (texelFetch), in the chosen stereo format (:func:`flexsheet.rendering.pacing.frame_layout`),
+optionally mirrored left-right.
 
 * **Monitor, mode.** ``monitor`` is an index into ``glfw.get_monitors()`` (0 = primary) or a substring of a
   monitor's name (on X11 the RandR output, e.g. ``"DP-1"``). Fullscreen asks for a video mode of the frame's
@@ -22,9 +23,10 @@ the chosen stereo format (:func:`flexsheet.rendering.pacing.frame_layout`), opti
   dropped vsync does not leave the eyes swapped.
 
 All calls must come from one thread (glfw's window-system calls and the GL context are bound to it), and that
-thread must not hold a headless EGL context: with libglvnd a thread can have a current context of one API only,
-and GLX answers the window's ``MakeCurrent`` with the fatal X error BadAccess. :class:`ProjectorWindow` checks
-this and raises :class:`WindowError` instead; the renderer node opens the window on a thread of its own.
+thread must not hold a headless EGL context: with libglvnd a thread can have a current context of one API
+only, and GLX answers the window's ``MakeCurrent`` with the fatal X error BadAccess. :class:`ProjectorWindow`
+checks this and raises :class:`WindowError` instead; the renderer node opens the window on a thread of its
+own.
 """
 
 from __future__ import annotations
@@ -72,8 +74,9 @@ def _egl_current() -> bool:
 
 def _glfw():
     if _egl_current():
-        raise WindowError("this thread has a current EGL (headless) OpenGL context; libglvnd then refuses the "
-                          "window's GLX context (X error BadAccess, fatal): open the window on its own thread")
+        raise WindowError("this thread has a current EGL (headless) OpenGL context; libglvnd then refuses "
+                          "the window's GLX context (X error BadAccess, fatal): open the window on its own "
+                          "thread")
     import glfw
 
     glfw.ERROR_REPORTING = "log"     # glfw errors are logged; every call's result is checked here
@@ -90,8 +93,8 @@ def monitor_names() -> list[str]:
 
 
 def find_monitor(monitor: int | str):
-    """The glfw monitor for ``monitor``: an index (int or digit string; 0 = primary) or a substring of its name.
-    Raises :class:`WindowError` listing the monitors when there is no match."""
+    """The glfw monitor for ``monitor``: an index (int or digit string; 0 = primary) or a substring of its
+    name. Raises :class:`WindowError` listing the monitors when there is no match."""
     import glfw
 
     mons = list(glfw.get_monitors() or [])
@@ -107,7 +110,8 @@ def find_monitor(monitor: int | str):
         raise WindowError(f"monitor={monitor!r}: index out of range; monitors: {list(enumerate(names))}")
     hits = [m for m, n in zip(mons, names, strict=True) if key.lower() in n.lower()]
     if len(hits) != 1:
-        raise WindowError(f"monitor={monitor!r} matches {len(hits)} monitors; monitors: {list(enumerate(names))}")
+        raise WindowError(f"monitor={monitor!r} matches {len(hits)} monitors; monitors: "
+                          f"{list(enumerate(names))}")
     return hits[0]
 
 
@@ -128,7 +132,8 @@ class _OmlSync:
         addr = get(b"glXGetSyncValuesOML")
         if not addr:  # pragma: no cover
             return
-        proto = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_ulong, ctypes.POINTER(ctypes.c_int64),
+        proto = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_ulong,
+                                 ctypes.POINTER(ctypes.c_int64),
                                  ctypes.POINTER(ctypes.c_int64), ctypes.POINTER(ctypes.c_int64))
         self.fn = proto(addr)
         self.display = glfw.get_x11_display()
@@ -156,7 +161,8 @@ class ProjectorWindow:
     """
 
     def __init__(self, frame_size: tuple[int, int], *, monitor: int | str = 0, fullscreen: bool = False,
-                 refresh_hz: float | None = None, quad_buffer: bool = False, title: str = "flexsheet projector",
+                 refresh_hz: float | None = None, quad_buffer: bool = False,
+                 title: str = "flexsheet projector",
                  position: tuple[int, int] | None = None) -> None:
         if refresh_hz is not None and not (math.isfinite(refresh_hz) and refresh_hz > 0):
             raise WindowError(f"refresh_hz must be > 0, got {refresh_hz!r}")
@@ -192,8 +198,8 @@ class ProjectorWindow:
             self.framebuffer_size = tuple(glfw.get_framebuffer_size(self.window))
             if self.framebuffer_size != (W, H):
                 self.warnings.append(f"frame {W}x{H} shown in a {self.framebuffer_size[0]}x"
-                                     f"{self.framebuffer_size[1]} framebuffer: scaled (set width/height to the "
-                                     "projector's native mode)")
+                                     f"{self.framebuffer_size[1]} framebuffer: scaled (set width/height to "
+                                     "the projector's native mode)")
             self._gl = self._gl_functions()
             if self.quad_buffered:
                 self.quad_buffered = self._gl_stereo()
@@ -235,7 +241,8 @@ class ProjectorWindow:
         glfw = self.glfw
         fns = {}
         for name, proto in (("glDrawBuffer", ctypes.CFUNCTYPE(None, ctypes.c_uint)),
-                            ("glGetBooleanv", ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.POINTER(ctypes.c_ubyte)))):
+                            ("glGetBooleanv",
+                             ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.POINTER(ctypes.c_ubyte)))):
             addr = glfw.get_proc_address(name)
             if not addr:  # pragma: no cover - core GL 1.0 entry points
                 raise WindowError(f"OpenGL entry point {name} not found")
@@ -271,16 +278,18 @@ class ProjectorWindow:
     @property
     def counter(self) -> str:
         """What counts vsyncs: "oml" (the driver's media stream counter), "grid" (timer pacing: the index of
-        the virtual vsync the frame was shown at) or "time" (none: :class:`FramePacer` infers it from times)."""
+        the virtual vsync the frame was shown at) or "time" (none: :class:`FramePacer` infers it from
+        times)."""
         if self.pacing == "timer":
             return "grid"
         return "oml" if self._oml.fn is not None else "time"
 
     def swap(self) -> tuple[float, int | None]:
-        """Show the back buffer at the next vsync; returns (time the swap completed, s on ``time.perf_counter``;
-        vsync counter or None, see :attr:`counter`). With ``pacing == "timer"`` it first sleeps to the next
-        point of a virtual vsync grid (at most one frame per grid point, like a display), and the counter is
-        that point's index: the timer is the display's clock there, so no inference from times is needed."""
+        """Show the back buffer at the next vsync; returns (time the swap completed, s on
+        ``time.perf_counter``; vsync counter or None, see :attr:`counter`). With ``pacing == "timer"`` it
+        first sleeps to the next point of a virtual vsync grid (at most one frame per grid point, like a
+        display), and the counter is that point's index: the timer is the display's clock there, so no
+        inference from times is needed."""
         if self.pacing == "timer":
             now = time.perf_counter()
             period = 1.0 / self.refresh_hz
@@ -328,7 +337,8 @@ class Presenter:
 
     ``window``: :class:`ProjectorWindow`; ``texture``: the renderer's colour texture (2W × H, left | right);
     ``eye_size`` (W, H) px; ``stereo``: a :data:`STEREO_MODES` format; ``mirror_x``: flip each eye's image
-    left-right (a projector set to rear projection, or a fold mirror in the light path). Raises ``ValueError``.
+    left-right (a projector set to rear projection, or a fold mirror in the light path). Raises
+    ``ValueError``.
     """
 
     def __init__(self, window: ProjectorWindow, texture, eye_size: tuple[int, int], stereo: str,
@@ -400,7 +410,8 @@ class WindowOutput:
     :class:`Presenter`; ``monitor``, ``fullscreen``, ``refresh_hz``, ``quad_buffer``: see
     :class:`ProjectorWindow`; ``swap_eyes``: start frame-sequential stereo with the right eye (glasses in the
     other phase); ``renderer_kwargs``: :class:`StereoRenderer` arguments (eye, ipd, screen, samples...).
-    Attributes: ``window``, ``renderer``, ``presenter``, ``pacer``. Raises :class:`WindowError`/``ValueError``.
+    Attributes: ``window``, ``renderer``, ``presenter``, ``pacer``. Raises
+    :class:`WindowError`/``ValueError``.
     """
 
     def __init__(self, projector: Projector, *, stereo: str = "frame_sequential", monitor: int | str = 0,
@@ -415,7 +426,8 @@ class WindowOutput:
                                       position=position)
         try:
             self.renderer = StereoRenderer(projector, ctx=self.window.ctx, **renderer_kwargs)
-            self.presenter = Presenter(self.window, self.renderer.texture, (projector.width, projector.height),
+            self.presenter = Presenter(self.window, self.renderer.texture,
+                                       (projector.width, projector.height),
                                        stereo, mirror_x)
         except BaseException:
             self.window.close()

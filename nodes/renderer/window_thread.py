@@ -1,7 +1,8 @@
-"""The renderer node's projector window (:class:`WindowThread`, a part of :class:`nodes.renderer.node.RendererNode`):
-``output: window`` opens the window (:class:`nodes.renderer.window.WindowOutput`, glfw) on a thread of its own,
-which presents a frame on every vsync and redraws the pair there when inputs arrive (at most ``max_render_rate``;
-published at ``publish_rate``); the heartbeat leads with the window's frame rate and missed vsyncs."""
+"""The renderer node's projector window (:class:`WindowThread`, a part of
+:class:`nodes.renderer.node.RendererNode`): ``output: window`` opens the window
+(:class:`nodes.renderer.window.WindowOutput`, glfw) on a thread of its own, which presents a frame on every
+vsync and redraws the pair there when inputs arrive (at most ``max_render_rate``; published at
+``publish_rate``); the heartbeat leads with the window's frame rate and missed vsyncs."""
 
 from __future__ import annotations
 
@@ -18,14 +19,16 @@ __all__ = ["WindowThread"]
 
 
 class WindowThread:
-    """The window half of the renderer node; it uses the node's ``params``, ``projector``, ``_renderer_kwargs``,
-    ``_frame``, ``pub``, ``_reject``, ``_last_render``, ``_last_publish``, ``log`` and ``shutdown``."""
+    """The window half of the renderer node; it uses the node's ``params``, ``projector``,
+    ``_renderer_kwargs``, ``_frame``, ``pub``, ``_reject``, ``_last_render``, ``_last_publish``, ``log`` and
+    ``shutdown``."""
 
     async def _open_window(self) -> None:
         self._stop_window = threading.Event()
         self._redraw = threading.Event()
         ready: concurrent.futures.Future = concurrent.futures.Future()
-        self._window_thread = threading.Thread(target=self._window_main, args=(ready,), name="renderer-window",
+        self._window_thread = threading.Thread(target=self._window_main, args=(ready,),
+                                               name="renderer-window",
                                                daemon=True)
         self._window_thread.start()
         await asyncio.wrap_future(ready)      # a WindowError (ValueError) is a configuration error
@@ -35,7 +38,8 @@ class WindowThread:
         try:
             out = WindowOutput(self.projector, stereo=p.stereo, monitor=p.monitor, fullscreen=p.fullscreen,
                                mirror_x=p.mirror_x, refresh_hz=p.refresh_hz, quad_buffer=p.quad_buffer,
-                               swap_eyes=p.swap_eyes, title=f"flexsheet {self.name}", **self._renderer_kwargs())
+                               swap_eyes=p.swap_eyes, title=f"flexsheet {self.name}",
+                               **self._renderer_kwargs())
         except BaseException as exc:  # noqa: BLE001 - handed to setup, which reports it
             ready.set_exception(exc)
             return

@@ -31,8 +31,8 @@ class XvfbError(RuntimeError):
 
 
 def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
-    """SIGTERM the server when the thread that started it dies (a test killed by a fatal X error must not leave
-    its Xvfb behind). Linux ``prctl(PR_SET_PDEATHSIG)``; a no-op elsewhere."""
+    """SIGTERM the server when the thread that started it dies (a test killed by a fatal X error must not
+    leave its Xvfb behind). Linux ``prctl(PR_SET_PDEATHSIG)``; a no-op elsewhere."""
     try:
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG = 1
     except (OSError, AttributeError):
@@ -43,8 +43,8 @@ def _die_with_parent() -> None:  # pragma: no cover - runs in the child between 
 def xvfb(width: int = 1280, height: int = 1024, depth: int = 24, timeout: float = 20.0) -> Iterator[str]:
     """Run a private Xvfb screen of ``width × height`` px at ``depth`` bits for the ``with`` block; yields its
     ``DISPLAY`` (":N"). The server is stopped on exit, and by the kernel if the calling thread dies first
-    (call it from a thread that outlives the block, e.g. the main thread). Raises :class:`XvfbError` if Xvfb is not installed or
-    does not report its display within ``timeout`` s."""
+    (call it from a thread that outlives the block, e.g. the main thread). Raises :class:`XvfbError` if Xvfb
+    is not installed or does not report its display within ``timeout`` s."""
     exe = shutil.which("Xvfb")
     if exe is None:
         raise XvfbError("Xvfb is not installed (Debian package 'xvfb')")

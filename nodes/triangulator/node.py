@@ -42,7 +42,8 @@ TriangulatorParams = params_model(
     module=__name__,
     max_stereo_skew_s=(float, Field(default=0.002, gt=0.0)),
     display_calib=(str | None, Field(default=None, description="display.yaml: the camera entry's pose (and "
-                                                               "stereo model) override the calibration message's")),
+                                                               "stereo model) override the calibration "
+                                                               "message's")),
 )
 
 
@@ -73,12 +74,14 @@ class TriangulatorNode(Node):
             st = self.display.stereo
             if st is not None:
                 if tuple(int(v) for v in st["image_size"]) != tuple(int(v) for v in msg.image_size):
-                    raise InputRejected(f"{self.params.display_calib}: camera entry is for {st['image_size']} images, "
-                                        f"the calibration message for {tuple(msg.image_size)}")
+                    raise InputRejected(f"{self.params.display_calib}: camera entry is for "
+                                        f"{st['image_size']} images, the calibration message for "
+                                        f"{tuple(msg.image_size)}")
                 calib = st
             dt = float(np.linalg.norm(T[:3, 3] - msg.T_display_camera[:3, 3]))
-            dr = float(np.degrees(np.arccos(np.clip((np.trace(T[:3, :3].T @ msg.T_display_camera[:3, :3]) - 1) / 2,
-                                                    -1.0, 1.0))))
+            dr = float(
+                np.degrees(np.arccos(np.clip((np.trace(T[:3, :3].T @ msg.T_display_camera[:3, :3]) - 1) / 2,
+                                             -1.0, 1.0))))
             if dt > 1e-3 or dr > 0.05:
                 self.log.warning("display_calib's camera pose differs from /camera/calibration's by %.1f mm, "
                                  "%.2f deg: using display_calib's", dt * 1e3, dr)
@@ -105,7 +108,8 @@ class TriangulatorNode(Node):
             raise InputRejected(str(exc)) from None
         self.pub.publish(Fingertip(
             header=self.pub.header("display", stamp=msg.exposure_stamp), position=res.position,
-            covariance=res.covariance, valid=res.valid, predicted_position=res.predicted if res.valid else np.zeros(3),
+            covariance=res.covariance, valid=res.valid,
+            predicted_position=res.predicted if res.valid else np.zeros(3),
             prediction_horizon=float(self.cfg.horizon_s), exposure_stamp=msg.exposure_stamp,
             frame_stamp=msg.header.stamp, sent_stamp=self.clock.stamp(),
             reprojection_px=float(res.residual_px)))

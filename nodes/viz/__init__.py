@@ -1,1 +1,2 @@
-"""Node ``viz``: the Foxglove WebSocket bridge (foxglove-sdk server) showing what the display believes, in 3-D."""
+"""Node ``viz``: the Foxglove WebSocket bridge (foxglove-sdk server) showing what the display believes, in
+3-D."""

@@ -1,14 +1,15 @@
 """``flexsheet bench viz``: CPU of the viz bridge in the running simulation, per viewer subscription set.
 
-Starts ``launch/sim.yaml`` (or ``--launch``) with a viz node added on a free port, waits for the stroke to run,
-then measures the viz process's CPU (utime + stime from ``/proc/<pid>/stat``, all its threads: Python, ZeroMQ
-I/O, the SDK's tokio workers) over windows of ``--window`` s: no viewer; a viewer with the shipped layout's
-channels (3-D scene, frames, metrics, images); a viewer on every channel; and no viewer again (inputs stay
-subscribed: the transport has no unsubscribe). The viewer is :class:`flexsheet.viz.wsclient.FoxgloveClient`.
-``--runs N`` launches the sim N times; ``OUT/viz_cpu.json`` holds every run and, per window, the median and
-min/max of the CPU (% of one core); ``OUT/viz_cpu.png`` draws them, beside an earlier run's (``--baseline
-FILE``) when given. ``--param KEY=VALUE`` sets a viz parameter. The machine's load shows in the numbers (the
-load average is recorded per run): compare runs taken under similar load, or interleave them.
+Starts ``launch/sim.yaml`` (or ``--launch``) with a viz node added on a free port, waits for the stroke to
+run, then measures the viz process's CPU (utime + stime from ``/proc/<pid>/stat``, all its threads: Python,
+ZeroMQ I/O, the SDK's tokio workers) over windows of ``--window`` s: no viewer; a viewer with the shipped
+layout's channels (3-D scene, frames, metrics, images); a viewer on every channel; and no viewer again (inputs
+stay subscribed: the transport has no unsubscribe). The viewer is
+:class:`flexsheet.viz.wsclient.FoxgloveClient`. ``--runs N`` launches the sim N times; ``OUT/viz_cpu.json``
+holds every run and, per window, the median and min/max of the CPU (% of one core); ``OUT/viz_cpu.png`` draws
+them, beside an earlier run's (``--baseline FILE``) when given. ``--param KEY=VALUE`` sets a viz parameter.
+The machine's load shows in the numbers (the load average is recorded per run): compare runs taken under
+similar load, or interleave them.
 """
 
 from __future__ import annotations
@@ -42,7 +43,8 @@ from flexsheet.viz.wsclient import FoxgloveClient
 __all__ = ["main", "WINDOWS"]
 
 ROOT = Path(__file__).resolve().parents[2]
-LAYOUT_CHANNELS = [SCENE, TF, METRICS, CAMERA_LEFT, CAMERA_RIGHT, RENDER_IMAGE, CAMERA_LEFT_INFO, CAMERA_RIGHT_INFO]
+LAYOUT_CHANNELS = [SCENE, TF, METRICS, CAMERA_LEFT, CAMERA_RIGHT, RENDER_IMAGE, CAMERA_LEFT_INFO,
+                   CAMERA_RIGHT_INFO]
 #: window name -> channels the viewer subscribes (None: every advertised channel; []: no viewer)
 WINDOWS = {"no viewer": [], "layout viewer": LAYOUT_CHANNELS, "all channels": None, "no viewer, after": []}
 _TICK = os.sysconf("SC_CLK_TCK")
@@ -99,11 +101,13 @@ async def _window(pid: int, port: int, channels, seconds: float) -> dict:
 
 
 def _one_run(lf: dict, params: dict, args, out: Path, label: str) -> dict:
-    """Launch the sim once with the viz node on a free port and measure every window; returns window -> numbers."""
+    """Launch the sim once with the viz node on a free port and measure every window; returns window ->
+    numbers."""
     port = free_port()
     host = next(iter(lf["hosts"]))
     lf = dict(lf, nodes={**{k: v for k, v in lf["nodes"].items() if v.get("type") != "viz"},
-                         "viz": {"type": "viz", "host": host, "nice": 10, "params": {**params, "port": port}}})
+                         "viz": {"type": "viz", "host": host, "nice": 10,
+                                 "params": {**params, "port": port}}})
     with tempfile.TemporaryDirectory() as tmp:
         launch = Path(tmp) / "bench_viz.yaml"
         launch.write_text(yaml.safe_dump(lf, sort_keys=False))
@@ -114,13 +118,14 @@ def _one_run(lf: dict, params: dict, args, out: Path, label: str) -> dict:
                                    stderr=subprocess.STDOUT)
         try:
             pid = _find_viz(launch)
-            print(f"[bench viz] run{label}: viz pid {pid}, port {port}; warming up {args.warmup:.0f} s", flush=True)
+            print(f"[bench viz] run{label}: viz pid {pid}, port {port}; warming up {args.warmup:.0f} "
+                  "s", flush=True)
             time.sleep(args.warmup)
             res = {}
             for name, channels in WINDOWS.items():
                 res[name] = asyncio.run(_window(pid, port, channels, args.window))
-                print(f"[bench viz] {name:<18} {100 * res[name]['cpu_fraction_of_one_core']:5.1f} % of one core, "
-                      f"{res[name]['messages_per_s']:6.1f} msg/s to the viewer", flush=True)
+                print(f"[bench viz] {name:<18} {100 * res[name]['cpu_fraction_of_one_core']:5.1f} % of one "
+                      f"core, {res[name]['messages_per_s']:6.1f} msg/s to the viewer", flush=True)
         finally:
             sim.terminate()
             sim.wait(timeout=60)
@@ -135,7 +140,8 @@ def stats(runs: list[dict]) -> dict:
         cpu = [100 * r[name]["cpu_fraction_of_one_core"] for r in runs if name in r]
         msg = [r[name]["messages_per_s"] for r in runs if name in r]
         if cpu:
-            out[name] = {"cpu_pct_median": statistics.median(cpu), "cpu_pct_min": min(cpu), "cpu_pct_max": max(cpu),
+            out[name] = {"cpu_pct_median": statistics.median(cpu), "cpu_pct_min": min(cpu),
+                         "cpu_pct_max": max(cpu),
                          "viewer_msg_per_s_median": statistics.median(msg), "n": len(cpu)}
     return out
 
@@ -173,8 +179,9 @@ def _figure(path: Path, after: dict, before: dict | None, title: str) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="flexsheet bench viz", description=__doc__.splitlines()[0],
                                  epilog="example:\n  flexsheet bench viz --out out/bench_viz --runs 3\n"
-                                        "  flexsheet bench viz --out out/bench_viz_10hz --param scene_rate=10 --param input_rate=10 "
-                                        "--baseline out/bench_viz/viz_cpu.json",
+                                        "  flexsheet bench viz --out out/bench_viz_10hz --param "
+                                        "scene_rate=10 --param input_rate=10 --baseline "
+                                        "out/bench_viz/viz_cpu.json",
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--launch", default=str(ROOT / "launch" / "sim.yaml"), help="launch file to run")
     ap.add_argument("--window", type=float, default=10.0, help="seconds per measurement window")
@@ -183,8 +190,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="out/bench_viz", help="output folder")
     ap.add_argument("--base-port", type=int, default=0, help="override the launch file's base_port (0: keep)")
     ap.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
-                    help="viz node parameter (YAML value), repeatable: --param scene_rate=10 --param camera_scale=1")
-    ap.add_argument("--baseline", help="viz_cpu.json of an earlier run of this bench, drawn beside as 'before'")
+                    help="viz node parameter (YAML value), repeatable: --param scene_rate=10 --param "
+                         "camera_scale=1")
+    ap.add_argument("--baseline", help="viz_cpu.json of an earlier run of this bench, drawn beside as "
+                                       "'before'")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -199,7 +208,8 @@ def main(argv: list[str] | None = None) -> int:
         params[key] = yaml.safe_load(value)
     runs = [_one_run(lf, params, args, out, f"{i + 1}" if args.runs > 1 else "") for i in range(args.runs)]
     summary = {"stats": stats(runs), "runs": runs, "cpus": os.cpu_count(), "launch": args.launch,
-               "viz_params": params, "command": " ".join(["flexsheet", "bench", "viz", *(argv or sys.argv[1:])])}
+               "viz_params": params,
+               "command": " ".join(["flexsheet", "bench", "viz", *(argv or sys.argv[1:])])}
     before = None
     if args.baseline:
         base = json.loads(Path(args.baseline).read_text())

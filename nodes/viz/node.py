@@ -1,8 +1,8 @@
 """Node ``viz``: the Foxglove WebSocket bridge. Serves the display's state in Foxglove's own schemas.
 
-Thin shell around :mod:`flexsheet.viz.foxglove` (what is drawn, how it is encoded, at what rate) and
-the ``foxglove-sdk`` WebSocket server behind :class:`~flexsheet.viz.ws_relay.SubprotocolRelay` (default port
-8765; a viewer may offer either ``foxglove.websocket.v1``, as Lichtblick and the official ``@foxglove/ws-protocol``
+Thin shell around :mod:`flexsheet.viz.foxglove` (what is drawn, how it is encoded, at what rate) and the
+``foxglove-sdk`` WebSocket server behind :class:`~flexsheet.viz.ws_relay.SubprotocolRelay` (default port 8765;
+a viewer may offer either ``foxglove.websocket.v1``, as Lichtblick and the official ``@foxglove/ws-protocol``
 client do, or ``foxglove.sdk.v1``). Open ``ws://HOST:8765`` in Foxglove or Lichtblick and import
 ``docs/foxglove_layout.json`` (see docs/visualise.md).
 
@@ -26,10 +26,10 @@ Inputs: ``/fingertip``, ``/sheet/target``, ``/arm/left/joint_state``, ``/arm/rig
   at ``render_rate``, the JSON copies of the plain topics as they arrive (≤ ``input_rate``); the scene is
   assembled from cached encoded entities, each rebuilt only when its input changed (foxglove_scene);
 * a slow viewer loses the oldest queued messages (the server keeps at most ``backlog`` per client);
-* it advertises Foxglove's ``time`` capability and broadcasts the graph's time every ``TIME_PERIOD`` (0.25 s of
-  the graph's clock): on a simulated clock a viewer's timeline follows simulated time. The SDK server queues
-  these per viewer in a queue of ``backlog`` that it does not thin, and lets go a viewer whose queue is full (a
-  viewer that reads nothing for ``backlog`` × 0.25 s, 16 s at the defaults), so they are few.
+* it advertises Foxglove's ``time`` capability and broadcasts the graph's time every ``TIME_PERIOD`` (0.25 s
+  of the graph's clock): on a simulated clock a viewer's timeline follows simulated time. The SDK server
+  queues these per viewer in a queue of ``backlog`` that it does not thin, and lets go a viewer whose queue is
+  full (a viewer that reads nothing for ``backlog`` × 0.25 s, 16 s at the defaults), so they are few.
 
 Publishes nothing on the graph (only its heartbeat). Input the scene cannot use (faces out of range, bad
 joints) is rejected and counted.
@@ -78,19 +78,23 @@ def _finite(cls, v: list[float]) -> list[float]:
 
 #: the WebSocket server: device settings, the node's own
 _SERVER = {
-    "host": (str, Field("127.0.0.1", description="address the WebSocket server binds (0.0.0.0: every interface)")),
+    "host": (str, Field("127.0.0.1", description="address the WebSocket server binds (0.0.0.0: every "
+                                                 "interface)")),
     "port": (int, Field(8765, ge=0, le=65535, description="WebSocket port (0: any free port)")),
-    "backlog": (int, Field(64, ge=1, le=100000, description="messages queued per viewer; older ones are dropped")),
+    "backlog": (int, Field(64, ge=1, le=100000, description="messages queued per viewer; older ones are "
+                                                            "dropped")),
 }
 
-#: the believed sheet: the renderer's pushed-sheet model (flexsheet.model.sheet_model.sheet_model_for); these are
-#: the renderer's params (same names, defaults and ranges): give them its values and the drawn dent is the one it
-#: corrects for
+#: the believed sheet: the renderer's pushed-sheet model
+#: (flexsheet.model.sheet_model.sheet_model_for); these are the renderer's params (same names,
+#: defaults and ranges): give them its values and the drawn dent is the one it corrects for
 _SHEET = config_fields(
-    RendererConfig, exclude=[f.name for f in dataclasses.fields(RendererConfig) if f.name not in SHEET_PARAMS],
-    descriptions={"depth_table_step": "as the renderer's depth_table_step, m", "tension_ratio": "as the renderer's tension_ratio",
-                  "sheet_cache": "as the renderer's sheet_cache (its FEM tables are read from there, never built "
-                                 "by the bridge)",
+    RendererConfig,
+    exclude=[f.name for f in dataclasses.fields(RendererConfig) if f.name not in SHEET_PARAMS],
+    descriptions={"depth_table_step": "as the renderer's depth_table_step, m",
+                  "tension_ratio": "as the renderer's tension_ratio",
+                  "sheet_cache": "as the renderer's sheet_cache (its FEM tables are read from there, never "
+                                 "built by the bridge)",
                   "sheet_mesh": "as the renderer's sheet_mesh", "push_threshold": "as the renderer's, m",
                   "sheet_half_width": "as the renderer's, m"})
 
@@ -98,9 +102,10 @@ VizParams = params_model(
     "VizParams",
     """Parameters of the viz bridge (SI units, display frame).
 
-    The server's ``host``, ``port``, ``backlog`` are the node's own; the believed sheet's (``depth_table_step`` …
-    ``sheet_half_width``) are the renderer's (:class:`flexsheet.rendering.config.RendererConfig`); every other
-    param is a field of — defined, defaulted and range-checked in — :class:`flexsheet.viz.config.VizNodeConfig`.
+    The server's ``host``, ``port``, ``backlog`` are the node's own; the believed sheet's
+    (``depth_table_step`` … ``sheet_half_width``) are the renderer's
+    (:class:`flexsheet.rendering.config.RendererConfig`); every other param is a field of — defined, defaulted
+    and range-checked in — :class:`flexsheet.viz.config.VizNodeConfig`.
     """,
     _SERVER,
     config_fields(VizNodeConfig),
@@ -112,7 +117,8 @@ VizParams = params_model(
 
 
 class _Listener(ServerListener):
-    """foxglove-sdk ``ServerListener``: forwards viewer subscriptions to the node's loop (SDK threads call it)."""
+    """foxglove-sdk ``ServerListener``: forwards viewer subscriptions to the node's loop (SDK threads call
+    it)."""
 
     def __init__(self, node: VizNode) -> None:
         self.node = node
@@ -134,7 +140,8 @@ class VizNode(Node):
     async def setup(self) -> None:
         p: VizParams = self.params
         cfg = VizConfig(eye=np.asarray(p.eye), ipd=p.ipd,
-                        projector=Projector.default(p.width, p.height, p.projector_pixel, p.projector_position),
+                        projector=Projector.default(p.width, p.height, p.projector_pixel,
+                                                    p.projector_position),
                         left_base=tuple(p.left_base), right_base=tuple(p.right_base), sheet_grid=p.sheet_grid,
                         camera_scale=p.camera_scale,
                         sheet=SheetConfig(half_width=p.sheet_half_width, push_threshold=p.push_threshold,
@@ -144,12 +151,14 @@ class VizNode(Node):
                                                                 render=p.render_rate, json=p.json_rate,
                                                                 calibration=p.calibration_rate))
         self.context = foxglove.Context()
-        self.channels = {topic: foxglove.Channel(topic, schema=schema, message_encoding=enc, context=self.context)
+        self.channels = {topic: foxglove.Channel(topic, schema=schema, message_encoding=enc,
+                                                 context=self.context)
                          for topic, (schema, enc) in channel_schemas().items()}
         try:    # the SDK's server on a loopback port of its own; viewers reach it through the relay
             self.server = foxglove.start_server(name=f"flexsheet {self.name}", host="127.0.0.1", port=0,
                                                 context=self.context, message_backlog_size=p.backlog,
-                                                server_listener=_Listener(self), capabilities=[Capability.Time])
+                                                server_listener=_Listener(self),
+                                                capabilities=[Capability.Time])
         except Exception as exc:  # the SDK raises its own error type; name the address
             raise RuntimeError(f"viz: cannot start the Foxglove server: {exc}") from exc
         self.relay = SubprotocolRelay(p.host, p.port, self.server.port)
@@ -171,7 +180,8 @@ class VizNode(Node):
         for t in inputs_for(topic):
             if t.name not in self._subscribed:
                 self._subscribed.add(t.name)
-                src = t.renamed(self.params.camera_topic) if t is T.STEREO else t   # same type, same stream key
+                # same type, same stream key
+                src = t.renamed(self.params.camera_topic) if t is T.STEREO else t
                 self.subscribe(src, self._handler(t.name), qos=QoS.LATCHED if t.latched else QoS.LATEST)
 
     def wanted(self, topic: str) -> bool:
@@ -207,7 +217,8 @@ class VizNode(Node):
     def on_poll(self) -> None:
         self._emit(self.streams.poll(self.now(), self.wanted))
         self._trimmer.maybe()          # the freed frame buffers back to the OS every 10 s of wall time
-        # the viewers' timeline follows the graph's clock (simulated time on a simulated clock): capability "time"
+        # the viewers' timeline follows the graph's clock
+        # (simulated time on a simulated clock): capability "time"
         now = self.now()
         if now - self._time_sent >= self.TIME_PERIOD:
             self._time_sent = now

@@ -2,26 +2,26 @@
 truth (:class:`flexsheet.twin.truth.TwinTruth`, param ``twin: {realism, truth_seed}``).
 
 * Finger: plays a list of :class:`flexsheet.twin.finger.FingerScript` segments one after the other (default:
-  the paper's stroking experiment at 10 s and 30 s moving time, then a combined stroke and push) and
-  publishes the true marker position on ``/world/finger`` at ``rate_hz`` (100 Hz; the camera twin renders it
-  with the truth's velocity between samples, extrapolating at most 0.1 s; 100 Hz and a 50 Hz sheet leave the
-  graph's other nodes their share of a loaded machine's cores). The finger follows the stroke path of the
-  ``scene`` (:mod:`flexsheet.model.scenes`; filled by the launcher from the launch file's top-level ``scene:``;
-  none = the paper's cylinder): p − depth·n along the path, with each segment's profile over the path fraction (stroke, push at the path's start, stroke_push). Between two
-  segments the finger lifts off and moves through free space to the next start (:func:`flexsheet.twin.finger.after`).
+  the paper's stroking experiment at 10 s and 30 s moving time, then a combined stroke and push) and publishes
+  the true marker position on ``/world/finger`` at ``rate_hz`` (100 Hz; the camera twin renders it with the
+  truth's velocity between samples, extrapolating at most 0.1 s; 100 Hz and a 50 Hz sheet leave the graph's
+  other nodes their share of a loaded machine's cores). The finger follows the stroke path of the ``scene``
+  (:mod:`flexsheet.model.scenes`; filled by the launcher from the launch file's top-level ``scene:``; none =
+  the paper's cylinder): p − depth·n along the path, with each segment's profile over the path fraction
+  (stroke, push at the path's start, stroke_push). Between two segments the finger lifts off and moves through
+  free space to the next start (:func:`flexsheet.twin.finger.after`).
 * Sheet: the true clamp poses are the *true* arms' forward kinematics of the measured joint states
   (``ArmJointState.position``; the truth's base poses, link lengths and joint zero offsets — never the
   bridge's model in ``ArmJointState.pose``), and the pushed sheet's shape is the nonlinear membrane FEM of
-  :mod:`flexsheet.model.sheet_fem` with the truth's Young's modulus, thickness, pre-strain and grip slip and the
-  gripped sheet's pre-stress (:mod:`flexsheet.twin.world`); published on ``/world/sheet`` (``membrane``: the
-  deflection on a G×G grid) and the finger's contact on ``/world/contact`` (depth, force, incremental stiffness),
-  stamped with the time its pose was true — the mean stamp of the two joint states it comes from — so a world
-  tick that runs late does not show as the display's lag in Table I (the finger's shape of a push is the
-  finger's at publication).
-  The true sheet comes from the shipped table family (:class:`flexsheet.twin.truth_sheet.TruthSheet`: the
-  drawn modulus and thickness scale its force, pre-strain and grip slip shift its strain), so a new truth seed
-  builds no table and simulated time starts at once; a family with tables missing stops the node at setup with
-  the command that ships them.
+  :mod:`flexsheet.model.sheet_fem` with the truth's Young's modulus, thickness, pre-strain and grip slip and
+  the gripped sheet's pre-stress (:mod:`flexsheet.twin.world`); published on ``/world/sheet`` (``membrane``:
+  the deflection on a G×G grid) and the finger's contact on ``/world/contact`` (depth, force, incremental
+  stiffness), stamped with the time its pose was true — the mean stamp of the two joint states it comes from —
+  so a world tick that runs late does not show as the display's lag in Table I (the finger's shape of a push
+  is the finger's at publication). The true sheet comes from the shipped table family
+  (:class:`flexsheet.twin.truth_sheet.TruthSheet`: the drawn modulus and thickness scale its force, pre-strain
+  and grip slip shift its strain), so a new truth seed builds no table and simulated time starts at once; a
+  family with tables missing stops the node at setup with the command that ships them.
 * Head: the viewer's true head (:mod:`flexsheet.twin.head`: a seeded slow sway about V, a scripted lean-in
   toward the sheet and occlusions of the glasses, param ``head``; ``head.still: true`` keeps the eye at V) on
   ``/world/head`` at ``rate_hz``, for the head camera's twin and the report.
@@ -101,13 +101,12 @@ WorldParams = params_model(
     "WorldParams",
     """``script``: segments played in order; ``rate_hz`` of ``/world/finger``; ``sheet_rate_hz`` of
     ``/world/sheet``; ``membrane_grid`` G (G×G deflection samples of the true shape); ``twin``: the hidden
-    truth (:class:`~flexsheet.model.truth_choice.TruthChoice`);
-    ``sheet_size`` m: unstretched sheet side between the clamps (for the stretch); ``start_delay`` s before the
-    script starts (lets the graph connect and the arms reach the first pose), counted from the heartbeat of the
-    last node named in ``start_after`` (node names of the launch file; empty: from the world's own start) or
-    from ``start_timeout`` s of waiting for them; ``loop``: repeat until Ctrl-C;
-    ``scene``: the scene file whose stroke path the finger follows (launch/scenes/*.yaml; none: the paper's
-    cylinder by the segments' own parameters); ``progress_period`` s.
+    truth (:class:`~flexsheet.model.truth_choice.TruthChoice`); ``sheet_size`` m: unstretched sheet side
+    between the clamps (for the stretch); ``start_delay`` s before the script starts (lets the graph connect
+    and the arms reach the first pose), counted from the heartbeat of the last node named in ``start_after``
+    (node names of the launch file; empty: from the world's own start) or from ``start_timeout`` s of waiting
+    for them; ``loop``: repeat until Ctrl-C; ``scene``: the scene file whose stroke path the finger follows
+    (launch/scenes/*.yaml; none: the paper's cylinder by the segments' own parameters); ``progress_period`` s.
     ``script`` and ``scene`` are the node's own; every other param is a field of — defined,
     defaulted and range-checked in — :class:`flexsheet.twin.world_config.WorldConfig`.""",
     {"script": (list[Segment], Field(default_factory=lambda: list(DEFAULT_SCRIPT), min_length=1))},
@@ -119,8 +118,8 @@ WorldParams = params_model(
 
 
 class WorldNode(Node):
-    """Publishes ``/world/finger``, ``/world/sheet``, ``/world/contact`` and ``/world/head``; subscribes the two
-    arms' joint states."""
+    """Publishes ``/world/finger``, ``/world/sheet``, ``/world/contact`` and ``/world/head``; subscribes the
+    two arms' joint states."""
 
     Params = WorldParams
     node_type = "world"
@@ -154,18 +153,21 @@ class WorldNode(Node):
         self._arm_t0()
         self.last_progress = 0.0
         self.paused_at: float | None = None   # script time stands still from here while a tool pauses it
-        self._no_sheet: tuple[str, int] | None = None   # (why, ticks) while no sheet can be made of the clamps
+        self._no_sheet: tuple[str, int] | None = None  # (why, ticks) while no sheet can be made of the clamps
         self.timer(1.0 / p.rate_hz, self.tick_finger)
         self.timer(1.0 / p.sheet_rate_hz, self.tick_sheet)
-        self.service("script/pause", self.srv_pause, "stop the script's time and take the finger away from the "
-                     "display (out of the camera's view) until script/resume, e.g. for a registration",
+        self.service("script/pause", self.srv_pause, "stop the script's time and take the finger away from "
+                     "the display (out of the camera's view) until script/resume, e.g. for a registration",
                      commanding=True)
-        self.service("script/resume", self.srv_resume, "the finger back where it was and the script on from there",
+        self.service("script/resume", self.srv_resume, "the finger back where it was and the script on from "
+                                                       "there",
                      commanding=True)
-        self.log.info("twin: %s truth, seed %d (sheet E %.2f MPa, t %.3f mm, pre-strain %.4f, grip slip %.3f)",
+        self.log.info("twin: %s truth, seed %d (sheet E %.2f MPa, t %.3f mm, pre-strain %.4f, grip slip "
+                      "%.3f)",
                       p.twin.realism, p.twin.truth_seed, self.truth.sheet_young * 1e-6,
                       self.truth.sheet_thickness * 1e3, self.truth.sheet_prestrain, self.truth.grip_slip)
-        self.log.info("finger on %s", self.scene.describe() + f", stroke {self.scene.stroke_length() * 1e3:.1f} mm"
+        self.log.info("finger on %s",
+                      self.scene.describe() + f", stroke {self.scene.stroke_length() * 1e3:.1f} mm"
                       if self.scene is not None else "the cylinder of the script's parameters")
         self.log.info("script: %s; %.1f s in all, starting in %.1f s%s",
                       ", ".join(f"{s.mode} {s.moving_time:g} s" for s in p.script), self.total, p.start_delay,
@@ -206,13 +208,14 @@ class WorldNode(Node):
         if msg.node in self.waiting_for:
             self.waiting_for.discard(msg.node)
             self.log.info("%s is up (%.1f s after the world)%s", msg.node, self.monotonic() - self.t_setup,
-                          "" if self.waiting_for else f"; the script starts in {self.params.start_delay:.1f} s")
+                          "" if self.waiting_for else f"; the script starts in {self.params.start_delay:.1f} "
+                                                      "s")
             self._arm_t0()
 
     def _read_arms(self) -> None:
-        """Keep each arm's *true* clamp pose: the truth's forward kinematics of its newest measured joints (the
-        bridge's own FK in ``ArmJointState.pose`` is not used). Joints the truth's FK refuses are rejected (counted,
-        naming the arm); the last good pose stays."""
+        """Keep each arm's *true* clamp pose: the truth's forward kinematics of its newest measured joints
+        (the bridge's own FK in ``ArmJointState.pose`` is not used). Joints the truth's FK refuses are
+        rejected (counted, naming the arm); the last good pose stays."""
         for side, sub in self._arm_states.items():
             sub.take(lambda msg, side=side: self._true_pose(side, msg))
 
@@ -266,20 +269,25 @@ class WorldNode(Node):
             self.last_progress = now
             done = min(1.0, (sum(s.duration for s in self.scripts[:i]) + ts) / self.total)
             bar = "#" * int(done * 30)
-            self.log.info("[%-30s] %3.0f%%  segment %d/%d %s %g s: %s, mark at %.1f deg (%.0f %% of the path)", bar,
-                          done * 100, i + 1, len(self.scripts), script.mode, script.moving_time, script.phase(ts),
-                          math.degrees(float(script.target_angle(ts))), 100.0 * float(script.target_fraction(ts)))
+            self.log.info("[%-30s] %3.0f%%  segment %d/%d %s %g s: %s, mark at %.1f deg (%.0f %% of the "
+                          "path)", bar,
+                          done * 100, i + 1, len(self.scripts), script.mode, script.moving_time,
+                          script.phase(ts),
+                          math.degrees(float(script.target_angle(ts))),
+                          100.0 * float(script.target_fraction(ts)))
 
     def _publish_head(self, t: float) -> None:
         """The viewer's true head at script time ``t`` s on ``/world/head``."""
         hs = self.head.state(t)
         self.head_pub.publish(HeadTruth(
             header=self.head_pub.header("display"), position=hs.T_display_glasses[:3, 3].copy(),
-            rotation=np.ascontiguousarray(hs.T_display_glasses[:3, :3]), left=hs.left, right=hs.right, eye=hs.eye,
+            rotation=np.ascontiguousarray(hs.T_display_glasses[:3, :3]), left=hs.left, right=hs.right,
+            eye=hs.eye,
             velocity=hs.velocity, visible=hs.visible))
 
     def _publish_away(self) -> None:
-        """The finger while the script is paused: at :data:`AWAY` (display frame), still, hidden from the camera."""
+        """The finger while the script is paused: at :data:`AWAY` (display frame), still, hidden from the
+        camera."""
         self.finger = AWAY.copy()
         self.finger_pub.publish(FingerTruth(header=self.finger_pub.header("display"), position=AWAY.copy(),
                                             velocity=np.zeros(3), phase="paused", visible=False))
@@ -312,8 +320,9 @@ class WorldNode(Node):
             inside = abs(float((np.asarray(self.finger) - sheet.origin) @ sheet.axis_u)) < sheet.half_span
             if depth > 0.0 and inside and not self._warned_flat:
                 self._warned_flat = True
-                self.log.warning("sheet pushed %.1f mm within a fingertip of a clamp (outside the true sheet's "
-                                 "contacts): publishing the depth with a flat membrane grid", depth * 1e3)
+                self.log.warning("sheet pushed %.1f mm within a fingertip of a clamp (outside the true "
+                                 "sheet's contacts): publishing the depth with a flat membrane "
+                                 "grid", depth * 1e3)
             depth = depth if inside else 0.0
             pushed = np.asarray(self.finger, float) if depth > 0.0 else sheet.origin
             grid = np.zeros((g, g))
@@ -322,7 +331,8 @@ class WorldNode(Node):
         # 50 ms, seconds in a stall) would read as the display's lag in Table I
         stamp = 0.5 * (self.pose_stamps["left"] + self.pose_stamps["right"])
         self.sheet_pub.publish(SheetState(
-            header=self.sheet_pub.header("display", stamp=stamp), origin=sheet.origin, normal=sheet.normal, axis_u=sheet.axis_u,
+            header=self.sheet_pub.header("display", stamp=stamp), origin=sheet.origin, normal=sheet.normal,
+            axis_u=sheet.axis_u,
             corners=sheet.corners, pushed_point=pushed, depth=depth, stretch=stretch,
             membrane=np.ascontiguousarray(grid)))
         self.contact_pub.publish(ContactTruth(

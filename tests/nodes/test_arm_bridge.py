@@ -29,7 +29,8 @@ def clamp_pose(side, theta, stretch=0.05):
 
 
 def target(side, theta, stamp=1.0):
-    return ArmTarget(header=Header(stamp=time.time()), arm=side, pose=clamp_pose(side, theta), source_stamp=stamp)
+    return ArmTarget(header=Header(stamp=time.time()), arm=side, pose=clamp_pose(side, theta),
+                     source_stamp=stamp)
 
 
 async def start_twin(side="left", port=0, q0=None):
@@ -218,14 +219,15 @@ def test_bridge_holds_on_lost_or_unreachable_targets_and_follows_estop():
                 # watchdog trip caused by a scheduling stall on a loaded machine)
                 assert max(np.max(np.abs(m.commanded - q_hold)) for m in after) < 1e-5
                 # e-stop from another client: the bridge reports it and does not fight it
-                client = AsyncModbusTcpClient("127.0.0.1", port=twin.port, timeout=1.0, retries=0, reconnect_delay=0)
+                client = AsyncModbusTcpClient("127.0.0.1", port=twin.port, timeout=1.0, retries=0,
+                                              reconnect_delay=0)
                 assert await client.connect()
                 await client.write_register(reg.HR_COMMAND, reg.CMD_STOP, device_id=1)
                 await asyncio.sleep(0.1)
                 st = h.messages(topics.ARM_LEFT_STATE)[-1]
                 assert st.bridge_status == "fault:estop" and st.fault == reg.FAULT_ESTOP
                 rr = await client.write_register(reg.HR_COMMAND, reg.CMD_RESET | reg.CMD_ENABLE, device_id=1)
-                assert not rr.isError()                   # accepted, but a network RESET never clears an e-stop
+                assert not rr.isError()  # accepted, but a network RESET never clears an e-stop
                 await asyncio.sleep(0.1)
                 st = h.messages(topics.ARM_LEFT_STATE)[-1]
                 assert st.bridge_status == "fault:estop" and st.fault == reg.FAULT_ESTOP
@@ -332,13 +334,14 @@ def test_stream_stop_ends_the_loop_when_a_cancellation_is_swallowed():
 
 
 def test_arm_services_hold_move_to_home_and_release_within_the_limits():
-    """The bridge's services (flexsheet service call arm_left hold|move_to|home|release): hold stays where the arm
-    is and ignores targets (counted, not rejections); move_to streams to the joints within the speed limit; a joint outside its limit or an
-    unreachable pose is refused naming it and nothing moves; home reaches the home sheet's clamp pose; release
-    follows targets again."""
+    """The bridge's services (flexsheet service call arm_left hold|move_to|home|release): hold stays where the
+    arm is and ignores targets (counted, not rejections); move_to streams to the joints within the speed
+    limit; a joint outside its limit or an unreachable pose is refused naming it and nothing moves; home
+    reaches the home sheet's clamp pose; release follows targets again."""
     async def scenario():
         twin = await start_twin("left")
-        params = {"arm": "left", "port": twin.port, "backoff_min": 0.02, "backoff_max": 0.1, "target_timeout": 1.0}
+        params = {"arm": "left", "port": twin.port, "backoff_min": 0.02, "backoff_max": 0.1,
+                  "target_timeout": 1.0}
         try:
             async with NodeHarness(ArmBridgeNode, params=params, name="arm_left") as h:
                 svc = h.node._pending_services
@@ -348,7 +351,8 @@ def test_arm_services_hold_move_to_home_and_release_within_the_limits():
                 h.inject(topics.ARM_LEFT_TARGET, target("left", 0.2, stamp=1.0))
                 await asyncio.sleep(0.2)
                 assert np.max(np.abs(twin.core.servo.q - q0)) < 1e-6            # held: the target was ignored
-                assert h.node.ignored_while_held >= 1 and h.node.rejected_total == 0   # by design: not a rejection
+                # by design: not a rejection
+                assert h.node.ignored_while_held >= 1 and h.node.rejected_total == 0
                 goal = q0 + np.array([0.1, -0.05, 0.05, 0.0, 0.0, 0.1])
                 t0 = time.monotonic()
                 call["move_to"]({"joints": goal.tolist()})
@@ -365,7 +369,7 @@ def test_arm_services_hold_move_to_home_and_release_within_the_limits():
                         raise AssertionError(f"{bad} accepted")
                     except ValueError as exc:
                         assert why in str(exc), exc
-                assert np.max(np.abs(h.node.tracker.manual - goal)) < 1e-12          # the refusals moved nothing
+                assert np.max(np.abs(h.node.tracker.manual - goal)) < 1e-12  # the refusals moved nothing
                 q_home = np.array(call["home"]({}))
                 while np.max(np.abs(twin.core.servo.q - q_home)) > 1e-3 and time.monotonic() - t0 < 10.0:
                     await asyncio.sleep(0.02)
@@ -383,11 +387,12 @@ def test_arm_services_hold_move_to_home_and_release_within_the_limits():
 
 
 def _peer_state(side: str, status: str, theta: float = 0.0) -> ArmJointState:
-    """The partner's joint state with ``status``, its clamp where a sheet tangent at ``theta`` puts it (the span
-    guard measures the span to it)."""
+    """The partner's joint state with ``status``, its clamp where a sheet tangent at ``theta`` puts it (the
+    span guard measures the span to it)."""
     z = np.zeros(6)
     return ArmJointState(header=Header(stamp=time.time()), arm=side, position=home_joints(side), velocity=z,
-                         commanded=z, executing=z, pose=clamp_pose(side, theta), status=0, bridge_status=status)
+                         commanded=z, executing=z, pose=clamp_pose(side, theta), status=0,
+                         bridge_status=status)
 
 
 def test_the_arm_holds_while_the_other_cannot_follow_and_follows_again_after_it():
@@ -416,7 +421,7 @@ def test_the_arm_holds_while_the_other_cannot_follow_and_follows_again_after_it(
                     await asyncio.sleep(0.01)
                 assert np.max(np.abs(twin.core.servo.q - q_held)) < 1e-3, np.abs(twin.core.servo.q - q_held)
                 assert h.messages(topics.ARM_LEFT_STATE)[-1].bridge_status == "hold:peer"
-                h.inject(topics.ARM_RIGHT_STATE, _peer_state("right", "hold:no_target", -0.3))   # not a reason
+                h.inject(topics.ARM_RIGHT_STATE, _peer_state("right", "hold:no_target", -0.3))  # not a reason
                 for k in range(150):
                     h.inject(topics.ARM_LEFT_TARGET, target("left", -0.3, stamp=60.0 + k))
                     await asyncio.sleep(0.01)
@@ -429,8 +434,9 @@ def test_the_arm_holds_while_the_other_cannot_follow_and_follows_again_after_it(
 
 
 def test_the_in_process_controller_twin_is_refused_on_the_wall_clock_naming_the_fix():
-    """``source: sim`` is the controller twin reached at simulated instants: on the wall clock the bridge does not
-    start, and says to use ``clock: sim`` or reach a controller twin node over the network (``source: tcp``)."""
+    """``source: sim`` is the controller twin reached at simulated instants: on the wall clock the bridge does
+    not start, and says to use ``clock: sim`` or reach a controller twin node over the network
+    (``source: tcp``)."""
     import pytest
 
     async def scenario():

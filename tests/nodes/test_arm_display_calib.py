@@ -30,7 +30,8 @@ def test_bridge_kinematics_use_the_registered_base(tmp_path):
     assert abs(T[0, 3] - nominal[0, 3] - 0.005) < 1e-9      # the file really moved it by 5 mm
 
     async def scenario():
-        params = {"arm": "left", "host": "127.0.0.1", "port": 1, "display_calib": str(tmp_path / "display.yaml")}
+        params = {"arm": "left", "host": "127.0.0.1", "port": 1,
+                  "display_calib": str(tmp_path / "display.yaml")}
         async with NodeHarness(ArmBridgeNode, params, name="arm_left") as h:
             return h.node.kin.T_display_base.copy(), h.node.fk_kin.T_display_base.copy()
 
@@ -45,7 +46,8 @@ def test_a_display_yaml_without_this_arm_is_a_configuration_error(tmp_path):
     write_display_calib(str(tmp_path / "display.yaml"), calib)
 
     async def scenario():
-        params = {"arm": "right", "host": "127.0.0.1", "port": 1, "display_calib": str(tmp_path / "display.yaml")}
+        params = {"arm": "right", "host": "127.0.0.1", "port": 1,
+                  "display_calib": str(tmp_path / "display.yaml")}
         async with NodeHarness(ArmBridgeNode, params, name="arm_right"):
             pass
 

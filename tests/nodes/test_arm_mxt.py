@@ -234,7 +234,8 @@ def test_twin_refuses_oversize_steps_limits_and_non_joint_commands():
     pose = mxt.Packet(mxt.CMD_MOVE, mxt.TYP_POSE, (mxt.TYP_JOINT, 0, 0, 0), ccount=9)
     core.receive(pose, 0.003)
     assert core.refused == 3 and "not JOINT" in core.last_refusal
-    rep = mxt.Packet.decode(core.reply(mxt.move_packet(bad[0], 2, (mxt.TYP_FB_JOINT, mxt.TYP_POSE, 0, 0))).encode())
+    rep = mxt.Packet.decode(
+        core.reply(mxt.move_packet(bad[0], 2, (mxt.TYP_FB_JOINT, mxt.TYP_POSE, 0, 0))).encode())
     assert rep.recv_types == (mxt.TYP_FB_JOINT, mxt.TYP_NULL, 0, 0) and rep.ccount == 2   # unmodelled → NULL
     assert np.allclose(rep.joints(mxt.TYP_FB_JOINT), Q_HOME, atol=1e-6)
 

@@ -1,6 +1,7 @@
-"""Nothing lost: the recorder stores or counts every malformed input and keeps recording; every read checks the
-chunk CRCs and skips only a damaged chunk; a bag cut by kill -9 is recovered for the stock ``mcap`` reader;
-``bag info`` reads any MCAP; ``bag play`` refuses a bad file in one line; a respawned recorder writes its gap."""
+"""Nothing lost: the recorder stores or counts every malformed input and keeps recording; every read checks
+the chunk CRCs and skips only a damaged chunk; a bag cut by kill -9 is recovered for the stock ``mcap``
+reader; ``bag info`` reads any MCAP; ``bag play`` refuses a bad file in one line; a respawned recorder writes
+its gap."""
 
 from __future__ import annotations
 
@@ -33,14 +34,16 @@ tip = fingertip
 
 
 def hostile_inputs() -> list[tuple[list, str]]:
-    """(frames, where it must end up): ``stored`` on the lossless channel, ``raw`` (malformed, stored as it came)."""
+    """(frames, where it must end up): ``stored`` on the lossless channel, ``raw`` (malformed, stored as it
+    came)."""
     good = encode(T.FINGERTIP.name, tip(0))
     return [([b"/fingertip"], "raw"),                                   # a 1-frame multipart message
             ([b"/fingertip", b"\xc1\xc1 not msgpack"], "raw"),          # undecodable meta
             ([b"/fingertip", msgpack.packb([1, 2, 3])], "raw"),         # msgpack, not an envelope
             ([], "raw"),                                                # no frame at all
-            (with_seq(good, "x"), "stored"), (with_seq(good, 1.5), "stored"), (with_seq(good, None), "stored"),
-            (with_seq(good, 2**64 - 1), "stored")]                      # a huge seq: a reset, not 1.8e19 drops
+            (with_seq(good, "x"), "stored"), (with_seq(good, 1.5), "stored"),
+            (with_seq(good, None), "stored"),
+            (with_seq(good, 2**64 - 1), "stored")]  # a huge seq: a reset, not 1.8e19 drops
 
 
 def test_malformed_frames_are_stored_or_counted_and_the_recording_goes_on(tmp_path):
@@ -56,7 +59,7 @@ def test_malformed_frames_are_stored_or_counted_and_the_recording_goes_on(tmp_pa
             frames, _ = hostile[(i // 20) % len(hostile)]
             w.write(frames, T0 + i * 25_000_000 + 1)
             fed += 1
-    w.write([b"/fingertip", 5], T0)                                      # not bytes: counted, cannot be stored
+    w.write([b"/fingertip", 5], T0)  # not bytes: counted, cannot be stored
     w.close()
     info = bag_info(path)
     n_hostile = sum(1 for i in range(len(good_seqs)) if i % 20 == 10)
@@ -69,7 +72,7 @@ def test_malformed_frames_are_stored_or_counted_and_the_recording_goes_on(tmp_pa
     assert sum(info.counts.values()) + sum(info.malformed.values()) == fed
     # drops are the real wire gap only; the huge and non-int seqs counted nothing
     assert info.dropped == {T.FINGERTIP.name: 5, "<not bytes>": 1}
-    assert w.resets[T.FINGERTIP.name] == 2                               # into the huge seq and back out of it
+    assert w.resets[T.FINGERTIP.name] == 2  # into the huge seq and back out of it
     # the recording went on to the end: the last good message is there and decodes
     msgs = list(read_bag(path))
     assert decode(msgs[-1].frames, T.FINGERTIP).header.seq == 199
@@ -105,7 +108,8 @@ def test_recorder_node_records_through_hostile_input_and_says_so_in_its_heartbea
         tasks = [asyncio.get_running_loop().create_task(n.run(install_signals=False)) for n in (rec, pub)]
         t0 = time.monotonic()
         while time.monotonic() - t0 < 15 and not (
-                hasattr(rec, "writer") and sum(rec.writer.counts.values()) + sum(rec.writer.malformed.values()) >= 110):
+                hasattr(rec, "writer")
+                and sum(rec.writer.counts.values()) + sum(rec.writer.malformed.values()) >= 110):
             await asyncio.sleep(0.02)
         await asyncio.sleep(0.1)
         hb = rec.heartbeat()
@@ -130,7 +134,8 @@ def test_recorder_node_records_through_hostile_input_and_says_so_in_its_heartbea
 def _stereo(i: int) -> StereoFrame:
     img = np.full((48, 64), i % 255, np.uint8)
     img[::7, ::5] = (i * 7) % 251   # not all one value: chunks hold a few messages each
-    return StereoFrame(header=Header(stamp=100.0 + i / 48, frame_id="camera_left", seq=i), left=img, right=img,
+    return StereoFrame(header=Header(stamp=100.0 + i / 48, frame_id="camera_left", seq=i), left=img,
+                       right=img,
                        exposure_stamp=100.0 + i / 48, exposure_time=0.004)
 
 
@@ -153,7 +158,8 @@ def _chunks(path) -> list:
 
 
 def _in_chunk(ci, n: int = 400) -> list[int]:
-    """The messages with a record in chunk ``ci`` (a message's image parts and its JSON share its log time)."""
+    """The messages with a record in chunk ``ci`` (a message's image parts and its JSON share its log
+    time)."""
     return [i for i in range(n) if ci.message_start_time <= _log_time(i) <= ci.message_end_time]
 
 
@@ -164,7 +170,8 @@ def _whole(chunks: list, kept) -> list[int]:
 
 
 def _flexsheet(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "flexsheet", *args], capture_output=True, text=True, timeout=timeout,
+    return subprocess.run([sys.executable, "-m", "flexsheet", *args], capture_output=True, text=True,
+                          timeout=timeout,
                           cwd=ROOT)
 
 
@@ -195,12 +202,15 @@ def test_flipped_bytes_in_one_chunk_lose_that_chunk_only_and_bag_info_says_so(tm
     assert f"{len(lost)} messages lost" in line and "1 unreadable part" in line
     assert f"{T.STEREO.name} {len(lost)}" in out.stdout
     assert _flexsheet("bag", "info", str(path)).returncode == 0
-    out = _flexsheet("bag", "info", str(bad), "--json")               # --json: the same facts, the same status
+    out = _flexsheet("bag", "info", str(bad), "--json")  # --json: the same facts, the same status
     assert out.stdout.startswith("{"), (out.stdout[-500:], out.stderr[-1500:])
     j = json.loads(out.stdout)
     assert out.returncode == 1 and j["topics"][T.STEREO.name]["count"] == 400 - len(lost)
-    assert len(j["damaged"]) == 1 and j["damaged"][0]["offset"] == ci.chunk_start_offset and not j["truncated"]
-    assert json.loads(_flexsheet("bag", "info", str(path), "--json").stdout)["topics"][T.STEREO.name]["count"] == 400
+    assert len(j["damaged"]) == 1 and j["damaged"][0]["offset"] == ci.chunk_start_offset and not j[
+        "truncated"]
+    assert (
+        json.loads(_flexsheet("bag", "info", str(path), "--json").stdout)["topics"][T.STEREO.name]["count"]
+            == 400)
 
 
 def test_a_damaged_chunk_length_in_a_cut_bag_skips_to_the_next_chunk(tmp_path):
@@ -215,7 +225,8 @@ def test_a_damaged_chunk_length_in_a_cut_bag_skips_to_the_next_chunk(tmp_path):
     bad.write_bytes(bytes(data))
     s = BagSummary()
     seqs = [decode(m.frames, T.STEREO).header.seq for m in read_bag(bad, summary=s)]
-    assert seqs == _whole(chunks, lambda c: c.chunk_start_offset < chunks[-2].chunk_start_offset and c is not ci)
+    assert (seqs
+            == _whole(chunks, lambda c: c.chunk_start_offset < chunks[-2].chunk_start_offset and c is not ci))
     assert len(s.damaged) == 1 and s.truncated
 
 
@@ -282,14 +293,17 @@ def test_bag_info_reads_an_export_and_other_tools_bags(tmp_path):
     assert dict(info.counts) == dict(counts) == {"/fingertip": 30, "/camera/stereo/left": 30,
                                                  "/camera/stereo/right": 30}
     assert info.start == T0 / 1e9 and info.end == (T0 + 29 * 25_000_000 + 1000) / 1e9
-    assert info.encodings["/fingertip"] == "json" and info.schemas["/camera/stereo/left"] == "foxglove.CompressedImage"
+    assert (info.encodings["/fingertip"] == "json"
+            and info.schemas["/camera/stereo/left"] == "foxglove.CompressedImage")
     out = _flexsheet("bag", "info", str(dst))
     assert out.returncode == 0 and "messages:  90" in out.stdout and "1970" not in out.stdout
     out = _flexsheet("bag", "export", str(src), str(tmp_path / "cli.mcap"), "--no-foxglove", "--json")
     j = json.loads(out.stdout)                          # one document on stdout; progress stays on stderr
-    assert out.returncode == 0 and j["counts"] == dict(sorted(counts.items())) and j["damaged"] == [], out.stderr
+    assert (out.returncode == 0 and j["counts"] == dict(sorted(counts.items()))
+            and j["damaged"] == []), out.stderr
 
-    other = tmp_path / "other.mcap"   # another tool's bag: ROS 2 cdr and protobuf channels, no flexsheet metadata
+    # another tool's bag: ROS 2 cdr and protobuf channels, no flexsheet metadata
+    other = tmp_path / "other.mcap"
     with open(other, "wb") as fh:
         ow = Writer(fh)
         ow.start(profile="ros2", library="another tool")
@@ -332,7 +346,8 @@ def test_a_respawned_recorder_writes_the_time_it_was_down_per_topic(tmp_path):
     assert set(gaps) == {"", T.FINGERTIP.name, T.STEREO.name}
     g = gaps[T.FINGERTIP.name]
     assert g["previous"] == "sim.mcap" and g["last_before"] == last[T.FINGERTIP.name] / 1e9
-    assert g["first_after"] == now / 1e9 and g["lost_s"] == pytest.approx((now - last[T.FINGERTIP.name]) / 1e9)
+    assert (g["first_after"] == now / 1e9
+            and g["lost_s"] == pytest.approx((now - last[T.FINGERTIP.name]) / 1e9))
     assert gaps[T.STEREO.name]["first_after"] is None                 # not recorded again since
     assert gaps[""]["last_before"] == max(last.values()) / 1e9
     assert info.counts == {T.FINGERTIP.name: 50} and GAP_TOPIC not in info.counts

@@ -1,10 +1,10 @@
 """GenICam stereo camera and the honest skew of the UVC path.
 
-Pure parts without hardware: frame-id gaps, device→host clock mapping, pairing by device stamp, sync
-planning, device lookup, the UVC skew bound. The real GVCP/GVSP path: two Aravis fake GigE Vision cameras
+Pure parts without hardware: frame-id gaps, device→host clock mapping, pairing by device stamp, sync planning,
+device lookup, the UVC skew bound. The real GVCP/GVSP path: two Aravis fake GigE Vision cameras
 (``arv-fake-gv-camera-0.8``) on 127.0.0.1 / 127.0.0.2 in a private network namespace
-(:func:`nodes.camera.fakecam.isolated`), streamed through the camera node into the triangulator. This
-file doubles as the script run inside the namespace (``python3 tests/nodes/test_camera_genicam.py child OUT``).
+(:func:`nodes.camera.fakecam.isolated`), streamed through the camera node into the triangulator. This file
+doubles as the script run inside the namespace (``python3 tests/nodes/test_camera_genicam.py child OUT``).
 """
 
 from __future__ import annotations
@@ -336,7 +336,7 @@ async def _child(out_path: str) -> None:
             n0 = len(cam.messages(topics.STEREO))
             cam.transport.listeners.append(tri.transport.deliver)   # camera -> triangulator (real codec)
             await asyncio.sleep(4.0)
-            await asyncio.to_thread(cam.node.source.genicam.close)         # stop acquisition, keep the figures
+            await asyncio.to_thread(cam.node.source.genicam.close)  # stop acquisition, keep the figures
             await tri.settle(0.5)
             cam.transport.listeners.clear()
             frames = cam.messages(topics.STEREO)[n0:]

@@ -98,8 +98,9 @@ def test_fingertip_error_from_images_within_target(registered):
 
 
 def test_moving_fingertip_error_at_stroke_speed(registered):
-    """2 s of the paper's 10 s stroke (0→60° of the cylinder, ~6 mm/s, motion blur over the 4 ms exposure) with
-    1 % dropped frames: RMS ≤ 0.5 mm on every seed, and the tracker keeps ≥ 95 % of the frames it gets."""
+    """2 s of the paper's 10 s stroke (0→60° of the cylinder, ~6 mm/s, motion blur over the 4 ms exposure)
+    with 1 % dropped frames: RMS ≤ 0.5 mm on every seed, and the tracker keeps ≥ 95 % of the frames it
+    gets."""
     for s, (truth, cam) in registered.items():
         m = vt.moving_error(truth, cam.stereo, cam.T_display_camera, SimConfig(), 10.0, 0.01, window_s=2.0,
                             sim_seed=s)
@@ -177,9 +178,10 @@ def test_camera_node_publishes_the_calibrated_registration_not_the_truth(tmp_pat
             assert not np.allclose(cal.T_display_camera, nom.T_display_camera)
             shipped = camera_model("ximea")
             assert np.allclose(cal.K1, shipped["K1"]) and not np.allclose(cal.K1, truth.camera_calib["K1"])
-            assert np.allclose(h.node.source.renderer.T_dc, truth.T_display_camera)       # images: the truth's
+            assert np.allclose(h.node.source.renderer.T_dc, truth.T_display_camera)  # images: the truth's
             assert np.allclose(h.node.source.renderer.model.K1, truth.camera_calib["K1"])
-            assert "display.yaml" in h.node.status_line() and "realistic twin, truth seed 2" in h.node.status_line()
+            assert ("display.yaml" in h.node.status_line()
+                    and "realistic twin, truth seed 2" in h.node.status_line())
     asyncio.run(scenario())
 
 
@@ -197,7 +199,8 @@ def test_camera_node_refuses_a_missing_registration(params, match):
 
 
 def test_camera_node_drops_frames_at_the_configured_rate(tmp_path):
-    """drop_rate 0.3 at 100 Hz: about 30 % of the ticks publish nothing (counted, and said in /diagnostics)."""
+    """drop_rate 0.3 at 100 Hz: about 30 % of the ticks publish nothing (counted, and said in
+    /diagnostics)."""
     _write_display(tmp_path / "display.yaml", nominal_display_calib().camera.T_display_camera)
 
     async def scenario():
@@ -214,8 +217,10 @@ def test_camera_node_drops_frames_at_the_configured_rate(tmp_path):
             assert n >= 60
             frac = dropped / n
             assert abs(frac - 0.3) < 4 * math.sqrt(0.3 * 0.7 / n), (frac, n)
-            # every frame counted as sent arrives (the last may still be in flight when counted): seq 0..frames-1
+            # every frame counted as sent arrives (the last may
+            # still be in flight when counted): seq 0..frames-1
             got = await h.wait_for(topics.STEREO, n=frames, timeout=5.0)
             assert [m.header.seq for m in got[:frames]] == list(range(frames))
-            assert f"dropped {node.source.dropped} of {node.frames + node.source.dropped}" in node.status_line()
+            assert (
+                f"dropped {node.source.dropped} of {node.frames + node.source.dropped}" in node.status_line())
     asyncio.run(scenario())

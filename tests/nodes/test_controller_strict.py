@@ -80,7 +80,8 @@ def test_mxt_60_moves_in_one_cycle_execute_one_step():
         qs.append(q)
         core.receive(mxt.move_packet(q, k), T_MXT + 0.001 + 1e-5 * k, OWNER)
     core.advance(2 * T_MXT + 1e-6)
-    print(f"[strict] mxt valid burst: superseded {core.superseded}, extra {core.extra}, executed {core.executed}")
+    print(f"[strict] mxt valid burst: superseded {core.superseded}, extra {core.extra}, executed "
+          f"{core.executed}")
     assert core.extra == 59 and core.superseded == 59 and core.executed == 1 and core.refused == 0
     assert np.allclose(core.active, qs[-1].astype(np.float32), atol=1e-6)
     assert np.all(np.abs(core.active - Q_HOME) <= CAP_MXT + 1e-6)
@@ -212,7 +213,7 @@ def test_modbus_20_target_writes_in_one_period_execute_one_step():
     core = _mb_enabled()
     q = Q_HOME.copy()
     refused = 0
-    for k in range(20):                                  # each 0.9 cap beyond the last write: the finding's ramp
+    for k in range(20):  # each 0.9 cap beyond the last write: the finding's ramp
         q = q + 0.9 * CAP_MB
         try:
             core.write_holding(reg.HR_WATCHDOG, [k + 1, *reg.encode_joints(q)], 1e-4 * (k + 1))
@@ -235,8 +236,8 @@ def test_modbus_20_target_writes_in_one_period_execute_one_step():
 
 def test_modbus_write_flood_over_tcp_never_executes_more_than_one_step_per_period():
     async def scenario():
-        # a long watchdog: a scheduling stall of the test must not trip it mid-flood (a trip holds the arm where
-        # it measures, which is not a commanded step)
+        # a long watchdog: a scheduling stall of the test must not trip it mid-flood
+        # (a trip holds the arm where it measures, which is not a commanded step)
         core = ControllerCore(home_joints("left"), watchdog_periods=100, now=time.monotonic())
         twin = ControllerTwin(core, "127.0.0.1", 0)
         await twin.start()
@@ -249,7 +250,8 @@ def test_modbus_write_flood_over_tcp_never_executes_more_than_one_step_per_perio
             n0, errors = len(twin.core.command_log), 0
             for k in range(20):                          # as fast as the socket goes
                 q = q + 0.9 * CAP_MB
-                rr = await client.write_registers(reg.HR_WATCHDOG, [k + 1, *reg.encode_joints(q)], device_id=1)
+                rr = await client.write_registers(reg.HR_WATCHDOG, [k + 1, *reg.encode_joints(q)],
+                                                  device_id=1)
                 errors += rr.isError()
             await asyncio.sleep(0.05)
             return twin.core, np.array(twin.core.command_log[max(0, n0 - 1):]), errors
@@ -259,12 +261,12 @@ def test_modbus_write_flood_over_tcp_never_executes_more_than_one_step_per_perio
 
     core, log, errors = asyncio.run(scenario())
     steps = np.abs(np.diff(log, axis=0)) / CAP_MB
-    print(f"\n[strict] modbus tcp flood: largest executed step {steps.max():.3f} x cap over {len(log)} periods; "
-          f"refused {errors} of 20")
+    print(f"\n[strict] modbus tcp flood: largest executed step {steps.max():.3f} x cap over {len(log)} "
+          f"periods; refused {errors} of 20")
     assert np.all(steps <= 1.0 + 1e-6)
 
 
-# ------------------------------------------------------------------------------------ Modbus: e-stop, watchdog
+# ----------------------------------------------------------------------------------- Modbus: e-stop, watchdog
 def test_modbus_reset_does_not_clear_an_estop_the_local_reset_does(tmp_path):
     reset_file = tmp_path / "reset"
 
@@ -320,7 +322,8 @@ def test_a_watchdog_fault_needs_an_explicit_reset():
 
 # -------------------------------------------------------------------------------------- the bridge's counting
 def _bad_targets(n: int) -> list[ArmTarget]:
-    """``n`` bad targets for the left arm: the wrong arm, beyond reach, beyond a joint limit, not a rotation."""
+    """``n`` bad targets for the left arm: the wrong arm, beyond reach, beyond a joint limit, not a
+    rotation."""
     out = []
     for k in range(n):
         t = target("left", 0.0)

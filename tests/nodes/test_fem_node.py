@@ -20,7 +20,8 @@ def _tip(pos, valid=True, stamp=1.0):
 
 def test_node_deforms_and_rejects_bad_input():
     async def scenario():
-        async with __import__("flexsheet.runtime.testing", fromlist=["NodeHarness"]).NodeHarness(FemNode, params=PARAMS) as h:
+        async with __import__("flexsheet.runtime.testing",
+                              fromlist=["NodeHarness"]).NodeHarness(FemNode, params=PARAMS) as h:
             h.inject(topics.FINGERTIP, _tip([-0.005, 0.0, 0.0], stamp=12.5))
             out = await h.wait_for(topics.DEFORMATION, n=1, timeout=20.0)
             d = out[-1]
@@ -45,7 +46,8 @@ def test_node_deforms_and_rejects_bad_input():
             # NaN position (built without validation, as a faulty sender would): rejected, not published
             nan = Fingertip.model_construct(header=Header(stamp=2.0), position=np.array([np.nan, 0.0, 0.0]),
                                             covariance=np.eye(3), valid=True,
-                                            predicted_position=np.array([np.nan, 0.0, 0.0]), prediction_horizon=0.0,
+                                            predicted_position=np.array([np.nan, 0.0, 0.0]),
+                                            prediction_horizon=0.0,
                                             exposure_stamp=2.0, reprojection_px=0.0)
             try:
                 h.inject(topics.FINGERTIP, nan)
@@ -69,8 +71,8 @@ def test_node_deforms_and_rejects_bad_input():
 
 def test_node_serves_cached_nonlinear_snapshots_and_says_so(tmp_path):
     """A snapshot table in the cache (under the node's key) is attached at start-up: pushes inside it are
-    answered by the snapshots (method "snapshots"), the diagnostics message says so; a push outside the table's
-    azimuth range falls back to the linear model."""
+    answered by the snapshots (method "snapshots"), the diagnostics message says so; a push outside the
+    table's azimuth range falls back to the linear model."""
     from test_snapshots import _analytic_table
 
     from flexsheet.fem.cache import ArrayCache
@@ -79,7 +81,8 @@ def test_node_serves_cached_nonlinear_snapshots_and_says_so(tmp_path):
     from flexsheet.model.scene_parts import GENT_JM_RUBBER
 
     tab = _analytic_table([0.0, 10.0], [0.0, 0.01, 0.02])
-    # the bare node's law is the paper scene's (Gent); a table under that key in cache_dir wins over the shipped one
+    # the bare node's law is the paper scene's (Gent); a table
+    # under that key in cache_dir wins over the shipped one
     from flexsheet.model.scenes import DEFAULT_SCENE_FILE, load_scene
 
     law = load_scene(DEFAULT_SCENE_FILE).finger.contact         # the table is looked up under the scene's law
@@ -107,8 +110,8 @@ def test_node_serves_cached_nonlinear_snapshots_and_says_so(tmp_path):
 
 
 def test_node_without_cached_snapshots_serves_linear_and_says_so(tmp_path):
-    """The cylinder made neo-Hookean again (cylinder.yaml's comment): no table is shipped or cached for that law,
-    so the node serves the linear model and says how to build the table."""
+    """The cylinder made neo-Hookean again (cylinder.yaml's comment): no table is shipped or cached for that
+    law, so the node serves the linear model and says how to build the table."""
     from flexsheet.model.scenes import SCENES_DIR
 
     text = (SCENES_DIR / "cylinder.yaml").read_text()
@@ -121,7 +124,8 @@ def test_node_without_cached_snapshots_serves_linear_and_says_so(tmp_path):
         from flexsheet.runtime.testing import NodeHarness
 
         async with NodeHarness(FemNode, params=dict(PARAMS, model="snapshots", scene=str(scene))) as h:
-            assert "LINEAR" in h.node.state_message and "experiment fem --node-table --nu 0.45 --Jm inf" in h.node.state_message
+            assert ("LINEAR" in h.node.state_message
+                    and "experiment fem --node-table --nu 0.45 --Jm inf" in h.node.state_message)
             h.inject(topics.FINGERTIP, _tip([-0.005, 0.0, 0.0]))
             d = (await h.wait_for(topics.DEFORMATION, n=1, timeout=20.0))[-1]
             assert d.method == "condensed" and d.valid
@@ -131,7 +135,8 @@ def test_node_without_cached_snapshots_serves_linear_and_says_so(tmp_path):
 
 def test_node_solves_the_scene_it_is_given_and_names_it():
     """``scene`` = the sphere: the node meshes and solves the sphere (not the cylinder), every message carries
-    the sphere's key; without a scene the key is the paper's cylinder's; a bad scene file is a params error."""
+    the sphere's key; without a scene the key is the paper's cylinder's; a bad scene file is a params
+    error."""
     import pytest
 
     from flexsheet.model.scenes import SCENES_DIR, load_scene, paper_scene
@@ -180,9 +185,10 @@ def test_node_solves_the_scene_it_is_given_and_names_it():
 
 
 def test_node_on_the_default_scene_serves_the_shipped_nonlinear_snapshots():
-    """launch/scenes/cylinder.yaml on a machine that never solved anything (no disk cache): the node attaches the
-    Gent snapshot table shipped in flexsheet/fem/data and answers a push on the stroke (30 deg, 20 mm) with it: the
-    table's force there, and the rendered surface moved about the push depth under the fingertip, nowhere more."""
+    """launch/scenes/cylinder.yaml on a machine that never solved anything (no disk cache): the node attaches
+    the Gent snapshot table shipped in flexsheet/fem/data and answers a push on the stroke (30 deg, 20 mm)
+    with it: the table's force there, and the rendered surface moved about the push depth under the fingertip,
+    nowhere more."""
     from flexsheet.fem.snapshots import DEFAULT_GRID
     from flexsheet.model.scenes import SCENES_DIR
 
@@ -202,9 +208,11 @@ def test_node_on_the_default_scene_serves_the_shipped_nonlinear_snapshots():
             assert d.method == "snapshots" and d.valid and abs(d.depth - 0.020) < 1e-6
             ia = list(DEFAULT_GRID.angles_deg).index(30.0)
             jd = int(np.argmin(np.abs(DEFAULT_GRID.depths() - 0.020)))
-            hertz = 4.0 / 3.0 * 1e4 / (1 - 0.45 ** 2) * np.sqrt(np.sqrt(0.008 / (1 + 0.008 / R) * 0.008)) * 0.020 ** 1.5
+            hertz = (4.0 / 3.0 * 1e4 / (1 - 0.45 ** 2) * np.sqrt(np.sqrt(0.008 / (1 + 0.008 / R) * 0.008))
+                     * 0.020 ** 1.5)
             assert abs(d.contact_force - snap.force[ia, jd]) < 1e-6      # the table's force, E as tabulated
-            assert 0.5 * hertz < d.contact_force < 1.5 * hertz, (d.contact_force, hertz)   # Hertz's order (Johnson §4.2)
+            # Hertz's order (Johnson §4.2)
+            assert 0.5 * hertz < d.contact_force < 1.5 * hertz, (d.contact_force, hertz)
             # the material under the fingertip went in with it; nothing else moved farther
             u = np.linalg.norm(np.asarray(d.vertices, float) - h.node.model._rest.astype(float), axis=1)
             assert 0.8 * 0.020 < u.max() < 1.3 * 0.020, u.max()
@@ -214,9 +222,10 @@ def test_node_on_the_default_scene_serves_the_shipped_nonlinear_snapshots():
 
 def test_node_on_the_sphere_serves_its_nonlinear_table_when_cached(tmp_path):
     """A sphere table under the key the node looks up (here the closed-form dent of
-    tests/unit/fem/test_sphere_snapshots.py, 0-60° every 10°, 0-10 mm): the node on sphere.yaml attaches it, says so, and
-    answers a push at 35° up the crown with it — the force is the table's bilinear value at the measured depth,
-    the vertex under the finger moved by about the depth; a push beyond the table's 60° is the linear model's."""
+    tests/unit/fem/test_sphere_snapshots.py, 0-60° every 10°, 0-10 mm): the node on sphere.yaml attaches it,
+    says so, and answers a push at 35° up the crown with it — the force is the table's bilinear value at the
+    measured depth, the vertex under the finger moved by about the depth; a push beyond the table's 60° is the
+    linear model's."""
     from test_sphere_snapshots import _table
 
     from flexsheet.fem.cache import ArrayCache
@@ -233,7 +242,8 @@ def test_node_on_the_sphere_serves_its_nonlinear_table_when_cached(tmp_path):
         from flexsheet.runtime.testing import NodeHarness
 
         async with NodeHarness(FemNode, params=params) as h:
-            assert "nonlinear sphere snapshots loaded from cache" in h.node.state_message, h.node.state_message
+            assert (
+                "nonlinear sphere snapshots loaded from cache" in h.node.state_message), h.node.state_message
             n = fr.direction(np.radians(35.0))
             h.inject(topics.FINGERTIP, _tip(fr.center + (fr.radius - 0.006) * n, stamp=5.0))
             d = (await h.wait_for(topics.DEFORMATION, n=1, timeout=30.0))[-1]
@@ -256,10 +266,10 @@ def test_node_on_the_sphere_serves_its_nonlinear_table_when_cached(tmp_path):
 
 
 def test_node_on_a_scene_without_symmetry_serves_its_path_table_when_cached(tmp_path):
-    """A path table (flexsheet/fem/path_snapshots.py, here a closed-form one) under the key the node looks up for a
-    scene no sphere table applies to (the sphere with a sticking finger and a 4° stroke): the node attaches it,
-    says so, and its answer on the stroke is the model's table answer (linear solve + correction, force scaled by
-    the table's ratio), not the linear one."""
+    """A path table (flexsheet/fem/path_snapshots.py, here a closed-form one) under the key the node looks up
+    for a scene no sphere table applies to (the sphere with a sticking finger and a 4° stroke): the node
+    attaches it, says so, and its answer on the stroke is the model's table answer (linear solve + correction,
+    force scaled by the table's ratio), not the linear one."""
     import yaml
     from test_path_snapshots import _table
     from unit.conftest import _scene
@@ -300,15 +310,16 @@ def test_node_on_a_scene_without_symmetry_serves_its_path_table_when_cached(tmp_
 
 
 def test_removed_params_are_refused_naming_the_scene_field():
-    """E, nu and finger_radius are the scene file's: a launch file that still sets one gets an error naming the
-    param, its value and the scene file's field that holds it now."""
+    """E, nu and finger_radius are the scene file's: a launch file that still sets one gets an error naming
+    the param, its value and the scene file's field that holds it now."""
     import re
 
     from nodes.fem.params import FemParams
 
     for name, value, field in (("E", 5000.0, "material: E"), ("nu", 0.4, "material: nu"),
                                ("finger_radius", 0.01, "finger: radius")):
-        with pytest.raises(ValueError, match=re.escape(f"fem param {name!r} (= {value!r}) was removed")) as exc:
+        with pytest.raises(ValueError, match=re.escape(f"fem param {name!r} (= {value!r}) was "
+                                                       "removed")) as exc:
             FemParams(**{name: value, "arc_deg": 60.0})
         assert f"set {field!r} in the scene file" in str(exc.value)
     assert FemParams(arc_deg=60.0).fem_config().arc_deg == 60.0

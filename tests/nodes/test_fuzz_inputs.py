@@ -88,7 +88,8 @@ def test_good_calibration_round_trips(tmp_path):
 
 
 NUM = re.compile(r"(?<![A-Za-z_])-?\d+\.?\d*(?:e[-+]?\d+)?")
-hostile_num = st.sampled_from([".nan", ".inf", "-.inf", "1e308", "-1e308", "0", "-1", "0.", "1e-320", "abc", "[]",
+hostile_num = st.sampled_from([".nan", ".inf", "-.inf", "1e308", "-1e308", "0", "-1", "0.", "1e-320", "abc",
+                               "[]",
                                "99999999999999999999999", "nan", "inf"])
 
 
@@ -102,7 +103,8 @@ def test_calibration_mutated_numbers(tmp_path, data):
     tok = data.draw(hostile_num)
     line = text[:a].rsplit("\n", 1)[-1]
     if line.strip() in ("rows:", "cols:") and tok.startswith("-"):
-        tok = "0"  # negative rows/cols corrupt the heap inside cv2.FileStorage: see test_calibration_heap_corruption
+        # negative rows/cols corrupt the heap inside cv2.FileStorage: see test_calibration_heap_corruption
+        tok = "0"
 
     p = tmp_path / "c.yaml"
     p.write_text(text[:a] + tok + text[b:])
@@ -124,8 +126,10 @@ def test_calibration_random_bytes(tmp_path, data):
 def test_calibration_wrong_shapes_and_missing_keys(tmp_path):
     text = _good_text(tmp_path)
     cases = {
-        "K1 2x2": text.replace("K1: !!opencv-matrix\n   rows: 3\n   cols: 3", "K1: !!opencv-matrix\n   rows: 2\n   cols: 2")
-                      .replace("data: [ 800., 0., 320., 0., 800., 256., 0., 0., 1. ]", "data: [ 800., 0., 0., 800. ]", 1),
+        "K1 2x2": text.replace("K1: !!opencv-matrix\n   rows: 3\n   cols: 3",
+                               "K1: !!opencv-matrix\n   rows: 2\n   cols: 2")
+                      .replace("data: [ 800., 0., 320., 0., 800., 256., 0., 0., 1. ]",
+                               "data: [ 800., 0., 0., 800. ]", 1),
         "no R": re.sub(r"R: !!opencv-matrix\n(   .*\n){4}", "", text, count=1),
         "no width": text.replace("image_width: 640\n", ""),
         "negative height": text.replace("image_height: 512", "image_height: -512"),
@@ -140,7 +144,8 @@ def test_calibration_wrong_shapes_and_missing_keys(tmp_path):
         assert str(p) in out or "not found" in out
 
 
-CALIB_BUGS = {  # flexsheet/vision/stereo_calibration.py load_yaml: reproducers of contract violations found by fuzzing
+# flexsheet/vision/stereo_calibration.py load_yaml: reproducers of contract violations found by fuzzing
+CALIB_BUGS = {
     "garbage bytes -> SystemError from cv2.FileStorage": b"\x00\xff garbage",
     "empty file -> SystemError from cv2.FileStorage": b"",
     "image_width .inf -> OverflowError": ("image_width: 640", "image_width: .inf"),
@@ -159,7 +164,8 @@ def test_calibration_former_bugs_are_rejected(tmp_path):
         else:
             p.write_text(text.replace(case[0], case[1], 1))
         kind, out = _load(p, "calibration: known-bug reproducers", strict=False)
-        if kind == "other" or (kind == "ok" and not all(np.isfinite(out[k]).all() for k in ("K1", "K2", "R", "T"))):
+        if (kind == "other"
+            or (kind == "ok" and not all(np.isfinite(out[k]).all() for k in ("K1", "K2", "R", "T")))):
             bad.append(f"{name}: {kind} {out!r:.80}")
     assert not bad, "; ".join(bad)
 
@@ -195,13 +201,15 @@ def test_decode_input_hostile_images(regs):
     valid = len(regs) == reg.IR_COUNT and all(_is_reg(v) for v in regs)
     assert (st_ is not None) == valid, f"valid={valid} accepted={st_ is not None}"
     if st_ is not None:
-        assert np.isfinite(st_.position).all() and np.abs(st_.position).max() <= reg.INT32_MAX * reg.SCALE + 1e-9
+        assert (np.isfinite(st_.position).all()
+                and np.abs(st_.position).max() <= reg.INT32_MAX * reg.SCALE + 1e-9)
         assert st_.status == regs[reg.IR_STATUS] and 0 <= st_.cycle < 2 ** 32
 
 
 @settings(max_examples=150, deadline=None, database=None)
 @given(q=st.lists(st.one_of(st.floats(min_value=-1e300, max_value=1e300),
-                            st.sampled_from([math.nan, math.inf, -math.inf, 2147.483647, 2147.4836475, -2147.483648,
+                            st.sampled_from([math.nan, math.inf, -math.inf, 2147.483647, 2147.4836475,
+                                             -2147.483648,
                                              -2147.4836485, 1e-7, 5e-7])), min_size=6, max_size=6))
 def test_joint_encode_decode_round_trip_or_valueerror(q):
     regs = _decode(reg.encode_joints, q, target="registers: encode_joints")
@@ -228,7 +236,8 @@ def test_register_wrong_containers_rejected():
     bad = []
     COUNTS["registers: wrong containers"]["tried"] += 1
     try:
-        reg.encode_joints([0, 0, 0, 0, 0, 1.8e302])  # |q|/SCALE overflows to inf: round() raises OverflowError
+        # |q|/SCALE overflows to inf: round() raises OverflowError
+        reg.encode_joints([0, 0, 0, 0, 0, 1.8e302])
     except ValueError:
         COUNTS["registers: wrong containers"]["rejected"] += 1
     except Exception as exc:  # noqa: BLE001
@@ -261,12 +270,12 @@ for old, new in (("rows: 5", "rows: -1"), ("cols: 1", "cols: -1")) * 200:
         load_yaml("{d}/bad.yaml")
     except ValueError:
         pass
-"""
+"""  # noqa: E501 - a table, template or command line kept whole
 
 
 def test_calibration_negative_rows_cols_never_reach_opencv(tmp_path):
-    """A calibration file with ``rows: -1`` / ``cols: -1`` (loaded repeatedly) must raise ValueError, not abort
-    the process. Run in a child process: the abort would kill pytest."""
+    """A calibration file with ``rows: -1`` / ``cols: -1`` (loaded repeatedly) must raise ValueError, not
+    abort the process. Run in a child process: the abort would kill pytest."""
     import subprocess
     import sys
 

@@ -5,8 +5,8 @@ topic gets a batch of fuzzed frame sets (random bytes, truncated meta, cut array
 frames, schema and version mismatches, NaN/inf and wrong-dtype/shape arrays, wrong field types, extra and
 missing fields). Each is injected alone and awaited, so the count is exact: the node must count every one
 as rejected in its diagnostics (``h.rejected(topic)`` and the heartbeat's ``rejected_total``), log no
-handler error, publish nothing for it, and then still handle a valid message. Counts are printed
-(``pytest -s``).
+handler error, publish nothing for it, and then still handle a valid message. Counts are printed (``pytest
+-s``).
 """
 
 from __future__ import annotations
@@ -32,7 +32,8 @@ N_RANDOM = 12  # random-bytes frame sets per topic (plus the fixed hostile kinds
 @pytest.fixture(scope="module", autouse=True)
 def _report():
     yield
-    print("\n[fuzz] nodes (NodeHarness): fuzzed frame sets injected / counted as rejected / valid handled after")
+    print("\n[fuzz] nodes (NodeHarness): fuzzed frame sets injected / counted as rejected / valid handled "
+          "after")
     for target, c in sorted(COUNTS.items()):
         print(f"[fuzz]   {target:<40} injected {c['tried']:4d}  rejected {c['rejected']:4d}  "
               f"valid handled after: {'yes' if c['alive'] else 'NO'}")
@@ -48,7 +49,8 @@ def fuzz_frames(topic, seed: int) -> list[tuple[str, list[bytes]]]:
     good = [bytes(f) for f in encode(topic.name, sample(topic.type, seed=1))]
     out: list[tuple[str, list[bytes]]] = []
     for _ in range(N_RANDOM):
-        out.append(("random bytes", [rng.bytes(int(rng.integers(0, 200))) for _ in range(int(rng.integers(1, 4)))]))
+        out.append(("random bytes",
+                    [rng.bytes(int(rng.integers(0, 200))) for _ in range(int(rng.integers(1, 4)))]))
     out.append(("empty", []))
     out.append(("cut meta", [good[1][:len(good[1]) // 2], *good[2:]]))
     if len(good) > 2:
@@ -72,9 +74,13 @@ def fuzz_frames(topic, seed: int) -> list[tuple[str, list[bytes]]]:
             idx = struct.unpack_from("<H", v.data)[0]
             ndim = v.data[2]
             dt = v.data[3 + 8 * ndim:].decode()
-            with_meta(f"{key} huge dims", lambda m, k=key, i=idx, n=ndim, d=dt: m["d"].__setitem__(k, msgpack.ExtType(
-                1, struct.pack("<HB", i, max(n, 1)) + struct.pack(f"<{max(n, 1)}Q", *([2 ** 62] * max(n, 1))) + d.encode())))
-            with_meta(f"{key} object dtype", lambda m, k=key, v=v, n=ndim: m["d"].__setitem__(k, msgpack.ExtType(
+            with_meta(f"{key} huge dims", lambda m, k=key, i=idx, n=ndim,
+                      d=dt: m["d"].__setitem__(k, msgpack.ExtType(
+                1,
+                struct.pack("<HB", i, max(n, 1)) + struct.pack(f"<{max(n, 1)}Q", *([2 ** 62] * max(n, 1)))
+                + d.encode())))
+            with_meta(f"{key} object dtype", lambda m, k=key, v=v,
+                      n=ndim: m["d"].__setitem__(k, msgpack.ExtType(
                 1, v.data[:3 + 8 * n] + b"|O")))
             arr = np.frombuffer(good[idx], dt).copy()
             if arr.dtype.kind == "f":
@@ -106,8 +112,8 @@ async def _inject_all(h: NodeHarness, topic, label: str, seed: int, timer_topics
     for kind, frames in cases:
         meta = frames[0] if frames else b""
         if topic.latched and meta == last_meta:
-            # a LATCHED subscription ignores a resent identical meta frame (late-joiner dedupe; buffers are not
-            # compared), so this one is neither handled nor counted: skip it
+            # a LATCHED subscription ignores a resent identical meta frame (late-joiner dedupe;
+            # buffers are not compared), so this one is neither handled nor counted: skip it
             continue
         last_meta = meta
         done = sum(s.stats.rejected + s.stats.count for s in subs)
@@ -169,11 +175,13 @@ def test_triangulator_survives_fuzz():
             await _inject_all(h, topics.STEREO, "triangulator", 4)
             p = np.array([0.02, 0.01, 0.01])
             L, R = StereoCameraTwin(calib, T_dc, SimConfig(seed=4)).render(p)
-            h.inject(topics.STEREO, StereoFrame(header=Header(stamp=200.0, frame_id="camera_left", seq=1), left=L,
-                                                right=R, exposure_stamp=200.0, exposure_time=0.004))
+            h.inject(topics.STEREO,
+                     StereoFrame(header=Header(stamp=200.0, frame_id="camera_left", seq=1), left=L,
+                                 right=R, exposure_stamp=200.0, exposure_time=0.004))
             out = (await h.wait_for(topics.FINGERTIP, n=1, timeout=5.0))[-1]
             assert out.valid and np.linalg.norm(out.position - p) < 2e-3
-            COUNTS["triangulator /camera/calibration"]["alive"] = COUNTS["triangulator /camera/stereo"]["alive"] = 1
+            COUNTS["triangulator /camera/calibration"]["alive"] = COUNTS["triangulator /camera/stereo"][
+                "alive"] = 1
     asyncio.run(scenario())
 
 

@@ -34,7 +34,8 @@ def _display_yaml(tmp_path, head=True) -> str:
 def _truth(hs, stamp) -> HeadTruth:
     """The head held still at ``hs`` (velocity 0: the wall-clock node renders it a few ms after ``stamp``)."""
     T = hs.T_display_glasses
-    return HeadTruth(header=Header(stamp=stamp), position=T[:3, 3].copy(), rotation=np.ascontiguousarray(T[:3, :3]),
+    return HeadTruth(header=Header(stamp=stamp), position=T[:3, 3].copy(),
+                     rotation=np.ascontiguousarray(T[:3, :3]),
                      left=hs.left, right=hs.right, eye=hs.eye, velocity=np.zeros(3), visible=hs.visible)
 
 
@@ -42,8 +43,9 @@ def test_the_node_tracks_the_twins_head_and_says_when_the_glasses_are_lost(tmp_p
     head = HeadMotion(Viewer.draw(0, "ideal"), seed=3, occlusions=((0.5, 10.0),))
 
     async def scenario():
-        async with NodeHarness(HeadCameraNode, params={"source": "sim", "display_calib": _display_yaml(tmp_path),
-                                                       "twin": IDEAL, "rate_hz": 30.0}) as h:
+        async with NodeHarness(HeadCameraNode,
+                               params={"source": "sim", "display_calib": _display_yaml(tmp_path),
+                                       "twin": IDEAL, "rate_hz": 30.0}) as h:
             t0 = time.time()
             hs = head.state(0.2)
             h.inject(topics.HEAD_TRUTH, _truth(hs, t0))
@@ -51,7 +53,8 @@ def test_the_node_tracks_the_twins_head_and_says_when_the_glasses_are_lost(tmp_p
             good = [m for m in out if m.valid]
             assert good, [m.valid for m in out]
             for m in good:
-                assert np.linalg.norm(m.left - hs.left) < 1.5e-3 and np.linalg.norm(m.right - hs.right) < 1.5e-3
+                assert (np.linalg.norm(m.left - hs.left) < 1.5e-3
+                        and np.linalg.norm(m.right - hs.right) < 1.5e-3)
                 assert m.markers >= 10 and m.reprojection_px < 0.5 and m.header.frame_id == "display"
             h.inject(topics.HEAD_TRUTH, _truth(head.state(1.0), time.time()))      # the glasses occluded
             n = len(h.messages(topics.EYE_POSE))
@@ -65,7 +68,8 @@ def test_without_a_head_camera_entry_the_node_names_the_fix(tmp_path):
     async def scenario():
         with pytest.raises(Exception, match="no head_camera entry"):
             async with NodeHarness(HeadCameraNode, params={"source": "sim", "twin": IDEAL,
-                                                           "display_calib": _display_yaml(tmp_path, head=False)}):
+                                                           "display_calib": _display_yaml(tmp_path,
+                                                                                          head=False)}):
                 pass
     asyncio.run(scenario())
 

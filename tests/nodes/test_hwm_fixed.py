@@ -21,7 +21,8 @@ HWM = {zmq.SNDHWM, zmq.RCVHWM}
 
 
 class _Watch:
-    """Wraps ``zmq.Socket`` ``bind``/``connect``/``close``/``set``: records each HWM change made on a live socket."""
+    """Wraps ``zmq.Socket`` ``bind``/``connect``/``close``/``set``: records each HWM change made on a live
+    socket."""
 
     def __init__(self, monkeypatch) -> None:
         self.live: set[int] = set()

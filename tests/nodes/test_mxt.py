@@ -153,7 +153,7 @@ int main(int argc, char **argv) {
   close(s);
   return 0;
 }
-"""
+"""  # noqa: E501 - a table, template or command line kept whole
 
 
 @pytest.fixture(scope="module")
@@ -178,13 +178,16 @@ def test_public_struct_layout_matches_the_codec(c_client):
     assert layout["size"] == mxt.SIZE == 196
     # a packet encoded by the codec, with a distinct value in every field, read at the compiler's offsets
     q = np.array([0.1, -0.2, 1.5, -3.0, 0.25, 2.75])
-    p = mxt.Packet(mxt.CMD_MOVE, mxt.TYP_JOINT, (mxt.TYP_JOINT, mxt.TYP_FB_JOINT, mxt.TYP_FJOINT, mxt.TYP_FBKCUR),
+    p = mxt.Packet(mxt.CMD_MOVE, mxt.TYP_JOINT,
+                   (mxt.TYP_JOINT, mxt.TYP_FB_JOINT, mxt.TYP_FJOINT, mxt.TYP_FBKCUR),
                    (mxt.encode_joint_data(q), mxt.encode_joint_data(q[::-1]), mxt.encode_joint_data(-q),
-                    struct.pack("<8i8x", *range(8))), mxt.IO_OUT, mxt.IO_IN, 900, 0x00FF, 0x0A5A, 7, 0xDEADBEEF)
+                    struct.pack("<8i8x", *range(8))), mxt.IO_OUT, mxt.IO_IN, 900, 0x00FF, 0x0A5A, 7,
+                   0xDEADBEEF)
     b = p.encode()
     u16 = lambda f: struct.unpack_from("<H", b, layout[f])[0]  # noqa: E731
-    assert [u16(f) for f in ("Command", "SendType", "RecvType", "SendIOType", "RecvIOType", "BitTop", "BitMask",
-                             "IoData", "TCount", "RecvType1", "RecvType2", "RecvType3")] == \
+    assert [u16(f)
+            for f in ("Command", "SendType", "RecvType", "SendIOType", "RecvIOType", "BitTop", "BitMask",
+                      "IoData", "TCount", "RecvType1", "RecvType2", "RecvType3")] == \
         [1, 2, 2, 1, 2, 900, 0x00FF, 0x0A5A, 7, 8, 5, 11]
     assert struct.unpack_from("<I", b, layout["CCount"])[0] == 0xDEADBEEF
     for f, want in (("dat", q), ("dat1", q[::-1]), ("dat2", -q)):
@@ -260,7 +263,8 @@ def test_twin_node_answers_an_independent_client_300_moves(c_client, tmp_path):
     from conftest import free_port
 
     port = free_port()
-    node = subprocess.Popen([sys.executable, "-m", "flexsheet", "run", "arm_controller_sim", "--param", "protocol=mxt",
+    node = subprocess.Popen([sys.executable, "-m", "flexsheet", "run", "arm_controller_sim", "--param",
+                             "protocol=mxt",
                              "--param", "host=127.0.0.1", "--param", f"port={port}", "--endpoint",
                              f"tcp://127.0.0.1:{free_port()}"], cwd=ROOT, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
@@ -283,10 +287,10 @@ def test_twin_node_answers_an_independent_client_300_moves(c_client, tmp_path):
     assert 0.001 < step < 0.01
     # JOINT = the command its cycle executes: the packet's own, or a later one that arrived in the same cycle
     # (newest wins; packets bunch when the machine stalls the client or the twin), never an earlier one
-    late = []                                                          # how many commands later each reply shows
+    late = []  # how many commands later each reply shows
     for i in range(1, 301):
         later = np.abs(moves[i]["joint"] - q[i - 1:]).max(axis=1)      # its own, then the later ones
-        assert later.min() < 1e-5, (i, later.min())                    # never an older command, always a sent one
+        assert later.min() < 1e-5, (i, later.min())  # never an older command, always a sent one
         late.append(int(np.flatnonzero(later < 1e-5)[0]))
     assert np.mean(np.asarray(late) == 0) >= 0.9, late                 # mostly its own
     # the servo (FB_JOINT) follows: at the stroke's far end within tau·v, back home at the end
@@ -315,8 +319,10 @@ def test_random_datagrams_are_refused_cleanly_and_never_move_the_twin():
             q = Q_HOME + rng.normal(0, [0.001, 0.01, 1.0][k % 3], 6)
             if k % 7 == 0:
                 q[rng.integers(6)] = rng.choice([np.nan, np.inf, 1e30])
-            raw = bytearray(mxt.PACKET.pack(int(rng.choice([0, 1, 1, 1, 255, 7])), int(rng.choice([2, 2, 1, 3, 12])),
-                                            int(rng.integers(0, 13)), struct.pack("<8f8x", *q, 0, 0), 0, 0, 0, 0, 0,
+            raw = bytearray(mxt.PACKET.pack(int(rng.choice([0, 1, 1, 1, 255, 7])),
+                                            int(rng.choice([2, 2, 1, 3, 12])),
+                                            int(rng.integers(0, 13)), struct.pack("<8f8x", *q, 0, 0), 0, 0, 0,
+                                            0, 0,
                                             0, k, 8, bytes(40), 0, bytes(40), 0, bytes(40)))
             buf = bytes(raw)
         try:

@@ -32,11 +32,13 @@ def test_node_publishes_targets_with_source_stamp_and_holds_on_lost_marker():
             assert np.allclose(st.sheet_origin, 0.0) and np.allclose(st.normal, [1, 0, 0])
             assert st.stiffness == pytest.approx(20.0, rel=1e-6)
             half = 0.12 * (1 + st.stretch)
-            assert np.allclose(left.pose[:3, 3], [0, half, 0]) and np.allclose(right.pose[:3, 3], [0, -half, 0])
+            assert (np.allclose(left.pose[:3, 3], [0, half, 0])
+                    and np.allclose(right.pose[:3, 3], [0, -half, 0]))
             assert left.source_stamp == m.exposure_stamp and right.arm == "right"
             h.inject(topics.FINGERTIP, _ft([0.0, 0.0, 0.0], valid=False, stamp=m.header.stamp + 0.02))
             out = await h.wait_for(topics.SHEET_TARGET, n=2, timeout=2.0)
-            assert out[1].status == "hold:marker_lost" and np.array_equal(out[1].sheet_origin, st.sheet_origin)
+            assert (out[1].status == "hold:marker_lost"
+                    and np.array_equal(out[1].sheet_origin, st.sheet_origin))
             h.inject_raw(topics.FINGERTIP, [b"garbage"])
             await asyncio.sleep(0.1)
             assert h.rejected(topics.FINGERTIP) == 1
@@ -129,7 +131,8 @@ def test_reach_takes_the_arm_bases_from_display_calib(tmp_path):
     path = tmp_path / "display.yaml"
     write_display_calib(str(path), dc)
     reach = PlannerParams(display_calib=str(path)).planner_config().reach
-    assert reach.left_base[:3] == pytest.approx((LEFT_BASE[0] + 0.004, LEFT_BASE[1] - 0.002, LEFT_BASE[2] + 0.001))
+    assert (reach.left_base[:3]
+            == pytest.approx((LEFT_BASE[0] + 0.004, LEFT_BASE[1] - 0.002, LEFT_BASE[2] + 0.001)))
     assert reach.left_base[3] == pytest.approx(LEFT_BASE[3])
     assert PlannerParams().planner_config().reach.left_base == LEFT_BASE     # no file: the design bases
     with pytest.raises(ValueError, match="not found"):
@@ -153,7 +156,8 @@ def test_the_pull_is_capped_at_the_targets_and_the_targets_carry_it():
         async with NodeHarness(PlannerNode, params={"object_stiffness": 900.0,
                                                     "stiffness_from_scene": False}) as h:
             home = max_pull(ArmKinematics("left", LEFT_BASE), home_joints("left"))[0]
-            assert h.node.stage.planner.pull_limit == pytest.approx(0.9 * home, rel=0.02) and 0.9 * home < 40.0
+            assert (h.node.stage.planner.pull_limit == pytest.approx(0.9 * home, rel=0.02)
+                    and 0.9 * home < 40.0)
             t0 = time.time()
             for k in range(5):
                 h.inject(topics.FINGERTIP, _ft([0.02 * np.cos(0.1 * k), 0.02 * np.sin(0.1 * k), 0.0],

@@ -1,6 +1,6 @@
-"""World twin node: typed finger truth, the sheet state from the measured joints through the truth's kinematics
-(stretch by the one sheet geometry; the bridge's own pose is not used), and its script params are FingerScript's
-fields."""
+"""World twin node: typed finger truth, the sheet state from the measured joints through the truth's
+kinematics (stretch by the one sheet geometry; the bridge's own pose is not used), and its script params are
+FingerScript's fields."""
 
 from __future__ import annotations
 
@@ -21,7 +21,8 @@ from nodes.world.node import Segment, WorldNode, WorldParams
 
 
 def _arm(arm: str, q: np.ndarray, pose: np.ndarray, stamp: float) -> ArmJointState:
-    return ArmJointState(header=Header(stamp=stamp), arm=arm, position=q, velocity=np.zeros(6), commanded=q, executing=q,
+    return ArmJointState(header=Header(stamp=stamp), arm=arm, position=q, velocity=np.zeros(6), commanded=q,
+                         executing=q,
                          pose=pose, status=0)
 
 
@@ -44,7 +45,8 @@ def test_world_publishes_typed_truth_and_sheet_from_measured_joints(tmp_path, mo
                   "rate_hz": 100.0, "sheet_rate_hz": 50.0, "twin": {"realism": "ideal"}}
         async with NodeHarness(WorldNode, params=params) as h:
             truth = (await h.wait_for(T.FINGER_TRUTH, n=2, timeout=3.0))[-1]
-            assert (truth.segment, truth.mode, truth.moving_time, truth.phase) == (0, "stroke_push", 2.0, "approach")
+            assert ((truth.segment, truth.mode, truth.moving_time, truth.phase)
+                    == (0, "stroke_push", 2.0, "approach"))
             assert truth.position[0] > 0.0                      # approaching from in front of the cylinder
             bad = Tl.copy()
             bad[:3, :3] *= 1.5                                  # the bridge's pose is not used: no effect
@@ -54,8 +56,10 @@ def test_world_publishes_typed_truth_and_sheet_from_measured_joints(tmp_path, mo
             assert h.rejected(T.ARM_LEFT_STATE) == 0
             # ideal twin: the true FK of the joints is the nominal model's, so the commanded sheet comes back
             assert sheet.stretch == pytest.approx(0.05, abs=1e-9)
-            assert sheet.normal == pytest.approx(n, abs=1e-9) and sheet.origin == pytest.approx(np.zeros(3), abs=1e-9)
-            assert sheet.corners[0] == pytest.approx([0.12 * math.sin(tilt), 0.126, 0.12 * math.cos(tilt)], abs=1e-9)
+            assert (sheet.normal == pytest.approx(n, abs=1e-9)
+                    and sheet.origin == pytest.approx(np.zeros(3), abs=1e-9))
+            assert (sheet.corners[0]
+                    == pytest.approx([0.12 * math.sin(tilt), 0.126, 0.12 * math.cos(tilt)], abs=1e-9))
     asyncio.run(scenario())
 
 

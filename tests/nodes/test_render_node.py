@@ -23,7 +23,8 @@ def fingertip(pos, stamp=100.0, valid=True):
 
 def arm(name, T):
     z = np.zeros(6)
-    return ArmJointState(header=Header(stamp=time.time()), arm=name, position=z, velocity=z, commanded=z, executing=z,
+    return ArmJointState(header=Header(stamp=time.time()), arm=name, position=z, velocity=z, commanded=z,
+                         executing=z,
                          pose=np.asarray(T, dtype=float), status=0)
 
 
@@ -44,8 +45,9 @@ async def frame_with(h, model, timeout):
 
 
 def test_frames_model_choice_and_source_stamp():
-    # the planner's stretch 0.04: its pushed-sheet table is cached after the first run on a machine (built in the
-    # node's worker process otherwise, ~30 s of one core; pushes are drawn with the 4-triangle model meanwhile)
+    # the planner's stretch 0.04: its pushed-sheet table is cached after the
+    # first run on a machine (built in the node's worker process otherwise,
+    # ~30 s of one core; pushes are drawn with the 4-triangle model meanwhile)
     from flexsheet.model.sheet import clamp_poses
 
     async def scenario():
@@ -58,7 +60,7 @@ def test_frames_model_choice_and_source_stamp():
             h.inject(topics.ARM_RIGHT_STATE, arm("right", Tr))
             h.inject(topics.FINGERTIP, fingertip([-0.03, 0.0, 0.0], stamp=123.5))
             await h.settle(0.1)
-            m, before = await frame_with(h, "fine", timeout=600.0)           # 30 mm push: 4-triangle misses 0.7 mm
+            m, before = await frame_with(h, "fine", timeout=600.0)  # 30 mm push: 4-triangle misses 0.7 mm
             assert set(before) <= {"four_triangle"}                         # never uncorrected while it waits
             assert m.source_stamp == 123.5
             h.inject(topics.FINGERTIP, fingertip([0.05, 0.0, 0.0], stamp=124.0))   # in front: not pushing
@@ -70,8 +72,9 @@ def test_frames_model_choice_and_source_stamp():
 
 
 def test_missing_sheet_table_is_built_in_a_worker_while_drawing(tmp_path):
-    """A push at a stretch whose table is not cached: drawn with the 4-triangle model (said in the diagnostics)
-    while a worker process builds it, then with the fine model. A coarse FEM mesh keeps the build to seconds."""
+    """A push at a stretch whose table is not cached: drawn with the 4-triangle model (said in the
+    diagnostics) while a worker process builds it, then with the fine model. A coarse FEM mesh keeps the build
+    to seconds."""
     from flexsheet.model.sheet import clamp_poses
 
     params = dict(PARAMS, sheet_cache=str(tmp_path), sheet_mesh={"h_fine": 0.02, "h_coarse": 0.04})
@@ -89,7 +92,7 @@ def test_missing_sheet_table_is_built_in_a_worker_while_drawing(tmp_path):
             assert "not built yet" in h.node.state_message
             m, before = await frame_with(h, "fine", timeout=300.0)
             assert set(before) <= {"four_triangle"} and h.rejected() == 0
-            assert any(p.name.startswith("indent_") for p in tmp_path.iterdir())     # cached for the next start
+            assert any(p.name.startswith("indent_") for p in tmp_path.iterdir())  # cached for the next start
             await next_frame(h)
             assert h.node.state_message == ""
     asyncio.run(scenario())
@@ -101,12 +104,13 @@ def test_bad_input_is_rejected_and_node_keeps_running():
             await next_frame(h)
             h.inject_raw(topics.FINGERTIP, [b"garbage"])
             v = np.zeros((3, 3), np.float32)
-            bad = ObjectDeformation(header=Header(stamp=time.time()), vertices=v, faces=np.array([[0, 1, 7]], np.int32),
+            bad = ObjectDeformation(header=Header(stamp=time.time()), vertices=v,
+                                    faces=np.array([[0, 1, 7]], np.int32),
                                     contact_force=0.0, stiffness=0.0, depth=0.0, contact_point=np.zeros(3),
                                     method="condensed")
             h.inject(topics.DEFORMATION, bad)
             flipped = np.eye(4)
-            flipped[:3, :3] = np.diag([-1.0, -1.0, 1.0])                   # sheet normal facing away from the eye
+            flipped[:3, :3] = np.diag([-1.0, -1.0, 1.0])  # sheet normal facing away from the eye
             flipped[:3, 3] = [0.0, 0.12, 0.0]
             h.inject(topics.ARM_LEFT_STATE, arm("left", flipped))
             shear = np.eye(4)
@@ -152,15 +156,16 @@ def test_window_output_params_are_validated(monkeypatch):
     import importlib.util
 
     real = importlib.util.find_spec
-    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "glfw" else real(name, *a))
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name,
+                        *a: None if name == "glfw" else real(name, *a))
     with pytest.raises(pydantic.ValidationError, match="glfw"):
         RendererParams(output="window")
 
 
 def test_show_image_replaces_the_scene_in_both_eyes_until_cleared(tmp_path):
     """The renderer's show_image service (registration patterns through the projector): any image file, scaled
-    to the projector with nearest neighbour, fills both eyes of the published pair; a bad path is refused naming
-    it and the scene stays; clear_image draws the scene again."""
+    to the projector with nearest neighbour, fills both eyes of the published pair; a bad path is refused
+    naming it and the scene stays; clear_image draws the scene again."""
     import cv2
 
     pattern = np.zeros((48, 64, 3), np.uint8)
@@ -174,14 +179,15 @@ def test_show_image_replaces_the_scene_in_both_eyes_until_cleared(tmp_path):
             with pytest.raises(ValueError, match="cannot read an image from '/nope.png'"):
                 call["show_image"]({"path": "/nope.png"})
             shown = call["show_image"]({"path": str(tmp_path / "p.png")})
-            assert {k: shown[k] for k in ("path", "size")} == {"path": str(tmp_path / "p.png"), "size": [128, 96]}
+            assert {k: shown[k] for k in ("path", "size")} == {"path": str(tmp_path / "p.png"),
+                                                               "size": [128, 96]}
             # latched on /projector/image at the projector's size: what the camera twin lights the sheet with
             lit = (await h.wait_for(topics.PROJECTOR_IMAGE))[-1]
             assert lit.showing and lit.header.stamp == shown["stamp"] and lit.image.shape == (96, 128)
             red = round(0.299 * 255)                                 # luminance of pure red
             assert int(lit.image[:, :64].max()) == 0 and abs(int(lit.image[:, 64:].min()) - red) <= 1
             m, _ = await frame_with(h, "image", timeout=10.0)
-            for img in (m.left, m.right):                    # published at scale 0.5: 64 x 48, the pattern itself
+            for img in (m.left, m.right):  # published at scale 0.5: 64 x 48, the pattern itself
                 assert img.shape == (48, 64, 3)
                 assert np.array_equal(img, pattern), np.abs(img.astype(int) - pattern).max()
             call["clear_image"]({})

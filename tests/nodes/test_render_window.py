@@ -118,7 +118,8 @@ def test_pacer_counts_missed_vsyncs_and_keeps_the_eyes_in_phase():
     # each frame that lands on the vsync after its predecessor shows the eye of that vsync's parity
     on_time = [(k, e) for (k, e, _), prev in zip(shown[1:], landed[:-1], strict=True) if k == prev + 1]
     assert all(e == k % 2 for k, e in on_time) and len(on_time) == 9
-    # a per-frame counter would be out of phase after the 1-vsync drop (vsync 4) and stay so until the next odd drop
+    # a per-frame counter would be out of phase after the
+    # 1-vsync drop (vsync 4) and stay so until the next odd drop
     assert [n == k % 2 for k, _, n in shown].count(False) >= 3
     st = p.stats()
     assert st.missed_vsyncs == 1 + 2 + 1 and st.eye_resyncs == 2 and st.frames == len(landed)
@@ -165,7 +166,7 @@ def test_frame_sequential_shows_left_then_right(display, offscreen, window):
     open_, call = window
     out = open_(stereo="frame_sequential", refresh_hz=2.0)    # 500 ms vsyncs: room for a screenshot each
     L, Rt = offscreen[0.064]
-    assert diff(L, Rt) > 50                                       # the eyes differ: the test can tell them apart
+    assert diff(L, Rt) > 50  # the eyes differ: the test can tell them apart
     assert out.window.pacing == "timer" and not out.window.quad_buffered   # Xvfb: no vsync, no quad buffer
     assert out.window.counter == "grid"
     ks = _record_vsyncs(out)
@@ -231,7 +232,8 @@ def test_mirror_x_flips_each_eye(display, offscreen, window):
 
 
 def test_fullscreen_takes_the_monitor_mode(offscreen):
-    """A second Xvfb whose screen is one eye image: fullscreen on it shows the image 1:1 over the whole screen."""
+    """A second Xvfb whose screen is one eye image: fullscreen on it shows the image 1:1 over the whole
+    screen."""
     from nodes.renderer.window import WindowError, WindowOutput
 
     with xvfb(W, H) as d:
@@ -250,9 +252,11 @@ def test_fullscreen_takes_the_monitor_mode(offscreen):
                 assert diff(grab(d), offscreen[0.0][0]) <= TOL
             finally:
                 ex.submit(out.close).result()
-            # a frame of half the monitor's mode: the mode stays, the frame is scaled up (bilinear), with a warning
+            # a frame of half the monitor's mode: the mode stays,
+            # the frame is scaled up (bilinear), with a warning
             small = Projector.default(W // 2, H // 2, pixel=0.0056)
-            out = ex.submit(WindowOutput, small, stereo="mono", ipd=0.0, fullscreen=True, refresh_hz=4.0).result()
+            out = ex.submit(WindowOutput, small, stereo="mono", ipd=0.0, fullscreen=True,
+                            refresh_hz=4.0).result()
             try:
                 assert out.window.framebuffer_size == (W, H)
                 assert any("scaled" in w for w in out.window.warnings)
@@ -305,7 +309,8 @@ def test_node_window_output_publishes_and_reports_pacing(display, monkeypatch):
             assert diff(img[:, :W], m.left) <= TOL and diff(img[:, W:], m.right) <= TOL
             assert m.left.max() > 100 and m.correction == "none"
             hb = (await h.wait_for(topics.DIAGNOSTICS, n=2, timeout=10.0))[-1]
-            assert "fps" in hb.message and "missed vsyncs" in hb.message and "pacing timer, counter grid" in hb.message
+            assert ("fps" in hb.message and "missed vsyncs" in hb.message
+                    and "pacing timer, counter grid" in hb.message)
             fps = float(hb.message.split("window ")[1].split(" fps")[0])
             assert 10.0 < fps < 35.0                       # paced near 30 Hz even on a loaded 2-core machine
             assert h.node.pacing.frames > 10

@@ -44,10 +44,12 @@ def test_record_then_play_is_byte_identical_with_original_timing(tmp_path):
     bag1, bag2 = tmp_path / "live.mcap", tmp_path / "replay.mcap"
 
     async def record_live():
-        talker = TalkerNode(NodeConfig(name="talker", endpoint=talker_ep, params={"rate": 50.0, "count": 60, "start_delay": 1.0}))
+        talker = TalkerNode(NodeConfig(name="talker", endpoint=talker_ep,
+                                       params={"rate": 50.0, "count": 60, "start_delay": 1.0}))
         rec = RecorderNode(NodeConfig(name="rec", endpoint="", peers=[talker_ep],
                                       params={"output": str(bag1), "topics": [T.FINGERTIP.name]}))
-        await _run_for([rec, talker], 10.0, stop_when=lambda: hasattr(rec, "writer") and sum(rec.writer.counts.values()) >= 60)
+        await _run_for([rec, talker], 10.0,
+                       stop_when=lambda: hasattr(rec, "writer") and sum(rec.writer.counts.values()) >= 60)
 
     asyncio.run(record_live())
     live = list(read_bag(bag1))
@@ -57,10 +59,12 @@ def test_record_then_play_is_byte_identical_with_original_timing(tmp_path):
 
     async def replay():
         player = PlayerNode(NodeConfig(name="play", endpoint=player_ep,
-                                       params={"file": str(bag1), "start_delay": 0.5, "exit_when_done": False}))
+                                       params={"file": str(bag1), "start_delay": 0.5,
+                                               "exit_when_done": False}))
         rec = RecorderNode(NodeConfig(name="rec2", endpoint="", peers=[player_ep],
                                       params={"output": str(bag2), "topics": [T.FINGERTIP.name]}))
-        await _run_for([rec, player], 10.0, stop_when=lambda: hasattr(rec, "writer") and sum(rec.writer.counts.values()) >= 60)
+        await _run_for([rec, player], 10.0,
+                       stop_when=lambda: hasattr(rec, "writer") and sum(rec.writer.counts.values()) >= 60)
 
     asyncio.run(replay())
     played = list(read_bag(bag2))
@@ -69,13 +73,14 @@ def test_record_then_play_is_byte_identical_with_original_timing(tmp_path):
         assert a.frames == b.frames  # byte-identical payloads (header stamps included)
     rel_live = np.array([m.log_time for m in live]) - live[0].log_time
     rel_play = np.array([m.log_time for m in played]) - played[0].log_time
-    # a latency common to every message (a recorder's first receive, the player's timer wake-up) is not timing:
-    # the spacing is judged, after taking out the median offset between the two recordings
+    # a latency common to every message (a recorder's first receive, the player's timer wake-up) is
+    # not timing: the spacing is judged, after taking out the median offset between the two recordings
     off = rel_play - rel_live
     err = np.abs(off - np.median(off))
     # both sides are a recorder's receive times, so the error holds two recorders' scheduling jitter: median
     # 0.5 ms, but a 90th percentile of 2.2 ms and single 11 ms outliers on the loaded 2-core machine.
-    # A player that ignored the timing would be off by up to the bag's 1.18 s span, one at half speed by up to 295 ms after the median offset is taken out.
+    # A player that ignored the timing would be off by up to the bag's 1.18 s span,
+    # one at half speed by up to 295 ms after the median offset is taken out.
     assert np.median(err) < 0.002 and np.percentile(err, 90) < 0.005, f"timing error ms: {err * 1e3}"
     assert abs(rel_play[-1] - rel_live[-1]) < 0.02, (rel_play[-1], rel_live[-1])
     info = bag_info(bag1)
@@ -84,7 +89,8 @@ def test_record_then_play_is_byte_identical_with_original_timing(tmp_path):
 
 def _stereo(i: int, shape: tuple[int, int] = (48, 64)) -> StereoFrame:
     img = np.full(shape, i % 255, np.uint8)
-    return StereoFrame(header=Header(stamp=100.0 + i / 48, frame_id="camera_left", seq=i), left=img, right=img,
+    return StereoFrame(header=Header(stamp=100.0 + i / 48, frame_id="camera_left", seq=i), left=img,
+                       right=img,
                        exposure_stamp=100.0 + i / 48, exposure_time=0.004)
 
 
@@ -100,7 +106,8 @@ def test_export_opens_with_mcap_reader_and_validates_against_stored_schema(tmp_p
         w.write(encode(T.STEREO.name, _stereo(i)), 1_000_000_000 + i)
     w.close()
     counts = export_bag(src, dst)
-    assert counts["/fingertip"] == 5 and counts["/camera/stereo/left"] == 5 and counts["/camera/stereo/right"] == 5
+    assert counts["/fingertip"] == 5 and counts["/camera/stereo/left"] == 5 and counts[
+        "/camera/stereo/right"] == 5
     with open(dst, "rb") as fh:
         reader = make_reader(fh)
         n = 0
@@ -145,9 +152,11 @@ class _Calib(Node):
     async def setup(self) -> None:
         pub = self.publisher(T.CALIBRATION)
         e = np.eye(3)
-        pub.publish(StereoCalibration(header=pub.header("camera_left"), image_size=np.array([640, 512]), K1=e, D1=np.zeros(5),
+        pub.publish(StereoCalibration(header=pub.header("camera_left"), image_size=np.array([640, 512]), K1=e,
+                                      D1=np.zeros(5),
                                       K2=e, D2=np.zeros(5), R=e, T=np.array([-0.09, 0, 0]), R1=e, R2=e,
-                                      P1=np.zeros((3, 4)), P2=np.zeros((3, 4)), Q=np.eye(4), T_display_camera=np.eye(4)))
+                                      P1=np.zeros((3, 4)), P2=np.zeros((3, 4)), Q=np.eye(4),
+                                      T_display_camera=np.eye(4)))
 
 
 def test_a_second_of_the_recorders_images_is_one_chunk_so_the_index_in_memory_stays_small(tmp_path):

@@ -98,7 +98,7 @@ def test_a_sampled_topic_decodes_only_the_newest_when_read_and_keeps_the_last_go
     assert first.header.seq == 19 and abs(first.position[0] - 0.19) < 1e-12
     assert again is first and count == 1              # read twice, decoded once
     assert after_bad is first and rejected == 1      # a bad message is rejected; the last good one stays
-    assert dropped >= 18                              # the 19 superseded unread ones (and the last read one's not)
+    assert dropped >= 18  # the 19 superseded unread ones (and the last read one's not)
 
 
 def test_take_applies_each_new_sampled_message_once_and_counts_its_value_error_as_rejected():
@@ -137,7 +137,8 @@ def test_bad_input_rejected_node_keeps_serving():
     async def scenario():
         async with NodeHarness(make(QoS.KEEP_ALL)) as h:
             h.inject_raw(T.FINGERTIP, [b"\x00garbage"])
-            h.transport.deliver(encode(T.FINGERTIP.name, Heartbeat(header=Header(stamp=1.0), node="imposter")))
+            h.transport.deliver(encode(T.FINGERTIP.name,
+                                       Heartbeat(header=Header(stamp=1.0), node="imposter")))
             h.inject(T.FINGERTIP, tip(1, x=5.0))   # handler raises ValueError
             h.inject(T.FINGERTIP, tip(2))          # still served
             await h.settle(0.3)
@@ -292,8 +293,9 @@ def _dying_parent(q) -> None:
 
 def test_a_worker_whose_parent_died_before_it_tied_itself_exits_at_once():
     """lower_priority compares the parent multiprocessing recorded at the start with getppid(): a worker whose
-    node died while it still imported (before PR_SET_PDEATHSIG) has been reparented and exits in lower_priority
-    instead of running on as an orphan (getppid() alone, read inside lower_priority, sees init and goes on)."""
+    node died while it still imported (before PR_SET_PDEATHSIG) has been reparented and exits in
+    lower_priority instead of running on as an orphan (getppid() alone, read inside lower_priority, sees init
+    and goes on)."""
     import multiprocessing as mp
     import queue
 
@@ -317,9 +319,9 @@ def _sigint_at_start(q) -> None:
 
 
 def test_a_node_worker_ignores_sigint_from_its_first_instruction():
-    """flexsheet.runtime.background.start_worker: the child starts with SIGINT ignored (the launcher's SIGINT to
-    the node's group hit a table builder still importing numpy and printed a traceback), and the caller's own
-    handler is back afterwards; a plain start gives the child Python's KeyboardInterrupt handler."""
+    """flexsheet.runtime.background.start_worker: the child starts with SIGINT ignored (the launcher's SIGINT
+    to the node's group hit a table builder still importing numpy and printed a traceback), and the caller's
+    own handler is back afterwards; a plain start gives the child Python's KeyboardInterrupt handler."""
     import multiprocessing as mp
     import signal
 
@@ -327,7 +329,8 @@ def test_a_node_worker_ignores_sigint_from_its_first_instruction():
 
     ctx = mp.get_context("spawn")
     got = {}
-    outer = signal.signal(signal.SIGINT, signal.default_int_handler)   # a test process may run with it ignored,
+    # a test process may run with it ignored,
+    outer = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:                                                                # which every child would inherit
         before = signal.getsignal(signal.SIGINT)
         for how in ("start_worker", "plain"):
@@ -360,9 +363,9 @@ def _pool_parent(path: str) -> None:
 
 
 def test_experiment_workers_are_tied_to_their_parent(tmp_path):
-    """flexsheet.fem.reference.workers.run_workers, the pool of the reference, sphere-table and path-table solves: its
-    workers ignore SIGINT, run one BLAS thread, and die when the experiment is killed (kill -9): the path table's
-    own pool once left two workers solving for minutes after its parent was gone."""
+    """flexsheet.fem.reference.workers.run_workers, the pool of the reference, sphere-table and path-table
+    solves: its workers ignore SIGINT, run one BLAS thread, and die when the experiment is killed (kill -9):
+    the path table's own pool once left two workers solving for minutes after its parent was gone."""
     import multiprocessing as mp
     import signal
 
@@ -414,13 +417,15 @@ def test_publisher_close_survives_subscribers_leaving_mid_message():
     """libzmq 4.3.5 aborts the process (``session_base.cpp:233``, zeromq/libzmq#3442) when a publisher closes
     with linger 0 while a subscriber disconnects part-way through a multipart message: it killed the camera
     node at a launch's shutdown in CI. The same race with linger 0 aborted 6 of 60 single-round runs here;
-    :meth:`XPub.close` lingers ``CLOSE_LINGER_MS``. Three processes of eight rounds each must all end clean."""
+    :meth:`XPub.close` lingers ``CLOSE_LINGER_MS``. Three processes of eight rounds each must all end
+    clean."""
 
     from conftest import free_port
 
     for _ in range(3):
         port = free_port(span=8)
-        res = subprocess.run([sys.executable, "-c", _CLOSE_RACE, str(port), "8"], capture_output=True, text=True,
+        res = subprocess.run([sys.executable, "-c", _CLOSE_RACE, str(port), "8"], capture_output=True,
+                             text=True,
                              timeout=60, cwd=str(Path(__file__).resolve().parents[2]))
         assert res.returncode == 0 and "clean" in res.stdout, (res.returncode, res.stderr[-2000:])
 
@@ -475,8 +480,9 @@ def test_a_node_stopped_while_a_sync_handler_is_inside_opencv_exits_cleanly(run)
 
 
 def test_background_work_runs_beside_the_wall_clock_and_to_completion_on_a_simulated_clock():
-    """``Node.background``: on the wall clock the call returns while the work runs in its named daemon thread; on
-    a simulated clock the work is done when the call returns (it attaches at a host-independent instant)."""
+    """``Node.background``: on the wall clock the call returns while the work runs in its named daemon thread;
+    on a simulated clock the work is done when the call returns (it attaches at a host-independent
+    instant)."""
     from flexsheet.runtime.clock import SimClock
 
     release, names, done = threading.Event(), [], []

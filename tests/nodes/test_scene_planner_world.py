@@ -46,12 +46,14 @@ def test_finger_follows_the_sphere_path_at_its_depth():
     assert np.linalg.norm(P - c, axis=1) == pytest.approx(R - 0.001, abs=1e-6)   # p − depth·n on the sphere
     # the arc 0° → 60° toward +z in the y = 0 plane (sphere.yaml's stroke), monotone
     ang = np.degrees(np.arctan2(P[:, 2] - c[2], P[:, 0] - c[0]))
-    assert np.abs(P[:, 1]).max() < 1e-9 and ang[0] == pytest.approx(0.0, abs=1e-6) and ang[-1] == pytest.approx(60.0, abs=1e-4)
+    assert (np.abs(P[:, 1]).max() < 1e-9 and ang[0] == pytest.approx(0.0, abs=1e-6)
+            and ang[-1] == pytest.approx(60.0, abs=1e-4))
     assert np.all(np.diff(ang) >= -1e-9)
     # approach from 30 mm outside along the normal at the start
     assert np.linalg.norm(f.position(0.0) - c) == pytest.approx(R + f.approach_distance - 0.001, abs=1e-6)
     # a push presses at the path's start, to push_depth
-    push = FingerScript(scene=sc, mode="push", push_depth=0.008, tremor_rms=0.0, wander_deg=0.0, wander_axial=0.0)
+    push = FingerScript(scene=sc, mode="push", push_depth=0.008, tremor_rms=0.0, wander_deg=0.0,
+                        wander_axial=0.0)
     mid = push.t_move + push.moving_time / 2
     assert np.linalg.norm(push.position(mid) - c) == pytest.approx(R - 0.008, abs=1e-6)
     # with the human's noise the finger stays within a millimetre of the path's depth
@@ -121,11 +123,14 @@ def test_planner_node_takes_the_scene_and_its_compliance():
             st = (await h.wait_for(T.SHEET_TARGET, n=1, timeout=3.0))[0]
             # FEM stiffness for a cylinder: not this scene's, so not used
             h.inject(T.DEFORMATION, ObjectDeformation(
-                header=Header(stamp=now), vertices=np.zeros((3, 3), np.float32), faces=np.array([[0, 1, 2]], np.int32),
-                contact_force=0.1, stiffness=12.0, depth=0.001, contact_point=np.zeros(3), method="condensed"))
+                header=Header(stamp=now), vertices=np.zeros((3, 3), np.float32),
+                faces=np.array([[0, 1, 2]], np.int32),
+                contact_force=0.1, stiffness=12.0, depth=0.001, contact_point=np.zeros(3),
+                method="condensed"))
             await asyncio.sleep(0.1)
-            h.inject(T.FINGERTIP, Fingertip(header=Header(stamp=now + 0.02), position=p, covariance=np.eye(3) * 1e-8,
-                                            valid=True, predicted_position=p, exposure_stamp=now + 0.01))
+            h.inject(T.FINGERTIP,
+                     Fingertip(header=Header(stamp=now + 0.02), position=p, covariance=np.eye(3) * 1e-8,
+                               valid=True, predicted_position=p, exposure_stamp=now + 0.01))
             st2 = (await h.wait_for(T.SHEET_TARGET, n=2, timeout=3.0))[1]
             hb = h.node.heartbeat()
         return st, st2, hb
@@ -150,8 +155,10 @@ def test_planner_uses_the_fem_stiffness_on_the_paper_cylinder():
         async with NodeHarness(PlannerNode, params={"scene": str(SCENES_DIR / "cylinder.yaml")}) as h:
             now = h.node.now()
             h.inject(T.DEFORMATION, ObjectDeformation(
-                header=Header(stamp=now), vertices=np.zeros((3, 3), np.float32), faces=np.array([[0, 1, 2]], np.int32),
-                contact_force=0.1, stiffness=12.0, depth=0.001, contact_point=np.zeros(3), method="condensed"))
+                header=Header(stamp=now), vertices=np.zeros((3, 3), np.float32),
+                faces=np.array([[0, 1, 2]], np.int32),
+                contact_force=0.1, stiffness=12.0, depth=0.001, contact_point=np.zeros(3),
+                method="condensed"))
             await asyncio.sleep(0.1)
             p = np.array([0.001, 0.0, 0.0])
             h.inject(T.FINGERTIP, Fingertip(header=Header(stamp=now), position=p, covariance=np.eye(3) * 1e-8,
@@ -180,7 +187,8 @@ def test_hertz_estimate_matches_closed_forms():
     assert e.k == pytest.approx(2.0 * 20e3 / (1 - nu ** 2) * math.sqrt(r_f * 0.001), rel=1e-6)
     # below the light-touch depth the estimate takes that depth; deeper pushes are stiffer (√d)
     C = SceneCompliance(cyl)
-    assert C(q, n, 0.0) == C(q, n, 0.0005) and C(q, n, 0.008) == pytest.approx(4.0 * C(q, n, 0.0005), rel=1e-9)
+    assert (C(q, n, 0.0) == C(q, n, 0.0005)
+            and C(q, n, 0.008) == pytest.approx(4.0 * C(q, n, 0.0005), rel=1e-9))
     with pytest.raises(ValueError, match="finite"):
         C(q, n, float("nan"))
 
@@ -190,7 +198,9 @@ def test_energy_share_and_eshelby_factor():
     # a small ball far below: share ∝ cos²θ / r⁴ (Boussinesq, ν = ½) — doubling the distance: 1/16
     w1 = energy_share(q, n, 0.002, (-0.02, 0.0, 0.0), 0.002)
     w2 = energy_share(q, n, 0.002, (-0.04, 0.0, 0.0), 0.002)
-    assert w1 / w2 == pytest.approx(16.0 * ((0.04 ** 2 + 0.002 ** 2) / (0.02 ** 2 + 0.002 ** 2) / 4.0) ** 2, rel=0.02)
+    assert (w1 / w2
+            == pytest.approx(16.0 * ((0.04 ** 2 + 0.002 ** 2) / (0.02 ** 2 + 0.002 ** 2) / 4.0) ** 2,
+                             rel=0.02))
     # and at 45° off the axis: cos² = ½ of straight below at the same distance
     w45 = energy_share(q, n, 0.002, (-0.02 / math.sqrt(2), 0.02 / math.sqrt(2), 0.0), 0.002)
     assert w45 / w1 == pytest.approx(0.5, rel=0.02)
@@ -213,7 +223,7 @@ def test_organ_stiffness_along_the_path_peaks_over_the_tumour():
         est = [C.estimate(p, n, depth) for p, n in zip(P, N, strict=True)]
         k = np.array([e.k for e in est])
         contrast = k / np.array([e.k_body for e in est])
-        assert abs(int(np.argmax(k)) - i_inc) * step < 0.004, depth          # the stiffest point: over the tumour
+        assert abs(int(np.argmax(k)) - i_inc) * step < 0.004, depth  # the stiffest point: over the tumour
         assert abs(int(np.argmax(contrast)) - i_inc) * step < 0.002
         assert contrast[i_inc] > 1.05 and contrast[0] < 1.005               # 10x stiffer tumour 8.6 mm down
         assert k[i_inc] > 1.04 * np.median(k)
@@ -237,20 +247,23 @@ def test_organ_planner_normals_are_smooth_and_local_support_finds_the_contact():
 
 
 def test_organ_batched_queries_give_the_one_at_a_time_answers():
-    """The report's batched closest points and supports (``closest_many``, ``support_many``) on the organ equal
-    the per-sample queries, inside and outside, for tilted planes near the stroke."""
+    """The report's batched closest points and supports (``closest_many``, ``support_many``) on the organ
+    equal the per-sample queries, inside and outside, for tilted planes near the stroke."""
     shape = planner_shape(load_scene(ORGAN))
     rng = np.random.default_rng(7)
     P, N = load_scene(ORGAN).stroke_points(40)
     x = P + N * rng.uniform(-0.004, 0.004, (len(P), 1))
     q, n, d = shape.closest_many(x)
     one = [shape.closest(tuple(p)) for p in x]
-    assert np.abs(q - np.array([o[0] for o in one])).max() < 1e-12 and np.abs(n - np.array([o[1] for o in one])).max() < 1e-12
+    assert (np.abs(q - np.array([o[0] for o in one])).max() < 1e-12
+            and np.abs(n - np.array([o[1] for o in one])).max() < 1e-12)
     assert np.abs(d - np.array([o[2] for o in one])).max() < 1e-12 and (d < 0).any() and (d > 0).any()
     tilt = N + rng.normal(0.0, 0.08, N.shape)
     tilt /= np.linalg.norm(tilt, axis=1, keepdims=True)
     s = shape.support_many(tilt, P)
-    assert np.abs(s - np.array([shape.support(tuple(t), tuple(p)) for t, p in zip(tilt, P, strict=True)])).max() < 1e-9
+    assert (np.abs(s
+                   - np.array([shape.support(tuple(t), tuple(p)) for t,
+                               p in zip(tilt, P, strict=True)])).max() < 1e-9)
     assert np.abs(s - P).max() > 1e-3                                   # the tilted planes touch elsewhere
 
 

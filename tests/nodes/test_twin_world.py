@@ -1,6 +1,7 @@
-"""The world twin's truth: its clamps are the *true* arms' forward kinematics of the measured joints (they differ
-from the bridge model's FK under a realistic truth and equal it under the ideal one, three truth seeds), it starts
-at once for a new truth seed (nothing to build), and a true-sheet family missing a table stops it at setup."""
+"""The world twin's truth: its clamps are the *true* arms' forward kinematics of the measured joints (they
+differ from the bridge model's FK under a realistic truth and equal it under the ideal one, three truth
+seeds), it starts at once for a new truth seed (nothing to build), and a true-sheet family missing a table
+stops it at setup."""
 
 from __future__ import annotations
 
@@ -44,18 +45,21 @@ def test_true_clamps_differ_from_the_bridge_model_under_realistic_truth_and_equa
         Ti = ideal.clamp_pose(side, q[side])
         assert np.abs(Ti - fk[side]).max() < 1e-12
         d = np.linalg.norm(Tr_[:3, 3] - fk[side][:3, 3])
-        assert 0.3e-3 < d < 25e-3                                   # mm-level: base 3 mm σ, links, zero offsets
+        assert 0.3e-3 < d < 25e-3  # mm-level: base 3 mm σ, links, zero offsets
         ang = np.degrees(np.arccos(np.clip((np.trace(Tr_[:3, :3].T @ fk[side][:3, :3]) - 1) / 2, -1, 1)))
         assert 0.005 < ang < 2.0
     # the sheet they hold: off the commanded home pose under the realistic truth, exactly on it under ideal
-    o_i, n_i, _, _ = frame_from_clamps(ideal.clamp_pose("left", q["left"]), ideal.clamp_pose("right", q["right"]))
-    o_r, n_r, _, _ = frame_from_clamps(real.clamp_pose("left", q["left"]), real.clamp_pose("right", q["right"]))
+    o_i, n_i, _, _ = frame_from_clamps(ideal.clamp_pose("left", q["left"]),
+                                       ideal.clamp_pose("right", q["right"]))
+    o_r, n_r, _, _ = frame_from_clamps(real.clamp_pose("left", q["left"]),
+                                       real.clamp_pose("right", q["right"]))
     assert np.abs(o_i).max() < 1e-9 and n_i == pytest.approx([1.0, 0.0, 0.0], abs=1e-9)
     assert np.linalg.norm(o_r) > 0.3e-3
 
 
 def _state(arm: str, q: np.ndarray, pose: np.ndarray, stamp: float) -> ArmJointState:
-    return ArmJointState(header=Header(stamp=stamp), arm=arm, position=q, velocity=np.zeros(6), commanded=q, executing=q,
+    return ArmJointState(header=Header(stamp=stamp), arm=arm, position=q, velocity=np.zeros(6), commanded=q,
+                         executing=q,
                          pose=pose, status=0)
 
 
@@ -64,7 +68,8 @@ def test_world_node_publishes_the_sheet_of_the_true_kinematics(realism, tmp_path
     monkeypatch.setenv("FLEXSHEET_CACHE", str(tmp_path))
     q, fk = _home_joints_and_bridge_fk()
     truth = TwinTruth.draw(1, realism)
-    o_t, n_t, u_t, a_t = frame_from_clamps(truth.clamp_pose("left", q["left"]), truth.clamp_pose("right", q["right"]))
+    o_t, n_t, u_t, a_t = frame_from_clamps(truth.clamp_pose("left", q["left"]),
+                                           truth.clamp_pose("right", q["right"]))
     o_b, _, _, _ = frame_from_clamps(fk["left"], fk["right"])
 
     async def scenario():
@@ -77,8 +82,10 @@ def test_world_node_publishes_the_sheet_of_the_true_kinematics(realism, tmp_path
             sheet = (await h.wait_for(T.SHEET_STATE, n=1, timeout=5.0))[-1]
             # stamped when that pose was true (the joints' mean stamp), not when the world published it
             assert sheet.header.stamp == pytest.approx(t_meas + 0.002, abs=1e-6)
-            assert sheet.origin == pytest.approx(o_t, abs=1e-12) and sheet.normal == pytest.approx(n_t, abs=1e-12)
-            assert sheet.stretch == pytest.approx(2 * a_t / 0.24 - 1, abs=1e-12)     # signed: negative when slack
+            assert (sheet.origin == pytest.approx(o_t, abs=1e-12)
+                    and sheet.normal == pytest.approx(n_t, abs=1e-12))
+            # signed: negative when slack
+            assert sheet.stretch == pytest.approx(2 * a_t / 0.24 - 1, abs=1e-12)
             if realism == "ideal":
                 assert np.linalg.norm(sheet.origin - o_b) < 1e-12
             else:
@@ -110,8 +117,10 @@ def test_world_script_waits_for_the_heartbeats_of_start_after_then_starts(tmp_pa
     monkeypatch.setenv("FLEXSHEET_CACHE", str(tmp_path))
 
     async def scenario():
-        params = {"start_delay": 0.0, "start_after": ["fem", "renderer"], "rate_hz": 50.0, "sheet_rate_hz": 10.0,
-                  "script": [{"mode": "stroke", "moving_time": 2.0, "approach_time": 0.2, "hold_before": 0.0}]}
+        params = {"start_delay": 0.0, "start_after": ["fem", "renderer"], "rate_hz": 50.0,
+                  "sheet_rate_hz": 10.0,
+                  "script":
+                      [{"mode": "stroke", "moving_time": 2.0, "approach_time": 0.2, "hold_before": 0.0}]}
         async with NodeHarness(WorldNode, params=params) as h:
             await asyncio.sleep(0.8)
             h.inject(T.DIAGNOSTICS, _heartbeat("planner", h.node.now()))     # not one of start_after
@@ -137,7 +146,9 @@ def test_world_script_starts_after_start_timeout_without_the_heartbeats(tmp_path
 
     async def scenario():
         params = {"start_delay": 0.0, "start_after": ["fme"], "start_timeout": 0.5, "rate_hz": 50.0,
-                  "sheet_rate_hz": 10.0, "script": [{"mode": "stroke", "moving_time": 2.0, "approach_time": 0.2, "hold_before": 0.0}]}
+                  "sheet_rate_hz": 10.0,
+                  "script":
+                      [{"mode": "stroke", "moving_time": 2.0, "approach_time": 0.2, "hold_before": 0.0}]}
         async with NodeHarness(WorldNode, params=params) as h:
             await asyncio.sleep(0.3)
             assert h.node.t0 is None
@@ -151,8 +162,9 @@ def test_world_script_starts_after_start_timeout_without_the_heartbeats(tmp_path
 
 
 def test_world_starts_without_building_and_a_family_missing_a_table_stops_it_at_setup(monkeypatch):
-    """A new truth seed's world is ready at once (no table to build: the family is shipped); a family that lacks
-    a table is an error at setup naming the command that ships it, never a build while simulated time runs."""
+    """A new truth seed's world is ready at once (no table to build: the family is shipped); a family that
+    lacks a table is an error at setup naming the command that ships it, never a build while simulated time
+    runs."""
     import time
 
     from flexsheet.twin import truth_sheet
@@ -169,5 +181,6 @@ def test_world_starts_without_building_and_a_family_missing_a_table_stops_it_at_
     assert asyncio.run(ready()) < 10.0                                 # s, on a loaded 2-core machine
     monkeypatch.setattr(truth_sheet, "_FAMILIES", {})
     monkeypatch.setattr(truth_sheet, "node_path", lambda lay, s, folder="": f"/nonexistent/{lay}{s}.npz")
-    with pytest.raises(ConfigError, match="lacks 15 of 15 tables: build and ship them with .*truth_sheet --ship"):
+    with pytest.raises(ConfigError, match="lacks 15 of 15 tables: build and ship them with .*truth_sheet "
+                                          "--ship"):
         asyncio.run(ready())

@@ -53,7 +53,8 @@ def test_triangulator_valid_invalid_and_bad_frames():
             Lh, Rh = RENDER.render(p, visible=False)
             h.inject(topics.STEREO, _frame(Lh, Rh, 102.0, seq=10))
             out = await h.wait_for(topics.FINGERTIP, n=4, timeout=3.0)
-            assert not out[-1].valid and np.all(out[-1].position == 0) and np.all(out[-1].predicted_position == 0)
+            assert (not out[-1].valid and np.all(out[-1].position == 0)
+                    and np.all(out[-1].predicted_position == 0))
             # bad frames: wrong size, unsynchronised pair, wrong dtype (bypassing the sender's validation)
             h.inject(topics.STEREO, _frame(L[:100], R[:100], 102.1, seq=11))
             await h.settle(0.1)
@@ -62,7 +63,8 @@ def test_triangulator_valid_invalid_and_bad_frames():
             await h.settle(0.1)
             assert "stereo_skew 0.0100 s exceeds" in h.node.last_rejection
             bad = StereoFrame.model_construct(header=Header(stamp=102.3, seq=13), left=L.astype(np.uint16),
-                                              right=R.astype(np.uint16), exposure_stamp=102.3, exposure_time=0.0,
+                                              right=R.astype(np.uint16), exposure_stamp=102.3,
+                                              exposure_time=0.0,
                                               stereo_skew=0.0)
             h.transport.deliver(encode(topics.STEREO.name, bad))
             await h.settle(0.1)
@@ -110,7 +112,8 @@ def test_camera_node_sim_follows_finger_truth():
             n0 = len(h.messages(topics.STEREO))
             frames = await h.wait_for(topics.STEREO, n=n0 + 2, timeout=3.0)
             f = frames[-1]
-            assert f.left.shape == (512, 640) and f.header.stamp >= f.exposure_stamp  # published after exposure
+            # published after exposure
+            assert f.left.shape == (512, 640) and f.header.stamp >= f.exposure_stamp
             from flexsheet.vision.tracker import FingertipTracker
             res = FingertipTracker(cal).process(f.left, f.right, f.exposure_stamp)
             assert res.valid and np.linalg.norm(res.position - p) < 2e-3
@@ -140,7 +143,8 @@ def test_camera_node_holds_a_stale_finger_truth_and_never_returns_to_the_param_p
             cal = (await h.wait_for(topics.CALIBRATION, n=1, timeout=3.0))[0]
             # 15 mm to the side of the param path's plane (y = 0): never within 5 mm of it, whenever the frame
             p, v = np.array([-0.010, 0.015, 0.024]), np.array([-0.02, 0.0, 0.03])
-            h.inject(topics.FINGER_TRUTH, FingerTruth(header=Header(stamp=h.node.now()), position=p, velocity=v))
+            h.inject(topics.FINGER_TRUTH,
+                     FingerTruth(header=Header(stamp=h.node.now()), position=p, velocity=v))
             await h.settle(1.0)
             n0 = len(h.messages(topics.STEREO))
             f = (await h.wait_for(topics.STEREO, n=n0 + 2, timeout=3.0))[-1]
@@ -160,7 +164,8 @@ def test_camera_node_holds_a_stale_finger_truth_and_never_returns_to_the_param_p
 
 def test_camera_node_falls_back_to_trajectory_bumblebee2():
     async def scenario():
-        async with NodeHarness(CameraNode, params={"model": "bumblebee2", "rate_hz": 50.0, "twin": IDEAL}) as h:
+        async with NodeHarness(CameraNode,
+                               params={"model": "bumblebee2", "rate_hz": 50.0, "twin": IDEAL}) as h:
             cal = (await h.wait_for(topics.CALIBRATION, n=1, timeout=3.0))[0]
             assert tuple(cal.image_size) == (640, 480) and abs(cal.K1[0, 0] - 513.5) < 0.1
             assert abs(np.linalg.norm(cal.T) - 0.12) < 1e-9
@@ -174,8 +179,8 @@ def test_camera_node_falls_back_to_trajectory_bumblebee2():
 
 
 def test_camera_link_delay_needs_the_simulated_clock():
-    """link_delay_s (the stability sweep's delay) is charged on the simulated clock only; on the wall clock the
-    camera twin refuses it at set-up, naming it, and a negative one is refused by the params."""
+    """link_delay_s (the stability sweep's delay) is charged on the simulated clock only; on the wall clock
+    the camera twin refuses it at set-up, naming it, and a negative one is refused by the params."""
     import pydantic
     import pytest
 
@@ -185,7 +190,8 @@ def test_camera_link_delay_needs_the_simulated_clock():
         async with NodeHarness(CameraNode, params={"rate_hz": 50.0, "twin": IDEAL, "link_delay_s": 0.05}):
             pass
 
-    with pytest.raises((ValueError, ConfigError), match="link_delay_s 0.05 is the camera twin.s on the simulated clock"):
+    with pytest.raises((ValueError, ConfigError), match="link_delay_s 0.05 is the camera twin.s on the "
+                                                        "simulated clock"):
         asyncio.run(scenario())
     with pytest.raises(pydantic.ValidationError, match="link_delay_s"):
         CameraNode.Params.model_validate({"link_delay_s": -0.01})

@@ -1,7 +1,7 @@
 """The live view as the viewers' own code sees it: the official ``@foxglove/ws-protocol`` client (what
 Lichtblick uses), offering one subprotocol name at a time, decodes every advertised channel with
-``@mcap/support``'s channel parser (tests/js/foxglove_client.mjs; its packages come from tests/js/package.json,
-installed by docker/install.sh)."""
+``@mcap/support``'s channel parser (tests/js/foxglove_client.mjs; its packages come from
+tests/js/package.json, installed by docker/install.sh)."""
 
 from __future__ import annotations
 

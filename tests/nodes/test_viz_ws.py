@@ -24,7 +24,8 @@ from nodes.viz.node import VizNode
 
 
 def _inject_all(h: NodeHarness, state: dict) -> None:
-    """Deliver the sample state; the camera pair arrives as the camera publishes it for viewers (the preview)."""
+    """Deliver the sample state; the camera pair arrives as the camera publishes it for viewers (the
+    preview)."""
     for name, msg in state.items():
         h.inject(T.STEREO_PREVIEW if name == T.STEREO.name else T.BY_NAME[name], msg)
 
@@ -44,7 +45,8 @@ def test_client_sees_channels_and_decodes_scene_fingertip_and_frames():
             assert names["/render/image"] == ("foxglove.RawImage", "protobuf")
             assert names["/fingertip"] == ("flexsheet/Fingertip", "json")
             assert names["/viz/metrics"][1] == "json"
-            for t in ("/sheet/target", "/arm/left/joint_state", "/arm/right/joint_state", "/object/deformation",
+            for t in ("/sheet/target", "/arm/left/joint_state", "/arm/right/joint_state",
+                      "/object/deformation",
                       "/diagnostics"):
                 assert c.channels[t]["schemaEncoding"] == "jsonschema", t
             assert "properties" in json.loads(c.channels["/fingertip"]["schema"])
@@ -67,7 +69,8 @@ def test_client_sees_channels_and_decodes_scene_fingertip_and_frames():
     assert rejected == 0
     su = c.decode("/viz/scene", got["/viz/scene"][-1])
     ents = {e.id: e for e in su.entities}
-    assert {"object", "sheet", "sheet_true", "fingertip", "contact", "projector", "eyes", "cameras", "arm_left",
+    assert {"object", "sheet", "sheet_true", "fingertip", "contact", "projector", "eyes", "cameras",
+            "arm_left",
             "arm_right"} <= set(ents)
     # the object's mesh is the deformation's vertices and faces, unchanged
     d = state["/object/deformation"]
@@ -87,7 +90,8 @@ def test_client_sees_channels_and_decodes_scene_fingertip_and_frames():
     # /fingertip JSON carries the numbers
     j = c.decode("/fingertip", got["/fingertip"][-1])
     assert np.allclose(j["position"], tip) and j["valid"] is True
-    # frames: chaining the left arm's URDF links from display gives the clamp holding the home sheet's left edge
+    # frames: chaining the left arm's URDF links from display
+    # gives the clamp holding the home sheet's left edge
     tf = c.decode("/viz/tf", got["/viz/tf"][-1])
     by_child = {t.child_frame_id: t for t in tf.transforms}
     from scipy.spatial.transform import Rotation
@@ -147,8 +151,10 @@ def test_slow_viewer_loses_old_frames_and_never_blocks_the_node():
     n_sent, period = 200, 0.01
 
     async def scenario():
-        async with NodeHarness(VizNode, params={"port": port, "camera_rate": 100.0, "poll_rate": 200.0, "input_rate": 500.0,
-                                                 "backlog": 16}) as h:
+        async with NodeHarness(VizNode,
+                               params={"port": port, "camera_rate": 100.0, "poll_rate": 200.0,
+                                       "input_rate": 500.0,
+                                       "backlog": 16}) as h:
             c = await FoxgloveClient.open(port)
             await c.wait_channels({"/camera/left"})
             await c.subscribe(["/camera/left"])
@@ -156,13 +162,14 @@ def test_slow_viewer_loses_old_frames_and_never_blocks_the_node():
             t0 = time.monotonic()
             for i in range(n_sent):          # the client reads nothing meanwhile
                 fr = state["/camera/stereo"]
-                h.inject(T.STEREO_PREVIEW, fr.model_copy(update={"header": fr.header.model_copy(update={"seq": i})}))
+                h.inject(T.STEREO_PREVIEW,
+                         fr.model_copy(update={"header": fr.header.model_copy(update={"seq": i})}))
                 await asyncio.sleep(period)
             elapsed = time.monotonic() - t0
             await h.settle(0.3)
             sent = h.node.streams.built.get("/camera/left", 0)
             received = 0
-            deadline = time.monotonic() + 0.5     # until 0.5 s pass without a frame (server times do not count)
+            deadline = time.monotonic() + 0.5  # until 0.5 s pass without a frame (server times do not count)
             try:
                 while True:
                     m = await c._recv(deadline)
@@ -178,13 +185,15 @@ def test_slow_viewer_loses_old_frames_and_never_blocks_the_node():
     print(f"built {sent}, received {received}, {elapsed:.2f} s")
     assert sent > 0.5 * n_sent, sent                       # the node kept building at the input rate
     assert elapsed < n_sent * period * 1.5 + 1.0                  # ... and was never held up by the viewer
-    # old frames were dropped for the slow viewer: a server that queued all would deliver all 200; the kernel's
-    # autotuned socket buffers hold a load-dependent share (100 of 200 seen on a loaded 2-core machine)
+    # old frames were dropped for the slow viewer: a server that queued all
+    # would deliver all 200; the kernel's autotuned socket buffers hold a
+    # load-dependent share (100 of 200 seen on a loaded 2-core machine)
     assert received < 0.8 * sent, (received, sent)
 
 
 @pytest.mark.parametrize("params, field", [({"port": 70000}, "port"), ({"camera_scale": 0.0}, "camera_scale"),
-                                           ({"eye": [0.0, 0.0]}, "eye"), ({"left_base": [0, 0, 0]}, "left_base")])
+                                           ({"eye": [0.0, 0.0]}, "eye"),
+                                           ({"left_base": [0, 0, 0]}, "left_base")])
 def test_bad_params_name_the_field(params, field):
     with pytest.raises(ValueError, match=field):
         VizNode.Params.model_validate(params)

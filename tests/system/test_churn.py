@@ -1,12 +1,12 @@
 """A graph stays up while short-lived clients connect and leave (slow tier, loopback only, bounded).
 
-One node process (the graph: a publisher at 500 Hz with its service socket, ``PYTHONFAULTHANDLER=1``) runs
-for :data:`SECONDS` s while :data:`CLIENTS` client processes at a time, all pinned to core 0 with the graph
-(``taskset -c 0``: a busy core, as the crash reports had), each connect a SUB socket, subscribe (the topic and a
-prefix of their own, so each departure reaches the publisher as an unsubscription), read for ~20 ms, call the
-node's ``list`` service once and leave: ``close(linger=0)``, or SIGKILL at random. Half the runs are CURVE.
-The graph must end by itself with exit 0: a death by a signal (libzmq's I/O-thread crash, zeromq/libzmq#4524)
-or no clean exit by the deadline fails.
+One node process (the graph: a publisher at 500 Hz with its service socket, ``PYTHONFAULTHANDLER=1``) runs for
+:data:`SECONDS` s while :data:`CLIENTS` client processes at a time, all pinned to core 0 with the graph
+(``taskset -c 0``: a busy core, as the crash reports had), each connect a SUB socket, subscribe (the topic and
+a prefix of their own, so each departure reaches the publisher as an unsubscription), read for ~20 ms, call
+the node's ``list`` service once and leave: ``close(linger=0)``, or SIGKILL at random. Half the runs are
+CURVE. The graph must end by itself with exit 0: a death by a signal (libzmq's I/O-thread crash,
+zeromq/libzmq#4524) or no clean exit by the deadline fails.
 
 The positive control (:func:`test_the_churn_crashes_a_graph_that_changes_its_hwm_on_the_live_socket`) turns
 on a switch in the graph script only: after each departure it changes ``SNDHWM`` on the live XPUB socket,
@@ -85,7 +85,7 @@ async def main():
     print(json.dumps({"clean_exit": True}), flush=True)
 
 asyncio.run(main())
-'''
+'''  # noqa: E501 - a table, template or command line kept whole
 
 CLIENT = r'''
 import json, os, random, signal, sys, time
@@ -123,7 +123,8 @@ def _keys() -> dict:
             "client_secret": cs.decode()}
 
 
-def churn(tmp_path: Path, curve: bool, live_hwm: bool, seconds: float = SECONDS, clients: int = CLIENTS) -> dict:
+def churn(tmp_path: Path, curve: bool, live_hwm: bool, seconds: float = SECONDS,
+          clients: int = CLIENTS) -> dict:
     """Run the graph under churn; returns its exit code (negative: the signal that killed it), the cycles of
     clients run, whether it printed its clean exit, and its stderr's last lines."""
     (tmp_path / "graph.py").write_text(GRAPH)
@@ -149,7 +150,8 @@ def churn(tmp_path: Path, curve: bool, live_hwm: bool, seconds: float = SECONDS,
         while graph.poll() is None and time.monotonic() < deadline:
             alive = [c for c in alive if c.poll() is None]
             while len(alive) < clients and graph.poll() is None:
-                alive.append(subprocess.Popen(pin + [sys.executable, str(tmp_path / "client.py"), ep, service],
+                alive.append(subprocess.Popen(pin
+                                              + [sys.executable, str(tmp_path / "client.py"), ep, service],
                                               env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
                 cycles += 1
             time.sleep(0.005 + 0.01 * rng.random())

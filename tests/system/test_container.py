@@ -1,6 +1,7 @@
 """Composable containers: objects between nodes of one process (read-only arrays, no encode unless someone
 outside asks), QoS in a container, crash containment and restart by policy, and the launch-file path
-(``container:`` → one process; ``flexsheet node list`` shows it; the supervisor restarts a killed container)."""
+(``container:`` → one process; ``flexsheet node list`` shows it; the supervisor restarts a killed
+container)."""
 
 from __future__ import annotations
 
@@ -67,7 +68,8 @@ class Sub(Node):
 
 
 def _make(cls, bus: Bus, name: str, endpoint: str = "", **attrs) -> Node:
-    node = cls(NodeConfig(name=name, endpoint=endpoint, heartbeat_period=0.2), transport=ContainerTransport(bus, endpoint))
+    node = cls(NodeConfig(name=name, endpoint=endpoint, heartbeat_period=0.2),
+               transport=ContainerTransport(bus, endpoint))
     for k, v in attrs.items():
         setattr(node, k, v)
     return node
@@ -130,7 +132,7 @@ def test_in_process_message_is_the_object_itself_with_read_only_arrays_and_never
         a.got[0].position[0] = 1.0
     assert own.flags.writeable and np.shares_memory(own, a.got[0].position)
     assert all(t.startswith("sub/fingertip@a") for t in a.threads)                  # sync handler: its worker
-    assert [t for t in calls if t != T.DIAGNOSTICS.name] == []                      # nobody outside: no encode
+    assert [t for t in calls if t != T.DIAGNOSTICS.name] == []  # nobody outside: no encode
 
 
 def test_encoded_once_only_while_someone_outside_subscribes(monkeypatch):
@@ -158,7 +160,8 @@ def test_encoded_once_only_while_someone_outside_subscribes(monkeypatch):
             pub.tip.publish(tip(i))
         got = []
         while len(got) < 3:
-            assert await asyncio.get_running_loop().run_in_executor(None, sub.poll, 3000), "nothing on the wire"
+            assert await asyncio.get_running_loop().run_in_executor(None, sub.poll, 3000), ("nothing on the "
+                                                                                            "wire")
             got.append(sub.recv_multipart())
         sub.close(0)
         ctx.term()
@@ -263,13 +266,15 @@ def test_a_crashing_node_is_restarted_alone_and_its_neighbours_keep_their_state(
     assert bad.codes == [EXIT_CONFIG] and bad.restarts == 0
     assert any("bad: configuration error" in line and "gain" in line for line in lines)
     assert any("crasher: restarting" in line for line in lines)
-    assert code == 1 and any("failed during the run: crasher, bad" in line for line in lines)   # the launch knows
+    # the launch knows
+    assert code == 1 and any("failed during the run: crasher, bad" in line for line in lines)
 
 
 # ---------------------------------------------------------------------------------------------- launch file
 class Launch:
     def __init__(self, *args: str) -> None:
-        self.proc = subprocess.Popen([sys.executable, "-m", "flexsheet", "launch", *args], stdout=subprocess.PIPE,
+        self.proc = subprocess.Popen([sys.executable, "-m", "flexsheet", "launch", *args],
+                                     stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, text=True, start_new_session=True)
         self.lines: list[str] = []
         self._t = threading.Thread(target=self._read, daemon=True)
@@ -322,7 +327,7 @@ nodes:
         assert "container=pair" in rows["listener"] and f"pid={pid}" in rows["listener"], res.stdout
         assert "container=-" in rows["outside"] and f"pid={pid}" not in rows["outside"], res.stdout
         last = max(int(m.group(1)) for m in lf.wait_for(r"\[outside\s*\] heard seq=(\d+)", count=30))
-        os.kill(pid, signal.SIGKILL)                                 # what a segfault does to the whole process
+        os.kill(pid, signal.SIGKILL)  # what a segfault does to the whole process
         lf.wait_for(r"\[pair\s*\] respawning")
         new = int(lf.wait_for(r"\[pair\s*\] started pid (\d+)", count=2)[1].group(1))
         assert new != pid
@@ -334,11 +339,13 @@ nodes:
             time.sleep(0.05)
     finally:
         code = lf.stop()
-    assert code == 1 and any(ln.endswith("failed during the run: pair (exit -9)") for ln in lf.lines)   # the kill
+    # the kill
+    assert code == 1 and any(ln.endswith("failed during the run: pair (exit -9)") for ln in lf.lines)
     time.sleep(0.2)
     assert not pid_alive(new)
     cpu = __import__("json").loads((out / "cpu.json").read_text())
     assert set(cpu["nodes"]) == {"talker", "listener", "outside"}
-    assert cpu["processes"]["pair"]["nodes"] == ["talker", "listener"] and cpu["processes"]["pair"]["cpu_s"] > 0
+    assert (cpu["processes"]["pair"]["nodes"] == ["talker", "listener"]
+            and cpu["processes"]["pair"]["cpu_s"] > 0)
     assert cpu["nodes"]["talker"]["process"] == "pair" and cpu["nodes"]["outside"]["cpu_s"] > 0
 

@@ -23,7 +23,8 @@ def test_two_graphs_of_one_file_run_side_by_side_and_tools_see_their_own_domain(
     env = {k: v for k, v in os.environ.items() if k != DOMAIN_ENV}
     env["FLEXSHEET_GRAPH_DIR"] = str(tmp_path / "graph")         # this test's discovery only
     procs = {d: subprocess.Popen([sys.executable, "-m", "flexsheet", "launch", str(path), "--domain", str(d),
-                                  "--duration", "20"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                  "--duration", "20"], env=env, stdout=subprocess.PIPE,
+                                 stderr=subprocess.STDOUT,
                                  text=True) for d in (3, 4)}
     try:
         seen: dict[int, list] = {}

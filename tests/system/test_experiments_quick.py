@@ -1,7 +1,7 @@
-"""The experiments that launch the graph, in their quick modes: ``flexsheet experiment determinism --quick`` (two
-simulated-clock runs, byte-identical on every recorded topic), ``flexsheet experiment latency_load --quick`` (one
-wall-clock run with no busy core: the loop's two chain ends measured from the bag) and ``flexsheet experiment
-stroke --quick`` (Table I's 10 s row on the graph)."""
+"""The experiments that launch the graph, in their quick modes: ``flexsheet experiment determinism --quick``
+(two simulated-clock runs, byte-identical on every recorded topic),
+``flexsheet experiment latency_load --quick`` (one wall-clock run with no busy core: the loop's two chain ends
+measured from the bag) and ``flexsheet experiment stroke --quick`` (Table I's 10 s row on the graph)."""
 
 from __future__ import annotations
 
@@ -46,9 +46,9 @@ def test_latency_load_quick_measures_both_chain_ends(tmp_path):
 
 
 def test_stroke_quick_judges_the_10s_row_on_the_graph(tmp_path):
-    """``flexsheet experiment stroke --quick``: truth seed 0, the 10 s stroke alone on the simulated-clock graph;
-    only that row is judged. The felt Δθ meets its target; the paper's way of measuring (measured finger against
-    the believed sheet) does not, so the command exits 1 as the full run does."""
+    """``flexsheet experiment stroke --quick``: truth seed 0, the 10 s stroke alone on the simulated-clock
+    graph; only that row is judged. The felt Δθ meets its target; the paper's way of measuring (measured
+    finger against the believed sheet) does not, so the command exits 1 as the full run does."""
     from flexsheet.experiments.stroke import main
 
     assert main(["--quick", "--out", str(tmp_path)]) == 1

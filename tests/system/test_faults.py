@@ -1,5 +1,6 @@
-"""Faults in the full simulated graph: ``kill -9`` of every node but the world, one after
-another, while the paper's stroke runs (``launch/sim_composed.yaml``, the wall-clock graph of processes, through ``flexsheet launch``).
+"""Faults in the full simulated graph: ``kill -9`` of every node but the world, one after another, while the
+paper's stroke runs (``launch/sim_composed.yaml``, the wall-clock graph of processes, through ``flexsheet
+launch``).
 
 What must hold:
 
@@ -53,7 +54,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]   # the faulted run an
 
 #: kill order, in groups killed together (nodes of different chains): the recorder first (see module doc),
 #: the slow-to-start FEM solver with the renderer and camera, the triangulator, the planner, then one arm's
-#: bridge with the other's controller twin, and the other way round. The world is required (its exit ends the run).
+#: bridge with the other's controller twin, and the other
+#: way round. The world is required (its exit ends the run).
 KILL_GROUPS = [["recorder"], ["fem", "renderer", "camera"], ["triangulator"], ["planner"],
                ["arm_left", "ctrl_right"], ["ctrl_left", "arm_right"]]
 KILL_ORDER = [n for g in KILL_GROUPS for n in g]
@@ -71,12 +73,13 @@ PUBLISHES = {
     "world": ["/world/finger", "/world/sheet", "/world/contact", "/world/head"],
     "head_camera": ["/eye/pose"],
 }
-#: a 120 s stroke the kills start in, then the paper's two stroking speeds (Table I rows 30 s and 10 s): ~170 s
-#: of script, so that it outlasts the kill schedule, whose length depends on the machine: the kills once took
-#: 27 s, > 46 s on a slower day, and > 94 s on a quiet 2-core machine with the two-arm motion (each respawn waits
-#: for its node to be "up"); every shorter script ended before the last kill on some machine. The 10 s stroke after
-#: them shows the graph recovered. The FEM's precompute is cached before the launch (conftest.sim_fem_cache): a
-#: cold FEM start inside the graph took > 60 s on a fresh machine and the FEM was not up for its kill.
+#: a 120 s stroke the kills start in, then the paper's two stroking speeds (Table I rows 30 s and
+#: 10 s): ~170 s of script, so that it outlasts the kill schedule, whose length depends on the
+#: machine: the kills once took 27 s, > 46 s on a slower day, and > 94 s on a quiet 2-core
+#: machine with the two-arm motion (each respawn waits for its node to be "up"); every shorter
+#: script ended before the last kill on some machine. The 10 s stroke after them shows the graph
+#: recovered. The FEM's precompute is cached before the launch (conftest.sim_fem_cache): a cold
+#: FEM start inside the graph took > 60 s on a fresh machine and the FEM was not up for its kill.
 SCRIPT = ("world.script=[{mode: stroke, moving_time: 120, seed: 2}, {mode: stroke, moving_time: 30}, "
           "{mode: stroke, moving_time: 10, seed: 1}]")
 SETTLE = 1.5              # s after a respawn (or, for WAIT_UP nodes, after "up") before the next kill
@@ -85,7 +88,8 @@ SETTLE = 1.5              # s after a respawn (or, for WAIT_UP nodes, after "up"
 #: of three had the FEM killed before the respawned recorder received /object/deformation (no restart seen)
 SETTLE_AFTER = {"recorder": 5.0}
 #: the launcher's wait before each respawn, per node (s), from the launch file the scenario runs
-RESPAWN_DELAY = {name: spec.respawn.delay for name, spec in load_launch(ROOT / "launch" / "sim_composed.yaml").nodes.items()}
+RESPAWN_DELAY = {name: spec.respawn.delay for name,
+                 spec in load_launch(ROOT / "launch" / "sim_composed.yaml").nodes.items()}
 STEP_TOLERANCE = 1.5      # the controller twin's own refusal threshold: qd_max · period · 1.5
 
 
@@ -158,7 +162,8 @@ def run_scenario(out: Path, cut_copy: Path) -> dict:
     The nodes of a group die together once all are up; the next group follows ``SETTLE`` s after the
     launcher restarted them (and, for the arm chain, after they are up again)."""
     # kill -9 is about one node = one process: no composable containers here
-    lf = private_ports(ROOT / "launch" / "sim_composed.yaml", out.parent / f"{out.name}_sim.yaml", split_containers=True)
+    lf = private_ports(ROOT / "launch" / "sim_composed.yaml", out.parent / f"{out.name}_sim.yaml",
+                       split_containers=True)
     launch = Launch(lf, out, "--set", SCRIPT)
     kills = []
     try:
@@ -175,7 +180,8 @@ def run_scenario(out: Path, cut_copy: Path) -> dict:
                 try:
                     os.kill(pid, signal.SIGKILL)
                 except ProcessLookupError:
-                    raise AssertionError(f"{name} (pid {pid}) died before its kill:\n" + launch.tail()) from None
+                    raise AssertionError(f"{name} (pid {pid}) died before its kill:\n"
+                                         + launch.tail()) from None
                 if name == "recorder":
                     shutil.copyfile(out / "sim.mcap", cut_copy)
                 kills.append({"node": name, "old_pid": pid, "t_kill": t_kill})
@@ -244,11 +250,13 @@ def faults(tmp_path_factory, sim_fem_cache):
 
 def test_every_killed_node_is_respawned_and_the_run_finishes(faults):
     out, _, run = faults
-    why = [ln for ln in run["lines"] if re.search(r"exited with code|failed during|Traceback|Error|escalating", ln)]
+    why = [ln for ln in run["lines"] if re.search(r"exited with code|failed "
+                                                  r"during|Traceback|Error|escalating", ln)]
     # a launch in which nodes failed exits 1, naming them: the kills, and nothing else
     failed = [ln for ln in run["lines"] if "failed during the run" in ln]
     assert run["code"] == 1 and len(failed) == 1, "\n".join(why[-40:] + ["..."] + run["lines"][-60:])
-    assert sorted(part.split(" (")[0] for part in failed[0].split(": ", 1)[1].split("), ")) == sorted(KILL_ORDER), \
+    assert (sorted(part.split(" (")[0] for part in failed[0].split(": ", 1)[1].split("), "))
+            == sorted(KILL_ORDER)), \
         failed
     assert [k["node"] for k in run["kills"]] == KILL_ORDER
     for k in run["kills"]:
@@ -273,7 +281,8 @@ def test_the_recording_loses_only_the_dead_nodes_own_messages(faults):
         # no message lost on the wire in any publisher incarnation (the recorder's own count agrees)
         assert t["wire_lost"] == 0, (topic, t)
         assert info.dropped.get(topic, 0) == 0, (topic, info.dropped)
-        if topic in ("/camera/calibration", "/object/force_depth"):   # latched: resent to every (re)joining subscriber
+        # latched: resent to every (re)joining subscriber
+        if topic in ("/camera/calibration", "/object/force_depth"):
             continue
         owner = next(n for n, ts in PUBLISHES.items() if topic in ts)
         if owner in killed:
@@ -281,9 +290,9 @@ def test_the_recording_loses_only_the_dead_nodes_own_messages(faults):
             assert len(t["restarts"]) == 1, (topic, t["restarts"])
             a, b = t["restarts"][0]
             # the stream stopped at the kill (a is the recorder's receive time of the last message sent before
-            # it: 0.077 s after the kill was seen at load 9 on the 2 cores, so 0.15 s) and stayed down at least
-            # the launcher's respawn delay: a and b are both the recorder's clock. (Bounding b by the
-            # launcher's "started pid" line failed in CI: the test read that line 0.27 s after the new
+            # it: 0.077 s after the kill was seen at load 9 on the 2 cores, so 0.15 s) and stayed down at
+            # least the launcher's respawn delay: a and b are both the recorder's clock. (Bounding b by
+            # the launcher's "started pid" line failed in CI: the test read that line 0.27 s after the new
             # incarnation's first message had been recorded; the test reads the launcher's output late.)
             assert a <= k["t_kill"] + 0.15, (topic, a, k)
             assert b - a >= RESPAWN_DELAY[owner], (topic, a, b, RESPAWN_DELAY[owner])
@@ -328,7 +337,8 @@ def test_the_arms_hold_and_never_jump(faults):
                 # consecutive cycles: no commanded step beyond the controller's own step check; except into a
                 # cycle where the controller faulted (e.g. its watchdog, after a late cycle under load): the
                 # bridge then reseeds its command to the measured joints (flexsheet/arm/stream.py,
-                # Verdict.reseed), which lag the last command by the servo's tracking error, not a motion (seen
+                # Verdict.reseed), which lag the last command by
+                # the servo's tracking error, not a motion (seen
                 # once: 0.039 rad on J6 at a fault:watchdog cycle, 3.0x the step limit); the step out of the
                 # fault is checked
                 if not cur[4].startswith("fault:"):
@@ -341,7 +351,8 @@ def test_the_arms_hold_and_never_jump(faults):
                 assert np.all(moved <= (cur[1] + 2) * STEP_TOLERANCE * limit + 5e-3), (arm, moved, cur[1])
             # every command starts where the arm is after any gap (no jump toward a stale goal)
             if cur[1] != prev[1] + 1 or cur[0] - prev[0] >= 0.5:
-                assert np.all(np.abs(cur[2] - cur[3]) <= (cur[1] + 2) * STEP_TOLERANCE * limit + 5e-3), (arm, cur[0])
+                assert np.all(np.abs(cur[2] - cur[3]) <= (cur[1] + 2) * STEP_TOLERANCE * limit
+                              + 5e-3), (arm, cur[0])
         assert n_reset == 1, (arm, n_reset)
 
 

@@ -36,14 +36,16 @@ LAB_KEYGEN = ["keys", "generate", "--launch", "launch/lab.yaml"]
 
 
 def flexsheet(*args: str, env: dict | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "flexsheet", *args], capture_output=True, text=True, cwd=ROOT,
+    return subprocess.run([sys.executable, "-m", "flexsheet", *args], capture_output=True, text=True,
+                          cwd=ROOT,
                           env={**os.environ, **(env or {})}, timeout=timeout)
 
 
 @pytest.fixture
 def keys(tmp_path, monkeypatch) -> Path:
-    """``$FLEXSHEET_KEYS`` = a fresh folder, filled by ``flexsheet keys generate --launch launch/lab.yaml`` and
-    ``--launch launch/lab_sim.yaml`` (both run CURVE; one public_keys.yaml holds both files' identities)."""
+    """``$FLEXSHEET_KEYS`` = a fresh folder, filled by ``flexsheet keys generate --launch launch/lab.yaml``
+    and ``--launch launch/lab_sim.yaml`` (both run CURVE; one public_keys.yaml holds both files'
+    identities)."""
     folder = tmp_path / "keys"
     monkeypatch.setenv("FLEXSHEET_KEYS", str(folder))
     for keygen in (LAB_KEYGEN, ["keys", "generate", "--launch", "launch/lab_sim.yaml"]):
@@ -67,15 +69,16 @@ def _tiny_bag(path: Path) -> Path:
 
 
 def _here(errors: list[str], path: Path) -> list[str]:
-    """``errors`` less the one "not an address of this machine" line of each host of ``path`` whose address this
-    machine lacks (the lab's 10.77.0.x); asserts that each such host got that line."""
+    """``errors`` less the one "not an address of this machine" line of each host of ``path`` whose address
+    this machine lacks (the lab's 10.77.0.x); asserts that each such host got that line."""
     from flexsheet.runtime.machine_checks import not_local
 
     lf = load_launch(path)
     absent = {h: s.address for h, s in lf.hosts.items() if not_local(s.address)}
     out = []
     for e in errors:
-        host = next((h for h, a in absent.items() if f"hosts.{h}.address = '{a}': not an address of this machine"
+        host = next((h for h, a in absent.items() if f"hosts.{h}.address = '{a}': not an address of this "
+                                                     "machine"
                      in e), None)
         if host is None:
             out.append(e)
@@ -106,7 +109,8 @@ def test_lab_is_secure_by_default_and_check_without_keys_names_the_command(tmp_p
     assert len(key_lines) == 1, r.stderr
     assert "flexsheet keys generate --launch launch/lab.yaml" in key_lines[0]
     assert str(tmp_path / "nokeys") in key_lines[0]
-    # one node's secret missing (the arm PC got only public_keys.yaml and its host key): names it and the command
+    # one node's secret missing (the arm PC got only
+    # public_keys.yaml and its host key): names it and the command
     flexsheet(*LAB_KEYGEN, env={"FLEXSHEET_KEYS": str(tmp_path / "k")})
     (tmp_path / "k" / "arm_right.key_secret").unlink()
     res = _check_env(ROOT / "launch" / "lab.yaml", "arm2", tmp_path / "k")
@@ -121,7 +125,8 @@ def test_a_host_whose_address_this_machine_lacks_fails_the_check_and_names_it(ke
     (it printed OK, then the launch failed 63 times to bind); the same file with main on 127.0.0.1 passes."""
     r = flexsheet("launch", "launch/lab.yaml", "--check", "--host", "main")
     assert r.returncode == EXIT_CONFIG, r.stdout + r.stderr
-    lines = [ln for ln in r.stderr.splitlines() if "hosts.main.address = '10.77.0.1': not an address of this machine"
+    lines = [ln for ln in r.stderr.splitlines() if "hosts.main.address = '10.77.0.1': not an address of this "
+                                                   "machine"
              in ln]
     assert len(lines) == 1, r.stderr
     doc = yaml.safe_load((ROOT / "launch" / "lab.yaml").read_text())
@@ -171,20 +176,24 @@ def _mutate(doc: dict, dotted: str, value) -> dict:
 
 @pytest.mark.parametrize("dotted, value, expect", [
     ("nodes.talker.params.rate", -3, r"node talker: params\.rate = -3: Input should be greater than 0"),
-    ("nodes.talker.params.colour", "red", r"node talker: params\.colour = 'red': not a parameter of node type "
-                                          r"talker \(its params: rate, count, start_delay, worker_s, exit_lines\)"),
-    ("nodes.talker.params", {"co\nlour": 1}, r"node talker: params\.co\\nlour = 1: not a parameter of node type talker"),
-    ("nodes.ctrl.params.port", 21003, r"node ctrl: params\.port = 21003: port 21003 on host arm1 is already used by "
-                                      r"node rec's publisher"),
-    ("hosts.arm1.address", "not_a host!", r"hosts\.arm1\.address = 'not_a host!': not an IP address or a host name"),
+    ("nodes.talker.params.colour", "red", r"node talker: params\.colour = 'red': not a parameter of node "
+                                          r"type talker \(its params: rate, count, start_delay, worker_s, "
+                                          r"exit_lines\)"),
+    ("nodes.talker.params", {"co\nlour": 1}, r"node talker: params\.co\\nlour = 1: not a parameter of node "
+                                             r"type talker"),
+    ("nodes.ctrl.params.port", 21003, r"node ctrl: params\.port = 21003: port 21003 on host arm1 is already "
+                                      r"used by node rec's publisher"),
+    ("hosts.arm1.address", "not_a host!", r"hosts\.arm1\.address = 'not_a host!': not an IP address or a "
+                                          r"host name"),
     ("hosts.arm1.address", "0.0.0.0", r"hosts\.arm1\.address = '0\.0\.0\.0': the unspecified address"),
     ("hosts.arm1.address", "nosuchhost-flexsheet.invalid", r"does not resolve on this machine"),
     ("nodes.ctrl.params.host", "bad host!", r"node ctrl: params\.host = 'bad host!': not an IP address"),
     ("nodes.talker", {"type": "player", "host": "main"}, r"node talker: params\.file: required, not given"),
     ("report", "flexsheet.nosuch:main", r"report = 'flexsheet\.nosuch:main': no such 'module:function'"),
     ("display_calib", "$(launch_dir)/display.yaml", r"display_calib = '.*/display\.yaml': no such file"),
-    ("nodes.rec.params.output", "$(launch_dir)/chk.yaml/x.mcap", r"node rec: params\.output = '.*/chk\.yaml/x\.mcap': "
-                                                               r"cannot write here: .*chk\.yaml is not a folder"),
+    ("nodes.rec.params.output", "$(launch_dir)/chk.yaml/x.mcap", r"node rec: params\.output = "
+                                                               r"'.*/chk\.yaml/x\.mcap': cannot write here: "
+                                                               r".*chk\.yaml is not a folder"),
 ])
 def test_each_problem_is_one_line_naming_node_key_and_value(tmp_path, dotted, value, expect):
     path = tmp_path / "chk.yaml"
@@ -221,11 +230,13 @@ def test_display_calib_present_but_unreadable_is_one_clear_line(tmp_path):
     module's loader (or says the loader is not available)."""
     (tmp_path / "display.yaml").write_text("%YAML:1.0\n---\nnothing: here\n")
     path = tmp_path / "chk.yaml"
-    path.write_text(yaml.safe_dump(_mutate(BASE, "display_calib", "$(launch_dir)/display.yaml"), sort_keys=False))
+    path.write_text(yaml.safe_dump(_mutate(BASE, "display_calib", "$(launch_dir)/display.yaml"),
+                                   sort_keys=False))
     res = check_launch(path, out=str(tmp_path / "out"))
     assert len(res.errors) == 1, res.errors
     assert res.errors[0].startswith(f"{path}: display_calib = '{tmp_path / 'display.yaml'}': ")
-    assert "unusable" in res.errors[0] or "flexsheet.calibration.display_calib is not available" in res.errors[0]
+    assert ("unusable" in res.errors[0]
+            or "flexsheet.calibration.display_calib is not available" in res.errors[0])
 
 
 def test_display_calib_missing_or_stale_entries_are_named_per_host(tmp_path):
@@ -259,7 +270,8 @@ def test_display_calib_missing_or_stale_entries_are_named_per_host(tmp_path):
     assert "stale 'camera' entry: measured 2000-01-01T00:00:00Z, before node cam's calib_file" in main[0]
     assert "no 'projector' entry, which node rend needs (run: flexsheet calibrate projector" in main[1]
     arm1 = check_launch(path, host="arm1").errors
-    assert len(arm1) == 1 and "no 'arms.right' entry, which node arm_right needs (run: flexsheet calibrate arms" \
+    assert len(arm1) == 1 and ("no 'arms.right' entry, which node arm_right needs (run: flexsheet calibrate "
+                               "arms") \
         in arm1[0], arm1
 
 
@@ -295,17 +307,19 @@ def test_node_ports_in_the_ephemeral_range_are_a_warning_naming_the_range(tmp_pa
     lo, hi = ephemeral_port_range()
     assert 1024 <= lo < hi <= 65535
     path = tmp_path / "chk.yaml"
-    below = _mutate(_mutate(BASE, "base_port", min(21000, lo - 600)), "nodes.ctrl.params.port", min(21500, lo - 100))
+    below = _mutate(_mutate(BASE, "base_port", min(21000, lo - 600)), "nodes.ctrl.params.port",
+                    min(21500, lo - 100))
     path.write_text(yaml.safe_dump(below, sort_keys=False))
     assert not any("ephemeral" in w for w in check_launch(path, out=str(tmp_path / "out")).warnings)
-    inside = _mutate(_mutate(BASE, "base_port", lo), "nodes.ctrl.params.port", lo + 10)   # talker lo + 1, rec lo + 3
+    # talker lo + 1, rec lo + 3
+    inside = _mutate(_mutate(BASE, "base_port", lo), "nodes.ctrl.params.port", lo + 10)
     path.write_text(yaml.safe_dump(inside, sort_keys=False))
     res = check_launch(path, out=str(tmp_path / "out"))
     assert res.errors == []
     eph = [w for w in res.warnings if "ephemeral" in w]
     assert len(eph) == 1 and f"range {lo}-{hi}" in eph[0] and f"talker ({lo + 1})" in eph[0] \
         and f"below {lo}" in eph[0] and eph[0].count("(") >= 4, eph      # 3 named, "..." for the rest
-    assert "4 listening port(s)" in eph[0], eph                          # 3 publishers + the twin's Modbus port
+    assert "4 listening port(s)" in eph[0], eph  # 3 publishers + the twin's Modbus port
     bad = tmp_path / "range"
     bad.write_text("not numbers\n")
     assert ephemeral_port_range(bad) == (32768, 60999)       # unreadable: Linux's default
@@ -321,11 +335,13 @@ def test_free_ports_lie_below_the_ephemeral_range_and_bad_ranges_are_named(monke
         assert ports.LOW_PORT <= p and p + span <= min(lo, 32768)
     with pytest.raises(ValueError, match="span must be an int >= 1, got 0"):
         ports.free_port(span=0)
-    monkeypatch.setattr(ports, "ephemeral_port_range", lambda: (20005, 60999))   # no room below: above the range
+    # no room below: above the range
+    monkeypatch.setattr(ports, "ephemeral_port_range", lambda: (20005, 60999))
     p = ports.free_port(span=10)
     assert 61000 <= p and p + 10 <= 65536
     monkeypatch.setattr(ports, "ephemeral_port_range", lambda: (1024, 65535))
-    with pytest.raises(RuntimeError, match=r"range 1024-65535 \(net.ipv4.ip_local_port_range\) leaves no room"):
+    with pytest.raises(RuntimeError, match=r"range 1024-65535 \(net.ipv4.ip_local_port_range\) leaves no "
+                                           r"room"):
         ports.free_port(span=10)
 
 
@@ -360,7 +376,8 @@ nodes:
     code, lines = _run_supervisor(load_launch(path), duration=5.0)
     assert code == EXIT_CONFIG
     assert sum("started pid" in line for line in lines) == 1, "\n".join(lines)
-    assert any(re.search(r"configuration error: setup: file: bag '.*gone\.mcap' not found", line) for line in lines)
+    assert any(re.search(r"configuration error: setup: file: bag '.*gone\.mcap' not found", line)
+               for line in lines)
     assert any("configuration error (see the line above): not respawned" in line for line in lines)
     assert not any("respawning" in line for line in lines)
 
@@ -371,8 +388,8 @@ def test_other_failures_are_still_respawned(tmp_path):
     fake.write_text("#!/bin/sh\necho 'transport down'\nexit 1\n")
     fake.chmod(0o755)
     path = tmp_path / "f.yaml"
-    path.write_text(f"hosts: {{main: {{address: 127.0.0.1}}}}\nnodes:\n  t: {{type: talker, host: main, port: "
-                    f"{free_port()}, respawn: {{policy: on-failure, delay: 0.1, max_restarts: 3}}}}\n")
+    path.write_text("hosts: {main: {address: 127.0.0.1}}\nnodes:\n  t: {type: talker, host: main, "
+                    f"port: {free_port()}, respawn: {{policy: on-failure, delay: 0.1, max_restarts: 3}}}}\n")
     code, lines = _run_supervisor(load_launch(path), duration=3.0, python=str(fake))
     assert sum("started pid" in line for line in lines) == 4, "\n".join(lines)
     assert any("not respawned: 3 restarts used" in line for line in lines)
@@ -386,9 +403,9 @@ def _doc_commands() -> list[str]:
 
 
 def test_deploy_doc_commands_pass_the_check(keys, tmp_path, monkeypatch):
-    """Every ``flexsheet launch``/``flexsheet run --launch`` command of docs/deploy.md parses with the real CLI
-    and passes the check, once ``flexsheet keys generate --launch launch/lab.yaml`` has run (the doc's step 3). The lab's
-    own stereo calibration (step 5) stands in as a copy of the shipped one."""
+    """Every ``flexsheet launch``/``flexsheet run --launch`` command of docs/deploy.md parses with the real
+    CLI and passes the check, once ``flexsheet keys generate --launch launch/lab.yaml`` has run (the doc's
+    step 3). The lab's own stereo calibration (step 5) stands in as a copy of the shipped one."""
     import shlex
 
     from flexsheet.cli import build_parser
@@ -396,7 +413,8 @@ def test_deploy_doc_commands_pass_the_check(keys, tmp_path, monkeypatch):
 
     monkeypatch.setenv("HOME", str(tmp_path))
     (tmp_path / ".flexsheet").mkdir()
-    (tmp_path / ".flexsheet" / "stereo.yaml").write_text((ROOT / "flexsheet/vision/ximea_calib.yaml").read_text())
+    (tmp_path / ".flexsheet"
+     / "stereo.yaml").write_text((ROOT / "flexsheet/vision/ximea_calib.yaml").read_text())
     cmds = _doc_commands()
     assert sum(c.startswith("flexsheet launch launch/lab.yaml") for c in cmds) >= 9, cmds
     assert "flexsheet keys generate --launch launch/lab.yaml" in (ROOT / "docs" / "deploy.md").read_text()
@@ -405,7 +423,8 @@ def test_deploy_doc_commands_pass_the_check(keys, tmp_path, monkeypatch):
         if args.command == "launch":
             toplevel, overrides = split_sets(args.set, set(load_launch(ROOT / args.file).nodes))
             monkeypatch.setenv(TOPLEVEL_ENV, json.dumps(toplevel))   # as flexsheet launch hands them on
-            res = check_launch(ROOT / args.file, host=args.host, out=str(tmp_path / "out"), overrides=overrides)
+            res = check_launch(ROOT / args.file, host=args.host, out=str(tmp_path / "out"),
+                               overrides=overrides)
             monkeypatch.delenv(TOPLEVEL_ENV)
         else:
             lf = load_launch(ROOT / args.launch)
@@ -415,10 +434,12 @@ def test_deploy_doc_commands_pass_the_check(keys, tmp_path, monkeypatch):
 
 
 def test_probe_names_the_cameras_this_machine_does_not_see(tmp_path):
-    """``--check --probe``: the camera node's GenICam serials (Aravis discovery) and UVC devices are asked for on
-    the checked host; without ``--probe`` the same file passes; another host's camera is not probed here."""
+    """``--check --probe``: the camera node's GenICam serials (Aravis discovery) and UVC devices are asked for
+    on the checked host; without ``--probe`` the same file passes; another host's camera is not probed
+    here."""
     doc = _mutate(BASE, "nodes.cam", {"type": "camera", "host": "main",
-                                      "params": {"source": "genicam", "left_id": "SN-LEFT-0", "right_id": "SN-RIGHT-0"}})
+                                      "params": {"source": "genicam", "left_id": "SN-LEFT-0",
+                                                 "right_id": "SN-RIGHT-0"}})
     path = tmp_path / "chk.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     assert check_launch(path, host="main").errors == []
@@ -431,7 +452,8 @@ def test_probe_names_the_cameras_this_machine_does_not_see(tmp_path):
                                       "params": {"source": "device", "device_left": 57}})
     path.write_text(yaml.safe_dump(uvc, sort_keys=False))
     errs = check_launch(path, host="main", probe=True).errors
-    assert errs == [f"{path}: node cam: probe: camera device_left = 57: no such video device can be opened here"]
+    assert errs == [f"{path}: node cam: probe: camera device_left = 57: no such video device can be opened "
+                    "here"]
     r = flexsheet("launch", str(path), "--check", "--host", "main", "--probe")
     assert r.returncode == EXIT_CONFIG and "probe: camera device_left = 57" in r.stderr, r.stderr
 
@@ -443,7 +465,8 @@ def test_check_json_is_one_document_with_the_same_lines_and_status(tmp_path):
     path.write_text(yaml.safe_dump(BASE, sort_keys=False))
     r = flexsheet("launch", str(path), "--check", "--json")
     j = json.loads(r.stdout)
-    assert r.returncode == 0 and j["ok"] and j["errors"] == [] and j["nodes"] == 3 and j["hosts"] == ["main", "arm1"]
+    assert (r.returncode == 0 and j["ok"] and j["errors"] == [] and j["nodes"] == 3
+            and j["hosts"] == ["main", "arm1"])
     path.write_text(yaml.safe_dump(_mutate(BASE, "nodes.talker.params.rate", -3), sort_keys=False))
     r = flexsheet("launch", str(path), "--check", "--json")
     j = json.loads(r.stdout)

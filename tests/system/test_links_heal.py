@@ -4,8 +4,8 @@
   libzmq ends a connection's session after a protocol or handshake error and never connects to that endpoint
   again. Squatted by (a) a raw TCP listener that sends garbage (a ZMTP-like signature with a bad greeting) and
   (b) a plain ZMTP socket while the graph uses CURVE, then released and the real publisher restarted: the
-  subscriber receives again (:class:`flexsheet.runtime.zmq.linkwatch.LinkWatch`). A control run without the watch
-  receives nothing, so the squat really did kill the connection.
+  subscriber receives again (:class:`flexsheet.runtime.zmq.linkwatch.LinkWatch`). A control run without the
+  watch receives nothing, so the squat really did kill the connection.
 * A subscriber that never reads big messages costs the publisher at most its byte budget
   (:data:`flexsheet.runtime.zmq.xpub.PUB_QUEUE_BYTES` per subscriber), and the messages its full queue could
   not take are counted in the publisher's ``dropped``.
@@ -89,16 +89,17 @@ def test_silent_endpoint_is_named_in_the_heartbeat(monkeypatch):
     finally:
         linkwatch.log.removeHandler(handler)
     assert hb.state == "warn" and f"no link to {ep}" in hb.message, hb
-    assert accepted >= 3 and link.reconnects >= 2, (accepted, link.reconnects)  # back-off: 0.1, 0.2, 0.4, 0.8 s
+    # back-off: 0.1, 0.2, 0.4, 0.8 s
+    assert accepted >= 3 and link.reconnects >= 2, (accepted, link.reconnects)
     lines = [r for r in records if ep in r]
-    assert 1 <= len(lines) <= 2, lines           # 3 s: one line (+1 if a 5 s window ends), not one per refusal
+    assert 1 <= len(lines) <= 2, lines  # 3 s: one line (+1 if a 5 s window ends), not one per refusal
 
 
 def test_a_link_up_before_the_first_poll_is_seen_up():
-    """The monitor is attached before the first connect (checked on the socket's call order: on a quick machine
-    the handshake rarely beats a monitor attached just after, so the order is what is tested), and a handshake
-    that completes before the watch's first poll still marks the link up: the heartbeat never warns of a
-    live link."""
+    """The monitor is attached before the first connect (checked on the socket's call order: on a quick
+    machine the handshake rarely beats a monitor attached just after, so the order is what is tested), and a
+    handshake that completes before the watch's first poll still marks the link up: the heartbeat never warns
+    of a live link."""
     import time
 
     import zmq
@@ -166,9 +167,11 @@ def test_check_refuses_an_output_under_proc(tmp_path):
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     res = check_launch(path)
     assert len(res.errors) == 1, res.errors
-    assert res.errors[0].startswith(f"{path}: node rec: params.output = '/proc/x.mcap': cannot write here: "), res.errors
+    assert res.errors[0].startswith(f"{path}: node rec: params.output = '/proc/x.mcap': cannot write "
+                                    "here: "), res.errors
     assert "under /proc" in res.errors[0]
-    out = subprocess.run([sys.executable, "-m", "flexsheet", "launch", str(path), "--check"], capture_output=True,
+    out = subprocess.run([sys.executable, "-m", "flexsheet", "launch", str(path), "--check"],
+                         capture_output=True,
                          text=True, cwd=ROOT, timeout=120)
     assert out.returncode != 0 and "node rec: params.output = '/proc/x.mcap'" in out.stdout + out.stderr, out
 
@@ -178,4 +181,5 @@ if __name__ == "__main__":
         print(json.dumps(asyncio.run(squat_then_restart(v))))
     print(json.dumps(asyncio.run(squat_then_restart("garbage", heal=False, deadline=3.0))))
     print(json.dumps(memory_run()))
-    print(json.dumps({"control: budget of 2000 frames (SNDHWM 2000 alone)": memory_run(budget=2000 * 655585)}))
+    print(
+        json.dumps({"control: budget of 2000 frames (SNDHWM 2000 alone)": memory_run(budget=2000 * 655585)}))

@@ -72,7 +72,8 @@ def test_a_slow_latest_subscriber_keeps_one_frame_and_flat_memory():
     # … the subscription kept at most one waiting frame, dropping (and counting) the stale ones …
     assert sub.max_depth <= 1
     # (every frame sent was handled or dropped as stale; only those in flight at the stop are neither)
-    assert sub.sub.stats.dropped > sent / 3 and 0 <= sent - sub.sub.stats.dropped - sub.handled <= 0.02 * sent + 2, (
+    assert (sub.sub.stats.dropped > sent / 3
+            and 0 <= sent - sub.sub.stats.dropped - sub.handled <= 0.02 * sent + 2), (
         sent, sub.sub.stats.dropped, sub.handled)
     assert 0 <= got - sub.handled <= 1   # the last one may be decoded when the run stops
     # … so the process did not keep the ~500 MB it was sent: RSS flat after the first seconds

@@ -81,7 +81,8 @@ class Ticker(Node):
         self.timer(0.05, self.tick)
 
     def tick(self) -> None:
-        self.pub.publish(FingerTruth(header=self.pub.header("display"), position=np.zeros(3), velocity=np.zeros(3)))
+        self.pub.publish(FingerTruth(header=self.pub.header("display"), position=np.zeros(3),
+                                     velocity=np.zeros(3)))
 
 
 def _replay(bag: Path, out: Path) -> dict:
@@ -89,11 +90,13 @@ def _replay(bag: Path, out: Path) -> dict:
         bus = Bus("replay", clock=SimClock())
 
         def member(cls, name, params, **kw):
-            cfg = NodeConfig(name=name, node_type=cls.node_type, endpoint="", params=params, heartbeat_period=0.5)
+            cfg = NodeConfig(name=name, node_type=cls.node_type, endpoint="", params=params,
+                             heartbeat_period=0.5)
             return Member(name, lambda b: cls(cfg, transport=ContainerTransport(b, "")), **kw)
 
         c = Container("replay", [
-            member(LockstepPlayer, "player", {"file": str(bag), "topics": [T.FINGERTIP.name], "start_delay": 0.0},
+            member(LockstepPlayer, "player",
+                   {"file": str(bag), "topics": [T.FINGERTIP.name], "start_delay": 0.0},
                    required=True),
             member(PlannerNode, "planner", {"object_stiffness": 20.0}),
             member(Ticker, "ticker", {}),
@@ -182,7 +185,8 @@ def test_sim_clock_timers_fire_in_due_order_and_never_go_back():
 
 
 def test_launch_file_lockstep_replay(bag, tmp_path):
-    """The launch-file path: ``--set player.mode=lockstep`` on a player in a container (needs bag.py's hook)."""
+    """The launch-file path: ``--set player.mode=lockstep`` on a player in a container (needs bag.py's
+    hook)."""
     if "mode" not in PlayerParams.model_fields:
         pytest.skip("PlayerParams has no 'mode' yet (the bag.py lockstep hook is missing)")
     import subprocess
@@ -208,7 +212,8 @@ nodes:
     for k in range(2):
         out = tmp_path / f"out{k}"
         t0 = time.monotonic()
-        res = subprocess.run([sys.executable, "-m", "flexsheet", "launch", str(path), "--out", str(out), "--set",
+        res = subprocess.run([sys.executable, "-m", "flexsheet", "launch", str(path), "--out", str(out),
+                              "--set",
                               "player.mode=lockstep"], capture_output=True, text=True, timeout=120)
         assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-2000:]
         assert "lockstep: 60 messages" in res.stdout and time.monotonic() - t0 < 100

@@ -57,21 +57,25 @@ def test_a_2s_cut_to_arm1_holds_that_arm_and_it_recovers_without_a_jump(lab_run)
     status_cut = {s[3] for s in left if t_cut < s[0] < t_back}
     assert "hold:no_target" in status_cut, status_cut
     assert any(s[3] == "ok" for s in left if s[0] > t_back + 1.0)
-    # A controller watchdog trip (the bridge's loop late by 3 periods: a scheduling stall on this shared 2-core
-    # machine, not the cut) makes the bridge restart from the measured joints, where the tripped controller
-    # holds the arm: that reseed is not a commanded motion, so steps into or out of a trip are left out, and
-    # trips must stay rare (the loop runs SCHED_FIFO in launch/lab_sim.yaml; measured 0-1 per arm per run, 3 with
-    # two FEM solves running beside the suite, 15-67 at nice -5; 11 and 4 in a clean cold suite,
-    # 32-54 with two idle-class FEM solves beside it). A bridge that trips on every late loop would count hundreds.
-    trips = {arm: sum(a[3] != "fault:watchdog" and b[3] == "fault:watchdog" for a, b in zip(s, s[1:], strict=False))
+    # A controller watchdog trip (the bridge's loop late by 3 periods: a scheduling stall on this
+    # shared 2-core machine, not the cut) makes the bridge restart from the measured joints,
+    # where the tripped controller holds the arm: that reseed is not a commanded motion, so steps
+    # into or out of a trip are left out, and trips must stay rare (the loop runs SCHED_FIFO in
+    # launch/lab_sim.yaml; measured 0-1 per arm per run, 3 with two FEM solves running beside the
+    # suite, 15-67 at nice -5; 11 and 4 in a clean cold suite, 32-54 with two idle-class FEM
+    # solves beside it). A bridge that trips on every late loop would count hundreds.
+    trips = {arm: sum(a[3] != "fault:watchdog" and b[3] == "fault:watchdog" for a,
+                      b in zip(s, s[1:], strict=False))
              for arm, s in states.items()}
     assert max(trips.values()) <= 15, trips
     pairs = list(zip(left, left[1:], strict=False))
     reseed = ["fault:watchdog" in (a[3], b[3]) for a, b in pairs]
     # ... and none may hide the return of the cable, the step this test exists for
-    assert not any(r and t_back - 0.1 <= b[0] <= t_back + 1.0 for r, (_, b) in zip(reseed, pairs, strict=True)), \
+    assert not any(r and t_back - 0.1 <= b[0] <= t_back + 1.0 for r,
+                   (_, b) in zip(reseed, pairs, strict=True)), \
         "a watchdog trip at the cable's return"
-    steps = np.array([np.max(np.abs(b[2] - a[2]) / limit) for r, (a, b) in zip(reseed, pairs, strict=True) if not r])
+    steps = np.array([np.max(np.abs(b[2] - a[2]) / limit) for r,
+                      (a, b) in zip(reseed, pairs, strict=True) if not r])
     assert steps.max() <= STEP_TOLERANCE + 1e-6, steps.max()
     # the other arm went on following targets through the cut
     right_cut = {s[3] for s in states["right"] if t_cut + 0.5 < s[0] < t_back}

@@ -1,5 +1,5 @@
-"""Launch across real processes: pub/sub, clean stop with no orphans (checked in /proc), respawn after kill -9,
-latched topics for late joiners, and clear errors for bad launch files."""
+"""Launch across real processes: pub/sub, clean stop with no orphans (checked in /proc), respawn after kill
+-9, latched topics for late joiners, and clear errors for bad launch files."""
 
 from __future__ import annotations
 
@@ -41,7 +41,8 @@ class Launch:
             if len(found) >= count:
                 return found
             time.sleep(0.05)
-        raise AssertionError(f"{pattern!r} x{count} not seen in {timeout} s; output:\n" + "\n".join(self.lines[-40:]))
+        raise AssertionError(f"{pattern!r} x{count} not seen in {timeout} s; output:\n"
+                             + "\n".join(self.lines[-40:]))
 
     def pids(self) -> dict[str, int]:
         out = {}
@@ -93,7 +94,8 @@ def test_respawn_after_kill_9(demo_launch):
                 break
             time.sleep(0.05)
         else:
-            raise AssertionError("no message from the respawned talker:\n" + "\n".join(lf.lines[start:start + 30]))
+            raise AssertionError("no message from the respawned talker:\n"
+                                 + "\n".join(lf.lines[start:start + 30]))
         assert any("exited with code -9" in line for line in lf.lines)
     finally:
         assert lf.stop() == 1   # the kill is a failure of the run, named
@@ -103,8 +105,8 @@ def test_respawn_after_kill_9(demo_launch):
 
 
 def _talker_file(tmp_path, name: str, talker: str, shutdown_timeout: float = 2.0):
-    """A launch file of one talker node (``talker``: the node's YAML flow mapping after ``type, host``) on free
-    ports, in ``tmp_path``."""
+    """A launch file of one talker node (``talker``: the node's YAML flow mapping after ``type, host``) on
+    free ports, in ``tmp_path``."""
     path = tmp_path / f"{name}.yaml"
     path.write_text(f"""
 name: {name}
@@ -119,10 +121,10 @@ nodes:
 
 
 def test_a_killed_node_is_respawned_at_once_though_its_worker_holds_its_output(tmp_path):
-    """A node killed -9 while a child it started (not tied to it, as a table builder still importing) holds its
-    output pipe: the launcher reports the exit and respawns within seconds, and the child, in the node's process
-    group, goes with it (the renderer's sheet-table worker stalled the faults scenario's respawn
-    past 30 s). Before the fix the exit was seen only when the child's 60 s sleep ended."""
+    """A node killed -9 while a child it started (not tied to it, as a table builder still importing) holds
+    its output pipe: the launcher reports the exit and respawns within seconds, and the child, in the node's
+    process group, goes with it (the renderer's sheet-table worker stalled the faults scenario's respawn past
+    30 s). Before the fix the exit was seen only when the child's 60 s sleep ended."""
     path = _talker_file(tmp_path, "worker",
                         "params: {rate: 20, worker_s: 60}, respawn: {policy: on-failure, delay: 0.2}")
     lf = Launch(path)
@@ -165,7 +167,8 @@ def test_a_respawned_node_that_stops_cleanly_is_not_a_failure_though_it_says_muc
     assert sum("talker: last words" in line for line in lf.lines) == 200000      # every line was read
     # the kill is the run's one failure (exit 1, named); the clean stop of its respawn is not another
     failed = [ln for ln in lf.lines if "failed during the run" in ln]
-    assert len(failed) == 1 and failed[0].endswith("talker (exit -9)"), [ln for ln in lf.lines if "[launch]" in ln]
+    assert len(failed) == 1 and failed[0].endswith("talker (exit -9)"), [ln for ln in lf.lines
+                                                                         if "[launch]" in ln]
     assert code == 1
 
 
@@ -202,9 +205,10 @@ nodes:
 
 
 def test_a_real_time_nodes_children_start_in_the_normal_class(tmp_path):
-    """A node with ``rt_priority`` runs SCHED_FIFO; a process it starts (here the talker's ``worker_s`` child, as the
-    world node's sheet-table builder) begins in the normal class (SCHED_RESET_ON_FORK), not at the node's
-    real-time priority, where a CPU-bound build would starve every normal node. Needs root (CI is root)."""
+    """A node with ``rt_priority`` runs SCHED_FIFO; a process it starts (here the talker's ``worker_s`` child,
+    as the world node's sheet-table builder) begins in the normal class (SCHED_RESET_ON_FORK), not at the
+    node's real-time priority, where a CPU-bound build would starve every normal node. Needs root (CI is
+    root)."""
     if os.geteuid() != 0:
         pytest.skip("SCHED_FIFO needs root (CAP_SYS_NICE)")
     path = _talker_file(tmp_path, "rt", "rt_priority: 5, params: {rate: 20, worker_s: 30}")

@@ -49,7 +49,8 @@ def test_sim_launch_on_the_sphere_scene_reports_the_scene_and_dtheta(tmp_path):
     # script) instead of being cut by --duration inside the 30 s stroke that follows it. --duration is only a
     # cap: at 25 s a slow start (the world's script began ~17 s in) cut the stroke at 20 %
     res = subprocess.run([sys.executable, "-m", "flexsheet", "launch", "launch/sim.yaml", "--set",
-                          "scene=launch/scenes/sphere.yaml", "--set", "world.script=[{mode: stroke, moving_time: 10}]",
+                          "scene=launch/scenes/sphere.yaml", "--set", "world.script=[{mode: stroke, "
+                                                                      "moving_time: 10}]",
                           "--duration", "60", "--out", str(tmp_path)],
                          cwd=ROOT, capture_output=True, text=True, timeout=300)
     out = res.stdout + res.stderr
@@ -59,7 +60,7 @@ def test_sim_launch_on_the_sphere_scene_reports_the_scene_and_dtheta(tmp_path):
     assert s["scene"]["file"].endswith("sphere.yaml") and s["scene"]["source"] == "launch file scene"
     row = s["10"]                                          # the 10 s stroke, measured on the sphere
     assert row["n"] > MIN_TIPS and "paper" not in row      # the paper's row belongs to its cylinder
-    assert math.isfinite(row["dtheta_mean_deg"]) and 0.0 < row["dtheta_mean_deg"] < 10.0, row   # 1.4° measured
+    assert math.isfinite(row["dtheta_mean_deg"]) and 0.0 < row["dtheta_mean_deg"] < 10.0, row  # 1.4° measured
     assert math.isfinite(row["dd_mean_mm"]) and row["dd_2r_mean_mm"] > 0.0     # the sphere has a radius
     comp = s["compliance"]["10"]                           # the tension the planner set at the contacts
     assert comp["n"] > MIN_TIPS and comp["tension_n_per_m"]["median"] > 0.0
@@ -87,8 +88,8 @@ def test_sim_launch_on_the_sphere_scene_reports_the_scene_and_dtheta(tmp_path):
 def test_sim_launch_on_the_organ_shows_the_fem_stiffness_peak_over_the_inclusion_in_the_tension(tmp_path):
     """Palpation along the organ: a 3 mm stroke (the default 0.5 mm stroking contact feels the 8 mm-deep
     tumour by only ~5 %, within the FEM mesh's scatter) and the sheet asked for 0.5 x the organ's stiffness
-    (the identified sheet presents ~37-90 N/m at 3 mm, from its least stretch to the arms' pull limit; the organ
-    is ~100-130 N/m at 3 mm)."""
+    (the identified sheet presents ~37-90 N/m at 3 mm, from its least stretch to the arms' pull limit; the
+    organ is ~100-130 N/m at 3 mm)."""
     from flexsheet.model.scenes import load_scene
 
     sc = load_scene(ROOT / "launch" / "scenes" / "organ.yaml")
@@ -103,7 +104,8 @@ def test_sim_launch_on_the_organ_shows_the_fem_stiffness_peak_over_the_inclusion
     s = json.loads((tmp_path / "summary.json").read_text())
     assert s["scene"]["name"] == "organ" and s["scene"]["kind"] == "mesh", s["scene"]
     row = s["10"]
-    assert row["n"] > MIN_TIPS and math.isfinite(row["dtheta_mean_deg"]) and 0.0 < row["dtheta_mean_deg"] < 10.0, row
+    assert row["n"] > MIN_TIPS and math.isfinite(row["dtheta_mean_deg"]) and 0.0 < row[
+        "dtheta_mean_deg"] < 10.0, row
     assert s["compliance"]["10"]["n"] > MIN_TIPS
     assert "scene 'organ'" in out and res.returncode in (0, 1), out[-4000:]
     # bins along the stroke (the organ's long axis, y) from the scene file: over the tumour = within its
@@ -125,7 +127,8 @@ def test_sim_launch_on_the_organ_shows_the_fem_stiffness_peak_over_the_inclusion
     assert len(de) > 50 and {m.scene_key for m in de} == {key}     # the FEM solved this organ
     k_over, k_away = over_away([m.contact_point[1] for m in de], [m.stiffness for m in de])
     assert k_over > 1.08 * k_away, (k_over, k_away)                # measured 158 vs 132 N/m (+19 %)
-    tg = [m for m in _bag(tmp_path / "sim.mcap", "/sheet/target") if m.touching and not m.status.startswith("hold")]
+    tg = [m for m in _bag(tmp_path / "sim.mcap", "/sheet/target") if m.touching
+          and not m.status.startswith("hold")]
     t_over, t_away = over_away([m.contact_point[1] for m in tg], [m.tension for m in tg])
     # the tension follows the stiffness through the arms' response, which lags it by a few mm of stroke:
     # measured 19.1 vs 16.5 N/m (+16 %; the identified sheet carries much of the force itself at low tension)

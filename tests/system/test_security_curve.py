@@ -1,8 +1,8 @@
-"""CURVE on the graph, per node: a publisher that does not hold the key of the node at its endpoint (no CURVE, an
-unlisted key, the host's tool key) is refused by the subscriber's handshake, and a node of the graph that is not
-allowed the arm-target topic (``security.publishers``) has its targets dropped and counted, so nothing but the
-planner reaches an arm bridge. Keys come from ``flexsheet keys generate --launch FILE`` into ``$FLEXSHEET_KEYS``
-and reach the launch file by ``public_keys_file``."""
+"""CURVE on the graph, per node: a publisher that does not hold the key of the node at its endpoint (no CURVE,
+an unlisted key, the host's tool key) is refused by the subscriber's handshake, and a node of the graph that
+is not allowed the arm-target topic (``security.publishers``) has its targets dropped and counted, so nothing
+but the planner reaches an arm bridge. Keys come from ``flexsheet keys generate --launch FILE`` into
+``$FLEXSHEET_KEYS`` and reach the launch file by ``public_keys_file``."""
 
 from __future__ import annotations
 
@@ -30,8 +30,10 @@ from messages import topics as T
 
 
 def _keys(launch, *names, check=True):
-    """``flexsheet keys generate --launch LAUNCH NAMES`` into ``$FLEXSHEET_KEYS`` (the ``keys_env`` fixture)."""
-    out = subprocess.run([sys.executable, "-m", "flexsheet", "keys", "generate", "--launch", str(launch), *names],
+    """``flexsheet keys generate --launch LAUNCH NAMES`` into ``$FLEXSHEET_KEYS`` (the ``keys_env``
+    fixture)."""
+    out = subprocess.run([sys.executable, "-m", "flexsheet", "keys", "generate", "--launch", str(launch),
+                          *names],
                          capture_output=True, text=True, check=check)
     return out.stdout if check else out
 
@@ -71,7 +73,8 @@ class Sink(Node):
 
 
 class WideSink(Sink):
-    """A sink that also subscribes the wider prefix ``/arm/`` on the wire (as a record-everything tool would)."""
+    """A sink that also subscribes the wider prefix ``/arm/`` on the wire (as a record-everything tool
+    would)."""
 
     async def setup(self) -> None:
         await super().setup()
@@ -85,7 +88,8 @@ class Source(Node):
                                                             pose=np.eye(4))))
 
 
-async def _exchange(source_cfg: NodeConfig, sink_cfg: NodeConfig, seconds: float = 1.0, container: bool = False,
+async def _exchange(source_cfg: NodeConfig, sink_cfg: NodeConfig, seconds: float = 1.0,
+                    container: bool = False,
                     report: list | None = None) -> int:
     transport = None
     if container:   # the sink as a node of a composable container (the bus's one SUB side, the host's key)
@@ -113,19 +117,21 @@ def test_listed_publisher_gets_through_and_strangers_do_not(tmp_path, keys_env):
         zmq.auth.create_certificates(tmp_path, "stranger")[1])
     plain = NodeConfig(name="rogue_plain", endpoint=legit.endpoint)                       # no CURVE at all
     unlisted = NodeConfig(name="rogue_key", endpoint=legit.endpoint,                     # CURVE, wrong key
-                          curve=CurveConfig(stranger_pub, stranger_secret, allowed_clients=legit.curve.allowed_clients))
-    host_key = NodeConfig(name="stolen_host_key", endpoint=legit.endpoint,              # main's key at the planner's port
+                          curve=CurveConfig(stranger_pub, stranger_secret,
+                                            allowed_clients=legit.curve.allowed_clients))
+    host_key = NodeConfig(name="stolen_host_key", endpoint=legit.endpoint,  # main's key at the planner's port
                           curve=curve_config(lf, "main"))
     counts = {name: asyncio.run(_exchange(cfg, bridge))
-              for name, cfg in (("legit", legit), ("plain", plain), ("unlisted", unlisted), ("host", host_key))}
+              for name,
+              cfg in (("legit", legit), ("plain", plain), ("unlisted", unlisted), ("host", host_key))}
     assert counts["legit"] > 20, counts
     assert counts["plain"] == 0 and counts["unlisted"] == 0 and counts["host"] == 0, counts
 
 
 @pytest.mark.parametrize("container", [False, True], ids=["node", "container"])
 def test_a_node_not_allowed_the_topic_never_reaches_the_bridge(tmp_path, keys_env, container):
-    """The triangulator's own (valid) key, publishing arm targets from its own endpoint: none reaches the bridge;
-    the planner's still arrive, on a node alone and in a container."""
+    """The triangulator's own (valid) key, publishing arm targets from its own endpoint: none reaches the
+    bridge; the planner's still arrive, on a node alone and in a container."""
     lf = _launch(tmp_path)
     _keys(lf.path)
     _exchange.lf = lf
@@ -135,12 +141,14 @@ def test_a_node_not_allowed_the_topic_never_reaches_the_bridge(tmp_path, keys_en
     assert asyncio.run(_exchange(tri, bridge, container=container, report=hb)) == 0
     assert hb[0].state == "ok", hb[0].message   # every link of the bridge is up: the guard, not a broken link
     assert asyncio.run(_exchange(planner, bridge, container=container)) > 20
-    if not container:   # a wider prefix on the wire: the other node's targets still dropped, the planner's once
+    # a wider prefix on the wire: the other node's targets still dropped, the planner's once
+    if not container:
         for source, lo, hi in ((tri, 0, 0), (planner, 80, 101)):
             sink, src = WideSink(bridge), Source(source)
 
             async def run(sink=sink, src=src):
-                tasks = [asyncio.get_running_loop().create_task(n.run(install_signals=False)) for n in (sink, src)]
+                tasks = [asyncio.get_running_loop().create_task(n.run(install_signals=False))
+                         for n in (sink, src)]
                 await asyncio.sleep(1.0)
                 for n in (sink, src):
                     n.shutdown()
@@ -169,8 +177,8 @@ def test_unlisted_subscriber_is_refused_by_the_publisher(tmp_path, keys_env):
 def test_curve_config_errors_name_the_key_and_the_command(tmp_path, keys_env):
     lf = _launch(tmp_path)
     _keys(lf.path, "main", "planner", "triangulator")   # no key for arm1 nor arm_left
-    with pytest.raises(LaunchError, match=r"security.public_keys.*arm1, arm_left.*flexsheet keys generate --launch "
-                                          r".*secure.yaml"):
+    with pytest.raises(LaunchError, match=r"security.public_keys.*arm1, arm_left.*flexsheet keys generate "
+                                          r"--launch .*secure.yaml"):
         node_config(lf, "planner")
     # inline keys (no file) are checked when the file is loaded
     inline = yaml.safe_load((keys_env / "public_keys.yaml").read_text())
@@ -178,7 +186,8 @@ def test_curve_config_errors_name_the_key_and_the_command(tmp_path, keys_env):
         _launch(tmp_path, "security: {curve: true, public_keys: " + json.dumps(inline) + "}")
     # a policy naming a node the file lacks, or without CURVE, is refused at load
     with pytest.raises(LaunchError, match=r"security.publishers./arm/left/target.*no node named 'plannr'"):
-        _launch(tmp_path, "security: {curve: true, public_keys_file: x, publishers: {/arm/left/target: [plannr]}}")
+        _launch(tmp_path, "security: {curve: true, public_keys_file: x, publishers: {/arm/left/target: "
+                          "[plannr]}}")
     with pytest.raises(LaunchError, match=r"security.publishers.*needs curve: true"):
         _launch(tmp_path, "security: {" + POLICY + "}")
 
@@ -197,7 +206,8 @@ def test_keys_generate_writes_what_the_launch_file_needs_and_keeps_existing_keys
     first = yaml.safe_load((keys_env / "public_keys.yaml").read_text())
     assert set(first) == {"main", "arm1", "planner", "arm_left", "triangulator"}
     assert all(len(k) == 40 for k in first.values()) and len(set(first.values())) == 5
-    cfgs = {h: curve_config(lf, h) for h in ("main", "arm1")} | {n: node_config(lf, n).curve for n in lf.nodes}
+    cfgs = ({h: curve_config(lf, h) for h in ("main", "arm1")}
+            | {n: node_config(lf, n).curve for n in lf.nodes})
     assert {h: c.public_key.decode() for h, c in cfgs.items()} == first
     assert "kept" in _keys(lf.path)
     assert yaml.safe_load((keys_env / "public_keys.yaml").read_text()) == first

@@ -75,8 +75,8 @@ class Sink(Node):
 
 
 def _container(until: float, members: list[tuple[type, str]], rtf: float | None = None) -> dict[str, Node]:
-    """Run ``members`` (node class, name) in one container on a live simulated clock until ``until`` s past the
-    epoch; returns the nodes by name and the bus (key "bus")."""
+    """Run ``members`` (node class, name) in one container on a live simulated clock until ``until`` s past
+    the epoch; returns the nodes by name and the bus (key "bus")."""
     async def main() -> dict:
         clock = SimClock(live=True)
         clock.set(SIM_EPOCH)
@@ -100,7 +100,8 @@ def _container(until: float, members: list[tuple[type, str]], rtf: float | None 
 
 def _run(until: float, rtf: float | None = None) -> dict:
     made = _container(until, [(Source, "source"), (Worker, "worker"), (Sink, "sink")], rtf)
-    return {"code": made["code"], "sink": list(made["sink"].got), "bus": made["bus"], "seen": made["worker"].seen}
+    return {"code": made["code"], "sink": list(made["sink"].got), "bus": made["bus"],
+            "seen": made["worker"].seen}
 
 
 @pytest.fixture(scope="module")
@@ -115,10 +116,12 @@ def test_outputs_leave_after_the_declared_cost_and_a_busy_node_takes_only_the_ne
     # handled at once (free), its output leaves 25 ms later
     recv, stamp, value, topic = got[0]
     assert (value, topic) == (1.0, "/work/out")
-    assert stamp == pytest.approx(SIM_EPOCH + 0.011 + 0.025, abs=1e-9) and recv == pytest.approx(stamp, abs=1e-9)
+    assert (stamp == pytest.approx(SIM_EPOCH + 0.011 + 0.025, abs=1e-9)
+            and recv == pytest.approx(stamp, abs=1e-9))
     for (_, s0, _, _), (_, s1, v1, t1) in zip(got, got[1:], strict=False):
         busy = 0.025 + (0.005 if t1 == "/work/charged" else 0.0)
-        assert s1 - s0 == pytest.approx(busy, abs=1e-9), (got[:6])   # back to back: never idle, never overlapping
+        # back to back: never idle, never overlapping
+        assert s1 - s0 == pytest.approx(busy, abs=1e-9), (got[:6])
         # the input taken when free is the newest that had left by then (latest QoS): value = ticks so far
         assert v1 == pytest.approx(np.floor((s0 - SIM_EPOCH - 0.001) / 0.010 + 1e-9)), (s0, v1)
     # every third input took 5 ms more (charge): its output leaves 30 ms after the input was taken
@@ -149,20 +152,22 @@ class DelayedSource(Node):
 class TruthSink(Node):
     async def setup(self) -> None:
         self.got: list[tuple[float, float, float]] = []
-        self.subscribe(T.FINGER_TRUTH, lambda m: self.got.append((self.now(), m.header.stamp, float(m.position[0]))),
+        self.subscribe(T.FINGER_TRUTH,
+                       lambda m: self.got.append((self.now(), m.header.stamp, float(m.position[0]))),
                        qos=QoS.KEEP_ALL)
 
 
 def test_a_link_delay_is_pipelined_and_never_keeps_its_node_busy():
-    """A timer's ``sim_delay`` (the camera link's ``link_delay_s``): each output arrives cost + delay after its
-    tick, stamped then, while the ticks go on every period (a busy node would tick every 36 ms)."""
+    """A timer's ``sim_delay`` (the camera link's ``link_delay_s``): each output arrives cost + delay after
+    its tick, stamped then, while the ticks go on every period (a busy node would tick every 36 ms)."""
     made = _container(0.2, [(DelayedSource, "source"), (TruthSink, "sink")])
     assert made["code"] == 0
     ticks, got = made["source"].ticks, made["sink"].got
     assert np.allclose(np.diff(ticks), 0.010, atol=1e-9) and len(ticks) >= 19
     assert len(got) == len([t for t in ticks if t + 0.036 <= SIM_EPOCH + 0.2 + 1e-9])
     for recv, stamp, value in got:
-        assert stamp == pytest.approx(ticks[int(value) - 1] + 0.036, abs=1e-9) and recv == pytest.approx(stamp)
+        assert (stamp == pytest.approx(ticks[int(value) - 1] + 0.036, abs=1e-9)
+                and recv == pytest.approx(stamp))
 
 
 def test_two_runs_are_identical():
@@ -191,16 +196,19 @@ def _hashes(bag: Path) -> dict[str, str]:
 
 
 def test_the_display_on_the_simulated_clock_is_byte_identical_run_to_run(tmp_path):
-    """Two runs of launch/sim.yaml (a 3 s stroke, truth seed 0), the second paced at real speed (--rtf 1), write
-    the same messages on every topic but /diagnostics (wall-clock liveness), stamps included; the paced one
-    keeps to the wall clock within 5 % where the machine can (the unpaced run faster than real time), else it
-    runs as fast as the unpaced one; the summary says the clock."""
+    """Two runs of launch/sim.yaml (a 3 s stroke, truth seed 0), the second paced at real speed (--rtf 1),
+    write the same messages on every topic but /diagnostics (wall-clock liveness), stamps included; the paced
+    one keeps to the wall clock within 5 % where the machine can (the unpaced run faster than real time), else
+    it runs as fast as the unpaced one; the summary says the clock."""
     outs = []
     for i in range(2):
         out = tmp_path / f"run{i}"
-        res = subprocess.run([sys.executable, "-m", "flexsheet", "launch", "launch/sim.yaml", "--duration", "7",
-                              "--out", str(out), "--set", "viz.port=0", "--set", "world.start_delay=1.0", "--set",
-                              "world.script=[{mode: stroke, moving_time: 3}]", *(["--rtf", "1"] if i else [])],
+        res = subprocess.run([sys.executable, "-m", "flexsheet", "launch", "launch/sim.yaml", "--duration",
+                              "7",
+                              "--out", str(out), "--set", "viz.port=0", "--set", "world.start_delay=1.0",
+                              "--set",
+                              "world.script=[{mode: stroke, moving_time: 3}]",
+                              *(["--rtf", "1"] if i else [])],
                              cwd=ROOT, capture_output=True, text=True, timeout=600)
         assert res.returncode == 0, res.stdout[-4000:] + res.stderr[-2000:]
         outs.append(out)
@@ -215,8 +223,9 @@ def test_the_display_on_the_simulated_clock_is_byte_identical_run_to_run(tmp_pat
     paced = json.loads((outs[1] / "sim_clock.json").read_text())
     assert s["clock"]["rtf_target"] is None and json.loads((outs[1] / "summary.json").read_text())["clock"][
         "rtf_target"] == 1.0
-    # --rtf 1 caps simulated time at the wall clock: never ahead of it; within 5 % of it where this machine runs
-    # the graph faster than real time unpaced, else as fast as it can (the unpaced run's factor, within noise)
+    # --rtf 1 caps simulated time at the wall clock: never ahead of it; within
+    # 5 % of it where this machine runs the graph faster than real time
+    # unpaced, else as fast as it can (the unpaced run's factor, within noise)
     unpaced, rtf = s["realtime_factor"], paced["realtime_factor"]
     assert paced["sim_s"] == pytest.approx(7.0) and rtf <= 1.05, (rtf, unpaced)
     if unpaced >= 1.1:
@@ -227,4 +236,5 @@ def test_the_display_on_the_simulated_clock_is_byte_identical_run_to_run(tmp_pat
     # the chain adds up: each end-to-end figure is the sum of its hops (deterministic costs: medians too)
     assert chain["exposure_to_arm_command"]["median"] == pytest.approx(
         sum(chain[h]["median"] for h in ("exposure_to_camera_frame", "camera_frame_to_fingertip",
-                                         "fingertip_to_sheet_target", "sheet_target_to_arm_command")), abs=1e-6)
+                                         "fingertip_to_sheet_target", "sheet_target_to_arm_command")),
+        abs=1e-6)

@@ -54,7 +54,8 @@ def test_independent_client_sees_the_running_sim(sim_run):
     assert len(idx) % 3 == 0 and len(idx) >= len(v) and idx.max() < len(v) and idx.min() >= 0
     r = _radius(v)
     assert np.all(np.isfinite(v))
-    assert r.max() < R + 0.002 and np.all(np.abs(v[:, 1]) < HALF_LENGTH + 0.002), (r.max(), np.abs(v[:, 1]).max())
+    assert (r.max() < R + 0.002 and np.all(np.abs(v[:, 1]) < HALF_LENGTH + 0.002)), (r.max(),
+                                                                                     np.abs(v[:, 1]).max())
     side = np.abs(v[:, 1]) < HALF_LENGTH - 0.001   # away from the end caps: the curved surface, dented ≤ 2 cm
     assert side.sum() > 0.3 * len(v) and np.all(r[side] > R - 0.02), r[side].min()
     assert np.median(np.abs(r[side] - R)) < 0.001   # most of the surface is where the cylinder is
@@ -62,8 +63,9 @@ def test_independent_client_sees_the_running_sim(sim_run):
     print(f"object: {len(v)} vertices, {len(idx) // 3} triangles, radius {r.min():.4f}..{r.max():.4f} m "
           f"(R = {R:.4f}), |y| <= {np.abs(v[:, 1]).max():.4f} m")
 
-    # the measured fingertip (JSON, SI units, display frame) follows the stroke: every valid one within a few cm
-    # of the cylinder's surface (the finger approaches from ~3 cm), and it reaches the surface (within 3 mm)
+    # the measured fingertip (JSON, SI units, display frame) follows the
+    # stroke: every valid one within a few cm of the cylinder's surface (the
+    # finger approaches from ~3 cm), and it reaches the surface (within 3 mm)
     for tip in tips:
         p = np.asarray(tip["position"], dtype=float)
         assert p.shape == (3,) and tip["header"]["frame_id"] == "display"

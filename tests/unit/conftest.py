@@ -1,8 +1,8 @@
-"""Fixtures shared by several packages' tests. ``home_patterns``: the Gray-code frames of the projector twin at
-the home sheet (truth seed 3), read by calibration/test_projector and twin/test_registration_camera.
-``model``, built once per worker: the real-time model of the sphere
-scene with a 4° stroke and a sticking finger, that path tables are attached to (fem/test_path_snapshots,
-fem/test_scene_model, fem/reference/test_path_table: one xdist group, ``SAME_WORKER`` in tests/conftest.py)."""
+"""Fixtures shared by several packages' tests. ``home_patterns``: the Gray-code frames of the projector twin
+at the home sheet (truth seed 3), read by calibration/test_projector and twin/test_registration_camera.
+``model``, built once per worker: the real-time model of the sphere scene with a 4° stroke and a sticking
+finger, that path tables are attached to (fem/test_path_snapshots, fem/test_scene_model,
+fem/reference/test_path_table: one xdist group, ``SAME_WORKER`` in tests/conftest.py)."""
 
 from __future__ import annotations
 

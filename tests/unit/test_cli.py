@@ -1,6 +1,7 @@
 """The command line (flexsheet.cli): bad input gets one clear line and a non-zero exit, never a traceback:
-``--duration`` and ``--rtf`` must be positive, a launch file without ``type:`` names itself once, a reader that goes
-away (``bag info … | head``) ends the command quietly; every subcommand's --help shows an example."""
+``--duration`` and ``--rtf`` must be positive, a launch file without ``type:`` names itself once, a reader
+that goes away (``bag info … | head``) ends the command quietly; every subcommand's --help shows an
+example."""
 
 from __future__ import annotations
 
@@ -33,7 +34,8 @@ def test_a_duration_or_pace_that_is_not_positive_is_refused_in_one_line(capsys, 
         cli.main(["launch", "launch/sim.yaml", flag, value])
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1] == f"flexsheet launch: error: argument {flag}: {flag} must be a finite number > 0, got '{value}'"
+    assert (err[-1]
+            == f"flexsheet launch: error: argument {flag}: {flag} must be a finite number > 0, got '{value}'")
 
 
 def test_a_launch_file_without_type_names_the_file_once(tmp_path, capsys):

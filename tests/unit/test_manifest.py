@@ -35,9 +35,11 @@ def test_record_replaces_the_old_table_of_its_kind_and_verify_names_a_changed_fi
     new.write_bytes(b"new table")
     e = manifest.record(new, "flexsheet experiment fem --node-table --ship", replaces="snapshots_")
     assert not old.exists() and other.exists()
-    assert e == {"kind": "snapshots", "key": "bbbb", "sha256": hashlib.sha256(b"new table").hexdigest(), "size": 9,
+    assert e == {"kind": "snapshots", "key": "bbbb", "sha256": hashlib.sha256(b"new table").hexdigest(),
+                 "size": 9,
                  "command": "flexsheet experiment fem --node-table --ship"}
-    assert sorted(json.loads((tmp_path / manifest.MANIFEST).read_text())) == ["pathsnap_cccc.npz", "snapshots_bbbb.npz"]
+    assert sorted(json.loads((tmp_path / manifest.MANIFEST).read_text())) == ["pathsnap_cccc.npz",
+                                                                              "snapshots_bbbb.npz"]
     assert manifest.verify(tmp_path) == []
     new.write_bytes(b"new tablf")                       # same size, one byte flipped
     assert manifest.verify(tmp_path) == [f"{new}: SHA-256 differs from MANIFEST.json"]

@@ -41,7 +41,8 @@ class CalibratedDisplay:
         dc.require("projector", "eye", "arms.left", "arms.right")
         p = dc.projector
         return cls(p.projector(), np.asarray(p.D, float).ravel().copy(), np.asarray(dc.eye.V, float).copy(),
-                   float(dc.eye.ipd), {s: np.asarray(dc.arms[s].T_display_base, float).copy() for s in ("left", "right")},
+                   float(dc.eye.ipd),
+                   {s: np.asarray(dc.arms[s].T_display_base, float).copy() for s in ("left", "right")},
                    source or dc.path or "display calibration",
                    0.0 if dc.sheet is None else float(dc.sheet.strain_offset))
 
@@ -52,7 +53,8 @@ class CalibratedDisplay:
 
 
 
-def display_calib_for(seed: int, realism: str, path: str | None = None, quick: bool = False) -> tuple[CalibratedDisplay, dict]:
+def display_calib_for(seed: int, realism: str, path: str | None = None,
+                      quick: bool = False) -> tuple[CalibratedDisplay, dict]:
     """The estimator's display for truth ``seed``: ``path`` (a display.yaml) if given, else the registration
     procedures run in the twin (:func:`flexsheet.twin.registration.sim_display_calib`, cached per seed;
     ``quick``: its quick preset). Returns (display, info with the path and, when known, the registration's own

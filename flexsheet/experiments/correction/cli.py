@@ -6,9 +6,10 @@ light lands on the **true** sheet, lit by the **true** projector:
 * *Estimator side* (:class:`DisplayEstimator`, built from :class:`CalibratedDisplay` — ``display.yaml`` of the
   registration procedures run in the twin, :func:`flexsheet.twin.registration.sim_display_calib`): the
   bridges' IK/FK at the calibrated arm bases (nominal URDF), the renderer's sheet
-  (:class:`flexsheet.rendering.state.RendererState` from those clamp poses and the tracked fingertip), its model
-  choice (:class:`flexsheet.rendering.state.ErrorTable`, ``auto``) and its drawing through the calibrated projector
-  (K_p, distortion, pose) for the calibrated eye (:class:`flexsheet.rendering.stereo_renderer.StereoRenderer`).
+  (:class:`flexsheet.rendering.state.RendererState` from those clamp poses and the tracked fingertip), its
+  model choice (:class:`flexsheet.rendering.state.ErrorTable`, ``auto``) and its drawing through the
+  calibrated projector (K_p, distortion, pose) for the calibrated eye
+  (:class:`flexsheet.rendering.stereo_renderer.StereoRenderer`).
 * *Twin side* (:class:`TwinWorld`, built from :class:`flexsheet.twin.truth.TwinTruth`): the true clamp poses
   (true forward kinematics of the commanded joints: true bases, link lengths, joint zeros), the true pushed
   shape (the nonlinear membrane FEM of :mod:`flexsheet.model.sheet_fem` with the truth's E, pre-strain and
@@ -49,24 +50,27 @@ def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="flexsheet experiment correction", description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="examples:\n  flexsheet experiment correction --twin realistic --truth-seed 0 --quick --out /tmp/corr\n"
-               "  flexsheet experiment correction --twin both --seeds 0 1 2 --stability --speed "
+        epilog="examples:\n  flexsheet experiment correction --twin realistic --truth-seed 0 --quick --out "
+               "/tmp/corr\n  flexsheet experiment correction --twin both --seeds 0 1 2 --stability --speed "
                "--out docs/figures/renderer")
     ap.add_argument("--out", required=True, type=Path, help="output directory")
     ap.add_argument("--twin", choices=("realistic", "ideal", "both"), default="realistic",
                     help="the truth's realism (both: realistic and ideal columns)")
     ap.add_argument("--truth-seed", type=int, default=None, help="hidden truth seed (>= 0; default 0)")
     ap.add_argument("--seeds", type=int, nargs="+", default=None,
-                    help="several truth seeds: each run goes to OUT/<realism>-<seed>/, the table to OUT/seeds.json")
+                    help="several truth seeds: each run goes to OUT/<realism>-<seed>/, the table to "
+                         "OUT/seeds.json")
     ap.add_argument("--display-calib", default=None,
-                    help="display.yaml for the estimators (default: run the registration in the twin, cached per seed)")
+                    help="display.yaml for the estimators (default: run the registration in the twin, cached "
+                         "per seed)")
     ap.add_argument("--quick", action="store_true", help="θ = 10, 50°, S = 10, 50 mm, quick registration")
-    ap.add_argument("--thetas", type=float, nargs="+", default=None, help="inclinations, deg (default 10..50)")
+    ap.add_argument("--thetas", type=float, nargs="+", default=None,
+                    help="inclinations, deg (default 10..50)")
     ap.add_argument("--depths", type=float, nargs="+", default=None, help="push depths, mm (default 10..50)")
     ap.add_argument("--pixel", type=float, default=0.35, help="measurement camera pixel on the screen, mm")
     ap.add_argument("--sheet-model", choices=("auto", "fem"), default="auto",
-                    help="renderer's pushed-sheet model (the gripped FEM depth table; the old series model is the "
-                         "comparison column 'fine')")
+                    help="renderer's pushed-sheet model (the gripped FEM depth table; the old series model "
+                         "is the comparison column 'fine')")
     ap.add_argument("--stability", action="store_true",
                     help="also sweep tension-ratio, pre-strain and projector errors (first realistic run)")
     ap.add_argument("--speed", action="store_true", help="time a stereo pair per model (OUT/seeds.json)")
@@ -74,7 +78,8 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _plan(ap: argparse.ArgumentParser, args: argparse.Namespace) -> tuple[list, list, list, tuple, bool]:
-    """(seeds, thetas, depths, realisms, single) of the parsed ``args``; ``ap.error`` on an invalid combination."""
+    """(seeds, thetas, depths, realisms, single) of the parsed ``args``; ``ap.error`` on an invalid
+    combination."""
     seeds = args.seeds if args.seeds is not None else [0 if args.truth_seed is None else args.truth_seed]
     if args.seeds is not None and args.truth_seed is not None:
         ap.error("give --truth-seed or --seeds, not both")
@@ -102,7 +107,8 @@ def main(argv: list[str] | None = None) -> int:
         speed = model_speed(pushed_sheet_model(args.sheet_model, args.quick)) if args.speed else None
         aggregate(args.out, runs, speed)
         if speed:
-            print("stereo pair ms:", {k: (round(v, 2) if isinstance(v, float) else v) for k, v in speed.items()})
+            print("stereo pair ms:",
+                  {k: (round(v, 2) if isinstance(v, float) else v) for k, v in speed.items()})
     print(f"wrote {args.out} in {time.perf_counter() - t0:.0f} s")
     return 0
 
@@ -128,9 +134,9 @@ def _run_all(args: argparse.Namespace, seeds, thetas, depths, realisms, single: 
                     (out / name).replace(args.out / name)
             runs[f"{realism}-{seed}"] = s
             h = s["headline"]
-            print(f"{realism} seed {seed}: inclined max corrected {h['inclined_max_corrected_mm']:.2f} mm, pushed max "
-                  f"corrected {h['pushed_max_corrected_mm']:.2f} mm (target {PIXEL * 1e3:.1f} mm); "
-                  f"models {s['models_picked']}")
+            print(f"{realism} seed {seed}: inclined max corrected {h['inclined_max_corrected_mm']:.2f} mm, "
+                  f"pushed max corrected {h['pushed_max_corrected_mm']:.2f} mm (target {PIXEL * 1e3:.1f} "
+                  f"mm); models {s['models_picked']}")
     return runs
 
 

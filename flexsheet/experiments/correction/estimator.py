@@ -16,12 +16,13 @@ from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_me
 
 
 class DisplayEstimator:
-    """The display's estimators for one :class:`CalibratedDisplay` (and nothing else — by construction it takes
-    no truth): the bridges' kinematics at the calibrated bases, the renderer's sheet, model choice and drawing.
+    """The display's estimators for one :class:`CalibratedDisplay` (and nothing else — by construction it
+    takes no truth): the bridges' kinematics at the calibrated bases, the renderer's sheet, model choice and
+    drawing.
 
-    ``config``: the renderer's :class:`flexsheet.model.sheet_model.SheetConfig`; ``sheet_model``: the renderer's
-    pushed-sheet model (:class:`flexsheet.model.sheet_model.NominalSheetModel`; None: the node's own,
-    :func:`flexsheet.model.sheet_model.sheet_model_for` ``config``), the ``fem_nominal`` column;
+    ``config``: the renderer's :class:`flexsheet.model.sheet_model.SheetConfig`; ``sheet_model``: the
+    renderer's pushed-sheet model (:class:`flexsheet.model.sheet_model.NominalSheetModel`; None: the node's
+    own, :func:`flexsheet.model.sheet_model.sheet_model_for` ``config``), the ``fem_nominal`` column;
     ``samples``: MSAA samples; ``target`` m: the ``auto`` model choice's accuracy target. Raises ``TypeError``
     if ``cal`` is not a :class:`CalibratedDisplay`.
     """
@@ -41,7 +42,8 @@ class DisplayEstimator:
         self.renderer.set_mesh(v, f)
         home = SheetSurface(np.zeros(3), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], clamp_half_span(STRETCH))
         self.table = ErrorTable.build(silhouette_probes(v), eye=cal.eye, projector=cal.projector.position,
-                                      screen_point=geometry.SCREEN_POINT, screen_normal=geometry.SCREEN_NORMAL, sheet=home,
+                                      screen_point=geometry.SCREEN_POINT,
+                                      screen_normal=geometry.SCREEN_NORMAL, sheet=home,
                                       sheet_model=self.sheet_model)
 
     def joints(self, origin, normal, axis_u, stretch: float = STRETCH) -> dict[str, np.ndarray]:
@@ -51,15 +53,16 @@ class DisplayEstimator:
         return clamp_joints(self.kin, *clamp_poses(origin, normal, axis_u, stretch))
 
     def clamps(self, q: dict) -> tuple[np.ndarray, np.ndarray]:
-        """The bridges' clamp poses (FK of the measured joints at the calibrated bases), (left, right) (4, 4)."""
+        """The bridges' clamp poses (FK of the measured joints at the calibrated bases), (left, right) (4,
+        4)."""
         return self.kin["left"].fk(q["left"]), self.kin["right"].fk(q["right"])
 
     def sheet(self, q: dict, finger=None, series: bool = False) -> SheetSurface:
-        """The renderer's sheet (:meth:`flexsheet.rendering.state.RendererState.current_sheet`, the node's code path)
-        from the bridges' clamp poses and the tracked fingertip ``finger`` (3,) m or None; when pushed, its
-        membrane is the ``sheet_model``'s (``fem_nominal``). ``series``: instead the renderer's OLD pushed-sheet
-        model, the 16-mode sine series (:class:`flexsheet.model.sheet.Membrane`, tension ratio 1), for the
-        comparison column ``fine`` only; the renderer no longer uses it."""
+        """The renderer's sheet (:meth:`flexsheet.rendering.state.RendererState.current_sheet`, the node's
+        code path) from the bridges' clamp poses and the tracked fingertip ``finger`` (3,) m or None; when
+        pushed, its membrane is the ``sheet_model``'s (``fem_nominal``). ``series``: instead the renderer's
+        OLD pushed-sheet model, the 16-mode sine series (:class:`flexsheet.model.sheet.Membrane`, tension
+        ratio 1), for the comparison column ``fine`` only; the renderer no longer uses it."""
         Tl, Tr = self.clamps(q)
         if series:
             flat = SheetSurface.from_clamps(Tl, Tr, half_width=self.config.half_width)
@@ -67,20 +70,24 @@ class DisplayEstimator:
                     self.config.push_threshold:
                 return flat
             return SheetSurface.from_clamps(Tl, Tr, half_width=self.config.half_width,
-                                            pushed_point=np.asarray(finger, float), membrane_kwargs={"modes": 16})
-        st = RendererState(self.cal.eye, self.cal.projector.position, self.config, sheet_model=self.sheet_model)
+                                            pushed_point=np.asarray(finger, float),
+                                            membrane_kwargs={"modes": 16})
+        st = RendererState(self.cal.eye, self.cal.projector.position, self.config,
+                           sheet_model=self.sheet_model)
         st.set_arm_pose("left", Tl)
         st.set_arm_pose("right", Tr)
         st.set_fingertip(None if finger is None else np.asarray(finger, float), 0.0)
         return st.current_sheet()
 
     def pick(self, sheet: SheetSurface) -> str:
-        """The model the renderer's ``auto`` picks for ``sheet`` (:func:`flexsheet.rendering.state.pick_model`)."""
+        """The model the renderer's ``auto`` picks for ``sheet``
+        (:func:`flexsheet.rendering.state.pick_model`)."""
         return pick_model("auto", sheet, self.table, self.target)
 
     def draw(self, model: str, sheet: SheetSurface) -> np.ndarray:
         """The projector image (H, W) float in [0, 1] drawn with ``model`` (one of
-        :data:`flexsheet.rendering.correction.MODELS`; ``fine`` uses ``sheet``'s membrane) for the calibrated eye."""
+        :data:`flexsheet.rendering.correction.MODELS`; ``fine`` uses ``sheet``'s membrane) for the calibrated
+        eye."""
         with self.renderer.ctx:           # another renderer's (standalone) context may be current
             self.renderer.set_model(model, None if model == "none" else sheet)
             return self.renderer.render_single(self.cal.eye)

@@ -28,7 +28,8 @@ log = logging.getLogger(__name__)
 
 def run(out: Path, truth_seed: int = 0, realism: str = "realistic", *, thetas=(10, 20, 30, 40, 50),
         depths=(10, 20, 30, 40, 50), display_calib: str | None = None, quick: bool = False,
-        pixel: float = 0.00035, sheet_model: str = "auto", stability: bool = False, charts: bool = True) -> dict:
+        pixel: float = 0.00035, sheet_model: str = "auto", stability: bool = False,
+        charts: bool = True) -> dict:
     """Run the experiment for one truth and write ``out/summary.json`` (+ charts); returns the summary."""
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
@@ -43,8 +44,9 @@ def run(out: Path, truth_seed: int = 0, realism: str = "realistic", *, thetas=(1
     tag = f"[correction] seed {truth_seed} {realism}"
     s["inclined"] = sweep_inclined(est, world, meas, thetas, photos, tag)
     s["pushed"] = sweep_pushed(est, world, meas, depths, photos, tag)
-    s["live_path"] = {"note": "the renderer node's code path (RendererState, ErrorTable, auto) on the true FEM "
-                              "sheet, ray-traced, same eye/projector both sides; max/mean over the silhouette, mm",
+    s["live_path"] = {"note": "the renderer node's code path (RendererState, ErrorTable, auto) on the true "
+                              "FEM sheet, ray-traced, same eye/projector both sides; max/mean over the "
+                              "silhouette, mm",
                       "rows": live_path(truth, (0, 10, 30, 50), strain_offset=cal.strain_offset)}
     s["models_picked"] = {"inclined": sorted({r["model"] for r in s["inclined"].values()}),
                           "pushed": sorted({r["model"] for r in s["pushed"].values()})}
@@ -60,7 +62,8 @@ def run(out: Path, truth_seed: int = 0, realism: str = "realistic", *, thetas=(1
     return s
 
 
-def _header(realism: str, truth_seed: int, truth: TwinTruth, cal: CalibratedDisplay, cal_info: dict, model_obj,
+def _header(realism: str, truth_seed: int, truth: TwinTruth, cal: CalibratedDisplay, cal_info: dict,
+            model_obj,
             meas: Measurer, quick: bool, pixel: float) -> dict:
     """The summary's first keys: the truth's sheet, the estimator's sources, the target and the settings."""
     return {"twin": {"realism": realism, "truth_seed": int(truth_seed),
@@ -86,7 +89,8 @@ def _headline(s: dict, thetas, depths) -> dict:
 
 def _stability(out: Path, est: DisplayEstimator, cal: CalibratedDisplay, truth: TwinTruth, meas: Measurer,
                model_obj, quick: bool, charts: bool) -> dict:
-    """The stability sweeps (tension ratio, pre-strain, projector), written to ``out/stability.json`` (+ chart)."""
+    """The stability sweeps (tension ratio, pre-strain, projector), written to ``out/stability.json`` (+
+    chart)."""
     stab = {
         "tension_ratio": sweep_sheet(est, truth, meas, "tension_ratio", quick=quick),
         "prestrain": sweep_sheet(est, truth, meas, "prestrain", quick=quick),

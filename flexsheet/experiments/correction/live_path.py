@@ -33,14 +33,15 @@ class LivePath:
 
     Renderer side, as ``RendererNode.setup`` builds it: the sheet model of
     :func:`flexsheet.model.sheet_model.sheet_model_for` ``config`` (or ``sheet_model``), a
-    :class:`flexsheet.rendering.state.RendererState` fed both clamp poses (the home pose at ``stretch``) and the
-    fingertip, the :class:`flexsheet.rendering.state.ErrorTable` and ``auto`` :func:`flexsheet.rendering.state.pick_model`,
-    and the picked model's correction in numpy (the shader's twin, equal to 2e-6 m). Truth side: the twin's
-    FEM sheet (:meth:`TwinWorld.table`, the truth's E, pre-strain and tension ratio) at the same clamps, lit
-    along the projector's rays and traced by the measurement camera's bisection (:func:`trace_to_sheet` on a
-    241×241 grid), not the renderer's Newton solver. Eye V and projector P are the same on both sides, so the
-    error is the sheet model's alone: per probe (the object's silhouette points), the distance on the imaginary
-    screen seen from the eye between where the light for A' lands and where the eye expects A."""
+    :class:`flexsheet.rendering.state.RendererState` fed both clamp poses (the home pose at ``stretch``) and
+    the fingertip, the :class:`flexsheet.rendering.state.ErrorTable` and ``auto``
+    :func:`flexsheet.rendering.state.pick_model`, and the picked model's correction in numpy (the shader's
+    twin, equal to 2e-6 m). Truth side: the twin's FEM sheet (:meth:`TwinWorld.table`, the truth's E,
+    pre-strain and tension ratio) at the same clamps, lit along the projector's rays and traced by the
+    measurement camera's bisection (:func:`trace_to_sheet` on a 241×241 grid), not the renderer's Newton
+    solver. Eye V and projector P are the same on both sides, so the error is the sheet model's alone: per
+    probe (the object's silhouette points), the distance on the imaginary screen seen from the eye between
+    where the light for A' lands and where the eye expects A."""
 
     def __init__(self, stretch: float = STRETCH, config=None, sheet_model=None, eye=geometry.EYE,
                  projector=geometry.PROJECTOR) -> None:
@@ -53,7 +54,8 @@ class LivePath:
         self.clamps = clamp_poses(*HOME_POSE, self.stretch)
         self.table = ErrorTable.at_home(self.probes, eye=self.eye, projector=self.projector,
                                         stretch_node=self.stretch, config=self.config,
-                                        sheet_model=sheet_model if sheet_model is not None else sheet_model_for(self.config))
+                                        sheet_model=sheet_model if sheet_model is not None
+                                        else sheet_model_for(self.config))
         self.state = RendererState(self.eye, self.projector, self.config, mesh=(v, f), sheet_model=model)
         self.state.set_arm_pose("left", self.clamps[0])
         self.state.set_arm_pose("right", self.clamps[1])
@@ -73,7 +75,8 @@ class LivePath:
         if model == "fine":
             return correct_vertices_fine(self.probes, sheet=sheet, **c)
         if model == "four_triangle":
-            return correct_vertices_pushed(self.probes, pushed_point=sheet.pushed_point, corners=sheet.corners, **c)
+            return correct_vertices_pushed(self.probes, pushed_point=sheet.pushed_point,
+                                           corners=sheet.corners, **c)
         if model == "flat":
             return correct_vertices(self.probes, sheet_point=sheet.origin, sheet_normal=sheet.normal, **c)
         return self.probes.copy()
@@ -87,7 +90,8 @@ class LivePath:
         return SheetSurface(origin, n, eu, a, geometry.SHEET_SIZE / 2, mem)
 
     def landing_error(self, a_hat, true: SheetSurface) -> np.ndarray:
-        """Per probe, m: where the light for ``a_hat`` lands on ``true``, seen from the eye, against the probe."""
+        """Per probe, m: where the light for ``a_hat`` lands on ``true``, seen from the eye, against the
+        probe."""
         scr = dict(eye=self.eye, screen_point=geometry.SCREEN_POINT, screen_normal=geometry.SCREEN_NORMAL)
         b = project_vertices(a_hat, **scr)                            # where the projector aims (its pinhole)
         grid = true.membrane.grid(241) if true.membrane is not None else None
@@ -97,8 +101,8 @@ class LivePath:
         return np.linalg.norm(project_vertices(c, **scr) - project_vertices(self.probes, **scr), axis=1)
 
     def measure(self, world: TwinWorld, depth: float) -> dict:
-        """The live path at push ``depth`` m at the sheet centre: the picked model's max and mean landing error,
-        and (for comparison only) the uncorrected image's and the old series model's, mm."""
+        """The live path at push ``depth`` m at the sheet centre: the picked model's max and mean landing
+        error, and (for comparison only) the uncorrected image's and the old series model's, mm."""
         finger = HOME_POSE[0] - depth * HOME_POSE[1]
         sheet, model = self.sheet(finger)
         true = self.true_sheet(world, finger)
@@ -107,7 +111,8 @@ class LivePath:
                "depth_table": list(sheet.membrane.w.shape) if sheet.membrane is not None else None,
                "uncorrected_max_mm": float(self.landing_error(self.probes, true).max() * 1e3)}
         if depth > 0.0:
-            old = SheetSurface.from_clamps(*self.clamps, half_width=self.config.half_width, pushed_point=finger,
+            old = SheetSurface.from_clamps(*self.clamps, half_width=self.config.half_width,
+                                           pushed_point=finger,
                                            membrane_kwargs={"modes": 16})
             row["series_max_mm"] = float(self.landing_error(self.corrected("fine", old), true).max() * 1e3)
         return row

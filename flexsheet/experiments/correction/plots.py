@@ -45,11 +45,13 @@ def _fig11(plt, out: Path, s: dict, thetas, tw: str) -> None:
 
 def _fig13(plt, out: Path, s: dict, depths, tw: str) -> None:
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
-    names = [n for n in ("uncorrected", "four_triangle", "fine", "fem_nominal") if f"{n}_mm" in s["pushed"][f"{depths[0]:g}"]]
+    names = [n for n in ("uncorrected", "four_triangle", "fine", "fem_nominal")
+             if f"{n}_mm" in s["pushed"][f"{depths[0]:g}"]]
     for name in names:
         ax.plot(depths, [max(s["pushed"][f"{d:g}"][f"{name}_mm"], 0.01) for d in depths],
                 "--o" if name == "uncorrected" else "-o", label=f"{name} (mean of Δh, Δw)")
-    ax.plot(depths, [max(s["pushed"][f"{d:g}"]["corrected_mm"], 0.01) for d in depths], "k-", lw=4, alpha=0.25,
+    ax.plot(depths, [max(s["pushed"][f"{d:g}"]["corrected_mm"], 0.01) for d in depths], "k-", lw=4,
+            alpha=0.25,
             label="picked by the renderer")
     ax.axhline(0.7, color="grey", lw=0.8, ls=":", label="1 projector pixel (0.7 mm)")
     ax.plot([50], [15.8], "k*", ms=12, label="paper S=50 uncorrected mean")

@@ -11,8 +11,9 @@ from flexsheet.model import geometry
 
 
 def inclined_pose(theta_deg: float, direction: str = "down") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Commanded sheet pose (origin (3,) m, normal (3,), axis_u (3,)) = the cylinder's tangent plane at θ (deg),
-    tilted ``direction`` ("down" or "up"). Raises ``ValueError`` for another direction or a non-finite θ."""
+    """Commanded sheet pose (origin (3,) m, normal (3,), axis_u (3,)) = the cylinder's tangent plane at θ
+    (deg), tilted ``direction`` ("down" or "up"). Raises ``ValueError`` for another direction or a non-finite
+    θ."""
     if direction not in ("down", "up") or not math.isfinite(theta_deg):
         raise ValueError(f"need direction 'down'/'up' and a finite theta, got {direction!r}, {theta_deg!r}")
     R = geometry.CYLINDER_RADIUS

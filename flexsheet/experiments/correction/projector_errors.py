@@ -30,9 +30,11 @@ log = logging.getLogger(__name__)
 PROJECTOR_SCALES = (0.0, 1.0, 3.0, 10.0, 30.0, 100.0)
 RANDOM_SCALES = (0.1, 0.25, 0.5, 1.0, 2.0, 4.0)
 #: one unit of random projector error: the registration target (2 mm, 0.2°) in a random direction,
-#: with 0.5 px of principal point and 0.1 % of focal length (unlike a calibration's error, it is not constrained
-#: by the reprojection of the calibration points, so it moves the image: 0.2° is ~5 px on the screen)
-PROJECTOR_UNIT_ERROR = {"translation_mm": 2.0, "rotation_deg": 0.2, "principal_point_px": 0.5, "focal_rel": 0.001}
+#: with 0.5 px of principal point and 0.1 % of focal length (unlike a
+#: calibration's error, it is not constrained by the reprojection of the
+#: calibration points, so it moves the image: 0.2° is ~5 px on the screen)
+PROJECTOR_UNIT_ERROR = {"translation_mm": 2.0, "rotation_deg": 0.2, "principal_point_px": 0.5,
+                        "focal_rel": 0.001}
 #: points where the induced mapping error is taken: the imaginary screen ±100 × ±80 mm and 50 mm behind it
 _MAP_POINTS = np.array([[x, y, z] for x in (0.0, -0.05) for y in np.linspace(-0.1, 0.1, 9)
                         for z in np.linspace(-0.08, 0.08, 7)])
@@ -41,7 +43,8 @@ _MAP_POINTS = np.array([[x, y, z] for x in (0.0, -0.05) for y in np.linspace(-0.
 
 def perturbed_projector(projector: Projector, scale: float, seed: int, direction: int = 0) -> Projector:
     """``projector`` moved by ``scale`` × :data:`PROJECTOR_UNIT_ERROR` in the random direction number
-    ``direction`` of ``seed`` (translation, rotation axis, principal-point direction, sign of the focal error)."""
+    ``direction`` of ``seed`` (translation, rotation axis, principal-point direction, sign of the focal
+    error)."""
     rng = np.random.default_rng([int(seed), 4242, int(direction)])
     u = PROJECTOR_UNIT_ERROR
     dt = rng.normal(size=3)
@@ -59,27 +62,31 @@ def perturbed_projector(projector: Projector, scale: float, seed: int, direction
     return Projector(K, R, np.asarray(projector.position, float) + dt, projector.width, projector.height)
 
 
-def scaled_error(true: Projector, true_D, est: Projector, est_D, scale: float) -> tuple[Projector, np.ndarray]:
+def scaled_error(true: Projector, true_D, est: Projector, est_D, scale: float) -> tuple[Projector,
+                                                                                        np.ndarray]:
     """The projector whose error against ``true`` is ``scale`` × the error of ``est`` (K, D and centre
     linearly; the rotation along the geodesic, exp(s·log.info(R_est R_trueᵀ)) R_true)."""
     K = true.K + scale * (est.K - true.K)
     D = np.asarray(true_D, float) + scale * (np.asarray(est_D, float) - np.asarray(true_D, float))
     w = cv2.Rodrigues(np.asarray(est.R, float) @ np.asarray(true.R, float).T)[0]
     R = cv2.Rodrigues(scale * w)[0] @ np.asarray(true.R, float)
-    P = np.asarray(true.position, float) + scale * (np.asarray(est.position, float) - np.asarray(true.position, float))
+    P = (np.asarray(true.position, float)
+         + scale * (np.asarray(est.position, float) - np.asarray(true.position, float)))
     return Projector(K, R, P, true.width, true.height), D
 
 
 def mapping_error_px(true: Projector, true_D, est: Projector, est_D) -> float:
     """RMS distance (projector px) between the pixels the two projectors give the points of the imaginary
-    screen (±100 × ±80 mm) and of a plane 50 mm behind it: how far the renderer's screen → pixel map is off."""
+    screen (±100 × ±80 mm) and of a plane 50 mm behind it: how far the renderer's screen → pixel map is
+    off."""
     a, _ = projector_pixels(_MAP_POINTS, true, true_D)
     b, _ = projector_pixels(_MAP_POINTS, est, est_D)
     return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))))
 
 
 def sweep_projector(cal: CalibratedDisplay, truth: TwinTruth, meas: Measurer, scales=PROJECTOR_SCALES,
-                    random_scales=RANDOM_SCALES, theta: float = 50.0, depth_mm: float = 50.0, directions: int = 2,
+                    random_scales=RANDOM_SCALES, theta: float = 50.0, depth_mm: float = 50.0,
+                    directions: int = 2,
                     sheet_model=None, quick: bool = False) -> dict:
     """Both figures' corrected errors against a scaled projector calibration error (a sensitivity study: these
     estimator inputs are built from the truth on purpose). Two families, eye and arm bases kept calibrated:
@@ -102,7 +109,8 @@ def sweep_projector(cal: CalibratedDisplay, truth: TwinTruth, meas: Measurer, sc
         rp = measure_pushed(est, world, meas, depth_mm, ())
         est.release()
         return {"mapping_px": mapping_error_px(world.projector, world.distortion, p, D),
-                "inclined_corrected_mm": ri["corrected_mm"], "inclined_position_mm": ri["corrected_position_mm"],
+                "inclined_corrected_mm": ri["corrected_mm"],
+                "inclined_position_mm": ri["corrected_position_mm"],
                 "pushed_corrected_mm": rp["corrected_mm"], "pushed_model": rp["model"]}
 
     fam: dict = {"calibrated": [], "random": []}
@@ -131,5 +139,6 @@ def sweep_projector(cal: CalibratedDisplay, truth: TwinTruth, meas: Measurer, sc
             ys = [r[f"{fig}_corrected_mm"] for r in rows]
             out[f"{name}_{fig}_breaks_at_scale"] = breaking_point([r["scale"] for r in rows], ys, lim)
             out[f"{name}_{fig}_breaks_at_px"] = breaking_point([r["mapping_px"] for r in rows_px],
-                                                               [r[f"{fig}_corrected_mm"] for r in rows_px], lim)
+                                                               [r[f"{fig}_corrected_mm"] for r in rows_px],
+                                                               lim)
     return out

@@ -1,5 +1,6 @@
 """The seeds table (``seeds.json`` + ``seeds.png``: the headline numbers of each (realism, seed) run side by
-side) and, with the speed timing, each model's accuracy against its speed (``accuracy_vs_speed.{json,png}``)."""
+side) and, with the speed timing, each model's accuracy against its speed
+(``accuracy_vs_speed.{json,png}``)."""
 
 from __future__ import annotations
 
@@ -12,17 +13,20 @@ from flexsheet.experiments.correction.settings import PIXEL
 
 
 def aggregate(out: Path, runs: dict, speed: dict | None = None) -> dict:
-    """``out/seeds.json`` + ``out/seeds.png``: the headline numbers of each (realism, seed) run side by side."""
+    """``out/seeds.json`` + ``out/seeds.png``: the headline numbers of each (realism, seed) run side by
+    side."""
     doc: dict = {"target_mm": PIXEL * 1e3, "runs": {}}
     for key, s in runs.items():
         doc["runs"][key] = {
             "realism": s["twin"]["realism"], "truth_seed": s["twin"]["truth_seed"],
             "truth_sheet": s["twin"]["truth_sheet"],
             "registration_errors": s["estimator"].get("registration_errors"),
-            "inclined": {k: {f: r[f] for f in ("uncorrected_mm", "corrected_mm", "corrected_position_mm", "model")}
-                         for k, r in s["inclined"].items()},
-            "pushed": {k: {f: r[f] for f in r if f.endswith("_mm") and not f.endswith(("sizes_mm", "contact_mm"))}
-                       | {"model": r["model"]} for k, r in s["pushed"].items()},
+            "inclined":
+                {k: {f: r[f] for f in ("uncorrected_mm", "corrected_mm", "corrected_position_mm", "model")}
+                 for k, r in s["inclined"].items()},
+            "pushed":
+                {k: {f: r[f] for f in r if f.endswith("_mm") and not f.endswith(("sizes_mm", "contact_mm"))}
+                 | {"model": r["model"]} for k, r in s["pushed"].items()},
             "headline": s["headline"]}
     if speed:
         doc["stereo_pair_ms"] = speed
@@ -63,8 +67,8 @@ def aggregate(out: Path, runs: dict, speed: dict | None = None) -> dict:
 
 
 def _accuracy_vs_speed(out: Path, runs: dict, speed: dict) -> None:
-    """``accuracy_vs_speed.{json,png}``: each model's stereo-pair time against its error at the largest θ and S
-    (mean over the realistic runs)."""
+    """``accuracy_vs_speed.{json,png}``: each model's stereo-pair time against its error at the largest θ and
+    S (mean over the realistic runs)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -77,8 +81,10 @@ def _accuracy_vs_speed(out: Path, runs: dict, speed: dict) -> None:
     def mean(f):
         return float(np.mean([f(s) for s in real]))
 
-    pts = {"none": (mean(lambda s: s["inclined"][tmax]["uncorrected_mm"]), mean(lambda s: s["pushed"][dmax]["uncorrected_mm"])),
-           "flat": (mean(lambda s: s["inclined"][tmax]["corrected_mm"]), mean(lambda s: s["pushed"][dmax]["uncorrected_mm"])),
+    pts = {"none": (mean(lambda s: s["inclined"][tmax]["uncorrected_mm"]),
+                    mean(lambda s: s["pushed"][dmax]["uncorrected_mm"])),
+           "flat": (mean(lambda s: s["inclined"][tmax]["corrected_mm"]),
+                    mean(lambda s: s["pushed"][dmax]["uncorrected_mm"])),
            "four_triangle": (None, mean(lambda s: s["pushed"][dmax]["four_triangle_mm"])),
            "fine": (None, mean(lambda s: s["pushed"][dmax]["fine_mm"]))}
     if "fem_nominal" in speed and "fem_nominal_mm" in real[0]["pushed"][dmax]:

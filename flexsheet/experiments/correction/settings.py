@@ -12,8 +12,8 @@ PIXEL = geometry.PIXEL_ON_SCREEN
 STRETCH = 0.04
 #: depths (m) of the true sheet's FEM table (centre contact; solved directly at Fig. 13's depths)
 FEM_DEPTHS = (0.005, 0.010, 0.020, 0.030, 0.040, 0.050, 0.060)
-#: contact positions of the true sheet's table: the centre only (the true contact is within a few mm of it; the
-#: table's remapping moves the solution there, :class:`flexsheet.model.sheet_table.IndentTable`)
+#: contact positions of the true sheet's table: the centre only (the true contact is within a few mm of
+#: it; the table's remapping moves the solution there, :class:`flexsheet.model.sheet_table.IndentTable`)
 FEM_POSITIONS = (0.0,)
 
 PAPER = {
@@ -26,18 +26,19 @@ PAPER = {
 }
 
 ASSUMPTIONS = [
-    "Inclined sheet = tangent plane of the cylinder at angle θ, tilted down (contact (−R+R cosθ, 0, −R sinθ), "
-    "normal (cosθ, 0, −sinθ)); the planner commands it, the bridges solve the joints with the calibrated "
-    "bases, the true arms put the sheet where the true kinematics of those joints say.",
+    "Inclined sheet = tangent plane of the cylinder at angle θ, tilted down (contact (−R+R cosθ, 0, −R "
+    "sinθ), normal (cosθ, 0, −sinθ)); the planner commands it, the bridges solve the joints with the "
+    "calibrated bases, the true arms put the sheet where the true kinematics of those joints say.",
     "Pushed sheet: the home pose; the finger is commanded to S behind the commanded sheet centre along its "
     "normal; the true depth and contact point follow from the true sheet plane; tracking is perfect.",
     f"Clamp stretch {STRETCH} in both (the planner's for the default 30 N/m object).",
     "Sizes on the imaginary screen seen from the eye: h at the centre column, u/d 10 % of h inside the "
-    "top/bottom edges, w at the middle row; 0.5-crossings of the anti-aliased photograph. corrected_mm = mean "
-    "absolute size error of the model the renderer picks; position_mm = shift of the image's centre.",
+    "top/bottom edges, w at the middle row; 0.5-crossings of the anti-aliased photograph. corrected_mm = "
+    "mean absolute size error of the model the renderer picks; position_mm = shift of the image's centre.",
     "The measurement camera sits at the paper's fixed viewpoint V (geometry.EYE); the renderer draws for the "
     "eye of display.yaml.",
-    "The drawn object is the rigid cylinder (the paper draws the FEM-deformed one; its outline barely moves).",
+    "The drawn object is the rigid cylinder (the paper draws the FEM-deformed one; its outline barely "
+    "moves).",
 ]
 
 MODEL_LABELS = {"none": "uncorrected", "flat": "flat", "four_triangle": "four_triangle", "fine": "fine",

@@ -1,5 +1,5 @@
-"""The renderer's pushed-sheet model for the experiment (the gripped sheet's FEM depth table with the identified
-strain offset, as the node builds it) and its description for the summary."""
+"""The renderer's pushed-sheet model for the experiment (the gripped sheet's FEM depth table with the
+identified strain offset, as the node builds it) and its description for the summary."""
 
 from __future__ import annotations
 
@@ -13,9 +13,9 @@ log = logging.getLogger(__name__)
 
 def pushed_sheet_model(name: str, quick: bool = False, strain_offset: float = 0.0):
     """The renderer's pushed-sheet model (``auto``/``fem``: the gripped sheet's FEM depth table, the node's
-    :func:`flexsheet.model.sheet_model.sheet_model_for`) with the identified ``strain_offset`` (``display.yaml``'s
-    sheet entry); ``quick``: its tables for centre contacts only (the experiment pushes at the centre; the node
-    uses the full tables)."""
+    :func:`flexsheet.model.sheet_model.sheet_model_for`) with the identified ``strain_offset``
+    (``display.yaml``'s sheet entry); ``quick``: its tables for centre contacts only (the experiment pushes at
+    the centre; the node uses the full tables)."""
     if name not in ("auto", "fem"):
         raise ValueError(f"sheet model must be 'auto' or 'fem', got {name!r}")
 

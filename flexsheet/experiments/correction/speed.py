@@ -27,7 +27,8 @@ def model_speed(sheet_model=None, repeats: int = 10) -> dict:
     out = {m: d["median_ms"] for m, d in t.items()}
     if sheet_model is not None:
         fem = sheet_model.surface(series)
-        out["fem_nominal"] = time_models(rt, repeats, models=("fine",), sheets={"fine": fem})["fine"]["median_ms"]
+        out["fem_nominal"] = time_models(rt, repeats, models=("fine",),
+                                         sheets={"fine": fem})["fine"]["median_ms"]
     out["gl_renderer"] = rt.ctx.info.get("GL_RENDERER", "?")
     rt.release()
     return out

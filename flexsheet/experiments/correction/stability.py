@@ -26,9 +26,9 @@ PRESTRAINS = (0.0, 0.005, 0.01, 0.02, 0.04)
 def sweep_sheet(est: DisplayEstimator, truth: TwinTruth, meas: Measurer, kind: str, values=None,
                 depth_mm: float = 50.0, quick: bool = False) -> dict:
     """Pushed error (``depth_mm``) of every model against an error in the true sheet the estimator cannot see:
-    ``kind`` ``tension_ratio`` — the true β = value × the estimator's assumed β (1.0); ``prestrain`` — the true
-    pre-strain = value (the estimator assumes 0; the same as an error in the clamp strain it measures). The
-    truth's other values are kept (one FEM table per value). The breaking point is where the renderer's
+    ``kind`` ``tension_ratio`` — the true β = value × the estimator's assumed β (1.0); ``prestrain`` — the
+    true pre-strain = value (the estimator assumes 0; the same as an error in the clamp strain it measures).
+    The truth's other values are kept (one FEM table per value). The breaking point is where the renderer's
     picked model passes one projector pixel, going away from the assumption on each side."""
     if kind == "tension_ratio":
         values = values or ((0.5, 1.0, 2.0) if quick else TENSION_FACTORS)
@@ -44,7 +44,8 @@ def sweep_sheet(est: DisplayEstimator, truth: TwinTruth, meas: Measurer, kind: s
         t = dataclasses.replace(truth, **({"tension_ratio": float(x)} if kind == "tension_ratio"
                                           else {"sheet_prestrain": float(x)}))
         r = measure_pushed(est, TwinWorld(t), meas, depth_mm, models)
-        rows.append({"value": float(x), **{MODEL_LABELS[m] + "_mm": r[MODEL_LABELS[m] + "_mm"] for m in models},
+        rows.append({"value": float(x),
+                     **{MODEL_LABELS[m] + "_mm": r[MODEL_LABELS[m] + "_mm"] for m in models},
                      "picked": r["model"], "corrected_mm": r["corrected_mm"]})
         log.info(f"[correction] stability: true {kind} {x:g}: picked {r['model']} {r['corrected_mm']:.2f} mm")
     lim = PIXEL * 1e3

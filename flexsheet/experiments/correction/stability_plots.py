@@ -32,10 +32,12 @@ def stability_chart(path: Path, stab: dict) -> None:
         b = t["corrected_breaks_at"]
         if key == "tension_ratio":
             a.set_xscale("log")
-            a.xaxis.set_major_locator(FixedLocator([x for x in xs if x in (0.3, 0.5, 0.7, 1.0, 1.4, 2.0, 3.0)] or xs))
+            a.xaxis.set_major_locator(FixedLocator([x for x in xs if x in (0.3, 0.5, 0.7, 1.0, 1.4, 2.0, 3.0)]
+                                                   or xs))
             a.xaxis.set_minor_locator(NullLocator())
             a.xaxis.set_major_formatter(ScalarFormatter())
-            title = f"wrong tension ratio: picked model > 0.7 mm below β = {_fmt(b['below'])}, above β = {_fmt(b['above'])}"
+            title = (f"wrong tension ratio: picked model > 0.7 mm below β = {_fmt(b['below'])}, above β = "
+                     f"{_fmt(b['above'])}")
         else:
             title = f"wrong pre-strain: picked model > 0.7 mm above {_fmt(b['above'])}"
         a.set_title(title, fontsize=8)
@@ -61,8 +63,9 @@ def stability_chart(path: Path, stab: dict) -> None:
     ax[2].set_ylim(floor, 30)
     ax[2].set_xlabel("projector screen→pixel mapping error, RMS [projector px] (0.001 = exact)", fontsize=8)
     ax[2].set_ylabel("mean size error [mm]", fontsize=8)
-    ax[2].set_title(f"projector error: inclined > 0.7 mm from {_fmt(p['calibrated_inclined_breaks_at_px'], ' px')}\n"
-                    f"(registration error scaled), {_fmt(p['random_inclined_breaks_at_px'], ' px')} (random directions)",
+    ax[2].set_title("projector error: inclined > 0.7 mm from "
+                    f"{_fmt(p['calibrated_inclined_breaks_at_px'], ' px')}\n(registration error scaled), "
+                    f"{_fmt(p['random_inclined_breaks_at_px'], ' px')} (random directions)",
                     fontsize=8)
     ax[2].legend(fontsize=6)
     fig.tight_layout()

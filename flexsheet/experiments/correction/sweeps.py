@@ -1,6 +1,6 @@
-"""The figures' sweeps: one point of Fig. 11's inclined sheet (:func:`measure_inclined`) and of Fig. 13's pushed
-sheet (:func:`measure_pushed`), the estimator's image photographed on the true sheet, and the sweeps over θ and
-S (:func:`sweep_inclined`, :func:`sweep_pushed`)."""
+"""The figures' sweeps: one point of Fig. 11's inclined sheet (:func:`measure_inclined`) and of Fig. 13's
+pushed sheet (:func:`measure_pushed`), the estimator's image photographed on the true sheet, and the sweeps
+over θ and S (:func:`sweep_inclined`, :func:`sweep_pushed`)."""
 
 from __future__ import annotations
 
@@ -26,7 +26,8 @@ def _pose_dev(world_info: dict, est: SheetSurface) -> dict:
 
 def measure_inclined(est: DisplayEstimator, world: TwinWorld, meas: Measurer, theta: float,
                      photos: dict | None = None, direction: str = "down") -> dict:
-    """Fig. 11 at inclination ``theta`` deg: the uncorrected image and the picked model's, on the true sheet."""
+    """Fig. 11 at inclination ``theta`` deg: the uncorrected image and the picked model's, on the true
+    sheet."""
     q = est.joints(*inclined_pose(theta, direction))
     sheet = est.sheet(q)
     true, info = world.sheet(q)
@@ -35,7 +36,8 @@ def measure_inclined(est: DisplayEstimator, world: TwinWorld, meas: Measurer, th
     for name, model in (("uncorrected", "none"), ("corrected", picked)):
         ph = meas.shoot(est.draw(model, sheet), world, true)
         e = meas.errors(ph, "hud")
-        row[f"{name}_mm"], row[f"{name}_sizes_mm"], row[f"{name}_position_mm"] = e["mean_mm"], e["sizes_mm"], e["position_mm"]
+        row[f"{name}_mm"], row[f"{name}_sizes_mm"], row[f"{name}_position_mm"] = (e["mean_mm"], e["sizes_mm"],
+                                                                                  e["position_mm"])
         if photos is not None:
             photos[f"inclined_{theta:g}_{name}"] = ph
     return row
@@ -60,7 +62,8 @@ def measure_pushed(est: DisplayEstimator, world: TwinWorld, meas: Measurer, dept
         ph = meas.shoot(est.draw(gl, sheets.get(model, sheet)), world, true)
         e = meas.errors(ph, "hw")
         lab = MODEL_LABELS[model]
-        row[f"{lab}_mm"], row[f"{lab}_sizes_mm"], row[f"{lab}_position_mm"] = e["mean_mm"], e["sizes_mm"], e["position_mm"]
+        row[f"{lab}_mm"], row[f"{lab}_sizes_mm"], row[f"{lab}_position_mm"] = (e["mean_mm"], e["sizes_mm"],
+                                                                               e["position_mm"])
         if photos is not None:
             photos[f"pushed_{depth_mm:g}_{lab}"] = ph
     row["corrected_mm"] = row[f"{MODEL_LABELS[picked]}_mm"]
@@ -90,5 +93,6 @@ def sweep_pushed(est: DisplayEstimator, world: TwinWorld, meas: Measurer, depths
     for S in depths:
         rows[f"{S:g}"] = r = measure_pushed(est, world, meas, S, models, photos)
         log.info(f"{tag}: pushed {S:g} mm: " + ", ".join(
-            f"{MODEL_LABELS[m]} {r[MODEL_LABELS[m] + '_mm']:.2f}" for m in models) + f" mm; picked {r['model']}")
+            f"{MODEL_LABELS[m]} {r[MODEL_LABELS[m] + '_mm']:.2f}" for m in models)
+                 + f" mm; picked {r['model']}")
     return rows

@@ -14,8 +14,8 @@ from flexsheet.twin.truth import TwinTruth
 
 
 class TwinWorld:
-    """The hidden truth's display, for the measurement only: the true projector (K, distortion, pose), the true
-    clamp poses of commanded joints, the true sheet (flat, or pushed: the FEM table of
+    """The hidden truth's display, for the measurement only: the true projector (K, distortion, pose), the
+    true clamp poses of commanded joints, the true sheet (flat, or pushed: the FEM table of
     :class:`flexsheet.model.sheet_table.IndentTable` with the truth's material, cached in ``cache_dir``)."""
 
     def __init__(self, truth: TwinTruth, *, cache_dir: str | None = None, fem_mesh: dict | None = None,
@@ -23,7 +23,8 @@ class TwinWorld:
         self.truth = truth
         T = np.asarray(truth.T_display_projector, float)
         w, h = truth.projector_size
-        self.projector = Projector(np.asarray(truth.projector_K, float), T[:3, :3].copy(), T[:3, 3].copy(), int(w), int(h))
+        self.projector = Projector(np.asarray(truth.projector_K, float), T[:3, :3].copy(), T[:3, 3].copy(),
+                                   int(w), int(h))
         self.distortion = np.asarray(truth.projector_D, float).ravel().copy()
         self.cache_dir = cache_dir or default_cache_dir()
         self.fem_mesh = dict(fem_mesh or {})
@@ -31,9 +32,11 @@ class TwinWorld:
         self._table = None
 
     def table(self):
-        """The true sheet's FEM table at the commanded stretch (built once, ~3 s per table, cached on disk)."""
+        """The true sheet's FEM table at the commanded stretch (built once, ~3 s per table, cached on
+        disk)."""
         if self._table is None:
-            self._table = IndentTable(SheetPhysics.from_truth(self.truth, self.stretch), self.depths, self.positions,
+            self._table = IndentTable(SheetPhysics.from_truth(self.truth, self.stretch), self.depths,
+                                      self.positions,
                                       mesh=self.fem_mesh, cache_dir=self.cache_dir)
         return self._table
 

@@ -1,6 +1,6 @@
-"""Attacks on the recorder and on bags (:mod:`flexsheet.runtime.bag_write`, :mod:`~flexsheet.runtime.bag_read`,
-:mod:`~flexsheet.runtime.bag_recover`): malformed frames between good ones, flipped bytes in one chunk, a file
-cut as ``kill -9`` leaves it."""
+"""Attacks on the recorder and on bags (:mod:`flexsheet.runtime.bag_write`,
+:mod:`~flexsheet.runtime.bag_read`, :mod:`~flexsheet.runtime.bag_recover`): malformed frames between good
+ones, flipped bytes in one chunk, a file cut as ``kill -9`` leaves it."""
 
 from __future__ import annotations
 
@@ -25,7 +25,8 @@ T0 = 1_700_000_000_000_000_000   # ns
 def fingertip(seq: int) -> Fingertip:
     """A valid fingertip with ``header.seq`` = ``seq``, stamped 1/40 s apart from :data:`T0`."""
     p = np.array([0.01, -0.02, 0.03])
-    return Fingertip(header=Header(stamp=T0 / 1e9 + seq / 40, seq=seq), position=p, covariance=np.eye(3) * 1e-8,
+    return Fingertip(header=Header(stamp=T0 / 1e9 + seq / 40, seq=seq), position=p,
+                     covariance=np.eye(3) * 1e-8,
                      valid=True, predicted_position=p, exposure_stamp=T0 / 1e9 + seq / 40)
 
 
@@ -40,7 +41,8 @@ def recorder_malformed(tmp: Path, n: int = 200) -> dict:
     """``n`` good fingertips with a hostile frame after every 20th (1-frame, undecodable, not an envelope,
     empty, seq "x" / 1.5 / None / 2⁶⁴−1): every frame must be in the bag (``lost`` 0)."""
     good = encode(T.FINGERTIP.name, fingertip(0))
-    hostile = [[b"/fingertip"], [b"/fingertip", b"\xc1\xc1 not msgpack"], [b"/fingertip", msgpack.packb([1, 2])],
+    hostile = [[b"/fingertip"], [b"/fingertip", b"\xc1\xc1 not msgpack"],
+               [b"/fingertip", msgpack.packb([1, 2])],
                [], with_seq(good, "x"), with_seq(good, 1.5), with_seq(good, None), with_seq(good, 2**64 - 1)]
     path = tmp / "hostile.mcap"
     w = BagWriter(path, chunk_size=4096)
@@ -54,7 +56,8 @@ def recorder_malformed(tmp: Path, n: int = 200) -> dict:
     w.close()
     info = bag_info(path)
     kept = sum(info.counts.values()) + sum(info.malformed.values())
-    return {"fed": fed, "in_bag": kept, "lost": fed - kept, "malformed_stored_raw": sum(info.malformed.values()),
+    return {"fed": fed, "in_bag": kept, "lost": fed - kept,
+            "malformed_stored_raw": sum(info.malformed.values()),
             "dropped_reported": sum(info.dropped.values())}
 
 
@@ -63,8 +66,9 @@ def _stereo_bag(path: Path, n: int) -> None:
     for i in range(n):
         img = np.full((48, 64), i % 255, np.uint8)
         img[::7, ::5] = (i * 7) % 251
-        w.write(encode(T.STEREO.name, StereoFrame(header=Header(stamp=100.0 + i / 48, seq=i), left=img, right=img,
-                                                  exposure_stamp=100.0 + i / 48, exposure_time=0.004)),
+        w.write(encode(T.STEREO.name,
+                       StereoFrame(header=Header(stamp=100.0 + i / 48, seq=i), left=img, right=img,
+                                   exposure_stamp=100.0 + i / 48, exposure_time=0.004)),
                 T0 + i * 20_000_000)
     w.close()
 
@@ -104,7 +108,8 @@ def bag_cut_recover(tmp: Path, n: int = 400, share: float = 0.5) -> dict:
         return {i for i in range(n) if c.message_start_time <= T0 + i * 20_000_000 <= c.message_end_time}
 
     whole = set().union(*(msgs(c) for c in chunks if c.chunk_start_offset + c.chunk_length <= size))
-    expected = len(whole - set().union(*(msgs(c) for c in chunks if c.chunk_start_offset + c.chunk_length > size)))
+    expected = len(whole
+                   - set().union(*(msgs(c) for c in chunks if c.chunk_start_offset + c.chunk_length > size)))
     cut, fixed = tmp / "cut.mcap", tmp / "fixed.mcap"
     cut.write_bytes(path.read_bytes()[:size])
     try:

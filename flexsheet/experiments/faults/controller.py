@@ -1,6 +1,7 @@
-"""Attacks on the controller twins (:mod:`flexsheet.twin.controller`, :mod:`flexsheet.twin.mxt_server`): bursts
-inside one control cycle, a stranger's END, replayed CCounts, a STOP reset over the network. Each returns a
-dict of counts; ``beyond_cap_rad`` is the executed motion past the per-cycle step check (must be 0)."""
+"""Attacks on the controller twins (:mod:`flexsheet.twin.controller`, :mod:`flexsheet.twin.mxt_server`):
+bursts inside one control cycle, a stranger's END, replayed CCounts, a STOP reset over the network. Each
+returns a dict of counts; ``beyond_cap_rad`` is the executed motion past the per-cycle step check (must be
+0)."""
 
 from __future__ import annotations
 
@@ -83,7 +84,8 @@ def modbus_estop_network_reset() -> dict:
     """STOP, then RESET|ENABLE and RESET edges over Modbus; then the twin's local reset."""
     core = ControllerCore(Q_HOME, period=T_MB, now=0.0)
     t = 0.0
-    for cmd in (reg.CMD_ENABLE, reg.CMD_STOP, 0, reg.CMD_RESET | reg.CMD_ENABLE, 0, reg.CMD_RESET, reg.CMD_ENABLE):
+    for cmd in (reg.CMD_ENABLE, reg.CMD_STOP, 0, reg.CMD_RESET | reg.CMD_ENABLE, 0, reg.CMD_RESET,
+                reg.CMD_ENABLE):
         t += T_MB
         try:
             core.write_holding(reg.HR_COMMAND, [cmd], t)

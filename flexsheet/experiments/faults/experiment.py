@@ -2,9 +2,9 @@
 
 Runs, in this process (nothing else needs to be running):
 
-* recorder and bags (:mod:`.bags`): malformed frames between good ones (``lost`` must be 0); 8 flipped bytes in
-  one chunk (reported damaged, nothing lost beyond that chunk); a bag cut as ``kill -9`` leaves it, recovered
-  for the stock ``mcap`` reader;
+* recorder and bags (:mod:`.bags`): malformed frames between good ones (``lost`` must be 0); 8 flipped bytes
+  in one chunk (reported damaged, nothing lost beyond that chunk); a bag cut as ``kill -9`` leaves it,
+  recovered for the stock ``mcap`` reader;
 * controller twins (:mod:`.controller`): 60 MXT MOVEs and 20 Modbus writes inside one cycle (executed motion
   beyond the per-cycle step check must be 0), a stranger's END, replayed CCounts, a STOP reset over Modbus;
 * time (:mod:`.planner`): one fingertip stamped 1e12 s into the planner node;
@@ -61,7 +61,8 @@ def run(quick: bool = False) -> dict:
     if not quick:
         log.info("[faults] never-reading subscriber of stereo frames (8 s) ...")
         r = links.memory_run()
-        out["never_reading_subscriber"] = {k: r[k] for k in ("published", "dropped", "growth_mb", "offered_mb")}
+        out["never_reading_subscriber"] = {k: r[k]
+                                           for k in ("published", "dropped", "growth_mb", "offered_mb")}
     return out
 
 
@@ -74,11 +75,13 @@ def verdicts(r: dict) -> dict:
            "flipped_bag_reported_rest_read": v(r["bag_flip"]["reported_damaged"]
                                                and r["bag_flip"]["lost_beyond_the_damaged_chunk"] == 0),
            "recovered_bag_opens_in_stock_reader": v(r["bag_cut_recover"]["stock_reader_opens_recovered"]),
-           "no_motion_beyond_cap": v(r["mxt_burst"]["beyond_cap_rad"] == 0.0 and r["modbus_burst"]["beyond_cap_rad"]
+           "no_motion_beyond_cap": v(r["mxt_burst"]["beyond_cap_rad"] == 0.0
+                                     and r["modbus_burst"]["beyond_cap_rad"]
                                      == 0.0),
            "strangers_end_ignored": v(r["mxt_stranger_end"]["owner_session_open"]),
            "replays_dropped": v(r["mxt_replay"]["dropped_counted"] == r["mxt_replay"]["sent_bad"]),
-           "estop_not_reset_over_network": v(r["modbus_estop_network_reset"]["estop_latched_after_network_reset"]),
+           "estop_not_reset_over_network":
+               v(r["modbus_estop_network_reset"]["estop_latched_after_network_reset"]),
            "future_stamp_rejected_alone": v(r["planner_future_stamp"]["rejected"] == 1 and
                                             r["planner_future_stamp"]["served_after"]
                                             == r["planner_future_stamp"]["sent_after"])}
@@ -126,7 +129,8 @@ def main(argv: list[str] | None = None) -> int:
     _chart(res, out_dir / "faults.png")
     missed = [k for k, x in res["verdicts"].items() if x != "met"]
     print(f"[faults] {len(res['verdicts']) - len(missed)} of {len(res['verdicts'])} targets met"
-          + (f"; MISSED: {', '.join(missed)}" if missed else "") + f"; wrote {out_dir}/faults.json, faults.png")
+          + (f"; MISSED: {', '.join(missed)}" if missed else "") + f"; wrote {out_dir}/faults.json, "
+                                                                   "faults.png")
     return 0 if not missed else 1
 
 

@@ -24,7 +24,8 @@ def _tip(stamp: float, y: float) -> Fingertip:
 
 
 def future_stamp(n_after: int = 10) -> dict:
-    """3 good fingertips, one stamped 1e12, ``n_after`` good ones: counts of refusals and of served targets."""
+    """3 good fingertips, one stamped 1e12, ``n_after`` good ones: counts of refusals and of served
+    targets."""
     planner = node_class("planner")
 
     async def scenario() -> dict:

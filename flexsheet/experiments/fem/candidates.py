@@ -25,9 +25,10 @@ from flexsheet.fem.visible_error import errors
 log = logging.getLogger(__name__)
 
 
-def validation_set(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, fine: dict) -> list[dict]:
-    """Reference fields at the rendered vertices for the configurations the candidates are judged on: azimuth 0
-    from the finest convergence mesh (every depth), and each held-out azimuth on the snapshot mesh."""
+def validation_set(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel,
+                   fine: dict) -> list[dict]:
+    """Reference fields at the rendered vertices for the configurations the candidates are judged on: azimuth
+    0 from the finest convergence mesh (every depth), and each held-out azimuth on the snapshot mesh."""
     depths = push_depths(st.fine_step)
     verts = rm.rest_vertices.astype(float)
     snap_d = st.grid.depths()
@@ -55,7 +56,7 @@ def snapshot_source(st: Settings, mat: Material, cache: ArrayCache, rm: Realtime
     def solved(ang, model, depths):
         if ang == 0.0:
             return path_states(src, sd, depths, model)
-        fd = push_depths(st.fine_step)          # other azimuths: the cached path the held-out check also reads
+        fd = push_depths(st.fine_step)  # other azimuths: the cached path the held-out check also reads
         p = stable_path(st.snap_spec, ang, fd, mat, cache, verts, st.contact)
         return path_states(p, fd, depths, model)
 
@@ -63,7 +64,8 @@ def snapshot_source(st: Settings, mat: Material, cache: ArrayCache, rm: Realtime
 
 
 def update_ms(rm: RealtimeModel, angles_deg, depths, n: int) -> dict:
-    """Median and 90th-percentile wall time (ms) of ``rm.update_finger`` over ``n`` calls per configuration."""
+    """Median and 90th-percentile wall time (ms) of ``rm.update_finger`` over ``n`` calls per
+    configuration."""
     ts = []
     for a in angles_deg:
         for d in depths:
@@ -90,21 +92,25 @@ def candidates(st: Settings, mat: Material, rm: RealtimeModel, table: dict, case
                      "time_ms": update_ms(rm, [a for a in t_angles if a <= st.linear_spec.arc_deg + 1e-9],
                                           t_depths, st.n_time)}
     rm.snapshots = snap
-    res["snapshots"] = {"name": "nonlinear snapshots", "kind": "snapshots", "errors_m": errors(rm, cases, "snapshots"),
+    res["snapshots"] = {"name": "nonlinear snapshots", "kind": "snapshots",
+                        "errors_m": errors(rm, cases, "snapshots"),
                         "errors_rest_footprint_m": errors(rm, cases, "snapshots", rest_footprint=True),
-                        "time_ms": update_ms(rm, t_angles, t_depths, st.n_time), "table_MB": snap.nbytes / 1e6}
+                        "time_ms": update_ms(rm, t_angles, t_depths, st.n_time),
+                        "table_MB": snap.nbytes / 1e6}
     for k, v in res.items():
-        log.info(f"  {k}: worst visible error {max(v['errors_m']) * 1e3:.2f} mm, update {v['time_ms']['median']:.3f} ms")
+        log.info(f"  {k}: worst visible error {max(v['errors_m']) * 1e3:.2f} mm, update "
+                 f"{v['time_ms']['median']:.3f} ms")
     return res
 
 
 def azimuth0_table_errors(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, spec: RefSpec,
                           cases: list[dict]) -> tuple[dict, list[float]]:
-    """(the stable branch of ``spec``'s azimuth-0 push at ``push_depths(st.depth_step)``, :func:`errors` in m of an
-    azimuth-0 snapshot table on ``st.grid``'s depths built from it, on ``cases``): how :func:`snapshot_mesh_study`
-    and :func:`_tip_snapshots` judge a candidate snapshot mesh. ``rm``'s table is left as it was."""
+    """(the stable branch of ``spec``'s azimuth-0 push at ``push_depths(st.depth_step)``, :func:`errors` in m
+    of an azimuth-0 snapshot table on ``st.grid``'s depths built from it, on ``cases``): how
+    :func:`snapshot_mesh_study` and :func:`_tip_snapshots` judge a candidate snapshot mesh. ``rm``'s table is
+    left as it was."""
     sd = push_depths(st.depth_step)
-    src = stable_path(spec, 0.0, sd, mat, cache, rm.rest_vertices.astype(float), st.contact)   # as every table
+    src = stable_path(spec, 0.0, sd, mat, cache, rm.rest_vertices.astype(float), st.contact)  # as every table
     table = load_or_build(cache, replace(st.grid, angles_deg=(0.0,)), spec, mat, FINGER_R, build=True,
                           contact=st.contact,
                           solved=lambda ang, model, depths: path_states(src, sd, depths, model))[0]
@@ -118,21 +124,23 @@ def azimuth0_table_errors(st: Settings, mat: Material, cache: ArrayCache, rm: Re
 
 def snapshot_mesh_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, cases: list[dict]
                         ) -> dict:
-    """Which mesh the snapshots need: an azimuth-0 table (``st.grid``'s depths) on the next-to-finest mesh (full
-    mode: the snapshot mesh) and on each of its skin-refined variants (``st.skin_sizes``; the convergence and skin
-    studies' solves, read from the cache), judged on the azimuth-0 validation cases (the finest convergence
-    mesh; depths between snapshots held out). Per mesh: DOF, CPU of its azimuth-0 path and the worst visible
+    """Which mesh the snapshots need: an azimuth-0 table (``st.grid``'s depths) on the next-to-finest mesh
+    (full mode: the snapshot mesh) and on each of its skin-refined variants (``st.skin_sizes``; the
+    convergence and skin studies' solves, read from the cache), judged on the azimuth-0 validation cases (the
+    finest convergence mesh; depths between snapshots held out). Per mesh: DOF, CPU of its azimuth-0 path and
+    the worst visible
     error (mm). ``rm``'s snapshot table is left as it was."""
     az0 = [c for c in cases if c["angle_deg"] == 0.0]
     rows = []
-    base = st.levels[-2]                        # the skin study's meshes (full mode: the snapshot mesh and its skins)
+    base = st.levels[-2]  # the skin study's meshes (full mode: the snapshot mesh and its skins)
     for spec in [base] + [replace(base, skin_h=h) for h in st.skin_sizes]:
         src, err = azimuth0_table_errors(st, mat, cache, rm, spec, az0)
         rows.append({"spec": spec.__dict__, "skin_h_m": spec.skin_h, "dofs": int(src["dofs"]),
                      "cpu_seconds_per_azimuth": float(src["cpu_seconds"]),
                      "max_visible_error_mm": max(err) * 1e3,
                      "max_visible_error_mm_held_out_depths": max(
-                         (e for c, e in zip(az0, err, strict=True) if c["held_out"]), default=float("nan")) * 1e3})
+                         (e for c, e in zip(az0, err, strict=True) if c["held_out"]), default=float("nan"))
+                     * 1e3})
         log.info(f"snapshot mesh {spec.key()}: {rows[-1]['dofs']} DOF, azimuth 0 worst visible error "
                  f"{rows[-1]['max_visible_error_mm']:.2f} mm")
     return {"azimuth_deg": 0.0, "depth_step_mm": st.grid.depth_step * 1e3, "target_mm": TARGET * 1e3,

@@ -11,7 +11,8 @@ from flexsheet.fem.reference.settings import TARGET
 
 
 def plot_convergence(out: str, conv: dict, law: str = "neo-Hookean") -> None:
-    """convergence.png: visible-surface difference to the finest mesh against depth, and against h at 3 depths."""
+    """convergence.png: visible-surface difference to the finest mesh against depth, and against h at 3
+    depths."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -20,7 +21,8 @@ def plot_convergence(out: str, conv: dict, law: str = "neo-Hookean") -> None:
     d = np.array(conv["depths_m"]) * 1e3
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
     for lv in conv["levels"][:-1]:
-        a1.plot(d, lv["error_vs_finest_mm"], "o-", ms=3, label=f"h_fine {lv['h_fine_m'] * 1e3:.1f} mm ({lv['dofs']} DOF)")
+        a1.plot(d, lv["error_vs_finest_mm"], "o-", ms=3, label=f"h_fine {lv['h_fine_m'] * 1e3:.1f} mm "
+                                                               f"({lv['dofs']} DOF)")
     a1.axhline(TARGET * 1e3, color="k", ls="--", lw=0.8, label="target 0.7 mm")
     a1.set_xlabel("push depth (mm)")
     a1.set_ylabel("max visible-surface difference to finest (mm)")
@@ -28,12 +30,14 @@ def plot_convergence(out: str, conv: dict, law: str = "neo-Hookean") -> None:
     h = np.array([lv["h_fine_m"] for lv in conv["levels"][:-1]]) * 1e3
     for dd in (10.0, 30.0, 50.0):
         j = int(np.argmin(np.abs(d - dd)))
-        a2.loglog(h, [lv["error_vs_finest_mm"][j] for lv in conv["levels"][:-1]], "o-", label=f"{d[j]:.0f} mm push")
+        a2.loglog(h, [lv["error_vs_finest_mm"][j] for lv in conv["levels"][:-1]], "o-",
+                  label=f"{d[j]:.0f} mm push")
     a2.set_xlabel("element size under the finger, h_fine (mm)")
     a2.set_ylabel("difference to finest (mm)")
     a2.legend(fontsize=8)
-    fig.suptitle(f"{law} reference, mesh convergence (finest h_fine = {conv['levels'][-1]['h_fine_m'] * 1e3:.1f} mm)"
-                 f": converged = {conv['converged']}", fontsize=10)
+    fig.suptitle(f"{law} reference, mesh convergence (finest h_fine = "
+                 f"{conv['levels'][-1]['h_fine_m'] * 1e3:.1f} mm): converged = "
+                 f"{conv['converged']}", fontsize=10)
     fig.tight_layout()
     fig.savefig(os.path.join(out, "convergence.png"), dpi=110)
     plt.close(fig)
@@ -62,9 +66,10 @@ def plot_mirror_study(out: str, ms: dict) -> None:
         lab = f"cut half, h_fine {row['h_fine_m'] * 1e3:.1f} mm ({row['dofs']} DOF)"
         c = col[round(row["h_fine_m"], 9)]
         a1.plot(dm, row["force_N"], "-", lw=1.8, color=c, label=lab)
-        a2.plot(dm, row["diff_vs_finest_quarter_mm"], "o-", ms=3, color=c, label=f"{lab}: from finest quarter")
-        a2.plot(dm, row["asymmetry_mm"], "s--", ms=3, color=c, label=f"h_fine {row['h_fine_m'] * 1e3:.1f} mm: "
-                "own asymmetry")
+        a2.plot(dm, row["diff_vs_finest_quarter_mm"], "o-", ms=3, color=c,
+                label=f"{lab}: from finest quarter")
+        a2.plot(dm, row["asymmetry_mm"], "s--", ms=3, color=c, label=f"h_fine {row['h_fine_m'] * 1e3:.1f} "
+                "mm: own asymmetry")
     a1.set_xlabel("push depth (mm)")
     a1.set_ylabel("finger force (N)")
     a1.legend(fontsize=7)
@@ -74,13 +79,15 @@ def plot_mirror_study(out: str, ms: dict) -> None:
     a2.legend(fontsize=7)
     for row in ms.get("stability", []):
         a3.plot(np.array(row["depths_m"]) * 1e3, row["anti_over_sym"], "o-", ms=3,
-                color=col.get(round(row["h_fine_m"], 9)), label=f"quarter, h_fine {row['h_fine_m'] * 1e3:.1f} mm")
+                color=col.get(round(row["h_fine_m"], 9)), label=f"quarter, h_fine {row['h_fine_m'] * 1e3:.1f}"
+                                                                " mm")
     a3.axhline(0.0, color="k", lw=0.8)
     a3.set_xlabel("push depth (mm)")
     a3.set_ylabel("lowest antisymmetric / symmetric\ntangent eigenvalue (< 0: unstable)")
     a3.legend(fontsize=7)
-    fig.suptitle("azimuth-0 push: quarter models (z mirror plane) against cut half models (nodes on that plane, "
-                 "no BC), and the symmetric solution's stability against asymmetric modes", fontsize=10)
+    fig.suptitle("azimuth-0 push: quarter models (z mirror plane) against cut half models (nodes on that "
+                 "plane, no BC), and the symmetric solution's stability against asymmetric "
+                 "modes", fontsize=10)
     fig.tight_layout()
     fig.savefig(os.path.join(out, "mirror_study.png"), dpi=110)
     plt.close(fig)
@@ -130,8 +137,8 @@ def plot_candidates(out: str, cand: dict, fmap: dict, law: str = "neo-Hookean") 
 
 def plot_fold_study(out: str, fs: dict) -> None:
     """fold_study.png: per level, the largest winding number (off the footprint, and with it) and the smallest
-    surface stretch against depth, beside the visible-surface difference to the finest level (:func:`fold_study`, the numbers in
-    ``fold_study.json``)."""
+    surface stretch against depth, beside the visible-surface difference to the finest level
+    (:func:`fold_study`, the numbers in ``fold_study.json``)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -162,7 +169,8 @@ def plot_fold_study(out: str, fs: dict) -> None:
                    label=f"tube {r['h_fine_mm']:g} mm + tip {r['tip_h_mm']:g} mm ({r['dofs']} DOF) vs finest")
     fin = tip["levels"][-1]
     ax[3].plot(d, fin["difference_to_finest_plain_level_mm"], "s--", color="k", ms=3, lw=0.8,
-               label=f"finest (tube {fin['h_fine_mm']:g} + tip {fin['tip_h_mm']:g} mm) vs the finest plain level")
+               label=f"finest (tube {fin['h_fine_mm']:g} + tip {fin['tip_h_mm']:g} mm) vs the finest plain "
+                     "level")
     if "tip_check" in tip:
         tc = tip["tip_check"]
         ax[3].plot(d, tc["difference_to_its_level_mm"], "^-", color="C7", ms=3,
@@ -184,8 +192,8 @@ def plot_fold_study(out: str, fs: dict) -> None:
 
 
 def plot_material_study(out: str, ms: dict) -> None:
-    """material_study.png: per material, each level's visible-surface difference to its finest level (left) and
-    the azimuth-0 snapshot table's error (right), against depth."""
+    """material_study.png: per material, each level's visible-surface difference to its finest level (left)
+    and the azimuth-0 snapshot table's error (right), against depth."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -228,8 +236,8 @@ def plot_holdout_study(out: str, hs: dict) -> None:
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for r in hs["azimuths"]:
         ax.semilogy(r["depths_mm"], r["error_mm"], "o-" if r["held_out"] else "s--", ms=3,
-                    label=f"azimuth {r['azimuth_deg']:g}° ({'held out' if r['held_out'] else 'on the grid'}), "
-                          f"against {r['against']}")
+                    label=f"azimuth {r['azimuth_deg']:g}° ({'held out' if r['held_out'] else 'on the grid'}"
+                          f"), against {r['against']}")
     ax.axhline(hs["target_mm"], color="k", ls="--", lw=0.8, label="target 0.7 mm (1 projector px)")
     ax.set_xlabel("push depth (mm)")
     ax.set_ylabel("worst visible-surface error (mm)")
@@ -242,8 +250,8 @@ def plot_holdout_study(out: str, hs: dict) -> None:
 
 
 def plot_node_table(out: str, rep: dict) -> None:
-    """node_table.png: finger force against depth per azimuth, and the apex check (:func:`node_table_report`), with
-    the held-out azimuths' and the between-depths checks' errors."""
+    """node_table.png: finger force against depth per azimuth, and the apex check (:func:`node_table_report`),
+    with the held-out azimuths' and the between-depths checks' errors."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -262,7 +270,8 @@ def plot_node_table(out: str, rep: dict) -> None:
         b.plot(h["depths_mm"], h["shape_px"], ".-", color=("k", "0.45", "0.7")[i % 3], ms=4, lw=1.5,
                label=f"held out {h['azimuth_deg']:g}°: visible shape error (px)")
         if h.get("twin"):
-            b.plot(h["depths_mm"], h["twin"]["noise_px"], "v:", color=("k", "0.45", "0.7")[i % 3], ms=3, lw=1.2,
+            b.plot(h["depths_mm"], h["twin"]["noise_px"], "v:", color=("k", "0.45", "0.7")[i % 3], ms=3,
+                   lw=1.2,
                    label=f"{h['azimuth_deg']:g}°: the mesh's noise (twin mesh, px)")
     for h in rep.get("between_depths", []):
         b.plot(h["depths_mm"], h["shape_px"], "rx-", ms=4, lw=1,
@@ -279,7 +288,8 @@ def plot_node_table(out: str, rep: dict) -> None:
 
 
 def plot_linear_study(out: str, rows: list, hz: dict, stab: dict) -> None:
-    """linear_accuracy_speed.png, hertz.png and stability.png of :func:`flexsheet.experiments.fem.studies.linear.linear_study`."""
+    """linear_accuracy_speed.png, hertz.png and stability.png of
+    :func:`flexsheet.experiments.fem.studies.linear.linear_study`."""
     import matplotlib
 
     matplotlib.use("Agg")

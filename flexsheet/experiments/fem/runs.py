@@ -47,9 +47,9 @@ log = logging.getLogger(__name__)
 
 
 def run(args, st: Settings, mat: Material, cache: ArrayCache, t0: float) -> int:
-    """The run ``args`` (:func:`flexsheet.experiments.fem.cli.main`'s, checked) asks for with settings ``st`` and
-    material ``mat``, started at ``t0`` (``time.perf_counter``); returns 0."""
-    for h in st.skin_sizes:     # before any solve: a bad size would otherwise fail after the convergence study
+    """The run ``args`` (:func:`flexsheet.experiments.fem.cli.main`'s, checked) asks for with settings ``st``
+    and material ``mat``, started at ``t0`` (``time.perf_counter``); returns 0."""
+    for h in st.skin_sizes:  # before any solve: a bad size would otherwise fail after the convergence study
         replace(st.levels[-2], skin_h=h)
     rm = realtime_model(st, mat, args.cache_dir or None)
     probes = rm.rest_vertices.astype(float)       # the rendered vertices every reference path is sampled at
@@ -57,7 +57,8 @@ def run(args, st: Settings, mat: Material, cache: ArrayCache, t0: float) -> int:
         if not 0 <= args.level < len(st.levels):
             raise SystemExit(f"--level must be in [0, {len(st.levels) - 1}], got {args.level}")
         last = args.level == len(st.levels) - 1
-        reference_path(st.levels[args.level], 0.0, push_depths(st.fine_step if last else st.depth_step), mat, cache,
+        reference_path(st.levels[args.level], 0.0, push_depths(st.fine_step if last else st.depth_step), mat,
+                       cache,
                        probes, st.contact)
         log.info(f"level {args.level} cached in {time.perf_counter() - t0:.1f} s")
         return 0
@@ -65,24 +66,28 @@ def run(args, st: Settings, mat: Material, cache: ArrayCache, t0: float) -> int:
         mats = (Material(mat.E, mat.nu), Material(mat.E, mat.nu, mat.Jm if mat.gent else GENT_JM_RUBBER))
         for m in mats:
             prefetch(planned_solves(st, "material"), args.jobs, m, cache, probes, st.contact)
-        return _study_done(args.out, "material_study", material_study(st, mats, cache, rm), plot_material_study, t0)
+        return _study_done(args.out, "material_study", material_study(st, mats, cache, rm),
+                           plot_material_study, t0)
     study = "mirror" if args.mirror_study else "holdout" if args.holdout_study else \
         "fold" if args.fold_study else "full"
     prefetch(planned_solves(st, study), args.jobs, mat, cache, probes, st.contact)
     if args.holdout_study:
         fine = reference_path(st.levels[-1], 0.0, push_depths(st.fine_step), mat, cache, probes, st.contact)
-        return _study_done(args.out, "holdout_study", holdout_study(st, mat, cache, rm, fine), plot_holdout_study, t0)
+        return _study_done(args.out, "holdout_study", holdout_study(st, mat, cache, rm, fine),
+                           plot_holdout_study, t0)
     if args.fold_study:
         return _study_done(args.out, "fold_study", fold_study(st, mat, cache, rm), plot_fold_study, t0)
     conv, fine = convergence(st, mat, cache, rm)
     if args.mirror_study:
-        return _study_done(args.out, "mirror_study", mirror_study(st, mat, cache, rm, conv, fine), plot_mirror_study,
+        return _study_done(args.out, "mirror_study", mirror_study(st, mat, cache, rm, conv, fine),
+                           plot_mirror_study,
                            t0)
     return _full_run(args, st, mat, cache, rm, conv, fine, t0)
 
 
 def _study_done(out: str, name: str, result: dict, plot, t0: float) -> int:
-    """Write a study run alone: ``name``.json and its figure (``plot``) into ``out``, and log it; returns 0."""
+    """Write a study run alone: ``name``.json and its figure (``plot``) into ``out``, and log it; returns
+    0."""
     write_json(out, name, result)
     plot(out, result)
     log.info(f"{name.replace('_', ' ')} done in {time.perf_counter() - t0:.1f} s -> {out}/{name}.json")
@@ -99,7 +104,8 @@ def _full_run(args, st: Settings, mat: Material, cache: ArrayCache, rm: Realtime
     table, hit, sec = snapshot_table(st, mat, cache, solved)
     sec += float(src["seconds"])              # the solve the table was sampled from
     rm.attach_snapshots(table)
-    snap_info = {"snapshot_azimuths_deg": list(st.grid.angles_deg), "snapshot_depth_step_mm": st.grid.depth_step * 1e3,
+    snap_info = {"snapshot_azimuths_deg": list(st.grid.angles_deg),
+                 "snapshot_depth_step_mm": st.grid.depth_step * 1e3,
                  "snapshot_mesh": st.snap_spec.__dict__, "precompute_s": sec, "precompute_cache_hit": hit,
                  "table_MB": rm.snapshots.nbytes / 1e6}
     cases = validation_set(st, mat, cache, rm, fine)
@@ -115,8 +121,8 @@ def _full_run(args, st: Settings, mat: Material, cache: ArrayCache, rm: Realtime
 
 def _penalty_and_skin(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, conv: dict,
                       fine: dict) -> None:
-    """Add the penalty study (and its verdict to ``conv``'s) and the skin study to :func:`convergence`'s report
-    ``conv``."""
+    """Add the penalty study (and its verdict to ``conv``'s) and the skin study to :func:`convergence`'s
+    report ``conv``."""
     pen = penalty_study(st, mat, cache, rm)
     conv["penalty_study"] = pen
     conv["mesh_converged"] = conv["converged"]
@@ -128,8 +134,8 @@ def _penalty_and_skin(st: Settings, mat: Material, cache: ArrayCache, rm: Realti
 
 def _write_full(args, st: Settings, mat: Material, conv: dict, ms: dict, cand: dict, cases: list[dict],
                 fmap: dict, summ: dict) -> None:
-    """The full run's JSON files and figures into ``args.out``, the node's model table where it is due, and the
-    linear study when asked for."""
+    """The full run's JSON files and figures into ``args.out``, the node's model table where it is due, and
+    the linear study when asked for."""
     write_json(args.out, "convergence", conv)
     write_json(args.out, "mirror_study", ms)
     write_json(args.out, "failure_map", fmap)

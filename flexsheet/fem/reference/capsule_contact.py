@@ -4,13 +4,13 @@ along its shaft), the contact laws, and the smoothed penalty that keeps the surf
 * **Finger**: rigid frictionless *capsule* (the fingertip sphere of radius r plus the finger's shaft behind
   it, along −p̂), non-penetration at the contact quadrature points of the outer surface of a
   :class:`~flexsheet.fem.reference.hyperelastic.HyperelasticModel` (order
-  :data:`~flexsheet.fem.reference.hyperelastic.CONTACT_INTORDER`: 25 points per facet, because the facets around
-  the tip stretch several times over and the fingertip slipped between the 6 points of the order-4 rule),
-  penalty E_c = Σ w φ(g_i) (gap g_i = distance to the capsule's axis segment − r; φ a C² penalty that starts
-  ε = 20 µm before contact, :func:`smooth_penalty`); k = :data:`PENALTY_SCALE`·E/h, chosen by a penalty study
-  (the visible surface within 0.03 mm of a 10× stiffer finger; the loaded points stand off by < ε or penetrate
-  < 0.02 mm at 50 mm, reported). A real finger, not a bonded imposed displacement (the linear model's contact):
-  material slides along it and wraps around it.
+  :data:`~flexsheet.fem.reference.hyperelastic.CONTACT_INTORDER`: 25 points per facet, because the facets
+  around the tip stretch several times over and the fingertip slipped between the 6 points of the order-4
+  rule), penalty E_c = Σ w φ(g_i) (gap g_i = distance to the capsule's axis segment − r; φ a C² penalty that
+  starts ε = 20 µm before contact, :func:`smooth_penalty`); k = :data:`PENALTY_SCALE`·E/h, chosen by a penalty
+  study (the visible surface within 0.03 mm of a 10× stiffer finger; the loaded points stand off by < ε or
+  penetrate < 0.02 mm at 50 mm, reported). A real finger, not a bonded imposed displacement (the linear
+  model's contact): material slides along it and wraps around it.
 * **Sticking**: optionally (``contact="sticking"``,
   :func:`~flexsheet.fem.reference.path_solver.solve_path_capsule`) a fingertip that does not slip: points that
   touch it stick to it. It removes the frictionless snap-through under the tip but mesh-converges worse
@@ -29,11 +29,11 @@ import numpy as np
 __all__ = ["PENALTY_SCALE", "CONTACT_LAWS", "DEFAULT_CONTACT", "Capsule", "capsule_at", "smooth_penalty"]
 
 #: contact penalty κ = PENALTY_SCALE·E/h. Chosen by a penalty study (``flexsheet experiment fem``,
-#: ``reference.penalty_study``): on the 6 mm mesh at 50 mm the old 10³ penetrated the finger by 1.2 mm, made the
-#: force 10 % low and moved the visible surface by 2.2 mm against 10⁴; 10⁵ penetrates 0.004 mm and lies
-#: 0.03 mm from 10⁶ (docs/fem.md). Newton needs ~2.3× the CPU of 10³ for it. Changing it needs a
-#: :data:`~flexsheet.fem.reference.versions.SOLVER_VERSION` bump (the snapshot tables' cache key carries the
-#: solver tag, not the penalty).
+#: ``reference.penalty_study``): on the 6 mm mesh at 50 mm the old 10³ penetrated the finger
+#: by 1.2 mm, made the force 10 % low and moved the visible surface by 2.2 mm against 10⁴; 10⁵
+#: penetrates 0.004 mm and lies 0.03 mm from 10⁶ (docs/fem.md). Newton needs ~2.3× the CPU of
+#: 10³ for it. Changing it needs a :data:`~flexsheet.fem.reference.versions.SOLVER_VERSION`
+#: bump (the snapshot tables' cache key carries the solver tag, not the penalty).
 PENALTY_SCALE = 1e5
 #: finger contact laws (:func:`~flexsheet.fem.reference.path_solver.solve_path_capsule`)
 CONTACT_LAWS = ("frictionless", "sticking")
@@ -42,12 +42,12 @@ DEFAULT_CONTACT = "frictionless"            #: the contact law the experiment an
 
 @dataclass(frozen=True)
 class Capsule:
-    """Rigid finger: the sphere (centre ``center`` (3,) m, radius ``radius`` m) swept back along −``direction``
-    by ``shaft`` m (the finger's body). ``direction`` (3,) unit push direction p̂ (into the object).
-    ``anchors`` (Fc, Qf, 3) m, sticking contact only: for each contact quadrature point of the
-    :class:`HyperelasticModel` it is used with, the finger point it is stuck to, relative to ``center``
-    (NaN where not stuck); stuck points are held there by the penalty k/2 |x − (center + anchor)|² instead of
-    the normal-only one (the finger only translates, so a point on it keeps its offset from ``center``)."""
+    """Rigid finger: the sphere (centre ``center`` (3,) m, radius ``radius`` m) swept back along
+    −``direction`` by ``shaft`` m (the finger's body). ``direction`` (3,) unit push direction p̂ (into the
+    object). ``anchors`` (Fc, Qf, 3) m, sticking contact only: for each contact quadrature point of the
+    :class:`HyperelasticModel` it is used with, the finger point it is stuck to, relative to ``center`` (NaN
+    where not stuck); stuck points are held there by the penalty k/2 |x − (center + anchor)|² instead of the
+    normal-only one (the finger only translates, so a point on it keeps its offset from ``center``)."""
 
     center: np.ndarray
     direction: np.ndarray
@@ -75,9 +75,9 @@ class Capsule:
 
 def capsule_at(angle: float, depth: float, radius: float, cyl_radius: float, cyl_center: np.ndarray,
                axial: float = 0.0) -> Capsule:
-    """Finger pushed radially at azimuth ``angle`` (rad) to ``depth`` (m; the sphere's leading point is ``depth``
-    inside the undeformed surface, as :func:`flexsheet.fem.contact.finger_at`). Raises ``ValueError`` on NaN or
-    negative depth."""
+    """Finger pushed radially at azimuth ``angle`` (rad) to ``depth`` (m; the sphere's leading point is
+    ``depth`` inside the undeformed surface, as :func:`flexsheet.fem.contact.finger_at`). Raises
+    ``ValueError`` on NaN or negative depth."""
     for name, v in (("angle", angle), ("depth", depth), ("radius", radius), ("axial", axial)):
         if not math.isfinite(v):
             raise ValueError(f"{name} must be finite, got {v!r}")

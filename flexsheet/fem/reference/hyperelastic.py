@@ -17,12 +17,11 @@ the accuracy reference the real-time models are judged against (docs/fem.md, "Ph
 * **Discretisation**: scikit-fem ``ElementTetP2`` on straight-sided tetrahedra (shape-function gradients and
   the 4-point quadrature, ``intorder=2``, positive weights); element matrices and residuals are vectorised
   numpy here (the tangent split into μ(∇N·∇N)⊗I + two rank-structured terms in h = ∇N·F⁻¹).
-* **Quadrature**: the energy is integrated with the Gauss rule (weight 1 − β) blended with the element's 10
-  P2 nodes (weight β/10 each, β = :data:`NODE_WEIGHT`; still exact for linear integrands, so the scheme stays
+* **Quadrature**: the energy is integrated with the Gauss rule (weight 1 − β) blended with the element's 10 P2
+  nodes (weight β/10 each, β = :data:`NODE_WEIGHT`; still exact for linear integrands, so the scheme stays
   consistent and the levels still converge). The Gauss points alone cannot see a P2 element fold through its
-  corners and edge midpoints (det F is cubic over the element): under the fingertip such a fold let a column of
-  material collapse to zero thickness and the tip jump ahead at a mesh-dependent depth (the snap-through of
-  solver nh-2). With the nodes in the rule the neo-Hookean barrier (−μ ln J → ∞) keeps every node's det F > 0.
+  corners and edge midpoints (det F is cubic over the element: a column under the fingertip collapsed); with
+  the nodes in the rule the neo-Hookean barrier (−μ ln J → ∞) keeps every node's det F > 0.
 * **Finger**: a rigid capsule pressed onto the contact quadrature points of the outer surface (order
   :data:`CONTACT_INTORDER`: 25 points per facet) through a smoothed penalty, frictionless or sticking
   (:mod:`flexsheet.fem.reference.capsule_contact`, whose docstring gives the law and its choices).
@@ -33,12 +32,9 @@ the accuracy reference the real-time models are judged against (docs/fem.md, "Ph
 
 Units SI: m, N, Pa. Display frame (cylinder axis along +y through ``mesh.center``).
 
-Files: the mesh (:mod:`flexsheet.fem.reference.mesh`), the finger (:mod:`~flexsheet.fem.reference.capsule_contact`),
-this module's model (:class:`HyperelasticModel`: quadrature, energy, residual and tangent, contact forces) with
-its 3 × 3 algebra (:mod:`~flexsheet.fem.reference.kinematics`) and projected tangent
-(:mod:`~flexsheet.fem.reference.projected_tangent`), the version tags (:mod:`~flexsheet.fem.reference.versions`),
-Newton's method (:mod:`~flexsheet.fem.reference.newton`), the push along a path and the stable branch
-(:mod:`~flexsheet.fem.reference.path_solver`).
+Files: this module is the model (:class:`HyperelasticModel`: quadrature, energy, residual and tangent,
+contact forces); the mesh, the finger, the 3 × 3 algebra, the projected tangent, the version tags, Newton and
+the push along a path are their own modules of :mod:`flexsheet.fem.reference`.
 """
 
 from __future__ import annotations
@@ -57,16 +53,19 @@ from flexsheet.fem.reference.projected_tangent import projection_correction
 
 __all__ = ["HyperelasticModel", "NODE_WEIGHT", "CONTACT_INTORDER"]
 
-CONTACT_INTORDER = 10   #: facet quadrature order of the contact points (25 per facet; see the module docstring)
-NODE_WEIGHT = 0.05      #: share β of the element volume integrated at the 10 P2 nodes (see the module docstring)
+#: facet quadrature order of the contact points (25 per facet; see the module docstring)
+CONTACT_INTORDER = 10
+#: share β of the element volume integrated at the 10 P2 nodes (see the module docstring)
+NODE_WEIGHT = 0.05
 
 
 class HyperelasticModel:
-    """Neo-Hookean (or Gent, ``material.Jm`` finite) P2 model of a (half/quarter) cylinder mesh with the support and symmetry planes.
+    """Neo-Hookean (or Gent, ``material.Jm`` finite) P2 model of a (half/quarter) cylinder mesh with the
+    support and symmetry planes.
 
     Attributes: ``points`` (P, 3) m DOF points (mesh nodes, then edge midpoints); ``n`` = 3P DOFs, DOF of
     point p component c is 3p + c; ``surface`` (P,) bool points on the outer (non-symmetry) boundary;
-    ``support`` (P,) bool fixed points; ``free`` (nf,) free DOF indices. Raises ``ValueError`` on an empty mesh.
+    ``support`` (P,) bool fixed points; ``free`` (nf,) free DOFs. Raises ``ValueError`` on an empty mesh.
     """
 
     def __init__(self, mesh: TetMesh, material: Material, sym_y: bool = True, sym_z: bool = False,
@@ -98,14 +97,16 @@ class HyperelasticModel:
         self._init_material(material, E_elem, nu_elem)
         self._pattern()
         self.eps = 2e-5           #: width (m) of the smooth onset of the contact penalty (see smooth_penalty)
-        self.h_contact = float(np.sqrt(2.0 * np.percentile(self._cf_w.sum(axis=1), 10)))  #: fine facet size, m
+        #: fine facet size, m
+        self.h_contact = float(np.sqrt(2.0 * np.percentile(self._cf_w.sum(axis=1), 10)))
 
     def _init_quadrature(self, intorder: int, node_weight: float) -> None:
-        """The P2 basis, the DOF points and the volume quadrature (the Gauss rule blended with the 10 nodes)."""
+        """The P2 basis, the DOF points and the volume quadrature (Gauss rule blended with the 10 nodes)."""
         from skfem import Basis, ElementTetP2
 
         if intorder not in (2, 5, 6):
-            raise ValueError(f"intorder must be 2, 5 or 6 (tetrahedral rules with positive weights), got {intorder!r}")
+            raise ValueError("intorder must be 2, 5 or 6 (tetrahedral rules with positive weights), got "
+                             f"{intorder!r}")
         self.basis = Basis(self.skmesh, ElementTetP2(), intorder=intorder)
         b = self.basis
         self.points = np.ascontiguousarray(b.doflocs.T)
@@ -120,7 +121,8 @@ class HyperelasticModel:
         if node_weight > 0:         # blended rule: (1 − β) × the Gauss rule + β × the 10 nodes, equal weights
             vol_e = b.dx.sum(axis=1, keepdims=True)
             gq = np.concatenate([gq, self._node_grad], axis=1)
-            wq = np.concatenate([(1.0 - node_weight) * b.dx, np.repeat(node_weight * vol_e / 10.0, 10, axis=1)],
+            wq = np.concatenate([(1.0 - node_weight) * b.dx,
+                                 np.repeat(node_weight * vol_e / 10.0, 10, axis=1)],
                                 axis=1)
         else:
             wq = b.dx
@@ -164,7 +166,7 @@ class HyperelasticModel:
         return outer
 
     def _init_contact_quadrature(self, outer: np.ndarray, default_support: bool) -> None:
-        """Contact quadrature on the outer facets not wholly in the support (6-point rule, positive weights)."""
+        """Contact quadrature on the outer facets not wholly in the support (6-point rule)."""
         from skfem import ElementTetP2, FacetBasis
 
         sk, c, tol = self.skmesh, self.mesh.center, 1e-9
@@ -178,8 +180,9 @@ class HyperelasticModel:
         self._cf_X = np.ascontiguousarray(fb.global_coordinates().value.transpose(1, 2, 0))    # (Fc, Qf, 3)
         self._cf_w = np.ascontiguousarray(fb.dx)                                         # (Fc, Qf) m²
 
-    def _init_material(self, material: Material, E_elem: np.ndarray | None, nu_elem: np.ndarray | None) -> None:
-        """Lamé λ, μ (the material's, or per element from ``E_elem``/``nu_elem``), the reference modulus, Gent's Jm."""
+    def _init_material(self, material: Material, E_elem: np.ndarray | None,
+                       nu_elem: np.ndarray | None) -> None:
+        """Lamé λ, μ (the material's, or per element from ``E_elem``/``nu_elem``), reference modulus, Jm."""
         lam, mu = material.lame
         self.E_ref = material.E          #: modulus (Pa) that scales the contact penalty and the tolerances
         if E_elem is not None or nu_elem is not None:
@@ -188,7 +191,8 @@ class HyperelasticModel:
             ve = np.full(ne, material.nu) if nu_elem is None else np.asarray(nu_elem, float)
             for name, a in (("E_elem", Ee), ("nu_elem", ve)):
                 if a.shape != (ne,):
-                    raise ValueError(f"{name} must have shape ({ne},) (one value per tetrahedron), got {a.shape}")
+                    raise ValueError(f"{name} must have shape ({ne},) (one value per tetrahedron), got "
+                                     f"{a.shape}")
             if not np.all(np.isfinite(Ee) & (Ee > 0)):
                 raise ValueError(f"E_elem must be finite and > 0 Pa, got min {float(np.min(Ee))!r}")
             if not np.all(np.isfinite(ve) & (ve >= 0) & (ve < 0.5)):
@@ -204,9 +208,9 @@ class HyperelasticModel:
 
     # ---- assembly ------------------------------------------------------------------------------------
     def _gent_factor(self, F: np.ndarray) -> np.ndarray | None:
-        """Gent's stress factor g = 1/(1 − (I₁ − 3)/Jm) (E, Q) at deformation gradients ``F`` (E, Q, 3, 3), so that
-        P's isochoric-free part is μ g F; None for neo-Hookean (g ≡ 1). Raises ``FloatingPointError`` at or
-        beyond the limiting extensibility (the energy is +inf there; Newton's line search never goes there)."""
+        """Gent's stress factor g = 1/(1 − (I₁ − 3)/Jm) (E, Q) at deformation gradients ``F`` (E, Q, 3, 3), so
+        that P's isochoric-free part is μ g F; None for neo-Hookean (g ≡ 1). Raises ``FloatingPointError`` at
+        or beyond the limiting extensibility (the energy is +inf there; Newton's line search stops short)."""
         if self.Jm is None:
             return None
         x = ((F * F).sum(axis=(2, 3)) - 3.0) / self.Jm
@@ -221,7 +225,7 @@ class HyperelasticModel:
         el = ElementTetP2()
         X = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1],
                       [.5, 0, 0], [.5, .5, 0], [0, .5, 0], [0, 0, .5], [.5, 0, .5], [0, .5, .5]]).T
-        ref = np.stack([el.lbasis(X, i)[1] for i in range(10)], axis=0)                 # (10 basis, 3, 10 nodes)
+        ref = np.stack([el.lbasis(X, i)[1] for i in range(10)], axis=0)  # (10 basis, 3, 10 nodes)
         p = self.mesh.points[self.mesh.tets]                                              # (E, 4, 3)
         Jm = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], axis=2)  # dX/dxi (E, 3, 3)
         Jinv = np.linalg.inv(Jm)
@@ -265,7 +269,7 @@ class HyperelasticModel:
         I1 = (F * F).sum(axis=(2, 3))
         if self.Jm is None:
             W = 0.5 * self.mu * (I1 - 3) - self.mu * lnJ + 0.5 * self.lam * lnJ ** 2
-        else:                   # Gent: −μJm/2 ln(1 − (I1 − 3)/Jm), +inf at and beyond the limiting extensibility
+        else:  # Gent: −μJm/2 ln(1 − (I1 − 3)/Jm), +inf at and beyond the limiting extensibility
             x = (I1 - 3) / self.Jm
             if np.any(x >= 1.0):
                 return math.inf
@@ -283,7 +287,7 @@ class HyperelasticModel:
         return e
 
     def _contact_x(self, u: np.ndarray, facets: np.ndarray | None = None) -> np.ndarray:
-        """Deformed positions (Fc, Qf, 3) m of the contact quadrature points (of ``facets`` only, if given)."""
+        """Deformed positions (Fc, Qf, 3) m of the contact quadrature points (``facets`` only, if given)."""
         if facets is None:
             return self._cf_X + self._cf_N @ u[self._cf_dofs]
         return self._cf_X[facets] + self._cf_N[facets] @ u[self._cf_dofs[facets]]
@@ -293,8 +297,8 @@ class HyperelasticModel:
         (P, 3) m with the finger ``caps``: points already stuck keep theirs, every other contact quadrature
         point in touch with the finger (gap < ε, the penalty's onset width: with a stiff penalty the points
         carrying load sit at 0 ≤ g < ε, not inside) is stuck: its anchor is placed along the finger's normal
-        where the sticking spring k/2 |x − anchor|² carries the penalty's force at that gap (x − φ'(g)/k n), so
-        the force is continuous when it sticks; relative to ``caps.center``."""
+        where the sticking spring k/2 |x − anchor|² carries the penalty's force at that gap (x − φ'(g)/k n),
+        so the force is continuous when it sticks; relative to ``caps.center``."""
         x = self._contact_x(u)
         g, n = caps.gap(x.reshape(-1, 3))
         g, n = g.reshape(x.shape[:2]), n.reshape(x.shape)
@@ -302,7 +306,7 @@ class HyperelasticModel:
         if out.shape != x.shape:
             raise ValueError(f"anchors must have shape {x.shape}, got {out.shape}")
         new = (g < self.eps) & ~np.isfinite(out[..., 0])
-        d1 = smooth_penalty(g[new], self.penalty(), self.eps)[1]                  # φ'(g) ≤ 0: the push-out force
+        d1 = smooth_penalty(g[new], self.penalty(), self.eps)[1]  # φ'(g) ≤ 0: the push-out force
         out[new] = x[new] - (d1 / self.penalty())[:, None] * n[new] - caps.center
         return out
 
@@ -345,14 +349,17 @@ class HyperelasticModel:
         if not len(fa):
             return np.zeros(3), 0.0, 0
         f, _, wf = self._contact_dE(u, caps, k, fa, curvature=False)
-        return (-(wf[..., None] * f)).sum(axis=(0, 1)), float(max(0.0, -g.min())), int(np.sum((g < self.eps) | stuck))
+        return (-(wf[..., None] * f)).sum(axis=(0, 1)), float(max(0.0,
+                                                                  -g.min())), int(np.sum((g < self.eps)
+                                                                                         | stuck))
 
     def residual_tangent(self, u: np.ndarray, caps: Capsule | None, k: float, need_K: bool = True,
                          project: bool = False):
         """Residual r (n,) N and tangent K_t (csr, n × n, N/m) of Π at ``u`` (P, 3); K_t is None when not
         ``need_K``. ``project``: replace the material tangent A (9 × 9) at every quadrature point where it is
-        indefinite by its positive semi-definite projection (projected Newton, Teran, Sifakis, Irving & Fedkiw,
-        SCA 2005), so K_t is positive definite. Raises ``FloatingPointError`` when an element is inverted."""
+        indefinite by its positive semi-definite projection (projected Newton, Teran, Sifakis, Irving &
+        Fedkiw, SCA 2005), so K_t is positive definite. Raises ``FloatingPointError`` when an element is
+        inverted."""
         F = self.deformation(u)
         Finv, J = inv_det3(F)
         if np.any(J <= 0):
@@ -367,7 +374,8 @@ class HyperelasticModel:
         E, Q = lnJ.shape
         G = self.grad
         Gf = G.transpose(0, 2, 1, 3).reshape(E, 10, 3 * Q)                                 # [e, a, (q, J)]
-        re = Gf @ (P * self.w[..., None, None]).transpose(0, 1, 3, 2).reshape(E, 3 * Q, 3)   # Σ_qJ w ∇N_a,J P_iJ
+        # Σ_qJ w ∇N_a,J P_iJ
+        re = Gf @ (P * self.w[..., None, None]).transpose(0, 1, 3, 2).reshape(E, 3 * Q, 3)
         r = np.bincount(self._vd.ravel(), weights=re.ravel(), minlength=self.n)
         cdata = None
         if caps is not None:
@@ -443,9 +451,10 @@ class HyperelasticModel:
         return float(minJ.min()), int(np.count_nonzero(minJ <= 0)), float(np.linalg.eigvalsh(Egl).max())
 
     def probe_matrix(self, x: np.ndarray) -> sp.csr_matrix:
-        """Interpolation matrix (k, P): values of the P2 field at points ``x`` (k, 3) m. Points just outside the
-        faceted boundary use the nearest element's polynomial (a tiny extrapolation), as in
-        :meth:`flexsheet.fem.solver.FemModel.probe`. Points beyond the symmetry planes must be mirrored first."""
+        """Interpolation matrix (k, P): values of the P2 field at points ``x`` (k, 3) m. Points just outside
+        the faceted boundary use the nearest element's polynomial (a tiny extrapolation), as in
+        :meth:`flexsheet.fem.solver.FemModel.probe`. Points beyond the symmetry planes must be mirrored
+        first."""
         from scipy.spatial import cKDTree
 
         x = np.asarray(x, float)
@@ -470,10 +479,11 @@ class HyperelasticModel:
         return sp.csr_matrix((phis.ravel(), (rows, cols)), shape=(len(x), len(self.points)))
 
     def penalty(self, mesh_h: float | None = None) -> float:
-        """Contact penalty per unit area, N/m³: ``penalty_scale``·E/h (default :data:`PENALTY_SCALE`), h the fine
-        contact-facet size. With the smoothed onset (:func:`~flexsheet.fem.reference.capsule_contact.smooth_penalty`)
-        a point carries pressure p at the stand-off g = ε − √(2εp/κ) for p < κε/2 (≈ 290·E on the 3.4 mm mesh) and penetrates (p − κε/2)/κ beyond: the
-        geometric contact error is at most ε = 20 µm plus that penetration."""
+        """Contact penalty per unit area, N/m³: ``penalty_scale``·E/h (default :data:`PENALTY_SCALE`), h the
+        fine contact-facet size. With the smoothed onset
+        (:func:`~flexsheet.fem.reference.capsule_contact.smooth_penalty`) a point carries pressure p at the
+        stand-off g = ε − √(2εp/κ) for p < κε/2 (≈ 290·E on the 3.4 mm mesh) and penetrates (p − κε/2)/κ
+        beyond: the geometric contact error is at most ε = 20 µm plus that penetration."""
         return self.penalty_scale * self.E_ref / (mesh_h or self.h_contact)
 
     def dof_points(self, node_mask: np.ndarray) -> np.ndarray:

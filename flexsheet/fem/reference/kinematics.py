@@ -1,6 +1,6 @@
-"""Batched 3 × 3 algebra of the nonlinear reference (pure): the inverse and determinant of a stack of deformation
-gradients (:func:`inv_det3`) and Gram products over a summed axis (:func:`gram`), vectorised over elements and
-quadrature points for :class:`flexsheet.fem.reference.hyperelastic.HyperelasticModel`."""
+"""Batched 3 × 3 algebra of the nonlinear reference (pure): the inverse and determinant of a stack of
+deformation gradients (:func:`inv_det3`) and Gram products over a summed axis (:func:`gram`), vectorised over
+elements and quadrature points for :class:`flexsheet.fem.reference.hyperelastic.HyperelasticModel`."""
 
 from __future__ import annotations
 

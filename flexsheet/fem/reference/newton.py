@@ -1,22 +1,21 @@
 """Newton's method of the geometrically nonlinear reference (pure): one load step's minimisation of the total
-potential Π of a :class:`flexsheet.fem.reference.hyperelastic.HyperelasticModel` under a finger: the step from the
-true tangent by PCG with a lagged Cholesky preconditioner or a fresh sparse Cholesky, else from the projected
-tangent or the diagonally shifted true tangent, a backtracking line search with a trust region, and the
-continuation of a call that ran out of iterations.
+potential Π of a :class:`flexsheet.fem.reference.hyperelastic.HyperelasticModel` under a finger: the step from
+the true tangent by PCG with a lagged Cholesky preconditioner or a fresh sparse Cholesky, else from the
+projected tangent or the diagonally shifted true tangent, a backtracking line search with a trust region, and
+the continuation of a call that ran out of iterations.
 
-Minimise Π = ∫W dV + E_c; each step solves K_t δ = −r, first by PCG preconditioned with the
-last sparse Cholesky factorisation (Newton–Krylov with a lagged preconditioner, :data:`PCG_RTOL`), else by a
-fresh sparse Cholesky (CHOLMOD, :func:`cholesky_or_none`, which also tells whether K_t is positive definite; PCG's
-negative curvature tells it too).
-Where K_t is not positive definite — far from equilibrium — the material tangent is projected to its
-positive part (Teran et al. 2005); where Newton then crawls (:data:`CRAWL_ITERS` projected steps that each
-cut the residual by less than 10 %: a limit point, where the projection stiffens the direction the material
-snaps through), the true tangent plus the smallest diagonal shift that factorises takes over for the rest of
-the load step's Newton solve (Nocedal & Wright alg. 3.3, :func:`shifted_step`; solver nh-6). Then a
-backtracking line search keeps det F > 0 at every quadrature point and decreases Π (Armijo), with at most
-1 mm of motion per iteration so no surface point can jump across the finger. Load stepping: depth in steps
-of ``step`` m with a linear-extrapolation predictor. Converged when ‖δ‖∞ < ``tol_u`` and the free
-residual is below ``tol_r`` × the finger force scale.
+Minimise Π = ∫W dV + E_c; each step solves K_t δ = −r, first by PCG preconditioned with the last sparse
+Cholesky factorisation (Newton–Krylov with a lagged preconditioner, :data:`PCG_RTOL`), else by a fresh sparse
+Cholesky (CHOLMOD, :func:`cholesky_or_none`, which also tells whether K_t is positive definite; PCG's negative
+curvature tells it too). Where K_t is not positive definite — far from equilibrium — the material tangent is
+projected to its positive part (Teran et al. 2005); where Newton then crawls (:data:`CRAWL_ITERS` projected
+steps that each cut the residual by less than 10 %: a limit point, where the projection stiffens the direction
+the material snaps through), the true tangent plus the smallest diagonal shift that factorises takes over for
+the rest of the load step's Newton solve (Nocedal & Wright alg. 3.3, :func:`shifted_step`; solver nh-6). Then
+a backtracking line search keeps det F > 0 at every quadrature point and decreases Π (Armijo), with at most 1
+mm of motion per iteration so no surface point can jump across the finger. Load stepping: depth in steps of
+``step`` m with a linear-extrapolation predictor. Converged when ‖δ‖∞ < ``tol_u`` and the free residual is
+below ``tol_r`` × the finger force scale.
 """
 
 from __future__ import annotations
@@ -38,9 +37,9 @@ __all__ = ["PCG_RTOL", "PCG_MAXITER", "RESUME_MAX", "CRAWL_ITERS", "CRAWL_RATIO"
 
 
 def cholesky_or_none(K: sp.spmatrix):
-    """Sparse Cholesky of the symmetric ``K`` (:func:`flexsheet.fem.sparse_factor.factor`, CHOLMOD): the factor (with
-    ``.solve(b)``) when K is positive definite, None when it is not (CHOLMOD stops at the first non-positive
-    pivot). On a loaded 3.4 mm-mesh tangent (16 596 DOF): 0.69 s and 9.9 ms per solve, against
+    """Sparse Cholesky of the symmetric ``K`` (:func:`flexsheet.fem.sparse_factor.factor`, CHOLMOD): the
+    factor (with ``.solve(b)``) when K is positive definite, None when it is not (CHOLMOD stops at the first
+    non-positive pivot). On a loaded 3.4 mm-mesh tangent (16 596 DOF): 0.69 s and 9.9 ms per solve, against
     3.8 s and 22 ms for the simplicial QDLDL used before, and 4.1 s for SuperLU in symmetric mode."""
     try:
         return factor(K, "cholmod")
@@ -78,12 +77,12 @@ def pcg(A: sp.csr_matrix, b: np.ndarray, precond, rtol: float, maxiter: int) -> 
     return None, maxiter
 
 
-#: inexact Newton (Newton–Krylov): the step solves K δ = −r by PCG to this relative residual, preconditioned by
-#: the last Cholesky factorisation; a fresh factorisation only when PCG fails (Knoll & Keyes, J. Comput. Phys.
-#: 193, 2004, "lagged" preconditioner). The step is then not exact, but the residual r is, so the converged state
-#: is the same within the tolerances. A PCG iteration is two triangular solves, ~1/70 of a CHOLMOD factorisation
-#: here, so PCG gives up after 20 (3.4 mm mesh, 47.5 → 50 mm step, same 22 Newton iterations: 45 s of CPU at 20,
-#: 59 s at 60, 47 s never using PCG).
+#: inexact Newton (Newton–Krylov): the step solves K δ = −r by PCG to this relative residual,
+#: preconditioned by the last Cholesky factorisation; a fresh factorisation only when PCG fails (Knoll
+#: & Keyes, J. Comput. Phys. 193, 2004, "lagged" preconditioner). The step is then not exact, but the
+#: residual r is, so the converged state is the same within the tolerances. A PCG iteration is two
+#: triangular solves, ~1/70 of a CHOLMOD factorisation here, so PCG gives up after 20 (3.4 mm mesh,
+#: 47.5 → 50 mm step, same 22 Newton iterations: 45 s of CPU at 20, 59 s at 60, 47 s never using PCG).
 PCG_RTOL = 1e-4
 PCG_MAXITER = 20
 
@@ -100,14 +99,16 @@ def _pcg_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict) -> tuple[np.ndarra
     return None, its < 0
 
 
-def _tangent_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict, projected: bool) -> tuple[np.ndarray | None, bool]:
+def _tangent_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict, projected: bool) -> tuple[np.ndarray | None,
+                                                                                            bool]:
     """(Newton step δ (n,) solving Kc δ = −rf, whether PCG gave it). PCG with the lagged factorisation
-    (:func:`_pcg_step`) first, else a fresh factorisation that becomes the next preconditioner. On the true tangent
-    (``projected`` False) returns (None, False) when Kc is not positive definite (PCG met negative curvature, or
-    the Cholesky meets a non-positive pivot): the caller then takes the projected tangent. On the projected
-    (semi-definite) tangent, rounding can leave it not quite positive definite: a diagonal shift, ×100 per try (at
-    most 3 more factorisations; each ~1 s on 20k+ DOF); ``FloatingPointError`` if it is still not positive
-    definite then (:func:`~flexsheet.fem.reference.path_solver.solve_path_capsule` halves the load step on it)."""
+    (:func:`_pcg_step`) first, else a fresh factorisation that becomes the next preconditioner. On the true
+    tangent (``projected`` False) returns (None, False) when Kc is not positive definite (PCG met negative
+    curvature, or the Cholesky meets a non-positive pivot): the caller then takes the projected tangent. On
+    the projected (semi-definite) tangent, rounding can leave it not quite positive definite: a diagonal
+    shift, ×100 per try (at most 3 more factorisations; each ~1 s on 20k+ DOF); ``FloatingPointError`` if it
+    is still not positive definite then (:func:`~flexsheet.fem.reference.path_solver.solve_path_capsule`
+    halves the load step on it)."""
     if state.get("pc") is not None:         # lagged factorisation as preconditioner (one PCG solve)
         x, indefinite = _pcg_step(Kc, rf, state)
         if x is not None:
@@ -137,8 +138,8 @@ RESUME_MAX = 3
 
 #: Newton "crawls" on the projected tangent when this many consecutive projected steps each left the residual
 #: above CRAWL_RATIO of the one before (linear convergence: at a limit point the projection stiffens the soft
-#: direction, 3.5 % per iteration at the azimuth-10° stall, docs/fem.md); from then on :func:`newton_minimise` takes the
-#: true tangent with a diagonal shift instead (:func:`shifted_step`).
+#: direction, 3.5 % per iteration at the azimuth-10° stall, docs/fem.md); from then on
+#: :func:`newton_minimise` takes the true tangent with a diagonal shift instead (:func:`shifted_step`).
 CRAWL_ITERS = 4
 CRAWL_RATIO = 0.9
 #: the diagonal shift's first and largest try, × max |diag K| (Nocedal & Wright, *Numerical Optimization*, 2nd
@@ -147,8 +148,8 @@ SHIFT_MIN, SHIFT_MAX = 1e-8, 1e-3
 
 
 def shifted_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict) -> np.ndarray | None:
-    """Newton step δ (n,) from (Kc + μ I) δ = −rf with the smallest μ ∈ {SHIFT_MIN, …, SHIFT_MAX}·max |diag Kc|
-    (×10, starting a tenth below the last μ that worked) for which the sparse Cholesky succeeds (Nocedal &
+    """Newton step δ (n,) from (Kc + μ I) δ = −rf with the smallest μ ∈ {SHIFT_MIN, …, SHIFT_MAX}·max |diag
+    Kc| (×10, starting a tenth below the last μ that worked) for which the sparse Cholesky succeeds (Nocedal &
     Wright alg. 3.3: a descent direction that keeps the true tangent's curvature, unlike the element-wise
     projection); None when even SHIFT_MAX does not make it positive definite (the caller takes the projected
     tangent). The factorisation becomes the PCG preconditioner; ``state["shifted"]`` counts these steps."""
@@ -166,29 +167,29 @@ def shifted_step(Kc: sp.csr_matrix, rf: np.ndarray, state: dict) -> np.ndarray |
     return None
 
 
-def newton_minimise(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, iters: int, tol_u: float,
+def newton_minimise(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, iters: int,
+                    tol_u: float,
             tol_r: float, log, state: dict | None = None, max_step: float = 0.001,
             shifted: bool = False) -> tuple[np.ndarray, int, bool]:
     """Minimise Π from ``u``; returns (u, iterations, converged). ``state`` (dict) carries between calls the
-    last positive-definite factorisation (``"pc"``, the PCG preconditioner, and ``"pc_n"``, its size), the last
-    diagonal shift that factorised (``"mu"``, × max |diag K|), and counters (``"projected"``: steps on the
-    projected tangent, ``"shifted"``: steps on the shifted true tangent, ``"factorisations"``, ``"pcg"``: steps
-    solved by PCG). Where the true tangent is not positive definite the step is on the projected
-    tangent, until Newton crawls there (:data:`CRAWL_ITERS`): then, for the rest of this call, on the true tangent
-    with a diagonal shift (:func:`shifted_step`), which crosses the limit points the projection cannot
+    last positive-definite factorisation (``"pc"``, the PCG preconditioner, and ``"pc_n"``, its size), the
+    last diagonal shift that factorised (``"mu"``, × max |diag K|), and counters (``"projected"``: steps on
+    the projected tangent, ``"shifted"``: steps on the shifted true tangent, ``"factorisations"``, ``"pcg"``:
+    steps solved by PCG). Where the true tangent is not positive definite the step is on the projected
+    tangent, until Newton crawls there (:data:`CRAWL_ITERS`): then, for the rest of this call, on the true
+    tangent with a diagonal shift (:func:`shifted_step`), which crosses the limit points the projection cannot
     (``shifted=True``: from the first iteration, for a call that continues one that ended so;
-    ``state["ended_shifted"]`` says how this one ended). Raises
-    ``FloatingPointError`` when the line search fails or the projected tangent stays singular
-    (:func:`_tangent_step`)."""
+    ``state["ended_shifted"]`` says how this one ended). Raises ``FloatingPointError`` when the line search
+    fails or the projected tangent stays singular (:func:`_tangent_step`)."""
     state = {} if state is None else state
     free = model.free
     pi = model.energy(u, caps, k)
     if not math.isfinite(pi):
         raise FloatingPointError("start point has inverted elements")
     rn_prev = math.inf
-    # crawl: consecutive projected iterations whose residual is above CRAWL_RATIO of the one before (counted as
-    # the iteration starts, so the CRAWL_ITERS-th is still projected); shifted: true tangent plus a shift from the
-    # next iteration on, for the rest of this call
+    # crawl: consecutive projected iterations whose residual is above CRAWL_RATIO of the one
+    # before (counted as the iteration starts, so the CRAWL_ITERS-th is still projected);
+    # shifted: true tangent plus a shift from the next iteration on, for the rest of this call
     crawl = 0
     state["ended_shifted"] = shifted
     for it in range(1, iters + 1):
@@ -200,7 +201,7 @@ def newton_minimise(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: f
         delta, from_pcg = _tangent_step(Kc, rf, state, projected=False)
         if delta is None and shifted:
             delta, from_pcg = shifted_step(Kc, rf, state), False
-        if delta is None:           # not positive definite (far from equilibrium): projected tangent, this step
+        if delta is None:  # not positive definite (far from equilibrium): projected tangent, this step
             state["projected"] = state.get("projected", 0) + 1
             crawl = crawl + 1 if rn > CRAWL_RATIO * rn_prev else 0
             shifted = shifted or crawl >= CRAWL_ITERS   # (a projected step after a failed shift stays in it)
@@ -239,7 +240,7 @@ def newton_minimise(model: HyperelasticModel, u: np.ndarray, caps: Capsule, k: f
         # is not stagnation: the stiff contact penalty makes the step tiny long before the residual is (3.4 mm
         # mesh at 50 mm: |du| < 1e-8 m at |r| = 1.4e-4 N, one iteration before quadratic convergence)
         if step < 0.01 * tol_u and (alpha < 1.0 or rn > 0.5 * rn_prev):
-            if from_pcg:            # maybe only PCG's inexactness: one exact step before calling it stagnation
+            if from_pcg:  # maybe only PCG's inexactness: one exact step before calling it stagnation
                 state["pc"] = None
                 rn_prev = rn
                 continue

@@ -49,8 +49,8 @@ def check_azimuth(angle_deg: float) -> None:
 
 def node_table_path(angle_deg: float, mat: Material, cache: ArrayCache, rm: RealtimeModel,
                     contact: str = DEFAULT_CONTACT) -> tuple[dict, np.ndarray]:
-    """One azimuth of the node's table: the reference path on its mesh (DEFAULT_REF_SPEC) through DEFAULT_GRID's
-    depths, solved or taken from the cache (azimuth 0 is the full run's 3.4 mm level); returns
+    """One azimuth of the node's table: the reference path on its mesh (DEFAULT_REF_SPEC) through
+    DEFAULT_GRID's depths, solved or taken from the cache (azimuth 0 is the full run's 3.4 mm level); returns
     (path, depths (D,) m). Raises ``SystemExit`` for an azimuth DEFAULT_GRID does not have."""
     check_azimuth(angle_deg)
     depths = push_depths(DEFAULT_GRID.depth_step)
@@ -60,14 +60,13 @@ def node_table_path(angle_deg: float, mat: Material, cache: ArrayCache, rm: Real
 
 def node_table_report(table: dict, paths: dict[float, dict], mat: Material, key: str) -> dict:
     """What ``node_table.json`` records of the FEM node's table (:func:`build_node_table`): per azimuth the
-    reference path's DOF, the loading path's CPU and the unloading sweep's wall time, the Newton iterations of the
-    states kept (one branch per depth), the depths where the stable
-    branch took the unloaded state, and the finger force (N), largest Green–Lagrange strain and inverted
-    elements at every depth; plus a check against the finger's geometry, not against the reference the table
-    came from: the table's displacement of the surface point under the fingertip along the inward normal, minus
-    the push depth (mm; the rigid apex's penetration plus the surface grid's sampling), largest per azimuth.
-    ``paths``: azimuth (deg) → its :func:`stable_path` dict, or None when not cached (its facts are then left
-    out). Units in keys."""
+    reference path's DOF, the loading path's CPU and the unloading sweep's wall time, the Newton iterations of
+    the states kept (one branch per depth), the depths where the stable branch took the unloaded state, and
+    the finger force (N), largest Green–Lagrange strain and inverted elements at every depth; plus a check
+    against the finger's geometry, not against the reference the table came from: the table's displacement of
+    the surface point under the fingertip along the inward normal, minus the push depth (mm; the rigid apex's
+    penetration plus the surface grid's sampling), largest per azimuth. ``paths``: azimuth (deg) → its
+    :func:`stable_path` dict, or None when not cached (its facts are then left out). Units in keys."""
 
     R, c = float(table["radius"]), np.asarray(table["center"], float)
     phis = np.asarray(table["angles"], float)
@@ -88,15 +87,18 @@ def node_table_report(table: dict, paths: dict[float, dict], mat: Material, key:
             "newton_iterations": int(np.sum(p["newton"])), "converged": bool(np.all(p["converged"])),
             "unloaded_state_at_mm": [round(float(d) * 1e3, 3) for d in depths[1:][
                 np.asarray(p.get("branch", np.zeros(len(depths) - 1))) == 1]]}
-        rows.append({"azimuth_deg": round(math.degrees(phi), 6), **facts, "force_N": sm.force[i].tolist(), "max_strain": np.asarray(table["max_strain"])[i].tolist(),
+        rows.append({"azimuth_deg": round(math.degrees(phi), 6), **facts, "force_N": sm.force[i].tolist(),
+                     "max_strain": np.asarray(table["max_strain"])[i].tolist(),
                      "inverted": np.asarray(table["inverted"])[i].tolist(),
                      "apex_depth_error_mm": apex, "apex_depth_error_max_mm": max(abs(a) for a in apex)})
     return {"key": key, "material": {"E": mat.E, "nu": mat.nu, "Jm": mat.Jm if mat.gent else None,
                                      "law": law_name(mat)},
-            "mesh": DEFAULT_REF_SPEC.__dict__, "grid": DEFAULT_GRID.key(), "depths_mm": (depths * 1e3).tolist(),
+            "mesh": DEFAULT_REF_SPEC.__dict__, "grid": DEFAULT_GRID.key(),
+            "depths_mm": (depths * 1e3).tolist(),
             "table_MB_float32": float(sum(np.asarray(table[k]).size * 4 for k in ("side", "cap")) / 1e6),
-            "apex_check": "the table's displacement of the surface point under the fingertip along the inward "
-                          "normal minus the push depth: the finger's geometry, not the reference it came from",
+            "apex_check": "the table's displacement of the surface point under the fingertip along the "
+                          "inward normal minus the push depth: the finger's geometry, not the reference it "
+                          "came from",
             "azimuths": rows}
 
 
@@ -115,7 +117,8 @@ TARGET_PX = 1.0
 
 
 def _fingers(rm, azimuth_deg: float, depths) -> list:
-    return [finger_at(math.radians(azimuth_deg), float(d), FINGER_R, rm.mesh.radius, rm.mesh.center) for d in depths]
+    return [finger_at(math.radians(azimuth_deg), float(d), FINGER_R, rm.mesh.radius, rm.mesh.center)
+            for d in depths]
 
 
 def _table_px(rm, table: dict, mat: Material, azimuth_deg: float, depths, ref_u) -> list[float]:
@@ -124,17 +127,18 @@ def _table_px(rm, table: dict, mat: Material, azimuth_deg: float, depths, ref_u)
     verts = rm.rest_vertices.astype(float)
     sm = SnapshotModel(table, verts, E=mat.E)
     u = np.stack([sm.surface(math.radians(azimuth_deg), float(d), 0.0)[0] for d in depths])
-    return shape_px_by_depth(u, np.asarray(ref_u, float), verts, np.asarray(rm.faces), _fingers(rm, azimuth_deg, depths))
+    return shape_px_by_depth(u, np.asarray(ref_u, float), verts, np.asarray(rm.faces),
+                             _fingers(rm, azimuth_deg, depths))
 
 
 def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: RealtimeModel, azimuth_deg: float,
                        contact: str = DEFAULT_CONTACT, twin: bool = False) -> dict:
-    """The node's table at an azimuth it does not hold, against that push's own stable path on the table's mesh
-    (:func:`stable_path` on DEFAULT_REF_SPEC, solved here unless cached: ~10 min of one core): the
-    interpolation across azimuth alone, every table depth, the largest visible shape error (px, what either eye
-    sees, :func:`flexsheet.fem.eye_judge.shape_px_by_depth`). ``twin``: also the same push on the mesh's twin
-    (:func:`twin_spec`; as long again), and that mesh's noise (``noise_px``, the same figure between the two). Raises ``ValueError`` for an azimuth
-    the table holds or outside it."""
+    """The node's table at an azimuth it does not hold, against that push's own stable path on the table's
+    mesh (:func:`stable_path` on DEFAULT_REF_SPEC, solved here unless cached: ~10 min of one core): the
+    interpolation across azimuth alone, every table depth, the largest visible shape error (px, what either
+    eye sees, :func:`flexsheet.fem.eye_judge.shape_px_by_depth`). ``twin``: also the same push on the mesh's
+    twin (:func:`twin_spec`; as long again), and that mesh's noise (``noise_px``, the same figure between the
+    two). Raises ``ValueError`` for an azimuth the table holds or outside it."""
 
     held = np.degrees(np.asarray(table["angles"], float))
     if np.any(np.abs(held - azimuth_deg) < 1e-9) or not held[0] < azimuth_deg < held[-1]:
@@ -151,21 +155,23 @@ def node_table_holdout(table: dict, mat: Material, cache: ArrayCache, rm: Realti
            "cpu_seconds_loading": float(p["cpu_seconds"])}
     if twin:
         q = stable_path(twin_spec(DEFAULT_REF_SPEC), azimuth_deg, depths[1:], mat, cache, verts, contact)
-        noise = shape_px_by_depth(np.asarray(q["u"], float), np.asarray(p["u"], float), verts, np.asarray(rm.faces),
+        noise = shape_px_by_depth(np.asarray(q["u"], float), np.asarray(p["u"], float), verts,
+                                  np.asarray(rm.faces),
                                   _fingers(rm, azimuth_deg, depths[1:]))
         row["twin"] = {"spec": twin_spec(DEFAULT_REF_SPEC).__dict__, "dofs": int(q["dofs"]),
-                       "converged": bool(np.all(q["converged"])), "noise_px": noise, "max_noise_px": max(noise),
-                       "what": "the same push on the twin mesh (same sizes, the tube 0.1 mm wider, laid out anew) "
-                               "against the table mesh's solve, the same vertices: the mesh's noise"}
+                       "converged": bool(np.all(q["converged"])), "noise_px": noise,
+                       "max_noise_px": max(noise),
+                       "what": "the same push on the twin mesh (same sizes, the tube 0.1 mm wider, laid out "
+                               "anew) against the table mesh's solve, the same vertices: the mesh's noise"}
     return row
 
 
 def node_table_compare(tables: dict[str, dict], azimuths, mat: Material, cache: ArrayCache, rm: RealtimeModel,
                        contact: str = DEFAULT_CONTACT) -> list[dict]:
     """Several tables (name → table, e.g. the node's before and after azimuths were added) judged at the same
-    held-out ``azimuths`` (deg) as :func:`node_table_holdout` judges each (its push solved unless cached). One row
-    per azimuth: {"azimuth_deg", "depths_mm", and per name {"shape_px" (rounded to 0.001 px), "max_shape_px",
-    "over_target_from_mm"} or "holds this azimuth" where that table holds it}."""
+    held-out ``azimuths`` (deg) as :func:`node_table_holdout` judges each (its push solved unless cached). One
+    row per azimuth: {"azimuth_deg", "depths_mm", and per name {"shape_px" (rounded to 0.001 px),
+    "max_shape_px", "over_target_from_mm"} or "holds this azimuth" where that table holds it}."""
     rows = []
     for az in (float(a) for a in azimuths):
         row: dict = {"azimuth_deg": az}
@@ -174,7 +180,8 @@ def node_table_compare(tables: dict[str, dict], azimuths, mat: Material, cache: 
                 row[name] = "holds this azimuth"
                 continue
             r = node_table_holdout(tab, mat, cache, rm, az, contact)
-            row[name] = {"shape_px": [round(e, 3) for e in r["shape_px"]], "max_shape_px": round(r["max_shape_px"], 3),
+            row[name] = {"shape_px": [round(e, 3) for e in r["shape_px"]],
+                         "max_shape_px": round(r["max_shape_px"], 3),
                          "over_target_from_mm": r["over_target_from_mm"]}
             row["depths_mm"] = r["depths_mm"]
         rows.append(row)
@@ -187,15 +194,16 @@ def node_table_between_depths(table: dict, mat: Material, cache: ArrayCache, rm:
     table's mesh solved at **half** the table's load step (:func:`stable_path` on DEFAULT_REF_SPEC through
     depths every step/2 to the table's deepest; solved unless cached: ~20 min of one core at azimuth 0, the
     quarter model). Judged as :func:`node_table_holdout` judges (the largest visible shape error, px) at every
-    depth of that path: the midpoints are the interpolation in depth, and
-    with a bistable push they show what blending two branches' states costs; at the table's own depths the
-    two sides differ only by float16 rounding and by a branch that the finer load step may leave elsewhere.
-    Returns per-depth errors, the largest at the midpoints and at the table's depths, and the depths where each
-    side holds the unloaded (stable-branch) state. Raises ``ValueError`` for an azimuth the table does not hold."""
+    depth of that path: the midpoints are the interpolation in depth, and with a bistable push they show what
+    blending two branches' states costs; at the table's own depths the two sides differ only by float16
+    rounding and by a branch that the finer load step may leave elsewhere. Returns per-depth errors, the
+    largest at the midpoints and at the table's depths, and the depths where each side holds the unloaded
+    (stable-branch) state. Raises ``ValueError`` for an azimuth the table does not hold."""
 
     held = np.degrees(np.asarray(table["angles"], float))
     if not np.any(np.abs(held - azimuth_deg) < 1e-9):
-        raise ValueError(f"azimuth must be one of the table's ({held.round(6).tolist()} deg), got {azimuth_deg!r}")
+        raise ValueError(f"azimuth must be one of the table's ({held.round(6).tolist()} deg), got "
+                         f"{azimuth_deg!r}")
     depths = np.asarray(table["depths"], float)
     step = float(depths[1] - depths[0])
     fine = np.round(np.arange(1, int(round(depths[-1] / (step / 2))) + 1) * (step / 2), 9)
@@ -210,15 +218,17 @@ def node_table_between_depths(table: dict, mat: Material, cache: ArrayCache, rm:
             "max_shape_px_between_depths": float(err[mid].max()),
             "max_shape_px_at_table_depths": float(err[~mid].max()),
             "over_target_from_mm": float(bad.min() * 1e3) if len(bad) else None,
-            "unloaded_state_at_mm": (fine[np.asarray(p["branch"]) == 1] * 1e3).tolist() if "branch" in p else None,
+            "unloaded_state_at_mm": (fine[np.asarray(p["branch"]) == 1] * 1e3).tolist() if "branch" in p
+            else None,
             "dofs": int(p["dofs"]), "cpu_seconds_loading": float(p["cpu_seconds"])}
 
 
 def table_update_ms(table: dict, verts: np.ndarray, mat: Material, n: int = 50) -> dict:
-    """CPU time (``time.thread_time``) of one snapshot look-up for the rendered vertices ``verts`` (k, 3) m — what
-    the node does per update on the cylinder (:meth:`flexsheet.fem.snapshots.SnapshotModel.surface`) — at pushes
-    between the table's azimuths (the first, middle and last midpoints: 5°, 35°, 55° for the node's) and at 0.1,
-    0.4, 0.9 of its deepest push (5, 20, 45 mm), ``n`` calls each: median and 90th percentile, ms."""
+    """CPU time (``time.thread_time``) of one snapshot look-up for the rendered vertices ``verts`` (k, 3) m —
+    what the node does per update on the cylinder (:meth:`flexsheet.fem.snapshots.SnapshotModel.surface`) — at
+    pushes between the table's azimuths (the first, middle and last midpoints: 5°, 35°, 55° for the node's)
+    and at 0.1, 0.4, 0.9 of its deepest push (5, 20, 45 mm), ``n`` calls each: median and 90th percentile,
+    ms."""
     sm = SnapshotModel(table, verts, E=mat.E)
     mids = np.degrees(np.asarray(table["angles"], float))
     mids = (mids[:-1] + mids[1:]) / 2 if len(mids) > 1 else mids
@@ -239,20 +249,21 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
                      holdout: tuple[float, ...] = (), between: tuple[float, ...] = (), twin: bool = False,
                      plot=None) -> int:
     """Build (or find) the FEM node's snapshot table: :data:`flexsheet.fem.snapshots.DEFAULT_GRID` on
-    :data:`flexsheet.fem.snapshots.DEFAULT_REF_SPEC`, the key the node looks up (its ``finger_radius`` default is
-    the experiment's 8 mm). Every azimuth's path is a cached :func:`node_table_path` (azimuth 0: the full run's
-    3.4 mm level), so ``azimuth`` (deg) solves just that one and returns: run the azimuths in parallel
+    :data:`flexsheet.fem.snapshots.DEFAULT_REF_SPEC`, the key the node looks up (its ``finger_radius`` default
+    is the experiment's 8 mm). Every azimuth's path is a cached :func:`node_table_path` (azimuth 0: the full
+    run's 3.4 mm level), so ``azimuth`` (deg) solves just that one and returns: run the azimuths in parallel
     processes, or over several sittings, then once without it to assemble the table; without it the azimuths
     the cache lacks are solved in ``jobs`` worker processes first
     (:func:`flexsheet.fem.reference.workers.prefetch`). ``ship``: also write the table, packed
-    (:func:`flexsheet.fem.reference.snapshot_build.pack_table`: float16 surface fields, compressed), into the repository's ``flexsheet/fem/data/`` (:meth:`flexsheet.fem.cache.ArrayCache.ship`),
-    where the node finds it on a machine that never solved it. A table on fewer azimuths in the cache or the
-    shipped store (:func:`flexsheet.fem.reference.snapshot_build.reusable_table`) is extended: only the azimuths it
-    lacks are solved. ``out``: write ``node_table.json`` there (:func:`node_table_report`), with the table judged at each
-    ``holdout`` azimuth (deg, between the table's) against its own solve (:func:`node_table_holdout`; solved
-    unless cached) and between its depths at each ``between`` azimuth (deg, one of the table's;
-    :func:`node_table_between_depths`); ``twin`` (``--mesh-check``): each held-out push also on the mesh's twin,
-    its noise beside the error; ``plot``: callable (out, report) that draws the report beside it
+    (:func:`flexsheet.fem.reference.snapshot_build.pack_table`: float16 surface fields, compressed), into the
+    repository's ``flexsheet/fem/data/`` (:meth:`flexsheet.fem.cache.ArrayCache.ship`), where the node finds
+    it on a machine that never solved it. A table on fewer azimuths in the cache or the shipped store
+    (:func:`flexsheet.fem.reference.snapshot_build.reusable_table`) is extended: only the azimuths it lacks
+    are solved. ``out``: write ``node_table.json`` there (:func:`node_table_report`), with the table judged at
+    each ``holdout`` azimuth (deg, between the table's) against its own solve (:func:`node_table_holdout`;
+    solved unless cached) and between its depths at each ``between`` azimuth (deg, one of the table's;
+    :func:`node_table_between_depths`); ``twin`` (``--mesh-check``): each held-out push also on the mesh's
+    twin, its noise beside the error; ``plot``: callable (out, report) that draws the report beside it
     (``node_table.png``, :func:`flexsheet.experiments.fem.plots.plot_node_table`). Returns 0."""
     st = replace(settings_for(False), grid=DEFAULT_GRID, snap_spec=DEFAULT_REF_SPEC, contact=contact)
     t0 = time.perf_counter()
@@ -266,11 +277,13 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
     table = _find_or_build(st, mat, cache, rm, jobs, t0)
     verts = rm.rest_vertices.astype(float)
     depths = push_depths(DEFAULT_GRID.depth_step)
-    paths = {a: cached_path(DEFAULT_REF_SPEC, a, depths, mat, cache, verts, contact) for a in DEFAULT_GRID.angles_deg}
+    paths = {a: cached_path(DEFAULT_REF_SPEC, a, depths, mat, cache, verts, contact)
+             for a in DEFAULT_GRID.angles_deg}
     shipped = _ship(table, paths, mat, cache, contact) if ship else None
     if out and holdout:     # the held-out pushes (and their twins) the cache lacks, in worker processes
         specs = [DEFAULT_REF_SPEC] + ([twin_spec(DEFAULT_REF_SPEC)] if twin else [])
-        prefetch([Solve(sp, a, DEFAULT_GRID.depth_step, stable=True) for a in holdout for sp in specs], jobs, mat,
+        prefetch([Solve(sp, a, DEFAULT_GRID.depth_step, stable=True) for a in holdout for sp in specs], jobs,
+                 mat,
                  cache, verts, contact)
     if out:
         rep = node_table_report(table, paths, mat, key)
@@ -284,21 +297,24 @@ def build_node_table(mat: Material, cache: ArrayCache, cache_dir: str | None, co
     return 0
 
 
-def _find_or_build(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, jobs: int, t0: float) -> dict:
+def _find_or_build(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeModel, jobs: int,
+                   t0: float) -> dict:
     """The node's table from the cache or the shipped store, else built (:func:`build_node_table`): a table on
     fewer azimuths extended, the paths the cache lacks solved in ``jobs`` workers first."""
     contact = st.contact
     table, hit, _ = load_or_build(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, FINGER_R, build=False,
                                   contact=contact)
-    if hit:     # in the cache or shipped: its paths are not solved again (a held-out check needs only its own)
+    if hit:  # in the cache or shipped: its paths are not solved again (a held-out check needs only its own)
         log.info("node table found (this machine's cache or flexsheet/fem/data): not solving its paths again")
         return table
     base = reusable_table(cache, DEFAULT_GRID, DEFAULT_REF_SPEC, mat, FINGER_R, contact)
     have = set() if base is None else {round(float(a), 6) for a in np.degrees(base["angles"])}
     if base is not None:
         log.info(f"node table: extending the table on azimuths {sorted(have)} deg (this machine's cache or "
-                 f"flexsheet/fem/data): only {[a for a in DEFAULT_GRID.angles_deg if a not in have]} deg are solved")
-    prefetch([Solve(DEFAULT_REF_SPEC, a, DEFAULT_GRID.depth_step, stable=True) for a in DEFAULT_GRID.angles_deg
+                 f"flexsheet/fem/data): only {[a for a in DEFAULT_GRID.angles_deg if a not in have]} deg are "
+                 "solved")
+    prefetch([Solve(DEFAULT_REF_SPEC, a, DEFAULT_GRID.depth_step, stable=True)
+              for a in DEFAULT_GRID.angles_deg
               if a not in have], jobs, mat, cache, rm.rest_vertices.astype(float), contact)
 
     def solved(ang, model, depths):
@@ -313,37 +329,44 @@ def _find_or_build(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeM
     return table
 
 
-def _ship(table: dict, paths: dict[float, dict | None], mat: Material, cache: ArrayCache, contact: str) -> dict:
+def _ship(table: dict, paths: dict[float, dict | None], mat: Material, cache: ArrayCache,
+          contact: str) -> dict:
     """Write ``table``, packed, into the shipped store (``--ship``); what ``node_table.json`` records of it.
     ``SystemExit`` when an azimuth's path is unconverged or not in this machine's cache (so not checked)."""
-    # an azimuth copied from an extended table was checked when that table shipped (or was built from this cache)
+    # an azimuth copied from an extended table was checked
+    # when that table shipped (or was built from this cache)
     reused = reused_azimuths(table)
     missing = [a for a, q in paths.items() if q is None and round(a, 6) not in reused]
     unconverged = [a for a, q in paths.items() if q is not None and not np.all(q["converged"])]
     if missing or unconverged:
-        raise SystemExit(f"flexsheet experiment fem: not shipping the node table: Newton did not converge at every "
-                         f"load step at azimuth(s) {unconverged} deg, paths not in this machine's cache (so not "
-                         f"checked) at {missing} deg")
+        raise SystemExit("flexsheet experiment fem: not shipping the node table: Newton did not converge at "
+                         f"every load step at azimuth(s) {unconverged} deg, paths not in this machine's "
+                         f"cache (so not checked) at {missing} deg")
     packed, err = pack_table(table)
-    p = cache.ship("snapshots", table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact, mat.Jm), packed)
+    p = cache.ship("snapshots", table_key(DEFAULT_GRID, DEFAULT_REF_SPEC, mat.nu, FINGER_R, contact, mat.Jm),
+                   packed)
     log.info(f"node table shipped: {p} ({os.path.getsize(p) / 1e6:.1f} MB, float16 surface fields: rounding "
              f"<= {err * 1e3:.4f} mm); commit it")
-    return {"path": os.path.relpath(p, os.getcwd()), "MB": os.path.getsize(p) / 1e6, "float16_rounding_mm": err * 1e3}
+    return {"path": os.path.relpath(p, os.getcwd()), "MB": os.path.getsize(p) / 1e6,
+            "float16_rounding_mm": err * 1e3}
 
 
 def _judge(rep: dict, table: dict, mat: Material, cache: ArrayCache, rm: RealtimeModel, contact: str,
            holdout: tuple[float, ...], between: tuple[float, ...], twin: bool) -> None:
-    """Add to ``rep`` (:func:`node_table_report`) the table's look-up time, its errors at the ``holdout`` azimuths
-    and between its depths at the ``between`` ones, and log them."""
+    """Add to ``rep`` (:func:`node_table_report`) the table's look-up time, its errors at the ``holdout``
+    azimuths and between its depths at the ``between`` ones, and log them."""
     rep["update"] = table_update_ms(table, rm.rest_vertices.astype(float), mat)
     rep["held_out"] = [node_table_holdout(table, mat, cache, rm, a, contact, twin) for a in holdout]
     rep["between_depths"] = [node_table_between_depths(table, mat, cache, rm, a, contact) for a in between]
     for h in rep["between_depths"]:
         log.info(f"node table between its depths at {h['azimuth_deg']:g} deg: worst visible shape "
-                 f"{h['max_shape_px_between_depths']:.2f} px (at its own depths {h['max_shape_px_at_table_depths']:.2f})")
+                 f"{h['max_shape_px_between_depths']:.2f} px (at its own depths "
+                 f"{h['max_shape_px_at_table_depths']:.2f})")
     for h in rep["held_out"]:
-        log.info(f"node table held out at {h['azimuth_deg']:g} deg: worst visible shape {h['max_shape_px']:.2f} px"
-                 + (f", over the target from {h['over_target_from_mm']:g} mm" if h["over_target_from_mm"] else ""))
+        log.info(f"node table held out at {h['azimuth_deg']:g} deg: worst visible shape "
+                 f"{h['max_shape_px']:.2f} px"
+                 + (f", over the target from {h['over_target_from_mm']:g} mm" if h["over_target_from_mm"]
+                    else ""))
 
 
 def _write(out: str, name: str, data: dict) -> None:

@@ -1,7 +1,7 @@
 """The geometrically nonlinear reference pushed along a path (pure): load stepping in the push depth with
-Newton (:mod:`flexsheet.fem.reference.newton`) at each step (:func:`solve_path`, :func:`solve_path_capsule`, one
-:class:`PathState` per requested depth), and the unloading sweep that finds the stable branch of a bistable
-push (:func:`unload_sweep`, :func:`stable_states`).
+Newton (:mod:`flexsheet.fem.reference.newton`) at each step (:func:`solve_path`, :func:`solve_path_capsule`,
+one :class:`PathState` per requested depth), and the unloading sweep that finds the stable branch of a
+bistable push (:func:`unload_sweep`, :func:`stable_states`).
 
 Units SI: m, N, Pa. Display frame (cylinder axis along +y through the mesh centre).
 """
@@ -24,7 +24,8 @@ log = logging.getLogger(__name__)
 if TYPE_CHECKING:
     from flexsheet.fem.reference.hyperelastic import HyperelasticModel
 
-__all__ = ["PathState", "solve_path", "solve_path_capsule", "stable_states", "unload_sweep", "BRANCH_MEET_TOL"]
+__all__ = ["PathState", "solve_path", "solve_path_capsule", "stable_states", "unload_sweep",
+           "BRANCH_MEET_TOL"]
 
 
 @dataclass
@@ -60,7 +61,8 @@ def solve_path(model: HyperelasticModel, angle: float, depths, finger_radius: fl
     if not math.isfinite(angle):
         raise ValueError(f"angle must be finite, got {angle!r}")
     m = model
-    return solve_path_capsule(model, lambda d: capsule_at(angle, d, finger_radius, m.mesh.radius, m.mesh.center),
+    return solve_path_capsule(model,
+                              lambda d: capsule_at(angle, d, finger_radius, m.mesh.radius, m.mesh.center),
                               depths, step, iters, tol_u, tol_r, substeps_max,
                               label=f"angle {math.degrees(angle):.1f} deg", contact=contact)
 
@@ -82,9 +84,9 @@ def _check_path_args(depths, step: float, capsule, contact: str) -> np.ndarray:
 
 
 class _PathPush:
-    """:func:`solve_path_capsule`'s walk along the push: the iterate ``u`` at depth ``d_cur``, the previous one
-    (``u_prev`` at ``d_prev``, for the extrapolated guess), the sticking anchors, Newton's resume state and the
-    current load step size."""
+    """:func:`solve_path_capsule`'s walk along the push: the iterate ``u`` at depth ``d_cur``, the previous
+    one (``u_prev`` at ``d_prev``, for the extrapolated guess), the sticking anchors, Newton's resume state
+    and the current load step size."""
 
     def __init__(self, m: HyperelasticModel, capsule, sticking: bool, step: float, iters: int, tol_u: float,
                  tol_r: float | None, substeps_max: int, label: str):
@@ -123,7 +125,8 @@ class _PathPush:
                 g2 = self.u + (self.u - self.u_prev) * (h / (self.d_cur - self.d_prev))
                 if math.isfinite(m.energy(g2, None, 0.0)):
                     guess = g2
-            u_new, its, conv, u_try = newton_resumed(m, guess, caps, self.k, self.iters, self.tol_u, self.tol_r,
+            u_new, its, conv, u_try = newton_resumed(m, guess, caps, self.k, self.iters, self.tol_u,
+                                                     self.tol_r,
                                                      self.nstate)
             u_last = u_try if u_try is not None else u_last
             its_total += its
@@ -133,8 +136,8 @@ class _PathPush:
             self.step_now = min(self.step_now, h)
         else:
             if u_last is None:
-                raise RuntimeError(f"Newton failed at depth {self.d_cur * 1e3:.2f} mm -> {d_new * 1e3:.2f} mm "
-                                   f"({self.label})")
+                raise RuntimeError(f"Newton failed at depth {self.d_cur * 1e3:.2f} mm -> {d_new * 1e3:.2f} "
+                                   f"mm ({self.label})")
             u_new = u_last          # give up on this step: keep its last iterate, flagged not converged
             log.info(f"  Newton did not converge at {d_new * 1e3:.2f} mm ({self.label})")
         self.u_prev, self.d_prev = self.u, self.d_cur
@@ -154,23 +157,24 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
                        label: str = "path", contact: str = DEFAULT_CONTACT) -> list[PathState]:
     """Push a rigid finger given by ``capsule(depth) -> Capsule`` (depth m; any object, any push direction)
     through ``depths`` (m, ascending, ≥ 0), load steps of at most ``step`` m; returns one :class:`PathState`
-    per requested depth (``force`` along the capsule's direction, full-body force with the symmetry planes).
-    A Newton call that runs out of ``iters`` iterations (not failed: e.g. a snap-through under way) is continued
-    from its last iterate at the same depth, up to :data:`~flexsheet.fem.reference.newton.RESUME_MAX` more calls
-    (nh-7; a step stuck for good thus costs (1 + RESUME_MAX)× the iterations before each halving). A load step
-    whose Newton solve fails otherwise, or still has not converged then, is halved (up to ``substeps_max`` times) and the
-    load steps after it keep the halved size (the path got hard: on the 3.4 mm cylinder mesh a 2.5 mm step past
-    47.5 mm spent 60 iterations per try before halving, nh-5); if it still fails, its last iterate is kept and
-    the state is flagged ``converged=False`` (bounded time; the caller decides).
+    per requested depth (``force`` along the capsule's direction, full-body force with the symmetry planes). A
+    Newton call that runs out of ``iters`` iterations (not failed: e.g. a snap-through under way) is continued
+    from its last iterate at the same depth, up to :data:`~flexsheet.fem.reference.newton.RESUME_MAX` more
+    calls (nh-7; a step stuck for good thus costs (1 + RESUME_MAX)× the iterations before each halving). A
+    load step whose Newton solve fails otherwise, or still has not converged then, is halved (up to
+    ``substeps_max`` times) and the load steps after it keep the halved size (the path got hard: on the 3.4 mm
+    cylinder mesh a 2.5 mm step past 47.5 mm spent 60 iterations per try before halving, nh-5); if it still
+    fails, its last iterate is kept and the state is flagged ``converged=False`` (bounded time; the caller
+    decides).
 
     ``contact`` (a modelling choice, :data:`CONTACT_LAWS`): ``"frictionless"`` — non-penetration only, the
     surface slides freely on the finger; ``"sticking"`` — a fingertip that does not slip on soft tissue
-    (infinite friction): a contact quadrature point that is inside the finger at a converged load step is stuck
-    to the finger point nearest to it (:meth:`HyperelasticModel.stick_anchors`) and from the next load step
-    on follows the finger (penalty k/2 |x − anchor|², the same k; "inside" is gap < ε, the penalty's onset,
-    :meth:`HyperelasticModel.stick_anchors`); anchors are added after every load step,
-    never released (a monotone push). Raises ``ValueError`` on bad depths or an unknown ``contact`` and
-    ``RuntimeError`` when a step has no valid iterate at all."""
+    (infinite friction): a contact quadrature point that is inside the finger at a converged load step is
+    stuck to the finger point nearest to it (:meth:`HyperelasticModel.stick_anchors`) and from the next load
+    step on follows the finger (penalty k/2 |x − anchor|², the same k; "inside" is gap < ε, the penalty's
+    onset, :meth:`HyperelasticModel.stick_anchors`); anchors are added after every load step, never released
+    (a monotone push). Raises ``ValueError`` on bad depths or an unknown ``contact`` and ``RuntimeError`` when
+    a step has no valid iterate at all."""
     depths = _check_path_args(depths, step, capsule, contact)
     walk = _PathPush(model, capsule, contact == "sticking", step, iters, tol_u, tol_r, substeps_max, label)
     out = []
@@ -193,26 +197,28 @@ def solve_path_capsule(model: HyperelasticModel, capsule, depths, step: float = 
 def _path_state(m: HyperelasticModel, u: np.ndarray, caps: Capsule, k: float, depth: float, iterations: int,
                 converged: bool, t0: float) -> PathState:
     """The :class:`PathState` of displacement ``u`` (P, 3) m under ``caps`` at ``depth`` m: the finger force
-    (full body, the symmetry planes' mirror images added), the element checks; ``t0`` its start (perf_counter)."""
+    (full body, the symmetry planes' mirror images added), the element checks; ``t0`` its start
+    (perf_counter)."""
     fvec, pen, ncon = m.contact_force(u, caps, k)
     fvec = m.sym_factor * fvec * np.array([1.0, 0.0 if m.sym_y else 1.0, 0.0 if m.sym_z else 1.0])
     minJ, ninv, emax = m.checks(u)
-    return PathState(float(depth), u.copy(), float(fvec @ caps.direction), fvec, int(iterations), bool(converged),
+    return PathState(float(depth), u.copy(), float(fvec @ caps.direction), fvec, int(iterations),
+                     bool(converged),
                      minJ, ninv, emax, pen, ncon, time.perf_counter() - t0)
 
 
 def stable_states(model: HyperelasticModel, capsule, states: list[PathState], step: float = 0.0025,
                   iters: int = 30) -> tuple[list[PathState], np.ndarray, np.ndarray]:
     """Per depth the lower-energy of the loading state (``states``, :func:`solve_path_capsule`) and the
-    unloaded one (:func:`unload_sweep`): where a push is bistable, the stable branch rather than the metastable
-    one the loading path may stay on (both are equilibria under the same finger; the lower total potential Π
-    is the one a perturbation cannot leave). The unloaded state is taken only when it converged and lies
-    farther than :data:`BRANCH_MEET_TOL` from the loading one (else they are one state). Returns (states, branch
-    (D,) int: 1 where the unloaded state was taken, energies (D, 2) J: Π of the loading and of the unloaded
-    state at each depth). Frictionless contact only. Costs a Newton solve per load step (on the 3.4 mm half
-    model at 5° and 10°, 41 min of one core each with another solve beside it, about as long as the loading path:
-    the unloading steps start from the previous state with no predictor and need up to ~35 iterations at
-    5–20 mm)."""
+    unloaded one (:func:`unload_sweep`): where a push is bistable, the stable branch rather than the
+    metastable one the loading path may stay on (both are equilibria under the same finger; the lower total
+    potential Π is the one a perturbation cannot leave). The unloaded state is taken only when it converged
+    and lies farther than :data:`BRANCH_MEET_TOL` from the loading one (else they are one state). Returns
+    (states, branch (D,) int: 1 where the unloaded state was taken, energies (D, 2) J: Π of the loading and of
+    the unloaded state at each depth). Frictionless contact only. Costs a Newton solve per load step (on the
+    3.4 mm half model at 5° and 10°, 41 min of one core each with another solve beside it, about as long as
+    the loading path: the unloading steps start from the previous state with no predictor and need up to ~35
+    iterations at 5–20 mm)."""
     sw = unload_sweep(model, capsule, states, step=step, iters=iters)
     out, branch = [], np.zeros(len(states), np.int64)
     energies = np.array([[un.extra["energy_loading"], un.extra["energy"]] for un in sw])
@@ -234,21 +240,22 @@ def unload_sweep(model: HyperelasticModel, capsule, states: list[PathState], ste
                  substeps_max: int = 3) -> list[PathState]:
     """The equilibria of a frictionless push found by *unloading*: from the deepest of ``states`` (a loading
     path, :func:`solve_path_capsule`, ascending depths) the finger is withdrawn through the same depths, load
-    steps of at most ``step`` m, each Newton solve started from the last unloaded state (halved on failure as in
-    :func:`solve_path_capsule`). A push into a soft body can be bistable: the loading path stays on a
+    steps of at most ``step`` m, each Newton solve started from the last unloaded state (halved on failure as
+    in :func:`solve_path_capsule`). A push into a soft body can be bistable: the loading path stays on a
     metastable branch (a fold beside the finger not yet snapped) that unloading, starting past the snap, does
-    not visit. Returns one :class:`PathState` per depth of ``states`` (ascending), with
-    ``extra["energy"]`` (J, Π of the unloaded state) and ``extra["energy_loading"]`` (Π of the loading state
-    there); the deepest state is the loading one itself (taken as stable: the push is assumed past its snaps
-    there; the 50 mm states of 5°–20° on the 3.4 mm mesh are). The sweep runs to the shallowest depth: the two
-    branches coincide past the snap (at 10° on the 3.4 mm mesh from 45 mm) and part only below it, so meeting
-    the loading path says nothing about the depths still to come. Frictionless contact only (a sticking
-    finger's anchors depend on the loading history). Raises ``ValueError`` on an empty or unsorted ``states``,
+    not visit. Returns one :class:`PathState` per depth of ``states`` (ascending), with ``extra["energy"]``
+    (J, Π of the unloaded state) and ``extra["energy_loading"]`` (Π of the loading state there); the deepest
+    state is the loading one itself (taken as stable: the push is assumed past its snaps there; the 50 mm
+    states of 5°–20° on the 3.4 mm mesh are). The sweep runs to the shallowest depth: the two branches
+    coincide past the snap (at 10° on the 3.4 mm mesh from 45 mm) and part only below it, so meeting the
+    loading path says nothing about the depths still to come. Frictionless contact only (a sticking finger's
+    anchors depend on the loading history). Raises ``ValueError`` on an empty or unsorted ``states``,
     ``RuntimeError`` when a step has no valid iterate at all."""
     if not states:
         raise ValueError("states must be a non-empty loading path")
     if any("anchors" in s.extra for s in states):
-        raise ValueError("unload_sweep needs a frictionless push: these states carry a sticking finger's anchors")
+        raise ValueError("unload_sweep needs a frictionless push: these states carry a sticking finger's "
+                         "anchors")
     d = np.array([s.depth for s in states])
     if np.any(np.diff(d) <= 0):
         raise ValueError(f"states must have ascending depths, got {d.tolist()}")
@@ -279,7 +286,8 @@ def unload_sweep(model: HyperelasticModel, capsule, states: list[PathState], ste
                 h_max = min(h_max, h)
             else:
                 if u_last is None:
-                    raise RuntimeError(f"Newton failed unloading from {d_cur * 1e3:.2f} mm to {d_new * 1e3:.2f} mm")
+                    raise RuntimeError(f"Newton failed unloading from {d_cur * 1e3:.2f} mm to "
+                                       f"{d_new * 1e3:.2f} mm")
                 u_new = u_last
             conv_all &= conv
             u, d_cur = u_new, d_new
@@ -289,6 +297,6 @@ def unload_sweep(model: HyperelasticModel, capsule, states: list[PathState], ste
         st.extra.update(energy=e_un, energy_loading=e_ld)
         out[j] = st
         gap = float(np.abs(u - states[j].u).max())
-        log.info(f"  unloading {target * 1e3:5.2f} mm: {its_total} Newton its, Π {e_un:.6g} J against the loading "
-                 f"path's {e_ld:.6g} J, {gap * 1e3:.3f} mm apart, {st.seconds:.1f} s")
+        log.info(f"  unloading {target * 1e3:5.2f} mm: {its_total} Newton its, Π {e_un:.6g} J against the "
+                 f"loading path's {e_ld:.6g} J, {gap * 1e3:.3f} mm apart, {st.seconds:.1f} s")
     return out

@@ -5,22 +5,22 @@ paper's cylinder and the sphere (wired by :mod:`flexsheet.experiments.fem`; the 
 
 1. **Stations**: K fractions of the stroke's arc length, evenly spaced, start and end included
    (``--stations``, default :data:`DEFAULT_STATIONS`, 13). At each, the scene's hyperelastic reference
-   (:func:`flexsheet.fem.reference.scene_reference.scene_reference`: the scene's law and finger contact, full body, its
-   support and inclusions) is pushed along the inward normal 0 → :data:`GRID` ``depth_max`` in 2.5 mm steps on
-   a mesh refined along the whole push path (``h_fine`` 6 mm within 15 mm of it: the scene FULL run's first
-   level), sampled on the real-time model's rendered vertices; each push is cached on its own, ``--jobs``
-   solves the missing ones in worker processes.
+   (:func:`flexsheet.fem.reference.scene_reference.scene_reference`: the scene's law and finger contact, full
+   body, its support and inclusions) is pushed along the inward normal 0 → :data:`GRID` ``depth_max`` in 2.5
+   mm steps on a mesh refined along the whole push path (``h_fine`` 6 mm within 15 mm of it: the scene FULL
+   run's first level), sampled on the real-time model's rendered vertices; each push is cached on its own,
+   ``--jobs`` solves the missing ones in worker processes.
 2. **The table**: per station and depth the reference minus the real-time linear model's solve of the same
-   push, and the force and dF/dd ratios (module doc of :mod:`flexsheet.fem.path_snapshots`); stored under the key
-   the FEM node looks up (:func:`table_key`); ``--ship`` also writes it into ``flexsheet/fem/data/``.
+   push, and the force and dF/dd ratios (module doc of :mod:`flexsheet.fem.path_snapshots`); stored under the
+   key the FEM node looks up (:func:`table_key`); ``--ship`` also writes it into ``flexsheet/fem/data/``.
 3. **Held out** (``--holdout-fraction``, default the midpoints of every second interval): a push between
    stations solved on its own mesh (refined along *its* path), against what the node serves there (the
-   stations' states moved and turned with the contact, blended) and against the linear model alone: the largest visible shape error, px
-   (:func:`flexsheet.fem.eye_judge.shape_px_by_depth`: what either eye sees, the finger occluding) at
-   every depth. This judges the interpolation along the stroke and in depth (and the two
-   meshes' difference); it is not a judgement of the reference against physics, which is one mesh level here
-   (``--mesh-check``: the same push at the middle station on a mesh refined to 4 mm, the next level, gives its
-   change). Look-up time: the updating thread's CPU per update with the table attached.
+   stations' states moved and turned with the contact, blended) and against the linear model alone: the
+   largest visible shape error, px (:func:`flexsheet.fem.eye_judge.shape_px_by_depth`: what either eye sees,
+   the finger occluding) at every depth. This judges the interpolation along the stroke and in depth (and the
+   two meshes' difference); it is not a judgement of the reference against physics, which is one mesh level
+   here (``--mesh-check``: the same push at the middle station on a mesh refined to 4 mm, the next level,
+   gives its change). Look-up time: the updating thread's CPU per update with the table attached.
 
 Outputs: ``DIR/path_table.json`` + ``path_table.png``: stations (DOF, CPU, Newton, force), held-out errors
 (px) per depth, the look-up time (ms), the shipped file. Units in keys (px, mm, ms, N), else SI.
@@ -59,14 +59,16 @@ LOOKUP_DEPTHS = (0.005, 0.02, 0.045)
 
 
 def _st() -> dict:
-    """The stations' settings for :func:`flexsheet.fem.reference.scene_reference.scene_reference`: the scene full run's
-    (:data:`flexsheet.fem.reference.scene_reference.FULL`, whose first level is :data:`GRID`'s), so its pushes are shared."""
+    """The stations' settings for :func:`flexsheet.fem.reference.scene_reference.scene_reference`: the scene
+    full run's (:data:`flexsheet.fem.reference.scene_reference.FULL`, whose first level is :data:`GRID`'s), so
+    its pushes are shared."""
     return {k: FULL[k] for k in ("depths", "step", "h", "refine_radius", "path_depth")}
 
 
 def table_key(sc, rt) -> str:
-    """The key the FEM node looks a scene's path table up by (:func:`flexsheet.fem.path_snapshots.path_table_key`)
-    for the scene ``sc`` and the real-time model ``rt`` it corrects."""
+    """The key the FEM node looks a scene's path table up by
+    (:func:`flexsheet.fem.path_snapshots.path_table_key`) for the scene ``sc`` and the real-time model ``rt``
+    it corrects."""
     return path_table_key(sc.key(), rt.cache_key)
 
 
@@ -114,13 +116,13 @@ def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
 
 def assemble_path_table(sc, rt, fractions, refs: list[dict]) -> dict:
     """The path table (:data:`flexsheet.fem.path_snapshots.TABLE_FIELDS`) from the stations' reference pushes
-    ``refs`` (one :func:`flexsheet.fem.reference.scene_reference.scene_reference` result per fraction, sampled on
-    ``rt``'s rendered vertices at :data:`GRID`'s depths) and the real-time model ``rt``'s linear solves. The
-    table reaches the deepest depth to which every station's Newton solve converged at every load step (so a
-    scene whose reference stalls gets a shallower table, the linear model beyond it). Raises ``ValueError`` when
-    no station converged at the first depth."""
+    ``refs`` (one :func:`flexsheet.fem.reference.scene_reference.scene_reference` result per fraction, sampled
+    on ``rt``'s rendered vertices at :data:`GRID`'s depths) and the real-time model ``rt``'s linear solves.
+    The table reaches the deepest depth to which every station's Newton solve converged at every load step (so
+    a scene whose reference stalls gets a shallower table, the linear model beyond it). Raises ``ValueError``
+    when no station converged at the first depth."""
     depths = np.concatenate([[0.0], np.asarray(_st()["depths"])])
-    ok = np.all([np.asarray(r["converged"], bool) for r in refs], axis=0)      # (D-1,) every station converged
+    ok = np.all([np.asarray(r["converged"], bool) for r in refs], axis=0)  # (D-1,) every station converged
     n_ok = int(np.argmin(ok)) if not ok.all() else len(ok)
     if n_ok < 1:
         raise ValueError("path table: Newton did not converge at the first depth of every station")
@@ -157,13 +159,14 @@ def _path_fractions(stations, holdout) -> tuple[np.ndarray, tuple[float, ...]]:
         holdout = tuple(float((fractions[i] + fractions[i + 1]) / 2) for i in range(0, len(fractions) - 1, 2))
     for h in holdout:
         if not (0.0 < h < 1.0) or np.min(np.abs(fractions - h)) < 1e-6:
-            raise SystemExit(f"flexsheet experiment fem: --holdout-fraction {h} must lie in (0, 1) between the "
-                             f"stations {np.round(fractions, 4).tolist()}")
+            raise SystemExit(f"flexsheet experiment fem: --holdout-fraction {h} must lie in (0, 1) between "
+                             f"the stations {np.round(fractions, 4).tolist()}")
     return fractions, holdout
 
 
 def _ship_path_table(cache, key: str, table: dict, fractions, refs) -> dict:
-    """The table written into the shipped store (``SystemExit`` when a station did not converge): its path, MB."""
+    """The table written into the shipped store (``SystemExit`` when a station did not converge): its path,
+    MB."""
     bad = [float(f) for f, r in zip(fractions, refs, strict=True) if not np.all(r["converged"])]
     if bad:
         raise SystemExit(f"flexsheet experiment fem: not shipping the path table: Newton did not converge at "
@@ -175,7 +178,8 @@ def _ship_path_table(cache, key: str, table: dict, fractions, refs) -> dict:
 
 
 def _held_out_pushes(sc, rt, verts, cache, holdout, depths) -> list[dict]:
-    """Per held-out fraction: its own push against what the node serves (table attached) and the linear model."""
+    """Per held-out fraction: its own push against what the node serves (table attached) and the linear
+    model."""
     nd = len(depths)
     held_out = []
     for h in holdout:
@@ -205,7 +209,8 @@ def _held_out_pushes(sc, rt, verts, cache, holdout, depths) -> list[dict]:
 
 
 def _path_mesh_check(sc, faces, verts, cache, fractions, refs, depths) -> dict:
-    """``--mesh-check``: the middle station's push on the finer mesh against the table's, on the visible surface."""
+    """``--mesh-check``: the middle station's push on the finer mesh against the table's, on the visible
+    surface."""
     nd = len(depths)
     f = float(fractions[len(fractions) // 2])
     fine = _push(sc, f, CHECK_H_FINE, verts, cache)
@@ -225,14 +230,16 @@ def _path_report(sc, fractions, table, refs, depths, held_out, look, lin_ms, che
     """The report's JSON (``path_table.json``)."""
     return {"scene": {"name": sc.name, "file": str(sc.source), "key": sc.key(), "contact": sc.finger.contact,
                       "law": sc.material.model},
-            "what": "the scene's nonlinear path table (flexsheet/fem/path_snapshots.py): the stations' solved states "
-                    "(the real-time linear solve plus the reference-minus-linear correction), each moved and turned "
-                    "with the contact and blended along the stroke and in depth; held-out "
-                    "pushes between stations on their own meshes, the largest visible shape error (px)",
+            "what": "the scene's nonlinear path table (flexsheet/fem/path_snapshots.py): the stations' "
+                    "solved states (the real-time linear solve plus the reference-minus-linear correction), "
+                    "each moved and turned with the contact and blended along the stroke and in depth; "
+                    "held-out pushes between stations on their own meshes, the largest visible shape error "
+                    "(px)",
             "grid": GRID, "reach_m": REACH, "stroke_length_m": sc.stroke_length(),
             "stations": [{"fraction": float(f), "point_m": p.tolist(), "dofs": int(r["dofs"]),
                           "seconds": float(r["seconds"]), "newton_converged": bool(np.all(r["converged"])),
-                          "inverted_max": int(np.max(r["inverted"])), "max_strain": float(np.max(r["max_strain"])),
+                          "inverted_max": int(np.max(r["inverted"])),
+                          "max_strain": float(np.max(r["max_strain"])),
                           "force_N": np.asarray(r["force"]).tolist()}
                          for f, p, r in zip(fractions, table["points"], refs, strict=True)],
             "depths_m": depths.tolist(), "table_depth_max_m": float(depths[-1]), "held_out": held_out,
@@ -246,7 +253,8 @@ def _path_report(sc, fractions, table, refs, depths, held_out, look, lin_ms, che
             "seconds": time.perf_counter() - t0}
 
 
-def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, stations: int = DEFAULT_STATIONS,
+def build_path_table(scene_file: str, out: str | None, cache_dir: str | None,
+                     stations: int = DEFAULT_STATIONS,
                      holdout: tuple[float, ...] | None = None, jobs: int = 1, mesh_check: bool = False,
                      ship: bool = False) -> int:
     """Build (or find in the cache) the scene's path table and report it (module doc). ``holdout`` None: the
@@ -271,10 +279,12 @@ def build_path_table(scene_file: str, out: str | None, cache_dir: str | None, st
     lin_ms = scene_update_ms(rt, sc, LOOKUP_DEPTHS, 200)
     rt.attach_path_table(table)
     look = scene_update_ms(rt, sc, LOOKUP_DEPTHS, 200)
-    log.info(f"look-up with the table: CPU median {look['median']:.3f} ms (linear alone {lin_ms['median']:.3f} ms)")
+    log.info(f"look-up with the table: CPU median {look['median']:.3f} ms (linear alone "
+             f"{lin_ms['median']:.3f} ms)")
     depths = np.asarray(table["depths"][1:])            # the table's reach (every station converged to it)
     held_out = _held_out_pushes(sc, rt, verts, cache, holdout, depths)
-    check = _path_mesh_check(sc, np.asarray(rt.faces), verts, cache, fractions, refs, depths) if mesh_check else None
+    check = (_path_mesh_check(sc, np.asarray(rt.faces), verts, cache, fractions, refs, depths) if mesh_check
+             else None)
     rep = _path_report(sc, fractions, table, refs, depths, held_out, look, lin_ms, check, shipped, key, t0)
     if out:
         os.makedirs(out, exist_ok=True)
@@ -296,7 +306,8 @@ def _plot(out: str, rep: dict) -> None:
     fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))
     for i, h in enumerate(rep["held_out"]):
         c = f"C{i}"
-        ax[0].plot(d, h["table_shape_px"], "-o", ms=3, color=c, label=f"table, held out at {h['fraction']:.3f}")
+        ax[0].plot(d, h["table_shape_px"], "-o", ms=3, color=c, label="table, held out at "
+                                                                      f"{h['fraction']:.3f}")
         ax[0].plot(d, h["linear_shape_px"], "--", color=c, alpha=0.6, label=f"linear, {h['fraction']:.3f}")
     ax[0].axhline(rep["target_px"], color="k", lw=0.8, ls=":", label=f"target {rep['target_px']:g} px")
     ax[0].set_xlabel("push depth (mm)")
@@ -312,7 +323,8 @@ def _plot(out: str, rep: dict) -> None:
     ax[1].set_ylabel("finger force (N)")
     ax[1].set_title("reference force (held out: dotted; served: red dashed)")
     ax[1].legend(fontsize=7)
-    fig.suptitle(f"look-up {rep['lookup_ms']:.2f} ms (CPU median); linear alone {rep['linear_update_ms']:.2f} ms",
+    fig.suptitle(f"look-up {rep['lookup_ms']:.2f} ms (CPU median); linear alone {rep['linear_update_ms']:.2f}"
+                 " ms",
                  fontsize=9)
     fig.tight_layout()
     fig.savefig(os.path.join(out, "path_table.png"), dpi=110)

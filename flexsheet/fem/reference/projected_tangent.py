@@ -38,7 +38,7 @@ def projection_correction(model, F: np.ndarray, Finv: np.ndarray, lnJ: np.ndarra
     ne = len(e_idx)
     D = -(Vb * neg[..., None, :]) @ np.swapaxes(Vb, -1, -2)                 # [e, q, (i, J), (k, L)]
     G = model.grad[e_idx]                                                    # [e, q, b, L]
-    DG = (D.reshape(ne, Q, 27, 3) @ np.swapaxes(G, -1, -2)).reshape(ne, Q, 3, 3, 3, 10)    # [e, q, i, J, k, b]
+    DG = (D.reshape(ne, Q, 27, 3) @ np.swapaxes(G, -1, -2)).reshape(ne, Q, 3, 3, 3, 10)  # [e, q, i, J, k, b]
     Gw = (G * model.w[e_idx][..., None, None]).transpose(0, 2, 1, 3).reshape(ne, 10, 3 * Q)  # [e, a, (q, J)]
     K = Gw @ DG.transpose(0, 1, 3, 2, 4, 5).reshape(ne, 3 * Q, 90)                         # [e, a, (i, k, b)]
     out[e_idx] = K.reshape(ne, 10, 3, 3, 10).transpose(0, 1, 2, 4, 3)

@@ -1,5 +1,5 @@
-"""The offline build of the cylinder's snapshot table (:mod:`flexsheet.fem.snapshots` is its run-time look-up):
-the hyperelastic reference pushed at every snapshot azimuth and sampled on the table's surface grid
+"""The offline build of the cylinder's snapshot table (:mod:`flexsheet.fem.snapshots` is its run-time
+look-up): the hyperelastic reference pushed at every snapshot azimuth and sampled on the table's surface grid
 (:func:`build_table`), the table from the cache or built (:func:`load_or_build`), an earlier table it extends
 (:func:`reusable_table`, :func:`reused_azimuths`), the packing that ships it (:func:`pack_table`), and the
 sampling of a (half or quarter) reference model anywhere on the whole body (:func:`folded_probe`,
@@ -35,9 +35,11 @@ PREVIOUS_ANGLES_DEG = (0.0, 5.0, 10.0, 20.0, 30.0, 40.0, 50.0, 55.0, 60.0)
 
 def load_or_build(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float,
                   build: bool = True, solved=None,
-                  contact: str = DEFAULT_CONTACT, reuse: dict | None = None) -> tuple[dict | None, bool, float]:
-    """(table or None, cache hit, seconds): the table from ``cache`` (:class:`flexsheet.fem.cache.ArrayCache`), or
-    built and stored when ``build`` (``solved``, ``contact``, ``reuse``: as :func:`build_table`)."""
+                  contact: str = DEFAULT_CONTACT, reuse: dict | None = None) -> tuple[dict | None, bool,
+                                                                                      float]:
+    """(table or None, cache hit, seconds): the table from ``cache``
+    (:class:`flexsheet.fem.cache.ArrayCache`), or built and stored when ``build`` (``solved``, ``contact``,
+    ``reuse``: as :func:`build_table`)."""
     z = load_snapshot_table(cache, grid, spec, material, finger_radius, contact)
     if z is not None:
         return z, True, 0.0
@@ -52,14 +54,16 @@ def load_or_build(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, 
 def reusable_table(cache, grid: SnapshotGrid, spec: RefSpec, material: Material, finger_radius: float,
                    contact: str = DEFAULT_CONTACT,
                    previous: tuple[tuple[float, ...], ...] = (PREVIOUS_ANGLES_DEG,)) -> dict | None:
-    """A cached or shipped table that :func:`build_table` can extend to ``grid`` (its ``reuse``): the table of the
-    same mesh spec, material, finger radius (m) and contact law on ``grid``'s samples but an earlier azimuth set,
-    each of ``previous`` tried in turn (only sets that are a proper subset of ``grid``'s azimuths); None when none
-    is there. Its cache key (:func:`flexsheet.fem.snapshots.table_key`) is what vouches for the spec, material and contact."""
+    """A cached or shipped table that :func:`build_table` can extend to ``grid`` (its ``reuse``): the table of
+    the same mesh spec, material, finger radius (m) and contact law on ``grid``'s samples but an earlier
+    azimuth set, each of ``previous`` tried in turn (only sets that are a proper subset of ``grid``'s
+    azimuths); None when none is there. Its cache key (:func:`flexsheet.fem.snapshots.table_key`) is what
+    vouches for the spec, material and contact."""
     for angles in previous:
         if not set(angles) < set(grid.angles_deg):
             continue
-        z, hit, _ = load_or_build(cache, replace(grid, angles_deg=tuple(angles)), spec, material, finger_radius,
+        z, hit, _ = load_or_build(cache, replace(grid, angles_deg=tuple(angles)), spec, material,
+                                  finger_radius,
                                   build=False, contact=contact)
         if hit:
             return z
@@ -67,17 +71,19 @@ def reusable_table(cache, grid: SnapshotGrid, spec: RefSpec, material: Material,
 
 
 def pack_table(table: dict) -> tuple[dict, float]:
-    """A table (:func:`build_table`) made small enough to ship in the repository: the surface fields ``side`` and
-    ``cap`` as float16 (half the bytes; :class:`flexsheet.fem.snapshots.SnapshotModel` reads them back as float32), everything else as
-    it is. Returns (packed table, largest rounding error in m): float16 keeps 11 significant bits, so a
-    displacement of up to 64 mm is off by at most 2⁻¹⁶ m ≈ 0.015 mm, 2 % of the 0.7 mm target. Raises
-    ``ValueError`` when a surface value does not fit float16's range (|u| ≥ 65504 m: not a displacement)."""
+    """A table (:func:`build_table`) made small enough to ship in the repository: the surface fields ``side``
+    and ``cap`` as float16 (half the bytes; :class:`flexsheet.fem.snapshots.SnapshotModel` reads them back as
+    float32), everything else as it is. Returns (packed table, largest rounding error in m): float16 keeps 11
+    significant bits, so a displacement of up to 64 mm is off by at most 2⁻¹⁶ m ≈ 0.015 mm, 2 % of the 0.7 mm
+    target. Raises ``ValueError`` when a surface value does not fit float16's range (|u| ≥ 65504 m: not a
+    displacement)."""
     out = dict(table)
     err = 0.0
     for k in ("side", "cap"):
         a = np.asarray(table[k], np.float32)
         if not np.all(np.abs(a) < np.finfo(np.float16).max):
-            raise ValueError(f"snapshot table field {k!r} does not fit float16 (largest |u| {np.abs(a).max():g} m)")
+            raise ValueError(f"snapshot table field {k!r} does not fit float16 (largest |u| "
+                             f"{np.abs(a).max():g} m)")
         h = a.astype(np.float16)
         err = max(err, float(np.abs(h.astype(np.float32) - a).max(initial=0.0)))
         out[k] = h
@@ -134,9 +140,12 @@ def _store_states(t: dict, i: int, model, states, free, side_pts, cap_pts, ny: i
 
 def _copy_reused(t: dict, i: int, reuse: dict, k: int) -> None:
     """Azimuth ``i`` of the table's arrays ``t`` copied from azimuth ``k`` of the table ``reuse``."""
-    t["side"][i], t["cap"][i] = np.asarray(reuse["side"][k], np.float32), np.asarray(reuse["cap"][k], np.float32)
-    t["force"][i], t["max_strain"][i], t["inverted"][i] = reuse["force"][k], reuse["max_strain"][k], reuse["inverted"][k]
-    t["min_detF"][i], t["newton"][i], t["seconds"][i] = reuse["min_detF"][k], reuse["newton"][k], reuse["seconds"][k]
+    t["side"][i], t["cap"][i] = np.asarray(reuse["side"][k], np.float32), np.asarray(reuse["cap"][k],
+                                                                                     np.float32)
+    t["force"][i], t["max_strain"][i], t["inverted"][i] = (reuse["force"][k], reuse["max_strain"][k],
+                                                           reuse["inverted"][k])
+    t["min_detF"][i], t["newton"][i], t["seconds"][i] = (reuse["min_detF"][k], reuse["newton"][k],
+                                                         reuse["seconds"][k])
     t["reused"][i] = True
 
 
@@ -144,25 +153,26 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
                 progress=None, solved=None, contact: str = DEFAULT_CONTACT,
                 reuse: dict | None = None) -> dict[str, np.ndarray]:
     """Run the nonlinear reference at every snapshot azimuth and sample the surface; returns the table arrays
-    (see :class:`flexsheet.fem.snapshots.SnapshotModel`). Heavy (minutes per azimuth on a small machine): cache the result
-    (:class:`flexsheet.fem.cache.ArrayCache`). ``spec.half_z`` is used for the azimuth-0 snapshot only.
-    ``solved``: optional callable (azimuth deg, model, depths m) -> list of :class:`PathState` (or None to
-    solve here: the loading path and, frictionless, its stable branch, :func:`flexsheet.fem.reference.path_solver.stable_states`),
-    e.g. the experiment's cached stable paths on the same mesh, so nothing is solved twice.
-    ``contact``: the finger's contact law (:func:`flexsheet.fem.reference.path_solver.solve_path_capsule`).
-    ``reuse``: optional table of the **same** mesh spec, material, finger and contact law holding some of
-    ``grid``'s azimuths (e.g. the shipped table before azimuths were added, :func:`reusable_table`): those
-    azimuths are copied from it, not solved (its surface fields as stored: float16 in a shipped table, ≤ 0.015
-    mm). The caller vouches for the spec, material, finger and contact (its cache key); its samples (depths, θ,
-    y, ρ, E, version) are checked here: ``ValueError`` when they differ. The result's ``reused`` (A,) bool marks
-    the copied azimuths."""
+    (see :class:`flexsheet.fem.snapshots.SnapshotModel`). Heavy (minutes per azimuth on a small machine):
+    cache the result (:class:`flexsheet.fem.cache.ArrayCache`). ``spec.half_z`` is used for the azimuth-0
+    snapshot only. ``solved``: optional callable (azimuth deg, model, depths m) -> list of :class:`PathState`
+    (or None to solve here: the loading path and, frictionless, its stable branch,
+    :func:`flexsheet.fem.reference.path_solver.stable_states`), e.g. the experiment's cached stable paths on
+    the same mesh, so nothing is solved twice. ``contact``: the finger's contact law
+    (:func:`flexsheet.fem.reference.path_solver.solve_path_capsule`). ``reuse``: optional table of the
+    **same** mesh spec, material, finger and contact law holding some of ``grid``'s azimuths (e.g. the shipped
+    table before azimuths were added, :func:`reusable_table`): those azimuths are copied from it, not solved
+    (its surface fields as stored: float16 in a shipped table, ≤ 0.015 mm). The caller vouches for the spec,
+    material, finger and contact (its cache key); its samples (depths, θ, y, ρ, E, version) are checked here:
+    ``ValueError`` when they differ. The result's ``reused`` (A,) bool marks the copied azimuths."""
     R, L, c = CYLINDER_RADIUS, CYLINDER_LENGTH, CYLINDER_CENTER
     depths = grid.depths()
     th, ys, rh = grid.thetas(), grid.ys(L / 2), grid.rhos(R)
     na, nd = len(grid.angles_deg), len(depths)
     t = {"side": np.zeros((na, nd, len(th), len(ys), 3), np.float32),
          "cap": np.zeros((na, nd, len(th), len(rh), 3), np.float32), "force": np.zeros((na, nd)),
-         "max_strain": np.zeros((na, nd)), "inverted": np.zeros((na, nd), np.int64), "min_detF": np.ones((na, nd)),
+         "max_strain": np.zeros((na, nd)), "inverted": np.zeros((na, nd), np.int64),
+         "min_detF": np.ones((na, nd)),
          "newton": np.zeros((na, nd), np.int64), "seconds": np.zeros(na), "reused": np.zeros(na, bool)}
     free, side_pts, cap_pts = _surface_samples(th, ys, rh, R, L, c)
     src = _reuse_index(reuse, grid, depths, th, ys, rh, material) if reuse is not None else {}
@@ -177,10 +187,14 @@ def build_table(grid: SnapshotGrid, spec: RefSpec, material: Material, finger_ra
         t["seconds"][i] = time.perf_counter() - t0
         if progress:
             progress(i, ang, states, model)
-    return {"version": np.array(TABLE_VERSION), "E": np.array(material.E), "angles": np.radians(np.asarray(grid.angles_deg, float)),
-            "depths": depths, "theta": th, "y": ys, "rho": rh, "side": t["side"], "cap": t["cap"], "force": t["force"],
-            "max_strain": t["max_strain"], "inverted": t["inverted"], "min_detF": t["min_detF"], "newton": t["newton"],
-            "seconds": t["seconds"], "radius": np.array(R), "length": np.array(L), "center": np.asarray(c, float),
+    return {"version": np.array(TABLE_VERSION), "E": np.array(material.E),
+            "angles": np.radians(np.asarray(grid.angles_deg, float)),
+            "depths": depths, "theta": th, "y": ys, "rho": rh, "side": t["side"], "cap": t["cap"],
+            "force": t["force"],
+            "max_strain": t["max_strain"], "inverted": t["inverted"], "min_detF": t["min_detF"],
+            "newton": t["newton"],
+            "seconds": t["seconds"], "radius": np.array(R), "length": np.array(L),
+            "center": np.asarray(c, float),
             "reused": t["reused"]}
 
 
@@ -194,8 +208,9 @@ def reused_azimuths(table: dict) -> set[float]:
 
 
 def _reuse_index(reuse: dict, grid: SnapshotGrid, depths, th, ys, rh, material: Material) -> dict[float, int]:
-    """{azimuth deg of ``grid`` → its index in ``reuse``} for the azimuths ``reuse`` holds; ``ValueError`` when
-    ``reuse`` is sampled otherwise (version, E, depths, θ, y, ρ) than :func:`build_table` would sample."""
+    """{azimuth deg of ``grid`` → its index in ``reuse``} for the azimuths ``reuse`` holds; ``ValueError``
+    when ``reuse`` is sampled otherwise (version, E, depths, θ, y, ρ) than :func:`build_table` would
+    sample."""
     if str(reuse.get("version", "")) != TABLE_VERSION:
         raise ValueError(f"reuse: snapshot table version {reuse.get('version')!r} != {TABLE_VERSION!r}")
     if float(reuse["E"]) != material.E:
@@ -215,8 +230,9 @@ def _reuse_index(reuse: dict, grid: SnapshotGrid, depths, th, ys, rh, material: 
 
 
 def folded_probe(model: HyperelasticModel, x: np.ndarray):
-    """Probe matrix (k, P) csr of ``model``'s P2 field at points ``x`` (k, 3) m anywhere on the whole body, the
-    points folded into the modelled part (y ≥ y_O; z ≥ z_O for a quarter model); see :func:`unfolded_sample`."""
+    """Probe matrix (k, P) csr of ``model``'s P2 field at points ``x`` (k, 3) m anywhere on the whole body,
+    the points folded into the modelled part (y ≥ y_O; z ≥ z_O for a quarter model); see
+    :func:`unfolded_sample`."""
     c = model.mesh.center
     xf = x.copy()
     xf[:, 1] = c[1] + np.abs(xf[:, 1] - c[1])
@@ -226,8 +242,8 @@ def folded_probe(model: HyperelasticModel, x: np.ndarray):
 
 
 def unfolded_sample(P, u: np.ndarray, x: np.ndarray, model: HyperelasticModel) -> np.ndarray:
-    """Displacements (k, 3) m at points ``x`` (k, 3) m from ``model``'s DOF-point displacements ``u`` (P, 3) m via
-    the probe matrix ``P`` of :func:`folded_probe`, unfolding the mirror images (component signs)."""
+    """Displacements (k, 3) m at points ``x`` (k, 3) m from ``model``'s DOF-point displacements ``u`` (P, 3) m
+    via the probe matrix ``P`` of :func:`folded_probe`, unfolding the mirror images (component signs)."""
     v = np.asarray(P @ u)
     c = model.mesh.center
     v[:, 1] *= np.where(x[:, 1] < c[1], -1.0, 1.0)

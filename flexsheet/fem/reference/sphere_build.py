@@ -1,8 +1,8 @@
-"""The offline build of the sphere scene's nonlinear table (:mod:`flexsheet.fem.sphere_snapshots` is its run-time
-look-up and describes the table): one snapshot angle's push of the scene's hyperelastic body, its stable branch
-and its samples on the table's grid (:func:`solve_alpha`), and the table's arrays from every angle's result
-(:func:`assemble_table`). :mod:`flexsheet.fem.reference.sphere_table` runs them. Heavy: ~10 min of one core per
-angle."""
+"""The offline build of the sphere scene's nonlinear table (:mod:`flexsheet.fem.sphere_snapshots` is its
+run-time look-up and describes the table): one snapshot angle's push of the scene's hyperelastic body, its
+stable branch and its samples on the table's grid (:func:`solve_alpha`), and the table's arrays from every
+angle's result (:func:`assemble_table`). :mod:`flexsheet.fem.reference.sphere_table` runs them. Heavy: ~10 min
+of one core per angle."""
 
 from __future__ import annotations
 
@@ -38,11 +38,11 @@ def solve_alpha(scene, alpha_deg: float, grid: SphereGrid = DEFAULT_SPHERE_GRID,
     """One snapshot angle: the scene's hyperelastic body pushed at polar angle ``alpha_deg`` (stroke plane)
     through the grid's depths on a mesh refined along that push path (``spec`` = (h, h_fine, refine_radius,
     path_depth) m), the loading path then its stable branch, sampled on the grid (and at ``probes`` (k, 3) m,
-    e.g. the real-time model's rendered vertices), under the scene's contact law (a frictionless push keeps its
-    stable branch, :func:`stable_states`; a sticking one its loading path). Heavy (~10 min of one core at h_fine 4.5 mm): cache it.
-    Returns {"field": (D, T, P, 3) float32 m, "u_probes": (D, k, 3) float32, "force" (D,) N, "converged",
-    "inverted", "max_strain", "min_detF", "newton", "branch" (D,), "dofs", "cpu_seconds", "unload_seconds"};
-    row 0 is the rest state."""
+    e.g. the real-time model's rendered vertices), under the scene's contact law (a frictionless push keeps
+    its stable branch, :func:`stable_states`; a sticking one its loading path). Heavy (~10 min of one core at
+    h_fine 4.5 mm): cache it. Returns {"field": (D, T, P, 3) float32 m, "u_probes": (D, k, 3) float32, "force"
+    (D,) N, "converged", "inverted", "max_strain", "min_detF", "newton", "branch" (D,), "dofs", "cpu_seconds",
+    "unload_seconds"}; row 0 is the rest state."""
     fr = sphere_frame(scene)
     if not (math.isfinite(alpha_deg) and 0 <= alpha_deg < 90):
         raise ValueError(f"alpha_deg must be in [0, 90), got {alpha_deg!r}")
@@ -95,8 +95,9 @@ def solve_alpha(scene, alpha_deg: float, grid: SphereGrid = DEFAULT_SPHERE_GRID,
 
 
 def assemble_table(frame: SphereFrame, grid: SphereGrid, per_alpha: list[dict], E: float) -> dict:
-    """The table arrays (:class:`flexsheet.fem.sphere_snapshots.SphereSnapshotModel`) from :func:`solve_alpha`'s results, one per grid angle
-    in order; ``E`` Pa the modulus they were solved with. Raises ``ValueError`` on a count or shape mismatch."""
+    """The table arrays (:class:`flexsheet.fem.sphere_snapshots.SphereSnapshotModel`) from
+    :func:`solve_alpha`'s results, one per grid angle in order; ``E`` Pa the modulus they were solved with.
+    Raises ``ValueError`` on a count or shape mismatch."""
     if len(per_alpha) != len(grid.alphas_deg):
         raise ValueError(f"per_alpha: {len(per_alpha)} results for {len(grid.alphas_deg)} grid angles")
     field = np.stack([np.asarray(p["field"], np.float32) for p in per_alpha])

@@ -1,7 +1,8 @@
 """The worker processes of the long reference solves: :func:`run_workers`, the one pool of every long solve
 (the cylinder's reference pushes, the sphere and path tables, the scenes' references) on dask.distributed (a
-local cluster, or a lab's with ``--scheduler``); and :func:`prefetch`, which solves the :class:`Solve` jobs a run
-reads and the cache lacks (:func:`missing_solves`) in such workers before the run reads them from the cache."""
+local cluster, or a lab's with ``--scheduler``); and :func:`prefetch`, which solves the :class:`Solve` jobs a
+run reads and the cache lacks (:func:`missing_solves`) in such workers before the run reads them from the
+cache."""
 
 from __future__ import annotations
 
@@ -33,8 +34,8 @@ log = logging.getLogger(__name__)
 @dataclass(frozen=True)
 class Solve:
     """One :func:`reference_path` a run reads: mesh, azimuth (deg), output depth spacing (m; depths
-    ``push_depths(step)``) and contact penalty scale; ``stable``: its :func:`stable_path` (the snapshot tables and
-    the held-out pushes)."""
+    ``push_depths(step)``) and contact penalty scale; ``stable``: its :func:`stable_path` (the snapshot tables
+    and the held-out pushes)."""
 
     spec: RefSpec
     angle_deg: float
@@ -43,8 +44,8 @@ class Solve:
     stable: bool = False
 
     def cost(self) -> float:
-        """Relative CPU estimate for ordering (largest first): ∝ h_fine⁻³ (× (h_fine/skin)² with a skin), × 2 for
-        a half model, × the load steps."""
+        """Relative CPU estimate for ordering (largest first): ∝ h_fine⁻³ (× (h_fine/skin)² with a skin), × 2
+        for a half model, × the load steps."""
         c = self.spec.h_fine ** -3 * (self.spec.h_fine / self.spec.skin_h) ** 2 if self.spec.skin_h else \
             self.spec.h_fine ** -3
         c *= self.spec.h_fine / self.spec.tip_h if self.spec.tip_h else 1.0      # a rough share for the tip
@@ -56,7 +57,7 @@ def missing_solves(jobs: list[Solve], mat: Material, cache: ArrayCache, probes: 
                    ) -> list[Solve]:
     """The ``jobs`` :func:`reference_path` (or, ``stable``, :func:`stable_path`) would solve, not read, from
     ``cache``, each loading path once (its ``stable`` job where there is one)."""
-    todo: dict[str, Solve] = {}             # by the loading path's key: one worker per path, its sweep included
+    todo: dict[str, Solve] = {}  # by the loading path's key: one worker per path, its sweep included
     for j in jobs:
         key = reference_key(j.spec, j.angle_deg, push_depths(j.step), mat, probes, contact, j.penalty_scale)
         missing = not os.path.exists(cache.path("reference", key))
@@ -94,11 +95,10 @@ def prefetch(jobs: list[Solve], n_workers: int, mat: Material, cache: ArrayCache
 
 
 def _solver_init(name=None) -> None:
-    """Worker setup, once per worker process (:func:`_setup_plugin`): the progress lines printed with the prefix
-    "[solver N] " (:func:`flexsheet.runtime.console.show_lines` of the library's loggers; N the worker's name); one
-    BLAS and OpenMP thread (the
-    nanny starts workers with ``OMP_NUM_THREADS=1``; CHOLMOD's libraries load under that limit); SIGINT
-    ignored and tied to its parent, dying with it even on ``kill -9``
+    """Worker setup, once per worker process (:func:`_setup_plugin`): the progress lines printed with the
+    prefix "[solver N] " (:func:`flexsheet.runtime.console.show_lines` of the library's loggers; N the
+    worker's name); one BLAS and OpenMP thread (the nanny starts workers with ``OMP_NUM_THREADS=1``; CHOLMOD's
+    libraries load under that limit); SIGINT ignored and tied to its parent, dying with it even on ``kill -9``
     (:func:`flexsheet.runtime.background.lower_priority`, niceness unchanged)."""
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = "1"
@@ -113,8 +113,8 @@ def _solver_init(name=None) -> None:
 
 
 def _solve_one(args: tuple) -> tuple[int, float, str | None]:
-    """Worker: one :func:`reference_path` (or :func:`stable_path`) into the cache; (job index, seconds, None or
-    the error)."""
+    """Worker: one :func:`reference_path` (or :func:`stable_path`) into the cache; (job index, seconds, None
+    or the error)."""
     i, job, mat, cache_dir, probes, contact = args
     t = time.perf_counter()
     try:
@@ -140,8 +140,8 @@ def _setup_plugin():
     return _Setup()
 
 
-#: the dask scheduler every :func:`run_workers` uses ("tcp://HOST:PORT"), or None for a local cluster; set once
-#: by a command's ``--scheduler`` (:func:`set_scheduler`)
+#: the dask scheduler every :func:`run_workers` uses ("tcp://HOST:PORT"), or None for
+#: a local cluster; set once by a command's ``--scheduler`` (:func:`set_scheduler`)
 SCHEDULER: str | None = None
 
 
@@ -162,14 +162,15 @@ def parallel(n: int) -> bool:
 
 
 def run_workers(fn, work: list, n: int, scheduler: str | None = None, key=None):
-    """Yield ``fn(w)`` for every ``w`` of ``work``, in the order they finish, computed on dask.distributed:
-    a :class:`distributed.LocalCluster` of ``n`` worker processes, one thread each (the default), or the
-    cluster whose scheduler listens at ``scheduler`` (default :data:`SCHEDULER`) ("tcp://HOST:8786", a lab's cluster: its workers need
-    flexsheet installed and the same cache folder, a shared disk). Every local worker runs :func:`_solver_init`
-    first (a lab's workers are not changed: no plugin is left on its scheduler). Logs "k/N done" as results arrive. ``key(w)`` names a task (default: its index), so a result the
-    cluster still holds is not computed twice. Ctrl-C, an error or leaving the loop early cancels what is
-    left and closes a local cluster at once. ``fn`` must be importable (module level) and catch its own
-    errors. Raises ``ValueError`` for ``n`` < 1 and ``OSError`` when ``scheduler`` cannot be reached."""
+    """Yield ``fn(w)`` for every ``w`` of ``work``, in the order they finish, computed on dask.distributed: a
+    :class:`distributed.LocalCluster` of ``n`` worker processes, one thread each (the default), or the cluster
+    whose scheduler listens at ``scheduler`` (default :data:`SCHEDULER`) ("tcp://HOST:8786", a lab's cluster:
+    its workers need flexsheet installed and the same cache folder, a shared disk). Every local worker runs
+    :func:`_solver_init` first (a lab's workers are not changed: no plugin is left on its scheduler). Logs
+    "k/N done" as results arrive. ``key(w)`` names a task (default: its index), so a result the cluster still
+    holds is not computed twice. Ctrl-C, an error or leaving the loop early cancels what is left and closes a
+    local cluster at once. ``fn`` must be importable (module level) and catch its own errors. Raises
+    ``ValueError`` for ``n`` < 1 and ``OSError`` when ``scheduler`` cannot be reached."""
     from distributed import Client, LocalCluster, as_completed
 
     if n < 1:
@@ -189,7 +190,7 @@ def run_workers(fn, work: list, n: int, scheduler: str | None = None, key=None):
 
     run = uuid.uuid4().hex[:12]             # task keys unique per run: a shared scheduler holds others' too
     try:
-        if cluster is not None:             # our own workers only; a lab's cluster's workers are left as they are
+        if cluster is not None:  # our own workers only; a lab's cluster's workers are left as they are
             client.register_plugin(_setup_plugin())
         futures = [client.submit(fn, w, pure=False, key=f"flexsheet-{run}-{key(w) if key else i}")
                    for i, w in enumerate(work)]

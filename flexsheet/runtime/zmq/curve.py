@@ -1,5 +1,6 @@
-"""ZeroMQ CURVE security: a node's keys (:class:`CurveConfig`), the ZAP check of a publisher (:class:`AllowList`,
-:func:`allow_list`) and the key files (:func:`create_curve_keypair`, :func:`load_curve_keys`)."""
+"""ZeroMQ CURVE security: a node's keys (:class:`CurveConfig`), the ZAP check of a publisher
+(:class:`AllowList`, :func:`allow_list`) and the key files (:func:`create_curve_keypair`,
+:func:`load_curve_keys`)."""
 
 from __future__ import annotations
 
@@ -22,14 +23,13 @@ class CurveConfig:
 
     ``public_key``/``secret_key``: this host's Z85 keypair (from ``flexsheet keys generate``).
     ``server_keys``: peer endpoint → the Z85 public key its publisher must prove it owns; a peer whose
-    publisher lacks that secret key fails the handshake and none of its messages arrive.
-    ``allowed_clients``: Z85 public keys allowed to subscribe to this node's publisher (ZAP check);
-    any other subscriber is refused.
-    ``tool_keys``: the hosts' keys, the callers allowed a node's commanding services (:mod:`flexsheet.runtime.services`).
-    ``topic_publishers``: guarded topic → the endpoints allowed to publish it (the launch file's
-    ``security.publishers``, per node as SROS2 grants per participant): a guarded topic is received only on a
-    SUB socket connected to those endpoints alone, each pinned to its node's key
-    (:class:`~flexsheet.runtime.zmq.subscriber.SubLinks`).
+    publisher lacks that secret key fails the handshake and none of its messages arrive. ``allowed_clients``:
+    Z85 public keys allowed to subscribe to this node's publisher (ZAP check); any other subscriber is
+    refused. ``tool_keys``: the hosts' keys, the callers allowed a node's commanding services
+    (:mod:`flexsheet.runtime.services`). ``topic_publishers``: guarded topic → the endpoints allowed to
+    publish it (the launch file's ``security.publishers``, per node as SROS2 grants per participant): a
+    guarded topic is received only on a SUB socket connected to those endpoints alone, each pinned to its
+    node's key (:class:`~flexsheet.runtime.zmq.subscriber.SubLinks`).
     Source: pyzmq ``zmq.auth`` and ``examples/security``; SROS2 access control (``sros2/policy``).
     """
 
@@ -43,9 +43,9 @@ class CurveConfig:
 
 
 class AllowList:
-    """The ZAP check of a CURVE publisher: admits the listed client keys; refusals are counted (``refused``) and
-    logged at most once per :data:`LOG_EVERY_S` s with the count since the last line (a handshake flood wrote
-    one warning per refusal: 1 106 lines, and the logging slowed the node)."""
+    """The ZAP check of a CURVE publisher: admits the listed client keys; refusals are counted (``refused``)
+    and logged at most once per :data:`LOG_EVERY_S` s with the count since the last line (a handshake flood
+    wrote one warning per refusal: 1 106 lines, and the logging slowed the node)."""
 
     LOG_EVERY_S = 5.0
 
@@ -62,15 +62,17 @@ class AllowList:
             self._unlogged += 1
             now = _monotonic()
             if now - self._logged_at >= self.LOG_EVERY_S:
-                log.warning("CURVE: refused %d subscriber handshake(s) with an unlisted public key since the last "
-                            "line (last key %s; %d in all)", self._unlogged, key.decode(errors="replace"),
+                log.warning("CURVE: refused %d subscriber handshake(s) with an unlisted public key since the "
+                            "last line (last key %s; %d in "
+                            "all)", self._unlogged, key.decode(errors="replace"),
                             self.refused)
                 self._logged_at, self._unlogged = now, 0
         return ok
 
 
 def allow_list(ctx: zmq.Context, curve: CurveConfig):
-    """Start a ZAP authenticator on ``ctx`` that admits ``curve.allowed_clients`` (returns it and its list)."""
+    """Start a ZAP authenticator on ``ctx`` that admits ``curve.allowed_clients`` (returns it and its
+    list)."""
     from zmq.auth.thread import ThreadAuthenticator
 
     auth = ThreadAuthenticator(ctx, log=log)

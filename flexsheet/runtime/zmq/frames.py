@@ -18,7 +18,8 @@ NOBLOCK_MORE = NOBLOCK | SNDMORE
 
 
 def send_frames(sock: zmq.Socket, frames: list) -> None:
-    """Send one multipart message without blocking (``send_multipart`` minus its per-frame enum arithmetic)."""
+    """Send one multipart message without blocking (``send_multipart`` minus its per-frame enum
+    arithmetic)."""
     send = sock.send
     last = len(frames) - 1
     for i, f in enumerate(frames):
@@ -32,9 +33,9 @@ def frame_nbytes(frame) -> int:
 
 
 def drain_sub(sub: zmq.Socket | None, handler: FramesHandler) -> None:
-    """Receive every message ready on ``sub`` without blocking and hand each to ``handler`` as a list of frames:
-    the topic and meta frames as ``bytes`` (small: a copy is cheaper than a ``zmq.Frame``), the array buffers
-    as zero-copy ``zmq.Frame`` objects."""
+    """Receive every message ready on ``sub`` without blocking and hand each to ``handler`` as a list of
+    frames: the topic and meta frames as ``bytes`` (small: a copy is cheaper than a ``zmq.Frame``), the array
+    buffers as zero-copy ``zmq.Frame`` objects."""
     if sub is None or sub.closed:
         return
     recv, getsockopt = sub.recv, sub.getsockopt

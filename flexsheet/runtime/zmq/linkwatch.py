@@ -22,7 +22,8 @@ _monotonic = time.monotonic
 _EV_CONNECTED, _EV_DELAYED = int(zmq.EVENT_CONNECTED), int(zmq.EVENT_CONNECT_DELAYED)
 _EV_RETRIED, _EV_DISCONNECTED = int(zmq.EVENT_CONNECT_RETRIED), int(zmq.EVENT_DISCONNECTED)
 _EV_OK, _EV_FAIL_NO_DETAIL = int(zmq.EVENT_HANDSHAKE_SUCCEEDED), int(zmq.EVENT_HANDSHAKE_FAILED_NO_DETAIL)
-_EV_FAIL_PROTOCOL, _EV_FAIL_AUTH = int(zmq.EVENT_HANDSHAKE_FAILED_PROTOCOL), int(zmq.EVENT_HANDSHAKE_FAILED_AUTH)
+_EV_FAIL_PROTOCOL, _EV_FAIL_AUTH = (int(zmq.EVENT_HANDSHAKE_FAILED_PROTOCOL),
+                                    int(zmq.EVENT_HANDSHAKE_FAILED_AUTH))
 _LINK_EVENTS = (_EV_CONNECTED | _EV_DELAYED | _EV_RETRIED | _EV_DISCONNECTED | _EV_OK | _EV_FAIL_PROTOCOL
                 | _EV_FAIL_AUTH | _EV_FAIL_NO_DETAIL)
 _PROTOCOL_ERRORS = {int(getattr(zmq, n)): n[len("PROTOCOL_ERROR_"):].lower().replace("_", " ")
@@ -57,10 +58,11 @@ class LinkWatch:
     another security mechanism, sends a malformed greeting or command) ends the connection's session for good:
     libzmq never connects to that endpoint again. Read from the socket's monitor: a session that disconnects
     and shows no reconnect (``EVENT_CONNECT_RETRIED``, which libzmq emits right after the disconnect when it
-    retries) within :data:`GRACE_S`, or that failed its handshake (``HANDSHAKE_FAILED_PROTOCOL``/``_AUTH``), is
-    gone: the endpoint is disconnected and connected again after a back-off (:data:`BACKOFF_MIN_S` doubling to
-    :data:`BACKOFF_MAX_S`; reset by a handshake that succeeds). So within about ``BACKOFF_MAX_S`` + libzmq's
-    ``RECONNECT_IVL_MAX`` (1 s) after a squatter leaves and the real publisher is back, messages flow again.
+    retries) within :data:`GRACE_S`, or that failed its handshake (``HANDSHAKE_FAILED_PROTOCOL``/``_AUTH``),
+    is gone: the endpoint is disconnected and connected again after a back-off (:data:`BACKOFF_MIN_S` doubling
+    to :data:`BACKOFF_MAX_S`; reset by a handshake that succeeds). So within about ``BACKOFF_MAX_S`` +
+    libzmq's ``RECONNECT_IVL_MAX`` (1 s) after a squatter leaves and the real publisher is back, messages flow
+    again.
 
     :meth:`poll` runs on the socket's thread (the transports' safety poll, every 50 ms). A connection given up
     is logged at most once per :data:`LOG_EVERY_S` per endpoint, with the count of failed handshakes;
@@ -133,10 +135,12 @@ class LinkWatch:
                 self._busy.add(link)
         elif event == _EV_FAIL_PROTOCOL or event == _EV_FAIL_AUTH or event == _EV_FAIL_NO_DETAIL:
             if event == _EV_FAIL_PROTOCOL:
-                link.reason = "handshake refused: " + _PROTOCOL_ERRORS.get(value, f"protocol error {value:#x}")
+                link.reason = "handshake refused: " + _PROTOCOL_ERRORS.get(value,
+                                                                           f"protocol error {value:#x}")
             elif event == _EV_FAIL_AUTH:
                 link.reason = f"handshake refused by the publisher (ZAP status {value})"
-            elif not (link.failed_down and link.reason.startswith("handshake refused")):  # a refusal says more
+            # a refusal says more
+            elif not (link.failed_down and link.reason.startswith("handshake refused")):
                 link.reason = f"handshake failed: {_strerror(value)}"
             link.failures += 1
             link.failed_down += 1
@@ -178,8 +182,8 @@ class LinkWatch:
         if now - link.logged_at < self.LOG_EVERY_S:
             return
         n, link.unlogged, link.logged_at = link.unlogged, 0, now
-        log.warning("link to %s: %s; libzmq gave up on it, connecting again in %.1f s (back-off up to %.0f s; "
-                    "%d failed handshake(s) since the last line, %d in all)", link.endpoint,
+        log.warning("link to %s: %s; libzmq gave up on it, connecting again in %.1f s (back-off up to %.0f "
+                    "s; %d failed handshake(s) since the last line, %d in all)", link.endpoint,
                     link.reason or "ended without a reconnect", link.retry_at - now, self.BACKOFF_MAX_S, n,
                     link.failures)
 

@@ -14,8 +14,8 @@ __all__ = ["ServiceSocket", "request"]
 
 class ServiceSocket:
     """A node's service socket (:mod:`flexsheet.runtime.services`): a ROUTER bound on ``address``
-    ("tcp://HOST") at a port the OS picks (:attr:`endpoint`), a CURVE server with the node's keys when ``curve``,
-    on the node's context ``ctx`` (its ZAP authenticator then covers it) or its own. Requests above
+    ("tcp://HOST") at a port the OS picks (:attr:`endpoint`), a CURVE server with the node's keys when
+    ``curve``, on the node's context ``ctx`` (its ZAP authenticator then covers it) or its own. Requests above
     ``max_bytes`` are dropped by libzmq (MAXMSGSIZE). Used on the loop thread only."""
 
     def __init__(self, address: str, curve: CurveConfig | None = None, ctx: zmq.Context | None = None,
@@ -34,8 +34,8 @@ class ServiceSocket:
         self.endpoint = f"{address}:{self.sock.bind_to_random_port(address)}"
 
     async def recv(self) -> tuple[bytes, bytes, str] | None:
-        """(caller identity, request payload, the caller's CURVE public key in Z85 or "" without CURVE), or None
-        once the socket is closed."""
+        """(caller identity, request payload, the caller's CURVE public key in Z85 or "" without CURVE), or
+        None once the socket is closed."""
         try:
             frames = await self.sock.recv_multipart(copy=False)
         except (zmq.ContextTerminated, zmq.ZMQError):
@@ -62,7 +62,8 @@ class ServiceSocket:
 async def request(endpoint: str, payload: bytes, timeout: float, curve: CurveConfig | None = None,
                   server_key: bytes | None = None) -> bytes | None:
     """Send one request to the :class:`ServiceSocket` at ``endpoint`` and return its reply, or None when none
-    arrives within ``timeout`` s. ``curve`` (the caller's keys) with ``server_key`` (the node's public key)."""
+    arrives within ``timeout`` s. ``curve`` (the caller's keys) with ``server_key`` (the node's public
+    key)."""
     import zmq.asyncio
 
     ctx = zmq.asyncio.Context()

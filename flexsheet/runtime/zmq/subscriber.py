@@ -1,5 +1,5 @@
-"""The SUB side of a process: :func:`connect_sub`, :class:`SubLinks` (a SUB socket to every peer, plus one per set
-of publishers a guarded topic is restricted to) and a composable container's :class:`BusSocket`."""
+"""The SUB side of a process: :func:`connect_sub`, :class:`SubLinks` (a SUB socket to every peer, plus one per
+set of publishers a guarded topic is restricted to) and a composable container's :class:`BusSocket`."""
 
 from __future__ import annotations
 
@@ -54,16 +54,15 @@ def connect_sub(ctx: zmq.Context, peers: list[str], curve: CurveConfig | None, r
 
 class SubLinks:
     """The SUB side of one process: a SUB socket connected to every peer (with its :class:`LinkWatch`), plus,
-    under CURVE with guarded topics (``curve.topic_publishers``), one SUB socket per set of allowed publishers,
-    connected to those endpoints alone.
+    under CURVE with guarded topics (``curve.topic_publishers``), one SUB socket per set of allowed
+    publishers, connected to those endpoints alone.
 
     A guarded topic is subscribed on its publishers' socket only, so another node's publisher (ZMTP filters at
-    the publisher) never sends it and the SUB's own filter drops it should it come; a message of a guarded topic
-    that arrives on the socket of every peer under a wider prefix subscription ("") is dropped too (it may be
-    the allowed publisher's copy, which arrives on its own socket, or another node's: the socket cannot tell,
-    so nothing is counted). Every socket's
-    links heal (:class:`LinkWatch`). ``on_error`` is called before a :class:`TransportError` (bad peer) is
-    raised. Runs on the loop thread.
+    the publisher) never sends it and the SUB's own filter drops it should it come; a message of a guarded
+    topic that arrives on the socket of every peer under a wider prefix subscription ("") is dropped too (it
+    may be the allowed publisher's copy, which arrives on its own socket, or another node's: the socket cannot
+    tell, so nothing is counted). Every socket's links heal (:class:`LinkWatch`). ``on_error`` is called
+    before a :class:`TransportError` (bad peer) is raised. Runs on the loop thread.
     """
 
     def __init__(self, ctx: zmq.Context, peers: Iterable[str], curve: CurveConfig | None, rcvhwm: int,
@@ -92,8 +91,8 @@ class SubLinks:
         return [self.sock] + [s for s, _ in self.guarded.values()]
 
     def subscribe(self, prefix: bytes) -> None:
-        """Subscribe ``prefix``: a guarded topic on its publishers' socket alone; any other prefix on the socket
-        of every peer, plus each guarded topic it covers on that topic's publishers' socket."""
+        """Subscribe ``prefix``: a guarded topic on its publishers' socket alone; any other prefix on the
+        socket of every peer, plus each guarded topic it covers on that topic's publishers' socket."""
         self._subscription(prefix, zmq.SUBSCRIBE)
 
     def unsubscribe(self, prefix: bytes) -> None:
@@ -117,8 +116,8 @@ class SubLinks:
             if self.curve is not None:
                 key = server_key or self.curve.server_keys.get(endpoint)
                 if key is None or (server_key is not None and key not in self.curve.allowed_clients):
-                    raise ValueError(f"CURVE is on: {endpoint} needs the public key of one of the launch file's "
-                                     "identities")
+                    raise ValueError(f"CURVE is on: {endpoint} needs the public key of one of the launch "
+                                     "file's identities")
                 self.sock.curve_serverkey = key
             try:                                # a malformed endpoint raises before anything is recorded
                 self.sock.connect(endpoint)
@@ -182,8 +181,8 @@ class SubLinks:
 
 
 class BusSocket:
-    """A composable container's SUB side (:class:`SubLinks`), with the ZeroMQ context (and CURVE authenticator)
-    its nodes' :class:`XPub` sockets share (:class:`flexsheet.runtime.bus.Bus`).
+    """A composable container's SUB side (:class:`SubLinks`), with the ZeroMQ context (and CURVE
+    authenticator) its nodes' :class:`XPub` sockets share (:class:`flexsheet.runtime.bus.Bus`).
 
     ``peers``: endpoints to connect to; ``curve``: CURVE keys or None; ``rcvhwm``: receive high-water mark."""
 

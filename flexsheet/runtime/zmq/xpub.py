@@ -30,8 +30,8 @@ SMALL_MESSAGE_BYTES = 16 << 10
 
 def send_hwm(sndhwm: int, largest_bytes: int, budget_bytes: int = PUB_QUEUE_BYTES) -> int:
     """The send high-water mark (messages) that keeps one subscriber's queue of ``largest_bytes`` messages
-    within ``budget_bytes``: ``budget_bytes // largest_bytes``, at most ``sndhwm``, at least :data:`MIN_SNDHWM`.
-    Raises ``ValueError`` naming a value that is not a positive int."""
+    within ``budget_bytes``: ``budget_bytes // largest_bytes``, at most ``sndhwm``, at least
+    :data:`MIN_SNDHWM`. Raises ``ValueError`` naming a value that is not a positive int."""
     for name, v in (("sndhwm", sndhwm), ("largest_bytes", largest_bytes), ("budget_bytes", budget_bytes)):
         if not (isinstance(v, int) and v >= 1):
             raise ValueError(f"{name} must be an int >= 1, got {v!r}")
@@ -46,16 +46,17 @@ class XPub:
     topic prefixes its subscribers asked for (:meth:`wants`).
 
     Created on the loop thread; :meth:`drain` is the loop's reader for the socket's FD. Every socket operation
-    takes ``lock`` (ZeroMQ sockets may change threads only across a full memory barrier, which the lock gives).
-    Raises :class:`TransportError` naming the endpoint when it cannot be bound.
+    takes ``lock`` (ZeroMQ sockets may change threads only across a full memory barrier, which the lock
+    gives). Raises :class:`TransportError` naming the endpoint when it cannot be bound.
 
-    Bounded by bytes, set once: the high-water mark is :func:`send_hwm` of ``sndhwm`` and ``largest_bytes`` (the
-    largest message the node declares), set before ``bind`` and never changed on the live socket (changing it
-    while a subscriber's pipe is torn down crashes libzmq 4.3.5's I/O thread: zeromq/libzmq#4524). A subscriber
-    that stops reading then holds about ``budget_bytes``. A message bigger than declared is still sent (counted
-    in ``oversize``; its node should declare more). Counted drops: the socket runs with
-    ``XPUB_NODROP``, so a send that a full queue cannot take fails instead of vanishing; it is then sent again
-    lossy (the subscribers with room still get it) and :meth:`send` returns False. ``dropped`` counts them.
+    Bounded by bytes, set once: the high-water mark is :func:`send_hwm` of ``sndhwm`` and ``largest_bytes``
+    (the largest message the node declares), set before ``bind`` and never changed on the live socket
+    (changing it while a subscriber's pipe is torn down crashes libzmq 4.3.5's I/O thread:
+    zeromq/libzmq#4524). A subscriber that stops reading then holds about ``budget_bytes``. A message bigger
+    than declared is still sent (counted in ``oversize``; its node should declare more). Counted drops: the
+    socket runs with ``XPUB_NODROP``, so a send that a full queue cannot take fails instead of vanishing; it
+    is then sent again lossy (the subscribers with room still get it) and :meth:`send` returns False.
+    ``dropped`` counts them.
     """
 
     def __init__(self, ctx: zmq.Context, endpoint: str, curve: CurveConfig | None, sndhwm: int,
@@ -111,8 +112,8 @@ class XPub:
         return w
 
     def send(self, frames: list) -> bool:
-        """Send one multipart message without blocking (any thread); False if a subscriber's full queue dropped
-        it (the others got it; counted in ``dropped``) or the socket is shut down."""
+        """Send one multipart message without blocking (any thread); False if a subscriber's full queue
+        dropped it (the others got it; counted in ``dropped``) or the socket is shut down."""
         if len(frames) == 2:  # [topic, meta]: no array buffers (the topic's few bytes are left out)
             m = frames[1]
             size = len(m) if type(m) is bytes else frame_nbytes(m)
@@ -202,7 +203,8 @@ class XPub:
                 pass
             # a short linger, not 0: closing with linger 0 while a subscriber disconnects mid-way through a
             # multipart message aborts the whole process in libzmq 4.3.5 ("Resource temporarily unavailable
-            # (src/session_base.cpp:233)", zeromq/libzmq#3442; it killed the camera node at a launch's shutdown).
-            # Reproduced with 4 subscribers closing as the XPUB closes after 0.6 MB frames: 6 aborts in 60
-            # runs at linger 0, none in 210 at 100 ms. ctx.term() then waits at most CLOSE_LINGER_MS.
+            # (src/session_base.cpp:233)", zeromq/libzmq#3442; it killed the camera
+            # node at a launch's shutdown). Reproduced with 4 subscribers closing as
+            # the XPUB closes after 0.6 MB frames: 6 aborts in 60 runs at linger 0,
+            # none in 210 at 100 ms. ctx.term() then waits at most CLOSE_LINGER_MS.
             self.sock.close(linger=CLOSE_LINGER_MS)

@@ -1,7 +1,7 @@
-"""The run report a researcher reads (flexsheet.analysis.report): report.md parsed back from a synthetic
-bag. One headline per Table I row (the felt Δθ) with the paper's figure, the target, the target's source and
-the verdict; latency rows labelled modelled or measured; one delay figure; the planner's stiffness_scale;
-a run cut inside a segment gets no verdict; charts with JSON that carry titles, units, targets, verdicts; the twin
+"""The run report a researcher reads (flexsheet.analysis.report): report.md parsed back from a synthetic bag.
+One headline per Table I row (the felt Δθ) with the paper's figure, the target, the target's source and the
+verdict; latency rows labelled modelled or measured; one delay figure; the planner's stiffness_scale; a run
+cut inside a segment gets no verdict; charts with JSON that carry titles, units, targets, verdicts; the twin
 the run used and both Δd conventions in summary.json."""
 
 from __future__ import annotations
@@ -64,25 +64,31 @@ def write_run(path, script, t_end: float | None = None, scale: float = 0.5) -> N
     for k, t in enumerate(np.arange(0.0, t_end, 0.01)):
         i, mode, mt, phase, a = _state(t, segs)
         v = (np.array(c.point_at(_state(t + 1e-3, segs)[4], 0.0, R)) - np.array(c.point_at(a, 0.0, R))) / 1e-3
-        put(T.FINGER_TRUTH.name, FingerTruth(header=Header(stamp=t, seq=k), position=np.array(c.point_at(a, 0.0, R)),
-                                             velocity=v, segment=i, mode=mode, moving_time=mt, phase=phase), t)
+        put(T.FINGER_TRUTH.name,
+            FingerTruth(header=Header(stamp=t, seq=k), position=np.array(c.point_at(a, 0.0, R)),
+                        velocity=v, segment=i, mode=mode, moving_time=mt, phase=phase),
+            t)
         b = a - LAG
         o = np.array(c.point_at(b))
         put(T.SHEET_STATE.name, SheetState(header=Header(stamp=t, seq=k), origin=o,
                                            normal=np.array([math.cos(b), 0.0, -math.sin(b)]),
-                                           axis_u=np.array([0.0, 1.0, 0.0]), corners=np.zeros((4, 3)), pushed_point=o,
+                                           axis_u=np.array([0.0, 1.0, 0.0]), corners=np.zeros((4, 3)),
+                                           pushed_point=o,
                                            depth=0.0, stretch=0.02, membrane=np.zeros((2, 2))), t)
     for k, t in enumerate(np.arange(0.005, t_end - 0.02, 1.0 / 48.0)):
         p = np.array(c.point_at(_state(t, segs)[4], 0.0, R + 0.002))
-        put(T.FINGERTIP.name, Fingertip(header=Header(stamp=t + 0.0066, seq=k), position=p, covariance=np.eye(3) * 1e-8,
-                                        valid=True, predicted_position=p, prediction_horizon=0.025,
-                                        exposure_stamp=float(t),
-                                        frame_stamp=t + 0.0066, sent_stamp=t + 0.0084), t + 0.0084)
+        put(T.FINGERTIP.name,
+            Fingertip(header=Header(stamp=t + 0.0066, seq=k), position=p, covariance=np.eye(3) * 1e-8,
+                      valid=True, predicted_position=p, prediction_horizon=0.025,
+                      exposure_stamp=float(t),
+                      frame_stamp=t + 0.0066, sent_stamp=t + 0.0084), t + 0.0084)
         st, z3 = t + 0.009, np.zeros(3)
-        put(T.SHEET_TARGET.name, SheetTarget(header=Header(stamp=st, seq=k), contact_point=p, normal=z3, axis_u=z3,
-                                             axis_v=z3, sheet_origin=p, stretch=0.02, tension=100.0, stiffness=50.0,
-                                             object_stiffness=50.0, touching=True, status="ok",
-                                             source_stamp=float(t)), st)
+        put(T.SHEET_TARGET.name,
+            SheetTarget(header=Header(stamp=st, seq=k), contact_point=p, normal=z3, axis_u=z3,
+                        axis_v=z3, sheet_origin=p, stretch=0.02, tension=100.0,
+                        stiffness=50.0,
+                        object_stiffness=50.0, touching=True, status="ok",
+                        source_stamp=float(t)), st)
     for k, t in enumerate(np.arange(0.5, t_end, 1.0)):
         msg = "stiffness: the FEM's dF/dd" + (f"; x {scale:g} (stiffness_scale)" if scale != 1.0 else "")
         put(T.DIAGNOSTICS.name, Heartbeat(header=Header(stamp=t, seq=k), node="planner", node_type="planner",
@@ -91,7 +97,8 @@ def write_run(path, script, t_end: float | None = None, scale: float = 0.5) -> N
 
 
 def _section(md: str, heading: str) -> tuple[str, list[list[str]]]:
-    """The prose and the table rows (cells split at two or more spaces; header first) of a report.md section."""
+    """The prose and the table rows (cells split at two or more spaces; header first) of a report.md
+    section."""
     body = md.split(f"## {heading}\n", 1)[1].split("\n## ", 1)[0]
     prose = body.split("```")[0]
     table = body.split("```\n")[1].split("```")[0] if "```" in body else ""
@@ -130,7 +137,9 @@ def test_report_md_gives_one_headline_per_row_with_its_target_source_and_verdict
     # the other metrics in their own, named tables, never beside the headline
     assert [h for h in table[0] if "Δθ" in h] == ["felt Δθ mean deg"]
     assert "secondary check" in _section(md, "Table I — the paper's method (not the headline)")[0]
-    assert _rows(_section(md, "Table I — measured fingertip vs true sheet (not the headline)")[1])["10 s"]["n"] == n
+    assert (
+        _rows(_section(md, "Table I — measured fingertip vs true sheet (not the headline)")[1])["10 s"]["n"]
+            == n)
 
 
 def test_latency_rows_say_modelled_on_the_sim_clock_and_measured_on_the_wall_clock(tmp_path):
@@ -150,7 +159,7 @@ def test_one_delay_figure_from_the_chain_and_the_scaled_stiffness_says_so(tmp_pa
     _, md, s = _report(tmp_path, [("stroke", 10.0)], scale=0.5)
     prose, _ = _section(md, "Delay — exposure → sheet at its pose")
     assert prose.count("The delay:") == 1 and "not measured" in prose      # this bag has no arm chain
-    assert f"a horizon of {s['delay']['exposure_to_sheet_ms']:.1f} ms" in prose   # the prediction check, named
+    assert f"a horizon of {s['delay']['exposure_to_sheet_ms']:.1f} ms" in prose  # the prediction check, named
     assert s["delay"]["exposure_to_sheet_ms"] == pytest.approx(1e3 * LAG / math.radians(6.0) + 25.0, abs=1.5)
     prose, table = _section(md, "Sheet tension and stiffness at the contacts (the planner's model)")
     row = _rows(table)["10 s"]
@@ -164,7 +173,8 @@ def test_a_run_cut_inside_a_segment_is_partial_and_gets_no_verdict(tmp_path):
     assert code == 0 and "Run: PARTIAL" in md and s["run"]["partial"]
     row = _rows(_section(md, "Table I — felt Δθ, the headline")[1])["10 s"]
     assert row["verdict"] == PARTIAL and s["table1"]["verdicts"] == {"felt.10": PARTIAL}
-    assert s["headline"]["overall"] == PARTIAL and s["segments"]["10"]["coverage"] == pytest.approx(0.5, abs=0.01)
+    assert (s["headline"]["overall"] == PARTIAL
+            and s["segments"]["10"]["coverage"] == pytest.approx(0.5, abs=0.01))
     n, _, expected = row["n"].partition(" of ")
     assert int(n) < 0.6 * int(expected)
     for heading in ("Table I — felt Δθ, the headline", "Latency per hop and end to end"):
@@ -184,7 +194,8 @@ def test_charts_carry_title_units_target_and_verdict(tmp_path):
     _report(tmp_path, [("stroke", 10.0)])
     t1 = json.loads((tmp_path / "table1.json").read_text())
     assert t1["rows"]["10"]["target_deg"] == pytest.approx(PAPER_TABLE1["10"]["dtheta_mean_deg"] / 2)
-    assert t1["rows"]["10"]["verdict"] == "MISSED" and t1["units"] == {"dtheta": "deg", "dd": "mm"} and t1["title"]
+    assert (t1["rows"]["10"]["verdict"] == "MISSED" and t1["units"] == {"dtheta": "deg", "dd": "mm"}
+            and t1["title"])
     felt = json.loads((tmp_path / "felt.json").read_text())
     assert felt["unit"] == "deg" and felt["verdicts"] == {"10": "MISSED"}
     assert felt["target_source"]["10"] == "paper Table I ÷ 2"
@@ -196,8 +207,8 @@ def test_charts_carry_title_units_target_and_verdict(tmp_path):
 
 
 def test_report_records_the_twin_and_both_dd_conventions(tmp_path):
-    """summary.json has Table I's Δθ headline with Δd on R and in the paper's 2R convention, and the twin the run
-    used (a launch file's top-level ``twin:``, else the world node's ``twin`` param)."""
+    """summary.json has Table I's Δθ headline with Δd on R and in the paper's 2R convention, and the twin the
+    run used (a launch file's top-level ``twin:``, else the world node's ``twin`` param)."""
 
     from flexsheet.analysis.report import main, twin_settings
     from flexsheet.analysis.table1 import paper_dd_ratio
@@ -205,7 +216,8 @@ def test_report_records_the_twin_and_both_dd_conventions(tmp_path):
 
     _write_bag(tmp_path / "run.mcap")
     lf_path = tmp_path / "l.yaml"
-    lf_path.write_text("name: t\nnodes:\n  world:\n    type: world\n    params: {twin: {realism: ideal, truth_seed: 2}}\n")
+    lf_path.write_text("name: t\nnodes:\n  world:\n    type: world\n    params: {twin: {realism: ideal, "
+                       "truth_seed: 2}}\n")
     assert main(str(tmp_path), load_launch(lf_path)) == 0
     s = json.loads((tmp_path / "summary.json").read_text())
     assert s["twin"] == {"realism": "ideal", "truth_seed": 2, "source": "world node params"}
@@ -213,11 +225,12 @@ def test_report_records_the_twin_and_both_dd_conventions(tmp_path):
     assert row["dtheta_mean_deg"] == pytest.approx(math.degrees(LAG), abs=1e-4)
     assert row["dd_2r_mean_mm"] == pytest.approx(2e3 * R * LAG, abs=1e-4)           # the paper's convention
     assert row["dd_mean_mm"] == pytest.approx(2e3 * R * math.sin(LAG / 2), abs=1e-4)  # ours: the chord on R
-    assert paper_dd_ratio("10") == pytest.approx(2e3 * R, rel=0.01)                 # why: the paper's Δd/Δθ = 2R
+    assert paper_dd_ratio("10") == pytest.approx(2e3 * R, rel=0.01)  # why: the paper's Δd/Δθ = 2R
     assert "2R" in s["dd_convention"] and "2R" in (tmp_path / "report.md").read_text()
     top_path = tmp_path / "top.yaml"
     top_path.write_text("name: t\ntwin: {realism: realistic, truth_seed: 5, registration: false}\n"
-                        "nodes:\n  world:\n    type: world\n    params: {twin: {realism: ideal, truth_seed: 2}}\n")
+                        "nodes:\n  world:\n    type: world\n    params: {twin: {realism: ideal, truth_seed: "
+                        "2}}\n")
     assert twin_settings(load_launch(top_path)) == {"realism": "realistic", "truth_seed": 5,
                                                     "source": "launch file twin section"}
     assert twin_settings(None)["source"].startswith("world node defaults")
@@ -230,7 +243,8 @@ def test_an_earlier_runs_bags_in_a_reused_folder_are_left_out(tmp_path):
 
     from flexsheet.analysis.report import run_bags
 
-    old, part0, part1, replay = (tmp_path / n for n in ("sim.mcap", "sim.1.mcap", "sim.2.mcap", "replay.mcap"))
+    old, part0, part1, replay = (tmp_path / n
+                                 for n in ("sim.mcap", "sim.1.mcap", "sim.2.mcap", "replay.mcap"))
     for k, p in enumerate((old, part0, part1, replay)):
         p.write_bytes(b"")
         os.utime(p, (1000.0 + 100 * k, 1000.0 + 100 * k))
@@ -287,7 +301,8 @@ def test_the_report_judges_the_sheet_model_where_the_run_touched_the_sheet(monke
          "compliance": {"n": 1, "contacts_on_sheet": {"uv_m": uv, "n": [1, 1]}}}
     sheet_model_error(s, None)
     mc = s["compliance"]["model_error_contacts"]
-    assert mc["contacts"] == 2 and 0.0 < mc["median_pct"] <= mc["p90_pct"] <= mc["max_pct"] and mc["target_pct"] == 5.0
+    assert mc["contacts"] == 2 and 0.0 < mc["median_pct"] <= mc["p90_pct"] <= mc["max_pct"] and mc[
+        "target_pct"] == 5.0
     truth, sheet = TwinTruth.draw(0, "realistic"), load_display_calib(path).sheet
     centre = reg.contacts_model_error(truth, sheet, uv[:1])
     off = reg.contacts_model_error(truth, sheet, uv[1:])

@@ -23,15 +23,18 @@ def _bag(n=40, eye_error=0.001):
     for k in range(n):
         t = 100.0 + 0.02 * k
         h = Header(stamp=t)
-        d["/world/head"].append((t, HeadTruth(header=h, position=HEAD, rotation=rot, left=L, right=R, eye=HEAD,
-                                              velocity=np.zeros(3))))
+        d["/world/head"].append((t,
+                                 HeadTruth(header=h, position=HEAD, rotation=rot, left=L, right=R, eye=HEAD,
+                                           velocity=np.zeros(3))))
         d["/eye/pose"].append((t, EyePose(header=h, position=HEAD, rotation=rot, left=L + [eye_error, 0, 0],
-                                          right=R + [eye_error, 0, 0], eye=HEAD, velocity=np.zeros(3), valid=True)))
+                                          right=R + [eye_error, 0, 0], eye=HEAD, velocity=np.zeros(3),
+                                          valid=True)))
         d["/world/sheet"].append((t, SheetState(**{**dict(sheet), "header": h, "origin": np.zeros(3),
                                                    "normal": np.array([1.0, 0, 0]), "depth": 0.0})))
-        d["/render/stereo"].append((t, RenderedFrame(header=h, left=img, right=img, scale=0.1, correction="flat",
-                                                     render_time=0.004, eyes=np.stack([L, R]),
-                                                     eye_source="tracked")))
+        d["/render/stereo"].append((t,
+                                    RenderedFrame(header=h, left=img, right=img, scale=0.1, correction="flat",
+                                                  render_time=0.004, eyes=np.stack([L, R]),
+                                                  eye_source="tracked")))
     return d
 
 
@@ -43,7 +46,7 @@ def test_tracked_frames_are_exact_and_the_fixed_v_is_not():
     # drawn for V, seen from 30 mm to the side: the cylinder's far points (35 mm behind the sheet) move
     # ~ 30 · 35 / 400 ≈ 2.6 mm on the screen ≈ 3.7 px; the near ones 0
     assert 1.0 < v["fixed"]["error_px_p95"] < 5.0
-    assert v["sources"] == {"tracked": 39, "held": 0, "fixed": 0}     # the last one is shown after the bag ends
+    assert v["sources"] == {"tracked": 39, "held": 0, "fixed": 0}  # the last one is shown after the bag ends
 
 
 def test_the_home_sheet_is_clear_of_the_head_at_v():

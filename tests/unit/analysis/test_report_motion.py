@@ -1,5 +1,5 @@
-"""The run report's sheet-motion figures (flexsheet/analysis/report_motion.py) from a hand-made bag: the true span
-against the motion's at each instant (not the goal's), and the guards' cycles."""
+"""The run report's sheet-motion figures (flexsheet/analysis/report_motion.py) from a hand-made bag: the true
+span against the motion's at each instant (not the goal's), and the guards' cycles."""
 
 from __future__ import annotations
 
@@ -19,14 +19,16 @@ def _h(t: float) -> Header:
 
 
 def _world(t: float, strain: float) -> SheetState:
-    return SheetState(header=_h(t), origin=np.zeros(3), normal=np.array([1.0, 0, 0]), axis_u=np.array([0, 1.0, 0]),
+    return SheetState(header=_h(t), origin=np.zeros(3), normal=np.array([1.0, 0, 0]),
+                      axis_u=np.array([0, 1.0, 0]),
                       corners=np.zeros((4, 3)), pushed_point=np.zeros(3), depth=0.0, stretch=strain,
                       membrane=np.zeros((2, 2)))
 
 
 def _joint(t: float, arm: str, status: str) -> ArmJointState:
     z = np.zeros(6)
-    return ArmJointState(header=_h(t), arm=arm, position=z, velocity=z, commanded=z, executing=z, pose=np.eye(4),
+    return ArmJointState(header=_h(t), arm=arm, position=z, velocity=z, commanded=z, executing=z,
+                         pose=np.eye(4),
                          status=0, bridge_status=status)
 
 
@@ -44,7 +46,8 @@ def test_the_span_error_is_judged_against_the_motion_at_each_instant_and_guard_c
     s = motion_summary(d)
     n_long = int(np.sum(ts > 0.1))
     assert s["span_error_mm"]["n"] == 60
-    assert np.isclose(s["span_error_mm"]["max"], 2.0) and np.isclose(s["span_error_mm"]["median"], 2.0 if n_long > 30 else 0.0)
+    assert np.isclose(s["span_error_mm"]["max"], 2.0) and np.isclose(s["span_error_mm"]["median"],
+                                                                     2.0 if n_long > 30 else 0.0)
     assert s["guard_waits"] == 2 and s["motion_verdict"] == "MISSED"
     # judged against the goal's strain instead, the ramp itself would read as up to 9.6 mm of error
     assert abs(true[0] - 0.05) * 240 > 9.0
@@ -68,7 +71,8 @@ def _tracking_bag(lag_left: float, lag_right: float, offset_right=(0.0, 0.0, 0.0
     for i, (side, lag) in enumerate((("left", lag_left), ("right", lag_right))):
         js = []
         for t in ts:
-            p = seg.clamp_points(max(t - lag, 0.0))[i] + (np.asarray(offset_right) if side == "right" else 0.0)
+            p = seg.clamp_points(max(t - lag, 0.0))[i] + (np.asarray(offset_right) if side == "right"
+                                                          else 0.0)
             m = _joint(t, side, "ok")
             js.append((t, m.model_copy(update={"pose": _pose_at(p)})))
         d[f"/arm/{side}/joint_state"] = js

@@ -26,8 +26,9 @@ def _finger(t: float, x: float):
 
 def test_placement_measures_the_sheet_against_the_surface_and_counts_a_late_sheet():
     """Two touches of the box's front face at 10 mm/s: in the first the sheet stands at the surface all along
-    (it waited 200 ms for the finger); in the second it stands 4 mm behind until 1.75 s and at the surface from
-    1.76 s, while the finger arrives at 1.70 s: late by 58.75 ms (the crossing of 0.5 mm behind, interpolated)."""
+    (it waited 200 ms for the finger); in the second it stands 4 mm behind until 1.75 s and at the surface
+    from 1.76 s, while the finger arrives at 1.70 s: late by 58.75 ms (the crossing of 0.5 mm behind,
+    interpolated)."""
     fingers, sheets = [], []
     for k in range(251):
         t = round(0.01 * k, 10)
@@ -45,13 +46,16 @@ def test_placement_measures_the_sheet_against_the_surface_and_counts_a_late_shee
     assert p["sheet_first"] == 0.5 and p["verdicts"]["sheet_first"] == "MISSED"
     assert p["arrival_ms"]["max"] == pytest.approx(58.75, abs=1e-6)
     assert p["arrival_ms"]["median"] == pytest.approx(0.5 * (58.75 - 200.0), abs=1e-6)
-    assert p["distance_mm"]["max"] == pytest.approx(4.0, abs=1e-9) and p["distance_mm"]["p50"] == pytest.approx(0.0)
+    assert (p["distance_mm"]["max"] == pytest.approx(4.0, abs=1e-9)
+            and p["distance_mm"]["p50"] == pytest.approx(0.0))
     assert p["signed_mm"]["p1"] == pytest.approx(-4.0, abs=1e-9)                      # behind: negative
-    assert p["distance_mm"]["p99"] > 2.0 and p["verdicts"]["distance"] == "MISSED" and p["verdict"] == "MISSED"
+    assert (p["distance_mm"]["p99"] > 2.0 and p["verdicts"]["distance"] == "MISSED"
+            and p["verdict"] == "MISSED")
     # the same run with the sheet on time: met
     on_time = [(t, _sheet_state(t, [0.0, 0.0, 0.01], [1, 0, 0])) for t, _ in sheets]
     q = placement({**d, "/world/sheet": on_time}, load_scene(BOX))
-    assert q["sheet_first"] == 1.0 and q["distance_mm"]["max"] == pytest.approx(0.0, abs=1e-12) and q["verdict"] == "met"
+    assert (q["sheet_first"] == 1.0 and q["distance_mm"]["max"] == pytest.approx(0.0, abs=1e-12)
+            and q["verdict"] == "met")
     assert placement(d, None) == {}
 
 
@@ -60,15 +64,18 @@ def _plan(t: float, status: str):
 
     return (t, SheetTarget(header=Header(stamp=t), contact_point=np.array([0.0, 0.0, 0.01]),
                            normal=np.array([1.0, 0.0, 0.0]), axis_u=np.array([0.0, 1.0, 0.0]),
-                           axis_v=np.array([0.0, 0.0, 1.0]), sheet_origin=np.array([0.0, 0.0, 0.01]), stretch=0.05,
-                           tension=100.0, stiffness=100.0, object_stiffness=100.0, touching=True, status=status))
+                           axis_v=np.array([0.0, 0.0, 1.0]), sheet_origin=np.array([0.0, 0.0, 0.01]),
+                           stretch=0.05,
+                           tension=100.0, stiffness=100.0, object_stiffness=100.0, touching=True,
+                           status=status))
 
 
 def test_a_sheet_that_yields_to_the_head_is_counted_apart_until_it_is_back_at_the_planned_contact():
-    """The finger rests 2 mm into the box's front face for 2 s. The sheet stands at the surface, then 6 mm behind
-    it from 0.50 to 1.20 s. The plans say keep_out from 0.45 to 0.90 s (the guard backed it off), then ok; the sheet
-    is back at 1.21 s. The 71 samples 0.50-1.20 s (and the 5 at the surface before, under a keep_out plan) are the
-    head's: the verdict is met and distance_mm_all keeps the 6 mm. With no keep_out plan the same run is MISSED."""
+    """The finger rests 2 mm into the box's front face for 2 s. The sheet stands at the surface, then 6 mm
+    behind it from 0.50 to 1.20 s. The plans say keep_out from 0.45 to 0.90 s (the guard backed it off), then
+    ok; the sheet is back at 1.21 s. The 71 samples 0.50-1.20 s (and the 5 at the surface before, under a
+    keep_out plan) are the head's: the verdict is met and distance_mm_all keeps the 6 mm. With no keep_out
+    plan the same run is MISSED."""
     fingers, sheets, plans = [], [], []
     for k in range(201):
         t = round(0.01 * k, 10)
@@ -89,10 +96,11 @@ def test_a_sheet_that_yields_to_the_head_is_counted_apart_until_it_is_back_at_th
 
 
 def test_a_yield_ends_at_the_object_s_surface_and_a_later_miss_is_still_judged():
-    """The planned contact stands 0.6 mm off the true sheet all along (the planner's belief), so the sheet never
-    comes "back at the planned contact". The plans say keep_out 0.10-0.15 s; the sheet is at the object's surface
-    from 0.16 s, and 6 mm behind it again 1.50-1.90 s with ok plans: the yield ends at 0.16 s and the later 6 mm is
-    judged (MISSED). When every touching sample yields, the distance has no verdict and no NaN."""
+    """The planned contact stands 0.6 mm off the true sheet all along (the planner's belief), so the sheet
+    never comes "back at the planned contact". The plans say keep_out 0.10-0.15 s; the sheet is at the
+    object's surface from 0.16 s, and 6 mm behind it again 1.50-1.90 s with ok plans: the yield ends at 0.16 s
+    and the later 6 mm is judged (MISSED). When every touching sample yields, the distance has no verdict and
+    no NaN."""
     fingers, sheets, plans = [], [], []
     for k in range(201):
         t = round(0.01 * k, 10)
@@ -109,13 +117,14 @@ def test_a_yield_ends_at_the_object_s_surface_and_a_later_miss_is_still_judged()
     all_out = [(t, _plan(t, "keep_out")[1]) for t, _ in plans]
     q = placement({**d, "/sheet/target": all_out}, load_scene(BOX))
     assert q["head_yield"]["n"] == 201 and q["n"] == 0 and q["distance_mm"] is None and q["signed_mm"] is None
-    assert q["verdicts"]["distance"] == "no verdict" and q["distance_mm_all"]["max"] == pytest.approx(6.0, abs=1e-9)
+    assert (q["verdicts"]["distance"] == "no verdict"
+            and q["distance_mm_all"]["max"] == pytest.approx(6.0, abs=1e-9))
 
 
 def test_the_misses_split_into_the_arms_the_plan_s_pose_and_its_contact():
-    """The sheet 6 mm behind the box's front face for 0.5 s under ok plans: with the plan's pose on the surface the
-    whole miss is the arms' (share 1, median −6 mm); with the plan's pose itself 6 mm back and the sheet on it, the
-    plan's pose (share 1); the planned contact on the surface in both (its term 0)."""
+    """The sheet 6 mm behind the box's front face for 0.5 s under ok plans: with the plan's pose on the
+    surface the whole miss is the arms' (share 1, median −6 mm); with the plan's pose itself 6 mm back and the
+    sheet on it, the plan's pose (share 1); the planned contact on the surface in both (its term 0)."""
     def run(plan_x: float) -> dict:
         fingers, sheets, plans = [], [], []
         for k in range(101):
@@ -130,9 +139,11 @@ def test_the_misses_split_into_the_arms_the_plan_s_pose_and_its_contact():
                          load_scene(BOX))["split"]
     arms, pose = run(0.0), run(-0.006)
     assert arms["n"] == 51 and pose["n"] == 51
-    assert arms["share"]["arms"] == pytest.approx(1.0) and arms["share"]["plan_pose"] == pytest.approx(0.0, abs=1e-12)
+    assert (arms["share"]["arms"] == pytest.approx(1.0)
+            and arms["share"]["plan_pose"] == pytest.approx(0.0, abs=1e-12))
     assert arms["median_mm"]["arms"] == pytest.approx(-6.0, abs=1e-9)
-    assert pose["share"]["plan_pose"] == pytest.approx(1.0) and pose["share"]["arms"] == pytest.approx(0.0, abs=1e-12)
+    assert (pose["share"]["plan_pose"] == pytest.approx(1.0)
+            and pose["share"]["arms"] == pytest.approx(0.0, abs=1e-12))
     assert arms["share"]["contact"] == pytest.approx(0.0, abs=1e-12) == pose["share"]["contact"]
 
 
@@ -155,13 +166,17 @@ def test_each_landing_is_judged_and_a_sheet_far_ahead_is_a_wall_in_the_air_not_t
             x, xs = 0.003 - 0.01 * (t - 1.5), (0.006 if t <= 2.0 + 1e-9 else 0.0)
         fingers.append(_finger(t, x))
         sheets.append((t, _sheet_state(t, [xs, 0.0, 0.01], [1, 0, 0])))
-        contacts.append((t, ContactTruth(header=Header(stamp=t), touching=x < xs, depth=max(xs - x, 0.0), force=0.1,
-                                         point=np.zeros(3), stiffness=100.0)))
-    p = placement({"/world/finger": fingers, "/world/sheet": sheets, "/world/contact": contacts}, load_scene(BOX))
+        contacts.append((t,
+                         ContactTruth(header=Header(stamp=t), touching=x < xs, depth=max(xs - x, 0.0),
+                                      force=0.1,
+                                      point=np.zeros(3), stiffness=100.0)))
+    p = placement({"/world/finger": fingers, "/world/sheet": sheets, "/world/contact": contacts},
+                  load_scene(BOX))
     assert p["touches"] == 1 and p["arrivals"] == 2 and p["late"] == 1 and p["never"] == 0
     assert p["sheet_first"] == 0.5 and p["verdicts"]["sheet_first"] == "MISSED"
     assert p["arrival_ms"]["max"] == pytest.approx(1000.0 * (2.0 + 0.01 * 0.004 / 0.0045 - 1.8), abs=1e-6)
     # the sheet 1.5 mm ahead at the second landing is within the band: there, and first
     near = [(t, _sheet_state(t, [min(m.origin[0], 0.0015), 0.0, 0.01], [1, 0, 0])) for t, m in sheets]
-    q = placement({"/world/finger": fingers, "/world/sheet": near, "/world/contact": contacts}, load_scene(BOX))
+    q = placement({"/world/finger": fingers, "/world/sheet": near, "/world/contact": contacts},
+                  load_scene(BOX))
     assert q["arrivals"] == 2 and q["sheet_first"] == 1.0 and q["late"] == 0

@@ -18,8 +18,8 @@ def test_report_text_leaves_dd_2r_blank_on_a_shape_with_no_radius():
 
 
 def test_the_delay_is_the_chains_figure():
-    """The one delay figure is the latency chain's exposure → sheet at its pose; the fitted lag is named as the
-    prediction check, with why the two differ."""
+    """The one delay figure is the latency chain's exposure → sheet at its pose; the fitted lag is named as
+    the prediction check, with why the two differ."""
     from flexsheet.analysis.report_text import format_text
 
     s = {"latency_ms": {"chain": {"exposure_to_sheet_at_pose": {"median": 14.33, "p99": 29.29, "n": 838},
@@ -30,7 +30,8 @@ def test_the_delay_is_the_chains_figure():
                    "angle_at_best_deg": 0.114, "stroke_speed_mm_per_s": 6.2}}
     text = format_text(s)
     delay = [li for li in text.splitlines() if li.startswith("The delay:")]
-    assert len(delay) == 1 and "median 14.3 ms (p99 29.3 ms, modelled" in delay[0] and "838 of 1424" in delay[0]
+    assert (len(delay) == 1 and "median 14.3 ms (p99 29.3 ms, modelled" in delay[0]
+            and "838 of 1424" in delay[0])
     check = next(li for li in text.splitlines() if li.startswith("Not a second delay"))
     assert "-1.0 ms beyond the prediction's 25.0 ms lead" in check and "horizon of 24.0 ms" in check
     assert "16 ms of travel" in check                                       # 0.1 mm at 6.2 mm/s
@@ -38,12 +39,14 @@ def test_the_delay_is_the_chains_figure():
 
 
 def test_the_clamps_against_the_motion_are_written_only_when_measured():
-    """``sheet.path_dev_mm`` / ``arrival_skew_ms`` in the softness prose: both figures when measured; a run whose
-    sheet never moved fast enough gets the deviation alone, said so, and a summary without them no line."""
+    """``sheet.path_dev_mm`` / ``arrival_skew_ms`` in the softness prose: both figures when measured; a run
+    whose sheet never moved fast enough gets the deviation alone, said so, and a summary without them no
+    line."""
     from flexsheet.analysis.report_text import sections
 
     band = {"median": 1.0, "p5": 1.0, "p95": 1.0}
-    seg = {"tension_n_per_m": band, "stiffness_n_per_m": band, "object_stiffness_n_per_m": band, "at_limit": 0.0}
+    seg = {"tension_n_per_m": band, "stiffness_n_per_m": band, "object_stiffness_n_per_m": band,
+           "at_limit": 0.0}
 
     def _softness(summary):
         summary["compliance"]["all"] = seg

@@ -8,9 +8,10 @@ import pytest
 
 
 def test_latency_chain_comes_from_the_nodes_stamps_and_adds_up():
-    """One fingertip sample through both chains, with made-up stamps (s): every hop is a difference of stamps the
-    nodes set (the recorder's arrival times, here absurd on purpose, are never used); the ends are the sums;
-    the sheet is at its pose at the later of the two arms' first readbacks within 0.1 mm and 0.05 deg."""
+    """One fingertip sample through both chains, with made-up stamps (s): every hop is a difference of stamps
+    the nodes set (the recorder's arrival times, here absurd on purpose, are never used); the ends are the
+    sums; the sheet is at its pose at the later of the two arms' first readbacks within 0.1 mm and 0.05
+    deg."""
     from types import SimpleNamespace as NS
 
     from flexsheet.analysis.report_timing import latency_hops
@@ -34,9 +35,10 @@ def test_latency_chain_comes_from_the_nodes_stamps_and_adds_up():
             (0.0, NS(target_stamp=e, write_stamp=t_write, pose=near, header=NS(stamp=t_at)))]
     out = latency_hops(d)
     c = {k: v["median"] for k, v in out["chain"].items()}
-    assert c["exposure_to_camera_frame"] == pytest.approx(6.0) and c["camera_frame_to_fingertip"] == pytest.approx(1.0)
+    assert (c["exposure_to_camera_frame"] == pytest.approx(6.0)
+            and c["camera_frame_to_fingertip"] == pytest.approx(1.0))
     assert c["fingertip_to_sheet_target"] == pytest.approx(0.5)
-    assert c["sheet_target_to_arm_command"] == pytest.approx(0.3)          # the earlier of the two arms' writes
+    assert c["sheet_target_to_arm_command"] == pytest.approx(0.3)  # the earlier of the two arms' writes
     assert c["exposure_to_arm_command"] == pytest.approx(7.8)
     assert c["arm_command_to_sheet_at_pose"] == pytest.approx(27.1 - 7.8)   # the later arm at its pose
     assert c["exposure_to_sheet_at_pose"] == pytest.approx(27.1) and out["sheet_at_pose_reached"] == 1.0
@@ -45,4 +47,5 @@ def test_latency_chain_comes_from_the_nodes_stamps_and_adds_up():
     assert c["exposure_to_projected"] == pytest.approx(sum(c[h] for h in (
         "exposure_to_camera_frame", "camera_frame_to_fingertip", "fingertip_to_deformation",
         "deformation_to_rendered_frame", "rendered_to_projected")))
-    assert 11.4 + 0.0 < projected <= 11.4 + 1e3 / LAB.projector_refresh_hz + LAB.projector_input_latency_s * 1e3
+    assert (11.4 + 0.0 < projected <= 11.4 + 1e3 / LAB.projector_refresh_hz
+            + LAB.projector_input_latency_s * 1e3)

@@ -20,5 +20,6 @@ def test_more_digits_where_figure_and_target_round_alike():
 
 
 def test_headline_of_an_empty_summary_has_no_rows():
-    assert headline({}) == {"metric": headline({})["metric"], "target_source": "paper Table I ÷ 2", "rows": {},
+    assert headline({}) == {"metric": headline({})["metric"], "target_source": "paper Table I ÷ 2",
+                            "rows": {},
                             "overall": NO_TARGET}

@@ -31,10 +31,12 @@ def test_the_twin_is_modbus_in_process_on_a_simulated_clock_with_the_truths_cloc
     with pytest.raises(ValueError, match="clock: sim"):
         TwinController.check_clock(SimpleNamespace(simulated=False))
     ideal = TwinController.clock_offset(SimpleNamespace(arm="left", twin=TruthChoice(realism="ideal")))
-    real = [TwinController.clock_offset(SimpleNamespace(arm=a, twin=TruthChoice(truth_seed=3))) for a in ("left", "right")]
+    real = [TwinController.clock_offset(SimpleNamespace(arm=a, twin=TruthChoice(truth_seed=3)))
+            for a in ("left", "right")]
     assert ideal == 0.0 and all(0.0 < abs(o) <= 0.25e-3 for o in real) and real[0] != real[1]
 
 
 def test_an_unknown_source_is_named_with_the_installed_ones():
-    with pytest.raises(LookupError, match=rf"unknown controller source 'udp' \({SOURCES_GROUP}\); known: sim, tcp"):
+    with pytest.raises(LookupError, match=rf"unknown controller source 'udp' \({SOURCES_GROUP}\); known: "
+                                          r"sim, tcp"):
         controller_source("udp")

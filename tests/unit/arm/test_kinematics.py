@@ -1,5 +1,5 @@
-"""RV-1A kinematics (flexsheet.arm.kinematics): FK/IK round trip, reachability of the paper's sheet poses, refusals
-with clear status, the datasheet's joint speeds in the URDF."""
+"""RV-1A kinematics (flexsheet.arm.kinematics): FK/IK round trip, reachability of the paper's sheet poses,
+refusals with clear status, the datasheet's joint speeds in the URDF."""
 
 import math
 
@@ -65,7 +65,8 @@ def test_home_sheet_and_tilts_reachable_with_margin(side):
                 T = tilted_clamps(sign * math.radians(deg), stretch)[idx]
                 res = kin.ik(T, q)
                 assert res.ok, (side, sign * deg, stretch, res.status)
-                assert np.all(res.q - Q_LOWER > math.radians(10)) and np.all(Q_UPPER - res.q > math.radians(10))
+                assert (np.all(res.q - Q_LOWER > math.radians(10))
+                        and np.all(Q_UPPER - res.q > math.radians(10)))
                 assert res.manipulability > 5e-3
             q = res.q
 
@@ -167,7 +168,8 @@ def test_urdf_speeds_are_the_rv1a_datasheet():
     model = pin.buildModelFromUrdf(str(URDF_PATH))
     for k, name in enumerate(JOINT_NAMES):
         j = model.getJointId(name)
-        assert math.degrees(model.velocityLimit[model.joints[j].idx_v]) == pytest.approx(DATASHEET_SPEED_DEG[k],
+        assert math.degrees(model.velocityLimit[model.joints[j].idx_v]) == pytest.approx(
+            DATASHEET_SPEED_DEG[k],
                                                                                        abs=1e-9)
     assert np.degrees(QD_MAX) == pytest.approx(DATASHEET_SPEED_DEG, abs=1e-9)
 

@@ -1,5 +1,5 @@
-"""The bridges' stream limiter (flexsheet.arm.limiter): limits never exceeded, a held goal reached exactly, the
-feed-forward through sparse goals, snapshot and restore."""
+"""The bridges' stream limiter (flexsheet.arm.limiter): limits never exceeded, a held goal reached exactly,
+the feed-forward through sparse goals, snapshot and restore."""
 
 import numpy as np
 import pytest
@@ -38,8 +38,8 @@ def test_limiter_reaches_a_held_goal_exactly_and_stops():
 
 
 def test_feed_forward_streams_through_48_hz_goals_where_the_rate_limiter_brakes_at_each():
-    """A finger-like ramp of 0.1 rad/s sampled as goals at 48 Hz (every 3 periods): fed the goal moved on at its
-    velocity (what TargetTracker.reference gives) the command runs one period ahead of the ramp; fed the
+    """A finger-like ramp of 0.1 rad/s sampled as goals at 48 Hz (every 3 periods): fed the goal moved on at
+    its velocity (what TargetTracker.reference gives) the command runs one period ahead of the ramp; fed the
     held goal, the limiter brakes toward each and trails it by more than a target period."""
     w = np.full(6, 0.1)
     err = {}

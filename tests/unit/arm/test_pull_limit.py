@@ -1,5 +1,5 @@
-"""The sheet's pull against the arm's joint torques (flexsheet.arm.pull_limit): Jᵀ·F agrees with the virtual work
-of the pull along the clamp's motion (finite differences of the forward kinematics, independent of the
+"""The sheet's pull against the arm's joint torques (flexsheet.arm.pull_limit): Jᵀ·F agrees with the virtual
+work of the pull along the clamp's motion (finite differences of the forward kinematics, independent of the
 Jacobian), the largest pull loads exactly one joint to its limit, and at the home pose a 40 N pull passes the
 J3 limit that the rated 1 kg sets (3.34 against 2.80 N·m)."""
 
@@ -28,7 +28,7 @@ def test_torques_are_the_virtual_work_of_the_pull(side):
             dq = np.zeros(6)
             dq[j] = h
             dp = (kin.fk(q + dq)[:3, 3] - kin.fk(q - dq)[:3, 3]) / (2 * h)
-            work.append(f @ dp)                                     # τ_j = f · ∂p/∂q_j (no moment at the clamp)
+            work.append(f @ dp)  # τ_j = f · ∂p/∂q_j (no moment at the clamp)
         np.testing.assert_allclose(joint_torques(kin, q, F), work, atol=1e-6 * F)
 
 

@@ -1,6 +1,6 @@
-"""The two arms' one motion (flexsheet/arm/sheet_motion.py): the span held along the whole path, continuity at a
-replan, the Cartesian and joint limits, one trajectory from a message, and two bridges' trackers driven through a
-36° turn of the sheet."""
+"""The two arms' one motion (flexsheet/arm/sheet_motion.py): the span held along the whole path, continuity at
+a replan, the Cartesian and joint limits, one trajectory from a message, and two bridges' trackers driven
+through a 36° turn of the sheet."""
 
 from __future__ import annotations
 
@@ -59,27 +59,31 @@ def test_the_clamps_points_and_twist_rate_agree_with_the_poses_and_twists_they_c
         cl = seg.clamps(t, True, ("left", "right"))
         assert np.abs(left - cl[0][0][:3, 3]).max() < 1e-15 and np.abs(right - cl[1][0][:3, 3]).max() < 1e-15
         for side, (T, tw, acc) in zip(("left", "right"), cl, strict=True):
-            # the twist's rate in the clamp frame, to first order in the rotation (the rotating frame's terms are
-            # second order): the finite difference of the twist, rotated into the frame at t
+            # the twist's rate in the clamp frame, to first order in the rotation (the rotating frame's
+            # terms are second order): the finite difference of the twist, rotated into the frame at t
             T2, tw2 = seg.clamp(side, t + h)
             rate = np.concatenate([T[:3, :3].T @ T2[:3, :3] @ tw2[:3] - tw[:3], tw2[3:] - tw[3:]]) / h
             assert np.allclose(acc, rate, atol=0.05 * max(1.0, np.abs(rate).max())), (side, t, acc, rate)
 
 
 def test_the_first_motion_starts_where_the_arms_hold_the_sheet_not_at_the_goal():
-    """The first plan (or the first after a reset) is 22 mm and 20° from the home pose the arms hold: given the
-    held sheet, the motion starts there at rest and reaches the goal; without it, it starts at the goal (the
-    arms then jump to it joint by joint: 34 mm off the motion and a 22 mm span error in the organ's start)."""
+    """The first plan (or the first after a reset) is 22 mm and 20° from the home pose the arms hold: given
+    the held sheet, the motion starts there at rest and reaches the goal; without it, it starts at the goal
+    (the arms then jump to it joint by joint: 34 mm off the motion and a 22 mm span error in the organ's
+    start)."""
     home = (np.zeros(3), R0, 0.0)
     goal_o, goal_R = np.array([-0.002, -0.022, 0.007]), _turn(20.0)
     seg = SheetShaper().update(0.0, goal_o, goal_R, 0.012, current=home)
-    assert np.allclose(seg.clamp("left", 0.0)[0], clamp_poses(np.zeros(3), R0[:, 0], R0[:, 1], 0.0)[0], atol=1e-12)
+    assert np.allclose(seg.clamp("left", 0.0)[0], clamp_poses(np.zeros(3), R0[:, 0], R0[:, 1], 0.0)[0],
+                       atol=1e-12)
     assert np.allclose(seg.clamp("left", 0.0)[1], 0.0, atol=1e-12)              # at rest
     assert seg.duration > 0.1
     o, R, eps = seg.goal_pose()
-    assert np.allclose(o, goal_o, atol=1e-9) and np.allclose(R, goal_R, atol=1e-9) and eps == pytest.approx(0.012)
+    assert (np.allclose(o, goal_o, atol=1e-9) and np.allclose(R, goal_R, atol=1e-9)
+            and eps == pytest.approx(0.012))
     cold = SheetShaper().update(0.0, goal_o, goal_R, 0.012)
-    assert cold.duration == 0.0 and np.allclose(cold.clamp("left", 0.0)[0][:3, 3], seg.clamp("left", 9.0)[0][:3, 3])
+    assert cold.duration == 0.0 and np.allclose(cold.clamp("left", 0.0)[0][:3, 3],
+                                                seg.clamp("left", 9.0)[0][:3, 3])
 
 
 def test_a_replan_mid_move_continues_in_pose_velocity_and_acceleration():
@@ -113,8 +117,10 @@ def test_one_trajectory_from_the_message_both_arms_receive():
     seg = sh.update(1.25, [-0.03, 0.0, 0.01], _turn(20.0), 0.02)
     from flexsheet.runtime import codec
     from messages import topics
-    msg = ArmTarget(header=Header(stamp=1.25, frame_id="display", seq=3), arm="left", pose=np.eye(4), **seg.fields())
-    back = SheetSegment.from_fields(codec.decode(codec.encode("/arm/left/target", msg), topics.arm_target("left")))
+    msg = ArmTarget(header=Header(stamp=1.25, frame_id="display", seq=3), arm="left", pose=np.eye(4),
+                    **seg.fields())
+    back = SheetSegment.from_fields(codec.decode(codec.encode("/arm/left/target", msg),
+                                                 topics.arm_target("left")))
     for t in np.linspace(1.2, 1.25 + seg.duration + 0.1, 30):
         assert np.array_equal(back.clamp("left", t)[0], seg.clamp("left", t)[0])
     assert SheetSegment.from_fields(ArmTarget(header=msg.header, arm="left", pose=np.eye(4))) is None
@@ -132,12 +138,13 @@ def test_a_bad_segment_is_refused_naming_its_field(field, value, named):
         SheetSegment.from_fields(msg)
 
 
-def _two_bridges(turn_deg: float, turn_s: float, *, motion: bool, axis=(0.0, 0.7, 0.7), period=0.0071, acc=None,
+def _two_bridges(turn_deg: float, turn_s: float, *, motion: bool, axis=(0.0, 0.7, 0.7), period=0.0071,
+                 acc=None,
                  allowance=1.0):
-    """Both bridges' trackers and limiters (the bridge's defaults: speed_scale 0.5, accel_scale 6) fed the same
-    targets at 48 Hz while the plan turns the sheet by ``turn_deg`` in ``turn_s`` s and moves it back 30 mm,
-    stretch 0.012. Returns (|span − planned span| per cycle, mm; the largest joint speed asked / limit; the
-    motion points IK refused)."""
+    """Both bridges' trackers and limiters (the bridge's defaults: speed_scale 0.5, accel_scale 6) fed the
+    same targets at 48 Hz while the plan turns the sheet by ``turn_deg`` in ``turn_s`` s and moves it back 30
+    mm, stretch 0.012. Returns (|span − planned span| per cycle, mm; the largest joint speed asked / limit;
+    the motion points IK refused)."""
     margin, qd, acc = 0.02, QD_MAX * 0.5, acc or BridgeConfig().accel_scale
     arms = {}
     T0 = dict(zip(("left", "right"), clamp_poses(np.zeros(3), R0[:, 0], R0[:, 1], 0.012), strict=True))
@@ -176,14 +183,14 @@ def _two_bridges(turn_deg: float, turn_s: float, *, motion: bool, axis=(0.0, 0.7
 
 
 def test_two_bridges_following_one_motion_hold_the_span_through_a_36_degree_turn():
-    """The organ's repositioning turned the sheet's normal by about 36° in 0.8 s. Fed the same targets, bridges
-    that shape joint by joint leave the span by 1 mm, and by 51 mm when the turn takes 0.3 s (the positive
-    control); following one motion within the bridges' joint limits, the span stays within 0.1 mm. With the
-    limiters' acceleration at 2× speed and the motion let 3× past it (the same accelerations asked), the
-    limiters lag the motion and the span leaves it by 1 and 4.4 mm (the negative control)."""
+    """The organ's repositioning turned the sheet's normal by about 36° in 0.8 s. Fed the same targets,
+    bridges that shape joint by joint leave the span by 1 mm, and by 51 mm when the turn takes 0.3 s (the
+    positive control); following one motion within the bridges' joint limits, the span stays within 0.1 mm.
+    With the limiters' acceleration at 2× speed and the motion let 3× past it (the same accelerations asked),
+    the limiters lag the motion and the span leaves it by 1 and 4.4 mm (the negative control)."""
     err, speed, refused = _two_bridges(36.0, 0.8, motion=True)
     assert np.percentile(err, 99) <= 0.1
-    assert speed <= 1.0 and refused == 0          # within the joints' speed, never streamed to a refused point
+    assert speed <= 1.0 and refused == 0  # within the joints' speed, never streamed to a refused point
     assert np.percentile(_two_bridges(36.0, 0.8, motion=False)[0], 99) > 0.5
     assert np.percentile(_two_bridges(36.0, 0.8, motion=True, acc=2.0, allowance=3.0)[0], 99) > 0.5
     fast, speed, _ = _two_bridges(36.0, 0.3, motion=True)
@@ -193,7 +200,8 @@ def test_two_bridges_following_one_motion_hold_the_span_through_a_36_degree_turn
 
 
 class _Slowing:
-    """A stand-in for :class:`JointRates`: the joints ask every segment to be ``k``-fold gentler in acceleration."""
+    """A stand-in for :class:`JointRates`: the joints ask every segment to be ``k``-fold gentler in
+    acceleration."""
 
     def __init__(self) -> None:
         self.k = 1.0
@@ -203,9 +211,9 @@ class _Slowing:
 
 
 def test_a_motion_slowed_mid_acceleration_does_not_overshoot_its_goal():
-    """A strain step of 0.01 (a press's request), slowed 5-fold for the joints 5 ms into its acceleration, as a
-    box's run recorded it: the strain settles on its goal with at most 0.001 over; lowering the jerk with the
-    acceleration let it run to 4 times the step (0.025 → 0.072 for a goal of 0.036)."""
+    """A strain step of 0.01 (a press's request), slowed 5-fold for the joints 5 ms into its acceleration, as
+    a box's run recorded it: the strain settles on its goal with at most 0.001 over; lowering the jerk with
+    the acceleration let it run to 4 times the step (0.025 → 0.072 for a goal of 0.036)."""
     rates = _Slowing()
     sh = SheetShaper(rates=rates)
     o = np.zeros(3)
@@ -241,7 +249,8 @@ def test_a_moving_plan_is_followed_on_its_track_not_stopped_at():
 def test_the_plans_velocity_is_their_least_squares_slope_and_a_single_plan_is_refused():
     from flexsheet.arm.sheet_motion import plan_velocity
     w = np.array([0.1, -0.4, 0.2])                      # rad/s, display frame
-    plans = [(t, np.array([0.01, 0.05, -0.02]) * t, Rotation.from_rotvec(w * t).as_matrix() @ R0, 0.01 + 0.2 * t)
+    plans = [(t, np.array([0.01, 0.05, -0.02]) * t, Rotation.from_rotvec(w * t).as_matrix() @ R0,
+              0.01 + 0.2 * t)
              for t in np.arange(16) / 48.0]
     v, om, ed = plan_velocity(plans)
     assert np.allclose(v, [0.01, 0.05, -0.02]) and np.isclose(ed, 0.2)

@@ -1,6 +1,6 @@
-"""The two-arm span guard (flexsheet.arm.span_guard, asked by the bridge's tracker): a step that takes the clamp
-span further outside its band waits, one back toward it is taken; without a partner or a band nothing waits; a
-service's goal is not judged."""
+"""The two-arm span guard (flexsheet.arm.span_guard, asked by the bridge's tracker): a step that takes the
+clamp span further outside its band waits, one back toward it is taken; without a partner or a band nothing
+waits; a service's goal is not judged."""
 
 import numpy as np
 import pytest
@@ -62,7 +62,7 @@ def test_without_a_partner_or_a_band_nothing_waits_and_a_bad_band_is_refused():
     t.span.set_band(None)
     assert not t.span_worse(ql, _toward(kl, ql, -0.030)) and t.span.waits == 0
     t.span.set_band(BAND)
-    t.move_to(_toward(kl, ql, -0.030))                              # a service's goal: the operator's, not judged
+    t.move_to(_toward(kl, ql, -0.030))  # a service's goal: the operator's, not judged
     assert not t.span_worse(ql, _toward(kl, ql, -0.030)) and t.span.waits == 0
     t.release()
     assert t.span_worse(ql, _toward(kl, ql, -0.030)) and t.span.waits == 1

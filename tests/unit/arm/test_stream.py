@@ -1,5 +1,5 @@
-"""The arm's command stream (flexsheet.arm.stream): the span guard brakes a step that would take the clamp span
-further outside its band, and goes on once the partner follows."""
+"""The arm's command stream (flexsheet.arm.stream): the span guard brakes a step that would take the clamp
+span further outside its band, and goes on once the partner follows."""
 
 import numpy as np
 from test_tracking import BAND, _home, _tracker
@@ -41,7 +41,7 @@ def test_the_stream_brakes_where_a_lagging_partner_would_slacken_the_sheet():
         t.set_target(T, now, now)
         cmd = stream._next_command()
         spans.append(np.linalg.norm(kl.fk(cmd)[:3, 3] - peer))
-    assert min(spans) > BAND[0] - 0.001 and t.span.waits > 0       # held at the edge (braking: < 1 mm past it)
+    assert min(spans) > BAND[0] - 0.001 and t.span.waits > 0  # held at the edge (braking: < 1 mm past it)
     assert spans[-1] < BAND[0] + 0.001                            # and stays there, 20 mm short of the target
     assert np.linalg.norm(kl.fk(lim.c)[:3, 3] - T[:3, 3]) > 0.015
     t.span.peer_clamp = peer + np.array([0.0, -0.030, 0.0])           # the partner followed
@@ -53,9 +53,9 @@ def test_the_stream_brakes_where_a_lagging_partner_would_slacken_the_sheet():
 
 
 def test_two_arms_each_waiting_for_the_other_step_together():
-    """The same shift while the partner says it waits on its own span guard (``wait:span``): the step goes (the
-    partner, waiting for this arm, would never move first) and the target is reached; without that the arm
-    waits and says so."""
+    """The same shift while the partner says it waits on its own span guard (``wait:span``): the step goes
+    (the partner, waiting for this arm, would never move first) and the target is reached; without that the
+    arm waits and says so."""
     kl, t, peer, lim, stream, T, period = _shift_toward_partner(lambda: now)
     now = 1.0
     for k in range(300):

@@ -29,7 +29,8 @@ def _tracker(kl, ql):
 
 def test_a_target_after_a_pause_may_ask_what_the_arm_could_move_meanwhile():
     """TargetTracker: within a flowing stream (targets 30 ms apart) a 0.9 rad change is a branch jump, refused
-    with the goal kept; the same target after the stream paused 2 s (a planner respawning while the finger moved
+    with the goal kept; the same target after the stream paused 2 s (a planner respawning while the finger
+    moved
     on) is taken: 0.5 rad + 2 s at the fastest joint's speed."""
     kin = ArmKinematics("left", LEFT_BASE)
     q = home_joints("left")
@@ -69,10 +70,11 @@ def test_a_stream_that_starts_far_away_is_joined_once_the_arm_could_have_got_the
     assert tr.set_target(kin.fk(q), 99.0, now=10.0 + taken + 0.02).status == "jump"
 
 
-@pytest.mark.parametrize("status,holds", [("hold:limit:J3", True), ("hold:jump", True), ("hold:unreachable", True),
-                                          ("fault:watchdog", True), ("disconnected", True), ("ok", False),
-                                          ("hold:no_target", False), ("hold:disabled", False),
-                                          ("hold:peer", False), ("hold:refused", False), ("manual", False)])
+@pytest.mark.parametrize("status,holds",
+                         [("hold:limit:J3", True), ("hold:jump", True), ("hold:unreachable", True),
+                          ("fault:watchdog", True), ("disconnected", True), ("ok", False),
+                          ("hold:no_target", False), ("hold:disabled", False),
+                          ("hold:peer", False), ("hold:refused", False), ("manual", False)])
 def test_which_partner_states_hold_this_arm_too(status, holds):
     kin = ArmKinematics("left", LEFT_BASE)
     q = home_joints("left")
@@ -103,7 +105,7 @@ def test_a_target_in_the_viewers_keep_out_is_refused_and_the_partner_holds_with_
     t.keep_out = lambda q: True                                                 # a head where the arm goes
     with pytest.raises(TargetRefused):
         t.set_target(left, 2.0, 1.01, strict=True)
-    assert t.ik_status == "keep_out" and np.allclose(t.goal, goal)              # it stops short at the last goal
+    assert t.ik_status == "keep_out" and np.allclose(t.goal, goal)  # it stops short at the last goal
     assert t.status(1.02) == "hold:keep_out" and peer_holds("hold:keep_out")
 
 
@@ -123,10 +125,10 @@ def test_a_target_whose_pull_passes_a_joint_torque_is_refused_and_the_partner_ho
 
 
 def test_the_span_guard_judges_a_partner_on_the_motion_where_the_motion_has_it_now():
-    """Both arms follow the sheet's motion (a 40 mm move along y at up to 0.3 m/s). The partner's measurement, 20 ms
-    old (servo and a cycle), lags by mm: judged against it, this arm's step on the motion waits (what stalled the
-    organ's repositioning); judged where the motion has the partner now, it does not. A partner that stopped,
-    40 mm off the motion, is judged where it was measured, and the step waits."""
+    """Both arms follow the sheet's motion (a 40 mm move along y at up to 0.3 m/s). The partner's measurement,
+    20 ms old (servo and a cycle), lags by mm: judged against it, this arm's step on the motion waits (what
+    stalled the organ's repositioning); judged where the motion has the partner now, it does not. A partner
+    that stopped, 40 mm off the motion, is judged where it was measured, and the step waits."""
     from flexsheet.arm.sheet_motion import SheetShaper
     from flexsheet.model.sheet import sheet_rotation
     kl, kr, ql, qr, _ = _home()
@@ -151,10 +153,11 @@ def test_the_span_guard_judges_a_partner_on_the_motion_where_the_motion_has_it_n
 
 
 def test_on_the_motion_the_span_guard_keeps_the_motions_own_span_within_5_mm():
-    """Both arms on the sheet's motion: the band is the motion's span ± 5 mm (SPAN_ON_MOTION), not the fixed band
-    whose floor sits 1.2 mm under the planner's least stretch. A step 2 mm short of the motion (a turn's tracking)
-    goes on though the fixed band says it is out; a step that takes the span 6 mm short waits; an arm left 20 mm
-    over the span, its partner at rest on the motion's end, steps back toward it (no deadlock)."""
+    """Both arms on the sheet's motion: the band is the motion's span ± 5 mm (SPAN_ON_MOTION), not the fixed
+    band whose floor sits 1.2 mm under the planner's least stretch. A step 2 mm short of the motion (a turn's
+    tracking) goes on though the fixed band says it is out; a step that takes the span 6 mm short waits; an
+    arm left 20 mm over the span, its partner at rest on the motion's end, steps back toward it (no
+    deadlock)."""
     from flexsheet.arm.sheet_motion import SheetShaper
     from flexsheet.arm.tracking import SPAN_ON_MOTION
     from flexsheet.model.sheet import sheet_rotation
@@ -169,12 +172,12 @@ def test_on_the_motion_the_span_guard_keeps_the_motions_own_span_within_5_mm():
     span = float(np.linalg.norm(Tl[:3, 3] - Tr[:3, 3]))
     assert span == pytest.approx(0.2424, abs=2e-4)
     tr = _tracker(kl, ql)
-    tr.span.set_band((span - 0.0012, 0.264))                        # the fixed band: floor 1.2 mm under the plan
+    tr.span.set_band((span - 0.0012, 0.264))  # the fixed band: floor 1.2 mm under the plan
     assert tr.set_target(seg.clamp("left", 10.0)[0], 0.0, 0.0, motion=seg).ok
     tr.span.peer_clamp, tr.span.peer_stamp = Tr[:3, 3], t
     toward = (Tr[:3, 3] - Tl[:3, 3]) / span                          # (3,) from this clamp to the partner's
 
-    def q_at(offset_m):                                              # this clamp moved offset_m toward the partner
+    def q_at(offset_m):  # this clamp moved offset_m toward the partner
         T = Tl.copy()
         T[:3, 3] += offset_m * toward
         res = kl.ik(T, ql, max_jump=10.0)

@@ -1,5 +1,6 @@
 """flexsheet bench sim's arithmetic (flexsheet.benches.sim): CPU-seconds per simulated second from a launch's
-clock file, the runtime's share as the process's rest, and clear errors on files that are not a sim launch's."""
+clock file, the runtime's share as the process's rest, and clear errors on files that are not a sim
+launch's."""
 
 import pytest
 

@@ -19,5 +19,6 @@ def twin_and_camera():
     board = QUICK.board_spec()
     views = twin.board_views(board, cp.plan_board_views(8))
     nom = nominal_display_calib()
-    r = cp.estimate_camera_pose(views, board, nom.camera.stereo, nom.camera.T_display_camera, prior_cov=cp.load_prior())
+    r = cp.estimate_camera_pose(views, board, nom.camera.stereo, nom.camera.T_display_camera,
+                                prior_cov=cp.load_prior())
     return truth, twin, views, r

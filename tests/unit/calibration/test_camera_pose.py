@@ -1,5 +1,5 @@
-"""The camera-pose estimator (flexsheet.calibration.camera_pose) on the twin's board views: a board not found, a
-bowed board fitted or refused; no estimator imports the truth or the twin."""
+"""The camera-pose estimator (flexsheet.calibration.camera_pose) on the twin's board views: a board not found,
+a bowed board fitted or refused; no estimator imports the truth or the twin."""
 
 from __future__ import annotations
 
@@ -38,7 +38,8 @@ def test_board_not_found_is_refused(twin_and_camera):
         cp.estimate_camera_pose([(blank, views[0][1])] + views[1:], QUICK.board_spec(), nom.camera.stereo,
                                 nom.camera.T_display_camera)
     with pytest.raises(ValueError, match="board found in only 1 of 3 views, need at least 3"):
-        cp.estimate_camera_pose([views[0], (blank, blank), (blank, blank)], QUICK.board_spec(), nom.camera.stereo,
+        cp.estimate_camera_pose([views[0], (blank, blank), (blank, blank)], QUICK.board_spec(),
+                                nom.camera.stereo,
                                 nom.camera.T_display_camera)
 
 

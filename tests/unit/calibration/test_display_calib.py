@@ -1,5 +1,5 @@
-"""The display calibration's entries (flexsheet.calibration.display_calib): stale and nominal entries refused when
-asked, a base pose as x, y, z, yaw."""
+"""The display calibration's entries (flexsheet.calibration.display_calib): stale and nominal entries refused
+when asked, a base pose as x, y, z, yaw."""
 
 from __future__ import annotations
 

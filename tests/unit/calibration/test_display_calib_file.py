@@ -1,5 +1,5 @@
-"""display.yaml (flexsheet.calibration.display_calib_file): OpenCV FileStorage round trip, clear errors for missing
-and malformed entries, a bad entry refused on write."""
+"""display.yaml (flexsheet.calibration.display_calib_file): OpenCV FileStorage round trip, clear errors for
+missing and malformed entries, a bad entry refused on write."""
 
 from __future__ import annotations
 
@@ -27,13 +27,17 @@ def _measured() -> DisplayCalib:
     c.projector.D = np.array([0.0123, 0.0, 0.0, 0.0, 0.0])
     A = np.random.default_rng(0).normal(size=(30, 30))
     c.camera.cov = A @ A.T * 1e-6
-    c.arms["left"] = ArmEntry(geometry.pose_matrix(-0.051, 0.552, -0.398, -1.57), np.array([0.011, -0.001, 0.041]),
+    c.arms["left"] = ArmEntry(geometry.pose_matrix(-0.051, 0.552, -0.398, -1.57),
+                              np.array([0.011, -0.001, 0.041]),
                               Provenance("arms: test", n_poses=16, residuals={"residual_mm": 0.2}))
     c.head_camera = HeadCameraEntry(np.array([[601.0, 0, 318.0], [0, 601.5, 257.0], [0, 0, 1]]),
                                     np.array([-0.08, 0.05, 0, 0, 0]), 640, 512,
-                                    geometry.pose_matrix(0.002, 0.003, 0.199, 0.01), Provenance("head: test", n_poses=30))
-    c.sheet = SheetEntry(0.0231, 2.71, 0.51, 289.0, 18500.0, 0.0204, 0.21, -0.47, Provenance("sheet: test", n_poses=15,
-                                                                                residuals={"median_pct": 4.6}))
+                                    geometry.pose_matrix(0.002, 0.003, 0.199, 0.01),
+                                    Provenance("head: test", n_poses=30))
+    c.sheet = SheetEntry(0.0231, 2.71, 0.51, 289.0, 18500.0, 0.0204, 0.21, -0.47,
+                         Provenance("sheet: test", n_poses=15,
+                                                                                residuals={"median_pct":
+                                                                                               4.6}))
     return c
 
 
@@ -53,11 +57,14 @@ def test_round_trip_through_opencv_filestorage(tmp_path):
     pj = fs.getNode("projector")
     np.testing.assert_allclose(pj.getNode("K").mat(), c.projector.K, atol=1e-12)
     np.testing.assert_allclose(pj.getNode("D").mat().ravel(), c.projector.D, atol=1e-15)
-    np.testing.assert_allclose(pj.getNode("T_display_projector").mat(), c.projector.T_display_projector, atol=1e-15)
+    np.testing.assert_allclose(pj.getNode("T_display_projector").mat(), c.projector.T_display_projector,
+                               atol=1e-15)
     assert int(pj.getNode("width").real()) == 1024
     left = fs.getNode("arms").getNode("left")
-    np.testing.assert_allclose(left.getNode("T_display_base").mat(), c.arms["left"].T_display_base, atol=1e-15)
-    np.testing.assert_allclose(left.getNode("marker_offset").mat().ravel(), [0.011, -0.001, 0.041], atol=1e-15)
+    np.testing.assert_allclose(left.getNode("T_display_base").mat(), c.arms["left"].T_display_base,
+                               atol=1e-15)
+    np.testing.assert_allclose(left.getNode("marker_offset").mat().ravel(), [0.011, -0.001, 0.041],
+                               atol=1e-15)
     eye = fs.getNode("eye")
     assert eye.getNode("mode").string() == "fixed"
     np.testing.assert_allclose(eye.getNode("V").mat().ravel(), geometry.EYE)
@@ -85,8 +92,9 @@ def test_missing_entry_is_named(tmp_path):
     write_display_calib(path, c)
     with pytest.raises(ValueError, match=r"display\.yaml: missing entries \['projector', 'arms.left'"):
         load_display_calib(path, require=("camera", "projector", "arms.left"))
-    assert load_display_calib(path, require=("camera",)).missing() == ["projector", "arms.left", "arms.right", "eye",
-                                                                      "head_camera", "sheet"]
+    assert load_display_calib(path, require=("camera",)).missing() == ["projector", "arms.left", "arms.right",
+                                                                       "eye",
+                                                                       "head_camera", "sheet"]
 
 
 def test_malformed_entries_name_the_key(tmp_path):
@@ -94,11 +102,14 @@ def test_malformed_entries_name_the_key(tmp_path):
     write_display_calib(str(path), nominal_display_calib())
     text = path.read_text()
     # break the rigid transform of the projector: scale a rotation entry
-    bad = text.replace("T_display_projector: !!opencv-matrix\n      rows: 4\n      cols: 4\n      dt: d\n      data: [ 0.,",
-                       "T_display_projector: !!opencv-matrix\n      rows: 4\n      cols: 4\n      dt: d\n      data: [ 0.5,")
+    bad = text.replace("T_display_projector: !!opencv-matrix\n      rows: 4\n      cols: 4\n      dt: d\n    "
+                       "  data: [ 0.,",
+                       "T_display_projector: !!opencv-matrix\n      rows: 4\n      cols: 4\n      dt: d\n    "
+                       "  data: [ 0.5,")
     assert bad != text
     path.write_text(bad)
-    with pytest.raises(ValueError, match=r"display\.yaml: projector\.T_display_projector rotation block is not a proper rotation"):
+    with pytest.raises(ValueError, match=r"display\.yaml: projector\.T_display_projector rotation block is "
+                                         r"not a proper rotation"):
         load_display_calib(str(path))
     path.write_text(text.replace("   ipd: ", "   ipd_m: "))
     with pytest.raises(ValueError, match=r"missing key eye\.ipd"):

@@ -34,6 +34,7 @@ def test_tracked_eyes_follow_the_glasses():
     assert np.allclose((left - right) / 0.064, turn @ [0.0, 1.0, 0.0])
     assert np.allclose(V, T2[:3, :3] @ off + T2[:3, 3])
     with pytest.raises(ValueError, match="collinear"):
-        glasses_pose(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0.0]]), np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0.0]]))
+        glasses_pose(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0.0]]),
+                     np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0.0]]))
     with pytest.raises(ValueError, match="ipd"):
         tracked_eyes(T2, off, 0.5)

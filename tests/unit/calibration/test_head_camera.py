@@ -1,4 +1,5 @@
-"""The head camera's registration on the chin-rest fixture and the eye's offset in the glasses, in the twin."""
+"""The head camera's registration on the chin-rest fixture and the eye's offset in the glasses, in the
+twin."""
 
 import math
 
@@ -22,10 +23,11 @@ def test_registration_finds_the_true_camera_and_the_eye(seed):
     K0, _, w, h = design_head_camera()
     poses = fixture_poses()
     finder = GlassesTracker(K0, None, np.eye(4), rig.board, np.zeros(3), 0.064)
-    entry = register_head_camera([finder.detect(im) for im in rig.fixture_images(poses)], poses, rig.board, K0,
+    entry = register_head_camera([finder.detect(im) for im in rig.fixture_images(poses)], poses, rig.board,
+                                 K0,
                                  (w, h), "twin")
     K, _, T, _, _ = true_head_camera(seed)
-    assert np.linalg.norm(entry.T_display_camera[:3, 3] - T[:3, 3]) < 0.006        # mount drawn ~5 mm per axis off
+    assert np.linalg.norm(entry.T_display_camera[:3, 3] - T[:3, 3]) < 0.006  # mount drawn ~5 mm per axis off
     dR = cv2.Rodrigues(entry.T_display_camera[:3, :3].T @ T[:3, :3])[0]
     assert math.degrees(np.linalg.norm(dR)) < 0.8                                  # drawn ~1 deg off
     assert entry.provenance.residuals["rms_px"] < 1.5 and entry.provenance.n_poses >= 25
@@ -34,7 +36,7 @@ def test_registration_finds_the_true_camera_and_the_eye(seed):
     eye = eye_entry([tracker.track(rig.chin_rest_image()).T_display_glasses for _ in range(5)],
                     rig.pupillometer_ipd(), source="twin")
     assert eye.mode == "tracked" and eye.provenance.n_poses == 5 and one.provenance.n_poses == 1
-    assert np.linalg.norm(one.glasses_eye_offset - rig.viewer.eye_offset) < 0.006    # chin rest: ~1 mm per axis
+    assert np.linalg.norm(one.glasses_eye_offset - rig.viewer.eye_offset) < 0.006  # chin rest: ~1 mm per axis
     assert np.linalg.norm(eye.glasses_eye_offset - rig.viewer.eye_offset) < 0.003    # five sittings: ~0.45 mm
     assert 0.0 < eye.provenance.residuals["offset_spread_mm"] < 3.0
     assert abs(eye.ipd - rig.viewer.ipd) < 0.002
@@ -46,13 +48,15 @@ def test_too_few_views_are_refused():
     poses = fixture_poses()[:3]
     finder = GlassesTracker(K0, None, np.eye(4), rig.board, np.zeros(3), 0.064)
     with pytest.raises(ValueError, match="fixture steps"):
-        register_head_camera([finder.detect(im) for im in rig.fixture_images(poses)], poses, rig.board, K0, (w, h))
+        register_head_camera([finder.detect(im) for im in rig.fixture_images(poses)], poses, rig.board, K0,
+                             (w, h))
     with pytest.raises(ValueError, match="one detection per"):
         register_head_camera([], poses, rig.board, K0, (w, h))
 
 
 def test_the_lab_images_give_the_twins_registration(tmp_path):
-    """Offline: the twin's head-camera images saved in the lab layout and read back register the same camera."""
+    """Offline: the twin's head-camera images saved in the lab layout and read back register the same
+    camera."""
     from flexsheet.calibration.procedures import run_head_camera
     from flexsheet.calibration.sources import ImageDirSource, save_frames
     from flexsheet.twin.registration import TwinSource

@@ -34,7 +34,8 @@ def test_grid_correspondences_hit_the_true_projector(home_patterns):
     col, row, valid = pj.decode([f[0] for f in frames], W, H)
     proj, cam = pj.grid_correspondences(col, row, valid, 8)
     assert len(proj) > 1000
-    # where does each camera point's ray meet the home sheet (x = 0), and where does the true projector put it?
+    # where does each camera point's ray meet the home sheet
+    # (x = 0), and where does the true projector put it?
     c = twin.cams[0]
     X = []
     for u, v in cam:
@@ -52,7 +53,8 @@ def test_too_few_poses_are_refused(twin_and_camera):
     truth, twin, _, cam = twin_and_camera
     W, H = truth.projector_size
     pats = pj.gray_code_patterns(W, H)
-    pose = pj.triangulate_pose(twin.pattern_frames(pats, np.eye(4), frames=1), W, H, cam.stereo, cam.T_display_camera)
+    pose = pj.triangulate_pose(twin.pattern_frames(pats, np.eye(4), frames=1), W, H, cam.stereo,
+                               cam.T_display_camera)
     assert len(pose.X) > 500
     with pytest.raises(ValueError, match="needs at least 3 sheet poses"):
         pj.estimate_projector([pose, pose], nominal_display_calib().projector.K, (W, H))

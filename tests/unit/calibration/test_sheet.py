@@ -1,6 +1,7 @@
-"""The sheet identified from presses (flexsheet.calibration.sheet): the fit recovers a model it is given, refuses
-what cannot identify it, and on the twin's gripped sheet (a probe on a load cell, flexsheet.twin.load_cell) it
-predicts the true force within the 10 % target where the nominal string band is off by tens of per cent."""
+"""The sheet identified from presses (flexsheet.calibration.sheet): the fit recovers a model it is given,
+refuses what cannot identify it, and on the twin's gripped sheet (a probe on a load cell,
+flexsheet.twin.load_cell) it predicts the true force within the 10 % target where the nominal string band is
+off by tens of per cent."""
 
 from __future__ import annotations
 
@@ -13,11 +14,14 @@ from flexsheet.model.tension import SheetMaterial, press_force, stiffness
 
 def test_fit_recovers_the_model_that_made_the_presses():
     rng = np.random.default_rng(3)
-    truth = SheetMaterial(contact_width=float(rng.uniform(0.015, 0.03)), contact_growth=float(rng.uniform(0.5, 4)),
+    truth = SheetMaterial(contact_width=float(rng.uniform(0.015, 0.03)),
+                          contact_growth=float(rng.uniform(0.5, 4)),
                           own_stiffness=float(rng.uniform(0.1, 1.0)), own_growth=float(rng.uniform(50, 500)),
-                          stretching=float(rng.uniform(5e3, 4e4)), strain_offset=float(rng.uniform(-0.005, 0.02)),
+                          stretching=float(rng.uniform(5e3, 4e4)),
+                          strain_offset=float(rng.uniform(-0.005, 0.02)),
                           position_u=float(rng.uniform(-0.3, 0.6)), position_v=float(rng.uniform(-0.6, 0.3)))
-    presses = [Press(s, u, v, d, press_force(s, truth, u, d, v)) for s, u, v, ds in plan_presses() for d in ds]
+    presses = [Press(s, u, v, d, press_force(s, truth, u, d, v)) for s, u, v,
+               ds in plan_presses() for d in ds]
     fit = fit_sheet(presses)
     assert fit.contact_width == pytest.approx(truth.contact_width, rel=1e-3)
     assert fit.contact_growth == pytest.approx(truth.contact_growth, rel=1e-2)
@@ -64,12 +68,13 @@ def test_the_twins_gripped_sheet_is_identified_within_ten_percent():
     assert s["model_error_pct"] <= s["target_pct"] == 10.0, s
     assert s["nominal_error_pct"] > 40.0, s                 # the string band it replaces
     assert entry.provenance.residuals["median_pct"] < 10.0 and entry.provenance.n_poses == 45
-    w = s["working"]                                        # strains 0.005-0.05, eight contacts, 3 never pressed
+    w = s["working"]  # strains 0.005-0.05, eight contacts, 3 never pressed
     assert w["strains"] == [0.005, 0.05] and w["n"] > 400 and w["median_pct"] <= w["target_pct"] == 5.0, w
 
 
 def test_a_drawn_truths_sheet_is_identified_within_ten_percent_and_within_five_over_the_working_strains():
-    """A truth seed drawn for this run: its true sheet is the shipped family's, scaled and shifted (no build)."""
+    """A truth seed drawn for this run: its true sheet is the shipped family's, scaled and shifted (no
+    build)."""
     import random
 
     from flexsheet.calibration.procedures import run_sheet
@@ -83,6 +88,7 @@ def test_a_drawn_truths_sheet_is_identified_within_ten_percent_and_within_five_o
     assert s["model_error_pct"] <= s["target_pct"], (seed, s)
     assert s["nominal_error_pct"] > 2 * s["model_error_pct"], (seed, s)
     # the working strains: within 5 % (median), and closer than pressed at three strains only
-    sparse = run_sheet(TwinSource(CalibrationTwin(truth, seed=seed)), plan_presses(stretches=(0.01, 0.04, 0.08)))
+    sparse = run_sheet(TwinSource(CalibrationTwin(truth, seed=seed)),
+                       plan_presses(stretches=(0.01, 0.04, 0.08)))
     w, w3 = s["working"], working_model_error(truth, sparse)
     assert w["median_pct"] <= 5.0 and w["p90_pct"] < w3["p90_pct"], (seed, w, w3)

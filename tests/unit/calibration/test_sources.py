@@ -1,5 +1,5 @@
-"""The lab's captured-images path (flexsheet.calibration.sources): saved frames read back by ImageDirSource give
-the same estimates as the frames the twin handed over."""
+"""The lab's captured-images path (flexsheet.calibration.sources): saved frames read back by ImageDirSource
+give the same estimates as the frames the twin handed over."""
 
 from __future__ import annotations
 
@@ -42,7 +42,8 @@ def test_lab_images_path_for_the_arms(twin_and_camera, tmp_path):
     opts = QUICK.__class__(arm_configs=8)
     src = TwinSource(twin, marker_frames=2)
     nom = nominal_display_calib().arms["left"]
-    qs = arms_mod.plan_arm_configs("left", 8, nom.T_display_base, nom.marker_offset, r.stereo, r.T_display_camera)
+    qs = arms_mod.plan_arm_configs("left", 8, nom.T_display_base, nom.marker_offset, r.stereo,
+                                   r.T_display_camera)
     frames, q = src.marker_frames("left", qs)
     save_frames(str(tmp_path), arms={"left": (frames, q)})
     lab = run_arms(ImageDirSource(str(tmp_path)), opts, calib, ("left",))["left"]

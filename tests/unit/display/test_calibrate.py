@@ -1,6 +1,6 @@
-"""``flexsheet calibrate display`` (flexsheet.display.calibrate): the simulated registration needs a truth seed;
-the live plan's dry run prints the poses and moves nothing; ``calibrate sheet`` fits the twin's presses and a lab's
-CSV alike."""
+"""``flexsheet calibrate display`` (flexsheet.display.calibrate): the simulated registration needs a truth
+seed; the live plan's dry run prints the poses and moves nothing; ``calibrate sheet`` fits the twin's presses
+and a lab's CSV alike."""
 
 from __future__ import annotations
 
@@ -25,8 +25,9 @@ def test_dry_run_prints_the_poses_and_moves_nothing(capsys, tmp_path):
 
 
 def test_sheet_from_the_twin_and_from_a_lab_file_give_the_same_entry(tmp_path):
-    """``flexsheet calibrate sheet``: the twin's presses (truth seed 0, whose true-sheet tables ship) fit within
-    the 10 % target against the true force; the readings it writes as a lab's CSV fit to the same entry."""
+    """``flexsheet calibrate sheet``: the twin's presses (truth seed 0, whose true-sheet tables ship) fit
+    within the 10 % target against the true force; the readings it writes as a lab's CSV fit to the same
+    entry."""
     import json
 
     from flexsheet.calibration.display_calib_file import load_display_calib
@@ -40,7 +41,8 @@ def test_sheet_from_the_twin_and_from_a_lab_file_give_the_same_entry(tmp_path):
     assert sheet_main(["--presses", str(tmp_path / "p.csv"), "--out", str(tmp_path / "lab")]) == 0
     a = load_display_calib(str(tmp_path / "sim" / "display.yaml")).sheet
     b = load_display_calib(str(tmp_path / "lab" / "display.yaml")).sheet
-    assert b.contact_width == pytest.approx(a.contact_width, rel=1e-9) and b.provenance.source == "lab presses p.csv"
+    assert (b.contact_width == pytest.approx(a.contact_width, rel=1e-9)
+            and b.provenance.source == "lab presses p.csv")
     assert "truth" not in json.loads((tmp_path / "lab" / "sheet.json").read_text())
 
 

@@ -10,15 +10,17 @@ from flexsheet.calibration.procedures import FULL
 
 
 def test_launch_check_with_a_stale_twin_registration_notes_it_and_runs_nothing(tmp_path, monkeypatch):
-    """``flexsheet launch … --check`` must not run the twin's registration: a cache written by older procedures
-    (another summary version) reads as absent — a note — like an empty one; a current one is used as is."""
+    """``flexsheet launch … --check`` must not run the twin's registration: a cache written by older
+    procedures (another summary version) reads as absent — a note — like an empty one; a current one is used
+    as is."""
     from flexsheet.display.launch import before_launch
     from flexsheet.runtime.launch import TOPLEVEL_ENV, load_launch
     from flexsheet.runtime.testing import console_lines
     from flexsheet.twin import registration as reg
 
     monkeypatch.setenv("FLEXSHEET_CACHE", str(tmp_path))
-    monkeypatch.setattr(reg, "run_display_sim", lambda *a, **k: pytest.fail("the registration ran on --check"))
+    monkeypatch.setattr(reg, "run_display_sim", lambda *a,
+                        **k: pytest.fail("the registration ran on --check"))
     d = tmp_path / "display" / "realistic-77"
     d.mkdir(parents=True)
     (d / "display.yaml").write_text("{}\n")

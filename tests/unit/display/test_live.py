@@ -1,6 +1,7 @@
-"""``flexsheet calibrate display --live`` without a graph (flexsheet.display.live): the plan checked against the
-joint limits, and the live frame source's refusals (board not found, an arm refusing or not arriving) and resume,
-on a scripted graph client. The whole run on the three-host graph: tests/system/test_live_registration.py."""
+"""``flexsheet calibrate display --live`` without a graph (flexsheet.display.live): the plan checked against
+the joint limits, and the live frame source's refusals (board not found, an arm refusing or not arriving) and
+resume, on a scripted graph client. The whole run on the three-host graph:
+tests/system/test_live_registration.py."""
 
 import json
 import os
@@ -40,7 +41,8 @@ class ScriptedGraph:
         if service == "move_to":
             side = "left" if node == "arm_left" else "right"
             if self.refuse == side:
-                raise ServiceError("joints outside the limits (with the bridge's margin): J3 59.0 deg outside")
+                raise ServiceError("joints outside the limits (with the bridge's margin): J3 59.0 deg "
+                                   "outside")
             if not self.stuck:
                 self.q[side] = np.asarray(args["joints"], float)
         if service == "home":
@@ -55,11 +57,13 @@ class ScriptedGraph:
     def latest(self, topic):
         side = "left" if topic is topics.ARM_LEFT_STATE else "right"
         z = np.zeros(6)
-        return ArmJointState(header=Header(stamp=1.0), arm=side, position=self.q[side], velocity=z, commanded=z,
+        return ArmJointState(header=Header(stamp=1.0), arm=side, position=self.q[side], velocity=z,
+                             commanded=z,
                              executing=z, pose=np.eye(4), status=0)
 
     def collect(self, topic, n, after, timeout, stamp=None):
-        return [StereoFrame(header=Header(stamp=after), left=self.image, right=self.image, exposure_stamp=after,
+        return [StereoFrame(header=Header(stamp=after), left=self.image, right=self.image,
+                            exposure_stamp=after,
                             exposure_time=0.004) for _ in range(n)]
 
 
@@ -99,8 +103,8 @@ def test_the_world_is_paused_meanwhile_and_the_arms_go_home_before_they_follow_a
 def test_a_board_not_found_is_refused_in_one_line_and_kept(tmp_path):
     g = ScriptedGraph()                                   # a black image: no board
     src = LiveSource(g, ROLES, str(tmp_path), QUICK, twin=True, settle_s=0.0)
-    with pytest.raises(LiveError, match=r"^camera-pose: view 1/2: the board \(chessboard:9x8\) is not found in "
-                                        r"the left image \(saved as .*view00_left.rejected.png\)$"):
+    with pytest.raises(LiveError, match=r"^camera-pose: view 1/2: the board \(chessboard:9x8\) is not found "
+                                        r"in the left image \(saved as .*view00_left.rejected.png\)$"):
         src.board_views(QUICK.board_spec(), cp.plan_board_views(2))
     assert os.path.isfile(tmp_path / "frames" / "camera_pose" / "view00_left.rejected.png")
     assert not os.path.exists(tmp_path / "frames" / "camera_pose" / "view00_left.png")
@@ -124,10 +128,12 @@ def test_captured_views_are_resumed_without_moving(tmp_path):
 
 def test_an_arm_that_refuses_or_does_not_arrive_stops_the_run_naming_it(tmp_path):
     src = LiveSource(ScriptedGraph(refuse="right"), ROLES, str(tmp_path), QUICK, twin=True)
-    with pytest.raises(LiveError, match="^camera-pose: view 1/2: the right arm refused it: joints outside the limits"):
+    with pytest.raises(LiveError, match="^camera-pose: view 1/2: the right arm refused it: joints outside "
+                                        "the limits"):
         src.board_views(QUICK.board_spec(), cp.plan_board_views(2))
     src = LiveSource(ScriptedGraph(stuck=True), ROLES, str(tmp_path), QUICK, twin=True, move_timeout_s=0.2)
-    with pytest.raises(LiveError, match=r"did not arrive within 0.2 s \(still left [0-9.]+°, right [0-9.]+° away\)"):
+    with pytest.raises(LiveError, match=r"did not arrive within 0.2 s \(still left [0-9.]+°, right [0-9.]+° "
+                                        r"away\)"):
         src.board_views(QUICK.board_spec(), cp.plan_board_views(2))
 
 
@@ -139,9 +145,11 @@ def test_marker_captures_resume_from_the_manifest(tmp_path):
     d.mkdir(parents=True)
     for side in ("left", "right"):
         cv2.imwrite(str(d / f"config00_{side}.png"), np.full((512, 640), 9, np.uint8))
-    (tmp_path / "frames" / "manifest.json").write_text(json.dumps({"arms": {"left": {"joints": [qs[0].tolist()]}}}))
+    (tmp_path / "frames"
+     / "manifest.json").write_text(json.dumps({"arms": {"left": {"joints": [qs[0].tolist()]}}}))
     g = ScriptedGraph(image=np.full((512, 640), 50, np.uint8))
-    frames, used = LiveSource(g, ROLES, str(tmp_path), QUICK, twin=True, settle_s=0.0).marker_frames("left", qs)
+    frames, used = LiveSource(g, ROLES, str(tmp_path), QUICK, twin=True, settle_s=0.0).marker_frames("left",
+                                                                                                     qs)
     assert [int(a[0, 0]) for a, _ in frames] == [9, 50, 50]
     moved = [np.asarray(a["joints"]) for n, s, a in g.calls if s == "move_to" and n == "arm_left"]
     assert len(moved) == 2 and np.allclose(moved[0], qs[1])

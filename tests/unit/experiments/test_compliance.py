@@ -1,5 +1,6 @@
-"""``flexsheet experiment compliance`` (flexsheet.experiments.compliance): the object's force-depth from its FEM,
-the presentable range from the arms' torque and the sheet, one scale per scene, and the contrast a finger feels."""
+"""``flexsheet experiment compliance`` (flexsheet.experiments.compliance): the object's force-depth from its
+FEM, the presentable range from the arms' torque and the sheet, one scale per scene, and the contrast a finger
+feels."""
 
 from __future__ import annotations
 
@@ -24,12 +25,15 @@ def test_the_organ_maps_into_the_range_keeping_its_tumour_contrast_and_the_gain_
     asked, pres = np.asarray(top["contrast_asked"]), np.asarray(top["contrast_presented"])
     assert np.median(asked) > 0.15                       # the FEM's tumour: above the Weber fraction
     assert np.allclose(pres, asked, atol=1e-9)           # faithful inside the range: every ratio kept
-    assert main(["--scene", "launch/scenes/organ.yaml", "--contrast-gain", "2.5", "--out", str(tmp_path / "g2")]) == 0
+    assert (
+        main(["--scene", "launch/scenes/organ.yaml", "--contrast-gain", "2.5", "--out", str(tmp_path / "g2")])
+            == 0)
     res2 = json.loads((tmp_path / "g2" / "compliance.json").read_text())
     top2 = next(p for p in res2["points"] if p["name"] == top["name"])
     inside = np.asarray(top2["requested_n"]) == np.asarray(top2["presented_n"])
     want = (1.0 + asked) ** 2.5 - 1.0
-    assert inside.any() and np.allclose(np.asarray(top2["contrast_presented"])[inside], want[inside], rtol=1e-6)
+    assert (inside.any()
+            and np.allclose(np.asarray(top2["contrast_presented"])[inside], want[inside], rtol=1e-6))
     assert (tmp_path / "g1" / "compliance.png").stat().st_size > 5000
 
 

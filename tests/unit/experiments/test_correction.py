@@ -1,23 +1,26 @@
-"""The correction experiment (flexsheet.experiments.correction): Figs 11 and 13 on the honest twin, the correction
-with calibrated values only, measured on the truth.
+"""The correction experiment (flexsheet.experiments.correction): Figs 11 and 13 on the honest twin, the
+correction with calibrated values only, measured on the truth.
 
 Three truth seeds, ``--quick``. The registration (``display.yaml``) comes from the twin's procedures
 (:func:`flexsheet.twin.registration.sim_display_calib`, cached per seed) and the true pushed sheet from the
 nonlinear FEM (cached tables), so the first run on a clean machine takes ~2 min, later runs ~1 min.
 
 The live renderer's pushed-sheet correction, measured against the twin's TRUE sheet:
-:class:`flexsheet.experiments.correction.live_path.LivePath` builds the renderer side exactly as ``RendererNode.setup``
-does: :func:`flexsheet.model.sheet_model.sheet_model_for` of the node's default :class:`SheetConfig` (the nominal FEM:
-nominal E, no pre-strain, an assumed uniform tension ratio 1), :class:`RendererState` fed the clamp poses and the fingertip,
-:class:`ErrorTable` + :func:`pick_model` ``auto``, and the picked model's correction (the numpy twin of the
-shader, equal to 2e-6 m: test_shader_draws_the_fitted_fem_shape in tests/unit/rendering/test_stereo_renderer.py).
+:class:`flexsheet.experiments.correction.live_path.LivePath` builds the renderer side exactly as
+``RendererNode.setup`` does: :func:`flexsheet.model.sheet_model.sheet_model_for` of the node's default
+:class:`SheetConfig` (the nominal FEM: nominal E, no pre-strain, an assumed uniform tension ratio 1),
+:class:`RendererState` fed the clamp poses and the fingertip, :class:`ErrorTable` + :func:`pick_model`
+``auto``, and the picked model's correction (the numpy twin of the shader, equal to 2e-6 m:
+test_shader_draws_the_fitted_fem_shape in tests/unit/rendering/test_stereo_renderer.py).
 
 The truth side never shares the renderer's model: the true sheet is the FEM of the sheet gripped on two edges
-(its plane-stress pre-stress, T_v/T_u 0.035 at the centre, where the renderer assumes a uniform T_v = T_u) at the
-truth's E, thickness, grip slip and pre-strain (:meth:`SheetPhysics.from_truth` of a realistic :class:`TwinTruth`), and the light is traced onto it by the measurement camera's bisection tracer on a 241×241 grid
-(:func:`flexsheet.experiments.measurement.trace_to_sheet`), not the renderer's Newton solver. Eye, projector and
-clamps are the same on both sides, so what is measured is the sheet model (the registration's share is in the
-correction experiment, docs/renderer.md). The first run on a clean machine builds FEM tables (~1–2 min).
+(its plane-stress pre-stress, T_v/T_u 0.035 at the centre, where the renderer assumes a uniform T_v = T_u) at
+the truth's E, thickness, grip slip and pre-strain (:meth:`SheetPhysics.from_truth` of a realistic
+:class:`TwinTruth`), and the light is traced onto it by the measurement camera's bisection tracer on a 241×241
+grid (:func:`flexsheet.experiments.measurement.trace_to_sheet`), not the renderer's Newton solver. Eye,
+projector and clamps are the same on both sides, so what is measured is the sheet model (the registration's
+share is in the correction experiment, docs/renderer.md). The first run on a clean machine builds FEM tables
+(~1–2 min).
 """
 
 import dataclasses
@@ -81,18 +84,20 @@ def test_summary_keys_per_seed(runs):
         assert s["models_picked"]["inclined"] == ["flat"]
         assert s["estimator"]["display_calib"].endswith("display.yaml")
         assert "registration_errors" in s["estimator"]        # the registration's own score, for the report
-        # the estimator's sheet model is the gripped sheet with the identified strain offset, never the truth's
+        # the estimator's sheet model is the gripped sheet
+        # with the identified strain offset, never the truth's
         sm = s["estimator"]["sheet_model"]
         assert sm["tension_ratio"] is None and sm["name"] == "fem_gripped"
-        entry = load_display_calib(s["estimator"]["display_calib"]).sheet            # None: not identified (quick)
+        entry = load_display_calib(s["estimator"]["display_calib"]).sheet  # None: not identified (quick)
         assert sm["strain_offset"] == pytest.approx(0.0 if entry is None else entry.strain_offset)
         assert set(s["twin"]["truth_sheet"]) == {"young_Pa", "prestrain", "thickness_m", "grip_slip"}
 
 
 def test_corrected_against_target(runs):
     # measured (docs/renderer.md): inclined 0.05-0.2 mm, within the target; pushed (fem_nominal: the gripped
-    # sheet's depth table) 0.1-0.34 mm on the unseen seeds, within the target at every depth (the uniform-tension
-    # model it replaced missed from 20 mm, 0.9-1.3 mm); uncorrected is 1.1-1.2 mm at 10 mm and 9.2-9.4 mm at 50 mm
+    # sheet's depth table) 0.1-0.34 mm on the unseen seeds, within the target
+    # at every depth (the uniform-tension model it replaced missed from 20 mm,
+    # 0.9-1.3 mm); uncorrected is 1.1-1.2 mm at 10 mm and 9.2-9.4 mm at 50 mm
     for seed, s in runs.items():
         for key, row in s["inclined"].items():
             assert row["corrected_mm"] <= TARGET_MM, (seed, "inclined", key, row["corrected_mm"])
@@ -136,7 +141,8 @@ def test_estimator_takes_no_truth():
 
 
 def test_measurement_is_on_the_truth(meas):
-    """Same estimator (same display.yaml), two truths: the projector image is identical, the measurement not."""
+    """Same estimator (same display.yaml), two truths: the projector image is identical, the measurement
+    not."""
     cal = CalibratedDisplay.nominal()
     est = DisplayEstimator(cal)
     t0 = TwinTruth.draw(0, "ideal")

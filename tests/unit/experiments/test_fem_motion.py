@@ -1,7 +1,8 @@
-"""The served surface in motion (flexsheet/experiments/fem_motion.py): on the organ's path table every frame of the
-push (0.25 mm) and of the stroke (0.5 mm) is judged; the drawn dent meets the fingertip within a pixel and no frame
-jumps (the stations' solved states blended, not the linear model's contact set, and kept out of the fingertip
-sphere); the command writes motion.json and its chart, and a bad scene file is refused with exit 2."""
+"""The served surface in motion (flexsheet/experiments/fem_motion.py): on the organ's path table every frame
+of the push (0.25 mm) and of the stroke (0.5 mm) is judged; the drawn dent meets the fingertip within a pixel
+and no frame jumps (the stations' solved states blended, not the linear model's contact set, and kept out of
+the fingertip sphere); the command writes motion.json and its chart, and a bad scene file is refused with exit
+2."""
 
 from __future__ import annotations
 
@@ -25,9 +26,11 @@ def test_the_moving_finger_on_the_organ_every_frame_meets_the_fingertip_and_neve
     assert c["push"]["methods"] == ["path_snapshots"] == c["stroke"]["methods"]
     assert len(c["push"]["gap_px"]) == n_push and len(t["push"]["jump_px"]) == n_push - 3
     assert c["gap_px_max"] == max(max(c["push"]["gap_px"]), max(c["stroke"]["gap_px"]))
-    # measured: gap 0.51 px, stroke -0.47..-0.38 mm (the rendered triangles' chords under the fingertip: a moved
-    # dent left inside it, -0.87 mm, is put on it); jump p99 0.10 px (the linear model's snapping: 2.59 px)
-    assert c["gap_px_max"] <= 0.7 and -0.6 < c["stroke"]["gap_mm_range"][0] <= c["stroke"]["gap_mm_range"][1] < 0.5
+    # measured: gap 0.51 px, stroke -0.47..-0.38 mm (the rendered triangles'
+    # chords under the fingertip: a moved dent left inside it, -0.87 mm, is
+    # put on it); jump p99 0.10 px (the linear model's snapping: 2.59 px)
+    assert c["gap_px_max"] <= 0.7 and -0.6 < c["stroke"]["gap_mm_range"][0] <= c["stroke"]["gap_mm_range"][
+        1] < 0.5
     assert t["jump_px_p99"] <= 0.5 and t["jump_px_p99"] <= t["jump_px_max"] < 1.0
     assert out["verdict"] == {"contact": "met", "temporal": "met"}
     assert 0 < out["realtime"]["update_ms"] < 20 and out["realtime"]["methods"] == ["path_snapshots"]
@@ -48,4 +51,5 @@ def test_a_bad_scene_file_exits_2_naming_it(tmp_path, capsys):
 def test_help_shows_an_example(argv, capsys):
     with pytest.raises(SystemExit) as e:
         main(argv)
-    assert e.value.code == 0 and "example: python -m flexsheet.experiments.fem_motion --scene" in capsys.readouterr().out
+    assert (e.value.code == 0
+            and "example: python -m flexsheet.experiments.fem_motion --scene" in capsys.readouterr().out)

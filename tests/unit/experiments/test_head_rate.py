@@ -12,7 +12,8 @@ from messages import topics as T
 
 
 def _summary(view_median=0.05, view_p95=0.4, eye_median=1.3):
-    return {"realtime_factor": 0.7, "view": {"tracked": {"error_px_median": view_median, "error_px_p95": view_p95}},
+    return {"realtime_factor": 0.7,
+            "view": {"tracked": {"error_px_median": view_median, "error_px_p95": view_p95}},
             "eye": {"error_mm": {"median": eye_median, "n": 100}},
             "safety": {"keepout_violations": 0, "max_speed_near_head_mps": 0.12},
             "headline": {"rows": {"30": {"dtheta_mean_deg": 0.13}}}}

@@ -1,5 +1,5 @@
-"""The measurement camera (flexsheet.experiments.measurement): projector pixels as OpenCV projects them, the flat
-correction within a pixel on its photographs."""
+"""The measurement camera (flexsheet.experiments.measurement): projector pixels as OpenCV projects them, the
+flat correction within a pixel on its photographs."""
 
 import cv2
 import numpy as np
@@ -43,7 +43,8 @@ def test_measurement_camera_flat_correction_within_a_pixel():
         shot = {}
         for model in ("none", "flat"):
             r.set_model(model, tilt)
-            shot[model] = measure_sizes(cam.photograph(r.render_single(geometry.EYE), r.projector, tilt), cam.pixel)
+            shot[model] = measure_sizes(cam.photograph(r.render_single(geometry.EYE), r.projector, tilt),
+                                        cam.pixel)
         err = {m: np.mean([abs(shot[m][k] - proper[k]) for k in "hud"]) for m in shot}
         assert err["none"] > 0.005           # uncorrected: several mm off at 40°
         assert err["flat"] < 0.0007          # corrected: within one projector pixel

@@ -10,8 +10,8 @@ from flexsheet.model.scenes import SCENES_DIR, load_scene
 
 
 def test_planner_tension_follows_the_organ_tumour():
-    """Palpation in-process: stroking the organ pressed 5 mm, the sheet presents its stiffness (scaled into the
-    arms' range) — peaking over the tumour, and the tension above what the same place needs without it."""
+    """Palpation in-process: stroking the organ pressed 5 mm, the sheet presents its stiffness (scaled into
+    the arms' range) — peaking over the tumour, and the tension above what the same place needs without it."""
     from flexsheet.experiments.scenes import (
         PALPATION_DEPTH,
         peak_along_path,
@@ -31,9 +31,9 @@ def test_planner_tension_follows_the_organ_tumour():
 
 @pytest.mark.slow
 def test_quick_run_on_the_organ_writes_table1_and_the_tumour_where_it_is(tmp_path):
-    """``flexsheet experiment scenes --quick --scene organ``: one seed, the 10 s stroke; the stiffness the object
-    asks peaks over the tumour at every depth and rises with depth; its contrast stays under the 15 % a finger
-    notices (the medical use this scene stands for is not presentable yet)."""
+    """``flexsheet experiment scenes --quick --scene organ``: one seed, the 10 s stroke; the stiffness the
+    object asks peaks over the tumour at every depth and rises with depth; its contrast stays under the 15 % a
+    finger notices (the medical use this scene stands for is not presentable yet)."""
     import json
 
     from flexsheet.experiments.scenes import main

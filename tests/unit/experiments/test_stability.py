@@ -1,6 +1,6 @@
-"""Where the methods fail (flexsheet.experiments.stability): the breaking point is where the error curve crosses
-the limit (a refused value breaks at the latest), the calibration error is the stated size, the quick run writes
-the chart and its JSON, and the graph sweep sets one error at a time."""
+"""Where the methods fail (flexsheet.experiments.stability): the breaking point is where the error curve
+crosses the limit (a refused value breaks at the latest), the calibration error is the stated size, the quick
+run writes the chart and its JSON, and the graph sweep sets one error at a time."""
 
 from __future__ import annotations
 
@@ -52,8 +52,9 @@ def test_quick_run_writes_chart_and_breaking_points(tmp_path):
 
 
 def test_graph_stability_sets_one_error_at_a_time_and_finds_where_it_breaks(tmp_path):
-    """flexsheet experiment stability --graph: each error reaches the graph as one launch override (camera noise,
-    the camera link's delay in s, lost frames); the breaking points come from the felt rows; the chart says them."""
+    """flexsheet experiment stability --graph: each error reaches the graph as one launch override (camera
+    noise, the camera link's delay in s, lost frames); the breaking points come from the felt rows; the chart
+    says them."""
     import json
 
     from flexsheet.experiments.stability import GRAPH_SWEEPS, breaking_point, graph_chart, graph_sets
@@ -64,13 +65,16 @@ def test_graph_stability_sets_one_error_at_a_time_and_finds_where_it_breaks(tmp_
     assert graph_sets("base_error", 0.0, tmp_path, 0) == []                 # the twin's own registration
     with pytest.raises(ValueError, match="unknown error 'x'"):
         graph_sets("x", 1.0, tmp_path, 0)
-    assert all(v[1][0] == (1.0 if k == "noise_scale" else 0.0) for k, v in GRAPH_SWEEPS.items())   # baselines first
+    # baselines first
+    assert all(v[1][0] == (1.0 if k == "noise_scale" else 0.0) for k, v in GRAPH_SWEEPS.items())
     x, y = [0.0, 25.0, 50.0, 100.0], [0.11, 0.15, 0.30, 0.50]
     assert breaking_point(x, y, 0.359) == pytest.approx(50.0 + 50.0 * (0.359 - 0.30) / 0.20)
     assert breaking_point(x, y, 0.9) is None
     res = {"title": "t", "paper_dtheta_deg": 0.359, "target_dtheta_deg": 0.18, "errors": {
-        "link_delay_ms": {"label": "ms", "rows": [{"value": a, "dtheta_mean_deg": b} for a, b in zip(x, y, strict=True)],
-                          "breaks_paper_at": breaking_point(x, y, 0.359), "breaks_target_at": breaking_point(x, y, 0.18)}}}
+        "link_delay_ms": {"label": "ms",
+                          "rows": [{"value": a, "dtheta_mean_deg": b} for a, b in zip(x, y, strict=True)],
+                          "breaks_paper_at": breaking_point(x, y, 0.359),
+                          "breaks_target_at": breaking_point(x, y, 0.18)}}}
     graph_chart(res, tmp_path / "s.png")
     assert (tmp_path / "s.png").stat().st_size > 5000 and json.dumps(res)
 

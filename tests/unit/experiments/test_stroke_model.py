@@ -1,6 +1,6 @@
 """The stroke model experiment (flexsheet.experiments.stroke_model): with the arm twin's datasheet speeds the
-planner's stroke (and stroke + push) stays reachable and within the bridge's commanded speed on the realistic twin,
-three truth seeds; the quick run writes its summary."""
+planner's stroke (and stroke + push) stays reachable and within the bridge's commanded speed on the realistic
+twin, three truth seeds; the quick run writes its summary."""
 
 from __future__ import annotations
 

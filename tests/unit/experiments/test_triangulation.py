@@ -1,5 +1,6 @@
-"""``flexsheet experiment triangulation --quick`` end to end (one truth seed, fewer points): the numbers it writes
-are those of the real XIMEA pairs and of the honest twin, judged against the fingertip target (0.5 mm RMS)."""
+"""``flexsheet experiment triangulation --quick`` end to end (one truth seed, fewer points): the numbers it
+writes are those of the real XIMEA pairs and of the honest twin, judged against the fingertip target (0.5 mm
+RMS)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""Fixtures shared by the linear FEM's modules, built once per package: the coarse cylinder's mesh and its P1 and
-P2 models (test_mesh, test_solver, test_realtime, test_corotational: one xdist group, ``SAME_WORKER`` in
+"""Fixtures shared by the linear FEM's modules, built once per package: the coarse cylinder's mesh and its P1
+and P2 models (test_mesh, test_solver, test_realtime, test_corotational: one xdist group, ``SAME_WORKER`` in
 tests/conftest.py)."""
 
 import pytest

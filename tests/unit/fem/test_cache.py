@@ -36,7 +36,9 @@ def test_cache_round_trip_hit_and_corrupt_entry(tmp_path, caplog):
     both_key = cache_key("shipped")
     both.ship("thing", both_key, {"a": np.arange(2.0)})
     z4, hit4, _ = both.get_or_compute("thing", both_key, compute)
-    assert hit4 and both.shipped() and np.array_equal(z4["a"], [0.0, 1.0]) and "shipped store" in _said(caplog)[-1]
+    assert (hit4 and both.shipped() and np.array_equal(z4["a"], [0.0, 1.0])
+            and "shipped store" in _said(caplog)[-1])
     both.save("thing", both_key, {"a": np.arange(4.0)})
     z5, hit5, _ = both.get_or_compute("thing", both_key, compute)
-    assert hit5 and not both.shipped() and len(z5["a"]) == 4 and _said(caplog)[-1].endswith(f"from cache (thing_{both_key})")
+    assert hit5 and not both.shipped() and len(z5["a"]) == 4 and _said(caplog)[-1].endswith(
+        f"from cache (thing_{both_key})")

@@ -1,5 +1,5 @@
-"""The model choice (flexsheet/fem/choose.py): the cheapest mesh meeting the accuracy target, the shipped table's
-choice, linear where it suffices and the snapshots where it does not."""
+"""The model choice (flexsheet/fem/choose.py): the cheapest mesh meeting the accuracy target, the shipped
+table's choice, linear where it suffices and the snapshots where it does not."""
 
 import pytest
 
@@ -18,7 +18,8 @@ def test_choose_takes_cheapest_meeting_target():
         entry(0.012, 0.006, 1, 1000, 0.003), entry(0.012, 0.004, 2, 9000, 0.0006),
         entry(0.010, 0.004, 2, 15000, 0.0005), entry(0.008, 0.003, 1, 4000, 0.0009)]}
     ch = choose(table, 0.0007, 0.005, 0.03, 0.45, 0.008)
-    assert isinstance(ch, Choice) and ch.met and ch.order == 2 and ch.spec.h_fine == 0.004 and ch.spec.h == 0.012
+    assert (isinstance(ch, Choice) and ch.met and ch.order == 2 and ch.spec.h_fine == 0.004
+            and ch.spec.h == 0.012)
     ch = choose(table, 0.001, 0.005, 0.03, 0.45, 0.008)
     assert ch.met and ch.order == 1 and ch.spec.h == 0.008
     ch = choose(table, 0.0001, 0.005, 0.03, 0.45, 0.008)

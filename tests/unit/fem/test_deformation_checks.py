@@ -1,5 +1,5 @@
-"""The real-time validity checks (flexsheet/fem/deformation_checks.py) against plain implementations: the tets'
-strain and inversion, the folded surface faces."""
+"""The real-time validity checks (flexsheet/fem/deformation_checks.py) against plain implementations: the
+tets' strain and inversion, the folded surface faces."""
 
 from __future__ import annotations
 
@@ -11,8 +11,9 @@ from flexsheet.model.scenes import SCENES_DIR, load_scene
 
 
 def test_tet_checks_equal_element_checks_on_random_deformations():
-    """flexsheet.fem.deformation_checks.TetChecks (sparse gradient operator + exact bounds that skip tets) against the plain
-    element_checks, from small strain to many inverted tets, with and without a selection."""
+    """flexsheet.fem.deformation_checks.TetChecks (sparse gradient operator + exact bounds that skip tets)
+    against the plain element_checks, from small strain to many inverted tets, with and without a
+    selection."""
     from flexsheet.fem.deformation_checks import TetChecks, element_checks
 
     sc = load_scene(SCENES_DIR / "sphere.yaml")
@@ -35,8 +36,8 @@ def test_tet_checks_equal_element_checks_on_random_deformations():
 
 
 def test_fold_operator_counts_the_faces_np_cross_finds_folded():
-    """flexsheet.fem.deformation_checks.fold_operator ((e1 × e2)·n0 as a sparse product) against np.cross on random moves of
-    the sphere's surface, from none folded to many."""
+    """flexsheet.fem.deformation_checks.fold_operator ((e1 × e2)·n0 as a sparse product) against np.cross on
+    random moves of the sphere's surface, from none folded to many."""
     from flexsheet.fem.deformation_checks import fold_operator
 
     m = scene_mesh(load_scene(SCENES_DIR / "sphere.yaml"), MeshSpec(0.02, 0.02, 0.0)).mesh

@@ -1,5 +1,5 @@
-"""The FEM's judge (flexsheet/fem/eye_judge.py) against closed forms: shape against sliding, each eye's outline,
-the dent's gap to the fingertip, and frame-to-frame jumps, in projector pixels."""
+"""The FEM's judge (flexsheet/fem/eye_judge.py) against closed forms: shape against sliding, each eye's
+outline, the dent's gap to the fingertip, and frame-to-frame jumps, in projector pixels."""
 
 import types
 
@@ -64,7 +64,8 @@ def test_the_interpolated_outline_is_the_tangent_cone():
     assert len(seg) > 100
     # on the sphere (within the chord's sagitta) and tangent to the ray: (T − C)·(T − E) = 0
     assert np.abs(np.linalg.norm(seg - c, axis=1) - 0.035).max() < 3e-4
-    cosang = np.einsum("ij,ij->i", seg - c, seg - e) / (np.linalg.norm(seg - c, axis=1) * np.linalg.norm(seg - e, axis=1))
+    cosang = (np.einsum("ij,ij->i", seg - c, seg - e)
+              / (np.linalg.norm(seg - c, axis=1) * np.linalg.norm(seg - e, axis=1)))
     assert np.abs(cosang).max() < 0.02
 
 
@@ -106,7 +107,7 @@ def test_a_jump_between_frames_is_seen_and_a_smooth_motion_is_not():
     j = frame_jumps(jumped, faces)
     assert j.argmax() == 4                                    # the change 5 → 6 (jumps start at change 1 → 2)
     assert j.max() == pytest.approx(1.0, rel=1e-6)            # 0.7 mm on the screen plane: 1 px
-    assert np.delete(j, [3, 4, 5]).max() < 1e-9               # the neighbours see half of it, the rest nothing
+    assert np.delete(j, [3, 4, 5]).max() < 1e-9  # the neighbours see half of it, the rest nothing
 
 
 def test_bad_input_names_the_field():

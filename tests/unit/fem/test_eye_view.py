@@ -14,7 +14,8 @@ V = geometry.EYE
 
 
 def visible_px_error(model, ref, faces, eye_pair=None):
-    """The vertex-to-vertex figure (``total_px``) of :func:`flexsheet.fem.eye_judge.judge` and the seen count."""
+    """The vertex-to-vertex figure (``total_px``) of :func:`flexsheet.fem.eye_judge.judge` and the seen
+    count."""
     out, k = judge([model], ref, faces, eye_pair=eye_pair, silhouette=False)
     return out[0]["total_px"], k
 
@@ -45,7 +46,8 @@ def test_the_finger_hides_its_shadow_and_nothing_else():
     assert np.allclose(b - a, [FINGER_LENGTH, 0.0, 0.0]) and r == 0.008
     vis = seen(pts, faces, V, (a, b, r))
     lat = np.hypot(pts[:, 1], pts[:, 2])
-    # the capsule's far end (x = 88 mm) casts the widest shadow: r * 0.4 / (0.4 - 0.088) = 10.3 mm on the plane
+    # the capsule's far end (x = 88 mm) casts the widest
+    # shadow: r * 0.4 / (0.4 - 0.088) = 10.3 mm on the plane
     assert not vis[lat < 0.0079].any()
     assert vis[lat > 0.0106].all()
     assert 0 < (~vis).sum() < 0.05 * len(pts)

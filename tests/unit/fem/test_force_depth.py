@@ -38,7 +38,8 @@ def test_the_organ_table_is_stiffer_over_its_tumour_and_hertz_is_not_claimed_the
 def test_contact_fit_replaces_only_the_unsolved_shallow_part():
     d = np.arange(0.0, 0.0101, 0.0005)
     f = 2000.0 * d ** 1.5
-    f[(d > 0) & (d < SOLVED_FROM)] = 2000.0 * SOLVED_FROM ** 1.5 * d[(d > 0) & (d < SOLVED_FROM)] / SOLVED_FROM
+    f[(d > 0) & (d < SOLVED_FROM)] = (2000.0 * SOLVED_FROM ** 1.5 * d[(d > 0) & (d < SOLVED_FROM)]
+                                      / SOLVED_FROM)
     fit, c = contact_fit(d, f)
     assert c == pytest.approx(2000.0, rel=1e-9) and np.allclose(fit, 2000.0 * d ** 1.5)
     with pytest.raises(ValueError, match="depth"):

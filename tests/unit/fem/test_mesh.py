@@ -1,5 +1,5 @@
-"""The cylinder's tetrahedral mesh (flexsheet/fem/mesh.py): closed, outward, supported on its back half; its spec
-refuses bad values; it round-trips through meshio."""
+"""The cylinder's tetrahedral mesh (flexsheet/fem/mesh.py): closed, outward, supported on its back half; its
+spec refuses bad values; it round-trips through meshio."""
 
 import math
 

@@ -1,10 +1,10 @@
-"""A scene's nonlinear path table (flexsheet/fem/path_snapshots.py): the served surface is the stations' solved
-states (the linear model's station solve plus the table's correction), each moved and turned with the contact,
-bilinear along the stroke and in depth, with the force and stiffness the linear solve of the push scaled by the
-table's ratios; outside the table (off the stroke, deeper) the linear model; bad tables are refused naming the
-field; the shipped tables fit a fresh mesh; each station's state moves with the contact (a bump that travels
-along the stroke is served where the finger is, not as two half bumps at the stations) and turns with the
-surface's normal. The model (fixture ``model``) is tests/unit/conftest.py's."""
+"""A scene's nonlinear path table (flexsheet/fem/path_snapshots.py): the served surface is the stations'
+solved states (the linear model's station solve plus the table's correction), each moved and turned with the
+contact, bilinear along the stroke and in depth, with the force and stiffness the linear solve of the push
+scaled by the table's ratios; outside the table (off the stroke, deeper) the linear model; bad tables are
+refused naming the field; the shipped tables fit a fresh mesh; each station's state moves with the contact (a
+bump that travels along the stroke is served where the finger is, not as two half bumps at the stations) and
+turns with the surface's normal. The model (fixture ``model``) is tests/unit/conftest.py's."""
 
 from __future__ import annotations
 
@@ -46,8 +46,8 @@ def _table(m: SceneModel) -> dict:
 
 
 def _moved(m: SceneModel, field: np.ndarray, p_f, n_f, p_s, n_s) -> np.ndarray:
-    """``field`` (S, 3) of a station at (``p_s``, ``n_s``) moved to the push at (``p_f``, ``n_f``): vertex v takes
-    R·field at the rest-surface point nearest p_s + Rᵀ(v − p_f), R the least rotation n_s → n_f (scipy's
+    """``field`` (S, 3) of a station at (``p_s``, ``n_s``) moved to the push at (``p_f``, ``n_f``): vertex v
+    takes R·field at the rest-surface point nearest p_s + Rᵀ(v − p_f), R the least rotation n_s → n_f (scipy's
     ``align_vectors``; the module doc's move, here exact rather than at the model's sub-fractions)."""
     import trimesh
     from scipy.spatial.transform import Rotation
@@ -61,16 +61,18 @@ def _moved(m: SceneModel, field: np.ndarray, p_f, n_f, p_s, n_s) -> np.ndarray:
 
 
 def _state(m: SceneModel, i: int, j: int) -> np.ndarray:
-    """Station i's solved state at table depth j: the linear model's solve of that push plus the correction."""
+    """Station i's solved state at table depth j: the linear model's solve of that push plus the
+    correction."""
     q, n = m.scene.stroke_at([FRACTIONS[i]])
-    lin = m.surface_displacement(finger_on_scene(q[0], n[0], float(DEPTHS[j]), m.finger_radius))[0] if j else 0.0
+    lin = (m.surface_displacement(finger_on_scene(q[0], n[0], float(DEPTHS[j]), m.finger_radius))[0] if j
+           else 0.0)
     return lin + _field(m, i, j)
 
 
 def test_served_surface_is_the_stations_states_moved_and_turned_with_the_contact(model):
     m = model
     m.path_table = None
-    q, n = m.scene.stroke_at([0.75])                     # between stations 0.5 and 1.0, between depths 2 and 4 mm
+    q, n = m.scene.stroke_at([0.75])  # between stations 0.5 and 1.0, between depths 2 and 4 mm
     fg = finger_on_scene(q[0], n[0], 0.003, m.finger_radius)
     lin = m.update_finger(fg)
     assert lin.method == "condensed"
@@ -92,18 +94,20 @@ def test_served_surface_is_the_stations_states_moved_and_turned_with_the_contact
         rel = m.rest_vertices + want - fg.center
         dist = np.linalg.norm(rel, axis=1)
         inside = dist < fg.radius
-        assert 0 < inside.sum() < 0.5 * len(inside)                      # this closed-form field enters the finger
+        assert 0 < inside.sum() < 0.5 * len(inside)  # this closed-form field enters the finger
         on = m.rest_vertices[inside] + got[inside] - fg.center
         assert np.abs(np.linalg.norm(on, axis=1) - fg.radius).max() < 1e-6
         assert np.abs(on / fg.radius - rel[inside] / dist[inside, None]).max() < 2e-4
         err = np.abs(got - want)[~inside].max()
         # the model blends moves precomputed at sub-fractions <= 1 mm of path apart (here 0.62 mm) and float32
-        # states; the exact move differs from it by the piecewise-linear field's change over part of a sub-step
+        # states; the exact move differs from it by the
+        # piecewise-linear field's change over part of a sub-step
         assert err < 2e-6, err
         unmoved = (1 - a) * c1 + a * c2
         unmoved[held] = 0.0
         assert np.abs(got - unmoved).max() > 5 * err, (np.abs(got - unmoved).max(), err)   # it did move
-        unturned = (1 - a) * _moved(m, c1, p[0], nn[1], p[1], nn[1]) + a * _moved(m, c2, p[0], nn[2], p[2], nn[2])
+        unturned = ((1 - a) * _moved(m, c1, p[0], nn[1], p[1], nn[1])
+                    + a * _moved(m, c2, p[0], nn[2], p[2], nn[2]))
         unturned[held] = 0.0
         assert np.abs(got - unturned).max() > 5 * err, (np.abs(got - unturned).max(), err)  # and turned
         assert np.abs(want).max() > 5e-4                                 # the state is not nothing
@@ -122,7 +126,7 @@ def test_served_surface_is_the_stations_states_moved_and_turned_with_the_contact
         m.path_table = keep
         w = _field(m, 1, 2)
         w[held] = 0.0
-        out = np.linalg.norm(base.vertices + w - fg1.center, axis=1) >= fg1.radius    # (inside: on the sphere)
+        out = np.linalg.norm(base.vertices + w - fg1.center, axis=1) >= fg1.radius  # (inside: on the sphere)
         assert np.abs((at.vertices.astype(float) - base.vertices) - w)[out].max() < 2e-7
     finally:
         m.path_table = None
@@ -213,10 +217,10 @@ def test_stiffness_from_force_is_second_order_on_a_power_law():
 
 @pytest.mark.parametrize("name, stations", [("rounded_box", 13), ("organ", 7)])
 def test_the_shipped_path_tables_are_found_under_their_keys_and_fit_a_fresh_mesh(name, stations):
-    """The FEM node on rounded_box.yaml and organ.yaml finds the shipped path table
-    (flexsheet/fem/data) under its key, and the table's rendered vertices are exactly the boundary corner nodes of the
-    scene's mesh meshed anew here (gmsh is deterministic for one version: a table on another mesh would be
-    refused at attach time)."""
+    """The FEM node on rounded_box.yaml and organ.yaml finds the shipped path table (flexsheet/fem/data) under
+    its key, and the table's rendered vertices are exactly the boundary corner nodes of the scene's mesh
+    meshed anew here (gmsh is deterministic for one version: a table on another mesh would be refused at
+    attach time)."""
     from flexsheet.fem.scene_mesh import DEFAULT_SCENE_SPEC, scene_mesh
     from flexsheet.fem.scene_model import scene_cache_key
 
@@ -267,7 +271,8 @@ def _flat_bump_table():
 
 
 def _flat(table, v, faces, path, pf) -> PathSnapshotModel:
-    """The flat table's model: normals +z along the path, the linear solves zero (the states are the bumps)."""
+    """The flat table's model: normals +z along the path, the linear solves zero (the states are the
+    bumps)."""
     return PathSnapshotModel(table, v, faces, path, np.tile([0.0, 0.0, 1.0], (len(path), 1)), pf,
                              np.zeros(table["correction"].shape))
 
@@ -275,8 +280,8 @@ def _flat(table, v, faces, path, pf) -> PathSnapshotModel:
 def test_a_station_state_moves_with_the_contact_along_the_stroke():
     """Between stations the served state is the bump where the finger is (within the 1 mm grid's linear
     interpolation: measured 0.1 % on a sub-fraction, 1.5 % between them), where a fixed-vertex blend
-    gives two half bumps (79 % of the height off at the finger); at a station it is the station's, exactly; along
-    the stroke it changes smoothly (no jump at the sub-fractions or the stations)."""
+    gives two half bumps (79 % of the height off at the finger); at a station it is the station's, exactly;
+    along the stroke it changes smoothly (no jump at the sub-fractions or the stations)."""
     table, v, faces, path, pf, bump, A = _flat_bump_table()
     pm = _flat(table, v, faces, path, pf)
     for f in (0.25, 0.275, 0.6, 0.83):                  # on a sub-fraction (x = 5 mm) and between them
@@ -300,7 +305,8 @@ def test_a_station_state_turns_with_the_normal_around_a_curved_stroke():
     """On a cylinder (R 20 mm, axis y) with a stroke around it and stations at 0°, 20°, 40°, each station's
     state a dent along its own inward normal (A 5 mm, σ 4 mm): between stations the served dent is the dent
     where the finger is, within 2 % of A at every vertex (measured 1.3–1.7 % at 5°, 10°, 15°, 30°, the 1 mm
-    grid's interpolation); moved without the turn (translated along the chord, vectors kept) it is 2.7–3.1 %."""
+    grid's interpolation); moved without the turn (translated along the chord, vectors kept) it is 2.7–3.1
+    %."""
     R0, A, sig = 0.020, 0.005, 0.004
     th, ys = np.radians(np.arange(-30.0, 90.5, 1.0)), np.arange(-0.012, 0.0125, 0.0005)
     gt, gy = np.meshgrid(th, ys, indexing="ij")

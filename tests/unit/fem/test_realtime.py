@@ -1,5 +1,6 @@
-"""The cylinder's real-time model (flexsheet/fem/realtime.py): bad fingertips raise and the model keeps working,
-the cache, deep pushes flagged, the single-precision update and near checks, sticky contact, the nonlinear table."""
+"""The cylinder's real-time model (flexsheet/fem/realtime.py): bad fingertips raise and the model keeps
+working, the cache, deep pushes flagged, the single-precision update and near checks, sticky contact, the
+nonlinear table."""
 
 import numpy as np
 import pytest
@@ -47,10 +48,11 @@ def test_deep_push_is_flagged_never_garbage(p1):
 
 
 def test_single_precision_update_and_near_checks_match_the_full_ones(tmp_path):
-    """The cylinder's update runs the condensed solve in float32 and checks only the monitor tets near the finger
-    (as the scenes' does): displacements within 1 µm of the float64 solver of the cached (float64) Green's
-    functions, and the same largest strain and inverted count as checking every monitor tet, at depths where
-    linear is valid and where it inverts elements, with the near set leaving tets out where it inverts."""
+    """The cylinder's update runs the condensed solve in float32 and checks only the monitor tets near the
+    finger (as the scenes' does): displacements within 1 µm of the float64 solver of the cached (float64)
+    Green's functions, and the same largest strain and inverted count as checking every monitor tet, at depths
+    where linear is valid and where it inverts elements, with the near set leaving tets out where it
+    inverts."""
     rm = RealtimeModel(MeshSpec(0.012, 0.006, 0.012, 60.0), MAT, order=2, cache_dir=str(tmp_path))
     assert rm.solver.G_co.dtype == np.float32
     z = rm.cache.load("capacitance", rm.cache_key)
@@ -61,7 +63,8 @@ def test_single_precision_update_and_near_checks_match_the_full_ones(tmp_path):
     for ang in (0.0, -0.8):
         for d in (0.005, 0.02, 0.03, 0.04):
             fg = finger_at(ang, d, 0.008, rm.mesh.radius, rm.mesh.center)
-            assert np.allclose(fg.center + fg.direction * (fg.radius - fg.depth), fg.contact_point, atol=1e-12)
+            assert np.allclose(fg.center + fg.direction * (fg.radius - fg.depth), fg.contact_point,
+                               atol=1e-12)
             u32, u64 = rm.solver.solve(fg).u, s64.solve(fg).u
             assert np.abs(u32 - u64).max() < 1e-6 and np.abs(u64).max() > 0.5 * d
             near, full = rm._checks(fg, u64), tc(u64)

@@ -1,5 +1,5 @@
-"""Any scene meshed (flexsheet/fem/scene_mesh.py): gmsh meshes every shipped scene into valid tets with its support
-and material, and the sphere's mesh volume converges to the analytic one."""
+"""Any scene meshed (flexsheet/fem/scene_mesh.py): gmsh meshes every shipped scene into valid tets with its
+support and material, and the sphere's mesh volume converges to the analytic one."""
 
 from __future__ import annotations
 
@@ -62,7 +62,8 @@ def test_sphere_mesh_volume_converges_to_the_analytic_volume():
 @pytest.mark.parametrize("name", ["sphere", "cylinder", "rounded_box"])
 def test_the_support_rim_is_a_mesh_line_when_asked(name):
     """rim=True (the references): every held surface node that shares a triangle with a free one lies on the
-    support's plane, refined to h_fine along it; without it a back-half's held-to-free step falls between nodes."""
+    support's plane, refined to h_fine along it; without it a back-half's held-to-free step falls between
+    nodes."""
     from flexsheet.fem.mesh import surface_faces
     from flexsheet.fem.scene_mesh import support_plane
 
@@ -86,5 +87,5 @@ def test_the_support_rim_is_a_mesh_line_when_asked(name):
     d_off, _ = rim_offsets(scene_mesh(sc, spec).mesh)
     if sc.support.kind == "back_half":                 # node selection: the step lies up to an element away
         assert d_off.max() > 1e-3
-    else:                                              # the box's held back face: its edges, within the tolerance
+    else:  # the box's held back face: its edges, within the tolerance
         assert d_off.max() <= sc.support.tolerance + 1e-9

@@ -1,6 +1,6 @@
-"""The FEM on any scene, in real time (flexsheet/fem/scene_model.py): the update equals the full solve and names
-its scene, the organ's update equals a dense float64 solve of the same system with the same verdicts, bad input
-gives clear errors, and the path table is found under the node's key."""
+"""The FEM on any scene, in real time (flexsheet/fem/scene_model.py): the update equals the full solve and
+names its scene, the organ's update equals a dense float64 solve of the same system with the same verdicts,
+bad input gives clear errors, and the path table is found under the node's key."""
 
 from __future__ import annotations
 
@@ -34,7 +34,8 @@ def test_scene_model_realtime_matches_the_full_solve_and_names_its_scene(tmp_pat
     u = m.update(tip)
     assert u.valid and u.method == "condensed" and abs(u.depth - 0.004) < 2e-4
     ref = solve_full(m.model, m.finger(tip))
-    assert abs(u.force - ref.force) < 1e-9 + 1e-6 * ref.force and abs(u.stiffness - ref.stiffness) < 1e-6 * ref.stiffness
+    assert (abs(u.force - ref.force) < 1e-9 + 1e-6 * ref.force
+            and abs(u.stiffness - ref.stiffness) < 1e-6 * ref.stiffness)
     us = u.vertices - m.rest_vertices
     assert np.allclose(us, ref.u[m.surface_nodes], atol=1e-7)
     # the vertex under the finger moved by about the depth, into the body
@@ -137,7 +138,8 @@ def test_organ_realtime_update_equals_a_dense_float64_solve_of_the_same_system()
             err = float(np.abs(us - us_ref).max())
             worst = max(worst, err)
             assert err < 1e-7, (i, d, err)
-            assert abs(F - force) <= 1e-6 * force and abs(K - stiff) <= 1e-6 * stiff, (i, d, F, force, K, stiff)
+            assert (abs(F - force) <= 1e-6 * force and abs(K - stiff) <= 1e-6 * stiff), (i, d, F, force, K,
+                                                                                         stiff)
             up = rt.update_finger(fg)
             if d < STIFFNESS_FLOOR:                    # a light touch reports the 0.5 mm press's dF/dd
                 stiff = _dense_condensed(z, finger_on_scene(q[i], n[i], STIFFNESS_FLOOR, rt.finger_radius))[2]
@@ -150,8 +152,10 @@ def test_organ_realtime_update_equals_a_dense_float64_solve_of_the_same_system()
             x = rest + us_ref
             nn = np.cross(x[rt.faces[:, 1]] - x[rt.faces[:, 0]], x[rt.faces[:, 2]] - x[rt.faces[:, 0]])
             folded = int(np.count_nonzero(np.einsum("ij,ij->i", nn, n0) <= 0.0))
-            assert up.inverted == inv and abs(up.max_strain - strain) <= 1e-5 * strain, (i, d, up, strain, inv)
-            assert up.valid == (folded == 0) and (up.status == "ok") == (folded == 0 and inv == 0 and strain <= 1.0)
+            assert (up.inverted == inv and abs(up.max_strain - strain) <= 1e-5 * strain), (i, d, up, strain,
+                                                                                           inv)
+            assert (up.valid == (folded == 0)
+                    and (up.status == "ok") == (folded == 0 and inv == 0 and strain <= 1.0))
             if folded:
                 assert up.status == f"linear_invalid:folded_surface={folded}"
             else:

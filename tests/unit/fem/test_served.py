@@ -1,5 +1,5 @@
-"""The one way the FEM node's model is built (flexsheet.fem.served): every object is a scene file whose material
-and finger the model takes; the paper's cylinder on its own mesh with its snapshot table."""
+"""The one way the FEM node's model is built (flexsheet.fem.served): every object is a scene file whose
+material and finger the model takes; the paper's cylinder on its own mesh with its snapshot table."""
 
 import dataclasses
 
@@ -49,7 +49,8 @@ def test_the_cylinder_scene_gets_its_shipped_table_and_a_missing_one_is_named():
     m, _ = build_model(neo, COARSE)
     t = attach_table(m, neo, dataclasses.replace(COARSE, model="snapshots"))
     assert t.missing and t.where is None and m.snapshots is None
-    assert "--node-table --nu 0.45 --Jm inf" in t.message and t.what == "linear P1 cylinder model (no snapshot table stored)"
+    assert ("--node-table --nu 0.45 --Jm inf" in t.message
+            and t.what == "linear P1 cylinder model (no snapshot table stored)")
 
 
 def test_only_the_paper_cylinder_as_shipped_uses_the_cylinder_mesh():

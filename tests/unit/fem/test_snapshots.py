@@ -11,13 +11,14 @@ from flexsheet.fem.cache import ArrayCache
 from flexsheet.fem.material import Material
 from flexsheet.fem.snapshots import TABLE_VERSION, SnapshotGrid, SnapshotModel
 
-# ---- snapshot look-up: an analytic rotation-covariant table must be reproduced exactly ----------------------------
+# ---- snapshot look-up: an analytic rotation-covariant table must be reproduced exactly ---------------------
 R, L, C = 0.035, 0.12, np.array([-0.035, 0.0, 0.0])
 
 
 def _analytic_table(angles_deg, depths):
-    """A table whose field, for a push at φ, is the rigid rotation by φ of f(θ − φ, y) (exactly what the cylinder's
-    symmetry gives without the support), f linear in θ and y on the grid so bilinear look-up is exact."""
+    """A table whose field, for a push at φ, is the rigid rotation by φ of f(θ − φ, y) (exactly what the
+    cylinder's symmetry gives without the support), f linear in θ and y on the grid so bilinear look-up is
+    exact."""
     g = SnapshotGrid(tuple(angles_deg), depths[-1], depths[1] - depths[0], 1.0, 0.001, 0.002)
     th, ys, rh = g.thetas(), g.ys(L / 2), g.rhos(R)
     a = np.radians(angles_deg)
@@ -26,7 +27,8 @@ def _analytic_table(angles_deg, depths):
     for i, ai in enumerate(a):
         for j, d in enumerate(depths):
             rel = th - ai                                                # relative azimuth
-            fr = d * (1.0 + 0.3 * rel)[:, None] * (1.0 - ys / L)[None, :]  # radial component in the rotated frame
+            # radial component in the rotated frame
+            fr = d * (1.0 + 0.3 * rel)[:, None] * (1.0 - ys / L)[None, :]
             ft = d * 0.2 * rel[:, None] * np.ones_like(ys)[None, :]        # tangential
             # display-frame components of (radial, tangential) at azimuth θ
             side[i, j, :, :, 0] = fr * np.cos(th)[:, None] - ft * np.sin(th)[:, None]
@@ -34,8 +36,10 @@ def _analytic_table(angles_deg, depths):
             side[i, j, :, :, 1] = d * 0.1 * ys[None, :] / L * np.ones_like(rel)[:, None]
     return {"version": np.array(TABLE_VERSION), "E": np.array(1e4), "angles": a, "depths": np.asarray(depths),
             "theta": th, "y": ys, "rho": rh, "side": side, "cap": cap,
-            "force": np.outer(np.ones(len(a)), 100.0 * np.asarray(depths)), "max_strain": np.zeros((len(a), len(depths))),
-            "inverted": np.zeros((len(a), len(depths)), np.int64), "radius": np.array(R), "length": np.array(L),
+            "force": np.outer(np.ones(len(a)), 100.0 * np.asarray(depths)),
+            "max_strain": np.zeros((len(a), len(depths))),
+            "inverted": np.zeros((len(a), len(depths)), np.int64), "radius": np.array(R),
+            "length": np.array(L),
             "center": C}
 
 
@@ -53,7 +57,8 @@ def test_snapshot_lookup_rotates_with_the_finger_and_mirrors():
         rel = tt - s
         fr = d * (1.0 + 0.3 * rel) * (1.0 - np.abs(ys) / L)
         ft = d * 0.2 * rel
-        ex = np.column_stack([fr * np.cos(tt) - ft * np.sin(tt), d * 0.1 * ys / L, fr * np.sin(tt) + ft * np.cos(tt)])
+        ex = np.column_stack([fr * np.cos(tt) - ft * np.sin(tt), d * 0.1 * ys / L,
+                              fr * np.sin(tt) + ft * np.cos(tt)])
         if phi < 0:
             ex[:, 2] *= -1.0
         assert np.abs(u - ex).max() < 1e-6 * d / 0.01, (phi_deg, np.abs(u - ex).max())
@@ -77,13 +82,13 @@ def test_snapshot_lookup_rejects_outside_and_bad_input():
 
 def test_shipped_node_table_is_the_default_scenes_and_stiffens_from_hertz():
     """The FEM node's snapshot table for the default scene (the paper's cylinder, Gent Jm 97.2) ships in
-    flexsheet/fem/data under the key the node looks up (gmsh's version is in the key: a machine with another gmsh
-    would fall back to the linear model). Its forces, checked against a closed form and not against the
+    flexsheet/fem/data under the key the node looks up (gmsh's version is in the key: a machine with another
+    gmsh would fall back to the linear model). Its forces, checked against a closed form and not against the
     reference they came from: at a 2.5 mm push Hertz's sphere (8 mm) on the cylinder (R 35.4 mm), F = 4/3 E*
     √R_e d^1.5 with R_e = √(R′R″), R′ = (1/r + 1/R)⁻¹, R″ = r (Johnson, Contact Mechanics, §4.2), within 15 %
     at every azimuth (a finite body held on its back half is a little stiffer than a half-space); the force
-    rises with every depth and stiffens (dF/dd over the last 2.5 mm step more than twice the first step's; Hertz's
-    d^1.5 alone gives √13 ≈ 3.6 between those steps' midpoints)."""
+    rises with every depth and stiffens (dF/dd over the last 2.5 mm step more than twice the first step's;
+    Hertz's d^1.5 alone gives √13 ≈ 3.6 between those steps' midpoints)."""
     from flexsheet.fem.snapshots import DEFAULT_GRID, DEFAULT_REF_SPEC, table_key
     from flexsheet.model.scenes import SCENES_DIR, load_scene
 

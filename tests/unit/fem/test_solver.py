@@ -81,7 +81,8 @@ def test_force_is_mirror_symmetric_and_normal(mesh, p1, p2):
     the +/- angle forces of the P2 model agree within 5 %, and a central push has no lateral force."""
     from flexsheet.fem.mesh import finish_cylinder_mesh
 
-    mirrored = finish_cylinder_mesh(mesh.points * np.array([1.0, 1.0, -1.0]), mesh.tets, mesh.radius, mesh.length,
+    mirrored = finish_cylinder_mesh(mesh.points * np.array([1.0, 1.0, -1.0]), mesh.tets, mesh.radius,
+                                    mesh.length,
                                     mesh.center, mesh.spec)
     pm = FemModel(mirrored, MAT, order=1)
     a = solve_full(p1, finger_at(0.3, 0.006, 0.008, mesh.radius, mesh.center))
@@ -107,7 +108,8 @@ def test_zero_depth_gives_zero_force(p1):
 
 def test_force_grows_with_depth_and_is_linear_for_fixed_contact_set(p1):
     m = p1
-    F = [solve_full(m, finger_at(0.0, d, 0.008, m.mesh.radius, m.mesh.center)).force for d in (0.002, 0.004, 0.008)]
+    F = [solve_full(m, finger_at(0.0, d, 0.008, m.mesh.radius, m.mesh.center)).force
+         for d in (0.002, 0.004, 0.008)]
     assert F[0] < F[1] < F[2]
 
 
@@ -174,7 +176,8 @@ def test_organ_is_stiffer_over_its_inclusion_than_away_from_it():
     inc = np.asarray(sc.inclusions[0].center)
     pts, nrm = sc.stroke_points(64)
     i_over = int(np.argmin(np.linalg.norm(pts - inc, axis=1)))
-    i_away = int(np.argmin(np.abs(np.linalg.norm(pts - pts[i_over], axis=1) - 0.025) + (pts[:, 1] > inc[1]) * 1.0))
+    i_away = int(np.argmin(np.abs(np.linalg.norm(pts - pts[i_over], axis=1) - 0.025)
+                           + (pts[:, 1] > inc[1]) * 1.0))
     assert np.linalg.norm(pts[i_away] - inc) > 0.025
     k = {}
     for label, s in (("tumour", sc), ("bare", bare)):

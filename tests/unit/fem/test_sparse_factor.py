@@ -1,4 +1,5 @@
-"""The one sparse Cholesky (flexsheet/fem/sparse_factor.py) of the linear model and the nonlinear reference."""
+"""The one sparse Cholesky (flexsheet/fem/sparse_factor.py) of the linear model and the nonlinear
+reference."""
 
 import numpy as np
 import pytest
@@ -23,7 +24,8 @@ def test_cholesky_solves_spd_systems_and_refuses_an_indefinite_matrix_without_ke
     bad = (lap - 0.2 * sp.identity(n)).tocsr()          # smallest eigenvalue 0.05 - 0.2 < 0
     with pytest.raises(NotPositiveDefinite) as err:
         factor(bad, "cholmod")
-    assert err.value.__context__ is None and err.value.__cause__ is None     # nothing refers to the failed factor
+    # nothing refers to the failed factor
+    assert err.value.__context__ is None and err.value.__cause__ is None
     assert cholesky_or_none(bad) is None
     fac = cholesky_or_none(lap)
     assert np.abs(lap @ fac.solve(b[:, 1]) - b[:, 1]).max() < 1e-10

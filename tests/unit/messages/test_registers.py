@@ -1,5 +1,5 @@
-"""The register map (messages.registers): signed 32-bit fixed point over two registers, word order, limits, the
-command word and the input image's checks."""
+"""The register map (messages.registers): signed 32-bit fixed point over two registers, word order, limits,
+the command word and the input image's checks."""
 
 import math
 

@@ -12,7 +12,8 @@ D = np.linspace(0.0, 0.02, 41)
 
 
 def _table(c=(1000.0, 1000.0, 2000.0)) -> ForceDepth:
-    """Three points 10 mm apart along +z with F = c·d^1.5 each (the middle one a stiff 'inclusion' when c differs)."""
+    """Three points 10 mm apart along +z with F = c·d^1.5 each (the middle one a stiff 'inclusion' when c
+    differs)."""
     P = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.01], [0.0, 0.0, 0.02]])
     F = np.array([ci * D ** 1.5 for ci in c])
     return ForceDepth(P, np.tile([1.0, 0.0, 0.0], (3, 1)), ("reference", "a", "b"), D, F, "key")
@@ -23,7 +24,8 @@ def test_lookup_interpolates_along_the_stroke_and_in_depth_and_extrapolates_past
     d = 0.0075
     assert t.force_at([0.0, 0.0, 0.0], d) == pytest.approx(1000 * d ** 1.5, rel=0.01)
     assert t.force_at([0.0, 0.0, 0.005], d) == pytest.approx(1500 * d ** 1.5, rel=0.01)   # half-way
-    assert t.force_at([0.003, 0.0, 0.015], d) == pytest.approx(2000 * d ** 1.5, rel=0.01)  # 3 mm off the stroke
+    # 3 mm off the stroke
+    assert t.force_at([0.003, 0.0, 0.015], d) == pytest.approx(2000 * d ** 1.5, rel=0.01)
     slope = 1000 * (D[-1] ** 1.5 - D[-2] ** 1.5) / (D[-1] - D[-2])
     assert t.force_at([0.0, 0.0, 0.0], 0.03) == pytest.approx(1000 * 0.02 ** 1.5 + slope * 0.01, rel=1e-9)
     assert t.force_at([0.0, 0.0, 0.0], 0.0) == 0.0
@@ -39,7 +41,8 @@ def test_mapping_keeps_ratios_at_gain_one_and_raises_contrast_keeping_order_abov
     assert kb == pytest.approx(0.5 * 1.5 * 1000 * d ** 0.5, rel=1e-3)      # dF/dd of c·d^1.5
     gi, _ = t.mapped(q_inc, d, 0.5, gain=2.5)
     gb, _ = t.mapped(q_body, d, 0.5, gain=2.5)
-    assert gi / gb == pytest.approx(2.0 ** 2.5, rel=1e-6) and gb == pytest.approx(fb, rel=1e-6)  # body = median
+    # body = median
+    assert gi / gb == pytest.approx(2.0 ** 2.5, rel=1e-6) and gb == pytest.approx(fb, rel=1e-6)
 
 
 def test_scene_scale_is_the_geometric_centre_of_the_range_that_fits_and_says_when_none_does():
@@ -79,6 +82,7 @@ def test_bad_lookups_and_mappings_are_refused():
         t.mapped([0, 0, 0], 0.001, 0.0)
     with pytest.raises(ValueError, match="contrast_gain"):
         t.mapped([0, 0, 0], 0.001, 1.0, gain=float("inf"))
-    assert ForceDepth.from_json(t.to_json()).force_at([0, 0, 0.01], 0.005) == pytest.approx(t.force_at([0, 0, 0.01], 0.005))
+    assert (ForceDepth.from_json(t.to_json()).force_at([0, 0, 0.01], 0.005)
+            == pytest.approx(t.force_at([0, 0, 0.01], 0.005)))
     with pytest.raises(ValueError, match="malformed"):
         ForceDepth.from_json({"points": []})

@@ -19,4 +19,5 @@ def test_organ_mesh_is_closed_small_and_reproducible():
     from flexsheet.model.organ_mesh import kidney_mesh
 
     g = kidney_mesh()
-    assert len(g.vertices) == len(m.vertices) and np.abs(np.sort(g.vertices, 0) - np.sort(m.vertices, 0)).max() < 1e-5
+    assert (len(g.vertices) == len(m.vertices)
+            and np.abs(np.sort(g.vertices, 0) - np.sort(m.vertices, 0)).max() < 1e-5)

@@ -57,7 +57,8 @@ def test_cylinder_scene_is_the_papers_cylinder(scenes):
     rho = np.hypot(v[:, 0] + 0.025 * math.sqrt(2), v[:, 2])
     side = np.abs(np.abs(v[:, 1]) - 0.060) > 1e-6
     assert np.abs(rho[side] - 0.025 * math.sqrt(2)).max() < 1e-7
-    assert v[:, 1].min() == pytest.approx(-0.060, abs=1e-7) and v[:, 1].max() == pytest.approx(0.060, abs=1e-7)
+    assert (v[:, 1].min() == pytest.approx(-0.060, abs=1e-7)
+            and v[:, 1].max() == pytest.approx(0.060, abs=1e-7))
     assert v[:, 0].max() == pytest.approx(0.0, abs=1e-7)                             # touches the home sheet
     m = trimesh.Trimesh(v, f)
     n = 96                                                                          # polygon area factor
@@ -70,7 +71,7 @@ def test_cylinder_scene_is_the_papers_cylinder(scenes):
 
 def test_cylinder_stroke_is_the_papers_arc(scenes):
     p, n = scenes["cylinder"].stroke_points(13)
-    phi = np.radians(np.linspace(0.0, 60.0, 13))                                    # evenly spaced by arc length
+    phi = np.radians(np.linspace(0.0, 60.0, 13))  # evenly spaced by arc length
     R = 0.025 * math.sqrt(2)
     want = np.column_stack([-R + R * np.cos(phi), np.zeros(13), R * np.sin(phi)])
     np.testing.assert_allclose(p, want, atol=1e-9)
@@ -88,7 +89,8 @@ def test_sphere_and_rounded_box_geometry(scenes):
     o = bx.object
     a, b, c = (2 * e - 2 * o.radius for e in o.half_extents)                        # inner box sizes
     rr = o.radius
-    vol = a * b * c + 2 * rr * (a * b + b * c + c * a) + math.pi * rr ** 2 * (a + b + c) + 4 / 3 * math.pi * rr ** 3
+    vol = (a * b * c + 2 * rr * (a * b + b * c + c * a) + math.pi * rr ** 2 * (a + b + c) + 4 / 3 * math.pi
+           * rr ** 3)
     v, f = bx.surface_mesh()
     m = trimesh.Trimesh(v.astype(float), f)
     assert m.volume == pytest.approx(vol, rel=2e-3)                                # Minkowski box + ball
@@ -117,10 +119,10 @@ def test_organ_inclusion_is_inside_and_under_the_stroke(scenes):
     assert sc.object.kind == "mesh" and isinstance(sc.shape(), shapes.MeshShape)
     (inc,) = sc.inclusions
     assert inc.E >= 5 * sc.material.E                                               # a stiff "tumour"
-    m = trimesh.load(str(SCENES_DIR / "kidney.obj"), force="mesh")                   # independent of the scene code
+    m = trimesh.load(str(SCENES_DIR / "kidney.obj"), force="mesh")  # independent of the scene code
     m.apply_translation(sc.object.pose.position)
     depth = float(trimesh.proximity.signed_distance(m, [inc.center])[0])            # trimesh: > 0 inside
-    assert depth > inc.radius + 0.003                                               # wholly inside, 3 mm spare
+    assert depth > inc.radius + 0.003  # wholly inside, 3 mm spare
     ball = np.asarray(inc.center) + inc.radius * trimesh.creation.icosphere(2).vertices
     assert m.contains(ball).all()
     E, _ = sc.material_at(np.array([inc.center, [-0.03, -0.03, 0.0]]))
@@ -218,14 +220,15 @@ def test_a_closed_stl_from_elsewhere_is_a_scene(tmp_path):
     box = trimesh.creation.box((50.0, 80.0, 40.0))                                 # a file in mm
     box.export(tmp_path / "block.stl")
     sc = parse_scene({"name": "block", "object": {"kind": "mesh", "file": "block.stl", "scale": 0.001,
-                                                  "pose": {"position": [-0.025, 0.0, 0.0], "rpy_deg": [0, 0, 90]}},
+                                                  "pose": {"position": [-0.025, 0.0, 0.0],
+                                                           "rpy_deg": [0, 0, 90]}},
                       "stroke": {"kind": "polyline", "points": [[0.03, -0.02, 0.0], [0.03, 0.02, 0.0]]}},
                      "<test>", tmp_path)
     v, _ = sc.surface_mesh()
     ext = v.max(0) - v.min(0)
     np.testing.assert_allclose(ext, [0.080, 0.050, 0.040], atol=1e-6)               # yawed 90°: x and y swap
     p, n = sc.stroke_points(5)
-    np.testing.assert_allclose(p[:, 0], 0.015, atol=1e-9)                           # front face x = -25 + 40 mm
+    np.testing.assert_allclose(p[:, 0], 0.015, atol=1e-9)  # front face x = -25 + 40 mm
     np.testing.assert_allclose(n, [[1.0, 0.0, 0.0]] * 5, atol=1e-6)
     assert sc.key() != load_scene(SCENES_DIR / "organ.yaml").key()
     inside = {"name": "block", "object": {"kind": "mesh", "file": "block.stl", "scale": 0.001,
@@ -236,8 +239,9 @@ def test_a_closed_stl_from_elsewhere_is_a_scene(tmp_path):
 
 
 def test_the_shipped_sphere_table_is_found_under_the_scene_key_and_the_contact_law_is_in_it(tmp_path):
-    # the default (frictionless) contact law is left out of Scene.key() (keys from before the field existed hold);
-    # the sphere's sticking law is in it, and its shipped table is the one the FEM node finds under that key
+    # the default (frictionless) contact law is left out of Scene.key() (keys
+    # from before the field existed hold); the sphere's sticking law is in
+    # it, and its shipped table is the one the FEM node finds under that key
     from flexsheet.fem.sphere_snapshots import sphere_table_key
 
     sphere = load_scene(SCENES_DIR / "sphere.yaml")
@@ -254,8 +258,8 @@ def test_the_shipped_sphere_table_is_found_under_the_scene_key_and_the_contact_l
 
 
 def test_every_shipped_scene_declares_its_depths_and_they_do_not_change_its_key(tmp_path):
-    """use.max_depth (the FEM's judged range, >= 15 mm) and use.stroke_depth, with the reason; neither is part of
-    the FEM's cache key, nor is the contact law's source."""
+    """use.max_depth (the FEM's judged range, >= 15 mm) and use.stroke_depth, with the reason; neither is part
+    of the FEM's cache key, nor is the contact law's source."""
     for name in ("cylinder", "sphere", "rounded_box", "organ"):
         sc = load_scene(SCENES_DIR / f"{name}.yaml")
         assert 0.015 <= sc.use.max_depth <= 0.06 and 0 < sc.use.stroke_depth <= sc.use.max_depth, name

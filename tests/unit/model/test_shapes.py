@@ -1,4 +1,5 @@
-"""Shapes (flexsheet.model.shapes): closest point, centre ray, geodesic length, singular and edge behaviour."""
+"""Shapes (flexsheet.model.shapes): closest point, centre ray, geodesic length, singular and edge
+behaviour."""
 
 import math
 

@@ -1,5 +1,6 @@
 """The sheet's geometry in one place (flexsheet.model.sheet): clamps ↔ sheet frame ↔ stretch, used by the
-planner, the world twin and the tension model; the arm bases defined once; the membrane's boundary conditions."""
+planner, the world twin and the tension model; the arm bases defined once; the membrane's boundary
+conditions."""
 
 from __future__ import annotations
 
@@ -30,7 +31,8 @@ def test_clamp_poses_place_the_edges_and_invert_to_the_sheet_frame():
     # 0.24 m sheet stretched 5 %: the clamped edges are 0.126 m either side of the centre along axis_u
     assert Tl[:3, 3] == pytest.approx([-0.01, 0.128, -0.02], abs=1e-15)
     assert Tr[:3, 3] == pytest.approx([-0.01, -0.124, -0.02], abs=1e-15)
-    assert Tl[:3, 0] == pytest.approx(N_TILT) and Tl[:3, 2] == pytest.approx([math.sin(TILT), 0.0, math.cos(TILT)])
+    assert (Tl[:3, 0] == pytest.approx(N_TILT)
+            and Tl[:3, 2] == pytest.approx([math.sin(TILT), 0.0, math.cos(TILT)]))
     origin, n, u, a = frame_from_clamps(Tl, Tr)
     assert origin == pytest.approx(o, abs=1e-15) and n == pytest.approx(N_TILT) and u == pytest.approx(Y)
     assert a == pytest.approx(0.126, abs=1e-15) and stretch_of_span(a) == pytest.approx(0.05, abs=1e-12)

@@ -4,13 +4,15 @@ three truth seeds (the sheet's E, thickness, pre-strain and grip slip differ per
 uniform pre-stress); a long gripped strip under a load across its width is the taut string; bad inputs are
 refused.
 
-At low stretch a deep, off-centre push into a sheet held at 1–2 % clamp strain (T ≈ 24–49 N/m) pulls the sheet in
-around the finger; the hoop stress of the plain membrane turns compressive there and its Newton iteration used to
-stall (the renderer's nominal tables at stretch 0.01 and 0.02 could not be built). With the tension-field
-relaxation (wrinkling) the solve converges, and the result is checked against physics that the solver does not
-impose: the finger reaches its depth, the force grows faster than the depth, a mirrored contact gives the mirrored
-sheet, the clamp nearer the finger is the steeper one, and no point of the relaxed membrane is in compression while
-the plain stress would be."""
+At low stretch a deep, off-centre push into a sheet held at 1–2 % clamp strain (T ≈ 24–49 N/m) pulls the sheet
+in around the finger; the hoop stress of the plain membrane turns compressive there and its Newton iteration
+used to stall (the renderer's nominal tables at stretch 0.01 and 0.02 could not be built). With the
+tension-field relaxation (wrinkling) the solve converges, and the result is checked against physics that the
+solver does not
+impose: the finger reaches its depth, the force grows faster than the depth, a mirrored contact gives the
+mirrored sheet, the clamp nearer the finger is the steeper one, and no point of the relaxed membrane is in
+compression
+while the plain stress would be."""
 
 from __future__ import annotations
 
@@ -39,7 +41,8 @@ def _phys(seed: int, stretch: float = 0.04) -> SheetPhysics:
 
 def _nominal(stretch: float) -> SheetPhysics:
     mat = SheetMaterial()
-    return SheetPhysics(half_span=clamp_half_span(stretch, mat.size), half_width=mat.size / 2, young=mat.young,
+    return SheetPhysics(half_span=clamp_half_span(stretch, mat.size), half_width=mat.size / 2,
+                        young=mat.young,
                         thickness=mat.thickness, tension_u=tension(stretch, mat))
 
 
@@ -64,9 +67,10 @@ def test_deep_push_near_a_clamp_converges_at_low_stretch(stretch):
     mirror = fem.solve_indent(list(DEPTHS), pu, -pv)
     F = np.array([s.force for s in sols])
     for s, m in zip(sols, mirror, strict=True):
-        assert s.residual < 1e-6 and s.penetration < 1e-4               # converged; the finger does not sink in
-        assert s.deflection(pu, pv) == pytest.approx(s.depth, abs=0.08 * s.depth)   # depth reached (12 mm mesh)
-        assert s.w.min() >= -1e-6 and s.w.max() <= 1.08 * s.depth       # pushed away from the user, nowhere deeper
+        assert s.residual < 1e-6 and s.penetration < 1e-4  # converged; the finger does not sink in
+        # depth reached (12 mm mesh)
+        assert s.deflection(pu, pv) == pytest.approx(s.depth, abs=0.08 * s.depth)
+        assert s.w.min() >= -1e-6 and s.w.max() <= 1.08 * s.depth  # pushed away from the user, nowhere deeper
         assert np.all(s.w[[0, -1], :] == 0.0)                           # clamps hold
         # mirror symmetry v -> -v (not imposed: the mesh and the solve are not symmetrised)
         np.testing.assert_allclose(m.w, s.w[:, ::-1], atol=1e-6 * s.depth / 0.01)
@@ -78,7 +82,8 @@ def test_deep_push_near_a_clamp_converges_at_low_stretch(stretch):
     assert np.all(np.diff(F) > 0.0)                                     # force grows with depth
     assert np.all(np.diff(F / np.array(DEPTHS)) > 0.0)                  # and stiffens (the push stretches it)
     assert 100.0 < F[-1] / DEPTHS[-1] < 3000.0                          # N/m: a soft sheet, not a wall
-    # the case that stalled: the plain (unrelaxed) stress is compressive around the finger, the relaxed one is not
+    # the case that stalled: the plain (unrelaxed) stress is
+    # compressive around the finger, the relaxed one is not
     plain, relaxed = _principal_min(fem, sols[-1], False), _principal_min(fem, sols[-1], True)
     assert plain.min() < -0.2 * ph.tension_u
     assert relaxed.min() >= -1e-6 * ph.tension_u
@@ -117,7 +122,8 @@ def test_indentation_converges_and_stiffens_at_50mm(seed):
     small, deep = fem.solve_indent([0.003, 0.050], 0.0, 0.0)
     for s in (small, deep):
         assert s.residual < 1e-6 and s.penetration < 1e-4
-        assert s.w.max() == pytest.approx(s.depth, abs=0.02 * s.depth + 1e-4)   # the finger is the deepest point
+        # the finger is the deepest point
+        assert s.w.max() == pytest.approx(s.depth, abs=0.02 * s.depth + 1e-4)
         assert np.all(s.w[[0, -1], :] == 0.0)                          # clamped edges u = ±a do not move
     k_lin = small.force / small.depth                                  # N/m at 3 mm (linear regime)
     assert 30.0 < k_lin < 400.0
@@ -130,9 +136,9 @@ def test_indentation_converges_and_stiffens_at_50mm(seed):
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_a_long_gripped_strip_under_a_band_load_is_the_taut_string(seed):
-    """String limit: a strip 600 mm between the grips and 24 mm wide, gripped (its pre-stress from the plane-stress
-    solve, not imposed), loaded by a small force on a band |u| ≤ c across its whole width: the centre deflects
-    w₀ = F (a − c/2) / (2 T_u W) (taut string of tension T_u·W, linear), W = 2b."""
+    """String limit: a strip 600 mm between the grips and 24 mm wide, gripped (its pre-stress from the
+    plane-stress solve, not imposed), loaded by a small force on a band |u| ≤ c across its whole width: the
+    centre deflects w₀ = F (a − c/2) / (2 T_u W) (taut string of tension T_u·W, linear), W = 2b."""
     rng = np.random.default_rng(seed)
     a, b, F = 0.30, 0.012, float(rng.uniform(0.005, 0.02))
     T = float(rng.uniform(30.0, 120.0))
@@ -146,9 +152,9 @@ def test_a_long_gripped_strip_under_a_band_load_is_the_taut_string(seed):
 
 
 def test_gripped_square_sheet_is_softer_under_the_finger_than_a_uniform_one():
-    """At a 40 N pull on the nominal square sheet the gripped pre-stress (T_v/T_u ≈ 0.035 at the centre) gives a
-    secant stiffness between 40 and 120 N/m at 2–10 mm (the notes' independent estimate: 72–135 N/m), and the
-    uniform T_v = T_u sheet at the same T_u is over 1.8× stiffer at 2 mm."""
+    """At a 40 N pull on the nominal square sheet the gripped pre-stress (T_v/T_u ≈ 0.035 at the centre) gives
+    a secant stiffness between 40 and 120 N/m at 2–10 mm (the notes' independent estimate: 72–135 N/m), and
+    the uniform T_v = T_u sheet at the same T_u is over 1.8× stiffer at 2 mm."""
     from flexsheet.model.tension import clamp_force
 
     mat = SheetMaterial()

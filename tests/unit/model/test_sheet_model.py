@@ -1,5 +1,5 @@
-"""The renderer's sheet model (flexsheet.model.sheet_model): the depth table is the FEM table at its samples and
-bilinear between them, the gripped model is not the uniform one, the identified strain offset blends the
+"""The renderer's sheet model (flexsheet.model.sheet_model): the depth table is the FEM table at its samples
+and bilinear between them, the gripped model is not the uniform one, the identified strain offset blends the
 neighbouring strain nodes, the model is cached and replaces the membrane, the tensor-grid evaluation is the
 point-wise one."""
 
@@ -59,23 +59,26 @@ def test_depth_table_matches_the_gripped_fem_table(nominal_model):
         assert err[outline].max() < 0.004 * S, (S, err[outline].max())   # 0.2 mm at 50 mm between samples
         # the uniform-tension series the renderer drew before is far off the gripped sheet
         m = Membrane(a, 0.12, 0.0, 0.0, S)
-        assert np.abs(m.deflection(u, v) - tab.evaluate(S, 0.0, 0.0, u, v, a))[outline].max() > 10 * err[outline].max()
+        assert (np.abs(m.deflection(u, v) - tab.evaluate(S, 0.0, 0.0, u, v, a))[outline].max() > 10
+                * err[outline].max())
 
 
 def test_strain_offset_blends_the_neighbouring_strain_nodes(tmp_path):
     m = NominalSheetModel(positions=(0.0,), mesh=COARSE, cache_dir=str(tmp_path), strain_offset=0.0025)
     assert m.node_of(0.04) == 0.04 and m.node_of(0.0476) == 0.05
     assert m.blend_of(0.0425) == [(0.04, pytest.approx(0.75)), (0.05, pytest.approx(0.25))]
-    assert m.blend_of(0.04001) == [(0.04, 1.0)]                             # < 1 % of the other node: one table
+    assert m.blend_of(0.04001) == [(0.04, 1.0)]  # < 1 % of the other node: one table
     a = clamp_half_span(STRETCH)
     assert m.shape(a, 0.03, 0.0, 0.0, build=False) is None and m.missing(a) == 0.04
     shp = m.shape(a, 0.03, 0.0, 0.0)                                        # builds both nodes
     nu, nv = m.grid_of(a, 0.12)
     u, v = np.linspace(-a, a, nu), np.linspace(-0.12, 0.12, nv)           # the depth table's samples
-    want = 0.75 * table_grid(m.table(0.04), 0.03, 0.0, 0.0, u, v, a) + 0.25 * table_grid(m.table(0.05), 0.03, 0.0,
-                                                                                          0.0, u, v, a)
+    want = 0.75 * table_grid(m.table(0.04), 0.03, 0.0, 0.0, u, v, a) + 0.25 * table_grid(m.table(0.05), 0.03,
+                                                                                         0.0,
+                                                                                         0.0, u, v, a)
     np.testing.assert_allclose(shp.w, want, atol=1e-7)
-    assert np.abs(shp.w - table_grid(m.table(0.04), 0.03, 0.0, 0.0, u, v, a)).max() > 1e-5     # the offset counts
+    # the offset counts
+    assert np.abs(shp.w - table_grid(m.table(0.04), 0.03, 0.0, 0.0, u, v, a)).max() > 1e-5
     assert "identified offset +0.0025" in shp.source and m.missing(a) is None
     for bad in (0.2, float("nan")):
         with pytest.raises(ValueError, match="strain_offset"):

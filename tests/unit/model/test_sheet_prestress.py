@@ -1,7 +1,7 @@
-"""The gripped sheet's pre-stress (flexsheet.model.sheet_prestress): the plane-stress solve against its closed-form
-limits (a long strip is uniaxial at its centre, a short wide one is in plane strain there), its equilibrium (the
-same pull crosses every section between the grips; the free edges carry no normal stress) and the square sheet's
-transverse tension, small at the centre and growing toward the grips."""
+"""The gripped sheet's pre-stress (flexsheet.model.sheet_prestress): the plane-stress solve against its
+closed-form limits (a long strip is uniaxial at its centre, a short wide one is in plane strain there), its
+equilibrium (the same pull crosses every section between the grips; the free edges carry no normal stress) and
+the square sheet's transverse tension, small at the centre and growing toward the grips."""
 
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ def test_square_sheet_pull_crosses_every_section_and_free_edges_are_unloaded():
     # resultant of n_uu over a band of elements around each section u = const, per unit length of the band
     resultants = []
     h = x[1] - x[0]
-    for k in (2, 15, 31, 45, 58):                                       # one column of elements, x[k] to x[k + 1]
+    for k in (2, 15, 31, 45, 58):  # one column of elements, x[k] to x[k + 1]
         band = np.abs(X[0] - (x[k] + h / 2)) < h / 2
         resultants.append(np.sum((n[0] * B.dx)[band]) / h)
     np.testing.assert_allclose(resultants, resultants[2], rtol=0.02)
@@ -46,7 +46,8 @@ def test_square_sheet_pull_crosses_every_section_and_free_edges_are_unloaded():
     centre, mid, near = (_at(x, y, n, u, 0.0) for u in (0.0, 0.06, 0.09))
     assert 0.02 < centre[1] / centre[0] < 0.06                         # the notes' ~0.04 at the centre
     assert centre[1] / centre[0] < mid[1] / mid[0] < near[1] / near[0] < 0.5
-    edge = (np.abs(np.abs(X[1]) - 0.12) < 0.0012) & (np.abs(X[0]) < 0.08)   # next to a free edge, off the grips
+    # next to a free edge, off the grips
+    edge = (np.abs(np.abs(X[1]) - 0.12) < 0.0012) & (np.abs(X[0]) < 0.08)
     assert np.max(np.abs(n[1][edge])) < 0.05 and np.max(np.abs(n[2][edge])) < 0.08
 
 
@@ -66,7 +67,8 @@ def test_taut_floor_raises_only_the_slack_principal_values():
     np.testing.assert_allclose(f[:, taut], n[:, taut], atol=1e-12)          # taut points are untouched
     # the principal direction is kept where the larger value is not floored
     keep = a1 > 0.02
-    np.testing.assert_allclose(np.arctan2(f[2], f[0] - f[1])[keep], np.arctan2(n[2], n[0] - n[1])[keep], atol=1e-9)
+    np.testing.assert_allclose(np.arctan2(f[2], f[0] - f[1])[keep], np.arctan2(n[2], n[0] - n[1])[keep],
+                               atol=1e-9)
 
 
 def test_bad_nodes_and_poisson_are_refused_with_the_field_named():

@@ -1,5 +1,5 @@
-"""The sheet's indentation table (flexsheet.model.sheet_table): its interpolation reproduces direct solves of the
-FEM, it is cached, and at low stretch it builds for every contact."""
+"""The sheet's indentation table (flexsheet.model.sheet_table): its interpolation reproduces direct solves of
+the FEM, it is cached, and at low stretch it builds for every contact."""
 
 from __future__ import annotations
 
@@ -36,9 +36,11 @@ def test_table_interpolation_matches_direct_solves(tmp_path):
     assert surf.pushed_point == pytest.approx([-0.02, 0.01, 0.0])
     g = sh.grid(9)
     assert g.shape == (9, 9) and np.all(g[[0, -1], :] == 0.0) and g.max() <= 0.02 + 1e-9
-    # the tensor-grid evaluation (the renderer's fit grid) is the point-wise one, for the table's span and another
+    # the tensor-grid evaluation (the renderer's fit grid) is
+    # the point-wise one, for the table's span and another
     u, v = np.linspace(-0.15, 0.15, 41), np.linspace(-0.13, 0.13, 23)    # reaches past the edges (clamped)
-    for S, pu, pv, a in ((0.02, 0.01, 0.0, None), (0.035, -0.03, 0.05, 1.01 * ph.half_span), (0.004, 0.06, -0.1, None)):
+    for S, pu, pv, a in ((0.02, 0.01, 0.0, None), (0.035, -0.03, 0.05, 1.01 * ph.half_span),
+                         (0.004, 0.06, -0.1, None)):
         g = tab.evaluate_grid(S, pu, pv, u, v, a)
         assert g.shape == (41, 23) and g.max() > 0.5 * S
         np.testing.assert_allclose(g, tab.evaluate(S, pu, pv, u[:, None], v[None, :], a), rtol=0, atol=1e-15)
@@ -49,7 +51,8 @@ def test_table_interpolation_matches_direct_solves(tmp_path):
 
 def test_low_stretch_table_builds_for_every_contact(tmp_path):
     ph = _nominal(0.01)
-    tab = IndentTable(ph, depths=(0.02, 0.06), positions=(0.0, 0.036, 0.072), mesh=COARSE_12MM, cache_dir=str(tmp_path))
+    tab = IndentTable(ph, depths=(0.02, 0.06), positions=(0.0, 0.036, 0.072), mesh=COARSE_12MM,
+                      cache_dir=str(tmp_path))
     assert not tab.built_from_cache and np.all(np.isfinite(tab.W))
     # every contact reaches its depths and pushes with a positive force that grows with depth
     for i, pu in enumerate(tab.positions):

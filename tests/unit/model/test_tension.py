@@ -1,5 +1,5 @@
-"""The sheet's tension model (flexsheet.model.tension): the Gent modulus and its small-strain limit, the string
-formula for the stiffness and its inverse, saturation reported."""
+"""The sheet's tension model (flexsheet.model.tension): the Gent modulus and its small-strain limit, the
+string formula for the stiffness and its inverse, saturation reported."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,5 @@
-"""The planner's head guard: normal limits far from the head, reduced ones near it, a back-off before the keep-out."""
+"""The planner's head guard: normal limits far from the head, reduced ones near it, a back-off before the
+keep-out."""
 
 import numpy as np
 import pytest

@@ -39,10 +39,10 @@ def _segs(arms):
 
 
 def _hand(eye_x):
-    """Hand-computed clearances for the home sheet and arms, eye at (eye_x, 0, 0): head centre
-    C = (eye_x + 0.08, 0, 0.02). Sheet: nearest point (0, 0, 0.02) (on the 0.02 m grid) → C_x − R.
-    Clamp bars: nearest (0, ±0.12, 0.02) → √(C_x² + 0.12²) − R. Arm: the flange face (0, ±0.15, 0) (clamp
-    jaw at (0, ±0.12, 0), clamp 0.030 m long along ±y), link radius 0.05 m → √(C_x² + 0.15² + 0.02²) − R − 0.05.
+    """Hand-computed clearances for the home sheet and arms, eye at (eye_x, 0, 0): head centre C = (eye_x +
+    0.08, 0, 0.02). Sheet: nearest point (0, 0, 0.02) (on the 0.02 m grid) → C_x − R. Clamp bars: nearest (0,
+    ±0.12, 0.02) → √(C_x² + 0.12²) − R. Arm: the flange face (0, ±0.15, 0) (clamp jaw at (0, ±0.12, 0), clamp
+    0.030 m long along ±y), link radius 0.05 m → √(C_x² + 0.15² + 0.02²) − R − 0.05.
     """
     cx = eye_x + 0.08
     return cx - R_KO, math.hypot(cx, 0.12) - R_KO, math.sqrt(cx ** 2 + 0.15 ** 2 + 0.02 ** 2) - R_KO - 0.05
@@ -85,7 +85,7 @@ def test_eye_at_015_is_near_but_outside(arms):
 
 
 def test_head_leaned_in_makes_the_sheet_violate(arms):
-    V = (0.05, 0.0, 0.0)                                 # head centre (0.13, 0, 0.02): 0.02 m inside at the sheet
+    V = (0.05, 0.0, 0.0)  # head centre (0.13, 0, 0.02): 0.02 m inside at the sheet
     v = check_targets(KO, V, sheet_points(**HOME), _segs(arms))
     assert v.inside and v.what == "sheet"
     assert v.clearance == pytest.approx(0.13 - R_KO, abs=1e-12)

@@ -1,5 +1,6 @@
-"""The planner's stage (flexsheet.planning.planner_stage): which stiffness sets the tension, which FEM messages
-count for the scene, and one plan's command to both arms (poses, pull, the pull cap, the shared motion)."""
+"""The planner's stage (flexsheet.planning.planner_stage): which stiffness sets the tension, which FEM
+messages count for the scene, and one plan's command to both arms (poses, pull, the pull cap, the shared
+motion)."""
 
 from __future__ import annotations
 
@@ -19,7 +20,8 @@ from flexsheet.planning.pull_guard import PullGuard
 
 def _params(**kw) -> SimpleNamespace:
     p = dict(min_contact_depth=5e-4, stiffness_from_scene=True, head_radius=0.10, keepout_margin=0.05,
-             pull_margin=0.9, arm_speed_scale=SPEED_SCALE, arm_accel_scale=ACCEL_SCALE, use_fem_stiffness=True,
+             pull_margin=0.9, arm_speed_scale=SPEED_SCALE, arm_accel_scale=ACCEL_SCALE,
+             use_fem_stiffness=True,
              fem_timeout=0.5, fem_window=0.0, object_stiffness=30.0, model_fields_set=set(),
              planner_config=PlannerConfig)
     p.update(kw)

@@ -1,5 +1,6 @@
 """The planner's pull limit at its targets (flexsheet.planning.pull_guard): margin × the smaller arm's
-torque-limited pull at the IK solution of each clamp target; a target IK cannot reach keeps the last figure."""
+torque-limited pull at the IK solution of each clamp target; a target IK cannot reach keeps the last
+figure."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""The surface planner (flexsheet.planning.surface_planner): encountered placement, rolling without slip, pushing,
-limits, the stability cases, and clamps and tension from the sheet's geometry."""
+"""The surface planner (flexsheet.planning.surface_planner): encountered placement, rolling without slip,
+pushing, limits, the stability cases, and clamps and tension from the sheet's geometry."""
 
 from __future__ import annotations
 
@@ -237,7 +237,8 @@ def test_sheet_edge_slip_is_reported():
 
 def test_cross_product_convention_axis_v():
     plan = SurfacePlanner(paper_cylinder()).update(0.0, (0.01, 0.0, 0.0))
-    assert plan.axis_v == pytest.approx(cross(plan.normal, plan.axis_u)) and plan.axis_v[2] == pytest.approx(1.0)
+    assert (plan.axis_v == pytest.approx(cross(plan.normal, plan.axis_u))
+            and plan.axis_v[2] == pytest.approx(1.0))
 
 
 def test_planner_clamps_and_tension_use_the_sheet_geometry():
@@ -247,17 +248,19 @@ def test_planner_clamps_and_tension_use_the_sheet_geometry():
     assert plan.left == pytest.approx(tuple(np.add(plan.origin, np.multiply(a, plan.axis_u))), abs=1e-15)
     assert (plan.left, plan.right) == clamp_points(plan.origin, plan.axis_u, plan.stretch)
     Tl, Tr = plan.clamp_matrices()
-    assert Tl[:3, 3] == pytest.approx(plan.left, abs=1e-15) and Tr[:3, 3] == pytest.approx(plan.right, abs=1e-15)
+    assert (Tl[:3, 3] == pytest.approx(plan.left, abs=1e-15)
+            and Tr[:3, 3] == pytest.approx(plan.right, abs=1e-15))
     # string model at the centre: k = T·w·2/a with a the clamp half span
     mat = SheetMaterial()
-    assert stiffness(plan.stretch, mat) == pytest.approx(tension(plan.stretch, mat) * mat.contact_width * 2 / a)
+    assert (stiffness(plan.stretch, mat)
+            == pytest.approx(tension(plan.stretch, mat) * mat.contact_width * 2 / a))
     assert plan.stiffness == pytest.approx(20.0, rel=1e-6)
 
 
 def test_a_given_object_press_is_matched_in_force_along_the_press():
-    """With the object's press (force at a depth) given, the planned stretch makes the identified sheet's force
-    at the finger's depth the object's, extrapolated by its stiffness; shallower than FORCE_DEPTH, and without a
-    press, the stiffness is matched instead."""
+    """With the object's press (force at a depth) given, the planned stretch makes the identified sheet's
+    force at the finger's depth the object's, extrapolated by its stiffness; shallower than FORCE_DEPTH, and
+    without a press, the stiffness is matched instead."""
     from flexsheet.model.tension import press_force
     from flexsheet.planning.surface_planner import FORCE_DEPTH
 
@@ -273,7 +276,8 @@ def test_a_given_object_press_is_matched_in_force_along_the_press():
         plan = None
         for i, dd in enumerate(np.linspace(0.0, d, 30)):
             plan = pl.update((i + 1) * DT, c.point_at(0.3, 0.0, R - dd), k, object_press=(f_obj, d_obj))
-        assert plan.depth == pytest.approx(d) and plan.depth >= FORCE_DEPTH and plan.status == "ok", plan.status
+        assert (plan.depth == pytest.approx(d) and plan.depth >= FORCE_DEPTH
+                and plan.status == "ok"), plan.status
         want = f_obj + k * (d - d_obj)
         assert press_force(plan.stretch, mat, pl.s[0], d) == pytest.approx(want, rel=1e-6)
         # the same push matched in stiffness presents the slope, and a different force
@@ -336,7 +340,8 @@ def test_with_the_objects_force_depth_table_its_mapped_force_is_matched_at_every
             want, k = table.mapped(plan.contact, d, 0.8, gain)
             assert plan.k_source == "table" and plan.object_stiffness == pytest.approx(k)
             if not plan.status.startswith("object_"):
-                assert press_force(plan.stretch, mat, pl.s[0], d) == pytest.approx(want, rel=1e-6), (dd, plan.status)
+                assert (press_force(plan.stretch, mat, pl.s[0], d)
+                        == pytest.approx(want, rel=1e-6)), (dd, plan.status)
                 checked += 1
     assert checked >= 20
     pl.set_force_depth(None)                                      # back to the stiffness given
@@ -393,9 +398,9 @@ def test_a_held_pose_keeps_the_sheet_still_while_its_stretch_follows_the_push_wi
 
 
 def test_the_stretch_meets_the_force_where_on_the_sheet_the_finger_presses():
-    """With the sheet's position terms identified, the stretch asked for a press 40 mm along the clamp line and
-    about 25 mm across (rolled there by a diagonal stroke) meets the object's force with the model at that contact, and
-    differs from the stretch the band alone would ask there."""
+    """With the sheet's position terms identified, the stretch asked for a press 40 mm along the clamp line
+    and about 25 mm across (rolled there by a diagonal stroke) meets the object's force with the model at that
+    contact, and differs from the stretch the band alone would ask there."""
     from flexsheet.model.tension import press_force
 
     rng = np.random.default_rng(12)
@@ -414,7 +419,8 @@ def test_the_stretch_meets_the_force_where_on_the_sheet_the_finger_presses():
 
     pl, plan = stroke(mat)
     su, sv = pl.s
-    assert abs(su) > 0.03 and abs(sv) > 0.02 and plan.touching and "object" not in plan.status, (pl.s, plan.status)
+    assert (abs(su) > 0.03 and abs(sv) > 0.02 and plan.touching
+            and "object" not in plan.status), (pl.s, plan.status)
     assert press_force(plan.stretch, mat, su, d, sv) == pytest.approx(f_obj, rel=1e-6)
     band = replace(mat, position_u=0.0, position_v=0.0)
     _, plan0 = stroke(band)

@@ -41,8 +41,10 @@ def dist_to_lines(x, v, a):
 
 def test_eqs_hand_computed_parallel_sheet():
     # sheet plane x = -0.1 parallel to the screen; V = (0.4, 0, 0), P = (-1, 0, 0), A = (-0.05, 0.02, 0):
-    # C = (-0.1, 0.02*10/9, 0); C' = (0, 0.02*(10/9)^2, 0); A' = (-0.05, 0.02*(10/9)^2*9/8, 0) = (-0.05, 1/36, 0)
-    out = correct_vertices([[-0.05, 0.02, 0.0]], eye=[0.4, 0, 0], projector=[-1, 0, 0], screen_point=[0, 0, 0],
+    # C = (-0.1, 0.02*10/9, 0); C' = (0, 0.02*(10/9)^2, 0);
+    # A' = (-0.05, 0.02*(10/9)^2*9/8, 0) = (-0.05, 1/36, 0)
+    out = correct_vertices([[-0.05, 0.02, 0.0]], eye=[0.4, 0, 0], projector=[-1, 0, 0],
+                           screen_point=[0, 0, 0],
                            screen_normal=[1, 0, 0], sheet_point=[-0.1, 0, 0], sheet_normal=[2, 0, 0])
     np.testing.assert_allclose(out[0], [-0.05, 1 / 36, 0.0], atol=1e-12)
 
@@ -68,7 +70,8 @@ def test_identity_when_sheet_is_the_screen():
 def test_flat_light_lands_on_eye_line(theta):
     a = cylinder_points()
     sheet = tilted(theta)
-    ah, ok = correct_vertices(a, sheet_point=sheet.origin, sheet_normal=sheet.normal, return_valid=True, **COM)
+    ah, ok = correct_vertices(a, sheet_point=sheet.origin, sheet_normal=sheet.normal, return_valid=True,
+                              **COM)
     assert ok.all()
     b = project_vertices(ah, eye=geometry.EYE, screen_point=[0, 0, 0], screen_normal=[1, 0, 0])
     c = land_projector_rays(b, geometry.PROJECTOR, sheet)
@@ -94,7 +97,8 @@ def test_pushed_four_triangle_light_lands_on_eye_line(depth):
 @pytest.mark.parametrize("depth", [0.01, 0.05])
 def test_pushed_fine_light_lands_on_eye_line(depth):
     a = cylinder_points()
-    sheet = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], membrane=Membrane(0.12, 0.12, 0.01, -0.02, depth, modes=16))
+    sheet = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0],
+                         membrane=Membrane(0.12, 0.12, 0.01, -0.02, depth, modes=16))
     ah, ok = correct_vertices_fine(a, sheet=sheet, return_valid=True, **COM)
     assert ok.all()
     b = project_vertices(ah, eye=geometry.EYE, screen_point=[0, 0, 0], screen_normal=[1, 0, 0])
@@ -125,10 +129,12 @@ def test_grazing_rays_are_left_uncorrected_and_flagged():
 def test_ray_missing_the_sheet_is_flagged_but_finite():
     home = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0])
     a = np.array([[-0.01, 0.0, 0.0], [-0.01, 0.5, 0.3]])              # second one far outside the sheet
-    out, ok = correct_vertices_pushed(a, pushed_point=[-0.02, 0, 0], corners=home.corners, return_valid=True, **COM)
+    out, ok = correct_vertices_pushed(a, pushed_point=[-0.02, 0, 0], corners=home.corners, return_valid=True,
+                                      **COM)
     assert ok.tolist() == [True, False]
     assert np.all(np.isfinite(out))
-    sheet = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], membrane=Membrane(0.12, 0.12, 0, 0, 0.02, modes=16))
+    sheet = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0],
+                         membrane=Membrane(0.12, 0.12, 0, 0, 0.02, modes=16))
     out, ok = correct_vertices_fine(a, sheet=sheet, return_valid=True, **COM)
     assert ok.tolist() == [True, False]
     assert np.all(np.isfinite(out))
@@ -152,7 +158,8 @@ def test_degenerate_triangles_and_vanishing_push():
         out = correct_vertices_pushed(a, pushed_point=[-S, 0, 0], corners=home.corners, **COM)
         np.testing.assert_allclose(out, flat, atol=1e-6)
     # pushed point on a corner: two triangles have zero area and are skipped; result stays finite
-    out, ok = correct_vertices_pushed(a, pushed_point=home.corners[0], corners=home.corners, return_valid=True,
+    out, ok = correct_vertices_pushed(a, pushed_point=home.corners[0], corners=home.corners,
+                                      return_valid=True,
                                       **COM)
     assert np.all(np.isfinite(out)) and ok.any()
     with pytest.raises(ValueError, match="degenerate"):
@@ -213,7 +220,7 @@ def test_predicted_errors_grow_with_depth_and_fine_is_reference():
     assert max(p0.values()) < 1e-9                       # unpushed: every model is the flat correction
 
 
-# ------------------------------------------------------------------ the nominal FEM sheet model (fine shader form)
+# ------------------------------------------------------------- the nominal FEM sheet model (fine shader form)
 @pytest.fixture(scope="module")
 def nominal_model(tmp_path_factory):
     from flexsheet.model.sheet_model import NominalSheetModel
@@ -225,7 +232,8 @@ def nominal_model(tmp_path_factory):
 
 def test_fine_correction_on_the_fitted_shape_lands_on_eye_line(nominal_model):
     a = 0.12 * 1.04
-    sheet = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], a, membrane=nominal_model.shape(a, 0.05, 0.0, 0.0))
+    sheet = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], a,
+                         membrane=nominal_model.shape(a, 0.05, 0.0, 0.0))
     pts = cylinder_points()
     ah, ok = correct_vertices_fine(pts, sheet=sheet, return_valid=True, **COM)
     assert ok.all()
@@ -241,7 +249,8 @@ def test_predicted_errors_against_the_nominal_model(nominal_model):
         return nominal_model.shape(s.half_span, depth, 0.0, 0.0, s.half_width)
 
     p_series = predict_model_errors(0.05, probes=cylinder_points(), sheet=home, **COM,
-                                    reference=lambda s, d: Membrane(s.half_span, s.half_width, 0.0, 0.0, d, modes=16))
+                                    reference=lambda s,
+                                    d: Membrane(s.half_span, s.half_width, 0.0, 0.0, d, modes=16))
     p_fem = predict_model_errors(0.05, probes=cylinder_points(), sheet=home, reference=ref, **COM)
     assert p_fem["fine"] < 1e-9                        # the fine model now carries the reference shape
     # the conical FEM dent is closer to the 4-triangle pyramid than the series membrane is

@@ -1,5 +1,5 @@
-"""The renderer's state (flexsheet.rendering.state): in the node's drawing thread a missing table is not built; the
-push is drawn with the 4-triangle model meanwhile."""
+"""The renderer's state (flexsheet.rendering.state): in the node's drawing thread a missing table is not
+built; the push is drawn with the 4-triangle model meanwhile."""
 
 import numpy as np
 import pytest
@@ -15,8 +15,8 @@ EYE, PROJ = geometry.EYE, geometry.PROJECTOR
 
 def test_missing_table_is_not_built_in_the_drawing_thread(tmp_path):
     """With build=False (the node's drawing thread) a push at a stretch without a table is a PendingPush, the
-    node is asked for it, and auto draws it with the 4-triangle model (stretch 0.12: beyond the shipped tables,
-    0.01–0.11: the bridges' span band, clamp strain 0.01–0.10, and one step past it)."""
+    node is asked for it, and auto draws it with the 4-triangle model (stretch 0.12: beyond the shipped
+    tables, 0.01–0.11: the bridges' span band, clamp strain 0.01–0.10, and one step past it)."""
     asked = []
     cfg = SheetConfig(cache_dir=str(tmp_path))
     st = RendererState(EYE, PROJ, cfg, build=False, on_missing=asked.append)
@@ -30,4 +30,4 @@ def test_missing_table_is_not_built_in_the_drawing_thread(tmp_path):
     assert pick_model("auto", sheet, None, TARGET) == "four_triangle"
     assert pick_model("fine", sheet, None, TARGET) == "four_triangle"
     assert not list(tmp_path.iterdir())                                   # nothing was built
-    assert NominalSheetModel(cache_dir=str(tmp_path)).nearest_on_disk(0.12) == 0.11     # the nearest shipped one
+    assert NominalSheetModel(cache_dir=str(tmp_path)).nearest_on_disk(0.12) == 0.11  # the nearest shipped one

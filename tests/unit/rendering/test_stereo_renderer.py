@@ -1,6 +1,7 @@
-"""The stereo renderer (flexsheet.rendering.stereo_renderer): GLSL correction vs numpy (transform feedback), the
-gripped sheet's depth table sampled by the fine shader (its light lands on the identified model's sheet, the
-uniform-tension model's does not), deterministic headless render, the left image for the user's left eye."""
+"""The stereo renderer (flexsheet.rendering.stereo_renderer): GLSL correction vs numpy (transform feedback),
+the gripped sheet's depth table sampled by the fine shader (its light lands on the identified model's sheet,
+the uniform-tension model's does not), deterministic headless render, the left image for the user's left
+eye."""
 
 import numpy as np
 import pytest
@@ -11,7 +12,8 @@ from flexsheet.model.sheet import Membrane, SheetSurface
 from flexsheet.rendering.correction import correct_vertices, correct_vertices_fine, correct_vertices_pushed
 from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh, sampled
 
-COM = dict(projector=geometry.PROJECTOR, screen_point=geometry.SCREEN_POINT, screen_normal=geometry.SCREEN_NORMAL)
+COM = dict(projector=geometry.PROJECTOR, screen_point=geometry.SCREEN_POINT,
+           screen_normal=geometry.SCREEN_NORMAL)
 R = geometry.CYLINDER_RADIUS
 
 
@@ -50,7 +52,8 @@ def test_shader_matches_numpy(gl, model, eye_dy):
     if model == "none":
         want, ok = v, np.ones(len(v), bool)
     elif model == "flat":
-        want, ok = correct_vertices(v, eye=eye, sheet_point=tilt.origin, sheet_normal=tilt.normal, return_valid=True, **COM)
+        want, ok = correct_vertices(v, eye=eye, sheet_point=tilt.origin, sheet_normal=tilt.normal,
+                                    return_valid=True, **COM)
     elif model == "four_triangle":
         want, ok = correct_vertices_pushed(v, eye=eye, pushed_point=push.pushed_point, corners=push.corners,
                                            return_valid=True, **COM)
@@ -82,8 +85,8 @@ def test_headless_render_is_deterministic_and_sized(gl):
 
 
 def test_left_image_is_drawn_for_the_users_left_eye():
-    """The user faces −x with +z up, so the left eye is at −y (right-handed frame); a small object 0.3 m behind
-    the screen must show uncrossed disparity: its left-eye image lies toward the user's left."""
+    """The user faces −x with +z up, so the left eye is at −y (right-handed frame); a small object 0.3 m
+    behind the screen must show uncrossed disparity: its left-eye image lies toward the user's left."""
     forward, up = -np.asarray(geometry.SCREEN_NORMAL, float), np.array([0.0, 0.0, 1.0])
     users_right = np.cross(forward, up)
     left_eye, right_eye = geometry.EYE - 0.032 * users_right, geometry.EYE + 0.032 * users_right
@@ -99,8 +102,8 @@ def test_left_image_is_drawn_for_the_users_left_eye():
     finally:
         r.release()
     col = [np.average(np.arange(256), weights=(im.mean(axis=2) > 127).sum(axis=0)) for im in (left, right)]
-    # where each eye sees the object's centroid on the screen (x = 0), and the projector column that lights it:
-    # projector image right is the projector's own right, which faces the user: the user's left
+    # where each eye sees the object's centroid on the screen (x = 0), and the projector column that
+    # lights it: projector image right is the projector's own right, which faces the user: the user's left
     c = tri.mean(axis=0)
     hit = [e + (c - e) * (e[0] / (e[0] - c[0])) for e in (left_eye, right_eye)]
     want = float((hit[0] - hit[1]) @ -users_right) / px
@@ -119,15 +122,17 @@ def _landing_error(r, sheet_drawn, sheet_true, v):
     assert ok.all()
     b = project_vertices(got.astype(float), eye=geometry.EYE, **scr)
     c = land_projector_rays(b, geometry.PROJECTOR, sheet_true)
-    return np.linalg.norm(project_vertices(c, eye=geometry.EYE, **scr) - project_vertices(v, eye=geometry.EYE, **scr),
+    return np.linalg.norm(project_vertices(c, eye=geometry.EYE, **scr)
+                          - project_vertices(v, eye=geometry.EYE, **scr),
                           axis=1).max()
 
 
 def test_shader_samples_the_gripped_sheet_depth_table(tmp_path):
-    """The fine shader draws the identified, gripped sheet model from its depth table: the GLSL correction equals
-    numpy's on the same table (2e-6 m), the table's samples are the FEM table's, and the light it aims lands on
-    the FEM table's own sheet within 0.1 mm on the screen from 10 to 50 mm; drawn with the uniform-tension model
-    (T_v = T_u, what the renderer drew before) it lands > 0.5 mm off at 30 mm and more."""
+    """The fine shader draws the identified, gripped sheet model from its depth table: the GLSL correction
+    equals numpy's on the same table (2e-6 m), the table's samples are the FEM table's, and the light it aims
+    lands on the FEM table's own sheet within 0.1 mm on the screen from 10 to 50 mm; drawn with the
+    uniform-tension model (T_v = T_u, what the renderer drew before) it lands > 0.5 mm off at 30 mm and
+    more."""
     from flexsheet.model.sheet import SheetSurface
     from flexsheet.model.sheet_model import NominalSheetModel
     from flexsheet.rendering.correction import correct_vertices_fine
@@ -144,12 +149,15 @@ def test_shader_samples_the_gripped_sheet_depth_table(tmp_path):
     try:
         for S, pu, pv in ((0.01, 0.0, 0.0), (0.03, 0.002, -0.001), (0.05, 0.0, 0.0)):
             shp = m.shape(a, S, pu, pv)
-            true = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], a, membrane=m.table(0.04).shape(S, pu, pv, a))
+            true = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], a,
+                                membrane=m.table(0.04).shape(S, pu, pv, a))
             sheet = SheetSurface(np.zeros(3), [1, 0, 0], [0, 1, 0], a, membrane=shp)
             r.set_model("fine", sheet)
             got, got_ok = r.transform(geometry.EYE)
-            want, ok = correct_vertices_fine(probes.astype(float), eye=geometry.EYE, projector=geometry.PROJECTOR,
-                                             screen_point=geometry.SCREEN_POINT, screen_normal=geometry.SCREEN_NORMAL,
+            want, ok = correct_vertices_fine(probes.astype(float), eye=geometry.EYE,
+                                             projector=geometry.PROJECTOR,
+                                             screen_point=geometry.SCREEN_POINT,
+                                             screen_normal=geometry.SCREEN_NORMAL,
                                              sheet=sheet, return_valid=True)
             assert ok.all()
             np.testing.assert_array_equal(got_ok, ok)

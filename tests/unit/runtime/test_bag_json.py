@@ -1,6 +1,6 @@
-"""The bag's viewer encoding: every message of the display goes to JSON (validating against the jsonschema stored
-with it) plus foxglove.RawImage parts for its images, and comes back as the very wire frames it was recorded
-from; a message whose image part is missing is not made up."""
+"""The bag's viewer encoding: every message of the display goes to JSON (validating against the jsonschema
+stored with it) plus foxglove.RawImage parts for its images, and comes back as the very wire frames it was
+recorded from; a message whose image part is missing is not made up."""
 
 from __future__ import annotations
 
@@ -39,7 +39,8 @@ def _roundtrip(frames: list, t: int = 5) -> tuple[list, list]:
 @pytest.mark.parametrize("topic", sorted(sample_state()))
 def test_every_message_comes_back_byte_identical_from_its_viewer_records(topic):
     msg = sample_state(stamp=1234.5678, seq=7)[topic]
-    frames = [bytes(f) if isinstance(f, bytes) else np.ascontiguousarray(f).tobytes() for f in encode(topic, msg)]
+    frames = [bytes(f) if isinstance(f, bytes) else np.ascontiguousarray(f).tobytes()
+              for f in encode(topic, msg)]
     recs, out = _roundtrip(frames)
     assert len(out) == 1 and out[0] == frames                     # the same meta and buffers, byte for byte
     main = recs[-1]
@@ -77,7 +78,7 @@ def test_a_message_whose_image_part_was_lost_is_not_yielded():
     assert dec.frames(r.topic, r.schema, r.metadata, r.data, r.schema_data, 5) is None
     m = recs[-1]
     assert dec.frames(m.topic, m.schema, m.metadata, m.data, m.schema_data, 5) is None
-    for r in recs[:-1]:                                             # both parts, but of another message (t = 4)
+    for r in recs[:-1]:  # both parts, but of another message (t = 4)
         dec.frames(r.topic, r.schema, r.metadata, r.data, r.schema_data, 4)
     assert dec.frames(m.topic, m.schema, m.metadata, m.data, m.schema_data, 5) is None
 

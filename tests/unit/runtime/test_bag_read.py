@@ -51,7 +51,8 @@ def test_a_bag_of_the_earlier_msgpack_encoding_still_plays_and_exports(tmp_path)
         for t, frames in run[:120]:
             topic = bytes(frames[0]).decode()
             if topic not in channels:
-                channels[topic] = w.register_channel(topic, ENCODING, w.register_schema("s", "jsonschema", b"{}"))
+                channels[topic] = w.register_channel(topic, ENCODING,
+                                                     w.register_schema("s", "jsonschema", b"{}"))
             w.add_message(channels[topic], log_time=int(t * 1e9), publish_time=int(t * 1e9),
                           data=msgpack.packb([bytes(f) for f in frames[1:]]))
         w.finish()

@@ -1,12 +1,13 @@
-"""The codec and the message contract (flexsheet.runtime.codec): round trips, zero-copy arrays, rejection of bad
-input with clear errors; and hostile input against every message decoder: property-based fuzzing with hypothesis.
+"""The codec and the message contract (flexsheet.runtime.codec): round trips, zero-copy arrays, rejection of
+bad input with clear errors; and hostile input against every message decoder: property-based fuzzing with
+hypothesis.
 
-Targets: :func:`flexsheet.runtime.codec.decode` for every topic of ``messages.topics.ALL``, :func:`decode_any` and
-:func:`peek_schema`. Inputs: random bytes, truncated frames, valid envelopes with mutated fields (wrong
+Targets: :func:`flexsheet.runtime.codec.decode` for every topic of ``messages.topics.ALL``, :func:`decode_any`
+and :func:`peek_schema`. Inputs: random bytes, truncated frames, valid envelopes with mutated fields (wrong
 types, NaN/inf, huge or negative numbers, missing/extra keys), schema and version mismatches (``True`` and
-``1.0`` are not version 1), hostile array descriptors (huge, negative-as-uint64 and zero dims, 40-D
-shapes, object/structured/sub-array/byte-swapped dtypes, out-of-range buffer indices) and random array
-contents (NaN/inf bit patterns).
+``1.0`` are not version 1), hostile array descriptors (huge, negative-as-uint64 and zero dims, 40-D shapes,
+object/structured/sub-array/byte-swapped dtypes, out-of-range buffer indices) and random array contents
+(NaN/inf bit patterns).
 
 Oracle for every input: either a :class:`DecodeError` (one line, naming the topic) or a message of the
 topic's type whose floats are all finite and that survives a re-encode — never another exception type,
@@ -80,7 +81,8 @@ def _trace_and_report():
     tracemalloc.stop()
     print("\n[fuzz] codec: inputs tried / rejected (DecodeError) / accepted")
     for target, c in sorted(COUNTS.items()):
-        print(f"[fuzz]   {target:<32} tried {c['tried']:6d}  rejected {c['rejected']:6d}  accepted {c['accepted']:6d}")
+        print(f"[fuzz]   {target:<32} tried {c['tried']:6d}  rejected {c['rejected']:6d}  accepted "
+              f"{c['accepted']:6d}")
     total = sum(c["tried"] for c in COUNTS.values()), sum(c["rejected"] for c in COUNTS.values())
     print(f"[fuzz]   {'TOTAL codec':<32} tried {total[0]:6d}  rejected {total[1]:6d}")
 
@@ -133,7 +135,8 @@ def check(frames: list, topic: T.Topic, target: str, any_too: bool = True) -> Me
             again = decode(encode(topic.name, msg), T.Topic(topic.name, type(msg)))
             assert again.header == msg.header
         peak = tracemalloc.get_traced_memory()[1] - base
-        assert peak < 8 * _size(frames) + (4 << 20), f"decode allocated {peak} bytes for {_size(frames)} input bytes"
+        assert (peak < 8 * _size(frames)
+                + (4 << 20)), f"decode allocated {peak} bytes for {_size(frames)} input bytes"
         if name == target:
             result = msg
     return result
@@ -143,18 +146,22 @@ def check(frames: list, topic: T.Topic, target: str, any_too: bool = True) -> Me
 topic_st = st.sampled_from(TOPICS)
 scalar_st = st.one_of(
     st.none(), st.booleans(), st.integers(-(2 ** 63), 2 ** 64 - 1),
-    st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([math.nan, math.inf, -math.inf, -0.0, 1e308]),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([math.nan, math.inf, -math.inf, -0.0, 1e308]),
     st.text(max_size=40), st.binary(max_size=40))
 hostile_st = st.one_of(
     scalar_st,
     st.lists(scalar_st, max_size=6),
     st.dictionaries(st.text(max_size=8), scalar_st, max_size=4),
-    st.recursive(scalar_st, lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=4), c, max_size=3),
+    st.recursive(scalar_st,
+                 lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=4), c, max_size=3),
                  max_leaves=12))
-DTYPES = ["<f8", "<f4", ">f8", "|u1", "<i4", "<i8", "|b1", "<u2", "<f2", "<c16", "|O", "|V8", "<U4", "|S3", "<M8[s]",
+DTYPES = ["<f8", "<f4", ">f8", "|u1", "<i4", "<i8", "|b1", "<u2", "<f2", "<c16", "|O", "|V8", "<U4", "|S3",
+          "<M8[s]",
           "(2,)f8", "f8,f8", "", "x", "\xff", "<f8" * 20, "float64", "bool", "int32"]
 dtype_st = st.one_of(st.sampled_from(DTYPES), st.text(max_size=12))
-dims_st = st.lists(st.one_of(st.integers(0, 8), st.sampled_from([2 ** 31, 2 ** 32 + 3, 2 ** 63, 2 ** 64 - 1, 2 ** 64 - 3])),
+dims_st = st.lists(st.one_of(st.integers(0, 8),
+                             st.sampled_from([2 ** 31, 2 ** 32 + 3, 2 ** 63, 2 ** 64 - 1, 2 ** 64 - 3])),
                    max_size=40)
 
 
@@ -206,7 +213,8 @@ def test_truncated_and_reordered_frames(topic, data):
         frames[2], frames[3] = frames[3], frames[2]
     msg = check(frames, topic, "truncated frames")
     if kind == "cut_meta" or (kind in ("cut_buffer", "drop_buffer") and len(SAMPLES[topic.name]) > 2):
-        # a cut meta is not msgpack of the envelope; a cut or dropped array buffer never matches its descriptor
+        # a cut meta is not msgpack of the envelope; a cut or
+        # dropped array buffer never matches its descriptor
         assert msg is None, f"{topic.name}: accepted after {kind}"
 
 
@@ -292,8 +300,10 @@ def test_random_array_contents_nan_inf(topic, data):
 
 
 @FUZZ
-@given(topic=topic_st, version=st.one_of(st.integers(-(2 ** 63), 2 ** 64 - 1), st.booleans(), st.floats(), st.text(max_size=4),
-                                         st.none()),
+@given(topic=topic_st,
+       version=st.one_of(st.integers(-(2 ** 63), 2 ** 64 - 1), st.booleans(), st.floats(),
+                         st.text(max_size=4),
+                         st.none()),
        schema=st.one_of(st.sampled_from(sorted({t.type.SCHEMA for t in TOPICS})), st.text(max_size=30)))
 def test_schema_version_mismatch(topic, version, schema):
     meta = _meta(topic)
@@ -312,7 +322,8 @@ def test_schema_version_mismatch(topic, version, schema):
 
 
 @FUZZ
-@given(meta=st.one_of(st.binary(max_size=200), hostile_st.map(lambda v: _pack(v) if _packable(v) else b"\xc1")))
+@given(meta=st.one_of(st.binary(max_size=200),
+                      hostile_st.map(lambda v: _pack(v) if _packable(v) else b"\xc1")))
 def test_peek_schema_garbage(meta):
     COUNTS["peek_schema"]["tried"] += 1
     try:
@@ -345,8 +356,10 @@ def test_huge_declared_sizes_allocate_nothing():
 
 def test_non_bytes_frames_are_decode_errors():
     """Wrong Python types where frames belong (a topic frame that is an int must not become ``bytes(n)``)."""
-    for frames in ([10 ** 12, SAMPLES["/fingertip"][1]], [None, b"x"], [b"/fingertip", None], [b"/fingertip", "str"],
-                   [b"/fingertip", 12345], [], [b"/fingertip"], [b"/fingertip", SAMPLES["/fingertip"][1], None]):
+    for frames in ([10 ** 12, SAMPLES["/fingertip"][1]], [None, b"x"], [b"/fingertip", None],
+                   [b"/fingertip", "str"],
+                   [b"/fingertip", 12345], [], [b"/fingertip"],
+                   [b"/fingertip", SAMPLES["/fingertip"][1], None]):
         assert check(frames, T.FINGERTIP, "wrong frame types") is None
 
 

@@ -1,4 +1,5 @@
-"""flexsheet.runtime.cpu_time: an async handler's CPU is its own steps', not what the loop ran while it waited."""
+"""flexsheet.runtime.cpu_time: an async handler's CPU is its own steps', not what the loop ran while it
+waited."""
 
 from __future__ import annotations
 

@@ -44,7 +44,8 @@ def test_a_bad_domain_is_refused_naming_its_source_and_value(monkeypatch, bad):
 def test_local_ports_move_by_the_stride_and_remote_ones_stay():
     assert shift_port(7400, 3) == 7400 + 3 * DOMAIN_STRIDE == 8150 and shift_port(0, 3) == 0
     assert shift_params({"port": 15021}, 2) == {"port": 15521}
-    assert shift_params({"host": "127.0.0.1", "port": 15021, "rate": 5}, 2) == {"host": "127.0.0.1", "port": 15521,
+    assert shift_params({"host": "127.0.0.1", "port": 15021, "rate": 5}, 2) == {"host": "127.0.0.1",
+                                                                                "port": 15521,
                                                                                   "rate": 5}
     assert shift_params({"host": "192.168.10.2", "port": 10000}, 2) == {"host": "192.168.10.2", "port": 10000}
     assert shift_params({"ws_port": 8765, "port": 0}, 1) == {"ws_port": 9015, "port": 0}

@@ -1,5 +1,5 @@
-"""Launch extensions (flexsheet/runtime/extensions.py): the display's sections reach the runtime only through the
-``flexsheet.launch_extensions`` entry point (and the bag channels through theirs)."""
+"""Launch extensions (flexsheet/runtime/extensions.py): the display's sections reach the runtime only through
+the ``flexsheet.launch_extensions`` entry point (and the bag channels through theirs)."""
 
 from __future__ import annotations
 

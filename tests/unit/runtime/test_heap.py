@@ -16,8 +16,9 @@ def _rss_mb() -> float:
 
 @pytest.mark.skipif(not sys.platform.startswith("linux") or heap._malloc_trim() is None, reason="glibc only")
 def test_a_fragmented_heap_shrinks_by_what_was_freed_in_it():
-    """128 MB in 16 KiB blocks (below glibc's mmap threshold: on the heap), every block but each 64th freed: the
-    pinned blocks keep the heap's top, so the free pages stay resident until the trim, which returns ≥ 60 MB."""
+    """128 MB in 16 KiB blocks (below glibc's mmap threshold: on the heap), every block but each 64th freed:
+    the pinned blocks keep the heap's top, so the free pages stay resident until the trim, which returns ≥ 60
+    MB."""
     blocks = [bytearray(16384) for _ in range(8192)]
     for b in blocks:
         b[::4096] = b"\x01" * len(b[::4096])            # touch every page
@@ -31,8 +32,8 @@ def test_a_fragmented_heap_shrinks_by_what_was_freed_in_it():
 
 
 def test_the_trimmer_trims_once_per_period():
-    """With period 10 s on an injected clock: not at 5 s, once at 10 s, not again at 15 s, again at 20 s; a bad
-    period is named."""
+    """With period 10 s on an injected clock: not at 5 s, once at 10 s, not again at 15 s, again at 20 s; a
+    bad period is named."""
     now, calls = [100.0], []
     t = heap.Trimmer(10.0, clock=lambda: now[0], release=lambda: calls.append(now[0]) or True)
     got = []

@@ -1,5 +1,6 @@
-"""Launch files (flexsheet.runtime.launch, load_launch): ``--set hosts.NAME.address`` moves a host, ``clock: {type:
-sim, rtf: X}`` paces the simulated clock, a launch extension's sections are validated naming the key and value.
+"""Launch files (flexsheet.runtime.launch, load_launch): ``--set hosts.NAME.address`` moves a host,
+``clock: {type: sim, rtf: X}`` paces the simulated clock, a launch extension's sections are validated naming
+the key and value.
 
 Hostile launch files: :func:`flexsheet.runtime.launch.load_launch` must give a
 :class:`LaunchError` naming the file (and the key where one is at fault) or a valid graph — never another
@@ -29,7 +30,8 @@ FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=[HealthChe
                                                                         HealthCheck.function_scoped_fixture],
                 database=None)
 COUNTS: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
-VALID = {"name": "fz", "hosts": {"main": {"address": "127.0.0.1"}}, "base_port": 7100, "heartbeat_period": 1.0,
+VALID = {"name": "fz", "hosts": {"main": {"address": "127.0.0.1"}}, "base_port": 7100,
+         "heartbeat_period": 1.0,
          "nodes": {"w": {"type": "world", "host": "main", "params": {"rate": 10.0},
                          "respawn": {"policy": "on-failure", "delay": 0.5, "max_restarts": 3}},
                    "p": {"type": "planner", "host": "main", "port": 7200, "remaps": {"/fingertip": "/ft"}}}}
@@ -40,7 +42,8 @@ def _report():
     yield
     print("\n[fuzz] launch files: inputs tried / rejected (LaunchError) / accepted")
     for target, c in sorted(COUNTS.items()):
-        print(f"[fuzz]   {target:<28} tried {c['tried']:5d}  rejected {c['rejected']:5d}  accepted {c['accepted']:5d}")
+        print(f"[fuzz]   {target:<28} tried {c['tried']:5d}  rejected {c['rejected']:5d}  accepted "
+              f"{c['accepted']:5d}")
 
 
 def _write(tmp_path: Path, text: str) -> Path:
@@ -108,11 +111,14 @@ PATHS = [("name",), ("hosts",), ("hosts", "main"), ("hosts", "main", "address"),
          ("heartbeat_period",), ("shutdown_timeout",), ("report",), ("nodes",), ("nodes", "w"),
          ("nodes", "w", "type"), ("nodes", "w", "host"), ("nodes", "w", "port"), ("nodes", "w", "endpoint"),
          ("nodes", "w", "params"), ("nodes", "w", "remaps"), ("nodes", "w", "respawn", "delay"),
-         ("nodes", "w", "respawn", "policy"), ("nodes", "w", "respawn", "max_restarts"), ("nodes", "w", "required"),
+         ("nodes", "w", "respawn", "policy"), ("nodes", "w", "respawn", "max_restarts"),
+         ("nodes", "w", "required"),
          ("nodes", "p", "port"), ("security", "curve"), ("security", "public_keys"), ("bogus",)]
-hostile = st.one_of(yaml_leaf, st.sampled_from([math.nan, math.inf, -math.inf, -1, 0, 2 ** 63, 65536, 1e300, "",
-                                                "tcp://", "x" * 500, [], {}]),
-                    st.lists(yaml_leaf, max_size=3), st.dictionaries(st.text(max_size=5), yaml_leaf, max_size=3))
+hostile = st.one_of(yaml_leaf,
+                    st.sampled_from([math.nan, math.inf, -math.inf, -1, 0, 2 ** 63, 65536, 1e300, "",
+                                     "tcp://", "x" * 500, [], {}]),
+                    st.lists(yaml_leaf, max_size=3),
+                    st.dictionaries(st.text(max_size=5), yaml_leaf, max_size=3))
 
 
 @FUZZ
@@ -150,7 +156,8 @@ def test_hostile_structures(tmp_path):
         "duplicate node": "nodes:\n  w: {type: world}\n  w: {type: planner}\n",
         "non-UTF-8": b"nodes: {w: {type: \xff\xfe}}\n",
         "huge file": b"#" * (2 << 20),
-        "ports past 65535": "base_port: 65000\nnodes:\n" + "".join(f"  n{i}: {{type: world}}\n" for i in range(540)),
+        "ports past 65535": "base_port: 65000\nnodes:\n" + "".join(f"  n{i}: {{type: "
+                                                                   "world}\n" for i in range(540)),
         "python tag": "nodes: !!python/object/apply:os.system [echo hi]\n",
         "recursive": "nodes: &a {x: *a}\n",
         "inf period": "heartbeat_period: .inf\nnodes: {}\n",
@@ -168,7 +175,8 @@ def test_hostile_structures(tmp_path):
 
 
 def test_set_hosts_moves_a_host_and_an_unknown_host_is_one_error(monkeypatch):
-    assert parse_toplevel_set("hosts.arm1.address=127.0.0.2", {"world"}) == ("hosts", {"arm1": {"address": "127.0.0.2"}})
+    assert (parse_toplevel_set("hosts.arm1.address=127.0.0.2", {"world"})
+            == ("hosts", {"arm1": {"address": "127.0.0.2"}}))
     with pytest.raises(LaunchError, match="expected hosts.NAME.address=ADDRESS"):
         parse_toplevel_set("hosts.arm1=127.0.0.2", {"world"})
     monkeypatch.setenv(TOPLEVEL_ENV, json.dumps({"hosts": {"main": {"address": "127.0.0.1"},

@@ -1,5 +1,5 @@
-"""``flexsheet launch --check`` (flexsheet.runtime.launch_check): a missing scene file is one error; on hostile
-values it never raises and reports one line per problem."""
+"""``flexsheet launch --check`` (flexsheet.runtime.launch_check): a missing scene file is one error; on
+hostile values it never raises and reports one line per problem."""
 
 from __future__ import annotations
 
@@ -25,9 +25,11 @@ def test_a_missing_scene_file_is_reported_once(monkeypatch):
     assert len(hits) == 1 and "no such file" in hits[0], res.errors
 
 
-CHECK_PATHS = [("nodes", "w", "params", "rate_hz"), ("nodes", "w", "params", "script"), ("nodes", "p", "params"),
+CHECK_PATHS = [("nodes", "w", "params", "rate_hz"), ("nodes", "w", "params", "script"),
+               ("nodes", "p", "params"),
                ("nodes", "p", "params", "shape"), ("nodes", "p", "params", "calib_file"), ("display_calib",),
-               ("security",), ("security", "curve"), ("security", "public_keys_file"), ("security", "keys_dir"),
+               ("security",), ("security", "curve"), ("security", "public_keys_file"),
+               ("security", "keys_dir"),
                ("hosts", "main", "address"), ("report",), ("nodes", "w", "params", "host")]
 
 

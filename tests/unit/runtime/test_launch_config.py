@@ -1,5 +1,5 @@
-"""Node configuration from a launch file (flexsheet.runtime.launch_config): a launch extension's section reaches
-the nodes whose params take it."""
+"""Node configuration from a launch file (flexsheet.runtime.launch_config): a launch extension's section
+reaches the nodes whose params take it."""
 
 from __future__ import annotations
 

@@ -1,5 +1,6 @@
-"""A node's heavy call at a bounded rate (flexsheet.runtime.paced): on the wall clock in a thread of its own, the
-loop free; on a simulated clock on the loop thread at the request, charged its cost; never faster than its rate."""
+"""A node's heavy call at a bounded rate (flexsheet.runtime.paced): on the wall clock in a thread of its own,
+the loop free; on a simulated clock on the loop thread at the request, charged its cost; never faster than its
+rate."""
 
 from __future__ import annotations
 
@@ -66,7 +67,7 @@ def test_on_the_wall_clock_the_call_runs_in_its_own_thread_at_most_at_its_rate()
 
         def call():
             threads.add(threading.current_thread().name)
-            starts.append(paced.last)            # the loop's start of this call (its thread runs it just after)
+            starts.append(paced.last)  # the loop's start of this call (its thread runs it just after)
             return len(starts)
 
         paced = PacedCall(node, 20.0, call, done.put_nowait, lambda exc: None, cost=0.0, name="paced-test")

@@ -13,8 +13,8 @@ from flexsheet.vision.head_camera_port import HeadCameraSource
 def test_an_entry_is_loaded_and_checked_against_its_base():
     cls = plugin("flexsheet.camera_sources", "sim", what="camera source", base=CameraSource)
     assert cls.__name__ == "TwinCamera"
-    with pytest.raises(LookupError, match=r"camera source 'sim' \(flexsheet.camera_sources\) is .*TwinCamera.*, not a "
-                                          r"HeadCameraSource"):
+    with pytest.raises(LookupError, match=r"camera source 'sim' \(flexsheet.camera_sources\) is "
+                                          r".*TwinCamera.*, not a HeadCameraSource"):
         plugin("flexsheet.camera_sources", "sim", what="camera source", base=HeadCameraSource)
 
 

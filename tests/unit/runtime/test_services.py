@@ -51,8 +51,9 @@ def test_a_call_over_the_socket_and_a_silent_endpoint():
 
 
 def test_commanding_services_take_only_the_hosts_tools():
-    """A commanding service (param/set, graph/*, the arm's moves): with CURVE only a host's key may call it, never
-    another node's; without CURVE only on a loopback graph. Reading services stay open to every identity."""
+    """A commanding service (param/set, graph/*, the arm's moves): with CURVE only a host's key may call it,
+    never another node's; without CURVE only on a loopback graph. Reading services stay open to every
+    identity."""
     import zmq
 
     from flexsheet.runtime.zmq.curve import CurveConfig

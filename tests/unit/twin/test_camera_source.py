@@ -1,4 +1,5 @@
-"""The camera twin's sensor config from the camera node's params: the realism's preset, each set param over it."""
+"""The camera twin's sensor config from the camera node's params: the realism's preset, each set param over
+it."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ from flexsheet.twin.camera_source import sim_config
 
 
 def _params(realism: str, **set_) -> SimpleNamespace:
-    unset = dict.fromkeys(("noise_dn", "shot_gain", "blur_px", "self_occlusion", "background_gain", "finger_dir"))
+    unset = dict.fromkeys(("noise_dn", "shot_gain", "blur_px", "self_occlusion", "background_gain",
+                           "finger_dir"))
     return SimpleNamespace(twin=TruthChoice(realism=realism), exposure_s=0.004, blur_samples=5, clutter=False,
                            seed=0, noise_scale=1.0, **{**unset, **set_})
 

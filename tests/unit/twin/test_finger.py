@@ -1,5 +1,5 @@
-"""The scripted finger (flexsheet.twin.finger): it follows the mark, deterministically per seed, with the stated
-tremor; position and velocity in one call."""
+"""The scripted finger (flexsheet.twin.finger): it follows the mark, deterministically per seed, with the
+stated tremor; position and velocity in one call."""
 
 import numpy as np
 import pytest
@@ -35,7 +35,8 @@ def test_finger_script_state_is_position_and_velocity_in_one_call(t):
     is the stroke's (≈ R·dφ/dt on the linear profile plus the tremor's), not zero."""
     fs = FingerScript(mode="stroke", moving_time=5.0, seed=3)
     p, v = fs.state(t)
-    assert p == pytest.approx(fs.position(t), abs=1e-15) and v == pytest.approx(fs.velocity(t), rel=1e-9, abs=1e-12)
+    assert (p == pytest.approx(fs.position(t), abs=1e-15)
+            and v == pytest.approx(fs.velocity(t), rel=1e-9, abs=1e-12))
     assert np.linalg.norm(v) > 1e-4
 
 

@@ -77,7 +77,7 @@ def test_board_hidden_when_turned_away_behind_or_occluded():
     assert np.all(twin.render(behind) == 90)
     assert np.all(twin.render(_glasses(), occluded=True) == 0)
     noisy = _twin(noise_sigma=2.0).render(_glasses(), occluded=True)
-    assert noisy.mean() < 1.5 and noisy.max() < 15                   # black plus the positive half of the noise
+    assert noisy.mean() < 1.5 and noisy.max() < 15  # black plus the positive half of the noise
 
 
 def test_noise_is_seeded_and_has_its_sigma():
@@ -121,9 +121,11 @@ def test_distortion_moves_the_board_as_the_lens_model_does():
 
 
 @pytest.mark.parametrize("kwargs, field", [({"width": 8}, "width"), ({"height": 100.5}, "height"),
-                                           ({"noise_sigma": -1.0}, "noise_sigma"), ({"blur_px": np.nan}, "blur_px"),
+                                           ({"noise_sigma": -1.0}, "noise_sigma"),
+                                           ({"blur_px": np.nan}, "blur_px"),
                                            ({"exposure_gain": 0.0}, "exposure_gain"), ({"board": 3}, "board"),
-                                           ({"white": 300.0}, "white"), ({"camera_matrix": np.eye(4)}, "camera_matrix"),
+                                           ({"white": 300.0}, "white"),
+                                           ({"camera_matrix": np.eye(4)}, "camera_matrix"),
                                            ({"dist": [1.0, 2.0]}, "dist"),
                                            ({"T_display_camera": np.ones((4, 4))}, "T_display_camera")])
 def test_twin_rejects_bad_inputs(kwargs, field):
@@ -136,6 +138,7 @@ def test_twin_rejects_bad_inputs(kwargs, field):
 def test_render_rejects_bad_inputs():
     twin = _twin()
     for kwargs, field in (({"T_display_glasses": np.eye(3)}, "T_display_glasses"),
-                          ({"velocity": [0.0, np.inf, 0.0]}, "velocity"), ({"exposure_s": -0.001}, "exposure_s")):
+                          ({"velocity": [0.0, np.inf, 0.0]}, "velocity"),
+                          ({"exposure_s": -0.001}, "exposure_s")):
         with pytest.raises(ValueError, match=field):
             twin.render(**{"T_display_glasses": _glasses(), **kwargs})

@@ -1,4 +1,5 @@
-"""The head camera port's twin: frames of the glasses at the true head, moved on to each frame's mid-exposure."""
+"""The head camera port's twin: frames of the glasses at the true head, moved on to each frame's
+mid-exposure."""
 
 from __future__ import annotations
 
@@ -16,8 +17,10 @@ from messages import Header, HeadTruth, topics
 
 def _truth(hs, stamp, velocity, visible=True) -> HeadTruth:
     T = hs.T_display_glasses
-    return HeadTruth(header=Header(stamp=stamp), position=T[:3, 3].copy(), rotation=np.ascontiguousarray(T[:3, :3]),
-                     left=hs.left, right=hs.right, eye=hs.eye, velocity=np.asarray(velocity, float), visible=visible)
+    return HeadTruth(header=Header(stamp=stamp), position=T[:3, 3].copy(),
+                     rotation=np.ascontiguousarray(T[:3, :3]),
+                     left=hs.left, right=hs.right, eye=hs.eye, velocity=np.asarray(velocity, float),
+                     visible=visible)
 
 
 def test_frames_show_the_true_head_moved_on_to_mid_exposure_by_at_most_a_tenth_of_a_second():

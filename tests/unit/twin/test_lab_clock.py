@@ -1,5 +1,5 @@
-"""The arm PCs' clock offsets the twin draws (flexsheet.twin.lab_clock): within the bound docs/deploy.md gives,
-spread over it, fixed per truth seed and arm, none for an ideal truth, and bad arguments named."""
+"""The arm PCs' clock offsets the twin draws (flexsheet.twin.lab_clock): within the bound docs/deploy.md
+gives, spread over it, fixed per truth seed and arm, none for an ideal truth, and bad arguments named."""
 
 import numpy as np
 import pytest

@@ -18,14 +18,16 @@ from flexsheet.twin.registration import run_display_sim
 from flexsheet.twin.truth import TwinTruth
 
 #: the truth seeds of the twin's quick registration that tests/nodes/test_camera_realism.py and
-#: tests/unit/experiments/test_correction.py load (sim_display_calib(seed, quick=True)): run here fresh, then shared
+#: tests/unit/experiments/test_correction.py load
+#: (sim_display_calib(seed, quick=True)): run here fresh, then shared
 SEEDS = (0, 1, 2)
 
 
 def _share_with_the_cache(seed: int, out: Path) -> None:
     """Put this fresh run's files where :func:`flexsheet.twin.registration.sim_display_calib` caches the
     realistic quick registration of ``seed`` (when that entry is absent), so the tests that load it do not run
-    the same procedures again: the same call (seed, realism, QUICK) whose summary key run_display_sim checks."""
+    the same procedures again: the same call (seed, realism, QUICK) whose summary key run_display_sim
+    checks."""
     dst = Path(cache_root()) / "display" / f"realistic-{int(seed)}-quick"
     if (dst / "summary.json").is_file() and (dst / "display.yaml").is_file():
         return
@@ -60,13 +62,16 @@ def test_every_procedure_within_target(sim):
     d = load_display_calib(str(out / "display.yaml"), require=tuple(n for n in ENTRIES if n != "sheet"))
     assert d.sheet is None and "sheet" not in s                  # the quick preset presses no probe
     assert d.camera.provenance.source == f"twin seed {seed} (realistic)"
-    assert d.projector.provenance.residuals["reprojection_px"] == pytest.approx(s["projector"]["reprojection_px"])
+    assert d.projector.provenance.residuals["reprojection_px"] == pytest.approx(
+        s["projector"]["reprojection_px"])
     # estimates moved away from the nominal toward the truth (they were not handed the nominal back)
     truth = TwinTruth.draw(seed)
     nom = nominal_display_calib()
     assert (truth.camera_pose_error(nom.camera.T_display_camera)[0] * 1e3
             > 5 * s["camera"]["translation_error_mm"])
-    assert truth.base_error("left", nom.arms["left"].T_display_base)[0] * 1e3 > s["arms"]["left"]["translation_error_mm"]
+    assert truth.base_error("left",
+                            nom.arms["left"].T_display_base)[0] * 1e3 > s["arms"]["left"][
+                                "translation_error_mm"]
 
 
 def test_summary_is_cached_per_seed(sim):

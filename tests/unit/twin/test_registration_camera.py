@@ -1,5 +1,5 @@
-"""The calibration twin's image formation (flexsheet.twin.registration_camera): exact rays, and image noise at the
-level measured on the real XIMEA images."""
+"""The calibration twin's image formation (flexsheet.twin.registration_camera): exact rays, and image noise at
+the level measured on the real XIMEA images."""
 
 from __future__ import annotations
 
@@ -19,7 +19,8 @@ def test_twin_rays_reproject_exactly():
     r = cam.rays(2)
     rng = np.random.default_rng(0)
     idx = rng.integers(0, [r.shape[0], r.shape[1]], (500, 2))
-    uv = cv2.projectPoints(r[idx[:, 0], idx[:, 1]].astype(np.float64), np.zeros(3), np.zeros(3), c["K1"], c["D1"])[0]
+    uv = cv2.projectPoints(r[idx[:, 0], idx[:, 1]].astype(np.float64), np.zeros(3), np.zeros(3), c["K1"],
+                           c["D1"])[0]
     expect = np.column_stack([(idx[:, 1] + 0.5) / 2 - 0.5, (idx[:, 0] + 0.5) / 2 - 0.5])
     assert np.abs(uv.reshape(-1, 2) - expect).max() < 1e-3
 

@@ -30,7 +30,8 @@ def test_each_target_counts_its_misses_worst_and_median(tmp_path, monkeypatch):
     def fake(seed, out_dir, opts, realism):
         arm = {"translation_error_mm": 0.4, "rotation_error_deg": 0.01}
         return {"camera": {"translation_error_mm": 0.1 * (seed % 7), "rotation_error_deg": 0.02},
-                "projector": {"translation_error_mm": proj[seed], "rotation_error_deg": 0.05, "reprojection_px": 0.3},
+                "projector": {"translation_error_mm": proj[seed], "rotation_error_deg": 0.05,
+                              "reprojection_px": 0.3},
                 "arms": {"left": arm, "right": arm}, "targets": dict(TARGETS)}
 
     monkeypatch.setattr(rd, "run_display_sim", fake)

@@ -1,4 +1,5 @@
-"""The hidden truth (flexsheet.twin.truth): deterministic draws, the ideal one nominal, the documented spreads."""
+"""The hidden truth (flexsheet.twin.truth): deterministic draws, the ideal one nominal, the documented
+spreads."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ from flexsheet.twin.truth import Spreads, TwinTruth
 
 def test_truth_is_deterministic_and_ideal_is_nominal():
     a, b, c = TwinTruth.draw(4), TwinTruth.draw(4), TwinTruth.draw(5)
-    assert np.array_equal(a.T_display_camera, b.T_display_camera) and np.array_equal(a.projector_K, b.projector_K)
+    assert (np.array_equal(a.T_display_camera, b.T_display_camera)
+            and np.array_equal(a.projector_K, b.projector_K))
     assert not np.allclose(a.T_display_camera, c.T_display_camera)
     nom = nominal_display_calib()
     i = TwinTruth.draw(4, "ideal")
@@ -20,9 +22,11 @@ def test_truth_is_deterministic_and_ideal_is_nominal():
     assert np.allclose(i.camera_calib["K1"], nom.camera.stereo["K1"], atol=1e-9)
     assert np.array_equal(i.projector_K, nom.projector.K) and not i.projector_D.any()
     q = home_joints("left") + 0.1
-    assert np.allclose(i.clamp_pose("left", q), ArmKinematics("left", nom.arms["left"].T_display_base).fk(q), atol=1e-12)
+    assert np.allclose(i.clamp_pose("left", q), ArmKinematics("left", nom.arms["left"].T_display_base).fk(q),
+                       atol=1e-12)
     # realistic: the as-built arm differs from the nominal by mm, not cm
-    d = np.linalg.norm(a.clamp_pose("left", q)[:3, 3] - ArmKinematics("left", nom.arms["left"].T_display_base).fk(q)[:3, 3])
+    d = np.linalg.norm(a.clamp_pose("left", q)[:3, 3]
+                       - ArmKinematics("left", nom.arms["left"].T_display_base).fk(q)[:3, 3])
     assert 1e-4 < d < 0.03
     with pytest.raises(ValueError, match="realism"):
         TwinTruth.draw(1, "perfect")

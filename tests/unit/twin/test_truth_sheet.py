@@ -1,7 +1,7 @@
-"""The twin's true sheet from one table family (flexsheet/twin/truth_sheet.py): modulus and thickness scale the
-FEM's force exactly, pre-strain and grip slip shift its strain, the interpolation is exact on the forms it is
-built for, a missing table is an error naming the command that ships it, and against full FEM solves of three
-drawn truths the force is within 2 % (slow tier)."""
+"""The twin's true sheet from one table family (flexsheet/twin/truth_sheet.py): modulus and thickness scale
+the FEM's force exactly, pre-strain and grip slip shift its strain, the interpolation is exact on the forms it
+is built for, a missing table is an error naming the command that ships it, and against full FEM solves of
+three drawn truths the force is within 2 % (slow tier)."""
 
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ def test_modulus_and_thickness_scale_the_fem_force_exactly_and_leave_the_shape()
     nominal = SheetFEM(_physics(E0, T0, 0.05, 0.05), **COARSE).solve_indent(depths, 0.036, 0.0)
     drawn = SheetFEM(_physics(1.3 * E0, 0.95 * T0, 0.05, 0.05), **COARSE).solve_indent(depths, 0.036, 0.0)
     for a, b in zip(nominal, drawn, strict=True):
-        assert b.force / a.force == pytest.approx(1.3 * 0.95, rel=2e-4)      # only the contact penalty is fixed
+        assert b.force / a.force == pytest.approx(1.3 * 0.95, rel=2e-4)  # only the contact penalty is fixed
         assert np.abs(b.w - a.w).max() < 2e-6                                 # m
     assert nominal[-1].force > 5.0 * nominal[0].force                         # the forces are not trivial
 
@@ -53,7 +53,8 @@ def _fake_family(folder, alpha, cubic, span_gain) -> None:
             Fd *= 1.0 + np.arange(P)[:, None, None] * 0.1                    # stiffer toward the clamp
             Fd *= 1.0 + (span_gain if lay == "B" else 0.0)
             span = e + (SPAN_OFFSET if lay == "B" else 0.0)
-            np.savez(node_path(lay, e, str(folder)), x=np.zeros(2), y=np.zeros(2), W=np.zeros((P, P, 5, 2, 2)),
+            np.savez(node_path(lay, e, str(folder)), x=np.zeros(2), y=np.zeros(2),
+                     W=np.zeros((P, P, 5, 2, 2)),
                      F=Fd[:, :, :5], Fd=Fd, strain=e, span_strain=span, key=ts.family_key())
 
 
@@ -66,7 +67,7 @@ def test_the_truth_sheet_scales_shifts_and_interpolates_a_known_family_exactly(t
         for s in (0.0037, 0.05, 0.173, 0.29):                                    # off its strains
             want = alpha(s) * d + 4.0e4 * d ** 3
             assert nominal.force(d, 0.0, 0.0, s) == pytest.approx(want, rel=1e-9)
-            assert nominal.force(d, -0.054, 0.018, s) == pytest.approx(1.15 * want, rel=1e-9)    # bilinear in u
+            assert nominal.force(d, -0.054, 0.018, s) == pytest.approx(1.15 * want, rel=1e-9)  # bilinear in u
     drawn = TruthSheet(1.2 * E0, 0.9 * T0, 0.004, 0.05, folder)
     s = 0.12
     eps = s * 0.95 + 0.004
@@ -86,7 +87,8 @@ def test_a_missing_table_is_an_error_naming_the_command_that_ships_it(tmp_path):
     _fake_family(tmp_path, lambda e: 10.0, 0.0, 0.0)
     gone = node_path("B", B_STRAINS[1], str(tmp_path))
     (tmp_path / gone.split("/")[-1]).unlink()
-    with pytest.raises(FileNotFoundError, match=r"lacks 1 of 15 tables: .*truth_sheet --ship.*\(missing: B0\.04\)"):
+    with pytest.raises(FileNotFoundError, match=r"lacks 1 of 15 tables: .*truth_sheet --ship.*\(missing: "
+                                                r"B0\.04\)"):
         load_family(str(tmp_path))
 
 
@@ -99,7 +101,7 @@ def test_the_shipped_family_is_whole_and_reads_its_own_tables_at_their_strains()
             assert sheet.force(FORCE_DEPTHS[k], u, v, tab.strain) == pytest.approx(tab.Fd[i, j, k], rel=1e-12)
     f = [sheet.force(0.01, 0.0, 0.0, s) for s in np.linspace(0.0025, 0.30, 596)]
     assert np.all(np.diff(f) > 0.0)                                             # stiffer with the pull
-    for e in A_STRAINS[1:-1]:                                                   # no step where the windows change
+    for e in A_STRAINS[1:-1]:  # no step where the windows change
         below, above = sheet.force(0.01, 0.0, 0.0, e - 1e-7), sheet.force(0.01, 0.0, 0.0, e + 1e-7)
         assert abs(above / below - 1.0) < 1e-4
     assert 0.05 < f[0] < f[-1] < 5.0                                            # N at 10 mm
@@ -107,6 +109,7 @@ def test_the_shipped_family_is_whole_and_reads_its_own_tables_at_their_strains()
 
 @pytest.mark.slow
 def test_the_truth_sheet_is_within_2_percent_of_the_full_fem_on_three_drawn_truths():
-    out = ts.check(ts.check_seeds(), depths=(0.002, 0.008, 0.017, 0.030), bins=ts.CHECK_BINS[1::2], off_grid=False)
+    out = ts.check(ts.check_seeds(), depths=(0.002, 0.008, 0.017, 0.030), bins=ts.CHECK_BINS[1::2],
+                   off_grid=False)
     errs = [abs(r["error_pct"]) for r in out["points"]]
     assert len(errs) == 3 * 2 * 4 and max(errs) < 2.0, out["worst_pct"]

@@ -1,6 +1,6 @@
 """The world twin's physics (flexsheet/twin/world.py): the pushed sheet it makes of the true clamps is the
-truth's sheet (:class:`flexsheet.twin.truth_sheet.TruthSheet`) at the measured span, and a sheet of another size
-than the table family's is refused."""
+truth's sheet (:class:`flexsheet.twin.truth_sheet.TruthSheet`) at the measured span, and a sheet of another
+size than the table family's is refused."""
 
 from __future__ import annotations
 

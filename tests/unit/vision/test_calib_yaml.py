@@ -1,5 +1,5 @@
-"""The stereo calibration's YAML file (flexsheet.vision.calib_yaml): a round trip of a real calibration and its
-message, a missing file named."""
+"""The stereo calibration's YAML file (flexsheet.vision.calib_yaml): a round trip of a real calibration and
+its message, a missing file named."""
 
 import numpy as np
 import pytest

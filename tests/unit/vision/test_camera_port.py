@@ -11,14 +11,15 @@ from flexsheet.vision.camera_port import SOURCES_GROUP, CameraSource, camera_sou
 def test_the_installed_sources_are_the_twin_and_the_lab_cameras():
     assert camera_source("sim") is TwinCamera and TwinCamera.models_link_delay
     lab = {name: camera_source(name) for name in ("genicam", "device", "files")}
-    assert all(issubclass(c, CameraSource) and c.__module__ == "nodes.camera.sources" and not c.models_link_delay
+    assert all(issubclass(c, CameraSource) and c.__module__ == "nodes.camera.sources"
+               and not c.models_link_delay
                for c in lab.values())
     assert [c.__name__ for c in lab.values()] == ["GenICamCamera", "UvcCamera", "FilesCamera"]
 
 
 def test_an_unknown_source_is_named_with_the_installed_ones():
-    with pytest.raises(LookupError, match=rf"unknown camera source 'v4l' \({SOURCES_GROUP}\); known: device, files, "
-                                          r"genicam, sim"):
+    with pytest.raises(LookupError, match=rf"unknown camera source 'v4l' \({SOURCES_GROUP}\); known: device, "
+                                          r"files, genicam, sim"):
         camera_source("v4l")
 
 

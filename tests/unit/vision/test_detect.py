@@ -1,4 +1,5 @@
-"""The marker detector (flexsheet.vision.detect): the sub-pixel centroid without noise, bad parameters refused."""
+"""The marker detector (flexsheet.vision.detect): the sub-pixel centroid without noise, bad parameters
+refused."""
 
 import numpy as np
 import pytest

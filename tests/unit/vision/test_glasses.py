@@ -1,6 +1,6 @@
 """The glasses tracker (flexsheet.vision.glasses) on frames of the head-camera twin
-(flexsheet.twin.head_camera): board geometry, eye and pose accuracy, the visibility rules, input checks and the
-constant-velocity head predictor."""
+(flexsheet.twin.head_camera): board geometry, eye and pose accuracy, the visibility rules, input checks and
+the constant-velocity head predictor."""
 
 import cv2
 import numpy as np
@@ -54,7 +54,8 @@ def test_board_geometry_in_glasses_frame():
     assert b.size == pytest.approx((0.102, 0.027), abs=1e-12)
     T = b.T_glasses_board
     # board centre 30 mm above the glasses origin; printed face (−z of the OpenCV board) toward glasses +z
-    assert T[:3, :3] @ np.array([0.051, 0.0135, 0.0]) + T[:3, 3] == pytest.approx([0.0, 0.030, 0.0], abs=1e-12)
+    assert (T[:3, :3] @ np.array([0.051, 0.0135, 0.0]) + T[:3, 3]
+            == pytest.approx([0.0, 0.030, 0.0], abs=1e-12))
     assert -T[:3, 2] == pytest.approx([0.0, 0.0, 1.0], abs=1e-12)
     P = b.object_points_glasses()
     assert P.shape == (56, 3)
@@ -82,7 +83,8 @@ def test_board_image_is_the_opencv_print():
 
 @pytest.mark.parametrize("kwargs, field", [({"rows": 0}, "rows"), ({"cols": 2.5}, "cols"),
                                            ({"marker": -0.01}, "marker"), ({"gap": 0.0}, "gap"),
-                                           ({"first_id": 40}, "first_id"), ({"dictionary": 9999}, "dictionary"),
+                                           ({"first_id": 40}, "first_id"),
+                                           ({"dictionary": 9999}, "dictionary"),
                                            ({"height": float("nan")}, "height")])
 def test_board_rejects_bad_fields(kwargs, field):
     with pytest.raises(ValueError, match=field):

@@ -16,12 +16,14 @@ def test_the_installed_sources_are_the_twin_and_the_uvc_camera():
 
 
 def test_an_unknown_source_is_named_with_the_installed_ones():
-    with pytest.raises(LookupError, match=rf"unknown head camera source 'gige' \({SOURCES_GROUP}\); known: device, sim"):
+    with pytest.raises(LookupError, match=rf"unknown head camera source 'gige' \({SOURCES_GROUP}\); known: "
+                                          r"device, sim"):
         head_camera_source("gige")
 
 
 def test_the_uvc_probe_names_a_missing_device():
     from types import SimpleNamespace
 
-    lines = head_camera_source("device").probe(SimpleNamespace(device="/dev/video_nothing_here", rate_hz=60.0))
+    lines = head_camera_source("device").probe(SimpleNamespace(device="/dev/video_nothing_here",
+                                                               rate_hz=60.0))
     assert lines == ["head camera: cannot open UVC device '/dev/video_nothing_here' (cv2.VideoCapture)"]

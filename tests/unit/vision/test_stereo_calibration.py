@@ -59,8 +59,10 @@ def test_epipolar_constraint_on_real_corners(real_result):
     board = parse_board("chessboard:9x6", 0.024)
     _, cl = detect_board(left[0], board)
     _, cr = detect_board(right[0], board)
-    ul = cv2.undistortPoints(cl.reshape(-1, 1, 2), real_result.K1, real_result.D1, P=real_result.K1).reshape(-1, 2)
-    ur = cv2.undistortPoints(cr.reshape(-1, 1, 2), real_result.K2, real_result.D2, P=real_result.K2).reshape(-1, 2)
+    ul = cv2.undistortPoints(cl.reshape(-1, 1, 2), real_result.K1, real_result.D1,
+                             P=real_result.K1).reshape(-1, 2)
+    ur = cv2.undistortPoints(cr.reshape(-1, 1, 2), real_result.K2, real_result.D2,
+                             P=real_result.K2).reshape(-1, 2)
     from flexsheet.vision.stereo import StereoModel
     m = StereoModel.from_calib(real_result.as_dict())
     res = m.epipolar_residual(ul, ur)
@@ -121,16 +123,18 @@ def test_skipped_pair_reported():
 
 def test_cli_writes_yaml(tmp_path, capsys):
     out = str(tmp_path / "cal.yaml")
-    rc = main(["--left", os.path.join(DATA, "left0[1-5].jpg"), "--right", os.path.join(DATA, "right0[1-5].jpg"),
+    rc = main(["--left", os.path.join(DATA, "left0[1-5].jpg"), "--right",
+               os.path.join(DATA, "right0[1-5].jpg"),
                "--board", "chessboard:9x6", "--square", "0.024", "-o", out])
     assert rc == 0
     assert "stereo RMS" in capsys.readouterr().out
     assert 0.08 < np.linalg.norm(load_yaml(out)["T"]) < 0.105
 
 
-@pytest.mark.parametrize("spec,square", [("chessboard:9", 0.024), ("chessboard:9x6", None), ("chessboard:1x6", 0.02),
-                                          ("charuco:5x7:0.04:0.05:DICT_4X4_50", None),
-                                          ("charuco:5x7:0.04:0.03:DICT_NOPE", None), ("grid:3x3", 0.01)])
+@pytest.mark.parametrize("spec,square",
+                         [("chessboard:9", 0.024), ("chessboard:9x6", None), ("chessboard:1x6", 0.02),
+                          ("charuco:5x7:0.04:0.05:DICT_4X4_50", None),
+                          ("charuco:5x7:0.04:0.03:DICT_NOPE", None), ("grid:3x3", 0.01)])
 def test_bad_board_specs(spec, square):
     with pytest.raises(ValueError):
         parse_board(spec, square)

@@ -1,5 +1,5 @@
-"""The fingertip tracker (flexsheet.vision.tracker), the full per-frame pipeline on twin-rendered images: accuracy
-vs covariance, ROI re-acquisition, occlusion, ambiguity (reflection), gating and input checks."""
+"""The fingertip tracker (flexsheet.vision.tracker), the full per-frame pipeline on twin-rendered images:
+accuracy vs covariance, ROI re-acquisition, occlusion, ambiguity (reflection), gating and input checks."""
 
 import numpy as np
 import pytest
@@ -110,16 +110,17 @@ def test_a_finger_that_turns_and_trembles_is_tracked_and_a_jump_still_gated():
 
 
 def _reach(t, t0=0.5, dur=0.35, dist=0.1):
-    """A minimum-jerk reach of ``dist`` m along +z starting at ``t0`` s, lasting ``dur`` s: position m, and its
-    peak acceleration 5.77·dist/dur² m/s² (4.7 here)."""
+    """A minimum-jerk reach of ``dist`` m along +z starting at ``t0`` s, lasting ``dur`` s: position m, and
+    its peak acceleration 5.77·dist/dur² m/s² (4.7 here)."""
     s = np.clip((t - t0) / dur, 0.0, 1.0)
     return dist * (10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5)
 
 
 def test_a_reach_is_tracked_through_its_acceleration_and_a_jump_still_gated():
-    """A finger at rest that reaches 0.1 m in 0.35 s and stops (minimum jerk, peak 4.7 m/s²), seen at 60 Hz: the
-    smooth filter alone refuses fixes as it starts and stops (its prediction lags by many σ); the manoeuvre gate
-    keeps every fix, each within 1 mm of the truth, and a 15 mm jump out of rest is still gated."""
+    """A finger at rest that reaches 0.1 m in 0.35 s and stops (minimum jerk, peak 4.7 m/s²), seen at 60 Hz:
+    the smooth filter alone refuses fixes as it starts and stops (its prediction lags by many σ); the
+    manoeuvre gate keeps every fix, each within 1 mm of the truth, and a 15 mm jump out of rest is still
+    gated."""
     calib, T, rnd = _setup()
     p0 = np.array([0.03, 0.0, -0.05])
     out = {}

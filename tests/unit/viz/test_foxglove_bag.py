@@ -1,6 +1,6 @@
 """Foxglove channels in bags (flexsheet.viz.foxglove_bag): written from raw recorder frames or from a recorded
-bag, read back with the ``mcap`` reader and decoded against the schemas they carry (protobuf FileDescriptorSet /
-JSON schema); bad messages counted, never raised."""
+bag, read back with the ``mcap`` reader and decoded against the schemas they carry (protobuf FileDescriptorSet
+/ JSON schema); bad messages counted, never raised."""
 
 from __future__ import annotations
 
@@ -153,5 +153,6 @@ def test_bad_messages_are_counted_never_raised(tmp_path):
             fox.add_frames(frames, int(t * 1e9))
         fox.close()
         w.finish()
-    assert fox.rejected == Counter({"/object/deformation: undecodable": 1, "/object/deformation: ValueError": 1})
+    assert fox.rejected == Counter({"/object/deformation: undecodable": 1,
+                                    "/object/deformation: ValueError": 1})
     assert fox.counts["/viz/scene"] >= 1

@@ -1,5 +1,5 @@
-"""The shipped Foxglove layout (flexsheet.viz.layout) matches its generator and only names channels (and fields)
-that exist."""
+"""The shipped Foxglove layout (flexsheet.viz.layout) matches its generator and only names channels (and
+fields) that exist."""
 
 from __future__ import annotations
 

@@ -29,7 +29,8 @@ def test_preview_draws_the_bag(tmp_path):
     drawn = numbers["scene_entities"]
     st = sample_state()
     assert drawn["object:triangles"] == len(st["/object/deformation"].faces)
-    assert drawn["arm_left:cylinders"] == 7 and drawn["cameras:lines"] == 16 and drawn["fingertip:spheres"] == 3
+    assert drawn["arm_left:cylinders"] == 7 and drawn["cameras:lines"] == 16 and drawn[
+        "fingertip:spheres"] == 3
     tension = numbers["plots"]["Plot!tension"]["tension (N/m)"]
     assert len(tension) >= 10 and {v for _, v in tension} == {120.0}
     with pytest.raises(ValueError, match="MCAP"):

@@ -1,5 +1,5 @@
-"""The Foxglove scene builder (flexsheet.viz.scene_builder): a bad joint state is refused and the arm kept; the
-scene's bytes decode as the SDK would encode them.
+"""The Foxglove scene builder (flexsheet.viz.scene_builder): a bad joint state is refused and the arm kept;
+the scene's bytes decode as the SDK would encode them.
 
 The Foxglove bridge draws the pushed sheet the renderer corrects for (its nominal-FEM model,
 :func:`flexsheet.model.sheet_model.sheet_model_for` of the same :class:`SheetConfig`), not the old linear
@@ -7,8 +7,8 @@ series dent (:class:`flexsheet.model.sheet.Membrane`).
 
 Two routes to the same sheet: the bridge gets the clamp poses by its own forward kinematics of the arms'
 measured joints and reads the depression off the vertices it encodes into ``/viz/scene``; the renderer side is
-:class:`flexsheet.rendering.state.RendererState` fed the arm bridges' ``pose`` field and the fingertip, as the node
-does. The tables are the shipped ones (stretch 0.04 and 0.05 are shipped nodes), so nothing is built.
+:class:`flexsheet.rendering.state.RendererState` fed the arm bridges' ``pose`` field and the fingertip, as the
+node does. The tables are the shipped ones (stretch 0.04 and 0.05 are shipped nodes), so nothing is built.
 """
 
 from __future__ import annotations
@@ -36,15 +36,18 @@ TOL = 5e-5          # 0.05 mm
 
 def _arm_states(stretch: float) -> dict[str, ArmJointState]:
     """Both arms' joint states holding the sheet at the home plane with clamp strain ``stretch`` (IK)."""
-    targets = dict(zip(("left", "right"), clamp_poses(np.zeros(3), geometry.SCREEN_NORMAL, [0.0, 1.0, 0.0], stretch),
+    targets = dict(zip(("left", "right"),
+                       clamp_poses(np.zeros(3), geometry.SCREEN_NORMAL, [0.0, 1.0, 0.0], stretch),
                        strict=True))
     out = {}
     for side, base in (("left", LEFT_BASE), ("right", RIGHT_BASE)):
         kin = ArmKinematics(side, base)
         res = kin.ik(targets[side], home_joints(side))
         assert res.ok, (side, res.status)
-        out[side] = ArmJointState(header=Header(stamp=10.0, frame_id="display", seq=0), arm=side, position=res.q,
-                                  velocity=np.zeros(6), commanded=res.q, executing=res.q, pose=kin.fk(res.q), status=1,
+        out[side] = ArmJointState(header=Header(stamp=10.0, frame_id="display", seq=0), arm=side,
+                                  position=res.q,
+                                  velocity=np.zeros(6), commanded=res.q, executing=res.q, pose=kin.fk(res.q),
+                                  status=1,
                                   target_stamp=9.99, write_stamp=9.999)
     return out
 
@@ -81,7 +84,8 @@ def _renderer_sheet(arms, tip_pos, cfg: SheetConfig) -> SheetSurface:
     return sheet
 
 
-@pytest.mark.parametrize("stretch, depth, pu, pv", [(0.04, 0.030, 0.020, 0.010), (0.05, 0.045, -0.030, 0.040)])
+@pytest.mark.parametrize("stretch, depth, pu, pv",
+                         [(0.04, 0.030, 0.020, 0.010), (0.05, 0.045, -0.030, 0.040)])
 def test_bridge_draws_the_renderers_nominal_fem_dent(stretch, depth, pu, pv):
     cfg = SheetConfig()
     arms = _arm_states(stretch)
@@ -112,8 +116,8 @@ def test_bridge_draws_the_renderers_nominal_fem_dent(stretch, depth, pu, pv):
 
 
 def test_bridge_follows_the_renderers_config_and_draws_four_triangles_while_the_table_is_missing(tmp_path):
-    # an assumed uniform tension ratio the shipped tables do not have, and an empty cache: the renderer meets a
-    # PendingPush (it draws four_triangle); the bridge builds nothing and draws that 4-triangle tent
+    # an assumed uniform tension ratio the shipped tables do not have, and an empty cache: the renderer
+    # meets a PendingPush (it draws four_triangle); the bridge builds nothing and draws that 4-triangle tent
     cfg = SheetConfig(tension_ratio=1.3, cache_dir=str(tmp_path))
     depth, pu, pv = 0.03, 0.02, -0.01
     arms = _arm_states(0.04)
@@ -148,12 +152,14 @@ def test_bad_joint_state_is_refused_and_the_arm_kept():
     with pytest.raises(ValueError, match="q must be"):
         b.update("/arm/left/joint_state", bad)
     after = b.frames()
-    assert len(before) == len(after) and all(np.allclose(x[2], y[2]) for x, y in zip(before, after, strict=True))
+    assert (len(before) == len(after)
+            and all(np.allclose(x[2], y[2]) for x, y in zip(before, after, strict=True)))
 
 
 def test_scene_bytes_decode_as_the_sdk_would_encode_them():
     """The scene's bulk arrays are written with numpy on the protobuf wire (foxglove_scene: "protobuf wire
-    format"); decoded against the SDK's schema they must equal the same entities built with the SDK's classes."""
+    format"); decoded against the SDK's schema they must equal the same entities built with the SDK's
+    classes."""
     import base64
 
     from foxglove.messages import (
@@ -178,7 +184,8 @@ def test_scene_bytes_decode_as_the_sdk_would_encode_them():
         b.update(name, msg)
     su = Update.FromString(b.scene_bytes(1234.5))
     ents = {e.id: e for e in su.entities}
-    assert {"object", "sheet", "sheet_true", "fingertip", "contact", "projector", "eyes", "cameras", "arm_left",
+    assert {"object", "sheet", "sheet_true", "fingertip", "contact", "projector", "eyes", "cameras",
+            "arm_left",
             "arm_right"} == set(ents)
     d = st["/object/deformation"]
 
@@ -186,8 +193,9 @@ def test_scene_bytes_decode_as_the_sdk_would_encode_them():
         return [Point3(x=float(x), y=float(y), z=float(z)) for x, y, z in np.asarray(a, dtype=float)]
 
     sdk = SceneEntity(timestamp=Timestamp.from_epoch_secs(1234.5), frame_id="display", id="object",
-                      triangles=[TriangleListPrimitive(points=pts(d.vertices), indices=d.faces.ravel().tolist(),
-                                                       color=Color(r=0.95, g=0.55, b=0.2, a=0.9))])
+                      triangles=
+                          [TriangleListPrimitive(points=pts(d.vertices), indices=d.faces.ravel().tolist(),
+                                                 color=Color(r=0.95, g=0.55, b=0.2, a=0.9))])
     assert Entity.FromString(sdk.encode()) == ents["object"]
     assert len(ents["object"].triangles[0].points) == len(d.vertices) == 1200
     v, f = sheet_mesh(b.believed_sheet(), b.cfg.sheet_grid)

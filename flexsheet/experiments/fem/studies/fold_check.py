@@ -33,13 +33,14 @@ def fold_path(spec: RefSpec, angle_deg: float, path: dict, depths: np.ndarray, m
     reference has no self-contact, so where its surface passes through itself it is not a physical solution.
     Cached (kind "fold", keyed by the states themselves). Returns (D,) arrays: "max_winding" (0.5 on a smooth
     surface, α/2π at the bottom of a fold of interior angle α, > 1 where the surface lies inside the body),
-    "n_penetrating" (surface points with w > 1), "max_penetration" m, "min_stretch_ratio" (smallest in-plane stretch
-    of the surface triangles off the footprint), "n_creased" (triangles below
-    :data:`flexsheet.fem.reference.fold.CREASE_STRETCH_RATIO`), "worst_lateral" / "worst_drop" m (the largest-w point's rest
-    distance from the push axis and its motion along the push); the same with the footprint included ("all_…":
-    the material over the fingertip); "max_strain" the largest principal Green–Lagrange strain of any element
-    and "max_strain_lateral_m" that element's rest distance from the push axis; "seconds". Raises ``RuntimeError`` when the
-    re-made mesh has another DOF count than the path (:func:`check_dofs`)."""
+    "n_penetrating" (surface points with w > 1), "max_penetration" m, "min_stretch_ratio" (smallest in-plane
+    stretch of the surface triangles off the footprint), "n_creased" (triangles below
+    :data:`flexsheet.fem.reference.fold.CREASE_STRETCH_RATIO`), "worst_lateral" / "worst_drop" m (the
+    largest-w point's rest distance from the push axis and its motion along the push); the same with the
+    footprint included ("all_…": the material over the fingertip); "max_strain" the largest principal
+    Green–Lagrange strain of any element and "max_strain_lateral_m" that element's rest distance from the push
+    axis; "seconds". Raises ``RuntimeError`` when the re-made mesh has another DOF count than the path
+    (:func:`check_dofs`)."""
     spec, angle_deg = as_solved(spec, angle_deg)
     ud = np.asarray(path["u_dof"])
     key = cache_key(FOLD_VERSION, spec.key(), angle_deg, np.round(depths, 9).tolist(), FOLD_REGION, FINGER_R,
@@ -53,23 +54,28 @@ def fold_path(spec: RefSpec, angle_deg: float, path: dict, depths: np.ndarray, m
         surf = outer_surface(model)
         rows = []
         for j, d in enumerate(depths):
-            caps = capsule_at(math.radians(angle_deg), float(d), FINGER_R, model.mesh.radius, model.mesh.center)
+            caps = capsule_at(math.radians(angle_deg), float(d), FINGER_R, model.mesh.radius,
+                              model.mesh.center)
             u = ud[j].reshape(-1, 3).astype(float)
             r = fold_report(model, surf, u, caps, FOLD_REGION)
             a = fold_report(model, surf, u, caps, FOLD_REGION, margin=-np.inf)     # the footprint too
             F = model.deformation(u)
-            ev = np.linalg.eigvalsh(0.5 * (np.einsum("eqki,eqkj->eqij", F, F) - np.eye(3)))[..., -1].max(axis=1)
+            ev = np.linalg.eigvalsh(0.5 * (np.einsum("eqki,eqkj->eqij", F, F) - np.eye(3)))[...,
+                                                                                            -1].max(axis=1)
             e = int(np.argmax(ev))
             r.update(all_max_winding=a["max_winding"], all_n_penetrating=a["n_penetrating"],
-                     all_max_stretch_ratio=a["max_stretch_ratio"], all_max_stretch_ratio_lateral_m=a["max_stretch_ratio_lateral_m"],
+                     all_max_stretch_ratio=a["max_stretch_ratio"],
+                     all_max_stretch_ratio_lateral_m=a["max_stretch_ratio_lateral_m"],
                      max_strain=float(ev[e]),
                      max_strain_lateral_m=float(lateral_distance(model.points[model.edofs[e]].mean(axis=0)[None],
                                                                   caps)[0]))
             rows.append(r)
         out = {k: np.array([r[k] if r[k] is not None else np.nan for r in rows], float)
-               for k in ("max_winding", "n_penetrating", "max_penetration_m", "min_stretch_ratio", "n_creased_tris",
+               for k in ("max_winding", "n_penetrating", "max_penetration_m", "min_stretch_ratio",
+                         "n_creased_tris",
                          "worst_lateral_m", "worst_drop_m", "all_max_winding", "all_n_penetrating",
-                         "all_max_stretch_ratio", "all_max_stretch_ratio_lateral_m", "max_strain", "max_strain_lateral_m")}
+                         "all_max_stretch_ratio", "all_max_stretch_ratio_lateral_m", "max_strain",
+                         "max_strain_lateral_m")}
         out["seconds"] = np.array(time.perf_counter() - t)
         return out
 
@@ -79,14 +85,18 @@ def fold_path(spec: RefSpec, angle_deg: float, path: dict, depths: np.ndarray, m
 
 def fold_path_json(f: dict) -> dict:
     """The JSON form of a :func:`fold_path` result (mm where a length)."""
-    return {"max_winding": f["max_winding"].tolist(), "n_penetrating": f["n_penetrating"].astype(int).tolist(),
-            "max_penetration_mm": (f["max_penetration_m"] * 1e3).tolist(), "min_stretch_ratio": f["min_stretch_ratio"].tolist(),
+    return {"max_winding": f["max_winding"].tolist(),
+            "n_penetrating": f["n_penetrating"].astype(int).tolist(),
+            "max_penetration_mm": (f["max_penetration_m"] * 1e3).tolist(),
+            "min_stretch_ratio": f["min_stretch_ratio"].tolist(),
             "n_creased_tris": f["n_creased_tris"].astype(int).tolist(),
             "worst_lateral_mm": (f["worst_lateral_m"] * 1e3).tolist(),
             "worst_drop_mm": (f["worst_drop_m"] * 1e3).tolist(),
             "with_footprint": {"max_winding": f["all_max_winding"].tolist(),
                                "n_penetrating": f["all_n_penetrating"].astype(int).tolist(),
                                "max_stretch_ratio": f["all_max_stretch_ratio"].tolist(),
-                               "max_stretch_ratio_rest_lateral_mm": (f["all_max_stretch_ratio_lateral_m"] * 1e3).tolist()},
+                               "max_stretch_ratio_rest_lateral_mm": (f["all_max_stretch_ratio_lateral_m"]
+                                                                     * 1e3).tolist()},
             "max_principal_strain": f["max_strain"].tolist(),
-            "max_strain_rest_lateral_mm": (f["max_strain_lateral_m"] * 1e3).tolist(), "seconds": float(f["seconds"])}
+            "max_strain_rest_lateral_mm": (f["max_strain_lateral_m"] * 1e3).tolist(),
+            "seconds": float(f["seconds"])}

@@ -1,5 +1,6 @@
-"""The held-out azimuth study (``--holdout-study``, ``holdout_study.json``, :func:`holdout_study`): the snapshots
-between azimuths alone, on a table of the azimuths around each held-out one (:func:`holdout_grid`)."""
+"""The held-out azimuth study (``--holdout-study``, ``holdout_study.json``, :func:`holdout_study`): the
+snapshots between azimuths alone, on a table of the azimuths around each held-out one
+(:func:`holdout_grid`)."""
 
 from __future__ import annotations
 
@@ -18,9 +19,9 @@ log = logging.getLogger(__name__)
 
 
 def holdout_grid(st: Settings) -> Settings:
-    """``st`` with its snapshot azimuths cut to the grid's first azimuth (0, judged too) and the two around each
-    held-out one (full mode: 0 and 10 for 5), the ones the table's blend reads. ``ValueError`` when there is no
-    held-out azimuth or one is not inside the grid."""
+    """``st`` with its snapshot azimuths cut to the grid's first azimuth (0, judged too) and the two around
+    each held-out one (full mode: 0 and 10 for 5), the ones the table's blend reads. ``ValueError`` when there
+    is no held-out azimuth or one is not inside the grid."""
     if not st.holdout_deg:
         raise ValueError("these settings hold no azimuth out (the quick settings): nothing to study")
     g = sorted(st.grid.angles_deg)
@@ -59,12 +60,14 @@ def holdout_study(st: Settings, mat: Material, cache: ArrayCache, rm: RealtimeMo
                      "against": "its own solve on the snapshot mesh (cut half model)" if a in hs.holdout_deg
                      else f"the finest convergence mesh (h_fine {st.levels[-1].h_fine * 1e3:g} mm)",
                      "depths_mm": [d for d, _ in pairs], "error_mm": [e for _, e in pairs],
-                     "max_error_mm": max(e for _, e in pairs), "breaks_at_depth_mm": min(bad) if bad else None})
+                     "max_error_mm": max(e for _, e in pairs),
+                     "breaks_at_depth_mm": min(bad) if bad else None})
         log.info(f"holdout study: azimuth {a:g} deg: worst visible error {rows[-1]['max_error_mm']:.2f} mm"
                  + (f", over the target from {min(bad):g} mm" if bad else ", within the target"))
     return {"snapshot_azimuths_deg": list(hs.grid.angles_deg), "held_out_deg": list(hs.holdout_deg),
             "snapshot_depth_step_mm": hs.grid.depth_step * 1e3, "snapshot_mesh": hs.snap_spec.__dict__,
             "table_build_s": sec, "table_cache_hit": hit, "target_mm": TARGET * 1e3,
             "footprint": f"left out: vertices whose deformed position (the reference's) lies within "
-                         f"{(FINGER_R + 0.002) * 1e3:g} mm of the push axis (finger radius + 2 mm), hidden by the finger",
+                         f"{(FINGER_R + 0.002) * 1e3:g} mm of the push axis (finger radius + 2 mm), hidden "
+                         "by the finger",
             "azimuths": rows}

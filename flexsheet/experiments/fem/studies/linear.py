@@ -27,8 +27,9 @@ log = logging.getLogger(__name__)
 
 def linear_study(out: str, mat: Material) -> None:
     """Linear P1/P2 meshes against a fine linear P2 solution (``accuracy_table.json``, read by
-    :func:`flexsheet.fem.choose.choose`), the Hertz exponent check and the linear/corotational stability curve.
-    Writes linear_accuracy_speed, hertz, stability (.json/.png) and accuracy_table.json into ``out``."""
+    :func:`flexsheet.fem.choose.choose`), the Hertz exponent check and the linear/corotational stability
+    curve. Writes linear_accuracy_speed, hertz, stability (.json/.png) and accuracy_table.json into
+    ``out``."""
     ref_spec = MeshSpec(0.010, 0.002, 0.015)
     depths = [0.005, 0.01, 0.02, 0.03, 0.04, 0.05]
     cands = [(MeshSpec(h, hf, rr), 1) for h, hf, rr in ((0.012, 0.004, 0.012), (0.010, 0.003, 0.012),
@@ -38,7 +39,8 @@ def linear_study(out: str, mat: Material) -> None:
                                                          (0.010, 0.004, 0.012))]
     ref_mesh = cylinder_tet_mesh(ref_spec)
     ref_model = FemModel(ref_mesh, mat, order=2)
-    refs = {d: solve_full(ref_model, finger_at(0.0, d, FINGER_R, ref_mesh.radius, ref_mesh.center)) for d in depths}
+    refs = {d: solve_full(ref_model, finger_at(0.0, d, FINGER_R, ref_mesh.radius, ref_mesh.center))
+            for d in depths}
     table, rows = _linear_candidates(cands, ref_spec, ref_model, refs, mat)
     table["depths"] = depths
     write_json(out, "accuracy_table", table)
@@ -54,7 +56,8 @@ def linear_study(out: str, mat: Material) -> None:
 
 def _linear_candidates(cands, ref_spec, ref_model, refs, mat):
     table = {"nu": mat.nu, "finger_radius": FINGER_R, "reference": {"spec": ref_spec.__dict__, "order": 2,
-                                                                   "dofs": ref_model.n_dofs}, "candidates": []}
+                                                                   "dofs": ref_model.n_dofs},
+             "candidates": []}
     rows = []
     for spec, order in cands:
         ev = evaluate_spec(spec, ref_model, refs, mat, FINGER_R, order=order)
@@ -62,7 +65,8 @@ def _linear_candidates(cands, ref_spec, ref_model, refs, mat):
         rm = RealtimeModel(spec, mat, FINGER_R, cache_dir=None, order=order)
         fg = finger_at(0.0, 0.03, FINGER_R, rm.mesh.radius, rm.mesh.center)
         t = update_ms(rm, [0.0], [0.03], 100)["median"]
-        rows.append({"spec": spec.__dict__, "order": order, "mesh_nodes": ev["mesh_nodes"], "dofs": ev["dofs"],
+        rows.append({"spec": spec.__dict__, "order": order, "mesh_nodes": ev["mesh_nodes"],
+                     "dofs": ev["dofs"],
                      "precompute_s": rm.precompute_s, "update_ms": t,
                      "surface_error_mm_at_30mm": ev["surface_error_m"]["0.0300"] * 1e3,
                      "force_error_pct_at_30mm": ev["force_error_pct"]["0.0300"],

@@ -23,17 +23,18 @@ log = logging.getLogger(__name__)
 
 def material_study(st: Settings, mats: tuple[Material, ...], cache: ArrayCache, rm: RealtimeModel) -> dict:
     """Does the reference converge with a strain-stiffening material? For each of ``mats`` (neo-Hookean and a
-    Gent solid, :class:`flexsheet.fem.material.Material` ``Jm``; same E, ν, finger, penalty, meshes): the azimuth-0
-    mesh convergence of :func:`convergence` (its verdict, every level's visible-surface difference to the
-    finest, force, largest Green–Lagrange strain), and an azimuth-0 snapshot table (``st.grid``'s depths) taken
-    from the stable branch of the next-to-finest level (full mode: the node's 3.4 mm mesh) judged at every
-    ``st.fine_step`` against that material's finest level — never against the solve it was sampled from; and
-    the visible-surface distance between the materials' finest solutions (how far the choice of material
-    moves what the display shows). Full mode also a tip check per material (the fold study's, :func:`tip_specs`:
-    the next-to-finest level's tube with the push point alone refined further), its visible-surface distance to
-    that level and to the finest (neo-Hookean: the apex the fold study found unresolved). Returns {"depths_mm",
-    "target_mm", "materials": [{"name", "Jm", "convergence", "snapshots_azimuth0", "tip_check" (full mode)}],
-    "difference_between_materials_mm", "what"}; lengths in mm."""
+    Gent solid, :class:`flexsheet.fem.material.Material` ``Jm``; same E, ν, finger, penalty, meshes): the
+    azimuth-0 mesh convergence of :func:`convergence` (its verdict, every level's visible-surface difference
+    to the finest, force, largest Green–Lagrange strain), and an azimuth-0 snapshot table (``st.grid``'s
+    depths) taken from the stable branch of the next-to-finest level (full mode: the node's 3.4 mm mesh)
+    judged at every ``st.fine_step`` against that material's finest level — never against the solve it was
+    sampled from; and the visible-surface distance between the materials' finest solutions (how far the choice
+    of material moves what the display shows). Full mode also a tip check per material (the fold study's,
+    :func:`tip_specs`: the next-to-finest level's tube with the push point alone refined further), its
+    visible-surface distance to that level and to the finest (neo-Hookean: the apex the fold study found
+    unresolved). Returns {"depths_mm", "target_mm", "materials": [{"name", "Jm", "convergence",
+    "snapshots_azimuth0", "tip_check" (full mode)}], "difference_between_materials_mm", "what"}; lengths in
+    mm."""
     depths = push_depths(st.depth_step)
     fdepths = push_depths(st.fine_step)
     verts = rm.rest_vertices.astype(float)
@@ -53,9 +54,14 @@ def material_study(st: Settings, mats: tuple[Material, ...], cache: ArrayCache, 
             tp = reference_path(chk, 0.0, depths, mat, cache, verts, st.contact)
             plain = reference_path(st.levels[-2], 0.0, depths, mat, cache, verts, st.contact)
             tip = {"tip_check": {
-                "spec": chk.__dict__, "dofs": int(tp["dofs"]), "newton_converged": bool(tp["converged"].all()),
-                "difference_to_plain_level_mm": [e * 1e3 for e in visible_diffs(tp, plain, depths, verts, fixed, rm.mesh)],
-                "difference_to_finest_mm": [e * 1e3 for e in visible_diffs(tp, fines[-1], depths, verts, fixed, rm.mesh)],
+                "spec": chk.__dict__, "dofs": int(tp["dofs"]),
+                "newton_converged": bool(tp["converged"].all()),
+                "difference_to_plain_level_mm": [e * 1e3
+                                                 for e in visible_diffs(tp, plain, depths, verts, fixed,
+                                                                        rm.mesh)],
+                "difference_to_finest_mm": [e * 1e3
+                                            for e in visible_diffs(tp, fines[-1], depths, verts, fixed,
+                                                                   rm.mesh)],
                 "max_strain": tp["max_strain"].tolist(), "force_N": tp["force"].tolist(),
                 "cpu_seconds": float(tp["cpu_seconds"])}}
         rows.append({"name": name, "Jm": mat.Jm if mat.gent else None, "convergence": conv, **tip,
@@ -64,14 +70,16 @@ def material_study(st: Settings, mats: tuple[Material, ...], cache: ArrayCache, 
                          "error_mm": [e * 1e3 for e in err], "depths_mm": (fdepths * 1e3).tolist(),
                          "max_visible_error_mm": max(err) * 1e3,
                          "max_visible_error_mm_held_out_depths": max(
-                             (e for c, e in zip(cases, err, strict=True) if c["held_out"]), default=math.nan) * 1e3}})
+                             (e for c, e in zip(cases, err, strict=True) if c["held_out"]), default=math.nan)
+                         * 1e3}})
         log.info(f"material study, {name}: converged {conv['converged']}, last refinement "
-                 f"{conv['last_refinement_change_mm']:.3f} mm, azimuth-0 snapshots worst {max(err) * 1e3:.2f} mm")
+                 f"{conv['last_refinement_change_mm']:.3f} mm, azimuth-0 snapshots worst {max(err) * 1e3:.2f}"
+                 " mm")
     diff = [e * 1e3 for e in visible_diffs(fines[0], fines[-1], depths, verts, fixed, rm.mesh)] \
         if len(fines) > 1 else []
     return {"depths_mm": (depths * 1e3).tolist(), "target_mm": TARGET * 1e3, "materials": rows,
             "difference_between_materials_mm": diff,
-            "what": "azimuth-0 mesh convergence of the reference (convergence()) for each material, an azimuth-0 "
-                    "snapshot table on the next-to-finest level judged against that material's finest level, "
-                    "and the visible-surface distance between the first and the last material's finest "
-                    "solutions (visible on the last's surface)"}
+            "what": "azimuth-0 mesh convergence of the reference (convergence()) for each material, an "
+                    "azimuth-0 snapshot table on the next-to-finest level judged against that material's "
+                    "finest level, and the visible-surface distance between the first and the last "
+                    "material's finest solutions (visible on the last's surface)"}

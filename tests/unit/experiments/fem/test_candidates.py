@@ -1,5 +1,5 @@
-"""The real-time candidates judged against the reference (flexsheet/experiments/fem/candidates.py): the snapshot
-mesh study, and the snapshots beating linear elasticity at a large push."""
+"""The real-time candidates judged against the reference (flexsheet/experiments/fem/candidates.py): the
+snapshot mesh study, and the snapshots beating linear elasticity at a large push."""
 
 import json
 
@@ -11,10 +11,10 @@ pytestmark = [pytest.mark.timeout(1500), pytest.mark.slow]   # and the slow tier
 
 
 def test_snapshot_mesh_study_tables_the_skin_meshes_and_agrees_with_the_convergence_figure(quick):
-    """The snapshot-mesh study builds an azimuth-0 table on the next-to-finest mesh and on its skin variant from
-    the cached solves. The base mesh's table error and the convergence study's error of that mesh measure the
-    same mesh against the same finest one by different routes (table sampling and depth interpolation against
-    direct probing): they agree to 0.2 mm."""
+    """The snapshot-mesh study builds an azimuth-0 table on the next-to-finest mesh and on its skin variant
+    from the cached solves. The base mesh's table error and the convergence study's error of that mesh measure
+    the same mesh against the same finest one by different routes (table sampling and depth interpolation
+    against direct probing): they agree to 0.2 mm."""
     base, s, _ = quick
     with open(base / "out" / "convergence.json") as fh:
         conv = json.load(fh)
@@ -30,6 +30,7 @@ def test_snapshot_mesh_study_tables_the_skin_meshes_and_agrees_with_the_converge
 def test_snapshots_beat_linear_elasticity_at_large_push(quick):
     _, s, _ = quick
     assert s["realtime"]["max_visible_error_mm_0_50"] < 0.5 * s["linear"]["max_visible_error_mm_0_50"]
-    # between snapshot depths the interpolation adds error; at the snapshot depths only surface sampling is left
+    # between snapshot depths the interpolation adds error;
+    # at the snapshot depths only surface sampling is left
     rt = s["realtime"]
     assert rt["max_visible_error_mm_snapshot_depths"] < rt["max_visible_error_mm_held_out_depths"]

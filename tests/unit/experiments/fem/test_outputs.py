@@ -1,5 +1,5 @@
-"""What the quick run writes (flexsheet/experiments/fem/outputs.py): summary.json's keys with real numbers and the
-figures."""
+"""What the quick run writes (flexsheet/experiments/fem/outputs.py): summary.json's keys with real numbers and
+the figures."""
 
 import json
 import math

@@ -5,15 +5,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-pytestmark = [pytest.mark.timeout(1500), pytest.mark.slow]   # the slow tier, with the FEM experiment's quick run
+# the slow tier, with the FEM experiment's quick run
+pytestmark = [pytest.mark.timeout(1500), pytest.mark.slow]
 
 
 def test_planned_solves_list_each_push_the_run_reads_once_by_cache_key():
     """The full run reads 16 distinct reference pushes: five convergence levels, three cut half models, three
     more penalties (the default is level 1's), two skins, azimuth 5 held out and the snapshots' 10 and 20; the
     quick run 5; ``--mirror-study`` the levels and the half models (its stability check reads two levels);
-    ``--holdout-study`` the finest level, the snapshot mesh's azimuth-0 level and its cut paths at 5 and 10 only
-    (the table's blend at 5 reads 0 and 10, not 20)."""
+    ``--holdout-study`` the finest level, the snapshot mesh's azimuth-0 level and its cut paths at 5 and 10
+    only (the table's blend at 5 reads 0 and 10, not 20)."""
     from flexsheet.experiments.fem.plan import planned_solves
     from flexsheet.experiments.fem.studies.holdout import holdout_grid
     from flexsheet.fem.material import Material

@@ -1,5 +1,5 @@
-"""The runs of `flexsheet experiment fem` (flexsheet/experiments/fem/runs.py): the quick run solves every reference
-push in its prefetch workers, and a second run reads everything from the cache."""
+"""The runs of `flexsheet experiment fem` (flexsheet/experiments/fem/runs.py): the quick run solves every
+reference push in its prefetch workers, and a second run reads everything from the cache."""
 
 import pytest
 
@@ -19,14 +19,15 @@ def test_second_run_reads_the_cache(quick):
     solves = [ln for ln in log1.splitlines() if "DOF, load steps" in ln]
     assert "prefetch: " in log1 and all(ln.startswith("[solver ") for ln in solves), solves
     assert {ln.split("]")[0] for ln in solves} == {"[solver 1", "[solver 2"}
-    # the pushes the tables read (the snapshots' and the snapshot-mesh study's three) got their unloading sweep
-    # (stable_path) in a worker too
+    # the pushes the tables read (the snapshots' and the snapshot-mesh
+    # study's three) got their unloading sweep (stable_path) in a worker too
     sweeps = [ln for ln in log1.splitlines() if "unloading from" in ln]
     assert len(sweeps) == 3 and all(ln.startswith("[solver ") for ln in sweeps), sweeps
     s2, log = _run(base / "out2", base / "cache")
     assert "DOF, load steps" not in log and "loaded from cache" in log      # ... the second did not
     assert "unloading from" not in log
     assert s2["realtime"]["precompute_cache_hit"] is True
-    assert s2["realtime"]["max_visible_error_mm_0_50"] == pytest.approx(s1["realtime"]["max_visible_error_mm_0_50"],
+    assert s2["realtime"]["max_visible_error_mm_0_50"] == pytest.approx(
+        s1["realtime"]["max_visible_error_mm_0_50"],
                                                                         rel=1e-9)
     assert s2["reference"]["levels"] == s1["reference"]["levels"]

@@ -1,4 +1,5 @@
-"""The reference's finger (flexsheet/fem/reference/capsule_contact.py): the capsule's gap, bad input refused."""
+"""The reference's finger (flexsheet/fem/reference/capsule_contact.py): the capsule's gap, bad input
+refused."""
 
 
 import numpy as np

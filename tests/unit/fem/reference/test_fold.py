@@ -1,4 +1,5 @@
-"""Self-contact and crease checks of deformed states (flexsheet/fem/reference/fold.py), on shapes whose answer is known."""
+"""Self-contact and crease checks of deformed states (flexsheet/fem/reference/fold.py), on shapes whose answer
+is known."""
 
 from types import SimpleNamespace
 
@@ -40,7 +41,8 @@ def quarter():
     return m, outer_surface(m)
 
 
-def test_winding_number_is_one_inside_zero_outside_and_half_on_the_quarter_cylinders_mirrored_surface(quarter):
+def test_winding_number_is_one_inside_zero_outside_and_half_on_the_quarter_cylinders_mirrored_surface(
+    quarter):
     m, s = quarter
     V, T = s.closed(m.points)
     assert len(T) == 4 * len(s.tris)                      # the part and its three mirror images
@@ -49,8 +51,8 @@ def test_winding_number_is_one_inside_zero_outside_and_half_on_the_quarter_cylin
     out = m.points[s.points] + np.array([0.2, 0.0, 0.0])
     np.testing.assert_allclose(winding_numbers(out, V, T), 0.0, atol=1e-9)
     w = winding_numbers(m.points[s.points], V, T)
-    # on the surface: 1/2 on the curved side and the end cap (a little above on a chord's midpoint, a dip), 1/4
-    # on the rim between them (a right-angled edge)
+    # on the surface: 1/2 on the curved side and the end cap (a little above on a
+    # chord's midpoint, a dip), 1/4 on the rim between them (a right-angled edge)
     assert w.max() < 0.53 and w.min() > 0.2
     assert np.median(w) == pytest.approx(0.5, abs=0.03)
 
@@ -128,8 +130,9 @@ def test_outer_surface_refuses_a_p1_model(quarter):
 
 
 def test_a_quarter_model_moved_through_its_mirror_plane_penetrates_its_mirror_image(quarter):
-    """Shift the quarter model 5 mm across its z mirror plane: its surface near the plane now lies inside its own
-    mirror image (the closed surface is the part and its mirrors), and the depth is measured, not left at 0."""
+    """Shift the quarter model 5 mm across its z mirror plane: its surface near the plane now lies inside its
+    own mirror image (the closed surface is the part and its mirrors), and the depth is measured, not left at
+    0."""
     m, s = quarter
     caps = capsule_at(0.0, 0.01, 0.008, m.mesh.radius, m.mesh.center)
     u = np.zeros_like(m.points)

@@ -1,4 +1,5 @@
-"""The grid convergence index (flexsheet/fem/reference/gci.py) on sequences whose error is known in closed form."""
+"""The grid convergence index (flexsheet/fem/reference/gci.py) on sequences whose error is known in closed
+form."""
 
 import math
 

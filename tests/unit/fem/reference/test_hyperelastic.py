@@ -1,7 +1,7 @@
-"""The neo-Hookean and Gent reference (flexsheet/fem/reference/hyperelastic.py): the residual and tangent are the
-derivatives of the energy (frictionless and sticking), the small-strain limit is scikit-fem's linear elasticity,
-inadmissible states have infinite energy, per-element material and support, the contact penalty. The quarter
-model (fixture ``quarter``) is this folder's conftest.py's."""
+"""The neo-Hookean and Gent reference (flexsheet/fem/reference/hyperelastic.py): the residual and tangent are
+the derivatives of the energy (frictionless and sticking), the small-strain limit is scikit-fem's linear
+elasticity, inadmissible states have infinite energy, per-element material and support, the contact penalty.
+The quarter model (fixture ``quarter``) is this folder's conftest.py's."""
 
 import math
 
@@ -26,7 +26,8 @@ def test_residual_and_tangent_are_the_derivatives_of_the_energy(quarter, Jm, sca
     """Central differences of Π and r, with and without the finger in contact (exact tangent incl. the
     contact curvature term); neo-Hookean, and a Gent solid (Jm 2) stiffening strongly within the field
     (I1 − 3 > 1 somewhere: Gent's factor g = 1/(1 − (I1 − 3)/Jm) > 2)."""
-    m = quarter if Jm == math.inf else H.HyperelasticModel(quarter.mesh, Material(Jm=Jm), sym_y=True, sym_z=True,
+    m = quarter if Jm == math.inf else H.HyperelasticModel(quarter.mesh, Material(Jm=Jm), sym_y=True,
+                                                           sym_z=True,
                                                            intorder=2)
     rng = np.random.default_rng(0)
     u = _smooth_field(m, scale) + 1e-4 * rng.standard_normal((len(m.points), 3))
@@ -88,7 +89,7 @@ def test_element_folded_through_an_edge_midpoint_is_inadmissible(quarter):
     g = _gauss_only(m)
     Jq = np.linalg.det(g.deformation(u))
     assert Jq.min() > 0.2
-    assert g.checks(u)[1] >= 1 and g.checks(u)[0] < -0.5        # inverted at a node (every element on the edge)
+    assert g.checks(u)[1] >= 1 and g.checks(u)[0] < -0.5  # inverted at a node (every element on the edge)
     assert math.isfinite(g.energy(u, None, 0.0))
     assert m.energy(u, None, 0.0) == math.inf
 
@@ -124,7 +125,8 @@ def test_gent_energy_of_a_homogeneous_stretch_its_limit_and_its_neo_hookean_limi
     assert quarter.energy(u, None, 0.0) == pytest.approx(quarter.vol * W_nh, rel=1e-9)
     near_nh = H.HyperelasticModel(quarter.mesh, Material(Jm=1e9), sym_y=True, sym_z=True, intorder=2)
     assert near_nh.energy(u, None, 0.0) == pytest.approx(quarter.energy(u, None, 0.0), rel=1e-8)
-    tight = H.HyperelasticModel(quarter.mesh, Material(Jm=I1 - 3.0 - 1e-3), sym_y=True, sym_z=True, intorder=2)
+    tight = H.HyperelasticModel(quarter.mesh, Material(Jm=I1 - 3.0 - 1e-3), sym_y=True, sym_z=True,
+                                intorder=2)
     assert tight.energy(u, None, 0.0) == math.inf
     with pytest.raises(FloatingPointError, match="limiting extensibility"):
         tight.residual_tangent(u, None, 0.0)
@@ -144,12 +146,14 @@ def test_per_element_material_and_support_override(quarter):
     r1, K1 = same.residual_tangent(u, caps, same.penalty())
     assert np.allclose(r1, r0, rtol=1e-12, atol=1e-12 * np.abs(r0).max())
     assert abs(K1 - K0).max() <= 1e-12 * abs(K0).max()
-    stiff = H.HyperelasticModel(m.mesh, MAT, sym_y=True, sym_z=True, intorder=2, E_elem=np.full(ne, 2 * MAT.E))
+    stiff = H.HyperelasticModel(m.mesh, MAT, sym_y=True, sym_z=True, intorder=2,
+                                E_elem=np.full(ne, 2 * MAT.E))
     r2, _ = stiff.residual_tangent(u, None, 0.0, need_K=False)
     re, _ = m.residual_tangent(u, None, 0.0, need_K=False)
     assert np.allclose(r2, 2 * re, rtol=1e-10, atol=1e-12)
     half = np.where(m.mesh.points[m.mesh.tets].mean(axis=1)[:, 2] > m.mesh.center[2] + 0.01, 5 * MAT.E, MAT.E)
-    r3, _ = H.HyperelasticModel(m.mesh, MAT, sym_y=True, sym_z=True, intorder=2, E_elem=half).residual_tangent(
+    r3, _ = H.HyperelasticModel(m.mesh, MAT, sym_y=True, sym_z=True, intorder=2,
+                                E_elem=half).residual_tangent(
         u, None, 0.0, need_K=False)
     assert np.linalg.norm(r3 - re) > 0.1 * np.linalg.norm(re)
     # support from a node mask: fix the whole back half-space x <= centre - 10 mm instead of the surface only
@@ -166,10 +170,11 @@ def test_per_element_material_and_support_override(quarter):
         H.HyperelasticModel(m.mesh, MAT, nu_elem=np.full(ne, 0.5))
 
 
-# ---- sticking contact (the fingertip does not slip on the tissue) ------------------------------------------------
+# ---- sticking contact (the fingertip does not slip on the tissue) ------------------------------------------
 def test_sticking_residual_and_tangent_are_the_derivatives_of_the_energy(quarter):
-    """With some contact points stuck (anchors perturbed off the finger) the residual and tangent are still the
-    exact derivatives of Π; the anchors lie on the finger's surface; points already stuck keep their anchor."""
+    """With some contact points stuck (anchors perturbed off the finger) the residual and tangent are still
+    the exact derivatives of Π; the anchors lie on the finger's surface; points already stuck keep their
+    anchor."""
     from dataclasses import replace
 
     m = quarter
@@ -184,7 +189,8 @@ def test_sticking_residual_and_tangent_are_the_derivatives_of_the_energy(quarter
     x = m._contact_x(u)[stuck]
     gx, _ = caps.gap(x)
     d1 = CC.smooth_penalty(gx, m.penalty(), m.eps)[1]
-    assert np.allclose(m.penalty() * np.linalg.norm(x - caps.center - a[stuck], axis=1), -d1, rtol=1e-9, atol=1e-9)
+    assert np.allclose(m.penalty() * np.linalg.norm(x - caps.center - a[stuck], axis=1), -d1, rtol=1e-9,
+                       atol=1e-9)
     g, _ = caps.gap(caps.center + a[stuck])
     assert np.all((g > 0.5 * m.eps - 1e-12) & (g < m.eps + 1e-12)), (g.min(), g.max())
     deeper = CC.capsule_at(0.0, 0.009, 0.008, m.mesh.radius, m.mesh.center)

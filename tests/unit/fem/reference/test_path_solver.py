@@ -1,5 +1,6 @@
-"""The reference pushed along a path (flexsheet/fem/reference/path_solver.py): a physical push, convergence with
-refinement, the capsule form, sticking contact, halved load steps, the unloading sweep and the stable states."""
+"""The reference pushed along a path (flexsheet/fem/reference/path_solver.py): a physical push, convergence
+with refinement, the capsule form, sticking contact, halved load steps, the unloading sweep and the stable
+states."""
 
 from dataclasses import replace
 
@@ -67,8 +68,9 @@ def test_solve_path_capsule_matches_the_cylinder_path(quarter):
     """The callable-finger variant reproduces the azimuth form for the same finger; refuses a non-callable."""
     m = quarter
     a = PS.solve_path(m, 0.0, [0.004], 0.008, step=0.002)
-    b = PS.solve_path_capsule(m, lambda d: CC.capsule_at(0.0, d, 0.008, m.mesh.radius, m.mesh.center), [0.004],
-                             step=0.002)
+    b = PS.solve_path_capsule(m, lambda d: CC.capsule_at(0.0, d, 0.008, m.mesh.radius, m.mesh.center),
+                              [0.004],
+                              step=0.002)
     assert a[0].converged and b[0].converged and a[0].force > 0.05
     assert b[0].force == pytest.approx(a[0].force, rel=1e-12)
     assert np.abs(b[0].u - a[0].u).max() <= 1e-12
@@ -78,9 +80,9 @@ def test_solve_path_capsule_matches_the_cylinder_path(quarter):
 
 def test_sticking_push_holds_the_surface_on_the_finger(quarter):
     """8 mm push: the contact points stuck to the finger stay on their finger points (within the penalty's
-    elastic give) and move with the finger between 4 and 8 mm, while frictionless the same material points slide
-    over the sphere; the stuck surface needs more force (friction stiffens the contact); both converge with no
-    inverted element; an unknown law is refused."""
+    elastic give) and move with the finger between 4 and 8 mm, while frictionless the same material points
+    slide over the sphere; the stuck surface needs more force (friction stiffens the contact); both converge
+    with no inverted element; an unknown law is refused."""
     m = quarter
     fr = PS.solve_path(m, 0.0, [0.004, 0.008], 0.008, step=0.002, contact="frictionless")
     st = PS.solve_path(m, 0.0, [0.004, 0.008], 0.008, step=0.002, contact="sticking")
@@ -98,7 +100,7 @@ def test_sticking_push_holds_the_surface_on_the_finger(quarter):
     held = np.isfinite(st[0].extra["anchors"][..., 0])                # stuck already at 4 mm
     assert held.sum() >= 1
     rel = [np.linalg.norm((m._contact_x(s[1].u)[held] - c8) - (m._contact_x(s[0].u)[held] - c4), axis=1).max()
-           for s in (fr, st)]                                           # motion relative to the finger, 4 -> 8 mm
+           for s in (fr, st)]  # motion relative to the finger, 4 -> 8 mm
     assert rel[1] < 0.3 * rel[0], rel
     with pytest.raises(ValueError, match="contact"):
         PS.solve_path(m, 0.0, [0.004], 0.008, contact="glued")
@@ -106,8 +108,8 @@ def test_sticking_push_holds_the_surface_on_the_finger(quarter):
 
 def test_load_steps_after_a_halved_step_keep_the_halved_size(quarter, monkeypatch):
     """A step that fails (stagnates: not converged before running out of iterations) is halved and the steps
-    after it stay that small (once the path got hard, Newton is not sent back into the 2.5 mm steps that cost 60
-    iterations per try on the 3.4 mm mesh at 47.5 mm)."""
+    after it stay that small (once the path got hard, Newton is not sent back into the 2.5 mm steps that cost
+    60 iterations per try on the 3.4 mm mesh at 47.5 mm)."""
     real = N.newton_minimise
     tried = []
 
@@ -145,7 +147,8 @@ def test_unload_sweep_finds_the_loading_path_where_there_is_one_branch(quarter, 
         assert abs(a.extra["energy"] - a.extra["energy_loading"]) <= 1e-6 * abs(a.extra["energy"])
     chosen, branch, energies = PS.stable_states(quarter, _caps(quarter), st, step=0.002)
     assert branch.tolist() == [0, 0, 0] and energies.shape == (3, 2)
-    assert np.allclose(energies[:, 0], energies[:, 1], rtol=1e-6) and all(c is s for c, s in zip(chosen, st, strict=True))
+    assert (np.allclose(energies[:, 0], energies[:, 1], rtol=1e-6)
+            and all(c is s for c, s in zip(chosen, st, strict=True)))
 
 
 def test_stable_states_replaces_a_higher_energy_state_by_the_unloaded_equilibrium(quarter, loading):

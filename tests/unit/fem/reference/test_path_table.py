@@ -1,6 +1,6 @@
-"""A scene's path table command (flexsheet/fem/reference/path_table.py): the assembly turns a station's reference push
-into exactly the reference, and the arguments a path table does not take are refused. The model (fixture
-``model``) is tests/unit/conftest.py's."""
+"""A scene's path table command (flexsheet/fem/reference/path_table.py): the assembly turns a station's
+reference push into exactly the reference, and the arguments a path table does not take are refused. The model
+(fixture ``model``) is tests/unit/conftest.py's."""
 
 from __future__ import annotations
 
@@ -26,7 +26,8 @@ def test_assembly_turns_a_station_push_into_its_reference(model):
     for i, (q, n) in enumerate(zip(pts, nrm, strict=True)):
         u_lin, f_lin, _ = P._linear(m, m.scene, q, n, depths)
         extra = (2e-4 * (i + 1)) * np.ones_like(u_lin) * (depths[:, None, None] / depths[-1])
-        refs.append({"u": u_lin + extra, "force": f_lin * 1.3 + 0.2 * depths, "inverted": np.zeros(len(depths)),
+        refs.append({"u": u_lin + extra, "force": f_lin * 1.3 + 0.2 * depths,
+                     "inverted": np.zeros(len(depths)),
                      "max_strain": np.full(len(depths), 0.1), "converged": np.ones(len(depths), bool)})
     t = P.assemble_path_table(m.scene, m, fr, refs)
     check_path_table(t)
@@ -47,7 +48,8 @@ def test_assembly_turns_a_station_push_into_its_reference(model):
         assert up.method == "path_snapshots"
         want = refs[1]["u"][j].copy()
         want[m.mesh.fixed[m.surface_nodes]] = 0.0
-        out = np.linalg.norm(m.rest_vertices + want - fg.center, axis=1) >= fg.radius   # inside: put on the finger
+        # inside: put on the finger
+        out = np.linalg.norm(m.rest_vertices + want - fg.center, axis=1) >= fg.radius
         assert out.sum() > 0.9 * len(out)
         assert np.abs((up.vertices.astype(float) - m.rest_vertices) - want)[out].max() < 1e-6
         assert up.force == pytest.approx(refs[1]["force"][j], rel=1e-6)

@@ -1,12 +1,13 @@
-"""The cylinder's cached reference pushes (flexsheet/fem/reference/paths.py): off-axis pushes on the half model under
-one key, and the stable path's rows and dtypes."""
+"""The cylinder's cached reference pushes (flexsheet/fem/reference/paths.py): off-axis pushes on the half
+model under one key, and the stable path's rows and dtypes."""
 
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-pytestmark = [pytest.mark.timeout(1500), pytest.mark.slow]   # the slow tier, with the FEM experiment's quick run
+# the slow tier, with the FEM experiment's quick run
+pytestmark = [pytest.mark.timeout(1500), pytest.mark.slow]
 
 
 def _fake_path_dict(n_dof: int, depths) -> dict:
@@ -17,7 +18,8 @@ def _fake_path_dict(n_dof: int, depths) -> dict:
 
 
 class _KeyRecorder:
-    """A stand-in cache for :func:`reference_path` that records (key, what) of every lookup and has nothing."""
+    """A stand-in cache for :func:`reference_path` that records (key, what) of every lookup and has
+    nothing."""
 
     def __init__(self):
         self.seen = []
@@ -34,8 +36,8 @@ class _KeyRecorder:
 
 
 def test_reference_path_solves_off_axis_pushes_on_the_half_model_under_one_key():
-    """Away from azimuth 0 a quarter-model spec (``half_z``) is solved on its half model, as the snapshot table
-    meshes it: the quarter and the half spec give one cache entry (one solve), and −0° is 0°."""
+    """Away from azimuth 0 a quarter-model spec (``half_z``) is solved on its half model, as the snapshot
+    table meshes it: the quarter and the half spec give one cache entry (one solve), and −0° is 0°."""
     from dataclasses import replace
 
     from flexsheet.fem.material import Material
@@ -64,7 +66,8 @@ def test_stable_path_takes_the_unloaded_rows_only_and_keeps_the_dtypes(tmp_path,
     depths = np.array([0.01, 0.02, 0.03])
     n_dof, k = 4, 2
     base = {**_fake_path_dict(n_dof, depths), "u": np.zeros((3, k, 3)), "inverted_qp": np.zeros(3, int),
-            "inverted_nodal_visible": np.zeros(3, int), "seconds": np.array(1.0), "cpu_seconds": np.array(1.0)}
+            "inverted_nodal_visible": np.zeros(3, int), "seconds": np.array(1.0),
+            "cpu_seconds": np.array(1.0)}
     calls = []
 
     def fake_reference_path(*a, **kw):
@@ -83,7 +86,8 @@ def test_stable_path_takes_the_unloaded_rows_only_and_keeps_the_dtypes(tmp_path,
         n = len(states)
         return {"u": np.full((n, k, 3), 7.0), "u_dof": np.stack([s.u for s in states]).astype(np.float64),
                 "force": np.array([s.force for s in states]), "inverted": np.full(n, 5),
-                "inverted_qp": np.full(n, 6), "inverted_nodal_visible": np.full(n, 2), "min_detF": np.full(n, 0.5),
+                "inverted_qp": np.full(n, 6), "inverted_nodal_visible": np.full(n, 2),
+                "min_detF": np.full(n, 0.5),
                 "max_strain": np.full(n, 0.25), "penetration": np.full(n, 1e-5), "newton": np.full(n, 9),
                 "converged": np.array([True] * n)}
 
@@ -95,11 +99,12 @@ def test_stable_path_takes_the_unloaded_rows_only_and_keeps_the_dtypes(tmp_path,
     spec, probes = RefSpec(0.016, 0.012), np.zeros((k, 3))
     z = X.stable_path(spec, 10.0, depths, Material(), cache, probes)
     assert z["branch"].tolist() == [0, 1, 0] and z["energy_unloading"].tolist() == [3.0, 1.5, 1.0]
-    assert z["force"].tolist() == [0.0, 11.0, 2.0]                  # the loading path's 0 and 2, the record's 11
+    assert z["force"].tolist() == [0.0, 11.0, 2.0]  # the loading path's 0 and 2, the record's 11
     assert z["u"][1].max() == 7.0 and z["u"][[0, 2]].max() == 0.0
     assert z["u_dof"].dtype == np.float32 and np.all(z["u_dof"][1] == 1.0) and np.all(z["u_dof"][0] == 0.0)
     assert z["newton"].tolist() == [1, 9, 1] and z["inverted_qp"].tolist() == [0, 6, 0]
     assert z["converged"].dtype == bool
     assert calls == [10.0]
-    z2 = X.stable_path(spec, 10.0, depths, Material(), cache, probes)   # the cached entry, no loading path read
+    # the cached entry, no loading path read
+    z2 = X.stable_path(spec, 10.0, depths, Material(), cache, probes)
     assert calls == [10.0] and z2["force"].tolist() == [0.0, 11.0, 2.0]

@@ -1,5 +1,6 @@
-"""Projected Newton's tangent (flexsheet/fem/reference/projected_tangent.py) against the material tangent built
-another way, element by element; the batched 3 × 3 inverse and determinant (kinematics.py) against numpy's."""
+"""Projected Newton's tangent (flexsheet/fem/reference/projected_tangent.py) against the material tangent
+built another way, element by element; the batched 3 × 3 inverse and determinant (kinematics.py) against
+numpy's."""
 
 import math
 
@@ -18,12 +19,13 @@ def _smooth_field(m, scale):
 
 @pytest.mark.parametrize("Jm", [math.inf, 2.0])
 def test_projected_tangent_is_the_clamped_material_tangent_element_by_element(quarter, Jm):
-    """``_projection`` (batched matmuls) against a loop over one element's quadrature points built another way:
-    the material tangent A = ∂P/∂F by central differences of P(F), clamped to its non-negative eigenvalues,
-    and Σ_q w Bᵀ(A₊ − A)B with B the explicit 9 × 30 gradient matrix. The field compresses the part enough
-    that A is indefinite somewhere; 3 × 3 inverse and determinant against numpy's. Neo-Hookean and a strongly
-    stiffening Gent solid (Jm 2: the field reaches I1 − 3 ≈ 1.5, so Gent's factor g reaches ~4)."""
-    m = quarter if Jm == math.inf else H.HyperelasticModel(quarter.mesh, Material(Jm=Jm), sym_y=True, sym_z=True,
+    """``_projection`` (batched matmuls) against a loop over one element's quadrature points built another
+    way: the material tangent A = ∂P/∂F by central differences of P(F), clamped to its non-negative
+    eigenvalues, and Σ_q w Bᵀ(A₊ − A)B with B the explicit 9 × 30 gradient matrix. The field compresses the
+    part enough that A is indefinite somewhere; 3 × 3 inverse and determinant against numpy's. Neo-Hookean and
+    a strongly stiffening Gent solid (Jm 2: the field reaches I1 − 3 ≈ 1.5, so Gent's factor g reaches ~4)."""
+    m = quarter if Jm == math.inf else H.HyperelasticModel(quarter.mesh, Material(Jm=Jm), sym_y=True,
+                                                           sym_z=True,
                                                            intorder=2)
     u = _smooth_field(m, 0.2)                 # indefinite at some points of 244 of the 311 elements
     F = m.deformation(u)

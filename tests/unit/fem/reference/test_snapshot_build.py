@@ -31,7 +31,8 @@ def test_packed_table_rounds_within_float16_and_looks_up_as_the_original(tmp_pat
     assert 0.0 < err <= 2.0 ** -16 and err == np.abs(packed["side"].astype(np.float32) - tab["side"]).max()
     c = ArrayCache(None, shipped_dir=str(tmp_path / "data"))
     path = c.ship("snapshots", "k" * 24, packed)
-    assert path.startswith(str(tmp_path / "data")) and c.load("snapshots", "k" * 24)["side"].dtype == np.float16
+    assert (path.startswith(str(tmp_path / "data"))
+            and c.load("snapshots", "k" * 24)["side"].dtype == np.float16)
     mtime = os.stat(path).st_mtime_ns
     assert c.ship("snapshots", "k" * 24, packed) == path and os.stat(path).st_mtime_ns == mtime   # same: kept
     th = np.radians(np.array([-20.0, 0.0, 15.0]))
@@ -46,8 +47,9 @@ def test_packed_table_rounds_within_float16_and_looks_up_as_the_original(tmp_pat
 
 
 def _linear_states(model, ang, depths, log=None):
-    """PathStates whose displacement is a linear field of the rest position scaled by depth and azimuth: P2 holds it
-    exactly, so the table samples it exactly wherever it is sampled (u = 20·d·(1 + φ)·A·(x − c), A fixed)."""
+    """PathStates whose displacement is a linear field of the rest position scaled by depth and azimuth: P2
+    holds it exactly, so the table samples it exactly wherever it is sampled (u = 20·d·(1 + φ)·A·(x − c), A
+    fixed)."""
     A = np.array([[0.3, 0.0, 0.1], [0.0, -0.2, 0.0], [0.1, 0.0, 0.4]])
     X = model.points - model.mesh.center
     out = []
@@ -62,10 +64,11 @@ def _linear_states(model, ang, depths, log=None):
 
 
 def test_a_table_is_extended_azimuth_by_azimuth_from_a_shipped_one(tmp_path):
-    """build_table(reuse=...): a table on fewer azimuths (here packed to float16 and found through the cache as a
-    shipped one would be) gives its azimuths as they are stored, and only the new azimuth is solved; the extended
-    table equals the one built whole within float16's rounding (exactly at the solved azimuth); a table sampled
-    otherwise is refused, and reusable_table finds only a proper subset of the grid's azimuths."""
+    """build_table(reuse=...): a table on fewer azimuths (here packed to float16 and found through the cache
+    as a shipped one would be) gives its azimuths as they are stored, and only the new azimuth is solved; the
+    extended table equals the one built whole within float16's rounding (exactly at the solved azimuth); a
+    table sampled otherwise is refused, and reusable_table finds only a proper subset of the grid's
+    azimuths."""
     from flexsheet.fem.reference.snapshot_build import (
         build_table,
         load_or_build,
@@ -86,13 +89,16 @@ def test_a_table_is_extended_azimuth_by_azimuth_from_a_shipped_one(tmp_path):
     base = pack_table(base)[0]
     cache = ArrayCache(str(tmp_path / "cache"), shipped_dir=str(tmp_path / "data"))
     cache.ship("snapshots", _table_key(base_grid, spec), base)
-    found = reusable_table(cache, grid, spec, MAT, 0.008, previous=((0.0, 10.0, 20.0), (0.0, 30.0), (0.0, 20.0)))
+    found = reusable_table(cache, grid, spec, MAT, 0.008,
+                           previous=((0.0, 10.0, 20.0), (0.0, 30.0), (0.0, 20.0)))
     assert found is not None and np.allclose(np.degrees(found["angles"]), [0.0, 20.0])
     assert reusable_table(cache, grid, spec, MAT, 0.008, previous=((0.0, 30.0),)) is None
     asked.clear()
-    ext = build_table(grid, spec, MAT, 0.008, solved=lambda a, m, d: _linear_states(m, a, d, asked), reuse=found)
+    ext = build_table(grid, spec, MAT, 0.008, solved=lambda a, m, d: _linear_states(m, a, d, asked),
+                      reuse=found)
     assert asked == [10.0] and ext["reused"].tolist() == [True, False, True]
-    assert reused_azimuths(ext) == {0.0, 20.0} and reused_azimuths(whole) == set() and reused_azimuths(base) == set()
+    assert (reused_azimuths(ext) == {0.0, 20.0} and reused_azimuths(whole) == set()
+            and reused_azimuths(base) == set())
     assert np.array_equal(ext["side"][1], whole["side"][1]) and np.array_equal(ext["cap"][1], whole["cap"][1])
     for f in ("side", "cap"):
         diff = np.abs(ext[f] - whole[f]).max()

@@ -1,5 +1,5 @@
-"""The sphere scene's table command (flexsheet/fem/reference/sphere_table.py), its solves replaced by the closed-form
-dent of tests/unit/fem/test_sphere_snapshots.py."""
+"""The sphere scene's table command (flexsheet/fem/reference/sphere_table.py), its solves replaced by the
+closed-form dent of tests/unit/fem/test_sphere_snapshots.py."""
 
 import math
 import os
@@ -46,7 +46,8 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
                                    for d in ds]).astype(np.float32),
                 "u_probes": np.stack([_dent(probes, fr.center, n, d) + d * off for d in ds]),
                 "force": ds ** 1.5 * 100.0, "max_strain": ds, "inverted": np.zeros(len(ds), np.int64),
-                "converged": np.array([True] * (len(ds) - 1) + [converged["ok"]]), "newton": np.full(len(ds), 5),
+                "converged": np.array([True] * (len(ds) - 1) + [converged["ok"]]),
+                "newton": np.full(len(ds), 5),
                 "branch": np.zeros(len(ds), np.int64), "dofs": np.array(123), "cpu_seconds": np.array(1.0),
                 "unload_seconds": np.array(2.0)}
 
@@ -56,11 +57,13 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
     assert main(["--out", str(out), "--cache-dir", cache_dir, "--scene", str(SPHERE), "--node-table",
                    "--holdout-azimuth", "5", "--ship", "--jobs", "1"]) == 0
     rep = json.loads((out / "sphere_table.json").read_text())
-    assert [r["alpha_deg"] for r in rep["alphas"]] == list(grid.alphas_deg) and rep["material"]["law"] == "gent"
+    assert ([r["alpha_deg"] for r in rep["alphas"]] == list(grid.alphas_deg)
+            and rep["material"]["law"] == "gent")
     h = rep["held_out"][0]
     assert h["alpha_deg"] == 5.0 and h["depths_mm"] == pytest.approx([5.0, 10.0])
     assert h["max_snapshots_shape_px"] < 0.07 and h["max_linear_shape_px"] > 0.7
-    # packed (2° cells, float16) against the full table: the closed-form dent is smooth, so a few µm per mm of depth
+    # packed (2° cells, float16) against the full table: the
+    # closed-form dent is smooth, so a few µm per mm of depth
     assert 0.0 < rep["shipped"]["packing_error_mm"] < 0.05 and os.path.getsize(out / "sphere_table.png") > 5e3
     key = S.sphere_table_key(sc, grid)
     assert rep["key"] == key and ArrayCache(cache_dir).load("spheresnap", key) is not None
@@ -69,10 +72,12 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
     assert np.array_equal(store["theta"], grid.thetas()[::2]) and store["theta"][-1] == grid.thetas()[-1]
     converged["ok"] = False                       # a push that did not converge at its deepest step
     with pytest.raises(SystemExit, match="not shipping"):
-        main(["--out", str(out), "--cache-dir", str(tmp_path / "cache2"), "--scene", str(SPHERE), "--node-table",
+        main(["--out", str(out), "--cache-dir", str(tmp_path / "cache2"), "--scene", str(SPHERE),
+              "--node-table",
                 "--ship", "--jobs", "1"])
-    # --mesh-check at the held-out angle: every study mesh and its twin solved, each mesh's noise and the table
-    # against each read back (at 10 mm: 2 x 0.1 mm on the table's h_fine 4.5 mm, 2 x 0.1 x 6/4.5 mm on 6 mm)
+    # --mesh-check at the held-out angle: every study mesh and its twin
+    # solved, each mesh's noise and the table against each read back (at 10
+    # mm: 2 x 0.1 mm on the table's h_fine 4.5 mm, 2 x 0.1 x 6/4.5 mm on 6 mm)
     converged["ok"] = True
     calls.clear()
     monkeypatch.setattr(T, "MESH_STUDY_SPECS", ((0.012, 0.006, 0.030, 0.055),))
@@ -88,12 +93,13 @@ def test_sphere_table_command_reports_held_out_angles_and_ships(tmp_path, monkey
     assert noise > 0.01 and tab["vs_table_mesh_px"][-1] == 0.0
     assert lv["noise_px"][-1] == pytest.approx(noise * 6 / 4.5, rel=0.03)
     assert lv["vs_table_mesh_px"][-1] == pytest.approx(noise / 2 * (6 / 4.5 - 1), rel=0.03)
-    assert abs(lv["snapshots_vs_this_px"][-1] - lv["vs_table_mesh_px"][-1]) < 0.07    # plus the α interpolation
+    assert abs(lv["snapshots_vs_this_px"][-1] - lv["vs_table_mesh_px"][-1]) < 0.07  # plus the α interpolation
     for args, word in ((["--mesh-check"], "--mesh-check is for"),
                        # the organ has no sphere symmetry: its --node-table is a path table (test_path_table)
                        (["--scene", str(SCENES_DIR / "organ.yaml"), "--node-table", "--azimuth", "10"],
                         "path table takes --stations"),
-                       (["--scene", str(SPHERE), "--node-table", "--holdout-azimuth", "60"], "strictly between"),
+                       (["--scene", str(SPHERE), "--node-table", "--holdout-azimuth", "60"],
+                        "strictly between"),
                        (["--scene", str(SPHERE), "--between-depths", "0"], "cylinder")):
         with pytest.raises(SystemExit, match=word):
             main(["--out", str(out), "--cache-dir", ""] + args)

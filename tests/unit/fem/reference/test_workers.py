@@ -1,9 +1,10 @@
-"""The reference solves' workers (flexsheet/fem/reference/workers.py): the scheduler's address is checked before any
-work."""
+"""The reference solves' workers (flexsheet/fem/reference/workers.py): the scheduler's address is checked
+before any work."""
 
 import pytest
 
-pytestmark = [pytest.mark.timeout(1500), pytest.mark.slow]   # the slow tier, with the FEM experiment's quick run
+# the slow tier, with the FEM experiment's quick run
+pytestmark = [pytest.mark.timeout(1500), pytest.mark.slow]
 
 
 def test_scheduler_address_is_checked_before_any_work(tmp_path):

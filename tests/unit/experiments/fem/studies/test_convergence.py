@@ -1,6 +1,7 @@
-"""The reference's convergence study and the studies beside it (flexsheet/experiments/fem/studies/convergence.py) in
-the quick run: the reference's physics (force rising with depth, the Hertz force at a shallow push, no element
-inverted at a quadrature point), the skin study and the penalty study."""
+"""The reference's convergence study and the studies beside it
+(flexsheet/experiments/fem/studies/convergence.py) in the quick run: the reference's physics (force rising
+with depth, the Hertz force at a shallow push, no element inverted at a quadrature point), the skin study and
+the penalty study."""
 
 import json
 import math
@@ -21,10 +22,11 @@ def test_reference_physics(quick):
     assert depths[-1] == pytest.approx(0.05)
     for lv in conv["levels"]:
         f = lv["force_N"]
-        assert all(b > a for a, b in zip(f, f[1:], strict=False)), f          # stiffer the deeper, no snap back
-        assert max(lv["inverted_qp"]) == 0                                    # the line search keeps det F > 0
+        assert all(b > a for a, b in zip(f, f[1:], strict=False)), f  # stiffer the deeper, no snap back
+        assert max(lv["inverted_qp"]) == 0  # the line search keeps det F > 0
         assert lv["newton_converged"]
-    # Hertz (Johnson, Contact Mechanics §4.2) at the shallowest push: sphere r = 8 mm on the R = 35.4 mm cylinder
+    # Hertz (Johnson, Contact Mechanics §4.2) at the shallowest
+    # push: sphere r = 8 mm on the R = 35.4 mm cylinder
     E, nu, r, R = s["material"]["E"], s["material"]["nu"], s["finger_radius_m"], 0.025 * math.sqrt(2)
     d = depths[0]
     r_eff = math.sqrt(r * (r * R / (r + R)))
@@ -36,21 +38,24 @@ def test_reference_physics(quick):
     assert max(conv["levels"][-1]["error_vs_finest_mm"]) == 0
     ref = s["reference"]
     assert ref["mesh_converged"] == (ref["monotone_decrease"] and ref["last_refinement_change_mm"] <= 0.35
-                                     and ref["finest_newton_converged"] and ref["finest_inverted_qp_max"] == 0)
+                                     and ref["finest_newton_converged"]
+                                     and ref["finest_inverted_qp_max"] == 0)
     assert ref["converged"] == (ref["mesh_converged"] and ref["penalty_study"]["converged"])
     if len(conv["levels"]) < 3:
         assert not ref["converged"]
 
 
 def test_skin_study_refines_the_surface_layer_only(quick):
-    """The skin study's variant is the next-to-finest mesh plus a finer surface layer: more DOF than that mesh,
-    Newton converged, a real change of the visible surface at every depth past the first, and a softer push at
-    50 mm (finer elements where the finger bends the surface stiffen it less; the full tube refinement does too)."""
+    """The skin study's variant is the next-to-finest mesh plus a finer surface layer: more DOF than that
+    mesh, Newton converged, a real change of the visible surface at every depth past the first, and a softer
+    push at 50 mm (finer elements where the finger bends the surface stiffen it less; the full tube refinement
+    does too)."""
     base, s, _ = quick
     with open(base / "out" / "convergence.json") as fh:
         conv = json.load(fh)
     sk = conv["skin_study"]
-    assert sk["unrefined"]["h_fine"] == conv["levels"][-2]["h_fine_m"] and sk["unrefined_dofs"] == conv["levels"][-2]["dofs"]
+    assert (sk["unrefined"]["h_fine"] == conv["levels"][-2]["h_fine_m"]
+            and sk["unrefined_dofs"] == conv["levels"][-2]["dofs"])
     (row,) = sk["skins"]
     assert row["spec"]["skin_h"] == 0.005 and row["newton_converged"] and row["dofs"] > sk["unrefined_dofs"]
     ch = np.array(row["change_vs_unrefined_mm"])
@@ -61,9 +66,9 @@ def test_skin_study_refines_the_surface_layer_only(quick):
 
 
 def test_penalty_study_shows_the_default_penalty_converged(quick):
-    """The contact penalty is a discretisation parameter too: a 10× stiffer finger penetrates less and moves the
-    visible surface by less than 0.1 mm at the default; the default penetrates the finger by < 0.05 mm at 50 mm
-    (the old 10³·E/h penetrated 1.2 mm there)."""
+    """The contact penalty is a discretisation parameter too: a 10× stiffer finger penetrates less and moves
+    the visible surface by less than 0.1 mm at the default; the default penetrates the finger by < 0.05 mm at
+    50 mm (the old 10³·E/h penetrated 1.2 mm there)."""
     base, s, _ = quick
     with open(base / "out" / "convergence.json") as fh:
         pen = json.load(fh)["penalty_study"]

@@ -1,5 +1,5 @@
-"""The material study (flexsheet/experiments/fem/studies/material.py) on the quick run's cache: Gent stiffens the
-deep push only and is judged against its own finest level."""
+"""The material study (flexsheet/experiments/fem/studies/material.py) on the quick run's cache: Gent stiffens
+the deep push only and is judged against its own finest level."""
 
 import json
 import os
@@ -17,15 +17,17 @@ pytestmark = [pytest.mark.timeout(1500), pytest.mark.slow]   # and the slow tier
 
 
 def test_material_study_gent_stiffens_the_deep_push_only_and_is_judged_against_its_own_finest_level(quick):
-    """--material-study: the quick run's neo-Hookean levels come from its cache, only the Gent solid's (Jm 97.2,
-    natural rubber) two levels and its table's stable branch are solved. Physics whatever the mesh: Gent is the
-    neo-Hookean solid at small strain (the two finest solutions within 0.05 mm at 5 mm) and stiffer where the
-    chains stretch (more force, less strain at 50 mm on every level, the distance between the materials growing
-    with depth), its strain stays below its own limiting extensibility; the snapshots are judged against the
-    finer level, never the one they were sampled from."""
+    """--material-study: the quick run's neo-Hookean levels come from its cache, only the Gent solid's (Jm
+    97.2, natural rubber) two levels and its table's stable branch are solved. Physics whatever the mesh: Gent
+    is the neo-Hookean solid at small strain (the two finest solutions within 0.05 mm at 5 mm) and stiffer
+    where the chains stretch (more force, less strain at 50 mm on every level, the distance between the
+    materials growing with depth), its strain stays below its own limiting extensibility; the snapshots are
+    judged against the finer level, never the one they were sampled from."""
     base, _, _ = quick
-    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--Jm", "inf", "--material-study",
-                        "--out", str(base / "material"), "--cache-dir", str(base / "cache"), "--jobs", "2"], cwd=ROOT,
+    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--Jm", "inf",
+                        "--material-study",
+                        "--out", str(base / "material"), "--cache-dir", str(base / "cache"), "--jobs", "2"],
+                       cwd=ROOT,
                        capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     solved = [ln for ln in r.stdout.splitlines() if "DOF, load steps" in ln]
@@ -47,7 +49,7 @@ def test_material_study_gent_stiffens_the_deep_push_only_and_is_judged_against_i
     for row, conv in ((nh, nh["convergence"]), (gent, gent["convergence"])):
         sn = row["snapshots_azimuth0"]
         assert sn["mesh"]["h_fine"] == pytest.approx(0.012) and len(sn["error_mm"]) == 10
-        assert min(sn["error_mm"]) > 0                                  # judged against the 9 mm level, not itself
+        assert min(sn["error_mm"]) > 0  # judged against the 9 mm level, not itself
         assert sn["max_visible_error_mm"] == pytest.approx(max(sn["error_mm"]))
         # at 50 mm, a snapshot depth, the table is its own material's 12 mm solve: its error is that level's
         # distance to the 9 mm level (a table of the other material would be ~0.8 mm off it)

@@ -1,5 +1,5 @@
-"""The mirror study (flexsheet/experiments/fem/studies/mirror.py) on the quick run's cache: the half model's force
-and asymmetry, and the stability check's lowest eigenvalues of each symmetry block."""
+"""The mirror study (flexsheet/experiments/fem/studies/mirror.py) on the quick run's cache: the half model's
+force and asymmetry, and the stability check's lowest eigenvalues of each symmetry block."""
 
 import json
 import os
@@ -20,8 +20,9 @@ pytestmark = [pytest.mark.timeout(1500), pytest.mark.slow]   # and the slow tier
 def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its_asymmetry(quick):
     """The mirror study's half model (no z mirror plane; cut: nodes on that plane, as every off-axis push is
     meshed) at azimuth 0: about twice the quarter model's DOF, the quarter model's force at every depth (3 %:
-    the symmetry factors agree, and the cut half mesh is as stiff as the quarter one), and an asymmetry measure that reads 0 on the quarter model (symmetric
-    by construction) and not on the half model. ``--mirror-study`` alone writes the same study from the cache."""
+    the symmetry factors agree, and the cut half mesh is as stiff as the quarter one), and an asymmetry
+    measure that reads 0 on the quarter model (symmetric by construction) and not on the half model.
+    ``--mirror-study`` alone writes the same study from the cache."""
     from dataclasses import replace
 
     from flexsheet.experiments.fem.studies.mirror import mirror_asymmetry
@@ -48,8 +49,8 @@ def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its
     assert len(row["asymmetry_mm"]) == len(ms["depths_m"]) and max(row["asymmetry_mm"]) > 0.1
     assert row["diff_vs_finest_quarter_mm"][0] > 0
     assert os.path.getsize(base / "out" / "mirror_study.png") > 5000
-    # the instrument: on the quarter model's own path it reads 0 (u_dof is float32: 1e-5 m is rounding); on the half
-    # model a uniform field u = (0, 0, a) is read as |a - (-a)| = 2a
+    # the instrument: on the quarter model's own path it reads 0 (u_dof is float32: 1e-5 m is
+    # rounding); on the half model a uniform field u = (0, 0, a) is read as |a - (-a)| = 2a
     st, mat = settings_for(True), Material()
     rm = realtime_model(st, mat, str(base / "cache"))
     depths = np.array(ms["depths_m"])
@@ -62,8 +63,10 @@ def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its
     uni = {"u_dof": np.broadcast_to([0.0, 0.0, a], h["u_dof"][:1].shape).astype(np.float32),
            "u": np.broadcast_to([0.0, 0.0, a], h["u"][:1].shape)}
     assert mirror_asymmetry(uni, half, depths[:1], mat, rm)[0] == pytest.approx(2 * a, rel=1e-5)
-    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--Jm", "inf", "--mirror-study", "--out",
-                        str(base / "mirror"), "--cache-dir", str(base / "cache")], cwd=ROOT, capture_output=True,
+    r = subprocess.run([sys.executable, "-m", "flexsheet", "experiment", "fem", "--quick", "--Jm", "inf",
+                        "--mirror-study", "--out",
+                        str(base / "mirror"), "--cache-dir", str(base / "cache")], cwd=ROOT,
+                       capture_output=True,
                        text=True, timeout=600)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     with open(base / "mirror" / "mirror_study.json") as fh:
@@ -75,8 +78,8 @@ def test_mirror_study_solves_azimuth_0_without_the_mirror_plane_and_measures_its
 def test_mirror_stability_finds_the_lowest_eigenvalues_of_each_symmetry_block(quick):
     """The stability check's shift-invert eigenvalues are the lowest of the symmetric and antisymmetric blocks
     of the quarter model's tangent (dense ``eigvalsh`` on the coarse quick mesh agrees to 1e-6), its positive-
-    definite verdict agrees with the sign of the lowest eigenvalue, and each converged state's free residual is
-    small against the finger force. The blocks: on the z plane the symmetric one frees u_x, u_y and the
+    definite verdict agrees with the sign of the lowest eigenvalue, and each converged state's free residual
+    is small against the finger force. The blocks: on the z plane the symmetric one frees u_x, u_y and the
     antisymmetric one u_z only; the support is fixed in both."""
     from dataclasses import replace
 
@@ -105,7 +108,8 @@ def test_mirror_stability_finds_the_lowest_eigenvalues_of_each_symmetry_block(qu
     spec = st.levels[0]
     rm = realtime_model(st, mat, str(base / "cache"))
     depths = push_depths(st.depth_step)
-    p = reference_path(spec, 0.0, depths, mat, ArrayCache(str(base / "cache")), rm.rest_vertices.astype(float),
+    p = reference_path(spec, 0.0, depths, mat, ArrayCache(str(base / "cache")),
+                       rm.rest_vertices.astype(float),
                          st.contact)
     j = len(depths) // 2
     got = mirror_stability({"u_dof": p["u_dof"][j:j + 1]}, spec, depths[j:j + 1], mat)
@@ -116,8 +120,9 @@ def test_mirror_stability_finds_the_lowest_eigenvalues_of_each_symmetry_block(qu
     assert inner.any() and not sym[inner][:, :2].any() and sym[inner][:, 2].all()
     assert anti[inner][:, :2].all() and not anti[inner][:, 2].any()
     assert sym[m.support].all() and anti[m.support].all()
-    _, K = m.residual_tangent(p["u_dof"][j].astype(float), capsule_at(0.0, float(depths[j]), FINGER_R, m.mesh.radius,
-                                                                      m.mesh.center), m.penalty())
+    _, K = m.residual_tangent(p["u_dof"][j].astype(float),
+                              capsule_at(0.0, float(depths[j]), FINGER_R, m.mesh.radius,
+                                         m.mesh.center), m.penalty())
     for name, fixed in (("sym_N_per_m", sym), ("anti_N_per_m", anti)):
         fr = np.flatnonzero(~fixed.ravel())
         lo = scipy.linalg.eigvalsh(K[fr][:, fr].toarray(), subset_by_index=[0, 0])[0]

@@ -1,4 +1,5 @@
-"""The fold study's tip-refined sequence (flexsheet/experiments/fem/studies/tip.py): its convergence verdict."""
+"""The fold study's tip-refined sequence (flexsheet/experiments/fem/studies/tip.py): its convergence
+verdict."""
 
 import numpy as np
 import pytest
@@ -20,4 +21,5 @@ def test_the_tip_sequence_verdict_needs_three_levels_a_falling_difference_and_a_
     assert not tip_verdict(good, depths, True, 3, None)["converged"]         # inverted elements
     worse = np.array([[0.2, 0.6, 0.9], [0.1, 0.7, 0.3]])        # not falling at 5 mm, and over 0.35 mm there
     w = tip_verdict(worse, depths, True, 0, None)
-    assert not w["converged"] and not w["monotone_decrease"] and w["converged_to_depth_mm"] == pytest.approx(2.5)
+    assert (not w["converged"] and not w["monotone_decrease"]
+            and w["converged_to_depth_mm"] == pytest.approx(2.5))
