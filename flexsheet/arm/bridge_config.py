@@ -17,12 +17,22 @@ from pydantic import Field
 
 from messages import mxt
 
-__all__ = ["BridgeConfig", "DEFAULT_PORT", "DEFAULT_PERIOD"]
+__all__ = ["BridgeConfig", "DEFAULT_PORT", "DEFAULT_PERIOD", "protocol_defaults"]
 
 #: the controller's port by protocol: Modbus TCP, MXT UDP
 DEFAULT_PORT = {"modbus": 15020, "mxt": mxt.DEFAULT_PORT}
 #: the controller cycle by protocol, s (MXT: CR750-Q, CR800-Q; 0.0035 for CR800-R/D)
 DEFAULT_PERIOD = {"modbus": 0.0071, "mxt": 0.00711}
+
+
+def protocol_defaults(params):
+    """Fill ``params.port`` and ``params.period`` left None with their ``params.protocol``'s defaults
+    (:data:`DEFAULT_PORT`, :data:`DEFAULT_PERIOD`); returns ``params`` (a pydantic ``after`` validator)."""
+    if params.port is None:
+        params.port = DEFAULT_PORT[params.protocol]
+    if params.period is None:
+        params.period = DEFAULT_PERIOD[params.protocol]
+    return params
 
 
 @dataclass(frozen=True)

@@ -7,19 +7,13 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from flexsheet.arm.bridge_config import DEFAULT_PERIOD, DEFAULT_PORT, BridgeConfig
+from flexsheet.arm.bridge_config import BridgeConfig, protocol_defaults
 from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.runtime.params import config_fields, params_model
 
 __all__ = ["ArmBridgeParams"]
 
 
-def _protocol_defaults(self):
-    if self.port is None:
-        self.port = DEFAULT_PORT[self.protocol]
-    if self.period is None:
-        self.period = DEFAULT_PERIOD[self.protocol]
-    return self
 
 
 #: which arm and controller, and the registration file: the node's own
@@ -55,6 +49,6 @@ ArmBridgeParams = params_model(
     """,
     _DEVICE,
     config_fields(BridgeConfig),
-    validators={"_protocol_defaults": model_validator(mode="after")(_protocol_defaults)},
+    validators={"_protocol_defaults": model_validator(mode="after")(protocol_defaults)},
     module=__name__,
 )

@@ -22,7 +22,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from flexsheet.arm.bridge_config import DEFAULT_PERIOD, DEFAULT_PORT
+from flexsheet.arm.bridge_config import protocol_defaults
 from flexsheet.runtime.node import Node
 from flexsheet.runtime.params import config_fields, params_model
 from flexsheet.twin import loopback
@@ -35,12 +35,6 @@ from flexsheet.twin.servo import ServoParams
 __all__ = ["ArmControllerSimParams", "ArmControllerSimNode"]
 
 
-def _protocol_defaults(self):
-    if self.port is None:
-        self.port = DEFAULT_PORT[self.protocol]
-    if self.period is None:
-        self.period = DEFAULT_PERIOD[self.protocol]
-    return self
 
 
 ArmControllerSimParams = params_model(
@@ -57,7 +51,7 @@ ArmControllerSimParams = params_model(
      "port": (int | None, Field(default=None, ge=0, le=65535, description="TCP (modbus) or UDP (mxt) port; "
                                 "0 = any free port; default 15020 (modbus) / 10000 (mxt)"))},
     config_fields(ControllerTwinConfig),
-    validators={"_protocol_defaults": model_validator(mode="after")(_protocol_defaults)},
+    validators={"_protocol_defaults": model_validator(mode="after")(protocol_defaults)},
     module=__name__,
 )
 
