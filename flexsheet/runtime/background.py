@@ -21,7 +21,7 @@ import os
 import signal
 import threading
 
-__all__ = ["lower_priority", "start_worker", "await_worker"]
+__all__ = ["lower_priority", "start_worker"]
 
 
 def lower_priority(nice: int = 19, idle: bool = True) -> str:
@@ -87,18 +87,3 @@ def start_worker(proc) -> None:
     finally:
         signal.signal(signal.SIGINT, old)
 
-
-async def await_worker(proc, stopping, poll: float = 0.05) -> bool:
-    """Wait for the worker process ``proc`` to end without blocking the event loop (heartbeats and signals are
-    served meanwhile), checking ``stopping()`` every ``poll`` s. Returns True when it ended by itself; False
-    when a stop was asked first, the worker then terminated (and joined for at most 1 s)."""
-    import asyncio
-
-    while proc.is_alive():
-        if stopping():
-            proc.terminate()
-            proc.join(timeout=1.0)
-            return False
-        await asyncio.sleep(poll)
-    proc.join()
-    return True

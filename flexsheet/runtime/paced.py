@@ -96,11 +96,8 @@ class PacedCall:
         self._wanted = False
         self.last = now
         self.node.charge(self.cost)
-        self._finish(self.call)
-
-    def _finish(self, call: Callable[[], Any]) -> None:
         try:
-            result = call()
+            result = self.call()
         except ValueError as exc:
             self.failed(exc)
             return
