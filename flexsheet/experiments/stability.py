@@ -93,8 +93,7 @@ QUICK = {"calibration_scale": [0.0, 16.0], "dropout": [0.0, 0.5], "marker_px": [
 def breaking_point(x, y, limit: float) -> float | None:
     """Smallest x where y crosses above ``limit`` (linear interpolation between points; x increasing), the
     first x if y starts above it, ``None`` if it never does; a point without a finite y (a run that was
-    refused) is
-    broken: its x, unless a crossing came before."""
+    refused) is broken: its x, unless a crossing came before."""
     x = np.asarray(x, float)
     y = np.asarray(y, float)
     if not np.isfinite(y[0]) or y[0] > limit:

@@ -210,8 +210,7 @@ class PathSnapshotModel:
         """For each sub-fraction in ``g`` and each of the interval's two stations f0, f1: the turn R (n+1, 2,
         3, 3) that takes the station's normal to the path's normal at g (the least rotation), and the point
         (n+1, 2, S, 3) m whose nearest rest-surface point gives vertex v its moved state, P(f_s) + Rᵀ(v −
-        P(g)): the
-        contact's travel along the path and its turn (module doc)."""
+        P(g)): the contact's travel along the path and its turn (module doc)."""
         pg, ps = self.path_point(g), self.path_point(np.array([f0, f1]))
         R = least_rotation(self.path_normal(np.array([f0, f1]))[None, :], self.path_normal(g)[:, None])
         x = np.einsum("gsji,gvj->gsvi", R, rv[None] - pg[:, None])          # Rᵀ (v − P(g))

@@ -428,8 +428,7 @@ class SceneModel(CondensedSurface):
         the ray from its centre (the material under a rigid finger lies on it). A station's dent moved between
         stations loses depth to linear interpolation on the rendered triangles (h²/8r: 0.25 mm for 4 mm
         triangles under an 8 mm fingertip); this keeps the drawn dent on the finger. Continuous in the
-        finger's
-        position: a vertex reaching the sphere moves by nothing."""
+        finger's position: a vertex reaching the sphere moves by nothing."""
         c = np.asarray(fg.center, np.float32)
         x = self._rest + us - c
         r2 = np.einsum("ij,ij->i", x, x)
@@ -453,8 +452,7 @@ def attach_scene_table(model: SceneModel, cache: ArrayCache) -> tuple[str | None
     (:mod:`flexsheet.fem.path_snapshots`), from ``cache`` (this machine's cache, then the shipped store
     ``flexsheet/fem/data``). Returns (kind "sphere" or "path",
     where: "cache" or "shipped store (flexsheet/fem/data)"), or (kind, None) when none is stored (the model
-    stays
-    linear). Raises ``ValueError`` when a stored table is unusable (inconsistent, another mesh)."""
+    stays linear). Raises ``ValueError`` when a stored table is unusable (inconsistent, another mesh)."""
     try:
         sphere_frame(model.scene)
         kind, table = "sphere", cache.load("spheresnap", sphere_table_key(model.scene))

@@ -10,8 +10,7 @@ compete with each other; ``threadpoolctl``), and ties it to its parent: when the
 dead node's stdout open, so the launcher never saw the node exit and never respawned it. The worker ignores
 SIGINT: its owner ends it (the node's teardown terminates it; the experiment's pool on Ctrl-C), or it dies
 with its owner. The launcher stops a node with SIGINT to its whole process group, and a worker that took it
-printed
-a ``KeyboardInterrupt`` traceback at every shutdown during a table build."""
+printed a ``KeyboardInterrupt`` traceback at every shutdown during a table build."""
 
 from __future__ import annotations
 

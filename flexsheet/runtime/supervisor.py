@@ -320,8 +320,7 @@ class Supervisor:
                      limit_s: float = 120.0) -> None:
         """Wait for the watchers to record their nodes' exits (≤ 1 s reap + 2 s of output), and for longer
         while the stopped nodes' last output is still arriving (a node with much to say as it stops, on a
-        loaded
-        machine: no line is dropped while lines keep coming); at most ``limit_s``."""
+        loaded machine: no line is dropped while lines keep coming); at most ``limit_s``."""
         t_end = time.monotonic() + limit_s
         while True:
             before = self._lines_read

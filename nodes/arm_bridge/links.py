@@ -1,7 +1,6 @@
 """The arm controller port's lab side (``source: tcp``): a controller over the network — the RV-1A's over MXT
 (UDP) or a Modbus TCP controller or gateway, or a controller twin node — on the wall clock. The arm PC's clock
-is
-main's: chrony keeps them together (docs/deploy.md). See :mod:`flexsheet.arm.controller_port`."""
+is main's: chrony keeps them together (docs/deploy.md). See :mod:`flexsheet.arm.controller_port`."""
 
 from __future__ import annotations
 

@@ -30,8 +30,7 @@ def _tracker(kl, ql):
 def test_a_target_after_a_pause_may_ask_what_the_arm_could_move_meanwhile():
     """TargetTracker: within a flowing stream (targets 30 ms apart) a 0.9 rad change is a branch jump, refused
     with the goal kept; the same target after the stream paused 2 s (a planner respawning while the finger
-    moved
-    on) is taken: 0.5 rad + 2 s at the fastest joint's speed."""
+    moved on) is taken: 0.5 rad + 2 s at the fastest joint's speed."""
     kin = ArmKinematics("left", LEFT_BASE)
     q = home_joints("left")
     q_far = q + np.array([0.9, 0.0, 0.0, 0.0, 0.0, 0.0])

@@ -11,8 +11,7 @@ tension-field relaxation (wrinkling) the solve converges, and the result is chec
 solver does not
 impose: the finger reaches its depth, the force grows faster than the depth, a mirrored contact gives the
 mirrored sheet, the clamp nearer the finger is the steeper one, and no point of the relaxed membrane is in
-compression
-while the plain stress would be."""
+compression while the plain stress would be."""
 
 from __future__ import annotations
 
