@@ -14,13 +14,22 @@
 #   tests/run.sh --wall    the slow tier's phase 3: the whole graph live against the wall clock (faults, partition,
 #                          three hosts in network namespaces, live registration, the MXT stroke); not in CI
 #   tests/run.sh --soak    an hour of launch/lab_sim.yaml with a viewer and the recorder (tests/soak.py; not in CI)
+#   tests/run.sh --image   builds docker/Dockerfile without a Docker engine (buildah) and runs the main job in it
+#                          (docker/prove_image.sh: docs/figures/image/image.json; as root, not in CI)
+#   tests/run.sh --bare    the README's first command in a bare Debian 12 made with debootstrap
+#                          (docker/prove_bare.sh: docs/figures/image/bare.json; as root, not in CI)
 # Other arguments go to every phase (e.g. tests/run.sh -x, tests/run.sh -p no:cacheprovider, tests/run.sh -k bridge);
 # not -m, which replaces the phase's own marker selection. With -x a failure in phase 1 skips phase 2; an
 # interrupt (Ctrl-C), an internal or a usage error in phase 1 ends the run. $SUITE_JSON=FILE writes the phases'
 # wall times and exit codes there (docs/figures/testing/). Plain `python3 -m pytest -q` runs every test of
 # both tiers in one process, one by one (slower).
 set -u
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/.." || exit 4
+# the proofs of the image and of the install need no virtual environment: dispatched before it is looked for
+case "${1:-}" in
+  --image) shift; exec bash docker/prove_image.sh "$@";;
+  --bare) shift; exec bash docker/prove_bare.sh "$@";;
+esac
 # the virtual environment docker/install.sh made ($FLEXSHEET_VENV, default .venv): its python3, pytest, flexsheet
 venv=${FLEXSHEET_VENV:-$PWD/.venv}
 if [ -x "$venv/bin/python" ]; then
