@@ -7,16 +7,19 @@ installer precomputes (``python3 -m nodes.fem.warm``), never inside the installe
   set, the user's data folder (Linux: ``~/.local/share/flexsheet``), the machine's
   (``/usr/local/share/flexsheet``, the first of ``$XDG_DATA_DIRS``);
 * :func:`install_data_dir`: where an installer writes: ``$FLEXSHEET_DATA``, else the machine's folder when
-  this user may write there (root, the image's build), else the user's.
+  this user may write there (root, the image's build), else the user's;
+* :func:`launch_dir`: the launch files and shipped scenes (``launch/``): the checkout's, else the current
+  folder's (a non-editable install, e.g. the image's ``/opt/flexsheet/launch``).
 """
 
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import platformdirs
 
-__all__ = ["APP", "cache_root", "data_dirs", "install_data_dir"]
+__all__ = ["APP", "cache_root", "data_dirs", "install_data_dir", "launch_dir"]
 
 APP = "flexsheet"
 
@@ -55,3 +58,18 @@ def install_data_dir() -> str:
         return os.path.abspath(os.path.expanduser(os.environ["FLEXSHEET_DATA"]))
     site = os.path.abspath(platformdirs.site_data_dir(APP))
     return site if _writable(site) else os.path.abspath(platformdirs.user_data_dir(APP))
+
+
+#: the checkout this package lives in (an installed package: its site-packages, which has no launch/)
+_CHECKOUT = Path(__file__).resolve().parents[1]
+
+
+def launch_dir() -> Path:
+    """The folder of the launch files and shipped scenes (absolute ``Path`` to a ``launch/``): the checkout's
+    when this package runs from a checkout (editable or ``python -m``), else ``launch/`` of the current folder
+    (a non-editable install run where the launch files are, e.g. the image's ``/opt/flexsheet``). Resolved on
+    each call, never raising: a missing folder is named by the loader that reads from it."""
+    own = _CHECKOUT / "launch"
+    if (own / "sim.yaml").is_file():
+        return own
+    return Path.cwd().resolve() / "launch"

@@ -559,7 +559,11 @@ def make_sandbox(sb: Path) -> Path:
     wrapper = sb / "bin" / "flexsheet"
     wrapper.write_text(f'#!/bin/sh\nexec {sys.executable} -m flexsheet "$@"\n')
     wrapper.chmod(0o755)
-    (sb / "bin" / "python").symlink_to(sys.executable)
+    # a script, not a link: CPython finds the venv's pyvenv.cfg from the path it was started by, and a link
+    # outside the venv's folder would start the base Python, without the project's packages
+    for name in ("python", "python3"):
+        (sb / "bin" / name).write_text(f'#!/bin/sh\nexec {sys.executable} "$@"\n')
+        (sb / "bin" / name).chmod(0o755)
     lab = load_launch(str(ROOT / "launch" / "lab.yaml"))
     generate(identities(lab), sb / "home" / ".flexsheet" / "keys")
     return sb

@@ -62,6 +62,7 @@ import numpy as np
 from flexsheet.analysis.table1 import FELT_TARGET_FACTOR, PAPER_TABLE1, target
 from flexsheet.calibration.display_calib import pose_from_rt
 from flexsheet.calibration.display_calib_file import load_display_calib, write_display_calib
+from flexsheet.dirs import launch_dir
 from flexsheet.experiments.stroke import DURATION_10S, SCRIPT_10S, run_seed
 from flexsheet.experiments.stroke_model import MARKER_PX, make_twin, simulate
 from flexsheet.model import geometry
@@ -407,7 +408,7 @@ def main(argv: list[str] | None = None) -> int:
                          "breaking point")
     ap.add_argument("--seed", type=int, default=0, help="--graph: the truth seed (default 0)")
     ap.add_argument("--launch", type=Path,
-                    default=Path(__file__).resolve().parents[2] / "launch" / "sim.yaml",
+                    default=launch_dir() / "sim.yaml",
                     help="--graph: the launch file (clock: sim; default launch/sim.yaml)")
     a = ap.parse_args(argv)
     if a.graph:

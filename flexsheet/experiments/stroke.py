@@ -27,12 +27,12 @@ import time
 from pathlib import Path
 
 from flexsheet.analysis.table1 import FELT_TARGET_FACTOR, PAPER_TABLE1, TARGET_FACTOR, target
+from flexsheet.dirs import launch_dir
 
 log = logging.getLogger(__name__)
 
 __all__ = ["run_seed", "aggregate", "chart", "main", "ROWS"]
 
-ROOT = Path(__file__).resolve().parents[2]
 #: the rows judged: the paper's two moving times
 ROWS = tuple(PAPER_TABLE1)
 #: the 10 s stroke alone (``--quick``, and each run of ``experiment stability --graph``), and the simulated
@@ -51,7 +51,7 @@ def run_seed(seed: int, out: Path, duration: float, launch: Path, extra: list[st
            str(out), "--set", f"twin.truth_seed={seed}", *(extra or [])]
     t0 = time.monotonic()
     with open(out / "launch.log", "w") as fh:
-        subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=ROOT, check=False)
+        subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=launch_dir().parent, check=False)
     path = out / "summary.json"
     if not path.exists():
         raise RuntimeError(f"seed {seed}: the run wrote no summary.json (see {out / 'launch.log'})")
@@ -169,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--duration", type=float, default=70.0,
                     help="simulated s per run, a cap (default 70; the world's script, a 10 s stroke, a 30 s "
                          "stroke and a 10 s stroke and push, ends the run at 63 s)")
-    ap.add_argument("--launch", default=str(ROOT / "launch" / "sim.yaml"), help="launch file (clock: sim)")
+    ap.add_argument("--launch", default=str(launch_dir() / "sim.yaml"), help="launch file (clock: sim)")
     ap.add_argument("--quick", action="store_true",
                     help=f"truth seed 0 only, the 10 s stroke alone ({DURATION_10S:g} simulated s); judges "
                          "that row")

@@ -48,6 +48,7 @@ from flexsheet.arm.limiter import StreamLimiter
 from flexsheet.arm.tracking import TargetTracker
 from flexsheet.calibration.display_calib import nominal_display_calib
 from flexsheet.calibration.display_calib_file import load_display_calib
+from flexsheet.dirs import launch_dir
 from flexsheet.experiments.stroke_model_chart import plot as plot_chart
 from flexsheet.model import geometry
 from flexsheet.model.shapes import paper_cylinder
@@ -67,7 +68,7 @@ __all__ = ["LatencyModel", "ArmChain", "Twin", "launch_kf", "make_twin",
            "simulate", "run", "main", "MARKER_PX"]
 
 #: the launch file whose triangulator/planner settings the in-process rows use
-SIM_LAUNCH = Path(__file__).resolve().parents[2] / "launch" / "sim.yaml"
+SIM_LAUNCH = launch_dir() / "sim.yaml"
 #: marker-centre noise per image coordinate, px, by twin: realistic = the level the vision bench assumes for
 #: a real camera (0.1 px → ≈ 0.38 mm rms at 0.5 m, ``docs/figures/vision``); ideal = the old camera twin
 #: (0.02–0.03 px). Replace the realistic value by the camera twin's measured one when it is known.

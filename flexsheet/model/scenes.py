@@ -50,6 +50,7 @@ from pydantic import (
     ValidationError,
 )
 
+from flexsheet.dirs import launch_dir
 from flexsheet.model import geometry as paper
 from flexsheet.model import shapes
 from flexsheet.model.scene_parts import (
@@ -76,8 +77,8 @@ from flexsheet.yamlio import UniqueKeyLoader
 __all__ = ["Scene", "load_scene", "parse_scene", "paper_scene", "is_paper_cylinder", "load_scene_or_paper",
            "SCENES_DIR", "DEFAULT_SCENE_FILE", "MAX_SCENE_BYTES"]
 
-#: the shipped scenes (launch/scenes/ in the repository)
-SCENES_DIR = Path(__file__).resolve().parents[2] / "launch" / "scenes"
+#: the shipped scenes (``launch/scenes/`` of :func:`flexsheet.dirs.launch_dir`, resolved at import)
+SCENES_DIR = launch_dir() / "scenes"
 #: the default scene: the paper's cylinder
 DEFAULT_SCENE_FILE = SCENES_DIR / "cylinder.yaml"
 MAX_SCENE_BYTES = 1 << 20

@@ -23,21 +23,21 @@ from pathlib import Path
 
 import yaml
 
+from flexsheet.dirs import launch_dir
 from flexsheet.fem.cache import INSTALL_DIR
 from flexsheet.runtime.config import NodeConfig
 from flexsheet.runtime.transport import InProcTransport
 from nodes.fem.node import FemNode
 
-ROOT = Path(__file__).resolve().parents[2]
-
 
 def launch_root() -> Path:
-    """The folder holding ``launch/sim.yaml``: the checkout this module lives in, else the current folder.
-    Raises ``FileNotFoundError`` naming both when neither has it."""
-    for root in (ROOT, Path.cwd()):
-        if (root / "launch" / "sim.yaml").is_file():
-            return root
-    raise FileNotFoundError(f"launch/sim.yaml is in neither {ROOT} nor {Path.cwd()}: run from the checkout")
+    """The folder holding ``launch/sim.yaml`` (:func:`flexsheet.dirs.launch_dir`'s parent: the checkout, else
+    the current folder). Raises ``FileNotFoundError`` naming it when it has no ``launch/sim.yaml``."""
+    launch = launch_dir()
+    if not (launch / "sim.yaml").is_file():
+        raise FileNotFoundError(f"{launch / 'sim.yaml'}: not found; run from the checkout or from the folder "
+                                "that holds launch/")
+    return launch.parent
 
 
 def param_sets(root: Path | None = None) -> list[dict]:

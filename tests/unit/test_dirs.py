@@ -50,3 +50,12 @@ def test_the_fem_cache_searches_the_install_folders_after_the_shipped_store_neve
     pkg = os.path.dirname(cache.__file__)
     assert not any(d.startswith(pkg) for d in (cache.INSTALL_DIR, *cache.INSTALL_DIRS))
     assert cache.DEFAULT_CACHE_DIR == os.path.join(platformdirs.user_cache_dir("flexsheet"), "fem")
+
+
+def test_launch_files_are_the_checkouts_else_the_current_folders(monkeypatch, tmp_path):
+    assert dirs.launch_dir() == dirs._CHECKOUT / "launch"
+    assert (dirs.launch_dir() / "scenes" / "cylinder.yaml").is_file()
+    # an installed package: its folder's parent (site-packages) holds no launch/
+    monkeypatch.setattr(dirs, "_CHECKOUT", tmp_path / "site-packages")
+    monkeypatch.chdir(tmp_path)
+    assert dirs.launch_dir() == tmp_path / "launch"
