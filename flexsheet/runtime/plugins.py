@@ -14,8 +14,11 @@ from __future__ import annotations
 
 import functools
 from importlib.metadata import entry_points
+from typing import Annotated
 
-__all__ = ["NODES_GROUP", "table", "node_types", "node_class", "unknown_node_type", "plugin"]
+from pydantic import AfterValidator
+
+__all__ = ["NODES_GROUP", "table", "node_types", "node_class", "unknown_node_type", "plugin", "EntryName"]
 
 #: the entry-point group of the node types
 NODES_GROUP = "flexsheet.nodes"
@@ -58,3 +61,16 @@ def plugin(group: str, name: str, what: str = "entry", base: type | None = None)
         return obj
     known = ", ".join(table(group)) or "none (is flexsheet installed: pip install -e .?)"
     raise LookupError(f"unknown {what} {name!r} ({group}); known: {known}")
+
+
+def EntryName(group: str, what: str) -> object:  # noqa: N802 - a type, used as one in a model's field
+    """A pydantic field type: a ``str`` that names an installed entry point of ``group`` (an open set: any
+    package may add one; nothing lists the names in code). A name not installed fails validation with
+    ``unknown <what> 'NAME'; installed: …``. Example: ``source: EntryName("flexsheet.camera_sources",
+    "camera source") = "sim"``."""
+    def check(name: str) -> str:
+        if name not in table(group):
+            known = ", ".join(table(group)) or "none (is flexsheet installed: pip install -e .?)"
+            raise ValueError(f"unknown {what} {name!r}; installed: {known}")
+        return name
+    return Annotated[str, AfterValidator(check)]

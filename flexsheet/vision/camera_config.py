@@ -12,6 +12,9 @@ from typing import Annotated
 
 from pydantic import Field
 
+from flexsheet.runtime.plugins import EntryName
+from flexsheet.vision.camera_port import SOURCES_GROUP
+
 __all__ = ["CameraConfig"]
 
 
@@ -26,7 +29,7 @@ class CameraConfig:
     delay from exposure to the frame in the graph, s (simulated clock only: stability sweeps);
     ``preview_rate`` Hz of the decimated pairs on ``/camera/stereo_preview`` (0: off)."""
 
-    source: Annotated[str, Field(pattern="^(sim|device|files|genicam)$")] = "sim"
+    source: EntryName(SOURCES_GROUP, "camera source") = "sim"  # type: ignore[valid-type]
     rate_hz: Annotated[float, Field(gt=0.0, le=1000.0)] = 48.0
     # camera model (sim) / calibration to publish (all sources)
     model: Annotated[str, Field(pattern="^(ximea|bumblebee2|file)$")] = "ximea"

@@ -8,8 +8,10 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from flexsheet.arm.bridge_config import BridgeConfig, protocol_defaults
+from flexsheet.arm.controller_port import SOURCES_GROUP
 from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.runtime.params import config_fields, params_model
+from flexsheet.runtime.plugins import EntryName
 
 __all__ = ["ArmBridgeParams"]
 
@@ -23,10 +25,10 @@ _DEVICE = {
     "protocol": (Literal["modbus", "mxt"],
                  Field(default="modbus", description="modbus (Modbus TCP register map) "
                        "or mxt (MELFA real-time external control, UDP)")),
-    "source": (Literal["tcp", "sim"], Field(default="tcp", description="where the controller is "
-                                             "(flexsheet/arm/controller_port.py): tcp, over the network on "
-                                             "the wall clock; sim, the controller twin of this process on a "
-                                             "simulated clock")),
+    "source": (EntryName(SOURCES_GROUP, "controller source"),
+               Field(default="tcp", description="where the controller is, an entry point of "
+                     "flexsheet.controller_sources (flexsheet/arm/controller_port.py): tcp, over the network "
+                     "on the wall clock; sim, the controller twin of this process on a simulated clock")),
     "host": (str, Field(default="127.0.0.1", description="controller (or twin) address")),
     "twin": (TruthChoice, Field(default_factory=TruthChoice, description="source sim: the hidden truth "
                                 "that draws this arm PC's clock offset from main "

@@ -20,7 +20,6 @@ calibrate display`` registers it). Bad frames are rejected and counted; the node
 from __future__ import annotations
 
 import asyncio
-from typing import Literal
 
 import numpy as np
 from pydantic import Field
@@ -30,9 +29,10 @@ from flexsheet.model.timing import LAB
 from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.runtime.node import Node
 from flexsheet.runtime.params import params_model
+from flexsheet.runtime.plugins import EntryName
 from flexsheet.runtime.qos import QoS
 from flexsheet.vision.glasses import GlassesBoard, GlassesPose, GlassesTracker, HeadPredictor
-from flexsheet.vision.head_camera_port import head_camera_source
+from flexsheet.vision.head_camera_port import SOURCES_GROUP, head_camera_source
 from messages import EyePose, topics
 
 __all__ = ["HeadCameraParams", "HeadCameraNode"]
@@ -45,7 +45,9 @@ HeadCameraParams = params_model(
     ``eye`` entry's); ``display_calib`` (the head camera and eye entries); ``twin`` (sim: the hidden
     truth).""",
     module=__name__,
-    source=(Literal["sim", "device"], Field(default="sim")),
+    source=(EntryName(SOURCES_GROUP, "head camera source"),
+            Field(default="sim", description="an entry point of flexsheet.head_camera_sources: sim (twin) "
+                  "or device (UVC)")),
     device=(str, Field(default="0", description="device source: a UVC index or a /dev/video* path")),
     rate_hz=(float, Field(default=60.0, gt=0.0, le=240.0)),
     exposure_s=(float, Field(default=0.004, gt=0.0, le=0.05)),

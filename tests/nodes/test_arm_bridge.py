@@ -444,3 +444,18 @@ def test_the_in_process_controller_twin_is_refused_on_the_wall_clock_naming_the_
             pass
     with pytest.raises(Exception, match=r"source sim is the controller twin.*clock: sim.*source: tcp"):
         asyncio.run(scenario())
+
+
+def test_the_arm_bridge_and_camera_params_refuse_an_uninstalled_source_with_its_field():
+    import pytest
+    from pydantic import ValidationError
+
+    from nodes.arm_bridge.params import ArmBridgeParams
+    from nodes.camera.node import CameraParams
+
+    with pytest.raises(ValidationError, match=r"source\n.*unknown controller source 'rs232'"):
+        ArmBridgeParams(source="rs232")
+    with pytest.raises(ValidationError, match=r"source\n.*unknown camera source 'webcam'; installed: device, "
+                                              r"files, genicam, sim"):
+        CameraParams(source="webcam")
+    assert CameraParams(source="files").source == "files"

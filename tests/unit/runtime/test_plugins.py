@@ -23,3 +23,16 @@ def test_an_unknown_name_and_an_empty_group_are_said():
         plugin("flexsheet.benches", "nope", what="bench")
     with pytest.raises(LookupError, match=r"known: none \(is flexsheet installed"):
         plugin("flexsheet.no_such_group", "x")
+
+
+def test_a_source_param_is_any_installed_entry_and_an_unknown_one_is_refused_naming_the_installed():
+    from pydantic import TypeAdapter, ValidationError
+
+    from flexsheet.runtime.plugins import EntryName
+
+    source = TypeAdapter(EntryName("flexsheet.controller_sources", "controller source"))
+    assert source.validate_python("tcp") == "tcp"
+    assert source.validate_python("sim") == "sim"
+    with pytest.raises(ValidationError, match=r"unknown controller source 'udp'; installed: sim, tcp"):
+        source.validate_python("udp")
+
