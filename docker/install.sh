@@ -13,7 +13,8 @@
 # missing), then pip in the background (~1 min with an empty pip cache on the 2-core machine) while apt installs
 # the runtime libraries (Mesa, X, Xvfb, Aravis with its GTK viewer, iproute2), which pip does not need.
 set -euo pipefail
-# any failing step ends the install with a non-zero exit and this line naming it
+# any failing step ends the install with a non-zero exit and this line naming it (rc: the trap's own)
+# shellcheck disable=SC2154
 trap 'rc=$?; echo "[install] FAILED (exit $rc) at docker/install.sh line $LINENO: $BASH_COMMAND" >&2; exit $rc' ERR
 cd "$(dirname "$0")/.."
 export DEBIAN_FRONTEND=noninteractive
@@ -111,6 +112,15 @@ for exe in flexsheet register-python-argcomplete; do
 done
 echo "[install] $bindir/flexsheet -> $VENV/bin/flexsheet"
 case ":$PATH:" in *":$bindir:"*) ;; *) echo "[install] note: $bindir is not on PATH here; add it" >&2;; esac
+# the link serves every user only if they can read the venv and (editable) the checkout: not so under a home
+# folder such as /root (mode 700); tried as the user nobody
+if [ "$(id -u)" -eq 0 ] && command -v setpriv >/dev/null 2>&1 \
+   && ! (cd / && setpriv --reuid=65534 --regid=65534 --clear-groups env HOME=/ "$VPY" -c 'import flexsheet') \
+        >/dev/null 2>&1; then
+  echo "[install] note: only root can run $bindir/flexsheet: $VENV or $PWD is not readable to other users" \
+       "(e.g. under /root). For every user, put the checkout in a readable folder such as /opt/flexsheet" \
+       "(docs/install.md)" >&2
+fi
 found=$(command -v flexsheet || true)
 if [ -n "$found" ] && [ "$(readlink -f "$found")" != "$(readlink -f "$VENV/bin/flexsheet")" ]; then
   echo "[install] note: 'flexsheet' on this PATH is $found (another install), before $bindir/flexsheet" >&2

@@ -22,7 +22,7 @@
 set -uo pipefail
 cd "$(dirname "$0")/.." || exit 1
 PROG=image
-# shellcheck source=docker/rootfs.sh
+# shellcheck source=rootfs.sh
 . docker/rootfs.sh
 OUT_JSON=${IMAGE_JSON:-docs/figures/image/image.json}
 SOURCE=${IMAGE_SOURCE:-HEAD}
