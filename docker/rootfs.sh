@@ -77,14 +77,14 @@ pip_config_files() {
 }
 
 # the existing absolute paths that the host's pip configuration names (cert, constraint, find-links, file://
-# indexes), in its files and PIP_* variables, one a line
+# indexes: for DIR/simple, DIR, whose pages link to DIR/files), in its files and PIP_* variables, one a line
 pip_config_paths() {
   local f
   {
     while IFS= read -r f; do sed -n 's/^[^=#;[]*=\s*//p' "$f"; done < <(pip_config_files)
     env | sed -n 's/^PIP_[A-Z_]*=//p'
   } | tr '[:blank:]' '\n' | sed -e "s/^['\"]//" -e "s/['\"]$//" -e 's|^file://||' | grep '^/' | sort -u \
-    | while IFS= read -r f; do [ -e "$f" ] && echo "$f"; done
+    | sed 's|/simple/*$||' | sort -u | while IFS= read -r f; do [ -e "$f" ] && echo "$f"; done
   return 0
 }
 
