@@ -5,7 +5,8 @@ For the analytic kinds (cylinder, sphere, rounded box) this is ``scene.shape()``
 ``scene.shape()`` is a :class:`flexsheet.model.shapes.MeshShape`, whose normals are the *face* normals: on the
 organ's 5120-triangle mesh they jump by a few degrees from face to face, so the sheet would shake as the
 finger strokes and the Table I metric would measure the facets. :class:`SmoothMeshShape` keeps the mesh's
-closest point and inside test and replaces the normal by the scene's smoothed surface normal
+closest point and inside test and replaces the normal by the scene's smoothed surface normal on every path
+(closest point, support point, centre-ray exit)
 (:meth:`flexsheet.model.scenes.Scene.surface_point`: corner normals averaged within 30° creases and
 interpolated barycentrically — the normals the renderer and the world use), and finds the plane's support
 point *locally* (a non-convex organ's global support can be on its other side).
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from flexsheet.model.scene_surface import corner_normals
 from flexsheet.model.shape_base import Shape
 from flexsheet.model.shapes import MeshShape
 from flexsheet.model.vec import Vec, dot, norm, sub
@@ -34,6 +36,20 @@ class SmoothMeshShape(MeshShape):
     def __init__(self, scene) -> None:
         super().__init__(scene.trimesh())
         self.scene = scene
+        self._corner_normals = corner_normals(self.mesh)
+
+    def _ray_exit(self, s: Vec, w: Vec) -> tuple[Vec, Vec]:
+        """Exit point (3,) m of the ray from ``s`` (inside) along unit ``w``, and the smooth normal (3,)
+        there: one trimesh ray cast (the farthest hit), the corner normals interpolated barycentrically in the
+        hit triangle (the centre ray of a convex mesh, :meth:`Shape.project`, sees no facets)."""
+        loc, _, tri = self.mesh.ray.intersects_location(np.asarray([s]), np.asarray([w]), multiple_hits=True)
+        if len(loc) == 0:
+            return Shape._ray_exit(self, s, w)          # Newton on the smooth closest point
+        k = int(np.argmax((loc - np.asarray(s)) @ np.asarray(w)))
+        t = int(tri[k])
+        n = _barycentric(self.mesh.triangles[t], loc[k]) @ self._corner_normals[t]
+        n /= np.linalg.norm(n)
+        return tuple(float(x) for x in loc[k]), tuple(float(x) for x in n)  # type: ignore[return-value]
 
     def closest(self, p: Vec) -> tuple[Vec, Vec, float]:
         """Closest point q (3,) m, smooth outward normal n (3,), signed distance m (< 0 inside; the side from
@@ -124,6 +140,17 @@ class SmoothMeshShape(MeshShape):
             better = err < best_err[i]
             best[i[better]], best_err[i[better]] = q1[better], err[better]
         return best
+
+
+def _barycentric(tri: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Barycentric weights (3,) of point ``q`` (3,) in triangle ``tri`` (3, 3) (its plane's projection)."""
+    a, b, c = tri
+    v0, v1, v2 = b - a, c - a, q - a
+    d00, d01, d11, d20, d21 = v0 @ v0, v0 @ v1, v1 @ v1, v2 @ v0, v2 @ v1
+    den = d00 * d11 - d01 * d01
+    y = (d11 * d20 - d01 * d21) / den
+    z = (d00 * d21 - d01 * d20) / den
+    return np.array([1.0 - y - z, y, z])
 
 
 def planner_shape(scene) -> Shape:
