@@ -2,8 +2,8 @@
 and stroked in any direction (:mod:`flexsheet.model.scene_draw`), as a lab would bring them.
 
 For each draw the scene is written to ``OUT/draw<k>/`` and the whole graph of ``launch/sim.yaml`` runs on it
-on the simulated clock (the world's default script: a 10 s stroke, a 30 s stroke, a 10 s stroke and push),
-then the run's report is read. Per object (the run's ``summary.json`` and bag):
+on the simulated clock, on TCP ports of its own (the world's default script: a 10 s stroke, a 30 s stroke, a
+10 s stroke and push), then the run's report is read. Per object (the run's ``summary.json`` and bag):
 
 * ``felt_dtheta_deg`` 10 / 30 s: Table I felt (true finger against true sheet, paper Fig. 9);
 * ``residual_lag_ms``: the sheet's lag beyond the prediction's lead (``delay``);
@@ -33,6 +33,7 @@ from flexsheet.experiments.stroke import run_seed
 from flexsheet.model.scene_draw import write_scene
 from flexsheet.runtime.bag_read import read_bag
 from flexsheet.runtime.codec import DecodeError, decode_any
+from flexsheet.runtime.ports import free_port
 
 log = logging.getLogger(__name__)
 
@@ -142,10 +143,20 @@ def chart(result: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def _ports_apart() -> list[str]:
+    """``--set`` items that move the graph's TCP ports (its base port, the viewer's WebSocket, the controller
+    twins') to free ones, so a run does not collide with another graph on this machine."""
+    ctrl = {"left": free_port(), "right": free_port()}
+    items = [f"base_port={free_port(span=32)}", f"viz.port={free_port()}"]
+    for side, port in ctrl.items():
+        items += [f"ctrl_{side}.port={port}", f"arm_{side}.port={port}"]
+    return [a for kv in items for a in ("--set", kv)]
+
+
 def _run(name: str, scene: Path | None, out: Path, truth_seed: int, launch: Path, extra: list[str]) -> dict:
     """Run the graph on ``scene`` (None: the launch file's own) into ``out``: the figures, or
     ``{"error": …}``."""
-    args = list(extra) + (["--set", f"scene={scene}"] if scene is not None else [])
+    args = list(extra) + _ports_apart() + (["--set", f"scene={scene}"] if scene is not None else [])
     try:
         summary = run_seed(truth_seed, out, DURATION, launch, args)
     except RuntimeError as exc:

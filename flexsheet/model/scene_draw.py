@@ -14,7 +14,8 @@ direction, so the display is judged on shapes nobody tuned it to.
   user), turning toward a uniformly random direction around it (any stroke direction), over 30–60°;
 * **material**: neo-Hookean, E log-uniform 3–30 kPa (soft tissue), ν 0.40–0.49; the finger sticks (8 mm).
 
-Meshes are icospheres (level 4: 5120 triangles) mapped radially (star-shaped, so watertight), in metres.
+Meshes are icospheres (level 4: 5120 triangles) scaled per axis (an ellipsoid stays a convex polyhedron), a
+superquadric's radial map wrapped in its convex hull, in metres.
 The same seed draws the same scene. :func:`write_scene` writes the YAML (and the mesh as OBJ beside it).
 """
 
@@ -67,18 +68,17 @@ def _star_mesh(rng: np.random.Generator, kind: str):
         p = float(rng.uniform(2.5, 4.0))
         r = np.sum(np.abs(d / a) ** p, axis=1) ** (-1.0 / p)
         what = f"superquadric, semi-axes {np.round(a * 1e3, 1).tolist()} mm, exponent {p:.2f}"
-    else:
-        r = np.sum((d / a) ** 2, axis=1) ** -0.5
-        what = f"ellipsoid, semi-axes {np.round(a * 1e3, 1).tolist()} mm"
-        if kind == "dented":
-            c = rng.normal(size=3)
-            c /= np.linalg.norm(c)
-            depth, width = float(rng.uniform(0.2, 0.35)), float(rng.uniform(0.35, 0.6))
-            ang = np.arccos(np.clip(d @ c, -1.0, 1.0))
-            r = r * (1.0 - depth * np.exp(-0.5 * (ang / width) ** 2))
-            what += f", dented {depth * 100:.0f} % over {math.degrees(width):.0f}° (non-convex)"
-    mesh = trimesh.Trimesh(d * r[:, None], ico.faces, process=False)
-    return mesh, what
+        return trimesh.Trimesh(d * r[:, None], ico.faces, process=False).convex_hull, what
+    v = d * a                               # the icosphere scaled: an ellipsoid, still a convex polyhedron
+    what = f"ellipsoid, semi-axes {np.round(a * 1e3, 1).tolist()} mm"
+    if kind == "dented":
+        c = rng.normal(size=3)
+        c /= np.linalg.norm(c)
+        depth, width = float(rng.uniform(0.2, 0.35)), float(rng.uniform(0.35, 0.6))
+        ang = np.arccos(np.clip(d @ c, -1.0, 1.0))
+        v = v * (1.0 - depth * np.exp(-0.5 * (ang / width) ** 2))[:, None]
+        what += f", dented {depth * 100:.0f} % over {math.degrees(width):.0f}° (non-convex)"
+    return trimesh.Trimesh(v, ico.faces, process=False), what
 
 
 def _capsule(rng: np.random.Generator):
@@ -147,14 +147,14 @@ def draw_scene(seed: int) -> tuple[dict, object | None]:
 
 
 def write_scene(seed: int, folder: str | Path) -> Path:
-    """Write draw ``seed`` as ``folder/draw<seed>.yaml`` (and ``draw<seed>.obj`` for a mesh kind, 10 µm
+    """Write draw ``seed`` as ``folder/draw<seed>.yaml`` (and ``draw<seed>.obj`` for a mesh kind, 10 nm
     precision); returns the YAML's path. Creates ``folder``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     scene, mesh = draw_scene(seed)
     if mesh is not None:
         v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
-        lines = ([f"v {x:.5f} {y:.5f} {z:.5f}" for x, y, z in v]
+        lines = ([f"v {x:.8f} {y:.8f} {z:.8f}" for x, y, z in v]
                  + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in f])
         (folder / scene["object"]["file"]).write_text("\n".join(lines) + "\n")
     path = folder / f"draw{seed}.yaml"

@@ -428,8 +428,9 @@ def substitute(value: Any, subs: dict[str, str]) -> Any:
 
 
 #: launch-file keys of the core (not of an extension) that a top-level override may set: ``hosts`` (merged
-#: host by host: ``--set hosts.main.address=127.0.0.1``) and ``rtf`` (``flexsheet launch --rtf X``)
-CORE_SET = ("hosts", "rtf")
+#: host by host: ``--set hosts.main.address=127.0.0.1``), ``rtf`` (``flexsheet launch --rtf X``) and
+#: ``base_port`` (``--set base_port=9400``: a second graph beside a running one)
+CORE_SET = ("hosts", "rtf", "base_port")
 
 
 def _apply_toplevel_env(raw: dict, path: Path) -> dict:
@@ -450,6 +451,8 @@ def _apply_toplevel_env(raw: dict, path: Path) -> dict:
     for key, value in over.items():
         if key == "hosts":
             raw["hosts"] = _merge_hosts(raw.get("hosts"), value, path)
+        elif key == "base_port":
+            raw["base_port"] = value
         elif key == "rtf":
             clock = raw.get("clock", "wall")
             raw["clock"] = {**(clock if isinstance(clock, dict) else {"type": clock}), "rtf": value}

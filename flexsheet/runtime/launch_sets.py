@@ -37,10 +37,16 @@ def parse_toplevel_set(item: str, node_names) -> tuple[str, Any] | None:
             raise LaunchError(f"--set {item!r}: expected {head}.KEY=VALUE")
         return head, {key: yaml.safe_load(value)}
     key, eq, value = item.partition("=")
+    if key == "base_port" and eq and "base_port" not in node_names:
+        port = yaml.safe_load(value)
+        if not isinstance(port, int) or not 1024 <= port <= 65000:
+            raise LaunchError(f"--set {item!r}: base_port must be an integer in 1024..65000 (the graph's "
+                              "first TCP port; two graphs on one machine need ports apart)")
+        return "base_port", port
     if eq and "." not in key:
         if key not in known or known[key].parse_set is None:
             forms = [f"{k}=VALUE" if s.parse_set else f"{k}.KEY=VALUE" for k, s in known.items()]
-            forms.append("hosts.NAME.address=ADDRESS")
+            forms += ["hosts.NAME.address=ADDRESS", "base_port=PORT"]
             raise LaunchError(f"--set {item!r}: a top-level override is one of {', '.join(forms)}; a node "
                               "param is NODE.KEY=VALUE")
         return key, known[key].parse_set(value)
