@@ -56,6 +56,15 @@ class ControllerSource:
         """The arm PC's clock minus main's, s, for the bridge's ``params``; 0 by default."""
         return 0.0
 
+    @classmethod
+    def link(cls, protocol: str, host: str, port: int, **options: Any) -> Any:
+        """A new :class:`~flexsheet.arm.stream.ControllerLink` to the controller at ``host``:``port`` (TCP for
+        Modbus, UDP for MXT) over ``protocol``, ``options`` being the link's keyword arguments (Modbus:
+        ``request_timeout`` s, ``device_id``, ``auto_reset``; MXT: ``period`` s, ``open_timeout`` s,
+        ``lost_cycles``, ``record``). Raises ``LookupError`` for a source that reaches no controller by its
+        address (the default), ``ValueError`` for a protocol it does not carry."""
+        raise LookupError(f"controller source {cls.__name__} opens no link to a controller by its address")
+
 
 def controller_source(name: str) -> type[ControllerSource]:
     """The :class:`ControllerSource` installed as ``name`` in :data:`SOURCES_GROUP`. Raises ``LookupError``

@@ -26,12 +26,10 @@ from __future__ import annotations
 import math
 from itertools import pairwise
 
-import cv2
 import numpy as np
 from pydantic import Field, model_validator
 
-from flexsheet.calibration.display_calib import nominal_display_calib
-from flexsheet.calibration.display_calib_file import load_display_calib
+from flexsheet.calibration.published_registration import published_registration
 from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.runtime.node import Node
 from flexsheet.runtime.params import config_fields, params_model
@@ -42,7 +40,7 @@ from flexsheet.vision.camera_port import camera_source
 from flexsheet.vision.stereo_calibration import to_message
 from messages import StereoFrame, topics
 
-__all__ = ["CameraParams", "CameraNode", "published_registration"]
+__all__ = ["CameraParams", "CameraNode"]
 
 
 
@@ -118,53 +116,6 @@ CameraParams = params_model(
 )
 
 
-def _with_rectification(st: dict) -> dict:
-    """A stereo dict (image_size, K1, D1, K2, D2, R, T) completed with R1, R2, P1, P2, Q
-    (``cv2.stereoRectify``, alpha 0) for :func:`flexsheet.vision.stereo_calibration.to_message`."""
-    out = {k: np.asarray(st[k], float)
-           for k in ("K1", "D1", "K2", "D2", "R", "T", "R1", "R2", "P1", "P2", "Q")
-           if k in st}
-    out["image_size"] = tuple(int(x) for x in st["image_size"])
-    out["rms_px"] = float(st.get("rms_px", 0.0))
-    if "R1" not in out:
-        R1, R2, P1, P2, Q, _, _ = cv2.stereoRectify(out["K1"], out["D1"], out["K2"], out["D2"],
-                                                    out["image_size"],
-                                                    out["R"], out["T"].reshape(3, 1), alpha=0)
-        out.update(R1=R1, R2=R2, P1=P1, P2=P2, Q=Q)
-    return out
-
-
-def published_registration(p: CameraParams, calib: dict, exact_nominal: bool = False) -> tuple[dict,
-                                                                                               np.ndarray,
-                                                                                               str]:
-    """What ``/camera/calibration`` carries: (stereo dict, T_display_camera (4, 4), one line saying where they
-    come from). The pose from ``display.yaml``'s camera entry (``p.display_calib``), with its stereo model
-    when it has one (the pose was fitted with it), else ``calib`` (the stereo file). Without
-    ``display_calib``: the nominal registration when ``exact_nominal`` (the source's camera is the nominal
-    one: the ideal twin). Raises ``ValueError`` naming the fix when ``display_calib`` is missing (lab sources,
-    realistic twin), unreadable, lacks the camera entry, or its image size differs from the camera's."""
-    size = tuple(int(v) for v in calib["image_size"])
-    if p.display_calib:
-        cam = load_display_calib(p.display_calib, require=("camera",)).camera
-        stereo = cam.stereo if cam.stereo is not None else calib
-        got = tuple(int(v) for v in stereo["image_size"])
-        if got != size:
-            raise ValueError(f"{p.display_calib}: camera entry is for {got[0]}x{got[1]} images but the "
-                             f"camera delivers {size[0]}x{size[1]} (model {p.model!r}); re-run flexsheet "
-                             "calibrate camera-pose with this camera")
-        src = "display.yaml stereo" if cam.stereo is not None else "stereo file"
-        return (_with_rectification(stereo), np.asarray(cam.T_display_camera, float),
-                f"pose from {p.display_calib} ({cam.provenance.source}, {cam.provenance.measured_at}), {src}")
-    if exact_nominal:
-        return (_with_rectification(calib), nominal_display_calib().camera.T_display_camera.copy(),
-                "nominal registration (ideal twin: exact)")
-    raise ValueError("display_calib is not set: the camera's pose in the display frame comes from "
-                     "display.yaml's camera entry. Lab: run `flexsheet calibrate camera-pose`; twin: "
-                     "`flexsheet calibrate display --sim --truth-seed N --out DIR`; then name the file in "
-                     "the launch file (`display_calib: DIR/display.yaml`) or in this node's params "
-                     "(docs/calibration.md)")
-
-
 class CameraNode(Node):
     """Publishes :class:`messages.StereoFrame` (at ``rate_hz``, or as the GenICam pair delivers) and latches
     :class:`messages.StereoCalibration`. Every pair at most ``preview_rate`` Hz is also published on
@@ -193,7 +144,7 @@ class CameraNode(Node):
         self.calib = calib
         source = camera_source(p.source)
         published, self.T_dc, self.registration = published_registration(
-            p, calib, source.exact_nominal_registration(p))
+            p.display_calib, calib, source.exact_nominal_registration(p), p.model)
         self.stereo_pub = self.publisher(topics.STEREO)
         self.preview_pub = self.publisher(topics.STEREO_PREVIEW)
         self._preview_next = -math.inf

@@ -1,8 +1,9 @@
 """The renderer node's projector window (:class:`WindowThread`, a part of
-:class:`nodes.renderer.node.RendererNode`): ``output: window`` opens the window
-(:class:`nodes.renderer.window.WindowOutput`, glfw) on a thread of its own, which presents a frame on every
-vsync and redraws the pair there when inputs arrive (at most ``max_render_rate``; published at
-``publish_rate``); the heartbeat leads with the window's frame rate and missed vsyncs."""
+:class:`nodes.renderer.node.RendererNode`): ``output: window`` opens the window (the projector output port's
+``window``, :mod:`flexsheet.rendering.output_port`: :class:`nodes.renderer.window.WindowOutput`, glfw) on a
+thread of its own, which presents a frame on every vsync and redraws the pair there when inputs arrive (at
+most ``max_render_rate``; published at ``publish_rate``); the heartbeat leads with the window's frame rate and
+missed vsyncs."""
 
 from __future__ import annotations
 
@@ -11,9 +12,9 @@ import concurrent.futures
 import threading
 import time
 
+from flexsheet.rendering.output_port import projector_output
 from messages import Heartbeat
 from nodes.renderer.params import RendererParams
-from nodes.renderer.window import WindowOutput
 
 __all__ = ["WindowThread"]
 
@@ -36,10 +37,11 @@ class WindowThread:
     def _window_main(self, ready: concurrent.futures.Future) -> None:
         p: RendererParams = self.params
         try:
-            out = WindowOutput(self.projector, stereo=p.stereo, monitor=p.monitor, fullscreen=p.fullscreen,
-                               mirror_x=p.mirror_x, refresh_hz=p.refresh_hz, quad_buffer=p.quad_buffer,
-                               swap_eyes=p.swap_eyes, title=f"flexsheet {self.name}",
-                               **self._renderer_kwargs())
+            out = projector_output(p.output)(self.projector, stereo=p.stereo, monitor=p.monitor,
+                                             fullscreen=p.fullscreen, mirror_x=p.mirror_x,
+                                             refresh_hz=p.refresh_hz, quad_buffer=p.quad_buffer,
+                                             swap_eyes=p.swap_eyes, title=f"flexsheet {self.name}",
+                                             **self._renderer_kwargs())
         except BaseException as exc:  # noqa: BLE001 - handed to setup, which reports it
             ready.set_exception(exc)
             return
