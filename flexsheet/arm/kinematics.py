@@ -249,7 +249,11 @@ class ArmKinematics:
                 lam2 = lambda_max ** 2 * (1.0 - (w / w0) ** 2)
                 dq = J.T @ np.linalg.solve(J @ J.T + lam2 * np.eye(6), err)
             else:
-                dq = np.linalg.solve(J, err)
+                try:
+                    dq = np.linalg.solve(J, err)
+                except np.linalg.LinAlgError:   # an iterate landed exactly singular: damp this step fully
+                    w = 0.0
+                    dq = J.T @ np.linalg.solve(J @ J.T + lambda_max ** 2 * np.eye(6), err)
             m = float(np.max(np.abs(dq)))
             if m > max_step:
                 dq *= max_step / m

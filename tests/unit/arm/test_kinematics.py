@@ -194,3 +194,21 @@ def test_a_newton_step_converges_quadratically_and_its_rate_moves_the_clamp_at_t
         assert np.allclose(v, twist[:3], atol=1e-5)
     T, m = kin.fk_manipulability(q)
     assert np.abs(T - kin.fk(q)).max() < 1e-14 and abs(m - kin.manipulability(q)) < 1e-12
+
+
+def test_an_iterate_that_lands_exactly_singular_is_damped_not_raised():
+    # found by seeding the right arm at random for a sheet turned 40 deg about +z: the undamped step's
+    # Jacobian became exactly singular (numpy.linalg.LinAlgError crashed the caller)
+    from flexsheet.arm.kinematics import ArmKinematics
+
+    kin = ArmKinematics("right", (-0.05, -0.55, -0.4, 1.5708))
+    T = np.array([[0.7660444431189781, -0.6208851530148456, 0.16636567534280192, 0.07586951607162253],
+                  [0.6427876096865394, 0.7399421116938482, -0.19826689127414618, -0.0775494773067559],
+                  [0.0, 0.25881904510252074, 0.9659258262890684, 0.006336416222768142],
+                  [0.0, 0.0, 0.0, 1.0]])
+    seed = np.array([2.597358915927031, 1.0964283671416035, 1.099011804160582, -2.652494133165792,
+                     -1.425696533795577, 2.250524942886251])
+    r = kin.ik(T, seed, max_jump=100.0)
+    assert r.status in ("ok", "unreachable", "singular", "jump") or r.status.startswith("limit:")
+    assert np.all(np.isfinite(r.q))
+    assert np.all(r.q >= kin.q_lower - 1e-9) and np.all(r.q <= kin.q_upper + 1e-9)
