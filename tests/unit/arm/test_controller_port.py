@@ -40,3 +40,17 @@ def test_an_unknown_source_is_named_with_the_installed_ones():
     with pytest.raises(LookupError, match=rf"unknown controller source 'udp' \({SOURCES_GROUP}\); known: "
                                           r"sim, tcp"):
         controller_source("udp")
+
+
+def test_the_network_controller_hands_out_a_link_by_address_and_the_twin_none():
+    """``link`` builds the bridge's link to a controller at an address (the arm bench reaches its links so);
+    a protocol the source does not carry is refused, and the in-process twin has no address to link to."""
+    tcp = controller_source("tcp")
+    modbus = tcp.link("modbus", "127.0.0.1", 15021, request_timeout=0.5)
+    mxt = tcp.link("mxt", "127.0.0.1", 10000, period=0.00711, record=True)
+    assert type(modbus).__name__ == "ModbusLink" and (modbus.host, modbus.port) == ("127.0.0.1", 15021)
+    assert modbus.request_timeout == 0.5 and type(mxt).__name__ == "MxtLink"
+    with pytest.raises(ValueError, match="carries protocol modbus or mxt, not profinet"):
+        tcp.link("profinet", "127.0.0.1", 1)
+    with pytest.raises(LookupError, match="TwinController opens no link"):
+        TwinController.link("modbus", "127.0.0.1", 15021)
