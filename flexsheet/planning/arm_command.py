@@ -4,8 +4,9 @@ motion.
 The one owner of the two arms' motion on the planner's side. For each :class:`~flexsheet.planning.plan.Plan`
 the :class:`ArmCommander`
 
-- solves IK for both clamp targets (:class:`~flexsheet.planning.pull_guard.PullGuard`, seeded from the last
-  solutions) and caps the next plans' clamp force at ``pull_margin`` × the arms' torque-limited pull there;
+- takes both clamp targets' IK (:class:`~flexsheet.planning.pull_guard.PullGuard`, from the planner's
+  :class:`~flexsheet.planning.arm_reach.ArmReach`: one solve per arm and plan) and caps the next plans'
+  clamp force at ``pull_margin`` × the arms' torque-limited pull there;
 - shapes the sheet's motion from where it is to the plan (:class:`flexsheet.arm.sheet_motion.SheetShaper`),
   within both arms' joint rates (:class:`~flexsheet.arm.sheet_motion.JointRates` at ``speed_scale`` × the
   URDF's joint speeds and ``accel_scale`` × that per second: the bridges' own scales), and at the plan's own
@@ -29,6 +30,7 @@ from flexsheet.arm.sheet_motion import VELOCITY_PLANS, JointRates, MotionError, 
 from flexsheet.model.motion_limits import MotionLimits
 from flexsheet.model.sheet import clamp_poses, sheet_rotation
 from flexsheet.model.tension import SheetMaterial, clamp_force
+from flexsheet.planning.arm_reach import ArmReach
 from flexsheet.planning.plan import Plan
 from flexsheet.planning.pull_guard import PullGuard
 
@@ -58,12 +60,15 @@ class ArmCommand:
 class ArmCommander:
     """Both arms' command for each plan (see module docstring). ``bases``: {"left", "right"}: (x, y, z, yaw)
     of the arms' bases (registered); ``material``: the sheet; ``pull_margin`` in (0, 1]; ``speed_scale`` in
-    (0, 1], ``accel_scale`` 1/s > 0. Raises ``ValueError`` on a bad margin or base."""
+    (0, 1], ``accel_scale`` 1/s > 0; ``reach``: the planner's :class:`~flexsheet.planning.arm_reach.ArmReach`,
+    whose solve of each plan's targets the pull guard reuses (None: one of its own). Raises ``ValueError`` on
+    a bad margin or base."""
 
     def __init__(self, bases: dict, material: SheetMaterial, pull_margin: float = 0.9,
-                 speed_scale: float = SPEED_SCALE, accel_scale: float = ACCEL_SCALE) -> None:
+                 speed_scale: float = SPEED_SCALE, accel_scale: float = ACCEL_SCALE,
+                 reach: ArmReach | None = None) -> None:
         self.material = material
-        self.pull_guard = PullGuard(bases, pull_margin)
+        self.pull_guard = PullGuard(bases, pull_margin, reach)
         qd = QD_MAX * speed_scale
         self.shaper = SheetShaper(size=material.size, rates=JointRates(bases, qd, qd * accel_scale))
         self._motion_q: dict[str, np.ndarray] = {}

@@ -62,9 +62,11 @@ import math
 from dataclasses import replace
 from typing import NamedTuple
 
+import numpy as np
+
 from flexsheet.model.force_depth import scene_scale
 from flexsheet.model.shape_base import Shape
-from flexsheet.model.sheet import clamp_half_span, clamp_points
+from flexsheet.model.sheet import clamp_half_span, clamp_points, clamp_poses
 from flexsheet.model.tension import (
     SheetMaterial,
     TensionResult,
@@ -138,9 +140,11 @@ class SurfacePlanner:
     lost marker, a refused input). ``counts`` counts statuses.
     """
 
-    def __init__(self, shape: Shape, config: PlannerConfig | None = None, compliance=None, guard=None):
+    def __init__(self, shape: Shape, config: PlannerConfig | None = None, compliance=None, guard=None,
+                 arm_reach=None):
         self.shape = shape
         self.guard = guard          # a flexsheet.planning.head_guard.HeadGuard, or None (no head tracking)
+        self.arm_reach = arm_reach  # a flexsheet.planning.arm_reach.ArmReach, or None (the reach shells only)
         self.cfg = config or PlannerConfig()
         self.compliance = compliance
         self.limiter = RateLimiter(self.cfg.limits)
@@ -259,7 +263,7 @@ class SurfacePlanner:
         su, sv = self._keep_on_sheet(su, sv, tr.stretch, status)
         origin = axpy(-sv, v, axpy(-su, u, q))
         o, (nc, uc, vc), st, left, right, margin = self._limit_and_reach(origin, rot_from_cols(n, u, v),
-                                                                          tr.stretch, s.dt, status)
+                                                                          tr.stretch, s.dt, status, (su, sv))
         mat = cfg.material
         plan = Plan(s.t, q, nc, uc, vc, o, (su, sv), st, tr.tension if st == tr.stretch else tension(st, mat),
                     tr.stiffness if st == tr.stretch else _stiffness_or_zero(st, mat, su, sv, depth), k_obj,
@@ -457,9 +461,13 @@ class SurfacePlanner:
             return max(-hu, min(hu, su)), max(-hv, min(hv, sv))
         return su, sv
 
-    def _limit_and_reach(self, origin: Vec, R, stretch: float, dt: float | None, status: list[str]):
+    def _limit_and_reach(self, origin: Vec, R, stretch: float, dt: float | None, status: list[str],
+                         offset: tuple[float, float] = (0.0, 0.0)):
         """Rate-limit the target pose, place the clamps and screen their reach. Returns (origin, (n, u, v),
-        stretch, left, right, reach margin); an unreachable step is undone and the last plan's pose held."""
+        stretch, left, right, reach margin). With an ``arm_reach`` both clamp targets must solve the arms' IK:
+        where they do not, the sheet turns only as far toward the target as the arms reach, through the point
+        at ``offset`` (s_u, s_v) m on it (status ``reach:nearest``). An unreachable step is undone and the
+        last plan's pose held."""
         prev = None
         if dt is None or not self.limiter.initialised:
             self.limiter.reset(origin, R, stretch)
@@ -480,6 +488,9 @@ class SurfacePlanner:
         axes = cols(Rc)
         left, right = clamp_points(o, axes[1], st, self.cfg.material.size)
         ok, margin = self.cfg.reach.reachable(left, right)
+        if ok and self.arm_reach is not None:
+            ok, o, Rc, axes = self._arm_reach(o, Rc, axes, st, prev, offset, status)
+            left, right = clamp_points(o, axes[1], st, self.cfg.material.size)
         if not ok:
             status.append("unreachable")
             if self.last is not None and prev is not None:
@@ -488,6 +499,29 @@ class SurfacePlanner:
                 L = self.last
                 return L.origin, (L.normal, L.axis_u, L.axis_v), L.stretch, L.left, L.right, margin
         return o, axes, st, left, right, margin
+
+    def _arm_reach(self, o: Vec, Rc, axes, st: float, prev, offset: tuple[float, float], status: list[str]):
+        """The arms' IK screen of the limited pose (:meth:`_limit_and_reach`): (ok, origin, R, axes), the
+        pose turned back toward the last one as far as the arms need (``reach:nearest``), or not ok."""
+        size = self.cfg.material.size
+        Tl, Tr = clamp_poses(o, axes[0], axes[1], st, size)
+        ok, why = self.arm_reach.reachable(Tl, Tr)
+        if ok:
+            return True, o, Rc, axes
+        if prev is None or prev.R is None:
+            status.append(f"ik:{why}")
+            return False, o, Rc, axes
+        point = axpy(offset[1], axes[2], axpy(offset[0], axes[1], o))
+        near = self.arm_reach.nearest(point, offset, np.array(prev.R, float), np.array(Rc, float), st, size)
+        if near is None:
+            status.append(f"ik:{why}")
+            return False, o, Rc, axes
+        _, on, Rn = near
+        o = tuple(float(x) for x in on)
+        Rc = tuple(tuple(float(x) for x in row) for row in Rn)
+        self.limiter.reset(o, Rc, st)
+        status.append("reach:nearest")
+        return True, o, Rc, cols(Rc)
 
 
 def _stiffness_or_zero(stretch: float, mat: SheetMaterial, su: float, sv: float, depth: float) -> float:
