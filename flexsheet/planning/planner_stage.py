@@ -70,34 +70,36 @@ def held_sheet(left_pose, right_pose, size: float) -> tuple | None:
     return o, sheet_rotation(n, u), max(2.0 * a / size - 1.0, 0.0)
 
 
-def _registered(p) -> tuple[ReachModel, SheetMaterial, dict]:
-    """The reach model, the sheet and the arms' bases: with a ``display_calib`` (the registered display), its
-    arm bases (``arms.left``/``arms.right``: the reach shells' (x, y, z, yaw), and the full T_display_base
-    (4, 4) for the arms' IK, as the bridges take it) and, where it has one, its identified ``sheet`` entry's
-    terms on top of the sheet params; else the ``left_base``/``right_base`` and sheet params. Raises
-    ``ValueError`` naming the file and entry when it is missing, unreadable or lacks an arm."""
+def _registered(p) -> tuple[ReachModel, SheetMaterial]:
+    """The reach model and the sheet: with a ``display_calib`` (the registered display), its arm bases
+    (``arms.left``/``arms.right``) and, where it has one, its identified ``sheet`` entry's terms on top of the
+    sheet params; else the ``left_base``/``right_base`` and sheet params. Raises ``ValueError`` naming the
+    file and entry when it is missing, unreadable or lacks an arm."""
     reach, material = build(ReachModel, p), build(SheetMaterial, p, rename=MATERIAL_RENAME)
     path = getattr(p, "display_calib", None)
     if not path:
-        return reach, material, {"left": reach.left_base, "right": reach.right_base}
+        return reach, material
     dc = load_display_calib(path, require=("arms.left", "arms.right"))
     reach = replace(reach, left_base=xyzyaw_from_pose(dc.arms["left"].T_display_base),
                     right_base=xyzyaw_from_pose(dc.arms["right"].T_display_base))
-    bases = {s: np.asarray(dc.arms[s].T_display_base, float) for s in ("left", "right")}
-    return reach, (dc.sheet.material(material) if dc.sheet is not None else material), bases
+    return reach, (dc.sheet.material(material) if dc.sheet is not None else material)
 
 
 def planner_config(p) -> PlannerConfig:
     """The :class:`PlannerConfig` that params ``p`` (the planner node's) describe; raises ``ValueError`` on
     inconsistent values or a bad ``display_calib``."""
-    reach, material, _ = _registered(p)
+    reach, material = _registered(p)
     return build(PlannerConfig, p, material=material, limits=build(MotionLimits, p), reach=reach)
 
 
-def arm_bases(p) -> dict:
-    """{"left", "right"}: each arm's base as its bridge takes it (the registered T_display_base (4, 4) with a
-    ``display_calib``, else the (x, y, z, yaw) params)."""
-    return _registered(p)[2]
+def arm_bases(p, reach: ReachModel) -> dict:
+    """{"left", "right"}: each arm's base as its bridge takes it: the registered T_display_base (4, 4) of
+    ``p.display_calib`` when set (tilt included), else ``reach``'s (x, y, z, yaw)."""
+    path = getattr(p, "display_calib", None)
+    if not path:
+        return {"left": reach.left_base, "right": reach.right_base}
+    dc = load_display_calib(path, require=("arms.left", "arms.right"))
+    return {s: np.asarray(dc.arms[s].T_display_base, float) for s in ("left", "right")}
 
 
 class PlannerStage:
@@ -115,7 +117,7 @@ class PlannerStage:
         cfg = p.planner_config()
         self.guard = HeadGuard(KeepOut(head_radius=p.head_radius, margin=p.keepout_margin), cfg.material.size)
         bases = {"left": cfg.reach.left_base, "right": cfg.reach.right_base}
-        self.arm_reach = ArmReach(arm_bases(p))
+        self.arm_reach = ArmReach(arm_bases(p, cfg.reach))
         self.planner = SurfacePlanner(shape, cfg, compliance, self.guard, self.arm_reach)
         self.commander = ArmCommander(bases, cfg.material, p.pull_margin, p.arm_speed_scale,
                                       p.arm_accel_scale, self.arm_reach)
