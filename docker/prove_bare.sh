@@ -49,9 +49,10 @@ in_root "$ROOT" "cd $CODE && bash docker/install.sh" >"$WORK/bare-install.log" 2
 install_rc=$?
 install_s=$(($(date +%s) - t0))
 tail -n 5 "$WORK/bare-install.log"
-main_rc=null main_s=null rtf=null user_rc=null
+main_rc=null main_s=null rtf=null user_rc=null load=null
 if [ $install_rc -eq 0 ]; then
   log "installed in $install_s s; flexsheet launch launch/sim.yaml --out out/sim (log $WORK/bare-main.log)"
+  load=$(cut -d' ' -f1-3 /proc/loadavg)   # the machine's load as the main job starts
   t0=$(date +%s)
   in_root "$ROOT" "cd $CODE && flexsheet launch launch/sim.yaml --out out/sim" >"$WORK/bare-main.log" 2>&1
   main_rc=$?
@@ -69,7 +70,8 @@ fi
 left=$(mounts_under "$ROOT")
 python_v=$(chroot "$ROOT" /usr/bin/python3 --version 2>/dev/null || echo null)
 json "$OUT_JSON" suite="$BARE_SUITE" mirror="$BARE_MIRROR" variant=minbase debootstrap_s=$debootstrap_s \
-  install_rc=$install_rc install_s=$install_s main_job_rc=$main_rc main_job_s=$main_s realtime_factor="$rtf" \
+  install_rc=$install_rc install_s=$install_s main_job_rc=$main_rc main_job_s=$main_s \
+  loadavg_at_main_job="$load" realtime_factor="$rtf" \
   other_user_help_rc=$user_rc mounts_left="$left" python="$python_v" commit="$commit" cores="$(nproc)" \
   command="cd $CODE && bash docker/install.sh && flexsheet launch launch/sim.yaml --out out/sim" \
   date="$(date -u +%FT%TZ)" \

@@ -95,13 +95,16 @@ if [ $build_rc -ne 0 ]; then
 fi
 log "built in $build_s s"
 
-# image sizes in MB (10^6 bytes), as buildah counts them (the sum of the uncompressed layers)
+# an image's size in MB (10^6 bytes): the apparent size of its file tree, mounted (du -sb), as a container
+# engine's uncompressed size counts it
 size_mb() {
-  "${B[@]}" images --json "$1" | python3 -c '
-import json, sys
-print(round(json.load(sys.stdin)[0]["size"] / 1e6))'
+  local c m n
+  c=$("${B[@]}" from --pull-never "$1") || return 1
+  m=$("${B[@]}" mount "$c") && n=$(du -sb "$m" | cut -f1)
+  "${B[@]}" umount "$c" >/dev/null; "${B[@]}" rm "$c" >/dev/null
+  [ -n "${n:-}" ] && echo $((n / 1000000))
 }
-size=$(size_mb "$TAG")
+size=$(size_mb "$TAG") || die "cannot measure the size of $TAG"
 
 # --- 4. the build stage as a single-stage image --------------------------------------------------------------
 single=null
@@ -118,13 +121,19 @@ ctr=$("${B[@]}" from --pull-never "$TAG") || die "buildah from $TAG failed"
 trap '"${B[@]}" rm "$ctr" >/dev/null 2>&1' EXIT
 in_image() { "${B[@]}" run --isolation chroot --user 1000:1000 "$ctr" -- "$@"; }
 user_uid=$(in_image id -u) || die "id -u in the image failed"
-has_gcc=false; in_image sh -c 'command -v gcc || command -v cc || command -v x86_64-linux-gnu-gcc-12' && has_gcc=true
-has_node=false; in_image sh -c 'command -v node || command -v nodejs || command -v npm' && has_node=true
+# the compilers and Node.js on the user's PATH (and in /usr/bin), one a line; nothing when none
+# shellcheck disable=SC2016  # expanded by the image's sh
+found=$(in_image sh -c 'for c in gcc cc c++ x86_64-linux-gnu-gcc-12 node nodejs npm; do
+  command -v "$c" || ls "/usr/bin/$c" 2>/dev/null; done; exit 0') || die "buildah run in $TAG failed"
+has_gcc=false; grep -qE '/(gcc|cc|c\+\+|x86_64-linux-gnu-gcc-12)$' <<<"$found" && has_gcc=true
+has_node=false; grep -qE '/(node|nodejs|npm)$' <<<"$found" && has_node=true
+[ -z "$found" ] || log "found in the image: $(echo "$found" | sort -u | tr '\n' ' ')"
 aravis_import=false
 in_image python -c "import gi; gi.require_version('Aravis', '0.8'); from gi.repository import Aravis; \
 print('gi.repository.Aravis imports:', Aravis.__name__)" >"$WORK/aravis.log" 2>&1 && aravis_import=true
 cat "$WORK/aravis.log"
 log "uid $user_uid, gcc $has_gcc, node $has_node, Aravis import $aravis_import; the main job (log $WORK/main.log)"
+load=$(cut -d' ' -f1-3 /proc/loadavg)   # the machine's load as the main job starts
 t0=$(date +%s)
 in_image sh -c 'ls -A; flexsheet launch launch/sim.yaml --out out/sim' >"$WORK/main.log" 2>&1
 main_rc=$?
@@ -138,11 +147,11 @@ json "$OUT_JSON" size_mb="$size" single_stage_size_mb="$single" build_s=$build_s
   base_s=$base_s \
   base_source=$base_source base="$FROM from $BARE_SUITE ($BARE_MIRROR), Debian's python3" \
   user_uid="$user_uid" has_gcc=$has_gcc has_node=$has_node aravis_import=$aravis_import \
-  main_job_rc=$main_rc main_job_s=$main_s realtime_factor="${rtf:-null}" \
+  main_job_rc=$main_rc main_job_s=$main_s loadavg_at_main_job="$load" realtime_factor="${rtf:-null}" \
   main_job="flexsheet launch launch/sim.yaml --out out/sim (uid 1000, in /opt/flexsheet: launch/, README.md)" \
   builder="$(buildah --version) --storage-driver vfs --isolation chroot --layers" commit="$commit" \
   cores="$(nproc)" date="$(date -u +%FT%TZ)" \
-  note="size_mb: buildah's size of the image (uncompressed layers, 10^6 bytes); single_stage_size_mb: the build stage built alone (--target build), what one stage shipping compiler, headers and sources would weigh; build_s: the Dockerfile's build (cold when cached_steps is 0); base_s: making the FROM image"
+  note="size_mb: the runtime image's file tree, mounted, du -sb (uncompressed, 10^6 bytes); single_stage_size_mb: the build stage built alone (--target build), what one stage shipping compiler, headers and sources would weigh; build_s: the Dockerfile's build (cold when cached_steps is 0); base_s: making the FROM image"
 log "wrote $OUT_JSON"
 ok=1
 [ "$main_rc" -eq 0 ] || { log "FAILED: the main job exited $main_rc ($WORK/main.log)"; ok=0; }
