@@ -22,8 +22,8 @@ import numpy as np
 from flexsheet.analysis.report_softness import MAX_GAP, episodes, object_surface
 from flexsheet.planning.shape import planner_shape
 
-__all__ = ["PLACEMENT_P99_MM", "SHEET_FIRST_TARGET", "ARRIVAL_TOL", "ARRIVAL_LOOKBACK", "YIELD_MAX",
-           "placement"]
+__all__ = ["PLACEMENT_P99_MM", "SHEET_FIRST_TARGET", "ARRIVAL_TOL", "ARRIVAL_ANGLE_DEG", "ONSET_TARGET",
+           "ARRIVAL_LOOKBACK", "YIELD_MAX", "placement"]
 
 #: the true sheet may stand at most this far (mm, p99 of |distance|) ahead of or behind the object's surface
 PLACEMENT_P99_MM = 2.0
@@ -32,6 +32,12 @@ SHEET_FIRST_TARGET = 0.99
 #: the sheet is "at" the object's surface when at most this far (m) behind it and at most
 #: :data:`PLACEMENT_P99_MM` ahead (a sheet farther ahead is a wall in the air, not the object's surface)
 ARRIVAL_TOL = 0.0005
+#: the sheet is "at" the object's surface only when it is also within this angle (deg) of the object's tangent
+#: plane under the finger: a sheet in place but still turning is not the surface the finger expects
+ARRIVAL_ANGLE_DEG = 5.0
+#: the share of landings (every touch onset, re-touches too) whose sheet is at the surface, in place and in
+#: pose, when the finger arrives
+ONSET_TARGET = 0.95
 #: how far back (s) before the finger's arrival a sheet's wait is measured
 ARRIVAL_LOOKBACK = 1.0
 #: a yield to the head ends at the latest this long (s) after the last keep_out
@@ -74,14 +80,18 @@ def _world_touch(d: dict[str, list], t: np.ndarray) -> np.ndarray:
     return on[k] & (np.abs(tc[k] - t) <= MAX_GAP)
 
 
-def _arrivals(t: np.ndarray, inside: np.ndarray, ahead: np.ndarray, runs) -> tuple[list[float], int, int]:
+def _arrivals(t: np.ndarray, inside: np.ndarray, ahead: np.ndarray, cos: np.ndarray,
+              runs) -> tuple[list[float], int, int, list[tuple[bool, float]]]:
     """Per landing of the finger on the object (a run of samples in it, within the touches ``runs``, index
-    ranges) the sheet's arrival − the finger's, s (:func:`placement`); and the counts of landings whose sheet
-    never arrived and of touches the finger never pushed into the object."""
-    # ≥ 0: the sheet is at the surface
+    ranges) the sheet's arrival − the finger's, s (:func:`placement`); the counts of landings whose sheet
+    never arrived and of touches the finger never pushed into the object; and per landing (whether the sheet
+    was there at the finger's arrival, its angle to the object's tangent plane there, deg). ``cos``: the
+    cosine between the object's and the sheet's normals per sample."""
+    # ≥ 0: the sheet is at the surface, in place; `there` also in pose
     band = np.minimum(ahead + ARRIVAL_TOL, PLACEMENT_P99_MM * 1e-3 - ahead)
-    there = band >= 0.0
-    arrivals, never, no_arrival = [], 0, 0
+    there = (band >= 0.0) & (cos >= np.cos(np.radians(ARRIVAL_ANGLE_DEG)))
+    angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    arrivals, never, no_arrival, onsets = [], 0, 0, []
     landings = []
     for a, b in runs:
         inn = [(a + i, a + j) for i, j in episodes(t[a:b], inside[a:b] >= 0.0)]
@@ -91,6 +101,7 @@ def _arrivals(t: np.ndarray, inside: np.ndarray, ahead: np.ndarray, runs) -> tup
     for f, b in landings:
         tf = (_crossing(t, inside, f) if f > 0 and inside[f - 1] <= 0.0 and t[f] - t[f - 1] <= MAX_GAP
               else float(t[f]))
+        onsets.append((bool(there[f]), float(angle[f])))
         if there[f]:
             i = f                                   # back to the start of the sheet's run at the surface
             while i > 0 and there[i - 1] and tf - t[i - 1] <= ARRIVAL_LOOKBACK and t[i] - t[i - 1] <= MAX_GAP:
@@ -104,7 +115,7 @@ def _arrivals(t: np.ndarray, inside: np.ndarray, ahead: np.ndarray, runs) -> tup
                 arrivals.append(float(t[b - 1]) - tf)
             else:
                 arrivals.append(_crossing(t, band, g) - tf)
-    return arrivals, never, no_arrival
+    return arrivals, never, no_arrival, onsets
 
 
 def _plans_in_force(d: dict[str, list], t: np.ndarray) -> tuple[list, np.ndarray]:
@@ -175,7 +186,8 @@ def placement(d: dict[str, list], scene) -> dict:
     (:func:`episodes`). Samples in a yield to the head (:func:`_head_yield`) are counted in ``head_yield`` and
     left out of ``distance_mm``, ``by_phase_mm`` and ``signed_mm``. Per landing the finger arrives at the
     object's surface when its indentation crosses 0; the sheet is there when at most :data:`ARRIVAL_TOL`
-    behind the surface under the finger and at most :data:`PLACEMENT_P99_MM` ahead of it. ``arrival_ms`` =
+    behind the surface under the finger, at most :data:`PLACEMENT_P99_MM` ahead of it and within
+    :data:`ARRIVAL_ANGLE_DEG` of its tangent plane (in place and in pose). ``arrival_ms`` =
     sheet's arrival − finger's arrival: negative, the sheet waited (from the start of its run there, at most
     :data:`ARRIVAL_LOOKBACK` s back); positive, late; a sheet that never arrives while the finger is in the
     object is late by the rest of that landing (and counted in ``never``). Each landing (a run with the finger
@@ -189,8 +201,10 @@ def placement(d: dict[str, list], scene) -> dict:
     ``"by_phase_mm"`` (as ``distance_mm`` per script phase of ``/world/finger``, with n), ``"signed_mm"``
     {median, p1, p99} (None as ``distance_mm``), ``"touches"``, ``"arrivals"`` (the finger's landings on the
     object), ``"sheet_first"`` (their share with arrival_ms ≤ 0), ``"late"``, ``"never"``,
-    ``"no_finger_arrival"``, ``"arrival_ms"`` {median, p99, max} (None without arrivals), ``"targets"``,
-    ``"verdicts"`` {distance, sheet_first}, ``"verdict"`` (MISSED if either is)}``."""
+    ``"no_finger_arrival"``, ``"arrival_ms"`` {median, p99, max} (None without arrivals), ``"onsets"`` {n,
+    ``in_place_and_pose`` (the share of landings whose sheet was there, in place and pose, at the finger's
+    arrival; target :data:`ONSET_TARGET`), ``angle_deg`` {median, max} there}, ``"targets"``,
+    ``"verdicts"`` {distance, sheet_first, onsets}, ``"verdict"`` (MISSED if any is)}``."""
     fingers = sorted((m for _, m in d.get("/world/finger", []) if m.phase != "paused"),
                      key=lambda m: m.header.stamp)
     if scene is None or len(fingers) < 2:
@@ -211,7 +225,7 @@ def placement(d: dict[str, list], scene) -> dict:
     runs = episodes(t, touching)
     if not runs:
         return {}
-    arrivals, never, no_arrival = _arrivals(t, inside, ahead, runs)
+    arrivals, never, no_arrival, onsets = _arrivals(t, inside, ahead, cos, runs)
     judged = touching & np.isfinite(ahead)
     if not judged.any():
         return {}
@@ -225,9 +239,11 @@ def placement(d: dict[str, list], scene) -> dict:
     arr = np.array(arrivals) * 1e3
     first = float(np.mean(arr <= 0.0)) if arr.size else None
     dist_mm, dist_all = (_spread(e) if e.size else None), _spread(e_all)
+    onset_ok = float(np.mean([o[0] for o in onsets])) if onsets else None
     verdicts = {"distance": "no verdict" if dist_mm is None else
                 ("met" if dist_mm["p99"] <= PLACEMENT_P99_MM else "MISSED"),
-                "sheet_first": "met" if first is not None and first >= SHEET_FIRST_TARGET else "MISSED"}
+                "sheet_first": "met" if first is not None and first >= SHEET_FIRST_TARGET else "MISSED",
+                "onsets": "met" if onset_ok is not None and onset_ok >= ONSET_TARGET else "MISSED"}
     n_yield = int(np.sum(judged & yielded))
     return {"n": int(keep.sum()), "distance_mm": dist_mm, "distance_mm_all": dist_all,
             "head_yield": {"n": n_yield, "share": n_yield / int(judged.sum())}, "by_phase_mm": by_phase,
@@ -238,7 +254,11 @@ def placement(d: dict[str, list], scene) -> dict:
             "late": int(np.sum(arr > 0.0)), "never": never, "no_finger_arrival": no_arrival,
             "arrival_ms": ({"median": float(np.median(arr)), "p99": float(np.percentile(arr, 99)),
                             "max": float(arr.max())} if arr.size else None),
+            "onsets": {"n": len(onsets), "in_place_and_pose": onset_ok,
+                       "angle_deg": ({"median": float(np.median([o[1] for o in onsets])),
+                                      "max": float(np.max([o[1] for o in onsets]))} if onsets else None)},
             "targets": {"distance_mm.p99": PLACEMENT_P99_MM, "sheet_first": SHEET_FIRST_TARGET,
-                        "arrival_tol_mm": ARRIVAL_TOL * 1e3},
+                        "arrival_tol_mm": ARRIVAL_TOL * 1e3, "arrival_angle_deg": ARRIVAL_ANGLE_DEG,
+                        "onsets": ONSET_TARGET},
             "verdicts": verdicts,
             "verdict": "MISSED" if "MISSED" in verdicts.values() else "met"}

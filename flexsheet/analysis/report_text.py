@@ -269,6 +269,13 @@ def _placement(s: dict) -> tuple[list[str], list[str]]:
     first = "-" if pl["sheet_first"] is None else f"{100 * pl['sheet_first']:.0f} % of {pl['arrivals']}"
     rows.append(["sheet first, touches", first, "-", "-", f"≥ {100 * pl['targets']['sheet_first']:.0f} %",
                  pl["verdicts"]["sheet_first"]])
+    on = pl.get("onsets")
+    if on and on["n"]:
+        rows.append([f"onsets in place and ≤ {pl['targets']['arrival_angle_deg']:g}°",
+                     f"{100 * on['in_place_and_pose']:.0f} % of {on['n']}",
+                     f"{on['angle_deg']['median']:.1f}°",
+                     f"{on['angle_deg']['max']:.1f}°", f"≥ {100 * pl['targets']['onsets']:.0f} %",
+                     pl["verdicts"]["onsets"]])
     if a:
         rows.append(["sheet − finger arrival, ms", f"{a['median']:.0f}", f"{a['p99']:.0f}", f"{a['max']:.0f}",
                      "≤ 0",

@@ -77,8 +77,9 @@ def measure_object(summary: dict, bag: Path | None, log_text: str = "") -> dict:
     return {
         "felt_dtheta_deg": {row: _get(felt, row, "dtheta_mean_deg") for row in ("10", "30")},
         "residual_lag_ms": _get(summary, "delay", "residual_lag_ms"),
-        "landings": {k: _get(summary, "placement", k) for k in ("touches", "arrivals", "sheet_first", "late",
-                                                                 "never")},
+        "landings": {**{k: _get(summary, "placement", k)
+                        for k in ("touches", "arrivals", "sheet_first", "late", "never")},
+                     "in_place_and_pose": _get(summary, "placement", "onsets", "in_place_and_pose")},
         "force_within_15pct": _get(summary, "compliance", "felt", "within_15pct"),
         "saturated": _get(summary, "compliance", "saturated"),
         "follow_ms": _get(summary, "compliance", "follow_ms"),

@@ -180,3 +180,27 @@ def test_each_landing_is_judged_and_a_sheet_far_ahead_is_a_wall_in_the_air_not_t
     q = placement({"/world/finger": fingers, "/world/sheet": near, "/world/contact": contacts},
                   load_scene(BOX))
     assert q["arrivals"] == 2 and q["sheet_first"] == 1.0 and q["late"] == 0
+
+
+def test_a_sheet_in_place_but_off_the_tangent_is_not_there_first():
+    """Two touches of the box's front face: the sheet's plane passes through the surface point under the
+    finger both times, but in the second it is still turned 20° off the tangent plane when the finger arrives
+    (upright again from 1.80 s): that landing is late and the onset is counted out of pose."""
+    fingers, sheets = [], []
+    tilt = np.radians(20.0)
+    for k in range(251):
+        t = round(0.01 * k, 10)
+        if t <= 1.0:
+            x = 0.002 - 0.01 * t
+        elif t < 1.5:
+            x = 0.02
+        else:
+            x = 0.002 - 0.01 * (t - 1.5)
+        normal = [np.cos(tilt), 0.0, np.sin(tilt)] if 1.5 < t < 1.8 - 1e-9 else [1.0, 0.0, 0.0]
+        fingers.append(_finger(t, x))
+        sheets.append((t, _sheet_state(t, [0.0, 0.0, 0.01], normal)))
+    p = placement({"/world/finger": fingers, "/world/sheet": sheets}, load_scene(BOX))
+    assert p["arrivals"] == 2 and p["late"] == 1 and p["sheet_first"] == 0.5
+    assert p["onsets"]["n"] == 2 and p["onsets"]["in_place_and_pose"] == 0.5
+    assert p["onsets"]["angle_deg"]["max"] == pytest.approx(20.0, abs=1e-6)
+    assert p["verdicts"]["onsets"] == "MISSED" and p["verdict"] == "MISSED"
