@@ -116,8 +116,8 @@ class PlannerStage:
         self.key = scene.key()
         cfg = p.planner_config()
         self.guard = HeadGuard(KeepOut(head_radius=p.head_radius, margin=p.keepout_margin), cfg.material.size)
-        bases = {"left": cfg.reach.left_base, "right": cfg.reach.right_base}
-        self.arm_reach = ArmReach(arm_bases(p, cfg.reach))
+        bases = arm_bases(p, cfg.reach)         # the arms' IK and joint rates: the bridges' own bases
+        self.arm_reach = ArmReach(bases)
         self.planner = SurfacePlanner(shape, cfg, compliance, self.guard, self.arm_reach)
         self.commander = ArmCommander(bases, cfg.material, p.pull_margin, p.arm_speed_scale,
                                       p.arm_accel_scale, self.arm_reach)
