@@ -29,7 +29,7 @@ from collections import Counter
 from pathlib import Path
 
 from flexsheet.dirs import launch_dir
-from flexsheet.experiments.stroke import run_seed
+from flexsheet.experiments.stroke import DURATION_10S, SCRIPT_10S, run_seed
 from flexsheet.model.scene_draw import write_scene
 from flexsheet.runtime.bag_read import read_bag
 from flexsheet.runtime.codec import DecodeError, decode_any
@@ -154,12 +154,13 @@ def _ports_apart() -> list[str]:
     return [a for kv in items for a in ("--set", kv)]
 
 
-def _run(name: str, scene: Path | None, out: Path, truth_seed: int, launch: Path, extra: list[str]) -> dict:
+def _run(name: str, scene: Path | None, out: Path, truth_seed: int, launch: Path, extra: list[str],
+         duration: float = DURATION) -> dict:
     """Run the graph on ``scene`` (None: the launch file's own) into ``out``: the figures, or
     ``{"error": …}``."""
     args = list(extra) + _ports_apart() + (["--set", f"scene={scene}"] if scene is not None else [])
     try:
-        summary = run_seed(truth_seed, out, DURATION, launch, args)
+        summary = run_seed(truth_seed, out, duration, launch, args)
     except RuntimeError as exc:
         log.warning(f"[objects] {name}: {exc}")
         return {"error": str(exc)}
@@ -174,7 +175,9 @@ def main(argv: list[str] | None = None) -> int:
                                  epilog="example: flexsheet experiment objects --draws 8 --reference "
                                         "--out docs/figures/objects\n"
                                         "         flexsheet experiment objects --first 3 --draws 1 --out "
-                                        "/tmp/objects")
+                                        "/tmp/objects\n"
+                                        "         flexsheet experiment objects --quick --out "
+                                        "/tmp/objects_quick")
     ap.add_argument("--out", required=True, help="output folder (draw<k>/, objects.json, objects.png)")
     ap.add_argument("--draws", type=int, default=8, help="how many objects (default 8)")
     ap.add_argument("--first", type=int, default=0, help="seed of the first draw (default 0)")
@@ -185,22 +188,30 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--launch", default=str(launch_dir() / "sim.yaml"), help="launch file (clock: sim)")
     ap.add_argument("--set", action="append", default=[], metavar="NODE.KEY=VALUE",
                     help="a param override passed to each run (flexsheet launch --set)")
+    ap.add_argument("--quick", action="store_true",
+                    help=f"one draw, the 10 s stroke alone ({DURATION_10S:g} simulated s): felt 10 s, "
+                         "landings, span and holds (no 30 s row, no press)")
     args = ap.parse_args(argv)
+    duration = DURATION
+    if args.quick:
+        args.draws, duration, args.set = 1, DURATION_10S, [SCRIPT_10S, *args.set]
     if args.draws < 1:
         ap.error(f"--draws must be >= 1, got {args.draws}")
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     out, launch = Path(args.out).resolve(), Path(args.launch).resolve()
     extra = [a for kv in args.set for a in ("--set", kv)]
-    result: dict = {"truth_seed": args.truth_seed, "targets": TARGETS, "overrides": args.set, "objects": {}}
+    result: dict = {"truth_seed": args.truth_seed, "targets": TARGETS, "overrides": args.set,
+                    "duration_s": duration, "objects": {}}
     if args.reference:
         print("[objects] the paper's cylinder (reference) ...", flush=True)
-        result["cylinder"] = _run("cylinder", None, out / "cylinder", args.truth_seed, launch, extra)
+        result["cylinder"] = _run("cylinder", None, out / "cylinder", args.truth_seed, launch, extra,
+                                  duration)
     cyl30 = _get(result, "cylinder", "felt_dtheta_deg", "30")
     for k in range(args.first, args.first + args.draws):
         path = write_scene(k, out / f"draw{k}")
         desc = path.read_text().splitlines()[0].lstrip("# ")
         print(f"[objects] draw {k} ({k - args.first + 1}/{args.draws}): {desc}", flush=True)
-        m = _run(f"draw{k}", path, out / f"draw{k}", args.truth_seed, launch, extra)
+        m = _run(f"draw{k}", path, out / f"draw{k}", args.truth_seed, launch, extra, duration)
         if "error" not in m:
             m["verdicts"] = _verdicts(m, cyl30)
             m["description"] = desc
