@@ -44,6 +44,7 @@ export_source "$ROOT$CODE" "$SOURCE"
 log "$BARE_SUITE in $ROOT after $debootstrap_s s; $commit's tracked files in $CODE"
 
 log "bash docker/install.sh (log $WORK/bare-install.log)"
+load0=$(cut -d' ' -f1-3 /proc/loadavg)   # the machine's load as the install starts
 t0=$(date +%s)
 in_root "$ROOT" "cd $CODE && bash docker/install.sh" >"$WORK/bare-install.log" 2>&1
 install_rc=$?
@@ -70,7 +71,7 @@ fi
 left=$(mounts_under "$ROOT")
 python_v=$(chroot "$ROOT" /usr/bin/python3 --version 2>/dev/null || echo null)
 json "$OUT_JSON" suite="$BARE_SUITE" mirror="$BARE_MIRROR" variant=minbase debootstrap_s=$debootstrap_s \
-  install_rc=$install_rc install_s=$install_s main_job_rc=$main_rc main_job_s=$main_s \
+  install_rc=$install_rc install_s=$install_s loadavg_at_install="$load0" main_job_rc=$main_rc main_job_s=$main_s \
   loadavg_at_main_job="$load" realtime_factor="$rtf" \
   other_user_help_rc=$user_rc mounts_left="$left" python="$python_v" commit="$commit" cores="$(nproc)" \
   command="cd $CODE && bash docker/install.sh && flexsheet launch launch/sim.yaml --out out/sim" \
