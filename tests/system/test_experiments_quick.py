@@ -1,5 +1,6 @@
 """The experiments that launch the graph, in their quick modes: ``flexsheet experiment determinism --quick``
-(two simulated-clock runs, byte-identical on every recorded topic),
+(two simulated-clock runs, byte-identical on every recorded topic), ``flexsheet experiment objects --quick``
+(one drawn object),
 ``flexsheet experiment latency_load --quick`` (one wall-clock run with no busy core: the loop's two chain ends
 measured from the bag) and ``flexsheet experiment stroke --quick`` (Table I's 10 s row on the graph)."""
 
@@ -59,3 +60,20 @@ def test_stroke_quick_judges_the_10s_row_on_the_graph(tmp_path):
     assert s["verdicts"]["paper.10"] == "MISSED" and paper["dtheta_mean_deg"] > felt["dtheta_mean_deg"]
     assert felt["per_seed"]["0"]["n"] > 200                                 # the whole stroke was measured
     assert (tmp_path / "stroke.png").stat().st_size > 5_000
+
+
+@pytest.mark.timeout(900)       # a new object's FEM model is built at its node's start (no cache)
+def test_objects_quick_runs_the_graph_on_a_drawn_object_and_judges_it(tmp_path):
+    """``flexsheet experiment objects --quick``: draw 0 (a turned ellipsoid mesh) under the 10 s stroke on
+    the simulated-clock graph; its figures come from the run's report and bag, and no bridge refuses a
+    target (the planner checks the arms' IK before it sends one)."""
+    from flexsheet.experiments.objects import main
+
+    assert main(["--quick", "--out", str(tmp_path)]) == 0
+    d = json.loads((tmp_path / "objects.json").read_text())
+    m = d["objects"]["draw0"]
+    assert "error" not in m and m["description"].startswith("drawn object 0: ellipsoid")
+    assert 0.0 < m["felt_dtheta_deg"]["10"] < 5.0 and m["felt_dtheta_deg"]["30"] is None
+    assert m["landings"]["touches"] >= 1 and m["bridge_holds"] == 0 and m["keepout_violations"] == 0
+    assert m["fem_model"] == "linear"                     # nobody built this object's nonlinear table
+    assert (tmp_path / "draw0" / "draw0.obj").exists() and (tmp_path / "objects.png").stat().st_size > 5_000
