@@ -59,13 +59,15 @@ def _rotation_power(R0: np.ndarray, R1: np.ndarray, t: float) -> np.ndarray:
 class ArmReach:
     """Two arms' IK for clamp target pairs (module doc). ``bases``: {"left", "right"}: (x, y, z, yaw) or
     (4, 4) T_display_base of each arm (the registered ones); ``limit_margin`` rad kept from each joint limit
-    (the bridges' own plus :data:`REACH_SLACK`) and ``max_jump`` rad, the largest joint change from the last
-    solution a target may ask (the bridges' own; :class:`~flexsheet.arm.bridge_config.BridgeConfig` owns
-    both). Raises ``ValueError`` on a bad
-    side or base."""
+    (the bridges' own, :class:`~flexsheet.arm.bridge_config.BridgeConfig`, plus :data:`REACH_SLACK`);
+    ``max_jump`` rad, the largest joint change from the last solution a target may ask (default: none. The
+    planner's seeds are its own last solutions, not the arms' joints: from the first target on, a bound
+    there would refuse the re-pose from wherever the arms start, and keep refusing, since a refused target
+    never moves the seed; the bridges judge their own jump from their measured joints). Raises
+    ``ValueError`` on a bad side or base."""
 
     def __init__(self, bases: dict, limit_margin: float = BridgeConfig.limit_margin + REACH_SLACK,
-                 max_jump: float = BridgeConfig.max_ik_jump) -> None:
+                 max_jump: float = math.inf) -> None:
         if set(bases) != set(SIDES):
             raise ValueError(f"bases must name 'left' and 'right', got {sorted(bases)}")
         self.kin = {s: ArmKinematics(s, bases[s], Q_LOWER + limit_margin, Q_UPPER - limit_margin)

@@ -94,3 +94,13 @@ def test_a_stroke_around_an_upright_cylinder_never_asks_the_arms_what_they_canno
         assert np.linalg.norm(c - np.asarray(p.contact)) < 0.003
     # past that, the last reachable sheet is held and the plan says so
     assert "unreachable" in with_ik[-1].status and with_ik[-1].origin == nearest[-1].origin
+
+
+def test_a_first_target_far_from_the_arms_start_is_reachable_not_refused_as_a_jump():
+    # the sheet tilted 40° up from home: each arm's IK lies 0.71 rad from its home joints (more than a
+    # bridge's 0.5 rad jump); a jump bound on the planner's own seed would refuse it, and every target after
+    reach = ArmReach(BASES)
+    th = math.radians(40.0)
+    Tl, Tr = clamp_poses(np.array([-0.01, 0.0, 0.01]), np.array([math.cos(th), 0.0, math.sin(th)]),
+                         np.array([0.0, 1.0, 0.0]), 0.04, 0.24)
+    assert reach.reachable(Tl, Tr) == (True, "ok")
