@@ -16,7 +16,7 @@ on the simulated clock, on TCP ports of its own (the world's default script: a 1
 
 With ``--reference`` the paper's cylinder runs too on the same truth seed: the targets "felt Δθ at 30 s ≤ 2 ×
 the cylinder's" are judged against it. Writes ``objects.json`` and ``objects.png`` (one chart, the same
-numbers) into ``OUT``. Exit status 1 when no draw produced a report.
+numbers) into ``OUT`` (the JSON after every draw too). Exit status 1 when no draw produced a report.
 """
 
 from __future__ import annotations
@@ -220,6 +220,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{m['force_within_15pct']}, span p99 {m['span_p99_mm']} mm, holds {m['bridge_holds']}; "
                   f"MISSED: {', '.join(missed) or 'none'}", flush=True)
         result["objects"][f"draw{k}"] = m
+        (out / "objects.json").write_text(json.dumps(result, indent=1))     # after each draw: hours of runs
     good = {n: m for n, m in result["objects"].items() if "error" not in m}
     out.mkdir(parents=True, exist_ok=True)
     (out / "objects.json").write_text(json.dumps(result, indent=1))
